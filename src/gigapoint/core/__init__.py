@@ -1,0 +1,21 @@
+"""Point data in gigapoint's own layout: chunks, Morton order, batches, quantization, demo scene."""
+
+from .chunk import DEFAULT_COLOR, PointChunk, to_rgba8
+from .cloud import PointCloud, build_cloud, cloud_from_points, from_arrays
+from .demo import demo_arrays, demo_chunks
+from .layout import BATCH_DTYPE, BATCH_SIZE, EMPTY_PIXEL
+
+__all__ = [
+    "BATCH_DTYPE",
+    "BATCH_SIZE",
+    "DEFAULT_COLOR",
+    "EMPTY_PIXEL",
+    "PointChunk",
+    "PointCloud",
+    "build_cloud",
+    "cloud_from_points",
+    "demo_arrays",
+    "demo_chunks",
+    "from_arrays",
+    "to_rgba8",
+]

@@ -1,0 +1,66 @@
+"""PointChunk: what every reader yields, a bounded slice of a point cloud."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: Color given to points of files that carry none (a light grey that reads on black and white).
+DEFAULT_COLOR = (200, 200, 200, 255)
+
+
+@dataclass
+class PointChunk:
+    """A bounded number of points: float64 xyz (N, 3), uint8 rgba (N, 4), named attributes.
+
+    Attributes are 1-D (or (N, k)) numpy arrays of length N, e.g. ``intensity``,
+    ``classification``, ``return_number``.
+    """
+
+    xyz: np.ndarray
+    rgba: np.ndarray | None = None
+    attributes: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.xyz = np.ascontiguousarray(self.xyz, dtype=np.float64).reshape(-1, 3)
+        n = len(self.xyz)
+        if self.rgba is None:
+            self.rgba = np.empty((n, 4), np.uint8)
+            self.rgba[:] = DEFAULT_COLOR
+        else:
+            self.rgba = to_rgba8(self.rgba)
+            if len(self.rgba) != n:
+                raise ValueError(f"rgba has {len(self.rgba)} rows, xyz has {n}")
+        for name, values in self.attributes.items():
+            if len(values) != n:
+                raise ValueError(f"attribute {name!r} has {len(values)} rows, xyz has {n}")
+
+    def __len__(self) -> int:
+        return len(self.xyz)
+
+
+def to_rgba8(colors: np.ndarray) -> np.ndarray:
+    """(N, 3|4) colors of any integer or float type to uint8 RGBA.
+
+    uint16 colors (LAS) are scaled down by 256 when any value exceeds 255, as Potree does;
+    floats are taken as 0..1.
+    """
+    c = np.asarray(colors)
+    if c.ndim != 2 or c.shape[1] not in (3, 4):
+        raise ValueError(f"colors must have shape (N, 3) or (N, 4), got {c.shape}")
+    if c.dtype.kind == "f":
+        c8 = np.clip(np.nan_to_num(c) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    elif c.dtype == np.uint8:
+        c8 = c
+    else:
+        c = c.astype(np.int64, copy=False)
+        if c.size and c.max() > 255:
+            c = c >> 8
+        c8 = np.clip(c, 0, 255).astype(np.uint8)
+    if c8.shape[1] == 3:
+        out = np.empty((len(c8), 4), np.uint8)
+        out[:, :3] = c8
+        out[:, 3] = 255
+        return out
+    return np.ascontiguousarray(c8)

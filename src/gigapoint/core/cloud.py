@@ -1,0 +1,154 @@
+"""PointCloud: points in Morton order, grouped into batches, quantized batch-relative.
+
+This is the in-memory form every backend renders (DESIGN.md, "Contracts"). Nothing
+downstream sees float64 points: positions live as three u32 precision words per point
+inside float64 batch boxes.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import EmptyCloudError, GigapointWarning, InputError
+from .chunk import PointChunk
+from .layout import BATCH_DTYPE, BATCH_SIZE
+from .morton import cube_of, morton_codes, morton_order
+from .quantize import dequantize, make_batches, quantize
+
+#: Coordinates beyond this magnitude are not of this planet in any CRS: skipped as invalid.
+MAX_ABS_COORDINATE = 1e12
+
+
+@dataclass
+class PointCloud:
+    """A renderable point cloud (unstructured: batches of consecutive Morton-ordered points)."""
+
+    batches: np.ndarray  # BATCH_DTYPE records
+    low: np.ndarray  # u32 per point: bits 20-29 of x, y, z
+    med: np.ndarray  # u32 per point: bits 10-19
+    high: np.ndarray  # u32 per point: bits 0-9
+    color: np.ndarray  # u32 per point: RGBA8 little-endian (r in the low byte)
+    attributes: dict[str, np.ndarray] = field(default_factory=dict)
+    name: str = "cloud"
+    skipped: int = 0  # invalid input points (NaN, inf, absurd) left out
+
+    @property
+    def n_points(self) -> int:
+        return len(self.low)
+
+    def __len__(self) -> int:
+        return self.n_points
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(min, max) float64 corners of the box around all points."""
+        return self.batches["bbox_min"].min(axis=0), self.batches["bbox_max"].max(axis=0)
+
+    @property
+    def rgba(self) -> np.ndarray:
+        """(N, 4) uint8 view of the colors."""
+        return self.color.view(np.uint8).reshape(-1, 4)
+
+    def batch_of(self, indices) -> np.ndarray:
+        """Batch number of each point index."""
+        return np.searchsorted(self.batches["first"], np.asarray(indices, np.uint64), side="right") - 1
+
+    def positions(self, indices=None) -> np.ndarray:
+        """float64 (k, 3) world positions (30-bit precision) of point indices (all if None)."""
+        if indices is None:
+            indices = np.arange(self.n_points)
+        indices = np.atleast_1d(np.asarray(indices, np.int64))
+        b = self.batch_of(indices)
+        out = np.empty((len(indices), 3))
+        for batch in np.unique(b):
+            sel = b == batch
+            i = indices[sel]
+            rec = self.batches[batch]
+            out[sel] = dequantize(self.low[i], self.med[i], self.high[i], rec["bbox_min"], rec["bbox_max"], 30)
+        return out
+
+    def point_info(self, index: int) -> dict:
+        """Everything known about one point: position, color and attributes."""
+        if not 0 <= index < self.n_points:
+            raise IndexError(f"point index {index} out of range 0..{self.n_points - 1}")
+        info = {"index": int(index), "position": self.positions([index])[0].tolist()}
+        info["rgba"] = self.rgba[index].tolist()
+        for name, values in self.attributes.items():
+            v = values[index]
+            info[name] = v.tolist() if hasattr(v, "tolist") else v
+        return info
+
+    def __repr__(self) -> str:
+        lo, hi = self.bounds
+        return f"PointCloud({self.name!r}, {self.n_points:,} points, {len(self.batches):,} batches, bounds {lo.tolist()} .. {hi.tolist()})"
+
+
+def _valid_mask(xyz: np.ndarray) -> np.ndarray:
+    return np.all(np.isfinite(xyz) & (np.abs(xyz) <= MAX_ABS_COORDINATE), axis=1)
+
+
+def build_cloud(chunks: Iterable[PointChunk], name: str = "cloud", batch_size: int = BATCH_SIZE) -> PointCloud:
+    """Collect chunks, drop invalid points (counted and warned), sort by Morton code, batch, quantize."""
+    xyz_parts, rgba_parts, attr_parts = [], [], {}
+    skipped = 0
+    total = 0
+    attr_names: list[str] | None = None
+    for chunk in chunks:
+        valid = _valid_mask(chunk.xyz)
+        n_bad = int(len(valid) - valid.sum())
+        skipped += n_bad
+        keep = slice(None) if n_bad == 0 else valid
+        names = sorted(chunk.attributes)
+        if attr_names is None:
+            attr_names = names
+        elif names != attr_names:  # files of one scene with different attributes: keep the common ones
+            attr_names = [a for a in attr_names if a in names]
+        xyz_parts.append(chunk.xyz[keep])
+        rgba_parts.append(chunk.rgba[keep])
+        for a, values in chunk.attributes.items():
+            attr_parts.setdefault(a, []).append(values[keep])
+        total += len(xyz_parts[-1])
+    if total == 0:
+        detail = f" ({skipped:,} invalid points: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
+        raise EmptyCloudError(f"{name}: no valid points{detail}")
+    if skipped:
+        warnings.warn(f"{name}: skipped {skipped:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})", GigapointWarning, stacklevel=2)
+    xyz = xyz_parts[0] if len(xyz_parts) == 1 else np.concatenate(xyz_parts)
+    del xyz_parts
+    rgba = rgba_parts[0] if len(rgba_parts) == 1 else np.concatenate(rgba_parts)
+    del rgba_parts
+    attributes = {a: (v[0] if len(v) == 1 else np.concatenate(v)) for a, v in attr_parts.items() if a in (attr_names or [])}
+    return cloud_from_points(xyz, rgba, attributes, name=name, skipped=skipped, batch_size=batch_size)
+
+
+def cloud_from_points(xyz, rgba, attributes=None, name="cloud", skipped=0, batch_size=BATCH_SIZE) -> PointCloud:
+    """Build a PointCloud from valid float64 xyz (N, 3) and uint8 rgba (N, 4)."""
+    if batch_size < 1:
+        raise InputError(f"{name}: batch size must be >= 1, got {batch_size}")
+    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+    origin, edge = cube_of(lo, hi)
+    order = morton_order(morton_codes(xyz, origin, edge))
+    batches = make_batches(len(xyz), batch_size)
+    low, med, high = quantize(xyz, order, batches)
+    color = np.ascontiguousarray(rgba[order]).view(np.uint32).reshape(-1)
+    attrs = {a: np.ascontiguousarray(v[order]) for a, v in (attributes or {}).items()}
+    return PointCloud(batches, low, med, high, color, attrs, name=name, skipped=skipped)
+
+
+def from_arrays(xyz, rgb=None, name: str = "arrays", **attributes) -> PointCloud:
+    """A PointCloud from numpy arrays: float64 (N, 3) positions, (N, 3|4) uint8/uint16/float colors."""
+    xyz = np.asarray(xyz)
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise InputError(f"{name}: xyz must have shape (N, 3), got {xyz.shape}")
+    try:
+        chunk = PointChunk(xyz, rgb, {k: np.asarray(v) for k, v in attributes.items()})
+    except ValueError as exc:
+        raise InputError(f"{name}: {exc}") from None
+    return build_cloud([chunk], name=name)
+
+
+__all__ = ["PointCloud", "build_cloud", "cloud_from_points", "from_arrays", "BATCH_DTYPE"]

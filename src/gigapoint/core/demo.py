@@ -1,0 +1,275 @@
+"""A deterministic procedural demo scene of any size: terrain, roads, water, buildings, trees.
+
+Every point is a pure function of its index (a counter-based hash), so the scene is the
+same whatever the thread count, any sub-range can be generated alone, and generation runs
+at memory speed in parallel. The geometry does not depend on the point count: more points
+only mean a denser sampling of the same 1 km x 1 km town.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+from numba import njit, prange
+
+SCENE_SIZE = 1000.0  # metres
+_LOT = 100.0  # roads every 100 m
+_ROAD_HALF_WIDTH = 6.0
+_N_LOTS = int(SCENE_SIZE / _LOT)
+
+# ASPRS classes used by the scene
+CLASS_GROUND, CLASS_VEGETATION, CLASS_BUILDING, CLASS_WATER, CLASS_ROAD = 2, 5, 6, 9, 11
+
+
+@njit(inline="always")
+def _mix(z):
+    """splitmix64 finaliser: a well-distributed 64-bit hash."""
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+@njit(inline="always")
+def _uniform(seed, i, k):
+    """The k-th uniform [0, 1) number of point i."""
+    h = _mix(np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(i) * np.uint64(8) + np.uint64(k))
+    return float(h >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@njit(inline="always")
+def _height(x, y):
+    """Terrain height: rolling hills and a river valley along a sine."""
+    h = 12.0 * math.sin(x * 0.004) * math.cos(y * 0.005) + 4.0 * math.sin(x * 0.013 + y * 0.011)
+    h += 1.5 * math.sin(x * 0.041) * math.sin(y * 0.037)
+    river = y - (300.0 + 80.0 * math.sin(x * 0.006))
+    h -= 10.0 * math.exp(-(river * river) / 1800.0)
+    return h
+
+
+_GRID = 512  # terrain height samples per side (2 m spacing), bilinearly interpolated
+_N_TREES = 1500
+
+
+@njit(cache=True)
+def _height_grid():
+    g = np.empty((_GRID + 1, _GRID + 1))
+    step = SCENE_SIZE / _GRID
+    for a in range(_GRID + 1):
+        for b in range(_GRID + 1):
+            g[a, b] = _height(a * step, b * step)
+    return g
+
+
+@njit(inline="always")
+def _grid_height(grid, x, y):
+    fx = min(max(x / SCENE_SIZE * _GRID, 0.0), _GRID - 1e-9)
+    fy = min(max(y / SCENE_SIZE * _GRID, 0.0), _GRID - 1e-9)
+    ix = int(fx)
+    iy = int(fy)
+    tx = fx - ix
+    ty = fy - iy
+    h0 = grid[ix, iy] * (1 - tx) + grid[ix + 1, iy] * tx
+    h1 = grid[ix, iy + 1] * (1 - tx) + grid[ix + 1, iy + 1] * tx
+    return h0 * (1 - ty) + h1 * ty
+
+
+@njit(inline="always")
+def _is_road(x, y):
+    dx = abs((x % _LOT) - _LOT * 0.5)
+    dy = abs((y % _LOT) - _LOT * 0.5)
+    return dx > _LOT * 0.5 - _ROAD_HALF_WIDTH or dy > _LOT * 0.5 - _ROAD_HALF_WIDTH
+
+
+@njit(cache=True)
+def _lot_table(seed, grid):
+    """Per lot: has_building, width, depth, height, base height, gabled, style."""
+    lots = np.zeros((_N_LOTS, _N_LOTS, 7))
+    for lx in range(_N_LOTS):
+        for ly in range(_N_LOTS):
+            lot = lx * 131 + ly
+            cx = (lx + 0.5) * _LOT
+            cy = (ly + 0.5) * _LOT
+            river = cy - (300.0 + 80.0 * math.sin(cx * 0.006))  # lots by the river are parks
+            lots[lx, ly, 0] = 1.0 if abs(river) >= 90.0 and _uniform(seed, lot, 7) < 0.8 else 0.0
+            lots[lx, ly, 1] = 25.0 + 45.0 * _uniform(seed, lot, 1)
+            lots[lx, ly, 2] = 25.0 + 45.0 * _uniform(seed, lot, 2)
+            lots[lx, ly, 3] = 8.0 + 40.0 * _uniform(seed, lot, 3) ** 2
+            lots[lx, ly, 4] = _grid_height(grid, cx, cy)
+            lots[lx, ly, 5] = 1.0 if _uniform(seed, lot, 4) < 0.5 else 0.0
+            lots[lx, ly, 6] = _uniform(seed, lot, 5)
+    return lots
+
+
+@njit(cache=True)
+def _tree_table(seed, grid, lots):
+    """Per tree: x, y, base height, height, crown radius."""
+    trees = np.empty((_N_TREES, 5))
+    for t in range(_N_TREES):
+        tx = _uniform(seed, t, 61) * SCENE_SIZE
+        ty = _uniform(seed, t, 62) * SCENE_SIZE
+        lx = min(int(tx / _LOT), _N_LOTS - 1)
+        ly = min(int(ty / _LOT), _N_LOTS - 1)
+        if lots[lx, ly, 0] > 0 and _uniform(seed, t, 63) < 0.85:
+            # trees in built lots stand along the lot border
+            tx = (lx + 0.12) * _LOT if _uniform(seed, t, 64) < 0.5 else (lx + 0.88) * _LOT
+        base = _grid_height(grid, tx, ty)
+        if base < -5.0:  # no trees in the river
+            ty = min(ty + 120.0, SCENE_SIZE)
+            base = _grid_height(grid, tx, ty)
+        trees[t, 0] = tx
+        trees[t, 1] = ty
+        trees[t, 2] = base
+        trees[t, 3] = 6.0 + 14.0 * _uniform(seed, t, 65)
+        trees[t, 4] = 2.0 + 4.0 * _uniform(seed, t, 66)
+    return trees
+
+
+@njit(inline="always")
+def _terrain_point(seed, i, grid, out, rgba, cls, inten, j):
+    x = _uniform(seed, i, 1) * SCENE_SIZE
+    y = _uniform(seed, i, 2) * SCENE_SIZE
+    z = _grid_height(grid, x, y)
+    n = _uniform(seed, i, 3)
+    if z < -5.0:  # water surface
+        z = -5.0
+        r, g, b, c = 40 + 20 * n, 90 + 30 * n, 160 + 40 * n, CLASS_WATER
+    elif _is_road(x, y):
+        r = g = b = 95 + 30 * n
+        c = CLASS_ROAD
+    else:
+        t = min(max((z + 5.0) / 25.0, 0.0), 1.0)
+        r, g, b, c = 70 + 90 * t + 30 * n, 120 + 40 * t + 30 * n, 50 + 20 * t + 20 * n, CLASS_GROUND
+    out[j, 0], out[j, 1], out[j, 2] = x, y, z
+    rgba[j, 0], rgba[j, 1], rgba[j, 2], rgba[j, 3] = r, g, b, 255
+    cls[j] = c
+    inten[j] = 20000 + 20000 * n
+
+
+@njit(inline="always")
+def _building_point(seed, i, grid, lots, out, rgba, cls, inten, j):
+    lx = 0
+    ly = 0
+    found = False
+    for k in range(16):  # pick a lot that carries a building (bounded rejection)
+        lx = int(_uniform(seed, i, 10 + k) * _N_LOTS)
+        ly = int(_uniform(seed, i, 30 + k) * _N_LOTS)
+        if lots[lx, ly, 0] > 0:
+            found = True
+            break
+    if not found:
+        _terrain_point(seed, i, grid, out, rgba, cls, inten, j)
+        return
+    w, d, h, base, gabled, style = lots[lx, ly, 1], lots[lx, ly, 2], lots[lx, ly, 3], lots[lx, ly, 4], lots[lx, ly, 5], lots[lx, ly, 6]
+    cx = (lx + 0.5) * _LOT
+    cy = (ly + 0.5) * _LOT
+    u = _uniform(seed, i, 50)
+    v = _uniform(seed, i, 51)
+    n = _uniform(seed, i, 52)
+    wall_area = 2.0 * (w + d) * h
+    roof_area = w * d
+    if _uniform(seed, i, 53) * (wall_area + roof_area) < wall_area:
+        p = u * 2.0 * (w + d)
+        if p < w:
+            x, y = cx - w / 2 + p, cy - d / 2
+        elif p < w + d:
+            x, y = cx + w / 2, cy - d / 2 + (p - w)
+        elif p < 2 * w + d:
+            x, y = cx + w / 2 - (p - w - d), cy + d / 2
+        else:
+            x, y = cx - w / 2, cy + d / 2 - (p - 2 * w - d)
+        z = base + v * h
+        # windows: darker cells in a regular pattern
+        window = (p % 4.0) < 2.0 and ((z - base) % 3.5) < 1.8 and (z - base) > 1.0
+        if style < 0.33:
+            r, g, b = 200, 190, 170
+        elif style < 0.66:
+            r, g, b = 170, 80, 60
+        else:
+            r, g, b = 220, 220, 225
+        if window:
+            r, g, b = 50, 70, 90
+        r, g, b = r * (0.85 + 0.15 * n), g * (0.85 + 0.15 * n), b * (0.85 + 0.15 * n)
+    else:
+        x = cx - w / 2 + u * w
+        y = cy - d / 2 + v * d
+        z = base + h
+        if gabled > 0:
+            z += 0.35 * min(w, d) * (1.0 - abs(y - cy) / (d / 2)) * 0.5
+            r, g, b = 150 + 40 * n, 50 + 20 * n, 40 + 15 * n
+        else:
+            r, g, b = 90 + 25 * n, 90 + 25 * n, 95 + 25 * n
+    out[j, 0], out[j, 1], out[j, 2] = x, y, z
+    rgba[j, 0], rgba[j, 1], rgba[j, 2], rgba[j, 3] = r, g, b, 255
+    cls[j] = CLASS_BUILDING
+    inten[j] = 30000 + 15000 * n
+
+
+@njit(inline="always")
+def _tree_point(seed, i, trees, out, rgba, cls, inten, j):
+    t = int(_uniform(seed, i, 60) * _N_TREES)
+    tx, ty, base, height, radius = trees[t, 0], trees[t, 1], trees[t, 2], trees[t, 3], trees[t, 4]
+    n = _uniform(seed, i, 67)
+    a = _uniform(seed, i, 71) * 2 * math.pi
+    if _uniform(seed, i, 68) < 0.08:  # trunk
+        x = tx + 0.3 * math.cos(a)
+        y = ty + 0.3 * math.sin(a)
+        z = base + _uniform(seed, i, 70) * height * 0.5
+        r, g, b = 90 + 20 * n, 60 + 15 * n, 35 + 10 * n
+    else:  # crown: points in an ellipsoid shell
+        cz = 2.0 * _uniform(seed, i, 72) - 1.0
+        s = math.sqrt(1.0 - cz * cz)
+        rr = radius * (0.7 + 0.3 * _uniform(seed, i, 73))
+        x = tx + rr * s * math.cos(a)
+        y = ty + rr * s * math.sin(a)
+        z = base + height * 0.55 + cz * height * 0.45
+        shade = 0.6 + 0.4 * (cz + 1.0) * 0.5
+        r, g, b = (30 + 40 * n) * shade, (90 + 80 * n) * shade, (25 + 30 * n) * shade
+    out[j, 0], out[j, 1], out[j, 2] = x, y, z
+    rgba[j, 0], rgba[j, 1], rgba[j, 2], rgba[j, 3] = r, g, b, 255
+    cls[j] = CLASS_VEGETATION
+    inten[j] = 8000 + 12000 * n
+
+
+@njit(parallel=True, cache=True)
+def _generate(start, n, seed, grid, lots, trees, xyz, rgba, cls, inten):
+    for j in prange(n):
+        i = start + j
+        kind = _uniform(seed, i, 0)
+        if kind < 0.55:
+            _terrain_point(seed, i, grid, xyz, rgba, cls, inten, j)
+        elif kind < 0.80:
+            _building_point(seed, i, grid, lots, xyz, rgba, cls, inten, j)
+        else:
+            _tree_point(seed, i, trees, xyz, rgba, cls, inten, j)
+
+
+@functools.lru_cache(maxsize=4)
+def _scene_tables(seed: int):
+    grid = _height_grid()
+    lots = _lot_table(seed, grid)
+    return grid, lots, _tree_table(seed, grid, lots)
+
+
+def demo_arrays(n_points: int, seed: int = 0, start: int = 0, offset=(0.0, 0.0, 0.0)):
+    """Points ``start .. start+n_points`` of the demo scene: (xyz, rgba, attributes)."""
+    if n_points < 0:
+        raise ValueError(f"n_points must be >= 0, got {n_points}")
+    xyz = np.empty((n_points, 3), np.float64)
+    rgba = np.empty((n_points, 4), np.uint8)
+    cls = np.empty(n_points, np.uint8)
+    inten = np.empty(n_points, np.uint16)
+    _generate(start, n_points, seed, *_scene_tables(seed), xyz, rgba, cls, inten)
+    if any(offset):
+        xyz += np.asarray(offset, np.float64)
+    return xyz, rgba, {"classification": cls, "intensity": inten}
+
+
+def demo_chunks(n_points: int, seed: int = 0, chunk_size: int = 5_000_000, offset=(0.0, 0.0, 0.0)):
+    """The demo scene as a stream of PointChunks (bounded memory per chunk)."""
+    from .chunk import PointChunk
+
+    for start in range(0, n_points, chunk_size):
+        xyz, rgba, attrs = demo_arrays(min(chunk_size, n_points - start), seed, start, offset)
+        yield PointChunk(xyz, rgba, attrs)

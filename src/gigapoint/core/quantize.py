@@ -1,0 +1,109 @@
+"""Batch-relative 30-bit quantization split into low / medium / high 10-bit words.
+
+X30 = min(floor(2^30 (x - min) / size), 2^30 - 1); low = bits 20-29 of x, y, z packed
+into one u32 (x | y << 10 | z << 20), medium = bits 10-19, high = bits 0-9.
+Decoding takes the centre of the cell: min + (X + 0.5) * size / 2^bits.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from .layout import BATCH_DTYPE, COORD_BITS, WORD_BITS, WORD_MASK
+
+_SCALE30 = float(1 << COORD_BITS)
+_MAX30 = (1 << COORD_BITS) - 1
+
+
+@njit(parallel=True, cache=True)
+def _quantize_batches(xyz, order, firsts, counts, bbox_min, bbox_max, low, med, high):
+    """Per batch: bbox of xyz[order[first:first+count]], then the three 10-bit words."""
+    for b in prange(firsts.shape[0]):
+        f = firsts[b]
+        c = counts[b]
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        for i in range(f, f + c):
+            src = order[i]
+            for a in range(3):
+                v = xyz[src, a]
+                lo[a] = min(lo[a], v)
+                hi[a] = max(hi[a], v)
+        inv = np.empty(3)
+        for a in range(3):
+            bbox_min[b, a] = lo[a]
+            bbox_max[b, a] = hi[a]
+            size = hi[a] - lo[a]
+            inv[a] = _SCALE30 / size if size > 0.0 else 0.0
+        for i in range(f, f + c):
+            src = order[i]
+            wl = np.uint32(0)
+            wm = np.uint32(0)
+            wh = np.uint32(0)
+            for a in range(3):
+                q = min(np.int64((xyz[src, a] - lo[a]) * inv[a]), _MAX30)
+                q = max(q, 0)
+                s = np.uint32(WORD_BITS * a)
+                wl |= np.uint32((q >> 20) & WORD_MASK) << s
+                wm |= np.uint32((q >> 10) & WORD_MASK) << s
+                wh |= np.uint32(q & WORD_MASK) << s
+            low[i] = wl
+            med[i] = wm
+            high[i] = wh
+
+
+def make_batches(n_points: int, batch_size: int) -> np.ndarray:
+    """Batch records covering points 0..n-1 in runs of ``batch_size`` (bboxes left empty)."""
+    n_batches = (n_points + batch_size - 1) // batch_size
+    batches = np.zeros(n_batches, BATCH_DTYPE)
+    batches["first"] = np.arange(n_batches, dtype=np.uint64) * batch_size
+    batches["count"] = np.minimum(batch_size, n_points - batches["first"].astype(np.int64))
+    return batches
+
+
+def quantize(xyz: np.ndarray, order: np.ndarray, batches: np.ndarray):
+    """Fill the batches' bboxes and return (low, med, high) u32 words for xyz[order]."""
+    n = len(order)
+    low = np.empty(n, np.uint32)
+    med = np.empty(n, np.uint32)
+    high = np.empty(n, np.uint32)
+    bmin = np.empty((len(batches), 3))
+    bmax = np.empty((len(batches), 3))
+    _quantize_batches(
+        xyz,
+        order,
+        batches["first"].astype(np.int64),
+        batches["count"].astype(np.int64),
+        bmin,
+        bmax,
+        low,
+        med,
+        high,
+    )
+    batches["bbox_min"] = bmin
+    batches["bbox_max"] = bmax
+    return low, med, high
+
+
+def unpack_words(words: np.ndarray) -> np.ndarray:
+    """(N,) u32 words -> (N, 3) int64 10-bit components x, y, z."""
+    w = words.astype(np.int64)
+    return np.stack([(w >> (WORD_BITS * a)) & WORD_MASK for a in range(3)], axis=1)
+
+
+def fixed_point(low, med, high, bits: int) -> np.ndarray:
+    """(N, 3) integer coordinates on the 2^bits grid from the first bits/10 words."""
+    q = unpack_words(low)
+    if bits >= 20:
+        q = (q << WORD_BITS) | unpack_words(med)
+    if bits >= 30:
+        q = (q << WORD_BITS) | unpack_words(high)
+    return q
+
+
+def dequantize(low, med, high, bbox_min, bbox_max, bits: int = 30) -> np.ndarray:
+    """float64 world positions of points of one batch at a given precision (cell centres)."""
+    q = fixed_point(low, med, high, bits).astype(np.float64)
+    size = np.asarray(bbox_max, np.float64) - np.asarray(bbox_min, np.float64)
+    return np.asarray(bbox_min, np.float64) + (q + 0.5) * (size / float(1 << bits))

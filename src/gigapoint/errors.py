@@ -1,0 +1,39 @@
+"""One exception hierarchy for gigapoint. Library code raises these; only the CLI exits."""
+
+from __future__ import annotations
+
+
+class GigapointError(Exception):
+    """Base class of every error gigapoint raises on purpose.
+
+    ``str(err)`` is always one line that names the file or option and the problem,
+    so the CLI can print it as it is.
+    """
+
+
+class InputError(GigapointError):
+    """A file or array that cannot be read: missing, truncated, corrupt, wrong format."""
+
+
+class UnsupportedFormatError(InputError):
+    """No reader recognises the file."""
+
+
+class EmptyCloudError(InputError):
+    """The input holds no valid point."""
+
+
+class CameraError(GigapointError):
+    """Impossible camera or image settings (zero size, NaN eye, eye == target...)."""
+
+
+class SettingsError(GigapointError):
+    """An invalid RenderSettings value."""
+
+
+class BackendUnavailableError(GigapointError):
+    """A requested backend is not installed or cannot start."""
+
+
+class GigapointWarning(UserWarning):
+    """Warnings about degenerate but valid input (skipped points, empty views)."""

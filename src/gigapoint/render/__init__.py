@@ -1,0 +1,8 @@
+"""Cameras, settings, batch selection and the renderer facade."""
+
+from .camera import VIEWS, Camera
+from .frame import Frame, RenderStats
+from .renderer import render, render_frame
+from .settings import RenderSettings, parse_color
+
+__all__ = ["VIEWS", "Camera", "Frame", "RenderSettings", "RenderStats", "parse_color", "render", "render_frame"]

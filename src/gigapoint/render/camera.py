@@ -1,0 +1,208 @@
+"""Camera: perspective or orthographic, built by look-at, orbit or fit-to-bounds.
+
+Conventions: right-handed world, z up by default; the camera looks down its -z axis;
+image row 0 is the top. ``fov`` is the vertical field of view in degrees. Orbit angles:
+yaw around the up axis measured from +x, pitch above the horizon (positive looks down).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..errors import CameraError
+
+MAX_IMAGE_SIDE = 16_384
+VIEWS = {
+    # name: (yaw, pitch) in degrees
+    "top": (-90.0, 90.0),
+    "front": (-90.0, 0.0),
+    "back": (90.0, 0.0),
+    "side": (0.0, 0.0),
+    "left": (180.0, 0.0),
+    "right": (0.0, 0.0),
+    "iso": (-135.0, 35.264),
+}
+
+
+def _vec3(value, what: str) -> tuple[float, float, float]:
+    try:
+        v = tuple(float(c) for c in value)
+    except (TypeError, ValueError):
+        raise CameraError(f"camera {what} must be three numbers, got {value!r}") from None
+    if len(v) != 3:
+        raise CameraError(f"camera {what} must be three numbers, got {len(v)}")
+    if not all(math.isfinite(c) for c in v):
+        raise CameraError(f"camera {what} must be finite, got {v}")
+    return v
+
+
+@dataclass(frozen=True)
+class Camera:
+    eye: tuple[float, float, float]
+    target: tuple[float, float, float]
+    up: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    fov: float = 60.0
+    width: int = 1920
+    height: int = 1080
+    projection: str = "perspective"
+    ortho_height: float | None = None  # world units seen vertically (orthographic only)
+    near: float | None = None  # None: chosen from the scene bounds at render time
+    far: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "eye", _vec3(self.eye, "eye"))
+        object.__setattr__(self, "target", _vec3(self.target, "target"))
+        object.__setattr__(self, "up", _vec3(self.up, "up"))
+        for name in ("width", "height"):
+            v = getattr(self, name)
+            if isinstance(v, float) and v.is_integer():
+                v = int(v)
+            if not isinstance(v, (int, np.integer)) or not 1 <= v <= MAX_IMAGE_SIDE:
+                raise CameraError(f"image {name} must be an integer in 1..{MAX_IMAGE_SIDE}, got {v!r}")
+            object.__setattr__(self, name, int(v))
+        if self.projection not in ("perspective", "orthographic"):
+            raise CameraError(f"camera projection must be 'perspective' or 'orthographic', got {self.projection!r}")
+        if not (isinstance(self.fov, (int, float)) and math.isfinite(self.fov) and 0.01 <= self.fov <= 179.0):
+            raise CameraError(f"camera fov must be between 0.01 and 179 degrees, got {self.fov!r}")
+        d = np.subtract(self.target, self.eye)
+        if not np.linalg.norm(d) > 0:
+            raise CameraError("camera eye and target are the same point")
+        if self.projection == "orthographic":
+            h = self.ortho_height
+            if h is None or not (math.isfinite(h) and h > 0):
+                raise CameraError(f"orthographic camera needs ortho_height > 0, got {h!r}")
+        if np.linalg.norm(self.up) == 0:
+            raise CameraError("camera up vector is zero")
+        for name in ("near", "far"):
+            v = getattr(self, name)
+            if v is not None and not (math.isfinite(v) and v > 0):
+                raise CameraError(f"camera {name} must be > 0, got {v!r}")
+        if self.near is not None and self.far is not None and self.near >= self.far:
+            raise CameraError(f"camera near ({self.near}) must be less than far ({self.far})")
+
+    # --- constructors -------------------------------------------------------------
+    @classmethod
+    def look_at(cls, eye, target, up=(0, 0, 1), fov=60.0, width=1920, height=1080, **kw) -> Camera:
+        return cls(eye=eye, target=target, up=up, fov=fov, width=width, height=height, **kw)
+
+    @classmethod
+    def orbit(cls, target, yaw, pitch, distance, up=(0, 0, 1), fov=60.0, width=1920, height=1080, **kw) -> Camera:
+        """Camera at ``distance`` from ``target``, at (yaw, pitch) degrees (z-up world)."""
+        if not (math.isfinite(distance) and distance > 0):
+            raise CameraError(f"orbit distance must be > 0, got {distance!r}")
+        target = np.asarray(_vec3(target, "target"))
+        yaw_r, pitch_r = math.radians(yaw), math.radians(pitch)
+        direction = np.array([math.cos(pitch_r) * math.cos(yaw_r), math.cos(pitch_r) * math.sin(yaw_r), math.sin(pitch_r)])
+        eye = target + distance * direction
+        if abs(pitch) >= 89.999:  # straight down or up: keep the image's up along the yaw direction
+            up = (-math.cos(yaw_r), -math.sin(yaw_r), 0.0) if pitch > 0 else (math.cos(yaw_r), math.sin(yaw_r), 0.0)
+        return cls(eye=tuple(eye), target=tuple(target), up=up, fov=fov, width=width, height=height, **kw)
+
+    @classmethod
+    def fit(cls, bounds, view="iso", width=1920, height=1080, fov=60.0, projection="perspective", margin=1.05, **kw) -> Camera:
+        """Camera that frames the box ``bounds = (min, max)`` from a named view or (yaw, pitch)."""
+        lo = np.asarray(_vec3(bounds[0], "bounds min"))
+        hi = np.asarray(_vec3(bounds[1], "bounds max"))
+        if isinstance(view, str):
+            if view not in VIEWS:
+                raise CameraError(f"unknown view {view!r}; choose one of {', '.join(VIEWS)}")
+            yaw, pitch = VIEWS[view]
+        else:
+            yaw, pitch = view
+        center = (lo + hi) / 2
+        radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-9 * max(1.0, float(np.abs(center).max())), 1e-9)
+        aspect = width / height
+        half_v = math.radians(fov) / 2
+        half = min(half_v, math.atan(math.tan(half_v) * aspect))
+        if projection == "orthographic":
+            distance = radius * 3
+            ortho_height = 2 * radius * margin * max(1.0, 1.0 / aspect)
+            return cls.orbit(center, yaw, pitch, distance, fov=fov, width=width, height=height, projection=projection, ortho_height=ortho_height, **kw)
+        distance = radius * margin / math.sin(half)
+        return cls.orbit(center, yaw, pitch, distance, fov=fov, width=width, height=height, **kw)
+
+    def with_size(self, width: int, height: int) -> Camera:
+        return replace(self, width=width, height=height)
+
+    # --- matrices -----------------------------------------------------------------
+    @property
+    def aspect(self) -> float:
+        return self.width / self.height
+
+    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Camera right, up and backward unit vectors (float64)."""
+        eye = np.asarray(self.eye)
+        back = eye - np.asarray(self.target)
+        back /= np.linalg.norm(back)
+        up = np.asarray(self.up, np.float64)
+        right = np.cross(up, back)
+        if np.linalg.norm(right) < 1e-9 * np.linalg.norm(up):  # up parallel to the view: pick another
+            alt = np.array([0.0, 1.0, 0.0]) if abs(back[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+            right = np.cross(alt, back)
+        right /= np.linalg.norm(right)
+        true_up = np.cross(back, right)
+        return right, true_up, back
+
+    def view_matrix(self) -> np.ndarray:
+        """float64 world -> camera matrix (camera looks down -z)."""
+        right, up, back = self.basis()
+        eye = np.asarray(self.eye)
+        m = np.eye(4)
+        m[0, :3], m[1, :3], m[2, :3] = right, up, back
+        m[:3, 3] = -m[:3, :3] @ eye
+        return m
+
+    def screen_rows(self) -> np.ndarray:
+        """float64 4x4 rows mapping world points to (x', y', w, depth).
+
+        Pixel coordinates are x'/w and y'/w (0..width, 0..height, row 0 at the top);
+        depth is the distance along the view direction (positive in front).
+        """
+        v = self.view_matrix()
+        forward = -v[2]  # distance along the view direction
+        half_w, half_h = self.width / 2.0, self.height / 2.0
+        rows = np.zeros((4, 4))
+        if self.projection == "perspective":
+            t = math.tan(math.radians(self.fov) / 2)
+            w_row = forward
+            rows[0] = half_w / (t * self.aspect) * v[0] + half_w * w_row
+            rows[1] = -half_h / t * v[1] + half_h * w_row
+        else:
+            extent_v = self.ortho_height / 2
+            extent_h = extent_v * self.aspect
+            w_row = np.array([0.0, 0.0, 0.0, 1.0])
+            rows[0] = half_w / extent_h * v[0] + half_w * w_row
+            rows[1] = -half_h / extent_v * v[1] + half_h * w_row
+        rows[2] = w_row
+        rows[3] = forward
+        return rows
+
+    def clip_range(self, bounds) -> tuple[float, float]:
+        """(near, far) depths: the camera's own, else chosen to enclose ``bounds``."""
+        lo, hi = np.asarray(bounds[0], np.float64), np.asarray(bounds[1], np.float64)
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        forward = -self.view_matrix()[2]
+        depths = corners @ forward[:3] + forward[3]
+        far = self.far if self.far is not None else max(float(depths.max()) * 1.001 + 1e-9, 1e-6)
+        if self.near is not None:
+            near = self.near
+        else:
+            extent = float(np.linalg.norm(hi - lo))
+            near = max(float(depths.min()) * 0.999, far * 1e-6, extent * 1e-9, 1e-9)
+        return near, max(far, near * 1.000001)
+
+    def ray(self, px: float, py: float) -> tuple[np.ndarray, np.ndarray]:
+        """World-space origin and unit direction through pixel coordinates (px, py)."""
+        right, up, back = self.basis()
+        nx = (px / self.width) * 2 - 1
+        ny = 1 - (py / self.height) * 2
+        if self.projection == "perspective":
+            t = math.tan(math.radians(self.fov) / 2)
+            d = -back + nx * t * self.aspect * right + ny * t * up
+            return np.asarray(self.eye), d / np.linalg.norm(d)
+        ev = self.ortho_height / 2
+        origin = np.asarray(self.eye) + nx * ev * self.aspect * right + ny * ev * up
+        return origin, -back

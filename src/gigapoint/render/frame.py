@@ -1,0 +1,58 @@
+"""Frame: what a render produces — the visibility buffer and everything derived from it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core.layout import EMPTY_PIXEL
+
+
+@dataclass
+class RenderStats:
+    points_total: int = 0
+    batches_total: int = 0
+    batches_culled: int = 0
+    batches_rendered: int = 0
+    points_processed: int = 0
+    precision_histogram: dict[int, int] = field(default_factory=lambda: {10: 0, 20: 0, 30: 0})
+    visible_pixels: int = 0
+    time_ms: float = 0.0
+    raster_ms: float = 0.0
+    backend: str = ""
+
+    @property
+    def points_per_second(self) -> float:
+        return self.points_processed / (self.time_ms / 1000.0) if self.time_ms > 0 else 0.0
+
+    def as_dict(self) -> dict:
+        d = dict(self.__dict__)
+        d["precision_histogram"] = {str(k): v for k, v in self.precision_histogram.items()}
+        d["points_per_second"] = self.points_per_second
+        return d
+
+
+@dataclass
+class Frame:
+    visibility: np.ndarray  # (H, W) u64: depth bits << 32 | point index; all ones = empty
+    image: np.ndarray  # (H, W, 4) uint8 RGBA
+    stats: RenderStats
+
+    @property
+    def empty(self) -> np.ndarray:
+        return self.visibility == EMPTY_PIXEL
+
+    @property
+    def depth(self) -> np.ndarray:
+        """(H, W) float32 distance along the view direction; inf where no point."""
+        d = (self.visibility >> np.uint64(32)).astype(np.uint32).view(np.float32).copy()
+        d[self.empty] = np.inf
+        return d
+
+    @property
+    def index(self) -> np.ndarray:
+        """(H, W) int64 index of the visible point (into the cloud's buffers); -1 where none."""
+        idx = (self.visibility & np.uint64(0xFFFFFFFF)).astype(np.int64)
+        idx[self.empty] = -1
+        return idx

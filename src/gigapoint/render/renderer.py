@@ -1,0 +1,73 @@
+"""The renderer facade: camera + settings -> selection -> backend -> Frame."""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+
+from ..backends import get_backend
+from ..errors import GigapointError, GigapointWarning
+from .camera import Camera
+from .frame import Frame, RenderStats
+from .selection import select
+from .settings import RenderSettings
+
+_MAX_INDEX = 0xFFFFFFFF  # point indices live in the low 32 bits of the visibility buffer
+
+
+def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) -> Frame:
+    """Render ``cloud`` into a Frame (visibility buffer, image, stats)."""
+    settings = settings or RenderSettings()
+    if not isinstance(camera, Camera):
+        raise GigapointError(f"camera must be a gigapoint.Camera, got {type(camera).__name__}")
+    if cloud.n_points > _MAX_INDEX:
+        raise GigapointError(f"{cloud.name}: {cloud.n_points:,} points exceed the 2^32 a brute-force frame can index; convert it to an octree")
+    t0 = time.perf_counter()
+    backend = get_backend(settings.backend)
+    width, height = camera.width, camera.height
+    near, far = camera.clip_range(cloud.bounds)
+    rows = camera.screen_rows()
+    sel = select(
+        cloud.batches,
+        rows,
+        width,
+        height,
+        near,
+        far,
+        settings.precision_threshold_px,
+        settings.adaptive_precision,
+        settings.frustum_culling,
+    )
+    t1 = time.perf_counter()
+    visibility = backend.rasterize(cloud, sel, width, height, near, far, settings.threads)
+    t2 = time.perf_counter()
+    colors = backend.resolve(visibility, cloud.color, settings.background)
+    image = colors.view(np.uint8).reshape(height, width, 4)
+    visibility = visibility.reshape(height, width)
+    counts = cloud.batches["count"][sel.ids].astype(np.int64)
+    stats = RenderStats(
+        points_total=cloud.n_points,
+        batches_total=len(cloud.batches),
+        batches_culled=sel.n_culled,
+        batches_rendered=len(sel.ids),
+        points_processed=int(counts.sum()),
+        precision_histogram={b: int(counts[sel.bits == b].sum()) for b in (10, 20, 30)},
+        time_ms=(time.perf_counter() - t0) * 1000.0,
+        raster_ms=(t2 - t1) * 1000.0,
+        backend=backend.name,
+    )
+    frame = Frame(visibility, image, stats)
+    stats.visible_pixels = int((~frame.empty).sum())
+    if stats.visible_pixels == 0:
+        warnings.warn(f"{cloud.name}: no point is in view of the camera; the image shows only the background", GigapointWarning, stacklevel=2)
+    return frame
+
+
+def render(cloud, camera: Camera, settings: RenderSettings | None = None, return_stats: bool = False, **setting_overrides):
+    """(H, W, 4) uint8 RGBA image of ``cloud`` seen by ``camera`` (and RenderStats if asked)."""
+    if setting_overrides:
+        settings = (settings or RenderSettings()).replace(**setting_overrides)
+    frame = render_frame(cloud, camera, settings)
+    return (frame.image, frame.stats) if return_stats else frame.image
