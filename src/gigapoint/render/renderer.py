@@ -8,9 +8,11 @@ import warnings
 import numpy as np
 
 from ..backends import get_backend
+from ..backends.numba_cpu.raster import count_covered
 from ..errors import GigapointError, GigapointWarning
 from .camera import Camera
 from .frame import Frame, RenderStats
+from .passes import finish_frame, wants_composite
 from .selection import select
 from .settings import RenderSettings
 
@@ -24,6 +26,10 @@ def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) 
         raise GigapointError(f"camera must be a gigapoint.Camera, got {type(camera).__name__}")
     if cloud.n_points > _MAX_INDEX:
         raise GigapointError(f"{cloud.name}: {cloud.n_points:,} points exceed the 2^32 a brute-force frame can index; convert it to an octree")
+    if wants_composite(settings):  # supersampling / stereo: whole renders combined (passes/compose.py)
+        from .passes.compose import composite_frame
+
+        return composite_frame(cloud, camera, settings)
     t0 = time.perf_counter()
     backend = get_backend(settings.backend)
     width, height = camera.width, camera.height
@@ -43,7 +49,7 @@ def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) 
     t1 = time.perf_counter()
     visibility = backend.rasterize(cloud, sel, width, height, near, far, settings.threads)
     t2 = time.perf_counter()
-    colors = backend.resolve(visibility, cloud.color, settings.background)
+    visibility, colors = finish_frame(backend, cloud, camera, sel, visibility, settings, near, far)
     image = colors.view(np.uint8).reshape(height, width, 4)
     visibility = visibility.reshape(height, width)
     counts = cloud.batches["count"][sel.ids].astype(np.int64)
@@ -59,7 +65,7 @@ def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) 
         backend=backend.name,
     )
     frame = Frame(visibility, image, stats)
-    stats.visible_pixels = int((~frame.empty).sum())
+    stats.visible_pixels = int(count_covered(frame.visibility.reshape(-1)))
     if stats.visible_pixels == 0:
         warnings.warn(f"{cloud.name}: no point is in view of the camera; the image shows only the background", GigapointWarning, stacklevel=2)
     return frame

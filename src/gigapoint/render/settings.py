@@ -48,6 +48,28 @@ class RenderSettings:
     precision_threshold_px: float = 500.0  # projected batch size below which 10 bits suffice
     adaptive_precision: bool = True  # False: always 30 bits (for comparisons)
     frustum_culling: bool = True
+    # --- image quality (render/passes, render/colors.py) ---
+    color_mode: str = "rgb"  # rgb | intensity | classification | elevation | return_number | point_source_id | batch | level | normal
+    colormap: str = "viridis"  # elevation colormap: viridis | turbo | terrain | inferno | gray
+    elevation_range: tuple[float, float] | None = None  # None: the cloud's z extent
+    intensity_range: tuple[float, float] | None = None  # None: 2nd..98th percentile
+    edl: bool = False  # eye-dome lighting
+    edl_strength: float = 1.0
+    edl_radius: float = 1.4  # pixels
+    fill_holes: int = 0  # 0 off; 1, 2, 3 = depth-aware dilation in a 3x3, 5x5, 7x7 window
+    fill_holes_foveated: bool = False  # window grows from 3x3 in the centre to the full size at the border
+    hqs: bool = False  # high-quality shading: average the colors of all points near the closest depth
+    hqs_depth_tolerance: float = 0.01  # relative depth range behind the closest point that blends
+    point_size: int = 1  # pixels (side of the square / diameter of the disc)
+    point_shape: str = "square"  # square | round
+    size_mode: str = "fixed"  # fixed | attenuated (point_world_size metres, clamped to point_size px)
+    point_world_size: float = 0.0  # world-space point size for size_mode='attenuated'
+    supersample: int = 1  # 1, 2 or 4: render larger and box-filter down
+    stereo: str = "none"  # none | side-by-side | anaglyph
+    ipd: float = 0.065  # eye distance, world units
+    convergence: float | None = None  # zero-parallax distance; None: the camera's target distance
+    lighting: bool = False  # Blinn-Phong headlight from the cloud's normals
+    shininess: float = 32.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "background", parse_color(self.background))
@@ -58,6 +80,7 @@ class RenderSettings:
         t = self.precision_threshold_px
         if not (isinstance(t, (int, float)) and math.isfinite(t) and t > 0):
             raise SettingsError(f"precision_threshold_px must be > 0, got {t!r}")
+        _validate_quality(self)
 
     def replace(self, **changes) -> RenderSettings:
         names = {f.name for f in fields(self)}
@@ -65,3 +88,64 @@ class RenderSettings:
         if unknown:
             raise SettingsError(f"unknown render setting(s): {', '.join(sorted(unknown))}")
         return replace(self, **changes)
+
+
+def _number(name, value, lo=None, hi=None, integer=False, lo_open=False):
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if ok and integer:
+        ok = float(value).is_integer()
+    if ok and lo is not None:
+        ok = value > lo if lo_open else value >= lo
+    if ok and hi is not None:
+        ok = value <= hi
+    if not ok:
+        rng = f" in {'(' if lo_open else '['}{lo}, {hi}]" if hi is not None else (f" {'>' if lo_open else '>='} {lo}" if lo is not None else "")
+        raise SettingsError(f"{name} must be a{'n integer' if integer else ' number'}{rng}, got {value!r}")
+
+
+def _range(s, name) -> None:
+    v = getattr(s, name)
+    if v is None:
+        return
+    try:
+        lo, hi = (float(x) for x in v)
+    except (TypeError, ValueError):
+        raise SettingsError(f"{name} must be two numbers (low, high), got {v!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+        raise SettingsError(f"{name} must be finite with high > low, got {v!r}")
+    object.__setattr__(s, name, (lo, hi))
+
+
+def _choice(s, name, choices) -> None:
+    if getattr(s, name) not in choices:
+        raise SettingsError(f"{name} must be one of {', '.join(map(str, choices))}, got {getattr(s, name)!r}")
+
+
+def _validate_quality(s: RenderSettings) -> None:
+    from .colors import COLOR_MODES, COLORMAPS
+
+    _choice(s, "color_mode", COLOR_MODES)
+    _choice(s, "colormap", COLORMAPS)
+    _range(s, "elevation_range")
+    _range(s, "intensity_range")
+    _number("edl_strength", s.edl_strength, 0.0)
+    _number("edl_radius", s.edl_radius, 0.5, 16.0)
+    _number("fill_holes", s.fill_holes, 0, 3, integer=True)
+    _number("hqs_depth_tolerance", s.hqs_depth_tolerance, 0.0, 1.0)
+    _number("point_size", s.point_size, 1, 64, integer=True)
+    _choice(s, "point_shape", ("square", "round"))
+    _choice(s, "size_mode", ("fixed", "attenuated"))
+    _number("point_world_size", s.point_world_size, 0.0)
+    if s.size_mode == "attenuated" and not s.point_world_size > 0:
+        raise SettingsError("size_mode 'attenuated' needs point_world_size > 0 (metres)")
+    _choice(s, "supersample", (1, 2, 4))
+    _choice(s, "stereo", ("none", "side-by-side", "anaglyph"))
+    _number("ipd", s.ipd, 0.0)
+    if s.convergence is not None:
+        _number("convergence", s.convergence, 0.0, lo_open=True)
+    _number("shininess", s.shininess, 0.0, 10_000.0)
+    for name in ("edl", "hqs", "fill_holes_foveated", "lighting"):
+        if not isinstance(getattr(s, name), (bool, int)):
+            raise SettingsError(f"{name} must be true or false, got {getattr(s, name)!r}")
+    object.__setattr__(s, "fill_holes", int(s.fill_holes))
+    object.__setattr__(s, "point_size", int(s.point_size))

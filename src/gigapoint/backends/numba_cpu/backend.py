@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+import threading
+
 import numba
 import numpy as np
 
 from . import raster
+
+# Numba's parallel kernels are not re-entrant from several Python threads (the workqueue
+# layer aborts) and the scratch buffers are shared: one frame at a time per process.
+_KERNEL_LOCK = threading.RLock()
 
 
 def split_by_points(counts: np.ndarray, n_parts: int) -> np.ndarray:
@@ -43,6 +49,10 @@ class NumbaCpuBackend:
         batches = cloud.batches[selection.ids]
         counts = batches["count"].astype(np.int64)
         starts = split_by_points(counts, n_threads)
+        with _KERNEL_LOCK:
+            return self._rasterize_locked(cloud, width, height, near, far, n_threads, batches, counts, starts, selection)
+
+    def _rasterize_locked(self, cloud, width, height, near, far, n_threads, batches, counts, starts, selection):
         frame = np.empty(width * height, np.uint64)
         raster.fill_empty(frame)
         scratch = self._scratch_for(n_threads, width * height)
@@ -77,5 +87,6 @@ class NumbaCpuBackend:
         """u32 RGBA per pixel: the winning point's color or the background."""
         bg = np.array(background_rgba, np.uint8).view(np.uint32)[0]
         out = np.empty(visibility.shape[0], np.uint32)
-        raster.resolve_colors(visibility, color, bg, out)
+        with _KERNEL_LOCK:
+            raster.resolve_colors(visibility, color, bg, out)
         return out

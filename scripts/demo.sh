@@ -1,0 +1,10 @@
+#!/usr/bin/env bash
+# The main job on built-in defaults: install, render the demo scene and the shared autzen sample.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+EXTRAS=all bash scripts/setup_env.sh
+mkdir -p out
+.venv/bin/gigapoint demo --points "${POINTS:-20000000}" -o out/demo.png
+if [ -f ../shared/data/autzen_trim.laz ]; then
+  .venv/bin/gigapoint render ../shared/data/autzen_trim.laz -o out/autzen.png --view iso --stats
+fi

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# The whole test suite: installs what it needs (system packages when run as root), then pytest.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+  need=""
+  command -v chromium >/dev/null || need="$need chromium"
+  [ -e /usr/share/vulkan/icd.d/lvp_icd.x86_64.json ] || ls /usr/share/vulkan/icd.d/lvp_icd*.json >/dev/null 2>&1 || need="$need mesa-vulkan-drivers"
+  dpkg -s libegl1 libgl1 libgl1-mesa-dri libgles2 >/dev/null 2>&1 || need="$need libegl1 libgl1 libgl1-mesa-dri libgles2"
+  if [ -n "$need" ]; then
+    apt-get update -qq >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $need >/dev/null
+  fi
+fi
+EXTRAS="all,test" bash scripts/setup_env.sh
+exec .venv/bin/python -m pytest -q "$@"

@@ -1,0 +1,67 @@
+"""The gigapoint command line: thin wrappers that parse arguments and call the library.
+
+Every command module registers itself on ``app``; ``main`` turns GigapointError (and the
+few OS errors a user can cause) into one line on stderr and a non-zero exit.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import warnings
+
+import typer
+
+from ..errors import GigapointError, GigapointWarning
+
+app = typer.Typer(
+    name="gigapoint",
+    help="Render massive point clouds fast: LAS/LAZ/PLY/XYZ/NPY to images, octrees and a browser viewer.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    print(f"warning: {message}", file=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``gigapoint`` script."""
+    from . import commands  # noqa: F401  (registers the commands)
+
+    warnings.showwarning = _show_warning
+    warnings.simplefilter("default", GigapointWarning)
+    try:
+        app(args=argv, standalone_mode=False)
+    except GigapointError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except MemoryError:
+        print("error: out of memory", file=sys.stderr)
+        return 1
+    except OSError as exc:
+        print(f"error: {exc.filename or ''}: {exc.strerror or exc}".replace(": : ", ": "), file=sys.stderr)
+        return 1
+    except SystemExit as exc:
+        return int(exc.code or 0) if isinstance(exc.code, int) else 1
+    except Exception as exc:
+        # typer bundles click; its usage errors carry show() and exit_code
+        if type(exc).__name__ == "Abort":
+            return 130
+        if hasattr(exc, "show") and hasattr(exc, "exit_code"):
+            exc.show()
+            return int(exc.exit_code)
+        if os.environ.get("GIGAPOINT_DEBUG"):
+            raise
+        print(f"internal error: {type(exc).__name__}: {exc} (set GIGAPOINT_DEBUG=1 for the traceback)", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

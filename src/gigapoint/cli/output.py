@@ -1,0 +1,58 @@
+"""Writing outputs safely: never over a user's file without --overwrite, never half-written."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import GigapointError
+
+IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff", ".bmp"}
+
+
+def check_output(path: Path, overwrite: bool, suffixes=IMAGE_SUFFIXES) -> Path:
+    """Validate an output path before any work is done."""
+    path = Path(path)
+    if suffixes is not None and path.suffix.lower() not in suffixes:
+        raise GigapointError(f"{path}: unsupported output type {path.suffix or '(none)'!r}; use one of {', '.join(sorted(suffixes))}")
+    if path.is_dir():
+        raise GigapointError(f"{path}: is a directory, not an output file")
+    if path.exists() and not overwrite:
+        raise GigapointError(f"{path}: already exists (pass --overwrite to replace it)")
+    if not path.parent.exists():
+        raise GigapointError(f"{path}: directory {path.parent} does not exist")
+    return path
+
+
+def _atomic_write(path: Path, write) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def save_image(image: np.ndarray, path: Path) -> None:
+    """Write an (H, W, 4) uint8 image; formats without alpha get RGB. Atomic."""
+    from PIL import Image
+
+    path = Path(path)
+    fmt = {".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF", ".tiff": "TIFF"}.get(path.suffix.lower())
+    img = Image.fromarray(image)
+    if path.suffix.lower() in (".jpg", ".jpeg", ".bmp"):
+        img = img.convert("RGB")
+    _atomic_write(path, lambda tmp: img.save(tmp, format=fmt or path.suffix[1:].upper()))
+
+
+def save_array(array: np.ndarray, path: Path) -> None:
+    def write(tmp):
+        with open(tmp, "wb") as f:
+            np.save(f, array)
+
+    _atomic_write(Path(path), write)

@@ -1,0 +1,60 @@
+"""Eye-dome lighting (Boucheny 2009, as in Potree): screen-space shading from log-depth.
+
+For every pixel, each of 8 neighbours at ``radius`` pixels adds max(0, log2 d - log2 d_n)
+(100 if this pixel is empty: the dark outline around silhouettes); the color is scaled by
+exp(-300 * strength * sum / 8). Needs only the visibility buffer's depth.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...backends.numba_cpu import passes as kernels
+from ...core.layout import EMPTY_PIXEL
+
+N_NEIGHBOURS = 8
+
+
+def neighbour_offsets(radius: float, n: int = N_NEIGHBOURS) -> np.ndarray:
+    """(n, 2) int32 pixel offsets (dx, dy) of the samples on a circle (nearest pixel)."""
+    a = 2.0 * math.pi * np.arange(n) / n
+    return np.stack([np.rint(radius * np.cos(a)), np.rint(radius * np.sin(a))], axis=1).astype(np.int32)
+
+
+def eye_dome_lighting(vis: np.ndarray, colors: np.ndarray, width: int, height: int, strength: float = 1.0, radius: float = 1.4) -> np.ndarray:
+    """(H*W,) u32 RGBA colors shaded by EDL (vis: (H*W,) u64 visibility buffer)."""
+    vis = np.ascontiguousarray(vis).reshape(-1)
+    logd = np.empty(vis.shape[0], np.float32)
+    empty = np.empty(vis.shape[0], np.float32)
+    kernels.log_depth(vis, vis.view(np.float32), logd, empty)
+    out = np.empty_like(colors)
+    kernels.edl(logd, empty, np.ascontiguousarray(colors).reshape(-1), width, height, neighbour_offsets(radius), np.float32(strength), out)
+    return out
+
+
+def edl_reference(vis: np.ndarray, colors: np.ndarray, width: int, height: int, strength: float = 1.0, radius: float = 1.4) -> np.ndarray:
+    """Plain-numpy eye-dome lighting, same float32 arithmetic as the kernel."""
+    vis = vis.reshape(height, width)
+    empty = vis == EMPTY_PIXEL
+    depth = (vis >> np.uint64(32)).astype(np.uint32).view(np.float32)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        logd = np.where(empty, np.float32(0), np.log2(depth)).astype(np.float32)
+    e = empty.astype(np.float32)
+    acc = np.zeros((height, width), np.float32)
+    for dx, dy in neighbour_offsets(radius):
+        # neighbour values shifted into place; outside the image counts as empty
+        nl = np.zeros_like(logd)
+        ne = np.ones_like(e)
+        ys, yd = slice(max(dy, 0), height + min(dy, 0)), slice(max(-dy, 0), height + min(-dy, 0))
+        xs, xd = slice(max(dx, 0), width + min(dx, 0)), slice(max(-dx, 0), width + min(-dx, 0))
+        nl[yd, xd] = logd[ys, xs]
+        ne[yd, xd] = e[ys, xs]
+        r = e * np.float32(100) + (np.float32(1) - e) * np.maximum(np.float32(0), logd - nl)
+        acc += (np.float32(1) - ne) * r
+    shade = np.exp(acc * np.float32(-300.0 * strength / N_NEIGHBOURS)).astype(np.float32)
+    rgba = colors.reshape(height, width).view(np.uint8).reshape(height, width, 4)
+    out = rgba.copy()
+    out[..., :3] = (rgba[..., :3].astype(np.float32) * shade[..., None] + np.float32(0.5)).astype(np.uint8)
+    return out.view(np.uint32).reshape(-1)
