@@ -4,7 +4,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 EXTRAS=all bash scripts/setup_env.sh
 mkdir -p out
-.venv/bin/gigapoint demo --points "${POINTS:-20000000}" -o out/demo.png
+.venv/bin/gigapoint demo --points "${POINTS:-20000000}" -o out/demo.png --overwrite
 if [ -f ../shared/data/autzen_trim.laz ]; then
-  .venv/bin/gigapoint render ../shared/data/autzen_trim.laz -o out/autzen.png --view iso --stats
+  .venv/bin/gigapoint render ../shared/data/autzen_trim.laz -o out/autzen.png --view iso --stats --overwrite
 fi

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import glob
+import os
+import sys
 import warnings
 
 from ..errors import BackendUnavailableError, GigapointWarning
@@ -23,6 +26,15 @@ def _make_wgpu(require_hardware: bool):
     return WgpuBackend(require_hardware=require_hardware)
 
 
+def gpu_device_present() -> bool:
+    """Cheap check for a GPU before asking wgpu (enumerating adapters takes ~1 s)."""
+    if os.environ.get("GIGAPOINT_NO_GPU"):
+        return False
+    if not sys.platform.startswith("linux"):
+        return True  # Metal / DX12: let wgpu decide
+    return bool(glob.glob("/dev/dri/renderD*") or glob.glob("/dev/nvidia[0-9]*"))
+
+
 def get_backend(name: str = "auto"):
     """The backend called ``name`` (cpu, wgpu) or, for auto, a real GPU if any else the CPU."""
     if name in _instances:
@@ -32,6 +44,8 @@ def get_backend(name: str = "auto"):
     elif name == "wgpu":
         backend = _make_wgpu(require_hardware=False)
     elif name == "auto":
+        if not gpu_device_present():
+            return get_backend("cpu")
         try:
             backend = _make_wgpu(require_hardware=True)
         except BackendUnavailableError:

@@ -73,7 +73,7 @@ def print_stats(stats, console=None) -> None:
         f"{stats.batches_rendered:,} batches drawn, {stats.batches_culled:,} culled, "
         f"precision 10/20/30 bit: {h[10]:,}/{h[20]:,}/{h[30]:,} points, "
         f"{stats.visible_pixels:,} pixels covered, {stats.time_ms:.1f} ms "
-        f"({stats.points_processed / max(stats.time_ms, 1e-9) / 1e3:,.0f} M points/s) on {stats.backend}",
+        f"({stats.points_processed / max(stats.time_ms, 1e-9) / 1e3:,.1f} M points/s) on {stats.backend}",
         highlight=False,
     )
 
@@ -132,6 +132,7 @@ def demo(
     view: str = typer.Option("iso"),
     threads: Optional[int] = typer.Option(None),
     seed: int = typer.Option(0),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output file."),
 ) -> None:
     """Generate the procedural demo scene, render it and report how fast each step was."""
     from rich.console import Console
@@ -143,11 +144,7 @@ def demo(
     console = Console()
     if not 1 <= points <= 4_000_000_000:
         raise GigapointError(f"--points must be between 1 and 4e9, got {points}")
-    if output.exists():  # the demo's own output: replacing it is what a re-run means
-        if output.is_dir():
-            raise GigapointError(f"{output}: is a directory, not an output file")
-    else:
-        check_output(output, overwrite=False)
+    check_output(output, overwrite)
     Camera.look_at((0, 0, 1), (0, 0, 0), up=(0, 1, 0), width=width, height=height)
     t0 = time.perf_counter()
     xyz, rgba, attrs = demo_arrays(points, seed)

@@ -113,15 +113,23 @@ class Camera:
         else:
             yaw, pitch = view
         center = (lo + hi) / 2
-        radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-9 * max(1.0, float(np.abs(center).max())), 1e-9)
+        # a single point or a tiny cloud far from the origin still gets a camera float64 can place
+        radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-6 * max(1.0, float(np.abs(center).max())))
         aspect = width / height
-        half_v = math.radians(fov) / 2
-        half = min(half_v, math.atan(math.tan(half_v) * aspect))
+        # orientation first (distance 1), then the distance at which every corner fits
+        probe = cls.orbit(center, yaw, pitch, 1.0, fov=fov, width=width, height=height)
+        right, up, back = probe.basis()
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]) - center
+        cx, cy, cz = corners @ right, corners @ up, corners @ back
         if projection == "orthographic":
-            distance = radius * 3
-            ortho_height = 2 * radius * margin * max(1.0, 1.0 / aspect)
-            return cls.orbit(center, yaw, pitch, distance, fov=fov, width=width, height=height, projection=projection, ortho_height=ortho_height, **kw)
-        distance = radius * margin / math.sin(half)
+            extent_v = max(float(np.abs(cy).max()), float(np.abs(cx).max()) / aspect, radius * 1e-6)
+            return cls.orbit(
+                center, yaw, pitch, radius * 3, fov=fov, width=width, height=height, projection=projection, ortho_height=2 * extent_v * margin, **kw
+            )
+        tan_v = math.tan(math.radians(fov) / 2)
+        tan_h = tan_v * aspect
+        distance = float(np.max(np.maximum(cz + np.abs(cx) * margin / tan_h, cz + np.abs(cy) * margin / tan_v)))
+        distance = max(distance, float(cz.max()) + radius, radius)
         return cls.orbit(center, yaw, pitch, distance, fov=fov, width=width, height=height, **kw)
 
     def with_size(self, width: int, height: int) -> Camera:

@@ -20,100 +20,197 @@ EMPTY = np.uint64(0xFFFFFFFFFFFFFFFF)
 _LOW32 = np.uint64(0xFFFFFFFF)
 
 
-# --- eye-dome lighting -------------------------------------------------------------------------
+# --- fast float32 log2 / exp2 (plain IEEE float32 operations, so numpy can repeat them bit for bit) --
+LOG2_C1 = np.float32(2.0 / math.log(2.0))
+LOG2_C3 = np.float32(2.0 / math.log(2.0) / 3.0)
+LOG2_C5 = np.float32(2.0 / math.log(2.0) / 5.0)
+LOG2_C7 = np.float32(2.0 / math.log(2.0) / 7.0)
+EXP2_C = tuple(np.float32(math.log(2.0) ** k / math.factorial(k)) for k in range(1, 7))
+_F0 = np.float32(0.0)
+_F1 = np.float32(1.0)
+
+
+@njit(inline="always")
+def log2_bits(b):
+    """log2 of the positive normal float32 whose bits are the u32 ``b`` (error < 1e-6)."""
+    e = np.float32(np.int32(b >> np.uint32(23)) - np.int32(127))
+    m = np.uint32((b & np.uint32(0x007FFFFF)) | np.uint32(0x3F800000))
+    return e, m
+
+
 @njit(parallel=True, cache=True)
-def log_depth(vis, vis_f32, logd, empty):
+def log_depth(vis, vis_u32, logd, empty):
     """logd = log2(depth) (0 where empty), empty = 1 where no point.
 
-    vis_f32 is ``vis.view(np.float32)``: element 2p+1 is pixel p's depth (little-endian)."""
-    for p in prange(vis.shape[0]):
-        e = vis[p] == EMPTY
-        logd[p] = np.float32(0.0) if e else np.float32(math.log2(vis_f32[2 * p + 1]))
-        empty[p] = np.float32(1.0) if e else np.float32(0.0)
+    vis_u32 is ``vis.view(np.uint32)``: element 2p+1 is pixel p's depth bits (little-endian).
+    log2 = exponent + atanh series of the mantissa m in [1, 2): t = (m-1)/(m+1)."""
+    n = vis.shape[0]
+    rows = (n + 4095) // 4096
+    for r in prange(rows):
+        p0 = r * 4096
+        p1 = min(n, p0 + 4096)
+        mant = np.empty(p1 - p0, np.uint32)
+        mf = mant.view(np.float32)
+        ex = np.empty(p1 - p0, np.float32)
+        for i in range(p1 - p0):
+            ex[i], mant[i] = log2_bits(vis_u32[2 * (p0 + i) + 1])
+        for i in range(p1 - p0):
+            m = mf[i]
+            t = (m - _F1) / (m + _F1)
+            t2 = t * t
+            lg = ex[i] + t * (LOG2_C1 + t2 * (LOG2_C3 + t2 * (LOG2_C5 + t2 * LOG2_C7)))
+            e = vis[p0 + i] == EMPTY
+            logd[p0 + i] = _F0 if e else lg
+            empty[p0 + i] = _F1 if e else _F0
 
 
 @njit(parallel=True, cache=True)
 def edl(logd, empty, colors, width, height, offsets, strength, out):
     """Potree's eye-dome lighting: shade = exp(-300 * strength * mean response), where each of
-    the neighbours at ``offsets`` adds max(0, logd - logd_n) (100 if this pixel is empty)."""
+    the neighbours at ``offsets`` adds max(0, logd - logd_n) (100 if this pixel is empty).
+    exp is 2^y with y = response * (-300 strength log2(e) / n), split into 2^floor(y) (bits)
+    and a degree-6 Taylor polynomial of 2^frac."""
     n_off = offsets.shape[0]
-    scale = np.float32(-300.0 * strength / n_off)
+    scale = np.float32(-300.0 * strength / n_off / math.log(2.0))
+    c1, c2, c3, c4, c5, c6 = EXP2_C
     for y in prange(height):
         acc = np.zeros(width, np.float32)
         base = y * width
+        crow = logd[base : base + width]
+        erow = empty[base : base + width]
         for o in range(n_off):
             dx = offsets[o, 0]
             dy = offsets[o, 1]
             yy = y + dy
             if yy < 0 or yy >= height:
                 continue
-            nb = yy * width + dx
             x0 = max(0, -dx)
             x1 = min(width, width - dx)
-            for x in range(x0, x1):
-                c = logd[base + x]
-                ec = empty[base + x]
-                valid = np.float32(1.0) - empty[nb + x]
-                r = ec * np.float32(100.0) + (np.float32(1.0) - ec) * max(np.float32(0.0), c - logd[nb + x])
-                acc[x] += valid * r
+            c_ = crow[x0:x1]
+            e_ = erow[x0:x1]
+            n_ = logd[yy * width + x0 + dx : yy * width + x1 + dx]
+            ne_ = empty[yy * width + x0 + dx : yy * width + x1 + dx]
+            a_ = acc[x0:x1]
+            for i in range(x1 - x0):
+                ec = e_[i]
+                r = ec * np.float32(100.0) + (_F1 - ec) * max(_F0, c_[i] - n_[i])
+                a_[i] += (_F1 - ne_[i]) * r
+        pw = np.empty(width, np.float32)
+        pwb = pw.view(np.int32)
+        poly = np.empty(width, np.float32)
         for x in range(width):
-            shade = np.float32(math.exp(acc[x] * scale))
-            c = colors[base + x]
+            yv = max(acc[x] * scale, np.float32(-126.0))
+            fl = np.float32(math.floor(yv))
+            f = yv - fl
+            poly[x] = _F1 + f * (c1 + f * (c2 + f * (c3 + f * (c4 + f * (c5 + f * c6)))))
+            pwb[x] = (np.int32(fl) + np.int32(127)) << np.int32(23)
+        orow = out[base : base + width]
+        colrow = colors[base : base + width]
+        for x in range(width):
+            shade = poly[x] * pw[x]
+            c = colrow[x]
             r = np.uint32(np.float32(c & np.uint32(255)) * shade + np.float32(0.5))
             g = np.uint32(np.float32((c >> np.uint32(8)) & np.uint32(255)) * shade + np.float32(0.5))
             b = np.uint32(np.float32((c >> np.uint32(16)) & np.uint32(255)) * shade + np.float32(0.5))
-            out[base + x] = (c & np.uint32(0xFF000000)) | r | (g << np.uint32(8)) | (b << np.uint32(16))
+            orow[x] = (c & np.uint32(0xFF000000)) | r | (g << np.uint32(8)) | (b << np.uint32(16))
 
 
 # --- hole filling ------------------------------------------------------------------------------
 @njit(parallel=True, cache=True)
-def fill_holes(vis, vis_f32, width, height, offsets, sector_bits, ring, radius_map, inv_gap, out):
-    """Depth-aware dilation. A pixel that is empty, or whose depth is more than ``1/inv_gap``
-    times that of closer neighbours, takes the closest key in its window, but only when those
-    closer neighbours surround it (no half of the 16 direction sectors is free of them), so
-    holes close and silhouettes do not grow.
+def row_min(vis, width, height, radius, out):
+    """out[r-1, p] = min of vis over the pixels of p's row within r columns, r = 1..radius."""
+    for y in prange(height):
+        base = y * width
+        src = vis[base : base + width]
+        prev = src
+        for r in range(1, radius + 1):
+            dst = out[r - 1, base : base + width]
+            for x in range(width):
+                dst[x] = prev[x]
+            a = dst[r:]
+            b = src[: width - r]
+            for i in range(width - r):
+                a[i] = min(a[i], b[i])
+            a = dst[: width - r]
+            b = src[r:]
+            for i in range(width - r):
+                a[i] = min(a[i], b[i])
+            prev = dst
 
-    offsets (k, 2) dx, dy; sector_bits (k,) u32 one bit per direction sector; ring (k,) the
-    Chebyshev distance of each offset; radius_map (height, width) int8 window radius per pixel.
-    """
+
+@njit(parallel=True, cache=True)
+def fill_holes(vis, vis_f32, width, height, rmin, radius_map, offsets, sector_bits, ring, inv_gap, out):
+    """Depth-aware dilation. A pixel that is empty, or whose depth is more than ``1/inv_gap``
+    times that of the closest pixel of its window, takes that closest key, but only when the
+    closer neighbours surround it (no run of 8 of the 16 direction sectors is free of them),
+    so holes close and silhouettes do not grow.
+
+    rmin (R, H*W): ``row_min`` of vis; radius_map (H, W) int8 window radius per pixel;
+    offsets (k, 2) dx, dy ordered by ring; sector_bits (k,) u32; ring (k,) int8.
+    Step 1 (vectorised): window minimum from the row minima. Step 2 (only where that minimum
+    is nearer than the pixel): the sector scan, ring by ring, stopping once surrounded."""
     n_off = offsets.shape[0]
     for y in prange(height):
-        best = np.empty(width, np.uint64)
-        thr = np.empty(width, np.uint64)
-        thr_f = np.empty(width, np.float32)
-        thr_b = thr_f.view(np.uint32)
-        occ = np.zeros(width, np.uint32)
         base = y * width
+        rrow = radius_map[y]
+        r_lo = np.int64(rrow.min())
+        r_hi = np.int64(rrow.max())
+        best = np.empty(width, np.uint64)
+        best_f = best.view(np.float32)
         for x in range(width):
             best[x] = EMPTY
-            thr_f[x] = np.float32(np.inf) if vis[base + x] == EMPTY else vis_f32[2 * (base + x) + 1] * inv_gap
-        for x in range(width):
-            thr[x] = np.uint64(thr_b[x]) << np.uint64(32)
-        rrow = radius_map[y]
-        for o in range(n_off):
-            dx = offsets[o, 0]
-            dy = offsets[o, 1]
+        for dy in range(-r_hi, r_hi + 1):
             yy = y + dy
             if yy < 0 or yy >= height:
                 continue
-            m = ring[o]
-            bit = sector_bits[o]
-            nb = yy * width + dx
-            x0 = max(0, -dx)
-            x1 = min(width, width - dx)
-            for x in range(x0, x1):
-                k = vis[nb + x]
-                use = m <= rrow[x]
-                kk = k if use else EMPTY
-                best[x] = min(best[x], kk)
-                occ[x] |= bit if (use and k < thr[x]) else np.uint32(0)
+            for r in range(max(abs(dy), r_lo, 1), r_hi + 1):
+                src = rmin[r - 1, yy * width : yy * width + width]
+                if r_lo == r_hi:
+                    for x in range(width):
+                        best[x] = min(best[x], src[x])
+                else:
+                    for x in range(width):
+                        v = src[x] if rrow[x] == r else EMPTY
+                        best[x] = min(best[x], v)
+        orow = out[base : base + width]
+        vrow = vis[base : base + width]
         for x in range(width):
-            m32 = np.uint64(occ[x]) | (np.uint64(occ[x]) << np.uint64(16))
-            z = (~m32) & _LOW32
-            z = z & (z >> np.uint64(1))
-            z = z & (z >> np.uint64(2))
-            z = z & (z >> np.uint64(4))  # a run of 8 free sectors survives
-            out[base + x] = best[x] if (z == 0 and best[x] < thr[x]) else vis[base + x]
+            k = vrow[x]
+            orow[x] = k
+            if best[x] >= k:  # nothing nearer in the window (or nothing at all)
+                continue
+            thr_f = np.float32(np.inf) if k == EMPTY else vis_f32[2 * (base + x) + 1] * inv_gap
+            if not best_f[2 * x + 1] < thr_f:
+                continue
+            rmax = rrow[x]
+            occ = np.uint32(0)
+            done = False
+            o = 0
+            while o < n_off and not done:
+                m = ring[o]
+                if m > rmax:
+                    break
+                xx = x + offsets[o, 0]
+                yy = y + offsets[o, 1]
+                if 0 <= xx < width and 0 <= yy < height:
+                    q = yy * width + xx
+                    if vis[q] != EMPTY and vis_f32[2 * q + 1] < thr_f:
+                        occ |= sector_bits[o]
+                if o + 1 == n_off or ring[o + 1] != m:  # end of a ring: surrounded yet?
+                    done = _surrounded(occ)
+                o += 1
+            if done:
+                orow[x] = best[x]
+
+
+@njit(inline="always")
+def _surrounded(occ):
+    m32 = np.uint64(occ) | (np.uint64(occ) << np.uint64(16))
+    z = (~m32) & _LOW32
+    z = z & (z >> np.uint64(1))
+    z = z & (z >> np.uint64(2))
+    z = z & (z >> np.uint64(4))  # a run of 8 free sectors survives
+    return z == 0
 
 
 # --- high-quality shading ----------------------------------------------------------------------

@@ -1,0 +1,152 @@
+"""`gigapoint render` and `gigapoint demo` end to end, including every bad input."""
+
+import subprocess
+import sys
+
+import laspy
+import numpy as np
+import pytest
+from PIL import Image
+
+from gigapoint.cli import main
+
+
+def run(capsys, *args):
+    rc = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+@pytest.fixture(scope="module")
+def small_las(tmp_path_factory):
+    from gigapoint.core.demo import demo_arrays
+
+    xyz, rgba, _ = demo_arrays(30_000)
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales = [0.001] * 3
+    header.offsets = [637_000.0, 851_000.0, 0.0]
+    las = laspy.LasData(header)
+    xyz = xyz + [637_000.0, 851_000.0, 0.0]
+    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    las.red, las.green, las.blue = (rgba[:, :3].astype(np.uint16) * 257).T
+    path = tmp_path_factory.mktemp("las") / "town.las"
+    las.write(path)
+    return path
+
+
+def test_render_writes_a_png_with_stats(capsys, tmp_path, small_las):
+    out = tmp_path / "town.png"
+    rc, stdout, err = run(capsys, "render", small_las, "-o", out, "--width", 320, "--height", 200, "--stats", "--background", "white")
+    assert rc == 0, err
+    img = np.asarray(Image.open(out))
+    assert img.shape == (200, 320, 4)
+    assert (img[..., :3] != 255).any(axis=2).mean() > 0.05  # points drawn on white
+    assert "30,000 of 30,000 points" in err and "batches drawn" in err
+    assert "wrote" in stdout
+
+
+def test_render_several_files_merge_into_one_scene(capsys, tmp_path, small_las):
+    out = tmp_path / "two.png"
+    rc, _, err = run(capsys, "render", small_las, small_las, "-o", out, "-W", 64, "-H", 64, "--stats")
+    assert rc == 0, err
+    assert "60,000 of 60,000 points" in err
+
+
+def test_camera_options_and_extra_outputs(capsys, tmp_path, small_las):
+    depth, index = tmp_path / "d.npy", tmp_path / "i.npy"
+    rc, _, err = run(
+        capsys, "render", small_las, "-o", tmp_path / "a.png", "-W", 80, "-H", 60,
+        "--camera", "eye=637500,850500,400 target=637500,851500,0", "--depth-out", depth, "--index-out", index,
+    )  # fmt: skip
+    assert rc == 0, err
+    d, i = np.load(depth), np.load(index)
+    assert d.shape == (60, 80) and i.shape == (60, 80)
+    assert np.isfinite(d[i >= 0]).all() and np.isinf(d[i < 0]).all()
+    rc, _, err = run(capsys, "render", small_las, "-o", tmp_path / "b.png", "-W", 80, "-H", 60, "--camera", "yaw=30;pitch=60")
+    assert rc == 0, err
+    rc, _, err = run(capsys, "render", small_las, "-o", tmp_path / "c.jpg", "-W", 80, "-H", 60, "--view", "top", "--projection", "orthographic")
+    assert rc == 0, err
+    assert Image.open(tmp_path / "c.jpg").size == (80, 60)
+
+
+def test_never_overwrites_without_asking(capsys, tmp_path, small_las):
+    out = tmp_path / "keep.png"
+    out.write_bytes(b"precious")
+    rc, _, err = run(capsys, "render", small_las, "-o", out)
+    assert rc == 1 and "already exists" in err and "--overwrite" in err
+    assert out.read_bytes() == b"precious"
+    rc, _, err = run(capsys, "render", small_las, "-o", out, "-W", 32, "-H", 32, "--overwrite")
+    assert rc == 0 and Image.open(out).size == (32, 32)
+
+
+def test_a_failed_render_leaves_no_output_behind(capsys, tmp_path, small_las):
+    out = tmp_path / "x.png"
+    rc, _, err = run(capsys, "render", small_las, "-o", out, "--camera", "eye=1,2,3")
+    assert rc == 1 and not out.exists()
+    assert not list(tmp_path.glob(".x.png*"))  # no temporary left either
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--width", "0"], "width"),
+        (["--height", "100000"], "height"),
+        (["--camera", "eye=1,2"], "--camera"),
+        (["--camera", "eye=1,2,3"], "target"),
+        (["--camera", "banana"], "--camera"),
+        (["--camera", "eye=a,b,c target=0,0,0"], "--camera"),
+        (["--camera", "eye=0,0,nan target=0,0,0"], "--camera"),
+        (["--camera", "eye=1,1,1 target=1,1,1"], "same point"),
+        (["--camera", "yaw=10 eye=1,1,1 target=0,0,0"], "not both"),
+        (["--fov", "0"], "fov"),
+        (["--view", "sideways"], "view"),
+        (["--background", "chartreuse-ish"], "background"),
+        (["--projection", "fisheye"], "projection"),
+        (["--backend", "quantum"], "backend"),
+        (["--threads", "0"], "threads"),
+    ],
+)
+def test_bad_options_give_one_line_errors(capsys, tmp_path, small_las, args, message):
+    out = tmp_path / "bad.png"
+    rc, _, err = run(capsys, "render", small_las, "-o", out, *args)
+    assert rc != 0
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], err
+    assert "Traceback" not in err and not out.exists()
+
+
+@pytest.mark.parametrize("suffix", [".gif2", ".txt", ""])
+def test_bad_output_type(capsys, tmp_path, small_las, suffix):
+    rc, _, err = run(capsys, "render", small_las, "-o", tmp_path / f"out{suffix}")
+    assert rc == 1 and "unsupported output type" in err
+
+
+def test_missing_input_and_missing_output_dir(capsys, tmp_path, small_las):
+    rc, _, err = run(capsys, "render", tmp_path / "nope.laz", "-o", tmp_path / "o.png")
+    assert rc == 1 and "nope.laz" in err and len(err.strip().splitlines()) == 1
+    rc, _, err = run(capsys, "render", small_las, "-o", tmp_path / "no" / "such" / "o.png")
+    assert rc == 1 and "does not exist" in err
+
+
+def test_camera_looking_away_warns_and_renders_background(capsys, tmp_path, small_las):
+    out = tmp_path / "away.png"
+    rc, _, err = run(capsys, "render", small_las, "-o", out, "-W", 40, "-H", 30, "--camera", "eye=0,0,0 target=-1,-1,0")
+    assert rc == 0 and "no point is in view" in err
+    assert (np.asarray(Image.open(out))[..., :3] == 0).all()
+
+
+def test_demo_command(capsys, tmp_path):
+    out = tmp_path / "demo.png"
+    rc, stdout, err = run(capsys, "demo", "--points", 50_000, "-o", out, "-W", 160, "-H", 90)
+    assert rc == 0, err
+    assert "M points/s" in stdout and "Morton sort" in stdout
+    assert Image.open(out).size == (160, 90)
+    rc, _, err = run(capsys, "demo", "--points", 0, "-o", tmp_path / "z.png")
+    assert rc == 1 and "--points" in err
+
+
+def test_installed_entry_point_exit_codes(tmp_path, small_las):
+    ok = subprocess.run([sys.executable, "-m", "gigapoint.cli", "render", str(small_las), "-o", str(tmp_path / "e.png"), "-W", "32", "-H", "32"], capture_output=True, text=True)
+    assert ok.returncode == 0, ok.stderr
+    bad = subprocess.run([sys.executable, "-m", "gigapoint.cli", "render", str(tmp_path / "missing.las"), "-o", str(tmp_path / "f.png")], capture_output=True, text=True)
+    assert bad.returncode == 1 and bad.stderr.startswith("error: ") and "Traceback" not in bad.stderr

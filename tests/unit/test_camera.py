@@ -1,0 +1,107 @@
+import math
+
+import numpy as np
+import pytest
+
+from gigapoint import Camera
+from gigapoint.errors import CameraError
+from gigapoint.render.camera import VIEWS
+
+
+def project(cam, p):
+    rows = cam.screen_rows()
+    x, y, w, d = rows @ np.append(np.asarray(p, float), 1.0)
+    return x / w, y / w, d
+
+
+def test_target_projects_to_the_image_centre():
+    cam = Camera.look_at((10, -20, 30), (1, 2, 3), width=640, height=480)
+    px, py, d = project(cam, (1, 2, 3))
+    assert px == pytest.approx(320) and py == pytest.approx(240)
+    assert d == pytest.approx(math.dist((10, -20, 30), (1, 2, 3)))
+
+
+def test_perspective_edges_and_orientation():
+    cam = Camera.look_at((0, -10, 0), (0, 0, 0), up=(0, 0, 1), fov=90, width=200, height=100)
+    # fov 90: at distance 10 the top edge of the image is z = 10, the right edge x = 20 (aspect 2)
+    assert project(cam, (0, 0, 10))[1] == pytest.approx(0)
+    assert project(cam, (20, 0, 0))[0] == pytest.approx(200)
+    assert project(cam, (-20, 0, -10))[:2] == pytest.approx((0, 100))
+
+
+def test_orthographic_scale_and_depth():
+    cam = Camera.look_at((0, 0, 50), (0, 0, 0), up=(0, 1, 0), width=100, height=100, projection="orthographic", ortho_height=10)
+    assert project(cam, (5, 5, 0))[:2] == pytest.approx((100, 0))
+    assert project(cam, (5, 5, -20))[:2] == pytest.approx((100, 0))  # no perspective shrink
+    assert project(cam, (0, 0, -20))[2] == pytest.approx(70)
+
+
+def test_orbit_places_the_eye():
+    cam = Camera.orbit((1, 1, 1), yaw=90, pitch=0, distance=5)
+    np.testing.assert_allclose(cam.eye, (1, 6, 1), atol=1e-12)
+    top = Camera.orbit((0, 0, 0), yaw=-90, pitch=90, distance=5)
+    np.testing.assert_allclose(top.eye, (0, 0, 5), atol=1e-12)
+    # straight down: north (+y) is up in the image
+    assert project(top, (0, 1, 0))[1] < project(top, (0, -1, 0))[1]
+
+
+@pytest.mark.parametrize("view", list(VIEWS))
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_fit_keeps_every_corner_in_the_image(view, projection):
+    lo, hi = np.array([637_000.0, 851_000.0, 100.0]), np.array([638_000.0, 851_500.0, 180.0])
+    cam = Camera.fit((lo, hi), view=view, width=320, height=200, projection=projection)
+    for x in (lo[0], hi[0]):
+        for y in (lo[1], hi[1]):
+            for z in (lo[2], hi[2]):
+                px, py, d = project(cam, (x, y, z))
+                assert 0 <= px <= 320 and 0 <= py <= 200 and d > 0
+
+
+def test_clip_range_encloses_bounds_and_handles_camera_inside():
+    bounds = (np.zeros(3), np.ones(3) * 10)
+    outside = Camera.look_at((30, 30, 30), (5, 5, 5))
+    near, far = outside.clip_range(bounds)
+    assert 0 < near < far and far >= math.dist((30, 30, 30), (0, 0, 0)) * 0.99
+    inside = Camera.look_at((5, 5, 5), (6, 5, 5))
+    near, far = inside.clip_range(bounds)
+    assert 0 < near < 1e-3 and far >= 5
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"width": 0},
+        {"height": 100_000},
+        {"width": 12.5},
+        {"fov": 0},
+        {"fov": 180},
+        {"fov": float("nan")},
+        {"eye": (0, 0, float("nan"))},
+        {"eye": (1, 2, 3), "target": (1, 2, 3)},
+        {"up": (0, 0, 0)},
+        {"projection": "fisheye"},
+        {"projection": "orthographic"},
+        {"near": 10, "far": 1},
+    ],
+)
+def test_impossible_cameras_raise_one_line_errors(kwargs):
+    base = {"eye": (0, 0, 10), "target": (0, 0, 0), "up": (0, 1, 0)}
+    base.update(kwargs)
+    with pytest.raises(CameraError) as err:
+        Camera(**base)
+    assert "\n" not in str(err.value)
+
+
+def test_up_parallel_to_view_is_repaired():
+    cam = Camera.look_at((0, 0, 10), (0, 0, 0), up=(0, 0, 1), width=100, height=100)
+    px, py, _ = project(cam, (0, 0, 0))
+    assert (px, py) == pytest.approx((50, 50))
+
+
+def test_ray_through_a_pixel_hits_the_projected_point():
+    cam = Camera.look_at((3, -40, 12), (0, 0, 0), width=300, height=200)
+    p = np.array([2.0, 5.0, -1.0])
+    px, py, _ = project(cam, p)
+    origin, direction = cam.ray(px, py)
+    t = np.dot(p - origin, direction)
+    np.testing.assert_allclose(origin + t * direction, p, atol=1e-9)

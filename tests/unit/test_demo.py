@@ -1,0 +1,31 @@
+import numpy as np
+
+from gigapoint.core.demo import demo_arrays, demo_chunks
+
+
+def test_demo_is_deterministic_and_sliceable():
+    a_xyz, a_rgba, a_attr = demo_arrays(50_000, seed=3)
+    b_xyz, b_rgba, _ = demo_arrays(20_000, seed=3, start=30_000)
+    np.testing.assert_array_equal(a_xyz[30_000:], b_xyz)
+    np.testing.assert_array_equal(a_rgba[30_000:], b_rgba)
+    chunks = list(demo_chunks(50_000, seed=3, chunk_size=7_000))
+    np.testing.assert_array_equal(np.concatenate([c.xyz for c in chunks]), a_xyz)
+    assert set(a_attr) == {"classification", "intensity"}
+
+
+def test_demo_has_terrain_buildings_and_trees():
+    xyz, rgba, attrs = demo_arrays(100_000)
+    assert np.isfinite(xyz).all()
+    assert xyz[:, :2].min() >= -10 and xyz[:, :2].max() <= 1010  # tree crowns may overhang the border
+    classes, counts = np.unique(attrs["classification"], return_counts=True)
+    share = dict(zip(classes.tolist(), (counts / counts.sum()).tolist()))
+    assert share[2] > 0.2 and share[6] > 0.15 and share[5] > 0.1  # ground, buildings, vegetation
+    assert {9, 11} <= set(share)  # water and roads
+    assert xyz[attrs["classification"] == 6, 2].max() > 30  # tall buildings exist
+    assert (rgba[:, 3] == 255).all()
+
+
+def test_seed_changes_the_scene():
+    a, _, _ = demo_arrays(1000, seed=1)
+    b, _, _ = demo_arrays(1000, seed=2)
+    assert not np.array_equal(a, b)

@@ -1,0 +1,55 @@
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gigapoint.core.morton import morton_codes, morton_order
+
+
+def reference_code(cell):
+    """Bit-by-bit interleave: x in bit 0, y in bit 1, z in bit 2."""
+    code = 0
+    for bit in range(21):
+        for axis in range(3):
+            code |= ((int(cell[axis]) >> bit) & 1) << (3 * bit + axis)
+    return code
+
+
+def test_codes_match_bitwise_interleave(rng):
+    xyz = rng.random((500, 3)) * 10 - 5
+    codes = morton_codes(xyz, np.array([-5.0, -5.0, -5.0]), 10.0)
+    cells = np.minimum(((xyz + 5) / 10 * 2**21).astype(np.int64), 2**21 - 1)
+    assert [int(c) for c in codes] == [reference_code(c) for c in cells]
+
+
+def test_codes_clamp_to_cube():
+    xyz = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [2.0, -1.0, 0.5]])
+    codes = morton_codes(xyz, np.zeros(3), 1.0)
+    assert codes[0] == 0
+    assert codes[1] == (1 << 63) - 1  # every bit of 21 x 3 set
+    assert codes[2] == reference_code([2**21 - 1, 0, 2**20])
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 47, 49, 1000, 300_000])
+def test_order_equals_stable_argsort(rng, n):
+    codes = rng.integers(0, 2**63 - 1, n, dtype=np.int64).astype(np.uint64)
+    if n > 10:
+        codes[: n // 3] = codes[n // 3 : 2 * (n // 3)]  # many duplicates: stability matters
+    order = morton_order(codes)
+    np.testing.assert_array_equal(order, np.argsort(codes, kind="stable"))
+
+
+def test_order_on_flat_and_clustered_clouds(rng):
+    # a flat cloud: z constant, so a third of the bits never vary (passes get skipped)
+    xyz = rng.random((200_000, 3))
+    xyz[:, 2] = 0.25
+    xyz[:1000] = xyz[0]  # a cluster of identical points
+    codes = morton_codes(xyz, np.zeros(3), 1.0)
+    np.testing.assert_array_equal(morton_order(codes), np.argsort(codes, kind="stable"))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.integers(0, 2**63 - 1), max_size=300))
+def test_order_property(values):
+    codes = np.array(values, np.uint64)
+    np.testing.assert_array_equal(morton_order(codes), np.argsort(codes, kind="stable"))

@@ -1,0 +1,155 @@
+"""The numba kernel against the plain-numpy reference, pixel-exact."""
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint import Camera, RenderSettings
+from gigapoint.core.layout import EMPTY_PIXEL
+from gigapoint.render.reference import reference_image, reference_visibility
+
+
+def _check_exact(cloud, cam, settings=None):
+    frame = gp.render_frame(cloud, cam, settings)
+    ref = reference_visibility(cloud, cam, settings)
+    np.testing.assert_array_equal(frame.visibility, ref)
+    np.testing.assert_array_equal(frame.image, reference_image(cloud, cam, settings))
+    return frame
+
+
+def test_hand_built_4x4_scene():
+    # 4x4 image, orthographic from above: one point per pixel centre, plus an occluded one
+    xy = [(x + 0.5, y + 0.5) for y in range(4) for x in range(4)]
+    pts = [(x, y, 0.0) for x, y in xy] + [(1.5, 1.5, -1.0)]  # below pixel (1, 2): hidden
+    rgb = [(16 * i, 0, 0) for i in range(16)] + [(0, 255, 0)]
+    cloud = gp.from_arrays(np.array(pts), np.array(rgb, np.uint8))
+    cam = Camera.look_at((2, 2, 10), (2, 2, 0), up=(0, 1, 0), width=4, height=4, projection="orthographic", ortho_height=4)
+    frame = _check_exact(cloud, cam)
+    assert (frame.index >= 0).all()
+    red = frame.image[..., 0].astype(int)
+    # image row 0 is the top (largest y); pixel (col x, row 3 - y) holds point y * 4 + x
+    expected = np.array([[16 * (y * 4 + x) for x in range(4)] for y in range(4)])[::-1]
+    np.testing.assert_array_equal(red, expected)
+    assert not (frame.image[..., 1] == 255).any()
+    depth = frame.depth
+    # 10-bit quantization of the batch (z range 1 m) moves depths by < 1 mm
+    np.testing.assert_allclose(depth, 10.0, atol=1e-3)
+
+
+def test_nearest_point_wins_and_ties_go_to_the_lower_index():
+    pts = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0]])
+    cloud = gp.from_arrays(pts, np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255], [9, 9, 9]], np.uint8))
+    cam = Camera.look_at((0, 0, 10), (0, 0, 0), up=(0, 1, 0), width=9, height=9, projection="orthographic", ortho_height=4)
+    frame = _check_exact(cloud, cam)
+    centre = frame.index[4, 4]
+    pos = cloud.positions([centre])[0]
+    assert pos[2] == pytest.approx(1.0, abs=1e-6)  # the z = 1 points are nearer the camera
+    twins = [i for i in range(4) if abs(cloud.positions([i])[0][2] - 1.0) < 1e-6 and abs(cloud.positions([i])[0][0]) < 1e-6]
+    assert centre == min(twins)
+
+
+CAMERAS = {
+    "iso": lambda b: Camera.fit(b, view="iso", width=320, height=180),
+    "top-ortho": lambda b: Camera.fit(b, view="top", width=257, height=131, projection="orthographic"),
+    "front": lambda b: Camera.fit(b, view="front", width=200, height=200, fov=30),
+    "inside": lambda b: Camera.look_at((500, 480, 8), (560, 520, 5), width=240, height=160, fov=90),
+    "close-up": lambda b: Camera.look_at((430, 420, 25), (450, 450, 10), width=2000, height=1200, fov=20),
+    "away": lambda b: Camera.look_at((-100, -100, 10), (-200, -200, 10), width=64, height=64),
+}
+
+
+@pytest.mark.parametrize("view", list(CAMERAS))
+def test_kernel_equals_reference_on_demo_scene(demo_small, view):
+    cam = CAMERAS[view](demo_small.bounds)
+    if view == "away":
+        with pytest.warns(gp.GigapointWarning, match="no point is in view"):
+            frame = _check_exact(demo_small, cam)
+        assert (frame.visibility == EMPTY_PIXEL).all()
+        assert frame.stats.batches_rendered == 0
+        return
+    frame = _check_exact(demo_small, cam)
+    assert frame.stats.visible_pixels > 0
+    if view == "close-up":
+        assert frame.stats.precision_histogram[20] > 0  # large projected batches use more bits
+    if view == "inside":
+        assert frame.stats.batches_culled > 0
+
+
+def test_full_precision_setting_matches_reference(demo_small):
+    cam = CAMERAS["iso"](demo_small.bounds)
+    settings = RenderSettings(adaptive_precision=False)
+    frame = _check_exact(demo_small, cam, settings)
+    assert frame.stats.precision_histogram == {10: 0, 20: 0, 30: demo_small.n_points}
+
+
+@pytest.mark.parametrize("view", ["iso", "inside", "close-up"])
+def test_image_identical_with_one_and_two_threads(demo_small, view):
+    cam = CAMERAS[view](demo_small.bounds)
+    one = gp.render_frame(demo_small, cam, RenderSettings(threads=1, backend="cpu"))
+    two = gp.render_frame(demo_small, cam, RenderSettings(threads=2, backend="cpu"))
+    np.testing.assert_array_equal(one.visibility, two.visibility)
+    # and again, so leftovers in the per-thread buffers would show
+    again = gp.render_frame(demo_small, CAMERAS["iso"](demo_small.bounds), RenderSettings(threads=2, backend="cpu"))
+    ref = reference_visibility(demo_small, CAMERAS["iso"](demo_small.bounds))
+    np.testing.assert_array_equal(again.visibility, ref)
+
+
+def test_adaptive_precision_stays_close_to_full_precision(demo_small):
+    cam = CAMERAS["iso"](demo_small.bounds)
+    adaptive = gp.render_frame(demo_small, cam)
+    full = gp.render_frame(demo_small, cam, RenderSettings(adaptive_precision=False))
+    assert adaptive.stats.precision_histogram[10] == demo_small.n_points
+    # 10-bit positions move points by less than a pixel: nearly the same coverage
+    a, f = ~adaptive.empty, ~full.empty
+    assert abs(int(a.sum()) - int(f.sum())) < 0.02 * f.sum()
+
+
+def test_frustum_culling_never_drops_a_visible_point(demo_small):
+    cam = CAMERAS["inside"](demo_small.bounds)
+    culled = gp.render_frame(demo_small, cam)
+    everything = gp.render_frame(demo_small, cam, RenderSettings(frustum_culling=False))
+    assert culled.stats.batches_culled > 0 and everything.stats.batches_culled == 0
+    np.testing.assert_array_equal(culled.visibility, everything.visibility)
+
+
+def test_background_and_render_api(demo_small):
+    cam = Camera.fit(demo_small.bounds, width=64, height=48)
+    image, stats = gp.render(demo_small, cam, background="#102030", return_stats=True)
+    assert image.shape == (48, 64, 4) and image.dtype == np.uint8
+    corner = image[0, 0]
+    assert corner.tolist() == [16, 32, 48, 255]
+    assert stats.points_processed == demo_small.n_points
+    assert sum(stats.precision_histogram.values()) == stats.points_processed
+
+
+def test_degenerate_clouds_render(rng):
+    cam_for = lambda c: Camera.fit(c.bounds, view="iso", width=50, height=40)  # noqa: E731
+    single = gp.from_arrays(np.array([[637_000.5, 851_000.25, 120.0]]))
+    f = gp.render_frame(single, cam_for(single))
+    assert f.stats.visible_pixels == 1
+    rows, cols = np.nonzero(f.index == 0)  # the single point is in the middle
+    assert abs(rows[0] - 20) <= 1 and abs(cols[0] - 25) <= 1
+    same = gp.from_arrays(np.tile([[1.0, 2.0, 3.0]], (1000, 1)))
+    f = gp.render_frame(same, cam_for(same))
+    assert f.stats.visible_pixels == 1 and f.index[f.index >= 0][0] == 0
+    flat = gp.from_arrays(np.column_stack([rng.random((5000, 2)), np.zeros(5000)]))
+    for view in ("top", "iso", "front"):
+        cam = Camera.fit(flat.bounds, view=view, width=60, height=60)
+        np.testing.assert_array_equal(gp.render_frame(flat, cam).visibility, reference_visibility(flat, cam))
+
+
+def test_nan_and_absurd_points_are_skipped_with_a_warning(rng):
+    xyz = rng.random((100, 3))
+    xyz[3] = np.nan
+    xyz[7, 1] = np.inf
+    xyz[9, 2] = 1e300
+    with pytest.warns(gp.GigapointWarning, match="skipped 3 invalid points"):
+        cloud = gp.from_arrays(xyz)
+    assert cloud.n_points == 97 and cloud.skipped == 3
+
+
+def test_all_invalid_points_is_an_error():
+    with pytest.raises(gp.GigapointError, match="no valid points"):
+        gp.from_arrays(np.full((5, 3), np.nan))
+    with pytest.raises(gp.GigapointError, match="no valid points"):
+        gp.from_arrays(np.empty((0, 3)))
