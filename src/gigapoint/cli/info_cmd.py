@@ -1,0 +1,29 @@
+"""`gigapoint info FILE...`: what point cloud files hold (format, points, bounds, attributes, CRS)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+from . import app
+
+
+@app.command()
+def info(
+    files: list[Path] = typer.Argument(..., help="Point cloud files (LAS/LAZ/PLY/XYZ/TXT/CSV/PTS/NPY/NPZ) or directories."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object per file instead of text."),
+) -> None:
+    """Show format, point count, bounds, attributes, LAS version/scale/offset and CRS of files."""
+    from ..io import expand_paths, file_info, format_info
+
+    paths = expand_paths(files)
+    for i, path in enumerate(paths):
+        data = file_info(path)
+        if as_json:
+            typer.echo(json.dumps(data))
+        else:
+            if i:
+                typer.echo("")
+            typer.echo(format_info(data))

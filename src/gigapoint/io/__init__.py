@@ -1,0 +1,179 @@
+"""Point cloud readers: LAS/LAZ, PLY, XYZ/TXT/CSV/PTS, NPY, NPZ, all yielding bounded PointChunks.
+
+>>> for chunk in read_chunks("tile.laz", chunk_size=1_000_000): ...   # never loads the file whole
+>>> cloud = open_cloud("tiles/")                                       # every supported file, merged
+>>> print(format_info(file_info("tile.laz")))
+
+The format is chosen by content (magic bytes) first, then by suffix (``registry.py``).
+Every bad input raises a ``gigapoint.errors.InputError`` subclass with a one-line message
+that starts with the file's path.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+from ..core.chunk import PointChunk
+from ..core.cloud import PointCloud, build_cloud
+from ..errors import EmptyCloudError, GigapointWarning, InputError
+from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail
+from .registry import is_supported_name, reader_for, readers, register, supported_suffixes
+
+
+def read_chunks(path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
+    """Yield the points of one file as PointChunks of at most ``chunk_size`` points."""
+    chunk_size = check_chunk_size(chunk_size)
+    reader = reader_for(path)
+    return reader.read_chunks(Path(path), chunk_size)
+
+
+def expand_paths(paths: Iterable) -> list[Path]:
+    """Files named, with each directory replaced by its supported files sorted by name."""
+    out: list[Path] = []
+    for p in paths:
+        p = Path(p)
+        if p.is_dir():
+            found = sorted((c for c in p.iterdir() if c.is_file() and is_supported_name(c)), key=lambda c: c.name)
+            if not found:
+                raise fail(p, f"directory holds no supported point cloud file ({', '.join(supported_suffixes())})", EmptyCloudError)
+            out.extend(found)
+        else:
+            out.append(check_file(p))
+    if not out:
+        raise InputError("open: no file given")
+    return out
+
+
+def _with_progress(path: Path, chunks: Iterator[PointChunk], total: int | None, progress) -> Iterator[PointChunk]:
+    task = progress.add_task(path.name, total=total)
+    for chunk in chunks:
+        progress.advance(task, len(chunk))
+        yield chunk
+
+
+def open_cloud(*paths, chunk_size: int = DEFAULT_CHUNK_SIZE, progress: bool = False, name: str | None = None) -> PointCloud:
+    """Read files and/or directories (all supported files inside, sorted by name) into one PointCloud.
+
+    Several files are merged (attributes they all have are kept). With several files, a file
+    without any point is skipped with a warning; one file without points raises EmptyCloudError.
+    ``progress=True`` shows a progress bar on stderr (rich).
+    """
+    if not paths:
+        raise InputError("open: no file given")
+    chunk_size = check_chunk_size(chunk_size)
+    files = expand_paths(paths)
+    plan = [(f, reader_for(f)) for f in files]
+    if name is None:
+        name = files[0].name if len(files) == 1 else f"{len(files)} files"
+    several = len(files) > 1
+    empty: list[Path] = []
+
+    def chunks(bar=None) -> Iterator[PointChunk]:
+        for f, reader in plan:
+            it = reader.read_chunks(f, chunk_size)
+            if bar is not None:
+                it = _with_progress(f, it, reader.point_count(f), bar)
+            try:
+                yield from it
+            except EmptyCloudError:
+                if not several:
+                    raise
+                empty.append(f)
+                warnings.warn(f"{f}: holds no points, skipped", GigapointWarning, stacklevel=4)
+
+    def build(stream) -> PointCloud:
+        try:
+            return build_cloud(stream, name=name)
+        except EmptyCloudError as exc:
+            where = files[0] if not several else ", ".join(str(f) for f in files[:3]) + (" ..." if len(files) > 3 else "")
+            detail = str(exc).split(": ", 1)[-1]
+            raise EmptyCloudError(f"{where}: {detail}") from None
+
+    if not progress:
+        return build(chunks())
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
+    with Progress(*columns, console=Console(stderr=True), transient=True) as bar:
+        return build(chunks(bar))
+
+
+def file_info(path) -> dict:
+    """What a file holds: format, point_count, bounds {min, max}, attributes, file_size, and for
+    LAS/LAZ las_version, point_format, scale, offset, crs (EPSG/WKT string or None).
+
+    LAS bounds come from the header; other formats are scanned (in chunks)."""
+    p = check_file(path)
+    reader = reader_for(p)
+    info = reader.info(p)
+    info.setdefault("crs", None)
+    info["reader"] = reader.name
+    return info
+
+
+def _fmt_num(v) -> str:
+    return f"{v:,.3f}" if abs(v) >= 1000 else f"{v:.6g}"
+
+
+def format_info(info: dict) -> str:
+    """Human-readable text of a ``file_info`` dict (what ``gigapoint info`` prints)."""
+    lines = [f"{info.get('path', '?')}"]
+    fmt = info.get("format", "?")
+    if info.get("las_version"):
+        fmt += f" {info['las_version']}, point format {info.get('point_format')}"
+    if info.get("encoding"):
+        fmt += f" ({info['encoding']})"
+    lines.append(f"  format:      {fmt}")
+    lines.append(f"  points:      {info.get('point_count', 0):,}")
+    b = info.get("bounds") or {}
+    if b.get("min") is not None:
+        lo, hi = b["min"], b["max"]
+        src = " (header)" if info.get("bounds_source") == "header" else ""
+        lines.append(f"  bounds min:  {', '.join(_fmt_num(v) for v in lo)}{src}")
+        lines.append(f"  bounds max:  {', '.join(_fmt_num(v) for v in hi)}")
+        lines.append(f"  extent:      {', '.join(_fmt_num(h - lo_) for lo_, h in zip(lo, hi))}")
+    lines.append(f"  color:       {'yes' if info.get('has_color') else 'no (default color)'}")
+    attrs = info.get("attributes") or []
+    lines.append(f"  attributes:  {', '.join(attrs) if attrs else 'none'}")
+    if info.get("scale") is not None:
+        lines.append(f"  scale:       {', '.join(f'{v:g}' for v in info['scale'])}")
+        lines.append(f"  offset:      {', '.join(f'{v:.10g}' for v in info['offset'])}")
+    if info.get("crs") or info.get("las_version"):
+        crs = info.get("crs")
+        if crs and len(crs) > 100:
+            crs = crs[:97] + "..."
+        lines.append(f"  crs:         {crs or 'unknown'}")
+    if info.get("generating_software"):
+        lines.append(f"  software:    {info['generating_software']}")
+    if info.get("columns"):
+        lines.append(f"  columns:     {' '.join(info['columns'])} ({info.get('delimiter')}{', header line' if info.get('header_line') else ''})")
+    size = info.get("file_size")
+    if size is not None:
+        lines.append(f"  file size:   {_human_bytes(size)}")
+    return "\n".join(lines)
+
+
+def _human_bytes(n: int) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB"):
+        if n < 1024 or unit == "TiB":
+            return f"{n:,} {unit}" if unit == "bytes" else f"{n:,.1f} {unit}"
+        n /= 1024
+    return str(n)
+
+
+__all__ = [
+    "DEFAULT_CHUNK_SIZE",
+    "Reader",
+    "expand_paths",
+    "file_info",
+    "format_info",
+    "open_cloud",
+    "read_chunks",
+    "reader_for",
+    "readers",
+    "register",
+    "supported_suffixes",
+]

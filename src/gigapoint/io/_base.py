@@ -1,0 +1,194 @@
+"""What every reader shares: the Reader interface, path checks, one-line errors, color scaling."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from ..core.chunk import PointChunk, to_rgba8
+from ..errors import EmptyCloudError, InputError
+
+#: Points per chunk a reader yields unless told otherwise (about 100 MB of xyz + rgba + attributes).
+DEFAULT_CHUNK_SIZE = 2_000_000
+
+#: Bytes of a file's beginning that readers' ``sniff`` sees.
+HEAD_BYTES = 4096
+
+
+class Reader:
+    """One point cloud file format. Subclasses set the class attributes and implement the methods.
+
+    ``sniff(head)`` answers True only when the first bytes prove the format (a magic number);
+    ``weak_sniff(head)`` may guess from content (text readers) and is tried after suffixes.
+    ``read_chunks`` yields PointChunks of at most ``chunk_size`` points and raises InputError
+    subclasses for bad input; ``info`` returns a dict as described in ``gigapoint.io.file_info``.
+    """
+
+    name: str = ""
+    suffixes: tuple[str, ...] = ()
+
+    def sniff(self, head: bytes) -> bool:
+        return False
+
+    def weak_sniff(self, head: bytes) -> bool:
+        return False
+
+    def read_chunks(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
+        raise NotImplementedError
+
+    def info(self, path: Path) -> dict:
+        raise NotImplementedError
+
+    def point_count(self, path: Path) -> int | None:
+        """Number of points when the header tells it cheaply, else None (used for progress bars)."""
+        return None
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name}>"
+
+
+def one_line(text: object) -> str:
+    """Collapse a message (possibly from a third-party library) to one trimmed line."""
+    s = " ".join(str(text).split())
+    return s if len(s) <= 300 else s[:297] + "..."
+
+
+def fail(path: Path | str, problem: object, cls: type[InputError] = InputError) -> InputError:
+    """An InputError (or subclass) whose one-line message starts with the path."""
+    return cls(f"{path}: {one_line(problem)}")
+
+
+def check_file(path: Path | str) -> Path:
+    """The path as a Path, after checking it names a readable, non-empty regular file."""
+    p = Path(path)
+    try:
+        st = p.stat()
+    except FileNotFoundError:
+        raise fail(p, "no such file") from None
+    except OSError as exc:
+        raise fail(p, exc.strerror or exc) from None
+    if p.is_dir():
+        raise fail(p, "is a directory, expected a point cloud file")
+    if not p.is_file():
+        raise fail(p, "is not a regular file")
+    if not os.access(p, os.R_OK):
+        raise fail(p, "permission denied")
+    if st.st_size == 0:
+        raise fail(p, "file is empty (0 bytes)", EmptyCloudError)
+    return p
+
+
+def read_head(path: Path, n: int = HEAD_BYTES) -> bytes:
+    try:
+        with open(path, "rb") as f:
+            return f.read(n)
+    except OSError as exc:
+        raise fail(path, exc.strerror or exc) from None
+
+
+def check_chunk_size(chunk_size: int) -> int:
+    try:
+        n = int(chunk_size)
+    except (TypeError, ValueError):
+        raise InputError(f"chunk_size: must be a positive integer, got {chunk_size!r}") from None
+    if n < 1:
+        raise InputError(f"chunk_size: must be a positive integer, got {chunk_size!r}")
+    return n
+
+
+class ColorScaler:
+    """Turns a file's color columns into uint8, deciding the file's color range once.
+
+    uint8 colors pass through. Other colors are judged on the first chunk that holds a
+    non-zero color: floats all within 0..1 are unit colors (x 255); integer-valued colors
+    above 255 are 16-bit (>> 8); otherwise 8-bit. An 8-bit decision is revised to 16-bit
+    when a later chunk holds values above 255 (never back), so a dark first chunk of a
+    16-bit LAS file does not make the rest of it white.
+    """
+
+    def __init__(self) -> None:
+        self.mode: str | None = None  # "unit", "8", "16"
+
+    def __call__(self, colors: np.ndarray) -> np.ndarray:
+        c = np.asarray(colors)
+        if c.dtype == np.uint8:
+            return to_rgba8(c)
+        if c.dtype.kind == "b":
+            c = c.astype(np.uint8) * 255
+            return to_rgba8(c)
+        if c.dtype.kind == "f":
+            c = np.nan_to_num(c, nan=0.0, posinf=0.0, neginf=0.0)
+        if self.mode is None and c.size and np.any(c):
+            hi = float(c.max())
+            if c.dtype.kind == "f" and hi <= 1.0:
+                self.mode = "unit"
+            else:
+                self.mode = "16" if hi > 255 else "8"
+        if self.mode == "unit":
+            return to_rgba8(c.astype(np.float64, copy=False))
+        if c.dtype in (np.uint16, np.uint32, np.uint64) and c.size:  # the LAS / PLY fast path
+            hi = c.max()
+            if self.mode == "8" and hi > 255:
+                self.mode = "16"
+            if self.mode == "16":
+                c = c >> 8
+                hi = hi >> 8
+            return to_rgba8(c.astype(np.uint8) if hi <= 255 else np.minimum(c, 255).astype(np.uint8))
+        ci = np.clip(np.rint(c) if c.dtype.kind == "f" else c, 0, 65535).astype(np.int64)
+        if self.mode == "8" and ci.size and ci.max() > 255:
+            self.mode = "16"
+        if self.mode == "16":
+            ci >>= 8
+        return to_rgba8(np.clip(ci, 0, 255).astype(np.uint8))
+
+
+def rows_to_chunk(path: Path, names: list[str], columns: list[np.ndarray], scaler: ColorScaler) -> PointChunk:
+    """A PointChunk from named 1-D columns: x y z, red green blue [alpha] (or r g b [a]), the rest attributes."""
+    lower = [n.lower() for n in names]
+    col = dict(zip(lower, columns))
+    try:
+        xyz = np.column_stack([col["x"], col["y"], col["z"]]).astype(np.float64, copy=False)
+    except KeyError:
+        raise fail(path, f"no x, y, z columns (found {', '.join(names) or 'none'})") from None
+    rgba = None
+    for keys in (("red", "green", "blue", "alpha"), ("r", "g", "b", "a"), ("diffuse_red", "diffuse_green", "diffuse_blue", "diffuse_alpha")):
+        if all(k in col for k in keys[:3]):
+            used = [k for k in keys if k in col]
+            rgba = scaler(np.column_stack([col[k] for k in used]))
+            break
+    else:
+        used = []
+    attributes = {}
+    for name, values in zip(lower, columns):
+        if name in ("x", "y", "z") or name in used:
+            continue
+        attributes[name] = np.ascontiguousarray(values)
+    return PointChunk(xyz, rgba, attributes)
+
+
+def color_names(names: list[str]) -> list[str]:
+    lower = [n.lower() for n in names]
+    for keys in (("red", "green", "blue", "alpha"), ("r", "g", "b", "a"), ("diffuse_red", "diffuse_green", "diffuse_blue", "diffuse_alpha")):
+        if all(k in lower for k in keys[:3]):
+            return [k for k in keys if k in lower]
+    return []
+
+
+def scan_bounds(chunks: Iterator[PointChunk]) -> tuple[int, list[float] | None, list[float] | None]:
+    """(count, min, max) over finite points of a chunk stream (bounds None when no finite point)."""
+    n = 0
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for chunk in chunks:
+        n += len(chunk)
+        ok = np.all(np.isfinite(chunk.xyz), axis=1)
+        if ok.any():
+            v = chunk.xyz[ok]
+            lo = np.minimum(lo, v.min(axis=0))
+            hi = np.maximum(hi, v.max(axis=0))
+    if not np.all(np.isfinite(lo)):
+        return n, None, None
+    return n, lo.tolist(), hi.tolist()

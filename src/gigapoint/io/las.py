@@ -1,0 +1,391 @@
+"""LAS and LAZ 1.0-1.4, point formats 0-10, through laspy (+ lazrs for LAZ).
+
+The header is parsed and checked against the file size here, with struct, *before* laspy
+sees the file: laspy trusts counts and offsets (EVLR lengths, LAZ chunk tables) and would
+allocate or loop on whatever a corrupt header claims.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import struct
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..core.chunk import PointChunk
+from ..core.cloud import MAX_ABS_COORDINATE
+from ..errors import EmptyCloudError, InputError
+from ._base import DEFAULT_CHUNK_SIZE, ColorScaler, Reader, check_chunk_size, check_file, fail, one_line
+
+#: Minimum point record length of each point format (bytes).
+RECORD_SIZE = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}
+#: Header size of each LAS 1.x minor version.
+HEADER_SIZE = {0: 227, 1: 227, 2: 227, 3: 235, 4: 375}
+#: Largest |scale| accepted: one unit of the stored integers must be less than a kilometre (or degree...).
+MAX_SCALE = 1e3
+VLR_HEADER = 54
+EVLR_HEADER = 60
+LASZIP_USER_ID = b"laszip encoded"
+LASZIP_RECORD_ID = 22204
+
+#: Attributes read from every point format that has them (laspy dimension name -> gigapoint name).
+LAS_ATTRIBUTES = ("intensity", "classification", "return_number", "number_of_returns", "point_source_id", "gps_time", "nir")
+
+
+@dataclass
+class LasHeader:
+    """The fields of a LAS header gigapoint checks and reports (parsed without laspy)."""
+
+    version: str
+    point_format: int
+    compressed: bool
+    record_length: int
+    point_count: int
+    header_size: int
+    offset_to_point_data: int
+    number_of_vlrs: int
+    scale: tuple[float, float, float]
+    offset: tuple[float, float, float]
+    mins: tuple[float, float, float]
+    maxs: tuple[float, float, float]
+    file_size: int
+    start_of_first_evlr: int = 0
+    number_of_evlrs: int = 0
+    generating_software: str = ""
+    vlrs: list[tuple[bytes, int, bytes]] = field(default_factory=list)  # (user_id, record_id, data)
+
+
+def _u(fmt: str, buf: bytes, off: int):
+    return struct.unpack_from("<" + fmt, buf, off)
+
+
+def read_las_header(path: Path) -> LasHeader:
+    """Parse and validate a LAS/LAZ header against the file size; raise InputError on any inconsistency."""
+    path = check_file(path)
+    with open(path, "rb") as f:
+        f.seek(0, 2)
+        size = f.tell()
+        f.seek(0)
+        head = f.read(375)
+        if head[:4] != b"LASF":
+            raise fail(path, f"not a LAS/LAZ file (starts with {head[:4]!r}, expected b'LASF')")
+        if size < 227:
+            raise fail(path, f"truncated LAS header: the file has {size} bytes, a LAS header needs at least 227")
+        major, minor = head[24], head[25]
+        if major != 1 or minor > 4:
+            raise fail(path, f"unsupported LAS version {major}.{minor} (gigapoint reads 1.0-1.4)")
+        (header_size,) = _u("H", head, 94)
+        offset_to_data, n_vlrs = _u("II", head, 96)
+        fmt_id, record_length, legacy_count = _u("BHI", head, 104)
+        scale = _u("3d", head, 131)
+        offset = _u("3d", head, 155)
+        mm = _u("6d", head, 179)
+        need = HEADER_SIZE[minor]
+        if size < need:
+            raise fail(path, f"truncated LAS {major}.{minor} header: the file has {size} bytes, the header needs {need}")
+        if header_size < need:
+            raise fail(path, f"corrupt LAS header: header size {header_size} is smaller than LAS {major}.{minor} needs ({need})")
+        if header_size > size:
+            raise fail(path, f"truncated LAS file: header size {header_size} lies past the end of the file ({size} bytes)")
+        compressed = bool(fmt_id & 0xC0)
+        point_format = fmt_id & 0x3F
+        if point_format not in RECORD_SIZE:
+            raise fail(path, f"unsupported LAS point format {point_format} (gigapoint reads 0-10)")
+        if record_length < RECORD_SIZE[point_format]:
+            raise fail(path, f"corrupt LAS header: point record length {record_length} is smaller than point format {point_format} needs ({RECORD_SIZE[point_format]})")
+        point_count = legacy_count
+        start_evlr = n_evlrs = 0
+        if minor >= 4:
+            start_evlr, n_evlrs, count64 = _u("QIQ", head, 235)
+            point_count = count64 if count64 else legacy_count
+        if offset_to_data < header_size:
+            raise fail(path, f"corrupt LAS header: offset to point data {offset_to_data} lies inside the {header_size}-byte header")
+        if offset_to_data > size:
+            raise fail(path, f"truncated LAS file: offset to point data {offset_to_data:,} lies past the end of the file ({size:,} bytes)")
+        if n_vlrs * VLR_HEADER > offset_to_data - header_size:
+            raise fail(path, f"corrupt LAS header: it lists {n_vlrs:,} VLRs but only {offset_to_data - header_size:,} bytes lie between header and point data")
+        for axis, s, o in zip("xyz", scale, offset):
+            if not math.isfinite(s) or s == 0 or abs(s) > MAX_SCALE:
+                raise fail(path, f"corrupt LAS header: absurd {axis} scale {s!r} (expected a finite, non-zero value up to {MAX_SCALE:g})")
+            if not math.isfinite(o) or abs(o) > MAX_ABS_COORDINATE:
+                raise fail(path, f"corrupt LAS header: absurd {axis} offset {o!r} (expected a finite value within ±{MAX_ABS_COORDINATE:g})")
+        # VLRs: each record's length is a u16, so walking them is bounded by offset_to_data
+        vlrs = []
+        pos = header_size
+        f.seek(pos)
+        vlr_bytes = f.read(offset_to_data - header_size)
+        for i in range(n_vlrs):
+            rel = pos - header_size
+            if rel + VLR_HEADER > len(vlr_bytes):
+                raise fail(path, f"corrupt LAS file: VLR {i + 1} of {n_vlrs} runs into the point data")
+            user_id = vlr_bytes[rel + 2 : rel + 18].rstrip(b"\0")
+            record_id, length = _u("HH", vlr_bytes, rel + 18)
+            data_start = rel + VLR_HEADER
+            if data_start + length > len(vlr_bytes):
+                raise fail(path, f"corrupt LAS file: VLR {i + 1} of {n_vlrs} ({length} bytes) runs into the point data")
+            vlrs.append((user_id, record_id, vlr_bytes[data_start : data_start + length]))
+            pos += VLR_HEADER + length
+        hdr = LasHeader(
+            version=f"{major}.{minor}",
+            point_format=point_format,
+            compressed=compressed,
+            record_length=record_length,
+            point_count=point_count,
+            header_size=header_size,
+            offset_to_point_data=offset_to_data,
+            number_of_vlrs=n_vlrs,
+            scale=scale,
+            offset=offset,
+            mins=(mm[1], mm[3], mm[5]),
+            maxs=(mm[0], mm[2], mm[4]),
+            file_size=size,
+            start_of_first_evlr=start_evlr,
+            number_of_evlrs=n_evlrs,
+            generating_software=head[58:90].split(b"\0")[0].decode("ascii", "replace").strip(),
+            vlrs=vlrs,
+        )
+        data_end = size
+        if n_evlrs:
+            data_end = _check_evlrs(path, f, hdr)
+        if compressed:
+            _check_laz(path, f, hdr)
+        else:
+            have = data_end - offset_to_data
+            need_bytes = point_count * record_length
+            if need_bytes > have:
+                fits = have // record_length
+                raise fail(
+                    path,
+                    f"truncated LAS file: the header claims {point_count:,} points ({need_bytes:,} bytes) "
+                    f"but only {have:,} bytes of point data follow (room for {fits:,} points)",
+                )
+    return hdr
+
+
+def _check_evlrs(path: Path, f, hdr: LasHeader) -> int:
+    """Check that every EVLR lies inside the file; return where the EVLRs start (end of point data)."""
+    start, n, size = hdr.start_of_first_evlr, hdr.number_of_evlrs, hdr.file_size
+    if start < hdr.offset_to_point_data or start + n * EVLR_HEADER > size:
+        raise fail(path, f"truncated or corrupt LAS file: {n:,} EVLRs said to start at byte {start:,} do not fit in the file ({size:,} bytes)")
+    pos = start
+    for i in range(n):
+        f.seek(pos)
+        buf = f.read(EVLR_HEADER)
+        if len(buf) < EVLR_HEADER:
+            raise fail(path, f"truncated LAS file: EVLR {i + 1} of {n} is cut off at byte {size:,}")
+        (length,) = _u("Q", buf, 20)
+        pos += EVLR_HEADER + length
+        if pos > size:
+            raise fail(path, f"truncated LAS file: EVLR {i + 1} of {n} ({length:,} bytes) runs past the end of the file ({size:,} bytes)")
+    return start
+
+
+def _check_laz(path: Path, f, hdr: LasHeader) -> None:
+    """Check a LAZ file's chunk table against the file size and the header's point count."""
+    import lazrs
+
+    laszip = [d for u, r, d in hdr.vlrs if u == LASZIP_USER_ID and r == LASZIP_RECORD_ID]
+    if not laszip:
+        raise fail(path, "corrupt LAZ file: compressed point format but no LASzip VLR")
+    vlr_data = laszip[0]
+    if len(vlr_data) < 34:
+        raise fail(path, f"corrupt LAZ file: LASzip VLR has {len(vlr_data)} bytes, expected at least 34")
+    (chunk_size,) = _u("I", vlr_data, 12)
+    start = hdr.offset_to_point_data
+    end = hdr.start_of_first_evlr if hdr.number_of_evlrs and hdr.start_of_first_evlr > start else hdr.file_size
+    if hdr.point_count == 0:
+        return
+    if start + 8 > end:
+        raise fail(path, f"truncated LAZ file: no compressed point data after byte {start:,} (file has {hdr.file_size:,} bytes)")
+    f.seek(start)
+    (table_offset,) = _u("q", f.read(8), 0)
+    if table_offset == -1:  # written by a streaming writer: the offset is in the last 8 bytes
+        f.seek(hdr.file_size - 8)
+        (table_offset,) = _u("q", f.read(8), 0)
+    if not start + 8 <= table_offset <= hdr.file_size - 8:
+        raise fail(path, f"truncated or corrupt LAZ file: chunk table offset {table_offset:,} lies outside the file's point data (bytes {start + 8:,}..{hdr.file_size:,})")
+    f.seek(table_offset)
+    _version, n_chunks = _u("II", f.read(8), 0)
+    min_chunk_bytes = RECORD_SIZE[hdr.point_format]  # each chunk starts with one raw point
+    max_chunks = (table_offset - start - 8) // min_chunk_bytes + 1
+    if n_chunks > max_chunks:
+        raise fail(path, f"corrupt LAZ file: chunk table lists {n_chunks:,} chunks, the compressed data has room for at most {max_chunks:,}")
+    f.seek(start)
+    try:
+        table = lazrs.read_chunk_table(f, lazrs.LazVlr(vlr_data))
+    except Exception as exc:  # lazrs.LazrsError, OSError, ...
+        raise fail(path, f"corrupt LAZ chunk table: {exc}") from None
+    if table is None:
+        return
+    counts = [int(c[0]) for c in table]
+    sizes = [int(c[1]) for c in table]
+    if sum(sizes) > table_offset - start:  # chunks lie between the 8-byte table offset and the table
+        raise fail(path, f"truncated LAZ file: the chunk table lists {sum(sizes):,} bytes of compressed points, only {table_offset - start:,} are present")
+    if chunk_size != 0xFFFFFFFF:
+        capacity = len(table) * chunk_size
+    else:
+        capacity = sum(counts)
+    if hdr.point_count > capacity:
+        raise fail(path, f"truncated or corrupt LAZ file: the header claims {hdr.point_count:,} points but the compressed chunks hold at most {capacity:,}")
+
+
+class _Las10AsLas11(io.RawIOBase):
+    """A LAS 1.0 file seen as 1.1 (same header layout and point formats 0-1): laspy reads 1.1-1.4 only."""
+
+    def __init__(self, path: Path):
+        self._f = open(path, "rb")  # noqa: SIM115 - closed by close()
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return True
+
+    def seek(self, pos: int, whence: int = 0) -> int:
+        return self._f.seek(pos, whence)
+
+    def tell(self) -> int:
+        return self._f.tell()
+
+    def readinto(self, b) -> int:
+        pos = self._f.tell()
+        n = self._f.readinto(b)
+        if n and pos <= 25 < pos + n:
+            memoryview(b)[25 - pos] = 1
+        return n
+
+    def close(self) -> None:
+        self._f.close()
+        super().close()
+
+
+def _laspy_open(path: Path, hdr: LasHeader):
+    import laspy
+
+    if hdr.version == "1.0":
+        return laspy.open(io.BufferedReader(_Las10AsLas11(path)), closefd=True)
+    return laspy.open(str(path))
+
+
+def _parse_crs(header) -> str | None:
+    """CRS of a laspy header as 'EPSG:n' or WKT; through pyproj when installed, else from the VLRs."""
+    try:
+        import pyproj
+    except ImportError:
+        pyproj = None
+    if pyproj is not None:
+        try:
+            crs = header.parse_crs()
+        except Exception:
+            crs = None
+        if crs is not None:
+            epsg = crs.to_epsg()
+            return f"EPSG:{epsg}" if epsg else crs.to_wkt()
+    records = list(header.vlrs)
+    if header.evlrs is not None:
+        records += list(header.evlrs)
+    for rec in records:
+        if type(rec).__name__ == "WktCoordinateSystemVlr":
+            text = rec.string.strip("\0 ").strip()
+            if text:
+                return text
+    for rec in records:
+        if type(rec).__name__ == "GeoKeyDirectoryVlr":
+            keys = {k.id: k for k in rec.geo_keys}
+            for key_id in (3072, 2048):  # ProjectedCSTypeGeoKey, GeographicTypeGeoKey
+                k = keys.get(key_id)
+                if k is not None and k.tiff_tag_location == 0 and 0 < k.value_offset < 32767:
+                    return f"EPSG:{k.value_offset}"
+    return None
+
+
+class LasReader(Reader):
+    name = "LAS/LAZ"
+    suffixes = (".las", ".laz")
+
+    def sniff(self, head: bytes) -> bool:
+        return head[:4] == b"LASF"
+
+    def point_count(self, path: Path) -> int | None:
+        return read_las_header(path).point_count
+
+    def read_chunks(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
+        chunk_size = check_chunk_size(chunk_size)
+        hdr = read_las_header(path)
+        kind = "LAZ" if hdr.compressed else "LAS"
+        if hdr.point_count == 0:
+            raise fail(path, f"{kind} file holds no points (header point count is 0)", EmptyCloudError)
+        done = 0
+        try:
+            with _laspy_open(path, hdr) as reader:
+                dims = set(reader.header.point_format.dimension_names)
+                attrs = [a for a in LAS_ATTRIBUTES if a in dims]
+                has_rgb = {"red", "green", "blue"} <= dims
+                scale = np.asarray(reader.header.scales, np.float64)
+                offset = np.asarray(reader.header.offsets, np.float64)
+                scaler = ColorScaler()
+                total = hdr.point_count
+                if reader.header.point_count != total:  # LAS 1.4 with only the legacy count filled in
+                    reader.header.point_count = total
+                while done < total:
+                    pts = reader.read_points(min(chunk_size, total - done))
+                    n = len(pts)
+                    if n == 0:
+                        break
+                    xyz = np.empty((n, 3), np.float64)
+                    xyz[:, 0] = np.asarray(pts.X) * scale[0] + offset[0]
+                    xyz[:, 1] = np.asarray(pts.Y) * scale[1] + offset[1]
+                    xyz[:, 2] = np.asarray(pts.Z) * scale[2] + offset[2]
+                    rgba = scaler(np.column_stack([np.asarray(pts.red), np.asarray(pts.green), np.asarray(pts.blue)])) if has_rgb else None
+                    attributes = {a: np.ascontiguousarray(np.asarray(pts[a])) for a in attrs}
+                    done += n
+                    yield PointChunk(xyz, rgba, attributes)
+        except InputError:
+            raise
+        except MemoryError:
+            raise
+        except Exception as exc:  # laspy / lazrs / OS errors on corrupt data
+            raise fail(
+                path,
+                f"truncated or corrupt {kind} point data: reading failed after {done:,} of the {hdr.point_count:,} points "
+                f"the header claims ({one_line(exc) or type(exc).__name__})",
+            ) from None
+        if done < hdr.point_count:
+            raise fail(path, f"truncated {kind} file: the header claims {hdr.point_count:,} points, only {done:,} could be read")
+
+    def info(self, path: Path) -> dict:
+        hdr = read_las_header(path)
+        try:
+            with _laspy_open(path, hdr) as reader:
+                header = reader.header
+                dims = list(header.point_format.dimension_names)
+                crs = _parse_crs(header)
+                creation = header.creation_date.isoformat() if header.creation_date else None
+        except InputError:
+            raise
+        except Exception as exc:
+            raise fail(path, f"corrupt {'LAZ' if hdr.compressed else 'LAS'} header: {exc}") from None
+        attrs = [a for a in LAS_ATTRIBUTES if a in dims]
+        return {
+            "path": str(path),
+            "format": "LAZ" if hdr.compressed else "LAS",
+            "point_count": hdr.point_count,
+            "bounds": {"min": list(hdr.mins), "max": list(hdr.maxs)},
+            "bounds_source": "header",
+            "has_color": {"red", "green", "blue"} <= set(dims),
+            "attributes": attrs,
+            "dimensions": dims,
+            "las_version": hdr.version,
+            "point_format": hdr.point_format,
+            "point_record_length": hdr.record_length,
+            "scale": list(hdr.scale),
+            "offset": list(hdr.offset),
+            "crs": crs,
+            "generating_software": hdr.generating_software,
+            "creation_date": creation,
+            "file_size": hdr.file_size,
+        }

@@ -1,0 +1,269 @@
+"""NPY and NPZ point arrays, read in chunks (NPY memory-mapped, NPZ members streamed from the zip).
+
+Layouts understood (NPY, or one array of an NPZ without named keys):
+
+- 2-D numeric (N, 3) x y z; (N, 4) x y z intensity; (N, 6) x y z r g b; (N, 7) x y z r g b a.
+- structured with fields x, y, z [red green blue [alpha] | r g b [a]]; other numeric fields
+  become attributes.
+
+NPZ keys: ``xyz`` / ``positions`` / ``points`` / ``pos`` (N, 3) or separate ``x``, ``y``, ``z``;
+``rgb`` / ``rgba`` / ``colors`` / ``color``; every other array with N rows is an attribute.
+Colors may be uint8, uint16 or float 0..1.
+"""
+
+from __future__ import annotations
+
+import zipfile
+import zlib
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from ..core.chunk import PointChunk
+from ..errors import EmptyCloudError
+from ._base import DEFAULT_CHUNK_SIZE, ColorScaler, Reader, check_chunk_size, check_file, fail, rows_to_chunk, scan_bounds
+
+NPY_MAGIC = b"\x93NUMPY"
+_COLUMNS = {3: ["x", "y", "z"], 4: ["x", "y", "z", "intensity"], 6: ["x", "y", "z", "r", "g", "b"], 7: ["x", "y", "z", "r", "g", "b", "a"]}
+XYZ_KEYS = ("xyz", "positions", "position", "points", "pos")
+COLOR_KEYS = ("rgb", "rgba", "colors", "color", "colours")
+
+
+def _read_npy_header(f) -> tuple[tuple, bool, np.dtype]:
+    """(shape, fortran_order, dtype) of the NPY stream at its start; leaves f at the data."""
+    version = np.lib.format.read_magic(f)
+    if version == (1, 0):
+        return np.lib.format.read_array_header_1_0(f)
+    return np.lib.format.read_array_header_2_0(f)  # 2.0 and 3.0 (utf-8 names) share the layout
+
+
+def _layout_names(path: Path, what: str, dtype: np.dtype, shape: tuple) -> list[str]:
+    """Column names of an array used as a whole point table (raises on shapes that are not one)."""
+    if dtype.names:
+        if not {"x", "y", "z"} <= {n.lower() for n in dtype.names}:
+            raise fail(path, f"{what}: structured array without x, y, z fields (fields: {', '.join(dtype.names)})")
+        if len(shape) != 1:
+            raise fail(path, f"{what}: structured point array must be 1-D, got shape {shape}")
+        return list(dtype.names)
+    if dtype.kind not in "biuf":
+        raise fail(path, f"{what}: expected a numeric array, got dtype {dtype}")
+    if len(shape) != 2 or shape[1] not in _COLUMNS:
+        raise fail(path, f"{what}: expected an (N, 3), (N, 4), (N, 6) or (N, 7) array, got shape {shape}")
+    return _COLUMNS[shape[1]]
+
+
+def _table_chunk(path: Path, names: list[str], block: np.ndarray, scaler: ColorScaler) -> PointChunk:
+    if block.dtype.names:
+        block = block.astype(block.dtype.newbyteorder("="), copy=False) if not block.dtype.isnative else block
+        cols = [np.asarray(block[n]) for n in names]
+    else:
+        cols = [block[:, i] for i in range(block.shape[1])]
+    return rows_to_chunk(path, names, cols, scaler)
+
+
+class NpyReader(Reader):
+    name = "NPY"
+    suffixes = (".npy",)
+
+    def sniff(self, head: bytes) -> bool:
+        return head[:6] == NPY_MAGIC
+
+    def _open(self, path: Path) -> np.ndarray:
+        try:
+            with open(path, "rb") as f:
+                if f.read(6) != NPY_MAGIC:
+                    raise fail(path, "not an NPY file (no \\x93NUMPY magic)")
+                f.seek(0)
+                shape, _fortran, dtype = _read_npy_header(f)
+                data_start = f.tell()
+            if dtype.hasobject:
+                raise fail(path, f"NPY array holds Python objects (dtype {dtype}), which gigapoint does not unpickle")
+            nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
+            have = path.stat().st_size - data_start
+            if nbytes > have:
+                raise fail(path, f"truncated NPY file: its header declares shape {tuple(shape)} ({nbytes:,} bytes) but only {have:,} bytes follow")
+            arr = np.load(path, mmap_mode="r", allow_pickle=False)
+        except ValueError as exc:  # bad header, truncated data ("mmap length is greater than file size"), object arrays
+            raise fail(path, f"corrupt or truncated NPY file: {exc}") from None
+        except OSError as exc:
+            raise fail(path, exc.strerror or exc) from None
+        return arr
+
+    def point_count(self, path: Path) -> int | None:
+        arr = self._open(check_file(path))
+        return arr.shape[0] if arr.ndim else None
+
+    def read_chunks(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
+        chunk_size = check_chunk_size(chunk_size)
+        path = check_file(path)
+        arr = self._open(path)
+        names = _layout_names(path, "NPY array", arr.dtype, arr.shape)
+        if len(arr) == 0:
+            raise fail(path, "NPY array holds no points (0 rows)", EmptyCloudError)
+        scaler = ColorScaler()
+        for start in range(0, len(arr), chunk_size):
+            yield _table_chunk(path, names, np.array(arr[start : start + chunk_size]), scaler)
+
+    def info(self, path: Path) -> dict:
+        path = check_file(path)
+        arr = self._open(path)
+        names = _layout_names(path, "NPY array", arr.dtype, arr.shape)
+        n, lo, hi = scan_bounds(self.read_chunks(path)) if len(arr) else (0, None, None)
+        from ._base import color_names
+
+        cols = color_names(names)
+        return {
+            "path": str(path),
+            "format": "NPY",
+            "point_count": n,
+            "bounds": {"min": lo, "max": hi},
+            "bounds_source": "data",
+            "has_color": bool(cols),
+            "attributes": [c for c in names if c.lower() not in ("x", "y", "z") and c.lower() not in cols],
+            "dtype": str(arr.dtype),
+            "shape": list(arr.shape),
+            "file_size": path.stat().st_size,
+        }
+
+
+class _Member:
+    """One array inside an NPZ, read row block by row block without loading it whole."""
+
+    def __init__(self, path: Path, zf: zipfile.ZipFile, name: str):
+        self.path, self.zf, self.name = path, zf, name
+        self.key = name.removesuffix(".npy")
+        info = zf.getinfo(name)
+        with zf.open(name) as m:
+            try:
+                shape, fortran, dtype = _read_npy_header(m)
+                header_len = m.tell() if m.seekable() else None
+            except ValueError as exc:
+                raise fail(path, f"NPZ member {self.key!r} is not a valid NPY array: {exc}") from None
+        if dtype.hasobject:
+            raise fail(path, f"NPZ member {self.key!r} holds Python objects (dtype {dtype}), which gigapoint does not unpickle")
+        self.shape, self.fortran, self.dtype = tuple(shape), fortran, dtype
+        nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
+        if header_len is not None and nbytes > info.file_size - header_len:
+            raise fail(path, f"corrupt NPZ member {self.key!r}: its header claims shape {self.shape} ({nbytes:,} bytes) but it holds {info.file_size - header_len:,} bytes")
+        self.rows = self.shape[0] if self.shape else 0
+
+    def blocks(self, chunk_size: int) -> Iterator[np.ndarray]:
+        if self.fortran or not self.shape:  # rare: read whole
+            data = np.load(self.zf.open(self.name), allow_pickle=False)
+            for start in range(0, max(self.rows, 1), chunk_size):
+                yield data[start : start + chunk_size]
+            return
+        row_shape = self.shape[1:]
+        row_bytes = int(np.prod(row_shape, dtype=np.int64)) * self.dtype.itemsize
+        with self.zf.open(self.name) as m:
+            _read_npy_header(m)
+            done = 0
+            while done < self.rows:
+                n = min(chunk_size, self.rows - done)
+                buf = m.read(n * row_bytes)
+                if len(buf) < n * row_bytes:
+                    raise fail(self.path, f"truncated NPZ member {self.key!r}: {done + len(buf) // max(row_bytes, 1):,} of {self.rows:,} rows present")
+                yield np.frombuffer(buf, self.dtype).reshape((n, *row_shape))
+                done += n
+
+
+def _npz_plan(path: Path, zf: zipfile.ZipFile) -> tuple[dict[str, _Member], list[str] | None, dict[str, _Member]]:
+    """(members by key, names when one member is a whole point table else None, members to read)."""
+    members = {}
+    for name in zf.namelist():
+        m = _Member(path, zf, name)
+        members[m.key] = m
+    if not members:
+        raise fail(path, "NPZ archive holds no arrays", EmptyCloudError)
+    lower = {k.lower(): k for k in members}
+    xyz_key = next((lower[k] for k in XYZ_KEYS if k in lower), None)
+    if xyz_key is None and {"x", "y", "z"} <= set(lower):
+        n = members[lower["x"]].rows
+        use = {k: m for k, m in members.items() if m.rows == n and len(m.shape) in (1, 2)}
+        return members, None, use
+    if xyz_key is None:
+        if len(members) == 1:
+            (m,) = members.values()
+            return members, _layout_names(path, f"NPZ member {m.key!r}", m.dtype, m.shape), {m.key: m}
+        raise fail(path, f"NPZ archive has no point positions: expected a key named one of {', '.join(XYZ_KEYS)} or x, y, z (keys: {', '.join(members)})")
+    xm = members[xyz_key]
+    if xm.dtype.names or len(xm.shape) != 2 or xm.shape[1] != 3 or xm.dtype.kind not in "biuf":
+        if len(members) == 1 or xm.dtype.names:
+            return members, _layout_names(path, f"NPZ member {xm.key!r}", xm.dtype, xm.shape), {xm.key: xm}
+        raise fail(path, f"NPZ member {xyz_key!r} must be a numeric (N, 3) array, got shape {xm.shape} dtype {xm.dtype}")
+    use = {xyz_key: xm}
+    for k, m in members.items():
+        if k != xyz_key and m.rows == xm.rows and len(m.shape) in (1, 2) and m.dtype.kind in "biuf":
+            use[k] = m
+    return members, None, use
+
+
+class NpzReader(Reader):
+    name = "NPZ"
+    suffixes = (".npz",)
+
+    def sniff(self, head: bytes) -> bool:
+        return head[:4] == b"PK\x03\x04" and b".npy" in head[:200]
+
+    def _zip(self, path: Path) -> zipfile.ZipFile:
+        try:
+            return zipfile.ZipFile(path)
+        except (zipfile.BadZipFile, zlib.error, EOFError, ValueError) as exc:
+            raise fail(path, f"corrupt or truncated NPZ (zip) file: {exc}") from None
+
+    def point_count(self, path: Path) -> int | None:
+        with self._zip(check_file(path)) as zf:
+            _, _table, use = _npz_plan(path, zf)
+            return next(iter(use.values())).rows
+
+    def read_chunks(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
+        chunk_size = check_chunk_size(chunk_size)
+        path = check_file(path)
+        with self._zip(path) as zf:
+            try:
+                yield from self._chunks(path, zf, chunk_size)
+            except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
+                raise fail(path, f"corrupt NPZ (zip) data: {exc}") from None
+
+    def _chunks(self, path: Path, zf: zipfile.ZipFile, chunk_size: int) -> Iterator[PointChunk]:
+        _, table, use = _npz_plan(path, zf)
+        rows = next(iter(use.values())).rows
+        if rows == 0:
+            raise fail(path, "NPZ archive holds no points (0 rows)", EmptyCloudError)
+        scaler = ColorScaler()
+        if table is not None:
+            (m,) = use.values()
+            for block in m.blocks(chunk_size):
+                yield _table_chunk(path, table, block, scaler)
+            return
+        iters = {k: m.blocks(chunk_size) for k, m in use.items()}
+        lower = {k.lower(): k for k in use}
+        xyz_key = next((lower[k] for k in XYZ_KEYS if k in lower), None)
+        color_key = next((lower[k] for k in COLOR_KEYS if k in lower and use[lower[k]].shape[1:] in ((3,), (4,))), None)
+        for _ in range(0, rows, chunk_size):
+            blocks = {k: next(it) for k, it in iters.items()}
+            if xyz_key is not None:
+                xyz = blocks.pop(xyz_key)
+            else:
+                xyz = np.column_stack([blocks.pop(lower[a]) for a in "xyz"])
+            rgba = scaler(blocks.pop(color_key)) if color_key else None
+            yield PointChunk(xyz.astype(np.float64), rgba, {k: np.array(v) for k, v in blocks.items()})
+
+    def info(self, path: Path) -> dict:
+        path = check_file(path)
+        with self._zip(path) as zf:
+            members, table, use = _npz_plan(path, zf)
+        n, lo, hi = scan_bounds(self.read_chunks(path))
+        lower = [k.lower() for k in use]
+        return {
+            "path": str(path),
+            "format": "NPZ",
+            "point_count": n,
+            "bounds": {"min": lo, "max": hi},
+            "bounds_source": "data",
+            "has_color": any(k in lower for k in COLOR_KEYS) or bool(table and {"r", "red"} & {t.lower() for t in table}),
+            "attributes": [k for k in use if k.lower() not in XYZ_KEYS + COLOR_KEYS + ("x", "y", "z")],
+            "arrays": {k: {"shape": list(m.shape), "dtype": str(m.dtype)} for k, m in members.items()},
+            "file_size": path.stat().st_size,
+        }

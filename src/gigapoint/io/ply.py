@@ -1,0 +1,191 @@
+"""PLY (ascii and binary little/big endian): the ``vertex`` element, streamed in chunks.
+
+plyfile parses the header (element and property types). Binary vertex data without list
+properties is memory-mapped and copied chunk by chunk; ascii vertex lines are parsed
+chunk by chunk with numpy.loadtxt. Anything else (list properties before or inside the
+vertex element) falls back to plyfile reading the whole file.
+Vertex properties: x y z, red green blue [alpha] (also r g b, diffuse_*), the rest
+(nx ny nz, intensity, scalar_*...) become attributes.
+"""
+
+from __future__ import annotations
+
+import io
+import itertools
+import warnings
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from ..core.chunk import PointChunk
+from ..errors import EmptyCloudError
+from ._base import DEFAULT_CHUNK_SIZE, ColorScaler, Reader, check_chunk_size, check_file, color_names, fail, rows_to_chunk, scan_bounds
+
+_MAX_HEADER = 1 << 20
+
+
+class _Header:
+    def __init__(self, path: Path):
+        import plyfile
+
+        self.path = path
+        with open(path, "rb") as f:
+            head = f.read(_MAX_HEADER)
+        if not head.startswith(b"ply"):
+            raise fail(path, f"not a PLY file (starts with {head[:4]!r}, expected b'ply')")
+        end = head.find(b"end_header")
+        nl = head.find(b"\n", end) if end >= 0 else -1
+        if end < 0 or nl < 0:
+            raise fail(path, "truncated or corrupt PLY header (no 'end_header' line)")
+        self.data_offset = nl + 1
+        self.header_lines = head[: self.data_offset].count(b"\n")
+        try:
+            ply = plyfile.PlyData._parse_header(io.BytesIO(head[: self.data_offset]))
+        except Exception as exc:  # plyfile.PlyHeaderParseError and friends
+            raise fail(path, f"corrupt PLY header: {exc}") from None
+        self.ply = ply
+        self.text = ply.text
+        self.byte_order = ply.byte_order
+        self.file_size = path.stat().st_size
+        self.vertex = None
+        self.before = []
+        for el in ply.elements:
+            if el.name == "vertex":
+                self.vertex = el
+                break
+            self.before.append(el)
+        if self.vertex is None:
+            raise fail(path, f"PLY file has no 'vertex' element (elements: {', '.join(e.name for e in ply.elements) or 'none'})")
+        self.names = [p.name for p in self.vertex.properties]
+        if not {"x", "y", "z"} <= {n.lower() for n in self.names}:
+            raise fail(path, f"PLY vertex element has no x, y, z properties (has {', '.join(self.names)})")
+        self.count = self.vertex.count
+        self.has_lists = any(isinstance(p, plyfile.PlyListProperty) for el in [*self.before, self.vertex] for p in el.properties)
+
+
+def _vertex_columns(data: np.ndarray) -> tuple[list[str], list[np.ndarray]]:
+    names = list(data.dtype.names)
+    return names, [np.asarray(data[n]) for n in names]
+
+
+class PlyReader(Reader):
+    name = "PLY"
+    suffixes = (".ply",)
+
+    def sniff(self, head: bytes) -> bool:
+        return head[:4] in (b"ply\n", b"ply\r")
+
+    def point_count(self, path: Path) -> int | None:
+        return _Header(check_file(path)).count
+
+    def read_chunks(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
+        chunk_size = check_chunk_size(chunk_size)
+        path = check_file(path)
+        h = _Header(path)
+        if h.count == 0:
+            raise fail(path, "PLY file holds no points (vertex count is 0)", EmptyCloudError)
+        scaler = ColorScaler()
+        if h.has_lists:
+            yield from self._read_plyfile(path, h, chunk_size, scaler)
+        elif h.text:
+            yield from self._read_ascii(path, h, chunk_size, scaler)
+        else:
+            yield from self._read_binary(path, h, chunk_size, scaler)
+
+    def _read_binary(self, path, h: _Header, chunk_size, scaler) -> Iterator[PointChunk]:
+        offset = h.data_offset + sum(el.count * el.dtype(h.byte_order).itemsize for el in h.before)
+        dtype = h.vertex.dtype(h.byte_order)
+        need = h.count * dtype.itemsize
+        have = h.file_size - offset
+        if need > have:
+            raise fail(
+                path,
+                f"truncated PLY file: the header declares {h.count:,} vertices ({need:,} bytes) "
+                f"but only {max(have, 0):,} bytes follow (room for {max(have, 0) // dtype.itemsize:,})",
+            )
+        mm = np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=(h.count,))
+        try:
+            for start in range(0, h.count, chunk_size):
+                block = np.array(mm[start : start + chunk_size])  # copy out of the map
+                native = block.astype(block.dtype.newbyteorder("="), copy=False)
+                names, cols = _vertex_columns(native)
+                yield rows_to_chunk(path, names, cols, scaler)
+        finally:
+            del mm
+
+    def _read_ascii(self, path, h: _Header, chunk_size, scaler) -> Iterator[PointChunk]:
+        ncols = len(h.names)
+        dtypes = [p.val_dtype for p in h.vertex.properties]
+        with open(path, "rb") as raw:
+            raw.seek(h.data_offset)
+            f = io.TextIOWrapper(raw, encoding="ascii", errors="replace")
+            skip = sum(el.count for el in h.before)
+            lineno = h.header_lines + 1  # number of the first data line
+            for _ in itertools.islice(f, skip):
+                lineno += 1
+            done = 0
+            while done < h.count:
+                lines = list(itertools.islice(f, min(chunk_size, h.count - done)))
+                if not lines:
+                    break
+                try:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore", UserWarning)
+                        arr = np.loadtxt(lines, ndmin=2, dtype=np.float64, comments=None)
+                except ValueError:
+                    raise fail(path, self._bad_line(lines, lineno, ncols)) from None
+                if len(arr) != len(lines) or (arr.size and arr.shape[1] != ncols):
+                    raise fail(path, self._bad_line(lines, lineno, ncols))
+                lineno += len(lines)
+                done += len(arr)
+                cols = [arr[:, i].astype(np.dtype(dt), copy=False) if np.dtype(dt).kind != "f" else arr[:, i] for i, dt in enumerate(dtypes)]
+                yield rows_to_chunk(path, h.names, cols, scaler)
+        if done < h.count:
+            raise fail(path, f"truncated PLY file: the header declares {h.count:,} vertices, only {done:,} lines of them are present")
+
+    @staticmethod
+    def _bad_line(lines, first_lineno, ncols) -> str:
+        for i, line in enumerate(lines):
+            tokens = line.split()
+            if len(tokens) != ncols:
+                return f"line {first_lineno + i} has {len(tokens)} values, the vertex element declares {ncols}"
+            for t in tokens:
+                try:
+                    float(t)
+                except ValueError:
+                    return f"line {first_lineno + i}: {t[:40]!r} is not a number"
+        return "corrupt vertex data"
+
+    def _read_plyfile(self, path, h: _Header, chunk_size, scaler) -> Iterator[PointChunk]:
+        import plyfile
+
+        try:
+            ply = plyfile.PlyData.read(str(path))
+            data = ply["vertex"].data
+        except Exception as exc:
+            raise fail(path, f"corrupt PLY data: {exc}") from None
+        if len(data) < h.count:
+            raise fail(path, f"truncated PLY file: {len(data):,} of {h.count:,} vertices present")
+        keep = [n for n in data.dtype.names if data.dtype[n].kind != "O"]
+        for start in range(0, len(data), chunk_size):
+            block = data[start : start + chunk_size]
+            yield rows_to_chunk(path, keep, [np.asarray(block[n]) for n in keep], scaler)
+
+    def info(self, path: Path) -> dict:
+        path = check_file(path)
+        h = _Header(path)
+        n, lo, hi = scan_bounds(self.read_chunks(path)) if h.count else (0, None, None)
+        cols = color_names(h.names)
+        return {
+            "path": str(path),
+            "format": "PLY",
+            "encoding": "ascii" if h.text else {"<": "binary little endian", ">": "binary big endian"}.get(h.byte_order, "binary"),
+            "point_count": n,
+            "bounds": {"min": lo, "max": hi},
+            "bounds_source": "data",
+            "has_color": bool(cols),
+            "attributes": [c for c in h.names if c.lower() not in ("x", "y", "z") and c.lower() not in cols],
+            "elements": {el.name: el.count for el in h.ply.elements},
+            "file_size": h.file_size,
+        }

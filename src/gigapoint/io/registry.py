@@ -1,0 +1,81 @@
+"""The one registry of point cloud readers: chosen by magic bytes, then suffix, then content guess."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import UnsupportedFormatError
+from ._base import Reader, check_file, fail, read_head
+
+_READERS: list[Reader] = []
+
+
+def register(reader: Reader) -> Reader:
+    """Add a reader (an instance of a Reader subclass); later registrations win ties on suffix."""
+    _READERS.insert(0, reader)
+    return reader
+
+
+def readers() -> list[Reader]:
+    _load_builtin()
+    return list(_READERS)
+
+
+def supported_suffixes() -> list[str]:
+    return sorted({s for r in readers() for s in r.suffixes})
+
+
+def is_supported_name(path: Path | str) -> bool:
+    """True when the file's suffix belongs to a registered reader (used to pick files in a directory)."""
+    name = Path(path).name.lower()
+    return any(name.endswith(s) for s in supported_suffixes())
+
+
+def reader_by_name(name: str) -> Reader:
+    for r in readers():
+        if r.name.lower() == name.lower():
+            return r
+    raise UnsupportedFormatError(f"format: unknown format {name!r}; known: {', '.join(r.name for r in readers())}")
+
+
+def reader_for(path: Path | str) -> Reader:
+    """The reader for a file: a magic number in its first bytes wins, then its suffix, then a content guess."""
+    p = check_file(path)
+    head = read_head(p)
+    all_readers = readers()
+    for r in all_readers:
+        if r.sniff(head):
+            return r
+    name = p.name.lower()
+    for r in all_readers:
+        if any(name.endswith(s) for s in r.suffixes):
+            return r
+    for r in all_readers:
+        if r.weak_sniff(head):
+            return r
+    start = head[:8]
+    raise fail(
+        p,
+        f"unknown point cloud format (suffix {p.suffix or 'none'!r}, starts with {start!r}); "
+        f"supported: {', '.join(r.name for r in reversed(all_readers))}",
+        UnsupportedFormatError,
+    )
+
+
+_loaded = False
+
+
+def _load_builtin() -> None:
+    global _loaded
+    if _loaded:
+        return
+    _loaded = True
+    from .las import LasReader
+    from .numpy_io import NpyReader, NpzReader
+    from .ply import PlyReader
+    from .text import TextReader
+
+    # registered last = tried first; order only matters for suffix ties (there are none)
+    for reader in (TextReader(), NpzReader(), NpyReader(), PlyReader(), LasReader()):
+        if not any(type(r) is type(reader) for r in _READERS):
+            _READERS.append(reader)

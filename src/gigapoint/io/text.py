@@ -1,0 +1,234 @@
+"""XYZ / TXT / CSV / PTS: one point per line, streamed in chunks with numpy.loadtxt.
+
+Delimiter sniffed from the first data line (semicolon, comma, else whitespace: spaces or tabs).
+An optional header line names the columns (x y z, red green blue [alpha] or r g b [a],
+anything else becomes an attribute, e.g. intensity, nx); CloudCompare's ``//X,Y,Z`` header
+works too. Without a header, columns are read by count:
+
+====  ==============================================
+ 3    x y z
+ 4    x y z intensity
+ 6    x y z r g b
+ 7    x y z intensity r g b   (the PTS layout)
+ 9    x y z r g b nx ny nz
+ 10   x y z intensity r g b nx ny nz
+ k    x y z, then attributes column_3 ... column_{k-1}
+====  ==============================================
+
+A PTS file's first line (the point count alone) is skipped. Lines starting with ``#`` or
+``//`` are comments; blank lines are skipped.
+"""
+
+from __future__ import annotations
+
+import itertools
+import warnings
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from ..core.chunk import PointChunk
+from ..errors import EmptyCloudError
+from ._base import DEFAULT_CHUNK_SIZE, ColorScaler, Reader, check_chunk_size, check_file, color_names, fail, rows_to_chunk, scan_bounds
+
+_BY_COUNT = {
+    3: ["x", "y", "z"],
+    4: ["x", "y", "z", "intensity"],
+    6: ["x", "y", "z", "r", "g", "b"],
+    7: ["x", "y", "z", "intensity", "r", "g", "b"],
+    9: ["x", "y", "z", "r", "g", "b", "nx", "ny", "nz"],
+    10: ["x", "y", "z", "intensity", "r", "g", "b", "nx", "ny", "nz"],
+}
+_ALIASES = {"red": "r", "green": "g", "blue": "b", "alpha": "a", "//x": "x"}
+_MAX_HEADER_LINES = 100
+_MAX_LINE = 1 << 16
+
+
+def _is_comment(line: str) -> bool:
+    s = line.lstrip()
+    return s.startswith(("#", "//"))
+
+
+def _sniff_delimiter(line: str) -> str | None:
+    for d in (";", ",", "\t"):
+        if d in line:
+            return d if d != "\t" else None
+    return None
+
+
+def _split(line: str, delimiter: str | None) -> list[str]:
+    return [t.strip() for t in (line.split(delimiter) if delimiter else line.split())]
+
+
+def _numeric(tokens: list[str]) -> bool:
+    try:
+        for t in tokens:
+            float(t)
+    except ValueError:
+        return False
+    return bool(tokens)
+
+
+def _names_by_count(k: int) -> list[str]:
+    return _BY_COUNT.get(k) or (["x", "y", "z"] + [f"column_{i}" for i in range(3, k)])
+
+
+class _Layout:
+    """What the first lines of a text file say: lines to skip, delimiter, column names."""
+
+    def __init__(self, path: Path, skip: int, delimiter: str | None, names: list[str], header: bool):
+        self.path, self.skip, self.delimiter, self.names, self.header = path, skip, delimiter, names, header
+
+
+def _layout(path: Path) -> _Layout:
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            first: list[tuple[int, str]] = []
+            for lineno in itertools.count(1):
+                line = f.readline(_MAX_LINE + 1)
+                if not line:
+                    break
+                if len(line) > _MAX_LINE:
+                    raise fail(path, f"line {lineno} is longer than {_MAX_LINE:,} characters: not a text point file")
+                if not line.strip():
+                    continue
+                first.append((lineno, line.rstrip("\r\n")))
+                if sum(not _is_comment(ln) for _, ln in first) >= 3 or lineno > _MAX_HEADER_LINES:
+                    break
+    except UnicodeDecodeError:
+        raise fail(path, "not a text point file (bytes that are not UTF-8 text)") from None
+    except OSError as exc:
+        raise fail(path, exc.strerror or exc) from None
+    skip = 0
+    header_names: list[str] | None = None
+    candidates = list(first)
+    # header: the first line that is not a comment, or a comment line naming x y z (CloudCompare's "//X,Y,Z")
+    for i, (lineno, line) in enumerate(candidates):
+        body = line.lstrip().lstrip("#/").strip()
+        tokens = _split(body, _sniff_delimiter(body))
+        lowered = [_ALIASES.get(t.strip("'\"").lower(), t.strip("'\"").lower()) for t in tokens]
+        if not _numeric(tokens) and {"x", "y", "z"} <= set(lowered):
+            header_names = lowered
+            skip = lineno
+            candidates = candidates[i + 1 :]
+            break
+        if not _is_comment(line):
+            break
+    # PTS: a point count alone on the first line
+    if header_names is None and len(candidates) >= 2:
+        tokens = candidates[0][1].split()
+        if len(tokens) == 1 and tokens[0].isdigit() and len(candidates[1][1].split()) >= 3:
+            skip = candidates[0][0]
+            candidates = candidates[1:]
+    data = [c for c in candidates if not _is_comment(c[1])]
+    if not data and first and first[-1][0] > _MAX_HEADER_LINES:
+        raise fail(path, f"no point data in the first {_MAX_HEADER_LINES} lines (only comments)")
+    if not data:
+        if header_names is not None:
+            raise fail(path, "holds a header line but no points", EmptyCloudError)
+        raise fail(path, "holds no points", EmptyCloudError)
+    lineno, line = data[0]
+    delimiter = _sniff_delimiter(line)
+    tokens = _split(line, delimiter)
+    if header_names is None and not _numeric(tokens):
+        raise fail(path, f"line {lineno}: not numeric point data: {line[:80]!r}")
+    if header_names is not None:
+        if len(header_names) != len(tokens):
+            raise fail(path, f"line {lineno} has {len(tokens)} columns, the header names {len(header_names)}")
+        names = header_names
+    else:
+        if len(tokens) < 3:
+            raise fail(path, f"line {lineno} has {len(tokens)} columns, expected at least 3 (x y z)")
+        names = _names_by_count(len(tokens))
+    return _Layout(path, skip, delimiter, names, header_names is not None)
+
+
+def _first_bad_line(path: Path, lines: list[str], first_lineno: int, delimiter: str | None, ncols: int) -> str:
+    """Find and describe the first unparsable line of a chunk (only called after loadtxt failed)."""
+    for i, line in enumerate(lines):
+        if not line.strip() or _is_comment(line):
+            continue
+        tokens = _split(line.rstrip("\r\n"), delimiter)
+        if len(tokens) != ncols:
+            return f"line {first_lineno + i} has {len(tokens)} columns, expected {ncols}"
+        for t in tokens:
+            try:
+                float(t)
+            except ValueError:
+                return f"line {first_lineno + i}: {t[:40]!r} is not a number"
+    return "unparsable data"
+
+
+def _chunks(path: Path, chunk_size: int, layout: _Layout) -> Iterator[np.ndarray]:
+    ncols = len(layout.names)
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            lineno = layout.skip + 1
+            for _ in range(layout.skip):
+                next(f)
+            while True:
+                lines = list(itertools.islice(f, chunk_size))
+                if not lines:
+                    return
+                try:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore", UserWarning)  # "input contained no data" for comment-only chunks
+                        arr = np.loadtxt(lines, delimiter=layout.delimiter, comments=("#", "//"), ndmin=2, dtype=np.float64)
+                except ValueError:
+                    raise fail(path, _first_bad_line(path, lines, lineno, layout.delimiter, ncols)) from None
+                if arr.size and arr.shape[1] != ncols:
+                    raise fail(path, _first_bad_line(path, lines, lineno, layout.delimiter, ncols))
+                lineno += len(lines)
+                if arr.size:
+                    yield arr
+    except UnicodeDecodeError:
+        raise fail(path, "not a text point file (bytes that are not UTF-8 text)") from None
+
+
+class TextReader(Reader):
+    name = "XYZ/TXT/CSV"
+    suffixes = (".xyz", ".txt", ".csv", ".pts", ".asc", ".xyzrgb")
+
+    def weak_sniff(self, head: bytes) -> bool:
+        try:
+            text = head.decode("utf-8")
+        except UnicodeDecodeError:
+            text = head[:-4].decode("utf-8", "ignore") if len(head) > 4 else ""
+        lines = [ln for ln in text.splitlines()[:-1] if ln.strip() and not _is_comment(ln)] or [ln for ln in text.splitlines() if ln.strip()]
+        for line in lines[:3]:
+            tokens = _split(line, _sniff_delimiter(line))
+            if len(tokens) >= 3 and _numeric(tokens):
+                return True
+        return False
+
+    def read_chunks(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
+        chunk_size = check_chunk_size(chunk_size)
+        path = check_file(path)
+        layout = _layout(path)
+        scaler = ColorScaler()  # colors arrive as floats: 0..1, 0..255 or 0..65535, decided once per file
+        total = 0
+        for arr in _chunks(path, chunk_size, layout):
+            total += len(arr)
+            yield rows_to_chunk(path, layout.names, [arr[:, i] for i in range(arr.shape[1])], scaler)
+        if total == 0:
+            raise fail(path, "holds no points", EmptyCloudError)
+
+    def info(self, path: Path) -> dict:
+        path = check_file(path)
+        layout = _layout(path)
+        n, lo, hi = scan_bounds(self.read_chunks(path))
+        cols = color_names(layout.names)
+        return {
+            "path": str(path),
+            "format": "text",
+            "point_count": n,
+            "bounds": {"min": lo, "max": hi},
+            "bounds_source": "data",
+            "has_color": bool(cols),
+            "attributes": [c for c in layout.names if c not in ("x", "y", "z") and c not in cols],
+            "columns": layout.names,
+            "delimiter": {None: "whitespace", ",": "comma", ";": "semicolon"}[layout.delimiter],
+            "header_line": layout.header,
+            "file_size": path.stat().st_size,
+        }

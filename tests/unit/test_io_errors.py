@@ -1,0 +1,407 @@
+"""Bad input, one case at a time: each raises the right InputError subclass, one line, path first, fast."""
+
+from __future__ import annotations
+
+import struct
+import time
+import zipfile
+
+import laspy
+import numpy as np
+import pytest
+from test_io_las import write_las  # tests/unit is on sys.path (pytest rootdir-less import)
+
+from gigapoint.errors import EmptyCloudError, InputError, UnsupportedFormatError
+from gigapoint.io import file_info, open_cloud, read_chunks
+
+
+def patch(path, offset, fmt, value):
+    with open(path, "r+b") as f:
+        f.seek(offset)
+        f.write(struct.pack("<" + fmt, value))
+
+
+def raises(cls, path, fn=None, match=None):
+    """Run the read (default: read every chunk) and check the error: class, one line, starts with the path."""
+    fn = fn or (lambda p: [len(c) for c in read_chunks(p)])
+    t0 = time.perf_counter()
+    with pytest.raises(cls) as info:
+        fn(path)
+    elapsed = time.perf_counter() - t0
+    msg = str(info.value)
+    assert "\n" not in msg, msg
+    assert msg.startswith(f"{path}: "), msg
+    assert len(msg) < 400, msg
+    if match:
+        assert match in msg, msg
+    assert elapsed < 5, f"took {elapsed:.1f} s"
+    return msg
+
+
+ALL_WAYS = [
+    lambda p: list(read_chunks(p)),
+    lambda p: open_cloud(p),
+    lambda p: file_info(p),
+]
+
+
+# --- files that are not there or not files -------------------------------------------------------
+
+
+@pytest.mark.parametrize("way", ALL_WAYS)
+def test_missing_file(tmp_path, way):
+    raises(InputError, tmp_path / "nope.laz", way, "no such file")
+
+
+def test_missing_among_several(tmp_path):
+    good = tmp_path / "a.las"
+    write_las(good, n=10)
+    raises(InputError, tmp_path / "b.las", lambda p: open_cloud(good, p), "no such file")
+
+
+def test_directory_without_supported_files(tmp_path):
+    (tmp_path / "readme.md").write_text("hello")
+    raises(EmptyCloudError, tmp_path, open_cloud, "no supported point cloud file")
+
+
+@pytest.mark.parametrize("way", [ALL_WAYS[0], ALL_WAYS[2]])
+def test_directory_where_a_file_is_required(tmp_path, way):
+    raises(InputError, tmp_path, way, "is a directory")
+
+
+def test_unknown_format(tmp_path):
+    p = tmp_path / "cloud.bin"
+    p.write_bytes(bytes(range(256)) * 4)
+    msg = raises(UnsupportedFormatError, p, match="unknown point cloud format")
+    assert "LAS" in msg and "PLY" in msg  # tells what is supported
+    raises(UnsupportedFormatError, p, file_info)
+    q = tmp_path / "notes.dat"
+    q.write_text("this is just prose\nnot points at all\n")
+    raises(UnsupportedFormatError, q)
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz", ".ply", ".xyz", ".csv", ".npy", ".npz", ".bin"])
+def test_empty_file(tmp_path, suffix):
+    p = tmp_path / f"empty{suffix}"
+    p.write_bytes(b"")
+    for way in ALL_WAYS:
+        raises(EmptyCloudError, p, way, "empty")
+
+
+# --- LAS / LAZ ------------------------------------------------------------------------------------
+
+
+def test_wrong_signature_with_las_suffix(tmp_path):
+    p = tmp_path / "fake.las"
+    p.write_bytes(b"NOPE" + bytes(400))
+    raises(InputError, p, match="not a LAS/LAZ file")
+
+
+def test_truncated_header(tmp_path):
+    p = tmp_path / "t.las"
+    write_las(p, n=100)
+    p.write_bytes(p.read_bytes()[:150])
+    raises(InputError, p, match="truncated LAS header")
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_truncated_point_data(tmp_path, suffix):
+    p = tmp_path / f"t{suffix}"
+    write_las(p, n=120_000, point_format=3)
+    data = p.read_bytes()
+    p.write_bytes(data[: len(data) * 2 // 3])
+    for way in ALL_WAYS[:2]:
+        raises(InputError, p, way, "truncated")
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+@pytest.mark.parametrize("version,fmt", [("1.2", 3), ("1.4", 6)])
+@pytest.mark.parametrize("claimed", [10**12, 10**9, 1001])
+def test_header_point_count_beyond_data(tmp_path, suffix, version, fmt, claimed):
+    """A header claiming more points than present fails fast (10^12 on a tiny file included)."""
+    p = tmp_path / f"c{suffix}"
+    write_las(p, n=1000, point_format=fmt, version=version)
+    if version == "1.4":
+        patch(p, 247, "Q", claimed)
+    else:  # LAS 1.0-1.3 counts are 32-bit
+        claimed = min(claimed, 2**32 - 1)
+        patch(p, 107, "I", claimed)
+    assert p.stat().st_size < 100_000
+    msg = raises(InputError, p)
+    assert f"{claimed:,}" in msg
+    raises(InputError, p, open_cloud)
+
+
+def test_las_14_count_1e12_small_file(tmp_path):
+    p = tmp_path / "huge.las"
+    write_las(p, n=10, point_format=6, version="1.4")
+    patch(p, 247, "Q", 10**12)
+    patch(p, 107, "I", 0)
+    p.write_bytes(p.read_bytes()[:1024])
+    raises(InputError, p, match="1,000,000,000,000")
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_offset_to_point_data_past_end(tmp_path, suffix):
+    p = tmp_path / f"o{suffix}"
+    write_las(p, n=50)
+    patch(p, 96, "I", 10**9)
+    raises(InputError, p, match="offset to point data")
+    raises(InputError, p, file_info, "offset to point data")
+
+
+@pytest.mark.parametrize("field,offset,value", [
+    ("x scale", 131, 1e300), ("y scale", 139, 0.0), ("z scale", 147, float("nan")),
+    ("x offset", 155, float("inf")), ("y offset", 163, 1e200),
+])
+def test_absurd_scale_or_offset(tmp_path, field, offset, value):
+    p = tmp_path / "s.las"
+    write_las(p, n=50)
+    patch(p, offset, "d", value)
+    raises(InputError, p, match=f"absurd {field}")
+    raises(InputError, p, file_info, f"absurd {field}")
+
+
+def test_unsupported_version_and_point_format(tmp_path):
+    p = tmp_path / "v.las"
+    write_las(p, n=5)
+    patch(p, 24, "B", 2)
+    raises(InputError, p, match="unsupported LAS version 2.2")
+    write_las(p, n=5)
+    patch(p, 104, "B", 11)
+    raises(InputError, p, match="point format 11")
+
+
+def test_record_length_too_small(tmp_path):
+    p = tmp_path / "r.las"
+    write_las(p, n=5, point_format=3)
+    patch(p, 105, "H", 20)
+    raises(InputError, p, match="point record length 20")
+
+
+def test_absurd_vlr_count(tmp_path):
+    p = tmp_path / "v.las"
+    write_las(p, n=5)
+    patch(p, 100, "I", 4_000_000_000)
+    raises(InputError, p, match="VLRs")
+
+
+def test_evlr_longer_than_file(tmp_path):
+    """An EVLR whose u64 length is absurd must not make laspy allocate it."""
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    las = laspy.LasData(header)
+    las.x = las.y = las.z = np.arange(10.0)
+    from laspy.vlrs.vlrlist import VLRList
+
+    las.evlrs = VLRList([laspy.VLR(user_id="test", record_id=1, record_data=b"x" * 100)])
+    p = tmp_path / "e.las"
+    las.write(str(p))
+    assert len(list(read_chunks(p))) == 1  # valid as written
+    with open(p, "rb") as f:
+        f.seek(235)
+        start = struct.unpack("<Q", f.read(8))[0]
+    patch(p, start + 20, "Q", 2**60)
+    raises(InputError, p, match="EVLR")
+    patch(p, 243, "I", 1_000_000)  # more EVLRs than fit
+    raises(InputError, p, match="EVLR")
+
+
+def test_laz_chunk_table_absurd(tmp_path):
+    p = tmp_path / "ct.laz"
+    write_las(p, n=1000)
+    data = p.read_bytes()
+    start = struct.unpack_from("<I", data, 96)[0]
+    table = struct.unpack_from("<q", data, start)[0]
+    patch(p, table + 4, "I", 4_000_000_000)  # number of chunks
+    raises(InputError, p, match="chunk table")
+    patch(p, start, "q", 10**15)  # offset to the chunk table
+    raises(InputError, p, match="chunk table offset")
+
+
+def test_laz_corrupt_compressed_bytes(tmp_path):
+    p = tmp_path / "g.laz"
+    write_las(p, n=150_000)
+    data = bytearray(p.read_bytes())
+    third = len(data) // 3
+    data[third : third + 5000] = np.random.default_rng(1).integers(0, 256, 5000, dtype=np.uint8).tobytes()
+    p.write_bytes(bytes(data))
+    try:
+        n = sum(len(c) for c in read_chunks(p, chunk_size=50_000))
+    except InputError as exc:  # what lazrs reports on this damage
+        msg = str(exc)
+        assert msg.startswith(f"{p}: ") and "\n" not in msg
+    else:  # arithmetic decoding may also yield garbage points: never more or fewer than the header says
+        assert n == 150_000
+
+
+def test_zero_point_las(tmp_path):
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    las = laspy.LasData(header)
+    for suffix in (".las", ".laz"):
+        p = tmp_path / f"zero{suffix}"
+        las.write(str(p))
+        for way in ALL_WAYS[:2]:
+            raises(EmptyCloudError, p, way, "no points")
+        assert file_info(p)["point_count"] == 0
+
+
+def test_all_points_invalid(tmp_path):
+    p = tmp_path / "nan.xyz"
+    p.write_text("nan 1 2\ninf 3 4\n")
+    assert sum(len(c) for c in read_chunks(p)) == 2  # NaN/inf are read ...
+    raises(EmptyCloudError, p, open_cloud, "no valid points")  # ... and left out by build_cloud
+
+
+def test_nan_points_skipped_with_warning(tmp_path):
+    from gigapoint.errors import GigapointWarning
+
+    p = tmp_path / "some_nan.xyz"
+    p.write_text("nan 1 2\n1 2 3\n4 5 6\n")
+    with pytest.warns(GigapointWarning, match="skipped 1"):
+        cloud = open_cloud(p)
+    assert cloud.n_points == 2 and cloud.skipped == 1
+
+
+# --- PLY ------------------------------------------------------------------------------------------
+
+PLY_ASCII = "ply\nformat ascii 1.0\nelement vertex {n}\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+
+
+def test_ply_non_numeric(tmp_path):
+    p = tmp_path / "bad.ply"
+    p.write_text(PLY_ASCII.format(n=3) + "1 2 3\n4 five 6\n7 8 9\n")
+    raises(InputError, p, match="line 9: 'five' is not a number")
+
+
+def test_ply_wrong_column_count(tmp_path):
+    p = tmp_path / "bad.ply"
+    p.write_text(PLY_ASCII.format(n=3) + "1 2 3\n4 5\n7 8 9\n")
+    raises(InputError, p, match="line 9 has 2 values")
+
+
+def test_ply_ascii_fewer_lines_than_declared(tmp_path):
+    p = tmp_path / "short.ply"
+    p.write_text(PLY_ASCII.format(n=5) + "1 2 3\n4 5 6\n")
+    raises(InputError, p, match="truncated PLY")
+
+
+def test_ply_binary_truncated_and_huge_count(tmp_path):
+    from plyfile import PlyData, PlyElement
+
+    v = np.zeros(1000, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4")])
+    p = tmp_path / "b.ply"
+    PlyData([PlyElement.describe(v, "vertex")]).write(str(p))
+    data = p.read_bytes()
+    p.write_bytes(data[:-100])
+    raises(InputError, p, match="truncated PLY")
+    p.write_bytes(data.replace(b"element vertex 1000", b"element vertex 999999999999"))
+    raises(InputError, p, match="truncated PLY")
+
+
+def test_ply_bad_header(tmp_path):
+    p = tmp_path / "h.ply"
+    p.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n")
+    raises(InputError, p, match="end_header")
+    p.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nproperty floot x\nend_header\n")
+    raises(InputError, p, match="corrupt PLY header")
+    p.write_bytes(b"ply\nformat ascii 1.0\nelement face 1\nproperty float x\nend_header\n1\n")
+    raises(InputError, p, match="no 'vertex' element")
+    p.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float a\nend_header\n1\n")
+    raises(InputError, p, match="no x, y, z")
+
+
+def test_ply_zero_vertices(tmp_path):
+    p = tmp_path / "z.ply"
+    p.write_text(PLY_ASCII.format(n=0))
+    raises(EmptyCloudError, p, match="no points")
+
+
+# --- text -----------------------------------------------------------------------------------------
+
+
+def test_csv_non_numeric(tmp_path):
+    p = tmp_path / "bad.csv"
+    p.write_text("x,y,z\n1,2,3\n4,abc,6\n")
+    raises(InputError, p, match="line 3: 'abc' is not a number")
+
+
+def test_csv_wrong_column_count(tmp_path):
+    p = tmp_path / "bad.xyz"
+    p.write_text("1 2 3\n" * 5 + "1 2\n")
+    raises(InputError, p, match="line 6 has 2 columns, expected 3")
+
+
+def test_text_error_line_number_in_a_later_chunk(tmp_path):
+    p = tmp_path / "late.xyz"
+    p.write_text("1 2 3\n" * 250 + "1 2 x\n")
+    raises(InputError, p, lambda q: list(read_chunks(q, chunk_size=100)), "line 251")
+
+
+def test_text_too_few_columns(tmp_path):
+    p = tmp_path / "two.xyz"
+    p.write_text("1 2\n3 4\n")
+    raises(InputError, p, match="expected at least 3")
+
+
+def test_text_binary_content(tmp_path):
+    p = tmp_path / "bin.xyz"
+    p.write_bytes(b"\xff\xfe\x00\x01" * 100)
+    raises(InputError, p, match="not UTF-8")
+
+
+@pytest.mark.parametrize("text", ["x y z\n", "# only a comment\n", "\n\n"])
+def test_text_without_points(tmp_path, text):
+    p = tmp_path / "none.xyz"
+    p.write_text(text)
+    raises(EmptyCloudError, p, match="no points")
+
+
+# --- NPY / NPZ ------------------------------------------------------------------------------------
+
+
+def test_npy_truncated(tmp_path):
+    p = tmp_path / "t.npy"
+    np.save(p, np.zeros((1000, 3)))
+    p.write_bytes(p.read_bytes()[:-200])
+    raises(InputError, p, match="truncated NPY")
+
+
+def test_npy_bad_shape_and_dtype(tmp_path):
+    p = tmp_path / "s.npy"
+    np.save(p, np.zeros((10, 5)))
+    raises(InputError, p, match="(N, 3)")
+    np.save(p, np.zeros(30))
+    raises(InputError, p, match="(N, 3)")
+    np.save(p, np.array([{"a": 1}] * 3, dtype=object), allow_pickle=True)
+    raises(InputError, p, match="Python objects")
+    np.save(p, np.zeros(4, dtype=[("a", "f8"), ("b", "f8")]))
+    raises(InputError, p, match="without x, y, z")
+
+
+def test_npy_zero_rows(tmp_path):
+    p = tmp_path / "z.npy"
+    np.save(p, np.zeros((0, 3)))
+    raises(EmptyCloudError, p, match="no points")
+
+
+def test_npz_problems(tmp_path):
+    p = tmp_path / "k.npz"
+    np.savez(p, foo=np.zeros((5, 3)), bar=np.zeros(5))
+    raises(InputError, p, match="no point positions")
+    np.savez(p, xyz=np.zeros((0, 3)))
+    raises(EmptyCloudError, p, match="no points")
+    np.savez_compressed(p, xyz=np.random.default_rng(0).random((5000, 3)))
+    data = p.read_bytes()
+    p.write_bytes(data[: len(data) // 2])
+    raises(InputError, p, match="NPZ")
+    q = tmp_path / "lies.npz"
+    with zipfile.ZipFile(q, "w") as zf:  # header claims 10^12 rows
+        zf.writestr("xyz.npy", b"\x93NUMPY\x01\x00v\x00{'descr': '<f8', 'fortran_order': False, 'shape': (1000000000000, 3), }".ljust(128, b" ")[:127] + b"\n" + bytes(48))
+    raises(InputError, q, match="1000000000000")
+
+
+def test_bad_chunk_size(tmp_path):
+    p = tmp_path / "a.xyz"
+    p.write_text("1 2 3\n")
+    with pytest.raises(InputError, match="chunk_size"):
+        list(read_chunks(p, chunk_size=0))

@@ -1,0 +1,353 @@
+"""PLY, XYZ/TXT/CSV/PTS, NPY and NPZ round trips; registry choice by content and suffix; open_cloud."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from plyfile import PlyData, PlyElement
+
+from gigapoint.core.chunk import DEFAULT_COLOR
+from gigapoint.io import file_info, format_info, open_cloud, read_chunks, reader_for
+
+RNG = np.random.default_rng(3)
+N = 1234
+
+
+def ref_points(n=N, seed=0):
+    rng = np.random.default_rng(seed)
+    xyz = np.column_stack([rng.uniform(-50, 50, n), rng.uniform(0, 10, n), rng.uniform(100, 101, n)])
+    rgb = rng.integers(0, 256, (n, 3)).astype(np.uint8)
+    return xyz, rgb
+
+
+def collect(path, chunk_size=10_000_000):
+    chunks = list(read_chunks(path, chunk_size=chunk_size))
+    xyz = np.concatenate([c.xyz for c in chunks])
+    rgba = np.concatenate([c.rgba for c in chunks])
+    attrs = {k: np.concatenate([c.attributes[k] for c in chunks]) for k in chunks[0].attributes}
+    return chunks, xyz, rgba, attrs
+
+
+def check_chunking(path, n):
+    """Reading in small chunks yields the same points as one read, in bounded chunks."""
+    _, xyz1, rgba1, attrs1 = collect(path)
+    chunks, xyz2, rgba2, attrs2 = collect(path, chunk_size=100)
+    assert all(len(c) <= 100 for c in chunks) and len(chunks) == -(-n // 100)
+    np.testing.assert_array_equal(xyz1, xyz2)
+    np.testing.assert_array_equal(rgba1, rgba2)
+    for k in attrs1:
+        np.testing.assert_array_equal(attrs1[k], attrs2[k])
+
+
+# --- PLY ------------------------------------------------------------------------------------------
+
+
+def ply_vertices(xyz, rgb=None, normals=False, intensity=False, xyz_type="f8", color_type="u1"):
+    fields = [("x", xyz_type), ("y", xyz_type), ("z", xyz_type)]
+    if normals:
+        fields += [("nx", "f4"), ("ny", "f4"), ("nz", "f4")]
+    if rgb is not None:
+        fields += [("red", color_type), ("green", color_type), ("blue", color_type)]
+    if intensity:
+        fields += [("intensity", "u2")]
+    v = np.zeros(len(xyz), dtype=fields)
+    v["x"], v["y"], v["z"] = xyz.T
+    if normals:
+        nrm = np.tile(np.array([0, 0, 1], np.float32), (len(xyz), 1))
+        v["nx"], v["ny"], v["nz"] = nrm.T
+    if rgb is not None:
+        v["red"], v["green"], v["blue"] = rgb.T
+    if intensity:
+        v["intensity"] = np.arange(len(xyz)) % 65535
+    return v
+
+
+@pytest.mark.parametrize("text,byte_order", [(True, "="), (False, "<"), (False, ">")])
+def test_ply_round_trip(tmp_path, text, byte_order):
+    xyz, rgb = ref_points()
+    v = ply_vertices(xyz, rgb, normals=True, intensity=True)
+    faces = np.array([([0, 1, 2],)], dtype=[("vertex_indices", "i4", (3,))])
+    p = tmp_path / "v.ply"
+    PlyData([PlyElement.describe(v, "vertex"), PlyElement.describe(faces, "face")], text=text, byte_order=byte_order).write(str(p))
+    _, got, rgba, attrs = collect(p)
+    np.testing.assert_allclose(got, xyz, rtol=1e-6 if text else 0)
+    np.testing.assert_array_equal(rgba[:, :3], rgb)
+    assert (rgba[:, 3] == 255).all()
+    assert set(attrs) == {"nx", "ny", "nz", "intensity"}
+    np.testing.assert_array_equal(attrs["nz"], 1)
+    np.testing.assert_array_equal(attrs["intensity"], np.arange(N))
+    check_chunking(p, N)
+    info = file_info(p)
+    assert info["format"] == "PLY" and info["point_count"] == N and info["has_color"]
+    np.testing.assert_allclose(info["bounds"]["min"], xyz.min(axis=0), rtol=1e-6)
+
+
+def test_ply_without_color_float32_and_alpha(tmp_path):
+    xyz, _ = ref_points(50)
+    p = tmp_path / "plain.ply"
+    PlyData([PlyElement.describe(ply_vertices(xyz, xyz_type="f4"), "vertex")]).write(str(p))
+    _, got, rgba, attrs = collect(p)
+    np.testing.assert_allclose(got, xyz.astype(np.float32))
+    assert (rgba == np.array(DEFAULT_COLOR, np.uint8)).all()
+    assert attrs == {}
+    v = np.zeros(3, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1"), ("alpha", "u1")])
+    v["red"], v["alpha"] = 10, 128
+    PlyData([PlyElement.describe(v, "vertex")]).write(str(p))
+    _, _, rgba, _ = collect(p)
+    np.testing.assert_array_equal(rgba[0], [10, 0, 0, 128])
+
+
+def test_ply_16bit_and_float_colors(tmp_path):
+    xyz, rgb = ref_points(20)
+    p = tmp_path / "c16.ply"
+    PlyData([PlyElement.describe(ply_vertices(xyz, rgb.astype(np.uint16) * 257, color_type="u2"), "vertex")]).write(str(p))
+    np.testing.assert_array_equal(collect(p)[2][:, :3], rgb)
+    PlyData([PlyElement.describe(ply_vertices(xyz, rgb / 255.0, color_type="f4"), "vertex")]).write(str(p))
+    np.testing.assert_array_equal(collect(p)[2][:, :3], rgb)
+
+
+def test_ply_list_property_in_vertex_falls_back_to_plyfile(tmp_path):
+    xyz, _ = ref_points(30)
+    v = np.zeros(30, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("tags", "O")])
+    v["x"], v["y"], v["z"] = xyz.T.astype(np.float32)
+    for i in range(30):
+        v["tags"][i] = np.arange(i % 3, dtype=np.int32)
+    p = tmp_path / "lists.ply"
+    PlyData([PlyElement.describe(v, "vertex")]).write(str(p))
+    _, got, _, attrs = collect(p)
+    np.testing.assert_allclose(got, xyz.astype(np.float32))
+    assert "tags" not in attrs
+
+
+# --- text -----------------------------------------------------------------------------------------
+
+
+def write_text(path, xyz, rgb=None, sep=" ", header=None, intensity=None, fmt="%.6f"):
+    cols = [xyz]
+    if intensity is not None:
+        cols.append(intensity[:, None])
+    if rgb is not None:
+        cols.append(rgb)
+    table = np.column_stack(cols)
+    with open(path, "w") as f:
+        if header:
+            f.write(header + "\n")
+        for row in table:
+            f.write(sep.join(fmt % v if i < 3 else "%g" % v for i, v in enumerate(row)) + "\n")
+
+
+@pytest.mark.parametrize("sep,suffix", [(" ", ".xyz"), ("\t", ".txt"), (",", ".csv"), (";", ".csv"), ("  ", ".asc")])
+@pytest.mark.parametrize("header", [False, True])
+def test_text_round_trip(tmp_path, sep, suffix, header):
+    xyz, rgb = ref_points()
+    p = tmp_path / f"pts{suffix}"
+    write_text(p, xyz, rgb, sep=sep, header=sep.join(["X", "Y", "Z", "Red", "Green", "Blue"]) if header else None)
+    _, got, rgba, attrs = collect(p)
+    np.testing.assert_allclose(got, xyz, atol=5e-7)
+    np.testing.assert_array_equal(rgba[:, :3], rgb)
+    assert attrs == {}
+    check_chunking(p, N)
+    assert file_info(p)["point_count"] == N
+
+
+def test_text_layouts_by_column_count(tmp_path):
+    xyz, rgb = ref_points(40)
+    inten = np.arange(40.0)
+    p = tmp_path / "a.pts"
+    with open(p, "w") as f:  # PTS: count line, then x y z intensity r g b
+        f.write("40\n")
+    write_text(tmp_path / "body", xyz, rgb, intensity=inten)
+    p.write_text(p.read_text() + (tmp_path / "body").read_text())
+    _, got, rgba, attrs = collect(p)
+    np.testing.assert_allclose(got, xyz, atol=5e-7)
+    np.testing.assert_array_equal(rgba[:, :3], rgb)
+    np.testing.assert_array_equal(attrs["intensity"], inten)
+    q = tmp_path / "xyz_only.xyz"
+    write_text(q, xyz)
+    _, got, rgba, attrs = collect(q)
+    assert (rgba == np.array(DEFAULT_COLOR, np.uint8)).all() and attrs == {}
+
+
+def test_text_cloudcompare_header_comments_and_unit_colors(tmp_path):
+    p = tmp_path / "cc.txt"
+    p.write_text("//X,Y,Z,R,G,B,Nx,Ny,Nz\n# a comment\n1,2,3,1.0,0.5,0,0,0,1\n\n4,5,6,0,0,0.25,0,1,0\n")
+    _, got, rgba, attrs = collect(p)
+    np.testing.assert_array_equal(got, [[1, 2, 3], [4, 5, 6]])
+    np.testing.assert_array_equal(rgba[:, :3], [[255, 128, 0], [0, 0, 64]])
+    np.testing.assert_array_equal(attrs["nz"], [1, 0])
+
+
+def test_text_content_sniffed_without_known_suffix(tmp_path):
+    p = tmp_path / "points.dat"
+    p.write_text("1 2 3\n4 5 6\n")
+    assert reader_for(p).name == "XYZ/TXT/CSV"
+    assert len(open_cloud(p)) == 2
+
+
+# --- NPY / NPZ ------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("layout", ["n3", "n4", "n6", "n7", "structured", "f32"])
+def test_npy_layouts(tmp_path, layout):
+    xyz, rgb = ref_points()
+    if layout == "n3":
+        arr = xyz
+    elif layout == "n4":
+        arr = np.column_stack([xyz, np.arange(N)])
+    elif layout == "n6":
+        arr = np.column_stack([xyz, rgb / 255.0])
+    elif layout == "n7":
+        arr = np.column_stack([xyz, rgb, np.full(N, 255)])
+    elif layout == "f32":
+        arr = xyz.astype(np.float32)
+    else:
+        arr = np.zeros(N, dtype=[("x", "f8"), ("y", "f8"), ("z", "f8"), ("red", "u1"), ("green", "u1"), ("blue", "u1"), ("intensity", "u2")])
+        arr["x"], arr["y"], arr["z"] = xyz.T
+        arr["red"], arr["green"], arr["blue"] = rgb.T
+        arr["intensity"] = np.arange(N)
+    p = tmp_path / "a.npy"
+    np.save(p, arr)
+    _, got, rgba, attrs = collect(p)
+    np.testing.assert_allclose(got, xyz.astype(np.float32) if layout == "f32" else xyz, rtol=0)
+    if layout in ("n6", "n7", "structured"):
+        np.testing.assert_array_equal(rgba[:, :3], rgb)
+    else:
+        assert (rgba == np.array(DEFAULT_COLOR, np.uint8)).all()
+    if layout in ("n4", "structured"):
+        np.testing.assert_array_equal(attrs["intensity"], np.arange(N))
+    check_chunking(p, N)
+    assert file_info(p)["point_count"] == N
+
+
+@pytest.mark.parametrize("compressed", [False, True])
+@pytest.mark.parametrize("keys", ["xyz_rgb", "positions_colors", "separate_xyz"])
+def test_npz_round_trip(tmp_path, compressed, keys):
+    xyz, rgb = ref_points()
+    normals = np.tile([0.0, 0.0, 1.0], (N, 1))
+    if keys == "xyz_rgb":
+        arrays = {"xyz": xyz, "rgb": rgb, "intensity": np.arange(N, dtype=np.uint16), "normals": normals, "meta": np.arange(3)}
+    elif keys == "positions_colors":
+        arrays = {"positions": xyz, "colors": rgb.astype(np.uint16) * 257, "intensity": np.arange(N, dtype=np.uint16), "normals": normals}
+    else:
+        arrays = {"x": xyz[:, 0], "y": xyz[:, 1], "z": xyz[:, 2], "rgb": rgb, "intensity": np.arange(N, dtype=np.uint16), "normals": normals}
+    p = tmp_path / "a.npz"
+    (np.savez_compressed if compressed else np.savez)(p, **arrays)
+    _, got, rgba, attrs = collect(p)
+    np.testing.assert_array_equal(got, xyz)
+    np.testing.assert_array_equal(rgba[:, :3], rgb)
+    assert set(attrs) == {"intensity", "normals"}  # "meta" has another length: not an attribute
+    np.testing.assert_array_equal(attrs["intensity"], np.arange(N))
+    np.testing.assert_array_equal(attrs["normals"], normals)
+    check_chunking(p, N)
+
+
+# --- registry, open_cloud, info ---------------------------------------------------------------------
+
+
+def test_format_chosen_by_content_over_suffix(tmp_path):
+    from test_io_las import write_las
+
+    las = tmp_path / "really_las.xyz"
+    write_las(las, n=10)
+    assert reader_for(las).name == "LAS/LAZ"
+    npy = tmp_path / "really_npy.dat"
+    np.save(tmp_path / "tmp.npy", np.zeros((4, 3)))
+    npy.write_bytes((tmp_path / "tmp.npy").read_bytes())
+    assert reader_for(npy).name == "NPY"
+    ply = tmp_path / "really_ply.bin"
+    ply.write_text("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n")
+    assert reader_for(ply).name == "PLY"
+    assert len(open_cloud(las)) == 10
+
+
+def test_open_cloud_directory_merges_sorted_files(tmp_path):
+    from test_io_las import write_las
+
+    d = tmp_path / "tiles"
+    d.mkdir()
+    xyz, rgb = ref_points(100)
+    write_text(d / "b.xyz", xyz[50:], rgb[50:])
+    write_text(d / "a.xyz", xyz[:50], rgb[:50])
+    (d / "notes.md").write_text("not a cloud")
+    cloud = open_cloud(d)
+    assert cloud.name == "2 files" and cloud.n_points == 100
+    np.testing.assert_allclose(np.sort(cloud.positions()[:, 0]), np.sort(xyz[:, 0]), atol=1e-5)
+    extra = tmp_path / "c.las"
+    write_las(extra, n=30)
+    cloud = open_cloud(d, extra, chunk_size=7)
+    assert cloud.name == "3 files" and cloud.n_points == 130
+
+
+def test_open_cloud_skips_empty_file_among_several(tmp_path):
+    from gigapoint.errors import GigapointWarning
+
+    a = tmp_path / "a.xyz"
+    a.write_text("1 2 3\n4 5 6\n")
+    b = tmp_path / "b.xyz"
+    b.write_text("x y z\n")
+    with pytest.warns(GigapointWarning, match="holds no points"):
+        cloud = open_cloud(a, b)
+    assert cloud.n_points == 2
+
+
+def test_open_cloud_progress_and_gigapoint_open(tmp_path, capsys):
+    import gigapoint
+
+    p = tmp_path / "a.xyz"
+    write_text(p, *ref_points(500))
+    cloud = gigapoint.open(p, progress=True, chunk_size=100)
+    assert cloud.n_points == 500 and cloud.name == "a.xyz"
+    assert capsys.readouterr().out == ""  # the bar goes to stderr
+
+
+def test_format_info_text(tmp_path):
+    p = tmp_path / "a.csv"
+    p.write_text("x,y,z,intensity\n1,2,3,7\n4,5,6,8\n")
+    info = file_info(p)
+    assert info["point_count"] == 2 and info["attributes"] == ["intensity"]
+    assert info["bounds"] == {"min": [1.0, 2.0, 3.0], "max": [4.0, 5.0, 6.0]}
+    text = format_info(info)
+    assert "points:      2" in text and "intensity" in text and "comma" in text
+
+
+def test_registry_takes_a_new_reader(tmp_path, monkeypatch):
+    from gigapoint.core.chunk import PointChunk
+    from gigapoint.io import registry
+    from gigapoint.io._base import Reader
+
+    monkeypatch.setattr(registry, "_READERS", list(registry.readers()))
+
+    class FooReader(Reader):
+        name = "FOO"
+        suffixes = (".foo",)
+
+        def sniff(self, head):
+            return head.startswith(b"FOO!")
+
+        def read_chunks(self, path, chunk_size=10):
+            yield PointChunk(np.arange(6.0).reshape(2, 3))
+
+        def info(self, path):
+            return {"path": str(path), "format": "FOO", "point_count": 2}
+
+    registry.register(FooReader())
+    p = tmp_path / "x.anything"
+    p.write_bytes(b"FOO!data")
+    assert reader_for(p).name == "FOO"
+    assert open_cloud(p).n_points == 2
+    assert file_info(p)["format"] == "FOO"
+    assert ".foo" in registry.supported_suffixes()
+
+
+def test_text_comment_lines_before_the_header(tmp_path):
+    p = tmp_path / "c.csv"
+    p.write_text("# exported by a scanner\n# units: m\nX;Y;Z;Intensity\n1;2;3;9\n4;5;6;10\n")
+    _, got, _, attrs = collect(p)
+    np.testing.assert_array_equal(got, [[1, 2, 3], [4, 5, 6]])
+    np.testing.assert_array_equal(attrs["intensity"], [9, 10])
+
+
+def test_text_with_byte_order_mark(tmp_path):
+    p = tmp_path / "bom.csv"
+    p.write_bytes("x,y,z\n1,2,3\n".encode("utf-8-sig"))
+    np.testing.assert_array_equal(collect(p)[1], [[1, 2, 3]])

@@ -1,0 +1,232 @@
+"""LAS/LAZ reading: round trips over versions 1.0-1.4 and point formats 0-10, chunking, colors."""
+
+from __future__ import annotations
+
+import laspy
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gigapoint.core.chunk import DEFAULT_COLOR
+from gigapoint.io import file_info, open_cloud, read_chunks
+
+RNG = np.random.default_rng(7)
+COLOR_FORMATS = {2, 3, 5, 7, 8, 10}
+GPS_FORMATS = {1, 3, 4, 5, 6, 7, 8, 9, 10}
+
+
+def write_las(path, n=1000, point_format=3, version="1.2", scale=0.001, offset=(500_000.0, 4_000_000.0, 100.0), color16=True, seed=0):
+    """Write a LAS/LAZ file (by suffix) with known values; return the arrays written."""
+    rng = np.random.default_rng(seed)
+    header = laspy.LasHeader(point_format=point_format, version="1.1" if version == "1.0" else version)
+    header.scales = np.array([scale] * 3)
+    header.offsets = np.array(offset)
+    las = laspy.LasData(header)
+    xyz = np.column_stack([rng.uniform(0, 1000, n), rng.uniform(0, 800, n), rng.uniform(0, 50, n)]) + np.array(offset)
+    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    ref = {"xyz": xyz}
+    ref["intensity"] = rng.integers(0, 65535, n).astype(np.uint16)
+    las.intensity = ref["intensity"]
+    ref["classification"] = rng.integers(0, 31, n).astype(np.uint8)
+    las.classification = ref["classification"]
+    nret = rng.integers(1, 6, n).astype(np.uint8)
+    ret = np.minimum(rng.integers(1, 6, n), nret).astype(np.uint8)
+    las.return_number, las.number_of_returns = ret, nret
+    ref["return_number"], ref["number_of_returns"] = ret, nret
+    ref["point_source_id"] = rng.integers(0, 65535, n).astype(np.uint16)
+    las.point_source_id = ref["point_source_id"]
+    if point_format in GPS_FORMATS:
+        ref["gps_time"] = rng.uniform(0, 1e6, n)
+        las.gps_time = ref["gps_time"]
+    if point_format in COLOR_FORMATS:
+        rgb8 = rng.integers(0, 256, (n, 3)).astype(np.uint16)
+        rgb = rgb8 * 257 if color16 else rgb8
+        las.red, las.green, las.blue = rgb[:, 0], rgb[:, 1], rgb[:, 2]
+        ref["rgb8"] = rgb8.astype(np.uint8)
+    las.write(str(path))
+    if version == "1.0":  # laspy writes 1.1 at the oldest; 1.0 has the same header layout
+        with open(path, "r+b") as f:
+            f.seek(25)
+            f.write(b"\x00")
+    return ref
+
+
+def collect(path, chunk_size=10_000_000):
+    chunks = list(read_chunks(path, chunk_size=chunk_size))
+    xyz = np.concatenate([c.xyz for c in chunks])
+    rgba = np.concatenate([c.rgba for c in chunks])
+    attrs = {k: np.concatenate([c.attributes[k] for c in chunks]) for k in chunks[0].attributes}
+    return chunks, xyz, rgba, attrs
+
+
+FORMAT_VERSIONS = [(f, "1.2") for f in range(4)] + [(4, "1.3"), (5, "1.3")] + [(f, "1.4") for f in range(6, 11)] + [(0, "1.0"), (1, "1.1"), (3, "1.3"), (3, "1.4")]
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+@pytest.mark.parametrize("point_format,version", FORMAT_VERSIONS)
+def test_round_trip_all_point_formats(tmp_path, point_format, version, suffix):
+    path = tmp_path / f"pf{point_format}_{version}{suffix}"
+    ref = write_las(path, n=777, point_format=point_format, version=version)
+    _, xyz, rgba, attrs = collect(path)
+    assert len(xyz) == 777
+    assert xyz.dtype == np.float64
+    np.testing.assert_allclose(xyz, ref["xyz"], rtol=0, atol=0.001 / 2 + 1e-9)
+    if point_format in COLOR_FORMATS:
+        np.testing.assert_array_equal(rgba[:, :3], ref["rgb8"])  # 16-bit colors scaled to 8 bits
+    else:
+        assert (rgba == np.array(DEFAULT_COLOR, np.uint8)).all()  # no RGB: default color
+    assert (rgba[:, 3] == 255).all()
+    for name in ("intensity", "classification", "return_number", "number_of_returns", "point_source_id"):
+        np.testing.assert_array_equal(attrs[name], ref[name], err_msg=name)
+    if point_format in GPS_FORMATS:
+        np.testing.assert_array_equal(attrs["gps_time"], ref["gps_time"])
+    else:
+        assert "gps_time" not in attrs
+    info = file_info(path)
+    assert info["format"] == ("LAZ" if suffix == ".laz" else "LAS")
+    assert info["las_version"] == version
+    assert info["point_format"] == point_format
+    assert info["point_count"] == 777
+    assert info["has_color"] == (point_format in COLOR_FORMATS)
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_chunking_gives_the_same_points(tmp_path, suffix):
+    path = tmp_path / f"c{suffix}"
+    write_las(path, n=10_001, point_format=7, version="1.4")
+    one, xyz1, rgba1, attrs1 = collect(path)
+    many, xyz2, rgba2, attrs2 = collect(path, chunk_size=999)
+    assert len(one) == 1
+    assert [len(c) for c in many] == [999] * 10 + [11]
+    np.testing.assert_array_equal(xyz1, xyz2)
+    np.testing.assert_array_equal(rgba1, rgba2)
+    for k in attrs1:
+        np.testing.assert_array_equal(attrs1[k], attrs2[k])
+
+
+def test_8bit_colors_stored_in_16bit_fields_kept(tmp_path):
+    path = tmp_path / "c8.las"
+    ref = write_las(path, n=500, point_format=2, color16=False)
+    _, _, rgba, _ = collect(path)
+    np.testing.assert_array_equal(rgba[:, :3], ref["rgb8"])
+
+
+def test_16bit_decision_is_per_file_not_per_chunk(tmp_path):
+    """A dark first chunk (all values <= 255 in 16-bit) must not switch the file to 8-bit."""
+    header = laspy.LasHeader(point_format=2, version="1.2")
+    las = laspy.LasData(header)
+    n = 2000
+    las.x = np.arange(n, dtype=float)
+    las.y = np.zeros(n)
+    las.z = np.zeros(n)
+    rgb = np.full(n, 200 * 257, np.uint16)
+    rgb[:1000] = 200  # first half very dark in 16-bit terms: 200/65535
+    las.red = las.green = las.blue = rgb
+    path = tmp_path / "dark.las"
+    las.write(str(path))
+    # first chunk has only values <= 255: judged 8-bit, then the next chunk (>255) switches to 16-bit
+    chunks = list(read_chunks(path, chunk_size=1000))
+    assert chunks[1].rgba[0, 0] == 200
+    # one chunk: 16-bit for all
+    (whole,) = list(read_chunks(path, chunk_size=5000))
+    assert whole.rgba[0, 0] == 0 and whole.rgba[1500, 0] == 200
+
+
+def test_open_cloud_las_utm_precision(tmp_path):
+    path = tmp_path / "utm.laz"
+    ref = write_las(path, n=3000, point_format=3, scale=0.01)
+    cloud = open_cloud(path)
+    assert cloud.n_points == 3000
+    assert cloud.name == "utm.laz"
+    lo, hi = cloud.bounds
+    np.testing.assert_allclose(lo, ref["xyz"].min(axis=0), atol=0.006)
+    np.testing.assert_allclose(hi, ref["xyz"].max(axis=0), atol=0.006)
+    # every written point comes back (order changes: Morton order)
+    got = np.round(cloud.positions(), 2)
+    want = np.round(ref["xyz"], 2)
+    np.testing.assert_allclose(got[np.lexsort(got.T[::-1])], want[np.lexsort(want.T[::-1])], atol=0.011)
+    assert set(cloud.attributes) >= {"intensity", "classification", "gps_time"}
+
+
+def test_file_info_las_fields(tmp_path):
+    path = tmp_path / "i.las"
+    write_las(path, n=100, point_format=1, version="1.4", scale=0.01, offset=(10.0, 20.0, 30.0))
+    info = file_info(path)
+    assert info["scale"] == [0.01, 0.01, 0.01]
+    assert info["offset"] == [10.0, 20.0, 30.0]
+    assert info["crs"] is None
+    assert info["file_size"] == path.stat().st_size
+    assert "gps_time" in info["attributes"]
+    assert len(info["bounds"]["min"]) == 3
+
+
+def test_crs_from_geokeys_without_pyproj(tmp_path):
+    from laspy.vlrs.known import GeoKeyDirectoryVlr, GeoKeyEntryStruct
+
+    header = laspy.LasHeader(point_format=0, version="1.2")
+    vlr = GeoKeyDirectoryVlr()
+    vlr.geo_keys_header.number_of_keys = 1
+    key = GeoKeyEntryStruct()
+    key.id, key.tiff_tag_location, key.count, key.value_offset = 3072, 0, 1, 32633
+    vlr.geo_keys = [key]
+    header.vlrs.append(vlr)
+    las = laspy.LasData(header)
+    las.x = las.y = las.z = np.arange(5.0)
+    path = tmp_path / "crs.las"
+    las.write(str(path))
+    assert file_info(path)["crs"] == "EPSG:32633"  # from the GeoKey without pyproj, or pyproj's to_epsg()
+
+
+def test_extra_bytes_dimensions_are_tolerated(tmp_path):
+    header = laspy.LasHeader(point_format=3, version="1.4")
+    header.add_extra_dim(laspy.ExtraBytesParams(name="height_above_ground", type=np.float32))
+    las = laspy.LasData(header)
+    las.x = las.y = las.z = np.arange(20.0)
+    las.height_above_ground = np.arange(20, dtype=np.float32)
+    path = tmp_path / "eb.laz"
+    las.write(str(path))
+    _, xyz, _, attrs = collect(path)
+    np.testing.assert_array_equal(xyz[:, 0], np.arange(20.0))
+    assert "intensity" in attrs
+    assert "height_above_ground" in file_info(path)["dimensions"]
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    scale=st.sampled_from([1e-3, 0.01, 0.25, 1.0]),
+    offset=st.floats(-1e7, 1e7, allow_nan=False),
+    n=st.integers(1, 300),
+    chunk=st.integers(1, 400),
+    seed=st.integers(0, 2**16),
+)
+def test_round_trip_property(tmp_path_factory, scale, offset, n, chunk, seed):
+    """Any scale/offset/count/chunk size: every point comes back within half a scale step, in order."""
+    rng = np.random.default_rng(seed)
+    ints = rng.integers(-(2**31) + 1, 2**31 - 1, (n, 3))
+    header = laspy.LasHeader(point_format=0, version="1.2")
+    header.scales = np.array([scale] * 3)
+    header.offsets = np.array([offset] * 3)
+    las = laspy.LasData(header)
+    las.X, las.Y, las.Z = ints[:, 0], ints[:, 1], ints[:, 2]
+    path = tmp_path_factory.mktemp("prop") / "p.las"
+    las.write(str(path))
+    chunks = list(read_chunks(path, chunk_size=chunk))
+    assert all(len(c) <= chunk for c in chunks)
+    xyz = np.concatenate([c.xyz for c in chunks])
+    np.testing.assert_array_equal(xyz, ints * scale + offset)
+
+
+def test_las14_with_only_the_legacy_count(tmp_path):
+    import struct
+
+    path = tmp_path / "legacy.las"
+    write_las(path, n=321, point_format=3, version="1.4")
+    with open(path, "r+b") as f:
+        f.seek(107)
+        f.write(struct.pack("<I", 321))
+        f.seek(247)
+        f.write(struct.pack("<Q", 0))
+    _, xyz, _, _ = collect(path)
+    assert len(xyz) == 321
+    assert file_info(path)["point_count"] == 321
