@@ -1,0 +1,44 @@
+"""`gigapoint bench`: the brute-force render benchmark with its GL_POINTS baseline."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from . import app
+
+
+@app.command()
+def bench(
+    points: list[str] = typer.Option(["20M", "100M"], "--points", "-n", help="Point counts of the demo scene (repeat: -n 20M -n 100M)."),
+    width: int = typer.Option(1920, "--width", "-W"),
+    height: int = typer.Option(1080, "--height", "-H"),
+    threads: list[str] = typer.Option(["1", "all"], "--threads", help="Thread counts to measure (repeat; 'all' = every core)."),
+    repeats: int = typer.Option(5, help="Timed frames per measurement (the median is reported)."),
+    gl: bool = typer.Option(True, "--gl/--no-gl", help="Also time GL_POINTS through OpenGL (Mesa llvmpipe via EGL)."),
+    out: Path | None = typer.Option(None, "--out", help="Directory for the frames as PNG and bench_render.json."),
+    json_path: Path | None = typer.Option(None, "--json", help="Where to write the JSON results (default: <out>/bench_render.json)."),
+) -> None:
+    """Measure brute-force rendering (points/s) of the demo scene, overview and close-up, against GL_POINTS."""
+    from rich.console import Console
+
+    from ..bench import parse_count, parse_threads, print_results, run_render_benchmark, write_results
+
+    counts = [parse_count(p) for p in points]
+    thread_counts = [parse_threads(t) for t in threads]
+    err = Console(stderr=True)
+    results = run_render_benchmark(
+        points=counts,
+        width=width,
+        height=height,
+        threads=thread_counts,
+        repeats=repeats,
+        gl=gl,
+        out=out,
+        progress=lambda m: err.print(f"[dim]{m}[/dim]"),
+    )
+    print_results(results)
+    target = json_path or (out / "bench_render.json" if out is not None else None)
+    if target is not None:
+        err.print(f"results written to {write_results(results, target)}")

@@ -1,0 +1,172 @@
+"""The render benchmark: result structure, sane figures, and a GL baseline that draws the same thing."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+import gigapoint
+from gigapoint.bench import (
+    COVERAGE_TOLERANCE,
+    benchmark_cameras,
+    demo_cloud,
+    gl_matrix,
+    parse_count,
+    parse_threads,
+    results_table,
+    run_render_benchmark,
+    write_results,
+)
+from gigapoint.errors import GigapointError
+
+N = 200_000
+W, H = 320, 240
+
+
+@pytest.fixture(scope="module")
+def bench_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench")
+    return run_render_benchmark(points=(N,), width=W, height=H, threads=(1, None), repeats=1, out=out), out
+
+
+def test_result_structure_and_figures(bench_run):
+    results, _ = bench_run
+    kinds = [r["kind"] for r in results]
+    assert kinds[0] == "environment" and "points in the cloud" in results[0]["definition"]
+    gen = next(r for r in results if r["kind"] == "generate")
+    build = next(r for r in results if r["kind"] == "build")
+    assert gen["points"] == N and gen["points_per_second"] > 0 and gen["seconds"] > 0
+    assert build["batches"] == math.ceil(N / gigapoint.core.BATCH_SIZE) and build["seconds"] > 0
+    renders = [r for r in results if r["kind"] == "render" and r["renderer"] == "gigapoint"]
+    assert {(r["view"], r["threads"] == 1) for r in renders} == {
+        ("overview", True),
+        ("overview", False),
+        ("closeup", True),
+        ("closeup", False),
+    }
+    for r in renders:
+        assert r["points_per_second"] > 0
+        assert r["points_per_second"] == pytest.approx(N / (r["frame_ms"] / 1e3))  # points in the cloud / frame time
+        assert len(r["frame_ms_runs"]) == 1 and 0 < r["raster_ms"] <= r["frame_ms"]
+        assert r["batches_culled"] + r["batches_rendered"] == r["batches_total"] == build["batches"]
+        assert sum(r["precision_histogram"].values()) == r["points_processed"]
+        assert 0 < r["coverage"] < 1
+    by_view = {r["view"]: r for r in renders}
+    # the overview frames the whole scene; the close-up culls what is behind it and needs more than 10 bits nearby
+    assert by_view["overview"]["batches_culled"] == 0 and by_view["overview"]["points_processed"] == N
+    assert by_view["closeup"]["batches_culled"] > 0
+    h = by_view["closeup"]["precision_histogram"]
+    assert h["20"] + h["30"] > 0 and h["10"] > 0
+    json.dumps(results)  # everything is plain JSON
+
+
+def test_gl_baseline_ran_and_matches_or_was_skipped(bench_run):
+    results, out = bench_run
+    gl_rows = [r for r in results if r["kind"] == "render" and r["renderer"] == "gl"]
+    assert [r["view"] for r in gl_rows] == ["overview", "closeup"]
+    for r in gl_rows:
+        if r["skipped"]:
+            assert r["reason"] and results[0]["gl_skipped_reason"] == r["reason"]
+            continue
+        assert r["points_per_second"] > 0 and r["gigapoint_over_gl"] > 0
+        assert abs(r["coverage"] - r["coverage_gigapoint"]) <= COVERAGE_TOLERANCE
+        assert r["coverage_matches"] and r["coverage_iou"] > 0.9
+        assert (out / f"gl_{N}_{r['view']}.png").is_file()
+    for view in ("overview", "closeup"):
+        assert (out / f"gigapoint_{N}_{view}.png").is_file()
+
+
+def test_table_and_json(bench_run, tmp_path):
+    from rich.console import Console
+
+    results, _ = bench_run
+    console = Console(record=True, width=240)
+    console.print(results_table(results))
+    text = console.export_text()
+    assert "closeup" in text and "generate" in text and "Morton sort" in text
+    path = write_results(results, tmp_path / "r.json")
+    assert json.loads(path.read_text()) == json.loads(json.dumps(results))
+
+
+def test_demo_cloud_is_gigapoint_demo():
+    timings: dict = {}
+    mine = demo_cloud(30_000, seed=3, timings=timings)
+    ref = gigapoint.demo(30_000, seed=3)
+    assert timings["generate_s"] > 0 and timings["build_s"] > 0
+    for name in ("low", "med", "high", "color"):
+        np.testing.assert_array_equal(getattr(mine, name), getattr(ref, name))
+    np.testing.assert_array_equal(mine.batches, ref.batches)
+
+
+@pytest.mark.parametrize("view", ["overview", "closeup"])
+def test_gl_matrix_projects_like_gigapoint(view):
+    """GL window coordinates of centre-relative points == gigapoint's pixel coordinates; depth maps near/far to -1/1."""
+    bounds = (np.array([1000.0, 2000.0, -15.0]), np.array([2000.0, 3000.0, 60.0]))
+    cam = benchmark_cameras(bounds, W, H)[view]
+    near, far = cam.clip_range(bounds)
+    center = (bounds[0] + bounds[1]) / 2
+    rng = np.random.default_rng(0)
+    world = bounds[0] + rng.random((500, 3)) * (bounds[1] - bounds[0])
+    p = np.c_[world, np.ones(len(world))] @ cam.screen_rows().T
+    front = p[:, 2] > 0
+    clip = np.c_[world - center, np.ones(len(world))] @ gl_matrix(cam, near, far, center).T
+    ndc = clip[front, :3] / clip[front, 3:4]
+    np.testing.assert_allclose((ndc[:, 0] + 1) / 2 * W, p[front, 0] / p[front, 2], rtol=0, atol=1e-6)
+    np.testing.assert_allclose((ndc[:, 1] + 1) / 2 * H, p[front, 1] / p[front, 2], rtol=0, atol=1e-6)
+    for d, z in ((near, -1.0), (far, 1.0)):
+        on_plane = cam.eye + d * (-cam.basis()[2])  # a point at depth d on the view axis
+        c = np.r_[on_plane - center, 1.0] @ gl_matrix(cam, near, far, center).T
+        assert c[2] / c[3] == pytest.approx(z, abs=1e-9)
+
+
+def test_parsers_and_bad_input(tmp_path):
+    assert parse_count("20M") == 20_000_000 and parse_count("200k") == 200_000 and parse_count("1e6") == 1_000_000
+    assert parse_count("5_000_000") == 5_000_000
+    assert parse_threads("all") is None and parse_threads("2") == 2
+    for bad in ("abc", "0", "-5", "1.5"):
+        with pytest.raises(GigapointError, match="--points"):
+            parse_count(bad)
+    with pytest.raises(GigapointError, match="--threads"):
+        parse_threads("x")
+    with pytest.raises(GigapointError, match="repeats"):
+        run_render_benchmark(points=(1000,), repeats=0, gl=False)
+    with pytest.raises(GigapointError, match="points"):
+        run_render_benchmark(points=(0,), gl=False)
+    afile = tmp_path / "f"
+    afile.write_text("x")
+    with pytest.raises(GigapointError, match="directory"):
+        run_render_benchmark(points=(1000,), out=afile, gl=False)
+
+
+def test_no_gl_reports_skipped():
+    results = run_render_benchmark(points=(20_000,), width=64, height=48, threads=(1,), repeats=1, gl=False, views=("overview",))
+    gl_rows = [r for r in results if r.get("renderer") == "gl"]
+    assert len(gl_rows) == 1 and gl_rows[0]["skipped"] and "no-gl" in gl_rows[0]["reason"]
+
+
+@pytest.mark.parametrize("broken", ["no_module", "no_context"])
+def test_gl_unavailable_is_reported_not_raised(monkeypatch, broken):
+    import sys
+    import types
+
+    if broken == "no_module":
+        monkeypatch.setitem(sys.modules, "moderngl", None)  # import fails
+        expected = "moderngl"
+    else:
+        fake = types.ModuleType("moderngl")
+
+        def no_context(**kw):
+            raise RuntimeError("eglInitialize failed\nmore detail")
+
+        fake.create_standalone_context = no_context
+        monkeypatch.setitem(sys.modules, "moderngl", fake)
+        expected = "eglInitialize failed"
+    results = run_render_benchmark(points=(20_000,), width=64, height=48, threads=(1,), repeats=1, views=("closeup",))
+    gl_rows = [r for r in results if r.get("renderer") == "gl"]
+    assert len(gl_rows) == 1 and gl_rows[0]["skipped"]
+    assert expected in gl_rows[0]["reason"] and "\n" not in gl_rows[0]["reason"]
+    assert results[0]["gl_renderer"] is None
+    assert any(r.get("renderer") == "gigapoint" and r["points_per_second"] > 0 for r in results)
