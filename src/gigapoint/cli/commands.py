@@ -1,0 +1,5 @@
+"""Imports every command module so each registers on the app."""
+
+from . import render_cmd  # noqa: F401
+from . import bench_cmd  # noqa: F401
+from . import info_cmd  # noqa: F401
