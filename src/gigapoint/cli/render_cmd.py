@@ -161,6 +161,7 @@ def demo(
         times.append(frame.stats.time_ms)
     best = sorted(times)[1]
     save_image(frame.image, output)
+    console.print("(the first run after installing also compiles the numba kernels: later runs are faster)", style="dim", highlight=False)
     console.print(f"demo scene: {points:,} points generated in {t1 - t0:.2f} s ({points / (t1 - t0) / 1e6:.1f} M points/s)", highlight=False)
     console.print(f"Morton sort + batching: {t2 - t1:.2f} s ({points / (t2 - t1) / 1e6:.1f} M points/s), {len(cloud.batches):,} batches", highlight=False)
     console.print(f"first render (JIT compile included): {first.stats.time_ms:.0f} ms", highlight=False)
