@@ -1,0 +1,92 @@
+"""GPU-side binary layouts: numpy dtypes, and the WGSL struct text derived from them.
+
+The dtypes are the single definition; ``wgsl_struct`` writes the matching WGSL struct and
+checks that WGSL's alignment rules place every field at the numpy offset, so a layout can
+never drift between host and shader (DESIGN.md: layouts defined once, derived elsewhere).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: One record per selected batch, rebuilt every frame from the Selection.
+#: ``rows`` is the batch's float32 4x4 matrix (10-bit grid units -> x', y', w, depth), row-major,
+#: so the shader can repeat the CPU kernel's ``m[i,0]*x + m[i,1]*y + m[i,2]*z + m[i,3]`` exactly.
+GPU_BATCH_DTYPE = np.dtype(
+    [
+        ("rows", "<f4", (4, 4)),
+        ("first", "<u4"),  # global index of the batch's first point (the visibility key's low word)
+        ("local_first", "<u4"),  # the same point's index inside its page's buffers
+        ("count", "<u4"),
+        ("bits", "<u4"),  # precision: 10, 20 or 30
+    ]
+)
+
+#: Per-dispatch uniforms shared by every pass (each pass reads the fields it needs).
+PARAMS_DTYPE = np.dtype(
+    [
+        ("width", "<u4"),
+        ("height", "<u4"),
+        ("near", "<f4"),
+        ("far", "<f4"),
+        ("batch_offset", "<u4"),  # raster: first record of this dispatch in the batch buffer
+        ("batch_count", "<u4"),  # raster: records in this dispatch (one workgroup each)
+        ("n_items", "<u4"),  # clear / resolve: number of u32 words / pixels
+        ("page_first", "<u4"),  # resolve: global index of the color page's first point
+        ("page_count", "<u4"),  # resolve: points in the color page
+        ("background", "<u4"),  # resolve: RGBA8 background
+        ("_pad", "<u4", (2,)),  # uniform buffers are bound in multiples of 16 bytes
+    ]
+)
+
+# numpy scalar kind -> WGSL scalar (4-byte types only: WGSL has no portable 64-bit scalar)
+_SCALARS = {("u", 4): "u32", ("i", 4): "i32", ("f", 4): "f32"}
+
+
+def _wgsl_field(base: np.dtype, shape: tuple[int, ...]) -> tuple[str, int, int]:
+    """(WGSL type, alignment, size) of a numpy field (scalar, vector or array of them)."""
+    key = (base.kind, base.itemsize)
+    if key not in _SCALARS:
+        raise TypeError(f"numpy type {base} has no WGSL equivalent (only 4-byte u32/i32/f32)")
+    scalar = _SCALARS[key]
+    if not shape:
+        return scalar, 4, 4
+    *outer, inner = shape
+    if inner in (2, 4):  # vec2 / vec4 (no vec3: its 16-byte alignment would leave holes)
+        t, align, size = f"vec{inner}<{scalar}>", 4 * inner, 4 * inner
+    else:
+        t, align, size = f"array<{scalar}, {inner}>", 4, 4 * inner
+    for n in reversed(outer):
+        t, size = f"array<{t}, {n}>", size * n  # stride = element size (a multiple of its alignment)
+    return t, align, size
+
+
+def wgsl_struct(name: str, dtype: np.dtype) -> str:
+    """WGSL ``struct name {...}`` with the numpy layout of ``dtype``, checked field by field."""
+    lines = ["// generated from numpy dtype by gigapoint.backends.wgpu.layout; do not edit", f"struct {name} {{"]
+    offset = 0
+    struct_align = 4
+    for field in dtype.names:
+        base, np_offset = dtype.fields[field][:2]
+        shape = base.shape
+        base = base.base
+        t, align, size = _wgsl_field(base, shape)
+        offset = -(-offset // align) * align
+        if offset != np_offset:
+            raise TypeError(f"{name}.{field}: WGSL would place it at byte {offset}, numpy has it at {np_offset}; reorder the dtype")
+        lines.append(f"    {field}: {t},")
+        offset += size
+        struct_align = max(struct_align, align)
+    total = -(-offset // struct_align) * struct_align
+    if total != dtype.itemsize:
+        raise TypeError(f"{name}: WGSL size would be {total} bytes, numpy itemsize is {dtype.itemsize}")
+    lines.append("}")
+    return "\n".join(lines) + "\n"
+
+
+#: The structs every shader sees (prepended by the loader).
+STRUCTS = {"BatchRecord": GPU_BATCH_DTYPE, "Params": PARAMS_DTYPE}
+
+
+def wgsl_structs() -> str:
+    return "\n".join(wgsl_struct(n, d) for n, d in STRUCTS.items())

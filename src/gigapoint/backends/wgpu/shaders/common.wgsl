@@ -1,0 +1,106 @@
+// Shared by the rasterize passes: the bindings of one page of point data, the point
+// decoder and the projection. The loader inserts this file where a pass says
+// `//! include common.wgsl`; the structs BatchRecord and Params are generated from numpy
+// dtypes (backends/wgpu/layout.py) and prepended to every shader.
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> batches: array<BatchRecord>;
+// Struct-of-arrays point words of one page (whole batches), so a 10-bit batch reads
+// only `low`: 4 bytes per point instead of 12.
+@group(0) @binding(2) var<storage, read> low: array<u32>;
+@group(0) @binding(3) var<storage, read> med: array<u32>;
+@group(0) @binding(4) var<storage, read> high: array<u32>;
+// The same buffer as `low`, seen 4 words at a time for vertex prefetch (paper 3.4).
+@group(0) @binding(5) var<storage, read> low4: array<vec4<u32>>;
+
+// The paper's workgroup: 128 threads share one batch, ~80 points each.
+const WORKGROUP_SIZE: u32 = 128u;
+const WORD_MASK: u32 = 1023u;
+// Exact power of two, so scaling by it never rounds (the CPU kernel relies on the same).
+const INV1024: f32 = 0.0009765625;
+// A point that lands on no pixel.
+const NO_PIXEL: u32 = 0xffffffffu;
+
+// The three 10-bit fields of one packed word, as floats.
+fn unpack_word(w: u32) -> vec3<f32> {
+    return vec3<f32>(f32(w & WORD_MASK), f32((w >> 10u) & WORD_MASK), f32((w >> 20u) & WORD_MASK));
+}
+
+// A 10-bit point: the centre of its grid cell.
+fn grid_coords10(low_word: u32) -> vec3<f32> {
+    return unpack_word(low_word) + 0.5;
+}
+
+// A point's position in units of its batch's 10-bit grid (cell centres), with the same
+// float32 operations in the same order as grid_coords in backends/numba_cpu/raster.py.
+// Medium and high words are read only when the batch's precision needs them.
+fn grid_coords(i: u32, bits: u32) -> vec3<f32> {
+    if (bits == 10u) {
+        return grid_coords10(low[i]);
+    }
+    let c = unpack_word(low[i]);
+    let f = unpack_word(med[i]);
+    if (bits == 20u) {
+        return c + (f + 0.5) * INV1024;
+    }
+    let g = unpack_word(high[i]);
+    return c + (f + (g + 0.5) * INV1024) * INV1024;
+}
+
+// (pixel id or NO_PIXEL, float32 depth bits) of a grid-space point: project_point in raster.py,
+// term by term. Depth and w are tested before the divide so no inf/NaN reaches a
+// comparison (GPUs need not honour IEEE NaN rules); the CPU kernel rejects the same points.
+fn project(m: array<vec4<f32>, 4>, p: vec3<f32>) -> vec2<u32> {
+    let sd = m[3].x * p.x + m[3].y * p.y + m[3].z * p.z + m[3].w;
+    let sw = m[2].x * p.x + m[2].y * p.y + m[2].z * p.z + m[2].w;
+    if (!(sd > params.near && sd < params.far && sw > 0.0)) {
+        return vec2<u32>(NO_PIXEL, 0u);
+    }
+    let sx = m[0].x * p.x + m[0].y * p.y + m[0].z * p.z + m[0].w;
+    let sy = m[1].x * p.x + m[1].y * p.y + m[1].z * p.z + m[1].w;
+    let px = sx / sw;
+    let py = sy / sw;
+    if (!(px >= 0.0 && px < f32(params.width) && py >= 0.0 && py < f32(params.height))) {
+        return vec2<u32>(NO_PIXEL, 0u);
+    }
+    // depth > near > 0, so its bit pattern orders like the float itself
+    return vec2<u32>(u32(py) * params.width + u32(px), bitcast<u32>(sd));
+}
+
+// One workgroup draws one selected batch. Each pass supplies
+//     fn visit(pixel: u32, depth_bits: u32, index: u32)
+// (WGSL resolves module-scope names in any order), so the batch loop exists once.
+fn draw_batch(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) {
+    // Dispatches are 2D when there are more batches than one dimension allows (65535).
+    let b = wid.x + wid.y * nwg.x;
+    if (b >= params.batch_count) {
+        return;
+    }
+    // The batch record first: matrix, precision and point range are the same for all
+    // 128 threads (one cached load each).
+    let rec = batches[params.batch_offset + b];
+    var tail = 0u;  // first point left to the one-by-one loop
+    if (rec.bits == 10u && (rec.local_first & 3u) == 0u) {
+        // Vertex prefetch (paper 3.4): one 16-byte load yields 4 points' low words;
+        // thread t draws points 4t..4t+3, then 4(t+128).. and so on.
+        let quads = rec.count / 4u;
+        let base = rec.local_first / 4u;
+        for (var q = lid; q < quads; q += WORKGROUP_SIZE) {
+            let words = low4[base + q];
+            for (var k = 0u; k < 4u; k++) {
+                let hit = project(rec.rows, grid_coords10(words[k]));
+                if (hit.x != NO_PIXEL) {
+                    visit(hit.x, hit.y, rec.first + 4u * q + k);
+                }
+            }
+        }
+        tail = 4u * quads;
+    }
+    // Thread t draws points t, t+128, ...: neighbouring threads read neighbouring words.
+    for (var j = tail + lid; j < rec.count; j += WORKGROUP_SIZE) {
+        let hit = project(rec.rows, grid_coords(rec.local_first + j, rec.bits));
+        if (hit.x != NO_PIXEL) {
+            visit(hit.x, hit.y, rec.first + j);
+        }
+    }
+}
