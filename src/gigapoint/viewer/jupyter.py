@@ -1,0 +1,70 @@
+"""gigapoint.Viewer: the browser viewer inside Jupyter (an IFrame on a background server)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import GigapointError
+
+
+def _as_cloud(cloud_or_path):
+    if hasattr(cloud_or_path, "batches") and hasattr(cloud_or_path, "n_points"):
+        return cloud_or_path
+    from .. import open as open_cloud
+
+    paths = cloud_or_path if isinstance(cloud_or_path, (list, tuple)) else [cloud_or_path]
+    if not paths or not all(isinstance(p, (str, Path)) for p in paths):
+        raise GigapointError(f"Viewer needs a PointCloud or file path(s), got {type(cloud_or_path).__name__}")
+    return open_cloud(*paths)
+
+
+class Viewer:
+    """Serve ``cloud_or_path`` (a PointCloud, a path or a list of paths) and show it.
+
+    The server runs in a background thread on 127.0.0.1 (a free port unless ``port``);
+    in IPython/Jupyter the viewer is displayed as an IFrame. ``screenshot()`` renders the
+    view of the most recently used tab (or the default view) to PNG bytes; ``close()``
+    stops the server. Usable as a context manager.
+    """
+
+    def __init__(self, cloud_or_path, width: int = 960, height: int = 600, host: str = "127.0.0.1", port: int = 0, settings=None, display: bool = True):
+        from .server import ViewerServer
+
+        self.cloud = _as_cloud(cloud_or_path)
+        self.server = ViewerServer(self.cloud, host=host, port=port, settings=settings).start()
+        self.width, self.height = width, height
+        if display:
+            self.display()
+
+    @property
+    def url(self) -> str:
+        return self.server.url
+
+    def display(self) -> None:
+        """Show the IFrame when running under IPython (a no-op elsewhere)."""
+        try:
+            from IPython import get_ipython
+            from IPython.display import IFrame, display
+        except ImportError:
+            return
+        if get_ipython() is None:
+            return
+        display(IFrame(self.url, width=self.width, height=self.height))
+
+    def screenshot(self, width: int | None = None, height: int | None = None, scale: int = 1) -> bytes:
+        """PNG bytes of the current view at width x height (default: the tab's size x scale, else 1280x720)."""
+        core = self.server.core
+        active = core.last_active
+        return core.screenshot(active.id if active is not None and active.id in core.sessions else None, width, height, scale)
+
+    def close(self) -> None:
+        self.server.close()
+
+    def __enter__(self) -> Viewer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"Viewer({getattr(self.cloud, 'name', 'cloud')!r}, {self.url})"

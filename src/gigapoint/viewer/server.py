@@ -1,0 +1,315 @@
+"""The viewer's HTTP/WebSocket server (Starlette + uvicorn).
+
+Routes: ``/`` the page, ``/static/<name>`` a fixed whitelist of assets held in memory (no
+client path ever reaches the file system), ``/ws`` the tab's WebSocket, ``/screenshot`` a
+PNG rendered server-side, ``/api/info`` the cloud and settings schema. With a token (always
+on a non-loopback bind) every route needs ``?token=...``; on a loopback bind the Host header
+must name the loopback (no DNS rebinding) and a WebSocket's Origin must match its Host.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import hmac
+import ipaddress
+import json
+import logging
+import secrets
+import socket
+import struct
+import threading
+import time
+from importlib import resources
+from urllib.parse import quote, urlsplit
+
+from ..errors import GigapointError
+from . import protocol as P
+from .session import SEND_TIMEOUT_S, ViewerCore
+
+log = logging.getLogger("gigapoint.viewer")
+
+STATIC_TYPES = {
+    "viewer.js": "text/javascript; charset=utf-8",
+    "viewer.css": "text/css; charset=utf-8",
+    "favicon.svg": "image/svg+xml",
+}
+LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
+CSP = (
+    "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' blob: data:; "
+    "connect-src 'self' ws: wss:; frame-ancestors *; base-uri 'none'; form-action 'none'"
+)
+
+
+def _require_starlette():
+    try:
+        import starlette  # noqa: F401
+        import uvicorn  # noqa: F401
+    except ImportError as exc:
+        raise GigapointError(f"the viewer needs Starlette and uvicorn ({exc.name} is missing): pip install 'gigapoint[viewer]'") from None
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def _load_static() -> dict[str, bytes]:
+    root = resources.files("gigapoint.viewer") / "static"
+    out = {name: (root / name).read_bytes() for name in STATIC_TYPES}
+    out["index.html"] = (root / "index.html").read_bytes()
+    return out
+
+
+def _host_name(value: str) -> str:
+    """'127.0.0.1:8000' -> '127.0.0.1', '[::1]:80' -> '::1'."""
+    try:
+        return (urlsplit("//" + value).hostname or "").lower()
+    except ValueError:
+        return ""
+
+
+def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
+    """The Starlette app serving ``core``; ``allowed_hosts`` None accepts any Host header."""
+    _require_starlette()
+    from starlette.applications import Starlette
+    from starlette.concurrency import run_in_threadpool
+    from starlette.responses import JSONResponse, PlainTextResponse, Response
+    from starlette.routing import Route, WebSocketRoute
+    from starlette.websockets import WebSocketDisconnect
+
+    static = _load_static()
+    query = f"?token={quote(token)}" if token else ""
+    index = static.pop("index.html").replace(b"{{QUERY}}", query.encode())
+    allowed = None if allowed_hosts is None else {h.lower() for h in allowed_hosts}
+
+    def authorized(conn) -> bool:
+        if allowed is not None and _host_name(conn.headers.get("host", "")) not in allowed:
+            return False
+        if token is None:
+            return True
+        return hmac.compare_digest(conn.query_params.get("token", "").encode(), token.encode())
+
+    def denied():
+        return PlainTextResponse("forbidden: wrong or missing token", status_code=403)
+
+    headers = {"Cache-Control": "no-store", "X-Content-Type-Options": "nosniff", "Referrer-Policy": "no-referrer"}
+
+    async def page(request):
+        if not authorized(request):
+            return denied()
+        return Response(index, media_type="text/html; charset=utf-8", headers={**headers, "Content-Security-Policy": CSP})
+
+    async def asset(request):
+        if not authorized(request):
+            return denied()
+        name = request.path_params["name"]
+        if name not in STATIC_TYPES:  # a fixed whitelist: nothing from the client reaches the file system
+            return PlainTextResponse("not found", status_code=404)
+        return Response(static[name], media_type=STATIC_TYPES[name], headers=headers)
+
+    async def info(request):
+        if not authorized(request):
+            return denied()
+        return JSONResponse(P.json_safe({"cloud": core.cloud_info(), "schema": P.settings_schema(type(core.settings))}), headers=headers)
+
+    async def screenshot(request):
+        if not authorized(request):
+            return denied()
+        q = request.query_params
+        try:
+            args = {k: q.get(k) for k in ("width", "height", "scale")}
+            for k, v in args.items():
+                if v is not None and not (v.isdigit() and len(v) <= 6):
+                    raise P.ProtocolError(f"screenshot: {k} must be a positive integer")
+            scale = int(args["scale"] or 1)
+            if scale not in (1, 2, 4):
+                raise P.ProtocolError("screenshot: scale must be 1, 2 or 4")
+            width = int(args["width"]) if args["width"] else None
+            height = int(args["height"]) if args["height"] else None
+            sid = q.get("session") or None
+            if sid is not None and len(sid) > 64:
+                raise P.ProtocolError("screenshot: unknown session")
+            png = await run_in_threadpool(core.screenshot, sid, width, height, scale)
+        except GigapointError as exc:
+            return PlainTextResponse(str(exc), status_code=400)
+        w, h = struct.unpack(">II", png[16:24])
+        return Response(png, media_type="image/png", headers={**headers, "Content-Disposition": f'attachment; filename="gigapoint_{w}x{h}.png"'})
+
+    async def ws_endpoint(websocket):
+        origin = websocket.headers.get("origin")
+        if not authorized(websocket) or (origin and _host_name(urlsplit(origin).netloc) != _host_name(websocket.headers.get("host", ""))):
+            await websocket.close(code=1008)
+            return
+        await websocket.accept()
+        loop = asyncio.get_running_loop()
+        send_lock = asyncio.Lock()
+        gone = threading.Event()
+
+        async def send(kind, payload):
+            async with send_lock:
+                if kind == "bytes":
+                    await websocket.send_bytes(payload)
+                else:
+                    await websocket.send_text(json.dumps(P.json_safe(payload), separators=(",", ":")))
+
+        def send_from_worker(kind, payload) -> bool:
+            if gone.is_set():
+                return False
+            try:
+                fut = asyncio.run_coroutine_threadsafe(send(kind, payload), loop)
+            except RuntimeError:  # the loop is closed
+                return False
+            while True:
+                try:
+                    fut.result(timeout=SEND_TIMEOUT_S)
+                    return True
+                except concurrent.futures.TimeoutError:
+                    if gone.is_set():
+                        fut.cancel()
+                        return False
+                except Exception:  # noqa: BLE001 - the client went away mid-send
+                    gone.set()
+                    return False
+
+        q = websocket.query_params
+        try:
+            w = P.integer({"type": "connect", "w": int(q.get("w", "1280"))}, "w", 1, P.MAX_VIEW_SIDE)
+            h = P.integer({"type": "connect", "h": int(q.get("h", "720"))}, "h", 1, P.MAX_VIEW_SIDE)
+        except (ValueError, P.ProtocolError):
+            w, h = 1280, 720
+        try:
+            session = core.open_session(send_from_worker, w, h)
+        except P.ProtocolError as exc:
+            await send("json", {"type": "error", "message": str(exc)})
+            await websocket.close(code=1013)
+            return
+        try:
+            state, settings, _ = session.snapshot()
+            await send(
+                "json",
+                {
+                    "type": "hello",
+                    "session": session.id,
+                    "cloud": core.cloud_info(),
+                    "schema": P.settings_schema(type(core.settings)),
+                    "settings": P.settings_values(settings),
+                    "camera": state.as_dict(),
+                    "views": list(P.VIEW_NAMES),
+                    "limits": {"max_view_side": P.MAX_VIEW_SIDE, "max_shot_side": P.MAX_SHOT_SIDE, "max_message": P.MAX_MESSAGE},
+                },
+            )
+            while True:
+                message = await websocket.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                kind = None
+                try:
+                    msg = P.parse_message(message.get("text"))
+                    kind = msg["type"]
+                    reply = session.handle(msg)
+                except P.ProtocolError as exc:
+                    reply = {"type": "error", "message": str(exc), "in_reply_to": kind}
+                except Exception as exc:
+                    log.exception("viewer: message %s failed", kind)
+                    reply = {"type": "error", "message": f"internal error: {exc}"[:300], "in_reply_to": kind}
+                if reply is not None:
+                    await send("json", reply)
+        except (WebSocketDisconnect, RuntimeError, OSError, asyncio.CancelledError):
+            pass
+        except Exception:
+            log.debug("viewer: websocket ended", exc_info=True)
+        finally:
+            gone.set()
+            core.close_session(session)
+
+    routes = [
+        Route("/", page),
+        Route("/index.html", page),
+        Route("/static/{name}", asset),
+        Route("/api/info", info),
+        Route("/screenshot", screenshot),
+        WebSocketRoute("/ws", ws_endpoint),
+    ]
+    app = Starlette(routes=routes)
+    app.state.core = core
+    app.state.token = token
+    return app
+
+
+class ViewerServer:
+    """The viewer bound to a socket: run it in the foreground (CLI) or in a background thread (Jupyter)."""
+
+    def __init__(self, cloud, host: str = "127.0.0.1", port: int = 0, token: str | None = None, settings=None, log_level: str = "warning"):
+        _require_starlette()
+        import uvicorn
+
+        if not isinstance(port, int) or not 0 <= port <= 65535:
+            raise GigapointError(f"--port must be in 0..65535, got {port!r}")
+        self.host = host
+        self.loopback = is_loopback(host)
+        self.token = token if token is not None else (None if self.loopback else secrets.token_urlsafe(18))
+        self.core = ViewerCore(cloud, settings)
+        allowed = LOOPBACK_HOSTS if self.loopback and self.token is None else None
+        self.app = create_app(self.core, self.token, allowed)
+        try:
+            family, kind, proto, _, addr = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
+            self.sock = socket.socket(family, kind, proto)
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            self.sock.bind(addr)
+        except OSError as exc:
+            raise GigapointError(f"--host {host} --port {port}: cannot listen there ({exc.strerror or exc})") from None
+        self.sock.listen(128)
+        self.sock.setblocking(False)
+        self.port = self.sock.getsockname()[1]
+        config = uvicorn.Config(
+            self.app,
+            log_level=log_level,
+            lifespan="off",
+            ws_max_size=P.MAX_MESSAGE * 4,
+            ws_ping_interval=20.0,
+            ws_ping_timeout=20.0,
+            timeout_graceful_shutdown=2,
+            access_log=False,
+        )
+        self.server = uvicorn.Server(config)
+        self.thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        host = self.host if self.host not in ("0.0.0.0", "::", "") else socket.gethostname()
+        if ":" in host:
+            host = f"[{host}]"
+        return f"http://{host}:{self.port}/" + (f"?token={quote(self.token)}" if self.token else "")
+
+    def serve_forever(self) -> None:
+        """Serve in this thread until Ctrl+C (uvicorn installs its signal handlers in the main thread)."""
+        try:
+            self.server.run(sockets=[self.sock])
+        finally:
+            self.core.close_all()
+
+    def start(self, timeout: float = 10.0) -> ViewerServer:
+        """Serve from a background thread; returns once the server accepts connections."""
+        self.thread = threading.Thread(target=self.serve_forever, name="gigapoint-viewer-server", daemon=True)
+        self.thread.start()
+        t0 = time.monotonic()
+        while not self.server.started:
+            if not self.thread.is_alive() or time.monotonic() - t0 > timeout:
+                raise GigapointError(f"viewer server on {self.host}:{self.port} did not start")
+            time.sleep(0.01)
+        return self
+
+    def close(self) -> None:
+        self.server.should_exit = True
+        if self.thread is not None:
+            self.thread.join(timeout=10)
+        self.core.close_all()
+        try:
+            self.sock.close()
+        except OSError:
+            pass

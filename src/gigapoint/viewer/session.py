@@ -1,0 +1,485 @@
+"""Viewer sessions: one per browser tab, each with its camera, settings and render worker thread.
+
+The worker renders only the latest state: input updates a version counter and wakes it; a
+request that arrives while a frame renders replaces the previous one (never queued). While
+the camera moves the worker renders at a reduced resolution chosen so a frame (render +
+JPEG) fits the frame-time budget; once the camera has rested for REST_S it renders once
+more at full resolution. All renders go through one process-wide lock: the CPU backend
+keeps scratch buffers per backend instance and uses every core already, so concurrent
+renders would only fight (and share those buffers).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import secrets
+import threading
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core.layout import EMPTY_PIXEL
+from ..errors import GigapointError, GigapointWarning
+from ..render.renderer import render_frame
+from ..render.settings import RenderSettings
+from . import protocol as P
+from .state import OrbitState
+
+RENDER_LOCK = threading.Lock()
+REST_S = 0.15  # no camera input for this long = at rest: refine to full resolution
+FRAME_BUDGET_S = 0.045  # render + encode while moving (>= 20 frames/s with the transfer)
+SCALES = (1, 2, 4, 8)  # resolution divisors while moving
+SEND_TIMEOUT_S = 0.25
+MAX_SESSIONS = 64
+
+
+def memory_rss() -> int:
+    """Resident memory of this process in bytes (0 if unknown)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        try:
+            import resource
+
+            return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        except Exception:  # noqa: BLE001
+            return 0
+
+
+def encode_image(image: np.ndarray, fmt: str = "JPEG", quality: int = 85) -> bytes:
+    from PIL import Image
+
+    buf = io.BytesIO()
+    if fmt == "JPEG":
+        Image.fromarray(np.ascontiguousarray(image[..., :3])).save(buf, "JPEG", quality=quality)
+    else:
+        Image.fromarray(np.ascontiguousarray(image)).save(buf, "PNG", compress_level=3)
+    return buf.getvalue()
+
+
+# "no point is in view" is normal while flying around; render_frame attributes it to this module
+warnings.filterwarnings("ignore", message=".*no point is in view", category=GigapointWarning, module=__name__)
+
+
+_render_count = 0  # renders done in this process (under RENDER_LOCK)
+
+
+def render_locked(cloud, camera, settings, cancelled=None):
+    """render_frame under the process-wide lock; None if ``cancelled()`` turned true while waiting for it.
+
+    The frame gets ``render_number``: while it is still the latest render, buffers the renderer
+    shares between frames (an octree's arena) still hold what this frame's indices point at.
+    """
+    global _render_count
+    with RENDER_LOCK:
+        if cancelled is not None and cancelled():
+            return None
+        frame = render_frame(cloud, camera, settings)
+        _render_count += 1
+        frame.render_number = _render_count
+        return frame
+
+
+def depth_position(camera, px: float, py: float, depth: float) -> np.ndarray:
+    """World point at pixel centre (px, py) and view depth ``depth`` (float32 precision of the depth)."""
+    origin, d = camera.ray(px + 0.5, py + 0.5)
+    _, _, back = camera.basis()
+    return origin + d * (depth / float(np.dot(d, -back)))
+
+
+def point_info(cloud, last, index: int, camera, px: int, py: int, depth: float) -> dict:
+    """What is known about the point drawn at (px, py) of the last frame, for any kind of cloud.
+
+    A PointCloud answers exactly (float64 position, color, attributes). An octree cloud draws
+    from an arena: its 30-bit position and color are exact while the frame is the latest
+    render; otherwise the position comes from the depth buffer.
+    """
+    if hasattr(cloud, "point_info") and hasattr(cloud, "positions"):
+        return cloud.point_info(index)
+    if RENDER_LOCK.acquire(timeout=0.2):  # called from the event loop: never wait out a long screenshot
+        try:
+            arena = getattr(cloud, "arena", None)
+            if arena is not None and getattr(last, "render_number", -1) == _render_count and index < arena.n_points:
+                from ..core.quantize import dequantize
+
+                slot = int(np.searchsorted(arena.batches["first"], np.uint64(index), side="right") - 1)
+                rec = arena.batches[slot]
+                i = np.array([index])
+                pos = dequantize(arena.low[i], arena.med[i], arena.high[i], rec["bbox_min"], rec["bbox_max"], 30)[0]
+                rgba = arena.color[i].view(np.uint8).tolist()
+                return {"position": pos.tolist(), "rgba": rgba, "level": int(rec["level"]), "source": "octree"}
+        finally:
+            RENDER_LOCK.release()
+    return {"position": depth_position(camera, px, py, depth).tolist(), "source": "depth buffer"}
+
+
+@dataclass
+class LastFrame:
+    camera: object
+    visibility: np.ndarray  # (h, w) u64 visibility buffer of the last frame sent (depth bits << 32 | index)
+    render_number: int = -1
+
+    def window(self, y0, y1, x0, x1):
+        """(index, depth) of a window: int64 (-1 where empty) and float32 (inf where empty)."""
+        v = self.visibility[y0:y1, x0:x1]
+        empty = v == EMPTY_PIXEL
+        index = (v & np.uint64(0xFFFFFFFF)).astype(np.int64)
+        index[empty] = -1
+        depth = (v >> np.uint64(32)).astype(np.uint32).view(np.float32)
+        depth[empty] = np.inf
+        return index, depth
+
+
+@dataclass
+class ScaleControl:
+    """Picks the resolution divisor while moving from measured frame times."""
+
+    level: int = 1  # index into SCALES
+    times: dict = field(default_factory=dict)  # level -> smoothed seconds
+
+    def scale(self) -> int:
+        return SCALES[self.level]
+
+    def record(self, level: int, seconds: float) -> None:
+        old = self.times.get(level)
+        self.times[level] = seconds if old is None else 0.6 * old + 0.4 * seconds
+        t = self.times[level]
+        if level != self.level:
+            return
+        if t > FRAME_BUDGET_S and self.level < len(SCALES) - 1:
+            self.level += 1
+        elif self.level > 0:
+            # the finer level's old time drifts toward this level's time x 4 (pixels), so it is retried
+            # once the load that made it slow has gone
+            guess = t * 4.0
+            finer = self.times.get(self.level - 1, guess)
+            finer = self.times[self.level - 1] = 0.85 * finer + 0.15 * guess
+            if finer < FRAME_BUDGET_S * 0.8:
+                self.level -= 1
+
+
+class ViewerCore:
+    """What all tabs share: the cloud, the session registry, screenshots."""
+
+    def __init__(self, cloud, settings: RenderSettings | None = None, max_sessions: int = MAX_SESSIONS):
+        self.cloud = cloud
+        self.settings = settings or RenderSettings()
+        self.sessions: dict[str, Session] = {}
+        self.max_sessions = max_sessions
+        self.lock = threading.Lock()
+        self.last_active: Session | None = None
+        lo, hi = cloud.bounds
+        self.bounds = (np.asarray(lo, np.float64), np.asarray(hi, np.float64))
+
+    def cloud_info(self) -> dict:
+        lo, hi = self.bounds
+        return {
+            "name": getattr(self.cloud, "name", "cloud"),
+            "points": int(self.cloud.n_points),
+            "batches": len(self.cloud.batches),
+            "bounds": [lo.tolist(), hi.tolist()],
+            "attributes": sorted(getattr(self.cloud, "attributes", {}) or {}),
+            "load_progress": float(getattr(self.cloud, "load_progress", 1.0)),
+        }
+
+    def open_session(self, send, width: int = 1280, height: int = 720) -> Session:
+        with self.lock:
+            if len(self.sessions) >= self.max_sessions:
+                raise P.ProtocolError(f"too many open viewer tabs (limit {self.max_sessions})")
+            s = Session(self, send, width, height)
+            self.sessions[s.id] = s
+            self.last_active = s
+        s.start()
+        return s
+
+    def close_session(self, s: Session) -> None:
+        s.close()
+        with self.lock:
+            self.sessions.pop(s.id, None)
+            if self.last_active is s:
+                self.last_active = next(iter(self.sessions.values()), None)
+
+    def close_all(self) -> None:
+        for s in list(self.sessions.values()):
+            self.close_session(s)
+
+    def default_state(self, width: int, height: int, view="iso") -> OrbitState:
+        return OrbitState.fit(self.bounds, view=view, width=width, height=height)
+
+    def screenshot(self, session_id: str | None = None, width=None, height=None, scale: int = 1) -> bytes:
+        """PNG of a tab's view (or the default view) at its size x ``scale`` or at width x height."""
+        s = self.sessions.get(session_id) if session_id else None
+        if session_id and s is None:
+            raise P.ProtocolError("screenshot: unknown session")
+        if s is not None:
+            state, settings, (vw, vh) = s.snapshot()
+        else:
+            vw, vh = 1280, 720
+            state, settings = self.default_state(vw, vh), self.settings
+        if width is not None and height is None:  # one side given: keep the view's aspect
+            height = max(1, round(int(width) * vh / vw))
+        elif height is not None and width is None:
+            width = max(1, round(int(height) * vw / vh))
+        w = int(width) if width is not None else vw * scale
+        h = int(height) if height is not None else vh * scale
+        if not (1 <= w <= P.MAX_SHOT_SIDE and 1 <= h <= P.MAX_SHOT_SIDE and w * h <= P.MAX_SHOT_PIXELS):
+            raise P.ProtocolError(f"screenshot: {w}x{h} is outside 1..{P.MAX_SHOT_SIDE} per side / {P.MAX_SHOT_PIXELS:,} pixels")
+        frame = render_locked(self.cloud, state.camera(w, h), settings)
+        return encode_image(frame.image, "PNG")
+
+
+class Session:
+    """One tab: orbit state, settings, viewport, and the worker thread that renders them."""
+
+    def __init__(self, core: ViewerCore, send, width: int, height: int):
+        self.id = secrets.token_hex(8)
+        self.core = core
+        self.send = send  # send(kind, payload) -> bool, blocking; False once the tab is gone
+        self.cond = threading.Condition()
+        self.width, self.height = width, height
+        self.state = core.default_state(width, height)
+        self.settings = core.settings
+        self.good_settings = self.settings
+        self.version = 0  # bumped by every change
+        self.seq = 0  # the client's latest input sequence number
+        self.last_motion = 0.0
+        self.adaptive = True
+        self.jpeg_quality = 85
+        self.closed = False
+        self.last: LastFrame | None = None
+        self.scales = ScaleControl()
+        self.frames = 0
+        self._done_version = -1
+        self._done_full = True
+        self.thread = threading.Thread(target=self._run, name=f"gigapoint-viewer-{self.id}", daemon=True)
+
+    # --- called from the event loop ------------------------------------------------------
+    def start(self) -> None:
+        self.thread.start()
+
+    def close(self) -> None:
+        with self.cond:
+            self.closed = True
+            self.cond.notify_all()
+
+    def snapshot(self):
+        with self.cond:
+            return OrbitState(**{**self.state.__dict__, "target": self.state.target.copy()}), self.settings, (self.width, self.height)
+
+    def _changed(self, motion: bool) -> None:
+        self.version += 1
+        if motion:
+            self.last_motion = time.monotonic()
+        self.core.last_active = self
+        self.cond.notify_all()
+
+    def handle(self, msg: dict) -> dict | None:
+        """Apply one validated client message; returns a JSON reply or None. Raises ProtocolError."""
+        kind = msg["type"]
+        seq = msg.get("seq")
+        if seq is not None:
+            seq = P.integer(msg, "seq", 0, 2**53)
+        reply = None
+        with self.cond:
+            motion = True
+            st = self.state
+            if kind == "resize":
+                self.width = P.integer(msg, "width", 1, P.MAX_VIEW_SIDE)
+                self.height = P.integer(msg, "height", 1, P.MAX_VIEW_SIDE)
+                motion = False
+            elif kind in ("orbit", "look"):
+                dyaw, dpitch = P.number(msg, "dyaw", -3600, 3600, 0.0), P.number(msg, "dpitch", -3600, 3600, 0.0)
+                (st.orbit if kind == "orbit" else st.look)(dyaw, dpitch)
+            elif kind == "pan":
+                st.pan(P.number(msg, "dx", -1e4, 1e4, 0.0), P.number(msg, "dy", -1e4, 1e4, 0.0))
+            elif kind == "zoom":
+                factor = P.number(msg, "factor", 1e-3, 1e3)
+                anchor = None
+                if "x" in msg or "y" in msg:
+                    anchor = self._world_at(P.number(msg, "x", 0, 1), P.number(msg, "y", 0, 1))
+                st.zoom(factor, anchor)
+            elif kind == "move":
+                lim = st.scene_radius * 100
+                st.move(P.number(msg, "forward", -lim, lim, 0.0), P.number(msg, "right", -lim, lim, 0.0), P.number(msg, "up", -lim, lim, 0.0))
+            elif kind == "camera":
+                st.set(
+                    target=P.vec3(msg, "target") if "target" in msg else None,
+                    yaw=P.number(msg, "yaw", -1e6, 1e6) if "yaw" in msg else None,
+                    pitch=P.number(msg, "pitch", -90, 90) if "pitch" in msg else None,
+                    distance=P.number(msg, "distance", 1e-9, P.MAX_ABS_COORD) if "distance" in msg else None,
+                    fov=P.number(msg, "fov", 1, 150) if "fov" in msg else None,
+                )
+            elif kind in ("view", "reset"):
+                name = msg.get("name", "iso") if kind == "view" else "iso"
+                if name not in P.VIEW_NAMES:
+                    raise P.ProtocolError(f"view: unknown view {str(name)[:20]!r}; choose one of {', '.join(P.VIEW_NAMES)}")
+                fov = 60.0 if kind == "reset" else st.fov
+                self.state = OrbitState.fit(self.core.bounds, view=name, width=self.width, height=self.height, fov=fov)
+            elif kind == "fov":
+                st.set(fov=P.number(msg, "value", 1, 150))
+            elif kind == "pick":
+                x, y = P.number(msg, "x", 0, 1), P.number(msg, "y", 0, 1)
+                pivot = P.flag(msg, "pivot")
+                reply = self._pick(x, y, pivot, msg.get("id"))
+                motion = pivot
+                if not pivot:
+                    return reply
+            elif kind == "settings":
+                self.settings = P.apply_settings(self.settings, msg.get("values"))
+                motion = False
+                reply = {"type": "settings", "values": P.settings_values(self.settings)}
+            elif kind == "quality":
+                self.adaptive = P.flag(msg, "adaptive", self.adaptive)
+                self.jpeg_quality = P.integer(msg, "jpeg_quality", 10, 100, self.jpeg_quality)
+                motion = False
+            elif kind == "ping":
+                return {"type": "pong", "t": P.number(msg, "t", -1e15, 1e15, 0.0)}
+            elif kind == "refresh":
+                motion = False
+            if seq is not None:
+                self.seq = seq
+            self._changed(motion)
+        return reply
+
+    # --- picking -------------------------------------------------------------------------
+    def _hit(self, x: float, y: float, radius: int = 4):
+        """(index, depth, camera, px, py) of the visible point nearest to (x, y) in the last frame, or None."""
+        last = self.last
+        if last is None:
+            return None
+        h, w = last.visibility.shape
+        px, py = min(int(x * w), w - 1), min(int(y * h), h - 1)
+        y0, y1, x0, x1 = max(py - radius, 0), min(py + radius + 1, h), max(px - radius, 0), min(px + radius + 1, w)
+        win, depth = last.window(y0, y1, x0, x1)
+        ys, xs = np.nonzero(win >= 0)
+        if len(ys) == 0:
+            return None
+        d2 = (ys + y0 - py) ** 2 + (xs + x0 - px) ** 2
+        k = int(np.lexsort((depth[ys, xs], d2))[0])
+        return int(win[ys[k], xs[k]]), float(depth[ys[k], xs[k]]), last.camera, xs[k] + x0, ys[k] + y0
+
+    def _world_at(self, x: float, y: float):
+        """World point under the cursor: the visible point there (from the depth buffer), else the target plane."""
+        hit = self._hit(x, y)
+        if hit is not None:
+            _, depth, cam, px, py = hit
+            return depth_position(cam, px, py, depth)
+        if self.last is None:
+            return None
+        cam = self.last.camera
+        origin, d = cam.ray(x * cam.width, y * cam.height)
+        _, _, back = cam.basis()
+        denom = float(np.dot(d, -back))
+        if denom <= 1e-9:
+            return None
+        dist = float(np.dot(np.asarray(cam.target) - origin, -back)) / denom
+        return origin + d * dist
+
+    def _pick(self, x, y, pivot, pick_id) -> dict:
+        hit = self._hit(x, y)
+        if hit is None:
+            return {"type": "pick", "id": pick_id, "found": False}
+        index, depth, cam, px, py = hit
+        info = point_info(self.core.cloud, self.last, index, cam, px, py, depth)
+        if pivot:
+            self.state.set_pivot(info["position"])
+        return {"type": "pick", "id": pick_id, "found": True, "pivot": pivot, "info": P.json_safe(info)}
+
+    # --- the worker ----------------------------------------------------------------------
+    def _next_job(self):
+        """Wait for work; returns (version, seq, state, settings, size, scale_level, quality) or None when closed."""
+        with self.cond:
+            while True:
+                if self.closed:
+                    return None
+                now = time.monotonic()
+                moving = self.adaptive and now - self.last_motion < REST_S
+                if self.version != self._done_version:
+                    level = self.scales.level if moving else 0
+                    break
+                if not self._done_full:
+                    if moving:
+                        self.cond.wait(REST_S - (now - self.last_motion) + 0.005)
+                        continue
+                    level = 0
+                    break
+                self.cond.wait()
+            st = self.state
+            job_state = OrbitState(st.target.copy(), st.yaw, st.pitch, st.distance, st.fov, st.scene_radius)
+            return self.version, self.seq, job_state, self.settings, (self.width, self.height), level, self.jpeg_quality, moving
+
+    def _run(self) -> None:
+        while True:
+            job = self._next_job()
+            if job is None:
+                return
+            version, seq, state, settings, (w, h), level, quality, moving = job
+            scale = SCALES[level]
+            t0 = time.perf_counter()
+            try:
+                cam = state.camera(max(1, round(w / scale)), max(1, round(h / scale)))
+                frame = render_locked(self.core.cloud, cam, settings, cancelled=lambda: self.closed)
+                if frame is None:
+                    return
+            except GigapointError as exc:
+                ok = self._render_failed(version, exc, settings)
+                if not ok:
+                    return
+                continue
+            except Exception as exc:  # noqa: BLE001 - a bug must not kill the tab silently
+                if not self._render_failed(version, exc, settings):
+                    return
+                continue
+            t1 = time.perf_counter()
+            jpeg = encode_image(frame.image, "JPEG", quality if level == 0 else min(quality, 75))
+            t2 = time.perf_counter()
+            if moving:
+                self.scales.record(level, t2 - t0)
+            with self.cond:
+                self.last = LastFrame(cam, frame.visibility, frame.render_number)
+                self._done_version = version
+                self._done_full = level == 0
+                self.good_settings = settings
+            self.frames += 1
+            stats = frame.stats
+            header = {
+                "frame": self.frames,
+                "seq": seq,
+                "width": int(frame.image.shape[1]),
+                "height": int(frame.image.shape[0]),
+                "scale": scale,
+                "full": level == 0,
+                "render_ms": (t1 - t0) * 1000,
+                "encode_ms": (t2 - t1) * 1000,
+                "points": stats.points_processed,
+                "points_total": stats.points_total,
+                "batches": stats.batches_rendered,
+                "batches_total": stats.batches_total,
+                "visible_pixels": stats.visible_pixels,
+                "backend": stats.backend,
+                "memory": memory_rss(),
+                "load_progress": float(getattr(self.core.cloud, "load_progress", 1.0)),
+                "camera": state.as_dict(),
+            }
+            if not self.send("bytes", P.pack_frame(header, jpeg)):
+                return
+
+    def _render_failed(self, version, exc, settings) -> bool:
+        """Report a failed render, fall back to the last settings that worked; False if the tab is gone."""
+        with self.cond:
+            self._done_version = version
+            self._done_full = True
+            reverted = self.settings is settings and settings is not self.good_settings
+            if reverted:
+                self.settings = self.good_settings
+                self._changed(False)
+        msg = {"type": "error", "message": f"render failed: {exc}"[:500]}
+        if not self.send("json", msg):
+            return False
+        if reverted:
+            return self.send("json", {"type": "settings", "values": P.settings_values(self.good_settings)})
+        return True

@@ -1,0 +1,370 @@
+// gigapoint viewer client: sends input to the server, draws the JPEG frames it streams back.
+// Plain JS, no build step, no external assets.
+"use strict";
+(function () {
+  const $ = (id) => document.getElementById(id);
+  const canvas = $("canvas");
+  const ctx = canvas.getContext("2d");
+  const token = new URLSearchParams(location.search).get("token");
+  const withToken = (path, params) => {
+    const u = new URL(path, location.href);
+    if (token) u.searchParams.set("token", token);
+    for (const [k, v] of Object.entries(params || {})) u.searchParams.set(k, v);
+    return u;
+  };
+
+  const S = {
+    ws: null, session: null, cloud: null, schema: [], settings: {}, camera: null,
+    seq: 0, sentAt: new Map(), lastFrame: 0, frameTimes: [], latency: 0,
+    header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0,
+    pending: { orbit: null, look: null, pan: null, zoom: null }, retry: 0,
+  };
+  window.gigapoint = S; // for tests and the curious
+
+  // ---------------------------------------------------------------- connection
+  function deviceSize() {
+    const r = canvas.getBoundingClientRect();
+    const dpr = Math.min(window.devicePixelRatio || 1, 2);
+    return [Math.max(1, Math.min(4096, Math.round(r.width * dpr))), Math.max(1, Math.min(4096, Math.round(r.height * dpr)))];
+  }
+
+  function connect() {
+    const [w, h] = deviceSize();
+    const u = withToken("ws", { w, h });
+    u.protocol = location.protocol === "https:" ? "wss:" : "ws:";
+    const ws = new WebSocket(u);
+    ws.binaryType = "arraybuffer";
+    S.ws = ws;
+    status("connecting…");
+    ws.onopen = () => { S.retry = 0; status("connected"); sendResize(true); };
+    ws.onmessage = (ev) => (typeof ev.data === "string" ? onJson(JSON.parse(ev.data)) : onFrame(ev.data));
+    ws.onclose = () => {
+      S.ws = null;
+      status("disconnected — reconnecting…");
+      S.retry = Math.min(S.retry + 1, 10);
+      setTimeout(connect, 300 * S.retry);
+    };
+  }
+
+  function send(msg, trackLatency) {
+    if (!S.ws || S.ws.readyState !== WebSocket.OPEN) return;
+    if (trackLatency) {
+      msg.seq = ++S.seq;
+      S.sentAt.set(S.seq, performance.now());
+      if (S.sentAt.size > 500) S.sentAt.delete(S.sentAt.keys().next().value);
+    }
+    S.ws.send(JSON.stringify(msg));
+  }
+
+  function status(text) { $("status").textContent = text; }
+  let errorTimer = null;
+  function showError(text) {
+    const e = $("error");
+    e.textContent = text;
+    e.classList.remove("hidden");
+    clearTimeout(errorTimer);
+    errorTimer = setTimeout(() => e.classList.add("hidden"), 5000);
+  }
+
+  function onJson(m) {
+    if (m.type === "hello") {
+      S.session = m.session; S.cloud = m.cloud; S.schema = m.schema; S.settings = m.settings; S.camera = m.camera;
+      const b = m.cloud.bounds;
+      S.sceneRadius = Math.hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]) / 2 || 1;
+      $("cloudinfo").textContent = `${m.cloud.name} · ${m.cloud.points.toLocaleString()} points · ${m.cloud.batches.toLocaleString()} batches`;
+      buildSettings();
+      updateSpeedLabel();
+      setFov(m.camera.fov, false);
+    } else if (m.type === "settings") {
+      S.settings = m.values;
+      syncSettings();
+    } else if (m.type === "pick") {
+      showPick(m);
+    } else if (m.type === "error") {
+      showError(m.message);
+      if (m.in_reply_to === "settings") syncSettings(); // the panel shows what the server kept
+    }
+  }
+
+  // ---------------------------------------------------------------- frames
+  let drawing = 0;
+  function onFrame(buf) {
+    const dv = new DataView(buf);
+    const n = dv.getUint32(4, true);
+    const header = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 8, n)));
+    const blob = new Blob([new Uint8Array(buf, 8 + n)], { type: "image/jpeg" });
+    const now = performance.now();
+    if (header.seq != null && S.sentAt.has(header.seq)) {
+      S.latency = now - S.sentAt.get(header.seq);
+      for (const k of S.sentAt.keys()) { if (k <= header.seq) S.sentAt.delete(k); else break; }
+    }
+    createImageBitmap(blob).then((bmp) => {
+      if (header.frame < drawing) { bmp.close(); return; }
+      drawing = header.frame;
+      const [w, h] = deviceSize();
+      if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; }
+      ctx.imageSmoothingEnabled = header.full;
+      ctx.drawImage(bmp, 0, 0, canvas.width, canvas.height);
+      bmp.close();
+      S.header = header; S.camera = header.camera; S.lastFrame = header.frame;
+      S.frameTimes.push(performance.now());
+      canvas.dataset.frame = String(header.frame);
+      canvas.dataset.full = String(header.full);
+      updateStats();
+      if (Math.abs(S.camera.fov - Number($("fov").value)) > 0.5 && document.activeElement !== $("fov")) setFov(S.camera.fov, false);
+    }).catch((e) => showError("cannot decode frame: " + e));
+  }
+
+  function fmtBytes(b) { return b > 1 << 30 ? (b / (1 << 30)).toFixed(2) + " GiB" : (b / (1 << 20)).toFixed(0) + " MiB"; }
+  function updateStats() {
+    const h = S.header; if (!h) return;
+    const now = performance.now();
+    while (S.frameTimes.length && now - S.frameTimes[0] > 1000) S.frameTimes.shift();
+    const lines = [
+      `fps ${S.frameTimes.length}   latency ${S.latency.toFixed(0)} ms`,
+      `frame ${h.render_ms.toFixed(1)} ms render + ${h.encode_ms.toFixed(1)} ms jpeg`,
+      `${h.width}×${h.height}${h.full ? "" : "  (1/" + h.scale + " while moving)"}`,
+      `points ${h.points.toLocaleString()} / ${h.points_total.toLocaleString()}`,
+      `batches ${h.batches.toLocaleString()} / ${h.batches_total.toLocaleString()}`,
+      `memory ${fmtBytes(h.memory)}   loaded ${(h.load_progress * 100).toFixed(0)}%   ${h.backend}`,
+    ];
+    $("stats").textContent = lines.join("\n");
+  }
+  setInterval(updateStats, 500);
+
+  // ---------------------------------------------------------------- settings panel (from the server's schema)
+  function toHex(c) { return "#" + c.slice(0, 3).map((v) => v.toString(16).padStart(2, "0")).join(""); }
+  function buildSettings() {
+    const form = $("settings");
+    form.textContent = "";
+    for (const f of S.schema) {
+      const row = document.createElement("label");
+      row.className = "row";
+      row.title = f.help || "";
+      let input;
+      if (f.kind === "bool") {
+        input = document.createElement("input"); input.type = "checkbox";
+        row.append(input, " " + f.label);
+      } else {
+        row.append(f.label + " ");
+        if (f.kind === "enum") {
+          input = document.createElement("select");
+          for (const c of f.choices) { const o = document.createElement("option"); o.value = JSON.stringify(c); o.textContent = String(c); input.append(o); }
+        } else if (f.kind === "color") {
+          input = document.createElement("input"); input.type = "color";
+        } else if (f.kind === "range") {
+          input = document.createElement("span"); input.className = "range-pair";
+          for (let i = 0; i < 2; i++) { const e = document.createElement("input"); e.type = "number"; e.step = "any"; e.placeholder = i ? "high" : "low"; input.append(e); }
+        } else if (f.kind === "int" || f.kind === "float") {
+          input = document.createElement("input"); input.type = "number";
+          input.step = f.step || (f.kind === "int" ? "1" : "any");
+          if (f.min != null) input.min = f.min;
+          if (f.max != null) input.max = f.max;
+          if (f.nullable) input.placeholder = "auto";
+        } else {
+          input = document.createElement("input"); input.type = "text";
+        }
+        row.append(input);
+      }
+      input.dataset.name = f.name;
+      input.id = "setting-" + f.name;
+      input.addEventListener("change", () => onSettingChange(f, input));
+      form.append(row);
+    }
+    syncSettings();
+  }
+
+  function syncSettings() {
+    for (const f of S.schema) {
+      const input = $("setting-" + f.name); if (!input) continue;
+      const v = S.settings[f.name];
+      input.classList?.remove("invalid");
+      if (f.kind === "bool") input.checked = !!v;
+      else if (f.kind === "enum") input.value = JSON.stringify(v);
+      else if (f.kind === "color") input.value = toHex(v);
+      else if (f.kind === "range") { const [a, b] = input.querySelectorAll("input"); a.value = v ? v[0] : ""; b.value = v ? v[1] : ""; }
+      else input.value = v == null ? "" : String(v);
+    }
+  }
+
+  function onSettingChange(f, input) {
+    let v;
+    if (f.kind === "bool") v = input.checked;
+    else if (f.kind === "enum") v = JSON.parse(input.value);
+    else if (f.kind === "color") { const a = (S.settings[f.name] || [0, 0, 0, 255])[3]; v = [1, 3, 5].map((i) => parseInt(input.value.slice(i, i + 2), 16)).concat([a]); }
+    else if (f.kind === "range") {
+      const [a, b] = input.querySelectorAll("input");
+      if (a.value === "" && b.value === "") v = null; else if (a.value === "" || b.value === "") return; else v = [Number(a.value), Number(b.value)];
+    } else if (f.kind === "int" || f.kind === "float") {
+      if (input.value === "") { if (!f.nullable) { input.classList.add("invalid"); return; } v = null; }
+      else { v = Number(input.value); if (!Number.isFinite(v)) { input.classList.add("invalid"); return; } }
+    } else v = input.value;
+    send({ type: "settings", values: { [f.name]: v } }, true);
+  }
+
+  // ---------------------------------------------------------------- picking
+  function showPick(m) {
+    const box = $("pickinfo");
+    if (!m.found) { box.textContent = "no point here"; box.classList.remove("hidden"); return; }
+    const i = m.info;
+    const lines = [`point ${i.index == null ? "" : "#" + i.index}${m.pivot ? "  (new pivot)" : ""}`, `x ${String(i.position[0])}`, `y ${String(i.position[1])}`, `z ${String(i.position[2])}`, `rgba ${i.rgba.join(", ")}`];
+    for (const [k, v] of Object.entries(i)) if (!["index", "position", "rgba"].includes(k)) lines.push(`${k} ${Array.isArray(v) ? v.join(", ") : v}`);
+    box.textContent = lines.join("\n");
+    box.dataset.index = String(i.index);
+    box.classList.remove("hidden");
+  }
+
+  function relPos(ev) {
+    const r = canvas.getBoundingClientRect();
+    return [Math.min(1, Math.max(0, (ev.clientX - r.left) / r.width)), Math.min(1, Math.max(0, (ev.clientY - r.top) / r.height))];
+  }
+
+  // ---------------------------------------------------------------- mouse and touch
+  const pointers = new Map();
+  let drag = null; // {mode, x, y, moved}
+  let pinch = null; // {dist, cx, cy}
+  const viewHeight = () => canvas.getBoundingClientRect().height || 1;
+
+  function queue(kind, a, b) {
+    const p = S.pending;
+    if (kind === "zoom") { p.zoom = p.zoom ? { factor: p.zoom.factor * a, x: b[0], y: b[1] } : { factor: a, x: b[0], y: b[1] }; }
+    else if (p[kind]) { p[kind][0] += a; p[kind][1] += b; } else p[kind] = [a, b];
+  }
+
+  canvas.addEventListener("contextmenu", (e) => e.preventDefault());
+  canvas.addEventListener("pointerdown", (e) => {
+    canvas.focus();
+    canvas.setPointerCapture(e.pointerId);
+    pointers.set(e.pointerId, [e.clientX, e.clientY]);
+    if (e.pointerType === "touch") {
+      if (pointers.size === 2) { drag = null; pinch = pinchState(); }
+      else if (pointers.size === 1) drag = { mode: "orbit", x: e.clientX, y: e.clientY, moved: 0 };
+      return;
+    }
+    const pan = e.button === 2 || e.button === 1 || (e.button === 0 && e.shiftKey);
+    drag = { mode: pan ? "pan" : S.fly ? "look" : "orbit", x: e.clientX, y: e.clientY, moved: 0, button: e.button };
+    canvas.classList.add("dragging");
+  });
+  canvas.addEventListener("pointermove", (e) => {
+    if (!pointers.has(e.pointerId)) return;
+    pointers.set(e.pointerId, [e.clientX, e.clientY]);
+    if (pinch && pointers.size >= 2) {
+      const p = pinchState();
+      const h = viewHeight();
+      queue("zoom", pinch.dist / Math.max(p.dist, 1), relPos({ clientX: p.cx, clientY: p.cy }));
+      queue("pan", (p.cx - pinch.cx) / h, (p.cy - pinch.cy) / h);
+      pinch = p;
+      return;
+    }
+    if (!drag) return;
+    const dx = e.clientX - drag.x, dy = e.clientY - drag.y;
+    drag.x = e.clientX; drag.y = e.clientY; drag.moved += Math.abs(dx) + Math.abs(dy);
+    const h = viewHeight();
+    if (drag.mode === "pan") queue("pan", dx / h, dy / h);
+    else if (drag.mode === "look") queue("look", (dx / h) * 90, (dy / h) * 90);
+    else queue("orbit", (-dx / h) * 240, (dy / h) * 180);
+  });
+  function endPointer(e) {
+    pointers.delete(e.pointerId);
+    canvas.classList.remove("dragging");
+    if (drag && drag.moved < 4 && e.type === "pointerup" && (drag.button === 0 || e.pointerType === "touch")) {
+      const [x, y] = relPos(e);
+      send({ type: "pick", x, y, id: ++S.pickId });
+    }
+    if (pointers.size < 2) pinch = null;
+    drag = null;
+    if (pointers.size === 1 && [...pointers.values()][0]) { const [x, y] = [...pointers.values()][0]; drag = { mode: "orbit", x, y, moved: 99 }; }
+  }
+  canvas.addEventListener("pointerup", endPointer);
+  canvas.addEventListener("pointercancel", endPointer);
+  function pinchState() {
+    const [a, b] = [...pointers.values()];
+    return { dist: Math.hypot(a[0] - b[0], a[1] - b[1]), cx: (a[0] + b[0]) / 2, cy: (a[1] + b[1]) / 2 };
+  }
+  canvas.addEventListener("dblclick", (e) => {
+    const [x, y] = relPos(e);
+    send({ type: "pick", x, y, pivot: true, id: ++S.pickId }, true);
+  });
+  canvas.addEventListener("wheel", (e) => {
+    e.preventDefault();
+    const unit = e.deltaMode === 1 ? 33 : e.deltaMode === 2 ? 400 : 1;
+    const factor = Math.exp(Math.max(-300, Math.min(300, e.deltaY * unit)) * 0.0015);
+    queue("zoom", factor, relPos(e));
+  }, { passive: false });
+
+  // ---------------------------------------------------------------- keyboard: fly with WASD / QE
+  const typing = () => ["INPUT", "SELECT", "TEXTAREA"].includes(document.activeElement?.tagName);
+  window.addEventListener("keydown", (e) => {
+    if (typing() || e.ctrlKey || e.metaKey || e.altKey) return;
+    const k = e.key.toLowerCase();
+    if ("wasdqe".includes(k) && k.length === 1) { S.keys.add(k); e.preventDefault(); }
+    else if (k === "f") setFly(!S.fly);
+    else if (k === "r") send({ type: "reset" }, true);
+    else if (k >= "1" && k <= "4") send({ type: "view", name: ["top", "front", "side", "iso"][Number(k) - 1] }, true);
+    else if (k === "+" || k === "=") adjustSpeed(0.5);
+    else if (k === "-") adjustSpeed(-0.5);
+  });
+  window.addEventListener("keyup", (e) => S.keys.delete(e.key.toLowerCase()));
+  window.addEventListener("blur", () => S.keys.clear());
+
+  function flySpeed() { return (S.sceneRadius || 1) * 0.25 * Math.pow(2, S.speedExp); }
+  function updateSpeedLabel() { $("speed-value").textContent = `${flySpeed().toPrecision(3)}/s`; }
+  function adjustSpeed(d) { S.speedExp = Math.max(-4, Math.min(4, S.speedExp + d)); $("speed").value = S.speedExp; updateSpeedLabel(); }
+  function setFly(on) { S.fly = on; $("fly").checked = on; }
+
+  // ---------------------------------------------------------------- per animation frame: flush input
+  let lastTick = performance.now();
+  function tick(now) {
+    const dt = Math.min(0.1, (now - lastTick) / 1000);
+    lastTick = now;
+    const p = S.pending;
+    if (p.orbit) { send({ type: "orbit", dyaw: p.orbit[0], dpitch: p.orbit[1] }, true); p.orbit = null; }
+    if (p.look) { send({ type: "look", dyaw: p.look[0], dpitch: p.look[1] }, true); p.look = null; }
+    if (p.pan) { send({ type: "pan", dx: p.pan[0], dy: p.pan[1] }, true); p.pan = null; }
+    if (p.zoom) { send({ type: "zoom", factor: Math.max(0.001, Math.min(1000, p.zoom.factor)), x: p.zoom.x, y: p.zoom.y }, true); p.zoom = null; }
+    if (S.keys.size) {
+      const k = (c) => (S.keys.has(c) ? 1 : 0);
+      const step = flySpeed() * dt;
+      const f = (k("w") - k("s")) * step, r = (k("d") - k("a")) * step, u = (k("e") - k("q")) * step;
+      if (f || r || u) send({ type: "move", forward: f, right: r, up: u }, true);
+    }
+    requestAnimationFrame(tick);
+  }
+  requestAnimationFrame(tick);
+
+  // ---------------------------------------------------------------- resize
+  let resizeTimer = null;
+  function sendResize(now) {
+    clearTimeout(resizeTimer);
+    resizeTimer = setTimeout(() => { const [w, h] = deviceSize(); send({ type: "resize", width: w, height: h }, true); }, now ? 0 : 100);
+  }
+  new ResizeObserver(() => sendResize(false)).observe(canvas);
+
+  // ---------------------------------------------------------------- toolbar
+  $("btn-reset").addEventListener("click", () => send({ type: "reset" }, true));
+  for (const b of document.querySelectorAll("[data-view]")) b.addEventListener("click", () => send({ type: "view", name: b.dataset.view }, true));
+  function setFov(v, tell) {
+    $("fov").value = v; $("fov-value").textContent = `${Math.round(v)}°`;
+    if (tell) send({ type: "fov", value: Number(v) }, true);
+  }
+  $("fov").addEventListener("input", (e) => setFov(e.target.value, true));
+  $("fly").addEventListener("change", (e) => setFly(e.target.checked));
+  $("speed").addEventListener("input", (e) => { S.speedExp = Number(e.target.value); updateSpeedLabel(); });
+  const sendQuality = () => {
+    const q = Math.round(Number($("jpeg").value));
+    send({ type: "quality", adaptive: $("adaptive").checked, jpeg_quality: Number.isFinite(q) ? Math.max(10, Math.min(100, q)) : 85 }, true);
+  };
+  $("adaptive").addEventListener("change", sendQuality);
+  $("jpeg").addEventListener("change", sendQuality);
+  $("btn-shot").addEventListener("click", () => {
+    const a = document.createElement("a");
+    a.href = withToken("screenshot", { session: S.session || "", scale: $("shot-scale").value }).toString();
+    a.download = "";
+    document.body.append(a);
+    a.click();
+    a.remove();
+  });
+
+  $("settings").addEventListener("submit", (e) => e.preventDefault());
+  connect();
+})();

@@ -1,0 +1,286 @@
+"""The viewer in a real headless Chromium against a real uvicorn server."""
+
+from __future__ import annotations
+
+import base64
+import io
+import os
+import time
+
+import numpy as np
+import pytest
+
+CHROMIUM = "/usr/bin/chromium"
+ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update", "--no-first-run"]
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(180)]
+if not os.path.exists(CHROMIUM):
+    pytest.skip("chromium is not installed at /usr/bin/chromium", allow_module_level=True)
+sync_api = pytest.importorskip("playwright.sync_api")
+pytest.importorskip("starlette")
+pytest.importorskip("uvicorn")
+
+from PIL import Image
+
+import gigapoint
+from gigapoint.viewer.server import ViewerServer
+
+MARKER = np.array([637050.123456789, 4850040.987654321, 30.0])
+VIEWPORT = {"width": 290 + 640, "height": 480}  # the panel is 290 px wide: the canvas is 640 x 480
+
+
+def marker_scene():
+    """Ground of two colours (so any camera move changes the image) and one red marker point above it."""
+    g = np.stack(np.meshgrid(np.linspace(0, 100, 200), np.linspace(0, 80, 160), indexing="ij"), -1).reshape(-1, 2)
+    ground = np.column_stack([g[:, 0] + 637000.0, g[:, 1] + 4850000.0, 10.0 + 0.02 * g[:, 0]])
+    rgb = np.zeros((len(g) + 1, 3), np.uint8)
+    rgb[:-1, 1] = 200
+    rgb[:-1, 2] = np.where(g[:, 0] > 50, 200, 0)
+    rgb[-1] = (255, 0, 0)
+    intensity = np.ones(len(g) + 1, np.uint16)
+    intensity[-1] = 4242
+    return gigapoint.from_arrays(np.vstack([ground, MARKER]), rgb, name="marker", intensity=intensity)
+
+
+@pytest.fixture(scope="module")
+def server():
+    srv = ViewerServer(marker_scene()).start()
+    yield srv
+    srv.close()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    with sync_api.sync_playwright() as p:
+        try:
+            b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        except Exception as exc:  # noqa: BLE001 - a broken browser install is a skip, not a failure
+            pytest.skip(f"cannot launch chromium: {exc}")
+        yield b
+        b.close()
+
+
+@pytest.fixture()
+def page(browser, server):
+    ctx = browser.new_context(viewport=VIEWPORT, accept_downloads=True)
+    pg = ctx.new_page()
+    errors = []
+    pg.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    pg.on("pageerror", lambda e: errors.append(str(e)))
+    pg.goto(server.url)
+    wait_full_frame(pg, 0)
+    yield pg
+    ctx.close()
+    assert not errors, errors
+
+
+def frame_no(pg) -> int:
+    return int(pg.evaluate("() => Number(document.getElementById('canvas').dataset.frame || 0)"))
+
+
+def wait_full_frame(pg, after: int) -> int:
+    pg.wait_for_function(
+        "(n) => { const c = document.getElementById('canvas'); return Number(c.dataset.frame || 0) > n && c.dataset.full === 'true'; }",
+        arg=after,
+        timeout=30_000,
+    )
+    return frame_no(pg)
+
+
+def camera(pg) -> dict:
+    return pg.evaluate("() => window.gigapoint.camera")
+
+
+def settle(pg, quiet_s: float = 0.4) -> dict:
+    """The camera once it has stopped changing (all queued input applied)."""
+    last, t_end = camera(pg), time.monotonic() + 30
+    while time.monotonic() < t_end:
+        time.sleep(quiet_s)
+        now = camera(pg)
+        if now == last:
+            return now
+        last = now
+    raise AssertionError("the camera never came to rest")
+
+
+def canvas_pixels(pg) -> np.ndarray:
+    """What the canvas shows (without the overlays on top of it)."""
+    url = pg.evaluate("() => document.getElementById('canvas').toDataURL('image/png')")
+    png = base64.b64decode(url.split(",", 1)[1])
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int16)
+
+
+def canvas_box(pg) -> dict:
+    return pg.locator("#canvas").bounding_box()
+
+
+def drag(pg, dx, dy, button="left"):
+    b = canvas_box(pg)
+    x, y = b["x"] + b["width"] / 2, b["y"] + b["height"] / 2
+    pg.mouse.move(x, y)
+    pg.mouse.down(button=button)
+    pg.mouse.move(x + dx, y + dy, steps=12)
+    pg.mouse.up(button=button)
+
+
+def test_page_loads_and_shows_a_frame(page):
+    img = canvas_pixels(page)
+    assert img.shape[:2] == (480, 640)
+    assert (img.sum(axis=2) > 60).mean() > 0.05  # not all background
+    assert page.locator("#stats").inner_text().count("points") == 1
+    assert page.locator("#settings input, #settings select").count() >= 4  # the panel was built from the schema
+
+
+def test_drag_orbits_and_changes_the_frame(page):
+    before_img, before = canvas_pixels(page), camera(page)
+    n = frame_no(page)
+    drag(page, 120, 0)
+    wait_full_frame(page, n)
+    after = camera(page)
+    assert after["yaw"] != pytest.approx(before["yaw"], abs=1.0)
+    assert after["target"] == before["target"]
+    assert np.abs(canvas_pixels(page) - before_img).mean() > 2
+
+
+def test_right_drag_pans(page):
+    before = camera(page)
+    n = frame_no(page)
+    drag(page, 80, 40, button="right")
+    wait_full_frame(page, n)
+    after = camera(page)
+    assert after["target"] != before["target"] and after["yaw"] == before["yaw"]
+
+
+def test_wheel_zooms(page):
+    before_img, before = canvas_pixels(page), camera(page)
+    n = frame_no(page)
+    b = canvas_box(page)
+    page.mouse.move(b["x"] + b["width"] / 2, b["y"] + b["height"] / 2)
+    for _ in range(3):
+        page.mouse.wheel(0, -200)
+    page.wait_for_function("(d) => window.gigapoint.camera.distance < d * 0.9", arg=before["distance"], timeout=30_000)
+    wait_full_frame(page, n)
+    assert camera(page)["distance"] < before["distance"] * 0.9
+    assert np.abs(canvas_pixels(page) - before_img).mean() > 2
+
+
+def test_panel_change_changes_the_frame(page):
+    assert canvas_pixels(page)[2, 2].max() < 40  # black background
+    n = frame_no(page)
+    page.locator("#setting-background").fill("#ffffff")
+    wait_full_frame(page, n)
+    page.wait_for_function("() => window.gigapoint.settings.background[0] === 255", timeout=30_000)
+    assert canvas_pixels(page)[2, 2].min() > 225
+
+
+def test_view_presets_and_fov(page):
+    n = frame_no(page)
+    page.get_by_role("button", name="top").click()
+    page.wait_for_function("() => window.gigapoint.camera.pitch > 89", timeout=30_000)
+    wait_full_frame(page, n)
+    n = frame_no(page)
+    page.locator("#fov").fill("30")
+    page.wait_for_function("() => Math.abs(window.gigapoint.camera.fov - 30) < 0.01", timeout=30_000)
+    page.get_by_role("button", name="reset").click()
+    page.wait_for_function("() => window.gigapoint.camera.fov === 60 && window.gigapoint.camera.pitch < 40", timeout=30_000)
+
+
+def marker_css_position(page, server):
+    """Where the marker is on the page, from the camera of the last frame the server rendered."""
+    (session,) = server.core.sessions.values()
+    cam = session.last.camera
+    x, y, w, _ = cam.screen_rows() @ np.append(MARKER, 1.0)
+    b = canvas_box(page)
+    return b["x"] + (x / w) / cam.width * b["width"], b["y"] + (y / w) / cam.height * b["height"]
+
+
+def test_pick_shows_the_coordinates_of_the_marker_and_double_click_sets_the_pivot(page, server):
+    n = frame_no(page)
+    page.get_by_role("button", name="top").click()
+    page.wait_for_function("() => window.gigapoint.camera.pitch > 89", timeout=30_000)
+    wait_full_frame(page, n)
+    cloud = server.core.cloud
+    index = int(np.argmax(cloud.attributes["intensity"]))
+    px, py, _ = (float(v) for v in cloud.positions([index])[0])
+    x, y = marker_css_position(page, server)
+    page.mouse.click(x, y)
+    box = page.locator("#pickinfo")
+    box.wait_for(state="visible")
+    page.wait_for_function("(i) => document.getElementById('pickinfo').dataset.index === String(i)", arg=index, timeout=30_000)
+    text = box.inner_text()
+    assert f"x {px!r}" in text and f"y {py!r}" in text  # full float64 precision, as Python prints it
+    assert abs(px - MARKER[0]) < 1e-6 and "intensity 4242" in text and "rgba 255, 0, 0, 255" in text
+    n = frame_no(page)
+    page.mouse.dblclick(x, y)
+    page.wait_for_function("(x) => window.gigapoint.camera.target[0] === x", arg=px, timeout=30_000)
+    wait_full_frame(page, n)
+    assert camera(page)["target"] == cloud.positions([index])[0].tolist()
+
+
+def test_keyboard_fly_moves_the_camera(page):
+    before = camera(page)
+    page.locator("#canvas").focus()
+    page.keyboard.down("w")
+    time.sleep(0.4)
+    page.keyboard.up("w")
+    page.wait_for_function("(t) => window.gigapoint.camera.target.some((v, i) => v !== t[i])", arg=before["target"], timeout=30_000)
+    after = camera(page)
+    assert after["distance"] == pytest.approx(before["distance"]) and after["yaw"] == before["yaw"]
+
+
+def content_box(img: np.ndarray) -> np.ndarray:
+    ys, xs = np.nonzero(img.sum(axis=2) > 60)
+    return np.array([xs.min(), ys.min(), xs.max(), ys.max()], np.float64)
+
+
+def test_screenshot_downloads_a_png_of_the_requested_size(page):
+    view = content_box(canvas_pixels(page))
+    page.locator("#shot-scale").select_option("2")
+    with page.expect_download(timeout=60_000) as dl:
+        page.locator("#btn-shot").click()
+    path = dl.value.path()
+    assert dl.value.suggested_filename == "gigapoint_1280x960.png"
+    img = Image.open(path)
+    assert img.format == "PNG" and img.size == (1280, 960)
+    shot = np.asarray(img.convert("RGB")).astype(np.int16)
+    assert (shot.sum(axis=2) > 60).mean() > 0.01
+    np.testing.assert_allclose(content_box(shot), view * 2, atol=1280 * 0.03)  # the same view, twice the pixels
+
+
+def test_touch_one_finger_orbits_two_fingers_pinch(browser, server):
+    ctx = browser.new_context(viewport=VIEWPORT, has_touch=True)
+    pg = ctx.new_page()
+    try:
+        pg.goto(server.url)
+        wait_full_frame(pg, 0)
+        cdp = ctx.new_cdp_session(pg)
+        b = canvas_box(pg)
+        cx, cy = b["x"] + b["width"] / 2, b["y"] + b["height"] / 2
+
+        def touch(kind, points):
+            cdp.send("Input.dispatchTouchEvent", {"type": kind, "touchPoints": [{"x": x, "y": y, "id": i} for i, (x, y) in enumerate(points)]})
+
+        before = camera(pg)
+        touch("touchStart", [(cx, cy)])
+        for k in range(1, 11):
+            touch("touchMove", [(cx + 10 * k, cy)])
+        touch("touchEnd", [])
+        pg.wait_for_function("(y) => Math.abs(window.gigapoint.camera.yaw - y) > 5", arg=before["yaw"], timeout=30_000)
+        before = settle(pg)
+        touch("touchStart", [(cx - 40, cy), (cx + 40, cy)])
+        for k in range(1, 11):
+            touch("touchMove", [(cx - 40 - 8 * k, cy), (cx + 40 + 8 * k, cy)])  # fingers apart: zoom in
+        touch("touchEnd", [])
+        pg.wait_for_function("(d) => window.gigapoint.camera.distance < d * 0.8", arg=before["distance"], timeout=30_000)
+        assert camera(pg)["yaw"] == pytest.approx(before["yaw"])
+    finally:
+        ctx.close()
+
+
+def test_a_rejected_setting_shows_an_error_and_the_panel_keeps_the_valid_value(page):
+    field = page.locator("#setting-precision_threshold_px")
+    field.fill("-5")
+    field.press("Enter")
+    page.locator("#error").wait_for(state="visible")
+    assert "precision_threshold_px" in page.locator("#error").inner_text()
+    page.wait_for_function("() => document.getElementById('setting-precision_threshold_px').value === '500'", timeout=30_000)
