@@ -5,6 +5,7 @@ cd "$(dirname "$0")/.."
 if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
   need=""
   command -v chromium >/dev/null || need="$need chromium"
+  command -v npm >/dev/null || need="$need npm"  # tests/integration/test_lod_browser.py: potree-core + three.js from npm
   [ -e /usr/share/vulkan/icd.d/lvp_icd.x86_64.json ] || ls /usr/share/vulkan/icd.d/lvp_icd*.json >/dev/null 2>&1 || need="$need mesa-vulkan-drivers"
   dpkg -s libegl1 libgl1 libgl1-mesa-dri libgles2 >/dev/null 2>&1 || need="$need libegl1 libgl1 libgl1-mesa-dri libgles2"
   if [ -n "$need" ]; then

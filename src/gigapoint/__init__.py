@@ -18,9 +18,22 @@ def demo(n_points: int = 1_000_000, seed: int = 0) -> PointCloud:
 
 def open(*paths, **options) -> PointCloud:  # noqa: A001 - the natural name, like PIL.Image.open
     """Read one or more files or directories (LAS/LAZ/PLY/XYZ/CSV/NPY/NPZ) into one PointCloud."""
+    if len(paths) == 1 and not options:  # a converted octree directory (gigapoint or Potree 2.0)
+        from .lod import is_octree_dir, open_octree
+
+        if is_octree_dir(paths[0]):
+            return open_octree(paths[0])
     from .io import open_cloud
 
     return open_cloud(*paths, **options)
+
+
+def __getattr__(name):
+    if name == "Viewer":  # lazily: the viewer pulls in Starlette/uvicorn only when used
+        from .viewer.jupyter import Viewer
+
+        return Viewer
+    raise AttributeError(f"module 'gigapoint' has no attribute {name!r}")
 
 
 __all__ = [
@@ -32,6 +45,7 @@ __all__ = [
     "PointCloud",
     "RenderSettings",
     "RenderStats",
+    "Viewer",
     "__version__",
     "demo",
     "demo_arrays",

@@ -4,3 +4,4 @@ from . import render_cmd  # noqa: F401
 from . import bench_cmd  # noqa: F401
 from . import info_cmd  # noqa: F401
 from . import view_cmd  # noqa: F401
+from . import convert_cmd  # noqa: F401

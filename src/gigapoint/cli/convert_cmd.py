@@ -1,0 +1,44 @@
+"""`gigapoint convert`: point cloud files -> an LOD octree directory (gigapoint or Potree 2.0)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import typer
+
+from . import app
+
+
+@app.command()
+def convert(
+    inputs: list[Path] = typer.Argument(..., help="Input files or directories (LAS/LAZ/PLY/XYZ/CSV/NPY/NPZ)."),
+    output: Path = typer.Option(..., "-o", "--output", help="Output directory (created; resumed when a conversion was interrupted)."),
+    sampler: str = typer.Option("grid", help="grid (first point per cell of a 128³ grid per node) or poisson (minimum distance)."),
+    memory_limit: str | None = typer.Option(None, "--memory-limit", help="Peak memory, e.g. 4G or 512M (default: a quarter of the RAM)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing converted cloud in OUTPUT."),
+    format: str = typer.Option(
+        "gigapoint", "--format", help="gigapoint (rendered directly) or potree (Potree 2.0, for Potree's web viewers)."
+    ),
+    max_leaf: int = typer.Option(20_000, "--max-leaf", help="Most points a leaf node holds."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+) -> None:
+    """Convert point clouds into a level-of-detail octree, out of core, resumable."""
+    from ..lod import convert as run
+
+    result = run(
+        [str(p) for p in inputs],
+        output,
+        sampler=sampler,
+        memory_limit=memory_limit,
+        overwrite=overwrite,
+        format=format,
+        max_leaf=max_leaf,
+        progress=not quiet and sys.stderr.isatty(),
+    )
+    resumed = " (resumed)" if result.resumed else ""
+    skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
+    print(
+        f"{result.out}: {result.points:,} points in {result.nodes:,} nodes ({result.format}, {result.sampler}){skipped}, "
+        f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s{resumed}"
+    )

@@ -1,0 +1,350 @@
+"""Building a layered-point-cloud octree over points sorted by code (see keys.py).
+
+Every node is a contiguous run ``starts[k]:ends[k]`` of the sorted points; a point is
+*owned* by the node at level ``ownlevel[i]`` on its path. Leaves own their whole run at
+first; sampling then goes bottom-up, level by level: an inner node's candidates are the
+points its children own (``ownlevel == level + 1``), and the ones its sampler accepts move
+up to it. Every point is therefore owned by exactly one node: stored exactly once.
+
+Color filtering: each point carries the sum of the colors it stands for and their count
+(``wsum``, ``wcount``); an accepted point absorbs the sums of the candidates it stands for
+(its grid cell, or the ones its Poisson disc rejected), so inner-node colors are the
+average of all the input points they represent.
+
+Samplers (both give the spacing ``cube edge / 128 / 2^level``):
+
+- ``grid``: the first candidate (in code order) of each cell of the node's 128³ grid;
+  cells are code prefixes, so they are contiguous runs and need no hash table.
+- ``poisson``: a candidate is accepted only when no accepted point lies closer than the
+  spacing (a hash grid of spacing-sized cells, 27 neighbours checked).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from .keys import CODE_BITS, MAX_LEVEL, key_cube, key_range
+
+SAMPLERS = {"grid": 0, "poisson": 1}
+_OFFSETS = np.array(
+    sorted(([x, y, z] for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1)), key=lambda v: abs(v[0]) + abs(v[1]) + abs(v[2])),
+    np.int64,
+)
+GRID_BITS = 7  # 128 cells per axis and node
+
+
+@njit(inline="always")
+def _grid_node(codes, ownlevel, wsum, wcount, s, e, level, grid_bits):
+    cell_level = min(level + grid_bits, CODE_BITS)
+    shift = np.uint64(3 * (CODE_BITS - cell_level))
+    acc = -1
+    prev = np.uint64(0)
+    child = level + 1
+    for i in range(s, e):
+        if ownlevel[i] != child:
+            continue
+        cell = codes[i] >> shift
+        if acc < 0 or cell != prev:
+            acc = i
+            prev = cell
+            ownlevel[i] = level
+        else:
+            wsum[acc, 0] += wsum[i, 0]
+            wsum[acc, 1] += wsum[i, 1]
+            wsum[acc, 2] += wsum[i, 2]
+            wcount[acc] += wcount[i]
+
+
+@njit(inline="always")
+def _poisson_node(xyz, ownlevel, wsum, wcount, s, e, level, nmin, radius, cells, heads):
+    """Poisson-disc sampling of one node; ``heads`` (cells³, all -1) is the thread's cell grid,
+    handed back all -1."""
+    child = level + 1
+    m = 0
+    for i in range(s, e):
+        if ownlevel[i] == child:
+            m += 1
+    nxt = np.empty(m, np.int64)
+    pid = np.empty(m, np.int64)
+    pcell = np.empty(m, np.int64)
+    n_acc = 0
+    r2 = radius * radius
+    inv = 1.0 / radius
+    for i in range(s, e):
+        if ownlevel[i] != child:
+            continue
+        c0 = min(max(np.int64((xyz[i, 0] - nmin[0]) * inv), 0), cells - 1)
+        c1 = min(max(np.int64((xyz[i, 1] - nmin[1]) * inv), 0), cells - 1)
+        c2 = min(max(np.int64((xyz[i, 2] - nmin[2]) * inv), 0), cells - 1)
+        found = -1
+        for o in range(27):  # the point's own cell first: that is where a close neighbour usually is
+            cx = c0 + _OFFSETS[o, 0]
+            cy = c1 + _OFFSETS[o, 1]
+            cz = c2 + _OFFSETS[o, 2]
+            if cx < 0 or cx >= cells or cy < 0 or cy >= cells or cz < 0 or cz >= cells:
+                continue
+            j = heads[(cx * cells + cy) * cells + cz]
+            while j >= 0:
+                q = pid[j]
+                d0 = xyz[i, 0] - xyz[q, 0]
+                d1 = xyz[i, 1] - xyz[q, 1]
+                d2 = xyz[i, 2] - xyz[q, 2]
+                if d0 * d0 + d1 * d1 + d2 * d2 < r2:
+                    found = q
+                    break
+                j = nxt[j]
+            if found >= 0:
+                break
+        if found >= 0:
+            wsum[found, 0] += wsum[i, 0]
+            wsum[found, 1] += wsum[i, 1]
+            wsum[found, 2] += wsum[i, 2]
+            wcount[found] += wcount[i]
+        else:
+            ownlevel[i] = level
+            cid = (c0 * cells + c1) * cells + c2
+            pid[n_acc] = i
+            pcell[n_acc] = cid
+            nxt[n_acc] = heads[cid]
+            heads[cid] = n_acc
+            n_acc += 1
+    for j in range(n_acc):
+        heads[pcell[j]] = -1
+
+
+@njit(parallel=True, cache=True)
+def _sample_level(codes, xyz, ownlevel, wsum, wcount, starts, ends, node_min, level, sampler, radius, grid_bits, n_threads):
+    """Sample every inner node of one level (nodes are disjoint). Thread t takes nodes t, t + T, ...
+    (largest first), reusing one dense cell grid for the Poisson sampler."""
+    cells = 1 << grid_bits
+    sizes = ends - starts
+    by_size = np.argsort(-sizes)
+    for t in prange(n_threads):
+        heads = np.full(cells * cells * cells if sampler == 1 else 1, -1, np.int64)
+        for r in range(t, starts.shape[0], n_threads):
+            k = by_size[r]
+            if sampler == 0:
+                _grid_node(codes, ownlevel, wsum, wcount, starts[k], ends[k], level, grid_bits)
+            else:
+                _poisson_node(xyz, ownlevel, wsum, wcount, starts[k], ends[k], level, node_min[k], radius, cells, heads)
+
+
+@njit(parallel=True, cache=True)
+def _count_owned(ownlevel, starts, ends, levels, counts):
+    for k in prange(starts.shape[0]):
+        c = 0
+        lev = levels[k]
+        for i in range(starts[k], ends[k]):
+            if ownlevel[i] == lev:
+                c += 1
+        counts[k] = c
+
+
+@njit(parallel=True, cache=True)
+def _scatter_owned(ownlevel, starts, ends, levels, offsets, perm):
+    for k in prange(starts.shape[0]):
+        p = offsets[k]
+        lev = levels[k]
+        for i in range(starts[k], ends[k]):
+            if ownlevel[i] == lev:
+                perm[p] = i
+                p += 1
+
+
+class Tree:
+    """Nodes over sorted codes: keys, levels, runs and whether each is a leaf (parallel arrays)."""
+
+    def __init__(self, keys, levels, starts, ends, leaf):
+        self.keys = np.asarray(keys, np.uint64)
+        self.levels = np.asarray(levels, np.int32)
+        self.starts = np.asarray(starts, np.int64)
+        self.ends = np.asarray(ends, np.int64)
+        self.leaf = np.asarray(leaf, bool)
+
+    def __len__(self) -> int:
+        return len(self.keys)
+
+
+def _child_runs(codes, key: int, s: int, e: int):
+    level, lo, _ = key_range(key)
+    shift = 3 * (CODE_BITS - level - 1)
+    bounds = np.array([lo + (c << shift) for c in range(9)], np.uint64)
+    cuts = s + np.searchsorted(codes[s:e], bounds, side="left")
+    return [(key << 3 | c, int(cuts[c]), int(cuts[c + 1])) for c in range(8) if cuts[c + 1] > cuts[c]]
+
+
+def split_tree(codes: np.ndarray, root_key: int, max_leaf: int, max_level: int = MAX_LEVEL) -> Tree:
+    """Top-down: split runs of sorted ``codes`` until nodes hold at most ``max_leaf`` points."""
+    keys, levels, starts, ends, leaf = [], [], [], [], []
+    stack = [(int(root_key), 0, len(codes))]
+    while stack:
+        key, s, e = stack.pop()
+        level = (key.bit_length() - 1) // 3
+        is_leaf = e - s <= max_leaf or level >= max_level
+        keys.append(key)
+        levels.append(level)
+        starts.append(s)
+        ends.append(e)
+        leaf.append(is_leaf)
+        if not is_leaf:
+            stack.extend(_child_runs(codes, key, s, e))
+    return Tree(keys, levels, starts, ends, leaf)
+
+
+def upper_tree(codes: np.ndarray, leaf_keys) -> Tree:
+    """The given nodes (as leaves) and all their ancestors, over sorted ``codes``."""
+    leaf_keys = {int(k) for k in leaf_keys}
+    nodes = set(leaf_keys)
+    for k in leaf_keys:
+        while k > 1:
+            k >>= 3
+            nodes.add(k)
+    keys = sorted(nodes)
+    levels, starts, ends = [], [], []
+    for k in keys:
+        level, lo, hi = key_range(k)
+        levels.append(level)
+        s, e = np.searchsorted(codes, np.array([lo, hi], np.uint64), side="left")
+        starts.append(int(s))
+        ends.append(int(e))
+    return Tree(keys, levels, starts, ends, [k in leaf_keys for k in keys])
+
+
+def sample_tree(tree: Tree, codes, xyz, ownlevel, wsum, wcount, sampler: str, origin, edge: float) -> None:
+    """Bottom-up sampling of the inner nodes of ``tree`` (``ownlevel`` must mark the leaves' points)."""
+    mode = SAMPLERS[sampler]
+    inner = ~tree.leaf
+    for level in sorted(set(tree.levels[inner].tolist()), reverse=True):
+        sel = np.flatnonzero(inner & (tree.levels == level))
+        nmin, _ = key_cube(tree.keys[sel], origin, edge)
+        radius = edge / (1 << GRID_BITS) / float(1 << level)
+        n_threads = max(1, min(numba.get_num_threads(), len(sel)))
+        _sample_level(codes, xyz, ownlevel, wsum, wcount, tree.starts[sel], tree.ends[sel], nmin, level, mode, radius, GRID_BITS, n_threads)
+
+
+def init_ownlevel(tree: Tree, n: int) -> np.ndarray:
+    own = np.full(n, -1, np.int8)
+    for k in np.flatnonzero(tree.leaf):
+        own[tree.starts[k] : tree.ends[k]] = tree.levels[k]
+    return own
+
+
+def owned_order(tree: Tree, ownlevel) -> tuple[np.ndarray, np.ndarray]:
+    """(perm, counts): points grouped by owning node in tree order, and each node's count."""
+    counts = np.empty(len(tree), np.int64)
+    lev8 = tree.levels.astype(np.int8)
+    _count_owned(ownlevel, tree.starts, tree.ends, lev8, counts)
+    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    perm = np.empty(int(counts.sum()), np.int64)
+    _scatter_owned(ownlevel, tree.starts, tree.ends, lev8, offsets, perm)
+    return perm, counts
+
+
+@njit(parallel=True, cache=True)
+def _take1(src, idx, out):
+    for i in prange(idx.shape[0]):
+        out[i] = src[idx[i]]
+
+
+@njit(parallel=True, cache=True)
+def _take2(src, idx, out):
+    for i in prange(idx.shape[0]):
+        for j in range(src.shape[1]):
+            out[i, j] = src[idx[i], j]
+
+
+@njit(cache=True)
+def counting_order(keys, n_bins):
+    """(stable permutation sorting small integer keys, per-bin counts): a counting sort."""
+    counts = np.zeros(n_bins, np.int64)
+    for i in range(keys.shape[0]):
+        counts[keys[i]] += 1
+    pos = np.empty(n_bins, np.int64)
+    total = 0
+    for b in range(n_bins):
+        pos[b] = total
+        total += counts[b]
+    order = np.empty(keys.shape[0], np.int64)
+    for i in range(keys.shape[0]):
+        k = keys[i]
+        order[pos[k]] = i
+        pos[k] += 1
+    return order, counts
+
+
+@njit(parallel=True, cache=True)
+def _valid_bounds(xyz, limit, valid, lo, hi):
+    """valid[i] = finite and within ±limit; per-thread-slice min/max of the valid points into lo/hi (T, 3)."""
+    n = xyz.shape[0]
+    n_threads = lo.shape[0]
+    step = (n + n_threads - 1) // n_threads
+    for t in prange(n_threads):
+        for i in range(t * step, min(n, (t + 1) * step)):
+            ok = True
+            for a in range(3):
+                v = xyz[i, a]
+                if not (abs(v) <= limit):  # False for NaN too
+                    ok = False
+            valid[i] = ok
+            if ok:
+                for a in range(3):
+                    v = xyz[i, a]
+                    lo[t, a] = min(lo[t, a], v)
+                    hi[t, a] = max(hi[t, a], v)
+
+
+def valid_bounds(xyz: np.ndarray, limit: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(valid mask, min, max of the valid points) in one parallel pass."""
+    n_threads = max(1, numba.get_num_threads())
+    valid = np.empty(len(xyz), np.bool_)
+    lo = np.full((n_threads, 3), np.inf)
+    hi = np.full((n_threads, 3), -np.inf)
+    _valid_bounds(np.ascontiguousarray(xyz, np.float64), float(limit), valid, lo, hi)
+    return valid, lo.min(axis=0), hi.max(axis=0)
+
+
+_UINT_OF_SIZE = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}
+
+
+def take(src: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """src[idx] along the first axis, in parallel (numpy's fancy indexing is single-threaded).
+
+    Values are moved as same-width unsigned integers, so the kernels compile for 4 types only.
+    """
+    src = np.ascontiguousarray(src)
+    out = np.empty((len(idx),) + src.shape[1:], src.dtype)
+    u = _UINT_OF_SIZE.get(src.dtype.itemsize)
+    idx = np.ascontiguousarray(idx, np.int64)
+    if u is not None and src.ndim == 1:
+        _take1(src.view(u), idx, out.view(u))
+    elif u is not None and src.ndim == 2:
+        _take2(src.view(u), idx, out.view(u))
+    else:
+        out[:] = src[idx]
+    return out
+
+
+@njit(parallel=True, cache=True)
+def _filtered(rgba8, wsum, wcount, idx, out8):
+    for i in prange(idx.shape[0]):
+        k = idx[i]
+        inv = 1.0 / max(wcount[k], 1.0)
+        for c in range(3):
+            out8[i, c] = np.uint8(min(max(np.floor(wsum[k, c] * inv + 0.5), 0.0), 255.0))
+        out8[i, 3] = rgba8[k, 3]
+
+
+def filtered_colors(rgba_u32: np.ndarray, wsum: np.ndarray, wcount: np.ndarray, idx: np.ndarray | None = None) -> np.ndarray:
+    """u32 RGBA of points ``idx``: the average color each stands for (alpha kept)."""
+    if idx is None:
+        idx = np.arange(len(rgba_u32), dtype=np.int64)
+    out = np.empty((len(idx), 4), np.uint8)
+    _filtered(np.ascontiguousarray(rgba_u32).view(np.uint8).reshape(-1, 4), wsum, wcount, idx, out)
+    return out.view(np.uint32).reshape(-1)
+
+
+def color_sums(rgba_u32: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    rgb = rgba_u32.view(np.uint8).reshape(-1, 4)[:, :3].astype(np.float64)
+    return rgb, np.ones(len(rgba_u32), np.float64)

@@ -1,0 +1,760 @@
+"""Out-of-core conversion of point clouds into a layered-point-cloud octree.
+
+Phases (each resumable; state in ``OUT/.partial/state.json``, written atomically):
+
+1. **read**: input chunks are validated, bounded and spilled to ``.partial/raw`` (the
+   input is decoded once: LAZ decoding is usually the bottleneck).
+2. **count**: spilled points are counted into a 128³ grid of the octree cube.
+3. **distribute**: grid cells are merged into partitions (octree subtrees) holding at
+   most what fits the memory limit; each spilled chunk is appended to its partitions'
+   files, then deleted.
+4. **build**: per partition, a local octree is split until nodes hold ≤ ``max_leaf``
+   points and sampled bottom-up (build.py); the subtree's root points are carried up.
+5. **upper**: the nodes above the partitions are sampled from the carried points.
+6. **write**: node payloads are assembled into the output format; the metadata file
+   (``octree.json`` or Potree's ``metadata.json``) is written last, atomically, and only
+   then is ``.partial`` removed. OUT therefore never looks complete before it is.
+
+A re-run after an interruption resumes where the state says (same inputs and options),
+otherwise it starts clean.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..core.chunk import PointChunk
+from ..core.cloud import MAX_ABS_COORDINATE
+from ..core.morton import morton_order
+from ..errors import EmptyCloudError, GigapointError, GigapointWarning, InputError
+from .build import (
+    SAMPLERS,
+    color_sums,
+    counting_order,
+    filtered_colors,
+    init_ownlevel,
+    owned_order,
+    sample_tree,
+    split_tree,
+    take,
+    upper_tree,
+    valid_bounds,
+)
+from .keys import CODE_BITS, point_codes
+from .progress import NullProgress, RichProgress
+
+STATE_VERSION = 1
+COUNT_LEVEL = 7  # the count grid: 128³ cells of the cube
+BYTES_PER_POINT_BUILD = 220  # peak working set per point of a partition build
+DEFAULT_MAX_LEAF = 20_000
+FORMATS = ("gigapoint", "potree")
+_OWN_FILES = (
+    "octree.json",
+    "metadata.json",
+    "hierarchy.bin",
+    "octree.bin",
+    "nodes.npy",
+    "keys.npy",
+    "low.npy",
+    "med.npy",
+    "high.npy",
+    "color.npy",
+    "rgba.npy",
+)
+
+
+class ConvertError(GigapointError):
+    """A conversion that cannot start or go on (bad options, output in the way)."""
+
+
+class OutputExistsError(ConvertError):
+    """The output directory already holds something that --overwrite is needed for."""
+
+
+@dataclass
+class ConvertResult:
+    out: Path
+    format: str
+    sampler: str
+    points: int
+    nodes: int
+    skipped: int
+    seconds: float
+    resumed: bool
+    phase_seconds: dict | None = None
+
+    @property
+    def points_per_second(self) -> float:
+        return self.points / self.seconds if self.seconds > 0 else 0.0
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def parse_memory(value) -> int:
+    """'4G', '512M', '2GiB', '1.5g' or a byte count -> bytes; None -> a quarter of the RAM."""
+    if value is None:
+        try:
+            total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        except (ValueError, OSError, AttributeError):
+            total = 8 << 30
+        return max(256 << 20, total // 4)
+    if isinstance(value, (int, np.integer)):
+        n = int(value)
+    else:
+        s = str(value).strip().lower().removesuffix("b").removesuffix("i")
+        mult = {"k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}.get(s[-1:], 1)
+        try:
+            n = int(float(s[:-1] if s[-1:] in "kmgt" else s) * mult)
+        except ValueError:
+            raise ConvertError(f"--memory-limit: cannot read {value!r} (use e.g. 4G, 512M)") from None
+    if n < 64 << 20:
+        raise ConvertError(f"--memory-limit: {value!r} is below the 64M a conversion needs")
+    return n
+
+
+def _atomic_write_bytes(path: Path, data: bytes) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def _atomic_json(path: Path, obj) -> None:
+    _atomic_write_bytes(path, json.dumps(obj, indent=1).encode())
+
+
+def _save_npy(path: Path, arr: np.ndarray) -> None:
+    tmp = path.with_name(path.name + ".tmp.npy")
+    np.save(tmp, arr)
+    os.replace(tmp, path)
+
+
+def _input_paths(inputs) -> list[Path] | None:
+    if isinstance(inputs, (str, os.PathLike)):
+        inputs = [inputs]
+    if isinstance(inputs, (list, tuple)) and all(isinstance(p, (str, os.PathLike)) for p in inputs):
+        paths = []
+        for p in map(Path, inputs):
+            if p.is_dir() and ((p / "octree.json").exists() or (p / "metadata.json").exists() or (p / ".partial").exists()):
+                raise InputError(f"{p}: is a converted octree (or a conversion in progress), not an input point cloud")
+            if p.is_dir():
+                found = sorted(
+                    q
+                    for q in p.iterdir()
+                    if q.is_file() and q.suffix.lower() in (".las", ".laz", ".ply", ".xyz", ".csv", ".txt", ".npy", ".npz", ".pts")
+                )
+                if not found:
+                    raise InputError(f"{p}: directory holds no point cloud files")
+                paths.extend(found)
+            elif not p.exists():
+                raise InputError(f"{p}: no such file")
+            else:
+                paths.append(p)
+        if not paths:
+            raise InputError("convert: no input given")
+        return paths
+    return None
+
+
+def _read_chunks(path: Path, chunk_size: int):
+    try:
+        from ..io import read_chunks
+    except ImportError:
+        read_chunks = _laspy_chunks
+    return read_chunks(path, chunk_size)
+
+
+def _laspy_chunks(path: Path, chunk_size: int):  # used only until gigapoint.io exists
+    import laspy
+
+    if path.suffix.lower() not in (".las", ".laz"):
+        raise InputError(f"{path}: unsupported format (only LAS/LAZ until gigapoint.io is installed)")
+    try:
+        with laspy.open(str(path)) as reader:
+            dims = set(reader.header.point_format.dimension_names)
+            for pts in reader.chunk_iterator(chunk_size):
+                xyz = np.column_stack([np.asarray(pts.x), np.asarray(pts.y), np.asarray(pts.z)])
+                rgb = np.column_stack([pts.red, pts.green, pts.blue]) if "red" in dims else None
+                attrs = {a: np.asarray(pts[a]) for a in ("intensity", "classification") if a in dims}
+                yield PointChunk(xyz, rgb, attrs)
+    except (laspy.errors.LaspyException, ValueError) as exc:
+        raise InputError(f"{path}: cannot read LAS/LAZ: {' '.join(str(exc).split())}") from None
+
+
+def _point_total(paths) -> int | None:
+    try:
+        from ..io.registry import reader_for
+
+        total = 0
+        for p in paths:
+            n = reader_for(p).point_count(p)
+            if n is None:
+                return None
+            total += n
+        return total
+    except Exception:  # noqa: BLE001 - only a progress-bar total: unknown is fine
+        return None
+
+
+def _rss_bytes() -> int:
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError, AttributeError):
+        return 0
+
+
+def _interrupt_hook(done_partitions: int) -> None:
+    """Test hook: GIGAPOINT_TEST_INTERRUPT=raise:N or kill:N stops after N built partitions."""
+    spec = os.environ.get("GIGAPOINT_TEST_INTERRUPT")
+    if not spec:
+        return
+    how, _, n = spec.partition(":")
+    if done_partitions == int(n):
+        if how == "kill":
+            os.kill(os.getpid(), signal.SIGKILL)
+        raise KeyboardInterrupt(f"test interrupt after {done_partitions} partitions")
+
+
+def _plan_partitions(counts: np.ndarray, level: int, prefix: int, depth: int, budget: int) -> list[list[int]]:
+    """Merge the cells of a count grid ``depth`` levels below node (level, prefix) into the largest
+    subtrees holding at most ``budget`` points: [[level, prefix, count], ...] in Morton order."""
+    pyramid = [counts]
+    for _ in range(depth):
+        pyramid.insert(0, pyramid[0].reshape(-1, 8).sum(axis=1))
+    parts: list[list[int]] = []
+
+    def visit(d: int, rel: int) -> None:
+        c = int(pyramid[d][rel])
+        if c == 0:
+            return
+        if c <= budget or d == depth:
+            parts.append([level + d, (prefix << 3 * d) | rel, c])
+        else:
+            for k in range(8):
+                visit(d + 1, rel * 8 + k)
+
+    visit(0, 0)
+    return parts
+
+
+def _built_name(level: int, prefix: int) -> str:
+    return f"p{(1 << 3 * level) | prefix:x}"
+
+
+# --------------------------------------------------------------------------- output directory
+
+
+def _looks_like_output(out: Path) -> bool:
+    return any((out / f).exists() for f in ("octree.json", "metadata.json", ".partial"))
+
+
+def _clear_output(out: Path) -> None:
+    shutil.rmtree(out / ".partial", ignore_errors=True)
+    for f in _OWN_FILES:
+        (out / f).unlink(missing_ok=True)
+    for p in [*out.glob("attr.*.npy"), *out.glob("*.tmp"), *out.glob("*.tmp.npy")]:
+        p.unlink()
+
+
+def _prepare_output(out: Path, fingerprint: dict, overwrite: bool) -> dict | None:
+    """Create/clean OUT; return the saved state when a matching partial run can resume."""
+    if out.exists() and not out.is_dir():
+        raise OutputExistsError(f"{out}: exists and is not a directory")
+    if out.exists():
+        complete = (out / "octree.json").exists() or (out / "metadata.json").exists()
+        if complete and not overwrite:
+            raise OutputExistsError(f"{out}: already holds a converted point cloud; pass --overwrite to replace it")
+        if not complete and not _looks_like_output(out) and any(out.iterdir()):
+            raise OutputExistsError(f"{out}: directory is not empty and is not a gigapoint/Potree output; refusing to write into it")
+        if complete:
+            _clear_output(out)
+        else:
+            state_file = out / ".partial" / "state.json"
+            try:
+                state = json.loads(state_file.read_text())
+            except (OSError, ValueError):
+                state = None
+            if state and state.get("fingerprint") == fingerprint:
+                return state
+            _clear_output(out)
+    (out / ".partial").mkdir(parents=True, exist_ok=True)
+    return None
+
+
+# --------------------------------------------------------------------------- the converter
+
+
+class _Converter:
+    def __init__(
+        self, inputs, out, sampler, memory_limit, format, max_leaf, partition_points, chunk_size, progress, name, encoding="DEFAULT"
+    ):
+        self.encoding = encoding
+        self.out = Path(out)
+        self.partial = self.out / ".partial"
+        self.sampler = sampler
+        self.format = format
+        self.max_leaf = max_leaf
+        self.mem = memory_limit
+        usable = max(memory_limit - _rss_bytes() - (48 << 20), memory_limit // 4)  # what the process already holds is not ours
+        self.partition_points = partition_points or max(50_000, usable // BYTES_PER_POINT_BUILD)
+        self.partition_override = partition_points  # None: derived from the memory limit (and this process's size)
+        self.chunk_size = chunk_size or int(min(2_000_000, max(50_000, memory_limit // 600)))
+        self.progress = progress
+        self.inputs = inputs
+        self.paths = _input_paths(inputs)
+        self.name = name or (self.paths[0].stem if self.paths else "cloud")
+        self.state: dict = {}
+
+    # -- state
+    def fingerprint(self) -> dict | None:
+        if self.paths is None:
+            return None
+        files = [[str(p.resolve()), p.stat().st_size, p.stat().st_mtime_ns] for p in self.paths]
+        return {
+            "version": STATE_VERSION,
+            "inputs": files,
+            "sampler": self.sampler,
+            "format": self.format,
+            "encoding": self.encoding,
+            "max_leaf": self.max_leaf,
+            "memory_limit": self.mem,
+            "partition_points": self.partition_override,
+            "chunk_size": self.chunk_size,
+        }
+
+    def save_state(self) -> None:
+        _atomic_json(self.partial / "state.json", self.state)
+
+    # -- phase 1
+    def _chunks(self):
+        if self.paths is None:
+            yield from self.inputs
+        else:
+            for p in self.paths:
+                yield from _read_chunks(p, self.chunk_size)
+
+    def read(self) -> None:
+        st = self.state
+        raw = self.partial / "raw"
+        raw.mkdir(exist_ok=True)
+        done = st.get("chunks", 0)
+        lo = np.array(st.get("lo", [np.inf] * 3))
+        hi = np.array(st.get("hi", [-np.inf] * 3))
+        attrs: dict | None = st.get("attributes")
+        total = _point_total(self.paths) if self.paths else None
+        self.progress.phase("read", total)
+        for i, chunk in enumerate(self._chunks()):
+            n_in = len(chunk)
+            if i < done:
+                self.progress.advance(n_in)
+                continue
+            valid, c_lo, c_hi = valid_bounds(chunk.xyz, MAX_ABS_COORDINATE)
+            n_valid = int(np.count_nonzero(valid))
+            keep = slice(None) if n_valid == n_in else valid
+            xyz = chunk.xyz[keep]
+            st["skipped"] = st.get("skipped", 0) + int(n_in - n_valid)
+            names = {a: v.dtype.str for a, v in chunk.attributes.items() if v.ndim == 1}
+            if attrs is None:
+                attrs = names
+            else:
+                attrs = {a: d for a, d in attrs.items() if names.get(a) == d}
+            if n_valid:
+                lo = np.minimum(lo, c_lo)
+                hi = np.maximum(hi, c_hi)
+            _save_npy(raw / f"c{i:06d}.xyz.npy", xyz)
+            _save_npy(raw / f"c{i:06d}.rgba.npy", np.ascontiguousarray(chunk.rgba[keep]).view(np.uint32).reshape(-1))
+            for a in names:
+                _save_npy(raw / f"c{i:06d}.attr.{a}.npy", np.ascontiguousarray(chunk.attributes[a][keep]))
+            st.update(chunks=i + 1, lo=lo.tolist(), hi=hi.tolist(), attributes=attrs, points=st.get("points", 0) + len(xyz))
+            self.save_state()
+            self.progress.advance(n_in)
+        if st.get("points", 0) == 0:
+            skipped = st.get("skipped", 0)
+            detail = f" ({skipped:,} invalid points: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
+            raise EmptyCloudError(f"{self.name}: no valid points{detail}")
+        if st.get("skipped"):
+            warnings.warn(
+                f"{self.name}: skipped {st['skipped']:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})",
+                GigapointWarning,
+                stacklevel=3,
+            )
+        edge = float(np.max(hi - lo))
+        st.update(origin=lo.tolist(), edge=edge if edge > 0 else 1.0, phase="count")
+        self.save_state()
+
+    def raw_chunk(self, i: int, names) -> dict:
+        raw = self.partial / "raw"
+        d = {"xyz": np.load(raw / f"c{i:06d}.xyz.npy", mmap_mode="r"), "rgba": np.load(raw / f"c{i:06d}.rgba.npy", mmap_mode="r")}
+        for a in names:
+            d["attr." + a] = np.load(raw / f"c{i:06d}.attr.{a}.npy", mmap_mode="r")
+        return d
+
+    # -- phase 2
+    def count(self) -> None:
+        st = self.state
+        origin, edge = np.array(st["origin"]), st["edge"]
+        shift = np.uint64(3 * (CODE_BITS - COUNT_LEVEL))
+        counts = np.zeros(8**COUNT_LEVEL, np.int64)
+        self.progress.phase("count", st["points"])
+        for i in range(st["chunks"]):
+            xyz = np.ascontiguousarray(self.raw_chunk(i, [])["xyz"])
+            if len(xyz):
+                counts += np.bincount((point_codes(xyz, origin, edge) >> shift).astype(np.int64), minlength=len(counts))
+            self.progress.advance(len(xyz))
+        budget = st.setdefault("partition_points", self.partition_points)  # a resumed run keeps the first run's plan
+        parts = _plan_partitions(counts, 0, 0, COUNT_LEVEL, budget)
+        st.update(partitions=parts, part_counts=[0] * len(parts), distributed=0, phase="distribute")
+        self.save_state()
+
+    # -- phase 3
+    def _part_files(self, level: int, prefix: int) -> dict[str, Path]:
+        d = self.partial / "parts"
+        stem = _built_name(level, prefix)  # named by node key: refined partitions never clash
+        files = {"xyz": d / f"{stem}.xyz", "rgba": d / f"{stem}.rgba"}
+        for a in self.state["attributes"]:
+            files["attr." + a] = d / f"{stem}.attr.{a}"
+        return files
+
+    def _dtypes(self) -> dict[str, np.dtype]:
+        dts = {"xyz": np.dtype(np.float64), "rgba": np.dtype(np.uint32)}
+        for a, dt in self.state["attributes"].items():
+            dts["attr." + a] = np.dtype(dt)
+        return dts
+
+    def _append(self, parts: list, data: dict, pid: np.ndarray, counts: list) -> None:
+        """Append the rows of ``data`` to the files of partition ``parts[pid[i]]``."""
+        order, per = counting_order(pid, len(parts))
+        cuts = np.concatenate([[0], np.cumsum(per)])
+        sorted_data = {k: take(np.asarray(v), order) for k, v in data.items()}
+        for p in np.flatnonzero(per):
+            for key, path in self._part_files(parts[p][0], parts[p][1]).items():
+                with open(path, "ab") as f:
+                    f.write(sorted_data[key][cuts[p] : cuts[p + 1]].tobytes())
+            counts[p] += int(per[p])
+
+    def distribute(self) -> None:
+        st = self.state
+        (self.partial / "parts").mkdir(exist_ok=True)
+        origin, edge = np.array(st["origin"]), st["edge"]
+        parts = st["partitions"]
+        counts = st["part_counts"]
+        if len(parts) == 1:  # one partition: the build reads the spilled chunks themselves
+            st.update(part_counts=[st["points"]], distributed=st["chunks"], from_raw=True, phase="build")
+            self.save_state()
+            return
+        if st["distributed"] < st["chunks"]:
+            lut = np.empty(8**COUNT_LEVEL, np.int32)
+            for pid, (lev, prefix, _) in enumerate(parts):
+                span = 8 ** (COUNT_LEVEL - lev)
+                lut[prefix * span : (prefix + 1) * span] = pid
+            dts = self._dtypes()
+            # a chunk interrupted half-way: cut every partition file back to the last checkpoint
+            for pid, (lev, prefix, _) in enumerate(parts):
+                for key, path in self._part_files(lev, prefix).items():
+                    if path.exists():
+                        os.truncate(path, counts[pid] * dts[key].itemsize)
+            shift = np.uint64(3 * (CODE_BITS - COUNT_LEVEL))
+            self.progress.phase("distribute", st["points"])
+            for i in range(st["distributed"], st["chunks"]):
+                data = self.raw_chunk(i, st["attributes"])
+                xyz = np.ascontiguousarray(data["xyz"])
+                if len(xyz):
+                    self._append(parts, data, lut[(point_codes(xyz, origin, edge) >> shift).astype(np.int64)], counts)
+                del data
+                st["distributed"] = i + 1
+                self.save_state()
+                for f in (self.partial / "raw").glob(f"c{i:06d}.*"):
+                    f.unlink()
+                self.progress.advance(len(xyz))
+        self._refine()
+        st["phase"] = "build"
+        self.save_state()
+
+    def _refine(self) -> None:
+        """Split partitions that still exceed the budget (dense spots finer than the count grid)."""
+        st = self.state
+        origin, edge = np.array(st["origin"]), st["edge"]
+        budget = st["partition_points"]
+        dts = self._dtypes()
+        unsplittable = st.setdefault("unsplittable", [])
+        while True:
+            big = [
+                i
+                for i, (lev, prefix, _) in enumerate(st["partitions"])
+                if st["part_counts"][i] > budget and lev < CODE_BITS and [lev, prefix] not in unsplittable
+            ]
+            if not big:
+                return
+            i = big[0]
+            lev, prefix, _ = st["partitions"][i]
+            n = st["part_counts"][i]
+            sub = min(lev + COUNT_LEVEL, CODE_BITS)
+            base = np.uint64(prefix << 3 * (sub - lev))
+            shift = np.uint64(3 * (CODE_BITS - sub))
+            files = self._part_files(lev, prefix)
+            arrays = {k: np.memmap(path, dtype=dts[k], mode="r", shape=(n, 3) if k == "xyz" else (n,)) for k, path in files.items()}
+            step = self.chunk_size
+            counts = np.zeros(8 ** (sub - lev), np.int64)
+            for s in range(0, n, step):
+                rel = (point_codes(np.ascontiguousarray(arrays["xyz"][s : s + step]), origin, edge) >> shift) - base
+                counts += np.bincount(rel.astype(np.int64), minlength=len(counts))
+            plan = _plan_partitions(counts, lev, prefix, sub - lev, budget)
+            if len(plan) == 1 and plan[0][0] == lev:
+                unsplittable.append([lev, prefix])  # everything in one finest cell: it stays big
+                self.save_state()
+                continue
+            lut = np.empty(len(counts), np.int32)
+            for pid, (plev, pprefix, _) in enumerate(plan):
+                span = 8 ** (sub - plev)
+                rel0 = pprefix * span - int(base)
+                lut[rel0 : rel0 + span] = pid
+            for plev, pprefix, _ in plan:  # a run killed half-way left partial files: start them over
+                for path in self._part_files(plev, pprefix).values():
+                    path.unlink(missing_ok=True)
+            new_counts = [0] * len(plan)
+            for s in range(0, n, step):
+                data = {k: np.ascontiguousarray(v[s : s + step]) for k, v in arrays.items()}
+                rel = (point_codes(data["xyz"], origin, edge) >> shift) - base
+                self._append(plan, data, lut[rel.astype(np.int64)], new_counts)
+            del arrays
+            st["partitions"][i : i + 1] = plan
+            st["part_counts"][i : i + 1] = new_counts
+            self.save_state()
+            for path in files.values():
+                path.unlink(missing_ok=True)
+
+    # -- phase 4
+    def build(self) -> None:
+        st = self.state
+        origin, edge = np.array(st["origin"]), st["edge"]
+        built = self.partial / "built"
+        built.mkdir(exist_ok=True)
+        self.progress.phase("build", st["points"])
+        done_now = 0
+        for pid, (lev, prefix, _) in enumerate(st["partitions"]):
+            n = st["part_counts"][pid]
+            target = built / _built_name(lev, prefix)
+            if target.exists() or n == 0:
+                self.progress.advance(n)
+                continue
+            files = self._part_files(lev, prefix)
+            if st.get("from_raw"):
+                parts = [self.raw_chunk(i, st["attributes"]) for i in range(st["chunks"])]
+                data = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+                files = {f"raw{i}": f for i, f in enumerate((self.partial / "raw").glob("c*.npy"))}
+                del parts
+            else:
+                data = {
+                    k: np.fromfile(path, dtype=np.float64 if k == "xyz" else (np.uint32 if k == "rgba" else st["attributes"][k[5:]]))
+                    for k, path in files.items()
+                }
+                data["xyz"] = data["xyz"].reshape(-1, 3)
+            root_key = (1 << 3 * lev) | prefix
+            tmp = built / (_built_name(lev, prefix) + ".tmp")
+            shutil.rmtree(tmp, ignore_errors=True)
+            tmp.mkdir()
+            self._build_subtree(data, root_key, origin, edge, tmp)
+            os.replace(tmp, target)
+            for path in files.values():
+                path.unlink(missing_ok=True)
+            self.progress.advance(n)
+            done_now += 1
+            _interrupt_hook(done_now)
+        st["phase"] = "upper"
+        self.save_state()
+
+    def _build_subtree(self, data: dict, root_key: int, origin, edge, dest: Path) -> None:
+        xyz = data.pop("xyz")
+        codes = point_codes(xyz, origin, edge)
+        order = morton_order(codes)
+        codes = take(codes, order)
+        rgba_sorted = take(data["rgba"], order)
+        # the grid sampler needs only codes; Poisson measures distances on sorted positions
+        xyz_sorted = take(xyz, order) if self.sampler == "poisson" else np.zeros((1, 3))
+        tree = split_tree(codes, root_key, self.max_leaf)
+        own = init_ownlevel(tree, len(codes))
+        wsum, wcount = color_sums(rgba_sorted)
+        sample_tree(tree, codes, xyz_sorted, own, wsum, wcount, self.sampler, origin, edge)
+        del xyz_sorted
+        perm, counts = owned_order(tree, own)  # indices into the sorted arrays
+        src = take(order, perm)  # the same points as indices into the input arrays
+        del order
+        n0 = int(counts[0])
+        carry, rest = perm[:n0], perm[n0:]
+        # carried up: the subtree root's points, with their color sums
+        _save_npy(dest / "carry.xyz.npy", take(xyz, src[:n0]))
+        _save_npy(dest / "carry.codes.npy", take(codes, carry))
+        _save_npy(dest / "carry.wsum.npy", take(wsum, carry))
+        _save_npy(dest / "carry.wcount.npy", take(wcount, carry))
+        for k, v in data.items():
+            _save_npy(dest / f"carry.{k}.npy", take(v, src[:n0]))
+        np.save(dest / "root.npy", np.array([root_key, 0 if tree.leaf[0] else 1], np.uint64))  # key, has children
+        # final: every node below the root
+        color = filtered_colors(rgba_sorted, wsum, wcount, rest)
+        src = src[n0:]
+        self._save_nodes(dest, tree.keys[1:], counts[1:], ~tree.leaf[1:], take(xyz, src), color, {k: take(v, src) for k, v in data.items()})
+
+    @staticmethod
+    def _save_nodes(dest: Path, keys, counts, inner, xyz, color, data) -> None:
+        keep = (counts > 0) | inner  # empty leaves are dropped; empty inner nodes keep the hierarchy whole
+        _save_npy(dest / "keys.npy", np.asarray(keys, np.uint64)[keep])
+        _save_npy(dest / "counts.npy", np.asarray(counts, np.int64)[keep])
+        _save_npy(dest / "xyz.npy", xyz)
+        _save_npy(dest / "color.npy", color)
+        for k, v in data.items():
+            _save_npy(dest / f"{k}.npy", v)
+
+    # -- phase 5
+    def upper(self) -> None:
+        st = self.state
+        origin, edge = np.array(st["origin"]), st["edge"]
+        built = self.partial / "built"
+        target = built / "upper"
+        if target.exists():
+            st["phase"] = "write"
+            self.save_state()
+            return
+        self.progress.phase("upper", None)
+        parts = [p for p in (built / _built_name(lev, prefix) for lev, prefix, _ in st["partitions"]) if p.exists()]
+        names = ["rgba"] + ["attr." + a for a in st["attributes"]]
+        root_info = [np.load(p / "root.npy") for p in parts]
+        roots = [int(r[0]) for r in root_info]
+        inner_roots = np.array([r[0] for r in root_info if r[1]], np.uint64)
+        cat = {k: np.concatenate([np.load(p / f"carry.{k}.npy") for p in parts]) for k in ["xyz", "codes", "wsum", "wcount", *names]}
+        order = morton_order(cat["codes"])
+        cat = {k: take(v, order) for k, v in cat.items()}
+        codes, xyz, wsum, wcount = cat.pop("codes"), cat.pop("xyz"), cat.pop("wsum"), cat.pop("wcount")
+        tree = upper_tree(codes, roots)
+        own = init_ownlevel(tree, len(codes))
+        sample_tree(tree, codes, xyz, own, wsum, wcount, self.sampler, origin, edge)
+        perm, counts = owned_order(tree, own)
+        self.progress.advance(len(codes))
+        tmp = built / "upper.tmp"
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir()
+        inner = ~tree.leaf | np.isin(tree.keys, inner_roots)  # roots with children stay even when emptied
+        self._save_nodes(
+            tmp,
+            tree.keys,
+            counts,
+            inner,
+            take(xyz, perm),
+            filtered_colors(cat["rgba"], wsum, wcount, perm),
+            {k: take(v, perm) for k, v in cat.items()},
+        )
+        os.replace(tmp, target)
+        st["phase"] = "write"
+        self.save_state()
+
+    # -- phase 6
+    def sources(self) -> list[Path]:
+        built = self.partial / "built"
+        return [built / "upper"] + [
+            p for p in (built / _built_name(lev, prefix) for lev, prefix, _ in self.state["partitions"]) if p.exists()
+        ]
+
+    def write(self) -> int:
+        from .store import write_gigapoint
+
+        st = self.state
+        self.progress.phase("write", st["points"])
+        if self.format == "potree":
+            from .potree import write_potree
+
+            n_nodes = write_potree(self.out, self.sources(), st, self.name, self.progress, self.encoding)
+        else:
+            n_nodes = write_gigapoint(self.out, self.sources(), st, self.name, self.sampler, self.max_leaf, self.progress)
+        shutil.rmtree(self.partial, ignore_errors=True)
+        return n_nodes
+
+    def run(self, overwrite: bool) -> ConvertResult:
+        t0 = time.perf_counter()
+        fp = self.fingerprint()
+        saved = _prepare_output(self.out, fp, overwrite)
+        resumed = saved is not None
+        self.state = saved or {"fingerprint": fp, "phase": "read"}
+        self.save_state()
+        phases = ["read", "count", "distribute", "build", "upper", "write"]
+        try:
+            timings = {}
+            for ph in phases[phases.index(self.state["phase"]) :]:
+                t = time.perf_counter()
+                if ph == "write":
+                    n_nodes = self.write()
+                else:
+                    getattr(self, ph)()
+                timings[ph] = round(time.perf_counter() - t, 3)
+        finally:
+            self.progress.close()
+        return ConvertResult(
+            self.out,
+            self.format,
+            self.sampler,
+            int(self.state["points"]),
+            n_nodes,
+            int(self.state.get("skipped", 0)),
+            time.perf_counter() - t0,
+            resumed,
+            timings,
+        )
+
+
+def convert(
+    inputs,
+    out,
+    *,
+    sampler: str = "grid",
+    memory_limit=None,
+    overwrite: bool = False,
+    format: str = "gigapoint",
+    max_leaf: int = DEFAULT_MAX_LEAF,
+    partition_points: int | None = None,
+    chunk_size: int | None = None,
+    progress: bool = False,
+    name: str | None = None,
+    encoding: str = "DEFAULT",
+) -> ConvertResult:
+    """Convert point cloud files (or an iterable of PointChunks) into an LOD octree directory ``out``.
+
+    ``sampler``: grid | poisson. ``format``: gigapoint (rendered directly) | potree (Potree 2.0,
+    ``encoding`` DEFAULT or BROTLI). ``memory_limit``: bytes or '4G'; bounds partition sizes. Only path
+    inputs can resume after an interruption; chunk iterables always start clean.
+    """
+    if sampler not in SAMPLERS:
+        raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
+    if format not in FORMATS:
+        raise ConvertError(f"--format: unknown format {format!r}; choose {' or '.join(FORMATS)}")
+    if not (isinstance(max_leaf, int) and max_leaf >= 100):
+        raise ConvertError(f"max_leaf must be an integer >= 100, got {max_leaf!r}")
+    if encoding not in ("DEFAULT", "BROTLI"):
+        raise ConvertError(f"encoding: unknown Potree encoding {encoding!r}; choose DEFAULT or BROTLI")
+    mem = parse_memory(memory_limit)
+    if out is None or str(out) == "":
+        raise ConvertError("convert: no output directory given (-o OUT)")
+    conv = _Converter(
+        inputs,
+        out,
+        sampler,
+        mem,
+        format,
+        max_leaf,
+        partition_points,
+        chunk_size,
+        RichProgress() if progress else NullProgress(),
+        name,
+        encoding,
+    )
+    return conv.run(overwrite)

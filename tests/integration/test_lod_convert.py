@@ -1,0 +1,195 @@
+"""`gigapoint convert` end to end: LAS input, interruption and resume, overwrite safety, bad input."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gigapoint.cli import main
+from gigapoint.core import demo_arrays
+from gigapoint.lod import OutputExistsError, convert, open_octree
+
+laspy = pytest.importorskip("laspy")
+
+SHARED = Path(__file__).resolve().parents[2] / ".." / "shared" / "data"
+
+
+def write_demo_las(path: Path, n: int, seed: int = 0) -> Path:
+    xyz, rgba, attrs = demo_arrays(n, seed)
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales = [0.001] * 3
+    header.offsets = [0.0, 0.0, 0.0]
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    rgb16 = rgba[:, :3].astype(np.uint16) * 257
+    las.red, las.green, las.blue = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
+    las.intensity = attrs["intensity"]
+    las.classification = attrs["classification"]
+    las.write(str(path))
+    return path
+
+
+@pytest.fixture(scope="module")
+def demo_las(tmp_path_factory):
+    return write_demo_las(tmp_path_factory.mktemp("las") / "demo.las", 150_000)
+
+
+OPTS = {"max_leaf": 3_000, "partition_points": 25_000, "chunk_size": 40_000}
+
+
+def _snapshot(path: Path) -> dict:
+    oc = open_octree(path)
+    d = {"keys": oc.keys, "nodes": oc.nodes}
+    for k, v in oc.arrays.items():
+        d[k] = np.asarray(v)
+    for k, v in oc.attributes.items():
+        d["attr." + k] = np.asarray(v)
+    return d
+
+
+def _assert_same(a: dict, b: dict):
+    assert a.keys() == b.keys()
+    for k, v in a.items():
+        np.testing.assert_array_equal(v, b[k], err_msg=k)
+
+
+@pytest.fixture(scope="module")
+def reference(demo_las, tmp_path_factory):
+    out = tmp_path_factory.mktemp("ref") / "oct"
+    res = convert([demo_las], out, **OPTS)
+    assert res.points == 150_000 and not res.resumed
+    return _snapshot(out)
+
+
+def test_las_conversion_counts_and_layout(reference, demo_las):
+    assert int(reference["nodes"]["count"].sum()) == 150_000
+    assert set(reference) >= {"low", "med", "high", "color", "rgba", "attr.intensity", "attr.classification"}
+    with laspy.open(str(demo_las)) as f:
+        las = f.read()
+    # every LAS classification value is there exactly as often as in the file
+    np.testing.assert_array_equal(
+        np.bincount(reference["attr.classification"], minlength=32), np.bincount(np.asarray(las.classification), minlength=32)
+    )
+
+
+def test_interrupted_conversion_resumes_to_the_same_result(demo_las, reference, tmp_path, monkeypatch):
+    out = tmp_path / "oct"
+    monkeypatch.setenv("GIGAPOINT_TEST_INTERRUPT", "raise:2")
+    with pytest.raises(KeyboardInterrupt):
+        convert([demo_las], out, **OPTS)
+    assert not (out / "octree.json").exists() and (out / ".partial" / "state.json").exists()
+    state = json.loads((out / ".partial" / "state.json").read_text())
+    assert state["phase"] == "build" and len(state["partitions"]) > 3
+    import gigapoint as gp
+    from gigapoint.errors import InputError
+
+    with pytest.raises(InputError, match="conversion not finished"):
+        gp.open(out)  # an unfinished output never opens as a cloud
+    monkeypatch.delenv("GIGAPOINT_TEST_INTERRUPT")
+    res = convert([demo_las], out, **OPTS)
+    assert res.resumed
+    assert not (out / ".partial").exists()
+    _assert_same(_snapshot(out), reference)
+
+
+def test_killed_conversion_resumes_via_cli(demo_las, tmp_path):
+    """SIGKILL in the middle of the build phase, then the same command again: it resumes."""
+    out = tmp_path / "oct"
+    code = "import sys; from gigapoint.cli import main; sys.exit(main(sys.argv[1:]))"
+    argv = [sys.executable, "-c", code, "convert", str(demo_las), "-o", str(out), "--memory-limit", "64M", "--max-leaf", "3000", "--quiet"]
+    env = dict(os.environ, GIGAPOINT_TEST_INTERRUPT="kill:1")
+    proc = subprocess.run(argv, env=env, capture_output=True, timeout=300, check=False)
+    assert proc.returncode == -9, proc.stderr.decode()[-2000:]
+    assert not (out / "octree.json").exists()
+    state = json.loads((out / ".partial" / "state.json").read_text())
+    assert state["phase"] == "build" and len(state["partitions"]) >= 2
+    env.pop("GIGAPOINT_TEST_INTERRUPT")
+    proc = subprocess.run(argv, env=env, capture_output=True, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr.decode()[-2000:]
+    assert "(resumed)" in proc.stdout.decode()
+    ref = tmp_path / "ref"
+    convert([demo_las], ref, max_leaf=3000)  # one partition, in one go
+    a, b = open_octree(out), open_octree(ref)
+    assert a.n_points == b.n_points == 150_000
+    np.testing.assert_array_equal(a.keys, b.keys)
+    np.testing.assert_array_equal(a.nodes["count"], b.nodes["count"])
+    np.testing.assert_array_equal(np.sort(a.arrays["rgba"]), np.sort(b.arrays["rgba"]))
+
+
+def test_changed_input_restarts_clean(demo_las, tmp_path, monkeypatch):
+    src = write_demo_las(tmp_path / "a.las", 60_000, seed=1)
+    out = tmp_path / "oct"
+    monkeypatch.setenv("GIGAPOINT_TEST_INTERRUPT", "raise:1")
+    with pytest.raises(KeyboardInterrupt):
+        convert([src], out, **OPTS)
+    monkeypatch.delenv("GIGAPOINT_TEST_INTERRUPT")
+    write_demo_las(src, 40_000, seed=2)  # the input changed meanwhile: no resume
+    res = convert([src], out, **OPTS)
+    assert not res.resumed and res.points == 40_000
+
+
+def test_refuses_to_overwrite(demo_las, tmp_path, capsys):
+    out = tmp_path / "oct"
+    assert main(["convert", str(demo_las), "-o", str(out), "--quiet", "--max-leaf", "5000"]) == 0
+    before = (out / "octree.json").stat().st_mtime_ns
+    capsys.readouterr()
+    assert main(["convert", str(demo_las), "-o", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "--overwrite" in err and err.count("\n") == 1
+    assert (out / "octree.json").stat().st_mtime_ns == before
+    with pytest.raises(OutputExistsError):
+        convert([demo_las], out)
+    assert main(["convert", str(demo_las), "-o", str(out), "--quiet", "--overwrite", "--sampler", "poisson"]) == 0
+    assert json.loads((out / "octree.json").read_text())["sampler"] == "poisson"
+    # a directory that is not ours is never written into, even with --overwrite
+    foreign = tmp_path / "photos"
+    foreign.mkdir()
+    (foreign / "holiday.jpg").write_bytes(b"x")
+    assert main(["convert", str(demo_las), "-o", str(foreign), "--quiet", "--overwrite"]) == 1
+    assert sorted(p.name for p in foreign.iterdir()) == ["holiday.jpg"]
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["{missing}"], "no such file"),
+        (["{garbage}"], "garbage.las"),
+        (["{las}", "--sampler", "random"], "--sampler"),
+        (["{las}", "--memory-limit", "lots"], "--memory-limit"),
+        (["{las}", "--memory-limit", "1M"], "--memory-limit"),
+        (["{las}", "--format", "ept"], "--format"),
+        (["{octree}"], "converted octree"),
+    ],
+)
+def test_bad_input_one_line_errors(demo_las, tmp_path, capsys, args, message):
+    garbage = tmp_path / "garbage.las"
+    garbage.write_bytes(b"LASF" + b"\x00" * 50)
+    (tmp_path / "oct").mkdir()
+    (tmp_path / "oct" / "octree.json").write_text("{}")
+    subst = {"missing": str(tmp_path / "missing.las"), "garbage": str(garbage), "las": str(demo_las), "octree": str(tmp_path / "oct")}
+    argv = ["convert", *[a.format(**subst) for a in args], "-o", str(tmp_path / "out"), "--quiet"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1 and err.startswith("error: "), err
+    assert not (tmp_path / "out" / "octree.json").exists()
+
+
+def test_autzen_laz_converts_and_renders(tmp_path):
+    autzen = SHARED / "autzen_trim.laz"
+    if not autzen.exists():
+        pytest.skip("shared sample not present")
+    out = tmp_path / "autzen"
+    assert main(["convert", str(autzen), "-o", str(out), "--quiet", "--format", "gigapoint"]) == 0
+    import gigapoint as gp
+
+    oc = gp.open(out)
+    assert oc.n_points == 110_000
+    png = tmp_path / "a.png"
+    assert main(["render", str(out), "-o", str(png), "--width", "320", "--height", "200", "--backend", "cpu"]) == 0
+    assert png.stat().st_size > 1000

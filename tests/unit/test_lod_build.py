@@ -1,0 +1,237 @@
+"""LOD octree building: keys, exactly-once storage, node bounds, samplers' spacing, color filtering."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from gigapoint.core import PointChunk, demo_arrays
+from gigapoint.lod import convert, open_octree
+from gigapoint.lod.keys import key_cube, key_name, key_of, level_of, name_key, point_codes
+
+
+def _mm_chunks(n, seed=0, chunk=40_000):
+    """Demo scene points on a millimetre grid (so positions compare exactly after quantization)."""
+    xyz, rgba, attrs = demo_arrays(n, seed)
+    xyz = np.round(xyz * 1000) / 1000
+    return (
+        [PointChunk(xyz[s : s + chunk], rgba[s : s + chunk], {k: v[s : s + chunk] for k, v in attrs.items()}) for s in range(0, n, chunk)],
+        xyz,
+        rgba,
+        attrs,
+    )
+
+
+def _all_points(oc):
+    xyz, rgba, inten = [], [], []
+    for i in range(len(oc.keys)):
+        p = oc.node_points(i)
+        xyz.append(p["xyz"])
+        rgba.append(p["rgba"])
+        inten.append(p.get("intensity", np.zeros(len(p["xyz"]), np.uint16)))
+    return np.concatenate(xyz), np.concatenate(rgba), np.concatenate(inten)
+
+
+def _rows(xyz_mm: np.ndarray, rgba_u32: np.ndarray, inten) -> np.ndarray:
+    ints = np.floor(xyz_mm * 1000 + 0.5).astype(np.int64)
+    rows = np.column_stack([ints, rgba_u32.astype(np.int64), np.asarray(inten, np.int64)])
+    return rows[np.lexsort(rows.T[::-1])]
+
+
+def _checksum(rows: np.ndarray) -> int:
+    """Order-independent: sum of a 64-bit mix of every row."""
+    h = np.zeros(len(rows), np.uint64)
+    with np.errstate(over="ignore"):
+        for c in range(rows.shape[1]):
+            h = (h ^ rows[:, c].astype(np.uint64)) * np.uint64(0x9E3779B97F4A7C15)
+            h ^= h >> np.uint64(29)
+        return int(h.sum(dtype=np.uint64))
+
+
+@pytest.fixture(scope="module")
+def grid_tree(tmp_path_factory):
+    chunks, xyz, rgba, attrs = _mm_chunks(120_000)
+    out = tmp_path_factory.mktemp("lod") / "grid"
+    res = convert(chunks, out, sampler="grid", max_leaf=2_000, partition_points=30_000)
+    return open_octree(out), res, xyz, rgba, attrs
+
+
+@pytest.fixture(scope="module")
+def poisson_tree(tmp_path_factory):
+    chunks, xyz, _, _ = _mm_chunks(60_000, seed=3)
+    out = tmp_path_factory.mktemp("lod") / "poisson"
+    convert(chunks, out, sampler="poisson", max_leaf=2_000, partition_points=20_000)
+    return open_octree(out), xyz
+
+
+def test_keys_round_trip_and_potree_child_order():
+    assert key_name(1) == "r" and name_key("r") == 1
+    for name in ("r0", "r7", "r0123", "r7654321"):
+        assert key_name(name_key(name)) == name
+    assert level_of(np.array([1, 8, 15, name_key("r0123")], np.uint64)).tolist() == [0, 1, 1, 4]
+    # child index = x*4 + y*2 + z, as in Potree
+    pts = np.array([[0.9, 0.1, 0.1], [0.1, 0.9, 0.1], [0.1, 0.1, 0.9], [0.9, 0.9, 0.9]])
+    codes = point_codes(pts, np.zeros(3), 1.0)
+    assert [key_name(int(k)) for k in key_of(codes, 1)] == ["r4", "r2", "r1", "r7"]
+    mins, edges = key_cube(np.array([name_key("r7"), name_key("r43")], np.uint64), np.zeros(3), 8.0)
+    assert mins.tolist() == [[4, 4, 4], [4, 2, 2]] and edges.tolist() == [4, 2]
+
+
+def test_every_point_stored_exactly_once(grid_tree):
+    oc, res, xyz, rgba, attrs = grid_tree
+    assert res.points == len(xyz) == oc.n_points == int(oc.nodes["count"].sum())
+    got = _rows(*_all_points(oc))
+    want = _rows(xyz, rgba.view(np.uint32).reshape(-1), attrs["intensity"])
+    assert _checksum(got) == _checksum(want)
+    np.testing.assert_array_equal(got, want)
+
+
+def test_hierarchy_is_consistent_and_leaves_small(grid_tree):
+    oc = grid_tree[0]
+    keys = oc.keys
+    assert keys[0] == 1 and np.all(np.diff(keys.astype(np.float64)) > 0)
+    parents = keys[1:] >> np.uint64(3)
+    assert np.isin(parents, keys).all()
+    leaf = (oc.children < 0).all(axis=1)
+    assert oc.nodes["count"][leaf].max() <= 2_000
+    assert (oc.nodes["level"] == level_of(keys)).all()
+    assert oc.levels.max() >= 3
+
+
+def test_node_bounds_contain_their_points(grid_tree):
+    oc = grid_tree[0]
+    cmin, cedge = key_cube(oc.keys, oc.meta["cube_min"], oc.meta["cube_edge"])
+    for i in range(len(oc.keys)):
+        p = oc.node_points(i)["xyz"]
+        if not len(p):
+            continue
+        rec = oc.nodes[i]
+        tol = 1e-6 * oc.meta["cube_edge"]
+        assert np.all(p >= rec["bbox_min"] - tol) and np.all(p <= rec["bbox_max"] + tol)
+        assert np.all(p >= cmin[i] - tol) and np.all(p <= cmin[i] + cedge[i] + tol), f"node {i} points outside its cube"
+
+
+def test_grid_sampler_one_point_per_cell(grid_tree):
+    oc = grid_tree[0]
+    cmin, cedge = key_cube(oc.keys, oc.meta["cube_min"], oc.meta["cube_edge"])
+    inner = np.flatnonzero((oc.children >= 0).any(axis=1))
+    assert len(inner) > 3
+    for i in inner:
+        p = oc.node_points(i)["xyz"]
+        cells = np.clip(np.floor((p - cmin[i]) / (cedge[i] / 128)).astype(np.int64), 0, 127)
+        ids = (cells[:, 0] * 128 + cells[:, 1]) * 128 + cells[:, 2]
+        # 30-bit quantization can move a point across a cell border only by ~1e-9 of the node
+        assert len(np.unique(ids)) >= len(ids) - 2, f"node {i}: {len(ids) - len(np.unique(ids))} shared cells"
+
+
+def test_poisson_sampler_respects_spacing(poisson_tree):
+    oc, xyz = poisson_tree
+    assert oc.n_points == len(xyz)
+    spacing = oc.meta["cube_edge"] / 128
+    inner = np.flatnonzero((oc.children >= 0).any(axis=1))
+    assert len(inner) > 1
+    checked = 0
+    for i in inner:
+        p = oc.node_points(i)["xyz"]
+        r = spacing / 2 ** int(oc.nodes["level"][i])
+        pairs = cKDTree(p).query_pairs(r * (1 - 1e-6))
+        assert not pairs, f"node {i} (level {oc.nodes['level'][i]}): {len(pairs)} pairs closer than {r}"
+        checked += len(p)
+    assert checked > 1000
+
+
+def test_grid_color_filtering_averages_the_cell():
+    """A root point's color is the mean of every input point in its 128³ root cell."""
+    rng = np.random.default_rng(5)
+    centres = np.array([[1.0, 1.0, 1.0], [60.0, 20.0, 5.0], [126.0, 126.0, 126.0]])
+    xyz = np.concatenate([c + rng.random((3000, 3)) * 0.9 for c in centres])  # each cluster inside one 1-unit cell
+    xyz = np.concatenate([xyz, [[0.0, 0.0, 0.0], [128.0, 128.0, 128.0]]])  # corners: cube edge 128 -> root cells of 1
+    rgba = rng.integers(0, 256, (len(xyz), 4), dtype=np.uint8)
+    rgba[:, 3] = 255
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        convert([PointChunk(xyz, rgba)], f"{d}/o", max_leaf=200)
+        oc = open_octree(f"{d}/o")
+        root = oc.node_points(0)
+        assert oc.levels.max() >= 2
+        cells = np.floor(xyz).clip(0, 127).astype(int)
+        for pos, color in zip(root["xyz"], root["color"].view(np.uint8).reshape(-1, 4)):
+            c = np.floor(pos).clip(0, 127).astype(int)
+            members = np.all(cells == c, axis=1)
+            expect = rgba[members, :3].astype(float).mean(axis=0)
+            assert np.all(np.abs(color[:3] - expect) <= 0.51 + 1e-9), (pos, color, expect, members.sum())
+        # and a leaf point keeps its own color
+        leaf = int(np.flatnonzero((oc.children < 0).all(axis=1) & (oc.nodes["count"] > 0))[0])
+        lp = oc.node_points(leaf)
+        np.testing.assert_array_equal(lp["color"], lp["rgba"])
+
+
+@pytest.mark.parametrize("sampler", ["grid", "poisson"])
+def test_result_does_not_depend_on_partitioning(tmp_path, sampler):
+    """Out-of-core partitions and the upper tree give exactly the in-memory octree."""
+    chunks = _mm_chunks(50_000, seed=11)[0]
+    convert(chunks, tmp_path / "one", sampler=sampler, max_leaf=1_500)
+    convert(chunks, tmp_path / "many", sampler=sampler, max_leaf=1_500, partition_points=4_000)
+    a, b = open_octree(tmp_path / "one"), open_octree(tmp_path / "many")
+    np.testing.assert_array_equal(a.keys, b.keys)
+    for f in ("count", "level", "bbox_min", "bbox_max"):
+        np.testing.assert_array_equal(a.nodes[f], b.nodes[f])
+    for i in range(len(a.keys)):  # the file layout (first) differs; every node's payload is the same
+        sa = slice(int(a.nodes["first"][i]), int(a.nodes["first"][i] + a.nodes["count"][i]))
+        sb = slice(int(b.nodes["first"][i]), int(b.nodes["first"][i] + b.nodes["count"][i]))
+        for k in ("low", "med", "high", "color", "rgba"):
+            np.testing.assert_array_equal(a.arrays[k][sa], b.arrays[k][sb])
+
+
+def test_degenerate_inputs(tmp_path):
+    same = np.tile([[5.0, 6.0, 7.0]], (30_000, 1))
+    convert([PointChunk(same)], tmp_path / "same", max_leaf=1_000)
+    oc = open_octree(tmp_path / "same")
+    assert oc.n_points == 30_000 and int(oc.nodes["count"].sum()) == 30_000
+    np.testing.assert_allclose(oc.node_points(len(oc.keys) - 1)["xyz"], same[:1].repeat(oc.nodes["count"][-1], 0))
+    convert([PointChunk(np.array([[1.0, 2.0, 3.0]]))], tmp_path / "one")
+    assert open_octree(tmp_path / "one").n_points == 1
+    flat = np.column_stack([np.arange(5000.0), np.zeros(5000), np.zeros(5000)])  # a line: two degenerate axes
+    convert([PointChunk(flat)], tmp_path / "flat", max_leaf=300)
+    assert open_octree(tmp_path / "flat").n_points == 5000
+
+
+def test_invalid_points_skipped_with_warning(tmp_path):
+    from gigapoint.errors import EmptyCloudError, GigapointWarning
+
+    xyz = np.array([[0.0, 0, 0], [np.nan, 0, 0], [1.0, 1, 1], [np.inf, 0, 0]])
+    with pytest.warns(GigapointWarning, match="skipped 2 invalid"):
+        res = convert([PointChunk(xyz)], tmp_path / "o")
+    assert res.points == 2 and res.skipped == 2
+    with pytest.raises(EmptyCloudError, match="no valid points"):
+        convert([PointChunk(np.full((3, 3), np.nan))], tmp_path / "o2")
+
+
+def test_dense_spot_is_split_below_the_count_grid(tmp_path, monkeypatch):
+    """A spot denser than the budget inside one 128³ count cell is re-partitioned at deeper levels."""
+    import json
+
+    rng = np.random.default_rng(2)
+    xyz = np.concatenate([rng.random((5_000, 3)) * 1000, 500 + rng.random((35_000, 3)) * 0.5])
+    xyz = np.round(xyz * 1000) / 1000
+    rgba = rng.integers(0, 256, (len(xyz), 4), dtype=np.uint8)
+    chunks = [PointChunk(xyz[s : s + 10_000], rgba[s : s + 10_000]) for s in range(0, len(xyz), 10_000)]
+    monkeypatch.setenv("GIGAPOINT_TEST_INTERRUPT", "raise:1")
+    with pytest.raises(KeyboardInterrupt):
+        convert(chunks, tmp_path / "many", max_leaf=1_000, partition_points=4_000)
+    state = json.loads((tmp_path / "many" / ".partial" / "state.json").read_text())
+    levels = [p[0] for p in state["partitions"]]
+    assert max(levels) > 7 and max(state["part_counts"]) <= 4_000
+    monkeypatch.delenv("GIGAPOINT_TEST_INTERRUPT")
+    convert(chunks, tmp_path / "many", max_leaf=1_000, partition_points=4_000)  # not resumable (chunks): starts clean
+    convert(chunks, tmp_path / "one", max_leaf=1_000)
+    a, b = open_octree(tmp_path / "one"), open_octree(tmp_path / "many")
+    np.testing.assert_array_equal(a.keys, b.keys)
+    np.testing.assert_array_equal(a.nodes["count"], b.nodes["count"])
+    assert (
+        _checksum(_rows(*_all_points(a)))
+        == _checksum(_rows(*_all_points(b)))
+        == _checksum(_rows(xyz, rgba.view(np.uint32).reshape(-1), np.zeros(len(xyz))))
+    )

@@ -1,0 +1,131 @@
+"""Potree 2.0: writer output re-read by the reader (DEFAULT and BROTLI), hand-made files, bad files."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from gigapoint.core import PointChunk, demo_arrays
+from gigapoint.errors import InputError
+from gigapoint.lod import convert, open_octree
+from gigapoint.lod.keys import name_key
+from gigapoint.lod.potree import HIERARCHY_DTYPE, decode_node
+
+pytest.importorskip("brotli")
+
+
+def _chunks(n=50_000):
+    xyz, rgba, attrs = demo_arrays(n, seed=7)
+    xyz = np.round(xyz * 1000) / 1000
+    return [PointChunk(xyz, rgba, attrs)]
+
+
+@pytest.fixture(scope="module")
+def converted(tmp_path_factory):
+    d = tmp_path_factory.mktemp("potree")
+    out = {}
+    for fmt, enc in (("gigapoint", "DEFAULT"), ("potree", "DEFAULT"), ("potree", "BROTLI")):
+        path = d / f"{fmt}_{enc}"
+        convert(_chunks(), path, format=fmt, encoding=enc, max_leaf=3_000, partition_points=20_000)
+        out[(fmt, enc)] = path
+    return out
+
+
+@pytest.mark.parametrize("encoding", ["DEFAULT", "BROTLI"])
+def test_potree_round_trip(converted, encoding):
+    ref = open_octree(converted[("gigapoint", "DEFAULT")])
+    pot = open_octree(converted[("potree", encoding)])
+    meta = json.loads((converted[("potree", encoding)] / "metadata.json").read_text())
+    assert meta["encoding"] == encoding and meta["points"] == ref.n_points
+    assert [a["name"] for a in meta["attributes"]] == ["position", "intensity", "classification", "rgb"]
+    np.testing.assert_array_equal(pot.keys, ref.keys)
+    np.testing.assert_array_equal(pot.nodes["count"], ref.nodes["count"])
+    for i in range(len(ref.keys)):
+        a, b = ref.node_points(i), pot.node_points(i)
+        if not len(a["xyz"]):
+            continue
+        order_a = np.lexsort(np.round(a["xyz"] * 1000).T)
+        order_b = np.lexsort(np.round(b["xyz"] * 1000).T)  # BROTLI permutes points into Morton order
+        np.testing.assert_allclose(b["xyz"][order_b], a["xyz"][order_a], atol=1e-6)
+        np.testing.assert_array_equal(b["rgba"][order_b], a["rgba"][order_a])
+        np.testing.assert_array_equal(b["intensity"][order_b], a["intensity"][order_a])
+        np.testing.assert_array_equal(b["classification"][order_b], a["classification"][order_a])
+
+
+def test_potree_hierarchy_breadth_first(converted):
+    path = converted[("potree", "DEFAULT")]
+    meta = json.loads((path / "metadata.json").read_text())
+    recs = np.frombuffer((path / "hierarchy.bin").read_bytes(), HIERARCHY_DTYPE)
+    assert meta["hierarchy"]["firstChunkSize"] == len(recs) * 22
+    # replay the viewer: children created in child-index order, records consumed in sequence
+    names = ["r"]
+    for i, r in enumerate(recs):
+        names += [names[i] + str(c) for c in range(8) if r["mask"] >> c & 1]
+        assert (r["type"] == 1) == (r["mask"] == 0)
+    assert len(names) == len(recs)
+    assert sum(int(r["size"]) for r in recs) == (path / "octree.bin").stat().st_size
+    assert meta["boundingBox"]["max"][0] - meta["boundingBox"]["min"][0] == pytest.approx(
+        meta["boundingBox"]["max"][2] - meta["boundingBox"]["min"][2]
+    )
+
+
+def test_brotli_decoder_hand_made_vector():
+    """One point X=1, Y=2, Z=4 (+ 65536 on X), rgb (1, 2, 4): Morton bits placed by hand."""
+    import brotli
+
+    lower = (1 << 0) | (1 << (3 * 1 + 1)) | (1 << (3 * 2 + 2))
+    upper = 1 << 0  # X bit 16
+    rgb = (1 << 0) | (1 << 4) | (1 << 8)
+    raw = np.array([upper, lower], "<u8").tobytes() + np.array([7], "<u2").tobytes() + bytes([2]) + np.array([rgb], "<u8").tobytes()
+    attrs = [
+        {"name": "position", "type": "int32", "numElements": 3},
+        {"name": "intensity", "type": "uint16", "numElements": 1},
+        {"name": "classification", "type": "uint8", "numElements": 1},
+        {"name": "rgb", "type": "uint16", "numElements": 3},
+    ]
+    d = decode_node(brotli.compress(raw), 1, attrs, "BROTLI")
+    assert d["position"].tolist() == [[65537, 2, 4]]
+    assert d["rgb"].tolist() == [[1, 2, 4]] and d["intensity"].tolist() == [7] and d["classification"].tolist() == [2]
+
+
+def _write_potree(path, hierarchy: bytes, first: int, nodes_bin: bytes):
+    path.mkdir()
+    meta = {
+        "version": "2.0", "name": "hand", "points": 3, "hierarchy": {"firstChunkSize": first, "stepSize": 4, "depth": 1},
+        "offset": [10.0, 20.0, 30.0], "scale": [0.5, 0.5, 0.5], "spacing": 1.0,
+        "boundingBox": {"min": [10.0, 20.0, 30.0], "max": [18.0, 28.0, 38.0]}, "encoding": "DEFAULT",
+        "attributes": [{"name": "position", "type": "int32", "numElements": 3, "size": 12, "elementSize": 4}],
+    }  # fmt: skip
+    (path / "metadata.json").write_text(json.dumps(meta))
+    (path / "hierarchy.bin").write_bytes(hierarchy)
+    (path / "octree.bin").write_bytes(nodes_bin)
+
+
+def test_reader_follows_proxy_chunks(tmp_path):
+    pts = np.array([[0, 0, 0], [2, 2, 2], [12, 4, 4]], "<i4")  # root: 2 points; r4 (x high half): 1 point
+    octree = pts.tobytes()
+    root_chunk = np.array([(0, 1 << 4, 2, 0, 24), (2, 0, 1, 44, 22)], HIERARCHY_DTYPE)  # r4 is a proxy -> chunk at 44
+    sub_chunk = np.array([(1, 0, 1, 24, 12)], HIERARCHY_DTYPE)
+    _write_potree(tmp_path / "p", root_chunk.tobytes() + sub_chunk.tobytes(), 44, octree)
+    oc = open_octree(tmp_path / "p")
+    assert oc.keys.tolist() == [1, name_key("r4")]
+    assert oc.nodes["count"].tolist() == [2, 1]
+    np.testing.assert_allclose(oc.node_points(1)["xyz"], [[16.0, 22.0, 32.0]], atol=1e-6)
+    np.testing.assert_allclose(oc.node_points(0)["xyz"], [[10, 20, 30], [11, 21, 31]], atol=1e-6)
+
+
+def test_reader_bad_files_one_line_errors(tmp_path):
+    _write_potree(tmp_path / "bad", b"\x00" * 21, 21, b"")
+    with pytest.raises(InputError, match="hierarchy") as e:
+        open_octree(tmp_path / "bad")
+    assert "\n" not in str(e.value)
+    (tmp_path / "bad2").mkdir()
+    (tmp_path / "bad2" / "metadata.json").write_text("{not json")
+    with pytest.raises(InputError, match="metadata.json"):
+        open_octree(tmp_path / "bad2")
+    short = np.array([(1, 0, 5, 0, 60)], HIERARCHY_DTYPE)  # 5 points claimed, 60 bytes, file empty
+    _write_potree(tmp_path / "bad3", short.tobytes(), 22, b"\x00" * 12)
+    with pytest.raises(InputError, match="cannot decode node r"):
+        open_octree(tmp_path / "bad3")
