@@ -1,9 +1,9 @@
 """Conversion throughput (points/s) and peak memory per sampler, demo scene as LAS input.
 
-    .venv/bin/python benchmarks/bench_convert.py --points 2000000 [--samplers grid,poisson] [--memory-limit 2G]
+    .venv/bin/python benchmarks/bench_convert.py --points 2000000 [--samplers grid,poisson] [--memory-limit 2G] [--input laz]
 
 Each conversion runs in its own child process; its peak memory is the child's maxrss
-(os.wait4). A tiny conversion first fills numba's cache so JIT compile time is excluded.
+(os.wait4). ``--input laz`` converts the same points from a LAZ copy (made once with laspy). A tiny conversion first fills numba's cache so JIT compile time is excluded.
 Reference (PotreeConverter 2 on the project machine, 20 M points LAS): 1.7 M points/s
 poisson, 2.5 M points/s random.
 """
@@ -51,6 +51,16 @@ def write_las(path: Path, n: int) -> None:
             writer.write_points(rec)
 
 
+def write_laz(las: Path, laz: Path) -> None:
+    import laspy
+
+    tmp = laz.with_name(laz.name + ".tmp")
+    with laspy.open(str(las)) as reader, laspy.open(str(tmp), mode="w", header=reader.header, do_compress=True) as writer:
+        for pts in reader.chunk_iterator(1_000_000):
+            writer.write_points(pts)
+    tmp.rename(laz)
+
+
 def run_child(args: dict) -> tuple[dict, float, int]:
     t = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-c", CHILD, json.dumps(args)], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
@@ -70,6 +80,7 @@ def main() -> None:
     ap.add_argument("--samplers", default="grid,poisson")
     ap.add_argument("--memory-limit", default=None)
     ap.add_argument("--format", default="gigapoint")
+    ap.add_argument("--input", choices=("las", "laz"), default="las", help="input file format (LAZ: the same points compressed)")
     ap.add_argument("--workdir", default=None, help="keep the LAS file and outputs here")
     ap.add_argument("--repeat", type=int, default=1, help="runs per sampler; the fastest is reported (shared machines are noisy)")
     a = ap.parse_args()
@@ -81,6 +92,14 @@ def main() -> None:
     warm = work / "warm.las"
     if not warm.exists():
         write_las(warm, 20_000)
+    if a.input == "laz":
+        las = las.with_suffix(".laz")
+        if not las.exists():
+            write_laz(las.with_suffix(".las"), las)
+        warm_laz = warm.with_suffix(".laz")
+        if not warm_laz.exists():
+            write_laz(warm, warm_laz)
+        warm = warm_laz
     results = []
     try:
         for sampler in a.samplers.split(","):
@@ -99,6 +118,7 @@ def main() -> None:
                     best = run
             info, wall, rss = best
             row = {
+                "input": a.input,
                 "sampler": sampler,
                 "points": info["points"],
                 "nodes": info["nodes"],

@@ -14,6 +14,7 @@ from ..errors import GigapointError
 from ..render import VIEWS, Camera, RenderSettings
 from . import app
 from .output import check_output, save_array, save_image
+from .quality_opts import prepare_cloud, quality_settings
 
 _CAMERA_KEYS = {"eye": 3, "target": 3, "up": 3, "yaw": 1, "pitch": 1, "distance": 1, "fov": 1}
 
@@ -95,15 +96,45 @@ def render(
     index_out: Optional[Path] = typer.Option(None, help="Also write the point index buffer (.npy, int64, -1 = empty)."),
     stats: bool = typer.Option(False, "--stats", help="Print render statistics."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace existing output files."),
+    color_mode: str = typer.Option("rgb", "--color-mode", help="rgb, intensity, classification, elevation, return_number, point_source_id, batch, level, normal."),
+    colormap: str = typer.Option("viridis", help="Elevation colormap: viridis, turbo, terrain, inferno, gray."),
+    elevation_range: Optional[str] = typer.Option(None, help="'low,high' elevations mapped onto the colormap (default: the cloud's z extent)."),
+    intensity_range: Optional[str] = typer.Option(None, help="'low,high' intensity contrast range (default: 2nd..98th percentile)."),
+    edl: bool = typer.Option(False, "--edl", help="Eye-dome lighting."),
+    edl_strength: float = typer.Option(1.0, help="Eye-dome lighting strength."),
+    edl_radius: float = typer.Option(1.4, help="Eye-dome lighting radius in pixels."),
+    fill_holes: int = typer.Option(0, help="Depth-aware hole filling: 0 off, 1/2/3 = 3x3/5x5/7x7 window."),
+    foveated: bool = typer.Option(False, "--foveated", help="Hole filling window grows from 3x3 in the centre to the full size at the border."),
+    hqs: bool = typer.Option(False, "--hqs", help="High-quality shading: blend the colors of all points near the front."),
+    point_size: int = typer.Option(1, help="Point size in pixels."),
+    point_shape: str = typer.Option("square", help="square or round."),
+    point_world_size: Optional[float] = typer.Option(None, help="Attenuated points: size in world units, at most --point-size pixels (16 unless given)."),
+    splat_softness: float = typer.Option(0.0, help="Soft splats (Kraft's falloff exponent, e.g. 2) blended by --hqs; 0 = hard."),
+    supersample: int = typer.Option(1, help="Anti-aliasing: render 1, 2 or 4 times larger and filter down."),
+    stereo: str = typer.Option("none", help="none, side-by-side or anaglyph."),
+    ipd: float = typer.Option(0.065, help="Stereo eye distance in world units."),
+    lighting: bool = typer.Option(False, "--lighting", help="Blinn-Phong headlight (estimates normals when the cloud has none)."),
+    turntable: Optional[int] = typer.Option(None, help="Write a video of N frames orbiting the cloud instead of an image (-o out.mp4)."),
+    fps: float = typer.Option(30.0, help="Frames per second of --turntable videos."),
 ) -> None:
-    """Render point clouds to an image."""
+    """Render point clouds to an image (or a turntable video)."""
     import gigapoint as gp
 
-    check_output(output, overwrite)
+    if turntable is not None:
+        from ..render.video import VIDEO_SUFFIXES
+
+        check_output(output, overwrite, suffixes=VIDEO_SUFFIXES)
+    else:
+        check_output(output, overwrite)
     for extra in (depth_out, index_out):
         if extra is not None:
             check_output(extra, overwrite, suffixes={".npy"})
     settings = RenderSettings(background=background, backend=backend, threads=threads)
+    settings = settings.replace(**quality_settings(
+        color_mode=color_mode, colormap=colormap, elevation_range=elevation_range, intensity_range=intensity_range, edl=edl, edl_strength=edl_strength,
+        edl_radius=edl_radius, fill_holes=fill_holes, foveated=foveated, hqs=hqs, point_size=point_size, point_shape=point_shape,
+        point_world_size=point_world_size, splat_softness=splat_softness, supersample=supersample, stereo=stereo, ipd=ipd, lighting=lighting,
+    ))  # fmt: skip
     if projection not in ("perspective", "orthographic"):
         raise GigapointError(f"--projection must be perspective or orthographic, got {projection!r}")
     if view not in VIEWS:
@@ -111,6 +142,13 @@ def render(
     # validate the image size before reading anything
     Camera.look_at((0, 0, 1), (0, 0, 0), up=(0, 1, 0), width=width, height=height, fov=fov)
     cloud = gp.open(*inputs)
+    prepare_cloud(cloud, settings)
+    if turntable is not None:
+        from ..render.video import render_turntable
+
+        render_turntable(cloud, turntable, output, settings, width=width, height=height, fov=fov, fps=fps)
+        typer.echo(f"wrote {output} ({turntable} frames, {width}x{height}, {cloud.n_points:,} points)")
+        return
     cam = make_camera(cloud, width, height, view, camera, projection, fov)
     frame = gp.render_frame(cloud, cam, settings)
     save_image(frame.image, output)

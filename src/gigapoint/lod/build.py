@@ -153,6 +153,22 @@ def _scatter_owned(ownlevel, starts, ends, levels, offsets, perm):
                 p += 1
 
 
+def sort_codes(codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(sorted codes, stable order): ``morton_order`` plus the sorted keys the radix sort already
+    holds, which saves gathering the codes again."""
+    from ..core.morton import _sort_codes, morton_order
+
+    codes = np.ascontiguousarray(codes, dtype=np.uint64)
+    if len(codes) == 0:
+        return codes, morton_order(codes)
+    previous = numba.get_parallel_chunksize()
+    numba.set_parallel_chunksize(8)  # as morton_order: buckets vary wildly in size
+    try:
+        return _sort_codes(codes, numba.get_num_threads(), np.uint32 if len(codes) < 2**32 else np.int64)
+    finally:
+        numba.set_parallel_chunksize(previous)
+
+
 class Tree:
     """Nodes over sorted codes: keys, levels, runs and whether each is a leaf (parallel arrays)."""
 
@@ -308,15 +324,22 @@ def valid_bounds(xyz: np.ndarray, limit: float) -> tuple[np.ndarray, np.ndarray,
 _UINT_OF_SIZE = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}
 
 
-def take(src: np.ndarray, idx: np.ndarray) -> np.ndarray:
-    """src[idx] along the first axis, in parallel (numpy's fancy indexing is single-threaded).
+def take(src: np.ndarray, idx: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """src[idx] along the first axis, in parallel (numpy's fancy indexing is single-threaded),
+    into ``out`` when given (e.g. a slice of a memory-mapped output file).
 
     Values are moved as same-width unsigned integers, so the kernels compile for 4 types only.
     """
     src = np.ascontiguousarray(src)
-    out = np.empty((len(idx),) + src.shape[1:], src.dtype)
+    if out is None:
+        out = np.empty((len(idx),) + src.shape[1:], src.dtype)
+    else:
+        out = np.asarray(out)
     u = _UINT_OF_SIZE.get(src.dtype.itemsize)
-    idx = np.ascontiguousarray(idx, np.int64)
+    idx = np.asarray(idx)
+    if idx.dtype not in (np.int64, np.uint32, np.int32):  # sort orders are u32: gathered as they are, not widened
+        idx = idx.astype(np.int64)
+    idx = np.ascontiguousarray(idx)
     if u is not None and src.ndim == 1:
         _take1(src.view(u), idx, out.view(u))
     elif u is not None and src.ndim == 2:
@@ -336,15 +359,29 @@ def _filtered(rgba8, wsum, wcount, idx, out8):
         out8[i, 3] = rgba8[k, 3]
 
 
-def filtered_colors(rgba_u32: np.ndarray, wsum: np.ndarray, wcount: np.ndarray, idx: np.ndarray | None = None) -> np.ndarray:
-    """u32 RGBA of points ``idx``: the average color each stands for (alpha kept)."""
+def filtered_colors(
+    rgba_u32: np.ndarray, wsum: np.ndarray, wcount: np.ndarray, idx: np.ndarray | None = None, out: np.ndarray | None = None
+) -> np.ndarray:
+    """u32 RGBA of points ``idx``: the average color each stands for (alpha kept); into ``out`` when given."""
     if idx is None:
         idx = np.arange(len(rgba_u32), dtype=np.int64)
-    out = np.empty((len(idx), 4), np.uint8)
-    _filtered(np.ascontiguousarray(rgba_u32).view(np.uint8).reshape(-1, 4), wsum, wcount, idx, out)
-    return out.view(np.uint32).reshape(-1)
+    out = np.empty(len(idx), np.uint32) if out is None else np.asarray(out)
+    _filtered(np.ascontiguousarray(rgba_u32).view(np.uint8).reshape(-1, 4), wsum, wcount, idx, out.view(np.uint8).reshape(-1, 4))
+    return out
+
+
+@njit(parallel=True, cache=True)
+def _color_sums(rgba8, wsum, wcount):
+    for i in prange(rgba8.shape[0]):
+        for c in range(3):
+            wsum[i, c] = rgba8[i, c]
+        wcount[i] = 1.0
 
 
 def color_sums(rgba_u32: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    rgb = rgba_u32.view(np.uint8).reshape(-1, 4)[:, :3].astype(np.float64)
-    return rgb, np.ones(len(rgba_u32), np.float64)
+    """(float64 (n, 3) RGB sums, float64 counts) of single points: their own color, weight 1."""
+    n = len(rgba_u32)
+    wsum = np.empty((n, 3), np.float64)
+    wcount = np.empty(n, np.float64)
+    _color_sums(np.ascontiguousarray(rgba_u32).view(np.uint8).reshape(-1, 4), wsum, wcount)
+    return wsum, wcount

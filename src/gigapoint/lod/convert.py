@@ -44,6 +44,7 @@ from .build import (
     init_ownlevel,
     owned_order,
     sample_tree,
+    sort_codes,
     split_tree,
     take,
     upper_tree,
@@ -55,6 +56,10 @@ from .progress import NullProgress, RichProgress
 STATE_VERSION = 1
 COUNT_LEVEL = 7  # the count grid: 128³ cells of the cube
 BYTES_PER_POINT_BUILD = 220  # peak working set per point of a partition build
+# Partitions above this gain nothing (every kernel is already parallel inside one) and lose a lot:
+# 20 M points on the 2-core project machine convert at 1.2 M points/s as one partition, 2.5 M
+# points/s in 4 M-point ones (page faults on a larger working set, cache misses in the sort).
+MAX_PARTITION_POINTS = 4_000_000
 DEFAULT_MAX_LEAF = 20_000
 FORMATS = ("gigapoint", "potree")
 _OWN_FILES = (
@@ -216,6 +221,81 @@ def _rss_bytes() -> int:
         return 0
 
 
+class _KeepFreedMemory:
+    """Within the conversion, glibc keeps freed memory for reuse instead of handing every large
+    array back to the kernel (mmap/munmap): the build allocates and drops many arrays of the
+    partition's size, and faulting fresh zeroed pages in cost about a third of the run. On leaving,
+    the defaults come back and the kept memory is returned (malloc_trim)."""
+
+    _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD, _M_MMAP_MAX = -1, -3, -4
+
+    def __enter__(self):
+        self.libc = None
+        try:
+            import ctypes
+
+            libc = ctypes.CDLL(None)
+            libc.mallopt, libc.malloc_trim  # noqa: B018 - glibc only: AttributeError elsewhere
+        except (OSError, AttributeError):
+            return self
+        if libc.mallopt(self._M_MMAP_MAX, 0) and libc.mallopt(self._M_TRIM_THRESHOLD, 2**31 - 1):
+            self.libc = libc
+        return self
+
+    def __exit__(self, *exc):
+        if self.libc is not None:
+            self.libc.mallopt(self._M_MMAP_MAX, 65536)  # glibc's defaults
+            self.libc.mallopt(self._M_TRIM_THRESHOLD, 128 * 1024)
+            self.libc.mallopt(self._M_MMAP_THRESHOLD, 128 * 1024)
+            self.libc.malloc_trim(0)
+        return False
+
+
+def _prefetch(chunks):
+    """The chunks of ``chunks``, the next one decoded in a thread while the caller spills this one
+    (LAS/LAZ decoding and file writes release the GIL): one chunk of extra memory."""
+    import queue
+    import threading
+
+    q: queue.Queue = queue.Queue(maxsize=1)
+    stop = threading.Event()
+    done = object()
+
+    def produce():
+        try:
+            for c in chunks:
+                while not stop.is_set():
+                    try:
+                        q.put((c, None), timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            q.put((done, None))
+        except BaseException as exc:  # noqa: BLE001 - handed to the consumer, raised there
+            q.put((None, exc))
+
+    t = threading.Thread(target=produce, name="gigapoint-read", daemon=True)
+    t.start()
+    try:
+        while True:
+            c, exc = q.get()
+            if exc is not None:
+                raise exc
+            if c is done:
+                return
+            yield c
+    finally:
+        stop.set()
+        while t.is_alive():
+            try:
+                q.get(timeout=0.1)
+            except queue.Empty:
+                pass
+        t.join()
+
+
 def _interrupt_hook(done_partitions: int) -> None:
     """Test hook: GIGAPOINT_TEST_INTERRUPT=raise:N or kill:N stops after N built partitions."""
     spec = os.environ.get("GIGAPOINT_TEST_INTERRUPT")
@@ -265,8 +345,8 @@ def _clear_output(out: Path) -> None:
     shutil.rmtree(out / ".partial", ignore_errors=True)
     for f in _OWN_FILES:
         (out / f).unlink(missing_ok=True)
-    for p in [*out.glob("attr.*.npy"), *out.glob("*.tmp"), *out.glob("*.tmp.npy")]:
-        p.unlink()
+    for p in {*out.glob("attr.*.npy"), *out.glob("*.tmp"), *out.glob("*.tmp.npy")}:
+        p.unlink(missing_ok=True)
 
 
 def _prepare_output(out: Path, fingerprint: dict, overwrite: bool) -> dict | None:
@@ -309,7 +389,7 @@ class _Converter:
         self.max_leaf = max_leaf
         self.mem = memory_limit
         usable = max(memory_limit - _rss_bytes() - (48 << 20), memory_limit // 4)  # what the process already holds is not ours
-        self.partition_points = partition_points or max(50_000, usable // BYTES_PER_POINT_BUILD)
+        self.partition_points = partition_points or max(50_000, min(MAX_PARTITION_POINTS, usable // BYTES_PER_POINT_BUILD))
         self.partition_override = partition_points  # None: derived from the memory limit (and this process's size)
         self.chunk_size = chunk_size or int(min(2_000_000, max(50_000, memory_limit // 600)))
         self.progress = progress
@@ -317,6 +397,7 @@ class _Converter:
         self.paths = _input_paths(inputs)
         self.name = name or (self.paths[0].stem if self.paths else "cloud")
         self.state: dict = {}
+        self._outs: dict | None = None
 
     # -- state
     def fingerprint(self) -> dict | None:
@@ -344,7 +425,7 @@ class _Converter:
             yield from self.inputs
         else:
             for p in self.paths:
-                yield from _read_chunks(p, self.chunk_size)
+                yield from _prefetch(_read_chunks(p, self.chunk_size))
 
     def read(self) -> None:
         st = self.state
@@ -442,7 +523,7 @@ class _Converter:
         for p in np.flatnonzero(per):
             for key, path in self._part_files(parts[p][0], parts[p][1]).items():
                 with open(path, "ab") as f:
-                    f.write(sorted_data[key][cuts[p] : cuts[p + 1]].tobytes())
+                    sorted_data[key][cuts[p] : cuts[p + 1]].tofile(f)
             counts[p] += int(per[p])
 
     def distribute(self) -> None:
@@ -578,9 +659,7 @@ class _Converter:
 
     def _build_subtree(self, data: dict, root_key: int, origin, edge, dest: Path) -> None:
         xyz = data.pop("xyz")
-        codes = point_codes(xyz, origin, edge)
-        order = morton_order(codes)
-        codes = take(codes, order)
+        codes, order = sort_codes(point_codes(xyz, origin, edge))
         rgba_sorted = take(data["rgba"], order)
         # the grid sampler needs only codes; Poisson measures distances on sorted positions
         xyz_sorted = take(xyz, order) if self.sampler == "poisson" else np.zeros((1, 3))
@@ -603,19 +682,96 @@ class _Converter:
             _save_npy(dest / f"carry.{k}.npy", take(v, src[:n0]))
         np.save(dest / "root.npy", np.array([root_key, 0 if tree.leaf[0] else 1], np.uint64))  # key, has children
         # final: every node below the root
-        color = filtered_colors(rgba_sorted, wsum, wcount, rest)
-        src = src[n0:]
-        self._save_nodes(dest, tree.keys[1:], counts[1:], ~tree.leaf[1:], take(xyz, src), color, {k: take(v, src) for k, v in data.items()})
+        del codes
+        self._save_nodes(dest, tree.keys[1:], counts[1:], ~tree.leaf[1:], xyz, data, src[n0:], (rgba_sorted, wsum, wcount, rest))
 
-    @staticmethod
-    def _save_nodes(dest: Path, keys, counts, inner, xyz, color, data) -> None:
+    def _outputs(self) -> dict:
+        """gigapoint format: the final point arrays (OUT/<name>.tmp.npy), which the build and upper
+        phases fill in place; the write phase only renames them. {name: (path, dtype, data offset)}."""
+        if self._outs is None:
+            total = int(self.state["points"])
+            dts = {k: np.dtype(np.uint32) for k in ("low", "med", "high", "color", "rgba")}
+            dts.update({f"attr.{a}": np.dtype(d) for a, d in self.state["attributes"].items()})
+            self._outs = {}
+            for k, dt in dts.items():
+                path = self.out / f"{k}.tmp.npy"
+                arr = np.load(path, mmap_mode="r") if path.exists() else None
+                if arr is None or arr.shape != (total,) or arr.dtype != dt:
+                    arr = np.lib.format.open_memmap(path, mode="w+", dtype=dt, shape=(total,))
+                self._outs[k] = (path, dt, arr.offset)
+                del arr
+        return self._outs
+
+    def _output_slices(self, start: int, n: int) -> dict:
+        """Memory maps of points start..start+n of every output array. Only this node set's pages
+        are mapped, and only while it is written: whole-file maps would count every written page
+        of the output in the process's resident memory."""
+        return {
+            k: np.memmap(path, dtype=dt, mode="r+", offset=off + start * dt.itemsize, shape=(n,))
+            for k, (path, dt, off) in self._outputs().items()
+        }
+
+    def _close_outputs(self) -> None:
+        """Output arrays on disk (fsync) before the write phase renames them and writes the metadata."""
+        names = ["low", "med", "high", "color", "rgba", *(f"attr.{a}" for a in self.state.get("attributes", {}))]
+        for path in (self.out / f"{k}.tmp.npy" for k in names):
+            if not path.exists():  # a write phase resumed after its renames
+                continue
+            fd = os.open(path, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+        self._outs = None
+
+    def _next_offset(self) -> int:
+        """Where the next node set's points go in the output arrays: after every finished one."""
+        built = self.partial / "built"
+        ends = [int(np.load(p)[1]) for p in built.glob("*/span.npy") if not p.parent.name.endswith(".tmp")]
+        return max(ends, default=0)
+
+    def _save_nodes(self, dest: Path, keys, counts, inner, xyz, data, idx, colors) -> None:
+        """One node set: nodes ``keys`` holding ``counts`` points each, in order: the points
+        ``xyz[idx]``, ``data[k][idx]``, with colors ``filtered_colors(*colors)``.
+
+        gigapoint format: quantized (node records with tight bboxes, the three precision words)
+        and written straight into the output arrays at the next free offset (``span.npy``), so
+        every array is gathered and written once. Potree: float64 positions, in ``dest``."""
         keep = (counts > 0) | inner  # empty leaves are dropped; empty inner nodes keep the hierarchy whole
-        _save_npy(dest / "keys.npy", np.asarray(keys, np.uint64)[keep])
-        _save_npy(dest / "counts.npy", np.asarray(counts, np.int64)[keep])
-        _save_npy(dest / "xyz.npy", xyz)
-        _save_npy(dest / "color.npy", color)
+        keys = np.asarray(keys, np.uint64)[keep]
+        counts = np.asarray(counts, np.int64)[keep]
+        _save_npy(dest / "keys.npy", keys)
+        _save_npy(dest / "counts.npy", counts)
+        n = len(idx)
+        if self.format != "gigapoint":
+            _save_npy(dest / "xyz.npy", take(xyz, idx))
+            _save_npy(dest / "color.npy", filtered_colors(*colors))
+            for k, v in data.items():
+                _save_npy(dest / f"{k}.npy", take(v, idx))
+            return
+        from ..core.layout import BATCH_DTYPE
+        from ..core.quantize import _quantize_batches
+        from .keys import level_of
+
+        off = self._next_offset()
+        outs = self._output_slices(off, n) if n else {k: np.empty(0, dt) for k, (_, dt, _) in self._outputs().items()}
+        sl = slice(0, n)
+        nodes = np.zeros(len(keys), BATCH_DTYPE)
+        first = np.cumsum(counts) - counts
+        nodes["count"] = counts
+        nodes["level"] = level_of(keys)
+        bmin = np.empty((len(keys), 3))
+        bmax = np.empty((len(keys), 3))
+        low, med, high = (np.asarray(outs[k][sl]) for k in ("low", "med", "high"))
+        _quantize_batches(xyz, np.ascontiguousarray(idx), first, counts, bmin, bmax, low, med, high)
+        nodes["bbox_min"], nodes["bbox_max"] = bmin, bmax
+        nodes["first"] = (first + off).astype(np.uint64)
+        filtered_colors(*colors, out=outs["color"][sl])
         for k, v in data.items():
-            _save_npy(dest / f"{k}.npy", v)
+            take(v, idx, out=outs[k][sl])
+        del outs, low, med, high  # unmapped; a killed process's writes stay in the page cache
+        _save_npy(dest / "nodes.npy", nodes)
+        np.save(dest / "span.npy", np.array([off, off + n], np.int64))
 
     # -- phase 5
     def upper(self) -> None:
@@ -651,9 +807,10 @@ class _Converter:
             tree.keys,
             counts,
             inner,
-            take(xyz, perm),
-            filtered_colors(cat["rgba"], wsum, wcount, perm),
-            {k: take(v, perm) for k, v in cat.items()},
+            xyz,
+            cat,
+            perm,
+            (cat["rgba"], wsum, wcount, perm),
         )
         os.replace(tmp, target)
         st["phase"] = "write"
@@ -676,6 +833,7 @@ class _Converter:
 
             n_nodes = write_potree(self.out, self.sources(), st, self.name, self.progress, self.encoding)
         else:
+            self._close_outputs()
             n_nodes = write_gigapoint(self.out, self.sources(), st, self.name, self.sampler, self.max_leaf, self.progress)
         shutil.rmtree(self.partial, ignore_errors=True)
         return n_nodes
@@ -757,4 +915,5 @@ def convert(
         name,
         encoding,
     )
-    return conv.run(overwrite)
+    with _KeepFreedMemory():
+        return conv.run(overwrite)

@@ -41,38 +41,54 @@ _ARRAYS = ("low", "med", "high", "color", "rgba")
 
 
 def write_gigapoint(out: Path, sources: list[Path], st: dict, name: str, sampler: str, max_leaf: int, progress) -> int:
-    """Assemble built node sets (dirs with keys/counts/xyz/color/rgba/attr.*) into ``out``."""
+    """Assemble built node sets into ``out``.
+
+    A node set is a dir with keys.npy and either nodes.npy + span.npy (its points already written
+    into ``out/<array>.tmp.npy`` by the converter: only the node records are gathered here) or
+    counts/xyz/color/rgba/attr.* (quantized and copied here).
+    """
     attrs = st["attributes"]
-    total = sum(int(np.load(s / "xyz.npy", mmap_mode="r").shape[0]) for s in sources)
     origin, edge = np.array(st["origin"]), float(st["edge"])
     dtypes = {"low": np.uint32, "med": np.uint32, "high": np.uint32, "color": np.uint32, "rgba": np.uint32}
     dtypes.update({f"attr.{a}": np.dtype(d) for a, d in attrs.items()})
     tmp_paths = {k: out / f"{k}.tmp.npy" for k in dtypes}
-    outs = {k: np.lib.format.open_memmap(tmp_paths[k], mode="w+", dtype=dtypes[k], shape=(total,)) for k in dtypes}
+    direct = all((src / "span.npy").exists() for src in sources)
+    if direct:
+        total = int(st["points"])
+        if sum(int(np.diff(np.load(src / "span.npy"))[0]) for src in sources) != total:
+            raise RuntimeError("internal error: built node sets do not cover every point once")
+        outs = {}
+    else:
+        total = sum(int(np.load(src / "xyz.npy", mmap_mode="r").shape[0]) for src in sources)
+        outs = {k: np.lib.format.open_memmap(tmp_paths[k], mode="w+", dtype=dtypes[k], shape=(total,)) for k in dtypes}
     all_nodes, all_keys = [], []
     offset = 0
     for src in sources:
         keys = np.load(src / "keys.npy")
         counts = np.load(src / "counts.npy")
-        xyz = np.load(src / "xyz.npy")
-        n = len(xyz)
-        nodes = np.zeros(len(keys), BATCH_DTYPE)
-        nodes["first"] = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint64)
-        nodes["count"] = counts
-        nodes["level"] = level_of(keys)
-        low, med, high = quantize(xyz, np.arange(n, dtype=np.int64), nodes)
+        if direct:
+            nodes = np.load(src / "nodes.npy")
+            n = int(counts.sum())
+        else:
+            xyz = np.load(src / "xyz.npy")
+            n = len(xyz)
+            nodes = np.zeros(len(keys), BATCH_DTYPE)
+            nodes["first"] = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint64)
+            nodes["count"] = counts
+            nodes["level"] = level_of(keys)
+            low, med, high = quantize(xyz, np.arange(n, dtype=np.int64), nodes)
+            nodes["first"] += np.uint64(offset)
+            sl = slice(offset, offset + n)
+            outs["low"][sl], outs["med"][sl], outs["high"][sl] = low, med, high
+            outs["color"][sl] = np.load(src / "color.npy", mmap_mode="r")
+            outs["rgba"][sl] = np.load(src / "rgba.npy", mmap_mode="r")
+            for a in attrs:
+                outs[f"attr.{a}"][sl] = np.load(src / f"attr.{a}.npy", mmap_mode="r")
         empty = counts == 0
         if empty.any():  # an empty inner node: its cube stands in for the bbox
             cmin, cedge = key_cube(keys[empty], origin, edge)
             nodes["bbox_min"][empty] = cmin
             nodes["bbox_max"][empty] = cmin + cedge[:, None]
-        nodes["first"] += np.uint64(offset)
-        sl = slice(offset, offset + n)
-        outs["low"][sl], outs["med"][sl], outs["high"][sl] = low, med, high
-        outs["color"][sl] = np.load(src / "color.npy")
-        outs["rgba"][sl] = np.load(src / "rgba.npy")
-        for a in attrs:
-            outs[f"attr.{a}"][sl] = np.load(src / f"attr.{a}.npy")
         all_nodes.append(nodes)
         all_keys.append(keys)
         offset += n
@@ -82,7 +98,8 @@ def write_gigapoint(out: Path, sources: list[Path], st: dict, name: str, sampler
         del arr
     outs.clear()
     for k, p in tmp_paths.items():
-        os.replace(p, out / f"{k}.npy")
+        if p.exists() or not (out / f"{k}.npy").exists():  # a write phase resumed after its renames
+            os.replace(p, out / f"{k}.npy")
     keys = np.concatenate(all_keys)
     nodes = np.concatenate(all_nodes)
     order = np.argsort(keys, kind="stable")

@@ -24,7 +24,14 @@ _CONTROL = {
     "inferno": ["000004", "1b0c41", "4a0c6b", "781c6d", "a52c60", "cf4446", "ed6925", "fb9b06", "f7d13d", "fcffa4"],
 }
 # matplotlib's "terrain": (position, rgb 0..1) segments
-_TERRAIN = [(0.00, (0.2, 0.2, 0.6)), (0.15, (0.0, 0.6, 1.0)), (0.25, (0.0, 0.8, 0.4)), (0.50, (1.0, 1.0, 0.6)), (0.75, (0.5, 0.36, 0.33)), (1.00, (1.0, 1.0, 1.0))]
+_TERRAIN = [
+    (0.00, (0.2, 0.2, 0.6)),
+    (0.15, (0.0, 0.6, 1.0)),
+    (0.25, (0.0, 0.8, 0.4)),
+    (0.50, (1.0, 1.0, 0.6)),
+    (0.75, (0.5, 0.36, 0.33)),
+    (1.00, (1.0, 1.0, 1.0)),
+]
 # Google's polynomial fit of Turbo (r, g, b coefficients of x^0..x^5)
 _TURBO = np.array(
     [
@@ -170,7 +177,7 @@ def elevations(cloud) -> np.ndarray:
     z = cache.get("__z__")
     if z is None:
         b = cloud.batches
-        z = np.empty(cloud.n_points, np.float64)
+        z = np.zeros(cloud.n_points, np.float64)  # zeros: an LOD arena has slots no batch covers
         zmin = np.ascontiguousarray(b["bbox_min"][:, 2])
         zsize = np.ascontiguousarray(b["bbox_max"][:, 2] - b["bbox_min"][:, 2])
         _decode_z(b["first"].astype(np.int64), b["count"].astype(np.int64), zmin, zsize, cloud.low, cloud.med, cloud.high, z)
@@ -179,13 +186,16 @@ def elevations(cloud) -> np.ndarray:
 
 
 def _cache(cloud) -> dict:
+    """Per-cloud cache of derived arrays. Only PointClouds (immutable point buffers) keep one;
+    an LOD arena refills its buffers every frame, so it gets a fresh dict each call."""
+    from ..core.cloud import PointCloud
+
+    if not isinstance(cloud, PointCloud):
+        return {}
     cache = getattr(cloud, "_gigapoint_color_cache", None)
     if cache is None:
         cache = {}
-        try:
-            object.__setattr__(cloud, "_gigapoint_color_cache", cache)
-        except (AttributeError, TypeError):  # an object that takes no attributes: no caching
-            pass
+        object.__setattr__(cloud, "_gigapoint_color_cache", cache)
     return cache
 
 
@@ -220,14 +230,18 @@ def _compute(cloud, mode: str, settings) -> np.ndarray:
         ids, inverse = np.unique(v, return_inverse=True)
         return _hash_colors(ids).view(np.uint32).reshape(-1)[inverse]
     if mode in ("batch", "level"):
-        counts = cloud.batches["count"].astype(np.int64)
-        per_batch = np.arange(len(counts)) if mode == "batch" else cloud.batches["level"].astype(np.int64)
+        b = cloud.batches
+        per_batch = np.arange(len(b)) if mode == "batch" else b["level"].astype(np.int64)
         colors = _hash_colors(per_batch + (0 if mode == "batch" else 3)).view(np.uint32).reshape(-1)
-        return np.repeat(colors, counts)[:n]
+        order = np.argsort(b["first"], kind="stable")  # batches by position (an LOD arena's slots need not be in order)
+        owner = np.searchsorted(b["first"][order].astype(np.int64), np.arange(n), side="right") - 1
+        return colors[order[np.maximum(owner, 0)]]
     if mode == "normal":
         nrm = normals_of(cloud)
         if nrm is None:
-            raise SettingsError(f"color_mode 'normal': {cloud.name} has no normals (attributes nx, ny, nz); estimate them with gigapoint.render.normals.estimate_normals")
+            raise SettingsError(
+                f"color_mode 'normal': {cloud.name} has no normals (attributes nx, ny, nz); estimate them with gigapoint.render.normals.estimate_normals"
+            )
         out = np.empty((n, 4), np.uint8)
         out[:, :3] = np.clip(np.rint((nrm * 0.5 + 0.5) * 255.0), 0, 255)
         out[:, 3] = 255
@@ -240,7 +254,12 @@ def point_colors(cloud, settings) -> np.ndarray:
     mode = getattr(settings, "color_mode", "rgb")
     if mode == "rgb":
         return cloud.color
-    key = (mode, settings.colormap if mode == "elevation" else None, settings.elevation_range if mode == "elevation" else None, settings.intensity_range if mode == "intensity" else None)
+    key = (
+        mode,
+        settings.colormap if mode == "elevation" else None,
+        settings.elevation_range if mode == "elevation" else None,
+        settings.intensity_range if mode == "intensity" else None,
+    )
     cache = _cache(cloud)
     colors = cache.get(key)
     if colors is None:

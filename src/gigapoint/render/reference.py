@@ -11,6 +11,7 @@ import numpy as np
 from ..core.layout import EMPTY_PIXEL
 from ..core.quantize import unpack_words
 from .camera import Camera
+from .passes.splats import point_sizes, splat_params
 from .selection import select
 from .settings import RenderSettings
 
@@ -35,6 +36,7 @@ def reference_visibility(cloud, camera: Camera, settings: RenderSettings | None 
     near, far = camera.clip_range(cloud.bounds)
     sel = select(cloud.batches, camera.screen_rows(), w, h, near, far, settings.precision_threshold_px, settings.adaptive_precision, settings.frustum_culling)
     vis = np.full(w * h, EMPTY_PIXEL, np.uint64)
+    footprint, size, atten = splat_params(settings, camera)
     for k, b in enumerate(sel.ids):
         first, count = int(cloud.batches["first"][b]), int(cloud.batches["count"][b])
         g = grid_coordinates(cloud, first, count, int(sel.bits[k]))
@@ -44,9 +46,12 @@ def reference_visibility(cloud, camera: Camera, settings: RenderSettings | None 
         with np.errstate(divide="ignore", invalid="ignore"):
             px, py = sx / sw, sy / sw
         ok = (sd > np.float32(near)) & (sd < np.float32(far)) & (sw > 0) & (px >= 0) & (px < w) & (py >= 0) & (py < h)
-        pix = py[ok].astype(np.int64) * w + px[ok].astype(np.int64)
         keys = (sd[ok].view(np.uint32).astype(np.uint64) << np.uint64(32)) | (first + np.flatnonzero(ok)).astype(np.uint64)
-        np.minimum.at(vis, pix, keys)
+        x0, y0 = px[ok].astype(np.int64), py[ok].astype(np.int64)
+        sizes = point_sizes(sd[ok], size, atten)
+        for dx, dy, need in footprint:  # point size: every covered pixel gets the point's own key
+            m = (need <= sizes) & (x0 + dx >= 0) & (x0 + dx < w) & (y0 + dy >= 0) & (y0 + dy < h)
+            np.minimum.at(vis, (y0[m] + dy) * w + x0[m] + dx, keys[m])
     return vis.reshape(h, w)
 
 

@@ -12,7 +12,7 @@ from ..backends.numba_cpu.raster import count_covered
 from ..errors import GigapointError, GigapointWarning
 from .camera import Camera
 from .frame import Frame, RenderStats
-from .passes import finish_frame, wants_composite
+from .passes import finish_frame, raster_options, wants_composite
 from .selection import select
 from .settings import RenderSettings
 
@@ -24,7 +24,8 @@ def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) 
     settings = settings or RenderSettings()
     if not isinstance(camera, Camera):
         raise GigapointError(f"camera must be a gigapoint.Camera, got {type(camera).__name__}")
-    if cloud.n_points > _MAX_INDEX:
+    lod_select = getattr(cloud, "select", None)  # octree clouds (gigapoint.lod) pick nodes into an arena
+    if lod_select is None and cloud.n_points > _MAX_INDEX:
         raise GigapointError(f"{cloud.name}: {cloud.n_points:,} points exceed the 2^32 a brute-force frame can index; convert it to an octree")
     if wants_composite(settings):  # supersampling / stereo: whole renders combined (passes/compose.py)
         from .passes.compose import composite_frame
@@ -35,27 +36,22 @@ def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) 
     width, height = camera.width, camera.height
     near, far = camera.clip_range(cloud.bounds)
     rows = camera.screen_rows()
-    sel = select(
-        cloud.batches,
-        rows,
-        width,
-        height,
-        near,
-        far,
-        settings.precision_threshold_px,
-        settings.adaptive_precision,
-        settings.frustum_culling,
-    )
+    lod_cloud = cloud
+    if lod_select is not None:
+        cloud, sel = lod_select(camera, settings)  # the arena quacks like a PointCloud for everything below
+    else:
+        sel = select(cloud.batches, rows, width, height, near, far, settings.precision_threshold_px, settings.adaptive_precision, settings.frustum_culling)
     t1 = time.perf_counter()
-    visibility = backend.rasterize(cloud, sel, width, height, near, far, settings.threads)
+    backend, extra = raster_options(backend, settings, camera)  # point size / shape (passes/splats.py)
+    visibility = backend.rasterize(cloud, sel, width, height, near, far, settings.threads, **extra)
     t2 = time.perf_counter()
     visibility, colors = finish_frame(backend, cloud, camera, sel, visibility, settings, near, far)
     image = colors.view(np.uint8).reshape(height, width, 4)
     visibility = visibility.reshape(height, width)
     counts = cloud.batches["count"][sel.ids].astype(np.int64)
     stats = RenderStats(
-        points_total=cloud.n_points,
-        batches_total=len(cloud.batches),
+        points_total=lod_cloud.n_points,
+        batches_total=len(lod_cloud.batches),
         batches_culled=sel.n_culled,
         batches_rendered=len(sel.ids),
         points_processed=int(counts.sum()),

@@ -48,6 +48,10 @@ class RenderSettings:
     precision_threshold_px: float = 500.0  # projected batch size below which 10 bits suffice
     adaptive_precision: bool = True  # False: always 30 bits (for comparisons)
     frustum_culling: bool = True
+    # --- level of detail (octree clouds, gigapoint.lod) ---
+    point_budget: int = 10_000_000  # most points an octree frame draws (largest projected nodes first)
+    lod_threshold_px: float = 100.0  # octree nodes projected smaller than this are not drawn
+    lod_foveation: float = 0.0  # > 0: the threshold grows to lod_threshold_px * (1 + lod_foveation) at the image corners
     # --- image quality (render/passes, render/colors.py) ---
     color_mode: str = "rgb"  # rgb | intensity | classification | elevation | return_number | point_source_id | batch | level | normal
     colormap: str = "viridis"  # elevation colormap: viridis | turbo | terrain | inferno | gray
@@ -64,7 +68,9 @@ class RenderSettings:
     point_shape: str = "square"  # square | round
     size_mode: str = "fixed"  # fixed | attenuated (point_world_size metres, clamped to point_size px)
     point_world_size: float = 0.0  # world-space point size for size_mode='attenuated'
+    splat_softness: float = 0.0  # Kraft's soft splats (eq. 3.1 falloff exponent) blended by HQS; 0 = hard
     supersample: int = 1  # 1, 2 or 4: render larger and box-filter down
+    supersample_filter: str = "box"  # box (exact block mean) | lanczos (Pillow)
     stereo: str = "none"  # none | side-by-side | anaglyph
     ipd: float = 0.065  # eye distance, world units
     convergence: float | None = None  # zero-parallax distance; None: the camera's target distance
@@ -80,6 +86,9 @@ class RenderSettings:
         t = self.precision_threshold_px
         if not (isinstance(t, (int, float)) and math.isfinite(t) and t > 0):
             raise SettingsError(f"precision_threshold_px must be > 0, got {t!r}")
+        _number("point_budget", self.point_budget, 1, integer=True)
+        _number("lod_threshold_px", self.lod_threshold_px, 0.0)
+        _number("lod_foveation", self.lod_foveation, 0.0)
         _validate_quality(self)
 
     def replace(self, **changes) -> RenderSettings:
@@ -136,9 +145,13 @@ def _validate_quality(s: RenderSettings) -> None:
     _choice(s, "point_shape", ("square", "round"))
     _choice(s, "size_mode", ("fixed", "attenuated"))
     _number("point_world_size", s.point_world_size, 0.0)
+    _number("splat_softness", s.splat_softness, 0.0, 64.0)
+    if s.splat_softness > 0 and not s.hqs:
+        raise SettingsError("splat_softness needs hqs=True (soft splats are blended by high-quality shading)")
     if s.size_mode == "attenuated" and not s.point_world_size > 0:
         raise SettingsError("size_mode 'attenuated' needs point_world_size > 0 (metres)")
     _choice(s, "supersample", (1, 2, 4))
+    _choice(s, "supersample_filter", ("box", "lanczos"))
     _choice(s, "stereo", ("none", "side-by-side", "anaglyph"))
     _number("ipd", s.ipd, 0.0)
     if s.convergence is not None:

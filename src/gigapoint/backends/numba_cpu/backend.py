@@ -12,6 +12,8 @@ from . import raster
 # Numba's parallel kernels are not re-entrant from several Python threads (the workqueue
 # layer aborts) and the scratch buffers are shared: one frame at a time per process.
 _KERNEL_LOCK = threading.RLock()
+_ONE_PIXEL = np.zeros((1, 3), np.int32)  # footprint of one-pixel points (dx, dy, need)
+_ONE_PIXEL[0, 2] = 1
 
 
 def split_by_points(counts: np.ndarray, n_parts: int) -> np.ndarray:
@@ -28,60 +30,87 @@ class NumbaCpuBackend:
     name = "cpu"
 
     def __init__(self) -> None:
-        self._scratch: np.ndarray | None = None
+        self._scratch: dict | None = None  # (views, threads - 1, pixels) -> buffers
 
     def describe(self) -> str:
         return f"cpu (numba {numba.__version__}, {numba.get_num_threads()} threads)"
 
-    def _scratch_for(self, n_threads: int, n_pixels: int) -> np.ndarray:
-        need = (max(n_threads - 1, 0), n_pixels)
-        if self._scratch is None or self._scratch.shape != need:
-            self._scratch = None
-            self._scratch = np.empty(need, np.uint64)
-            for row in self._scratch:
-                raster.fill_empty(row)
-        return self._scratch
+    def _scratch_for(self, n_views: int, n_threads: int, n_pixels: int) -> np.ndarray:
+        """Per-thread buffers (EMPTY between frames), kept per shape: mono and stereo frames
+        that alternate (a viewer, a benchmark) do not reallocate every time."""
+        need = (n_views, max(n_threads - 1, 0), n_pixels)
+        cache = self._scratch if isinstance(self._scratch, dict) else {}
+        if need not in cache:
+            if len(cache) >= 2:
+                cache.pop(next(iter(cache)))
+            buf = np.empty(need, np.uint64)
+            for view in buf:
+                for row in view:
+                    raster.fill_empty(row)
+            cache[need] = buf
+        self._scratch = cache
+        return cache[need]
 
-    def rasterize(self, cloud, selection, width: int, height: int, near: float, far: float, threads: int | None = None) -> np.ndarray:
-        """The (height * width,) u64 visibility buffer of the selected batches."""
+    def rasterize(
+        self, cloud, selection, width: int, height: int, near: float, far: float, threads: int | None = None, splat=None
+    ) -> np.ndarray:
+        """The (height * width,) u64 visibility buffer of the selected batches.
+
+        ``splat``: (footprint, size, atten) for points larger than a pixel (render/passes/splats.py)."""
+        return self.rasterize_views(
+            cloud, selection.ids, selection.bits[None], selection.matrices[None], width, height, [near], [far], threads, splat
+        )[0]
+
+    def rasterize_views(self, cloud, ids, bits, matrices, width, height, nears, fars, threads=None, splat=None) -> np.ndarray:
+        """(V, height * width) visibility buffers of V views drawn in one pass over batches ``ids``
+        (bits (V, k), matrices (V, k, 4, 4), nears/fars (V,): each view's own)."""
         n_threads = threads or numba.get_num_threads()
         n_threads = max(1, min(n_threads, numba.config.NUMBA_NUM_THREADS))
-        batches = cloud.batches[selection.ids]
+        batches = cloud.batches[ids]
         counts = batches["count"].astype(np.int64)
         starts = split_by_points(counts, n_threads)
+        if splat is None:
+            splat = (_ONE_PIXEL, np.float32(1.0), np.float32(0.0))
         with _KERNEL_LOCK:
-            return self._rasterize_locked(cloud, width, height, near, far, n_threads, batches, counts, starts, selection)
+            return self._rasterize_locked(cloud, width, height, np.asarray(nears, np.float64), np.asarray(fars, np.float64), n_threads, batches, counts, starts,
+                                          np.ascontiguousarray(bits, np.int32), np.ascontiguousarray(matrices, np.float32), splat)  # fmt: skip
 
-    def _rasterize_locked(self, cloud, width, height, near, far, n_threads, batches, counts, starts, selection):
-        frame = np.empty(width * height, np.uint64)
-        raster.fill_empty(frame)
-        scratch = self._scratch_for(n_threads, width * height)
-        rows_touched = np.empty((n_threads, 2), np.int64)
+    def _rasterize_locked(self, cloud, width, height, nears, fars, n_threads, batches, counts, starts, bits, matrices, splat):
+        n_views = len(nears)
+        frames = np.empty((n_views, width * height), np.uint64)
+        for frame in frames:
+            raster.fill_empty(frame)
+        scratch = self._scratch_for(n_views, n_threads, width * height)
+        rows_touched = np.empty((n_views, n_threads, 2), np.int64)
         previous = numba.get_num_threads()
         numba.set_num_threads(n_threads)
         try:
             raster.rasterize(
                 batches["first"].astype(np.int64),
                 counts,
-                selection.bits,
-                selection.matrices,
+                bits,
+                matrices,
                 cloud.low,
                 cloud.med,
                 cloud.high,
                 width,
                 height,
-                near,
-                far,
+                nears,
+                fars,
                 starts,
-                frame,
+                frames,
                 scratch,
                 rows_touched,
+                splat[0],
+                np.float32(splat[1]),
+                np.float32(splat[2]),
             )
             if n_threads > 1:
-                raster.merge(frame, scratch, rows_touched, width)
+                for v in range(n_views):
+                    raster.merge(frames[v], scratch[v], rows_touched[v], width)
         finally:
             numba.set_num_threads(previous)
-        return frame
+        return frames
 
     def resolve(self, visibility: np.ndarray, color: np.ndarray, background_rgba) -> np.ndarray:
         """u32 RGBA per pixel: the winning point's color or the background."""

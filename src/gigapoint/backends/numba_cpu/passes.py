@@ -117,61 +117,120 @@ def edl(logd, empty, colors, width, height, offsets, strength, out):
 
 # --- hole filling ------------------------------------------------------------------------------
 @njit(parallel=True, cache=True)
-def row_min(vis, width, height, radius, out):
-    """out[r-1, p] = min of vis over the pixels of p's row within r columns, r = 1..radius."""
+def row_min(vis, width, height, needed, out):
+    """out[r-1, p] = min of vis over the pixels of p's row within r columns, for the radii r
+    with needed[r] set (r = 1..len(needed)-1; the others are computed but not stored)."""
+    radius = needed.shape[0] - 1
     for y in prange(height):
         base = y * width
         src = vis[base : base + width]
-        prev = src
+        cur = src.copy()
         for r in range(1, radius + 1):
-            dst = out[r - 1, base : base + width]
-            for x in range(width):
-                dst[x] = prev[x]
-            a = dst[r:]
+            a = cur[r:]
             b = src[: width - r]
             for i in range(width - r):
                 a[i] = min(a[i], b[i])
-            a = dst[: width - r]
+            a = cur[: width - r]
             b = src[r:]
             for i in range(width - r):
                 a[i] = min(a[i], b[i])
-            prev = dst
+            if needed[r]:
+                dst = out[r - 1, base : base + width]
+                for x in range(width):
+                    dst[x] = cur[x]
 
 
 @njit(parallel=True, cache=True)
-def fill_holes(vis, vis_f32, width, height, rmin, radius_map, offsets, sector_bits, ring, inv_gap, out):
+def pack_rows(vis, width, height, nw, out):
+    """out[y, w] bit i = pixel (64 w + i, y) is not empty (bit planes for the sector scan)."""
+    for y in prange(height):
+        base = y * width
+        for w in range(nw):
+            word = np.uint64(0)
+            row = vis[base + 64 * w : base + min(width, 64 * w + 64)]
+            for i in range(row.shape[0]):
+                word |= np.uint64(row[i] != EMPTY) << np.uint64(i)
+            out[y, w] = word
+
+
+@njit(inline="always")
+def _shifted(src, w, dx, nw):
+    """Word w of the bit row ``src`` moved so that bit x holds bit x + dx (zeros beyond the row)."""
+    if dx == 0:
+        return src[w]
+    if dx > 0:
+        v = src[w] >> np.uint64(dx)
+        if w + 1 < nw:
+            v |= src[w + 1] << np.uint64(64 - dx)
+        return v
+    v = src[w] << np.uint64(-dx)
+    if w > 0:
+        v |= src[w - 1] >> np.uint64(64 + dx)
+    return v
+
+
+@njit(parallel=True, cache=True)
+def fill_holes(vis, vis_f32, width, height, rmin, radius_map, ring_masks, present, offsets, sector_bits, sectors, ring, inv_gap, out):
     """Depth-aware dilation. A pixel that is empty, or whose depth is more than ``1/inv_gap``
     times that of the closest pixel of its window, takes that closest key, but only when the
     closer neighbours surround it (no run of 8 of the 16 direction sectors is free of them),
     so holes close and silhouettes do not grow.
 
     rmin (R, H*W): ``row_min`` of vis; radius_map (H, W) int8 window radius per pixel;
-    offsets (k, 2) dx, dy ordered by ring; sector_bits (k,) u32; ring (k,) int8.
-    Step 1 (vectorised): window minimum from the row minima. Step 2 (only where that minimum
-    is nearer than the pixel): the sector scan, ring by ring, stopping once surrounded."""
+    ring_masks (H, R+1, nw) u64: bit set where the pixel's radius >= ring; present (H, nw):
+    ``pack_rows`` of vis; offsets (k, 2) dx, dy ordered by ring; sector_bits (k,) u32,
+    sectors (k,) their index; ring (k,) int8.
+    Step 1 (vectorised): the window minimum from the row minima. Step 2, empty pixels: the
+    sectors holding a point, 64 pixels a word as bit planes, and the free-half test bit-sliced.
+    Step 3, pixels with a point: only where the window minimum is nearer, a scalar sector
+    scan, ring by ring, stopping once surrounded."""
     n_off = offsets.shape[0]
+    nw = present.shape[1]
     for y in prange(height):
         base = y * width
         rrow = radius_map[y]
-        r_lo = np.int64(rrow.min())
         r_hi = np.int64(rrow.max())
         best = np.empty(width, np.uint64)
         best_f = best.view(np.float32)
         for x in range(width):
             best[x] = EMPTY
-        for dy in range(-r_hi, r_hi + 1):
-            yy = y + dy
+        xa = 0
+        while xa < width:  # runs of equal radius (the whole row unless foveated)
+            r = np.int64(rrow[xa])
+            xb = xa + 1
+            while xb < width and rrow[xb] == r:
+                xb += 1
+            seg = best[xa:xb]
+            for dy in range(-r, r + 1):
+                yy = y + dy
+                if r >= 1 and 0 <= yy < height:
+                    src = rmin[r - 1, yy * width + xa : yy * width + xb]
+                    for i in range(xb - xa):
+                        seg[i] = min(seg[i], src[i])
+            xa = xb
+        # step 2: sector planes of the empty pixels
+        occ = np.zeros((16, nw), np.uint64)
+        for o in range(n_off):
+            yy = y + offsets[o, 1]
             if yy < 0 or yy >= height:
                 continue
-            for r in range(max(abs(dy), r_lo, 1), r_hi + 1):
-                src = rmin[r - 1, yy * width : yy * width + width]
-                if r_lo == r_hi:
-                    for x in range(width):
-                        best[x] = min(best[x], src[x])
-                else:
-                    for x in range(width):
-                        v = src[x] if rrow[x] == r else EMPTY
-                        best[x] = min(best[x], v)
+            m = ring[o]
+            if m > r_hi:
+                break
+            srow = present[yy]
+            plane = occ[sectors[o]]
+            rm = ring_masks[y, m]
+            for w in range(nw):
+                plane[w] |= _shifted(srow, w, offsets[o, 0], nw) & rm[w]
+        surrounded = np.empty(nw, np.uint64)
+        for w in range(nw):
+            free_half = np.uint64(0)
+            for s0 in range(16):
+                run = ~occ[s0, w]
+                for k in range(1, 8):
+                    run &= ~occ[(s0 + k) % 16, w]
+                free_half |= run
+            surrounded[w] = ~free_half
         orow = out[base : base + width]
         vrow = vis[base : base + width]
         for x in range(width):
@@ -179,11 +238,16 @@ def fill_holes(vis, vis_f32, width, height, rmin, radius_map, offsets, sector_bi
             orow[x] = k
             if best[x] >= k:  # nothing nearer in the window (or nothing at all)
                 continue
-            thr_f = np.float32(np.inf) if k == EMPTY else vis_f32[2 * (base + x) + 1] * inv_gap
+            if k == EMPTY:
+                if (surrounded[x >> 6] >> np.uint64(x & 63)) & np.uint64(1):
+                    orow[x] = best[x]
+                continue
+            # step 3: a point far behind nearer neighbours?
+            thr_f = vis_f32[2 * (base + x) + 1] * inv_gap
             if not best_f[2 * x + 1] < thr_f:
                 continue
             rmax = rrow[x]
-            occ = np.uint32(0)
+            occ1 = np.uint32(0)
             done = False
             o = 0
             while o < n_off and not done:
@@ -195,9 +259,9 @@ def fill_holes(vis, vis_f32, width, height, rmin, radius_map, offsets, sector_bi
                 if 0 <= xx < width and 0 <= yy < height:
                     q = yy * width + xx
                     if vis[q] != EMPTY and vis_f32[2 * q + 1] < thr_f:
-                        occ |= sector_bits[o]
+                        occ1 |= sector_bits[o]
                 if o + 1 == n_off or ring[o + 1] != m:  # end of a ring: surrounded yet?
-                    done = _surrounded(occ)
+                    done = _surrounded(occ1)
                 o += 1
             if done:
                 orow[x] = best[x]
@@ -214,11 +278,55 @@ def _surrounded(occ):
 
 
 # --- high-quality shading ----------------------------------------------------------------------
+@njit(inline="always")
+def _hqs_add(p, depth, col, w, vis, vis_f32, t1, rg, ba, cnt):
+    if vis[p] != EMPTY and depth <= vis_f32[2 * p + 1] * t1:
+        rg[p] += w * (np.uint64(col & np.uint32(255)) | (np.uint64((col >> np.uint32(8)) & np.uint32(255)) << np.uint64(32)))
+        ba[p] += w * (np.uint64((col >> np.uint32(16)) & np.uint32(255)) | (np.uint64(col >> np.uint32(24)) << np.uint64(32)))
+        cnt[p] += np.uint32(w)
+
+
+@njit(inline="always")
+def soft_weight(dx, dy, s, softness):
+    """Kraft 2019 eq. 3.1 opacity 1 - (r / R)^x of a footprint pixel at (dx, dy) from the centre
+    of a splat of diameter s (R = s / 2), quantised to 0..15 (1 for hard splats)."""
+    if softness == 0:
+        return np.uint64(1)
+    o = 1.0 - (math.sqrt(float(dx * dx + dy * dy)) / (0.5 * float(s))) ** softness
+    return np.uint64(max(0.0, 15.0 * o + 0.5))
+
+
 @njit(parallel=True, cache=True)
-def hqs_accumulate(firsts, counts, bits, mats, low, med, high, width, height, near, far, starts, vis, vis_f32, tol1, color, acc_rg, acc_ba, acc_n):
+def hqs_accumulate(
+    firsts,
+    counts,
+    bits,
+    mats,
+    low,
+    med,
+    high,
+    width,
+    height,
+    near,
+    far,
+    starts,
+    vis,
+    vis_f32,
+    tol1,
+    color,
+    acc_rg,
+    acc_ba,
+    acc_n,
+    footprint,
+    size,
+    atten,
+    softness,
+):
     """Every point whose depth is <= (1 + tolerance) x the closest depth at its pixel adds its
     RGBA to thread t's sums (r | g << 32 and b | a << 32: exact for up to 2^24 points a pixel)
-    and 1 to its count. acc_*[t] must be zero on entry."""
+    and 1 to its count, at every pixel of its footprint (same rule as raster.write_batch).
+    With ``softness`` > 0 (soft splats) each footprint pixel adds w x color and w, w = 0..15 from
+    ``soft_weight`` (exact for up to 2^24 / 15 points a pixel). acc_*[t] must be zero on entry."""
     n_threads = starts.shape[0] - 1
     max_count = 0
     for k in range(counts.shape[0]):
@@ -226,6 +334,7 @@ def hqs_accumulate(firsts, counts, bits, mats, low, med, high, width, height, ne
     near32 = np.float32(near)
     far32 = np.float32(far)
     t1 = np.float32(tol1)
+    n_fp = footprint.shape[0]
     for t in prange(n_threads):
         rg = acc_rg[t]
         ba = acc_ba[t]
@@ -235,30 +344,58 @@ def hqs_accumulate(firsts, counts, bits, mats, low, med, high, width, height, ne
         for k in range(starts[t], starts[t + 1]):
             first = firsts[k]
             c = counts[k]
-            project_batch(low[first : first + c], med[first : first + c], high[first : first + c], bits[k], mats[k], width, height, near32, far32, pix[:c], depth[:c])
+            project_batch(
+                low[first : first + c],
+                med[first : first + c],
+                high[first : first + c],
+                bits[k],
+                mats[k],
+                width,
+                height,
+                near32,
+                far32,
+                pix[:c],
+                depth[:c],
+            )
             for j in range(c):
                 p = pix[j]
-                if p >= 0:
-                    if vis[p] != EMPTY:
-                        if depth[j] <= vis_f32[2 * p + 1] * t1:
-                            col = color[first + j]
-                            rg[p] += np.uint64(col & np.uint32(255)) | (np.uint64((col >> np.uint32(8)) & np.uint32(255)) << np.uint64(32))
-                            ba[p] += np.uint64((col >> np.uint32(16)) & np.uint32(255)) | (np.uint64(col >> np.uint32(24)) << np.uint64(32))
-                            cnt[p] += np.uint32(1)
+                if p < 0:
+                    continue
+                col = color[first + j]
+                if n_fp == 1:
+                    _hqs_add(p, depth[j], col, np.uint64(1), vis, vis_f32, t1, rg, ba, cnt)
+                    continue
+                s = size if atten == 0 else min(size, max(np.float32(1.0), atten / depth[j]))
+                x = p % width
+                y = p // width
+                for o in range(n_fp):
+                    if footprint[o, 2] > s:
+                        break
+                    xx = x + footprint[o, 0]
+                    yy = y + footprint[o, 1]
+                    if 0 <= xx < width and 0 <= yy < height:
+                        w = soft_weight(footprint[o, 0], footprint[o, 1], s, softness)
+                        if w > 0:
+                            _hqs_add(np.int64(yy) * width + xx, depth[j], col, w, vis, vis_f32, t1, rg, ba, cnt)
 
 
 @njit(parallel=True, cache=True)
 def hqs_resolve(acc_rg, acc_ba, acc_n, fallback, out):
-    """out[p] = the rounded mean color over all threads' sums (fallback where nothing added)."""
+    """out[p] = the rounded mean color over all threads' sums (fallback where nothing added).
+    The sums are set back to zero, ready for the next frame."""
     n_threads = acc_rg.shape[0]
     for p in prange(out.shape[0]):
         rg = np.uint64(0)
         ba = np.uint64(0)
         n = np.uint64(0)
         for t in range(n_threads):
-            rg += acc_rg[t, p]
-            ba += acc_ba[t, p]
-            n += np.uint64(acc_n[t, p])
+            if acc_n[t, p] != 0:
+                rg += acc_rg[t, p]
+                ba += acc_ba[t, p]
+                n += np.uint64(acc_n[t, p])
+                acc_rg[t, p] = 0
+                acc_ba[t, p] = 0
+                acc_n[t, p] = 0
         if n == 0:
             out[p] = fallback[p]
         else:
@@ -271,17 +408,34 @@ def hqs_resolve(acc_rg, acc_ba, acc_n, fallback, out):
 
 
 @njit(parallel=True, cache=True)
-def zero_u64(a):
-    flat = a.reshape(-1)
-    for i in prange(flat.shape[0]):
-        flat[i] = 0
-
-
-@njit(parallel=True, cache=True)
-def zero_u32(a):
-    flat = a.reshape(-1)
-    for i in prange(flat.shape[0]):
-        flat[i] = 0
+def downsample(vis, image, width, height, s, vis_out, image_out):
+    """s x s blocks of a (height*s, width*s) render -> the closest key and the rounded mean RGBA."""
+    big_w = width * s
+    half = (s * s) // 2
+    for y in prange(height):
+        for x in range(width):
+            k = EMPTY
+            acc0 = 0
+            acc1 = 0
+            acc2 = 0
+            acc3 = 0
+            for dy in range(s):
+                row = (y * s + dy) * big_w + x * s
+                for dx in range(s):
+                    k = min(k, vis[row + dx])
+                    c = image[row + dx]
+                    acc0 += c & np.uint32(255)
+                    acc1 += (c >> np.uint32(8)) & np.uint32(255)
+                    acc2 += (c >> np.uint32(16)) & np.uint32(255)
+                    acc3 += c >> np.uint32(24)
+            vis_out[y * width + x] = k
+            n = s * s
+            image_out[y * width + x] = (
+                np.uint32((acc0 + half) // n)
+                | (np.uint32((acc1 + half) // n) << np.uint32(8))
+                | (np.uint32((acc2 + half) // n) << np.uint32(16))
+                | (np.uint32((acc3 + half) // n) << np.uint32(24))
+            )
 
 
 # --- lighting ----------------------------------------------------------------------------------
@@ -297,7 +451,7 @@ def blinn_phong(vis, normals, colors, view_dirs, ambient, diffuse, specular, shi
             out[p] = c
             continue
         i = np.int64(k & _LOW32)
-        q = 0 if one_dir else p
+        q = np.int64(0) if one_dir else np.int64(p)
         ndv = abs(normals[i, 0] * view_dirs[q, 0] + normals[i, 1] * view_dirs[q, 1] + normals[i, 2] * view_dirs[q, 2])
         ndv = min(ndv, np.float32(1.0))
         lit = ambient + diffuse * ndv

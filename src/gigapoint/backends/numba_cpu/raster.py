@@ -107,18 +107,45 @@ def project_batch(low, med, high, bits, m, width, height, near, far, pix, depth)
 
 
 @njit(cache=True)
-def write_batch(first, pix, depth_bits, buf):
-    """Phase 2: depth test and write; returns the (min, max) pixel id written."""
+def write_batch(first, pix, depth, depth_bits, buf, width, height, footprint, size, atten):
+    """Phase 2: depth test and write; returns the (min, max) pixel id written.
+
+    ``footprint`` (k, 3) rows (dx, dy, need) sorted by need: a point of size s covers the
+    offsets with need <= s, every one with the point's own key (so nearer points win
+    pixel by pixel). One row = one-pixel points, the plain loop. The size is ``size``, or
+    with ``atten`` > 0 (attenuated splats) atten / depth clamped to 1..size.
+    """
     p_lo = np.int64(1 << 62)
     p_hi = np.int64(-1)
+    if footprint.shape[0] == 1:
+        for j in range(pix.shape[0]):
+            p = pix[j]
+            if p >= 0:
+                key = (np.uint64(depth_bits[j]) << np.uint64(32)) | np.uint64(first + j)
+                if key < buf[p]:
+                    buf[p] = key
+                    p_lo = min(p_lo, np.int64(p))
+                    p_hi = max(p_hi, np.int64(p))
+        return p_lo, p_hi
     for j in range(pix.shape[0]):
         p = pix[j]
-        if p >= 0:
-            key = (np.uint64(depth_bits[j]) << np.uint64(32)) | np.uint64(first + j)
-            if key < buf[p]:
-                buf[p] = key
-                p_lo = min(p_lo, np.int64(p))
-                p_hi = max(p_hi, np.int64(p))
+        if p < 0:
+            continue
+        key = (np.uint64(depth_bits[j]) << np.uint64(32)) | np.uint64(first + j)
+        s = size if atten == 0 else min(size, max(np.float32(1.0), atten / depth[j]))
+        x = p % width
+        y = p // width
+        for o in range(footprint.shape[0]):
+            if footprint[o, 2] > s:
+                break
+            xx = x + footprint[o, 0]
+            yy = y + footprint[o, 1]
+            if 0 <= xx < width and 0 <= yy < height:
+                q = np.int64(yy) * width + xx
+                if key < buf[q]:
+                    buf[q] = key
+                    p_lo = min(p_lo, q)
+                    p_hi = max(p_hi, q)
     return p_lo, p_hi
 
 
@@ -129,35 +156,54 @@ def fill_empty(buf):
 
 
 @njit(parallel=True, cache=True)
-def rasterize(firsts, counts, bits, mats, low, med, high, width, height, near, far, starts, frame, scratch, rows_touched):
-    """Draw the selected batches into ``frame`` (pre-filled with EMPTY).
+def rasterize(
+    firsts, counts, bits, mats, low, med, high, width, height, nears, fars, starts, frames, scratch, rows_touched, footprint, size, atten
+):
+    """Draw the selected batches into ``frames`` (pre-filled with EMPTY), one per view.
 
-    starts[t]..starts[t+1] are the selection entries thread t draws; scratch[t-1] is
-    thread t's buffer (EMPTY on entry, restored to EMPTY by ``merge``).
-    rows_touched[t] receives the row range thread t wrote.
+    V views (1; 2 for stereo, section 3.7 of the 2022 paper) are drawn in the same pass:
+    each batch is read once and projected and written into every view's buffer.
+    bits (V, k) and mats (V, k, 4, 4) per view and batch, nears/fars (V,), frames (V, n_pix).
+    starts[t]..starts[t+1] are the selection entries thread t draws; scratch[v, t-1] is
+    thread t's buffer of view v (EMPTY on entry, restored to EMPTY by ``merge``).
+    rows_touched[v, t] receives the row range thread t wrote in view v.
+    footprint / size / atten: point size and shape (see ``write_batch``).
     """
     n_threads = starts.shape[0] - 1
+    n_views = frames.shape[0]
     max_count = 0
     for k in range(counts.shape[0]):
         max_count = max(max_count, counts[k])
-    near32 = np.float32(near)
-    far32 = np.float32(far)
     for t in prange(n_threads):
-        buf = frame if t == 0 else scratch[t - 1]
         pix = np.empty(max_count, np.int32)
         depth = np.empty(max_count, np.float32)
         depth_bits = depth.view(np.uint32)
-        lo = np.int64(1 << 62)
-        hi = np.int64(-1)
+        lo = np.full(n_views, np.int64(1 << 62))
+        hi = np.full(n_views, np.int64(-1))
         for k in range(starts[t], starts[t + 1]):
             f = firsts[k]
             c = counts[k]
-            project_batch(low[f : f + c], med[f : f + c], high[f : f + c], bits[k], mats[k], width, height, near32, far32, pix[:c], depth[:c])
-            p0, p1 = write_batch(f, pix[:c], depth_bits[:c], buf)
-            lo = min(lo, p0)
-            hi = max(hi, p1)
-        rows_touched[t, 0] = lo // width if hi >= 0 else height
-        rows_touched[t, 1] = hi // width if hi >= 0 else -1
+            for v in range(n_views):
+                buf = frames[v] if t == 0 else scratch[v, t - 1]
+                project_batch(
+                    low[f : f + c],
+                    med[f : f + c],
+                    high[f : f + c],
+                    bits[v, k],
+                    mats[v, k],
+                    width,
+                    height,
+                    np.float32(nears[v]),
+                    np.float32(fars[v]),
+                    pix[:c],
+                    depth[:c],
+                )
+                p0, p1 = write_batch(f, pix[:c], depth[:c], depth_bits[:c], buf, width, height, footprint, size, atten)
+                lo[v] = min(lo[v], p0)
+                hi[v] = max(hi[v], p1)
+        for v in range(n_views):
+            rows_touched[v, t, 0] = lo[v] // width if hi[v] >= 0 else height
+            rows_touched[v, t, 1] = hi[v] // width if hi[v] >= 0 else -1
 
 
 @njit(parallel=True, cache=True)

@@ -18,8 +18,38 @@ def wants_composite(settings) -> bool:
     return settings.supersample > 1 or settings.stereo != "none"
 
 
+def raster_options(backend, settings, camera):
+    """(backend, keyword arguments for backend.rasterize): points larger than one pixel.
+
+    Backends without point sizes (wgpu for now) hand such frames to the CPU backend."""
+    if settings.point_size == 1:
+        return backend, {}
+    from .splats import splat_params
+
+    if backend.name != "cpu":
+        import warnings
+
+        from ...backends import get_backend
+        from ...errors import GigapointWarning
+
+        warnings.warn(
+            f"point_size {settings.point_size}: the {backend.name} backend draws one-pixel points only; using the CPU backend",
+            GigapointWarning,
+            stacklevel=3,
+        )
+        backend = get_backend("cpu")
+    return backend, {"splat": splat_params(settings, camera)}
+
+
 def finish_frame(backend, cloud, camera, sel, vis, settings, near, far):
     """(visibility, u32 colors) of a frame after the passes ``settings`` asks for."""
+    from ...backends.numba_cpu.backend import _KERNEL_LOCK  # numba's parallel kernels: one frame at a time
+
+    with _KERNEL_LOCK:
+        return _finish(backend, cloud, camera, sel, vis, settings, near, far)
+
+
+def _finish(backend, cloud, camera, sel, vis, settings, near, far):
     width, height = camera.width, camera.height
     if settings.fill_holes:
         from .holes import fill_holes
@@ -30,7 +60,26 @@ def finish_frame(backend, cloud, camera, sel, vis, settings, near, far):
     if settings.hqs:
         from .hqs import hqs_colors
 
-        colors = hqs_colors(cloud, sel, vis, width, height, near, far, colors_per_point, colors, settings.hqs_depth_tolerance, settings.threads)
+        splat = None
+        if settings.point_size > 1:
+            from .splats import splat_params
+
+            splat = splat_params(settings, camera)
+        colors = hqs_colors(
+            cloud,
+            sel,
+            vis,
+            width,
+            height,
+            near,
+            far,
+            colors_per_point,
+            colors,
+            settings.hqs_depth_tolerance,
+            settings.threads,
+            splat,
+            settings.splat_softness,
+        )
     if settings.lighting:
         from .lighting import shade
 

@@ -23,12 +23,34 @@ def neighbour_offsets(radius: float, n: int = N_NEIGHBOURS) -> np.ndarray:
     return np.stack([np.rint(radius * np.cos(a)), np.rint(radius * np.sin(a))], axis=1).astype(np.int32)
 
 
-def eye_dome_lighting(vis: np.ndarray, colors: np.ndarray, width: int, height: int, strength: float = 1.0, radius: float = 1.4) -> np.ndarray:
+def log2_approx(bits: np.ndarray) -> np.ndarray:
+    """float32 log2 of positive float32s given as u32 bits: exponent + atanh series of the mantissa."""
+    e = ((bits >> np.uint32(23)).astype(np.int32) - np.int32(127)).astype(np.float32)
+    m = ((bits & np.uint32(0x007FFFFF)) | np.uint32(0x3F800000)).view(np.float32)
+    t = (m - np.float32(1)) / (m + np.float32(1))
+    t2 = t * t
+    return e + t * (kernels.LOG2_C1 + t2 * (kernels.LOG2_C3 + t2 * (kernels.LOG2_C5 + t2 * kernels.LOG2_C7)))
+
+
+def exp2_approx(y: np.ndarray) -> np.ndarray:
+    """float32 2^y for y <= 0: 2^floor(y) from bits times a degree-6 Taylor polynomial of 2^frac."""
+    y = np.maximum(y.astype(np.float32), np.float32(-126.0))
+    fl = np.floor(y)
+    f = y - fl
+    c1, c2, c3, c4, c5, c6 = kernels.EXP2_C
+    poly = np.float32(1) + f * (c1 + f * (c2 + f * (c3 + f * (c4 + f * (c5 + f * c6)))))
+    scale = ((fl.astype(np.int32) + np.int32(127)) << np.int32(23)).view(np.float32)
+    return poly * scale
+
+
+def eye_dome_lighting(
+    vis: np.ndarray, colors: np.ndarray, width: int, height: int, strength: float = 1.0, radius: float = 1.4
+) -> np.ndarray:
     """(H*W,) u32 RGBA colors shaded by EDL (vis: (H*W,) u64 visibility buffer)."""
     vis = np.ascontiguousarray(vis).reshape(-1)
     logd = np.empty(vis.shape[0], np.float32)
     empty = np.empty(vis.shape[0], np.float32)
-    kernels.log_depth(vis, vis.view(np.float32), logd, empty)
+    kernels.log_depth(vis, vis.view(np.uint32), logd, empty)
     out = np.empty_like(colors)
     kernels.edl(logd, empty, np.ascontiguousarray(colors).reshape(-1), width, height, neighbour_offsets(radius), np.float32(strength), out)
     return out
@@ -38,9 +60,7 @@ def edl_reference(vis: np.ndarray, colors: np.ndarray, width: int, height: int, 
     """Plain-numpy eye-dome lighting, same float32 arithmetic as the kernel."""
     vis = vis.reshape(height, width)
     empty = vis == EMPTY_PIXEL
-    depth = (vis >> np.uint64(32)).astype(np.uint32).view(np.float32)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        logd = np.where(empty, np.float32(0), np.log2(depth)).astype(np.float32)
+    logd = np.where(empty, np.float32(0), log2_approx((vis >> np.uint64(32)).astype(np.uint32))).astype(np.float32)
     e = empty.astype(np.float32)
     acc = np.zeros((height, width), np.float32)
     for dx, dy in neighbour_offsets(radius):
@@ -53,7 +73,7 @@ def edl_reference(vis: np.ndarray, colors: np.ndarray, width: int, height: int, 
         ne[yd, xd] = e[ys, xs]
         r = e * np.float32(100) + (np.float32(1) - e) * np.maximum(np.float32(0), logd - nl)
         acc += (np.float32(1) - ne) * r
-    shade = np.exp(acc * np.float32(-300.0 * strength / N_NEIGHBOURS)).astype(np.float32)
+    shade = exp2_approx(acc * np.float32(-300.0 * strength / N_NEIGHBOURS / math.log(2.0)))
     rgba = colors.reshape(height, width).view(np.uint8).reshape(height, width, 4)
     out = rgba.copy()
     out[..., :3] = (rgba[..., :3].astype(np.float32) * shade[..., None] + np.float32(0.5)).astype(np.uint8)

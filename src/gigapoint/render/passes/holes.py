@@ -12,6 +12,7 @@ The result is a new visibility buffer, so picking, depth and later passes see th
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -26,7 +27,9 @@ DEPTH_GAP = 0.1
 def window(level: int):
     """offsets (k, 2) int32 (dx, dy), sector bit (k,) u32, Chebyshev ring (k,) int8 of a (2L+1)^2 window."""
     r = int(level)
-    offs = [(dx, dy) for dy in range(-r, r + 1) for dx in range(-r, r + 1) if (dx, dy) != (0, 0)]
+    offs = sorted(
+        ((dx, dy) for dy in range(-r, r + 1) for dx in range(-r, r + 1) if (dx, dy) != (0, 0)), key=lambda o: max(abs(o[0]), abs(o[1]))
+    )
     offsets = np.array(offs, np.int32).reshape(-1, 2)
     ang = np.arctan2(offsets[:, 1].astype(np.float64), offsets[:, 0].astype(np.float64))
     sector = np.floor((ang + math.pi) / (2 * math.pi) * N_SECTORS).astype(np.int64) % N_SECTORS
@@ -35,6 +38,7 @@ def window(level: int):
     return offsets, bits, ring
 
 
+@functools.lru_cache(maxsize=8)
 def radius_map(width: int, height: int, level: int, foveated: bool) -> np.ndarray:
     """(height, width) int8 window radius per pixel."""
     if not foveated or level <= 1:
@@ -50,9 +54,45 @@ def fill_holes(vis: np.ndarray, width: int, height: int, level: int, foveated: b
     if level <= 0:
         return vis
     offsets, bits, ring = window(level)
+    sectors = np.log2(bits).astype(np.int64)
+    radii = radius_map(width, height, level, foveated)
+    needed = np.zeros(level + 1, np.bool_)
+    needed[1 if foveated else level :] = True
+    rmin = np.empty((level, vis.shape[0]), np.uint64)
+    kernels.row_min(vis, width, height, needed, rmin)
+    nw = (width + 63) // 64
+    present = np.empty((height, nw), np.uint64)
+    kernels.pack_rows(vis, width, height, nw, present)
+    masks = ring_masks(width, height, level, foveated)
     out = np.empty_like(vis)
-    kernels.fill_holes(vis, vis.view(np.float32), width, height, offsets, bits, ring, radius_map(width, height, level, foveated), np.float32(1.0 / (1.0 + depth_gap)), out)
+    kernels.fill_holes(
+        vis,
+        vis.view(np.float32),
+        width,
+        height,
+        rmin,
+        radii,
+        masks,
+        present,
+        offsets,
+        bits,
+        sectors,
+        ring,
+        np.float32(1.0 / (1.0 + depth_gap)),
+        out,
+    )
     return out
+
+
+@functools.lru_cache(maxsize=8)
+def ring_masks(width: int, height: int, level: int, foveated: bool) -> np.ndarray:
+    """(H, level+1, nw) u64 bit rows: bit x of [y, m] set where pixel (x, y)'s window radius >= m."""
+    radii = radius_map(width, height, level, foveated)
+    nw = (width + 63) // 64
+    bits = np.zeros((height, level + 1, nw * 64), bool)
+    for m in range(level + 1):
+        bits[:, m, :width] = radii >= m
+    return np.packbits(bits, axis=-1, bitorder="little").view(np.uint64)
 
 
 def _no_free_half(occ: np.ndarray) -> np.ndarray:
@@ -68,7 +108,9 @@ def _no_free_half(occ: np.ndarray) -> np.ndarray:
     return ~any_run
 
 
-def fill_holes_reference(vis: np.ndarray, width: int, height: int, level: int, foveated: bool = False, depth_gap: float = DEPTH_GAP) -> np.ndarray:
+def fill_holes_reference(
+    vis: np.ndarray, width: int, height: int, level: int, foveated: bool = False, depth_gap: float = DEPTH_GAP
+) -> np.ndarray:
     """Plain-numpy version of :func:`fill_holes` (same float32 threshold)."""
     v = vis.reshape(height, width)
     if level <= 0:

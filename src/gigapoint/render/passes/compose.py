@@ -1,0 +1,201 @@
+"""Passes that combine whole renders: supersampling (anti-aliasing) and stereo pairs.
+
+Supersampling renders at ``s`` times the size (point size and EDL radius scaled along) and
+box-filters down with exact integer rounding; the frame's visibility buffer is the
+closest key of each s x s block, so depth and picking stay meaningful.
+
+Stereo uses parallel eyes ``ipd`` apart along the camera's right vector and a horizontal
+image translation that puts zero parallax at ``convergence`` (default: the camera's
+target distance): each eye's image moves by fx * ipd / (2 * convergence) pixels, the
+uncovered columns show the background. ``side-by-side`` puts the eyes next to each other
+(2W x H); ``anaglyph`` takes red from the left eye and green and blue from the right.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from ...backends.numba_cpu import passes as kernels
+from ...core.layout import EMPTY_PIXEL
+from ...errors import SettingsError
+from ..camera import MAX_IMAGE_SIDE
+from ..frame import Frame, RenderStats
+
+
+def box_downsample(image: np.ndarray, s: int) -> np.ndarray:
+    """(H*s, W*s, C) uint8 -> (H, W, C): the rounded mean of each s x s block (numpy reference)."""
+    hs, ws, c = image.shape
+    blocks = image.reshape(hs // s, s, ws // s, s, c).astype(np.uint32)
+    total = blocks.sum(axis=(1, 3))
+    return ((total + (s * s) // 2) // (s * s)).astype(np.uint8)
+
+
+def block_min(vis: np.ndarray, s: int) -> np.ndarray:
+    hs, ws = vis.shape
+    return vis.reshape(hs // s, s, ws // s, s).min(axis=(1, 3))
+
+
+def _inner(settings, **changes):
+    return replace(settings, **changes)  # dataclasses.replace: validated again by __post_init__
+
+
+def supersampled_frame(cloud, camera, settings) -> Frame:
+    from ..renderer import render_frame
+
+    s = settings.supersample
+    if camera.width * s > MAX_IMAGE_SIDE or camera.height * s > MAX_IMAGE_SIDE:
+        raise SettingsError(f"supersample {s}: a {camera.width * s}x{camera.height * s} render exceeds the {MAX_IMAGE_SIDE} pixel limit")
+    inner = _inner(
+        settings, supersample=1, stereo="none", point_size=min(64, settings.point_size * s), edl_radius=min(16.0, settings.edl_radius * s)
+    )
+    big = render_frame(cloud, camera.with_size(camera.width * s, camera.height * s), inner)
+    t0 = time.perf_counter()
+    vis = np.empty(camera.width * camera.height, np.uint64)
+    image = np.empty((camera.height, camera.width, 4), np.uint8)
+    big_img = np.ascontiguousarray(big.image).reshape(-1, 4).view(np.uint32).reshape(-1)
+    kernels.downsample(
+        np.ascontiguousarray(big.visibility).reshape(-1),
+        big_img,
+        camera.width,
+        camera.height,
+        s,
+        vis,
+        image.reshape(-1, 4).view(np.uint32).reshape(-1),
+    )
+    vis = vis.reshape(camera.height, camera.width)
+    if settings.supersample_filter == "lanczos":
+        from PIL import Image
+
+        image = np.asarray(
+            Image.fromarray(np.ascontiguousarray(big.image)).resize((camera.width, camera.height), Image.Resampling.LANCZOS)
+        ).copy()
+    stats = replace(big.stats)
+    stats.time_ms += (time.perf_counter() - t0) * 1000.0
+    stats.visible_pixels = int((vis != EMPTY_PIXEL).sum())
+    return Frame(vis, image, stats)
+
+
+def eye_cameras(camera, ipd: float):
+    """(left, right) cameras: parallel, ipd apart along the camera's right vector."""
+    right = camera.basis()[0] * (ipd / 2.0)
+    left = replace(camera, eye=tuple(np.subtract(camera.eye, right)), target=tuple(np.subtract(camera.target, right)))
+    rite = replace(camera, eye=tuple(np.add(camera.eye, right)), target=tuple(np.add(camera.target, right)))
+    return left, rite
+
+
+def convergence_shift(camera, ipd: float, convergence: float | None) -> int:
+    """Pixels each eye's image moves (left eye to the left, right eye to the right)."""
+    if camera.projection != "perspective" or ipd == 0:
+        return 0
+    c = convergence if convergence is not None else float(np.linalg.norm(np.subtract(camera.target, camera.eye)))
+    fx = (camera.width / 2.0) / (math.tan(math.radians(camera.fov) / 2.0) * camera.aspect)
+    return round(fx * ipd / (2.0 * c))
+
+
+def shift_columns(a: np.ndarray, dx: int, fill, out: np.ndarray | None = None) -> np.ndarray:
+    """Move an (H, W, ...) array dx columns to the right (left if negative), filling with ``fill``
+    (into ``out`` when given; ``a`` itself when dx is 0 and no ``out``)."""
+    if dx == 0 and out is None:
+        return a
+    if out is None:
+        out = np.empty_like(a)
+    w = a.shape[1]
+    if abs(dx) >= w:
+        out[...] = fill
+    elif dx >= 0:
+        out[:, dx:] = a[:, : w - dx]
+        out[:, :dx] = fill
+    else:
+        out[:, : w + dx] = a[:, -dx:]
+        out[:, w + dx :] = fill
+    return out
+
+
+def render_views(cloud, cameras, settings, backend) -> list[Frame]:
+    """Frames of several cameras of one size drawn in ONE pass over the batches (2022 paper,
+    3.7: every point is written into both eyes' buffers). Each view keeps its own batch
+    selection, precision, near/far and passes, so each frame equals a separate render."""
+    from ..selection import select
+    from . import finish_frame, raster_options
+
+    t0 = time.perf_counter()
+    width, height = cameras[0].width, cameras[0].height
+    args = (settings.precision_threshold_px, settings.adaptive_precision)
+    ranges = [cam.clip_range(cloud.bounds) for cam in cameras]
+    sels = [
+        select(cloud.batches, cam.screen_rows(), width, height, n, f, *args, settings.frustum_culling)
+        for cam, (n, f) in zip(cameras, ranges)
+    ]
+    ids = sels[0].ids
+    for sel in sels[1:]:
+        ids = np.union1d(ids, sel.ids)
+    # every view's precision and matrix for the union of the batches any view draws
+    full = [select(cloud.batches, cam.screen_rows(), width, height, n, f, *args, False) for cam, (n, f) in zip(cameras, ranges)]
+    bits = np.stack([fs.bits[ids] for fs in full])
+    mats = np.stack([fs.matrices[ids] for fs in full])
+    backend, extra = raster_options(backend, settings, cameras[0])
+    t1 = time.perf_counter()
+    vis = backend.rasterize_views(
+        cloud, ids, bits, mats, width, height, [r[0] for r in ranges], [r[1] for r in ranges], settings.threads, extra.get("splat")
+    )
+    t2 = time.perf_counter()
+    frames = []
+    for v, (cam, sel, (near, far)) in enumerate(zip(cameras, sels, ranges)):
+        t3 = time.perf_counter()
+        visibility, colors = finish_frame(backend, cloud, cam, sel, vis[v], settings, near, far)
+        counts = cloud.batches["count"][sel.ids].astype(np.int64)
+        stats = RenderStats(
+            points_total=cloud.n_points, batches_total=len(cloud.batches), batches_culled=sel.n_culled, batches_rendered=len(sel.ids),
+            points_processed=int(counts.sum()), precision_histogram={b: int(counts[sel.bits == b].sum()) for b in (10, 20, 30)},
+            time_ms=((t1 - t0) + (t2 - t1)) * 1000.0 / len(cameras) + (time.perf_counter() - t3) * 1000.0,
+            raster_ms=(t2 - t1) * 1000.0 / len(cameras), backend=backend.name,
+        )  # fmt: skip
+        visibility = visibility.reshape(height, width)
+        stats.visible_pixels = int((visibility != EMPTY_PIXEL).sum())
+        frames.append(Frame(visibility, colors.view(np.uint8).reshape(height, width, 4), stats))
+    return frames
+
+
+def stereo_frame(cloud, camera, settings, frames=None) -> Frame:
+    """Render both eyes (one pass over the points where the backend can) into one stereo Frame."""
+    from ...backends import get_backend
+    from ..renderer import render_frame
+
+    if frames is None:
+        inner = _inner(settings, stereo="none")
+        cams = eye_cameras(camera, settings.ipd)
+        backend = get_backend(settings.backend)
+        if inner.supersample == 1 and hasattr(backend, "rasterize_views") and not hasattr(cloud, "select"):
+            frames = render_views(cloud, cams, inner, backend)
+        else:  # supersampled eyes, LOD clouds, backends without multi-view: two renders
+            frames = [render_frame(cloud, cam, inner) for cam in cams]
+    h = convergence_shift(camera, settings.ipd, settings.convergence)
+    bg = np.array(settings.background, np.uint8)
+    stats = replace(frames[0].stats)
+    for f in frames[1:]:
+        stats.time_ms += f.stats.time_ms
+        stats.raster_ms += f.stats.raster_ms
+        stats.points_processed += f.stats.points_processed
+    hgt, w = frames[0].visibility.shape
+    if settings.stereo == "side-by-side":
+        image = np.empty((hgt, 2 * w, 4), np.uint8)
+        vis = np.empty((hgt, 2 * w), np.uint64)
+        for k, (f, dx) in enumerate(zip(frames, (-h, h))):
+            shift_columns(f.image, dx, bg, image[:, k * w : (k + 1) * w])
+            shift_columns(f.visibility, dx, EMPTY_PIXEL, vis[:, k * w : (k + 1) * w])
+    else:  # anaglyph: red from the left eye, green and blue from the right
+        image = shift_columns(frames[1].image, h, bg).copy() if h == 0 else shift_columns(frames[1].image, h, bg)
+        image[..., 0] = shift_columns(frames[0].image, -h, bg)[..., 0]
+        vis = np.minimum(shift_columns(frames[0].visibility, -h, EMPTY_PIXEL), shift_columns(frames[1].visibility, h, EMPTY_PIXEL))
+    stats.visible_pixels = int((vis != EMPTY_PIXEL).sum())
+    return Frame(vis, image, stats)
+
+
+def composite_frame(cloud, camera, settings) -> Frame:
+    if settings.stereo != "none":
+        return stereo_frame(cloud, camera, settings)
+    return supersampled_frame(cloud, camera, settings)

@@ -1,0 +1,139 @@
+"""Color modes (issue #5): every mode against a plain-numpy recomputation from the winning indices."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.errors import SettingsError
+from gigapoint.render.colors import classification_table, colormap_table, elevations, point_colors
+
+
+@pytest.fixture(scope="module")
+def scene():
+    xyz, rgba, attrs = gp.demo_arrays(60_000, seed=3)
+    rng = np.random.default_rng(0)
+    attrs["return_number"] = rng.integers(1, 5, len(xyz)).astype(np.uint8)
+    attrs["point_source_id"] = rng.integers(0, 7, len(xyz)).astype(np.uint16)
+    n = rng.normal(size=(len(xyz), 3)).astype(np.float32)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    attrs.update(nx=n[:, 0], ny=n[:, 1], nz=n[:, 2])
+    cloud = gp.from_arrays(xyz, rgba, name="colors", **attrs)
+    cam = gp.Camera.fit(cloud.bounds, view=(-60.0, 50.0), width=160, height=100)
+    return cloud, cam
+
+
+def _pixels(frame):
+    idx = frame.index.reshape(-1)
+    return idx, idx >= 0
+
+
+def _check(frame, expected_rgba_per_point, background=(0, 0, 0, 255)):
+    idx, hit = _pixels(frame)
+    img = frame.image.reshape(-1, 4)
+    assert hit.sum() > 1000
+    np.testing.assert_array_equal(img[hit], expected_rgba_per_point[idx[hit]])
+    np.testing.assert_array_equal(img[~hit], np.broadcast_to(np.array(background, np.uint8), img[~hit].shape))
+
+
+def test_rgb_is_the_clouds_color(scene):
+    cloud, cam = scene
+    _check(gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu")), cloud.rgba)
+
+
+def test_classification_uses_the_asprs_table(scene):
+    cloud, cam = scene
+    f = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", color_mode="classification"))
+    expected = classification_table()[cloud.attributes["classification"].astype(np.int64)]
+    _check(f, expected)
+    assert tuple(classification_table()[2, :3]) == (160, 82, 45)  # ground is brown
+    assert tuple(classification_table()[9, :3]) == (0, 0, 255)  # water is blue
+
+
+def test_intensity_with_contrast_range(scene):
+    cloud, cam = scene
+    lo, hi = 15000.0, 40000.0
+    f = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", color_mode="intensity", intensity_range=(lo, hi)))
+    v = cloud.attributes["intensity"].astype(np.float64)
+    g = np.clip(np.rint((v - lo) * 255.0 / (hi - lo)), 0, 255).astype(np.uint8)
+    expected = np.stack([g, g, g, np.full_like(g, 255)], axis=1)
+    _check(f, expected)
+
+
+@pytest.mark.parametrize("cmap", ["viridis", "turbo", "terrain", "inferno", "gray"])
+def test_elevation_colormaps(scene, cmap):
+    cloud, cam = scene
+    zr = (-5.0, 30.0)
+    f = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", color_mode="elevation", colormap=cmap, elevation_range=zr))
+    z = cloud.positions()[:, 2]  # the library's own float64 dequantization, independent of the kernel
+    i = np.clip(np.rint((z - zr[0]) * 255.0 / (zr[1] - zr[0])), 0, 255).astype(np.int64)
+    _check(f, colormap_table(cmap)[i])
+
+
+def test_elevations_match_positions(scene):
+    cloud, _ = scene
+    np.testing.assert_array_equal(elevations(cloud), cloud.positions()[:, 2])
+    assert elevations(cloud) is elevations(cloud)  # cached on the cloud
+
+
+def test_colormap_tables_have_the_published_end_points():
+    v = colormap_table("viridis")
+    assert tuple(v[0, :3]) == (68, 1, 84) and tuple(v[-1, :3]) == (253, 231, 37)
+    t = colormap_table("turbo")
+    assert t[64, 2] > t[64, 0] and t[128, 1] > max(t[128, 0], t[128, 2]) and t[-1, 0] > t[-1, 2]  # blue, green, red
+    assert tuple(colormap_table("terrain")[-1, :3]) == (255, 255, 255)  # snow caps
+    g = colormap_table("gray")
+    np.testing.assert_array_equal(g[:, 0], np.arange(256))
+
+
+def test_return_number_point_source_batch_level_normal(scene):
+    cloud, cam = scene
+    for mode in ("return_number", "point_source_id", "batch", "level", "normal"):
+        s = gp.RenderSettings(backend="cpu", color_mode=mode)
+        f = gp.render_frame(cloud, cam, s)
+        _check(f, point_colors(cloud, s).view(np.uint8).reshape(-1, 4))
+    # return numbers: equal numbers equal colors, different numbers different colors
+    pc = point_colors(cloud, gp.RenderSettings(color_mode="return_number"))
+    rn = cloud.attributes["return_number"]
+    for r in range(1, 5):
+        assert len(np.unique(pc[rn == r])) == 1
+    assert len(np.unique(pc)) == 4
+    # batches: one color per batch, neighbours differ
+    pb = point_colors(cloud, gp.RenderSettings(color_mode="batch"))
+    b = cloud.batch_of(np.arange(cloud.n_points))
+    assert all(len(np.unique(pb[b == k])) == 1 for k in range(len(cloud.batches)))
+    assert len(np.unique(pb)) == len(cloud.batches)
+    # normals: (n * 0.5 + 0.5) * 255
+    pn = point_colors(cloud, gp.RenderSettings(color_mode="normal")).view(np.uint8).reshape(-1, 4)
+    n = np.stack([cloud.attributes[k] for k in ("nx", "ny", "nz")], axis=1)
+    np.testing.assert_array_equal(pn[:, :3], np.clip(np.rint((n * 0.5 + 0.5) * 255), 0, 255).astype(np.uint8))
+
+
+def test_missing_attribute_and_bad_settings_are_one_line_errors():
+    cloud = gp.from_arrays(np.random.default_rng(1).random((500, 3)), name="bare")
+    cam = gp.Camera.fit(cloud.bounds, width=32, height=32)
+    with pytest.raises(SettingsError, match="bare has no intensity attribute"):
+        gp.render(cloud, cam, color_mode="intensity")
+    with pytest.raises(SettingsError, match="no normals"):
+        gp.render(cloud, cam, color_mode="normal")
+    bad_settings = (
+        {"color_mode": "height"},
+        {"colormap": "jet"},
+        {"elevation_range": (5, 1)},
+        {"intensity_range": "x"},
+        {"fill_holes": 4},
+        {"point_size": 0},
+        {"point_shape": "star"},
+        {"size_mode": "attenuated"},  # needs point_world_size
+        {"supersample": 3},
+        {"supersample_filter": "bicubic"},
+        {"stereo": "vr"},
+        {"splat_softness": 1.0},  # needs hqs
+        {"edl_strength": float("nan")},
+        {"hqs_depth_tolerance": -0.1},
+    )
+    for bad in bad_settings:
+        with pytest.raises(SettingsError) as err:
+            gp.RenderSettings(**bad)
+        assert "\n" not in str(err.value) and next(iter(bad)).split("_")[0] in str(err.value)

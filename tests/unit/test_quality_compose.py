@@ -1,0 +1,145 @@
+"""Supersampling, stereo, normals and lighting (issue #5)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.errors import GigapointError, SettingsError
+from gigapoint.render.normals import decode_octahedral, encode_octahedral, estimate_normals, octahedral_error
+from gigapoint.render.passes.compose import convergence_shift, eye_cameras
+from gigapoint.render.passes.lighting import shade_reference
+
+
+@pytest.fixture(scope="module")
+def scene():
+    cloud = gp.demo(80_000, seed=2)
+    cam = gp.Camera.fit(cloud.bounds, view=(-50.0, 40.0), width=120, height=80, fov=40.0, margin=0.7)
+    return cloud, cam
+
+
+@pytest.mark.parametrize("s", [2, 4])
+def test_supersample_is_the_box_filtered_big_render(scene, s):
+    cloud, cam = scene
+    f = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", supersample=s))
+    # points keep their size in output pixels: s x s in the big render
+    big = gp.render_frame(cloud, cam.with_size(cam.width * s, cam.height * s), gp.RenderSettings(backend="cpu", point_size=s))
+    blocks = big.image.reshape(cam.height, s, cam.width, s, 4).astype(np.int64).sum(axis=(1, 3))
+    np.testing.assert_array_equal(f.image, ((blocks + s * s // 2) // (s * s)).astype(np.uint8))
+    assert f.visibility.shape == (cam.height, cam.width)
+    np.testing.assert_array_equal(f.visibility, big.visibility.reshape(cam.height, s, cam.width, s).min(axis=(1, 3)))
+    # anti-aliasing: more distinct in-between colors than the plain render
+    plain = gp.render(cloud, cam, backend="cpu")
+    assert len(np.unique(f.image.reshape(-1, 4), axis=0)) > len(np.unique(plain.reshape(-1, 4), axis=0))
+
+
+def test_supersample_lanczos_is_pillows_resize(scene):
+    from PIL import Image
+
+    cloud, cam = scene
+    f = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", supersample=2, supersample_filter="lanczos"))
+    big = gp.render(cloud, cam.with_size(cam.width * 2, cam.height * 2), backend="cpu", point_size=2)
+    np.testing.assert_array_equal(f.image, np.asarray(Image.fromarray(big).resize((cam.width, cam.height), Image.Resampling.LANCZOS)))
+    box = gp.render(cloud, cam, backend="cpu", supersample=2)
+    assert not np.array_equal(f.image, box)
+
+
+def test_supersample_too_big_is_a_settings_error(scene):
+    cloud, _ = scene
+    cam = gp.Camera.fit(cloud.bounds, width=8000, height=100)
+    with pytest.raises(SettingsError, match="supersample 4"):
+        gp.render(cloud, cam, supersample=4)
+
+
+def test_stereo_equals_two_renders_with_shifted_cameras(scene):
+    cloud, cam = scene
+    ipd, conv = 40.0, 900.0
+    s = gp.RenderSettings(backend="cpu", stereo="side-by-side", ipd=ipd, convergence=conv)
+    f = gp.render_frame(cloud, cam, s)
+    left_cam, right_cam = eye_cameras(cam, ipd)
+    np.testing.assert_allclose(np.subtract(right_cam.eye, left_cam.eye), cam.basis()[0] * ipd)
+    left = gp.render(cloud, left_cam, backend="cpu")
+    right = gp.render(cloud, right_cam, backend="cpu")
+    h = convergence_shift(cam, ipd, conv)
+    assert h > 0
+    bg = np.array([0, 0, 0, 255], np.uint8)
+    w = cam.width
+    np.testing.assert_array_equal(f.image[:, : w - h], left[:, h:])  # left eye moved left by h
+    assert np.all(f.image[:, w - h : w] == bg)
+    np.testing.assert_array_equal(f.image[:, w + h :], right[:, : w - h])  # right eye moved right by h
+    assert not np.array_equal(left, right)
+    ana = gp.render(cloud, cam, s.replace(stereo="anaglyph"))
+    np.testing.assert_array_equal(ana[..., 0], f.image[:, :w, 0])
+    np.testing.assert_array_equal(ana[..., 1:3], f.image[:, w:, 1:3])
+
+
+@pytest.mark.parametrize("kw", [{"threads": 1}, {"threads": 2, "point_size": 3}, {"edl": True, "fill_holes": 1, "hqs": True}])
+def test_one_pass_stereo_equals_separate_renders(scene, kw):
+    from gigapoint.render.passes import compose
+
+    cloud, cam = scene
+    s = gp.RenderSettings(backend="cpu", **kw)
+    cams = eye_cameras(cam, 60.0)
+    calls = []
+    real = compose.render_views
+    compose.render_views = lambda *a: calls.append(1) or real(*a)
+    try:
+        f = gp.render_frame(cloud, cam, s.replace(stereo="side-by-side", ipd=60.0, convergence=1e9))
+    finally:
+        compose.render_views = real
+    assert calls, "the one-pass path was not taken"
+    for k, c in enumerate(cams):
+        sep = gp.render_frame(cloud, c, s)
+        np.testing.assert_array_equal(f.visibility[:, k * cam.width : (k + 1) * cam.width], sep.visibility)
+        np.testing.assert_array_equal(f.image[:, k * cam.width : (k + 1) * cam.width], sep.image)
+
+
+def test_octahedral_normals_round_trip():
+    rng = np.random.default_rng(5)
+    n = rng.normal(size=(50_000, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    code = encode_octahedral(n)
+    assert code.dtype == np.uint16
+    d = decode_octahedral(code)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1, atol=1e-5)
+    err = octahedral_error(n)
+    assert err["max_deg"] < 1.2 and err["mean_deg"] < 0.5
+    axes = np.eye(3)
+    np.testing.assert_allclose(
+        decode_octahedral(encode_octahedral(np.concatenate([axes, -axes]))), np.concatenate([axes, -axes]), atol=1e-6
+    )
+
+
+def test_estimated_normals_of_planes():
+    rng = np.random.default_rng(1)
+    xy = rng.random((4000, 2)) * 10
+    floor = np.c_[xy, np.zeros(4000)]
+    wall = np.c_[xy[:, 0] + 20, np.full(4000, 5.0), xy[:, 1]]  # the plane y = 5
+    cloud = gp.from_arrays(np.concatenate([floor, wall]) + [500000.0, 4000000.0, 100.0], name="planes")
+    normals, radii = estimate_normals(cloud, k=12)
+    z = cloud.positions()[:, 2] - 100.0
+    x = cloud.positions()[:, 0] - 500000.0
+    on_floor = (z < 1e-6) & (x < 10)
+    on_wall = x > 21
+    assert np.all(np.abs(normals[on_floor, 2]) > 0.999)
+    assert np.all(np.abs(normals[on_wall, 1]) > 0.999)
+    assert np.all(normals[:, 2] >= 0)
+    assert 0.05 < np.median(radii) < 0.5  # ~0.16 m spacing at 40 points / m^2
+    assert {"nx", "ny", "nz", "radius"} <= set(cloud.attributes)
+    with pytest.raises(GigapointError):
+        estimate_normals(gp.from_arrays(np.zeros((2, 3)) + [[0, 0, 0], [1, 1, 1]]))
+
+
+def test_lighting_matches_reference_and_needs_normals(scene):
+    cloud, cam = scene
+    with pytest.raises(SettingsError, match="no normals"):
+        gp.render(cloud, cam, lighting=True)
+    estimate_normals(cloud, k=10)
+    for c in (cam, gp.Camera.fit(cloud.bounds, view="top", width=64, height=48, projection="orthographic")):
+        plain = gp.render_frame(cloud, c, gp.RenderSettings(backend="cpu"))
+        lit = gp.render(cloud, c, backend="cpu", lighting=True, shininess=16.0)
+        ref = shade_reference(cloud, c, plain.visibility, np.ascontiguousarray(plain.image).view(np.uint32).reshape(-1), 16.0)
+        d = np.abs(lit.reshape(-1, 4).astype(int) - ref.view(np.uint8).reshape(-1, 4).astype(int))
+        assert d.max() <= 1
+        assert not np.array_equal(lit, plain.image)
