@@ -14,22 +14,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..core.morton import _spread_bits_3 as _spread3  # one bit-spreading routine for every code
+
 CODE_BITS = 21  # bits per axis of a point code
 MAX_LEVEL = 20  # keys stay below 2^61
 ROOT_KEY = 1
 _SPAN = float(1 << CODE_BITS)
 _TOP = (1 << CODE_BITS) - 1
-
-
-@njit(inline="always")
-def _spread3(v):
-    v = v & np.uint64(0x1FFFFF)
-    v = (v | (v << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
-    v = (v | (v << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
-    v = (v | (v << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
-    v = (v | (v << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
-    v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
-    return v
 
 
 @njit(parallel=True, cache=True)
