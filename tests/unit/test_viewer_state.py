@@ -225,3 +225,26 @@ def test_scale_control_adapts_to_frame_time():
     c.record(c.level, 10.0)
     assert c.scale() == SCALES[-1]
     assert math.isfinite(c.times[c.level])
+
+
+def test_moving_budget_caps_points_from_the_measured_rate(monkeypatch, demo_small):
+    import gigapoint as gp
+    from gigapoint.viewer import session as S
+
+    b = S.MovingBudget()
+    base = gp.RenderSettings(point_budget=5_000_000)
+    assert b.settings_for(base) is base  # nothing measured yet: draw everything
+    b.record(100_000_000, 1.0)  # 100 M points/s
+    s = b.settings_for(base)
+    assert s.max_points == int(100_000_000 * S.MOVING_RENDER_S) and s.point_budget == min(5_000_000, s.max_points)
+    b.record(10_000_000, 1.0)  # the machine got slower: the cap follows
+    assert b.points() < s.max_points
+    b.record(0, 0.0)  # empty frames are ignored
+    b.rate = 10.0
+    assert b.points() == S.MIN_MOVING_POINTS
+    # a moving frame of a plain cloud under the cap draws about that many points
+    monkeypatch.setattr(S, "MIN_MOVING_POINTS", 1)
+    b.rate = 50_000 / S.MOVING_RENDER_S
+    cam = gp.Camera.fit(demo_small.bounds, view="iso", width=96, height=64)
+    frame = gp.render_frame(demo_small, cam, b.settings_for(gp.RenderSettings(backend="cpu")))
+    assert 40_000 < frame.stats.points_processed <= 50_000

@@ -19,6 +19,19 @@ from .settings import RenderSettings
 _MAX_INDEX = 0xFFFFFFFF  # point indices live in the low 32 bits of the visibility buffer
 
 
+def subsample_step(counts: np.ndarray, max_points: int) -> int:
+    """Smallest k such that every k-th point of each batch stays within ``max_points`` (0: no cap;
+    never fewer than one point per batch)."""
+    total = int(counts.sum())
+    if max_points <= 0 or total <= max_points:
+        return 1
+    step = -(-total // max_points)
+    largest = int(counts.max())
+    while step < largest and int(((counts + step - 1) // step).sum()) > max_points:  # each batch rounds up
+        step += 1
+    return min(step, largest)  # one point per batch is the floor
+
+
 def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) -> Frame:
     """Render ``cloud`` into a Frame (visibility buffer, image, stats)."""
     settings = settings or RenderSettings()
@@ -41,14 +54,18 @@ def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) 
         cloud, sel = lod_select(camera, settings)  # the arena quacks like a PointCloud for everything below
     else:
         sel = select(cloud.batches, rows, width, height, near, far, settings.precision_threshold_px, settings.adaptive_precision, settings.frustum_culling)
+    counts = cloud.batches["count"][sel.ids].astype(np.int64)
     t1 = time.perf_counter()
     backend, extra = raster_options(backend, settings, camera)  # point size / shape (passes/splats.py)
+    step = subsample_step(counts, settings.max_points) if lod_select is None and backend.name == "cpu" else 1
+    if step > 1:
+        extra["step"] = step
+        counts = (counts + step - 1) // step
     visibility = backend.rasterize(cloud, sel, width, height, near, far, settings.threads, **extra)
     t2 = time.perf_counter()
     visibility, colors = finish_frame(backend, cloud, camera, sel, visibility, settings, near, far)
     image = colors.view(np.uint8).reshape(height, width, 4)
     visibility = visibility.reshape(height, width)
-    counts = cloud.batches["count"][sel.ids].astype(np.int64)
     stats = RenderStats(
         points_total=lod_cloud.n_points,
         batches_total=len(lod_cloud.batches),

@@ -50,6 +50,7 @@ class RenderSettings:
     frustum_culling: bool = True
     # --- level of detail (octree clouds, gigapoint.lod) ---
     point_budget: int = 10_000_000  # most points an octree frame draws (largest projected nodes first)
+    max_points: int = 0  # plain (unconverted) clouds: draw at most this many (every k-th point of each batch); 0 = all
     lod_threshold_px: float = 100.0  # octree nodes projected smaller than this are not drawn
     lod_foveation: float = 0.0  # > 0: the threshold grows to lod_threshold_px * (1 + lod_foveation) at the image corners
     # --- image quality (render/passes, render/colors.py) ---
@@ -87,6 +88,7 @@ class RenderSettings:
         if not (isinstance(t, (int, float)) and math.isfinite(t) and t > 0):
             raise SettingsError(f"precision_threshold_px must be > 0, got {t!r}")
         _number("point_budget", self.point_budget, 1, integer=True)
+        _number("max_points", self.max_points, 0, integer=True)
         _number("lod_threshold_px", self.lod_threshold_px, 0.0)
         _number("lod_foveation", self.lod_foveation, 0.0)
         _validate_quality(self)

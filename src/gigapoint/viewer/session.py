@@ -32,6 +32,8 @@ RENDER_LOCK = threading.Lock()
 REST_S = 0.15  # no camera input for this long = at rest: refine to full resolution
 FRAME_BUDGET_S = 0.045  # render + encode while moving (>= 20 frames/s with the transfer)
 SCALES = (1, 2, 4, 8)  # resolution divisors while moving
+MOVING_RENDER_S = 0.03  # a moving frame draws what the measured point rate renders in this time
+MIN_MOVING_POINTS = 1_000_000
 SEND_TIMEOUT_S = 0.25
 MAX_SESSIONS = 64
 
@@ -162,6 +164,32 @@ class ScaleControl:
                 self.level -= 1
 
 
+@dataclass
+class MovingBudget:
+    """The point cap while moving, from the measured draw rate (points/s) of recent frames.
+
+    Resolution scaling alone cannot keep a 100 M point plain cloud interactive: its cost is
+    per point. Applied as max_points (plain clouds: every k-th point of each batch) and as a
+    lower point_budget (octrees)."""
+
+    rate: float | None = None  # smoothed points per second
+
+    def points(self) -> int:
+        return 0 if self.rate is None else max(MIN_MOVING_POINTS, int(self.rate * MOVING_RENDER_S))
+
+    def record(self, points: int, seconds: float) -> None:
+        if points <= 0 or seconds <= 0:
+            return
+        rate = points / seconds
+        self.rate = rate if self.rate is None else 0.6 * self.rate + 0.4 * rate
+
+    def settings_for(self, settings: RenderSettings) -> RenderSettings:
+        cap = self.points()
+        if cap == 0:
+            return settings
+        return settings.replace(max_points=cap, point_budget=min(settings.point_budget, cap))
+
+
 class ViewerCore:
     """What all tabs share: the cloud, the session registry, screenshots."""
 
@@ -252,6 +280,7 @@ class Session:
         self.closed = False
         self.last: LastFrame | None = None
         self.scales = ScaleControl()
+        self.budget = MovingBudget()
         self.frames = 0
         self._done_version = -1
         self._done_full = True
@@ -422,7 +451,8 @@ class Session:
             t0 = time.perf_counter()
             try:
                 cam = state.camera(max(1, round(w / scale)), max(1, round(h / scale)))
-                frame = render_locked(self.core.cloud, cam, settings, cancelled=lambda: self.closed)
+                drawn = self.budget.settings_for(settings) if moving else settings
+                frame = render_locked(self.core.cloud, cam, drawn, cancelled=lambda: self.closed)
                 if frame is None:
                     return
             except GigapointError as exc:
@@ -435,6 +465,7 @@ class Session:
                     return
                 continue
             t1 = time.perf_counter()
+            self.budget.record(frame.stats.points_processed, frame.stats.time_ms / 1000.0)
             jpeg = encode_image(frame.image, "JPEG", quality if level == 0 else min(quality, 75))
             t2 = time.perf_counter()
             if moving:

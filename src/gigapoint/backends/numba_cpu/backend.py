@@ -52,16 +52,17 @@ class NumbaCpuBackend:
         return cache[need]
 
     def rasterize(
-        self, cloud, selection, width: int, height: int, near: float, far: float, threads: int | None = None, splat=None
+        self, cloud, selection, width: int, height: int, near: float, far: float, threads: int | None = None, splat=None, step: int = 1
     ) -> np.ndarray:
         """The (height * width,) u64 visibility buffer of the selected batches.
 
-        ``splat``: (footprint, size, atten) for points larger than a pixel (render/passes/splats.py)."""
+        ``splat``: (footprint, size, atten) for points larger than a pixel (render/passes/splats.py).
+        ``step`` > 1: only every step-th point of each batch (a point budget, render/renderer.py)."""
         return self.rasterize_views(
-            cloud, selection.ids, selection.bits[None], selection.matrices[None], width, height, [near], [far], threads, splat
+            cloud, selection.ids, selection.bits[None], selection.matrices[None], width, height, [near], [far], threads, splat, step
         )[0]
 
-    def rasterize_views(self, cloud, ids, bits, matrices, width, height, nears, fars, threads=None, splat=None) -> np.ndarray:
+    def rasterize_views(self, cloud, ids, bits, matrices, width, height, nears, fars, threads=None, splat=None, step=1) -> np.ndarray:
         """(V, height * width) visibility buffers of V views drawn in one pass over batches ``ids``
         (bits (V, k), matrices (V, k, 4, 4), nears/fars (V,): each view's own)."""
         n_threads = threads or numba.get_num_threads()
@@ -73,9 +74,9 @@ class NumbaCpuBackend:
             splat = (_ONE_PIXEL, np.float32(1.0), np.float32(0.0))
         with _KERNEL_LOCK:
             return self._rasterize_locked(cloud, width, height, np.asarray(nears, np.float64), np.asarray(fars, np.float64), n_threads, batches, counts, starts,
-                                          np.ascontiguousarray(bits, np.int32), np.ascontiguousarray(matrices, np.float32), splat)  # fmt: skip
+                                          np.ascontiguousarray(bits, np.int32), np.ascontiguousarray(matrices, np.float32), splat, max(1, int(step)))  # fmt: skip
 
-    def _rasterize_locked(self, cloud, width, height, nears, fars, n_threads, batches, counts, starts, bits, matrices, splat):
+    def _rasterize_locked(self, cloud, width, height, nears, fars, n_threads, batches, counts, starts, bits, matrices, splat, step):
         n_views = len(nears)
         frames = np.empty((n_views, width * height), np.uint64)
         for frame in frames:
@@ -104,6 +105,7 @@ class NumbaCpuBackend:
                 splat[0],
                 np.float32(splat[1]),
                 np.float32(splat[2]),
+                np.int64(step),
             )
             if n_threads > 1:
                 for v in range(n_views):
