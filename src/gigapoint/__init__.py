@@ -28,11 +28,22 @@ def open(*paths, **options) -> PointCloud:  # noqa: A001 - the natural name, lik
     return open_cloud(*paths, **options)
 
 
-def __getattr__(name):
-    if name == "Viewer":  # lazily: the viewer pulls in Starlette/uvicorn only when used
-        from .viewer.jupyter import Viewer
+# Imported on first use: they pull in heavier packages (Starlette/uvicorn, imageio, scipy).
+_LAZY = {
+    "Viewer": ("gigapoint.viewer.jupyter", "Viewer"),
+    "render_turntable": ("gigapoint.render.video", "render_turntable"),
+    "render_flythrough": ("gigapoint.render.video", "render_flythrough"),
+    "estimate_normals": ("gigapoint.render.normals", "estimate_normals"),
+    "convert": ("gigapoint.lod.convert", "convert"),
+}
 
-        return Viewer
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        module, attr = _LAZY[name]
+        return getattr(importlib.import_module(module), attr)
     raise AttributeError(f"module 'gigapoint' has no attribute {name!r}")
 
 
@@ -47,10 +58,14 @@ __all__ = [
     "RenderStats",
     "Viewer",
     "__version__",
+    "convert",
     "demo",
     "demo_arrays",
     "from_arrays",
     "open",
+    "estimate_normals",
     "render",
+    "render_flythrough",
     "render_frame",
+    "render_turntable",
 ]

@@ -1,0 +1,36 @@
+"""The public names of the gigapoint package resolve to the documented functions."""
+
+import inspect
+
+import gigapoint as gp
+
+
+def test_public_names_resolve():
+    for name in gp.__all__:
+        assert getattr(gp, name) is not None, name
+    from gigapoint.lod.convert import convert
+    from gigapoint.render.normals import estimate_normals
+    from gigapoint.render.video import render_flythrough, render_turntable
+
+    assert gp.convert is convert and gp.estimate_normals is estimate_normals
+    assert gp.render_turntable is render_turntable and gp.render_flythrough is render_flythrough
+    assert "out" in inspect.signature(gp.convert).parameters
+
+
+def test_unknown_name_is_an_attribute_error():
+    try:
+        gp.no_such_thing  # noqa: B018
+    except AttributeError as exc:
+        assert "no_such_thing" in str(exc)
+    else:
+        raise AssertionError("expected AttributeError")
+
+
+def test_estimate_normals_through_the_package_on_a_plane():
+    import numpy as np
+
+    rng = np.random.default_rng(1)
+    xyz = np.column_stack([rng.uniform(0, 10, 4000), rng.uniform(0, 10, 4000), np.zeros(4000)])
+    cloud = gp.from_arrays(xyz)
+    normals, radii = gp.estimate_normals(cloud, store=False)
+    assert normals.shape == (4000, 3) and np.all(normals[:, 2] > 0.999) and np.all(radii > 0)
