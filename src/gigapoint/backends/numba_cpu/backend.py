@@ -35,19 +35,21 @@ class NumbaCpuBackend:
     def describe(self) -> str:
         return f"cpu (numba {numba.__version__}, {numba.get_num_threads()} threads)"
 
-    def _scratch_for(self, n_views: int, n_threads: int, n_pixels: int) -> np.ndarray:
-        """Per-thread buffers (EMPTY between frames), kept per shape: mono and stereo frames
-        that alternate (a viewer, a benchmark) do not reallocate every time."""
-        need = (n_views, max(n_threads - 1, 0), n_pixels)
+    def _scratch_for(self, n_views: int, n_threads: int, n_pixels: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per-thread buffers (EMPTY between frames) and their written-tile flags (zero between
+        frames), kept per shape: mono and stereo frames that alternate (a viewer, a benchmark)
+        do not reallocate every time."""
+        need = (n_views, n_threads, n_pixels)
         cache = self._scratch if isinstance(self._scratch, dict) else {}
         if need not in cache:
             if len(cache) >= 2:
                 cache.pop(next(iter(cache)))
-            buf = np.empty(need, np.uint64)
+            buf = np.empty((n_views, n_threads - 1, n_pixels), np.uint64)
             for view in buf:
                 for row in view:
                     raster.fill_empty(row)
-            cache[need] = buf
+            n_tiles = (n_pixels >> raster.TILE_SHIFT) + 1
+            cache[need] = (buf, np.zeros((n_views, n_threads, n_tiles), np.uint8))
         self._scratch = cache
         return cache[need]
 
@@ -81,8 +83,7 @@ class NumbaCpuBackend:
         frames = np.empty((n_views, width * height), np.uint64)
         for frame in frames:
             raster.fill_empty(frame)
-        scratch = self._scratch_for(n_views, n_threads, width * height)
-        rows_touched = np.empty((n_views, n_threads, 2), np.int64)
+        scratch, dirty = self._scratch_for(n_views, n_threads, width * height)
         previous = numba.get_num_threads()
         numba.set_num_threads(n_threads)
         try:
@@ -101,7 +102,7 @@ class NumbaCpuBackend:
                 starts,
                 frames,
                 scratch,
-                rows_touched,
+                dirty,
                 splat[0],
                 np.float32(splat[1]),
                 np.float32(splat[2]),
@@ -109,7 +110,7 @@ class NumbaCpuBackend:
             )
             if n_threads > 1:
                 for v in range(n_views):
-                    raster.merge(frames[v], scratch[v], rows_touched[v], width)
+                    raster.merge(frames[v], scratch[v], dirty[v])
         finally:
             numba.set_num_threads(previous)
         return frames

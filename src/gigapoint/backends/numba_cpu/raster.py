@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit, prange
 
 EMPTY = np.uint64(0xFFFFFFFFFFFFFFFF)
+TILE_SHIFT = 6  # merge bookkeeping: runs of 64 pixels
 _MASK = np.uint32(1023)
 _HALF = np.float32(0.5)
 _INV1024 = np.float32(1.0 / 1024.0)
@@ -110,8 +111,8 @@ def project_batch(low, med, high, bits, m, width, height, near, far, pix, depth)
 
 
 @njit(cache=True)
-def write_batch(first, step, pix, depth, depth_bits, buf, width, height, footprint, size, atten):
-    """Phase 2: depth test and write; returns the (min, max) pixel id written.
+def write_batch(first, step, pix, depth, depth_bits, buf, dirty, width, height, footprint, size, atten):
+    """Phase 2: depth test and write; marks the TILE-pixel tiles written in ``dirty``.
 
     Entry j is point ``first + j * step`` (step > 1: a subsample, see ``rasterize``).
 
@@ -120,8 +121,6 @@ def write_batch(first, step, pix, depth, depth_bits, buf, width, height, footpri
     pixel by pixel). One row = one-pixel points, the plain loop. The size is ``size``, or
     with ``atten`` > 0 (attenuated splats) atten / depth clamped to 1..size.
     """
-    p_lo = np.int64(1 << 62)
-    p_hi = np.int64(-1)
     if footprint.shape[0] == 1:
         for j in range(pix.shape[0]):
             p = pix[j]
@@ -129,9 +128,8 @@ def write_batch(first, step, pix, depth, depth_bits, buf, width, height, footpri
                 key = (np.uint64(depth_bits[j]) << np.uint64(32)) | np.uint64(first + j * step)
                 if key < buf[p]:
                     buf[p] = key
-                    p_lo = min(p_lo, np.int64(p))
-                    p_hi = max(p_hi, np.int64(p))
-        return p_lo, p_hi
+                    dirty[p >> TILE_SHIFT] = 1
+        return
     for j in range(pix.shape[0]):
         p = pix[j]
         if p < 0:
@@ -149,9 +147,7 @@ def write_batch(first, step, pix, depth, depth_bits, buf, width, height, footpri
                 q = np.int64(yy) * width + xx
                 if key < buf[q]:
                     buf[q] = key
-                    p_lo = min(p_lo, q)
-                    p_hi = max(p_hi, q)
-    return p_lo, p_hi
+                    dirty[q >> TILE_SHIFT] = 1
 
 
 @njit(parallel=True, cache=True)
@@ -161,17 +157,15 @@ def fill_empty(buf):
 
 
 @njit(parallel=True, cache=True)
-def rasterize(
-    firsts, counts, bits, mats, low, med, high, width, height, nears, fars, starts, frames, scratch, rows_touched, footprint, size, atten, step
-):
+def rasterize(firsts, counts, bits, mats, low, med, high, width, height, nears, fars, starts, frames, scratch, dirty, footprint, size, atten, step):
     """Draw the selected batches into ``frames`` (pre-filled with EMPTY), one per view.
 
     V views (1; 2 for stereo, section 3.7 of the 2022 paper) are drawn in the same pass:
     each batch is read once and projected and written into every view's buffer.
     bits (V, k) and mats (V, k, 4, 4) per view and batch, nears/fars (V,), frames (V, n_pix).
     starts[t]..starts[t+1] are the selection entries thread t draws; scratch[v, t-1] is
-    thread t's buffer of view v (EMPTY on entry, restored to EMPTY by ``merge``).
-    rows_touched[v, t] receives the row range thread t wrote in view v.
+    thread t's buffer of view v (EMPTY on entry, restored to EMPTY by ``merge``), and
+    dirty[v, t] flags its tiles written (zero on entry; thread 0's, the frame's, go unread).
     footprint / size / atten: point size and shape (see ``write_batch``).
     step > 1 draws every step-th point of each batch (a point budget for plain clouds:
     Morton order makes that an even spatial subsample).
@@ -185,8 +179,6 @@ def rasterize(
         pix = np.empty(max_count, np.int32)
         depth = np.empty(max_count, np.float32)
         depth_bits = depth.view(np.uint32)
-        lo = np.full(n_views, np.int64(1 << 62))
-        hi = np.full(n_views, np.int64(-1))
         for k in range(starts[t], starts[t + 1]):
             f = firsts[k]
             c = counts[k]
@@ -199,24 +191,22 @@ def rasterize(
                     project_batch(low[f : f + c], med[f : f + c], high[f : f + c], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n])
                 else:
                     project_batch(low[f : f + c : step], med[f : f + c : step], high[f : f + c : step], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n])
-                p0, p1 = write_batch(f, step, pix[:n], depth[:n], depth_bits[:n], buf, width, height, footprint, size, atten)
-                lo[v] = min(lo[v], p0)
-                hi[v] = max(hi[v], p1)
-        for v in range(n_views):
-            rows_touched[v, t, 0] = lo[v] // width if hi[v] >= 0 else height
-            rows_touched[v, t, 1] = hi[v] // width if hi[v] >= 0 else -1
+                write_batch(f, step, pix[:n], depth[:n], depth_bits[:n], buf, dirty[v, t], width, height, footprint, size, atten)
 
 
 @njit(parallel=True, cache=True)
-def merge(frame, scratch, rows_touched, width):
-    """frame = min(frame, scratch[t]) over the rows each thread touched; scratch back to EMPTY."""
-    lo = rows_touched[:, 0].min()
-    hi = rows_touched[:, 1].max()
-    for r in prange(lo, hi + 1):
-        for t in range(1, rows_touched.shape[0]):
-            if rows_touched[t, 0] <= r <= rows_touched[t, 1]:
-                sb = scratch[t - 1]
-                for p in range(r * width, (r + 1) * width):
+def merge(frame, scratch, dirty):
+    """frame = min(frame, scratch[t]) over the tiles thread t + 1 wrote; those tiles back to EMPTY.
+
+    Only written tiles are visited: an overview covers a fraction of the image, and the
+    merge used to read (and reset) whole rows."""
+    n = frame.shape[0]
+    for tile in prange(dirty.shape[1]):
+        for t in range(scratch.shape[0]):
+            if dirty[t + 1, tile]:
+                dirty[t + 1, tile] = 0
+                sb = scratch[t]
+                for p in range(tile << TILE_SHIFT, min((tile + 1) << TILE_SHIFT, n)):
                     v = sb[p]
                     if v != EMPTY:
                         if v < frame[p]:
