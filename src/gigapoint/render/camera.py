@@ -102,8 +102,11 @@ class Camera:
         return cls(eye=tuple(eye), target=tuple(target), up=up, fov=fov, width=width, height=height, **kw)
 
     @classmethod
-    def fit(cls, bounds, view="iso", width=1920, height=1080, fov=60.0, projection="perspective", margin=1.05, **kw) -> Camera:
-        """Camera that frames the box ``bounds = (min, max)`` from a named view or (yaw, pitch)."""
+    def fit(cls, bounds, view="iso", width=1920, height=1080, fov=60.0, projection="perspective", margin=1.05, recenter=True, **kw) -> Camera:
+        """Camera that frames the box ``bounds = (min, max)`` from a named view or (yaw, pitch).
+
+        ``recenter``: move the target so the box's image is centred (perspective pushes it off
+        centre); False keeps the target at the box centre (an orbit around it, a turntable)."""
         lo = np.asarray(_vec3(bounds[0], "bounds min"))
         hi = np.asarray(_vec3(bounds[1], "bounds max"))
         if isinstance(view, str):
@@ -132,11 +135,13 @@ class Camera:
         # is at depth distance - z and fits when |x| <= tan_h * depth (and likewise y). Then the
         # target moves so the box's projection is centred (perspective pushes it down otherwise),
         # and the distance is solved again: two rounds settle it.
-        for _ in range(3):
+        for _ in range(3 if recenter else 1):
             distance = float(np.max(np.maximum(cz + np.abs(cx) * margin / tan_h, cz + np.abs(cy) * margin / tan_v)))
             distance = max(distance, float(cz.max()) + 0.05 * radius)  # every corner well in front of the eye
             depth = distance - cz
             sx, sy = cx / depth / tan_h, cy / depth / tan_v  # -1..1 across the image
+            if not recenter:
+                break
             shift_x = (sx.max() + sx.min()) / 2 * tan_h * distance
             shift_y = (sy.max() + sy.min()) / 2 * tan_v * distance
             center = center + right * shift_x + up * shift_y

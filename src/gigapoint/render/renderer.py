@@ -57,7 +57,7 @@ def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) 
     counts = cloud.batches["count"][sel.ids].astype(np.int64)
     t1 = time.perf_counter()
     backend, extra = raster_options(backend, settings, camera)  # point size / shape (passes/splats.py)
-    step = subsample_step(counts, settings.max_points) if lod_select is None and backend.name == "cpu" else 1
+    step = subsample_step(counts, settings.max_points) if lod_select is None else 1
     if step > 1:
         extra["step"] = step
         counts = (counts + step - 1) // step

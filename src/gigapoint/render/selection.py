@@ -10,10 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from ..core.layout import WORD_BITS
 
-_CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], np.float64)
 
 
 @dataclass
@@ -25,32 +25,50 @@ class Selection:
     n_culled: int
 
 
-def project_boxes(rows: np.ndarray, bbox_min: np.ndarray, bbox_max: np.ndarray) -> np.ndarray:
-    """(k, 8, 4) screen-space (x', y', w, depth) of the 8 corners of each box."""
-    size = bbox_max - bbox_min
-    corners = bbox_min[:, None, :] + _CORNERS[None, :, :] * size[:, None, :]
-    return corners @ rows[:, :3].T + rows[:, 3]
-
-
 def visible_and_size(rows, bbox_min, bbox_max, width, height, near, far):
     """Per box: in the frustum (conservatively) and projected size in pixels."""
-    p = project_boxes(rows, bbox_min, bbox_max)
-    x, y, w, d = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
-    outside = (
-        np.all(x < 0, axis=1)
-        | np.all(x > width * w, axis=1)
-        | np.all(y < 0, axis=1)
-        | np.all(y > height * w, axis=1)
-        | np.all(d < near, axis=1)
-        | np.all(d > far, axis=1)
-    )
-    in_front = np.all(w > 0, axis=1) & np.all(d >= near, axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        px = np.where(w > 0, x / w, 0.0)
-        py = np.where(w > 0, y / w, 0.0)
-    size = np.maximum(px.max(axis=1) - px.min(axis=1), py.max(axis=1) - py.min(axis=1))
-    size = np.where(in_front, size, np.inf)
-    return ~outside, size
+    k = len(bbox_min)
+    visible = np.empty(k, np.bool_)
+    size = np.empty(k, np.float64)
+    _boxes_in_view(np.ascontiguousarray(rows, np.float64), np.ascontiguousarray(bbox_min, np.float64), np.ascontiguousarray(bbox_max, np.float64),
+                   float(width), float(height), float(near), float(far), visible, size)  # fmt: skip
+    return visible, size
+
+
+@njit(cache=True)
+def _boxes_in_view(rows, bbox_min, bbox_max, width, height, near, far, visible, size):
+    """visible_and_size for k boxes in one compiled loop (numpy took 1.2 ms for 2 000 boxes).
+
+    A box is outside when all 8 corners are beyond one frustum plane; its size is the larger
+    side of its corners' screen rectangle, inf when a corner is not in front of the near plane.
+    """
+    for b in range(bbox_min.shape[0]):
+        # per plane: do all corners lie beyond it? (x < 0, x > w*W, y < 0, y > h*H, d < near, d > far)
+        beyond = np.ones(6, np.bool_)
+        in_front = True
+        x_lo = y_lo = np.inf
+        x_hi = y_hi = -np.inf
+        for c in range(8):
+            p0 = bbox_min[b, 0] + ((c >> 2) & 1) * (bbox_max[b, 0] - bbox_min[b, 0])
+            p1 = bbox_min[b, 1] + ((c >> 1) & 1) * (bbox_max[b, 1] - bbox_min[b, 1])
+            p2 = bbox_min[b, 2] + (c & 1) * (bbox_max[b, 2] - bbox_min[b, 2])
+            x = p0 * rows[0, 0] + p1 * rows[0, 1] + p2 * rows[0, 2] + rows[0, 3]
+            y = p0 * rows[1, 0] + p1 * rows[1, 1] + p2 * rows[1, 2] + rows[1, 3]
+            w = p0 * rows[2, 0] + p1 * rows[2, 1] + p2 * rows[2, 2] + rows[2, 3]
+            d = p0 * rows[3, 0] + p1 * rows[3, 1] + p2 * rows[3, 2] + rows[3, 3]
+            beyond[0] &= x < 0
+            beyond[1] &= x > width * w
+            beyond[2] &= y < 0
+            beyond[3] &= y > height * w
+            beyond[4] &= d < near
+            beyond[5] &= d > far
+            in_front &= (w > 0) & (d >= near)
+            px = x / w if w > 0 else 0.0
+            py = y / w if w > 0 else 0.0
+            x_lo, x_hi = min(x_lo, px), max(x_hi, px)
+            y_lo, y_hi = min(y_lo, py), max(y_hi, py)
+        visible[b] = not beyond.any()
+        size[b] = max(x_hi - x_lo, y_hi - y_lo) if in_front else np.inf
 
 
 def precision_for(size_px: np.ndarray, threshold_px: float) -> np.ndarray:

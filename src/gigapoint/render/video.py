@@ -31,7 +31,7 @@ def turntable_cameras(
     if not (isinstance(n_frames, (int, np.integer)) and n_frames >= 1):
         raise GigapointError(f"turntable: number of frames must be a positive integer, got {n_frames!r}")
     views = [(start_yaw + 360.0 * i / n_frames, pitch) for i in range(n_frames)]
-    fitted = [Camera.fit(cloud.bounds, view=v, width=width, height=height, fov=fov, margin=margin, projection=projection) for v in views]
+    fitted = [Camera.fit(cloud.bounds, view=v, width=width, height=height, fov=fov, margin=margin, projection=projection, recenter=False) for v in views]
     lo, hi = (np.asarray(b, np.float64) for b in cloud.bounds)
     center = tuple((lo + hi) / 2)
     distance = max(float(np.linalg.norm(np.subtract(c.eye, c.target))) for c in fitted)
