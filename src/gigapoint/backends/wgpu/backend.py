@@ -2,7 +2,10 @@
 
 Same interface and same visibility buffer as NumbaCpuBackend: the host selects batches
 and builds float32 per-batch matrices (render/selection.py); the GPU decodes, projects and
-depth-tests with the CPU kernel's float32 arithmetic, then resolves colors.
+depth-tests with the CPU kernel's float32 arithmetic, then resolves colors. Points larger
+than a pixel (square / round splats, fixed or attenuated size) are drawn by the same
+kernels; the image-quality passes (hole filling, HQS, lighting, eye-dome lighting) run on
+the GPU too (passes.py), on buffers that stay on the GPU between passes.
 
 Where the adapter offers 64-bit atomics (``shader-int64-atomic-min-max``) one pass does
 ``atomicMin(depth << 32 | index)``; otherwise two passes of 32-bit atomics give the
@@ -21,6 +24,7 @@ import sys
 import tempfile
 import threading
 import weakref
+from collections import defaultdict
 from contextlib import contextmanager
 
 import numpy as np
@@ -28,6 +32,7 @@ import numpy as np
 from ...errors import BackendUnavailableError, GigapointError
 from .layout import GPU_BATCH_DTYPE, PARAMS_DTYPE
 from .memory import BufferCache, PagePlan, plan_pages
+from .passes import DeviceArray, GpuPasses
 from .shaders import shader_source
 
 _INSTALL_HINT = (
@@ -40,6 +45,9 @@ _LINEAR_WORKGROUP = 256  # clear / resolve workgroup size
 # Clear / resolve loop over their items (grid stride): 1024 x 256 threads fill any GPU,
 # and CPU drivers pay per workgroup (lavapipe: clear 3-4x faster than with 65535).
 _LINEAR_GROUPS_MAX = 1024
+#: Storage buffers the HQS accumulate pass binds (point words, footprint, visibility, colors, sums).
+HQS_STORAGE_BUFFERS = 9
+_EMPTY_WORD = 0xFFFFFFFF
 
 #: Default bound on GPU memory held for point data (bytes). Frames whose selection needs
 #: more are drawn page by page, re-uploading what was evicted.
@@ -122,16 +130,23 @@ class WgpuBackend:
         self.atomics64 = has64 if atomics64 is None else bool(atomics64)
         limits = self.adapter.limits
         binding = int(min(limits["max-storage-buffer-binding-size"], limits["max-buffer-size"]))
+        required = {"max-storage-buffer-binding-size": binding, "max-buffer-size": int(limits["max-buffer-size"])}
+        # WebGPU guarantees 8 storage buffers per stage; HQS binds 9 where the adapter allows
+        n_storage = int(limits.get("max-storage-buffers-per-shader-stage", 8))
+        if n_storage >= HQS_STORAGE_BUFFERS:
+            required["max-storage-buffers-per-shader-stage"] = HQS_STORAGE_BUFFERS
         try:
             with _quiet_wayland_probe():
                 self.device = self.adapter.request_device_sync(
                     label="gigapoint",
                     required_features=list(_INT64_FEATURES) if self.atomics64 else [],
-                    required_limits={"max-storage-buffer-binding-size": binding, "max-buffer-size": int(limits["max-buffer-size"])},
+                    required_limits=required,
                 )
         except Exception as exc:  # noqa: BLE001 - wgpu-native reports failures with many types
             raise BackendUnavailableError(f"wgpu backend: cannot open device {info.get('device')} ({exc}); {_INSTALL_HINT}") from None
         self.max_binding = binding
+        #: HQS runs on the GPU (else it falls back to the CPU pass on read-back buffers).
+        self.hqs_on_gpu = n_storage >= HQS_STORAGE_BUFFERS
         # Three point words of one page must fit the budget together; whole 16-byte rows
         # so the prefetch view (vec4) of a page stays within one binding.
         limit = min(binding, int(memory_budget) // 4, binding if page_bytes is None else int(page_bytes))
@@ -141,8 +156,17 @@ class WgpuBackend:
         self._pipelines: dict[str, object] = {}
         self._frame_buffers: dict[str, object] = {}
         self._dummy = self.device.create_buffer(size=16, usage=wgpu.BufferUsage.STORAGE)
-        self._lock = threading.Lock()  # one instance serves every caller (registry); frames go one at a time
+        # One instance serves every caller (registry); frames go one at a time. Re-entrant:
+        # reading back a DeviceArray takes it too.
+        self._lock = threading.RLock()
+        # Frame buffers by role, and which results still read them: a role's generation
+        # goes up each time it is written; DeviceArrays of an older generation are stale.
+        self._generation: dict[str, int] = defaultdict(int)
+        self._arrays: weakref.WeakSet = weakref.WeakSet()
+        self._host_copies: dict[str, tuple] = {}  # role -> (weakref to the numpy array it equals, generation)
         self.info = dict(info)
+        #: The image-quality passes on GPU buffers (render/passes calls them when present).
+        self.passes = GpuPasses(self)
 
     # ------------------------------------------------------------------ reporting
     def describe(self) -> str:
@@ -251,88 +275,162 @@ class WgpuBackend:
                 f"more than this adapter binds ({self.max_binding:,}); render smaller or use backend 'cpu'"
             )
 
+    # ------------------------------------------------------------------ frame buffers between passes
+    def _writable(self, role: str, nbytes: int, usage: int):
+        """The role's buffer, about to be overwritten: results still reading it are read
+        back first (DeviceArray), so no array ever changes under its holder."""
+        for array in list(self._arrays):
+            if array.role == role:
+                array.materialise()
+        self._generation[role] += 1
+        self._host_copies.pop(role, None)
+        return self._frame_buffer(role, nbytes, usage)
+
+    def _remember_host_copy(self, role: str, array: np.ndarray) -> None:
+        """``array`` (just read back) equals the role's buffer: passes given it use the buffer."""
+        self._host_copies[role] = (weakref.ref(array), self._generation[role])
+
+    def _device_input(self, x, roles: tuple[str, str], dtype, n: int) -> tuple[object, str]:
+        """(buffer, role) holding ``x`` (n items of ``dtype``): its own buffer if it is a
+        DeviceArray or the array rasterize returned, else uploaded into the first of ``roles``
+        (the pass then writes the second)."""
+        if isinstance(x, DeviceArray) and x.backend is self and x.valid:
+            if x.shape != (n,) or x.dtype != np.dtype(dtype):
+                raise GigapointError(f"wgpu backend: a pass needs {n:,} values of {np.dtype(dtype)}, got {x.shape} {x.dtype}")
+            return self._frame_buffers[x.role], x.role
+        if isinstance(x, np.ndarray):
+            for role, (ref, generation) in self._host_copies.items():
+                if ref() is x and self._generation[role] == generation and role in self._frame_buffers:
+                    return self._frame_buffers[role], role
+        host = np.ascontiguousarray(np.asarray(x), dtype).reshape(-1)
+        if host.shape != (n,):
+            raise GigapointError(f"wgpu backend: a pass needs {n:,} values, got {host.shape[0]:,}")
+        role = roles[0]
+        usage = self._wgpu.BufferUsage
+        buf = self._writable(role, host.nbytes, usage.STORAGE | usage.COPY_SRC | usage.COPY_DST)
+        self.device.queue.write_buffer(buf, 0, host)
+        return buf, role
+
+    def _output(self, roles: tuple[str, str], avoid: str, nbytes: int) -> tuple[object, str]:
+        """A buffer of the pair ``roles`` other than ``avoid`` (ping-pong), ready to be written."""
+        role = roles[1] if roles[0] == avoid else roles[0]
+        usage = self._wgpu.BufferUsage
+        return self._writable(role, nbytes, usage.STORAGE | usage.COPY_SRC | usage.COPY_DST), role
+
     # ------------------------------------------------------------------ the interface
-    def rasterize(self, cloud, selection, width: int, height: int, near: float, far: float, threads: int | None = None) -> np.ndarray:
-        """The (height * width,) u64 visibility buffer of the selected batches (``threads`` unused)."""
+    def rasterize(
+        self,
+        cloud,
+        selection,
+        width: int,
+        height: int,
+        near: float,
+        far: float,
+        threads: int | None = None,
+        splat=None,
+        step: int = 1,
+        keep_on_device: bool = False,
+    ) -> np.ndarray:
+        """The (height * width,) u64 visibility buffer of the selected batches (``threads`` unused).
+
+        ``splat``: (footprint, size, atten) for points larger than a pixel (render/passes/splats.py)
+        and ``step`` (> 1: every step-th point of each batch, a point budget), as the CPU backend.
+        ``keep_on_device``: return a DeviceArray instead (the frame's passes read it in place;
+        ``np.asarray`` reads it back), once the GPU is done."""
+        step = max(1, int(step))
         with self._lock:
-            return self._rasterize(cloud, selection, int(width), int(height), float(near), float(far))
+            return self._rasterize(cloud, selection, int(width), int(height), float(near), float(far), splat, keep_on_device, step)
 
     def resolve(self, visibility: np.ndarray, color: np.ndarray, background_rgba) -> np.ndarray:
         """u32 RGBA per pixel: the winning point's color or the background."""
         with self._lock:
-            return self._resolve(visibility, color, background_rgba)
+            return np.asarray(self.passes.resolve(visibility, color, background_rgba))
 
-    def _rasterize(self, cloud, selection, width: int, height: int, near: float, far: float) -> np.ndarray:
-        wgpu = self._wgpu
+    def _footprint(self, splat, softness: float = 0.0) -> tuple[object, dict]:
+        """(GPU footprint rows (dx, dy, need, weight), splat uniforms) of ``splat`` (None: one pixel)."""
+        from ..numba_cpu.passes import soft_weight  # the CPU kernels' weight, so both agree
+
+        if splat is None:
+            fp, size, atten = np.array([[0, 0, 1]], np.int32), np.float32(1.0), np.float32(0.0)
+        else:
+            fp, size, atten = np.asarray(splat[0], np.int32).reshape(-1, 3), np.float32(splat[1]), np.float32(splat[2])
+        rows = np.ones((len(fp), 4), np.int32)
+        rows[:, :3] = fp
+        if softness > 0 and len(fp) > 1:
+            if atten == 0:  # fixed size: the host's float64 weights
+                rows[:, 3] = [int(soft_weight(int(dx), int(dy), size, float(softness))) for dx, dy, _ in fp]
+            else:  # per-point size: the shader computes it
+                rows[:, 3] = -1
+        usage = self._wgpu.BufferUsage
+        buf = self._frame_buffer("footprint", rows.nbytes, usage.STORAGE | usage.COPY_DST)
+        self.device.queue.write_buffer(buf, 0, rows)
+        uniforms = {"fp_count": len(fp), "point_size": size, "atten": atten, "softness": np.float32(softness)}
+        return (buf, rows.nbytes), uniforms
+
+    def _draw_batches(self, cloud, selection, pass_names, params: dict, footprint, extra) -> None:
+        """Dispatch ``pass_names`` (draw passes: common.wgsl's bindings 0-6) over the selected
+        batches, page by page; ``extra(start, stop, pinned)`` gives the pass's own bindings
+        (7...) for the page of points start..stop."""
+        ids = np.asarray(selection.ids, np.int64)
+        if not len(ids):
+            return
+        usage = self._wgpu.BufferUsage
+        plan = self._plan(cloud)
+        pages = plan.page_of[ids]
+        order = np.argsort(pages, kind="stable")  # one run of records per page
+        ids, pages = ids[order], pages[order]
+        chosen = cloud.batches[ids]
+        records = np.zeros(len(ids), GPU_BATCH_DTYPE)
+        records["rows"] = np.asarray(selection.matrices, np.float32)[order]
+        records["first"] = chosen["first"]
+        records["local_first"] = chosen["first"].astype(np.int64) - plan.starts[pages]
+        records["count"] = chosen["count"]
+        records["bits"] = np.asarray(selection.bits)[order]
+        rec_buf = self._frame_buffer("records", records.nbytes, usage.STORAGE | usage.COPY_DST)
+        self.device.queue.write_buffer(rec_buf, 0, records)
+        bounds = np.flatnonzero(np.diff(pages)) + 1
+        runs = list(zip(np.concatenate([[0], bounds]).tolist(), np.concatenate([bounds, [len(ids)]]).tolist()))
+        for pass_name in pass_names:
+            for r0, r1 in runs:
+                p = int(pages[r0])
+                start, stop = int(plan.starts[p]), int(plan.stops[p])
+                max_bits = int(records["bits"][r0:r1].max())
+                pinned: set = set()
+                words = [self.cache.get(cloud.low, start, stop, pinned)]
+                # Medium/high words go to the GPU only once a frame needs them.
+                words.append(self.cache.get(cloud.med, start, stop, pinned) if max_bits >= 20 else self._dummy)
+                words.append(self.cache.get(cloud.high, start, stop, pinned) if max_bits >= 30 else self._dummy)
+                own = extra(start, stop, pinned)
+                uniform = self._params(**params, batch_offset=r0, batch_count=r1 - r0, page_first=start, page_count=stop - start)
+                entries = [(uniform, PARAMS_DTYPE.itemsize), (rec_buf, records.nbytes)]
+                entries += [(w, w.size) for w in words]
+                entries.append((words[0], words[0].size // 16 * 16))  # low again, as vec4 (prefetch)
+                entries.append(footprint)
+                self._dispatch(pass_name, entries + own, r1 - r0)
+
+    def _rasterize(self, cloud, selection, width: int, height: int, near: float, far: float, splat=None, keep_on_device=False, step=1):
         n_pixels = int(width) * int(height)
         self._check_frame(n_pixels)
         if cloud.n_points > 0xFFFFFFFF:
             raise GigapointError(f"{cloud.name}: {cloud.n_points:,} points exceed the 2^32 a visibility buffer can index")
-        usage = wgpu.BufferUsage
-        vis = self._frame_buffer("visibility", n_pixels * 8, usage.STORAGE | usage.COPY_SRC | usage.COPY_DST)
-        self.cache.purge_dead()
-        params = {"width": width, "height": height, "near": np.float32(near), "far": np.float32(far)}
-
-        # Clear to EMPTY (all ones) on the GPU rather than uploading a full frame; in 16-byte
-        # rows (the buffer is allocated in whole rows).
-        rows = vis.size // 16
-        self._dispatch("clear", [(self._params(n_items=rows), PARAMS_DTYPE.itemsize), (vis, vis.size)], self._linear_groups(rows))
-
-        ids = np.asarray(selection.ids, np.int64)
-        if len(ids):
-            plan = self._plan(cloud)
-            pages = plan.page_of[ids]
-            order = np.argsort(pages, kind="stable")  # one run of records per page
-            ids, pages = ids[order], pages[order]
-            chosen = cloud.batches[ids]
-            records = np.zeros(len(ids), GPU_BATCH_DTYPE)
-            records["rows"] = np.asarray(selection.matrices, np.float32)[order]
-            records["first"] = chosen["first"]
-            records["local_first"] = chosen["first"].astype(np.int64) - plan.starts[pages]
-            records["count"] = chosen["count"]
-            records["bits"] = np.asarray(selection.bits)[order]
-            rec_buf = self._frame_buffer("records", records.nbytes, usage.STORAGE | usage.COPY_DST)
-            self.device.queue.write_buffer(rec_buf, 0, records)
-            bounds = np.flatnonzero(np.diff(pages)) + 1
-            runs = list(zip(np.concatenate([[0], bounds]).tolist(), np.concatenate([bounds, [len(ids)]]).tolist()))
-            passes = ("raster64",) if self.atomics64 else ("raster_depth", "raster_index")
-            for pass_name in passes:
-                for r0, r1 in runs:
-                    p = int(pages[r0])
-                    start, stop = int(plan.starts[p]), int(plan.stops[p])
-                    max_bits = int(records["bits"][r0:r1].max())
-                    pinned: set = set()
-                    words = [self.cache.get(cloud.low, start, stop, pinned)]
-                    # Medium/high words go to the GPU only once a frame needs them.
-                    words.append(self.cache.get(cloud.med, start, stop, pinned) if max_bits >= 20 else self._dummy)
-                    words.append(self.cache.get(cloud.high, start, stop, pinned) if max_bits >= 30 else self._dummy)
-                    uniform = self._params(**params, batch_offset=r0, batch_count=r1 - r0)
-                    entries = [(uniform, PARAMS_DTYPE.itemsize), (rec_buf, records.nbytes)]
-                    entries += [(w, w.size) for w in words]
-                    entries.append((words[0], words[0].size // 16 * 16))  # low again, as vec4 (prefetch)
-                    entries.append((vis, n_pixels * 8))
-                    self._dispatch(pass_name, entries, r1 - r0)
-
-        return self._read_back(vis, np.uint64, n_pixels)
-
-    def _resolve(self, visibility: np.ndarray, color: np.ndarray, background_rgba) -> np.ndarray:
         usage = self._wgpu.BufferUsage
-        color = np.ascontiguousarray(color, np.uint32)  # the same array (cache key) when already u32
-        visibility = np.ascontiguousarray(visibility, np.uint64).reshape(-1)
-        n_pixels = visibility.shape[0]
-        self._check_frame(n_pixels)
-        bg = int(np.array(background_rgba, np.uint8).view(np.uint32)[0])
-        # rasterize's buffer: its content was read back already
-        vis = self._frame_buffer("visibility", n_pixels * 8, usage.STORAGE | usage.COPY_SRC | usage.COPY_DST)
-        self.device.queue.write_buffer(vis, 0, visibility)
-        image = self._frame_buffer("image", n_pixels * 4, usage.STORAGE | usage.COPY_SRC)
+        vis = self._writable("visibility", n_pixels * 8, usage.STORAGE | usage.COPY_SRC | usage.COPY_DST)
         self.cache.purge_dead()
-        n_colors = len(color)
-        step = self.page_points
-        for start in range(0, max(n_colors, 1), step):
-            stop = min(start + step, n_colors)
-            colors = self.cache.get(color, start, stop, set()) if stop > start else self._dummy
-            uniform = self._params(n_items=n_pixels, page_first=start, page_count=stop - start, background=bg)
-            entries = [(uniform, PARAMS_DTYPE.itemsize), (vis, n_pixels * 8), (colors, colors.size), (image, n_pixels * 4)]
-            self._dispatch("resolve", entries, self._linear_groups(n_pixels))
-        return self._read_back(image, np.uint32, n_pixels)
+        # Clear to EMPTY (all ones) on the GPU rather than uploading a full frame.
+        self._clear(vis, _EMPTY_WORD)
+        footprint, splat_uniforms = self._footprint(splat)
+        params = {"width": width, "height": height, "near": np.float32(near), "far": np.float32(far), "step": step, **splat_uniforms}
+        passes = ("raster64",) if self.atomics64 else ("raster_depth", "raster_index")
+        self._draw_batches(cloud, selection, passes, params, footprint, lambda start, stop, pinned: [(vis, n_pixels * 8)])
+        if keep_on_device:
+            self._read_back(vis, np.uint64, 1)  # wait for the GPU, so the caller's raster time is real
+            return DeviceArray(self, "visibility", np.uint64, n_pixels)
+        out = self._read_back(vis, np.uint64, n_pixels)
+        self._remember_host_copy("visibility", out)
+        return out
+
+    def _clear(self, buffer, value: int) -> None:
+        """Every u32 of ``buffer`` = value, in 16-byte rows (buffers are allocated in whole rows)."""
+        rows = buffer.size // 16
+        uniform = self._params(n_items=rows, fill=value)
+        self._dispatch("clear", [(uniform, PARAMS_DTYPE.itemsize), (buffer, buffer.size)], self._linear_groups(rows))

@@ -32,13 +32,29 @@ PARAMS_DTYPE = np.dtype(
         ("batch_offset", "<u4"),  # raster: first record of this dispatch in the batch buffer
         ("batch_count", "<u4"),  # raster: records in this dispatch (one workgroup each)
         ("n_items", "<u4"),  # clear / resolve: number of u32 words / pixels
-        ("page_first", "<u4"),  # resolve: global index of the color page's first point
-        ("page_count", "<u4"),  # resolve: points in the color page
+        ("page_first", "<u4"),  # resolve, HQS, lighting: global index of the page's first point
+        ("page_count", "<u4"),  # resolve, lighting: points in the page
         ("background", "<u4"),  # resolve: RGBA8 background
-        ("_pad", "<u4", (2,)),  # uniform buffers are bound in multiples of 16 bytes
+        ("fill", "<u4"),  # clear: the u32 written to every word
+        ("fp_count", "<u4"),  # raster, HQS: rows of the splat footprint (1: one-pixel points)
+        ("point_size", "<f4"),  # raster, HQS: splat size in pixels (the clamp when attenuated)
+        ("atten", "<f4"),  # raster, HQS: perspective size scale (0: fixed size)
+        ("softness", "<f4"),  # HQS: soft-splat falloff exponent (0: hard)
+        ("tol1", "<f4"),  # HQS: 1 + relative depth tolerance
+        ("n_offsets", "<u4"),  # EDL, hole filling: neighbour offsets in the table
+        ("edl_scale", "<f4"),  # EDL: -300 strength / n / ln 2
+        ("level", "<u4"),  # hole filling: window radius (the largest when foveated)
+        ("foveated", "<u4"),  # hole filling: 1 = radius per pixel from the radius map
+        ("inv_gap", "<f4"),  # hole filling: 1 / (1 + depth gap)
+        ("one_dir", "<u4"),  # lighting: 1 = one view direction for all pixels (orthographic)
+        ("ambient", "<f4"),  # lighting: Blinn-Phong terms
+        ("diffuse", "<f4"),
+        ("specular", "<f4"),
+        ("shininess", "<f4"),
+        ("step", "<u4"),  # raster: draw every step-th point of each batch (0 or 1: all)
+        ("_pad", "<u4"),  # uniform buffers are bound in multiples of 16 bytes
     ]
 )
-
 # numpy scalar kind -> WGSL scalar (4-byte types only: WGSL has no portable 64-bit scalar)
 _SCALARS = {("u", 4): "u32", ("i", 4): "i32", ("f", 4): "f32"}
 

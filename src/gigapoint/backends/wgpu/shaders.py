@@ -1,4 +1,5 @@
-"""Loads the WGSL passes shipped in shaders/: generated structs first, then includes expanded.
+"""Loads the WGSL passes shipped in shaders/: generated structs and constants first, then
+includes expanded.
 
 A pass file names shared code with a line ``//! include common.wgsl``; the loader inserts
 that file there (once), so shared functions live in one file and are never copied.
@@ -10,12 +11,34 @@ import re
 from functools import cache
 from importlib import resources
 
+import numpy as np
+
 from .layout import wgsl_structs
 
 _INCLUDE = re.compile(r"^//! include (\S+)\s*$", re.MULTILINE)
 
 #: The passes, one file each.
-PASSES = ("raster64", "raster_depth", "raster_index", "clear", "resolve")
+PASSES = (
+    "raster64", "raster_depth", "raster_index", "clear", "resolve",
+    "hqs_accumulate", "hqs_resolve", "fill_holes", "log_depth", "edl", "lighting",
+)  # fmt: skip
+
+
+def constants() -> dict[str, np.float32]:
+    """float32 constants the shaders share with the CPU kernels (fast log2 / exp2 of EDL)."""
+    from ..numba_cpu import passes as cpu
+
+    out = {f"LOG2_C{k}": getattr(cpu, f"LOG2_C{k}") for k in (1, 3, 5, 7)}
+    out.update({f"EXP2_C{k + 1}": c for k, c in enumerate(cpu.EXP2_C)})
+    return {k: np.float32(v) for k, v in out.items()}
+
+
+def wgsl_constants() -> str:
+    """``const NAME: f32 = ...;`` lines; the decimal text is the float32 value exactly (repr of
+    the float64 holding it), so the shader gets the same bits."""
+    lines = ["// generated from the CPU kernels' constants by gigapoint.backends.wgpu.shaders; do not edit"]
+    lines += [f"const {k}: f32 = {float(v)!r};" for k, v in constants().items()]
+    return "\n".join(lines) + "\n"
 
 
 def _read(name: str) -> str:
@@ -38,4 +61,4 @@ def shader_source(pass_name: str) -> str:
     """Complete WGSL text of one pass (``raster64``, ``clear``...)."""
     if pass_name not in PASSES:
         raise KeyError(f"no shader pass {pass_name!r}; known: {', '.join(PASSES)}")
-    return wgsl_structs() + "\n" + _expand(_read(f"{pass_name}.wgsl"), set())
+    return wgsl_structs() + "\n" + wgsl_constants() + "\n" + _expand(_read(f"{pass_name}.wgsl"), set())

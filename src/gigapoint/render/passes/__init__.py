@@ -21,12 +21,13 @@ def wants_composite(settings) -> bool:
 def raster_options(backend, settings, camera):
     """(backend, keyword arguments for backend.rasterize): points larger than one pixel.
 
-    Backends without point sizes (wgpu for now) hand such frames to the CPU backend."""
+    Backends without point sizes (other than cpu and wgpu) hand such frames to the CPU backend.
+    Backends with GPU ``passes`` keep the visibility buffer on the device for them."""
     if settings.point_size == 1:
-        return backend, {}
+        return backend, ({"keep_on_device": True} if getattr(backend, "passes", None) is not None else {})
     from .splats import splat_params
 
-    if backend.name != "cpu":
+    if backend.name not in ("cpu", "wgpu"):
         import warnings
 
         from ...backends import get_backend
@@ -38,7 +39,8 @@ def raster_options(backend, settings, camera):
             stacklevel=3,
         )
         backend = get_backend("cpu")
-    return backend, {"splat": splat_params(settings, camera)}
+    extra = {"keep_on_device": True} if getattr(backend, "passes", None) is not None else {}
+    return backend, {"splat": splat_params(settings, camera), **extra}
 
 
 def finish_frame(backend, cloud, camera, sel, vis, settings, near, far):
@@ -51,14 +53,22 @@ def finish_frame(backend, cloud, camera, sel, vis, settings, near, far):
 
 def _finish(backend, cloud, camera, sel, vis, settings, near, far):
     width, height = camera.width, camera.height
+    # Backends with ``passes`` (wgpu) run each pass themselves, on buffers kept on the device;
+    # their results turn into numpy arrays (read back) only at the end.
+    gpu = getattr(backend, "passes", None)
     if settings.fill_holes:
         from .holes import fill_holes
 
+        if gpu is not None:
+            fill_holes = gpu.fill_holes
         vis = fill_holes(vis, width, height, settings.fill_holes, settings.fill_holes_foveated)
     colors_per_point = point_colors(cloud, settings)
-    colors = backend.resolve(vis, colors_per_point, settings.background)
+    colors = (backend if gpu is None else gpu).resolve(vis, colors_per_point, settings.background)
     if settings.hqs:
         from .hqs import hqs_colors
+
+        if gpu is not None:
+            hqs_colors = gpu.hqs_colors
 
         splat = None
         if settings.point_size > 1:
@@ -83,9 +93,13 @@ def _finish(backend, cloud, camera, sel, vis, settings, near, far):
     if settings.lighting:
         from .lighting import shade
 
+        if gpu is not None:
+            shade = gpu.shade
         colors = shade(cloud, camera, vis, colors, settings.shininess)
     if settings.edl:
         from .edl import eye_dome_lighting
 
+        if gpu is not None:
+            eye_dome_lighting = gpu.eye_dome_lighting
         colors = eye_dome_lighting(vis, colors, width, height, settings.edl_strength, settings.edl_radius)
-    return vis, np.ascontiguousarray(colors)
+    return np.ascontiguousarray(vis), np.ascontiguousarray(colors)

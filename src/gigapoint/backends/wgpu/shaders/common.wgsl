@@ -1,5 +1,5 @@
-// Shared by the rasterize passes: the bindings of one page of point data, the point
-// decoder and the projection. The loader inserts this file where a pass says
+// Shared by the passes that draw points (rasterize, HQS): the bindings of one page of
+// point data, the point decoder, the projection and the splat footprint. The loader inserts this file where a pass says
 // `//! include common.wgsl`; the structs BatchRecord and Params are generated from numpy
 // dtypes (backends/wgpu/layout.py) and prepended to every shader.
 
@@ -12,6 +12,9 @@
 @group(0) @binding(4) var<storage, read> high: array<u32>;
 // The same buffer as `low`, seen 4 words at a time for vertex prefetch (paper 3.4).
 @group(0) @binding(5) var<storage, read> low4: array<vec4<u32>>;
+// Splat footprint (render/passes/splats.py): rows (dx, dy, need, weight) sorted by need;
+// weight is the HQS soft-splat weight of the row (-1: computed per point, attenuated sizes).
+@group(0) @binding(6) var<storage, read> footprint: array<vec4<i32>>;
 
 // The paper's workgroup: 128 threads share one batch, ~80 points each.
 const WORKGROUP_SIZE: u32 = 128u;
@@ -67,9 +70,37 @@ fn project(m: array<vec4<f32>, 4>, p: vec3<f32>) -> vec2<u32> {
     return vec2<u32>(u32(py) * params.width + u32(px), bitcast<u32>(sd));
 }
 
-// One workgroup draws one selected batch. Each pass supplies
-//     fn visit(pixel: u32, depth_bits: u32, index: u32)
-// (WGSL resolves module-scope names in any order), so the batch loop exists once.
+// Every pixel a point covers: write_batch in raster.py. A point of size s (params.point_size,
+// or with attenuation atten / depth clamped to 1..point_size) covers the footprint rows with
+// need <= s, each with the point's own key, so nearer points win pixel by pixel. Each pass
+// supplies
+//     fn visit(pixel: u32, depth_bits: u32, index: u32, row: u32, size: f32)
+// (WGSL resolves module-scope names in any order), so the loops exist once.
+fn cover(pixel: u32, depth_bits: u32, index: u32) {
+    if (params.fp_count == 1u) {  // one-pixel points
+        visit(pixel, depth_bits, index, 0u, 1.0);
+        return;
+    }
+    var s = params.point_size;
+    if (params.atten != 0.0) {
+        s = min(params.point_size, max(1.0, params.atten / bitcast<f32>(depth_bits)));
+    }
+    let x = i32(pixel % params.width);
+    let y = i32(pixel / params.width);
+    for (var o = 0u; o < params.fp_count; o++) {
+        let row = footprint[o];
+        if (f32(row.z) > s) {
+            break;
+        }
+        let xx = x + row.x;
+        let yy = y + row.y;
+        if (xx >= 0 && xx < i32(params.width) && yy >= 0 && yy < i32(params.height)) {
+            visit(u32(yy) * params.width + u32(xx), depth_bits, index, o, s);
+        }
+    }
+}
+
+// One workgroup draws one selected batch.
 fn draw_batch(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) {
     // Dispatches are 2D when there are more batches than one dimension allows (65535).
     let b = wid.x + wid.y * nwg.x;
@@ -79,8 +110,11 @@ fn draw_batch(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) {
     // The batch record first: matrix, precision and point range are the same for all
     // 128 threads (one cached load each).
     let rec = batches[params.batch_offset + b];
+    // step > 1: every step-th point only (a point budget; Morton order makes it an even subsample)
+    let step = max(params.step, 1u);
+    let n = (rec.count + step - 1u) / step;
     var tail = 0u;  // first point left to the one-by-one loop
-    if (rec.bits == 10u && (rec.local_first & 3u) == 0u) {
+    if (step == 1u && rec.bits == 10u && (rec.local_first & 3u) == 0u) {
         // Vertex prefetch (paper 3.4): one 16-byte load yields 4 points' low words;
         // thread t draws points 4t..4t+3, then 4(t+128).. and so on.
         let quads = rec.count / 4u;
@@ -90,17 +124,18 @@ fn draw_batch(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) {
             for (var k = 0u; k < 4u; k++) {
                 let hit = project(rec.rows, grid_coords10(words[k]));
                 if (hit.x != NO_PIXEL) {
-                    visit(hit.x, hit.y, rec.first + 4u * q + k);
+                    cover(hit.x, hit.y, rec.first + 4u * q + k);
                 }
             }
         }
         tail = 4u * quads;
     }
     // Thread t draws points t, t+128, ...: neighbouring threads read neighbouring words.
-    for (var j = tail + lid; j < rec.count; j += WORKGROUP_SIZE) {
-        let hit = project(rec.rows, grid_coords(rec.local_first + j, rec.bits));
+    for (var j = tail + lid; j < n; j += WORKGROUP_SIZE) {
+        let i = j * step;
+        let hit = project(rec.rows, grid_coords(rec.local_first + i, rec.bits));
         if (hit.x != NO_PIXEL) {
-            visit(hit.x, hit.y, rec.first + j);
+            cover(hit.x, hit.y, rec.first + i);
         }
     }
 }

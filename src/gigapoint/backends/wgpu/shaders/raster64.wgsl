@@ -3,9 +3,9 @@
 // index, whatever order the workgroups run in.
 //! include common.wgsl
 
-@group(0) @binding(6) var<storage, read_write> visibility: array<atomic<u64>>;
+@group(0) @binding(7) var<storage, read_write> visibility: array<atomic<u64>>;
 
-fn visit(pixel: u32, depth_bits: u32, index: u32) {
+fn visit(pixel: u32, depth_bits: u32, index: u32, row: u32, size: f32) {
     let key = (u64(depth_bits) << 32u) | u64(index);
     // Early-depth test: a plain load rejects most occluded points without an atomic.
     if (key < atomicLoad(&visibility[pixel])) {

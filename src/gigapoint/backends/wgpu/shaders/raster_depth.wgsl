@@ -3,9 +3,9 @@
 // u64 (depth bits), word 2p the low half (point index), so no pack pass is needed.
 //! include common.wgsl
 
-@group(0) @binding(6) var<storage, read_write> visibility: array<atomic<u32>>;
+@group(0) @binding(7) var<storage, read_write> visibility: array<atomic<u32>>;
 
-fn visit(pixel: u32, depth_bits: u32, index: u32) {
+fn visit(pixel: u32, depth_bits: u32, index: u32, row: u32, size: f32) {
     let slot = 2u * pixel + 1u;
     if (depth_bits < atomicLoad(&visibility[slot])) {  // early-depth test
         atomicMin(&visibility[slot], depth_bits);

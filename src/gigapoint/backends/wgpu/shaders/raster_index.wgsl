@@ -3,9 +3,9 @@
 // min of depth << 32 | index, so both paths give the same buffer.
 //! include common.wgsl
 
-@group(0) @binding(6) var<storage, read_write> visibility: array<atomic<u32>>;
+@group(0) @binding(7) var<storage, read_write> visibility: array<atomic<u32>>;
 
-fn visit(pixel: u32, depth_bits: u32, index: u32) {
+fn visit(pixel: u32, depth_bits: u32, index: u32, row: u32, size: f32) {
     // Pass 1 is complete, so the depth word no longer changes.
     if (depth_bits == atomicLoad(&visibility[2u * pixel + 1u]) && index < atomicLoad(&visibility[2u * pixel])) {
         atomicMin(&visibility[2u * pixel], index);

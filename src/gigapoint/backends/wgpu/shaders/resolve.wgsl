@@ -2,9 +2,9 @@
 // shading: colors are read for visible points only), or the background.
 // Colors may span several pages (storage binding limit): one dispatch per page, each
 // writing the pixels whose index falls in its page; every dispatch writes the background.
+//! include keys.wgsl
 
 @group(0) @binding(0) var<uniform> params: Params;
-// One u64 per pixel seen as (low, high) u32 words: x = point index, y = depth bits.
 @group(0) @binding(1) var<storage, read> visibility: array<vec2<u32>>;
 @group(0) @binding(2) var<storage, read> colors: array<u32>;
 @group(0) @binding(3) var<storage, read_write> image: array<u32>;
@@ -13,7 +13,7 @@
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     for (var p = gid.x; p < params.n_items; p += nwg.x * 256u) {
         let key = visibility[p];
-        if (key.x == 0xffffffffu && key.y == 0xffffffffu) {
+        if (is_empty(key)) {
             image[p] = params.background;
         } else if (key.x >= params.page_first && key.x - params.page_first < params.page_count) {
             image[p] = colors[key.x - params.page_first];
