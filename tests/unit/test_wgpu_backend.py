@@ -22,27 +22,12 @@ from gigapoint.errors import BackendUnavailableError, GigapointError
 from gigapoint.render.reference import reference_visibility
 from gigapoint.render.selection import Selection, select
 
+from wgpu_support import gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
+
 pytestmark = pytest.mark.gpu
 
 MAX_DIFF_FRACTION = 0.001
 _LOW32 = np.uint64(0xFFFFFFFF)
-
-
-def _wgpu_or_skip(**options) -> WgpuBackend:
-    try:
-        return WgpuBackend(**options)
-    except BackendUnavailableError as exc:
-        pytest.skip(f"no wgpu adapter: {exc}")
-
-
-@pytest.fixture(scope="module")
-def gpu():
-    return _wgpu_or_skip()
-
-
-@pytest.fixture(scope="module")
-def gpu32():
-    return _wgpu_or_skip(atomics64=False)
 
 
 @pytest.fixture(scope="module")
@@ -186,7 +171,7 @@ def test_frame_beyond_one_binding_is_refused(gpu, scene):
 def test_paging_gives_the_same_buffer(gpu, scene):
     """Pages of 3 batches and a budget of 4 page-words: 7 pages, evictions every frame."""
     page = 3 * BATCH_SIZE * 4
-    paged = _wgpu_or_skip(page_bytes=page, memory_budget=4 * page)
+    paged = wgpu_or_skip(page_bytes=page, memory_budget=4 * page)
     assert paged.page_points == 3 * BATCH_SIZE
     for view in ("iso", "inside"):
         cam = _cameras(scene)[view]
@@ -202,7 +187,7 @@ def test_paging_with_ragged_batches(cpu):
     """Batches of 1001 points: page starts and batch starts not multiples of 4 (no prefetch)."""
     xyz, rgba, _ = gigapoint.demo_arrays(30_000)
     cloud = cloud_from_points(xyz, rgba, batch_size=1001)
-    paged = _wgpu_or_skip(page_bytes=5 * 1001 * 4 + 16, atomics64=False)
+    paged = wgpu_or_skip(page_bytes=5 * 1001 * 4 + 16, atomics64=False)
     cam = Camera.fit(cloud.bounds, width=160, height=120)
     sel, args = _frame(cloud, cam)
     assert paged._plan(cloud).n_pages == 6
@@ -210,14 +195,14 @@ def test_paging_with_ragged_batches(cpu):
 
 
 def test_a_batch_larger_than_a_page_is_refused(scene):
-    small = _wgpu_or_skip(page_bytes=BATCH_SIZE * 2)  # 5120 points
+    small = wgpu_or_skip(page_bytes=BATCH_SIZE * 2)  # 5120 points
     sel, args = _frame(scene, _cameras(scene)["iso"])
     with pytest.raises(GigapointError, match="more than one GPU page"):
         small.rasterize(scene, sel, *args)
 
 
 def test_second_frame_uploads_nothing_and_dead_clouds_are_freed():
-    backend = _wgpu_or_skip()
+    backend = wgpu_or_skip()
     cloud = gigapoint.demo(30_000)
     cam = Camera.fit(cloud.bounds, width=64, height=64)
     sel, args = _frame(cloud, cam, threshold_px=1e-9)  # 30 bits: low, med and high uploaded
@@ -237,7 +222,7 @@ def test_second_frame_uploads_nothing_and_dead_clouds_are_freed():
 
 
 def test_only_needed_words_are_uploaded(scene):
-    backend = _wgpu_or_skip()
+    backend = wgpu_or_skip()
     sel, args = _frame(scene, _cameras(scene)["iso"], threshold_px=1e9)  # 10 bits everywhere
     backend.rasterize(scene, sel, *args)
     assert backend.memory["uploaded"] == 4 * scene.n_points  # low words only
@@ -254,7 +239,7 @@ def test_resolve_matches_cpu_on_the_same_buffer(gpu, cpu, scene):
 
 
 def test_resolve_with_paged_colors(cpu, scene):
-    paged = _wgpu_or_skip(page_bytes=BATCH_SIZE * 4 * 2)  # 10 color pages
+    paged = wgpu_or_skip(page_bytes=BATCH_SIZE * 4 * 2)  # 10 color pages
     sel, args = _frame(scene, _cameras(scene)["top"])
     vis = cpu.rasterize(scene, sel, *args)
     assert np.array_equal(paged.resolve(vis, scene.color, (0, 0, 0, 255)), cpu.resolve(vis, scene.color, (0, 0, 0, 255)))

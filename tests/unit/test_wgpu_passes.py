@@ -31,27 +31,12 @@ from gigapoint.render.passes.lighting import shade
 from gigapoint.render.passes.splats import point_sizes, splat_params
 from gigapoint.render.selection import Selection, select
 
+from wgpu_support import gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
+
 pytestmark = pytest.mark.gpu
 
 MAX_DIFF_FRACTION = 0.001
 BG = (10, 20, 30, 255)
-
-
-def _wgpu_or_skip(**options) -> WgpuBackend:
-    try:
-        return WgpuBackend(**options)
-    except BackendUnavailableError as exc:
-        pytest.skip(f"no wgpu adapter: {exc}")
-
-
-@pytest.fixture(scope="module")
-def gpu():
-    return _wgpu_or_skip()
-
-
-@pytest.fixture(scope="module")
-def gpu32():
-    return _wgpu_or_skip(atomics64=False)
 
 
 @pytest.fixture(scope="module", params=["atomics64", "two-pass"])
@@ -249,7 +234,7 @@ def test_hqs_means_round_half_up_like_the_reference(any_gpu):
 
 def test_hqs_with_paged_colors(cpu, scene):
     """Point words and colors in pages of 2 batches: the accumulate reads each page's colors."""
-    paged = _wgpu_or_skip(page_bytes=BATCH_SIZE * 4 * 2)
+    paged = wgpu_or_skip(page_bytes=BATCH_SIZE * 4 * 2)
     cam = _cameras(scene)["iso"]
     sel, (w, h, near, far) = _frame(scene, cam)
     assert paged._plan(scene).n_pages > 2
@@ -317,7 +302,7 @@ def test_lighting_matches_cpu(any_gpu, cpu, scene, view, shininess):
 
 
 def test_lighting_with_paged_normals(cpu, scene):
-    paged = _wgpu_or_skip(page_bytes=BATCH_SIZE * 4 * 2)
+    paged = wgpu_or_skip(page_bytes=BATCH_SIZE * 4 * 2)
     cam = _cameras(scene)["iso"]
     sel, (w, h, near, far) = _frame(scene, cam)
     vis = cpu.rasterize(scene, sel, w, h, near, far)
@@ -427,7 +412,7 @@ def test_every_step_th_point_like_the_cpu(any_gpu, cpu, scene, step):
 
 def test_hqs_falls_back_to_the_cpu_pass_on_adapters_binding_8_storage_buffers(cpu, scene):
     """WebGPU guarantees 8 storage buffers a stage; HQS needs 9 and otherwise runs on the CPU."""
-    small = _wgpu_or_skip()
+    small = wgpu_or_skip()
     small.hqs_on_gpu = False
     cam = _cameras(scene)["iso"]
     sel, (w, h, near, far) = _frame(scene, cam)
