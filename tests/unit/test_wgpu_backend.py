@@ -14,7 +14,6 @@ import pytest
 
 import gigapoint
 from gigapoint import Camera, RenderSettings
-from gigapoint.backends.numba_cpu import NumbaCpuBackend
 from gigapoint.backends.wgpu import WgpuBackend
 from gigapoint.core.cloud import cloud_from_points
 from gigapoint.core.layout import BATCH_SIZE, EMPTY_PIXEL
@@ -22,17 +21,12 @@ from gigapoint.errors import BackendUnavailableError, GigapointError
 from gigapoint.render.reference import reference_visibility
 from gigapoint.render.selection import Selection, select
 
-from wgpu_support import gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
+from wgpu_support import cpu, gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
 
 pytestmark = pytest.mark.gpu
 
 MAX_DIFF_FRACTION = 0.001
 _LOW32 = np.uint64(0xFFFFFFFF)
-
-
-@pytest.fixture(scope="module")
-def cpu():
-    return NumbaCpuBackend()
 
 
 @pytest.fixture(scope="module")

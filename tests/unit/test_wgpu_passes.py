@@ -31,23 +31,12 @@ from gigapoint.render.passes.lighting import shade
 from gigapoint.render.passes.splats import point_sizes, splat_params
 from gigapoint.render.selection import Selection, select
 
-from wgpu_support import gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
+from wgpu_support import any_gpu, cpu, gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
 
 pytestmark = pytest.mark.gpu
 
 MAX_DIFF_FRACTION = 0.001
 BG = (10, 20, 30, 255)
-
-
-@pytest.fixture(scope="module", params=["atomics64", "two-pass"])
-def any_gpu(request, gpu, gpu32):
-    """Each test using it runs on the 64-bit path (where the adapter has it) and the fallback."""
-    return gpu if request.param == "atomics64" else gpu32
-
-
-@pytest.fixture(scope="module")
-def cpu():
-    return NumbaCpuBackend()
 
 
 @pytest.fixture(scope="module")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from gigapoint.backends.numba_cpu import NumbaCpuBackend
 from gigapoint.backends.wgpu import WgpuBackend
 from gigapoint.errors import BackendUnavailableError
 
@@ -25,3 +26,14 @@ def gpu():
 def gpu32():
     """The two-pass 32-bit fallback."""
     return wgpu_or_skip(atomics64=False)
+
+
+@pytest.fixture(scope="module", params=["atomics64", "two-pass"])
+def any_gpu(request, gpu, gpu32):
+    """Each test using it runs on the 64-bit path (where the adapter has it) and the fallback."""
+    return gpu if request.param == "atomics64" else gpu32
+
+
+@pytest.fixture(scope="module")
+def cpu():
+    return NumbaCpuBackend()

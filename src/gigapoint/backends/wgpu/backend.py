@@ -11,7 +11,13 @@ Where the adapter offers 64-bit atomics (``shader-int64-atomic-min-max``) one pa
 ``atomicMin(depth << 32 | index)``; otherwise two passes of 32-bit atomics give the
 identical buffer. Point words are uploaded once per cloud, in pages of whole batches that
 fit one storage binding, and kept within a memory budget (memory.py); medium/high words
-only once a frame draws a batch at 20/30 bits.
+only once a frame draws a batch at 20/30 bits. Clouds that refill their buffers in place
+(the LOD arena: nodes loaded and evicted between frames) bump a ``version``; the slots
+written since a page was uploaded are sent again before the page is drawn.
+
+``rasterize_views`` draws several views (a stereo pair) in one pass, as the CPU backend's:
+each workgroup reads its batch's words once and projects and writes every point into each
+view's buffer, at that view's precision (2022 paper, 3.7).
 
 Adapters: Vulkan, Metal or D3D12 (wgpu's OpenGL backend is not used: no 64-bit atomics,
 small storage limits); a hardware GPU is preferred, Mesa lavapipe serves where none is.
@@ -30,8 +36,8 @@ from contextlib import contextmanager
 import numpy as np
 
 from ...errors import BackendUnavailableError, GigapointError
-from .layout import GPU_BATCH_DTYPE, PARAMS_DTYPE
-from .memory import BufferCache, PagePlan, plan_pages
+from .layout import GPU_BATCH_DTYPE, MAX_VIEWS, PARAMS_DTYPE
+from .memory import BufferCache, PagePlan, batch_ends, plan_pages
 from .passes import DeviceArray, GpuPasses
 from .shaders import shader_source
 
@@ -94,6 +100,38 @@ def _pick_adapter(wgpu, require_hardware: bool):
     return min(adapters, key=lambda a: _TYPE_RANK.get(a.info.get("adapter_type"), 2))
 
 
+class _Views:
+    """The batches one draw reads and, per view, their precision, matrix and clip range."""
+
+    __slots__ = ("bits", "fars", "ids", "matrices", "nears")
+
+    def __init__(self, ids, bits, matrices, nears, fars) -> None:
+        self.ids, self.bits, self.matrices, self.nears, self.fars = ids, bits, matrices, nears, fars
+
+    @property
+    def n(self) -> int:
+        return len(self.nears)
+
+    @classmethod
+    def of(cls, ids, bits, matrices, nears, fars) -> _Views:
+        """Checked and converted: ids (k,), bits (V, k), matrices (V, k, 4, 4), nears/fars (V,)."""
+        ids = np.asarray(ids, np.int64).reshape(-1)
+        nears = np.asarray(nears, np.float32).reshape(-1)
+        fars = np.asarray(fars, np.float32).reshape(-1)
+        n, k = len(nears), len(ids)
+        bits = np.asarray(bits, np.int64)
+        matrices = np.asarray(matrices, np.float32)
+        if n == 0 or len(fars) != n or bits.shape != (n, k) or matrices.shape != (n, k, 4, 4):
+            raise GigapointError(
+                f"wgpu backend: views need bits (V, k), matrices (V, k, 4, 4) and V nears/fars for k = {k} batches; "
+                f"got bits {bits.shape}, matrices {matrices.shape}, {n} nears, {len(fars)} fars"
+            )
+        return cls(ids, bits.astype(np.uint32), matrices, nears, fars)
+
+    def subset(self, v0: int, v1: int) -> _Views:
+        return _Views(self.ids, self.bits[v0:v1], self.matrices[v0:v1], self.nears[v0:v1], self.fars[v0:v1])
+
+
 class WgpuBackend:
     """GPU rasterizer. ``require_hardware``: refuse CPU adapters (lavapipe), for backend auto.
 
@@ -153,7 +191,8 @@ class WgpuBackend:
         self.page_points = max(4, limit // 16 * 4)
         self.cache = BufferCache(self.device, memory_budget)
         self._plans: dict[int, PagePlan] = {}
-        self._pipelines: dict[str, object] = {}
+        self._pipelines: dict[tuple[str, int], object] = {}
+        self._modules: dict[str, object] = {}
         self._frame_buffers: dict[str, object] = {}
         self._dummy = self.device.create_buffer(size=16, usage=wgpu.BufferUsage.STORAGE)
         # One instance serves every caller (registry); frames go one at a time. Re-entrant:
@@ -188,24 +227,32 @@ class WgpuBackend:
             "uploaded": self.cache.bytes_uploaded,
             "uploads": self.cache.uploads,
             "evictions": self.cache.evictions,
+            "refreshes": self.cache.refreshes,
             "budget": self.cache.budget,
             "page_points": self.page_points,
         }
 
     def forget(self, cloud) -> None:
-        """Drop a cloud's GPU copies (needed only after changing its arrays in place)."""
+        """Drop a cloud's GPU copies (needed only after changing its arrays in place, for clouds
+        without a ``version`` counter: memory.py)."""
         for a in (cloud.low, cloud.med, cloud.high, cloud.color):
             self.cache.forget(a)
         self._plans.pop(id(cloud.batches), None)
 
     # ------------------------------------------------------------------ plumbing
-    def _pipeline(self, pass_name: str):
-        if pass_name not in self._pipelines:
-            module = self.device.create_shader_module(label=pass_name, code=shader_source(pass_name))
-            self._pipelines[pass_name] = self.device.create_compute_pipeline(
-                label=pass_name, layout="auto", compute={"module": module, "entry_point": "main"}
-            )
-        return self._pipelines[pass_name]
+    def _pipeline(self, pass_name: str, views: int = 1):
+        """The compute pipeline of a pass; draw passes per number of views (common.wgsl's
+        VIEWS override: the one-view pipeline compiles without the views loops)."""
+        key = (pass_name, views)
+        if key not in self._pipelines:
+            module = self._modules.get(pass_name)
+            if module is None:
+                module = self._modules[pass_name] = self.device.create_shader_module(label=pass_name, code=shader_source(pass_name))
+            compute = {"module": module, "entry_point": "main"}
+            if views != 1:
+                compute["constants"] = {"VIEWS": views}
+            self._pipelines[key] = self.device.create_compute_pipeline(label=f"{pass_name} x{views}", layout="auto", compute=compute)
+        return self._pipelines[key]
 
     def _frame_buffer(self, role: str, nbytes: int, usage: int):
         """A reusable per-role buffer of at least ``nbytes`` (visibility, records, image...)."""
@@ -224,18 +271,30 @@ class WgpuBackend:
         return self.device.create_buffer_with_data(data=p, usage=self._wgpu.BufferUsage.UNIFORM)
 
     def _plan(self, cloud) -> PagePlan:
+        """The cloud's pages. Clouds with a ``version`` (an LOD arena) refill their batches in
+        place: their pages span each batch's room up to the next, so they stay put while
+        counts change, and are planned again if a batch outgrows them."""
         for key in [k for k, p in self._plans.items() if p.ref() is None]:
             del self._plans[key]
-        plan = self._plans.get(id(cloud.batches))
-        if plan is None or plan.ref() is not cloud.batches:
-            starts, stops, page_of = plan_pages(cloud.batches, self.page_points)
-            plan = PagePlan(weakref.ref(cloud.batches), starts, stops, page_of)
-            self._plans[id(cloud.batches)] = plan
+        batches = cloud.batches
+        plan = self._plans.get(id(batches))
+        if getattr(cloud, "version", None) is None:
+            if plan is None or plan.ref() is not batches:
+                starts, stops, page_of = plan_pages(batches, self.page_points)
+                plan = PagePlan(weakref.ref(batches), starts, stops, page_of)
+                self._plans[id(batches)] = plan
+            return plan
+        ends = batch_ends(batches, self.page_points, len(cloud.low))
+        if plan is None or plan.ref() is not batches or plan.ends is None or not np.array_equal(plan.ends, ends):
+            starts, stops, page_of = plan_pages(batches, self.page_points, ends)
+            plan = PagePlan(weakref.ref(batches), starts, stops, page_of, ends)
+            self._plans[id(batches)] = plan
         return plan
 
-    def _dispatch(self, pass_name: str, entries: list, groups: int) -> None:
-        """Record and submit one dispatch of ``groups`` workgroups (2D past 65535)."""
-        pipeline = self._pipeline(pass_name)
+    def _dispatch(self, pass_name: str, entries: list, groups: int, views: int = 1) -> None:
+        """Record and submit one dispatch of ``groups`` workgroups (2D past 65535); ``views``:
+        of a draw pass (common.wgsl)."""
+        pipeline = self._pipeline(pass_name, views)
         bind_group = self.device.create_bind_group(
             layout=pipeline.get_bind_group_layout(0),
             entries=[{"binding": i, "resource": {"buffer": b, "offset": 0, "size": s}} for i, (b, s) in enumerate(entries)],
@@ -338,8 +397,36 @@ class WgpuBackend:
         ``keep_on_device``: return a DeviceArray instead (the frame's passes read it in place;
         ``np.asarray`` reads it back), once the GPU is done."""
         step = max(1, int(step))
+        views = _Views.of(selection.ids, np.asarray(selection.bits)[None], np.asarray(selection.matrices)[None], [near], [far])
         with self._lock:
-            return self._rasterize(cloud, selection, int(width), int(height), float(near), float(far), splat, keep_on_device, step)
+            n_pixels = int(width) * int(height)
+            self._check_frame(n_pixels)
+            vis = self._draw_views(cloud, views, int(width), int(height), splat, step, "visibility")
+            if keep_on_device:
+                self._read_back(vis, np.uint64, 1)  # wait for the GPU, so the caller's raster time is real
+                return DeviceArray(self, "visibility", np.uint64, n_pixels)
+            out = self._read_back(vis, np.uint64, n_pixels)
+            self._remember_host_copy("visibility", out)
+            return out
+
+    def rasterize_views(self, cloud, ids, bits, matrices, width, height, nears, fars, threads=None, splat=None, step=1) -> np.ndarray:
+        """(V, height * width) visibility buffers of V views drawn in ONE pass over batches ``ids``
+        (2022 paper, 3.7; the CPU backend's signature): bits (V, k), matrices (V, k, 4, 4) and
+        nears/fars (V,) are each view's own. Each workgroup reads its batch's points once and
+        writes them into every view's buffer (both atomics paths); views that do not fit one
+        buffer binding together, or more than MAX_VIEWS, are drawn in groups."""
+        views = _Views.of(ids, bits, matrices, nears, fars)
+        width, height, step = int(width), int(height), max(1, int(step))
+        n_pixels = width * height
+        with self._lock:
+            self._check_frame(n_pixels)
+            out = np.empty((views.n, n_pixels), np.uint64)
+            group = max(1, min(MAX_VIEWS, self.max_binding // (8 * max(n_pixels, 1))))
+            for v0 in range(0, views.n, group):
+                part = views.subset(v0, min(views.n, v0 + group))
+                vis = self._draw_views(cloud, part, width, height, splat, step, "views")
+                out[v0 : v0 + part.n] = self._read_back(vis, np.uint64, part.n * n_pixels).reshape(part.n, n_pixels)
+            return out
 
     def resolve(self, visibility: np.ndarray, color: np.ndarray, background_rgba) -> np.ndarray:
         """u32 RGBA per pixel: the winning point's color or the background."""
@@ -367,67 +454,83 @@ class WgpuBackend:
         uniforms = {"fp_count": len(fp), "point_size": size, "atten": atten, "softness": np.float32(softness)}
         return (buf, rows.nbytes), uniforms
 
-    def _draw_batches(self, cloud, selection, pass_names, params: dict, footprint, extra) -> None:
-        """Dispatch ``pass_names`` (draw passes: common.wgsl's bindings 0-6) over the selected
-        batches, page by page; ``extra(start, stop, pinned)`` gives the pass's own bindings
-        (7...) for the page of points start..stop."""
-        ids = np.asarray(selection.ids, np.int64)
+    def _draw_batches(self, cloud, views: _Views, pass_names, params: dict, footprint, extra) -> None:
+        """Dispatch ``pass_names`` (draw passes: common.wgsl's bindings 0-6) over the batches of
+        ``views``, page by page, each workgroup drawing one batch into every view;
+        ``extra(start, stop, pinned)`` gives the pass's own bindings (7...) for the page of
+        points start..stop."""
+        ids = views.ids
         if not len(ids):
             return
+        n_views, k = views.n, len(ids)
+        if n_views > MAX_VIEWS:
+            raise GigapointError(f"wgpu backend: one dispatch draws at most {MAX_VIEWS} views, got {n_views}")
         usage = self._wgpu.BufferUsage
+        # arrays that an LOD arena rewrites between frames: pages are checked against its version
+        self.cache.track(cloud, (cloud.low, cloud.med, cloud.high, getattr(cloud, "color", None)))
         plan = self._plan(cloud)
         pages = plan.page_of[ids]
         order = np.argsort(pages, kind="stable")  # one run of records per page
         ids, pages = ids[order], pages[order]
         chosen = cloud.batches[ids]
-        records = np.zeros(len(ids), GPU_BATCH_DTYPE)
-        records["rows"] = np.asarray(selection.matrices, np.float32)[order]
-        records["first"] = chosen["first"]
-        records["local_first"] = chosen["first"].astype(np.int64) - plan.starts[pages]
-        records["count"] = chosen["count"]
-        records["bits"] = np.asarray(selection.bits)[order]
+        bounds = np.flatnonzero(np.diff(pages)) + 1
+        runs = list(zip(np.concatenate([[0], bounds]).tolist(), np.concatenate([bounds, [k]]).tolist()))
+        # per page run r0..r1 (one dispatch), its records view by view: view v's record of
+        # the run's b-th batch is record V * r0 + v * (r1 - r0) + b
+        run_start = np.repeat([r0 for r0, _ in runs], [r1 - r0 for r0, r1 in runs])
+        run_len = np.repeat([r1 - r0 for r0, r1 in runs], [r1 - r0 for r0, r1 in runs])
+        j = np.arange(k)
+        slot = n_views * run_start + np.arange(n_views)[:, None] * run_len + (j - run_start)  # (V, k)
+        records = np.zeros(n_views * k, GPU_BATCH_DTYPE)
+        records["rows"][slot] = views.matrices[:, order]
+        records["first"][slot] = chosen["first"]
+        records["local_first"][slot] = chosen["first"].astype(np.int64) - plan.starts[pages]
+        records["count"][slot] = chosen["count"]
+        records["bits"][slot] = views.bits[:, order]
         rec_buf = self._frame_buffer("records", records.nbytes, usage.STORAGE | usage.COPY_DST)
         self.device.queue.write_buffer(rec_buf, 0, records)
-        bounds = np.flatnonzero(np.diff(pages)) + 1
-        runs = list(zip(np.concatenate([[0], bounds]).tolist(), np.concatenate([bounds, [len(ids)]]).tolist()))
+        table = np.zeros((MAX_VIEWS, 4), np.float32)
+        table[:n_views, 0] = views.nears
+        table[:n_views, 1] = views.fars
+        view_bits = views.bits[:, order]
         for pass_name in pass_names:
             for r0, r1 in runs:
                 p = int(pages[r0])
                 start, stop = int(plan.starts[p]), int(plan.stops[p])
-                max_bits = int(records["bits"][r0:r1].max())
+                max_bits = int(view_bits[:, r0:r1].max())
                 pinned: set = set()
                 words = [self.cache.get(cloud.low, start, stop, pinned)]
                 # Medium/high words go to the GPU only once a frame needs them.
                 words.append(self.cache.get(cloud.med, start, stop, pinned) if max_bits >= 20 else self._dummy)
                 words.append(self.cache.get(cloud.high, start, stop, pinned) if max_bits >= 30 else self._dummy)
                 own = extra(start, stop, pinned)
-                uniform = self._params(**params, batch_offset=r0, batch_count=r1 - r0, page_first=start, page_count=stop - start)
+                uniform = self._params(
+                    **params, batch_offset=n_views * r0, batch_count=r1 - r0, page_first=start, page_count=stop - start,
+                    near=table[0, 0], far=table[0, 1], views=table,
+                )  # fmt: skip
                 entries = [(uniform, PARAMS_DTYPE.itemsize), (rec_buf, records.nbytes)]
                 entries += [(w, w.size) for w in words]
                 entries.append((words[0], words[0].size // 16 * 16))  # low again, as vec4 (prefetch)
                 entries.append(footprint)
-                self._dispatch(pass_name, entries + own, r1 - r0)
+                self._dispatch(pass_name, entries + own, r1 - r0, n_views)
 
-    def _rasterize(self, cloud, selection, width: int, height: int, near: float, far: float, splat=None, keep_on_device=False, step=1):
-        n_pixels = int(width) * int(height)
-        self._check_frame(n_pixels)
+    def _draw_views(self, cloud, views: _Views, width: int, height: int, splat, step: int, role: str):
+        """The visibility buffer (frame buffer ``role``) of ``views``: view v's image at pixels
+        v * width * height.., cleared and drawn on the GPU (not read back)."""
+        n_pixels = width * height
         if cloud.n_points > 0xFFFFFFFF:
             raise GigapointError(f"{cloud.name}: {cloud.n_points:,} points exceed the 2^32 a visibility buffer can index")
         usage = self._wgpu.BufferUsage
-        vis = self._writable("visibility", n_pixels * 8, usage.STORAGE | usage.COPY_SRC | usage.COPY_DST)
+        vis = self._writable(role, views.n * n_pixels * 8, usage.STORAGE | usage.COPY_SRC | usage.COPY_DST)
         self.cache.purge_dead()
         # Clear to EMPTY (all ones) on the GPU rather than uploading a full frame.
         self._clear(vis, _EMPTY_WORD)
         footprint, splat_uniforms = self._footprint(splat)
-        params = {"width": width, "height": height, "near": np.float32(near), "far": np.float32(far), "step": step, **splat_uniforms}
+        params = {"width": width, "height": height, "step": step, **splat_uniforms}
         passes = ("raster64",) if self.atomics64 else ("raster_depth", "raster_index")
-        self._draw_batches(cloud, selection, passes, params, footprint, lambda start, stop, pinned: [(vis, n_pixels * 8)])
-        if keep_on_device:
-            self._read_back(vis, np.uint64, 1)  # wait for the GPU, so the caller's raster time is real
-            return DeviceArray(self, "visibility", np.uint64, n_pixels)
-        out = self._read_back(vis, np.uint64, n_pixels)
-        self._remember_host_copy("visibility", out)
-        return out
+        nbytes = views.n * n_pixels * 8
+        self._draw_batches(cloud, views, passes, params, footprint, lambda start, stop, pinned: [(vis, nbytes)])
+        return vis
 
     def _clear(self, buffer, value: int) -> None:
         """Every u32 of ``buffer`` = value, in 16-byte rows (buffers are allocated in whole rows)."""

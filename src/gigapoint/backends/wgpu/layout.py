@@ -9,7 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
-#: One record per selected batch, rebuilt every frame from the Selection.
+#: Most views one draw dispatch writes (stereo: 2; the size of Params' view table); more
+#: views are drawn in groups of this many.
+MAX_VIEWS = 8
+
+#: One record per selected batch and view, rebuilt every frame from the Selection. A dispatch
+#: of n batches and V views reads records batch_offset.. : view v's record of its b-th batch
+#: is record batch_offset + v * n + b.
 #: ``rows`` is the batch's float32 4x4 matrix (10-bit grid units -> x', y', w, depth), row-major,
 #: so the shader can repeat the CPU kernel's ``m[i,0]*x + m[i,1]*y + m[i,2]*z + m[i,3]`` exactly.
 GPU_BATCH_DTYPE = np.dtype(
@@ -27,10 +33,10 @@ PARAMS_DTYPE = np.dtype(
     [
         ("width", "<u4"),
         ("height", "<u4"),
-        ("near", "<f4"),
+        ("near", "<f4"),  # raster, HQS: clip range of view 0 (of the only view, but in multi-view draws)
         ("far", "<f4"),
         ("batch_offset", "<u4"),  # raster: first record of this dispatch in the batch buffer
-        ("batch_count", "<u4"),  # raster: records in this dispatch (one workgroup each)
+        ("batch_count", "<u4"),  # raster: batches in this dispatch (one workgroup each; records per view)
         ("n_items", "<u4"),  # clear / resolve: number of u32 words / pixels
         ("page_first", "<u4"),  # resolve, HQS, lighting: global index of the page's first point
         ("page_count", "<u4"),  # resolve, lighting: points in the page
@@ -52,7 +58,8 @@ PARAMS_DTYPE = np.dtype(
         ("specular", "<f4"),
         ("shininess", "<f4"),
         ("step", "<u4"),  # raster: draw every step-th point of each batch (0 or 1: all)
-        ("_pad", "<u4"),  # uniform buffers are bound in multiples of 16 bytes
+        ("_pad", "<u4"),  # the view table starts on a 16-byte boundary
+        ("views", "<f4", (MAX_VIEWS, 4)),  # raster: view v's (near, far, -, -) (entry 0 repeats near, far)
     ]
 )
 # numpy scalar kind -> WGSL scalar (4-byte types only: WGSL has no portable 64-bit scalar)
@@ -105,4 +112,6 @@ STRUCTS = {"BatchRecord": GPU_BATCH_DTYPE, "Params": PARAMS_DTYPE}
 
 
 def wgsl_structs() -> str:
-    return "\n".join(wgsl_struct(n, d) for n, d in STRUCTS.items())
+    """The structs, and the size of Params' view table (shaders size their per-view arrays by it)."""
+    head = f"const MAX_VIEWS: u32 = {MAX_VIEWS}u;\n"
+    return head + "\n".join(wgsl_struct(n, d) for n, d in STRUCTS.items())

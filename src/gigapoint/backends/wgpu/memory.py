@@ -3,7 +3,16 @@ cached per array, evicted least-recently-used to stay within a byte budget.
 
 Arrays are keyed by identity (``id`` checked through a weak reference), so a second frame
 of the same cloud uploads nothing, and a cloud that is garbage-collected frees its copy.
-An array changed in place must be dropped with ``forget`` (the cache cannot see writes).
+
+Clouds that rewrite their arrays in place (an LOD arena loading and evicting nodes between
+frames) say so with two attributes, and the cache never serves a stale page of them:
+
+- ``version``: an int the cloud increments on every write;
+- ``batch_version`` (optional): per batch, the ``version`` of the write that last filled it.
+
+Their arrays are registered with ``track``; each use of a page compares the cloud's version
+with the page's, and rewrites in place only the batches written since (the whole page without
+``batch_version``). Any other array changed in place must be dropped with ``forget``.
 """
 
 from __future__ import annotations
@@ -22,6 +31,7 @@ class _Entry:
     ref: weakref.ref
     buffer: object
     nbytes: int
+    version: int = 0  # the tracked cloud's version the buffer's contents are from
 
 
 @dataclass
@@ -32,18 +42,19 @@ class PagePlan:
     starts: np.ndarray  # int64 first point of each page
     stops: np.ndarray  # int64 one past the last point
     page_of: np.ndarray  # int64 page of each batch
+    ends: np.ndarray | None = None  # int64 end of each batch as planned (clouds whose batches refill: re-plan when it moves)
 
     @property
     def n_pages(self) -> int:
         return len(self.starts)
 
 
-def plan_pages(batches: np.ndarray, max_points: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Greedy split of batches (in point order) into pages of at most ``max_points`` points.
+def batch_ends(batches: np.ndarray, max_points: int, capacity: int | None = None) -> np.ndarray:
+    """int64 one past the last point of each batch, as pages are planned.
 
-    A page is a contiguous range of point indices holding whole batches, so a workgroup
-    never needs two bindings.
-    """
+    ``capacity`` (the cloud's buffer length) for clouds whose batches are refilled in place
+    (an LOD arena's slots): a batch then reaches up to the next batch's first point (at most
+    a page), so the pages stay put while the counts change."""
     first = batches["first"].astype(np.int64)
     end = first + batches["count"].astype(np.int64)
     too_big = np.flatnonzero(end - first > max_points)
@@ -52,6 +63,22 @@ def plan_pages(batches: np.ndarray, max_points: int) -> tuple[np.ndarray, np.nda
         raise GigapointError(
             f"batch {b} holds {int(end[b] - first[b]):,} points, more than one GPU page ({max_points:,}); rebuild the cloud with smaller batches"
         )
+    if capacity is not None and len(first):
+        order = np.argsort(first, kind="stable")
+        room = np.empty(len(first), np.int64)
+        room[order] = np.append(first[order][1:], max(int(capacity), int(first.max()))) - first[order]
+        end = np.maximum(end, first + np.minimum(room, max_points))
+    return end
+
+
+def plan_pages(batches: np.ndarray, max_points: int, end: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Greedy split of batches (in point order) into pages of at most ``max_points`` points.
+
+    A page is a contiguous range of point indices holding whole batches, so a workgroup
+    never needs two bindings. ``end``: each batch's end (default from ``batch_ends``).
+    """
+    first = batches["first"].astype(np.int64)
+    end = batch_ends(batches, max_points) if end is None else end
     order = np.argsort(first, kind="stable")
     page_of = np.empty(len(batches), np.int64)
     starts, stops = [], []
@@ -79,6 +106,9 @@ class BufferCache:
         self.bytes_uploaded = 0
         self.uploads = 0
         self.evictions = 0
+        self.refreshes = 0  # pages of tracked arrays rewritten in place after their cloud changed
+        # id(array) -> (weak array, weak cloud): arrays their cloud rewrites in place (see track)
+        self._sources: dict[int, tuple[weakref.ref, weakref.ref]] = {}
 
     def _drop(self, key) -> None:
         entry = self._entries.pop(key)
@@ -90,6 +120,27 @@ class BufferCache:
         """Free the copies of arrays that no longer exist."""
         for key in [k for k, e in self._entries.items() if e.ref() is None]:
             self._drop(key)
+        for key in [k for k, (a, c) in self._sources.items() if a() is None or c() is None]:
+            del self._sources[key]
+
+    def track(self, cloud, arrays) -> None:
+        """Register ``arrays`` as ``cloud``'s, if the cloud has a ``version`` (it rewrites them
+        in place): their pages are checked against it at every ``get``."""
+        if getattr(cloud, "version", None) is None:
+            return
+        for a in arrays:
+            if a is not None:
+                self._sources[id(a)] = (weakref.ref(a), weakref.ref(cloud))
+
+    def _owner(self, array):
+        """The tracked cloud ``array`` belongs to, or None."""
+        source = self._sources.get(id(array))
+        if source is None:
+            return None
+        if source[0]() is not array:  # the tracked array is gone and its id reused
+            del self._sources[id(array)]
+            return None
+        return source[1]()
 
     def forget(self, array) -> None:
         """Drop every page of ``array`` (call after changing it in place)."""
@@ -110,8 +161,12 @@ class BufferCache:
         key = (id(array), int(start), int(stop))
         pinned.add(key)
         entry = self._entries.get(key)
+        owner = self._owner(array) if self._sources else None
+        version = int(owner.version) if owner is not None else 0
         if entry is not None and entry.ref() is array:
             self._entries.move_to_end(key)
+            if entry.version != version:
+                self._refresh(entry, array, int(start), int(stop), owner, version)
             return entry.buffer
         if entry is not None:  # an id reused by a new array
             self._drop(key)
@@ -131,9 +186,47 @@ class BufferCache:
         if data.nbytes == 0:
             data = np.zeros(16, np.uint8)
             nbytes = 16
-        buffer = self.device.create_buffer_with_data(data=data, usage=wgpu.BufferUsage.STORAGE)
-        self._entries[key] = _Entry(weakref.ref(array), buffer, nbytes)
+        buffer = self.device.create_buffer_with_data(data=data, usage=wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_DST)
+        self._entries[key] = _Entry(weakref.ref(array), buffer, nbytes, version)
         self.bytes_resident += nbytes
         self.bytes_uploaded += nbytes
         self.uploads += 1
         return buffer
+
+    def _refresh(self, entry: _Entry, array: np.ndarray, start: int, stop: int, owner, version: int) -> None:
+        """Rewrite the points of ``array[start:stop]`` that ``owner`` wrote since the entry's version.
+
+        Queued writes run after the work already submitted and before the work submitted
+        next, so earlier dispatches still see the old contents and later ones the new."""
+        row_bytes = array.itemsize * int(np.prod(array.shape[1:], dtype=np.int64))
+        for s, e in stale_ranges(owner, entry.version, start, stop):
+            data = np.ascontiguousarray(array[s:e])
+            self.device.queue.write_buffer(entry.buffer, (s - start) * row_bytes, data.view(np.uint8).reshape(-1))
+            self.bytes_uploaded += data.nbytes
+        entry.version = version
+        self.refreshes += 1
+
+
+def stale_ranges(cloud, since: int, start: int, stop: int) -> list[tuple[int, int]]:
+    """Point ranges within start..stop that ``cloud`` wrote after its version ``since``:
+    the batches whose ``batch_version`` is newer, merged where they touch (all of start..stop
+    when the cloud has no per-batch versions)."""
+    versions = getattr(cloud, "batch_version", None)
+    if versions is None:
+        return [(start, stop)]
+    batches = cloud.batches
+    first = batches["first"].astype(np.int64)
+    end = first + batches["count"].astype(np.int64)
+    hit = np.flatnonzero((np.asarray(versions) > since) & (first < stop) & (end > start))
+    if not len(hit):
+        return []
+    lo = np.maximum(first[hit], start)
+    hi = np.minimum(end[hit], stop)
+    order = np.argsort(lo, kind="stable")
+    lo, hi = lo[order], hi[order]
+    reach = np.maximum.accumulate(hi)
+    new_run = np.concatenate([[True], lo[1:] > reach[:-1]])
+    run_of = np.cumsum(new_run) - 1
+    run_hi = np.zeros(int(run_of[-1]) + 1, np.int64)
+    np.maximum.at(run_hi, run_of, hi)
+    return list(zip(lo[new_run].tolist(), run_hi.tolist()))

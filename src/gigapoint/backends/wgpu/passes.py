@@ -159,6 +159,8 @@ class GpuPasses:
 
         u32 atomic sums per channel: exact up to 2^24 points a pixel (2^24 / 15 with soft
         splats), the CPU pass's bound too. ``threads`` is unused."""
+        from .backend import _Views
+
         b = self.b
         if not b.hqs_on_gpu:  # the adapter binds fewer than 9 storage buffers: the CPU pass
             from ...render.passes.hqs import hqs_colors
@@ -176,16 +178,14 @@ class GpuPasses:
             b._clear(accum, 0)
             b.cache.purge_dead()
             footprint, splat_uniforms = b._footprint(splat, float(softness))
-            params = {
-                "width": width, "height": height, "near": np.float32(near), "far": np.float32(far),
-                "tol1": np.float32(1.0 + tolerance), **splat_uniforms,
-            }  # fmt: skip
+            params = {"width": width, "height": height, "tol1": np.float32(1.0 + tolerance), **splat_uniforms}
+            views = _Views.of(sel.ids, np.asarray(sel.bits)[None], np.asarray(sel.matrices)[None], [near], [far])
 
             def own(start, stop, pinned):
                 colors = b.cache.get(point_colors, start, stop, pinned)
                 return [(vbuf, n_pixels * 8), (colors, colors.size), (accum, n_pixels * 20)]
 
-            b._draw_batches(cloud, sel, ("hqs_accumulate",), params, footprint, own)
+            b._draw_batches(cloud, views, ("hqs_accumulate",), params, footprint, own)
             out, orole = b._output(_IMAGE_ROLES, frole, n_pixels * 4)
             # the fallback colors first, then the means where points contributed
             encoder = b.device.create_command_encoder()

@@ -29,34 +29,30 @@ fn unpack_word(w: u32) -> vec3<f32> {
     return vec3<f32>(f32(w & WORD_MASK), f32((w >> 10u) & WORD_MASK), f32((w >> 20u) & WORD_MASK));
 }
 
-// A 10-bit point: the centre of its grid cell.
-fn grid_coords10(low_word: u32) -> vec3<f32> {
-    return unpack_word(low_word) + 0.5;
-}
-
-// A point's position in units of its batch's 10-bit grid (cell centres), with the same
-// float32 operations in the same order as grid_coords in backends/numba_cpu/raster.py.
-// Medium and high words are read only when the batch's precision needs them.
-fn grid_coords(i: u32, bits: u32) -> vec3<f32> {
+// A point's position in units of its batch's 10-bit grid (cell centres) from its low, medium
+// and high words, with the same float32 operations in the same order as grid_coords in
+// backends/numba_cpu/raster.py (a 10-bit point: the centre of its grid cell). Medium and high
+// words are used only when ``bits`` needs them.
+fn grid_coords(low_word: u32, med_word: u32, high_word: u32, bits: u32) -> vec3<f32> {
+    let c = unpack_word(low_word);
     if (bits == 10u) {
-        return grid_coords10(low[i]);
+        return c + 0.5;
     }
-    let c = unpack_word(low[i]);
-    let f = unpack_word(med[i]);
+    let f = unpack_word(med_word);
     if (bits == 20u) {
         return c + (f + 0.5) * INV1024;
     }
-    let g = unpack_word(high[i]);
+    let g = unpack_word(high_word);
     return c + (f + (g + 0.5) * INV1024) * INV1024;
 }
 
 // (pixel id or NO_PIXEL, float32 depth bits) of a grid-space point: project_point in raster.py,
 // term by term. Depth and w are tested before the divide so no inf/NaN reaches a
 // comparison (GPUs need not honour IEEE NaN rules); the CPU kernel rejects the same points.
-fn project(m: array<vec4<f32>, 4>, p: vec3<f32>) -> vec2<u32> {
+fn project(m: array<vec4<f32>, 4>, p: vec3<f32>, near: f32, far: f32) -> vec2<u32> {
     let sd = m[3].x * p.x + m[3].y * p.y + m[3].z * p.z + m[3].w;
     let sw = m[2].x * p.x + m[2].y * p.y + m[2].z * p.z + m[2].w;
-    if (!(sd > params.near && sd < params.far && sw > 0.0)) {
+    if (!(sd > near && sd < far && sw > 0.0)) {
         return vec2<u32>(NO_PIXEL, 0u);
     }
     let sx = m[0].x * p.x + m[0].y * p.y + m[0].z * p.z + m[0].w;
@@ -75,10 +71,11 @@ fn project(m: array<vec4<f32>, 4>, p: vec3<f32>) -> vec2<u32> {
 // need <= s, each with the point's own key, so nearer points win pixel by pixel. Each pass
 // supplies
 //     fn visit(pixel: u32, depth_bits: u32, index: u32, row: u32, size: f32)
-// (WGSL resolves module-scope names in any order), so the loops exist once.
-fn cover(pixel: u32, depth_bits: u32, index: u32) {
+// (WGSL resolves module-scope names in any order), so the loops exist once. ``base``: the
+// first pixel of the view's image in the buffer (view v of several: v * width * height).
+fn cover(pixel: u32, depth_bits: u32, index: u32, base: u32) {
     if (params.fp_count == 1u) {  // one-pixel points
-        visit(pixel, depth_bits, index, 0u, 1.0);
+        visit(base + pixel, depth_bits, index, 0u, 1.0);
         return;
     }
     var s = params.point_size;
@@ -95,12 +92,38 @@ fn cover(pixel: u32, depth_bits: u32, index: u32) {
         let xx = x + row.x;
         let yy = y + row.y;
         if (xx >= 0 && xx < i32(params.width) && yy >= 0 && yy < i32(params.height)) {
-            visit(u32(yy) * params.width + u32(xx), depth_bits, index, o, s);
+            visit(base + u32(yy) * params.width + u32(xx), depth_bits, index, o, s);
         }
     }
 }
 
-// One workgroup draws one selected batch.
+// One point (index: its global index; words as read) into view v: decoded at the view's
+// precision, projected with the view's matrix and clip range, written into the view's image.
+fn draw_view(m: array<vec4<f32>, 4>, bits: u32, near: f32, far: f32, v: u32, lw: u32, mw: u32, hw: u32, index: u32) {
+    let hit = project(m, grid_coords(lw, mw, hw, bits), near, far);
+    if (hit.x != NO_PIXEL) {
+        cover(hit.x, hit.y, index, v * params.width * params.height);
+    }
+}
+
+// Views a draw pipeline writes (stereo: 2), fixed when the pipeline is created: in the
+// one-view pipeline every `if (VIEWS > 1u)` block is dead code the driver drops (a views
+// loop left to run zero times cost lavapipe about a third of the pass).
+override VIEWS: u32 = 1u;
+
+// Matrices and precisions of views 1.. of the batch a thread draws (view 0's: its record).
+alias ViewRows = array<array<vec4<f32>, 4>, MAX_VIEWS>;
+alias ViewBits = array<u32, MAX_VIEWS>;
+
+// The same point into views 1.. of a multi-view draw (2022 paper, 3.7: read once, drawn into
+// every view; the caller draws view 0).
+fn draw_other_views(rows: ptr<function, ViewRows>, bits: ptr<function, ViewBits>, lw: u32, mw: u32, hw: u32, index: u32) {
+    for (var v = 1u; v < VIEWS; v++) {
+        draw_view((*rows)[v], (*bits)[v], params.views[v].x, params.views[v].y, v, lw, mw, hw, index);
+    }
+}
+
+// One workgroup draws one selected batch, into each of VIEWS views (stereo: two).
 fn draw_batch(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) {
     // Dispatches are 2D when there are more batches than one dimension allows (65535).
     let b = wid.x + wid.y * nwg.x;
@@ -110,11 +133,25 @@ fn draw_batch(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) {
     // The batch record first: matrix, precision and point range are the same for all
     // 128 threads (one cached load each).
     let rec = batches[params.batch_offset + b];
+    // The words every view needs: the finest precision any view draws the batch at.
+    var max_bits = rec.bits;
+    // The other views' records, once per thread (not per point). A barrier to share them
+    // through workgroup memory would cost CPU drivers (lavapipe: coroutines) more.
+    var rows: ViewRows;
+    var bits: ViewBits;
+    if (VIEWS > 1u) {
+        for (var v = 1u; v < VIEWS; v++) {
+            let r = batches[params.batch_offset + v * params.batch_count + b];
+            rows[v] = r.rows;
+            bits[v] = r.bits;
+            max_bits = max(max_bits, r.bits);
+        }
+    }
     // step > 1: every step-th point only (a point budget; Morton order makes it an even subsample)
     let step = max(params.step, 1u);
     let n = (rec.count + step - 1u) / step;
     var tail = 0u;  // first point left to the one-by-one loop
-    if (step == 1u && rec.bits == 10u && (rec.local_first & 3u) == 0u) {
+    if (step == 1u && max_bits == 10u && (rec.local_first & 3u) == 0u) {
         // Vertex prefetch (paper 3.4): one 16-byte load yields 4 points' low words;
         // thread t draws points 4t..4t+3, then 4(t+128).. and so on.
         let quads = rec.count / 4u;
@@ -122,9 +159,10 @@ fn draw_batch(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) {
         for (var q = lid; q < quads; q += WORKGROUP_SIZE) {
             let words = low4[base + q];
             for (var k = 0u; k < 4u; k++) {
-                let hit = project(rec.rows, grid_coords10(words[k]));
-                if (hit.x != NO_PIXEL) {
-                    cover(hit.x, hit.y, rec.first + 4u * q + k);
+                let index = rec.first + 4u * q + k;
+                draw_view(rec.rows, 10u, params.near, params.far, 0u, words[k], 0u, 0u, index);
+                if (VIEWS > 1u) {
+                    draw_other_views(&rows, &bits, words[k], 0u, 0u, index);
                 }
             }
         }
@@ -133,9 +171,19 @@ fn draw_batch(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) {
     // Thread t draws points t, t+128, ...: neighbouring threads read neighbouring words.
     for (var j = tail + lid; j < n; j += WORKGROUP_SIZE) {
         let i = j * step;
-        let hit = project(rec.rows, grid_coords(rec.local_first + i, rec.bits));
-        if (hit.x != NO_PIXEL) {
-            cover(hit.x, hit.y, rec.first + i);
+        let li = rec.local_first + i;
+        var mw = 0u;
+        var hw = 0u;
+        if (max_bits >= 20u) {
+            mw = med[li];
+        }
+        if (max_bits >= 30u) {
+            hw = high[li];
+        }
+        let lw = low[li];
+        draw_view(rec.rows, rec.bits, params.near, params.far, 0u, lw, mw, hw, rec.first + i);
+        if (VIEWS > 1u) {
+            draw_other_views(&rows, &bits, lw, mw, hw, rec.first + i);
         }
     }
 }
