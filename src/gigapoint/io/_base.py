@@ -192,3 +192,20 @@ def scan_bounds(chunks: Iterator[PointChunk]) -> tuple[int, list[float] | None, 
     if not np.all(np.isfinite(lo)):
         return n, None, None
     return n, lo.tolist(), hi.tolist()
+
+
+def scanned_info(path: Path, fmt: str, chunks: Iterator[PointChunk] | None, has_color: bool, attributes: list[str], **extra) -> dict:
+    """``info()`` of a format whose header holds no bounds: count and bounds scanned from ``chunks``
+    (None: a file without points); ``extra`` entries follow the common ones, ``file_size`` comes last."""
+    n, lo, hi = scan_bounds(chunks) if chunks is not None else (0, None, None)
+    return {
+        "path": str(path),
+        "format": fmt,
+        "point_count": n,
+        "bounds": {"min": lo, "max": hi},
+        "bounds_source": "data",
+        "has_color": has_color,
+        "attributes": attributes,
+        **extra,
+        "file_size": path.stat().st_size,
+    }

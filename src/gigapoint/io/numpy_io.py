@@ -22,7 +22,17 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..errors import EmptyCloudError
-from ._base import DEFAULT_CHUNK_SIZE, ColorScaler, Reader, check_chunk_size, check_file, fail, rows_to_chunk, scan_bounds
+from ._base import (
+    DEFAULT_CHUNK_SIZE,
+    ColorScaler,
+    Reader,
+    check_chunk_size,
+    check_file,
+    color_names,
+    fail,
+    rows_to_chunk,
+    scanned_info,
+)
 
 NPY_MAGIC = b"\x93NUMPY"
 _COLUMNS = {3: ["x", "y", "z"], 4: ["x", "y", "z", "intensity"], 6: ["x", "y", "z", "r", "g", "b"], 7: ["x", "y", "z", "r", "g", "b", "a"]}
@@ -109,22 +119,10 @@ class NpyReader(Reader):
         path = check_file(path)
         arr = self._open(path)
         names = _layout_names(path, "NPY array", arr.dtype, arr.shape)
-        n, lo, hi = scan_bounds(self.read_chunks(path)) if len(arr) else (0, None, None)
-        from ._base import color_names
-
         cols = color_names(names)
-        return {
-            "path": str(path),
-            "format": "NPY",
-            "point_count": n,
-            "bounds": {"min": lo, "max": hi},
-            "bounds_source": "data",
-            "has_color": bool(cols),
-            "attributes": [c for c in names if c.lower() not in ("x", "y", "z") and c.lower() not in cols],
-            "dtype": str(arr.dtype),
-            "shape": list(arr.shape),
-            "file_size": path.stat().st_size,
-        }
+        attributes = [c for c in names if c.lower() not in ("x", "y", "z") and c.lower() not in cols]
+        chunks = self.read_chunks(path) if len(arr) else None
+        return scanned_info(path, "NPY", chunks, bool(cols), attributes, dtype=str(arr.dtype), shape=list(arr.shape))
 
 
 class _Member:
@@ -254,16 +252,8 @@ class NpzReader(Reader):
         path = check_file(path)
         with self._zip(path) as zf:
             members, table, use = _npz_plan(path, zf)
-        n, lo, hi = scan_bounds(self.read_chunks(path))
         lower = [k.lower() for k in use]
-        return {
-            "path": str(path),
-            "format": "NPZ",
-            "point_count": n,
-            "bounds": {"min": lo, "max": hi},
-            "bounds_source": "data",
-            "has_color": any(k in lower for k in COLOR_KEYS) or bool(table and {"r", "red"} & {t.lower() for t in table}),
-            "attributes": [k for k in use if k.lower() not in XYZ_KEYS + COLOR_KEYS + ("x", "y", "z")],
-            "arrays": {k: {"shape": list(m.shape), "dtype": str(m.dtype)} for k, m in members.items()},
-            "file_size": path.stat().st_size,
-        }
+        has_color = any(k in lower for k in COLOR_KEYS) or bool(table and {"r", "red"} & {t.lower() for t in table})
+        attributes = [k for k in use if k.lower() not in XYZ_KEYS + COLOR_KEYS + ("x", "y", "z")]
+        arrays = {k: {"shape": list(m.shape), "dtype": str(m.dtype)} for k, m in members.items()}
+        return scanned_info(path, "NPZ", self.read_chunks(path), has_color, attributes, arrays=arrays)

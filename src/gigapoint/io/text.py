@@ -30,7 +30,7 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..errors import EmptyCloudError
-from ._base import DEFAULT_CHUNK_SIZE, ColorScaler, Reader, check_chunk_size, check_file, color_names, fail, rows_to_chunk, scan_bounds
+from ._base import DEFAULT_CHUNK_SIZE, ColorScaler, Reader, check_chunk_size, check_file, color_names, fail, rows_to_chunk, scanned_info
 
 _BY_COUNT = {
     3: ["x", "y", "z"],
@@ -217,18 +217,14 @@ class TextReader(Reader):
     def info(self, path: Path) -> dict:
         path = check_file(path)
         layout = _layout(path)
-        n, lo, hi = scan_bounds(self.read_chunks(path))
         cols = color_names(layout.names)
-        return {
-            "path": str(path),
-            "format": "text",
-            "point_count": n,
-            "bounds": {"min": lo, "max": hi},
-            "bounds_source": "data",
-            "has_color": bool(cols),
-            "attributes": [c for c in layout.names if c not in ("x", "y", "z") and c not in cols],
-            "columns": layout.names,
-            "delimiter": {None: "whitespace", ",": "comma", ";": "semicolon"}[layout.delimiter],
-            "header_line": layout.header,
-            "file_size": path.stat().st_size,
-        }
+        return scanned_info(
+            path,
+            "text",
+            self.read_chunks(path),
+            bool(cols),
+            [c for c in layout.names if c not in ("x", "y", "z") and c not in cols],
+            columns=layout.names,
+            delimiter={None: "whitespace", ",": "comma", ";": "semicolon"}[layout.delimiter],
+            header_line=layout.header,
+        )

@@ -34,7 +34,6 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..core.cloud import MAX_ABS_COORDINATE
-from ..core.morton import morton_order
 from ..errors import EmptyCloudError, GigapointError, GigapointWarning, InputError
 from .build import (
     SAMPLERS,
@@ -790,9 +789,11 @@ class _Converter:
         roots = [int(r[0]) for r in root_info]
         inner_roots = np.array([r[0] for r in root_info if r[1]], np.uint64)
         cat = {k: np.concatenate([np.load(p / f"carry.{k}.npy") for p in parts]) for k in ["xyz", "codes", "wsum", "wcount", *names]}
-        order = morton_order(cat["codes"])
-        cat = {k: take(v, order) for k, v in cat.items()}
-        codes, xyz, wsum, wcount = cat.pop("codes"), cat.pop("xyz"), cat.pop("wsum"), cat.pop("wcount")
+        codes, order = sort_codes(cat.pop("codes"))  # the sorted codes come with the order: no gather
+        for k in list(cat):  # one array at a time, so only one unsorted array is alive next to the sorted ones
+            cat[k] = take(cat[k], order)
+        del order
+        xyz, wsum, wcount = cat.pop("xyz"), cat.pop("wsum"), cat.pop("wcount")
         tree = upper_tree(codes, roots)
         own = init_ownlevel(tree, len(codes))
         sample_tree(tree, codes, xyz, own, wsum, wcount, self.sampler, origin, edge)

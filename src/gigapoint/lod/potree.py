@@ -2,8 +2,10 @@
 
 Writing: the converter's node sets are streamed into ``octree.bin``; ``hierarchy.bin`` is one
 chunk holding every node breadth-first (sorted keys are breadth-first); ``metadata.json``
-comes last. Reading: the hierarchy (with proxy chunks) and every node are decoded into
-gigapoint's batch layout, so the result renders like any converted octree.
+comes last. Reading (PotreeCloud): the hierarchy (with proxy chunks) is parsed at open; a node's
+payload is read from ``octree.bin`` and decoded into gigapoint's batch layout only when the
+node is drawn (made resident in the arena), so the result renders like any converted octree,
+in bounded memory.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
 from ..errors import InputError
 from .keys import MAX_LEVEL, key_cube, level_of
+from .store import OctreeCloud
 
 HIERARCHY_DTYPE = np.dtype([("type", "u1"), ("mask", "u1"), ("points", "<u4"), ("offset", "<i8"), ("size", "<i8")])
 _TYPES = {
@@ -285,10 +288,161 @@ def decode_node(blob: bytes, n: int, attributes: list[dict], encoding: str) -> d
     return out
 
 
-def read_potree(path) -> OctreeCloud:  # noqa: F821
-    """A Potree 2.0 directory (PotreeConverter 2.x or ``gigapoint convert --format potree``) as an OctreeCloud."""
-    from .store import OctreeCloud
+class PotreeCloud(OctreeCloud):
+    """A Potree 2.0 directory opened for rendering: the hierarchy is read at open (it is small),
+    a node's payload only when the node is made resident in the arena (the bounded node cache
+    every OctreeCloud draws through) or asked for by ``node_points``, so a dataset larger than
+    the memory renders. ``node_reads``/``bytes_read`` count the payloads read.
 
+    A node's record (``nodes``) holds its cube clipped to the cloud's bounds until the node is
+    first decoded, then its tight bbox, which is what it is quantized against and drawn with,
+    exactly as if every node had been decoded at open. The cloud's bounds are the ``position``
+    attribute's min/max from metadata.json (the bounding box where absent).
+    """
+
+    def __init__(self, p: Path, meta: dict):
+        self.encoding = meta.get("encoding", "DEFAULT")
+        if self.encoding not in ("DEFAULT", "BROTLI"):
+            raise InputError(f"{p / 'metadata.json'}: unknown encoding {self.encoding!r}")
+        try:
+            self.potree_attributes = meta["attributes"]
+            self.scale, self.offset = np.array(meta["scale"], np.float64), np.array(meta["offset"], np.float64)
+            bmin, bmax = np.array(meta["boundingBox"]["min"], np.float64), np.array(meta["boundingBox"]["max"], np.float64)
+            first = int(meta["hierarchy"]["firstChunkSize"])
+            hier = (p / "hierarchy.bin").read_bytes()
+            info: dict[int, tuple[int, int, int]] = {}
+            _parse_hierarchy(hier, 0, first, 1, info)
+            record = _node_dtype(self.potree_attributes)
+            lo, hi = _position_range(self.potree_attributes, bmin, bmax)
+        except (KeyError, TypeError, ValueError, OSError) as exc:
+            raise InputError(f"{p}: invalid Potree hierarchy/metadata ({' '.join(str(exc).split())})") from None
+        self.octree_bin = p / "octree.bin"
+        try:
+            bin_size = self.octree_bin.stat().st_size
+        except OSError as exc:
+            raise InputError(f"{self.octree_bin}: cannot read ({exc.strerror or exc})") from None
+        keys = np.array(sorted(info), np.uint64)
+        table = np.array([info[k] for k in keys.tolist()], np.int64).reshape(-1, 3)
+        counts, self.byte_offset, self.byte_size = table[:, 0], table[:, 1], table[:, 2]
+        # payload ranges are checked here, so that a truncated file fails at open, not mid-render
+        full = counts > 0
+        outside = full & ((self.byte_offset < 0) | (self.byte_offset + self.byte_size > bin_size))
+        wrong_size = full & (self.byte_size != counts * record.itemsize) if self.encoding == "DEFAULT" else np.zeros_like(full)
+        if outside.any() or wrong_size.any():
+            i = int(np.flatnonzero(outside | wrong_size)[0])
+            off, size, n = int(self.byte_offset[i]), int(self.byte_size[i]), int(counts[i])
+            problem = (
+                f"bytes {off}..{off + size} lie beyond the file's {bin_size}"
+                if outside[i]
+                else f"node holds {size} bytes, {n} points need {n * record.itemsize}"
+            )
+            raise InputError(f"{self.octree_bin}: cannot decode node {_name(int(keys[i]))} ({problem})")
+        edge = float(np.max(bmax - bmin))
+        nodes = np.zeros(len(keys), BATCH_DTYPE)
+        nodes["level"] = level_of(keys)
+        nodes["count"] = counts
+        nodes["first"] = np.cumsum(counts) - counts  # where each node's points go in to_memory()
+        cmin, cedge = key_cube(keys, bmin, edge)
+        nonempty = counts > 0  # until decoded: the cube clipped to the bounds (an empty node keeps its cube)
+        nodes["bbox_min"] = np.where(nonempty[:, None], np.clip(cmin, lo, hi), cmin)
+        nodes["bbox_max"] = np.where(nonempty[:, None], np.clip(cmin + cedge[:, None], lo, hi), cmin + cedge[:, None])
+        self.extra = {  # decoded name -> (gigapoint attribute name, dtype)
+            a["name"]: (a["name"].replace(" ", "_").replace("-", "_"), np.dtype(_TYPES[a["type"]]))
+            for a in self.potree_attributes
+            if a["name"] not in ("position", "rgb") and int(a.get("numElements", 1)) == 1
+        }
+        cloud_meta = {
+            "format": "potree-2.0",
+            "points": int(counts.sum()),
+            "nodes": len(keys),
+            "cube_min": bmin.tolist(),
+            "cube_edge": edge,
+            "bounds": {"min": lo.tolist(), "max": hi.tolist()},
+            "encoding": self.encoding,
+            "spacing": meta.get("spacing"),
+        }
+        super().__init__(meta.get("name") or p.name, cloud_meta, nodes, keys, {}, {}, p)
+        self.node_reads = 0
+        self.bytes_read = 0
+
+    def _attribute_dtypes(self) -> dict:
+        return {name: dt for name, dt in self.extra.values()}
+
+    def node_arrays(self, index: int) -> tuple[dict, dict, int]:
+        """Node ``index`` read from octree.bin, decoded and quantized against its tight bbox
+        (which its record takes from now on): (point arrays, attribute arrays, 0)."""
+        n = int(self.nodes["count"][index])
+        if n == 0:
+            empty = np.empty(0, np.uint32)
+            return (
+                dict.fromkeys(("low", "med", "high", "color", "rgba"), empty),
+                {a: np.empty(0, dt) for a, dt in self._attribute_dtypes().items()},
+                0,
+            )
+        off, size = int(self.byte_offset[index]), int(self.byte_size[index])
+        with open(self.octree_bin, "rb") as f:
+            f.seek(off)
+            blob = f.read(size)
+        self.node_reads += 1
+        self.bytes_read += len(blob)
+        try:
+            d = decode_node(blob, n, self.potree_attributes, self.encoding)
+        except Exception as exc:  # noqa: BLE001 - any decoding failure is a corrupt node
+            raise InputError(
+                f"{self.octree_bin}: cannot decode node {_name(int(self.keys[index]))} ({' '.join(str(exc).split())})"
+            ) from None
+        rec = self.nodes[index : index + 1].copy()
+        rec["first"] = 0
+        low, med, high = quantize(d["position"] * self.scale + self.offset, np.arange(n, dtype=np.int64), rec)
+        self.nodes[index]["bbox_min"], self.nodes[index]["bbox_max"] = rec[0]["bbox_min"], rec[0]["bbox_max"]
+        rgba = np.full((n, 4), 255, np.uint8)
+        if "rgb" in d:
+            c = d["rgb"].astype(np.int64)
+            rgba[:, :3] = np.clip(np.where(c > 255, c // 256, c), 0, 255)
+        color = rgba.view(np.uint32).reshape(-1)
+        attrs = {name: (d[a] if a in d else np.zeros(n, dt)) for a, (name, dt) in self.extra.items()}
+        return {"low": low, "med": med, "high": high, "color": color, "rgba": color}, attrs, 0
+
+    def to_memory(self) -> OctreeCloud:
+        """Every node decoded into one in-memory OctreeCloud (small datasets; the eager reading)."""
+        total = self.n_points
+        arrays = {k: np.empty(total, np.uint32) for k in ("low", "med", "high", "color")}
+        arrays["rgba"] = arrays["color"]
+        attrs = {name: np.zeros(total, dt) for name, dt in self._attribute_dtypes().items()}
+        for i in np.flatnonzero(self.nodes["count"] > 0).tolist():
+            src, src_attrs, _ = self.node_arrays(i)
+            s = slice(int(self.nodes["first"][i]), int(self.nodes["first"][i]) + int(self.nodes["count"][i]))
+            for k in ("low", "med", "high", "color"):
+                arrays[k][s] = src[k]
+            for a, v in src_attrs.items():
+                attrs[a][s] = v
+        nodes = self.nodes.copy()
+        meta = dict(self.meta)
+        full = nodes["count"] > 0
+        if full.any():
+            meta["bounds"] = {"min": nodes["bbox_min"][full].min(axis=0).tolist(), "max": nodes["bbox_max"][full].max(axis=0).tolist()}
+        return OctreeCloud(self.name, meta, nodes, self.keys, arrays, attrs, self.path)
+
+
+def _position_range(attributes: list[dict], bmin: np.ndarray, bmax: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The points' bounds: the ``position`` attribute's min/max (world coordinates, as
+    PotreeConverter 2 and our writer store them) when they are sane, else the bounding box."""
+    for a in attributes:
+        if a.get("name") == "position":
+            try:
+                lo, hi = np.array(a["min"], np.float64), np.array(a["max"], np.float64)
+            except (KeyError, TypeError, ValueError):
+                break
+            slack = 1e-6 * max(float(np.max(bmax - bmin)), 1.0)
+            if lo.shape == hi.shape == (3,) and np.all(lo <= hi) and np.all(lo >= bmin - slack) and np.all(hi <= bmax + slack):
+                return lo, hi
+            break
+    return bmin, bmax
+
+
+def read_potree(path) -> PotreeCloud:
+    """A Potree 2.0 directory (PotreeConverter 2.x or ``gigapoint convert --format potree``), nodes
+    loaded on demand (see PotreeCloud)."""
     p = Path(path)
     try:
         meta = json.loads((p / "metadata.json").read_text())
@@ -296,83 +450,7 @@ def read_potree(path) -> OctreeCloud:  # noqa: F821
         raise InputError(f"{p / 'metadata.json'}: cannot read ({' '.join(str(exc).split())})") from None
     if not str(meta.get("version", "")).startswith("2."):
         raise InputError(f"{p / 'metadata.json'}: Potree version {meta.get('version')!r} is not supported (2.x only)")
-    encoding = meta.get("encoding", "DEFAULT")
-    if encoding not in ("DEFAULT", "BROTLI"):
-        raise InputError(f"{p / 'metadata.json'}: unknown encoding {encoding!r}")
-    try:
-        attributes = meta["attributes"]
-        scale, offset = np.array(meta["scale"], np.float64), np.array(meta["offset"], np.float64)
-        bmin, bmax = np.array(meta["boundingBox"]["min"], np.float64), np.array(meta["boundingBox"]["max"], np.float64)
-        first = int(meta["hierarchy"]["firstChunkSize"])
-        hier = (p / "hierarchy.bin").read_bytes()
-        nodes_info: dict[int, tuple[int, int, int]] = {}
-        _parse_hierarchy(hier, 0, first, 1, nodes_info)
-    except (KeyError, TypeError, ValueError, OSError) as exc:
-        raise InputError(f"{p}: invalid Potree hierarchy/metadata ({' '.join(str(exc).split())})") from None
-    keys = np.array(sorted(nodes_info), np.uint64)
-    counts = np.array([nodes_info[k][0] for k in keys.tolist()], np.int64)
-    total = int(counts.sum())
-    low, med, high = (np.empty(total, np.uint32) for _ in range(3))
-    rgba = np.full((total, 4), 255, np.uint8)
-    extra = {
-        a["name"]: np.zeros(total, _TYPES[a["type"]])
-        for a in attributes
-        if a["name"] not in ("position", "rgb") and int(a.get("numElements", 1)) == 1
-    }
-    nodes = np.zeros(len(keys), BATCH_DTYPE)
-    nodes["level"] = level_of(keys)
-    pos = 0
-    lo_all, hi_all = np.full(3, np.inf), np.full(3, -np.inf)
-    with open(p / "octree.bin", "rb") as f:
-        for i, key in enumerate(keys.tolist()):
-            n, off, size = nodes_info[key]
-            nodes[i]["first"] = pos
-            nodes[i]["count"] = n
-            if n == 0:
-                continue
-            f.seek(off)
-            blob = f.read(size)
-            try:
-                d = decode_node(blob, n, attributes, encoding)
-            except Exception as exc:  # noqa: BLE001 - any decoding failure is a corrupt node
-                raise InputError(f"{p / 'octree.bin'}: cannot decode node {_name(key)} ({' '.join(str(exc).split())})") from None
-            xyz = d["position"] * scale + offset
-            rec = nodes[i : i + 1].copy()
-            rec["first"] = 0
-            l_, m_, h_ = quantize(xyz, np.arange(n, dtype=np.int64), rec)
-            nodes[i]["bbox_min"], nodes[i]["bbox_max"] = rec[0]["bbox_min"], rec[0]["bbox_max"]
-            lo_all, hi_all = np.minimum(lo_all, rec[0]["bbox_min"]), np.maximum(hi_all, rec[0]["bbox_max"])
-            s = slice(pos, pos + n)
-            low[s], med[s], high[s] = l_, m_, h_
-            if "rgb" in d:
-                c = d["rgb"].astype(np.int64)
-                rgba[s, :3] = np.clip(np.where(c > 255, c // 256, c), 0, 255)
-            for a, values in extra.items():
-                if a in d:
-                    values[s] = d[a]
-            pos += n
-    empty = counts == 0
-    if empty.any():
-        cmin, cedge = key_cube(keys[empty], bmin, float(np.max(bmax - bmin)))
-        nodes["bbox_min"][empty] = cmin
-        nodes["bbox_max"][empty] = cmin + cedge[:, None]
-    if total == 0:
-        lo_all, hi_all = bmin, bmax
-    color = rgba.view(np.uint32).reshape(-1)
-    arrays = {"low": low, "med": med, "high": high, "color": color, "rgba": color}
-    cloud_meta = {
-        "format": "potree-2.0",
-        "points": total,
-        "nodes": len(keys),
-        "cube_min": bmin.tolist(),
-        "cube_edge": float(np.max(bmax - bmin)),
-        "bounds": {"min": lo_all.tolist(), "max": hi_all.tolist()},
-        "encoding": encoding,
-        "spacing": meta.get("spacing"),
-    }
-    rename = {"classification": "classification", "intensity": "intensity"}
-    attrs = {rename.get(k, k.replace(" ", "_").replace("-", "_")): v for k, v in extra.items()}
-    return OctreeCloud(meta.get("name") or p.name, cloud_meta, nodes, keys, arrays, attrs, p)
+    return PotreeCloud(p, meta)
 
 
 def _name(key: int) -> str:

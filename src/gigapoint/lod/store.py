@@ -176,6 +176,33 @@ def _box_test(rows, bmin, size, width, height, near, far):
     return visible, max(xmax - xmin, ymax - ymin), np.sqrt(cx * cx + cy * cy) / (0.5 * np.sqrt(width * width + height * height))
 
 
+@njit(inline="always")
+def _heap_place(hp, hi, n, j, p, item):
+    """Put (priority ``p``, ``item``) into the hole at ``j`` of the max-heap ``hp``/``hi`` of ``n``
+    entries: entries move down into the hole while their priority is lower (sift up), then up
+    while a child's is higher (sift down). A push fills a hole at the end, a pop the one at 0."""
+    while j > 0:
+        q = (j - 1) // 2
+        if hp[q] >= p:
+            break
+        hp[j] = hp[q]
+        hi[j] = hi[q]
+        j = q
+    while True:
+        c = 2 * j + 1
+        if c >= n:
+            break
+        if c + 1 < n and hp[c + 1] > hp[c]:
+            c += 1
+        if hp[c] <= p:
+            break
+        hp[j] = hp[c]
+        hi[j] = hi[c]
+        j = c
+    hp[j] = p
+    hi[j] = item
+
+
 @njit(cache=True)
 def select_nodes(rows, box_min, box_size, counts, children, width, height, near, far, threshold, budget, out_ids, out_size, foveation=0.0):
     """Largest-projected-first traversal: visible nodes of ≥ threshold px (the root always), within budget.
@@ -204,23 +231,7 @@ def select_nodes(rows, box_min, box_size, counts, children, width, height, near,
         node = hi[0]
         size = hp[0]
         hn -= 1
-        # pop: move the last entry to the top and sift down
-        lp = hp[hn]
-        li = hi[hn]
-        j = 0
-        while True:
-            c = 2 * j + 1
-            if c >= hn:
-                break
-            if c + 1 < hn and hp[c + 1] > hp[c]:
-                c += 1
-            if hp[c] <= lp:
-                break
-            hp[j] = hp[c]
-            hi[j] = hi[c]
-            j = c
-        hp[j] = lp
-        hi[j] = li
+        _heap_place(hp, hi, hn, 0, hp[hn], hi[hn])  # pop: the last entry fills the top's hole
         cnt = counts[node]
         if total + cnt > budget and k > 0:
             break
@@ -235,18 +246,8 @@ def select_nodes(rows, box_min, box_size, counts, children, width, height, near,
             vis, s, dist = _box_test(rows, box_min[ch], box_size[ch], width, height, near, far)
             if not vis or s < threshold * (1.0 + foveation * dist):
                 continue
-            # push and sift up
-            j = hn
             hn += 1
-            while j > 0:
-                p = (j - 1) // 2
-                if hp[p] >= s:
-                    break
-                hp[j] = hp[p]
-                hi[j] = hi[p]
-                j = p
-            hp[j] = s
-            hi[j] = ch
+            _heap_place(hp, hi, hn, hn - 1, s, ch)  # push: into the new hole at the end
     return k, total
 
 
@@ -285,6 +286,9 @@ class Arena:
         self.name = name
         self.bounds = bounds
         self.loads = 0  # nodes copied in since creation (cache misses)
+        # Bumped on every write; per slot, the version that last filled it (GPU backends re-upload those slots)
+        self.version = 0
+        self.batch_version = np.zeros(n_slots, np.int64)
 
     @property
     def n_slots(self) -> int:
@@ -311,20 +315,19 @@ class Arena:
                     self.free.extend(self.resident.pop(nd).tolist())
         if need > len(self.free):
             return False
-        src = cloud.arrays
-        src_color = src["color"] if cloud.filtered_colors else src["rgba"]
         for nd in nodes.tolist():
             if nd in self.resident:
                 continue
+            arrays, attrs, first = cloud.node_arrays(nd)  # a Potree node is read and decoded here
             rec = cloud.nodes[nd]
             count = int(rec["count"])
             k = -(-count // ARENA_CHUNK)
             slots = np.array([self.free.pop() for _ in range(k)], np.int64)
-            first = int(rec["first"])
-            for a, b in ((src["low"], self.low), (src["med"], self.med), (src["high"], self.high), (src_color, self.color)):
+            src_color = arrays["color"] if cloud.filtered_colors else arrays["rgba"]
+            for a, b in ((arrays["low"], self.low), (arrays["med"], self.med), (arrays["high"], self.high), (src_color, self.color)):
                 _copy_slots(a, first, count, slots, ARENA_CHUNK, b)
             for a, b in self.attributes.items():
-                _copy_slots(cloud.attributes[a], first, count, slots, ARENA_CHUNK, b)
+                _copy_slots(attrs[a], first, count, slots, ARENA_CHUNK, b)
             b = self.batches[slots]
             b["count"] = np.minimum(ARENA_CHUNK, count - np.arange(k) * ARENA_CHUNK)
             b["level"] = rec["level"]
@@ -333,6 +336,8 @@ class Arena:
             self.batches[slots] = b
             self.resident[nd] = slots
             self.loads += 1
+            self.version += 1
+            self.batch_version[slots] = self.version
         return True
 
 
@@ -410,15 +415,22 @@ class OctreeCloud:
         lo, hi = self.bounds
         return f"OctreeCloud({self.name!r}, {self.n_points:,} points, {len(self.nodes):,} nodes, depth {int(self.levels.max())}, bounds {lo.tolist()} .. {hi.tolist()})"
 
+    def node_arrays(self, index: int) -> tuple[dict, dict, int]:
+        """(point arrays ``low``, ``med``, ``high``, ``color``, ``rgba``; attribute arrays; where node
+        ``index``'s points start in them). Here: the memory-mapped files (only the pages a node's
+        slice touches are read); a Potree cloud reads and decodes the node instead."""
+        return self.arrays, self.attributes, int(self.nodes["first"][index])
+
     def node_points(self, index: int) -> dict:
         """Decoded float64 positions (30-bit) and colors of one node (for tests and tools)."""
         from ..core.quantize import dequantize
 
+        arrays, attrs, first = self.node_arrays(index)
         rec = self.nodes[index]
-        s = slice(int(rec["first"]), int(rec["first"]) + int(rec["count"]))
-        xyz = dequantize(self.arrays["low"][s], self.arrays["med"][s], self.arrays["high"][s], rec["bbox_min"], rec["bbox_max"], 30)
-        out = {"xyz": xyz, "color": np.asarray(self.arrays["color"][s]), "rgba": np.asarray(self.arrays["rgba"][s])}
-        for a, v in self.attributes.items():
+        s = slice(first, first + int(rec["count"]))
+        xyz = dequantize(arrays["low"][s], arrays["med"][s], arrays["high"][s], rec["bbox_min"], rec["bbox_max"], 30)
+        out = {"xyz": xyz, "color": np.asarray(arrays["color"][s]), "rgba": np.asarray(arrays["rgba"][s])}
+        for a, v in attrs.items():
             out[a] = np.asarray(v[s])
         return out
 
