@@ -8,6 +8,7 @@ from PIL import Image
 
 import gigapoint as gp
 from gigapoint.cli import main
+from gigapoint.cli.quality_opts import OPTION_OF, prepare_cloud
 
 
 @pytest.fixture(scope="module")
@@ -55,3 +56,70 @@ def test_turntable_option_writes_a_video(npy, tmp_path):
     assert main(["render", str(npy), "-o", str(out), "-W", "64", "-H", "48", "--turntable", "4", "--backend", "cpu"]) == 0
     assert len([f for f in iio.get_reader(out)]) == 4
     assert main(["render", str(npy), "-o", str(tmp_path / "spin.png"), "--turntable", "4"]) == 1
+
+
+def _render(npy, out, *extra):
+    assert main(["render", str(npy), "-o", str(out), "-W", "80", "-H", "56", "--backend", "cpu", *extra]) == 0
+    return np.asarray(Image.open(out))
+
+
+@pytest.mark.parametrize(
+    "base, base_settings, option, setting",
+    [
+        (["--supersample", "2"], {"supersample": 2}, ["--supersample-filter", "lanczos"], {"supersample_filter": "lanczos"}),
+        (
+            ["--stereo", "side-by-side", "--ipd", "20"],
+            {"stereo": "side-by-side", "ipd": 20.0},
+            ["--convergence", "40"],
+            {"convergence": 40.0},
+        ),
+        (
+            ["--hqs", "--color-mode", "elevation"],
+            {"hqs": True, "color_mode": "elevation"},
+            ["--hqs-depth-tolerance", "0.3"],
+            {"hqs_depth_tolerance": 0.3},
+        ),
+        (["--lighting"], {"lighting": True}, ["--shininess", "2"], {"shininess": 2.0}),
+    ],
+)
+def test_each_new_quality_option_changes_the_image_like_the_api(npy, tmp_path, base, base_settings, option, setting):
+    if "lighting" in base_settings:
+        pytest.importorskip("scipy")
+    without = _render(npy, tmp_path / "a.png", *base)
+    with_option = _render(npy, tmp_path / "b.png", *base, *option)
+    assert without.shape == with_option.shape and not np.array_equal(without, with_option)
+    cloud = gp.open(npy)
+    s = gp.RenderSettings(backend="cpu", **base_settings, **setting)
+    prepare_cloud(cloud, s)
+    np.testing.assert_array_equal(with_option, gp.render(cloud, gp.Camera.fit(cloud.bounds, view="iso", width=80, height=56), s))
+
+
+def test_every_quality_setting_has_a_render_option():
+    import dataclasses
+
+    import typer
+
+    from gigapoint.cli import app, commands  # noqa: F401  (commands registers `render`)
+
+    names = [f.name for f in dataclasses.fields(gp.RenderSettings)]
+    quality = names[names.index("color_mode") :]  # the image-quality block of RenderSettings
+    assert sorted(OPTION_OF) == sorted(quality)
+    render = typer.main.get_command(app).commands["render"]
+    opts = {o for p in render.params for o in p.opts}
+    assert {OPTION_OF[f] for f in quality} <= opts
+
+
+@pytest.mark.parametrize(
+    "extra, option",
+    [
+        (["--supersample", "2", "--supersample-filter", "bicubic"], "--supersample-filter"),
+        (["--stereo", "anaglyph", "--convergence", "-3"], "--convergence"),
+        (["--hqs", "--hqs-depth-tolerance", "2"], "--hqs-depth-tolerance"),
+        (["--lighting", "--shininess", "-1"], "--shininess"),
+    ],
+)
+def test_bad_new_options_are_one_line_errors_naming_the_option(npy, tmp_path, capsys, extra, option):
+    assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "32", *extra]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"error: {option}:") and "\n" not in err
+    assert not (tmp_path / "x.png").exists()

@@ -202,6 +202,86 @@ def test_hqs_kernel_equals_reference_and_thread_count(demo):
     assert not np.array_equal(img, f.image)
 
 
+def test_hqs_mean_is_exact_past_the_packed_sums():
+    """5000 points in one pixel, far more than the 32 a packed u64 sums: the spill sums keep the
+    mean exact, hard and with soft-splat weights, whatever the threads and bands."""
+    rng = np.random.default_rng(5)
+    n = 5000
+    xyz = np.concatenate([np.column_stack([np.full(n, 20.5), np.full(n, 10.5), -0.001 * rng.random(n)]), [[10.5, 20.5, 0.0]]])
+    rgba = rng.integers(0, 256, (n + 1, 4)).astype(np.uint8)
+    cam = top_camera(z=50.0)
+    _, f = frame_of(xyz, rgba, cam, hqs=True)
+    np.testing.assert_array_equal(f.image[H - 11, 20], (rgba[:n].astype(np.int64).sum(0) + n // 2) // n)
+    assert tuple(f.image[H - 21, 10]) == tuple(rgba[n])
+    cloud = gp.from_arrays(xyz, rgba, name="pile")
+    from gigapoint.render.passes.splats import splat_params
+
+    near, far = cam.clip_range(cloud.bounds)
+    sel = select(cloud.batches, cam.screen_rows(), W, H, near, far)
+    vis = f.visibility.reshape(-1)
+    for softness in (0.0, 2.0):
+        s = gp.RenderSettings(point_size=7, point_shape="round", hqs=True, splat_softness=softness)
+        splat = splat_params(s, cam)
+        big = gp.render_frame(cloud, cam, s.replace(backend="cpu")).visibility.reshape(-1)
+        ref = hqs_reference(cloud, sel, big, W, H, near, far, cloud.color, _u32(f.image), 0.01, splat, softness)
+        for threads, bands in ((1, None), (2, None), (2, 9)):
+            got = hqs_colors(cloud, sel, big, W, H, near, far, cloud.color, _u32(f.image), 0.01, threads, splat, softness, bands)
+            np.testing.assert_array_equal(got, ref)
+    assert not np.array_equal(got, hqs_colors(cloud, sel, vis, W, H, near, far, cloud.color, _u32(f.image), 0.01, 2))
+
+
+def test_hqs_bands_and_cameras_inside_the_cloud(demo):
+    """The screen bands (many, and batches reaching behind the eye) change nothing."""
+    from gigapoint.render.passes.splats import splat_params
+
+    cloud, _, _ = demo
+    lo, hi = np.asarray(cloud.bounds[0]), np.asarray(cloud.bounds[1])
+    centre = (lo + hi) / 2
+    cam = gp.Camera.look_at(centre + [0, 0, 5], centre + [300, 200, -5], up=(0, 0, 1), width=90, height=70, fov=70.0)
+    f = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", point_size=3))
+    near, far = cam.clip_range(cloud.bounds)
+    sel = select(cloud.batches, cam.screen_rows(), cam.width, cam.height, near, far)
+    vis = f.visibility.reshape(-1)
+    splat = splat_params(gp.RenderSettings(point_size=3), cam)
+    ref = hqs_reference(cloud, sel, vis, cam.width, cam.height, near, far, cloud.color, _u32(f.image), 0.05, splat)
+    assert not np.array_equal(ref, _u32(f.image))
+    for bands in (1, 2, 7, 70):
+        got = hqs_colors(cloud, sel, vis, cam.width, cam.height, near, far, cloud.color, _u32(f.image), 0.05, 2, splat, 0.0, bands)
+        np.testing.assert_array_equal(got, ref)
+
+
+def test_hqs_packed_mean_is_exact_for_every_lane_sum():
+    """The resolve's float32 reciprocal gives round-half-up(s / n) for every lane sum s <= 255 n, n <= 32."""
+    from numba import njit
+
+    from gigapoint.backends.numba_cpu.passes import _lane_mean
+
+    @njit
+    def all_means(out):
+        for n in range(1, 33):
+            rcp = np.float32(1.0) / np.float32(n)
+            for s in range(255 * n + 1):
+                out[n, s] = _lane_mean(np.uint64(s), np.uint32(n >> 1), rcp)
+
+    got = np.zeros((33, 255 * 32 + 1), np.int64)
+    all_means(got)
+    for n in range(1, 33):
+        s = np.arange(255 * n + 1)
+        np.testing.assert_array_equal(got[n, : len(s)], (s + n // 2) // n)
+
+
+def test_hqs_bands_share_the_points_evenly():
+    from gigapoint.render.passes.hqs import split_rows
+
+    # 90 000 points over rows 0..99, 10 000 over rows 100..999 of a 100 px wide screen
+    lo, hi, span, counts = np.array([0, 100]), np.array([99, 999]), np.array([100.0, 900.0]), np.array([90_000, 10_000])
+    two = split_rows(lo, hi, span, counts, 100, 1000, 2)
+    assert two[0] == 0 and two[2] == 1000 and 50 < two[1] < 80  # the dense rows are split, not the screen
+    four = split_rows(lo, hi, span, counts, 100, 1000, 4)
+    assert np.all(np.diff(four) > 0) and four[3] < 100
+    assert list(split_rows(lo, hi, span, counts, 100, 1000, 1)) == [0, 1000]
+
+
 def test_passes_compose_like_their_references(demo):
     """fill holes -> color mode -> HQS -> EDL, each step by its numpy reference."""
     from gigapoint.render.colors import point_colors

@@ -14,7 +14,7 @@ from ..errors import GigapointError
 from ..render import VIEWS, Camera, RenderSettings
 from . import app
 from .output import check_output, save_array, save_image
-from .quality_opts import prepare_cloud, quality_settings
+from .quality_opts import apply_quality, prepare_cloud
 
 _CAMERA_KEYS = {"eye": 3, "target": 3, "up": 3, "yaw": 1, "pitch": 1, "distance": 1, "fov": 1}
 
@@ -106,14 +106,18 @@ def render(
     fill_holes: int = typer.Option(0, help="Depth-aware hole filling: 0 off, 1/2/3 = 3x3/5x5/7x7 window."),
     foveated: bool = typer.Option(False, "--foveated", help="Hole filling window grows from 3x3 in the centre to the full size at the border."),
     hqs: bool = typer.Option(False, "--hqs", help="High-quality shading: blend the colors of all points near the front."),
+    hqs_depth_tolerance: float = typer.Option(0.01, help="--hqs blends the points at most this fraction behind the closest (0..1)."),
     point_size: int = typer.Option(1, help="Point size in pixels."),
     point_shape: str = typer.Option("square", help="square or round."),
     point_world_size: Optional[float] = typer.Option(None, help="Attenuated points: size in world units, at most --point-size pixels (16 unless given)."),
     splat_softness: float = typer.Option(0.0, help="Soft splats (Kraft's falloff exponent, e.g. 2) blended by --hqs; 0 = hard."),
     supersample: int = typer.Option(1, help="Anti-aliasing: render 1, 2 or 4 times larger and filter down."),
+    supersample_filter: str = typer.Option("box", help="--supersample filter: box (exact block mean) or lanczos."),
     stereo: str = typer.Option("none", help="none, side-by-side or anaglyph."),
     ipd: float = typer.Option(0.065, help="Stereo eye distance in world units."),
+    convergence: Optional[float] = typer.Option(None, help="Stereo zero-parallax distance in world units (default: the camera's target distance)."),
     lighting: bool = typer.Option(False, "--lighting", help="Blinn-Phong headlight (estimates normals when the cloud has none)."),
+    shininess: float = typer.Option(32.0, help="--lighting specular exponent."),
     turntable: Optional[int] = typer.Option(None, help="Write a video of N frames orbiting the cloud instead of an image (-o out.mp4)."),
     fps: float = typer.Option(30.0, help="Frames per second of --turntable videos."),
 ) -> None:
@@ -130,11 +134,12 @@ def render(
         if extra is not None:
             check_output(extra, overwrite, suffixes={".npy"})
     settings = RenderSettings(background=background, backend=backend, threads=threads)
-    settings = settings.replace(**quality_settings(
-        color_mode=color_mode, colormap=colormap, elevation_range=elevation_range, intensity_range=intensity_range, edl=edl, edl_strength=edl_strength,
-        edl_radius=edl_radius, fill_holes=fill_holes, foveated=foveated, hqs=hqs, point_size=point_size, point_shape=point_shape,
-        point_world_size=point_world_size, splat_softness=splat_softness, supersample=supersample, stereo=stereo, ipd=ipd, lighting=lighting,
-    ))  # fmt: skip
+    settings = apply_quality(
+        settings, color_mode=color_mode, colormap=colormap, elevation_range=elevation_range, intensity_range=intensity_range, edl=edl,
+        edl_strength=edl_strength, edl_radius=edl_radius, fill_holes=fill_holes, foveated=foveated, hqs=hqs, hqs_depth_tolerance=hqs_depth_tolerance,
+        point_size=point_size, point_shape=point_shape, point_world_size=point_world_size, splat_softness=splat_softness, supersample=supersample,
+        supersample_filter=supersample_filter, stereo=stereo, ipd=ipd, convergence=convergence, lighting=lighting, shininess=shininess,
+    )  # fmt: skip
     if projection not in ("perspective", "orthographic"):
         raise GigapointError(f"--projection must be perspective or orthographic, got {projection!r}")
     if view not in VIEWS:

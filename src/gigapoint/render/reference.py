@@ -30,13 +30,9 @@ def grid_coordinates(cloud, first: int, count: int, bits: int) -> np.ndarray:
     return q + (m + (h + half) * inv) * inv
 
 
-def reference_visibility(cloud, camera: Camera, settings: RenderSettings | None = None) -> np.ndarray:
-    settings = settings or RenderSettings()
-    w, h = camera.width, camera.height
-    near, far = camera.clip_range(cloud.bounds)
-    sel = select(cloud.batches, camera.screen_rows(), w, h, near, far, settings.precision_threshold_px, settings.adaptive_precision, settings.frustum_culling)
-    vis = np.full(w * h, EMPTY_PIXEL, np.uint64)
-    footprint, size, atten = splat_params(settings, camera)
+def projected_batches(cloud, sel, width: int, height: int, near: float, far: float):
+    """Per selected batch: (first, idx, x, y, depth) of its points in view, decoded and projected
+    in the kernels' float32 operation order; idx are batch-relative, x, y int64 pixel columns/rows."""
     for k, b in enumerate(sel.ids):
         first, count = int(cloud.batches["first"][b]), int(cloud.batches["count"][b])
         g = grid_coordinates(cloud, first, count, int(sel.bits[k]))
@@ -45,13 +41,39 @@ def reference_visibility(cloud, camera: Camera, settings: RenderSettings | None 
         sx, sy, sw, sd = (m[r, 0] * x + m[r, 1] * y + m[r, 2] * z + m[r, 3] for r in range(4))
         with np.errstate(divide="ignore", invalid="ignore"):
             px, py = sx / sw, sy / sw
-        ok = (sd > np.float32(near)) & (sd < np.float32(far)) & (sw > 0) & (px >= 0) & (px < w) & (py >= 0) & (py < h)
-        keys = (sd[ok].view(np.uint32).astype(np.uint64) << np.uint64(32)) | (first + np.flatnonzero(ok)).astype(np.uint64)
-        x0, y0 = px[ok].astype(np.int64), py[ok].astype(np.int64)
-        sizes = point_sizes(sd[ok], size, atten)
-        for dx, dy, need in footprint:  # point size: every covered pixel gets the point's own key
-            m = (need <= sizes) & (x0 + dx >= 0) & (x0 + dx < w) & (y0 + dy >= 0) & (y0 + dy < h)
-            np.minimum.at(vis, (y0[m] + dy) * w + x0[m] + dx, keys[m])
+        ok = (sd > np.float32(near)) & (sd < np.float32(far)) & (sw > 0) & (px >= 0) & (px < width) & (py >= 0) & (py < height)
+        yield first, np.flatnonzero(ok), px[ok].astype(np.int64), py[ok].astype(np.int64), sd[ok]
+
+
+def footprint_pixels(x0, y0, sizes, footprint, width: int, height: int):
+    """Per footprint row (dx, dy, need): (dx, dy, mask of the points that cover it, their pixel ids)."""
+    for dx, dy, need in footprint:
+        m = (need <= sizes) & (x0 + dx >= 0) & (x0 + dx < width) & (y0 + dy >= 0) & (y0 + dy < height)
+        yield dx, dy, m, (y0[m] + dy) * width + x0[m] + dx
+
+
+def reference_visibility(cloud, camera: Camera, settings: RenderSettings | None = None) -> np.ndarray:
+    settings = settings or RenderSettings()
+    w, h = camera.width, camera.height
+    near, far = camera.clip_range(cloud.bounds)
+    sel = select(
+        cloud.batches,
+        camera.screen_rows(),
+        w,
+        h,
+        near,
+        far,
+        settings.precision_threshold_px,
+        settings.adaptive_precision,
+        settings.frustum_culling,
+    )
+    vis = np.full(w * h, EMPTY_PIXEL, np.uint64)
+    footprint, size, atten = splat_params(settings, camera)
+    for first, idx, x0, y0, d in projected_batches(cloud, sel, w, h, near, far):
+        keys = (d.view(np.uint32).astype(np.uint64) << np.uint64(32)) | (first + idx).astype(np.uint64)
+        sizes = point_sizes(d, size, atten)
+        for _, _, m, pix in footprint_pixels(x0, y0, sizes, footprint, w, h):  # every covered pixel gets the point's own key
+            np.minimum.at(vis, pix, keys[m])
     return vis.reshape(h, w)
 
 

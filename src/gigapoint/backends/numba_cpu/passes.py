@@ -12,7 +12,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from llvmlite import ir
 from numba import njit, prange
+from numba.core import cgutils, types
+from numba.extending import intrinsic
 
 from .raster import project_batch
 
@@ -278,12 +281,66 @@ def _surrounded(occ):
 
 
 # --- high-quality shading ----------------------------------------------------------------------
+# One u64 a pixel holds the running sums (Schütz et al.'s HQS, exact integer means): 13-bit
+# lanes for r, g, b, a (bits 0-51), an 11-bit weight count (bits 52-62) and a flag (bit 63)
+# saying that wider sums in the spill arrays belong to the pixel too. Before a lane could pass
+# 2^13 (more than 32 weights) the packed sums move to the spill arrays (r | g << 32, b | a << 32,
+# count: exact for up to 2^24 weights a pixel). 8 bytes a pixel instead of 20 is what makes the
+# scattered accumulation fast: it is memory-bound.
+_LANE = np.uint64(8191)
+_N_SHIFT = np.uint64(52)
+_N_MASK = np.uint64(2047)
+_SPILLED = np.uint64(1) << np.uint64(63)
+_LANE_WEIGHTS = np.uint64(32)  # 32 x 255 < 2^13
+_ONE_COUNT = np.uint64(1) << _N_SHIFT
+_PREFETCH_AHEAD = 64  # points: the scattered sums wait on memory, so their lines are asked for early
+
+
+@intrinsic
+def prefetch(typingctx, arr, idx):
+    """Hint that arr[idx] will be written soon (LLVM's prefetch; no effect on results, never faults)."""
+    sig = types.void(arr, idx)
+
+    def codegen(context, builder, signature, args):
+        aryty = signature.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [args[1]], wraparound=False, boundscheck=False)
+        i8p = ir.IntType(8).as_pointer()
+        name = "llvm.prefetch.p0" if getattr(i8p, "is_opaque", False) else "llvm.prefetch.p0i8"
+        i32 = ir.IntType(32)
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]), name)
+        builder.call(fn, [builder.bitcast(ptr, i8p), ir.Constant(i32, 1), ir.Constant(i32, 3), ir.Constant(i32, 1)])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
 @njit(inline="always")
-def _hqs_add(p, depth, col, w, vis, vis_f32, t1, rg, ba, cnt):
-    if vis[p] != EMPTY and depth <= vis_f32[2 * p + 1] * t1:
-        rg[p] += w * (np.uint64(col & np.uint32(255)) | (np.uint64((col >> np.uint32(8)) & np.uint32(255)) << np.uint64(32)))
-        ba[p] += w * (np.uint64((col >> np.uint32(16)) & np.uint32(255)) | (np.uint64(col >> np.uint32(24)) << np.uint64(32)))
-        cnt[p] += np.uint32(w)
+def _packed_color(col):
+    """RGBA u32 -> the four 13-bit lanes plus a count of one."""
+    c = np.uint64(col)
+    return (
+        (c & np.uint64(0xFF))
+        | ((c & np.uint64(0xFF00)) << np.uint64(5))
+        | ((c & np.uint64(0xFF0000)) << np.uint64(10))
+        | ((c & np.uint64(0xFF000000)) << np.uint64(15))
+        | _ONE_COUNT
+    )
+
+
+@njit(inline="always")
+def _hqs_add(p, depth, col, w, vis_f32, t1, acc, spill_rg, spill_ba, spill_n):
+    """Add w x color and w to pixel p if ``depth`` is within the tolerance of its closest depth
+    (an empty pixel's depth bits are a NaN: the test fails). Branch-free: a point that fails
+    adds zero (every point's pixel is covered, so its line is written anyway)."""
+    w = w * np.uint64(depth <= vis_f32[2 * p + 1] * t1)
+    v = acc[p]
+    if ((v >> _N_SHIFT) & _N_MASK) + w > _LANE_WEIGHTS:
+        spill_rg[p] += (v & _LANE) | (((v >> np.uint64(13)) & _LANE) << np.uint64(32))
+        spill_ba[p] += ((v >> np.uint64(26)) & _LANE) | (((v >> np.uint64(39)) & _LANE) << np.uint64(32))
+        spill_n[p] += np.uint32((v >> _N_SHIFT) & _N_MASK)
+        v = _SPILLED
+    acc[p] = v + w * _packed_color(col)
 
 
 @njit(inline="always")
@@ -296,12 +353,92 @@ def soft_weight(dx, dy, s, softness):
     return np.uint64(max(0.0, 15.0 * o + 0.5))
 
 
+@njit(inline="always")
+def _mean(s, n, nf):
+    """round-half-up(s / n) for s <= 255 n < 2^32: a float64 quotient is exact enough (a
+    non-integer quotient is >= 1/n from the next integer, far above the rounding error)."""
+    return np.uint32(np.float64(s + (n >> np.uint64(1))) / nf)
+
+
+@njit(inline="always")
+def _lane_mean(s, h, rcp):
+    """round-half-up(s / n) of a 13-bit lane (n <= 32), h = n // 2, rcp = float32(1 / n):
+    (s + h + 0.5) / n lies >= 0.5 / n >= 1/64 away from the integers, and float32 is off by
+    less than 2^-15 here, so truncating is exact."""
+    return np.uint32((np.float32(np.uint32(s) + h) + np.float32(0.5)) * rcp)
+
+
+@njit(inline="always")
+def _rgba(r, g, b, a):
+    return r | (g << np.uint32(8)) | (b << np.uint32(16)) | (a << np.uint32(24))
+
+
+@njit(inline="always")
+def _hqs_resolve_rows(r0, r1, width, acc, spill_rg, spill_ba, spill_n, fallback, out):
+    """out = the rounded mean color of rows r0..r1 (fallback where nothing was added); the sums
+    are set back to zero. Rows without a spilled pixel take a branch-free (vectorised) loop."""
+    for y in range(r0, r1):
+        base = y * width
+        a_ = acc[base : base + width]
+        o_ = out[base : base + width]
+        f_ = fallback[base : base + width]
+        used = np.uint64(0)
+        for x in range(width):
+            used |= a_[x]
+        if used == 0:  # nothing added in this row
+            for x in range(width):
+                o_[x] = f_[x]
+            continue
+        if used & _SPILLED:
+            for x in range(width):
+                v = a_[x]
+                p = base + x
+                rg = (v & _LANE) | (((v >> np.uint64(13)) & _LANE) << np.uint64(32))
+                ba = ((v >> np.uint64(26)) & _LANE) | (((v >> np.uint64(39)) & _LANE) << np.uint64(32))
+                n = (v >> _N_SHIFT) & _N_MASK
+                if v & _SPILLED:
+                    rg += spill_rg[p]
+                    ba += spill_ba[p]
+                    n += np.uint64(spill_n[p])
+                    spill_rg[p] = 0
+                    spill_ba[p] = 0
+                    spill_n[p] = 0
+                a_[x] = 0
+                if n == 0:
+                    o_[x] = f_[x]
+                else:
+                    nf = np.float64(n)
+                    o_[x] = _rgba(
+                        _mean(rg & _LOW32, n, nf),
+                        _mean(rg >> np.uint64(32), n, nf),
+                        _mean(ba & _LOW32, n, nf),
+                        _mean(ba >> np.uint64(32), n, nf),
+                    )
+            continue
+        for x in range(width):
+            v = a_[x]
+            n = np.uint32((v >> _N_SHIFT) & _N_MASK)
+            h = n >> np.uint32(1)
+            rcp = np.float32(1.0) / np.float32(max(n, np.uint32(1)))
+            c = _rgba(
+                _lane_mean(v & _LANE, h, rcp),
+                _lane_mean((v >> np.uint64(13)) & _LANE, h, rcp),
+                _lane_mean((v >> np.uint64(26)) & _LANE, h, rcp),
+                _lane_mean((v >> np.uint64(39)) & _LANE, h, rcp),
+            )
+            o_[x] = c if n != 0 else f_[x]
+            if v != 0:  # lines of empty pixels stay clean
+                a_[x] = 0
+
+
 @njit(parallel=True, cache=True)
-def hqs_accumulate(
+def hqs_shade(
     firsts,
     counts,
     bits,
     mats,
+    row_lo,
+    row_hi,
     low,
     med,
     high,
@@ -309,39 +446,52 @@ def hqs_accumulate(
     height,
     near,
     far,
-    starts,
-    vis,
+    bands,
     vis_f32,
     tol1,
     color,
-    acc_rg,
-    acc_ba,
-    acc_n,
     footprint,
     size,
     atten,
     softness,
+    acc,
+    spill_rg,
+    spill_ba,
+    spill_n,
+    fallback,
+    out,
 ):
-    """Every point whose depth is <= (1 + tolerance) x the closest depth at its pixel adds its
-    RGBA to thread t's sums (r | g << 32 and b | a << 32: exact for up to 2^24 points a pixel)
-    and 1 to its count, at every pixel of its footprint (same rule as raster.write_batch).
-    With ``softness`` > 0 (soft splats) each footprint pixel adds w x color and w, w = 0..15 from
-    ``soft_weight`` (exact for up to 2^24 / 15 points a pixel). acc_*[t] must be zero on entry."""
-    n_threads = starts.shape[0] - 1
+    """High-quality shading, accumulation and resolve in one parallel pass over screen bands.
+
+    Band t (rows bands[t]..bands[t+1]) belongs to one thread, which re-projects (raster.py's
+    ``project_batch``) the batches whose rows row_lo[k]..row_hi[k] reach its band, adds every
+    point whose depth is <= tol1 x the closest depth at its pixel (``vis_f32`` = the depth pass's
+    visibility buffer viewed as float32) at every pixel of its footprint inside the band (same
+    footprint rule as raster.write_batch; with ``softness`` > 0 weights 0..15 from
+    ``soft_weight``), then writes its rows' rounded means to ``out`` (``fallback`` where nothing
+    was added). Each pixel is summed by one thread in index order, so the image does not depend
+    on the thread count. acc and the spill arrays must be zero on entry; they are on exit."""
+    n_bands = bands.shape[0] - 1
+    n_fp = footprint.shape[0]
+    reach = 0
+    for o in range(n_fp):
+        reach = max(reach, abs(footprint[o, 1]))
     max_count = 0
     for k in range(counts.shape[0]):
         max_count = max(max_count, counts[k])
     near32 = np.float32(near)
     far32 = np.float32(far)
     t1 = np.float32(tol1)
-    n_fp = footprint.shape[0]
-    for t in prange(n_threads):
-        rg = acc_rg[t]
-        ba = acc_ba[t]
-        cnt = acc_n[t]
+    for t in prange(n_bands):
+        r0 = bands[t]
+        r1 = bands[t + 1]
+        p0 = np.int32(r0 * width)
+        p1 = np.int32(r1 * width)
         pix = np.empty(max_count, np.int32)
         depth = np.empty(max_count, np.float32)
-        for k in range(starts[t], starts[t + 1]):
+        for k in range(counts.shape[0]):
+            if r0 == r1 or row_hi[k] + reach < r0 or row_lo[k] - reach >= r1:
+                continue
             first = firsts[k]
             c = counts[k]
             project_batch(
@@ -357,54 +507,42 @@ def hqs_accumulate(
                 pix[:c],
                 depth[:c],
             )
+            if n_fp == 1:
+                for j in range(c):
+                    if j + _PREFETCH_AHEAD < c:
+                        q = pix[j + _PREFETCH_AHEAD]
+                        if p0 <= q < p1:
+                            prefetch(acc, q)
+                            prefetch(vis_f32, 2 * q + 1)
+                    p = pix[j]
+                    if p0 <= p < p1:
+                        _hqs_add(p, depth[j], color[first + j], np.uint64(1), vis_f32, t1, acc, spill_rg, spill_ba, spill_n)
+                continue
             for j in range(c):
+                if j + _PREFETCH_AHEAD < c and pix[j + _PREFETCH_AHEAD] >= 0:
+                    q = pix[j + _PREFETCH_AHEAD]
+                    prefetch(acc, q)
+                    prefetch(vis_f32, 2 * q + 1)
                 p = pix[j]
                 if p < 0:
                     continue
-                col = color[first + j]
-                if n_fp == 1:
-                    _hqs_add(p, depth[j], col, np.uint64(1), vis, vis_f32, t1, rg, ba, cnt)
-                    continue
-                s = size if atten == 0 else min(size, max(np.float32(1.0), atten / depth[j]))
                 x = p % width
                 y = p // width
+                if y + reach < r0 or y - reach >= r1:
+                    continue
+                s = size if atten == 0 else min(size, max(np.float32(1.0), atten / depth[j]))
                 for o in range(n_fp):
                     if footprint[o, 2] > s:
                         break
                     xx = x + footprint[o, 0]
                     yy = y + footprint[o, 1]
-                    if 0 <= xx < width and 0 <= yy < height:
+                    if 0 <= xx < width and r0 <= yy < r1:
                         w = soft_weight(footprint[o, 0], footprint[o, 1], s, softness)
                         if w > 0:
-                            _hqs_add(np.int64(yy) * width + xx, depth[j], col, w, vis, vis_f32, t1, rg, ba, cnt)
-
-
-@njit(parallel=True, cache=True)
-def hqs_resolve(acc_rg, acc_ba, acc_n, fallback, out):
-    """out[p] = the rounded mean color over all threads' sums (fallback where nothing added).
-    The sums are set back to zero, ready for the next frame."""
-    n_threads = acc_rg.shape[0]
-    for p in prange(out.shape[0]):
-        rg = np.uint64(0)
-        ba = np.uint64(0)
-        n = np.uint64(0)
-        for t in range(n_threads):
-            if acc_n[t, p] != 0:
-                rg += acc_rg[t, p]
-                ba += acc_ba[t, p]
-                n += np.uint64(acc_n[t, p])
-                acc_rg[t, p] = 0
-                acc_ba[t, p] = 0
-                acc_n[t, p] = 0
-        if n == 0:
-            out[p] = fallback[p]
-        else:
-            h = n >> np.uint64(1)
-            r = ((rg & _LOW32) + h) // n
-            g = ((rg >> np.uint64(32)) + h) // n
-            b = ((ba & _LOW32) + h) // n
-            a = ((ba >> np.uint64(32)) + h) // n
-            out[p] = np.uint32(r | (g << np.uint64(8)) | (b << np.uint64(16)) | (a << np.uint64(24)))
+                            _hqs_add(
+                                np.int64(yy) * width + xx, depth[j], color[first + j], w, vis_f32, t1, acc, spill_rg, spill_ba, spill_n
+                            )
+        _hqs_resolve_rows(r0, r1, width, acc, spill_rg, spill_ba, spill_n, fallback, out)
 
 
 @njit(parallel=True, cache=True)
