@@ -32,7 +32,7 @@ RENDER_LOCK = threading.Lock()
 REST_S = 0.15  # no camera input for this long = at rest: refine to full resolution
 FRAME_BUDGET_S = 0.045  # render + encode while moving (>= 20 frames/s with the transfer)
 SCALES = (1, 2, 4, 8)  # resolution divisors while moving
-MOVING_RENDER_S = 0.03  # a moving frame draws what the measured point rate renders in this time
+MOVING_RENDER_S = 0.015  # a moving frame draws what the measured point rate renders in this time
 MIN_MOVING_POINTS = 1_000_000
 SEND_TIMEOUT_S = 0.25
 MAX_SESSIONS = 64
@@ -155,9 +155,10 @@ class ScaleControl:
         if t > FRAME_BUDGET_S and self.level < len(SCALES) - 1:
             self.level += 1
         elif self.level > 0:
-            # the finer level's old time drifts toward this level's time x 4 (pixels), so it is retried
-            # once the load that made it slow has gone
-            guess = t * 4.0
+            # the finer level's old time drifts toward this level's time x 2 (4x the pixels, but the
+            # point cost, most of a frame, is capped by MovingBudget), so it is retried once the
+            # load that made it slow has gone
+            guess = t * 2.0
             finer = self.times.get(self.level - 1, guess)
             finer = self.times[self.level - 1] = 0.85 * finer + 0.15 * guess
             if finer < FRAME_BUDGET_S * 0.8:
