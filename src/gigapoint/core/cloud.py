@@ -12,6 +12,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit, prange
 
 from ..errors import EmptyCloudError, GigapointWarning, InputError
 from .chunk import PointChunk
@@ -91,17 +92,72 @@ def _valid_mask(xyz: np.ndarray) -> np.ndarray:
     return np.all(np.isfinite(xyz) & (np.abs(xyz) <= MAX_ABS_COORDINATE), axis=1)
 
 
+_SCAN_BLOCKS = 64
+
+
+@njit(parallel=True, cache=True)
+def _scan_blocks(xyz, limit, bad, lo, hi):
+    """Per block of points: the invalid count (NaN, inf, beyond ``limit``) and the bounds of the
+    valid ones; one pass instead of numpy's six full-size temporaries (2 s for 20 M points)."""
+    n = xyz.shape[0]
+    nb = bad.shape[0]
+    for b in prange(nb):
+        count = 0
+        for axis in range(3):
+            lo[b, axis] = np.inf
+            hi[b, axis] = -np.inf
+        for i in range(b * n // nb, (b + 1) * n // nb):
+            x = xyz[i, 0]
+            y = xyz[i, 1]
+            z = xyz[i, 2]
+            if abs(x) <= limit and abs(y) <= limit and abs(z) <= limit:  # False for NaN too
+                lo[b, 0] = min(lo[b, 0], x)
+                lo[b, 1] = min(lo[b, 1], y)
+                lo[b, 2] = min(lo[b, 2], z)
+                hi[b, 0] = max(hi[b, 0], x)
+                hi[b, 1] = max(hi[b, 1], y)
+                hi[b, 2] = max(hi[b, 2], z)
+            else:
+                count += 1
+        bad[b] = count
+
+
+def scan_points(xyz: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+    """(invalid points, min, max of the valid ones) of float64 (N, 3) positions."""
+    bad = np.empty(_SCAN_BLOCKS, np.int64)
+    lo = np.empty((_SCAN_BLOCKS, 3))
+    hi = np.empty((_SCAN_BLOCKS, 3))
+    _scan_blocks(np.ascontiguousarray(xyz, np.float64), MAX_ABS_COORDINATE, bad, lo, hi)
+    return int(bad.sum()), lo.min(axis=0), hi.max(axis=0)
+
+
+@njit(parallel=True, cache=True)
+def _gather(src, order, out):
+    for i in prange(order.shape[0]):
+        out[i] = src[order[i]]
+
+
+def gather(values: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """values[order] along the first axis, on all cores (numpy's take is single-threaded)."""
+    if values.ndim != 1 or not values.flags.c_contiguous:
+        return np.ascontiguousarray(values[order])
+    out = np.empty(len(order), values.dtype)
+    _gather(values, order, out)
+    return out
+
+
 def build_cloud(chunks: Iterable[PointChunk], name: str = "cloud", batch_size: int = BATCH_SIZE) -> PointCloud:
     """Collect chunks, drop invalid points (counted and warned), sort by Morton code, batch, quantize."""
     xyz_parts, rgba_parts, attr_parts = [], [], {}
     skipped = 0
     total = 0
     attr_names: list[str] | None = None
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for chunk in chunks:
-        valid = _valid_mask(chunk.xyz)
-        n_bad = int(len(valid) - valid.sum())
+        n_bad, chunk_lo, chunk_hi = scan_points(chunk.xyz)
+        lo, hi = np.minimum(lo, chunk_lo), np.maximum(hi, chunk_hi)
         skipped += n_bad
-        keep = slice(None) if n_bad == 0 else valid
+        keep = slice(None) if n_bad == 0 else _valid_mask(chunk.xyz)
         names = sorted(chunk.attributes)
         if attr_names is None:
             attr_names = names
@@ -122,20 +178,22 @@ def build_cloud(chunks: Iterable[PointChunk], name: str = "cloud", batch_size: i
     rgba = rgba_parts[0] if len(rgba_parts) == 1 else np.concatenate(rgba_parts)
     del rgba_parts
     attributes = {a: (v[0] if len(v) == 1 else np.concatenate(v)) for a, v in attr_parts.items() if a in (attr_names or [])}
-    return cloud_from_points(xyz, rgba, attributes, name=name, skipped=skipped, batch_size=batch_size)
+    return cloud_from_points(xyz, rgba, attributes, name=name, skipped=skipped, batch_size=batch_size, bounds=(lo, hi))
 
 
-def cloud_from_points(xyz, rgba, attributes=None, name="cloud", skipped=0, batch_size=BATCH_SIZE) -> PointCloud:
-    """Build a PointCloud from valid float64 xyz (N, 3) and uint8 rgba (N, 4)."""
+def cloud_from_points(xyz, rgba, attributes=None, name="cloud", skipped=0, batch_size=BATCH_SIZE, bounds=None) -> PointCloud:
+    """Build a PointCloud from valid float64 xyz (N, 3) and uint8 rgba (N, 4) (``bounds``: their
+    (min, max) if already known)."""
     if batch_size < 1:
         raise InputError(f"{name}: batch size must be >= 1, got {batch_size}")
-    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+    lo, hi = bounds if bounds is not None else scan_points(xyz)[1:]
     origin, edge = cube_of(lo, hi)
     order = morton_order(morton_codes(xyz, origin, edge))
     batches = make_batches(len(xyz), batch_size)
     low, med, high = quantize(xyz, order, batches)
-    color = np.ascontiguousarray(rgba[order]).view(np.uint32).reshape(-1)
-    attrs = {a: np.ascontiguousarray(v[order]) for a, v in (attributes or {}).items()}
+    rgba = np.ascontiguousarray(rgba, np.uint8)
+    color = gather(rgba.view(np.uint32).reshape(-1), order)  # RGBA8 as one u32 a point
+    attrs = {a: gather(v, order) for a, v in (attributes or {}).items()}
     return PointCloud(batches, low, med, high, color, attrs, name=name, skipped=skipped)
 
 
