@@ -236,18 +236,19 @@ def fill_holes(vis, vis_f32, width, height, rmin, radius_map, ring_masks, presen
             surrounded[w] = ~free_half
         orow = out[base : base + width]
         vrow = vis[base : base + width]
+        # empty pixels surrounded by points take the window minimum: branch-free (the pattern of
+        # empty and covered pixels is too irregular for the branch predictor)
         for x in range(width):
             k = vrow[x]
-            orow[x] = k
-            if best[x] >= k:  # nothing nearer in the window (or nothing at all)
-                continue
-            if k == EMPTY:
-                if (surrounded[x >> 6] >> np.uint64(x & 63)) & np.uint64(1):
-                    orow[x] = best[x]
-                continue
-            # step 3: a point far behind nearer neighbours?
+            b = best[x]
+            s = (surrounded[x >> 6] >> np.uint64(x & 63)) & np.uint64(1)
+            orow[x] = b if (k == EMPTY) & (b < k) & (s != np.uint64(0)) else k
+        for x in range(width):
+            # step 3 (a few % of the pixels): a point far behind nearer neighbours? one rarely
+            # taken branch, the conditions evaluated without short-circuit
+            k = vrow[x]
             thr_f = vis_f32[2 * (base + x) + 1] * inv_gap
-            if not best_f[2 * x + 1] < thr_f:
+            if not ((k != EMPTY) & (best[x] < k) & (best_f[2 * x + 1] < thr_f)):
                 continue
             rmax = rrow[x]
             occ1 = np.uint32(0)
