@@ -52,6 +52,14 @@ def test_render_several_files_merge_into_one_scene(capsys, tmp_path, small_las):
     assert "60,000 of 60,000 points" in err
 
 
+def test_max_points_previews_a_subsample(capsys, tmp_path, small_las):
+    out = tmp_path / "preview.png"
+    rc, _, err = run(capsys, "render", small_las, "-o", out, "-W", 160, "-H", 100, "--stats", "--max-points", 15_000)
+    assert rc == 0, err
+    assert "15,000 of 30,000 points" in err  # every second point of each batch
+    assert (np.asarray(Image.open(out))[..., :3] != 0).any(axis=2).mean() > 0.05
+
+
 def test_camera_options_and_extra_outputs(capsys, tmp_path, small_las):
     depth, index = tmp_path / "d.npy", tmp_path / "i.npy"
     rc, _, err = run(
@@ -104,6 +112,8 @@ def test_a_failed_render_leaves_no_output_behind(capsys, tmp_path, small_las):
         (["--projection", "fisheye"], "projection"),
         (["--backend", "quantum"], "backend"),
         (["--threads", "0"], "threads"),
+        (["--max-points", "-5"], "max_points"),
+        (["--point-budget", "0"], "point_budget"),
     ],
 )
 def test_bad_options_give_one_line_errors(capsys, tmp_path, small_las, args, message):

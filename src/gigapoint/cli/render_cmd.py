@@ -92,6 +92,8 @@ def render(
     background: str = typer.Option("black", help="Background color: name, #rrggbb or r,g,b."),
     backend: str = typer.Option("auto", help="auto, cpu or wgpu."),
     threads: Optional[int] = typer.Option(None, help="CPU threads (default: all cores)."),
+    max_points: int = typer.Option(0, help="Plain clouds: draw at most this many points, every k-th of each batch (a quick preview); 0 = all."),
+    point_budget: int = typer.Option(10_000_000, help="Converted octrees: most points a frame draws (largest projected nodes first)."),
     depth_out: Optional[Path] = typer.Option(None, help="Also write the depth buffer (.npy, float32, inf = empty)."),
     index_out: Optional[Path] = typer.Option(None, help="Also write the point index buffer (.npy, int64, -1 = empty)."),
     stats: bool = typer.Option(False, "--stats", help="Print render statistics."),
@@ -133,7 +135,7 @@ def render(
     for extra in (depth_out, index_out):
         if extra is not None:
             check_output(extra, overwrite, suffixes={".npy"})
-    settings = RenderSettings(background=background, backend=backend, threads=threads)
+    settings = RenderSettings(background=background, backend=backend, threads=threads, max_points=max_points, point_budget=point_budget)
     settings = apply_quality(
         settings, color_mode=color_mode, colormap=colormap, elevation_range=elevation_range, intensity_range=intensity_range, edl=edl,
         edl_strength=edl_strength, edl_radius=edl_radius, fill_holes=fill_holes, foveated=foveated, hqs=hqs, hqs_depth_tolerance=hqs_depth_tolerance,
