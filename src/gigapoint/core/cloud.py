@@ -89,7 +89,8 @@ class PointCloud:
 
 
 def _valid_mask(xyz: np.ndarray) -> np.ndarray:
-    return np.all(np.isfinite(xyz) & (np.abs(xyz) <= MAX_ABS_COORDINATE), axis=1)
+    """The rule of ``_scan_blocks``: |x| <= the limit on every axis (False for NaN and inf)."""
+    return np.all(np.abs(xyz) <= MAX_ABS_COORDINATE, axis=1)
 
 
 _SCAN_BLOCKS = 64

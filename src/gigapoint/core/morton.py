@@ -30,8 +30,9 @@ def _spread_bits_3(v):
 
 
 @njit(parallel=True, cache=True)
-def morton_codes(xyz, origin, cube_size):
-    """Morton code of each point inside the cube [origin, origin + cube_size]^3 (x in the lowest bit)."""
+def morton_codes(xyz, origin, cube_size, x_high=False):
+    """Morton code of each point inside the cube [origin, origin + cube_size]^3: x in the lowest
+    bit of every 3-bit digit, or with ``x_high`` in the highest (Potree's child order, lod/keys.py)."""
     n = xyz.shape[0]
     codes = np.empty(n, np.uint64)
     cells = float(1 << MORTON_BITS_PER_AXIS)
@@ -42,7 +43,7 @@ def morton_codes(xyz, origin, cube_size):
         for axis in range(3):
             c = np.int64((xyz[i, axis] - origin[axis]) * inv)
             c = min(max(c, 0), top)
-            code |= _spread_bits_3(np.uint64(c)) << np.uint64(axis)
+            code |= _spread_bits_3(np.uint64(c)) << np.uint64(2 - axis if x_high else axis)
         codes[i] = code
     return codes
 

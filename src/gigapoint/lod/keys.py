@@ -12,31 +12,17 @@ Potree's name order), with no strings anywhere.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
 
-from ..core.morton import _spread_bits_3 as _spread3  # one bit-spreading routine for every code
+from ..core.morton import MORTON_BITS_PER_AXIS, morton_codes  # one Morton kernel for every code
 
-CODE_BITS = 21  # bits per axis of a point code
+CODE_BITS = MORTON_BITS_PER_AXIS  # bits per axis of a point code
 MAX_LEVEL = 20  # keys stay below 2^61
 ROOT_KEY = 1
-_SPAN = float(1 << CODE_BITS)
-_TOP = (1 << CODE_BITS) - 1
 
 
-@njit(parallel=True, cache=True)
 def point_codes(xyz, origin, edge):
     """u64 code of each point inside the cube [origin, origin + edge]^3 (x in bit 2 of each digit)."""
-    n = xyz.shape[0]
-    codes = np.empty(n, np.uint64)
-    inv = _SPAN / edge if edge > 0.0 else 0.0
-    for i in prange(n):
-        code = np.uint64(0)
-        for axis in range(3):
-            c = np.int64((xyz[i, axis] - origin[axis]) * inv)
-            c = min(max(c, 0), _TOP)
-            code |= _spread3(np.uint64(c)) << np.uint64(2 - axis)
-        codes[i] = code
-    return codes
+    return morton_codes(xyz, origin, edge, True)
 
 
 def key_of(codes, level: int):

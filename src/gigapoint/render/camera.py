@@ -135,17 +135,19 @@ class Camera:
         # is at depth distance - z and fits when |x| <= tan_h * depth (and likewise y). Then the
         # target moves so the box's projection is centred (perspective pushes it down otherwise),
         # and the distance is solved again: two rounds settle it.
-        for _ in range(3 if recenter else 1):
-            distance = float(np.max(np.maximum(cz + np.abs(cx) * margin / tan_h, cz + np.abs(cy) * margin / tan_v)))
-            distance = max(distance, float(cz.max()) + 0.05 * radius)  # every corner well in front of the eye
+        def fitting_distance():
+            d = float(np.max(np.maximum(cz + np.abs(cx) * margin / tan_h, cz + np.abs(cy) * margin / tan_v)))
+            return max(d, float(cz.max()) + 0.05 * radius)  # every corner well in front of the eye
+
+        distance = fitting_distance()
+        for _ in range(2 if recenter else 0):
             depth = distance - cz
             sx, sy = cx / depth / tan_h, cy / depth / tan_v  # -1..1 across the image
-            if not recenter:
-                break
             shift_x = (sx.max() + sx.min()) / 2 * tan_h * distance
             shift_y = (sy.max() + sy.min()) / 2 * tan_v * distance
             center = center + right * shift_x + up * shift_y
             cx, cy = cx - shift_x, cy - shift_y
+            distance = fitting_distance()
         return cls.orbit(center, yaw, pitch, distance, fov=fov, width=width, height=height, **kw)
 
     def with_size(self, width: int, height: int) -> Camera:

@@ -19,28 +19,15 @@ def wants_composite(settings) -> bool:
 
 
 def raster_options(backend, settings, camera):
-    """(backend, keyword arguments for backend.rasterize): points larger than one pixel.
-
-    Backends without point sizes (other than cpu and wgpu) hand such frames to the CPU backend.
-    Backends with GPU ``passes`` keep the visibility buffer on the device for them."""
-    if settings.point_size == 1:
-        return backend, ({"keep_on_device": True} if getattr(backend, "passes", None) is not None else {})
-    from .splats import splat_params
-
-    if backend.name not in ("cpu", "wgpu"):
-        import warnings
-
-        from ...backends import get_backend
-        from ...errors import GigapointWarning
-
-        warnings.warn(
-            f"point_size {settings.point_size}: the {backend.name} backend draws one-pixel points only; using the CPU backend",
-            GigapointWarning,
-            stacklevel=3,
-        )
-        backend = get_backend("cpu")
+    """(backend, keyword arguments for backend.rasterize): point size and shape, and, for
+    backends with GPU ``passes``, keeping the visibility buffer on the device for them.
+    Both backends (cpu, wgpu) draw every point size, so the backend is returned as given."""
     extra = {"keep_on_device": True} if getattr(backend, "passes", None) is not None else {}
-    return backend, {"splat": splat_params(settings, camera), **extra}
+    if settings.point_size > 1:
+        from .splats import splat_params
+
+        extra["splat"] = splat_params(settings, camera)
+    return backend, extra
 
 
 def finish_frame(backend, cloud, camera, sel, vis, settings, near, far):
