@@ -153,3 +153,48 @@ def test_all_invalid_points_is_an_error():
         gp.from_arrays(np.full((5, 3), np.nan))
     with pytest.raises(gp.GigapointError, match="no valid points"):
         gp.from_arrays(np.empty((0, 3)))
+
+
+def _batch_views(cloud, cam):
+    """Per selected batch: (inside_frustum as the kernel decides, matrix shape)."""
+    from gigapoint.backends.numba_cpu.raster import inside_frustum, matrix_shape
+    from gigapoint.render.selection import select
+
+    near, far = cam.clip_range(cloud.bounds)
+    sel = select(cloud.batches, cam.screen_rows(), cam.width, cam.height, near, far)
+    return sel, near, far, [(bool(inside_frustum(m, cam.width, cam.height, near, far)), int(matrix_shape(m))) for m in sel.matrices]
+
+
+@pytest.mark.parametrize("view", ["iso", "top-ortho", "front", "inside"])
+def test_batches_inside_the_frustum_skip_clipping_and_stay_exact(demo_small, view):
+    """Phase 1 skips the clipping tests for batches whose grid cube projects inside the image:
+    every reference point of such a batch must have a pixel, and the image stays exact."""
+    from gigapoint.backends.numba_cpu import raster
+    from gigapoint.render.reference import projected_batches
+
+    cam = CAMERAS[view](demo_small.bounds)
+    sel, near, far, flags = _batch_views(demo_small, cam)
+    n_inside = sum(ok for ok, _ in flags)
+    assert n_inside > 0 and (n_inside < len(flags) or view == "iso")
+    want_shape = raster.ORTHOGRAPHIC if view == "top-ortho" else raster.PERSPECTIVE
+    assert {s for _, s in flags} == {want_shape}
+    counts = demo_small.batches["count"][sel.ids]
+    for (ok, _), count, (_, idx, _, _, _) in zip(flags, counts, projected_batches(demo_small, sel, cam.width, cam.height, near, far)):
+        if ok:
+            assert len(idx) == count  # no point of an inside batch is clipped
+    _check_exact(demo_small, cam)
+
+
+def test_odd_and_tiny_batches_write_every_point():
+    """Phase 2 interleaves a batch's two halves: odd counts (the last point has no partner)
+    and one- to three-point clouds draw every point."""
+    for n in (1, 2, 3, 7, 10241):
+        cols = min(n, 128)
+        rows = -(-n // cols)
+        i = np.arange(n)
+        xyz = np.column_stack([i % cols + 0.5, i // cols + 0.5, np.zeros(n)])  # one point per pixel centre
+        cloud = gp.from_arrays(np.vstack([xyz, [[0.0, 0.0, 0.0], [cols, rows, 0.0]]]))  # two corners fix the bounds
+        cam = Camera.look_at((cols / 2, rows / 2, 10), (cols / 2, rows / 2, 0), up=(0, 1, 0), width=cols, height=rows, projection="orthographic", ortho_height=rows)
+        frame = _check_exact(cloud, cam)
+        covered = ~frame.empty[::-1]  # image row 0 is the top (largest y)
+        assert covered.reshape(-1)[:n].all()

@@ -22,6 +22,7 @@ TILE_SHIFT = 6  # merge bookkeeping: runs of 64 pixels
 _MASK = np.uint32(1023)
 _HALF = np.float32(0.5)
 _INV1024 = np.float32(1.0 / 1024.0)
+GENERAL, PERSPECTIVE, ORTHOGRAPHIC = 0, 1, 2  # batch matrix shapes (see project_point)
 
 
 @njit(inline="always")
@@ -55,21 +56,35 @@ def grid_coords(low, med, high, j, bits):
 
 
 @njit(inline="always", error_model="numpy")
-def project_point(m, x, y, z, wf, hf, wi, near, far):
+def project_point(m, x, y, z, wf, hf, wi, near, far, shape=0, clip=True):
     """(pixel id or -1, depth) of a grid-space point; m is the batch matrix as a 16-tuple.
 
     This operation order is the contract: the numpy reference and the WGSL shader follow
-    it, so all three agree bit for bit.
+    it, so all three agree bit for bit. ``shape`` (a compile-time constant after inlining)
+    skips work whose result is known exactly: PERSPECTIVE, the depth row equals the w row
+    (so depth is w, bit for bit); ORTHOGRAPHIC, w is exactly 1 (x'/1 = x'). ``clip=False``
+    for a batch that lies inside the frustum with a margin (``Selection.interior``): every
+    point maps to a pixel, no test needed.
     """
     sx = m[0] * x + m[1] * y + m[2] * z + m[3]
     sy = m[4] * x + m[5] * y + m[6] * z + m[7]
-    sw = m[8] * x + m[9] * y + m[10] * z + m[11]
-    sd = m[12] * x + m[13] * y + m[14] * z + m[15]
-    px = sx / sw
-    py = sy / sw
+    if shape == ORTHOGRAPHIC:
+        sw = np.float32(1.0)
+        px = sx
+        py = sy
+    else:
+        sw = m[8] * x + m[9] * y + m[10] * z + m[11]
+        px = sx / sw
+        py = sy / sw
+    if shape == PERSPECTIVE:
+        sd = sw
+    else:
+        sd = m[12] * x + m[13] * y + m[14] * z + m[15]
+    p = np.int32(py) * wi + np.int32(px)
+    if not clip:
+        return p, sd
     zero = np.float32(0.0)
     inside = (sd > near) & (sd < far) & (sw > zero) & (px >= zero) & (px < wf) & (py >= zero) & (py < hf)
-    p = np.int32(py) * wi + np.int32(px)
     return (p if inside else np.int32(-1)), sd
 
 
@@ -84,30 +99,83 @@ def matrix_tuple(m):
     )  # fmt: skip
 
 
+@njit(inline="always")
+def matrix_shape(m):
+    """PERSPECTIVE when the depth row is the w row, ORTHOGRAPHIC when w is the constant 1."""
+    if m[2, 0] == m[3, 0] and m[2, 1] == m[3, 1] and m[2, 2] == m[3, 2] and m[2, 3] == m[3, 3]:
+        return PERSPECTIVE
+    if m[2, 0] == 0 and m[2, 1] == 0 and m[2, 2] == 0 and m[2, 3] == 1:
+        return ORTHOGRAPHIC
+    return GENERAL
+
+
+@njit(inline="always", error_model="numpy")
+def _project_loop(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, shape, clip):
+    """The phase-1 loop; every argument after ``depth`` is a constant at its call site, so
+    each instance is branch-free and vectorises."""
+    for j in range(low.shape[0]):
+        x, y, z = grid_coords(low, med, high, j, bits)
+        pix[j], depth[j] = project_point(mt, x, y, z, wf, hf, wi, near, far, shape, clip)
+
+
+@njit(inline="always", error_model="numpy")
+def _project_shapes(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, shape, clip):
+    if shape == PERSPECTIVE:
+        if clip:
+            _project_loop(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, PERSPECTIVE, True)
+        else:
+            _project_loop(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, PERSPECTIVE, False)
+    elif shape == ORTHOGRAPHIC:
+        if clip:
+            _project_loop(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, ORTHOGRAPHIC, True)
+        else:
+            _project_loop(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, ORTHOGRAPHIC, False)
+    else:
+        _project_loop(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, GENERAL, True)
+
+
+@njit(inline="always")
+def inside_frustum(m, width, height, near, far):
+    """True when the batch's whole grid cube [0, 1024]^3 projects inside the image and the
+    depth range with a margin (1 pixel, 0.1 % of the depth): every point then has a pixel and
+    phase 1 needs no clipping tests. Corners in float64 from the float32 matrix; the float32
+    projection of a point differs from it by far less than the margin."""
+    for c in range(8):
+        x = 1024.0 * ((c >> 2) & 1)
+        y = 1024.0 * ((c >> 1) & 1)
+        z = 1024.0 * (c & 1)
+        sx = np.float64(m[0, 0]) * x + np.float64(m[0, 1]) * y + np.float64(m[0, 2]) * z + np.float64(m[0, 3])
+        sy = np.float64(m[1, 0]) * x + np.float64(m[1, 1]) * y + np.float64(m[1, 2]) * z + np.float64(m[1, 3])
+        sw = np.float64(m[2, 0]) * x + np.float64(m[2, 1]) * y + np.float64(m[2, 2]) * z + np.float64(m[2, 3])
+        sd = np.float64(m[3, 0]) * x + np.float64(m[3, 1]) * y + np.float64(m[3, 2]) * z + np.float64(m[3, 3])
+        if not (sw > 0.0 and sd > near + 1e-3 * abs(near) + 1e-6 and sd < far - 1e-3 * abs(far)):
+            return False
+        if not (1.0 <= sx / sw <= width - 1.0 and 1.0 <= sy / sw <= height - 1.0):
+            return False
+    return True
+
+
 @njit(cache=True, error_model="numpy")
 def project_batch(low, med, high, bits, m, width, height, near, far, pix, depth):
     """Phase 1: pixel id (or -1) and float32 depth of each point of one batch.
 
     ``low/med/high`` are the batch's slices, ``m`` its float32 matrix from 10-bit grid
-    units to (x', y', w, depth). One loop per precision (same body) so each loop is
-    branch-free and vectorises.
+    units to (x', y', w, depth). One loop per precision, matrix shape and clipping (same
+    body, constants folded) so each loop is branch-free and vectorises. A batch inside
+    the frustum (most of them in an overview) skips the clipping tests.
     """
     mt = matrix_tuple(m)
+    shape = matrix_shape(m)
+    clip = not inside_frustum(m, width, height, near, far)
     wf = np.float32(width)
     hf = np.float32(height)
     wi = np.int32(width)
     if bits == 10:
-        for j in range(low.shape[0]):
-            x, y, z = grid_coords(low, med, high, j, 10)
-            pix[j], depth[j] = project_point(mt, x, y, z, wf, hf, wi, near, far)
+        _project_shapes(low, med, high, 10, mt, wf, hf, wi, near, far, pix, depth, shape, clip)
     elif bits == 20:
-        for j in range(low.shape[0]):
-            x, y, z = grid_coords(low, med, high, j, 20)
-            pix[j], depth[j] = project_point(mt, x, y, z, wf, hf, wi, near, far)
+        _project_shapes(low, med, high, 20, mt, wf, hf, wi, near, far, pix, depth, shape, clip)
     else:
-        for j in range(low.shape[0]):
-            x, y, z = grid_coords(low, med, high, j, 30)
-            pix[j], depth[j] = project_point(mt, x, y, z, wf, hf, wi, near, far)
+        _project_shapes(low, med, high, 30, mt, wf, hf, wi, near, far, pix, depth, shape, clip)
 
 
 @njit(cache=True)
@@ -122,13 +190,26 @@ def write_batch(first, step, pix, depth, depth_bits, buf, dirty, width, height, 
     with ``atten`` > 0 (attenuated splats) atten / depth clamped to 1..size.
     """
     if footprint.shape[0] == 1:
-        for j in range(pix.shape[0]):
+        # Two interleaved streams, the batch's halves, with a branch-free min: Morton order puts
+        # ~60 % of consecutive points on the pixel just written, so one stream waits on its own
+        # store (store-to-load forwarding) every other point; the far half's pixels are
+        # others, and its chain runs alongside. (The ``key < old`` branch mispredicts on the
+        # ~10 % of points that win.)
+        # The body is written out, not an inline helper taking the arrays: numba then keeps
+        # reference counting calls in the loop (30x slower).
+        n = pix.shape[0]
+        h = (n + 1) >> 1
+        for j in range(h):
             p = pix[j]
             if p >= 0:
-                key = (np.uint64(depth_bits[j]) << np.uint64(32)) | np.uint64(first + j * step)
-                if key < buf[p]:
-                    buf[p] = key
-                    dirty[p >> TILE_SHIFT] = 1
+                buf[p] = min(buf[p], (np.uint64(depth_bits[j]) << np.uint64(32)) | np.uint64(first + j * step))
+                dirty[p >> TILE_SHIFT] = 1
+            i = j + h
+            if i < n:  # (the last point of an odd count has no partner)
+                q = pix[i]
+                if q >= 0:
+                    buf[q] = min(buf[q], (np.uint64(depth_bits[i]) << np.uint64(32)) | np.uint64(first + i * step))
+                    dirty[q >> TILE_SHIFT] = 1
         return
     for j in range(pix.shape[0]):
         p = pix[j]
