@@ -156,17 +156,16 @@ def inside_frustum(m, width, height, near, far):
 
 
 @njit(cache=True, error_model="numpy")
-def project_batch(low, med, high, bits, m, width, height, near, far, pix, depth):
+def project_batch(low, med, high, bits, m, width, height, near, far, pix, depth, clip=True):
     """Phase 1: pixel id (or -1) and float32 depth of each point of one batch.
 
     ``low/med/high`` are the batch's slices, ``m`` its float32 matrix from 10-bit grid
     units to (x', y', w, depth). One loop per precision, matrix shape and clipping (same
-    body, constants folded) so each loop is branch-free and vectorises. A batch inside
-    the frustum (most of them in an overview) skips the clipping tests.
+    body, constants folded) so each loop is branch-free and vectorises. ``clip=False`` only
+    for a batch ``inside_frustum`` (most of them in an overview): no clipping tests.
     """
     mt = matrix_tuple(m)
     shape = matrix_shape(m)
-    clip = not inside_frustum(m, width, height, near, far)
     wf = np.float32(width)
     hf = np.float32(height)
     wi = np.int32(width)
@@ -178,11 +177,38 @@ def project_batch(low, med, high, bits, m, width, height, near, far, pix, depth)
         _project_shapes(low, med, high, 30, mt, wf, hf, wi, near, far, pix, depth, shape, clip)
 
 
-@njit(cache=True)
-def write_batch(first, step, pix, depth, depth_bits, buf, dirty, width, height, footprint, size, atten):
-    """Phase 2: depth test and write; marks the TILE-pixel tiles written in ``dirty``.
+@njit(inline="always")
+def _write_pixels(first, step, pix, depth_bits, buf, dirty, clipped, mark):
+    """The one-pixel phase 2. Two interleaved streams, the batch's halves, with a branch-free
+    min: Morton order puts ~60 % of consecutive points on the pixel just written, so one
+    stream waits on its own store (store-to-load forwarding) every other point; the far
+    half's pixels are others, and its chain runs alongside. (A ``key < old`` branch
+    mispredicts on the ~10 % of points that win.) ``clipped``: some pix are -1; ``mark``:
+    flag the tiles written (constants at the call sites). The loop body is written out:
+    an inline helper taking the arrays would keep reference counting calls in the loop."""
+    n = pix.shape[0]
+    h = (n + 1) >> 1
+    for j in range(h):
+        p = pix[j]
+        if not clipped or p >= 0:
+            buf[p] = min(buf[p], (np.uint64(depth_bits[j]) << np.uint64(32)) | np.uint64(first + j * step))
+            if mark:
+                dirty[p >> TILE_SHIFT] = 1
+        i = j + h
+        if i < n:  # (the last point of an odd count has no partner)
+            q = pix[i]
+            if not clipped or q >= 0:
+                buf[q] = min(buf[q], (np.uint64(depth_bits[i]) << np.uint64(32)) | np.uint64(first + i * step))
+                if mark:
+                    dirty[q >> TILE_SHIFT] = 1
 
-    Entry j is point ``first + j * step`` (step > 1: a subsample, see ``rasterize``).
+
+@njit(cache=True)
+def write_batch(first, step, pix, depth, depth_bits, buf, dirty, width, height, footprint, size, atten, clipped=True, mark=True):
+    """Phase 2: depth test and write; marks the TILE-pixel tiles written in ``dirty`` (if ``mark``).
+
+    Entry j is point ``first + j * step`` (step > 1: a subsample, see ``rasterize``);
+    ``clipped=False``: no entry is -1 (a batch ``inside_frustum``).
 
     ``footprint`` (k, 3) rows (dx, dy, need) sorted by need: a point of size s covers the
     offsets with need <= s, every one with the point's own key (so nearer points win
@@ -190,26 +216,15 @@ def write_batch(first, step, pix, depth, depth_bits, buf, dirty, width, height, 
     with ``atten`` > 0 (attenuated splats) atten / depth clamped to 1..size.
     """
     if footprint.shape[0] == 1:
-        # Two interleaved streams, the batch's halves, with a branch-free min: Morton order puts
-        # ~60 % of consecutive points on the pixel just written, so one stream waits on its own
-        # store (store-to-load forwarding) every other point; the far half's pixels are
-        # others, and its chain runs alongside. (The ``key < old`` branch mispredicts on the
-        # ~10 % of points that win.)
-        # The body is written out, not an inline helper taking the arrays: numba then keeps
-        # reference counting calls in the loop (30x slower).
-        n = pix.shape[0]
-        h = (n + 1) >> 1
-        for j in range(h):
-            p = pix[j]
-            if p >= 0:
-                buf[p] = min(buf[p], (np.uint64(depth_bits[j]) << np.uint64(32)) | np.uint64(first + j * step))
-                dirty[p >> TILE_SHIFT] = 1
-            i = j + h
-            if i < n:  # (the last point of an odd count has no partner)
-                q = pix[i]
-                if q >= 0:
-                    buf[q] = min(buf[q], (np.uint64(depth_bits[i]) << np.uint64(32)) | np.uint64(first + i * step))
-                    dirty[q >> TILE_SHIFT] = 1
+        if clipped:
+            if mark:
+                _write_pixels(first, step, pix, depth_bits, buf, dirty, True, True)
+            else:
+                _write_pixels(first, step, pix, depth_bits, buf, dirty, True, False)
+        elif mark:
+            _write_pixels(first, step, pix, depth_bits, buf, dirty, False, True)
+        else:
+            _write_pixels(first, step, pix, depth_bits, buf, dirty, False, False)
         return
     for j in range(pix.shape[0]):
         p = pix[j]
@@ -268,11 +283,13 @@ def rasterize(firsts, counts, bits, mats, low, med, high, width, height, nears, 
                 buf = frames[v] if t == 0 else scratch[v, t - 1]
                 near = np.float32(nears[v])
                 far = np.float32(fars[v])
+                clip = not inside_frustum(mats[v, k], width, height, near, far)
                 if step == 1:  # contiguous slices: the vectorised loop
-                    project_batch(low[f : f + c], med[f : f + c], high[f : f + c], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n])
+                    project_batch(low[f : f + c], med[f : f + c], high[f : f + c], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip)
                 else:
-                    project_batch(low[f : f + c : step], med[f : f + c : step], high[f : f + c : step], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n])
-                write_batch(f, step, pix[:n], depth[:n], depth_bits[:n], buf, dirty[v, t], width, height, footprint, size, atten)
+                    project_batch(low[f : f + c : step], med[f : f + c : step], high[f : f + c : step], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip)
+                # thread 0 draws into the frame itself: its tiles need no merge, so no flags
+                write_batch(f, step, pix[:n], depth[:n], depth_bits[:n], buf, dirty[v, t], width, height, footprint, size, atten, clip, t > 0)
 
 
 @njit(parallel=True, cache=True)
