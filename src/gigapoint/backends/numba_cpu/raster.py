@@ -19,6 +19,7 @@ from numba import njit, prange
 
 EMPTY = np.uint64(0xFFFFFFFFFFFFFFFF)
 TILE_SHIFT = 6  # merge bookkeeping: runs of 64 pixels
+_TILE_SHIFT_U = np.uint32(TILE_SHIFT)
 _MASK = np.uint32(1023)
 _HALF = np.float32(0.5)
 _INV1024 = np.float32(1.0 / 1024.0)
@@ -187,20 +188,27 @@ def _write_pixels(first, step, pix, depth_bits, buf, dirty, clipped, mark):
     flag the tiles written (constants at the call sites). The loop body is written out:
     an inline helper taking the arrays would keep reference counting calls in the loop."""
     n = pix.shape[0]
-    h = (n + 1) >> 1
+    h = n >> 1
     for j in range(h):
         p = pix[j]
         if not clipped or p >= 0:
-            buf[p] = min(buf[p], (np.uint64(depth_bits[j]) << np.uint64(32)) | np.uint64(first + j * step))
+            u = np.uint32(p)  # unsigned: numba then skips its negative-index wraparound
+            buf[u] = min(buf[u], (np.uint64(depth_bits[j]) << np.uint64(32)) | np.uint64(first + j * step))
             if mark:
-                dirty[p >> TILE_SHIFT] = 1
-        i = j + h
-        if i < n:  # (the last point of an odd count has no partner)
-            q = pix[i]
-            if not clipped or q >= 0:
-                buf[q] = min(buf[q], (np.uint64(depth_bits[i]) << np.uint64(32)) | np.uint64(first + i * step))
-                if mark:
-                    dirty[q >> TILE_SHIFT] = 1
+                dirty[u >> _TILE_SHIFT_U] = 1
+        q = pix[j + h]
+        if not clipped or q >= 0:
+            u = np.uint32(q)
+            buf[u] = min(buf[u], (np.uint64(depth_bits[j + h]) << np.uint64(32)) | np.uint64(first + (j + h) * step))
+            if mark:
+                dirty[u >> _TILE_SHIFT_U] = 1
+    for j in range(2 * h, n):  # the last point of an odd count
+        p = pix[j]
+        if not clipped or p >= 0:
+            u = np.uint32(p)
+            buf[u] = min(buf[u], (np.uint64(depth_bits[j]) << np.uint64(32)) | np.uint64(first + j * step))
+            if mark:
+                dirty[u >> _TILE_SHIFT_U] = 1
 
 
 @njit(cache=True)
