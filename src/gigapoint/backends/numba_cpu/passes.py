@@ -15,6 +15,7 @@ import numpy as np
 from llvmlite import ir
 from numba import njit, prange
 from numba.core import cgutils, types
+from numba.cpython.unsafe.numbers import trailing_zeros as _ctz
 from numba.extending import intrinsic
 
 from .raster import project_batch
@@ -119,156 +120,59 @@ def edl(logd, empty, colors, width, height, offsets, strength, out):
 
 
 # --- hole filling ------------------------------------------------------------------------------
-@njit(parallel=True, cache=True)
-def row_min(vis, width, height, needed, out):
-    """out[r-1, p] = min of vis over the pixels of p's row within r columns, for the radii r
-    with needed[r] set (r = 1..len(needed)-1; the others are computed but not stored)."""
-    radius = needed.shape[0] - 1
-    for y in prange(height):
-        base = y * width
-        src = vis[base : base + width]
-        cur = src.copy()
-        for r in range(1, radius + 1):
-            a = cur[r:]
-            b = src[: width - r]
-            for i in range(width - r):
-                a[i] = min(a[i], b[i])
-            a = cur[: width - r]
-            b = src[r:]
-            for i in range(width - r):
-                a[i] = min(a[i], b[i])
-            if needed[r]:
-                dst = out[r - 1, base : base + width]
-                for x in range(width):
-                    dst[x] = cur[x]
-
-
-@njit(parallel=True, cache=True)
-def pack_rows(vis, width, height, nw, out):
-    """out[y, w] bit i = pixel (64 w + i, y) is not empty (bit planes for the sector scan)."""
-    for y in prange(height):
-        base = y * width
-        for w in range(nw):
-            word = np.uint64(0)
-            row = vis[base + 64 * w : base + min(width, 64 * w + 64)]
-            for i in range(row.shape[0]):
-                word |= np.uint64(row[i] != EMPTY) << np.uint64(i)
-            out[y, w] = word
+@njit(inline="always")
+def _pack_row(vrow, nw, dst):
+    """dst[1 + w] bit i = pixel 64 w + i of the row is not empty; dst[0], dst[nw + 1] = 0 (padding)."""
+    width = vrow.shape[0]
+    dst[0] = np.uint64(0)
+    dst[nw + 1] = np.uint64(0)
+    for w in range(nw):
+        word = np.uint64(0)
+        row = vrow[64 * w : min(width, 64 * w + 64)]
+        for i in range(row.shape[0]):
+            word |= np.uint64(row[i] != EMPTY) << np.uint64(i)
+        dst[w + 1] = word
 
 
 @njit(inline="always")
-def _shifted(src, w, dx, nw):
-    """Word w of the bit row ``src`` moved so that bit x holds bit x + dx (zeros beyond the row)."""
+def _or_shifted(plane, src, dx, mask):
+    """plane |= mask & the padded bit row ``src`` (``_pack_row``) moved so that bit x holds
+    bit x + dx (|dx| < 64; zeros beyond the row), word by word."""
+    nw = plane.shape[0]
+    a = src[1 : nw + 1]
     if dx == 0:
-        return src[w]
-    if dx > 0:
-        v = src[w] >> np.uint64(dx)
-        if w + 1 < nw:
-            v |= src[w + 1] << np.uint64(64 - dx)
-        return v
-    v = src[w] << np.uint64(-dx)
-    if w > 0:
-        v |= src[w - 1] >> np.uint64(64 + dx)
-    return v
-
-
-@njit(parallel=True, cache=True)
-def fill_holes(vis, vis_f32, width, height, rmin, radius_map, ring_masks, present, offsets, sector_bits, sectors, ring, inv_gap, out):
-    """Depth-aware dilation. A pixel that is empty, or whose depth is more than ``1/inv_gap``
-    times that of the closest pixel of its window, takes that closest key, but only when the
-    closer neighbours surround it (no run of 8 of the 16 direction sectors is free of them),
-    so holes close and silhouettes do not grow.
-
-    rmin (R, H*W): ``row_min`` of vis; radius_map (H, W) int8 window radius per pixel;
-    ring_masks (H, R+1, nw) u64: bit set where the pixel's radius >= ring; present (H, nw):
-    ``pack_rows`` of vis; offsets (k, 2) dx, dy ordered by ring; sector_bits (k,) u32,
-    sectors (k,) their index; ring (k,) int8.
-    Step 1 (vectorised): the window minimum from the row minima. Step 2, empty pixels: the
-    sectors holding a point, 64 pixels a word as bit planes, and the free-half test bit-sliced.
-    Step 3, pixels with a point: only where the window minimum is nearer, a scalar sector
-    scan, ring by ring, stopping once surrounded."""
-    n_off = offsets.shape[0]
-    nw = present.shape[1]
-    for y in prange(height):
-        base = y * width
-        rrow = radius_map[y]
-        r_hi = np.int64(rrow.max())
-        best = np.empty(width, np.uint64)
-        best_f = best.view(np.float32)
-        for x in range(width):
-            best[x] = EMPTY
-        xa = 0
-        while xa < width:  # runs of equal radius (the whole row unless foveated)
-            r = np.int64(rrow[xa])
-            xb = xa + 1
-            while xb < width and rrow[xb] == r:
-                xb += 1
-            seg = best[xa:xb]
-            for dy in range(-r, r + 1):
-                yy = y + dy
-                if r >= 1 and 0 <= yy < height:
-                    src = rmin[r - 1, yy * width + xa : yy * width + xb]
-                    for i in range(xb - xa):
-                        seg[i] = min(seg[i], src[i])
-            xa = xb
-        # step 2: sector planes of the empty pixels
-        occ = np.zeros((16, nw), np.uint64)
-        for o in range(n_off):
-            yy = y + offsets[o, 1]
-            if yy < 0 or yy >= height:
-                continue
-            m = ring[o]
-            if m > r_hi:
-                break
-            srow = present[yy]
-            plane = occ[sectors[o]]
-            rm = ring_masks[y, m]
-            for w in range(nw):
-                plane[w] |= _shifted(srow, w, offsets[o, 0], nw) & rm[w]
-        surrounded = np.empty(nw, np.uint64)
         for w in range(nw):
-            free_half = np.uint64(0)
-            for s0 in range(16):
-                run = ~occ[s0, w]
-                for k in range(1, 8):
-                    run &= ~occ[(s0 + k) % 16, w]
-                free_half |= run
-            surrounded[w] = ~free_half
-        orow = out[base : base + width]
-        vrow = vis[base : base + width]
-        # empty pixels surrounded by points take the window minimum: branch-free (the pattern of
-        # empty and covered pixels is too irregular for the branch predictor)
-        for x in range(width):
-            k = vrow[x]
-            b = best[x]
-            s = (surrounded[x >> 6] >> np.uint64(x & 63)) & np.uint64(1)
-            orow[x] = b if (k == EMPTY) & (b < k) & (s != np.uint64(0)) else k
-        for x in range(width):
-            # step 3 (a few % of the pixels): a point far behind nearer neighbours? one rarely
-            # taken branch, the conditions evaluated without short-circuit
-            k = vrow[x]
-            thr_f = vis_f32[2 * (base + x) + 1] * inv_gap
-            if not ((k != EMPTY) & (best[x] < k) & (best_f[2 * x + 1] < thr_f)):
-                continue
-            rmax = rrow[x]
-            occ1 = np.uint32(0)
-            done = False
-            o = 0
-            while o < n_off and not done:
-                m = ring[o]
-                if m > rmax:
-                    break
-                xx = x + offsets[o, 0]
-                yy = y + offsets[o, 1]
-                if 0 <= xx < width and 0 <= yy < height:
-                    q = yy * width + xx
-                    if vis[q] != EMPTY and vis_f32[2 * q + 1] < thr_f:
-                        occ1 |= sector_bits[o]
-                if o + 1 == n_off or ring[o + 1] != m:  # end of a ring: surrounded yet?
-                    done = _surrounded(occ1)
-                o += 1
-            if done:
-                orow[x] = best[x]
+            plane[w] |= a[w] & mask[w]
+    elif dx > 0:
+        b = src[2 : nw + 2]
+        sr, sl = np.uint64(dx), np.uint64(64 - dx)
+        for w in range(nw):
+            plane[w] |= ((a[w] >> sr) | (b[w] << sl)) & mask[w]
+    else:
+        b = src[0:nw]
+        sl, sr = np.uint64(-dx), np.uint64(64 + dx)
+        for w in range(nw):
+            plane[w] |= ((a[w] << sl) | (b[w] >> sr)) & mask[w]
+
+
+@njit(inline="always")
+def _surrounded_words(occ, tmp, surr):
+    """surr[w] bit x: the 16 sector planes occ[:, w] leave no run of 8 (cyclically) sectors
+    clear at x, i.e. every run of 8 has a set bit: OR over runs of 2, 4, 8, then AND."""
+    nw = surr.shape[0]
+    for s in range(16):
+        p, q, d = occ[s], occ[(s + 1) & 15], tmp[0, s]
+        for w in range(nw):
+            d[w] = p[w] | q[w]
+    for s in range(16):
+        p, q, d = tmp[0, s], tmp[0, (s + 2) & 15], tmp[1, s]
+        for w in range(nw):
+            d[w] = p[w] | q[w]
+    surr[:] = ~np.uint64(0)
+    for s in range(16):
+        p, q = tmp[1, s], tmp[1, (s + 4) & 15]
+        for w in range(nw):
+            surr[w] &= p[w] | q[w]
 
 
 @njit(inline="always")
@@ -279,6 +183,189 @@ def _surrounded(occ):
     z = z & (z >> np.uint64(2))
     z = z & (z >> np.uint64(4))  # a run of 8 free sectors survives
     return z == 0
+
+
+@njit(inline="always")
+def _window_min(vis, width, height, y, runs, r_hi, x_lo, x_hi, empty_row, cm, t, best):
+    """best[x] = min of vis over pixel (x, y)'s window (EMPTY where its radius is 0), the centre
+    included, for x_lo <= x < x_hi; runs (k, 3): the row's runs of pixels [xa, xb) of one radius
+    r, r_hi their largest r. cm (>= r_hi, width + 2 pad) gets the column minima of radius
+    1..r_hi, t (2, width + 2 pad) is scratch; both keep EMPTY in their pad columns."""
+    pad = (cm.shape[1] - width) // 2
+    c_lo, c_hi = max(x_lo - r_hi, 0), min(x_hi + r_hi, width)  # the columns the windows reach
+    for m in range(1, r_hi + 1):  # column minima, nested: radius m = radius m - 1 and rows y -+ m
+        c = cm[m - 1, pad + c_lo : pad + c_hi]
+        row = y * width
+        prev = vis[row + c_lo : row + c_hi] if m == 1 else cm[m - 2, pad + c_lo : pad + c_hi]
+        row = (y - m) * width
+        up = vis[row + c_lo : row + c_hi] if y - m >= 0 else empty_row[c_lo:c_hi]
+        row = (y + m) * width
+        down = vis[row + c_lo : row + c_hi] if y + m < height else empty_row[c_lo:c_hi]
+        for x in range(c_hi - c_lo):
+            c[x] = min(prev[x], min(up[x], down[x]))
+    for j in range(runs.shape[0]):  # runs of equal radius (the whole row unless foveated)
+        xa, xb, r = max(runs[j, 0], x_lo), min(runs[j, 1], x_hi), runs[j, 2]
+        if xa >= xb:
+            continue
+        if r == 0:
+            best[xa:xb] = EMPTY
+        else:
+            # row minima by doubling: t[i] = min of c[i .. i + k - 1], k the largest power of 2
+            # <= 2r + 1; the window [x - r, x + r] is [x - r, x - r + k) and (x + r - k, x + r]
+            c = cm[r - 1]
+            k = 1
+            while 2 * k <= 2 * r + 1:
+                k *= 2
+            lo = pad + xa - r
+            hi = pad + xb + r - k + 1  # t needed on [lo, hi)
+            src = c
+            par = 0
+            k_now = 1
+            while k_now < k:  # ping-pong between t[0] and t[1] (LLVM does not vectorise in place)
+                end = hi + k - 2 * k_now
+                d = t[par, lo:end]  # (slices: loops from 0 let LLVM drop numba's negative-index wrap)
+                s0 = src[lo:end]
+                s1 = src[lo + k_now : end + k_now]
+                for i in range(end - lo):
+                    d[i] = min(s0[i], s1[i])
+                src = t[par]
+                par ^= 1
+                k_now *= 2
+            a = src[pad + xa - r : pad + xb - r]
+            b = src[pad + xa + r - k + 1 : pad + xb + r - k + 1]
+            seg = best[xa:xb]
+            for x in range(xb - xa):
+                seg[x] = min(a[x], b[x])
+
+
+@njit(inline="always")
+def _select_bits(dst, a, b, bits):
+    """dst[i] = a[i] where bit i of ``bits`` is set, else b[i] (i < 64)."""
+    for i in range(dst.shape[0]):
+        dst[i] = a[i] if (bits >> np.uint64(i)) & np.uint64(1) else b[i]
+
+
+@njit(inline="always")
+def _flag_word(vrow, vf, best, bf, inv_gap, x0, x1):
+    """Bit i: pixel x0 + i holds a point and its window minimum is nearer by more than the gap."""
+    word = np.uint64(0)
+    v = vrow[x0:x1]
+    b = best[x0:x1]
+    vd = vf[2 * x0 : 2 * x1]
+    bd = bf[2 * x0 : 2 * x1]
+    for i in range(x1 - x0):
+        k = v[i]
+        hit = (k != EMPTY) & (b[i] < k) & (bd[2 * i + 1] < vd[2 * i + 1] * inv_gap)
+        word |= np.uint64(hit) << np.uint64(i)
+    return word
+
+
+@njit(parallel=True, cache=True)
+def fill_holes(vis, vis_f32, width, height, radius_map, runs, run_start, ring_masks, offsets, sector_bits, sectors, ring, inv_gap, n_bands, out):
+    """Depth-aware dilation into out. A pixel that is empty, or whose depth is more than
+    ``1/inv_gap`` times that of the closest pixel of its window, takes that closest key, but
+    only when the closer neighbours surround it (no run of 8 of the 16 direction sectors is
+    free of them), so holes close and silhouettes do not grow.
+
+    radius_map (H, W) int8 window radius per pixel, runs (k, 3) int64 its runs (xa, xb, r) of
+    one radius in a row, row y's are runs[run_start[y] : run_start[y + 1]]; ring_masks
+    (H, R+1, nw) u64: bit set where the pixel's radius >= ring; offsets (k, 2) dx, dy ordered
+    by ring; sector_bits (k,) u32, sectors (k,) their index; ring (k,) int8.
+    The rows are split into ``n_bands`` bands; each goes down its rows once, so the window's
+    rows stay in cache. Per row: (2) the sectors holding a point, 64 pixels a word as bit planes,
+    the free-half test bit-sliced; (1) where that finds pixels surrounded, the window minimum,
+    from column minima and row minima by doubling (vectorised); empty pixels so surrounded take
+    it (a vectorised select writes the row); (3) pixels with a point, only where the window minimum is nearer
+    (a flag word of 64 pixels, vectorised) and their points surround them: a scalar sector
+    scan of the nearer points, ring by ring, stopping once surrounded."""
+    n_off = offsets.shape[0]
+    nw = (width + 63) // 64
+    n_rings = np.int64(ring[n_off - 1])
+    ring_start = np.zeros(n_rings + 2, np.int64)
+    for o in range(n_off):
+        ring_start[ring[o] + 1] = o + 1
+    empty_row = np.full(width, EMPTY, np.uint64)
+    step2 = 2 * (offsets[:, 1].astype(np.int64) * width + offsets[:, 0])  # offsets in vis_f32
+    for b in prange(n_bands):
+        y0 = b * height // n_bands
+        y1 = (b + 1) * height // n_bands
+        # bit rows of the band and n_rings rows above and below it (zeros outside the image),
+        # each packed just before its first use (while it is in cache anyway)
+        present = np.zeros((y1 - y0 + 2 * n_rings, nw + 2), np.uint64)
+        for yy in range(max(y0 - n_rings, 0), min(y0 + n_rings, height)):
+            _pack_row(vis[yy * width : yy * width + width], nw, present[yy - y0 + n_rings])
+        cm = np.full((n_rings, width + 2 * n_rings), EMPTY, np.uint64)
+        t = np.full((2, width + 2 * n_rings), EMPTY, np.uint64)
+        best = np.empty(width, np.uint64)
+        best_f = best.view(np.float32)
+        occ = np.empty((16, nw), np.uint64)
+        tmp = np.empty((2, 16, nw), np.uint64)
+        surr = np.empty(nw, np.uint64)
+        for y in range(y0, y1):
+            base = y * width
+            rrow = radius_map[y]
+            row_runs = runs[run_start[y] : run_start[y + 1]]
+            r_hi = np.int64(0)
+            for j in range(row_runs.shape[0]):
+                r_hi = max(r_hi, row_runs[j, 2])
+            vrow = vis[base : base + width]
+            vrow_f = vis_f32[2 * base : 2 * base + 2 * width]
+            yy = y + n_rings
+            if yy < height:
+                _pack_row(vis[yy * width : yy * width + width], nw, present[yy - y0 + n_rings])
+            # step 2: sector planes of the points around each pixel
+            occ[:] = 0
+            for o in range(ring_start[r_hi + 1]):
+                dy = offsets[o, 1]
+                if not 0 <= y + dy < height:
+                    continue
+                _or_shifted(occ[sectors[o]], present[y - y0 + n_rings + dy], offsets[o, 0], ring_masks[y, ring[o]])
+            _surrounded_words(occ, tmp, surr)
+            # step 1: the window minimum, needed only where the points around surround a pixel
+            w_lo, w_hi = nw, 0
+            for w in range(nw):
+                if surr[w]:
+                    w_lo, w_hi = min(w_lo, w), w + 1
+            if w_lo < w_hi:
+                _window_min(vis, width, height, y, row_runs, r_hi, 64 * w_lo, min(width, 64 * w_hi), empty_row, cm, t, best)
+            me = present[y - y0 + n_rings]
+            for w in range(nw):
+                # empty pixels surrounded by points (so their window minimum is a point) take it
+                take = surr[w] & ~me[w + 1]
+                x0 = 64 * w
+                x1 = min(width, x0 + 64)
+                _select_bits(out[base + x0 : base + x1], best[x0:x1], vrow[x0:x1], take)  # vectorised
+                # step 3 (a few % of the pixels): a point far behind nearer neighbours; only
+                # where its neighbours with a point surround it can the nearer ones
+                cand = surr[w] & me[w + 1]
+                if cand:
+                    cand &= _flag_word(vrow, vrow_f, best, best_f, inv_gap, x0, x1)
+                while cand:
+                    x = x0 + np.int64(_ctz(cand))
+                    cand &= cand - np.uint64(1)
+                    # the sectors of the nearer points, ring by ring until surrounded (an empty
+                    # key's depth bits are a NaN: never nearer)
+                    p2 = 2 * (base + x) + 1
+                    thr_f = vis_f32[p2] * inv_gap
+                    occ1 = np.uint32(0)
+                    done = False
+                    interior = (x >= n_rings) & (x < width - n_rings) & (y >= n_rings) & (y < height - n_rings)
+                    for m in range(1, np.int64(rrow[x]) + 1):
+                        for o in range(ring_start[m], ring_start[m + 1]):
+                            q2 = p2 + step2[o]
+                            ok = True
+                            if not interior:
+                                xx = x + offsets[o, 0]
+                                yy = y + offsets[o, 1]
+                                ok = (xx >= 0) & (xx < width) & (yy >= 0) & (yy < height)
+                                q2 = q2 if ok else p2
+                            occ1 |= sector_bits[o] * np.uint32(ok & (vis_f32[q2] < thr_f))
+                        if _surrounded(occ1):
+                            done = True
+                            break
+                    if not done:
+                        continue
+                    out[base + x] = best[x]
 
 
 # --- high-quality shading ----------------------------------------------------------------------

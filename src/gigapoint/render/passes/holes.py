@@ -15,6 +15,7 @@ from __future__ import annotations
 import functools
 import math
 
+import numba
 import numpy as np
 
 from ...backends.numba_cpu import passes as kernels
@@ -56,45 +57,28 @@ def fill_holes(vis: np.ndarray, width: int, height: int, level: int, foveated: b
     offsets, bits, ring = window(level)
     sectors = np.log2(bits).astype(np.int64)
     radii = radius_map(width, height, level, foveated)
-    needed = np.zeros(level + 1, np.bool_)
-    needed[1 if foveated else level :] = True
-    rmin = _scratch((level, vis.shape[0]))
-    kernels.row_min(vis, width, height, needed, rmin)
-    nw = (width + 63) // 64
-    present = np.empty((height, nw), np.uint64)
-    kernels.pack_rows(vis, width, height, nw, present)
+    runs, run_start = radius_runs(width, height, level, foveated)
     masks = ring_masks(width, height, level, foveated)
+    n_bands = min(height, 8 * numba.get_num_threads())  # bands of rows, each gone down once
     out = np.empty_like(vis)
-    kernels.fill_holes(
-        vis,
-        vis.view(np.float32),
-        width,
-        height,
-        rmin,
-        radii,
-        masks,
-        present,
-        offsets,
-        bits,
-        sectors,
-        ring,
-        np.float32(1.0 / (1.0 + depth_gap)),
-        out,
-    )
+    gap = np.float32(1.0 / (1.0 + depth_gap))
+    kernels.fill_holes(vis, vis.view(np.float32), width, height, radii, runs, run_start, masks, offsets, bits, sectors, ring, gap, n_bands, out)
     return out
 
 
-_SCRATCH: dict = {}
-
-
-def _scratch(shape) -> np.ndarray:
-    """A reused u64 work buffer: a fresh 16-48 MB array a frame costs ~2-4 ms of page zeroing.
-    Callers hold the CPU kernel lock (render/passes.finish_frame), so one buffer is enough."""
-    buf = _SCRATCH.get(shape)
-    if buf is None:
-        _SCRATCH.clear()
-        buf = _SCRATCH[shape] = np.empty(shape, np.uint64)
-    return buf
+@functools.lru_cache(maxsize=8)
+def radius_runs(width: int, height: int, level: int, foveated: bool):
+    """(runs (k, 3) int64, start (H+1,) int64): the runs (xa, xb, r) of one window radius r in
+    each row of ``radius_map``, row y's are runs[start[y] : start[y + 1]]."""
+    radii = radius_map(width, height, level, foveated)
+    brk = np.ones((height, width), bool)
+    brk[:, 1:] = radii[:, 1:] != radii[:, :-1]
+    ys, xa = np.nonzero(brk)
+    nxt = np.append(xa[1:], width)
+    xb = np.where(np.append(ys[1:], height) == ys, nxt, width)
+    runs = np.stack([xa, xb, radii[ys, xa]], axis=1).astype(np.int64)
+    start = np.searchsorted(ys, np.arange(height + 1)).astype(np.int64)
+    return runs, start
 
 
 @functools.lru_cache(maxsize=8)
