@@ -18,7 +18,7 @@ from numba.core import cgutils, types
 from numba.cpython.unsafe.numbers import trailing_zeros as _ctz
 from numba.extending import intrinsic
 
-from .raster import project_batch
+from .raster import inside_frustum, project_batch
 
 EMPTY = np.uint64(0xFFFFFFFFFFFFFFFF)
 _LOW32 = np.uint64(0xFFFFFFFF)
@@ -421,7 +421,8 @@ def _hqs_add(p, depth, col, w, vis_f32, t1, acc, spill_rg, spill_ba, spill_n):
     """Add w x color and w to pixel p if ``depth`` is within the tolerance of its closest depth
     (an empty pixel's depth bits are a NaN: the test fails). Branch-free: a point that fails
     adds zero (every point's pixel is covered, so its line is written anyway)."""
-    w = w * np.uint64(depth <= vis_f32[2 * p + 1] * t1)
+    p = np.uint64(p)  # unsigned (p >= 0 here): numba then skips its negative-index wraparound
+    w = w * np.uint64(depth <= vis_f32[np.uint64(2) * p + np.uint64(1)] * t1)
     v = acc[p]
     if ((v >> _N_SHIFT) & _N_MASK) + w > _LANE_WEIGHTS:
         spill_rg[p] += (v & _LANE) | (((v >> np.uint64(13)) & _LANE) << np.uint64(32))
@@ -582,6 +583,7 @@ def hqs_shade(
                 continue
             first = firsts[k]
             c = counts[k]
+            clip = not inside_frustum(mats[k], width, height, near32, far32)
             project_batch(
                 low[first : first + c],
                 med[first : first + c],
@@ -594,6 +596,7 @@ def hqs_shade(
                 far32,
                 pix[:c],
                 depth[:c],
+                clip,
             )
             if n_fp == 1:
                 for j in range(c):
