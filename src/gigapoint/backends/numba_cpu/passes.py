@@ -32,40 +32,36 @@ LOG2_C7 = np.float32(2.0 / math.log(2.0) / 7.0)
 EXP2_C = tuple(np.float32(math.log(2.0) ** k / math.factorial(k)) for k in range(1, 7))
 _F0 = np.float32(0.0)
 _F1 = np.float32(1.0)
-
-
-@njit(inline="always")
-def log2_bits(b):
-    """log2 of the positive normal float32 whose bits are the u32 ``b`` (error < 1e-6)."""
-    e = np.float32(np.int32(b >> np.uint32(23)) - np.int32(127))
-    m = np.uint32((b & np.uint32(0x007FFFFF)) | np.uint32(0x3F800000))
-    return e, m
+_TWO_M23 = np.float32(2.0**-23)
 
 
 @njit(parallel=True, cache=True)
 def log_depth(vis, vis_u32, logd, empty):
     """logd = log2(depth) (0 where empty), empty = 1 where no point.
 
-    vis_u32 is ``vis.view(np.uint32)``: element 2p+1 is pixel p's depth bits (little-endian).
-    log2 = exponent + atanh series of the mantissa m in [1, 2): t = (m-1)/(m+1)."""
+    log2 = exponent + atanh series of the mantissa m in [1, 2): t = (m-1)/(m+1). The depth
+    bits are taken from the u64 keys (contiguous loads: the loop vectorises); ``vis_u32``
+    (``vis.view(np.uint32)``) is unused, kept for the callers' signature."""
     n = vis.shape[0]
     rows = (n + 4095) // 4096
     for r in prange(rows):
         p0 = r * 4096
         p1 = min(n, p0 + 4096)
-        mant = np.empty(p1 - p0, np.uint32)
-        mf = mant.view(np.float32)
-        ex = np.empty(p1 - p0, np.float32)
+        keys = vis[p0:p1]
+        lrow = logd[p0:p1]
+        erow = empty[p0:p1]
         for i in range(p1 - p0):
-            ex[i], mant[i] = log2_bits(vis_u32[2 * (p0 + i) + 1])
-        for i in range(p1 - p0):
-            m = mf[i]
+            k = keys[i]
+            b = np.uint32(k >> np.uint64(32))
+            ex = np.float32(np.int32(b >> np.uint32(23)) - np.int32(127))
+            # the mantissa as a float in [1, 2), exactly (23 fraction bits): no bit cast needed
+            m = _F1 + np.float32(np.int32(b & np.uint32(0x007FFFFF))) * _TWO_M23
             t = (m - _F1) / (m + _F1)
             t2 = t * t
-            lg = ex[i] + t * (LOG2_C1 + t2 * (LOG2_C3 + t2 * (LOG2_C5 + t2 * LOG2_C7)))
-            e = vis[p0 + i] == EMPTY
-            logd[p0 + i] = _F0 if e else lg
-            empty[p0 + i] = _F1 if e else _F0
+            lg = ex + t * (LOG2_C1 + t2 * (LOG2_C3 + t2 * (LOG2_C5 + t2 * LOG2_C7)))
+            e = k == EMPTY
+            lrow[i] = _F0 if e else lg
+            erow[i] = _F1 if e else _F0
 
 
 @njit(parallel=True, cache=True)

@@ -48,12 +48,23 @@ def eye_dome_lighting(
 ) -> np.ndarray:
     """(H*W,) u32 RGBA colors shaded by EDL (vis: (H*W,) u64 visibility buffer)."""
     vis = np.ascontiguousarray(vis).reshape(-1)
-    logd = np.empty(vis.shape[0], np.float32)
-    empty = np.empty(vis.shape[0], np.float32)
+    logd, empty = _scratch(vis.shape[0])
     kernels.log_depth(vis, vis.view(np.uint32), logd, empty)
     out = np.empty_like(colors)
     kernels.edl(logd, empty, np.ascontiguousarray(colors).reshape(-1), width, height, neighbour_offsets(radius), np.float32(strength), out)
     return out
+
+
+_SCRATCH: dict = {}
+
+
+def _scratch(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Reused log-depth and empty-flag buffers: two fresh 8 MB arrays a 1080p frame cost ~2 ms
+    of page faults. Callers hold the CPU kernel lock (render/passes.finish_frame)."""
+    if n not in _SCRATCH:
+        _SCRATCH.clear()
+        _SCRATCH[n] = (np.empty(n, np.float32), np.empty(n, np.float32))
+    return _SCRATCH[n]
 
 
 def edl_reference(vis: np.ndarray, colors: np.ndarray, width: int, height: int, strength: float = 1.0, radius: float = 1.4) -> np.ndarray:
