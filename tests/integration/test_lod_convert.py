@@ -98,6 +98,33 @@ def test_interrupted_conversion_resumes_to_the_same_result(demo_las, reference, 
     _assert_same(_snapshot(out), reference)
 
 
+def test_conversion_interrupted_while_grouping_resumes_to_the_same_result(demo_las, tmp_path, monkeypatch):
+    """Killed after the first group of partition roots is joined: the re-run resumes in the
+    group phase and gives the uninterrupted result."""
+    import importlib
+
+    conv = importlib.import_module("gigapoint.lod.convert")
+    opts = dict(OPTS, upper_points=8_000)  # 150 000 points in 25 000-point partitions: their roots are joined in groups
+    convert([demo_las], tmp_path / "whole", **opts)
+    join, calls = conv._Converter._join_roots, []
+
+    def stop_at_second(self, parts, top, dest):
+        calls.append(top)
+        if len(calls) == 2:
+            raise KeyboardInterrupt("test interrupt while grouping")
+        return join(self, parts, top, dest)
+
+    monkeypatch.setattr(conv._Converter, "_join_roots", stop_at_second)
+    with pytest.raises(KeyboardInterrupt):
+        convert([demo_las], tmp_path / "oct", **opts)
+    state = json.loads((tmp_path / "oct" / ".partial" / "state.json").read_text())
+    assert state["phase"] == "group" and calls[0] != 1
+    monkeypatch.setattr(conv._Converter, "_join_roots", join)
+    res = convert([demo_las], tmp_path / "oct", **opts)
+    assert res.resumed and "group" in res.phase_seconds
+    _assert_same(_snapshot(tmp_path / "oct"), _snapshot(tmp_path / "whole"))
+
+
 def test_killed_conversion_resumes_via_cli(demo_las, tmp_path):
     """SIGKILL in the middle of the build phase, then the same command again: it resumes."""
     out = tmp_path / "oct"

@@ -258,3 +258,52 @@ def test_a_chunk_generator_converts_streaming_like_a_list(tmp_path):
     np.testing.assert_array_equal(a.nodes, b.nodes)
     for k in ("low", "med", "high", "color", "rgba"):
         np.testing.assert_array_equal(a.arrays[k], b.arrays[k])
+
+
+@pytest.mark.parametrize("sampler", ["grid", "poisson"])
+def test_upper_tree_built_in_groups_keeps_the_octree_and_bounds_what_it_holds(tmp_path, monkeypatch, sampler):
+    """With many partitions the roots' carried points are joined a group at a time, so the upper
+    phase holds about the budget instead of every root's sample, and the octree is exactly the
+    one built without partitions."""
+    import importlib
+
+    conv = importlib.import_module("gigapoint.lod.convert")  # the module (gigapoint.lod.convert is also the function)
+    held = []
+    join = conv._Converter._join_roots
+
+    def spy(self, parts, top, dest):
+        held.append((top, sum(int(np.load(p / "carry.codes.npy", mmap_mode="r").shape[0]) for p in parts)))
+        return join(self, parts, top, dest)
+
+    monkeypatch.setattr(conv._Converter, "_join_roots", spy)
+    chunks = _mm_chunks(1_200_000, seed=5, chunk=200_000)[0]  # 16 partitions whose roots carry ~25 k points each
+    budget = 100_000
+    convert(chunks, tmp_path / "many", sampler=sampler, max_leaf=20_000, partition_points=budget)
+    groups = [n for top, n in held if top != 1]
+    final = [n for top, n in held if top == 1]
+    assert len(groups) >= 2 and len(final) == 1
+    assert max(groups + final) <= 1.25 * budget  # the coarsest groups that fit, or the finest possible
+    assert final[0] < 0.5 * sum(groups)  # without groups it would hold all of them
+    monkeypatch.setattr(conv._Converter, "_join_roots", join)
+    convert(chunks, tmp_path / "one", sampler=sampler, max_leaf=20_000)
+    a, b = open_octree(tmp_path / "one"), open_octree(tmp_path / "many")
+    np.testing.assert_array_equal(a.keys, b.keys)
+    for f in ("count", "level", "bbox_min", "bbox_max"):
+        np.testing.assert_array_equal(a.nodes[f], b.nodes[f])
+    for i in range(len(a.keys)):
+        sa = slice(int(a.nodes["first"][i]), int(a.nodes["first"][i] + a.nodes["count"][i]))
+        sb = slice(int(b.nodes["first"][i]), int(b.nodes["first"][i] + b.nodes["count"][i]))
+        for k in ("low", "med", "high", "color", "rgba"):
+            np.testing.assert_array_equal(a.arrays[k][sa], b.arrays[k][sb])
+
+
+def test_plan_groups_picks_the_coarsest_level_that_fits():
+    from gigapoint.lod.convert import _plan_groups
+
+    # eight partitions at level 2 under two level-1 nodes (prefixes 0-3 under 0, 8-11 under 1), 100 points each
+    carried = {(2, p): 100 for p in (0, 1, 2, 3, 8, 9, 10, 11)}
+    assert _plan_groups(carried, 800) == []  # everything fits at once
+    assert _plan_groups(carried, 400) == [[1, 0, [[2, 0], [2, 1], [2, 2], [2, 3]]], [1, 1, [[2, 8], [2, 9], [2, 10], [2, 11]]]]
+    carried[(1, 7)] = 50  # a coarser partition stays out of every group
+    plan = _plan_groups(carried, 400)
+    assert all([1, 7] not in members for _, _, members in plan) and len(plan) == 2

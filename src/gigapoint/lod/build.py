@@ -209,12 +209,13 @@ def split_tree(codes: np.ndarray, root_key: int, max_leaf: int, max_level: int =
     return Tree(keys, levels, starts, ends, leaf)
 
 
-def upper_tree(codes: np.ndarray, leaf_keys) -> Tree:
-    """The given nodes (as leaves) and all their ancestors, over sorted ``codes``."""
+def upper_tree(codes: np.ndarray, leaf_keys, top: int = 1) -> Tree:
+    """The given nodes (as leaves) and all their ancestors up to ``top`` (the root by default;
+    it must be an ancestor of every leaf), over sorted ``codes``."""
     leaf_keys = {int(k) for k in leaf_keys}
     nodes = set(leaf_keys)
     for k in leaf_keys:
-        while k > 1:
+        while k > top:
             k >>= 3
             nodes.add(k)
     keys = sorted(nodes)

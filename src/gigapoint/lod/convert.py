@@ -333,6 +333,33 @@ def _built_name(level: int, prefix: int) -> str:
     return f"p{(1 << 3 * level) | prefix:x}"
 
 
+def _group_name(level: int, prefix: int) -> str:
+    return f"g{(1 << 3 * level) | prefix:x}"
+
+
+def _plan_groups(carried: dict, budget: int) -> list[list]:
+    """Partitions (level, prefix) -> [[level, prefix, [[plevel, pprefix], ...]], ...]: groups of
+    partitions under a common ancestor node (level, prefix) whose carried points (their
+    roots' samples) sum to at most ``budget``, at the coarsest level where every group fits.
+    No groups when all carried points fit at once; a partition alone under its ancestor stays
+    ungrouped (a group of one saves nothing)."""
+    if sum(carried.values()) <= budget:
+        return []
+    deepest = max(lev for lev, _ in carried)
+    best = None
+    for level in range(1, deepest):
+        groups: dict = {}
+        for (lev, prefix), n in carried.items():
+            if lev > level:
+                g = groups.setdefault(prefix >> 3 * (lev - level), [0, []])
+                g[0] += n
+                g[1].append([lev, prefix])
+        best = [[level, anc, sorted(members)] for anc, (_, members) in sorted(groups.items()) if len(members) > 1]
+        if all(n <= budget for n, _ in groups.values()):
+            break
+    return best or []
+
+
 # --------------------------------------------------------------------------- output directory
 
 
@@ -390,6 +417,7 @@ class _Converter:
         usable = max(memory_limit - _rss_bytes() - (48 << 20), memory_limit // 4)  # what the process already holds is not ours
         self.partition_points = partition_points or max(50_000, min(MAX_PARTITION_POINTS, usable // BYTES_PER_POINT_BUILD))
         self.partition_override = partition_points  # None: derived from the memory limit (and this process's size)
+        self.upper_points = self.partition_points  # carried root points the group/upper phases join at once
         self.chunk_size = chunk_size or int(min(2_000_000, max(50_000, memory_limit // 600)))
         self.progress = progress
         self.inputs = inputs
@@ -653,7 +681,7 @@ class _Converter:
             self.progress.advance(n)
             done_now += 1
             _interrupt_hook(done_now)
-        st["phase"] = "upper"
+        st["phase"] = "group"
         self.save_state()
 
     def _build_subtree(self, data: dict, root_key: int, origin, edge, dest: Path) -> None:
@@ -773,17 +801,58 @@ class _Converter:
         np.save(dest / "span.npy", np.array([off, off + n], np.int64))
 
     # -- phase 5
-    def upper(self) -> None:
+    def group(self) -> None:
+        """Partition roots joined under common ancestors, a group at a time (``_plan_groups``), so
+        the upper phase never holds every root's sample at once: a 10^9-point input has ~900
+        partitions whose roots carry ~22 M points, more than a 3 GB memory limit allows. A group
+        is built like a partition: its nodes above the member roots, and its root's sample
+        carried up; rounds repeat on the groups' roots until what is left fits. Sampling only
+        ever looks at a node's children, so the tree is the same as without groups."""
+        st = self.state
+        built = self.partial / "built"
+        if "top_sets" not in st:  # the built sets whose roots are not joined yet: [level, prefix, kind]
+            st["top_sets"] = [[lev, pre, "p"] for lev, pre, _ in st["partitions"] if (built / _built_name(lev, pre)).exists()]
+            st["groups"] = []
+            st["round"] = None
+        while True:
+            dirs = {(lev, pre): built / (_built_name if kind == "p" else _group_name)(lev, pre) for lev, pre, kind in st["top_sets"]}
+            if st["round"] is None:
+                carried = {k: int(np.load(d / "carry.codes.npy", mmap_mode="r").shape[0]) for k, d in dirs.items()}
+                st["round"] = _plan_groups(carried, self.upper_points)
+                self.save_state()
+            if not st["round"]:
+                break
+            self.progress.phase("group", None)
+            for level, prefix, members in st["round"]:
+                target = built / _group_name(level, prefix)
+                if target.exists():
+                    continue
+                tmp = built / (_group_name(level, prefix) + ".tmp")
+                shutil.rmtree(tmp, ignore_errors=True)
+                tmp.mkdir()
+                self._join_roots([dirs[tuple(m)] for m in members], (1 << 3 * level) | prefix, tmp)
+                os.replace(tmp, target)
+            joined = {tuple(m) for _, _, members in st["round"] for m in members}
+            st["top_sets"] = [t for t in st["top_sets"] if (t[0], t[1]) not in joined] + [[lev, pre, "g"] for lev, pre, _ in st["round"]]
+            st["groups"] += [[lev, pre] for lev, pre, _ in st["round"]]
+            st["round"] = None
+            self.save_state()
+        st["phase"] = "upper"
+        self.save_state()
+
+    def _top_sets(self) -> list[Path]:
+        """The built sets whose roots the upper phase joins (every partition, before grouping)."""
+        built = self.partial / "built"
+        tops = self.state.get("top_sets") or [[lev, pre, "p"] for lev, pre, _ in self.state["partitions"]]
+        paths = [built / (_built_name if kind == "p" else _group_name)(lev, pre) for lev, pre, kind in tops]
+        return [p for p in paths if p.exists()]
+
+    def _join_roots(self, parts: list[Path], top: int, dest: Path) -> None:
+        """The nodes from the roots of the built sets ``parts`` up to node ``top``, sampled from
+        the points those roots carry, as a node set in ``dest``. ``top`` = 1 (the octree's root):
+        the whole upper tree; else a group, whose root's own points are carried up in turn."""
         st = self.state
         origin, edge = np.array(st["origin"]), st["edge"]
-        built = self.partial / "built"
-        target = built / "upper"
-        if target.exists():
-            st["phase"] = "write"
-            self.save_state()
-            return
-        self.progress.phase("upper", None)
-        parts = [p for p in (built / _built_name(lev, prefix) for lev, prefix, _ in st["partitions"]) if p.exists()]
         names = ["rgba"] + ["attr." + a for a in st["attributes"]]
         root_info = [np.load(p / "root.npy") for p in parts]
         roots = [int(r[0]) for r in root_info]
@@ -794,35 +863,50 @@ class _Converter:
             cat[k] = take(cat[k], order)
         del order
         xyz, wsum, wcount = cat.pop("xyz"), cat.pop("wsum"), cat.pop("wcount")
-        tree = upper_tree(codes, roots)
+        tree = upper_tree(codes, roots, top)
         own = init_ownlevel(tree, len(codes))
         sample_tree(tree, codes, xyz, own, wsum, wcount, self.sampler, origin, edge)
         perm, counts = owned_order(tree, own)
         self.progress.advance(len(codes))
+        inner = ~tree.leaf | np.isin(tree.keys, inner_roots)  # roots with children stay even when emptied
+        if top == 1:
+            self._save_nodes(dest, tree.keys, counts, inner, xyz, cat, perm, (cat["rgba"], wsum, wcount, perm))
+            return
+        n0 = int(counts[0])  # the keys are sorted: node ``top`` comes first
+        carry, rest = perm[:n0], perm[n0:]
+        _save_npy(dest / "carry.xyz.npy", take(xyz, carry))
+        _save_npy(dest / "carry.codes.npy", take(codes, carry))
+        _save_npy(dest / "carry.wsum.npy", take(wsum, carry))
+        _save_npy(dest / "carry.wcount.npy", take(wcount, carry))
+        for k, v in cat.items():
+            _save_npy(dest / f"carry.{k}.npy", take(v, carry))
+        np.save(dest / "root.npy", np.array([top, 1], np.uint64))  # a group's root always has children
+        self._save_nodes(dest, tree.keys[1:], counts[1:], inner[1:], xyz, cat, rest, (cat["rgba"], wsum, wcount, rest))
+
+    # -- phase 6
+    def upper(self) -> None:
+        st = self.state
+        built = self.partial / "built"
+        target = built / "upper"
+        if target.exists():
+            st["phase"] = "write"
+            self.save_state()
+            return
+        self.progress.phase("upper", None)
         tmp = built / "upper.tmp"
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir()
-        inner = ~tree.leaf | np.isin(tree.keys, inner_roots)  # roots with children stay even when emptied
-        self._save_nodes(
-            tmp,
-            tree.keys,
-            counts,
-            inner,
-            xyz,
-            cat,
-            perm,
-            (cat["rgba"], wsum, wcount, perm),
-        )
+        self._join_roots(self._top_sets(), 1, tmp)
         os.replace(tmp, target)
         st["phase"] = "write"
         self.save_state()
 
-    # -- phase 6
+    # -- phase 7
     def sources(self) -> list[Path]:
         built = self.partial / "built"
-        return [built / "upper"] + [
-            p for p in (built / _built_name(lev, prefix) for lev, prefix, _ in self.state["partitions"]) if p.exists()
-        ]
+        groups = [built / _group_name(level, prefix) for level, prefix in self.state.get("groups", [])]
+        parts = [built / _built_name(lev, prefix) for lev, prefix, _ in self.state["partitions"]]
+        return [built / "upper"] + [p for p in groups + parts if p.exists()]
 
     def write(self) -> int:
         from .store import write_gigapoint
@@ -846,7 +930,7 @@ class _Converter:
         resumed = saved is not None
         self.state = saved or {"fingerprint": fp, "phase": "read"}
         self.save_state()
-        phases = ["read", "count", "distribute", "build", "upper", "write"]
+        phases = ["read", "count", "distribute", "build", "group", "upper", "write"]
         try:
             timings = {}
             for ph in phases[phases.index(self.state["phase"]) :]:
@@ -885,12 +969,15 @@ def convert(
     progress: bool = False,
     name: str | None = None,
     encoding: str = "DEFAULT",
+    upper_points: int | None = None,
 ) -> ConvertResult:
     """Convert point cloud files (or an iterable of PointChunks) into an LOD octree directory ``out``.
 
     ``sampler``: grid | poisson. ``format``: gigapoint (rendered directly) | potree (Potree 2.0,
     ``encoding`` DEFAULT or BROTLI). ``memory_limit``: bytes or '4G'; bounds partition sizes. Only path
     inputs can resume after an interruption; chunk iterables always start clean.
+    ``partition_points``, ``chunk_size`` and ``upper_points`` (the carried root points joined
+    at once, default ``partition_points``) are tuning knobs, derived from the memory limit.
     """
     if sampler not in SAMPLERS:
         raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
@@ -916,5 +1003,7 @@ def convert(
         name,
         encoding,
     )
+    if upper_points is not None:
+        conv.upper_points = int(upper_points)
     with _KeepFreedMemory():
         return conv.run(overwrite)
