@@ -425,6 +425,7 @@ class _Converter:
         self.name = name or (self.paths[0].stem if self.paths else "cloud")
         self.state: dict = {}
         self._outs: dict | None = None
+        self._next: int | None = None  # next free offset in the output arrays (_next_offset)
 
     # -- state
     def fingerprint(self) -> dict | None:
@@ -752,10 +753,14 @@ class _Converter:
         self._outs = None
 
     def _next_offset(self) -> int:
-        """Where the next node set's points go in the output arrays: after every finished one."""
-        built = self.partial / "built"
-        ends = [int(np.load(p)[1]) for p in built.glob("*/span.npy") if not p.parent.name.endswith(".tmp")]
-        return max(ends, default=0)
+        """Where the next node set's points go in the output arrays: after every finished one.
+        Read from the finished sets once per process, then kept: reading every set's span per
+        set made the build and group phases quadratic (14 of 24 s with 400 sets)."""
+        if self._next is None:
+            built = self.partial / "built"
+            ends = [int(np.load(p)[1]) for p in built.glob("*/span.npy") if not p.parent.name.endswith(".tmp")]
+            self._next = max(ends, default=0)
+        return self._next
 
     def _save_nodes(self, dest: Path, keys, counts, inner, xyz, data, idx, colors) -> None:
         """One node set: nodes ``keys`` holding ``counts`` points each, in order: the points
@@ -799,6 +804,7 @@ class _Converter:
         del outs, low, med, high  # unmapped; a killed process's writes stay in the page cache
         _save_npy(dest / "nodes.npy", nodes)
         np.save(dest / "span.npy", np.array([off, off + n], np.int64))
+        self._next = off + n
 
     # -- phase 5
     def group(self) -> None:
