@@ -132,6 +132,7 @@ def run_render(args) -> list[dict]:
         if args.save_images:
             from PIL import Image
 
+            Path(args.save_images).mkdir(parents=True, exist_ok=True)
             Image.fromarray(f.image).save(Path(args.save_images) / f"lod_{name}.png")
     print(f"open: {t_open * 1e3:.0f} ms, {oc.n_points:,} points in {len(oc.keys):,} nodes")
     return rows
