@@ -168,21 +168,25 @@ def test_grid_color_filtering_averages_the_cell():
         np.testing.assert_array_equal(lp["color"], lp["rgba"])
 
 
+def _assert_same_octree(a, b):
+    """The same nodes with the same payloads (the file layout, ``first``, may differ)."""
+    np.testing.assert_array_equal(a.keys, b.keys)
+    for f in ("count", "level", "bbox_min", "bbox_max"):
+        np.testing.assert_array_equal(a.nodes[f], b.nodes[f])
+    for i in range(len(a.keys)):
+        sa = slice(int(a.nodes["first"][i]), int(a.nodes["first"][i] + a.nodes["count"][i]))
+        sb = slice(int(b.nodes["first"][i]), int(b.nodes["first"][i] + b.nodes["count"][i]))
+        for k in ("low", "med", "high", "color", "rgba"):
+            np.testing.assert_array_equal(a.arrays[k][sa], b.arrays[k][sb])
+
+
 @pytest.mark.parametrize("sampler", ["grid", "poisson"])
 def test_result_does_not_depend_on_partitioning(tmp_path, sampler):
     """Out-of-core partitions and the upper tree give exactly the in-memory octree."""
     chunks = _mm_chunks(50_000, seed=11)[0]
     convert(chunks, tmp_path / "one", sampler=sampler, max_leaf=1_500)
     convert(chunks, tmp_path / "many", sampler=sampler, max_leaf=1_500, partition_points=4_000)
-    a, b = open_octree(tmp_path / "one"), open_octree(tmp_path / "many")
-    np.testing.assert_array_equal(a.keys, b.keys)
-    for f in ("count", "level", "bbox_min", "bbox_max"):
-        np.testing.assert_array_equal(a.nodes[f], b.nodes[f])
-    for i in range(len(a.keys)):  # the file layout (first) differs; every node's payload is the same
-        sa = slice(int(a.nodes["first"][i]), int(a.nodes["first"][i] + a.nodes["count"][i]))
-        sb = slice(int(b.nodes["first"][i]), int(b.nodes["first"][i] + b.nodes["count"][i]))
-        for k in ("low", "med", "high", "color", "rgba"):
-            np.testing.assert_array_equal(a.arrays[k][sa], b.arrays[k][sb])
+    _assert_same_octree(open_octree(tmp_path / "one"), open_octree(tmp_path / "many"))
 
 
 def test_degenerate_inputs(tmp_path):
@@ -286,15 +290,7 @@ def test_upper_tree_built_in_groups_keeps_the_octree_and_bounds_what_it_holds(tm
     assert final[0] < 0.5 * sum(groups)  # without groups it would hold all of them
     monkeypatch.setattr(conv._Converter, "_join_roots", join)
     convert(chunks, tmp_path / "one", sampler=sampler, max_leaf=20_000)
-    a, b = open_octree(tmp_path / "one"), open_octree(tmp_path / "many")
-    np.testing.assert_array_equal(a.keys, b.keys)
-    for f in ("count", "level", "bbox_min", "bbox_max"):
-        np.testing.assert_array_equal(a.nodes[f], b.nodes[f])
-    for i in range(len(a.keys)):
-        sa = slice(int(a.nodes["first"][i]), int(a.nodes["first"][i] + a.nodes["count"][i]))
-        sb = slice(int(b.nodes["first"][i]), int(b.nodes["first"][i] + b.nodes["count"][i]))
-        for k in ("low", "med", "high", "color", "rgba"):
-            np.testing.assert_array_equal(a.arrays[k][sa], b.arrays[k][sb])
+    _assert_same_octree(open_octree(tmp_path / "one"), open_octree(tmp_path / "many"))
 
 
 def test_plan_groups_picks_the_coarsest_level_that_fits():
