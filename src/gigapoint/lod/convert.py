@@ -337,6 +337,22 @@ def _group_name(level: int, prefix: int) -> str:
     return f"g{(1 << 3 * level) | prefix:x}"
 
 
+def _set_name(level: int, prefix: int, kind: str) -> str:
+    """A built node set's directory name: a partition ("p") or a group of roots ("g")."""
+    return (_built_name if kind == "p" else _group_name)(level, prefix)
+
+
+def _save_carry(dest: Path, root_key: int, has_children: bool, gathered: dict, arrays: dict, idx) -> None:
+    """A built set's root: the points it carries up (``carry.<name>.npy``: ``gathered`` maps a
+    name to (array, its own indices), ``arrays`` to arrays taken at ``idx``) and root.npy (key,
+    has children)."""
+    for k, (v, i) in gathered.items():
+        _save_npy(dest / f"carry.{k}.npy", take(v, i))
+    for k, v in arrays.items():
+        _save_npy(dest / f"carry.{k}.npy", take(v, idx))
+    np.save(dest / "root.npy", np.array([root_key, 1 if has_children else 0], np.uint64))
+
+
 def _plan_groups(carried: dict, budget: int) -> list[list]:
     """Partitions (level, prefix) -> [[level, prefix, [[plevel, pprefix], ...]], ...]: groups of
     partitions under a common ancestor node (level, prefix) whose carried points (their
@@ -405,7 +421,7 @@ def _prepare_output(out: Path, fingerprint: dict, overwrite: bool) -> dict | Non
 
 class _Converter:
     def __init__(
-        self, inputs, out, sampler, memory_limit, format, max_leaf, partition_points, chunk_size, progress, name, encoding="DEFAULT"
+        self, inputs, out, sampler, memory_limit, format, max_leaf, partition_points, chunk_size, progress, name, encoding="DEFAULT", upper_points=None
     ):
         self.encoding = encoding
         self.out = Path(out)
@@ -417,7 +433,7 @@ class _Converter:
         usable = max(memory_limit - _rss_bytes() - (48 << 20), memory_limit // 4)  # what the process already holds is not ours
         self.partition_points = partition_points or max(50_000, min(MAX_PARTITION_POINTS, usable // BYTES_PER_POINT_BUILD))
         self.partition_override = partition_points  # None: derived from the memory limit (and this process's size)
-        self.upper_points = self.partition_points  # carried root points the group/upper phases join at once
+        self.upper_points = upper_points or self.partition_points  # carried root points the group/upper phases join at once
         self.chunk_size = chunk_size or int(min(2_000_000, max(50_000, memory_limit // 600)))
         self.progress = progress
         self.inputs = inputs
@@ -701,14 +717,10 @@ class _Converter:
         del order
         n0 = int(counts[0])
         carry, rest = perm[:n0], perm[n0:]
-        # carried up: the subtree root's points, with their color sums
-        _save_npy(dest / "carry.xyz.npy", take(xyz, src[:n0]))
-        _save_npy(dest / "carry.codes.npy", take(codes, carry))
-        _save_npy(dest / "carry.wsum.npy", take(wsum, carry))
-        _save_npy(dest / "carry.wcount.npy", take(wcount, carry))
-        for k, v in data.items():
-            _save_npy(dest / f"carry.{k}.npy", take(v, src[:n0]))
-        np.save(dest / "root.npy", np.array([root_key, 0 if tree.leaf[0] else 1], np.uint64))  # key, has children
+        # carried up: the subtree root's points, with their color sums (xyz and data are in
+        # input order, the rest sorted)
+        inputs = {"xyz": xyz, **data}
+        _save_carry(dest, root_key, not tree.leaf[0], {k: (v, src[:n0]) for k, v in inputs.items()}, {"codes": codes, "wsum": wsum, "wcount": wcount}, carry)
         # final: every node below the root
         del codes
         self._save_nodes(dest, tree.keys[1:], counts[1:], ~tree.leaf[1:], xyz, data, src[n0:], (rgba_sorted, wsum, wcount, rest))
@@ -821,7 +833,7 @@ class _Converter:
             st["groups"] = []
             st["round"] = None
         while True:
-            dirs = {(lev, pre): built / (_built_name if kind == "p" else _group_name)(lev, pre) for lev, pre, kind in st["top_sets"]}
+            dirs = {(lev, pre): built / _set_name(lev, pre, kind) for lev, pre, kind in st["top_sets"]}
             if st["round"] is None:
                 carried = {k: int(np.load(d / "carry.codes.npy", mmap_mode="r").shape[0]) for k, d in dirs.items()}
                 st["round"] = _plan_groups(carried, self.upper_points)
@@ -850,7 +862,7 @@ class _Converter:
         """The built sets whose roots the upper phase joins (every partition, before grouping)."""
         built = self.partial / "built"
         tops = self.state.get("top_sets") or [[lev, pre, "p"] for lev, pre, _ in self.state["partitions"]]
-        paths = [built / (_built_name if kind == "p" else _group_name)(lev, pre) for lev, pre, kind in tops]
+        paths = [built / _set_name(lev, pre, kind) for lev, pre, kind in tops]
         return [p for p in paths if p.exists()]
 
     def _join_roots(self, parts: list[Path], top: int, dest: Path) -> None:
@@ -880,13 +892,7 @@ class _Converter:
             return
         n0 = int(counts[0])  # the keys are sorted: node ``top`` comes first
         carry, rest = perm[:n0], perm[n0:]
-        _save_npy(dest / "carry.xyz.npy", take(xyz, carry))
-        _save_npy(dest / "carry.codes.npy", take(codes, carry))
-        _save_npy(dest / "carry.wsum.npy", take(wsum, carry))
-        _save_npy(dest / "carry.wcount.npy", take(wcount, carry))
-        for k, v in cat.items():
-            _save_npy(dest / f"carry.{k}.npy", take(v, carry))
-        np.save(dest / "root.npy", np.array([top, 1], np.uint64))  # a group's root always has children
+        _save_carry(dest, top, True, {}, {"xyz": xyz, "codes": codes, "wsum": wsum, "wcount": wcount, **cat}, carry)  # a group's root has children
         self._save_nodes(dest, tree.keys[1:], counts[1:], inner[1:], xyz, cat, rest, (cat["rgba"], wsum, wcount, rest))
 
     # -- phase 6
@@ -1008,8 +1014,7 @@ def convert(
         RichProgress() if progress else NullProgress(),
         name,
         encoding,
+        upper_points,
     )
-    if upper_points is not None:
-        conv.upper_points = int(upper_points)
     with _KeepFreedMemory():
         return conv.run(overwrite)

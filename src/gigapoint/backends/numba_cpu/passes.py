@@ -36,12 +36,11 @@ _TWO_M23 = np.float32(2.0**-23)
 
 
 @njit(parallel=True, cache=True)
-def log_depth(vis, vis_u32, logd, empty):
+def log_depth(vis, logd, empty):
     """logd = log2(depth) (0 where empty), empty = 1 where no point.
 
     log2 = exponent + atanh series of the mantissa m in [1, 2): t = (m-1)/(m+1). The depth
-    bits are taken from the u64 keys (contiguous loads: the loop vectorises); ``vis_u32``
-    (``vis.view(np.uint32)``) is unused, kept for the callers' signature."""
+    bits are taken from the u64 keys (contiguous loads: the loop vectorises)."""
     n = vis.shape[0]
     rows = (n + 4095) // 4096
     for r in prange(rows):

@@ -64,7 +64,7 @@ def project_point(m, x, y, z, wf, hf, wi, near, far, shape=0, clip=True):
     it, so all three agree bit for bit. ``shape`` (a compile-time constant after inlining)
     skips work whose result is known exactly: PERSPECTIVE, the depth row equals the w row
     (so depth is w, bit for bit); ORTHOGRAPHIC, w is exactly 1 (x'/1 = x'). ``clip=False``
-    for a batch that lies inside the frustum with a margin (``Selection.interior``): every
+    for a batch that lies inside the frustum with a margin (``inside_frustum``): every
     point maps to a pixel, no test needed.
     """
     sx = m[0] * x + m[1] * y + m[2] * z + m[3]
@@ -122,17 +122,19 @@ def _project_loop(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, s
 @njit(inline="always", error_model="numpy")
 def _project_shapes(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, shape, clip):
     if shape == PERSPECTIVE:
-        if clip:
-            _project_loop(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, PERSPECTIVE, True)
-        else:
-            _project_loop(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, PERSPECTIVE, False)
+        _project_clip(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, PERSPECTIVE, clip)
     elif shape == ORTHOGRAPHIC:
-        if clip:
-            _project_loop(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, ORTHOGRAPHIC, True)
-        else:
-            _project_loop(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, ORTHOGRAPHIC, False)
+        _project_clip(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, ORTHOGRAPHIC, clip)
     else:
-        _project_loop(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, GENERAL, True)
+        _project_clip(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, GENERAL, clip)
+
+
+@njit(inline="always", error_model="numpy")
+def _project_clip(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, shape, clip):
+    if clip:
+        _project_loop(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, shape, True)
+    else:
+        _project_loop(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, shape, False)
 
 
 @njit(inline="always")

@@ -49,7 +49,7 @@ def eye_dome_lighting(
     """(H*W,) u32 RGBA colors shaded by EDL (vis: (H*W,) u64 visibility buffer)."""
     vis = np.ascontiguousarray(vis).reshape(-1)
     logd, empty = _scratch(vis.shape[0])
-    kernels.log_depth(vis, vis.view(np.uint32), logd, empty)
+    kernels.log_depth(vis, logd, empty)
     out = np.empty_like(colors)
     kernels.edl(logd, empty, np.ascontiguousarray(colors).reshape(-1), width, height, neighbour_offsets(radius), np.float32(strength), out)
     return out
