@@ -5,7 +5,8 @@
 Each conversion runs in its own child process; its peak memory is the child's maxrss
 (os.wait4). ``--input laz`` converts the same points from a LAZ copy (made once with laspy). A tiny conversion first fills numba's cache so JIT compile time is excluded.
 Reference (PotreeConverter 2 on the project machine, 20 M points LAS): 1.7 M points/s
-poisson, 2.5 M points/s random.
+poisson, 2.5 M points/s random. PotreeConverter shows nothing before it finishes; ``first_view_s``
+is when gigapoint's output first opened (its preview, lod/preview.py).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from gigapoint.lod import convert
 args = json.loads(sys.argv[1])
 t = time.perf_counter()
 r = convert([args["input"]], args["out"], sampler=args["sampler"], memory_limit=args["memory_limit"], format=args["format"])
-print(json.dumps({"points": r.points, "nodes": r.nodes, "seconds": time.perf_counter() - t, "phases": r.phase_seconds}))
+print(json.dumps({"points": r.points, "nodes": r.nodes, "seconds": time.perf_counter() - t, "phases": r.phase_seconds, "first_view": r.first_view_seconds}))
 """
 
 
@@ -123,6 +124,7 @@ def main() -> None:
                 "points": info["points"],
                 "nodes": info["nodes"],
                 "convert_s": round(info["seconds"], 3),
+                "first_view_s": round(info["first_view"], 3),  # until OUT/.partial/preview.npz could be viewed
                 "process_s": round(wall, 3),
                 "points_per_s": round(info["points"] / info["seconds"]),
                 "process_points_per_s": round(info["points"] / wall),

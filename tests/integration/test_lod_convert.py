@@ -87,10 +87,18 @@ def test_interrupted_conversion_resumes_to_the_same_result(demo_las, reference, 
     state = json.loads((out / ".partial" / "state.json").read_text())
     assert state["phase"] == "build" and len(state["partitions"]) > 3
     import gigapoint as gp
-    from gigapoint.errors import InputError
+    from gigapoint.errors import GigapointWarning
+    from gigapoint.lod import OctreeCloud
 
-    with pytest.raises(InputError, match="conversion not finished"):
-        gp.open(out)  # an unfinished output never opens as a cloud
+    with pytest.warns(GigapointWarning, match="conversion not finished"):
+        preview = gp.open(out)  # an unfinished output opens as its preview, never as the octree
+    assert not isinstance(preview, OctreeCloud)
+    with laspy.open(str(demo_las)) as f:
+        las = f.read()
+    every = np.column_stack([las.x, las.y, las.z])[:: state["preview"]["stride"]]
+    assert preview.n_points == len(every) == state["preview"]["points"]
+    # positions come back at 30-bit batch precision, far finer than the LAS file's millimetres
+    np.testing.assert_array_equal(np.unique(np.round(preview.positions(), 3), axis=0), np.unique(np.round(every, 3), axis=0))
     monkeypatch.delenv("GIGAPOINT_TEST_INTERRUPT")
     res = convert([demo_las], out, **OPTS)
     assert res.resumed
@@ -124,6 +132,49 @@ def test_conversion_interrupted_while_grouping_resumes_to_the_same_result(demo_l
     assert res.resumed and "group" in res.phase_seconds
     _assert_same(_snapshot(tmp_path / "oct"), _snapshot(tmp_path / "whole"))
 
+
+
+def test_conversion_killed_while_distributing_resumes_to_the_same_result(demo_las, reference, tmp_path, monkeypatch):
+    """Chunks are grouped and written at checkpoints; killed half-way through writing one, the
+    re-run cuts the partition files back to the last checkpoint and gives the uninterrupted result."""
+    import importlib
+
+    conv = importlib.import_module("gigapoint.lod.convert")
+    C = conv._Converter
+    real_distribute, real_append, real_files = C.distribute, C._append, C._part_files
+    seen = {"append": 0, "files": 0, "groups": []}
+
+    def distribute(self):
+        self.distribute_bytes = 150_000 * 40 // 3  # a checkpoint every second chunk
+        return real_distribute(self)
+
+    def append(self, parts, pieces, counts):
+        seen["append"] += 1
+        seen["groups"].append(len(pieces))
+        return real_append(self, parts, pieces, counts)
+
+    def part_files(self, level, prefix):
+        if seen["append"] == 2:  # the second checkpoint: some partitions written, then killed
+            seen["files"] += 1
+            if seen["files"] == 3:
+                raise KeyboardInterrupt("test interrupt while distributing")
+        return real_files(self, level, prefix)
+
+    monkeypatch.setattr(C, "distribute", distribute)
+    monkeypatch.setattr(C, "_append", append)
+    monkeypatch.setattr(C, "_part_files", part_files)
+    out = tmp_path / "oct"
+    with pytest.raises(KeyboardInterrupt):
+        convert([demo_las], out, **OPTS)
+    state = json.loads((out / ".partial" / "state.json").read_text())
+    assert state["phase"] == "distribute" and seen["groups"][0] == 2 and state["distributed"] == 2
+    raw = sorted(p.name.split(".")[0] for p in (out / ".partial" / "raw").glob("*.xyz.npy"))
+    assert raw == ["c000002", "c000003"]  # spills are deleted only once their checkpoint is written
+    for name, f in [("distribute", real_distribute), ("_append", real_append), ("_part_files", real_files)]:
+        monkeypatch.setattr(C, name, f)
+    res = convert([demo_las], out, **OPTS)
+    assert res.resumed
+    _assert_same(_snapshot(out), reference)
 
 def test_killed_conversion_resumes_via_cli(demo_las, tmp_path):
     """SIGKILL in the middle of the build phase, then the same command again: it resumes."""

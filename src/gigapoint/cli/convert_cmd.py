@@ -26,6 +26,8 @@ def convert(
     """Convert point clouds into a level-of-detail octree, out of core, resumable."""
     from ..lod import convert as run
 
+    if not quiet:
+        print(f"while this runs, `gigapoint view {output}` shows what has been read so far", file=sys.stderr)
     result = run(
         [str(p) for p in inputs],
         output,
@@ -41,4 +43,5 @@ def convert(
     print(
         f"{result.out}: {result.points:,} points in {result.nodes:,} nodes ({result.format}, {result.sampler}){skipped}, "
         f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s{resumed}"
+        + (f"; viewable after {result.first_view_seconds:.1f} s" if result.first_view_seconds is not None else "")
     )

@@ -150,6 +150,13 @@ def format_info(info: dict) -> str:
         lines.append(f"  software:    {info['generating_software']}")
     if info.get("columns"):
         lines.append(f"  columns:     {' '.join(info['columns'])} ({info.get('delimiter')}{', header line' if info.get('header_line') else ''})")
+    if info.get("nodes") is not None:
+        spacing = f", spacing {info['spacing']:.6g}" if info.get("spacing") else ""
+        lines.append(f"  octree:      {info['nodes']:,} nodes in {info['levels']} levels{', ' + info['sampler'] + ' sampler' if info.get('sampler') else ''}{spacing}")
+    conv = info.get("conversion")
+    if conv is not None:
+        total = f" of {conv['total']:,}" if conv.get("total") else ""
+        lines.append(f"  conversion:  phase {conv.get('phase') or '?'}, {conv.get('points', 0):,}{total} points read, preview of {conv.get('preview_points', 0):,} points")
     size = info.get("file_size")
     if size is not None:
         lines.append(f"  file size:   {_human_bytes(size)}")

@@ -494,7 +494,9 @@ def open_octree(path) -> OctreeCloud:
 
             return read_potree(p)
         if (p / ".partial").exists():
-            raise InputError(f"{p}: conversion not finished (re-run `gigapoint convert` to resume it)")
+            from .preview import open_preview
+
+            return open_preview(p)
         raise InputError(f"{p}: no {META_NAME} or metadata.json: not a converted octree")
     try:
         meta = json.loads((p / META_NAME).read_text())
@@ -515,3 +517,40 @@ def open_octree(path) -> OctreeCloud:
     if any(len(a) != n for a in arrays.values()) or int(nodes["count"].astype(np.int64).sum()) != n:
         raise InputError(f"{p}: point arrays hold a different number of points than {META_NAME} says ({n:,})")
     return OctreeCloud(meta.get("name", p.name), meta, nodes, keys, arrays, attributes, p)
+
+
+def octree_info(path) -> dict:
+    """What ``gigapoint info`` says about an octree directory (gigapoint or Potree 2.0) or an
+    unfinished conversion, in ``file_info``'s keys plus nodes, levels, sampler and conversion."""
+    p = Path(path)
+    size = sum(f.stat().st_size for f in p.rglob("*") if f.is_file())
+    if not (p / META_NAME).is_file() and not (p / "metadata.json").is_file():
+        from .preview import conversion_status
+
+        s = conversion_status(p)
+        return {
+            "path": str(p),
+            "format": "unfinished conversion",
+            "point_count": int(s.get("points", 0)),
+            "has_color": True,
+            "attributes": s.get("attributes", []),
+            "conversion": s,
+            "file_size": size,
+        }
+    cloud = open_octree(p)
+    lo, hi = cloud.bounds
+    potree = cloud.meta.get("format") != FORMAT_NAME
+    return {
+        "path": str(p),
+        "format": "Potree 2.0 octree" if potree else f"gigapoint octree {FORMAT_VERSION}",
+        "encoding": cloud.meta.get("encoding") if potree else None,
+        "point_count": int(cloud.n_points),
+        "bounds": {"min": np.asarray(lo).tolist(), "max": np.asarray(hi).tolist()},
+        "has_color": True,
+        "attributes": sorted(cloud.attributes),
+        "nodes": len(cloud.keys),
+        "levels": int(cloud.nodes["level"].max()) + 1,
+        "sampler": cloud.meta.get("sampler"),
+        "spacing": cloud.meta.get("spacing"),
+        "file_size": size,
+    }

@@ -124,6 +124,7 @@ class LastFrame:
     camera: object
     visibility: np.ndarray  # (h, w) u64 visibility buffer of the last frame sent (depth bits << 32 | index)
     render_number: int = -1
+    cloud: object = None  # what it was drawn from (the core's cloud can be swapped since: viewer/watch.py)
 
     def window(self, y0, y1, x0, x1):
         """(index, depth) of a window: int64 (-1 where empty) and float32 (inf where empty)."""
@@ -203,6 +204,20 @@ class ViewerCore:
         self.last_active: Session | None = None
         lo, hi = cloud.bounds
         self.bounds = (np.asarray(lo, np.float64), np.asarray(hi, np.float64))
+        self.watcher = None
+        if getattr(cloud, "preview_of", None) is not None:  # an unfinished conversion: follow it
+            from .watch import ConversionWatcher
+
+            self.watcher = ConversionWatcher(self, cloud.preview_of).start()
+
+    def replace_cloud(self, cloud) -> None:
+        """Draw ``cloud`` from now on (a newer preview, or the finished octree); every tab redraws, views stay."""
+        self.cloud = cloud
+        lo, hi = cloud.bounds
+        self.bounds = (np.asarray(lo, np.float64), np.asarray(hi, np.float64))
+        for s in list(self.sessions.values()):
+            with s.cond:
+                s._changed(False)
 
     def cloud_info(self) -> dict:
         lo, hi = self.bounds
@@ -233,6 +248,8 @@ class ViewerCore:
                 self.last_active = next(iter(self.sessions.values()), None)
 
     def close_all(self) -> None:
+        if self.watcher is not None:
+            self.watcher.stop()
         for s in list(self.sessions.values()):
             self.close_session(s)
 
@@ -414,7 +431,7 @@ class Session:
         if hit is None:
             return {"type": "pick", "id": pick_id, "found": False}
         index, depth, cam, px, py = hit
-        info = point_info(self.core.cloud, self.last, index, cam, px, py, depth)
+        info = point_info(self.last.cloud or self.core.cloud, self.last, index, cam, px, py, depth)
         if pivot:
             self.state.set_pivot(info["position"])
         return {"type": "pick", "id": pick_id, "found": True, "pivot": pivot, "info": P.json_safe(info)}
@@ -450,10 +467,11 @@ class Session:
             version, seq, state, settings, (w, h), level, quality, moving = job
             scale = SCALES[level]
             t0 = time.perf_counter()
+            cloud = self.core.cloud
             try:
                 cam = state.camera(max(1, round(w / scale)), max(1, round(h / scale)))
                 drawn = self.budget.settings_for(settings) if moving else settings
-                frame = render_locked(self.core.cloud, cam, drawn, cancelled=lambda: self.closed)
+                frame = render_locked(cloud, cam, drawn, cancelled=lambda: self.closed)
                 if frame is None:
                     return
             except GigapointError as exc:
@@ -472,7 +490,7 @@ class Session:
             if moving:
                 self.scales.record(level, t2 - t0)
             with self.cond:
-                self.last = LastFrame(cam, frame.visibility, frame.render_number)
+                self.last = LastFrame(cam, frame.visibility, frame.render_number, cloud)
                 self._done_version = version
                 self._done_full = level == 0
                 self.good_settings = settings
@@ -494,7 +512,7 @@ class Session:
                 "visible_pixels": stats.visible_pixels,
                 "backend": stats.backend,
                 "memory": memory_rss(),
-                "load_progress": float(getattr(self.core.cloud, "load_progress", 1.0)),
+                "load_progress": float(getattr(cloud, "load_progress", 1.0)),
                 "camera": state.as_dict(),
             }
             if not self.send("bytes", P.pack_frame(header, jpeg)):

@@ -1,0 +1,74 @@
+"""Follow a conversion that is still running: newer previews, then the finished octree.
+
+``gigapoint view OUT`` on an unfinished conversion starts with its preview (lod/preview.py).
+A thread polls ``OUT`` about once a second and swaps the viewer's cloud when the preview file
+is rewritten, and for good when the octree's metadata appears; the tabs redraw with their
+camera unchanged.
+"""
+
+from __future__ import annotations
+
+import threading
+import warnings
+from pathlib import Path
+
+from ..errors import GigapointError, GigapointWarning
+
+
+def _complete(out: Path) -> bool:
+    from ..lod.store import META_NAME
+
+    return (out / META_NAME).is_file() or (out / "metadata.json").is_file()  # metadata is written last
+
+
+def _stamp(path: Path):
+    try:
+        st = path.stat()
+        return st.st_mtime_ns, st.st_size
+    except OSError:
+        return None
+
+
+class ConversionWatcher:
+    def __init__(self, core, out, interval_s: float = 1.0):
+        from ..lod.preview import PREVIEW_NAME
+
+        self.core = core
+        self.out = Path(out)
+        self.preview = self.out / ".partial" / PREVIEW_NAME
+        self.seen = _stamp(self.preview)
+        self.interval_s = interval_s
+        self.finished = threading.Event()  # set once the octree is drawn (or the watch stopped)
+        self.swaps = 0
+        self._thread = threading.Thread(target=self._run, name="gigapoint-conversion-watch", daemon=True)
+
+    def start(self) -> ConversionWatcher:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self.finished.set()
+
+    def _run(self) -> None:
+        from ..lod.preview import open_preview
+        from ..lod.store import open_octree
+
+        while not self.finished.wait(self.interval_s):
+            try:
+                if _complete(self.out):
+                    self._swap(open_octree(self.out))
+                    self.finished.set()
+                    return
+                stamp = _stamp(self.preview)
+                if stamp is not None and stamp != self.seen:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore", GigapointWarning)
+                        cloud = open_preview(self.out)
+                    self.seen = stamp
+                    self._swap(cloud)
+            except (GigapointError, OSError, ValueError):
+                continue  # caught between two atomic renames, or the conversion was restarted: look again
+
+    def _swap(self, cloud) -> None:
+        self.core.replace_cloud(cloud)
+        self.swaps += 1

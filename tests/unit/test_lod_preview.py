@@ -1,0 +1,253 @@
+"""The viewable preview of a conversion in progress: sampler, resume, open/render/info, viewer swap."""
+
+from __future__ import annotations
+
+import importlib
+import json
+import time
+import warnings
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.cli import main
+from gigapoint.core import demo_arrays
+from gigapoint.errors import GigapointWarning, InputError
+from gigapoint.lod import OctreeCloud, convert
+from gigapoint.lod.preview import PREVIEW_NAME, PreviewSampler, preview_points
+
+laspy = pytest.importorskip("laspy")
+conv_mod = importlib.import_module("gigapoint.lod.convert")  # the module (gigapoint.lod.convert is the function)
+
+
+def _chunk(start: int, n: int, with_intensity: bool = True):
+    """n points whose x is their global index (so the sample's x values show what was kept)."""
+    x = np.arange(start, start + n, dtype=np.float64)
+    xyz = np.column_stack([x, x % 7, x % 11])
+    rgba = (np.arange(start, start + n) % 256).astype(np.uint32) * 0x01010101
+    attrs = {"intensity": (x % 1000).astype(np.uint16)} if with_intensity else {}
+    return xyz, rgba, attrs
+
+
+def _feed(sampler: PreviewSampler, sizes, start: int = 0, check=None):
+    for n in sizes:
+        sampler.add(*_chunk(start, n))
+        start += n
+        if check:
+            check(sampler, start)
+    return start
+
+
+def _kept_x(sampler: PreviewSampler) -> np.ndarray:
+    return sampler._merged()["xyz"][:, 0]
+
+
+def test_unknown_total_keeps_a_uniform_thinning_within_the_target(tmp_path):
+    s = PreviewSampler(tmp_path / PREVIEW_NAME, target=1000, total=None)
+
+    def check(s, seen):
+        assert s.held <= 1000
+        np.testing.assert_array_equal(_kept_x(s), np.arange(0, seen, s.stride))  # every stride-th point, none else
+
+    _feed(s, [7, 900, 33, 5000, 1, 12_345, 999], check=check)
+    assert s.stride == 32 and s.held > 500  # the stride doubled only as far as needed
+
+
+def test_known_total_fixes_the_stride(tmp_path):
+    s = PreviewSampler(tmp_path / PREVIEW_NAME, target=1000, total=50_000)
+    seen = _feed(s, [20_000, 20_000, 10_000])
+    assert s.stride == 50 and s.held == 1000
+    np.testing.assert_array_equal(_kept_x(s), np.arange(0, seen, 50))
+    np.testing.assert_array_equal(s._merged()["attr.intensity"], np.arange(0, seen, 50) % 1000)
+
+
+def test_attributes_some_chunks_lack_are_dropped(tmp_path):
+    s = PreviewSampler(tmp_path / PREVIEW_NAME, target=10_000, total=None)
+    s.add(*_chunk(0, 100))
+    s.add(*_chunk(100, 100, with_intensity=False))
+    assert set(s._merged()) == {"xyz", "rgba"} and s.held == 200
+
+
+def test_write_is_atomic_timed_and_opens_as_a_cloud(tmp_path):
+    path = tmp_path / PREVIEW_NAME
+    s = PreviewSampler(path, target=10_000, total=None, interval_s=3600)
+    assert not s.maybe_write()  # nothing yet
+    s.add(*_chunk(0, 500))
+    assert s.maybe_write()  # the first chunk is written at once
+    s.add(*_chunk(500, 500))
+    assert not s.maybe_write()  # not due for an hour
+    assert s.maybe_write(force=True)
+    assert not s.maybe_write(force=True)  # unchanged since
+    assert sorted(p.name for p in tmp_path.iterdir()) == [PREVIEW_NAME]  # no temporary file left
+    cloud = gp.open(path)
+    assert cloud.n_points == 1000 and set(cloud.attributes) == {"intensity"}
+    np.testing.assert_array_equal(np.sort(np.round(cloud.positions()[:, 0])), np.arange(1000))
+
+
+def test_resume_continues_the_same_sample(tmp_path):
+    whole = PreviewSampler(tmp_path / "a.npz", target=300, total=None)
+    _feed(whole, [400, 400, 400, 400])
+    part = PreviewSampler(tmp_path / "b.npz", target=300, total=None)
+    seen = _feed(part, [400, 400])
+    part.maybe_write(force=True)
+    resumed = PreviewSampler(tmp_path / "b.npz", target=300, total=None)
+    resumed.resume(seen, part.stride)
+    _feed(resumed, [400, 400], start=seen)
+    np.testing.assert_array_equal(_kept_x(resumed), _kept_x(whole))
+    assert resumed.stride == whole.stride
+
+
+def test_resume_from_a_missing_or_corrupt_file_starts_afresh(tmp_path):
+    (tmp_path / PREVIEW_NAME).write_bytes(b"PK\x03\x04 torn")
+    s = PreviewSampler(tmp_path / PREVIEW_NAME, target=300, total=None)
+    s.resume(1000, 4)
+    assert s.held == 0 and s.seen == 0
+
+
+def test_preview_size_follows_the_memory_limit():
+    assert preview_points(24 << 30) == 2_000_000
+    assert preview_points(256 << 20) == 256 * 2**20 // 50 // 48
+    assert preview_points(1 << 20) == 50_000
+
+
+# ------------------------------------------------------------------ inside a conversion
+
+
+def _write_las(path, n, seed=3):
+    xyz, rgba, attrs = demo_arrays(n, seed)
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales = [0.001] * 3
+    header.offsets = [0.0, 0.0, 0.0]
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    rgb16 = rgba[:, :3].astype(np.uint16) * 257
+    las.red, las.green, las.blue = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
+    las.intensity = attrs["intensity"]
+    las.write(str(path))
+    return np.column_stack([las.x, las.y, las.z])
+
+
+OPTS = {"max_leaf": 3_000, "partition_points": 25_000, "chunk_size": 20_000}
+
+
+@pytest.fixture(scope="module")
+def las_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("las") / "scan.las"
+    return path, _write_las(path, 100_000)
+
+
+def _stop_reading_after(monkeypatch, k: int):
+    real = conv_mod._read_chunks
+
+    def chunks(path, size):
+        for i, c in enumerate(real(path, size)):
+            if i == k:
+                raise KeyboardInterrupt("test: stopped while reading")
+            yield c
+
+    monkeypatch.setattr(conv_mod, "_read_chunks", chunks)
+    return real
+
+
+def _same_points(cloud, xyz):
+    """Same point set, at the LAS file's millimetres (the cloud decodes at 30-bit batch precision)."""
+    np.testing.assert_array_equal(np.unique(np.round(cloud.positions(), 3), axis=0), np.unique(np.round(xyz, 3), axis=0))
+
+
+def _open_preview(out):
+    with pytest.warns(GigapointWarning, match="conversion not finished"):
+        return gp.open(out)
+
+
+def test_killed_while_reading_shows_what_was_read_and_resumes_exactly(las_file, tmp_path, monkeypatch):
+    path, xyz = las_file
+    out = tmp_path / "oct"
+    monkeypatch.setattr(conv_mod, "preview_points", lambda mem: 10_000)  # stride 10 for 100 000 points
+    real = _stop_reading_after(monkeypatch, 3)
+    with pytest.raises(KeyboardInterrupt):
+        convert([path], out, **OPTS)
+    state = json.loads((out / ".partial" / "state.json").read_text())
+    assert state["phase"] == "read" and state["chunks"] == 3 and state["preview"]["stride"] == 10
+    shown = state["preview"]["seen"]
+    preview = _open_preview(out)
+    assert 20_000 <= shown <= 60_000 and preview.n_points == shown // 10
+    _same_points(preview, xyz[:shown:10])
+    img = gp.render(preview, gp.Camera.fit(preview.bounds, width=160, height=120))
+    assert (img[..., :3] != 0).any(axis=2).mean() > 0.05  # it draws something
+
+    # resumed and stopped again after the read phase: the preview is exactly every 10th point
+    monkeypatch.setattr(conv_mod, "_read_chunks", real)
+    monkeypatch.setenv("GIGAPOINT_TEST_INTERRUPT", "raise:1")
+    with pytest.raises(KeyboardInterrupt):
+        convert([path], out, **OPTS)
+    preview = _open_preview(out)
+    _same_points(preview, xyz[::10])
+
+    monkeypatch.delenv("GIGAPOINT_TEST_INTERRUPT")
+    res = convert([path], out, **OPTS)
+    assert res.resumed and res.first_view_seconds is None  # this run read nothing new
+    assert isinstance(gp.open(out), OctreeCloud) and not (out / ".partial").exists()
+
+
+def test_first_view_comes_after_the_first_chunk(las_file, tmp_path):
+    path, _ = las_file
+    res = convert([path], tmp_path / "oct", **OPTS)
+    assert res.first_view_seconds is not None and 0 < res.first_view_seconds < res.seconds
+    assert res.first_view_seconds < res.phase_seconds["read"] + 1e-3  # during the read phase, not after it
+
+
+def test_unfinished_conversion_without_a_preview_is_a_clear_error(tmp_path):
+    out = tmp_path / "oct"
+    (out / ".partial").mkdir(parents=True)
+    (out / ".partial" / "state.json").write_text(json.dumps({"phase": "read"}))
+    with pytest.raises(InputError, match="no preview written yet"):
+        gp.open(out)
+    assert main(["render", str(out), "-o", str(tmp_path / "x.png")]) == 1
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_info_describes_octrees_and_unfinished_conversions(las_file, tmp_path, monkeypatch, capsys):
+    path, _ = las_file
+    done = tmp_path / "done"
+    convert([path], done, **OPTS)
+    _stop_reading_after(monkeypatch, 2)
+    with pytest.raises(KeyboardInterrupt):
+        convert([path], tmp_path / "half", **OPTS)
+    assert main(["info", str(done), str(tmp_path / "half")]) == 0
+    text = capsys.readouterr().out
+    assert "gigapoint octree" in text and "100,000" in text and " nodes in " in text and "grid sampler" in text
+    assert "unfinished conversion" in text and "phase read, 40,000 of 100,000 points read" in text
+    assert main(["info", "--json", str(done)]) == 0
+    data = json.loads(capsys.readouterr().out)
+    oc = gp.open(done)
+    assert data["point_count"] == 100_000 and data["nodes"] == len(oc.keys) and data["attributes"] == sorted(oc.attributes)
+    assert "intensity" in data["attributes"] and data["levels"] == int(oc.nodes["level"].max()) + 1
+
+
+def test_viewer_follows_the_conversion_to_the_octree(las_file, tmp_path, monkeypatch):
+    from gigapoint.viewer.session import ViewerCore
+
+    path, _ = las_file
+    out = tmp_path / "oct"
+    real = _stop_reading_after(monkeypatch, 2)
+    with pytest.raises(KeyboardInterrupt):
+        convert([path], out, **OPTS)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GigapointWarning)
+        preview = gp.open(out)
+    core = ViewerCore(preview)
+    frames = []
+    session = core.open_session(lambda kind, payload: frames.append(kind) or True, 96, 64)
+    try:
+        assert core.watcher is not None
+        core.watcher.interval_s = 0.05
+        monkeypatch.setattr(conv_mod, "_read_chunks", real)
+        convert([path], out, **OPTS)  # finishes the conversion while the viewer is open
+        deadline = time.monotonic() + 20
+        while not (isinstance(core.cloud, OctreeCloud) and session.last is not None and session.last.cloud is core.cloud):
+            assert time.monotonic() < deadline, "the viewer did not switch to the finished octree"
+            time.sleep(0.05)
+        assert core.watcher.finished.is_set() and core.cloud.n_points == 100_000
+    finally:
+        core.close_all()
