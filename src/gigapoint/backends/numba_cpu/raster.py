@@ -314,12 +314,9 @@ def merge(frame, scratch, dirty):
             if dirty[t + 1, tile]:
                 dirty[t + 1, tile] = 0
                 sb = scratch[t]
-                for p in range(tile << TILE_SHIFT, min((tile + 1) << TILE_SHIFT, n)):
-                    v = sb[p]
-                    if v != EMPTY:
-                        if v < frame[p]:
-                            frame[p] = v
-                        sb[p] = EMPTY
+                for p in range(tile << TILE_SHIFT, min((tile + 1) << TILE_SHIFT, n)):  # branch-free: vectorises
+                    frame[p] = min(frame[p], sb[p])
+                    sb[p] = EMPTY
 
 
 @njit(parallel=True, cache=True)
