@@ -68,7 +68,7 @@ def test_kernel_equals_reference_on_demo_scene(demo_small, view):
         assert frame.stats.batches_rendered == 0
         return
     frame = _check_exact(demo_small, cam)
-    assert frame.stats.visible_pixels > 0
+    assert frame.stats.visible_pixels == int((frame.visibility != EMPTY_PIXEL).sum()) > 0  # counted by the resolve
     if view == "close-up":
         assert frame.stats.precision_histogram[20] > 0  # large projected batches use more bits
     if view == "inside":
@@ -198,3 +198,12 @@ def test_odd_and_tiny_batches_write_every_point():
         frame = _check_exact(cloud, cam)
         covered = ~frame.empty[::-1]  # image row 0 is the top (largest y)
         assert covered.reshape(-1)[:n].all()
+
+
+def test_visible_pixels_count_the_frame_after_hole_filling(demo_small):
+    cam = Camera.fit(demo_small.bounds, view="top", width=300, height=200)
+    plain = gp.render_frame(demo_small, cam, gp.RenderSettings(threads=2))
+    filled = gp.render_frame(demo_small, cam, gp.RenderSettings(threads=2, fill_holes=2))
+    for f in (plain, filled):
+        assert f.stats.visible_pixels == int((f.visibility != EMPTY_PIXEL).sum())
+    assert filled.stats.visible_pixels > plain.stats.visible_pixels

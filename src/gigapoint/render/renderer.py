@@ -63,7 +63,8 @@ def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) 
         counts = (counts + step - 1) // step
     visibility = backend.rasterize(cloud, sel, width, height, near, far, settings.threads, **extra)
     t2 = time.perf_counter()
-    visibility, colors = finish_frame(backend, cloud, camera, sel, visibility, settings, near, far)
+    covered: list = []
+    visibility, colors = finish_frame(backend, cloud, camera, sel, visibility, settings, near, far, covered)
     image = colors.view(np.uint8).reshape(height, width, 4)
     visibility = visibility.reshape(height, width)
     stats = RenderStats(
@@ -78,7 +79,7 @@ def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) 
         backend=backend.name,
     )
     frame = Frame(visibility, image, stats)
-    stats.visible_pixels = int(count_covered(frame.visibility.reshape(-1)))
+    stats.visible_pixels = covered[0] if covered else int(count_covered(frame.visibility.reshape(-1)))
     if stats.visible_pixels == 0:
         warnings.warn(f"{cloud.name}: no point is in view of the camera; the image shows only the background", GigapointWarning, stacklevel=2)
     return frame

@@ -28,6 +28,7 @@ def split_by_points(counts: np.ndarray, n_parts: int) -> np.ndarray:
 
 class NumbaCpuBackend:
     name = "cpu"
+    counts_covered = True  # resolve(..., covered) counts the covered pixels on the way
 
     def __init__(self) -> None:
         self._scratch: dict | None = None  # (views, threads - 1, pixels) -> buffers
@@ -115,10 +116,13 @@ class NumbaCpuBackend:
             numba.set_num_threads(previous)
         return frames
 
-    def resolve(self, visibility: np.ndarray, color: np.ndarray, background_rgba) -> np.ndarray:
-        """u32 RGBA per pixel: the winning point's color or the background."""
+    def resolve(self, visibility: np.ndarray, color: np.ndarray, background_rgba, covered: list | None = None) -> np.ndarray:
+        """u32 RGBA per pixel: the winning point's color or the background. ``covered``: a list
+        that gets the number of covered pixels appended (counted on the way, for the stats)."""
         bg = np.array(background_rgba, np.uint8).view(np.uint32)[0]
         out = np.empty(visibility.shape[0], np.uint32)
         with _KERNEL_LOCK:
-            raster.resolve_colors(visibility, color, bg, out)
+            n = raster.resolve_colors(visibility, color, bg, out)
+        if covered is not None:
+            covered.append(int(n))
         return out

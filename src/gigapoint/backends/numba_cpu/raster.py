@@ -321,13 +321,17 @@ def merge(frame, scratch, dirty):
 
 @njit(parallel=True, cache=True)
 def resolve_colors(frame, color, background, out):
-    """out[p] = color of the winning point, or the background (u32 RGBA)."""
+    """out[p] = color of the winning point, or the background (u32 RGBA); returns the number of
+    covered pixels (what ``count_covered`` says, without reading the frame again)."""
+    covered = 0
     for p in prange(frame.shape[0]):
         key = frame[p]
         if key == EMPTY:
             out[p] = background
         else:
             out[p] = color[key & np.uint64(0xFFFFFFFF)]
+            covered += 1
+    return covered
 
 
 @njit(parallel=True, cache=True)

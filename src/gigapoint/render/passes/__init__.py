@@ -30,15 +30,16 @@ def raster_options(backend, settings, camera):
     return backend, extra
 
 
-def finish_frame(backend, cloud, camera, sel, vis, settings, near, far):
-    """(visibility, u32 colors) of a frame after the passes ``settings`` asks for."""
+def finish_frame(backend, cloud, camera, sel, vis, settings, near, far, covered: list | None = None):
+    """(visibility, u32 colors) of a frame after the passes ``settings`` asks for. ``covered``:
+    gets the covered-pixel count appended when the resolve counts them on the way (CPU)."""
     from ...backends.numba_cpu.backend import _KERNEL_LOCK  # numba's parallel kernels: one frame at a time
 
     with _KERNEL_LOCK:
-        return _finish(backend, cloud, camera, sel, vis, settings, near, far)
+        return _finish(backend, cloud, camera, sel, vis, settings, near, far, covered)
 
 
-def _finish(backend, cloud, camera, sel, vis, settings, near, far):
+def _finish(backend, cloud, camera, sel, vis, settings, near, far, covered=None):
     width, height = camera.width, camera.height
     # Backends with ``passes`` (wgpu) run each pass themselves, on buffers kept on the device;
     # their results turn into numpy arrays (read back) only at the end.
@@ -50,7 +51,10 @@ def _finish(backend, cloud, camera, sel, vis, settings, near, far):
             fill_holes = gpu.fill_holes
         vis = fill_holes(vis, width, height, settings.fill_holes, settings.fill_holes_foveated)
     colors_per_point = point_colors(cloud, settings)
-    colors = (backend if gpu is None else gpu).resolve(vis, colors_per_point, settings.background)
+    if getattr(backend, "counts_covered", False) and covered is not None:  # after hole filling: later passes keep the pixels
+        colors = backend.resolve(vis, colors_per_point, settings.background, covered)
+    else:
+        colors = (backend if gpu is None else gpu).resolve(vis, colors_per_point, settings.background)
     if settings.hqs:
         from .hqs import hqs_colors
 
