@@ -437,9 +437,11 @@ class OctreeCloud:
     # -- rendering
     def select_nodes(self, camera, settings, near: float, far: float) -> tuple[np.ndarray, np.ndarray, int]:
         """(node indices, projected cube sizes, point total) chosen for a view."""
+        if getattr(self, "_counts", None) is None:  # node counts never change; a frame need not re-widen them
+            self._counts = self.nodes["count"].astype(np.int64)
         out_ids = np.empty(len(self.keys), np.int64)
         out_size = np.empty(len(self.keys), np.float64)
-        counts = self.nodes["count"].astype(np.int64)
+        counts = self._counts
         k, total = select_nodes(
             camera.screen_rows(), self.box_min, self.box_size, counts, self.children, float(camera.width), float(camera.height),
             float(near), float(far), float(settings.lod_threshold_px), int(settings.point_budget), out_ids, out_size,
