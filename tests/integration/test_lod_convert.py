@@ -271,3 +271,17 @@ def test_autzen_laz_converts_and_renders(tmp_path):
     png = tmp_path / "a.png"
     assert main(["render", str(out), "-o", str(png), "--width", "320", "--height", "200", "--backend", "cpu"]) == 0
     assert png.stat().st_size > 1000
+
+
+def test_partition_appends_survive_short_writes(tmp_path, monkeypatch):
+    """writev may write less than asked (a signal, a nearly full disk): the rest follows, in order."""
+    import importlib
+
+    conv = importlib.import_module("gigapoint.lod.convert")
+    real = os.writev
+    monkeypatch.setattr(os, "writev", lambda fd, bufs: real(fd, [bytes(memoryview(bufs[0]))[:5]]))  # 5 bytes a call
+    arrays = [np.arange(7, dtype=np.float64).reshape(-1, 1)[2:5], np.zeros(0, np.uint32), np.arange(3, dtype=np.uint16)]
+    path = tmp_path / "part.bin"
+    path.write_bytes(b"head")
+    conv._append_file(path, arrays)
+    assert path.read_bytes() == b"head" + b"".join(a.tobytes() for a in arrays)

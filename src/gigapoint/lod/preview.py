@@ -93,11 +93,11 @@ class PreviewSampler:
     def maybe_write(self, force: bool = False) -> bool:
         """Write the sample if it changed and enough time passed (always after the first chunk).
 
-        The pause between writes is at least 20x the last write's duration, so writing costs
-        the conversion at most ~5 %.
+        The pause between writes is at least 40x the last write's duration, so writing costs
+        the conversion at most ~2.5 %.
         """
         now = time.perf_counter()
-        due = self.first_written is None or now - self.last_write >= max(self.interval_s, 20 * self.write_seconds)
+        due = self.first_written is None or now - self.last_write >= max(self.interval_s, 40 * self.write_seconds)
         if not self.dirty or not (due or force) or self.held == 0:
             return False
         merged = self._merged()
