@@ -53,3 +53,14 @@ def test_order_on_flat_and_clustered_clouds(rng):
 def test_order_property(values):
     codes = np.array(values, np.uint64)
     np.testing.assert_array_equal(morton_order(codes), np.argsort(codes, kind="stable"))
+
+
+@pytest.mark.parametrize("shared_bits", [3, 9, 12, 13, 30, 60])
+def test_order_of_codes_sharing_a_prefix(rng, shared_bits):
+    """An octree partition's codes share their top bits: the buckets move below them."""
+    free = 63 - shared_bits
+    prefix = np.uint64(int(rng.integers(0, 2**shared_bits))) << np.uint64(free)
+    low = rng.integers(0, 2**free, 300_000, dtype=np.uint64) if free < 63 else rng.integers(0, 2**62, 300_000, dtype=np.uint64)
+    low[::7] = low[3]  # ties: the order must stay stable
+    codes = prefix | low
+    np.testing.assert_array_equal(morton_order(codes), np.argsort(codes, kind="stable"))

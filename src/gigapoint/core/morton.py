@@ -1,7 +1,7 @@
 """63-bit Morton codes and a parallel radix sort that orders points by them.
 
 ``np.argsort`` takes ~9 s for 20 M int64 keys on this class of machine; the sort here is
-an MSD pass on the top 12 bits (4096 buckets, per-thread histograms) followed by an LSD
+an MSD pass on the top 12 bits that vary (4096 buckets, per-thread histograms) followed by an LSD
 radix sort of each bucket in cache, with passes skipped where every key shares a digit
 (flat or clustered clouds).
 """
@@ -14,7 +14,6 @@ from numba import njit, prange
 
 MORTON_BITS_PER_AXIS = 21
 _TOP_BITS = 12
-_TOP_SHIFT = 3 * MORTON_BITS_PER_AXIS - _TOP_BITS  # 51
 
 
 @njit(inline="always")
@@ -103,13 +102,27 @@ def _lsd_sort_range(keys, idx, tmp_keys, tmp_idx, lo, hi, bits):
 def _sort_codes(codes, n_threads, index_type):
     n = codes.shape[0]
     n_buckets = 1 << _TOP_BITS
-    shift = np.uint64(_TOP_SHIFT)
-    # 1. per-thread histograms of the top bits over contiguous slices (keeps the sort stable)
-    hist = np.zeros((n_threads, n_buckets), np.int64)
+    mask = np.uint64(n_buckets - 1)
     step = (n + n_threads - 1) // n_threads
+    # 0. the bits every code shares (an octree partition's prefix) are skipped: the buckets are
+    # the top 12 bits that vary, else a partition lands in one bucket sorted by one thread
+    lows = np.full(n_threads, np.uint64(0xFFFFFFFFFFFFFFFF))
+    highs = np.zeros(n_threads, np.uint64)
     for t in prange(n_threads):
         for i in range(t * step, min(n, (t + 1) * step)):
-            hist[t, codes[i] >> shift] += 1
+            lows[t] = min(lows[t], codes[i])
+            highs[t] = max(highs[t], codes[i])
+    varying = highs.max() ^ lows.min()
+    top = 0
+    while varying >> np.uint64(top):
+        top += 1
+    low_bits = max(top - _TOP_BITS, 0)
+    shift = np.uint64(low_bits)
+    # 1. per-thread histograms of the bucket bits over contiguous slices (keeps the sort stable)
+    hist = np.zeros((n_threads, n_buckets), np.int64)
+    for t in prange(n_threads):
+        for i in range(t * step, min(n, (t + 1) * step)):
+            hist[t, (codes[i] >> shift) & mask] += 1
     offsets = np.empty((n_threads, n_buckets), np.int64)
     bucket_start = np.empty(n_buckets + 1, np.int64)
     total = 0
@@ -125,7 +138,7 @@ def _sort_codes(codes, n_threads, index_type):
     for t in prange(n_threads):
         off = offsets[t]
         for i in range(t * step, min(n, (t + 1) * step)):
-            b = codes[i] >> shift
+            b = (codes[i] >> shift) & mask
             p = off[b]
             keys[p] = codes[i]
             idx[p] = i
@@ -134,7 +147,7 @@ def _sort_codes(codes, n_threads, index_type):
     tmp_keys = np.empty(n, np.uint64)
     tmp_idx = np.empty(n, index_type)
     for b in prange(n_buckets):
-        _lsd_sort_range(keys, idx, tmp_keys, tmp_idx, bucket_start[b], bucket_start[b + 1], _TOP_SHIFT)
+        _lsd_sort_range(keys, idx, tmp_keys, tmp_idx, bucket_start[b], bucket_start[b + 1], low_bits)
     return keys, idx
 
 
