@@ -298,18 +298,18 @@ def _valid_bounds(xyz, limit, valid, lo, hi):
     n_threads = lo.shape[0]
     step = (n + n_threads - 1) // n_threads
     for t in prange(n_threads):
+        # running bounds in locals: stored into lo/hi per point they would not stay in registers
+        lx, ly, lz = lo[t, 0], lo[t, 1], lo[t, 2]
+        hx, hy, hz = hi[t, 0], hi[t, 1], hi[t, 2]
         for i in range(t * step, min(n, (t + 1) * step)):
-            ok = True
-            for a in range(3):
-                v = xyz[i, a]
-                if not (abs(v) <= limit):  # False for NaN too
-                    ok = False
+            x, y, z = xyz[i, 0], xyz[i, 1], xyz[i, 2]
+            ok = abs(x) <= limit and abs(y) <= limit and abs(z) <= limit  # False for NaN too
             valid[i] = ok
             if ok:
-                for a in range(3):
-                    v = xyz[i, a]
-                    lo[t, a] = min(lo[t, a], v)
-                    hi[t, a] = max(hi[t, a], v)
+                lx, ly, lz = min(lx, x), min(ly, y), min(lz, z)
+                hx, hy, hz = max(hx, x), max(hy, y), max(hz, z)
+        lo[t, 0], lo[t, 1], lo[t, 2] = lx, ly, lz
+        hi[t, 0], hi[t, 1], hi[t, 2] = hx, hy, hz
 
 
 def valid_bounds(xyz: np.ndarray, limit: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
