@@ -33,6 +33,33 @@ def rng():
     return np.random.default_rng(12345)
 
 
+def write_demo_las(path: Path, n: int, seed: int = 0) -> Path:
+    """The demo scene's first n points as a LAS 1.2 file (point format 3, millimetre scale)."""
+    import laspy
+
+    from gigapoint.core import demo_arrays
+
+    xyz, rgba, attrs = demo_arrays(n, seed)
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales = [0.001] * 3
+    header.offsets = [0.0, 0.0, 0.0]
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    rgb16 = rgba[:, :3].astype(np.uint16) * 257
+    las.red, las.green, las.blue = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
+    las.intensity = attrs["intensity"]
+    las.classification = attrs["classification"]
+    las.write(str(path))
+    return path
+
+
+@pytest.fixture(scope="session")
+def las_writer():
+    """``write_demo_las(path, n, seed=0)`` for tests that need LAS input files."""
+    pytest.importorskip("laspy")
+    return write_demo_las
+
+
 def pytest_report_header(config):
     import numba
 

@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from gigapoint.cli import main
-from gigapoint.core import demo_arrays
 from gigapoint.lod import OutputExistsError, convert, open_octree
 
 laspy = pytest.importorskip("laspy")
@@ -20,24 +19,9 @@ laspy = pytest.importorskip("laspy")
 SHARED = Path(__file__).resolve().parents[2] / ".." / "shared" / "data"
 
 
-def write_demo_las(path: Path, n: int, seed: int = 0) -> Path:
-    xyz, rgba, attrs = demo_arrays(n, seed)
-    header = laspy.LasHeader(point_format=3, version="1.2")
-    header.scales = [0.001] * 3
-    header.offsets = [0.0, 0.0, 0.0]
-    las = laspy.LasData(header)
-    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-    rgb16 = rgba[:, :3].astype(np.uint16) * 257
-    las.red, las.green, las.blue = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
-    las.intensity = attrs["intensity"]
-    las.classification = attrs["classification"]
-    las.write(str(path))
-    return path
-
-
 @pytest.fixture(scope="module")
-def demo_las(tmp_path_factory):
-    return write_demo_las(tmp_path_factory.mktemp("las") / "demo.las", 150_000)
+def demo_las(tmp_path_factory, las_writer):
+    return las_writer(tmp_path_factory.mktemp("las") / "demo.las", 150_000)
 
 
 OPTS = {"max_leaf": 3_000, "partition_points": 25_000, "chunk_size": 40_000}
@@ -200,14 +184,14 @@ def test_killed_conversion_resumes_via_cli(demo_las, tmp_path):
     np.testing.assert_array_equal(np.sort(a.arrays["rgba"]), np.sort(b.arrays["rgba"]))
 
 
-def test_changed_input_restarts_clean(demo_las, tmp_path, monkeypatch):
-    src = write_demo_las(tmp_path / "a.las", 60_000, seed=1)
+def test_changed_input_restarts_clean(demo_las, tmp_path, monkeypatch, las_writer):
+    src = las_writer(tmp_path / "a.las", 60_000, seed=1)
     out = tmp_path / "oct"
     monkeypatch.setenv("GIGAPOINT_TEST_INTERRUPT", "raise:1")
     with pytest.raises(KeyboardInterrupt):
         convert([src], out, **OPTS)
     monkeypatch.delenv("GIGAPOINT_TEST_INTERRUPT")
-    write_demo_las(src, 40_000, seed=2)  # the input changed meanwhile: no resume
+    las_writer(src, 40_000, seed=2)  # the input changed meanwhile: no resume
     res = convert([src], out, **OPTS)
     assert not res.resumed and res.points == 40_000
 

@@ -12,7 +12,6 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.cli import main
-from gigapoint.core import demo_arrays
 from gigapoint.errors import GigapointWarning, InputError
 from gigapoint.lod import OctreeCloud, convert
 from gigapoint.lod.preview import PREVIEW_NAME, PreviewSampler, preview_points
@@ -114,27 +113,15 @@ def test_preview_size_follows_the_memory_limit():
 # ------------------------------------------------------------------ inside a conversion
 
 
-def _write_las(path, n, seed=3):
-    xyz, rgba, attrs = demo_arrays(n, seed)
-    header = laspy.LasHeader(point_format=3, version="1.2")
-    header.scales = [0.001] * 3
-    header.offsets = [0.0, 0.0, 0.0]
-    las = laspy.LasData(header)
-    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-    rgb16 = rgba[:, :3].astype(np.uint16) * 257
-    las.red, las.green, las.blue = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
-    las.intensity = attrs["intensity"]
-    las.write(str(path))
-    return np.column_stack([las.x, las.y, las.z])
-
-
 OPTS = {"max_leaf": 3_000, "partition_points": 25_000, "chunk_size": 20_000}
 
 
 @pytest.fixture(scope="module")
-def las_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("las") / "scan.las"
-    return path, _write_las(path, 100_000)
+def las_file(tmp_path_factory, las_writer):
+    path = las_writer(tmp_path_factory.mktemp("las") / "scan.las", 100_000, seed=3)
+    with laspy.open(str(path)) as f:
+        las = f.read()
+    return path, np.column_stack([las.x, las.y, las.z])
 
 
 def _stop_reading_after(monkeypatch, k: int):
