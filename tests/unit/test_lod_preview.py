@@ -213,6 +213,7 @@ def test_info_describes_octrees_and_unfinished_conversions(las_file, tmp_path, m
 
 
 def test_viewer_follows_the_conversion_to_the_octree(las_file, tmp_path, monkeypatch):
+    from gigapoint.viewer.protocol import unpack_frame
     from gigapoint.viewer.session import ViewerCore
 
     path, _ = las_file
@@ -224,8 +225,14 @@ def test_viewer_follows_the_conversion_to_the_octree(las_file, tmp_path, monkeyp
         warnings.simplefilter("ignore", GigapointWarning)
         preview = gp.open(out)
     core = ViewerCore(preview)
-    frames = []
-    session = core.open_session(lambda kind, payload: frames.append(kind) or True, 96, 64)
+    notes = []  # the HUD line of every frame sent
+
+    def send(kind, payload):
+        if kind == "bytes":
+            notes.append(unpack_frame(payload)[0]["note"])
+        return True
+
+    session = core.open_session(send, 96, 64)
     try:
         assert core.watcher is not None
         core.watcher.interval_s = 0.05
@@ -236,5 +243,6 @@ def test_viewer_follows_the_conversion_to_the_octree(las_file, tmp_path, monkeyp
             assert time.monotonic() < deadline, "the viewer did not switch to the finished octree"
             time.sleep(0.05)
         assert core.watcher.finished.is_set() and core.cloud.n_points == 100_000
+        assert core.note == "" and any(n.startswith("preview") for n in notes)
     finally:
         core.close_all()

@@ -205,6 +205,7 @@ class ViewerCore:
         lo, hi = cloud.bounds
         self.bounds = (np.asarray(lo, np.float64), np.asarray(hi, np.float64))
         self.watcher = None
+        self.note = ""  # a line for the HUD (what a conversion preview shows)
         if getattr(cloud, "preview_of", None) is not None:  # an unfinished conversion: follow it
             from .watch import ConversionWatcher
 
@@ -513,6 +514,7 @@ class Session:
                 "backend": stats.backend,
                 "memory": memory_rss(),
                 "load_progress": float(getattr(cloud, "load_progress", 1.0)),
+                "note": self.core.note,
                 "camera": state.as_dict(),
             }
             if not self.send("bytes", P.pack_frame(header, jpeg)):

@@ -21,6 +21,19 @@ def _complete(out: Path) -> bool:
     return (out / META_NAME).is_file() or (out / "metadata.json").is_file()  # metadata is written last
 
 
+def preview_note(out: Path) -> str:
+    """One line for the viewer's HUD: what the preview shows of the conversion."""
+    from ..lod.preview import conversion_status
+
+    s = conversion_status(out)
+    if not s:
+        return "preview of an unfinished conversion"
+    if s.get("phase") in (None, "read"):
+        of = f" of {s['total']:,}" if s.get("total") else ""
+        return f"preview: {s.get('points', 0):,}{of} points read, {s.get('preview_points', 0):,} shown"
+    return f"preview ({s.get('preview_points', 0):,} of {s.get('points', 0):,} points): conversion in phase {s['phase']}"
+
+
 def _stamp(path: Path):
     try:
         st = path.stat()
@@ -40,6 +53,7 @@ class ConversionWatcher:
         self.interval_s = interval_s
         self.finished = threading.Event()  # set once the octree is drawn (or the watch stopped)
         self.swaps = 0
+        core.note = preview_note(self.out)  # before the first frame is drawn
         self._thread = threading.Thread(target=self._run, name="gigapoint-conversion-watch", daemon=True)
 
     def start(self) -> ConversionWatcher:
@@ -57,8 +71,10 @@ class ConversionWatcher:
             try:
                 if _complete(self.out):
                     self._swap(open_octree(self.out))
+                    self.core.note = ""
                     self.finished.set()
                     return
+                self.core.note = preview_note(self.out)
                 stamp = _stamp(self.preview)
                 if stamp is not None and stamp != self.seen:
                     with warnings.catch_warnings():

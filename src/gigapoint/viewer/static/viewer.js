@@ -128,6 +128,7 @@
       `batches ${h.batches.toLocaleString()} / ${h.batches_total.toLocaleString()}`,
       `memory ${fmtBytes(h.memory)}   loaded ${(h.load_progress * 100).toFixed(0)}%   ${h.backend}`,
     ];
+    if (h.note) lines.push(h.note);  // e.g. the preview of a conversion still running
     $("stats").textContent = lines.join("\n");
   }
   setInterval(updateStats, 500);
