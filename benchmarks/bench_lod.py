@@ -38,7 +38,7 @@ with tempfile.TemporaryDirectory() as d:  # JIT warm-up (numba's on-disk cache)
     convert(demo_chunks(200_000, chunk_size=100_000), Path(d) / "w", memory_limit=a["memory_limit"], partition_points=60_000)
 t = time.perf_counter()
 r = convert(demo_chunks(a["points"], chunk_size=a["chunk"]), a["out"], memory_limit=a["memory_limit"], overwrite=True, name="demo")
-print(json.dumps({"points": r.points, "nodes": r.nodes, "seconds": time.perf_counter() - t, "phases": r.phase_seconds}))
+print(json.dumps({"points": r.points, "nodes": r.nodes, "seconds": time.perf_counter() - t, "phases": r.phase_seconds, "first_view": r.first_view_seconds}))
 """
 
 
@@ -166,6 +166,8 @@ def main() -> None:
             f"peak memory {c['peak_rss'] / 2**20:.0f} MiB, output {c['size_bytes'] / 1e9:.1f} GB"
         )
         print("  phases (s): " + ", ".join(f"{k} {v:.1f}" for k, v in (c["phases"] or {}).items()))
+        if c.get("first_view") is not None:
+            print(f"  viewable after {c['first_view']:.2f} s (OUT's preview; the octree after {c['seconds']:.1f} s)")
     if args.render or both:
         import numba
 
