@@ -112,6 +112,15 @@ class ColorScaler:
     def __init__(self) -> None:
         self.mode: str | None = None  # "unit", "8", "16"
 
+    def int_shift(self, hi: int) -> int:
+        """Right shift (0 or 8) to 8 bits for unsigned integer colors whose maximum is ``hi``:
+        the decision ``__call__`` makes, for readers that convert their columns themselves."""
+        if self.mode is None and hi > 0:
+            self.mode = "16" if hi > 255 else "8"
+        if self.mode == "8" and hi > 255:
+            self.mode = "16"
+        return 8 if self.mode == "16" else 0
+
     def __call__(self, colors: np.ndarray) -> np.ndarray:
         c = np.asarray(colors)
         if c.dtype == np.uint8:
@@ -129,13 +138,10 @@ class ColorScaler:
                 self.mode = "16" if hi > 255 else "8"
         if self.mode == "unit":
             return to_rgba8(c.astype(np.float64, copy=False))
-        if c.dtype in (np.uint16, np.uint32, np.uint64) and c.size:  # the LAS / PLY fast path
-            hi = c.max()
-            if self.mode == "8" and hi > 255:
-                self.mode = "16"
-            if self.mode == "16":
-                c = c >> 8
-                hi = hi >> 8
+        if c.dtype in (np.uint16, np.uint32, np.uint64) and c.size:  # the PLY fast path (LAS: io/las.py)
+            shift = self.int_shift(int(c.max()))
+            c = c >> shift
+            hi = int(c.max())
             return to_rgba8(c.astype(np.uint8) if hi <= 255 else np.minimum(c, 255).astype(np.uint8))
         ci = np.clip(np.rint(c) if c.dtype.kind == "f" else c, 0, 65535).astype(np.int64)
         if self.mode == "8" and ci.size and ci.max() > 255:

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numba import njit, prange
 
 from ..core.chunk import PointChunk
 from ..core.cloud import MAX_ABS_COORDINATE
@@ -303,6 +304,34 @@ def _parse_crs(header) -> str | None:
     return None
 
 
+@njit(parallel=True, cache=True)
+def _scaled_xyz(X, Y, Z, scale, offset, out):
+    """Integer record coordinates to float64 positions (numpy took 3 temporaries an axis)."""
+    for i in prange(X.shape[0]):
+        out[i, 0] = X[i] * scale[0] + offset[0]
+        out[i, 1] = Y[i] * scale[1] + offset[1]
+        out[i, 2] = Z[i] * scale[2] + offset[2]
+
+
+@njit(parallel=True, cache=True)
+def _max3(r, g, b):
+    hi = 0
+    for i in prange(r.shape[0]):
+        hi = max(hi, max(r[i], max(g[i], b[i])))
+    return hi
+
+
+@njit(parallel=True, cache=True)
+def _rgb8(r, g, b, shift, out):
+    """16-bit record colors to opaque 8-bit RGBA (ColorScaler.int_shift chose the shift)."""
+    s = np.uint16(shift)
+    for i in prange(r.shape[0]):
+        out[i, 0] = min(r[i] >> s, 255)
+        out[i, 1] = min(g[i] >> s, 255)
+        out[i, 2] = min(b[i] >> s, 255)
+        out[i, 3] = 255
+
+
 class LasReader(Reader):
     name = "LAS/LAZ"
     suffixes = (".las", ".laz")
@@ -336,11 +365,14 @@ class LasReader(Reader):
                     n = len(pts)
                     if n == 0:
                         break
+                    raw = pts.array  # the records as read: fields are strided views, decoded in one pass each
                     xyz = np.empty((n, 3), np.float64)
-                    xyz[:, 0] = np.asarray(pts.X) * scale[0] + offset[0]
-                    xyz[:, 1] = np.asarray(pts.Y) * scale[1] + offset[1]
-                    xyz[:, 2] = np.asarray(pts.Z) * scale[2] + offset[2]
-                    rgba = scaler(np.column_stack([np.asarray(pts.red), np.asarray(pts.green), np.asarray(pts.blue)])) if has_rgb else None
+                    _scaled_xyz(raw["X"], raw["Y"], raw["Z"], scale, offset, xyz)
+                    rgba = None
+                    if has_rgb:
+                        r, g, b = raw["red"], raw["green"], raw["blue"]
+                        rgba = np.empty((n, 4), np.uint8)
+                        _rgb8(r, g, b, scaler.int_shift(int(_max3(r, g, b))), rgba)
                     attributes = {a: np.ascontiguousarray(np.asarray(pts[a])) for a in attrs}
                     done += n
                     yield PointChunk(xyz, rgba, attributes)
