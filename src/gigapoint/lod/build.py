@@ -58,36 +58,35 @@ def _grid_node(codes, ownlevel, wsum, wcount, s, e, level, grid_bits):
 
 
 @njit(inline="always")
-def _poisson_node(xyz, ownlevel, wsum, wcount, s, e, level, nmin, radius, cells, heads):
-    """Poisson-disc sampling of one node; ``heads`` (cells³, all -1) is the thread's cell grid,
-    handed back all -1."""
+def _poisson_node(xyz, ownlevel, wsum, wcount, s, e, level, nmin, radius, cells, heads, near):
+    """Poisson-disc sampling of one node; ``heads`` ((cells + 2)³, all -1: a cell grid with a
+    border, so the 27 neighbours of a cell need no bounds tests) is the thread's, handed back
+    all -1; ``near`` the 27 neighbour offsets into it, own cell first."""
     child = level + 1
     m = 0
     for i in range(s, e):
         if ownlevel[i] == child:
             m += 1
-    nxt = np.empty(m, np.int64)
-    pid = np.empty(m, np.int64)
-    pcell = np.empty(m, np.int64)
+    # 32-bit links and cell ids: half the cache footprint of the grid walk
+    nxt = np.empty(m, np.int32)
+    pid = np.empty(m, np.int32)
+    pcell = np.empty(m, np.int32)
     n_acc = 0
     r2 = radius * radius
     inv = 1.0 / radius
+    cp = cells + 2
     for i in range(s, e):
         if ownlevel[i] != child:
             continue
         c0 = min(max(np.int64((xyz[i, 0] - nmin[0]) * inv), 0), cells - 1)
         c1 = min(max(np.int64((xyz[i, 1] - nmin[1]) * inv), 0), cells - 1)
         c2 = min(max(np.int64((xyz[i, 2] - nmin[2]) * inv), 0), cells - 1)
+        cid = ((c0 + 1) * cp + c1 + 1) * cp + c2 + 1
         found = -1
         for o in range(27):  # the point's own cell first: that is where a close neighbour usually is
-            cx = c0 + _OFFSETS[o, 0]
-            cy = c1 + _OFFSETS[o, 1]
-            cz = c2 + _OFFSETS[o, 2]
-            if cx < 0 or cx >= cells or cy < 0 or cy >= cells or cz < 0 or cz >= cells:
-                continue
-            j = heads[(cx * cells + cy) * cells + cz]
+            j = heads[cid + near[o]]
             while j >= 0:
-                q = pid[j]
+                q = pid[j] + s
                 d0 = xyz[i, 0] - xyz[q, 0]
                 d1 = xyz[i, 1] - xyz[q, 1]
                 d2 = xyz[i, 2] - xyz[q, 2]
@@ -104,8 +103,7 @@ def _poisson_node(xyz, ownlevel, wsum, wcount, s, e, level, nmin, radius, cells,
             wcount[found] += wcount[i]
         else:
             ownlevel[i] = level
-            cid = (c0 * cells + c1) * cells + c2
-            pid[n_acc] = i
+            pid[n_acc] = i - s
             pcell[n_acc] = cid
             nxt[n_acc] = heads[cid]
             heads[cid] = n_acc
@@ -119,16 +117,20 @@ def _sample_level(codes, xyz, ownlevel, wsum, wcount, starts, ends, node_min, le
     """Sample every inner node of one level (nodes are disjoint). Thread t takes nodes t, t + T, ...
     (largest first), reusing one dense cell grid for the Poisson sampler."""
     cells = 1 << grid_bits
+    cp = cells + 2
+    near = np.empty(27, np.int64)
+    for o in range(27):
+        near[o] = (_OFFSETS[o, 0] * cp + _OFFSETS[o, 1]) * cp + _OFFSETS[o, 2]
     sizes = ends - starts
     by_size = np.argsort(-sizes)
     for t in prange(n_threads):
-        heads = np.full(cells * cells * cells if sampler == 1 else 1, -1, np.int64)
+        heads = np.full(cp * cp * cp if sampler == 1 else 1, -1, np.int32)
         for r in range(t, starts.shape[0], n_threads):
             k = by_size[r]
             if sampler == 0:
                 _grid_node(codes, ownlevel, wsum, wcount, starts[k], ends[k], level, grid_bits)
             else:
-                _poisson_node(xyz, ownlevel, wsum, wcount, starts[k], ends[k], level, node_min[k], radius, cells, heads)
+                _poisson_node(xyz, ownlevel, wsum, wcount, starts[k], ends[k], level, node_min[k], radius, cells, heads, near)
 
 
 @njit(parallel=True, cache=True)
