@@ -246,3 +246,26 @@ def test_viewer_follows_the_conversion_to_the_octree(las_file, tmp_path, monkeyp
         assert core.note == "" and any(n.startswith("preview") for n in notes)
     finally:
         core.close_all()
+
+
+def test_view_waits_for_the_first_preview(tmp_path):
+    import threading
+
+    from gigapoint.lod.preview import awaiting_preview, wait_for_preview
+
+    out = tmp_path / "oct"
+    (out / ".partial").mkdir(parents=True)
+    (out / ".partial" / "state.json").write_text(json.dumps({"phase": "read"}))
+    assert awaiting_preview(out) and not wait_for_preview(out, timeout_s=0.3, poll_s=0.05)
+
+    def write_preview():
+        s = PreviewSampler(out / ".partial" / PREVIEW_NAME, target=100, total=None)
+        s.add(*_chunk(0, 50))
+        s.maybe_write()
+
+    threading.Timer(0.2, write_preview).start()
+    t0 = time.monotonic()
+    assert wait_for_preview(out, timeout_s=10, poll_s=0.05) and time.monotonic() - t0 < 5
+    assert not awaiting_preview(out)
+    with pytest.warns(GigapointWarning, match="conversion not finished"):
+        assert gp.open(out).n_points == 50

@@ -43,6 +43,11 @@ def view(
             raise GigapointError(f"--demo: point count must be in 1..2e9, got {demo}")
         cloud = gigapoint.demo(demo)
     elif paths:
+        from ..lod.preview import awaiting_preview, wait_for_preview
+
+        if len(paths) == 1 and awaiting_preview(paths[0]):  # `convert` was started a moment ago
+            print(f"gigapoint viewer: waiting for the first preview of the conversion into {paths[0]} ...", file=sys.stderr)
+            wait_for_preview(paths[0])
         cloud = gigapoint.open(*paths)
     else:
         raise GigapointError("view: name at least one file or directory (or --demo N)")

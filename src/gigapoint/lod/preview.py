@@ -148,3 +148,23 @@ def open_preview(out: Path):
     cloud = open_cloud(path, name=out.name)
     cloud.preview_of = out  # type: ignore[attr-defined]  (the viewer watches it for the finished octree)
     return cloud
+
+
+def wait_for_preview(out: Path, timeout_s: float = 60.0, poll_s: float = 0.25) -> bool:
+    """For an unfinished conversion into ``out`` that has not written its preview yet (its first
+    second or so): wait until the preview or the finished octree appears. False on timeout."""
+    out = Path(out)
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if (out / ".partial" / PREVIEW_NAME).is_file() or not (out / ".partial").exists():
+            return True
+        time.sleep(poll_s)
+    return False
+
+
+def awaiting_preview(path) -> bool:
+    """``path`` is an unfinished conversion that has no preview yet."""
+    p = Path(path)
+    return (p / ".partial" / "state.json").is_file() and not (p / ".partial" / PREVIEW_NAME).is_file() and not any(
+        (p / name).is_file() for name in ("octree.json", "metadata.json")
+    )
