@@ -160,3 +160,25 @@ def test_installed_entry_point_exit_codes(tmp_path, small_las):
     assert ok.returncode == 0, ok.stderr
     bad = subprocess.run([sys.executable, "-m", "gigapoint.cli", "render", str(tmp_path / "missing.las"), "-o", str(tmp_path / "f.png")], capture_output=True, text=True)
     assert bad.returncode == 1 and bad.stderr.startswith("error: ") and "Traceback" not in bad.stderr
+
+
+def test_ctrl_c_exits_130_with_a_message(tmp_path):
+    """SIGINT in the middle of a command: exit status 130 and one line, never a silent 0."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    code = (
+        "import time, gigapoint.cli as c, typer\n"
+        "@c.app.command('sleepy-test')\n"
+        "def sleepy():\n"
+        "    print('ready', flush=True); time.sleep(30)\n"
+        "raise SystemExit(c.main(['sleepy-test']))\n"
+    )
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "ready"
+    time.sleep(0.2)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=20)
+    assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted", (p.returncode, err)

@@ -269,3 +269,37 @@ def test_partition_appends_survive_short_writes(tmp_path, monkeypatch):
     path.write_bytes(b"head")
     conv._append_file(path, arrays)
     assert path.read_bytes() == b"head" + b"".join(a.tobytes() for a in arrays)
+
+
+def test_a_second_conversion_into_the_same_directory_stops_at_once(demo_las, reference, tmp_path, capsys):
+    """Two conversions into one OUT would clear or interleave each other's files: the second one
+    is refused while the first holds OUT (here: this process holding its lock), and once the
+    first is gone a re-run works."""
+    import importlib
+
+    conv = importlib.import_module("gigapoint.lod.convert")
+    out = tmp_path / "oct"
+    held = conv._lock_output(out)
+    try:
+        assert main(["convert", str(demo_las), "-o", str(out), "--quiet"]) == 1
+        err = capsys.readouterr().err
+        assert "another conversion is writing into it" in err and err.count("\n") == 1
+        assert sorted(p.name for p in out.iterdir()) == []  # nothing was written or cleared
+    finally:
+        os.close(held)
+    res = convert([demo_las], out, **OPTS)
+    assert res.points == 150_000
+    _assert_same(_snapshot(out), reference)
+
+
+def test_the_lock_goes_with_a_killed_conversion(demo_las, tmp_path):
+    """flock is dropped by the kernel when the process dies: a SIGKILLed conversion does not
+    leave OUT locked."""
+    out = tmp_path / "oct"
+    code = (
+        "import importlib, os, signal; conv = importlib.import_module('gigapoint.lod.convert'); "
+        f"conv._lock_output(__import__('pathlib').Path({str(out)!r})); os.kill(os.getpid(), signal.SIGKILL)"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True)
+    assert proc.returncode == -9
+    assert convert([demo_las], out, **OPTS).points == 150_000

@@ -34,7 +34,13 @@ def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _show_warning
     warnings.simplefilter("default", GigapointWarning)
     try:
-        app(args=argv, standalone_mode=False)
+        rv = app(args=argv, standalone_mode=False)
+        # typer turns Ctrl+C into Exit(130) and, outside standalone mode, *returns* that code
+        # (commands themselves return None): before, an interrupted command exited 0 silently
+        if isinstance(rv, int) and not isinstance(rv, bool) and rv != 0:
+            if rv == 130:
+                print("interrupted", file=sys.stderr)
+            return rv
     except GigapointError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

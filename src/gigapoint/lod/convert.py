@@ -97,7 +97,7 @@ class ConvertResult:
     seconds: float
     resumed: bool
     phase_seconds: dict | None = None
-    first_view_seconds: float | None = None  # until OUT showed its first preview (None: this run wrote none)
+    first_view_seconds: float | None = None  # until OUT first opened (its preview); 0: a resumed run's was there; None: none
 
     @property
     def points_per_second(self) -> float:
@@ -412,6 +412,27 @@ def _clear_output(out: Path) -> None:
         (out / f).unlink(missing_ok=True)
     for p in {*out.glob("attr.*.npy"), *out.glob("*.tmp"), *out.glob("*.tmp.npy")}:
         p.unlink(missing_ok=True)
+
+
+def _lock_output(out: Path) -> int | None:
+    """An exclusive lock on OUT (flock on the directory itself) held for the whole conversion, so
+    that a second conversion into the same directory stops at once instead of clearing or
+    interleaving the first one's files. The kernel drops it when the process ends, even killed.
+    Returns the descriptor to close (None where flock does not exist)."""
+    try:
+        import fcntl
+    except ImportError:  # Windows
+        return None
+    if out.exists() and not out.is_dir():
+        raise OutputExistsError(f"{out}: exists and is not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+    fd = os.open(out, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        raise ConvertError(f"{out}: another conversion is writing into it; let it finish or stop it first") from None
+    return fd
 
 
 def _prepare_output(out: Path, fingerprint: dict, overwrite: bool) -> dict | None:
@@ -1003,22 +1024,31 @@ class _Converter:
     def run(self, overwrite: bool) -> ConvertResult:
         t0 = self.t0 = time.perf_counter()
         fp = self.fingerprint()
+        lock = None
+        try:
+            lock = _lock_output(self.out)
+            return self._run_locked(overwrite, fp, t0)
+        finally:
+            if lock is not None:
+                os.close(lock)
+            self.progress.close()
+
+    def _run_locked(self, overwrite: bool, fp, t0: float) -> ConvertResult:
         saved = _prepare_output(self.out, fp, overwrite)
         resumed = saved is not None
+        if resumed and (self.partial / PREVIEW_NAME).is_file():
+            self.first_view = 0.0  # the interrupted run's preview: viewable from the start
         self.state = saved or {"fingerprint": fp, "phase": "read"}
         self.save_state()
         phases = ["read", "count", "distribute", "build", "group", "upper", "write"]
-        try:
-            timings = {}
-            for ph in phases[phases.index(self.state["phase"]) :]:
-                t = time.perf_counter()
-                if ph == "write":
-                    n_nodes = self.write()
-                else:
-                    getattr(self, ph)()
-                timings[ph] = round(time.perf_counter() - t, 3)
-        finally:
-            self.progress.close()
+        timings = {}
+        for ph in phases[phases.index(self.state["phase"]) :]:
+            t = time.perf_counter()
+            if ph == "write":
+                n_nodes = self.write()
+            else:
+                getattr(self, ph)()
+            timings[ph] = round(time.perf_counter() - t, 3)
         return ConvertResult(
             self.out,
             self.format,
