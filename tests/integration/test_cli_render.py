@@ -170,6 +170,9 @@ def test_ctrl_c_exits_130_with_a_message(tmp_path):
     import time
 
     code = (
+        # a shell's background job (CI runners can be one) starts with SIGINT ignored, which
+        # children inherit: give the child what a terminal user's process has
+        "import signal; signal.signal(signal.SIGINT, signal.default_int_handler)\n"
         "import time, gigapoint.cli as c, typer\n"
         "@c.app.command('sleepy-test')\n"
         "def sleepy():\n"
