@@ -139,9 +139,9 @@ class ColorScaler:
         if self.mode == "unit":
             return to_rgba8(c.astype(np.float64, copy=False))
         if c.dtype in (np.uint16, np.uint32, np.uint64) and c.size:  # the PLY fast path (LAS: io/las.py)
-            shift = self.int_shift(int(c.max()))
-            c = c >> shift
             hi = int(c.max())
+            shift = self.int_shift(hi)
+            c, hi = c >> shift, hi >> shift
             return to_rgba8(c.astype(np.uint8) if hi <= 255 else np.minimum(c, 255).astype(np.uint8))
         ci = np.clip(np.rint(c) if c.dtype.kind == "f" else c, 0, 65535).astype(np.int64)
         if self.mode == "8" and ci.size and ci.max() > 255:

@@ -437,10 +437,12 @@ def _lock_output(out: Path) -> int | None:
 
 def _prepare_output(out: Path, fingerprint: dict, overwrite: bool) -> dict | None:
     """Create/clean OUT; return the saved state when a matching partial run can resume."""
+    from .store import octree_complete
+
     if out.exists() and not out.is_dir():
         raise OutputExistsError(f"{out}: exists and is not a directory")
     if out.exists():
-        complete = (out / "octree.json").exists() or (out / "metadata.json").exists()
+        complete = octree_complete(out)
         if complete and not overwrite:
             raise OutputExistsError(f"{out}: already holds a converted point cloud; pass --overwrite to replace it")
         if not complete and not _looks_like_output(out) and any(out.iterdir()):
@@ -487,7 +489,7 @@ class _Converter:
         self.state: dict = {}
         self._outs: dict | None = None
         self._next: int | None = None  # next free offset in the output arrays (_next_offset)
-        self.t0 = time.perf_counter()
+        self.t0 = 0.0  # perf_counter() at the start of run()
         self.first_view: float | None = None  # seconds from the start until the first preview was written
 
     # -- state

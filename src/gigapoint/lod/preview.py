@@ -50,7 +50,6 @@ class PreviewSampler:
         self.last_write = -np.inf
         self.write_seconds = 0.0
         self.dirty = False
-        self.first_written: float | None = None  # perf_counter() of the first write
 
     def resume(self, seen: int, stride: int) -> None:
         """Continue a sample written by an interrupted run (its file is loaded, its stride kept)."""
@@ -97,7 +96,7 @@ class PreviewSampler:
         the conversion at most ~2.5 %.
         """
         now = time.perf_counter()
-        due = self.first_written is None or now - self.last_write >= max(self.interval_s, 40 * self.write_seconds)
+        due = now - self.last_write >= max(self.interval_s, 40 * self.write_seconds)  # -inf before the first write
         if not self.dirty or not (due or force) or self.held == 0:
             return False
         merged = self._merged()
@@ -110,8 +109,6 @@ class PreviewSampler:
         self.write_seconds = time.perf_counter() - now
         self.last_write = now
         self.dirty = False
-        if self.first_written is None:
-            self.first_written = time.perf_counter()
         return True
 
 
@@ -153,18 +150,17 @@ def open_preview(out: Path):
 def wait_for_preview(out: Path, timeout_s: float = 60.0, poll_s: float = 0.25) -> bool:
     """For an unfinished conversion into ``out`` that has not written its preview yet (its first
     second or so): wait until the preview or the finished octree appears. False on timeout."""
-    out = Path(out)
     deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if (out / ".partial" / PREVIEW_NAME).is_file() or not (out / ".partial").exists():
-            return True
+    while awaiting_preview(out):
+        if time.monotonic() >= deadline:
+            return False
         time.sleep(poll_s)
-    return False
+    return True
 
 
 def awaiting_preview(path) -> bool:
     """``path`` is an unfinished conversion that has no preview yet."""
+    from .store import octree_complete
+
     p = Path(path)
-    return (p / ".partial" / "state.json").is_file() and not (p / ".partial" / PREVIEW_NAME).is_file() and not any(
-        (p / name).is_file() for name in ("octree.json", "metadata.json")
-    )
+    return (p / ".partial" / "state.json").is_file() and not (p / ".partial" / PREVIEW_NAME).is_file() and not octree_complete(p)

@@ -344,6 +344,12 @@ class Arena:
 # --------------------------------------------------------------------------- reader
 
 
+def octree_complete(path) -> bool:
+    """A finished octree: its metadata file (gigapoint's or Potree's) is written last, atomically."""
+    p = Path(path)
+    return (p / META_NAME).is_file() or (p / "metadata.json").is_file()
+
+
 def is_octree_dir(path) -> bool:
     """A gigapoint or Potree 2.0 octree directory, or an unfinished conversion into one."""
     try:
@@ -374,6 +380,7 @@ class OctreeCloud:
         self.path = path
         self.filtered_colors = True
         self.arena: Arena | None = None
+        self.counts = nodes["count"].astype(np.int64)  # node counts never change: widened once, not per frame
         self.cube_min, self.cube_edge = key_cube(self.keys, meta["cube_min"], float(meta["cube_edge"]))
         lo, hi = self.bounds
         self.box_min = np.clip(self.cube_min, lo, hi)
@@ -437,11 +444,9 @@ class OctreeCloud:
     # -- rendering
     def select_nodes(self, camera, settings, near: float, far: float) -> tuple[np.ndarray, np.ndarray, int]:
         """(node indices, projected cube sizes, point total) chosen for a view."""
-        if getattr(self, "_counts", None) is None:  # node counts never change; a frame need not re-widen them
-            self._counts = self.nodes["count"].astype(np.int64)
         out_ids = np.empty(len(self.keys), np.int64)
         out_size = np.empty(len(self.keys), np.float64)
-        counts = self._counts
+        counts = self.counts
         k, total = select_nodes(
             camera.screen_rows(), self.box_min, self.box_size, counts, self.children, float(camera.width), float(camera.height),
             float(near), float(far), float(settings.lod_threshold_px), int(settings.point_budget), out_ids, out_size,
@@ -526,7 +531,7 @@ def octree_info(path) -> dict:
     unfinished conversion, in ``file_info``'s keys plus nodes, levels, sampler and conversion."""
     p = Path(path)
     size = sum(f.stat().st_size for f in p.rglob("*") if f.is_file())
-    if not (p / META_NAME).is_file() and not (p / "metadata.json").is_file():
+    if not octree_complete(p):
         from .preview import conversion_status
 
         s = conversion_status(p)

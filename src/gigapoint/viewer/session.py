@@ -123,8 +123,8 @@ def point_info(cloud, last, index: int, camera, px: int, py: int, depth: float) 
 class LastFrame:
     camera: object
     visibility: np.ndarray  # (h, w) u64 visibility buffer of the last frame sent (depth bits << 32 | index)
-    render_number: int = -1
-    cloud: object = None  # what it was drawn from (the core's cloud can be swapped since: viewer/watch.py)
+    render_number: int
+    cloud: object  # what it was drawn from (the core's cloud can be swapped since: viewer/watch.py)
 
     def window(self, y0, y1, x0, x1):
         """(index, depth) of a window: int64 (-1 where empty) and float32 (inf where empty)."""
@@ -432,7 +432,7 @@ class Session:
         if hit is None:
             return {"type": "pick", "id": pick_id, "found": False}
         index, depth, cam, px, py = hit
-        info = point_info(self.last.cloud or self.core.cloud, self.last, index, cam, px, py, depth)
+        info = point_info(self.last.cloud, self.last, index, cam, px, py, depth)
         if pivot:
             self.state.set_pivot(info["position"])
         return {"type": "pick", "id": pick_id, "found": True, "pivot": pivot, "info": P.json_safe(info)}

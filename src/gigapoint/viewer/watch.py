@@ -15,12 +15,6 @@ from pathlib import Path
 from ..errors import GigapointError, GigapointWarning
 
 
-def _complete(out: Path) -> bool:
-    from ..lod.store import META_NAME
-
-    return (out / META_NAME).is_file() or (out / "metadata.json").is_file()  # metadata is written last
-
-
 def preview_note(out: Path) -> str:
     """One line for the viewer's HUD: what the preview shows of the conversion."""
     from ..lod.preview import conversion_status
@@ -52,7 +46,6 @@ class ConversionWatcher:
         self.seen = _stamp(self.preview)
         self.interval_s = interval_s
         self.finished = threading.Event()  # set once the octree is drawn (or the watch stopped)
-        self.swaps = 0
         core.note = preview_note(self.out)  # before the first frame is drawn
         self._thread = threading.Thread(target=self._run, name="gigapoint-conversion-watch", daemon=True)
 
@@ -65,12 +58,12 @@ class ConversionWatcher:
 
     def _run(self) -> None:
         from ..lod.preview import open_preview
-        from ..lod.store import open_octree
+        from ..lod.store import octree_complete, open_octree
 
         while not self.finished.wait(self.interval_s):
             try:
-                if _complete(self.out):
-                    self._swap(open_octree(self.out))
+                if octree_complete(self.out):
+                    self.core.replace_cloud(open_octree(self.out))
                     self.core.note = ""
                     self.finished.set()
                     return
@@ -81,10 +74,6 @@ class ConversionWatcher:
                         warnings.simplefilter("ignore", GigapointWarning)
                         cloud = open_preview(self.out)
                     self.seen = stamp
-                    self._swap(cloud)
+                    self.core.replace_cloud(cloud)
             except (GigapointError, OSError, ValueError):
                 continue  # caught between two atomic renames, or the conversion was restarted: look again
-
-    def _swap(self, cloud) -> None:
-        self.core.replace_cloud(cloud)
-        self.swaps += 1

@@ -1,8 +1,8 @@
 """Numba kernels of the image-quality passes (render/passes/ drives them).
 
-Screen-space passes (eye-dome lighting, hole filling) run row-parallel; their inner loops
-go over one row for one neighbour offset at a time, branch-free, so LLVM vectorises
-them. High-quality shading re-projects the selected batches with raster.py's own ``project_batch``
+Screen-space passes run in parallel over rows (eye-dome lighting) or bands of rows (hole
+filling); their inner loops go over one row for one neighbour offset at a time, branch-free,
+so LLVM vectorises them. High-quality shading re-projects the selected batches with raster.py's own ``project_batch``
 (decode + project, the contract's operation order) so a point lands on exactly the
 pixel the depth pass gave it.
 """
