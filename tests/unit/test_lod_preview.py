@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import os
 import time
 import warnings
 
@@ -205,6 +206,7 @@ def test_info_describes_octrees_and_unfinished_conversions(las_file, tmp_path, m
     text = capsys.readouterr().out
     assert "gigapoint octree" in text and "100,000" in text and " nodes in " in text and "grid sampler" in text
     assert "unfinished conversion" in text and "phase read, 40,000 of 100,000 points read" in text
+    assert "stopped: run `gigapoint convert` again to resume it" in text  # nothing holds its lock
     assert main(["info", "--json", str(done)]) == 0
     data = json.loads(capsys.readouterr().out)
     oc = gp.open(done)
@@ -235,6 +237,7 @@ def test_viewer_follows_the_conversion_to_the_octree(las_file, tmp_path, monkeyp
     session = core.open_session(send, 96, 64)
     try:
         assert core.watcher is not None
+        assert "conversion stopped (run `gigapoint convert` again" in core.note  # the killed run holds no lock
         core.watcher.interval_s = 0.05
         monkeypatch.setattr(conv_mod, "_read_chunks", real)
         convert([path], out, **OPTS)  # finishes the conversion while the viewer is open
@@ -256,16 +259,43 @@ def test_view_waits_for_the_first_preview(tmp_path):
     out = tmp_path / "oct"
     (out / ".partial").mkdir(parents=True)
     (out / ".partial" / "state.json").write_text(json.dumps({"phase": "read"}))
-    assert awaiting_preview(out) and not wait_for_preview(out, timeout_s=0.3, poll_s=0.05)
-
-    def write_preview():
-        s = PreviewSampler(out / ".partial" / PREVIEW_NAME, target=100, total=None)
-        s.add(*_chunk(0, 50))
-        s.maybe_write()
-
-    threading.Timer(0.2, write_preview).start()
+    # a conversion killed before its first preview: nothing to wait for
     t0 = time.monotonic()
-    assert wait_for_preview(out, timeout_s=10, poll_s=0.05) and time.monotonic() - t0 < 5
-    assert not awaiting_preview(out)
-    with pytest.warns(GigapointWarning, match="conversion not finished"):
-        assert gp.open(out).n_points == 50
+    assert awaiting_preview(out) and not wait_for_preview(out, timeout_s=30, poll_s=0.05)
+    assert time.monotonic() - t0 < 5
+    lock = conv_mod._lock_output(out)  # a conversion at work (it holds OUT's lock)
+    try:
+        assert not wait_for_preview(out, timeout_s=0.3, poll_s=0.05)  # times out
+
+        def write_preview():
+            s = PreviewSampler(out / ".partial" / PREVIEW_NAME, target=100, total=None)
+            s.add(*_chunk(0, 50))
+            s.maybe_write()
+
+        threading.Timer(0.2, write_preview).start()
+        t0 = time.monotonic()
+        assert wait_for_preview(out, timeout_s=10, poll_s=0.05) and time.monotonic() - t0 < 5
+        assert not awaiting_preview(out)
+        with pytest.warns(GigapointWarning, match="conversion not finished") as caught:
+            assert gp.open(out).n_points == 50
+        assert "stopped" not in str(caught[0].message)
+    finally:
+        os.close(lock)
+    with pytest.warns(GigapointWarning, match="it has stopped: run `gigapoint convert` again to resume it"):
+        gp.open(out)
+
+
+def test_conversion_running_follows_the_output_lock(tmp_path):
+    out = tmp_path / "oct"
+    out.mkdir()
+    assert conv_mod.conversion_running(out) is False
+    lock = conv_mod._lock_output(out)
+    try:
+        assert conv_mod.conversion_running(out) is True
+        assert conv_mod.conversion_running(out) is True  # probing leaves the lock where it was
+        with pytest.raises(conv_mod.ConvertError, match="another conversion is writing into it"):
+            conv_mod._lock_output(out)
+    finally:
+        os.close(lock)
+    assert conv_mod.conversion_running(out) is False
+    assert conv_mod.conversion_running(tmp_path / "missing") is None

@@ -157,6 +157,10 @@ def format_info(info: dict) -> str:
     if conv is not None:
         total = f" of {conv['total']:,}" if conv.get("total") else ""
         lines.append(f"  conversion:  phase {conv.get('phase') or '?'}, {conv.get('points', 0):,}{total} points read, preview of {conv.get('preview_points', 0):,} points")
+        if conv.get("running") is not None:
+            from ..lod.preview import RESUME_HINT
+
+            lines.append("  state:       " + ("a conversion is writing into it" if conv["running"] else f"stopped: {RESUME_HINT}"))
     size = info.get("file_size")
     if size is not None:
         lines.append(f"  file size:   {_human_bytes(size)}")

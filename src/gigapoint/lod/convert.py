@@ -427,12 +427,34 @@ def _lock_output(out: Path) -> int | None:
         raise OutputExistsError(f"{out}: exists and is not a directory")
     out.mkdir(parents=True, exist_ok=True)
     fd = os.open(out, os.O_RDONLY)
+    for attempt in range(10):  # a viewer's conversion_running probe holds a shared lock for microseconds
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return fd
+        except OSError:
+            time.sleep(0.02)
+    os.close(fd)
+    raise ConvertError(f"{out}: another conversion is writing into it; let it finish or stop it first")
+
+
+def conversion_running(out) -> bool | None:
+    """Whether a conversion holds OUT's lock (``_lock_output``) right now: False once it has
+    ended, finished or killed. None where flock does not exist or OUT cannot be opened."""
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        import fcntl
+    except ImportError:  # Windows
+        return None
+    try:
+        fd = os.open(out, os.O_RDONLY)
     except OSError:
-        os.close(fd)
-        raise ConvertError(f"{out}: another conversion is writing into it; let it finish or stop it first") from None
-    return fd
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    finally:
+        os.close(fd)  # closing drops the probe's own shared lock
+    return False
 
 
 def _prepare_output(out: Path, fingerprint: dict, overwrite: bool) -> dict | None:

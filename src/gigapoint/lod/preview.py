@@ -113,7 +113,10 @@ class PreviewSampler:
 
 
 def conversion_status(out: Path) -> dict:
-    """What an unfinished conversion's state says: phase, points read, input total, preview size."""
+    """What an unfinished conversion's state says: phase, points read, input total, preview size,
+    and whether a conversion is still running (``running``: False once it stopped; None: unknown)."""
+    from .convert import conversion_running
+
     try:
         st = json.loads((Path(out) / ".partial" / "state.json").read_text())
     except (OSError, ValueError):
@@ -125,7 +128,11 @@ def conversion_status(out: Path) -> dict:
         "total": st.get("total"),
         "preview_points": meta.get("points", 0),
         "attributes": sorted(st.get("attributes") or {}),
+        "running": conversion_running(out),
     }
+
+
+RESUME_HINT = "run `gigapoint convert` again to resume it"  # what a stopped conversion needs
 
 
 def open_preview(out: Path):
@@ -141,7 +148,8 @@ def open_preview(out: Path):
     read = f"{s['points']:,} of {s['total']:,} points read" if s.get("total") else f"{s.get('points', 0):,} points read"
     if s.get("phase") not in (None, "read"):
         read = f"all {s['points']:,} points read, now in phase {s['phase']}"
-    warnings.warn(f"{out}: conversion not finished ({read}); showing its preview", GigapointWarning, stacklevel=3)
+    stopped = f"; it has stopped: {RESUME_HINT}" if s.get("running") is False else ""
+    warnings.warn(f"{out}: conversion not finished ({read}); showing its preview{stopped}", GigapointWarning, stacklevel=3)
     cloud = open_cloud(path, name=out.name)
     cloud.preview_of = out  # type: ignore[attr-defined]  (the viewer watches it for the finished octree)
     return cloud
@@ -149,10 +157,13 @@ def open_preview(out: Path):
 
 def wait_for_preview(out: Path, timeout_s: float = 60.0, poll_s: float = 0.25) -> bool:
     """For an unfinished conversion into ``out`` that has not written its preview yet (its first
-    second or so): wait until the preview or the finished octree appears. False on timeout."""
+    second or so): wait until the preview or the finished octree appears. False on timeout, or
+    at once when no conversion is running (one killed before its first preview)."""
+    from .convert import conversion_running
+
     deadline = time.monotonic() + timeout_s
     while awaiting_preview(out):
-        if time.monotonic() >= deadline:
+        if time.monotonic() >= deadline or conversion_running(out) is False:
             return False
         time.sleep(poll_s)
     return True

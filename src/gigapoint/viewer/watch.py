@@ -17,15 +17,16 @@ from ..errors import GigapointError, GigapointWarning
 
 def preview_note(out: Path) -> str:
     """One line for the viewer's HUD: what the preview shows of the conversion."""
-    from ..lod.preview import conversion_status
+    from ..lod.preview import RESUME_HINT, conversion_status
 
     s = conversion_status(out)
     if not s:
         return "preview of an unfinished conversion"
+    stopped = f"; conversion stopped ({RESUME_HINT})" if s.get("running") is False else ""
     if s.get("phase") in (None, "read"):
         of = f" of {s['total']:,}" if s.get("total") else ""
-        return f"preview: {s.get('points', 0):,}{of} points read, {s.get('preview_points', 0):,} shown"
-    return f"preview ({s.get('preview_points', 0):,} of {s.get('points', 0):,} points): conversion in phase {s['phase']}"
+        return f"preview: {s.get('points', 0):,}{of} points read, {s.get('preview_points', 0):,} shown{stopped}"
+    return f"preview ({s.get('preview_points', 0):,} of {s.get('points', 0):,} points): conversion in phase {s['phase']}{stopped}"
 
 
 def _stamp(path: Path):
