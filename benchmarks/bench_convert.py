@@ -7,6 +7,11 @@ Each conversion runs in its own child process; its peak memory is the child's ma
 Reference (PotreeConverter 2 on the project machine, 20 M points LAS): 1.7 M points/s
 poisson, 2.5 M points/s random. PotreeConverter shows nothing before it finishes; ``first_view_s``
 is when gigapoint's output first opened (its preview, lod/preview.py).
+
+``--potree-converter PATH`` measures a PotreeConverter 2 binary in the same run, on the same
+file, alternating with gigapoint run by run (grid is compared with its ``--method random``,
+poisson with ``--method poisson``): process wall time and peak memory of both, the ratio, and
+a check that its metadata.json holds every point.
 """
 
 from __future__ import annotations
@@ -75,6 +80,19 @@ def run_child(args: dict) -> tuple[dict, float, int]:
     return json.loads(out.decode().strip().splitlines()[-1]), wall, usage.ru_maxrss * 1024
 
 
+def run_potree(binary: str, las: Path, out: Path, method: str) -> tuple[float, int]:
+    """(wall seconds, peak RSS bytes) of one PotreeConverter run; its output must hold every point."""
+    shutil.rmtree(out, ignore_errors=True)
+    t = time.perf_counter()
+    proc = subprocess.Popen([binary, str(las), "-o", str(out), "--method", method], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    err = proc.stderr.read()
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t
+    if os.waitstatus_to_exitcode(status) != 0 or not (out / "metadata.json").is_file():
+        raise SystemExit(f"PotreeConverter failed: {err.decode(errors='replace')[-2000:]}")
+    return wall, usage.ru_maxrss * 1024
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--points", type=int, default=2_000_000)
@@ -84,6 +102,7 @@ def main() -> None:
     ap.add_argument("--input", choices=("las", "laz"), default="las", help="input file format (LAZ: the same points compressed)")
     ap.add_argument("--workdir", default=None, help="keep the LAS file and outputs here")
     ap.add_argument("--repeat", type=int, default=1, help="runs per sampler; the fastest is reported (shared machines are noisy)")
+    ap.add_argument("--potree-converter", default=None, help="a PotreeConverter 2 binary to measure in the same run (alternating)")
     a = ap.parse_args()
     work = Path(a.workdir) if a.workdir else Path(tempfile.mkdtemp(prefix="bench_convert_"))
     work.mkdir(parents=True, exist_ok=True)
@@ -109,7 +128,7 @@ def main() -> None:
             )
             shutil.rmtree(work / "warm_out", ignore_errors=True)
             out = work / f"out_{sampler}"
-            best = None
+            best, potree = None, None
             for _ in range(a.repeat):
                 shutil.rmtree(out, ignore_errors=True)
                 run = run_child(
@@ -117,6 +136,13 @@ def main() -> None:
                 )
                 if best is None or run[0]["seconds"] < best[0]["seconds"]:
                     best = run
+                if a.potree_converter:
+                    pc = run_potree(a.potree_converter, las, work / "out_potree", "random" if sampler == "grid" else "poisson")
+                    meta = json.loads((work / "out_potree" / "metadata.json").read_text())
+                    if int(meta["points"]) != run[0]["points"]:
+                        raise SystemExit(f"PotreeConverter wrote {meta['points']} points, gigapoint {run[0]['points']}")
+                    potree = pc if potree is None or pc[0] < potree[0] else potree
+                    shutil.rmtree(work / "out_potree", ignore_errors=True)
             info, wall, rss = best
             row = {
                 "input": a.input,
@@ -131,6 +157,14 @@ def main() -> None:
                 "peak_rss_mib": round(rss / 2**20, 1),
                 "phases_s": info["phases"],
             }
+            if potree is not None:
+                row.update(
+                    potree_method="random" if sampler == "grid" else "poisson",
+                    potree_process_s=round(potree[0], 3),
+                    potree_points_per_s=round(info["points"] / potree[0]),
+                    potree_peak_rss_mib=round(potree[1] / 2**20, 1),
+                    speedup_vs_potree=round(potree[0] / wall, 2),  # process wall times, both with start-up
+                )
             results.append(row)
             print(json.dumps(row))
             shutil.rmtree(out, ignore_errors=True)
