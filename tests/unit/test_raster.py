@@ -207,3 +207,33 @@ def test_visible_pixels_count_the_frame_after_hole_filling(demo_small):
     for f in (plain, filled):
         assert f.stats.visible_pixels == int((f.visibility != EMPTY_PIXEL).sum())
     assert filled.stats.visible_pixels > plain.stats.visible_pixels
+
+
+def test_batch_footprint_flags_every_tile_its_points_write(demo_small):
+    """Thread 1's merge visits only flagged tiles; for a batch inside the frustum the flags come
+    from its projected grid cube (raster.mark_footprint), not from its points: they must cover
+    every pixel the points land on."""
+    from gigapoint.backends.numba_cpu import raster
+    from gigapoint.render.selection import select
+
+    cam = CAMERAS["iso"](demo_small.bounds)
+    w, h = cam.width, cam.height
+    near, far = cam.clip_range(demo_small.bounds)
+    sel = select(demo_small.batches, cam.screen_rows(), w, h, near, far)
+    inside = 0
+    for k, bid in enumerate(sel.ids):
+        m = np.ascontiguousarray(sel.matrices[k], np.float32)
+        if not raster.inside_frustum(m, w, h, np.float32(near), np.float32(far)):
+            continue
+        inside += 1
+        b = demo_small.batches[bid]
+        f, c = int(b["first"]), int(b["count"])
+        pix = np.empty(c, np.int32)
+        depth = np.empty(c, np.float32)
+        raster.project_batch(demo_small.low[f : f + c], demo_small.med[f : f + c], demo_small.high[f : f + c], sel.bits[k], m, w, h, np.float32(near), np.float32(far), pix, depth, False)
+        dirty = np.zeros((w * h >> raster.TILE_SHIFT) + 1, np.uint8)
+        assert raster.mark_footprint(m, w, h, dirty, 1 << 40)
+        assert (pix >= 0).all() and dirty[pix >> raster.TILE_SHIFT].all()
+        untouched = np.zeros_like(dirty)
+        assert not raster.mark_footprint(m, w, h, untouched, 0) and not untouched.any()  # too sparse: the points flag their own tiles
+    assert inside > 0

@@ -138,23 +138,60 @@ def _project_clip(low, med, high, bits, mt, wf, hf, wi, near, far, pix, depth, s
 
 
 @njit(inline="always")
+def _grid_corner(m, c):
+    """(x', y', w, depth) in float64 of corner c (0..7) of a batch's grid cube [0, 1024]^3."""
+    x = 1024.0 * ((c >> 2) & 1)
+    y = 1024.0 * ((c >> 1) & 1)
+    z = 1024.0 * (c & 1)
+    sx = np.float64(m[0, 0]) * x + np.float64(m[0, 1]) * y + np.float64(m[0, 2]) * z + np.float64(m[0, 3])
+    sy = np.float64(m[1, 0]) * x + np.float64(m[1, 1]) * y + np.float64(m[1, 2]) * z + np.float64(m[1, 3])
+    sw = np.float64(m[2, 0]) * x + np.float64(m[2, 1]) * y + np.float64(m[2, 2]) * z + np.float64(m[2, 3])
+    sd = np.float64(m[3, 0]) * x + np.float64(m[3, 1]) * y + np.float64(m[3, 2]) * z + np.float64(m[3, 3])
+    return sx, sy, sw, sd
+
+
+@njit(inline="always")
 def inside_frustum(m, width, height, near, far):
     """True when the batch's whole grid cube [0, 1024]^3 projects inside the image and the
     depth range with a margin (1 pixel, 0.1 % of the depth): every point then has a pixel and
     phase 1 needs no clipping tests. Corners in float64 from the float32 matrix; the float32
     projection of a point differs from it by far less than the margin."""
     for c in range(8):
-        x = 1024.0 * ((c >> 2) & 1)
-        y = 1024.0 * ((c >> 1) & 1)
-        z = 1024.0 * (c & 1)
-        sx = np.float64(m[0, 0]) * x + np.float64(m[0, 1]) * y + np.float64(m[0, 2]) * z + np.float64(m[0, 3])
-        sy = np.float64(m[1, 0]) * x + np.float64(m[1, 1]) * y + np.float64(m[1, 2]) * z + np.float64(m[1, 3])
-        sw = np.float64(m[2, 0]) * x + np.float64(m[2, 1]) * y + np.float64(m[2, 2]) * z + np.float64(m[2, 3])
-        sd = np.float64(m[3, 0]) * x + np.float64(m[3, 1]) * y + np.float64(m[3, 2]) * z + np.float64(m[3, 3])
+        sx, sy, sw, sd = _grid_corner(m, c)
         if not (sw > 0.0 and sd > near + 1e-3 * abs(near) + 1e-6 and sd < far - 1e-3 * abs(far)):
             return False
         if not (1.0 <= sx / sw <= width - 1.0 and 1.0 <= sy / sw <= height - 1.0):
             return False
+    return True
+
+
+@njit(inline="always")
+def mark_footprint(m, width, height, dirty, n):
+    """For a batch ``inside_frustum``: flag the tiles its projected grid cube covers (one pixel
+    of margin) in ``dirty``, instead of one flag store per point (~4 % of a 2-thread overview).
+    The cube's projection is the hull of its corners', so every point's pixel is inside.
+    Returns False, flagging nothing, when the box has more tile rows than n / 4 (a large, sparse
+    batch of a close-up: its points then flag their own tiles, and the merge visits fewer)."""
+    x0 = np.inf
+    x1 = -np.inf
+    y0 = np.inf
+    y1 = -np.inf
+    for c in range(8):
+        sx, sy, sw, _ = _grid_corner(m, c)
+        x0 = min(x0, sx / sw)
+        x1 = max(x1, sx / sw)
+        y0 = min(y0, sy / sw)
+        y1 = max(y1, sy / sw)
+    xa = max(0, int(x0) - 1)
+    xb = min(width - 1, int(x1) + 1)
+    ya = max(0, int(y0) - 1)
+    yb = min(height - 1, int(y1) + 1)
+    if (yb - ya + 1) * (((xb - xa) >> TILE_SHIFT) + 2) > n >> 2:
+        return False
+    for y in range(ya, yb + 1):
+        row = y * width
+        for tile in range((row + xa) >> TILE_SHIFT, ((row + xb) >> TILE_SHIFT) + 1):
+            dirty[tile] = 1
     return True
 
 
@@ -294,12 +331,15 @@ def rasterize(firsts, counts, bits, mats, low, med, high, width, height, nears, 
                 near = np.float32(nears[v])
                 far = np.float32(fars[v])
                 clip = not inside_frustum(mats[v, k], width, height, near, far)
+                # thread 0 draws into the frame itself: its tiles need no merge, so no flags
+                mark = t > 0
+                if mark and not clip and footprint.shape[0] == 1:
+                    mark = not mark_footprint(mats[v, k], width, height, dirty[v, t], n)
                 if step == 1:  # contiguous slices: the vectorised loop
                     project_batch(low[f : f + c], med[f : f + c], high[f : f + c], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip)
                 else:
                     project_batch(low[f : f + c : step], med[f : f + c : step], high[f : f + c : step], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip)
-                # thread 0 draws into the frame itself: its tiles need no merge, so no flags
-                write_batch(f, step, pix[:n], depth[:n], depth_bits[:n], buf, dirty[v, t], width, height, footprint, size, atten, clip, t > 0)
+                write_batch(f, step, pix[:n], depth[:n], depth_bits[:n], buf, dirty[v, t], width, height, footprint, size, atten, clip, mark)
 
 
 @njit(parallel=True, cache=True)
