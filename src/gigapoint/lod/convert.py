@@ -32,7 +32,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.chunk import PointChunk
 from ..core.cloud import MAX_ABS_COORDINATE
 from ..errors import EmptyCloudError, GigapointError, GigapointWarning, InputError
 from .build import (
@@ -196,28 +195,10 @@ def _input_paths(inputs) -> list[Path] | None:
 
 
 def _read_chunks(path: Path, chunk_size: int):
-    try:
-        from ..io import read_chunks
-    except ImportError:
-        read_chunks = _laspy_chunks
+    """The chunks of one input file (any format gigapoint.io reads); a seam the tests stop."""
+    from ..io import read_chunks
+
     return read_chunks(path, chunk_size)
-
-
-def _laspy_chunks(path: Path, chunk_size: int):  # used only until gigapoint.io exists
-    import laspy
-
-    if path.suffix.lower() not in (".las", ".laz"):
-        raise InputError(f"{path}: unsupported format (only LAS/LAZ until gigapoint.io is installed)")
-    try:
-        with laspy.open(str(path)) as reader:
-            dims = set(reader.header.point_format.dimension_names)
-            for pts in reader.chunk_iterator(chunk_size):
-                xyz = np.column_stack([np.asarray(pts.x), np.asarray(pts.y), np.asarray(pts.z)])
-                rgb = np.column_stack([pts.red, pts.green, pts.blue]) if "red" in dims else None
-                attrs = {a: np.asarray(pts[a]) for a in ("intensity", "classification") if a in dims}
-                yield PointChunk(xyz, rgb, attrs)
-    except (laspy.errors.LaspyException, ValueError) as exc:
-        raise InputError(f"{path}: cannot read LAS/LAZ: {' '.join(str(exc).split())}") from None
 
 
 def _point_total(paths) -> int | None:
