@@ -409,11 +409,13 @@ def _lock_output(out: Path) -> int | None:
     out.mkdir(parents=True, exist_ok=True)
     fd = os.open(out, os.O_RDONLY)
     for attempt in range(10):  # a viewer's conversion_running probe holds a shared lock for microseconds
+        if attempt:
+            time.sleep(0.02)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             return fd
         except OSError:
-            time.sleep(0.02)
+            pass
     os.close(fd)
     raise ConvertError(f"{out}: another conversion is writing into it; let it finish or stop it first")
 
@@ -1027,18 +1029,18 @@ class _Converter:
         return n_nodes
 
     def run(self, overwrite: bool) -> ConvertResult:
-        t0 = self.t0 = time.perf_counter()
+        self.t0 = time.perf_counter()
         fp = self.fingerprint()
         lock = None
         try:
             lock = _lock_output(self.out)
-            return self._run_locked(overwrite, fp, t0)
+            return self._run_locked(overwrite, fp)
         finally:
             if lock is not None:
                 os.close(lock)
             self.progress.close()
 
-    def _run_locked(self, overwrite: bool, fp, t0: float) -> ConvertResult:
+    def _run_locked(self, overwrite: bool, fp) -> ConvertResult:
         saved = _prepare_output(self.out, fp, overwrite)
         resumed = saved is not None
         if resumed and (self.partial / PREVIEW_NAME).is_file():
@@ -1061,7 +1063,7 @@ class _Converter:
             int(self.state["points"]),
             n_nodes,
             int(self.state.get("skipped", 0)),
-            time.perf_counter() - t0,
+            time.perf_counter() - self.t0,
             resumed,
             timings,
             self.first_view,

@@ -143,7 +143,7 @@ def open_preview(out: Path):
     out = Path(out)
     path = out / ".partial" / PREVIEW_NAME
     if not path.is_file():
-        raise InputError(f"{out}: conversion not finished and no preview written yet (re-run `gigapoint convert` to resume it)")
+        raise InputError(f"{out}: conversion not finished and no preview written yet ({RESUME_HINT})")
     s = conversion_status(out)
     read = f"{s['points']:,} of {s['total']:,} points read" if s.get("total") else f"{s.get('points', 0):,} points read"
     if s.get("phase") not in (None, "read"):
