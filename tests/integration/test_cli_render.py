@@ -162,6 +162,29 @@ def test_installed_entry_point_exit_codes(tmp_path, small_las):
     assert bad.returncode == 1 and bad.stderr.startswith("error: ") and "Traceback" not in bad.stderr
 
 
+def test_console_script_skips_teardown_but_keeps_exit_handlers_output_and_threads(tmp_path, small_las):
+    """``run`` (the console script) ends with os._exit: what a command printed into a pipe, the
+    atexit handlers and a thread still running must all survive that, and the exit code too."""
+    out = tmp_path / "r.png"
+    code = (
+        "import atexit, sys, threading, time\n"
+        "from gigapoint.cli import run\n"
+        "atexit.register(print, 'atexit ran')\n"
+        "if sys.argv[1] == 'thread':\n"
+        "    threading.Thread(target=lambda: (time.sleep(0.5), print('thread finished'))).start()\n"
+        "sys.argv = ['gigapoint', *sys.argv[2:]]\n"
+        "run()\n"
+    )
+    args = ["render", str(small_las), "-o", str(out), "-W", "48", "-H", "32"]
+    ok = subprocess.run([sys.executable, "-c", code, "-", *args], capture_output=True, text=True)
+    assert ok.returncode == 0, ok.stderr
+    assert ok.stdout.splitlines() == [f"wrote {out} (48x32, 30,000 points)", "atexit ran"]
+    assert np.asarray(Image.open(out)).shape == (32, 48, 4)
+    bad = subprocess.run([sys.executable, "-c", code, "thread", "render", str(tmp_path / "missing.las"), "-o", str(tmp_path / "m.png")], capture_output=True, text=True)
+    assert bad.returncode == 1 and "no such file" in bad.stderr
+    assert "thread finished" in bad.stdout and "atexit ran" in bad.stdout  # waited for, the normal way
+
+
 def test_ctrl_c_exits_130_with_a_message(tmp_path):
     """SIGINT in the middle of a command: exit status 130 and one line, never a silent 0."""
     import signal

@@ -47,7 +47,10 @@ def save_image(image: np.ndarray, path: Path) -> None:
     img = Image.fromarray(image)
     if path.suffix.lower() in (".jpg", ".jpeg", ".bmp"):
         img = img.convert("RGB")
-    _atomic_write(path, lambda tmp: img.save(tmp, format=fmt or path.suffix[1:].upper()))
+    # PNG at zlib level 1: the default (6) took 0.3 s of a 1.8 s first render of 1 M points and its
+    # files of renders (flat background) were larger, not smaller (benchmarks/bench_cli.py)
+    options = {"compress_level": 1} if path.suffix.lower() == ".png" else {}
+    _atomic_write(path, lambda tmp: img.save(tmp, format=fmt or path.suffix[1:].upper(), **options))
 
 
 def save_array(array: np.ndarray, path: Path) -> None:
