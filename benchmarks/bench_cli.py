@@ -19,14 +19,13 @@ import json
 import shutil
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_convert import write_las  # noqa: E402  (the demo scene as LAS 1.2, format 3)
+from bench_convert import demo_las_in  # noqa: E402  (the demo scene as LAS 1.2, format 3)
 
 
 def timed(cmd: list[str]) -> float:
@@ -45,11 +44,7 @@ def main() -> None:
     ap.add_argument("--workdir", default=None, help="keep the LAS file and the images here")
     ap.add_argument("--json", default=None, help="also write the results here")
     a = ap.parse_args()
-    work = Path(a.workdir) if a.workdir else Path(tempfile.mkdtemp(prefix="bench_cli_"))
-    work.mkdir(parents=True, exist_ok=True)
-    las = work / f"demo_{a.points}.las"
-    if not las.exists():
-        write_las(las, a.points)
+    work, las = demo_las_in(a.workdir, a.points, "bench_cli_")
     script = Path(sys.executable).with_name("gigapoint")
     console = [str(script)] if script.exists() else [sys.executable, "-m", "gigapoint.cli"]
     args = ["render", str(las), "-o", str(work / "out.png"), "--overwrite"]

@@ -57,6 +57,17 @@ def write_las(path: Path, n: int) -> None:
             writer.write_points(rec)
 
 
+def demo_las_in(workdir: str | None, n: int, prefix: str) -> tuple[Path, Path]:
+    """(work directory, the demo scene's first n points as a LAS file in it, written once);
+    without ``workdir`` a new temporary directory."""
+    work = Path(workdir) if workdir else Path(tempfile.mkdtemp(prefix=prefix))
+    work.mkdir(parents=True, exist_ok=True)
+    las = work / f"demo_{n}.las"
+    if not las.exists():
+        write_las(las, n)
+    return work, las
+
+
 def write_laz(las: Path, laz: Path) -> None:
     import laspy
 
@@ -104,11 +115,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=1, help="runs per sampler; the fastest is reported (shared machines are noisy)")
     ap.add_argument("--potree-converter", default=None, help="a PotreeConverter 2 binary to measure in the same run (alternating)")
     a = ap.parse_args()
-    work = Path(a.workdir) if a.workdir else Path(tempfile.mkdtemp(prefix="bench_convert_"))
-    work.mkdir(parents=True, exist_ok=True)
-    las = work / f"demo_{a.points}.las"
-    if not las.exists():
-        write_las(las, a.points)
+    work, las = demo_las_in(a.workdir, a.points, "bench_convert_")
     warm = work / "warm.las"
     if not warm.exists():
         write_las(warm, 20_000)
