@@ -136,6 +136,7 @@ def main() -> None:
             shutil.rmtree(work / "warm_out", ignore_errors=True)
             out = work / f"out_{sampler}"
             best, potree = None, None
+            method = "random" if sampler == "grid" else "poisson"  # PotreeConverter's nearest sampler
             for _ in range(a.repeat):
                 shutil.rmtree(out, ignore_errors=True)
                 run = run_child(
@@ -144,7 +145,7 @@ def main() -> None:
                 if best is None or run[0]["seconds"] < best[0]["seconds"]:
                     best = run
                 if a.potree_converter:
-                    pc = run_potree(a.potree_converter, las, work / "out_potree", "random" if sampler == "grid" else "poisson")
+                    pc = run_potree(a.potree_converter, las, work / "out_potree", method)
                     meta = json.loads((work / "out_potree" / "metadata.json").read_text())
                     if int(meta["points"]) != run[0]["points"]:
                         raise SystemExit(f"PotreeConverter wrote {meta['points']} points, gigapoint {run[0]['points']}")
@@ -166,7 +167,7 @@ def main() -> None:
             }
             if potree is not None:
                 row.update(
-                    potree_method="random" if sampler == "grid" else "poisson",
+                    potree_method=method,
                     potree_process_s=round(potree[0], 3),
                     potree_points_per_s=round(info["points"] / potree[0]),
                     potree_peak_rss_mib=round(potree[1] / 2**20, 1),

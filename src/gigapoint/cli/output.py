@@ -48,7 +48,7 @@ def save_image(image: np.ndarray, path: Path) -> None:
     if path.suffix.lower() in (".jpg", ".jpeg", ".bmp"):
         img = img.convert("RGB")
     # PNG at zlib level 1: the default (6) took 0.3 s of a 1.8 s first render of 1 M points and its
-    # files of renders (flat background) were larger, not smaller (benchmarks/bench_cli.py)
+    # files of renders (flat background) were larger, not smaller (docs/benchmarks.md, CLI first render)
     options = {"compress_level": 1} if path.suffix.lower() == ".png" else {}
     _atomic_write(path, lambda tmp: img.save(tmp, format=fmt or path.suffix[1:].upper(), **options))
 
