@@ -15,7 +15,6 @@ from numba import njit
 from ..core.layout import WORD_BITS
 
 
-
 @dataclass
 class Selection:
     ids: np.ndarray  # int64 batch numbers drawn, ascending
@@ -26,13 +25,17 @@ class Selection:
 
 
 def visible_and_size(rows, bbox_min, bbox_max, width, height, near, far):
-    """Per box: in the frustum (conservatively) and projected size in pixels."""
+    """Per box: in the frustum (conservatively) and projected size in pixels. The boxes may be
+    fields of a structured array (strided): the kernel reads them in place, no copy."""
     k = len(bbox_min)
     visible = np.empty(k, np.bool_)
     size = np.empty(k, np.float64)
-    _boxes_in_view(np.ascontiguousarray(rows, np.float64), np.ascontiguousarray(bbox_min, np.float64), np.ascontiguousarray(bbox_max, np.float64),
-                   float(width), float(height), float(near), float(far), visible, size)  # fmt: skip
+    _boxes_in_view(np.ascontiguousarray(rows, np.float64), _as_f64(bbox_min), _as_f64(bbox_max), float(width), float(height), float(near), float(far), visible, size)
     return visible, size
+
+
+def _as_f64(a):
+    return a if a.dtype == np.float64 else a.astype(np.float64)
 
 
 @njit(cache=True)
@@ -44,7 +47,7 @@ def _boxes_in_view(rows, bbox_min, bbox_max, width, height, near, far, visible, 
     """
     for b in range(bbox_min.shape[0]):
         # per plane: do all corners lie beyond it? (x < 0, x > w*W, y < 0, y > h*H, d < near, d > far)
-        beyond = np.ones(6, np.bool_)
+        left = right = below = above = closer = farther = True
         in_front = True
         x_lo = y_lo = np.inf
         x_hi = y_hi = -np.inf
@@ -56,18 +59,18 @@ def _boxes_in_view(rows, bbox_min, bbox_max, width, height, near, far, visible, 
             y = p0 * rows[1, 0] + p1 * rows[1, 1] + p2 * rows[1, 2] + rows[1, 3]
             w = p0 * rows[2, 0] + p1 * rows[2, 1] + p2 * rows[2, 2] + rows[2, 3]
             d = p0 * rows[3, 0] + p1 * rows[3, 1] + p2 * rows[3, 2] + rows[3, 3]
-            beyond[0] &= x < 0
-            beyond[1] &= x > width * w
-            beyond[2] &= y < 0
-            beyond[3] &= y > height * w
-            beyond[4] &= d < near
-            beyond[5] &= d > far
+            left &= x < 0
+            right &= x > width * w
+            below &= y < 0
+            above &= y > height * w
+            closer &= d < near
+            farther &= d > far
             in_front &= (w > 0) & (d >= near)
             px = x / w if w > 0 else 0.0
             py = y / w if w > 0 else 0.0
             x_lo, x_hi = min(x_lo, px), max(x_hi, px)
             y_lo, y_hi = min(y_lo, py), max(y_hi, py)
-        visible[b] = not beyond.any()
+        visible[b] = not (left or right or below or above or closer or farther)
         size[b] = max(x_hi - x_lo, y_hi - y_lo) if in_front else np.inf
 
 
@@ -79,16 +82,29 @@ def precision_for(size_px: np.ndarray, threshold_px: float) -> np.ndarray:
     return bits
 
 
-def batch_matrices(rows: np.ndarray, bbox_min: np.ndarray, bbox_max: np.ndarray) -> np.ndarray:
-    """float32 (k, 4, 4): maps a point's 10-bit-grid coordinate (0..1024) to (x', y', w, depth).
+def batch_matrices(rows: np.ndarray, bbox_min: np.ndarray, bbox_max: np.ndarray, ids: np.ndarray | None = None) -> np.ndarray:
+    """float32 (k, 4, 4): maps a point's 10-bit-grid coordinate (0..1024) to (x', y', w, depth),
+    for boxes ``ids`` (default: all).
 
     Composed in float64 relative to each batch's own corner, then cast.
     """
-    scale = (bbox_max - bbox_min) / float(1 << WORD_BITS)
-    m = np.empty((len(bbox_min), 4, 4))
-    m[:, :, :3] = rows[None, :, :3] * scale[:, None, :]
-    m[:, :, 3] = bbox_min @ rows[:, :3].T + rows[:, 3]
-    return m.astype(np.float32)
+    if ids is None:
+        ids = np.arange(len(bbox_min))
+    out = np.empty((len(ids), 4, 4), np.float32)
+    _compose_matrices(np.ascontiguousarray(rows, np.float64), _as_f64(bbox_min), _as_f64(bbox_max), np.asarray(ids, np.int64), out)
+    return out
+
+
+@njit(cache=True)
+def _compose_matrices(rows, bbox_min, bbox_max, ids, out):
+    """out[k] = rows @ (scale to the grid of box ids[k], then its corner), in float64, cast."""
+    inv_grid = 1.0 / (1 << WORD_BITS)
+    for k in range(ids.shape[0]):
+        b = ids[k]
+        for r in range(4):
+            for a in range(3):
+                out[k, r, a] = rows[r, a] * ((bbox_max[b, a] - bbox_min[b, a]) * inv_grid)
+            out[k, r, 3] = bbox_min[b, 0] * rows[r, 0] + bbox_min[b, 1] * rows[r, 1] + bbox_min[b, 2] * rows[r, 2] + rows[r, 3]
 
 
 def select(batches, rows, width, height, near, far, threshold_px=500.0, adaptive=True, culling=True) -> Selection:
@@ -99,4 +115,4 @@ def select(batches, rows, width, height, near, far, threshold_px=500.0, adaptive
         visible[:] = True
     ids = np.flatnonzero(visible)
     bits = precision_for(size[ids], threshold_px) if adaptive else np.full(len(ids), 30, np.int32)
-    return Selection(ids, bits, batch_matrices(rows, bmin[ids], bmax[ids]), size[ids], int(len(batches) - len(ids)))
+    return Selection(ids, bits, batch_matrices(rows, bmin, bmax, ids), size[ids], int(len(batches) - len(ids)))
