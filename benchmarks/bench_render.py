@@ -1,4 +1,4 @@
-"""Brute-force render benchmark of the demo scene, with the GL_POINTS (Mesa llvmpipe) baseline.
+"""Brute-force render benchmark of the demo scene, with the GL_POINTS (Mesa llvmpipe) and naive-loop baselines.
 
     .venv/bin/python benchmarks/bench_render.py                       # 20 M and 100 M points, 1920x1080
     .venv/bin/python benchmarks/bench_render.py --points 2M --width 640 --height 360 --out /tmp/bench
@@ -28,6 +28,7 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", nargs="+", default=["1", "all"], help="thread counts to measure ('all' = every core)")
     ap.add_argument("--repeats", type=int, default=5, help="timed frames per measurement (median reported)")
     ap.add_argument("--no-gl", action="store_true", help="skip the GL_POINTS baseline")
+    ap.add_argument("--no-naive", action="store_true", help="skip the naive numba loop baseline")
     ap.add_argument("--out", type=Path, help="directory for the images (and the JSON)")
     ap.add_argument("--json", type=Path, help="where to write the JSON results")
     args = ap.parse_args(argv)
@@ -43,6 +44,7 @@ def main(argv=None) -> int:
             threads=threads,
             repeats=args.repeats,
             gl=not args.no_gl,
+            naive=not args.no_naive,
             out=args.out,
             progress=lambda m: err.print(f"[dim]{m}[/dim]"),
         )

@@ -14,6 +14,11 @@
   clip range, an offscreen framebuffer with a depth test, timed to ``glFinish``), and the
   ratio gigapoint / GL. Its image coverage is compared with gigapoint's so the baseline is
   known to draw the same thing. Without a usable GL the baseline rows say ``skipped``.
+- in the same run a *naive numba loop* (``naive_raster``: every point of a float32 array
+  through the 4x4 matrix, depth-tested into a per-thread 64-bit buffer, no batches,
+  culling or quantization) with gigapoint's colour resolve after it, and the ratio
+  gigapoint / naive. Issue #2 calibrated its target against such a loop (~290 M points/s
+  on its machine); this host's speed drifts 1.5x within minutes, and the ratio does not.
 
 Throughput is always *points in the cloud / wall-clock frame time* (the whole
 ``render_frame`` call: selection, rasterization, merge and color resolve), whatever
@@ -30,7 +35,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+from numba import njit, prange
 
+from .backends.numba_cpu.raster import EMPTY, fill_empty, resolve_colors
 from .core import cloud_from_points, demo_arrays
 from .core.quantize import dequantize
 from .errors import GigapointError
@@ -148,6 +155,22 @@ def relative_positions(cloud, center, batch_ids) -> np.ndarray:
     return dequantize(cloud.low[s], cloud.med[s], cloud.high[s], lo, hi, 30).astype(np.float32)
 
 
+def relative_chunks(cloud, center):
+    """(first point, float32 positions minus ``center``) of the whole cloud, a few million points at a time."""
+    per_chunk = max(1, _GL_UPLOAD_CHUNK // max(1, int(cloud.batches["count"].max())))
+    for k in range(0, len(cloud.batches), per_chunk):
+        ids = np.arange(k, min(k + per_chunk, len(cloud.batches)))
+        yield int(cloud.batches["first"][k]), relative_positions(cloud, center, ids)
+
+
+def relative_cloud(cloud, center) -> np.ndarray:
+    """float32 (N, 3) positions minus ``center`` of every point, in cloud order (the naive loop's input)."""
+    xyz = np.empty((cloud.n_points, 3), np.float32)
+    for first, chunk in relative_chunks(cloud, center):
+        xyz[first : first + len(chunk)] = chunk
+    return xyz
+
+
 class GLBaseline:
     """GL_POINTS of one cloud through moderngl on an offscreen EGL context (Mesa llvmpipe)."""
 
@@ -190,10 +213,8 @@ class GLBaseline:
         self._release_buffers()
         n = cloud.n_points
         pos = self.ctx.buffer(reserve=n * 12)
-        per_chunk = max(1, _GL_UPLOAD_CHUNK // max(1, int(cloud.batches["count"].max())))
-        for k in range(0, len(cloud.batches), per_chunk):
-            ids = np.arange(k, min(k + per_chunk, len(cloud.batches)))
-            pos.write(relative_positions(cloud, center, ids).tobytes(), offset=int(cloud.batches["first"][k]) * 12)
+        for first, chunk in relative_chunks(cloud, center):
+            pos.write(chunk.tobytes(), offset=first * 12)
         col = self.ctx.buffer(cloud.color)
         self._buffers = [pos, col]
         self.vao = self.ctx.vertex_array(self.prog, [(pos, "3f", "in_pos"), (col, "4f1", "in_color")])
@@ -233,6 +254,110 @@ class GLBaseline:
         self.fbo.release()
         self.prog.release()
         self.ctx.release()
+
+
+# --- the naive baseline ---------------------------------------------------------------
+@njit(parallel=True, cache=True, error_model="numpy")  # numpy's model: no zero-division branch on x'/w
+def naive_raster(xyz, m, width, height, near, far, bufs):
+    """The first loop one writes: point i of ``xyz`` (float32 (N, 3)) through ``m`` (float32
+    4x4, rows x', y', w, depth), depth-tested into thread t's buffer ``bufs[t]`` (EMPTY on
+    entry) with the key (depth bits << 32 | i). Thread t takes the t-th contiguous share of
+    the points; no batches, no culling, no quantization, no vectorised phases."""
+    n = xyz.shape[0]
+    n_threads = bufs.shape[0]
+    for t in prange(n_threads):
+        buf = bufs[t]
+        depth = np.empty(1, np.float32)
+        depth_bits = depth.view(np.uint32)
+        for i in range(t * n // n_threads, (t + 1) * n // n_threads):
+            x, y, z = xyz[i, 0], xyz[i, 1], xyz[i, 2]
+            sx = m[0, 0] * x + m[0, 1] * y + m[0, 2] * z + m[0, 3]
+            sy = m[1, 0] * x + m[1, 1] * y + m[1, 2] * z + m[1, 3]
+            sw = m[2, 0] * x + m[2, 1] * y + m[2, 2] * z + m[2, 3]
+            sd = m[3, 0] * x + m[3, 1] * y + m[3, 2] * z + m[3, 3]
+            if sw <= 0 or sd <= near or sd >= far:
+                continue
+            px = sx / sw
+            py = sy / sw
+            if px < 0 or px >= width or py < 0 or py >= height:
+                continue
+            p = np.int64(py) * width + np.int64(px)
+            depth[0] = sd
+            key = (np.uint64(depth_bits[0]) << np.uint64(32)) | np.uint64(i)
+            if key < buf[p]:
+                buf[p] = key
+
+
+@njit(parallel=True, cache=True)
+def naive_merge(bufs, frame):
+    """frame[p] = min over the threads' buffers (every pixel: the naive loop keeps no tile flags)."""
+    for p in prange(frame.shape[0]):
+        k = bufs[0, p]
+        for t in range(1, bufs.shape[0]):
+            k = min(k, bufs[t, p])
+        frame[p] = k
+
+
+def naive_matrix(camera: Camera, center) -> np.ndarray:
+    """float32 rows (x', y', w, depth) of ``camera`` for points given relative to ``center``."""
+    to_world = np.eye(4)
+    to_world[:3, 3] = center
+    return (camera.screen_rows() @ to_world).astype(np.float32)
+
+
+def naive_frame(xyz, color, camera: Camera, near: float, far: float, n_threads: int, background=(0, 0, 0, 255), center=(0.0, 0.0, 0.0)):
+    """(visibility (H*W,) u64, colors (H*W,) u32, seconds in ``naive_raster``) of one naive frame:
+    clear the per-thread buffers, the loop, the merge, and gigapoint's own colour resolve."""
+    import numba
+
+    n_pixels = camera.width * camera.height
+    bufs = np.empty((n_threads, n_pixels), np.uint64)
+    for b in bufs:
+        fill_empty(b)
+    previous = numba.get_num_threads()
+    numba.set_num_threads(n_threads)
+    try:
+        t0 = time.perf_counter()
+        naive_raster(xyz, naive_matrix(camera, center), camera.width, camera.height, np.float32(near), np.float32(far), bufs)
+        t1 = time.perf_counter()
+        frame = np.empty(n_pixels, np.uint64)
+        naive_merge(bufs, frame)
+        colors = np.empty(n_pixels, np.uint32)
+        resolve_colors(frame, color, np.array(background, np.uint8).view(np.uint32)[0], colors)
+    finally:
+        numba.set_num_threads(previous)
+    return frame, colors, t1 - t0
+
+
+def _measure_naive(row: dict, xyz, cloud, camera: Camera, center, background, repeats: int, best) -> np.ndarray:
+    """Time the naive loop's frame for one view with gigapoint's best thread count, fill ``row``,
+    return its image."""
+    near, far = camera.clip_range(cloud.bounds)
+    gp_row, gp_frame = best
+    n_threads = gp_row["threads"]
+    naive_frame(xyz, cloud.color, camera, near, far, n_threads, background, center)  # warm-up: JIT cache, page faults
+    times, kernel = [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        vis, colors, k = naive_frame(xyz, cloud.color, camera, near, far, n_threads, background, center)
+        times.append(time.perf_counter() - t0)
+        kernel.append(k)
+    covered = (vis != EMPTY).reshape(camera.height, camera.width)
+    gp_mask = ~gp_frame.empty
+    union = int((covered | gp_mask).sum())
+    median = statistics.median(times)
+    row.update(
+        threads=n_threads,
+        frame_ms=median * 1e3,
+        frame_ms_runs=[x * 1e3 for x in times],
+        raster_ms=statistics.median(kernel) * 1e3,
+        points_per_second=row["points"] / median,
+        coverage=float(covered.mean()),
+        coverage_iou=int((covered & gp_mask).sum()) / union if union else 1.0,
+        gigapoint_threads=n_threads,
+        gigapoint_over_naive=gp_row["points_per_second"] / (row["points"] / median),
+    )
+    return colors.view(np.uint8).reshape(camera.height, camera.width, 4)
 
 
 # --- the benchmark --------------------------------------------------------------------
@@ -303,6 +428,7 @@ def run_render_benchmark(
     gl: bool = True,
     out=None,
     views=VIEWS,
+    naive: bool = True,
     seed: int = 0,
     progress=None,
 ) -> list[dict]:
@@ -310,8 +436,10 @@ def run_render_benchmark(
 
     Rows (``kind``): ``environment`` (once), then per point count ``generate``, ``build``,
     and per view one ``render`` row per thread count (``renderer='gigapoint'``) and one GL
-    baseline row (``renderer='gl'``; ``skipped`` with a ``reason`` when GL is unavailable).
-    ``out`` (a directory) receives the PNG of each gigapoint and GL frame.
+    baseline row (``renderer='gl'``; ``skipped`` with a ``reason`` when GL is unavailable),
+    after a ``renderer='naive'`` row (the naive numba loop, with gigapoint's largest thread
+    count) unless ``naive`` is False.
+    ``out`` (a directory) receives the PNG of each gigapoint, naive and GL frame.
     ``progress`` (callable taking a string) is told what is being measured.
     """
     import numba
@@ -375,6 +503,7 @@ def run_render_benchmark(
             lo, hi = cloud.bounds
             center = (lo + hi) / 2
             n_reason = gl_reason
+            xyz = None  # the naive loop's float32 copy of the points, made when first needed
             if baseline is not None:
                 say(f"{n:,} points: uploading to GL")
                 try:
@@ -414,6 +543,15 @@ def run_render_benchmark(
                         best = (row, frame)
                 if out_dir is not None:
                     _save_png(out_dir / f"gigapoint_{n}_{view}.png", best[1].image)
+                if naive:
+                    say(f"{n:,} points, {view}: the naive numba loop")
+                    if xyz is None:
+                        xyz = relative_cloud(cloud, center)
+                    naive_row = {"kind": "render", "renderer": "naive", "points": n, "view": view, "width": width, "height": height}
+                    image = _measure_naive(naive_row, xyz, cloud, camera, center, settings_for[threads[0]].background, repeats, best)
+                    results.append(naive_row)
+                    if out_dir is not None:
+                        _save_png(out_dir / f"naive_{n}_{view}.png", image)
                 gl_row = {"kind": "render", "renderer": "gl", "points": n, "view": view, "width": width, "height": height}
                 if n_reason is None:
                     say(f"{n:,} points, {view}: GL_POINTS baseline")
@@ -427,7 +565,7 @@ def run_render_benchmark(
                 else:
                     gl_row.update(skipped=True, reason=n_reason)
                 results.append(gl_row)
-            del cloud
+            del cloud, xyz
     finally:
         if baseline is not None:
             baseline.release()
@@ -522,6 +660,19 @@ def results_table(results: list[dict]):
                 f"{r['coverage']:.1%}",
                 f"raster {r['raster_ms']:,.1f} ms",
             )
+        elif r["kind"] == "render" and r["renderer"] == "naive":
+            table.add_row(
+                _short(r["points"]),
+                "naive loop",
+                r["view"],
+                str(r["threads"]),
+                f"{r['frame_ms']:,.1f}",
+                _mps(r["points_per_second"]),
+                "",
+                "",
+                f"{r['coverage']:.1%}",
+                f"loop {r['raster_ms']:,.1f} ms; gigapoint / naive = {r['gigapoint_over_naive']:.2f}x; IoU {r['coverage_iou']:.2f}",
+            )
         elif r["kind"] == "render" and r["renderer"] == "gl":
             if r.get("skipped"):
                 table.add_row(_short(r["points"]), "GL_POINTS", r["view"], "", "", "", "", "", "", f"skipped: {r['reason']}")
@@ -561,6 +712,8 @@ __all__ = [
     "benchmark_cameras",
     "demo_cloud",
     "gl_matrix",
+    "naive_frame",
+    "naive_raster",
     "parse_count",
     "parse_threads",
     "print_results",

@@ -14,6 +14,8 @@ from gigapoint.bench import (
     benchmark_cameras,
     demo_cloud,
     gl_matrix,
+    naive_frame,
+    naive_matrix,
     parse_count,
     parse_threads,
     results_table,
@@ -77,6 +79,67 @@ def test_gl_baseline_ran_and_matches_or_was_skipped(bench_run):
         assert (out / f"gl_{N}_{r['view']}.png").is_file()
     for view in ("overview", "closeup"):
         assert (out / f"gigapoint_{N}_{view}.png").is_file()
+
+
+def test_naive_baseline_rows(bench_run):
+    results, out = bench_run
+    rows = [r for r in results if r["kind"] == "render" and r["renderer"] == "naive"]
+    assert [r["view"] for r in rows] == ["overview", "closeup"]
+    gigapoint = [r for r in results if r["kind"] == "render" and r["renderer"] == "gigapoint"]
+    for r in rows:
+        best = max((g for g in gigapoint if g["view"] == r["view"]), key=lambda g: g["threads"])  # what the loop is compared with
+        assert r["threads"] == best["threads"] and r["points_per_second"] == pytest.approx(N / (r["frame_ms"] / 1e3))
+        assert 0 < r["raster_ms"] <= r["frame_ms"] and len(r["frame_ms_runs"]) == 1
+        assert r["gigapoint_over_naive"] == pytest.approx(best["points_per_second"] / r["points_per_second"])
+        # the same points and view: the same pixels covered (float32 positions against 10/20/30-bit batches)
+        assert abs(r["coverage"] - best["coverage"]) <= COVERAGE_TOLERANCE and r["coverage_iou"] > 0.9
+        assert (out / f"naive_{N}_{r['view']}.png").is_file()
+    assert "naive loop" in _table_text(results)
+
+
+def test_no_naive_skips_it():
+    results = run_render_benchmark(points=(20_000,), width=64, height=48, threads=(1,), repeats=1, gl=False, naive=False, views=("overview",))
+    assert not [r for r in results if r.get("renderer") == "naive"]
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_naive_loop_is_the_plain_per_point_min(threads):
+    """naive_frame == a numpy transcription of the loop (same float32 operations, np.minimum.at
+    per pixel), whatever the thread count; points behind, beside or beyond the frustum drop out."""
+    bounds = (np.array([0.0, 0.0, 0.0]), np.array([100.0, 80.0, 30.0]))
+    cam = benchmark_cameras(bounds, 96, 64)["closeup"]
+    near, far = cam.clip_range(bounds)
+    center = (bounds[0] + bounds[1]) / 2
+    rng = np.random.default_rng(1)
+    xyz = (rng.random((50_000, 3)) * (bounds[1] - bounds[0]) + bounds[0] - center).astype(np.float32)
+    xyz[::7] = xyz[3::7][: len(xyz[::7])]  # repeated positions: ties go to the lower index
+    color = rng.integers(0, 2**32, len(xyz), dtype=np.uint64).astype(np.uint32)
+    vis, colors, seconds = naive_frame(xyz, color, cam, near, far, threads, (1, 2, 3, 255), center)
+    m = naive_matrix(cam, center)
+    x, y, z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    sx, sy, sw, sd = (m[r, 0] * x + m[r, 1] * y + m[r, 2] * z + m[r, 3] for r in range(4))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        px, py = sx / sw, sy / sw
+    keep = (sw > 0) & (sd > np.float32(near)) & (sd < np.float32(far)) & (px >= 0) & (px < cam.width) & (py >= 0) & (py < cam.height)
+    assert 0 < keep.sum() < len(xyz)  # some points are outside the view
+    idx = np.flatnonzero(keep)
+    pix = py[keep].astype(np.int64) * cam.width + px[keep].astype(np.int64)
+    keys = (sd[keep].view(np.uint32).astype(np.uint64) << np.uint64(32)) | idx.astype(np.uint64)
+    ref = np.full(cam.width * cam.height, np.uint64(2**64 - 1))
+    np.minimum.at(ref, pix, keys)
+    np.testing.assert_array_equal(vis, ref)
+    bg = np.array([1, 2, 3, 255], np.uint8).view(np.uint32)[0]
+    hit = ref != np.uint64(2**64 - 1)
+    np.testing.assert_array_equal(colors[hit], color[(ref[hit] & np.uint64(0xFFFFFFFF)).astype(np.int64)])
+    assert (colors[~hit] == bg).all() and seconds > 0
+
+
+def _table_text(results) -> str:
+    from rich.console import Console
+
+    console = Console(record=True, width=240)
+    console.print(results_table(results))
+    return console.export_text()
 
 
 def test_table_and_json(bench_run, tmp_path):

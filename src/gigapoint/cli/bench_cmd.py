@@ -17,10 +17,11 @@ def bench(
     threads: list[str] = typer.Option(["1", "all"], "--threads", help="Thread counts to measure (repeat; 'all' = every core)."),
     repeats: int = typer.Option(5, help="Timed frames per measurement (the median is reported)."),
     gl: bool = typer.Option(True, "--gl/--no-gl", help="Also time GL_POINTS through OpenGL (Mesa llvmpipe via EGL)."),
+    naive: bool = typer.Option(True, "--naive/--no-naive", help="Also time a naive numba loop over the same points."),
     out: Path | None = typer.Option(None, "--out", help="Directory for the frames as PNG and bench_render.json."),
     json_path: Path | None = typer.Option(None, "--json", help="Where to write the JSON results (default: <out>/bench_render.json)."),
 ) -> None:
-    """Measure brute-force rendering (points/s) of the demo scene, overview and close-up, against GL_POINTS."""
+    """Measure brute-force rendering (points/s) of the demo scene, overview and close-up, against GL_POINTS and a naive loop."""
     from rich.console import Console
 
     from ..bench import parse_count, parse_threads, print_results, run_render_benchmark, write_results
@@ -35,6 +36,7 @@ def bench(
         threads=thread_counts,
         repeats=repeats,
         gl=gl,
+        naive=naive,
         out=out,
         progress=lambda m: err.print(f"[dim]{m}[/dim]"),
     )
