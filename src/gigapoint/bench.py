@@ -631,6 +631,11 @@ def _short(n: int) -> str:
     return str(n)
 
 
+def _render_row(table, r: dict, step: str, threads: str, note: str, culled: str = "", bits: str = "") -> None:
+    """One timed frame's row: gigapoint, the naive loop or GL_POINTS."""
+    table.add_row(_short(r["points"]), step, r["view"], threads, f"{r['frame_ms']:,.1f}", _mps(r["points_per_second"]), culled, bits, f"{r['coverage']:.1%}", note)
+
+
 def results_table(results: list[dict]):
     """A rich Table of ``run_render_benchmark`` results."""
     from rich.table import Table
@@ -648,48 +653,19 @@ def results_table(results: list[dict]):
             table.add_row(_short(r["points"]), step, "", "", f"{r['seconds'] * 1e3:,.0f}", _mps(r["points_per_second"]), "", "", "", note)
         elif r["kind"] == "render" and r["renderer"] == "gigapoint":
             h = r["precision_histogram"]
-            table.add_row(
-                _short(r["points"]),
-                "gigapoint",
-                r["view"],
-                str(r["threads"]),
-                f"{r['frame_ms']:,.1f}",
-                _mps(r["points_per_second"]),
-                f"{r['batches_culled']:,}/{r['batches_total']:,}",
-                "/".join(_short(h[b]) for b in ("10", "20", "30")),
-                f"{r['coverage']:.1%}",
-                f"raster {r['raster_ms']:,.1f} ms",
-            )
+            culled = f"{r['batches_culled']:,}/{r['batches_total']:,}"
+            bits = "/".join(_short(h[b]) for b in ("10", "20", "30"))
+            _render_row(table, r, "gigapoint", str(r["threads"]), f"raster {r['raster_ms']:,.1f} ms", culled, bits)
         elif r["kind"] == "render" and r["renderer"] == "naive":
-            table.add_row(
-                _short(r["points"]),
-                "naive loop",
-                r["view"],
-                str(r["threads"]),
-                f"{r['frame_ms']:,.1f}",
-                _mps(r["points_per_second"]),
-                "",
-                "",
-                f"{r['coverage']:.1%}",
-                f"loop {r['raster_ms']:,.1f} ms; gigapoint / naive = {r['gigapoint_over_naive']:.2f}x; IoU {r['coverage_iou']:.2f}",
-            )
+            note = f"loop {r['raster_ms']:,.1f} ms; gigapoint / naive = {r['gigapoint_over_naive']:.2f}x; IoU {r['coverage_iou']:.2f}"
+            _render_row(table, r, "naive loop", str(r["threads"]), note)
         elif r["kind"] == "render" and r["renderer"] == "gl":
             if r.get("skipped"):
                 table.add_row(_short(r["points"]), "GL_POINTS", r["view"], "", "", "", "", "", "", f"skipped: {r['reason']}")
                 continue
             ok = "ok" if r["coverage_matches"] else "MISMATCH"
-            table.add_row(
-                _short(r["points"]),
-                "GL_POINTS",
-                r["view"],
-                str(env.get("gl_threads", "all")),
-                f"{r['frame_ms']:,.1f}",
-                _mps(r["points_per_second"]),
-                "",
-                "",
-                f"{r['coverage']:.1%}",
-                f"gigapoint ({r['gigapoint_threads']} thr) / GL = {r['gigapoint_over_gl']:.1f}x; coverage {ok}, IoU {r['coverage_iou']:.2f}",
-            )
+            note = f"gigapoint ({r['gigapoint_threads']} thr) / GL = {r['gigapoint_over_gl']:.1f}x; coverage {ok}, IoU {r['coverage_iou']:.2f}"
+            _render_row(table, r, "GL_POINTS", str(env.get("gl_threads", "all")), note)
     if env.get("gl_renderer"):
         table.caption += f"\nGL: {env['gl_renderer']}; CPU: {env['cpu_count']} cores, numba {env['numba']}"
     return table

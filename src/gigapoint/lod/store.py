@@ -28,6 +28,7 @@ from numba import njit
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
 from ..errors import InputError
+from ..render.selection import box_in_view
 from .keys import key_cube, level_of
 
 META_NAME = "octree.json"
@@ -141,34 +142,7 @@ def write_gigapoint(out: Path, sources: list[Path], st: dict, name: str, sampler
 def _box_test(rows, bmin, size, width, height, near, far):
     """(in the frustum, projected size in px, distance of its projection from the image centre
     as a fraction of the half diagonal) of a box; size inf and distance 0 when it crosses the near plane."""
-    all_l = all_r = all_t = all_b = all_n = all_f = True
-    in_front = True
-    xmin = ymin = np.inf
-    xmax = ymax = -np.inf
-    for c in range(8):
-        x = bmin[0] + size[0] * ((c >> 2) & 1)
-        y = bmin[1] + size[1] * ((c >> 1) & 1)
-        z = bmin[2] + size[2] * (c & 1)
-        sx = rows[0, 0] * x + rows[0, 1] * y + rows[0, 2] * z + rows[0, 3]
-        sy = rows[1, 0] * x + rows[1, 1] * y + rows[1, 2] * z + rows[1, 3]
-        sw = rows[2, 0] * x + rows[2, 1] * y + rows[2, 2] * z + rows[2, 3]
-        sd = rows[3, 0] * x + rows[3, 1] * y + rows[3, 2] * z + rows[3, 3]
-        all_l &= sx < 0
-        all_r &= sx > width * sw
-        all_t &= sy < 0
-        all_b &= sy > height * sw
-        all_n &= sd < near
-        all_f &= sd > far
-        if sw <= 0 or sd < near:
-            in_front = False
-        else:
-            px = sx / sw
-            py = sy / sw
-            xmin = min(xmin, px)
-            xmax = max(xmax, px)
-            ymin = min(ymin, py)
-            ymax = max(ymax, py)
-    visible = not (all_l or all_r or all_t or all_b or all_n or all_f)
+    visible, in_front, xmin, xmax, ymin, ymax = box_in_view(rows, bmin[0], bmin[1], bmin[2], size[0], size[1], size[2], width, height, near, far)
     if not in_front:
         return visible, np.inf, 0.0
     cx = min(max(width * 0.5, xmin), xmax) - width * 0.5
