@@ -29,3 +29,23 @@ def test_seed_changes_the_scene():
     a, _, _ = demo_arrays(1000, seed=1)
     b, _, _ = demo_arrays(1000, seed=2)
     assert not np.array_equal(a, b)
+
+
+def test_mod_is_pythons_modulo_at_the_boundaries():
+    """The generator's fmod-free ``_mod`` equals Python's ``a % m`` for a >= 0, also one to three
+    ulps either side of every multiple (where the quotient rounds to the next integer)."""
+    from numba import njit
+
+    from gigapoint.core.demo import _mod
+
+    mod = njit(lambda a, m: _mod(a, m))
+    rng = np.random.default_rng(0)
+    for m in (100.0, 4.0, 3.5):
+        values = list(rng.random(20_000) * 1000.0)
+        for k in range(300):
+            v_lo = v_hi = k * m
+            for _ in range(3):
+                v_lo, v_hi = np.nextafter(v_lo, -np.inf), np.nextafter(v_hi, np.inf)
+                values += [v for v in (v_lo, v_hi) if v >= 0]
+        got = [mod(v, m) for v in values]
+        assert got == [v % m for v in values]

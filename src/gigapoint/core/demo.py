@@ -76,9 +76,18 @@ def _grid_height(grid, x, y):
 
 
 @njit(inline="always")
+def _mod(a, m):
+    """a mod m for a >= 0, as Python's ``a % m`` but without its libm ``fmod`` call (which
+    took ~15 % of the generator's time); the fix-up covers a quotient rounded up to the next
+    integer, so the result stays in [0, m)."""
+    r = a - m * math.floor(a / m)
+    return r + m if r < 0.0 else r
+
+
+@njit(inline="always")
 def _is_road(x, y):
-    dx = abs((x % _LOT) - _LOT * 0.5)
-    dy = abs((y % _LOT) - _LOT * 0.5)
+    dx = abs(_mod(x, _LOT) - _LOT * 0.5)
+    dy = abs(_mod(y, _LOT) - _LOT * 0.5)
     return dx > _LOT * 0.5 - _ROAD_HALF_WIDTH or dy > _LOT * 0.5 - _ROAD_HALF_WIDTH
 
 
@@ -181,7 +190,7 @@ def _building_point(seed, i, grid, lots, out, rgba, cls, inten, j):
             x, y = cx - w / 2, cy + d / 2 - (p - 2 * w - d)
         z = base + v * h
         # windows: darker cells in a regular pattern
-        window = (p % 4.0) < 2.0 and ((z - base) % 3.5) < 1.8 and (z - base) > 1.0
+        window = _mod(p, 4.0) < 2.0 and _mod(z - base, 3.5) < 1.8 and (z - base) > 1.0
         if style < 0.33:
             r, g, b = 200, 190, 170
         elif style < 0.66:
