@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit, prange
 
+from .backends.numba_cpu.backend import _KERNEL_LOCK
 from .backends.numba_cpu.raster import EMPTY, fill_empty, resolve_colors
 from .core import cloud_from_points, demo_arrays
 from .core.quantize import dequantize
@@ -311,21 +312,22 @@ def naive_frame(xyz, color, camera: Camera, near: float, far: float, n_threads: 
     import numba
 
     n_pixels = camera.width * camera.height
-    bufs = np.empty((n_threads, n_pixels), np.uint64)
-    for b in bufs:
-        fill_empty(b)
-    previous = numba.get_num_threads()
-    numba.set_num_threads(n_threads)
-    try:
-        t0 = time.perf_counter()
-        naive_raster(xyz, naive_matrix(camera, center), camera.width, camera.height, np.float32(near), np.float32(far), bufs)
-        t1 = time.perf_counter()
-        frame = np.empty(n_pixels, np.uint64)
-        naive_merge(bufs, frame)
-        colors = np.empty(n_pixels, np.uint32)
-        resolve_colors(frame, color, np.array(background, np.uint8).view(np.uint32)[0], colors)
-    finally:
-        numba.set_num_threads(previous)
+    with _KERNEL_LOCK:  # numba's parallel kernels: one caller at a time (backends/numba_cpu/backend.py)
+        previous = numba.get_num_threads()
+        numba.set_num_threads(n_threads)
+        try:
+            bufs = np.empty((n_threads, n_pixels), np.uint64)
+            for b in bufs:
+                fill_empty(b)
+            t0 = time.perf_counter()
+            naive_raster(xyz, naive_matrix(camera, center), camera.width, camera.height, np.float32(near), np.float32(far), bufs)
+            t1 = time.perf_counter()
+            frame = np.empty(n_pixels, np.uint64)
+            naive_merge(bufs, frame)
+            colors = np.empty(n_pixels, np.uint32)
+            resolve_colors(frame, color, np.array(background, np.uint8).view(np.uint32)[0], colors)
+        finally:
+            numba.set_num_threads(previous)
     return frame, colors, t1 - t0
 
 
