@@ -38,7 +38,7 @@ import numpy as np
 from numba import njit, prange
 
 from .backends.numba_cpu.backend import _KERNEL_LOCK
-from .backends.numba_cpu.raster import EMPTY, fill_empty, resolve_colors
+from .backends.numba_cpu.raster import EMPTY, TILE_SHIFT, fill_empty, merge, resolve_colors
 from .core import cloud_from_points, demo_arrays
 from .core.quantize import dequantize
 from .errors import GigapointError
@@ -289,16 +289,6 @@ def naive_raster(xyz, m, width, height, near, far, bufs):
                 buf[p] = key
 
 
-@njit(parallel=True, cache=True)
-def naive_merge(bufs, frame):
-    """frame[p] = min over the threads' buffers (every pixel: the naive loop keeps no tile flags)."""
-    for p in prange(frame.shape[0]):
-        k = bufs[0, p]
-        for t in range(1, bufs.shape[0]):
-            k = min(k, bufs[t, p])
-        frame[p] = k
-
-
 def naive_matrix(camera: Camera, center) -> np.ndarray:
     """float32 rows (x', y', w, depth) of ``camera`` for points given relative to ``center``."""
     to_world = np.eye(4)
@@ -322,8 +312,9 @@ def naive_frame(xyz, color, camera: Camera, near: float, far: float, n_threads: 
             t0 = time.perf_counter()
             naive_raster(xyz, naive_matrix(camera, center), camera.width, camera.height, np.float32(near), np.float32(far), bufs)
             t1 = time.perf_counter()
-            frame = np.empty(n_pixels, np.uint64)
-            naive_merge(bufs, frame)
+            frame = bufs[0]
+            if n_threads > 1:  # gigapoint's merge with every tile flagged: the naive loop keeps no flags
+                merge(frame, bufs[1:], np.ones((n_threads, (n_pixels >> TILE_SHIFT) + 1), np.uint8))
             colors = np.empty(n_pixels, np.uint32)
             resolve_colors(frame, color, np.array(background, np.uint8).view(np.uint32)[0], colors)
         finally:

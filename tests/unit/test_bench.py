@@ -143,12 +143,8 @@ def _table_text(results) -> str:
 
 
 def test_table_and_json(bench_run, tmp_path):
-    from rich.console import Console
-
     results, _ = bench_run
-    console = Console(record=True, width=240)
-    console.print(results_table(results))
-    text = console.export_text()
+    text = _table_text(results)
     assert "closeup" in text and "generate" in text and "Morton sort" in text
     path = write_results(results, tmp_path / "r.json")
     assert json.loads(path.read_text()) == json.loads(json.dumps(results))
