@@ -49,3 +49,19 @@ def test_mod_is_pythons_modulo_at_the_boundaries():
                 values += [v for v in (v_lo, v_hi) if v >= 0]
         got = [mod(v, m) for v in values]
         assert got == [v % m for v in values]
+
+
+def test_prefault_writes_one_byte_a_page_and_nothing_else():
+    """``_prefault`` (run on the new output arrays before generating) zeroes the first byte of
+    each 4 KiB page, including a last partial page, and leaves every other byte alone."""
+    from gigapoint.core.demo import _prefault
+
+    buffer = np.full(3 * 4096 + 100, 7, np.uint8)
+    _prefault(buffer)
+    pages = np.arange(0, buffer.size, 4096)
+    assert (buffer[pages] == 0).all() and pages.size == 4
+    rest = np.delete(buffer, pages)
+    assert (rest == 7).all()
+    _prefault(np.empty(0, np.uint8))  # an empty cloud's arrays
+    xyz, _, _ = demo_arrays(0)
+    assert xyz.shape == (0, 3)

@@ -254,6 +254,20 @@ def _generate(start, n, seed, grid, lots, trees, xyz, rgba, cls, inten):
             _tree_point(seed, i, trees, xyz, rgba, cls, inten, j)
 
 
+_PAGE = 4096
+
+
+@njit(parallel=True, cache=True)
+def _prefault(buffer):
+    """Write one byte of every page of ``buffer`` (u8, flat) in parallel, before generating.
+
+    At 100 M points the four new output arrays are 3.1 GB. Their first-touch faults,
+    taken inside ``_generate``, made it 1.16x slower (median of 8 alternating pairs) than
+    faulting them here first and generating after; at 20 M there is no difference."""
+    for k in prange((buffer.shape[0] + _PAGE - 1) // _PAGE):
+        buffer[k * _PAGE] = 0
+
+
 @functools.lru_cache(maxsize=4)
 def _scene_tables(seed: int):
     grid = _height_grid()
@@ -269,6 +283,8 @@ def demo_arrays(n_points: int, seed: int = 0, start: int = 0, offset=(0.0, 0.0, 
     rgba = np.empty((n_points, 4), np.uint8)
     cls = np.empty(n_points, np.uint8)
     inten = np.empty(n_points, np.uint16)
+    for array in (xyz, rgba, cls, inten):
+        _prefault(array.reshape(-1).view(np.uint8))
     _generate(start, n_points, seed, *_scene_tables(seed), xyz, rgba, cls, inten)
     if any(offset):
         xyz += np.asarray(offset, np.float64)
