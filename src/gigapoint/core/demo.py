@@ -268,7 +268,8 @@ def _generate(start, n, seed, grid, lots, trees, xyz, rgba, cls, inten):
     trees), so the kind branch does not mispredict on every other point. Terrain points go
     in three loops: positions, heights, then colours and stores. The height grid (2 MB) is
     read in a loop of independent lookups, whose latency overlaps; inside the whole point
-    it held up everything after it. 1.27-1.43x with the same points, bit for bit."""
+    it held up everything after it. 1.15-1.64x (5 M points, 1 and 2 threads), the same
+    points bit for bit."""
     for block in prange((n + _BLOCK - 1) // _BLOCK):
         j0 = block * _BLOCK
         m = min(_BLOCK, n - j0)
@@ -308,8 +309,8 @@ def _prefault(buffer):
     """Write one byte of every page of ``buffer`` (u8, flat) in parallel, before generating.
 
     At 100 M points the four new output arrays are 3.1 GB. Their first-touch faults,
-    taken inside ``_generate``, made it 1.16x slower (median of 8 alternating pairs) than
-    faulting them here first and generating after; at 20 M there is no difference."""
+    taken inside the (then per-point) ``_generate``, made it 1.1-1.4x slower (median 1.18,
+    8 alternating pairs) than faulting them here first; at 20 M there was no difference."""
     for k in prange((buffer.shape[0] + _PAGE - 1) // _PAGE):
         buffer[k * _PAGE] = 0
 
