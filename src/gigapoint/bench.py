@@ -322,6 +322,12 @@ def naive_frame(xyz, color, camera: Camera, near: float, far: float, n_threads: 
     return frame, colors, t1 - t0
 
 
+def coverage_iou(covered: np.ndarray, reference: np.ndarray) -> float:
+    """Intersection over union of two covered-pixel masks (1 when both are empty)."""
+    union = int((covered | reference).sum())
+    return int((covered & reference).sum()) / union if union else 1.0
+
+
 def _measure_naive(row: dict, xyz, cloud, camera: Camera, center, background, repeats: int, best) -> np.ndarray:
     """Time the naive loop's frame for one view with gigapoint's best thread count, fill ``row``,
     return its image."""
@@ -336,8 +342,6 @@ def _measure_naive(row: dict, xyz, cloud, camera: Camera, center, background, re
         times.append(time.perf_counter() - t0)
         kernel.append(k)
     covered = (vis != EMPTY).reshape(camera.height, camera.width)
-    gp_mask = ~gp_frame.empty
-    union = int((covered | gp_mask).sum())
     median = statistics.median(times)
     row.update(
         threads=n_threads,
@@ -346,7 +350,7 @@ def _measure_naive(row: dict, xyz, cloud, camera: Camera, center, background, re
         raster_ms=statistics.median(kernel) * 1e3,
         points_per_second=row["points"] / median,
         coverage=float(covered.mean()),
-        coverage_iou=int((covered & gp_mask).sum()) / union if union else 1.0,
+        coverage_iou=coverage_iou(covered, ~gp_frame.empty),
         gigapoint_threads=n_threads,
         gigapoint_over_naive=gp_row["points_per_second"] / (row["points"] / median),
     )
@@ -369,7 +373,6 @@ def _measure_gl(baseline: GLBaseline, row: dict, camera: Camera, cloud, center, 
     median = statistics.median(times)
     gp_row, gp_frame = best
     gp_mask = ~gp_frame.empty
-    union = int((covered | gp_mask).sum())
     coverage, gp_coverage = float(covered.mean()), float(gp_mask.mean())
     row.update(
         skipped=False,
@@ -380,7 +383,7 @@ def _measure_gl(baseline: GLBaseline, row: dict, camera: Camera, cloud, center, 
         coverage=coverage,
         coverage_gigapoint=gp_coverage,
         coverage_difference=abs(coverage - gp_coverage),
-        coverage_iou=int((covered & gp_mask).sum()) / union if union else 1.0,
+        coverage_iou=coverage_iou(covered, gp_mask),
         coverage_matches=abs(coverage - gp_coverage) <= COVERAGE_TOLERANCE,
         gigapoint_threads=gp_row["threads"],
         gigapoint_over_gl=gp_row["points_per_second"] / (row["points"] / median),

@@ -229,3 +229,16 @@ def test_gl_unavailable_is_reported_not_raised(monkeypatch, broken):
     assert expected in gl_rows[0]["reason"] and "\n" not in gl_rows[0]["reason"]
     assert results[0]["gl_renderer"] is None
     assert any(r.get("renderer") == "gigapoint" and r["points_per_second"] > 0 for r in results)
+
+
+def test_coverage_iou_of_two_masks():
+    from gigapoint.bench import coverage_iou
+
+    a = np.zeros((4, 4), bool)
+    b = np.zeros((4, 4), bool)
+    assert coverage_iou(a, b) == 1.0  # both empty
+    a[0, :] = True  # 4 pixels
+    b[0, :2] = True
+    b[1, 0] = True  # 3 pixels, 2 shared: IoU 2 / 5
+    assert coverage_iou(a, b) == 0.4
+    assert coverage_iou(a, ~a) == 0.0
