@@ -97,8 +97,7 @@ def main() -> None:
         print(f"{name:28s} {c:8.1f} ms  plain {p:6.1f} ms  {r:5.2f}x (fastest frames {best:.2f}x)")
         rows.append((name, c, p, r, best))
     # screen-space passes alone
-    from gigapoint.render.passes.edl import eye_dome_lighting
-    from gigapoint.render.passes.holes import fill_holes
+    from gigapoint.backends.numba_cpu.passes import eye_dome_lighting, fill_holes
 
     f = gp.render_frame(cloud, cam, base)
     vis = f.visibility.reshape(-1)

@@ -27,7 +27,7 @@ from rich.table import Table
 
 import gigapoint
 from gigapoint.errors import GigapointError
-from gigapoint.render.selection import Selection, select
+from gigapoint.core.selection import Selection, select
 
 
 def parse_count(text: str) -> int:

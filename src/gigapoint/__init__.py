@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from . import backends as _backends  # noqa: F401  (registers the cpu and wgpu backends with render)
 from .core import PointChunk, PointCloud, demo_arrays, from_arrays
 from .errors import GigapointError, GigapointWarning
 from .render import Camera, Frame, RenderSettings, RenderStats, render, render_frame

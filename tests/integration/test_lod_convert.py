@@ -12,11 +12,22 @@ import numpy as np
 import pytest
 
 from gigapoint.cli import main
-from gigapoint.lod import OutputExistsError, convert, open_octree
+from gigapoint.lod import OctreeDir, OutputExistsError, convert, open_octree
+from gigapoint.lod.convert import hooks
 
 laspy = pytest.importorskip("laspy")
 
 SHARED = Path(__file__).resolve().parents[2] / ".." / "shared" / "data"
+
+
+def _interrupt_after(monkeypatch, n):
+    """The conversion stops (KeyboardInterrupt) once it has built ``n`` partitions in a run; None: never."""
+
+    def hook(done):
+        if done == n:
+            raise KeyboardInterrupt(f"test interrupt after {done} partitions")
+
+    monkeypatch.setattr(hooks, "after_partition_built", hook)
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +75,7 @@ def test_las_conversion_counts_and_layout(reference, demo_las):
 
 def test_interrupted_conversion_resumes_to_the_same_result(demo_las, reference, tmp_path, monkeypatch):
     out = tmp_path / "oct"
-    monkeypatch.setenv("GIGAPOINT_TEST_INTERRUPT", "raise:2")
+    _interrupt_after(monkeypatch, 2)
     with pytest.raises(KeyboardInterrupt):
         convert([demo_las], out, **OPTS)
     assert not (out / "octree.json").exists() and (out / ".partial" / "state.json").exists()
@@ -83,7 +94,7 @@ def test_interrupted_conversion_resumes_to_the_same_result(demo_las, reference, 
     assert preview.n_points == len(every) == state["preview"]["points"]
     # positions come back at 30-bit batch precision, far finer than the LAS file's millimetres
     np.testing.assert_array_equal(np.unique(np.round(preview.positions(), 3), axis=0), np.unique(np.round(every, 3), axis=0))
-    monkeypatch.delenv("GIGAPOINT_TEST_INTERRUPT")
+    _interrupt_after(monkeypatch, None)
     res = convert([demo_las], out, **OPTS)
     assert res.resumed
     assert not (out / ".partial").exists()
@@ -164,15 +175,16 @@ def test_killed_conversion_resumes_via_cli(demo_las, tmp_path):
     """SIGKILL in the middle of the build phase, then the same command again: it resumes."""
     out = tmp_path / "oct"
     code = "import sys; from gigapoint.cli import main; sys.exit(main(sys.argv[1:]))"
-    argv = [sys.executable, "-c", code, "convert", str(demo_las), "-o", str(out), "--memory-limit", "64M", "--max-leaf", "3000", "--quiet"]
-    env = dict(os.environ, GIGAPOINT_TEST_INTERRUPT="kill:1")
-    proc = subprocess.run(argv, env=env, capture_output=True, timeout=300, check=False)
+    # the first run kills itself once it has built one partition
+    kill = "import os, signal; from gigapoint.lod.convert import hooks; hooks.after_partition_built = lambda done: os.kill(os.getpid(), signal.SIGKILL); "
+    args = ["convert", str(demo_las), "-o", str(out), "--memory-limit", "64M", "--max-leaf", "3000", "--quiet"]
+    argv = [sys.executable, "-c", code, *args]
+    proc = subprocess.run([sys.executable, "-c", kill + code, *args], capture_output=True, timeout=300, check=False)
     assert proc.returncode == -9, proc.stderr.decode()[-2000:]
     assert not (out / "octree.json").exists()
     state = json.loads((out / ".partial" / "state.json").read_text())
     assert state["phase"] == "build" and len(state["partitions"]) >= 2
-    env.pop("GIGAPOINT_TEST_INTERRUPT")
-    proc = subprocess.run(argv, env=env, capture_output=True, timeout=300, check=False)
+    proc = subprocess.run(argv, capture_output=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stderr.decode()[-2000:]
     assert "(resumed)" in proc.stdout.decode()
     ref = tmp_path / "ref"
@@ -187,10 +199,10 @@ def test_killed_conversion_resumes_via_cli(demo_las, tmp_path):
 def test_changed_input_restarts_clean(demo_las, tmp_path, monkeypatch, las_writer):
     src = las_writer(tmp_path / "a.las", 60_000, seed=1)
     out = tmp_path / "oct"
-    monkeypatch.setenv("GIGAPOINT_TEST_INTERRUPT", "raise:1")
+    _interrupt_after(monkeypatch, 1)
     with pytest.raises(KeyboardInterrupt):
         convert([src], out, **OPTS)
-    monkeypatch.delenv("GIGAPOINT_TEST_INTERRUPT")
+    _interrupt_after(monkeypatch, None)
     las_writer(src, 40_000, seed=2)  # the input changed meanwhile: no resume
     res = convert([src], out, **OPTS)
     assert not res.resumed and res.points == 40_000
@@ -275,18 +287,15 @@ def test_a_second_conversion_into_the_same_directory_stops_at_once(demo_las, ref
     """Two conversions into one OUT would clear or interleave each other's files: the second one
     is refused while the first holds OUT (here: this process holding its lock), and once the
     first is gone a re-run works."""
-    import importlib
-
-    conv = importlib.import_module("gigapoint.lod.convert")
     out = tmp_path / "oct"
-    held = conv._lock_output(out)
+    held = OctreeDir(out).lock()
     try:
         assert main(["convert", str(demo_las), "-o", str(out), "--quiet"]) == 1
         err = capsys.readouterr().err
         assert "another conversion is writing into it" in err and err.count("\n") == 1
         assert sorted(p.name for p in out.iterdir()) == []  # nothing was written or cleared
     finally:
-        os.close(held)
+        held.release()
     res = convert([demo_las], out, **OPTS)
     assert res.points == 150_000
     _assert_same(_snapshot(out), reference)
@@ -297,9 +306,9 @@ def test_the_lock_goes_with_a_killed_conversion(demo_las, tmp_path):
     leave OUT locked."""
     out = tmp_path / "oct"
     code = (
-        "import importlib, os, signal; conv = importlib.import_module('gigapoint.lod.convert'); "
-        f"conv._lock_output(__import__('pathlib').Path({str(out)!r})); os.kill(os.getpid(), signal.SIGKILL)"
+        "import os, signal; from gigapoint.lod import OctreeDir; "
+        f"OctreeDir({str(out)!r}).lock(); os.kill(os.getpid(), signal.SIGKILL)"
     )
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, check=False)
     assert proc.returncode == -9
     assert convert([demo_las], out, **OPTS).points == 150_000

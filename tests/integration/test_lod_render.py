@@ -65,7 +65,7 @@ def test_point_budget_and_threshold_limit_what_is_drawn(scene):
     assert 0 < small <= 60_000
     # the selection is closed under parents (additive LOD) and takes the largest nodes first
     near, far = cam.clip_range(oc.bounds)
-    ids, sizes, total = oc.select_nodes(cam, s.replace(point_budget=60_000), near, far)
+    ids, sizes, total = oc.select_nodes(cam.view(oc.bounds), s.replace(point_budget=60_000))
     assert total <= 60_000 and ids[0] == 0
     chosen = set(oc.keys[ids].tolist())
     assert all((k >> 3) in chosen for k in chosen if k != 1)
@@ -161,8 +161,8 @@ def test_foveated_threshold_keeps_the_centre_and_thins_the_periphery(scene):
     cam = Camera.look_at((500, -150, 250), (500, 500, 0), width=480, height=320)
     s = RenderSettings(backend="cpu", lod_threshold_px=60.0, adaptive_precision=False)
     near, far = cam.clip_range(oc.bounds)
-    plain, _, n_plain = oc.select_nodes(cam, s, near, far)
-    fov, _, n_fov = oc.select_nodes(cam, s.replace(lod_foveation=2.0), near, far)
+    plain, _, n_plain = oc.select_nodes(cam.view(oc.bounds), s)
+    fov, _, n_fov = oc.select_nodes(cam.view(oc.bounds), s.replace(lod_foveation=2.0))
     assert n_fov < n_plain and set(fov.tolist()) < set(plain.tolist())
     a = render_frame(oc, cam, s)
     b = render_frame(oc, cam, s.replace(lod_foveation=2.0))

@@ -8,7 +8,18 @@ from scipy.spatial import cKDTree
 
 from gigapoint.core import PointChunk, demo_arrays
 from gigapoint.lod import convert, open_octree
+from gigapoint.lod.convert import hooks
 from gigapoint.lod.keys import key_cube, key_name, key_of, level_of, name_key, point_codes
+
+
+def _interrupt_after(monkeypatch, n):
+    """The conversion stops (KeyboardInterrupt) once it has built ``n`` partitions in a run; None: never."""
+
+    def hook(done):
+        if done == n:
+            raise KeyboardInterrupt(f"test interrupt after {done} partitions")
+
+    monkeypatch.setattr(hooks, "after_partition_built", hook)
 
 
 def _mm_chunks(n, seed=0, chunk=40_000):
@@ -222,13 +233,13 @@ def test_dense_spot_is_split_below_the_count_grid(tmp_path, monkeypatch):
     xyz = np.round(xyz * 1000) / 1000
     rgba = rng.integers(0, 256, (len(xyz), 4), dtype=np.uint8)
     chunks = [PointChunk(xyz[s : s + 10_000], rgba[s : s + 10_000]) for s in range(0, len(xyz), 10_000)]
-    monkeypatch.setenv("GIGAPOINT_TEST_INTERRUPT", "raise:1")
+    _interrupt_after(monkeypatch, 1)
     with pytest.raises(KeyboardInterrupt):
         convert(chunks, tmp_path / "many", max_leaf=1_000, partition_points=4_000)
     state = json.loads((tmp_path / "many" / ".partial" / "state.json").read_text())
     levels = [p[0] for p in state["partitions"]]
     assert max(levels) > 7 and max(state["part_counts"]) <= 4_000
-    monkeypatch.delenv("GIGAPOINT_TEST_INTERRUPT")
+    _interrupt_after(monkeypatch, None)
     convert(chunks, tmp_path / "many", max_leaf=1_000, partition_points=4_000)  # not resumable (chunks): starts clean
     convert(chunks, tmp_path / "one", max_leaf=1_000)
     a, b = open_octree(tmp_path / "one"), open_octree(tmp_path / "many")

@@ -213,7 +213,7 @@ def test_potree_nodes_load_on_demand_into_the_bounded_arena(big_potree, encoding
 
     def selected(cam):
         near, far = cam.clip_range(oc.bounds)
-        ids, _, _ = oc.select_nodes(cam, s, near, far)
+        ids, _, _ = oc.select_nodes(cam.view(oc.bounds), s)
         return ids[oc.nodes["count"][ids] > 0]
 
     def slots(ids):

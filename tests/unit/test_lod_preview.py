@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import importlib
 import json
-import os
 import time
 import warnings
 
@@ -14,11 +13,24 @@ import pytest
 import gigapoint as gp
 from gigapoint.cli import main
 from gigapoint.errors import GigapointWarning, InputError
-from gigapoint.lod import OctreeCloud, convert
-from gigapoint.lod.preview import PREVIEW_NAME, PreviewSampler, preview_points
+from gigapoint.lod import OctreeCloud, OctreeDir, convert
+from gigapoint.lod.convert import hooks
+from gigapoint.lod.octree_dir import PREVIEW as PREVIEW_NAME
+from gigapoint.lod.preview import PreviewSampler, preview_points
 
 laspy = pytest.importorskip("laspy")
-conv_mod = importlib.import_module("gigapoint.lod.convert")  # the module (gigapoint.lod.convert is the function)
+conv_mod = importlib.import_module("gigapoint.lod.convert")  # the package (gigapoint.lod.convert is the function)
+read_mod = importlib.import_module("gigapoint.lod.convert.read")  # the read phase: where input files are read
+
+
+def _interrupt_after(monkeypatch, n):
+    """The conversion stops (KeyboardInterrupt) once it has built ``n`` partitions in a run; None: never."""
+
+    def hook(done):
+        if done == n:
+            raise KeyboardInterrupt(f"test interrupt after {done} partitions")
+
+    monkeypatch.setattr(hooks, "after_partition_built", hook)
 
 
 def _chunk(start: int, n: int, with_intensity: bool = True):
@@ -126,7 +138,7 @@ def las_file(tmp_path_factory, las_writer):
 
 
 def _stop_reading_after(monkeypatch, k: int):
-    real = conv_mod._read_chunks
+    real = read_mod._read_chunks
 
     def chunks(path, size):
         for i, c in enumerate(real(path, size)):
@@ -134,7 +146,7 @@ def _stop_reading_after(monkeypatch, k: int):
                 raise KeyboardInterrupt("test: stopped while reading")
             yield c
 
-    monkeypatch.setattr(conv_mod, "_read_chunks", chunks)
+    monkeypatch.setattr(read_mod, "_read_chunks", chunks)
     return real
 
 
@@ -151,7 +163,7 @@ def _open_preview(out):
 def test_killed_while_reading_shows_what_was_read_and_resumes_exactly(las_file, tmp_path, monkeypatch):
     path, xyz = las_file
     out = tmp_path / "oct"
-    monkeypatch.setattr(conv_mod, "preview_points", lambda mem: 10_000)  # stride 10 for 100 000 points
+    monkeypatch.setattr(read_mod, "preview_points", lambda mem: 10_000)  # stride 10 for 100 000 points
     real = _stop_reading_after(monkeypatch, 3)
     with pytest.raises(KeyboardInterrupt):
         convert([path], out, **OPTS)
@@ -165,14 +177,14 @@ def test_killed_while_reading_shows_what_was_read_and_resumes_exactly(las_file, 
     assert (img[..., :3] != 0).any(axis=2).mean() > 0.05  # it draws something
 
     # resumed and stopped again after the read phase: the preview is exactly every 10th point
-    monkeypatch.setattr(conv_mod, "_read_chunks", real)
-    monkeypatch.setenv("GIGAPOINT_TEST_INTERRUPT", "raise:1")
+    monkeypatch.setattr(read_mod, "_read_chunks", real)
+    _interrupt_after(monkeypatch, 1)
     with pytest.raises(KeyboardInterrupt):
         convert([path], out, **OPTS)
     preview = _open_preview(out)
     _same_points(preview, xyz[::10])
 
-    monkeypatch.delenv("GIGAPOINT_TEST_INTERRUPT")
+    _interrupt_after(monkeypatch, None)
     res = convert([path], out, **OPTS)
     assert res.resumed and res.first_view_seconds == 0.0  # the interrupted run's preview was there all along
     assert isinstance(gp.open(out), OctreeCloud) and not (out / ".partial").exists()
@@ -239,7 +251,7 @@ def test_viewer_follows_the_conversion_to_the_octree(las_file, tmp_path, monkeyp
         assert core.watcher is not None
         assert "conversion stopped (run `gigapoint convert` again" in core.note  # the killed run holds no lock
         core.watcher.interval_s = 0.05
-        monkeypatch.setattr(conv_mod, "_read_chunks", real)
+        monkeypatch.setattr(read_mod, "_read_chunks", real)
         convert([path], out, **OPTS)  # finishes the conversion while the viewer is open
         deadline = time.monotonic() + 20
         while not (isinstance(core.cloud, OctreeCloud) and session.last is not None and session.last.cloud is core.cloud):
@@ -263,7 +275,7 @@ def test_view_waits_for_the_first_preview(tmp_path):
     t0 = time.monotonic()
     assert awaiting_preview(out) and not wait_for_preview(out, timeout_s=30, poll_s=0.05)
     assert time.monotonic() - t0 < 5
-    lock = conv_mod._lock_output(out)  # a conversion at work (it holds OUT's lock)
+    lock = OctreeDir(out).lock()  # a conversion at work (it holds OUT's lock)
     try:
         assert not wait_for_preview(out, timeout_s=0.3, poll_s=0.05)  # times out
 
@@ -280,7 +292,7 @@ def test_view_waits_for_the_first_preview(tmp_path):
             assert gp.open(out).n_points == 50
         assert "stopped" not in str(caught[0].message)
     finally:
-        os.close(lock)
+        lock.release()
     with pytest.warns(GigapointWarning, match="it has stopped: run `gigapoint convert` again to resume it"):
         gp.open(out)
 
@@ -288,14 +300,14 @@ def test_view_waits_for_the_first_preview(tmp_path):
 def test_conversion_running_follows_the_output_lock(tmp_path):
     out = tmp_path / "oct"
     out.mkdir()
-    assert conv_mod.conversion_running(out) is False
-    lock = conv_mod._lock_output(out)
+    assert OctreeDir(out).running is False
+    lock = OctreeDir(out).lock()
     try:
-        assert conv_mod.conversion_running(out) is True
-        assert conv_mod.conversion_running(out) is True  # probing leaves the lock where it was
+        assert OctreeDir(out).running is True
+        assert OctreeDir(out).running is True  # probing leaves the lock where it was
         with pytest.raises(conv_mod.ConvertError, match="another conversion is writing into it"):
-            conv_mod._lock_output(out)
+            OctreeDir(out).lock()
     finally:
-        os.close(lock)
-    assert conv_mod.conversion_running(out) is False
-    assert conv_mod.conversion_running(tmp_path / "missing") is None
+        lock.release()
+    assert OctreeDir(out).running is False
+    assert OctreeDir(tmp_path / "missing").running is None

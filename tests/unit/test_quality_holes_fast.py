@@ -7,7 +7,8 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.core.layout import EMPTY_PIXEL
-from gigapoint.render.passes.holes import fill_holes, fill_holes_reference
+from gigapoint.backends.numba_cpu.passes import fill_holes
+from gigapoint.render.passes.holes import fill_holes_reference
 
 
 def random_vis(width, height, empty_frac, seed):

@@ -7,10 +7,11 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.core.layout import EMPTY_PIXEL
-from gigapoint.render.passes.edl import edl_reference, eye_dome_lighting
-from gigapoint.render.passes.holes import fill_holes, fill_holes_reference
-from gigapoint.render.passes.hqs import hqs_colors, hqs_reference
-from gigapoint.render.selection import select
+from gigapoint.backends.numba_cpu.passes import eye_dome_lighting, fill_holes, hqs_colors
+from gigapoint.render.passes.edl import edl_reference
+from gigapoint.render.passes.holes import fill_holes_reference
+from gigapoint.render.passes.hqs import hqs_reference
+from gigapoint.core.selection import select
 
 W, H = 48, 32
 
@@ -178,7 +179,7 @@ def test_hqs_kernel_equals_reference_and_thread_count(demo):
         for threads in (1, 2):
             got = hqs_colors(cloud, sel, vis, cam.width, cam.height, near, far, cloud.color, fallback, tol, threads)
             np.testing.assert_array_equal(got, ref)
-    from gigapoint.render.passes.splats import splat_params
+    from gigapoint.render.splats import splat_params
 
     for kw in (
         {"point_size": 3},
@@ -214,7 +215,7 @@ def test_hqs_mean_is_exact_past_the_packed_sums():
     np.testing.assert_array_equal(f.image[H - 11, 20], (rgba[:n].astype(np.int64).sum(0) + n // 2) // n)
     assert tuple(f.image[H - 21, 10]) == tuple(rgba[n])
     cloud = gp.from_arrays(xyz, rgba, name="pile")
-    from gigapoint.render.passes.splats import splat_params
+    from gigapoint.render.splats import splat_params
 
     near, far = cam.clip_range(cloud.bounds)
     sel = select(cloud.batches, cam.screen_rows(), W, H, near, far)
@@ -232,7 +233,7 @@ def test_hqs_mean_is_exact_past_the_packed_sums():
 
 def test_hqs_bands_and_cameras_inside_the_cloud(demo):
     """The screen bands (many, and batches reaching behind the eye) change nothing."""
-    from gigapoint.render.passes.splats import splat_params
+    from gigapoint.render.splats import splat_params
 
     cloud, _, _ = demo
     lo, hi = np.asarray(cloud.bounds[0]), np.asarray(cloud.bounds[1])
@@ -254,7 +255,7 @@ def test_hqs_packed_mean_is_exact_for_every_lane_sum():
     """The resolve's float32 reciprocal gives round-half-up(s / n) for every lane sum s <= 255 n, n <= 32."""
     from numba import njit
 
-    from gigapoint.backends.numba_cpu.passes import _lane_mean
+    from gigapoint.backends.numba_cpu.pass_kernels import _lane_mean
 
     @njit
     def all_means(out):
@@ -271,7 +272,7 @@ def test_hqs_packed_mean_is_exact_for_every_lane_sum():
 
 
 def test_hqs_bands_share_the_points_evenly():
-    from gigapoint.render.passes.hqs import split_rows
+    from gigapoint.backends.numba_cpu.passes import split_rows
 
     # 90 000 points over rows 0..99, 10 000 over rows 100..999 of a 100 px wide screen
     lo, hi, span, counts = np.array([0, 100]), np.array([99, 999]), np.array([100.0, 900.0]), np.array([90_000, 10_000])

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import gigapoint as gp
-from gigapoint.render.passes.splats import footprint
+from gigapoint.render.splats import footprint
 from gigapoint.render.reference import reference_visibility
 
 W, H = 48, 32

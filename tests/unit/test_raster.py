@@ -158,7 +158,7 @@ def test_all_invalid_points_is_an_error():
 def _batch_views(cloud, cam):
     """Per selected batch: (inside_frustum as the kernel decides, matrix shape)."""
     from gigapoint.backends.numba_cpu.raster import inside_frustum, matrix_shape
-    from gigapoint.render.selection import select
+    from gigapoint.core.selection import select
 
     near, far = cam.clip_range(cloud.bounds)
     sel = select(cloud.batches, cam.screen_rows(), cam.width, cam.height, near, far)
@@ -214,7 +214,7 @@ def test_batch_footprint_flags_every_tile_its_points_write(demo_small):
     from its projected grid cube (raster.mark_footprint), not from its points: they must cover
     every pixel the points land on."""
     from gigapoint.backends.numba_cpu import raster
-    from gigapoint.render.selection import select
+    from gigapoint.core.selection import select
 
     cam = CAMERAS["iso"](demo_small.bounds)
     w, h = cam.width, cam.height

@@ -8,8 +8,8 @@ from gigapoint import Camera, RenderSettings
 from gigapoint.core.layout import EMPTY_PIXEL
 from gigapoint.errors import GigapointError
 from gigapoint.render.reference import projected_batches
-from gigapoint.render.renderer import subsample_step
-from gigapoint.render.selection import select
+from gigapoint.core.selection import subsample_step
+from gigapoint.core.selection import select
 
 
 def _reference_subsample(cloud, cam, step):

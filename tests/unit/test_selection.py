@@ -6,7 +6,7 @@ import numpy as np
 
 from gigapoint.core.layout import WORD_BITS
 from gigapoint.render import Camera
-from gigapoint.render.selection import batch_matrices, visible_and_size
+from gigapoint.core.selection import batch_matrices, visible_and_size
 
 
 def _boxes(rng, k):

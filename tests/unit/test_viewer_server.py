@@ -528,8 +528,8 @@ def test_octree_clouds_can_be_viewed_and_picked(tmp_path):
             exact = np.array(pick["info"]["position"])
             lo, hi = octree.bounds
             assert np.all(exact >= lo - 1e-6) and np.all(exact <= hi + 1e-6)
-            session = core.sessions[hello["session"]]
-            S.render_locked(octree, session.last.camera.with_size(50, 40), octree_settings := core.settings)  # another render
+            close = gigapoint.Camera.orbit(lo + 0.25 * (hi - lo), yaw=0.0, pitch=60.0, distance=0.02 * float(np.max(hi - lo)), width=200, height=150)
+            S.render_locked(octree, close, octree_settings := core.settings)  # another render, of nodes not drawn yet: the arena changes
             assert octree_settings is core.settings
             ws.send_json({"type": "pick", "x": 0.5, "y": 0.5, "id": 2})
             pick = receive(ws, reply("pick"))

@@ -19,7 +19,7 @@ from gigapoint.core.cloud import cloud_from_points
 from gigapoint.core.layout import BATCH_SIZE, EMPTY_PIXEL
 from gigapoint.errors import BackendUnavailableError, GigapointError
 from gigapoint.render.reference import reference_visibility
-from gigapoint.render.selection import Selection, select
+from gigapoint.core.selection import Selection, select
 
 from wgpu_support import cpu, gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
 
@@ -174,7 +174,7 @@ def test_paging_gives_the_same_buffer(gpu, scene):
     mem = paged.memory
     assert mem["evictions"] > 0
     assert mem["points_resident"] <= mem["budget"]
-    assert paged._plan(scene).n_pages == 7
+    assert paged.ctx.plan(scene).n_pages == 7
 
 
 def test_paging_with_ragged_batches(cpu):
@@ -184,7 +184,7 @@ def test_paging_with_ragged_batches(cpu):
     paged = wgpu_or_skip(page_bytes=5 * 1001 * 4 + 16, atomics64=False)
     cam = Camera.fit(cloud.bounds, width=160, height=120)
     sel, args = _frame(cloud, cam)
-    assert paged._plan(cloud).n_pages == 6
+    assert paged.ctx.plan(cloud).n_pages == 6
     assert _n_differ(paged.rasterize(cloud, sel, *args), cpu.rasterize(cloud, sel, *args)) <= MAX_DIFF_FRACTION * 160 * 120
 
 

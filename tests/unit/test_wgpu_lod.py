@@ -11,7 +11,6 @@ import pytest
 from wgpu_support import any_gpu, cpu, gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
 
 from gigapoint import Camera, RenderSettings, render_frame
-from gigapoint.backends.numba_cpu import NumbaCpuBackend
 from gigapoint.core import demo_chunks
 from gigapoint.core.layout import EMPTY_PIXEL
 from gigapoint.errors import BackendUnavailableError
@@ -107,7 +106,8 @@ def test_each_atomics_path_follows_the_arena(any_gpu, cpu, octree):
     arena = _small_arena(oc, 60_000)
     settings = SETTINGS
     for cam in _cameras(oc.bounds) * 2:
-        cloud, sel = oc.select(cam, settings)
+        draw = oc.prepare(cam.view(oc.bounds), settings)
+        cloud, sel = draw.points, draw.selection
         assert cloud is arena
         near, far = cam.clip_range(oc.bounds)
         args = (cam.width, cam.height, near, far)
@@ -123,14 +123,16 @@ def test_only_rewritten_slots_are_uploaded_again(gpu, cpu, octree):
     settings = SETTINGS.replace(adaptive_precision=False)  # every frame reads all three word arrays
     cams = _cameras(oc.bounds)
     for cam in (cams[0], cams[1], cams[3]):
-        cloud, sel = oc.select(cam, settings)
+        draw = oc.prepare(cam.view(oc.bounds), settings)
+        cloud, sel = draw.points, draw.selection
         near, far = cam.clip_range(oc.bounds)
         gpu.rasterize(cloud, sel, cam.width, cam.height, near, far)
     # back to the second view: its nodes evicted by the last one come back into freed slots
     cam = cams[1]
     version = arena.version
     before = gpu.memory["uploaded"]
-    cloud, sel = oc.select(cam, settings)
+    draw = oc.prepare(cam.view(oc.bounds), settings)
+    cloud, sel = draw.points, draw.selection
     changed = arena.batch_version > version
     changed_points = int(arena.batches["count"][changed].astype(np.int64).sum())
     assert 0 < changed_points < arena.n_points // 4
@@ -154,12 +156,13 @@ def test_arena_over_several_pages(cpu, octree):
     arena = _small_arena(oc, 60_000)
     plans = []
     for cam in _cameras(oc.bounds) * 2:
-        cloud, sel = oc.select(cam, SETTINGS)
+        draw = oc.prepare(cam.view(oc.bounds), SETTINGS)
+        cloud, sel = draw.points, draw.selection
         near, far = cam.clip_range(oc.bounds)
         args = (cam.width, cam.height, near, far)
         want = cpu.rasterize(cloud, sel, *args)
         assert _n_differ(paged.rasterize(cloud, sel, *args), want) <= MAX_DIFF_FRACTION * want.size
-        plan = paged._plan(arena)
+        plan = paged.ctx.plan(arena)
         assert plan.n_pages == -(-arena.n_slots // 3)
         plans.append(plan)
     assert all(p is plans[0] for p in plans)  # planned once, though the slots' counts changed
@@ -175,12 +178,14 @@ class _Frames:
         self.batches = cloud.batches
         self.low, self.med, self.high, self.color = (np.array(a) for a in (cloud.low, cloud.med, cloud.high, cloud.color))
         self.n_points = cloud.n_points
+        self.attributes = {}
         self.version = 0
+        self.batch_version = None  # the PointBuffers contract: no per-batch versions
 
 
 def test_a_cloud_with_a_version_only_is_resent_when_it_changes(any_gpu, cpu):
     import gigapoint
-    from gigapoint.render.selection import select
+    from gigapoint.core.selection import select
 
     stream = _Frames(gigapoint.demo(40_000))
     cam = Camera.fit(stream.bounds, view="iso", width=160, height=120)

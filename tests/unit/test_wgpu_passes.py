@@ -11,27 +11,21 @@ float passes (EDL, lighting) may differ by one unit in a channel on <= 0.1 % of 
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pytest
+from wgpu_support import any_gpu, cpu, gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
 
 import gigapoint
 from gigapoint import Camera, RenderSettings
 from gigapoint.backends.numba_cpu import NumbaCpuBackend
-from gigapoint.backends.wgpu import WgpuBackend
-from gigapoint.backends.wgpu.passes import DeviceArray
+from gigapoint.backends.numba_cpu.passes import eye_dome_lighting, fill_holes, hqs_colors, shade
+from gigapoint.backends.wgpu.context import DeviceArray, GpuContext
 from gigapoint.core.layout import BATCH_SIZE, EMPTY_PIXEL
+from gigapoint.core.selection import Selection, select
 from gigapoint.errors import BackendUnavailableError
-from gigapoint.render.passes import raster_options
-from gigapoint.render.passes.edl import eye_dome_lighting
-from gigapoint.render.passes.holes import fill_holes
-from gigapoint.render.passes.hqs import hqs_colors, hqs_reference
-from gigapoint.render.passes.lighting import shade
-from gigapoint.render.passes.splats import point_sizes, splat_params
-from gigapoint.render.selection import Selection, select
-
-from wgpu_support import any_gpu, cpu, gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
+from gigapoint.render.passes.hqs import hqs_reference
+from gigapoint.render.passes.lighting import point_normals
+from gigapoint.render.splats import point_sizes, splat_params
 
 pytestmark = pytest.mark.gpu
 
@@ -146,16 +140,6 @@ def test_a_near_small_point_beats_a_far_large_one_pixel_by_pixel(any_gpu, cpu):
     assert np.count_nonzero(idx == third) == 25 and np.count_nonzero(idx >= 0) == 60
 
 
-def test_raster_options_keep_wgpu_for_splats(gpu, scene):
-    cam = _cameras(scene)["iso"]
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # no "using the CPU backend" warning
-        backend, extra = raster_options(gpu, RenderSettings(point_size=3, point_shape="round"), cam)
-    assert backend is gpu and "splat" in extra and extra["keep_on_device"]
-    backend, extra = raster_options(gpu, RenderSettings(), cam)
-    assert backend is gpu and extra == {"keep_on_device": True}
-
-
 def test_render_frame_with_splats_stays_on_wgpu(scene):
     cam = _cameras(scene)["iso"]
     settings = {"point_size": 4, "point_shape": "round"}
@@ -226,7 +210,7 @@ def test_hqs_with_paged_colors(cpu, scene):
     paged = wgpu_or_skip(page_bytes=BATCH_SIZE * 4 * 2)
     cam = _cameras(scene)["iso"]
     sel, (w, h, near, far) = _frame(scene, cam)
-    assert paged._plan(scene).n_pages > 2
+    assert paged.ctx.plan(scene).n_pages > 2
     vis = cpu.rasterize(scene, sel, w, h, near, far)
     fallback = cpu.resolve(vis, scene.color, BG)
     want = hqs_colors(scene, sel, vis, w, h, near, far, scene.color, fallback, 0.05)
@@ -284,8 +268,8 @@ def test_lighting_matches_cpu(any_gpu, cpu, scene, view, shininess):
     sel, (w, h, near, far) = _frame(scene, cam)
     vis = np.asarray(any_gpu.rasterize(scene, sel, w, h, near, far))
     colors = cpu.resolve(vis, scene.color, BG)
-    want = shade(scene, cam, vis, colors, shininess)
-    got = any_gpu.passes.shade(scene, cam, vis, colors, shininess)
+    want = shade(vis, colors, point_normals(scene), cam, shininess)
+    got = any_gpu.passes.shade(vis, colors, point_normals(scene), cam, shininess)
     _assert_colors_close(got, want)
     assert np.count_nonzero(want != colors) > 0.5 * np.count_nonzero(vis != EMPTY_PIXEL)
 
@@ -296,7 +280,8 @@ def test_lighting_with_paged_normals(cpu, scene):
     sel, (w, h, near, far) = _frame(scene, cam)
     vis = cpu.rasterize(scene, sel, w, h, near, far)
     colors = cpu.resolve(vis, scene.color, BG)
-    _assert_colors_close(paged.passes.shade(scene, cam, vis, colors), shade(scene, cam, vis, colors))
+    normals = point_normals(scene)
+    _assert_colors_close(paged.passes.shade(vis, colors, normals, cam), shade(vis, colors, normals, cam))
 
 
 # --- the frame pipeline -------------------------------------------------------------------------
@@ -343,7 +328,7 @@ def test_a_frame_reads_each_buffer_back_once(monkeypatch, scene):
     cam = _cameras(scene)["iso"]
     n_pixels = cam.width * cam.height
     reads = []
-    real = WgpuBackend._read_back
+    real = GpuContext.read_back
 
     def counting(self, buffer, dtype, n):
         reads.append((np.dtype(dtype), n))
@@ -356,7 +341,7 @@ def test_a_frame_reads_each_buffer_back_once(monkeypatch, scene):
         uploads.append(np.asarray(data).nbytes)
         return real_write(buffer, offset, data, *args)
 
-    monkeypatch.setattr(WgpuBackend, "_read_back", counting)
+    monkeypatch.setattr(GpuContext, "read_back", counting)
     monkeypatch.setattr(backend.device.queue, "write_buffer", counting_write)
     gigapoint.render_frame(scene, cam, RenderSettings(backend="wgpu", **PIPELINES["all"]))
     big = [r for r in reads if r[1] >= n_pixels]
@@ -369,7 +354,7 @@ def test_results_survive_the_reuse_of_their_buffer(gpu, cpu, scene):
     cam = _cameras(scene)["closeup"]
     sel, (w, h, near, far) = _frame(scene, cam)
     vis = gpu.rasterize(scene, sel, w, h, near, far)
-    first = gpu.passes.resolve(vis, scene.color, BG)
+    first, _ = gpu.passes.resolve(vis, scene.color, BG)
     lit = gpu.passes.eye_dome_lighting(vis, first, w, h)  # into the other image buffer
     again = gpu.passes.eye_dome_lighting(vis, lit, w, h)  # back into first's buffer
     want = cpu.resolve(vis, scene.color, BG)
@@ -402,11 +387,11 @@ def test_every_step_th_point_like_the_cpu(any_gpu, cpu, scene, step):
 def test_hqs_falls_back_to_the_cpu_pass_on_adapters_binding_8_storage_buffers(cpu, scene):
     """WebGPU guarantees 8 storage buffers a stage; HQS needs 9 and otherwise runs on the CPU."""
     small = wgpu_or_skip()
-    small.hqs_on_gpu = False
+    small.ctx.hqs_on_gpu = False
     cam = _cameras(scene)["iso"]
     sel, (w, h, near, far) = _frame(scene, cam)
     vis = small.rasterize(scene, sel, w, h, near, far, keep_on_device=True)
-    fallback = small.passes.resolve(vis, scene.color, BG)
+    fallback, _ = small.passes.resolve(vis, scene.color, BG)
     got = small.passes.hqs_colors(scene, sel, vis, w, h, near, far, scene.color, fallback, 0.05)
     assert isinstance(got, np.ndarray)
     host_vis = np.asarray(vis)
@@ -425,12 +410,13 @@ def test_shader_constants_are_the_cpu_kernels_float32_bits():
     """EDL's log2 / exp2 series: the generated WGSL literals parse back to the CPU's float32 values."""
     import re
 
-    from gigapoint.backends.numba_cpu import passes as cpu_kernels
     from gigapoint.backends.wgpu.shaders import shader_source
+    from gigapoint.render import params as cpu_kernels  # the constants the CPU kernels use
 
     found = dict(re.findall(r"^const (\w+): f32 = (\S+);$", shader_source("log_depth"), re.MULTILINE))
     want = {f"LOG2_C{k}": getattr(cpu_kernels, f"LOG2_C{k}") for k in (1, 3, 5, 7)}
     want.update({f"EXP2_C{k + 1}": c for k, c in enumerate(cpu_kernels.EXP2_C)})
+    want["EDL_EMPTY_RESPONSE"] = cpu_kernels.EDL_EMPTY_RESPONSE
     assert set(found) == set(want)
     for name, value in want.items():
         assert np.float32(float(found[name])).view(np.uint32) == np.float32(value).view(np.uint32), name

@@ -12,13 +12,12 @@ from wgpu_support import any_gpu, cpu, gpu, gpu32, wgpu_or_skip  # noqa: F401 - 
 
 import gigapoint
 from gigapoint import Camera, RenderSettings
-from gigapoint.backends.numba_cpu import NumbaCpuBackend
 from gigapoint.backends.wgpu.layout import MAX_VIEWS
 from gigapoint.core.layout import EMPTY_PIXEL
+from gigapoint.core.selection import select
 from gigapoint.errors import BackendUnavailableError, GigapointError
 from gigapoint.render.passes.compose import eye_cameras
-from gigapoint.render.passes.splats import splat_params
-from gigapoint.render.selection import select
+from gigapoint.render.splats import splat_params
 
 pytestmark = pytest.mark.gpu
 
@@ -121,8 +120,8 @@ def test_one_dispatch_per_page_whatever_the_number_of_views(gpu, scene, monkeypa
     ids, bits, mats, nears, fars = _views(scene, cams)
     w, h = cams[0].width, cams[0].height
     calls: list[str] = []
-    original = gpu._dispatch
-    monkeypatch.setattr(gpu, "_dispatch", lambda name, *a: (calls.append(name), original(name, *a))[1])
+    original = gpu.ctx.dispatch
+    monkeypatch.setattr(gpu.ctx, "dispatch", lambda name, *a: (calls.append(name), original(name, *a))[1])
     gpu.rasterize_views(scene, ids, bits[:1], mats[:1], w, h, nears[:1], fars[:1])
     mono = [c for c in calls if c.startswith("raster")]
     calls.clear()
@@ -139,7 +138,7 @@ def test_more_views_than_one_dispatch_draws_in_groups(gpu, cpu, scene, monkeypat
     want = cpu.rasterize_views(scene, ids, bits, mats, w, h, nears, fars)
     _assert_views_close(gpu.rasterize_views(scene, ids, bits, mats, w, h, nears, fars), want)
     # views that do not fit one buffer binding together: groups of 3
-    monkeypatch.setattr(gpu, "max_binding", 3 * w * h * 8 + 8)
+    monkeypatch.setattr(gpu.ctx, "max_binding", 3 * w * h * 8 + 8)
     _assert_views_close(gpu.rasterize_views(scene, ids, bits, mats, w, h, nears, fars), want)
 
 

@@ -9,7 +9,7 @@ import pytest
 
 import gigapoint
 from gigapoint import Camera, RenderSettings
-from gigapoint.backends.wgpu.window import Orbit, open_window
+from gigapoint.viewer.window import Orbit, open_window
 from gigapoint.errors import BackendUnavailableError
 
 offscreen = pytest.importorskip("rendercanvas.offscreen")

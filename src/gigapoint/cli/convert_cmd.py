@@ -12,7 +12,7 @@ from . import app
 
 @app.command()
 def convert(
-    inputs: list[Path] = typer.Argument(..., help="Input files or directories (LAS/LAZ/PLY/XYZ/CSV/NPY/NPZ)."),
+    inputs: list[Path] = typer.Argument(..., help="Input files or directories (every supported point cloud file inside, as for render)."),
     output: Path = typer.Option(..., "-o", "--output", help="Output directory (created; resumed when a conversion was interrupted)."),
     sampler: str = typer.Option("grid", help="grid (first point per cell of a 128³ grid per node) or poisson (minimum distance)."),
     memory_limit: str | None = typer.Option(None, "--memory-limit", help="Peak memory, e.g. 4G or 512M (default: a quarter of the RAM)."),

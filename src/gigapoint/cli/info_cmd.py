@@ -17,10 +17,10 @@ def info(
 ) -> None:
     """Show format, point count, bounds, attributes, LAS version/scale/offset and CRS of files."""
     from ..io import expand_paths, file_info, format_info
-    from ..lod.store import is_octree_dir, octree_info
+    from ..lod import OctreeDir, octree_info
 
-    # an octree directory is one dataset, not a folder of files
-    paths = [p for f in files for p in ([f] if is_octree_dir(f) else expand_paths([f]))]
+    # an octree folder is one dataset, not a folder of files
+    paths = [p for f in files for p in ([f] if OctreeDir(f).is_octree else expand_paths([f]))]
     for i, path in enumerate(paths):
         data = octree_info(path) if path.is_dir() else file_info(path)
         if as_json:

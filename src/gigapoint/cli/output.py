@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_npy, atomic_write
 from ..errors import GigapointError
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff", ".bmp"}
@@ -27,17 +26,6 @@ def check_output(path: Path, overwrite: bool, suffixes=IMAGE_SUFFIXES) -> Path:
     return path
 
 
-def _atomic_write(path: Path, write) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def save_image(image: np.ndarray, path: Path) -> None:
     """Write an (H, W, 4) uint8 image; formats without alpha get RGB. Atomic."""
     from PIL import Image
@@ -50,12 +38,9 @@ def save_image(image: np.ndarray, path: Path) -> None:
     # PNG at zlib level 1: the default (6) took 0.3 s of a 1.8 s first render of 1 M points and its
     # files of renders (flat background) were larger, not smaller (docs/benchmarks.md, CLI first render)
     options = {"compress_level": 1} if path.suffix.lower() == ".png" else {}
-    _atomic_write(path, lambda tmp: img.save(tmp, format=fmt or path.suffix[1:].upper(), **options))
+    atomic_write(path, lambda tmp: img.save(tmp, format=fmt or path.suffix[1:].upper(), **options))
 
 
 def save_array(array: np.ndarray, path: Path) -> None:
-    def write(tmp):
-        with open(tmp, "wb") as f:
-            np.save(f, array)
-
-    _atomic_write(Path(path), write)
+    """Write an array as .npy (depth, point index). Atomic."""
+    atomic_npy(path, array)

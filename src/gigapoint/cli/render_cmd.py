@@ -6,15 +6,16 @@ import math
 import re
 import time
 from pathlib import Path
-from typing import Optional
+from typing import Annotated
 
 import typer
 
-from ..errors import GigapointError
+from ..errors import CameraError, GigapointError
 from ..render import VIEWS, Camera, RenderSettings
 from . import app
 from .output import check_output, save_array, save_image
-from .quality_opts import apply_quality, prepare_cloud
+from .quality_opts import prepare_cloud
+from .settings_opts import settings_from_options, with_settings_options
 
 _CAMERA_KEYS = {"eye": 3, "target": 3, "up": 3, "yaw": 1, "pitch": 1, "distance": 1, "fov": 1}
 
@@ -45,6 +46,18 @@ def parse_camera(text: str) -> dict:
     if not values:
         raise GigapointError("--camera: empty camera description")
     return values
+
+
+def check_image_size(width, height, fov=60.0) -> None:
+    """The image size and field of view checked as a camera would; a bad one names its option."""
+    try:
+        Camera.look_at((0, 0, 1), (0, 0, 0), up=(0, 1, 0), width=width, height=height, fov=fov)
+    except CameraError as exc:
+        text = str(exc)
+        for words, option in (("image width", "--width"), ("image height", "--height"), ("camera fov", "--fov")):
+            if text.startswith(words):
+                raise CameraError(f"{option}: {text}") from None
+        raise
 
 
 def make_camera(cloud, width, height, view, camera_text, projection, fov) -> Camera:
@@ -80,48 +93,27 @@ def print_stats(stats, console=None) -> None:
 
 
 @app.command()
+@with_settings_options(RenderSettings)
 def render(
-    inputs: list[Path] = typer.Argument(..., help="Point cloud files, directories or converted octrees (merged into one scene)."),
-    output: Path = typer.Option(..., "-o", "--output", help="Image to write (.png, .jpg, .webp, .tif)."),
-    width: int = typer.Option(1920, "--width", "-W"),
-    height: int = typer.Option(1080, "--height", "-H"),
-    view: str = typer.Option("iso", help=f"Named view: {', '.join(VIEWS)}."),
-    camera: Optional[str] = typer.Option(None, help="'eye=x,y,z target=x,y,z [up=x,y,z]' or 'yaw=deg pitch=deg [distance=m] [target=x,y,z]'."),
-    projection: str = typer.Option("perspective", help="perspective or orthographic."),
-    fov: float = typer.Option(60.0, help="Vertical field of view in degrees."),
-    background: str = typer.Option("black", help="Background color: name, #rrggbb or r,g,b."),
-    backend: str = typer.Option("auto", help="auto, cpu or wgpu."),
-    threads: Optional[int] = typer.Option(None, help="CPU threads (default: all cores)."),
-    max_points: int = typer.Option(0, help="Plain clouds: draw at most this many points, every k-th of each batch (a quick preview); 0 = all."),
-    point_budget: int = typer.Option(10_000_000, help="Converted octrees: most points a frame draws (largest projected nodes first)."),
-    depth_out: Optional[Path] = typer.Option(None, help="Also write the depth buffer (.npy, float32, inf = empty)."),
-    index_out: Optional[Path] = typer.Option(None, help="Also write the point index buffer (.npy, int64, -1 = empty)."),
-    stats: bool = typer.Option(False, "--stats", help="Print render statistics."),
-    overwrite: bool = typer.Option(False, "--overwrite", help="Replace existing output files."),
-    color_mode: str = typer.Option("rgb", "--color-mode", help="rgb, intensity, classification, elevation, return_number, point_source_id, batch, level, normal."),
-    colormap: str = typer.Option("viridis", help="Elevation colormap: viridis, turbo, terrain, inferno, gray."),
-    elevation_range: Optional[str] = typer.Option(None, help="'low,high' elevations mapped onto the colormap (default: the cloud's z extent)."),
-    intensity_range: Optional[str] = typer.Option(None, help="'low,high' intensity contrast range (default: 2nd..98th percentile)."),
-    edl: bool = typer.Option(False, "--edl", help="Eye-dome lighting."),
-    edl_strength: float = typer.Option(1.0, help="Eye-dome lighting strength."),
-    edl_radius: float = typer.Option(1.4, help="Eye-dome lighting radius in pixels."),
-    fill_holes: int = typer.Option(0, help="Depth-aware hole filling: 0 off, 1/2/3 = 3x3/5x5/7x7 window."),
-    foveated: bool = typer.Option(False, "--foveated", help="Hole filling window grows from 3x3 in the centre to the full size at the border."),
-    hqs: bool = typer.Option(False, "--hqs", help="High-quality shading: blend the colors of all points near the front."),
-    hqs_depth_tolerance: float = typer.Option(0.01, help="--hqs blends the points at most this fraction behind the closest (0..1)."),
-    point_size: int = typer.Option(1, help="Point size in pixels."),
-    point_shape: str = typer.Option("square", help="square or round."),
-    point_world_size: Optional[float] = typer.Option(None, help="Attenuated points: size in world units, at most --point-size pixels (16 unless given)."),
-    splat_softness: float = typer.Option(0.0, help="Soft splats (Kraft's falloff exponent, e.g. 2) blended by --hqs; 0 = hard."),
-    supersample: int = typer.Option(1, help="Anti-aliasing: render 1, 2 or 4 times larger and filter down."),
-    supersample_filter: str = typer.Option("box", help="--supersample filter: box (exact block mean) or lanczos."),
-    stereo: str = typer.Option("none", help="none, side-by-side or anaglyph."),
-    ipd: float = typer.Option(0.065, help="Stereo eye distance in world units."),
-    convergence: Optional[float] = typer.Option(None, help="Stereo zero-parallax distance in world units (default: the camera's target distance)."),
-    lighting: bool = typer.Option(False, "--lighting", help="Blinn-Phong headlight (estimates normals when the cloud has none)."),
-    shininess: float = typer.Option(32.0, help="--lighting specular exponent."),
-    turntable: Optional[int] = typer.Option(None, help="Write a video of N frames orbiting the cloud instead of an image (-o out.mp4)."),
-    fps: float = typer.Option(30.0, help="Frames per second of --turntable videos."),
+    inputs: Annotated[list[Path], typer.Argument(help="Point cloud files, directories or converted octrees (merged into one scene).")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Image to write (.png, .jpg, .webp, .tif).")],
+    settings: RenderSettings,  # one option per RenderSettings field (cli/settings_opts.py)
+    width: Annotated[int, typer.Option("--width", "-W", help="Image width in pixels.")] = 1920,
+    height: Annotated[int, typer.Option("--height", "-H", help="Image height in pixels.")] = 1080,
+    view: Annotated[str, typer.Option(help=f"Named view: {', '.join(VIEWS)}.")] = "iso",
+    camera: Annotated[
+        str | None, typer.Option(help=r"'eye=x,y,z target=x,y,z \[up=x,y,z]' or 'yaw=deg pitch=deg \[distance=m] \[target=x,y,z]'.")
+    ] = None,
+    projection: Annotated[str, typer.Option(help="perspective or orthographic.")] = "perspective",
+    fov: Annotated[float, typer.Option(help="Vertical field of view in degrees.")] = 60.0,
+    depth_out: Annotated[Path | None, typer.Option(help="Also write the depth buffer (.npy, float32, inf = empty).")] = None,
+    index_out: Annotated[Path | None, typer.Option(help="Also write the point index buffer (.npy, int64, -1 = empty).")] = None,
+    stats: Annotated[bool, typer.Option("--stats", help="Print render statistics.")] = False,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace existing output files.")] = False,
+    turntable: Annotated[
+        int | None, typer.Option(help="Write a video of N frames orbiting the cloud instead of an image (-o out.mp4).")
+    ] = None,
+    fps: Annotated[float, typer.Option(help="Frames per second of --turntable videos.")] = 30.0,
 ) -> None:
     """Render point clouds to an image (or a turntable video)."""
     import gigapoint as gp
@@ -135,19 +127,11 @@ def render(
     for extra in (depth_out, index_out):
         if extra is not None:
             check_output(extra, overwrite, suffixes={".npy"})
-    settings = RenderSettings(background=background, backend=backend, threads=threads, max_points=max_points, point_budget=point_budget)
-    settings = apply_quality(
-        settings, color_mode=color_mode, colormap=colormap, elevation_range=elevation_range, intensity_range=intensity_range, edl=edl,
-        edl_strength=edl_strength, edl_radius=edl_radius, fill_holes=fill_holes, foveated=foveated, hqs=hqs, hqs_depth_tolerance=hqs_depth_tolerance,
-        point_size=point_size, point_shape=point_shape, point_world_size=point_world_size, splat_softness=splat_softness, supersample=supersample,
-        supersample_filter=supersample_filter, stereo=stereo, ipd=ipd, convergence=convergence, lighting=lighting, shininess=shininess,
-    )  # fmt: skip
     if projection not in ("perspective", "orthographic"):
         raise GigapointError(f"--projection must be perspective or orthographic, got {projection!r}")
     if view not in VIEWS:
         raise GigapointError(f"--view: unknown view {view!r}; choose one of {', '.join(VIEWS)}")
-    # validate the image size before reading anything
-    Camera.look_at((0, 0, 1), (0, 0, 0), up=(0, 1, 0), width=width, height=height, fov=fov)
+    check_image_size(width, height, fov)  # before reading anything
     cloud = gp.open(*inputs)
     prepare_cloud(cloud, settings)
     if turntable is not None:
@@ -170,14 +154,14 @@ def render(
 
 @app.command()
 def demo(
-    points: int = typer.Option(20_000_000, "--points", "-n", help="Points in the procedural demo scene."),
-    output: Path = typer.Option(Path("demo.png"), "-o", "--output"),
-    width: int = typer.Option(1920, "--width", "-W"),
-    height: int = typer.Option(1080, "--height", "-H"),
-    view: str = typer.Option("iso"),
-    threads: Optional[int] = typer.Option(None),
-    seed: int = typer.Option(0),
-    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output file."),
+    points: Annotated[int, typer.Option("--points", "-n", help="Points in the procedural demo scene.")] = 20_000_000,
+    output: Annotated[Path, typer.Option("-o", "--output", help="Image to write.")] = Path("demo.png"),
+    width: Annotated[int, typer.Option("--width", "-W", help="Image width in pixels.")] = 1920,
+    height: Annotated[int, typer.Option("--height", "-H", help="Image height in pixels.")] = 1080,
+    view: Annotated[str, typer.Option(help=f"Named view: {', '.join(VIEWS)}.")] = "iso",
+    threads: Annotated[int | None, typer.Option(help="CPU threads (default: all cores).")] = None,
+    seed: Annotated[int, typer.Option(help="Seed of the procedural scene.")] = 0,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing output file.")] = False,
 ) -> None:
     """Generate the procedural demo scene, render it and report how fast each step was."""
     from rich.console import Console
@@ -190,7 +174,8 @@ def demo(
     if not 1 <= points <= 4_000_000_000:
         raise GigapointError(f"--points must be between 1 and 4e9, got {points}")
     check_output(output, overwrite)
-    Camera.look_at((0, 0, 1), (0, 0, 0), up=(0, 1, 0), width=width, height=height)
+    check_image_size(width, height)
+    settings = settings_from_options(RenderSettings, {"threads": threads})  # a bad --threads is named
     t0 = time.perf_counter()
     xyz, rgba, attrs = demo_arrays(points, seed)
     t1 = time.perf_counter()
@@ -198,7 +183,6 @@ def demo(
     del xyz, rgba, attrs
     t2 = time.perf_counter()
     cam = Camera.fit(cloud.bounds, view=view, width=width, height=height)
-    settings = RenderSettings(threads=threads)
     first = render_frame(cloud, cam, settings)
     times = []
     for _ in range(7):  # the median of 7: this kind of shared host swings 1.5x within seconds

@@ -43,16 +43,17 @@ def view(
             raise GigapointError(f"--demo: point count must be in 1..2e9, got {demo}")
         cloud = gigapoint.demo(demo)
     elif paths:
-        from ..lod.preview import awaiting_preview, wait_for_preview
+        from ..lod import OctreeDir
+        from ..lod.preview import wait_for_preview
 
-        if len(paths) == 1 and awaiting_preview(paths[0]):  # `convert` was started a moment ago
+        if len(paths) == 1 and OctreeDir(paths[0]).awaiting_preview:  # `convert` was started a moment ago
             print(f"gigapoint viewer: waiting for the first preview of the conversion into {paths[0]} ...", file=sys.stderr)
             wait_for_preview(paths[0])
         cloud = gigapoint.open(*paths)
     else:
         raise GigapointError("view: name at least one file or directory (or --demo N)")
     if window:  # native window (rendercanvas + glfw), no server
-        from ..backends.wgpu.window import run_window
+        from ..viewer.window import run_window
 
         print(f"gigapoint window: {cloud.name}, {cloud.n_points:,} points (drag: orbit, right drag: pan, wheel: zoom)", file=sys.stderr)
         run_window(cloud)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 from numba import njit, prange
@@ -19,6 +20,8 @@ from .chunk import PointChunk
 from .layout import BATCH_DTYPE, BATCH_SIZE
 from .morton import cube_of, morton_codes, morton_order
 from .quantize import dequantize, make_batches, quantize
+from .renderable import DrawList, MultiViewDrawList, SelectionSettings
+from .selection import View, select_view, select_views, subsample_step
 
 #: Coordinates beyond this magnitude are not of this planet in any CRS: skipped as invalid.
 MAX_ABS_COORDINATE = 1e12
@@ -26,7 +29,9 @@ MAX_ABS_COORDINATE = 1e12
 
 @dataclass
 class PointCloud:
-    """A renderable point cloud (unstructured: batches of consecutive Morton-ordered points)."""
+    """A renderable point cloud (unstructured: batches of consecutive Morton-ordered points).
+
+    It is its own point buffers (renderable.py): built once, never rewritten in place."""
 
     batches: np.ndarray  # BATCH_DTYPE records
     low: np.ndarray  # u32 per point: bits 20-29 of x, y, z
@@ -36,6 +41,10 @@ class PointCloud:
     attributes: dict[str, np.ndarray] = field(default_factory=dict)
     name: str = "cloud"
     skipped: int = 0  # invalid input points (NaN, inf, absurd) left out
+
+    version: ClassVar[None] = None  # PointBuffers: the arrays never change once built
+    batch_version: ClassVar[None] = None
+    load_progress: ClassVar[float] = 1.0  # Renderable: built whole
 
     @property
     def n_points(self) -> int:
@@ -82,6 +91,17 @@ class PointCloud:
             v = values[index]
             info[name] = v.tolist() if hasattr(v, "tolist") else v
         return info
+
+    # -- Renderable (renderable.py)
+    def prepare(self, view: View, settings: SelectionSettings) -> DrawList:
+        """The batches in view; with ``settings.max_points``, every k-th point of each."""
+        sel = select_view(self.batches, view, settings)
+        step = subsample_step(self.batches["count"][sel.ids].astype(np.int64), settings.max_points)
+        return DrawList(self, sel, len(self.batches), step)
+
+    def prepare_views(self, views: list[View], settings: SelectionSettings) -> MultiViewDrawList:
+        ids, bits, matrices, sels = select_views(self.batches, views, settings)
+        return MultiViewDrawList(self, ids, bits, matrices, [DrawList(self, sel, len(self.batches)) for sel in sels])
 
     def __repr__(self) -> str:
         lo, hi = self.bounds
@@ -210,4 +230,4 @@ def from_arrays(xyz, rgb=None, name: str = "arrays", **attributes) -> PointCloud
     return build_cloud([chunk], name=name)
 
 
-__all__ = ["PointCloud", "build_cloud", "cloud_from_points", "from_arrays", "BATCH_DTYPE"]
+__all__ = ["BATCH_DTYPE", "PointCloud", "build_cloud", "cloud_from_points", "from_arrays"]

@@ -119,7 +119,8 @@ def _fmt_num(v) -> str:
 
 
 def format_info(info: dict) -> str:
-    """Human-readable text of a ``file_info`` dict (what ``gigapoint info`` prints)."""
+    """Human-readable text of a ``file_info`` dict (what ``gigapoint info`` prints); a
+    ``details`` entry ({label: text}) adds lines as they are."""
     lines = [f"{info.get('path', '?')}"]
     fmt = info.get("format", "?")
     if info.get("las_version"):
@@ -150,17 +151,8 @@ def format_info(info: dict) -> str:
         lines.append(f"  software:    {info['generating_software']}")
     if info.get("columns"):
         lines.append(f"  columns:     {' '.join(info['columns'])} ({info.get('delimiter')}{', header line' if info.get('header_line') else ''})")
-    if info.get("nodes") is not None:
-        spacing = f", spacing {info['spacing']:.6g}" if info.get("spacing") else ""
-        lines.append(f"  octree:      {info['nodes']:,} nodes in {info['levels']} levels{', ' + info['sampler'] + ' sampler' if info.get('sampler') else ''}{spacing}")
-    conv = info.get("conversion")
-    if conv is not None:
-        total = f" of {conv['total']:,}" if conv.get("total") else ""
-        lines.append(f"  conversion:  phase {conv.get('phase') or '?'}, {conv.get('points', 0):,}{total} points read, preview of {conv.get('preview_points', 0):,} points")
-        if conv.get("running") is not None:
-            from ..lod.preview import RESUME_HINT
-
-            lines.append("  state:       " + ("a conversion is writing into it" if conv["running"] else f"stopped: {RESUME_HINT}"))
+    for label, text in (info.get("details") or {}).items():  # ready lines from other layers (an octree's, lod/reader.py)
+        lines.append(f"  {label + ':':<13}{text}")
     size = info.get("file_size")
     if size is not None:
         lines.append(f"  file size:   {_human_bytes(size)}")

@@ -1,9 +1,9 @@
 """Potree 2.0 interop (see ../shared/POTREE2.md): writer (DEFAULT or BROTLI) and reader (both).
 
-Writing: the converter's node sets are streamed into ``octree.bin``; ``hierarchy.bin`` is one
-chunk holding every node breadth-first (sorted keys are breadth-first); ``metadata.json``
-comes last. Reading (PotreeCloud): the hierarchy (with proxy chunks) is parsed at open; a node's
-payload is read from ``octree.bin`` and decoded into gigapoint's batch layout only when the
+Writing: the converter's node sets are streamed into the octree file; the hierarchy file is
+one chunk holding every node breadth-first (sorted keys are breadth-first); the metadata file
+comes last (file names: octree_dir.py). Reading (PotreeCloud): the hierarchy (with proxy chunks) is parsed at open; a node's
+payload is read from the octree file and decoded into gigapoint's batch layout only when the
 node is drawn (made resident in the arena), so the result renders like any converted octree,
 in bounded memory.
 """
@@ -11,15 +11,16 @@ in bounded memory.
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_bytes, atomic_json, atomic_open
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
 from ..errors import InputError
 from .keys import MAX_LEVEL, key_cube, level_of
+from .octree_dir import OctreeDir
 from .store import OctreeCloud
 
 HIERARCHY_DTYPE = np.dtype([("type", "u1"), ("mask", "u1"), ("points", "<u4"), ("offset", "<i8"), ("size", "<i8")])
@@ -135,8 +136,9 @@ def encode_node(
     return _brotli().compress(raw, quality=BROTLI_QUALITY)
 
 
-def write_potree(out: Path, sources: list[Path], st: dict, name: str, progress, encoding: str = "DEFAULT") -> int:
-    """Assemble built node sets into a Potree 2.0 directory; metadata.json last."""
+def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progress, encoding: str = "DEFAULT") -> int:
+    """Assemble built node sets into the Potree 2.0 folder ``out``, its metadata last; returns
+    the number of nodes."""
     origin, edge = np.array(st["origin"]), float(st["edge"])
     scale = max(0.001, edge / 2**30)
     scale3 = [scale] * 3
@@ -148,9 +150,9 @@ def write_potree(out: Path, sources: list[Path], st: dict, name: str, progress, 
         "classification": [[np.inf], [-np.inf]],
         "rgb": [[np.inf] * 3, [-np.inf] * 3],
     }
-    tmp_bin = out / "octree.bin.tmp"
+
     pos = 0
-    with open(tmp_bin, "wb") as f:
+    with atomic_open(out.potree_octree, durable=True) as f:  # node by node: never more than one node set in memory
         for src in sources:
             keys = np.load(src / "keys.npy")
             counts = np.load(src / "counts.npy")
@@ -180,8 +182,6 @@ def write_potree(out: Path, sources: list[Path], st: dict, name: str, progress, 
                     stats[nm][1] = np.maximum(stats[nm][1], arr.max(axis=0)).tolist()
             n_total += n
             progress.advance(n)
-        f.flush()
-        os.fsync(f.fileno())
     keys = np.array(sorted(records), np.uint64)
     key_set = set(records)
     hier = np.zeros(len(keys), HIERARCHY_DTYPE)
@@ -189,11 +189,7 @@ def write_potree(out: Path, sources: list[Path], st: dict, name: str, progress, 
         mask = sum(1 << c for c in range(8) if (key << 3 | c) in key_set)
         n, off, size = records[key]
         hier[i] = (0 if mask else 1, mask, n, off, size)
-    tmp_h = out / "hierarchy.bin.tmp"
-    with open(tmp_h, "wb") as f:
-        f.write(hier.tobytes())
-    os.replace(tmp_bin, out / "octree.bin")
-    os.replace(tmp_h, out / "hierarchy.bin")
+    atomic_bytes(out.potree_hierarchy, hier.tobytes())
     stats["position"] = [
         [v * scale + o for v, o in zip(stats["position"][0], origin)],
         [v * scale + o for v, o in zip(stats["position"][1], origin)],
@@ -212,12 +208,7 @@ def write_potree(out: Path, sources: list[Path], st: dict, name: str, progress, 
         "encoding": encoding,
         "attributes": _attribute_entries(scale3, list(map(float, origin)), stats),
     }
-    tmp = out / "metadata.json.tmp"
-    with open(tmp, "w") as f:
-        json.dump(meta, f, indent="\t")
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, out / "metadata.json")
+    atomic_json(out.potree_meta, meta, indent="\t", durable=True)  # last: the folder is complete from here on
     return len(keys)
 
 
@@ -302,26 +293,28 @@ class PotreeCloud(OctreeCloud):
     A node's record (``nodes``) holds its cube clipped to the cloud's bounds until the node is
     first decoded, then its tight bbox, which is what it is quantized against and drawn with,
     exactly as if every node had been decoded at open. The cloud's bounds are the ``position``
-    attribute's min/max from metadata.json (the bounding box where absent).
+    attribute's min/max from the metadata (the bounding box where absent).
     """
 
-    def __init__(self, p: Path, meta: dict):
+    def __init__(self, folder, meta: dict):
+        d = folder if isinstance(folder, OctreeDir) else OctreeDir(folder)
+        p = d.path
         self.encoding = meta.get("encoding", "DEFAULT")
         if self.encoding not in ("DEFAULT", "BROTLI"):
-            raise InputError(f"{p / 'metadata.json'}: unknown encoding {self.encoding!r}")
+            raise InputError(f"{d.potree_meta}: unknown encoding {self.encoding!r}")
         try:
             self.potree_attributes = meta["attributes"]
             self.scale, self.offset = np.array(meta["scale"], np.float64), np.array(meta["offset"], np.float64)
             bmin, bmax = np.array(meta["boundingBox"]["min"], np.float64), np.array(meta["boundingBox"]["max"], np.float64)
             first = int(meta["hierarchy"]["firstChunkSize"])
-            hier = (p / "hierarchy.bin").read_bytes()
+            hier = d.potree_hierarchy.read_bytes()
             info: dict[int, tuple[int, int, int]] = {}
             _parse_hierarchy(hier, 0, first, 1, info)
             record = _node_dtype(self.potree_attributes)
             lo, hi = _position_range(self.potree_attributes, bmin, bmax)
         except (KeyError, TypeError, ValueError, OSError) as exc:
             raise InputError(f"{p}: invalid Potree hierarchy/metadata ({' '.join(str(exc).split())})") from None
-        self.octree_bin = p / "octree.bin"
+        self.octree_bin = d.potree_octree
         try:
             bin_size = self.octree_bin.stat().st_size
         except OSError as exc:
@@ -445,17 +438,17 @@ def _position_range(attributes: list[dict], bmin: np.ndarray, bmax: np.ndarray) 
     return bmin, bmax
 
 
-def read_potree(path) -> PotreeCloud:
-    """A Potree 2.0 directory (PotreeConverter 2.x or ``gigapoint convert --format potree``), nodes
-    loaded on demand (see PotreeCloud)."""
-    p = Path(path)
+def read_potree(folder) -> PotreeCloud:
+    """A Potree 2.0 folder (an OctreeDir or a path; PotreeConverter 2.x or ``gigapoint convert
+    --format potree``), nodes loaded on demand (see PotreeCloud)."""
+    d = folder if isinstance(folder, OctreeDir) else OctreeDir(folder)
     try:
-        meta = json.loads((p / "metadata.json").read_text())
+        meta = json.loads(d.potree_meta.read_text())
     except (OSError, ValueError) as exc:
-        raise InputError(f"{p / 'metadata.json'}: cannot read ({' '.join(str(exc).split())})") from None
+        raise InputError(f"{d.potree_meta}: cannot read ({' '.join(str(exc).split())})") from None
     if not str(meta.get("version", "")).startswith("2."):
-        raise InputError(f"{p / 'metadata.json'}: Potree version {meta.get('version')!r} is not supported (2.x only)")
-    return PotreeCloud(p, meta)
+        raise InputError(f"{d.potree_meta}: Potree version {meta.get('version')!r} is not supported (2.x only)")
+    return PotreeCloud(d, meta)
 
 
 def _name(key: int) -> str:

@@ -2,24 +2,28 @@
 
 PotreeConverter shows nothing until it has finished. gigapoint's read phase keeps a uniform
 subsample of every point read so far (every ``stride``-th valid point, the stride doubling
-whenever the sample outgrows its target) and writes it atomically to
-``OUT/.partial/preview.npz`` after the first chunk and then every few seconds.
+whenever the sample outgrows its target) and writes it atomically into the conversion's
+working folder (``OctreeDir.preview``) after the first chunk and then every few seconds.
 ``gigapoint render OUT`` / ``view OUT`` / ``gp.open(OUT)`` draw it, with a warning, until the
 octree is complete; the viewer swaps in the octree when it appears (viewer/watch.py).
 """
 
 from __future__ import annotations
 
-import json
-import os
 import time
 import warnings
 import zipfile
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
 
-PREVIEW_NAME = "preview.npz"
+from ..atomic import atomic_open
+from ..core.cloud import PointCloud
+from ..errors import GigapointWarning, InputError
+from ..io import open_cloud
+from .octree_dir import RESUME_HINT, OctreeDir
+
 PREVIEW_BYTES_PER_POINT = 48  # xyz, rgba and a few attributes, held twice while a file is written
 MAX_PREVIEW_POINTS = 2_000_000  # renders brute force in a few ms: enough to look at, cheap to write
 MIN_PREVIEW_POINTS = 50_000
@@ -102,68 +106,48 @@ class PreviewSampler:
         merged = self._merged()
         arrays = {"xyz": merged["xyz"], "rgba": merged["rgba"]}
         arrays.update({k.removeprefix("attr."): v for k, v in merged.items() if k.startswith("attr.")})
-        tmp = self.path.with_name(self.path.name + ".tmp")
-        with open(tmp, "wb") as f:
+        with atomic_open(self.path) as f:  # readers see the old preview or the new one, never a torn file
             np.savez(f, **arrays)
-        os.replace(tmp, self.path)  # readers see the old preview or the new one, never a torn file
         self.write_seconds = time.perf_counter() - now
         self.last_write = now
         self.dirty = False
         return True
 
 
-def conversion_status(out: Path) -> dict:
-    """What an unfinished conversion's state says: phase, points read, input total, preview size,
-    and whether a conversion is still running (``running``: False once it stopped; None: unknown)."""
-    from .convert import conversion_running
+@dataclass(repr=False)
+class ConversionPreview(PointCloud):
+    """The preview of an unfinished conversion (``open_preview``): a PointCloud of every
+    ``stride``-th point read so far, which knows the octree folder it stands in for, so that
+    the viewer follows the conversion to its finished octree (viewer/watch.py)."""
 
-    try:
-        st = json.loads((Path(out) / ".partial" / "state.json").read_text())
-    except (OSError, ValueError):
-        return {}
-    meta = st.get("preview") or {}
-    return {
-        "phase": st.get("phase"),
-        "points": st.get("points", 0),
-        "total": st.get("total"),
-        "preview_points": meta.get("points", 0),
-        "attributes": sorted(st.get("attributes") or {}),
-        "running": conversion_running(out),
-    }
+    octree_dir: OctreeDir = field(kw_only=True)
 
 
-RESUME_HINT = "run `gigapoint convert` again to resume it"  # what a stopped conversion needs
-
-
-def open_preview(out: Path):
-    """The preview of an unfinished conversion into ``out`` as a PointCloud, with a warning saying so."""
-    from ..errors import GigapointWarning, InputError
-    from ..io import open_cloud
-
-    out = Path(out)
-    path = out / ".partial" / PREVIEW_NAME
-    if not path.is_file():
+def open_preview(octree_dir) -> ConversionPreview:
+    """The preview of an unfinished conversion into ``octree_dir`` (an OctreeDir or a path), with
+    a warning saying so."""
+    d = octree_dir if isinstance(octree_dir, OctreeDir) else OctreeDir(octree_dir)
+    out = d.path
+    if not d.preview.is_file():
         raise InputError(f"{out}: conversion not finished and no preview written yet ({RESUME_HINT})")
-    s = conversion_status(out)
+    s = d.status()
     read = f"{s['points']:,} of {s['total']:,} points read" if s.get("total") else f"{s.get('points', 0):,} points read"
     if s.get("phase") not in (None, "read"):
         read = f"all {s['points']:,} points read, now in phase {s['phase']}"
     stopped = f"; it has stopped: {RESUME_HINT}" if s.get("running") is False else ""
     warnings.warn(f"{out}: conversion not finished ({read}); showing its preview{stopped}", GigapointWarning, stacklevel=3)
-    cloud = open_cloud(path, name=out.name)
-    cloud.preview_of = out  # type: ignore[attr-defined]  (the viewer watches it for the finished octree)
-    return cloud
+    cloud = open_cloud(d.preview, name=out.name)
+    return ConversionPreview(**{f.name: getattr(cloud, f.name) for f in fields(PointCloud) if f.init}, octree_dir=d)
 
 
-def wait_for_preview(out: Path, timeout_s: float = 60.0, poll_s: float = 0.25) -> bool:
+def wait_for_preview(out, timeout_s: float = 60.0, poll_s: float = 0.25) -> bool:
     """For an unfinished conversion into ``out`` that has not written its preview yet (its first
     second or so): wait until the preview or the finished octree appears. False on timeout, or
     at once when no conversion is running (one killed before its first preview)."""
-    from .convert import conversion_running
-
+    d = OctreeDir(out)
     deadline = time.monotonic() + timeout_s
-    while awaiting_preview(out):
-        if time.monotonic() >= deadline or conversion_running(out) is False:
+    while d.awaiting_preview:
+        if time.monotonic() >= deadline or d.running is False:
             return False
         time.sleep(poll_s)
     return True
@@ -171,7 +155,4 @@ def wait_for_preview(out: Path, timeout_s: float = 60.0, poll_s: float = 0.25) -
 
 def awaiting_preview(path) -> bool:
     """``path`` is an unfinished conversion that has no preview yet."""
-    from .store import octree_complete
-
-    p = Path(path)
-    return (p / ".partial" / "state.json").is_file() and not (p / ".partial" / PREVIEW_NAME).is_file() and not octree_complete(p)
+    return OctreeDir(path).awaiting_preview

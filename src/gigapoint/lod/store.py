@@ -1,14 +1,7 @@
-"""The gigapoint octree directory: writer, reader (OctreeCloud), node arena and LOD selection.
+"""The gigapoint octree: reader (OctreeCloud, ``read_gigapoint``), node arena and LOD selection.
 
-Directory layout (every array a .npy file, memory-mapped when read):
-
-- ``octree.json``  metadata, written last (its presence means the directory is complete)
-- ``nodes.npy``    one BATCH_DTYPE record per node (first, count, level, tight bbox), sorted by key
-- ``keys.npy``     u64 integer node key per record (keys.py)
-- ``low.npy``, ``med.npy``, ``high.npy``  u32 node-relative 10-bit precision words per point
-- ``color.npy``    u32 RGBA, inner-node colors averaged over the points they stand for
-- ``rgba.npy``     u32 RGBA as read (source colors)
-- ``attr.<name>.npy``  per-point attributes (intensity, classification, ...)
+The folder's layout (file names, metadata, arrays) is octree_dir.py's; writer.py writes it;
+every array is memory-mapped when read.
 
 Rendering never transcodes: selected nodes are copied slot by slot into an Arena (one
 preallocated set of point buffers cut into fixed-size chunks, SimLOD-style) and the arena
@@ -18,7 +11,6 @@ is drawn by the same kernel as any PointCloud, each chunk a batch.
 from __future__ import annotations
 
 import json
-import os
 from collections import OrderedDict
 from pathlib import Path
 
@@ -26,113 +18,14 @@ import numpy as np
 from numba import njit
 
 from ..core.layout import BATCH_DTYPE
-from ..core.quantize import quantize
+from ..core.quantize import dequantize
+from ..core.renderable import DrawList
+from ..core.selection import Selection, View, batch_matrices, box_in_view, precision_for, visible_and_size
 from ..errors import InputError
-from ..render.selection import box_in_view
-from .keys import key_cube, level_of
+from .keys import key_cube
+from .octree_dir import FORMAT_NAME, FORMAT_VERSION, POINT_ARRAYS, OctreeDir
 
-META_NAME = "octree.json"
-FORMAT_NAME = "gigapoint-octree"
-FORMAT_VERSION = 1
 ARENA_CHUNK = 4096  # points per arena slot (a node spans ceil(count / ARENA_CHUNK) slots)
-_ARRAYS = ("low", "med", "high", "color", "rgba")
-
-
-# --------------------------------------------------------------------------- writer
-
-
-def write_gigapoint(out: Path, sources: list[Path], st: dict, name: str, sampler: str, max_leaf: int, progress) -> int:
-    """Assemble built node sets into ``out``.
-
-    A node set is a dir with keys.npy and either nodes.npy + span.npy (its points already written
-    into ``out/<array>.tmp.npy`` by the converter: only the node records are gathered here) or
-    counts/xyz/color/rgba/attr.* (quantized and copied here).
-    """
-    attrs = st["attributes"]
-    origin, edge = np.array(st["origin"]), float(st["edge"])
-    dtypes = {"low": np.uint32, "med": np.uint32, "high": np.uint32, "color": np.uint32, "rgba": np.uint32}
-    dtypes.update({f"attr.{a}": np.dtype(d) for a, d in attrs.items()})
-    tmp_paths = {k: out / f"{k}.tmp.npy" for k in dtypes}
-    direct = all((src / "span.npy").exists() for src in sources)
-    if direct:
-        total = int(st["points"])
-        if sum(int(np.diff(np.load(src / "span.npy"))[0]) for src in sources) != total:
-            raise RuntimeError("internal error: built node sets do not cover every point once")
-        outs = {}
-    else:
-        total = sum(int(np.load(src / "xyz.npy", mmap_mode="r").shape[0]) for src in sources)
-        outs = {k: np.lib.format.open_memmap(tmp_paths[k], mode="w+", dtype=dtypes[k], shape=(total,)) for k in dtypes}
-    all_nodes, all_keys = [], []
-    offset = 0
-    for src in sources:
-        keys = np.load(src / "keys.npy")
-        counts = np.load(src / "counts.npy")
-        if direct:
-            nodes = np.load(src / "nodes.npy")
-            n = int(counts.sum())
-        else:
-            xyz = np.load(src / "xyz.npy")
-            n = len(xyz)
-            nodes = np.zeros(len(keys), BATCH_DTYPE)
-            nodes["first"] = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint64)
-            nodes["count"] = counts
-            nodes["level"] = level_of(keys)
-            low, med, high = quantize(xyz, np.arange(n, dtype=np.int64), nodes)
-            nodes["first"] += np.uint64(offset)
-            sl = slice(offset, offset + n)
-            outs["low"][sl], outs["med"][sl], outs["high"][sl] = low, med, high
-            outs["color"][sl] = np.load(src / "color.npy", mmap_mode="r")
-            outs["rgba"][sl] = np.load(src / "rgba.npy", mmap_mode="r")
-            for a in attrs:
-                outs[f"attr.{a}"][sl] = np.load(src / f"attr.{a}.npy", mmap_mode="r")
-        empty = counts == 0
-        if empty.any():  # an empty inner node: its cube stands in for the bbox
-            cmin, cedge = key_cube(keys[empty], origin, edge)
-            nodes["bbox_min"][empty] = cmin
-            nodes["bbox_max"][empty] = cmin + cedge[:, None]
-        all_nodes.append(nodes)
-        all_keys.append(keys)
-        offset += n
-        progress.advance(n)
-    for k, arr in outs.items():
-        arr.flush()
-        del arr
-    outs.clear()
-    for k, p in tmp_paths.items():
-        if p.exists() or not (out / f"{k}.npy").exists():  # a write phase resumed after its renames
-            os.replace(p, out / f"{k}.npy")
-    keys = np.concatenate(all_keys)
-    nodes = np.concatenate(all_nodes)
-    order = np.argsort(keys, kind="stable")
-    if len(np.unique(keys)) != len(keys):
-        raise RuntimeError("internal error: duplicate octree node keys")
-    for fname, arr in (("nodes.npy", nodes[order]), ("keys.npy", keys[order])):
-        tmp = out / (fname + ".tmp.npy")
-        np.save(tmp, arr)
-        os.replace(tmp, out / fname)
-    lo, hi = np.array(st["lo"]), np.array(st["hi"])
-    meta = {
-        "format": FORMAT_NAME,
-        "version": FORMAT_VERSION,
-        "name": name,
-        "points": int(total),
-        "nodes": len(keys),
-        "cube_min": origin.tolist(),
-        "cube_edge": edge,
-        "bounds": {"min": lo.tolist(), "max": hi.tolist()},
-        "sampler": sampler,
-        "spacing": edge / 128.0,
-        "max_leaf": max_leaf,
-        "attributes": attrs,
-        "skipped": int(st.get("skipped", 0)),
-    }
-    tmp = out / (META_NAME + ".tmp")
-    with open(tmp, "w") as f:
-        json.dump(meta, f, indent=1)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, out / META_NAME)
-    return len(keys)
 
 
 # --------------------------------------------------------------------------- selection kernels
@@ -241,8 +134,9 @@ def _copy_slots(src, first, count, slots, chunk, dst):
 class Arena:
     """Preallocated point buffers cut into ``ARENA_CHUNK``-point slots, with an LRU of resident nodes.
 
-    It quacks like a PointCloud for the backends: ``low``, ``med``, ``high``, ``color`` and
-    ``batches`` (one BATCH_DTYPE record per slot).
+    The octree's PointBuffers (core/renderable.py): ``low``, ``med``, ``high``, ``color``,
+    ``attributes`` and ``batches`` (one BATCH_DTYPE record per slot), rewritten in place as
+    nodes come and go, so it counts its writes in ``version`` and ``batch_version``.
     """
 
     def __init__(self, capacity_points: int, name: str, bounds, attribute_dtypes: dict | None = None):
@@ -271,6 +165,14 @@ class Arena:
     @property
     def n_points(self) -> int:
         return len(self.low)
+
+    def point_info(self, index: int) -> dict:
+        """Position (30-bit), color and level of the point in slot position ``index``."""
+        slot = int(np.searchsorted(self.batches["first"], np.uint64(index), side="right") - 1)
+        rec = self.batches[slot]
+        i = np.array([index])
+        pos = dequantize(self.low[i], self.med[i], self.high[i], rec["bbox_min"], rec["bbox_max"], 30)[0]
+        return {"position": pos.tolist(), "rgba": self.color[i].view(np.uint8).tolist(), "level": int(rec["level"]), "source": "octree"}
 
     def ensure(self, nodes: np.ndarray, cloud: OctreeCloud) -> bool:
         """Make every node in ``nodes`` resident; False when they cannot all fit."""
@@ -318,29 +220,11 @@ class Arena:
 # --------------------------------------------------------------------------- reader
 
 
-def octree_complete(path) -> bool:
-    """A finished octree: its metadata file (gigapoint's or Potree's) is written last, atomically."""
-    p = Path(path)
-    return (p / META_NAME).is_file() or (p / "metadata.json").is_file()
-
-
-def is_octree_dir(path) -> bool:
-    """A gigapoint or Potree 2.0 octree directory, or an unfinished conversion into one."""
-    try:
-        p = Path(path)
-        if not p.is_dir():
-            return False
-    except (TypeError, OSError):
-        return False
-    return (
-        (p / META_NAME).is_file()
-        or ((p / "metadata.json").is_file() and (p / "hierarchy.bin").is_file())
-        or (p / ".partial" / "state.json").is_file()
-    )
-
-
 class OctreeCloud:
-    """A converted LOD octree, drawn through node selection + an arena (see ``select``)."""
+    """A converted LOD octree: a Renderable (core/renderable.py) whose ``prepare`` selects nodes
+    (largest projected first, within the point budget) and draws them from its arena."""
+
+    load_progress = 1.0  # converted whole
 
     def __init__(
         self, name: str, meta: dict, nodes: np.ndarray, keys: np.ndarray, arrays: dict, attributes: dict, path: Path | None = None
@@ -404,8 +288,6 @@ class OctreeCloud:
 
     def node_points(self, index: int) -> dict:
         """Decoded float64 positions (30-bit) and colors of one node (for tests and tools)."""
-        from ..core.quantize import dequantize
-
         arrays, attrs, first = self.node_arrays(index)
         rec = self.nodes[index]
         s = slice(first, first + int(rec["count"]))
@@ -415,28 +297,24 @@ class OctreeCloud:
             out[a] = np.asarray(v[s])
         return out
 
-    # -- rendering
-    def select_nodes(self, camera, settings, near: float, far: float) -> tuple[np.ndarray, np.ndarray, int]:
+    # -- Renderable (core/renderable.py)
+    def select_nodes(self, view: View, settings) -> tuple[np.ndarray, np.ndarray, int]:
         """(node indices, projected cube sizes, point total) chosen for a view."""
         out_ids = np.empty(len(self.keys), np.int64)
         out_size = np.empty(len(self.keys), np.float64)
-        counts = self.counts
         k, total = select_nodes(
-            camera.screen_rows(), self.box_min, self.box_size, counts, self.children, float(camera.width), float(camera.height),
-            float(near), float(far), float(settings.lod_threshold_px), int(settings.point_budget), out_ids, out_size,
-            float(getattr(settings, "lod_foveation", 0.0)),
+            view.rows, self.box_min, self.box_size, self.counts, self.children, float(view.width), float(view.height),
+            float(view.near), float(view.far), float(settings.lod_threshold_px), int(settings.point_budget), out_ids, out_size,
+            float(settings.lod_foveation),
         )  # fmt: skip
         return out_ids[:k], out_size[:k], int(total)
 
     def _attribute_dtypes(self) -> dict:
         return {a: v.dtype for a, v in self.attributes.items() if v.ndim == 1}
 
-    def select(self, camera, settings):
-        """(arena, Selection) for one frame: selected nodes made resident, one batch per arena slot."""
-        from ..render.selection import Selection, batch_matrices, precision_for, visible_and_size
-
-        near, far = camera.clip_range(self.bounds)
-        ids, _, total = self.select_nodes(camera, settings, near, far)
+    def prepare(self, view: View, settings) -> DrawList:
+        """The frame's nodes made resident in the arena, one batch per arena slot."""
+        ids, _, total = self.select_nodes(view, settings)
         ids = ids[self.nodes["count"][ids] > 0]
         if self.arena is None or self.arena.n_points < total:
             cap = max(total, min(int(settings.point_budget), self.n_points)) * 5 // 4 + 64 * ARENA_CHUNK
@@ -448,11 +326,10 @@ class OctreeCloud:
             # a selection of many small nodes that wastes slots: grow and retry once
             self.arena = arena = Arena(arena.n_points * 2 + (len(ids) + 1) * ARENA_CHUNK, self.name, self.bounds, self._attribute_dtypes())
             arena.ensure(ids, self)
-        rows = camera.screen_rows()
         recs = self.nodes[ids]
-        _, size = visible_and_size(rows, recs["bbox_min"], recs["bbox_max"], camera.width, camera.height, near, far)
+        _, size = visible_and_size(view.rows, recs["bbox_min"], recs["bbox_max"], view.width, view.height, view.near, view.far)
         bits = precision_for(size, settings.precision_threshold_px) if settings.adaptive_precision else np.full(len(ids), 30, np.int32)
-        mats = batch_matrices(rows, recs["bbox_min"], recs["bbox_max"])
+        mats = batch_matrices(view.rows, recs["bbox_min"], recs["bbox_max"])
         slot_lists = [arena.resident[nd] for nd in ids.tolist()]
         n_slots = np.array([len(s) for s in slot_lists], np.int64)
         slots = np.concatenate(slot_lists) if slot_lists else np.empty(0, np.int64)
@@ -460,78 +337,34 @@ class OctreeCloud:
         order = np.argsort(slots, kind="stable")
         slots, owner = slots[order], owner[order]
         sel = Selection(slots.astype(np.int64), bits[owner].astype(np.int32), mats[owner], size[owner], int(len(self.keys) - len(ids)))
-        sel.nodes = ids  # type: ignore[attr-defined]  (node indices drawn, for stats and tests)
-        return arena, sel
+        return DrawList(arena, sel, len(self.nodes), nodes=ids)
+
+    def prepare_views(self, views, settings) -> None:
+        """None: each view selects its own nodes, so stereo draws the eyes one by one."""
+        return None
 
 
-def open_octree(path) -> OctreeCloud:
-    """Open a converted octree directory (gigapoint format or Potree 2.0) for rendering."""
-    p = Path(path)
-    if not p.is_dir():
-        raise InputError(f"{p}: not a directory (an octree is a directory made by `gigapoint convert`)")
-    if not (p / META_NAME).is_file():
-        if (p / "metadata.json").is_file():
-            from .potree import read_potree
-
-            return read_potree(p)
-        if (p / ".partial").exists():
-            from .preview import open_preview
-
-            return open_preview(p)
-        raise InputError(f"{p}: no {META_NAME} or metadata.json: not a converted octree")
+def read_gigapoint(octree_dir) -> OctreeCloud:
+    """A gigapoint octree folder (an OctreeDir or a path) opened for rendering: its metadata
+    checked, its arrays memory-mapped. ``reader.open_octree`` opens a folder of any kind."""
+    d = octree_dir if isinstance(octree_dir, OctreeDir) else OctreeDir(octree_dir)
+    p = d.path
     try:
-        meta = json.loads((p / META_NAME).read_text())
+        meta = json.loads(d.meta.read_text())
     except ValueError as exc:
-        raise InputError(f"{p / META_NAME}: invalid JSON ({exc})") from None
+        raise InputError(f"{d.meta}: invalid JSON ({exc})") from None
     if meta.get("format") != FORMAT_NAME or meta.get("version") != FORMAT_VERSION:
-        raise InputError(f"{p / META_NAME}: not a gigapoint octree of version {FORMAT_VERSION}")
+        raise InputError(f"{d.meta}: not a gigapoint octree of version {FORMAT_VERSION}")
     try:
-        nodes = np.load(p / "nodes.npy")
-        keys = np.load(p / "keys.npy")
-        arrays = {k: np.load(p / f"{k}.npy", mmap_mode="r") for k in _ARRAYS}
-        attributes = {a: np.load(p / f"attr.{a}.npy", mmap_mode="r") for a in meta.get("attributes", {})}
+        nodes = np.load(d.array("nodes"))
+        keys = np.load(d.array("keys"))
+        arrays = {k: np.load(d.array(k), mmap_mode="r") for k in POINT_ARRAYS}
+        attributes = {a: np.load(d.array(f"attr.{a}"), mmap_mode="r") for a in meta.get("attributes", {})}
     except (OSError, ValueError) as exc:
         raise InputError(f"{p}: cannot read octree data ({' '.join(str(exc).split())})") from None
     if nodes.dtype != BATCH_DTYPE or len(nodes) != len(keys):
         raise InputError(f"{p}: nodes.npy / keys.npy do not match the gigapoint layout")
     n = int(meta["points"])
     if any(len(a) != n for a in arrays.values()) or int(nodes["count"].astype(np.int64).sum()) != n:
-        raise InputError(f"{p}: point arrays hold a different number of points than {META_NAME} says ({n:,})")
+        raise InputError(f"{p}: point arrays hold a different number of points than {d.meta.name} says ({n:,})")
     return OctreeCloud(meta.get("name", p.name), meta, nodes, keys, arrays, attributes, p)
-
-
-def octree_info(path) -> dict:
-    """What ``gigapoint info`` says about an octree directory (gigapoint or Potree 2.0) or an
-    unfinished conversion, in ``file_info``'s keys plus nodes, levels, sampler and conversion."""
-    p = Path(path)
-    size = sum(f.stat().st_size for f in p.rglob("*") if f.is_file())
-    if not octree_complete(p):
-        from .preview import conversion_status
-
-        s = conversion_status(p)
-        return {
-            "path": str(p),
-            "format": "unfinished conversion",
-            "point_count": int(s.get("points", 0)),
-            "has_color": True,
-            "attributes": s.get("attributes", []),
-            "conversion": s,
-            "file_size": size,
-        }
-    cloud = open_octree(p)
-    lo, hi = cloud.bounds
-    potree = cloud.meta.get("format") != FORMAT_NAME
-    return {
-        "path": str(p),
-        "format": "Potree 2.0 octree" if potree else f"gigapoint octree {FORMAT_VERSION}",
-        "encoding": cloud.meta.get("encoding") if potree else None,
-        "point_count": int(cloud.n_points),
-        "bounds": {"min": np.asarray(lo).tolist(), "max": np.asarray(hi).tolist()},
-        "has_color": True,
-        "attributes": sorted(cloud.attributes),
-        "nodes": len(cloud.keys),
-        "levels": int(cloud.nodes["level"].max()) + 1,
-        "sampler": cloud.meta.get("sampler"),
-        "spacing": cloud.meta.get("spacing"),
-        "file_size": size,
-    }

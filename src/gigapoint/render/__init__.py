@@ -1,4 +1,4 @@
-"""Cameras, settings, batch selection and the renderer facade."""
+"""The renderer: cameras, settings, the Backend contract, passes and their references, the facade."""
 
 from .camera import VIEWS, Camera
 from .frame import Frame, RenderStats

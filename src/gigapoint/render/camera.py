@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..core.selection import View
 from ..errors import CameraError
 
 MAX_IMAGE_SIDE = 16_384
@@ -230,6 +231,12 @@ class Camera:
             extent = float(np.linalg.norm(hi - lo))
             near = max(float(depths.min()) * 0.999, far * 1e-6, extent * 1e-9, 1e-9)
         return near, max(far, near * 1.000001)
+
+    def view(self, bounds) -> View:
+        """What selecting batches needs of this camera looking at ``bounds``: its screen rows,
+        image size and the clip range that encloses them."""
+        near, far = self.clip_range(bounds)
+        return View(self.screen_rows(), self.width, self.height, near, far)
 
     def ray(self, px: float, py: float) -> tuple[np.ndarray, np.ndarray]:
         """World-space origin and unit direction through pixel coordinates (px, py)."""

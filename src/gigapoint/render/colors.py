@@ -2,8 +2,8 @@
 
 ``point_colors(cloud, settings)`` returns the (N,) u32 RGBA array the resolve step
 fetches from (the cloud's own ``color`` for ``rgb``). Attribute-derived arrays are
-computed once per (mode, parameters) and cached on the cloud, so a frame only pays a
-dictionary lookup. Everything here is vectorised numpy over the cloud's point order
+computed once per (mode, parameters) and kept in the RenderCache (cache.py), so a frame
+only pays a dictionary lookup. Everything here is vectorised numpy over the cloud's point order
 (attributes are stored in that order) except the elevation decode, a small numba kernel.
 """
 
@@ -14,8 +14,8 @@ from numba import njit, prange
 
 from ..core.layout import COORD_BITS
 from ..errors import SettingsError
-
-COLOR_MODES = ("rgb", "intensity", "classification", "elevation", "return_number", "point_source_id", "batch", "level", "normal")
+from .cache import render_cache
+from .settings import COLOR_MODES, COLORMAPS  # the Literal choices of RenderSettings.color_mode and .colormap
 
 # --- colormaps: small tables of evenly spaced control points, interpolated to 256 entries --------
 _CONTROL = {
@@ -40,7 +40,6 @@ _TURBO = np.array(
         [0.10667330, 12.64194608, -60.58204836, 110.36276771, -89.90310912, 27.34824973],
     ]
 )
-COLORMAPS = ("viridis", "turbo", "terrain", "inferno", "gray")
 
 
 def colormap_table(name: str) -> np.ndarray:
@@ -172,8 +171,8 @@ def _decode_z(firsts, counts, zmin, zsize, low, med, high, out):
 
 
 def elevations(cloud) -> np.ndarray:
-    """float64 (N,) world z of every point in cloud order, decoded once and cached on the cloud."""
-    cache = _cache(cloud)
+    """float64 (N,) world z of every point in cloud order, decoded once (RenderCache)."""
+    cache = render_cache.arrays(cloud)
     z = cache.get("__z__")
     if z is None:
         b = cloud.batches
@@ -183,20 +182,6 @@ def elevations(cloud) -> np.ndarray:
         _decode_z(b["first"].astype(np.int64), b["count"].astype(np.int64), zmin, zsize, cloud.low, cloud.med, cloud.high, z)
         cache["__z__"] = z
     return z
-
-
-def _cache(cloud) -> dict:
-    """Per-cloud cache of derived arrays. Only PointClouds (immutable point buffers) keep one;
-    an LOD arena refills its buffers every frame, so it gets a fresh dict each call."""
-    from ..core.cloud import PointCloud
-
-    if not isinstance(cloud, PointCloud):
-        return {}
-    cache = getattr(cloud, "_gigapoint_color_cache", None)
-    if cache is None:
-        cache = {}
-        object.__setattr__(cloud, "_gigapoint_color_cache", cache)
-    return cache
 
 
 def _auto_range(values: np.ndarray) -> tuple[float, float]:
@@ -251,7 +236,7 @@ def _compute(cloud, mode: str, settings) -> np.ndarray:
 
 def point_colors(cloud, settings) -> np.ndarray:
     """(N,) u32 RGBA color of every point under ``settings.color_mode`` (cached per parameters)."""
-    mode = getattr(settings, "color_mode", "rgb")
+    mode = settings.color_mode
     if mode == "rgb":
         return cloud.color
     key = (
@@ -260,7 +245,7 @@ def point_colors(cloud, settings) -> np.ndarray:
         settings.elevation_range if mode == "elevation" else None,
         settings.intensity_range if mode == "intensity" else None,
     )
-    cache = _cache(cloud)
+    cache = render_cache.arrays(cloud)
     colors = cache.get(key)
     if colors is None:
         colors = np.ascontiguousarray(_compute(cloud, mode, settings), np.uint32)

@@ -7,6 +7,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.layout import EMPTY_PIXEL
+from ..errors import GigapointError
+
+MAX_INDEX = 0xFFFFFFFF  # point indices live in the low 32 bits of the visibility buffer
 
 
 @dataclass
@@ -26,6 +29,22 @@ class RenderStats:
     def points_per_second(self) -> float:
         return self.points_processed / (self.time_ms / 1000.0) if self.time_ms > 0 else 0.0
 
+    @classmethod
+    def of(cls, draw, counts: np.ndarray, points_total: int, time_ms: float, raster_ms: float, backend: str) -> RenderStats:
+        """The stats of a DrawList whose selected batches drew ``counts`` points each."""
+        sel = draw.selection
+        return cls(
+            points_total=points_total,
+            batches_total=draw.n_batches,
+            batches_culled=sel.n_culled,
+            batches_rendered=len(sel.ids),
+            points_processed=int(counts.sum()),
+            precision_histogram={b: int(counts[sel.bits == b].sum()) for b in (10, 20, 30)},
+            time_ms=time_ms,
+            raster_ms=raster_ms,
+            backend=backend,
+        )
+
     def as_dict(self) -> dict:
         d = dict(self.__dict__)
         d["precision_histogram"] = {str(k): v for k, v in self.precision_histogram.items()}
@@ -38,6 +57,18 @@ class Frame:
     visibility: np.ndarray  # (H, W) u64: depth bits << 32 | point index; all ones = empty
     image: np.ndarray  # (H, W, 4) uint8 RGBA
     stats: RenderStats
+    # The point buffers the indices name (a PointCloud itself; an octree's arena), and their
+    # version when drawn: while ``points.version == generation`` an index still names the
+    # point this frame drew (``point_info``).
+    points: object = None
+    generation: int | None = None
+
+    def point_info(self, index: int) -> dict | None:
+        """What the frame's point ``index`` is (position, color, attributes), or None when the
+        buffers have been rewritten since (an octree's arena, by a later frame)."""
+        if self.points is None or self.points.version != self.generation:
+            return None
+        return self.points.point_info(index)
 
     @property
     def empty(self) -> np.ndarray:
@@ -56,3 +87,9 @@ class Frame:
         idx = (self.visibility & np.uint64(0xFFFFFFFF)).astype(np.int64)
         idx[self.empty] = -1
         return idx
+
+
+def check_indexable(points) -> None:
+    """A visibility buffer names a point by 32 bits."""
+    if points.n_points > MAX_INDEX:
+        raise GigapointError(f"{points.name}: {points.n_points:,} points exceed the 2^32 a brute-force frame can index; convert it to an octree")

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import GigapointError
+from .cache import render_cache
 
 
 def estimate_normals(cloud, k: int = 16, chunk: int = 200_000, store: bool = True):
@@ -43,9 +44,7 @@ def estimate_normals(cloud, k: int = 16, chunk: int = 200_000, store: bool = Tru
         radii[s : s + chunk] = dist[:, 1:].mean(axis=1)
     if store:
         cloud.attributes.update(nx=normals[:, 0].copy(), ny=normals[:, 1].copy(), nz=normals[:, 2].copy(), radius=radii)
-        cache = getattr(cloud, "_gigapoint_color_cache", None)
-        if cache is not None:
-            cache.clear()
+        render_cache.forget(cloud)  # colors derived from the old attributes
     return normals, radii
 
 

@@ -11,8 +11,8 @@ import numpy as np
 from ..core.layout import EMPTY_PIXEL
 from ..core.quantize import unpack_words
 from .camera import Camera
-from .passes.splats import point_sizes, splat_params
-from .selection import select
+from .splats import point_sizes, splat_params
+from ..core.selection import select
 from .settings import RenderSettings
 
 

@@ -1,4 +1,8 @@
-"""The renderer facade: camera + settings -> selection -> backend -> Frame."""
+"""The renderer facade: camera + settings -> the cloud's DrawList -> backend -> Frame.
+
+It orchestrates and knows neither the kind of cloud (any Renderable: core/renderable.py)
+nor the backend (any Backend: backend.py).
+"""
 
 from __future__ import annotations
 
@@ -7,82 +11,48 @@ import warnings
 
 import numpy as np
 
-from ..backends import get_backend
-from ..backends.numba_cpu.raster import count_covered
+from ..core.layout import EMPTY_PIXEL
+from ..core.renderable import Renderable
 from ..errors import GigapointError, GigapointWarning
+from .backend import get_backend
 from .camera import Camera
-from .frame import Frame, RenderStats
-from .passes import finish_frame, raster_options, wants_composite
-from .selection import select
+from .frame import Frame, RenderStats, check_indexable
+from .passes import finish_frame, splat_for, wants_composite
+from .passes.compose import composite_frame
 from .settings import RenderSettings
-
-_MAX_INDEX = 0xFFFFFFFF  # point indices live in the low 32 bits of the visibility buffer
-
-
-def subsample_step(counts: np.ndarray, max_points: int) -> int:
-    """Smallest k such that every k-th point of each batch stays within ``max_points`` (0: no cap;
-    never fewer than one point per batch)."""
-    total = int(counts.sum())
-    if max_points <= 0 or total <= max_points:
-        return 1
-    step = -(-total // max_points)
-    largest = int(counts.max())
-    while step < largest and int(((counts + step - 1) // step).sum()) > max_points:  # each batch rounds up
-        step += 1
-    return min(step, largest)  # one point per batch is the floor
 
 
 def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) -> Frame:
-    """Render ``cloud`` into a Frame (visibility buffer, image, stats)."""
+    """Render ``cloud`` (any Renderable) into a Frame (visibility buffer, image, stats)."""
     settings = settings or RenderSettings()
+    if not isinstance(cloud, Renderable):
+        raise GigapointError(f"render: cannot draw a {type(cloud).__name__}; give a cloud (gigapoint.open, from_arrays, demo)")
     if not isinstance(camera, Camera):
         raise GigapointError(f"camera must be a gigapoint.Camera, got {type(camera).__name__}")
-    lod_select = getattr(cloud, "select", None)  # octree clouds (gigapoint.lod) pick nodes into an arena
-    if lod_select is None and cloud.n_points > _MAX_INDEX:
-        raise GigapointError(f"{cloud.name}: {cloud.n_points:,} points exceed the 2^32 a brute-force frame can index; convert it to an octree")
     if wants_composite(settings):  # supersampling / stereo: whole renders combined (passes/compose.py)
-        from .passes.compose import composite_frame
-
-        return composite_frame(cloud, camera, settings)
+        return composite_frame(cloud, camera, settings, render_frame)
     t0 = time.perf_counter()
     backend = get_backend(settings.backend)
-    width, height = camera.width, camera.height
-    near, far = camera.clip_range(cloud.bounds)
-    rows = camera.screen_rows()
-    lod_cloud = cloud
-    if lod_select is not None:
-        cloud, sel = lod_select(camera, settings)  # the arena quacks like a PointCloud for everything below
-    else:
-        sel = select(cloud.batches, rows, width, height, near, far, settings.precision_threshold_px, settings.adaptive_precision, settings.frustum_culling)
-    counts = cloud.batches["count"][sel.ids].astype(np.int64)
+    view = camera.view(cloud.bounds)
+    draw = cloud.prepare(view, settings)
+    check_indexable(draw.points)
+    counts = draw.points.batches["count"][draw.selection.ids].astype(np.int64)
+    if draw.step > 1:
+        counts = (counts + draw.step - 1) // draw.step
     t1 = time.perf_counter()
-    backend, extra = raster_options(backend, settings, camera)  # point size / shape (passes/splats.py)
-    step = subsample_step(counts, settings.max_points) if lod_select is None else 1
-    if step > 1:
-        extra["step"] = step
-        counts = (counts + step - 1) // step
-    visibility = backend.rasterize(cloud, sel, width, height, near, far, settings.threads, **extra)
+    visibility = backend.rasterize(
+        draw.points, draw.selection, view.width, view.height, view.near, view.far, settings.threads,
+        splat=splat_for(settings, camera), step=draw.step, keep_on_device=True,
+    )  # fmt: skip
     t2 = time.perf_counter()
-    covered: list = []
-    visibility, colors = finish_frame(backend, cloud, camera, sel, visibility, settings, near, far, covered)
-    image = colors.view(np.uint8).reshape(height, width, 4)
-    visibility = visibility.reshape(height, width)
-    stats = RenderStats(
-        points_total=lod_cloud.n_points,
-        batches_total=len(lod_cloud.batches),
-        batches_culled=sel.n_culled,
-        batches_rendered=len(sel.ids),
-        points_processed=int(counts.sum()),
-        precision_histogram={b: int(counts[sel.bits == b].sum()) for b in (10, 20, 30)},
-        time_ms=(time.perf_counter() - t0) * 1000.0,
-        raster_ms=(t2 - t1) * 1000.0,
-        backend=backend.name,
-    )
-    frame = Frame(visibility, image, stats)
-    stats.visible_pixels = covered[0] if covered else int(count_covered(frame.visibility.reshape(-1)))
+    visibility, colors, covered = finish_frame(backend, draw, camera, visibility, settings, view.near, view.far)
+    image = colors.view(np.uint8).reshape(view.height, view.width, 4)
+    visibility = visibility.reshape(view.height, view.width)
+    stats = RenderStats.of(draw, counts, cloud.n_points, (time.perf_counter() - t0) * 1000.0, (t2 - t1) * 1000.0, backend.name)
+    stats.visible_pixels = covered if covered is not None else int(np.count_nonzero(visibility != EMPTY_PIXEL))
     if stats.visible_pixels == 0:
         warnings.warn(f"{cloud.name}: no point is in view of the camera; the image shows only the background", GigapointWarning, stacklevel=2)
-    return frame
+    return Frame(visibility, image, stats, draw.points, draw.generation)
 
 
 def render(cloud, camera: Camera, settings: RenderSettings | None = None, return_stats: bool = False, **setting_overrides):

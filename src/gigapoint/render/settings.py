@@ -1,11 +1,41 @@
-"""RenderSettings: every knob of a render, one frozen dataclass shared by API, CLI and viewer."""
+"""RenderSettings: every knob of a render, one frozen dataclass shared by API, CLI and viewer.
+
+The dataclass is the one schema. A field's type says which values it takes (``Literal``
+choices, ``X | None``, a ``(low, high)`` range, a color) and its metadata, written by
+``setting(...)``, says the rest: range, help text, CLI option name, group. Validation
+(``__post_init__``), the options of ``gigapoint render`` (``cli/settings_opts.py``) and the
+viewer's settings panel (``viewer/protocol.py``) are all generated from ``settings_fields``,
+so a new setting is one field here and nothing else.
+"""
 
 from __future__ import annotations
 
+import enum
 import math
-from dataclasses import dataclass, fields, replace
+import numbers
+import sys
+import types
+import typing
+from dataclasses import MISSING, dataclass, field, fields, replace
+from typing import Literal, get_args
 
 from ..errors import SettingsError
+
+# --- the choices (render/colors.py derives COLOR_MODES and COLORMAPS from these) ----------------------
+Backend = Literal["auto", "cpu", "wgpu"]
+ColorMode = Literal["rgb", "intensity", "classification", "elevation", "return_number", "point_source_id", "batch", "level", "normal"]
+Colormap = Literal["viridis", "turbo", "terrain", "inferno", "gray"]
+PointShape = Literal["square", "round"]
+SizeMode = Literal["fixed", "attenuated"]
+Supersample = Literal[1, 2, 4]
+SupersampleFilter = Literal["box", "lanczos"]
+Stereo = Literal["none", "side-by-side", "anaglyph"]
+Color = tuple[int, int, int, int]  # r, g, b, a in 0..255
+Range = tuple[float, float]  # low, high
+
+COLOR_MODES: tuple[str, ...] = get_args(ColorMode)
+COLORMAPS: tuple[str, ...] = get_args(Colormap)
+GROUPS = ("execution", "lod", "appearance")  # CLI help panels (in this order); the viewer may use them
 
 _NAMED_COLORS = {
     "black": (0, 0, 0),
@@ -18,8 +48,9 @@ _NAMED_COLORS = {
 }
 
 
-def parse_color(value) -> tuple[int, int, int, int]:
+def parse_color(value, name: str = "background") -> tuple[int, int, int, int]:
     """'black', '#rrggbb', '#rrggbbaa', 'r,g,b' or a tuple -> (r, g, b, a) in 0..255."""
+    text = value
     if isinstance(value, str):
         s = value.strip().lower()
         if s in _NAMED_COLORS:
@@ -28,70 +59,134 @@ def parse_color(value) -> tuple[int, int, int, int]:
             try:
                 parts = [int(s[i : i + 2], 16) for i in range(1, len(s), 2)]
             except ValueError:
-                raise SettingsError(f"background: cannot read color {value!r}") from None
+                raise SettingsError(f"{name}: cannot read color {value!r}") from None
             return tuple(parts + [255] * (4 - len(parts)))  # type: ignore[return-value]
         value = s.split(",")
     try:
         parts = [int(float(v)) for v in value]
     except (TypeError, ValueError):
-        raise SettingsError(f"background: cannot read color {value!r} (use a name, #rrggbb or r,g,b)") from None
+        raise SettingsError(f"{name}: cannot read color {text!r} (use a name, #rrggbb or r,g,b)") from None
     if len(parts) not in (3, 4) or not all(0 <= p <= 255 for p in parts):
-        raise SettingsError(f"background: color needs 3 or 4 values in 0..255, got {value!r}")
+        raise SettingsError(f"{name}: color needs 3 or 4 values in 0..255, got {text!r}")
     return tuple(parts + [255] * (4 - len(parts)))  # type: ignore[return-value]
+
+
+def format_color(rgba) -> str:
+    """The text ``parse_color`` reads back: a name where one fits, else '#rrggbb' or '#rrggbbaa'."""
+    rgba = parse_color(rgba)
+    if rgba[3] == 255:
+        for name, rgb in _NAMED_COLORS.items():
+            if rgb == rgba[:3]:
+                return name
+    return "#" + "".join(f"{c:02x}" for c in (rgba if rgba[3] != 255 else rgba[:3]))
+
+
+def setting(
+    default,
+    help: str,
+    *,
+    min: float | None = None,
+    max: float | None = None,
+    exclusive_min: bool = False,
+    option: str | None = None,
+    group: str = "appearance",
+    viewer: bool = True,
+    kind: str | None = None,
+    label: str | None = None,
+    step: float | None = None,
+    implies: dict | None = None,
+):
+    """A settings field: its default and the metadata that CLI, viewer and validation read.
+
+    ``min``/``max`` bound numbers (``exclusive_min``: strictly above ``min``); ``option`` is the
+    CLI option where it is not ``--kebab-case`` of the field; ``group`` one of GROUPS;
+    ``viewer=False`` hides it from the viewer's panel; ``kind="color"`` marks a color tuple;
+    ``implies`` {field: value}: giving this field's CLI option also sets those fields, unless
+    their own options are given too.
+    """
+    meta = {"help": help, "group": group}
+    extra = {"min": min, "max": max, "option": option, "kind": kind, "label": label, "step": step, "implies": implies}
+    meta.update({k: v for k, v in extra.items() if v is not None})
+    if exclusive_min:
+        meta["exclusive_min"] = True
+    if not viewer:
+        meta["viewer"] = False
+    return field(default=default, metadata=meta)
 
 
 @dataclass(frozen=True)
 class RenderSettings:
-    background: tuple[int, int, int, int] = (0, 0, 0, 255)
-    backend: str = "auto"  # auto | cpu | wgpu
-    threads: int | None = None  # CPU threads; None = all cores
-    precision_threshold_px: float = 500.0  # projected batch size below which 10 bits suffice
-    adaptive_precision: bool = True  # False: always 30 bits (for comparisons)
-    frustum_culling: bool = True
-    # --- level of detail (octree clouds, gigapoint.lod) ---
-    point_budget: int = 10_000_000  # most points an octree frame draws (largest projected nodes first)
-    max_points: int = 0  # plain (unconverted) clouds: draw at most this many (every k-th point of each batch); 0 = all
-    lod_threshold_px: float = 100.0  # octree nodes projected smaller than this are not drawn
-    lod_foveation: float = 0.0  # > 0: the threshold grows to lod_threshold_px * (1 + lod_foveation) at the image corners
+    background: Color = setting((0, 0, 0, 255), "Background color: name, #rrggbb or r,g,b.", kind="color")
+    # --- execution ---
+    backend: Backend = setting("auto", "Rasterizer: auto (the GPU when wgpu finds one), cpu or wgpu.", group="execution")
+    threads: int | None = setting(None, "CPU threads (default: all cores).", min=1, max=1024, group="execution")
+    # --- precision and culling, level of detail (octree clouds, gigapoint.lod) ---
+    precision_threshold_px: float = setting(
+        500.0, "Batches projected smaller than this many pixels use 10-bit coordinates.", min=0, exclusive_min=True, group="lod"
+    )
+    adaptive_precision: bool = setting(True, "Choose 10, 20 or 30-bit coordinates per batch (off: always 30 bits).", group="lod")
+    frustum_culling: bool = setting(True, "Skip the batches outside the view.", group="lod")
+    point_budget: int = setting(
+        10_000_000, "Converted octrees: most points a frame draws (largest projected nodes first).", min=1, group="lod"
+    )
+    max_points: int = setting(
+        0, "Plain clouds: draw at most this many points, every k-th of each batch (a quick preview); 0 = all.", min=0, group="lod"
+    )
+    lod_threshold_px: float = setting(
+        100.0, "Converted octrees: nodes projected smaller than this many pixels are not drawn.", min=0.0, group="lod"
+    )
+    lod_foveation: float = setting(
+        0.0, "Above 0 the LOD threshold grows to threshold * (1 + this) at the image corners.", min=0.0, group="lod"
+    )
     # --- image quality (render/passes, render/colors.py) ---
-    color_mode: str = "rgb"  # rgb | intensity | classification | elevation | return_number | point_source_id | batch | level | normal
-    colormap: str = "viridis"  # elevation colormap: viridis | turbo | terrain | inferno | gray
-    elevation_range: tuple[float, float] | None = None  # None: the cloud's z extent
-    intensity_range: tuple[float, float] | None = None  # None: 2nd..98th percentile
-    edl: bool = False  # eye-dome lighting
-    edl_strength: float = 1.0
-    edl_radius: float = 1.4  # pixels
-    fill_holes: int = 0  # 0 off; 1, 2, 3 = depth-aware dilation in a 3x3, 5x5, 7x7 window
-    fill_holes_foveated: bool = False  # window grows from 3x3 in the centre to the full size at the border
-    hqs: bool = False  # high-quality shading: average the colors of all points near the closest depth
-    hqs_depth_tolerance: float = 0.01  # relative depth range behind the closest point that blends
-    point_size: int = 1  # pixels (side of the square / diameter of the disc)
-    point_shape: str = "square"  # square | round
-    size_mode: str = "fixed"  # fixed | attenuated (point_world_size metres, clamped to point_size px)
-    point_world_size: float = 0.0  # world-space point size for size_mode='attenuated'
-    splat_softness: float = 0.0  # Kraft's soft splats (eq. 3.1 falloff exponent) blended by HQS; 0 = hard
-    supersample: int = 1  # 1, 2 or 4: render larger and box-filter down
-    supersample_filter: str = "box"  # box (exact block mean) | lanczos (Pillow)
-    stereo: str = "none"  # none | side-by-side | anaglyph
-    ipd: float = 0.065  # eye distance, world units
-    convergence: float | None = None  # zero-parallax distance; None: the camera's target distance
-    lighting: bool = False  # Blinn-Phong headlight from the cloud's normals
-    shininess: float = 32.0
+    color_mode: ColorMode = setting("rgb", "Point colors: the cloud's own, an attribute, the elevation or a debug view.")
+    colormap: Colormap = setting("viridis", "Colormap of the elevation color mode.")
+    elevation_range: Range | None = setting(None, "'low,high' elevations mapped onto the colormap (default: the cloud's z extent).")
+    intensity_range: Range | None = setting(None, "'low,high' intensity contrast range (default: 2nd..98th percentile).")
+    edl: bool = setting(False, "Eye-dome lighting.")
+    edl_strength: float = setting(1.0, "Eye-dome lighting strength.", min=0.0)
+    edl_radius: float = setting(1.4, "Eye-dome lighting radius in pixels.", min=0.5, max=16.0)
+    fill_holes: int = setting(0, "Depth-aware hole filling: 0 off, 1/2/3 = 3x3/5x5/7x7 window.", min=0, max=3)
+    fill_holes_foveated: bool = setting(
+        False, "Hole filling window grows from 3x3 in the centre to the full size at the border.", option="--foveated"
+    )
+    hqs: bool = setting(False, "High-quality shading: blend the colors of all points near the front.")
+    hqs_depth_tolerance: float = setting(
+        0.01, "High-quality shading blends the points at most this fraction behind the closest.", min=0.0, max=1.0
+    )
+    point_size: int = setting(1, "Point size in pixels (attenuated points: the largest size).", min=1, max=64)
+    point_shape: PointShape = setting("square", "Point footprint shape.")
+    size_mode: SizeMode = setting("fixed", "fixed: point_size pixels; attenuated: point_world_size, at most point_size pixels.")
+    point_world_size: float = setting(
+        0.0,
+        "Attenuated points: size in world units (on the command line it also means --size-mode attenuated, --point-size 16).",
+        min=0.0,
+        implies={"size_mode": "attenuated", "point_size": 16},
+    )
+    splat_softness: float = setting(
+        0.0, "Soft splats (Kraft's falloff exponent, e.g. 2) blended by high-quality shading; 0 = hard.", min=0.0, max=64.0
+    )
+    supersample: Supersample = setting(1, "Anti-aliasing: render 1, 2 or 4 times larger and filter down.")
+    supersample_filter: SupersampleFilter = setting("box", "Supersampling filter: box (exact block mean) or lanczos (Pillow).")
+    stereo: Stereo = setting("none", "Stereo pair: none, side-by-side or anaglyph.")
+    ipd: float = setting(0.065, "Stereo eye distance in world units.", min=0.0)
+    convergence: float | None = setting(
+        None, "Stereo zero-parallax distance in world units (default: the camera's target distance).", min=0.0, exclusive_min=True
+    )
+    lighting: bool = setting(False, "Blinn-Phong headlight from the cloud's normals (the CLI estimates them when missing).")
+    shininess: float = setting(32.0, "Lighting specular exponent.", min=0.0, max=10_000.0)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "background", parse_color(self.background))
-        if self.backend not in ("auto", "cpu", "wgpu"):
-            raise SettingsError(f"backend must be auto, cpu or wgpu, got {self.backend!r}")
-        if self.threads is not None and not (isinstance(self.threads, int) and 1 <= self.threads <= 1024):
-            raise SettingsError(f"threads must be a positive integer, got {self.threads!r}")
-        t = self.precision_threshold_px
-        if not (isinstance(t, (int, float)) and math.isfinite(t) and t > 0):
-            raise SettingsError(f"precision_threshold_px must be > 0, got {t!r}")
-        _number("point_budget", self.point_budget, 1, integer=True)
-        _number("max_points", self.max_points, 0, integer=True)
-        _number("lod_threshold_px", self.lod_threshold_px, 0.0)
-        _number("lod_foveation", self.lod_foveation, 0.0)
-        _validate_quality(self)
+        for spec in settings_fields(type(self)):
+            value = getattr(self, spec.name)
+            checked = spec.check(value)
+            if checked is not value:
+                object.__setattr__(self, spec.name, checked)
+        # the few rules between fields
+        if self.splat_softness > 0 and not self.hqs:
+            raise SettingsError("splat_softness needs hqs=True (soft splats are blended by high-quality shading)")
+        if self.size_mode == "attenuated" and not self.point_world_size > 0:
+            raise SettingsError("size_mode 'attenuated' needs point_world_size > 0 (metres)")
 
     def replace(self, **changes) -> RenderSettings:
         names = {f.name for f in fields(self)}
@@ -101,8 +196,70 @@ class RenderSettings:
         return replace(self, **changes)
 
 
+# --- the schema, read from types and metadata ----------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SettingSpec:
+    """One field of a settings dataclass as CLI, viewer and validation see it.
+
+    kind: bool | int | float | enum (``choices``) | color | range (low, high) | text | other
+    (a type none of them can edit; it is not validated either).
+    """
+
+    name: str
+    kind: str
+    default: object  # dataclasses.MISSING for a field without one
+    nullable: bool = False
+    choices: tuple = ()
+    enum: type | None = None  # the Enum class whose values ``choices`` are
+    min: float | None = None
+    max: float | None = None
+    exclusive_min: bool = False
+    help: str = ""
+    option: str = ""  # the CLI option, '--kebab-case' of the name unless the metadata names one
+    group: str = "appearance"
+    viewer: bool = True
+    label: str = ""
+    step: float | None = None
+    size: int = 0  # values of a color tuple (3 or 4)
+    implies: tuple = ()  # ((field, value), ...) its CLI option also sets
+
+    def check(self, value):
+        """``value`` validated (and normalised: ints, the matching choice, (low, high) floats, RGBA)."""
+        if value is None and self.nullable:
+            return None
+        name, kind = self.name, self.kind
+        if kind == "bool":
+            if not isinstance(value, (bool, int)):
+                raise SettingsError(f"{name} must be true or false, got {value!r}")
+            return value
+        if kind in ("int", "float"):
+            _number(name, value, self.min, self.max, integer=kind == "int", lo_open=self.exclusive_min)
+            return value if kind == "float" or type(value) is int else int(value)
+        if kind == "enum":
+            if self.enum is not None:
+                try:
+                    return self.enum(value)
+                except (ValueError, TypeError):
+                    pass
+            else:
+                for c in self.choices:
+                    if value == c:
+                        return c
+            raise SettingsError(f"{name} must be one of {', '.join(map(str, self.choices))}, got {value!r}")
+        if kind == "color":
+            rgba = parse_color(value, name)
+            return rgba if self.size == 4 else rgba[: self.size]
+        if kind == "range":
+            return _range(name, value)
+        if kind == "text" and not isinstance(value, str):
+            raise SettingsError(f"{name} must be a string, got {value!r}")
+        return value
+
+
 def _number(name, value, lo=None, hi=None, integer=False, lo_open=False):
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
     if ok and integer:
         ok = float(value).is_integer()
     if ok and lo is not None:
@@ -110,57 +267,115 @@ def _number(name, value, lo=None, hi=None, integer=False, lo_open=False):
     if ok and hi is not None:
         ok = value <= hi
     if not ok:
-        rng = f" in {'(' if lo_open else '['}{lo}, {hi}]" if hi is not None else (f" {'>' if lo_open else '>='} {lo}" if lo is not None else "")
+        rng = (
+            f" in {'(' if lo_open else '['}{lo}, {hi}]"
+            if hi is not None
+            else (f" {'>' if lo_open else '>='} {lo}" if lo is not None else "")
+        )
         raise SettingsError(f"{name} must be a{'n integer' if integer else ' number'}{rng}, got {value!r}")
 
 
-def _range(s, name) -> None:
-    v = getattr(s, name)
-    if v is None:
-        return
+def _range(name, v) -> tuple[float, float]:
     try:
         lo, hi = (float(x) for x in v)
     except (TypeError, ValueError):
         raise SettingsError(f"{name} must be two numbers (low, high), got {v!r}") from None
     if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
         raise SettingsError(f"{name} must be finite with high > low, got {v!r}")
-    object.__setattr__(s, name, (lo, hi))
+    return (lo, hi)
 
 
-def _choice(s, name, choices) -> None:
-    if getattr(s, name) not in choices:
-        raise SettingsError(f"{name} must be one of {', '.join(map(str, choices))}, got {getattr(s, name)!r}")
+def field_types(cls) -> dict[str, object]:
+    """The resolved type of each field (``typing.get_type_hints``); when one annotation cannot be
+    resolved (a class local to a function), only that field goes without (it falls back to its default's type)."""
+    try:
+        return typing.get_type_hints(cls)
+    except (NameError, TypeError, AttributeError, SyntaxError):
+        pass
+    out: dict[str, object] = {}
+    for klass in reversed(cls.__mro__):
+        module = sys.modules.get(klass.__module__)
+        globalns = dict(vars(module)) if module is not None else {}
+        for name, ann in vars(klass).get("__annotations__", {}).items():
+            try:
+                out[name] = typing.get_type_hints(types.SimpleNamespace(__annotations__={name: ann}), globalns=globalns)[name]
+            except (NameError, TypeError, AttributeError, SyntaxError):
+                out.pop(name, None)
+    return out
 
 
-def _validate_quality(s: RenderSettings) -> None:
-    from .colors import COLOR_MODES, COLORMAPS
+def _strip_optional(tp) -> tuple[object, bool]:
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        args = [a for a in get_args(tp) if a is not type(None)]
+        nullable = len(args) < len(get_args(tp))
+        return (args[0] if len(args) == 1 else tp), nullable
+    return tp, False
 
-    _choice(s, "color_mode", COLOR_MODES)
-    _choice(s, "colormap", COLORMAPS)
-    _range(s, "elevation_range")
-    _range(s, "intensity_range")
-    _number("edl_strength", s.edl_strength, 0.0)
-    _number("edl_radius", s.edl_radius, 0.5, 16.0)
-    _number("fill_holes", s.fill_holes, 0, 3, integer=True)
-    _number("hqs_depth_tolerance", s.hqs_depth_tolerance, 0.0, 1.0)
-    _number("point_size", s.point_size, 1, 64, integer=True)
-    _choice(s, "point_shape", ("square", "round"))
-    _choice(s, "size_mode", ("fixed", "attenuated"))
-    _number("point_world_size", s.point_world_size, 0.0)
-    _number("splat_softness", s.splat_softness, 0.0, 64.0)
-    if s.splat_softness > 0 and not s.hqs:
-        raise SettingsError("splat_softness needs hqs=True (soft splats are blended by high-quality shading)")
-    if s.size_mode == "attenuated" and not s.point_world_size > 0:
-        raise SettingsError("size_mode 'attenuated' needs point_world_size > 0 (metres)")
-    _choice(s, "supersample", (1, 2, 4))
-    _choice(s, "supersample_filter", ("box", "lanczos"))
-    _choice(s, "stereo", ("none", "side-by-side", "anaglyph"))
-    _number("ipd", s.ipd, 0.0)
-    if s.convergence is not None:
-        _number("convergence", s.convergence, 0.0, lo_open=True)
-    _number("shininess", s.shininess, 0.0, 10_000.0)
-    for name in ("edl", "hqs", "fill_holes_foveated", "lighting"):
-        if not isinstance(getattr(s, name), (bool, int)):
-            raise SettingsError(f"{name} must be true or false, got {getattr(s, name)!r}")
-    object.__setattr__(s, "fill_holes", int(s.fill_holes))
-    object.__setattr__(s, "point_size", int(s.point_size))
+
+def _spec(f, tp) -> SettingSpec:
+    meta = dict(f.metadata or {})
+    default = f.default if f.default is not MISSING else (f.default_factory() if f.default_factory is not MISSING else MISSING)
+    if tp is None:
+        tp = type(default) if default not in (MISSING, None) else object
+    base, nullable = _strip_optional(tp)
+    origin, args = typing.get_origin(base), get_args(base)
+    choices, enum_cls, size = tuple(meta.get("choices", ())), None, 0
+    kind = meta.get("kind")
+    if kind == "color" or (
+        kind is None
+        and origin is tuple
+        and len(args) in (3, 4)
+        and (f.name == "background" or "color" in f.name)
+        and all(a is int for a in args)
+    ):
+        kind, size = "color", len(args) if len(args) in (3, 4) else 4
+    elif kind is not None:
+        pass
+    elif base is bool:
+        kind = "bool"
+    elif isinstance(base, type) and issubclass(base, enum.Enum):
+        kind, enum_cls, choices = "enum", base, tuple(m.value for m in base)
+    elif origin is Literal:
+        kind, choices = "enum", args
+    elif choices:
+        kind = "enum"
+    elif base is int or base is float:
+        kind = base.__name__
+    elif origin is tuple and len(args) == 2 and all(a in (int, float) for a in args):
+        kind = "range"
+    elif base is str:
+        kind = "text"
+    else:
+        kind = "other"
+    return SettingSpec(
+        name=f.name,
+        kind=kind,
+        default=default,
+        nullable=nullable,
+        choices=choices,
+        enum=enum_cls,
+        min=meta.get("min"),
+        max=meta.get("max"),
+        exclusive_min=bool(meta.get("exclusive_min", False)),
+        help=meta.get("help", ""),
+        option=meta.get("option") or "--" + f.name.replace("_", "-"),
+        group=meta.get("group", "appearance"),
+        viewer=meta.get("viewer", True) is not False,
+        label=meta.get("label") or f.name.replace("_", " "),
+        step=meta.get("step"),
+        size=size,
+        implies=tuple(dict(meta.get("implies") or {}).items()),
+    )
+
+
+_SPECS: dict[type, tuple[SettingSpec, ...]] = {}
+
+
+def settings_fields(cls: type = RenderSettings) -> tuple[SettingSpec, ...]:
+    """The schema of a settings dataclass (RenderSettings or one extending it): one SettingSpec per init field, in order."""
+    specs = _SPECS.get(cls)
+    if specs is None:
+        hints = field_types(cls)
+        specs = tuple(_spec(f, hints.get(f.name)) for f in fields(cls) if f.init)
+        _SPECS[cls] = specs
+    return specs

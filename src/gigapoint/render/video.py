@@ -10,12 +10,11 @@ temporary file that replaces ``path`` only when the video is complete.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_write
 from ..errors import GigapointError
 from .camera import Camera
 from .settings import RenderSettings
@@ -76,9 +75,8 @@ def render_flythrough(cloud, cameras, path, settings: RenderSettings | None = No
     cameras = list(cameras)
     if not cameras:
         raise GigapointError("video: no cameras to render")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
+
+    def write(tmp: Path) -> None:  # a temporary file that replaces ``path`` once the video is complete
         if path.suffix.lower() == ".gif":
             from PIL import Image
 
@@ -91,16 +89,14 @@ def render_flythrough(cloud, cameras, path, settings: RenderSettings | None = No
                 raise GigapointError("videos need imageio and imageio-ffmpeg (pip install 'gigapoint[quality]')") from None
             # even sizes for yuv420p; macro_block_size=1 keeps ours as they are
             with imageio.get_writer(
-                tmp, fps=fps, codec=None if path.suffix.lower() != ".mp4" else "libx264", quality=8, macro_block_size=1, format="FFMPEG"
+                str(tmp), fps=fps, codec=None if path.suffix.lower() != ".mp4" else "libx264", quality=8, macro_block_size=1, format="FFMPEG"
             ) as writer:
                 for i, cam in enumerate(cameras):
                     writer.append_data(np.ascontiguousarray(render(cloud, cam, settings)[..., :3]))
                     if progress is not None:
                         progress(i + 1, len(cameras))
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+
+    atomic_write(path, write)
     return path
 
 

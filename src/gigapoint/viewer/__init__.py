@@ -1,4 +1,5 @@
-"""The browser viewer: a Starlette/uvicorn server streaming frames rendered on the server to plain-JS pages.
+"""The viewers: a browser viewer (a Starlette/uvicorn server streaming frames rendered on the
+server to plain-JS pages) and a native window (window.py, rendercanvas).
 
 ``gigapoint view PATH`` from the shell, ``gigapoint.Viewer(cloud)`` from Jupyter. Starlette and
 uvicorn come with the ``viewer`` extra and are imported only when a server starts.

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..core.renderable import Renderable
 from ..errors import GigapointError
 
 
 def _as_cloud(cloud_or_path):
-    if hasattr(cloud_or_path, "batches") and hasattr(cloud_or_path, "n_points"):
+    """A cloud (any Renderable) as it is; a path or a list of paths opened."""
+    if isinstance(cloud_or_path, Renderable):
         return cloud_or_path
     from .. import open as open_cloud
 
@@ -67,4 +69,4 @@ class Viewer:
         self.close()
 
     def __repr__(self) -> str:
-        return f"Viewer({getattr(self.cloud, 'name', 'cloud')!r}, {self.url})"
+        return f"Viewer({self.cloud.name!r}, {self.url})"

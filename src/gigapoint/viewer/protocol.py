@@ -12,18 +12,13 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-import inspect
 import json
 import math
-import re
 import struct
-import sys
-import types
-import typing
 
 from ..errors import GigapointError
 from ..render.camera import VIEWS
-from ..render.settings import RenderSettings, parse_color
+from ..render.settings import RenderSettings, SettingSpec, parse_color, settings_fields
 
 MAX_MESSAGE = 16_384  # bytes of one client message
 MAX_VIEW_SIDE = 4096  # pixels of the live view
@@ -109,128 +104,34 @@ MESSAGE_TYPES = {
 VIEW_NAMES = tuple(VIEWS)
 
 
-# --- settings schema (introspected, so fields added to RenderSettings appear by themselves) -----------
-def _field_comments(cls) -> dict[str, str]:
-    try:
-        src = inspect.getsource(cls)
-    except (OSError, TypeError):
-        return {}
-    out = {}
-    for m in re.finditer(r"^\s+(\w+)\s*:[^=\n]+=[^#\n]*#\s*(.+)$", src, re.MULTILINE):
-        out[m.group(1)] = m.group(2).strip()
-    return out
-
-
-def _valid(cls, name: str, value) -> bool:
-    try:
-        dataclasses.replace(cls(), **{name: value})
-    except Exception:  # noqa: BLE001 - any failure means "not a valid value"
-        return False
-    return True
-
-
-def _str_choices(cls, name: str, comment: str) -> list[str] | None:
-    """Choices of a str setting: from the validator's "must be one of" message, else comment words that validate."""
-    try:
-        dataclasses.replace(cls(), **{name: "\x00?"})
-    except GigapointError as exc:
-        m = re.search(r"must be one of (.+?), got", str(exc))
-        if m:
-            return [c.strip() for c in m.group(1).split(",")]
-    except Exception:  # noqa: BLE001
-        pass
-    else:
-        return None  # anything goes: free text
-    words = list(dict.fromkeys(re.findall(r"[A-Za-z][\w-]*", comment)))
-    good = [w for w in words if _valid(cls, name, w)]
-    return good or None
-
-
-def _strip_optional(tp):
-    origin = typing.get_origin(tp)
-    if origin in (typing.Union, types.UnionType):
-        args = [a for a in typing.get_args(tp) if a is not type(None)]
-        nullable = len(args) < len(typing.get_args(tp))
-        return (args[0] if len(args) == 1 else tp), nullable
-    return tp, False
-
-
-def _describe(cls, f: dataclasses.Field, tp, comment: str, current) -> dict | None:
-    base, nullable = _strip_optional(tp)
-    meta = dict(f.metadata or {})
-    if meta.get("viewer") is False:
-        return None
-    d = {"name": f.name, "label": meta.get("label", f.name.replace("_", " ")), "help": meta.get("help", comment), "nullable": nullable}
-    origin, args = typing.get_origin(base), typing.get_args(base)
-    choices = meta.get("choices")
-    if base is bool:
-        d["kind"] = "bool"
-    elif inspect.isclass(base) and issubclass(base, enum.Enum):
-        d["kind"], choices = "enum", [m.value for m in base]
-    elif origin is typing.Literal:
-        d["kind"], choices = "enum", list(args)
-    elif base is int or base is float:
-        d["kind"] = "int" if base is int else "float"
-        for k in ("min", "max", "step"):
-            if k in meta:
-                d[k] = meta[k]
-    elif origin is tuple and (f.name == "background" or "color" in f.name) and len(args) in (3, 4):
-        d["kind"] = "color"
-    elif origin is tuple and len(args) == 2 and all(a in (int, float) for a in args):
-        d["kind"] = "range"
-    elif base is str:
-        choices = choices or _str_choices(cls, f.name, comment)
-        d["kind"] = "enum" if choices else "text"
-    else:
-        return None  # a type the panel cannot edit
-    if choices:
-        d["kind"] = "enum"
-        d["choices"] = list(choices)
-    d["default"] = to_json_value(f.default if f.default is not dataclasses.MISSING else current)
-    return d
-
-
-def _type_hints(cls) -> dict:
-    """Field types; one annotation that cannot be resolved only loses that field's type."""
-    try:
-        return typing.get_type_hints(cls)
-    except Exception:  # noqa: BLE001
-        pass
-    out = {}
-    for klass in reversed(cls.__mro__):
-        env = vars(sys.modules.get(klass.__module__, typing))
-        for name, ann in vars(klass).get("__annotations__", {}).items():
-            try:
-                out[name] = eval(ann, dict(env)) if isinstance(ann, str) else ann
-            except Exception:  # noqa: BLE001
-                out.pop(name, None)
-    return out
-
-
+# --- settings schema (generated from RenderSettings' types and field metadata) -------------------------
 _SCHEMAS: dict[type, list[dict]] = {}
 
 
-def settings_schema(cls: type = RenderSettings) -> list[dict]:
-    """One entry per editable field of the settings dataclass: name, kind (bool|int|float|enum|color|range|text), choices...
+def _describe(spec: SettingSpec) -> dict | None:
+    if not spec.viewer or spec.kind == "other" or spec.default is dataclasses.MISSING:
+        return None  # hidden, or a type the panel cannot edit
+    d = {"name": spec.name, "label": spec.label, "help": spec.help, "nullable": spec.nullable, "kind": spec.kind}
+    if spec.kind == "enum":
+        d["choices"] = list(spec.choices)
+    elif spec.kind in ("int", "float"):
+        for k in ("min", "max", "step"):
+            if getattr(spec, k) is not None:
+                d[k] = getattr(spec, k)
+    d["default"] = to_json_value(spec.default)
+    return d
 
-    Introspected (types, defaults, trailing comments, the validator itself), so fields
-    added to RenderSettings later show up in the viewer's panel without changes here.
-    A field's ``metadata`` may refine it: choices, min, max, step, label, help, viewer=False.
+
+def settings_schema(cls: type = RenderSettings) -> list[dict]:
+    """One entry per editable field of the settings dataclass: name, label, help, nullable,
+    kind (bool|int|float|enum|color|range|text), choices, min, max, step, default.
+
+    Generated from ``render.settings.settings_fields`` (the fields' types and metadata), so a
+    field added to RenderSettings, or to a class extending it, shows up in the viewer's panel
+    without changes here; ``viewer=False`` in its metadata hides it.
     """
     if cls not in _SCHEMAS:
-        hints = _type_hints(cls)
-        comments = _field_comments(cls)
-        defaults = cls()
-        out = []
-        for f in dataclasses.fields(cls):
-            if not f.init:
-                continue
-            current = getattr(defaults, f.name)
-            tp = hints.get(f.name, type(current))
-            d = _describe(cls, f, tp, comments.get(f.name, ""), current)
-            if d is not None:
-                out.append(d)
-        _SCHEMAS[cls] = out
+        _SCHEMAS[cls] = [d for d in map(_describe, settings_fields(cls)) if d is not None]
     return _SCHEMAS[cls]
 
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..core.layout import EMPTY_PIXEL
 from ..errors import GigapointError, GigapointWarning
+from ..render.frame import Frame
 from ..render.renderer import render_frame
 from ..render.settings import RenderSettings
 from . import protocol as P
@@ -67,23 +68,12 @@ def encode_image(image: np.ndarray, fmt: str = "JPEG", quality: int = 85) -> byt
 warnings.filterwarnings("ignore", message=".*no point is in view", category=GigapointWarning, module=__name__)
 
 
-_render_count = 0  # renders done in this process (under RENDER_LOCK)
-
-
 def render_locked(cloud, camera, settings, cancelled=None):
-    """render_frame under the process-wide lock; None if ``cancelled()`` turned true while waiting for it.
-
-    The frame gets ``render_number``: while it is still the latest render, buffers the renderer
-    shares between frames (an octree's arena) still hold what this frame's indices point at.
-    """
-    global _render_count
+    """render_frame under the process-wide lock; None if ``cancelled()`` turned true while waiting for it."""
     with RENDER_LOCK:
         if cancelled is not None and cancelled():
             return None
-        frame = render_frame(cloud, camera, settings)
-        _render_count += 1
-        frame.render_number = _render_count
-        return frame
+        return render_frame(cloud, camera, settings)
 
 
 def depth_position(camera, px: float, py: float, depth: float) -> np.ndarray:
@@ -93,38 +83,33 @@ def depth_position(camera, px: float, py: float, depth: float) -> np.ndarray:
     return origin + d * (depth / float(np.dot(d, -back)))
 
 
-def point_info(cloud, last, index: int, camera, px: int, py: int, depth: float) -> dict:
+def point_info(last: LastFrame, index: int, px: int, py: int, depth: float) -> dict:
     """What is known about the point drawn at (px, py) of the last frame, for any kind of cloud.
 
-    A PointCloud answers exactly (float64 position, color, attributes). An octree cloud draws
-    from an arena: its 30-bit position and color are exact while the frame is the latest
-    render; otherwise the position comes from the depth buffer.
+    The frame's point buffers answer (a PointCloud exactly: float64 position, color,
+    attributes; an octree's arena its 30-bit position, color and level) while they still
+    hold what the frame drew (Frame.point_info); after a later frame rewrote them, the
+    position comes from the depth buffer.
     """
-    if hasattr(cloud, "point_info") and hasattr(cloud, "positions"):
-        return cloud.point_info(index)
     if RENDER_LOCK.acquire(timeout=0.2):  # called from the event loop: never wait out a long screenshot
         try:
-            arena = getattr(cloud, "arena", None)
-            if arena is not None and getattr(last, "render_number", -1) == _render_count and index < arena.n_points:
-                from ..core.quantize import dequantize
-
-                slot = int(np.searchsorted(arena.batches["first"], np.uint64(index), side="right") - 1)
-                rec = arena.batches[slot]
-                i = np.array([index])
-                pos = dequantize(arena.low[i], arena.med[i], arena.high[i], rec["bbox_min"], rec["bbox_max"], 30)[0]
-                rgba = arena.color[i].view(np.uint8).tolist()
-                return {"position": pos.tolist(), "rgba": rgba, "level": int(rec["level"]), "source": "octree"}
+            info = last.frame.point_info(index)
         finally:
             RENDER_LOCK.release()
-    return {"position": depth_position(camera, px, py, depth).tolist(), "source": "depth buffer"}
+        if info is not None:
+            return info
+    return {"position": depth_position(last.camera, px, py, depth).tolist(), "source": "depth buffer"}
 
 
 @dataclass
 class LastFrame:
     camera: object
-    visibility: np.ndarray  # (h, w) u64 visibility buffer of the last frame sent (depth bits << 32 | index)
-    render_number: int
+    frame: Frame  # the last frame sent: its visibility buffer (depth bits << 32 | index) and point buffers
     cloud: object  # what it was drawn from (the core's cloud can be swapped since: viewer/watch.py)
+
+    @property
+    def visibility(self) -> np.ndarray:
+        return self.frame.visibility
 
     def window(self, y0, y1, x0, x1):
         """(index, depth) of a window: int64 (-1 where empty) and float32 (inf where empty)."""
@@ -206,10 +191,12 @@ class ViewerCore:
         self.bounds = (np.asarray(lo, np.float64), np.asarray(hi, np.float64))
         self.watcher = None
         self.note = ""  # a line for the HUD (what a conversion preview shows)
-        if getattr(cloud, "preview_of", None) is not None:  # an unfinished conversion: follow it
+        from ..lod.preview import ConversionPreview
+
+        if isinstance(cloud, ConversionPreview):  # an unfinished conversion: follow it to its octree
             from .watch import ConversionWatcher
 
-            self.watcher = ConversionWatcher(self, cloud.preview_of).start()
+            self.watcher = ConversionWatcher(self, cloud.octree_dir).start()
 
     def replace_cloud(self, cloud) -> None:
         """Draw ``cloud`` from now on (a newer preview, or the finished octree); every tab redraws, views stay."""
@@ -223,12 +210,12 @@ class ViewerCore:
     def cloud_info(self) -> dict:
         lo, hi = self.bounds
         return {
-            "name": getattr(self.cloud, "name", "cloud"),
+            "name": self.cloud.name,
             "points": int(self.cloud.n_points),
             "batches": len(self.cloud.batches),
             "bounds": [lo.tolist(), hi.tolist()],
-            "attributes": sorted(getattr(self.cloud, "attributes", {}) or {}),
-            "load_progress": float(getattr(self.cloud, "load_progress", 1.0)),
+            "attributes": sorted(self.cloud.attributes),
+            "load_progress": float(self.cloud.load_progress),
         }
 
     def open_session(self, send, width: int = 1280, height: int = 720) -> Session:
@@ -431,8 +418,8 @@ class Session:
         hit = self._hit(x, y)
         if hit is None:
             return {"type": "pick", "id": pick_id, "found": False}
-        index, depth, cam, px, py = hit
-        info = point_info(self.last.cloud, self.last, index, cam, px, py, depth)
+        index, depth, _, px, py = hit
+        info = point_info(self.last, index, px, py, depth)
         if pivot:
             self.state.set_pivot(info["position"])
         return {"type": "pick", "id": pick_id, "found": True, "pivot": pivot, "info": P.json_safe(info)}
@@ -491,7 +478,7 @@ class Session:
             if moving:
                 self.scales.record(level, t2 - t0)
             with self.cond:
-                self.last = LastFrame(cam, frame.visibility, frame.render_number, cloud)
+                self.last = LastFrame(cam, frame, cloud)
                 self._done_version = version
                 self._done_full = level == 0
                 self.good_settings = settings
@@ -513,7 +500,7 @@ class Session:
                 "visible_pixels": stats.visible_pixels,
                 "backend": stats.backend,
                 "memory": memory_rss(),
-                "load_progress": float(getattr(cloud, "load_progress", 1.0)),
+                "load_progress": float(cloud.load_progress),
                 "note": self.core.note,
                 "camera": state.as_dict(),
             }

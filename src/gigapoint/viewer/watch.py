@@ -1,25 +1,23 @@
 """Follow a conversion that is still running: newer previews, then the finished octree.
 
-``gigapoint view OUT`` on an unfinished conversion starts with its preview (lod/preview.py).
-A thread polls ``OUT`` about once a second and swaps the viewer's cloud when the preview file
-is rewritten, and for good when the octree's metadata appears; the tabs redraw with their
-camera unchanged.
+``gigapoint view OUT`` on an unfinished conversion starts with its preview (a
+ConversionPreview, lod/preview.py). A thread polls the octree folder (lod/octree_dir.py)
+about once a second and swaps the viewer's cloud when the preview file is rewritten, and for
+good when the octree is complete; the tabs redraw with their camera unchanged.
 """
 
 from __future__ import annotations
 
 import threading
 import warnings
-from pathlib import Path
 
 from ..errors import GigapointError, GigapointWarning
+from ..lod.octree_dir import RESUME_HINT, OctreeDir
 
 
-def preview_note(out: Path) -> str:
+def preview_note(folder: OctreeDir) -> str:
     """One line for the viewer's HUD: what the preview shows of the conversion."""
-    from ..lod.preview import RESUME_HINT, conversion_status
-
-    s = conversion_status(out)
+    s = folder.status()
     if not s:
         return "preview of an unfinished conversion"
     stopped = f"; conversion stopped ({RESUME_HINT})" if s.get("running") is False else ""
@@ -29,7 +27,7 @@ def preview_note(out: Path) -> str:
     return f"preview ({s.get('preview_points', 0):,} of {s.get('points', 0):,} points): conversion in phase {s['phase']}{stopped}"
 
 
-def _stamp(path: Path):
+def _stamp(path):
     try:
         st = path.stat()
         return st.st_mtime_ns, st.st_size
@@ -38,16 +36,13 @@ def _stamp(path: Path):
 
 
 class ConversionWatcher:
-    def __init__(self, core, out, interval_s: float = 1.0):
-        from ..lod.preview import PREVIEW_NAME
-
+    def __init__(self, core, folder: OctreeDir, interval_s: float = 1.0):
         self.core = core
-        self.out = Path(out)
-        self.preview = self.out / ".partial" / PREVIEW_NAME
-        self.seen = _stamp(self.preview)
+        self.folder = folder
+        self.seen = _stamp(folder.preview)
         self.interval_s = interval_s
         self.finished = threading.Event()  # set once the octree is drawn (or the watch stopped)
-        core.note = preview_note(self.out)  # before the first frame is drawn
+        core.note = preview_note(folder)  # before the first frame is drawn
         self._thread = threading.Thread(target=self._run, name="gigapoint-conversion-watch", daemon=True)
 
     def start(self) -> ConversionWatcher:
@@ -58,22 +53,22 @@ class ConversionWatcher:
         self.finished.set()
 
     def _run(self) -> None:
+        from ..lod import open_octree
         from ..lod.preview import open_preview
-        from ..lod.store import octree_complete, open_octree
 
         while not self.finished.wait(self.interval_s):
             try:
-                if octree_complete(self.out):
-                    self.core.replace_cloud(open_octree(self.out))
+                if self.folder.complete:
+                    self.core.replace_cloud(open_octree(self.folder.path))
                     self.core.note = ""
                     self.finished.set()
                     return
-                self.core.note = preview_note(self.out)
-                stamp = _stamp(self.preview)
+                self.core.note = preview_note(self.folder)
+                stamp = _stamp(self.folder.preview)
                 if stamp is not None and stamp != self.seen:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore", GigapointWarning)
-                        cloud = open_preview(self.out)
+                        cloud = open_preview(self.folder)
                     self.seen = stamp
                     self.core.replace_cloud(cloud)
             except (GigapointError, OSError, ValueError):

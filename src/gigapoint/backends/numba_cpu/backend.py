@@ -1,4 +1,5 @@
-"""NumbaCpuBackend: drives the kernels in raster.py, owns the per-thread buffers."""
+"""NumbaCpuBackend: drives the kernels in raster.py, owns the per-thread buffers, its passes
+(passes.py) and the lock every numba kernel of a frame runs under."""
 
 from __future__ import annotations
 
@@ -8,10 +9,8 @@ import numba
 import numpy as np
 
 from . import raster
+from .passes import CpuPasses
 
-# Numba's parallel kernels are not re-entrant from several Python threads (the workqueue
-# layer aborts) and the scratch buffers are shared: one frame at a time per process.
-_KERNEL_LOCK = threading.RLock()
 _ONE_PIXEL = np.zeros((1, 3), np.int32)  # footprint of one-pixel points (dx, dy, need)
 _ONE_PIXEL[0, 2] = 1
 
@@ -27,11 +26,21 @@ def split_by_points(counts: np.ndarray, n_parts: int) -> np.ndarray:
 
 
 class NumbaCpuBackend:
+    """The ``Backend`` on the CPU (gigapoint.render.backend): always available."""
+
     name = "cpu"
-    counts_covered = True  # resolve(..., covered) counts the covered pixels on the way
+    # Numba's parallel kernels are not re-entrant from several Python threads (the workqueue
+    # layer aborts) and the passes' scratch buffers are shared: one frame at a time per
+    # process, whichever instance draws it.
+    lock = threading.RLock()
 
     def __init__(self) -> None:
         self._scratch: dict | None = None  # (views, threads - 1, pixels) -> buffers
+        self.passes = CpuPasses()
+
+    @classmethod
+    def is_available(cls) -> bool:
+        return True
 
     def describe(self) -> str:
         return f"cpu (numba {numba.__version__}, {numba.get_num_threads()} threads)"
@@ -55,31 +64,33 @@ class NumbaCpuBackend:
         return cache[need]
 
     def rasterize(
-        self, cloud, selection, width: int, height: int, near: float, far: float, threads: int | None = None, splat=None, step: int = 1
-    ) -> np.ndarray:
+        self, points, selection, width: int, height: int, near: float, far: float, threads: int | None = None, splat=None, step: int = 1,
+        keep_on_device: bool = False,
+    ) -> np.ndarray:  # fmt: skip
         """The (height * width,) u64 visibility buffer of the selected batches.
 
-        ``splat``: (footprint, size, atten) for points larger than a pixel (render/passes/splats.py).
-        ``step`` > 1: only every step-th point of each batch (a point budget, render/renderer.py)."""
+        ``splat``: (footprint, size, atten) for points larger than a pixel (render/splats.py).
+        ``step`` > 1: only every step-th point of each batch (a point cap). ``keep_on_device``:
+        no difference here (host and device are one)."""
         return self.rasterize_views(
-            cloud, selection.ids, selection.bits[None], selection.matrices[None], width, height, [near], [far], threads, splat, step
+            points, selection.ids, selection.bits[None], selection.matrices[None], width, height, [near], [far], threads, splat, step
         )[0]
 
-    def rasterize_views(self, cloud, ids, bits, matrices, width, height, nears, fars, threads=None, splat=None, step=1) -> np.ndarray:
+    def rasterize_views(self, points, ids, bits, matrices, width, height, nears, fars, threads=None, splat=None, step=1) -> np.ndarray:
         """(V, height * width) visibility buffers of V views drawn in one pass over batches ``ids``
         (bits (V, k), matrices (V, k, 4, 4), nears/fars (V,): each view's own)."""
         n_threads = threads or numba.get_num_threads()
         n_threads = max(1, min(n_threads, numba.config.NUMBA_NUM_THREADS))
-        firsts = cloud.batches["first"][ids].astype(np.int64)  # two fields, not whole records: 0.1 ms less a frame
-        counts = cloud.batches["count"][ids].astype(np.int64)
+        firsts = points.batches["first"][ids].astype(np.int64)  # two fields, not whole records: 0.1 ms less a frame
+        counts = points.batches["count"][ids].astype(np.int64)
         starts = split_by_points(counts, n_threads)
         if splat is None:
             splat = (_ONE_PIXEL, np.float32(1.0), np.float32(0.0))
-        with _KERNEL_LOCK:
-            return self._rasterize_locked(cloud, width, height, np.asarray(nears, np.float64), np.asarray(fars, np.float64), n_threads, firsts, counts, starts,
+        with self.lock:
+            return self._rasterize_locked(points, width, height, np.asarray(nears, np.float64), np.asarray(fars, np.float64), n_threads, firsts, counts, starts,
                                           np.ascontiguousarray(bits, np.int32), np.ascontiguousarray(matrices, np.float32), splat, max(1, int(step)))  # fmt: skip
 
-    def _rasterize_locked(self, cloud, width, height, nears, fars, n_threads, firsts, counts, starts, bits, matrices, splat, step):
+    def _rasterize_locked(self, points, width, height, nears, fars, n_threads, firsts, counts, starts, bits, matrices, splat, step):
         n_views = len(nears)
         frames = np.empty((n_views, width * height), np.uint64)
         for frame in frames:
@@ -93,9 +104,9 @@ class NumbaCpuBackend:
                 counts,
                 bits,
                 matrices,
-                cloud.low,
-                cloud.med,
-                cloud.high,
+                points.low,
+                points.med,
+                points.high,
                 width,
                 height,
                 nears,
@@ -116,13 +127,7 @@ class NumbaCpuBackend:
             numba.set_num_threads(previous)
         return frames
 
-    def resolve(self, visibility: np.ndarray, color: np.ndarray, background_rgba, covered: list | None = None) -> np.ndarray:
-        """u32 RGBA per pixel: the winning point's color or the background. ``covered``: a list
-        that gets the number of covered pixels appended (counted on the way, for the stats)."""
-        bg = np.array(background_rgba, np.uint8).view(np.uint32)[0]
-        out = np.empty(visibility.shape[0], np.uint32)
-        with _KERNEL_LOCK:
-            n = raster.resolve_colors(visibility, color, bg, out)
-        if covered is not None:
-            covered.append(int(n))
-        return out
+    def resolve(self, visibility: np.ndarray, color: np.ndarray, background_rgba) -> np.ndarray:
+        """u32 RGBA per pixel: the winning point's color or the background."""
+        with self.lock:
+            return self.passes.resolve(visibility, color, background_rgba)[0]

@@ -4,11 +4,12 @@ cached per array, evicted least-recently-used to stay within a byte budget.
 Arrays are keyed by identity (``id`` checked through a weak reference), so a second frame
 of the same cloud uploads nothing, and a cloud that is garbage-collected frees its copy.
 
-Clouds that rewrite their arrays in place (an LOD arena loading and evicting nodes between
-frames) say so with two attributes, and the cache never serves a stale page of them:
+Point buffers that rewrite their arrays in place (an LOD arena loading and evicting nodes
+between frames) say so with the two attributes of the PointBuffers contract
+(gigapoint.core.renderable), and the cache never serves a stale page of them:
 
-- ``version``: an int the cloud increments on every write;
-- ``batch_version`` (optional): per batch, the ``version`` of the write that last filled it.
+- ``version``: an int bumped on every write (None: the arrays never change);
+- ``batch_version`` (or None): per batch, the ``version`` of the write that last filled it.
 
 Their arrays are registered with ``track``; each use of a page compares the cloud's version
 with the page's, and rewrites in place only the batches written since (the whole page without
@@ -126,7 +127,7 @@ class BufferCache:
     def track(self, cloud, arrays) -> None:
         """Register ``arrays`` as ``cloud``'s, if the cloud has a ``version`` (it rewrites them
         in place): their pages are checked against it at every ``get``."""
-        if getattr(cloud, "version", None) is None:
+        if cloud.version is None:
             return
         for a in arrays:
             if a is not None:
@@ -211,7 +212,7 @@ def stale_ranges(cloud, since: int, start: int, stop: int) -> list[tuple[int, in
     """Point ranges within start..stop that ``cloud`` wrote after its version ``since``:
     the batches whose ``batch_version`` is newer, merged where they touch (all of start..stop
     when the cloud has no per-batch versions)."""
-    versions = getattr(cloud, "batch_version", None)
+    versions = cloud.batch_version
     if versions is None:
         return [(start, stop)]
     batches = cloud.batches

@@ -13,6 +13,7 @@ from importlib import resources
 
 import numpy as np
 
+from ...render import params
 from .layout import wgsl_structs
 
 _INCLUDE = re.compile(r"^//! include (\S+)\s*$", re.MULTILINE)
@@ -25,18 +26,17 @@ PASSES = (
 
 
 def constants() -> dict[str, np.float32]:
-    """float32 constants the shaders share with the CPU kernels (fast log2 / exp2 of EDL)."""
-    from ..numba_cpu import passes as cpu
-
-    out = {f"LOG2_C{k}": getattr(cpu, f"LOG2_C{k}") for k in (1, 3, 5, 7)}
-    out.update({f"EXP2_C{k + 1}": c for k, c in enumerate(cpu.EXP2_C)})
+    """float32 constants the shaders share with the CPU kernels (render/params.py: EDL's fast log2 / exp2)."""
+    out = {"LOG2_C1": params.LOG2_C1, "LOG2_C3": params.LOG2_C3, "LOG2_C5": params.LOG2_C5, "LOG2_C7": params.LOG2_C7}
+    out.update({f"EXP2_C{k + 1}": c for k, c in enumerate(params.EXP2_C)})
+    out["EDL_EMPTY_RESPONSE"] = params.EDL_EMPTY_RESPONSE
     return {k: np.float32(v) for k, v in out.items()}
 
 
 def wgsl_constants() -> str:
     """``const NAME: f32 = ...;`` lines; the decimal text is the float32 value exactly (repr of
     the float64 holding it), so the shader gets the same bits."""
-    lines = ["// generated from the CPU kernels' constants by gigapoint.backends.wgpu.shaders; do not edit"]
+    lines = ["// generated from gigapoint.render.params by gigapoint.backends.wgpu.shaders; do not edit"]
     lines += [f"const {k}: f32 = {float(v)!r};" for k, v in constants().items()]
     return "\n".join(lines) + "\n"
 

@@ -9,6 +9,9 @@ image translation that puts zero parallax at ``convergence`` (default: the camer
 target distance): each eye's image moves by fx * ipd / (2 * convergence) pixels, the
 uncovered columns show the background. ``side-by-side`` puts the eyes next to each other
 (2W x H); ``anaglyph`` takes red from the left eye and green and blue from the right.
+
+Each whole render is ``render_one(cloud, camera, settings)`` (the renderer's render_frame,
+handed in by it).
 """
 
 from __future__ import annotations
@@ -19,11 +22,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from ...backends.numba_cpu import passes as kernels
 from ...core.layout import EMPTY_PIXEL
 from ...errors import SettingsError
+from ..backend import get_backend
 from ..camera import MAX_IMAGE_SIDE
-from ..frame import Frame, RenderStats
+from ..frame import Frame, RenderStats, check_indexable
+from . import finish_frame, splat_for
 
 
 def box_downsample(image: np.ndarray, s: int) -> np.ndarray:
@@ -43,30 +47,21 @@ def _inner(settings, **changes):
     return replace(settings, **changes)  # dataclasses.replace: validated again by __post_init__
 
 
-def supersampled_frame(cloud, camera, settings) -> Frame:
-    from ..renderer import render_frame
-
+def supersampled_frame(cloud, camera, settings, render_one) -> Frame:
     s = settings.supersample
     if camera.width * s > MAX_IMAGE_SIDE or camera.height * s > MAX_IMAGE_SIDE:
         raise SettingsError(f"supersample {s}: a {camera.width * s}x{camera.height * s} render exceeds the {MAX_IMAGE_SIDE} pixel limit")
     inner = _inner(
         settings, supersample=1, stereo="none", point_size=min(64, settings.point_size * s), edl_radius=min(16.0, settings.edl_radius * s)
     )
-    big = render_frame(cloud, camera.with_size(camera.width * s, camera.height * s), inner)
+    big = render_one(cloud, camera.with_size(camera.width * s, camera.height * s), inner)
     t0 = time.perf_counter()
-    vis = np.empty(camera.width * camera.height, np.uint64)
-    image = np.empty((camera.height, camera.width, 4), np.uint8)
+    backend = get_backend(settings.backend)
     big_img = np.ascontiguousarray(big.image).reshape(-1, 4).view(np.uint32).reshape(-1)
-    kernels.downsample(
-        np.ascontiguousarray(big.visibility).reshape(-1),
-        big_img,
-        camera.width,
-        camera.height,
-        s,
-        vis,
-        image.reshape(-1, 4).view(np.uint32).reshape(-1),
-    )
+    with backend.lock:
+        vis, image = backend.passes.downsample(np.ascontiguousarray(big.visibility).reshape(-1), big_img, camera.width, camera.height, s)
     vis = vis.reshape(camera.height, camera.width)
+    image = image.view(np.uint8).reshape(camera.height, camera.width, 4)
     if settings.supersample_filter == "lanczos":
         from PIL import Image
 
@@ -76,7 +71,7 @@ def supersampled_frame(cloud, camera, settings) -> Frame:
     stats = replace(big.stats)
     stats.time_ms += (time.perf_counter() - t0) * 1000.0
     stats.visible_pixels = int((vis != EMPTY_PIXEL).sum())
-    return Frame(vis, image, stats)
+    return Frame(vis, image, stats, big.points, big.generation)
 
 
 def eye_cameras(camera, ipd: float):
@@ -115,64 +110,43 @@ def shift_columns(a: np.ndarray, dx: int, fill, out: np.ndarray | None = None) -
     return out
 
 
-def render_views(cloud, cameras, settings, backend) -> list[Frame]:
+def render_views(cloud, cameras, settings, backend, multi) -> list[Frame]:
     """Frames of several cameras of one size drawn in ONE pass over the batches (2022 paper,
-    3.7: every point is written into both eyes' buffers). Each view keeps its own batch
-    selection, precision, near/far and passes, so each frame equals a separate render."""
-    from ..selection import select
-    from . import finish_frame, raster_options
-
+    3.7: every point is written into both eyes' buffers), from the cloud's MultiViewDrawList
+    ``multi``. Each view keeps its own batch selection, precision, near/far and passes, so each
+    frame equals a separate render."""
     t0 = time.perf_counter()
     width, height = cameras[0].width, cameras[0].height
-    args = (settings.precision_threshold_px, settings.adaptive_precision)
-    ranges = [cam.clip_range(cloud.bounds) for cam in cameras]
-    sels = [
-        select(cloud.batches, cam.screen_rows(), width, height, n, f, *args, settings.frustum_culling)
-        for cam, (n, f) in zip(cameras, ranges)
-    ]
-    ids = sels[0].ids
-    for sel in sels[1:]:
-        ids = np.union1d(ids, sel.ids)
-    # every view's precision and matrix for the union of the batches any view draws
-    full = [select(cloud.batches, cam.screen_rows(), width, height, n, f, *args, False) for cam, (n, f) in zip(cameras, ranges)]
-    bits = np.stack([fs.bits[ids] for fs in full])
-    mats = np.stack([fs.matrices[ids] for fs in full])
-    backend, extra = raster_options(backend, settings, cameras[0])
+    views = [cam.view(cloud.bounds) for cam in cameras]
+    check_indexable(multi.points)
     t1 = time.perf_counter()
     vis = backend.rasterize_views(
-        cloud, ids, bits, mats, width, height, [r[0] for r in ranges], [r[1] for r in ranges], settings.threads, extra.get("splat")
-    )
+        multi.points, multi.ids, multi.bits, multi.matrices, width, height, [v.near for v in views], [v.far for v in views],
+        settings.threads, splat_for(settings, cameras[0]),
+    )  # fmt: skip
     t2 = time.perf_counter()
     frames = []
-    for v, (cam, sel, (near, far)) in enumerate(zip(cameras, sels, ranges)):
+    for v, (cam, draw, view) in enumerate(zip(cameras, multi.views, views)):
         t3 = time.perf_counter()
-        visibility, colors = finish_frame(backend, cloud, cam, sel, vis[v], settings, near, far)
-        counts = cloud.batches["count"][sel.ids].astype(np.int64)
-        stats = RenderStats(
-            points_total=cloud.n_points, batches_total=len(cloud.batches), batches_culled=sel.n_culled, batches_rendered=len(sel.ids),
-            points_processed=int(counts.sum()), precision_histogram={b: int(counts[sel.bits == b].sum()) for b in (10, 20, 30)},
-            time_ms=((t1 - t0) + (t2 - t1)) * 1000.0 / len(cameras) + (time.perf_counter() - t3) * 1000.0,
-            raster_ms=(t2 - t1) * 1000.0 / len(cameras), backend=backend.name,
-        )  # fmt: skip
+        visibility, colors, _ = finish_frame(backend, draw, cam, vis[v], settings, view.near, view.far)
+        counts = draw.points.batches["count"][draw.selection.ids].astype(np.int64)
+        time_ms = (t2 - t0) * 1000.0 / len(cameras) + (time.perf_counter() - t3) * 1000.0  # the one pass shared, then this view's passes
+        stats = RenderStats.of(draw, counts, cloud.n_points, time_ms, (t2 - t1) * 1000.0 / len(cameras), backend.name)
         visibility = visibility.reshape(height, width)
         stats.visible_pixels = int((visibility != EMPTY_PIXEL).sum())
-        frames.append(Frame(visibility, colors.view(np.uint8).reshape(height, width, 4), stats))
+        frames.append(Frame(visibility, colors.view(np.uint8).reshape(height, width, 4), stats, draw.points, draw.generation))
     return frames
 
 
-def stereo_frame(cloud, camera, settings, frames=None) -> Frame:
-    """Render both eyes (one pass over the points where the backend can) into one stereo Frame."""
-    from ...backends import get_backend
-    from ..renderer import render_frame
-
-    if frames is None:
-        inner = _inner(settings, stereo="none")
-        cams = eye_cameras(camera, settings.ipd)
-        backend = get_backend(settings.backend)
-        if inner.supersample == 1 and hasattr(backend, "rasterize_views") and not hasattr(cloud, "select"):
-            frames = render_views(cloud, cams, inner, backend)
-        else:  # supersampled eyes, LOD clouds, backends without multi-view: two renders
-            frames = [render_frame(cloud, cam, inner) for cam in cams]
+def stereo_frame(cloud, camera, settings, render_one) -> Frame:
+    """Render both eyes (one pass over the points where the cloud can) into one stereo Frame."""
+    inner = _inner(settings, stereo="none")
+    cams = eye_cameras(camera, settings.ipd)
+    multi = cloud.prepare_views([cam.view(cloud.bounds) for cam in cams], inner) if inner.supersample == 1 else None
+    if multi is not None:
+        frames = render_views(cloud, cams, inner, get_backend(inner.backend), multi)
+    else:  # supersampled eyes, octrees (their nodes differ per eye): two renders
+        frames = [render_one(cloud, cam, inner) for cam in cams]
     h = convergence_shift(camera, settings.ipd, settings.convergence)
     bg = np.array(settings.background, np.uint8)
     stats = replace(frames[0].stats)
@@ -195,7 +169,8 @@ def stereo_frame(cloud, camera, settings, frames=None) -> Frame:
     return Frame(vis, image, stats)
 
 
-def composite_frame(cloud, camera, settings) -> Frame:
+def composite_frame(cloud, camera, settings, render_one) -> Frame:
+    """Supersampling or stereo around whole renders made by ``render_one``."""
     if settings.stereo != "none":
-        return stereo_frame(cloud, camera, settings)
-    return supersampled_frame(cloud, camera, settings)
+        return stereo_frame(cloud, camera, settings, render_one)
+    return supersampled_frame(cloud, camera, settings, render_one)

@@ -2,25 +2,17 @@
 
 For every pixel, each of 8 neighbours at ``radius`` pixels adds max(0, log2 d - log2 d_n)
 (100 if this pixel is empty: the dark outline around silhouettes); the color is scaled by
-exp(-300 * strength * sum / 8). Needs only the visibility buffer's depth.
+exp(-300 * strength * sum / 8). Needs only the visibility buffer's depth. The backends run
+it (their Passes.eye_dome_lighting); this is its plain-numpy reference, with the same
+float32 arithmetic, and the parameters all three share are in render/params.py.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from ...backends.numba_cpu import passes as kernels
 from ...core.layout import EMPTY_PIXEL
-
-N_NEIGHBOURS = 8
-
-
-def neighbour_offsets(radius: float, n: int = N_NEIGHBOURS) -> np.ndarray:
-    """(n, 2) int32 pixel offsets (dx, dy) of the samples on a circle (nearest pixel)."""
-    a = 2.0 * math.pi * np.arange(n) / n
-    return np.stack([np.rint(radius * np.cos(a)), np.rint(radius * np.sin(a))], axis=1).astype(np.int32)
+from ..params import EDL_EMPTY_RESPONSE, EXP2_C, LOG2_C1, LOG2_C3, LOG2_C5, LOG2_C7, N_NEIGHBOURS, edl_scale, neighbour_offsets
 
 
 def log2_approx(bits: np.ndarray) -> np.ndarray:
@@ -29,7 +21,7 @@ def log2_approx(bits: np.ndarray) -> np.ndarray:
     m = ((bits & np.uint32(0x007FFFFF)) | np.uint32(0x3F800000)).view(np.float32)
     t = (m - np.float32(1)) / (m + np.float32(1))
     t2 = t * t
-    return e + t * (kernels.LOG2_C1 + t2 * (kernels.LOG2_C3 + t2 * (kernels.LOG2_C5 + t2 * kernels.LOG2_C7)))
+    return e + t * (LOG2_C1 + t2 * (LOG2_C3 + t2 * (LOG2_C5 + t2 * LOG2_C7)))
 
 
 def exp2_approx(y: np.ndarray) -> np.ndarray:
@@ -37,38 +29,14 @@ def exp2_approx(y: np.ndarray) -> np.ndarray:
     y = np.maximum(y.astype(np.float32), np.float32(-126.0))
     fl = np.floor(y)
     f = y - fl
-    c1, c2, c3, c4, c5, c6 = kernels.EXP2_C
+    c1, c2, c3, c4, c5, c6 = EXP2_C
     poly = np.float32(1) + f * (c1 + f * (c2 + f * (c3 + f * (c4 + f * (c5 + f * c6)))))
     scale = ((fl.astype(np.int32) + np.int32(127)) << np.int32(23)).view(np.float32)
     return poly * scale
 
 
-def eye_dome_lighting(
-    vis: np.ndarray, colors: np.ndarray, width: int, height: int, strength: float = 1.0, radius: float = 1.4
-) -> np.ndarray:
-    """(H*W,) u32 RGBA colors shaded by EDL (vis: (H*W,) u64 visibility buffer)."""
-    vis = np.ascontiguousarray(vis).reshape(-1)
-    logd, empty = _scratch(vis.shape[0])
-    kernels.log_depth(vis, logd, empty)
-    out = np.empty_like(colors)
-    kernels.edl(logd, empty, np.ascontiguousarray(colors).reshape(-1), width, height, neighbour_offsets(radius), np.float32(strength), out)
-    return out
-
-
-_SCRATCH: dict = {}
-
-
-def _scratch(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Reused log-depth and empty-flag buffers: two fresh 8 MB arrays a 1080p frame cost ~2 ms
-    of page faults. Callers hold the CPU kernel lock (render/passes.finish_frame)."""
-    if n not in _SCRATCH:
-        _SCRATCH.clear()
-        _SCRATCH[n] = (np.empty(n, np.float32), np.empty(n, np.float32))
-    return _SCRATCH[n]
-
-
 def edl_reference(vis: np.ndarray, colors: np.ndarray, width: int, height: int, strength: float = 1.0, radius: float = 1.4) -> np.ndarray:
-    """Plain-numpy eye-dome lighting, same float32 arithmetic as the kernel."""
+    """Plain-numpy eye-dome lighting, same float32 arithmetic as the kernels."""
     vis = vis.reshape(height, width)
     empty = vis == EMPTY_PIXEL
     logd = np.where(empty, np.float32(0), log2_approx((vis >> np.uint64(32)).astype(np.uint32))).astype(np.float32)
@@ -82,9 +50,9 @@ def edl_reference(vis: np.ndarray, colors: np.ndarray, width: int, height: int, 
         xs, xd = slice(max(dx, 0), width + min(dx, 0)), slice(max(-dx, 0), width + min(-dx, 0))
         nl[yd, xd] = logd[ys, xs]
         ne[yd, xd] = e[ys, xs]
-        r = e * np.float32(100) + (np.float32(1) - e) * np.maximum(np.float32(0), logd - nl)
+        r = e * EDL_EMPTY_RESPONSE + (np.float32(1) - e) * np.maximum(np.float32(0), logd - nl)
         acc += (np.float32(1) - ne) * r
-    shade = exp2_approx(acc * np.float32(-300.0 * strength / N_NEIGHBOURS / math.log(2.0)))
+    shade = exp2_approx(acc * edl_scale(strength, N_NEIGHBOURS))
     rgba = colors.reshape(height, width).view(np.uint8).reshape(height, width, 4)
     out = rgba.copy()
     out[..., :3] = (rgba[..., :3].astype(np.float32) * shade[..., None] + np.float32(0.5)).astype(np.uint8)

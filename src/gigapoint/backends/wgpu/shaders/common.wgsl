@@ -12,7 +12,7 @@
 @group(0) @binding(4) var<storage, read> high: array<u32>;
 // The same buffer as `low`, seen 4 words at a time for vertex prefetch (paper 3.4).
 @group(0) @binding(5) var<storage, read> low4: array<vec4<u32>>;
-// Splat footprint (render/passes/splats.py): rows (dx, dy, need, weight) sorted by need;
+// Splat footprint (render/splats.py): rows (dx, dy, need, weight) sorted by need;
 // weight is the HQS soft-splat weight of the row (-1: computed per point, attenuated sizes).
 @group(0) @binding(6) var<storage, read> footprint: array<vec4<i32>>;
 

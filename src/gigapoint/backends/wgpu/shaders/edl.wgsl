@@ -1,4 +1,4 @@
-// Eye-dome lighting, step 2 (render/passes/edl.py; edl in backends/numba_cpu/passes.py): each
+// Eye-dome lighting, step 2 (render/passes/edl.py; edl in backends/numba_cpu/pass_kernels.py): each
 // of the neighbours at the offsets adds max(0, log2 d - log2 d_n) (100 if this pixel is
 // empty); the color is scaled by 2^(sum x edl_scale), 2^y from the exponent bits and a
 // degree-6 Taylor polynomial. The same float32 operations in the same order as the CPU
@@ -26,7 +26,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             let yy = y + offsets[o].y;
             if (xx >= 0 && xx < w && yy >= 0 && yy < h) {
                 let n = logd[u32(yy * w + xx)];
-                let r = ec * 100.0 + (1.0 - ec) * max(0.0, c - n.x);
+                let r = ec * EDL_EMPTY_RESPONSE + (1.0 - ec) * max(0.0, c - n.x);
                 acc += n.y * r;  // (1 - empty_n) * r
             }
         }

@@ -1,4 +1,4 @@
-// Hole filling (render/passes/holes.py; fill_holes in backends/numba_cpu/passes.py): a
+// Hole filling (render/passes/holes.py; fill_holes in backends/numba_cpu/pass_kernels.py): a
 // depth-aware dilation of the visibility buffer into a second buffer. A pixel that is empty,
 // or lies more than the depth gap behind the closest key of its window, takes that key, but
 // only when the nearer neighbours surround it: their directions, binned into 16 sectors,

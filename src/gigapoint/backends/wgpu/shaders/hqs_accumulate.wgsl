@@ -1,5 +1,5 @@
 // High-quality shading, accumulate (render/passes/hqs.py; hqs_accumulate in
-// backends/numba_cpu/passes.py): the selected batches are projected again exactly as in the
+// backends/numba_cpu/pass_kernels.py): the selected batches are projected again exactly as in the
 // depth pass, and every point within the relative depth tolerance of its pixel's closest
 // depth adds weight x RGBA and the weight, at every pixel of its footprint.
 //
@@ -16,7 +16,7 @@
 @group(0) @binding(9) var<storage, read_write> accum: array<atomic<u32>>;
 
 // Kraft 2019 eq. 3.1 soft-splat weight of footprint row `row` (0..15; 1 for hard splats).
-// Fixed sizes: precomputed on the host in float64 (soft_weight in the CPU kernels); attenuated
+// Fixed sizes: precomputed on the host in float64 (soft_weight in render/params.py); attenuated
 // sizes (weight -1): computed here in float32, so it may differ by one at rounding edges.
 fn splat_weight(row: u32, size: f32) -> u32 {
     let r = footprint[row];

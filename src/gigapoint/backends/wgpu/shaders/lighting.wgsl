@@ -1,4 +1,4 @@
-// Blinn-Phong headlight (render/passes/lighting.py; blinn_phong in backends/numba_cpu/passes.py):
+// Blinn-Phong headlight (render/passes/lighting.py; blinn_phong in backends/numba_cpu/pass_kernels.py):
 // c * (ambient + diffuse |n.v|) + specular |n.v|^shininess * 255 per channel, from the
 // winning point's normal. Normals are paged like colors: one dispatch per page, each
 // shading the pixels whose point lies in it, in place on the image.

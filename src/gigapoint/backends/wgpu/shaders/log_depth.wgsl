@@ -1,7 +1,7 @@
-// Eye-dome lighting, step 1 (log_depth in backends/numba_cpu/passes.py): per pixel
+// Eye-dome lighting, step 1 (log_depth in backends/numba_cpu/pass_kernels.py): per pixel
 // (log2 depth, 1) or (0, 0) where empty, so step 2 computes each logarithm once, not once
 // per neighbour. log2 = exponent + atanh series of the mantissa m in [1, 2), from IEEE
-// float32 operations in the CPU kernel's order (constants generated from the CPU module).
+// float32 operations in the CPU kernel's order (constants generated from render/params.py).
 //! include keys.wgsl
 
 @group(0) @binding(0) var<uniform> params: Params;

@@ -1,5 +1,10 @@
 """Per-frame batch selection: frustum culling, projected size, precision, batch matrices.
 
+Which batches of the quantized layout a view draws and at which precision (10/20/30-bit
+words), with the matrices that map a batch's 10-bit grid onto the screen. It needs of a
+camera only its ``View`` (screen rows, image size, clip range), so clouds of every kind
+(core's PointCloud, lod's octrees) select with it without knowing the renderer.
+
 All of it in float64 on the host (a few thousand batches a frame); only the composed
 per-batch matrices are cast to float32, camera-relative, so UTM-sized coordinates do
 not jitter (DESIGN.md, "Coordinates").
@@ -12,7 +17,18 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..core.layout import WORD_BITS
+from .layout import WORD_BITS
+
+
+@dataclass(frozen=True)
+class View:
+    """What a selection needs of a camera: world -> screen rows and the image it fills."""
+
+    rows: np.ndarray  # (4, 4) float64: world -> (x', y', w, depth); pixel = (x'/w, y'/w)
+    width: int
+    height: int
+    near: float
+    far: float
 
 
 @dataclass
@@ -45,7 +61,7 @@ def box_in_view(rows, x0, y0, z0, dx, dy, dz, width, height, near, far):
 
     A box is outside when all 8 corners are beyond one frustum plane (conservative); the
     rectangle bounds the screen positions of the corners in front of the eye. Shared by the
-    batch selection here and the octree's node selection (lod/store.py).
+    batch selection here and the octree's node selection (gigapoint.lod).
     """
     left = right = below = above = closer = farther = True
     in_front = True
@@ -133,3 +149,38 @@ def select(batches, rows, width, height, near, far, threshold_px=500.0, adaptive
     ids = np.flatnonzero(visible)
     bits = precision_for(size[ids], threshold_px) if adaptive else np.full(len(ids), 30, np.int32)
     return Selection(ids, bits, batch_matrices(rows, bmin, bmax, ids), size[ids], int(len(batches) - len(ids)))
+
+
+def select_view(batches, view: View, settings, culling: bool | None = None) -> Selection:
+    """``select`` for a View, with the precision rule and culling of ``settings``
+    (precision_threshold_px, adaptive_precision, frustum_culling)."""
+    culling = settings.frustum_culling if culling is None else culling
+    return select(batches, view.rows, view.width, view.height, view.near, view.far, settings.precision_threshold_px, settings.adaptive_precision, culling)
+
+
+def select_views(batches, views: list[View], settings) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[Selection]]:
+    """Batches for drawing several views in one pass (2022 paper, 3.7): (ids, the union of
+    what any view draws; bits (V, k) and matrices (V, k, 4, 4), every view's precision and
+    matrix for each of them; each view's own Selection). A batch another view drew lands
+    outside this view's frustum, so each view's image equals a separate render."""
+    sels = [select_view(batches, v, settings) for v in views]
+    ids = sels[0].ids
+    for sel in sels[1:]:
+        ids = np.union1d(ids, sel.ids)
+    full = [select_view(batches, v, settings, culling=False) for v in views]
+    bits = np.stack([fs.bits[ids] for fs in full])
+    mats = np.stack([fs.matrices[ids] for fs in full])
+    return ids, bits, mats, sels
+
+
+def subsample_step(counts: np.ndarray, max_points: int) -> int:
+    """Smallest k such that every k-th point of each batch stays within ``max_points`` (0: no cap;
+    never fewer than one point per batch)."""
+    total = int(counts.sum())
+    if max_points <= 0 or total <= max_points:
+        return 1
+    step = -(-total // max_points)
+    largest = int(counts.max())
+    while step < largest and int(((counts + step - 1) // step).sum()) > max_points:  # each batch rounds up
+        step += 1
+    return min(step, largest)  # one point per batch is the floor

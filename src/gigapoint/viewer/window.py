@@ -4,7 +4,7 @@ Each frame is rendered by ``gigapoint.render_frame`` (any backend) and shown thr
 rendercanvas's bitmap context. Controls: left drag orbits, right (or shift+left) drag
 pans, the wheel zooms, R resets the view.
 
-    from gigapoint.backends.wgpu.window import run_window
+    from gigapoint.viewer.window import run_window
     run_window(gigapoint.demo(2_000_000))
 """
 
@@ -17,10 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...errors import BackendUnavailableError
-from ...render.camera import Camera
-from ...render.renderer import render_frame
-from ...render.settings import RenderSettings
+from ..errors import BackendUnavailableError
+from ..render.camera import Camera
+from ..render.renderer import render_frame
+from ..render.settings import RenderSettings
 
 _HINT = "install with: pip install 'gigapoint[window]' (rendercanvas + glfw) and run on a desktop with a display"
 

@@ -1,0 +1,115 @@
+"""Reading the benchmark's arguments and presenting its results (a rich table, JSON)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from ..atomic import atomic_bytes
+from ..errors import GigapointError
+from .scene import THROUGHPUT_DEFINITION
+
+_SUFFIXES = {"k": 10**3, "m": 10**6, "g": 10**9, "b": 10**9}
+
+
+def parse_count(text) -> int:
+    """'20M', '100_000_000', '1e6', '200k' -> a positive int."""
+    s = str(text).strip().lower().replace("_", "").replace(",", "")
+    mult = 1
+    if s and s[-1] in _SUFFIXES:
+        s, mult = s[:-1], _SUFFIXES[s[-1]]
+    try:
+        value = float(s) * mult
+    except ValueError:
+        raise GigapointError(f"--points: cannot read {text!r} (use e.g. 20M, 200k, 1e6 or 5000000)") from None
+    if not (math.isfinite(value) and value >= 1 and value == int(value)):
+        raise GigapointError(f"--points: need a positive whole number of points, got {text!r}")
+    return int(value)
+
+
+def parse_threads(text) -> int | None:
+    """'all' -> None (every core), else a positive int."""
+    s = str(text).strip().lower()
+    if s in ("all", "none", "0"):
+        return None
+    try:
+        value = int(s)
+    except ValueError:
+        raise GigapointError(f"--threads: need a positive integer or 'all', got {text!r}") from None
+    if value < 1:
+        raise GigapointError(f"--threads: need a positive integer or 'all', got {text!r}")
+    return value
+
+
+def write_results(results: list[dict], path) -> Path:
+    """Write the results as JSON (atomically) and return the path."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise GigapointError(f"{path}: directory {path.parent} does not exist")
+    return atomic_bytes(path, (json.dumps(results, indent=2) + "\n").encode())
+
+
+def _mps(v: float) -> str:
+    return f"{v / 1e6:,.1f} M" if math.isfinite(v) else "-"
+
+
+def _short(n: int) -> str:
+    """1234567 -> '1.23M', 4096 -> '4.1k'."""
+    for div, unit in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
+        if n >= div:
+            return f"{n / div:.3g}{unit}"
+    return str(n)
+
+
+def _render_row(table, r: dict, step: str, threads: str, note: str, culled: str = "", bits: str = "") -> None:
+    """One timed frame's row: gigapoint, the naive loop or GL_POINTS."""
+    table.add_row(_short(r["points"]), step, r["view"], threads, f"{r['frame_ms']:,.1f}", _mps(r["points_per_second"]), culled, bits, f"{r['coverage']:.1%}", note)
+
+
+def results_table(results: list[dict]):
+    """A rich Table of ``run_render_benchmark`` results."""
+    from rich.table import Table
+
+    env = next((r for r in results if r["kind"] == "environment"), {})
+    table = Table(title="gigapoint brute-force render benchmark", caption=THROUGHPUT_DEFINITION)
+    for col in ("points", "step", "view", "threads", "ms", "points/s", "culled", "10/20/30 bit", "coverage", "note"):
+        table.add_column(col, justify="left" if col in ("step", "view", "note") else "right")
+    for r in results:
+        if r["kind"] in ("generate", "build"):
+            if r["kind"] == "build":
+                step, note = "build", f"Morton sort + batching, {r['batches']:,} batches"
+            else:
+                step, note = "generate", f"demo scene, median of {len(r['seconds_runs'])} after a warm-up run"
+            table.add_row(_short(r["points"]), step, "", "", f"{r['seconds'] * 1e3:,.0f}", _mps(r["points_per_second"]), "", "", "", note)
+        elif r["kind"] == "render" and r["renderer"] == "gigapoint":
+            h = r["precision_histogram"]
+            culled = f"{r['batches_culled']:,}/{r['batches_total']:,}"
+            bits = "/".join(_short(h[b]) for b in ("10", "20", "30"))
+            _render_row(table, r, "gigapoint", str(r["threads"]), f"raster {r['raster_ms']:,.1f} ms", culled, bits)
+        elif r["kind"] == "render" and r["renderer"] == "naive":
+            note = f"loop {r['raster_ms']:,.1f} ms; gigapoint / naive = {r['gigapoint_over_naive']:.2f}x; IoU {r['coverage_iou']:.2f}"
+            _render_row(table, r, "naive loop", str(r["threads"]), note)
+        elif r["kind"] == "render" and r["renderer"] == "gl":
+            if r.get("skipped"):
+                table.add_row(_short(r["points"]), "GL_POINTS", r["view"], "", "", "", "", "", "", f"skipped: {r['reason']}")
+                continue
+            ok = "ok" if r["coverage_matches"] else "MISMATCH"
+            note = f"gigapoint ({r['gigapoint_threads']} thr) / GL = {r['gigapoint_over_gl']:.1f}x; coverage {ok}, IoU {r['coverage_iou']:.2f}"
+            _render_row(table, r, "GL_POINTS", str(env.get("gl_threads", "all")), note)
+    if env.get("gl_renderer"):
+        table.caption += f"\nGL: {env['gl_renderer']}; CPU: {env['cpu_count']} cores, numba {env['numba']}"
+    return table
+
+
+def print_results(results: list[dict], console=None) -> None:
+    """Print the results table (wide enough to stay readable when stdout is not a terminal)."""
+    import sys
+
+    from rich.console import Console
+
+    if console is None:
+        console = Console() if sys.stdout.isatty() else Console(width=200)
+    console.print(results_table(results))
+
+

@@ -1,0 +1,114 @@
+"""The Renderable contract: what every kind of cloud gives the renderer.
+
+``gigapoint.render`` draws anything that implements :class:`Renderable` and never asks what
+it is: a plain PointCloud (core/cloud.py), a converted octree (gigapoint.lod), and the
+clouds still to come (progressive, live, COPC/EPT). For one view a Renderable *prepares* a
+:class:`DrawList`: the point buffers the backends read and the selection of their batches
+to draw, each with its precision and matrix (selection.py). Buffers are in the batch layout
+of layout.py, so one set of kernels draws every kind of cloud.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from .selection import Selection, View
+
+
+class SelectionSettings(Protocol):
+    """The fields of RenderSettings that choosing what to draw reads."""
+
+    precision_threshold_px: float
+    adaptive_precision: bool
+    frustum_culling: bool
+    max_points: int  # plain clouds: every k-th point of each batch within this cap (0: all)
+    point_budget: int  # octrees: most points a frame draws
+    lod_threshold_px: float
+    lod_foveation: float
+
+
+@runtime_checkable
+class PointBuffers(Protocol):
+    """Point arrays in the batch layout (layout.py) that backends draw and passes read.
+
+    ``version`` is None for buffers that never change after they are built (a PointCloud);
+    buffers rewritten in place between frames (an octree's arena) bump it on every write
+    and record in ``batch_version`` the version that last wrote each batch, so caches of
+    derived arrays (render's RenderCache, the GPU's copies) know what is stale."""
+
+    name: str
+    batches: np.ndarray  # BATCH_DTYPE records: first, count, level, bbox
+    low: np.ndarray  # u32 per point: bits 20-29 of x, y, z
+    med: np.ndarray
+    high: np.ndarray
+    color: np.ndarray  # u32 RGBA8 per point
+    attributes: dict[str, np.ndarray]
+    version: int | None
+    batch_version: np.ndarray | None
+
+    @property
+    def n_points(self) -> int: ...
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def point_info(self, index: int) -> dict: ...
+
+
+@dataclass
+class DrawList:
+    """What one view draws: batches ``selection`` of ``points``."""
+
+    points: PointBuffers  # the arrays the visibility buffer's indices point into
+    selection: Selection
+    n_batches: int  # batches (octree: nodes) of the whole renderable, for the stats
+    step: int = 1  # draw every step-th point of each batch (a point cap on a plain cloud)
+    nodes: np.ndarray | None = None  # octree node indices drawn (stats, tests)
+
+    @property
+    def generation(self) -> int | None:
+        """``points.version`` as prepared: while it is unchanged, the frame's indices still
+        name the points it drew."""
+        return self.points.version
+
+
+@dataclass
+class MultiViewDrawList:
+    """Several views drawn in ONE pass over the union of their batches (2022 paper, 3.7)."""
+
+    points: PointBuffers
+    ids: np.ndarray  # int64 batches any view draws
+    bits: np.ndarray  # (V, k) each view's precision for each of them
+    matrices: np.ndarray  # (V, k, 4, 4) each view's matrix for each of them
+    views: list[DrawList]  # each view's own selection (its passes and stats)
+
+
+@runtime_checkable
+class Renderable(Protocol):
+    """Anything ``gigapoint.render`` draws (``isinstance(x, Renderable)`` checks the members are there)."""
+
+    name: str
+    attributes: Mapping[str, np.ndarray]  # per-point attributes by name (intensity, classification...)
+    load_progress: float  # 0..1: how much of its source is loaded (1 for a finished cloud)
+
+    @property
+    def n_points(self) -> int: ...
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(min, max) float64 corners of the box around every point (clip ranges, framing)."""
+        ...
+
+    def prepare(self, view: View, settings: SelectionSettings) -> DrawList:
+        """The buffers and the batches to draw for ``view``."""
+        ...
+
+    def prepare_views(self, views: list[View], settings: SelectionSettings) -> MultiViewDrawList | None:
+        """Several views for one pass over shared buffers (stereo), where each view's own
+        selection differs from the others only by frustum culling; None where it cannot
+        (an octree picks other nodes per view): the renderer then draws them one by one."""
+        ...

@@ -1,0 +1,45 @@
+"""Out-of-core conversion of point clouds into a layered-point-cloud octree.
+
+Phases (each resumable; the state is saved atomically in the output folder, ``OctreeDir.state_file``):
+
+1. **read** (read.py): input chunks are validated, bounded and spilled to raw chunk files
+   (spill.py; the input is decoded once: LAZ decoding is usually the bottleneck, so the next
+   chunk is decoded in a thread while this one is spilled, prefetch.py).
+2. **count** (partition.py): spilled points are counted into a 128³ grid of the octree cube.
+3. **distribute** (partition.py): grid cells are merged into partitions (octree subtrees)
+   holding at most what fits the memory limit; each spilled chunk is appended to its
+   partitions' files, then deleted.
+4. **build** (phases.py): per partition, a local octree is split until nodes hold ≤
+   ``max_leaf`` points and sampled bottom-up (../build.py); the subtree's root points are
+   carried up.
+5. **group** and 6. **upper** (phases.py): the nodes above the partitions are sampled from the
+   carried points, a group of partition roots at a time.
+7. **write** (phases.py): node payloads are assembled into the output format (../writer.py,
+   ../potree.py); the metadata file is written last, atomically, and only then is the working
+   folder removed. The output therefore never looks complete before it is.
+
+A re-run after an interruption resumes where the state says (same inputs and options,
+state.py), otherwise it starts clean. converter.py runs the phases in order (``convert``);
+the output folder itself (kind, lock, clearing, state file) is ../octree_dir.py's.
+"""
+
+from ..octree_dir import ConvertError, OutputExistsError
+from .converter import ConvertResult, _Converter, convert
+from .options import DEFAULT_MAX_LEAF, FORMATS, parse_memory
+from .partition import plan_groups as _plan_groups  # the names tests use
+from .partition import plan_partitions as _plan_partitions
+from .spill import append_file as _append_file
+
+__all__ = [
+    "DEFAULT_MAX_LEAF",
+    "FORMATS",
+    "ConvertError",
+    "ConvertResult",
+    "OutputExistsError",
+    "_Converter",
+    "_append_file",
+    "_plan_groups",
+    "_plan_partitions",
+    "convert",
+    "parse_memory",
+]

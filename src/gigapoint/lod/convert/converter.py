@@ -1,0 +1,140 @@
+"""The conversion's orchestrator: ``convert()`` checks the options, takes the output folder's
+lock, prepares it (resume or start clean) and runs the phases in order."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..build import SAMPLERS
+from ..octree_dir import ConvertError
+from ..progress import NullProgress, RichProgress
+from .keep_freed_memory import KeepFreedMemory
+from .options import DEFAULT_MAX_LEAF, ENCODINGS, FORMATS, parse_memory
+from .partition import PartitionPhases
+from .phases import BuildPhases
+from .read import ReadPhase
+
+PHASES = ("read", "count", "distribute", "build", "group", "upper", "write")
+
+
+@dataclass
+class ConvertResult:
+    out: Path
+    format: str
+    sampler: str
+    points: int
+    nodes: int
+    skipped: int
+    seconds: float
+    resumed: bool
+    phase_seconds: dict | None = None
+    first_view_seconds: float | None = None  # until OUT first opened (its preview); 0: a resumed run's was there; None: none
+
+    @property
+    def points_per_second(self) -> float:
+        return self.points / self.seconds if self.seconds > 0 else 0.0
+
+
+class _Converter(ReadPhase, PartitionPhases, BuildPhases):
+    """One conversion (state.Job) with every phase: read (read.py), count and distribute
+    (partition.py), build, group, upper and write (phases.py)."""
+
+    def run(self, overwrite: bool) -> ConvertResult:
+        self.t0 = time.perf_counter()
+        fp = self.fingerprint()
+        try:
+            with self.dir.lock():
+                return self._run_locked(overwrite, fp)
+        finally:
+            self.progress.close()
+
+    def _run_locked(self, overwrite: bool, fp) -> ConvertResult:
+        saved = self.dir.prepare_output(fp, overwrite)
+        resumed = saved is not None
+        if resumed and self.dir.preview.is_file():
+            self.first_view = 0.0  # the interrupted run's preview: viewable from the start
+        self.state = saved or {"fingerprint": fp, "phase": "read"}
+        self.save_state()
+        steps = {
+            "read": self.read,
+            "count": self.count,
+            "distribute": self.distribute,
+            "build": self.build,
+            "group": self.group,
+            "upper": self.upper,
+        }
+        timings = {}
+        for ph in PHASES[PHASES.index(self.state["phase"]) :]:
+            t = time.perf_counter()
+            if ph == "write":
+                n_nodes = self.write()
+            else:
+                steps[ph]()
+            timings[ph] = round(time.perf_counter() - t, 3)
+        return ConvertResult(
+            self.out,
+            self.format,
+            self.sampler,
+            int(self.state["points"]),
+            n_nodes,
+            int(self.state.get("skipped", 0)),
+            time.perf_counter() - self.t0,
+            resumed,
+            timings,
+            self.first_view,
+        )
+
+
+def convert(
+    inputs,
+    out,
+    *,
+    sampler: str = "grid",
+    memory_limit=None,
+    overwrite: bool = False,
+    format: str = "gigapoint",
+    max_leaf: int = DEFAULT_MAX_LEAF,
+    partition_points: int | None = None,
+    chunk_size: int | None = None,
+    progress: bool = False,
+    name: str | None = None,
+    encoding: str = "DEFAULT",
+    upper_points: int | None = None,
+) -> ConvertResult:
+    """Convert point cloud files (or an iterable of PointChunks) into an LOD octree directory ``out``.
+
+    ``sampler``: grid | poisson. ``format``: gigapoint (rendered directly) | potree (Potree 2.0,
+    ``encoding`` DEFAULT or BROTLI). ``memory_limit``: bytes or '4G'; bounds partition sizes. Only path
+    inputs can resume after an interruption; chunk iterables always start clean.
+    ``partition_points``, ``chunk_size`` and ``upper_points`` (the carried root points joined
+    at once, default ``partition_points``) are tuning knobs, derived from the memory limit.
+    """
+    if sampler not in SAMPLERS:
+        raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
+    if format not in FORMATS:
+        raise ConvertError(f"--format: unknown format {format!r}; choose {' or '.join(FORMATS)}")
+    if not (isinstance(max_leaf, int) and max_leaf >= 100):
+        raise ConvertError(f"max_leaf must be an integer >= 100, got {max_leaf!r}")
+    if encoding not in ENCODINGS:
+        raise ConvertError(f"encoding: unknown Potree encoding {encoding!r}; choose DEFAULT or BROTLI")
+    mem = parse_memory(memory_limit)
+    if out is None or str(out) == "":
+        raise ConvertError("convert: no output directory given (-o OUT)")
+    conv = _Converter(
+        inputs,
+        out,
+        sampler,
+        mem,
+        format,
+        max_leaf,
+        partition_points,
+        chunk_size,
+        RichProgress() if progress else NullProgress(),
+        name,
+        encoding,
+        upper_points,
+    )
+    with KeepFreedMemory():
+        return conv.run(overwrite)

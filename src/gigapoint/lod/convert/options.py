@@ -1,0 +1,49 @@
+"""The conversion's options and the sizes derived from the memory limit."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from ..octree_dir import ConvertError
+
+BYTES_PER_POINT_BUILD = 220  # peak working set per point of a partition build
+# Partitions above this gain nothing (every kernel is already parallel inside one) and lose a lot:
+# 20 M points on the 2-core project machine convert at 1.2 M points/s as one partition, 2.5 M
+# points/s in 4 M-point ones (page faults on a larger working set, cache misses in the sort).
+MAX_PARTITION_POINTS = 4_000_000
+DEFAULT_MAX_LEAF = 20_000
+FORMATS = ("gigapoint", "potree")
+ENCODINGS = ("DEFAULT", "BROTLI")  # Potree's
+
+
+def parse_memory(value) -> int:
+    """'4G', '512M', '2GiB', '1.5g' or a byte count -> bytes; None -> a quarter of the RAM."""
+    if value is None:
+        try:
+            total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        except (ValueError, OSError, AttributeError):
+            total = 8 << 30
+        return max(256 << 20, total // 4)
+    if isinstance(value, (int, np.integer)):
+        n = int(value)
+    else:
+        s = str(value).strip().lower().removesuffix("b").removesuffix("i")
+        mult = {"k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}.get(s[-1:], 1)
+        try:
+            n = int(float(s[:-1] if s[-1:] in "kmgt" else s) * mult)
+        except ValueError:
+            raise ConvertError(f"--memory-limit: cannot read {value!r} (use e.g. 4G, 512M)") from None
+    if n < 64 << 20:
+        raise ConvertError(f"--memory-limit: {value!r} is below the 64M a conversion needs")
+    return n
+
+
+def rss_bytes() -> int:
+    """This process's resident memory (0 where /proc is not there)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError, AttributeError):
+        return 0

@@ -1,0 +1,32 @@
+"""``prefetch``: the next item of an iterator made in a worker thread while the caller uses this one."""
+
+from __future__ import annotations
+
+from collections.abc import Generator, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+T = TypeVar("T")
+_END = object()
+
+
+def prefetch(items: Iterable[T], name: str = "gigapoint-read") -> Iterator[T]:
+    """The items of ``items`` in order, item k+1 made in one worker thread while the caller works
+    on item k: decoding a LAS/LAZ chunk and writing the previous one to disk both release the
+    GIL, so they overlap. One item of extra memory.
+
+    An exception raised by ``items`` reaches the caller where its item would have. When the
+    caller stops early (``break``, an exception, closing this generator), the item in flight is
+    waited for and a generator ``items`` is closed (its ``finally`` blocks run, files close).
+    """
+    it = iter(items)
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=name)
+    try:
+        pending = pool.submit(next, it, _END)
+        while (item := pending.result()) is not _END:
+            pending = pool.submit(next, it, _END)
+            yield item
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)  # no thread is left inside ``it``
+        if isinstance(it, Generator):
+            it.close()

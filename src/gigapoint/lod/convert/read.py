@@ -1,0 +1,121 @@
+"""Phase 1, read: input chunks validated, bounded and spilled to raw chunk files, with the
+conversion's preview sampled on the way (../preview.py)."""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+
+from ...core.cloud import MAX_ABS_COORDINATE
+from ...errors import EmptyCloudError, GigapointWarning
+from ...io import read_chunks
+from ...io.registry import reader_for
+from ..build import valid_bounds
+from ..preview import PreviewSampler, preview_points
+from .prefetch import prefetch
+from .spill import load_raw_chunk, save_raw_chunk
+from .state import Job
+
+
+def _read_chunks(path, chunk_size: int):
+    """The chunks of one input file (any format gigapoint.io reads); a seam the tests stop."""
+    return read_chunks(path, chunk_size)
+
+
+def _point_total(paths) -> int | None:
+    try:
+        total = 0
+        for p in paths:
+            n = reader_for(p).point_count(p)
+            if n is None:
+                return None
+            total += n
+        return total
+    except Exception:  # noqa: BLE001 - only a progress-bar total: unknown is fine
+        return None
+
+
+class ReadPhase(Job):
+    def _chunks(self):
+        if self.paths is None:
+            yield from self.inputs
+        else:
+            for p in self.paths:
+                yield from prefetch(_read_chunks(p, self.chunk_size))
+
+    def read(self) -> None:
+        st = self.state
+        raw = self.dir.raw
+        raw.mkdir(exist_ok=True)
+        done = st.get("chunks", 0)
+        lo = np.array(st.get("lo", [np.inf] * 3))
+        hi = np.array(st.get("hi", [-np.inf] * 3))
+        attrs: dict | None = st.get("attributes")
+        total = _point_total(self.paths) if self.paths else None
+        st["total"] = total
+        preview = self._preview_sampler(total, done, attrs)
+        self.progress.phase("read", total)
+        for i, chunk in enumerate(self._chunks()):
+            n_in = len(chunk)
+            if i < done:
+                self.progress.advance(n_in)
+                continue
+            valid, c_lo, c_hi = valid_bounds(chunk.xyz, MAX_ABS_COORDINATE)
+            n_valid = int(np.count_nonzero(valid))
+            keep = slice(None) if n_valid == n_in else valid
+            xyz = chunk.xyz[keep]
+            st["skipped"] = st.get("skipped", 0) + int(n_in - n_valid)
+            names = {a: v.dtype.str for a, v in chunk.attributes.items() if v.ndim == 1}
+            if attrs is None:
+                attrs = names
+            else:
+                attrs = {a: d for a, d in attrs.items() if names.get(a) == d}
+            if n_valid:
+                lo = np.minimum(lo, c_lo)
+                hi = np.maximum(hi, c_hi)
+            rgba = np.ascontiguousarray(chunk.rgba[keep]).view(np.uint32).reshape(-1)
+            kept = {a: np.ascontiguousarray(chunk.attributes[a][keep]) for a in names}
+            save_raw_chunk(raw, i, xyz, rgba, kept)
+            preview.add(xyz, rgba, {a: kept[a] for a in attrs})
+            st.update(chunks=i + 1, lo=lo.tolist(), hi=hi.tolist(), attributes=attrs, points=st.get("points", 0) + len(xyz))
+            self._write_preview(preview)
+            self.save_state()
+            self.progress.advance(n_in)
+        self._write_preview(preview, force=True)
+        if st.get("points", 0) == 0:
+            skipped = st.get("skipped", 0)
+            detail = f" ({skipped:,} invalid points: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
+            raise EmptyCloudError(f"{self.name}: no valid points{detail}")
+        if st.get("skipped"):
+            warnings.warn(
+                f"{self.name}: skipped {st['skipped']:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})",
+                GigapointWarning,
+                stacklevel=3,
+            )
+        edge = float(np.max(hi - lo))
+        st.update(origin=lo.tolist(), edge=edge if edge > 0 else 1.0, phase="count")
+        self.save_state()
+
+    def _preview_sampler(self, total: int | None, done: int, attrs: dict | None) -> PreviewSampler:
+        """The read phase's preview sample; a resumed run reloads it and re-offers the chunks read after its last write."""
+        preview = PreviewSampler(self.dir.preview, preview_points(self.mem), total)
+        meta = self.state.get("preview")
+        if done and meta:
+            preview.resume(meta["seen"], meta["stride"])
+            for j in range(meta["chunks"], done):
+                d = load_raw_chunk(self.dir.raw, j, attrs or {})
+                preview.add(d["xyz"], d["rgba"], {a: d["attr." + a] for a in attrs or {}})
+        return preview
+
+    def _write_preview(self, preview: PreviewSampler, force: bool = False) -> None:
+        if preview.maybe_write(force):
+            self.state["preview"] = {
+                "chunks": self.state.get("chunks", 0),
+                "seen": preview.seen,
+                "stride": preview.stride,
+                "points": preview.held,
+            }
+            if self.first_view is None:
+                self.first_view = time.perf_counter() - self.t0

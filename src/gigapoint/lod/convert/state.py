@@ -1,0 +1,97 @@
+"""What one conversion is (inputs, options, sizes, output folder) and what lets it resume:
+the fingerprint of its inputs and options, and its saved state (``OctreeDir.write_state``).
+
+A re-run resumes only when its fingerprint equals the saved one: the same input files (path,
+size, modification time) and the same options; anything else starts clean.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ...errors import InputError
+from ...io import expand_paths
+from ..octree_dir import OctreeDir
+from .options import BYTES_PER_POINT_BUILD, MAX_PARTITION_POINTS, rss_bytes
+
+STATE_VERSION = 1
+
+
+def input_paths(inputs) -> list[Path] | None:
+    """The input files of a conversion given files and directories (a directory stands for its
+    supported files, ``io.expand_paths``, as for every other command); None for an iterable of
+    PointChunks. An octree folder is refused: it is an output, not an input."""
+    if isinstance(inputs, (str, os.PathLike)):
+        inputs = [inputs]
+    if not (isinstance(inputs, (list, tuple)) and all(isinstance(p, (str, os.PathLike)) for p in inputs)):
+        return None
+    if not inputs:
+        raise InputError("convert: no input given")
+    for p in inputs:
+        if OctreeDir(p).kind is not None:
+            raise InputError(f"{p}: is a converted octree (or a conversion in progress), not an input point cloud")
+    return expand_paths(inputs)
+
+
+class Job:
+    """One conversion: its inputs, options, the sizes derived from its memory limit, its output
+    folder, progress display and state. The phases (read.py, partition.py, phases.py) are
+    methods of subclasses that share it; converter.py runs them in order."""
+
+    def __init__(
+        self,
+        inputs,
+        out,
+        sampler,
+        memory_limit,
+        format,
+        max_leaf,
+        partition_points,
+        chunk_size,
+        progress,
+        name,
+        encoding="DEFAULT",
+        upper_points=None,
+    ):
+        self.encoding = encoding
+        self.out = Path(out)
+        self.dir = OctreeDir(self.out)
+        self.sampler = sampler
+        self.format = format
+        self.max_leaf = max_leaf
+        self.mem = memory_limit
+        usable = max(memory_limit - rss_bytes() - (48 << 20), memory_limit // 4)  # what the process already holds is not ours
+        self.partition_points = partition_points or max(50_000, min(MAX_PARTITION_POINTS, usable // BYTES_PER_POINT_BUILD))
+        self.partition_override = partition_points  # None: derived from the memory limit (and this process's size)
+        self.upper_points = upper_points or self.partition_points  # carried root points the group/upper phases join at once
+        # chunks grouped between checkpoints (more: page faults on fresh memory cost more than the opens saved)
+        self.distribute_bytes = int(min(256 << 20, max(64 << 20, usable // 8)))
+        self.chunk_size = chunk_size or int(min(2_000_000, max(50_000, memory_limit // 600)))
+        self.progress = progress
+        self.inputs = inputs
+        self.paths = input_paths(inputs)
+        self.name = name or (self.paths[0].stem if self.paths else "cloud")
+        self.state: dict = {}
+        self.t0 = 0.0  # perf_counter() at the start of the run
+        self.first_view: float | None = None  # seconds from the start until the first preview was written
+
+    def fingerprint(self) -> dict | None:
+        """The inputs and options a saved state must match to be resumed (None: chunk inputs)."""
+        if self.paths is None:
+            return None
+        files = [[str(p.resolve()), p.stat().st_size, p.stat().st_mtime_ns] for p in self.paths]
+        return {
+            "version": STATE_VERSION,
+            "inputs": files,
+            "sampler": self.sampler,
+            "format": self.format,
+            "encoding": self.encoding,
+            "max_leaf": self.max_leaf,
+            "memory_limit": self.mem,
+            "partition_points": self.partition_override,
+            "chunk_size": self.chunk_size,
+        }
+
+    def save_state(self) -> None:
+        self.dir.write_state(self.state)

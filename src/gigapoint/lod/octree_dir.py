@@ -1,0 +1,310 @@
+"""The octree folder: the one place that knows its layout, kind, state, lock and completeness.
+
+An octree folder ``OUT`` is made by ``gigapoint convert`` (or PotreeConverter) and holds one of:
+
+- a **gigapoint octree** (store.py reads it, writer.py writes it; arrays are .npy files):
+
+  - ``octree.json``: metadata (format, version, points, nodes, cube, bounds, sampler,
+    attributes), written last: its presence means the folder is complete
+  - ``nodes.npy``: one BATCH_DTYPE record per node (first, count, level, tight bbox), sorted by key
+  - ``keys.npy``: the u64 node key of each record (keys.py)
+  - ``low.npy``, ``med.npy``, ``high.npy``: u32 node-relative 10-bit precision words per point
+  - ``color.npy``: u32 RGBA, inner nodes' colors averaged over the points they stand for
+  - ``rgba.npy``: u32 RGBA as read (source colors)
+  - ``attr.<name>.npy``: per-point attributes (intensity, classification, ...)
+
+- a **Potree 2.0 octree** (potree.py): ``metadata.json`` (written last), ``hierarchy.bin``,
+  ``octree.bin``;
+
+- an **unfinished conversion**: ``.partial/`` with ``state.json`` (the resumable state, written
+  atomically after every step), ``preview.npz`` (preview.py) and the converter's working
+  folders ``raw/`` (spilled input chunks), ``parts/`` (partition files) and ``built/`` (built
+  node sets). A gigapoint conversion also fills ``<array>.tmp.npy`` in ``OUT`` itself; the
+  write phase renames them.
+
+A conversion holds an exclusive ``flock`` on the folder itself for as long as it runs
+(``lock``); ``running`` probes it. The kernel drops the lock when the process ends, even
+killed, so a stopped conversion is told apart from a running one.
+
+Every other module asks an ``OctreeDir`` for these names; none spells them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+from pathlib import Path
+from typing import Literal, Self
+
+from ..atomic import atomic_json, temp_files
+from ..errors import GigapointError
+
+GIGAPOINT_META = "octree.json"
+FORMAT_NAME = "gigapoint-octree"  # octree.json's "format"
+FORMAT_VERSION = 1
+POINT_ARRAYS = ("low", "med", "high", "color", "rgba")  # one entry per point each
+POTREE_META = "metadata.json"
+POTREE_HIERARCHY = "hierarchy.bin"
+POTREE_OCTREE = "octree.bin"
+PARTIAL = ".partial"
+STATE = "state.json"
+PREVIEW = "preview.npz"
+RESUME_HINT = "run `gigapoint convert` again to resume it"  # what a stopped conversion needs
+
+# what --overwrite clears besides .partial, attr.*.npy and temporary files (never anything else)
+_OWN_FILES = (GIGAPOINT_META, POTREE_META, POTREE_HIERARCHY, POTREE_OCTREE, "nodes.npy", "keys.npy", *(f"{a}.npy" for a in POINT_ARRAYS))
+
+Kind = Literal["gigapoint", "potree", "unfinished"]
+
+
+class ConvertError(GigapointError):
+    """A conversion that cannot start or go on (bad options, output in the way)."""
+
+
+class OutputExistsError(ConvertError):
+    """The output directory already holds something that --overwrite is needed for."""
+
+
+class DirLock:
+    """An exclusive flock on an octree folder (``OctreeDir.lock``), held until ``release``."""
+
+    def __init__(self, fd: int | None):
+        self._fd = fd
+
+    def release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)  # closing the descriptor drops the lock
+            self._fd = None
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+class OctreeDir:
+    """An octree folder (see the module's docstring), which need not exist yet."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+
+    def __repr__(self) -> str:
+        return f"OctreeDir({str(self.path)!r})"
+
+    def __fspath__(self) -> str:
+        return os.fspath(self.path)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, OctreeDir) and other.path == self.path
+
+    def __hash__(self) -> int:
+        return hash(self.path)
+
+    # ------------------------------------------------------------------ paths
+
+    @property
+    def meta(self) -> Path:
+        """A gigapoint octree's metadata (``octree.json``)."""
+        return self.path / GIGAPOINT_META
+
+    @property
+    def potree_meta(self) -> Path:
+        return self.path / POTREE_META
+
+    @property
+    def potree_hierarchy(self) -> Path:
+        return self.path / POTREE_HIERARCHY
+
+    @property
+    def potree_octree(self) -> Path:
+        return self.path / POTREE_OCTREE
+
+    def array(self, name: str) -> Path:
+        """A gigapoint octree's array ``name``: nodes, keys, one of POINT_ARRAYS, or attr.<attribute>."""
+        return self.path / f"{name}.npy"
+
+    def array_in_progress(self, name: str) -> Path:
+        """Array ``name`` while a conversion fills it (renamed to ``array(name)`` by the write phase)."""
+        return self.path / f"{name}.tmp.npy"
+
+    @property
+    def partial(self) -> Path:
+        """An unfinished conversion's working folder (removed once the octree is complete)."""
+        return self.path / PARTIAL
+
+    @property
+    def state_file(self) -> Path:
+        return self.partial / STATE
+
+    @property
+    def preview(self) -> Path:
+        return self.partial / PREVIEW
+
+    @property
+    def raw(self) -> Path:
+        """Spilled input chunks (read phase)."""
+        return self.partial / "raw"
+
+    @property
+    def parts(self) -> Path:
+        """Partition files (distribute phase)."""
+        return self.partial / "parts"
+
+    @property
+    def built(self) -> Path:
+        """Built node sets (build, group and upper phases)."""
+        return self.partial / "built"
+
+    # ------------------------------------------------------------------ what it is
+
+    @property
+    def kind(self) -> Kind | None:
+        """gigapoint or potree (complete), unfinished (a conversion's working folder only), or
+        None: not an octree folder (or not a folder at all)."""
+        if not self.path.is_dir():
+            return None
+        if self.meta.is_file():
+            return "gigapoint"
+        if self.potree_meta.is_file():
+            return "potree"
+        if self.partial.exists():
+            return "unfinished"
+        return None
+
+    @property
+    def complete(self) -> bool:
+        """A finished octree: its metadata file (gigapoint's or Potree's) is written last, atomically."""
+        return self.meta.is_file() or self.potree_meta.is_file()
+
+    @property
+    def is_octree(self) -> bool:
+        """Opens as an octree: a gigapoint or Potree 2.0 octree, or an unfinished conversion that
+        has saved its state (so that ``gigapoint.open`` treats the folder as one dataset)."""
+        kind = self.kind
+        return (
+            kind == "gigapoint"
+            or (kind == "potree" and self.potree_hierarchy.is_file())
+            or (kind == "unfinished" and self.state_file.is_file())
+        )
+
+    @property
+    def awaiting_preview(self) -> bool:
+        """An unfinished conversion that has not written its preview yet."""
+        return self.state_file.is_file() and not self.preview.is_file() and not self.complete
+
+    # ------------------------------------------------------------------ conversion state
+
+    def read_state(self) -> dict | None:
+        """The saved conversion state; None when there is none (or it cannot be read)."""
+        try:
+            state = json.loads(self.state_file.read_text())
+        except (OSError, ValueError):
+            return None
+        return state if isinstance(state, dict) else None
+
+    def write_state(self, state: dict) -> None:
+        """Save the conversion state, atomically and durably (a killed run resumes from it)."""
+        atomic_json(self.state_file, state, durable=True)
+
+    def status(self) -> dict:
+        """What an unfinished conversion's state says: phase, points read, input total, preview
+        size, attributes, and whether a conversion is still running (``running``: False once it
+        stopped; None: unknown). {} without a saved state."""
+        st = self.read_state()
+        if st is None:
+            return {}
+        preview = st.get("preview") or {}
+        return {
+            "phase": st.get("phase"),
+            "points": st.get("points", 0),
+            "total": st.get("total"),
+            "preview_points": preview.get("points", 0),
+            "attributes": sorted(st.get("attributes") or {}),
+            "running": self.running,
+        }
+
+    # ------------------------------------------------------------------ lock
+
+    @property
+    def running(self) -> bool | None:
+        """Whether a conversion holds the folder's lock (``lock``) right now: False once it has
+        ended, finished or killed. None where flock does not exist or the folder cannot be opened."""
+        try:
+            import fcntl
+        except ImportError:  # Windows
+            return None
+        try:
+            fd = os.open(self.path, os.O_RDONLY)
+        except OSError:
+            return None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except OSError:
+            return True
+        finally:
+            os.close(fd)  # closing drops the probe's own shared lock
+        return False
+
+    def lock(self) -> DirLock:
+        """An exclusive lock on the folder (flock on the directory itself, which is created),
+        held by a writer for the whole conversion, so that a second conversion into the same
+        folder stops at once instead of clearing or interleaving the first one's files. The
+        kernel drops it when the process ends, even killed. A no-op where flock does not exist."""
+        try:
+            import fcntl
+        except ImportError:  # Windows
+            return DirLock(None)
+        if self.path.exists() and not self.path.is_dir():
+            raise OutputExistsError(f"{self.path}: exists and is not a directory")
+        self.path.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path, os.O_RDONLY)
+        for attempt in range(10):  # a viewer's ``running`` probe holds a shared lock for microseconds
+            if attempt:
+                time.sleep(0.02)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                return DirLock(fd)
+            except OSError:
+                pass
+        os.close(fd)
+        raise ConvertError(f"{self.path}: another conversion is writing into it; let it finish or stop it first")
+
+    # ------------------------------------------------------------------ as an output
+
+    def prepare_output(self, fingerprint, overwrite: bool) -> dict | None:
+        """Make the folder ready for a conversion whose inputs and options are ``fingerprint``:
+        the saved state when an unfinished conversion with the same fingerprint can resume,
+        else None, the folder cleared (a complete octree only with ``overwrite``) and
+        ``.partial`` created. A folder that is not an octree is written into only when empty."""
+        out = self.path
+        if out.exists() and not out.is_dir():
+            raise OutputExistsError(f"{out}: exists and is not a directory")
+        if out.exists():
+            complete = self.complete
+            if complete and not overwrite:
+                raise OutputExistsError(f"{out}: already holds a converted point cloud; pass --overwrite to replace it")
+            if not complete and self.kind is None and any(out.iterdir()):
+                raise OutputExistsError(f"{out}: directory is not empty and is not a gigapoint/Potree output; refusing to write into it")
+            if not complete:
+                state = self.read_state()
+                if state and state.get("fingerprint") == fingerprint:
+                    return state
+            self.clear()
+        self.partial.mkdir(parents=True, exist_ok=True)
+        return None
+
+    def remove_partial(self) -> None:
+        """Remove an unfinished conversion's working folder (once the octree is complete)."""
+        shutil.rmtree(self.partial, ignore_errors=True)
+
+    def clear(self) -> None:
+        """Remove what a conversion writes here (for --overwrite or a fresh start); nothing else."""
+        shutil.rmtree(self.partial, ignore_errors=True)
+        for f in _OWN_FILES:
+            (self.path / f).unlink(missing_ok=True)
+        stale = {*self.path.glob("attr.*.npy"), *self.path.glob("*.tmp"), *self.path.glob("*.tmp.npy"), *temp_files(self.path)}
+        for p in stale:
+            p.unlink(missing_ok=True)

@@ -1,0 +1,102 @@
+"""The gigapoint octree writer: built node sets assembled into an octree folder (layout:
+octree_dir.py), its metadata file last."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..atomic import atomic_json, atomic_npy
+from ..core.layout import BATCH_DTYPE
+from ..core.quantize import quantize
+from .keys import key_cube, level_of
+from .octree_dir import FORMAT_NAME, FORMAT_VERSION, POINT_ARRAYS, OctreeDir
+
+
+def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sampler: str, max_leaf: int, progress) -> int:
+    """Assemble built node sets into the octree folder ``out``; returns the number of nodes.
+
+    A node set is a dir with keys.npy and either nodes.npy + span.npy (its points already written
+    into ``out.array_in_progress(<array>)`` by the converter: only the node records are gathered
+    here) or counts/xyz/color/rgba/attr.* (quantized and copied here).
+    """
+    attrs = st["attributes"]
+    origin, edge = np.array(st["origin"]), float(st["edge"])
+    dtypes = dict.fromkeys(POINT_ARRAYS, np.uint32)
+    dtypes.update({f"attr.{a}": np.dtype(d) for a, d in attrs.items()})
+    tmp_paths = {k: out.array_in_progress(k) for k in dtypes}
+    direct = all((src / "span.npy").exists() for src in sources)
+    if direct:
+        total = int(st["points"])
+        if sum(int(np.diff(np.load(src / "span.npy"))[0]) for src in sources) != total:
+            raise RuntimeError("internal error: built node sets do not cover every point once")
+        outs = {}
+    else:
+        total = sum(int(np.load(src / "xyz.npy", mmap_mode="r").shape[0]) for src in sources)
+        outs = {k: np.lib.format.open_memmap(tmp_paths[k], mode="w+", dtype=dtypes[k], shape=(total,)) for k in dtypes}
+    all_nodes, all_keys = [], []
+    offset = 0
+    for src in sources:
+        keys = np.load(src / "keys.npy")
+        counts = np.load(src / "counts.npy")
+        if direct:
+            nodes = np.load(src / "nodes.npy")
+            n = int(counts.sum())
+        else:
+            xyz = np.load(src / "xyz.npy")
+            n = len(xyz)
+            nodes = np.zeros(len(keys), BATCH_DTYPE)
+            nodes["first"] = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint64)
+            nodes["count"] = counts
+            nodes["level"] = level_of(keys)
+            low, med, high = quantize(xyz, np.arange(n, dtype=np.int64), nodes)
+            nodes["first"] += np.uint64(offset)
+            sl = slice(offset, offset + n)
+            outs["low"][sl], outs["med"][sl], outs["high"][sl] = low, med, high
+            outs["color"][sl] = np.load(src / "color.npy", mmap_mode="r")
+            outs["rgba"][sl] = np.load(src / "rgba.npy", mmap_mode="r")
+            for a in attrs:
+                outs[f"attr.{a}"][sl] = np.load(src / f"attr.{a}.npy", mmap_mode="r")
+        empty = counts == 0
+        if empty.any():  # an empty inner node: its cube stands in for the bbox
+            cmin, cedge = key_cube(keys[empty], origin, edge)
+            nodes["bbox_min"][empty] = cmin
+            nodes["bbox_max"][empty] = cmin + cedge[:, None]
+        all_nodes.append(nodes)
+        all_keys.append(keys)
+        offset += n
+        progress.advance(n)
+    for k, arr in outs.items():
+        arr.flush()
+        del arr
+    outs.clear()
+    for k, p in tmp_paths.items():
+        if p.exists() or not out.array(k).exists():  # a write phase resumed after its renames
+            os.replace(p, out.array(k))  # filled over several phases, renamed only once complete
+    keys = np.concatenate(all_keys)
+    nodes = np.concatenate(all_nodes)
+    order = np.argsort(keys, kind="stable")
+    if len(np.unique(keys)) != len(keys):
+        raise RuntimeError("internal error: duplicate octree node keys")
+    atomic_npy(out.array("nodes"), nodes[order])
+    atomic_npy(out.array("keys"), keys[order])
+    lo, hi = np.array(st["lo"]), np.array(st["hi"])
+    meta = {
+        "format": FORMAT_NAME,
+        "version": FORMAT_VERSION,
+        "name": name,
+        "points": int(total),
+        "nodes": len(keys),
+        "cube_min": origin.tolist(),
+        "cube_edge": edge,
+        "bounds": {"min": lo.tolist(), "max": hi.tolist()},
+        "sampler": sampler,
+        "spacing": edge / 128.0,
+        "max_leaf": max_leaf,
+        "attributes": attrs,
+        "skipped": int(st.get("skipped", 0)),
+    }
+    atomic_json(out.meta, meta, durable=True)  # last: the folder is complete from here on
+    return len(keys)

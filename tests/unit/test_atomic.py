@@ -1,0 +1,103 @@
+"""gigapoint.atomic: whole-file writes that never leave a torn or half-written file."""
+
+from __future__ import annotations
+
+import json
+import os
+import stat
+
+import numpy as np
+import pytest
+
+from gigapoint.atomic import atomic_bytes, atomic_json, atomic_npy, atomic_open, atomic_write, temp_files
+
+
+def test_writes_replace_the_file_and_leave_nothing_else(tmp_path):
+    path = tmp_path / "a.bin"
+    atomic_bytes(path, b"old")
+    atomic_bytes(path, b"new content")
+    assert path.read_bytes() == b"new content"
+    atomic_json(tmp_path / "m.json", {"a": [1, 2]}, indent="\t")
+    assert (tmp_path / "m.json").read_text() == json.dumps({"a": [1, 2]}, indent="\t")
+    arr = np.arange(12, dtype=np.uint32).reshape(3, 4)
+    atomic_npy(tmp_path / "x.npy", arr)
+    np.testing.assert_array_equal(np.load(tmp_path / "x.npy"), arr)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.bin", "m.json", "x.npy"]
+
+
+@pytest.mark.parametrize("error", [OSError("disk full"), KeyboardInterrupt()])
+def test_a_failed_write_keeps_the_old_file_and_removes_its_temporary(tmp_path, error):
+    path = tmp_path / "image.png"
+    path.write_bytes(b"the old image")
+    seen = []
+
+    def write(tmp):
+        seen.append(tmp)
+        tmp.write_bytes(b"half an ima")
+        raise error
+
+    with pytest.raises(type(error)):
+        atomic_write(path, write)
+    assert path.read_bytes() == b"the old image"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["image.png"] and not seen[0].exists()
+
+
+def test_the_temporary_file_is_new_hidden_beside_and_keeps_the_suffix(tmp_path):
+    names = []
+
+    def write(tmp):
+        assert tmp.parent == tmp_path and tmp.exists() and tmp.stat().st_size == 0
+        names.append(tmp.name)
+        tmp.write_bytes(b"x")
+
+    atomic_write(tmp_path / "video.mp4", write)
+    atomic_write(tmp_path / "video.mp4", write)
+    assert all(n.startswith(".video.mp4.") and n.endswith(".tmp.mp4") for n in names)
+    assert names[0] != names[1]  # two writers of one file never share a temporary file
+
+
+def test_permissions_follow_the_umask(tmp_path):
+    old = os.umask(0o027)
+    try:
+        atomic_bytes(tmp_path / "a", b"x")
+        os.umask(0o022)
+        atomic_bytes(tmp_path / "b", b"x")
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "a").stat().st_mode) == 0o640
+    assert stat.S_IMODE((tmp_path / "b").stat().st_mode) == 0o644
+
+
+def test_durable_writes_fsync_before_the_rename(tmp_path, monkeypatch):
+    events = []
+    real_fsync, real_replace = os.fsync, os.replace
+    monkeypatch.setattr(os, "fsync", lambda fd: (events.append("fsync"), real_fsync(fd))[1])
+    monkeypatch.setattr(os, "replace", lambda a, b: (events.append("replace"), real_replace(a, b))[1])
+    atomic_bytes(tmp_path / "fast", b"x")
+    assert events == ["replace"]
+    events.clear()
+    atomic_json(tmp_path / "state.json", {"phase": "read"}, durable=True)
+    assert events == ["fsync", "replace"]
+
+
+def test_temp_files_finds_what_a_killed_writer_left(tmp_path):
+    names = []
+    atomic_write(tmp_path / "keys.npy", lambda tmp: (names.append(tmp.name), tmp.write_bytes(b"x")))
+    atomic_write(tmp_path / "state", lambda tmp: (names.append(tmp.name), tmp.write_bytes(b"x")))
+    for name in names:  # as a SIGKILL between creating and renaming would leave them
+        (tmp_path / name).write_bytes(b"partial")
+    for other in ("keys.tmp", ".hidden", "a.tmp.npy", ".keys.npy.zzzzzzzz.tmp.npy"):
+        (tmp_path / other).write_bytes(b"y")
+    assert sorted(p.name for p in temp_files(tmp_path)) == sorted(names)
+
+
+def test_atomic_open_keeps_the_old_file_when_the_block_fails(tmp_path):
+    path = tmp_path / "state.json"
+    path.write_text("old")
+    with pytest.raises(RuntimeError, match="killed"), atomic_open(path) as f:
+        f.write(b"half a sta")
+        raise RuntimeError("killed")
+    assert path.read_text() == "old" and sorted(p.name for p in tmp_path.iterdir()) == ["state.json"]
+    with atomic_open(path, durable=True) as f:
+        f.write(b"new")
+    assert path.read_bytes() == b"new" and sorted(p.name for p in tmp_path.iterdir()) == ["state.json"]

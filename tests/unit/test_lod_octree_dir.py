@@ -1,0 +1,136 @@
+"""OctreeDir: the one owner of an octree folder's kind, completeness, state, lock and clearing."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.core import PointChunk, PointCloud
+from gigapoint.errors import GigapointWarning
+from gigapoint.lod import ConvertError, OctreeDir, OutputExistsError, convert, is_octree_dir
+from gigapoint.lod.convert import hooks
+from gigapoint.lod.preview import ConversionPreview
+
+
+def _chunks(n=20_000, seed=0):
+    rng = np.random.default_rng(seed)
+    xyz = np.round(rng.random((n, 3)) * 100, 3)
+    return [PointChunk(xyz[s : s + 5_000]) for s in range(0, n, 5_000)]
+
+
+@pytest.fixture(scope="module")
+def folders(tmp_path_factory):
+    """A finished gigapoint octree, a finished Potree one and an unfinished conversion."""
+    base = tmp_path_factory.mktemp("dirs")
+    convert(_chunks(), base / "gp", max_leaf=1_000)
+    convert(_chunks(), base / "pt", max_leaf=1_000, format="potree")
+
+    def stop(done):
+        raise KeyboardInterrupt("test interrupt")
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(hooks, "after_partition_built", stop)
+        with pytest.raises(KeyboardInterrupt):
+            convert(_chunks(), base / "half", max_leaf=1_000, partition_points=5_000)
+    return base
+
+
+def test_kind_completeness_and_what_opens_as_an_octree(folders, tmp_path):
+    gp_dir, pt_dir, half = OctreeDir(folders / "gp"), OctreeDir(folders / "pt"), OctreeDir(folders / "half")
+    assert (gp_dir.kind, pt_dir.kind, half.kind) == ("gigapoint", "potree", "unfinished")
+    assert gp_dir.complete and pt_dir.complete and not half.complete
+    assert gp_dir.is_octree and pt_dir.is_octree and half.is_octree
+    assert gp_dir.meta.is_file() and pt_dir.potree_meta.is_file() and pt_dir.potree_hierarchy.is_file() and pt_dir.potree_octree.is_file()
+    assert half.state_file.is_file() and half.preview.is_file() and half.built.is_dir()
+    assert not gp_dir.partial.exists() and not half.meta.exists()
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "file.las").write_bytes(b"x")
+    for p in (tmp_path / "empty", tmp_path / "file.las", tmp_path / "missing"):
+        assert OctreeDir(p).kind is None and not OctreeDir(p).is_octree and not is_octree_dir(p)
+    lone = tmp_path / "lone"  # Potree metadata without its hierarchy: not openable as an octree
+    lone.mkdir()
+    (lone / pt_dir.potree_meta.name).write_text("{}")
+    assert OctreeDir(lone).kind == "potree" and not OctreeDir(lone).is_octree
+
+
+def test_state_and_status_of_an_unfinished_conversion(folders, tmp_path):
+    half = OctreeDir(folders / "half")
+    state = half.read_state()
+    assert state["phase"] == "build" and state["points"] == 20_000
+    s = half.status()
+    assert s == {
+        "phase": "build",
+        "points": 20_000,
+        "total": None,
+        "preview_points": state["preview"]["points"],
+        "attributes": [],
+        "running": False,
+    }
+    d = OctreeDir(tmp_path / "x")
+    d.partial.mkdir(parents=True)
+    assert d.read_state() is None and d.status() == {}
+    d.state_file.write_text("{torn")
+    assert d.read_state() is None
+    d.write_state({"phase": "read", "points": 5})
+    assert json.loads(d.state_file.read_text()) == {"phase": "read", "points": 5}
+    assert d.awaiting_preview and not half.awaiting_preview
+
+
+def test_lock_and_running(tmp_path):
+    d = OctreeDir(tmp_path / "out")
+    assert d.running is None  # no folder yet
+    with d.lock():
+        assert d.path.is_dir() and d.running is True
+        with pytest.raises(ConvertError, match="another conversion is writing into it"):
+            OctreeDir(tmp_path / "out").lock()
+    assert d.running is False
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(OutputExistsError, match="not a directory"):
+        OctreeDir(tmp_path / "f").lock()
+
+
+def test_prepare_output_resumes_clears_or_refuses(tmp_path):
+    d = OctreeDir(tmp_path / "out")
+    assert d.prepare_output({"v": 1}, overwrite=False) is None and d.partial.is_dir()
+    d.write_state({"fingerprint": {"v": 1}, "phase": "count"})
+    assert d.prepare_output({"v": 1}, overwrite=False) == {"fingerprint": {"v": 1}, "phase": "count"}
+    (d.raw).mkdir()
+    assert d.prepare_output({"v": 2}, overwrite=False) is None  # other inputs or options: a clean start
+    assert not d.raw.exists() and d.partial.is_dir()
+    d.meta.write_text("{}")
+    with pytest.raises(OutputExistsError, match="--overwrite"):
+        d.prepare_output({"v": 2}, overwrite=False)
+    assert d.prepare_output({"v": 2}, overwrite=True) is None and not d.meta.exists()
+    foreign = OctreeDir(tmp_path / "photos")
+    foreign.path.mkdir()
+    (foreign.path / "holiday.jpg").write_bytes(b"x")
+    with pytest.raises(OutputExistsError, match="not a gigapoint/Potree output"):
+        foreign.prepare_output(None, overwrite=True)
+    assert [p.name for p in foreign.path.iterdir()] == ["holiday.jpg"]
+
+
+def test_clear_removes_what_a_conversion_writes_and_nothing_else(tmp_path):
+    d = OctreeDir(tmp_path / "out")
+    d.raw.mkdir(parents=True)
+    ours = [d.meta, d.potree_meta, d.potree_hierarchy, d.potree_octree, d.array("nodes"), d.array("keys"), d.array("low"),
+            d.array("attr.intensity"), d.array_in_progress("color"), d.path / ".octree.json.0123abcd.tmp.json"]  # fmt: skip
+    theirs = [d.path / "README.md", d.path / "notes.npy", d.path / "sub" / "low.npy"]
+    (d.path / "sub").mkdir()
+    for p in ours + theirs:
+        p.write_bytes(b"x")
+    d.clear()
+    assert sorted(p.relative_to(d.path).as_posix() for p in d.path.rglob("*")) == ["README.md", "notes.npy", "sub", "sub/low.npy"]
+
+
+def test_an_unfinished_conversion_opens_as_a_conversion_preview(folders):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GigapointWarning)
+        preview = gp.open(folders / "half")
+    assert type(preview) is ConversionPreview and isinstance(preview, PointCloud)
+    assert preview.octree_dir == OctreeDir(folders / "half") and preview.name == "half"
+    assert not hasattr(preview, "preview_of")
+    assert repr(preview).startswith("PointCloud('half',")

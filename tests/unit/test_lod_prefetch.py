@@ -1,0 +1,64 @@
+"""prefetch: the next input chunk decoded in a worker thread while the caller spills this one."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from gigapoint.lod.convert.prefetch import prefetch
+
+
+def _workers():
+    return [t for t in threading.enumerate() if t.name.startswith("gigapoint-read")]
+
+
+def test_items_in_order_made_one_ahead_in_a_worker_thread():
+    made = []  # (item, thread name) as the source makes them
+    got = []  # (item, items made by then) as the caller receives them
+
+    def source():
+        for i in range(6):
+            made.append((i, threading.current_thread().name))
+            yield i
+
+    for item in prefetch(source()):
+        time.sleep(0.02)  # the caller's work on the item: the worker makes the next one meanwhile
+        got.append((item, len(made)))
+    assert [i for i, _ in got] == list(range(6))
+    assert all(name.startswith("gigapoint-read") for _, name in made)
+    assert all(n == min(i + 2, 6) for i, n in got)  # exactly one item ahead, never more
+    assert not _workers()
+
+
+def test_an_error_of_the_source_reaches_the_caller_in_its_place():
+    def source():
+        yield 1
+        yield 2
+        raise ValueError("chunk 3 is corrupt")
+
+    items = prefetch(source())
+    assert [next(items), next(items)] == [1, 2]
+    with pytest.raises(ValueError, match="chunk 3 is corrupt"):
+        next(items)
+    assert not _workers()
+
+
+def test_stopping_early_waits_for_the_worker_and_closes_the_source():
+    closed = threading.Event()
+
+    def source():
+        try:
+            yield from range(100)
+        finally:
+            closed.set()
+
+    for item in prefetch(source()):
+        if item == 3:
+            break
+    assert closed.is_set() and not _workers()
+    with pytest.raises(KeyboardInterrupt):
+        for item in prefetch(source()):
+            raise KeyboardInterrupt
+    assert not _workers()
