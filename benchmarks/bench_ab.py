@@ -94,12 +94,15 @@ def compare_images(base, cloud, octree_path) -> list[str]:
 
 def interleaved(frames: list, rounds: int) -> list[list[float]]:
     """Seconds of each (render_frame, cloud, camera, settings) in ``frames``, drawn in turn
-    ``rounds`` times after one untimed frame each (JIT, scratch buffers)."""
+    ``rounds`` times after one untimed frame each (JIT, scratch buffers). The order flips
+    every round (ABBA...), so coming second in a pair favours neither."""
     for draw, *args in frames:
         draw(*args)
     times: list[list[float]] = [[] for _ in frames]
-    for _ in range(rounds):
-        for k, (draw, *args) in enumerate(frames):
+    for r in range(rounds):
+        order = range(len(frames)) if r % 2 == 0 else reversed(range(len(frames)))
+        for k in order:
+            draw, *args = frames[k]
             t = time.perf_counter()
             draw(*args)
             times[k].append(time.perf_counter() - t)
@@ -161,7 +164,7 @@ def main(argv=None) -> int:
 
 
 def _demo_chunks(n: int):
-    from gigapoint.core import demo_chunks
+    from gigapoint.io import demo_chunks
 
     return demo_chunks(n)
 

@@ -41,7 +41,7 @@ print(json.dumps({"points": r.points, "nodes": r.nodes, "seconds": time.perf_cou
 def write_las(path: Path, n: int) -> None:
     import laspy
 
-    from gigapoint.core import demo_chunks
+    from gigapoint.io import demo_chunks
 
     header = laspy.LasHeader(point_format=3, version="1.2")
     header.scales = [0.001] * 3

@@ -36,7 +36,8 @@ def multiply_add_chains(n_iterations, n_threads):
 def steal_seconds() -> float | None:
     """CPU time the hypervisor gave to others, all CPUs together (Linux /proc/stat), or None."""
     try:
-        fields = open("/proc/stat").readline().split()
+        with open("/proc/stat") as f:
+            fields = f.readline().split()
         return int(fields[8]) / os.sysconf("SC_CLK_TCK")
     except (OSError, IndexError, ValueError):
         return None
@@ -52,11 +53,11 @@ def main(argv=None) -> int:
     times: dict[int, list[float]] = {1: [], all_threads: []}
     steal0, wall0 = steal_seconds(), time.perf_counter()
     for _ in range(args.rounds):
-        for n in times:
+        for n, runs in times.items():
             numba.set_num_threads(n)
             t0 = time.perf_counter()
             multiply_add_chains(args.iterations, n)
-            times[n].append(time.perf_counter() - t0)
+            runs.append(time.perf_counter() - t0)
     one, many = statistics.median(times[1]), statistics.median(times[all_threads])
     print(f"1 thread: {one * 1e3:.0f} ms; {all_threads} threads, each the same work: {many * 1e3:.0f} ms (medians of {args.rounds})")
     print(f"speed-up of {all_threads} threads over 1: {all_threads * one / many:.2f}x (ideal {all_threads}.00x)")

@@ -4,7 +4,7 @@
     .venv/bin/python benchmarks/bench_lod.py --out /tmp/lod1b --render --threads 2 [--width 1920 --height 1080]
                                              [--budget 10000000] [--frames 10]
 
-``--convert``: the procedural demo scene (``gigapoint.core.demo_chunks``, generated on the fly:
+``--convert``: the procedural demo scene (``gigapoint.io.demo_chunks``, generated on the fly:
 no input file) is converted into a gigapoint octree in ``--out`` by ``gigapoint.lod.convert``, in a
 child process whose peak memory is its maxrss (os.wait4); a small conversion first fills numba's
 cache, so JIT compile time is excluded. The demo generation is part of the read phase.
@@ -31,7 +31,7 @@ from pathlib import Path
 CHILD = """
 import json, sys, tempfile, time
 from pathlib import Path
-from gigapoint.core import demo_chunks
+from gigapoint.io import demo_chunks
 from gigapoint.lod import convert
 a = json.loads(sys.argv[1])
 with tempfile.TemporaryDirectory() as d:  # JIT warm-up (numba's on-disk cache)

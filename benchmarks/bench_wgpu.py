@@ -26,8 +26,8 @@ from rich.console import Console
 from rich.table import Table
 
 import gigapoint
-from gigapoint.errors import GigapointError
 from gigapoint.core.selection import Selection, select
+from gigapoint.errors import GigapointError
 
 
 def parse_count(text: str) -> int:

@@ -37,7 +37,7 @@ def write_demo_las(path: Path, n: int, seed: int = 0) -> Path:
     """The demo scene's first n points as a LAS 1.2 file (point format 3, millimetre scale)."""
     import laspy
 
-    from gigapoint.core import demo_arrays
+    from gigapoint.io import demo_arrays
 
     xyz, rgba, attrs = demo_arrays(n, seed)
     header = laspy.LasHeader(point_format=3, version="1.2")

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from . import backends as _backends  # noqa: F401  (registers the cpu and wgpu backends with render)
-from .core import PointChunk, PointCloud, demo_arrays, from_arrays
+from .core import PointChunk, PointCloud, from_arrays
 from .errors import GigapointError, GigapointWarning
+from .io.demo import demo_arrays
 from .render import Camera, Frame, RenderSettings, RenderStats, render, render_frame
 
 __version__ = "0.1.0"
@@ -12,12 +13,13 @@ __version__ = "0.1.0"
 
 def demo(n_points: int = 1_000_000, seed: int = 0) -> PointCloud:
     """The procedural demo scene (terrain, roads, river, buildings, trees) as a PointCloud."""
-    from .core import build_cloud, demo_chunks
+    from .core import build_cloud
+    from .io.demo import demo_chunks
 
     return build_cloud(demo_chunks(n_points, seed), name=f"demo({n_points:,})")
 
 
-def open(*paths, **options) -> PointCloud:  # noqa: A001 - the natural name, like PIL.Image.open
+def open(*paths, **options) -> PointCloud:
     """Read one or more files or directories (LAS/LAZ/PLY/XYZ/CSV/NPY/NPZ) into one PointCloud."""
     if len(paths) == 1 and not options:  # a converted octree directory (gigapoint or Potree 2.0)
         from .lod import is_octree_dir, open_octree
@@ -62,9 +64,9 @@ __all__ = [
     "convert",
     "demo",
     "demo_arrays",
+    "estimate_normals",
     "from_arrays",
     "open",
-    "estimate_normals",
     "render",
     "render_flythrough",
     "render_frame",

@@ -11,7 +11,7 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.cli import main
-from gigapoint.core import demo_chunks
+from gigapoint.io import demo_chunks
 from gigapoint.lod import convert
 from gigapoint.lod.convert import hooks
 

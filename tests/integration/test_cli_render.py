@@ -19,7 +19,7 @@ def run(capsys, *args):
 
 @pytest.fixture(scope="module")
 def small_las(tmp_path_factory):
-    from gigapoint.core.demo import demo_arrays
+    from gigapoint.io.demo import demo_arrays
 
     xyz, rgba, _ = demo_arrays(30_000)
     header = laspy.LasHeader(point_format=3, version="1.2")

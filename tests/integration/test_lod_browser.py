@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from gigapoint.core import demo_chunks
+from gigapoint.io import demo_chunks
 from gigapoint.lod import convert
 
 pytestmark = pytest.mark.browser

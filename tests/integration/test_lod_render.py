@@ -7,7 +7,7 @@ import pytest
 
 import gigapoint as gp
 from gigapoint import Camera, RenderSettings, render_frame
-from gigapoint.core import demo_chunks
+from gigapoint.io import demo_chunks
 from gigapoint.lod import OctreeCloud, convert, open_octree
 
 N = 300_000

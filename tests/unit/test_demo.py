@@ -1,6 +1,6 @@
 import numpy as np
 
-from gigapoint.core.demo import demo_arrays, demo_chunks
+from gigapoint.io.demo import demo_arrays, demo_chunks
 
 
 def test_demo_is_deterministic_and_sliceable():
@@ -36,7 +36,7 @@ def test_mod_is_pythons_modulo_at_the_boundaries():
     ulps either side of every multiple (where the quotient rounds to the next integer)."""
     from numba import njit
 
-    from gigapoint.core.demo import _mod
+    from gigapoint.io.demo import _mod
 
     mod = njit(lambda a, m: _mod(a, m))
     rng = np.random.default_rng(0)
@@ -54,7 +54,7 @@ def test_mod_is_pythons_modulo_at_the_boundaries():
 def test_prefault_writes_one_byte_a_page_and_nothing_else():
     """``_prefault`` (run on the new output arrays before generating) zeroes the first byte of
     each 4 KiB page, including a last partial page, and leaves every other byte alone."""
-    from gigapoint.core.demo import _prefault
+    from gigapoint.io.demo import _prefault
 
     buffer = np.full(3 * 4096 + 100, 7, np.uint8)
     _prefault(buffer)

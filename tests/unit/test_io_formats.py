@@ -132,8 +132,7 @@ def write_text(path, xyz, rgb=None, sep=" ", header=None, intensity=None, fmt="%
     with open(path, "w") as f:
         if header:
             f.write(header + "\n")
-        for row in table:
-            f.write(sep.join(fmt % v if i < 3 else "%g" % v for i, v in enumerate(row)) + "\n")
+        f.writelines(sep.join(fmt % v if i < 3 else f"{v:g}" for i, v in enumerate(row)) + "\n" for row in table)
 
 
 @pytest.mark.parametrize("sep,suffix", [(" ", ".xyz"), ("\t", ".txt"), (",", ".csv"), (";", ".csv"), ("  ", ".asc")])

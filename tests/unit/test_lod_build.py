@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from gigapoint.core import PointChunk, demo_arrays
+from gigapoint.core import PointChunk
+from gigapoint.io import demo_arrays
 from gigapoint.lod import convert, open_octree
 from gigapoint.lod.convert import hooks
 from gigapoint.lod.keys import key_cube, key_name, key_of, level_of, name_key, point_codes
@@ -255,7 +256,7 @@ def test_dense_spot_is_split_below_the_count_grid(tmp_path, monkeypatch):
 def test_a_chunk_generator_converts_streaming_like_a_list(tmp_path):
     """The procedural demo scene goes straight into convert() (no file): each chunk is spilled
     before the next is generated, and the octree equals the one from the same chunks as a list."""
-    from gigapoint.core import demo_chunks
+    from gigapoint.io import demo_chunks
 
     raw = tmp_path / "gen" / ".partial" / "raw"
     spilled_before = []

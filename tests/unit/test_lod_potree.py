@@ -7,8 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from gigapoint.core import PointChunk, demo_arrays
+from gigapoint.core import PointChunk
 from gigapoint.errors import InputError
+from gigapoint.io import demo_arrays
 from gigapoint.lod import convert, open_octree
 from gigapoint.lod.keys import name_key
 from gigapoint.lod.potree import HIERARCHY_DTYPE, decode_node
@@ -157,7 +158,7 @@ def test_corrupt_brotli_node_fails_in_one_line_when_drawn(converted, tmp_path):
 @pytest.fixture(scope="module")
 def big_potree(tmp_path_factory):
     """Potree directories far larger than the node cache a test gives them (BROTLI smaller: its writer is slow)."""
-    from gigapoint.core import demo_chunks
+    from gigapoint.io import demo_chunks
 
     d = tmp_path_factory.mktemp("potree_lazy")
     for enc, n in LAZY_SIZES.items():

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import gigapoint as gp
-from gigapoint.core.layout import EMPTY_PIXEL
 from gigapoint.backends.numba_cpu.passes import fill_holes
+from gigapoint.core.layout import EMPTY_PIXEL
 from gigapoint.render.passes.holes import fill_holes_reference
 
 

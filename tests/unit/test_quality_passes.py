@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 import gigapoint as gp
-from gigapoint.core.layout import EMPTY_PIXEL
 from gigapoint.backends.numba_cpu.passes import eye_dome_lighting, fill_holes, hqs_colors
+from gigapoint.core.layout import EMPTY_PIXEL
+from gigapoint.core.selection import select
 from gigapoint.render.passes.edl import edl_reference
 from gigapoint.render.passes.holes import fill_holes_reference
 from gigapoint.render.passes.hqs import hqs_reference
-from gigapoint.core.selection import select
 
 W, H = 48, 32
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import gigapoint as gp
-from gigapoint.render.splats import footprint
 from gigapoint.render.reference import reference_visibility
+from gigapoint.render.splats import footprint
 
 W, H = 48, 32
 

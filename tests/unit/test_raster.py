@@ -123,7 +123,7 @@ def test_background_and_render_api(demo_small):
 
 
 def test_degenerate_clouds_render(rng):
-    cam_for = lambda c: Camera.fit(c.bounds, view="iso", width=50, height=40)  # noqa: E731
+    cam_for = lambda c: Camera.fit(c.bounds, view="iso", width=50, height=40)
     single = gp.from_arrays(np.array([[637_000.5, 851_000.25, 120.0]]))
     f = gp.render_frame(single, cam_for(single))
     assert f.stats.visible_pixels == 1

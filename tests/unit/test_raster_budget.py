@@ -6,10 +6,9 @@ import pytest
 import gigapoint as gp
 from gigapoint import Camera, RenderSettings
 from gigapoint.core.layout import EMPTY_PIXEL
+from gigapoint.core.selection import select, subsample_step
 from gigapoint.errors import GigapointError
 from gigapoint.render.reference import projected_batches
-from gigapoint.core.selection import subsample_step
-from gigapoint.core.selection import select
 
 
 def _reference_subsample(cloud, cam, step):

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from gigapoint.core.layout import WORD_BITS
-from gigapoint.render import Camera
 from gigapoint.core.selection import batch_matrices, visible_and_size
+from gigapoint.render import Camera
 
 
 def _boxes(rng, k):

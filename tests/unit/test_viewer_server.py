@@ -510,7 +510,7 @@ def test_cli_view_serves_and_stops(tmp_path):
 
 def test_octree_clouds_can_be_viewed_and_picked(tmp_path):
     lod = pytest.importorskip("gigapoint.lod")
-    from gigapoint.core import demo_chunks
+    from gigapoint.io import demo_chunks
 
     lod.convert(list(demo_chunks(60_000, chunk_size=30_000)), tmp_path / "oct", max_leaf=5_000, partition_points=40_000)
     octree = lod.open_octree(tmp_path / "oct")

@@ -11,17 +11,16 @@ import gc
 
 import numpy as np
 import pytest
+from wgpu_support import cpu, gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
 
 import gigapoint
 from gigapoint import Camera, RenderSettings
 from gigapoint.backends.wgpu import WgpuBackend
 from gigapoint.core.cloud import cloud_from_points
 from gigapoint.core.layout import BATCH_SIZE, EMPTY_PIXEL
+from gigapoint.core.selection import Selection, select
 from gigapoint.errors import BackendUnavailableError, GigapointError
 from gigapoint.render.reference import reference_visibility
-from gigapoint.core.selection import Selection, select
-
-from wgpu_support import cpu, gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
 
 pytestmark = pytest.mark.gpu
 

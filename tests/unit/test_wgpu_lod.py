@@ -11,9 +11,9 @@ import pytest
 from wgpu_support import any_gpu, cpu, gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
 
 from gigapoint import Camera, RenderSettings, render_frame
-from gigapoint.core import demo_chunks
 from gigapoint.core.layout import EMPTY_PIXEL
 from gigapoint.errors import BackendUnavailableError
+from gigapoint.io import demo_chunks
 from gigapoint.lod import convert, open_octree
 from gigapoint.lod.store import ARENA_CHUNK, Arena
 

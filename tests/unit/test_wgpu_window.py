@@ -9,8 +9,8 @@ import pytest
 
 import gigapoint
 from gigapoint import Camera, RenderSettings
-from gigapoint.viewer.window import Orbit, open_window
 from gigapoint.errors import BackendUnavailableError
+from gigapoint.viewer.window import Orbit, open_window
 
 offscreen = pytest.importorskip("rendercanvas.offscreen")
 CPU = RenderSettings(backend="cpu")

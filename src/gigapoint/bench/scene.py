@@ -8,8 +8,8 @@ import time
 import numpy as np
 
 from ..core import cloud_from_points
-from ..core.demo import demo_arrays
 from ..core.quantize import dequantize
+from ..io.demo import demo_arrays
 from ..render import Camera
 
 THROUGHPUT_DEFINITION = "points/s = points in the cloud / median wall-clock frame time (JIT warm-up excluded)"

@@ -166,8 +166,9 @@ def demo(
     """Generate the procedural demo scene, render it and report how fast each step was."""
     from rich.console import Console
 
-    from ..core import build_cloud, demo_arrays
+    from ..core import build_cloud
     from ..core.chunk import PointChunk
+    from ..io.demo import demo_arrays
     from ..render import render_frame
 
     console = Console()

@@ -6,7 +6,6 @@ import sys
 import threading
 import webbrowser
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -24,8 +23,8 @@ def _open_browser(url: str) -> None:
 
 @app.command("view")
 def view(
-    paths: Optional[list[Path]] = typer.Argument(None, help="Point cloud files or directories (several tiles make one scene)."),
-    demo: Optional[int] = typer.Option(None, "--demo", help="View the procedural demo scene with this many points instead."),
+    paths: list[Path] | None = typer.Argument(None, help="Point cloud files or directories (several tiles make one scene)."),
+    demo: int | None = typer.Option(None, "--demo", help="View the procedural demo scene with this many points instead."),
     port: int = typer.Option(0, "--port", help="Port to listen on (0: a free one)."),
     host: str = typer.Option("127.0.0.1", "--host", help="Address to listen on; anything but loopback requires a token in the URL."),
     browser: bool = typer.Option(True, "--browser/--no-browser", help="Open the page in a browser when one is available."),

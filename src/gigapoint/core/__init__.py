@@ -1,8 +1,8 @@
-"""Point data in gigapoint's own layout: chunks, Morton order, batches, quantization, demo scene."""
+"""Point data in gigapoint's own layout: chunks, Morton order, batches, quantization, selection,
+and the Renderable contract every kind of cloud implements."""
 
 from .chunk import DEFAULT_COLOR, PointChunk, to_rgba8
 from .cloud import PointCloud, build_cloud, cloud_from_points, from_arrays
-from .demo import demo_arrays, demo_chunks
 from .layout import BATCH_DTYPE, BATCH_SIZE, EMPTY_PIXEL
 
 __all__ = [
@@ -14,8 +14,6 @@ __all__ = [
     "PointCloud",
     "build_cloud",
     "cloud_from_points",
-    "demo_arrays",
-    "demo_chunks",
     "from_arrays",
     "to_rgba8",
 ]

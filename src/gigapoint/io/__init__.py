@@ -1,4 +1,5 @@
-"""Point cloud readers: LAS/LAZ, PLY, XYZ/TXT/CSV/PTS, NPY, NPZ, all yielding bounded PointChunks.
+"""Sources of points: readers of LAS/LAZ, PLY, XYZ/TXT/CSV/PTS, NPY, NPZ files and the procedural
+demo town (demo.py), all yielding bounded PointChunks.
 
 >>> for chunk in read_chunks("tile.laz", chunk_size=1_000_000): ...   # never loads the file whole
 >>> cloud = open_cloud("tiles/")                                       # every supported file, merged
@@ -19,6 +20,7 @@ from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
 from ..errors import EmptyCloudError, GigapointWarning, InputError
 from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail
+from .demo import demo_arrays, demo_chunks
 from .registry import is_supported_name, reader_for, readers, register, supported_suffixes
 
 
@@ -170,6 +172,8 @@ def _human_bytes(n: int) -> str:
 __all__ = [
     "DEFAULT_CHUNK_SIZE",
     "Reader",
+    "demo_arrays",
+    "demo_chunks",
     "expand_paths",
     "file_info",
     "format_info",

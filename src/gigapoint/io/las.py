@@ -218,7 +218,7 @@ def _check_laz(path: Path, f, hdr: LasHeader) -> None:
     f.seek(start)
     try:
         table = lazrs.read_chunk_table(f, lazrs.LazVlr(vlr_data))
-    except Exception as exc:  # lazrs.LazrsError, OSError, ...
+    except Exception as exc:  # noqa: BLE001 - lazrs.LazrsError, OSError, ...: a corrupt table, said in one line
         raise fail(path, f"corrupt LAZ chunk table: {exc}") from None
     if table is None:
         return
@@ -281,7 +281,7 @@ def _parse_crs(header) -> str | None:
     if pyproj is not None:
         try:
             crs = header.parse_crs()
-        except Exception:
+        except Exception:  # noqa: BLE001 - an unreadable CRS leaves the points readable: 'unknown'
             crs = None
         if crs is not None:
             epsg = crs.to_epsg()
@@ -380,7 +380,7 @@ class LasReader(Reader):
             raise
         except MemoryError:
             raise
-        except Exception as exc:  # laspy / lazrs / OS errors on corrupt data
+        except Exception as exc:  # noqa: BLE001 - laspy / lazrs / OS errors on corrupt data
             raise fail(
                 path,
                 f"truncated or corrupt {kind} point data: reading failed after {done:,} of the {hdr.point_count:,} points "
@@ -399,7 +399,7 @@ class LasReader(Reader):
                 creation = header.creation_date.isoformat() if header.creation_date else None
         except InputError:
             raise
-        except Exception as exc:
+        except Exception as exc:  # noqa: BLE001 - laspy raises many types on corrupt headers
             raise fail(path, f"corrupt {'LAZ' if hdr.compressed else 'LAS'} header: {exc}") from None
         attrs = [a for a in LAS_ATTRIBUTES if a in dims]
         return {

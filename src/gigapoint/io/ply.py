@@ -42,7 +42,7 @@ class _Header:
         self.header_lines = head[: self.data_offset].count(b"\n")
         try:
             ply = plyfile.PlyData._parse_header(io.BytesIO(head[: self.data_offset]))
-        except Exception as exc:  # plyfile.PlyHeaderParseError and friends
+        except Exception as exc:  # noqa: BLE001 - plyfile.PlyHeaderParseError and friends
             raise fail(path, f"corrupt PLY header: {exc}") from None
         self.ply = ply
         self.text = ply.text
@@ -163,7 +163,7 @@ class PlyReader(Reader):
         try:
             ply = plyfile.PlyData.read(str(path))
             data = ply["vertex"].data
-        except Exception as exc:
+        except Exception as exc:  # noqa: BLE001 - plyfile raises many types on corrupt data
             raise fail(path, f"corrupt PLY data: {exc}") from None
         if len(data) < h.count:
             raise fail(path, f"truncated PLY file: {len(data):,} of {h.count:,} vertices present")

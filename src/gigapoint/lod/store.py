@@ -341,7 +341,7 @@ class OctreeCloud:
 
     def prepare_views(self, views, settings) -> None:
         """None: each view selects its own nodes, so stereo draws the eyes one by one."""
-        return None
+        return
 
 
 def read_gigapoint(octree_dir) -> OctreeCloud:

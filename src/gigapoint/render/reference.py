@@ -10,10 +10,10 @@ import numpy as np
 
 from ..core.layout import EMPTY_PIXEL
 from ..core.quantize import unpack_words
-from .camera import Camera
-from .splats import point_sizes, splat_params
 from ..core.selection import select
+from .camera import Camera
 from .settings import RenderSettings
+from .splats import point_sizes, splat_params
 
 
 def grid_coordinates(cloud, first: int, count: int, bits: int) -> np.ndarray:

@@ -22,11 +22,22 @@ from .passes.compose import composite_frame
 from .settings import RenderSettings
 
 
+_RENDERABLE_TYPES: set[type] = set()  # classes already checked (isinstance of a Protocol costs ~50 µs)
+
+
+def check_renderable(cloud) -> None:
+    """A clear error for what is not a cloud (an array, a path) instead of an AttributeError later."""
+    if type(cloud) in _RENDERABLE_TYPES:
+        return
+    if not isinstance(cloud, Renderable):
+        raise GigapointError(f"render: cannot draw a {type(cloud).__name__}; give a cloud (gigapoint.open, from_arrays, demo)")
+    _RENDERABLE_TYPES.add(type(cloud))
+
+
 def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) -> Frame:
     """Render ``cloud`` (any Renderable) into a Frame (visibility buffer, image, stats)."""
     settings = settings or RenderSettings()
-    if not isinstance(cloud, Renderable):
-        raise GigapointError(f"render: cannot draw a {type(cloud).__name__}; give a cloud (gigapoint.open, from_arrays, demo)")
+    check_renderable(cloud)
     if not isinstance(camera, Camera):
         raise GigapointError(f"camera must be a gigapoint.Camera, got {type(camera).__name__}")
     if wants_composite(settings):  # supersampling / stereo: whole renders combined (passes/compose.py)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Self
 
 from ..core.renderable import Renderable
 from ..errors import GigapointError
@@ -62,7 +63,7 @@ class Viewer:
     def close(self) -> None:
         self.server.close()
 
-    def __enter__(self) -> Viewer:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc) -> None:

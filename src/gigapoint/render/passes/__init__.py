@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..colors import point_colors
-from .lighting import point_normals
 from ..splats import splat_params
+from .lighting import point_normals
 
 
 def wants_composite(settings) -> bool:

@@ -340,7 +340,7 @@ def demo_arrays(n_points: int, seed: int = 0, start: int = 0, offset=(0.0, 0.0, 
 
 def demo_chunks(n_points: int, seed: int = 0, chunk_size: int = 5_000_000, offset=(0.0, 0.0, 0.0)):
     """The demo scene as a stream of PointChunks (bounded memory per chunk)."""
-    from .chunk import PointChunk
+    from ..core.chunk import PointChunk
 
     for start in range(0, n_points, chunk_size):
         xyz, rgba, attrs = demo_arrays(min(chunk_size, n_points - start), seed, start, offset)
