@@ -1,7 +1,7 @@
 """The gigapoint command line: thin wrappers that parse arguments and call the library.
 
-Every command module registers itself on ``app``; ``main`` turns GigapointError (and the
-few OS errors a user can cause) into one line on stderr and a non-zero exit.
+Every command module registers itself on ``app`` (app.py); ``main`` turns GigapointError (and
+the few OS errors a user can cause) into one line on stderr and a non-zero exit.
 """
 
 from __future__ import annotations
@@ -12,17 +12,10 @@ import sys
 import threading
 import warnings
 
-import typer
-
 from ..errors import GigapointError, GigapointWarning
+from .app import app
 
-app = typer.Typer(
-    name="gigapoint",
-    help="Render massive point clouds fast: LAS/LAZ/PLY/XYZ/NPY to images, octrees and a browser viewer.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-)
+__all__ = ["app", "main", "run"]
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

@@ -12,7 +12,7 @@ import typer
 
 from ..errors import CameraError, GigapointError
 from ..render import VIEWS, Camera, RenderSettings
-from . import app
+from .app import app
 from .output import check_output, save_array, save_image
 from .quality_opts import prepare_cloud
 from .settings_opts import settings_from_options, with_settings_options

@@ -10,7 +10,7 @@ from pathlib import Path
 import typer
 
 from ..errors import GigapointError
-from . import app
+from .app import app
 
 
 def _open_browser(url: str) -> None:
