@@ -21,7 +21,6 @@ from .passes import finish_frame, splat_for, wants_composite
 from .passes.compose import composite_frame
 from .settings import RenderSettings
 
-
 _RENDERABLE_TYPES: set[type] = set()  # classes already checked (isinstance of a Protocol costs ~50 µs)
 
 
