@@ -82,7 +82,7 @@ def compare_images(base, cloud, octree_path) -> list[str]:
             for kw in IMAGE_SETTINGS:
                 if label == "octree" and "max_points" in kw:
                     kw = {"point_budget": kw["max_points"]}
-                s = {"backend": "cpu", **kw}
+                s = {"backend": "cpu", "size_mode": "fixed", **kw}  # the exact sizes (the base may know no other)
                 fb = base.render_frame(b, bcam, base.RenderSettings(**s))
                 fn = gp.render_frame(n, cam, gp.RenderSettings(**s))
                 same = np.array_equal(fb.visibility, fn.visibility) and np.array_equal(fb.image, fn.image)
@@ -139,7 +139,7 @@ def main(argv=None) -> int:
         for view, cam in benchmark_cameras(cloud.bounds, args.width, args.height).items():
             bcam = base.Camera(**{f: getattr(cam, f) for f in ("eye", "target", "up", "fov", "width", "height", "projection", "ortho_height", "near", "far")})
             for threads in (1, None):
-                s = {"backend": "cpu", "threads": threads}
+                s = {"backend": "cpu", "threads": threads, "size_mode": "fixed"}
                 bs, ns = base.RenderSettings(**s), gp.RenderSettings(**s)
                 tb, tn = interleaved([(base.render_frame, bcloud, bcam, bs), (gp.render_frame, cloud, cam, ns)], args.rounds)
                 rows.append((f"{n / 1e6:g} M brute force", view, threads or "all", tb, tn))
@@ -148,7 +148,7 @@ def main(argv=None) -> int:
         for view in ("iso", "top"):
             cam = gp.Camera.fit(noct.bounds, view=view, width=args.width, height=args.height)
             bcam = base.Camera.fit(noct.bounds, view=view, width=args.width, height=args.height)
-            s = {"backend": "cpu", "point_budget": 2_000_000}
+            s = {"backend": "cpu", "point_budget": 2_000_000, "size_mode": "fixed"}
             bs, ns = base.RenderSettings(**s), gp.RenderSettings(**s)
             tb, tn = interleaved([(base.render_frame, boct, bcam, bs), (gp.render_frame, noct, cam, ns)], args.rounds)
             rows.append((f"{n_lod / 1e6:g} M octree, 2 M budget", view, "all", tb, tn))

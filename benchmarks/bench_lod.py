@@ -94,7 +94,7 @@ def run_render(args) -> list[dict]:
     t = time.perf_counter()
     oc = open_octree(args.out)
     t_open = time.perf_counter() - t
-    s = RenderSettings(backend="cpu", threads=args.threads, point_budget=args.budget)
+    s = RenderSettings(backend="cpu", threads=args.threads, point_budget=args.budget, size_mode="fixed")  # one-pixel points
     render_frame(oc, Camera.fit(oc.bounds, width=64, height=48), s)  # JIT warm-up
     oc.arena = None  # the warm-up's arena is not measured
     rows = []

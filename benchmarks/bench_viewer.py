@@ -43,6 +43,7 @@ def run(url: str, width: int, height: int, seconds: float, rate: float, adaptive
         hello = json.loads(ws.recv(timeout=60))
         assert hello["type"] == "hello", hello
         ws.send(json.dumps({"type": "quality", "adaptive": adaptive}))
+        ws.send(json.dumps({"type": "settings", "values": {"size_mode": "fixed"}}))  # the exact one-pixel render
         while True:  # warm-up: the first full frame (numba kernels loaded, caches warm)
             m = ws.recv(timeout=120)
             if isinstance(m, bytes) and unpack_frame(m)[0]["full"]:

@@ -11,20 +11,38 @@ from .render import Camera, Frame, RenderSettings, RenderStats, render, render_f
 __version__ = "0.1.0"
 
 
-def demo(n_points: int = 1_000_000, seed: int = 0) -> PointCloud:
-    """The procedural demo scene (terrain, roads, river, buildings, trees) as a PointCloud."""
+def demo(n_points: int = 1_000_000, seed: int = 0, progressive: bool = False):
+    """The procedural demo scene (terrain, roads, river, buildings, trees) as a PointCloud;
+    ``progressive=True``: a ProgressiveOctree returned at once and filled in the background."""
     from .core import build_cloud
     from .io.demo import demo_chunks
+
+    if progressive:
+        from .lod.progressive import demo_sources, open_progressive
+
+        return open_progressive(*demo_sources(n_points, seed))
 
     return build_cloud(demo_chunks(n_points, seed), name=f"demo({n_points:,})")
 
 
-def open(*paths, **options) -> PointCloud:
-    """Read one or more files or directories (LAS/LAZ/PLY/XYZ/CSV/NPY/NPZ) into one PointCloud."""
-    if len(paths) == 1 and not options:  # a converted octree directory (gigapoint or Potree 2.0)
-        from .lod import is_octree_dir, open_octree
+def open(*paths, progressive: bool = False, **options):
+    """Read one or more files or directories (LAS/LAZ/PLY/XYZ/CSV/NPY/NPZ) into one PointCloud.
 
-        if is_octree_dir(paths[0]):
+    One octree opens as an OctreeCloud drawn level of detail: a converted directory (gigapoint
+    or Potree 2.0), a COPC file (``.copc.laz``, told by its COPC info VLR) or an EPT dataset
+    (``ept.json`` or its folder), local or an ``http(s)://`` URL (read by range requests).
+
+    ``progressive=True``: files open as a ProgressiveOctree, returned at once and filled by a
+    background loader (``cloud.progress``, ``cloud.wait()``); it draws what is there at any
+    moment (SimLOD)."""
+    if progressive:
+        from .lod.progressive import file_sources, open_progressive
+
+        return open_progressive(*file_sources(paths))
+    if len(paths) == 1 and not options:
+        from .lod import is_lod_source, open_octree
+
+        if is_lod_source(paths[0]):
             return open_octree(paths[0])
     from .io import open_cloud
 

@@ -31,6 +31,10 @@ class SettingsError(GigapointError):
     """An invalid RenderSettings value."""
 
 
+class PointIndexError(GigapointError, IndexError):
+    """A point index outside a cloud (-1, what an empty pixel holds, is not one: point_info gives None)."""
+
+
 class BackendUnavailableError(GigapointError):
     """A requested backend is not installed or cannot start."""
 

@@ -60,7 +60,7 @@ def test_cli_info(autzen_path, capsys):
     assert str(autzen_path) in out
     assert "LAZ 1.2, point format 3" in out
     assert "110,000" in out
-    assert "636,001.760" in out  # min x from the header
+    assert "636001.76, 848935.20, 406.26 (header)" in out  # min from the header, at the file's scale (#17)
     assert "Lambert_Conformal_Conic" in out
     assert "intensity" in out
 

@@ -39,7 +39,7 @@ def test_lod_matches_brute_force_when_budget_covers_everything(scene, make_camer
     oc = open_octree(path)
     oc.filtered_colors = False  # compare the points' own colors
     cam = make_camera(cloud.bounds)
-    base = RenderSettings(backend="cpu", adaptive_precision=adaptive)
+    base = RenderSettings(backend="cpu", adaptive_precision=adaptive, size_mode="fixed")  # one-pixel points
     brute = render_frame(cloud, cam, base)
     lod = render_frame(oc, cam, base.replace(point_budget=10**9, lod_threshold_px=0.0))
     assert lod.stats.points_total == N
@@ -108,9 +108,9 @@ def test_filtered_colors_are_averages(scene):
     cloud, path = scene
     oc = open_octree(path)
     cam = Camera.fit(cloud.bounds, view="top", width=200, height=200)
-    s = RenderSettings(backend="cpu", point_budget=30_000)
+    s = RenderSettings(backend="cpu", point_budget=30_000, size_mode="fixed")  # one-pixel points
     lod = render_frame(oc, cam, s)
-    full = render_frame(cloud, cam, RenderSettings(backend="cpu"))
+    full = render_frame(cloud, cam, RenderSettings(backend="cpu", size_mode="fixed"))
     assert lod.stats.points_processed <= 30_000
     m_lod = lod.image[..., :3][~lod.empty].reshape(-1, 3).mean(axis=0)
     m_full = full.image[..., :3][~full.empty].reshape(-1, 3).mean(axis=0)

@@ -17,10 +17,10 @@ def test_autzen_wgpu_image_equals_cpu(autzen_path, view):
     cloud = gigapoint.open(autzen_path)
     cam = Camera.fit(cloud.bounds, view=view, width=400, height=300)
     try:
-        gpu = gigapoint.render_frame(cloud, cam, RenderSettings(backend="wgpu"))
+        gpu = gigapoint.render_frame(cloud, cam, RenderSettings(backend="wgpu", size_mode="fixed"))  # the exact one-pixel render
     except BackendUnavailableError as exc:
         pytest.skip(str(exc))
-    cpu = gigapoint.render_frame(cloud, cam, RenderSettings(backend="cpu"))
+    cpu = gigapoint.render_frame(cloud, cam, RenderSettings(backend="cpu", size_mode="fixed"))
     differ = int(np.count_nonzero(gpu.visibility != cpu.visibility))
     assert differ <= 0.001 * cpu.visibility.size
     assert gpu.stats.visible_pixels > 5_000

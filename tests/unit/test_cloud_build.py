@@ -3,7 +3,15 @@
 import numpy as np
 import pytest
 
+from gigapoint.core import cloud
 from gigapoint.core.cloud import MAX_ABS_COORDINATE, _valid_mask, gather, scan_points
+
+
+@pytest.fixture(autouse=True, params=["numpy below the threshold", "the compiled kernels"])
+def kernel_path(request, monkeypatch):
+    """Both paths against numpy: small inputs take numpy's, large ones the parallel kernels."""
+    if not request.param.startswith("numpy"):
+        monkeypatch.setattr(cloud, "NUMPY_MAX", 0)
 
 
 @pytest.mark.parametrize("n", [0, 1, 5, 1000, 100_003])

@@ -102,7 +102,7 @@ def test_prepare_output_resumes_clears_or_refuses(tmp_path):
     assert d.prepare_output({"v": 2}, overwrite=False) is None  # other inputs or options: a clean start
     assert not d.raw.exists() and d.partial.is_dir()
     d.meta.write_text("{}")
-    with pytest.raises(OutputExistsError, match="--overwrite"):
+    with pytest.raises(OutputExistsError, match=r"overwrite=True"):  # a Python caller's keyword (the CLI says --overwrite)
         d.prepare_output({"v": 2}, overwrite=False)
     assert d.prepare_output({"v": 2}, overwrite=True) is None and not d.meta.exists()
     foreign = OctreeDir(tmp_path / "photos")

@@ -3,7 +3,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from gigapoint.core import morton
 from gigapoint.core.morton import morton_codes, morton_order
+
+
+@pytest.fixture(autouse=True, scope="module", params=["numpy below the threshold", "the compiled radix sort"])
+def sort_path(request):
+    """Every order test runs on both paths: numpy's stable sort (small inputs) and the radix sort."""
+    default = morton.NUMPY_SORT_MAX
+    morton.NUMPY_SORT_MAX = default if request.param.startswith("numpy") else 0
+    yield
+    morton.NUMPY_SORT_MAX = default
 
 
 def reference_code(cell):

@@ -21,7 +21,7 @@ def npy(tmp_path_factory):
 
 def test_render_with_quality_options_matches_the_api(npy, tmp_path):
     out = tmp_path / "q.png"
-    args = ["render", str(npy), "-o", str(out), "-W", "96", "-H", "64", "--backend", "cpu", "--edl", "--fill-holes", "1", "--hqs",
+    args = ["render", str(npy), "-o", str(out), "-W", "96", "-H", "64", "--view", "iso", "--backend", "cpu", "--edl", "--fill-holes", "1", "--hqs",
             "--point-size", "2", "--splat-softness", "2", "--color-mode", "elevation", "--colormap", "turbo", "--elevation-range", "-5,30"]  # fmt: skip
     assert main(args) == 0
     cloud = gp.open(npy)
@@ -59,7 +59,7 @@ def test_turntable_option_writes_a_video(npy, tmp_path):
 
 
 def _render(npy, out, *extra):
-    assert main(["render", str(npy), "-o", str(out), "-W", "80", "-H", "56", "--backend", "cpu", *extra]) == 0
+    assert main(["render", str(npy), "-o", str(out), "-W", "80", "-H", "56", "--view", "iso", "--backend", "cpu", *extra]) == 0
     return np.asarray(Image.open(out))
 
 

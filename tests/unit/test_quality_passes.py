@@ -38,14 +38,14 @@ def plane(width=W, height=H, z=0.0, skip=(), rgb=None):
 
 def frame_of(xyz, rgba, cam, **settings):
     cloud = gp.from_arrays(xyz, rgba, name="scene")
-    return cloud, gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", **settings))
+    return cloud, gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", **{"size_mode": "fixed", **settings}))  # one-pixel points
 
 
 @pytest.fixture(scope="module")
 def demo():
     cloud = gp.demo(150_000, seed=1)
     cam = gp.Camera.fit(cloud.bounds, view=(-70.0, 30.0), width=200, height=120, fov=35.0)
-    return cloud, cam, gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu"))
+    return cloud, cam, gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", size_mode="fixed"))  # one-pixel points
 
 
 # --- eye-dome lighting ---------------------------------------------------------------------------

@@ -7,6 +7,7 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.errors import GigapointError
+from gigapoint.render.camera import VIEWS
 from gigapoint.render.video import interpolate_cameras, render_flythrough, render_turntable, turntable_cameras
 
 
@@ -35,12 +36,33 @@ def test_turntable_mp4_has_the_rendered_frames(cloud, tmp_path):
 
 
 def test_turntable_cameras_orbit_once(cloud):
-    cams = turntable_cameras(cloud, 8, 64, 48)
-    c = (np.asarray(cloud.bounds[0]) + np.asarray(cloud.bounds[1])) / 2
-    d = [np.linalg.norm(np.subtract(k.eye, c)) for k in cams]
-    np.testing.assert_allclose(d, d[0])
-    np.testing.assert_allclose(cams[0].target, c)
+    cams = turntable_cameras(cloud, 8, 64, 48, start_yaw=10.0)
+    back = np.array([np.subtract(k.eye, k.target) for k in cams])
+    yaws = np.degrees(np.arctan2(back[:, 1], back[:, 0]))
+    np.testing.assert_allclose(np.remainder(yaws - 10.0 - 45.0 * np.arange(8) + 180.0, 360.0) - 180.0, 0.0, atol=1e-9)
+    np.testing.assert_allclose(np.degrees(np.arcsin(back[:, 2] / np.linalg.norm(back, axis=1))), VIEWS["iso"][1])
+    lo, hi = (np.asarray(b) for b in cloud.bounds)
+    assert all(np.linalg.norm(np.subtract(k.target, (lo + hi) / 2)) < np.linalg.norm(hi - lo) / 4 for k in cams)  # at the cloud
     assert cams[0].eye != cams[4].eye
+
+
+def test_turntable_fills_the_frame_with_a_long_cloud():
+    """A flat strip 4 x 1: the orbit starts side-on (the strip across the image) and every frame
+    is framed on its own, so the strip fills the frame end-on too (one distance for all frames
+    left it at a sliver); nothing leaves the frame."""
+    rng = np.random.default_rng(3)
+    xyz = np.column_stack([rng.random(40_000) * 400.0, rng.random(40_000) * 100.0, rng.random(40_000)])
+    strip = gp.from_arrays(xyz)
+    s = gp.RenderSettings(backend="cpu", point_size=3)
+    cams = turntable_cameras(strip, 8, 160, 90)
+    back = np.subtract(cams[0].eye, cams[0].target)
+    assert abs(back[0]) < 1e-3 * np.linalg.norm(back)  # side-on: looking along y, the strip's x across
+    for cam in cams:
+        p = np.c_[xyz, np.ones(len(xyz))] @ cam.screen_rows().T
+        px, py = p[:, 0] / p[:, 2], p[:, 1] / p[:, 2]
+        assert ((px < 0) | (px > 160) | (py < 0) | (py > 90)).mean() < 0.02  # (nearly) every point in the frame
+        rows, cols = np.nonzero(gp.render_frame(strip, cam, s).index >= 0)
+        assert max((cols.max() - cols.min()) / 160, (rows.max() - rows.min()) / 90) > 0.8  # spanning its width or height
 
 
 def test_flythrough_gif_and_errors(cloud, tmp_path):

@@ -126,7 +126,7 @@ def test_degenerate_clouds_render(rng):
     cam_for = lambda c: Camera.fit(c.bounds, view="iso", width=50, height=40)
     single = gp.from_arrays(np.array([[637_000.5, 851_000.25, 120.0]]))
     f = gp.render_frame(single, cam_for(single))
-    assert f.stats.visible_pixels == 1
+    assert f.stats.visible_pixels == 1  # adaptive size: no spacing, one pixel
     rows, cols = np.nonzero(f.index == 0)  # the single point is in the middle
     assert abs(rows[0] - 20) <= 1 and abs(cols[0] - 25) <= 1
     same = gp.from_arrays(np.tile([[1.0, 2.0, 3.0]], (1000, 1)))
@@ -135,7 +135,8 @@ def test_degenerate_clouds_render(rng):
     flat = gp.from_arrays(np.column_stack([rng.random((5000, 2)), np.zeros(5000)]))
     for view in ("top", "iso", "front"):
         cam = Camera.fit(flat.bounds, view=view, width=60, height=60)
-        np.testing.assert_array_equal(gp.render_frame(flat, cam).visibility, reference_visibility(flat, cam))
+        exact = gp.RenderSettings(size_mode="fixed")  # one-pixel points
+        np.testing.assert_array_equal(gp.render_frame(flat, cam, exact).visibility, reference_visibility(flat, cam, exact))
 
 
 def test_nan_and_absurd_points_are_skipped_with_a_warning(rng):

@@ -28,14 +28,14 @@ def _reference_subsample(cloud, cam, step):
 def test_budget_draws_every_kth_point_exactly(demo_small, view):
     cam = Camera.fit(demo_small.bounds, view=view, width=160, height=90)
     budget = demo_small.n_points // 3
-    frame = gp.render_frame(demo_small, cam, RenderSettings(max_points=budget, backend="cpu"))
+    frame = gp.render_frame(demo_small, cam, RenderSettings(max_points=budget, backend="cpu", size_mode="fixed"))  # one-pixel points
     counts = demo_small.batches["count"].astype(np.int64)
     step = subsample_step(counts, budget)
     assert step == 3 or step == 4
     assert frame.stats.points_processed == int(((counts + step - 1) // step).sum()) <= budget
     np.testing.assert_array_equal(frame.visibility, _reference_subsample(demo_small, cam, step))
     # the subsample still covers the scene: most pixels of the full render are covered
-    full = gp.render_frame(demo_small, cam, RenderSettings(backend="cpu"))
+    full = gp.render_frame(demo_small, cam, RenderSettings(backend="cpu", size_mode="fixed"))
     covered_full = (full.visibility != EMPTY_PIXEL).sum()
     assert (frame.visibility != EMPTY_PIXEL).sum() > 0.8 * covered_full
 

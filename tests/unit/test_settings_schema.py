@@ -178,7 +178,7 @@ def test_the_choices_are_the_literal_types():
         "color_mode": COLOR_MODES,
         "colormap": COLORMAPS,
         "point_shape": ("square", "round"),
-        "size_mode": ("fixed", "attenuated"),
+        "size_mode": ("auto", "adaptive", "fixed", "attenuated"),
         "supersample": (1, 2, 4),
         "supersample_filter": ("box", "lanczos"),
         "stereo": ("none", "side-by-side", "anaglyph"),
@@ -244,8 +244,8 @@ def test_point_world_size_alone_means_attenuated_points_of_at_most_16_px():
     assert parse(RenderSettings, "--size-mode", "attenuated", "--point-world-size", "2", "--point-size", "1").point_size == 1
     with pytest.raises(SettingsError, match=r"^--point-world-size: size_mode 'attenuated' needs point_world_size > 0"):
         parse(RenderSettings, "--point-world-size", "0")
-    # without a command line nothing is implied
-    assert settings_from_options(RenderSettings, {"point_world_size": 0.5}).size_mode == "fixed"
+    # without a command line nothing is implied (the default 'auto' then draws them attenuated)
+    assert settings_from_options(RenderSettings, {"point_world_size": 0.5}).size_mode == "auto"
 
 
 # --- layering -------------------------------------------------------------------------------------

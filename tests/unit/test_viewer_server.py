@@ -514,7 +514,7 @@ def test_octree_clouds_can_be_viewed_and_picked(tmp_path):
 
     lod.convert(list(demo_chunks(60_000, chunk_size=30_000)), tmp_path / "oct", max_leaf=5_000, partition_points=40_000)
     octree = lod.open_octree(tmp_path / "oct")
-    core = ViewerCore(octree)
+    core = ViewerCore(octree, gigapoint.RenderSettings(size_mode="fixed"))  # one-pixel points: a pixel shows its own point
     try:
         with TestClient(create_app(core)) as c, c.websocket_connect("/ws?w=200&h=150") as ws:
             hello = receive(ws, reply("hello"))

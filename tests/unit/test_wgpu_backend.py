@@ -100,7 +100,7 @@ def test_tiny_grid_matches_the_numpy_reference(gpu, gpu32, cpu):
     cloud = gigapoint.from_arrays(xyz, np.full((16, 3), 200, np.uint8))
     cam = Camera.look_at((1.5, 1.5, 10.0), (1.5, 1.5, 0.0), up=(0, 1, 0), fov=30, width=16, height=16)
     sel, args = _frame(cloud, cam)
-    ref = reference_visibility(cloud, cam).reshape(-1)
+    ref = reference_visibility(cloud, cam, RenderSettings(size_mode="fixed")).reshape(-1)  # one-pixel points, as rasterize draws
     for backend in (cpu, gpu, gpu32):
         assert _n_differ(backend.rasterize(cloud, sel, *args), ref) == 0
     hit = ref != EMPTY_PIXEL
@@ -242,10 +242,10 @@ def test_resolve_with_paged_colors(cpu, scene):
 def test_render_frame_with_backend_wgpu(gpu, scene):
     cam = _cameras(scene)["iso"]
     try:
-        frame = gigapoint.render_frame(scene, cam, RenderSettings(backend="wgpu"))
+        frame = gigapoint.render_frame(scene, cam, RenderSettings(backend="wgpu", size_mode="fixed"))  # the exact one-pixel render
     except BackendUnavailableError as exc:
         pytest.skip(str(exc))
-    ref = gigapoint.render_frame(scene, cam, RenderSettings(backend="cpu"))
+    ref = gigapoint.render_frame(scene, cam, RenderSettings(backend="cpu", size_mode="fixed"))
     assert frame.stats.backend == "wgpu"
     n = int(np.count_nonzero(frame.visibility != ref.visibility))
     assert n <= MAX_DIFF_FRACTION * ref.visibility.size

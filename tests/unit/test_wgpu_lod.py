@@ -47,7 +47,7 @@ def _small_arena(oc, points: int) -> Arena:
     return oc.arena
 
 
-SETTINGS = RenderSettings(point_budget=45_000, lod_threshold_px=12.0)
+SETTINGS = RenderSettings(point_budget=45_000, lod_threshold_px=12.0, size_mode="fixed")  # the exact one-pixel render
 
 
 def _n_differ(a, b) -> int:

@@ -305,10 +305,10 @@ PIPELINES = {
 def test_render_frame_on_wgpu_equals_cpu(gpu, scene, case):
     cam = _cameras(scene)["iso"]
     try:
-        frame = gigapoint.render_frame(scene, cam, RenderSettings(backend="wgpu", **PIPELINES[case]))
+        frame = gigapoint.render_frame(scene, cam, RenderSettings(backend="wgpu", **{"size_mode": "fixed", **PIPELINES[case]}))  # the exact one-pixel render
     except BackendUnavailableError as exc:
         pytest.skip(str(exc))
-    ref = gigapoint.render_frame(scene, cam, RenderSettings(backend="cpu", **PIPELINES[case]))
+    ref = gigapoint.render_frame(scene, cam, RenderSettings(backend="cpu", **{"size_mode": "fixed", **PIPELINES[case]}))
     assert frame.stats.backend == "wgpu"
     assert isinstance(frame.visibility, np.ndarray) and frame.visibility.dtype == np.uint64
     _assert_vis_close(frame.visibility.reshape(-1), ref.visibility.reshape(-1))

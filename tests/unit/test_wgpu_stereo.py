@@ -180,8 +180,8 @@ def test_stereo_frames_on_wgpu_equal_cpu(scene, settings, monkeypatch):
     lo, hi = scene.bounds
     c = (lo + hi) / 2
     cam = Camera.look_at((c[0] - 150, c[1] - 150, 60.0), (c[0], c[1], 0.0), fov=60, width=160, height=120)
-    frame = gigapoint.render_frame(scene, cam, RenderSettings(backend="wgpu", ipd=3.0, **settings))
-    ref = gigapoint.render_frame(scene, cam, RenderSettings(backend="cpu", ipd=3.0, **settings))
+    frame = gigapoint.render_frame(scene, cam, RenderSettings(backend="wgpu", ipd=3.0, **{"size_mode": "fixed", **settings}))  # the exact one-pixel render
+    ref = gigapoint.render_frame(scene, cam, RenderSettings(backend="cpu", ipd=3.0, **{"size_mode": "fixed", **settings}))
     assert calls == [1]  # both eyes in one pass
     assert frame.stats.backend == "wgpu" and frame.image.shape == ref.image.shape
     n_vis = _n_differ(frame.visibility, ref.visibility)

@@ -182,7 +182,8 @@ def run_render_benchmark(
         out_dir.mkdir(parents=True, exist_ok=True)
     say = progress or (lambda message: None)
     # Validate settings and image size before any work.
-    settings_for = {t: RenderSettings(threads=t, backend="cpu") for t in threads}
+    # the exact one-pixel render (the baselines draw one pixel a point, the throughput is the rasterizer's)
+    settings_for = {t: RenderSettings(threads=t, backend="cpu", size_mode="fixed") for t in threads}
     Camera.look_at((0, 0, 1), (0, 0, 0), width=width, height=height)
 
     baseline, gl_reason = None, None

@@ -22,6 +22,13 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
     print(f"warning: {message}", file=sys.stderr)
 
 
+def _compile_watch():
+    from .compiling import watching
+    from .progress import err_console
+
+    return watching(err_console())
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``gigapoint`` script."""
     from . import commands  # noqa: F401  (registers the commands)
@@ -29,7 +36,8 @@ def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _show_warning
     warnings.simplefilter("default", GigapointWarning)
     try:
-        rv = app(args=argv, standalone_mode=False)
+        with _compile_watch():  # a spinner while numba compiles kernels (first run after an install)
+            rv = app(args=argv, standalone_mode=False)
         # typer turns Ctrl+C into Exit(130) and, outside standalone mode, *returns* that code
         # (commands themselves return None): before, an interrupted command exited 0 silently
         if isinstance(rv, int) and not isinstance(rv, bool) and rv != 0:
@@ -37,7 +45,8 @@ def main(argv: list[str] | None = None) -> int:
                 print("interrupted", file=sys.stderr)
             return rv
     except GigapointError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        # the library words an overwrite hint for Python (overwrite=True): here it is the option
+        print(f"error: {exc}".replace("overwrite=True", "--overwrite"), file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

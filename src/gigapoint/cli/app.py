@@ -1,13 +1,60 @@
-"""The typer application every command module registers on."""
+"""The typer application every command module registers on.
+
+typer >= 0.27 renders help itself: it shows every option's type, a flag's too (``--stats
+<bool>``, ``--help <bool>``: a flag takes no value), and writes a required argument as
+``{inputs}...`` on the usage line. Our commands are ``Command``s (``App.command`` gives them
+that class), which show a flag without a type and an argument as ``INPUTS...``.
+"""
 
 from __future__ import annotations
 
 import typer
+from typer.core import TyperArgument, TyperCommand, TyperGroup, TyperOption
 
-app = typer.Typer(
+
+def _untyped_flags(params: list) -> list:
+    for p in params:
+        if isinstance(p, TyperOption) and p.is_flag and p.metavar is None:
+            p.metavar = ""  # the type column shows the metavar where there is one: nothing
+    return params
+
+
+class Command(TyperCommand):
+    """A command whose help shows flags without a type and arguments as NAME... on the usage line."""
+
+    def get_params(self, ctx) -> list:
+        return _untyped_flags(super().get_params(ctx))
+
+    def collect_usage_pieces(self, ctx) -> list[str]:
+        pieces = [self.options_metavar] if self.options_metavar else []
+        for p in self.get_params(ctx):
+            if isinstance(p, TyperArgument):
+                name = (p.metavar or p.name or "").upper() + ("..." if p.nargs != 1 else "")
+                pieces.append(name if p.required else f"[{name}]")
+            else:
+                pieces.extend(p.get_usage_pieces(ctx))
+        return pieces
+
+
+class Group(TyperGroup):
+    """The command group (``gigapoint --help``): its flags without a type too."""
+
+    def get_params(self, ctx) -> list:
+        return _untyped_flags(super().get_params(ctx))
+
+
+class App(typer.Typer):
+    """``typer.Typer`` whose commands are ``Command``s unless they ask for another class."""
+
+    def command(self, *args, cls=None, **kwargs):
+        return super().command(*args, cls=cls or Command, **kwargs)
+
+
+app = App(
     name="gigapoint",
     help="Render massive point clouds fast: LAS/LAZ/PLY/XYZ/NPY to images, octrees and a browser viewer.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    cls=Group,
 )

@@ -22,24 +22,27 @@ def bench(
     json_path: Path | None = typer.Option(None, "--json", help="Where to write the JSON results (default: <out>/bench_render.json)."),
 ) -> None:
     """Measure brute-force rendering (points/s) of the demo scene, overview and close-up, against GL_POINTS and a naive loop."""
-    from rich.console import Console
-
-    from ..bench import parse_count, parse_threads, print_results, run_render_benchmark, write_results
+    from ..bench import VIEWS, parse_count, parse_threads, print_results, run_render_benchmark, write_results
+    from .progress import err_console, progress_bar
 
     counts = [parse_count(p) for p in points]
     thread_counts = [parse_threads(t) for t in threads]
-    err = Console(stderr=True)
-    results = run_render_benchmark(
-        points=counts,
-        width=width,
-        height=height,
-        threads=thread_counts,
-        repeats=repeats,
-        gl=gl,
-        naive=naive,
-        out=out,
-        progress=lambda m: err.print(f"[dim]{m}[/dim]"),
-    )
+    err = err_console()
+    # the steps it reports: per point count the scene, the GL upload, and per view each thread count, the naive loop, GL
+    steps = len(counts) * (1 + gl + len(VIEWS) * (len(thread_counts) + naive + gl))
+    with progress_bar("bench", steps, err) as advance:
+        step = iter(range(steps + 1))
+        results = run_render_benchmark(
+            points=counts,
+            width=width,
+            height=height,
+            threads=thread_counts,
+            repeats=repeats,
+            gl=gl,
+            naive=naive,
+            out=out,
+            progress=lambda m: advance(min(next(step, steps), steps), m),
+        )
     print_results(results)
     target = json_path or (out / "bench_render.json" if out is not None else None)
     if target is not None:

@@ -2,6 +2,7 @@
 
 from . import (
     bench_cmd,  # noqa: F401
+    compile_cmd,  # noqa: F401
     convert_cmd,  # noqa: F401
     info_cmd,  # noqa: F401
     render_cmd,  # noqa: F401

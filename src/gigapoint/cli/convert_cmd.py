@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from contextlib import nullcontext
 from pathlib import Path
 
 import typer
@@ -13,31 +14,57 @@ from .app import app
 @app.command()
 def convert(
     inputs: list[Path] = typer.Argument(..., help="Input files or directories (every supported point cloud file inside, as for render)."),
-    output: Path = typer.Option(..., "-o", "--output", help="Output directory (created; resumed when a conversion was interrupted)."),
+    output: Path = typer.Option(
+        ..., "-o", "--output", help="Output directory (created; resumed when a conversion was interrupted), or the .copc.laz file of --format copc."
+    ),
     sampler: str = typer.Option("grid", help="grid (first point per cell of a 128³ grid per node) or poisson (minimum distance)."),
     memory_limit: str | None = typer.Option(None, "--memory-limit", help="Peak memory, e.g. 4G or 512M (default: a quarter of the RAM)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing converted cloud in OUTPUT."),
     format: str = typer.Option(
-        "gigapoint", "--format", help="gigapoint (rendered directly) or potree (Potree 2.0, for Potree's web viewers)."
+        "gigapoint",
+        "--format",
+        help="gigapoint (rendered directly), potree (Potree 2.0, for Potree's web viewers) or copc (one .copc.laz file, LAS 1.4).",
     ),
     max_leaf: int = typer.Option(20_000, "--max-leaf", help="Most points a leaf node holds."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+    dask: str | None = typer.Option(
+        None,
+        "--dask",
+        metavar="ADDRESS",
+        help="Convert on a running Dask cluster, e.g. tcp://host:8786; its workers read the inputs and write OUTPUT, "
+        "which must be on a file system they all share (needs gigapoint[dask]).",
+    ),
+    workers: int | None = typer.Option(
+        None, "--workers", min=1, help="Convert on a local Dask cluster of N single-threaded worker processes (needs gigapoint[dask])."
+    ),
 ) -> None:
     """Convert point clouds into a level-of-detail octree, out of core, resumable."""
+    from ..lod import ConvertError
     from ..lod import convert as run
+    from ..lod.copc_write import work_dir
 
+    if dask is not None and workers is not None:
+        raise ConvertError("--dask and --workers: give one of them (a running cluster's scheduler, or a local cluster's size)")
     if not quiet:
-        print(f"while this runs, `gigapoint view {output}` shows what has been read so far", file=sys.stderr)
-    result = run(
-        [str(p) for p in inputs],
-        output,
-        sampler=sampler,
-        memory_limit=memory_limit,
-        overwrite=overwrite,
-        format=format,
-        max_leaf=max_leaf,
-        progress=not quiet and sys.stderr.isatty(),
-    )
+        watch = work_dir(output) if format == "copc" else output  # a COPC output appears only once complete
+        print(f"while this runs, `gigapoint view {watch}` shows what has been read so far", file=sys.stderr)
+    cluster = nullcontext(None)
+    if dask is not None or workers is not None:
+        from ..lod.convert.distributed import open_client
+
+        cluster = open_client(dask if dask is not None else workers, announce=not quiet)  # prints the dashboard's address
+    with cluster as client:
+        result = run(
+            [str(p) for p in inputs],
+            output,
+            sampler=sampler,
+            memory_limit=memory_limit,
+            overwrite=overwrite,
+            format=format,
+            max_leaf=max_leaf,
+            progress=not quiet and sys.stderr.isatty(),
+            client=client,
+        )
     resumed = " (resumed)" if result.resumed else ""
     skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
     print(

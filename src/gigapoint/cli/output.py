@@ -20,7 +20,7 @@ def check_output(path: Path, overwrite: bool, suffixes=IMAGE_SUFFIXES) -> Path:
     if path.is_dir():
         raise GigapointError(f"{path}: is a directory, not an output file")
     if path.exists() and not overwrite:
-        raise GigapointError(f"{path}: already exists (pass --overwrite to replace it)")
+        raise GigapointError(f"{path}: already exists; pass --overwrite to replace it")
     if not path.parent.exists():
         raise GigapointError(f"{path}: directory {path.parent} does not exist")
     return path

@@ -12,8 +12,10 @@ import typer
 
 from ..errors import CameraError, GigapointError
 from ..render import VIEWS, Camera, RenderSettings
+from . import compiling
 from .app import app
 from .output import check_output, save_array, save_image
+from .progress import err_console, progress_bar, status
 from .quality_opts import prepare_cloud
 from .settings_opts import settings_from_options, with_settings_options
 
@@ -62,8 +64,8 @@ def check_image_size(width, height, fov=60.0) -> None:
 
 def make_camera(cloud, width, height, view, camera_text, projection, fov) -> Camera:
     bounds = cloud.bounds
-    if camera_text is None:
-        return Camera.fit(bounds, view=view, width=width, height=height, fov=fov, projection=projection)
+    if camera_text is None:  # 'auto' frames the cloud's points (the data fills the frame), the others its box
+        return Camera.fit_cloud(cloud, view=view, width=width, height=height, fov=fov, projection=projection)
     c = parse_camera(camera_text)
     fov = c.get("fov", fov)
     if "eye" in c:
@@ -77,17 +79,29 @@ def make_camera(cloud, width, height, view, camera_text, projection, fov) -> Cam
     return Camera.orbit(target, c["yaw"], c["pitch"], distance, fov=fov, width=width, height=height, **extra)
 
 
-def print_stats(stats, console=None) -> None:
-    from rich.console import Console
+def open_inputs(inputs):
+    """``gigapoint.open`` of the command's inputs; files show a bar while they are read (on a terminal)."""
+    import gigapoint as gp
 
-    console = console or Console(stderr=True)
+    from ..lod import is_lod_source
+
+    if len(inputs) == 1 and is_lod_source(inputs[0]):
+        return gp.open(inputs[0])
+    return gp.open(*inputs, progress=err_console().is_terminal)
+
+
+def print_stats(stats, console=None, compiled_s: float = 0.0) -> None:
+    """The render statistics line; ``compiled_s``: seconds of it numba spent compiling (a first run)."""
+    console = console or err_console()
     h = stats.precision_histogram
+    rate = f"{stats.points_processed / max(stats.time_ms, 1e-9) / 1e3:,.1f} M points/s"
+    if compiled_s >= 0.5:
+        rate = f"compiling kernels included: {compiled_s:.0f} s, once per install"
     console.print(
         f"{stats.points_processed:,} of {stats.points_total:,} points, "
         f"{stats.batches_rendered:,} batches drawn, {stats.batches_culled:,} culled, "
         f"precision 10/20/30 bit: {h[10]:,}/{h[20]:,}/{h[30]:,} points, "
-        f"{stats.visible_pixels:,} pixels covered, {stats.time_ms:.1f} ms "
-        f"({stats.points_processed / max(stats.time_ms, 1e-9) / 1e3:,.1f} M points/s) on {stats.backend}",
+        f"{stats.visible_pixels:,} pixels covered, {stats.time_ms:.1f} ms ({rate}) on {stats.backend}",
         highlight=False,
     )
 
@@ -100,7 +114,7 @@ def render(
     settings: RenderSettings,  # one option per RenderSettings field (cli/settings_opts.py)
     width: Annotated[int, typer.Option("--width", "-W", help="Image width in pixels.")] = 1920,
     height: Annotated[int, typer.Option("--height", "-H", help="Image height in pixels.")] = 1080,
-    view: Annotated[str, typer.Option(help=f"Named view: {', '.join(VIEWS)}.")] = "iso",
+    view: Annotated[str, typer.Option(help=f"Named view: {', '.join(VIEWS)} (auto: iso, or turned so a long cloud fills the frame).")] = "auto",
     camera: Annotated[
         str | None, typer.Option(help=r"'eye=x,y,z target=x,y,z \[up=x,y,z]' or 'yaw=deg pitch=deg \[distance=m] \[target=x,y,z]'.")
     ] = None,
@@ -132,23 +146,30 @@ def render(
     if view not in VIEWS:
         raise GigapointError(f"--view: unknown view {view!r}; choose one of {', '.join(VIEWS)}")
     check_image_size(width, height, fov)  # before reading anything
-    cloud = gp.open(*inputs)
+    cloud = open_inputs(inputs)
     prepare_cloud(cloud, settings)
     if turntable is not None:
         from ..render.video import render_turntable
 
-        render_turntable(cloud, turntable, output, settings, width=width, height=height, fov=fov, fps=fps)
+        with progress_bar(f"turntable {output.name}", turntable) as advance:
+            render_turntable(
+                cloud, turntable, output, settings, width=width, height=height, fov=fov, fps=fps, overwrite=overwrite,
+                progress=lambda done, total: advance(done),
+            )  # fmt: skip
         typer.echo(f"wrote {output} ({turntable} frames, {width}x{height}, {cloud.n_points:,} points)")
         return
     cam = make_camera(cloud, width, height, view, camera, projection, fov)
+    watch = compiling.current()
+    compiled = watch.seconds if watch is not None else 0.0
     frame = gp.render_frame(cloud, cam, settings)
+    compiled = (watch.seconds if watch is not None else 0.0) - compiled
     save_image(frame.image, output)
     if depth_out is not None:
         save_array(frame.depth, depth_out)
     if index_out is not None:
         save_array(frame.index, index_out)
     if stats:
-        print_stats(frame.stats)
+        print_stats(frame.stats, compiled_s=compiled)
     typer.echo(f"wrote {output} ({width}x{height}, {cloud.n_points:,} points)")
 
 
@@ -158,7 +179,7 @@ def demo(
     output: Annotated[Path, typer.Option("-o", "--output", help="Image to write.")] = Path("demo.png"),
     width: Annotated[int, typer.Option("--width", "-W", help="Image width in pixels.")] = 1920,
     height: Annotated[int, typer.Option("--height", "-H", help="Image height in pixels.")] = 1080,
-    view: Annotated[str, typer.Option(help=f"Named view: {', '.join(VIEWS)}.")] = "iso",
+    view: Annotated[str, typer.Option(help=f"Named view: {', '.join(VIEWS)}.")] = "auto",
     threads: Annotated[int | None, typer.Option(help="CPU threads (default: all cores).")] = None,
     seed: Annotated[int, typer.Option(help="Seed of the procedural scene.")] = 0,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing output file.")] = False,
@@ -177,24 +198,33 @@ def demo(
     check_output(output, overwrite)
     check_image_size(width, height)
     settings = settings_from_options(RenderSettings, {"threads": threads})  # a bad --threads is named
+    watch = compiling.current()
+    compiled_before = watch.seconds if watch is not None else 0.0
     t0 = time.perf_counter()
-    xyz, rgba, attrs = demo_arrays(points, seed)
+    with status(f"generating the demo scene ({points:,} points)"):
+        xyz, rgba, attrs = demo_arrays(points, seed)
     t1 = time.perf_counter()
-    cloud = build_cloud([PointChunk(xyz, rgba, attrs)], name=f"demo({points:,})")
+    with status("Morton sort and batching"):
+        cloud = build_cloud([PointChunk(xyz, rgba, attrs)], name=f"demo({points:,})")
     del xyz, rgba, attrs
     t2 = time.perf_counter()
-    cam = Camera.fit(cloud.bounds, view=view, width=width, height=height)
-    first = render_frame(cloud, cam, settings)
-    times = []
-    for _ in range(7):  # the median of 7: this kind of shared host swings 1.5x within seconds
-        frame = render_frame(cloud, cam, settings)
-        times.append(frame.stats.time_ms)
+    cam = make_camera(cloud, width, height, view, None, "perspective", 60.0)
+    with progress_bar("rendering", 8) as advance:
+        first = render_frame(cloud, cam, settings)
+        advance()
+        times = []
+        for _ in range(7):  # the median of 7: this kind of shared host swings 1.5x within seconds
+            frame = render_frame(cloud, cam, settings)
+            times.append(frame.stats.time_ms)
+            advance()
     median = sorted(times)[3]
     save_image(frame.image, output)
-    console.print("(the first run after installing also compiles the numba kernels: later runs are faster)", style="dim", highlight=False)
+    compiled = (watch.seconds if watch is not None else 0.0) - compiled_before  # numba compiled kernels: a first run
+    if compiled >= 0.5:
+        console.print(f"compiling the kernels took {compiled:.0f} s of the times below (once per install)", style="dim", highlight=False)
     console.print(f"demo scene: {points:,} points generated in {t1 - t0:.2f} s ({points / (t1 - t0) / 1e6:.1f} M points/s)", highlight=False)
     console.print(f"Morton sort + batching: {t2 - t1:.2f} s ({points / (t2 - t1) / 1e6:.1f} M points/s), {len(cloud.batches):,} batches", highlight=False)
-    console.print(f"first render (JIT compile included): {first.stats.time_ms:.0f} ms", highlight=False)
+    console.print(f"first render: {first.stats.time_ms:.0f} ms{' (compiling included)' if compiled >= 0.5 else ''}", highlight=False)
     console.print(
         f"render {width}x{height} '{view}': {median:.1f} ms per frame (median of 7) = {cloud.n_points / median / 1e3:,.0f} M points/s "
         f"({frame.stats.visible_pixels:,} pixels covered)",

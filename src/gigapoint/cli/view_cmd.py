@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 import threading
+import time
 import webbrowser
 from pathlib import Path
 
@@ -29,26 +30,41 @@ def view(
     host: str = typer.Option("127.0.0.1", "--host", help="Address to listen on; anything but loopback requires a token in the URL."),
     browser: bool = typer.Option(True, "--browser/--no-browser", help="Open the page in a browser when one is available."),
     window: bool = typer.Option(False, "--window", help="Show a native window instead (needs the window extra and a display)."),
+    progressive: bool | None = typer.Option(
+        None, "--progressive/--no-progressive",
+        help="Show the cloud while it loads, building its LOD octree as points arrive (default: for inputs above the point budget).",
+    ),
 ) -> None:
     """Serve an interactive viewer of PATH... in the browser (Ctrl+C stops it)."""
     import gigapoint
 
+    from ..lod.progressive import ProgressiveOctree
+    from ..render.settings import RenderSettings
     from ..viewer.server import ViewerServer
 
     if demo is not None and paths:
         raise GigapointError("view: give either PATH... or --demo N, not both")
+    budget = RenderSettings().point_budget
     if demo is not None:
         if not 1 <= demo <= 2_000_000_000:
             raise GigapointError(f"--demo: point count must be in 1..2e9, got {demo}")
-        cloud = gigapoint.demo(demo)
+        cloud = gigapoint.demo(demo, progressive=progressive if progressive is not None else demo > budget)
     elif paths:
-        from ..lod import OctreeDir
+        from ..lod import OctreeDir, is_lod_source
         from ..lod.preview import wait_for_preview
+        from ..lod.progressive import file_sources, open_progressive
 
         if len(paths) == 1 and OctreeDir(paths[0]).awaiting_preview:  # `convert` was started a moment ago
             print(f"gigapoint viewer: waiting for the first preview of the conversion into {paths[0]} ...", file=sys.stderr)
             wait_for_preview(paths[0])
-        cloud = gigapoint.open(*paths)
+        if (len(paths) == 1 and is_lod_source(paths[0])) or progressive is False:
+            cloud = gigapoint.open(*paths)
+        else:
+            sources, total, bounds, name = file_sources(paths)
+            if progressive or (total is not None and total > budget):  # big: show it while it loads
+                cloud = open_progressive(sources, total, bounds, name)
+            else:
+                cloud = gigapoint.open(*paths)
     else:
         raise GigapointError("view: name at least one file or directory (or --demo N)")
     if window:  # native window (rendercanvas + glfw), no server
@@ -57,6 +73,10 @@ def view(
         print(f"gigapoint window: {cloud.name}, {cloud.n_points:,} points (drag: orbit, right drag: pan, wheel: zoom)", file=sys.stderr)
         run_window(cloud)
         return
+    if isinstance(cloud, ProgressiveOctree):  # a first slice of points, so that the first view frames them
+        deadline = time.monotonic() + 5.0
+        while cloud.n_points == 0 and cloud.loading and time.monotonic() < deadline:
+            time.sleep(0.02)
     server = ViewerServer(cloud, host=host, port=port)
     print(f"gigapoint viewer: {cloud.name}, {cloud.n_points:,} points", file=sys.stderr)
     if not server.loopback:

@@ -15,12 +15,14 @@ class PointChunk:
     """A bounded number of points: float64 xyz (N, 3), uint8 rgba (N, 4), named attributes.
 
     Attributes are 1-D (or (N, k)) numpy arrays of length N, e.g. ``intensity``,
-    ``classification``, ``return_number``.
+    ``classification``, ``return_number``. ``scale``: the resolution the source stored the
+    coordinates at, per axis (a LAS file's scale), where it has one.
     """
 
     xyz: np.ndarray
     rgba: np.ndarray | None = None
     attributes: dict[str, np.ndarray] = field(default_factory=dict)
+    scale: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         self.xyz = np.ascontiguousarray(self.xyz, dtype=np.float64).reshape(-1, 3)

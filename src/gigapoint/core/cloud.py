@@ -7,6 +7,8 @@ inside float64 batch boxes.
 
 from __future__ import annotations
 
+import contextlib
+import math
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -15,7 +17,7 @@ from typing import ClassVar
 import numpy as np
 from numba import njit, prange
 
-from ..errors import EmptyCloudError, GigapointWarning, InputError
+from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError
 from .chunk import PointChunk
 from .layout import BATCH_DTYPE, BATCH_SIZE
 from .morton import cube_of, morton_codes, morton_order
@@ -41,6 +43,9 @@ class PointCloud:
     attributes: dict[str, np.ndarray] = field(default_factory=dict)
     name: str = "cloud"
     skipped: int = 0  # invalid input points (NaN, inf, absurd) left out
+    # the resolution the source stored coordinates at, per axis (a LAS file's scale; the finest
+    # of several files'), None where unknown: positions it reports are rounded to it
+    source_scale: tuple[float, float, float] | None = None
 
     version: ClassVar[None] = None  # PointBuffers: the arrays never change once built
     batch_version: ClassVar[None] = None
@@ -81,11 +86,20 @@ class PointCloud:
             out[sel] = dequantize(self.low[i], self.med[i], self.high[i], rec["bbox_min"], rec["bbox_max"], 30)
         return out
 
-    def point_info(self, index: int) -> dict:
-        """Everything known about one point: position, color and attributes."""
+    def point_info(self, index: int) -> dict | None:
+        """Everything known about one point: position, color and attributes; None for index -1
+        (what ``Frame.index`` holds where a pixel shows no point).
+
+        The position is rounded to the source's resolution (``source_scale``: a LAS file's
+        scale), so it reads as the file wrote it (636317.71, not 636317.7100002308)."""
+        if index == -1:
+            return None
         if not 0 <= index < self.n_points:
-            raise IndexError(f"point index {index} out of range 0..{self.n_points - 1}")
-        info = {"index": int(index), "position": self.positions([index])[0].tolist()}
+            raise PointIndexError(f"{self.name}: point index {index} out of range 0..{self.n_points - 1} (-1: no point)")
+        position = self.positions([index])[0]
+        if self.source_scale is not None:
+            position = [round(float(v), scale_decimals(s)) for v, s in zip(position, self.source_scale)]
+        info = {"index": int(index), "position": [float(v) for v in position]}
         info["rgba"] = self.rgba[index].tolist()
         for name, values in self.attributes.items():
             v = values[index]
@@ -99,6 +113,10 @@ class PointCloud:
         step = subsample_step(self.batches["count"][sel.ids].astype(np.int64), settings.max_points)
         return DrawList(self, sel, len(self.batches), step)
 
+    def reading(self) -> contextlib.nullcontext:
+        """Nothing to hold: the buffers never change."""
+        return contextlib.nullcontext()
+
     def prepare_views(self, views: list[View], settings: SelectionSettings) -> MultiViewDrawList:
         ids, bits, matrices, sels = select_views(self.batches, views, settings)
         return MultiViewDrawList(self, ids, bits, matrices, [DrawList(self, sel, len(self.batches)) for sel in sels])
@@ -106,6 +124,13 @@ class PointCloud:
     def __repr__(self) -> str:
         lo, hi = self.bounds
         return f"PointCloud({self.name!r}, {self.n_points:,} points, {len(self.batches):,} batches, bounds {lo.tolist()} .. {hi.tolist()})"
+
+
+def scale_decimals(scale: float) -> int:
+    """Decimals that show a coordinate stored at resolution ``scale`` (0.01 -> 2, 0.001 -> 3, 0.5 -> 1)."""
+    if not (math.isfinite(scale) and scale > 0):
+        return 6
+    return max(0, min(12, math.ceil(-math.log10(scale) - 1e-9)))
 
 
 def _valid_mask(xyz: np.ndarray) -> np.ndarray:
@@ -143,8 +168,18 @@ def _scan_blocks(xyz, limit, bad, lo, hi):
         bad[b] = count
 
 
+#: arrays up to this many points are scanned and gathered by numpy (milliseconds): a small
+#: cloud's first run does not wait for the parallel kernels to compile
+NUMPY_MAX = 1 << 20
+
+
 def scan_points(xyz: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
     """(invalid points, min, max of the valid ones) of float64 (N, 3) positions."""
+    if len(xyz) <= NUMPY_MAX:
+        valid = xyz[_valid_mask(xyz)]
+        if len(valid) == 0:
+            return len(xyz), np.full(3, np.inf), np.full(3, -np.inf)
+        return len(xyz) - len(valid), valid.min(axis=0), valid.max(axis=0)
     bad = np.empty(_SCAN_BLOCKS, np.int64)
     lo = np.empty((_SCAN_BLOCKS, 3))
     hi = np.empty((_SCAN_BLOCKS, 3))
@@ -160,7 +195,7 @@ def _gather(src, order, out):
 
 def gather(values: np.ndarray, order: np.ndarray) -> np.ndarray:
     """values[order] along the first axis, on all cores (numpy's take is single-threaded)."""
-    if values.ndim != 1 or not values.flags.c_contiguous:
+    if values.ndim != 1 or not values.flags.c_contiguous or len(order) <= NUMPY_MAX:
         return np.ascontiguousarray(values[order])
     out = np.empty(len(order), values.dtype)
     _gather(values, order, out)
@@ -170,6 +205,7 @@ def gather(values: np.ndarray, order: np.ndarray) -> np.ndarray:
 def build_cloud(chunks: Iterable[PointChunk], name: str = "cloud", batch_size: int = BATCH_SIZE) -> PointCloud:
     """Collect chunks, drop invalid points (counted and warned), sort by Morton code, batch, quantize."""
     xyz_parts, rgba_parts, attr_parts = [], [], {}
+    scales: list[tuple | None] = []
     skipped = 0
     total = 0
     attr_names: list[str] | None = None
@@ -184,6 +220,7 @@ def build_cloud(chunks: Iterable[PointChunk], name: str = "cloud", batch_size: i
             attr_names = names
         elif names != attr_names:  # files of one scene with different attributes: keep the common ones
             attr_names = [a for a in attr_names if a in names]
+        scales.append(chunk.scale)
         xyz_parts.append(chunk.xyz[keep])
         rgba_parts.append(chunk.rgba[keep])
         for a, values in chunk.attributes.items():
@@ -199,7 +236,10 @@ def build_cloud(chunks: Iterable[PointChunk], name: str = "cloud", batch_size: i
     rgba = rgba_parts[0] if len(rgba_parts) == 1 else np.concatenate(rgba_parts)
     del rgba_parts
     attributes = {a: (v[0] if len(v) == 1 else np.concatenate(v)) for a, v in attr_parts.items() if a in (attr_names or [])}
-    return cloud_from_points(xyz, rgba, attributes, name=name, skipped=skipped, batch_size=batch_size, bounds=(lo, hi))
+    cloud = cloud_from_points(xyz, rgba, attributes, name=name, skipped=skipped, batch_size=batch_size, bounds=(lo, hi))
+    if scales and all(s is not None for s in scales):  # the finest: rounding to it loses nothing any file holds
+        cloud.source_scale = tuple(float(v) for v in np.min(np.array(scales, np.float64), axis=0))
+    return cloud
 
 
 def cloud_from_points(xyz, rgba, attributes=None, name="cloud", skipped=0, batch_size=BATCH_SIZE, bounds=None) -> PointCloud:

@@ -14,6 +14,10 @@ from numba import njit, prange
 
 MORTON_BITS_PER_AXIS = 21
 _TOP_BITS = 12
+# parallel loops from prange only, numpy calls left serial: the sort's few small array calls
+# need no parfors, and compiling them as such took a quarter of its 2.7 s compile (a fresh
+# dict each use: numba consumes it)
+_PRANGE_ONLY = {"comprehension": False, "reduction": False, "inplace_binop": False, "setitem": False, "numpy": False, "stencil": False, "fusion": False}
 
 
 @njit(inline="always")
@@ -98,7 +102,7 @@ def _lsd_sort_range(keys, idx, tmp_keys, tmp_idx, lo, hi, bits):
         idx[lo:hi] = tmp_idx[lo:hi]
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=dict(_PRANGE_ONLY), cache=True)
 def _sort_codes(codes, n_threads, index_type):
     n = codes.shape[0]
     n_buckets = 1 << _TOP_BITS
@@ -151,11 +155,18 @@ def _sort_codes(codes, n_threads, index_type):
     return keys, idx
 
 
+#: up to this many codes numpy's stable sort orders them (milliseconds): a small cloud's first
+#: run then does not wait for the parallel sort to compile (2.7 s)
+NUMPY_SORT_MAX = 1 << 20
+
+
 def morton_order(codes: np.ndarray) -> np.ndarray:
     """Stable permutation that sorts ``codes`` (uint64) ascending (uint32 or int64 indices)."""
     codes = np.ascontiguousarray(codes, dtype=np.uint64)
     if len(codes) == 0:
         return np.empty(0, np.int64)
+    if len(codes) <= NUMPY_SORT_MAX:  # the same permutation (both stable), in the same index type
+        return np.argsort(codes, kind="stable").astype(np.uint32)
     previous = numba.get_parallel_chunksize()
     numba.set_parallel_chunksize(8)  # buckets vary wildly in size: hand them out dynamically
     try:

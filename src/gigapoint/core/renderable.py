@@ -11,7 +11,8 @@ of layout.py, so one set of kernels draws every kind of cloud.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from contextlib import AbstractContextManager
+from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -68,12 +69,11 @@ class DrawList:
     n_batches: int  # batches (octree: nodes) of the whole renderable, for the stats
     step: int = 1  # draw every step-th point of each batch (a point cap on a plain cloud)
     nodes: np.ndarray | None = None  # octree node indices drawn (stats, tests)
+    # ``points.version`` as prepared: while it is unchanged, the frame's indices still name the points it drew
+    generation: int | None = field(init=False)
 
-    @property
-    def generation(self) -> int | None:
-        """``points.version`` as prepared: while it is unchanged, the frame's indices still
-        name the points it drew."""
-        return self.points.version
+    def __post_init__(self) -> None:
+        self.generation = self.points.version
 
 
 @dataclass
@@ -111,4 +111,10 @@ class Renderable(Protocol):
         """Several views for one pass over shared buffers (stereo), where each view's own
         selection differs from the others only by frustum culling; None where it cannot
         (an octree picks other nodes per view): the renderer then draws them one by one."""
+        ...
+
+    def reading(self) -> AbstractContextManager:
+        """Held by the renderer from ``prepare`` until the frame is drawn: a cloud that fills
+        while it is drawn (a progressive octree) inserts nothing meanwhile. A cloud whose
+        buffers never change returns ``contextlib.nullcontext()``."""
         ...

@@ -17,7 +17,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from ..core.chunk import PointChunk
-from ..core.cloud import PointCloud, build_cloud
+from ..core.cloud import PointCloud, build_cloud, scale_decimals
 from ..errors import EmptyCloudError, GigapointWarning, InputError
 from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail
 from .demo import demo_arrays, demo_chunks
@@ -116,8 +116,17 @@ def file_info(path) -> dict:
     return info
 
 
-def _fmt_num(v) -> str:
-    return f"{v:,.3f}" if abs(v) >= 1000 else f"{v:.6g}"
+def _coords(values, scale=None) -> str:
+    """'636001.76, 848935.20, 406.26': each axis with the decimals of its stored resolution (a
+    LAS scale), else 3 (6 significant digits below 1); no thousands separators in the list."""
+    out = []
+    for axis, v in enumerate(values):
+        v = float(v)
+        if scale is not None:
+            out.append(f"{v:.{scale_decimals(abs(float(scale[axis])))}f}")
+        else:
+            out.append(f"{v:.3f}" if abs(v) >= 1 or v == 0 else f"{v:.6g}")
+    return ", ".join(out)
 
 
 def format_info(info: dict) -> str:
@@ -135,9 +144,10 @@ def format_info(info: dict) -> str:
     if b.get("min") is not None:
         lo, hi = b["min"], b["max"]
         src = " (header)" if info.get("bounds_source") == "header" else ""
-        lines.append(f"  bounds min:  {', '.join(_fmt_num(v) for v in lo)}{src}")
-        lines.append(f"  bounds max:  {', '.join(_fmt_num(v) for v in hi)}")
-        lines.append(f"  extent:      {', '.join(_fmt_num(h - lo_) for lo_, h in zip(lo, hi))}")
+        scale = info.get("scale")
+        lines.append(f"  bounds min:  {_coords(lo, scale)}{src}")
+        lines.append(f"  bounds max:  {_coords(hi, scale)}")
+        lines.append(f"  extent:      {_coords([h - lo_ for lo_, h in zip(lo, hi)], scale)}")
     lines.append(f"  color:       {'yes' if info.get('has_color') else 'no (default color)'}")
     attrs = info.get("attributes") or []
     lines.append(f"  attributes:  {', '.join(attrs) if attrs else 'none'}")

@@ -342,13 +342,27 @@ class LasReader(Reader):
     def point_count(self, path: Path) -> int | None:
         return read_las_header(path).point_count
 
-    def read_chunks(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
+    #: ``read_chunks`` takes ``start``/``stop``/``scaler``: one file read in parts (lod/convert/distributed.py)
+    reads_ranges = True
+
+    def read_chunks(
+        self,
+        path: Path,
+        chunk_size: int = DEFAULT_CHUNK_SIZE,
+        *,
+        start: int = 0,
+        stop: int | None = None,
+        scaler: ColorScaler | None = None,
+    ) -> Iterator[PointChunk]:
+        """Chunks of points ``start``..``stop`` (default: all) of the file. ``scaler``: the color
+        decision of the points before ``start`` (a new one by default); it is updated chunk by chunk."""
         chunk_size = check_chunk_size(chunk_size)
         hdr = read_las_header(path)
         kind = "LAZ" if hdr.compressed else "LAS"
         if hdr.point_count == 0:
             raise fail(path, f"{kind} file holds no points (header point count is 0)", EmptyCloudError)
-        done = 0
+        stop = hdr.point_count if stop is None else min(stop, hdr.point_count)
+        done = start
         try:
             with _laspy_open(path, hdr) as reader:
                 dims = set(reader.header.point_format.dimension_names)
@@ -356,12 +370,14 @@ class LasReader(Reader):
                 has_rgb = {"red", "green", "blue"} <= dims
                 scale = np.asarray(reader.header.scales, np.float64)
                 offset = np.asarray(reader.header.offsets, np.float64)
-                scaler = ColorScaler()
+                scaler = ColorScaler() if scaler is None else scaler
                 total = hdr.point_count
                 if reader.header.point_count != total:  # LAS 1.4 with only the legacy count filled in
                     reader.header.point_count = total
-                while done < total:
-                    pts = reader.read_points(min(chunk_size, total - done))
+                if start:
+                    reader.seek(start)
+                while done < stop:
+                    pts = reader.read_points(min(chunk_size, stop - done))
                     n = len(pts)
                     if n == 0:
                         break
@@ -375,7 +391,7 @@ class LasReader(Reader):
                         _rgb8(r, g, b, scaler.int_shift(int(_max3(r, g, b))), rgba)
                     attributes = {a: np.ascontiguousarray(np.asarray(pts[a])) for a in attrs}
                     done += n
-                    yield PointChunk(xyz, rgba, attributes)
+                    yield PointChunk(xyz, rgba, attributes, scale=tuple(float(abs(s)) for s in scale))
         except InputError:
             raise
         except MemoryError:
@@ -386,7 +402,7 @@ class LasReader(Reader):
                 f"truncated or corrupt {kind} point data: reading failed after {done:,} of the {hdr.point_count:,} points "
                 f"the header claims ({one_line(exc) or type(exc).__name__})",
             ) from None
-        if done < hdr.point_count:
+        if done < stop:
             raise fail(path, f"truncated {kind} file: the header claims {hdr.point_count:,} points, only {done:,} could be read")
 
     def info(self, path: Path) -> dict:

@@ -285,7 +285,7 @@ class OctreeDir:
         if out.exists():
             complete = self.complete
             if complete and not overwrite:
-                raise OutputExistsError(f"{out}: already holds a converted point cloud; pass --overwrite to replace it")
+                raise OutputExistsError(f"{out}: already holds a converted point cloud; pass overwrite=True to replace it")
             if not complete and self.kind is None and any(out.iterdir()):
                 raise OutputExistsError(f"{out}: directory is not empty and is not a gigapoint/Potree output; refusing to write into it")
             if not complete:

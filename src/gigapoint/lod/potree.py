@@ -199,7 +199,7 @@ def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progr
         "name": name,
         "description": "",
         "points": int(n_total),
-        "projection": "",
+        "projection": (st.get("source") or {}).get("crs") or "",
         "hierarchy": {"firstChunkSize": int(HIERARCHY_DTYPE.itemsize * len(keys)), "stepSize": 4, "depth": int(level_of(keys).max())},
         "offset": list(map(float, origin)),
         "scale": scale3,

@@ -1,13 +1,19 @@
 """Opening an octree folder of any kind (octree_dir.py): a gigapoint octree (store.py), a
 Potree 2.0 octree (potree.py) or an unfinished conversion, shown as its preview (preview.py);
-and what ``gigapoint info`` says about one."""
+a COPC file (copc.py) or an EPT dataset (ept.py), local or over HTTP; and what ``gigapoint
+info`` says about one."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 
 from ..core.cloud import PointCloud
 from ..errors import InputError
+from ..io.http import as_url
+from .copc import is_copc_file, open_copc
+from .ept import ept_location, open_ept
 from .octree_dir import FORMAT_VERSION, RESUME_HINT, OctreeDir
 from .potree import read_potree
 from .preview import open_preview
@@ -22,9 +28,36 @@ def is_octree_dir(path) -> bool:
         return False
 
 
+def lod_source_kind(path) -> str | None:
+    """What ``path`` opens as an octree: "folder" (is_octree_dir), "copc" (a file with the COPC
+    info VLR, or an http(s) URL that is not EPT's), "ept" (an ept.json, its folder or their
+    URL), or None (a file or folder of point cloud files)."""
+    if as_url(path) is not None:
+        return "ept" if ept_location(path) is not None else "copc"
+    try:
+        if is_octree_dir(path):
+            return "folder"
+        if ept_location(path) is not None:
+            return "ept"
+        return "copc" if is_copc_file(path) else None
+    except (TypeError, OSError):
+        return None
+
+
+def is_lod_source(path) -> bool:
+    """Opens as one octree (``open_octree``): an octree folder, a COPC file, an EPT dataset, a URL."""
+    return lod_source_kind(path) is not None
+
+
 def open_octree(path) -> OctreeCloud | PointCloud:
-    """Open an octree folder for rendering: an OctreeCloud (gigapoint or Potree 2.0), or for an
-    unfinished conversion its preview (a ConversionPreview, with a warning)."""
+    """Open an octree for rendering: an OctreeCloud (gigapoint or Potree 2.0 folder; a COPC file
+    or EPT dataset, local or an http(s) URL), or for an unfinished conversion its preview (a
+    ConversionPreview, with a warning)."""
+    kind = lod_source_kind(path)
+    if kind == "copc":
+        return open_copc(path)
+    if kind == "ept":
+        return open_ept(path)
     d = OctreeDir(path)
     if not d.path.is_dir():
         raise InputError(f"{d.path}: not a directory (an octree is a directory made by `gigapoint convert`)")
@@ -42,6 +75,8 @@ def octree_info(path) -> dict:
     """What ``gigapoint info`` says about an octree folder (gigapoint or Potree 2.0) or an
     unfinished conversion: ``file_info``'s keys plus nodes, levels, sampler, spacing or
     conversion (OctreeDir.status), and ``details``: {label: text} lines ready to print."""
+    if lod_source_kind(path) in ("copc", "ept"):
+        return _voxel_info(path)
     d = OctreeDir(path)
     p = d.path
     size = sum(f.stat().st_size for f in p.rglob("*") if f.is_file())
@@ -60,6 +95,9 @@ def octree_info(path) -> dict:
     cloud = open_octree(p)
     lo, hi = cloud.bounds
     potree = d.kind == "potree"
+    attributes, crs = sorted(cloud.attributes), None
+    if potree:  # its nodes are decoded on demand: the metadata names what they hold, and the CRS
+        attributes, crs = _potree_attributes_and_crs(d)
     levels = int(cloud.nodes["level"].max()) + 1
     sampler, spacing = cloud.meta.get("sampler"), cloud.meta.get("spacing")
     text = f"{len(cloud.keys):,} nodes in {levels} levels"
@@ -71,7 +109,8 @@ def octree_info(path) -> dict:
         "point_count": int(cloud.n_points),
         "bounds": {"min": np.asarray(lo).tolist(), "max": np.asarray(hi).tolist()},
         "has_color": True,
-        "attributes": sorted(cloud.attributes),
+        "attributes": attributes,
+        "crs": crs,
         "nodes": len(cloud.keys),
         "levels": levels,
         "sampler": sampler,
@@ -79,6 +118,61 @@ def octree_info(path) -> dict:
         "file_size": size,
         "details": {"octree": text},
     }
+
+
+def _potree_attributes_and_crs(d: OctreeDir) -> tuple[list[str], str | None]:
+    """The extra attributes (not position, rgb) and the projection a Potree metadata.json names."""
+    import json
+
+    try:
+        meta = json.loads(d.potree_meta.read_text(encoding="utf-8"))
+        names = [str(a["name"]) for a in meta.get("attributes", []) if a.get("name") not in ("position", "rgb")]
+    except (OSError, ValueError, TypeError, KeyError, AttributeError):
+        return [], None
+    return names, (meta.get("projection") or None)
+
+
+def _voxel_info(path) -> dict:
+    """``octree_info`` of a COPC file or EPT dataset: every hierarchy page read, no point."""
+    cloud = open_octree(path)
+    try:
+        cloud.load_hierarchy()
+        meta = cloud.meta
+        lo, hi = cloud.bounds
+        per_level = cloud.points_per_level()
+        copc = meta["format"] == "copc"
+        size = None
+        url = as_url(path)
+        if url is None:
+            p = ept_location(path) if not copc else path
+            size = sum(f.stat().st_size for f in Path(p).parent.rglob("*") if f.is_file()) if not copc else Path(p).stat().st_size
+        details = {
+            "octree": f"{len(cloud.keys):,} nodes in {len(per_level)} levels, {cloud.pages_read:,} hierarchy pages"
+            + (f", spacing {meta['spacing']:.6g}" if meta.get("spacing") else ""),
+            "per level": ", ".join(f"{lv}: {n:,}" for lv, n in enumerate(per_level)),
+        }
+        return {
+            "path": str(url or path),
+            "format": "COPC" if copc else f"EPT ({meta.get('data_type')})",
+            "las_version": meta.get("las_version"),
+            "point_format": meta.get("point_format"),
+            "point_count": int(cloud.n_points),
+            "bounds": {"min": np.asarray(lo).tolist(), "max": np.asarray(hi).tolist()},
+            "has_color": (meta.get("point_format") or 0) >= 7 if copc else "Red" in (meta.get("schema") or []),
+            "attributes": cloud.attribute_names,
+            "scale": meta.get("scale"),
+            "offset": meta.get("offset"),
+            "crs": meta.get("crs"),
+            "generating_software": meta.get("generating_software"),
+            "nodes": len(cloud.keys),
+            "levels": len(per_level),
+            "points_per_level": per_level,
+            "spacing": meta.get("spacing"),
+            "file_size": size,
+            "details": details,
+        }
+    finally:
+        cloud.close()
 
 
 def _conversion_details(s: dict) -> dict:

@@ -10,6 +10,7 @@ is drawn by the same kernel as any PointCloud, each chunk a batch.
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections import OrderedDict
 from pathlib import Path
@@ -19,7 +20,7 @@ from numba import njit
 
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import dequantize
-from ..core.renderable import DrawList
+from ..core.renderable import DrawList, MultiViewDrawList
 from ..core.selection import Selection, View, batch_matrices, box_in_view, precision_for, visible_and_size
 from ..errors import InputError
 from .keys import key_cube
@@ -71,14 +72,14 @@ def _heap_place(hp, hi, n, j, p, item):
 
 
 @njit(cache=True)
-def select_nodes(rows, box_min, box_size, counts, children, width, height, near, far, threshold, budget, out_ids, out_size, foveation=0.0):
+def select_nodes(rows, box_min, box_size, counts, children, width, height, near, far, threshold, budget, out_ids, out_size, foveation=0.0, root=0):
     """Largest-projected-first traversal: visible nodes of ≥ threshold px (the root always), within budget.
 
     ``foveation`` f > 0 raises the threshold away from the image centre: threshold · (1 + f·d),
     d = 0 at the centre .. 1 in the corners (the 2022 paper's 100/200/300 px is f = 2).
 
     ``box_min``/``box_size`` (k, 3): each node's cube clipped to the cloud's bounds (it holds
-    every point of the node's subtree, without the cube's empty space).
+    every point of the node's subtree, without the cube's empty space). ``root``: the root's index.
 
     Returns (number of selected nodes written to out_ids/out_size, their point total).
     """
@@ -86,11 +87,11 @@ def select_nodes(rows, box_min, box_size, counts, children, width, height, near,
     hp = np.empty(n, np.float64)
     hi = np.empty(n, np.int64)
     hn = 0
-    vis, s, _ = _box_test(rows, box_min[0], box_size[0], width, height, near, far)
+    vis, s, _ = _box_test(rows, box_min[root], box_size[root], width, height, near, far)
     if not vis:
         return 0, 0
     hp[0] = s
-    hi[0] = 0
+    hi[0] = root
     hn = 1
     k = 0
     total = 0
@@ -116,6 +117,74 @@ def select_nodes(rows, box_min, box_size, counts, children, width, height, near,
             hn += 1
             _heap_place(hp, hi, hn, hn - 1, s, ch)  # push: into the new hole at the end
     return k, total
+
+
+@njit(cache=True)
+def select_octants(
+    rows, box_min, box_size, counts, list_counts, parent, children, width, height, near, far, threshold, budget, drawn, size_of,
+    foveation=0.0, root=0,
+):  # fmt: skip
+    """Node selection for octrees whose inner nodes hold representatives (voxels) of the points
+    below them, in one list per child octant, and whose leaves hold every point (SimLOD):
+    largest projected child first, as ``select_nodes``, but a child drawn *replaces* its
+    parent's voxels of that octant instead of adding to them, so nothing is drawn twice and a
+    budget that covers every point draws exactly the visible leaves. ``list_counts[8 n + o]``:
+    entries of node n's list o (a leaf's points are its list 0); ``drawn[n, o]`` is set for
+    every list drawn and ``size_of[n]`` for every node drawn. Returns the entries drawn."""
+    n = counts.shape[0]
+    hp = np.empty(n, np.float64)
+    hi = np.empty(n, np.int64)
+    vis, s, dist = _box_test(rows, box_min[root], box_size[root], width, height, near, far)
+    if not vis:
+        return 0
+    for o in range(8):
+        drawn[root, o] = list_counts[root * 8 + o] > 0
+    size_of[root] = s
+    total = counts[root]
+    hn = 0
+    node = root
+    while True:
+        for d in range(8):  # the drawn node's children become candidates
+            ch = children[node, d]
+            if ch < 0:
+                continue
+            vis, s, dist = _box_test(rows, box_min[ch], box_size[ch], width, height, near, far)
+            if vis and s >= threshold * (1.0 + foveation * dist):
+                hn += 1
+                _heap_place(hp, hi, hn, hn - 1, s, ch)
+        while True:
+            if hn == 0:
+                return total
+            node = hi[0]
+            s = hp[0]
+            hn -= 1
+            _heap_place(hp, hi, hn, 0, hp[hn], hi[hn])
+            p = parent[node]
+            d = 0
+            while children[p, d] != node:
+                d += 1
+            cost = counts[node] - list_counts[p * 8 + d]
+            if total + cost <= budget:
+                break
+        drawn[p, d] = False
+        for o in range(8):
+            drawn[node, o] = list_counts[node * 8 + o] > 0
+        size_of[node] = s
+        total += cost
+
+
+@njit(cache=True)
+def list_chunks(first_chunk, chunk_next, lists, out, owner):
+    """The chunks of every list in ``lists`` (and the index of its list); returns how many."""
+    k = 0
+    for j in range(lists.shape[0]):
+        c = first_chunk[lists[j]]
+        while c >= 0:
+            out[k] = c
+            owner[k] = j
+            k += 1
+            c = chunk_next[c]
+    return k
 
 
 @njit(cache=True)
@@ -339,9 +408,13 @@ class OctreeCloud:
         sel = Selection(slots.astype(np.int64), bits[owner].astype(np.int32), mats[owner], size[owner], int(len(self.keys) - len(ids)))
         return DrawList(arena, sel, len(self.nodes), nodes=ids)
 
-    def prepare_views(self, views, settings) -> None:
+    def prepare_views(self, views, settings) -> MultiViewDrawList | None:
         """None: each view selects its own nodes, so stereo draws the eyes one by one."""
-        return
+        return None
+
+    def reading(self) -> contextlib.nullcontext:
+        """Nothing to hold beyond the frame: ``prepare`` fills the arena, which no one else writes."""
+        return contextlib.nullcontext()
 
 
 def read_gigapoint(octree_dir) -> OctreeCloud:

@@ -26,7 +26,9 @@ VIEWS = {
     "left": (180.0, 0.0),
     "right": (0.0, 0.0),
     "iso": (-135.0, 35.264),
+    "auto": (None, None),  # iso, or turned so a long cloud runs across the image (``auto_view``)
 }
+TRIM = 1e-4  # framing sample points: this share at each side may fall outside the frame (a few stray points)
 
 
 def _vec3(value, what: str) -> tuple[float, float, float]:
@@ -39,6 +41,67 @@ def _vec3(value, what: str) -> tuple[float, float, float]:
     if not all(math.isfinite(c) for c in v):
         raise CameraError(f"camera {what} must be finite, got {v}")
     return v
+
+
+AUTO_MAX_PITCH = 55.0  # the steepest 'auto' view (a long, flat cloud seen side-on)
+
+
+def auto_view(points, aspect: float = 16 / 9) -> tuple[float, float]:
+    """(yaw, pitch) of the 'auto' view of ``points`` for an image of ``aspect``: iso's for a
+    cloud whose plan is about as long as wide (less than 1.3 : 1); else turned so the long
+    horizontal axis (the principal axis of the points' xy) runs across the image, seen from
+    the side of -y, and looking down more steeply (up to ``AUTO_MAX_PITCH``) where a flat,
+    long cloud would fill only a band of the image at iso's pitch."""
+    iso_yaw, iso_pitch = VIEWS["iso"]
+    p = np.asarray(points, np.float64)
+    if len(p) < 3:
+        return iso_yaw, iso_pitch
+    xy = p[:, :2] - p[:, :2].mean(axis=0)
+    evals, evecs = np.linalg.eigh(np.cov(xy.T))
+    if not evals[1] > 1.69 * max(evals[0], 0.0):  # the axes' spreads' ratio, squared
+        return iso_yaw, iso_pitch
+    axis = math.degrees(math.atan2(evecs[1, 1], evecs[0, 1]))
+    yaws = [math.remainder(axis + 90.0, 360.0), math.remainder(axis - 90.0, 360.0)]
+    yaw = min(yaws, key=lambda y: math.sin(math.radians(y)))  # the eye south of the cloud
+    # extents along the long axis, across it and up (less TRIM at each side)
+    long_, across = (np.quantile(xy @ evecs[:, k], 1 - TRIM) - np.quantile(xy @ evecs[:, k], TRIM) for k in (1, 0))
+    up = np.quantile(p[:, 2], 1 - TRIM) - np.quantile(p[:, 2], TRIM)
+    pitch = iso_pitch
+    while pitch < AUTO_MAX_PITCH:  # steeper until the side view's height / width reaches the image's
+        r = math.radians(pitch)
+        if (across * math.sin(r) + up * math.cos(r)) * aspect >= long_:
+            break
+        pitch = min(AUTO_MAX_PITCH, pitch + 2.5)
+    return yaw, pitch
+
+
+def auto_yaw(points) -> float:
+    """The yaw of the 'auto' view of ``points`` (``auto_view``)."""
+    return auto_view(points)[0]
+
+
+def sample_points(cloud, n: int = 20_000) -> np.ndarray:
+    """About ``n`` float64 world positions spread over ``cloud`` (any Renderable): every k-th
+    point of the batches (octree nodes) that a view of its whole box draws. What framing a
+    cloud looks at, rather than its bounding box (whose corners may hold no point at all)."""
+    from ..core.quantize import dequantize
+    from .settings import RenderSettings
+
+    bounds = cloud.bounds
+    probe = Camera.fit(bounds, view="iso", width=256, height=256)
+    with cloud.reading():
+        draw = cloud.prepare(probe.view(bounds), RenderSettings())
+        rec = draw.points.batches[draw.selection.ids]
+        step = max(1, int(rec["count"].sum()) // max(n, 1))
+        parts = []
+        for r in rec:
+            idx = np.arange(int(r["first"]), int(r["first"]) + int(r["count"]), step)
+            if len(idx):
+                parts.append(dequantize(draw.points.low[idx], draw.points.med[idx], draw.points.high[idx], r["bbox_min"], r["bbox_max"], 30))
+    if not parts:
+        lo, hi = (np.asarray(b, np.float64) for b in bounds)
+        return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    return np.concatenate(parts)
 
 
 @dataclass(frozen=True)
@@ -104,19 +167,36 @@ class Camera:
         return cls(eye=tuple(eye), target=tuple(target), up=up, fov=fov, width=width, height=height, **kw)
 
     @classmethod
-    def fit(cls, bounds, view="iso", width=1920, height=1080, fov=60.0, projection="perspective", margin=1.05, recenter=True, **kw) -> Camera:
+    def fit(
+        cls, bounds, view="iso", width=1920, height=1080, fov=60.0, projection="perspective", margin=1.05, recenter=True, points=None,
+        trim=None, **kw,
+    ) -> Camera:  # fmt: skip
         """Camera that frames the box ``bounds = (min, max)`` from a named view or (yaw, pitch).
 
         ``recenter``: move the target so the box's image is centred (perspective pushes it off
-        centre); False keeps the target at the box centre (an orbit around it, a turntable)."""
+        centre); False keeps the target at the box centre (an orbit around it, a turntable).
+        ``points``: (k, 3) positions to frame instead of the box's corners (``sample_points``;
+        ``trim`` (default ``TRIM``) of them at each side may fall outside): the data, not its box, fills the frame.
+        ``view='auto'``: the (yaw, pitch) ``auto_view`` gives (of ``points``, else the box)."""
         lo = np.asarray(_vec3(bounds[0], "bounds min"))
         hi = np.asarray(_vec3(bounds[1], "bounds max"))
+        box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        if points is not None:
+            points = np.asarray(points, np.float64).reshape(-1, 3)
+            points = points[np.all(np.isfinite(points), axis=1)]
+            if len(points) == 0:
+                points = None
         if isinstance(view, str):
             if view not in VIEWS:
                 raise CameraError(f"unknown view {view!r}; choose one of {', '.join(VIEWS)}")
             yaw, pitch = VIEWS[view]
+            if yaw is None:
+                yaw, pitch = auto_view(points if points is not None else box, width / height)
         else:
             yaw, pitch = view
+        trim = (TRIM if trim is None else float(trim)) if points is not None and len(points) > 8 else 0.0
+        if points is not None:
+            lo, hi = np.quantile(points, trim, axis=0), np.quantile(points, 1.0 - trim, axis=0)
         center = (lo + hi) / 2
         # a single point or a tiny cloud far from the origin still gets a camera float64 can place
         radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-6 * max(1.0, float(np.abs(center).max())))
@@ -124,10 +204,17 @@ class Camera:
         # orientation first (distance 1), then the distance at which every corner fits
         probe = cls.orbit(center, yaw, pitch, 1.0, fov=fov, width=width, height=height)
         right, up, back = probe.basis()
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]) - center
+        corners = (points if points is not None else box) - center
         cx, cy, cz = corners @ right, corners @ up, corners @ back
+
+        def extreme(a, side=1.0):
+            """The largest of ``a`` (side 1) or its smallest (side -1), less the trimmed share."""
+            if trim == 0.0:
+                return float(a.max() if side > 0 else a.min())
+            return float(np.quantile(a, 1.0 - trim if side > 0 else trim))
+
         if projection == "orthographic":
-            extent_v = max(float(np.abs(cy).max()), float(np.abs(cx).max()) / aspect, radius * 1e-6)
+            extent_v = max(extreme(np.abs(cy)), extreme(np.abs(cx)) / aspect, radius * 1e-6)
             return cls.orbit(
                 center, yaw, pitch, radius * 3, fov=fov, width=width, height=height, projection=projection, ortho_height=2 * extent_v * margin, **kw
             )
@@ -138,19 +225,25 @@ class Camera:
         # target moves so the box's projection is centred (perspective pushes it down otherwise),
         # and the distance is solved again: two rounds settle it.
         def fitting_distance():
-            d = float(np.max(np.maximum(cz + np.abs(cx) * margin / tan_h, cz + np.abs(cy) * margin / tan_v)))
+            d = extreme(np.maximum(cz + np.abs(cx) * margin / tan_h, cz + np.abs(cy) * margin / tan_v))
             return max(d, float(cz.max()) + 0.05 * radius)  # every corner well in front of the eye
 
         distance = fitting_distance()
         for _ in range(2 if recenter else 0):
             depth = distance - cz
             sx, sy = cx / depth / tan_h, cy / depth / tan_v  # -1..1 across the image
-            shift_x = (sx.max() + sx.min()) / 2 * tan_h * distance
-            shift_y = (sy.max() + sy.min()) / 2 * tan_v * distance
+            shift_x = (extreme(sx) + extreme(sx, -1)) / 2 * tan_h * distance
+            shift_y = (extreme(sy) + extreme(sy, -1)) / 2 * tan_v * distance
             center = center + right * shift_x + up * shift_y
             cx, cy = cx - shift_x, cy - shift_y
             distance = fitting_distance()
         return cls.orbit(center, yaw, pitch, distance, fov=fov, width=width, height=height, **kw)
+
+    @classmethod
+    def fit_cloud(cls, cloud, view="auto", **kw) -> Camera:
+        """``fit`` for a cloud (any Renderable): the 'auto' view frames its points (``sample_points``),
+        so its data, not its bounding box, fills the frame; other views frame its box."""
+        return cls.fit(cloud.bounds, view=view, points=sample_points(cloud) if view == "auto" else None, **kw)
 
     def with_size(self, width: int, height: int) -> Camera:
         return replace(self, width=width, height=height)

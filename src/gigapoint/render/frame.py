@@ -64,9 +64,11 @@ class Frame:
     generation: int | None = None
 
     def point_info(self, index: int) -> dict | None:
-        """What the frame's point ``index`` is (position, color, attributes), or None when the
-        buffers have been rewritten since (an octree's arena, by a later frame)."""
-        if self.points is None or self.points.version != self.generation:
+        """What the frame's point ``index`` is (position, color, attributes), or None for -1
+        (an empty pixel: ``frame.index`` holds -1 where no point was drawn) and when the
+        buffers have been rewritten since (an octree's arena, by a later frame). Another
+        index outside the buffers raises PointIndexError."""
+        if index == -1 or self.points is None or self.points.version != self.generation:
             return None
         return self.points.point_info(index)
 

@@ -13,7 +13,7 @@ from ..core.quantize import unpack_words
 from ..core.selection import select
 from .camera import Camera
 from .settings import RenderSettings
-from .splats import point_sizes, splat_params
+from .splats import point_sizes, point_spacing, splat_params
 
 
 def grid_coordinates(cloud, first: int, count: int, bits: int) -> np.ndarray:
@@ -68,7 +68,7 @@ def reference_visibility(cloud, camera: Camera, settings: RenderSettings | None 
         settings.frustum_culling,
     )
     vis = np.full(w * h, EMPTY_PIXEL, np.uint64)
-    footprint, size, atten = splat_params(settings, camera)
+    footprint, size, atten = splat_params(settings, camera, point_spacing(cloud))
     for first, idx, x0, y0, d in projected_batches(cloud, sel, w, h, near, far):
         keys = (d.view(np.uint32).astype(np.uint64) << np.uint64(32)) | (first + idx).astype(np.uint64)
         sizes = point_sizes(d, size, atten)

@@ -44,18 +44,19 @@ def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) 
     t0 = time.perf_counter()
     backend = get_backend(settings.backend)
     view = camera.view(cloud.bounds)
-    draw = cloud.prepare(view, settings)
-    check_indexable(draw.points)
-    counts = draw.points.batches["count"][draw.selection.ids].astype(np.int64)
-    if draw.step > 1:
-        counts = (counts + draw.step - 1) // draw.step
-    t1 = time.perf_counter()
-    visibility = backend.rasterize(
-        draw.points, draw.selection, view.width, view.height, view.near, view.far, settings.threads,
-        splat=splat_for(settings, camera), step=draw.step, keep_on_device=True,
-    )  # fmt: skip
-    t2 = time.perf_counter()
-    visibility, colors, covered = finish_frame(backend, draw, camera, visibility, settings, view.near, view.far)
+    with cloud.reading():  # a cloud that fills while drawn waits with its next insertion
+        draw = cloud.prepare(view, settings)
+        check_indexable(draw.points)
+        counts = draw.points.batches["count"][draw.selection.ids].astype(np.int64)
+        if draw.step > 1:
+            counts = (counts + draw.step - 1) // draw.step
+        t1 = time.perf_counter()
+        visibility = backend.rasterize(
+            draw.points, draw.selection, view.width, view.height, view.near, view.far, settings.threads,
+            splat=splat_for(settings, camera, draw, view.near), step=draw.step, keep_on_device=True,
+        )  # fmt: skip
+        t2 = time.perf_counter()
+        visibility, colors, covered = finish_frame(backend, draw, camera, visibility, settings, view.near, view.far)
     image = colors.view(np.uint8).reshape(view.height, view.width, 4)
     visibility = visibility.reshape(view.height, view.width)
     stats = RenderStats.of(draw, counts, cloud.n_points, (time.perf_counter() - t0) * 1000.0, (t2 - t1) * 1000.0, backend.name)

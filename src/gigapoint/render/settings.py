@@ -26,7 +26,7 @@ Backend = Literal["auto", "cpu", "wgpu"]
 ColorMode = Literal["rgb", "intensity", "classification", "elevation", "return_number", "point_source_id", "batch", "level", "normal"]
 Colormap = Literal["viridis", "turbo", "terrain", "inferno", "gray"]
 PointShape = Literal["square", "round"]
-SizeMode = Literal["fixed", "attenuated"]
+SizeMode = Literal["auto", "adaptive", "fixed", "attenuated"]
 Supersample = Literal[1, 2, 4]
 SupersampleFilter = Literal["box", "lanczos"]
 Stereo = Literal["none", "side-by-side", "anaglyph"]
@@ -154,9 +154,14 @@ class RenderSettings:
     hqs_depth_tolerance: float = setting(
         0.01, "High-quality shading blends the points at most this fraction behind the closest.", min=0.0, max=1.0
     )
-    point_size: int = setting(1, "Point size in pixels (attenuated points: the largest size).", min=1, max=64)
+    point_size: int = setting(1, "Point size in pixels (attenuated: the largest size; adaptive: a multiple of the size).", min=1, max=64)
     point_shape: PointShape = setting("square", "Point footprint shape.")
-    size_mode: SizeMode = setting("fixed", "fixed: point_size pixels; attenuated: point_world_size, at most point_size pixels.")
+    size_mode: SizeMode = setting(
+        "auto",
+        "adaptive: as large as the cloud's point spacing seen at the point's depth, so surfaces look solid (Potree's default); "
+        "fixed: point_size pixels (with point_size 1: the exact one-pixel render); attenuated: point_world_size, at most point_size "
+        "pixels; auto: attenuated with a point_world_size, fixed with a point_size above 1, else adaptive.",
+    )
     point_world_size: float = setting(
         0.0,
         "Attenuated points: size in world units (on the command line it also means --size-mode attenuated, --point-size 16).",
@@ -187,6 +192,16 @@ class RenderSettings:
             raise SettingsError("splat_softness needs hqs=True (soft splats are blended by high-quality shading)")
         if self.size_mode == "attenuated" and not self.point_world_size > 0:
             raise SettingsError("size_mode 'attenuated' needs point_world_size > 0 (metres)")
+
+    @property
+    def point_sizing(self) -> str:
+        """The size mode drawn: ``size_mode``, with 'auto' resolved (attenuated when a
+        point_world_size is set, fixed when a point_size above 1 is, else adaptive)."""
+        if self.size_mode != "auto":
+            return self.size_mode
+        if self.point_world_size > 0:
+            return "attenuated"
+        return "fixed" if self.point_size > 1 else "adaptive"
 
     def replace(self, **changes) -> RenderSettings:
         names = {f.name for f in fields(self)}

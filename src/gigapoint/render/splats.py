@@ -10,6 +10,13 @@ nearer small point is never hidden by a farther large one.
 ``size_mode='attenuated'``: the size is ``point_world_size`` metres projected at the
 point's depth (perspective: scale / depth, with scale = world size x focal length in
 pixels), clamped to 1 .. point_size.
+
+``size_mode='adaptive'`` (Potree's default, and ours: ``size_mode='auto'`` without a
+point_size or point_world_size): the same, with the world size the cloud's own point
+spacing (``point_spacing``: each batch's points over the area of its box, the median over
+the points) times ``ADAPTIVE_FILL`` times ``point_size``, clamped to 1 .. ``ADAPTIVE_MAX_PX``:
+neighbouring points touch on screen, so sparse real data looks solid at every distance.
+``size_mode='fixed'`` with ``point_size=1`` is the exact one-pixel render.
 """
 
 from __future__ import annotations
@@ -18,6 +25,8 @@ import functools
 import math
 
 import numpy as np
+
+from ..errors import GigapointError
 
 
 @functools.lru_cache(maxsize=16)
@@ -39,17 +48,57 @@ def footprint(size: int, shape: str = "square") -> np.ndarray:
     return np.array(rows, np.int32).reshape(-1, 3)
 
 
-def splat_params(settings, camera):
+#: adaptive points cover this many times the point spacing: at 1 they would touch on a regular
+#: grid, real scans are not one (lines of a scanner, overlapping strips), so holes stay open below ~1.5
+ADAPTIVE_FILL = 1.25
+ADAPTIVE_MAX_PX = 16  # the largest adaptive point, in pixels
+
+
+def point_spacing(points, step: int = 1) -> float:
+    """World distance between neighbouring points of a cloud's buffers (``points.batches``),
+    drawing every ``step``-th point: per batch, the area of its box's two largest sides (points
+    on a surface) over its points, the median over points. 0 for a cloud without extent."""
+    rec = points.batches
+    counts = rec["count"].astype(np.float64)
+    keep = counts > 0
+    if not keep.any():
+        return 0.0
+    counts = np.ceil(counts[keep] / max(1, step))
+    ext = np.sort(rec["bbox_max"][keep] - rec["bbox_min"][keep], axis=1)
+    spacing = np.sqrt(ext[:, 2] * ext[:, 1] / counts)
+    order = np.argsort(spacing, kind="stable")
+    cum = np.cumsum(counts[order])
+    return float(spacing[order][np.searchsorted(cum, cum[-1] / 2.0)])
+
+
+def splat_params(settings, camera, spacing: float | None = None):
     """(footprint, size, atten) for the rasterizer: float32 size is the fixed size in pixels
-    (or the clamp for attenuated points), atten the perspective scale (0: fixed size)."""
+    (or the clamp for attenuated points), atten the perspective scale (0: fixed size).
+    ``spacing``: the cloud's ``point_spacing`` (needed by ``size_mode='adaptive'``)."""
     size = np.float32(settings.point_size)
     atten = np.float32(0.0)
-    if settings.size_mode == "attenuated":
+    mode, largest, world = settings.point_sizing, settings.point_size, settings.point_world_size
+    if mode == "adaptive":
+        if spacing is None:
+            raise GigapointError("size_mode 'adaptive' needs the cloud's point spacing (splats.point_spacing)")
+        largest, world = ADAPTIVE_MAX_PX, spacing * ADAPTIVE_FILL * settings.point_size
+        size = np.float32(largest)
+    if mode != "fixed":  # (this float64 operation order is the attenuated mode's since #5)
         if camera.projection == "perspective":
-            atten = np.float32(settings.point_world_size * (camera.height / 2.0) / math.tan(math.radians(camera.fov) / 2.0))
+            atten = np.float32(world * (camera.height / 2.0) / math.tan(math.radians(camera.fov) / 2.0))
+            if mode == "adaptive" and atten == 0:  # no spacing (a single point, a line): one pixel
+                size = np.float32(1.0)
         else:
-            size = np.float32(min(settings.point_size, max(1.0, settings.point_world_size * camera.height / camera.ortho_height)))
-    return footprint(settings.point_size, settings.point_shape), size, atten
+            size = np.float32(min(largest, max(1.0, world * camera.height / camera.ortho_height)))
+    return footprint(largest, settings.point_shape), size, atten
+
+
+def largest_size(splat, nearest_depth: float) -> float:
+    """The largest size in pixels a point of ``splat`` gets at depths >= ``nearest_depth``."""
+    _, size, atten = splat
+    if atten == 0:
+        return float(size)
+    return float(min(size, max(np.float32(1.0), atten / np.float32(max(nearest_depth, 1e-30)))))
 
 
 def point_sizes(depth: np.ndarray, size: np.float32, atten: np.float32) -> np.ndarray:

@@ -16,26 +16,47 @@ import numpy as np
 
 from ..atomic import atomic_write
 from ..errors import GigapointError
-from .camera import Camera
+from .camera import VIEWS, Camera, auto_view, sample_points
 from .settings import RenderSettings
 
 VIDEO_SUFFIXES = {".mp4", ".webm", ".mkv", ".avi", ".mov", ".gif"}
+#: a turntable frame may leave this share of the cloud's points out at each side (a still: camera.TRIM):
+#: a long cloud seen end-on then still fills a third of the frame on average, the odd corner cut in passing
+TURNTABLE_TRIM = 0.005
 
 
 def turntable_cameras(
-    cloud, n_frames: int, width=1280, height=720, pitch=30.0, fov=60.0, margin=1.05, start_yaw=-90.0, projection="perspective"
+    cloud, n_frames: int, width=1280, height=720, pitch=None, fov=60.0, margin=1.05, start_yaw=None, projection="perspective"
 ):
-    """n_frames cameras orbiting the cloud's centre once (yaw steps of 360 / n_frames), all at one
-    distance: the largest that ``Camera.fit`` needs over the orbit, so nothing leaves the frame."""
+    """n_frames cameras orbiting the cloud once (yaw steps of 360 / n_frames), starting at
+    ``start_yaw`` (by default the ``auto`` view's: a long cloud across the image) at ``pitch``
+    (by default iso's).
+
+    Each frame is framed like a still (``Camera.fit`` of the cloud's points, ``sample_points``:
+    its data, not its box; ``TURNTABLE_TRIM`` of them may be cut at a side), so an elongated
+    cloud fills the frame side-on and end-on alike (autzen_trim: 35 % of the frame on average,
+    against 12 % at one distance around the box's centre); distances and targets are running
+    means over an eighth of the orbit, so the camera glides instead of jumping."""
     if not (isinstance(n_frames, (int, np.integer)) and n_frames >= 1):
         raise GigapointError(f"turntable: number of frames must be a positive integer, got {n_frames!r}")
+    points = sample_points(cloud)
+    start_yaw = auto_view(points, width / height)[0] if start_yaw is None else start_yaw
+    pitch = VIEWS["iso"][1] if pitch is None else pitch  # (the auto view's steeper look suits side-on only)
     views = [(start_yaw + 360.0 * i / n_frames, pitch) for i in range(n_frames)]
-    fitted = [Camera.fit(cloud.bounds, view=v, width=width, height=height, fov=fov, margin=margin, projection=projection, recenter=False) for v in views]
-    lo, hi = (np.asarray(b, np.float64) for b in cloud.bounds)
-    center = tuple((lo + hi) / 2)
-    distance = max(float(np.linalg.norm(np.subtract(c.eye, c.target))) for c in fitted)
-    extra = {"projection": projection, "ortho_height": max(c.ortho_height for c in fitted)} if projection == "orthographic" else {}
-    return [Camera.orbit(center, v[0], v[1], distance, fov=fov, width=width, height=height, **extra) for v in views]
+    fit = {"width": width, "height": height, "fov": fov, "margin": margin, "projection": projection, "points": points, "trim": TURNTABLE_TRIM}
+    fitted = [Camera.fit(cloud.bounds, view=v, **fit) for v in views]
+    targets = np.array([c.target for c in fitted])
+    distances = np.array([float(np.linalg.norm(np.subtract(c.eye, c.target))) for c in fitted])
+    half = n_frames // 16  # the window: 2 * half + 1 frames, about an eighth of the orbit
+    if half > 0:
+        ring = (np.arange(-half, half + 1)[:, None] + np.arange(n_frames)[None, :]) % n_frames  # (window, frames), wrapping
+        distances = distances[ring].mean(axis=0)
+        targets = targets[ring].mean(axis=0)
+    if projection == "orthographic":
+        extra = {"projection": projection, "ortho_height": max(c.ortho_height for c in fitted)}
+    else:
+        extra = {}
+    return [Camera.orbit(tuple(t), v[0], v[1], float(d), fov=fov, width=width, height=height, **extra) for v, t, d in zip(views, targets, distances)]
 
 
 def interpolate_cameras(keys: list[Camera], n_frames: int) -> list[Camera]:
@@ -55,20 +76,29 @@ def interpolate_cameras(keys: list[Camera], n_frames: int) -> list[Camera]:
     return out
 
 
-def _check_path(path) -> Path:
+def _check_path(path, overwrite: bool = False) -> Path:
     path = Path(path)
     if path.suffix.lower() not in VIDEO_SUFFIXES:
         raise GigapointError(f"{path}: unsupported video type {path.suffix or '(none)'!r}; use one of {', '.join(sorted(VIDEO_SUFFIXES))}")
     if not path.parent.exists():
         raise GigapointError(f"{path}: directory {path.parent} does not exist")
+    if path.is_dir():
+        raise GigapointError(f"{path}: is a directory, not a video file")
+    if path.exists() and not overwrite:
+        raise GigapointError(f"{path}: already exists; pass overwrite=True to replace it")
     return path
 
 
-def render_flythrough(cloud, cameras, path, settings: RenderSettings | None = None, fps: float = 30.0, progress=None) -> Path:
-    """Render ``cameras`` one after another into the video ``path``; returns the path."""
+def render_flythrough(
+    cloud, cameras, path, settings: RenderSettings | None = None, fps: float = 30.0, progress=None, overwrite: bool = False
+) -> Path:
+    """Render ``cameras`` one after another into the video ``path``; returns the path.
+
+    An existing file at ``path`` is replaced only with ``overwrite=True``. ``progress(done,
+    total)`` is called after each frame."""
     from .renderer import render
 
-    path = _check_path(path)
+    path = _check_path(path, overwrite)
     settings = settings or RenderSettings()
     if not (math.isfinite(fps) and fps > 0):
         raise GigapointError(f"video fps must be > 0, got {fps!r}")
@@ -80,7 +110,11 @@ def render_flythrough(cloud, cameras, path, settings: RenderSettings | None = No
         if path.suffix.lower() == ".gif":
             from PIL import Image
 
-            frames = [Image.fromarray(render(cloud, cam, settings)[..., :3]) for cam in cameras]
+            frames = []
+            for i, cam in enumerate(cameras):
+                frames.append(Image.fromarray(render(cloud, cam, settings)[..., :3]))
+                if progress is not None:
+                    progress(i + 1, len(cameras))
             frames[0].save(tmp, save_all=True, append_images=frames[1:], duration=round(1000 / fps), loop=0)
         else:
             try:
@@ -107,12 +141,16 @@ def render_turntable(
     settings: RenderSettings | None = None,
     width=1280,
     height=720,
-    pitch=30.0,
+    pitch=None,
     fov=60.0,
     fps=30.0,
     progress=None,
+    overwrite: bool = False,
 ) -> Path:
-    """A video of the camera orbiting the cloud once in ``n_frames`` frames."""
+    """A video of the camera orbiting the cloud once in ``n_frames`` frames (``turntable_cameras``).
+    An existing file at ``path`` is replaced only with ``overwrite=True``."""
     if width % 2 or height % 2:
         raise GigapointError(f"turntable: width and height must be even for video encoding, got {width}x{height}")
-    return render_flythrough(cloud, turntable_cameras(cloud, n_frames, width, height, pitch, fov), path, settings, fps, progress)
+    _check_path(path, overwrite)  # before any frame is rendered
+    cameras = turntable_cameras(cloud, n_frames, width, height, pitch, fov)
+    return render_flythrough(cloud, cameras, path, settings, fps, progress, overwrite)

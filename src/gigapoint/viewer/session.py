@@ -23,6 +23,7 @@ import numpy as np
 
 from ..core.layout import EMPTY_PIXEL
 from ..errors import GigapointError, GigapointWarning
+from ..render.camera import sample_points
 from ..render.frame import Frame
 from ..render.renderer import render_frame
 from ..render.settings import RenderSettings
@@ -189,19 +190,30 @@ class ViewerCore:
         self.last_active: Session | None = None
         lo, hi = cloud.bounds
         self.bounds = (np.asarray(lo, np.float64), np.asarray(hi, np.float64))
+        self.framing = sample_points(cloud)  # what the 'auto' view frames: the data, not its box
         self.watcher = None
         self.note = ""  # a line for the HUD (what a conversion preview shows)
         from ..lod.preview import ConversionPreview
+        from ..lod.progressive import ProgressiveOctree
 
         if isinstance(cloud, ConversionPreview):  # an unfinished conversion: follow it to its octree
             from .watch import ConversionWatcher
 
             self.watcher = ConversionWatcher(self, cloud.octree_dir).start()
+        elif isinstance(cloud, ProgressiveOctree) and cloud.loader is not None:  # filling: redraw as it grows
+            from .watch import LoadWatcher
+
+            self.watcher = LoadWatcher(self, cloud).start()
 
     def replace_cloud(self, cloud) -> None:
         """Draw ``cloud`` from now on (a newer preview, or the finished octree); every tab redraws, views stay."""
+        self.framing = sample_points(cloud)  # before it is drawn: no frame reads its buffers yet
         self.cloud = cloud
-        lo, hi = cloud.bounds
+        self.redraw()
+
+    def redraw(self) -> None:
+        """Every tab draws again (the cloud changed: swapped, or grown while it loads); views stay."""
+        lo, hi = self.cloud.bounds
         self.bounds = (np.asarray(lo, np.float64), np.asarray(hi, np.float64))
         for s in list(self.sessions.values()):
             with s.cond:
@@ -241,8 +253,8 @@ class ViewerCore:
         for s in list(self.sessions.values()):
             self.close_session(s)
 
-    def default_state(self, width: int, height: int, view="iso") -> OrbitState:
-        return OrbitState.fit(self.bounds, view=view, width=width, height=height)
+    def default_state(self, width: int, height: int, view="auto", fov=60.0) -> OrbitState:
+        return OrbitState.fit(self.bounds, view=view, width=width, height=height, fov=fov, points=self.framing if view == "auto" else None)
 
     def screenshot(self, session_id: str | None = None, width=None, height=None, scale: int = 1) -> bytes:
         """PNG of a tab's view (or the default view) at its size x ``scale`` or at width x height."""
@@ -349,11 +361,11 @@ class Session:
                     fov=P.number(msg, "fov", 1, 150) if "fov" in msg else None,
                 )
             elif kind in ("view", "reset"):
-                name = msg.get("name", "iso") if kind == "view" else "iso"
+                name = msg.get("name", "auto") if kind == "view" else "auto"
                 if name not in P.VIEW_NAMES:
                     raise P.ProtocolError(f"view: unknown view {str(name)[:20]!r}; choose one of {', '.join(P.VIEW_NAMES)}")
                 fov = 60.0 if kind == "reset" else st.fov
-                self.state = OrbitState.fit(self.core.bounds, view=name, width=self.width, height=self.height, fov=fov)
+                self.state = self.core.default_state(self.width, self.height, view=name, fov=fov)
             elif kind == "fov":
                 st.set(fov=P.number(msg, "value", 1, 150))
             elif kind == "pick":

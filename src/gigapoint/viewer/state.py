@@ -33,12 +33,17 @@ class OrbitState:
     scene_radius: float = 1.0  # bounds the distance and how far the target may wander
 
     @classmethod
-    def fit(cls, bounds, view="iso", width=1280, height=720, fov=60.0) -> OrbitState:
-        cam = Camera.fit(bounds, view=view, width=width, height=height, fov=fov)
+    def fit(cls, bounds, view="auto", width=1280, height=720, fov=60.0, points=None) -> OrbitState:
+        """The state of ``Camera.fit`` (``points``: what to frame, ``render.camera.sample_points``)."""
+        cam = Camera.fit(bounds, view=view, width=width, height=height, fov=fov, points=points)
         yaw, pitch = VIEWS[view] if isinstance(view, str) else view
+        back = np.subtract(cam.eye, cam.target)
+        distance = float(np.linalg.norm(back))
+        if yaw is None:  # 'auto': the angles it chose, read back from the camera
+            yaw = math.degrees(math.atan2(back[1], back[0]))
+            pitch = math.degrees(math.asin(max(-1.0, min(1.0, back[2] / distance))))
         lo, hi = np.asarray(bounds[0], np.float64), np.asarray(bounds[1], np.float64)
         radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-6)
-        distance = float(np.linalg.norm(np.subtract(cam.eye, cam.target)))
         return cls(np.array(cam.target, np.float64), float(yaw), float(pitch), distance, float(fov), radius)
 
     # --- derived ----------------------------------------------------------------

@@ -1,4 +1,5 @@
-"""Follow a conversion that is still running: newer previews, then the finished octree.
+"""Follow a cloud that is still being made: a conversion (newer previews, then the finished
+octree: ConversionWatcher), or a progressive octree filling (LoadWatcher).
 
 ``gigapoint view OUT`` on an unfinished conversion starts with its preview (a
 ConversionPreview, lod/preview.py). A thread polls the octree folder (lod/octree_dir.py)
@@ -9,6 +10,7 @@ good when the octree is complete; the tabs redraw with their camera unchanged.
 from __future__ import annotations
 
 import threading
+import time
 import warnings
 
 from ..errors import GigapointError, GigapointWarning
@@ -73,3 +75,47 @@ class ConversionWatcher:
                     self.core.replace_cloud(cloud)
             except (GigapointError, OSError, ValueError):
                 continue  # caught between two atomic renames, or the conversion was restarted: look again
+
+
+def load_note(cloud, rate: float) -> str:
+    """One line for the HUD while a progressive octree fills: points loaded and their rate."""
+    if cloud.error is not None:
+        return f"loading stopped: {cloud.error}; showing the {cloud.n_points:,} points loaded"
+    total = f" of {cloud.loader.total:,}" if cloud.loader.total else ""
+    if not cloud.loading:
+        return f"loaded {cloud.n_points:,} points in {cloud.loader.finished_at - cloud.loader.started:.1f} s"
+    return f"loading: {cloud.loader.read:,}{total} points read, {rate / 1e6:.1f} M points/s"
+
+
+class LoadWatcher:
+    """While a progressive octree fills: redraw every tab ``interval_s`` (what is loaded so far)
+    and keep the HUD's line on points loaded and points/s; one last redraw when it is done."""
+
+    def __init__(self, core, cloud, interval_s: float = 0.25):
+        self.core = core
+        self.cloud = cloud
+        self.interval_s = interval_s
+        self.finished = threading.Event()
+        core.note = load_note(cloud, 0.0)
+        self._thread = threading.Thread(target=self._run, name="gigapoint-load-watch", daemon=True)
+
+    def start(self) -> LoadWatcher:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self.finished.set()
+
+    def _run(self) -> None:
+        last = (self.cloud.loader.read, self.cloud.loader.started)
+        rate = 0.0
+        while not self.finished.wait(self.interval_s):
+            now = (self.cloud.loader.read, time.perf_counter())
+            recent = (now[0] - last[0]) / max(now[1] - last[1], 1e-9)
+            rate = 0.7 * rate + 0.3 * recent if rate else recent
+            last = now
+            done = not self.cloud.loading
+            self.core.note = load_note(self.cloud, rate)
+            self.core.redraw()
+            if done:
+                self.finished.set()

@@ -20,7 +20,8 @@ Phases (each resumable; the state is saved atomically in the output folder, ``Oc
 
 A re-run after an interruption resumes where the state says (same inputs and options,
 state.py), otherwise it starts clean. converter.py runs the phases in order (``convert``);
-the output folder itself (kind, lock, clearing, state file) is ../octree_dir.py's.
+the output folder itself (kind, lock, clearing, state file) is ../octree_dir.py's. With a Dask
+client (``convert(..., client=...)``) distributed.py runs the same phases as tasks on workers.
 """
 
 from ..octree_dir import ConvertError, OutputExistsError

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..build import SAMPLERS
+from ..copc_write import check_output as check_copc_output
 from ..octree_dir import ConvertError
 from ..progress import NullProgress, RichProgress
 from .keep_freed_memory import KeepFreedMemory
@@ -41,6 +42,9 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
     """One conversion (state.Job) with every phase: read (read.py), count and distribute
     (partition.py), build, group, upper and write (phases.py)."""
 
+    def output_ready(self) -> None:
+        """The output folder is prepared and the state saved; the phases come next (distributed.py checks its workers here)."""
+
     def run(self, overwrite: bool) -> ConvertResult:
         self.t0 = time.perf_counter()
         fp = self.fingerprint()
@@ -57,6 +61,7 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
             self.first_view = 0.0  # the interrupted run's preview: viewable from the start
         self.state = saved or {"fingerprint": fp, "phase": "read"}
         self.save_state()
+        self.output_ready()
         steps = {
             "read": self.read,
             "count": self.count,
@@ -102,6 +107,7 @@ def convert(
     name: str | None = None,
     encoding: str = "DEFAULT",
     upper_points: int | None = None,
+    client=None,
 ) -> ConvertResult:
     """Convert point cloud files (or an iterable of PointChunks) into an LOD octree directory ``out``.
 
@@ -110,11 +116,19 @@ def convert(
     inputs can resume after an interruption; chunk iterables always start clean.
     ``partition_points``, ``chunk_size`` and ``upper_points`` (the carried root points joined
     at once, default ``partition_points``) are tuning knobs, derived from the memory limit.
+
+    ``client``: run the conversion as Dask tasks (distributed.py): a ``distributed.Client``, a
+    scheduler address (``"tcp://host:8786"``) or a number of local single-threaded worker
+    processes (a ``LocalCluster``, closed at the end). Workers read the inputs and write into
+    ``out``, which must be a path every worker sees (a shared file system); the octree is the
+    one this function makes without a client. ``memory_limit`` is then per worker.
     """
     if sampler not in SAMPLERS:
         raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
     if format not in FORMATS:
         raise ConvertError(f"--format: unknown format {format!r}; choose {' or '.join(FORMATS)}")
+    if format == "copc" and out is not None and str(out) != "":
+        check_copc_output(out, overwrite)
     if not (isinstance(max_leaf, int) and max_leaf >= 100):
         raise ConvertError(f"max_leaf must be an integer >= 100, got {max_leaf!r}")
     if encoding not in ENCODINGS:
@@ -122,7 +136,12 @@ def convert(
     mem = parse_memory(memory_limit)
     if out is None or str(out) == "":
         raise ConvertError("convert: no output directory given (-o OUT)")
-    conv = _Converter(
+    cls = _Converter
+    if client is not None:
+        from .distributed import DaskPhases, open_client  # dask is imported only when asked for
+
+        cls = type("_DaskConverter", (DaskPhases, _Converter), {})
+    conv = cls(
         inputs,
         out,
         sampler,
@@ -136,5 +155,8 @@ def convert(
         encoding,
         upper_points,
     )
+    if client is not None:
+        with open_client(client, announce=progress) as conv.client:
+            return conv.run(overwrite)
     with KeepFreedMemory():
         return conv.run(overwrite)

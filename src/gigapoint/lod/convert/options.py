@@ -14,7 +14,7 @@ BYTES_PER_POINT_BUILD = 220  # peak working set per point of a partition build
 # points/s in 4 M-point ones (page faults on a larger working set, cache misses in the sort).
 MAX_PARTITION_POINTS = 4_000_000
 DEFAULT_MAX_LEAF = 20_000
-FORMATS = ("gigapoint", "potree")
+FORMATS = ("gigapoint", "potree", "copc")
 ENCODINGS = ("DEFAULT", "BROTLI")  # Potree's
 
 

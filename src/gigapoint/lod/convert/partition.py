@@ -63,6 +63,20 @@ def plan_groups(carried: dict, budget: int) -> list[list]:
     return best or []
 
 
+def grid_cells(xyz: np.ndarray, origin, edge: float) -> np.ndarray:
+    """Each point's cell of the count grid (int64: its node key's low bits at COUNT_LEVEL)."""
+    return (point_codes(np.ascontiguousarray(xyz), origin, edge) >> np.uint64(3 * (CODE_BITS - COUNT_LEVEL))).astype(np.int64)
+
+
+def partition_lut(parts: list) -> np.ndarray:
+    """The partition (its index in ``parts``, a plan_partitions result) of every count-grid cell."""
+    lut = np.empty(8**COUNT_LEVEL, np.int32)
+    for pid, (lev, prefix, _) in enumerate(parts):
+        span = 8 ** (COUNT_LEVEL - lev)
+        lut[prefix * span : (prefix + 1) * span] = pid
+    return lut
+
+
 def built_name(level: int, prefix: int) -> str:
     """A partition's name (its files, its built node set): its root's node key in hex."""
     return f"p{(1 << 3 * level) | prefix:x}"
@@ -83,14 +97,18 @@ class PartitionPhases(Job):
     def count(self) -> None:
         st = self.state
         origin, edge = np.array(st["origin"]), st["edge"]
-        shift = np.uint64(3 * (CODE_BITS - COUNT_LEVEL))
         counts = np.zeros(8**COUNT_LEVEL, np.int64)
         self.progress.phase("count", st["points"])
         for i in range(st["chunks"]):
-            xyz = np.ascontiguousarray(load_raw_chunk(self.dir.raw, i, [])["xyz"])
+            xyz = load_raw_chunk(self.dir.raw, i, [])["xyz"]
             if len(xyz):
-                counts += np.bincount((point_codes(xyz, origin, edge) >> shift).astype(np.int64), minlength=len(counts))
+                counts += np.bincount(grid_cells(xyz, origin, edge), minlength=len(counts))
             self.progress.advance(len(xyz))
+        self._plan(counts)
+
+    def _plan(self, counts: np.ndarray) -> None:
+        """The partitions of the count grid ``counts`` (saved in the state): the distribute phase is next."""
+        st = self.state
         budget = st.setdefault("partition_points", self.partition_points)  # a resumed run keeps the first run's plan
         parts = plan_partitions(counts, 0, 0, COUNT_LEVEL, budget)
         st.update(partitions=parts, part_counts=[0] * len(parts), distributed=0, phase="distribute")
@@ -140,24 +158,20 @@ class PartitionPhases(Job):
             self.save_state()
             return
         if st["distributed"] < st["chunks"]:
-            lut = np.empty(8**COUNT_LEVEL, np.int32)
-            for pid, (lev, prefix, _) in enumerate(parts):
-                span = 8 ** (COUNT_LEVEL - lev)
-                lut[prefix * span : (prefix + 1) * span] = pid
+            lut = partition_lut(parts)
             dts = self._dtypes()
             # a chunk interrupted half-way: cut every partition file back to the last checkpoint
             for pid, (lev, prefix, _) in enumerate(parts):
                 for key, path in self._part_files(lev, prefix).items():
                     if path.exists():
                         os.truncate(path, counts[pid] * dts[key].itemsize * (3 if key == "xyz" else 1))  # xyz rows are 3 values
-            shift = np.uint64(3 * (CODE_BITS - COUNT_LEVEL))
             self.progress.phase("distribute", st["points"])
             pieces, held = [], 0  # chunks grouped since the last checkpoint, and their bytes
             for i in range(st["distributed"], st["chunks"]):
                 data = load_raw_chunk(self.dir.raw, i, st["attributes"])
                 xyz = np.ascontiguousarray(data["xyz"])
                 if len(xyz):
-                    pieces.append(self._by_partition(data, lut[(point_codes(xyz, origin, edge) >> shift).astype(np.int64)], len(parts)))
+                    pieces.append(self._by_partition(data, lut[grid_cells(xyz, origin, edge)], len(parts)))
                     held += sum(v.nbytes for v in pieces[-1][0].values())
                 del data
                 if held >= self.distribute_bytes or i == st["chunks"] - 1:

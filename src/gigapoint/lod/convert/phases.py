@@ -19,13 +19,38 @@ from ...atomic import atomic_npy
 from ...core.layout import BATCH_DTYPE
 from ...core.quantize import _quantize_batches
 from ..build import color_sums, filtered_colors, init_ownlevel, owned_order, sample_tree, sort_codes, split_tree, take, upper_tree
+from ..copc_write import write_copc_sets
 from ..keys import level_of, point_codes
 from ..potree import write_potree
 from ..writer import write_gigapoint
 from . import hooks
 from .partition import built_name, group_name, plan_groups, set_name
-from .spill import load_raw_chunk, raw_chunk_files
+from .spill import copy_range, load_raw_chunk, npy_data_offset, raw_chunk_files
 from .state import Job
+
+LOCAL = "local."  # prefix of a node set's own copy of its output arrays and records (local_sets), until place_set
+
+
+def place_set(dest: Path, outputs: dict, off: int) -> int:
+    """A node set built with ``local_sets`` placed into the output arrays (``outputs``: {name:
+    (path, dtype, data offset)}, as ``_outputs`` gives): its points copied to point ``off``, its
+    node records' ``first`` moved there (nodes.npy), span.npy written last, its own copies then
+    removed. Placed already (span.npy there): nothing to do. Returns its number of points."""
+    span = dest / "span.npy"
+    if span.exists():
+        return int(np.diff(np.load(span))[0])
+    nodes = np.load(dest / f"{LOCAL}nodes.npy")
+    n = int(nodes["count"].sum())
+    for k, (path, dt, data_off) in outputs.items():
+        if n:
+            src = dest / f"{LOCAL}{k}.npy"
+            copy_range(src, npy_data_offset(src), path, data_off + off * dt.itemsize, n * dt.itemsize)
+    nodes["first"] += np.uint64(off)
+    atomic_npy(dest / "nodes.npy", nodes)
+    atomic_npy(span, np.array([off, off + n], np.int64))
+    for k in [*outputs, "nodes"]:
+        (dest / f"{LOCAL}{k}.npy").unlink(missing_ok=True)
+    return n
 
 
 def save_carry(dest: Path, root_key: int, has_children: bool, gathered: dict, arrays: dict, idx) -> None:
@@ -44,46 +69,60 @@ class BuildPhases(Job):
 
     _outs: dict | None = None
     _next: int | None = None  # next free offset in the output arrays (_next_offset)
+    local_sets = False  # gigapoint format: node sets keep their points in their own folder until placed (place_set)
 
     # -- phase 4
     def build(self) -> None:
         st = self.state
-        origin, edge = np.array(st["origin"]), st["edge"]
-        built = self.dir.built
-        built.mkdir(exist_ok=True)
+        self.dir.built.mkdir(exist_ok=True)
         self.progress.phase("build", st["points"])
-        done_now = 0
-        for pid, (lev, prefix, _) in enumerate(st["partitions"]):
-            n = st["part_counts"][pid]
-            target = built / built_name(lev, prefix)
-            if target.exists() or n == 0:
-                self.progress.advance(n)
-                continue
-            files = self._part_files(lev, prefix)
-            if st.get("from_raw"):
-                parts = [load_raw_chunk(self.dir.raw, i, st["attributes"]) for i in range(st["chunks"])]
-                data = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-                files = {f"raw{i}": f for i, f in enumerate(raw_chunk_files(self.dir.raw))}
-                del parts
-            else:
-                data = {
-                    k: np.fromfile(path, dtype=np.float64 if k == "xyz" else (np.uint32 if k == "rgba" else st["attributes"][k[5:]]))
-                    for k, path in files.items()
-                }
-                data["xyz"] = data["xyz"].reshape(-1, 3)
-            root_key = (1 << 3 * lev) | prefix
-            tmp = built / (built_name(lev, prefix) + ".tmp")
-            shutil.rmtree(tmp, ignore_errors=True)
-            tmp.mkdir()
-            self._build_subtree(data, root_key, origin, edge, tmp)
-            os.replace(tmp, target)
-            for path in files.values():
-                path.unlink(missing_ok=True)
-            self.progress.advance(n)
-            done_now += 1
-            hooks.after_partition_built(done_now)
+        self._build_partitions([(lev, prefix, st["part_counts"][pid]) for pid, (lev, prefix, _) in enumerate(st["partitions"])])
         st["phase"] = "group"
         self.save_state()
+
+    def _build_partitions(self, parts: list) -> None:
+        """Build the partitions [(level, prefix, points), ...] in turn (distributed.py: as tasks)."""
+        done_now = 0
+        for lev, prefix, n in parts:
+            built_now = self.build_partition(lev, prefix, n)
+            self.progress.advance(n)
+            if built_now:
+                done_now += 1
+                hooks.after_partition_built(done_now)
+
+    def build_partition(self, lev: int, prefix: int, n: int) -> bool:
+        """Partition (lev, prefix) of ``n`` points -> its node set ``built/p<key>``: a local octree
+        split to ``max_leaf`` points a leaf and sampled bottom-up, its root's points carried up;
+        then its input files are removed. Written under a temporary name and renamed, so a
+        repeated call (a resumed run, a retried task) finds it done. False: nothing to do (built
+        already, or empty)."""
+        st = self.state
+        built = self.dir.built
+        target = built / built_name(lev, prefix)
+        if target.exists() or n == 0:
+            return False
+        data, files = self._partition_input(lev, prefix)
+        tmp = built / (built_name(lev, prefix) + ".tmp")
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir()
+        self._build_subtree(data, (1 << 3 * lev) | prefix, np.array(st["origin"]), st["edge"], tmp)
+        os.replace(tmp, target)
+        for path in files:
+            path.unlink(missing_ok=True)
+        return True
+
+    def _partition_input(self, lev: int, prefix: int) -> tuple[dict, list[Path]]:
+        """A partition's points ({"xyz": (n, 3), "rgba", "attr.<name>"}, in input order) and the
+        files they were read from (removed once it is built)."""
+        st = self.state
+        if st.get("from_raw"):  # one partition: the spilled chunks themselves
+            parts = [load_raw_chunk(self.dir.raw, i, st["attributes"]) for i in range(st["chunks"])]
+            return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}, raw_chunk_files(self.dir.raw)
+        files = self._part_files(lev, prefix)
+        dts = self._dtypes()
+        data = {k: np.fromfile(path, dtype=dts[k]) for k, path in files.items()}
+        data["xyz"] = data["xyz"].reshape(-1, 3)
+        return data, list(files.values())
 
     def _build_subtree(self, data: dict, root_key: int, origin, edge, dest: Path) -> None:
         xyz = data.pop("xyz")
@@ -121,10 +160,8 @@ class BuildPhases(Job):
         phases fill in place; the write phase only renames them. {name: (path, dtype, data offset)}."""
         if self._outs is None:
             total = int(self.state["points"])
-            dts = {k: np.dtype(np.uint32) for k in ("low", "med", "high", "color", "rgba")}
-            dts.update({f"attr.{a}": np.dtype(d) for a, d in self.state["attributes"].items()})
             self._outs = {}
-            for k, dt in dts.items():
+            for k, dt in self._output_dtypes().items():
                 path = self.dir.array_in_progress(k)
                 arr = np.load(path, mmap_mode="r") if path.exists() else None
                 if arr is None or arr.shape != (total,) or arr.dtype != dt:
@@ -132,6 +169,12 @@ class BuildPhases(Job):
                 self._outs[k] = (path, dt, arr.offset)
                 del arr
         return self._outs
+
+    def _output_dtypes(self) -> dict:
+        """gigapoint format: the output point arrays' names and dtypes."""
+        dts = {k: np.dtype(np.uint32) for k in ("low", "med", "high", "color", "rgba")}
+        dts.update({f"attr.{a}": np.dtype(d) for a, d in self.state["attributes"].items()})
+        return dts
 
     def _output_slices(self, start: int, n: int) -> dict:
         """Memory maps of points start..start+n of every output array. Only this node set's pages
@@ -184,8 +227,16 @@ class BuildPhases(Job):
             for k, v in data.items():
                 atomic_npy(dest / f"{k}.npy", take(v, idx))
             return
-        off = self._next_offset()
-        outs = self._output_slices(off, n) if n else {k: np.empty(0, dt) for k, (_, dt, _) in self._outputs().items()}
+        if self.local_sets:  # placed into the output arrays later (place_set), at an offset not known yet
+            off = 0
+            dts = self._output_dtypes()
+            if n:
+                outs = {k: np.lib.format.open_memmap(dest / f"{LOCAL}{k}.npy", mode="w+", dtype=dt, shape=(n,)) for k, dt in dts.items()}
+            else:
+                outs = {k: np.empty(0, dt) for k, dt in dts.items()}
+        else:
+            off = self._next_offset()
+            outs = self._output_slices(off, n) if n else {k: np.empty(0, dt) for k, (_, dt, _) in self._outputs().items()}
         sl = slice(0, n)
         nodes = np.zeros(len(keys), BATCH_DTYPE)
         first = np.cumsum(counts) - counts
@@ -201,6 +252,9 @@ class BuildPhases(Job):
         for k, v in data.items():
             take(v, idx, out=outs[k][sl])
         del outs, low, med, high  # unmapped; a killed process's writes stay in the page cache
+        if self.local_sets:
+            atomic_npy(dest / f"{LOCAL}nodes.npy", nodes)
+            return
         atomic_npy(dest / "nodes.npy", nodes)
         np.save(dest / "span.npy", np.array([off, off + n], np.int64))
         self._next = off + n
@@ -228,15 +282,7 @@ class BuildPhases(Job):
             if not st["round"]:
                 break
             self.progress.phase("group", None)
-            for level, prefix, members in st["round"]:
-                target = built / group_name(level, prefix)
-                if target.exists():
-                    continue
-                tmp = built / (group_name(level, prefix) + ".tmp")
-                shutil.rmtree(tmp, ignore_errors=True)
-                tmp.mkdir()
-                self._join_roots([dirs[tuple(m)] for m in members], (1 << 3 * level) | prefix, tmp)
-                os.replace(tmp, target)
+            self._join_groups([(level, prefix, [dirs[tuple(m)] for m in members]) for level, prefix, members in st["round"]])
             joined = {tuple(m) for _, _, members in st["round"] for m in members}
             st["top_sets"] = [t for t in st["top_sets"] if (t[0], t[1]) not in joined] + [[lev, pre, "g"] for lev, pre, _ in st["round"]]
             st["groups"] += [[lev, pre] for lev, pre, _ in st["round"]]
@@ -244,6 +290,24 @@ class BuildPhases(Job):
             self.save_state()
         st["phase"] = "upper"
         self.save_state()
+
+    def _join_groups(self, groups: list) -> None:
+        """Join a round's groups [(level, prefix, member set dirs), ...] in turn (distributed.py: as tasks)."""
+        for level, prefix, members in groups:
+            self.join_group(level, prefix, members)
+
+    def join_group(self, level: int, prefix: int, members: list[Path]) -> None:
+        """The group (level, prefix) of the built sets ``members``: its node set ``built/g<key>``
+        (temporary name, then renamed; nothing to do when it is there)."""
+        built = self.dir.built
+        target = built / group_name(level, prefix)
+        if target.exists():
+            return
+        tmp = built / (group_name(level, prefix) + ".tmp")
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir()
+        self._join_roots(members, (1 << 3 * level) | prefix, tmp)
+        os.replace(tmp, target)
 
     def _top_sets(self) -> list[Path]:
         """The built sets whose roots the upper phase joins (every partition, before grouping)."""
@@ -293,13 +357,18 @@ class BuildPhases(Job):
             self.save_state()
             return
         self.progress.phase("upper", None)
+        self.build_upper(self._top_sets())
+        st["phase"] = "write"
+        self.save_state()
+
+    def build_upper(self, tops: list[Path]) -> None:
+        """The nodes above the built sets ``tops``, up to the root: ``built/upper`` (temporary name, then renamed)."""
+        built = self.dir.built
         tmp = built / "upper.tmp"
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir()
-        self._join_roots(self._top_sets(), 1, tmp)
-        os.replace(tmp, target)
-        st["phase"] = "write"
-        self.save_state()
+        self._join_roots(tops, 1, tmp)
+        os.replace(tmp, built / "upper")
 
     # -- phase 7
     def sources(self) -> list[Path]:
@@ -313,8 +382,12 @@ class BuildPhases(Job):
         self.progress.phase("write", st["points"])
         if self.format == "potree":
             n_nodes = write_potree(self.dir, self.sources(), st, self.name, self.progress, self.encoding)
+        elif self.format == "copc":  # one file beside the working folder, which goes once it is written
+            n_nodes = write_copc_sets(self.out, self.sources(), st, self.progress)
         else:
             self._close_outputs()
             n_nodes = write_gigapoint(self.dir, self.sources(), st, self.name, self.sampler, self.max_leaf, self.progress)
         self.dir.remove_partial()
+        if self.format == "copc":
+            self.dir.path.rmdir()
         return n_nodes

@@ -14,6 +14,7 @@ from ...io import read_chunks
 from ...io.registry import reader_for
 from ..build import valid_bounds
 from ..preview import PreviewSampler, preview_points
+from .facts import input_facts
 from .prefetch import prefetch
 from .spill import load_raw_chunk, save_raw_chunk
 from .state import Job
@@ -22,6 +23,28 @@ from .state import Job
 def _read_chunks(path, chunk_size: int):
     """The chunks of one input file (any format gigapoint.io reads); a seam the tests stop."""
     return read_chunks(path, chunk_size)
+
+
+def merge_attributes(attrs: dict | None, names: dict) -> dict:
+    """The attributes every chunk so far has (``attrs``; None before the first) and this one's
+    (``names``: {name: dtype str}) have alike, in the first chunk's order."""
+    return names if attrs is None else {a: d for a, d in attrs.items() if names.get(a) == d}
+
+
+def spill_chunk(raw, i: int, chunk) -> tuple:
+    """Chunk ``i``'s valid points spilled to ``raw`` (spill.save_raw_chunk): its positions, colors
+    and 1-D attributes. Returns (xyz, rgba as u32, {attribute: values}, {attribute: dtype str},
+    invalid points, bounds min, bounds max; the bounds are None without a valid point)."""
+    n_in = len(chunk)
+    valid, c_lo, c_hi = valid_bounds(chunk.xyz, MAX_ABS_COORDINATE)
+    n_valid = int(np.count_nonzero(valid))
+    keep = slice(None) if n_valid == n_in else valid
+    xyz = chunk.xyz[keep]
+    names = {a: v.dtype.str for a, v in chunk.attributes.items() if v.ndim == 1}
+    rgba = np.ascontiguousarray(chunk.rgba[keep]).view(np.uint32).reshape(-1)
+    kept = {a: np.ascontiguousarray(chunk.attributes[a][keep]) for a in names}
+    save_raw_chunk(raw, i, xyz, rgba, kept)
+    return xyz, rgba, kept, names, n_in - n_valid, (c_lo if n_valid else None), (c_hi if n_valid else None)
 
 
 def _point_total(paths) -> int | None:
@@ -62,28 +85,24 @@ class ReadPhase(Job):
             if i < done:
                 self.progress.advance(n_in)
                 continue
-            valid, c_lo, c_hi = valid_bounds(chunk.xyz, MAX_ABS_COORDINATE)
-            n_valid = int(np.count_nonzero(valid))
-            keep = slice(None) if n_valid == n_in else valid
-            xyz = chunk.xyz[keep]
-            st["skipped"] = st.get("skipped", 0) + int(n_in - n_valid)
-            names = {a: v.dtype.str for a, v in chunk.attributes.items() if v.ndim == 1}
-            if attrs is None:
-                attrs = names
-            else:
-                attrs = {a: d for a, d in attrs.items() if names.get(a) == d}
-            if n_valid:
+            xyz, rgba, kept, names, invalid, c_lo, c_hi = spill_chunk(raw, i, chunk)
+            st["skipped"] = st.get("skipped", 0) + int(invalid)
+            attrs = merge_attributes(attrs, names)
+            if c_lo is not None:
                 lo = np.minimum(lo, c_lo)
                 hi = np.maximum(hi, c_hi)
-            rgba = np.ascontiguousarray(chunk.rgba[keep]).view(np.uint32).reshape(-1)
-            kept = {a: np.ascontiguousarray(chunk.attributes[a][keep]) for a in names}
-            save_raw_chunk(raw, i, xyz, rgba, kept)
             preview.add(xyz, rgba, {a: kept[a] for a in attrs})
             st.update(chunks=i + 1, lo=lo.tolist(), hi=hi.tolist(), attributes=attrs, points=st.get("points", 0) + len(xyz))
             self._write_preview(preview)
             self.save_state()
             self.progress.advance(n_in)
         self._write_preview(preview, force=True)
+        self._end_read(lo, hi)
+
+    def _end_read(self, lo, hi) -> None:
+        """Every input read (points, skipped, attributes saved): the octree's cube from the bounds
+        ``lo``..``hi``; no valid point is an error, skipped points a warning."""
+        st = self.state
         if st.get("points", 0) == 0:
             skipped = st.get("skipped", 0)
             detail = f" ({skipped:,} invalid points: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
@@ -92,9 +111,10 @@ class ReadPhase(Job):
             warnings.warn(
                 f"{self.name}: skipped {st['skipped']:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})",
                 GigapointWarning,
-                stacklevel=3,
+                stacklevel=4,
             )
         edge = float(np.max(hi - lo))
+        st.setdefault("source", input_facts(self.paths))  # CRS, LAS grid, colors: for outputs that hold them
         st.update(origin=lo.tolist(), edge=edge if edge > 0 else 1.0, phase="count")
         self.save_state()
 

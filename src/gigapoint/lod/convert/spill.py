@@ -56,3 +56,46 @@ def append_file(path: Path, arrays: list) -> None:
                     break
     finally:
         os.close(fd)
+
+
+def npy_data_offset(path: Path) -> int:
+    """Where a .npy file's data starts (after its header)."""
+    with open(path, "rb") as f:
+        version = np.lib.format.read_magic(f)
+        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        read_header(f)
+        return f.tell()
+
+
+_BLOCK = 64 << 20
+
+
+def copy_range(src: Path, src_off: int, dst, dst_off: int, n: int) -> None:
+    """Copy ``n`` bytes of ``src`` from ``src_off`` into the existing file ``dst`` (a path, or a
+    descriptor open for writing) at ``dst_off``, in the kernel where it can (copy_file_range: no
+    copy through this process; a reflink on file systems that share extents), else through a
+    buffer. Copying the same bytes twice is harmless."""
+    fi = os.open(src, os.O_RDONLY)
+    try:
+        fo = dst if isinstance(dst, int) else os.open(dst, os.O_WRONLY)
+        try:
+            done = 0
+            fast = hasattr(os, "copy_file_range")
+            while done < n:
+                if fast:
+                    try:
+                        k = os.copy_file_range(fi, fo, min(n - done, 1 << 30), src_off + done, dst_off + done)
+                    except OSError:  # not across these file systems, or not on this kernel
+                        fast = False
+                        continue
+                else:
+                    buf = os.pread(fi, min(n - done, _BLOCK), src_off + done)
+                    k = os.pwrite(fo, buf, dst_off + done) if buf else 0
+                if k <= 0:
+                    raise OSError(f"{src}: ends before byte {src_off + n} (copying into {dst})")
+                done += k
+        finally:
+            if fo is not dst:
+                os.close(fo)
+    finally:
+        os.close(fi)

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from ...errors import InputError
 from ...io import expand_paths
+from ..copc_write import work_dir as copc_work_dir
 from ..octree_dir import OctreeDir
 from .options import BYTES_PER_POINT_BUILD, MAX_PARTITION_POINTS, rss_bytes
 
@@ -56,7 +57,7 @@ class Job:
     ):
         self.encoding = encoding
         self.out = Path(out)
-        self.dir = OctreeDir(self.out)
+        self.dir = OctreeDir(copc_work_dir(self.out) if format == "copc" else self.out)  # a COPC output is one file
         self.sampler = sampler
         self.format = format
         self.max_leaf = max_leaf

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..colors import point_colors
-from ..splats import splat_params
+from ..splats import largest_size, point_spacing, splat_params
 from .lighting import point_normals
 
 
@@ -21,9 +21,26 @@ def wants_composite(settings) -> bool:
     return settings.supersample > 1 or settings.stereo != "none"
 
 
-def splat_for(settings, camera):
-    """The ``splat`` argument of rasterization for points larger than a pixel (None: one pixel)."""
-    return splat_params(settings, camera) if settings.point_size > 1 else None
+def splat_for(settings, camera, draw=None, near: float = 0.0):
+    """The ``splat`` argument of rasterization for points larger than a pixel (None: one pixel).
+
+    Adaptive sizes (``RenderSettings.point_sizing``: 'adaptive') come from the point spacing of ``draw``'s buffers
+    (every ``draw.step``-th point drawn); where no point of its selection can reach two pixels
+    (a dense cloud, a far view) the one-pixel loop draws the same image, faster."""
+    if settings.point_sizing != "adaptive":
+        return splat_params(settings, camera) if settings.point_size > 1 else None
+    if draw is None or len(draw.selection.ids) == 0:
+        return None
+    splat = splat_params(settings, camera, point_spacing(draw.points, draw.step))
+    return splat if largest_size(splat, nearest_depth(draw.selection.matrices, near)) >= 2.0 else None
+
+
+def nearest_depth(matrices: np.ndarray, near: float) -> float:
+    """The smallest depth (not below ``near``) of the grid cubes [0, 1024]^3 that batch
+    ``matrices`` (k, 4, 4: row 3 is the depth) place."""
+    m = matrices[:, 3, :].astype(np.float64)
+    d = m[:, 3] + np.minimum(m[:, :3] * 1024.0, 0.0).sum(axis=1)
+    return max(float(d.min()), near)
 
 
 def finish_frame(backend, draw, camera, vis, settings, near, far) -> tuple[np.ndarray, np.ndarray, int | None]:
@@ -41,7 +58,7 @@ def finish_frame(backend, draw, camera, vis, settings, near, far) -> tuple[np.nd
         if settings.hqs:
             colors = passes.hqs_colors(
                 points, draw.selection, vis, width, height, near, far, colors_per_point, colors,
-                settings.hqs_depth_tolerance, settings.threads, splat_for(settings, camera), settings.splat_softness,
+                settings.hqs_depth_tolerance, settings.threads, splat_for(settings, camera, draw, near), settings.splat_softness,
             )  # fmt: skip
         if settings.lighting:
             colors = passes.shade(vis, colors, point_normals(points), camera, settings.shininess)

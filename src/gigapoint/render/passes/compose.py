@@ -122,7 +122,7 @@ def render_views(cloud, cameras, settings, backend, multi) -> list[Frame]:
     t1 = time.perf_counter()
     vis = backend.rasterize_views(
         multi.points, multi.ids, multi.bits, multi.matrices, width, height, [v.near for v in views], [v.far for v in views],
-        settings.threads, splat_for(settings, cameras[0]),
+        settings.threads, splat_for(settings, cameras[0], multi.views[0], views[0].near),
     )  # fmt: skip
     t2 = time.perf_counter()
     frames = []
@@ -142,10 +142,11 @@ def stereo_frame(cloud, camera, settings, render_one) -> Frame:
     """Render both eyes (one pass over the points where the cloud can) into one stereo Frame."""
     inner = _inner(settings, stereo="none")
     cams = eye_cameras(camera, settings.ipd)
-    multi = cloud.prepare_views([cam.view(cloud.bounds) for cam in cams], inner) if inner.supersample == 1 else None
-    if multi is not None:
-        frames = render_views(cloud, cams, inner, get_backend(inner.backend), multi)
-    else:  # supersampled eyes, octrees (their nodes differ per eye): two renders
+    with cloud.reading():
+        multi = cloud.prepare_views([cam.view(cloud.bounds) for cam in cams], inner) if inner.supersample == 1 else None
+        if multi is not None:
+            frames = render_views(cloud, cams, inner, get_backend(inner.backend), multi)
+    if multi is None:  # supersampled eyes, octrees (their nodes differ per eye): two renders
         frames = [render_one(cloud, cam, inner) for cam in cams]
     h = convergence_shift(camera, settings.ipd, settings.convergence)
     bg = np.array(settings.background, np.uint8)

@@ -15,7 +15,7 @@
 
   const S = {
     ws: null, session: null, cloud: null, schema: [], settings: {}, camera: null,
-    seq: 0, sentAt: new Map(), lastFrame: 0, frameTimes: [], latency: 0,
+    seq: 0, sentAt: new Map(), lastFrame: 0, frameTimes: [], fps: null, latency: 0,
     header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0,
     pending: { orbit: null, look: null, pan: null, zoom: null }, retry: 0,
   };
@@ -71,7 +71,14 @@
       S.session = m.session; S.cloud = m.cloud; S.schema = m.schema; S.settings = m.settings; S.camera = m.camera;
       const b = m.cloud.bounds;
       S.sceneRadius = Math.hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]) / 2 || 1;
-      $("cloudinfo").textContent = `${m.cloud.name} · ${m.cloud.points.toLocaleString()} points · ${m.cloud.batches.toLocaleString()} batches`;
+      const info = $("cloudinfo");  // "name · N points · M batches": a count and its unit never split over lines
+      info.textContent = `${m.cloud.name} · `;
+      for (const [i, part] of [`${m.cloud.points.toLocaleString()} points`, `${m.cloud.batches.toLocaleString()} batches`].entries()) {
+        const span = document.createElement("span");
+        span.className = "nowrap";
+        span.textContent = part;
+        info.append(...(i ? [" · ", span] : [span]));
+      }
       buildSettings();
       updateSpeedLabel();
       setFov(m.camera.fov, false);
@@ -120,8 +127,12 @@
     const h = S.header; if (!h) return;
     const now = performance.now();
     while (S.frameTimes.length && now - S.frameTimes[0] > 1000) S.frameTimes.shift();
+    // the rate of the frames of the last second; idle (no new frame), the last rate measured, or nothing
+    const n = S.frameTimes.length;
+    if (n >= 2) S.fps = (n - 1) * 1000 / Math.max(S.frameTimes[n - 1] - S.frameTimes[0], 1);
+    const fps = S.fps == null ? "" : n >= 2 ? `fps ${S.fps.toFixed(0)}   ` : `idle (last fps ${S.fps.toFixed(0)})   `;
     const lines = [
-      `fps ${S.frameTimes.length}   latency ${S.latency.toFixed(0)} ms`,
+      `${fps}latency ${S.latency.toFixed(0)} ms`,
       `frame ${h.render_ms.toFixed(1)} ms render + ${h.encode_ms.toFixed(1)} ms jpeg`,
       `${h.width}×${h.height}${h.full ? "" : "  (1/" + h.scale + " while moving)"}`,
       `points ${h.points.toLocaleString()} / ${h.points_total.toLocaleString()}`,
@@ -208,7 +219,9 @@
     const box = $("pickinfo");
     if (!m.found) { box.textContent = "no point here"; box.classList.remove("hidden"); return; }
     const i = m.info;
-    const lines = [`point ${i.index == null ? "" : "#" + i.index}${m.pivot ? "  (new pivot)" : ""}`, `x ${String(i.position[0])}`, `y ${String(i.position[1])}`, `z ${String(i.position[2])}`, `rgba ${i.rgba.join(", ")}`];
+    // coordinates as the server sends them: a file's points rounded to its scale (PointCloud.point_info)
+    const lines = [`point ${i.index == null ? "" : "#" + i.index}${m.pivot ? "  (new pivot)" : ""}`, `x ${String(i.position[0])}`, `y ${String(i.position[1])}`, `z ${String(i.position[2])}`];
+    if (i.rgba) lines.push(`rgba ${i.rgba.join(", ")}`);
     for (const [k, v] of Object.entries(i)) if (!["index", "position", "rgba"].includes(k)) lines.push(`${k} ${Array.isArray(v) ? v.join(", ") : v}`);
     box.textContent = lines.join("\n");
     box.dataset.index = String(i.index);
@@ -301,7 +314,7 @@
     if ("wasdqe".includes(k) && k.length === 1) { S.keys.add(k); e.preventDefault(); }
     else if (k === "f") setFly(!S.fly);
     else if (k === "r") send({ type: "reset" }, true);
-    else if (k >= "1" && k <= "4") send({ type: "view", name: ["top", "front", "side", "iso"][Number(k) - 1] }, true);
+    else if (k >= "1" && k <= "5") send({ type: "view", name: ["top", "front", "side", "iso", "auto"][Number(k) - 1] }, true);
     else if (k === "+" || k === "=") adjustSpeed(0.5);
     else if (k === "-") adjustSpeed(-0.5);
   });

@@ -1,0 +1,402 @@
+"""Byte ranges of local files and of HTTP(S) resources: what the COPC and EPT readers read through.
+
+``open_source(path_or_url)`` gives a ``ByteSource``: ``read(offset, size)`` (exactly ``size``
+bytes or an InputError), ``read_many(ranges)``, ``read_head(n)`` (up to ``n`` bytes),
+``read_all()`` and ``sibling(relative)`` (another file of the same dataset: EPT's hierarchy and
+data files beside ``ept.json``).
+
+Over HTTP every dataset shares one ``HttpClient``: one ``httpx.Client`` (keep-alive
+connections reused), a small thread pool so that several requests are in flight
+(``read_many``), a timeout on every request (connect, each read) and an overall deadline per
+request, so that a server that stalls or trickles never hangs a frame, a bounded in-memory
+LRU cache of the ranges read, and two retries of transient failures (connection errors,
+HTTP 502/503/504). Whatever goes wrong is a one-line ``InputError`` naming the URL: an HTTP
+error status, a short read, a server that ignores ``Range`` (200 with the whole file) or
+answers another range than asked, a range past the end of the file, a timeout.
+
+httpx is an optional dependency (``pip install 'gigapoint[http]'``).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import threading
+import time
+from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from urllib.parse import urljoin
+
+from ..errors import InputError
+
+#: Seconds to connect and for each read of a request; a request's whole answer must come
+#: within ``DEADLINE_FACTOR`` times this (a server trickling bytes is cut off too).
+TIMEOUT = 10.0
+DEADLINE_FACTOR = 3.0
+#: Requests in flight at once (``read_many``).
+WORKERS = 6
+#: Bytes of ranges kept in memory (least recently used dropped first).
+CACHE_BYTES = 256 << 20
+#: Extra attempts after a transient failure (connection error, HTTP 502/503/504).
+RETRIES = 2
+#: ``read_many`` joins ranges less than this far apart into one request (the bytes between are
+#: read and dropped), up to MERGE_MAX bytes a request: a frame's nodes often lie side by side.
+MERGE_GAP = 64 << 10
+MERGE_MAX = 8 << 20
+_RETRY_STATUS = (502, 503, 504)
+_URL = re.compile(r"^(https?):/+(.+)$", re.IGNORECASE)
+_CONTENT_RANGE = re.compile(r"^\s*bytes\s+(\d+)-(\d+)/(\d+|\*)\s*$", re.IGNORECASE)
+
+
+def as_url(source) -> str | None:
+    """The http(s) URL that ``source`` names, else None. A ``Path`` made from a URL lost one of
+    its slashes (``Path("https://h/x")`` is ``https:/h/x``); it is given back."""
+    if isinstance(source, os.PathLike):
+        text = os.fspath(source)
+        if Path(text).exists():  # a local folder that happens to be called 'http:'
+            return None
+    elif isinstance(source, str):
+        text = source
+    else:
+        return None
+    m = _URL.match(str(text).strip())
+    if m is None:
+        return None
+    return f"{m.group(1).lower()}://{m.group(2)}"
+
+
+def _one_line(exc: object) -> str:
+    s = " ".join(str(exc).split())
+    return s if len(s) <= 300 else s[:297] + "..."
+
+
+class ByteSource:
+    """Bytes of one file, local or remote (see the module's docstring)."""
+
+    name: str = ""
+
+    def size(self) -> int | None:
+        """The file's size in bytes (None: not known yet)."""
+        raise NotImplementedError
+
+    def read(self, offset: int, size: int) -> bytes:
+        raise NotImplementedError
+
+    def read_head(self, size: int) -> bytes:
+        """The first ``size`` bytes, fewer when the file is shorter."""
+        raise NotImplementedError
+
+    def read_all(self) -> bytes:
+        raise NotImplementedError
+
+    def read_many(self, ranges) -> list[bytes]:
+        """``read(offset, size)`` of each (offset, size), in order."""
+        return [self.read(int(o), int(s)) for o, s in ranges]
+
+    def sibling(self, relative: str) -> ByteSource:
+        """The file ``relative`` to this one's folder."""
+        raise NotImplementedError
+
+    def read_all_many(self, sources: list[ByteSource]) -> list[bytes]:
+        """``read_all()`` of each of ``sources`` (siblings of this one), in order."""
+        return [s.read_all() for s in sources]
+
+    def close(self) -> None:
+        pass
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.name!r})"
+
+
+class LocalFile(ByteSource):
+    """A local file read with ``os.pread`` (the page cache is its cache)."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self.name = str(self.path)
+
+    def _fail(self, exc: OSError) -> InputError:
+        if isinstance(exc, FileNotFoundError):
+            return InputError(f"{self.name}: no such file")
+        return InputError(f"{self.name}: cannot read ({exc.strerror or _one_line(exc)})")
+
+    def size(self) -> int:
+        try:
+            return self.path.stat().st_size
+        except OSError as exc:
+            raise self._fail(exc) from None
+
+    def read(self, offset: int, size: int) -> bytes:
+        try:
+            fd = os.open(self.path, os.O_RDONLY)
+        except OSError as exc:
+            raise self._fail(exc) from None
+        try:
+            data = os.pread(fd, size, offset) if size > 0 else b""
+        except OSError as exc:
+            raise self._fail(exc) from None
+        finally:
+            os.close(fd)
+        if len(data) != size:
+            raise InputError(f"{self.name}: truncated file: bytes {offset:,}..{offset + size:,} lie past its end ({self.size():,} bytes)")
+        return data
+
+    def read_head(self, size: int) -> bytes:
+        try:
+            with open(self.path, "rb") as f:
+                return f.read(size)
+        except OSError as exc:
+            raise self._fail(exc) from None
+
+    def read_all(self) -> bytes:
+        try:
+            return self.path.read_bytes()
+        except OSError as exc:
+            raise self._fail(exc) from None
+
+    def sibling(self, relative: str) -> LocalFile:
+        return LocalFile(self.path.parent / relative)
+
+
+class _LruBytes:
+    """A bounded map of byte strings (least recently used dropped first), thread-safe."""
+
+    def __init__(self, capacity: int):
+        self.capacity = int(capacity)
+        self.held = 0
+        self._items: OrderedDict = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, key) -> bytes | None:
+        with self._lock:
+            v = self._items.get(key)
+            if v is not None:
+                self._items.move_to_end(key)
+            return v
+
+    def put(self, key, value: bytes) -> None:
+        if len(value) > self.capacity:
+            return
+        with self._lock:
+            old = self._items.pop(key, None)
+            if old is not None:
+                self.held -= len(old)
+            self._items[key] = value
+            self.held += len(value)
+            while self.held > self.capacity:
+                _, v = self._items.popitem(last=False)
+                self.held -= len(v)
+
+
+def _httpx():
+    try:
+        import httpx
+    except ImportError:
+        raise InputError("reading over HTTP needs the httpx package (pip install 'gigapoint[http]')") from None
+    return httpx
+
+
+class HttpClient:
+    """The connection pool, worker threads and range cache that the files of one dataset share."""
+
+    def __init__(
+        self, timeout: float | None = None, cache_bytes: int | None = None, workers: int | None = None, retries: int | None = None
+    ):
+        httpx = _httpx()
+        self.timeout = float(TIMEOUT if timeout is None else timeout)
+        self.retries = RETRIES if retries is None else int(retries)
+        self.workers = WORKERS if workers is None else int(workers)
+        self.client = httpx.Client(
+            timeout=httpx.Timeout(self.timeout),
+            limits=httpx.Limits(max_connections=2 * self.workers, max_keepalive_connections=self.workers),
+            follow_redirects=True,
+            headers={"User-Agent": "gigapoint", "Accept-Encoding": "identity"},
+        )
+        self.cache = _LruBytes(CACHE_BYTES if cache_bytes is None else cache_bytes)
+        self._pool: ThreadPoolExecutor | None = None
+        self._pool_lock = threading.Lock()
+        self.sizes: dict[str, int] = {}  # file sizes learnt from Content-Range
+        self.requests = 0  # requests sent (cache misses), for tests and benchmarks
+        self.bytes_read = 0
+
+    def map(self, fn, items: list) -> list:
+        """``fn(item)`` of each item, several at once; the first failure is raised."""
+        if len(items) <= 1:
+            return [fn(i) for i in items]
+        with self._pool_lock:
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(self.workers, thread_name_prefix="gigapoint-http")
+        return list(self._pool.map(fn, items))
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+        self.client.close()
+
+    def get(self, url: str, start: int | None = None, size: int | None = None, allow_short: bool = False, cache: bool = True) -> bytes:
+        """The bytes ``start..start+size`` of ``url`` (the whole resource when ``start`` is None);
+        ``allow_short``: fewer when the file ends before (the head of a small file); ``cache``:
+        look up and keep the answer in the range cache."""
+        key = (url, start, size)
+        hit = self.cache.get(key) if cache else None
+        if hit is not None:
+            return hit
+        httpx = _httpx()
+        what = f"bytes {start:,}..{start + size:,}" if start is not None else "the file"
+        if start is not None and size <= 0:
+            return b""
+        known = self.sizes.get(url)
+        if start is not None and not allow_short and known is not None and start + size > known:
+            raise InputError(f"{url}: {what} lie past the end of the file ({known:,} bytes)")
+        headers = {"Range": f"bytes={start}-{start + size - 1}"} if start is not None else {}
+        for attempt in range(self.retries + 1):
+            last = attempt == self.retries
+            try:
+                data = self._get_once(httpx, url, start, size, headers, allow_short, what)
+            except _Transient as exc:
+                if last:
+                    raise InputError(f"{url}: {exc} (after {self.retries + 1} attempts)") from None
+                time.sleep(0.05 * 2**attempt)
+                continue
+            if cache:
+                self.cache.put(key, data)
+            return data
+        raise AssertionError("unreachable")  # pragma: no cover
+
+    def _get_once(self, httpx, url, start, size, headers, allow_short, what) -> bytes:
+        deadline = time.monotonic() + DEADLINE_FACTOR * self.timeout
+        self.requests += 1
+        try:
+            with self.client.stream("GET", url, headers=headers) as r:
+                status = r.status_code
+                if status in _RETRY_STATUS:
+                    raise _Transient(f"HTTP {status} {r.reason_phrase} for {what}")
+                if status == 416:
+                    raise InputError(f"{url}: {what} lie past the end of the file (HTTP 416 Range Not Satisfiable)")
+                if status >= 400:
+                    raise InputError(f"{url}: HTTP {status} {r.reason_phrase} for {what}")
+                expect = size
+                if start is not None:
+                    if status == 200:
+                        raise InputError(
+                            f"{url}: the server ignored the range request for {what} (HTTP 200 with the whole file); "
+                            "COPC and EPT over HTTP need a server that answers Range requests (HTTP 206)"
+                        )
+                    if status != 206:
+                        raise InputError(f"{url}: unexpected HTTP {status} {r.reason_phrase} for {what}")
+                    m = _CONTENT_RANGE.match(r.headers.get("content-range", ""))
+                    if m is None:
+                        raise InputError(
+                            f"{url}: answer to a range request has no valid Content-Range header ({r.headers.get('content-range')!r})"
+                        )
+                    a, b, total = int(m.group(1)), int(m.group(2)), m.group(3)
+                    if total != "*":
+                        self.sizes[url] = int(total)
+                    if allow_short and total != "*" and a == start and b == min(start + size, int(total)) - 1:
+                        expect = b - a + 1
+                    elif a != start or b != start + size - 1:
+                        end = f" (the file has {int(total):,} bytes)" if total != "*" else ""
+                        raise InputError(f"{url}: the server answered bytes {a:,}..{b + 1:,} to a request for {what}{end}")
+                elif status != 200:
+                    raise InputError(f"{url}: unexpected HTTP {status} {r.reason_phrase}")
+                body = bytearray()
+                for part in r.iter_bytes():
+                    body += part
+                    if expect is not None and len(body) > expect:
+                        raise InputError(f"{url}: the server sent more than the {expect:,} bytes asked for ({what})")
+                    if time.monotonic() > deadline:
+                        raise InputError(f"{url}: {what} did not arrive within {DEADLINE_FACTOR * self.timeout:g} s")
+        except InputError:
+            raise
+        except _Transient:
+            raise
+        except httpx.TimeoutException:
+            raise InputError(f"{url}: no answer within {self.timeout:g} s for {what} (timed out)") from None
+        except (httpx.RemoteProtocolError, httpx.ReadError) as exc:
+            raise _Transient(f"short read of {what}: the connection broke off ({_one_line(exc)})") from None
+        except (httpx.ConnectError, httpx.WriteError) as exc:
+            raise _Transient(f"cannot connect ({_one_line(exc)})") from None
+        except httpx.HTTPError as exc:
+            raise InputError(f"{url}: {type(exc).__name__}: {_one_line(exc)}") from None
+        if expect is not None and len(body) != expect:
+            raise InputError(f"{url}: short read: {len(body):,} of the {expect:,} bytes asked for ({what})")
+        self.bytes_read += len(body)
+        return bytes(body)
+
+
+class _Transient(Exception):
+    """A failure worth another attempt (its text becomes the InputError's after the last one)."""
+
+
+class HttpFile(ByteSource):
+    """A file over HTTP(S), read by range requests through a shared ``HttpClient``."""
+
+    def __init__(self, url: str, client: HttpClient | None = None):
+        self.url = url
+        self.name = url
+        self.client = client or HttpClient()
+
+    def size(self) -> int | None:
+        return self.client.sizes.get(self.url)
+
+    def read(self, offset: int, size: int) -> bytes:
+        return self.client.get(self.url, int(offset), int(size))
+
+    def read_head(self, size: int) -> bytes:
+        return self.client.get(self.url, 0, int(size), allow_short=True)
+
+    def read_all(self) -> bytes:
+        return self.client.get(self.url)
+
+    def read_many(self, ranges) -> list[bytes]:
+        """The ranges not in the cache fetched several at once, neighbours joined into one
+        request (MERGE_GAP, MERGE_MAX, and no more than an even share of the bytes per worker,
+        so that the requests still run side by side); every range then cached on its own."""
+        ranges = [(int(o), int(s)) for o, s in ranges]
+        out: list[bytes | None] = [self.client.cache.get((self.url, o, s)) for o, s in ranges]
+        missing = sorted((i for i, v in enumerate(out) if v is None), key=lambda i: ranges[i][0])
+        if not missing:
+            return out
+        total = sum(ranges[i][1] for i in missing)
+        share = min(MERGE_MAX, max(1 << 20, -(-total // self.client.workers)))
+        groups: list[list[int]] = []
+        for i in missing:
+            o, s = ranges[i]
+            if groups:
+                g0, gend = ranges[groups[-1][0]][0], max(ranges[j][0] + ranges[j][1] for j in groups[-1])
+                if o - gend <= MERGE_GAP and max(gend, o + s) - g0 <= share and o >= g0:
+                    groups[-1].append(i)
+                    continue
+            groups.append([i])
+
+        def fetch(group: list[int]) -> None:
+            start = ranges[group[0]][0]
+            end = max(ranges[j][0] + ranges[j][1] for j in group)
+            data = self.client.get(self.url, start, end - start, cache=len(group) == 1)
+            for j in group:
+                o, s = ranges[j]
+                piece = data[o - start : o - start + s]
+                self.client.cache.put((self.url, o, s), piece)
+                out[j] = piece
+
+        self.client.map(fetch, groups)
+        return out
+
+    def read_all_many(self, sources: list[ByteSource]) -> list[bytes]:
+        return self.client.map(lambda s: s.read_all(), list(sources))
+
+    def sibling(self, relative: str) -> HttpFile:
+        return HttpFile(urljoin(self.url, relative), self.client)
+
+    def close(self) -> None:
+        self.client.close()
+
+
+def open_source(source, client: HttpClient | None = None) -> ByteSource:
+    """A ByteSource for a local path or an http(s) URL (see ``as_url``)."""
+    url = as_url(source)
+    if url is not None:
+        return HttpFile(url, client)
+    return LocalFile(source)

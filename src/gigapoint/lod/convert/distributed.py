@@ -1,0 +1,898 @@
+"""The conversion on Dask: the same phases, split into tasks that Dask workers run.
+
+``convert(inputs, out, client=...)`` (``gigapoint convert --dask ADDRESS`` or ``--workers N``).
+The driver (this process) holds the output's lock and its state, plans the tasks and runs
+the write phase; workers read the inputs and write into ``out``, which must be a path every
+worker sees the same (a local or a shared network file system). The tasks:
+
+=============  ==============================================================  ===============
+phase          one task per                                                    done when
+=============  ==============================================================  ===============
+read           ``READ_CHUNKS`` chunks of a LAS/LAZ file (a point range), or a    its result is in
+               whole file of another format: decoded, spilled to raw chunks;     the state
+               a thinning of its points comes back for the preview
+count          read task: the count grid of its chunks (sparse)                 (recomputed)
+distribute     read task: its points grouped by partition into one file per    ``parts/t*.json``
+               array (``parts/t<task>.<array>``), its raw chunks then removed
+refine         partition denser than the count grid shows (rare)               the state
+build          partition: ``BuildPhases.build_partition``                       ``built/p<key>``
+group, upper   group of partition roots; the nodes above everything            ``built/g<key>``,
+                                                                               ``built/upper``
+place          a few node sets: their points copied into the output arrays     ``span.npy``
+               at the offsets the single-process converter gives them, as
+               soon as the sets before them are built (during the builds)
+write          (the driver) the same write phase as without Dask               ``octree.json``
+=============  ==============================================================  ===============
+
+The octree is the single-process converter's, file for file: points keep their input order
+(ranges in file order, partitions' pieces in task order), the partition plan is made from the
+same count grid, and node sets are built by the same code; only where their points go in the
+gigapoint format's arrays is decided once all are built (``place``), in the order the
+single-process converter fills them.
+
+Faults: every task writes under temporary names and renames, or finds its result there and
+returns it, so a task that Dask runs again (its worker died: the scheduler gives it to another
+one) writes the same files. The driver saves the state as tasks finish; a run killed as a
+whole resumes from it when the same command (any cluster) runs again. Errors come back as
+one-line ``gigapoint.errors`` exceptions; a task whose workers keep dying fails the run after
+Dask's ``allowed-failures``; a cluster without workers for ``NO_WORKER_S`` fails it too.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import sys
+import tempfile
+import threading
+import time
+import weakref
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from ...atomic import atomic_json, atomic_open
+from ...errors import GigapointError
+from ...io._base import ColorScaler, one_line
+from ...io.registry import reader_for
+from ..keys import CODE_BITS
+from ..octree_dir import ConvertError, OctreeDir
+from ..preview import PreviewSampler, preview_points
+from ..progress import NullProgress
+from . import hooks
+from .keep_freed_memory import KeepFreedMemory
+from .partition import COUNT_LEVEL, PartitionPhases, built_name, grid_cells, group_name, partition_lut
+from .phases import BuildPhases, place_set
+from .read import ReadPhase, _point_total, _read_chunks, merge_attributes, spill_chunk
+from .spill import copy_range, load_raw_chunk, raw_chunk_files
+
+READ_CHUNKS = 1  # chunks (``chunk_size`` points, 2 M by default) a read task decodes: one a task
+CHUNK_STRIDE = 1 << 20  # read task t spills chunks t·CHUNK_STRIDE + 0, 1, ...: sorted ids are the input order
+PLACE_POINTS = 4_000_000  # node sets a place task copies: about this many points
+CONNECT_TIMEOUT_S = 10.0  # reaching the scheduler
+WORKER_WAIT_S = 60.0  # for a first worker to join the scheduler
+NO_WORKER_S = 120.0  # a run whose cluster has had no worker this long fails
+EARLIER_RUN_S = 600.0  # for tasks of an earlier, killed run into the same output to end
+POLL_S = 0.5
+SAVE_EVERY_S = 1.0  # the state is saved (fsynced) at most this often while tasks finish, and at every phase's end
+
+
+_OWN_WORKERS: weakref.WeakSet = weakref.WeakSet()  # clients of the LocalClusters open_client started
+_KEPT: list = []  # in a worker of such a cluster: the KeepFreedMemory entered for the process's life
+
+
+def _distributed():
+    try:
+        import distributed
+    except ImportError:
+        raise ConvertError("--dask/--workers: a distributed conversion needs Dask: pip install 'gigapoint[dask]'") from None
+    return distributed
+
+
+def _has_bokeh() -> bool:
+    try:
+        import bokeh  # noqa: F401 - the dashboard's pages need it
+    except ImportError:
+        return False
+    return True
+
+
+def dashboard_link(client, local: bool = False) -> str | None:
+    """The Dask dashboard's address when the scheduler serves one, else None. ``local``: the
+    scheduler runs here (a LocalCluster), whose pages need bokeh installed here."""
+    try:
+        services = client.scheduler_info().get("services", {})
+    except Exception:  # noqa: BLE001 - only a link to print
+        return None
+    if "dashboard" not in services or (local and not _has_bokeh()):
+        return None
+    return client.dashboard_link
+
+
+@contextmanager
+def open_client(client, announce: bool = False):
+    """A ``distributed.Client`` for ``client``: a Client (used as it is), a scheduler address
+    (connected to, closed at the end) or a number of workers (a LocalCluster of that many
+    single-threaded worker processes, closed at the end). ``announce``: print the dashboard's
+    address on stderr."""
+    dd = _distributed()
+    if isinstance(client, dd.Client):
+        yield client
+        return
+    cluster = None
+    if isinstance(client, int) and not isinstance(client, bool):
+        if client < 1:
+            raise ConvertError(f"--workers: needs at least 1 worker, got {client}")
+        cluster = dd.LocalCluster(
+            n_workers=client,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=":0",  # any free port (another cluster may hold 8787)
+            silence_logs=logging.ERROR,
+            env={"NUMBA_NUM_THREADS": "1"},  # one core a worker: numba's kernels run on the task's thread
+        )
+        c = dd.Client(cluster)
+        _OWN_WORKERS.add(c)
+    elif isinstance(client, str) and client.strip():
+        try:
+            c = dd.Client(client, timeout=CONNECT_TIMEOUT_S)
+        except Exception as exc:  # noqa: BLE001 - OSError, TimeoutError, ValueError (a bad address) alike
+            raise ConvertError(f"--dask {client}: cannot reach a Dask scheduler there ({one_line(exc) or type(exc).__name__})") from None
+    else:
+        raise ConvertError(f"client: a distributed.Client, a scheduler address or a number of workers, got {client!r}")
+    try:
+        if announce and (link := dashboard_link(c, local=cluster is not None)):
+            print(f"Dask dashboard: {link}", file=sys.stderr)
+        yield c
+    finally:
+        c.close()
+        if cluster is not None:
+            cluster.close()
+
+
+# ---------------------------------------------------------------------------------------- workers
+
+
+class _Task(PartitionPhases, BuildPhases):
+    """The phases' code on a worker, for one task: options and the state it needs from the
+    driver (``spec``), no progress display, and no state of its own (the driver saves it)."""
+
+    def __init__(self, spec: dict, source=None):
+        self.out = Path(spec["out"])
+        self.dir = OctreeDir(spec["dir"])  # OUT itself, or a COPC output's working folder beside it
+        self.sampler = spec["sampler"]
+        self.format = spec["format"]
+        self.max_leaf = spec["max_leaf"]
+        self.encoding = spec["encoding"]
+        self.chunk_size = spec["chunk_size"]
+        self.mem = spec["memory_limit"]
+        self.progress = NullProgress()
+        self.state = dict(spec["state"])
+        self.local_sets = self.format == "gigapoint"  # placed once every set is built (place_set)
+        self.source = source  # a partition's input: ("pieces", [[task, row, rows], ...]), ("raw", chunk ids) or None (its own files)
+
+    def save_state(self) -> None:
+        pass
+
+    def _partition_input(self, lev: int, prefix: int) -> tuple[dict, list[Path]]:
+        if self.source is None:  # a refined partition: files of its own, removed once built
+            return super()._partition_input(lev, prefix)
+        kind, items = self.source
+        attrs = self.state["attributes"]
+        if kind == "raw":  # the only partition: the spilled chunks (the driver removes them)
+            parts = [load_raw_chunk(self.dir.raw, i, attrs) for i in items]
+            return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}, []
+        n = sum(rows for _, _, rows in items)
+        data = {}
+        for key, dt in self._dtypes().items():
+            width = 3 if key == "xyz" else 1
+            arr = np.empty((n, width) if width > 1 else n, dt)
+            flat = memoryview(arr.reshape(-1).view(np.uint8))
+            row, at = dt.itemsize * width, 0
+            for t, start, rows in items:  # in task order: the input order
+                _read_into(_piece_file(self.dir, t, key), start * row, flat[at * row : (at + rows) * row])
+                at += rows
+            data[key] = arr
+        return data, []
+
+
+def _read_into(path: Path, offset: int, buf: memoryview) -> None:
+    """Bytes ``offset``.. of ``path`` read straight into ``buf`` (no copy through a bytes object)."""
+    with open(path, "rb", buffering=0) as f:
+        f.seek(offset)
+        done = 0
+        while done < len(buf):
+            k = f.readinto(buf[done:])
+            if not k:
+                raise OSError(f"{path}: ends before byte {offset + len(buf):,}")
+            done += k
+
+
+def _piece_file(d: OctreeDir, t: int, key: str) -> Path:
+    """Distribute task ``t``'s rows of array ``key``, grouped by partition."""
+    return d.parts / f"t{t:06d}.{key}"
+
+
+def _piece_result(d: OctreeDir, t: int) -> Path:
+    """Distribute task ``t``'s result: [[partition, first row, rows], ...]; written last."""
+    return d.parts / f"t{t:06d}.json"
+
+
+def _worker_name() -> str:
+    try:
+        from distributed import get_worker
+
+        return get_worker().address
+    except (ImportError, ValueError):
+        return "a Dask worker"
+
+
+def _task(kind: str, name: str, spec: dict, fn, *args):
+    """Run one task on a worker: numba's kernels on this thread only, freed memory kept while it
+    runs (keep_freed_memory.py; for the life of the process in the workers of a LocalCluster
+    that open_client started), an OSError turned into a one-line error naming the worker."""
+    import numba
+
+    hooks.task_started(kind, name)
+    numba.set_num_threads(1)
+    try:
+        if spec.get("own_workers"):  # a worker of ours: freed memory kept for the next task too
+            if not _KEPT:
+                _KEPT.append(KeepFreedMemory().__enter__())
+            result = fn(spec, *args)
+        else:  # someone else's worker: glibc's settings come back after each task
+            with KeepFreedMemory():
+                result = fn(spec, *args)
+        hooks.task_done(kind, name)
+        return result
+    except GigapointError:
+        raise
+    except OSError as exc:
+        where = exc.filename or spec["out"]
+        raise ConvertError(f"{where}: {exc.strerror or one_line(exc)} (on Dask worker {_worker_name()}, {kind} task {name})") from None
+
+
+def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | None, color_mode: str | None, stride: int) -> dict:
+    """Read task ``t``: points start..stop of ``path`` (None: the whole file) spilled to raw chunks
+    t·CHUNK_STRIDE + j. ``color_mode``: the file's color decision before ``start``. Its result
+    has every ``stride``-th valid point for the preview ("preview"; the driver's, not the state's)."""
+    raw = OctreeDir(spec["dir"]).raw
+    scaler = None
+    if start is None:
+        chunks = _read_chunks(Path(path), spec["chunk_size"])
+    else:
+        scaler = ColorScaler()
+        scaler.mode = color_mode
+        chunks = reader_for(path).read_chunks(Path(path), spec["chunk_size"], start=start, stop=stop, scaler=scaler)
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    attrs, n_chunks, n_in, points, skipped, eight = None, 0, 0, 0, 0, False
+    sample: list[dict] = []
+    for j, chunk in enumerate(chunks):
+        if j >= CHUNK_STRIDE:
+            raise ConvertError(f"{path}: more than {CHUNK_STRIDE:,} chunks in one read task")
+        xyz, rgba, _, names, invalid, c_lo, c_hi = spill_chunk(raw, t * CHUNK_STRIDE + j, chunk)
+        pick = slice((-points) % stride, None, stride)
+        sample.append({"xyz": np.array(xyz[pick]), "rgba": np.array(rgba[pick])})
+        eight |= scaler is not None and scaler.mode == "8"
+        attrs = merge_attributes(attrs, names)
+        if c_lo is not None:
+            lo, hi = np.minimum(lo, c_lo), np.maximum(hi, c_hi)
+        n_chunks, n_in, points, skipped = j + 1, n_in + len(chunk), points + len(xyz), skipped + int(invalid)
+    return {
+        "chunks": n_chunks,
+        "input": n_in,
+        "points": points,
+        "skipped": skipped,
+        "lo": lo.tolist(),
+        "hi": hi.tolist(),
+        "attributes": attrs,
+        "ends16": scaler is not None and scaler.mode == "16",
+        "eight": eight,  # a chunk was decoded as 8-bit colors: wrong if an earlier part of the file was 16-bit
+        # positions as float32 offsets from the task's corner, no attributes: what the driver takes in is a third
+        "preview": (lo, (np.concatenate([p["xyz"] for p in sample]) - lo).astype(np.float32), np.concatenate([p["rgba"] for p in sample]))
+        if points
+        else None,
+    }
+
+
+def _count_task(spec: dict, ids: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """The count grid of chunks ``ids``: (cells, points) of its non-empty cells."""
+    st = spec["state"]
+    raw = OctreeDir(spec["dir"]).raw
+    counts = np.zeros(8**COUNT_LEVEL, np.int64)
+    for i in ids:
+        xyz = load_raw_chunk(raw, i, [])["xyz"]
+        if len(xyz):
+            counts += np.bincount(grid_cells(xyz, np.array(st["origin"]), st["edge"]), minlength=len(counts))
+    cells = np.flatnonzero(counts)
+    return cells.astype(np.int32), counts[cells]
+
+
+def _distribute_task(spec: dict, t: int, ids: list[int], partitions: list) -> list:
+    """Task ``t``'s chunks ``ids`` grouped by partition: one file per array, each partition's
+    rows together, in partition order (chunks in order within each); the chunks are then
+    removed. Returns [[partition, first row, rows], ...] (also written, last: a repeated task
+    returns it)."""
+    d = OctreeDir(spec["dir"])
+    result = _piece_result(d, t)
+    if result.exists():
+        return json.loads(result.read_text())
+    w = _Task(spec)
+    st = w.state
+    origin, edge = np.array(st["origin"]), st["edge"]
+    lut = partition_lut(partitions)
+    pieces = []
+    try:
+        for i in ids:
+            data = load_raw_chunk(d.raw, i, st["attributes"])
+            if len(data["xyz"]):
+                pieces.append(w._by_partition(data, lut[grid_cells(data["xyz"], origin, edge)], len(partitions)))
+    except FileNotFoundError:
+        if result.exists():  # the same task, run twice at once (a worker thought dead), finished first
+            return json.loads(result.read_text())
+        raise
+    per = sum((np.diff(cuts) for _, cuts in pieces), np.zeros(len(partitions), np.int64))
+    touched = np.flatnonzero(per)
+    for key in w._dtypes():
+        with atomic_open(_piece_file(d, t, key)) as f:
+            for p in touched:
+                for sorted_data, cuts in pieces:
+                    if cuts[p + 1] > cuts[p]:
+                        f.write(memoryview(np.ascontiguousarray(sorted_data[key][cuts[p] : cuts[p + 1]])).cast("B"))
+    starts = np.cumsum(per) - per
+    out = [[int(p), int(starts[p]), int(per[p])] for p in touched]
+    atomic_json(result, out)
+    for i in ids:
+        for f in raw_chunk_files(d.raw, i):
+            f.unlink(missing_ok=True)
+    return out
+
+
+def _refine_task(spec: dict, lev: int, prefix: int, n: int, items: list) -> tuple[list, list, list]:
+    """A partition above the budget (a spot denser than the count grid): its pieces gathered into
+    files of its own, then split like the single-process converter does (PartitionPhases._refine).
+    Returns its sub-partitions, their points and the unsplittable ones."""
+    w = _Task(spec)
+    dts = w._dtypes()
+    for key, path in w._part_files(lev, prefix).items():  # the pieces, in order, copied in the kernel: no partition in memory
+        row = dts[key].itemsize * (3 if key == "xyz" else 1)
+        with atomic_open(path) as f:
+            f.truncate(n * row)
+            at = 0
+            for t, start, rows in items:
+                copy_range(_piece_file(w.dir, t, key), start * row, f.fileno(), at * row, rows * row)
+                at += rows
+    w.state.update(partitions=[[lev, prefix, n]], part_counts=[n], unsplittable=[])
+    w._refine()
+    return w.state["partitions"], w.state["part_counts"], w.state["unsplittable"]
+
+
+def _set_points(d: Path) -> int:
+    """The points a built node set holds (below its root: the root's are carried up)."""
+    return int(np.load(d / "counts.npy").sum())
+
+
+def _build_task(spec: dict, lev: int, prefix: int, n: int, source) -> int:
+    """Partition (lev, prefix) built; returns its node set's points."""
+    w = _Task(spec, source)
+    w.build_partition(lev, prefix, n)
+    return _set_points(w.dir.built / built_name(lev, prefix))
+
+
+def _group_task(spec: dict, level: int, prefix: int, members: list[str]) -> None:
+    _Task(spec).join_group(level, prefix, [Path(m) for m in members])
+
+
+def _upper_task(spec: dict, tops: list[str]) -> None:
+    w = _Task(spec)
+    if not (w.dir.built / "upper").exists():
+        w.build_upper([Path(p) for p in tops])
+
+
+def _place_task(spec: dict, sets: list, outputs: dict) -> int:
+    """Node sets [(folder, offset), ...] copied into the output arrays, which are then flushed to
+    disk (here, while other workers compute, rather than all at once in the write phase)."""
+    outs = {k: (Path(path), np.dtype(dt), off) for k, (path, dt, off) in outputs.items()}
+    n = sum(place_set(Path(d), outs, off) for d, off in sets)
+    for path, _, _ in outs.values():
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            getattr(os, "fdatasync", os.fsync)(fd)  # macOS has no fdatasync
+        finally:
+            os.close(fd)
+    return n
+
+
+def _probe(out: str, token: str) -> str | None:
+    """On each worker before the tasks: does it see the driver's output folder, and may it write there?"""
+    d = OctreeDir(out)
+    st = d.read_state()
+    if st is None or st.get("run") != token:
+        return "does not see the files the driver writes there (the output must be on a file system every worker shares)"
+    try:
+        fd, name = tempfile.mkstemp(dir=d.partial, prefix=".probe.", suffix=".tmp")
+        os.close(fd)
+        os.unlink(name)
+    except OSError as exc:
+        return f"cannot write into it ({exc.strerror or exc})"
+    return None
+
+
+# ----------------------------------------------------------------------------------------- driver
+
+
+class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
+    """The phases run as Dask tasks; the driver's side. converter.py puts it in front of its
+    ``_Converter`` (which runs the phases in order) when ``convert`` gets a client."""
+
+    client = None  # set by convert() before run()
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        if self.paths is None:
+            raise ConvertError("client: a distributed conversion reads files (its workers open them); got point chunks")
+        self.out = self.out.resolve()  # workers get absolute paths
+        self.dir = OctreeDir(self.dir.path.resolve())
+        self.paths = [p.resolve() for p in self.paths]
+        self._out_tag = hashlib.sha1(str(self.out).encode()).hexdigest()[:10]
+        self._run_tag = os.urandom(4).hex()
+        self._saved_at = 0.0
+        self._tasks_run = 0  # in this run: each task's key is unique
+        self._last_preview = None  # the read phase's preview sample, written in full while the count tasks run
+
+    def fingerprint(self) -> dict | None:
+        fp = super().fingerprint()
+        return None if fp is None else {**fp, "engine": "dask"}  # the state's layout differs from a single-process run's
+
+    def save_state(self) -> None:
+        super().save_state()
+        self._saved_at = time.monotonic()
+
+    def _save_soon(self) -> None:
+        if time.monotonic() - self._saved_at >= SAVE_EVERY_S:
+            self.save_state()
+
+    # ------------------------------------------------------------------ running tasks
+
+    def _spec(self) -> dict:
+        st = self.state
+        keep = ("origin", "edge", "attributes", "partition_points")
+        return {
+            "out": str(self.out),
+            "dir": str(self.dir.path),
+            "sampler": self.sampler,
+            "format": self.format,
+            "max_leaf": self.max_leaf,
+            "encoding": self.encoding,
+            "chunk_size": self.chunk_size,
+            "memory_limit": self.mem,
+            "own_workers": self.client in _OWN_WORKERS,
+            "state": {k: st[k] for k in keep if k in st},
+        }
+
+    def _run(self, kind: str, calls: list, on_done, also: tuple | None = None, meanwhile=None) -> None:
+        """Run ``calls`` [(name, function, args, priority), ...] as ``kind`` tasks; ``on_done(i,
+        result)`` runs in the driver as each one finishes and may return more tasks to run
+        alongside, as (kind, calls, on_done), as ``also`` is. ``meanwhile()`` runs once the tasks
+        are submitted. The first error cancels the rest and is raised."""
+        dd = _distributed()
+        spec = self._spec()
+        futures: dict = {}
+
+        def submit(kind: str, calls: list, on_done) -> set:
+            new = set()
+            for i, (name, fn, args, priority) in enumerate(calls):
+                self._tasks_run += 1
+                key = f"gigapoint-{self._out_tag}-{self._run_tag}-{kind}-{self._tasks_run}"
+                f = self.client.submit(_task, kind, name, spec, fn, *args, key=key, priority=priority, pure=False)
+                futures[f] = (kind, name, on_done, i)
+                new.add(f)
+            return new
+
+        stop = threading.Event()
+        lost = []  # the watchdog's finding: the cluster has had no worker for NO_WORKER_S
+
+        def watchdog() -> None:
+            since = None
+            while not stop.wait(POLL_S):
+                try:
+                    workers = self.client.scheduler_info()["workers"]
+                except Exception:  # noqa: BLE001 - a scheduler gone: the futures fail on their own
+                    return
+                since = None if workers else (since or time.monotonic())
+                if since is not None and time.monotonic() - since > NO_WORKER_S:
+                    lost.append(True)
+                    self.client.cancel([f for f in futures if not f.done()])
+                    return
+
+        # as_completed is event driven: distributed.wait(FIRST_COMPLETED) costs O(pending) a
+        # call, which made 10 000 pending tasks quadratic (bench_dask.py --overhead-tasks)
+        completed = dd.as_completed(submit(kind, calls, on_done) | (submit(*also) if also else set()))
+        guard = threading.Thread(target=watchdog, name="gigapoint-dask-watchdog", daemon=True)
+        guard.start()
+        try:
+            if meanwhile is not None:
+                meanwhile()
+            for f in completed:
+                kind, name, callback, i = futures.pop(f)
+                if lost:
+                    raise ConvertError(f"{self.out}: the Dask cluster has had no worker for {NO_WORKER_S:.0f} s; {self._resume_hint()}")
+                if f.status != "finished":
+                    raise self._task_error(kind, name, f)
+                more = callback(i, f.result())
+                f.release()
+                if more:
+                    completed.update(submit(*more))
+        finally:
+            stop.set()
+            if futures:
+                self.client.cancel(list(futures))
+
+    def _task_error(self, kind: str, name: str, future) -> Exception:
+        try:
+            exc = future.exception()
+        except Exception as e:  # noqa: BLE001 - a cancelled future has none
+            exc = e
+        if isinstance(exc, GigapointError):
+            return exc
+        if type(exc).__name__ == "KilledWorker":
+            return ConvertError(
+                f"{self.out}: the {kind} task {name} failed because its worker died every time it ran "
+                f"(out of memory? see the workers' logs); {self._resume_hint()}"
+            )
+        if type(exc).__name__ in ("CancelledError", "FutureCancelledError"):
+            return ConvertError(f"{self.out}: the {kind} task {name} was cancelled by the Dask scheduler; {self._resume_hint()}")
+        return exc
+
+    def _resume_hint(self) -> str:
+        return "run the same command again to resume"
+
+    def run(self, overwrite: bool):
+        """The conversion (converter.py's ``run``), once a worker is there and the tasks of an
+        earlier run into this output, if any are still running, have ended: before the output
+        folder is prepared (a fresh start clears it) and before any task writes into it."""
+        try:
+            try:
+                self.client.wait_for_workers(1, timeout=WORKER_WAIT_S)
+            except TimeoutError:
+                where = getattr(self.client.scheduler, "address", "the Dask scheduler")
+                raise ConvertError(f"{where}: no Dask worker joined the scheduler within {WORKER_WAIT_S:.0f} s") from None
+            self._wait_for_earlier_run()
+        except BaseException:
+            self.progress.close()  # super().run closes it otherwise
+            raise
+        return super().run(overwrite)
+
+    def output_ready(self) -> None:
+        """Before the first task: every worker sees the output folder and may write into it."""
+        token = os.urandom(8).hex()
+        self.state["run"] = token
+        self.save_state()
+        answers = self.client.run(_probe, str(self.dir.path), token, on_error="return")
+        for worker, problem in sorted(answers.items()):
+            if isinstance(problem, BaseException):
+                problem = one_line(problem)
+            if problem:
+                raise ConvertError(f"{self.out}: Dask worker {worker} {problem}")
+
+    def _wait_for_earlier_run(self) -> None:
+        """A killed driver's tasks that had started run to their end on the workers; its re-run
+        waits for them, so that no two tasks write the same files at once."""
+        prefix = f"gigapoint-{self._out_tag}-"
+        t0 = time.monotonic()
+        while True:
+            busy = [k for keys in self.client.processing().values() for k in keys if str(k).startswith(prefix)]
+            if not busy:
+                return
+            if time.monotonic() - t0 > EARLIER_RUN_S:
+                raise ConvertError(f"{self.out}: tasks of an earlier conversion into it are still running on the Dask cluster")
+            time.sleep(POLL_S)
+
+    # ------------------------------------------------------------------ read
+
+    def _plan_reads(self) -> list:
+        """[[file index, first point, end point, color mode], ...]: ranges of READ_CHUNKS chunks of
+        files whose reader reads ranges (LAS, LAZ), whole files (None, None) otherwise."""
+        reads = []
+        step = READ_CHUNKS * self.chunk_size
+        for f, p in enumerate(self.paths):
+            reader = reader_for(p)
+            n = reader.point_count(p) if getattr(reader, "reads_ranges", False) else None
+            if n:
+                reads += [[f, s, min(s + step, n), None] for s in range(0, n, step)]
+            else:
+                reads.append([f, None, None, None])
+        return reads
+
+    def _chunk_ids(self, t: int) -> list[int]:
+        return [t * CHUNK_STRIDE + j for j in range(self.state["read_results"][str(t)]["chunks"])]
+
+    def read(self) -> None:
+        st = self.state
+        self.dir.raw.mkdir(exist_ok=True)
+        if "reads" not in st:
+            st.update(reads=self._plan_reads(), read_results={})
+            self.save_state()
+        results = st["read_results"]
+        st["total"] = _point_total(self.paths)
+        self.progress.phase("read", st["total"])
+        for res in results.values():
+            self.progress.advance(res["input"])
+        again = False
+        # the preview: read tasks send every stride-th point (~target in all), the sampler thins further if need be
+        preview = PreviewSampler(self.dir.preview, preview_points(self.mem), None)
+        stride = max(1, (st["total"] or self.chunk_size * len(st["reads"])) // preview.target)
+        while True:
+            todo = [t for t in range(len(st["reads"])) if str(t) not in results]
+
+            def done(i, res, todo=todo, again=again):
+                sample = res.pop("preview")
+                results[str(todo[i])] = res
+                if not again:
+                    self.progress.advance(res["input"])
+                    if sample is not None:
+                        corner, xyz, rgba = sample
+                        preview.add(xyz.astype(np.float64) + corner, rgba, {})
+                        self._write_preview(preview)
+                self._save_soon()
+
+            calls = []
+            for t in todo:
+                f, start, stop, mode = st["reads"][t]
+                calls.append((f"{self.paths[f].name}:{start or 0}", _read_task, (t, str(self.paths[f]), start, stop, mode, stride), 0))
+            self._run("read", calls, done)
+            redo = self._color_redo()
+            if not redo:
+                break
+            for t in redo:  # rare: a dark part of a 16-bit file read before its bright start was known
+                st["reads"][t][3] = "16"
+                del results[str(t)]
+            again = True
+        self._last_preview = preview  # its last write waits for the count tasks to be under way (count)
+        lo, hi, attrs = np.full(3, np.inf), np.full(3, -np.inf), None
+        for t in range(len(st["reads"])):
+            res = results[str(t)]
+            lo, hi = np.minimum(lo, res["lo"]), np.maximum(hi, res["hi"])
+            if res["attributes"] is not None:
+                attrs = merge_attributes(attrs, res["attributes"])
+        st.update(
+            chunks=sum(r["chunks"] for r in results.values()),
+            points=sum(r["points"] for r in results.values()),
+            skipped=sum(r["skipped"] for r in results.values()),
+            lo=lo.tolist(),
+            hi=hi.tolist(),
+            attributes=attrs or {},
+        )
+        self._end_read(lo, hi)
+
+    def _color_redo(self) -> list[int]:
+        """Read tasks whose file's colors were 16-bit before their range began, but which decided
+        8-bit on a dark chunk of their own (io's ColorScaler never goes back from 16-bit)."""
+        st = self.state
+        redo, bright = [], set()
+        for t, (f, start, _, _) in enumerate(st["reads"]):
+            res = st["read_results"][str(t)]
+            if start is not None and f in bright and res["eight"]:
+                redo.append(t)
+            if res["ends16"]:
+                bright.add(f)
+        return redo
+
+    # ------------------------------------------------------------------ count, distribute
+
+    def _read_tasks(self) -> list[int]:
+        return [t for t in range(len(self.state["reads"])) if self.state["read_results"][str(t)]["chunks"]]
+
+    def count(self) -> None:
+        st = self.state
+        counts = np.zeros(8**COUNT_LEVEL, np.int64)
+        self.progress.phase("count", st["points"])
+        tasks = self._read_tasks()
+
+        def done(i, res):
+            cells, n = res
+            counts[cells] += n
+            self.progress.advance(st["read_results"][str(tasks[i])]["points"])
+
+        preview, self._last_preview = self._last_preview, None
+        self._run("count", [(f"t{t}", _count_task, (self._chunk_ids(t),), 0) for t in tasks], done, meanwhile=preview and (lambda: self._write_preview(preview, force=True)))
+        self._plan(counts)
+
+    def distribute(self) -> None:
+        st = self.state
+        parts = st["partitions"]
+        if len(parts) == 1:  # one partition: the build reads the spilled chunks themselves
+            st.update(part_counts=[st["points"]], from_raw=True, phase="build")
+            self.save_state()
+            return
+        self.dir.parts.mkdir(exist_ok=True)
+        results = st.setdefault("distributed_tasks", {})
+        self.progress.phase("distribute", st["points"])
+        todo = [t for t in self._read_tasks() if str(t) not in results]
+        for t in self._read_tasks():
+            if str(t) in results:
+                self.progress.advance(st["read_results"][str(t)]["points"])
+
+        def done(i, res):
+            results[str(todo[i])] = res
+            self.progress.advance(st["read_results"][str(todo[i])]["points"])
+            self._save_soon()
+
+        self._run("distribute", [(f"t{t}", _distribute_task, (t, self._chunk_ids(t), parts), 0) for t in todo], done)
+        counts = [0] * len(parts)
+        pieces: dict = {}
+        for t in sorted(map(int, results)):  # task order: the input order
+            for pid, start, rows in results[str(t)]:
+                counts[pid] += rows
+                pieces.setdefault(built_name(*parts[pid][:2]), []).append([t, start, rows])
+        st.update(part_counts=counts, pieces=pieces)
+        self.save_state()
+        self._refine_pieces()
+        st["phase"] = "build"
+        self.save_state()
+
+    def _refine_pieces(self) -> None:
+        """Partitions above the budget split as the single-process converter splits them, a task each."""
+        st = self.state
+        parts, counts = st["partitions"], st["part_counts"]
+        big = [i for i, (lev, _, _) in enumerate(parts) if counts[i] > st["partition_points"] and lev < CODE_BITS]
+        if not big:
+            return
+        results = {}
+
+        def done(i, res):
+            results[big[i]] = res
+
+        calls = []
+        for i in big:
+            lev, prefix, _ = parts[i]
+            calls.append(
+                (built_name(lev, prefix), _refine_task, (lev, prefix, counts[i], st["pieces"][built_name(lev, prefix)]), counts[i])
+            )
+        self._run("refine", calls, done)
+        new_parts, new_counts = [], []
+        for i, (p, n) in enumerate(zip(parts, counts)):
+            if i in results:
+                sub, sub_counts, unsplittable = results[i]
+                new_parts += sub
+                new_counts += sub_counts
+                st.setdefault("unsplittable", []).extend(unsplittable)
+            else:
+                new_parts.append(p)
+                new_counts.append(n)
+        st.update(partitions=new_parts, part_counts=new_counts)
+
+    # ------------------------------------------------------------------ build, group, upper
+
+    def _piece_keys(self) -> list[str]:
+        return ["xyz", "rgba", *("attr." + a for a in self.state["attributes"])]
+
+    def _build_partitions(self, parts: list) -> None:
+        """The partitions' builds as tasks, the largest first; gigapoint format: each set placed
+        into the output arrays as soon as every set before it is built (``_Placer``)."""
+        st = self.state
+        built = self.dir.built
+        pieces = st.get("pieces", {})
+        sets = [(lev, prefix, n) for lev, prefix, n in parts if n]  # the partitions that make a node set, in order
+        todo = [(lev, prefix, n) for lev, prefix, n in sets if not (built / built_name(lev, prefix)).exists()]
+        self.progress.advance(sum(n for _, _, n in parts) - sum(n for _, _, n in todo))
+        refs: dict[int, int] = dict.fromkeys(map(int, st.get("distributed_tasks", {})), 0)
+        for lev, prefix, _ in todo:
+            for t, _, _ in pieces.get(built_name(lev, prefix), []):
+                refs[t] += 1
+        for t in [t for t, r in refs.items() if r == 0]:
+            self._remove_pieces(t, refs)
+        placer = _Placer(self, [built / built_name(lev, prefix) for lev, prefix, _ in sets]) if self.format == "gigapoint" else None
+        first_places = None
+        if placer is not None:
+            pending = {(lev, prefix) for lev, prefix, _ in todo}
+            done_before = [built / built_name(lev, prefix) for lev, prefix, _ in sets if (lev, prefix) not in pending]
+            placer.sizes.update({s: _set_points(s) for s in done_before})
+            first_places = placer.built(done_before[0], placer.sizes[done_before[0]]) if done_before else None
+        done_now = 0
+
+        def done(i, set_points):
+            nonlocal done_now
+            lev, prefix, n = todo[i]
+            self.progress.advance(n)
+            done_now += 1
+            hooks.after_partition_built(done_now)
+            for t, _, _ in pieces.get(built_name(lev, prefix), []):
+                refs[t] -= 1
+                if refs[t] == 0:
+                    self._remove_pieces(t, refs)
+            return None if placer is None else placer.built(built / built_name(lev, prefix), set_points)
+
+        calls = []
+        for lev, prefix, n in todo:
+            name = built_name(lev, prefix)
+            if st.get("from_raw"):
+                source = ("raw", [i for t in self._read_tasks() for i in self._chunk_ids(t)])
+            elif name in pieces:
+                source = ("pieces", pieces[name])
+            else:
+                source = None  # a refined partition's own files
+            calls.append((name, _build_task, (lev, prefix, n, source), n))  # the largest first
+        self._run("build", calls, done, first_places)
+        if st.get("from_raw"):
+            for f in raw_chunk_files(self.dir.raw):
+                f.unlink(missing_ok=True)
+
+    def _remove_pieces(self, t: int, refs: dict) -> None:
+        for key in self._piece_keys():
+            _piece_file(self.dir, t, key).unlink(missing_ok=True)
+        refs.pop(t, None)
+
+    def _join_groups(self, groups: list) -> None:
+        calls = [(f"g{level}-{prefix:x}", _group_task, (level, prefix, [str(m) for m in members]), 0) for level, prefix, members in groups]
+        self._run("group", calls, lambda i, res: None)
+
+    def build_upper(self, tops: list[Path]) -> None:
+        self._run("upper", [("upper", _upper_task, ([str(p) for p in tops],), 0)], lambda i, res: None)
+
+    # ------------------------------------------------------------------ place, write
+
+    def _placing_order(self) -> list[Path]:
+        """The node sets in the order the single-process converter fills the output arrays: the
+        partitions (in order), the groups (round by round), the upper nodes."""
+        built = self.dir.built
+        st = self.state
+        sets = [built / built_name(lev, prefix) for lev, prefix, _ in st["partitions"]]
+        sets += [built / group_name(lev, pre) for lev, pre in st.get("groups", [])]
+        return [p for p in sets if p.exists()] + [built / "upper"]
+
+    def _output_spec(self) -> dict:
+        """gigapoint format: the output arrays (made here if need be), as the place tasks take them."""
+        return {k: (str(path), dt.str, int(off)) for k, (path, dt, off) in self._outputs().items()}
+
+    def _place(self) -> None:
+        """Every node set not placed yet (the groups', the upper nodes', a resumed run's) placed."""
+        sets = self._placing_order()
+        if all((s / "span.npy").exists() for s in sets):
+            return  # placed (and maybe renamed already by an interrupted write)
+        placer = _Placer(self, sets)
+        self.progress.phase("place", sum(_set_points(s) for s in sets if not (s / "span.npy").exists()))
+        for s in sets[:-1]:
+            placer.sizes[s] = _set_points(s)
+        self._run(*placer.built(sets[-1], _set_points(sets[-1])))
+
+    def write(self) -> int:
+        if self.format == "gigapoint":
+            self._place()
+        return super().write()
+
+
+class _Placer:
+    """gigapoint format: the node sets ``order`` (in the order the single-process converter fills
+    the output arrays) placed as soon as the sizes of all sets before them are known."""
+
+    def __init__(self, conv: DaskPhases, order: list[Path]):
+        self.order = order
+        self.sizes: dict[Path, int] = {}
+        self.next = 0  # order[:next] are placed (or being placed)
+        self.offset = 0  # where order[next] goes
+        self.outputs = conv._output_spec()
+        self.progress = conv.progress if conv.state.get("phase") == "write" else None  # the build phase's bar counts builds
+
+    def built(self, path: Path, points: int) -> tuple | None:
+        """Set ``path`` holds ``points``: the place tasks that can go now, as _run takes them."""
+        self.sizes[path] = points
+        batches: list[list] = []
+        held = PLACE_POINTS
+        while self.next < len(self.order) and self.order[self.next] in self.sizes:
+            s = self.order[self.next]
+            if not (s / "span.npy").exists():
+                if held >= PLACE_POINTS:
+                    batches.append([])
+                    held = 0
+                batches[-1].append((str(s), self.offset))
+                held += self.sizes[s]
+            self.offset += self.sizes[s]
+            self.next += 1
+        if not batches:
+            return None
+        calls = [(Path(b[0][0]).name, _place_task, (b, self.outputs), -1) for b in batches]
+        return "place", calls, lambda i, n: self.progress and self.progress.advance(n)

@@ -1,0 +1,383 @@
+"""COPC (Cloud Optimized Point Cloud, copc.io): a LAS 1.4 / LAZ file that is an octree, read as
+one (CopcCloud) from a local file or over HTTP; its binary layouts, shared with the writer
+(copc_write.py).
+
+A COPC file: the LAS 1.4 header (375 bytes), the COPC info VLR first (user ``copc``, record 1:
+the octree's cube as centre and half size, spacing, the root hierarchy page's offset and size),
+the LASzip VLR (variable-size chunks), a WKT CRS VLR, point data in point format 6, 7 or 8 as
+one LAZ chunk per octree node, the LAZ chunk table, and the hierarchy EVLR (user ``copc``,
+record 1000): pages of 32-byte entries (VoxelKey, offset, byte size, point count; count -1: the
+node's entry and subtree are in the child page at offset). Opening reads the header and VLRs
+(one request), then the root hierarchy page; pages below and node chunks are read when a frame
+draws them (voxel_octree.py), a chunk decoded with lazrs into the layouts below.
+"""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.http import ByteSource, open_source
+from ..io.las import _scaled_xyz
+from .voxel_octree import VOXEL_KEY_DTYPE, VoxelOctree, valid_voxels, voxel_name, voxel_to_key
+
+# --------------------------------------------------------------------------- layouts
+
+#: The LAS 1.4 public header block.
+LAS14_HEADER_DTYPE = np.dtype(
+    [
+        ("file_signature", "S4"),
+        ("file_source_id", "<u2"),
+        ("global_encoding", "<u2"),
+        ("project_id", "V16"),
+        ("version_major", "u1"),
+        ("version_minor", "u1"),
+        ("system_identifier", "S32"),
+        ("generating_software", "S32"),
+        ("creation_day", "<u2"),
+        ("creation_year", "<u2"),
+        ("header_size", "<u2"),
+        ("offset_to_point_data", "<u4"),
+        ("number_of_vlrs", "<u4"),
+        ("point_format", "u1"),
+        ("point_record_length", "<u2"),
+        ("legacy_point_count", "<u4"),
+        ("legacy_points_by_return", "<u4", (5,)),
+        ("scale", "<f8", (3,)),
+        ("offset", "<f8", (3,)),
+        ("max_x", "<f8"),
+        ("min_x", "<f8"),
+        ("max_y", "<f8"),
+        ("min_y", "<f8"),
+        ("max_z", "<f8"),
+        ("min_z", "<f8"),
+        ("start_of_waveform", "<u8"),
+        ("start_of_first_evlr", "<u8"),
+        ("number_of_evlrs", "<u4"),
+        ("point_count", "<u8"),
+        ("points_by_return", "<u8", (15,)),
+    ]
+)
+VLR_HEADER_DTYPE = np.dtype(
+    [("reserved", "<u2"), ("user_id", "S16"), ("record_id", "<u2"), ("record_length", "<u2"), ("description", "S32")]
+)
+EVLR_HEADER_DTYPE = np.dtype(
+    [("reserved", "<u2"), ("user_id", "S16"), ("record_id", "<u2"), ("record_length", "<u8"), ("description", "S32")]
+)
+#: The COPC info VLR's 160 bytes.
+COPC_INFO_DTYPE = np.dtype(
+    [
+        ("center", "<f8", (3,)),
+        ("halfsize", "<f8"),
+        ("spacing", "<f8"),
+        ("root_hier_offset", "<u8"),
+        ("root_hier_size", "<u8"),
+        ("gpstime_minimum", "<f8"),
+        ("gpstime_maximum", "<f8"),
+        ("reserved", "<u8", (11,)),
+    ]
+)
+#: One hierarchy entry (32 bytes).
+HIERARCHY_ENTRY_DTYPE = np.dtype([("key", VOXEL_KEY_DTYPE), ("offset", "<u8"), ("byte_size", "<i4"), ("point_count", "<i4")])
+#: LAS point data record formats 6, 7 and 8 (``point_dtype`` adds extra bytes).
+_PDRF6 = [
+    ("X", "<i4"),
+    ("Y", "<i4"),
+    ("Z", "<i4"),
+    ("intensity", "<u2"),
+    ("returns", "u1"),  # return number (bits 0-3), number of returns (bits 4-7)
+    ("flags", "u1"),  # classification flags, scanner channel, scan direction, edge of flight line
+    ("classification", "u1"),
+    ("user_data", "u1"),
+    ("scan_angle", "<i2"),
+    ("point_source_id", "<u2"),
+    ("gps_time", "<f8"),
+]
+POINT_DTYPES = {
+    6: np.dtype(_PDRF6),
+    7: np.dtype([*_PDRF6, ("red", "<u2"), ("green", "<u2"), ("blue", "<u2")]),
+    8: np.dtype([*_PDRF6, ("red", "<u2"), ("green", "<u2"), ("blue", "<u2"), ("nir", "<u2")]),
+}
+#: Point attributes gigapoint reads from (and writes to) these formats, as the LAS reader names them.
+ATTRIBUTE_DTYPES = {
+    "intensity": np.dtype(np.uint16),
+    "classification": np.dtype(np.uint8),
+    "return_number": np.dtype(np.uint8),
+    "number_of_returns": np.dtype(np.uint8),
+    "point_source_id": np.dtype(np.uint16),
+    "gps_time": np.dtype(np.float64),
+}
+
+COPC_USER_ID = b"copc"
+COPC_INFO_RECORD = 1
+COPC_HIERARCHY_RECORD = 1000
+LASZIP_USER_ID = b"laszip encoded"
+LASZIP_RECORD = 22204
+PROJECTION_USER_ID = b"LASF_Projection"
+WKT_RECORD = 2112
+HEADER_SIZE = LAS14_HEADER_DTYPE.itemsize  # 375
+INFO_OFFSET = HEADER_SIZE + VLR_HEADER_DTYPE.itemsize  # the info VLR's data: byte 429
+MAGIC_END = INFO_OFFSET  # bytes needed to tell a COPC file
+HEAD_READ = 64 << 10  # the first request reads this much (the header and VLRs, usually)
+
+
+def point_dtype(point_format: int, record_length: int) -> np.dtype:
+    """The record layout of point format 6/7/8 with ``record_length - base`` extra bytes."""
+    base = POINT_DTYPES[point_format]
+    extra = record_length - base.itemsize
+    if extra < 0:
+        raise ValueError(f"point record length {record_length} is smaller than point format {point_format} needs ({base.itemsize})")
+    return np.dtype([*base.descr, ("extra_bytes", f"V{extra}")]) if extra else base
+
+
+def is_copc_head(head: bytes) -> bool:
+    """The first bytes of a COPC file: 'LASF', LAS 1.4, the COPC info VLR first (copc.io's
+    reader notes: 'copc' at byte 377, record id 1 at 393)."""
+    if len(head) < MAGIC_END or head[:4] != b"LASF" or head[24:26] != b"\x01\x04":
+        return False
+    vlr = np.frombuffer(head, VLR_HEADER_DTYPE, count=1, offset=HEADER_SIZE)[0]
+    return vlr["user_id"].rstrip(b"\0") == COPC_USER_ID and int(vlr["record_id"]) == COPC_INFO_RECORD
+
+
+def is_copc_file(path) -> bool:
+    """A local file that starts as a COPC file does (``is_copc_head``)."""
+    try:
+        with open(path, "rb") as f:
+            return is_copc_head(f.read(MAGIC_END))
+    except OSError:
+        return False
+
+
+def read_vlrs(data: bytes, start: int, count: int, end: int) -> list[tuple[bytes, int, bytes]]:
+    """(user id, record id, data) of ``count`` VLRs from byte ``start`` of ``data`` (ending by ``end``)."""
+    out, pos = [], start
+    for i in range(count):
+        if pos + VLR_HEADER_DTYPE.itemsize > end:
+            raise ValueError(f"VLR {i + 1} of {count} runs into the point data")
+        h = np.frombuffer(data, VLR_HEADER_DTYPE, count=1, offset=pos)[0]
+        n = int(h["record_length"])
+        pos += VLR_HEADER_DTYPE.itemsize
+        if pos + n > end:
+            raise ValueError(f"VLR {i + 1} of {count} ({n} bytes) runs into the point data")
+        out.append((bytes(h["user_id"]).rstrip(b"\0"), int(h["record_id"]), data[pos : pos + n]))
+        pos += n
+    return out
+
+
+def wkt_of(vlrs) -> str | None:
+    """The WKT CRS of a LAS 1.4 file's VLRs (LASF_Projection 2112), None without one."""
+    for user, rec, data in vlrs:
+        if user == PROJECTION_USER_ID and rec == WKT_RECORD:
+            text = data.split(b"\0")[0].decode("utf-8", "replace").strip()
+            if text:
+                return text
+    return None
+
+
+# --------------------------------------------------------------------------- reader
+
+
+class CopcCloud(VoxelOctree):
+    """A COPC file (local path or http(s) URL) opened as an octree: the header, VLRs and root
+    hierarchy page are read at open, deeper pages and node chunks when a frame draws them
+    (voxel_octree.py). ``meta`` holds the LAS facts ``gigapoint info`` shows (``crs``,
+    ``point_format``, ``scale``, ``offset``, ``spacing``)."""
+
+    def __init__(self, source: ByteSource):
+        self.source = source
+        name = source.name
+        head = source.read_head(HEAD_READ)
+        if not is_copc_head(head):
+            what = "LAS 1.4 file without the COPC info VLR first" if head[:4] == b"LASF" else f"file that starts with {head[:4]!r}"
+            raise InputError(f"{name}: not a COPC file (a {what}); gigapoint reads COPC (.copc.laz) and EPT (ept.json) as octrees")
+        if len(head) < INFO_OFFSET + COPC_INFO_DTYPE.itemsize:
+            raise InputError(f"{name}: truncated COPC file ({len(head)} bytes: no room for the COPC info VLR)")
+        hdr = np.frombuffer(head, LAS14_HEADER_DTYPE, count=1)[0]
+        fmt_id, rec_len = int(hdr["point_format"]), int(hdr["point_record_length"])
+        fmt = fmt_id & 0x3F
+        if fmt not in POINT_DTYPES:
+            raise InputError(f"{name}: COPC point format {fmt} is not 6, 7 or 8")
+        try:
+            self.record = point_dtype(fmt, rec_len)
+        except ValueError as exc:
+            raise InputError(f"{name}: corrupt COPC header: {exc}") from None
+        data_start = int(hdr["offset_to_point_data"])
+        n_vlrs = int(hdr["number_of_vlrs"])
+        file_size = source.size()
+        if file_size is not None and data_start > file_size:
+            raise InputError(f"{name}: truncated COPC file: its point data would start at byte {data_start:,}, the file has {file_size:,}")
+        if data_start > len(head):
+            head = head + source.read(len(head), data_start - len(head))
+        try:
+            vlrs = read_vlrs(head, int(hdr["header_size"]), n_vlrs, data_start)
+        except ValueError as exc:
+            raise InputError(f"{name}: corrupt COPC file: {exc}") from None
+        info = np.frombuffer(head, COPC_INFO_DTYPE, count=1, offset=INFO_OFFSET)[0]
+        laszip = [d for u, r, d in vlrs if u == LASZIP_USER_ID and r == LASZIP_RECORD]
+        if not laszip:
+            raise InputError(f"{name}: corrupt COPC file: no LASzip VLR")
+        self.laszip = laszip[0]
+        self.scale = np.array(hdr["scale"], np.float64)
+        self.offset = np.array(hdr["offset"], np.float64)
+        center, half = np.array(info["center"], np.float64), float(info["halfsize"])
+        lo = np.array([hdr["min_x"], hdr["min_y"], hdr["min_z"]], np.float64)
+        hi = np.array([hdr["max_x"], hdr["max_y"], hdr["max_z"]], np.float64)
+        if not (np.all(np.isfinite(center)) and np.isfinite(half) and half > 0):
+            raise InputError(f"{name}: corrupt COPC info VLR: octree centre {center.tolist()} and half size {half!r}")
+        if not (np.all(np.isfinite(self.scale)) and np.all(self.scale != 0) and np.all(np.isfinite(self.offset))):
+            raise InputError(f"{name}: corrupt COPC header: scale {self.scale.tolist()}, offset {self.offset.tolist()}")
+        cube_min = center - half
+        n_points = int(hdr["point_count"]) or int(hdr["legacy_point_count"])
+        if not (
+            np.all(np.isfinite(lo))
+            and np.all(np.isfinite(hi))
+            and np.all(lo <= hi)
+            and np.all(lo <= center + half)
+            and np.all(hi >= cube_min)
+        ):
+            lo, hi = cube_min, center + half  # header bounds missing or beside the octree: its cube stands in
+        self.data_start = data_start
+        self.file_size = file_size
+        self.point_format = fmt
+        self._attr_dtypes = dict(ATTRIBUTE_DTYPES, **({"nir": np.dtype(np.uint16)} if fmt == 8 else {}))
+        crs = wkt_of(vlrs)
+        meta = {
+            "format": "copc",
+            "points": n_points,
+            "cube_min": cube_min.tolist(),
+            "cube_edge": 2.0 * half,
+            "bounds": {"min": lo.tolist(), "max": hi.tolist()},
+            "spacing": float(info["spacing"]),
+            "crs": crs,
+            "las_version": f"{hdr['version_major']}.{hdr['version_minor']}",
+            "point_format": fmt,
+            "scale": self.scale.tolist(),
+            "offset": self.offset.tolist(),
+            "generating_software": bytes(hdr["generating_software"]).split(b"\0")[0].decode("ascii", "replace").strip(),
+        }
+        root = (int(info["root_hier_offset"]), int(info["root_hier_size"]))
+        self._check_range(root[0], root[1], "the root hierarchy page")
+        stem = name.rstrip("/").rsplit("/", 1)[-1]
+        self._open(stem, meta, root, path=None)
+
+    def _check_range(self, offset: int, size: int, what: str) -> None:
+        if offset < 0 or size < 0 or (self.file_size is not None and offset + size > self.file_size):
+            raise InputError(
+                f"{self.source.name}: {what} at bytes {offset:,}..{offset + size:,} lies past the end of the file ({self.file_size:,} bytes)"
+            )
+
+    # -- VoxelOctree
+    def _fetch_pages(self, locators: list) -> list[bytes]:
+        return self.source.read_many(locators)
+
+    def _parse_page(self, blob: bytes, locator) -> tuple[dict, dict]:
+        offset, size = locator
+        name = self.source.name
+        if size == 0 or size % HIERARCHY_ENTRY_DTYPE.itemsize or len(blob) != size:
+            raise InputError(
+                f"{name}: truncated hierarchy page at byte {offset:,}: {size:,} bytes is not a whole number of "
+                f"{HIERARCHY_ENTRY_DTYPE.itemsize}-byte entries"
+            )
+        e = np.frombuffer(blob, HIERARCHY_ENTRY_DTYPE)
+        k = e["key"]
+        ok = valid_voxels(k["level"], k["x"], k["y"], k["z"])
+        if not ok.all():
+            i = int(np.flatnonzero(~ok)[0])
+            raise InputError(
+                f"{name}: invalid node key {k['level'][i]}-{k['x'][i]}-{k['y'][i]}-{k['z'][i]} in the hierarchy page at byte {offset:,}"
+            )
+        keys = voxel_to_key(k["level"], k["x"], k["y"], k["z"]).tolist()
+        if len(set(keys)) != len(keys):
+            raise InputError(f"{name}: the hierarchy page at byte {offset:,} lists a node twice")
+        counts, offs, sizes = e["point_count"].astype(np.int64), e["offset"].astype(np.int64), e["byte_size"].astype(np.int64)
+        # checked all at once (a page may hold 10^5 entries); the first bad entry is named
+        page, chunk = counts == -1, counts > 0
+        end = offs + sizes
+        beyond = (end > self.file_size) if self.file_size is not None else np.zeros(len(keys), bool)
+        problems = (
+            (counts < -1, "has an invalid point count {c} in the hierarchy"),
+            (
+                page & ((sizes <= 0) | (offs < 0) | beyond),
+                "has its hierarchy page at bytes {o:,}..{e:,}, past the end of the file ({f:,} bytes)",
+            ),
+            (chunk & ((sizes <= 0) | (offs < self.data_start)), "has its chunk at bytes {o:,}..{e:,}, outside the point data"),
+            (chunk & beyond, "has its chunk at bytes {o:,}..{e:,}, which lies past the end of the file ({f:,} bytes)"),
+        )
+        for bad, text in problems:
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                what = text.format(c=int(counts[i]), o=int(offs[i]), e=int(end[i]), f=self.file_size or 0)
+                raise InputError(f"{name}: node {voxel_name(keys[i])} {what}")
+        locs = list(zip(offs.tolist(), sizes.tolist()))
+        pages = {keys[i]: locs[i] for i in np.flatnonzero(page).tolist()}
+        entries = {keys[i]: ((int(counts[i]), locs[i]) if chunk[i] else (0, None)) for i in np.flatnonzero(~page).tolist()}
+        return entries, pages
+
+    def _fetch_nodes(self, locators: list) -> list[bytes]:
+        return self.source.read_many(locators)
+
+    def _decode(self, index: int, blob: bytes) -> dict:
+        import lazrs
+
+        n = int(self.counts[index])
+        out = np.zeros(n * self.record.itemsize, np.uint8)
+        lazrs.decompress_points_with_chunk_table(blob, self.laszip, out, [(n, len(blob))])
+        return self._points(out.view(self.record))
+
+    def _decode_batch(self, indices: list[int], blobs: list[bytes]) -> list[dict]:
+        """The nodes' chunks as one LAZ point block (offset, chunks, chunk table), decoded by
+        lazrs's parallel decompressor (a chunk per thread), then split by node."""
+        import lazrs
+
+        counts = [int(self.counts[i]) for i in indices]
+        table = io.BytesIO()
+        lazrs.write_chunk_table(table, [(n, len(b)) for n, b in zip(counts, blobs)], lazrs.LazVlr(self.laszip))
+        data = b"".join(blobs)
+        block = np.int64(8 + len(data)).tobytes() + data + table.getvalue()
+        out = np.zeros(sum(counts) * self.record.itemsize, np.uint8)
+        lazrs.ParLasZipDecompressor(io.BytesIO(block), self.laszip).decompress_many(out)
+        rec = out.view(self.record)
+        starts = np.concatenate([[0], np.cumsum(counts)])
+        return [self._points(rec[starts[k] : starts[k + 1]]) for k in range(len(indices))]
+
+    def _points(self, rec: np.ndarray) -> dict:
+        """Positions, colors and attributes of point records."""
+        xyz = np.empty((len(rec), 3), np.float64)
+        _scaled_xyz(rec["X"], rec["Y"], rec["Z"], self.scale, self.offset, xyz)
+        attrs = {
+            "intensity": rec["intensity"],
+            "classification": rec["classification"],
+            "return_number": rec["returns"] & np.uint8(0x0F),
+            "number_of_returns": rec["returns"] >> np.uint8(4),
+            "point_source_id": rec["point_source_id"],
+            "gps_time": rec["gps_time"],
+        }
+        rgb = None
+        if self.point_format >= 7:
+            rgb = np.stack([rec["red"], rec["green"], rec["blue"]], axis=1)
+        if self.point_format == 8:
+            attrs["nir"] = rec["nir"]
+        return {"xyz": xyz, "rgb": rgb, "attributes": attrs}
+
+
+def open_copc(path_or_url) -> CopcCloud:
+    """A COPC file (local path or http(s) URL) as an octree (CopcCloud)."""
+    return CopcCloud(open_source(path_or_url))
+
+
+__all__ = [
+    "ATTRIBUTE_DTYPES",
+    "COPC_INFO_DTYPE",
+    "EVLR_HEADER_DTYPE",
+    "HIERARCHY_ENTRY_DTYPE",
+    "LAS14_HEADER_DTYPE",
+    "POINT_DTYPES",
+    "VLR_HEADER_DTYPE",
+    "CopcCloud",
+    "is_copc_file",
+    "is_copc_head",
+    "open_copc",
+    "point_dtype",
+]

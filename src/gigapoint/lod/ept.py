@@ -1,0 +1,202 @@
+"""EPT (Entwine Point Tile, entwine.io): an ``ept.json`` with ``ept-hierarchy/`` and ``ept-data/``
+beside it, local or over HTTP, opened as an octree (EptCloud).
+
+``ept.json``: ``bounds`` (the octree's cube: xmin, ymin, zmin, xmax, ymax, zmax),
+``boundsConforming`` (the points' bounds), ``points``, ``dataType`` (``laszip``: every node a
+LAZ file ``ept-data/d-x-y-z.laz``; ``binary``: the schema's dimensions packed in order,
+little-endian, ``ept-data/d-x-y-z.bin``), ``hierarchyType`` (``json``), ``schema`` (name, type
+signed/unsigned/float, size, scale and offset per dimension) and ``srs`` (wkt, authority,
+horizontal). The hierarchy: ``ept-hierarchy/0-0-0-0.json`` maps node names to point counts,
+-1 for a node whose subtree is in ``ept-hierarchy/<name>.json``, read when a frame draws it
+(voxel_octree.py).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.http import ByteSource, as_url, open_source
+from ..io.las import _scaled_xyz
+from .voxel_octree import VoxelOctree, parse_voxel_name, voxel_name
+
+EPT_FILE = "ept.json"
+DATA_TYPES = {"laszip": ".laz", "binary": ".bin"}
+_TYPES = {("signed", 1): "i1", ("signed", 2): "<i2", ("signed", 4): "<i4", ("signed", 8): "<i8"}
+_TYPES.update({("unsigned", 1): "u1", ("unsigned", 2): "<u2", ("unsigned", 4): "<u4", ("unsigned", 8): "<u8"})
+_TYPES.update({("float", 4): "<f4", ("float", 8): "<f8"})
+#: EPT (PDAL) dimension names -> gigapoint attribute names and dtypes (as the LAS reader names them)
+ATTRIBUTES = {
+    "Intensity": ("intensity", np.uint16),
+    "Classification": ("classification", np.uint8),
+    "ReturnNumber": ("return_number", np.uint8),
+    "NumberOfReturns": ("number_of_returns", np.uint8),
+    "PointSourceId": ("point_source_id", np.uint16),
+    "GpsTime": ("gps_time", np.float64),
+    "Infrared": ("nir", np.uint16),
+}
+
+
+def ept_location(path) -> str | Path | None:
+    """The ``ept.json`` that ``path`` names (the file, its folder, or a URL ending in
+    ``ept.json`` or ``/``), else None."""
+    url = as_url(path)
+    if url is not None:
+        if url.endswith("/"):
+            return url + EPT_FILE
+        return url if url.rsplit("/", 1)[-1].endswith(".json") else None
+    p = Path(path)
+    if p.is_dir() and (p / EPT_FILE).is_file():
+        return p / EPT_FILE
+    if p.is_file() and p.name == EPT_FILE:
+        return p
+    return None
+
+
+def _srs_text(srs) -> str | None:
+    if not isinstance(srs, dict):
+        return None
+    if srs.get("authority") and srs.get("horizontal"):
+        text = f"{srs['authority']}:{srs['horizontal']}"
+        return text + (f"+{srs['vertical']}" if srs.get("vertical") else "")
+    return srs.get("wkt") or None
+
+
+class EptCloud(VoxelOctree):
+    """An EPT dataset opened as an octree: ``ept.json`` and the root hierarchy file at open,
+    deeper hierarchy files and node files when a frame draws them. ``meta`` holds ``crs``,
+    ``data_type`` and ``schema``."""
+
+    def __init__(self, source: ByteSource):
+        self.source = source
+        name = source.name
+        try:
+            meta = json.loads(source.read_all())
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise InputError(f"{name}: not valid JSON ({' '.join(str(exc).split())})") from None
+        if not isinstance(meta, dict):
+            raise InputError(f"{name}: not an EPT ept.json (expected a JSON object)")
+        missing = [k for k in ("bounds", "points", "dataType", "hierarchyType", "schema") if k not in meta]
+        if missing:
+            raise InputError(f"{name}: ept.json lacks {', '.join(repr(k) for k in missing)}")
+        self.data_type = meta["dataType"]
+        if self.data_type not in DATA_TYPES:
+            raise InputError(f"{name}: EPT dataType {self.data_type!r} is not supported (laszip or binary)")
+        if meta["hierarchyType"] != "json":
+            raise InputError(f"{name}: EPT hierarchyType {meta['hierarchyType']!r} is not supported (json)")
+        try:
+            b = np.array(meta["bounds"], np.float64).reshape(6)
+            tight = np.array(meta.get("boundsConforming", meta["bounds"]), np.float64).reshape(6)
+            n_points = int(meta["points"])
+            self._schema(meta["schema"])
+        except (TypeError, ValueError, KeyError) as exc:
+            raise InputError(f"{name}: invalid ept.json ({' '.join(str(exc).split())})") from None
+        if not (np.all(np.isfinite(b)) and np.all(b[3:] > b[:3])):
+            raise InputError(f"{name}: invalid ept.json bounds {b.tolist()}")
+        cube_min, edge = b[:3], float(np.max(b[3:] - b[:3]))
+        lo, hi = tight[:3], tight[3:]
+        if not (np.all(np.isfinite(tight)) and np.all(lo <= hi) and np.all(lo <= cube_min + edge) and np.all(hi >= cube_min)):
+            lo, hi = cube_min, cube_min + edge  # conforming bounds missing or beside the octree: its cube stands in
+        cloud_meta = {
+            "format": "ept",
+            "points": n_points,
+            "cube_min": cube_min.tolist(),
+            "cube_edge": edge,
+            "bounds": {"min": lo.tolist(), "max": hi.tolist()},
+            "span": meta.get("span"),
+            "crs": _srs_text(meta.get("srs")),
+            "data_type": self.data_type,
+            "schema": [d["name"] for d in meta["schema"]],
+            "version": meta.get("version"),
+        }
+        stem = Path(name.rstrip("/")).parent.name or "ept"
+        self._open(stem, cloud_meta, "0-0-0-0", path=None)
+
+    def _schema(self, schema) -> None:
+        """The binary record layout, per-dimension scale/offset and the attributes it holds."""
+        fields, self._scales = [], {}
+        for d in schema:
+            t = _TYPES.get((d["type"], int(d["size"])))
+            if t is None:
+                raise ValueError(f"dimension {d.get('name')!r} has an unknown type {d['type']!r} of size {d['size']}")
+            fields.append((d["name"], t))
+            self._scales[d["name"]] = (float(d.get("scale", 1.0)), float(d.get("offset", 0.0)))
+        names = [f for f, _ in fields]
+        for axis in ("X", "Y", "Z"):
+            if axis not in names:
+                raise ValueError(f"the schema has no {axis} dimension")
+        self.record = np.dtype(fields)
+        self._has_rgb = all(c in names for c in ("Red", "Green", "Blue"))
+        self._attr_dtypes = {a: np.dtype(dt) for n, (a, dt) in ATTRIBUTES.items() if n in names}
+
+    # -- VoxelOctree
+    def _fetch_pages(self, locators: list) -> list[bytes]:
+        return self.source.read_all_many([self.source.sibling(f"ept-hierarchy/{n}.json") for n in locators])
+
+    def _parse_page(self, blob: bytes, locator) -> tuple[dict, dict]:
+        where = f"ept-hierarchy/{locator}.json"
+        try:
+            page = json.loads(blob)
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise InputError(f"{self.source.name}: {where} is not valid JSON ({' '.join(str(exc).split())})") from None
+        if not isinstance(page, dict):
+            raise InputError(f"{self.source.name}: {where} is not a JSON object of node names and point counts")
+        entries, pages = {}, {}
+        for node, count in page.items():
+            try:
+                key = parse_voxel_name(node)
+            except ValueError as exc:
+                raise InputError(f"{self.source.name}: {where}: {exc}") from None
+            if not isinstance(count, int) or isinstance(count, bool) or count < -1:
+                raise InputError(f"{self.source.name}: {where}: node {node} has an invalid point count {count!r}")
+            if count == -1:
+                pages[key] = node
+            else:
+                entries[key] = (count, node if count > 0 else None)
+        return entries, pages
+
+    def _fetch_nodes(self, locators: list) -> list[bytes]:
+        ext = DATA_TYPES[self.data_type]
+        return self.source.read_all_many([self.source.sibling(f"ept-data/{n}{ext}") for n in locators])
+
+    def _decode(self, index: int, blob: bytes) -> dict:
+        n = int(self.counts[index])
+        if self.data_type == "binary":
+            if len(blob) != n * self.record.itemsize:
+                raise InputError(
+                    f"{self.source.name}: ept-data/{voxel_name(int(self.keys[index]))}.bin holds {len(blob):,} bytes, "
+                    f"{n:,} points of {self.record.itemsize} bytes need {n * self.record.itemsize:,}"
+                )
+            rec = np.frombuffer(blob, self.record)
+            xyz = np.empty((n, 3), np.float64)
+            for i, axis in enumerate("XYZ"):
+                s, o = self._scales[axis]
+                xyz[:, i] = rec[axis].astype(np.float64) * s + o
+            rgb = np.stack([rec["Red"], rec["Green"], rec["Blue"]], axis=1).astype(np.uint16) if self._has_rgb else None
+            attrs = {a: rec[d] for d, (a, _) in ATTRIBUTES.items() if d in self.record.names}
+            return {"xyz": xyz, "rgb": rgb, "attributes": attrs}
+        import laspy
+
+        with laspy.open(io.BytesIO(blob)) as r:
+            pts = r.read_points(r.header.point_count)
+            raw = pts.array
+            xyz = np.empty((len(raw), 3), np.float64)
+            _scaled_xyz(
+                raw["X"], raw["Y"], raw["Z"], np.asarray(r.header.scales, np.float64), np.asarray(r.header.offsets, np.float64), xyz
+            )
+            dims = set(r.header.point_format.dimension_names)
+        rgb = np.stack([pts["red"], pts["green"], pts["blue"]], axis=1).astype(np.uint16) if {"red", "green", "blue"} <= dims else None
+        attrs = {a: np.asarray(pts[a]) for a, _ in ATTRIBUTES.values() if a in dims}  # laspy's names are gigapoint's
+        return {"xyz": xyz, "rgb": rgb, "attributes": attrs}
+
+
+def open_ept(path_or_url) -> EptCloud:
+    """An EPT dataset (its ``ept.json``, its folder, or their URL) as an octree (EptCloud)."""
+    loc = ept_location(path_or_url)
+    if loc is None:
+        raise InputError(f"{path_or_url}: not an EPT dataset (no ept.json)")
+    return EptCloud(open_source(loc))

@@ -1,0 +1,424 @@
+"""Numba kernels of the progressive octree (octree.py): routing a sorted batch down the tree,
+sampling voxels, allocating chunks, writing points and voxels.
+
+A batch is sorted by point code (lod/keys.py: 21 bits an axis in the root cube, Potree's
+child order), so every node's share of it is one contiguous run and every 128³ voxel cell
+of a node one contiguous sub-run: routing is a few binary searches per node, and sampling
+a linear pass per run, with no hash lookups per point.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from ...core.layout import COORD_BITS, WORD_BITS, WORD_MASK
+from ..keys import CODE_BITS
+
+GRID_BITS = 7  # voxel cells per axis and inner node: 2^7 = 128 (SimLOD, Wand et al.)
+# Entry lists a node has: a leaf's points are list 0; an inner node's voxels go to the list of
+# the child octant they lie in, so a frame can draw a node's voxels but where a child is drawn.
+# List ``l`` belongs to node ``l // LISTS``.
+LISTS = 8
+EMPTY_KEY = np.uint64(0xFFFFFFFFFFFFFFFF)
+_HASH_MUL = np.uint64(0x9E3779B97F4A7C15)
+_SCALE30 = float(1 << COORD_BITS)
+_MAX30 = (1 << COORD_BITS) - 1
+_STACK = 8 * (CODE_BITS + 2)  # a depth-first walk holds at most 8 siblings a level
+
+
+@njit(inline="always")
+def _new_node(parent, d, key, level, parent_of, children, leaf, count, first_chunk, last_chunk, cmin, edge, n):
+    """Node ``n`` as child ``d`` (Potree order: x in bit 2) of ``parent``: an empty leaf."""
+    key[n] = (key[parent] << np.uint64(3)) | np.uint64(d)
+    level[n] = level[parent] + 1
+    parent_of[n] = parent
+    for c in range(8):
+        children[n, c] = -1
+    leaf[n] = 1
+    count[n] = 0
+    for o in range(LISTS):
+        first_chunk[n * LISTS + o] = -1
+        last_chunk[n * LISTS + o] = -1
+    e = edge[parent] * 0.5
+    edge[n] = e
+    cmin[n, 0] = cmin[parent, 0] + e * ((d >> 2) & 1)
+    cmin[n, 1] = cmin[parent, 1] + e * ((d >> 1) & 1)
+    cmin[n, 2] = cmin[parent, 2] + e * (d & 1)
+    children[parent, d] = n
+
+
+@njit(cache=True)
+def distribute(
+    codes, root, key, level, parent_of, children, leaf, count, first_chunk, last_chunk, cmin, edge, n_nodes, leaf_runs, inner_runs
+):
+    """Route the sorted ``codes`` from ``root`` down to the leaves, creating missing children as
+    empty leaves. Returns (leaf runs, inner runs, nodes): ``leaf_runs[k]`` / ``inner_runs[k]``
+    = (node, lo, hi) of the points each node receives; -1 leaf runs when the node arrays are full."""
+    cap = key.shape[0]
+    st_node = np.empty(_STACK, np.int64)
+    st_lo = np.empty(_STACK, np.int64)
+    st_hi = np.empty(_STACK, np.int64)
+    top = 0
+    st_node[0], st_lo[0], st_hi[0] = root, 0, codes.shape[0]
+    top = 1
+    nl = 0
+    ni = 0
+    while top > 0:
+        top -= 1
+        node, lo, hi = st_node[top], st_lo[top], st_hi[top]
+        if hi <= lo:
+            continue
+        if leaf[node]:
+            leaf_runs[nl, 0], leaf_runs[nl, 1], leaf_runs[nl, 2] = node, lo, hi
+            nl += 1
+            continue
+        inner_runs[ni, 0], inner_runs[ni, 1], inner_runs[ni, 2] = node, lo, hi
+        ni += 1
+        lev = level[node]
+        prefix = key[node] ^ (np.uint64(1) << np.uint64(3 * lev))
+        shift = np.uint64(3 * (CODE_BITS - lev - 1))
+        s = lo
+        for d in range(8):
+            # the first code at or past child d + 1's range
+            bound = ((prefix << np.uint64(3)) | np.uint64(d + 1)) << shift
+            a, b = s, hi
+            while a < b:
+                m = (a + b) >> 1
+                if codes[m] < bound:
+                    a = m + 1
+                else:
+                    b = m
+            if a > s:
+                ch = children[node, d]
+                if ch < 0:
+                    if n_nodes >= cap:
+                        return -1, 0, n_nodes
+                    _new_node(node, d, key, level, parent_of, children, leaf, count, first_chunk, last_chunk, cmin, edge, n_nodes)
+                    ch = n_nodes
+                    n_nodes += 1
+                st_node[top], st_lo[top], st_hi[top] = ch, s, a
+                top += 1
+            s = a
+    return nl, ni, n_nodes
+
+
+@njit(inline="always")
+def _add_color(sums, e, col):
+    sums[e, 0] += col & np.uint32(255)
+    sums[e, 1] += (col >> np.uint32(8)) & np.uint32(255)
+    sums[e, 2] += (col >> np.uint32(16)) & np.uint32(255)
+    sums[e, 3] += col >> np.uint32(24)
+    sums[e, 4] += 1
+
+
+@njit(cache=True)
+def sample_runs(
+    codes, rgba, order, inner_runs, leaf_runs, level, leaf, children, run_lo, run_hi, ent_start, ent_count, e_cell, e_first, e_sum, e_node, e_local
+):
+    """The voxel cells (code prefixes ``GRID_BITS`` levels below the node) that the routed points
+    occupy in every inner node they pass, with their first point and colour sums (r, g, b, a, n).
+
+    Bottom-up and shared: the cells of a node whose children are leaves come from a linear pass
+    over the leaves' points; a node's cells over an inner child are that child's cells (a level
+    finer, so consecutive ones merge when shifted by one digit). Each point is read once, not
+    once per level. ``inner_runs`` is in ``distribute``'s order (parents before children);
+    entries of node n end up at e_*[ent_start[n] : ent_start[n] + ent_count[n]], sorted by cell.
+    Returns the number of entries, or -1 when the entry arrays are too small."""
+    cap = e_cell.shape[0]
+    for r in range(leaf_runs.shape[0]):
+        run_lo[leaf_runs[r, 0]] = leaf_runs[r, 1]
+        run_hi[leaf_runs[r, 0]] = leaf_runs[r, 2]
+    for r in range(inner_runs.shape[0]):
+        run_lo[inner_runs[r, 0]] = inner_runs[r, 1]
+        run_hi[inner_runs[r, 0]] = inner_runs[r, 2]
+    m = 0
+    for r in range(inner_runs.shape[0] - 1, -1, -1):  # children before parents
+        node = inner_runs[r, 0]
+        lev = level[node]
+        cl = min(lev + GRID_BITS, CODE_BITS)
+        shift = np.uint64(3 * (CODE_BITS - cl))
+        start = m
+        for d in range(8):
+            c = children[node, d]
+            if c < 0 or run_lo[c] < 0:
+                continue
+            if leaf[c]:
+                for i in range(run_lo[c], run_hi[c]):
+                    cell = codes[i] >> shift
+                    if m == start or cell != e_cell[m - 1]:
+                        if m >= cap:
+                            return -1
+                        e_cell[m] = cell
+                        e_first[m] = order[i]
+                        for ch in range(5):
+                            e_sum[m, ch] = 0
+                        m += 1
+                    _add_color(e_sum, m - 1, rgba[order[i]])
+            else:
+                ccl = min(lev + 1 + GRID_BITS, CODE_BITS)
+                up = np.uint64(3 * (ccl - cl))
+                for k in range(ent_start[c], ent_start[c] + ent_count[c]):
+                    cell = e_cell[k] >> up
+                    if m == start or cell != e_cell[m - 1]:
+                        if m >= cap:
+                            return -1
+                        e_cell[m] = cell
+                        e_first[m] = e_first[k]
+                        for ch in range(5):
+                            e_sum[m, ch] = 0
+                        m += 1
+                    for ch in range(5):
+                        e_sum[m - 1, ch] += e_sum[k, ch]
+        ent_start[node] = start
+        ent_count[node] = m - start
+        mask = (np.uint64(1) << np.uint64(3 * (cl - lev))) - np.uint64(1)
+        top = np.uint64(3 * (cl - lev - 1))  # the cell's child octant: its highest digit
+        for k in range(start, m):
+            e_local[k] = e_cell[k] & mask
+            e_node[k] = node * LISTS + np.int64((e_local[k] >> top) & np.uint64(7))
+    for r in range(leaf_runs.shape[0]):
+        run_lo[leaf_runs[r, 0]] = -1
+    for r in range(inner_runs.shape[0]):
+        run_lo[inner_runs[r, 0]] = -1
+    return m
+
+
+@njit(inline="always")
+def _hash(k, mask):
+    return ((k * _HASH_MUL) >> np.uint64(32)) & mask
+
+
+@njit(cache=True)
+def voxel_ids(hkeys, hvals, node, cell, next_vid, vid, is_new):
+    """The voxel id of each (list, cell) (a list names its node): found in the open-addressing table, or a new id
+    (``next_vid`` on) entered there. The table is kept at most half full by the caller."""
+    mask = np.uint64(hkeys.shape[0] - 1)
+    for e in range(node.shape[0]):
+        k = (np.uint64(node[e]) << np.uint64(3 * GRID_BITS)) | cell[e]
+        h = _hash(k, mask)
+        while True:
+            hk = hkeys[h]
+            if hk == EMPTY_KEY:
+                hkeys[h] = k
+                hvals[h] = next_vid
+                vid[e] = next_vid
+                is_new[e] = 1
+                next_vid += 1
+                break
+            if hk == k:
+                vid[e] = hvals[h]
+                is_new[e] = 0
+                break
+            h = (h + np.uint64(1)) & mask
+    return next_vid
+
+
+@njit(cache=True)
+def rehash(vox_key, n_voxels, hkeys, hvals):
+    """Enter the first ``n_voxels`` voxel keys into an empty table."""
+    mask = np.uint64(hkeys.shape[0] - 1)
+    for v in range(n_voxels):
+        k = vox_key[v]
+        h = _hash(k, mask)
+        while hkeys[h] != EMPTY_KEY:
+            h = (h + np.uint64(1)) & mask
+        hkeys[h] = k
+        hvals[h] = v
+
+
+@njit(cache=True)
+def chunks_needed(lists, counts, chunk_size, last_chunk, fill):
+    """How many new chunks appending counts[j] entries to list lists[j] takes, all j."""
+    total = 0
+    for j in range(lists.shape[0]):
+        last = last_chunk[lists[j]]
+        space = chunk_size - fill[last] if last >= 0 else 0
+        extra = counts[j] - space
+        if extra > 0:
+            total += (extra + chunk_size - 1) // chunk_size
+    return total
+
+
+@njit(cache=True)
+def allocate(lists, counts, chunk_size, first_chunk, last_chunk, level, cmin, edge, fill, chunk_next, chunk_node, bbox_min, bbox_max,
+             chunk_level, free, n_free, n_chunks, version, batch_version, slots):  # fmt: skip
+    """Append counts[j] entries to list lists[j] (in this order): the pool slot of each entry
+    in ``slots`` (entries of list j follow those of j - 1). A list's chunks are linked
+    (first_chunk .. chunk_next .. last_chunk), each with its node's cube as its box; new chunks come from the free list, then from
+    the unused end of the pool (the caller made room: ``chunks_needed``). Every chunk written
+    gets batch_version = version. Returns (n_free, n_chunks)."""
+    e = 0
+    for j in range(lists.shape[0]):
+        lst = lists[j]
+        node = lst // LISTS
+        left = counts[j]
+        while left > 0:
+            c = last_chunk[lst]
+            if c < 0 or fill[c] == chunk_size:
+                if n_free > 0:
+                    n_free -= 1
+                    c = free[n_free]
+                else:
+                    c = n_chunks
+                    n_chunks += 1
+                fill[c] = 0
+                chunk_next[c] = -1
+                chunk_node[c] = node
+                chunk_level[c] = level[node]
+                for a in range(3):
+                    bbox_min[c, a] = cmin[node, a]
+                    bbox_max[c, a] = cmin[node, a] + edge[node]
+                if last_chunk[lst] >= 0:
+                    chunk_next[last_chunk[lst]] = c
+                else:
+                    first_chunk[lst] = c
+                last_chunk[lst] = c
+            take = min(left, chunk_size - fill[c])
+            base = c * chunk_size + fill[c]
+            for t in range(take):
+                slots[e + t] = base + t
+            fill[c] += take
+            batch_version[c] = version
+            e += take
+            left -= take
+    return n_free, n_chunks
+
+
+@njit(cache=True)
+def list_slots(first_chunk, chunk_next, fill, chunk_size, lst, out):
+    """The pool slots of a list's entries, in order, into ``out``; returns how many."""
+    k = 0
+    c = first_chunk[lst]
+    while c >= 0:
+        base = c * chunk_size
+        for t in range(fill[c]):
+            out[k] = base + t
+            k += 1
+        c = chunk_next[c]
+    return k
+
+
+@njit(cache=True)
+def free_chunks(first_chunk, last_chunk, chunk_next, fill, lst, free, n_free):
+    """Hand a list's chunks back to the free list (its entries are gone)."""
+    c = first_chunk[lst]
+    while c >= 0:
+        nxt = chunk_next[c]
+        fill[c] = 0
+        chunk_next[c] = -1
+        free[n_free] = c
+        n_free += 1
+        c = nxt
+    first_chunk[lst] = -1
+    last_chunk[lst] = -1
+    return n_free
+
+
+@njit(inline="always")
+def _words(x, y, z, mx, my, mz, inv):
+    """The three 10-bit words of a position in the cube [m, m + 1/inv]^3 (30-bit fixed point)."""
+    wl = np.uint32(0)
+    wm = np.uint32(0)
+    wh = np.uint32(0)
+    for a in range(3):
+        v = x if a == 0 else (y if a == 1 else z)
+        m = mx if a == 0 else (my if a == 1 else mz)
+        q = min(max(np.int64((v - m) * inv), 0), _MAX30)
+        s = np.uint32(WORD_BITS * a)
+        wl |= np.uint32((q >> 20) & WORD_MASK) << s
+        wm |= np.uint32((q >> 10) & WORD_MASK) << s
+        wh |= np.uint32(q & WORD_MASK) << s
+    return wl, wm, wh
+
+
+@njit(parallel=True, cache=True)
+def write_points(xyz, rgba, order, leaf_runs, run_offsets, slots, cmin, edge, low, med, high, color):
+    """Each leaf run's points quantized into their leaf's cube (30 bits) at their slots; the
+    runs index the sorted points, point k of which is xyz[order[k]] (no sorted copies made)."""
+    for r in prange(leaf_runs.shape[0]):
+        node, lo, hi = leaf_runs[r, 0], leaf_runs[r, 1], leaf_runs[r, 2]
+        inv = _SCALE30 / edge[node]
+        mx, my, mz = cmin[node, 0], cmin[node, 1], cmin[node, 2]
+        o = run_offsets[r] - lo
+        for i in range(lo, hi):
+            s = slots[o + i]
+            j = order[i]
+            wl, wm, wh = _words(xyz[j, 0], xyz[j, 1], xyz[j, 2], mx, my, mz, inv)
+            low[s] = wl
+            med[s] = wm
+            high[s] = wh
+            color[s] = rgba[j]
+
+
+@njit(inline="always")
+def _mean_color(sums, v):
+    n = sums[v, 4]
+    h = n >> np.uint32(1)
+    r = (sums[v, 0] + h) // n
+    g = (sums[v, 1] + h) // n
+    b = (sums[v, 2] + h) // n
+    a = (sums[v, 3] + h) // n
+    return np.uint32(r) | (np.uint32(g) << np.uint32(8)) | (np.uint32(b) << np.uint32(16)) | (np.uint32(a) << np.uint32(24))
+
+
+@njit(parallel=True, cache=True)
+def write_voxels(vid, is_new, node, cell, first, sums, rgba, level, slots_of_new, new_index, vox_sum, vox_slot, vox_key, vox_first,
+                 low, med, high, color, batch_version, chunk_size, version):  # fmt: skip
+    """Add each entry's color sums to its voxel; a new voxel also gets its slot, key, first
+    color and position (its cell's centre, 30 bits in the node's cube); every touched voxel's
+    drawn color becomes the rounded mean of the points it stands for. ``new_index[e]``: the
+    rank of entry e among the new ones (their slots' order)."""
+    for e in prange(vid.shape[0]):
+        v = vid[e]
+        if is_new[e]:
+            s = slots_of_new[new_index[e]]
+            vox_slot[v] = s
+            vox_key[v] = (np.uint64(node[e]) << np.uint64(3 * GRID_BITS)) | cell[e]
+            vox_first[v] = rgba[first[e]]
+            for ch in range(5):
+                vox_sum[v, ch] = 0
+            lev = level[node[e] // LISTS]
+            bits = min(lev + GRID_BITS, CODE_BITS) - lev  # bits per axis of the cell index
+            c = cell[e]
+            i0 = np.int64(0)
+            i1 = np.int64(0)
+            i2 = np.int64(0)
+            for b in range(bits):
+                digit = (c >> np.uint64(3 * b)) & np.uint64(7)
+                i0 |= np.int64((digit >> np.uint64(2)) & np.uint64(1)) << b
+                i1 |= np.int64((digit >> np.uint64(1)) & np.uint64(1)) << b
+                i2 |= np.int64(digit & np.uint64(1)) << b
+            shift = COORD_BITS - bits  # the cell's centre: index, then a one, then zeros
+            wl = np.uint32(0)
+            wm = np.uint32(0)
+            wh = np.uint32(0)
+            for a in range(3):
+                ia = i0 if a == 0 else (i1 if a == 1 else i2)
+                q = (ia << shift) | (np.int64(1) << (shift - 1))
+                sh = np.uint32(WORD_BITS * a)
+                wl |= np.uint32((q >> 20) & WORD_MASK) << sh
+                wm |= np.uint32((q >> 10) & WORD_MASK) << sh
+                wh |= np.uint32(q & WORD_MASK) << sh
+            low[s] = wl
+            med[s] = wm
+            high[s] = wh
+        # entries of one batch never share a voxel (one entry per node and cell), so no race
+        for ch in range(5):
+            vox_sum[v, ch] += sums[e, ch]
+        s = vox_slot[v]
+        color[s] = _mean_color(vox_sum, v)
+        batch_version[s // chunk_size] = version
+
+
+@njit(parallel=True, cache=True)
+def dequantize_slots(low, med, high, slots, cmin, edge, out):
+    """float64 positions (30-bit cell centres) of a node's entries at ``slots``."""
+    inv = edge / _SCALE30
+    for k in prange(slots.shape[0]):
+        s = slots[k]
+        for a in range(3):
+            sh = np.uint32(WORD_BITS * a)
+            q = (np.int64((low[s] >> sh) & np.uint32(WORD_MASK)) << 20) | (np.int64((med[s] >> sh) & np.uint32(WORD_MASK)) << 10)
+            q |= np.int64((high[s] >> sh) & np.uint32(WORD_MASK))
+            out[k, a] = cmin[a] + (q + 0.5) * inv

@@ -1,0 +1,702 @@
+"""ProgressiveOctree: an LOD octree that grows while points are added, drawn at any moment.
+
+The structure of SimLOD (Schütz, Herzberger, Wimmer 2024, sections 3-5; Wand et al. 2008):
+
+- **leaves** hold the original points (30-bit positions in the cube of the leaf a point first
+  landed in, at worst the root's: a micrometre for a kilometre, a millimetre for a thousand
+  kilometres), up to ``max_leaf`` (50 000) each; a leaf that would
+  overflow is split: it becomes an inner node, its points are *spilled* and inserted again,
+  together with the batch that made it overflow, until every leaf holds at most
+  ``max_leaf`` points. Every point added lives in exactly one leaf.
+- **inner nodes** hold voxels: one per occupied cell of a 128³ grid inscribed in the node,
+  at the cell's centre, with the colour of the first point that fell into it (kept) and the
+  rounded mean colour of all the points that passed through the cell (drawn; the paper leaves
+  that to post-processing). Voxels are extra representatives, not the points themselves.
+  Occupancy is an open-addressing table keyed by (node, cell), not a 128³ bit grid per node:
+  256 KB a node is more than the voxels of most nodes (a surface fills ~16 k of 2 M cells).
+- **storage**: a pool of fixed-size chunks (``CHUNK`` entries) in the batch layout of every
+  gigapoint cloud (low/med/high words relative to the node's cube, u32 RGBA, attributes);
+  a node's entries are a linked list of chunks, so nodes grow without copies, and a split
+  leaf's chunks go back to a free list. Each chunk is a batch: the renderer draws the pool
+  directly (one batch per chunk), with the octree's node selection (largest projected
+  first, within the point budget) and per-node precision, and the GPU re-uploads only the
+  chunks written since it last drew them (``version`` / ``batch_version``).
+- **the root** is the bounding cube of the points seen so far (or of bounds given up front,
+  e.g. from LAS headers); a point outside it makes the tree grow upwards: a new root twice
+  the size takes the old one as a child, and samples every point into its own voxels.
+
+An insertion runs SimLOD's passes on the CPU: sort the batch by point code (one parallel
+radix sort), route it down the tree (binary searches per node: a node's points are one
+contiguous run), split overflowing leaves and route again, then sample the voxels of every
+inner node a run passes (one linear pass per run), allocate chunks, and write points and
+voxels in parallel. ``add`` is thread-safe; ``reading()`` keeps a frame's view consistent.
+"""
+
+from __future__ import annotations
+
+import threading
+from contextlib import contextmanager
+from typing import Self
+
+import numpy as np
+
+from ...core.chunk import PointChunk, to_rgba8
+from ...core.cloud import MAX_ABS_COORDINATE
+from ...core.layout import BATCH_DTYPE
+from ...core.quantize import dequantize
+from ...core.renderable import DrawList, MultiViewDrawList
+from ...core.selection import Selection, View, batch_matrices, precision_for
+from ...errors import InputError
+from ..build import take, valid_bounds
+from ..keys import CODE_BITS, point_codes
+from ..store import list_chunks, select_octants
+from . import kernels as K
+
+CHUNK = 2048  # entries a chunk holds (the paper: 1 000)
+MAX_LEAF = 50_000  # points a leaf holds before it splits (the paper's)
+_INITIAL_NODES = 1024
+_INITIAL_CHUNKS = 64
+_ROOM_PER_POINT = 1.6  # pool entries an expected point takes: itself, ~0.3 voxels, half-filled chunks
+_VOXELS_PER_POINT = 0.35  # voxels a point brings, about (the demo town: 0.3; surfaces less)
+
+
+class Pool:
+    """The octree's point buffers (core/renderable.PointBuffers): chunks of ``CHUNK`` entries,
+    one batch record each; rewritten in place, so every write bumps ``version``."""
+
+    def __init__(self, name: str, n_chunks: int, chunk: int, attribute_dtypes: dict):
+        self.name = name
+        self.chunk = chunk
+        self.batches = np.zeros(n_chunks, BATCH_DTYPE)
+        self.batches["first"] = np.arange(n_chunks, dtype=np.uint64) * chunk
+        n = n_chunks * chunk
+        self.low = np.zeros(n, np.uint32)
+        self.med = np.zeros(n, np.uint32)
+        self.high = np.zeros(n, np.uint32)
+        self.color = np.zeros(n, np.uint32)
+        self.attributes = {a: np.zeros(n, dt) for a, dt in attribute_dtypes.items()}
+        self.chunk_next = np.full(n_chunks, -1, np.int64)
+        self.chunk_node = np.full(n_chunks, -1, np.int64)
+        self.batch_version = np.zeros(n_chunks, np.int64)
+        self.version = 0
+        self.bounds = (np.zeros(3), np.zeros(3))
+
+    @property
+    def n_points(self) -> int:
+        return len(self.low)
+
+    @property
+    def n_chunks(self) -> int:
+        return len(self.batches)
+
+    def grown(self, n_chunks: int) -> Pool:
+        """A pool of ``n_chunks`` chunks holding this one's contents (new arrays: caches of the
+        old ones are dropped by identity)."""
+        new = Pool(self.name, n_chunks, self.chunk, {a: v.dtype for a, v in self.attributes.items()})
+        k, n = self.n_chunks, self.n_points
+        new.batches[:k] = self.batches
+        for a in ("low", "med", "high", "color"):
+            getattr(new, a)[:n] = getattr(self, a)
+        for a, v in self.attributes.items():
+            new.attributes[a][:n] = v
+        new.chunk_next[:k] = self.chunk_next
+        new.chunk_node[:k] = self.chunk_node
+        new.batch_version[:k] = self.batch_version
+        new.version = self.version + 1
+        new.bounds = self.bounds
+        return new
+
+    def point_info(self, index: int) -> dict:
+        """Position (30-bit), color, level and attributes of the entry at pool slot ``index``."""
+        if not 0 <= index < self.n_points:
+            return {}
+        rec = self.batches[index // self.chunk]
+        i = np.array([index])
+        pos = dequantize(self.low[i], self.med[i], self.high[i], rec["bbox_min"], rec["bbox_max"], 30)[0]
+        info = {
+            "position": pos.tolist(),
+            "rgba": self.color[i].view(np.uint8).tolist(),
+            "level": int(rec["level"]),
+            "source": "progressive octree",
+        }
+        for a, v in self.attributes.items():
+            info[a] = v[index].item()
+        return info
+
+
+def _chunk_of(parts) -> PointChunk:
+    xyz = np.concatenate([p[0] for p in parts])
+    rgba = np.concatenate([p[1] for p in parts]).view(np.uint8).reshape(-1, 4)
+    return PointChunk(xyz, rgba, {a: np.concatenate([p[2][a] for p in parts]) for a in parts[0][2]})
+
+
+def _runs(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(value, length) of each run of equal consecutive values."""
+    if not len(values):
+        return np.empty(0, values.dtype), np.empty(0, np.int64)
+    starts = np.flatnonzero(np.concatenate([[True], values[1:] != values[:-1]]))
+    return values[starts], np.diff(np.append(starts, len(values)))
+
+
+class _Set:
+    """Points to be routed from node ``start`` (a batch from the root; a split leaf's points from
+    that leaf): their codes sorted, and ``order``, where sorted point k is in the arrays as given
+    (the kernels read through it: no sorted copy of positions, colours or attributes is made)."""
+
+    __slots__ = ("attrs", "codes", "order", "rgba", "start", "xyz")
+
+    def __init__(self, start, codes, order, xyz, rgba, attrs):
+        self.start, self.codes, self.order, self.xyz, self.rgba, self.attrs = start, codes, order, xyz, rgba, attrs
+
+    @classmethod
+    def of(cls, start: int, xyz, rgba, attrs: dict, origin, edge: float) -> _Set:
+        codes = point_codes(xyz, origin, edge)
+        order = np.argsort(codes)  # numpy's SIMD sort: 3x the radix sort on a million points
+        return cls(start, take(codes, order), order, xyz, rgba, attrs)
+
+
+class ProgressiveOctree:
+    """An LOD octree filled by ``add`` (or a background loader: gigapoint.open(..., progressive=True))
+    and drawable at any moment (a Renderable: core/renderable.py)."""
+
+    def __init__(
+        self, name: str = "progressive", cube=None, max_leaf: int = MAX_LEAF, chunk: int = CHUNK, attributes: dict | None = None,
+        capacity: int = 0,
+    ):  # fmt: skip
+        """``cube``: (origin, edge) of the root, when the bounds are known up front (else the first
+        batch's, grown as needed); ``capacity``: the points expected (the pool is sized for them,
+        their voxels and some room, so it need not grow and be copied while it fills)."""
+        if not (isinstance(max_leaf, int) and max_leaf >= 1):
+            raise InputError(f"{name}: max_leaf must be a positive integer, got {max_leaf!r}")
+        self.name = name
+        self.max_leaf = max_leaf
+        self.chunk = chunk
+        self.capacity = int(capacity)
+        self.lock = threading.RLock()
+        self._turn = threading.Condition()
+        self._readers_waiting = 0
+        self._attribute_dtypes = dict(attributes) if attributes is not None else None
+        self.pool: Pool | None = None
+        self.origin: np.ndarray | None = None
+        self.edge = 0.0
+        self.root = 0
+        self.n_nodes = 0
+        self.n_voxels = 0
+        self.points = 0  # points added (valid ones)
+        self.skipped = 0  # invalid points left out (NaN, inf, beyond ±1e12)
+        self.lo = np.full(3, np.inf)
+        self.hi = np.full(3, -np.inf)
+        self.loader = None  # the background Loader filling it (gigapoint.open(..., progressive=True))
+        self._nodes(_INITIAL_NODES)
+        self._vox(1 << 16)
+        self._hkeys = np.full(1 << 17, K.EMPTY_KEY, np.uint64)
+        self._hvals = np.zeros(1 << 17, np.int64)
+        self._run_lo = self._run_hi = self._ent_start = self._ent_count = np.empty(0, np.int64)  # sample_runs' scratch
+        self._free = np.zeros(_INITIAL_CHUNKS, np.int64)
+        self._n_free = 0
+        self._n_chunks = 0
+        if cube is not None:
+            origin, edge = cube
+            self._start(np.asarray(origin, np.float64), float(edge))
+
+    # ------------------------------------------------------------------ storage
+    def _nodes(self, cap: int) -> None:
+        """(Re)allocate the node arrays for ``cap`` nodes, keeping the first n_nodes."""
+        n = self.n_nodes
+        old = getattr(self, "key", None) if n else None
+        arrays = {
+            "key": np.zeros(cap, np.uint64), "level": np.zeros(cap, np.int32), "parent": np.full(cap, -1, np.int64),
+            "children": np.full((cap, 8), -1, np.int64), "leaf": np.zeros(cap, np.uint8), "count": np.zeros(cap, np.int64),
+            "first_chunk": np.full(cap * K.LISTS, -1, np.int64), "last_chunk": np.full(cap * K.LISTS, -1, np.int64),
+            "list_count": np.zeros(cap * K.LISTS, np.int64),
+            "cmin": np.zeros((cap, 3)), "cedge": np.zeros(cap),
+        }  # fmt: skip
+        for name, arr in arrays.items():
+            if old is not None:
+                k = n * K.LISTS if name in ("first_chunk", "last_chunk", "list_count") else n
+                arr[:k] = getattr(self, name)[:k]
+            setattr(self, name, arr)
+
+    def _vox(self, cap: int) -> None:
+        n = self.n_voxels
+        arrays = {"vox_key": np.zeros(cap, np.uint64), "vox_slot": np.zeros(cap, np.int64), "vox_sum": np.zeros((cap, 5), np.uint32),
+                  "vox_first": np.zeros(cap, np.uint32)}  # fmt: skip
+        for name, arr in arrays.items():
+            if n:
+                arr[:n] = getattr(self, name)[:n]
+            setattr(self, name, arr)
+
+    def _ensure_chunks(self, extra: int) -> None:
+        """Room for ``extra`` more chunks than are in use (the pool doubles when it grows)."""
+        need = self._n_chunks + extra
+        if need > self.pool.n_chunks:
+            self.pool = self.pool.grown(max(need, 2 * self.pool.n_chunks))
+        if len(self._free) < self.pool.n_chunks:
+            free = np.zeros(self.pool.n_chunks, np.int64)
+            free[: self._n_free] = self._free[: self._n_free]
+            self._free = free
+
+    def _ensure_hash(self, extra: int) -> None:
+        """The voxel table at most half full after ``extra`` more entries (rebuilt when it grows)."""
+        need = 2 * (self.n_voxels + extra)
+        if need <= len(self._hkeys):
+            return
+        size = len(self._hkeys)
+        while size < need:
+            size *= 2
+        self._hkeys = np.full(size, K.EMPTY_KEY, np.uint64)
+        self._hvals = np.zeros(size, np.int64)
+        K.rehash(self.vox_key, self.n_voxels, self._hkeys, self._hvals)
+
+    def _start(self, origin: np.ndarray, edge: float) -> None:
+        """The root cube, and the root: an empty leaf."""
+        self.origin, self.edge = origin, edge if edge > 0 else 1.0
+        self.key[0], self.level[0], self.leaf[0], self.count[0] = 1, 0, 1, 0
+        self.children[0] = -1
+        self._clear_lists(0)
+        self.cmin[0], self.cedge[0] = self.origin, self.edge
+        self.root, self.n_nodes = 0, 1
+
+    def _clear_lists(self, node: int) -> None:
+        lists = slice(node * K.LISTS, (node + 1) * K.LISTS)
+        self.first_chunk[lists] = self.last_chunk[lists] = -1
+        self.list_count[lists] = 0
+
+    def _list_slots(self, lst: int) -> np.ndarray:
+        """Pool slots of the entries of list ``lst`` (node lst // LISTS), in order."""
+        pool = self.pool
+        slots = np.empty(int(self.list_count[lst]), np.int64)
+        k = K.list_slots(self.first_chunk, pool.chunk_next, pool.batches["count"], pool.chunk, lst, slots)
+        return slots[:k]
+
+    # ------------------------------------------------------------------ loading
+    def attach(self, loader) -> None:
+        self.loader = loader
+
+    @property
+    def load_progress(self) -> float:
+        """0..1: how much of its sources is read (1 without a loader)."""
+        return 1.0 if self.loader is None else self.loader.progress
+
+    progress = load_progress
+
+    @property
+    def loading(self) -> bool:
+        return self.loader is not None and not self.loader.done
+
+    @property
+    def points_per_second(self) -> float:
+        """Input points read per second since loading started (0 without a loader)."""
+        return 0.0 if self.loader is None else self.loader.points_per_second
+
+    @property
+    def error(self):
+        """The error that stopped loading (one line, naming the file), or None."""
+        return None if self.loader is None else self.loader.error
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Until the loader has read everything (True) or ``timeout`` passes (False); raises the
+        error that stopped it, if any. What was inserted before an error stays drawable."""
+        return True if self.loader is None else self.loader.wait(timeout)
+
+    def close(self) -> None:
+        """Stop loading and free the octree's memory (it draws nothing afterwards)."""
+        if self.loader is not None:
+            self.loader.close()
+        with self.lock:
+            self.pool = None
+            self.origin = None
+            self.points = self.n_nodes = self.n_voxels = 0
+            self._nodes(1)
+            self._vox(1)
+            self._hkeys = np.full(2, K.EMPTY_KEY, np.uint64)
+            self._hvals = np.zeros(2, np.int64)
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ facts (Renderable)
+    @property
+    def n_points(self) -> int:
+        return self.points
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.points == 0:
+            return np.zeros(3), np.zeros(3)
+        return self.lo.copy(), self.hi.copy()
+
+    @property
+    def attributes(self) -> dict:
+        return self.pool.attributes if self.pool is not None else {}
+
+    @property
+    def batches(self) -> np.ndarray:
+        """One record per node (stats: ``batches_total`` counts nodes, as for a converted octree)."""
+        return self.key[: self.n_nodes]
+
+    def __len__(self) -> int:
+        return self.points
+
+    def __repr__(self) -> str:
+        return f"ProgressiveOctree({self.name!r}, {self.points:,} points, {self.n_nodes:,} nodes, {self.n_voxels:,} voxels)"
+
+    # ------------------------------------------------------------------ adding points
+    def add(self, xyz, rgb=None, **attributes) -> int:
+        """Insert points (float64 (N, 3); colors (N, 3|4) uint8/uint16/float; 1-D attributes of
+        length N). Invalid points (NaN, inf, beyond ±1e12) are skipped and counted. Returns the
+        number inserted. Attributes are the first call's; later calls fill missing ones with 0."""
+        xyz = np.ascontiguousarray(xyz, np.float64)
+        if xyz.ndim != 2 or xyz.shape[1] != 3:
+            raise InputError(f"{self.name}: xyz must have shape (N, 3), got {xyz.shape}")
+        n = len(xyz)
+        if n == 0:
+            return 0
+        if rgb is None:
+            rgba = np.full(n, np.array([200, 200, 200, 255], np.uint8).view(np.uint32)[0], np.uint32)
+        else:
+            try:
+                rgba = np.ascontiguousarray(to_rgba8(np.asarray(rgb))).view(np.uint32).reshape(-1)
+            except ValueError as exc:
+                raise InputError(f"{self.name}: {exc}") from None
+            if len(rgba) != n:
+                raise InputError(f"{self.name}: rgb has {len(rgba)} rows, xyz has {n}")
+        attrs = {}
+        for a, v in attributes.items():
+            v = np.asarray(v)
+            if v.ndim != 1 or len(v) != n:
+                raise InputError(f"{self.name}: attribute {a!r} must be 1-D of length {n}, got shape {v.shape}")
+            attrs[a] = v
+        valid, lo, hi = valid_bounds(xyz, MAX_ABS_COORDINATE)
+        n_valid = int(np.count_nonzero(valid))
+        with self._writing():
+            self.skipped += n - n_valid
+            if n_valid == 0:
+                return 0
+            if n_valid < n:
+                xyz, rgba = xyz[valid], rgba[valid]
+                attrs = {a: v[valid] for a, v in attrs.items()}
+            self._insert(xyz, rgba, attrs, lo, hi)
+        return n_valid
+
+    @contextmanager
+    def _writing(self):
+        """The lock, taken by a writer only when no frame waits for it: frames go first."""
+        with self._turn:
+            while self._readers_waiting:
+                self._turn.wait(0.05)
+        with self.lock:
+            yield
+
+    @contextmanager
+    def reading(self):
+        """Held while a frame reads what ``prepare`` returned: no insertion moves it meanwhile."""
+        with self._turn:
+            self._readers_waiting += 1
+        try:
+            self.lock.acquire()
+        finally:
+            with self._turn:
+                self._readers_waiting -= 1
+                self._turn.notify_all()
+        try:
+            yield
+        finally:
+            self.lock.release()
+
+    def _attribute_set(self, attrs: dict, n: int) -> dict:
+        """The batch's attributes in the octree's set (fixed by the first batch): missing ones 0."""
+        if self._attribute_dtypes is None:
+            self._attribute_dtypes = {a: v.dtype for a, v in attrs.items()}
+        return {a: (attrs[a].astype(dt, copy=False) if a in attrs else np.zeros(n, dt)) for a, dt in self._attribute_dtypes.items()}
+
+    def _insert(self, xyz, rgba, attrs, lo, hi) -> None:
+        n = len(xyz)
+        attrs = self._attribute_set(attrs, n)
+        if self.pool is None:
+            expected = int(self.capacity * _ROOM_PER_POINT) // self.chunk
+            self.pool = Pool(self.name, max(_INITIAL_CHUNKS, expected), self.chunk, self._attribute_dtypes)
+            if self.capacity:  # room for the expected voxels too: growing their arrays and table copies them
+                self._vox(max(len(self.vox_key), int(self.capacity * _VOXELS_PER_POINT)))
+                self._ensure_hash(int(self.capacity * _VOXELS_PER_POINT))
+        if self.origin is None:
+            pad = 0.01 * max(float(np.max(hi - lo)), 1e-9)  # a little room: growing the root costs a pass over every point
+            self._start(lo - pad, float(np.max(hi - lo)) + 2 * pad)
+        while np.any(lo < self.origin) or np.any(hi > self.origin + self.edge):
+            self._grow(lo, hi)
+        # The batch and, for every leaf that would overflow, its points (spilled: inserted again
+        # from that leaf down), each sorted by code and routed, until no leaf overflows.
+        sets = [_Set.of(self.root, xyz, rgba, attrs, self.origin, self.edge)]
+        while True:
+            routes = [self._distribute(st.codes, st.start) for st in sets]
+            incoming = np.zeros(self.n_nodes, np.int64)
+            for leaf_runs, _ in routes:
+                np.add.at(incoming, leaf_runs[:, 0], leaf_runs[:, 2] - leaf_runs[:, 1])
+            hit = np.flatnonzero(incoming)
+            over = hit[(self.count[hit] + incoming[hit] > self.max_leaf) & (self.level[hit] < CODE_BITS)]
+            if not len(over):
+                break
+            for node in over.tolist():
+                if self.count[node]:
+                    sets.append(_Set.of(node, *self._split(node), self.origin, self.edge))
+                else:
+                    self.leaf[node] = 0  # created by this batch: nothing stored to spill
+        self.pool.version += 1
+        for st, (leaf_runs, inner_runs) in zip(sets, routes):
+            self._sample(st, leaf_runs, inner_runs)
+            self._write_points(st, leaf_runs)
+            self.points += len(st.codes)  # the batch and the points spilled from split leaves
+        self.lo, self.hi = np.minimum(self.lo, lo), np.maximum(self.hi, hi)
+        self.pool.bounds = self.bounds
+
+    def _distribute(self, codes, start: int) -> tuple[np.ndarray, np.ndarray]:
+        """(leaf runs, inner runs) of sorted codes routed from node ``start``, growing the node
+        arrays as needed."""
+        while True:
+            cap = len(self.key)
+            leaf_runs = np.empty((cap, 3), np.int64)
+            inner_runs = np.empty((cap, 3), np.int64)
+            nl, ni, n_nodes = K.distribute(codes, start, self.key, self.level, self.parent, self.children, self.leaf, self.count,
+                                           self.first_chunk, self.last_chunk, self.cmin, self.cedge, self.n_nodes, leaf_runs, inner_runs)  # fmt: skip
+            self.n_nodes = n_nodes
+            if nl >= 0:
+                return leaf_runs[:nl], inner_runs[:ni]
+            self._nodes(2 * cap)
+
+    def _split(self, node: int):
+        """Turn leaf ``node`` into an (empty) inner node; its points come back, to be inserted again."""
+        pool = self.pool
+        slots = self._list_slots(node * K.LISTS)
+        k = len(slots)
+        xyz = np.empty((k, 3))
+        K.dequantize_slots(pool.low, pool.med, pool.high, slots, self.cmin[node], float(self.cedge[node]), xyz)
+        rgba = pool.color[slots]
+        attrs = {a: v[slots] for a, v in pool.attributes.items()}
+        self._n_free = K.free_chunks(
+            self.first_chunk, self.last_chunk, pool.chunk_next, pool.batches["count"], node * K.LISTS, self._free, self._n_free
+        )
+        self.list_count[node * K.LISTS] = 0
+        self.leaf[node] = 0
+        self.count[node] = 0
+        self.points -= k  # they are counted again when inserted again
+        return xyz, rgba, attrs
+
+    def _allocate(self, lists: np.ndarray, counts: np.ndarray) -> np.ndarray:
+        """Pool slots for counts[j] new entries of list lists[j], in order; the counts go up."""
+        pool = self.pool
+        extra = K.chunks_needed(lists, counts, pool.chunk, self.last_chunk, pool.batches["count"])
+        self._ensure_chunks(extra)
+        pool = self.pool
+        slots = np.empty(int(counts.sum()), np.int64)
+        b = pool.batches
+        self._n_free, self._n_chunks = K.allocate(
+            lists, counts, pool.chunk, self.first_chunk, self.last_chunk, self.level, self.cmin, self.cedge, b["count"], pool.chunk_next,
+            pool.chunk_node, b["bbox_min"], b["bbox_max"], b["level"], self._free, self._n_free, self._n_chunks, pool.version,
+            pool.batch_version, slots,
+        )  # fmt: skip
+        np.add.at(self.list_count, lists, counts)
+        np.add.at(self.count, lists // K.LISTS, counts)
+        return slots
+
+    def _write_points(self, st: _Set, leaf_runs) -> None:
+        """The routed points into their leaves (leaf runs are in code order: slots follow)."""
+        counts = leaf_runs[:, 2] - leaf_runs[:, 1]
+        slots = self._allocate(leaf_runs[:, 0] * K.LISTS, counts)  # a leaf's points: its list 0
+        offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        pool = self.pool
+        K.write_points(st.xyz, st.rgba, st.order, leaf_runs, offsets, slots, self.cmin, self.cedge, pool.low, pool.med, pool.high, pool.color)
+        if pool.attributes:
+            src = np.concatenate([st.order[lo:hi] for _, lo, hi in leaf_runs.tolist()]) if len(leaf_runs) else np.empty(0, np.int64)
+            for a, v in pool.attributes.items():
+                v[slots] = st.attrs[a][src]
+
+    def _sample(self, st: _Set, leaf_runs, inner_runs, only: int | None = None) -> None:
+        """Voxels of the inner nodes the routed points pass (of node ``only``): new cells become
+        voxels, every touched voxel's colour the mean of all the points that fell into it."""
+        if not len(inner_runs):
+            return
+        if len(self._run_lo) < len(self.key):
+            self._run_lo = np.full(len(self.key), -1, np.int64)
+            self._run_hi = np.full(len(self.key), -1, np.int64)
+            self._ent_start = np.zeros(len(self.key), np.int64)
+            self._ent_count = np.zeros(len(self.key), np.int64)
+        cap = 2 * len(st.codes) + 1024
+        while True:
+            e_cell, e_local = np.empty(cap, np.uint64), np.empty(cap, np.uint64)
+            e_first, e_node = np.empty(cap, np.int64), np.empty(cap, np.int64)
+            e_sum = np.empty((cap, 5), np.uint32)
+            m = K.sample_runs(st.codes, st.rgba, st.order, inner_runs, leaf_runs, self.level, self.leaf, self.children, self._run_lo, self._run_hi,
+                              self._ent_start, self._ent_count, e_cell, e_first, e_sum, e_node, e_local)  # fmt: skip
+            if m >= 0:
+                break
+            cap *= 2
+        if only is not None:
+            s0, c0 = int(self._ent_start[only]), int(self._ent_count[only])
+            entries = slice(s0, s0 + c0)
+        else:
+            entries = slice(0, m)
+        node, cell, first, sums = e_node[entries], e_local[entries], e_first[entries], e_sum[entries]
+        m = len(node)
+        if m == 0:
+            return
+        self._ensure_hash(m)
+        vid = np.empty(m, np.int64)
+        is_new = np.empty(m, np.uint8)
+        next_vid = K.voxel_ids(self._hkeys, self._hvals, node, cell, self.n_voxels, vid, is_new)
+        if next_vid > len(self.vox_key):
+            cap = len(self.vox_key)
+            while cap < next_vid:
+                cap *= 2
+            self._vox(cap)
+        # entries come list by list (node by node, octant by octant): so do the new ones, and their slots
+        new = np.flatnonzero(is_new)
+        new_lists, new_counts = _runs(node[new])
+        slots = self._allocate(new_lists, new_counts) if len(new) else np.empty(0, np.int64)
+        new_index = np.cumsum(is_new, dtype=np.int64) - 1
+        self.n_voxels = next_vid
+        pool = self.pool
+        K.write_voxels(vid, is_new, node, cell, first, sums, st.rgba, self.level, slots, new_index, self.vox_sum, self.vox_slot, self.vox_key,
+                       self.vox_first, pool.low, pool.med, pool.high, pool.color, pool.batch_version, pool.chunk, pool.version)  # fmt: skip
+        src = first[new]
+        for a, v in pool.attributes.items():
+            v[slots] = st.attrs[a][src]
+
+    def _grow(self, lo, hi) -> None:
+        """A root twice the size with the old one as a child, towards the points outside."""
+        if int(self.level[: self.n_nodes].max()) >= CODE_BITS:
+            raise InputError(f"{self.name}: points span more than the octree's {CODE_BITS} levels resolve; give the bounds up front")
+        below = lo < self.origin
+        d = int(below[0]) << 2 | int(below[1]) << 1 | int(below[2])
+        n = self.n_nodes
+        lev = self.level[:n].astype(np.uint64)
+        prefix = self.key[:n] ^ (np.uint64(1) << (np.uint64(3) * lev))
+        self.key[:n] = (np.uint64(1) << (np.uint64(3) * (lev + np.uint64(1)))) | (np.uint64(d) << (np.uint64(3) * lev)) | prefix
+        self.level[:n] += 1
+        if self.pool is not None:
+            used = self.pool.batches["count"] > 0
+            self.pool.batches["level"][used] += 1
+        if n >= len(self.key):
+            self._nodes(2 * len(self.key))
+        old = self.root
+        self.origin = self.origin - self.edge * below
+        self.edge *= 2.0
+        self.key[n], self.level[n], self.leaf[n], self.count[n], self.parent[n] = 1, 0, 0, 0, -1
+        self.children[n] = -1
+        self.children[n, d] = old
+        self._clear_lists(n)
+        self.cmin[n], self.cedge[n] = self.origin, self.edge
+        self.parent[old] = n
+        self.root, self.n_nodes = n, n + 1
+        if self.pool is not None and self.points:  # the new root's voxels: every point seen so far passed it
+            st = _Set.of(n, *self._all_points(), self.origin, self.edge)
+            self.pool.version += 1
+            self._sample(st, *self._distribute(st.codes, n), only=n)
+
+    def _all_points(self):
+        """(xyz, rgba, attributes) of every point in the leaves."""
+        parts = []
+        pool = self.pool
+        for node in self.leaves().tolist():
+            slots = self._list_slots(node * K.LISTS)
+            xyz = np.empty((len(slots), 3))
+            K.dequantize_slots(pool.low, pool.med, pool.high, slots, self.cmin[node], float(self.cedge[node]), xyz)
+            parts.append((xyz, slots))
+        slots = np.concatenate([s for _, s in parts])
+        return np.concatenate([x for x, _ in parts]), pool.color[slots], {a: v[slots] for a, v in pool.attributes.items()}
+
+    # ------------------------------------------------------------------ saving
+    def chunks(self, points_per_chunk: int = 1_000_000):
+        """The points of the leaves as PointChunks (positions, colours, attributes), leaf by leaf."""
+        with self.lock:
+            leaves = self.leaves().tolist()
+        parts, held = [], 0
+        for node in leaves:
+            with self.lock:
+                slots = self._list_slots(node * K.LISTS)
+                xyz = np.empty((len(slots), 3))
+                K.dequantize_slots(self.pool.low, self.pool.med, self.pool.high, slots, self.cmin[node], float(self.cedge[node]), xyz)
+                part = (xyz, self.pool.color[slots], {a: v[slots] for a, v in self.pool.attributes.items()})
+            parts.append(part)
+            held += len(xyz)
+            if held >= points_per_chunk:
+                yield _chunk_of(parts)
+                parts, held = [], 0
+        if parts:
+            yield _chunk_of(parts)
+
+    def save(self, out, format: str = "gigapoint", overwrite: bool = False, **options):
+        """Write the octree's points as a converted octree folder (gigapoint or potree) through
+        ``gigapoint.convert``; waits for loading to finish first. Returns the ConvertResult."""
+        from ..convert import convert
+
+        self.wait()
+        return convert(self.chunks(), out, format=format, overwrite=overwrite, name=self.name, **options)
+
+    # ------------------------------------------------------------------ reading
+    def node_entries(self, node: int) -> np.ndarray:
+        """Pool slots of a node's points (a leaf) or voxels (an inner node, octant by octant)."""
+        return np.concatenate([self._list_slots(node * K.LISTS + o) for o in range(K.LISTS)])
+
+    def leaves(self) -> np.ndarray:
+        """Indices of the leaves that hold points."""
+        n = self.n_nodes
+        return np.flatnonzero((self.leaf[:n] == 1) & (self.count[:n] > 0))
+
+    def inner_nodes(self) -> np.ndarray:
+        n = self.n_nodes
+        return np.flatnonzero(self.leaf[:n] == 0)
+
+    def positions(self, slots) -> np.ndarray:
+        """float64 positions (30-bit cell centres) of entries at pool ``slots``."""
+        pool = self.pool
+        slots = np.asarray(slots, np.int64)
+        out = np.empty((len(slots), 3))
+        chunks = slots // pool.chunk
+        for node in np.unique(pool.chunk_node[chunks]).tolist():
+            m = pool.chunk_node[chunks] == node
+            tmp = np.empty((int(m.sum()), 3))
+            K.dequantize_slots(pool.low, pool.med, pool.high, slots[m], self.cmin[node], float(self.cedge[node]), tmp)
+            out[m] = tmp
+        return out
+
+    # ------------------------------------------------------------------ drawing (Renderable)
+    def prepare(self, view: View, settings) -> DrawList:
+        """What a view draws (store.select_octants: largest projected child first within the point
+        budget, each drawn child replacing its parent's voxels of its octant), one batch per chunk."""
+        n = self.n_nodes
+        pool = self.pool
+        if pool is None or self.points == 0:
+            empty = Selection(np.empty(0, np.int64), np.empty(0, np.int32), np.empty((0, 4, 4), np.float32), np.empty(0), 0)
+            return DrawList(pool or Pool(self.name, 1, self.chunk, {}), empty, max(n, 1), nodes=np.empty(0, np.int64))
+        lo, hi = self.bounds
+        cmin, cedge = self.cmin[:n], self.cedge[:n]
+        box_min = np.clip(cmin, lo, hi)
+        box_size = np.clip(cmin + cedge[:, None], lo, hi) - box_min
+        drawn = np.zeros((n, K.LISTS), np.bool_)
+        size_of = np.zeros(n)
+        select_octants(
+            view.rows, box_min, box_size, self.count[:n], self.list_count, self.parent, self.children[:n], float(view.width),
+            float(view.height), float(view.near), float(view.far), float(settings.lod_threshold_px), int(settings.point_budget), drawn,
+            size_of, float(settings.lod_foveation), self.root,
+        )  # fmt: skip
+        lists = np.flatnonzero(drawn.reshape(-1))
+        ids, list_node = np.unique(lists // K.LISTS, return_inverse=True)
+        cube_max = cmin[ids] + cedge[ids, None]
+        size = size_of[ids]
+        bits = precision_for(size, settings.precision_threshold_px) if settings.adaptive_precision else np.full(len(ids), 30, np.int32)
+        mats = batch_matrices(view.rows, cmin[ids], cube_max)
+        chunks = np.empty(int((-(-self.list_count[lists] // pool.chunk)).sum()), np.int64)
+        owner = np.empty(len(chunks), np.int64)
+        k = list_chunks(self.first_chunk, pool.chunk_next, lists, chunks, owner)
+        chunks, owner = chunks[:k], list_node[owner[:k]]
+        order = np.argsort(chunks, kind="stable")
+        chunks, owner = chunks[order], owner[order]
+        sel = Selection(chunks, bits[owner].astype(np.int32), mats[owner], size[owner], int(n - len(ids)))
+        return DrawList(pool, sel, n, nodes=ids)
+
+    def prepare_views(self, views, settings) -> MultiViewDrawList | None:
+        """None: each eye selects its own nodes, as for a converted octree."""
+        return None

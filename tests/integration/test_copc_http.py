@@ -1,0 +1,282 @@
+"""COPC and EPT over HTTP: a local server with Range support (and ways to misbehave) started
+here on 127.0.0.1; renders equal the local files' renders, requests go several at a time over
+reused connections through a bounded cache, and every failure is one line naming the URL, in
+bounded time."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+import time
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+from urllib.parse import unquote
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.errors import InputError
+from gigapoint.io import http as gphttp
+from gigapoint.lod import CopcCloud, EptCloud, convert
+
+pytest.importorskip("httpx")
+
+AUTZEN = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "autzen_trim.laz"
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "unit"))
+from test_ept import make_scene, write_ept  # the EPT trees of the unit tests
+
+
+class RangeServer:
+    """Serves ``root`` on 127.0.0.1 with byte ranges; ``mode`` makes it misbehave: "error" (HTTP
+    500), "ignore_range" (200 with the whole file), "short" (closes before the promised body
+    ends), "short_206" (a 206 whose body and Content-Length are shorter than asked), "wrong_range"
+    (another range than asked), "hang" (never answers). ``fail_after``: behave for that many
+    requests first. Counts requests and connections."""
+
+    def __init__(self, root: Path):
+        self.root = root
+        self.mode = "ok"
+        self.fail_after = 0
+        self.requests = 0
+        self.ranges: list[str] = []
+        self.ports: set[int] = set()
+        self.delay = 0.0  # seconds each answer waits (so that concurrent requests overlap)
+        self.inflight = self.max_inflight = 0
+        self.lock = threading.Lock()
+        server = self
+
+        class Handler(BaseHTTPRequestHandler):
+            protocol_version = "HTTP/1.1"  # keep-alive: connections are reused
+
+            def log_message(self, *args):
+                pass
+
+            def do_GET(self):
+                with server.lock:
+                    server.requests += 1
+                    server.ports.add(self.client_address[1])
+                    n = server.requests
+                    server.ranges.append(self.headers.get("Range", ""))
+                    server.inflight += 1
+                    server.max_inflight = max(server.max_inflight, server.inflight)
+                try:
+                    time.sleep(server.delay)
+                    self.answer(n)
+                finally:
+                    with server.lock:
+                        server.inflight -= 1
+
+            def answer(self, n):
+                mode = server.mode if n > server.fail_after else "ok"
+                path = server.root / unquote(self.path.split("?")[0].lstrip("/"))
+                if mode == "hang":
+                    time.sleep(5)
+                    return
+                if mode == "error":
+                    self.send_response(500)
+                    self.send_header("Content-Length", "0")
+                    self.end_headers()
+                    return
+                if not path.is_file():
+                    self.send_response(404)
+                    self.send_header("Content-Length", "0")
+                    self.end_headers()
+                    return
+                data = path.read_bytes()
+                rng = self.headers.get("Range")
+                if rng and mode != "ignore_range":
+                    a, b = (int(v) for v in rng.split("=")[1].split("-"))
+                    if a >= len(data):
+                        self.send_response(416)
+                        self.send_header("Content-Range", f"bytes */{len(data)}")
+                        self.send_header("Content-Length", "0")
+                        self.end_headers()
+                        return
+                    b = min(b, len(data) - 1)
+                    if mode == "wrong_range":
+                        a, b = a + 1, min(b + 1, len(data) - 1)
+                    if mode == "short_206":
+                        b = a + max(0, (b - a) // 2)
+                    body = data[a : b + 1]
+                    self.send_response(206)
+                    self.send_header("Content-Range", f"bytes {a}-{b}/{len(data)}")
+                else:
+                    body = data
+                    self.send_response(200)
+                self.send_header("Content-Length", str(len(body)))
+                self.end_headers()
+                if mode == "short":
+                    self.wfile.write(body[: len(body) // 2])
+                    self.close_connection = True
+                    return
+                self.wfile.write(body)
+
+        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.httpd.daemon_threads = True
+        self.httpd.handle_error = lambda request, address: None  # a client that gave up is no news
+        self.thread = threading.Thread(target=self.httpd.serve_forever, daemon=True)
+        self.thread.start()
+
+    def url(self, name: str) -> str:
+        return f"http://127.0.0.1:{self.httpd.server_address[1]}/{name}"
+
+    def close(self):
+        self.httpd.shutdown()
+        self.httpd.server_close()
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    if not AUTZEN.exists():
+        pytest.skip("shared sample autzen_trim.laz not present")
+    d = tmp_path_factory.mktemp("http")
+    convert([AUTZEN], d / "autzen.copc.laz", format="copc", max_leaf=4_000)
+    scene = make_scene(20_000, seed=5)
+    write_ept(d / "ept_laz", scene, "laszip")
+    write_ept(d / "ept_bin", scene, "binary")
+    return d
+
+
+@pytest.fixture
+def server(data):
+    s = RangeServer(data)
+    yield s
+    s.close()
+
+
+@pytest.fixture
+def quick(monkeypatch):
+    monkeypatch.setattr(gphttp, "TIMEOUT", 0.5)
+    monkeypatch.setattr(gphttp, "RETRIES", 1)
+
+
+def _frame(cloud, **kw):
+    cam = gp.Camera.fit(cloud.bounds, view="iso", width=240, height=160)
+    return gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", **kw))
+
+
+def test_copc_over_http_renders_like_the_local_file(data, server):
+    url = server.url("autzen.copc.laz")
+    c = gp.open(url)
+    assert isinstance(c, CopcCloud) and c.n_points == 110_000
+    assert server.requests == 2  # the header and VLRs, then the root hierarchy page
+    local = gp.open(data / "autzen.copc.laz")
+    for kw in ({"point_budget": 10**9, "lod_threshold_px": 0.0}, {"point_budget": 30_000}):
+        a, b = _frame(local, **kw), _frame(c, **kw)
+        assert a.stats.points_processed == b.stats.points_processed
+        np.testing.assert_array_equal(a.image, b.image)
+    # every request a single range; neighbouring chunks joined; a few reused connections
+    assert all(r.startswith("bytes=") for r in server.ranges)
+    assert server.requests < 2 + c.node_reads
+    assert len(server.ports) <= gphttp.WORKERS + 1
+    # drawn again from the arena and the range cache: no new request
+    c.arena = None
+    before = server.requests
+    _frame(c, point_budget=10**9, lod_threshold_px=0.0)
+    assert server.requests == before
+    c.close()
+
+
+def test_several_requests_in_flight(server, monkeypatch):
+    monkeypatch.setattr(gphttp, "MERGE_GAP", -1)  # one request per node
+    c = gp.open(server.url("autzen.copc.laz"))
+    server.delay = 0.05
+    before = server.requests
+    t = time.perf_counter()
+    _frame(c, point_budget=10**9, lod_threshold_px=0.0)
+    n = server.requests - before
+    assert n == c.node_reads > 10
+    assert server.max_inflight >= 2 and len(server.ports) <= gphttp.WORKERS + 1
+    assert time.perf_counter() - t < n * 0.05  # not one after the other
+    c.close()
+
+
+def test_url_through_a_path_and_the_cli(data, server, tmp_path):
+    url = server.url("autzen.copc.laz")
+    c = gp.open(Path(url))  # what `gigapoint view URL` / `render URL` pass: typer makes a Path of it
+    assert isinstance(c, CopcCloud)
+    r = subprocess.run([sys.executable, "-m", "gigapoint.cli", "info", url], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "COPC 1.4" in r.stdout and "per level:" in r.stdout and url in r.stdout
+    out = tmp_path / "http.png"
+    r = subprocess.run(
+        [sys.executable, "-m", "gigapoint.cli", "render", url, "-o", str(out), "--width", "160", "--height", "120"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert r.returncode == 0, r.stderr
+    assert out.stat().st_size > 500
+
+
+@pytest.mark.parametrize("folder", ["ept_laz", "ept_bin"])
+def test_ept_over_http_renders_like_the_local_dataset(data, server, folder):
+    local = gp.open(data / folder)
+    for name in (f"{folder}/ept.json", f"{folder}/"):
+        c = gp.open(server.url(name))
+        assert isinstance(c, EptCloud) and c.n_points == local.n_points
+        a = _frame(local, point_budget=10**9, lod_threshold_px=0.0)
+        b = _frame(c, point_budget=10**9, lod_threshold_px=0.0)
+        assert b.stats.points_processed == local.n_points
+        np.testing.assert_array_equal(a.image, b.image)
+        assert all(r == "" for r in server.ranges)  # whole files, no range
+        c.close()
+
+
+# --------------------------------------------------------------------------- failures
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize(
+    "mode, match",
+    [
+        ("error", "HTTP 500"),
+        ("ignore_range", "ignored the range request"),
+        ("short", "short read"),
+        ("short_206", "answered bytes"),
+        ("wrong_range", "answered bytes"),
+        ("hang", "no answer within 0.5 s"),
+    ],
+)
+def test_a_misbehaving_server_fails_in_one_line_naming_the_url(server, quick, mode, match):
+    url = server.url("autzen.copc.laz")
+    server.mode = mode
+    t = time.perf_counter()
+    with pytest.raises(InputError, match=match) as e:
+        gp.open(url)
+    assert url in str(e.value) and "\n" not in str(e.value)
+    assert time.perf_counter() - t < 20
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("mode", ["error", "short", "hang"])
+def test_a_failure_while_drawing_raises_instead_of_a_partial_image(server, quick, mode):
+    url = server.url("autzen.copc.laz")
+    c = gp.open(url)
+    server.mode, server.fail_after = mode, server.requests  # from now on
+    with pytest.raises(InputError) as e:
+        _frame(c, point_budget=10**9, lod_threshold_px=0.0)
+    assert url in str(e.value) and "\n" not in str(e.value)
+    server.mode = "ok"  # the server recovers: the same cloud draws completely
+    f = _frame(c, point_budget=10**9, lod_threshold_px=0.0)
+    assert f.stats.points_processed == 110_000
+
+
+@pytest.mark.timeout(60)
+def test_missing_files_over_http(server, quick):
+    with pytest.raises(InputError, match="HTTP 404") as e:
+        gp.open(server.url("nothing.copc.laz"))
+    assert "nothing.copc.laz" in str(e.value)
+    with pytest.raises(InputError, match="HTTP 404"):
+        gp.open(server.url("nothing/ept.json"))
+
+
+def test_the_range_cache_is_bounded():
+    cache = gphttp._LruBytes(100)
+    for i in range(10):
+        cache.put(i, bytes(30))
+    assert cache.held <= 100 and cache.get(9) is not None and cache.get(0) is None
+    cache.put("big", bytes(200))  # larger than the whole cache: not kept
+    assert cache.get("big") is None and cache.held <= 100

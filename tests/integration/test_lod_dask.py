@@ -1,0 +1,354 @@
+"""The conversion on Dask (lod/convert/distributed.py): a LocalCluster of 2 single-threaded worker
+processes, shared by the module, converts a multi-file input into the single-process converter's
+octree, file for file and byte for byte; workers killed mid-task, a driver killed mid-run, bad
+inputs, an unreachable scheduler and an output a worker cannot write."""
+
+from __future__ import annotations
+
+import filecmp
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gigapoint.cli import main
+from gigapoint.errors import InputError
+from gigapoint.lod import ConvertError, OctreeDir, convert
+
+distributed = pytest.importorskip("distributed")
+laspy = pytest.importorskip("laspy")
+
+pytestmark = pytest.mark.timeout(180)
+
+# 260 000 town points in 3 files + a dense 30 000-point spot: ~16 partitions of <= 25 000 points
+# (the spot is denser than the count grid shows, so one is refined), whose roots are joined in groups
+OPTS = {"max_leaf": 3_000, "partition_points": 25_000, "chunk_size": 40_000}
+
+
+def _write_las(path: Path, xyz: np.ndarray, rgb16: np.ndarray, intensity=None) -> Path:
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales = [0.001] * 3
+    header.offsets = [0.0, 0.0, 0.0]
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    las.red, las.green, las.blue = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
+    las.intensity = np.arange(len(xyz), dtype=np.uint16) if intensity is None else intensity
+    las.write(str(path))
+    return path
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory, las_writer) -> list[Path]:
+    d = tmp_path_factory.mktemp("dask_in")
+    files = [las_writer(d / f"town{i}.las", n, seed=i) for i, n in enumerate([120_000, 50_000, 90_000])]
+    rng = np.random.default_rng(5)
+    lo = np.array([float(v) for v in laspy.read(str(files[0])).header.mins])
+    spot = lo + 20.0 + rng.random((30_000, 3)) * 0.05  # 30 000 points in a 5 cm cube: one count-grid cell
+    files.insert(1, _write_las(d / "spot.las", spot, rng.integers(0, 65535, (30_000, 3)).astype(np.uint16)))
+    return files
+
+
+@pytest.fixture(scope="module")
+def client():
+    cluster = distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0", env={"NUMBA_NUM_THREADS": "1"}, silence_logs=40
+    )
+    c = distributed.Client(cluster)
+    yield c
+    c.close()
+    cluster.close()
+
+
+@pytest.fixture(scope="module")
+def reference(inputs, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("dask_ref") / "oct"
+    convert(inputs, out, **OPTS)
+    return out
+
+
+def _files(d: Path) -> list[str]:
+    return sorted(str(p.relative_to(d)) for p in d.rglob("*") if p.is_file())
+
+
+def _assert_identical(a: Path, b: Path) -> None:
+    """Every file of the two folders, byte for byte."""
+    assert _files(a) == _files(b)
+    differ = [f for f in _files(a) if not filecmp.cmp(a / f, b / f, shallow=False)]
+    assert not differ, f"files differ: {differ}"
+
+
+def _tasks(stream) -> dict[str, int]:
+    kinds: dict[str, int] = {}
+    for t in stream.data:
+        kind = str(t["key"]).split("-")[3]
+        kinds[kind] = kinds.get(kind, 0) + 1
+    return kinds
+
+
+def test_dask_output_is_the_single_process_output(inputs, reference, client, tmp_path):
+    out = tmp_path / "oct"
+    with distributed.get_task_stream(client) as stream:
+        res = convert(inputs, out, client=client, **OPTS)
+    assert res.points == 290_000 and not res.resumed
+    _assert_identical(reference, out)
+    kinds = _tasks(stream)
+    # 8 read tasks (40 000-point ranges of the 3 town files and the spot), the spot's partition refined,
+    # more than one build per worker, groups of partition roots
+    assert kinds["read"] == 3 + 1 + 2 + 3 and kinds["refine"] == 1 and kinds["build"] >= 10 and kinds["group"] >= 1, kinds
+    assert kinds["count"] == kinds["distribute"] == kinds["read"] and kinds["upper"] == 1 and kinds["place"] >= 1
+    assert not OctreeDir(out).partial.exists()
+
+
+@pytest.mark.parametrize("fmt", ["potree", "copc"])
+def test_dask_potree_and_copc_outputs_are_the_single_process_outputs(inputs, client, tmp_path, fmt):
+    name = "oct.copc.laz" if fmt == "copc" else "oct"
+    (tmp_path / "ref").mkdir()
+    (tmp_path / "dask").mkdir()
+    convert(inputs[:2], tmp_path / "ref" / name, format=fmt, **OPTS)
+    convert(inputs[:2], tmp_path / "dask" / name, format=fmt, client=client, **OPTS)
+    _assert_identical(tmp_path / "ref", tmp_path / "dask")
+
+
+def _install(dask_client, hook: str, kind: str, marker: Path) -> None:
+    """On every worker: ``hooks.<hook>`` SIGKILLs its own process the first time a task of ``kind``
+    gets there (the marker file, made with O_EXCL, says one already did: the retry goes on)."""
+
+    def install(hook=hook, kind=kind, marker=str(marker)):
+        from gigapoint.lod.convert import hooks
+
+        def kill(k, name):
+            if k == kind:
+                try:
+                    os.close(os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+                except FileExistsError:
+                    return
+                os.kill(os.getpid(), signal.SIGKILL)
+
+        setattr(hooks, hook, kill)
+
+    dask_client.run(install)
+
+
+def _uninstall(dask_client) -> None:
+    def uninstall():
+        from gigapoint.lod.convert import hooks
+
+        hooks.task_started = lambda kind, name: None
+        hooks.task_done = lambda kind, name: None
+
+    dask_client.run(uninstall)
+
+
+@pytest.mark.parametrize(
+    ("hook", "kind"),
+    [
+        ("task_started", "build"),  # killed before it wrote anything
+        ("task_done", "distribute"),  # killed after writing its pieces and removing its raw chunks
+    ],
+)
+def test_a_worker_killed_mid_task_is_retried_and_the_output_is_the_same(inputs, reference, client, tmp_path, hook, kind):
+    import cloudpickle
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])  # the hook travels to the workers by value
+    marker = tmp_path / "killed"
+    _install(client, hook, kind, marker)
+    try:
+        out = tmp_path / "oct"
+        convert(inputs, out, client=client, **OPTS)
+    finally:
+        _uninstall(client)
+        client.wait_for_workers(2, timeout=60)  # the nanny restarted the killed one
+    assert marker.exists()  # a worker was killed
+    _assert_identical(reference, out)
+
+
+def test_a_task_whose_worker_always_dies_fails_the_run_with_one_line(inputs, tmp_path):
+    """allowed-failures = 0: the first worker death of a task is its last (KilledWorker)."""
+    import cloudpickle
+    import dask
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+        cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=50)
+    c = distributed.Client(cluster)
+    try:
+        _install(c, "task_started", "count", tmp_path / "killed")
+        with pytest.raises(ConvertError, match=r"oct: the count task t\d+ failed because its worker died every time it ran") as err:
+            convert(inputs[2:], tmp_path / "oct", client=c, **OPTS)
+    finally:
+        c.close()
+        cluster.close()
+    assert "\n" not in str(err.value) and (tmp_path / "killed").exists()
+    assert not OctreeDir(tmp_path / "oct").complete and OctreeDir(tmp_path / "oct").read_state()["phase"] == "count"
+
+
+def test_a_killed_run_resumes_its_finished_partitions(inputs, reference, client, tmp_path):
+    """The driver is SIGKILLed after 3 partitions are built; the same conversion resumes them."""
+    out = tmp_path / "oct"
+    code = (
+        "import os, signal, sys, json; from gigapoint.lod.convert import hooks, convert\n"
+        "hooks.after_partition_built = lambda done: done == 3 and os.kill(os.getpid(), signal.SIGKILL)\n"
+        "a = json.loads(sys.argv[1]); convert(a['inputs'], a['out'], client=a['address'], **a['opts'])\n"
+    )
+    args = {"inputs": [str(p) for p in inputs], "out": str(out), "address": client.scheduler.address, "opts": OPTS}
+    proc = subprocess.run([sys.executable, "-c", code, json.dumps(args)], capture_output=True, timeout=150)
+    assert proc.returncode == -9, proc.stderr.decode()[-2000:]
+    state = OctreeDir(out).read_state()
+    assert state["phase"] == "build" and not OctreeDir(out).complete
+    import gigapoint as gp
+    from gigapoint.errors import GigapointWarning
+
+    with pytest.warns(GigapointWarning, match="conversion not finished"):  # the read tasks' samples, as the preview
+        preview = gp.open(out)
+    assert 0 < preview.n_points == state["preview"]["points"] and preview.bounds[0][2] >= state["lo"][2]
+    built = [p.name for p in OctreeDir(out).built.iterdir() if p.name.startswith("p") and not p.name.endswith(".tmp")]
+    assert len(built) >= 3
+    n_parts = sum(1 for n in state["part_counts"] if n)
+    with distributed.get_task_stream(client) as stream:
+        res = convert(inputs, out, client=client, **OPTS)
+    assert res.resumed
+    kinds = _tasks(stream)
+    assert "read" not in kinds and "distribute" not in kinds and kinds["build"] <= n_parts - len(built), kinds
+    _assert_identical(reference, out)
+
+
+def test_cli_dask_option_gives_the_single_process_output(inputs, client, tmp_path, capsys):
+    """Defaults (one partition: the build reads the spilled chunks) through `gigapoint convert --dask`."""
+    ref, out = tmp_path / "ref", tmp_path / "oct"
+    convert(inputs[2:], ref, max_leaf=3_000)
+    assert main(["convert", *map(str, inputs[2:]), "-o", str(out), "--max-leaf", "3000", "--dask", client.scheduler.address]) == 0
+    printed = capsys.readouterr()
+    assert "140,000 points" in printed.out
+    assert f"Dask dashboard: {client.dashboard_link}" in printed.err  # the scheduler serves one
+    _assert_identical(ref, out)
+
+
+def test_cli_workers_option_starts_a_local_cluster(inputs, tmp_path, capsys):
+    ref, out = tmp_path / "ref", tmp_path / "oct"
+    convert(inputs[1:2], ref, max_leaf=3_000)
+    assert main(["convert", str(inputs[1]), "-o", str(out), "--max-leaf", "3000", "--workers", "1", "-q"]) == 0
+    assert "30,000 points" in capsys.readouterr().out
+    _assert_identical(ref, out)
+    assert main(["convert", str(inputs[1]), "-o", str(tmp_path / "x"), "--workers", "1", "--dask", "tcp://127.0.0.1:9"]) == 1
+    assert "give one of them" in capsys.readouterr().err
+
+
+def test_16bit_colors_dark_after_bright_read_in_parts_are_the_single_process_colors(client, tmp_path):
+    """io's color decision never goes back from 16-bit: a dark part of a 16-bit file read by its
+    own task decides 8-bit, is found out once the parts before it are read, and is read again."""
+    rng = np.random.default_rng(3)
+    xyz = rng.random((100_000, 3)) * 100
+    rgb = rng.integers(0, 65535, (100_000, 3)).astype(np.uint16)
+    rgb[40_000:] = rng.integers(1, 255, (60_000, 3))  # the 2nd and 3rd 40 000-point ranges: 8-bit values
+    src = _write_las(tmp_path / "mixed.las", xyz, rgb)
+    ref, out = tmp_path / "ref", tmp_path / "oct"
+    convert([src], ref, **OPTS)
+    with distributed.get_task_stream(client) as stream:
+        convert([src], out, client=client, **OPTS)
+    assert _tasks(stream)["read"] == 3 + 2  # the two dark parts again
+    _assert_identical(ref, out)
+
+
+@pytest.mark.parametrize("kind", ["truncated LAS", "bad text line"])
+def test_a_corrupt_file_among_many_fails_the_run_naming_it(inputs, client, tmp_path, kind):
+    """A truncated LAS is found by the driver's look at the headers; a text file with a bad line
+    3 000 lines in fails in a worker's read task."""
+    if kind == "truncated LAS":
+        bad = tmp_path / "bad.las"
+        data = inputs[0].read_bytes()
+        bad.write_bytes(data[: len(data) // 2])  # the header claims twice the points there are
+        message = r"bad\.las: truncated"
+    else:
+        bad = tmp_path / "bad.xyz"
+        lines = [f"{x:.3f} {y:.3f} {z:.3f}" for x, y, z in laspy.read(str(inputs[2])).xyz[:5000]]
+        lines[3000] = "1.0 oops 3.0"
+        bad.write_text("\n".join(lines) + "\n")
+        message = r"bad\.xyz: line 3001: 'oops' is not a number"
+    out = tmp_path / "oct"
+    t = time.perf_counter()
+    with pytest.raises(InputError, match=message) as err:
+        convert([*inputs[:2], bad], out, client=client, **OPTS)
+    assert "\n" not in str(err.value) and time.perf_counter() - t < 60
+    assert not OctreeDir(out).complete and not (out / "octree.json").exists()
+
+
+def test_an_unreachable_scheduler_is_a_one_line_error(inputs, tmp_path, capsys, monkeypatch):
+    from gigapoint.lod.convert import distributed as gd
+
+    monkeypatch.setattr(gd, "CONNECT_TIMEOUT_S", 2.0)
+    t = time.perf_counter()
+    code = main(["convert", str(inputs[0]), "-o", str(tmp_path / "oct"), "--dask", "tcp://127.0.0.1:9", "-q"])
+    err = capsys.readouterr().err
+    assert code == 1 and time.perf_counter() - t < 30
+    assert err.startswith("error: --dask tcp://127.0.0.1:9: cannot reach a Dask scheduler") and err.count("\n") == 1, err
+    assert not (tmp_path / "oct").exists()
+
+
+def test_a_scheduler_without_workers_is_a_one_line_error(inputs, tmp_path, monkeypatch):
+    from gigapoint.lod.convert import distributed as gd
+
+    monkeypatch.setattr(gd, "WORKER_WAIT_S", 1.0)
+    cluster = distributed.LocalCluster(n_workers=0, processes=True, dashboard_address=":0", silence_logs=40)
+    try:
+        t = time.perf_counter()
+        with pytest.raises(ConvertError, match=r"tcp://\S+: no Dask worker joined the scheduler within 1 s"):
+            convert(inputs[:1], tmp_path / "oct", client=cluster.scheduler_address, **OPTS)
+        assert time.perf_counter() - t < 30
+    finally:
+        cluster.close()
+    assert not OctreeDir(tmp_path / "oct").complete
+
+
+def test_an_output_a_worker_cannot_write_is_a_one_line_error(inputs, client, tmp_path):
+    """The workers run as root here, for whom permissions do not count: the workers' probe is made
+    to meet a read-only folder (its temporary file creation fails with EACCES)."""
+
+    def deny():
+        import tempfile
+
+        def mkstemp(*a, dir=None, **k):
+            raise PermissionError(13, "Permission denied", dir)
+
+        tempfile._real_mkstemp = tempfile.mkstemp
+        tempfile.mkstemp = mkstemp
+
+    def allow():
+        import tempfile
+
+        tempfile.mkstemp = tempfile._real_mkstemp
+
+    import cloudpickle
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    out = tmp_path / "oct"
+    client.run(deny)
+    try:
+        with pytest.raises(ConvertError, match=r"oct: Dask worker tcp://\S+ cannot write into it \(Permission denied\)") as err:
+            convert(inputs[:1], out, client=client, **OPTS)
+    finally:
+        client.run(allow)
+    assert "\n" not in str(err.value)
+    assert not OctreeDir(out).complete and not OctreeDir(out).raw.exists()  # nothing was read
+
+
+def test_no_dask_import_without_a_client_and_an_install_hint_without_dask(inputs, tmp_path, monkeypatch):
+    code = "import sys, gigapoint.lod.convert, gigapoint.cli.convert_cmd; assert 'distributed' not in sys.modules and 'dask' not in sys.modules"
+    assert subprocess.run([sys.executable, "-c", code], timeout=60).returncode == 0
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed -> ImportError
+    with pytest.raises(ConvertError, match=r"pip install 'gigapoint\[dask\]'"):
+        convert(inputs[:1], tmp_path / "oct", client=2)
+    assert not (tmp_path / "oct").exists()
+
+
+def test_chunk_inputs_cannot_go_to_workers(client, tmp_path):
+    from gigapoint.io import demo_chunks
+
+    with pytest.raises(ConvertError, match="reads files"):
+        convert(demo_chunks(1000), tmp_path / "oct", client=client)
+    assert not (tmp_path / "oct").exists()

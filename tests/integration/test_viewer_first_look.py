@@ -1,0 +1,99 @@
+"""The viewer's rough edges of issue #17, in a real headless Chromium: the HUD's rate when idle,
+the panel's cloud line, picked coordinates as the file wrote them."""
+
+from __future__ import annotations
+
+import os
+import re
+import time
+
+import numpy as np
+import pytest
+
+CHROMIUM = "/usr/bin/chromium"
+ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update", "--no-first-run"]
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(180)]
+if not os.path.exists(CHROMIUM):
+    pytest.skip("chromium is not installed at /usr/bin/chromium", allow_module_level=True)
+sync_api = pytest.importorskip("playwright.sync_api")
+pytest.importorskip("starlette")
+pytest.importorskip("uvicorn")
+
+import gigapoint
+from gigapoint.viewer.server import ViewerServer
+
+NAME = "a_rather_long_survey_file_name_of_a_point_cloud_tile_0001.las"
+
+
+@pytest.fixture(scope="module")
+def las_cloud(tmp_path_factory):
+    """A LAS file at centimetre scale with UTM-sized coordinates (float noise in float64 sums)."""
+    import laspy
+
+    g = np.stack(np.meshgrid(np.arange(0, 60, 0.37), np.arange(0, 40, 0.37), indexing="ij"), -1).reshape(-1, 2)
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales = [0.01, 0.01, 0.01]
+    header.offsets = [636000.0, 848000.0, 0.0]
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = g[:, 0] + 636317.71, g[:, 1] + 848935.2, 406.26 + 0.01 * g[:, 0]
+    las.red = las.green = las.blue = np.full(len(g), 40000, np.uint16)
+    path = tmp_path_factory.mktemp("las") / NAME
+    las.write(path)
+    return gigapoint.open(path)
+
+
+@pytest.fixture(scope="module")
+def page(las_cloud):
+    srv = ViewerServer(las_cloud).start()
+    with sync_api.sync_playwright() as p:
+        try:
+            b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        except Exception as exc:  # noqa: BLE001 - a broken browser install is a skip, not a failure
+            pytest.skip(f"cannot launch chromium: {exc}")
+        pg = b.new_page(viewport={"width": 290 + 640, "height": 480})
+        errors = []
+        pg.on("pageerror", lambda e: errors.append(str(e)))
+        pg.goto(srv.url)
+        pg.wait_for_function("() => document.getElementById('canvas').dataset.full === 'true'", timeout=30_000)
+        yield pg
+        assert not errors, errors
+        b.close()
+    srv.close()
+
+
+def test_the_hud_keeps_the_last_rate_when_idle(page):
+    box = page.locator("#canvas").bounding_box()
+    x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    page.mouse.move(x, y)
+    page.mouse.down()
+    page.mouse.move(x + 150, y + 20, steps=30)  # frames while moving: a rate
+    page.mouse.up()
+    page.wait_for_function("() => /fps \\d+/.test(document.getElementById('stats').textContent)", timeout=30_000)
+    time.sleep(2.5)  # no new frame for more than a second
+    text = page.locator("#stats").inner_text()
+    assert "fps 0" not in text and re.search(r"idle \(last fps \d+\)", text), text
+
+
+def test_the_cloud_line_breaks_between_words(page):
+    info = page.locator("#cloudinfo")
+    assert NAME in info.inner_text() and "batches" in info.inner_text()
+    # the counts and their units keep to one line each (no "batche|s"), the long name may break anywhere
+    lines_of = page.evaluate("() => [...document.querySelectorAll('#cloudinfo .nowrap')].map((s) => s.getClientRects().length)")
+    assert lines_of == [1, 1]
+
+
+def test_a_picked_point_reads_as_the_file_wrote_it(page, las_cloud):
+    page.get_by_role("button", name="top").click()
+    page.wait_for_function("() => window.gigapoint.camera.pitch > 89", timeout=30_000)
+    time.sleep(1.0)
+    box = page.locator("#canvas").bounding_box()
+    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    pick = page.locator("#pickinfo")
+    pick.wait_for(state="visible")
+    page.wait_for_function("() => /^x /m.test(document.getElementById('pickinfo').textContent)", timeout=30_000)
+    text = pick.inner_text()
+    coords = {m.group(1): m.group(2) for m in re.finditer(r"^([xyz]) (\S+)$", text, re.MULTILINE)}
+    assert set(coords) == {"x", "y", "z"}, text
+    for v in coords.values():
+        assert re.fullmatch(r"\d+(\.\d{1,2})?", v), text  # 636317.71, never 636317.7100002308

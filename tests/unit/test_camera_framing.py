@@ -1,0 +1,100 @@
+"""Default framing (issue #17): the 'auto' view turns a long cloud across the image and frames
+its points, not its bounding box."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.render.camera import VIEWS, auto_view, sample_points
+from gigapoint.viewer.state import OrbitState
+
+
+def strip(angle_deg: float, length=400.0, width=100.0, n=40_000, seed=0):
+    """A flat strip (length x width) turned by ``angle_deg`` around z."""
+    rng = np.random.default_rng(seed)
+    u, v = rng.random(n) * length, rng.random(n) * width
+    a = math.radians(angle_deg)
+    x, y = u * math.cos(a) - v * math.sin(a), u * math.sin(a) + v * math.cos(a)
+    return gp.from_arrays(np.column_stack([x + 637_000.0, y + 851_000.0, rng.random(n)]))
+
+
+def project(cam, xyz):
+    p = np.c_[xyz, np.ones(len(xyz))] @ cam.screen_rows().T
+    return p[:, 0] / p[:, 2], p[:, 1] / p[:, 2]
+
+
+@pytest.mark.parametrize("angle", [0.0, 30.0, 90.0, 135.0])
+def test_auto_turns_a_long_cloud_across_the_image(angle):
+    cloud = strip(angle)
+    pts = cloud.positions()
+    cam = gp.Camera.fit_cloud(cloud, width=320, height=180)
+    right, _, back = cam.basis()
+    axis = np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle)), 0.0])
+    assert abs(right @ axis) > 0.999  # the long axis runs across the image
+    if angle == 0.0:
+        assert back[1] < 0  # seen from the south
+    px, py = project(cam, pts)
+    inside = (px >= 0) & (px <= 320) & (py >= 0) & (py <= 180)
+    assert inside.mean() > 0.99  # (nearly) every point in the frame...
+    assert (px.max() - px.min()) / 320 > 0.9  # ...spanning its width
+    yaw, pitch = auto_view(pts, 16 / 9)
+    assert VIEWS["iso"][1] <= pitch <= 55.0
+
+
+def test_auto_keeps_iso_for_a_square_cloud_and_frames_the_data_not_the_box():
+    rng = np.random.default_rng(2)
+    square = gp.from_arrays(rng.random((20_000, 3)) * [100.0, 100.0, 5.0])
+    assert auto_view(square.positions()) == VIEWS["iso"]
+    box = gp.Camera.fit(square.bounds, view="iso", width=200, height=150)
+    auto = gp.Camera.fit_cloud(square, width=200, height=150)
+    np.testing.assert_allclose(np.subtract(auto.eye, auto.target) / np.linalg.norm(np.subtract(auto.eye, auto.target)),
+                               np.subtract(box.eye, box.target) / np.linalg.norm(np.subtract(box.eye, box.target)), atol=1e-9)  # fmt: skip
+    # a diagonal strip: its box is square and mostly empty; framing its points brings it closer
+    diag = strip(45.0)
+    by_box = gp.Camera.fit(diag.bounds, view="auto", width=200, height=150)
+    by_points = gp.Camera.fit_cloud(diag, width=200, height=150)
+    assert np.linalg.norm(np.subtract(by_points.eye, by_points.target)) < 0.9 * np.linalg.norm(np.subtract(by_box.eye, by_box.target))
+
+
+def test_sample_points_are_spread_over_the_cloud():
+    cloud = gp.demo(100_000)
+    pts = sample_points(cloud, n=5_000)
+    lo, hi = (np.asarray(b) for b in cloud.bounds)
+    assert 4_000 <= len(pts) <= 12_000
+    assert np.all(pts >= lo - 1e-6) and np.all(pts <= hi + 1e-6)
+    assert np.all(pts.max(axis=0) - pts.min(axis=0) > 0.9 * (hi - lo))
+
+
+def test_the_named_views_are_unchanged():
+    """'iso' and the others frame the box exactly as before (the bit-exact tests and benchmarks use them)."""
+    lo, hi = np.array([0.0, 0.0, 0.0]), np.array([100.0, 40.0, 10.0])
+    cam = gp.Camera.fit((lo, hi), view="iso", width=320, height=200)
+    back = np.subtract(cam.eye, cam.target)
+    assert math.degrees(math.atan2(back[1], back[0])) == pytest.approx(-135.0)
+    assert math.degrees(math.asin(back[2] / np.linalg.norm(back))) == pytest.approx(35.264)
+
+
+def test_the_viewers_default_state_is_the_auto_view():
+    cloud = strip(20.0)
+    state = OrbitState.fit(cloud.bounds, view="auto", width=320, height=180, points=sample_points(cloud))
+    cam = gp.Camera.fit_cloud(cloud, width=320, height=180)
+    np.testing.assert_allclose(state.camera(320, 180).eye, cam.eye, rtol=0, atol=1e-6)
+    assert state.yaw == pytest.approx(20.0 - 90.0, abs=0.5)
+
+
+def test_the_viewer_opens_on_the_auto_view():
+    from gigapoint.viewer.session import ViewerCore
+
+    cloud = strip(0.0)
+    core = ViewerCore(cloud)
+    try:
+        state = core.default_state(320, 180)
+        assert state.yaw == pytest.approx(-90.0, abs=0.5) and state.pitch > VIEWS["iso"][1] - 1e-9
+        iso = core.default_state(320, 180, view="iso")
+        assert iso.yaw == pytest.approx(-135.0)
+    finally:
+        core.close_all()

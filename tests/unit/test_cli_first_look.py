@@ -1,0 +1,232 @@
+"""What a new user meets first (issue #17): compiling said aloud, progress on a terminal only,
+clean --help, info formatted from the file's scale, picking an empty pixel, overwrite rules."""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+
+import numba
+import numpy as np
+import pytest
+from rich.console import Console
+
+import gigapoint as gp
+from gigapoint.cli import compiling, main
+from gigapoint.cli.progress import progress_bar
+from gigapoint.errors import GigapointError, PointIndexError
+
+
+def run(capsys, *args):
+    rc = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def terminal() -> tuple[Console, io.StringIO]:
+    buf = io.StringIO()
+    return Console(file=buf, force_terminal=True, width=100), buf
+
+
+def fresh_kernel():
+    """A numba kernel of 'gigapoint' that no cache holds: its first call compiles."""
+
+    def kernel(x):
+        return x * 2 + 1
+
+    kernel.__module__ = "gigapoint._first_look_test"
+    return numba.njit(kernel)
+
+
+# --- compiling, said aloud --------------------------------------------------------------------------
+def test_a_compile_shows_the_notice_on_a_terminal_and_a_warm_call_nothing():
+    console, buf = terminal()
+    kernel = fresh_kernel()
+    with compiling.watching(console) as watch:
+        assert kernel(20) == 41
+    assert watch.kernels == 1 and watch.seconds > 0
+    text = buf.getvalue()
+    assert compiling.MESSAGE in text and "kernel" in text  # the spinner, then the closing line... or the spinner alone
+    console, buf = terminal()
+    with compiling.watching(console) as watch:
+        assert kernel(21) == 43  # compiled: no event, no notice
+    assert watch.kernels == 0 and buf.getvalue() == ""
+
+
+def test_no_notice_when_piped():
+    buf = io.StringIO()
+    with compiling.watching(Console(file=buf)) as watch:  # not a terminal
+        fresh_kernel()(1)
+    assert watch.kernels == 1 and buf.getvalue() == ""
+
+
+def test_numba_helpers_alone_do_not_count():
+    @numba.njit
+    def not_ours(x):
+        return x + 1
+
+    with compiling.watching(Console(file=io.StringIO())) as watch:
+        not_ours(1)
+    assert watch.kernels == 0
+
+
+def test_a_progress_bar_on_a_terminal_only_and_the_compile_notice_inside_it():
+    console, buf = terminal()
+    with progress_bar("frames", 3, console) as advance:
+        for i in range(3):
+            advance(i + 1)
+    assert "frames" in buf.getvalue()
+    piped = io.StringIO()
+    with progress_bar("frames", 3, Console(file=piped)) as advance:
+        advance(1, "text")
+    assert piped.getvalue() == ""
+    console, buf = terminal()
+    with compiling.watching(console) as watch, progress_bar("frames", 2, console) as advance:
+        assert watch.sink is not None  # the bar shows the notice: one live display at a time
+        fresh_kernel()(3)
+        advance(2)
+    assert watch.sink is None and watch.kernels == 1
+
+
+def test_compile_command_reports_each_step(capsys, monkeypatch):
+    from gigapoint.cli import compile_cmd
+
+    kernel = fresh_kernel()
+    monkeypatch.setattr(compile_cmd, "steps", lambda folder: [("a kernel", lambda: kernel(1)), ("the same again", lambda: kernel(2))])
+    rc, out, err = run(capsys, "compile")
+    assert rc == 0, err
+    lines = out.splitlines()
+    assert re.match(r"\s+a kernel\s+compiled in \d+\.\d s$", lines[0]) and re.match(r"\s+the same again\s+cached$", lines[1])
+    assert "later runs load them from numba's cache" in lines[-1]
+    rc, out, _ = run(capsys, "compile")
+    assert rc == 0 and out.splitlines()[-1].startswith("every kernel was compiled already")
+
+
+def test_the_real_compile_steps_cover_every_pass(tmp_path):
+    from gigapoint.cli.compile_cmd import steps
+
+    names = " ".join(name for name, _ in steps(tmp_path))
+    for word in ("LAS", "demo", "rendering", "point sizes", "eye-dome", "hole filling", "high-quality", "supersampling", "color modes", "octrees"):
+        assert word in names
+
+
+# --- --help ----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("command", [[], ["render"], ["info"], ["convert"], ["view"], ["bench"], ["demo"], ["compile"]])
+def test_help_lists_no_bool_type_for_flags_and_no_braced_arguments(capsys, monkeypatch, command):
+    monkeypatch.setenv("COLUMNS", "160")
+    rc, out, err = run(capsys, *command, "--help")
+    assert rc == 0, err
+    assert "<bool>" not in out and not re.search(r"\{\w+\}", out), out
+    assert re.search(r"--help\s+Show this message", out)
+    if command in (["render"], ["info"], ["convert"]):
+        usage = next(line for line in out.splitlines() if "Usage:" in line)
+        assert re.search(r"\[OPTIONS\] [A-Z]+\.\.\.", usage), usage
+
+
+# --- info formatted from the file's scale -------------------------------------------------------------
+def test_info_prints_bounds_with_the_decimals_of_the_scale(capsys, las_writer, tmp_path):
+    path = las_writer(tmp_path / "mm.las", 5_000)  # scale 0.001
+    rc, out, err = run(capsys, "info", path)
+    assert rc == 0, err
+    for label in ("bounds min", "bounds max", "extent"):
+        values = next(line for line in out.splitlines() if line.strip().startswith(label + ":")).split(":", 1)[1]
+        values = values.replace("(header)", "").strip().split(", ")
+        assert len(values) == 3 and all(re.fullmatch(r"-?\d+\.\d{3}", v) for v in values), values  # no 1,234 separators
+
+
+def test_info_on_real_utm_data(capsys, autzen_path):
+    rc, out, _ = run(capsys, "info", autzen_path)
+    assert rc == 0
+    assert "bounds min:  636001.76, 848935.20, 406.26 (header)" in out
+    assert "extent:      1177.46, 562.70, 114.25" in out
+
+
+# --- picking -------------------------------------------------------------------------------------------
+def test_point_info_of_an_empty_pixel_is_none_and_a_bad_index_a_clear_error():
+    cloud = gp.from_arrays(np.random.default_rng(1).random((500, 3)) * 10)
+    cam = gp.Camera.fit(cloud.bounds, width=64, height=48)
+    frame = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", size_mode="fixed"))
+    ys, xs = np.nonzero(frame.index == -1)
+    empty = int(frame.index[ys[0], xs[0]])
+    assert empty == -1 and cloud.point_info(empty) is None and frame.point_info(empty) is None
+    hit = int(frame.index[frame.index >= 0][0])
+    assert cloud.point_info(hit)["index"] == hit and frame.point_info(hit)["index"] == hit
+    for bad in (500, -2, 10**9):
+        with pytest.raises(PointIndexError, match=r"out of range 0\.\.499 \(-1: no point\)"):
+            cloud.point_info(bad)
+    assert issubclass(PointIndexError, IndexError) and issubclass(PointIndexError, GigapointError)
+
+
+def test_picked_positions_read_as_the_file_wrote_them(autzen_path):
+    """A LAS file's points come back rounded to its scale (0.01 here), not 636317.7100002308."""
+    import laspy
+
+    cloud = gp.open(autzen_path)
+    assert cloud.source_scale == (0.01, 0.01, 0.01)
+    las = laspy.read(autzen_path)
+    file_xyz = {(round(x, 2), round(y, 2), round(z, 2)) for x, y, z in zip(las.x[:2000], las.y[:2000], las.z[:2000])}
+    raw = cloud.positions(np.arange(0, cloud.n_points, 97))
+    assert np.abs(raw * 100 - np.round(raw * 100)).max() > 1e-7  # the 30-bit positions carry float noise...
+    hits = 0
+    for i in range(0, cloud.n_points, 97):
+        pos = cloud.point_info(i)["position"]
+        assert all(repr(v) == repr(round(v, 2)) for v in pos), pos  # ...point_info none
+        hits += tuple(pos) in file_xyz
+    assert hits > 0  # and they are the file's own values
+    assert gp.from_arrays(np.zeros((3, 3))).source_scale is None
+
+
+def test_the_finest_scale_of_several_files(las_writer, tmp_path):
+    import laspy
+
+    a = las_writer(tmp_path / "a.las", 2_000)  # 0.001
+    las = laspy.read(a)
+    las.header.scales = np.array([0.01, 0.01, 0.01])
+    las.write(tmp_path / "b.las")
+    assert gp.open(tmp_path / "b.las").source_scale == (0.01, 0.01, 0.01)
+    assert gp.open(a, tmp_path / "b.las").source_scale == (0.001, 0.001, 0.001)
+
+
+# --- overwrite, worded for the caller --------------------------------------------------------------------
+def test_turntable_does_not_replace_a_file_silently(tmp_path):
+    pytest.importorskip("PIL")
+    cloud = gp.demo(5_000)
+    out = tmp_path / "spin.gif"
+    out.write_bytes(b"mine")
+    with pytest.raises(GigapointError, match=r"already exists; pass overwrite=True to replace it") as err:
+        gp.render_turntable(cloud, 2, out, width=32, height=24)
+    assert "--overwrite" not in str(err.value) and out.read_bytes() == b"mine"
+    frames = []
+    gp.render_turntable(cloud, 2, out, width=32, height=24, overwrite=True, progress=lambda done, total: frames.append((done, total)))
+    assert out.read_bytes()[:3] == b"GIF" and frames == [(1, 2), (2, 2)]
+
+
+def test_convert_says_overwrite_true_to_python_and_overwrite_to_the_command_line(tmp_path, capsys, las_writer):
+    from gigapoint.lod import OutputExistsError
+
+    src = las_writer(tmp_path / "in.las", 3_000)
+    out = tmp_path / "oct"
+    gp.convert([src], out)
+    with pytest.raises(OutputExistsError, match=r"pass overwrite=True to replace it") as err:
+        gp.convert([src], out)
+    assert "--overwrite" not in str(err.value)
+    rc, _, stderr = run(capsys, "convert", src, "-o", out, "--quiet")
+    assert rc == 1 and "pass --overwrite to replace it" in stderr and "overwrite=True" not in stderr
+    assert run(capsys, "render", src, "-o", tmp_path / "x.png", "-W", 64, "-H", 48)[0] == 0
+    rc, _, stderr = run(capsys, "render", src, "-o", tmp_path / "x.png", "-W", 64, "-H", 48)  # again: the image exists
+    assert rc == 1 and "already exists; pass --overwrite to replace it" in stderr
+
+
+# --- the Potree writer and info --------------------------------------------------------------------------
+def test_potree_info_lists_its_attributes_and_keeps_the_crs(tmp_path, capsys, autzen_path):
+    from gigapoint.lod import octree_info
+
+    out = tmp_path / "potree"
+    gp.convert([autzen_path], out, format="potree")
+    meta = json.loads((out / "metadata.json").read_text())
+    assert "NAD_1983_HARN_Lambert_Conformal_Conic" in meta["projection"]
+    info = octree_info(out)
+    assert {"intensity", "classification"} <= set(info["attributes"]) and "NAD_1983" in info["crs"]
+    rc, text, _ = run(capsys, "info", out)
+    assert rc == 0 and "attributes:  none" not in text and "intensity" in text and "crs:" in text and "NAD_1983" in text

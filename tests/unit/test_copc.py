@@ -1,0 +1,365 @@
+"""COPC: VoxelKey <-> integer keys, gigapoint's writer read back by laspy's CopcReader and by
+gigapoint itself (point for point, image for image), hierarchy pages on demand, the CRS carried
+through, and malformed files failing in one line."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import gigapoint as gp
+from gigapoint.errors import InputError
+from gigapoint.lod import CopcCloud, OctreeCloud, convert, open_octree
+from gigapoint.lod.copc import COPC_INFO_DTYPE, HIERARCHY_ENTRY_DTYPE, INFO_OFFSET, LAS14_HEADER_DTYPE
+from gigapoint.lod.copc_write import hierarchy_pages, write_copc
+from gigapoint.lod.keys import key_cube
+from gigapoint.lod.voxel_octree import key_to_voxel, voxel_name, voxel_to_key
+
+laspy = pytest.importorskip("laspy")
+
+AUTZEN = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "autzen_trim.laz"
+OPTS = {"max_leaf": 4_000, "partition_points": 30_000}
+
+
+# --------------------------------------------------------------------------- keys
+
+
+def test_voxel_keys_map_onto_integer_keys_with_potree_child_order():
+    # one level: the child digit is x·4 + y·2 + z
+    assert voxel_to_key(0, 0, 0, 0).tolist() == [1]
+    assert voxel_to_key([1, 1, 1], [1, 0, 0], [0, 1, 0], [0, 0, 1]).tolist() == [0o14, 0o12, 0o11]
+    # two levels: x = 0b11, y = 0, z = 0b01 -> digits (1,0,0) = 4 then (1,0,1) = 5
+    assert voxel_to_key(2, 3, 0, 1).tolist() == [(1 << 6) | (4 << 3) | 5]
+    assert voxel_name((1 << 6) | (4 << 3) | 5) == "2-3-0-1"
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 20).flatmap(lambda d: st.tuples(st.just(d), *(st.integers(0, 2**d - 1),) * 3)))
+def test_voxel_key_round_trip_and_cube(dxyz):
+    d, x, y, z = dxyz
+    key = voxel_to_key(d, x, y, z)
+    assert [int(v[0]) for v in key_to_voxel(key)] == [d, x, y, z]
+    assert int(key[0]) >> 3 == (int(voxel_to_key(d - 1, x >> 1, y >> 1, z >> 1)[0]) if d else 0)
+    cmin, edge = key_cube(key, [10.0, 20.0, 30.0], 64.0)
+    # laspy's VoxelKey.bounds: mins + (x, y, z) * side; the same cube
+    np.testing.assert_allclose(cmin[0], np.array([10.0, 20.0, 30.0]) + np.array([x, y, z]) * 64.0 / 2**d)
+    assert edge[0] == 64.0 / 2**d
+
+
+def test_hierarchy_pages_split_at_page_levels():
+    keys = [1, 8, 9, 64, 65, 72, 512]  # root, two children, grandchildren under 8 and 9, one great-grandchild
+    entries = {k: (1000 + k, 10, 5) for k in keys}
+    pages = hierarchy_pages(entries, 500, page_level=1)
+    roots = [r for r, _ in pages]
+    assert roots == [1, 8, 9, 64]  # nodes with children at levels 1, 2, 3... head pages
+    by_root = dict(pages)
+    root_page = by_root[1]
+    assert root_page["point_count"].tolist() == [5, -1, -1]  # the root itself, then pointers to 8 and 9
+    assert root_page["offset"][1] == 500 + root_page.nbytes  # page of node 8 right after the root page
+    assert sorted(voxel_to_key(*(by_root[8]["key"][f] for f in ("level", "x", "y", "z"))).tolist()) == [8, 64, 65]
+    assert by_root[8]["point_count"].tolist() == [5, -1, 5]  # 64 has a child: its own page
+    total = sum(p.nbytes for _, p in pages)
+    assert sum(len(p) for _, p in pages) * HIERARCHY_ENTRY_DTYPE.itemsize == total
+    assert sum((p["point_count"] >= 0).sum() for _, p in pages) == len(keys)
+
+
+# --------------------------------------------------------------------------- written by gigapoint
+
+
+@pytest.fixture(scope="module")
+def autzen_octrees(tmp_path_factory):
+    if not AUTZEN.exists():
+        pytest.skip("shared sample autzen_trim.laz not present")
+    d = tmp_path_factory.mktemp("copc")
+    convert([AUTZEN], d / "g", **OPTS)
+    convert([AUTZEN], d / "a.copc.laz", format="copc", **OPTS)
+    convert([AUTZEN], d / "p", format="potree", **OPTS)
+    return d
+
+
+def test_laspy_copc_reader_reads_every_point_and_the_hierarchy(autzen_octrees):
+    path = autzen_octrees / "a.copc.laz"
+    src = laspy.read(AUTZEN)
+    with laspy.CopcReader.open(path) as r:
+        assert r.header.version.minor == 4 and r.header.point_format.id == 7
+        pts = r.query()
+        assert len(pts) == len(src.points) == 110_000
+        got = np.lexsort((np.asarray(pts.X), np.asarray(pts.Y), np.asarray(pts.Z)))
+        want = np.lexsort((np.asarray(src.X), np.asarray(src.Y), np.asarray(src.Z)))
+        for a, b in (("X", "X"), ("Y", "Y"), ("Z", "Z"), ("intensity", "intensity"), ("classification", "classification")):
+            np.testing.assert_array_equal(np.asarray(pts[a])[got], np.asarray(src[b])[want], err_msg=a)
+        np.testing.assert_array_equal(np.asarray(pts.gps_time)[got], np.asarray(src.gps_time)[want])
+        np.testing.assert_array_equal(np.asarray(pts.return_number)[got], np.asarray(src.return_number)[want])
+        red = np.asarray(src.red)[want]
+        red8 = red >> 8 if red.max() > 255 else red  # autzen_trim holds 8-bit values in its 16-bit fields
+        np.testing.assert_array_equal(np.asarray(pts.red)[got], red8 * 257)  # COPC: 16-bit colors
+        # the hierarchy: the root page's entries are the gigapoint octree's nodes and counts
+        from laspy.copc import HierarchyPage
+
+        r.source.seek(r.copc_info.hierarchy_root_offset)
+        page = HierarchyPage.from_bytes(r.source.read(r.copc_info.hierarchy_root_size))
+        entries = {(k.level, k.x, k.y, k.z): e.point_count for k, e in page.entries.items()}
+    g = open_octree(autzen_octrees / "g")
+    want = {tuple(int(v) for v in dxyz): int(c) for *dxyz, c in zip(*key_to_voxel(g.keys), g.counts)}
+    assert entries == want
+    # laspy's level queries see the same levels
+    with laspy.CopcReader.open(path) as r:
+        assert len(r.query(level=0)) == int(g.counts[0])
+
+
+def test_gigapoint_reads_its_copc_back_point_for_point(autzen_octrees):
+    g = open_octree(autzen_octrees / "g")
+    c = gp.open(autzen_octrees / "a.copc.laz")
+    assert isinstance(c, CopcCloud) and isinstance(c, OctreeCloud)
+    assert c.n_points == g.n_points == 110_000
+    np.testing.assert_array_equal(c.keys, g.keys)
+    np.testing.assert_array_equal(c.counts, g.counts)
+    src = gp.open(AUTZEN)  # the flat reading of the input: its attributes are what COPC must carry
+    assert c.attribute_names == sorted(src.attributes)
+    for i in np.flatnonzero(g.counts > 0).tolist():
+        a, b = g.node_points(i), c.node_points(i)
+        np.testing.assert_array_equal(b["xyz"], a["xyz"])  # same points, same order, same tight bbox
+        np.testing.assert_array_equal(b["rgba"], a["rgba"])
+        for k in src.attributes:
+            np.testing.assert_array_equal(b[k], a[k], err_msg=k)
+    np.testing.assert_array_equal(c.nodes["bbox_min"], g.nodes["bbox_min"])
+
+
+@pytest.mark.parametrize("adaptive", [False, True])
+def test_copc_renders_like_the_gigapoint_octree_and_brute_force(autzen_octrees, adaptive):
+    g = open_octree(autzen_octrees / "g")
+    g.filtered_colors = False  # COPC points carry their own colors
+    c = gp.open(autzen_octrees / "a.copc.laz")
+    flat = gp.open(AUTZEN)
+    s = gp.RenderSettings(backend="cpu", adaptive_precision=adaptive, size_mode="fixed")  # one pixel a point: the exact comparison
+    for view in ("iso", "top"):
+        cam = gp.Camera.fit(g.bounds, view=view, width=320, height=240)
+        for budget, threshold in ((10**9, 0.0), (30_000, 100.0)):
+            a = gp.render_frame(g, cam, s.replace(point_budget=budget, lod_threshold_px=threshold))
+            b = gp.render_frame(c, cam, s.replace(point_budget=budget, lod_threshold_px=threshold))
+            assert a.stats.points_processed == b.stats.points_processed
+            np.testing.assert_array_equal(b.image, a.image)
+        full = gp.render_frame(c, cam, s.replace(point_budget=10**9, lod_threshold_px=0.0))
+        brute = gp.render_frame(flat, cam, s)
+        assert full.stats.points_processed == brute.stats.points_processed == 110_000
+        assert (full.empty != brute.empty).mean() < (0.05 if adaptive else 0.002)
+        assert np.all(full.image == brute.image, axis=2).mean() > (0.8 if adaptive else 0.95)
+
+
+def test_crs_carried_into_copc_and_potree(autzen_octrees):
+    import json
+
+    want = laspy.read(AUTZEN).header.vlrs.get("WktCoordinateSystemVlr")[0].string.strip("\0")
+    c = gp.open(autzen_octrees / "a.copc.laz")
+    assert c.meta["crs"] == want
+    with laspy.open(autzen_octrees / "a.copc.laz") as r:
+        assert r.header.vlrs.get("WktCoordinateSystemVlr")[0].string.strip("\0") == want
+        assert r.header.global_encoding.wkt
+    meta = json.loads((autzen_octrees / "p" / "metadata.json").read_text())
+    assert meta["projection"] == want
+    from gigapoint.lod import octree_info
+
+    info = octree_info(autzen_octrees / "a.copc.laz")
+    assert info["crs"] == want and info["levels"] == len(info["points_per_level"]) and sum(info["points_per_level"]) == 110_000
+
+
+def test_plain_laz_still_opens_flat_and_is_not_copc(tmp_path):
+    if not AUTZEN.exists():
+        pytest.skip("shared sample not present")
+    renamed = tmp_path / "not.copc.laz"
+    shutil.copy(AUTZEN, renamed)
+    for p in (AUTZEN, renamed):
+        cloud = gp.open(p)
+        assert not isinstance(cloud, OctreeCloud) and cloud.n_points == 110_000
+    with pytest.raises(InputError, match=r"not\.copc\.laz: not a COPC file") as e:
+        gp.lod.open_copc(renamed)
+    assert "\n" not in str(e.value)
+
+
+def test_a_copc_file_reads_flat_through_the_las_reader(autzen_octrees):
+    """A COPC file is a LAS 1.4 file: gp.open(..., chunk_size=...) reads it flat, every point."""
+    flat = gp.open(autzen_octrees / "a.copc.laz", chunk_size=50_000)
+    assert not isinstance(flat, OctreeCloud) and flat.n_points == 110_000
+
+
+# --------------------------------------------------------------------------- hierarchy pages on demand
+
+
+def _nodes_of(octree: OctreeCloud):
+    """(key, xyz, rgb16, attributes) of every node, decoded (for write_copc)."""
+    for i in range(len(octree.keys)):
+        p = octree.node_points(i) if octree.counts[i] else {"xyz": np.zeros((0, 3)), "rgba": np.zeros(0, np.uint32)}
+        rgb = p["rgba"].view(np.uint8).reshape(-1, 4)[:, :3].astype(np.uint16) * 257
+        yield int(octree.keys[i]), p["xyz"], rgb, {k: v for k, v in p.items() if k in ("intensity", "classification")}
+
+
+@pytest.fixture(scope="module")
+def paged(autzen_octrees, tmp_path_factory):
+    g = gp.open(autzen_octrees / "a.copc.laz").to_memory()
+    path = tmp_path_factory.mktemp("paged") / "paged.copc.laz"
+    summary = write_copc(path, _nodes_of(g), scale=[0.01] * 3, offset=[0.0] * 3,
+                         cube_min=g.meta["cube_min"], cube_edge=g.meta["cube_edge"], page_level=1)  # fmt: skip
+    assert summary["pages"] > 5
+    return path, g
+
+
+def test_child_pages_are_read_only_when_drawn(paged):
+    path, g = paged
+    c = gp.open(path)
+    assert c.pending_pages > 0 and len(c.keys) < len(g.keys)
+    cam = gp.Camera.fit(g.bounds, view="iso", width=160, height=120)
+    s = gp.RenderSettings(backend="cpu", point_budget=15_000, size_mode="fixed")
+    gp.render_frame(c, cam, s)
+    assert c.pages_read > 1 and c.pending_pages > 0  # the pages the view needed, not all
+    with laspy.CopcReader.open(path) as r:  # laspy follows the same child pages
+        assert len(r.query()) == 110_000
+    full = gp.render_frame(c, cam, s.replace(point_budget=10**9, lod_threshold_px=0.0))
+    ref = gp.render_frame(g, cam, s.replace(point_budget=10**9, lod_threshold_px=0.0))
+    assert c.pending_pages == 0 and full.stats.points_processed == 110_000
+    np.testing.assert_array_equal(full.image, ref.image)
+
+
+def test_nodes_resident_before_a_page_is_read_stay_resident(paged):
+    path, g = paged
+    c = gp.open(path)
+    cam = gp.Camera.fit(g.bounds, view="iso", width=160, height=120)
+    s = gp.RenderSettings(backend="cpu", point_budget=12_000, lod_threshold_px=50.0, size_mode="fixed")
+    gp.render_frame(c, cam, s)
+    loads = c.arena.loads
+    resident = {int(c.keys[i]) for i in c.arena.resident}
+    gp.render_frame(c, cam, s.replace(point_budget=60_000, lod_threshold_px=0.0))  # reads more pages: indices move
+    assert {int(c.keys[i]) for i in c.arena.resident} >= resident
+    again = gp.render_frame(c, cam, s.replace(point_budget=12_000, lod_threshold_px=50.0))
+    assert c.arena.loads > loads and again.stats.points_processed <= 12_000
+    np.testing.assert_array_equal(again.image, gp.render_frame(gp.open(path), cam, s).image)
+
+
+# --------------------------------------------------------------------------- malformed files
+
+
+def _patch(src: Path, dst: Path, offset: int, data: bytes) -> Path:
+    b = bytearray(src.read_bytes())
+    b[offset : offset + len(data)] = data
+    dst.write_bytes(bytes(b))
+    return dst
+
+
+def _info(path: Path):
+    b = path.read_bytes()
+    hdr = np.frombuffer(b, LAS14_HEADER_DTYPE, count=1)[0]
+    info = np.frombuffer(b, COPC_INFO_DTYPE, count=1, offset=INFO_OFFSET)[0]
+    root = np.frombuffer(b, HIERARCHY_ENTRY_DTYPE, count=int(info["root_hier_size"]) // 32, offset=int(info["root_hier_offset"]))
+    return b, hdr, info, root
+
+
+def _draw(path: Path):
+    cloud = gp.open(path)
+    cloud.load_hierarchy()
+    return gp.render_frame(cloud, gp.Camera.fit(cloud.bounds, width=64, height=48), gp.RenderSettings(backend="cpu", lod_threshold_px=0.0))
+
+
+def _one_line_error(path, match):
+    with pytest.raises(InputError, match=match) as e:
+        _draw(path)
+    assert "\n" not in str(e.value) and str(path) in str(e.value)
+    return str(e.value)
+
+
+def test_truncated_hierarchy_page(paged, tmp_path):
+    path, _ = paged
+    b, hdr, info, root = _info(path)
+    off = INFO_OFFSET + COPC_INFO_DTYPE.fields["root_hier_size"][1]
+    bad = _patch(path, tmp_path / "a.copc.laz", off, np.uint64(int(info["root_hier_size"]) - 12).tobytes())
+    _one_line_error(bad, "truncated hierarchy page")
+    cut = tmp_path / "cut.copc.laz"
+    cut.write_bytes(b[: int(info["root_hier_offset"]) + 40])  # the file ends inside the root page
+    _one_line_error(cut, "past the end of the file")
+
+
+def test_chunk_offsets_past_the_end_of_the_file(paged, tmp_path):
+    path, _ = paged
+    b, hdr, info, root = _info(path)
+    i = int(np.flatnonzero(root["point_count"] > 0)[0])
+    where = int(info["root_hier_offset"]) + i * 32 + HIERARCHY_ENTRY_DTYPE.fields["offset"][1]
+    bad = _patch(path, tmp_path / "b.copc.laz", where, np.uint64(len(b) + 1000).tobytes())
+    msg = _one_line_error(bad, "lies past the end of the file")
+    assert "node 0-0-0-0 has its chunk" in msg
+
+
+def test_a_hierarchy_that_refers_to_itself(paged, tmp_path):
+    path, _ = paged
+    b, hdr, info, root = _info(path)
+    i = int(np.flatnonzero(root["point_count"] == -1)[0])
+    rec = root[i : i + 1].copy()
+    rec["offset"], rec["byte_size"] = info["root_hier_offset"], info["root_hier_size"]  # a child page that is the root page
+    bad = _patch(path, tmp_path / "c.copc.laz", int(info["root_hier_offset"]) + i * 32, rec.tobytes())
+    _one_line_error(bad, "refers to itself")
+
+
+def test_corrupt_keys_and_counts(paged, tmp_path):
+    path, _ = paged
+    b, hdr, info, root = _info(path)
+    rec = root[1:2].copy()
+    rec["key"]["x"] = 5  # outside the 2^1 grid of level 1
+    bad = _patch(path, tmp_path / "d.copc.laz", int(info["root_hier_offset"]) + 32, rec.tobytes())
+    _one_line_error(bad, "invalid node key 1-5-")
+    rec = root[0:1].copy()
+    rec["point_count"] = rec["point_count"] + 7  # the chunk holds fewer points than the entry says
+    bad = _patch(path, tmp_path / "e.copc.laz", int(info["root_hier_offset"]), rec.tobytes())
+    with pytest.raises(InputError, match="node 0-0-0-0") as e:
+        _draw(bad)
+    assert "\n" not in str(e.value)
+
+
+# --------------------------------------------------------------------------- the CLI
+
+
+def _cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "gigapoint.cli", *map(str, args)], capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+def test_cli_convert_copc_info_and_render(tmp_path):
+    if not AUTZEN.exists():
+        pytest.skip("shared sample not present")
+    out = tmp_path / "cli.copc.laz"
+    r = _cli("convert", AUTZEN, "-o", out, "--format", "copc", "--max-leaf", "5000", "-q")
+    assert r.returncode == 0, r.stderr
+    assert out.is_file() and not (tmp_path / "cli.copc.laz.work").exists()
+    r = _cli("convert", AUTZEN, "-o", out, "--format", "copc", "-q")
+    assert r.returncode != 0 and "already exists; pass --overwrite" in r.stderr
+    r = _cli("info", out)
+    assert r.returncode == 0, r.stderr
+    assert "COPC 1.4, point format 7" in r.stdout and "per level:" in r.stdout and "NAD_1983_HARN" in r.stdout
+    assert "110,000" in r.stdout
+    r = _cli("render", out, "-o", tmp_path / "x.png", "--width", "160", "--height", "120")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "x.png").stat().st_size > 500
+
+
+def test_interrupted_copc_conversion_leaves_no_file_and_resumes(tmp_path, monkeypatch):
+    if not AUTZEN.exists():
+        pytest.skip("shared sample not present")
+    from gigapoint.lod.convert import hooks
+
+    out = tmp_path / "r.copc.laz"
+
+    def stop(done):
+        if done == 1:
+            raise KeyboardInterrupt("test")
+
+    monkeypatch.setattr(hooks, "after_partition_built", stop)
+    with pytest.raises(KeyboardInterrupt):
+        convert([AUTZEN], out, format="copc", max_leaf=3_000, partition_points=20_000)
+    assert not out.exists() and (tmp_path / "r.copc.laz.work").is_dir()
+    monkeypatch.setattr(hooks, "after_partition_built", lambda done: None)
+    res = convert([AUTZEN], out, format="copc", max_leaf=3_000, partition_points=20_000)
+    assert res.resumed and out.is_file() and not (tmp_path / "r.copc.laz.work").exists()
+    assert [p.name for p in tmp_path.iterdir()] == ["r.copc.laz"]
+    assert gp.open(out).n_points == 110_000

@@ -1,0 +1,277 @@
+"""EPT (laszip and binary) read as octrees: small EPT trees written here, their renders equal to
+the COPC of the same nodes and to brute force of the same points; malformed datasets fail in
+one line naming the file."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.errors import InputError
+from gigapoint.lod import EptCloud, OctreeCloud
+from gigapoint.lod.copc_write import write_copc
+from gigapoint.lod.keys import key_of, point_codes
+from gigapoint.lod.voxel_octree import voxel_name
+
+laspy = pytest.importorskip("laspy")
+
+SCALE = 0.01
+WKT = 'PROJCS["WGS 84 / UTM zone 10N",AUTHORITY["EPSG","32610"]]'
+
+
+def make_scene(n: int = 40_000, seed: int = 3) -> dict:
+    """Points on a centimetre grid in UTM-sized coordinates, each assigned to one node of a
+    4-level octree (every node's points inside its cube): {key: point indices}, arrays, cube."""
+    rng = np.random.default_rng(seed)
+    origin = np.array([500_000.0, 4_000_000.0, 80.0])
+    xyz = origin + np.round(rng.uniform(0, 1, (n, 3)) * [200.0, 150.0, 30.0] / SCALE) * SCALE
+    xyz[:, 2] += np.round((20 + 10 * np.sin(xyz[:, 0] / 20.0)) / SCALE) * SCALE  # hills, inside the cube
+    edge = 256.0
+    codes = point_codes(xyz, origin, edge)
+    level = rng.choice(4, n, p=[0.05, 0.15, 0.3, 0.5])
+    keys = np.zeros(n, np.uint64)
+    for lv in range(4):
+        m = level == lv
+        keys[m] = key_of(codes[m], lv)
+    order = np.lexsort((np.arange(n), keys))
+    uniq, start = np.unique(keys[order], return_index=True)
+    nodes = {int(k): order[s:e] for k, s, e in zip(uniq, start, [*start[1:], n])}
+    rgb = (rng.integers(0, 256, (n, 3)) * 257).astype(np.uint16)
+    attrs = {"intensity": rng.integers(0, 4000, n).astype(np.uint16), "classification": rng.integers(0, 10, n).astype(np.uint8)}
+    return {"xyz": xyz, "rgb": rgb, "attrs": attrs, "nodes": nodes, "origin": origin, "edge": edge}
+
+
+SCHEMA = [
+    {"name": "X", "type": "signed", "size": 4, "scale": SCALE, "offset": 500_100.0},
+    {"name": "Y", "type": "signed", "size": 4, "scale": SCALE, "offset": 4_000_100.0},
+    {"name": "Z", "type": "signed", "size": 4, "scale": SCALE, "offset": 0.0},
+    {"name": "Intensity", "type": "unsigned", "size": 2},
+    {"name": "Classification", "type": "unsigned", "size": 1},
+    {"name": "Red", "type": "unsigned", "size": 2},
+    {"name": "Green", "type": "unsigned", "size": 2},
+    {"name": "Blue", "type": "unsigned", "size": 2},
+]
+
+
+def write_ept(folder: Path, scene: dict, data_type: str, page_level: int | None = 2) -> Path:
+    """An EPT dataset of ``scene`` in ``folder``; nodes at ``page_level`` that have children
+    head hierarchy files of their own."""
+    folder.mkdir(parents=True)
+    (folder / "ept-data").mkdir()
+    (folder / "ept-hierarchy").mkdir()
+    xyz, nodes = scene["xyz"], scene["nodes"]
+    offsets = np.array([d["offset"] for d in SCHEMA[:3]])
+    dt = np.dtype([(d["name"], {"signed": "<i", "unsigned": "<u"}[d["type"]] + str(d["size"])) for d in SCHEMA])
+    for key, idx in nodes.items():
+        name = voxel_name(key)
+        if data_type == "binary":
+            rec = np.zeros(len(idx), dt)
+            ints = np.rint((xyz[idx] - offsets) / SCALE).astype(np.int64)
+            rec["X"], rec["Y"], rec["Z"] = ints.T
+            rec["Intensity"], rec["Classification"] = scene["attrs"]["intensity"][idx], scene["attrs"]["classification"][idx]
+            rec["Red"], rec["Green"], rec["Blue"] = scene["rgb"][idx].T
+            (folder / "ept-data" / f"{name}.bin").write_bytes(rec.tobytes())
+        else:
+            header = laspy.LasHeader(point_format=7, version="1.4")
+            header.scales, header.offsets = [SCALE] * 3, offsets
+            las = laspy.LasData(header)
+            las.X, las.Y, las.Z = np.rint((xyz[idx] - offsets) / SCALE).astype(np.int32).T
+            las.red, las.green, las.blue = scene["rgb"][idx].T
+            las.intensity, las.classification = scene["attrs"]["intensity"][idx], scene["attrs"]["classification"][idx]
+            las.write(str(folder / "ept-data" / f"{name}.laz"))
+    keys = set(nodes)
+    level = {k: (k.bit_length() - 1) // 3 for k in keys}
+    heads = {k for k in keys if page_level and level[k] == page_level and any((c >> 3) == k for c in keys)}
+
+    def head_of(k):
+        while k > 1 and k not in heads:
+            k >>= 3
+        return k if k in heads else 1
+
+    pages: dict[int, dict] = {1: {}}
+    for h in heads:
+        pages[h] = {}
+        pages[1][voxel_name(h)] = -1
+    for k in keys:
+        pages[head_of(k)][voxel_name(k)] = len(nodes[k])
+    for h, page in pages.items():
+        (folder / "ept-hierarchy" / f"{voxel_name(h)}.json").write_text(json.dumps(page))
+    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+    meta = {
+        "bounds": [*scene["origin"], *(scene["origin"] + scene["edge"])],
+        "boundsConforming": [*lo, *hi],
+        "dataType": data_type,
+        "hierarchyType": "json",
+        "points": len(xyz),
+        "schema": SCHEMA,
+        "span": 128,
+        "srs": {"authority": "EPSG", "horizontal": "32610", "wkt": WKT},
+        "version": "1.0.0",
+    }
+    (folder / "ept.json").write_text(json.dumps(meta))
+    return folder
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return make_scene()
+
+
+@pytest.fixture(scope="module")
+def datasets(scene, tmp_path_factory):
+    d = tmp_path_factory.mktemp("ept")
+    out = {t: write_ept(d / t, scene, t) for t in ("laszip", "binary")}
+    nodes = ((k, scene["xyz"][i], scene["rgb"][i], {a: v[i] for a, v in scene["attrs"].items()}) for k, i in scene["nodes"].items())
+    out["copc"] = d / "s.copc.laz"
+    write_copc(
+        out["copc"],
+        nodes,
+        scale=[SCALE] * 3,
+        offset=[500_100.0, 4_000_100.0, 0.0],
+        cube_min=scene["origin"],
+        cube_edge=scene["edge"],
+        wkt=WKT,
+    )
+    return out
+
+
+@pytest.mark.parametrize("data_type", ["laszip", "binary"])
+def test_ept_opens_as_an_octree_with_pages_on_demand(datasets, scene, data_type):
+    for path in (datasets[data_type], datasets[data_type] / "ept.json"):
+        c = gp.open(path)
+        assert isinstance(c, EptCloud) and isinstance(c, OctreeCloud)
+        assert c.n_points == len(scene["xyz"]) and c.meta["crs"] == "EPSG:32610"
+        assert c.pending_pages > 0
+    c.load_hierarchy()
+    assert sorted(c.keys[c.counts > 0].tolist()) == sorted(scene["nodes"])
+    assert int(c.counts.sum()) == len(scene["xyz"])
+    k = next(iter(scene["nodes"]))
+    i = int(np.searchsorted(c.keys, k))
+    p = c.node_points(i)
+    idx = scene["nodes"][k]
+    np.testing.assert_allclose(p["xyz"], scene["xyz"][idx], atol=1e-6)  # the 30-bit node quantization
+    np.testing.assert_array_equal(p["intensity"], scene["attrs"]["intensity"][idx])
+    np.testing.assert_array_equal(p["rgba"].view(np.uint8).reshape(-1, 4)[:, :3], scene["rgb"][idx] >> 8)
+
+
+@pytest.mark.parametrize("adaptive", [False, True])
+def test_ept_and_copc_render_alike_and_like_brute_force(datasets, scene, adaptive):
+    clouds = {k: gp.open(p) for k, p in datasets.items()}
+    brute = gp.from_arrays(scene["xyz"], (scene["rgb"] >> 8).astype(np.uint8), scene["attrs"])
+    s = gp.RenderSettings(backend="cpu", adaptive_precision=adaptive, size_mode="fixed")  # one pixel a point: the exact comparison
+    for view in ("iso", "top"):
+        cam = gp.Camera.fit(brute.bounds, view=view, width=320, height=240)
+        ref = gp.render_frame(brute, cam, s)
+        images = {}
+        for name, c in clouds.items():
+            f = gp.render_frame(c, cam, s.replace(point_budget=10**9, lod_threshold_px=0.0))
+            assert f.stats.points_processed == len(scene["xyz"])
+            images[name] = f.image
+            assert (f.empty != ref.empty).mean() < (0.05 if adaptive else 0.002)
+            assert np.all(f.image == ref.image, axis=2).mean() > (0.8 if adaptive else 0.95)
+        np.testing.assert_array_equal(images["laszip"], images["copc"])  # the same nodes, points and bboxes
+        np.testing.assert_array_equal(images["binary"], images["copc"])
+        # and with a budget: the same nodes chosen
+        small = {n: gp.render_frame(c, cam, s.replace(point_budget=15_000)) for n, c in clouds.items()}
+        assert len({f.stats.points_processed for f in small.values()}) == 1
+        np.testing.assert_array_equal(small["binary"].image, small["copc"].image)
+
+
+def test_octree_info_of_ept(datasets, scene):
+    from gigapoint.io import format_info
+    from gigapoint.lod import octree_info
+
+    info = octree_info(datasets["binary"])
+    assert info["point_count"] == len(scene["xyz"]) and sum(info["points_per_level"]) == len(scene["xyz"])
+    assert info["crs"] == "EPSG:32610" and info["levels"] == 4
+    text = format_info(info)
+    assert "EPT (binary)" in text and "per level:" in text and "EPSG:32610" in text
+
+
+# --------------------------------------------------------------------------- malformed datasets
+
+
+@pytest.fixture
+def broken(datasets, tmp_path):
+    def copy(data_type="binary"):
+        dst = tmp_path / f"b_{data_type}"
+        shutil.copytree(datasets[data_type], dst)
+        return dst
+
+    return copy
+
+
+def _fails(path, match):
+    with pytest.raises(InputError, match=match) as e:
+        c = gp.open(path)
+        c.load_hierarchy()
+        gp.render_frame(c, gp.Camera.fit(c.bounds, width=64, height=48), gp.RenderSettings(backend="cpu", lod_threshold_px=0.0))
+    assert "\n" not in str(e.value)
+    return str(e.value)
+
+
+@pytest.mark.parametrize("missing", ["schema", "bounds", "dataType"])
+def test_ept_json_with_missing_keys(broken, missing):
+    d = broken()
+    meta = json.loads((d / "ept.json").read_text())
+    del meta[missing]
+    (d / "ept.json").write_text(json.dumps(meta))
+    msg = _fails(d, f"lacks '{missing}'")
+    assert str(d / "ept.json") in msg
+
+
+def test_ept_unsupported_and_invalid_metadata(broken):
+    d = broken()
+    meta = json.loads((d / "ept.json").read_text())
+    (d / "ept.json").write_text(json.dumps(dict(meta, dataType="zstandard")))
+    _fails(d, "dataType 'zstandard' is not supported")
+    (d / "ept.json").write_text(json.dumps(dict(meta, schema=[{"name": "X", "type": "complex", "size": 4}])))
+    _fails(d, "invalid ept.json")
+    (d / "ept.json").write_text("{not json")
+    _fails(d, "not valid JSON")
+
+
+def test_ept_hierarchy_that_refers_to_itself(broken):
+    d = broken()
+    root = json.loads((d / "ept-hierarchy" / "0-0-0-0.json").read_text())
+    child = next(k for k, v in root.items() if v == -1)
+    page = json.loads((d / "ept-hierarchy" / f"{child}.json").read_text())
+    page[child] = -1  # the page points to itself
+    (d / "ept-hierarchy" / f"{child}.json").write_text(json.dumps(page))
+    _fails(d, "refers to itself")
+    page[child] = 5
+    page["0-0-0-0"] = -1  # a child page that names the root: outside its subtree
+    (d / "ept-hierarchy" / f"{child}.json").write_text(json.dumps(page))
+    _fails(d, "outside its subtree")
+
+
+def test_ept_missing_or_short_node_files(broken):
+    d = broken()
+    victim = min((d / "ept-data").iterdir())
+    data = victim.read_bytes()
+    victim.write_bytes(data[:-7])
+    msg = _fails(d, "holds .* bytes")
+    assert victim.stem in msg
+    victim.unlink()
+    msg = _fails(d, "no such file")
+    assert str(victim) in msg
+    d2 = broken("laszip")
+    victim = min((d2 / "ept-data").iterdir())
+    victim.write_bytes(b"LASF" + bytes(50))
+    _fails(d2, f"cannot decode node {victim.stem}")
+
+
+def test_ept_hierarchy_bad_entries(broken):
+    d = broken()
+    root = json.loads((d / "ept-hierarchy" / "0-0-0-0.json").read_text())
+    (d / "ept-hierarchy" / "0-0-0-0.json").write_text(json.dumps(dict(root, **{"1-7-0-0": 3})))
+    _fails(d, "outside the octree")
+    (d / "ept-hierarchy" / "0-0-0-0.json").write_text(json.dumps(dict(root, **{"0-0-0-0": "many"})))
+    _fails(d, "invalid point count")
+    (d / "ept-hierarchy" / "0-0-0-0.json").unlink()
+    _fails(d, "0-0-0-0.json: no such file")

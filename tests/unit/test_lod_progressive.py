@@ -1,0 +1,406 @@
+"""The progressive octree (lod/progressive): built while points arrive, drawn at any moment.
+
+Against plain numpy: every point added is in exactly one leaf (positions at 30 bits in the
+leaf's cube, colours and attributes exact); every inner node holds one voxel per occupied cell
+of its 128³ grid with the rounded mean colour of the points in that cell; leaf contents do not
+depend on batch size or order; the finished octree renders like a brute-force render and like
+a converted octree; a reader drawing while a writer inserts sees consistent frames.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.core.layout import EMPTY_PIXEL
+from gigapoint.errors import GigapointError, InputError
+from gigapoint.io import demo_arrays
+from gigapoint.lod.keys import CODE_BITS, point_codes
+from gigapoint.lod.progressive import ProgressiveOctree
+from gigapoint.lod.progressive.kernels import GRID_BITS
+
+EXACT = gp.RenderSettings(backend="cpu", size_mode="fixed")  # the one-pixel render
+
+
+@pytest.fixture(scope="module")
+def scene():
+    xyz, rgba, attrs = demo_arrays(120_000, seed=4)
+    return xyz, rgba, attrs
+
+
+def _cube(xyz):
+    """The root cube given up front (as a loader does from LAS headers): the tree is then the
+    same whatever the batches (without it, the first batch's bounds set the cube)."""
+    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+    return lo - 0.5, float(np.max(hi - lo)) + 1.0
+
+
+def _filled(scene, batch=20_000, order=None, max_leaf=3_000, **kw) -> ProgressiveOctree:
+    xyz, rgba, attrs = scene
+    idx = np.arange(len(xyz)) if order is None else order
+    o = ProgressiveOctree("t", max_leaf=max_leaf, cube=_cube(xyz), **kw)
+    for s in range(0, len(idx), batch):
+        sl = idx[s : s + batch]
+        o.add(xyz[sl], rgba[sl], **{a: v[sl] for a, v in attrs.items()})
+    return o
+
+
+@pytest.fixture(scope="module")
+def octree(scene):
+    return _filled(scene)
+
+
+def _leaf_points(o: ProgressiveOctree) -> dict:
+    """Every leaf's points: positions, u32 colours, attributes (concatenated, leaf by leaf)."""
+    slots = np.concatenate([o.node_entries(n) for n in o.leaves()])
+    return {"xyz": o.positions(slots), "color": o.pool.color[slots], **{a: v[slots] for a, v in o.attributes.items()}}
+
+
+def _match(got: np.ndarray, want: np.ndarray, tol: float) -> np.ndarray:
+    """For each of ``got``, the index of the point of ``want`` it is (within ``tol``); each used once."""
+    from scipy.spatial import cKDTree
+
+    dist, idx = cKDTree(want).query(got, k=1)
+    assert len(got) == len(want) and dist.max() <= tol
+    assert len(np.unique(idx)) == len(want)  # every point, once: duplicates of the input would show here
+    return idx
+
+
+def test_every_point_is_in_exactly_one_leaf(scene, octree):
+    xyz, rgba, attrs = scene
+    o = octree
+    assert o.n_points == len(xyz)
+    assert int(o.count[o.leaves()].sum()) == len(xyz)
+    assert all(o.count[n] <= o.max_leaf for n in o.leaves())
+    got = _leaf_points(o)
+    # a point's position is kept at 30 bits of the cube of the leaf it first landed in (at worst
+    # the root's): about a micrometre here, far below the data's millimetres
+    tol = np.sqrt(3) * o.edge / 2**30
+    match = _match(got["xyz"], xyz, tol)
+    np.testing.assert_array_equal(got["color"], rgba.view(np.uint32).reshape(-1)[match])
+    for a in ("intensity", "classification"):
+        np.testing.assert_array_equal(got[a], attrs[a][match])
+
+
+def test_leaves_cover_their_cubes_and_inner_nodes_hold_no_points(octree):
+    o = octree
+    for n in o.leaves():
+        p = o.positions(o.node_entries(n))
+        assert np.all(p >= o.cmin[n] - 1e-9) and np.all(p <= o.cmin[n] + o.cedge[n] + 1e-9)
+    for n in o.inner_nodes():
+        kids = o.children[n][o.children[n] >= 0]
+        assert len(kids) and np.all(o.level[kids] == o.level[n] + 1)
+
+
+def test_voxels_are_the_occupied_cells_with_their_mean_colour(scene, octree):
+    xyz, rgba, _ = scene
+    o = octree
+    codes = point_codes(xyz, o.origin, o.edge)
+    checked = 0
+    for n in o.inner_nodes():
+        lev = int(o.level[n])
+        prefix = np.uint64(int(o.key[n]) ^ (1 << 3 * lev))
+        inside = (codes >> np.uint64(3 * (CODE_BITS - lev))) == prefix
+        cl = min(lev + GRID_BITS, CODE_BITS)
+        cells = (codes[inside] >> np.uint64(3 * (CODE_BITS - cl))) & np.uint64((1 << 3 * (cl - lev)) - 1)
+        uniq, inverse = np.unique(cells, return_inverse=True)
+        sums = np.zeros((len(uniq), 4), np.int64)
+        np.add.at(sums, inverse, rgba[inside].astype(np.int64))
+        cnt = np.bincount(inverse)
+        mean = ((sums + (cnt // 2)[:, None]) // cnt[:, None]).astype(np.uint8)
+        slots = o.node_entries(n)
+        assert len(slots) == len(uniq)  # one voxel per occupied cell
+        # each voxel sits at its cell's centre: find its cell from its position
+        pos = o.positions(slots)
+        ijk = np.floor((pos - o.cmin[n]) / (o.cedge[n] / (1 << (cl - lev)))).astype(np.int64)
+        vcell = np.zeros(len(slots), np.uint64)
+        for b in range(cl - lev):
+            digit = ((ijk[:, 0] >> b) & 1) << 2 | ((ijk[:, 1] >> b) & 1) << 1 | ((ijk[:, 2] >> b) & 1)
+            vcell |= digit.astype(np.uint64) << np.uint64(3 * b)
+        k = np.searchsorted(uniq, vcell)
+        assert np.array_equal(uniq[k], vcell)
+        np.testing.assert_array_equal(o.pool.color[slots].view(np.uint8).reshape(-1, 4), mean[k])
+        checked += 1
+    assert checked >= 3
+
+
+@pytest.mark.parametrize("batch, shuffle", [(7_000, False), (50_000, True), (120_000, False)])
+def test_leaf_contents_do_not_depend_on_batches_or_order(scene, octree, batch, shuffle):
+    order = np.random.default_rng(3).permutation(len(scene[0])) if shuffle else None
+    other = _filled(scene, batch=batch, order=order)
+
+    def leaves(o):
+        return {int(o.key[n]): o.positions(o.node_entries(n)) for n in o.leaves()}
+
+    a, b = leaves(octree), leaves(other)
+    assert a.keys() == b.keys()
+    for key in a:
+        _match(a[key], b[key], 1e-6)
+    assert other.n_voxels == octree.n_voxels
+
+
+def test_the_root_grows_to_take_points_outside_it(scene):
+    xyz, rgba, _ = scene
+    o = ProgressiveOctree("grow", max_leaf=2_000)
+    centre = xyz[(xyz[:, 0] < np.median(xyz[:, 0])) & (xyz[:, 1] < np.median(xyz[:, 1]))]
+    o.add(centre[:20_000])
+    o.add(xyz)  # reaches beyond the first cube on every side
+    assert o.n_points == 20_000 + len(xyz)
+    assert int(o.count[o.leaves()].sum()) == o.n_points
+    got = o.positions(np.concatenate([o.node_entries(n) for n in o.leaves()]))
+    want = np.concatenate([centre[:20_000], xyz])
+    from scipy.spatial import cKDTree
+
+    dist, _ = cKDTree(got).query(want, k=1)
+    assert dist.max() <= np.sqrt(3) * o.edge / 2**30
+    # the new root samples every point, those added before it grew too
+    root_cells = len(o.node_entries(o.root))
+    assert root_cells > 0 and o.level[o.root] == 0
+
+
+def test_renders_like_brute_force_at_a_budget_covering_every_point(scene, octree):
+    xyz, rgba, attrs = scene
+    cloud = gp.from_arrays(xyz, rgba, **attrs)
+    cam = gp.Camera.fit(octree.bounds, view="iso", width=320, height=200)
+    every = EXACT.replace(point_budget=10**9, lod_threshold_px=0.0)
+    f = gp.render_frame(octree, cam, every)
+    assert f.stats.points_processed == len(xyz)  # the leaves, no voxel
+    ref = gp.render_frame(cloud, cam, EXACT)
+    a, b = f.visibility != EMPTY_PIXEL, ref.visibility != EMPTY_PIXEL
+    assert (a & b).sum() / (a | b).sum() >= 0.95
+    same = np.all(f.image == ref.image, axis=-1)
+    assert same.mean() > 0.9
+
+
+def test_renders_like_a_converted_octree_at_the_same_budget(scene, octree, tmp_path):
+    xyz, rgba, attrs = scene
+    gp.convert([gp.PointChunk(xyz, rgba, attrs)], tmp_path / "oct", max_leaf=3_000)
+    converted = gp.open(tmp_path / "oct")
+    from scipy.ndimage import binary_dilation
+
+    for view in ("iso", "top"):
+        cam = gp.Camera.fit(octree.bounds, view=view, width=320, height=200)
+        s = EXACT.replace(point_budget=40_000)
+        f, g = gp.render_frame(octree, cam, s), gp.render_frame(converted, cam, s)
+        assert abs(f.stats.points_processed - g.stats.points_processed) <= 0.1 * g.stats.points_processed
+        # the same density over the same footprint (the samples themselves differ: voxel centres
+        # against sampled points), so compare the footprints: coverage closed over 2-pixel gaps
+        a = binary_dilation(f.visibility != EMPTY_PIXEL, iterations=2)
+        b = binary_dilation(g.visibility != EMPTY_PIXEL, iterations=2)
+        assert (a & b).sum() / (a | b).sum() >= 0.95
+
+
+def test_a_drawn_child_replaces_its_parents_voxels_of_its_octant(octree):
+    """Within the budget; no voxel is drawn where a child of its node is drawn, every chunk once."""
+    cam = gp.Camera.fit(octree.bounds, view="iso", width=320, height=200)
+    pool = octree.pool
+    for budget in (5_000, 30_000, 80_000):
+        draw = octree.prepare(cam.view(octree.bounds), EXACT.replace(point_budget=budget))
+        chunks = draw.selection.ids
+        assert len(np.unique(chunks)) == len(chunks)
+        drawn = set(draw.nodes.tolist())
+        assert {int(pool.chunk_node[c]) for c in chunks} == drawn
+        entries = int(pool.batches["count"][chunks].astype(np.int64).sum())
+        assert entries <= max(budget, int(octree.count[octree.root]))
+        for c in chunks.tolist():
+            node = int(pool.chunk_node[c])
+            if octree.leaf[node]:
+                continue
+            slots = np.arange(c * pool.chunk, c * pool.chunk + int(pool.batches["count"][c]))
+            octants = ((octree.positions(slots) - octree.cmin[node]) // (octree.cedge[node] / 2)).astype(int)
+            for d in np.unique(octants[:, 0] * 4 + octants[:, 1] * 2 + octants[:, 2]).tolist():
+                assert int(octree.children[node, d]) not in drawn
+
+
+def test_drawing_while_another_thread_inserts(scene):
+    xyz, rgba, attrs = scene
+    o = ProgressiveOctree("live", max_leaf=2_000)
+    o.add(xyz[:5_000], rgba[:5_000])
+    cam = gp.Camera.fit((xyz.min(axis=0), xyz.max(axis=0)), width=160, height=120)
+    errors = []
+
+    def insert():
+        try:
+            for s in range(5_000, len(xyz), 5_000):
+                o.add(xyz[s : s + 5_000], rgba[s : s + 5_000])
+        except BaseException as exc:  # noqa: BLE001 - reported by the test
+            errors.append(exc)
+
+    t = threading.Thread(target=insert)
+    t.start()
+    frames = 0
+    while t.is_alive() or frames < 3:
+        with o.reading():
+            draw = o.prepare(cam.view(o.bounds), EXACT.replace(point_budget=10**9, lod_threshold_px=0))
+            ids = draw.selection.ids
+            b = draw.points.batches[ids]
+            # no torn node: every drawn chunk belongs to a drawn node and is full but the last
+            assert len(np.unique(ids)) == len(ids)
+            assert int(b["count"].astype(np.int64).sum()) == sum(int(o.count[n]) for n in draw.nodes)
+        f = gp.render_frame(o, cam, EXACT.replace(point_budget=10**9, lod_threshold_px=0))
+        assert f.stats.points_processed <= o.n_points  # no point drawn twice (nor a voxel with its points)
+        frames += 1
+    t.join()
+    assert not errors and o.n_points == len(xyz) and frames >= 3
+
+
+def test_bad_input_is_a_one_line_error():
+    o = ProgressiveOctree("bad")
+    with pytest.raises(InputError, match="shape"):
+        o.add(np.zeros((4, 2)))
+    with pytest.raises(InputError, match="rows"):
+        o.add(np.zeros((4, 3)), rgb=np.zeros((3, 3), np.uint8))
+    assert o.add(np.array([[np.nan, 0, 0], [1, 2, 3.0]])) == 1 and o.skipped == 1
+    assert o.add(np.empty((0, 3))) == 0
+
+
+def test_an_empty_octree_draws_nothing_and_a_single_point_draws():
+    o = ProgressiveOctree("one")
+    cam = gp.Camera.look_at((0, -10, 5), (0, 0, 0), width=32, height=24)
+    with pytest.warns(gp.GigapointWarning, match="no point"):
+        assert gp.render_frame(o, cam, EXACT).stats.visible_pixels == 0
+    o.add(np.array([[0.0, 0.0, 0.0]]), rgb=np.array([[255, 0, 0]], np.uint8))
+    f = gp.render_frame(o, cam, EXACT)
+    assert f.stats.visible_pixels == 1 and f.stats.points_processed == 1
+
+
+def test_open_progressive_loads_several_files_in_the_background(tmp_path, las_writer):
+    a = las_writer(tmp_path / "a.las", 60_000, seed=1)
+    b = las_writer(tmp_path / "b.las", 40_000, seed=2)
+    cloud = gp.open(a, b, progressive=True)
+    assert cloud.wait(timeout=120)
+    assert cloud.progress == 1.0 and not cloud.loading and cloud.error is None
+    plain = gp.open(a, b)
+    assert cloud.n_points == plain.n_points == 100_000
+    assert sorted(cloud.attributes) == sorted(plain.attributes)
+    cam = gp.Camera.fit(plain.bounds, view="top", width=200, height=150)
+    every = EXACT.replace(point_budget=10**9, lod_threshold_px=0)
+    x = gp.render_frame(cloud, cam, every).visibility != EMPTY_PIXEL
+    y = gp.render_frame(plain, cam, every).visibility != EMPTY_PIXEL
+    assert (x & y).sum() / (x | y).sum() >= 0.95
+    cloud.close()
+
+
+def test_a_source_failing_part_way_keeps_what_was_loaded():
+    """A file found corrupt part-way (here: a source that raises after two chunks): what was
+    loaded stays drawable, the error is one line naming the file, wait() raises it, no hang."""
+    from gigapoint.io import demo_chunks
+    from gigapoint.lod.progressive import Loader
+
+    def chunks():
+        for i, chunk in enumerate(demo_chunks(90_000, chunk_size=30_000)):
+            if i == 2:
+                raise InputError("tiles/b.laz: corrupt LAZ chunk 2 (lazrs: invalid data)")
+            yield chunk
+
+    o = ProgressiveOctree("failing")
+    o.attach(Loader(o, [("tiles/b.laz", chunks)], 90_000).start())
+    with pytest.raises(GigapointError) as err:
+        o.wait(timeout=60)
+    assert "tiles/b.laz" in str(err.value) and "\n" not in str(err.value)
+    assert o.n_points == 60_000 and o.error is not None and o.progress == pytest.approx(60_000 / 90_000)
+    cam = gp.Camera.fit(o.bounds, width=64, height=48)
+    assert gp.render_frame(o, cam, EXACT).stats.visible_pixels > 0
+
+
+def test_a_truncated_file_is_refused_at_open(tmp_path, las_writer):
+    bad = las_writer(tmp_path / "b.las", 50_000, seed=2)
+    bad.write_bytes(bad.read_bytes()[:-300_000])
+    with pytest.raises(GigapointError, match="b.las: truncated"):
+        gp.open(bad, progressive=True)
+
+
+def test_closing_mid_load_stops_the_loader_and_frees_memory():
+    cloud = gp.demo(3_000_000, progressive=True)
+    cloud.close()
+    assert not cloud.loader._thread.is_alive()
+    assert cloud.pool is None and cloud.n_points == 0
+
+
+def test_the_viewer_redraws_while_it_loads_and_says_how_far():
+    import time
+
+    from gigapoint.io import demo_chunks
+    from gigapoint.lod.progressive import Loader
+    from gigapoint.viewer.protocol import unpack_frame
+    from gigapoint.viewer.session import ViewerCore
+
+    def slow():  # a source that takes about 1.5 s: frames are drawn while it loads
+        for chunk in demo_chunks(200_000, chunk_size=20_000):
+            time.sleep(0.15)
+            yield chunk
+
+    cloud = ProgressiveOctree("slow")
+    cloud.attach(Loader(cloud, [("slow", slow)], 200_000).start())
+    while cloud.n_points == 0:
+        time.sleep(0.01)
+    core = ViewerCore(cloud)
+    headers = []
+
+    def send(kind, payload):
+        if kind == "bytes":
+            headers.append(unpack_frame(payload)[0])
+        return True
+
+    core.open_session(send, 96, 64)
+    try:
+        assert core.watcher is not None
+        cloud.wait(timeout=60)
+        assert core.watcher.finished.wait(10)
+        time.sleep(0.5)  # the last redraw
+        notes = [h["note"] for h in headers]
+        assert any(n.startswith("loading: ") and "M points/s" in n for n in notes)
+        assert notes[-1].startswith("loaded 200,000 points") and headers[-1]["points_total"] == 200_000
+        assert len({h["points_total"] for h in headers}) >= 3  # frames of a growing cloud
+        assert 0 < headers[0]["load_progress"] < 1 and headers[-1]["load_progress"] == 1
+    finally:
+        core.close_all()
+
+
+@pytest.mark.gpu
+def test_wgpu_draws_the_growing_octree_uploading_only_what_changed(scene):
+    from wgpu_support import wgpu_or_skip
+
+    from gigapoint.backends.numba_cpu import NumbaCpuBackend
+
+    gpu, cpu = wgpu_or_skip(), NumbaCpuBackend()
+    xyz, rgba, _ = scene
+    strips = np.argsort(xyz[:, 0], kind="stable")  # arriving strip by strip, as a scan does: a batch changes its part of the tree
+    xyz, rgba = xyz[strips], rgba[strips]
+    o = ProgressiveOctree("gpu", max_leaf=3_000, cube=_cube(xyz), capacity=4 * len(xyz))  # a pool that need not grow (small leaves: many voxels)
+    cam = gp.Camera.fit((xyz.min(axis=0), xyz.max(axis=0)), view="iso", width=200, height=150)
+    s = EXACT.replace(point_budget=10**9, lod_threshold_px=0, adaptive_precision=False)  # all three words of every point
+    pool = None
+    for k, start in enumerate(range(0, len(xyz), 40_000)):
+        o.add(xyz[start : start + 40_000], rgba[start : start + 40_000])
+        view = cam.view(o.bounds)
+        with o.reading():
+            draw = o.prepare(view, s)
+            args = (draw.points, draw.selection, 200, 150, view.near, view.far)
+            before = gpu.memory["uploaded"]
+            got = np.asarray(gpu.rasterize(*args))
+            sent = gpu.memory["uploaded"] - before
+            want = cpu.rasterize(*args)
+        assert np.count_nonzero(got != want) <= 0.001 * want.size
+        if k:  # a batch rewrites part of the pool: the rest stays on the GPU
+            assert draw.points is pool
+            assert 0 < sent < 0.8 * 4 * 4 * int(draw.points.batches["count"].astype(np.int64).sum())
+        pool = draw.points
+
+
+@pytest.mark.parametrize("fmt", ["gigapoint", "potree"])
+def test_save_writes_a_converted_octree_of_its_points(scene, octree, tmp_path, fmt):
+    result = octree.save(tmp_path / fmt, format=fmt)
+    assert result.points == octree.n_points
+    saved = gp.open(tmp_path / fmt)
+    assert saved.n_points == octree.n_points
+    cam = gp.Camera.fit(octree.bounds, view="top", width=200, height=150)
+    every = EXACT.replace(point_budget=10**9, lod_threshold_px=0)
+    a = gp.render_frame(saved, cam, every).visibility != EMPTY_PIXEL
+    b = gp.render_frame(octree, cam, every).visibility != EMPTY_PIXEL
+    assert (a & b).sum() / (a | b).sum() >= 0.95
+    with pytest.raises(GigapointError, match="overwrite"):
+        octree.save(tmp_path / fmt, format=fmt)
