@@ -7,14 +7,16 @@
   every batch over the whole town, and in scan order: 50 m strips), inserted in batches of 1 M
   with the root cube given (as from LAS headers); JIT warm-up excluded. Reported: points/s,
   voxels per point, memory per point against gigapoint's quantized layout of the same points
-  (16 bytes + the attributes).
+  (16 bytes + the attributes), while filling and once trimmed.
 - ``load``: the same points written as LAZ and LAS (scan order); decoding them alone (every
   chunk of ``gigapoint.io.read_chunks``) against ``gigapoint.open(..., progressive=True)`` to
   completion, alternately, in one process: the ratio is what LOD costs loading.
 - ``first``: seconds from ``gigapoint.demo(10**9, progressive=True)`` to its first image with
   points (1920x1080), then the loader is closed.
-- ``frames``: median frame time at 1920x1080 with a 10 M budget while the demo loads, and of
-  the same octree once loaded.
+- ``viewer``: ``gigapoint view --demo 1000000000`` (progressive: above the point budget):
+  seconds from a client's connect (as the page does) to its first frame.
+- ``frames``: median frame time at 1920x1080 with a 10 M budget while the demo loads, of the
+  same octree once loaded, and of a converted octree of the same points (alternately).
 """
 
 from __future__ import annotations
@@ -43,13 +45,6 @@ def _scan_order(xyz):
     return np.lexsort((xyz[:, 0], np.floor(xyz[:, 1] / 50.0)))
 
 
-def _memory(o: ProgressiveOctree) -> int:
-    pool = o.pool
-    arrays = [pool.low, pool.med, pool.high, pool.color, *pool.attributes.values(), pool.batches, pool.chunk_next, pool.chunk_node]
-    arrays += [o.vox_key, o.vox_slot, o.vox_sum, o.vox_first, o._hkeys, o._hvals, o.key, o.children, o.cmin, o.first_chunk, o.last_chunk]
-    return sum(a.nbytes for a in arrays)
-
-
 def bench_insert(n: int, batch: int) -> None:
     xyz, rgba, attrs = demo_arrays(n, seed=1)
     lo, hi = xyz.min(axis=0), xyz.max(axis=0)
@@ -64,9 +59,12 @@ def bench_insert(n: int, batch: int) -> None:
         for s in range(0, n, batch):
             o.add(x[s : s + batch], c[s : s + batch], **{a: v[s : s + batch] for a, v in at.items()})
         dt = time.perf_counter() - t
-        mem = _memory(o)
-        print(f"insert, {name}: {n / dt / 1e6:.2f} M points/s ({dt:.2f} s), {o.n_voxels / n:.2f} voxels a point, "
-              f"{mem / n:.1f} bytes a point = {mem / n / layout:.2f}x the quantized layout ({layout} B)")  # fmt: skip
+        filling = o.nbytes
+        o.trim()  # as the loader does when loading ends
+        mem = o.nbytes
+        print(f"insert, {name}: {n / dt / 1e6:.2f} M points/s ({dt:.2f} s), {o.n_voxels / n:.2f} voxels a point; memory "
+              f"{filling / n:.1f} bytes a point while filling (presized), {mem / n:.1f} once trimmed = {mem / n / layout:.2f}x "
+              f"the quantized layout ({layout} B)")  # fmt: skip
 
 
 def _write(path: Path, xyz, rgba, attrs) -> Path:
@@ -121,6 +119,33 @@ def bench_first(n: int) -> None:
     cloud.close()
 
 
+def bench_viewer(n: int) -> None:
+    """``gigapoint view --demo N`` in a subprocess; a client connects over the WebSocket as the
+    page does: seconds to the first frame it receives."""
+    import json
+    import sys
+
+    from websockets.sync.client import connect
+
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "gigapoint.cli", "view", "--demo", str(n), "--no-browser"], stdout=subprocess.PIPE, text=True)
+    try:
+        page = proc.stdout.readline().strip()
+        t_url = time.perf_counter()
+        url = page.replace("http://", "ws://", 1).split("?")[0] + "ws"
+        t1 = time.perf_counter()
+        with connect(f"{url}?w=1920&h=1080", max_size=2**26, open_timeout=60) as ws:
+            assert json.loads(ws.recv(timeout=60))["type"] == "hello"
+            while not isinstance(ws.recv(timeout=120), bytes):
+                pass
+            t2 = time.perf_counter()
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    print(f"viewer of demo({n:,}) progressive: URL printed {t_url - t0:.2f} s after start (Python, imports, first points); "
+          f"first frame {t2 - t1:.2f} s after the page connects")  # fmt: skip
+
+
 def bench_frames(n: int) -> None:
     cloud = gp.demo(n, progressive=True)
     while cloud.n_points == 0:
@@ -133,14 +158,20 @@ def bench_frames(n: int) -> None:
         gp.render_frame(cloud, cam, s)
         times.append(time.perf_counter() - t)
     cam = gp.Camera.fit(cloud.bounds, view="iso", width=1920, height=1080)
-    after = []
-    for _ in range(7):
-        t = time.perf_counter()
-        gp.render_frame(cloud, cam, s)
-        after.append(time.perf_counter() - t)
-    m, a = statistics.median(times), statistics.median(after)
+    with tempfile.TemporaryDirectory() as tmp:  # the same points converted (gigapoint convert), drawn alternately
+        gp.convert(cloud.chunks(), Path(tmp) / "octree")
+        converted = gp.open(Path(tmp) / "octree")
+        after, conv = [], []
+        for _ in range(7):
+            for target, out in ((cloud, after), (converted, conv)):
+                gp.render_frame(target, cam, s)  # each once before timing: caches, arena loads
+                t = time.perf_counter()
+                gp.render_frame(target, cam, s)
+                out.append(time.perf_counter() - t)
+    m, a, c = statistics.median(times), statistics.median(after), statistics.median(conv)
     print(f"frames of demo({n:,}) at 1920x1080, 10 M budget: while loading {len(times)} frames, median {m * 1e3:.1f} ms "
-          f"({1 / m:.1f} fps; loaded in {cloud.loader.finished_at - cloud.loader.started:.1f} s); once loaded {a * 1e3:.1f} ms ({1 / a:.1f} fps)")  # fmt: skip
+          f"({1 / m:.1f} fps; loaded in {cloud.loader.finished_at - cloud.loader.started:.1f} s); once loaded {a * 1e3:.1f} ms "
+          f"({1 / a:.1f} fps); the converted octree of the same points {c * 1e3:.1f} ms ({1 / c:.1f} fps): {c / a:.2f}x its fps")  # fmt: skip
 
 
 def main(argv=None) -> int:
@@ -148,7 +179,7 @@ def main(argv=None) -> int:
     ap.add_argument("--points", default="8M")
     ap.add_argument("--batch", default="1M")
     ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--parts", nargs="+", default=["insert", "load", "first", "frames"])
+    ap.add_argument("--parts", nargs="+", default=["insert", "load", "first", "viewer", "frames"])
     args = ap.parse_args(argv)
     n = parse_count(args.points)
     print(f"{_cpu()}, 2 cores; {n:,} points")
@@ -158,6 +189,8 @@ def main(argv=None) -> int:
         bench_load(n, args.rounds)
     if "first" in args.parts:
         bench_first(10**9)
+    if "viewer" in args.parts:
+        bench_viewer(10**9)
     if "frames" in args.parts:
         bench_frames(n)
     return 0

@@ -11,16 +11,17 @@ from .render import Camera, Frame, RenderSettings, RenderStats, render, render_f
 __version__ = "0.1.0"
 
 
-def demo(n_points: int = 1_000_000, seed: int = 0, progressive: bool = False):
+def demo(n_points: int = 1_000_000, seed: int = 0, progressive: bool = False, memory_limit: int | None = None):
     """The procedural demo scene (terrain, roads, river, buildings, trees) as a PointCloud;
-    ``progressive=True``: a ProgressiveOctree returned at once and filled in the background."""
+    ``progressive=True``: a ProgressiveOctree returned at once and filled in the background
+    (stopping at ``memory_limit`` bytes, by default half the machine's memory)."""
     from .core import build_cloud
     from .io.demo import demo_chunks
 
     if progressive:
         from .lod.progressive import demo_sources, open_progressive
 
-        return open_progressive(*demo_sources(n_points, seed))
+        return open_progressive(*demo_sources(n_points, seed), memory_limit=memory_limit)
 
     return build_cloud(demo_chunks(n_points, seed), name=f"demo({n_points:,})")
 
@@ -34,11 +35,16 @@ def open(*paths, progressive: bool = False, **options):
 
     ``progressive=True``: files open as a ProgressiveOctree, returned at once and filled by a
     background loader (``cloud.progress``, ``cloud.wait()``); it draws what is there at any
-    moment (SimLOD)."""
+    moment (SimLOD). Loading stops with a one-line MemoryLimitError once the octree holds
+    ``memory_limit=`` bytes (by default half the machine's memory); what was loaded stays."""
     if progressive:
+        from .errors import InputError
         from .lod.progressive import file_sources, open_progressive
 
-        return open_progressive(*file_sources(paths))
+        memory_limit = options.pop("memory_limit", None)
+        if options:
+            raise InputError(f"open(progressive=True) takes memory_limit= only, not {', '.join(sorted(options))}")
+        return open_progressive(*file_sources(paths), memory_limit=memory_limit)
     if len(paths) == 1 and not options:
         from .lod import is_lod_source, open_octree
 
@@ -56,6 +62,7 @@ _LAZY = {
     "render_flythrough": ("gigapoint.render.video", "render_flythrough"),
     "estimate_normals": ("gigapoint.render.normals", "estimate_normals"),
     "convert": ("gigapoint.lod.convert", "convert"),
+    "LiveCloud": ("gigapoint.live", "LiveCloud"),
 }
 
 
@@ -73,6 +80,7 @@ __all__ = [
     "Frame",
     "GigapointError",
     "GigapointWarning",
+    "LiveCloud",
     "PointChunk",
     "PointCloud",
     "RenderSettings",

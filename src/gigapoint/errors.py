@@ -39,5 +39,9 @@ class BackendUnavailableError(GigapointError):
     """A requested backend is not installed or cannot start."""
 
 
+class MemoryLimitError(GigapointError):
+    """Loading stopped because what was loaded reached its memory limit (what was loaded stays usable)."""
+
+
 class GigapointWarning(UserWarning):
     """Warnings about degenerate but valid input (skipped points, empty views)."""

@@ -137,7 +137,7 @@ def test_copc_renders_like_the_gigapoint_octree_and_brute_force(autzen_octrees, 
     g = open_octree(autzen_octrees / "g")
     g.filtered_colors = False  # COPC points carry their own colors
     c = gp.open(autzen_octrees / "a.copc.laz")
-    flat = gp.open(AUTZEN)
+    flat = gp.open(AUTZEN, colors="rgba")  # the octrees keep 32-bit colours; a compact cloud's are 16-bit by default
     s = gp.RenderSettings(backend="cpu", adaptive_precision=adaptive, size_mode="fixed")  # one pixel a point: the exact comparison
     for view in ("iso", "top"):
         cam = gp.Camera.fit(g.bounds, view=view, width=320, height=240)

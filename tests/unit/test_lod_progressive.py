@@ -142,6 +142,32 @@ def test_leaf_contents_do_not_depend_on_batches_or_order(scene, octree, batch, s
     assert other.n_voxels == octree.n_voxels
 
 
+def test_trimming_frees_the_room_and_the_octree_grows_on_the_same(scene, octree):
+    """trim() (when loading ends) gives back the pool's spare chunks and the voxel table; points
+    added afterwards land exactly as without it: the same leaves and voxel colours."""
+    xyz, rgba, attrs = scene
+    half = len(xyz) // 2
+    o = ProgressiveOctree("t", max_leaf=3_000, cube=_cube(xyz), capacity=len(xyz) * 4)
+    for s in range(0, half, 20_000):
+        o.add(xyz[s : s + 20_000], rgba[s : s + 20_000], **{a: v[s : s + 20_000] for a, v in attrs.items()})
+    before = o.nbytes
+    o.trim()
+    assert o.nbytes < before / 2 and o.pool.n_chunks == o._n_chunks
+    for s in range(half, len(xyz), 20_000):
+        o.add(xyz[s : s + 20_000], rgba[s : s + 20_000], **{a: v[s : s + 20_000] for a, v in attrs.items()})
+    assert o.n_points == octree.n_points and o.n_voxels == octree.n_voxels
+
+    def entries(t):
+        return {int(t.key[n]): (np.sort(t.pool.color[t.node_entries(n)]), t.positions(t.node_entries(n))) for n in range(t.n_nodes)}
+
+    a, b = entries(o), entries(octree)
+    assert a.keys() == b.keys()
+    for key in a:
+        np.testing.assert_array_equal(a[key][0], b[key][0])
+        if len(a[key][1]):
+            _match(a[key][1], b[key][1], 1e-6)
+
+
 def test_the_root_grows_to_take_points_outside_it(scene):
     xyz, rgba, _ = scene
     o = ProgressiveOctree("grow", max_leaf=2_000)
@@ -247,6 +273,27 @@ def test_drawing_while_another_thread_inserts(scene):
     assert not errors and o.n_points == len(xyz) and frames >= 3
 
 
+def test_frames_and_the_loader_take_turns():
+    """SimLOD's schedule: a renderer drawing back to back does not stop the loader (one slice a
+    frame at least), and while frames are drawn the loader inserts small slices between them."""
+    from gigapoint.lod.progressive.loader import SLICE_WHILE_DRAWING
+
+    cloud = gp.demo(3_000_000, progressive=True)
+    try:
+        while cloud.n_points == 0:
+            cloud.wait(timeout=0.01)
+        cam = gp.Camera.fit(cloud.bounds, width=96, height=64)
+        seen, deltas = cloud.n_points, []
+        for _ in range(40):
+            gp.render_frame(cloud, cam, EXACT)
+            deltas.append(cloud.n_points - seen)
+            seen = cloud.n_points
+        assert sum(deltas) >= 5 * SLICE_WHILE_DRAWING  # the loader went on while frames were drawn
+        assert np.median(deltas) <= SLICE_WHILE_DRAWING  # in small slices, mostly one a frame
+    finally:
+        cloud.close()
+
+
 def test_bad_input_is_a_one_line_error():
     o = ProgressiveOctree("bad")
     with pytest.raises(InputError, match="shape"):
@@ -304,6 +351,40 @@ def test_a_source_failing_part_way_keeps_what_was_loaded():
     assert o.n_points == 60_000 and o.error is not None and o.progress == pytest.approx(60_000 / 90_000)
     cam = gp.Camera.fit(o.bounds, width=64, height=48)
     assert gp.render_frame(o, cam, EXACT).stats.visible_pixels > 0
+
+
+def test_loading_stops_at_its_memory_limit_and_keeps_what_it_holds():
+    """A source larger than memory allows: the loader stops once the octree holds
+    ``memory_limit`` bytes (one line saying where and why), and what it holds draws."""
+    from gigapoint.errors import MemoryLimitError
+
+    cloud = gp.demo(50_000_000, progressive=True, memory_limit=40 << 20)
+    with pytest.raises(MemoryLimitError) as err:
+        cloud.wait(timeout=120)
+    msg = str(err.value)
+    assert "\n" not in msg and "demo(50,000,000): loading stopped at" in msg and "of 50,000,000 points" in msg
+    assert 0 < cloud.n_points < 50_000_000 and cloud.progress < 1
+    # one slice at most beyond the limit, and a pool step: far below the 50 M points' ~1.5 GB
+    assert cloud.nbytes < 200 << 20
+    cam = gp.Camera.fit(cloud.bounds, width=64, height=48)
+    assert gp.render_frame(cloud, cam, EXACT).stats.visible_pixels > 0
+    cloud.close()
+
+
+def test_a_billion_point_input_allocates_for_what_it_holds_not_its_total():
+    """The pool is presized from the header's total only up to a bound: a 10^9-point input
+    draws its first points at once instead of allocating tens of GB first."""
+    import time
+
+    t = time.perf_counter()
+    cloud = gp.demo(10**9, progressive=True)
+    try:
+        while cloud.n_points == 0 and time.perf_counter() - t < 60:
+            time.sleep(0.01)
+        assert cloud.n_points > 0
+        assert cloud.nbytes < 2 << 30
+    finally:
+        cloud.close()
 
 
 def test_a_truncated_file_is_refused_at_open(tmp_path, las_writer):
@@ -404,3 +485,34 @@ def test_save_writes_a_converted_octree_of_its_points(scene, octree, tmp_path, f
     assert (a & b).sum() / (a | b).sum() >= 0.95
     with pytest.raises(GigapointError, match="overwrite"):
         octree.save(tmp_path / fmt, format=fmt)
+
+
+def _cli(*args):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "gigapoint.cli", *map(str, args)], capture_output=True, text=True, timeout=300)
+
+
+def test_render_builds_an_octree_for_inputs_above_the_budget_and_waits_for_it(tmp_path, las_writer):
+    """``gigapoint render`` of an input above the point budget loads it progressively, waits for
+    the whole file, and draws the finished octree (the API's image); a file the header says is
+    small opens as a PointCloud as before."""
+    from PIL import Image
+
+    from gigapoint.cli.render_cmd import make_camera
+
+    f = las_writer(tmp_path / "a.las", 60_000, seed=1)
+    out = tmp_path / "a.png"
+    r = _cli("render", f, "-o", out, "--point-budget", 20_000, "--size-mode", "fixed", "-W", 160, "-H", 120, "--view", "top")
+    assert r.returncode == 0, r.stderr
+    cloud = gp.open(f, progressive=True)
+    cloud.wait(timeout=120)
+    assert cloud.n_points == 60_000
+    cam = make_camera(cloud, 160, 120, "top", None, "perspective", 60.0)
+    want = gp.render_frame(cloud, cam, EXACT.replace(point_budget=20_000)).image
+    np.testing.assert_array_equal(np.asarray(Image.open(out).convert("RGB")), want[..., :3])
+    cloud.close()
+    # below the budget: the plain cloud, every point drawn
+    r = _cli("render", f, "-o", tmp_path / "b.png", "--size-mode", "fixed", "-W", 160, "-H", 120, "--stats")
+    assert r.returncode == 0 and "60,000 of 60,000 points" in r.stderr, r.stderr

@@ -24,12 +24,15 @@ def _fields(text: str) -> list[tuple[str, str]]:
 
 def test_batch_record_struct_follows_the_dtype():
     text = wgsl_struct("BatchRecord", GPU_BATCH_DTYPE)
-    assert _fields(text) == [("rows", "array<vec4<f32>, 4>"), ("first", "u32"), ("local_first", "u32"), ("count", "u32"), ("bits", "u32")]
+    assert _fields(text) == [
+        ("rows", "array<vec4<f32>, 4>"), ("first", "u32"), ("local_first", "u32"), ("count", "u32"), ("bits", "u32"),
+        ("ext_first", "u32"), ("code", "u32"), ("_pad0", "u32"), ("_pad1", "u32"),
+    ]  # fmt: skip
     # row-major: rows[i] is row i of the 4x4 matrix, as the CPU kernel indexes m[i, j]
     rec = np.zeros(1, GPU_BATCH_DTYPE)
     rec["rows"][0] = np.arange(16, dtype=np.float32).reshape(4, 4)
     assert rec.view(np.float32)[:16].tolist() == list(range(16))
-    assert GPU_BATCH_DTYPE.itemsize == 80
+    assert GPU_BATCH_DTYPE.itemsize == 96
 
 
 def test_params_struct_is_a_multiple_of_16_bytes():
@@ -113,3 +116,21 @@ def test_missing_wgpu_is_backend_unavailable(monkeypatch):
     monkeypatch.setitem(sys.modules, "wgpu", None)  # import wgpu -> ImportError
     with pytest.raises(BackendUnavailableError, match=r"pip install 'gigapoint\[gpu\]'"):
         WgpuBackend()
+
+
+def test_stale_ranges_are_the_rewritten_batches_merged_and_never_empty():
+    """What a re-upload sends: the batches written after a version, touching ones merged; a
+    batch emptied since (a progressive leaf that split) sends nothing (wgpu refuses a write of
+    zero bytes)."""
+    from types import SimpleNamespace
+
+    from gigapoint.backends.wgpu.memory import stale_ranges
+
+    b = np.zeros(5, BATCH_DTYPE)
+    b["first"] = [0, 100, 200, 300, 400]
+    b["count"] = [100, 100, 0, 50, 100]
+    cloud = SimpleNamespace(batches=b, batch_version=np.array([1, 5, 5, 5, 5]))
+    assert stale_ranges(cloud, 2, 0, 500) == [(100, 200), (300, 350), (400, 500)]
+    assert stale_ranges(cloud, 2, 150, 450) == [(150, 200), (300, 350), (400, 450)]
+    assert stale_ranges(cloud, 5, 0, 500) == []
+    assert stale_ranges(SimpleNamespace(batches=b, batch_version=None), 0, 10, 20) == [(10, 20)]

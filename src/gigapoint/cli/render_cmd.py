@@ -14,6 +14,7 @@ from ..errors import CameraError, GigapointError
 from ..render import VIEWS, Camera, RenderSettings
 from . import compiling
 from .app import app
+from .info_cmd import memory_line
 from .output import check_output, save_array, save_image
 from .progress import err_console, progress_bar, status
 from .quality_opts import prepare_cloud
@@ -79,15 +80,19 @@ def make_camera(cloud, width, height, view, camera_text, projection, fov) -> Cam
     return Camera.orbit(target, c["yaw"], c["pitch"], distance, fov=fov, width=width, height=height, **extra)
 
 
-def open_inputs(inputs):
-    """``gigapoint.open`` of the command's inputs; files show a bar while they are read (on a terminal)."""
-    import gigapoint as gp
+def open_inputs(inputs, point_budget: int, progressive: bool | None = None):
+    """The command's inputs (lod/progressive.open_sized: inputs above the point budget build an
+    LOD octree as they load, and the render waits for it); files show a bar while they are read
+    (on a terminal). A load that stops (a corrupt file, the memory limit) raises its error."""
+    from ..lod.progressive import ProgressiveOctree, open_sized
 
-    from ..lod import is_lod_source
-
-    if len(inputs) == 1 and is_lod_source(inputs[0]):
-        return gp.open(inputs[0])
-    return gp.open(*inputs, progress=err_console().is_terminal)
+    cloud = open_sized(inputs, point_budget, progressive, progress=err_console().is_terminal)
+    if isinstance(cloud, ProgressiveOctree):
+        total = cloud.loader.total
+        with progress_bar(f"reading {cloud.name} into an LOD octree", total) as advance:
+            while not cloud.wait(timeout=0.1):
+                advance(cloud.loader.read)
+    return cloud
 
 
 def print_stats(stats, console=None, compiled_s: float = 0.0) -> None:
@@ -128,6 +133,13 @@ def render(
         int | None, typer.Option(help="Write a video of N frames orbiting the cloud instead of an image (-o out.mp4).")
     ] = None,
     fps: Annotated[float, typer.Option(help="Frames per second of --turntable videos.")] = 30.0,
+    progressive: Annotated[
+        bool | None,
+        typer.Option(
+            "--progressive/--no-progressive",
+            help="Build an LOD octree while reading and render from it (default: for inputs above the point budget).",
+        ),
+    ] = None,
 ) -> None:
     """Render point clouds to an image (or a turntable video)."""
     import gigapoint as gp
@@ -146,7 +158,7 @@ def render(
     if view not in VIEWS:
         raise GigapointError(f"--view: unknown view {view!r}; choose one of {', '.join(VIEWS)}")
     check_image_size(width, height, fov)  # before reading anything
-    cloud = open_inputs(inputs)
+    cloud = open_inputs(inputs, settings.point_budget, progressive)
     prepare_cloud(cloud, settings)
     if turntable is not None:
         from ..render.video import render_turntable
@@ -170,6 +182,7 @@ def render(
         save_array(frame.index, index_out)
     if stats:
         print_stats(frame.stats, compiled_s=compiled)
+        err_console().print(memory_line(cloud), highlight=False)
     typer.echo(f"wrote {output} ({width}x{height}, {cloud.n_points:,} points)")
 
 
@@ -183,8 +196,15 @@ def demo(
     threads: Annotated[int | None, typer.Option(help="CPU threads (default: all cores).")] = None,
     seed: Annotated[int, typer.Option(help="Seed of the procedural scene.")] = 0,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing output file.")] = False,
+    live: Annotated[bool, typer.Option("--live", help="Instead: a synthetic depth sensor flying through the demo town, in the viewer.")] = False,
 ) -> None:
     """Generate the procedural demo scene, render it and report how fast each step was."""
+    if live:
+        from .live_cmd import view_live
+        from .view_cmd import _open_browser
+
+        view_live("demo", open_browser=_open_browser)
+        return
     from rich.console import Console
 
     from ..core import build_cloud

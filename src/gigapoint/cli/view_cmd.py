@@ -34,8 +34,26 @@ def view(
         None, "--progressive/--no-progressive",
         help="Show the cloud while it loads, building its LOD octree as points arrive (default: for inputs above the point budget).",
     ),
+    live: str | None = typer.Option(
+        None, "--live", help="Show a live stream: 'demo' (a synthetic depth sensor), a TUM RGB-D folder, a ROS bag, a folder of frames.",
+    ),
+    replay: Path | None = typer.Option(None, "--replay", help="Play back a stream recorded with --record (or LiveCloud.record) at its rate."),
+    keep: int = typer.Option(100, "--keep", help="Live: frames drawn (the oldest leaves as a new one arrives)."),
+    decay: float | None = typer.Option(None, "--decay", help="Live: seconds after which a frame leaves (default: never)."),
+    record: Path | None = typer.Option(None, "--record", help="Live: also record the stream into this folder."),
 ) -> None:
     """Serve an interactive viewer of PATH... in the browser (Ctrl+C stops it)."""
+    if live is not None or replay is not None:
+        from .live_cmd import check_live_options, view_live
+
+        if paths or demo is not None or (live is not None and replay is not None):
+            raise GigapointError("view: give one of PATH..., --demo N, --live SOURCE or --replay DIR")
+        if window:
+            raise GigapointError("view: --window does not show live streams yet; use the browser viewer (without --window)")
+        check_live_options(keep, decay, 1.0)
+        view_live(str(replay) if replay is not None else live, replay=replay is not None, keep=keep, decay=decay, record=record,
+                  host=host, port=port, browser=browser, open_browser=_open_browser)  # fmt: skip
+        return
     import gigapoint
 
     from ..lod.progressive import ProgressiveOctree
@@ -50,21 +68,14 @@ def view(
             raise GigapointError(f"--demo: point count must be in 1..2e9, got {demo}")
         cloud = gigapoint.demo(demo, progressive=progressive if progressive is not None else demo > budget)
     elif paths:
-        from ..lod import OctreeDir, is_lod_source
+        from ..lod import OctreeDir
         from ..lod.preview import wait_for_preview
-        from ..lod.progressive import file_sources, open_progressive
+        from ..lod.progressive import open_sized
 
         if len(paths) == 1 and OctreeDir(paths[0]).awaiting_preview:  # `convert` was started a moment ago
             print(f"gigapoint viewer: waiting for the first preview of the conversion into {paths[0]} ...", file=sys.stderr)
             wait_for_preview(paths[0])
-        if (len(paths) == 1 and is_lod_source(paths[0])) or progressive is False:
-            cloud = gigapoint.open(*paths)
-        else:
-            sources, total, bounds, name = file_sources(paths)
-            if progressive or (total is not None and total > budget):  # big: show it while it loads
-                cloud = open_progressive(sources, total, bounds, name)
-            else:
-                cloud = gigapoint.open(*paths)
+        cloud = open_sized(paths, budget, progressive)  # big: shown while it loads
     else:
         raise GigapointError("view: name at least one file or directory (or --demo N)")
     if window:  # native window (rendercanvas + glfw), no server

@@ -19,6 +19,7 @@ from numba import njit, prange
 
 from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError
 from .chunk import PointChunk
+from .compact import compact_positions, full_words, pack_rgb565, point_words, rgba32
 from .layout import BATCH_DTYPE, BATCH_SIZE
 from .morton import cube_of, morton_codes, morton_order
 from .quantize import dequantize, make_batches, quantize
@@ -37,15 +38,20 @@ class PointCloud:
 
     batches: np.ndarray  # BATCH_DTYPE records
     low: np.ndarray  # u32 per point: bits 20-29 of x, y, z
-    med: np.ndarray  # u32 per point: bits 10-19
-    high: np.ndarray  # u32 per point: bits 0-9
-    color: np.ndarray  # u32 per point: RGBA8 little-endian (r in the low byte)
+    med: np.ndarray | None  # u32 per point: bits 10-19 (None in the compact layout)
+    high: np.ndarray | None  # u32 per point: bits 0-9 (None in the compact layout)
+    color: np.ndarray  # u32 per point: RGBA8 little-endian (r in the low byte); u16 RGB565 in the compact layout (compact.py)
     attributes: dict[str, np.ndarray] = field(default_factory=dict)
     name: str = "cloud"
     skipped: int = 0  # invalid input points (NaN, inf, absurd) left out
     # the resolution the source stored coordinates at, per axis (a LAS file's scale; the finest
     # of several files'), None where unknown: positions it reports are rounded to it
     source_scale: tuple[float, float, float] | None = None
+    # the compact layout (core/compact.py), else None: per-batch extension bit streams (u64 words)
+    # and their PACK_DTYPE records; its boxes are grid-aligned, ``data_bounds`` the points' own
+    ext: np.ndarray | None = None
+    packing: np.ndarray | None = None
+    data_bounds: tuple[np.ndarray, np.ndarray] | None = None
 
     version: ClassVar[None] = None  # PointBuffers: the arrays never change once built
     batch_version: ClassVar[None] = None
@@ -61,12 +67,14 @@ class PointCloud:
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(min, max) float64 corners of the box around all points."""
+        if self.data_bounds is not None:
+            return self.data_bounds[0].copy(), self.data_bounds[1].copy()
         return self.batches["bbox_min"].min(axis=0), self.batches["bbox_max"].max(axis=0)
 
     @property
     def rgba(self) -> np.ndarray:
-        """(N, 4) uint8 view of the colors."""
-        return self.color.view(np.uint8).reshape(-1, 4)
+        """(N, 4) uint8 colors (a view of u32 colors, decoded from 16-bit ones)."""
+        return rgba32(self.color).view(np.uint8).reshape(-1, 4)
 
     def batch_of(self, indices) -> np.ndarray:
         """Batch number of each point index."""
@@ -83,8 +91,48 @@ class PointCloud:
             sel = b == batch
             i = indices[sel]
             rec = self.batches[batch]
-            out[sel] = dequantize(self.low[i], self.med[i], self.high[i], rec["bbox_min"], rec["bbox_max"], 30)
+            if self.packing is None:
+                out[sel] = dequantize(self.low[i], self.med[i], self.high[i], rec["bbox_min"], rec["bbox_max"], 30)
+                continue
+            lo, hi = int(i.min()), int(i.max()) + 1
+            low, med, high = point_words(self, int(batch), lo, hi)
+            out[sel] = dequantize(low[i - lo], med[i - lo], high[i - lo], rec["bbox_min"], rec["bbox_max"], 30)
         return out
+
+    @property
+    def layout(self) -> str:
+        """"compact" (core/compact.py) or "words" (three u32 words a point)."""
+        return "words" if self.packing is None else "compact"
+
+    def memory(self) -> dict[str, int]:
+        """Bytes held per component: positions (words or low word + extension streams), color,
+        attributes, batches (records, and the compact layout's per-batch records)."""
+        pos = self.low.nbytes
+        if self.packing is None:
+            pos += self.med.nbytes + self.high.nbytes
+        else:
+            pos += self.ext.nbytes
+        batches = self.batches.nbytes + (0 if self.packing is None else self.packing.nbytes)
+        return {
+            "positions": int(pos),
+            "color": int(self.color.nbytes),
+            "attributes": int(sum(v.nbytes for v in self.attributes.values())),
+            "batches": int(batches),
+        }
+
+    def expanded(self) -> PointCloud:
+        """The same points in the three-word layout, with the same boxes: renders of the two are
+        identical bit for bit (the compact layout's contract; tests and benchmarks compare them)."""
+        if self.packing is None:
+            return self
+        med, high = full_words(self)
+        return PointCloud(self.batches.copy(), self.low.copy(), med, high, rgba32(self.color), dict(self.attributes), name=self.name,
+                          skipped=self.skipped, source_scale=self.source_scale, data_bounds=self.data_bounds)  # fmt: skip
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of all its arrays (``memory()`` has them per component)."""
+        return sum(self.memory().values())
 
     def point_info(self, index: int) -> dict | None:
         """Everything known about one point: position, color and attributes; None for index -1
@@ -100,7 +148,7 @@ class PointCloud:
         if self.source_scale is not None:
             position = [round(float(v), scale_decimals(s)) for v, s in zip(position, self.source_scale)]
         info = {"index": int(index), "position": [float(v) for v in position]}
-        info["rgba"] = self.rgba[index].tolist()
+        info["rgba"] = rgba32(self.color[index : index + 1]).view(np.uint8).tolist()
         for name, values in self.attributes.items():
             v = values[index]
             info[name] = v.tolist() if hasattr(v, "tolist") else v
@@ -202,8 +250,15 @@ def gather(values: np.ndarray, order: np.ndarray) -> np.ndarray:
     return out
 
 
-def build_cloud(chunks: Iterable[PointChunk], name: str = "cloud", batch_size: int = BATCH_SIZE) -> PointCloud:
-    """Collect chunks, drop invalid points (counted and warned), sort by Morton code, batch, quantize."""
+def build_cloud(
+    chunks: Iterable[PointChunk], name: str = "cloud", batch_size: int = BATCH_SIZE, layout: str = "auto", colors: str = "auto"
+) -> PointCloud:
+    """Collect chunks, drop invalid points (counted and warned), sort by Morton code, batch, quantize.
+
+    ``layout``: "auto" stores the compact layout (core/compact.py) where every chunk says its
+    source scale (LAS files), three u32 words a point otherwise; "words" always the latter;
+    "compact" needs a scale. ``colors``: "auto" stores opaque colors of a compact cloud in 16 bits
+    (RGB565, at most 4/255 off a channel), "rgba" always 32 bits (exact), "rgb565" always 16."""
     xyz_parts, rgba_parts, attr_parts = [], [], {}
     scales: list[tuple | None] = []
     skipped = 0
@@ -236,35 +291,74 @@ def build_cloud(chunks: Iterable[PointChunk], name: str = "cloud", batch_size: i
     rgba = rgba_parts[0] if len(rgba_parts) == 1 else np.concatenate(rgba_parts)
     del rgba_parts
     attributes = {a: (v[0] if len(v) == 1 else np.concatenate(v)) for a, v in attr_parts.items() if a in (attr_names or [])}
-    cloud = cloud_from_points(xyz, rgba, attributes, name=name, skipped=skipped, batch_size=batch_size, bounds=(lo, hi))
+    source_scale = None
     if scales and all(s is not None for s in scales):  # the finest: rounding to it loses nothing any file holds
-        cloud.source_scale = tuple(float(v) for v in np.min(np.array(scales, np.float64), axis=0))
+        source_scale = tuple(float(v) for v in np.min(np.array(scales, np.float64), axis=0))
+    if layout not in LAYOUTS:
+        raise InputError(f"{name}: layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
+    if layout == "compact" and source_scale is None:
+        raise InputError(f"{name}: the compact layout needs the source's scale (a LAS file's); these chunks have none")
+    if colors not in COLOR_FORMATS:
+        raise InputError(f"{name}: colors must be one of {', '.join(COLOR_FORMATS)}, got {colors!r}")
+    compact = source_scale if layout != "words" else None
+    opaque = bool((rgba[:, 3] == 255).all())
+    if colors == "rgb565" and not opaque:
+        raise InputError(f"{name}: 16-bit colors drop alpha, and some points are not opaque; use colors='rgba'")
+    short = colors == "rgb565" or (colors == "auto" and compact is not None and opaque)
+    cloud = cloud_from_points(xyz, rgba, attributes, name=name, skipped=skipped, batch_size=batch_size, bounds=(lo, hi), scale=compact, rgb565=short)
+    cloud.source_scale = source_scale
     return cloud
 
 
-def cloud_from_points(xyz, rgba, attributes=None, name="cloud", skipped=0, batch_size=BATCH_SIZE, bounds=None) -> PointCloud:
+#: ``build_cloud``'s layouts and color formats
+LAYOUTS = ("auto", "words", "compact")
+COLOR_FORMATS = ("auto", "rgba", "rgb565")
+
+
+def cloud_from_points(xyz, rgba, attributes=None, name="cloud", skipped=0, batch_size=BATCH_SIZE, bounds=None, scale=None, rgb565=False) -> PointCloud:
     """Build a PointCloud from valid float64 xyz (N, 3) and uint8 rgba (N, 4) (``bounds``: their
-    (min, max) if already known)."""
+    (min, max) if already known). ``scale``: the source grid's step per axis: the compact layout,
+    exact on that grid (core/compact.py); None: three u32 words a point. ``rgb565``: 16-bit colors."""
     if batch_size < 1:
         raise InputError(f"{name}: batch size must be >= 1, got {batch_size}")
     lo, hi = bounds if bounds is not None else scan_points(xyz)[1:]
     origin, edge = cube_of(lo, hi)
     order = morton_order(morton_codes(xyz, origin, edge))
     batches = make_batches(len(xyz), batch_size)
-    low, med, high = quantize(xyz, order, batches)
+    ext = pack = None
+    if scale is None:
+        low, med, high = quantize(xyz, order, batches)
+    else:
+        low, ext, pack = compact_positions(xyz, order, batches, scale, origin=lo)
+        med = high = None
     rgba = np.ascontiguousarray(rgba, np.uint8)
     color = gather(rgba.view(np.uint32).reshape(-1), order)  # RGBA8 as one u32 a point
+    if rgb565:
+        color = pack_rgb565(color)
     attrs = {a: gather(v, order) for a, v in (attributes or {}).items()}
-    return PointCloud(batches, low, med, high, color, attrs, name=name, skipped=skipped)
+    data_bounds = None if scale is None else (np.asarray(lo, np.float64).copy(), np.asarray(hi, np.float64).copy())
+    return PointCloud(batches, low, med, high, color, attrs, name=name, skipped=skipped, ext=ext, packing=pack, data_bounds=data_bounds)
 
 
-def from_arrays(xyz, rgb=None, name: str = "arrays", **attributes) -> PointCloud:
-    """A PointCloud from numpy arrays: float64 (N, 3) positions, (N, 3|4) uint8/uint16/float colors."""
+def from_arrays(xyz, rgb=None, name: str = "arrays", scale=None, **attributes) -> PointCloud:
+    """A PointCloud from numpy arrays: float64 (N, 3) positions, (N, 3|4) uint8/uint16/float colors.
+
+    ``scale``: the grid the positions were measured on (metres, one value or one per axis, as a
+    LAS file's scale): the cloud is then held in the compact layout, exact on that grid
+    (core/compact.py); points off it keep 30 bits a batch."""
     xyz = np.asarray(xyz)
     if xyz.ndim != 2 or xyz.shape[1] != 3:
         raise InputError(f"{name}: xyz must have shape (N, 3), got {xyz.shape}")
+    if scale is not None:
+        try:
+            s = np.asarray(scale, np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            s = np.zeros(0)
+        if len(s) not in (1, 3) or not np.all(np.isfinite(s) & (s > 0)):
+            raise InputError(f"{name}: scale must be a positive number or three, got {scale!r}")
+        scale = tuple(float(v) for v in np.broadcast_to(s, (3,)))
     try:
-        chunk = PointChunk(xyz, rgb, {k: np.asarray(v) for k, v in attributes.items()})
+        chunk = PointChunk(xyz, rgb, {k: np.asarray(v) for k, v in attributes.items()}, scale=scale)
     except ValueError as exc:
         raise InputError(f"{name}: {exc}") from None
     return build_cloud([chunk], name=name)

@@ -34,3 +34,15 @@ PRECISIONS = (10, 20, 30)
 
 #: The 2022 paper's rule: a batch spanning fewer pixels than half a 10-bit grid uses 10 bits.
 PRECISION_THRESHOLD_PX = 500.0
+
+#: The compact layout (core/compact.py): one record per batch beside BATCH_DTYPE. ``ext_first`` is
+#: the first u64 word of the batch's extension bit stream; ``code`` = e_x | e_y << 8 | e_z << 16,
+#: the bits per axis a point holds there (0..19: a grid-aligned batch of 10 + e bits an axis;
+#: 20 on every axis: a wide batch, today's medium and high words).
+PACK_DTYPE = np.dtype([("ext_first", "<u8"), ("code", "<u4"), ("_pad", "<u4")])
+
+#: Fewest bits an axis of a compact batch has (its box is 2^bits source steps): the low word's.
+COMPACT_MIN_BITS = 10
+
+#: Extension bits an axis of a wide batch holds (medium and high words: 2 x 10).
+EXT_FULL_BITS = 20

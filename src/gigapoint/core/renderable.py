@@ -44,9 +44,11 @@ class PointBuffers(Protocol):
     name: str
     batches: np.ndarray  # BATCH_DTYPE records: first, count, level, bbox
     low: np.ndarray  # u32 per point: bits 20-29 of x, y, z
-    med: np.ndarray
-    high: np.ndarray
-    color: np.ndarray  # u32 RGBA8 per point
+    # medium and high words; both None in the compact layout (core/compact.py), whose buffers then
+    # have ``packing`` (PACK_DTYPE per batch) and ``ext`` (the extension streams) instead
+    med: np.ndarray | None
+    high: np.ndarray | None
+    color: np.ndarray  # u32 RGBA8 per point (u16 RGB565 in a compact cloud)
     attributes: dict[str, np.ndarray]
     version: int | None
     batch_version: np.ndarray | None
@@ -69,6 +71,10 @@ class DrawList:
     n_batches: int  # batches (octree: nodes) of the whole renderable, for the stats
     step: int = 1  # draw every step-th point of each batch (a point cap on a plain cloud)
     nodes: np.ndarray | None = None  # octree node indices drawn (stats, tests)
+    # opacity 0..1 of each selected batch (float, aligned with selection.ids), multiplied with the
+    # settings' opacity; None: 1 each. Any batch below 1 makes the frame transparent (a live cloud's
+    # fade of its older frames; render/passes/transparency.py). A batch of opacity 0 is better left unselected.
+    alpha: np.ndarray | None = None
     # ``points.version`` as prepared: while it is unchanged, the frame's indices still name the points it drew
     generation: int | None = field(init=False)
 

@@ -55,8 +55,13 @@ def _with_progress(path: Path, chunks: Iterator[PointChunk], total: int | None, 
         yield chunk
 
 
-def open_cloud(*paths, chunk_size: int = DEFAULT_CHUNK_SIZE, progress: bool = False, name: str | None = None) -> PointCloud:
+def open_cloud(
+    *paths, chunk_size: int = DEFAULT_CHUNK_SIZE, progress: bool = False, name: str | None = None, layout: str = "auto", colors: str = "auto"
+) -> PointCloud:
     """Read files and/or directories (all supported files inside, sorted by name) into one PointCloud.
+
+    ``layout`` / ``colors``: how the points are held (``core.build_cloud``: by default compact
+    where the files say their scale, LAS).
 
     Several files are merged (attributes they all have are kept). With several files, a file
     without any point is skipped with a warning; one file without points raises EmptyCloudError.
@@ -87,7 +92,7 @@ def open_cloud(*paths, chunk_size: int = DEFAULT_CHUNK_SIZE, progress: bool = Fa
 
     def build(stream) -> PointCloud:
         try:
-            return build_cloud(stream, name=name)
+            return build_cloud(stream, name=name, layout=layout, colors=colors)
         except EmptyCloudError as exc:
             where = files[0] if not several else ", ".join(str(f) for f in files[:3]) + (" ..." if len(files) > 3 else "")
             detail = str(exc).split(": ", 1)[-1]

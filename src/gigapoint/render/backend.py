@@ -51,6 +51,15 @@ class Passes(Protocol):
     ):  # fmt: skip
         """High-quality shading: the mean color of the points near each pixel's closest depth."""
 
+    def transparent_colors(
+        self, points: PointBuffers, sel: Selection, vis, width: int, height: int, near: float, far: float,
+        point_colors: np.ndarray, alphas: np.ndarray, fallback, background, threads: int | None = None,
+        splat: Splat | None = None, step: int = 1,
+    ):  # fmt: skip
+        """Transparent points: each pixel's fragments composited, the nearest depth-sorted and the rest
+        by their mean (render/passes/transparency.py); ``alphas`` (k, 2) u32 per selected batch
+        (params.batch_alphas), ``fallback`` the colors of pixels no fragment reaches."""
+
     def shade(self, vis, colors, normals: np.ndarray, camera, shininess: float = 32.0):
         """Blinn-Phong headlight from per-point float32 (N, 3) normals."""
 

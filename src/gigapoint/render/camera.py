@@ -84,6 +84,7 @@ def sample_points(cloud, n: int = 20_000) -> np.ndarray:
     """About ``n`` float64 world positions spread over ``cloud`` (any Renderable): every k-th
     point of the batches (octree nodes) that a view of its whole box draws. What framing a
     cloud looks at, rather than its bounding box (whose corners may hold no point at all)."""
+    from ..core.compact import point_words
     from ..core.quantize import dequantize
     from .settings import RenderSettings
 
@@ -94,10 +95,11 @@ def sample_points(cloud, n: int = 20_000) -> np.ndarray:
         rec = draw.points.batches[draw.selection.ids]
         step = max(1, int(rec["count"].sum()) // max(n, 1))
         parts = []
-        for r in rec:
-            idx = np.arange(int(r["first"]), int(r["first"]) + int(r["count"]), step)
-            if len(idx):
-                parts.append(dequantize(draw.points.low[idx], draw.points.med[idx], draw.points.high[idx], r["bbox_min"], r["bbox_max"], 30))
+        for b, r in zip(draw.selection.ids.tolist(), rec):
+            first, count = int(r["first"]), int(r["count"])
+            if count:
+                low, med, high = point_words(draw.points, b, first, first + count)  # any layout
+                parts.append(dequantize(low[::step], med[::step], high[::step], r["bbox_min"], r["bbox_max"], 30))
     if not parts:
         lo, hi = (np.asarray(b, np.float64) for b in bounds)
         return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..core.compact import full_words, rgba32
 from ..core.layout import COORD_BITS
 from ..errors import SettingsError
 from .cache import render_cache
@@ -179,7 +180,8 @@ def elevations(cloud) -> np.ndarray:
         z = np.zeros(cloud.n_points, np.float64)  # zeros: an LOD arena has slots no batch covers
         zmin = np.ascontiguousarray(b["bbox_min"][:, 2])
         zsize = np.ascontiguousarray(b["bbox_max"][:, 2] - b["bbox_min"][:, 2])
-        _decode_z(b["first"].astype(np.int64), b["count"].astype(np.int64), zmin, zsize, cloud.low, cloud.med, cloud.high, z)
+        med, high = full_words(cloud)  # decoded for this once where the layout is compact
+        _decode_z(b["first"].astype(np.int64), b["count"].astype(np.int64), zmin, zsize, cloud.low, med, high, z)
         cache["__z__"] = z
     return z
 
@@ -253,3 +255,17 @@ def point_colors(cloud, settings) -> np.ndarray:
             del cache[k]
         cache[key] = colors
     return colors
+
+
+def rgba_point_colors(cloud, settings) -> np.ndarray:
+    """``point_colors`` as u32 RGBA8 for the passes that blend colors (HQS, transparency): decoded
+    once from a compact cloud's 16-bit colors (kept in the RenderCache while they are drawn)."""
+    colors = point_colors(cloud, settings)
+    if colors.dtype == np.uint32:
+        return colors
+    cache = render_cache.arrays(cloud)
+    out = cache.get("__rgba32__")
+    if out is None:
+        out = cache["__rgba32__"] = rgba32(colors)
+    return out
+

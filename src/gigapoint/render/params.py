@@ -95,3 +95,36 @@ def soft_weight(dx, dy, s, softness):
         return np.uint64(1)
     o = 1.0 - (math.sqrt(float(dx * dx + dy * dy)) / (0.5 * float(s))) ** softness
     return np.uint64(max(0.0, 15.0 * o + 0.5))
+
+
+
+# --- transparency: hybrid transparency (Maule et al. 2013): the TR_LAYERS nearest fragments of a
+# pixel depth-sorted and blended exactly, the rest by their mean (docs/transparency.md). All integer,
+# so the numpy reference, the CPU kernel and the WGSL shader agree bit for bit, whatever the order
+# the points come in.
+TR_LAYERS = 8  # fragments a pixel keeps sorted (a k-buffer of u64 keys: 64 bytes a pixel)
+TR_REVEAL_BITS = 16  # -log2(1 - alpha) in 1/2^16 units
+TR_COUNT_BITS = 8  # each fragment adds (L << 8) + 1 to the revealage sum: nonzero where any point lands
+TR_OPAQUE_LOG = 32 << TR_REVEAL_BITS  # alpha 255: transmittance 2^-32 (none)
+
+
+def alpha_logs(a8: np.ndarray) -> np.ndarray:
+    """-log2(1 - a8 / 255) in 1/2^TR_REVEAL_BITS units (u32) of 8-bit alphas; 255: TR_OPAQUE_LOG."""
+    a = np.asarray(a8, np.int64)
+    with np.errstate(divide="ignore"):
+        lg = np.rint(-np.log2(1.0 - np.minimum(a, 254) / 255.0) * (1 << TR_REVEAL_BITS))
+    return np.where(a >= 255, TR_OPAQUE_LOG, lg).astype(np.uint32)
+
+
+@functools.cache
+def transmittance_table() -> np.ndarray:
+    """(256,) u32: round(2^16 * 2^(-f / 256)); transmittance = table[fraction byte] >> integer part."""
+    return np.rint(65536.0 * np.exp2(-np.arange(256) / 256.0)).astype(np.uint32)
+
+
+def batch_alphas(alpha, opacity: float, n: int) -> np.ndarray:
+    """(n, 2) u32 per selected batch: 8-bit alpha round(255 * opacity * alpha) and its
+    ``alpha_logs`` (the revealage term); ``alpha`` None: the opacity alone."""
+    a = np.full(n, float(opacity)) if alpha is None else float(opacity) * np.clip(np.asarray(alpha, np.float64).reshape(-1), 0.0, 1.0)
+    a8 = np.rint(a * 255.0).astype(np.int64)
+    return np.ascontiguousarray(np.stack([a8, alpha_logs(a8)], axis=1), np.uint32)

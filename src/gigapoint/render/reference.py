@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.compact import point_words, rgba32
 from ..core.layout import EMPTY_PIXEL
 from ..core.quantize import unpack_words
 from ..core.selection import select
@@ -16,17 +17,22 @@ from .settings import RenderSettings
 from .splats import point_sizes, point_spacing, splat_params
 
 
-def grid_coordinates(cloud, first: int, count: int, bits: int) -> np.ndarray:
-    """(count, 3) float32 positions of a batch's points in its 10-bit grid units (cell centres)."""
-    s = slice(first, first + count)
+def grid_coordinates(cloud, first: int, count: int, bits: int, batch: int | None = None) -> np.ndarray:
+    """(count, 3) float32 positions of a batch's points in its 10-bit grid units (cell centres).
+    ``batch``: its number, needed for the compact layout (whose words decode per batch)."""
+    if cloud.med is None:  # the compact layout
+        low, med, high = point_words(cloud, int(batch), first, first + count)
+    else:
+        s = slice(first, first + count)
+        low, med, high = cloud.low[s], cloud.med[s], cloud.high[s]
     half, inv = np.float32(0.5), np.float32(1.0 / 1024.0)
-    q = unpack_words(cloud.low[s]).astype(np.float32)
+    q = unpack_words(low).astype(np.float32)
     if bits == 10:
         return q + half
-    m = unpack_words(cloud.med[s]).astype(np.float32)
+    m = unpack_words(med).astype(np.float32)
     if bits == 20:
         return q + (m + half) * inv
-    h = unpack_words(cloud.high[s]).astype(np.float32)
+    h = unpack_words(high).astype(np.float32)
     return q + (m + (h + half) * inv) * inv
 
 
@@ -35,7 +41,7 @@ def projected_batches(cloud, sel, width: int, height: int, near: float, far: flo
     in the kernels' float32 operation order; idx are batch-relative, x, y int64 pixel columns/rows."""
     for k, b in enumerate(sel.ids):
         first, count = int(cloud.batches["first"][b]), int(cloud.batches["count"][b])
-        g = grid_coordinates(cloud, first, count, int(sel.bits[k]))
+        g = grid_coordinates(cloud, first, count, int(sel.bits[k]), int(b))
         m = sel.matrices[k]
         x, y, z = g[:, 0], g[:, 1], g[:, 2]
         sx, sy, sw, sd = (m[r, 0] * x + m[r, 1] * y + m[r, 2] * z + m[r, 3] for r in range(4))
@@ -83,5 +89,5 @@ def reference_image(cloud, camera: Camera, settings: RenderSettings | None = Non
     out = np.empty(len(vis), np.uint32)
     out[:] = np.array(settings.background, np.uint8).view(np.uint32)[0]
     hit = vis != EMPTY_PIXEL
-    out[hit] = cloud.color[(vis[hit] & np.uint64(0xFFFFFFFF)).astype(np.int64)]
+    out[hit] = rgba32(cloud.color[(vis[hit] & np.uint64(0xFFFFFFFF)).astype(np.int64)])
     return out.view(np.uint8).reshape(camera.height, camera.width, 4)

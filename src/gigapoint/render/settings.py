@@ -171,6 +171,14 @@ class RenderSettings:
     splat_softness: float = setting(
         0.0, "Soft splats (Kraft's falloff exponent, e.g. 2) blended by high-quality shading; 0 = hard.", min=0.0, max=64.0
     )
+    opacity: float = setting(
+        1.0,
+        "Point opacity 0..1; below 1 the points are composited as transparent splats, nearest first (each pixel's 8 nearest "
+        "depth-sorted, the rest by their mean; docs/transparency.md); it replaces high-quality shading. 1 = opaque.",
+        min=0.0,
+        max=1.0,
+        step=0.05,
+    )
     supersample: Supersample = setting(1, "Anti-aliasing: render 1, 2 or 4 times larger and filter down.")
     supersample_filter: SupersampleFilter = setting("box", "Supersampling filter: box (exact block mean) or lanczos (Pillow).")
     stereo: Stereo = setting("none", "Stereo pair: none, side-by-side or anaglyph.")

@@ -24,6 +24,7 @@ from importlib import resources
 from urllib.parse import quote, urlsplit
 
 from ..errors import GigapointError
+from ..live.wire import MAX_PUSH_BYTES
 from . import protocol as P
 from .session import SEND_TIMEOUT_S, ViewerCore
 
@@ -227,6 +228,39 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
             gone.set()
             core.close_session(session)
 
+    async def push_endpoint(websocket):
+        """Frames from another process into a live cloud (live/wire.py): only with the push token
+        printed at start; a malformed frame is answered with an error and the stream goes on."""
+        from ..live.wire import decode_frame
+
+        push_token = core.push_token
+        given = websocket.query_params.get("push_token", "")
+        if push_token is None or not authorized(websocket) or not hmac.compare_digest(given.encode(), push_token.encode()):
+            await websocket.close(code=1008)  # unknown token: refused before anything is read
+            return
+        await websocket.accept()
+        try:
+            while True:
+                message = await websocket.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                try:
+                    data = message.get("bytes")
+                    try:
+                        if data is None:
+                            raise GigapointError("push: frames are binary messages (live/wire.py encode_frame)")
+                        frame = decode_frame(data)
+                    except GigapointError as exc:
+                        core.cloud.refused(exc)  # counted, shown on the HUD; push counts its own
+                        raise
+                    seq = await run_in_threadpool(frame.push_into, core.cloud)
+                    reply = {"type": "ack", "seq": seq}
+                except GigapointError as exc:
+                    reply = {"type": "error", "message": str(exc)[:500]}
+                await websocket.send_text(json.dumps(reply))
+        except (WebSocketDisconnect, RuntimeError, OSError, asyncio.CancelledError):
+            pass  # a producer gone mid-frame: nothing of its frame was pushed (frames are pushed whole)
+
     routes = [
         Route("/", page),
         Route("/index.html", page),
@@ -234,6 +268,7 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
         Route("/api/info", info),
         Route("/screenshot", screenshot),
         WebSocketRoute("/ws", ws_endpoint),
+        WebSocketRoute("/push", push_endpoint),
     ]
     app = Starlette(routes=routes)
     app.state.core = core
@@ -270,7 +305,7 @@ class ViewerServer:
             self.app,
             log_level=log_level,
             lifespan="off",
-            ws_max_size=P.MAX_MESSAGE * 4,
+            ws_max_size=P.MAX_MESSAGE * 4 if self.core.push_token is None else MAX_PUSH_BYTES,  # a live cloud takes pushed frames
             ws_ping_interval=20.0,
             ws_ping_timeout=20.0,
             timeout_graceful_shutdown=2,

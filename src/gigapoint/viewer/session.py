@@ -54,6 +54,13 @@ def memory_rss() -> int:
             return 0
 
 
+def cloud_bytes(cloud) -> int:
+    """Bytes the cloud's point arrays hold (``PointCloud.memory``; 0 for kinds without a breakdown)."""
+    from ..core import PointCloud
+
+    return cloud.nbytes if isinstance(cloud, PointCloud) else 0
+
+
 def encode_image(image: np.ndarray, fmt: str = "JPEG", quality: int = 85) -> bytes:
     from PIL import Image
 
@@ -193,6 +200,9 @@ class ViewerCore:
         self.framing = sample_points(cloud)  # what the 'auto' view frames: the data, not its box
         self.watcher = None
         self.note = ""  # a line for the HUD (what a conversion preview shows)
+        self.push_token: str | None = None  # a live cloud's: the key of the /push WebSocket
+        self.live = None  # the LiveCloud shown, if it is one
+        from ..live import LiveCloud
         from ..lod.preview import ConversionPreview
         from ..lod.progressive import ProgressiveOctree
 
@@ -204,6 +214,12 @@ class ViewerCore:
             from .watch import LoadWatcher
 
             self.watcher = LoadWatcher(self, cloud).start()
+        elif isinstance(cloud, LiveCloud):  # frames stream in: redraw on each, the HUD's line on rates and latency
+            from .watch import LiveWatcher
+
+            self.live = cloud
+            self.push_token = secrets.token_urlsafe(18)  # another process pushes frames only with it (server.py /push)
+            self.watcher = LiveWatcher(self, cloud).start()
 
     def replace_cloud(self, cloud) -> None:
         """Draw ``cloud`` from now on (a newer preview, or the finished octree); every tab redraws, views stay."""
@@ -487,6 +503,8 @@ class Session:
             self.budget.record(frame.stats.points_processed, frame.stats.time_ms / 1000.0)
             jpeg = encode_image(frame.image, "JPEG", quality if level == 0 else min(quality, 75))
             t2 = time.perf_counter()
+            if cloud is self.core.live:  # a live cloud measures push-to-pixels latency
+                cloud.drawn(frame)
             if moving:
                 self.scales.record(level, t2 - t0)
             with self.cond:
@@ -512,6 +530,7 @@ class Session:
                 "visible_pixels": stats.visible_pixels,
                 "backend": stats.backend,
                 "memory": memory_rss(),
+                "cloud_bytes": cloud_bytes(cloud),
                 "load_progress": float(cloud.load_progress),
                 "note": self.core.note,
                 "camera": state.as_dict(),

@@ -1,5 +1,6 @@
 """Follow a cloud that is still being made: a conversion (newer previews, then the finished
-octree: ConversionWatcher), or a progressive octree filling (LoadWatcher).
+octree: ConversionWatcher), a progressive octree filling (LoadWatcher), or a live cloud
+receiving frames (LiveWatcher).
 
 ``gigapoint view OUT`` on an unfinished conversion starts with its preview (a
 ConversionPreview, lod/preview.py). A thread polls the octree folder (lod/octree_dir.py)
@@ -119,3 +120,40 @@ class LoadWatcher:
             self.core.redraw()
             if done:
                 self.finished.set()
+
+
+class LiveWatcher:
+    """While frames stream into a LiveCloud: redraw every tab when one arrives (at most every
+    ``min_interval_s``; a tab renders only the latest state, so frames that arrive while it draws
+    coalesce), and keep the HUD's line on frames in per second, live points and push-to-pixels
+    latency (LiveCloud.hud)."""
+
+    def __init__(self, core, cloud, min_interval_s: float = 1 / 120, hud_interval_s: float = 0.25):
+        self.core = core
+        self.cloud = cloud
+        self.min_interval_s = min_interval_s
+        self.hud_interval_s = hud_interval_s
+        self.finished = threading.Event()
+        core.note = cloud.hud()
+        self._thread = threading.Thread(target=self._run, name="gigapoint-live-watch", daemon=True)
+
+    def start(self) -> LiveWatcher:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self.finished.set()
+
+    def _run(self) -> None:
+        seen = self.cloud.changes
+        hud_at = 0.0
+        while not self.finished.is_set():
+            now_seen = self.cloud.wait_frame(seen, timeout=self.hud_interval_s)
+            now = time.monotonic()
+            if now - hud_at >= self.hud_interval_s:
+                self.core.note = self.cloud.hud()
+                hud_at = now
+            if now_seen != seen or self.cloud.decay is not None:
+                seen = now_seen
+                self.core.redraw()
+            self.finished.wait(self.min_interval_s)

@@ -13,6 +13,17 @@ from .passes import CpuPasses
 
 _ONE_PIXEL = np.zeros((1, 3), np.int32)  # footprint of one-pixel points (dx, dy, need)
 _ONE_PIXEL[0, 2] = 1
+_NO_WORDS = np.zeros(0, np.uint32)
+_NO_EXT = np.zeros(0, np.uint64)
+
+
+def layout_words(points, ids) -> tuple:
+    """``raster.rasterize``'s (med, high, ext, ext_firsts, codes) for the batches ``ids``: the
+    medium/high word arrays, or the compact layout's streams and codes (core/compact.py)."""
+    if points.med is not None:  # three words a point (else the compact layout: core/compact.py)
+        return points.med, points.high, _NO_EXT, np.zeros(len(ids), np.int64), np.full(len(ids), raster.FULL_LAYOUT, np.uint32)
+    chosen = points.packing[ids]
+    return _NO_WORDS, _NO_WORDS, points.ext, chosen["ext_first"].astype(np.int64), chosen["code"].astype(np.uint32)
 
 
 def split_by_points(counts: np.ndarray, n_parts: int) -> np.ndarray:
@@ -86,11 +97,12 @@ class NumbaCpuBackend:
         starts = split_by_points(counts, n_threads)
         if splat is None:
             splat = (_ONE_PIXEL, np.float32(1.0), np.float32(0.0))
+        words = layout_words(points, ids)
         with self.lock:
             return self._rasterize_locked(points, width, height, np.asarray(nears, np.float64), np.asarray(fars, np.float64), n_threads, firsts, counts, starts,
-                                          np.ascontiguousarray(bits, np.int32), np.ascontiguousarray(matrices, np.float32), splat, max(1, int(step)))  # fmt: skip
+                                          np.ascontiguousarray(bits, np.int32), np.ascontiguousarray(matrices, np.float32), splat, max(1, int(step)), words)  # fmt: skip
 
-    def _rasterize_locked(self, points, width, height, nears, fars, n_threads, firsts, counts, starts, bits, matrices, splat, step):
+    def _rasterize_locked(self, points, width, height, nears, fars, n_threads, firsts, counts, starts, bits, matrices, splat, step, words):
         n_views = len(nears)
         frames = np.empty((n_views, width * height), np.uint64)
         for frame in frames:
@@ -105,8 +117,7 @@ class NumbaCpuBackend:
                 bits,
                 matrices,
                 points.low,
-                points.med,
-                points.high,
+                *words,
                 width,
                 height,
                 nears,

@@ -19,8 +19,18 @@ from numba.core import cgutils, types
 from numba.cpython.unsafe.numbers import trailing_zeros as _ctz
 from numba.extending import intrinsic
 
-from ...render.params import EDL_EMPTY_RESPONSE, EXP2_C, LOG2_C1, LOG2_C3, LOG2_C5, LOG2_C7, soft_weight
-from .raster import inside_frustum, project_batch
+from ...render.params import (
+    EDL_EMPTY_RESPONSE,
+    EXP2_C,
+    LOG2_C1,
+    LOG2_C3,
+    LOG2_C5,
+    LOG2_C7,
+    TR_COUNT_BITS,
+    TR_REVEAL_BITS,
+    soft_weight,
+)
+from .raster import footprint_spans, inside_frustum, project_batch
 
 EMPTY = np.uint64(0xFFFFFFFFFFFFFFFF)
 _LOW32 = np.uint64(0xFFFFFFFF)
@@ -612,6 +622,173 @@ def hqs_shade(
                                 np.int64(yy) * width + xx, depth[j], color[first + j], w, vis_f32, t1, acc, spill_rg, spill_ba, spill_n
                             )
         _hqs_resolve_rows(r0, r1, width, acc, spill_rg, spill_ba, spill_n, fallback, out)
+
+
+# --- transparency (render/passes/transparency.py: the rule and its numpy reference) ------------
+_TR_COUNT_SHIFT = np.uint64(TR_COUNT_BITS)
+_FULL = np.int64(65536)  # transmittance 1, 16-bit fixed point
+
+
+@njit(inline="always")
+def _tr_add(p, key, col, a8, reveal, kbuf, kalpha, sums):
+    """One fragment into pixel p: its key into the k-buffer kbuf[p] (ascending, EMPTY-padded: the
+    largest drops out) and its alpha into kalpha[p] beside it; a8, a8 x color and the revealage
+    term into sums[p]."""
+    p = np.uint64(p)  # unsigned (p >= 0 here): no negative-index wraparound
+    layers = kbuf.shape[1]
+    if key < kbuf[p, layers - 1]:
+        i = layers - 1
+        while i > 0 and kbuf[p, i - 1] > key:
+            kbuf[p, i] = kbuf[p, i - 1]
+            kalpha[p, i] = kalpha[p, i - 1]
+            i -= 1
+        kbuf[p, i] = key
+        kalpha[p, i] = np.uint8(a8)
+    c = np.uint64(col)
+    sums[p, 0] += a8
+    sums[p, 1] += a8 * (c & np.uint64(255))
+    sums[p, 2] += a8 * ((c >> np.uint64(8)) & np.uint64(255))
+    sums[p, 3] += a8 * ((c >> np.uint64(16)) & np.uint64(255))
+    sums[p, 4] += reveal
+
+
+@njit(inline="always")
+def _tr_resolve_rows(r0, r1, width, kbuf, kalpha, sums, color, table, background, fallback, out):
+    """out = the composite of rows r0..r1 (fallback where no fragment landed); k-buffer and sums
+    back to EMPTY and zero."""
+    layers = kbuf.shape[1]
+    for p in range(r0 * width, r1 * width):
+        reveal = sums[p, 4]
+        if reveal == 0:
+            out[p] = fallback[p]
+            continue
+        t = _FULL
+        acc0 = np.int64(0)
+        acc1 = np.int64(0)
+        acc2 = np.int64(0)
+        kept_a = np.uint64(0)
+        kept0 = np.uint64(0)
+        kept1 = np.uint64(0)
+        kept2 = np.uint64(0)
+        for i in range(layers):  # the nearest fragments, front to back
+            key = kbuf[p, i]
+            if key == EMPTY:
+                break
+            kbuf[p, i] = EMPTY
+            index = np.int64(key & _LOW32)
+            a = np.int64(kalpha[p, i])
+            c = color[index]
+            c0 = np.int64(c & np.uint32(255))
+            c1 = np.int64((c >> np.uint32(8)) & np.uint32(255))
+            c2 = np.int64((c >> np.uint32(16)) & np.uint32(255))
+            w = (a * t + 127) // 255
+            acc0 += w * c0
+            acc1 += w * c1
+            acc2 += w * c2
+            t -= w
+            kept_a += np.uint64(a)
+            kept0 += np.uint64(a * c0)
+            kept1 += np.uint64(a * c1)
+            kept2 += np.uint64(a * c2)
+        tail_a = sums[p, 0] - kept_a
+        if tail_a > 0:  # fragments left out: their mean color gets the light the kept ones leave
+            lg = reveal >> _TR_COUNT_SHIFT
+            e = lg >> np.uint64(TR_REVEAL_BITS)
+            t_all = np.int64(0) if e >= np.uint64(16) else np.int64(table[(lg >> np.uint64(TR_REVEAL_BITS - 8)) & np.uint64(255)] >> np.uint32(e))
+            t_all = min(t_all, t)
+            s = np.uint64(0)
+            while (tail_a >> s) >= np.uint64(65536):
+                s += np.uint64(1)
+            w16 = tail_a >> s
+            h = w16 >> np.uint64(1)
+            tw = t - t_all
+            acc0 += tw * np.int64((((sums[p, 1] - kept0) >> s) + h) // w16)
+            acc1 += tw * np.int64((((sums[p, 2] - kept1) >> s) + h) // w16)
+            acc2 += tw * np.int64((((sums[p, 3] - kept2) >> s) + h) // w16)
+            t = t_all
+        r = np.uint32((acc0 + np.int64(background[0]) * t + 32768) >> 16)
+        g = np.uint32((acc1 + np.int64(background[1]) * t + 32768) >> 16)
+        b = np.uint32((acc2 + np.int64(background[2]) * t + 32768) >> 16)
+        a_out = np.uint32((255 * (_FULL - t) + np.int64(background[3]) * t + 32768) >> 16)
+        out[p] = r | (g << np.uint32(8)) | (b << np.uint32(16)) | (a_out << np.uint32(24))
+        for q in range(5):
+            sums[p, q] = 0
+
+
+@njit(parallel=True, cache=True)
+def transparency_shade(
+    firsts, counts, bits, mats, row_lo, row_hi, low, med, high, width, height, near, far, step, bands,
+    alphas, color, footprint, size, atten, kbuf, kalpha, sums, table, background, fallback, out,
+):  # fmt: skip
+    """Hybrid transparency, accumulation and resolve in one parallel pass over screen bands (the
+    layout of ``hqs_shade``): band t's thread re-projects (raster.py's ``project_batch``) the
+    batches reaching its rows and puts every fragment (each footprint pixel of every step-th
+    point, as the depth pass drew them) into its pixel's k-buffer ``kbuf`` (pixels, layers) u64,
+    with the kept fragments' alphas in ``kalpha`` (pixels, layers) u8, and sums ``sums``
+    (pixels, 5) u64 (``_tr_add``; ``alphas[k]`` = the batch's 8-bit alpha and revealage term),
+    then composites its rows over ``background`` (4 ints) with the transmittance ``table``
+    (``fallback`` where nothing landed). The k-buffer keeps the
+    smallest keys and the sums are integers: the image does not depend on the order or the
+    thread count. kbuf must be EMPTY and sums zero on entry; they are on exit."""
+    n_bands = bands.shape[0] - 1
+    n_fp = footprint.shape[0]
+    reach = 0
+    for o in range(n_fp):
+        reach = max(reach, abs(footprint[o, 1]))
+    max_count = 0
+    for k in range(counts.shape[0]):
+        max_count = max(max_count, counts[k])
+    near32 = np.float32(near)
+    far32 = np.float32(far)
+    spans, rows = footprint_spans(footprint)
+    rr = spans.shape[1] // 2
+    k_max = spans.shape[0] - 1
+    one_centre = rows[1, 0] == 0 and rows[1, 1] == 0 and spans[1, rr, 0] == 0 and spans[1, rr, 1] == 0
+    for t in prange(n_bands):
+        r0 = bands[t]
+        r1 = bands[t + 1]
+        p0 = np.int32(r0 * width)
+        p1 = np.int32(r1 * width)
+        pix = np.empty(max_count, np.int32)
+        depth = np.empty(max_count, np.float32)
+        dbits = depth.view(np.uint32)
+        for k in range(counts.shape[0]):
+            if r0 == r1 or row_hi[k] + reach < r0 or row_lo[k] - reach >= r1:
+                continue
+            first = firsts[k]
+            c = counts[k]
+            clip = not inside_frustum(mats[k], width, height, near32, far32)
+            project_batch(low[first : first + c], med[first : first + c], high[first : first + c], bits[k], mats[k],
+                          width, height, near32, far32, pix[:c], depth[:c], clip)  # fmt: skip
+            a8 = np.uint64(alphas[k, 0])
+            reveal = (np.uint64(alphas[k, 1]) << _TR_COUNT_SHIFT) + np.uint64(1)
+            for j in range(0, c, step):
+                p = pix[j]
+                if p < 0:
+                    continue
+                key = (np.uint64(dbits[j]) << np.uint64(32)) | np.uint64(first + j)
+                if n_fp == 1:
+                    if p0 <= p < p1:
+                        _tr_add(p, key, color[first + j], a8, reveal, kbuf, kalpha, sums)
+                    continue
+                x = np.int64(p % width)
+                y = np.int64(p // width)
+                if y + reach < r0 or y - reach >= r1:
+                    continue
+                s = size if atten == 0 else min(size, max(np.float32(1.0), atten / depth[j]))
+                kk = min(np.int64(s), k_max)  # needs are integers: size s covers those of floor(s)
+                col = color[first + j]
+                if kk == 1 and one_centre:  # most points of an adaptive overview: their own pixel
+                    if r0 <= y < r1:
+                        _tr_add(p, key, col, a8, reveal, kbuf, kalpha, sums)
+                    continue
+                # row by row (the footprint as runs of columns, raster.footprint_spans): neighbouring
+                # pixels one after the other, 7-18 % faster than the table's order by need
+                for dy in range(max(np.int64(rows[kk, 0]), r0 - y), min(np.int64(rows[kk, 1]), r1 - 1 - y) + 1):
+                    row = (y + dy) * width
+                    for xx in range(max(x + spans[kk, dy + rr, 0], 0), min(x + spans[kk, dy + rr, 1], width - 1) + 1):
+                        _tr_add(row + xx, key, col, a8, reveal, kbuf, kalpha, sums)
+        _tr_resolve_rows(r0, r1, width, kbuf, kalpha, sums, color, table, background, fallback, out)
 
 
 @njit(parallel=True, cache=True)

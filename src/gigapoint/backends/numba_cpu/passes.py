@@ -13,7 +13,20 @@ import functools
 import numba
 import numpy as np
 
-from ...render.params import AMBIENT, DEPTH_GAP, DIFFUSE, SPECULAR, edl_scale, neighbour_offsets, radius_map, view_directions, window
+from ...core.compact import full_words, rgb565_table, rgb565_words
+from ...render.params import (
+    AMBIENT,
+    DEPTH_GAP,
+    DIFFUSE,
+    SPECULAR,
+    TR_LAYERS,
+    edl_scale,
+    neighbour_offsets,
+    radius_map,
+    transmittance_table,
+    view_directions,
+    window,
+)
 from . import pass_kernels as kernels
 from . import raster
 
@@ -26,7 +39,10 @@ def resolve(vis: np.ndarray, point_colors: np.ndarray, background) -> tuple[np.n
     vis = np.ascontiguousarray(vis).reshape(-1)
     bg = np.array(background, np.uint8).view(np.uint32)[0]
     out = np.empty(vis.shape[0], np.uint32)
-    covered = raster.resolve_colors(vis, point_colors, bg, out)
+    if point_colors.dtype == np.uint16:  # a compact cloud's 16-bit colors
+        covered = raster.resolve_colors(vis, rgb565_words(point_colors), bg, out, rgb565_table())
+    else:
+        covered = raster.resolve_colors(vis, point_colors, bg, out, raster.NO_TABLE)
     return out, int(covered)
 
 
@@ -179,12 +195,68 @@ def hqs_colors(
     try:  # if the pass fails half-way the sums are dirty: drop them
         kernels.hqs_shade(
             batches["first"].astype(np.int64), counts, np.ascontiguousarray(sel.bits, np.int32), matrices, row_lo, row_hi,
-            points.low, points.med, points.high, width, height, near, far, bands, vis.view(np.float32), np.float32(1.0 + tolerance),
+            points.low, *full_words(points), width, height, near, far, bands, vis.view(np.float32), np.float32(1.0 + tolerance),
             point_colors, np.ascontiguousarray(footprint, np.int32), np.float32(size), np.float32(atten), float(softness),
             acc, spill_rg, spill_ba, spill_n, np.ascontiguousarray(fallback).reshape(-1), out,
         )  # fmt: skip
     except BaseException:
         _HQS_BUFFERS.clear()
+        raise
+    finally:
+        numba.set_num_threads(previous)
+    return out
+
+
+# --- transparency ----------------------------------------------------------------------------
+_TR_BUFFERS: dict = {}
+
+
+def _transparency_buffers(n_pixels: int):
+    """The k-buffer (EMPTY), its alphas and the sums (zero) between frames; ``transparency_shade``
+    restores them."""
+    bufs = _TR_BUFFERS.get(n_pixels)
+    if bufs is None:
+        _TR_BUFFERS.clear()
+        kbuf = np.empty((n_pixels, TR_LAYERS), np.uint64)
+        raster.fill_empty(kbuf.reshape(-1))
+        bufs = _TR_BUFFERS[n_pixels] = (kbuf, np.zeros((n_pixels, TR_LAYERS), np.uint8), np.zeros((n_pixels, 5), np.uint64))
+    return bufs
+
+
+def transparent_colors(
+    points, sel, vis, width, height, near, far, point_colors, alphas, fallback, background, threads=None, splat=None, step=1, bands=None
+) -> np.ndarray:
+    """(H*W,) u32 hybrid transparency composite of the selected batches' points
+    (render/passes/transparency.py gives the rule and its reference): ``alphas`` (k, 2) u32 per
+    selected batch (8-bit alpha, revealage term: params.batch_alphas), ``fallback`` the colors of
+    pixels no point reaches, ``background`` RGBA; ``vis`` is not read (the k-buffer holds the
+    fronts). One band of rows per thread, as high-quality shading (``hqs_colors``; ``bands``: how
+    many bands instead; more than one a thread was slower in every view measured, the
+    re-projection outweighing the smaller working set). ``step``: every step-th point of each
+    batch, as the depth pass drew them."""
+    footprint, size, atten = splat if splat is not None else (_ONE, np.float32(1), np.float32(0))
+    n_threads = max(1, min(threads or numba.get_num_threads(), numba.config.NUMBA_NUM_THREADS, height))
+    batches = points.batches[sel.ids]
+    counts = batches["count"].astype(np.int64)
+    firsts = batches["first"].astype(np.int64)
+    matrices = np.ascontiguousarray(sel.matrices, np.float32)
+    row_lo, row_hi, span = batch_rows(matrices, height)
+    step = max(1, int(step))
+    bands = split_rows(row_lo, row_hi, span, counts // step, width, height, max(1, min(int(bands or n_threads), height)))
+    alphas = np.ascontiguousarray(alphas, np.uint32).reshape(-1, 2)
+    kbuf, kalpha, sums = _transparency_buffers(width * height)
+    out = np.empty(width * height, np.uint32)
+    previous = numba.get_num_threads()
+    numba.set_num_threads(n_threads)
+    try:  # if the pass fails half-way the buffers are dirty: drop them
+        kernels.transparency_shade(
+            firsts, counts, np.ascontiguousarray(sel.bits, np.int32), matrices, row_lo, row_hi, points.low, *full_words(points),
+            width, height, near, far, step, bands, alphas, np.ascontiguousarray(point_colors, np.uint32),
+            np.ascontiguousarray(footprint, np.int32), np.float32(size), np.float32(atten), kbuf, kalpha, sums, transmittance_table(),
+            np.array(background, np.int64), np.ascontiguousarray(fallback, np.uint32).reshape(-1), out,
+        )  # fmt: skip
+    except BaseException:
+        _TR_BUFFERS.clear()
         raise
     finally:
         numba.set_num_threads(previous)
@@ -215,6 +287,7 @@ class CpuPasses:
     resolve = staticmethod(resolve)
     fill_holes = staticmethod(fill_holes)
     hqs_colors = staticmethod(hqs_colors)
+    transparent_colors = staticmethod(transparent_colors)
     shade = staticmethod(shade)
     eye_dome_lighting = staticmethod(eye_dome_lighting)
     downsample = staticmethod(downsample)

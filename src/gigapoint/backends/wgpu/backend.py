@@ -48,6 +48,10 @@ _INT64_FEATURES = ("shader-int64", "shader-int64-atomic-min-max")
 _TYPE_RANK = {"DiscreteGPU": 0, "IntegratedGPU": 1, "Unknown": 2, "CPU": 3}
 #: Storage buffers the HQS accumulate pass binds (point words, footprint, visibility, colors, sums).
 HQS_STORAGE_BUFFERS = 9
+#: Storage buffers the transparency accumulate pass binds (point words, footprint, k-buffer, colors, sums, alphas).
+TRANSPARENCY_STORAGE_BUFFERS = 10
+#: What the transparency pass's k-buffer needs besides 64-bit atomicMin: atomics that return the old value.
+_ALL_OPS = "shader-int64-atomic-all-ops"
 _EMPTY_WORD = 0xFFFFFFFF
 
 #: Default bound on GPU memory held for point data (bytes). Frames whose selection needs
@@ -144,12 +148,13 @@ class WgpuBackend:
         # WebGPU guarantees 8 storage buffers per stage; HQS binds 9 where the adapter allows
         n_storage = int(limits.get("max-storage-buffers-per-shader-stage", 8))
         if n_storage >= HQS_STORAGE_BUFFERS:
-            required["max-storage-buffers-per-shader-stage"] = HQS_STORAGE_BUFFERS
+            required["max-storage-buffers-per-shader-stage"] = min(n_storage, TRANSPARENCY_STORAGE_BUFFERS)
+        all_ops = atomics64 and _ALL_OPS in offered  # the transparency pass on the GPU (else the CPU's)
         try:
             with _quiet_wayland_probe():
                 device = self.adapter.request_device_sync(
                     label="gigapoint",
-                    required_features=list(_INT64_FEATURES) if atomics64 else [],
+                    required_features=[*_INT64_FEATURES, *([_ALL_OPS] if all_ops else [])] if atomics64 else [],
                     required_limits=required,
                 )
         except Exception as exc:  # noqa: BLE001 - wgpu-native reports failures with many types
@@ -159,6 +164,7 @@ class WgpuBackend:
         limit = min(binding, int(memory_budget) // 4, binding if page_bytes is None else int(page_bytes))
         #: The device, its buffers and the draw loop, shared with the passes.
         self.ctx = GpuContext(wgpu, device, binding, max(4, limit // 16 * 4), memory_budget, atomics64, n_storage >= HQS_STORAGE_BUFFERS)
+        self.ctx.transparency_on_gpu = all_ops and n_storage >= TRANSPARENCY_STORAGE_BUFFERS
         self.lock = self.ctx.lock  # one frame at a time; re-entrant: reading back a DeviceArray takes it too
         self.info = dict(info)
         #: The image-quality passes on GPU buffers; where the adapter cannot run one, the CPU's.
@@ -218,8 +224,10 @@ class WgpuBackend:
     def forget(self, points) -> None:
         """Drop the GPU copies of point buffers (needed only after changing their arrays in place,
         for buffers without a ``version``: memory.py)."""
-        for a in (points.low, points.med, points.high, points.color):
-            self.ctx.cache.forget(a)
+        extra = (points.ext,) if points.med is None else ()  # the compact layout's streams (core/compact.py)
+        for a in (points.low, points.med, points.high, *extra, points.color):
+            if a is not None:
+                self.ctx.cache.forget(a)
         self.ctx.plans.pop(id(points.batches), None)
 
     # ------------------------------------------------------------------ the interface

@@ -21,7 +21,7 @@ import numpy as np
 
 from ...errors import GigapointError
 from ...render.params import soft_weight
-from .layout import GPU_BATCH_DTYPE, MAX_VIEWS, PARAMS_DTYPE
+from .layout import FULL_LAYOUT, GPU_BATCH_DTYPE, MAX_VIEWS, PARAMS_DTYPE
 from .memory import BufferCache, PagePlan, batch_ends, plan_pages
 from .shaders import shader_source
 
@@ -123,7 +123,10 @@ class GpuContext:
     """A wgpu device with its pipelines, frame buffers, point-page cache and draw loop.
 
     ``max_binding``: the largest storage binding; ``page_points``: points of one page of
-    point words; ``hqs_on_gpu``: the adapter binds the 9 storage buffers HQS needs."""
+    point words; ``hqs_on_gpu``: the adapter binds the 9 storage buffers HQS needs;
+    ``transparency_on_gpu``: the device has what the transparency pass needs (set by WgpuBackend)."""
+
+    transparency_on_gpu = False
 
     def __init__(self, wgpu, device, max_binding: int, page_points: int, memory_budget: int, atomics64: bool, hqs_on_gpu: bool) -> None:
         self.wgpu = wgpu
@@ -290,7 +293,10 @@ class GpuContext:
         plan = self.plans.get(id(batches))
         if points.version is None:
             if plan is None or plan.ref() is not batches:
-                starts, stops, page_of = plan_pages(batches, self.page_points)
+                # a compact cloud's extension streams hold up to 7.5 bytes a point (wide batches):
+                # half-size pages keep them within one binding
+                page = self.page_points if points.med is not None else max(1, self.page_points // 2)
+                starts, stops, page_of = plan_pages(batches, page)
                 plan = PagePlan(weakref.ref(batches), starts, stops, page_of)
                 self.plans[id(batches)] = plan
             return plan
@@ -319,6 +325,23 @@ class GpuContext:
         self.device.queue.write_buffer(buf, 0, rows)
         uniforms = {"fp_count": len(fp), "point_size": size, "atten": atten, "softness": np.float32(softness)}
         return (buf, rows.nbytes), uniforms
+
+    def ext_ranges(self, points, plan: PagePlan) -> tuple[np.ndarray, np.ndarray]:
+        """Per page of a compact cloud: the u64 words lo..hi of ``points.ext`` its batches' streams
+        span (computed once per plan)."""
+        if plan.ext_ranges is not None:
+            return plan.ext_ranges
+        pack, counts = points.packing, points.batches["count"].astype(np.int64)
+        first = pack["ext_first"].astype(np.int64)
+        code = pack["code"].astype(np.int64)
+        t = (code & 0xFF) + ((code >> 8) & 0xFF) + ((code >> 16) & 0xFF)
+        end = first + np.where(t > 0, (counts * t + 63) // 64 + 1, 0)
+        lo = np.full(plan.n_pages, np.iinfo(np.int64).max)
+        hi = np.zeros(plan.n_pages, np.int64)
+        np.minimum.at(lo, plan.page_of, first)
+        np.maximum.at(hi, plan.page_of, end)
+        plan.ext_ranges = (lo, np.maximum(hi, lo))
+        return plan.ext_ranges
 
     def draw_batches(self, points, views: Views, pass_names, params: dict, footprint, extra) -> None:
         """Dispatch ``pass_names`` (draw passes: common.wgsl's bindings 0-6) over the batches of
@@ -353,6 +376,13 @@ class GpuContext:
         records["local_first"][slot] = chosen["first"].astype(np.int64) - plan.starts[pages]
         records["count"][slot] = chosen["count"]
         records["bits"][slot] = views.bits[:, order]
+        pack = points.packing if points.med is None else None  # the compact layout (core/compact.py)
+        if pack is None:
+            records["code"] = FULL_LAYOUT
+        else:
+            ext_lo, ext_hi = self.ext_ranges(points, plan)
+            records["code"][slot] = pack["code"][ids]
+            records["ext_first"][slot] = 2 * (pack["ext_first"][ids].astype(np.int64) - ext_lo[pages])  # u32 words of the page's stream
         rec_buf = self.frame_buffer("records", records.nbytes, usage.STORAGE | usage.COPY_DST)
         self.device.queue.write_buffer(rec_buf, 0, records)
         table = np.zeros((MAX_VIEWS, 4), np.float32)
@@ -367,8 +397,12 @@ class GpuContext:
                 pinned: set = set()
                 words = [self.cache.get(points.low, start, stop, pinned)]
                 # Medium/high words go to the GPU only once a frame needs them.
-                words.append(self.cache.get(points.med, start, stop, pinned) if max_bits >= 20 else self.dummy)
-                words.append(self.cache.get(points.high, start, stop, pinned) if max_bits >= 30 else self.dummy)
+                if pack is not None:  # the compact layout: the page's extension streams in med's place
+                    words.append(self.cache.get(points.ext, int(ext_lo[p]), int(ext_hi[p]), pinned) if max_bits >= 20 else self.dummy)
+                    words.append(self.dummy)
+                else:
+                    words.append(self.cache.get(points.med, start, stop, pinned) if max_bits >= 20 else self.dummy)
+                    words.append(self.cache.get(points.high, start, stop, pinned) if max_bits >= 30 else self.dummy)
                 own = extra(start, stop, pinned)
                 uniform = self.uniform(
                     **params, batch_offset=n_views * r0, batch_count=r1 - r0, page_first=start, page_count=stop - start,

@@ -25,8 +25,17 @@ GPU_BATCH_DTYPE = np.dtype(
         ("local_first", "<u4"),  # the same point's index inside its page's buffers
         ("count", "<u4"),
         ("bits", "<u4"),  # precision: 10, 20 or 30
+        # the compact layout (core/compact.py): the batch's extension stream starts at this u32 of
+        # the page's stream (bound where three-word pages bind ``med``)
+        ("ext_first", "<u4"),
+        ("code", "<u4"),  # its e_x | e_y << 8 | e_z << 16; FULL_LAYOUT: three words (med, high)
+        ("_pad0", "<u4"),
+        ("_pad1", "<u4"),
     ]
 )
+
+#: ``code`` of a batch in three u32 words
+FULL_LAYOUT = 0xFFFFFFFF
 
 #: Per-dispatch uniforms shared by every pass (each pass reads the fields it needs).
 PARAMS_DTYPE = np.dtype(
@@ -58,7 +67,7 @@ PARAMS_DTYPE = np.dtype(
         ("specular", "<f4"),
         ("shininess", "<f4"),
         ("step", "<u4"),  # raster: draw every step-th point of each batch (0 or 1: all)
-        ("_pad", "<u4"),  # the view table starts on a 16-byte boundary
+        ("color_bits", "<u4"),  # resolve: 16 = colors are u16 RGB565 (a compact cloud's), else u32 RGBA8
         ("views", "<f4", (MAX_VIEWS, 4)),  # raster: view v's (near, far, -, -) (entry 0 repeats near, far)
     ]
 )

@@ -44,6 +44,7 @@ class PagePlan:
     stops: np.ndarray  # int64 one past the last point
     page_of: np.ndarray  # int64 page of each batch
     ends: np.ndarray | None = None  # int64 end of each batch as planned (clouds whose batches refill: re-plan when it moves)
+    ext_ranges: tuple[np.ndarray, np.ndarray] | None = None  # compact clouds: each page's u64 words of the extension streams
 
     @property
     def n_pages(self) -> int:
@@ -218,7 +219,7 @@ def stale_ranges(cloud, since: int, start: int, stop: int) -> list[tuple[int, in
     batches = cloud.batches
     first = batches["first"].astype(np.int64)
     end = first + batches["count"].astype(np.int64)
-    hit = np.flatnonzero((np.asarray(versions) > since) & (first < stop) & (end > start))
+    hit = np.flatnonzero((np.asarray(versions) > since) & (first < stop) & (end > start) & (end > first))  # an emptied batch: nothing to send
     if not len(hit):
         return []
     lo = np.maximum(first[hit], start)

@@ -1,8 +1,8 @@
-"""The image-quality passes on the GPU: resolve, hole filling, HQS, lighting, eye-dome lighting.
+"""The image-quality passes on the GPU: resolve, hole filling, HQS, transparency, lighting, eye-dome lighting.
 
 ``GpuPasses`` is the wgpu backend's ``Passes`` (gigapoint.render.backend): each method has
 the signature of the CPU's and gives the same image on the same input: bit for bit where
-the pass is integer work (hole filling, HQS, resolve), and within one unit per channel on
+the pass is integer work (hole filling, HQS, transparency, resolve), and within one unit per channel on
 rare pixels where float rounding may differ (lighting's ``pow``; EDL's float32 series on
 GPUs that fuse multiply-adds; soft splat weights of attenuated points, float32 here,
 float64 on the CPU). On Mesa lavapipe all of them are bit for bit. Tables and constants
@@ -21,11 +21,37 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...render.params import AMBIENT, DEPTH_GAP, DIFFUSE, SPECULAR, edl_scale, neighbour_offsets, radius_map, view_directions, window
+from ...render.params import (
+    AMBIENT,
+    DEPTH_GAP,
+    DIFFUSE,
+    SPECULAR,
+    TR_LAYERS,
+    edl_scale,
+    neighbour_offsets,
+    radius_map,
+    transmittance_table,
+    view_directions,
+    window,
+)
 from .context import DeviceArray, GpuContext, Views
 
 _VIS_ROLES = ("visibility", "visibility_b")
 _IMAGE_ROLES = ("image", "image_b")
+
+
+def _alpha_rows(firsts: np.ndarray, alphas: np.ndarray) -> np.ndarray:
+    """(m, 4) u32 rows (first point, 8-bit alpha, revealage term, 0) ascending by first point: the
+    shaders find a point's alpha by binary search; one row when every batch has the same."""
+    if len(alphas) == 0 or np.all(alphas == alphas[0]):
+        rows = np.zeros((1, 4), np.uint32)
+        rows[0, 1:3] = alphas[0] if len(alphas) else 0
+        return rows
+    order = np.argsort(firsts, kind="stable")
+    rows = np.zeros((len(firsts), 4), np.uint32)
+    rows[:, 0] = firsts[order]
+    rows[:, 1:3] = alphas[order]
+    return rows
 
 
 class GpuPasses:
@@ -40,7 +66,8 @@ class GpuPasses:
         pixels are not counted on the GPU)."""
         ctx = self.ctx
         with ctx.lock:
-            color = np.ascontiguousarray(point_colors, np.uint32)  # the same array (cache key) when already u32
+            short = point_colors.dtype == np.uint16  # a compact cloud's RGB565 colors, decoded by the shader
+            color = point_colors if short else np.ascontiguousarray(point_colors, np.uint32)  # the same array (cache key) when already u32
             n_pixels = int(np.prod(np.shape(vis)))  # np.shape reads a DeviceArray's shape without reading it back
             ctx.check_frame(n_pixels)
             bg = int(np.array(background, np.uint8).view(np.uint32)[0])
@@ -52,7 +79,7 @@ class GpuPasses:
             for start in range(0, max(n_colors, 1), step):
                 stop = min(start + step, n_colors)
                 colors = ctx.cache.get(color, start, stop, set()) if stop > start else ctx.dummy
-                uniform = ctx.uniform(n_items=n_pixels, page_first=start, page_count=stop - start, background=bg)
+                uniform = ctx.uniform(n_items=n_pixels, page_first=start, page_count=stop - start, background=bg, color_bits=16 if short else 32)
                 ctx.dispatch_screen("resolve", [uniform, (vbuf, n_pixels * 8), (colors, colors.size), (image, n_pixels * 4)], n_pixels)
             return DeviceArray(ctx, role, np.uint32, n_pixels), None
 
@@ -115,6 +142,58 @@ class GpuPasses:
             out, orole = ctx.output(_IMAGE_ROLES, frole, n_pixels * 4)
             ctx.copy(fbuf, out, n_pixels * 4)  # the fallback colors first, then the means where points contributed
             ctx.dispatch_screen("hqs_resolve", [ctx.uniform(n_items=n_pixels), (accum, n_pixels * 20), (out, n_pixels * 4)], n_pixels)
+            return DeviceArray(ctx, orole, np.uint32, n_pixels)
+
+    def transparent_colors(
+        self, points, sel, vis, width, height, near, far, point_colors, alphas, fallback, background, threads=None, splat=None, step=1
+    ):
+        """Transparent points (render/passes/transparency.py): the hybrid composite of the selected
+        batches' fragments, bit for bit the CPU's. Three passes: accumulate (k-buffer of 64-bit
+        atomicMin cascades, u64 sums), gather (the kept fragments' colors, page by page), resolve.
+        Where the adapter lacks 64-bit atomics that return a value, binds fewer than 10 storage
+        buffers or the k-buffer (64 bytes a pixel) exceeds a binding: the CPU pass. ``vis`` and
+        ``threads`` are unused."""
+        ctx = self.ctx
+        n_pixels = int(width) * int(height)
+        if not ctx.transparency_on_gpu or n_pixels * TR_LAYERS * 8 > ctx.max_binding:
+            return self.fallback.transparent_colors(points, sel, None, width, height, near, far, point_colors, alphas,
+                                                    np.asarray(fallback), background, threads, splat, step)  # fmt: skip
+        with ctx.lock:
+            ctx.check_frame(n_pixels)
+            point_colors = np.ascontiguousarray(point_colors, np.uint32)
+            usage = ctx.wgpu.BufferUsage
+            fbuf, frole = ctx.device_input(fallback, _IMAGE_ROLES, np.uint32, n_pixels)
+            layers = ctx.frame_buffer("tr_layers", n_pixels * TR_LAYERS * 8, usage.STORAGE)
+            sums = ctx.frame_buffer("tr_sums", n_pixels * 40, usage.STORAGE)
+            ctx.clear(layers, 0xFFFFFFFF)
+            ctx.clear(sums, 0)
+            alphas = np.asarray(alphas, np.uint32).reshape(-1, 2)
+            firsts = points.batches["first"][sel.ids].astype(np.int64)
+            rows = _alpha_rows(firsts, alphas)
+            table = ctx.table("tr_alphas", rows)
+            ctx.cache.purge_dead()
+            footprint, splat_uniforms = ctx.footprint(splat)
+            params = {"width": width, "height": height, "step": max(1, int(step)), "n_items": len(rows), **splat_uniforms}
+
+            def own(start, stop, pinned):
+                colors = ctx.cache.get(point_colors, start, stop, pinned)
+                return [(layers, n_pixels * TR_LAYERS * 8), (colors, colors.size), (sums, n_pixels * 40), table]
+
+            ctx.draw_batches(points, Views.single(sel, near, far), ("transparency_accumulate",), params, footprint, own)
+            slots = ctx.frame_buffer("tr_slot_colors", n_pixels * TR_LAYERS * 4, usage.STORAGE)
+            n_slots = n_pixels * TR_LAYERS
+            for start in range(0, len(point_colors), ctx.page_points):
+                stop = min(start + ctx.page_points, len(point_colors))
+                colors = ctx.cache.get(point_colors, start, stop, set())
+                uniform = ctx.uniform(n_items=n_slots, page_first=start, page_count=stop - start)
+                ctx.dispatch_screen("transparency_gather", [uniform, (layers, n_slots * 8), (colors, colors.size), (slots, n_slots * 4)], n_slots)
+            out, orole = ctx.output(_IMAGE_ROLES, frole, n_pixels * 4)
+            ctx.copy(fbuf, out, n_pixels * 4)  # the fallback colors first, then the composite where fragments landed
+            bg = int(np.array(background, np.uint8).view(np.uint32)[0])
+            uniform = ctx.uniform(n_items=n_pixels, n_offsets=len(rows), background=bg)
+            entries = [uniform, (layers, n_slots * 8), (sums, n_pixels * 40), (slots, n_slots * 4), table,
+                       ctx.table("tr_transmittance", transmittance_table()), (out, n_pixels * 4)]  # fmt: skip
+            ctx.dispatch_screen("transparency_resolve", entries, n_pixels)
             return DeviceArray(ctx, orole, np.uint32, n_pixels)
 
     def shade(self, vis, colors, normals, camera, shininess=32.0):

@@ -22,6 +22,7 @@ _INCLUDE = re.compile(r"^//! include (\S+)\s*$", re.MULTILINE)
 PASSES = (
     "raster64", "raster_depth", "raster_index", "clear", "resolve",
     "hqs_accumulate", "hqs_resolve", "fill_holes", "log_depth", "edl", "lighting",
+    "transparency_accumulate", "transparency_gather", "transparency_resolve",
 )  # fmt: skip
 
 
@@ -33,11 +34,17 @@ def constants() -> dict[str, np.float32]:
     return {k: np.float32(v) for k, v in out.items()}
 
 
+def integer_constants() -> dict[str, int]:
+    """u32 constants the shaders share with the CPU kernels (render/params.py: transparency's)."""
+    return {"TR_LAYERS": params.TR_LAYERS, "TR_COUNT_BITS": params.TR_COUNT_BITS, "TR_REVEAL_BITS": params.TR_REVEAL_BITS}
+
+
 def wgsl_constants() -> str:
     """``const NAME: f32 = ...;`` lines; the decimal text is the float32 value exactly (repr of
     the float64 holding it), so the shader gets the same bits."""
     lines = ["// generated from gigapoint.render.params by gigapoint.backends.wgpu.shaders; do not edit"]
     lines += [f"const {k}: f32 = {float(v)!r};" for k, v in constants().items()]
+    lines += [f"const {k}: u32 = {int(v)}u;" for k, v in integer_constants().items()]
     return "\n".join(lines) + "\n"
 
 

@@ -189,13 +189,18 @@ def _hash(k, mask):
     return ((k * _HASH_MUL) >> np.uint64(32)) & mask
 
 
+@njit(inline="always")
+def _voxel_key(node, cell):
+    return (np.uint64(node) << np.uint64(3 * GRID_BITS)) | cell
+
+
 @njit(cache=True)
 def voxel_ids(hkeys, hvals, node, cell, next_vid, vid, is_new):
     """The voxel id of each (list, cell) (a list names its node): found in the open-addressing table, or a new id
-    (``next_vid`` on) entered there. The table is kept at most half full by the caller."""
+    (``next_vid`` on, in entry order) entered there. The table is kept at most half full by the caller."""
     mask = np.uint64(hkeys.shape[0] - 1)
     for e in range(node.shape[0]):
-        k = (np.uint64(node[e]) << np.uint64(3 * GRID_BITS)) | cell[e]
+        k = _voxel_key(node[e], cell[e])
         h = _hash(k, mask)
         while True:
             hk = hkeys[h]
@@ -351,6 +356,17 @@ def write_points(xyz, rgba, order, leaf_runs, run_offsets, slots, cmin, edge, lo
             color[s] = rgba[j]
 
 
+@njit(parallel=True, cache=True)
+def scatter_runs(src, order, leaf_runs, run_offsets, slots, dst):
+    """dst[slot] = src[point] for each leaf run's points, as write_points places them (one
+    attribute; called on same-width unsigned views, so it compiles for four types only)."""
+    for r in prange(leaf_runs.shape[0]):
+        lo, hi = leaf_runs[r, 1], leaf_runs[r, 2]
+        o = run_offsets[r] - lo
+        for i in range(lo, hi):
+            dst[slots[o + i]] = src[order[i]]
+
+
 @njit(inline="always")
 def _mean_color(sums, v):
     n = sums[v, 4]
@@ -363,18 +379,18 @@ def _mean_color(sums, v):
 
 
 @njit(parallel=True, cache=True)
-def write_voxels(vid, is_new, node, cell, first, sums, rgba, level, slots_of_new, new_index, vox_sum, vox_slot, vox_key, vox_first,
+def write_voxels(vid, is_new, node, cell, first, sums, rgba, level, slots_of_new, first_new, vox_sum, vox_slot, vox_key, vox_first,
                  low, med, high, color, batch_version, chunk_size, version):  # fmt: skip
     """Add each entry's color sums to its voxel; a new voxel also gets its slot, key, first
     color and position (its cell's centre, 30 bits in the node's cube); every touched voxel's
-    drawn color becomes the rounded mean of the points it stands for. ``new_index[e]``: the
-    rank of entry e among the new ones (their slots' order)."""
+    drawn color becomes the rounded mean of the points it stands for. New voxels have the ids
+    ``first_new`` on in entry order, so voxel v's slot is slots_of_new[v - first_new]."""
     for e in prange(vid.shape[0]):
         v = vid[e]
         if is_new[e]:
-            s = slots_of_new[new_index[e]]
+            s = slots_of_new[v - first_new]
             vox_slot[v] = s
-            vox_key[v] = (np.uint64(node[e]) << np.uint64(3 * GRID_BITS)) | cell[e]
+            vox_key[v] = _voxel_key(node[e], cell[e])
             vox_first[v] = rgba[first[e]]
             for ch in range(5):
                 vox_sum[v, ch] = 0

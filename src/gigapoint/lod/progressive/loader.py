@@ -2,9 +2,11 @@
 
 A loader thread reads point chunks from the sources (any reader, several files, the demo
 generator), decoding the next chunk in a second thread while it inserts this one (LAS/LAZ
-decoding releases the GIL), and inserts them in slices of ``SLICE_POINTS``: between slices
-a frame that waits for the octree goes first (ProgressiveOctree.reading), so drawing stays
-interactive while the octree grows. Where the sources tell their bounds up front (LAS
+decoding releases the GIL), and inserts them in slices. Frames go first (SimLOD's schedule,
+ProgressiveOctree.builder_turn): while a frame draws, or waits to, neither thread starts a
+slice or a chunk, unless a frame has been drawn since its last one (frames and slices then
+alternate), and while frames are being drawn the slices are small, so drawing stays
+interactive while the octree grows and loading runs at full speed when nothing draws. Where the sources tell their bounds up front (LAS
 headers) the octree's root cube is set from them, so it never has to grow.
 
 A source that fails part-way (a truncated or corrupt file) stops the loader: what was
@@ -14,6 +16,7 @@ raises it. ``close`` stops the loader and waits for it.
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -21,17 +24,32 @@ from collections.abc import Callable, Iterable, Iterator
 import numpy as np
 
 from ...core.chunk import PointChunk
-from ...errors import GigapointError, InputError
+from ...errors import GigapointError, InputError, MemoryLimitError
 from ..convert.prefetch import prefetch
 
-SLICE_POINTS = 250_000  # points inserted under one hold of the octree (~10-30 ms): a waiting frame waits at most that
+SLICE_POINTS = 250_000  # points inserted under one hold of the octree (~20-40 ms) while no frames are drawn
+SLICE_WHILE_DRAWING = 50_000  # ... and while frames are drawn: a waiting frame waits ~5-10 ms at most
+DECODE_CHUNK = 250_000  # points decoded at a time: decoding pauses between chunks while frames draw
+_PRESIZED_BYTES_PER_POINT = 64  # what presizing for one expected point allocates, about (pool room, voxels, table)
+MEMORY_SHARE = 0.5  # the default memory limit: this share of the machine's physical memory
+
+
+def default_memory_limit() -> int:
+    """Bytes a progressive octree may hold by default: half the machine's physical memory."""
+    try:
+        return int(MEMORY_SHARE * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # not POSIX: 8 GB
+        return 8 << 30
 
 
 class Loader:
     """The thread that fills ``octree`` from ``sources``: (name, make_chunks) pairs."""
 
-    def __init__(self, octree, sources: list[tuple[str, Callable[[], Iterable[PointChunk]]]], total: int | None):
+    def __init__(
+        self, octree, sources: list[tuple[str, Callable[[], Iterable[PointChunk]]]], total: int | None, memory_limit: int | None = None
+    ):
         self.octree = octree
+        self.memory_limit = int(memory_limit) if memory_limit else default_memory_limit()
         self.sources = sources
         self.total = total  # input points, when the sources tell it up front
         self.read = 0  # input points read so far (valid or not)
@@ -65,20 +83,33 @@ class Loader:
         return self.read / max(end - self.started, 1e-9)
 
     def _chunks(self) -> Iterator[tuple[str, PointChunk]]:
+        turn = -1
         for name, make in self.sources:
-            for chunk in make():
+            chunks = iter(make())
+            while True:
+                turn, _ = self.octree.builder_turn(turn)  # decoding, too, waits while a frame draws
+                chunk = next(chunks, None)
+                if chunk is None:
+                    break
                 yield name, chunk
 
     def _run(self) -> None:
         name = self.octree.name
+        turn = -1
         try:
             for name, chunk in prefetch(self._chunks(), name="gigapoint-decode"):
-                for s in range(0, len(chunk), SLICE_POINTS):
+                s = 0
+                while s < len(chunk):
                     if self._stop.is_set():
                         return
-                    sl = slice(s, s + SLICE_POINTS)
+                    turn, drawing = self.octree.builder_turn(turn)
+                    sl = slice(s, s + (SLICE_WHILE_DRAWING if drawing else SLICE_POINTS))
                     self.octree.add(chunk.xyz[sl], chunk.rgba[sl], **{a: v[sl] for a, v in chunk.attributes.items()})
+                    s += len(chunk.xyz[sl])
                     self.read += len(chunk.xyz[sl])
+                    if self.octree.nbytes > self.memory_limit:
+                        self._stop_for_memory(name)
+                        return
         except GigapointError as exc:
             self.error = exc
         except MemoryError:
@@ -86,8 +117,17 @@ class Loader:
         except Exception as exc:  # noqa: BLE001 - any failure of a source ends the load with a one-line error
             self.error = InputError(f"{name}: loading stopped: {' '.join(str(exc).split()) or type(exc).__name__}")
         finally:
+            if not self._stop.is_set():
+                self.octree.trim()  # the room kept for growth, back
             self.finished_at = time.perf_counter()
             self._done.set()
+
+    def _stop_for_memory(self, name: str) -> None:
+        of = f" of {self.total:,}" if self.total else ""
+        self.error = MemoryLimitError(
+            f"{name}: loading stopped at {self.read:,}{of} points: the octree holds {self.octree.nbytes / 2**30:.1f} GiB, its memory "
+            f"limit ({self.memory_limit / 2**30:.1f} GiB; pass memory_limit=, or convert the input with `gigapoint convert` to view all of it)"
+        )
 
     def wait(self, timeout: float | None = None) -> bool:
         """Until the load ends (True) or ``timeout`` seconds pass (False); raises the load's error."""
@@ -123,20 +163,22 @@ def file_sources(paths) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray]
             lo, hi = np.minimum(lo, b["min"]), np.maximum(hi, b["max"])
         else:
             bounds_known = False
-        sources.append((str(f), lambda f=f, reader=reader: reader.read_chunks(f, min(DEFAULT_CHUNK_SIZE, 1_000_000))))
+        sources.append((str(f), lambda f=f, reader=reader: reader.read_chunks(f, min(DEFAULT_CHUNK_SIZE, DECODE_CHUNK))))
     name = files[0].name if len(files) == 1 else f"{len(files)} files"
     return sources, total, ((lo, hi) if bounds_known and np.all(lo <= hi) else None), name
 
 
 def demo_sources(n_points: int, seed: int = 0) -> tuple[list, int, tuple[np.ndarray, np.ndarray] | None, str]:
-    """The procedural demo town as a source, generated a million points at a time."""
+    """The procedural demo town as a source, generated DECODE_CHUNK points at a time."""
     from ...io.demo import demo_chunks
 
-    return [(f"demo({n_points:,})", lambda: demo_chunks(n_points, seed, chunk_size=1_000_000))], n_points, None, f"demo({n_points:,})"
+    return [(f"demo({n_points:,})", lambda: demo_chunks(n_points, seed, chunk_size=DECODE_CHUNK))], n_points, None, f"demo({n_points:,})"
 
 
-def open_progressive(sources, total, bounds, name, max_leaf=None):
-    """A ProgressiveOctree filled by a started Loader (bounds: the root cube, when known)."""
+def open_progressive(sources, total, bounds, name, max_leaf=None, memory_limit=None):
+    """A ProgressiveOctree filled by a started Loader (bounds: the root cube, when known; loading
+    stops with a MemoryLimitError once the octree holds ``memory_limit`` bytes, by default half
+    the machine's memory)."""
     from .octree import MAX_LEAF, ProgressiveOctree
 
     cube = None
@@ -144,6 +186,25 @@ def open_progressive(sources, total, bounds, name, max_leaf=None):
         lo, hi = (np.asarray(b, np.float64) for b in bounds)
         pad = 0.001 * max(float(np.max(hi - lo)), 1e-9)  # headers round their bounds
         cube = (lo - pad, float(np.max(hi - lo)) + 2 * pad)
-    octree = ProgressiveOctree(name, cube=cube, max_leaf=max_leaf or MAX_LEAF, capacity=total or 0)
-    octree.attach(Loader(octree, sources, total).start())
+    memory_limit = int(memory_limit) if memory_limit else default_memory_limit()
+    capacity = min(total or 0, memory_limit // _PRESIZED_BYTES_PER_POINT)  # presized no larger than the limit allows
+    octree = ProgressiveOctree(name, cube=cube, max_leaf=max_leaf or MAX_LEAF, capacity=capacity)
+    octree.attach(Loader(octree, sources, total, memory_limit).start())
     return octree
+
+
+def open_sized(paths, point_budget: int, progressive: bool | None = None, progress: bool = False):
+    """What ``gigapoint view`` and ``render`` open: an octree (a converted folder, COPC, EPT) as
+    itself; other inputs as a ProgressiveOctree (drawable while it loads) when asked, or when
+    their headers count more points than ``point_budget``; else as one PointCloud."""
+    from ...io import open_cloud
+    from ..reader import is_lod_source, open_octree
+
+    paths = list(paths)
+    if len(paths) == 1 and is_lod_source(paths[0]):
+        return open_octree(paths[0])
+    if progressive is not False:
+        sources, total, bounds, name = file_sources(paths)
+        if progressive or (total is not None and total > point_budget):
+            return open_progressive(sources, total, bounds, name)
+    return open_cloud(*paths, progress=progress)

@@ -34,14 +34,13 @@ voxels in parallel. ``add`` is thread-safe; ``reading()`` keeps a frame's view c
 
 from __future__ import annotations
 
-import threading
-from contextlib import contextmanager
 from typing import Self
 
 import numpy as np
 
 from ...core.chunk import PointChunk, to_rgba8
 from ...core.cloud import MAX_ABS_COORDINATE
+from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE
 from ...core.quantize import dequantize
 from ...core.renderable import DrawList, MultiViewDrawList
@@ -58,6 +57,11 @@ _INITIAL_NODES = 1024
 _INITIAL_CHUNKS = 64
 _ROOM_PER_POINT = 1.6  # pool entries an expected point takes: itself, ~0.3 voxels, half-filled chunks
 _VOXELS_PER_POINT = 0.35  # voxels a point brings, about (the demo town: 0.3; surfaces less)
+_PRESIZE_MAX = 16_000_000  # points presized for at most (~0.6 GB): a 10^9-point input must not allocate 30 GB up front
+_GROWTH_MAX_CHUNKS = 16_384  # the pool grows by at most this many chunks (32 M entries, ~0.6 GB) beyond doubling small pools
+
+
+_UINT_OF_SIZE = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}  # attributes moved as same-width integers
 
 
 class Pool:
@@ -90,18 +94,19 @@ class Pool:
         return len(self.batches)
 
     def grown(self, n_chunks: int) -> Pool:
-        """A pool of ``n_chunks`` chunks holding this one's contents (new arrays: caches of the
-        old ones are dropped by identity)."""
+        """A pool of ``n_chunks`` chunks holding this one's contents, or its first ``n_chunks``
+        when smaller (new arrays: caches of the old ones are dropped by identity)."""
         new = Pool(self.name, n_chunks, self.chunk, {a: v.dtype for a, v in self.attributes.items()})
-        k, n = self.n_chunks, self.n_points
-        new.batches[:k] = self.batches
+        k = min(self.n_chunks, n_chunks)
+        n = k * self.chunk
+        new.batches[:k] = self.batches[:k]
         for a in ("low", "med", "high", "color"):
-            getattr(new, a)[:n] = getattr(self, a)
+            getattr(new, a)[:n] = getattr(self, a)[:n]
         for a, v in self.attributes.items():
-            new.attributes[a][:n] = v
-        new.chunk_next[:k] = self.chunk_next
-        new.chunk_node[:k] = self.chunk_node
-        new.batch_version[:k] = self.batch_version
+            new.attributes[a][:n] = v[:n]
+        new.chunk_next[:k] = self.chunk_next[:k]
+        new.chunk_node[:k] = self.chunk_node[:k]
+        new.batch_version[:k] = self.batch_version[:k]
         new.version = self.version + 1
         new.bounds = self.bounds
         return new
@@ -171,10 +176,8 @@ class ProgressiveOctree:
         self.name = name
         self.max_leaf = max_leaf
         self.chunk = chunk
-        self.capacity = int(capacity)
-        self.lock = threading.RLock()
-        self._turn = threading.Condition()
-        self._readers_waiting = 0
+        self.capacity = min(int(capacity), _PRESIZE_MAX)
+        self.lock = FrameLock()
         self._attribute_dtypes = dict(attributes) if attributes is not None else None
         self.pool: Pool | None = None
         self.origin: np.ndarray | None = None
@@ -190,7 +193,7 @@ class ProgressiveOctree:
         self._nodes(_INITIAL_NODES)
         self._vox(1 << 16)
         self._hkeys = np.full(1 << 17, K.EMPTY_KEY, np.uint64)
-        self._hvals = np.zeros(1 << 17, np.int64)
+        self._hvals = np.zeros(1 << 17, np.uint32)
         self._run_lo = self._run_hi = self._ent_start = self._ent_count = np.empty(0, np.int64)  # sample_runs' scratch
         self._free = np.zeros(_INITIAL_CHUNKS, np.int64)
         self._n_free = 0
@@ -219,7 +222,7 @@ class ProgressiveOctree:
 
     def _vox(self, cap: int) -> None:
         n = self.n_voxels
-        arrays = {"vox_key": np.zeros(cap, np.uint64), "vox_slot": np.zeros(cap, np.int64), "vox_sum": np.zeros((cap, 5), np.uint32),
+        arrays = {"vox_key": np.zeros(cap, np.uint64), "vox_slot": np.zeros(cap, np.uint32), "vox_sum": np.zeros((cap, 5), np.uint32),
                   "vox_first": np.zeros(cap, np.uint32)}  # fmt: skip
         for name, arr in arrays.items():
             if n:
@@ -230,7 +233,8 @@ class ProgressiveOctree:
         """Room for ``extra`` more chunks than are in use (the pool doubles when it grows)."""
         need = self._n_chunks + extra
         if need > self.pool.n_chunks:
-            self.pool = self.pool.grown(max(need, 2 * self.pool.n_chunks))
+            # doubling, but by bounded steps: a memory limit is checked between inserts, so overshoot it little
+            self.pool = self.pool.grown(max(need, self.pool.n_chunks + min(self.pool.n_chunks, _GROWTH_MAX_CHUNKS)))
         if len(self._free) < self.pool.n_chunks:
             free = np.zeros(self.pool.n_chunks, np.int64)
             free[: self._n_free] = self._free[: self._n_free]
@@ -245,8 +249,26 @@ class ProgressiveOctree:
         while size < need:
             size *= 2
         self._hkeys = np.full(size, K.EMPTY_KEY, np.uint64)
-        self._hvals = np.zeros(size, np.int64)
+        self._hvals = np.zeros(size, np.uint32)
         K.rehash(self.vox_key, self.n_voxels, self._hkeys, self._hvals)
+
+    def _drop_hash(self) -> None:
+        """Free the voxel table (rebuilt from vox_key by _ensure_hash when points come again)."""
+        self._hkeys = np.full(2, K.EMPTY_KEY, np.uint64)
+        self._hvals = np.zeros(2, np.uint32)
+
+    def trim(self) -> None:
+        """Release the room kept for growth (the loader calls it when loading ends): the pool
+        down to the chunks in use, the voxel arrays to the voxels, and the voxel table (the
+        next ``add`` rebuilds it)."""
+        with self.lock:
+            if self.pool is None:
+                return
+            if self._n_chunks < self.pool.n_chunks:
+                self.pool = self.pool.grown(max(self._n_chunks, 1))
+                self._free = self._free[: self.pool.n_chunks].copy()
+            self._vox(max(self.n_voxels, 1))
+            self._drop_hash()
 
     def _start(self, origin: np.ndarray, edge: float) -> None:
         """The root cube, and the root: an empty leaf."""
@@ -309,8 +331,21 @@ class ProgressiveOctree:
             self.points = self.n_nodes = self.n_voxels = 0
             self._nodes(1)
             self._vox(1)
-            self._hkeys = np.full(2, K.EMPTY_KEY, np.uint64)
-            self._hvals = np.zeros(2, np.int64)
+            self._drop_hash()
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes the octree holds: its pool (points and voxels), the voxels' colour sums and
+        lookup table, and the nodes."""
+        arrays = [self.vox_key, self.vox_slot, self.vox_sum, self.vox_first, self._hkeys, self._hvals, self._free]
+        arrays += [self.key, self.level, self.parent, self.children, self.leaf, self.count, self.first_chunk, self.last_chunk]
+        arrays += [self.list_count, self.cmin, self.cedge]
+        total = sum(a.nbytes for a in arrays)
+        pool = self.pool
+        if pool is not None:
+            total += sum(a.nbytes for a in (pool.low, pool.med, pool.high, pool.color, pool.batches, pool.chunk_next, pool.chunk_node))
+            total += pool.batch_version.nbytes + sum(v.nbytes for v in pool.attributes.values())
+        return int(total)
 
     def __enter__(self) -> Self:
         return self
@@ -372,7 +407,7 @@ class ProgressiveOctree:
             attrs[a] = v
         valid, lo, hi = valid_bounds(xyz, MAX_ABS_COORDINATE)
         n_valid = int(np.count_nonzero(valid))
-        with self._writing():
+        with self.lock.writing():
             self.skipped += n - n_valid
             if n_valid == 0:
                 return 0
@@ -382,30 +417,14 @@ class ProgressiveOctree:
             self._insert(xyz, rgba, attrs, lo, hi)
         return n_valid
 
-    @contextmanager
-    def _writing(self):
-        """The lock, taken by a writer only when no frame waits for it: frames go first."""
-        with self._turn:
-            while self._readers_waiting:
-                self._turn.wait(0.05)
-        with self.lock:
-            yield
-
-    @contextmanager
     def reading(self):
-        """Held while a frame reads what ``prepare`` returned: no insertion moves it meanwhile."""
-        with self._turn:
-            self._readers_waiting += 1
-        try:
-            self.lock.acquire()
-        finally:
-            with self._turn:
-                self._readers_waiting -= 1
-                self._turn.notify_all()
-        try:
-            yield
-        finally:
-            self.lock.release()
+        """Held while a frame reads what ``prepare`` returned: no insertion moves it meanwhile
+        (core/framelock.py: frames first, insertions between them)."""
+        return self.lock.reading()
+
+    def builder_turn(self, seen: int) -> tuple[int, bool]:
+        """The loader's turn (SimLOD's schedule): FrameLock.builder_turn."""
+        return self.lock.builder_turn(seen)
 
     def _attribute_set(self, attrs: dict, n: int) -> dict:
         """The batch's attributes in the octree's set (fixed by the first batch): missing ones 0."""
@@ -508,10 +527,9 @@ class ProgressiveOctree:
         offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
         pool = self.pool
         K.write_points(st.xyz, st.rgba, st.order, leaf_runs, offsets, slots, self.cmin, self.cedge, pool.low, pool.med, pool.high, pool.color)
-        if pool.attributes:
-            src = np.concatenate([st.order[lo:hi] for _, lo, hi in leaf_runs.tolist()]) if len(leaf_runs) else np.empty(0, np.int64)
-            for a, v in pool.attributes.items():
-                v[slots] = st.attrs[a][src]
+        for a, v in pool.attributes.items():
+            u = _UINT_OF_SIZE[v.dtype.itemsize]
+            K.scatter_runs(np.ascontiguousarray(st.attrs[a]).view(u), st.order, leaf_runs, offsets, slots, v.view(u))
 
     def _sample(self, st: _Set, leaf_runs, inner_runs, only: int | None = None) -> None:
         """Voxels of the inner nodes the routed points pass (of node ``only``): new cells become
@@ -547,7 +565,7 @@ class ProgressiveOctree:
         is_new = np.empty(m, np.uint8)
         next_vid = K.voxel_ids(self._hkeys, self._hvals, node, cell, self.n_voxels, vid, is_new)
         if next_vid > len(self.vox_key):
-            cap = len(self.vox_key)
+            cap = max(len(self.vox_key), 1)
             while cap < next_vid:
                 cap *= 2
             self._vox(cap)
@@ -555,10 +573,10 @@ class ProgressiveOctree:
         new = np.flatnonzero(is_new)
         new_lists, new_counts = _runs(node[new])
         slots = self._allocate(new_lists, new_counts) if len(new) else np.empty(0, np.int64)
-        new_index = np.cumsum(is_new, dtype=np.int64) - 1
+        first_new = self.n_voxels
         self.n_voxels = next_vid
         pool = self.pool
-        K.write_voxels(vid, is_new, node, cell, first, sums, st.rgba, self.level, slots, new_index, self.vox_sum, self.vox_slot, self.vox_key,
+        K.write_voxels(vid, is_new, node, cell, first, sums, st.rgba, self.level, slots, first_new, self.vox_sum, self.vox_slot, self.vox_key,
                        self.vox_first, pool.low, pool.med, pool.high, pool.color, pool.batch_version, pool.chunk, pool.version)  # fmt: skip
         src = first[new]
         for a, v in pool.attributes.items():

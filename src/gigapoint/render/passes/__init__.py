@@ -2,7 +2,8 @@
 
 ``finish_frame`` turns a depth pass's visibility buffer into the final colors, in this
 order: hole filling (on the visibility buffer) -> color resolve (color mode; HQS blends
-instead of taking the winner) -> Blinn-Phong lighting -> eye-dome lighting. The backend's
+instead of taking the winner; transparent points, transparency.py, are composited instead)
+-> Blinn-Phong lighting -> eye-dome lighting. The backend's
 ``Passes`` (gigapoint.render.backend) run each step on its own buffers; supersampling and
 stereo wrap whole renders (``compose.py``). Every pass has a plain-numpy reference in
 this package, which the tests compare the backends against.
@@ -12,9 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..colors import point_colors
+from ..colors import point_colors, rgba_point_colors
 from ..splats import largest_size, point_spacing, splat_params
 from .lighting import point_normals
+from .transparency import frame_alphas, wants_transparency
 
 
 def wants_composite(settings) -> bool:
@@ -53,11 +55,16 @@ def finish_frame(backend, draw, camera, vis, settings, near, far) -> tuple[np.nd
     with backend.lock:
         if settings.fill_holes:
             vis = passes.fill_holes(vis, width, height, settings.fill_holes, settings.fill_holes_foveated)
-        colors_per_point = point_colors(points, settings)
+        colors_per_point = point_colors(points, settings)  # RGBA8, or RGB565 (a compact cloud's): the blending passes get RGBA8
         colors, covered = passes.resolve(vis, colors_per_point, settings.background)  # after hole filling: later passes keep the pixels
-        if settings.hqs:
+        if wants_transparency(settings, draw):  # transparent points (instead of HQS): blended behind the depth pass's front
+            colors = passes.transparent_colors(
+                points, draw.selection, vis, width, height, near, far, rgba_point_colors(points, settings), frame_alphas(settings, draw), colors,
+                settings.background, settings.threads, splat_for(settings, camera, draw, near), draw.step,
+            )  # fmt: skip
+        elif settings.hqs:
             colors = passes.hqs_colors(
-                points, draw.selection, vis, width, height, near, far, colors_per_point, colors,
+                points, draw.selection, vis, width, height, near, far, rgba_point_colors(points, settings), colors,
                 settings.hqs_depth_tolerance, settings.threads, splat_for(settings, camera, draw, near), settings.splat_softness,
             )  # fmt: skip
         if settings.lighting:

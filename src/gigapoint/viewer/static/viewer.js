@@ -15,7 +15,7 @@
 
   const S = {
     ws: null, session: null, cloud: null, schema: [], settings: {}, camera: null,
-    seq: 0, sentAt: new Map(), lastFrame: 0, frameTimes: [], fps: null, latency: 0,
+    seq: 0, sentAt: new Map(), lastFrame: 0, frameTimes: [], fps: null, latency: 0, renderTimes: [],
     header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0,
     pending: { orbit: null, look: null, pan: null, zoom: null }, retry: 0,
   };
@@ -115,6 +115,8 @@
       bmp.close();
       S.header = header; S.camera = header.camera; S.lastFrame = header.frame;
       S.frameTimes.push(performance.now());
+      S.renderTimes.push(header.render_ms);  // the profiler line: the last 100 frames
+      if (S.renderTimes.length > 100) S.renderTimes.shift();
       canvas.dataset.frame = String(header.frame);
       canvas.dataset.full = String(header.full);
       updateStats();
@@ -134,10 +136,12 @@
     const lines = [
       `${fps}latency ${S.latency.toFixed(0)} ms`,
       `frame ${h.render_ms.toFixed(1)} ms render + ${h.encode_ms.toFixed(1)} ms jpeg`,
+      `last ${S.renderTimes.length}: avg ${(S.renderTimes.reduce((a, b) => a + b, 0) / Math.max(S.renderTimes.length, 1)).toFixed(1)} ms, worst ${Math.max(0, ...S.renderTimes).toFixed(1)} ms`,
       `${h.width}×${h.height}${h.full ? "" : "  (1/" + h.scale + " while moving)"}`,
       `points ${h.points.toLocaleString()} / ${h.points_total.toLocaleString()}`,
       `batches ${h.batches.toLocaleString()} / ${h.batches_total.toLocaleString()}`,
       `memory ${fmtBytes(h.memory)}   loaded ${(h.load_progress * 100).toFixed(0)}%   ${h.backend}`,
+      ...(h.cloud_bytes ? [`cloud data ${fmtBytes(h.cloud_bytes)}, ${(h.cloud_bytes / Math.max(h.points_total, 1)).toFixed(1)} B a point`] : []),
     ];
     if (h.note) lines.push(h.note);  // e.g. the preview of a conversion still running
     $("stats").textContent = lines.join("\n");
@@ -172,6 +176,8 @@
           input.step = f.step || (f.kind === "int" ? "1" : "any");
           if (f.min != null) input.min = f.min;
           if (f.max != null) input.max = f.max;
+          // a bounded float with a step (opacity) is a slider
+          if (f.kind === "float" && f.min != null && f.max != null && f.step && !f.nullable) input.type = "range";
           if (f.nullable) input.placeholder = "auto";
         } else {
           input = document.createElement("input"); input.type = "text";

@@ -46,6 +46,62 @@ fn grid_coords(low_word: u32, med_word: u32, high_word: u32, bits: u32) -> vec3<
     return c + (f + (g + 0.5) * INV1024) * INV1024;
 }
 
+// The compact layout (core/compact.py): where a batch's code is not FULL_LAYOUT, binding 3
+// (`med`) holds the page's extension streams (u32 words of the host's u64 words) and a point's
+// medium and high words decode from its e_x + e_y + e_z stream bits, step by step as
+// read_ext and tail_words in core/compact.py; grid_coords then runs unchanged, so both
+// layouts give the same floats.
+const FULL_LAYOUT: u32 = 0xffffffffu;
+
+// The e bits at bit pos of the 64-bit value hi:lo (e <= 20).
+fn ext_field(lo: u32, hi: u32, pos: u32, e: u32) -> u32 {
+    if (e == 0u) {
+        return 0u;
+    }
+    var v = lo;
+    if (pos >= 32u) {
+        v = hi >> (pos - 32u);
+    } else if (pos > 0u) {
+        v = (lo >> pos) | (hi << (32u - pos));
+    }
+    return v & ((1u << e) - 1u);
+}
+
+// (medium, high) words of point j of a compact batch whose stream starts at u32 word0.
+fn compact_words(word0: u32, code: u32, j: u32) -> vec2<u32> {
+    let t = (code & 0xffu) + ((code >> 8u) & 0xffu) + ((code >> 16u) & 0xffu);
+    var lo = 0u;
+    var hi = 0u;
+    if (t > 0u) {
+        let p = j * t;
+        let w = word0 + (p >> 5u);
+        let s = p & 31u;
+        let a = med[w];
+        let b = med[w + 1u];
+        if (s == 0u) {
+            lo = a;
+            hi = b;
+        } else {
+            let c = med[w + 2u];
+            lo = (a >> s) | (b << (32u - s));
+            hi = (b >> s) | (c << (32u - s));
+        }
+    }
+    var words = vec2<u32>(0u, 0u);
+    var pos = 0u;
+    for (var axis = 0u; axis < 3u; axis++) {
+        let e = (code >> (8u * axis)) & 0xffu;
+        var tail = ext_field(lo, hi, pos, e) << (20u - e);
+        pos += e;
+        if (e < 20u) {
+            tail |= 1u << (19u - e);
+        }
+        words.x |= ((tail >> 10u) & WORD_MASK) << (10u * axis);
+        words.y |= (tail & WORD_MASK) << (10u * axis);
+    }
+    return words;
+}
+
 // (pixel id or NO_PIXEL, float32 depth bits) of a grid-space point: project_point in raster.py,
 // term by term. Depth and w are tested before the divide so no inf/NaN reaches a
 // comparison (GPUs need not honour IEEE NaN rules); the CPU kernel rejects the same points.
@@ -174,11 +230,17 @@ fn draw_batch(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) {
         let li = rec.local_first + i;
         var mw = 0u;
         var hw = 0u;
-        if (max_bits >= 20u) {
-            mw = med[li];
-        }
-        if (max_bits >= 30u) {
-            hw = high[li];
+        if (max_bits >= 20u && rec.code != FULL_LAYOUT) {
+            let tails = compact_words(rec.ext_first, rec.code, i);
+            mw = tails.x;
+            hw = tails.y;
+        } else {
+            if (max_bits >= 20u) {
+                mw = med[li];
+            }
+            if (max_bits >= 30u) {
+                hw = high[li];
+            }
         }
         let lw = low[li];
         draw_view(rec.rows, rec.bits, params.near, params.far, 0u, lw, mw, hw, rec.first + i);

@@ -9,6 +9,14 @@
 @group(0) @binding(2) var<storage, read> colors: array<u32>;
 @group(0) @binding(3) var<storage, read_write> image: array<u32>;
 
+// RGBA8 (opaque) of an RGB565 color: rgb565_rgba in core/compact.py (bit replication).
+fn rgb565_rgba(c: u32) -> u32 {
+    let r = c >> 11u;
+    let g = (c >> 5u) & 63u;
+    let b = c & 31u;
+    return ((r << 3u) | (r >> 2u)) | (((g << 2u) | (g >> 4u)) << 8u) | (((b << 3u) | (b >> 2u)) << 16u) | 0xff000000u;
+}
+
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     for (var p = gid.x; p < params.n_items; p += nwg.x * 256u) {
@@ -16,7 +24,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         if (is_empty(key)) {
             image[p] = params.background;
         } else if (key.x >= params.page_first && key.x - params.page_first < params.page_count) {
-            image[p] = colors[key.x - params.page_first];
+            let i = key.x - params.page_first;
+            if (params.color_bits == 16u) {
+                image[p] = rgb565_rgba((colors[i >> 1u] >> (16u * (i & 1u))) & 0xffffu);
+            } else {
+                image[p] = colors[i];
+            }
         }
     }
 }

@@ -1,0 +1,166 @@
+"""The compact layout (core/compact.py) against three u32 words a point: bytes and speed.
+
+    .venv/bin/python benchmarks/bench_compact.py                       # autzen_trim + a 5 M demo town
+    .venv/bin/python benchmarks/bench_compact.py --points 20M --rounds 5 --width 1920 --height 1080
+
+For each scene the same points are built twice, in the compact layout and in the three-word
+layout of the *same boxes* (``PointCloud.expanded``), so the images must be identical bit
+for bit and any speed difference is the layout's:
+
+1. **bytes a point** per component (positions, color, attributes, batch records) of both;
+2. **exactness**: every decoded position against the source at the source's scale;
+3. **speed**: brute-force frames (CPU backend, every point, fixed size) of the benchmark
+   cameras, the two layouts interleaved frame by frame (ABBA), median ms and the ratio
+   words / compact (> 1: compact is faster). JIT warm-up excluded.
+
+The demo town has no source scale of its own (its points are floats): it is stored at 1 cm
+here, as a LAS export of it would be (``--scale``). Peak RSS is reported at the end; the
+1 B point figure in docs/benchmarks.md is extrapolated from the bytes a point measured here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import gigapoint as gp
+from gigapoint.core import PointChunk, build_cloud
+from gigapoint.core.compact import rgba32
+
+AUTZEN = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "autzen_trim.laz"
+
+
+def scaled_demo_chunks(n: int, scale: float):
+    """The demo town's chunks with coordinates rounded to ``scale`` metres (a survey's grid)."""
+    from gigapoint.io import demo_chunks
+
+    for chunk in demo_chunks(n):
+        xyz = np.round(chunk.xyz / scale) * scale
+        yield PointChunk(xyz, chunk.rgba, chunk.attributes, scale=(scale,) * 3)
+
+
+def bytes_row(cloud) -> str:
+    n = max(cloud.n_points, 1)
+    mem = cloud.memory()
+    pc = (mem["positions"] + mem["color"]) / n
+    return f"{cloud.layout:8} " + " ".join(f"{v / n:10.2f}" for v in mem.values()) + f" {sum(mem.values()) / n:10.2f} {pc:14.2f}"
+
+
+def interleaved(frames: list, rounds: int) -> tuple[list[list[float]], list[list[float]]]:
+    """(wall, CPU) seconds of each (cloud, camera, settings) drawn in turn, ABBA, after one untimed
+    frame each. The CPU time (the process's, all threads) is the steadier on a shared host."""
+    for args in frames:
+        gp.render_frame(*args)
+    wall: list[list[float]] = [[] for _ in frames]
+    cpu: list[list[float]] = [[] for _ in frames]
+    for r in range(rounds):
+        for k in range(len(frames)) if r % 2 == 0 else reversed(range(len(frames))):
+            t, c = time.perf_counter(), time.process_time()
+            gp.render_frame(*frames[k])
+            wall[k].append(time.perf_counter() - t)
+            cpu[k].append(time.process_time() - c)
+    return wall, cpu
+
+
+def check_exact(cloud, reference_xyz, scale) -> str:
+    """'exact' when the decoded positions are the source's points at the source's scale."""
+    s = np.asarray(scale, np.float64)
+    origin = reference_xyz.min(axis=0)
+    got = np.round((cloud.positions() - origin) / s).astype(np.int64)
+    want = np.round((reference_xyz - origin) / s).astype(np.int64)
+    same = np.array_equal(got[np.lexsort(got.T)], want[np.lexsort(want.T)])
+    dev = float(np.abs((cloud.positions() - origin) / s - got).max())
+    return f"{'exact' if same else 'NOT EXACT'} (largest distance from the source grid point: {dev:.1e} steps)"
+
+
+def scene(name: str, cloud, reference_xyz, args) -> bool:
+    print(f"\n{name}: {cloud.n_points:,} points, {len(cloud.batches):,} batches, source scale {cloud.source_scale}")
+    words = cloud.expanded()
+    mem = cloud.memory()
+    print(f"  {'layout':8} {'positions':>10} {'color':>10} {'attributes':>10} {'batches':>10} {'total':>10} {'pos+color B/pt':>14}")
+    print("  " + bytes_row(words))
+    print("  " + bytes_row(cloud))
+    bits = np.bincount(
+        ((cloud.packing["code"] & 0xFF) + ((cloud.packing["code"] >> 8) & 0xFF) + ((cloud.packing["code"] >> 16) & 0xFF)).astype(np.int64)
+    )
+    print("  extension bits a point per batch: " + ", ".join(f"{b}: {c} batches" for b, c in enumerate(bits) if c))
+    print(
+        f"  positions {mem['positions'] / cloud.n_points:.2f} B/pt (three words: 12): "
+        + (check_exact(cloud, reference_xyz, cloud.source_scale) if reference_xyz is not None else "not checked")
+    )
+    from gigapoint.bench import benchmark_cameras
+
+    ok = True
+    # the compact positions with 32-bit colors: what each half of the layout costs
+    positions_only = dataclasses.replace(cloud, color=rgba32(cloud.color))
+    print(f"  speed ({args.width}x{args.height}, CPU backend, {args.rounds} interleaved frames; medians in ms, ratios words / compact)")
+    print(f"  {'view':9} {'thr':>3} {'clock':5} {'words':>7} {'compact':>8} {'ratio':>6} {'pos.only':>9} {'ratio':>6}  images")
+    for view, cam in benchmark_cameras(cloud.bounds, args.width, args.height).items():
+        for threads in (1, None):
+            s = gp.RenderSettings(backend="cpu", size_mode="fixed", threads=threads)
+            same = np.array_equal(gp.render_frame(cloud, cam, s).image, gp.render_frame(words, cam, s).image)
+            ok &= same
+            for clock, (tw, tc, tp) in zip(
+                ("wall", "cpu"), interleaved([(words, cam, s), (cloud, cam, s), (positions_only, cam, s)], args.rounds)
+            ):
+                mw, mc, mp = (statistics.median(t) * 1e3 for t in (tw, tc, tp))
+                print(
+                    f"  {view:9} {threads or 'all'!s:>3} {clock:5} {mw:7.1f} {mc:8.1f} {mw / mc:6.3f} {mp:9.1f} {mw / mp:6.3f}  "
+                    f"{'identical' if same else 'DIFFERENT'}"
+                )
+    return ok
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--points", default="5M", help="demo town size")
+    ap.add_argument("--scale", type=float, default=0.01, help="grid the demo town is stored at (metres)")
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--width", type=int, default=1920)
+    ap.add_argument("--height", type=int, default=1080)
+    ap.add_argument("--skip-autzen", action="store_true")
+    args = ap.parse_args(argv)
+    from gigapoint.bench import parse_count
+
+    lscpu = subprocess.run(["lscpu"], check=False, capture_output=True, text=True).stdout
+    cpu = next((line.split(":", 1)[1].strip() for line in lscpu.splitlines() if line.startswith("Model name")), platform.processor())
+    print(f"compact layout vs three words; {cpu}, numba threads {gp.RenderSettings().threads or 'all'}")
+    ok = True
+    if not args.skip_autzen and AUTZEN.exists():
+        import laspy
+
+        las = laspy.read(str(AUTZEN))
+        xyz = np.stack([las.x, las.y, las.z], axis=1)
+        ok &= scene("autzen_trim", gp.open(AUTZEN), xyz, args)
+        del las, xyz
+    n = parse_count(args.points)
+    t = time.perf_counter()
+    cloud = build_cloud(scaled_demo_chunks(n, args.scale), name="demo", layout="compact")
+    print(f"\n(demo town built in {time.perf_counter() - t:.1f} s)")
+    # the reference points only for small towns (the check holds a second copy)
+    ref = np.concatenate([c.xyz for c in scaled_demo_chunks(n, args.scale)]) if n <= 5_000_000 else None
+    ok &= scene(f"demo town at {args.scale:g} m", cloud, ref, args)
+    del ref
+    mem = cloud.memory()
+    per_point = sum(mem.values()) / cloud.n_points
+    pos_color = (mem["positions"] + mem["color"]) / cloud.n_points
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    print(f"\npeak RSS {rss / 2**30:.2f} GiB (both layouts of the town and the build's temporaries)")
+    print(
+        f"1 B points of this town at this density would hold {per_point:.2f} GB ({pos_color:.2f} GB positions + color) in the compact layout"
+    )
+    print("all images identical" if ok else "DIFFERENT images")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

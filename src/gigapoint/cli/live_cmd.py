@@ -1,0 +1,59 @@
+"""Live streams in the viewer: ``gigapoint view --live SOURCE``, ``gigapoint view --replay DIR``,
+``gigapoint demo --live`` (the synthetic depth sensor flying through the demo town)."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from ..errors import GigapointError
+
+
+def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: float | None = None, record: Path | None = None,
+              rate: float | None = 1.0, loop: bool = False, host: str = "127.0.0.1", port: int = 0, browser: bool = True,
+              open_browser=None) -> None:  # fmt: skip
+    """Play ``source`` into a LiveCloud and serve the viewer on it until Ctrl+C."""
+    from ..live import LiveCloud
+    from ..live.sources import Player, ReplaySource, SyntheticSensor, open_source
+    from ..viewer.server import ViewerServer
+
+    src = ReplaySource(source) if replay else open_source(source)
+    bounds = None
+    if isinstance(src, SyntheticSensor):
+        from ..io.demo import SCENE_SIZE
+
+        bounds = ((0.0, 0.0, -30.0), (SCENE_SIZE, SCENE_SIZE, 60.0))  # frame the town from the start
+    live = LiveCloud(keep=keep, decay=decay, name=f"live: {src.name}", bounds=bounds)
+    if record is not None:
+        live.record(record)
+    player = Player(src, live, rate=rate, loop=loop).start()
+    deadline = time.monotonic() + 10.0
+    while live.n_frames == 0 and not player.done.is_set() and time.monotonic() < deadline:  # the first view frames a first frame
+        time.sleep(0.02)
+    if player.error is not None:
+        raise player.error
+    server = ViewerServer(live, host=host, port=port)
+    print(f"gigapoint viewer: {live.name} (keep {keep} frames{f', decay {decay:g} s' if decay else ''})", file=sys.stderr)
+    if not server.loopback:
+        print(f"warning: listening on {host}, reachable from the network; the URL's token is the only key", file=sys.stderr)
+    base = server.url.split("?")[0].rstrip("/")
+    print(f"push frames from another process: {base.replace('http', 'ws', 1)}/push?push_token={server.core.push_token}", file=sys.stderr)
+    print(server.url, flush=True)
+    if browser and open_browser is not None:
+        open_browser(server.url)
+    try:
+        server.serve_forever()
+    finally:
+        live.close()
+        if record is not None:
+            print(f"recorded {live.stats.frames_in} frames into {record}", file=sys.stderr)
+
+
+def check_live_options(keep: int, decay: float | None, rate: float | None) -> None:
+    if keep < 1:
+        raise GigapointError(f"--keep must be >= 1, got {keep}")
+    if decay is not None and not decay > 0:
+        raise GigapointError(f"--decay must be > 0 seconds, got {decay}")
+    if rate is not None and not rate > 0:
+        raise GigapointError(f"--rate must be > 0, got {rate}")

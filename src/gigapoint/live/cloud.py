@@ -1,0 +1,593 @@
+"""LiveCloud: point frames streamed in by producer threads, the last ``keep`` of them drawn
+(Kraft 2019: a depth sensor's frames replaced every frame, pose-tagged snapshots accumulated).
+
+A frame (``push``: points in sensor or world coordinates with a 4x4 pose; ``push_depth``: an
+organised depth image turned into points and normals by depth.py's kernel) is put in world
+coordinates, Morton-ordered and cut into batches on arrival by core's own path
+(core/morton.py, core/quantize.py: Morton codes, sort, batches, 30-bit words), outside any lock;
+then its batches are copied into free chunks of the ring (ring.py) under a frames-first lock,
+so a frame appears whole or not at all (no torn frames) and culling and adaptive precision work
+on it unchanged. A frame pushed while another is being drawn waits, batched, in a queue and is
+copied in when the drawing lets go of the lock: producers never wait for the renderer. Frames beyond ``keep`` (or older than ``decay``
+seconds) leave the ring and their chunks are reused: memory stays flat over a long stream.
+
+``snapshot()`` freezes the frames in the ring into a ProgressiveOctree (lod.progressive, its
+public ``add``); the octree's pool is mirrored into the same buffers, so one DrawList draws the
+ring (every chunk in view) and the octree's selection (its LOD within ``point_budget``).
+
+Per point, ``frame_time`` (float32) holds the seconds since the cloud's start at which its
+frame arrived (NaN for snapshot points). With ``decay``, frames older than ``decay`` seconds
+leave the ring, and until then fade: ``prepare`` gives each drawn batch an ``alpha`` (1 for a
+new frame, falling linearly to 0 at ``decay``; ``fade_alpha``) that the transparency pass
+(render/passes/transparency.py) composites; ``fade=False`` drops them without fading.
+"""
+
+from __future__ import annotations
+
+import heapq
+import threading
+import time as _time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core.chunk import to_rgba8
+from ..core.cloud import MAX_ABS_COORDINATE, PointCloud
+from ..core.layout import BATCH_SIZE
+from ..core.morton import cube_of, morton_codes
+from ..core.quantize import make_batches, quantize
+from ..core.renderable import DrawList
+from ..core.selection import Selection, View, select_view, subsample_step
+from ..errors import GigapointError, InputError
+from ..lod.build import valid_bounds
+from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
+from .depth import depth_to_points, parse_pose
+from .ring import BASE_ATTRIBUTES, NORMAL_PARTS, LiveBuffers, LiveLock, attribute_dtype
+
+_INITIAL_CHUNKS = 32
+_LATENCIES = 512
+SNAPSHOT_BATCH = 1 << 20  # points a snapshot adds to the octree at a time  # push-to-pixels latencies kept for the median / p99
+
+
+@dataclass
+class FrameInfo:
+    """One frame in the ring."""
+
+    seq: int  # 0, 1, 2... in arrival order
+    chunks: list[int]
+    n_points: int
+    time: float  # the sensor's time stamp (seconds), or the arrival clock's
+    arrived: float  # seconds since the cloud's start (the frame_time of its points)
+    pose: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    pushed_at: float = 0.0  # perf_counter when push was called (latency)
+
+
+@dataclass
+class LiveStats:
+    frames_in: int = 0  # frames accepted
+    frames_rejected: int = 0
+    points_in: int = 0
+    last_error: str | None = None
+    arrivals: deque = field(default_factory=lambda: deque(maxlen=120))  # perf_counter of recent arrivals
+    latencies: deque = field(default_factory=lambda: deque(maxlen=_LATENCIES))  # seconds, push -> drawn
+
+    def frames_per_second(self, now: float | None = None) -> float:
+        a = list(self.arrivals)
+        if len(a) < 2:
+            return 0.0
+        now = _time.perf_counter() if now is None else now
+        if now - a[-1] > 2.0:  # the stream stopped
+            return 0.0
+        return (len(a) - 1) / max(a[-1] - a[0], 1e-9)
+
+    def latency_ms(self, q: float = 50.0) -> float | None:
+        lat = list(self.latencies)
+        return float(np.percentile(lat, q) * 1000.0) if lat else None
+
+
+def _as_points(xyz, name: str) -> np.ndarray:
+    try:
+        a = np.asarray(xyz)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: xyz must be an (N, 3) array of numbers, got {type(xyz).__name__}") from None
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise InputError(f"{name}: xyz must have shape (N, 3), got {a.shape}")
+    if a.dtype.kind not in "uif":
+        raise InputError(f"{name}: xyz must hold numbers, got dtype {a.dtype}")
+    return a
+
+
+def batch_frame(pts: np.ndarray, rgba: np.ndarray, attributes: dict, lo, hi, chunk: int) -> PointCloud:
+    """One frame in core's layout: Morton codes in its bounding cube, batches of ``chunk``
+    points, 30-bit words (core/morton.py, core/quantize.py). The order is numpy's SIMD argsort
+    (as the progressive octree sorts its batches): 3 ms for a 512x424 frame where the stable
+    sort of ``cloud_from_points`` took 10 (ties are the same point: their order does not matter)."""
+    origin, edge = cube_of(lo, hi)
+    order = np.argsort(morton_codes(pts, origin, edge))
+    batches = make_batches(len(pts), chunk)
+    low, med, high = quantize(pts, order, batches)
+    color = np.ascontiguousarray(rgba, np.uint8).view(np.uint32).reshape(-1)[order]
+    return PointCloud(batches, low, med, high, color, {a: np.asarray(v)[order] for a, v in attributes.items()}, name="frame")
+
+
+class LiveCloud:
+    """A cloud fed frame by frame (``push``, ``push_depth``), drawn at any moment (a Renderable)."""
+
+    def __init__(self, keep: int = 100, decay: float | None = None, name: str = "live", chunk: int = BATCH_SIZE, clock: Callable[[], float] | None = None,
+                 bounds=None, fade: bool = True):  # fmt: skip
+        """``keep``: frames drawn (a ring: the oldest leaves when a new one arrives); ``decay``:
+        seconds after which a frame leaves the ring whatever ``keep`` says (None: never);
+        ``clock``: seconds (monotonic) for decay and frame times (tests pass a fake);
+        ``bounds``: (min, max) of the region the stream will cover, if known (the viewer frames
+        it from the start; the clip range covers it); ``fade``: with ``decay``, frames fade out
+        as they age (each drawn batch's ``alpha`` in the DrawList, for the transparency pass)."""
+        if not (isinstance(keep, int) and keep >= 1):
+            raise InputError(f"{name}: keep must be a positive integer, got {keep!r}")
+        self.fade = bool(fade)
+        if decay is not None and not (float(decay) > 0):
+            raise InputError(f"{name}: decay must be a positive number of seconds or None, got {decay!r}")
+        self.name = name
+        self.keep = keep
+        self.decay = None if decay is None else float(decay)
+        self.chunk = int(chunk)
+        self.clock = clock or _time.monotonic
+        self.expected_bounds = None if bounds is None else tuple(np.asarray(b, np.float64).reshape(3) for b in bounds)
+        self.started = self.clock()
+        self.lock = LiveLock(released=self._commit_pending)
+        self._pending: deque = deque()  # (frame in core's layout, FrameInfo, attributes) batched, not yet in the ring
+        self._pending_lock = threading.Lock()
+        self._attr_dtypes: dict | None = None  # fixed by the first frame (as the octree's attributes)
+        self.buffers_: LiveBuffers | None = None
+        self._free: list[int] = []
+        self.frames: deque[FrameInfo] = deque()
+        self._seq = 0
+        self.points = 0  # points in the ring
+        self.stats = LiveStats()
+        self.snapshots = None  # the ProgressiveOctree of snapshots (created by the first snapshot)
+        self._mirror_pool = None
+        self._mirror_version = -1
+        self._version_pushed: dict[int, float] = {}  # buffers version -> perf_counter of the newest push it holds
+        self._counted_versions: deque = deque(maxlen=64)
+        self._changed = threading.Condition()
+        self.changes = 0  # frames accepted, snapshots, clears (wait_frame)
+        self._chunk_time = np.empty(0, np.float32)  # per ring chunk: its frame's arrival (frame_time), NaN when free
+        self._listeners: list[Callable[[], None]] = []
+        self.recorder = None
+        self._last_time = 0.0
+        self.player = None  # a source feeding it (sources.Player), if any
+
+    # ------------------------------------------------------------------ facts (Renderable)
+    load_progress = 1.0
+
+    @property
+    def n_points(self) -> int:
+        return self.points + (self.snapshots.n_points if self.snapshots is not None else 0)
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.frames)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for f in list(self.frames):
+            lo, hi = np.minimum(lo, f.lo), np.maximum(hi, f.hi)
+        if self.snapshots is not None and self.snapshots.n_points:
+            slo, shi = self.snapshots.bounds
+            # the octree draws far nodes with 10-bit positions in node cubes: up to half a cell
+            # (root edge / 2048) off, so a clip range fitted to the exact bounds of a flat scene
+            # seen edge-on or from above would cut them away
+            pad = self.snapshots.edge / 2048.0
+            lo, hi = np.minimum(lo, slo - pad), np.maximum(hi, shi + pad)
+        if self.expected_bounds is not None:
+            lo, hi = np.minimum(lo, self.expected_bounds[0]), np.maximum(hi, self.expected_bounds[1])
+        if not np.isfinite(lo).all():
+            return np.zeros(3), np.ones(3)  # nothing yet: a unit box to look at
+        return lo, hi
+
+    @property
+    def attributes(self) -> dict:
+        return self.buffers_.attributes if self.buffers_ is not None else {}
+
+    @property
+    def batches(self) -> np.ndarray:
+        return self.buffers_.batches if self.buffers_ is not None else np.empty(0)
+
+    def buffers(self) -> LiveBuffers | None:
+        """The point buffers frames are drawn from (None before the first frame)."""
+        return self.buffers_
+
+    def __len__(self) -> int:
+        return self.n_points
+
+    def __repr__(self) -> str:
+        snap = f", {self.snapshots.n_points:,} snapshot points" if self.snapshots is not None else ""
+        return f"LiveCloud({self.name!r}, {len(self.frames)} of {self.keep} frames, {self.points:,} live points{snap})"
+
+    def now(self) -> float:
+        """Seconds since the cloud started (the clock of ``frame_time``)."""
+        return self.clock() - self.started
+
+    def fade_alpha(self, frame_time: np.ndarray, now: float | None = None) -> np.ndarray:
+        """float32 opacity factor per point for fading old frames: 1 for a new frame falling
+        linearly to 0 at ``decay`` seconds (1 everywhere without decay; 1 for snapshot points, NaN)."""
+        t = np.asarray(frame_time, np.float32)
+        if self.decay is None:
+            return np.ones(t.shape, np.float32)
+        age = np.float32(self.now() if now is None else now) - t
+        alpha = np.clip(1.0 - age / np.float32(self.decay), 0.0, 1.0).astype(np.float32)
+        return np.where(np.isnan(t), np.float32(1.0), alpha)
+
+    # ------------------------------------------------------------------ events
+    def add_listener(self, fn: Callable[[], None]) -> None:
+        """``fn()`` is called (from the producer's thread) after every accepted frame or snapshot."""
+        self._listeners.append(fn)
+
+    def remove_listener(self, fn) -> None:
+        if fn in self._listeners:
+            self._listeners.remove(fn)
+
+    def wait_frame(self, seen: int, timeout: float | None = None) -> int:
+        """Wait until the cloud changed (a frame accepted, a snapshot, a clear) more than ``seen``
+        times, or ``timeout`` passes; returns the count of changes."""
+        with self._changed:
+            self._changed.wait_for(lambda: self.changes > seen, timeout)
+            return self.changes
+
+    def _notify(self) -> None:
+        with self._changed:
+            self.changes += 1
+            self._changed.notify_all()
+        for fn in list(self._listeners):
+            fn()
+
+    def refused(self, error) -> None:
+        """Count a frame refused before it reached ``push`` (a malformed pushed message, an
+        unreadable file): the HUD shows the last such error."""
+        self.stats.frames_rejected += 1
+        self.stats.last_error = str(error)
+
+    # ------------------------------------------------------------------ pushing frames
+    def push(self, xyz, rgb=None, pose=None, time: float | None = None, normals=None, **attributes) -> int:
+        """Add a frame: xyz (N, 3) in sensor coordinates (``pose``: 4x4 sensor -> world; None:
+        world coordinates), colors (N, 3|4) uint8/uint16/float, optional (N, 3) normals in sensor
+        coordinates and 1-D attributes of length N. Points with NaN/inf coordinates are dropped.
+        Returns the frame's sequence number. A bad frame raises a one-line InputError and leaves
+        the ring as it was."""
+        pushed_at = _time.perf_counter()
+        try:
+            return self._push(xyz, rgb, pose, time, normals, attributes, pushed_at)
+        except GigapointError as exc:
+            self.refused(exc)
+            raise
+
+    def push_depth(self, depth, intrinsics, pose=None, rgb=None, depth_scale: float | None = None, time: float | None = None,
+                   max_depth: float | None = None) -> int:  # fmt: skip
+        """Add a frame from an organised (H, W) depth image (uint16 in ``depth_scale`` metres, by
+        default millimetres; float in metres, or times ``depth_scale``) and its pinhole
+        ``intrinsics`` (3x3 matrix or (fx, fy, cx, cy)); ``rgb`` an aligned (H, W, 3|4) image.
+        Zero and NaN depths are holes (skipped); points get normals from their image neighbours."""
+        pushed_at = _time.perf_counter()
+        try:
+            p = parse_pose(pose, "push_depth")
+            xyz, nrm, rgba, _ = depth_to_points(depth, intrinsics, p, rgb, depth_scale, max_depth)
+            seq = self._push(xyz, rgba, None, time, None, {}, pushed_at, world_normals=nrm, pose_tag=p)
+        except GigapointError as exc:
+            self.refused(exc)
+            raise
+        if self.recorder is not None:
+            self.recorder.write_depth(seq, depth, intrinsics, p, rgb, depth_scale, max_depth, self._last_time)
+        return seq
+
+    def _push(self, xyz, rgb, pose, time, normals, attributes, pushed_at, world_normals=None, pose_tag=None) -> int:
+        name = self.name
+        xyz_in = _as_points(xyz, f"{name}: push")
+        n = len(xyz_in)
+        if n == 0:
+            raise InputError(f"{name}: push: the frame has no points")
+        p = parse_pose(pose, f"{name}: push") if pose_tag is None else pose_tag
+        rgba = None
+        if rgb is not None:
+            try:
+                rgba = to_rgba8(np.asarray(rgb))
+            except ValueError as exc:
+                raise InputError(f"{name}: push: {exc}") from None
+            if len(rgba) != n:
+                raise InputError(f"{name}: push: rgb has {len(rgba)} rows, xyz has {n}")
+        attrs = {}
+        for a, v in attributes.items():
+            v = np.asarray(v)
+            if v.ndim != 1 or len(v) != n or v.dtype.kind not in "biuf":
+                raise InputError(f"{name}: push: attribute {a!r} must be 1-D numbers of length {n}, got shape {v.shape} dtype {v.dtype}")
+            if a in BASE_ATTRIBUTES or a in NORMAL_PARTS:
+                raise InputError(f"{name}: push: attribute name {a!r} is reserved (give normals=...)")
+            attrs[a] = v
+        if normals is not None:
+            nrm = np.asarray(normals)
+            if nrm.shape != (n, 3) or nrm.dtype.kind not in "if":
+                raise InputError(f"{name}: push: normals must be (N, 3) numbers like xyz ({n}, 3), got shape {nrm.shape}")
+            world_normals = (nrm.astype(np.float64) @ p[:3, :3].T).astype(np.float32)
+        pts = xyz_in.astype(np.float64)
+        if pose_tag is None and pose is not None:  # sensor -> world (push_depth's kernel applied it already)
+            pts = pts @ p[:3, :3].T + p[:3, 3]
+        valid, lo, hi = valid_bounds(pts, MAX_ABS_COORDINATE)  # one parallel pass (the octree's)
+        if not valid.all():
+            if not valid.any():
+                raise InputError(f"{name}: push: none of the frame's {n} points is valid (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})")
+            pts = pts[valid]
+            rgba = rgba[valid] if rgba is not None else None
+            world_normals = world_normals[valid] if world_normals is not None else None
+            attrs = {a: v[valid] for a, v in attrs.items()}
+        m = len(pts)
+        if rgba is None:
+            rgba = np.empty((m, 4), np.uint8)
+            rgba[:] = (200, 200, 200, 255)
+        if world_normals is None:
+            world_normals = np.zeros((m, 3), np.float32)
+        arrived = self.now()
+        t = float(time) if time is not None else self.clock()
+        if not np.isfinite(t):
+            raise InputError(f"{name}: push: time must be a finite number of seconds, got {time!r}")
+        per_point = {"normal": world_normals, "frame_time": np.full(m, arrived, np.float32)}
+        per_point.update(attrs)
+        frame = batch_frame(pts, rgba, per_point, lo, hi, self.chunk)
+        with self._pending_lock:
+            seq = self._seq
+            self._seq += 1
+            self._pending.append((frame, FrameInfo(seq, [], m, t, arrived, p, lo, hi, pushed_at), attrs))
+            self._last_time = t
+        self._commit_pending()
+        if self.recorder is not None and pose_tag is None:
+            self.recorder.write_points(seq, xyz_in, rgb, pose, t, normals, attributes)
+        return seq
+
+    def _commit_pending(self) -> None:
+        """Copy the frames waiting in ``_pending`` into the ring, in push order, whenever the lock
+        is free: by the producer at once, else by whoever holds the lock (a frame being drawn)
+        when it lets go (LiveLock's ``released``). A producer never waits for a frame to be drawn."""
+        while self._pending and self.lock.try_write():
+            committed = 0
+            try:
+                while True:
+                    with self._pending_lock:
+                        if not self._pending:
+                            break
+                        frame, info, attrs = self._pending.popleft()
+                    self._attribute_set(attrs)
+                    self._insert(frame, info)
+                    self._expire()
+                    self.stats.frames_in += 1
+                    self.stats.points_in += info.n_points
+                    self.stats.arrivals.append(_time.perf_counter())
+                    committed += 1
+            finally:
+                self.lock.release()
+            if committed:
+                self._notify()
+
+    def _attribute_set(self, attrs: dict) -> None:
+        if self._attr_dtypes is None:
+            self._attr_dtypes = {**BASE_ATTRIBUTES, **{a: attribute_dtype(v) for a, v in attrs.items()}}
+
+    def _insert(self, frame, info: FrameInfo) -> None:
+        k = len(frame.batches)
+        if self.buffers_ is None:
+            self.buffers_ = LiveBuffers(self.name, max(_INITIAL_CHUNKS, 2 * k), self.chunk, 0, SNAPSHOT_CHUNK, self._attr_dtypes)
+            self._free = list(range(self.buffers_.n_ring))
+        buf = self.buffers_
+        if len(self._free) < k:
+            old = buf.n_ring
+            buf = self.buffers_ = buf.grown(max(2 * old, old + k), buf.n_mirror)
+            for s in range(old, buf.n_ring):
+                heapq.heappush(self._free, s)
+        buf.version += 1
+        for j, rec in enumerate(frame.batches):
+            slot = heapq.heappop(self._free)
+            f, c = int(rec["first"]), int(rec["count"])
+            attrs = {a: (frame.attributes[a][f : f + c] if a in frame.attributes else 0) for a in buf.attributes}
+            buf.write_chunk(slot, rec, frame.low[f : f + c], frame.med[f : f + c], frame.high[f : f + c], frame.color[f : f + c], attrs)
+            info.chunks.append(slot)
+        self._chunk_time = self._sized(self._chunk_time, buf.n_ring)
+        self._chunk_time[info.chunks] = info.arrived
+        self.frames.append(info)
+        self.points += info.n_points
+
+    @staticmethod
+    def _sized(a: np.ndarray, n: int) -> np.ndarray:
+        if len(a) >= n:
+            return a
+        out = np.full(n, np.nan, a.dtype)
+        out[: len(a)] = a
+        return out
+
+    def _expire(self) -> None:
+        """Frames beyond ``keep`` or older than ``decay`` leave the ring (lock held)."""
+        now = self.now()
+        drop = []
+        while len(self.frames) > self.keep or (self.decay is not None and self.frames and now - self.frames[0].arrived > self.decay):
+            drop.append(self.frames.popleft())
+        if not drop:
+            return
+        buf = self.buffers_
+        buf.version += 1
+        for f in drop:
+            buf.clear_chunks(f.chunks)
+            self._chunk_time[f.chunks] = np.nan
+            for s in f.chunks:
+                heapq.heappush(self._free, s)
+            self.points -= f.n_points
+
+    def clear(self) -> None:
+        """Drop every frame from the ring (snapshots stay)."""
+        with self.lock.writing():
+            keep, self.keep = self.keep, 0
+            try:
+                self._expire()
+            finally:
+                self.keep = keep
+        self._notify()
+
+    # ------------------------------------------------------------------ drawing (Renderable)
+    def reading(self):
+        """Held by the renderer from prepare until the frame is drawn: pushes wait (frames first)."""
+        return self.lock.reading()
+
+    def prepare(self, view: View, settings) -> DrawList:
+        """Every ring chunk in view (``max_points``: every k-th point of each), then the snapshot
+        octree's selection (its LOD within ``point_budget``), as one selection over the buffers."""
+        if self.decay is not None and self.frames:
+            self._expire()  # the lock is held (reading): frames past their decay leave before this frame
+        self._sync_mirror()
+        buf = self.buffers_
+        if buf is None:
+            empty = Selection(np.empty(0, np.int64), np.empty(0, np.int32), np.empty((0, 4, 4), np.float32), np.empty(0), 0)
+            return DrawList(LiveBuffers(self.name, 1, self.chunk, 0, SNAPSHOT_CHUNK, BASE_ATTRIBUTES), empty, 0)
+        buf.bounds = self.bounds
+        used = np.flatnonzero(buf.batches["count"][: buf.n_ring] > 0)
+        sel = select_view(buf.batches[used], view, settings)
+        ids, bits, mats, size = used[sel.ids], sel.bits, sel.matrices, sel.projected_px
+        step = subsample_step(buf.batches["count"][ids].astype(np.int64), settings.max_points) if len(ids) else 1
+        culled = sel.n_culled
+        n_batches = len(used)
+        if self.snapshots is not None and self._mirror_pool is not None and self.snapshots.n_points:
+            with self.snapshots.reading():
+                od = self.snapshots.prepare(view, settings)
+            ids = np.concatenate([ids, buf.n_ring + od.selection.ids])
+            bits = np.concatenate([bits, od.selection.bits])
+            mats = np.concatenate([mats, od.selection.matrices])
+            size = np.concatenate([size, od.selection.projected_px])
+            culled += od.selection.n_culled
+            n_batches += od.n_batches
+        if self.frames:  # what a frame of this version shows: the newest push it holds (latency, ``drawn``)
+            self._version_pushed[buf.version] = self.frames[-1].pushed_at
+            if len(self._version_pushed) > 256:
+                for v in sorted(self._version_pushed)[:-128]:
+                    del self._version_pushed[v]
+        alpha = None
+        if self.decay is not None and self.fade:  # per drawn batch: its frame's fade (render/passes/transparency.py composites it)
+            t = np.full(len(ids), np.nan, np.float32)
+            ring = ids < buf.n_ring
+            t[ring] = self._chunk_time[ids[ring]]
+            alpha = self.fade_alpha(t)
+        return DrawList(buf, Selection(ids, bits.astype(np.int32), mats, size, culled), n_batches, step, alpha=alpha)
+
+    def prepare_views(self, views, settings):
+        return None  # drawn one view at a time
+
+    def drawn(self, frame) -> None:
+        """Tell the cloud a frame drawn from it reached the screen (the viewer calls it): the
+        push-to-pixels latency of the newest frame it showed, once per buffers version."""
+        gen = frame.generation
+        t = self._version_pushed.get(gen)
+        if t is None or gen in self._counted_versions:
+            return
+        self._counted_versions.append(gen)
+        self.stats.latencies.append(_time.perf_counter() - t)
+
+    def hud(self) -> str:
+        """One line for the viewer's HUD: frames in per second, live points, latency."""
+        s = self.stats
+        lat = s.latency_ms(50)
+        p99 = s.latency_ms(99)
+        latency = f", latency {lat:.0f} ms (p99 {p99:.0f})" if lat is not None else ""
+        snap = f", {self.snapshots.n_points:,} snapshot points" if self.snapshots is not None else ""
+        err = f"; last bad frame: {s.last_error}" if s.last_error else ""
+        return f"live: {s.frames_per_second():.1f} frames/s in, {len(self.frames)} frames, {self.points:,} live points{snap}{latency}{err}"[:400]
+
+    # ------------------------------------------------------------------ snapshots
+    def _sync_mirror(self) -> None:
+        """Bring the mirror region up to the snapshot octree's pool (chunks written since last time)."""
+        oct_ = self.snapshots
+        if oct_ is None:
+            return
+        with oct_.reading():
+            pool = oct_.pool
+            if pool is None or (pool is self._mirror_pool and pool.version == self._mirror_version):
+                return
+            buf = self.buffers_
+            if buf is None:
+                self.buffers_ = buf = LiveBuffers(self.name, _INITIAL_CHUNKS, self.chunk, 0, pool.chunk, self._attr_dtypes or dict(BASE_ATTRIBUTES))
+                self._free = list(range(buf.n_ring))
+            if buf.mirror_chunk != pool.chunk:
+                raise GigapointError(f"{self.name}: snapshot octree chunks of {pool.chunk} entries, mirror of {buf.mirror_chunk}")
+            if pool.n_chunks > buf.n_mirror:
+                buf = self.buffers_ = buf.grown(buf.n_ring, pool.n_chunks)
+                changed = np.arange(pool.n_chunks)
+            elif pool is not self._mirror_pool:
+                changed = np.arange(pool.n_chunks)
+            else:
+                changed = np.flatnonzero(pool.batch_version > self._mirror_version)
+            buf.version += 1
+            buf.mirror_from(pool, changed.astype(np.int64))
+            self._mirror_pool, self._mirror_version = pool, pool.version
+
+    def frame_points(self, frames: list[FrameInfo] | None = None):
+        """(xyz float64 world, rgba uint8 (N, 4), attributes) of the frames in the ring (30-bit positions)."""
+        with self.lock.reading():
+            frames = list(self.frames) if frames is None else frames
+            buf = self.buffers_
+            slots = [s for f in frames for s in f.chunks]
+            if not slots:
+                return np.empty((0, 3)), np.empty((0, 4), np.uint8), {}
+            return buf.gather(slots, skip=("frame_time",))
+
+    def snapshot(self, normals: bool = True) -> int:
+        """Freeze the frames now in the ring (world coordinates: their poses applied) into the
+        accumulating snapshot octree, drawn with the live frames (``normals=False``: positions and
+        colors only, ~1.5x faster). Returns the points added.
+
+        Added in batches of SNAPSHOT_BATCH points (SimLOD's batch size): the octree inserts a
+        million points with their attributes at twice the rate of seven million at once."""
+        xyz, rgba, attrs = self.frame_points()
+        if not len(xyz):
+            return 0
+        if not normals:
+            attrs = {a: v for a, v in attrs.items() if a not in NORMAL_PARTS}
+        if self.snapshots is None:
+            from ..lod.progressive import ProgressiveOctree
+
+            lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+            if self.expected_bounds is not None:
+                lo, hi = np.minimum(lo, self.expected_bounds[0]), np.maximum(hi, self.expected_bounds[1])
+            centre, edge = (lo + hi) / 2, float(np.max(hi - lo)) * 2 + 1e-6  # room to move: growing the root re-samples every point
+            self.snapshots = ProgressiveOctree(name=f"{self.name} snapshots", cube=(centre - edge / 2, edge), capacity=len(xyz))
+        added = 0
+        for s in range(0, len(xyz), SNAPSHOT_BATCH):
+            part = slice(s, s + SNAPSHOT_BATCH)
+            added += self.snapshots.add(xyz[part], rgba[part], **{a: v[part] for a, v in attrs.items()})
+        self._notify()
+        return added
+
+    def save(self, path, overwrite: bool = False) -> int:
+        """Write the accumulated snapshots: ``.las``/``.laz``/``.ply`` (points with colors and
+        normals), else a gigapoint octree folder. Returns the points written."""
+        from .save import save_snapshots
+
+        if self.snapshots is None or self.snapshots.n_points == 0:
+            raise InputError(f"{self.name}: nothing to save: no snapshot taken yet (call snapshot())")
+        return save_snapshots(self.snapshots, path, overwrite)
+
+    # ------------------------------------------------------------------ recording
+    def record(self, directory, overwrite: bool = False):
+        """Record every frame pushed from now on into ``directory`` (an npz per frame with its pose
+        and time, and index.json); returns the Recorder (``stop()`` or ``live.stop_recording()``)."""
+        from .record import Recorder
+
+        if self.recorder is not None:
+            raise InputError(f"{self.name}: already recording into {self.recorder.directory}")
+        self.recorder = Recorder(directory, overwrite=overwrite)
+        return self.recorder
+
+    def stop_recording(self) -> None:
+        rec, self.recorder = self.recorder, None
+        if rec is not None:
+            rec.stop()
+
+    def close(self) -> None:
+        if self.player is not None:
+            self.player.stop()
+        self.stop_recording()

@@ -1,0 +1,162 @@
+"""Recording a live stream and reading it back.
+
+A recording is a folder: ``frames/000000.npz``... one file per frame, each written atomically
+(gigapoint.atomic: a reader never sees half a frame) and self-describing (its kind, pose, time
+and arrays), and ``index.json`` listing them, rewritten atomically about once a second and when
+the recording stops. A frame pushed as a depth image is recorded as that image and its
+intrinsics (replay runs the same kernel again), one pushed as points as its sensor-frame points.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..atomic import atomic_json, atomic_open
+from ..errors import InputError
+
+FORMAT = "gigapoint-live-recording"
+INDEX = "index.json"
+FRAMES = "frames"
+
+
+@dataclass
+class RecordedFrame:
+    """One frame of a stream: points (``xyz`` in sensor coordinates) or a depth image, with its pose and time."""
+
+    kind: str  # "points" or "depth"
+    time: float
+    pose: np.ndarray | None = None
+    xyz: np.ndarray | None = None
+    rgb: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    attributes: dict = field(default_factory=dict)
+    depth: np.ndarray | None = None
+    intrinsics: np.ndarray | None = None
+    depth_scale: float | None = None
+    max_depth: float | None = None
+
+    def push_into(self, live) -> int:
+        """Push this frame into a LiveCloud (``push`` or ``push_depth``)."""
+        if self.kind == "depth":
+            return live.push_depth(self.depth, self.intrinsics, self.pose, self.rgb, self.depth_scale, self.time, self.max_depth)
+        return live.push(self.xyz, self.rgb, self.pose, self.time, self.normals, **self.attributes)
+
+
+class Recorder:
+    """Writes the frames a LiveCloud accepts into a recording folder (``LiveCloud.record``)."""
+
+    def __init__(self, directory, overwrite: bool = False, index_every_s: float = 1.0):
+        self.directory = Path(directory)
+        if (self.directory / INDEX).exists() and not overwrite:
+            raise InputError(f"{self.directory}: holds a recording already; pass overwrite=True to replace it")
+        if self.directory.exists() and not self.directory.is_dir():
+            raise InputError(f"{self.directory}: exists and is not a folder")
+        (self.directory / FRAMES).mkdir(parents=True, exist_ok=True)
+        if overwrite:
+            for old in (self.directory / FRAMES).glob("*.npz"):
+                old.unlink()
+        self.index_every_s = index_every_s
+        self.entries: list[dict] = []
+        self._lock = threading.Lock()
+        self._written_at = 0.0
+        self.started = time.time()
+        self._write_index()
+
+    def _write(self, arrays: dict, kind: str, t: float) -> None:
+        with self._lock:
+            k = len(self.entries)
+            name = f"{FRAMES}/{k:06d}.npz"
+            self.entries.append({"file": name, "time": t, "kind": kind})
+        with atomic_open(self.directory / name) as f:
+            np.savez(f, kind=np.array(kind), time=np.array(t, np.float64), **arrays)
+        if time.monotonic() - self._written_at > self.index_every_s:
+            self._write_index()
+
+    def write_points(self, seq, xyz, rgb, pose, t, normals, attributes) -> None:
+        arrays = {"xyz": np.asarray(xyz)}
+        if pose is not None:
+            arrays["pose"] = np.asarray(pose, np.float64)
+        if rgb is not None:
+            arrays["rgb"] = np.asarray(rgb)
+        if normals is not None:
+            arrays["normals"] = np.asarray(normals)
+        for a, v in attributes.items():
+            arrays[f"attr_{a}"] = np.asarray(v)
+        self._write(arrays, "points", t)
+
+    def write_depth(self, seq, depth, intrinsics, pose, rgb, depth_scale, max_depth, t) -> None:
+        from .depth import parse_intrinsics
+
+        arrays = {"depth": np.asarray(depth), "intrinsics": np.array(parse_intrinsics(intrinsics)), "pose": np.asarray(pose, np.float64)}
+        if rgb is not None:
+            arrays["rgb"] = np.asarray(rgb)
+        arrays["depth_scale"] = np.array(np.nan if depth_scale is None else depth_scale, np.float64)
+        arrays["max_depth"] = np.array(np.nan if max_depth is None else max_depth, np.float64)
+        self._write(arrays, "depth", t)
+
+    def _write_index(self) -> None:
+        with self._lock:
+            entries = list(self.entries)
+        atomic_json(self.directory / INDEX, {"format": FORMAT, "version": 1, "frames": entries})
+        self._written_at = time.monotonic()
+
+    def stop(self) -> None:
+        self._write_index()
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.entries)
+
+
+def _opt(z, name):
+    if name not in z:
+        return None
+    v = float(z[name])
+    return None if np.isnan(v) else v
+
+
+def read_frame(path: Path) -> RecordedFrame:
+    """One recorded frame (an npz written by Recorder)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            kind = str(z["kind"])
+            t = float(z["time"])
+            pose = z.get("pose", None)
+            rgb = z.get("rgb", None)
+            if kind == "depth":
+                return RecordedFrame("depth", t, pose, rgb=rgb, depth=z["depth"], intrinsics=z["intrinsics"],
+                                     depth_scale=_opt(z, "depth_scale"), max_depth=_opt(z, "max_depth"))  # fmt: skip
+            if kind != "points":
+                raise InputError(f"{path}: unknown frame kind {kind!r} (points or depth)")
+            attrs = {k[5:]: z[k] for k in z.files if k.startswith("attr_")}
+            return RecordedFrame("points", t, pose, xyz=z["xyz"], rgb=rgb, normals=z.get("normals", None), attributes=attrs)
+    except (OSError, ValueError, KeyError) as exc:
+        raise InputError(f"{path}: not a recorded frame ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+
+
+def recording_files(directory) -> list[Path]:
+    """The frame files of a recording, in order: index.json's, then any written after it."""
+    directory = Path(directory)
+    index = directory / INDEX
+    if not index.is_file():
+        raise InputError(f"{directory}: not a live recording (no {INDEX})")
+    try:
+        meta = json.loads(index.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{index}: unreadable ({exc})") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise InputError(f"{index}: not a gigapoint live recording index")
+    listed = [directory / e["file"] for e in meta.get("frames", []) if isinstance(e, dict) and "file" in e]
+    seen = {p.name for p in listed}
+    later = sorted(p for p in (directory / FRAMES).glob("[0-9]*.npz") if p.name not in seen)
+    return [p for p in listed if p.is_file()] + later
+
+
+def is_recording(path) -> bool:
+    return (Path(path) / INDEX).is_file()

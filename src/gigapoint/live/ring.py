@@ -1,0 +1,218 @@
+"""The live cloud's point buffers: a pool of fixed-size chunks, one batch each, rewritten in place.
+
+Two regions share the arrays (core/renderable.PointBuffers):
+
+- the **ring**: chunks of ``chunk`` (BATCH_SIZE) entries; a frame's Morton-ordered batches
+  go into free chunks when it arrives and the chunks go back to the free list when the frame
+  leaves the ring (``keep``, ``decay``). A chunk holding no frame has count 0.
+- the **mirror**: a copy of the snapshot octree's pool (lod.progressive.Pool, chunks of its
+  own size), refreshed chunk by chunk from its ``batch_version`` so the renderer draws live
+  frames and snapshots from one set of buffers in one pass.
+
+Every write bumps ``version`` and records it in ``batch_version`` of the chunks written, as
+the progressive octree's pool does, so render's RenderCache and the GPU's page cache redo only
+what changed. Growing a region makes new arrays (caches drop the old ones by identity).
+"""
+
+from __future__ import annotations
+
+import weakref
+from contextlib import contextmanager
+
+import numpy as np
+from numba import njit, prange
+
+from ..core.framelock import FrameLock
+from ..core.layout import BATCH_DTYPE, COORD_BITS, WORD_BITS, WORD_MASK
+from ..core.quantize import dequantize
+
+_SCALE30 = float(1 << COORD_BITS)
+
+#: attributes every live point has: ``normal``, its (3,) float32 unit normal (0 where unknown; one
+#: (N, 3) array, which lighting reads without a copy: render/colors.normals_of) and ``frame_time``,
+#: the seconds since the cloud's start at which its frame arrived (NaN: a snapshot point, never fades)
+BASE_ATTRIBUTES = {"normal": np.dtype((np.float32, (3,))), "frame_time": np.dtype(np.float32)}
+NORMAL_PARTS = ("nx", "ny", "nz")  # the normal as 1-D attributes (the snapshot octree's, LAS/PLY files')
+
+
+def attribute_dtype(values: np.ndarray) -> np.dtype:
+    """The dtype that ``np.zeros(n, dtype)`` makes (n, ...) arrays like ``values`` of."""
+    return np.dtype((values.dtype, values.shape[1:])) if values.ndim > 1 else values.dtype
+
+
+@njit(parallel=True, cache=True)
+def _dequantize_runs(low, med, high, firsts, counts, offsets, bbox_min, bbox_max, out):
+    """float64 positions of runs of points (run j: ``counts[j]`` points from ``firsts[j]``, in the
+    box of row j) into ``out`` from ``offsets[j]``: core/quantize.dequantize at 30 bits (the cell
+    centre, min + (X + 0.5) size / 2^30), compiled over many batches at once."""
+    for j in prange(firsts.shape[0]):
+        f = firsts[j]
+        o = offsets[j]
+        for a in range(3):
+            lo = bbox_min[j, a]
+            cell = (bbox_max[j, a] - lo) / _SCALE30
+            s = WORD_BITS * a
+            for k in range(counts[j]):
+                q = (((low[f + k] >> s) & WORD_MASK) << 20) | (((med[f + k] >> s) & WORD_MASK) << 10) | ((high[f + k] >> s) & WORD_MASK)
+                out[o + k, a] = lo + (q + 0.5) * cell
+
+
+class LiveLock(FrameLock):
+    """The live cloud's lock: core/framelock.FrameLock (frames first, a writer between frames),
+    plus ``released`` (a bound method, held
+    weakly: no reference cycle) called after every frame and write: the live cloud then commits
+    the frames that arrived while the lock was held (producers never wait for a frame)."""
+
+    def __init__(self, released=None) -> None:
+        super().__init__()
+        self._released = weakref.WeakMethod(released) if released is not None else None
+
+    def _after(self) -> None:
+        fn = self._released() if self._released is not None else None
+        if fn is not None:
+            fn()
+
+    @contextmanager
+    def writing(self):
+        try:
+            with super().writing():
+                yield
+        finally:
+            self._after()
+
+    @contextmanager
+    def reading(self):
+        try:
+            with super().reading():
+                yield
+        finally:
+            self._after()
+
+
+class LiveBuffers:
+    """Ring chunks [0, n_ring) then mirror chunks [n_ring, n_ring + n_mirror), in the batch layout."""
+
+    def __init__(self, name: str, n_ring: int, chunk: int, n_mirror: int, mirror_chunk: int, attribute_dtypes: dict):
+        self.name = name
+        self.chunk = chunk
+        self.mirror_chunk = mirror_chunk
+        self.n_ring = n_ring
+        self.n_mirror = n_mirror
+        self.ring_points = n_ring * chunk
+        n = self.ring_points + n_mirror * mirror_chunk
+        self.batches = np.zeros(n_ring + n_mirror, BATCH_DTYPE)
+        self.batches["first"][:n_ring] = np.arange(n_ring, dtype=np.uint64) * chunk
+        self.batches["first"][n_ring:] = self.ring_points + np.arange(n_mirror, dtype=np.uint64) * mirror_chunk
+        self.low = np.zeros(n, np.uint32)
+        self.med = np.zeros(n, np.uint32)
+        self.high = np.zeros(n, np.uint32)
+        self.color = np.zeros(n, np.uint32)
+        self.attributes = {a: np.zeros(n, dt) for a, dt in attribute_dtypes.items()}
+        if "frame_time" in self.attributes:
+            self.attributes["frame_time"][self.ring_points :] = np.nan
+        self.batch_version = np.zeros(n_ring + n_mirror, np.int64)
+        self.version = 0
+        self.bounds = (np.zeros(3), np.zeros(3))
+
+    @property
+    def n_points(self) -> int:
+        return len(self.low)
+
+    def grown(self, n_ring: int, n_mirror: int) -> LiveBuffers:
+        """Buffers with room for ``n_ring`` ring and ``n_mirror`` mirror chunks holding this one's
+        contents (new arrays, a new version)."""
+        new = LiveBuffers(self.name, n_ring, self.chunk, n_mirror, self.mirror_chunk, {a: attribute_dtype(v) for a, v in self.attributes.items()})
+        r, m = min(self.n_ring, n_ring), min(self.n_mirror, n_mirror)
+        rp, mp = r * self.chunk, m * self.mirror_chunk
+        for a in ("low", "med", "high", "color"):
+            src, dst = getattr(self, a), getattr(new, a)
+            dst[:rp] = src[:rp]
+            dst[new.ring_points : new.ring_points + mp] = src[self.ring_points : self.ring_points + mp]
+        for a, v in self.attributes.items():
+            new.attributes[a][:rp] = v[:rp]
+            new.attributes[a][new.ring_points : new.ring_points + mp] = v[self.ring_points : self.ring_points + mp]
+        for field in ("count", "level", "bbox_min", "bbox_max"):
+            new.batches[field][:r] = self.batches[field][:r]
+            new.batches[field][n_ring : n_ring + m] = self.batches[field][self.n_ring : self.n_ring + m]
+        new.batch_version[:] = self.version + 1
+        new.version = self.version + 1
+        new.bounds = self.bounds
+        return new
+
+    def write_chunk(self, slot: int, record, low, med, high, color, attributes: dict) -> None:
+        """Ring chunk ``slot`` := one batch (its record's count and box) and its point arrays."""
+        n = len(low)
+        f = slot * self.chunk
+        b = self.batches[slot]
+        b["count"], b["level"], b["bbox_min"], b["bbox_max"] = n, 0, record["bbox_min"], record["bbox_max"]
+        self.low[f : f + n] = low
+        self.med[f : f + n] = med
+        self.high[f : f + n] = high
+        self.color[f : f + n] = color
+        for a, v in self.attributes.items():
+            v[f : f + n] = attributes[a]
+        self.batch_version[slot] = self.version
+
+    def clear_chunks(self, slots) -> None:
+        """Chunks ``slots`` hold nothing from now on (not drawn; their words stay until a frame
+        refills them, which is the write ``batch_version`` records)."""
+        self.batches["count"][slots] = 0
+
+    def mirror_from(self, pool, chunks: np.ndarray) -> None:
+        """Copy chunks ``chunks`` of the snapshot octree's pool into the mirror region."""
+        if not len(chunks):
+            return
+        mc = self.mirror_chunk
+        ids = self.n_ring + chunks
+        for field in ("count", "level", "bbox_min", "bbox_max"):
+            self.batches[field][ids] = pool.batches[field][chunks]
+        src = (chunks[:, None] * mc + np.arange(mc)).reshape(-1)
+        dst = src + self.ring_points
+        for a in ("low", "med", "high", "color"):
+            getattr(self, a)[dst] = getattr(pool, a)[src]
+        for a, v in self.attributes.items():
+            if a in pool.attributes:
+                v[dst] = pool.attributes[a][src]
+            elif a == "normal" and all(p in pool.attributes for p in NORMAL_PARTS):
+                for k, part in enumerate(NORMAL_PARTS):
+                    v[dst, k] = pool.attributes[part][src]
+        self.batch_version[ids] = self.version
+
+    def positions(self, slot: int) -> np.ndarray:
+        """float64 world positions (30-bit cell centres) of the points of chunk ``slot``."""
+        rec = self.batches[slot]
+        f, n = int(rec["first"]), int(rec["count"])
+        return dequantize(self.low[f : f + n], self.med[f : f + n], self.high[f : f + n], rec["bbox_min"], rec["bbox_max"], 30)
+
+    def gather(self, slots: list[int], skip=()):
+        """(xyz float64 (N, 3) world, rgba uint8 (N, 4), attributes: the normal as nx, ny, nz) of the
+        points of chunks ``slots``, in order."""
+        rec = self.batches[np.asarray(slots, np.int64)]
+        firsts, counts = rec["first"].astype(np.int64), rec["count"].astype(np.int64)
+        offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        xyz = np.empty((int(counts.sum()), 3))
+        _dequantize_runs(self.low, self.med, self.high, firsts, counts, offsets, rec["bbox_min"].copy(), rec["bbox_max"].copy(), xyz)
+        runs = [slice(f, f + c) for f, c in zip(firsts.tolist(), counts.tolist())]
+        rgba = np.concatenate([self.color[r] for r in runs]).view(np.uint8).reshape(-1, 4)
+        attrs = {a: np.concatenate([v[r] for r in runs]) for a, v in self.attributes.items() if a not in skip}
+        if "normal" in attrs:  # 1-D parts, as the octree and the file writers take attributes
+            normal = attrs.pop("normal")
+            attrs.update({part: np.ascontiguousarray(normal[:, k]) for k, part in enumerate(NORMAL_PARTS)})
+        return xyz, rgba, attrs
+
+    def point_info(self, index: int) -> dict:
+        """Position, colour and attributes of the entry at ``index`` (a live frame's point or a snapshot's)."""
+        if not 0 <= index < self.n_points:
+            return {}
+        if index < self.ring_points:
+            slot = index // self.chunk
+        else:
+            slot = self.n_ring + (index - self.ring_points) // self.mirror_chunk
+        rec = self.batches[slot]
+        i = np.array([index])
+        pos = dequantize(self.low[i], self.med[i], self.high[i], rec["bbox_min"], rec["bbox_max"], 30)[0]
+        info = {"index": int(index), "position": pos.tolist(), "rgba": self.color[i].view(np.uint8).tolist(),
+                "source": "live frame" if index < self.ring_points else "snapshot"}  # fmt: skip
+        for a, v in self.attributes.items():
+            info[a] = v[index].tolist()
+        return info

@@ -1,0 +1,74 @@
+"""Writing a live cloud's accumulated snapshots: LAS/LAZ (laspy, lazrs), PLY (plyfile), or an octree folder."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..atomic import atomic_write
+from ..errors import InputError
+
+
+def _collect(octree):
+    chunks = list(octree.chunks())
+    xyz = np.concatenate([c.xyz for c in chunks])
+    rgba = np.concatenate([c.rgba for c in chunks])
+    names = chunks[0].attributes.keys()
+    attrs = {a: np.concatenate([c.attributes[a] for c in chunks]) for a in names}
+    return xyz, rgba, attrs
+
+
+def save_snapshots(octree, path, overwrite: bool = False) -> int:
+    """Write every point of the snapshot octree to ``path`` (its suffix picks the format:
+    .las, .laz, .ply; anything else a gigapoint octree folder). Returns the points written."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".las", ".laz", ".ply"):
+        return int(octree.save(path, overwrite=overwrite).points)
+    if path.exists() and not overwrite:
+        raise InputError(f"{path}: exists; pass overwrite=True to replace it")
+    if not path.parent.is_dir():
+        raise InputError(f"{path}: the folder {path.parent} does not exist")
+    xyz, rgba, attrs = _collect(octree)
+    if suffix == ".ply":
+        _write_ply(path, xyz, rgba, attrs)
+    else:
+        _write_las(path, xyz, rgba, attrs)
+    return len(xyz)
+
+
+def _write_ply(path: Path, xyz, rgba, attrs) -> None:
+    from plyfile import PlyData, PlyElement
+
+    fields = [("x", "f8"), ("y", "f8"), ("z", "f8"), ("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    fields += [(a, v.dtype.str) for a, v in attrs.items()]
+    data = np.empty(len(xyz), fields)
+    for k, a in enumerate("xyz"):
+        data[a] = xyz[:, k]
+    for k, a in enumerate(("red", "green", "blue")):
+        data[a] = rgba[:, k]
+    for a, v in attrs.items():
+        data[a] = v
+    ply = PlyData([PlyElement.describe(data, "vertex")])
+    atomic_write(path, lambda tmp: ply.write(str(tmp)))
+
+
+def _write_las(path: Path, xyz, rgba, attrs) -> None:
+    import laspy
+
+    header = laspy.LasHeader(point_format=7, version="1.4")
+    header.offsets = np.floor(xyz.min(axis=0))
+    header.scales = np.array([0.001, 0.001, 0.001])
+    for a, v in attrs.items():
+        header.add_extra_dim(laspy.ExtraBytesParams(name=a, type=v.dtype))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    las.red, las.green, las.blue = (rgba[:, k].astype(np.uint16) * 257 for k in range(3))
+    for a, v in attrs.items():
+        las[a] = v
+
+    def write(tmp: Path) -> None:
+        las.write(str(tmp), do_compress=path.suffix.lower() == ".laz")
+
+    atomic_write(path, write)

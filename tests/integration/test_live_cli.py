@@ -1,0 +1,92 @@
+"""`gigapoint view --replay DIR` / `--live SOURCE` as a process, frames pushed into it from this one."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("starlette")
+pytest.importorskip("uvicorn")
+pytest.importorskip("websockets")
+httpx = pytest.importorskip("httpx")
+
+from gigapoint.errors import GigapointError
+from gigapoint.live import LiveCloud
+from gigapoint.live.wire import PushClient, encode_frame
+
+pytestmark = [pytest.mark.timeout(180)]
+
+
+def start_viewer(*args):
+    proc = subprocess.Popen([sys.executable, "-m", "gigapoint.cli", "view", *args, "--no-browser"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)  # fmt: skip
+    lines = []
+    while True:
+        line = proc.stderr.readline()
+        if not line:
+            raise AssertionError(f"viewer exited: {''.join(lines)}")
+        lines.append(line)
+        if "push frames from another process:" in line:
+            push_url = line.split(": ", 1)[1].strip()
+            break
+    url = proc.stdout.readline().strip()
+    return proc, url, push_url
+
+
+def stop(proc):
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        raise
+
+
+def test_replay_a_recording_and_push_into_it_from_another_process(tmp_path):
+    live = LiveCloud()
+    live.record(tmp_path / "rec")
+    rng = np.random.default_rng(0)
+    for k in range(3):
+        live.push(rng.uniform(0, 10, (1000, 3)), time=0.05 * k)
+    live.stop_recording()
+    proc, url, push_url = start_viewer("--replay", str(tmp_path / "rec"), "--keep", "10")
+    try:
+        token = push_url.split("push_token=")[1]
+        info = httpx.get(url.rstrip("/") + "/api/info", timeout=10).json()["cloud"]
+        assert info["name"].startswith("live: ") and info["points"] >= 1000
+        with pytest.raises(GigapointError, match="refused"):
+            PushClient(url, "not-the-token")
+        with PushClient(url, token) as client:
+            assert client.push(rng.uniform(0, 10, (500, 3)))["type"] == "ack"
+            bad = client.send(encode_frame("points", xyz=np.zeros((4, 3)))[:-3])
+            assert bad["type"] == "error" and "cut short" in bad["message"]
+            assert client.push(rng.uniform(0, 10, (250, 3)))["type"] == "ack"  # the stream goes on
+        for _ in range(50):
+            info = httpx.get(url.rstrip("/") + "/api/info", timeout=10).json()["cloud"]
+            if info["points"] == 3750:
+                break
+        assert info["points"] == 3750
+    finally:
+        stop(proc)
+    assert proc.returncode in (0, 130)
+
+
+def test_view_live_a_folder_of_frames_and_bad_sources(tmp_path):
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for k in range(2):
+        np.save(frames / f"{k}.npy", np.random.default_rng(k).uniform(0, 5, (300, 3)))
+    proc, url, _ = start_viewer("--live", str(frames))
+    try:
+        info = httpx.get(url.rstrip("/") + "/api/info", timeout=10).json()["cloud"]
+        assert info["points"] >= 300
+    finally:
+        stop(proc)
+    for args, message in ((["--live", str(tmp_path / "nowhere")], "no such file"), (["--replay", str(frames)], "not a live recording"),
+                          (["--live", "demo", "--keep", "0"], "--keep")):  # fmt: skip
+        bad = subprocess.run([sys.executable, "-m", "gigapoint.cli", "view", *args, "--no-browser"], capture_output=True, text=True, timeout=60)
+        assert bad.returncode == 1 and message in bad.stderr and len(bad.stderr.strip().splitlines()) == 1, bad.stderr

@@ -1,0 +1,399 @@
+"""The compact layout (core/compact.py): exact at the source's scale, renders identical to the
+three-word layout of the same boxes, the wider paths, and the memory it reports."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import gigapoint as gp
+from gigapoint import Camera, RenderSettings
+from gigapoint.core import PointChunk, build_cloud
+from gigapoint.core.compact import ext_bits_per_point, wide_batches
+from gigapoint.errors import InputError
+from gigapoint.render.reference import reference_image, reference_visibility
+
+AUTZEN = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "autzen_trim.laz"
+UTM = np.array([636_000.0, 5_012_000.0, 120.0])
+
+
+def grid_cloud(rng, n, scale, extent, origin=UTM, batch_size=1024, layout="compact"):
+    """n points on a grid of step ``scale`` (per axis) over ``extent`` metres, far from the origin."""
+    scale = np.asarray(scale, np.float64)
+    steps = np.maximum((np.asarray(extent) / scale).astype(np.int64), 1)
+    q = rng.integers(0, steps, (n, 3))
+    xyz = origin + q * scale
+    rgba = rng.integers(0, 256, (n, 4), dtype=np.uint8)
+    rgba[:, 3] = 255
+    chunk = PointChunk(xyz, rgba, {"intensity": rng.integers(0, 65535, n).astype(np.uint16)}, scale=tuple(scale.tolist()))
+    return build_cloud([chunk], name="grid", batch_size=batch_size, layout=layout), xyz
+
+
+def assert_exact(cloud, xyz, scale):
+    """Every point decodes to a source point at the source's scale (same multiset of grid points)."""
+    scale = np.asarray(scale, np.float64)
+    got = np.round((cloud.positions() - UTM) / scale).astype(np.int64)
+    want = np.round((xyz - UTM) / scale).astype(np.int64)
+    np.testing.assert_array_equal(got[np.lexsort(got.T)], want[np.lexsort(want.T)])
+    dev = np.abs((cloud.positions() - UTM) / scale - got)
+    assert dev.max() < 1e-3, dev.max()  # the cell centre is the source point
+
+
+@pytest.mark.parametrize("scale", [(0.01, 0.01, 0.01), (0.001, 0.001, 0.001), (0.25, 0.25, 0.1), (0.01, 0.02, 0.005)])
+def test_round_trip_exact_at_the_source_scale(rng, scale):
+    cloud, xyz = grid_cloud(rng, 20_000, scale, (300.0, 200.0, 40.0))
+    assert cloud.layout == "compact"
+    assert_exact(cloud, xyz, scale)
+    assert not wide_batches(cloud.packing).any()
+    # bounds are the points' own, not the grid-aligned boxes
+    np.testing.assert_allclose(cloud.bounds[0], xyz.min(axis=0))
+    np.testing.assert_allclose(cloud.bounds[1], xyz.max(axis=0))
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**31),
+    scale=st.sampled_from([1e-4, 0.001, 0.005, 0.01, 0.25, 1.0]),
+    steps=st.tuples(st.integers(1, 2**22), st.integers(1, 2**22), st.integers(1, 2**16)),
+    n=st.integers(1, 3000),
+    batch=st.sampled_from([1, 7, 256, 1000, 10_240]),
+    far=st.booleans(),
+)
+def test_round_trip_property(seed, scale, steps, n, batch, far):
+    """Any grid, extent (1 to 4 M steps an axis), count and batch size: every point exact."""
+    r = np.random.default_rng(seed)
+    q = r.integers(0, steps, (n, 3))
+    origin = UTM if far else np.zeros(3)
+    xyz = origin + q * scale
+    cloud = build_cloud([PointChunk(xyz, None, {}, scale=(scale,) * 3)], batch_size=batch, layout="compact")
+    got = np.round((cloud.positions() - origin) / scale).astype(np.int64)
+    np.testing.assert_array_equal(got[np.lexsort(got.T)], q[np.lexsort(q.T)])
+    assert not wide_batches(cloud.packing).any()
+
+
+def test_ten_bit_batches_hold_four_bytes_a_point(rng):
+    # 1024 points in a batch whose extent is < 1024 steps on every axis: the low word only
+    cloud, xyz = grid_cloud(rng, 8 * 1024, (0.01,) * 3, (10.0, 10.0, 5.0), batch_size=1024)
+    assert (ext_bits_per_point(cloud.packing, cloud.batches["count"]) == 0).all()
+    assert cloud.ext.nbytes == 0
+    assert cloud.memory()["positions"] == 4 * cloud.n_points
+    assert_exact(cloud, xyz, (0.01,) * 3)
+
+
+def test_wider_batches_take_the_extension_and_stay_exact(rng):
+    # extents of ~2^14 steps in x: 4 extension bits on that axis
+    cloud, xyz = grid_cloud(rng, 4096, (0.01,) * 3, (160.0, 5.0, 5.0), batch_size=4096)
+    code = int(cloud.packing["code"][0])
+    assert code & 0xFF == 4 and (code >> 8) & 0xFF == 0 and (code >> 16) & 0xFF == 0
+    assert_exact(cloud, xyz, (0.01,) * 3)
+
+
+def test_off_grid_and_huge_batches_are_stored_wide(rng):
+    # a batch whose points are off the declared grid (another file's offset) keeps 30 bits
+    xyz = UTM + rng.uniform(0, 50, (3000, 3))
+    chunk = PointChunk(xyz, None, {}, scale=(0.01, 0.01, 0.01))
+    cloud = build_cloud([chunk], batch_size=1000, layout="compact")
+    assert wide_batches(cloud.packing).all()
+    words = gp.core.cloud_from_points(xyz, chunk.rgba, batch_size=1000)
+    np.testing.assert_array_equal(cloud.positions(), words.positions())  # today's 30-bit words exactly
+    # a batch spanning more than 2^29 steps (0.1 mm over 100 km) is wide too, the rest compact
+    q = np.concatenate([rng.integers(0, 1000, (1000, 3)), [[6 * 10**8, 0, 0], [12 * 10**8, 5, 5]]])
+    pts = UTM + q * 1e-4
+    cloud = build_cloud([PointChunk(pts, None, {}, scale=(1e-4,) * 3)], batch_size=1000, layout="compact")
+    wide = wide_batches(cloud.packing)
+    assert wide.any() and not wide.all()
+    got = cloud.positions()
+    order = np.lexsort(pts.T)
+    back = got[np.lexsort(got.T)]
+    np.testing.assert_allclose(back, pts[order], rtol=0, atol=1e-3)  # 30 bits of 100 km: 0.1 mm
+
+
+def test_autzen_is_compact_and_exact():
+    if not AUTZEN.exists():
+        pytest.skip("shared sample missing")
+    laspy = pytest.importorskip("laspy")
+    cloud = gp.open(AUTZEN)
+    assert cloud.layout == "compact"
+    las = laspy.read(str(AUTZEN))
+    scale, offset = np.asarray(las.header.scales), np.asarray(las.header.offsets)
+    src = np.stack([las.X, las.Y, las.Z], axis=1).astype(np.int64)
+    got = np.round((cloud.positions() - offset) / scale).astype(np.int64)
+    np.testing.assert_array_equal(got[np.lexsort(got.T)], src[np.lexsort(src.T)])
+    mem = cloud.memory()
+    assert mem["positions"] < 6.5 * cloud.n_points  # 12 bytes a point in three words
+    assert cloud.nbytes == sum(mem.values())
+    info = cloud.point_info(0)
+    assert all(round(v, 2) == v for v in info["position"])
+
+
+def test_layout_choice_and_errors(rng):
+    xyz = UTM + rng.uniform(0, 10, (100, 3))
+    assert build_cloud([PointChunk(xyz, None, {})]).layout == "words"  # no scale: today's layout
+    with pytest.raises(InputError, match="compact layout needs"):
+        build_cloud([PointChunk(xyz, None, {})], layout="compact")
+    with pytest.raises(InputError, match="layout must be one of"):
+        build_cloud([PointChunk(xyz, None, {})], layout="tiny")
+    scaled = PointChunk(np.round(xyz, 2), None, {}, scale=(0.01,) * 3)
+    assert build_cloud([scaled]).layout == "compact"
+    assert build_cloud([scaled], layout="words").layout == "words"
+    words = build_cloud([scaled], layout="words")
+    assert words.memory()["positions"] == 12 * 100
+
+
+def test_from_arrays_with_a_scale(rng):
+    xyz = UTM + rng.integers(0, 5000, (3000, 3)) * 0.005
+    cloud = gp.from_arrays(xyz, scale=0.005, intensity=np.arange(3000, dtype=np.uint16))
+    assert cloud.layout == "compact" and cloud.source_scale == (0.005, 0.005, 0.005)
+    assert_exact(cloud, xyz, (0.005,) * 3)
+    assert gp.from_arrays(xyz).layout == "words"
+    assert gp.from_arrays(xyz, scale=(0.005, 0.005, 0.001)).layout == "compact"
+    for bad in (0.0, -1, (0.01, 0.01), "x", float("nan")):
+        with pytest.raises(InputError, match="scale must be"):
+            gp.from_arrays(xyz, scale=bad)
+
+
+# --- rendering -------------------------------------------------------------------------------
+CAMS = {
+    "iso": lambda b: Camera.fit(b, view="iso", width=160, height=120),
+    "close": lambda b: Camera.look_at(b[0] + (b[1] - b[0]) * [0.5, -0.2, 2.0], (b[0] + b[1]) / 2, width=160, height=120),
+    "ortho": lambda b: Camera.fit(b, view="top", width=120, height=120, projection="orthographic"),
+}
+
+
+@pytest.fixture(scope="module")
+def scene():
+    rng = np.random.default_rng(7)
+    cloud, _ = grid_cloud(rng, 30_000, (0.01, 0.01, 0.005), (80.0, 60.0, 20.0), batch_size=2048)
+    return cloud
+
+
+@pytest.mark.parametrize("view", list(CAMS))
+@pytest.mark.parametrize("threshold", [1e9, 40.0, 0.5])  # 10, mixed, 20/30-bit batches
+def test_renders_equal_the_three_word_layout(scene, view, threshold):
+    cam = CAMS[view](scene.bounds)
+    settings = RenderSettings(size_mode="fixed", backend="cpu", precision_threshold_px=threshold)
+    a = gp.render_frame(scene, cam, settings)
+    b = gp.render_frame(scene.expanded(), cam, settings)
+    np.testing.assert_array_equal(a.visibility, b.visibility)
+    np.testing.assert_array_equal(a.image, b.image)
+    np.testing.assert_array_equal(a.visibility, reference_visibility(scene, cam, settings))
+    np.testing.assert_array_equal(a.image, reference_image(scene, cam, settings))
+    assert (a.visibility != np.iinfo(np.uint64).max).sum() > 500
+
+
+@pytest.mark.parametrize("max_points", [7_000, 0])
+def test_subsample_and_splats_equal_the_three_word_layout(scene, max_points):
+    cam = CAMS["close"](scene.bounds)
+    settings = RenderSettings(size_mode="fixed", backend="cpu", precision_threshold_px=0.5, max_points=max_points, point_size=3.0)
+    a = gp.render_frame(scene, cam, settings)
+    b = gp.render_frame(scene.expanded(), cam, settings)
+    np.testing.assert_array_equal(a.visibility, b.visibility)
+
+
+def test_stereo_equals_the_three_word_layout(scene):
+    cam = CAMS["close"](scene.bounds)
+    settings = RenderSettings(size_mode="fixed", backend="cpu", precision_threshold_px=0.5, stereo="side-by-side")
+    np.testing.assert_array_equal(gp.render_frame(scene, cam, settings).image, gp.render_frame(scene.expanded(), cam, settings).image)
+
+
+def test_expanded_twin_has_the_same_boxes(scene):
+    twin = scene.expanded()
+    assert twin.layout == "words"
+    np.testing.assert_array_equal(twin.batches, scene.batches)
+    np.testing.assert_array_equal(twin.positions(), scene.positions())
+    assert twin.memory()["positions"] == 12 * scene.n_points > 2 * scene.memory()["positions"]
+
+
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {"hqs": True},
+        {"color_mode": "elevation"},
+        {"edl": True, "fill_holes": 1},
+        {"point_size": 3, "point_shape": "round", "hqs": True},
+        {"opacity": 0.5},
+    ],
+)
+def test_passes_equal_the_three_word_layout(scene, kw):
+    cam = CAMS["close"](scene.bounds)
+    settings = RenderSettings(size_mode="fixed", backend="cpu", precision_threshold_px=40.0, **kw)
+    np.testing.assert_array_equal(gp.render_frame(scene, cam, settings).image, gp.render_frame(scene.expanded(), cam, settings).image)
+
+
+def test_framing_is_the_same(scene):
+    a, b = Camera.fit_cloud(scene, width=200, height=100), Camera.fit_cloud(scene.expanded(), width=200, height=100)
+    np.testing.assert_allclose(a.eye, b.eye)
+    np.testing.assert_allclose(a.target, b.target)
+
+
+# --- colors ----------------------------------------------------------------------------------
+def test_colors_in_16_bits_within_4_levels(rng):
+    cloud, _ = grid_cloud(rng, 5000, (0.01,) * 3, (20.0, 20.0, 5.0))
+    assert cloud.color.dtype == np.uint16 and cloud.memory()["color"] == 2 * cloud.n_points
+    exact = build_cloud([PointChunk(cloud.positions(), cloud.rgba, {}, scale=(0.01,) * 3)], colors="rgba")
+    assert exact.color.dtype == np.uint32
+    # every 8-bit value through 5/6/5 bits and back: the rounding's bound (4 red/blue, 2 green)
+    levels = np.arange(256, dtype=np.uint8)
+    rgba = np.stack([levels, levels, levels, np.full(256, 255, np.uint8)], axis=1)
+    c = build_cloud([PointChunk(UTM + np.arange(256)[:, None] * 0.01, rgba, {}, scale=(0.01,) * 3)])
+    back = c.rgba[np.argsort(c.positions()[:, 0])].astype(int)
+    err = np.abs(back - rgba.astype(int)).max(axis=0)
+    assert err.tolist() == [4, 2, 4, 0]
+    assert back[0, :3].tolist() == [0, 0, 0] and back[-1, :3].tolist() == [255, 255, 255]  # black and white exact
+    info = c.point_info(0)
+    assert info["rgba"] == c.rgba[0].tolist()
+
+
+@pytest.mark.parametrize("n", [1001, 1000])
+def test_resolve_of_16_bit_colors_any_length(rng, n):
+    from gigapoint.core.compact import pack_rgb565, rgb565_words
+
+    cloud, _ = grid_cloud(rng, n, (0.01,) * 3, (30.0, 30.0, 5.0), batch_size=256)
+    assert cloud.color.dtype == np.uint16 and len(cloud.color) == n
+    words = rgb565_words(cloud.color)
+    assert np.shares_memory(words, cloud.color)  # no copy a frame
+    halves = words.view(np.uint16)[:n]
+    np.testing.assert_array_equal(halves, cloud.color)
+    loose = pack_rgb565(rgba32_of(cloud))[: n - 1].copy()  # an array not from pack_rgb565: padded copy
+    np.testing.assert_array_equal(rgb565_words(loose).view(np.uint16)[: n - 1], loose)
+    cam = CAMS["iso"](cloud.bounds)
+    s = RenderSettings(size_mode="fixed", backend="cpu")
+    a, b = gp.render_frame(cloud, cam, s), gp.render_frame(cloud.expanded(), cam, s)
+    np.testing.assert_array_equal(a.image, b.image)
+    np.testing.assert_array_equal(a.image, reference_image(cloud, cam, s))
+    assert a.stats.visible_pixels > 100
+
+
+def rgba32_of(cloud):
+    return cloud.rgba.view(np.uint32).reshape(-1)
+
+
+def test_translucent_colors_stay_32_bit(rng):
+    xyz = UTM + np.round(rng.uniform(0, 10, (100, 3)), 2)
+    rgba = np.full((100, 4), 200, np.uint8)
+    cloud = build_cloud([PointChunk(xyz, rgba, {}, scale=(0.01,) * 3)])
+    assert cloud.layout == "compact" and cloud.color.dtype == np.uint32
+    np.testing.assert_array_equal(cloud.rgba, rgba)
+    with pytest.raises(InputError, match="not opaque"):
+        build_cloud([PointChunk(xyz, rgba, {}, scale=(0.01,) * 3)], colors="rgb565")
+    with pytest.raises(InputError, match="colors must be one of"):
+        build_cloud([PointChunk(xyz, rgba, {}, scale=(0.01,) * 3)], colors="rgb8")
+
+
+# --- the GPU (lavapipe in CI) ----------------------------------------------------------------
+@pytest.mark.gpu
+@pytest.mark.parametrize("threshold", [1e9, 40.0, 0.5])
+def test_wgpu_agrees_with_cpu(scene, threshold):
+    from gigapoint.backends.wgpu import WgpuBackend
+    from gigapoint.errors import BackendUnavailableError
+
+    try:
+        WgpuBackend()
+    except BackendUnavailableError as exc:
+        pytest.skip(f"no wgpu adapter: {exc}")
+    for make_camera in CAMS.values():
+        cam = make_camera(scene.bounds)
+        cpu = gp.render_frame(scene, cam, RenderSettings(size_mode="fixed", backend="cpu", precision_threshold_px=threshold))
+        gpu = gp.render_frame(scene, cam, RenderSettings(size_mode="fixed", backend="wgpu", precision_threshold_px=threshold))
+        np.testing.assert_array_equal(gpu.visibility, cpu.visibility)
+        np.testing.assert_array_equal(gpu.image, cpu.image)
+
+
+@pytest.mark.gpu
+def test_wgpu_passes_agree_with_cpu(scene):
+    from gigapoint.backends.wgpu import WgpuBackend
+    from gigapoint.errors import BackendUnavailableError
+
+    try:
+        WgpuBackend()
+    except BackendUnavailableError as exc:
+        pytest.skip(f"no wgpu adapter: {exc}")
+    cam = CAMS["close"](scene.bounds)
+    for kw in ({"hqs": True}, {"point_size": 2, "stereo": "side-by-side"}):
+        cpu = gp.render_frame(scene, cam, RenderSettings(size_mode="fixed", backend="cpu", precision_threshold_px=40.0, **kw))
+        gpu = gp.render_frame(scene, cam, RenderSettings(size_mode="fixed", backend="wgpu", precision_threshold_px=40.0, **kw))
+        np.testing.assert_array_equal(gpu.image, cpu.image)
+
+
+# --- memory you can see ----------------------------------------------------------------------
+def test_cli_prints_bytes_a_point(tmp_path, capsys):
+    if not AUTZEN.exists():
+        pytest.skip("shared sample missing")
+    from gigapoint.cli import main
+
+    cloud = gp.open(AUTZEN)
+    mem = cloud.memory()
+    assert main(["info", "--memory", str(AUTZEN)]) == 0
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith("memory:"))
+    assert f"positions {mem['positions'] / cloud.n_points:.2f}" in line and "color 2.00" in line and "compact layout" in line
+    assert f"{sum(mem.values()) / cloud.n_points:.2f} bytes/point" in line
+    assert main(["info", "--memory", "--json", str(AUTZEN)]) == 0
+    import json
+
+    rows = [json.loads(x) for x in capsys.readouterr().out.splitlines() if x.startswith("{")]
+    assert rows[-1]["memory"] == mem and rows[-1]["layout"] == "compact"
+    out_png = tmp_path / "a.png"
+    assert main(["render", str(AUTZEN), "-o", str(out_png), "-W", "64", "-H", "48", "--backend", "cpu", "--stats"]) == 0
+    err = capsys.readouterr().err
+    assert "memory:" in err and "bytes/point" in err and "peak RSS" in err
+
+
+@pytest.mark.gpu
+def test_wgpu_wide_and_ten_bit_batches_agree_with_cpu(rng):
+    from gigapoint.backends.wgpu import WgpuBackend
+    from gigapoint.errors import BackendUnavailableError
+
+    try:
+        WgpuBackend()
+    except BackendUnavailableError as exc:
+        pytest.skip(f"no wgpu adapter: {exc}")
+    off_grid = build_cloud(
+        [PointChunk(UTM + rng.uniform(0, 50, (3000, 3)), None, {}, scale=(0.01,) * 3)], batch_size=1000, layout="compact"
+    )
+    assert wide_batches(off_grid.packing).all()
+    ten_bit, _ = grid_cloud(rng, 4096, (0.01,) * 3, (8.0, 8.0, 3.0), batch_size=1024)
+    assert ten_bit.ext.nbytes == 0
+    for cloud in (off_grid, ten_bit):
+        for threshold in (1e9, 0.5):
+            cam = CAMS["close"](cloud.bounds)
+            cpu = gp.render_frame(cloud, cam, RenderSettings(size_mode="fixed", backend="cpu", precision_threshold_px=threshold))
+            gpu = gp.render_frame(cloud, cam, RenderSettings(size_mode="fixed", backend="wgpu", precision_threshold_px=threshold))
+            np.testing.assert_array_equal(gpu.visibility, cpu.visibility)
+            np.testing.assert_array_equal(gpu.image, cpu.image)
+            assert cpu.stats.visible_pixels > 50
+
+
+@pytest.mark.gpu
+def test_wgpu_pages_of_compact_batches(scene):
+    """Pages of 2 batches (page_bytes of 4, halved for the streams), a budget that evicts, ragged
+    batches (1001 points: streams not starting on page words), odd colour pages."""
+    from gigapoint.backends.numba_cpu import NumbaCpuBackend
+    from gigapoint.backends.wgpu import WgpuBackend
+    from gigapoint.core.selection import select
+    from gigapoint.errors import BackendUnavailableError
+
+    rng = np.random.default_rng(3)
+    ragged, _ = grid_cloud(rng, 15_015, (0.01, 0.01, 0.005), (60.0, 40.0, 10.0), batch_size=1001)
+    cpu = NumbaCpuBackend()
+    for cloud, batch in ((scene, 2048), (ragged, 1001)):
+        try:
+            page = 4 * batch * 4 + 16
+            paged = WgpuBackend(page_bytes=page, memory_budget=max(1 << 16, 3 * page))
+        except BackendUnavailableError as exc:
+            pytest.skip(f"no wgpu adapter: {exc}")
+        assert paged.ctx.plan(cloud).n_pages >= 4
+        for threshold in (1e9, 40.0, 0.5):
+            cam = CAMS["close"](cloud.bounds)
+            near, far = cam.clip_range(cloud.bounds)
+            sel = select(cloud.batches, cam.screen_rows(), cam.width, cam.height, near, far, threshold, True, True)
+            args = (cam.width, cam.height, near, far)
+            want = cpu.rasterize(cloud, sel, *args)
+            np.testing.assert_array_equal(np.asarray(paged.rasterize(cloud, sel, *args)), want)
+            bg = (10, 20, 30, 255)
+            np.testing.assert_array_equal(np.asarray(paged.resolve(want, cloud.color, bg)), cpu.resolve(want, cloud.color, bg))
+        assert paged.memory["evictions"] > 0

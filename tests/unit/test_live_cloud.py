@@ -1,0 +1,339 @@
+"""LiveCloud (live/cloud.py): the ring of frames, poses, bad frames, decay, threads, snapshots, saving."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.errors import InputError
+from gigapoint.live import LiveCloud
+
+
+def frame(k: int, n: int | None = None, seed: int = 0):
+    """Frame k: a small random patch of n points (sizes differ frame to frame), colored by k."""
+    rng = np.random.default_rng(seed + k)
+    n = n or 3000 + 137 * k
+    xyz = rng.uniform(-1, 1, (n, 3)) * [5, 4, 1] + [k, 0, 0]
+    rgb = np.zeros((n, 3), np.uint8)
+    rgb[:] = (40 + 20 * k % 200, 100, 200)
+    return xyz, rgb
+
+
+def pose_of(k: int) -> np.ndarray:
+    a = 0.1 * k
+    p = np.eye(4)
+    p[:3, :3] = [[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]]
+    p[:3, 3] = [100.0 + k, -50.0, 7.0]
+    return p
+
+
+def sorted_rows(a):
+    a = np.asarray(a, np.float64)
+    return a[np.lexsort(a.T[::-1])]
+
+
+def assert_same_points(got, want, tol):
+    """The same set of points within ``tol``: one to one, each nearest to its own."""
+    from scipy.spatial import cKDTree
+
+    got, want = np.asarray(got, np.float64), np.asarray(want, np.float64)
+    assert got.shape == want.shape
+    dist, idx = cKDTree(want).query(got)
+    assert dist.max() <= tol
+    assert len(np.unique(idx)) == len(want)
+
+
+def test_ring_keeps_the_last_frames_transformed_by_their_poses():
+    live = LiveCloud(keep=3)
+    pushed = []
+    for k in range(5):
+        xyz, rgb = frame(k)
+        live.push(xyz, rgb, pose=pose_of(k), time=10.0 + k)
+        pushed.append(xyz @ pose_of(k)[:3, :3].T + pose_of(k)[:3, 3])
+    assert live.n_frames == 3 and [f.seq for f in live.frames] == [2, 3, 4]
+    assert [f.time for f in live.frames] == [12.0, 13.0, 14.0]
+    assert live.n_points == sum(len(p) for p in pushed[2:])
+    xyz, rgba, attrs = live.frame_points()
+    assert_same_points(xyz, np.concatenate(pushed[2:]), 1e-6)  # 30-bit positions in boxes of ~10 m
+    lo, hi = live.bounds
+    np.testing.assert_allclose(lo, np.concatenate(pushed[2:]).min(axis=0))
+    np.testing.assert_allclose(hi, np.concatenate(pushed[2:]).max(axis=0))
+    assert set(attrs) == {"nx", "ny", "nz"}
+
+
+def test_chunks_are_reused_so_memory_stays_flat():
+    live = LiveCloud(keep=4)
+    for k in range(6):
+        live.push(*frame(k % 3, n=25_000))
+    buffers = live.buffers()
+    for k in range(60):
+        live.push(*frame(k % 3, n=25_000))
+    assert live.buffers() is buffers  # no growth: the frames' chunks were reused
+    assert int((buffers.batches["count"] > 0).sum()) == 4 * 3  # 4 frames of 3 batches of <= 10 240 points
+
+
+def test_one_frame_draws_exactly_as_the_same_points_as_a_plain_cloud():
+    xyz, rgb = frame(1, n=20_000)
+    live = LiveCloud(keep=2)
+    live.push(xyz, rgb)
+    plain = gp.from_arrays(xyz, rgb)
+    cam = gp.Camera.fit(plain.bounds, view="iso", width=160, height=120)
+    a = gp.render_frame(live, cam, gp.RenderSettings(size_mode="fixed"))
+    b = gp.render_frame(plain, cam, gp.RenderSettings(size_mode="fixed"))
+    np.testing.assert_array_equal(a.image, b.image)
+    assert a.stats.points_processed == 20_000
+    i = int(a.index[a.index >= 0][0])
+    info = a.point_info(i)
+    assert info["source"] == "live frame" and info["rgba"] == b.point_info(int(b.index[a.index == i][0]))["rgba"]
+
+
+def test_frames_culled_outside_the_view_and_dropped_frames_not_drawn():
+    live = LiveCloud(keep=2)
+    live.push(*frame(0, n=5000))
+    far = frame(0, n=5000)[0] + [1000, 0, 0]
+    live.push(far)
+    cam = gp.Camera.fit((np.array([-6.0, -5, -2]), np.array([6.0, 5, 2])), view="top", width=100, height=100)
+    f = gp.render_frame(live, cam, gp.RenderSettings(size_mode="fixed"))
+    assert f.stats.points_processed == 5000  # the far frame's batches are culled
+    live.push(far + [0, 0, 1])  # the first frame leaves the ring
+    with pytest.warns(gp.GigapointWarning):
+        f = gp.render_frame(live, cam, gp.RenderSettings(size_mode="fixed"))
+    assert f.stats.visible_pixels == 0
+
+
+@pytest.mark.parametrize(
+    ("args", "kwargs", "message"),
+    [
+        ((np.zeros((5, 2)),), {}, "shape (N, 3)"),
+        ((np.zeros((0, 3)),), {}, "no points"),
+        ((np.array([["a", "b", "c"]]),), {}, "numbers"),
+        ((np.full((4, 3), np.nan),), {}, "none of the frame's 4 points is valid"),
+        ((np.zeros((4, 3)), np.zeros((3, 3), np.uint8)), {}, "rgb has 3 rows"),
+        ((np.zeros((4, 3)),), {"pose": np.eye(3)}, "pose must be a 4x4"),
+        ((np.zeros((4, 3)),), {"intensity": np.zeros(3)}, "attribute 'intensity'"),
+        ((np.zeros((4, 3)),), {"nx": np.zeros(4)}, "reserved"),
+        ((np.zeros((4, 3)),), {"normals": np.zeros((4, 2))}, "normals must be"),
+        ((np.zeros((4, 3)),), {"time": float("nan")}, "time must be"),
+    ],
+)
+def test_a_bad_frame_is_one_line_and_the_stream_goes_on(args, kwargs, message):
+    live = LiveCloud(keep=5)
+    live.push(*frame(0))
+    before = (live.n_points, live.buffers().version)
+    with pytest.raises(InputError) as err:
+        live.push(*args, **kwargs)
+    assert message in str(err.value) and "\n" not in str(err.value)
+    assert (live.n_points, live.buffers().version) == before  # nothing of it landed
+    assert live.stats.frames_rejected == 1 and live.stats.last_error == str(err.value)
+    live.push(*frame(1))
+    assert live.n_frames == 2
+
+
+def test_bad_depth_frames_are_refused_and_the_stream_goes_on():
+    live = LiveCloud()
+    with pytest.raises(InputError, match="intrinsics are missing"):
+        live.push_depth(np.ones((4, 4)), None)
+    with pytest.raises(InputError, match="no valid pixel"):
+        live.push_depth(np.zeros((4, 4), np.uint16), (1, 1, 2, 2))
+    live.push_depth(np.full((4, 4), 1000, np.uint16), (1, 1, 2, 2))
+    assert live.n_points == 16 and live.stats.frames_rejected == 2
+    np.testing.assert_allclose(live.frame_points()[0][:, 2], 1.0, atol=1e-6)
+
+
+def test_nan_points_inside_a_frame_are_dropped():
+    live = LiveCloud()
+    xyz, rgb = frame(0, n=100)
+    xyz[::10] = np.nan
+    live.push(xyz, rgb)
+    assert live.n_points == 90
+
+
+def test_decay_drops_old_frames_and_fades_the_rest():
+    now = [0.0]
+    live = LiveCloud(keep=100, decay=2.0, clock=lambda: now[0])
+    live.push(*frame(0, n=2000))
+    now[0] = 1.5
+    live.push(*frame(1, n=2000))
+    cam = gp.Camera.fit(live.bounds, view="top", width=64, height=64)
+    view = cam.view(live.bounds)
+    with live.reading():
+        draw = live.prepare(view, gp.RenderSettings())
+    alpha = dict(zip(draw.selection.ids.tolist(), draw.alpha.tolist()))
+    first, second = live.frames[0].chunks[0], live.frames[1].chunks[0]
+    assert alpha[first] == pytest.approx(1 - 1.5 / 2) and alpha[second] == pytest.approx(1.0)
+    now[0] = 2.5  # the first frame is 2.5 s old: gone at the next frame
+    with live.reading():
+        draw = live.prepare(view, gp.RenderSettings())
+    assert live.n_frames == 1 and first not in draw.selection.ids.tolist()
+    assert draw.alpha.tolist() == pytest.approx([1 - 1.0 / 2.0])
+    np.testing.assert_allclose(live.fade_alpha(np.array([2.5, 0.5, np.nan], np.float32)), [1.0, 0.0, 1.0])
+
+
+def test_without_decay_no_alpha_is_given():
+    live = LiveCloud()
+    live.push(*frame(0))
+    cam = gp.Camera.fit(live.bounds, view="top", width=64, height=64)
+    with live.reading():
+        draw = live.prepare(cam.view(live.bounds), gp.RenderSettings())
+    assert getattr(draw, "alpha", None) is None
+
+
+def test_producers_push_while_frames_render_and_no_frame_is_torn():
+    live = LiveCloud(keep=4)
+    sizes = {k: 4000 + 311 * k for k in range(40)}
+    stop = threading.Event()
+    errors = []
+
+    def produce(offset):
+        try:
+            for k in range(offset, 40, 2):
+                live.push(*frame(k % 5, n=sizes[k]))
+        except Exception as exc:  # noqa: BLE001
+            errors.append(exc)
+
+    threads = [threading.Thread(target=produce, args=(o,)) for o in (0, 1)]
+    for t in threads:
+        t.start()
+    cam = gp.Camera.fit((np.array([-6.0, -5, -2]), np.array([10.0, 5, 2])), view="top", width=96, height=96)
+    seen = 0
+    while any(t.is_alive() for t in threads) or not seen:
+        with live.reading():
+            draw = live.prepare(cam.view(live.bounds), gp.RenderSettings(frustum_culling=False))
+            drawn = int(draw.points.batches["count"][draw.selection.ids].sum())
+            frames = list(live.frames)
+        assert drawn == sum(f.n_points for f in frames)  # whole frames only
+        assert drawn == sum(sizes[f.seq] for f in frames) or len({f.seq for f in frames}) == len(frames)
+        seen += 1
+    stop.set()
+    for t in threads:
+        t.join()
+    assert not errors and live.stats.frames_in == 40 and live.n_frames == 4
+
+
+def test_snapshot_holds_the_pushed_points_transformed_by_their_poses_and_draws_with_the_ring():
+    live = LiveCloud(keep=2)
+    want = []
+    for k in range(2):
+        xyz, rgb = frame(k, n=4000)
+        live.push(xyz, rgb, pose=pose_of(k))
+        want.append(xyz @ pose_of(k)[:3, :3].T + pose_of(k)[:3, 3])
+    assert live.snapshot() == 8000
+    got = np.concatenate([c.xyz for c in live.snapshots.chunks()])
+    assert_same_points(got, np.concatenate(want), 1e-5)
+    live.clear()
+    assert live.n_frames == 0 and live.n_points == 8000
+    cam = gp.Camera.fit(live.bounds, view="top", width=80, height=80)
+    f = gp.render_frame(live, cam, gp.RenderSettings(size_mode="fixed"))
+    assert f.stats.visible_pixels > 0
+    i = int(f.index[f.index >= 0][0])
+    assert f.point_info(i)["source"] == "snapshot"
+    live.push(*frame(5, n=3000), pose=pose_of(5))  # live frames and snapshots in one pass
+    f2 = gp.render_frame(live, cam, gp.RenderSettings(size_mode="fixed"))
+    assert f2.stats.points_processed >= 3000 + 8000
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz", ".ply"])
+def test_save_writes_the_snapshots(tmp_path, suffix):
+    live = LiveCloud()
+    xyz, rgb = frame(2, n=5000)
+    live.push(xyz, rgb, pose=pose_of(2))
+    with pytest.raises(InputError, match="no snapshot"):
+        live.save(tmp_path / f"a{suffix}")
+    live.snapshot()
+    out = tmp_path / f"a{suffix}"
+    assert live.save(out) == 5000
+    back = gp.open(out)
+    assert back.n_points == 5000
+    assert_same_points(back.positions(), xyz @ pose_of(2)[:3, :3].T + pose_of(2)[:3, 3], 2e-3)  # LAS: millimetres
+    with pytest.raises(InputError, match="exists"):
+        live.save(out)
+
+
+def test_an_aging_frame_fades_through_the_transparency_pass():
+    now = [0.0]
+    live = LiveCloud(decay=2.0, clock=lambda: now[0])
+    g = np.stack(np.meshgrid(np.linspace(0, 10, 20), np.linspace(0, 10, 20)), -1).reshape(-1, 2)
+    xyz = np.column_stack([g, np.zeros(len(g))])
+    live.push(xyz, np.tile([255, 0, 0], (len(xyz), 1)).astype(np.uint8))
+    cam = gp.Camera.fit(live.bounds, view="top", width=64, height=64)
+    settings = gp.RenderSettings(size_mode="fixed", background=(0, 0, 0))
+    reds = []
+    for t in (0.0, 1.0, 1.5):
+        now[0] = t
+        image = gp.render(live, cam, settings)
+        lit = image[..., 0] > 0
+        assert int(lit.sum()) == 400  # one pixel a point, every point still drawn
+        reds.append(sorted(set(image[lit, 0].tolist())))
+    assert reds == [[255], [128], [64]]  # alpha 1 - age / decay over a black background
+
+
+def test_save_without_a_point_cloud_suffix_writes_an_octree_folder(tmp_path):
+    live = LiveCloud()
+    xyz, rgb = frame(3, n=6000)
+    live.push(xyz, rgb)
+    live.snapshot()
+    assert live.save(tmp_path / "octree") == 6000
+    back = gp.open(tmp_path / "octree")
+    assert back.n_points == 6000
+
+
+def test_a_push_during_a_frame_returns_at_once_and_lands_when_the_frame_is_drawn():
+    live = LiveCloud(keep=5)
+    live.push(*frame(0, n=1000))
+    done = threading.Event()
+    with live.reading():
+        version = live.buffers().version
+        t = threading.Thread(target=lambda: (live.push(*frame(1, n=1000)), done.set()))
+        t.start()
+        assert done.wait(10)  # the producer did not wait for the frame
+        live.push(*frame(2, n=1000))  # nor does a push from the drawing thread itself
+        assert live.n_frames == 1 and live.buffers().version == version  # nothing moved under the frame
+    t.join()
+    assert live.n_frames == 3 and [f.seq for f in live.frames] == [0, 1, 2] and live.stats.frames_in == 3
+
+
+def test_a_dropped_cloud_is_freed_at_once():
+    import weakref
+
+    live = LiveCloud()
+    live.push(*frame(0))
+    ref = weakref.ref(live)
+    del live
+    assert ref() is None  # no reference cycle waits for the garbage collector (GBs of buffers)
+
+
+def test_depth_frame_normals_reach_the_normal_color_mode_and_lighting():
+    live = LiveCloud()
+    pose = np.eye(4)
+    pose[:3, :3] = [[1, 0, 0], [0, -1, 0], [0, 0, -1]]  # looking down (sensor z -> world -z) from 10 m up
+    pose[2, 3] = 10.0
+    live.push_depth(np.full((40, 50), 10.0, np.float32), (40.0, 40.0, 24.5, 19.5), pose=pose)  # the ground plane z = 0
+    assert live.attributes["normal"].shape[1] == 3
+    np.testing.assert_allclose(live.frame_points()[2]["nz"], 1.0, atol=1e-6)  # facing up, towards the sensor
+    cam = gp.Camera.fit(live.bounds, view="top", width=60, height=60)
+    image = gp.render(live, cam, gp.RenderSettings(size_mode="fixed", color_mode="normal"))
+    lit = image[..., 3] > 0
+    drawn = image[image[..., 0] != image[0, 0, 0]]
+    assert len(drawn) > 100 and lit.all()
+    np.testing.assert_array_equal(np.unique(drawn[:, :3], axis=0), [[128, 128, 255]])  # (0, 0, 1) * 0.5 + 0.5
+    shaded = gp.render(live, cam, gp.RenderSettings(size_mode="fixed", lighting=True))
+    plain = gp.render(live, cam, gp.RenderSettings(size_mode="fixed"))
+    assert not np.array_equal(shaded, plain)
+
+
+def test_a_flat_snapshot_seen_from_above_draws_every_point_with_its_normal():
+    live = LiveCloud()
+    pose = np.eye(4)
+    pose[:3, :3] = [[1, 0, 0], [0, -1, 0], [0, 0, -1]]
+    pose[2, 3] = 10.0
+    live.push_depth(np.full((40, 50), 10.0, np.float32), (40.0, 40.0, 24.5, 19.5), pose=pose)
+    live.snapshot()
+    live.clear()
+    cam = gp.Camera.fit(live.bounds, view="top", width=60, height=60)
+    f = gp.render_frame(live, cam, gp.RenderSettings(size_mode="fixed"))
+    assert f.stats.visible_pixels == 2000  # 10-bit node positions stay inside the clip range
+    info = f.point_info(int(f.index[f.index >= 0][0]))
+    assert info["source"] == "snapshot" and info["normal"] == pytest.approx([0.0, 0.0, 1.0]) and np.isnan(info["frame_time"])

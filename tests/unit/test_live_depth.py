@@ -1,0 +1,103 @@
+"""Depth images -> points with normals (live/depth.py): the compiled kernel against the numpy reference."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gigapoint.errors import InputError
+from gigapoint.live.depth import depth_to_points, depth_to_points_reference
+
+K = (365.5, 360.0, 31.5, 23.5)
+
+
+def pose_of(angle=0.4, t=(1.0, -2.0, 3.0)):
+    c, s = np.cos(angle), np.sin(angle)
+    p = np.eye(4)
+    p[:3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
+    p[:3, 3] = t
+    return p
+
+
+def test_kernel_equals_reference_with_holes_nans_and_a_pose():
+    rng = np.random.default_rng(1)
+    d = rng.uniform(0.5, 4.0, (48, 64)).astype(np.float32)
+    d[5:9, 10:20] = 0
+    d[30, :] = np.nan
+    d[:, 40] = -1.0
+    d[0, 0] = np.inf
+    xyz, nrm, rgba, pix = depth_to_points(d, K, pose_of())
+    rx, rn, ridx = depth_to_points_reference(d, K, pose_of())
+    assert rgba is None
+    np.testing.assert_array_equal(pix, ridx)
+    np.testing.assert_allclose(xyz, rx, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(nrm, rn, rtol=0, atol=1e-6)
+    assert len(xyz) == np.count_nonzero(np.isfinite(d) & (d > 0))
+
+
+def test_uint16_millimetres_and_a_3x3_matrix_and_max_depth():
+    d = np.full((10, 12), 2000, np.uint16)
+    d[0, 0] = 9000
+    m = np.array([[K[0], 0, K[2]], [0, K[1], K[3]], [0, 0, 1]])
+    xyz, _, _, pix = depth_to_points(d, m, max_depth=5.0)
+    assert 0 not in pix and len(xyz) == 119
+    np.testing.assert_allclose(xyz[:, 2], 2.0)
+    v, u = divmod(pix[0], 12)
+    np.testing.assert_allclose(xyz[0, :2], [(u - K[2]) * 2.0 / K[0], (v - K[3]) * 2.0 / K[1]])
+    rx, _, _ = depth_to_points_reference(d, m, max_depth=5.0)
+    np.testing.assert_allclose(xyz, rx, atol=1e-12)
+
+
+def test_a_plane_facing_the_sensor_has_normals_towards_it_rotated_by_the_pose():
+    d = np.full((20, 20), 3.0)
+    _, nrm, _, _ = depth_to_points(d, K)
+    np.testing.assert_allclose(nrm, np.tile([0.0, 0.0, -1.0], (400, 1)), atol=1e-6)
+    p = pose_of(0.0)
+    p[:3, :3] = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]  # sensor z -> world +y: the normal (towards the sensor) -> -y
+    _, nrm, _, _ = depth_to_points(d, K, p)
+    np.testing.assert_allclose(nrm[0], [0.0, -1.0, 0.0], atol=1e-6)
+
+
+def test_tilted_plane_normal_and_isolated_pixels_get_zero_normals():
+    v, u = np.mgrid[0:30, 0:40].astype(np.float64)
+    # the plane z = 2 + 0.5 x (x = (u - cx) z / fx): z = 2 / (1 - 0.5 (u - cx) / fx)
+    z = 2.0 / (1.0 - 0.5 * (u - K[2]) / K[0])
+    _, nrm, _, _ = depth_to_points(z, K)
+    expect = np.array([0.5, 0.0, -1.0]) / np.sqrt(1.25)
+    np.testing.assert_allclose(nrm, np.tile(expect, (len(nrm), 1)), atol=1e-5)
+    lone = np.zeros((5, 5))
+    lone[2, 2] = 1.0
+    _, nrm, _, _ = depth_to_points(lone, K)
+    np.testing.assert_array_equal(nrm, [[0.0, 0.0, 0.0]])
+
+
+def test_rgb_follows_the_pixels():
+    d = np.ones((4, 5), np.float32)
+    d[1, 1] = 0
+    rgb = np.arange(4 * 5 * 3, dtype=np.uint8).reshape(4, 5, 3)
+    _, _, rgba, pix = depth_to_points(d, K, rgb=rgb)
+    np.testing.assert_array_equal(rgba[:, :3], rgb.reshape(-1, 3)[pix])
+    assert (rgba[:, 3] == 255).all()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"intrinsics": None}, "intrinsics are missing"),
+        ({"intrinsics": (1.0, 2.0)}, "intrinsics must be"),
+        ({"intrinsics": (0.0, 1.0, 1.0, 1.0)}, "fx, fy > 0"),
+        ({"depth": np.ones((4, 4, 2))}, "depth must be an (H, W) image"),
+        ({"depth": np.array([["a"]])}, "dtype"),
+        ({"depth": np.zeros((4, 4))}, "no valid pixel"),
+        ({"depth": np.full((4, 4), np.nan)}, "no valid pixel"),
+        ({"pose": np.eye(3)}, "pose must be a 4x4"),
+        ({"pose": np.full((4, 4), np.nan)}, "NaN"),
+        ({"rgb": np.zeros((3, 3, 3), np.uint8)}, "rgb must be"),
+        ({"depth_scale": -1.0}, "depth_scale"),
+    ],
+)
+def test_bad_input_is_one_line(kwargs, message):
+    args = {"depth": np.ones((4, 4)), "intrinsics": K, **kwargs}
+    with pytest.raises(InputError) as err:
+        depth_to_points(**args)
+    assert message in str(err.value) and "\n" not in str(err.value)

@@ -1,0 +1,334 @@
+"""Live sources (live/sources.py), recording and replay (live/record.py), pushed frames (live/wire.py),
+on small files written with the libraries themselves (plyfile, pypcd4, Pillow, rosbags)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from gigapoint.errors import GigapointError, InputError
+from gigapoint.live import LiveCloud
+from gigapoint.live.record import RecordedFrame, recording_files
+from gigapoint.live.sources import (
+    BagSource,
+    FramesDir,
+    Player,
+    ReplaySource,
+    SyntheticSensor,
+    TumSequence,
+    open_source,
+    quaternion_pose,
+)
+from gigapoint.live.wire import decode_frame, encode_frame
+
+
+def sorted_rows(a):
+    a = np.asarray(a, np.float64)
+    return a[np.lexsort(a.T[::-1])]
+
+
+def cloud_points(live):
+    return sorted_rows(live.frame_points()[0])
+
+
+def patch(k, n=500):
+    rng = np.random.default_rng(k)
+    return rng.uniform(-2, 2, (n, 3)).astype(np.float32) + np.float32(k), rng.integers(0, 255, (n, 3), dtype=np.uint8)
+
+
+# ---------------------------------------------------------------------- synthetic sensor
+def test_synthetic_sensor_is_deterministic_and_sees_the_town():
+    a = SyntheticSensor(n_frames=3, scene_points=200_000)
+    b = SyntheticSensor(n_frames=3, scene_points=200_000)
+    fa, fb = a.render(2), b.render(2)
+    np.testing.assert_array_equal(fa.depth, fb.depth)
+    np.testing.assert_array_equal(fa.rgb, fb.rgb)
+    np.testing.assert_array_equal(fa.pose, fb.pose)
+    assert fa.depth.shape == (424, 512) and (fa.depth > 0).mean() > 0.5
+    assert not np.array_equal(a.render(0).depth, fa.depth)  # it moves
+    live = LiveCloud(keep=3)
+    Player(a, live, rate=None).run()
+    assert live.n_frames == 3 and live.n_points > 3 * 100_000
+    lo, hi = live.bounds
+    assert (lo > -50).all() and (hi[:2] < 1050).all()  # inside the demo town
+
+
+# ---------------------------------------------------------------------- folders of frames
+def test_frames_dir_reads_ply_pcd_npy_in_name_order(tmp_path):
+    from plyfile import PlyData, PlyElement
+
+    pypcd4 = pytest.importorskip("pypcd4")
+    xyz0, rgb0 = patch(0)
+    v = np.empty(len(xyz0), [("x", "f4"), ("y", "f4"), ("z", "f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")])
+    for k, a in enumerate("xyz"):
+        v[a] = xyz0[:, k]
+    for k, a in enumerate(("red", "green", "blue")):
+        v[a] = rgb0[:, k]
+    PlyData([PlyElement.describe(v, "vertex")]).write(str(tmp_path / "000.ply"))
+    xyz1, rgb1 = patch(1)
+    packed = pypcd4.PointCloud.encode_rgb(rgb1)
+    pc = pypcd4.PointCloud.from_xyzrgb_points(np.column_stack([xyz1, packed.astype(np.float32)]))
+    pc.save(tmp_path / "001.pcd")
+    xyz2, _ = patch(2)
+    np.save(tmp_path / "002.npy", xyz2)
+    (tmp_path / "notes.txt").write_text("not a frame")
+    src = open_source(tmp_path)
+    assert isinstance(src, FramesDir) and [p.name for p in src.files] == ["000.ply", "001.pcd", "002.npy"]
+    frames = list(src.frames())
+    np.testing.assert_allclose(frames[0].xyz, xyz0)
+    np.testing.assert_array_equal(frames[0].rgb, rgb0)
+    np.testing.assert_allclose(frames[1].xyz, xyz1)
+    np.testing.assert_array_equal(frames[1].rgb, rgb1)
+    np.testing.assert_allclose(frames[2].xyz, xyz2)
+    live = LiveCloud(keep=10)
+    player = Player(src, live, rate=None)
+    player.run()
+    assert live.n_frames == 3 and player.errors == 0
+
+
+def test_a_bad_file_in_a_frames_dir_is_skipped_with_a_message(tmp_path):
+    np.save(tmp_path / "a.npy", patch(0)[0])
+    (tmp_path / "b.ply").write_bytes(b"ply\nformat garbage\n")
+    np.save(tmp_path / "c.npy", np.zeros((4, 2)))
+    np.save(tmp_path / "d.npy", patch(3)[0])
+    live = LiveCloud()
+    player = Player(FramesDir(tmp_path), live, rate=None)
+    player.run()
+    assert player.frames == 2 and player.errors == 2 and live.n_frames == 2
+    assert "c.npy" in live.stats.last_error and "\n" not in live.stats.last_error
+
+
+# ---------------------------------------------------------------------- TUM RGB-D
+def test_tum_sequence_pairs_depth_rgb_and_poses(tmp_path):
+    from PIL import Image
+
+    (tmp_path / "rgb").mkdir()
+    (tmp_path / "depth").mkdir()
+    h, w = 24, 32
+    depth_lines, rgb_lines, gt_lines = [], [], []
+    poses = {}
+    for k in range(3):
+        t = 1305031102.0 + 0.1 * k
+        d = np.full((h, w), 5000 * (1 + k), np.uint16)  # (1 + k) metres at 5000 units a metre
+        d[0, :] = 0
+        Image.fromarray(d).save(tmp_path / "depth" / f"{t:.6f}.png")
+        Image.fromarray(np.full((h, w, 3), 50 * k, np.uint8)).save(tmp_path / "rgb" / f"{t + 0.004:.6f}.png")
+        depth_lines.append(f"{t:.6f} depth/{t:.6f}.png")
+        rgb_lines.append(f"{t + 0.004:.6f} rgb/{t + 0.004:.6f}.png")
+        q = (0.0, 0.0, np.sin(0.1 * k), np.cos(0.1 * k))
+        gt_lines.append(f"{t + 0.001:.4f} {k} 2 3 {q[0]} {q[1]} {q[2]} {q[3]}")
+        poses[k] = quaternion_pose((k, 2, 3), q)
+    (tmp_path / "depth.txt").write_text("# depth maps\n" + "\n".join(depth_lines) + "\n")
+    (tmp_path / "rgb.txt").write_text("# color images\n" + "\n".join(rgb_lines) + "\n")
+    (tmp_path / "groundtruth.txt").write_text("# timestamp tx ty tz qx qy qz qw\n" + "\n".join(gt_lines) + "\n")
+    src = open_source(tmp_path)
+    assert isinstance(src, TumSequence)
+    frames = list(src.frames())
+    assert len(frames) == 3
+    np.testing.assert_allclose(frames[1].pose, poses[1])
+    assert np.allclose(frames[2].rgb, 100)
+    live = LiveCloud(keep=3)
+    Player(src, live, rate=None).run()
+    assert live.n_points == 3 * (h - 1) * w
+    # frame 1: a plane at 2 m in front of the sensor, moved by its pose
+    f = live.frames[1]
+    xyz = live.frame_points([f])[0]
+    cam = (xyz - poses[1][:3, 3]) @ poses[1][:3, :3]
+    np.testing.assert_allclose(cam[:, 2], 2.0, atol=1e-5)
+    rz = np.array([[np.cos(0.2), -np.sin(0.2), 0], [np.sin(0.2), np.cos(0.2), 0], [0, 0, 1]])  # qz = sin(0.1): 0.2 rad about z
+    np.testing.assert_allclose(poses[1][:3, :3], rz, atol=1e-12)
+
+
+def test_tum_association_file(tmp_path):
+    from PIL import Image
+
+    (tmp_path / "depth").mkdir()
+    (tmp_path / "rgb").mkdir()
+    Image.fromarray(np.full((8, 8), 5000, np.uint16)).save(tmp_path / "depth" / "a.png")
+    Image.fromarray(np.full((8, 8, 3), 9, np.uint8)).save(tmp_path / "rgb" / "a.png")
+    (tmp_path / "associations.txt").write_text("1.000 rgb/a.png 1.010 depth/a.png\n")
+    (tmp_path / "groundtruth.txt").write_text("1.01 0 0 0 0 0 0 1\n")
+    frames = list(TumSequence(tmp_path).frames())
+    assert len(frames) == 1 and frames[0].time == pytest.approx(1.01) and frames[0].rgb[0, 0, 0] == 9
+
+
+# ---------------------------------------------------------------------- ROS bags
+def _pointcloud2(typestore, xyz, rgb, stamp_ns, ros1):
+    PointCloud2 = typestore.types["sensor_msgs/msg/PointCloud2"]
+    PointField = typestore.types["sensor_msgs/msg/PointField"]
+    Header = typestore.types["std_msgs/msg/Header"]
+    Time = typestore.types["builtin_interfaces/msg/Time"]
+    rec = np.zeros(len(xyz), [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("pad", "<f4"), ("rgb", "<u4")])
+    rec["x"], rec["y"], rec["z"] = xyz.T
+    rec["rgb"] = (rgb[:, 0].astype(np.uint32) << 16) | (rgb[:, 1].astype(np.uint32) << 8) | rgb[:, 2]
+    fields = [PointField(name=n, offset=o, datatype=7, count=1) for n, o in (("x", 0), ("y", 4), ("z", 8))]
+    fields.append(PointField(name="rgb", offset=16, datatype=6, count=1))
+    extra = {"seq": 0} if ros1 else {}
+    header = Header(stamp=Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9), frame_id="lidar", **extra)
+    return PointCloud2(header=header, height=1, width=len(xyz), fields=fields, is_bigendian=False, point_step=20,
+                       row_step=20 * len(xyz), data=rec.view(np.uint8).reshape(-1), is_dense=True)  # fmt: skip
+
+
+def _write_bag(path, ros1: bool):
+    from rosbags.typesys import Stores, get_typestore
+
+    typestore = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    String = typestore.types["std_msgs/msg/String"]
+    if ros1:
+        from rosbags.rosbag1 import Writer
+
+        writer = Writer(path)
+    else:
+        from rosbags.rosbag2 import Writer
+
+        writer = Writer(path, version=8)
+    sent = []
+    with writer:
+        conn = writer.add_connection("/points", "sensor_msgs/msg/PointCloud2", typestore=typestore)
+        chat = writer.add_connection("/chatter", "std_msgs/msg/String", typestore=typestore)
+        ser = typestore.serialize_ros1 if ros1 else typestore.serialize_cdr
+        for k in range(3):
+            xyz, rgb = patch(10 + k, n=300)
+            t = 1_700_000_000_000_000_000 + k * 100_000_000
+            msg = _pointcloud2(typestore, xyz, rgb, t, ros1)
+            writer.write(conn, t, ser(msg, "sensor_msgs/msg/PointCloud2"))
+            writer.write(chat, t, ser(String(data="hello"), "std_msgs/msg/String"))
+            sent.append((xyz, rgb, t))
+    return sent
+
+
+@pytest.mark.parametrize("ros1", [True, False], ids=["ros1", "ros2"])
+def test_bags_with_pointcloud2(tmp_path, ros1):
+    pytest.importorskip("rosbags")
+    path = tmp_path / ("run.bag" if ros1 else "run")
+    sent = _write_bag(path, ros1)
+    src = open_source(path)
+    assert isinstance(src, BagSource)
+    frames = list(src.frames())
+    assert len(frames) == 3  # the String messages on /chatter are not frames
+    for f, (xyz, rgb, t) in zip(frames, sent):
+        np.testing.assert_allclose(f.xyz, xyz)
+        np.testing.assert_array_equal(f.rgb, rgb)
+        assert f.time == pytest.approx(t * 1e-9)
+    live = LiveCloud(keep=5)
+    Player(src, live, rate=None).run()
+    assert live.n_frames == 3 and live.n_points == 900
+    with pytest.raises(InputError, match="holds std_msgs/msg/String, not sensor_msgs/PointCloud2"):
+        list(BagSource(path, topic="/chatter").frames())
+    with pytest.raises(InputError, match="no topic '/nope'"):
+        list(BagSource(path, topic="/nope").frames())
+
+
+def test_a_file_that_is_not_a_bag(tmp_path):
+    pytest.importorskip("rosbags")
+    bad = tmp_path / "x.bag"
+    bad.write_bytes(b"#ROSBAG V2.0\nnonsense")
+    with pytest.raises(InputError, match="not a readable ROS bag"):
+        list(BagSource(bad).frames())
+
+
+# ---------------------------------------------------------------------- recording and replay
+def test_a_replay_equals_the_recorded_frames(tmp_path):
+    live = LiveCloud(keep=10)
+    rec = live.record(tmp_path / "rec")
+    for k in range(3):
+        xyz, rgb = patch(k)
+        pose = np.eye(4)
+        pose[:3, 3] = [k, 10, 0]
+        live.push(xyz, rgb, pose=pose, time=100.0 + 0.5 * k, intensity=np.arange(len(xyz), dtype=np.uint16))
+    d = np.full((6, 8), 1500, np.uint16)
+    d[2, 3] = 0
+    live.push_depth(d, (5.0, 5.0, 3.5, 2.5), time=102.0)
+    with pytest.raises(InputError):
+        live.push(np.zeros((3, 2)))  # refused: not recorded
+    live.stop_recording()
+    assert rec.n_frames == 4
+    index = json.loads((tmp_path / "rec" / "index.json").read_text())
+    assert [e["kind"] for e in index["frames"]] == ["points"] * 3 + ["depth"]
+    assert [e["time"] for e in index["frames"]] == [100.0, 100.5, 101.0, 102.0]
+    src = open_source(tmp_path / "rec")
+    assert isinstance(src, ReplaySource)
+    again = LiveCloud(keep=10)
+    Player(src, again, rate=None).run()
+    assert again.n_frames == 4 and [f.time for f in again.frames] == [100.0, 100.5, 101.0, 102.0]
+    np.testing.assert_array_equal(cloud_points(again), cloud_points(live))
+    np.testing.assert_array_equal(sorted(again.frame_points()[2]["intensity"]), sorted(live.frame_points()[2]["intensity"]))
+    with pytest.raises(InputError, match="holds a recording already"):
+        live.record(tmp_path / "rec")
+
+
+def test_replay_plays_at_the_recorded_rate_and_a_frame_written_after_the_index_is_found(tmp_path):
+    import time
+
+    live = LiveCloud()
+    live.record(tmp_path / "rec").index_every_s = 0.0  # the index rewritten after every frame
+    live.push(patch(0)[0], time=5.0)
+    live.push(patch(1)[0], time=5.3)
+    live.recorder.index_every_s = 1e9  # the index stops being rewritten: the last frame is only on disk
+    live.push(patch(2)[0], time=5.6)
+    assert len(json.loads((tmp_path / "rec" / "index.json").read_text())["frames"]) == 2
+    assert len(recording_files(tmp_path / "rec")) == 3
+    again = LiveCloud()
+    t0 = time.perf_counter()
+    Player(ReplaySource(tmp_path / "rec"), again, rate=2.0).run()
+    assert again.n_frames == 3 and time.perf_counter() - t0 >= 0.29  # 0.6 s of stream at twice its rate
+
+
+def test_not_a_recording(tmp_path):
+    with pytest.raises(InputError, match="not a live recording"):
+        ReplaySource(tmp_path)
+    with pytest.raises(InputError, match="no such file"):
+        open_source(tmp_path / "missing")
+
+
+# ---------------------------------------------------------------------- pushed frames (wire format)
+def test_wire_round_trip_and_malformed_messages():
+    xyz, rgb = patch(4)
+    pose = np.eye(4)
+    pose[0, 3] = 3
+    f = decode_frame(encode_frame("points", xyz=xyz, rgb=rgb, pose=pose, time=1.5))
+    np.testing.assert_array_equal(f.xyz, xyz)
+    np.testing.assert_array_equal(f.rgb, rgb)
+    np.testing.assert_array_equal(f.pose, pose)
+    assert f.time == 1.5
+    d = decode_frame(encode_frame("depth", depth=np.ones((3, 4), np.uint16), intrinsics=(1, 1, 1, 1), depth_scale=0.01))
+    assert d.kind == "depth" and d.depth_scale == 0.01
+    good = encode_frame("points", xyz=xyz)
+    bad = [
+        b"nope",
+        good[:-5],  # cut short mid-frame
+        good + b"xx",
+        encode_frame("mesh", xyz=xyz),
+        encode_frame("points", rgb=rgb),
+        encode_frame("points", xyz=xyz, depth=np.ones(3)),
+        b"GPL1" + (5).to_bytes(4, "little") + b"{oops",
+        "text",
+    ]
+    for message in bad:
+        with pytest.raises(InputError) as err:
+            decode_frame(message)
+        assert "\n" not in str(err.value) and str(err.value).startswith("push:")
+    live = LiveCloud()
+    with pytest.raises(GigapointError, match="intrinsics are missing"):
+        decode_frame(encode_frame("depth", depth=np.ones((3, 4), np.uint16))).push_into(live)
+    RecordedFrame("points", 0.0, None, xyz=xyz).push_into(live)
+    assert live.n_frames == 1
+
+
+def test_a_source_that_breaks_stops_the_player_with_one_line():
+    from gigapoint.live.sources import Source
+
+    class Broken(Source):
+        name = "broken"
+
+        def frames(self):
+            yield RecordedFrame("points", 0.0, None, xyz=np.zeros((3, 3)))
+            raise ZeroDivisionError("boom\nmore")
+
+    live = LiveCloud()
+    player = Player(Broken(), live, rate=None)
+    player.run()
+    assert live.n_frames == 1 and player.done.is_set()
+    assert str(player.error) == "broken: the stream stopped (ZeroDivisionError: boom)"

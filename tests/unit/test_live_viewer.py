@@ -1,0 +1,132 @@
+"""A LiveCloud in the viewer: redraws as frames arrive, the HUD line, pushed frames over /push with the token."""
+
+from __future__ import annotations
+
+import json
+import time
+import warnings
+
+import numpy as np
+import pytest
+
+pytest.importorskip("starlette")
+pytest.importorskip("uvicorn")
+pytest.importorskip("httpx")
+
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")
+    from starlette.testclient import TestClient
+from starlette.websockets import WebSocketDisconnect
+
+from gigapoint.live import LiveCloud
+from gigapoint.live.wire import encode_frame
+from gigapoint.viewer import protocol as P
+from gigapoint.viewer.server import create_app
+from gigapoint.viewer.session import ViewerCore
+from gigapoint.viewer.watch import LiveWatcher
+
+pytestmark = [pytest.mark.timeout(120), pytest.mark.filterwarnings("ignore::DeprecationWarning")]
+
+
+def patch(k, n=2000):
+    rng = np.random.default_rng(k)
+    return rng.uniform(-1, 1, (n, 3)) * [10, 10, 1], np.full((n, 3), (255, 40 * k % 255, 0), np.uint8)
+
+
+@pytest.fixture()
+def live_core():
+    live = LiveCloud(keep=5, bounds=((-12, -12, -2), (12, 12, 2)))
+    live.push(*patch(0))
+    core = ViewerCore(live)
+    yield live, core
+    core.close_all()
+
+
+def frames_from(ws, want=1, limit=100):
+    out = []
+    for _ in range(limit):
+        m = ws.receive()
+        if m.get("bytes") is not None:
+            out.append(P.unpack_frame(m["bytes"]))
+            if len(out) >= want:
+                return out
+    raise AssertionError("no frame")
+
+
+def test_a_live_core_has_a_push_token_a_watcher_and_a_hud_line(live_core):
+    live, core = live_core
+    assert isinstance(core.watcher, LiveWatcher) and core.push_token and len(core.push_token) >= 20
+    assert core.note.startswith("live: ") and "1 frames" in core.note and "2,000 live points" in core.note
+
+
+def test_tabs_redraw_when_frames_arrive_and_latency_is_measured(live_core):
+    live, core = live_core
+    with TestClient(create_app(core)) as client, client.websocket_connect("/ws?w=64&h=48") as ws:
+        json.loads(ws.receive_text())  # hello
+        header, _ = frames_from(ws)[0]
+        assert header["points_total"] == 2000
+        for k in range(1, 4):
+            live.push(*patch(k))
+            deadline = time.monotonic() + 10
+            while True:
+                header, _ = frames_from(ws)[0]
+                if header["points_total"] == 2000 * (k + 1) or time.monotonic() > deadline:
+                    break
+            assert header["points_total"] == 2000 * (k + 1)
+        assert len(live.stats.latencies) >= 1 and live.stats.latency_ms(50) < 10_000
+        time.sleep(0.3)
+        assert "latency" in core.note and "frames/s in" in core.note
+
+
+def test_push_needs_the_token_and_a_malformed_frame_does_not_stop_the_stream(live_core):
+    live, core = live_core
+    with TestClient(create_app(core)) as client:
+        for query in ("", "?push_token=wrong"):
+            with pytest.raises(WebSocketDisconnect) as err, client.websocket_connect("/push" + query) as ws:
+                ws.receive_text()
+            assert err.value.code == 1008
+        assert live.stats.frames_in == 1
+        with client.websocket_connect(f"/push?push_token={core.push_token}") as ws:
+            xyz, rgb = patch(7)
+            ws.send_bytes(encode_frame("points", xyz=xyz, rgb=rgb, time=3.0))
+            assert json.loads(ws.receive_text()) == {"type": "ack", "seq": 1}
+            ws.send_bytes(encode_frame("points", xyz=xyz)[:-7])  # cut short
+            reply = json.loads(ws.receive_text())
+            assert reply["type"] == "error" and "cut short" in reply["message"]
+            ws.send_bytes(encode_frame("points", xyz=np.full((5, 3), np.nan)))
+            reply = json.loads(ws.receive_text())
+            assert reply["type"] == "error" and "none of the frame's 5 points is valid" in reply["message"]
+            ws.send_text("hello")
+            assert json.loads(ws.receive_text())["type"] == "error"
+            ws.send_bytes(encode_frame("depth", depth=np.full((4, 6), 1200, np.uint16), intrinsics=(3, 3, 2.5, 1.5)))
+            assert json.loads(ws.receive_text()) == {"type": "ack", "seq": 2}
+        assert live.stats.frames_in == 3 and live.n_points == 2000 + 2000 + 24 and live.stats.frames_rejected == 3
+
+
+def test_a_plain_cloud_has_no_push_route(live_core):
+    import gigapoint as gp
+
+    core = ViewerCore(gp.from_arrays(patch(1)[0]))
+    try:
+        with TestClient(create_app(core)) as client, pytest.raises(WebSocketDisconnect), client.websocket_connect("/push?push_token=x") as ws:
+            ws.receive_text()
+    finally:
+        core.close_all()
+
+
+def test_gp_viewer_of_a_live_cloud_shows_frames_pushed_after_it_started():
+    import io
+
+    from PIL import Image
+
+    import gigapoint as gp
+
+    live = gp.LiveCloud(keep=3, bounds=((-12, -12, -2), (12, 12, 2)))
+    with gp.Viewer(live, display=False) as viewer:
+        with pytest.warns(gp.GigapointWarning, match="no point is in view"):
+            empty = np.asarray(Image.open(io.BytesIO(viewer.screenshot(64, 48))))
+        live.push(*patch(2, n=20_000))
+        shot = np.asarray(Image.open(io.BytesIO(viewer.screenshot(64, 48))))
+        assert viewer.push_url.startswith("ws://127.0.0.1:") and viewer.push_url.endswith(viewer.server.core.push_token)
+    assert (empty[..., :3] == empty[0, 0, :3]).all()  # nothing yet: background only
+    assert (shot[..., 0] == 255).sum() > 100  # the frame's red points
