@@ -161,17 +161,22 @@ def bench_frames(n: int) -> None:
     with tempfile.TemporaryDirectory() as tmp:  # the same points converted (gigapoint convert), drawn alternately
         gp.convert(cloud.chunks(), Path(tmp) / "octree")
         converted = gp.open(Path(tmp) / "octree")
-        after, conv = [], []
-        for _ in range(7):
-            for target, out in ((cloud, after), (converted, conv)):
-                gp.render_frame(target, cam, s)  # each once before timing: caches, arena loads
-                t = time.perf_counter()
-                gp.render_frame(target, cam, s)
-                out.append(time.perf_counter() - t)
-    m, a, c = statistics.median(times), statistics.median(after), statistics.median(conv)
-    print(f"frames of demo({n:,}) at 1920x1080, 10 M budget: while loading {len(times)} frames, median {m * 1e3:.1f} ms "
-          f"({1 / m:.1f} fps; loaded in {cloud.loader.finished_at - cloud.loader.started:.1f} s); once loaded {a * 1e3:.1f} ms "
-          f"({1 / a:.1f} fps); the converted octree of the same points {c * 1e3:.1f} ms ({1 / c:.1f} fps): {c / a:.2f}x its fps")  # fmt: skip
+        m = statistics.median(times)
+        print(f"frames of demo({n:,}) at 1920x1080, 10 M budget: while loading {len(times)} frames, median {m * 1e3:.1f} ms "
+              f"({1 / m:.1f} fps; loaded in {cloud.loader.finished_at - cloud.loader.started:.1f} s)")  # fmt: skip
+        for mode in ("auto", "fixed"):  # adaptive sizes (the default) and the one-pixel render
+            ms = s.replace(size_mode=mode)
+            after, conv = [], []
+            for _ in range(7):
+                for target, out in ((cloud, after), (converted, conv)):
+                    gp.render_frame(target, cam, ms)  # each once before timing: caches, arena loads
+                    t = time.perf_counter()
+                    frame = gp.render_frame(target, cam, ms)
+                    out.append(time.perf_counter() - t)
+                    out.append(frame.stats.points_processed)
+            a, c = statistics.median(after[::2]), statistics.median(conv[::2])
+            print(f"  once loaded, size_mode {mode}: {a * 1e3:.1f} ms ({1 / a:.1f} fps, {after[1]:,} points); the converted octree of "
+                  f"the same points {c * 1e3:.1f} ms ({1 / c:.1f} fps, {conv[1]:,} points): {c / a:.2f}x its fps")  # fmt: skip
 
 
 def main(argv=None) -> int:

@@ -219,6 +219,19 @@ def test_renders_like_a_converted_octree_at_the_same_budget(scene, octree, tmp_p
         assert (a & b).sum() / (a | b).sum() >= 0.95
 
 
+def test_adaptive_points_are_sized_like_the_plain_clouds(scene):
+    """The default (adaptive) point size comes from the point spacing; the octree's chunks all
+    carry their node's cube as box, so it gives the spacing from its voxel grids instead: the
+    picture is as solid as the plain cloud's of the same points (not 16-pixel blobs)."""
+    xyz, rgba, attrs = scene
+    plain = gp.from_arrays(xyz, rgb=rgba)
+    cam = gp.Camera.fit(plain.bounds, view="iso", width=320, height=240)
+    every = gp.RenderSettings(backend="cpu", point_budget=10**9, lod_threshold_px=0)
+    octree = _filled(scene, max_leaf=50_000)  # leaves of many chunks (the default), each with the leaf's cube as box
+    lit = [(gp.render_frame(c, cam, every).visibility != EMPTY_PIXEL).mean() for c in (plain, octree)]
+    assert lit[0] > 0.2 and abs(lit[1] / lit[0] - 1) < 0.1, lit
+
+
 def test_a_drawn_child_replaces_its_parents_voxels_of_its_octant(octree):
     """Within the budget; no voxel is drawn where a child of its node is drawn, every chunk once."""
     cam = gp.Camera.fit(octree.bounds, view="iso", width=320, height=200)
@@ -504,11 +517,14 @@ def test_render_builds_an_octree_for_inputs_above_the_budget_and_waits_for_it(tm
 
     f = las_writer(tmp_path / "a.las", 60_000, seed=1)
     out = tmp_path / "a.png"
-    r = _cli("render", f, "-o", out, "--point-budget", 20_000, "--size-mode", "fixed", "-W", 160, "-H", 120, "--view", "top")
+    r = _cli("render", f, "-o", out, "--point-budget", 20_000, "--size-mode", "fixed", "-W", 160, "-H", 120, "--view", "top", "--stats")
     assert r.returncode == 0, r.stderr
+    assert "(progressive octree layout)" in " ".join(r.stderr.split())  # --stats: what the octree holds, per component
     cloud = gp.open(f, progressive=True)
     cloud.wait(timeout=120)
     assert cloud.n_points == 60_000
+    mem = cloud.memory()
+    assert sum(mem.values()) == cloud.nbytes and mem["positions"] >= 12 * (60_000 + cloud.n_voxels)
     cam = make_camera(cloud, 160, 120, "top", None, "perspective", 60.0)
     want = gp.render_frame(cloud, cam, EXACT.replace(point_budget=20_000)).image
     np.testing.assert_array_equal(np.asarray(Image.open(out).convert("RGB")), want[..., :3])

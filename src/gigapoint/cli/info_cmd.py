@@ -46,13 +46,15 @@ def info(
 
 def memory_line(cloud) -> str:
     """``memory: 2.6 MiB, 23.9 bytes/point: positions 5.67, color 4.00, ... (compact layout)``: what
-    a cloud holds per component (``PointCloud.memory``), or what the process holds for other kinds."""
+    a cloud holds per component (``PointCloud.memory``, ``ProgressiveOctree.memory``), or what the process
+    holds for other kinds."""
     from ..core import PointCloud
+    from ..lod.progressive import ProgressiveOctree
 
     n = max(int(cloud.n_points), 1)
     rss = peak_rss()
     tail = f", peak RSS {rss / 2**20:,.0f} MiB" if rss else ""
-    if not isinstance(cloud, PointCloud):
+    if not isinstance(cloud, (PointCloud, ProgressiveOctree)):
         return f"memory: {type(cloud).__name__} has no breakdown{tail}"
     m = cloud.memory()
     total = sum(m.values())

@@ -75,6 +75,10 @@ class DrawList:
     # settings' opacity; None: 1 each. Any batch below 1 makes the frame transparent (a live cloud's
     # fade of its older frames; render/passes/transparency.py). A batch of opacity 0 is better left unselected.
     alpha: np.ndarray | None = None
+    # world distance between neighbouring drawn points, for adaptive point sizes, where the batch
+    # boxes do not tell it (chunks that share their node's cube: lod/progressive); None: the
+    # boxes' (render/splats.point_spacing)
+    spacing: float | None = None
     # ``points.version`` as prepared: while it is unchanged, the frame's indices still name the points it drew
     generation: int | None = field(init=False)
 

@@ -335,17 +335,30 @@ class ProgressiveOctree:
 
     @property
     def nbytes(self) -> int:
-        """Bytes the octree holds: its pool (points and voxels), the voxels' colour sums and
-        lookup table, and the nodes."""
-        arrays = [self.vox_key, self.vox_slot, self.vox_sum, self.vox_first, self._hkeys, self._hvals, self._free]
-        arrays += [self.key, self.level, self.parent, self.children, self.leaf, self.count, self.first_chunk, self.last_chunk]
-        arrays += [self.list_count, self.cmin, self.cedge]
-        total = sum(a.nbytes for a in arrays)
+        """Bytes the octree holds (the sum of ``memory()``)."""
+        return sum(self.memory().values())
+
+    layout = "progressive octree"  # what `--stats` and `gigapoint info` call its memory layout
+
+    def memory(self) -> dict[str, int]:
+        """Bytes per component: the pool's positions, colours, attributes and batch records
+        (points and voxels, with the room kept for growth), the voxels' colour sums and lookup
+        table (build state), and the nodes."""
+        def size(*arrays) -> int:
+            return int(sum(a.nbytes for a in arrays))
+
         pool = self.pool
+        m = {"positions": 0, "color": 0, "attributes": 0, "batches": 0}
         if pool is not None:
-            total += sum(a.nbytes for a in (pool.low, pool.med, pool.high, pool.color, pool.batches, pool.chunk_next, pool.chunk_node))
-            total += pool.batch_version.nbytes + sum(v.nbytes for v in pool.attributes.values())
-        return int(total)
+            m = {
+                "positions": size(pool.low, pool.med, pool.high), "color": size(pool.color),
+                "attributes": size(*pool.attributes.values()),
+                "batches": size(pool.batches, pool.chunk_next, pool.chunk_node, pool.batch_version),
+            }  # fmt: skip
+        m["voxels"] = size(self.vox_key, self.vox_slot, self.vox_sum, self.vox_first, self._hkeys, self._hvals)
+        m["nodes"] = size(self.key, self.level, self.parent, self.children, self.leaf, self.count, self.first_chunk, self.last_chunk,
+                          self.list_count, self.cmin, self.cedge, self._free)  # fmt: skip
+        return m
 
     def __enter__(self) -> Self:
         return self
@@ -713,7 +726,36 @@ class ProgressiveOctree:
         order = np.argsort(chunks, kind="stable")
         chunks, owner = chunks[order], owner[order]
         sel = Selection(chunks, bits[owner].astype(np.int32), mats[owner], size[owner], int(n - len(ids)))
-        return DrawList(pool, sel, n, nodes=ids)
+        return DrawList(pool, sel, n, nodes=ids, spacing=self._drawn_spacing(lists, box_size))
+
+    def _drawn_spacing(self, lists: np.ndarray, box_size: np.ndarray) -> float:
+        """Spacing of the drawn entries (adaptive point sizes), from the voxel grids rather than
+        the chunks' boxes (each is its node's whole cube): an octant's voxels sit one cell apart;
+        a leaf's points cover the area its parent's voxels of its octant do (cells x cell area),
+        so their spacing is sqrt(area / points). The median over the drawn entries."""
+        node = lists // K.LISTS
+        counts = self.list_count[lists].astype(np.float64)
+        keep = counts > 0
+        if not keep.any():
+            return 0.0
+        node, counts = node[keep], counts[keep]
+        cell = self.cedge[: self.n_nodes] / (1 << K.GRID_BITS)
+        spacing = cell[node].copy()  # voxels
+        leaf = self.leaf[node] == 1
+        parent = self.parent[node]
+        has = leaf & (parent >= 0)
+        if has.any():
+            p = parent[has]
+            octant = np.argmax(self.children[p] == node[has][:, None], axis=1)
+            voxels = self.list_count[p * K.LISTS + octant].astype(np.float64)
+            spacing[has] = cell[p] * np.sqrt(np.maximum(voxels, 1.0) / counts[has])
+        alone = leaf & (parent < 0)  # the root, still a leaf: its box within the bounds
+        if alone.any():
+            ext = np.sort(box_size[node[alone]], axis=1)
+            spacing[alone] = np.sqrt(ext[:, 2] * ext[:, 1] / counts[alone])
+        order = np.argsort(spacing, kind="stable")
+        cum = np.cumsum(counts[order])
+        return float(spacing[order][np.searchsorted(cum, cum[-1] / 2.0)])
 
     def prepare_views(self, views, settings) -> MultiViewDrawList | None:
         """None: each eye selects its own nodes, as for a converted octree."""

@@ -33,7 +33,8 @@ def splat_for(settings, camera, draw=None, near: float = 0.0):
         return splat_params(settings, camera) if settings.point_size > 1 else None
     if draw is None or len(draw.selection.ids) == 0:
         return None
-    splat = splat_params(settings, camera, point_spacing(draw.points, draw.step))
+    spacing = draw.spacing if draw.spacing is not None else point_spacing(draw.points, draw.step)
+    splat = splat_params(settings, camera, spacing)
     return splat if largest_size(splat, nearest_depth(draw.selection.matrices, near)) >= 2.0 else None
 
 
