@@ -508,6 +508,19 @@ def _hqs_resolve_rows(r0, r1, width, acc, spill_rg, spill_ba, spill_n, fallback,
                 a_[x] = 0
 
 
+
+@njit(inline="always")
+def _band_reach(footprint, counts):
+    """(rows a footprint reaches above or below its point, the largest batch count): what a
+    band pass needs to find the batches that reach its rows and size its scratch."""
+    reach = 0
+    for o in range(footprint.shape[0]):
+        reach = max(reach, abs(footprint[o, 1]))
+    max_count = 0
+    for k in range(counts.shape[0]):
+        max_count = max(max_count, counts[k])
+    return reach, max_count
+
 @njit(parallel=True, cache=True)
 def hqs_shade(
     firsts,
@@ -550,12 +563,7 @@ def hqs_shade(
     on the thread count. acc and the spill arrays must be zero on entry; they are on exit."""
     n_bands = bands.shape[0] - 1
     n_fp = footprint.shape[0]
-    reach = 0
-    for o in range(n_fp):
-        reach = max(reach, abs(footprint[o, 1]))
-    max_count = 0
-    for k in range(counts.shape[0]):
-        max_count = max(max_count, counts[k])
+    reach, max_count = _band_reach(footprint, counts)
     near32 = np.float32(near)
     far32 = np.float32(far)
     t1 = np.float32(tol1)
@@ -732,12 +740,7 @@ def transparency_shade(
     thread count. kbuf must be EMPTY and sums zero on entry; they are on exit."""
     n_bands = bands.shape[0] - 1
     n_fp = footprint.shape[0]
-    reach = 0
-    for o in range(n_fp):
-        reach = max(reach, abs(footprint[o, 1]))
-    max_count = 0
-    for k in range(counts.shape[0]):
-        max_count = max(max_count, counts[k])
+    reach, max_count = _band_reach(footprint, counts)
     near32 = np.float32(near)
     far32 = np.float32(far)
     spans, rows = footprint_spans(footprint)
