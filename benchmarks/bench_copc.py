@@ -99,20 +99,10 @@ def bench_write(args, out: Path) -> dict:
 
 
 def _views(cloud, width, height):
-    from gigapoint import Camera
+    """bench_lod.py's overview and close-up, so that the frame rates compare with its."""
+    from bench_lod import views  # a sibling script: its folder is sys.path[0]
 
-    lo, hi = cloud.bounds
-    cx, cy = (lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2
-    ex, dz = hi[0] - lo[0], hi[2] - lo[2]
-    return {
-        "overview": Camera.fit(cloud.bounds, view="iso", width=width, height=height),
-        "close-up": Camera.look_at(
-            (cx - 0.05 * ex, cy + 0.02 * ex, lo[2] + 0.8 * dz),
-            (cx + 0.12 * ex, cy + 0.2 * ex, lo[2] + 0.2 * dz),
-            width=width,
-            height=height,
-        ),
-    }
+    return views(cloud, width, height)
 
 
 def bench_render(args, out: Path) -> dict:

@@ -32,7 +32,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-__all__ = ["atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "temp_files"]
+__all__ = ["atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "fsync_file", "temp_files"]
 
 _TEMP_NAME = re.compile(r"\..+\.[0-9a-f]{8}\.tmp(\.[^.]+)?")  # what ``_create_temp`` names a file
 
@@ -48,7 +48,8 @@ def _create_temp(path: Path) -> tuple[Path, int]:
     raise FileExistsError(f"{path}: cannot create a temporary file beside it")  # pragma: no cover - 100 random clashes
 
 
-def _fsync(path: Path) -> None:
+def fsync_file(path) -> None:
+    """``path``'s content on the disk (fsync): a file written in place, e.g. through memory maps."""
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)
@@ -66,7 +67,7 @@ def atomic_write(path, write: Callable[[Path], object], *, durable: bool = False
     try:
         write(tmp)
         if durable:
-            _fsync(tmp)
+            fsync_file(tmp)
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)

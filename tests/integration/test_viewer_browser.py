@@ -4,19 +4,12 @@ from __future__ import annotations
 
 import base64
 import io
-import os
 import time
 
 import numpy as np
 import pytest
 
-CHROMIUM = "/usr/bin/chromium"
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update", "--no-first-run"]
-
-pytestmark = [pytest.mark.browser, pytest.mark.timeout(180)]
-if not os.path.exists(CHROMIUM):
-    pytest.skip("chromium is not installed at /usr/bin/chromium", allow_module_level=True)
-sync_api = pytest.importorskip("playwright.sync_api")
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(180)]  # the browser: tests/integration/conftest.py
 pytest.importorskip("starlette")
 pytest.importorskip("uvicorn")
 
@@ -47,17 +40,6 @@ def server():
     srv = ViewerServer(marker_scene()).start()
     yield srv
     srv.close()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    with sync_api.sync_playwright() as p:
-        try:
-            b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
-        except Exception as exc:  # noqa: BLE001 - a broken browser install is a skip, not a failure
-            pytest.skip(f"cannot launch chromium: {exc}")
-        yield b
-        b.close()
 
 
 @pytest.fixture()

@@ -3,20 +3,13 @@ the panel's cloud line, picked coordinates as the file wrote them."""
 
 from __future__ import annotations
 
-import os
 import re
 import time
 
 import numpy as np
 import pytest
 
-CHROMIUM = "/usr/bin/chromium"
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update", "--no-first-run"]
-
-pytestmark = [pytest.mark.browser, pytest.mark.timeout(180)]
-if not os.path.exists(CHROMIUM):
-    pytest.skip("chromium is not installed at /usr/bin/chromium", allow_module_level=True)
-sync_api = pytest.importorskip("playwright.sync_api")
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(180)]  # the browser: tests/integration/conftest.py
 pytest.importorskip("starlette")
 pytest.importorskip("uvicorn")
 
@@ -44,22 +37,17 @@ def las_cloud(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def page(las_cloud):
+def page(browser, las_cloud):
     srv = ViewerServer(las_cloud).start()
-    with sync_api.sync_playwright() as p:
-        try:
-            b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
-        except Exception as exc:  # noqa: BLE001 - a broken browser install is a skip, not a failure
-            pytest.skip(f"cannot launch chromium: {exc}")
-        pg = b.new_page(viewport={"width": 290 + 640, "height": 480})
-        errors = []
-        pg.on("pageerror", lambda e: errors.append(str(e)))
-        pg.goto(srv.url)
-        pg.wait_for_function("() => document.getElementById('canvas').dataset.full === 'true'", timeout=30_000)
-        yield pg
-        assert not errors, errors
-        b.close()
+    pg = browser.new_page(viewport={"width": 290 + 640, "height": 480})
+    errors = []
+    pg.on("pageerror", lambda e: errors.append(str(e)))
+    pg.goto(srv.url)
+    pg.wait_for_function("() => document.getElementById('canvas').dataset.full === 'true'", timeout=30_000)
+    yield pg
+    pg.close()
     srv.close()
+    assert not errors, errors
 
 
 def test_the_hud_keeps_the_last_rate_when_idle(page):

@@ -130,3 +130,44 @@ def test_gp_viewer_of_a_live_cloud_shows_frames_pushed_after_it_started():
         assert viewer.push_url.startswith("ws://127.0.0.1:") and viewer.push_url.endswith(viewer.server.core.push_token)
     assert (empty[..., :3] == empty[0, 0, :3]).all()  # nothing yet: background only
     assert (shot[..., 0] == 255).sum() > 100  # the frame's red points
+
+
+def test_the_push_url_works_on_a_server_off_loopback():
+    """Off loopback every route wants the page's token= as well: the printed push URL carries
+    it, and a PushClient given the page's URL keeps it; without it the push is refused."""
+    from urllib.parse import parse_qs, urlsplit
+
+    from gigapoint.errors import GigapointError
+    from gigapoint.live.wire import PushClient
+    from gigapoint.viewer.server import ViewerServer
+
+    live = LiveCloud(keep=2, bounds=((-12, -12, -2), (12, 12, 2)))
+    srv = ViewerServer(live, host="0.0.0.0", port=0)
+    try:
+        url = urlsplit(srv.push_url)
+        query = parse_qs(url.query)
+        assert url.path == "/push" and query["token"] == [srv.token] and query["push_token"] == [srv.core.push_token]
+        with TestClient(srv.app) as client:
+            with client.websocket_connect(f"/push?{url.query}") as ws:
+                ws.send_bytes(encode_frame("points", xyz=patch(1)[0]))
+                assert json.loads(ws.receive_text()) == {"type": "ack", "seq": 0}
+            with pytest.raises(WebSocketDisconnect), client.websocket_connect(f"/push?push_token={srv.core.push_token}") as ws:
+                ws.receive_text()
+        captured = {}
+
+        def fake_connect(ws_url, **_):  # PushClient's URL, without a network
+            captured["url"] = ws_url
+            raise OSError("no server here")
+
+        import websockets.sync.client as wsc
+
+        real, wsc.connect = wsc.connect, fake_connect
+        try:
+            with pytest.raises(GigapointError, match="refused"):
+                PushClient(srv.url, srv.core.push_token)
+        finally:
+            wsc.connect = real
+        assert parse_qs(urlsplit(captured["url"]).query) == {"token": [srv.token], "push_token": [srv.core.push_token]}
+    finally:
+        srv.sock.close()
+        srv.core.close_all()

@@ -8,6 +8,7 @@ import pytest
 import gigapoint as gp
 from gigapoint.errors import SettingsError
 from gigapoint.render.colors import classification_table, colormap_table, elevations, point_colors
+from gigapoint.render.passes.lighting import point_normals
 
 
 @pytest.fixture(scope="module")
@@ -75,6 +76,16 @@ def test_elevations_match_positions(scene):
     cloud, _ = scene
     np.testing.assert_array_equal(elevations(cloud), cloud.positions()[:, 2])
     assert elevations(cloud) is elevations(cloud)  # cached on the cloud
+
+
+def test_a_new_color_mode_keeps_the_other_derived_arrays(scene):
+    """The RenderCache keeps one color array at a time, and the elevations and normals beside it."""
+    cloud, _ = scene
+    z, normals = elevations(cloud), point_normals(cloud)
+    first = point_colors(cloud, gp.RenderSettings(color_mode="intensity"))
+    point_colors(cloud, gp.RenderSettings(color_mode="classification"))
+    assert elevations(cloud) is z and point_normals(cloud) is normals
+    assert point_colors(cloud, gp.RenderSettings(color_mode="intensity")) is not first  # dropped, computed again
 
 
 def test_colormap_tables_have_the_published_end_points():

@@ -111,6 +111,11 @@ def current() -> CompileWatch | None:
     return _current
 
 
+def compiled_seconds() -> float:
+    """Seconds the running command has spent compiling kernels so far (0 outside ``watching``)."""
+    return _current.seconds if _current is not None else 0.0
+
+
 @contextlib.contextmanager
 def watching(console=None):
     """Watch compilations for the duration of a command; on a terminal, end with one line

@@ -37,8 +37,7 @@ def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: floa
     print(f"gigapoint viewer: {live.name} (keep {keep} frames{f', decay {decay:g} s' if decay else ''})", file=sys.stderr)
     if not server.loopback:
         print(f"warning: listening on {host}, reachable from the network; the URL's token is the only key", file=sys.stderr)
-    base = server.url.split("?")[0].rstrip("/")
-    print(f"push frames from another process: {base.replace('http', 'ws', 1)}/push?push_token={server.core.push_token}", file=sys.stderr)
+    print(f"push frames from another process: {server.push_url}", file=sys.stderr)
     print(server.url, flush=True)
     if browser and open_browser is not None:
         open_browser(server.url)

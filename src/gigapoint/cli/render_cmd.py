@@ -171,10 +171,9 @@ def render(
         typer.echo(f"wrote {output} ({turntable} frames, {width}x{height}, {cloud.n_points:,} points)")
         return
     cam = make_camera(cloud, width, height, view, camera, projection, fov)
-    watch = compiling.current()
-    compiled = watch.seconds if watch is not None else 0.0
+    compiled = compiling.compiled_seconds()
     frame = gp.render_frame(cloud, cam, settings)
-    compiled = (watch.seconds if watch is not None else 0.0) - compiled
+    compiled = compiling.compiled_seconds() - compiled
     save_image(frame.image, output)
     if depth_out is not None:
         save_array(frame.depth, depth_out)
@@ -218,8 +217,7 @@ def demo(
     check_output(output, overwrite)
     check_image_size(width, height)
     settings = settings_from_options(RenderSettings, {"threads": threads})  # a bad --threads is named
-    watch = compiling.current()
-    compiled_before = watch.seconds if watch is not None else 0.0
+    compiled_before = compiling.compiled_seconds()
     t0 = time.perf_counter()
     with status(f"generating the demo scene ({points:,} points)"):
         xyz, rgba, attrs = demo_arrays(points, seed)
@@ -239,7 +237,7 @@ def demo(
             advance()
     median = sorted(times)[3]
     save_image(frame.image, output)
-    compiled = (watch.seconds if watch is not None else 0.0) - compiled_before  # numba compiled kernels: a first run
+    compiled = compiling.compiled_seconds() - compiled_before  # numba compiled kernels: a first run
     if compiled >= 0.5:
         console.print(f"compiling the kernels took {compiled:.0f} s of the times below (once per install)", style="dim", highlight=False)
     console.print(f"demo scene: {points:,} points generated in {t1 - t0:.2f} s ({points / (t1 - t0) / 1e6:.1f} M points/s)", highlight=False)

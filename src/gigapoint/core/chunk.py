@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import InputError
+
 #: Color given to points of files that carry none (a light grey that reads on black and white).
 DEFAULT_COLOR = (200, 200, 200, 255)
 
@@ -66,3 +68,16 @@ def to_rgba8(colors: np.ndarray) -> np.ndarray:
         out[:, 3] = 255
         return out
     return np.ascontiguousarray(c8)
+
+
+def colors_for(rgb, n: int, where: str) -> np.ndarray:
+    """Colors given with ``n`` points (a frame pushed, points added) as uint8 RGBA (n, 4)
+    (``to_rgba8``); a one-line InputError starting with ``where`` when they are not (N, 3|4)
+    colors or not ``n`` rows."""
+    try:
+        rgba = to_rgba8(np.asarray(rgb))
+    except ValueError as exc:
+        raise InputError(f"{where}: {exc}") from None
+    if len(rgba) != n:
+        raise InputError(f"{where}: rgb has {len(rgba)} rows, xyz has {n}")
+    return rgba

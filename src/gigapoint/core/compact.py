@@ -38,6 +38,7 @@ import numpy as np
 from numba import njit, prange
 
 from .layout import COMPACT_MIN_BITS, EXT_FULL_BITS, PACK_DTYPE, WORD_BITS, WORD_MASK
+from .quantize import gather_batch
 
 _SCALE30 = float(1 << 30)
 _MAX30 = (1 << 30) - 1
@@ -205,19 +206,6 @@ def _compact_batches(phase, xyz, order, firsts, counts, gmin, scale, tol, qmin, 
 
 
 @njit
-def _gather_batch(xyz, order, f, c):
-    """xyz[order[f:f + c]] into a local array: independent loads that overlap their cache misses
-    (quantize.py: reading through ``order`` inside the arithmetic was 1.7-2.5x slower)."""
-    pts = np.empty((c, 3))
-    for k in range(c):
-        src = order[f + k]
-        pts[k, 0] = xyz[src, 0]
-        pts[k, 1] = xyz[src, 1]
-        pts[k, 2] = xyz[src, 2]
-    return pts
-
-
-@njit
 def _plan(b, xyz, order, firsts, counts, gmin, scale, tol, qmin, bits, bbox_min, bbox_max):
     """Batch b: the smallest integer grid coordinate (steps from gmin) and the bits B per axis
     its extent needs (>= COMPACT_MIN_BITS), the grid-aligned box; bits[b, 0] = -1 where the batch
@@ -233,7 +221,7 @@ def _plan(b, xyz, order, firsts, counts, gmin, scale, tol, qmin, bits, bbox_min,
         hi[a] = np.iinfo(np.int64).min
         flo[a] = np.inf
         fhi[a] = -np.inf
-    pts = _gather_batch(xyz, order, f, c)
+    pts = gather_batch(xyz, order, f, c)
     on_grid = True
     for a in range(3):
         inv = 1.0 / scale[a]
@@ -280,7 +268,7 @@ def _write(b, xyz, order, firsts, counts, gmin, scale, qmin, bits, bbox_min, bbo
         inv[a] = _SCALE30 / size if size > 0.0 else 0.0
     t = e[0] + e[1] + e[2]
     w0 = word0s[b]
-    pts = _gather_batch(xyz, order, f, c)
+    pts = gather_batch(xyz, order, f, c)
     for k in range(c):
         wl = np.uint32(0)
         v = np.uint64(0)
@@ -330,7 +318,7 @@ def compact_positions(xyz: np.ndarray, order: np.ndarray, batches: np.ndarray, s
     wide = bits[:, 0] < 0
     e = np.where(wide[:, None], EXT_FULL_BITS, bits - WORD_BITS)
     t = e.sum(axis=1)
-    words = np.where(t > 0, (counts * t + 63) // 64 + 1, 0)  # + 1: read_ext's second word stays inside
+    words = stream_words(t, counts)
     word0s = np.concatenate([[0], np.cumsum(words)[:-1]]).astype(np.int64) if nb else np.zeros(0, np.int64)
     ext = np.zeros(int(words.sum()), np.uint64)
     _compact_batches(1, xyz, order, firsts, counts, gmin, scale, GRID_TOLERANCE, qmin, bits, bmin, bmax, word0s, low, ext)
@@ -360,15 +348,23 @@ def ext_bits_per_point(pack: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return (code & 0xFF) + ((code >> 8) & 0xFF) + ((code >> 16) & 0xFF)
 
 
+def stream_words(t: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """u64 words of each batch's extension stream (``t`` bits a point, ``counts`` points): one
+    more than the bits need, so ``read_ext``'s second word stays inside; none where t is 0."""
+    return np.where(t > 0, (counts * t + 63) // 64 + 1, 0)
+
+
 __all__ = [
     "GRID_TOLERANCE",
     "compact_positions",
     "expand_cloud_words",
     "expand_tails",
+    "ext_bits_per_point",
     "full_words",
     "pack_code",
     "point_words",
     "read_ext",
+    "stream_words",
     "tail_words",
     "wide_batches",
 ]

@@ -16,6 +16,19 @@ _SCALE30 = float(1 << COORD_BITS)
 _MAX30 = (1 << COORD_BITS) - 1
 
 
+@njit
+def gather_batch(xyz, order, f, c):
+    """xyz[order[f:f + c]] into a local (c, 3) array, in a loop of independent loads that overlap
+    their cache misses (also compact.py's)."""
+    pts = np.empty((c, 3))
+    for k in range(c):
+        src = order[f + k]
+        pts[k, 0] = xyz[src, 0]
+        pts[k, 1] = xyz[src, 1]
+        pts[k, 2] = xyz[src, 2]
+    return pts
+
+
 @njit(parallel=True, cache=True)
 def _quantize_batches(xyz, order, firsts, counts, bbox_min, bbox_max, low, med, high):
     """Per batch: bbox of xyz[order[first:first+count]], then the three 10-bit words.
@@ -27,12 +40,7 @@ def _quantize_batches(xyz, order, firsts, counts, bbox_min, bbox_max, low, med, 
     for b in prange(firsts.shape[0]):
         f = firsts[b]
         c = counts[b]
-        pts = np.empty((c, 3))
-        for k in range(c):
-            src = order[f + k]
-            pts[k, 0] = xyz[src, 0]
-            pts[k, 1] = xyz[src, 1]
-            pts[k, 2] = xyz[src, 2]
+        pts = gather_batch(xyz, order, f, c)
         lo0 = lo1 = lo2 = np.inf
         hi0 = hi1 = hi2 = -np.inf
         for k in range(c):

@@ -361,21 +361,20 @@ class HttpFile(ByteSource):
             return out
         total = sum(ranges[i][1] for i in missing)
         share = min(MERGE_MAX, max(1 << 20, -(-total // self.client.workers)))
-        groups: list[list[int]] = []
+        groups: list[list] = []  # [first byte, end byte, indices of its ranges], by first byte
         for i in missing:
             o, s = ranges[i]
-            if groups:
-                g0, gend = ranges[groups[-1][0]][0], max(ranges[j][0] + ranges[j][1] for j in groups[-1])
-                if o - gend <= MERGE_GAP and max(gend, o + s) - g0 <= share and o >= g0:
-                    groups[-1].append(i)
-                    continue
-            groups.append([i])
+            g = groups[-1] if groups else None
+            if g is not None and o - g[1] <= MERGE_GAP and max(g[1], o + s) - g[0] <= share:
+                g[1] = max(g[1], o + s)
+                g[2].append(i)
+            else:
+                groups.append([o, o + s, [i]])
 
-        def fetch(group: list[int]) -> None:
-            start = ranges[group[0]][0]
-            end = max(ranges[j][0] + ranges[j][1] for j in group)
-            data = self.client.get(self.url, start, end - start, cache=len(group) == 1)
-            for j in group:
+        def fetch(group: list) -> None:
+            start, end, members = group
+            data = self.client.get(self.url, start, end - start, cache=len(members) == 1)
+            for j in members:
                 o, s = ranges[j]
                 piece = data[o - start : o - start + s]
                 self.client.cache.put((self.url, o, s), piece)

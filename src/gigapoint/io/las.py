@@ -369,6 +369,7 @@ class LasReader(Reader):
                 attrs = [a for a in LAS_ATTRIBUTES if a in dims]
                 has_rgb = {"red", "green", "blue"} <= dims
                 scale = np.asarray(reader.header.scales, np.float64)
+                stored_scale = tuple(float(abs(s)) for s in scale)  # PointChunk.scale: the resolution the file stores
                 offset = np.asarray(reader.header.offsets, np.float64)
                 scaler = ColorScaler() if scaler is None else scaler
                 total = hdr.point_count
@@ -391,7 +392,7 @@ class LasReader(Reader):
                         _rgb8(r, g, b, scaler.int_shift(int(_max3(r, g, b))), rgba)
                     attributes = {a: np.ascontiguousarray(np.asarray(pts[a])) for a in attrs}
                     done += n
-                    yield PointChunk(xyz, rgba, attributes, scale=tuple(float(abs(s)) for s in scale))
+                    yield PointChunk(xyz, rgba, attributes, scale=stored_scale)
         except InputError:
             raise
         except MemoryError:

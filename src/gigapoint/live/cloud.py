@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.chunk import to_rgba8
+from ..core.chunk import colors_for
 from ..core.cloud import MAX_ABS_COORDINATE, PointCloud
 from ..core.layout import BATCH_SIZE
 from ..core.morton import cube_of, morton_codes
@@ -47,8 +47,8 @@ from .depth import depth_to_points, parse_pose
 from .ring import BASE_ATTRIBUTES, NORMAL_PARTS, LiveBuffers, LiveLock, attribute_dtype
 
 _INITIAL_CHUNKS = 32
-_LATENCIES = 512
-SNAPSHOT_BATCH = 1 << 20  # points a snapshot adds to the octree at a time  # push-to-pixels latencies kept for the median / p99
+_LATENCIES = 512  # push-to-pixels latencies kept for the median / p99
+SNAPSHOT_BATCH = 1 << 20  # points a snapshot adds to the octree at a time
 
 
 @dataclass
@@ -290,14 +290,7 @@ class LiveCloud:
         if n == 0:
             raise InputError(f"{name}: push: the frame has no points")
         p = parse_pose(pose, f"{name}: push") if pose_tag is None else pose_tag
-        rgba = None
-        if rgb is not None:
-            try:
-                rgba = to_rgba8(np.asarray(rgb))
-            except ValueError as exc:
-                raise InputError(f"{name}: push: {exc}") from None
-            if len(rgba) != n:
-                raise InputError(f"{name}: push: rgb has {len(rgba)} rows, xyz has {n}")
+        rgba = colors_for(rgb, n, f"{name}: push") if rgb is not None else None
         attrs = {}
         for a, v in attributes.items():
             v = np.asarray(v)

@@ -115,8 +115,10 @@ class PushClient:
             from websockets.sync.client import connect
         except ImportError:
             raise GigapointError("pushing frames needs websockets (pip install 'gigapoint[viewer]')") from None
-        base = url.split("?")[0].rstrip("/")
-        ws_url = base.replace("http://", "ws://").replace("https://", "wss://") + f"/push?push_token={token}"
+        base, _, query = url.partition("?")  # the page's token= (a server off loopback wants it) is kept
+        base = base.rstrip("/").removesuffix("/push")
+        query = "&".join(q for q in query.split("&") if q and not q.startswith("push_token="))
+        ws_url = base.replace("http://", "ws://").replace("https://", "wss://") + "/push?" + (query + "&" if query else "") + f"push_token={token}"
         try:
             self._connection = connect(ws_url, max_size=1 << 20, open_timeout=timeout)
             self.ws = self._connection.__enter__()  # websockets >= 15 wants it entered as a context

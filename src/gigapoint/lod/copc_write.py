@@ -326,11 +326,7 @@ def write_copc(
     in any order (missing ancestors get empty entries); ``scale``/``offset``: the LAS integer
     grid; ``cube_min``/``cube_edge``: the octree's cube (keys are relative to it); ``wkt``: the
     CRS. Returns {points, nodes, pages}."""
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise OutputExistsError(f"{path}: already exists; pass overwrite=True to replace it")
-    if path.is_dir():
-        raise OutputExistsError(f"{path}: is a directory, a COPC output is one file")
+    check_output(path, overwrite)
     with atomic_open(path, durable=durable) as f:
         w = CopcWriter(
             f, scale=scale, offset=offset, cube_min=cube_min, cube_edge=cube_edge, point_format=point_format, wkt=wkt, spacing=spacing

@@ -86,7 +86,8 @@ class DirLock:
 
 
 class OctreeDir:
-    """An octree folder (see the module's docstring), which need not exist yet."""
+    """An octree folder (see the module's docstring), which need not exist yet. ``path``: a
+    path or an OctreeDir (os.PathLike through ``__fspath__``)."""
 
     def __init__(self, path):
         self.path = Path(path)

@@ -297,7 +297,7 @@ class PotreeCloud(OctreeCloud):
     """
 
     def __init__(self, folder, meta: dict):
-        d = folder if isinstance(folder, OctreeDir) else OctreeDir(folder)
+        d = OctreeDir(folder)
         p = d.path
         self.encoding = meta.get("encoding", "DEFAULT")
         if self.encoding not in ("DEFAULT", "BROTLI"):
@@ -358,6 +358,7 @@ class PotreeCloud(OctreeCloud):
             "bounds": {"min": lo.tolist(), "max": hi.tolist()},
             "encoding": self.encoding,
             "spacing": meta.get("spacing"),
+            "crs": meta.get("projection") or None,
         }
         super().__init__(meta.get("name") or p.name, cloud_meta, nodes, keys, {}, {}, p)
         self.node_reads = 0
@@ -441,7 +442,7 @@ def _position_range(attributes: list[dict], bmin: np.ndarray, bmax: np.ndarray) 
 def read_potree(folder) -> PotreeCloud:
     """A Potree 2.0 folder (an OctreeDir or a path; PotreeConverter 2.x or ``gigapoint convert
     --format potree``), nodes loaded on demand (see PotreeCloud)."""
-    d = folder if isinstance(folder, OctreeDir) else OctreeDir(folder)
+    d = OctreeDir(folder)
     try:
         meta = json.loads(d.potree_meta.read_text())
     except (OSError, ValueError) as exc:

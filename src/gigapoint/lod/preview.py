@@ -126,7 +126,7 @@ class ConversionPreview(PointCloud):
 def open_preview(octree_dir) -> ConversionPreview:
     """The preview of an unfinished conversion into ``octree_dir`` (an OctreeDir or a path), with
     a warning saying so."""
-    d = octree_dir if isinstance(octree_dir, OctreeDir) else OctreeDir(octree_dir)
+    d = OctreeDir(octree_dir)
     out = d.path
     if not d.preview.is_file():
         raise InputError(f"{out}: conversion not finished and no preview written yet ({RESUME_HINT})")

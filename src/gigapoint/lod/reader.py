@@ -95,9 +95,9 @@ def octree_info(path) -> dict:
     cloud = open_octree(p)
     lo, hi = cloud.bounds
     potree = d.kind == "potree"
-    attributes, crs = sorted(cloud.attributes), None
-    if potree:  # its nodes are decoded on demand: the metadata names what they hold, and the CRS
-        attributes, crs = _potree_attributes_and_crs(d)
+    attributes, crs = sorted(cloud.attributes), cloud.meta.get("crs")
+    if potree:  # its nodes are decoded on demand: the metadata names what they hold
+        attributes = [str(a["name"]) for a in cloud.potree_attributes if a.get("name") not in ("position", "rgb")]
     levels = int(cloud.nodes["level"].max()) + 1
     sampler, spacing = cloud.meta.get("sampler"), cloud.meta.get("spacing")
     text = f"{len(cloud.keys):,} nodes in {levels} levels"
@@ -120,18 +120,6 @@ def octree_info(path) -> dict:
     }
 
 
-def _potree_attributes_and_crs(d: OctreeDir) -> tuple[list[str], str | None]:
-    """The extra attributes (not position, rgb) and the projection a Potree metadata.json names."""
-    import json
-
-    try:
-        meta = json.loads(d.potree_meta.read_text(encoding="utf-8"))
-        names = [str(a["name"]) for a in meta.get("attributes", []) if a.get("name") not in ("position", "rgb")]
-    except (OSError, ValueError, TypeError, KeyError, AttributeError):
-        return [], None
-    return names, (meta.get("projection") or None)
-
-
 def _voxel_info(path) -> dict:
     """``octree_info`` of a COPC file or EPT dataset: every hierarchy page read, no point."""
     cloud = open_octree(path)
@@ -141,11 +129,13 @@ def _voxel_info(path) -> dict:
         lo, hi = cloud.bounds
         per_level = cloud.points_per_level()
         copc = meta["format"] == "copc"
-        size = None
         url = as_url(path)
-        if url is None:
-            p = ept_location(path) if not copc else path
-            size = sum(f.stat().st_size for f in Path(p).parent.rglob("*") if f.is_file()) if not copc else Path(p).stat().st_size
+        if url is not None:
+            size = None
+        elif copc:
+            size = Path(path).stat().st_size
+        else:  # the whole dataset: ept.json's folder
+            size = sum(f.stat().st_size for f in Path(ept_location(path)).parent.rglob("*") if f.is_file())
         details = {
             "octree": f"{len(cloud.keys):,} nodes in {len(per_level)} levels, {cloud.pages_read:,} hierarchy pages"
             + (f", spacing {meta['spacing']:.6g}" if meta.get("spacing") else ""),

@@ -72,14 +72,14 @@ def _heap_place(hp, hi, n, j, p, item):
 
 
 @njit(cache=True)
-def select_nodes(rows, box_min, box_size, counts, children, width, height, near, far, threshold, budget, out_ids, out_size, foveation=0.0, root=0):
+def select_nodes(rows, box_min, box_size, counts, children, width, height, near, far, threshold, budget, out_ids, out_size, foveation=0.0):
     """Largest-projected-first traversal: visible nodes of ≥ threshold px (the root always), within budget.
 
     ``foveation`` f > 0 raises the threshold away from the image centre: threshold · (1 + f·d),
     d = 0 at the centre .. 1 in the corners (the 2022 paper's 100/200/300 px is f = 2).
 
     ``box_min``/``box_size`` (k, 3): each node's cube clipped to the cloud's bounds (it holds
-    every point of the node's subtree, without the cube's empty space). ``root``: the root's index.
+    every point of the node's subtree, without the cube's empty space).
 
     Returns (number of selected nodes written to out_ids/out_size, their point total).
     """
@@ -87,11 +87,11 @@ def select_nodes(rows, box_min, box_size, counts, children, width, height, near,
     hp = np.empty(n, np.float64)
     hi = np.empty(n, np.int64)
     hn = 0
-    vis, s, _ = _box_test(rows, box_min[root], box_size[root], width, height, near, far)
+    vis, s, _ = _box_test(rows, box_min[0], box_size[0], width, height, near, far)
     if not vis:
         return 0, 0
     hp[0] = s
-    hi[0] = root
+    hi[0] = 0
     hn = 1
     k = 0
     total = 0
@@ -420,7 +420,7 @@ class OctreeCloud:
 def read_gigapoint(octree_dir) -> OctreeCloud:
     """A gigapoint octree folder (an OctreeDir or a path) opened for rendering: its metadata
     checked, its arrays memory-mapped. ``reader.open_octree`` opens a folder of any kind."""
-    d = octree_dir if isinstance(octree_dir, OctreeDir) else OctreeDir(octree_dir)
+    d = OctreeDir(octree_dir)
     p = d.path
     try:
         meta = json.loads(d.meta.read_text())

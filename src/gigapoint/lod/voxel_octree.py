@@ -29,6 +29,7 @@ from ..core.quantize import quantize
 from ..errors import InputError
 from ..io._base import ColorScaler
 from .keys import MAX_LEVEL, ROOT_KEY, key_cube, level_of
+from .octree_dir import POINT_ARRAYS
 from .store import OctreeCloud
 
 #: Points of the fetched nodes decoded together (``VoxelOctree._decode_batch``).
@@ -217,8 +218,8 @@ class VoxelOctree(OctreeCloud):
         nodes["bbox_min"] = np.where(full[:, None], np.clip(cmin, lo, hi), cmin)
         nodes["bbox_max"] = np.where(full[:, None], np.clip(cmin + cedge[:, None], lo, hi), cmin + cedge[:, None])
         old_keys, old_nodes, arena = self.keys, self.nodes, self.arena
+        pos = np.searchsorted(keys, old_keys)  # every old key is kept: its new index
         if len(old_keys):
-            pos = np.searchsorted(keys, old_keys)  # every old key is kept
             decoded = np.isin(old_keys, np.array(sorted(self._decoded), np.uint64))
             nodes["bbox_min"][pos[decoded]] = old_nodes["bbox_min"][decoded]
             nodes["bbox_max"][pos[decoded]] = old_nodes["bbox_max"][decoded]
@@ -226,8 +227,7 @@ class VoxelOctree(OctreeCloud):
         self.locators = [self._entries.get(k, (0, None))[1] for k in keys.tolist()]
         OctreeCloud.__init__(self, self._name, meta, nodes, keys, {}, {}, self._path)
         self.filtered_colors = filtered
-        if arena is not None:
-            pos = np.searchsorted(keys, old_keys)  # resident nodes keep their slots under their new indices
+        if arena is not None:  # resident nodes keep their slots under their new indices
             resident = list(arena.resident.items())
             arena.resident.clear()
             arena.resident.update((int(pos[i]), slots) for i, slots in resident)
@@ -250,11 +250,13 @@ class VoxelOctree(OctreeCloud):
             # decoded a group at a time (``_decode_batch``, in parallel where the format allows),
             # in the order the arena loads them, so that no more than a group is held decoded
             group: list[int] = []
+            held = 0
             for i in need:
                 group.append(i)
                 self._group_of[i] = group
-                if sum(int(self.counts[j]) for j in group) >= DECODE_GROUP_POINTS:
-                    group = []
+                held += int(self.counts[i])
+                if held >= DECODE_GROUP_POINTS:
+                    group, held = [], 0
         try:
             return super().prepare(view, settings)
         finally:
@@ -275,7 +277,7 @@ class VoxelOctree(OctreeCloud):
         if n == 0:
             empty = np.empty(0, np.uint32)
             return (
-                dict.fromkeys(("low", "med", "high", "color", "rgba"), empty),
+                dict.fromkeys(POINT_ARRAYS, empty),
                 {a: np.empty(0, dt) for a, dt in self._attr_dtypes.items()},
                 0,
             )

@@ -15,6 +15,14 @@ from .keys import key_cube, level_of
 from .octree_dir import FORMAT_NAME, FORMAT_VERSION, POINT_ARRAYS, OctreeDir
 
 
+def point_dtypes(attributes: dict) -> dict[str, np.dtype]:
+    """The octree's per-point arrays and their dtypes: POINT_ARRAYS (u32 each) and
+    ``attr.<name>`` of every attribute in ``attributes`` ({name: dtype})."""
+    dtypes = {k: np.dtype(np.uint32) for k in POINT_ARRAYS}
+    dtypes.update({f"attr.{a}": np.dtype(d) for a, d in attributes.items()})
+    return dtypes
+
+
 def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sampler: str, max_leaf: int, progress) -> int:
     """Assemble built node sets into the octree folder ``out``; returns the number of nodes.
 
@@ -24,8 +32,7 @@ def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sa
     """
     attrs = st["attributes"]
     origin, edge = np.array(st["origin"]), float(st["edge"])
-    dtypes = dict.fromkeys(POINT_ARRAYS, np.uint32)
-    dtypes.update({f"attr.{a}": np.dtype(d) for a, d in attrs.items()})
+    dtypes = point_dtypes(attrs)
     tmp_paths = {k: out.array_in_progress(k) for k in dtypes}
     direct = all((src / "span.npy").exists() for src in sources)
     if direct:

@@ -251,7 +251,7 @@ def point_colors(cloud, settings) -> np.ndarray:
     colors = cache.get(key)
     if colors is None:
         colors = np.ascontiguousarray(_compute(cloud, mode, settings), np.uint32)
-        for k in [k for k in cache if k != "__z__" and k[0] != "__"]:  # keep one color array at a time
+        for k in [k for k in cache if isinstance(k, tuple)]:  # keep one color array at a time (not "__z__", "__normals__"...)
             del cache[k]
         cache[key] = colors
     return colors

@@ -48,6 +48,10 @@ def footprint(size: int, shape: str = "square") -> np.ndarray:
     return np.array(rows, np.int32).reshape(-1, 3)
 
 
+#: the ``splat`` of one-pixel points, what None stands for: footprint (dx, dy, need) of the
+#: point's own pixel, size 1, no attenuation
+ONE_PIXEL = (np.array([[0, 0, 1]], np.int32), np.float32(1.0), np.float32(0.0))
+
 #: adaptive points cover this many times the point spacing: at 1 they would touch on a regular
 #: grid, real scans are not one (lines of a scanner, overlapping strips), so holes stay open below ~1.5
 ADAPTIVE_FILL = 1.25
@@ -65,10 +69,15 @@ def point_spacing(points, step: int = 1) -> float:
         return 0.0
     counts = np.ceil(counts[keep] / max(1, step))
     ext = np.sort(rec["bbox_max"][keep] - rec["bbox_min"][keep], axis=1)
-    spacing = np.sqrt(ext[:, 2] * ext[:, 1] / counts)
-    order = np.argsort(spacing, kind="stable")
-    cum = np.cumsum(counts[order])
-    return float(spacing[order][np.searchsorted(cum, cum[-1] / 2.0)])
+    return weighted_median(np.sqrt(ext[:, 2] * ext[:, 1] / counts), counts)
+
+
+def weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
+    """The median of ``values`` with each counted ``weights`` times (the median over points of a
+    per-batch figure). ``weights`` > 0, not empty."""
+    order = np.argsort(values, kind="stable")
+    cum = np.cumsum(weights[order])
+    return float(values[order][np.searchsorted(cum, cum[-1] / 2.0)])
 
 
 def splat_params(settings, camera, spacing: float | None = None):

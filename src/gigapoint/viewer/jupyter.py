@@ -47,10 +47,7 @@ class Viewer:
     def push_url(self) -> str | None:
         """Where another process pushes frames into a LiveCloud shown here (``ws://.../push?push_token=...``;
         gigapoint.live.wire.PushClient), None for other clouds."""
-        token = self.server.core.push_token
-        if token is None:
-            return None
-        return self.url.split("?")[0].rstrip("/").replace("http", "ws", 1) + f"/push?push_token={token}"
+        return self.server.push_url
 
     def display(self) -> None:
         """Show the IFrame when running under IPython (a no-op elsewhere)."""

@@ -321,6 +321,17 @@ class ViewerServer:
             host = f"[{host}]"
         return f"http://{host}:{self.port}/" + (f"?token={quote(self.token)}" if self.token else "")
 
+    @property
+    def push_url(self) -> str | None:
+        """Where another process pushes frames into the live cloud shown (``ws://.../push?push_token=...``,
+        with the page's ``token=`` too when the server needs one: not on loopback; live/wire.PushClient);
+        None for other clouds."""
+        token = self.core.push_token
+        if token is None:
+            return None
+        base, _, query = self.url.partition("?")
+        return base.rstrip("/").replace("http", "ws", 1) + "/push?" + (query + "&" if query else "") + f"push_token={token}"
+
     def serve_forever(self) -> None:
         """Serve in this thread until Ctrl+C (uvicorn installs its signal handlers in the main thread)."""
         try:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import threading
 import time
 import warnings
+from typing import Self
 
 from ..errors import GigapointError, GigapointWarning
 from ..lod.octree_dir import RESUME_HINT, OctreeDir
@@ -38,22 +39,33 @@ def _stamp(path):
         return None
 
 
-class ConversionWatcher:
-    def __init__(self, core, folder: OctreeDir, interval_s: float = 1.0):
-        self.core = core
-        self.folder = folder
-        self.seen = _stamp(folder.preview)
-        self.interval_s = interval_s
-        self.finished = threading.Event()  # set once the octree is drawn (or the watch stopped)
-        core.note = preview_note(folder)  # before the first frame is drawn
-        self._thread = threading.Thread(target=self._run, name="gigapoint-conversion-watch", daemon=True)
+class _Watcher:
+    """A daemon thread (``_run``) following the viewer core's cloud until ``stop``, or until it
+    is done with it (it sets ``finished`` itself)."""
 
-    def start(self) -> ConversionWatcher:
+    def __init__(self, core, thread_name: str) -> None:
+        self.core = core
+        self.finished = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=thread_name, daemon=True)
+
+    def start(self) -> Self:
         self._thread.start()
         return self
 
     def stop(self) -> None:
         self.finished.set()
+
+    def _run(self) -> None:
+        raise NotImplementedError
+
+
+class ConversionWatcher(_Watcher):
+    def __init__(self, core, folder: OctreeDir, interval_s: float = 1.0):
+        super().__init__(core, "gigapoint-conversion-watch")  # finished: once the octree is drawn (or the watch stopped)
+        self.folder = folder
+        self.seen = _stamp(folder.preview)
+        self.interval_s = interval_s
+        core.note = preview_note(folder)  # before the first frame is drawn
 
     def _run(self) -> None:
         from ..lod import open_octree
@@ -88,24 +100,15 @@ def load_note(cloud, rate: float) -> str:
     return f"loading: {cloud.loader.read:,}{total} points read, {rate / 1e6:.1f} M points/s"
 
 
-class LoadWatcher:
+class LoadWatcher(_Watcher):
     """While a progressive octree fills: redraw every tab ``interval_s`` (what is loaded so far)
     and keep the HUD's line on points loaded and points/s; one last redraw when it is done."""
 
     def __init__(self, core, cloud, interval_s: float = 0.25):
-        self.core = core
+        super().__init__(core, "gigapoint-load-watch")
         self.cloud = cloud
         self.interval_s = interval_s
-        self.finished = threading.Event()
         core.note = load_note(cloud, 0.0)
-        self._thread = threading.Thread(target=self._run, name="gigapoint-load-watch", daemon=True)
-
-    def start(self) -> LoadWatcher:
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self.finished.set()
 
     def _run(self) -> None:
         last = (self.cloud.loader.read, self.cloud.loader.started)
@@ -122,27 +125,18 @@ class LoadWatcher:
                 self.finished.set()
 
 
-class LiveWatcher:
+class LiveWatcher(_Watcher):
     """While frames stream into a LiveCloud: redraw every tab when one arrives (at most every
     ``min_interval_s``; a tab renders only the latest state, so frames that arrive while it draws
     coalesce), and keep the HUD's line on frames in per second, live points and push-to-pixels
     latency (LiveCloud.hud)."""
 
     def __init__(self, core, cloud, min_interval_s: float = 1 / 120, hud_interval_s: float = 0.25):
-        self.core = core
+        super().__init__(core, "gigapoint-live-watch")
         self.cloud = cloud
         self.min_interval_s = min_interval_s
         self.hud_interval_s = hud_interval_s
-        self.finished = threading.Event()
         core.note = cloud.hud()
-        self._thread = threading.Thread(target=self._run, name="gigapoint-live-watch", daemon=True)
-
-    def start(self) -> LiveWatcher:
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self.finished.set()
 
     def _run(self) -> None:
         seen = self.cloud.changes

@@ -8,11 +8,10 @@ import threading
 import numba
 import numpy as np
 
+from ...render.splats import ONE_PIXEL
 from . import raster
 from .passes import CpuPasses
 
-_ONE_PIXEL = np.zeros((1, 3), np.int32)  # footprint of one-pixel points (dx, dy, need)
-_ONE_PIXEL[0, 2] = 1
 _NO_WORDS = np.zeros(0, np.uint32)
 _NO_EXT = np.zeros(0, np.uint64)
 
@@ -96,7 +95,7 @@ class NumbaCpuBackend:
         counts = points.batches["count"][ids].astype(np.int64)
         starts = split_by_points(counts, n_threads)
         if splat is None:
-            splat = (_ONE_PIXEL, np.float32(1.0), np.float32(0.0))
+            splat = ONE_PIXEL
         words = layout_words(points, ids)
         with self.lock:
             return self._rasterize_locked(points, width, height, np.asarray(nears, np.float64), np.asarray(fars, np.float64), n_threads, firsts, counts, starts,

@@ -8,6 +8,7 @@ buffers are reused between frames: callers hold the backend's lock (the renderer
 
 from __future__ import annotations
 
+import contextlib
 import functools
 
 import numba
@@ -27,10 +28,9 @@ from ...render.params import (
     view_directions,
     window,
 )
+from ...render.splats import ONE_PIXEL
 from . import pass_kernels as kernels
 from . import raster
-
-_ONE = np.array([[0, 0, 1]], np.int32)  # footprint of one-pixel points (dx, dy, need)
 
 
 # --- resolve ---------------------------------------------------------------------------------
@@ -165,6 +165,34 @@ def split_rows(row_lo, row_hi, span, counts, width: int, height: int, n_bands: i
     return np.concatenate([[0], np.minimum(inner, height), [height]]).astype(np.int64)
 
 
+def _banding(points, sel, width, height, threads, bands, step):
+    """(threads, firsts, counts, float32 matrices, row_lo, row_hi, band bounds) of a pass over
+    screen bands (``hqs_shade``, ``transparency_shade``) of the selection ``sel``, drawing every
+    step-th point: ``bands`` bands (default: one per thread), balanced by ``split_rows``."""
+    n_threads = max(1, min(threads or numba.get_num_threads(), numba.config.NUMBA_NUM_THREADS, height))
+    batches = points.batches[sel.ids]
+    counts = batches["count"].astype(np.int64)
+    matrices = np.ascontiguousarray(sel.matrices, np.float32)
+    row_lo, row_hi, span = batch_rows(matrices, height)
+    bounds = split_rows(row_lo, row_hi, span, counts // step, width, height, max(1, min(int(bands or n_threads), height)))
+    return n_threads, batches["first"].astype(np.int64), counts, matrices, row_lo, row_hi, bounds
+
+
+@contextlib.contextmanager
+def _banded_run(n_threads: int, scratch: dict):
+    """Run a banded kernel on ``n_threads`` threads; if it fails half-way its ``scratch`` buffers
+    are dirty (not back to their empty state): drop them."""
+    previous = numba.get_num_threads()
+    numba.set_num_threads(n_threads)
+    try:
+        yield
+    except BaseException:
+        scratch.clear()
+        raise
+    finally:
+        numba.set_num_threads(previous)
+
+
 def hqs_colors(
     points, sel, vis, width, height, near, far, point_colors, fallback, tolerance=0.01, threads=None, splat=None, softness=0.0, bands=None
 ) -> np.ndarray:
@@ -180,30 +208,18 @@ def hqs_colors(
     no point contributed to. ``splat``: (footprint, size, atten) of points larger than a
     pixel; each footprint pixel blends. ``bands``: how many bands of rows the screen is cut
     into (default: one per thread)."""
-    footprint, size, atten = splat if splat is not None else (_ONE, np.float32(1), np.float32(0))
+    footprint, size, atten = splat if splat is not None else ONE_PIXEL
     vis = np.ascontiguousarray(vis).reshape(-1)
-    n_threads = max(1, min(threads or numba.get_num_threads(), numba.config.NUMBA_NUM_THREADS, height))
-    batches = points.batches[sel.ids]
-    counts = batches["count"].astype(np.int64)
-    matrices = np.ascontiguousarray(sel.matrices, np.float32)
-    row_lo, row_hi, span = batch_rows(matrices, height)
-    bands = split_rows(row_lo, row_hi, span, counts, width, height, max(1, min(int(bands or n_threads), height)))
+    n_threads, firsts, counts, matrices, row_lo, row_hi, bands = _banding(points, sel, width, height, threads, bands, 1)
     acc, spill_rg, spill_ba, spill_n = _accumulators(width * height)
     out = np.empty(width * height, np.uint32)
-    previous = numba.get_num_threads()
-    numba.set_num_threads(n_threads)
-    try:  # if the pass fails half-way the sums are dirty: drop them
+    with _banded_run(n_threads, _HQS_BUFFERS):
         kernels.hqs_shade(
-            batches["first"].astype(np.int64), counts, np.ascontiguousarray(sel.bits, np.int32), matrices, row_lo, row_hi,
+            firsts, counts, np.ascontiguousarray(sel.bits, np.int32), matrices, row_lo, row_hi,
             points.low, *full_words(points), width, height, near, far, bands, vis.view(np.float32), np.float32(1.0 + tolerance),
             point_colors, np.ascontiguousarray(footprint, np.int32), np.float32(size), np.float32(atten), float(softness),
             acc, spill_rg, spill_ba, spill_n, np.ascontiguousarray(fallback).reshape(-1), out,
         )  # fmt: skip
-    except BaseException:
-        _HQS_BUFFERS.clear()
-        raise
-    finally:
-        numba.set_num_threads(previous)
     return out
 
 
@@ -234,32 +250,19 @@ def transparent_colors(
     many bands instead; more than one a thread was slower in every view measured, the
     re-projection outweighing the smaller working set). ``step``: every step-th point of each
     batch, as the depth pass drew them."""
-    footprint, size, atten = splat if splat is not None else (_ONE, np.float32(1), np.float32(0))
-    n_threads = max(1, min(threads or numba.get_num_threads(), numba.config.NUMBA_NUM_THREADS, height))
-    batches = points.batches[sel.ids]
-    counts = batches["count"].astype(np.int64)
-    firsts = batches["first"].astype(np.int64)
-    matrices = np.ascontiguousarray(sel.matrices, np.float32)
-    row_lo, row_hi, span = batch_rows(matrices, height)
+    footprint, size, atten = splat if splat is not None else ONE_PIXEL
     step = max(1, int(step))
-    bands = split_rows(row_lo, row_hi, span, counts // step, width, height, max(1, min(int(bands or n_threads), height)))
+    n_threads, firsts, counts, matrices, row_lo, row_hi, bands = _banding(points, sel, width, height, threads, bands, step)
     alphas = np.ascontiguousarray(alphas, np.uint32).reshape(-1, 2)
     kbuf, kalpha, sums = _transparency_buffers(width * height)
     out = np.empty(width * height, np.uint32)
-    previous = numba.get_num_threads()
-    numba.set_num_threads(n_threads)
-    try:  # if the pass fails half-way the buffers are dirty: drop them
+    with _banded_run(n_threads, _TR_BUFFERS):
         kernels.transparency_shade(
             firsts, counts, np.ascontiguousarray(sel.bits, np.int32), matrices, row_lo, row_hi, points.low, *full_words(points),
             width, height, near, far, step, bands, alphas, np.ascontiguousarray(point_colors, np.uint32),
             np.ascontiguousarray(footprint, np.int32), np.float32(size), np.float32(atten), kbuf, kalpha, sums, transmittance_table(),
             np.array(background, np.int64), np.ascontiguousarray(fallback, np.uint32).reshape(-1), out,
         )  # fmt: skip
-    except BaseException:
-        _TR_BUFFERS.clear()
-        raise
-    finally:
-        numba.set_num_threads(previous)
     return out
 
 

@@ -19,8 +19,10 @@ from collections import defaultdict
 
 import numpy as np
 
+from ...core.compact import ext_bits_per_point, stream_words
 from ...errors import GigapointError
 from ...render.params import soft_weight
+from ...render.splats import ONE_PIXEL
 from .layout import FULL_LAYOUT, GPU_BATCH_DTYPE, MAX_VIEWS, PARAMS_DTYPE
 from .memory import BufferCache, PagePlan, batch_ends, plan_pages
 from .shaders import shader_source
@@ -309,10 +311,8 @@ class GpuContext:
 
     def footprint(self, splat, softness: float = 0.0) -> tuple[tuple[object, int], dict]:
         """(GPU footprint rows (dx, dy, need, weight), splat uniforms) of ``splat`` (None: one pixel)."""
-        if splat is None:
-            fp, size, atten = np.array([[0, 0, 1]], np.int32), np.float32(1.0), np.float32(0.0)
-        else:
-            fp, size, atten = np.asarray(splat[0], np.int32).reshape(-1, 3), np.float32(splat[1]), np.float32(splat[2])
+        fp, size, atten = splat if splat is not None else ONE_PIXEL
+        fp, size, atten = np.asarray(fp, np.int32).reshape(-1, 3), np.float32(size), np.float32(atten)
         rows = np.ones((len(fp), 4), np.int32)
         rows[:, :3] = fp
         if softness > 0 and len(fp) > 1:
@@ -333,9 +333,7 @@ class GpuContext:
             return plan.ext_ranges
         pack, counts = points.packing, points.batches["count"].astype(np.int64)
         first = pack["ext_first"].astype(np.int64)
-        code = pack["code"].astype(np.int64)
-        t = (code & 0xFF) + ((code >> 8) & 0xFF) + ((code >> 16) & 0xFF)
-        end = first + np.where(t > 0, (counts * t + 63) // 64 + 1, 0)
+        end = first + stream_words(ext_bits_per_point(pack, counts), counts)
         lo = np.full(plan.n_pages, np.iinfo(np.int64).max)
         hi = np.zeros(plan.n_pages, np.int64)
         np.minimum.at(lo, plan.page_of, first)

@@ -767,9 +767,6 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
 
     # ------------------------------------------------------------------ build, group, upper
 
-    def _piece_keys(self) -> list[str]:
-        return ["xyz", "rgba", *("attr." + a for a in self.state["attributes"])]
-
     def _build_partitions(self, parts: list) -> None:
         """The partitions' builds as tasks, the largest first; gigapoint format: each set placed
         into the output arrays as soon as every set before it is built (``_Placer``)."""
@@ -822,7 +819,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
                 f.unlink(missing_ok=True)
 
     def _remove_pieces(self, t: int, refs: dict) -> None:
-        for key in self._piece_keys():
+        for key in self._dtypes():  # the arrays a distribute task writes
             _piece_file(self.dir, t, key).unlink(missing_ok=True)
         refs.pop(t, None)
 

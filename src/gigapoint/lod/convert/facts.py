@@ -41,18 +41,17 @@ def input_facts(paths) -> dict:
         if not isinstance(reader, LasReader):
             has_color = True if has_color is None else has_color
             continue
-        hdr = read_las_header(p)
         info = reader.info(p)
         has_color = bool(has_color) or bool(info.get("has_color"))
-        s = np.asarray(hdr.scale, np.float64)
+        s = np.asarray(info["scale"], np.float64)
         scale = s if scale is None else np.minimum(scale, s)
-        offset = np.asarray(hdr.offset, np.float64) if offset is None else offset
+        offset = np.asarray(info["offset"], np.float64) if offset is None else offset
         text = info.get("crs")
         if text:
             crs_seen.add(text)
             if crs is None:
                 crs = text
-                wkt = wkt_of(hdr.vlrs) or _wkt_from_epsg(text)
+                wkt = wkt_of(read_las_header(p).vlrs) or _wkt_from_epsg(text)  # the header's VLRs: the first CRS's file only
     if len(crs_seen) > 1:
         warnings.warn(
             f"the inputs have {len(crs_seen)} different CRSs; the output takes the first ({crs[:60]})", GigapointWarning, stacklevel=3

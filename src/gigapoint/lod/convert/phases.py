@@ -15,14 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_npy
+from ...atomic import atomic_npy, fsync_file
 from ...core.layout import BATCH_DTYPE
 from ...core.quantize import _quantize_batches
 from ..build import color_sums, filtered_colors, init_ownlevel, owned_order, sample_tree, sort_codes, split_tree, take, upper_tree
 from ..copc_write import write_copc_sets
 from ..keys import level_of, point_codes
 from ..potree import write_potree
-from ..writer import write_gigapoint
+from ..writer import point_dtypes, write_gigapoint
 from . import hooks
 from .partition import built_name, group_name, plan_groups, set_name
 from .spill import copy_range, load_raw_chunk, npy_data_offset, raw_chunk_files
@@ -172,9 +172,7 @@ class BuildPhases(Job):
 
     def _output_dtypes(self) -> dict:
         """gigapoint format: the output point arrays' names and dtypes."""
-        dts = {k: np.dtype(np.uint32) for k in ("low", "med", "high", "color", "rgba")}
-        dts.update({f"attr.{a}": np.dtype(d) for a, d in self.state["attributes"].items()})
-        return dts
+        return point_dtypes(self.state["attributes"])
 
     def _output_slices(self, start: int, n: int) -> dict:
         """Memory maps of points start..start+n of every output array. Only this node set's pages
@@ -187,15 +185,9 @@ class BuildPhases(Job):
 
     def _close_outputs(self) -> None:
         """Output arrays on disk (fsync) before the write phase renames them and writes the metadata."""
-        names = ["low", "med", "high", "color", "rgba", *(f"attr.{a}" for a in self.state.get("attributes", {}))]
-        for path in map(self.dir.array_in_progress, names):
-            if not path.exists():  # a write phase resumed after its renames
-                continue
-            fd = os.open(path, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
+        for path in map(self.dir.array_in_progress, self._output_dtypes()):
+            if path.exists():  # not after a resumed write phase's renames
+                fsync_file(path)
         self._outs = None
 
     def _next_offset(self) -> int:

@@ -103,10 +103,10 @@ class Loader:
                     if self._stop.is_set():
                         return
                     turn, drawing = self.octree.builder_turn(turn)
-                    sl = slice(s, s + (SLICE_WHILE_DRAWING if drawing else SLICE_POINTS))
+                    sl = slice(s, min(s + (SLICE_WHILE_DRAWING if drawing else SLICE_POINTS), len(chunk)))
                     self.octree.add(chunk.xyz[sl], chunk.rgba[sl], **{a: v[sl] for a, v in chunk.attributes.items()})
-                    s += len(chunk.xyz[sl])
-                    self.read += len(chunk.xyz[sl])
+                    s = sl.stop
+                    self.read += sl.stop - sl.start
                     if self.octree.nbytes > self.memory_limit:
                         self._stop_for_memory(name)
                         return

@@ -9,9 +9,9 @@ The structure of SimLOD (Schütz, Herzberger, Wimmer 2024, sections 3-5; Wand et
   together with the batch that made it overflow, until every leaf holds at most
   ``max_leaf`` points. Every point added lives in exactly one leaf.
 - **inner nodes** hold voxels: one per occupied cell of a 128³ grid inscribed in the node,
-  at the cell's centre, with the colour of the first point that fell into it (kept) and the
-  rounded mean colour of all the points that passed through the cell (drawn; the paper leaves
-  that to post-processing). Voxels are extra representatives, not the points themselves.
+  at the cell's centre, with the rounded mean colour of all the points that passed through the
+  cell (the paper draws the first point's colour and leaves the mean to post-processing; the
+  first point gives the voxel its attributes). Voxels are extra representatives, not the points themselves.
   Occupancy is an open-addressing table keyed by (node, cell), not a 128³ bit grid per node:
   256 KB a node is more than the voxels of most nodes (a surface fills ~16 k of 2 M cells).
 - **storage**: a pool of fixed-size chunks (``CHUNK`` entries) in the batch layout of every
@@ -25,11 +25,11 @@ The structure of SimLOD (Schütz, Herzberger, Wimmer 2024, sections 3-5; Wand et
   e.g. from LAS headers); a point outside it makes the tree grow upwards: a new root twice
   the size takes the old one as a child, and samples every point into its own voxels.
 
-An insertion runs SimLOD's passes on the CPU: sort the batch by point code (one parallel
-radix sort), route it down the tree (binary searches per node: a node's points are one
-contiguous run), split overflowing leaves and route again, then sample the voxels of every
-inner node a run passes (one linear pass per run), allocate chunks, and write points and
-voxels in parallel. ``add`` is thread-safe; ``reading()`` keeps a frame's view consistent.
+An insertion runs SimLOD's passes on the CPU: sort the batch by point code (numpy's sort),
+route it down the tree in one pass over the sorted codes (``kernels.distribute``: a node's
+points are one contiguous run), split overflowing leaves and route again, then find the voxel
+cells of every inner node the runs pass, bottom-up and shared (``kernels.sample_runs``), look
+them up in the voxel table, allocate chunks, and write points and voxels in parallel. ``add`` is thread-safe; ``reading()`` keeps a frame's view consistent.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from typing import Self
 
 import numpy as np
 
-from ...core.chunk import PointChunk, to_rgba8
+from ...core.chunk import PointChunk, colors_for
 from ...core.cloud import MAX_ABS_COORDINATE
 from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE
@@ -46,6 +46,7 @@ from ...core.quantize import dequantize
 from ...core.renderable import DrawList, MultiViewDrawList
 from ...core.selection import Selection, View, batch_matrices, precision_for
 from ...errors import InputError
+from ...render.splats import weighted_median
 from ..build import take, valid_bounds
 from ..keys import CODE_BITS, point_codes
 from ..store import list_chunks, select_octants
@@ -222,8 +223,7 @@ class ProgressiveOctree:
 
     def _vox(self, cap: int) -> None:
         n = self.n_voxels
-        arrays = {"vox_key": np.zeros(cap, np.uint64), "vox_slot": np.zeros(cap, np.uint32), "vox_sum": np.zeros((cap, 5), np.uint32),
-                  "vox_first": np.zeros(cap, np.uint32)}  # fmt: skip
+        arrays = {"vox_key": np.zeros(cap, np.uint64), "vox_slot": np.zeros(cap, np.uint32), "vox_sum": np.zeros((cap, 5), np.uint32)}
         for name, arr in arrays.items():
             if n:
                 arr[:n] = getattr(self, name)[:n]
@@ -355,7 +355,7 @@ class ProgressiveOctree:
                 "attributes": size(*pool.attributes.values()),
                 "batches": size(pool.batches, pool.chunk_next, pool.chunk_node, pool.batch_version),
             }  # fmt: skip
-        m["voxels"] = size(self.vox_key, self.vox_slot, self.vox_sum, self.vox_first, self._hkeys, self._hvals)
+        m["voxels"] = size(self.vox_key, self.vox_slot, self.vox_sum, self._hkeys, self._hvals)
         m["nodes"] = size(self.key, self.level, self.parent, self.children, self.leaf, self.count, self.first_chunk, self.last_chunk,
                           self.list_count, self.cmin, self.cedge, self._free)  # fmt: skip
         return m
@@ -406,12 +406,7 @@ class ProgressiveOctree:
         if rgb is None:
             rgba = np.full(n, np.array([200, 200, 200, 255], np.uint8).view(np.uint32)[0], np.uint32)
         else:
-            try:
-                rgba = np.ascontiguousarray(to_rgba8(np.asarray(rgb))).view(np.uint32).reshape(-1)
-            except ValueError as exc:
-                raise InputError(f"{self.name}: {exc}") from None
-            if len(rgba) != n:
-                raise InputError(f"{self.name}: rgb has {len(rgba)} rows, xyz has {n}")
+            rgba = colors_for(rgb, n, self.name).view(np.uint32).reshape(-1)
         attrs = {}
         for a, v in attributes.items():
             v = np.asarray(v)
@@ -589,9 +584,9 @@ class ProgressiveOctree:
         first_new = self.n_voxels
         self.n_voxels = next_vid
         pool = self.pool
-        K.write_voxels(vid, is_new, node, cell, first, sums, st.rgba, self.level, slots, first_new, self.vox_sum, self.vox_slot, self.vox_key,
-                       self.vox_first, pool.low, pool.med, pool.high, pool.color, pool.batch_version, pool.chunk, pool.version)  # fmt: skip
-        src = first[new]
+        K.write_voxels(vid, is_new, node, cell, sums, self.level, slots, first_new, self.vox_sum, self.vox_slot, self.vox_key, pool.low,
+                       pool.med, pool.high, pool.color, pool.batch_version, pool.chunk, pool.version)  # fmt: skip
+        src = first[new]  # a new voxel's attributes: its cell's first point's
         for a, v in pool.attributes.items():
             v[slots] = st.attrs[a][src]
 
@@ -753,9 +748,7 @@ class ProgressiveOctree:
         if alone.any():
             ext = np.sort(box_size[node[alone]], axis=1)
             spacing[alone] = np.sqrt(ext[:, 2] * ext[:, 1] / counts[alone])
-        order = np.argsort(spacing, kind="stable")
-        cum = np.cumsum(counts[order])
-        return float(spacing[order][np.searchsorted(cum, cum[-1] / 2.0)])
+        return weighted_median(spacing, counts)
 
     def prepare_views(self, views, settings) -> MultiViewDrawList | None:
         """None: each eye selects its own nodes, as for a converted octree."""

@@ -15,9 +15,7 @@ import numpy as np
 
 from ...core.layout import EMPTY_PIXEL
 from ..reference import footprint_pixels, projected_batches
-from ..splats import point_sizes
-
-_ONE = np.array([[0, 0, 1]], np.int32)
+from ..splats import ONE_PIXEL, point_sizes
 
 
 def hqs_reference(
@@ -25,7 +23,7 @@ def hqs_reference(
 ) -> np.ndarray:
     """Plain numpy: the same projection as the reference renderer, exact integer means."""
     vis = vis.reshape(-1)
-    footprint, size, atten = splat if splat is not None else (_ONE, np.float32(1), np.float32(0))
+    footprint, size, atten = splat if splat is not None else ONE_PIXEL
     n = width * height
     sums = np.zeros((n, 4), np.int64)
     cnt = np.zeros(n, np.int64)

@@ -37,9 +37,8 @@ import numpy as np
 from ...errors import GigapointError
 from ..params import TR_COUNT_BITS, TR_LAYERS, TR_REVEAL_BITS, batch_alphas, transmittance_table
 from ..reference import footprint_pixels, projected_batches
-from ..splats import point_sizes
+from ..splats import ONE_PIXEL, point_sizes
 
-_ONE = np.array([[0, 0, 1]], np.int32)
 _FULL = 65536  # transmittance 1 in 16-bit fixed point
 
 
@@ -64,7 +63,7 @@ def frame_alphas(settings, draw) -> np.ndarray:
 def fragments(cloud, sel, width, height, near, far, splat=None, step: int = 1):
     """(pixel, float32 depth, point index, selected batch position) of every fragment, as arrays,
     in the projection and footprint of the depth pass (render/reference.py)."""
-    footprint, size, atten = splat if splat is not None else (_ONE, np.float32(1), np.float32(0))
+    footprint, size, atten = splat if splat is not None else ONE_PIXEL
     out = ([], [], [], [])
     for k, (first, idx, x0, y0, d) in enumerate(projected_batches(cloud, sel, width, height, near, far)):
         keep = idx % step == 0

@@ -7,6 +7,7 @@
 // holding the smallest keys in order. Integer sums: the image does not depend on thread order.
 // Needs 64-bit atomics that return their old value (wgpu's shader-int64-atomic-all-ops).
 //! include common.wgsl
+//! include transparency_alphas.wgsl
 
 const EMPTY64: u64 = 0xfffffffffffffffflu;
 
@@ -15,23 +16,8 @@ const EMPTY64: u64 = 0xfffffffffffffffflu;
 @group(0) @binding(8) var<storage, read> colors: array<u32>;
 // Per pixel p: sums[5p] = sum of a, 5p+1..5p+3 = sum of a x r, g, b, 5p+4 = revealage.
 @group(0) @binding(9) var<storage, read_write> sums: array<atomic<u64>>;
-// params.n_items rows (first point, 8-bit alpha, revealage term, -) of the selected batches,
-// ascending by first point: a point's row is the last whose first is <= its index.
+// params.n_items rows (first point, 8-bit alpha, revealage term, -): transparency_alphas.wgsl
 @group(0) @binding(10) var<storage, read> alphas: array<vec4<u32>>;
-
-fn alpha_of(index: u32) -> vec2<u32> {
-    var lo = 0u;
-    var hi = params.n_items;
-    while (lo < hi) {
-        let mid = (lo + hi) / 2u;
-        if (alphas[mid].x <= index) {
-            lo = mid + 1u;
-        } else {
-            hi = mid;
-        }
-    }
-    return alphas[max(lo, 1u) - 1u].yz;
-}
 
 fn visit(pixel: u32, depth_bits: u32, index: u32, row: u32, size: f32) {
     let base = pixel * TR_LAYERS;
@@ -46,7 +32,7 @@ fn visit(pixel: u32, depth_bits: u32, index: u32, row: u32, size: f32) {
             key = select(key, old, old > key);  // the larger of the two moves on
         }
     }
-    let al = alpha_of(index);
+    let al = alpha_row(index, params.n_items).yz;
     let a = u64(al.x);
     let c = colors[index - params.page_first];
     atomicAdd(&sums[5u * pixel], a);

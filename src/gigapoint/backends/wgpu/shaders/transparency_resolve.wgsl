@@ -4,6 +4,7 @@
 // and the whole pixel does not let through, then the background. Pixels no fragment reached
 // keep the color they have (the image holds the fallback colors on entry).
 //! include keys.wgsl
+//! include transparency_alphas.wgsl
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> layers: array<vec2<u32>>;
@@ -16,20 +17,6 @@
 @group(0) @binding(6) var<storage, read_write> image: array<u32>;
 
 const FULL: u32 = 65536u;
-
-fn alpha_of(index: u32) -> u32 {
-    var lo = 0u;
-    var hi = params.n_offsets;
-    while (lo < hi) {
-        let mid = (lo + hi) / 2u;
-        if (alphas[mid].x <= index) {
-            lo = mid + 1u;
-        } else {
-            hi = mid;
-        }
-    }
-    return alphas[max(lo, 1u) - 1u].y;
-}
 
 fn to64(v: vec2<u32>) -> u64 {
     return u64(v.x) | (u64(v.y) << 32u);
@@ -51,7 +38,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             if (is_empty(key)) {
                 break;
             }
-            let a = alpha_of(key.x);
+            let a = alpha_row(key.x, params.n_offsets).y;
             let c = slot_colors[p * TR_LAYERS + i];
             let rgb = vec3<u32>(c & 255u, (c >> 8u) & 255u, (c >> 16u) & 255u);
             let w = (a * t + 127u) / 255u;
