@@ -13,6 +13,16 @@ for bit and any speed difference is the layout's:
    cameras, the two layouts interleaved frame by frame (ABBA), median ms and the ratio
    words / compact (> 1: compact is faster). JIT warm-up excluded.
 
+``--octree`` measures the compact octree on disk instead (lod/compact_octree.py, format version
+2, against version 1: ``convert(layout="words")``), for autzen_trim and the demo town written as
+a LAS file at ``--scale``: bytes of the output folder, conversion time (the two layouts
+alternated, ``--rounds`` each, medians; JIT warmed up first) and LOD frame times of the two
+octrees (the first frame from a cold arena, which reads and decodes every node it draws, then
+warm frames interleaved ABBA) with the share of identical pixels (the boxes differ: version 1's
+are tight, version 2's on the source grid)::
+
+    .venv/bin/python benchmarks/bench_compact.py --octree --points 5M --rounds 3
+
 The demo town has no source scale of its own (its points are floats): it is stored at 1 cm
 here, as a LAS export of it would be (``--scale``). Peak RSS is reported at the end; the
 1 B point figure in docs/benchmarks.md is extrapolated from the bytes a point measured here.
@@ -120,6 +130,95 @@ def scene(name: str, cloud, reference_xyz, args) -> bool:
     return ok
 
 
+def write_town_las(path: Path, n: int, scale: float) -> Path:
+    """The demo town as a LAS 1.2 file (point format 3) at ``scale`` metres, written in chunks."""
+    import laspy
+
+    from gigapoint.io import demo_chunks
+
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales = [scale] * 3
+    header.offsets = [0.0, 0.0, 0.0]
+    with laspy.open(str(path), mode="w", header=header) as writer:
+        for chunk in demo_chunks(n, chunk_size=1_000_000):
+            rec = laspy.ScaleAwarePointRecord.zeros(len(chunk), header=header)
+            rec.x, rec.y, rec.z = chunk.xyz[:, 0], chunk.xyz[:, 1], chunk.xyz[:, 2]
+            rgb = chunk.rgba[:, :3].astype(np.uint16) * 257
+            rec.red, rec.green, rec.blue = rgb[:, 0], rgb[:, 1], rgb[:, 2]
+            rec.intensity = chunk.attributes["intensity"]
+            rec.classification = chunk.attributes["classification"]
+            writer.write_points(rec)
+    return path
+
+
+def folder_bytes(path: Path) -> int:
+    return sum(f.stat().st_size for f in Path(path).rglob("*") if f.is_file())
+
+
+def octree_scene(name: str, src: Path, work: Path, args) -> None:
+    """Version 1 against version 2 of one input: bytes, conversion time, LOD frames."""
+    from gigapoint.lod import convert, open_octree
+
+    layouts = {"v1 words": {"layout": "words"}, "v2 compact": {"layout": "compact"}, "v2 rgb565": {"layout": "compact", "colors": "rgb565"}}
+    secs: dict[str, list[float]] = {k: [] for k in layouts}
+    for _ in range(args.rounds):
+        for k, opts in layouts.items():
+            t = time.perf_counter()
+            r = convert([src], work / k.replace(" ", "_"), overwrite=True, **opts)
+            secs[k].append(time.perf_counter() - t)
+    n = r.points
+    print(f"\n{name}: {n:,} points, {r.nodes:,} nodes; conversion medians of {args.rounds}")
+    print(f"{'layout':12} {'bytes':>12} {'B/point':>8} {'v1/this':>8} {'convert s':>10} {'this/v1':>8}")
+    b1, t1 = folder_bytes(work / "v1_words"), statistics.median(secs["v1 words"])
+    for k in layouts:
+        b, t = folder_bytes(work / k.replace(" ", "_")), statistics.median(secs[k])
+        print(f"{k:12} {b:12,} {b / n:8.2f} {b1 / b:8.2f} {t:10.2f} {t / t1:8.2f}")
+    cam = gp.Camera.fit(open_octree(work / "v1_words").bounds, view="iso", width=args.width, height=args.height)
+    settings = gp.RenderSettings(backend="cpu", size_mode="fixed")
+    cold = {}
+    for k in ("v1 words", "v2 compact"):
+        oc = open_octree(work / k.replace(" ", "_"))
+        t = time.perf_counter()
+        gp.render_frame(oc, cam, settings)
+        cold[k] = time.perf_counter() - t
+    clouds = [open_octree(work / k.replace(" ", "_")) for k in ("v1 words", "v2 compact")]
+    images = [gp.render_frame(c, cam, settings) for c in clouds]
+    same = float(np.all(images[0].image == images[1].image, axis=2).mean())
+    wall, cpu = interleaved([(c, cam, settings) for c in clouds], args.rounds * 2)
+    w = [statistics.median(x) * 1e3 for x in wall]
+    c = [statistics.median(x) * 1e3 for x in cpu]
+    print(
+        f"LOD frame {args.width}x{args.height}, default budget, {images[0].stats.points_processed:,} points: "
+        f"cold (node reads + decoding) v1 {cold['v1 words'] * 1e3:.1f} ms, v2 {cold['v2 compact'] * 1e3:.1f} ms "
+        f"(v2/v1 {cold['v2 compact'] / cold['v1 words']:.2f}); warm wall v1 {w[0]:.1f} / v2 {w[1]:.1f} ms (v2/v1 {w[1] / w[0]:.2f}), "
+        f"CPU {c[0]:.1f} / {c[1]:.1f} ms; identical pixels {same:.4f}"
+    )
+
+
+def octree_part(args) -> None:
+    import tempfile
+
+    from gigapoint.bench import parse_count
+    from gigapoint.lod import convert, open_octree
+
+    with tempfile.TemporaryDirectory(prefix="bench_compact_octree_") as tmp:
+        work = Path(tmp)
+        for layout in ("words", "compact"):  # JIT: conversion, node decoding, the frame
+            warm = [PointChunk(np.round(np.random.default_rng(0).random((5_000, 3)) * 100, 2), scale=(0.01,) * 3)]
+            convert(warm, work / f"warm_{layout}", max_leaf=1_000, layout=layout)
+            oc = open_octree(work / f"warm_{layout}")
+            gp.render_frame(oc, gp.Camera.fit(oc.bounds, width=64, height=64), gp.RenderSettings(backend="cpu", size_mode="fixed"))
+        if not args.skip_autzen and AUTZEN.exists():
+            octree_scene("autzen_trim", AUTZEN, work / "autzen", args)
+        n = parse_count(args.points)
+        t = time.perf_counter()
+        src = write_town_las(work / "town.las", n, args.scale)
+        print(f"\n(demo town LAS written in {time.perf_counter() - t:.1f} s, {src.stat().st_size / n:.1f} B/point)")
+        octree_scene(f"demo town at {args.scale:g} m", src, work / "town", args)
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    print(f"\npeak RSS {rss / 2**30:.2f} GiB")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", default="5M", help="demo town size")
@@ -128,12 +227,16 @@ def main(argv=None) -> int:
     ap.add_argument("--width", type=int, default=1920)
     ap.add_argument("--height", type=int, default=1080)
     ap.add_argument("--skip-autzen", action="store_true")
+    ap.add_argument("--octree", action="store_true", help="the compact octree on disk (format 2) against format 1 instead")
     args = ap.parse_args(argv)
     from gigapoint.bench import parse_count
 
     lscpu = subprocess.run(["lscpu"], check=False, capture_output=True, text=True).stdout
     cpu = next((line.split(":", 1)[1].strip() for line in lscpu.splitlines() if line.startswith("Model name")), platform.processor())
     print(f"compact layout vs three words; {cpu}, numba threads {gp.RenderSettings().threads or 'all'}")
+    if args.octree:
+        octree_part(args)
+        return 0
     ok = True
     if not args.skip_autzen and AUTZEN.exists():
         import laspy

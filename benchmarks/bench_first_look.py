@@ -8,7 +8,8 @@ a disc of ``--radius`` pixels, 8 by default: the issue's definition, which gives
 the frame and 23 % covered); reported: lit pixels, footprint (share of the frame) and the share
 of the footprint covered, for the exact one-pixel render at the iso view (before #17) and the
 default render (adaptive point size, the 'auto' view). Frame times are render_frame calls of
-the two interleaved (the host drifts), median and best; the ratio is default / exact. The
+the two interleaved (the host drifts), median and best; the ratio is default / exact; with
+``--threads 1`` the whole process is single-threaded and the clock is its CPU time. The
 turntable row is the mean footprint over the frames of ``turntable_cameras``.
 
 Compile: each command runs once in a fresh process on an empty NUMBA_CACHE_DIR (``render``),
@@ -52,8 +53,9 @@ def coverage(args) -> None:
     cloud = gp.open(args.file)
     w, h = args.width, args.height
     threads = args.threads
-    # one thread: its CPU time (time.thread_time), steady on a busy host; else wall time
-    clock = time.thread_time if threads == 1 else time.perf_counter
+    # one thread: the process's CPU time, steady on a busy host (main() made numba single-threaded,
+    # so every kernel of the frame, the parallel passes too, runs on this thread); else wall time
+    clock = time.process_time if threads == 1 else time.perf_counter
     cases = {
         "exact, iso (before #17)": (gp.Camera.fit(cloud.bounds, view="iso", width=w, height=h), gp.RenderSettings(size_mode="fixed", threads=threads)),
         "default (adaptive, auto)": (gp.Camera.fit_cloud(cloud, width=w, height=h), gp.RenderSettings(threads=threads)),
@@ -141,6 +143,11 @@ def main(argv=None) -> int:
     if not args.file.exists():
         print(f"error: {args.file} not found", file=sys.stderr)
         return 1
+    if args.threads == 1 and not args.compile:
+        # before numba loads: with more threads its parallel passes (clear, resolve) would run
+        # partly on others, whose time one thread's clock misses (the Xeon's figures before
+        # 2026-12-02 afternoon did: time.thread_time with numba's default threads)
+        os.environ["NUMBA_NUM_THREADS"] = "1"
     compile_times(args) if args.compile else coverage(args)
     return 0
 

@@ -78,7 +78,7 @@ def autzen_octrees(tmp_path_factory):
     if not AUTZEN.exists():
         pytest.skip("shared sample autzen_trim.laz not present")
     d = tmp_path_factory.mktemp("copc")
-    convert([AUTZEN], d / "g", **OPTS)
+    convert([AUTZEN], d / "g", layout="words", **OPTS)  # format 1: the tight node boxes the COPC reader quantizes in too
     convert([AUTZEN], d / "a.copc.laz", format="copc", **OPTS)
     convert([AUTZEN], d / "p", format="potree", **OPTS)
     return d
@@ -168,6 +168,30 @@ def test_crs_carried_into_copc_and_potree(autzen_octrees):
 
     info = octree_info(autzen_octrees / "a.copc.laz")
     assert info["crs"] == want and info["levels"] == len(info["points_per_level"]) and sum(info["points_per_level"]) == 110_000
+    # gigapoint's own octree holds it too (octree.json), and info shows it
+    assert json.loads((autzen_octrees / "g" / "octree.json").read_text())["crs"] == want
+    assert open_octree(autzen_octrees / "g").meta["crs"] == want and octree_info(autzen_octrees / "g")["crs"] == want
+
+
+def test_crs_carried_from_a_progressive_octree_to_what_it_saves(tmp_path):
+    """A progressive octree loads chunks, not files; its save() still takes the files' CRS and LAS grid."""
+    import json
+
+    if not AUTZEN.exists():
+        pytest.skip("shared sample not present")
+    want = laspy.read(AUTZEN).header.vlrs.get("WktCoordinateSystemVlr")[0].string.strip("\0")
+    cloud = gp.open(AUTZEN, progressive=True)
+    cloud.wait()
+    cloud.save(tmp_path / "g", **OPTS)
+    cloud.save(tmp_path / "c.copc.laz", format="copc", **OPTS)
+    assert json.loads((tmp_path / "g" / "octree.json").read_text())["crs"] == want
+    with laspy.open(tmp_path / "c.copc.laz") as r:
+        assert r.header.vlrs.get("WktCoordinateSystemVlr")[0].string.strip("\0") == want
+        np.testing.assert_array_equal(r.header.scales, laspy.read(AUTZEN).header.scales)  # the file's grid, not a guess
+    demo = gp.demo(20_000, progressive=True)  # no file: no CRS, and saving still works
+    demo.wait()
+    demo.save(tmp_path / "d", **OPTS)
+    assert json.loads((tmp_path / "d" / "octree.json").read_text())["crs"] is None
 
 
 def test_plain_laz_still_opens_flat_and_is_not_copc(tmp_path):
@@ -363,3 +387,65 @@ def test_interrupted_copc_conversion_leaves_no_file_and_resumes(tmp_path, monkey
     assert res.resumed and out.is_file() and not (tmp_path / "r.copc.laz.work").exists()
     assert [p.name for p in tmp_path.iterdir()] == ["r.copc.laz"]
     assert gp.open(out).n_points == 110_000
+
+
+def test_attributes_without_a_las_field_go_to_extra_bytes(tmp_path):
+    """Attributes point format 7 has no field for are written as LAS 1.4 extra bytes: laspy's
+    CopcReader and gigapoint read them back point for point; what cannot be stored is named."""
+    from gigapoint.core.chunk import PointChunk
+    from gigapoint.errors import GigapointWarning
+
+    rng = np.random.default_rng(3)
+    n = 30_000
+    xyz = np.round(rng.uniform(0, 100, (n, 3)), 3)
+    rgba = rng.integers(0, 256, (n, 4), dtype=np.uint8)
+    attrs = {
+        "intensity": rng.integers(0, 65535, n).astype(np.uint16),
+        "curvature": rng.normal(size=n).astype(np.float32),
+        "label": rng.integers(0, 60_000, n).astype(np.uint16),
+        "segment": rng.integers(-(2**40), 2**40, n).astype(np.int64),
+        "ground": rng.random(n) < 0.5,
+        "a_name_much_longer_than_thirty_two_bytes": np.zeros(n, np.uint8),
+    }
+    with pytest.warns(GigapointWarning, match="a_name_much_longer_than_thirty_two_bytes.*not written"):
+        convert([PointChunk(xyz, rgba, attrs)], tmp_path / "x.copc.laz", format="copc", **OPTS)
+    with laspy.CopcReader.open(tmp_path / "x.copc.laz") as r:
+        pts = r.query()
+        assert {"curvature", "label", "segment", "ground"} <= set(pts.point_format.extra_dimension_names)
+        got_xyz = np.stack([pts.x, pts.y, pts.z], axis=1)
+        got = {a: np.asarray(pts[a]) for a in ("intensity", "curvature", "label", "segment", "ground")}
+    assert len(got_xyz) == n
+    mm = lambda a: np.rint(a * 1000).astype(np.int64).T  # positions on their millimetre grid: exact ties
+    want_order, got_order = np.lexsort(mm(xyz)), np.lexsort(mm(got_xyz))
+    np.testing.assert_allclose(got_xyz[got_order], xyz[want_order], atol=5e-4)
+    for a in ("intensity", "curvature", "label", "segment"):
+        np.testing.assert_array_equal(got[a][got_order], attrs[a][want_order], err_msg=a)
+    np.testing.assert_array_equal(got["ground"][got_order], attrs["ground"][want_order].astype(np.uint8))
+    # gigapoint's own reader: the same values under the same names
+    c = gp.open(tmp_path / "x.copc.laz")
+    assert {"curvature", "label", "segment", "ground"} <= set(c.attribute_names)
+    parts = [c.node_points(i) for i in np.flatnonzero(c.counts > 0).tolist()]
+    mine = np.concatenate([p["xyz"] for p in parts])
+    order = np.lexsort(mm(mine))
+    for a in ("curvature", "label", "segment"):
+        np.testing.assert_array_equal(np.concatenate([p[a] for p in parts])[order], attrs[a][want_order], err_msg=a)
+
+
+def test_extra_bytes_descriptors_are_read_with_their_scale(tmp_path):
+    """A COPC written elsewhere with a scaled extra bytes field: gigapoint applies scale and offset."""
+    from gigapoint.lod.copc import EXTRA_BYTES_DTYPE, extra_fields, point_dtype
+
+    d = np.zeros(3, EXTRA_BYTES_DTYPE)
+    d[0]["data_type"], d[0]["name"] = 3, b"height_above_ground"
+    d[0]["options"], d[0]["scale"][0], d[0]["offset"][0] = 8 | 16, 0.01, -5.0
+    d[1]["data_type"], d[1]["options"] = 0, 3  # three undocumented bytes
+    d[2]["data_type"], d[2]["name"] = 1, b"classification"  # clashes with a standard attribute: kept in place, not exposed
+    fields = extra_fields([(b"LASF_Spec", 4, d.tobytes())])
+    assert [f.name for f in fields] == ["height_above_ground", "_extra1", "_extra2"]
+    rec = np.zeros(2, point_dtype(7, 36 + 2 + 3 + 1, fields))
+    rec["height_above_ground"] = [500, 1234]
+    np.testing.assert_allclose(fields[0].values(rec), [0.0, 7.34])
+    with pytest.raises(ValueError, match="whole 192-byte descriptors"):
+        extra_fields([(b"LASF_Spec", 4, d.tobytes()[:-1])])
+    with pytest.raises(ValueError, match="smaller than point format 7 and 6 extra bytes"):
+        point_dtype(7, 36 + 2, fields)

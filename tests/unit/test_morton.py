@@ -74,3 +74,24 @@ def test_order_of_codes_sharing_a_prefix(rng, shared_bits):
     low[::7] = low[3]  # ties: the order must stay stable
     codes = prefix | low
     np.testing.assert_array_equal(morton_order(codes), np.argsort(codes, kind="stable"))
+
+
+@pytest.mark.parametrize("kind", ["quicksort", "stable"])
+def test_argsort_codes_sorts_with_either_of_numpys_sorts(kind, monkeypatch):
+    """Whichever sort the CPU favours, the permutation sorts the codes (ties in any order)."""
+    from gigapoint.core import morton
+
+    monkeypatch.setattr(morton, "_SORT_KIND", [kind])
+    rng = np.random.default_rng(5)
+    codes = np.concatenate([np.sort(rng.integers(0, 1 << 40, 5000, dtype=np.uint64)), rng.integers(0, 1 << 20, 5000, dtype=np.uint64)])
+    perm = morton.argsort_codes(codes)
+    np.testing.assert_array_equal(np.sort(perm), np.arange(len(codes)))
+    np.testing.assert_array_equal(codes[perm], np.sort(codes))
+
+
+def test_the_faster_sort_is_chosen_once(monkeypatch):
+    from gigapoint.core import morton
+
+    monkeypatch.setattr(morton, "_SORT_KIND", [])
+    kind = morton._faster_sort_kind()
+    assert kind in ("quicksort", "stable") and morton._SORT_KIND == [kind] and morton._faster_sort_kind() == kind

@@ -39,14 +39,25 @@ def test_the_default_is_adaptive_and_size_mode_fixed_is_the_exact_render():
 
 
 def test_point_spacing_of_a_regular_grid():
-    """Proportional to the true spacing, somewhat above it (a batch's box holds more than its Morton
-    run of the grid: 1.2-1.4 times; ADAPTIVE_FILL is measured with this estimate)."""
+    """The true spacing within 3 % (the voxels its points occupy, not the batches' boxes: those
+    held more than their Morton runs of the grid, 1.2-1.4 times the spacing)."""
     for spacing in (0.25, 1.0, 3.0):
         for n in (120, 400):
-            assert spacing <= point_spacing(grid(spacing, n=n)) <= 1.45 * spacing
+            assert point_spacing(grid(spacing, n=n)) == pytest.approx(spacing, rel=0.03)
     cloud = grid(1.0)
     assert point_spacing(cloud, step=4) == pytest.approx(2 * point_spacing(cloud), rel=0.02)  # every 4th point: twice as far
     assert point_spacing(gp.from_arrays(np.zeros((10, 3)))) == 0.0
+
+
+def test_point_spacing_of_uneven_real_and_random_data():
+    """Uniform random points on a plane: sqrt(area / points) within 5 %; autzen_trim: near the
+    occupied area's (1.65-1.85 m from 2-4 m cells of its plan) and well under the batch boxes' 3.2 m."""
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(0, 100, (200_000, 2))
+    plane = gp.from_arrays(np.column_stack([xy, rng.normal(0, 0.01, len(xy))]))
+    assert point_spacing(plane) == pytest.approx(np.sqrt(100 * 100 / 200_000), rel=0.05)
+    if AUTZEN.exists():
+        assert 1.6 <= point_spacing(gp.open(AUTZEN)) <= 2.4
 
 
 @pytest.mark.parametrize("view", ["iso", "top", "front"])

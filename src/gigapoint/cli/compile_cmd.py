@@ -78,8 +78,10 @@ def steps(folder: Path):
 
         out = folder / "octree"
         convert(list(demo_chunks(60_000, chunk_size=30_000)), out, max_leaf=8_000)
-        oc = gp.open(out)
-        gp.render_frame(oc, gp.Camera.fit_cloud(oc, width=320, height=200), gp.RenderSettings(backend="cpu"))
+        convert([folder / "compile.las"], folder / "las_octree", max_leaf=8_000)  # compact nodes on a LAS grid, every field width
+        for path in (out, folder / "las_octree"):
+            oc = gp.open(path)
+            gp.render_frame(oc, gp.Camera.fit_cloud(oc, width=320, height=200), gp.RenderSettings(backend="cpu"))
 
     return [
         ("the demo scene", build),

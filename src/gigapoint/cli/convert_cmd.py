@@ -26,6 +26,10 @@ def convert(
         help="gigapoint (rendered directly), potree (Potree 2.0, for Potree's web viewers) or copc (one .copc.laz file, LAS 1.4).",
     ),
     max_leaf: int = typer.Option(20_000, "--max-leaf", help="Most points a leaf node holds."),
+    layout: str = typer.Option(
+        "compact", "--layout", help="gigapoint format: compact (version 2, ~half the bytes, exact at the source's scale) or words (version 1)."
+    ),
+    colors: str = typer.Option("rgba", "--colors", help="compact layout's colours: rgba (exact) or rgb565 (16 bits, at most 4/255 off)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
     dask: str | None = typer.Option(
         None,
@@ -62,6 +66,8 @@ def convert(
             overwrite=overwrite,
             format=format,
             max_leaf=max_leaf,
+            layout=layout,
+            colors=colors,
             progress=not quiet and sys.stderr.isatty(),
             client=client,
         )

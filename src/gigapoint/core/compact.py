@@ -299,7 +299,11 @@ def _write(b, xyz, order, firsts, counts, gmin, scale, qmin, bits, bbox_min, bbo
 def compact_positions(xyz: np.ndarray, order: np.ndarray, batches: np.ndarray, scale, origin=None):
     """Fill the batches' boxes and return (low u32 per point, ext u64 words, PACK_DTYPE per
     batch) for the points xyz[order] on a grid of step ``scale`` (per axis) through ``origin``
-    (default: the smallest coordinate, a source point)."""
+    (default: the smallest coordinate, a source point). ``scale`` None: no grid, every batch
+    wide (today's 30-bit words, as the octree stores points of sources without a scale)."""
+    tol = GRID_TOLERANCE
+    if scale is None:
+        scale, tol = np.ones(3), -1.0  # no point is ever within -1 of the grid
     scale = np.asarray(scale, np.float64).reshape(3)
     if not np.all(np.isfinite(scale) & (scale > 0)):
         raise ValueError(f"source scale must be finite and positive, got {scale.tolist()}")
@@ -314,14 +318,14 @@ def compact_positions(xyz: np.ndarray, order: np.ndarray, batches: np.ndarray, s
     bmax = np.empty((nb, 3))
     low = np.empty(len(order), np.uint32)
     no_ext = np.zeros(0, np.uint64)
-    _compact_batches(0, xyz, order, firsts, counts, gmin, scale, GRID_TOLERANCE, qmin, bits, bmin, bmax, firsts, low, no_ext)
+    _compact_batches(0, xyz, order, firsts, counts, gmin, scale, tol, qmin, bits, bmin, bmax, firsts, low, no_ext)
     wide = bits[:, 0] < 0
     e = np.where(wide[:, None], EXT_FULL_BITS, bits - WORD_BITS)
     t = e.sum(axis=1)
     words = stream_words(t, counts)
     word0s = np.concatenate([[0], np.cumsum(words)[:-1]]).astype(np.int64) if nb else np.zeros(0, np.int64)
     ext = np.zeros(int(words.sum()), np.uint64)
-    _compact_batches(1, xyz, order, firsts, counts, gmin, scale, GRID_TOLERANCE, qmin, bits, bmin, bmax, word0s, low, ext)
+    _compact_batches(1, xyz, order, firsts, counts, gmin, scale, tol, qmin, bits, bmin, bmax, word0s, low, ext)
     batches["bbox_min"] = bmin
     batches["bbox_max"] = bmax
     pack = np.zeros(nb, PACK_DTYPE)

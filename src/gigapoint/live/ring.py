@@ -48,13 +48,21 @@ def _dequantize_runs(low, med, high, firsts, counts, offsets, bbox_min, bbox_max
     for j in prange(firsts.shape[0]):
         f = firsts[j]
         o = offsets[j]
-        for a in range(3):
-            lo = bbox_min[j, a]
-            cell = (bbox_max[j, a] - lo) / _SCALE30
-            s = WORD_BITS * a
-            for k in range(counts[j]):
-                q = (((low[f + k] >> s) & WORD_MASK) << 20) | (((med[f + k] >> s) & WORD_MASK) << 10) | ((high[f + k] >> s) & WORD_MASK)
-                out[o + k, a] = lo + (q + 0.5) * cell
+        lo0, lo1, lo2 = bbox_min[j, 0], bbox_min[j, 1], bbox_min[j, 2]
+        c0 = (bbox_max[j, 0] - lo0) / _SCALE30
+        c1 = (bbox_max[j, 1] - lo1) / _SCALE30
+        c2 = (bbox_max[j, 2] - lo2) / _SCALE30
+        for k in range(counts[j]):  # a point's three coordinates together: out's rows are written in order
+            lw, mw, hw = low[f + k], med[f + k], high[f + k]
+            for a in range(3):
+                s = WORD_BITS * a
+                q = (((lw >> s) & WORD_MASK) << 20) | (((mw >> s) & WORD_MASK) << 10) | ((hw >> s) & WORD_MASK)
+                if a == 0:
+                    out[o + k, 0] = lo0 + (q + 0.5) * c0
+                elif a == 1:
+                    out[o + k, 1] = lo1 + (q + 0.5) * c1
+                else:
+                    out[o + k, 2] = lo2 + (q + 0.5) * c2
 
 
 class LiveLock(FrameLock):
@@ -192,12 +200,23 @@ class LiveBuffers:
         offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
         xyz = np.empty((int(counts.sum()), 3))
         _dequantize_runs(self.low, self.med, self.high, firsts, counts, offsets, rec["bbox_min"].copy(), rec["bbox_max"].copy(), xyz)
-        runs = [slice(f, f + c) for f, c in zip(firsts.tolist(), counts.tolist())]
-        rgba = np.concatenate([self.color[r] for r in runs]).view(np.uint8).reshape(-1, 4)
-        attrs = {a: np.concatenate([v[r] for r in runs]) for a, v in self.attributes.items() if a not in skip}
-        if "normal" in attrs:  # 1-D parts, as the octree and the file writers take attributes
-            normal = attrs.pop("normal")
-            attrs.update({part: np.ascontiguousarray(normal[:, k]) for k, part in enumerate(NORMAL_PARTS)})
+        runs = [(slice(f, f + c), slice(o, o + c)) for f, c, o in zip(firsts.tolist(), counts.tolist(), offsets.tolist())]
+
+        def take(values):
+            out = np.empty(len(xyz), values.dtype)
+            for src, dst in runs:
+                out[dst] = values[src]
+            return out
+
+        rgba = take(self.color).view(np.uint8).reshape(-1, 4)
+        attrs = {}
+        for a, v in self.attributes.items():
+            if a in skip:
+                continue
+            if a == "normal":  # 1-D parts, as the octree and the file writers take attributes: gathered straight into them
+                attrs.update({part: take(v[:, k]) for k, part in enumerate(NORMAL_PARTS)})
+            else:
+                attrs[a] = take(v)
         return xyz, rgba, attrs
 
     def point_info(self, index: int) -> dict:

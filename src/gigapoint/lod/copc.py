@@ -117,19 +117,97 @@ LASZIP_USER_ID = b"laszip encoded"
 LASZIP_RECORD = 22204
 PROJECTION_USER_ID = b"LASF_Projection"
 WKT_RECORD = 2112
+EXTRA_BYTES_USER_ID = b"LASF_Spec"
+EXTRA_BYTES_RECORD = 4
+#: One Extra Bytes descriptor (LAS 1.4 R15 section 2.5.4: 192 bytes), naming bytes that follow
+#: a point record's standard fields; the writer stores attributes point format 6/7/8 has no
+#: field for there.
+EXTRA_BYTES_DTYPE = np.dtype(
+    [
+        ("reserved", "<u2"),
+        ("data_type", "u1"),  # 1-10: the scalars of EXTRA_BYTES_TYPES; 0: ``options`` untyped bytes
+        ("options", "u1"),  # bit 0 no_data, 1 min, 2 max, 3 scale, 4 offset are set
+        ("name", "S32"),
+        ("unused", "V4"),
+        ("no_data", "V24"),
+        ("min", "V24"),
+        ("max", "V24"),
+        ("scale", "<f8", (3,)),
+        ("offset", "<f8", (3,)),
+        ("description", "S32"),
+    ]
+)
+EXTRA_BYTES_TYPES = {
+    1: np.dtype("u1"), 2: np.dtype("i1"), 3: np.dtype("<u2"), 4: np.dtype("<i2"), 5: np.dtype("<u4"),
+    6: np.dtype("<i4"), 7: np.dtype("<u8"), 8: np.dtype("<i8"), 9: np.dtype("<f4"), 10: np.dtype("<f8"),
+}  # fmt: skip
 HEADER_SIZE = LAS14_HEADER_DTYPE.itemsize  # 375
 INFO_OFFSET = HEADER_SIZE + VLR_HEADER_DTYPE.itemsize  # the info VLR's data: byte 429
 MAGIC_END = INFO_OFFSET  # bytes needed to tell a COPC file
 HEAD_READ = 64 << 10  # the first request reads this much (the header and VLRs, usually)
 
 
-def point_dtype(point_format: int, record_length: int) -> np.dtype:
-    """The record layout of point format 6/7/8 with ``record_length - base`` extra bytes."""
+def point_dtype(point_format: int, record_length: int, extra: list[ExtraField] | None = None) -> np.dtype:
+    """The record layout of point format 6/7/8 with ``record_length - base`` extra bytes: the
+    ``extra`` fields (extra_fields) first, any bytes they do not describe as ``extra_bytes``."""
     base = POINT_DTYPES[point_format]
-    extra = record_length - base.itemsize
-    if extra < 0:
-        raise ValueError(f"point record length {record_length} is smaller than point format {point_format} needs ({base.itemsize})")
-    return np.dtype([*base.descr, ("extra_bytes", f"V{extra}")]) if extra else base
+    fields = [(f.name, f.dtype) for f in extra or []]
+    named = sum(dt.itemsize for _, dt in fields)
+    rest = record_length - base.itemsize - named
+    if rest < 0:
+        what = f" and {named} extra bytes" if named else ""
+        raise ValueError(
+            f"point record length {record_length} is smaller than point format {point_format}{what} need ({base.itemsize + named})"
+        )
+    return np.dtype([*base.descr, *fields, *([("extra_bytes", f"V{rest}")] if rest else [])])
+
+
+class ExtraField:
+    """One attribute stored in a point's extra bytes: ``name``, its stored ``dtype``, and the
+    ``scale``/``offset`` its descriptor applies (value = stored * scale + offset), or None."""
+
+    def __init__(self, name: str, dtype, scale: float | None = None, offset: float | None = None):
+        self.name, self.dtype, self.scale, self.offset = name, np.dtype(dtype), scale, offset
+
+    @property
+    def value_dtype(self) -> np.dtype:
+        """The attribute's dtype once decoded: float64 where a scale or offset applies."""
+        return np.dtype(np.float64) if self.scale is not None or self.offset is not None else self.dtype
+
+    def values(self, rec: np.ndarray) -> np.ndarray:
+        v = rec[self.name]
+        if self.scale is None and self.offset is None:
+            return v
+        return v * (1.0 if self.scale is None else self.scale) + (0.0 if self.offset is None else self.offset)
+
+
+def extra_fields(vlrs) -> list[ExtraField]:
+    """The named, typed fields of a LAS 1.4 file's Extra Bytes VLR (LASF_Spec 4), in record order.
+    Untyped bytes, and fields whose name is empty, repeated or a standard attribute's, become
+    ``_extra<i>`` fields that only hold their place."""
+    for user, rec, data in vlrs:
+        if user != EXTRA_BYTES_USER_ID or rec != EXTRA_BYTES_RECORD:
+            continue
+        if len(data) % EXTRA_BYTES_DTYPE.itemsize:
+            raise ValueError(f"its Extra Bytes VLR holds {len(data)} bytes, not whole {EXTRA_BYTES_DTYPE.itemsize}-byte descriptors")
+        out, seen = [], set()
+        for i, d in enumerate(np.frombuffer(data, EXTRA_BYTES_DTYPE)):
+            kind, opts = int(d["data_type"]), int(d["options"])
+            name = bytes(d["name"]).split(b"\0")[0].decode("ascii", "replace").strip()
+            if kind == 0:
+                out.append(ExtraField(f"_extra{i}", f"V{max(opts, 1)}"))
+                continue
+            if kind not in EXTRA_BYTES_TYPES:
+                raise ValueError(f"its extra bytes field {name!r} has data type {kind}, which LAS 1.4 R15 no longer defines (1-10)")
+            if not name or name in seen or name in ATTRIBUTE_DTYPES or name == "nir":
+                out.append(ExtraField(f"_extra{i}", EXTRA_BYTES_TYPES[kind]))
+                continue
+            seen.add(name)
+            scale = float(d["scale"][0]) if opts & 8 else None
+            offset = float(d["offset"][0]) if opts & 16 else None
+            out.append(ExtraField(name, EXTRA_BYTES_TYPES[kind], scale, offset))
+        return out
+    return []
 
 
 def is_copc_head(head: bytes) -> bool:
@@ -199,10 +277,6 @@ class CopcCloud(VoxelOctree):
         fmt = fmt_id & 0x3F
         if fmt not in POINT_DTYPES:
             raise InputError(f"{name}: COPC point format {fmt} is not 6, 7 or 8")
-        try:
-            self.record = point_dtype(fmt, rec_len)
-        except ValueError as exc:
-            raise InputError(f"{name}: corrupt COPC header: {exc}") from None
         data_start = int(hdr["offset_to_point_data"])
         n_vlrs = int(hdr["number_of_vlrs"])
         file_size = source.size()
@@ -214,6 +288,11 @@ class CopcCloud(VoxelOctree):
             vlrs = read_vlrs(head, int(hdr["header_size"]), n_vlrs, data_start)
         except ValueError as exc:
             raise InputError(f"{name}: corrupt COPC file: {exc}") from None
+        try:
+            self.extra = [f for f in extra_fields(vlrs) if not f.name.startswith("_extra")]
+            self.record = point_dtype(fmt, rec_len, extra_fields(vlrs))
+        except ValueError as exc:
+            raise InputError(f"{name}: corrupt COPC header: {exc}") from None
         info = np.frombuffer(head, COPC_INFO_DTYPE, count=1, offset=INFO_OFFSET)[0]
         laszip = [d for u, r, d in vlrs if u == LASZIP_USER_ID and r == LASZIP_RECORD]
         if not laszip:
@@ -242,6 +321,7 @@ class CopcCloud(VoxelOctree):
         self.file_size = file_size
         self.point_format = fmt
         self._attr_dtypes = dict(ATTRIBUTE_DTYPES, **({"nir": np.dtype(np.uint16)} if fmt == 8 else {}))
+        self._attr_dtypes.update({f.name: f.value_dtype for f in self.extra})
         crs = wkt_of(vlrs)
         meta = {
             "format": "copc",
@@ -359,6 +439,8 @@ class CopcCloud(VoxelOctree):
             rgb = np.stack([rec["red"], rec["green"], rec["blue"]], axis=1)
         if self.point_format == 8:
             attrs["nir"] = rec["nir"]
+        for f in self.extra:
+            attrs[f.name] = f.values(rec)
         return {"xyz": xyz, "rgb": rgb, "attributes": attrs}
 
 
@@ -371,11 +453,14 @@ __all__ = [
     "ATTRIBUTE_DTYPES",
     "COPC_INFO_DTYPE",
     "EVLR_HEADER_DTYPE",
+    "EXTRA_BYTES_DTYPE",
     "HIERARCHY_ENTRY_DTYPE",
     "LAS14_HEADER_DTYPE",
     "POINT_DTYPES",
     "VLR_HEADER_DTYPE",
     "CopcCloud",
+    "ExtraField",
+    "extra_fields",
     "is_copc_file",
     "is_copc_head",
     "open_copc",

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import datetime
 import io
+import warnings
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -23,12 +24,18 @@ import numpy as np
 from numba import njit
 
 from ..atomic import atomic_open
+from ..errors import GigapointWarning
 from .copc import (
+    ATTRIBUTE_DTYPES,
     COPC_HIERARCHY_RECORD,
     COPC_INFO_DTYPE,
     COPC_INFO_RECORD,
     COPC_USER_ID,
     EVLR_HEADER_DTYPE,
+    EXTRA_BYTES_DTYPE,
+    EXTRA_BYTES_RECORD,
+    EXTRA_BYTES_TYPES,
+    EXTRA_BYTES_USER_ID,
     HIERARCHY_ENTRY_DTYPE,
     LAS14_HEADER_DTYPE,
     LASZIP_RECORD,
@@ -68,6 +75,39 @@ def _las_integers(xyz, offset, scale, X, Y, Z, lo, hi) -> bool:
     return True
 
 
+def extra_attributes(attributes: dict, where: str = "COPC") -> dict[str, np.dtype]:
+    """The attributes ({name: dtype}) that point format 6/7/8 has no field for, as they will be
+    stored in extra bytes (LAS 1.4 types: booleans as u8, half floats as f4). An attribute that
+    cannot be stored (a name that is not ASCII or longer than 32 bytes, a non-scalar dtype) is
+    left out with a warning."""
+    out = {}
+    by_dtype = {dt: dt for dt in EXTRA_BYTES_TYPES.values()}
+    for name, dt in attributes.items():
+        if name in ATTRIBUTE_DTYPES or name == "nir":
+            continue
+        dt = np.dtype(dt)
+        stored = np.dtype(np.uint8) if dt == np.bool_ else np.dtype(np.float32) if dt == np.float16 else dt.newbyteorder("<")
+        problem = None
+        if not name.isascii() or not 0 < len(name) <= 32:
+            problem = "its name is not 1-32 ASCII characters"
+        elif stored not in by_dtype:
+            problem = f"its dtype {dt} is not a LAS extra bytes type (8-64-bit integers and floats)"
+        if problem:
+            warnings.warn(f"{where}: attribute {name!r} is not written: {problem}", GigapointWarning, stacklevel=3)
+            continue
+        out[name] = stored
+    return out
+
+
+def _extra_bytes_vlr(extra: dict[str, np.dtype]) -> bytes:
+    """The Extra Bytes VLR's descriptors of ``extra`` ({name: dtype}, in record order)."""
+    code = {dt: k for k, dt in EXTRA_BYTES_TYPES.items()}
+    d = np.zeros(len(extra), EXTRA_BYTES_DTYPE)
+    for i, (name, dt) in enumerate(extra.items()):
+        d[i]["data_type"], d[i]["name"], d[i]["description"] = code[np.dtype(dt)], name.encode(), b"gigapoint attribute"
+    return _vlr(EXTRA_BYTES_USER_ID, EXTRA_BYTES_RECORD, d.tobytes(), "Extra Bytes")
+
+
 def choose_point_format(attributes, has_color: bool = True) -> int:
     """6 (no color), 7 (RGB) or 8 (RGB + NIR), as the points' attributes need."""
     if "nir" in attributes:
@@ -84,7 +124,9 @@ def _vlr(user: bytes, record: int, data: bytes, description: str) -> bytes:
 class CopcWriter:
     """Nodes -> a COPC file on the binary file object ``f`` (positioned at 0, seekable)."""
 
-    def __init__(self, f, *, scale, offset, cube_min, cube_edge: float, point_format: int = 7, wkt: str | None = None, spacing=None):
+    def __init__(
+        self, f, *, scale, offset, cube_min, cube_edge: float, point_format: int = 7, wkt: str | None = None, spacing=None, extra=None
+    ):
         import lazrs
 
         if point_format not in POINT_DTYPES:
@@ -92,18 +134,22 @@ class CopcWriter:
         self.f = f
         self.lazrs = lazrs
         self.point_format = point_format
-        self.dtype = POINT_DTYPES[point_format]
+        self.extra = {str(k): np.dtype(v) for k, v in (extra or {}).items()}  # {name: dtype}: extra_attributes
+        self.dtype = np.dtype([*POINT_DTYPES[point_format].descr, *self.extra.items()])
+        extra_size = self.dtype.itemsize - POINT_DTYPES[point_format].itemsize
         self.scale = np.asarray(scale, np.float64).reshape(3)
         self.offset = np.asarray(offset, np.float64).reshape(3)
         self.cube_min = np.asarray(cube_min, np.float64).reshape(3)
         self.cube_edge = float(cube_edge)
         self.spacing = float(spacing) if spacing is not None else self.cube_edge / 128.0
-        self.vlr = lazrs.LazVlr.new_for_compression(point_format, 0, True)
+        self.vlr = lazrs.LazVlr.new_for_compression(point_format, extra_size, True)
         self.wkt = wkt
         self.vlrs = [
             _vlr(COPC_USER_ID, COPC_INFO_RECORD, bytes(COPC_INFO_DTYPE.itemsize), "COPC info VLR"),
             _vlr(LASZIP_USER_ID, LASZIP_RECORD, bytes(self.vlr.record_data()), "lazrs variant"),
         ]
+        if self.extra:
+            self.vlrs.append(_extra_bytes_vlr(self.extra))
         if wkt:
             self.vlrs.append(_vlr(PROJECTION_USER_ID, WKT_RECORD, wkt.encode() + b"\0", "WKT"))
         self.data_start = LAS14_HEADER_DTYPE.itemsize + sum(map(len, self.vlrs))
@@ -122,7 +168,7 @@ class CopcWriter:
     def add(self, key: int, xyz: np.ndarray, rgb16: np.ndarray | None = None, attributes: dict | None = None) -> None:
         """One node: ``key`` (keys.py), its points (float64 (n, 3)), 16-bit colors (n, 3) and
         attributes (intensity, classification, return_number, number_of_returns,
-        point_source_id, gps_time, nir: the rest is not stored)."""
+        point_source_id, gps_time, nir, and the writer's ``extra`` ones: the rest is not stored)."""
         key = int(key)
         if key in self.entries or key in self._batch_keys:
             raise ValueError(f"node key {key} given twice")
@@ -158,6 +204,9 @@ class CopcWriter:
             rec["red"], rec["green"], rec["blue"] = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
         if self.point_format == 8 and "nir" in attributes:
             rec["nir"] = np.clip(attributes["nir"], 0, 65535)
+        for name in self.extra:
+            if name in attributes:
+                rec[name] = attributes[name]
         self._batch.append((key, rec))
         self._batch_keys.add(key)
         self._batch_points += n
@@ -319,18 +368,21 @@ def write_copc(
     page_level: int | None = None,
     overwrite: bool = False,
     durable: bool = True,
+    extra=None,
 ) -> dict:
     """Write octree nodes as the COPC file ``path``, atomically (it appears only when complete).
 
     ``nodes``: (key, float64 xyz (n, 3), u16 rgb (n, 3) or None, {attribute: array}) per node,
     in any order (missing ancestors get empty entries); ``scale``/``offset``: the LAS integer
     grid; ``cube_min``/``cube_edge``: the octree's cube (keys are relative to it); ``wkt``: the
-    CRS. Returns {points, nodes, pages}."""
+    CRS; ``extra``: {name: dtype} of attributes stored in extra bytes (``extra_attributes``).
+    Returns {points, nodes, pages}."""
     check_output(path, overwrite)
     with atomic_open(path, durable=durable) as f:
         w = CopcWriter(
-            f, scale=scale, offset=offset, cube_min=cube_min, cube_edge=cube_edge, point_format=point_format, wkt=wkt, spacing=spacing
-        )
+            f, scale=scale, offset=offset, cube_min=cube_min, cube_edge=cube_edge, point_format=point_format, wkt=wkt, spacing=spacing,
+            extra=extra,
+        )  # fmt: skip
         for key, xyz, rgb, attrs in nodes:
             w.add(key, xyz, rgb, attrs)
         return w.finish(page_level)
@@ -364,6 +416,7 @@ def write_copc_sets(path: Path, sources: list[Path], st: dict, progress, page_le
     summary = write_copc(
         path, nodes(), scale=scale, offset=offset, cube_min=origin, cube_edge=edge, point_format=fmt,
         wkt=src.get("wkt"), spacing=edge / 128.0, page_level=page_level, overwrite=overwrite,
+        extra=extra_attributes(attrs, str(path)),
     )  # fmt: skip
     return int(summary["nodes"])
 

@@ -13,6 +13,11 @@ An octree folder ``OUT`` is made by ``gigapoint convert`` (or PotreeConverter) a
   - ``rgba.npy``: u32 RGBA as read (source colors)
   - ``attr.<name>.npy``: per-point attributes (intensity, classification, ...)
 
+  That is version 1 (``convert(layout="words")``). Version 2, the default (compact_octree.py),
+  keeps ``octree.json``, ``nodes.npy``, ``keys.npy`` and ``low.npy`` and holds the rest per node
+  in bit streams: ``pack.npy`` + ``ext.npy`` (positions below the low word), ``fields.npy`` +
+  ``field.<name>.npy`` (rgba, color, attr.<name>), about half the bytes.
+
 - a **Potree 2.0 octree** (potree.py): ``metadata.json`` (written last), ``hierarchy.bin``,
   ``octree.bin``;
 
@@ -43,8 +48,10 @@ from ..errors import GigapointError
 
 GIGAPOINT_META = "octree.json"
 FORMAT_NAME = "gigapoint-octree"  # octree.json's "format"
-FORMAT_VERSION = 1
-POINT_ARRAYS = ("low", "med", "high", "color", "rgba")  # one entry per point each
+FORMAT_VERSION = 2  # written by default (compact_octree.py); version 1 is still read and written
+FORMAT_VERSIONS = (1, 2)
+POINT_ARRAYS = ("low", "med", "high", "color", "rgba")  # one entry per point each (version 1)
+COMPACT_ARRAYS = ("low", "pack", "ext", "fields")  # version 2, besides field.<name>.npy
 POTREE_META = "metadata.json"
 POTREE_HIERARCHY = "hierarchy.bin"
 POTREE_OCTREE = "octree.bin"
@@ -54,7 +61,7 @@ PREVIEW = "preview.npz"
 RESUME_HINT = "run `gigapoint convert` again to resume it"  # what a stopped conversion needs
 
 # what --overwrite clears besides .partial, attr.*.npy and temporary files (never anything else)
-_OWN_FILES = (GIGAPOINT_META, POTREE_META, POTREE_HIERARCHY, POTREE_OCTREE, "nodes.npy", "keys.npy", *(f"{a}.npy" for a in POINT_ARRAYS))
+_OWN_FILES = (GIGAPOINT_META, POTREE_META, POTREE_HIERARCHY, POTREE_OCTREE, "nodes.npy", "keys.npy", *(f"{a}.npy" for a in POINT_ARRAYS + COMPACT_ARRAYS[1:]))
 
 Kind = Literal["gigapoint", "potree", "unfinished"]
 
@@ -124,7 +131,8 @@ class OctreeDir:
         return self.path / POTREE_OCTREE
 
     def array(self, name: str) -> Path:
-        """A gigapoint octree's array ``name``: nodes, keys, one of POINT_ARRAYS, or attr.<attribute>."""
+        """A gigapoint octree's array ``name``: nodes, keys, one of POINT_ARRAYS, attr.<attribute>,
+        or (version 2) one of COMPACT_ARRAYS or field.<name>."""
         return self.path / f"{name}.npy"
 
     def array_in_progress(self, name: str) -> Path:
@@ -306,6 +314,6 @@ class OctreeDir:
         shutil.rmtree(self.partial, ignore_errors=True)
         for f in _OWN_FILES:
             (self.path / f).unlink(missing_ok=True)
-        stale = {*self.path.glob("attr.*.npy"), *self.path.glob("*.tmp"), *self.path.glob("*.tmp.npy"), *temp_files(self.path)}
+        stale = {*self.path.glob("attr.*.npy"), *self.path.glob("field.*.npy"), *self.path.glob("*.tmp"), *self.path.glob("*.tmp.npy"), *temp_files(self.path)}
         for p in stale:
             p.unlink(missing_ok=True)

@@ -12,12 +12,13 @@ import numpy as np
 from ..core.cloud import PointCloud
 from ..errors import InputError
 from ..io.http import as_url
+from .compact_octree import read_compact
 from .copc import is_copc_file, open_copc
 from .ept import ept_location, open_ept
-from .octree_dir import FORMAT_VERSION, RESUME_HINT, OctreeDir
+from .octree_dir import RESUME_HINT, OctreeDir
 from .potree import read_potree
 from .preview import open_preview
-from .store import OctreeCloud, read_gigapoint
+from .store import OctreeCloud, read_gigapoint, read_meta
 
 
 def is_octree_dir(path) -> bool:
@@ -63,7 +64,8 @@ def open_octree(path) -> OctreeCloud | PointCloud:
         raise InputError(f"{d.path}: not a directory (an octree is a directory made by `gigapoint convert`)")
     kind = d.kind
     if kind == "gigapoint":
-        return read_gigapoint(d)
+        meta = read_meta(d)
+        return read_compact(d, meta) if meta["version"] == 2 else read_gigapoint(d, meta)
     if kind == "potree":
         return read_potree(d)
     if kind == "unfinished":
@@ -104,7 +106,7 @@ def octree_info(path) -> dict:
     text += (f", {sampler} sampler" if sampler else "") + (f", spacing {spacing:.6g}" if spacing else "")
     return {
         "path": str(p),
-        "format": "Potree 2.0 octree" if potree else f"gigapoint octree {FORMAT_VERSION}",
+        "format": "Potree 2.0 octree" if potree else f"gigapoint octree {cloud.meta.get('version')}",
         "encoding": cloud.meta.get("encoding") if potree else None,
         "point_count": int(cloud.n_points),
         "bounds": {"min": np.asarray(lo).tolist(), "max": np.asarray(hi).tolist()},
@@ -116,8 +118,20 @@ def octree_info(path) -> dict:
         "sampler": sampler,
         "spacing": spacing,
         "file_size": size,
-        "details": {"octree": text},
+        "details": {"octree": text} if potree else {"octree": text, "on disk": _bytes_a_point(d, cloud.n_points)},
     }
+
+
+def _bytes_a_point(d: OctreeDir, n: int) -> str:
+    """A gigapoint octree's files per point on disk, by what they hold (either format version)."""
+    parts = {"positions": 0, "colour": 0, "attributes": 0, "nodes": 0}
+    for f in d.path.glob("*.npy"):
+        name = f.name.removesuffix(".npy").removeprefix("field.")
+        kind = "attributes" if name.startswith("attr.") else "colour" if name in ("color", "rgba") else None
+        kind = kind or ("positions" if name in ("low", "med", "high", "ext") else "nodes")
+        parts[kind] += f.stat().st_size
+    n = max(n, 1)
+    return ", ".join(f"{k} {v / n:.2f}" for k, v in parts.items()) + f" bytes a point ({sum(parts.values()) / n:.2f} in all)"
 
 
 def _voxel_info(path) -> dict:

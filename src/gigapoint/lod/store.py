@@ -23,8 +23,9 @@ from ..core.quantize import dequantize
 from ..core.renderable import DrawList, MultiViewDrawList
 from ..core.selection import Selection, View, batch_matrices, box_in_view, precision_for, visible_and_size
 from ..errors import InputError
+from ..render.splats import finest_spacing
 from .keys import key_cube
-from .octree_dir import FORMAT_NAME, FORMAT_VERSION, POINT_ARRAYS, OctreeDir
+from .octree_dir import FORMAT_NAME, FORMAT_VERSIONS, POINT_ARRAYS, OctreeDir
 
 ARENA_CHUNK = 4096  # points per arena slot (a node spans ceil(count / ARENA_CHUNK) slots)
 
@@ -406,7 +407,9 @@ class OctreeCloud:
         order = np.argsort(slots, kind="stable")
         slots, owner = slots[order], owner[order]
         sel = Selection(slots.astype(np.int64), bits[owner].astype(np.int32), mats[owner], size[owner], int(len(self.keys) - len(ids)))
-        return DrawList(arena, sel, len(self.nodes), nodes=ids)
+        adaptive = settings.point_sizing == "adaptive"  # its sizes from the nodes drawn finest (issue #17)
+        spacing = finest_spacing(arena, sel.ids, owner, ids, self.children, self.counts) if adaptive else None
+        return DrawList(arena, sel, len(self.nodes), nodes=ids, spacing=spacing)
 
     def prepare_views(self, views, settings) -> MultiViewDrawList | None:
         """None: each view selects its own nodes, so stereo draws the eyes one by one."""
@@ -417,17 +420,26 @@ class OctreeCloud:
         return contextlib.nullcontext()
 
 
-def read_gigapoint(octree_dir) -> OctreeCloud:
-    """A gigapoint octree folder (an OctreeDir or a path) opened for rendering: its metadata
-    checked, its arrays memory-mapped. ``reader.open_octree`` opens a folder of any kind."""
-    d = OctreeDir(octree_dir)
-    p = d.path
+def read_meta(d: OctreeDir) -> dict:
+    """A gigapoint octree's metadata (``octree.json``), its format and version checked."""
     try:
         meta = json.loads(d.meta.read_text())
     except ValueError as exc:
         raise InputError(f"{d.meta}: invalid JSON ({exc})") from None
-    if meta.get("format") != FORMAT_NAME or meta.get("version") != FORMAT_VERSION:
-        raise InputError(f"{d.meta}: not a gigapoint octree of version {FORMAT_VERSION}")
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME or meta.get("version") not in FORMAT_VERSIONS:
+        raise InputError(f"{d.meta}: not a gigapoint octree of version {' or '.join(map(str, FORMAT_VERSIONS))}")
+    return meta
+
+
+def read_gigapoint(octree_dir, meta: dict | None = None) -> OctreeCloud:
+    """A gigapoint octree folder of format version 1 (an OctreeDir or a path) opened for
+    rendering: its metadata checked, its arrays memory-mapped. ``reader.open_octree`` opens a
+    folder of any kind (version 2: compact_octree.read_compact)."""
+    d = OctreeDir(octree_dir)
+    p = d.path
+    meta = read_meta(d) if meta is None else meta
+    if meta["version"] != 1:
+        raise InputError(f"{d.meta}: a version {meta['version']} octree; open it with gigapoint.open")
     try:
         nodes = np.load(d.array("nodes"))
         keys = np.load(d.array("keys"))

@@ -8,16 +8,20 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_json, atomic_npy
+from ..atomic import atomic_json, atomic_npy, fsync_file
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
+from .compact_octree import field_names
 from .keys import key_cube, level_of
 from .octree_dir import FORMAT_NAME, FORMAT_VERSION, POINT_ARRAYS, OctreeDir
 
 
-def point_dtypes(attributes: dict) -> dict[str, np.dtype]:
+def point_dtypes(attributes: dict, compact: bool = False) -> dict[str, np.dtype]:
     """The octree's per-point arrays and their dtypes: POINT_ARRAYS (u32 each) and
-    ``attr.<name>`` of every attribute in ``attributes`` ({name: dtype})."""
+    ``attr.<name>`` of every attribute in ``attributes`` ({name: dtype}); ``compact`` (version 2):
+    only the low words (the rest is in per-node streams, compact_octree.py)."""
+    if compact:
+        return {"low": np.dtype(np.uint32)}
     dtypes = {k: np.dtype(np.uint32) for k in POINT_ARRAYS}
     dtypes.update({f"attr.{a}": np.dtype(d) for a, d in attributes.items()})
     return dtypes
@@ -32,9 +36,12 @@ def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sa
     """
     attrs = st["attributes"]
     origin, edge = np.array(st["origin"]), float(st["edge"])
-    dtypes = point_dtypes(attrs)
+    plan = st.get("compact")
+    dtypes = point_dtypes(attrs, compact=plan is not None)
     tmp_paths = {k: out.array_in_progress(k) for k in dtypes}
     direct = all((src / "span.npy").exists() for src in sources)
+    if plan is not None and not direct:
+        raise RuntimeError("internal error: a compact octree's node sets are written in place")
     if direct:
         total = int(st["points"])
         if sum(int(np.diff(np.load(src / "span.npy"))[0]) for src in sources) != total:
@@ -87,12 +94,15 @@ def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sa
     order = np.argsort(keys, kind="stable")
     if len(np.unique(keys)) != len(keys):
         raise RuntimeError("internal error: duplicate octree node keys")
+    extra = {}
+    if plan is not None:
+        extra = write_streams(out, sources, order, attrs, plan)
     atomic_npy(out.array("nodes"), nodes[order])
     atomic_npy(out.array("keys"), keys[order])
     lo, hi = np.array(st["lo"]), np.array(st["hi"])
     meta = {
         "format": FORMAT_NAME,
-        "version": FORMAT_VERSION,
+        "version": FORMAT_VERSION if plan is not None else 1,
         "name": name,
         "points": int(total),
         "nodes": len(keys),
@@ -104,6 +114,47 @@ def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sa
         "max_leaf": max_leaf,
         "attributes": attrs,
         "skipped": int(st.get("skipped", 0)),
+        "crs": (st.get("source") or {}).get("crs"),  # 'EPSG:n' or WKT from the LAS/COPC inputs (info shows it)
     }
+    meta.update(extra)
     atomic_json(out.meta, meta, durable=True)  # last: the folder is complete from here on
     return len(keys)
+
+
+def write_streams(out: OctreeDir, sources: list[Path], order: np.ndarray, attrs: dict, plan: dict) -> dict:
+    """Version 2: the node sets' bit streams (ext, field.<name>) joined in the order of their
+    points (span.npy), so the single-process and the Dask converter write the same bytes, and
+    their per-node records (pack, fields; concatenated in ``sources`` order like the node
+    records, then put in key order by ``order``) pointing into them. Returns what octree.json
+    says about them."""
+    names = field_names(attrs)
+    streams = ["ext", *(f"field.{k}" for k in names)]
+    by_points = sorted(sources, key=lambda s: int(np.load(s / "span.npy")[0]))
+    base = {}  # (set, stream) -> its first word in the joined stream
+    for k in streams:
+        total = 0
+        for src in by_points:
+            base[src, k] = total
+            total += int(np.load(src / f"{k}.npy", mmap_mode="r").shape[0])
+        dest = out.array_in_progress(k)
+        joined = np.lib.format.open_memmap(dest, mode="w+", dtype=np.uint64, shape=(total,))
+        for src in by_points:
+            part = np.load(src / f"{k}.npy", mmap_mode="r")
+            joined[base[src, k] : base[src, k] + len(part)] = part
+        joined.flush()
+        del joined
+        fsync_file(dest)
+        os.replace(dest, out.array(k))
+    packs, fields = [], []
+    for src in sources:
+        pack, rec = np.load(src / "pack.npy"), np.load(src / "fields.npy")
+        pack["ext_first"] += np.uint64(base[src, "ext"])
+        for j, k in enumerate(names):
+            rec[:, j]["word0"] += np.uint64(base[src, f"field.{k}"])
+        packs.append(pack)
+        fields.append(rec)
+    atomic_npy(out.array("pack"), np.concatenate(packs)[order])
+    atomic_npy(out.array("fields"), np.concatenate(fields)[order])
+    dtypes = {"rgba": "<u2" if plan["colors"] == "rgb565" else "<u4", **{f"attr.{a}": np.dtype(d).str for a, d in attrs.items()}}
+    dtypes["color"] = dtypes["rgba"]
+    return {"layout": "compact", "colors": plan["colors"], "scale": plan["scale"], "fields": names, "field_dtypes": dtypes}

@@ -258,8 +258,8 @@ def _flag_word(vrow, vf, best, bf, inv_gap, x0, x1):
     return word
 
 
-@njit(parallel=True, cache=True)
-def fill_holes(vis, vis_f32, width, height, radius_map, runs, run_start, ring_masks, offsets, sector_bits, sectors, ring, inv_gap, n_bands, out):
+@njit(cache=True, nogil=True)
+def fill_holes(vis, vis_f32, width, height, radius_map, runs, run_start, ring_masks, offsets, sector_bits, sectors, ring, inv_gap, n_bands, out, band_lo, band_hi):
     """Depth-aware dilation into out. A pixel that is empty, or whose depth is more than
     ``1/inv_gap`` times that of the closest pixel of its window, takes that closest key, but
     only when the closer neighbours surround it (no run of 8 of the 16 direction sectors is
@@ -270,8 +270,13 @@ def fill_holes(vis, vis_f32, width, height, radius_map, runs, run_start, ring_ma
     (H, R+1, nw) u64: bit set where the pixel's radius >= ring; offsets (k, 2) dx, dy ordered
     by ring; sector_bits (k,) u32, sectors (k,) their index; ring (k,) int8.
     The rows are split into ``n_bands`` bands; each goes down its rows once, so the window's
-    rows stay in cache. Per row: (2) the sectors holding a point, 64 pixels a word as bit planes,
-    the free-half test bit-sliced; (1) where that finds pixels surrounded, the window minimum,
+    rows stay in cache. This call fills bands ``band_lo`` .. ``band_hi`` - 1: threads share the
+    bands out (``passes._in_bands``; the GIL is released). As a parallel kernel (a prange over
+    the bands) it compiled 3.5x longer: numba's parfor passes and gufunc lowering went over the
+    whole band loop again (18.5 s CPU on an AMD EPYC, 5.2 s now; HQS's kernel, tried the same
+    way, compiled 3x faster but drew 1.2-2x slower, so it stays a prange). Per row: (2) the
+    sectors holding a point, 64 pixels a word as bit planes, the free-half test bit-sliced;
+    (1) where that finds pixels surrounded, the window minimum,
     from column minima and row minima by doubling (vectorised); empty pixels so surrounded take
     it (a vectorised select writes the row); (3) pixels with a point, only where the window minimum is nearer
     (a flag word of 64 pixels, vectorised) and their points surround them: a scalar sector
@@ -284,7 +289,7 @@ def fill_holes(vis, vis_f32, width, height, radius_map, runs, run_start, ring_ma
         ring_start[ring[o] + 1] = o + 1
     empty_row = np.full(width, EMPTY, np.uint64)
     step2 = 2 * (offsets[:, 1].astype(np.int64) * width + offsets[:, 0])  # offsets in vis_f32
-    for b in prange(n_bands):
+    for b in range(band_lo, band_hi):
         y0 = b * height // n_bands
         y1 = (b + 1) * height // n_bands
         # bit rows of the band and n_rings rows above and below it (zeros outside the image),

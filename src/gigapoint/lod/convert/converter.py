@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..build import SAMPLERS
+from ..compact_octree import COLOR_FORMATS, LAYOUTS
 from ..copc_write import check_output as check_copc_output
 from ..octree_dir import ConvertError
 from ..progress import NullProgress, RichProgress
@@ -108,6 +109,9 @@ def convert(
     encoding: str = "DEFAULT",
     upper_points: int | None = None,
     client=None,
+    source_files=None,
+    layout: str = "compact",
+    colors: str = "rgba",
 ) -> ConvertResult:
     """Convert point cloud files (or an iterable of PointChunks) into an LOD octree directory ``out``.
 
@@ -122,6 +126,14 @@ def convert(
     processes (a ``LocalCluster``, closed at the end). Workers read the inputs and write into
     ``out``, which must be a path every worker sees (a shared file system); the octree is the
     one this function makes without a client. ``memory_limit`` is then per worker.
+
+    ``source_files``: where ``inputs`` are chunks, the LAS/LAZ/COPC files they came from; their
+    headers give the output its CRS and LAS grid (a progressive octree's ``save``).
+
+    ``layout`` (gigapoint format): "compact" writes format version 2, node payloads in bit
+    streams (../compact_octree.py, about half the bytes; positions exact at the source's scale),
+    "words" version 1 (three u32 words and 32-bit colours a point). ``colors`` (version 2):
+    "rgba" keeps colours exact, "rgb565" stores 16 bits (at most 4/255 off a channel).
     """
     if sampler not in SAMPLERS:
         raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
@@ -133,6 +145,10 @@ def convert(
         raise ConvertError(f"max_leaf must be an integer >= 100, got {max_leaf!r}")
     if encoding not in ENCODINGS:
         raise ConvertError(f"encoding: unknown Potree encoding {encoding!r}; choose DEFAULT or BROTLI")
+    if layout not in LAYOUTS:
+        raise ConvertError(f"--layout: unknown layout {layout!r}; choose {' or '.join(LAYOUTS)}")
+    if colors not in COLOR_FORMATS:
+        raise ConvertError(f"--colors: unknown colour format {colors!r}; choose {' or '.join(COLOR_FORMATS)}")
     mem = parse_memory(memory_limit)
     if out is None or str(out) == "":
         raise ConvertError("convert: no output directory given (-o OUT)")
@@ -154,6 +170,9 @@ def convert(
         name,
         encoding,
         upper_points,
+        source_files,
+        layout,
+        colors,
     )
     if client is not None:
         with open_client(client, announce=progress) as conv.client:

@@ -459,7 +459,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
 
     def _spec(self) -> dict:
         st = self.state
-        keep = ("origin", "edge", "attributes", "partition_points")
+        keep = ("origin", "edge", "attributes", "partition_points", "compact")
         return {
             "out": str(self.out),
             "dir": str(self.dir.path),

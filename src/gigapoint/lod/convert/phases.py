@@ -19,6 +19,7 @@ from ...atomic import atomic_npy, fsync_file
 from ...core.layout import BATCH_DTYPE
 from ...core.quantize import _quantize_batches
 from ..build import color_sums, filtered_colors, init_ownlevel, owned_order, sample_tree, sort_codes, split_tree, take, upper_tree
+from ..compact_octree import encode_nodes
 from ..copc_write import write_copc_sets
 from ..keys import level_of, point_codes
 from ..potree import write_potree
@@ -172,7 +173,7 @@ class BuildPhases(Job):
 
     def _output_dtypes(self) -> dict:
         """gigapoint format: the output point arrays' names and dtypes."""
-        return point_dtypes(self.state["attributes"])
+        return point_dtypes(self.state["attributes"], compact=self.state.get("compact") is not None)
 
     def _output_slices(self, start: int, n: int) -> dict:
         """Memory maps of points start..start+n of every output array. Only this node set's pages
@@ -234,16 +235,34 @@ class BuildPhases(Job):
         first = np.cumsum(counts) - counts
         nodes["count"] = counts
         nodes["level"] = level_of(keys)
+        plan = self.state.get("compact")
+        if plan is not None:  # version 2: the low words at the points' offset, the rest as node streams in ``dest``
+            nodes["first"] = first
+            attrs = {f"attr.{a}": take(data[f"attr.{a}"], idx) for a in self.state["attributes"]}  # in the fields' order
+            low, ext, pack, fields, streams = encode_nodes(
+                xyz, idx, nodes, plan["scale"], np.array(self.state["origin"]), (filtered_colors(*colors), take(data["rgba"], idx)),
+                attrs, plan["colors"],
+            )  # fmt: skip
+            outs["low"][sl] = low
+            for k, v in {"ext": ext, "pack": pack, "fields": fields, **{f"field.{f}": v for f, v in streams.items()}}.items():
+                atomic_npy(dest / f"{k}.npy", v)
+            del outs, low
+            self._finish_set(dest, nodes, first, off, n)
+            return
         bmin = np.empty((len(keys), 3))
         bmax = np.empty((len(keys), 3))
         low, med, high = (np.asarray(outs[k][sl]) for k in ("low", "med", "high"))
         _quantize_batches(xyz, np.ascontiguousarray(idx), first, counts, bmin, bmax, low, med, high)
         nodes["bbox_min"], nodes["bbox_max"] = bmin, bmax
-        nodes["first"] = (first + off).astype(np.uint64)
         filtered_colors(*colors, out=outs["color"][sl])
         for k, v in data.items():
             take(v, idx, out=outs[k][sl])
         del outs, low, med, high  # unmapped; a killed process's writes stay in the page cache
+        self._finish_set(dest, nodes, first, off, n)
+
+    def _finish_set(self, dest: Path, nodes, first, off: int, n: int) -> None:
+        """A node set's records written (``first`` moved to ``off``); placed: its span last."""
+        nodes["first"] = (first + off).astype(np.uint64)
         if self.local_sets:
             atomic_npy(dest / f"{LOCAL}nodes.npy", nodes)
             return

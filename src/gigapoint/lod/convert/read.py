@@ -88,6 +88,8 @@ class ReadPhase(Job):
             xyz, rgba, kept, names, invalid, c_lo, c_hi = spill_chunk(raw, i, chunk)
             st["skipped"] = st.get("skipped", 0) + int(invalid)
             attrs = merge_attributes(attrs, names)
+            sc, prev = getattr(chunk, "scale", None), st.get("chunk_scale", "unset")  # the chunks' grid (compact_plan)
+            st["chunk_scale"] = None if sc is None or prev is None else (list(map(float, sc)) if prev == "unset" else np.minimum(prev, sc).tolist())
             if c_lo is not None:
                 lo = np.minimum(lo, c_lo)
                 hi = np.maximum(hi, c_hi)
@@ -114,7 +116,8 @@ class ReadPhase(Job):
                 stacklevel=4,
             )
         edge = float(np.max(hi - lo))
-        st.setdefault("source", input_facts(self.paths))  # CRS, LAS grid, colors: for outputs that hold them
+        st.setdefault("source", input_facts(self.paths or self.source_files))  # CRS, LAS grid, colors: for outputs that hold them
+        st["compact"] = self.compact_plan()
         st.update(origin=lo.tolist(), edge=edge if edge > 0 else 1.0, phase="count")
         self.save_state()
 

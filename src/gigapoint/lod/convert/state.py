@@ -54,8 +54,13 @@ class Job:
         name,
         encoding="DEFAULT",
         upper_points=None,
+        source_files=None,
+        layout="compact",
+        colors="rgba",
     ):
         self.encoding = encoding
+        self.layout = layout  # gigapoint format: "compact" (version 2, compact_octree.py) or "words" (version 1)
+        self.colors = colors  # version 2's colours: "rgba" (exact) or "rgb565"
         self.out = Path(out)
         self.dir = OctreeDir(copc_work_dir(self.out) if format == "copc" else self.out)  # a COPC output is one file
         self.sampler = sampler
@@ -72,6 +77,7 @@ class Job:
         self.progress = progress
         self.inputs = inputs
         self.paths = input_paths(inputs)
+        self.source_files = list(source_files or [])  # chunk inputs: the files their points came from
         self.name = name or (self.paths[0].stem if self.paths else "cloud")
         self.state: dict = {}
         self.t0 = 0.0  # perf_counter() at the start of the run
@@ -92,7 +98,22 @@ class Job:
             "memory_limit": self.mem,
             "partition_points": self.partition_override,
             "chunk_size": self.chunk_size,
+            "layout": self.layout,
+            "colors": self.colors,
         }
+
+    def compact_plan(self) -> dict | None:
+        """How the gigapoint format stores node payloads, decided once the inputs are read
+        (``state["compact"]``): None for version 1 (or another format), else {"scale": the
+        source grid's step per axis or None (the LAS inputs' finest scale, else the chunks'
+        own), "colors"}."""
+        if self.format != "gigapoint" or self.layout == "words":
+            return None
+        st = self.state
+        scale = (st.get("source") or {}).get("scale")
+        if scale is None and self.paths is None:
+            scale = st.get("chunk_scale")
+        return {"scale": scale if isinstance(scale, list) else None, "colors": self.colors}
 
     def save_state(self) -> None:
         self.dir.write_state(self.state)

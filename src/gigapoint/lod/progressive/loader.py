@@ -20,6 +20,7 @@ import os
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
 
 import numpy as np
 
@@ -189,6 +190,7 @@ def open_progressive(sources, total, bounds, name, max_leaf=None, memory_limit=N
     memory_limit = int(memory_limit) if memory_limit else default_memory_limit()
     capacity = min(total or 0, memory_limit // _PRESIZED_BYTES_PER_POINT)  # presized no larger than the limit allows
     octree = ProgressiveOctree(name, cube=cube, max_leaf=max_leaf or MAX_LEAF, capacity=capacity)
+    octree.source_files = [Path(label) for label, _ in sources if Path(label).is_file()]  # save() takes their CRS
     octree.attach(Loader(octree, sources, total, memory_limit).start())
     return octree
 

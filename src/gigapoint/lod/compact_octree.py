@@ -1,0 +1,347 @@
+"""The compact octree payload (gigapoint octree format version 2): node points in ~1/2 the bytes.
+
+Positions are core/compact.py's layout, one batch per node: the low word a point
+(``low.npy``, at the point's index as in version 1) and the node's extension bits
+(``ext.npy``: every node's u64 bit stream back to back, ``pack.npy``: one PACK_DTYPE record
+a node, sorted like ``nodes.npy``). A node whose points sit on the source grid (a LAS file's
+scale through the cloud's smallest coordinate) gets a grid-aligned box 2^B steps wide
+(``nodes.npy``'s bbox) and B - 10 bits an axis; any other node is *wide*: the tight box and
+version 1's 30-bit quantization, so its three words are version 1's, bit for bit. Positions
+are exact at the source's scale either way (compact.py).
+
+Every other per-point array is a **field**, stored per node as a frame of reference: the
+node's smallest value (``base``) and each point's difference from it in as many bits as the
+node's range needs (``bits``, 0..64), packed back to back in the field's u64 stream
+(``field.<name>.npy``) from word ``word0``. Values are packed as unsigned integers of their
+own width (signed ones with the sign bit flipped, floats by their bit patterns), so every
+field is lossless; ``fields.npy`` holds one FIELD_DTYPE record per node and field, in the
+order of ``octree.json``'s ``fields``. The fields are:
+
+- ``rgba``: the source colours, u32 RGBA8 (an opaque colour's alpha byte is constant: 24 bits
+  at most), or u16 RGB565 when converted with ``colors="rgb565"`` (core/compact.py's rounding);
+- ``color``: the LOD's filtered colours as the XOR with ``rgba`` (a leaf's are its own: 0
+  bits; an inner node's averages: what differs);
+- ``attr.<name>``: each attribute in its own dtype.
+
+A node loaded into the arena is decoded into the three-word layout (``node_arrays``: the
+extension bits by ``compact.expand_tails``, the fields by ``compact.read_ext``), so the arena
+and the renderers are version 1's and a render equals the one of the same boxes in three
+words. Malformed files (a truncated array, a stream shorter than its records say, counts
+that do not add up) are a one-line ``InputError`` naming the file when the octree opens.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from numba import njit, prange
+
+from ..core.compact import _expand_all, compact_positions, expand_tails, pack_rgb565, read_ext, rgba32, stream_words
+from ..core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE
+from ..errors import InputError
+from .octree_dir import OctreeDir
+from .store import OctreeCloud
+
+FORMAT_VERSION_COMPACT = 2
+FIELD_DTYPE = np.dtype([("base", "<u8"), ("word0", "<u8"), ("bits", "<u4"), ("_pad", "<u4")])
+LAYOUTS = ("compact", "words")
+COLOR_FORMATS = ("rgba", "rgb565")
+
+
+def field_names(attributes) -> list[str]:
+    """The fields of an octree with ``attributes``, in file order."""
+    return ["rgba", "color", *(f"attr.{a}" for a in attributes)]
+
+
+# --------------------------------------------------------------------------- values <-> u64 keys
+
+
+def to_keys(values: np.ndarray) -> np.ndarray:
+    """Unsigned integer keys of the values' own width, lossless: unsigned as they are, signed with
+    the sign bit flipped (small magnitudes stay close), floats and bools by their bit patterns
+    (views: no copy but for signed values)."""
+    v = np.ascontiguousarray(values)
+    kind, size = v.dtype.kind, v.dtype.itemsize
+    if kind not in "uifb":
+        raise InputError(f"a {v.dtype} array cannot be stored in a compact octree")
+    u = v.view(f"u{size}")
+    return u ^ np.array(1 << (8 * size - 1), u.dtype) if kind == "i" else u
+
+
+def from_keys(keys: np.ndarray, dtype) -> np.ndarray:
+    """Values of ``dtype`` from their keys (``to_keys``), given in any unsigned width."""
+    dt = np.dtype(dtype)
+    u = keys.astype(f"u{dt.itemsize}")
+    if dt.kind == "i":
+        u ^= np.array(1 << (8 * dt.itemsize - 1), u.dtype)
+    return u.view(dt)
+
+
+# --------------------------------------------------------------------------- fields: frame of reference + bit packing
+
+
+@njit(parallel=True, cache=True)
+def _field_plan(keys, firsts, counts, base, bits):
+    for b in prange(firsts.shape[0]):
+        f = firsts[b]
+        c = counts[b]
+        if c == 0:
+            continue
+        lo = np.uint64(keys[f])
+        hi = lo
+        for k in range(f + 1, f + c):
+            v = np.uint64(keys[k])
+            lo = min(lo, v)
+            hi = max(hi, v)
+        r = hi - lo
+        t = 0
+        while r:
+            t += 1
+            r >>= np.uint64(1)
+        base[b] = lo
+        bits[b] = t
+
+
+@njit(parallel=True, cache=True)
+def _field_write(keys, firsts, counts, base, bits, word0, out):
+    """The points' differences from their node's base into ``out`` (zeroed), t bits each."""
+    for b in prange(firsts.shape[0]):
+        t = np.uint64(bits[b])
+        if t == 0:
+            continue
+        f = firsts[b]
+        w0 = np.uint64(word0[b])
+        for k in range(counts[b]):
+            v = np.uint64(keys[f + k]) - base[b]
+            p = np.uint64(k) * t
+            w = w0 + (p >> np.uint64(6))
+            s = p & np.uint64(63)
+            out[w] |= v << s
+            if s + t > 64:
+                out[w + np.uint64(1)] |= v >> (np.uint64(64) - s)
+
+
+@njit(cache=True)
+def _field_read(stream, word0, t, base, out):
+    """Values of the len(out) points of a node: base + their t bits (compact.read_ext)."""
+    mask = np.uint64(0xFFFFFFFFFFFFFFFF) if t >= 64 else (np.uint64(1) << np.uint64(t)) - np.uint64(1)
+    for j in range(out.shape[0]):
+        out[j] = base + (read_ext(stream, word0, t, j) & mask)
+
+
+@njit(parallel=True, cache=True)
+def _field_read_all(stream, firsts, counts, word0s, bits, bases, out):
+    for b in prange(firsts.shape[0]):
+        f = firsts[b]
+        _field_read(stream, word0s[b], bits[b], bases[b], out[f : f + counts[b]])
+
+
+@njit(cache=True)
+def _node_tails(ext, word0, code, med, high):
+    """Medium and high words of a node's points (``expand_tails`` over the whole node, compiled
+    once into the cache: a first frame does not wait for it)."""
+    n = med.shape[0]
+    expand_tails(ext, word0, code, 0, n, 1, med, high, np.empty(n, np.uint64))
+
+
+def pack_field(values: np.ndarray, firsts: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(FIELD_DTYPE per node, u64 stream) of ``values`` cut into nodes (``firsts``/``counts``)."""
+    keys = to_keys(values)
+    nb = len(firsts)
+    firsts = np.asarray(firsts, np.int64)
+    counts = np.asarray(counts, np.int64)
+    base = np.zeros(nb, np.uint64)
+    bits = np.zeros(nb, np.int64)
+    _field_plan(keys, firsts, counts, base, bits)
+    words = stream_words(bits, counts)
+    word0 = np.concatenate([[0], np.cumsum(words)[:-1]]).astype(np.int64) if nb else np.zeros(0, np.int64)
+    stream = np.zeros(int(words.sum()), np.uint64)
+    _field_write(keys, firsts, counts, base, bits, word0, stream)
+    rec = np.zeros(nb, FIELD_DTYPE)
+    rec["base"], rec["word0"], rec["bits"] = base, word0, bits
+    return rec, stream
+
+
+def field_words(rec: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """u64 words each node's part of a field stream takes."""
+    return stream_words(rec["bits"].astype(np.int64), np.asarray(counts, np.int64))
+
+
+# --------------------------------------------------------------------------- a node set, encoded
+
+
+def encode_nodes(xyz, idx, nodes: np.ndarray, scale, origin, colors: tuple[np.ndarray, np.ndarray], data: dict, color_format: str):
+    """One node set's payload: the points ``xyz[idx]`` cut into ``nodes`` (BATCH_DTYPE, ``first``
+    relative to idx; their boxes are filled), their colours (``colors``: filtered, source RGBA,
+    u32 each) and ``data`` ({"attr.<name>": values in idx order}). ``scale`` None: no source
+    grid (every node wide). Returns (low, ext, PACK_DTYPE per node, FIELD_DTYPE (nodes, fields),
+    {field: stream})."""
+    low, ext, pack = compact_positions(xyz, np.ascontiguousarray(idx, np.int64), nodes, scale, origin=origin)
+    color, rgba = colors
+    if color_format == "rgb565":
+        color, rgba = pack_rgb565(color), pack_rgb565(rgba)
+    values = {"rgba": rgba, "color": color ^ rgba, **data}
+    firsts, counts = nodes["first"].astype(np.int64), nodes["count"].astype(np.int64)
+    recs = np.zeros((len(nodes), len(values)), FIELD_DTYPE)
+    streams = {}
+    for j, (k, v) in enumerate(values.items()):
+        recs[:, j], streams[k] = pack_field(v, firsts, counts)
+    return low, ext, pack, recs, streams
+
+
+# --------------------------------------------------------------------------- reading
+
+
+class _Decoded(Mapping):
+    """Whole per-point arrays of a compact octree, decoded on first use and kept (tests, tools,
+    ``to_memory``-like uses; the renderer decodes node by node instead)."""
+
+    def __init__(self, cloud: CompactOctree, names: list[str]):
+        self._cloud = cloud
+        self._names = names
+        self._cache: dict = {}
+
+    def __getitem__(self, name):
+        if name not in self._names:
+            raise KeyError(name)
+        if name not in self._cache:
+            self._cache[name] = self._cloud.decode_all(name)
+        return self._cache[name]
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self):
+        return len(self._names)
+
+
+class CompactOctree(OctreeCloud):
+    """A gigapoint octree of format version 2 (see the module's docstring): an OctreeCloud whose
+    nodes are decoded into the three-word layout as they are loaded."""
+
+    def __init__(self, name, meta, nodes, keys, low, ext, pack, fields, streams, path):
+        self.low, self.ext, self.pack, self.fields, self.streams = low, ext, pack, fields, streams
+        self.field_index = {k: j for j, k in enumerate(meta["fields"])}
+        self.color_format = meta.get("colors", "rgba")
+        self._dtypes = {k: np.dtype(d) for k, d in meta["field_dtypes"].items()}
+        attrs = list(meta.get("attributes", {}))
+        super().__init__(name, meta, nodes, keys, _Decoded(self, ["low", "med", "high", "color", "rgba"]), _Decoded(self, attrs), path)
+
+    def _attribute_dtypes(self) -> dict:
+        return {a: self._dtypes[f"attr.{a}"] for a in self.meta.get("attributes", {})}
+
+    def _field(self, name: str, index: int, count: int) -> np.ndarray:
+        """Field ``name`` of node ``index``'s ``count`` points, in its dtype."""
+        rec = self.fields[index, self.field_index[name]]
+        out = np.empty(count, np.uint64)
+        _field_read(self.streams[name], np.uint64(rec["word0"]), np.uint64(rec["bits"]), np.uint64(rec["base"]), out)
+        return from_keys(out, self._dtypes[name])
+
+    def node_arrays(self, index: int) -> tuple[dict, dict, int]:
+        """Node ``index`` decoded: (low, med, high, color, rgba in the three-word layout; its
+        attributes; 0, where its points start in them)."""
+        rec = self.nodes[index]
+        first, count = int(rec["first"]), int(rec["count"])
+        p = self.pack[index]
+        med = np.empty(count, np.uint32)
+        high = np.empty(count, np.uint32)
+        _node_tails(self.ext, np.int64(p["ext_first"]), np.uint32(p["code"]), med, high)
+        rgba = self._field("rgba", index, count)
+        color = rgba ^ self._field("color", index, count)
+        arrays = {
+            "low": np.asarray(self.low[first : first + count]),
+            "med": med,
+            "high": high,
+            "color": rgba32(color),
+            "rgba": rgba32(rgba),
+        }
+        attrs = {a: self._field(f"attr.{a}", index, count) for a in self.meta.get("attributes", {})}
+        return arrays, attrs, 0
+
+    def decode_all(self, name: str) -> np.ndarray:
+        """Array ``name`` (low, med, high, color, rgba or an attribute) of every point."""
+        n = self.n_points
+        firsts, counts = self.nodes["first"].astype(np.int64), self.counts
+        if name == "low":
+            return np.asarray(self.low)
+        if name in ("med", "high"):
+            med, high = np.zeros(n, np.uint32), np.zeros(n, np.uint32)
+            _expand_all(self.ext, firsts, counts, self.pack["ext_first"].astype(np.int64), self.pack["code"].astype(np.uint32), med, high)
+            return med if name == "med" else high
+
+        def field(k):
+            rec = self.fields[:, self.field_index[k]]
+            out = np.zeros(n, np.uint64)
+            _field_read_all(self.streams[k], firsts, counts, rec["word0"].copy(), rec["bits"].astype(np.uint64), rec["base"].copy(), out)
+            return from_keys(out, self._dtypes[k])
+
+        if name in ("color", "rgba"):
+            rgba = field("rgba")
+            return rgba32(rgba if name == "rgba" else rgba ^ field("color"))
+        return field(f"attr.{name}")
+
+
+def _load(d: OctreeDir, name: str, mmap: bool = True) -> np.ndarray:
+    path = d.array(name)
+    try:
+        return np.load(path, mmap_mode="r" if mmap else None)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: cannot read it ({' '.join(str(exc).split())})") from None
+
+
+def read_compact(d: OctreeDir, meta: dict) -> CompactOctree:
+    """A version 2 octree folder opened (``reader.open_octree`` dispatches here): its arrays
+    memory-mapped and checked against each other, so a damaged file is an error naming it now,
+    not a crash or garbage when its node is drawn."""
+    p = d.path
+    n = int(meta["points"])
+    names = meta.get("fields")
+    if not isinstance(names, list) or names != field_names(meta.get("attributes", {})) or set(names) - set(meta.get("field_dtypes", {})):
+        raise InputError(f"{d.meta}: its fields do not match its attributes")
+    nodes, keys, pack, fields = (_load(d, k, mmap=False) for k in ("nodes", "keys", "pack", "fields"))
+    if nodes.dtype != BATCH_DTYPE or keys.ndim != 1 or len(nodes) != len(keys):
+        raise InputError(f"{d.array('nodes')}: does not match {d.array('keys').name} ({len(nodes):,} and {len(keys):,} nodes)")
+    if pack.dtype != PACK_DTYPE or len(pack) != len(nodes):
+        raise InputError(f"{d.array('pack')}: holds {len(pack):,} records for {len(nodes):,} nodes")
+    if fields.dtype != FIELD_DTYPE or fields.shape != (len(nodes), len(names)):
+        raise InputError(f"{d.array('fields')}: holds {fields.shape} records for {len(nodes):,} nodes and {len(names)} fields")
+    counts = nodes["count"].astype(np.int64)
+    ends = nodes["first"].astype(np.int64) + counts
+    if int(counts.sum()) != n or (len(ends) and int(ends.max()) > n):
+        raise InputError(f"{d.array('nodes')}: its nodes hold {int(counts.sum()):,} points, {d.meta.name} says {n:,}")
+    low = _load(d, "low")
+    if low.dtype != np.uint32 or low.shape != (n,):
+        raise InputError(f"{d.array('low')}: holds {low.shape[0] if low.ndim else 0:,} points, {d.meta.name} says {n:,}")
+    ext = _load(d, "ext")
+    code = pack["code"].astype(np.int64)
+    widths = np.stack([(code >> s) & 0xFF for s in (0, 8, 16)], axis=1)
+    if np.any(widths > EXT_FULL_BITS):
+        raise InputError(f"{d.array('pack')}: a node's layout code is invalid")
+    need = pack["ext_first"].astype(np.int64) + stream_words(widths.sum(axis=1), counts)
+    if ext.dtype != np.uint64 or (len(need) and int(need.max()) > len(ext)):
+        raise InputError(f"{d.array('ext')}: the bit stream is shorter ({len(ext):,} words) than its nodes need ({int(need.max()):,})")
+    streams = {}
+    for j, k in enumerate(names):
+        s = _load(d, f"field.{k}")
+        rec = fields[:, j]
+        need = rec["word0"].astype(np.int64) + field_words(rec, counts)
+        if s.dtype != np.uint64 or np.any(rec["bits"] > 64) or (len(need) and int(need.max()) > len(s)):
+            raise InputError(f"{d.array(f'field.{k}')}: the bit stream is shorter ({len(s):,} words) than its nodes need")
+        streams[k] = np.asarray(s)
+    return CompactOctree(meta.get("name", p.name), meta, nodes, keys, low, np.asarray(ext), pack, fields, streams, p)
+
+
+__all__ = [
+    "COLOR_FORMATS",
+    "FIELD_DTYPE",
+    "FORMAT_VERSION_COMPACT",
+    "LAYOUTS",
+    "CompactOctree",
+    "encode_nodes",
+    "field_names",
+    "from_keys",
+    "pack_field",
+    "read_compact",
+    "to_keys",
+]

@@ -1,0 +1,299 @@
+"""Compact octree payloads (format version 2, lod/compact_octree.py): exact round trips, the
+previous format still read, renders equal to the three-word layout, corrupt files named."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gigapoint import Camera, RenderSettings, render_frame
+from gigapoint.core import PointChunk
+from gigapoint.errors import InputError
+from gigapoint.lod import ConvertError, OctreeCloud, OctreeDir, convert, open_octree
+from gigapoint.lod.compact_octree import CompactOctree, from_keys, pack_field, to_keys
+from gigapoint.lod.reader import octree_info
+
+AUTZEN = Path(__file__).parents[2] / ".." / "shared" / "data" / "autzen_trim.laz"
+laspy = pytest.importorskip("laspy")
+
+
+def _write_las(path: Path, n: int, scale: float, offset, seed: int = 0) -> Path:
+    """A LAS file of n points on a ``scale`` grid at UTM-sized ``offset``, dense in a few
+    spots and spread over 2 km (nodes of every size), with RGB, intensity, classification."""
+    rng = np.random.default_rng(seed)
+    centres = rng.random((6, 3)) * [2000, 1500, 80]
+    xyz = centres[rng.integers(0, 6, n)] + rng.normal(0, 30, (n, 3)) * rng.random((n, 1))
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales = [scale] * 3
+    header.offsets = list(offset)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = (xyz[:, a] + offset[a] for a in range(3))
+    las.red, las.green, las.blue = (rng.integers(0, 256, n).astype(np.uint16) * 257 for _ in range(3))
+    las.intensity = rng.integers(0, 4000, n).astype(np.uint16)
+    las.classification = rng.integers(0, 8, n).astype(np.uint8)
+    las.write(str(path))
+    return path
+
+
+def _source_grid(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    with laspy.open(str(path)) as f:
+        las = f.read()
+        return np.stack([np.asarray(las.X), np.asarray(las.Y), np.asarray(las.Z)], 1).astype(np.int64), f.header.scales, f.header.offsets
+
+
+def _decoded_grid(oc, scale, offset) -> np.ndarray:
+    """Every decoded point (30-bit cell centres) as integer steps of the source grid, asserting
+    each is on it within 1e-3 of a step."""
+    out = []
+    for i in range(len(oc.keys)):
+        xyz = oc.node_points(i)["xyz"]
+        steps = (xyz - np.asarray(offset)) / np.asarray(scale)
+        q = np.round(steps)
+        assert np.all(np.abs(steps - q) < 1e-3)
+        out.append(q.astype(np.int64))
+    return np.concatenate(out)
+
+
+def _sorted_rows(a: np.ndarray) -> np.ndarray:
+    return a[np.lexsort(a.T[::-1])]
+
+
+@pytest.fixture(scope="module")
+def las_pair(tmp_path_factory):
+    """A LAS file at UTM offsets converted in both formats (several partitions, groups)."""
+    base = tmp_path_factory.mktemp("cmp")
+    src = _write_las(base / "utm.las", 60_000, 0.01, (500_000.0, 4_800_000.0, 100.0))
+    opts = {"max_leaf": 2_000, "partition_points": 20_000}
+    convert([src], base / "v2", **opts)
+    convert([src], base / "v1", layout="words", **opts)
+    return src, base / "v1", base / "v2"
+
+
+@pytest.mark.parametrize("scale,offset", [(0.01, (500_000.0, 4_800_000.0, 100.0)), (0.001, (-73.0, 10.0, 0.5)), (0.25, (0.0, 0.0, 0.0))])
+def test_every_point_exact_at_the_source_scale(tmp_path, scale, offset):
+    src = _write_las(tmp_path / "in.las", 20_000, scale, offset, seed=int(scale * 1000))
+    convert([src], tmp_path / "oct", max_leaf=1_000, partition_points=8_000)
+    oc = open_octree(tmp_path / "oct")
+    assert isinstance(oc, CompactOctree) and oc.meta["version"] == 2 and oc.meta["scale"] == [scale] * 3
+    grid, scales, offsets = _source_grid(src)
+    np.testing.assert_array_equal(_sorted_rows(_decoded_grid(oc, scales, offsets)), _sorted_rows(grid))
+
+
+def test_autzen_every_point_exact_and_half_the_bytes(tmp_path):
+    if not AUTZEN.exists():
+        pytest.skip("shared sample autzen_trim.laz not present")
+    convert([AUTZEN], tmp_path / "v2")
+    convert([AUTZEN], tmp_path / "v1", layout="words")
+    oc = open_octree(tmp_path / "v2")
+    grid, scales, offsets = _source_grid(AUTZEN)
+    np.testing.assert_array_equal(_sorted_rows(_decoded_grid(oc, scales, offsets)), _sorted_rows(grid))
+    size = {v: sum(f.stat().st_size for f in (tmp_path / v).iterdir()) for v in ("v1", "v2")}
+    assert size["v1"] >= 2 * size["v2"], size
+
+
+def test_colors_and_attributes_are_the_previous_formats(las_pair):
+    """Same nodes, same points in each node, colours and attributes bit for bit; positions
+    within version 1's 30-bit cell."""
+    _, p1, p2 = las_pair
+    a, b = open_octree(p1), open_octree(p2)
+    assert type(a) is OctreeCloud and a.meta["version"] == 1 and isinstance(b, CompactOctree)
+    np.testing.assert_array_equal(a.keys, b.keys)
+    np.testing.assert_array_equal(a.nodes["count"], b.nodes["count"])
+    np.testing.assert_array_equal(a.nodes["first"], b.nodes["first"])
+    for k in ("color", "rgba"):
+        np.testing.assert_array_equal(np.asarray(a.arrays[k]), b.arrays[k], err_msg=k)
+    assert set(a.attributes) == set(b.attributes) >= {"intensity", "classification", "gps_time"}
+    for k in a.attributes:
+        np.testing.assert_array_equal(np.asarray(a.attributes[k]), b.attributes[k], err_msg=k)
+        assert b.attributes[k].dtype == a.attributes[k].dtype
+    for i in range(len(a.keys)):
+        pa, pb = a.node_points(i), b.node_points(i)
+        size = a.nodes["bbox_max"][i] - a.nodes["bbox_min"][i]
+        assert np.all(np.abs(pa["xyz"] - pb["xyz"]) <= size / 2**30 + 1e-6)
+        # the node's arrays as the arena gets them equal the whole-file decoding
+        arrays, attrs, first = b.node_arrays(i)
+        s = slice(int(b.nodes["first"][i]), int(b.nodes["first"][i] + b.nodes["count"][i]))
+        for k in ("low", "med", "high", "color", "rgba"):
+            np.testing.assert_array_equal(arrays[k], b.arrays[k][s])
+    info = octree_info(p2)
+    assert info["format"] == "gigapoint octree 2" and info["point_count"] == 60_000
+    assert octree_info(p1)["format"] == "gigapoint octree 1"
+
+    def on_disk(path) -> dict:
+        text = octree_info(path)["details"]["on disk"].split(" bytes")[0]
+        return {k: float(v) for k, v in (part.split() for part in text.split(", "))}
+
+    old, new = on_disk(p1), on_disk(p2)
+    assert old["positions"] == pytest.approx(12.0, abs=0.02) and old["colour"] == pytest.approx(8.0, abs=0.02)
+    assert 4.0 < new["positions"] < 7.0 and new["colour"] < 6.0 and new["attributes"] < old["attributes"] / 2
+
+
+def _twin(oc: CompactOctree) -> OctreeCloud:
+    """The same octree in the three-word layout (same boxes), as version 1 holds it."""
+    arrays = {k: np.array(oc.arrays[k]) for k in ("low", "med", "high", "color", "rgba")}
+    return OctreeCloud(oc.name, oc.meta, oc.nodes.copy(), oc.keys, arrays, {a: np.array(v) for a, v in oc.attributes.items()})
+
+
+CAMS = [
+    lambda b: Camera.fit(b, view="iso", width=320, height=240),
+    lambda b: Camera.fit(b, view="top", width=300, height=300),
+]
+
+
+@pytest.mark.parametrize("budget", [10**9, 15_000])
+@pytest.mark.parametrize("make_camera", CAMS)
+def test_renders_equal_the_three_word_layout(las_pair, make_camera, budget):
+    """Nodes decoded into the arena draw exactly as the same boxes in three words do (the LOD
+    selection, the budget and the adaptive precision included), and within a pixel of the
+    version 1 conversion (its tight boxes quantize differently)."""
+    _, p1, p2 = las_pair
+    oc = open_octree(p2)
+    cam = make_camera(oc.bounds)
+    settings = RenderSettings(backend="cpu", size_mode="fixed", point_budget=budget)
+    mine = render_frame(oc, cam, settings)
+    twin = render_frame(_twin(oc), cam, settings)
+    assert (~mine.empty).sum() > 1000
+    np.testing.assert_array_equal(mine.image, twin.image)
+    np.testing.assert_array_equal(mine.depth, twin.depth)
+    old = render_frame(open_octree(p1), cam, settings)
+    assert mine.stats.points_processed == old.stats.points_processed
+    assert (mine.empty != old.empty).mean() < 0.002
+    assert np.all(mine.image == old.image, axis=2).mean() > 0.99
+
+
+def test_without_a_source_grid_the_words_are_the_previous_formats(tmp_path):
+    """Float inputs (no scale): every node is wide, i.e. version 1's tight box and 30-bit words,
+    so the images are the previous format's bit for bit."""
+    rng = np.random.default_rng(5)
+    xyz = rng.random((30_000, 3)) * [300, 200, 20]
+    rgba = rng.integers(0, 256, (30_000, 4), dtype=np.uint8)
+    rgba[:, 3] = 255
+    chunks = [
+        PointChunk(xyz[s : s + 10_000], rgba[s : s + 10_000], {"intensity": np.arange(s, s + 10_000, dtype=np.int32) - 5})
+        for s in range(0, 30_000, 10_000)
+    ]
+    convert(chunks, tmp_path / "v2", max_leaf=1_000)
+    convert(chunks, tmp_path / "v1", max_leaf=1_000, layout="words")
+    a, b = open_octree(tmp_path / "v1"), open_octree(tmp_path / "v2")
+    assert b.meta["scale"] is None
+    np.testing.assert_array_equal(a.nodes, b.nodes)
+    for k in ("low", "med", "high", "color", "rgba"):
+        np.testing.assert_array_equal(np.asarray(a.arrays[k]), b.arrays[k], err_msg=k)
+    np.testing.assert_array_equal(np.asarray(a.attributes["intensity"]), b.attributes["intensity"])
+    cam = Camera.fit(a.bounds, view="iso", width=320, height=240)
+    for budget in (10**9, 8_000):
+        s = RenderSettings(backend="cpu", size_mode="fixed", point_budget=budget)
+        np.testing.assert_array_equal(render_frame(a, cam, s).image, render_frame(b, cam, s).image)
+
+
+def test_16_bit_colors_on_request(las_pair, tmp_path):
+    src, p1, p2 = las_pair
+    convert([src], tmp_path / "c16", max_leaf=2_000, partition_points=20_000, colors="rgb565")
+    a, b = open_octree(p2), open_octree(tmp_path / "c16")
+    assert b.meta["colors"] == "rgb565" and b.meta["field_dtypes"]["rgba"] == "<u2"
+    for k in ("rgba", "color"):
+        diff = np.abs(a.arrays[k].view(np.uint8).astype(int) - b.arrays[k].view(np.uint8).astype(int))
+        assert diff.max() <= 4, k
+    size = {p: sum(f.stat().st_size for f in Path(p).iterdir()) for p in (p2, tmp_path / "c16")}
+    assert size[tmp_path / "c16"] < size[p2]
+
+
+def test_options_are_checked(tmp_path):
+    chunks = [PointChunk(np.zeros((10, 3)))]
+    with pytest.raises(ConvertError, match="--layout"):
+        convert(chunks, tmp_path / "a", layout="bits")
+    with pytest.raises(ConvertError, match="--colors"):
+        convert(chunks, tmp_path / "b", colors="rgb332")
+
+
+@pytest.mark.parametrize("dtype", ["u1", "<u2", "<u4", "<u8", "i1", "<i2", "<i4", "<i8", "<f4", "<f8", "?"])
+def test_fields_pack_every_dtype_losslessly(dtype):
+    rng = np.random.default_rng(1)
+    dt = np.dtype(dtype)
+    if dt.kind == "f":
+        v = rng.normal(0, 1e6, 5_000).astype(dt)
+        v[:3] = [np.nan, -np.inf, -0.0]
+    elif dt.kind == "b":
+        v = rng.random(5_000) < 0.3
+    else:
+        info = np.iinfo(dt)
+        v = rng.integers(info.min, info.max, 5_000, dtype=dt, endpoint=True)
+        v[100:300] = 7  # a constant node: 0 bits
+    counts = np.array([0, 1, 99, 200, 700, 4_000], np.int64)
+    firsts = np.cumsum(counts) - counts
+    rec, stream = pack_field(v, firsts, counts)
+    assert rec["bits"][0] == 0 and rec["bits"][1] == 0  # empty and one-point nodes hold no bits
+    from gigapoint.lod.compact_octree import _field_read_all
+
+    out = np.zeros(len(v), np.uint64)
+    _field_read_all(stream, firsts, counts, rec["word0"].copy(), rec["bits"].astype(np.uint64), rec["base"].copy(), out)
+    back = from_keys(out, dt)
+    np.testing.assert_array_equal(back.view(f"u{dt.itemsize}"), v.view(f"u{dt.itemsize}"))
+    np.testing.assert_array_equal(from_keys(to_keys(v), dt).view(f"u{dt.itemsize}"), v.view(f"u{dt.itemsize}"))
+
+
+# --------------------------------------------------------------------------- corrupt files
+
+
+@pytest.fixture
+def damaged(las_pair, tmp_path):
+    """A fresh copy of the version 2 octree to damage."""
+    import shutil
+
+    _, _, p2 = las_pair
+    shutil.copytree(p2, tmp_path / "oct")
+    return OctreeDir(tmp_path / "oct")
+
+
+def _truncate(path: Path, keep: int) -> None:
+    data = path.read_bytes()
+    path.write_bytes(data[:keep])
+
+
+def _shorter_stream(path: Path) -> None:
+    a = np.load(path)
+    np.save(path, a[: len(a) - 5])
+
+
+def _fewer_records(path: Path) -> None:
+    a = np.load(path)
+    np.save(path, a[:-1])
+
+
+def _wrong_count(d: OctreeDir) -> None:
+    meta = json.loads(d.meta.read_text())
+    meta["points"] += 1
+    d.meta.write_text(json.dumps(meta))
+
+
+def _bad_code(path: Path) -> None:
+    a = np.load(path)
+    a["code"][0] = 33
+    np.save(path, a)
+
+
+DAMAGE = {
+    "truncated low": ("low", lambda d: _truncate(d.array("low"), 1000), "low.npy"),
+    "truncated ext": ("ext", lambda d: _truncate(d.array("ext"), 500), "ext.npy"),
+    "short ext stream": ("ext", lambda d: _shorter_stream(d.array("ext")), "ext.npy"),
+    "short colour stream": ("rgba", lambda d: _shorter_stream(d.array("field.rgba")), "field.rgba.npy"),
+    "short attribute stream": ("intensity", lambda d: _shorter_stream(d.array("field.attr.intensity")), "field.attr.intensity.npy"),
+    "pack records missing": ("pack", lambda d: _fewer_records(d.array("pack")), "pack.npy"),
+    "field records missing": ("fields", lambda d: _fewer_records(d.array("fields")), "fields.npy"),
+    "point count mismatch": ("count", _wrong_count, "nodes.npy"),
+    "bad layout code": ("code", lambda d: _bad_code(d.array("pack")), "pack.npy"),
+    "missing stream": ("missing", lambda d: d.array("field.color").unlink(), "field.color.npy"),
+}
+
+
+@pytest.mark.parametrize("case", list(DAMAGE))
+def test_corrupt_payloads_are_one_line_errors_naming_the_file(damaged, case):
+    _, damage, name = DAMAGE[case]
+    damage(damaged)
+    with pytest.raises(InputError) as err:
+        open_octree(damaged.path)
+    msg = str(err.value)
+    assert "\n" not in msg and name in msg, msg
