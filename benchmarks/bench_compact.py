@@ -131,24 +131,10 @@ def scene(name: str, cloud, reference_xyz, args) -> bool:
 
 
 def write_town_las(path: Path, n: int, scale: float) -> Path:
-    """The demo town as a LAS 1.2 file (point format 3) at ``scale`` metres, written in chunks."""
-    import laspy
+    """The demo town as a LAS 1.2 file (point format 3) at ``scale`` metres: bench_convert's writer."""
+    from bench_convert import write_las  # a sibling script: its folder is sys.path[0]
 
-    from gigapoint.io import demo_chunks
-
-    header = laspy.LasHeader(point_format=3, version="1.2")
-    header.scales = [scale] * 3
-    header.offsets = [0.0, 0.0, 0.0]
-    with laspy.open(str(path), mode="w", header=header) as writer:
-        for chunk in demo_chunks(n, chunk_size=1_000_000):
-            rec = laspy.ScaleAwarePointRecord.zeros(len(chunk), header=header)
-            rec.x, rec.y, rec.z = chunk.xyz[:, 0], chunk.xyz[:, 1], chunk.xyz[:, 2]
-            rgb = chunk.rgba[:, :3].astype(np.uint16) * 257
-            rec.red, rec.green, rec.blue = rgb[:, 0], rgb[:, 1], rgb[:, 2]
-            rec.intensity = chunk.attributes["intensity"]
-            rec.classification = chunk.attributes["classification"]
-            writer.write_points(rec)
-    return path
+    return write_las(path, n, scale)
 
 
 def folder_bytes(path: Path) -> int:

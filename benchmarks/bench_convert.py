@@ -38,13 +38,14 @@ print(json.dumps({"points": r.points, "nodes": r.nodes, "seconds": time.perf_cou
 """
 
 
-def write_las(path: Path, n: int) -> None:
+def write_las(path: Path, n: int, scale: float = 0.001) -> Path:
+    """The demo town's first ``n`` points as a LAS 1.2 file (point format 3) at ``scale`` metres, in chunks."""
     import laspy
 
     from gigapoint.io import demo_chunks
 
     header = laspy.LasHeader(point_format=3, version="1.2")
-    header.scales = [0.001] * 3
+    header.scales = [scale] * 3
     header.offsets = [0.0, 0.0, 0.0]
     with laspy.open(str(path), mode="w", header=header) as writer:
         for chunk in demo_chunks(n, chunk_size=1_000_000):
@@ -55,6 +56,7 @@ def write_las(path: Path, n: int) -> None:
             rec.intensity = chunk.attributes["intensity"]
             rec.classification = chunk.attributes["classification"]
             writer.write_points(rec)
+    return path
 
 
 def demo_las_in(workdir: str | None, n: int, prefix: str) -> tuple[Path, Path]:
