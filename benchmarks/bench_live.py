@@ -120,12 +120,16 @@ def bench_stream(frames, keep, fps, seconds) -> None:
     t0 = time.perf_counter()
     thread.start()
     drawn, seen, render_ms = 0, live.changes, []
+    rss, next_sample = [], t0
     while time.perf_counter() - t0 < seconds:  # as the viewer does: draw again when the cloud changed
         seen = live.wait_frame(seen, timeout=0.1)
         frame = gp.render_frame(live, cam)
         live.drawn(frame)
         render_ms.append(frame.stats.time_ms)
         drawn += 1
+        if time.perf_counter() >= next_sample:  # resident memory every 10 s: flat when the ring reuses its chunks
+            rss.append((time.perf_counter() - t0, _rss_mb(), pushed[0]))
+            next_sample += 10.0
     elapsed = time.perf_counter() - t0
     stop.set()
     thread.join()
@@ -134,6 +138,11 @@ def bench_stream(frames, keep, fps, seconds) -> None:
           f"{pushed[0] / elapsed:.1f} frames/s pushed, {drawn / elapsed:.1f} frames rendered/s (1280x720, "
           f"{statistics.median(render_ms):.0f} ms median), push-to-pixels latency median {np.median(lat):.0f} ms, "
           f"p99 {np.percentile(lat, 99):.0f} ms ({len(lat)} pushes seen)")  # fmt: skip
+    if len(rss) > 2:
+        later = [mb for t, mb, _ in rss if t >= 10.0]
+        print(f"resident memory over the stream: {rss[1][1]:.0f} MB at {rss[1][0]:.0f} s ({rss[1][2]} frames pushed), "
+              f"{rss[-1][1]:.0f} MB at {rss[-1][0]:.0f} s ({rss[-1][2]} frames), max {max(later):.0f} MB, "
+              f"min {min(later):.0f} MB after 10 s")  # fmt: skip
 
 
 def bench_snapshot(frames, keep) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numba
@@ -109,16 +110,19 @@ def _in_bands(kernel, args: tuple, n_bands: int, n_threads: int) -> None:
         f.result()
 
 
-_BAND_POOL: list = []
+_BAND_POOLS: dict[int, ThreadPoolExecutor] = {}
+_BAND_POOLS_LOCK = threading.Lock()
 
 
 def _band_pool(workers: int) -> ThreadPoolExecutor:
-    """The threads that run the other bands of ``_in_bands`` (kept between frames)."""
-    if not _BAND_POOL or _BAND_POOL[0][0] != workers:
-        if _BAND_POOL:
-            _BAND_POOL.pop()[1].shutdown(wait=False)
-        _BAND_POOL.append((workers, ThreadPoolExecutor(workers, thread_name_prefix="gigapoint-bands")))
-    return _BAND_POOL[0][1]
+    """The threads that run the other bands of ``_in_bands``, one pool per thread count, kept
+    between frames (several renderers, e.g. viewer sessions with other thread settings, may
+    draw at once: a pool is never shut down under another's frame)."""
+    with _BAND_POOLS_LOCK:
+        pool = _BAND_POOLS.get(workers)
+        if pool is None:
+            pool = _BAND_POOLS[workers] = ThreadPoolExecutor(workers, thread_name_prefix="gigapoint-bands")
+        return pool
 
 
 @functools.lru_cache(maxsize=8)
