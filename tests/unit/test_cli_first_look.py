@@ -230,3 +230,18 @@ def test_potree_info_lists_its_attributes_and_keeps_the_crs(tmp_path, capsys, au
     assert {"intensity", "classification"} <= set(info["attributes"]) and "NAD_1983" in info["crs"]
     rc, text, _ = run(capsys, "info", out)
     assert rc == 0 and "attributes:  none" not in text and "intensity" in text and "crs:" in text and "NAD_1983" in text
+
+
+def test_the_viewer_process_prefers_passive_openmp_waits(monkeypatch):
+    """`gigapoint view` (and `demo --live`) set OMP_WAIT_POLICY=passive before any kernel runs,
+    unless the user set it: their frames share the cores with a loader or a sensor's producer."""
+    import os
+
+    from gigapoint.cli.app import prefer_passive_wait
+
+    monkeypatch.delenv("OMP_WAIT_POLICY", raising=False)
+    prefer_passive_wait()
+    assert os.environ["OMP_WAIT_POLICY"] == "passive"
+    monkeypatch.setenv("OMP_WAIT_POLICY", "active")
+    prefer_passive_wait()
+    assert os.environ["OMP_WAIT_POLICY"] == "active"

@@ -14,6 +14,9 @@ def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: floa
               rate: float | None = 1.0, loop: bool = False, host: str = "127.0.0.1", port: int = 0, browser: bool = True,
               open_browser=None) -> None:  # fmt: skip
     """Play ``source`` into a LiveCloud and serve the viewer on it until Ctrl+C."""
+    from .app import prefer_passive_wait
+
+    prefer_passive_wait()  # `gigapoint demo --live` comes here without `view`
     from ..live import LiveCloud
     from ..live.sources import Player, ReplaySource, SyntheticSensor, open_source
     from ..viewer.server import ViewerServer

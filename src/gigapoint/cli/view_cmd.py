@@ -11,7 +11,7 @@ from pathlib import Path
 import typer
 
 from ..errors import GigapointError
-from .app import app
+from .app import app, prefer_passive_wait
 
 
 def _open_browser(url: str) -> None:
@@ -43,6 +43,7 @@ def view(
     record: Path | None = typer.Option(None, "--record", help="Live: also record the stream into this folder."),
 ) -> None:
     """Serve an interactive viewer of PATH... in the browser (Ctrl+C stops it)."""
+    prefer_passive_wait()
     if live is not None or replay is not None:
         from .live_cmd import check_live_options, view_live
 

@@ -41,7 +41,7 @@ from ..core.quantize import make_batches, quantize
 from ..core.renderable import DrawList
 from ..core.selection import Selection, View, select_view, subsample_step
 from ..errors import GigapointError, InputError
-from ..lod.build import valid_bounds
+from ..lod.build import take, valid_bounds
 from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
 from .depth import depth_to_points, parse_pose
 from .ring import BASE_ATTRIBUTES, NORMAL_PARTS, LiveBuffers, LiveLock, attribute_dtype
@@ -110,8 +110,9 @@ def batch_frame(pts: np.ndarray, rgba: np.ndarray, attributes: dict, lo, hi, chu
     order = argsort_codes(morton_codes(pts, origin, edge))
     batches = make_batches(len(pts), chunk)
     low, med, high = quantize(pts, order, batches)
-    color = np.ascontiguousarray(rgba, np.uint8).view(np.uint32).reshape(-1)[order]
-    return PointCloud(batches, low, med, high, color, {a: np.asarray(v)[order] for a, v in attributes.items()}, name="frame")
+    color = take(np.ascontiguousarray(rgba, np.uint8).view(np.uint32).reshape(-1), order)
+    # gathered in parallel: numpy's fancy indexing of the (N, 3) normals alone took ~3 ms a frame
+    return PointCloud(batches, low, med, high, color, {a: take(np.asarray(v), order) for a, v in attributes.items()}, name="frame")
 
 
 class LiveCloud:
@@ -541,7 +542,6 @@ class LiveCloud:
         if not normals:
             attrs = {a: v for a, v in attrs.items() if a not in NORMAL_PARTS}
         if self.snapshots is None:
-            from ..lod.build import valid_bounds
             from ..lod.progressive import ProgressiveOctree
 
             _, lo, hi = valid_bounds(xyz, np.inf)  # one parallel pass (numpy's min(axis=0) over (N, 3) is ~10x slower)
