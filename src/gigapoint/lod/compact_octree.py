@@ -43,7 +43,6 @@ from ..errors import InputError
 from .octree_dir import OctreeDir
 from .store import OctreeCloud
 
-FORMAT_VERSION_COMPACT = 2
 FIELD_DTYPE = np.dtype([("base", "<u8"), ("word0", "<u8"), ("bits", "<u4"), ("_pad", "<u4")])
 LAYOUTS = ("compact", "words")
 COLOR_FORMATS = ("rgba", "rgb565")
@@ -335,7 +334,6 @@ def read_compact(d: OctreeDir, meta: dict) -> CompactOctree:
 __all__ = [
     "COLOR_FORMATS",
     "FIELD_DTYPE",
-    "FORMAT_VERSION_COMPACT",
     "LAYOUTS",
     "CompactOctree",
     "encode_nodes",

@@ -109,6 +109,8 @@ ATTRIBUTE_DTYPES = {
     "point_source_id": np.dtype(np.uint16),
     "gps_time": np.dtype(np.float64),
 }
+#: Attributes point format 6/7/8 has a field for (nir: 8 only); the writer stores any other in extra bytes.
+LAS_FIELD_ATTRIBUTES = frozenset({*ATTRIBUTE_DTYPES, "nir"})
 
 COPC_USER_ID = b"copc"
 COPC_INFO_RECORD = 1
@@ -199,7 +201,7 @@ def extra_fields(vlrs) -> list[ExtraField]:
                 continue
             if kind not in EXTRA_BYTES_TYPES:
                 raise ValueError(f"its extra bytes field {name!r} has data type {kind}, which LAS 1.4 R15 no longer defines (1-10)")
-            if not name or name in seen or name in ATTRIBUTE_DTYPES or name == "nir":
+            if not name or name in seen or name in LAS_FIELD_ATTRIBUTES:
                 out.append(ExtraField(f"_extra{i}", EXTRA_BYTES_TYPES[kind]))
                 continue
             seen.add(name)
@@ -289,8 +291,9 @@ class CopcCloud(VoxelOctree):
         except ValueError as exc:
             raise InputError(f"{name}: corrupt COPC file: {exc}") from None
         try:
-            self.extra = [f for f in extra_fields(vlrs) if not f.name.startswith("_extra")]
-            self.record = point_dtype(fmt, rec_len, extra_fields(vlrs))
+            fields = extra_fields(vlrs)
+            self.record = point_dtype(fmt, rec_len, fields)
+            self.extra = [f for f in fields if not f.name.startswith("_extra")]  # the named ones: attributes
         except ValueError as exc:
             raise InputError(f"{name}: corrupt COPC header: {exc}") from None
         info = np.frombuffer(head, COPC_INFO_DTYPE, count=1, offset=INFO_OFFSET)[0]

@@ -26,7 +26,6 @@ from numba import njit
 from ..atomic import atomic_open
 from ..errors import GigapointWarning
 from .copc import (
-    ATTRIBUTE_DTYPES,
     COPC_HIERARCHY_RECORD,
     COPC_INFO_DTYPE,
     COPC_INFO_RECORD,
@@ -38,6 +37,7 @@ from .copc import (
     EXTRA_BYTES_USER_ID,
     HIERARCHY_ENTRY_DTYPE,
     LAS14_HEADER_DTYPE,
+    LAS_FIELD_ATTRIBUTES,
     LASZIP_RECORD,
     LASZIP_USER_ID,
     POINT_DTYPES,
@@ -81,16 +81,15 @@ def extra_attributes(attributes: dict, where: str = "COPC") -> dict[str, np.dtyp
     cannot be stored (a name that is not ASCII or longer than 32 bytes, a non-scalar dtype) is
     left out with a warning."""
     out = {}
-    by_dtype = {dt: dt for dt in EXTRA_BYTES_TYPES.values()}
     for name, dt in attributes.items():
-        if name in ATTRIBUTE_DTYPES or name == "nir":
+        if name in LAS_FIELD_ATTRIBUTES:
             continue
         dt = np.dtype(dt)
         stored = np.dtype(np.uint8) if dt == np.bool_ else np.dtype(np.float32) if dt == np.float16 else dt.newbyteorder("<")
         problem = None
         if not name.isascii() or not 0 < len(name) <= 32:
             problem = "its name is not 1-32 ASCII characters"
-        elif stored not in by_dtype:
+        elif stored not in EXTRA_BYTES_TYPES.values():
             problem = f"its dtype {dt} is not a LAS extra bytes type (8-64-bit integers and floats)"
         if problem:
             warnings.warn(f"{where}: attribute {name!r} is not written: {problem}", GigapointWarning, stacklevel=3)

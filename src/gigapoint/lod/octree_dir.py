@@ -49,7 +49,8 @@ from ..errors import GigapointError
 GIGAPOINT_META = "octree.json"
 FORMAT_NAME = "gigapoint-octree"  # octree.json's "format"
 FORMAT_VERSION = 2  # written by default (compact_octree.py); version 1 is still read and written
-FORMAT_VERSIONS = (1, 2)
+FORMAT_VERSION_WORDS = 1  # three u32 words a point (store.read_gigapoint; `layout="words"`)
+FORMAT_VERSIONS = (FORMAT_VERSION_WORDS, FORMAT_VERSION)
 POINT_ARRAYS = ("low", "med", "high", "color", "rgba")  # one entry per point each (version 1)
 COMPACT_ARRAYS = ("low", "pack", "ext", "fields")  # version 2, besides field.<name>.npy
 POTREE_META = "metadata.json"

@@ -15,7 +15,7 @@ from ..io.http import as_url
 from .compact_octree import read_compact
 from .copc import is_copc_file, open_copc
 from .ept import ept_location, open_ept
-from .octree_dir import RESUME_HINT, OctreeDir
+from .octree_dir import FORMAT_VERSION, RESUME_HINT, OctreeDir
 from .potree import read_potree
 from .preview import open_preview
 from .store import OctreeCloud, read_gigapoint, read_meta
@@ -65,7 +65,7 @@ def open_octree(path) -> OctreeCloud | PointCloud:
     kind = d.kind
     if kind == "gigapoint":
         meta = read_meta(d)
-        return read_compact(d, meta) if meta["version"] == 2 else read_gigapoint(d, meta)
+        return read_compact(d, meta) if meta["version"] == FORMAT_VERSION else read_gigapoint(d, meta)
     if kind == "potree":
         return read_potree(d)
     if kind == "unfinished":

@@ -23,9 +23,9 @@ from ..core.quantize import dequantize
 from ..core.renderable import DrawList, MultiViewDrawList
 from ..core.selection import Selection, View, batch_matrices, box_in_view, precision_for, visible_and_size
 from ..errors import InputError
-from ..render.splats import finest_spacing
+from ..render.splats import finest_spacing, union_gain
 from .keys import key_cube
-from .octree_dir import FORMAT_NAME, FORMAT_VERSIONS, POINT_ARRAYS, OctreeDir
+from .octree_dir import FORMAT_NAME, FORMAT_VERSION_WORDS, FORMAT_VERSIONS, POINT_ARRAYS, OctreeDir
 
 ARENA_CHUNK = 4096  # points per arena slot (a node spans ceil(count / ARENA_CHUNK) slots)
 
@@ -308,6 +308,8 @@ class OctreeCloud:
         self.path = path
         self.filtered_colors = True
         self.arena: Arena | None = None
+        self._union_gain: np.ndarray | None = None  # adaptive sizes' per-node facts (prepare), made on first use
+        self._node_spacing: np.ndarray | None = None
         self.counts = nodes["count"].astype(np.int64)  # node counts never change: widened once, not per frame
         self.cube_min, self.cube_edge = key_cube(self.keys, meta["cube_min"], float(meta["cube_edge"]))
         lo, hi = self.bounds
@@ -407,8 +409,12 @@ class OctreeCloud:
         order = np.argsort(slots, kind="stable")
         slots, owner = slots[order], owner[order]
         sel = Selection(slots.astype(np.int64), bits[owner].astype(np.int32), mats[owner], size[owner], int(len(self.keys) - len(ids)))
-        adaptive = settings.point_sizing == "adaptive"  # its sizes from the nodes drawn finest (issue #17)
-        spacing = finest_spacing(arena, sel.ids, owner, ids, self.children, self.counts) if adaptive else None
+        spacing = None
+        if settings.point_sizing == "adaptive":  # its sizes from the nodes drawn finest (issue #17)
+            if self._node_spacing is None:  # the hierarchy's share of ancestors' points, once: nodes never change
+                self._union_gain = union_gain(self.children, self.counts)
+                self._node_spacing = np.full(len(self.counts), np.nan)  # each node's own, measured when first drawn finest
+            spacing = finest_spacing(arena, sel.ids, owner, ids, self.children, self.counts, self._union_gain, self._node_spacing)
         return DrawList(arena, sel, len(self.nodes), nodes=ids, spacing=spacing)
 
     def prepare_views(self, views, settings) -> MultiViewDrawList | None:
@@ -438,7 +444,7 @@ def read_gigapoint(octree_dir, meta: dict | None = None) -> OctreeCloud:
     d = OctreeDir(octree_dir)
     p = d.path
     meta = read_meta(d) if meta is None else meta
-    if meta["version"] != 1:
+    if meta["version"] != FORMAT_VERSION_WORDS:
         raise InputError(f"{d.meta}: a version {meta['version']} octree; open it with gigapoint.open")
     try:
         nodes = np.load(d.array("nodes"))

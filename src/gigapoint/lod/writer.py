@@ -13,7 +13,7 @@ from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
 from .compact_octree import field_names
 from .keys import key_cube, level_of
-from .octree_dir import FORMAT_NAME, FORMAT_VERSION, POINT_ARRAYS, OctreeDir
+from .octree_dir import FORMAT_NAME, FORMAT_VERSION, FORMAT_VERSION_WORDS, POINT_ARRAYS, OctreeDir
 
 
 def point_dtypes(attributes: dict, compact: bool = False) -> dict[str, np.dtype]:
@@ -102,7 +102,7 @@ def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sa
     lo, hi = np.array(st["lo"]), np.array(st["hi"])
     meta = {
         "format": FORMAT_NAME,
-        "version": FORMAT_VERSION if plan is not None else 1,
+        "version": FORMAT_VERSION if plan is not None else FORMAT_VERSION_WORDS,
         "name": name,
         "points": int(total),
         "nodes": len(keys),

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import functools
 import math
-import weakref
 
 import numpy as np
 
@@ -114,21 +113,25 @@ def batch_spacings(
     return ids, np.where(np.isfinite(cell), cell, 0.0) * np.sqrt(voxels / drawn), drawn  # sqrt(voxels x cell^2 / drawn)
 
 
-def finest_spacing(points, slots: np.ndarray, slot_node: np.ndarray, nodes: np.ndarray, children: np.ndarray, counts: np.ndarray) -> float:
+def finest_spacing(points, slots: np.ndarray, slot_node: np.ndarray, nodes: np.ndarray, children: np.ndarray, counts: np.ndarray,
+                   gain: np.ndarray | None = None, own: np.ndarray | None = None) -> float:  # fmt: skip
     """Spacing of an octree's drawn points, for ``DrawList.spacing``. Drawn ``nodes`` (ancestors
     before descendants) have their points in batches ``slots`` (batch i: node
     ``nodes[slot_node[i]]``, all of its points); ``children`` (all nodes, 8; -1: none) and
     ``counts`` (their points) are the hierarchy. Where a node is drawn without any of its
     children it is the finest level drawn, its drawn ancestors' points there adding to its own
-    (``union_gain``); the spacing there is its own points' area (``batch_spacings`` of all its
-    points: the same whatever their order or slots) over that union, the median over the points.
-    A node's own spacing is measured once (kept with the hierarchy's arrays): a frame pays a median.
+    (``gain``: ``union_gain`` of the hierarchy); the spacing there is its own points' area
+    (``batch_spacings`` of all its points: the same whatever their order or slots) over that
+    union, the median over the points. ``own``: each node's own spacing, NaN until measured,
+    filled here: an octree keeps both arrays (lod/store.OctreeCloud), so a frame measures only
+    the nodes it draws finest for the first time and pays a median otherwise.
 
     What it replaces: the spacing of every drawn node's batches alone (what a frame without
     ``DrawList.spacing`` gets) counts each level's sparse subsample, 1.5-3 times too large; the
     levels' grid spacing (the converter's cube edge / 128 / 2^level) is a bound only: data
     sparser than a level's grid fills it with every point it has."""
-    gain, own = _hierarchy(children, counts)
+    gain = union_gain(children, counts) if gain is None else gain
+    own = np.full(len(counts), np.nan) if own is None else own
     finest = nodes[~np.isin(children[nodes], nodes).any(axis=1)]
     finest = np.unique(finest[counts[finest] > 0])
     unknown = finest[np.isnan(own[finest])]
@@ -151,18 +154,6 @@ def union_gain(children: np.ndarray, counts: np.ndarray) -> np.ndarray:
     the ancestors' share estimated by the data's: a node at level L holds ``subtree[n] /
     subtree[a]`` of ancestor a's points (``subtree``: points of a node and all its descendants).
     Nodes are numbered parents first (sorted keys). 1 for an empty node."""
-    return _hierarchy(children, counts)[0]
-
-
-_HIERARCHIES: dict = {}
-
-
-def _hierarchy(children: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(``union_gain``, each node's own spacing, NaN until measured) of a hierarchy, kept for
-    the last few asked (an octree's arrays never change)."""
-    hit = _HIERARCHIES.get(id(children))
-    if hit is not None and hit[0]() is children and hit[1]() is counts:
-        return hit[2], hit[3]
     n = len(counts)
     c = counts.astype(np.float64)
     parent = np.full(n, -1, np.int64)
@@ -177,11 +168,7 @@ def _hierarchy(children: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np
     for i in range(1, n):
         if parent[i] >= 0:
             acc[i] += acc[parent[i]]
-    gain = np.divide(subtree * acc, c, out=np.ones(n), where=c > 0)
-    if len(_HIERARCHIES) >= 8:
-        _HIERARCHIES.pop(next(iter(_HIERARCHIES)))
-    _HIERARCHIES[id(children)] = (weakref.ref(children), weakref.ref(counts), gain, np.full(n, np.nan))
-    return gain, _HIERARCHIES[id(children)][3]
+    return np.divide(subtree * acc, c, out=np.ones(n), where=c > 0)
 
 
 def weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
