@@ -11,19 +11,43 @@ from .render import Camera, Frame, RenderSettings, RenderStats, render, render_f
 __version__ = "0.1.0"
 
 
-def demo(n_points: int = 1_000_000, seed: int = 0, progressive: bool = False, memory_limit: int | None = None):
+def demo(
+    n_points: int = 1_000_000,
+    seed: int = 0,
+    progressive: bool = False,
+    memory_limit: int | None = None,
+    scale: float | None = None,
+    chunked: bool | None = None,
+    attributes: bool = True,
+):
     """The procedural demo scene (terrain, roads, river, buildings, trees) as a PointCloud;
     ``progressive=True``: a ProgressiveOctree returned at once and filled in the background
-    (stopping at ``memory_limit`` bytes, by default half the machine's memory)."""
-    from .core import build_cloud
+    (stopping at ``memory_limit`` bytes, by default half the machine's memory).
+
+    ``scale``: positions rounded to a grid of that step in metres (0.01: a LAS export of the
+    town), held in the compact layout, exact at that scale (~5-7 bytes a point of position and
+    colour instead of 16). ``chunked``: built in bounded memory (core/chunked.py: the same cloud,
+    array for array, holding only the finished arrays and one partition of ~4 M points; the
+    points go through a temporary folder, ~30 bytes a point of disk); None: chunked above
+    50 M points. 10⁹ points at ``scale=0.01`` hold ~9 GB (``attributes=False``: ~6 GB, without
+    the intensity and classification)."""
     from .io.demo import demo_chunks
 
     if progressive:
         from .lod.progressive import demo_sources, open_progressive
 
         return open_progressive(*demo_sources(n_points, seed), memory_limit=memory_limit)
+    name = f"demo({n_points:,})"
+    if chunked or (chunked is None and n_points > 50_000_000):
+        from .core.chunked import build_cloud_chunked
 
-    return build_cloud(demo_chunks(n_points, seed), name=f"demo({n_points:,})")
+        return build_cloud_chunked(lambda: demo_chunks(n_points, seed, chunk_size=2_000_000, scale=scale), name=name, attributes=attributes)
+    from .core import build_cloud
+
+    chunks = demo_chunks(n_points, seed, scale=scale)
+    if not attributes:
+        chunks = (PointChunk(c.xyz, c.rgba, scale=c.scale) for c in chunks)
+    return build_cloud(chunks, name=name)
 
 
 def open(*paths, progressive: bool = False, **options):

@@ -230,3 +230,21 @@ def test_las14_with_only_the_legacy_count(tmp_path):
     _, xyz, _, _ = collect(path)
     assert len(xyz) == 321
     assert file_info(path)["point_count"] == 321
+
+
+@pytest.mark.parametrize("color16", [True, False])
+def test_small_chunks_decode_by_numpy_like_the_kernels(tmp_path, monkeypatch, color16):
+    """Chunks up to NUMPY_MAX points are decoded by numpy (a small file's first open compiles no
+    kernel); the parallel kernels decode larger ones: both give the same positions and colors."""
+    from gigapoint.io import las
+
+    path = tmp_path / "a.las"
+    write_las(path, n=3000, point_format=3, color16=color16, offset=(636_000.0, 849_000.0, 400.0), scale=0.01)
+    small = [(c.xyz.copy(), c.rgba.copy()) for c in read_chunks(path, chunk_size=1000)]
+    monkeypatch.setattr(las, "NUMPY_MAX", 0)
+    large = [(c.xyz, c.rgba) for c in read_chunks(path, chunk_size=1000)]
+    assert len(small) == len(large) == 3
+    for (xa, ca), (xb, cb) in zip(small, large):
+        np.testing.assert_array_equal(xa, xb)
+        np.testing.assert_array_equal(ca, cb)
+    assert np.ptp(np.concatenate([c for _, c in small])[:, :3]) > 100  # real colors, not a constant

@@ -231,10 +231,74 @@ def test_batch_footprint_flags_every_tile_its_points_write(demo_small):
         f, c = int(b["first"]), int(b["count"])
         pix = np.empty(c, np.int32)
         depth = np.empty(c, np.float32)
-        raster.project_batch(demo_small.low[f : f + c], demo_small.med[f : f + c], demo_small.high[f : f + c], sel.bits[k], m, w, h, np.float32(near), np.float32(far), pix, depth, False)
+        raster.project_batch(demo_small.low[f : f + c], demo_small.med[f : f + c], demo_small.high[f : f + c], sel.bits[k], m, w, h, np.float32(near), np.float32(far), pix, depth, False, raster.shape_token(m))
         dirty = np.zeros((w * h >> raster.TILE_SHIFT) + 1, np.uint8)
         assert raster.mark_footprint(m, w, h, dirty, 1 << 40)
         assert (pix >= 0).all() and dirty[pix >> raster.TILE_SHIFT].all()
         untouched = np.zeros_like(dirty)
         assert not raster.mark_footprint(m, w, h, untouched, 0) and not untouched.any()  # too sparse: the points flag their own tiles
     assert inside > 0
+
+
+@pytest.mark.parametrize("view", ["iso", "top-ortho"])
+def test_every_matrix_shape_draws_the_same_image(demo_small, view):
+    """``shape_token`` names the batch matrices' shape (the kernels are compiled per shape, with
+    that shape's loops only); the GENERAL loops, which skip nothing and always clip, give the
+    same visibility buffer bit for bit as the camera's own shape."""
+    from gigapoint.backends.numba_cpu import raster
+    from gigapoint.backends.numba_cpu.backend import NumbaCpuBackend
+
+    cam = CAMERAS[view](demo_small.bounds)
+    sel, near, far, _ = _batch_views(demo_small, cam)
+    mats = np.ascontiguousarray(sel.matrices, np.float32)
+    own = raster.shape_token(mats)
+    assert own is raster.SHAPE_TOKENS[raster.ORTHOGRAPHIC if view == "top-ortho" else raster.PERSPECTIVE]
+    skewed = mats.copy()
+    skewed[0, 2, 0] += 1e-3  # one batch's w row: no longer its depth row, nor (0, 0, 0, 1)
+    assert raster.shape_token(skewed) is raster.SHAPE_TOKENS[raster.GENERAL]
+    assert raster.shape_token(mats[:0]) is raster.SHAPE_TOKENS[raster.PERSPECTIVE]  # nothing drawn: the common shape
+
+    backend = NumbaCpuBackend()
+    drawn = {}
+    for name, token in (("own", own), ("general", raster.SHAPE_TOKENS[raster.GENERAL])):
+        real = raster.shape_token
+        raster.shape_token = lambda m, token=token: token  # the driver asks this one
+        try:
+            drawn[name] = backend.rasterize(demo_small, sel, cam.width, cam.height, near, far, threads=2)
+        finally:
+            raster.shape_token = real
+    np.testing.assert_array_equal(drawn["general"], drawn["own"])
+    np.testing.assert_array_equal(drawn["own"], reference_visibility(demo_small, cam).reshape(-1))
+
+
+def test_first_render_compiles_each_kernel_once(tmp_path, autzen_path):
+    """A first render on an empty numba cache compiles each helper for one signature (a prange
+    index typed unsigned in the parallel loop's own compile, or a constant argument typed as a
+    literal, compiled helpers twice: 3 s of a 20 s first render) and only the camera's matrix
+    shape's projection loops."""
+    import os
+    import subprocess
+    import sys
+
+    script = f"""
+import gc
+import gigapoint as gp
+from numba.core.registry import CPUDispatcher
+from gigapoint.backends.numba_cpu import raster
+cloud = gp.open({str(autzen_path)!r})
+gp.render_frame(cloud, gp.Camera.fit_cloud(cloud, width=320, height=180))
+# by design: grid_coords per precision (10/20/30), project_point clipped or not
+allowed = {{"grid_coords": 3, "project_point": 2}}
+for o in gc.get_objects():
+    if isinstance(o, CPUDispatcher) and o.py_func.__module__.startswith("gigapoint"):
+        n = len(o.signatures)
+        if n > allowed.get(o.py_func.__name__, 1):
+            print("MANY", o.py_func.__module__, o.py_func.__qualname__, n)
+loops = [raster._projection_loop(b, s, c) for b in (10, 20, 30) for s in (raster.ORTHOGRAPHIC, raster.GENERAL) for c in (True, False)]
+print("OTHER SHAPES", sum(len(f.signatures) for f in loops))
+"""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "MANY" not in out.stdout, out.stdout
+    assert "OTHER SHAPES 0" in out.stdout, out.stdout

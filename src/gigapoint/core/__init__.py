@@ -2,6 +2,7 @@
 and the Renderable contract every kind of cloud implements."""
 
 from .chunk import DEFAULT_COLOR, PointChunk, to_rgba8
+from .chunked import build_cloud_chunked
 from .cloud import PointCloud, build_cloud, cloud_from_points, from_arrays
 from .layout import BATCH_DTYPE, BATCH_SIZE, EMPTY_PIXEL
 
@@ -13,6 +14,7 @@ __all__ = [
     "PointChunk",
     "PointCloud",
     "build_cloud",
+    "build_cloud_chunked",
     "cloud_from_points",
     "from_arrays",
     "to_rgba8",

@@ -291,20 +291,8 @@ def build_cloud(
     rgba = rgba_parts[0] if len(rgba_parts) == 1 else np.concatenate(rgba_parts)
     del rgba_parts
     attributes = {a: (v[0] if len(v) == 1 else np.concatenate(v)) for a, v in attr_parts.items() if a in (attr_names or [])}
-    source_scale = None
-    if scales and all(s is not None for s in scales):  # the finest: rounding to it loses nothing any file holds
-        source_scale = tuple(float(v) for v in np.min(np.array(scales, np.float64), axis=0))
-    if layout not in LAYOUTS:
-        raise InputError(f"{name}: layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
-    if layout == "compact" and source_scale is None:
-        raise InputError(f"{name}: the compact layout needs the source's scale (a LAS file's); these chunks have none")
-    if colors not in COLOR_FORMATS:
-        raise InputError(f"{name}: colors must be one of {', '.join(COLOR_FORMATS)}, got {colors!r}")
-    compact = source_scale if layout != "words" else None
-    opaque = bool((rgba[:, 3] == 255).all())
-    if colors == "rgb565" and not opaque:
-        raise InputError(f"{name}: 16-bit colors drop alpha, and some points are not opaque; use colors='rgba'")
-    short = colors == "rgb565" or (colors == "auto" and compact is not None and opaque)
+    source_scale = finest_scale(scales)
+    compact, short = storage_format(name, layout, colors, source_scale, bool((rgba[:, 3] == 255).all()))
     cloud = cloud_from_points(xyz, rgba, attributes, name=name, skipped=skipped, batch_size=batch_size, bounds=(lo, hi), scale=compact, rgb565=short)
     cloud.source_scale = source_scale
     return cloud
@@ -313,6 +301,29 @@ def build_cloud(
 #: ``build_cloud``'s layouts and color formats
 LAYOUTS = ("auto", "words", "compact")
 COLOR_FORMATS = ("auto", "rgba", "rgb565")
+
+
+def finest_scale(scales) -> tuple[float, float, float] | None:
+    """The finest of the chunks' scales per axis (rounding to it loses nothing any file holds);
+    None where any chunk has none."""
+    if scales and all(s is not None for s in scales):
+        return tuple(float(v) for v in np.min(np.array(scales, np.float64), axis=0))
+    return None
+
+
+def storage_format(name: str, layout: str, colors: str, source_scale, opaque: bool):
+    """(the compact layout's grid or None: three words, 16-bit colors?) for ``build_cloud``'s
+    ``layout`` and ``colors`` options (and the chunked build's, core/chunked.py)."""
+    if layout not in LAYOUTS:
+        raise InputError(f"{name}: layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
+    if layout == "compact" and source_scale is None:
+        raise InputError(f"{name}: the compact layout needs the source's scale (a LAS file's); these chunks have none")
+    if colors not in COLOR_FORMATS:
+        raise InputError(f"{name}: colors must be one of {', '.join(COLOR_FORMATS)}, got {colors!r}")
+    compact = source_scale if layout != "words" else None
+    if colors == "rgb565" and not opaque:
+        raise InputError(f"{name}: 16-bit colors drop alpha, and some points are not opaque; use colors='rgba'")
+    return compact, colors == "rgb565" or (colors == "auto" and compact is not None and opaque)
 
 
 def cloud_from_points(xyz, rgba, attributes=None, name="cloud", skipped=0, batch_size=BATCH_SIZE, bounds=None, scale=None, rgb565=False) -> PointCloud:

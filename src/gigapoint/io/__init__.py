@@ -56,7 +56,13 @@ def _with_progress(path: Path, chunks: Iterator[PointChunk], total: int | None, 
 
 
 def open_cloud(
-    *paths, chunk_size: int = DEFAULT_CHUNK_SIZE, progress: bool = False, name: str | None = None, layout: str = "auto", colors: str = "auto"
+    *paths,
+    chunk_size: int = DEFAULT_CHUNK_SIZE,
+    progress: bool = False,
+    name: str | None = None,
+    layout: str = "auto",
+    colors: str = "auto",
+    chunked: bool = False,
 ) -> PointCloud:
     """Read files and/or directories (all supported files inside, sorted by name) into one PointCloud.
 
@@ -65,7 +71,9 @@ def open_cloud(
 
     Several files are merged (attributes they all have are kept). With several files, a file
     without any point is skipped with a warning; one file without points raises EmptyCloudError.
-    ``progress=True`` shows a progress bar on stderr (rich).
+    ``progress=True`` shows a progress bar on stderr (rich). ``chunked=True``: built in bounded
+    memory (core/chunked.py: the files read three times, the points spilled to a temporary
+    folder; the same cloud), for files whose points do not fit in memory as floats.
     """
     if not paths:
         raise InputError("open: no file given")
@@ -92,6 +100,10 @@ def open_cloud(
 
     def build(stream) -> PointCloud:
         try:
+            if chunked:  # ``stream``: a function giving the chunks, called once a pass
+                from ..core.chunked import build_cloud_chunked
+
+                return build_cloud_chunked(stream, name=name, layout=layout, colors=colors)
             return build_cloud(stream, name=name, layout=layout, colors=colors)
         except EmptyCloudError as exc:
             where = files[0] if not several else ", ".join(str(f) for f in files[:3]) + (" ..." if len(files) > 3 else "")
@@ -99,13 +111,13 @@ def open_cloud(
             raise EmptyCloudError(f"{where}: {detail}") from None
 
     if not progress:
-        return build(chunks())
+        return build(chunks if chunked else chunks())
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
     with Progress(*columns, console=Console(stderr=True), transient=True) as bar:
-        return build(chunks(bar))
+        return build((lambda: chunks(bar)) if chunked else chunks(bar))
 
 
 def file_info(path) -> dict:

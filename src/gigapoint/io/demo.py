@@ -338,10 +338,16 @@ def demo_arrays(n_points: int, seed: int = 0, start: int = 0, offset=(0.0, 0.0, 
     return xyz, rgba, {"classification": cls, "intensity": inten}
 
 
-def demo_chunks(n_points: int, seed: int = 0, chunk_size: int = 5_000_000, offset=(0.0, 0.0, 0.0)):
-    """The demo scene as a stream of PointChunks (bounded memory per chunk)."""
+def demo_chunks(n_points: int, seed: int = 0, chunk_size: int = 5_000_000, offset=(0.0, 0.0, 0.0), scale: float | None = None):
+    """The demo scene as a stream of PointChunks (bounded memory per chunk). ``scale``: positions
+    rounded to a grid of that step (metres), and the chunks say so, as a LAS export of the town
+    at that scale would (``build_cloud`` then holds it in the compact layout)."""
     from ..core.chunk import PointChunk
 
     for start in range(0, n_points, chunk_size):
         xyz, rgba, attrs = demo_arrays(min(chunk_size, n_points - start), seed, start, offset)
-        yield PointChunk(xyz, rgba, attrs)
+        if scale is not None:  # np.round(xyz / scale) * scale, in place
+            np.divide(xyz, scale, out=xyz)
+            np.round(xyz, out=xyz)
+            np.multiply(xyz, scale, out=xyz)
+        yield PointChunk(xyz, rgba, attrs, scale=None if scale is None else (float(scale),) * 3)

@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..core.chunk import PointChunk
-from ..core.cloud import MAX_ABS_COORDINATE
+from ..core.cloud import MAX_ABS_COORDINATE, NUMPY_MAX
 from ..errors import EmptyCloudError, InputError
 from ._base import DEFAULT_CHUNK_SIZE, ColorScaler, Reader, check_chunk_size, check_file, fail, one_line
 
@@ -314,14 +314,6 @@ def _scaled_xyz(X, Y, Z, scale, offset, out):
 
 
 @njit(parallel=True, cache=True)
-def _max3(r, g, b):
-    hi = 0
-    for i in prange(r.shape[0]):
-        hi = max(hi, max(r[i], max(g[i], b[i])))
-    return hi
-
-
-@njit(parallel=True, cache=True)
 def _rgb8(r, g, b, shift, out):
     """16-bit record colors to opaque 8-bit RGBA (ColorScaler.int_shift chose the shift)."""
     s = np.uint16(shift)
@@ -330,6 +322,35 @@ def _rgb8(r, g, b, shift, out):
         out[i, 1] = min(g[i] >> s, 255)
         out[i, 2] = min(b[i] >> s, 255)
         out[i, 3] = 255
+
+
+def _positions(raw, scale, offset) -> np.ndarray:
+    """float64 (N, 3) positions of records (fields X, Y, Z): numpy for a chunk up to
+    ``NUMPY_MAX`` points (milliseconds; a small file's first open compiles no kernel), the
+    parallel kernel beyond. The same operations, so the same values."""
+    n = len(raw)
+    xyz = np.empty((n, 3), np.float64)
+    if n <= NUMPY_MAX:
+        for a, field in enumerate("XYZ"):
+            np.add(raw[field] * scale[a], offset[a], out=xyz[:, a])
+    else:
+        _scaled_xyz(raw["X"], raw["Y"], raw["Z"], scale, offset, xyz)
+    return xyz
+
+
+def _colors(r, g, b, scaler) -> np.ndarray:
+    """Opaque 8-bit RGBA (N, 4) of 16-bit record colors (``ColorScaler`` picks the shift from
+    the largest value seen); numpy up to ``NUMPY_MAX`` points, the parallel kernel beyond."""
+    n = len(r)
+    shift = scaler.int_shift(int(max(r.max(), g.max(), b.max())) if n else 0)
+    rgba = np.empty((n, 4), np.uint8)
+    if n <= NUMPY_MAX:
+        for a, v in enumerate((r, g, b)):
+            rgba[:, a] = np.minimum(v >> np.uint16(shift), 255)
+        rgba[:, 3] = 255
+    else:
+        _rgb8(r, g, b, shift, rgba)
+    return rgba
 
 
 class LasReader(Reader):
@@ -383,13 +404,10 @@ class LasReader(Reader):
                     if n == 0:
                         break
                     raw = pts.array  # the records as read: fields are strided views, decoded in one pass each
-                    xyz = np.empty((n, 3), np.float64)
-                    _scaled_xyz(raw["X"], raw["Y"], raw["Z"], scale, offset, xyz)
+                    xyz = _positions(raw, scale, offset)
                     rgba = None
                     if has_rgb:
-                        r, g, b = raw["red"], raw["green"], raw["blue"]
-                        rgba = np.empty((n, 4), np.uint8)
-                        _rgb8(r, g, b, scaler.int_shift(int(_max3(r, g, b))), rgba)
+                        rgba = _colors(raw["red"], raw["green"], raw["blue"], scaler)
                     attributes = {a: np.ascontiguousarray(np.asarray(pts[a])) for a in attrs}
                     done += n
                     yield PointChunk(xyz, rgba, attributes, scale=stored_scale)

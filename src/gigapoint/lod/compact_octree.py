@@ -141,7 +141,7 @@ def _node_tails(ext, word0, code, med, high):
     """Medium and high words of a node's points (``expand_tails`` over the whole node, compiled
     once into the cache: a first frame does not wait for it)."""
     n = med.shape[0]
-    expand_tails(ext, word0, code, 0, n, 1, med, high, np.empty(n, np.uint64))
+    expand_tails(ext, word0, code, np.int64(0), n, np.int64(1), med, high, np.empty(n, np.uint64))
 
 
 def pack_field(values: np.ndarray, firsts: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

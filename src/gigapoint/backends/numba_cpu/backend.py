@@ -129,6 +129,7 @@ class NumbaCpuBackend:
                 np.float32(splat[1]),
                 np.float32(splat[2]),
                 np.int64(step),
+                raster.shape_token(matrices),
             )
             if n_threads > 1:
                 for v in range(n_views):

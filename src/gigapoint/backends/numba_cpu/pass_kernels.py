@@ -555,6 +555,7 @@ def hqs_shade(
     spill_n,
     fallback,
     out,
+    token,
 ):
     """High-quality shading, accumulation and resolve in one parallel pass over screen bands.
 
@@ -565,7 +566,8 @@ def hqs_shade(
     footprint rule as raster.write_batch; with ``softness`` > 0 weights 0..15 from
     ``soft_weight``), then writes its rows' rounded means to ``out`` (``fallback`` where nothing
     was added). Each pixel is summed by one thread in index order, so the image does not depend
-    on the thread count. acc and the spill arrays must be zero on entry; they are on exit."""
+    on the thread count. acc and the spill arrays must be zero on entry; they are on exit.
+    ``token``: the matrices' shape (``raster.shape_token``)."""
     n_bands = bands.shape[0] - 1
     n_fp = footprint.shape[0]
     reach, max_count = _band_reach(footprint, counts)
@@ -598,6 +600,7 @@ def hqs_shade(
                 pix[:c],
                 depth[:c],
                 clip,
+                token,
             )
             if n_fp == 1:
                 for j in range(c):
@@ -731,7 +734,7 @@ def _tr_resolve_rows(r0, r1, width, kbuf, kalpha, sums, color, table, background
 @njit(parallel=True, cache=True)
 def transparency_shade(
     firsts, counts, bits, mats, row_lo, row_hi, low, med, high, width, height, near, far, step, bands,
-    alphas, color, footprint, size, atten, kbuf, kalpha, sums, table, background, fallback, out,
+    alphas, color, footprint, size, atten, kbuf, kalpha, sums, table, background, fallback, out, token,
 ):  # fmt: skip
     """Hybrid transparency, accumulation and resolve in one parallel pass over screen bands (the
     layout of ``hqs_shade``): band t's thread re-projects (raster.py's ``project_batch``) the
@@ -742,7 +745,8 @@ def transparency_shade(
     then composites its rows over ``background`` (4 ints) with the transmittance ``table``
     (``fallback`` where nothing landed). The k-buffer keeps the
     smallest keys and the sums are integers: the image does not depend on the order or the
-    thread count. kbuf must be EMPTY and sums zero on entry; they are on exit."""
+    thread count. kbuf must be EMPTY and sums zero on entry; they are on exit. ``token``: the
+    matrices' shape (``raster.shape_token``)."""
     n_bands = bands.shape[0] - 1
     n_fp = footprint.shape[0]
     reach, max_count = _band_reach(footprint, counts)
@@ -767,7 +771,7 @@ def transparency_shade(
             c = counts[k]
             clip = not inside_frustum(mats[k], width, height, near32, far32)
             project_batch(low[first : first + c], med[first : first + c], high[first : first + c], bits[k], mats[k],
-                          width, height, near32, far32, pix[:c], depth[:c], clip)  # fmt: skip
+                          width, height, near32, far32, pix[:c], depth[:c], clip, token)  # fmt: skip
             a8 = np.uint64(alphas[k, 0])
             reveal = (np.uint64(alphas[k, 1]) << _TR_COUNT_SHIFT) + np.uint64(1)
             for j in range(0, c, step):

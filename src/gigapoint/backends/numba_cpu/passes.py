@@ -254,7 +254,7 @@ def hqs_colors(
             firsts, counts, np.ascontiguousarray(sel.bits, np.int32), matrices, row_lo, row_hi,
             points.low, *full_words(points), width, height, near, far, bands, vis.view(np.float32), np.float32(1.0 + tolerance),
             point_colors, np.ascontiguousarray(footprint, np.int32), np.float32(size), np.float32(atten), float(softness),
-            acc, spill_rg, spill_ba, spill_n, np.ascontiguousarray(fallback).reshape(-1), out,
+            acc, spill_rg, spill_ba, spill_n, np.ascontiguousarray(fallback).reshape(-1), out, raster.shape_token(matrices),
         )  # fmt: skip
     return out
 
@@ -297,7 +297,7 @@ def transparent_colors(
             firsts, counts, np.ascontiguousarray(sel.bits, np.int32), matrices, row_lo, row_hi, points.low, *full_words(points),
             width, height, near, far, step, bands, alphas, np.ascontiguousarray(point_colors, np.uint32),
             np.ascontiguousarray(footprint, np.int32), np.float32(size), np.float32(atten), kbuf, kalpha, sums, transmittance_table(),
-            np.array(background, np.int64), np.ascontiguousarray(fallback, np.uint32).reshape(-1), out,
+            np.array(background, np.int64), np.ascontiguousarray(fallback, np.uint32).reshape(-1), out, raster.shape_token(matrices),
         )  # fmt: skip
     return out
 

@@ -14,8 +14,12 @@ LLVM from vectorising phase 1 (6x slower).
 
 from __future__ import annotations
 
+import functools
+
+import numba
 import numpy as np
 from numba import njit, prange
+from numba.extending import overload
 
 from ...core.compact import expand_tails
 
@@ -116,12 +120,16 @@ def matrix_shape(m):
     return GENERAL
 
 
+@functools.cache
 def _projection_loop(bits, shape, clip):
     """The phase-1 loop of one precision, matrix shape and clipping. The three are constants of
     the compiled function (closure variables), so its body is branch-free and vectorises; the
     helpers are small functions LLVM inlines, constants folded. Each variant is a function of
-    its own: numba's IR inlining of one nested helper chain per variant (``inline="always"``,
-    18 copies) took 11 s of a 14 s compile, these take 4 s in all (same code, same speed)."""
+    its own, made and compiled only when a frame first needs it: numba's IR inlining of one nested
+    helper chain per variant (``inline="always"``, 18 copies) took 11 s of a 14 s compile, and the
+    variants of the other matrix shapes took 2-4 s of the first render (one camera, one shape).
+    A GENERAL matrix (neither a perspective nor an orthographic camera's: only hand-made ones)
+    always clips (``_project_impl``), which is exact for a batch inside the frustum too."""
 
     @njit(error_model="numpy")
     def loop(low, med, high, mt, wf, hf, wi, near, far, pix, depth):
@@ -132,15 +140,48 @@ def _projection_loop(bits, shape, clip):
     return loop
 
 
-# (bits, shape, clip): a GENERAL matrix (neither a perspective nor an orthographic camera's: only
-# hand-made ones) always clips, which is exact for a batch inside the frustum too
-_P10C, _P10N = _projection_loop(10, PERSPECTIVE, True), _projection_loop(10, PERSPECTIVE, False)
-_P20C, _P20N = _projection_loop(20, PERSPECTIVE, True), _projection_loop(20, PERSPECTIVE, False)
-_P30C, _P30N = _projection_loop(30, PERSPECTIVE, True), _projection_loop(30, PERSPECTIVE, False)
-_O10C, _O10N = _projection_loop(10, ORTHOGRAPHIC, True), _projection_loop(10, ORTHOGRAPHIC, False)
-_O20C, _O20N = _projection_loop(20, ORTHOGRAPHIC, True), _projection_loop(20, ORTHOGRAPHIC, False)
-_O30C, _O30N = _projection_loop(30, ORTHOGRAPHIC, True), _projection_loop(30, ORTHOGRAPHIC, False)
-_G10, _G20, _G30 = (_projection_loop(b, GENERAL, True) for b in (10, 20, 30))
+# The matrix shape of a frame's batch matrices, a compile-time type: an empty array whose dtype
+# names it. Kernels that project (rasterize, the HQS and transparency passes) take it, so each is
+# compiled (and cached) per shape with that shape's loops only (``_project``).
+SHAPE_TOKENS = {PERSPECTIVE: np.zeros(0, np.int8), ORTHOGRAPHIC: np.zeros(0, np.int16), GENERAL: np.zeros(0, np.int32)}
+_TOKEN_SHAPES = {numba.from_dtype(t.dtype): shape for shape, t in SHAPE_TOKENS.items()}
+
+
+def shape_token(mats: np.ndarray) -> np.ndarray:
+    """The ``SHAPE_TOKENS`` entry of float32 batch matrices (..., 4, 4): PERSPECTIVE when every
+    depth row equals its w row, ORTHOGRAPHIC when every w row is (0, 0, 0, 1), else GENERAL
+    (exact for both: the same operations, only none skipped). ``matrix_shape`` for one."""
+    m = np.asarray(mats).reshape(-1, 4, 4)
+    if np.array_equal(m[:, 2], m[:, 3]):
+        return SHAPE_TOKENS[PERSPECTIVE]
+    if (m[:, 2, :3] == 0).all() and (m[:, 2, 3] == 1).all():
+        return SHAPE_TOKENS[ORTHOGRAPHIC]
+    return SHAPE_TOKENS[GENERAL]
+
+
+def _project(token, bits, clip, args):
+    """Phase 1 of one batch with the loop of its precision and clipping (numba only: ``_project_impl``)."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(_project)
+def _project_impl(token, bits, clip, args):
+    """Picks the matrix shape's loops when the caller compiles: only those are compiled."""
+    shape = _TOKEN_SHAPES[token.dtype]
+    unclipped = shape != GENERAL
+    c10, n10 = _projection_loop(10, shape, True), _projection_loop(10, shape, not unclipped)
+    c20, n20 = _projection_loop(20, shape, True), _projection_loop(20, shape, not unclipped)
+    c30, n30 = _projection_loop(30, shape, True), _projection_loop(30, shape, not unclipped)
+
+    def impl(token, bits, clip, args):
+        if bits == 10:
+            c10(*args) if clip else n10(*args)
+        elif bits == 20:
+            c20(*args) if clip else n20(*args)
+        else:
+            c30(*args) if clip else n30(*args)
+
+    return impl
 
 
 @njit
@@ -202,37 +243,17 @@ def mark_footprint(m, width, height, dirty, n):
 
 
 @njit(cache=True, error_model="numpy")
-def project_batch(low, med, high, bits, m, width, height, near, far, pix, depth, clip=True):
+def project_batch(low, med, high, bits, m, width, height, near, far, pix, depth, clip, token):
     """Phase 1: pixel id (or -1) and float32 depth of each point of one batch.
 
     ``low/med/high`` are the batch's slices, ``m`` its float32 matrix from 10-bit grid
-    units to (x', y', w, depth). One loop per precision, matrix shape and clipping (same
-    body, constants folded) so each loop is branch-free and vectorises. ``clip=False`` only
-    for a batch ``inside_frustum`` (most of them in an overview): no clipping tests.
+    units to (x', y', w, depth), ``token`` the matrix shape's (``shape_token``). One loop per
+    precision, matrix shape and clipping (same body, constants folded) so each loop is
+    branch-free and vectorises. ``clip=False`` only for a batch ``inside_frustum`` (most of
+    them in an overview): no clipping tests.
     """
-    mt = matrix_tuple(m)
-    shape = matrix_shape(m)
-    a = (low, med, high, mt, np.float32(width), np.float32(height), np.int32(width), near, far, pix, depth)
-    if shape == PERSPECTIVE:
-        if bits == 10:
-            _P10C(*a) if clip else _P10N(*a)
-        elif bits == 20:
-            _P20C(*a) if clip else _P20N(*a)
-        else:
-            _P30C(*a) if clip else _P30N(*a)
-    elif shape == ORTHOGRAPHIC:
-        if bits == 10:
-            _O10C(*a) if clip else _O10N(*a)
-        elif bits == 20:
-            _O20C(*a) if clip else _O20N(*a)
-        else:
-            _O30C(*a) if clip else _O30N(*a)
-    elif bits == 10:
-        _G10(*a)
-    elif bits == 20:
-        _G20(*a)
-    else:
-        _G30(*a)
+    args = (low, med, high, matrix_tuple(m), np.float32(width), np.float32(height), np.int32(width), near, far, pix, depth)
+    _project(token, bits, clip, args)
 
 
 @njit(inline="always")
@@ -438,7 +459,7 @@ def fill_empty(buf):
 
 
 @njit(parallel=True, cache=True)
-def rasterize(firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes, width, height, nears, fars, starts, frames, scratch, dirty, footprint, size, atten, step):
+def rasterize(firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes, width, height, nears, fars, starts, frames, scratch, dirty, footprint, size, atten, step, token):
     """Draw the selected batches into ``frames`` (pre-filled with EMPTY), one per view.
 
     Point words: ``low`` always; per selected batch ``codes[k]`` is FULL_LAYOUT (its medium and
@@ -452,69 +473,97 @@ def rasterize(firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes
     starts[t]..starts[t+1] are the selection entries thread t draws; scratch[v, t-1] is
     thread t's buffer of view v (EMPTY on entry, restored to EMPTY by ``merge``), and
     dirty[v, t] flags its tiles written (zero on entry; thread 0's, the frame's, go unread).
-    footprint / size / atten: point size and shape (see ``write_batch``).
+    footprint / size / atten: point size and shape (see ``write_batch``); token: the matrices'
+    shape (``shape_token``).
     step > 1 draws every step-th point of each batch (a point budget for plain clouds:
     Morton order makes that an even spatial subsample).
+
+    The parallel loop's body is one call (``_draw_part``): numba's parfor passes then lower a
+    small body, 2.5 s less compiling on a first render than the whole body inside the prange.
     """
-    n_threads = starts.shape[0] - 1
-    n_views = frames.shape[0]
+    spans, rows, uniform = footprint_runs(footprint, width)
+    max_count, any_packed = _batch_facts(counts, codes)
+    for t in prange(starts.shape[0] - 1):
+        # np.int64(t) and the facts from a call: arguments of one type each, so _draw_part is
+        # compiled once (a prange index is unsigned in the parallel loop's own compile, and
+        # constants assigned before a loop are first typed as literals: three compiles)
+        _draw_part(np.int64(t), firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes, width, height, nears, fars, starts, frames, scratch, dirty,
+                   footprint, size, atten, step, token, spans, rows, uniform, max_count, any_packed)  # fmt: skip
+
+
+@njit
+def footprint_runs(footprint, width):
+    """(spans, rows, uniform): ``footprint_spans`` and ``uniform_runs`` of a footprint."""
     spans, rows = footprint_spans(footprint)
-    uniform = uniform_runs(spans, rows, width)
-    splats = footprint.shape[0] > 1
-    max_count = 0
+    return spans, rows, uniform_runs(spans, rows, width)
+
+
+@njit
+def _batch_facts(counts, codes):
+    """(largest batch, whether some batch is compact) of the selected batches."""
+    max_count = np.int64(0)
     any_packed = False
     for k in range(counts.shape[0]):
-        max_count = max(max_count, counts[k])
+        max_count = max(max_count, np.int64(counts[k]))
         any_packed |= codes[k] != FULL_LAYOUT
-    for t in prange(n_threads):
-        pix = np.empty(max_count, np.int32)
-        depth = np.empty(max_count, np.float32)
-        depth_bits = depth.view(np.uint32)
-        # a subsample (step > 1) is gathered into contiguous words first: one compiled phase 1
-        # (contiguous slices) serves both, instead of a second one for strided slices (14 s)
-        # (a compact batch's medium and high words are decoded into the same scratch)
-        sub = max_count if step > 1 or any_packed else 0
-        sub_low = np.empty(sub, np.uint32)
-        sub_med = np.empty(sub, np.uint32)
-        sub_high = np.empty(sub, np.uint32)
-        sub_bits = np.empty(max_count if any_packed else 0, np.uint64)
-        for k in range(starts[t], starts[t + 1]):
-            f = firsts[k]
-            c = counts[k]
-            n = (c + step - 1) // step
-            packed = codes[k] != FULL_LAYOUT
-            if step > 1:
+    return max_count, any_packed
+
+
+@njit
+def _draw_part(t, firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes, width, height, nears, fars, starts, frames, scratch, dirty,
+               footprint, size, atten, step, token, spans, rows, uniform, max_count, any_packed):  # fmt: skip
+    """Thread t's part of ``rasterize`` (its arguments; spans, rows and uniform are the
+    footprint's runs, max_count the largest batch, any_packed: some batch is compact)."""
+    n_views = frames.shape[0]
+    splats = footprint.shape[0] > 1
+    pix = np.empty(max_count, np.int32)
+    depth = np.empty(max_count, np.float32)
+    depth_bits = depth.view(np.uint32)
+    # a subsample (step > 1) is gathered into contiguous words first: one compiled phase 1
+    # (contiguous slices) serves both, instead of a second one for strided slices (14 s)
+    # (a compact batch's medium and high words are decoded into the same scratch)
+    sub = max_count if step > 1 or any_packed else 0
+    sub_low = np.empty(sub, np.uint32)
+    sub_med = np.empty(sub, np.uint32)
+    sub_high = np.empty(sub, np.uint32)
+    sub_bits = np.empty(max_count if any_packed else 0, np.uint64)
+    for k in range(starts[t], starts[t + 1]):
+        f = firsts[k]
+        c = counts[k]
+        n = (c + step - 1) // step
+        packed = codes[k] != FULL_LAYOUT
+        if step > 1:
+            for j in range(n):
+                sub_low[j] = low[f + j * step]
+            if not packed:
                 for j in range(n):
-                    sub_low[j] = low[f + j * step]
-                if not packed:
-                    for j in range(n):
-                        sub_med[j] = med[f + j * step]
-                        sub_high[j] = high[f + j * step]
-            if packed:
-                fine = 0
-                for v in range(n_views):
-                    fine = max(fine, bits[v, k])
-                if fine > 10:  # a 10-bit draw reads the low word alone
-                    expand_tails(ext, ext_firsts[k], codes[k], 0, n, step, sub_med, sub_high, sub_bits)
+                    sub_med[j] = med[f + j * step]
+                    sub_high[j] = high[f + j * step]
+        if packed:
+            fine = 0
             for v in range(n_views):
-                buf = frames[v] if t == 0 else scratch[v, t - 1]
-                near = np.float32(nears[v])
-                far = np.float32(fars[v])
-                clip = not inside_frustum(mats[v, k], width, height, near, far)
-                # points that stay one pixel (all of a batch whose nearest corner is too far for two
-                # pixels: most of a dense cloud's) take the one-pixel loop, the same pixels faster
-                one = not splats or largest_size(mats[v, k], size, atten, near) < 2.0
-                # thread 0 draws into the frame itself: its tiles need no merge, so no flags
-                mark = t > 0
-                if mark and not clip and one:
-                    mark = not mark_footprint(mats[v, k], width, height, dirty[v, t], n)
-                if step == 1 and not packed:  # contiguous slices: the vectorised loop
-                    project_batch(low[f : f + c], med[f : f + c], high[f : f + c], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip)
-                elif step == 1:
-                    project_batch(low[f : f + c], sub_med[:n], sub_high[:n], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip)
-                else:
-                    project_batch(sub_low[:n], sub_med[:n], sub_high[:n], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip)
-                write_batch(f, step, pix[:n], depth[:n], depth_bits[:n], buf, dirty[v, t], width, height, one, spans, rows, uniform, size, atten, clip, mark)
+                fine = max(fine, bits[v, k])
+            if fine > 10:  # a 10-bit draw reads the low word alone
+                expand_tails(ext, ext_firsts[k], codes[k], np.int64(0), n, step, sub_med, sub_high, sub_bits)
+        for v in range(n_views):
+            buf = frames[v] if t == 0 else scratch[v, t - 1]
+            near = np.float32(nears[v])
+            far = np.float32(fars[v])
+            clip = not inside_frustum(mats[v, k], width, height, near, far)
+            # points that stay one pixel (all of a batch whose nearest corner is too far for two
+            # pixels: most of a dense cloud's) take the one-pixel loop, the same pixels faster
+            one = not splats or largest_size(mats[v, k], size, atten, near) < 2.0
+            # thread 0 draws into the frame itself: its tiles need no merge, so no flags
+            mark = t > 0
+            if mark and not clip and one:
+                mark = not mark_footprint(mats[v, k], width, height, dirty[v, t], n)
+            if step == 1 and not packed:  # contiguous slices: the vectorised loop
+                project_batch(low[f : f + c], med[f : f + c], high[f : f + c], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip, token)
+            elif step == 1:
+                project_batch(low[f : f + c], sub_med[:n], sub_high[:n], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip, token)
+            else:
+                project_batch(sub_low[:n], sub_med[:n], sub_high[:n], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip, token)
+            write_batch(f, step, pix[:n], depth[:n], depth_bits[:n], buf, dirty[v, t], width, height, one, spans, rows, uniform, size, atten, clip, mark)
 
 
 @njit(parallel=True, cache=True)

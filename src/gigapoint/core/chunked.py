@@ -1,0 +1,320 @@
+"""A PointCloud built in bounded memory: ``build_cloud``'s result, without its ~50 bytes a point.
+
+``build_cloud`` holds every point's float64 xyz, colour, Morton code and the sort order at once
+before it quantizes or compacts. ``build_cloud_chunked`` gives the same cloud, array for array
+(the same Morton order, batches, boxes, words, extension streams and colours), while it holds
+only the finished arrays (4-6 bytes a point of positions in the compact layout, 2 of colour,
+the attributes) and one bounded partition at a time. It reads its source three times, so the
+source is a function returning a fresh iterable of PointChunks (a demo generator, a file
+reader):
+
+1. **survey**: point count, invalid points, bounds (hence the Morton cube), the attributes
+   every chunk has, the finest scale, whether all colours are opaque;
+2. **histogram** of the Morton codes' top ``3 * level`` bits (cells of 1/2^level of the cube's
+   edge); consecutive cells are grouped into *partitions* of at most ``partition_points``
+   points (a cell denser than that forms one partition alone): contiguous ranges of Morton
+   codes, so partitions in turn are the global Morton order;
+3. **spill**: each chunk's valid points bucketed by partition (a stable counting sort) and
+   appended to per-partition files in a temporary folder (float64 xyz, colour, attributes);
+
+then **finalize**, partition by partition: read it back (the input order: chunk order, so the
+stable sort below is the in-memory build's), Morton-sort it, prepend the previous partition's
+points that did not fill a batch (the carry), cut batches of ``batch_size`` at the same global
+places as ``build_cloud``, compact (core/compact.py) or quantize them, and copy low words,
+colours and attributes into the preallocated arrays; the extension streams go to a file read
+back once at the end (their total length is known only then). The folder is removed on
+return, also on an error.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import warnings
+from collections.abc import Callable, Iterable
+from contextlib import ExitStack
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+from ..errors import EmptyCloudError, GigapointWarning, InputError
+from .chunk import PointChunk
+from .cloud import MAX_ABS_COORDINATE, PointCloud, _valid_mask, finest_scale, gather, scan_points, storage_format
+from .compact import compact_positions, pack_rgb565, stream_words
+from .layout import BATCH_SIZE, PACK_DTYPE
+from .morton import MORTON_BITS_PER_AXIS, cube_of, morton_codes, morton_order
+from .quantize import make_batches, quantize
+
+ChunkSource = Callable[[], Iterable[PointChunk]]
+
+#: points a partition holds at most (unless one cell alone holds more): ~60-70 bytes a point of
+#: transient memory while it is sorted and compacted (~130 MB at the default)
+PARTITION_POINTS = 2_000_000
+#: partitions are made of cells of the Morton cube's edge / 2^level (2^21 cells counted)
+CELL_LEVEL = 7
+
+
+def build_cloud_chunked(
+    source: ChunkSource,
+    name: str = "cloud",
+    batch_size: int = BATCH_SIZE,
+    layout: str = "auto",
+    colors: str = "auto",
+    attributes: bool = True,
+    partition_points: int = PARTITION_POINTS,
+    cell_level: int = CELL_LEVEL,
+    tmpdir: str | Path | None = None,
+) -> PointCloud:
+    """``build_cloud(source(), name, batch_size, layout, colors)`` in bounded memory (module doc).
+
+    ``source``: called three times, each call returns the same PointChunks (a generator
+    function, ``lambda: demo_chunks(n, scale=0.01)``). ``attributes=False``: leave the
+    attributes out (3 bytes a point for the demo town's intensity and classification).
+    ``partition_points``, ``cell_level``: the partitions' size (memory) and the cells they are
+    cut from. ``tmpdir``: where the spill folder goes (default: the system's temp folder); it
+    needs ~29-31 bytes a point of disk (float64 xyz, colour, attributes)."""
+    if batch_size < 1:
+        raise InputError(f"{name}: batch size must be >= 1, got {batch_size}")
+    if partition_points < 1:
+        raise InputError(f"{name}: partition_points must be >= 1, got {partition_points}")
+    if not 1 <= cell_level <= 8:
+        raise InputError(f"{name}: cell_level must be 1..8, got {cell_level}")
+    survey = _survey(source, attributes)
+    n, skipped = survey["n"], survey["skipped"]
+    if n == 0:
+        detail = f" ({skipped:,} invalid points: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
+        raise EmptyCloudError(f"{name}: no valid points{detail}")
+    if skipped:
+        warnings.warn(
+            f"{name}: skipped {skipped:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})", GigapointWarning, stacklevel=2
+        )
+    source_scale = finest_scale(survey["scales"])
+    compact, short = storage_format(name, layout, colors, source_scale, survey["opaque"])
+    lo, hi = survey["lo"], survey["hi"]
+    origin, edge = cube_of(lo, hi)
+    shift = 3 * (MORTON_BITS_PER_AXIS - cell_level)
+    part_of_cell, n_parts = _cut_partitions(_histogram(source, origin, edge, shift, cell_level), partition_points)
+    attr_dtypes = survey["attributes"]
+    with tempfile.TemporaryDirectory(prefix="gigapoint_chunked_", dir=tmpdir) as tmp:
+        folder = Path(tmp)
+        _spill(source, folder, origin, edge, shift, part_of_cell, n_parts, short, attr_dtypes)
+        return _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, short, attr_dtypes, batch_size, name, skipped, source_scale)
+
+
+# --- the three passes over the source --------------------------------------------------------
+def _valid(chunk: PointChunk):
+    """(points kept: a slice or a mask, how many invalid) of a chunk (build_cloud's rule)."""
+    n_bad, _, _ = scan_points(chunk.xyz)
+    return (slice(None) if n_bad == 0 else _valid_mask(chunk.xyz)), n_bad
+
+
+def _survey(source: ChunkSource, keep_attributes: bool) -> dict:
+    n = skipped = 0
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    names: list[str] | None = None
+    dtypes: dict[str, tuple] = {}  # name -> (dtype, shape of one point's value)
+    scales: list = []
+    opaque = True
+    for chunk in source():
+        n_bad, chunk_lo, chunk_hi = scan_points(chunk.xyz)
+        lo, hi = np.minimum(lo, chunk_lo), np.maximum(hi, chunk_hi)
+        skipped += n_bad
+        n += len(chunk.xyz) - n_bad
+        chunk_names = sorted(chunk.attributes)
+        names = chunk_names if names is None else [a for a in names if a in chunk_names]
+        for a, v in chunk.attributes.items():
+            dtypes.setdefault(a, (np.asarray(v).dtype, np.asarray(v).shape[1:]))
+        scales.append(chunk.scale)
+        if opaque and len(chunk.rgba):
+            keep, _ = _valid(chunk) if n_bad else (slice(None), 0)
+            opaque = bool((chunk.rgba[keep, 3] == 255).all())
+    attrs = {a: dtypes[a] for a in (names or [])} if keep_attributes else {}
+    return {"n": n, "skipped": skipped, "lo": lo, "hi": hi, "attributes": attrs, "scales": scales, "opaque": opaque}
+
+
+def _histogram(source: ChunkSource, origin, edge, shift: int, level: int) -> np.ndarray:
+    hist = np.zeros(1 << (3 * level), np.int64)
+    for chunk in source():
+        keep, _ = _valid(chunk)
+        codes = morton_codes(np.ascontiguousarray(chunk.xyz[keep], np.float64), origin, edge)
+        hist += np.bincount((codes >> np.uint64(shift)).astype(np.int64), minlength=len(hist))
+    return hist
+
+
+@njit(cache=True)
+def _cut(hist, budget, part_of_cell):
+    """Consecutive cells into partitions of at most ``budget`` points (a fuller cell alone);
+    empty cells join the partition before them. Returns the number of partitions."""
+    part = 0
+    held = 0
+    for c in range(hist.shape[0]):
+        h = hist[c]
+        if held > 0 and held + h > budget:
+            part += 1
+            held = 0
+        held += h
+        part_of_cell[c] = part
+    return part + 1 if held > 0 else part
+
+
+def _cut_partitions(hist: np.ndarray, budget: int) -> tuple[np.ndarray, int]:
+    part_of_cell = np.empty(len(hist), np.int32)
+    n_parts = _cut(hist, budget, part_of_cell)
+    return part_of_cell, max(int(n_parts), 1)
+
+
+@njit(cache=True)
+def _bucket_order(part, n_parts):
+    """A stable counting sort of points by partition: (order, start of each partition in it)."""
+    starts = np.zeros(n_parts + 1, np.int64)
+    for i in range(part.shape[0]):
+        starts[part[i] + 1] += 1
+    for p in range(n_parts):
+        starts[p + 1] += starts[p]
+    fill = starts[:-1].copy()
+    order = np.empty(part.shape[0], np.int64)
+    for i in range(part.shape[0]):
+        p = part[i]
+        order[fill[p]] = i
+        fill[p] += 1
+    return order, starts
+
+
+def _paths(folder: Path, p: int, attr_dtypes) -> dict[str, Path]:
+    return {key: folder / f"{p}.{key}" for key in ("xyz", "color", *(f"a_{a}" for a in attr_dtypes))}
+
+
+def _spill(source, folder, origin, edge, shift, part_of_cell, n_parts, short, attr_dtypes) -> None:
+    with ExitStack() as files:
+        handles: dict[tuple[int, str], object] = {}
+
+        def append(p: int, key: str, values: np.ndarray) -> None:
+            f = handles.get((p, key))
+            if f is None:
+                f = handles[(p, key)] = files.enter_context(open(_paths(folder, p, attr_dtypes)[key], "ab"))
+            values.tofile(f)
+
+        for chunk in source():
+            keep, _ = _valid(chunk)
+            xyz = np.ascontiguousarray(chunk.xyz[keep], np.float64)
+            if len(xyz) == 0:
+                continue
+            part = part_of_cell[(morton_codes(xyz, origin, edge) >> np.uint64(shift)).astype(np.int64)]
+            order, starts = _bucket_order(part, n_parts)
+            del part
+            color = np.ascontiguousarray(chunk.rgba[keep], np.uint8).view(np.uint32).reshape(-1)
+            if short:
+                color = pack_rgb565(color)
+            fields = {"xyz": xyz[order], "color": gather(color, order)}
+            for a, (dtype, _) in attr_dtypes.items():
+                fields[f"a_{a}"] = gather(np.ascontiguousarray(chunk.attributes[a][keep], dtype), order)
+            del xyz, color, order
+            for p in np.flatnonzero(np.diff(starts)):
+                s, e = starts[p], starts[p + 1]
+                for key, values in fields.items():
+                    append(int(p), key, values[s:e])
+
+
+def _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, short, attr_dtypes, batch_size, name, skipped, source_scale) -> PointCloud:
+    batches = make_batches(n, batch_size)
+    low = np.empty(n, np.uint32)
+    med = high = None
+    if compact is None:
+        med, high = np.empty(n, np.uint32), np.empty(n, np.uint32)
+    packing = np.zeros(len(batches), PACK_DTYPE) if compact is not None else None
+    # an even-length buffer, as pack_rgb565's: rgb565_words views it as u32 without a copy
+    color = np.zeros(n + (n & 1), np.uint16)[:n] if short else np.empty(n, np.uint32)
+    attrs = {a: np.empty((n, *shape), dtype) for a, (dtype, shape) in attr_dtypes.items()}
+    color_dtype = np.uint16 if short else np.uint32
+    ext_path = folder / "ext"
+    ext_words = 0
+    done = 0  # points written (a multiple of batch_size until the last partition)
+    carry = None  # the previous partition's points past its last full batch, in Morton order
+    with open(ext_path, "wb") as ext_file:
+        for p in range(n_parts):
+            paths = _paths(folder, p, attr_dtypes)
+            if not paths["xyz"].exists():
+                continue
+            # the carry, then the partition's points read in after it (no second copy)
+            c = 0 if carry is None else len(carry[0])
+            m = paths["xyz"].stat().st_size // 24
+            xyz = _read(paths["xyz"], (c + m, 3), np.float64, None if carry is None else carry[0])
+            col = _read(paths["color"], (c + m,), color_dtype, None if carry is None else carry[1])
+            att = {
+                a: _read(paths[f"a_{a}"], (c + m, *shape), dtype, None if carry is None else carry[2][a])
+                for a, (dtype, shape) in attr_dtypes.items()
+            }
+            carry = None
+            for path in paths.values():
+                path.unlink()
+            order = np.empty(c + m, np.uint32)
+            order[:c] = np.arange(c, dtype=np.uint32)
+            order[c:] = morton_order(morton_codes(xyz[c:], origin, edge))
+            order[c:] += np.uint32(c)
+            if done + len(order) > n:
+                raise _changed(name, n)
+            last = done + len(order) == n
+            k = len(order) if last else len(order) // batch_size * batch_size
+            if k:
+                b0 = done // batch_size
+                local = make_batches(k, batch_size)
+                head = order[:k]
+                if compact is None:
+                    lw, mw, hw = quantize(xyz, head, local)
+                    med[done : done + k], high[done : done + k] = mw, hw
+                else:
+                    lw, ext, pack = compact_positions(xyz, head, local, compact, origin=lo)
+                    pack["ext_first"] += np.uint64(ext_words)
+                    packing[b0 : b0 + len(local)] = pack
+                    ext.tofile(ext_file)
+                    ext_words += len(ext)
+                    del ext
+                low[done : done + k] = lw
+                del lw
+                batches["bbox_min"][b0 : b0 + len(local)] = local["bbox_min"]
+                batches["bbox_max"][b0 : b0 + len(local)] = local["bbox_max"]
+                color[done : done + k] = gather(col, head)
+                for a, v in att.items():
+                    attrs[a][done : done + k] = gather(v, head)
+                done += k
+            tail = order[k:]
+            carry = (xyz[tail], col[tail], {a: v[tail] for a, v in att.items()}) if len(tail) else None
+            del xyz, col, att, order
+    if done != n:
+        raise _changed(name, n)
+    ext = None
+    if compact is not None:
+        ext = np.fromfile(ext_path, np.uint64)
+        expected = int(stream_words(_ext_bits(packing), batches["count"].astype(np.int64)).sum())
+        assert len(ext) == expected == ext_words, (len(ext), expected, ext_words)
+    data_bounds = None if compact is None else (np.asarray(lo, np.float64).copy(), np.asarray(hi, np.float64).copy())
+    cloud = PointCloud(batches, low, med, high, color, attrs, name=name, skipped=skipped, ext=ext, packing=packing, data_bounds=data_bounds)
+    cloud.source_scale = source_scale
+    return cloud
+
+
+def _read(path: Path, shape: tuple, dtype, head: np.ndarray | None) -> np.ndarray:
+    """An array of ``shape``: ``head`` (the carry) and then the file's values."""
+    out = np.empty(shape, dtype)
+    c = 0 if head is None else len(head)
+    if c:
+        out[:c] = head
+    with open(path, "rb") as f:
+        view = memoryview(out[c:].reshape(-1).view(np.uint8))
+        if f.readinto(view) != len(view):
+            raise InputError(f"{path}: the spilled partition is shorter than expected")
+    return out
+
+
+def _changed(name: str, n: int) -> InputError:
+    return InputError(
+        f"{name}: the chunk source gave other points on a later pass than its first ({n:,}); it must give the same points each time"
+    )
+
+
+def _ext_bits(packing: np.ndarray) -> np.ndarray:
+    code = packing["code"].astype(np.int64)
+    return (code & 0xFF) + ((code >> 8) & 0xFF) + ((code >> 16) & 0xFF)
+
+
+__all__ = ["CELL_LEVEL", "PARTITION_POINTS", "ChunkSource", "build_cloud_chunked"]

@@ -1,0 +1,189 @@
+"""The chunked build (core/chunked.py): the same cloud as build_cloud, array for array and pixel
+for pixel, without holding every point's float64 position."""
+
+from __future__ import annotations
+
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint import Camera, RenderSettings
+from gigapoint.core import PointChunk, build_cloud
+from gigapoint.core.chunked import build_cloud_chunked
+from gigapoint.errors import EmptyCloudError, GigapointWarning, InputError
+from gigapoint.io.demo import demo_chunks
+
+AUTZEN = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "autzen_trim.laz"
+FIELDS = ("batches", "low", "med", "high", "color", "ext", "packing")
+
+
+def assert_same_cloud(got, want):
+    assert got.layout == want.layout
+    for f in FIELDS:
+        a, b = getattr(got, f), getattr(want, f)
+        if b is None:
+            assert a is None, f
+            continue
+        assert a.dtype == b.dtype, f
+        np.testing.assert_array_equal(a, b, err_msg=f)
+    assert sorted(got.attributes) == sorted(want.attributes)
+    for name, values in want.attributes.items():
+        assert got.attributes[name].dtype == values.dtype
+        np.testing.assert_array_equal(got.attributes[name], values, err_msg=name)
+    assert got.source_scale == want.source_scale
+    assert got.skipped == want.skipped
+    for a, b in zip(got.bounds, want.bounds):
+        np.testing.assert_array_equal(a, b)
+
+
+def assert_same_images(got, want):
+    settings = RenderSettings(backend="cpu", size_mode="fixed")
+    for view in ("top", "iso", "front"):
+        cam = Camera.fit(want.bounds, view=view, width=160, height=120)
+        a = gp.render_frame(got, cam, settings)
+        b = gp.render_frame(want, cam, settings)
+        assert a.stats.points_processed == want.n_points
+        np.testing.assert_array_equal(a.visibility, b.visibility)
+        np.testing.assert_array_equal(a.image, b.image)
+    close = Camera.orbit(want.bounds[0] + 0.5 * (want.bounds[1] - want.bounds[0]), 30.0, 35.0, 60.0, width=160, height=120)
+    np.testing.assert_array_equal(gp.render_frame(got, close, settings).image, gp.render_frame(want, close, settings).image)
+
+
+@pytest.mark.parametrize(
+    ("scale", "batch_size", "partition_points"),
+    [(0.01, 1000, 20_000), (0.01, 10_240, 50_000), (None, 777, 30_000)],
+)
+def test_equals_build_cloud(scale, batch_size, partition_points, tmp_path):
+    n = 250_000
+
+    def source():
+        return demo_chunks(n, seed=3, chunk_size=60_000, scale=scale)
+
+    want = build_cloud(source(), name="town", batch_size=batch_size)
+    got = build_cloud_chunked(source, name="town", batch_size=batch_size, partition_points=partition_points, tmpdir=tmp_path)
+    assert want.layout == ("words" if scale is None else "compact")
+    assert_same_cloud(got, want)
+    assert_same_images(got, want)
+    assert list(tmp_path.iterdir()) == []  # the spill folder is gone
+    if scale is not None:  # exact at the source's scale: the decoded points are the source's
+        xyz = np.concatenate([c.xyz for c in source()])
+        q = np.round(got.positions() / scale).astype(np.int64)
+        assert np.abs(got.positions() / scale - q).max() < 1e-3
+        want_q = np.round(xyz / scale).astype(np.int64)
+        np.testing.assert_array_equal(q[np.lexsort(q.T)], want_q[np.lexsort(want_q.T)])
+
+
+def test_many_partitions_carry_batches_across_them(tmp_path):
+    """Partitions much smaller than a batch: most batches gather points of several partitions."""
+    n = 60_000
+
+    def source():
+        return demo_chunks(n, seed=1, chunk_size=25_000, scale=0.01)
+
+    got = build_cloud_chunked(source, batch_size=4096, partition_points=500, tmpdir=tmp_path)
+    assert_same_cloud(got, build_cloud(source(), batch_size=4096))
+
+
+def test_large_partitions_take_the_parallel_sort(tmp_path):
+    """Partitions above 2^20 points: the radix sort and the parallel gathers (the 10⁹ path)."""
+    n = 2_400_000
+
+    def source():
+        return demo_chunks(n, seed=5, chunk_size=800_000, scale=0.01)
+
+    got = build_cloud_chunked(source, partition_points=1_300_000, tmpdir=tmp_path)
+    assert_same_cloud(got, build_cloud(source()))
+
+
+def test_invalid_points_mixed_attributes_wide_batches(rng, tmp_path):
+    """NaN/inf points skipped and counted, only the attributes every chunk has kept, a chunk off
+    the grid (wide batches), non-opaque colours kept 32-bit: all as build_cloud does."""
+    utm = np.array([636_000.0, 5_012_000.0, 120.0])
+    chunks = []
+    for k in range(4):
+        xyz = utm + np.round(rng.random((30_000, 3)) * [400.0, 300.0, 30.0], 2)
+        if k == 2:
+            xyz = xyz + 0.003  # off the 1 cm grid: its batches are stored wide
+        xyz[rng.integers(0, len(xyz), 50)] = np.nan
+        xyz[5, 1] = np.inf
+        rgba = rng.integers(0, 256, (len(xyz), 4), dtype=np.uint8)
+        attrs = {"intensity": rng.integers(0, 65535, len(xyz)).astype(np.uint16)}
+        if k != 1:
+            attrs["classification"] = rng.integers(0, 20, len(xyz)).astype(np.uint8)
+        chunks.append(PointChunk(xyz, rgba, attrs, scale=(0.01, 0.01, 0.01)))
+    with pytest.warns(GigapointWarning, match="skipped"):
+        want = build_cloud(chunks, batch_size=2000)
+    with pytest.warns(GigapointWarning, match="skipped"):
+        got = build_cloud_chunked(lambda: chunks, batch_size=2000, partition_points=7_000, tmpdir=tmp_path)
+    assert got.skipped == want.skipped > 0
+    assert sorted(got.attributes) == ["intensity"]
+    assert got.color.dtype == np.uint32  # not opaque: 32-bit colours
+    assert ((got.packing["code"] & 0xFF) == 20).any()  # some wide batches
+    assert_same_cloud(got, want)
+
+
+def test_options_and_errors(tmp_path):
+    def source():
+        return demo_chunks(20_000, chunk_size=7_000, scale=0.01)
+
+    got = build_cloud_chunked(source, attributes=False, colors="rgba", tmpdir=tmp_path)
+    assert got.attributes == {}
+    assert got.color.dtype == np.uint32
+    assert_same_cloud(got, build_cloud([PointChunk(c.xyz, c.rgba, scale=c.scale) for c in source()], colors="rgba"))
+    with pytest.raises(InputError, match="compact layout needs"):
+        build_cloud_chunked(lambda: demo_chunks(1000), layout="compact", tmpdir=tmp_path)
+    with pytest.raises(EmptyCloudError, match="no valid points"):
+        build_cloud_chunked(lambda: [PointChunk(np.full((10, 3), np.nan))], tmpdir=tmp_path)
+    passes = []
+
+    def shrinking():  # fewer points on every pass
+        passes.append(1)
+        return demo_chunks(20_000 - 3000 * len(passes), chunk_size=7_000)
+
+    with pytest.raises(InputError, match="same points each time"):
+        build_cloud_chunked(shrinking, tmpdir=tmp_path)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_demo_chunked_equals_in_memory():
+    a = gp.demo(120_000, seed=2, scale=0.01, chunked=True)
+    b = gp.demo(120_000, seed=2, scale=0.01, chunked=False)
+    assert a.layout == "compact" and a.source_scale == (0.01, 0.01, 0.01)
+    assert_same_cloud(a, b)
+    c = gp.demo(50_000, scale=0.01, chunked=True, attributes=False)
+    assert c.attributes == {} and c.n_points == 50_000
+
+
+def test_memory_holds_no_float64_copy_of_all_points(tmp_path):
+    """numpy's allocations at their peak (tracemalloc) stay near the finished arrays' bytes: one
+    float64 xyz of all points (24 bytes a point), as build_cloud holds, would break the bound."""
+    n, part, chunk = 2_000_000, 100_000, 100_000
+
+    def source():
+        return demo_chunks(n, chunk_size=chunk, scale=0.01)
+
+    build_cloud_chunked(lambda: demo_chunks(50_000, chunk_size=chunk, scale=0.01), partition_points=part, tmpdir=tmp_path)  # JIT
+    tracemalloc.start()
+    try:
+        cloud = build_cloud_chunked(source, partition_points=part, tmpdir=tmp_path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    held = cloud.nbytes
+    assert held / n < 10.5  # compact positions, 16-bit colour, 3 bytes of attributes
+    # the finished arrays, plus ~100 bytes a point of one chunk or partition and the cell histogram
+    bound = held + 100 * max(part, chunk) + 20_000_000
+    assert peak < bound, (peak / n, bound / n)
+    assert bound < held + 24 * n  # the bound is tight enough to catch a float64 (n, 3) array
+
+
+@pytest.mark.skipif(not AUTZEN.exists(), reason="shared sample missing")
+def test_open_chunked_equals_open(tmp_path):
+    """A LAS file (real scale, UTM offsets, 15 bytes of attributes) read chunked."""
+    want = gp.open(AUTZEN)
+    got = gp.open(AUTZEN, chunked=True, chunk_size=30_000)
+    assert got.layout == "compact"
+    assert_same_cloud(got, want)
