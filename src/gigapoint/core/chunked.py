@@ -42,7 +42,7 @@ from .chunk import PointChunk
 from .cloud import MAX_ABS_COORDINATE, PointCloud, _valid_mask, finest_scale, gather, scan_points, storage_format
 from .compact import compact_positions, pack_rgb565, stream_words
 from .layout import BATCH_SIZE, PACK_DTYPE
-from .morton import MORTON_BITS_PER_AXIS, cube_of, morton_codes, morton_order
+from .morton import MORTON_BITS_PER_AXIS, counting_order, cube_of, morton_codes, morton_order
 from .quantize import make_batches, quantize
 
 ChunkSource = Callable[[], Iterable[PointChunk]]
@@ -163,23 +163,6 @@ def _cut_partitions(hist: np.ndarray, budget: int) -> tuple[np.ndarray, int]:
     return part_of_cell, max(int(n_parts), 1)
 
 
-@njit(cache=True)
-def _bucket_order(part, n_parts):
-    """A stable counting sort of points by partition: (order, start of each partition in it)."""
-    starts = np.zeros(n_parts + 1, np.int64)
-    for i in range(part.shape[0]):
-        starts[part[i] + 1] += 1
-    for p in range(n_parts):
-        starts[p + 1] += starts[p]
-    fill = starts[:-1].copy()
-    order = np.empty(part.shape[0], np.int64)
-    for i in range(part.shape[0]):
-        p = part[i]
-        order[fill[p]] = i
-        fill[p] += 1
-    return order, starts
-
-
 def _paths(folder: Path, p: int, attr_dtypes) -> dict[str, Path]:
     return {key: folder / f"{p}.{key}" for key in ("xyz", "color", *(f"a_{a}" for a in attr_dtypes))}
 
@@ -200,7 +183,8 @@ def _spill(source, folder, origin, edge, shift, part_of_cell, n_parts, short, at
             if len(xyz) == 0:
                 continue
             part = part_of_cell[(morton_codes(xyz, origin, edge) >> np.uint64(shift)).astype(np.int64)]
-            order, starts = _bucket_order(part, n_parts)
+            order, per_part = counting_order(part, n_parts)
+            starts = np.concatenate([[0], np.cumsum(per_part)])
             del part
             color = np.ascontiguousarray(chunk.rgba[keep], np.uint8).view(np.uint32).reshape(-1)
             if short:

@@ -217,3 +217,22 @@ def cube_of(bmin: np.ndarray, bmax: np.ndarray) -> tuple[np.ndarray, float]:
     bmin = np.asarray(bmin, np.float64)
     size = float(np.max(np.asarray(bmax, np.float64) - bmin))
     return bmin, size
+
+
+@njit(cache=True)
+def counting_order(keys, n_bins):
+    """(stable permutation sorting small integer keys, per-bin counts): a counting sort."""
+    counts = np.zeros(n_bins, np.int64)
+    for i in range(keys.shape[0]):
+        counts[keys[i]] += 1
+    pos = np.empty(n_bins, np.int64)
+    total = 0
+    for b in range(n_bins):
+        pos[b] = total
+        total += counts[b]
+    order = np.empty(keys.shape[0], np.int64)
+    for i in range(keys.shape[0]):
+        k = keys[i]
+        order[pos[k]] = i
+        pos[k] += 1
+    return order, counts

@@ -274,25 +274,6 @@ def _take2(src, idx, out):
             out[i, j] = src[idx[i], j]
 
 
-@njit(cache=True)
-def counting_order(keys, n_bins):
-    """(stable permutation sorting small integer keys, per-bin counts): a counting sort."""
-    counts = np.zeros(n_bins, np.int64)
-    for i in range(keys.shape[0]):
-        counts[keys[i]] += 1
-    pos = np.empty(n_bins, np.int64)
-    total = 0
-    for b in range(n_bins):
-        pos[b] = total
-        total += counts[b]
-    order = np.empty(keys.shape[0], np.int64)
-    for i in range(keys.shape[0]):
-        k = keys[i]
-        order[pos[k]] = i
-        pos[k] += 1
-    return order, counts
-
-
 @njit(parallel=True, cache=True)
 def _valid_bounds(xyz, limit, valid, lo, hi):
     """valid[i] = finite and within ±limit; per-thread-slice min/max of the valid points into lo/hi (T, 3)."""

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..build import counting_order, take
+from ...core.morton import counting_order
+from ..build import take
 from ..keys import CODE_BITS, point_codes
 from .spill import append_file, load_raw_chunk, raw_chunk_files
 from .state import Job
