@@ -142,6 +142,17 @@ def test_info_on_real_utm_data(capsys, autzen_path):
     assert "extent:      1177.46, 562.70, 114.25" in out
 
 
+def test_info_of_a_converted_octree_prints_bounds_at_the_source_scale(capsys, autzen_path, tmp_path):
+    """A gigapoint octree records its LAS grid (format 2): info prints its bounds at that scale's
+    decimals, not float noise (848935.2000000001) or a fixed 3."""
+    out = tmp_path / "oct"
+    gp.convert([autzen_path], out)
+    rc, text, err = run(capsys, "info", out)
+    assert rc == 0, err
+    assert "bounds min:  636001.76, 848935.20, 406.26" in text and "extent:      1177.46, 562.70, 114.25" in text, text
+    assert "scale:       0.01, 0.01, 0.01" in text and "offset:" not in text
+
+
 # --- picking -------------------------------------------------------------------------------------------
 def test_point_info_of_an_empty_pixel_is_none_and_a_bad_index_a_clear_error():
     cloud = gp.from_arrays(np.random.default_rng(1).random((500, 3)) * 10)

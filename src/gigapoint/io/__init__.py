@@ -170,6 +170,7 @@ def format_info(info: dict) -> str:
     lines.append(f"  attributes:  {', '.join(attrs) if attrs else 'none'}")
     if info.get("scale") is not None:
         lines.append(f"  scale:       {', '.join(f'{v:g}' for v in info['scale'])}")
+    if info.get("offset") is not None:
         lines.append(f"  offset:      {', '.join(f'{v:.10g}' for v in info['offset'])}")
     if info.get("crs") or info.get("las_version"):
         crs = info.get("crs")

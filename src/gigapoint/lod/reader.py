@@ -113,6 +113,7 @@ def octree_info(path) -> dict:
         "has_color": True,
         "attributes": attributes,
         "crs": crs,
+        "scale": None if potree else cloud.meta.get("scale"),  # the source's grid (LAS inputs): bounds print at its decimals
         "nodes": len(cloud.keys),
         "levels": levels,
         "sampler": sampler,
