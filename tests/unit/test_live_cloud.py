@@ -337,3 +337,35 @@ def test_a_flat_snapshot_seen_from_above_draws_every_point_with_its_normal():
     assert f.stats.visible_pixels == 2000  # 10-bit node positions stay inside the clip range
     info = f.point_info(int(f.index[f.index >= 0][0]))
     assert info["source"] == "snapshot" and info["normal"] == pytest.approx([0.0, 0.0, 1.0]) and np.isnan(info["frame_time"])
+
+
+def test_adaptive_spacing_is_kept_between_pushes_and_measured_again_as_frames_turn_over(monkeypatch):
+    """A live cloud gives its frames the ring's point spacing (adaptive point sizes) itself,
+    measured again once a tenth of its kept frames are new, not in every frame of a stream; what
+    it gives is the spacing of its buffers when measured, and a frame draws as with that spacing."""
+    from gigapoint.live import cloud as live_cloud
+    from gigapoint.render.splats import point_spacing
+
+    calls = []
+    real = live_cloud.point_spacing
+    monkeypatch.setattr(live_cloud, "point_spacing", lambda buf, step: calls.append(step) or real(buf, step))
+    live = LiveCloud(keep=20)
+    cam = gp.Camera.look_at((30, -8, 6), (30, 0, 0), width=160, height=120)  # close: points of several pixels
+    adaptive = gp.RenderSettings()  # size_mode "auto": adaptive sizes
+    for k in range(40):
+        live.push(*frame(k, n=2000))
+        draw = live.prepare(cam.view(live.bounds), adaptive)
+        if k == 0:
+            assert draw.spacing == pytest.approx(point_spacing(live.buffers_, draw.step))
+        if k == 19:
+            filling = len(calls)
+    # while the ring fills (fewer than 10 frames kept) every push; then every 2 pushes (a tenth of 20 kept)
+    assert 11 <= filling <= 20 and len(calls) - filling == 10, (filling, len(calls))
+    assert draw.spacing > 0 and live.prepare(cam.view(live.bounds), gp.RenderSettings(size_mode="fixed")).spacing is None
+    live._spacing = None  # measured for this frame: the same image as the renderer's own measure
+    with_kept = gp.render_frame(live, cam, adaptive)
+    monkeypatch.setattr(live, "_kept_spacing", lambda buf, step: None)  # the renderer measures the buffers itself
+    fresh = gp.render_frame(live, cam, adaptive)
+    np.testing.assert_array_equal(with_kept.visibility, fresh.visibility)
+    one_pixel = gp.render_frame(live, cam, gp.RenderSettings(size_mode="fixed"))
+    assert (~with_kept.empty).sum() > 1.15 * (~one_pixel.empty).sum()  # the spacing made splats larger than a pixel

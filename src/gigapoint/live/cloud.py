@@ -43,6 +43,7 @@ from ..core.selection import Selection, View, select_view, subsample_step
 from ..errors import GigapointError, InputError
 from ..lod.build import take, valid_bounds
 from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
+from ..render.splats import point_spacing
 from .depth import depth_to_points, parse_pose
 from .ring import BASE_ATTRIBUTES, NORMAL_PARTS, LiveBuffers, LiveLock, attribute_dtype
 
@@ -146,6 +147,7 @@ class LiveCloud:
         self._free: list[int] = []
         self.frames: deque[FrameInfo] = deque()
         self._seq = 0
+        self._spacing = None  # ((buffers id, step, snapshot points), push count when measured, spacing): _kept_spacing
         self.points = 0  # points in the ring
         self.stats = LiveStats()
         self.snapshots = None  # the ProgressiveOctree of snapshots (created by the first snapshot)
@@ -467,7 +469,19 @@ class LiveCloud:
             ring = ids < buf.n_ring
             t[ring] = self._chunk_time[ids[ring]]
             alpha = self.fade_alpha(t)
-        return DrawList(buf, Selection(ids, bits.astype(np.int32), mats, size, culled), n_batches, step, alpha=alpha)
+        spacing = self._kept_spacing(buf, step) if getattr(settings, "point_sizing", None) == "adaptive" else None
+        return DrawList(buf, Selection(ids, bits.astype(np.int32), mats, size, culled), n_batches, step, alpha=alpha, spacing=spacing)
+
+    def _kept_spacing(self, buf: LiveBuffers, step: int) -> float:
+        """The buffers' point spacing (adaptive point sizes), measured again only when a tenth of
+        the kept frames are new since (or the buffers, ``step`` or the snapshots changed): the buffers change with
+        every push, and measuring them (``point_spacing``: ~2 ms) in every frame of a stream cost
+        what the spacing of a ring of similar frames hardly changes by."""
+        key = (id(buf), step, self.snapshots.n_points if self.snapshots is not None else 0)
+        kept = self._spacing
+        if kept is None or kept[0] != key or self._seq - kept[1] >= max(1, len(self.frames) // 10):
+            kept = self._spacing = (key, self._seq, point_spacing(buf, step))
+        return kept[2]
 
     def prepare_views(self, views, settings):
         return None  # drawn one view at a time
