@@ -9,9 +9,9 @@ Each conversion runs in its own child process, in rounds that alternate the conf
 all of them alike; the table gives each configuration's fastest run and each round's ratios.
 A child first converts a small file (numba's caches, the workers' imports), then times
 ``convert()`` of the demo scene as LAS (bench_convert.py writes it once). A Dask child starts
-a LocalCluster of N single-threaded worker processes (``NUMBA_NUM_THREADS=1``, as
-``--workers N`` does) before the clock starts, and records every task's compute time
-(``distributed.get_task_stream``): tasks per kind, compute seconds, the mean per task.
+the LocalCluster ``--workers N`` starts (distributed.open_client: N single-threaded worker
+processes, ``NUMBA_NUM_THREADS=1``, ``MALLOC_ARENA_MAX=1``, no Dask profiler) before the
+clock starts, and records every task's compute time (``distributed.get_task_stream``): tasks per kind, compute seconds, the mean per task.
 
 ``--overhead-tasks`` measures the scheduler's cost per task with metadata-only tasks: the
 converter's own task wrapper around a function that returns a read task's small result dict,

@@ -17,6 +17,7 @@ from .options import DEFAULT_MAX_LEAF, ENCODINGS, FORMATS, parse_memory
 from .partition import PartitionPhases
 from .phases import BuildPhases
 from .read import ReadPhase
+from .state import local_path
 
 PHASES = ("read", "count", "distribute", "build", "group", "upper", "write")
 
@@ -139,6 +140,7 @@ def convert(
         raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
     if format not in FORMATS:
         raise ConvertError(f"--format: unknown format {format!r}; choose {' or '.join(FORMATS)}")
+    out = local_path(out, "the output", ConvertError)  # a file:// URL names a path
     if format == "copc" and out is not None and str(out) != "":
         check_copc_output(out, overwrite)
     if not (isinstance(max_leaf, int) and max_leaf >= 100):

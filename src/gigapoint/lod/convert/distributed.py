@@ -80,6 +80,20 @@ POLL_S = 0.5
 SAVE_EVERY_S = 1.0  # the state is saved (fsynced) at most this often while tasks finish, and at every phase's end
 
 
+# A worker runs its tasks on a thread of its own, whose allocations glibc serves from a thread
+# arena: heaps of at most 64 MiB, of which every one but the first is unmapped as soon as it
+# empties, whatever mallopt says, so KeepFreedMemory kept little there and every task faulted
+# its arrays in afresh (a read task: 18 000 page faults, 60 % of its time in the kernel). One
+# arena (the main one, which KeepFreedMemory does keep) for the workers that open_client starts
+# (Dask puts it in this process's environment too, to spawn them); a cluster started elsewhere
+# gets the same by running its workers with MALLOC_ARENA_MAX=1 (docs/lod.md, docs/scale.md).
+WORKER_MALLOC_ENV = {"MALLOC_ARENA_MAX": "1"}
+# Dask's housekeeping in the LocalCluster that open_client starts, whose scheduler and nannies share
+# the cores with the workers: no statistical profiler (a thread in every worker that samples the
+# task's stack every 10 ms; the dashboard's Profile page stays empty) and event-loop health ticks
+# every 500 ms instead of 20 ms. With both, Dask's own threads used 0.3 s of CPU instead of 0.8 s
+# over 5 s of two busy workers (docs/scale.md).
+OWN_CLUSTER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "500ms"}
 _OWN_WORKERS: weakref.WeakSet = weakref.WeakSet()  # clients of the LocalClusters open_client started
 _KEPT: list = []  # in a worker of such a cluster: the KeepFreedMemory entered for the process's life
 
@@ -126,14 +140,19 @@ def open_client(client, announce: bool = False):
     if isinstance(client, int) and not isinstance(client, bool):
         if client < 1:
             raise ConvertError(f"--workers: needs at least 1 worker, got {client}")
-        cluster = dd.LocalCluster(
-            n_workers=client,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=":0",  # any free port (another cluster may hold 8787)
-            silence_logs=logging.ERROR,
-            env={"NUMBA_NUM_THREADS": "1"},  # one core a worker: numba's kernels run on the task's thread
-        )
+        import dask
+
+        # glibc reads MALLOC_* when a process starts: Dask sets them before it spawns the workers
+        settings = {**OWN_CLUSTER_CONFIG, **{f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in WORKER_MALLOC_ENV.items()}}
+        with dask.config.set(settings):
+            cluster = dd.LocalCluster(
+                n_workers=client,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=":0",  # any free port (another cluster may hold 8787)
+                silence_logs=logging.ERROR,
+                env={"NUMBA_NUM_THREADS": "1"},  # one core a worker: numba's kernels run on the task's thread
+            )
         c = dd.Client(cluster)
         _OWN_WORKERS.add(c)
     elif isinstance(client, str) and client.strip():

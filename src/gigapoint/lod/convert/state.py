@@ -8,6 +8,9 @@ size, modification time) and the same options; anything else starts clean.
 from __future__ import annotations
 
 import os
+import re
+import urllib.parse
+import urllib.request
 from pathlib import Path
 
 from ...errors import InputError
@@ -17,6 +20,21 @@ from ..octree_dir import OctreeDir
 from .options import BYTES_PER_POINT_BUILD, MAX_PARTITION_POINTS, rss_bytes
 
 STATE_VERSION = 1
+
+
+_URL = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*://")
+
+
+def local_path(p, what: str, error=InputError):
+    """``p`` itself, or the path a ``file://`` URL names. Other URLs (``s3://``, ``memory://``, ...)
+    are refused with ``error``: a conversion's workers read the inputs and write the output
+    through the file system (on a Dask cluster, one they all share; mount other storage there)."""
+    if isinstance(p, str) and _URL.match(p):
+        u = urllib.parse.urlsplit(p)
+        if u.scheme.lower() != "file" or u.netloc not in ("", "localhost"):
+            raise error(f"{p}: {what} must be a path or a file:// URL on this machine (a file system every worker shares)")
+        return Path(urllib.request.url2pathname(u.path))
+    return p
 
 
 def input_paths(inputs) -> list[Path] | None:
@@ -29,6 +47,7 @@ def input_paths(inputs) -> list[Path] | None:
         return None
     if not inputs:
         raise InputError("convert: no input given")
+    inputs = [local_path(p, "an input") for p in inputs]
     for p in inputs:
         if OctreeDir(p).kind is not None:
             raise InputError(f"{p}: is a converted octree (or a conversion in progress), not an input point cloud")

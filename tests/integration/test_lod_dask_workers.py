@@ -1,0 +1,57 @@
+"""The workers of the LocalCluster that ``--workers N`` starts (distributed.open_client): one
+malloc arena, so that a task thread's freed memory is kept for the next task (keep_freed_memory.py),
+and Dask's profiler and fast event-loop ticks off (docs/scale.md)."""
+
+from __future__ import annotations
+
+import sys
+
+import pytest
+
+distributed = pytest.importorskip("distributed")
+pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="glibc's malloc arenas and RUSAGE_THREAD are Linux's")
+
+
+def _settings() -> tuple:
+    import os
+
+    import dask
+
+    return os.environ.get("MALLOC_ARENA_MAX"), os.environ.get("NUMBA_NUM_THREADS"), dask.config.get("distributed.worker.profile.enabled")
+
+
+def _faults_of_a_second_array(spec: dict) -> list[int]:
+    """Page faults of making (and touching) two arrays of 48 and 40 MB, three times, on the task's thread."""
+    import resource
+
+    import numpy as np
+
+    (np._core if hasattr(np, "_core") else np.core).multiarray._set_madvise_hugepage(False)  # 4 KiB pages: a fault a page, whatever the system's huge page setting
+    faults = []
+    for _ in range(3):
+        before = resource.getrusage(resource.RUSAGE_THREAD).ru_minflt
+        a, b = np.ones(6_000_000), np.ones(5_000_000)  # each fits a thread arena's 64 MiB heap, both do not
+        faults.append(resource.getrusage(resource.RUSAGE_THREAD).ru_minflt - before)
+        del a, b
+    return faults
+
+
+def test_own_workers_get_one_malloc_arena_and_no_profiler():
+    from gigapoint.lod.convert.distributed import open_client
+
+    with open_client(1) as client:
+        assert set(client.run(_settings).values()) == {("1", "1", False)}
+
+
+def test_a_task_thread_reuses_the_memory_its_last_array_freed():
+    """Without the one-arena setting, a task thread's arrays live in thread-arena heaps, of which
+    glibc unmaps every one but the first as soon as it empties: the second array faulted its
+    ~10 000 pages in afresh every time."""
+    from gigapoint.lod.convert.distributed import _task, open_client
+
+    with open_client(1) as client:
+        spec = {"own_workers": True, "out": "."}
+        faults = client.submit(_task, "read", "probe", spec, _faults_of_a_second_array, pure=False).result()
+    if faults[0] < 15_000:  # transparent huge pages for every mapping ("always"): too few faults to tell
+        pytest.skip(f"the first 88 MB of arrays faulted only {faults[0]} pages in")
+    assert max(faults[1:]) < 1_000, faults
