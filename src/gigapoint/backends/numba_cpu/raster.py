@@ -477,93 +477,66 @@ def rasterize(firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes
     shape (``shape_token``).
     step > 1 draws every step-th point of each batch (a point budget for plain clouds:
     Morton order makes that an even spatial subsample).
-
-    The parallel loop's body is one call (``_draw_part``): numba's parfor passes then lower a
-    small body, 2.5 s less compiling on a first render than the whole body inside the prange.
     """
-    spans, rows, uniform = footprint_runs(footprint, width)
-    max_count, any_packed = _batch_facts(counts, codes)
-    for t in prange(starts.shape[0] - 1):
-        # np.int64(t) and the facts from a call: arguments of one type each, so _draw_part is
-        # compiled once (a prange index is unsigned in the parallel loop's own compile, and
-        # constants assigned before a loop are first typed as literals: three compiles)
-        _draw_part(np.int64(t), firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes, width, height, nears, fars, starts, frames, scratch, dirty,
-                   footprint, size, atten, step, token, spans, rows, uniform, max_count, any_packed)  # fmt: skip
-
-
-@njit
-def footprint_runs(footprint, width):
-    """(spans, rows, uniform): ``footprint_spans`` and ``uniform_runs`` of a footprint."""
+    n_threads = starts.shape[0] - 1
+    n_views = frames.shape[0]
     spans, rows = footprint_spans(footprint)
-    return spans, rows, uniform_runs(spans, rows, width)
-
-
-@njit
-def _batch_facts(counts, codes):
-    """(largest batch, whether some batch is compact) of the selected batches."""
-    max_count = np.int64(0)
+    uniform = uniform_runs(spans, rows, width)
+    splats = footprint.shape[0] > 1
+    max_count = 0
     any_packed = False
     for k in range(counts.shape[0]):
-        max_count = max(max_count, np.int64(counts[k]))
+        max_count = max(max_count, counts[k])
         any_packed |= codes[k] != FULL_LAYOUT
-    return max_count, any_packed
-
-
-@njit
-def _draw_part(t, firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes, width, height, nears, fars, starts, frames, scratch, dirty,
-               footprint, size, atten, step, token, spans, rows, uniform, max_count, any_packed):  # fmt: skip
-    """Thread t's part of ``rasterize`` (its arguments; spans, rows and uniform are the
-    footprint's runs, max_count the largest batch, any_packed: some batch is compact)."""
-    n_views = frames.shape[0]
-    splats = footprint.shape[0] > 1
-    pix = np.empty(max_count, np.int32)
-    depth = np.empty(max_count, np.float32)
-    depth_bits = depth.view(np.uint32)
-    # a subsample (step > 1) is gathered into contiguous words first: one compiled phase 1
-    # (contiguous slices) serves both, instead of a second one for strided slices (14 s)
-    # (a compact batch's medium and high words are decoded into the same scratch)
-    sub = max_count if step > 1 or any_packed else 0
-    sub_low = np.empty(sub, np.uint32)
-    sub_med = np.empty(sub, np.uint32)
-    sub_high = np.empty(sub, np.uint32)
-    sub_bits = np.empty(max_count if any_packed else 0, np.uint64)
-    for k in range(starts[t], starts[t + 1]):
-        f = firsts[k]
-        c = counts[k]
-        n = (c + step - 1) // step
-        packed = codes[k] != FULL_LAYOUT
-        if step > 1:
-            for j in range(n):
-                sub_low[j] = low[f + j * step]
-            if not packed:
+    for t in prange(n_threads):
+        pix = np.empty(max_count, np.int32)
+        depth = np.empty(max_count, np.float32)
+        depth_bits = depth.view(np.uint32)
+        # a subsample (step > 1) is gathered into contiguous words first: one compiled phase 1
+        # (contiguous slices) serves both, instead of a second one for strided slices (14 s)
+        # (a compact batch's medium and high words are decoded into the same scratch)
+        sub = max_count if step > 1 or any_packed else 0
+        sub_low = np.empty(sub, np.uint32)
+        sub_med = np.empty(sub, np.uint32)
+        sub_high = np.empty(sub, np.uint32)
+        sub_bits = np.empty(max_count if any_packed else 0, np.uint64)
+        for k in range(starts[t], starts[t + 1]):
+            f = firsts[k]
+            c = counts[k]
+            n = (c + step - 1) // step
+            packed = codes[k] != FULL_LAYOUT
+            if step > 1:
                 for j in range(n):
-                    sub_med[j] = med[f + j * step]
-                    sub_high[j] = high[f + j * step]
-        if packed:
-            fine = 0
+                    sub_low[j] = low[f + j * step]
+                if not packed:
+                    for j in range(n):
+                        sub_med[j] = med[f + j * step]
+                        sub_high[j] = high[f + j * step]
+            if packed:
+                fine = 0
+                for v in range(n_views):
+                    fine = max(fine, bits[v, k])
+                if fine > 10:  # a 10-bit draw reads the low word alone
+                    expand_tails(ext, ext_firsts[k], codes[k], np.int64(0), n, step, sub_med, sub_high, sub_bits)  # np.int64: a literal 0 compiles it again
             for v in range(n_views):
-                fine = max(fine, bits[v, k])
-            if fine > 10:  # a 10-bit draw reads the low word alone
-                expand_tails(ext, ext_firsts[k], codes[k], np.int64(0), n, step, sub_med, sub_high, sub_bits)
-        for v in range(n_views):
-            buf = frames[v] if t == 0 else scratch[v, t - 1]
-            near = np.float32(nears[v])
-            far = np.float32(fars[v])
-            clip = not inside_frustum(mats[v, k], width, height, near, far)
-            # points that stay one pixel (all of a batch whose nearest corner is too far for two
-            # pixels: most of a dense cloud's) take the one-pixel loop, the same pixels faster
-            one = not splats or largest_size(mats[v, k], size, atten, near) < 2.0
-            # thread 0 draws into the frame itself: its tiles need no merge, so no flags
-            mark = t > 0
-            if mark and not clip and one:
-                mark = not mark_footprint(mats[v, k], width, height, dirty[v, t], n)
-            if step == 1 and not packed:  # contiguous slices: the vectorised loop
-                project_batch(low[f : f + c], med[f : f + c], high[f : f + c], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip, token)
-            elif step == 1:
-                project_batch(low[f : f + c], sub_med[:n], sub_high[:n], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip, token)
-            else:
-                project_batch(sub_low[:n], sub_med[:n], sub_high[:n], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip, token)
-            write_batch(f, step, pix[:n], depth[:n], depth_bits[:n], buf, dirty[v, t], width, height, one, spans, rows, uniform, size, atten, clip, mark)
+                buf = frames[v] if t == 0 else scratch[v, t - 1]
+                near = np.float32(nears[v])
+                far = np.float32(fars[v])
+                clip = not inside_frustum(mats[v, k], width, height, near, far)
+                # points that stay one pixel (all of a batch whose nearest corner is too far for two
+                # pixels: most of a dense cloud's) take the one-pixel loop, the same pixels faster
+                one = not splats or largest_size(mats[v, k], size, atten, near) < 2.0
+                # thread 0 draws into the frame itself: its tiles need no merge, so no flags
+                mark = t > 0
+                if mark and not clip and one:
+                    mark = not mark_footprint(mats[v, k], width, height, dirty[v, t], n)
+                if step == 1 and not packed:  # contiguous slices: the vectorised loop
+                    project_batch(low[f : f + c], med[f : f + c], high[f : f + c], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip, token)
+                elif step == 1:
+                    project_batch(low[f : f + c], sub_med[:n], sub_high[:n], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip, token)
+                else:
+                    project_batch(sub_low[:n], sub_med[:n], sub_high[:n], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip, token)
+                write_batch(f, step, pix[:n], depth[:n], depth_bits[:n], buf, dirty[v, t], width, height, one, spans, rows, uniform, size, atten, clip, mark)
 
 
 @njit(parallel=True, cache=True)
