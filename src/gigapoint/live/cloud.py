@@ -469,14 +469,14 @@ class LiveCloud:
             ring = ids < buf.n_ring
             t[ring] = self._chunk_time[ids[ring]]
             alpha = self.fade_alpha(t)
-        spacing = self._kept_spacing(buf, step) if getattr(settings, "point_sizing", None) == "adaptive" else None
-        return DrawList(buf, Selection(ids, bits.astype(np.int32), mats, size, culled), n_batches, step, alpha=alpha, spacing=spacing)
+        sel = Selection(ids, bits.astype(np.int32), mats, size, culled)
+        return DrawList(buf, sel, n_batches, step, alpha=alpha, spacing=self._kept_spacing(buf, step))
 
     def _kept_spacing(self, buf: LiveBuffers, step: int) -> float:
-        """The buffers' point spacing (adaptive point sizes), measured again only when a tenth of
-        the kept frames are new since (or the buffers, ``step`` or the snapshots changed): the buffers change with
-        every push, and measuring them (``point_spacing``: ~2 ms) in every frame of a stream cost
-        what the spacing of a ring of similar frames hardly changes by."""
+        """The buffers' point spacing (what adaptive point sizes read), measured again only when a
+        tenth of the kept frames are new since (or the buffers, ``step`` or the snapshots changed):
+        the buffers change with every push, and measuring them (``point_spacing``: ~2 ms) in every
+        frame of a stream cost what the spacing of a ring of similar frames hardly changes by."""
         key = (id(buf), step, self.snapshots.n_points if self.snapshots is not None else 0)
         kept = self._spacing
         if kept is None or kept[0] != key or self._seq - kept[1] >= max(1, len(self.frames) // 10):
