@@ -187,3 +187,25 @@ def test_open_chunked_equals_open(tmp_path):
     got = gp.open(AUTZEN, chunked=True, chunk_size=30_000)
     assert got.layout == "compact"
     assert_same_cloud(got, want)
+
+
+def test_a_full_disk_while_spilling_is_one_line_naming_the_folder(monkeypatch, tmp_path):
+    """The spill needs ~30 bytes a point of disk: an OSError there (ENOSPC) becomes one line
+    naming the cloud, the folder and the space needed; the temporary folder is removed."""
+    import errno
+
+    from gigapoint.core import chunked
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(chunked, "_spill", full)
+    rng = np.random.default_rng(1)
+    points = rng.uniform(0, 10, (1000, 3))
+
+    def source():
+        return iter([PointChunk(points, None)])
+
+    with pytest.raises(InputError, match=r"spilling 1,000 points to .*gigapoint_chunked_.* failed: No space left on device .*tmpdir="):
+        chunked.build_cloud_chunked(source, name="full", tmpdir=tmp_path)
+    assert not list(tmp_path.iterdir())

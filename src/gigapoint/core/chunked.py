@@ -97,7 +97,13 @@ def build_cloud_chunked(
     attr_dtypes = survey["attributes"]
     with tempfile.TemporaryDirectory(prefix="gigapoint_chunked_", dir=tmpdir) as tmp:
         folder = Path(tmp)
-        _spill(source, folder, origin, edge, shift, part_of_cell, n_parts, short, attr_dtypes)
+        try:
+            _spill(source, folder, origin, edge, shift, part_of_cell, n_parts, short, attr_dtypes)
+        except OSError as exc:  # a full disk, most likely: say where and how much it needs
+            raise InputError(
+                f"{name}: spilling {n:,} points to {folder} failed: {exc.strerror or exc} (the chunked build needs ~30 bytes a point "
+                f"of free disk there, {30 * n / 1e9:.1f} GB; pass tmpdir= for another place)"
+            ) from exc
         return _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, short, attr_dtypes, batch_size, name, skipped, source_scale)
 
 
