@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import importlib
 import io
-import platform
 import statistics
 import subprocess
 import sys
@@ -118,11 +117,10 @@ def main(argv=None) -> int:
     ap.add_argument("--width", type=int, default=1920)
     ap.add_argument("--height", type=int, default=1080)
     args = ap.parse_args(argv)
-    from gigapoint.bench import benchmark_cameras, parse_count
+    from gigapoint.bench import benchmark_cameras, cpu_model, parse_count
 
     n, n_lod = parse_count(args.points), parse_count(args.lod_points)
-    lscpu = subprocess.run(["lscpu"], check=False, capture_output=True, text=True).stdout
-    cpu = next((line.split(":", 1)[1].strip() for line in lscpu.splitlines() if line.startswith("Model name")), platform.processor())
+    cpu = cpu_model()
     print(f"A/B: {args.base} (base) against the working tree (new); {cpu}")
     with tempfile.TemporaryDirectory() as tmp:
         base = load_base(args.base, Path(tmp) / "base")

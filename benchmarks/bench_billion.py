@@ -17,10 +17,8 @@ The JIT is warmed up on a small town before the build is timed.
 from __future__ import annotations
 
 import argparse
-import platform
 import resource
 import statistics
-import subprocess
 import sys
 import time
 
@@ -54,7 +52,7 @@ def frames(cloud, cam, settings, rounds: int) -> tuple[float, float, int]:
 
 
 def main(argv=None) -> int:
-    from gigapoint.bench import benchmark_cameras, parse_count
+    from gigapoint.bench import benchmark_cameras, cpu_model, parse_count
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", default="1G", help="demo town size (100M, 1G)")
@@ -66,8 +64,7 @@ def main(argv=None) -> int:
     ap.add_argument("--png", help="write the overview to this PNG")
     args = ap.parse_args(argv)
     n = parse_count(args.points)
-    lscpu = subprocess.run(["lscpu"], check=False, capture_output=True, text=True).stdout
-    cpu = next((line.split(":", 1)[1].strip() for line in lscpu.splitlines() if line.startswith("Model name")), platform.processor())
+    cpu = cpu_model()
     settings = gp.RenderSettings(backend="cpu", size_mode="fixed")
     print(f"bench_billion: {n:,} points at {args.scale:g} m; {cpu}, numba threads {settings.threads or 'all'}", flush=True)
     small = gp.demo(3_000_000, scale=args.scale, chunked=True)  # JIT: the build's kernels (radix sort too) and the frame's

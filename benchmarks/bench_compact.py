@@ -32,10 +32,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import platform
 import resource
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -215,10 +213,9 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-autzen", action="store_true")
     ap.add_argument("--octree", action="store_true", help="the compact octree on disk (format 2) against format 1 instead")
     args = ap.parse_args(argv)
-    from gigapoint.bench import parse_count
+    from gigapoint.bench import cpu_model, parse_count
 
-    lscpu = subprocess.run(["lscpu"], check=False, capture_output=True, text=True).stdout
-    cpu = next((line.split(":", 1)[1].strip() for line in lscpu.splitlines() if line.startswith("Model name")), platform.processor())
+    cpu = cpu_model()
     print(f"compact layout vs three words; {cpu}, numba threads {gp.RenderSettings().threads or 'all'}")
     if args.octree:
         octree_part(args)

@@ -133,12 +133,9 @@ def run_child(code: str, args: dict, timeout: float = 3600) -> dict:
 
 
 def cpu_model() -> str:
-    try:
-        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=True).stdout
-        model = next(line.split(":", 1)[1].strip() for line in out.splitlines() if line.startswith("Model name"))
-        return f"{model}, {os.cpu_count()} CPUs"
-    except (OSError, subprocess.CalledProcessError, StopIteration):
-        return f"{platform.processor() or 'unknown CPU'}, {os.cpu_count()} CPUs"
+    from gigapoint.bench import cpu_model
+
+    return f"{cpu_model()}, {os.cpu_count()} CPUs"
 
 
 def main() -> None:

@@ -122,11 +122,9 @@ def compile_times(args) -> None:
 
 
 def cpu_model() -> str:
-    try:
-        lscpu = subprocess.run(["lscpu"], check=False, capture_output=True, text=True).stdout
-        return next(line.split(":", 1)[1].strip() for line in lscpu.splitlines() if line.startswith("Model name"))
-    except (OSError, StopIteration):
-        return platform.processor()
+    from gigapoint.bench import cpu_model
+
+    return cpu_model()
 
 
 def main(argv=None) -> int:

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import subprocess
 import threading
 import time
 
@@ -38,8 +37,9 @@ from gigapoint.live.sources import SyntheticSensor
 
 
 def _cpu() -> str:
-    out = subprocess.run(["lscpu"], check=False, capture_output=True, text=True).stdout
-    return next((line.split(":", 1)[1].strip() for line in out.splitlines() if line.startswith("Model name")), "?")
+    from gigapoint.bench import cpu_model
+
+    return cpu_model()
 
 
 def _rss_mb() -> float:

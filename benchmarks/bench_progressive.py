@@ -37,8 +37,9 @@ from gigapoint.lod.progressive import ProgressiveOctree
 
 
 def _cpu() -> str:
-    out = subprocess.run(["lscpu"], check=False, capture_output=True, text=True).stdout
-    return next((line.split(":", 1)[1].strip() for line in out.splitlines() if line.startswith("Model name")), "?")
+    from gigapoint.bench import cpu_model
+
+    return cpu_model()
 
 
 def _scan_order(xyz):

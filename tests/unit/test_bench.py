@@ -242,3 +242,23 @@ def test_coverage_iou_of_two_masks():
     b[1, 0] = True  # 3 pixels, 2 shared: IoU 2 / 5
     assert coverage_iou(a, b) == 0.4
     assert coverage_iou(a, ~a) == 0.0
+
+
+def test_cpu_model_names_the_processor(monkeypatch):
+    """Every benchmark states the CPU (the machine changes between sessions): lscpu's model
+    name, or the platform's, never an empty string."""
+    import subprocess
+
+    from gigapoint.bench import cpu_model
+
+    class Done:
+        stdout = "Architecture:        x86_64\nModel name:          Some CPU 9000\n"
+
+    monkeypatch.setattr(subprocess, "run", lambda *a, **k: Done())
+    assert cpu_model() == "Some CPU 9000"
+
+    def missing(*a, **k):
+        raise FileNotFoundError("lscpu")
+
+    monkeypatch.setattr(subprocess, "run", missing)
+    assert cpu_model()  # the platform's name, or "unknown CPU"

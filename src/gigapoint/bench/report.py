@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+import platform
+import subprocess
 from pathlib import Path
 
 from ..atomic import atomic_bytes
@@ -11,6 +13,16 @@ from ..errors import GigapointError
 from .scene import THROUGHPUT_DEFINITION
 
 _SUFFIXES = {"k": 10**3, "m": 10**6, "g": 10**9, "b": 10**9}
+
+
+def cpu_model() -> str:
+    """The CPU's model name (``lscpu``), for every benchmark's figures: the machine changes."""
+    try:
+        out = subprocess.run(["lscpu"], check=False, capture_output=True, text=True).stdout
+    except OSError:
+        out = ""
+    model = next((line.split(":", 1)[1].strip() for line in out.splitlines() if line.startswith("Model name")), "")
+    return model or platform.processor() or "unknown CPU"
 
 
 def parse_count(text) -> int:

@@ -29,7 +29,6 @@ return, also on an error.
 from __future__ import annotations
 
 import tempfile
-import warnings
 from collections.abc import Callable, Iterable
 from contextlib import ExitStack
 from pathlib import Path
@@ -37,10 +36,10 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from ..errors import EmptyCloudError, GigapointWarning, InputError
+from ..errors import InputError
 from .chunk import PointChunk
-from .cloud import MAX_ABS_COORDINATE, PointCloud, _valid_mask, finest_scale, gather, scan_points, storage_format
-from .compact import compact_positions, pack_rgb565, stream_words
+from .cloud import PointCloud, _valid_mask, check_valid_count, finest_scale, gather, scan_points, storage_format
+from .compact import compact_positions, ext_bits_per_point, pack_rgb565, stream_words
 from .layout import BATCH_SIZE, PACK_DTYPE
 from .morton import MORTON_BITS_PER_AXIS, counting_order, cube_of, morton_codes, morton_order
 from .quantize import make_batches, quantize
@@ -81,24 +80,19 @@ def build_cloud_chunked(
         raise InputError(f"{name}: cell_level must be 1..8, got {cell_level}")
     survey = _survey(source, attributes)
     n, skipped = survey["n"], survey["skipped"]
-    if n == 0:
-        detail = f" ({skipped:,} invalid points: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
-        raise EmptyCloudError(f"{name}: no valid points{detail}")
-    if skipped:
-        warnings.warn(
-            f"{name}: skipped {skipped:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})", GigapointWarning, stacklevel=2
-        )
+    check_valid_count(name, n, skipped)
     source_scale = finest_scale(survey["scales"])
     compact, short = storage_format(name, layout, colors, source_scale, survey["opaque"])
     lo, hi = survey["lo"], survey["hi"]
     origin, edge = cube_of(lo, hi)
     shift = 3 * (MORTON_BITS_PER_AXIS - cell_level)
-    part_of_cell, n_parts = _cut_partitions(_histogram(source, origin, edge, shift, cell_level), partition_points)
+    clean = skipped == 0
+    part_of_cell, n_parts = _cut_partitions(_histogram(source, clean, origin, edge, shift, cell_level), partition_points)
     attr_dtypes = survey["attributes"]
     with tempfile.TemporaryDirectory(prefix="gigapoint_chunked_", dir=tmpdir) as tmp:
         folder = Path(tmp)
         try:
-            _spill(source, folder, origin, edge, shift, part_of_cell, n_parts, short, attr_dtypes)
+            _spill(source, clean, folder, origin, edge, shift, part_of_cell, n_parts, short, attr_dtypes)
         except OSError as exc:  # a full disk, most likely: say where and how much it needs
             raise InputError(
                 f"{name}: spilling {n:,} points to {folder} failed: {exc.strerror or exc} (the chunked build needs ~30 bytes a point "
@@ -108,10 +102,10 @@ def build_cloud_chunked(
 
 
 # --- the three passes over the source --------------------------------------------------------
-def _valid(chunk: PointChunk):
-    """(points kept: a slice or a mask, how many invalid) of a chunk (build_cloud's rule)."""
-    n_bad, _, _ = scan_points(chunk.xyz)
-    return (slice(None) if n_bad == 0 else _valid_mask(chunk.xyz)), n_bad
+def _kept(chunk: PointChunk, clean: bool):
+    """The points of a chunk the build keeps (build_cloud's rule): all of them where the survey
+    found no invalid point in the source (``clean``: no second scan), else a mask."""
+    return slice(None) if clean else _valid_mask(chunk.xyz)
 
 
 def _survey(source: ChunkSource, keep_attributes: bool) -> dict:
@@ -132,16 +126,16 @@ def _survey(source: ChunkSource, keep_attributes: bool) -> dict:
             dtypes.setdefault(a, (np.asarray(v).dtype, np.asarray(v).shape[1:]))
         scales.append(chunk.scale)
         if opaque and len(chunk.rgba):
-            keep, _ = _valid(chunk) if n_bad else (slice(None), 0)
+            keep = _kept(chunk, n_bad == 0)
             opaque = bool((chunk.rgba[keep, 3] == 255).all())
     attrs = {a: dtypes[a] for a in (names or [])} if keep_attributes else {}
     return {"n": n, "skipped": skipped, "lo": lo, "hi": hi, "attributes": attrs, "scales": scales, "opaque": opaque}
 
 
-def _histogram(source: ChunkSource, origin, edge, shift: int, level: int) -> np.ndarray:
+def _histogram(source: ChunkSource, clean: bool, origin, edge, shift: int, level: int) -> np.ndarray:
     hist = np.zeros(1 << (3 * level), np.int64)
     for chunk in source():
-        keep, _ = _valid(chunk)
+        keep = _kept(chunk, clean)
         codes = morton_codes(np.ascontiguousarray(chunk.xyz[keep], np.float64), origin, edge)
         hist += np.bincount((codes >> np.uint64(shift)).astype(np.int64), minlength=len(hist))
     return hist
@@ -173,7 +167,7 @@ def _paths(folder: Path, p: int, attr_dtypes) -> dict[str, Path]:
     return {key: folder / f"{p}.{key}" for key in ("xyz", "color", *(f"a_{a}" for a in attr_dtypes))}
 
 
-def _spill(source, folder, origin, edge, shift, part_of_cell, n_parts, short, attr_dtypes) -> None:
+def _spill(source, clean, folder, origin, edge, shift, part_of_cell, n_parts, short, attr_dtypes) -> None:
     with ExitStack() as files:
         handles: dict[tuple[int, str], object] = {}
 
@@ -184,7 +178,7 @@ def _spill(source, folder, origin, edge, shift, part_of_cell, n_parts, short, at
             values.tofile(f)
 
         for chunk in source():
-            keep, _ = _valid(chunk)
+            keep = _kept(chunk, clean)
             xyz = np.ascontiguousarray(chunk.xyz[keep], np.float64)
             if len(xyz) == 0:
                 continue
@@ -275,7 +269,8 @@ def _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, short, attr_dty
     ext = None
     if compact is not None:
         ext = np.fromfile(ext_path, np.uint64)
-        expected = int(stream_words(_ext_bits(packing), batches["count"].astype(np.int64)).sum())
+        counts = batches["count"].astype(np.int64)
+        expected = int(stream_words(ext_bits_per_point(packing, counts), counts).sum())
         assert len(ext) == expected == ext_words, (len(ext), expected, ext_words)
     data_bounds = None if compact is None else (np.asarray(lo, np.float64).copy(), np.asarray(hi, np.float64).copy())
     cloud = PointCloud(batches, low, med, high, color, attrs, name=name, skipped=skipped, ext=ext, packing=packing, data_bounds=data_bounds)
@@ -300,11 +295,6 @@ def _changed(name: str, n: int) -> InputError:
     return InputError(
         f"{name}: the chunk source gave other points on a later pass than its first ({n:,}); it must give the same points each time"
     )
-
-
-def _ext_bits(packing: np.ndarray) -> np.ndarray:
-    code = packing["code"].astype(np.int64)
-    return (code & 0xFF) + ((code >> 8) & 0xFF) + ((code >> 16) & 0xFF)
 
 
 __all__ = ["CELL_LEVEL", "PARTITION_POINTS", "ChunkSource", "build_cloud_chunked"]

@@ -281,11 +281,7 @@ def build_cloud(
         for a, values in chunk.attributes.items():
             attr_parts.setdefault(a, []).append(values[keep])
         total += len(xyz_parts[-1])
-    if total == 0:
-        detail = f" ({skipped:,} invalid points: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
-        raise EmptyCloudError(f"{name}: no valid points{detail}")
-    if skipped:
-        warnings.warn(f"{name}: skipped {skipped:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})", GigapointWarning, stacklevel=2)
+    check_valid_count(name, total, skipped)
     xyz = xyz_parts[0] if len(xyz_parts) == 1 else np.concatenate(xyz_parts)
     del xyz_parts
     rgba = rgba_parts[0] if len(rgba_parts) == 1 else np.concatenate(rgba_parts)
@@ -296,6 +292,16 @@ def build_cloud(
     cloud = cloud_from_points(xyz, rgba, attributes, name=name, skipped=skipped, batch_size=batch_size, bounds=(lo, hi), scale=compact, rgb565=short)
     cloud.source_scale = source_scale
     return cloud
+
+
+def check_valid_count(name: str, valid: int, skipped: int) -> None:
+    """No valid point is an error; invalid points skipped, a warning (``build_cloud``'s rule, and
+    the chunked build's)."""
+    if valid == 0:
+        detail = f" ({skipped:,} invalid points: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
+        raise EmptyCloudError(f"{name}: no valid points{detail}")
+    if skipped:
+        warnings.warn(f"{name}: skipped {skipped:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})", GigapointWarning, stacklevel=3)
 
 
 #: ``build_cloud``'s layouts and color formats
