@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from ...core.layout import COORD_BITS, WORD_BITS, WORD_MASK
+from ...core.compact import code_bits, read_ext, tail_words
+from ...core.layout import COORD_BITS, EXT_FULL_BITS, WORD_BITS, WORD_MASK
 from ..keys import CODE_BITS
 
 GRID_BITS = 7  # voxel cells per axis and inner node: 2^7 = 128 (SimLOD, Wand et al.)
@@ -25,6 +26,14 @@ _HASH_MUL = np.uint64(0x9E3779B97F4A7C15)
 _SCALE30 = float(1 << COORD_BITS)
 _MAX30 = (1 << COORD_BITS) - 1
 _STACK = 8 * (CODE_BITS + 2)  # a depth-first walk holds at most 8 siblings a level
+# The pool is in the compact layout (core/compact.py): a point chunk is a wide batch (its medium
+# and high words as 60 bits a point in its own stream); a voxel chunk holds the low word alone
+# (layout code 0: no stream), which places a voxel at the centre of a 1024-grid cell: its box is
+# its node's cube moved half such a cell down, so that centre is the voxel cell's centre.
+WIDE_CODE = EXT_FULL_BITS | EXT_FULL_BITS << 8 | EXT_FULL_BITS << 16
+WIDE_BITS = 3 * EXT_FULL_BITS
+VOXEL_SHIFT = 0.5 / (1 << WORD_BITS)  # of the node's edge
+_M20 = (1 << EXT_FULL_BITS) - 1
 
 
 @njit(inline="always")
@@ -235,6 +244,39 @@ def rehash(vox_key, n_voxels, hkeys, hvals):
 
 
 @njit(cache=True)
+def voxel_table(lists, first_chunk, chunk_next, fill, chunk_size, level, low, hkeys, hvals, vox_key, vox_slot):
+    """The voxels of ``lists`` (inner nodes' lists) entered into an empty table, ids in list
+    order, with their keys and slots: a voxel's cell comes from its low word (the cell index
+    per axis is its top bits). Returns the number of voxels."""
+    mask = np.uint64(hkeys.shape[0] - 1)
+    v = 0
+    for j in range(lists.shape[0]):
+        lst = lists[j]
+        lev = level[lst // LISTS]
+        bits = min(lev + GRID_BITS, CODE_BITS) - lev
+        c = first_chunk[lst]
+        while c >= 0:
+            for s in range(c * chunk_size, c * chunk_size + fill[c]):
+                w = low[s]
+                cell = np.uint64(0)
+                for a in range(3):
+                    i = np.uint64(((w >> np.uint32(WORD_BITS * a)) & np.uint32(WORD_MASK)) >> np.uint32(WORD_BITS - bits))
+                    for b in range(bits):
+                        cell |= ((i >> np.uint64(b)) & np.uint64(1)) << np.uint64(3 * b + 2 - a)
+                k = _voxel_key(lst, cell)
+                h = _hash(k, mask)
+                while hkeys[h] != EMPTY_KEY:
+                    h = (h + np.uint64(1)) & mask
+                hkeys[h] = k
+                hvals[h] = v
+                vox_key[v] = k
+                vox_slot[v] = s
+                v += 1
+            c = chunk_next[c]
+    return v
+
+
+@njit(cache=True)
 def chunks_needed(lists, counts, chunk_size, last_chunk, fill):
     """How many new chunks appending counts[j] entries to list lists[j] takes, all j."""
     total = 0
@@ -248,34 +290,46 @@ def chunks_needed(lists, counts, chunk_size, last_chunk, fill):
 
 
 @njit(cache=True)
-def allocate(lists, counts, chunk_size, first_chunk, last_chunk, level, cmin, edge, fill, chunk_next, chunk_node, bbox_min, bbox_max,
-             chunk_level, free, n_free, n_chunks, version, batch_version, slots):  # fmt: skip
+def allocate(lists, counts, chunk_size, first_chunk, last_chunk, level, leaf, cmin, edge, fill, chunk_next, chunk_node, bbox_min, bbox_max,
+             chunk_level, ext_first, code, ext, stream, free, n_free, n_chunks, n_streams, version, batch_version, slots):  # fmt: skip
     """Append counts[j] entries to list lists[j] (in this order): the pool slot of each entry
     in ``slots`` (entries of list j follow those of j - 1). A list's chunks are linked
-    (first_chunk .. chunk_next .. last_chunk), each with its node's cube as its box; new chunks come from the free list, then from
-    the unused end of the pool (the caller made room: ``chunks_needed``). Every chunk written
-    gets batch_version = version. Returns (n_free, n_chunks)."""
+    (first_chunk .. chunk_next .. last_chunk). A leaf's (point) chunk is wide, with its node's
+    cube as box and a zeroed stream of ``stream`` words: it comes from the free list (split
+    leaves' chunks, which keep their streams), else from the unused end of the pool with the
+    next stream, so streams follow chunk order. An inner node's (voxel) chunk is new, of code
+    0 (an empty stream where the next one starts), its box the cube moved by VOXEL_SHIFT. The caller made room (``chunks_needed``). Every
+    chunk written gets batch_version = version. Returns (n_free, n_chunks, n_streams)."""
     e = 0
     for j in range(lists.shape[0]):
         lst = lists[j]
         node = lst // LISTS
+        points = leaf[node] == 1
         left = counts[j]
         while left > 0:
             c = last_chunk[lst]
             if c < 0 or fill[c] == chunk_size:
-                if n_free > 0:
+                if points and n_free > 0:
                     n_free -= 1
                     c = free[n_free]
                 else:
                     c = n_chunks
                     n_chunks += 1
+                    ext_first[c] = n_streams * stream  # a voxel chunk's empty stream too: streams follow chunk order
+                    code[c] = WIDE_CODE if points else 0
+                    if points:
+                        n_streams += 1
+                if points:
+                    f = np.int64(ext_first[c])
+                    ext[f : f + stream] = 0
                 fill[c] = 0
                 chunk_next[c] = -1
                 chunk_node[c] = node
                 chunk_level[c] = level[node]
+                shift = 0.0 if points else VOXEL_SHIFT * edge[node]
                 for a in range(3):
-                    bbox_min[c, a] = cmin[node, a]
-                    bbox_max[c, a] = cmin[node, a] + edge[node]
+                    bbox_min[c, a] = cmin[node, a] - shift
+                    bbox_max[c, a] = bbox_min[c, a] + edge[node]
                 if last_chunk[lst] >= 0:
                     chunk_next[last_chunk[lst]] = c
                 else:
@@ -289,7 +343,7 @@ def allocate(lists, counts, chunk_size, first_chunk, last_chunk, level, cmin, ed
             batch_version[c] = version
             e += take
             left -= take
-    return n_free, n_chunks
+    return n_free, n_chunks, n_streams
 
 
 @njit(cache=True)
@@ -324,25 +378,25 @@ def free_chunks(first_chunk, last_chunk, chunk_next, fill, lst, free, n_free):
 
 @njit(inline="always")
 def _words(x, y, z, mx, my, mz, inv):
-    """The three 10-bit words of a position in the cube [m, m + 1/inv]^3 (30-bit fixed point)."""
+    """A position in the cube [m, m + 1/inv]^3 at 30 bits an axis: its low word (bits 20-29 of
+    each axis) and the 20 bits under them, x y z back to back (a wide batch's stream bits)."""
     wl = np.uint32(0)
-    wm = np.uint32(0)
-    wh = np.uint32(0)
+    v = np.uint64(0)
     for a in range(3):
-        v = x if a == 0 else (y if a == 1 else z)
+        p = x if a == 0 else (y if a == 1 else z)
         m = mx if a == 0 else (my if a == 1 else mz)
-        q = min(max(np.int64((v - m) * inv), 0), _MAX30)
-        s = np.uint32(WORD_BITS * a)
-        wl |= np.uint32((q >> 20) & WORD_MASK) << s
-        wm |= np.uint32((q >> 10) & WORD_MASK) << s
-        wh |= np.uint32(q & WORD_MASK) << s
-    return wl, wm, wh
+        q = min(max(np.int64((p - m) * inv), 0), _MAX30)
+        wl |= np.uint32((q >> 20) & WORD_MASK) << np.uint32(WORD_BITS * a)
+        v |= np.uint64(q & _M20) << np.uint64(EXT_FULL_BITS * a)
+    return wl, v
 
 
 @njit(parallel=True, cache=True)
-def write_points(xyz, rgba, order, leaf_runs, run_offsets, slots, cmin, edge, low, med, high, color):
-    """Each leaf run's points quantized into their leaf's cube (30 bits) at their slots; the
-    runs index the sorted points, point k of which is xyz[order[k]] (no sorted copies made)."""
+def write_points(xyz, rgba, order, leaf_runs, run_offsets, slots, cmin, edge, low, ext, ext_first, chunk_size, color):
+    """Each leaf run's points quantized into their leaf's cube (30 bits) at their slots: the low
+    word, and 60 bits in their chunk's stream (zeroed when allocated; a leaf's chunks are its own,
+    so runs never share a stream word). The runs index the sorted points, point k of which is
+    xyz[order[k]] (no sorted copies made)."""
     for r in prange(leaf_runs.shape[0]):
         node, lo, hi = leaf_runs[r, 0], leaf_runs[r, 1], leaf_runs[r, 2]
         inv = _SCALE30 / edge[node]
@@ -351,10 +405,15 @@ def write_points(xyz, rgba, order, leaf_runs, run_offsets, slots, cmin, edge, lo
         for i in range(lo, hi):
             s = slots[o + i]
             j = order[i]
-            wl, wm, wh = _words(xyz[j, 0], xyz[j, 1], xyz[j, 2], mx, my, mz, inv)
+            wl, v = _words(xyz[j, 0], xyz[j, 1], xyz[j, 2], mx, my, mz, inv)
             low[s] = wl
-            med[s] = wm
-            high[s] = wh
+            c = s // chunk_size
+            p = (s - c * chunk_size) * WIDE_BITS
+            w = np.int64(ext_first[c]) + (p >> 6)
+            sh = np.uint64(p & 63)
+            ext[w] |= v << sh
+            if (p & 63) + WIDE_BITS > 64:
+                ext[w + 1] |= v >> (np.uint64(64) - sh)
             color[s] = rgba[j]
 
 
@@ -382,9 +441,9 @@ def _mean_color(sums, v):
 
 @njit(parallel=True, cache=True)
 def write_voxels(vid, is_new, node, cell, sums, level, slots_of_new, first_new, vox_sum, vox_slot, vox_key,
-                 low, med, high, color, batch_version, chunk_size, version):  # fmt: skip
+                 low, color, batch_version, chunk_size, version):  # fmt: skip
     """Add each entry's color sums to its voxel; a new voxel also gets its slot, key and
-    position (its cell's centre, 30 bits in the node's cube); every touched voxel's
+    position (its cell's centre: the low word alone, VOXEL_SHIFT); every touched voxel's
     drawn color becomes the rounded mean of the points it stands for. New voxels have the ids
     ``first_new`` on in entry order, so voxel v's slot is slots_of_new[v - first_new]."""
     for e in prange(vid.shape[0]):
@@ -406,20 +465,13 @@ def write_voxels(vid, is_new, node, cell, sums, level, slots_of_new, first_new, 
                 i0 |= np.int64((digit >> np.uint64(2)) & np.uint64(1)) << b
                 i1 |= np.int64((digit >> np.uint64(1)) & np.uint64(1)) << b
                 i2 |= np.int64(digit & np.uint64(1)) << b
-            shift = COORD_BITS - bits  # the cell's centre: index, then a one, then zeros
+            shift = WORD_BITS - bits  # the cell's centre: index, then a one, then zeros (the low word's)
             wl = np.uint32(0)
-            wm = np.uint32(0)
-            wh = np.uint32(0)
             for a in range(3):
                 ia = i0 if a == 0 else (i1 if a == 1 else i2)
                 q = (ia << shift) | (np.int64(1) << (shift - 1))
-                sh = np.uint32(WORD_BITS * a)
-                wl |= np.uint32((q >> 20) & WORD_MASK) << sh
-                wm |= np.uint32((q >> 10) & WORD_MASK) << sh
-                wh |= np.uint32(q & WORD_MASK) << sh
+                wl |= np.uint32(q & WORD_MASK) << np.uint32(WORD_BITS * a)
             low[s] = wl
-            med[s] = wm
-            high[s] = wh
         # entries of one batch never share a voxel (one entry per node and cell), so no race
         for ch in range(5):
             vox_sum[v, ch] += sums[e, ch]
@@ -429,13 +481,17 @@ def write_voxels(vid, is_new, node, cell, sums, level, slots_of_new, first_new, 
 
 
 @njit(parallel=True, cache=True)
-def dequantize_slots(low, med, high, slots, cmin, edge, out):
-    """float64 positions (30-bit cell centres) of a node's entries at ``slots``."""
+def dequantize_slots(low, ext, ext_first, code, chunk_size, slots, box_min, edge, out):
+    """float64 positions (30-bit cell centres) of a node's entries at ``slots``, its chunks'
+    box starting at ``box_min``, through the compact layout's decoder (core/compact.py)."""
     inv = edge / _SCALE30
     for k in prange(slots.shape[0]):
         s = slots[k]
+        c = s // chunk_size
+        cd = code[c]
+        med, high = tail_words(read_ext(ext, ext_first[c], code_bits(cd), s - c * chunk_size), cd)
         for a in range(3):
             sh = np.uint32(WORD_BITS * a)
-            q = (np.int64((low[s] >> sh) & np.uint32(WORD_MASK)) << 20) | (np.int64((med[s] >> sh) & np.uint32(WORD_MASK)) << 10)
-            q |= np.int64((high[s] >> sh) & np.uint32(WORD_MASK))
-            out[k, a] = cmin[a] + (q + 0.5) * inv
+            q = (np.int64((low[s] >> sh) & np.uint32(WORD_MASK)) << 20) | (np.int64((med >> sh) & np.uint32(WORD_MASK)) << 10)
+            q |= np.int64((high >> sh) & np.uint32(WORD_MASK))
+            out[k, a] = box_min[a] + (q + 0.5) * inv

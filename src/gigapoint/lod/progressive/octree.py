@@ -14,9 +14,11 @@ The structure of SimLOD (Schütz, Herzberger, Wimmer 2024, sections 3-5; Wand et
   first point gives the voxel its attributes). Voxels are extra representatives, not the points themselves.
   Occupancy is an open-addressing table keyed by (node, cell), not a 128³ bit grid per node:
   256 KB a node is more than the voxels of most nodes (a surface fills ~16 k of 2 M cells).
-- **storage**: a pool of fixed-size chunks (``CHUNK`` entries) in the batch layout of every
-  gigapoint cloud (low/med/high words relative to the node's cube, u32 RGBA, attributes);
-  a node's entries are a linked list of chunks, so nodes grow without copies, and a split
+- **storage**: a pool of fixed-size chunks (``CHUNK`` entries) in gigapoint's compact batch
+  layout (core/compact.py: a low word, u32 RGBA and the attributes an entry, positions relative
+  to the node's cube): a point chunk keeps the 20 bits an axis under the low word in a stream
+  of its own (a wide batch, 7.5 bytes a point), a voxel chunk needs nothing more (a voxel sits
+  at its cell's centre on the node's 128³ grid, which the low word holds); a node's entries are a linked list of chunks, so nodes grow without copies, and a split
   leaf's chunks go back to a free list. Each chunk is a batch: the renderer draws the pool
   directly (one batch per chunk), with the octree's node selection (largest projected
   first, within the point budget) and per-node precision, and the GPU re-uploads only the
@@ -41,8 +43,9 @@ import numpy as np
 
 from ...core.chunk import PointChunk, colors_for
 from ...core.cloud import MAX_ABS_COORDINATE
+from ...core.compact import point_words, stream_words
 from ...core.framelock import FrameLock
-from ...core.layout import BATCH_DTYPE
+from ...core.layout import BATCH_DTYPE, PACK_DTYPE
 from ...core.morton import argsort_codes
 from ...core.quantize import dequantize
 from ...core.renderable import DrawList, MultiViewDrawList
@@ -59,6 +62,7 @@ MAX_LEAF = 50_000  # points a leaf holds before it splits (the paper's)
 _INITIAL_NODES = 1024
 _INITIAL_CHUNKS = 64
 _ROOM_PER_POINT = 1.6  # pool entries an expected point takes: itself, ~0.3 voxels, half-filled chunks
+_STREAMS_PER_POINT = 1.1  # point chunks' streams (CHUNK points each) an expected point takes: itself, half-filled chunks
 _VOXELS_PER_POINT = 0.35  # voxels a point brings, about (the demo town: 0.3; surfaces less)
 _PRESIZE_MAX = 16_000_000  # points presized for at most (~0.6 GB): a 10^9-point input must not allocate 30 GB up front
 _GROWTH_MAX_CHUNKS = 16_384  # the pool grows by at most this many chunks (32 M entries, ~0.6 GB) beyond doubling small pools
@@ -68,18 +72,24 @@ _UINT_OF_SIZE = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}  # attri
 
 
 class Pool:
-    """The octree's point buffers (core/renderable.PointBuffers): chunks of ``CHUNK`` entries,
-    one batch record each; rewritten in place, so every write bumps ``version``."""
+    """The octree's point buffers (core/renderable.PointBuffers) in the compact layout: chunks of
+    ``CHUNK`` entries, one batch and one PACK_DTYPE record each; ``n_streams`` point chunks'
+    streams (``stream`` u64 words each) in ``ext``. Rewritten in place, so every write bumps
+    ``version``."""
 
-    def __init__(self, name: str, n_chunks: int, chunk: int, attribute_dtypes: dict):
+    med = high = None  # the compact layout: positions are the low word and the streams
+
+    def __init__(self, name: str, n_chunks: int, chunk: int, attribute_dtypes: dict, n_streams: int):
         self.name = name
         self.chunk = chunk
+        self.stream = int(stream_words(np.int64(K.WIDE_BITS), np.int64(chunk)))
         self.batches = np.zeros(n_chunks, BATCH_DTYPE)
         self.batches["first"] = np.arange(n_chunks, dtype=np.uint64) * chunk
+        self.packing = np.zeros(n_chunks, PACK_DTYPE)
+        self.ext = np.zeros(n_streams * self.stream, np.uint64)
+        self.packing["ext_first"] = len(self.ext)  # chunks not in use yet: empty streams at the end (streams follow chunk order)
         n = n_chunks * chunk
         self.low = np.zeros(n, np.uint32)
-        self.med = np.zeros(n, np.uint32)
-        self.high = np.zeros(n, np.uint32)
         self.color = np.zeros(n, np.uint32)
         self.attributes = {a: np.zeros(n, dt) for a, dt in attribute_dtypes.items()}
         self.chunk_next = np.full(n_chunks, -1, np.int64)
@@ -96,15 +106,22 @@ class Pool:
     def n_chunks(self) -> int:
         return len(self.batches)
 
-    def grown(self, n_chunks: int) -> Pool:
-        """A pool of ``n_chunks`` chunks holding this one's contents, or its first ``n_chunks``
-        when smaller (new arrays: caches of the old ones are dropped by identity)."""
-        new = Pool(self.name, n_chunks, self.chunk, {a: v.dtype for a, v in self.attributes.items()})
+    @property
+    def n_streams(self) -> int:
+        return len(self.ext) // self.stream
+
+    def grown(self, n_chunks: int, n_streams: int) -> Pool:
+        """A pool of ``n_chunks`` chunks and ``n_streams`` streams holding this one's contents, or
+        its first ones when smaller (new arrays: caches of the old ones are dropped by identity)."""
+        new = Pool(self.name, n_chunks, self.chunk, {a: v.dtype for a, v in self.attributes.items()}, n_streams)
         k = min(self.n_chunks, n_chunks)
         n = k * self.chunk
         new.batches[:k] = self.batches[:k]
-        for a in ("low", "med", "high", "color"):
-            getattr(new, a)[:n] = getattr(self, a)[:n]
+        new.packing[:k] = self.packing[:k]
+        w = min(len(self.ext), len(new.ext))
+        new.ext[:w] = self.ext[:w]
+        new.low[:n] = self.low[:n]
+        new.color[:n] = self.color[:n]
         for a, v in self.attributes.items():
             new.attributes[a][:n] = v[:n]
         new.chunk_next[:k] = self.chunk_next[:k]
@@ -119,11 +136,10 @@ class Pool:
         if not 0 <= index < self.n_points:
             return {}
         rec = self.batches[index // self.chunk]
-        i = np.array([index])
-        pos = dequantize(self.low[i], self.med[i], self.high[i], rec["bbox_min"], rec["bbox_max"], 30)[0]
+        pos = dequantize(*point_words(self, index // self.chunk, index, index + 1), rec["bbox_min"], rec["bbox_max"], 30)[0]
         info = {
             "position": pos.tolist(),
-            "rgba": self.color[i].view(np.uint8).tolist(),
+            "rgba": self.color[index : index + 1].view(np.uint8).tolist(),
             "level": int(rec["level"]),
             "source": "progressive octree",
         }
@@ -202,6 +218,8 @@ class ProgressiveOctree:
         self._free = np.zeros(_INITIAL_CHUNKS, np.int64)
         self._n_free = 0
         self._n_chunks = 0
+        self._n_streams = 0
+        self._voxel_state = True  # the voxels' build state is there (trim drops it: _rebuild_voxel_state)
         if cube is not None:
             origin, edge = cube
             self._start(np.asarray(origin, np.float64), float(edge))
@@ -232,12 +250,18 @@ class ProgressiveOctree:
                 arr[:n] = getattr(self, name)[:n]
             setattr(self, name, arr)
 
-    def _ensure_chunks(self, extra: int) -> None:
-        """Room for ``extra`` more chunks than are in use (the pool doubles when it grows)."""
-        need = self._n_chunks + extra
-        if need > self.pool.n_chunks:
+    def _ensure_chunks(self, extra: int, streams: int) -> None:
+        """Room for ``extra`` more chunks and ``streams`` more streams than are in use (the pool
+        doubles when it grows)."""
+        pool = self.pool
+
+        def grown(have: int, need: int) -> int:
             # doubling, but by bounded steps: a memory limit is checked between inserts, so overshoot it little
-            self.pool = self.pool.grown(max(need, self.pool.n_chunks + min(self.pool.n_chunks, _GROWTH_MAX_CHUNKS)))
+            return have if need <= have else max(need, have + max(1, min(have, _GROWTH_MAX_CHUNKS)))
+
+        chunks, n_streams = grown(pool.n_chunks, self._n_chunks + extra), grown(pool.n_streams, self._n_streams + streams)
+        if (chunks, n_streams) != (pool.n_chunks, pool.n_streams):
+            self.pool = pool.grown(chunks, n_streams)
         if len(self._free) < self.pool.n_chunks:
             free = np.zeros(self.pool.n_chunks, np.int64)
             free[: self._n_free] = self._free[: self._n_free]
@@ -262,16 +286,46 @@ class ProgressiveOctree:
 
     def trim(self) -> None:
         """Release the room kept for growth (the loader calls it when loading ends): the pool
-        down to the chunks in use, the voxel arrays to the voxels, and the voxel table (the
-        next ``add`` rebuilds it)."""
+        down to the chunks and streams in use, and the voxels' build state (their colour sums,
+        keys, slots and table: the next ``add`` rebuilds it from the points)."""
         with self.lock:
             if self.pool is None:
                 return
-            if self._n_chunks < self.pool.n_chunks:
-                self.pool = self.pool.grown(max(self._n_chunks, 1))
+            if self._n_chunks < self.pool.n_chunks or self._n_streams < self.pool.n_streams:
+                self.pool = self.pool.grown(max(self._n_chunks, 1), self._n_streams)
                 self._free = self._free[: self.pool.n_chunks].copy()
-            self._vox(max(self.n_voxels, 1))
-            self._drop_hash()
+            self._drop_voxel_state()
+
+    def _drop_voxel_state(self) -> None:
+        self._voxel_state = False
+        self.vox_key, self.vox_slot, self.vox_sum = np.zeros(0, np.uint64), np.zeros(0, np.uint32), np.zeros((0, 5), np.uint32)
+        self._hkeys, self._hvals = np.zeros(0, np.uint64), np.zeros(0, np.uint32)
+
+    def _rebuild_voxel_state(self) -> None:
+        """The voxels' keys, slots and table from their lists (a voxel's cell is in its low word),
+        and their colour sums from the points: every point that passed a voxel's cell is in a
+        leaf below it, so sampling all of them again gives the sums the inserts had made."""
+        lists = (self.inner_nodes()[:, None] * K.LISTS + np.arange(K.LISTS)).reshape(-1)
+        n = self.n_voxels
+        size = 1 << 17
+        while size < 2 * n:
+            size *= 2
+        self._hkeys = np.full(size, K.EMPTY_KEY, np.uint64)
+        self._hvals = np.zeros(size, np.uint32)
+        cap = max(n, 1)
+        self.vox_key, self.vox_slot, self.vox_sum = np.zeros(cap, np.uint64), np.zeros(cap, np.uint32), np.zeros((cap, 5), np.uint32)
+        pool = self.pool
+        got = K.voxel_table(lists, self.first_chunk, pool.chunk_next, pool.batches["count"], pool.chunk, self.level, pool.low, self._hkeys,
+                            self._hvals, self.vox_key, self.vox_slot)  # fmt: skip
+        assert got == n, (got, n)
+        self._voxel_state = True
+        if n:
+            st = _Set.of(self.root, *self._all_points(), self.origin, self.edge)
+            _, node, cell, _, sums = self._voxel_cells(st, *self._distribute(st.codes, self.root))
+            vid = np.empty(len(node), np.int64)
+            is_new = np.empty(len(node), np.uint8)
+            assert K.voxel_ids(self._hkeys, self._hvals, node, cell, n, vid, is_new) == n  # every cell is a voxel already
+            self.vox_sum[vid] = sums
 
     def _start(self, origin: np.ndarray, edge: float) -> None:
         """The root cube, and the root: an empty leaf."""
@@ -333,8 +387,7 @@ class ProgressiveOctree:
             self.origin = None
             self.points = self.n_nodes = self.n_voxels = 0
             self._nodes(1)
-            self._vox(1)
-            self._drop_hash()
+            self._drop_voxel_state()
 
     @property
     def nbytes(self) -> int:
@@ -344,9 +397,9 @@ class ProgressiveOctree:
     layout = "progressive octree"  # what `--stats` and `gigapoint info` call its memory layout
 
     def memory(self) -> dict[str, int]:
-        """Bytes per component: the pool's positions, colours, attributes and batch records
-        (points and voxels, with the room kept for growth), the voxels' colour sums and lookup
-        table (build state), and the nodes."""
+        """Bytes per component: the pool's positions (low words and streams), colours, attributes
+        and batch records (points and voxels, with the room kept for growth), the voxels' colour
+        sums and lookup table (build state, none once trimmed), and the nodes."""
         def size(*arrays) -> int:
             return int(sum(a.nbytes for a in arrays))
 
@@ -354,9 +407,9 @@ class ProgressiveOctree:
         m = {"positions": 0, "color": 0, "attributes": 0, "batches": 0}
         if pool is not None:
             m = {
-                "positions": size(pool.low, pool.med, pool.high), "color": size(pool.color),
+                "positions": size(pool.low, pool.ext), "color": size(pool.color),
                 "attributes": size(*pool.attributes.values()),
-                "batches": size(pool.batches, pool.chunk_next, pool.chunk_node, pool.batch_version),
+                "batches": size(pool.batches, pool.packing, pool.chunk_next, pool.chunk_node, pool.batch_version),
             }  # fmt: skip
         m["voxels"] = size(self.vox_key, self.vox_slot, self.vox_sum, self._hkeys, self._hvals)
         m["nodes"] = size(self.key, self.level, self.parent, self.children, self.leaf, self.count, self.first_chunk, self.last_chunk,
@@ -448,10 +501,13 @@ class ProgressiveOctree:
         attrs = self._attribute_set(attrs, n)
         if self.pool is None:
             expected = int(self.capacity * _ROOM_PER_POINT) // self.chunk
-            self.pool = Pool(self.name, max(_INITIAL_CHUNKS, expected), self.chunk, self._attribute_dtypes)
+            streams = int(self.capacity * _STREAMS_PER_POINT) // self.chunk
+            self.pool = Pool(self.name, max(_INITIAL_CHUNKS, expected), self.chunk, self._attribute_dtypes, max(_INITIAL_CHUNKS, streams))
             if self.capacity:  # room for the expected voxels too: growing their arrays and table copies them
                 self._vox(max(len(self.vox_key), int(self.capacity * _VOXELS_PER_POINT)))
                 self._ensure_hash(int(self.capacity * _VOXELS_PER_POINT))
+        if not self._voxel_state:
+            self._rebuild_voxel_state()
         if self.origin is None:
             pad = 0.01 * max(float(np.max(hi - lo)), 1e-9)  # a little room: growing the root costs a pass over every point
             self._start(lo - pad, float(np.max(hi - lo)) + 2 * pad)
@@ -501,8 +557,7 @@ class ProgressiveOctree:
         pool = self.pool
         slots = self._list_slots(node * K.LISTS)
         k = len(slots)
-        xyz = np.empty((k, 3))
-        K.dequantize_slots(pool.low, pool.med, pool.high, slots, self.cmin[node], float(self.cedge[node]), xyz)
+        xyz = self._decode(node, slots)
         rgba = pool.color[slots]
         attrs = {a: v[slots] for a, v in pool.attributes.items()}
         self._n_free = K.free_chunks(
@@ -514,18 +569,19 @@ class ProgressiveOctree:
         self.points -= k  # they are counted again when inserted again
         return xyz, rgba, attrs
 
-    def _allocate(self, lists: np.ndarray, counts: np.ndarray) -> np.ndarray:
-        """Pool slots for counts[j] new entries of list lists[j], in order; the counts go up."""
+    def _allocate(self, lists: np.ndarray, counts: np.ndarray, points: bool) -> np.ndarray:
+        """Pool slots for counts[j] new entries of list lists[j], in order (leaves' points, or
+        inner nodes' voxels); the counts go up."""
         pool = self.pool
         extra = K.chunks_needed(lists, counts, pool.chunk, self.last_chunk, pool.batches["count"])
-        self._ensure_chunks(extra)
+        self._ensure_chunks(extra, extra if points else 0)
         pool = self.pool
         slots = np.empty(int(counts.sum()), np.int64)
-        b = pool.batches
-        self._n_free, self._n_chunks = K.allocate(
-            lists, counts, pool.chunk, self.first_chunk, self.last_chunk, self.level, self.cmin, self.cedge, b["count"], pool.chunk_next,
-            pool.chunk_node, b["bbox_min"], b["bbox_max"], b["level"], self._free, self._n_free, self._n_chunks, pool.version,
-            pool.batch_version, slots,
+        b, pk = pool.batches, pool.packing
+        self._n_free, self._n_chunks, self._n_streams = K.allocate(
+            lists, counts, pool.chunk, self.first_chunk, self.last_chunk, self.level, self.leaf, self.cmin, self.cedge, b["count"],
+            pool.chunk_next, pool.chunk_node, b["bbox_min"], b["bbox_max"], b["level"], pk["ext_first"], pk["code"], pool.ext, pool.stream,
+            self._free, self._n_free, self._n_chunks, self._n_streams, pool.version, pool.batch_version, slots,
         )  # fmt: skip
         np.add.at(self.list_count, lists, counts)
         np.add.at(self.count, lists // K.LISTS, counts)
@@ -534,19 +590,18 @@ class ProgressiveOctree:
     def _write_points(self, st: _Set, leaf_runs) -> None:
         """The routed points into their leaves (leaf runs are in code order: slots follow)."""
         counts = leaf_runs[:, 2] - leaf_runs[:, 1]
-        slots = self._allocate(leaf_runs[:, 0] * K.LISTS, counts)  # a leaf's points: its list 0
+        slots = self._allocate(leaf_runs[:, 0] * K.LISTS, counts, points=True)  # a leaf's points: its list 0
         offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
         pool = self.pool
-        K.write_points(st.xyz, st.rgba, st.order, leaf_runs, offsets, slots, self.cmin, self.cedge, pool.low, pool.med, pool.high, pool.color)
+        K.write_points(st.xyz, st.rgba, st.order, leaf_runs, offsets, slots, self.cmin, self.cedge, pool.low, pool.ext,
+                       pool.packing["ext_first"], pool.chunk, pool.color)  # fmt: skip
         for a, v in pool.attributes.items():
             u = _UINT_OF_SIZE[v.dtype.itemsize]
             K.scatter_runs(np.ascontiguousarray(st.attrs[a]).view(u), st.order, leaf_runs, offsets, slots, v.view(u))
 
-    def _sample(self, st: _Set, leaf_runs, inner_runs, only: int | None = None) -> None:
-        """Voxels of the inner nodes the routed points pass (of node ``only``): new cells become
-        voxels, every touched voxel's colour the mean of all the points that fell into it."""
-        if not len(inner_runs):
-            return
+    def _voxel_cells(self, st: _Set, leaf_runs, inner_runs, only: int | None = None):
+        """(count, list, cell, first point, colour sums) of each voxel cell of the inner nodes
+        (of node ``only``) the routed points pass (kernels.sample_runs)."""
         if len(self._run_lo) < len(self.key):
             self._run_lo = np.full(len(self.key), -1, np.int64)
             self._run_hi = np.full(len(self.key), -1, np.int64)
@@ -567,8 +622,15 @@ class ProgressiveOctree:
             entries = slice(s0, s0 + c0)
         else:
             entries = slice(0, m)
-        node, cell, first, sums = e_node[entries], e_local[entries], e_first[entries], e_sum[entries]
-        m = len(node)
+        node = e_node[entries]
+        return len(node), node, e_local[entries], e_first[entries], e_sum[entries]
+
+    def _sample(self, st: _Set, leaf_runs, inner_runs, only: int | None = None) -> None:
+        """Voxels of the inner nodes the routed points pass (of node ``only``): new cells become
+        voxels, every touched voxel's colour the mean of all the points that fell into it."""
+        if not len(inner_runs):
+            return
+        m, node, cell, first, sums = self._voxel_cells(st, leaf_runs, inner_runs, only)
         if m == 0:
             return
         self._ensure_hash(m)
@@ -583,12 +645,12 @@ class ProgressiveOctree:
         # entries come list by list (node by node, octant by octant): so do the new ones, and their slots
         new = np.flatnonzero(is_new)
         new_lists, new_counts = _runs(node[new])
-        slots = self._allocate(new_lists, new_counts) if len(new) else np.empty(0, np.int64)
+        slots = self._allocate(new_lists, new_counts, points=False) if len(new) else np.empty(0, np.int64)
         first_new = self.n_voxels
         self.n_voxels = next_vid
         pool = self.pool
         K.write_voxels(vid, is_new, node, cell, sums, self.level, slots, first_new, self.vox_sum, self.vox_slot, self.vox_key, pool.low,
-                       pool.med, pool.high, pool.color, pool.batch_version, pool.chunk, pool.version)  # fmt: skip
+                       pool.color, pool.batch_version, pool.chunk, pool.version)  # fmt: skip
         src = first[new]  # a new voxel's attributes: its cell's first point's
         for a, v in pool.attributes.items():
             v[slots] = st.attrs[a][src]
@@ -630,9 +692,7 @@ class ProgressiveOctree:
         pool = self.pool
         for node in self.leaves().tolist():
             slots = self._list_slots(node * K.LISTS)
-            xyz = np.empty((len(slots), 3))
-            K.dequantize_slots(pool.low, pool.med, pool.high, slots, self.cmin[node], float(self.cedge[node]), xyz)
-            parts.append((xyz, slots))
+            parts.append((self._decode(node, slots), slots))
         slots = np.concatenate([s for _, s in parts])
         return np.concatenate([x for x, _ in parts]), pool.color[slots], {a: v[slots] for a, v in pool.attributes.items()}
 
@@ -645,11 +705,9 @@ class ProgressiveOctree:
         for node in leaves:
             with self.lock:
                 slots = self._list_slots(node * K.LISTS)
-                xyz = np.empty((len(slots), 3))
-                K.dequantize_slots(self.pool.low, self.pool.med, self.pool.high, slots, self.cmin[node], float(self.cedge[node]), xyz)
-                part = (xyz, self.pool.color[slots], {a: v[slots] for a, v in self.pool.attributes.items()})
+                part = (self._decode(node, slots), self.pool.color[slots], {a: v[slots] for a, v in self.pool.attributes.items()})
             parts.append(part)
-            held += len(xyz)
+            held += len(slots)
             if held >= points_per_chunk:
                 yield _chunk_of(parts)
                 parts, held = [], 0
@@ -687,9 +745,19 @@ class ProgressiveOctree:
         chunks = slots // pool.chunk
         for node in np.unique(pool.chunk_node[chunks]).tolist():
             m = pool.chunk_node[chunks] == node
-            tmp = np.empty((int(m.sum()), 3))
-            K.dequantize_slots(pool.low, pool.med, pool.high, slots[m], self.cmin[node], float(self.cedge[node]), tmp)
-            out[m] = tmp
+            out[m] = self._decode(node, slots[m])
+        return out
+
+    def _box_min(self, nodes) -> np.ndarray:
+        """The corner of the box of each node's chunks: its cube's, moved by VOXEL_SHIFT for an inner node's voxels."""
+        return self.cmin[nodes] - np.where(self.leaf[nodes] == 1, 0.0, K.VOXEL_SHIFT * self.cedge[nodes])[..., None]
+
+    def _decode(self, node: int, slots: np.ndarray) -> np.ndarray:
+        """float64 positions of node ``node``'s entries at pool ``slots``."""
+        pool = self.pool
+        out = np.empty((len(slots), 3))
+        K.dequantize_slots(pool.low, pool.ext, pool.packing["ext_first"], pool.packing["code"], pool.chunk, slots, self._box_min(node),
+                           float(self.cedge[node]), out)  # fmt: skip
         return out
 
     # ------------------------------------------------------------------ drawing (Renderable)
@@ -700,7 +768,7 @@ class ProgressiveOctree:
         pool = self.pool
         if pool is None or self.points == 0:
             empty = Selection(np.empty(0, np.int64), np.empty(0, np.int32), np.empty((0, 4, 4), np.float32), np.empty(0), 0)
-            return DrawList(pool or Pool(self.name, 1, self.chunk, {}), empty, max(n, 1), nodes=np.empty(0, np.int64))
+            return DrawList(pool or Pool(self.name, 1, self.chunk, {}, 0), empty, max(n, 1), nodes=np.empty(0, np.int64))
         lo, hi = self.bounds
         cmin, cedge = self.cmin[:n], self.cedge[:n]
         box_min = np.clip(cmin, lo, hi)
@@ -714,10 +782,10 @@ class ProgressiveOctree:
         )  # fmt: skip
         lists = np.flatnonzero(drawn.reshape(-1))
         ids, list_node = np.unique(lists // K.LISTS, return_inverse=True)
-        cube_max = cmin[ids] + cedge[ids, None]
+        corner = self._box_min(ids)  # the chunks' boxes (the voxels' moved: kernels.VOXEL_SHIFT)
         size = size_of[ids]
         bits = precision_for(size, settings.precision_threshold_px) if settings.adaptive_precision else np.full(len(ids), 30, np.int32)
-        mats = batch_matrices(view.rows, cmin[ids], cube_max)
+        mats = batch_matrices(view.rows, corner, corner + cedge[ids, None])
         chunks = np.empty(int((-(-self.list_count[lists] // pool.chunk)).sum()), np.int64)
         owner = np.empty(len(chunks), np.int64)
         k = list_chunks(self.first_chunk, pool.chunk_next, lists, chunks, owner)
