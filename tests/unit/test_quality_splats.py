@@ -78,3 +78,46 @@ def test_attenuated_points_shrink_with_distance():
     counts = [(f.index == i).sum() for i in range(2)]
     near = int(np.argmin(cloud.positions()[:, 1]))
     assert counts[near] > 4 * counts[1 - near] > 0
+
+
+@pytest.mark.parametrize("kw", [{}, {"point_size": 7, "size_mode": "fixed"}, {"point_size": 5, "point_shape": "round", "size_mode": "fixed"}])
+def test_two_threads_draw_bands_of_rows_like_one_thread(kw):
+    """Splats on two threads: each thread writes its own band of rows straight into the frame
+    (``band_plan``), drawing every batch that may reach them. Every batch that wins a pixel of a
+    band is in that band's list, the bands cut the image where the work splits (not at the
+    middle of the image when the points sit in its top), and the frame is the one thread's."""
+    from gigapoint.backends.numba_cpu.backend import band_plan
+    from gigapoint.render.passes import splat_for
+
+    cloud = gp.demo(80_000, seed=5)
+    lo, hi = (np.asarray(b) for b in cloud.bounds)
+    cam = gp.Camera.orbit(tuple((lo + hi) / 2), -70.0, 25.0, float(np.linalg.norm(hi - lo)) * 0.3, width=320, height=200)
+    s = gp.RenderSettings(backend="cpu", **kw)
+    one = gp.render_frame(cloud, cam, s.replace(threads=1))
+    two = gp.render_frame(cloud, cam, s.replace(threads=2))
+    np.testing.assert_array_equal(two.visibility, one.visibility)
+    np.testing.assert_array_equal(two.visibility, reference_visibility(cloud, cam, s))
+
+    view = cam.view(cloud.bounds)
+    draw = cloud.prepare(view, s)
+    ids = draw.selection.ids
+    rec = draw.points.batches[ids]
+    splat = splat_for(s, cam, draw, view.near)
+    starts, entries, bands = band_plan(draw.selection.matrices, rec["first"].astype(np.int64), rec["count"].astype(np.int64), draw.points.low, 320, 200, splat, 2)
+    assert bands[0] == 0 and bands[-1] == 200 and 0 < bands[1] < 200
+    rows, cols = np.nonzero(one.index >= 0)
+    batch_of = np.searchsorted(rec["first"].astype(np.int64), one.index[rows, cols], side="right") - 1  # the selection entry of each winner
+    for t in range(2):
+        in_band = (rows >= bands[t]) & (rows < bands[t + 1])
+        assert set(np.unique(batch_of[in_band]).tolist()) <= set(entries[starts[t] : starts[t + 1]].tolist())
+
+    top = gp.from_arrays(np.column_stack([np.random.default_rng(1).random((20_000, 2)) * 100.0, np.zeros(20_000)]))
+    # a flat plane seen level from above it: all its points lie in the image's bottom half
+    look = gp.Camera.look_at((50.0, -60.0, 10.0), (50.0, 50.0, 10.0), up=(0, 0, 1), width=320, height=200, fov=60.0)
+    view = look.view(top.bounds)
+    draw = top.prepare(view, gp.RenderSettings(point_size=3, size_mode="fixed"))
+    rec = draw.points.batches[draw.selection.ids]
+    lit = np.nonzero(gp.render_frame(top, look, gp.RenderSettings(point_size=3, size_mode="fixed")).index >= 0)[0]
+    _, _, bands = band_plan(draw.selection.matrices, rec["first"].astype(np.int64), rec["count"].astype(np.int64), draw.points.low, 320, 200,
+                            splat_for(gp.RenderSettings(point_size=3, size_mode="fixed"), look, draw, view.near), 2)  # fmt: skip
+    assert lit.min() > 100 and lit.min() < bands[1] < lit.max()  # the cut lies among them, not at the middle

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import itertools
 import threading
 
 import numba
@@ -14,6 +15,9 @@ from .passes import CpuPasses
 
 _NO_WORDS = np.zeros(0, np.uint32)
 _NO_EXT = np.zeros(0, np.uint64)
+_NO_BANDS = np.zeros(0, np.int64)  # rasterize without bands: threads split the batches
+BAND_SAMPLES = 16  # points of each batch that ``band_plan`` places to balance the bands
+BAND_POINT_COST = 4.0  # a splat point's own work, in pixel writes (projection, size, the row division)
 
 
 def layout_words(points, ids) -> tuple:
@@ -33,6 +37,46 @@ def split_by_points(counts: np.ndarray, n_parts: int) -> np.ndarray:
     targets = cum[-1] * np.arange(1, n_parts) / n_parts
     inner = np.searchsorted(cum, targets, side="left") + 1
     return np.concatenate([[0], np.minimum(inner, len(counts)), [len(counts)]]).astype(np.int64)
+
+
+def band_plan(matrices, firsts, counts, low, width: int, height: int, splat, n_parts: int):
+    """(starts, entries, bands) of ``raster.rasterize``'s banded mode: the image cut into
+    ``n_parts`` bands of rows holding about equal shares of the work, and per band the
+    batches whose points may write its rows.
+
+    The work is estimated from ``BAND_SAMPLES`` points of each batch (evenly spaced in its
+    Morton order: spread over it), placed by their low words (10-bit cells) and projected with
+    the batch's matrix (``matrices``, (k, 4, 4)): per point ``BAND_POINT_COST`` plus the pixels
+    of its ``splat`` (footprint, size, atten; render/splats.py) at its depth. A batch's rows: the
+    projection of its grid cube [0, 1024]^3, the largest splat's reach more each way and one for
+    float32 rounding; all rows where a corner is behind the eye."""
+    footprint, size, atten = splat
+    reach = int(np.abs(footprint[:, 1]).max())
+    m = matrices.astype(np.float64)
+    corners = np.array([[x, y, z, 1.0] for x in (0, 1024) for y in (0, 1024) for z in (0, 1024)])
+    projected = np.einsum("kij,cj->kci", m, corners)  # (k, 8, [x', y', w, depth])
+    w = projected[:, :, 2]
+    seen = (w > 0).all(axis=1)
+    ys = projected[:, :, 1] / np.where(w > 0, w, 1.0)
+    top = np.where(seen, np.floor(ys.min(axis=1)) - reach - 1, 0).clip(0, height - 1).astype(np.int64)
+    bottom = np.where(seen, np.floor(ys.max(axis=1)) + reach + 1, height - 1).clip(0, height - 1).astype(np.int64)
+
+    picks = firsts[:, None] + (counts[:, None] * (np.arange(BAND_SAMPLES) + 0.5) / BAND_SAMPLES).astype(np.int64)
+    words = low[np.minimum(picks, len(low) - 1)].astype(np.int64)  # (k, samples)
+    cells = np.stack([words & 1023, (words >> 10) & 1023, (words >> 20) & 1023, np.full_like(words, 1)], axis=-1) + np.array([0.5, 0.5, 0.5, 0.0])
+    sample = np.einsum("kij,ksj->ksi", m, cells)
+    ahead = sample[:, :, 2] > 0
+    row = np.where(ahead, sample[:, :, 1] / np.where(ahead, sample[:, :, 2], 1.0), -1.0)
+    inside = ahead & (row >= 0) & (row < height)
+    depth = np.maximum(sample[:, :, 3], 1e-9)
+    sizes = np.floor(np.minimum(size, np.maximum(1.0, atten / depth))) if atten > 0 else np.full(row.shape, np.floor(size))
+    weight = counts[:, None] / BAND_SAMPLES * (BAND_POINT_COST + sizes * sizes)
+    above = np.concatenate([[0.0], np.cumsum(np.bincount(row[inside].astype(np.int64), weight[inside], minlength=height)[:height])])
+    cuts = np.searchsorted(above, above[-1] * np.arange(1, n_parts) / n_parts)
+    bands = np.concatenate([[0], cuts, [height]]).astype(np.int64)
+    parts = [np.nonzero((bottom >= lo) & (top < hi))[0] for lo, hi in itertools.pairwise(bands)]
+    starts = np.concatenate([[0], np.cumsum([len(p) for p in parts])]).astype(np.int64)
+    return starts, np.concatenate(parts).astype(np.int64), bands
 
 
 class NumbaCpuBackend:
@@ -93,15 +137,21 @@ class NumbaCpuBackend:
         n_threads = max(1, min(n_threads, numba.config.NUMBA_NUM_THREADS))
         firsts = points.batches["first"][ids].astype(np.int64)  # two fields, not whole records: 0.1 ms less a frame
         counts = points.batches["count"][ids].astype(np.int64)
-        starts = split_by_points(counts, n_threads)
         if splat is None:
             splat = ONE_PIXEL
+        if n_threads > 1 and len(nears) == 1 and len(splat[0]) > 1 and len(ids) > 0:
+            # splats: each thread its own band of rows, straight into the frame. Split by batches,
+            # the second thread's splats covered much of the image, and merging them back took
+            # as long as drawing them
+            starts, entries, bands = band_plan(matrices[0], firsts, counts, points.low, width, height, splat, n_threads)
+        else:
+            starts, entries, bands = split_by_points(counts, n_threads), np.arange(len(ids), dtype=np.int64), _NO_BANDS
         words = layout_words(points, ids)
         with self.lock:
             return self._rasterize_locked(points, width, height, np.asarray(nears, np.float64), np.asarray(fars, np.float64), n_threads, firsts, counts, starts,
-                                          np.ascontiguousarray(bits, np.int32), np.ascontiguousarray(matrices, np.float32), splat, max(1, int(step)), words)  # fmt: skip
+                                          entries, bands, np.ascontiguousarray(bits, np.int32), np.ascontiguousarray(matrices, np.float32), splat, max(1, int(step)), words)  # fmt: skip
 
-    def _rasterize_locked(self, points, width, height, nears, fars, n_threads, firsts, counts, starts, bits, matrices, splat, step, words):
+    def _rasterize_locked(self, points, width, height, nears, fars, n_threads, firsts, counts, starts, entries, bands, bits, matrices, splat, step, words):
         n_views = len(nears)
         frames = np.empty((n_views, width * height), np.uint64)
         for frame in frames:
@@ -122,6 +172,8 @@ class NumbaCpuBackend:
                 nears,
                 fars,
                 starts,
+                entries,
+                bands,
                 frames,
                 scratch,
                 dirty,
@@ -131,7 +183,7 @@ class NumbaCpuBackend:
                 np.int64(step),
                 raster.shape_token(matrices),
             )
-            if n_threads > 1:
+            if n_threads > 1 and len(bands) == 0:  # (bands: every thread drew into the frame)
                 for v in range(n_views):
                     raster.merge(frames[v], scratch[v], dirty[v])
         finally:

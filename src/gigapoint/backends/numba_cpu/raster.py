@@ -374,8 +374,8 @@ def uniform_runs(spans, rows, width):
 
 
 @njit
-def _write_splats(first, step, pix, depth, depth_bits, buf, dirty, width, height, spans, rows, uniform, size, atten, mark):
-    """``write_batch`` of points larger than a pixel (its arguments)."""
+def _write_splats(first, step, pix, depth, depth_bits, buf, dirty, width, height, spans, rows, uniform, size, atten, mark, row_lo, row_hi):
+    """``write_batch`` of points larger than a pixel (its arguments): only rows row_lo..row_hi - 1."""
     r = spans.shape[1] // 2
     k_max = spans.shape[0] - 1
     # the sizes first, in a loop of their own that vectorises: the writes then do not wait on a
@@ -393,7 +393,7 @@ def _write_splats(first, step, pix, depth, depth_bits, buf, dirty, width, height
         yu = np.uint32(p) // np.uint32(width)  # unsigned 32-bit: one cheap division, no sign fix-ups
         x = np.int64(np.uint32(p) - yu * np.uint32(width))
         y = np.int64(yu)
-        if r <= x < width - r and r <= y < height - r:  # away from the border: no clamping
+        if r <= x < width - r and row_lo + r <= y < row_hi - r:  # away from the border (and the band's): no clamping
             nr = uniform[k, 2]
             if nr > 0:  # every row the same run (squares): one run, moved down a row at a time
                 c = p + uniform[k, 0]
@@ -416,13 +416,13 @@ def _write_splats(first, step, pix, depth, depth_bits, buf, dirty, width, height
                 c = p + dy * width
                 _write_run(buf, dirty, c + np.int64(spans[k, dy + r, 0]), c + np.int64(spans[k, dy + r, 1]), key, mark)
             continue
-        for dy in range(max(np.int64(rows[k, 0]), -y), min(np.int64(rows[k, 1]), height - 1 - y) + 1):
+        for dy in range(max(np.int64(rows[k, 0]), row_lo - y), min(np.int64(rows[k, 1]), row_hi - 1 - y) + 1):
             row = (y + dy) * width
             _write_run(buf, dirty, row + max(x + spans[k, dy + r, 0], 0), row + min(x + spans[k, dy + r, 1], width - 1), key, mark)
 
 
 @njit(cache=True)
-def write_batch(first, step, pix, depth, depth_bits, buf, dirty, width, height, one_pixel, spans, rows, uniform, size, atten, clipped=True, mark=True):
+def write_batch(first, step, pix, depth, depth_bits, buf, dirty, width, height, one_pixel, spans, rows, uniform, size, atten, clipped, mark, row_lo, row_hi):
     """Phase 2: depth test and write; marks the TILE-pixel tiles written in ``dirty`` (if ``mark``).
 
     Entry j is point ``first + j * step`` (step > 1: a subsample, see ``rasterize``);
@@ -436,7 +436,9 @@ def write_batch(first, step, pix, depth, depth_bits, buf, dirty, width, height, 
     ``rows`` (``footprint_spans``) are the same offsets as runs of columns: needs are
     integers, so size s covers those of size floor(s); ``uniform`` (``uniform_runs``): sizes
     whose rows are all one run. Tiles are flagged per run written (a superset of the pixels
-    changed: the merge takes the minimum anyway), if ``mark``.
+    changed: the merge takes the minimum anyway), if ``mark``. Splats write only rows
+    row_lo..row_hi - 1 (a thread's band, see ``rasterize``); one-pixel points come restricted
+    to them (``in_band``).
     """
     if one_pixel:
         if clipped:
@@ -449,7 +451,15 @@ def write_batch(first, step, pix, depth, depth_bits, buf, dirty, width, height, 
         else:
             _write_pixels(first, step, pix, depth_bits, buf, dirty, False, False)
         return
-    _write_splats(first, step, pix, depth, depth_bits, buf, dirty, width, height, spans, rows, uniform, size, atten, mark)
+    _write_splats(first, step, pix, depth, depth_bits, buf, dirty, width, height, spans, rows, uniform, size, atten, mark, row_lo, row_hi)
+
+
+@njit
+def in_band(pix, lo, hi):
+    """pix outside lo..hi - 1 (a band's pixels) to -1, the one-pixel loop's "no pixel"."""
+    for j in range(pix.shape[0]):
+        p = pix[j]
+        pix[j] = p if lo <= p < hi else np.int32(-1)
 
 
 @njit(parallel=True, cache=True)
@@ -459,7 +469,7 @@ def fill_empty(buf):
 
 
 @njit(parallel=True, cache=True)
-def rasterize(firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes, width, height, nears, fars, starts, frames, scratch, dirty, footprint, size, atten, step, token):
+def rasterize(firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes, width, height, nears, fars, starts, entries, bands, frames, scratch, dirty, footprint, size, atten, step, token):
     """Draw the selected batches into ``frames`` (pre-filled with EMPTY), one per view.
 
     Point words: ``low`` always; per selected batch ``codes[k]`` is FULL_LAYOUT (its medium and
@@ -470,9 +480,13 @@ def rasterize(firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes
     V views (1; 2 for stereo, section 3.7 of the 2022 paper) are drawn in the same pass:
     each batch is read once and projected and written into every view's buffer.
     bits (V, k) and mats (V, k, 4, 4) per view and batch, nears/fars (V,), frames (V, n_pix).
-    starts[t]..starts[t+1] are the selection entries thread t draws; scratch[v, t-1] is
-    thread t's buffer of view v (EMPTY on entry, restored to EMPTY by ``merge``), and
-    dirty[v, t] flags its tiles written (zero on entry; thread 0's, the frame's, go unread).
+    entries[starts[t]:starts[t+1]] are the selection entries thread t draws. Without ``bands``
+    (empty), threads draw disjoint entries: scratch[v, t-1] is thread t's buffer of view v
+    (EMPTY on entry, restored to EMPTY by ``merge``), and dirty[v, t] flags its tiles written
+    (zero on entry; thread 0's, the frame's, go unread). With ``bands`` (n_threads + 1 rows,
+    one view): thread t writes only rows bands[t]..bands[t+1] - 1, straight into the frame
+    (no scratch, no merge), and draws every entry whose points may reach them: an entry near
+    a band's edge is drawn by both threads, each writing its own rows (``band_plan``).
     footprint / size / atten: point size and shape (see ``write_batch``); token: the matrices'
     shape (``shape_token``).
     step > 1 draws every step-th point of each batch (a point budget for plain clouds:
@@ -488,7 +502,10 @@ def rasterize(firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes
     for k in range(counts.shape[0]):
         max_count = max(max_count, counts[k])
         any_packed |= codes[k] != FULL_LAYOUT
+    banded = bands.shape[0] == n_threads + 1
     for t in prange(n_threads):
+        row_lo = np.int64(bands[t]) if banded else np.int64(0)
+        row_hi = np.int64(bands[t + 1]) if banded else np.int64(height)
         pix = np.empty(max_count, np.int32)
         depth = np.empty(max_count, np.float32)
         depth_bits = depth.view(np.uint32)
@@ -500,7 +517,8 @@ def rasterize(firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes
         sub_med = np.empty(sub, np.uint32)
         sub_high = np.empty(sub, np.uint32)
         sub_bits = np.empty(max_count if any_packed else 0, np.uint64)
-        for k in range(starts[t], starts[t + 1]):
+        for e in range(starts[t], starts[t + 1]):
+            k = entries[e]
             f = firsts[k]
             c = counts[k]
             n = (c + step - 1) // step
@@ -519,7 +537,7 @@ def rasterize(firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes
                 if fine > 10:  # a 10-bit draw reads the low word alone
                     expand_tails(ext, ext_firsts[k], codes[k], np.int64(0), n, step, sub_med, sub_high, sub_bits)  # np.int64: a literal 0 compiles it again
             for v in range(n_views):
-                buf = frames[v] if t == 0 else scratch[v, t - 1]
+                buf = frames[v] if t == 0 or banded else scratch[v, t - 1]
                 near = np.float32(nears[v])
                 far = np.float32(fars[v])
                 clip = not inside_frustum(mats[v, k], width, height, near, far)
@@ -527,7 +545,7 @@ def rasterize(firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes
                 # pixels: most of a dense cloud's) take the one-pixel loop, the same pixels faster
                 one = not splats or largest_size(mats[v, k], size, atten, near) < 2.0
                 # thread 0 draws into the frame itself: its tiles need no merge, so no flags
-                mark = t > 0
+                mark = t > 0 and not banded
                 if mark and not clip and one:
                     mark = not mark_footprint(mats[v, k], width, height, dirty[v, t], n)
                 if step == 1 and not packed:  # contiguous slices: the vectorised loop
@@ -536,7 +554,12 @@ def rasterize(firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes
                     project_batch(low[f : f + c], sub_med[:n], sub_high[:n], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip, token)
                 else:
                     project_batch(sub_low[:n], sub_med[:n], sub_high[:n], bits[v, k], mats[v, k], width, height, near, far, pix[:n], depth[:n], clip, token)
-                write_batch(f, step, pix[:n], depth[:n], depth_bits[:n], buf, dirty[v, t], width, height, one, spans, rows, uniform, size, atten, clip, mark)
+                if banded and one:
+                    in_band(pix[:n], row_lo * width, row_hi * width)
+                write_batch(
+                    f, step, pix[:n], depth[:n], depth_bits[:n], buf, dirty[v, t], width, height, one, spans, rows, uniform, size, atten,
+                    clip or banded, mark, row_lo, row_hi,
+                )  # fmt: skip
 
 
 @njit(parallel=True, cache=True)
