@@ -83,6 +83,44 @@ def coverage(args) -> None:
     print(f"  turntable ({args.turntable} frames, 1280x720): footprint mean {np.mean(shares):.1%}, min {np.min(shares):.1%}")
 
 
+def bands_ab(args) -> None:
+    """2-thread splat frames: the row bands of ``band_plan`` against the batch split with
+    per-thread buffers and a merge (what splat frames used before), alternated frame by frame
+    in this process, for the default view and a close-up."""
+    import gigapoint as gp
+    from gigapoint.backends.numba_cpu import backend
+
+    banded = backend.band_plan
+
+    def batch_split(matrices, firsts, counts, low, width, height, splat, n_parts):
+        return backend.split_by_points(counts, n_parts), np.arange(len(counts), dtype=np.int64), backend._NO_BANDS
+
+    cloud = gp.open(args.file) if args.demo is None else gp.demo(int(args.demo))
+    lo, hi = (np.asarray(b, np.float64) for b in cloud.bounds)
+    cams = {
+        "default view": gp.Camera.fit_cloud(cloud, width=args.width, height=args.height),
+        "close-up": gp.Camera.orbit(tuple((lo + hi) / 2), -60.0, 30.0, float(np.linalg.norm(hi - lo)) * 0.25, width=args.width, height=args.height),
+    }
+    settings = gp.RenderSettings(threads=2)
+    print(f"{cloud.name}, {args.width}x{args.height}, default (adaptive) size, 2 threads, {args.rounds} alternated frames; {cpu_model()}, load {os.getloadavg()[0]:.1f}")
+    for name, cam in cams.items():
+        times = {"bands": [], "batch split": []}
+        frames = {}
+        for mode, plan in (("bands", banded), ("batch split", batch_split)):
+            backend.band_plan = plan
+            frames[mode] = gp.render_frame(cloud, cam, settings).visibility  # warm-up
+        assert np.array_equal(frames["bands"], frames["batch split"])
+        for _ in range(args.rounds):
+            for mode, plan in (("bands", banded), ("batch split", batch_split)):
+                backend.band_plan = plan
+                t = time.perf_counter()
+                gp.render_frame(cloud, cam, settings)
+                times[mode].append(time.perf_counter() - t)
+        backend.band_plan = banded
+        b, s = (statistics.median(times[m]) for m in times)
+        print(f"  {name:13} bands {b * 1e3:6.2f} ms  batch split {s * 1e3:6.2f} ms (medians)  bands / split {b / s:.3f}  (best {min(times['bands']) / min(times['batch split']):.3f})")
+
+
 def _run(cmd, cache: Path) -> tuple[float, float]:
     """(wall, CPU) seconds of a command: CPU = user + system of the process (compiling is
     single-threaded, so on a busy host its CPU time is what the wall time would be on a quiet one)."""
@@ -137,10 +175,15 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=None, help="render threads (default: all; 1 is steadier on a busy host)")
     ap.add_argument("--turntable", type=int, default=36, help="turntable frames measured")
     ap.add_argument("--compile", action="store_true", help="measure cold compile times instead")
+    ap.add_argument("--bands-ab", action="store_true", help="2-thread splat frames: row bands against the batch split (same process)")
+    ap.add_argument("--demo", default=None, help="with --bands-ab: a demo town of this many points instead of --file")
     args = ap.parse_args(argv)
     if not args.file.exists():
         print(f"error: {args.file} not found", file=sys.stderr)
         return 1
+    if args.bands_ab:
+        bands_ab(args)
+        return 0
     if args.threads == 1 and not args.compile:
         # before numba loads: with more threads its parallel passes (clear, resolve) would run
         # partly on others, whose time one thread's clock misses (the Xeon's figures before
