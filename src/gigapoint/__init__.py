@@ -38,9 +38,9 @@ def demo(
 
         return open_progressive(*demo_sources(n_points, seed), memory_limit=memory_limit)
     name = f"demo({n_points:,})"
-    if chunked or (chunked is None and n_points > 50_000_000):
-        from .core.chunked import build_cloud_chunked
+    from .core.chunked import CHUNKED_ABOVE, build_cloud_chunked
 
+    if chunked or (chunked is None and n_points > CHUNKED_ABOVE):
         return build_cloud_chunked(lambda: demo_chunks(n_points, seed, chunk_size=2_000_000, scale=scale), name=name, attributes=attributes)
     from .core import build_cloud
 

@@ -209,3 +209,22 @@ def test_a_full_disk_while_spilling_is_one_line_naming_the_folder(monkeypatch, t
     with pytest.raises(InputError, match=r"spilling 1,000 points to .*gigapoint_chunked_.* failed: No space left on device .*tmpdir="):
         chunked.build_cloud_chunked(source, name="full", tmpdir=tmp_path)
     assert not list(tmp_path.iterdir())
+
+
+def test_open_builds_big_files_chunked_by_their_headers(monkeypatch):
+    """``gp.open`` (``chunked=None``) takes the bounded-memory build when the files' headers
+    count more than CHUNKED_ABOVE points, and the in-memory one otherwise or when told."""
+    import gigapoint.core.chunked as chunked_module
+
+    calls = []
+    real = chunked_module.build_cloud_chunked
+    monkeypatch.setattr(chunked_module, "build_cloud_chunked", lambda *a, **k: calls.append(1) or real(*a, **k))
+    small = gp.open(AUTZEN)
+    assert calls == []
+    monkeypatch.setattr(chunked_module, "CHUNKED_ABOVE", 100_000)  # autzen_trim holds 110 000
+    big = gp.open(AUTZEN)
+    assert calls == [1]
+    np.testing.assert_array_equal(big.low, small.low)
+    np.testing.assert_array_equal(big.color, small.color)
+    gp.open(AUTZEN, chunked=False)
+    assert calls == [1]

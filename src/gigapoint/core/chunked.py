@@ -44,6 +44,10 @@ from .layout import BATCH_SIZE, PACK_DTYPE
 from .morton import MORTON_BITS_PER_AXIS, counting_order, cube_of, morton_codes, morton_order
 from .quantize import make_batches, quantize
 
+#: ``gp.open`` and ``gp.demo`` build clouds of more points than this chunked (``chunked=None``):
+#: ``build_cloud``'s ~50 bytes a point would be 2.5 GB and more
+CHUNKED_ABOVE = 50_000_000
+
 ChunkSource = Callable[[], Iterable[PointChunk]]
 
 #: points a partition holds at most (unless one cell alone holds more): ~60-70 bytes a point of

@@ -62,7 +62,7 @@ def open_cloud(
     name: str | None = None,
     layout: str = "auto",
     colors: str = "auto",
-    chunked: bool = False,
+    chunked: bool | None = None,
 ) -> PointCloud:
     """Read files and/or directories (all supported files inside, sorted by name) into one PointCloud.
 
@@ -73,7 +73,8 @@ def open_cloud(
     without any point is skipped with a warning; one file without points raises EmptyCloudError.
     ``progress=True`` shows a progress bar on stderr (rich). ``chunked=True``: built in bounded
     memory (core/chunked.py: the files read three times, the points spilled to a temporary
-    folder; the same cloud), for files whose points do not fit in memory as floats.
+    folder; the same cloud), for files whose points do not fit in memory as floats; None (the
+    default): chunked when the files' headers say they hold more than ``CHUNKED_ABOVE`` (50 M).
     """
     if not paths:
         raise InputError("open: no file given")
@@ -84,6 +85,11 @@ def open_cloud(
         name = files[0].name if len(files) == 1 else f"{len(files)} files"
     several = len(files) > 1
     empty: list[Path] = []
+    if chunked is None:
+        from ..core.chunked import CHUNKED_ABOVE
+
+        counts = [reader.point_count(f) for f, reader in plan]
+        chunked = None not in counts and sum(counts) > CHUNKED_ABOVE
 
     def chunks(bar=None) -> Iterator[PointChunk]:
         for f, reader in plan:
