@@ -19,7 +19,8 @@ a LAS file at ``--scale``: bytes of the output folder, conversion time (the two 
 alternated, ``--rounds`` each, medians; JIT warmed up first) and LOD frame times of the two
 octrees (the first frame from a cold arena, which reads and decodes every node it draws, then
 warm frames interleaved ABBA) with the share of identical pixels (the boxes differ: version 1's
-are tight, version 2's on the source grid)::
+are tight, version 2's on the source grid) and the arenas' bytes a point (version 2's holds the
+compact layout)::
 
     .venv/bin/python benchmarks/bench_compact.py --octree --points 5M --rounds 3
 
@@ -139,6 +140,12 @@ def folder_bytes(path: Path) -> int:
     return sum(f.stat().st_size for f in Path(path).rglob("*") if f.is_file())
 
 
+def arena_bytes(arena) -> float:
+    """Bytes a point of an LOD arena's positions and colours (three words, or the compact layout)."""
+    arrays = [arena.low, arena.color, *((arena.med, arena.high) if arena.med is not None else (arena.ext,))]
+    return sum(a.nbytes for a in arrays) / arena.n_points
+
+
 def octree_scene(name: str, src: Path, work: Path, args) -> None:
     """Version 1 against version 2 of one input: bytes, conversion time, LOD frames."""
     from gigapoint.lod import convert, open_octree
@@ -175,7 +182,8 @@ def octree_scene(name: str, src: Path, work: Path, args) -> None:
         f"LOD frame {args.width}x{args.height}, default budget, {images[0].stats.points_processed:,} points: "
         f"cold (node reads + decoding) v1 {cold['v1 words'] * 1e3:.1f} ms, v2 {cold['v2 compact'] * 1e3:.1f} ms "
         f"(v2/v1 {cold['v2 compact'] / cold['v1 words']:.2f}); warm wall v1 {w[0]:.1f} / v2 {w[1]:.1f} ms (v2/v1 {w[1] / w[0]:.2f}), "
-        f"CPU {c[0]:.1f} / {c[1]:.1f} ms; identical pixels {same:.4f}"
+        f"CPU {c[0]:.1f} / {c[1]:.1f} ms; identical pixels {same:.4f}; arena bytes a point for positions and colour "
+        f"v1 {arena_bytes(clouds[0].arena):.2f}, v2 {arena_bytes(clouds[1].arena):.2f}"
     )
 
 

@@ -11,10 +11,12 @@ import pytest
 
 from gigapoint import Camera, RenderSettings, render_frame
 from gigapoint.core import PointChunk
+from gigapoint.core.layout import EMPTY_PIXEL
 from gigapoint.errors import InputError
 from gigapoint.lod import ConvertError, OctreeCloud, OctreeDir, convert, open_octree
 from gigapoint.lod.compact_octree import CompactOctree, from_keys, pack_field, to_keys
 from gigapoint.lod.reader import octree_info
+from gigapoint.lod.store import ARENA_CHUNK, Arena
 
 AUTZEN = Path(__file__).parents[2] / ".." / "shared" / "data" / "autzen_trim.laz"
 laspy = pytest.importorskip("laspy")
@@ -164,6 +166,59 @@ def test_renders_equal_the_three_word_layout(las_pair, make_camera, budget):
     assert np.all(mine.image == old.image, axis=2).mean() > 0.99
 
 
+@pytest.fixture(scope="module")
+def rgb565_octree(las_pair, tmp_path_factory):
+    src, _, _ = las_pair
+    out = tmp_path_factory.mktemp("c16") / "oct"
+    convert([src], out, max_leaf=2_000, partition_points=20_000, colors="rgb565")
+    return out
+
+
+@pytest.mark.parametrize("colors", ["rgba", "rgb565"])
+def test_the_compact_arena_draws_as_the_three_word_arena(las_pair, rgb565_octree, colors):
+    """A format-2 octree's arena holds nodes as stored (low word, extension bits, colours in the
+    octree's format): through loads, evictions and refilled slots, every frame (with HQS, an
+    elevation ramp) and picked point equals the three-word arena's, the same nodes drawn."""
+    oc = open_octree(las_pair[2] if colors == "rgba" else rgb565_octree)
+    compact = oc.new_arena(20_000)  # too small for every view: nodes evicted, slots reused
+    words = Arena(compact.n_points, oc.name, oc.bounds, oc._attribute_dtypes())
+    assert compact.med is None and words.med is not None
+    assert compact.color.dtype == (np.uint16 if colors == "rgb565" else np.uint32)
+    s = RenderSettings(backend="cpu", size_mode="fixed", point_budget=12_000, lod_threshold_px=10.0)
+    cams = [make(oc.bounds) for make in CAMS]
+    cams.append(Camera.look_at(oc.bounds[0] + [300, 200, 40], oc.bounds[0] + [900, 700, 0], width=320, height=240))
+    for cam, extra in zip(cams * 2, [{}, {"hqs": True}, {"color_mode": "elevation"}] * 2, strict=True):
+        frames = []
+        for arena in (compact, words):
+            oc.arena = arena
+            frames.append(render_frame(oc, cam, s.replace(**extra)))
+            assert oc.arena is arena
+        a, b = frames
+        assert (~a.empty).sum() > 500
+        np.testing.assert_array_equal(a.visibility, b.visibility)
+        np.testing.assert_array_equal(a.image, b.image)
+        hit = int(np.flatnonzero(a.visibility.reshape(-1) != EMPTY_PIXEL)[0])
+        index = int(a.visibility.reshape(-1)[hit] & np.uint64(0xFFFFFFFF))
+        assert compact.point_info(index) == words.point_info(index)
+    assert compact.loads > len(compact.resident) and list(compact.resident) == list(words.resident)
+
+
+def test_the_compact_arena_takes_fewer_bytes_a_point(las_pair, rgb565_octree):
+    """Positions in 4 bytes and the widest node's extension bits (each slot's room), colours in
+    4 or 2 bytes: 10.6 and 8.6 bytes a point here (nodes up to 21 extension bits) against the
+    three-word arena's 16."""
+    for path, color_bytes in ((las_pair[2], 4), (rgb565_octree, 2)):
+        oc = open_octree(path)
+        compact = oc.new_arena(50_000)
+        words = Arena(compact.n_points, oc.name, oc.bounds)
+        compact.attributes = {}  # attributes are held alike in both
+        room = compact.room * 8 / ARENA_CHUNK
+        assert int(oc.ext_bits.max()) < 24 and room == pytest.approx(oc.ext_bits.max() / 8, abs=0.01)
+        assert compact.nbytes / compact.n_points == pytest.approx(4 + color_bytes + room)
+        assert words.nbytes / words.n_points == 16
+        assert compact.nbytes / compact.n_points < 11
+
+
 def test_without_a_source_grid_the_words_are_the_previous_formats(tmp_path):
     """Float inputs (no scale): every node is wide, i.e. version 1's tight box and 30-bit words,
     so the images are the previous format's bit for bit."""
@@ -286,6 +341,7 @@ DAMAGE = {
     "point count mismatch": ("count", _wrong_count, "nodes.npy"),
     "bad layout code": ("code", lambda d: _bad_code(d.array("pack")), "pack.npy"),
     "missing stream": ("missing", lambda d: d.array("field.color").unlink(), "field.color.npy"),
+    "checksums missing": ("crc", lambda d: _fewer_records(d.array("crc")), "crc.npy"),
 }
 
 
@@ -297,3 +353,50 @@ def test_corrupt_payloads_are_one_line_errors_naming_the_file(damaged, case):
         open_octree(damaged.path)
     msg = str(err.value)
     assert "\n" not in msg and name in msg, msg
+
+
+def _flip_in_node(d: OctreeDir, name: str) -> int:
+    """Flip one bit inside a node's part of array ``name`` (a node that holds bits there);
+    returns the node."""
+    oc = open_octree(d.path)
+    counts = oc.counts
+    if name == "low":
+        node, word, size = int(np.argmax(counts)), int(oc.nodes["first"][np.argmax(counts)]) + 7, 4
+    elif name == "ext":  # the first word of a stream of more than 64 bits: bits 8-15 are the node's
+        node = int(np.flatnonzero(oc.ext_bits * counts > 64)[-1])
+        word, size = int(oc.pack["ext_first"][node]), 8
+    else:
+        rec = oc.fields[:, oc.field_index[name.removeprefix("field.")]]
+        node = int(np.flatnonzero(rec["bits"].astype(np.int64) * counts > 64)[0])
+        word, size = int(rec["word0"][node]), 8
+    path = d.array(name)
+    at = np.load(path, mmap_mode="r").offset + word * size + 1
+    data = bytearray(path.read_bytes())
+    data[at] ^= 0x04
+    path.write_bytes(bytes(data))
+    return node
+
+
+@pytest.mark.parametrize("name", ["low", "ext", "field.rgba", "field.color", "field.attr.intensity"])
+def test_a_flipped_byte_in_a_payload_is_a_one_line_error(damaged, name):
+    """Per node and array a CRC-32 (crc.npy) is checked when the node is first loaded: a
+    flipped bit is an error naming the file and the node, not points silently elsewhere."""
+    node = _flip_in_node(damaged, name)
+    oc = open_octree(damaged.path)  # opens: the records still add up
+    cam = Camera.fit(oc.bounds, view="iso", width=200, height=150)
+    with pytest.raises(InputError) as err:
+        render_frame(oc, cam, RenderSettings(backend="cpu", point_budget=10**9, lod_threshold_px=0.0))
+    msg = str(err.value)
+    assert "\n" not in msg and f"{name}.npy" in msg and f"(#{node})" in msg and "checksum" in msg, msg
+    with pytest.raises(InputError, match=f"#{node}"):
+        oc.node_points(node)
+
+
+def test_octrees_without_checksums_are_read_unchecked(damaged):
+    """Octrees written before crc.npy existed open and draw as before (nothing to check)."""
+    _flip_in_node(damaged, "field.rgba")
+    damaged.array("crc").unlink()
+    oc = open_octree(damaged.path)
+    assert oc.crc is None
+    frame = render_frame(oc, Camera.fit(oc.bounds, view="iso", width=200, height=150), RenderSettings(backend="cpu"))
+    assert (~frame.empty).sum() > 500

@@ -11,6 +11,7 @@ import pytest
 from wgpu_support import any_gpu, cpu, gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
 
 from gigapoint import Camera, RenderSettings, render_frame
+from gigapoint.core import PointChunk
 from gigapoint.core.layout import EMPTY_PIXEL
 from gigapoint.errors import BackendUnavailableError
 from gigapoint.io import demo_chunks
@@ -23,10 +24,21 @@ MAX_DIFF_FRACTION = 0.001
 N = 150_000
 
 
-@pytest.fixture(scope="module")
-def octree(tmp_path_factory):
+def _grid_chunks():
+    """The demo town on a 1 cm grid (a survey's): nodes of 0..~20 extension bits, not wide."""
+    for c in demo_chunks(N, chunk_size=75_000):
+        yield PointChunk(np.round(c.xyz / 0.01) * 0.01, c.rgba, c.attributes, scale=(0.01,) * 3)
+
+
+@pytest.fixture(scope="module", params=["wide", "grid"])
+def octree(tmp_path_factory, request):
+    """Format-2 octrees, drawn through the compact arena: the demo town's float points (every
+    node wide: 60 extension bits a point) and the same on a 1 cm grid (16-bit colours)."""
     out = tmp_path_factory.mktemp("wgpu_lod") / "oct"
-    convert(list(demo_chunks(N, chunk_size=75_000)), out, max_leaf=4_000, partition_points=60_000)
+    if request.param == "wide":
+        convert(list(demo_chunks(N, chunk_size=75_000)), out, max_leaf=4_000, partition_points=60_000)
+    else:
+        convert(list(_grid_chunks()), out, max_leaf=4_000, partition_points=60_000, colors="rgb565")
     return out
 
 
@@ -41,9 +53,11 @@ def _cameras(bounds, width=240, height=180):
     ]
 
 
-def _small_arena(oc, points: int) -> Arena:
-    """An arena too small for every view's nodes: frames evict nodes and reuse their slots."""
-    oc.arena = Arena(points, oc.name, oc.bounds, oc._attribute_dtypes())
+def _small_arena(oc, points: int, words: bool = False) -> Arena:
+    """An arena too small for every view's nodes: frames evict nodes and reuse their slots.
+    ``words``: the three-word layout instead of the octree's compact one."""
+    oc.arena = Arena(points, oc.name, oc.bounds, oc._attribute_dtypes()) if words else oc.new_arena(points)
+    assert (oc.arena.med is None) != words
     return oc.arena
 
 
@@ -117,9 +131,10 @@ def test_each_atomics_path_follows_the_arena(any_gpu, cpu, octree):
         assert np.count_nonzero(want != EMPTY_PIXEL) > 500
 
 
-def test_only_rewritten_slots_are_uploaded_again(gpu, cpu, octree):
+@pytest.mark.parametrize("words", [False, True], ids=["compact", "words"])
+def test_only_rewritten_slots_are_uploaded_again(gpu, cpu, octree, words):
     oc = open_octree(octree)
-    arena = _small_arena(oc, 60_000)
+    arena = _small_arena(oc, 60_000, words)
     settings = SETTINGS.replace(adaptive_precision=False)  # every frame reads all three word arrays
     cams = _cameras(oc.bounds)
     for cam in (cams[0], cams[1], cams[3]):
@@ -139,7 +154,9 @@ def test_only_rewritten_slots_are_uploaded_again(gpu, cpu, octree):
     near, far = cam.clip_range(oc.bounds)
     got = gpu.rasterize(cloud, sel, cam.width, cam.height, near, far)
     sent = gpu.memory["uploaded"] - before
-    assert 0 < sent <= 3 * 4 * changed_points  # low, med, high words of the new slots only
+    # low, med, high words of the new slots only; low words and the streams' bits in the compact layout
+    per_point = 12 if words else 4 + int(oc.ext_bits.max()) / 8
+    assert 0 < sent <= per_point * changed_points + 16 * int(changed.sum())
     want = cpu.rasterize(cloud, sel, cam.width, cam.height, near, far)
     assert _n_differ(got, want) <= MAX_DIFF_FRACTION * want.size
     # the same arena again: nothing to send
@@ -148,12 +165,13 @@ def test_only_rewritten_slots_are_uploaded_again(gpu, cpu, octree):
     assert gpu.memory["uploaded"] == before
 
 
-def test_arena_over_several_pages(cpu, octree):
-    """Pages of three slots: pages stay put while slots refill, and each is refreshed on its own."""
-    paged = wgpu_or_skip(page_bytes=3 * ARENA_CHUNK * 4)
-    assert paged.page_points == 3 * ARENA_CHUNK
+@pytest.mark.parametrize("words", [False, True], ids=["compact", "words"])
+def test_arena_over_several_pages(cpu, octree, words):
+    """Pages of three slots: pages stay put while slots refill, and each is refreshed on its own.
+    (A compact cloud's pages hold half the points: its streams take up to 7.5 bytes a point.)"""
+    paged = wgpu_or_skip(page_bytes=(3 if words else 6) * ARENA_CHUNK * 4)
     oc = open_octree(octree)
-    arena = _small_arena(oc, 60_000)
+    arena = _small_arena(oc, 60_000, words)
     plans = []
     for cam in _cameras(oc.bounds) * 2:
         draw = oc.prepare(cam.view(oc.bounds), SETTINGS)
@@ -181,6 +199,30 @@ class _Frames:
         self.attributes = {}
         self.version = 0
         self.batch_version = None  # the PointBuffers contract: no per-batch versions
+
+
+def test_the_compact_arena_uploads_fewer_bytes(gpu, cpu, octree):
+    """The same frames through the compact and the three-word arena: the same images, fewer
+    bytes sent to the GPU (every frame at 30 bits, so each reads every word it has)."""
+    settings = SETTINGS.replace(adaptive_precision=False)
+    sent, images_of = [], []
+    for words in (False, True):
+        oc = open_octree(octree)
+        arena = _small_arena(oc, 60_000, words)
+        gpu.ctx.cache.clear()
+        before = gpu.memory["uploaded"]
+        images = []
+        for cam in _cameras(oc.bounds) * 2:
+            draw = oc.prepare(cam.view(oc.bounds), settings)
+            near, far = cam.clip_range(oc.bounds)
+            images.append(gpu.rasterize(draw.points, draw.selection, cam.width, cam.height, near, far))
+        assert oc.arena is arena
+        sent.append(gpu.memory["uploaded"] - before)
+        images_of.append(images)
+    for got, want in zip(*images_of, strict=True):
+        assert _n_differ(got, want) == 0
+    wide = int(oc.ext_bits.max()) == 60
+    assert sent[0] < (0.97 if wide else 0.6) * sent[1], sent
 
 
 def test_a_cloud_with_a_version_only_is_resent_when_it_changes(any_gpu, cpu):

@@ -151,7 +151,7 @@ def _expand_all(ext, firsts, counts, word0s, codes, med, high):
         expand_tails(ext, word0s[b], codes[b], np.int64(0), n, np.int64(1), med[f : f + n], high[f : f + n], np.empty(n, np.uint64))
 
 
-#: the last compact buffers ``full_words`` decoded: id -> (weak reference, med, high)
+#: the last compact buffers ``full_words`` decoded: id -> (weak reference, version, med, high)
 _FULL_WORDS: dict[int, tuple] = {}
 
 
@@ -163,8 +163,8 @@ def full_words(points) -> tuple[np.ndarray, np.ndarray]:
     if points.med is not None:
         return points.med, points.high
     hit = _FULL_WORDS.get(id(points))
-    if hit is not None and hit[0]() is points:
-        return hit[1], hit[2]
+    if hit is not None and hit[0]() is points and hit[1] == points.version:  # an LOD arena refills in place
+        return hit[2], hit[3]
     pack = points.packing
     n = len(points.low)
     med = np.zeros(n, np.uint32)
@@ -173,7 +173,7 @@ def full_words(points) -> tuple[np.ndarray, np.ndarray]:
     firsts, counts = b["first"].astype(np.int64), b["count"].astype(np.int64)
     _expand_all(points.ext, firsts, counts, pack["ext_first"].astype(np.int64), pack["code"].astype(np.uint32), med, high)
     _FULL_WORDS.clear()
-    _FULL_WORDS[id(points)] = (weakref.ref(points), med, high)
+    _FULL_WORDS[id(points)] = (weakref.ref(points), points.version, med, high)
     return med, high
 
 

@@ -23,23 +23,28 @@ order of ``octree.json``'s ``fields``. The fields are:
   bits; an inner node's averages: what differs);
 - ``attr.<name>``: each attribute in its own dtype.
 
-A node loaded into the arena is decoded into the three-word layout (``node_arrays``: the
-extension bits by ``compact.expand_tails``, the fields by ``compact.read_ext``), so the arena
-and the renderers are version 1's and a render equals the one of the same boxes in three
-words. Malformed files (a truncated array, a stream shorter than its records say, counts
-that do not add up) are a one-line ``InputError`` naming the file when the octree opens.
+A node loaded into the arena keeps the compact layout (``node_payload``: its low words and
+extension bits as stored, its fields decoded by ``compact.read_ext``; store.Arena), which the
+kernels draw as any compact cloud, so a render equals the one of the same boxes in three
+words; ``node_arrays`` decodes a node into the three-word layout (``compact.expand_tails``).
+Malformed files (a truncated array, a stream shorter than its records say, counts that do
+not add up) are a one-line ``InputError`` naming the file when the octree opens; a flipped
+byte inside a node's payload, when the node is first loaded: ``crc.npy`` holds a CRC-32 per
+node of each of its arrays (``node_checksums``; octrees written without it are not checked).
 """
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Mapping
 
 import numpy as np
 from numba import njit, prange
 
-from ..core.compact import _expand_all, compact_positions, expand_tails, pack_rgb565, read_ext, rgba32, stream_words
+from ..core.compact import _expand_all, compact_positions, expand_tails, ext_bits_per_point, pack_rgb565, read_ext, rgba32, stream_words
 from ..core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE
 from ..errors import InputError
+from .keys import key_name
 from .octree_dir import OctreeDir
 from .store import OctreeCloud
 
@@ -167,6 +172,31 @@ def field_words(rec: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return stream_words(rec["bits"].astype(np.int64), np.asarray(counts, np.int64))
 
 
+# --------------------------------------------------------------------------- checksums
+
+
+def checksum_files(names: list[str]) -> list[str]:
+    """The arrays ``crc.npy``'s columns check, in order (``names``: the octree's fields)."""
+    return ["low", "ext", *(f"field.{k}" for k in names)]
+
+
+def node_checksums(index, nodes, low, ext, pack, ext_bits, fields, streams: list) -> np.ndarray:
+    """u32 CRC-32 per ``checksum_files`` column of node ``index``: each over the node's record
+    (nodes, pack, fields) and its slice of the array, so a flipped byte of either shows."""
+    rec = nodes[index]
+    first, count = int(rec["first"]), int(rec["count"])
+    w0 = int(pack["ext_first"][index])
+    out = [
+        zlib.crc32(low[first : first + count], zlib.crc32(nodes[index : index + 1].tobytes())),
+        zlib.crc32(ext[w0 : w0 + int(stream_words(ext_bits[index], count))], zlib.crc32(pack[index : index + 1].tobytes())),
+    ]
+    for j, stream in enumerate(streams):
+        f = fields[index, j]
+        w = int(f["word0"])
+        out.append(zlib.crc32(stream[w : w + int(stream_words(np.int64(f["bits"]), count))], zlib.crc32(fields[index, j : j + 1].tobytes())))
+    return np.array(out, np.uint32)
+
+
 # --------------------------------------------------------------------------- a node set, encoded
 
 
@@ -217,12 +247,15 @@ class _Decoded(Mapping):
 
 class CompactOctree(OctreeCloud):
     """A gigapoint octree of format version 2 (see the module's docstring): an OctreeCloud whose
-    nodes are decoded into the three-word layout as they are loaded."""
+    arena holds nodes in the compact layout, checked against ``crc.npy`` as they are loaded."""
 
-    def __init__(self, name, meta, nodes, keys, low, ext, pack, fields, streams, path):
+    def __init__(self, name, meta, nodes, keys, low, ext, pack, fields, streams, path, crc=None):
         self.low, self.ext, self.pack, self.fields, self.streams = low, ext, pack, fields, streams
+        self.crc = crc  # crc.npy's rows (None: an octree written without them, not checked)
+        self._checked = np.zeros(len(nodes), bool)
         self.field_index = {k: j for j, k in enumerate(meta["fields"])}
         self.color_format = meta.get("colors", "rgba")
+        self.ext_bits = ext_bits_per_point(pack, nodes["count"])  # extension bits a point of each node holds
         self._dtypes = {k: np.dtype(d) for k, d in meta["field_dtypes"].items()}
         attrs = list(meta.get("attributes", {}))
         super().__init__(name, meta, nodes, keys, _Decoded(self, ["low", "med", "high", "color", "rgba"]), _Decoded(self, attrs), path)
@@ -237,31 +270,62 @@ class CompactOctree(OctreeCloud):
         _field_read(self.streams[name], np.uint64(rec["word0"]), np.uint64(rec["bits"]), np.uint64(rec["base"]), out)
         return from_keys(out, self._dtypes[name])
 
-    def node_arrays(self, index: int) -> tuple[dict, dict, int]:
-        """Node ``index`` decoded: (low, med, high, color, rgba in the three-word layout; its
-        attributes; 0, where its points start in them)."""
+    def arena_layout(self) -> dict:
+        """The arena holds nodes as stored (``node_payload``): low words, each slot's room for
+        the extension bits of the octree's widest node, colours in the octree's format."""
+        return {"ext_bits": int(self.ext_bits.max()) if len(self.ext_bits) else 0, "color_dtype": self._dtypes["rgba"]}
+
+    def check_node(self, index: int) -> None:
+        """A one-line InputError naming the file and the node when node ``index``'s payload
+        does not match its checksums (once a node: a node loaded again is not read twice)."""
+        if self.crc is None or self._checked[index]:
+            return
+        streams = [self.streams[k] for k in self.meta["fields"]]
+        got = node_checksums(index, self.nodes, self.low, self.ext, self.pack, self.ext_bits, self.fields, streams)
+        bad = np.flatnonzero(got != self.crc[index])
+        if len(bad):
+            name = checksum_files(self.meta["fields"])[int(bad[0])]
+            where = self.path / f"{name}.npy" if self.path is not None else name
+            raise InputError(f"{where}: node {key_name(int(self.keys[index]))} (#{index}) does not match its checksum in crc.npy: the file is damaged")
+        self._checked[index] = True
+
+    def node_payload(self, index: int) -> tuple[dict, dict]:
+        """Node ``index`` in the compact layout: ({"low", "ext": its stream's u64 words (from
+        word 0), "code", "bits": a point's in the stream, "color", "rgba": colours in the
+        octree's format}, attributes)."""
+        self.check_node(index)
         rec = self.nodes[index]
         first, count = int(rec["first"]), int(rec["count"])
         p = self.pack[index]
+        w0, words = int(p["ext_first"]), int(stream_words(self.ext_bits[index], count))
+        rgba = self._field("rgba", index, count)
+        payload = {
+            "low": np.asarray(self.low[first : first + count]),
+            "ext": self.ext[w0 : w0 + words],
+            "code": np.uint32(p["code"]),
+            "bits": int(self.ext_bits[index]),
+            "color": rgba ^ self._field("color", index, count),
+            "rgba": rgba,
+        }
+        return payload, {a: self._field(f"attr.{a}", index, count) for a in self.meta.get("attributes", {})}
+
+    def node_arrays(self, index: int) -> tuple[dict, dict, int]:
+        """Node ``index`` decoded: (low, med, high, color, rgba in the three-word layout; its
+        attributes; 0, where its points start in them)."""
+        payload, attrs = self.node_payload(index)
+        count = len(payload["low"])
         med = np.empty(count, np.uint32)
         high = np.empty(count, np.uint32)
-        _node_tails(self.ext, np.int64(p["ext_first"]), np.uint32(p["code"]), med, high)
-        rgba = self._field("rgba", index, count)
-        color = rgba ^ self._field("color", index, count)
-        arrays = {
-            "low": np.asarray(self.low[first : first + count]),
-            "med": med,
-            "high": high,
-            "color": rgba32(color),
-            "rgba": rgba32(rgba),
-        }
-        attrs = {a: self._field(f"attr.{a}", index, count) for a in self.meta.get("attributes", {})}
+        _node_tails(payload["ext"], np.int64(0), payload["code"], med, high)
+        arrays = {"low": payload["low"], "med": med, "high": high, "color": rgba32(payload["color"]), "rgba": rgba32(payload["rgba"])}
         return arrays, attrs, 0
 
     def decode_all(self, name: str) -> np.ndarray:
         """Array ``name`` (low, med, high, color, rgba or an attribute) of every point."""
         n = self.n_points
         firsts, counts = self.nodes["first"].astype(np.int64), self.counts
+        for i in range(len(self.nodes)):
+            self.check_node(i)
         if name == "low":
             return np.asarray(self.low)
         if name in ("med", "high"):
@@ -328,7 +392,12 @@ def read_compact(d: OctreeDir, meta: dict) -> CompactOctree:
         if s.dtype != np.uint64 or np.any(rec["bits"] > 64) or (len(need) and int(need.max()) > len(s)):
             raise InputError(f"{d.array(f'field.{k}')}: the bit stream is shorter ({len(s):,} words) than its nodes need")
         streams[k] = np.asarray(s)
-    return CompactOctree(meta.get("name", p.name), meta, nodes, keys, low, np.asarray(ext), pack, fields, streams, p)
+    crc = None
+    if d.array("crc").exists():  # octrees written before checksums have none: not checked
+        crc = _load(d, "crc", mmap=False)
+        if crc.dtype != np.uint32 or crc.shape != (len(nodes), len(names) + 2):
+            raise InputError(f"{d.array('crc')}: holds {crc.shape} checksums for {len(nodes):,} nodes and {len(names) + 2} arrays")
+    return CompactOctree(meta.get("name", p.name), meta, nodes, keys, low, np.asarray(ext), pack, fields, streams, p, crc)
 
 
 __all__ = [
@@ -336,9 +405,11 @@ __all__ = [
     "FIELD_DTYPE",
     "LAYOUTS",
     "CompactOctree",
+    "checksum_files",
     "encode_nodes",
     "field_names",
     "from_keys",
+    "node_checksums",
     "pack_field",
     "read_compact",
     "to_keys",

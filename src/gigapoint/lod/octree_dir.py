@@ -52,7 +52,7 @@ FORMAT_VERSION = 2  # written by default (compact_octree.py); version 1 is still
 FORMAT_VERSION_WORDS = 1  # three u32 words a point (store.read_gigapoint; `layout="words"`)
 FORMAT_VERSIONS = (FORMAT_VERSION_WORDS, FORMAT_VERSION)
 POINT_ARRAYS = ("low", "med", "high", "color", "rgba")  # one entry per point each (version 1)
-COMPACT_ARRAYS = ("low", "pack", "ext", "fields")  # version 2, besides field.<name>.npy
+COMPACT_ARRAYS = ("low", "pack", "ext", "fields", "crc")  # version 2, besides field.<name>.npy (crc: since #22, optional)
 POTREE_META = "metadata.json"
 POTREE_HIERARCHY = "hierarchy.bin"
 POTREE_OCTREE = "octree.bin"

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from ..core.layout import BATCH_DTYPE
+from ..core.compact import point_words, rgba32, stream_words
+from ..core.layout import BATCH_DTYPE, PACK_DTYPE
 from ..core.quantize import dequantize
 from ..core.renderable import DrawList, MultiViewDrawList
 from ..core.selection import Selection, View, batch_matrices, box_in_view, precision_for, visible_and_size
@@ -207,15 +208,33 @@ class Arena:
     The octree's PointBuffers (core/renderable.py): ``low``, ``med``, ``high``, ``color``,
     ``attributes`` and ``batches`` (one BATCH_DTYPE record per slot), rewritten in place as
     nodes come and go, so it counts its writes in ``version`` and ``batch_version``.
+
+    ``ext_bits`` (an int): the compact layout instead (core/compact.py), nodes held as a
+    format-2 octree stores them (``CompactOctree.node_payload``): ``med``/``high`` None, a
+    PACK_DTYPE record per slot (``packing``) and ``ext``, where slot s's extension stream has a
+    fixed room of ``stream_words(ext_bits, ARENA_CHUNK)`` u64 words from word s · room (the
+    octree's widest node fits; a node's slot j is words 64 t · j.. of its stream, which start
+    on a word since 4096 t bits are whole words). Rooms never move, so a GPU page of slots has
+    a fixed range of ``ext`` too. ``color_dtype``: u16 for RGB565 colours.
     """
 
-    def __init__(self, capacity_points: int, name: str, bounds, attribute_dtypes: dict | None = None):
+    def __init__(
+        self, capacity_points: int, name: str, bounds, attribute_dtypes: dict | None = None, ext_bits: int | None = None,
+        color_dtype=np.uint32,
+    ):  # fmt: skip
         n_slots = max(1, -(-int(capacity_points) // ARENA_CHUNK))
         size = n_slots * ARENA_CHUNK
         self.low = np.zeros(size, np.uint32)
-        self.med = np.zeros(size, np.uint32)
-        self.high = np.zeros(size, np.uint32)
-        self.color = np.zeros(size, np.uint32)
+        if ext_bits is None:
+            self.med = np.zeros(size, np.uint32)
+            self.high = np.zeros(size, np.uint32)
+        else:
+            self.med = self.high = None
+            self.room = int(stream_words(np.int64(ext_bits), np.int64(ARENA_CHUNK)))
+            self.ext = np.zeros(n_slots * self.room, np.uint64)
+            self.packing = np.zeros(n_slots, PACK_DTYPE)
+            self.packing["ext_first"] = np.arange(n_slots, dtype=np.uint64) * np.uint64(self.room)
+        self.color = np.zeros(size, color_dtype)
         self.attributes = {a: np.zeros(size, dt) for a, dt in (attribute_dtypes or {}).items()}
         self.batches = np.zeros(n_slots, BATCH_DTYPE)
         self.batches["first"] = np.arange(n_slots, dtype=np.uint64) * ARENA_CHUNK
@@ -236,13 +255,40 @@ class Arena:
     def n_points(self) -> int:
         return len(self.low)
 
+    @property
+    def nbytes(self) -> int:
+        """Bytes of its point buffers (positions, colours, attributes; not the slot records)."""
+        arrays = [self.low, self.color, *self.attributes.values()]
+        arrays += [self.med, self.high] if self.med is not None else [self.ext]
+        return sum(a.nbytes for a in arrays)
+
     def point_info(self, index: int) -> dict:
         """Position (30-bit), color and level of the point in slot position ``index``."""
         slot = int(np.searchsorted(self.batches["first"], np.uint64(index), side="right") - 1)
         rec = self.batches[slot]
-        i = np.array([index])
-        pos = dequantize(self.low[i], self.med[i], self.high[i], rec["bbox_min"], rec["bbox_max"], 30)[0]
-        return {"position": pos.tolist(), "rgba": self.color[i].view(np.uint8).tolist(), "level": int(rec["level"]), "source": "octree"}
+        low, med, high = point_words(self, slot, index, index + 1)
+        pos = dequantize(low, med, high, rec["bbox_min"], rec["bbox_max"], 30)[0]
+        rgba = rgba32(self.color[index : index + 1]).view(np.uint8).tolist()
+        return {"position": pos.tolist(), "rgba": rgba, "level": int(rec["level"]), "source": "octree"}
+
+    def _load(self, nd: int, cloud: OctreeCloud, slots: np.ndarray, count: int) -> None:
+        """Node ``nd``'s points into ``slots``, in the arena's layout."""
+        if self.med is None:  # the compact layout: the node's words as stored (a format-2 octree)
+            arrays, attrs = cloud.node_payload(nd)
+            t = arrays["bits"]
+            for j, s in enumerate(slots.tolist()):
+                w = -(-min(ARENA_CHUNK, count - j * ARENA_CHUNK) * t // 64)  # the room's spare word left: only masked bits are read there
+                self.ext[s * self.room : s * self.room + w] = arrays["ext"][64 * t * j : 64 * t * j + w]
+            self.packing["code"][slots] = arrays["code"]
+            pairs = [(arrays["low"], self.low)]
+            first = 0
+        else:
+            arrays, attrs, first = cloud.node_arrays(nd)  # a Potree node is read and decoded here
+            pairs = [(arrays["low"], self.low), (arrays["med"], self.med), (arrays["high"], self.high)]
+        pairs.append((arrays["color"] if cloud.filtered_colors else arrays["rgba"], self.color))
+        pairs += [(attrs[a], b) for a, b in self.attributes.items()]
+        for a, b in pairs:
+            _copy_slots(a, first, count, slots, ARENA_CHUNK, b)
 
     def ensure(self, nodes: np.ndarray, cloud: OctreeCloud) -> bool:
         """Make every node in ``nodes`` resident; False when they cannot all fit."""
@@ -264,16 +310,11 @@ class Arena:
         for nd in nodes.tolist():
             if nd in self.resident:
                 continue
-            arrays, attrs, first = cloud.node_arrays(nd)  # a Potree node is read and decoded here
             rec = cloud.nodes[nd]
             count = int(rec["count"])
             k = -(-count // ARENA_CHUNK)
             slots = np.array([self.free.pop() for _ in range(k)], np.int64)
-            src_color = arrays["color"] if cloud.filtered_colors else arrays["rgba"]
-            for a, b in ((arrays["low"], self.low), (arrays["med"], self.med), (arrays["high"], self.high), (src_color, self.color)):
-                _copy_slots(a, first, count, slots, ARENA_CHUNK, b)
-            for a, b in self.attributes.items():
-                _copy_slots(attrs[a], first, count, slots, ARENA_CHUNK, b)
+            self._load(nd, cloud, slots, count)
             b = self.batches[slots]
             b["count"] = np.minimum(ARENA_CHUNK, count - np.arange(k) * ARENA_CHUNK)
             b["level"] = rec["level"]
@@ -384,19 +425,26 @@ class OctreeCloud:
     def _attribute_dtypes(self) -> dict:
         return {a: v.dtype for a, v in self.attributes.items() if v.ndim == 1}
 
+    def arena_layout(self) -> dict:
+        """Arena keywords of the layout its nodes are held in: the three-word layout (a
+        format-2 octree's: compact_octree.CompactOctree)."""
+        return {}
+
+    def new_arena(self, points: int) -> Arena:
+        """An empty arena of at least ``points`` points for this octree's nodes."""
+        return Arena(points, self.name, self.bounds, self._attribute_dtypes(), **self.arena_layout())
+
     def prepare(self, view: View, settings) -> DrawList:
         """The frame's nodes made resident in the arena, one batch per arena slot."""
         ids, _, total = self.select_nodes(view, settings)
         ids = ids[self.nodes["count"][ids] > 0]
         if self.arena is None or self.arena.n_points < total:
             cap = max(total, min(int(settings.point_budget), self.n_points)) * 5 // 4 + 64 * ARENA_CHUNK
-            self.arena = Arena(
-                min(cap, self.n_points + (len(self.keys) + 1) * ARENA_CHUNK), self.name, self.bounds, self._attribute_dtypes()
-            )
+            self.arena = self.new_arena(min(cap, self.n_points + (len(self.keys) + 1) * ARENA_CHUNK))
         arena = self.arena
         if not arena.ensure(ids, self):
             # a selection of many small nodes that wastes slots: grow and retry once
-            self.arena = arena = Arena(arena.n_points * 2 + (len(ids) + 1) * ARENA_CHUNK, self.name, self.bounds, self._attribute_dtypes())
+            self.arena = arena = self.new_arena(arena.n_points * 2 + (len(ids) + 1) * ARENA_CHUNK)
             arena.ensure(ids, self)
         recs = self.nodes[ids]
         _, size = visible_and_size(view.rows, recs["bbox_min"], recs["bbox_max"], view.width, view.height, view.near, view.far)

@@ -9,9 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_json, atomic_npy, fsync_file
+from ..core.compact import ext_bits_per_point
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
-from .compact_octree import field_names
+from .compact_octree import field_names, node_checksums
 from .keys import key_cube, level_of
 from .octree_dir import FORMAT_NAME, FORMAT_VERSION, FORMAT_VERSION_WORDS, POINT_ARRAYS, OctreeDir
 
@@ -99,6 +100,8 @@ def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sa
         extra = write_streams(out, sources, order, attrs, plan)
     atomic_npy(out.array("nodes"), nodes[order])
     atomic_npy(out.array("keys"), keys[order])
+    if plan is not None:
+        atomic_npy(out.array("crc"), write_checksums(out, nodes[order], extra["fields"]))
     lo, hi = np.array(st["lo"]), np.array(st["hi"])
     meta = {
         "format": FORMAT_NAME,
@@ -119,6 +122,19 @@ def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sa
     meta.update(extra)
     atomic_json(out.meta, meta, durable=True)  # last: the folder is complete from here on
     return len(keys)
+
+
+def write_checksums(out: OctreeDir, nodes: np.ndarray, names: list[str]) -> np.ndarray:
+    """Version 2's ``crc.npy``: per node a CRC-32 of each array's part of it, its record
+    included (compact_octree.node_checksums), from the files as written."""
+    low, ext, pack, fields = (np.load(out.array(k), mmap_mode="r") for k in ("low", "ext", "pack", "fields"))
+    pack, fields = np.asarray(pack), np.asarray(fields)
+    streams = [np.load(out.array(f"field.{k}"), mmap_mode="r") for k in names]
+    bits = ext_bits_per_point(pack, nodes["count"])
+    crc = np.empty((len(nodes), 2 + len(names)), np.uint32)
+    for i in range(len(nodes)):
+        crc[i] = node_checksums(i, nodes, low, ext, pack, bits, fields, streams)
+    return crc
 
 
 def write_streams(out: OctreeDir, sources: list[Path], order: np.ndarray, attrs: dict, plan: dict) -> dict:

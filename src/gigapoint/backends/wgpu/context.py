@@ -293,18 +293,18 @@ class GpuContext:
             del self.plans[key]
         batches = points.batches
         plan = self.plans.get(id(batches))
+        # a compact cloud's extension streams hold up to 7.5 bytes a point (wide batches):
+        # half-size pages keep them within one binding
+        page = self.page_points if points.med is not None else max(1, self.page_points // 2)
         if points.version is None:
             if plan is None or plan.ref() is not batches:
-                # a compact cloud's extension streams hold up to 7.5 bytes a point (wide batches):
-                # half-size pages keep them within one binding
-                page = self.page_points if points.med is not None else max(1, self.page_points // 2)
                 starts, stops, page_of = plan_pages(batches, page)
                 plan = PagePlan(weakref.ref(batches), starts, stops, page_of)
                 self.plans[id(batches)] = plan
             return plan
-        ends = batch_ends(batches, self.page_points, len(points.low))
+        ends = batch_ends(batches, page, len(points.low))
         if plan is None or plan.ref() is not batches or plan.ends is None or not np.array_equal(plan.ends, ends):
-            starts, stops, page_of = plan_pages(batches, self.page_points, ends)
+            starts, stops, page_of = plan_pages(batches, page, ends)
             plan = PagePlan(weakref.ref(batches), starts, stops, page_of, ends)
             self.plans[id(batches)] = plan
         return plan
@@ -328,12 +328,17 @@ class GpuContext:
 
     def ext_ranges(self, points, plan: PagePlan) -> tuple[np.ndarray, np.ndarray]:
         """Per page of a compact cloud: the u64 words lo..hi of ``points.ext`` its batches' streams
-        span (computed once per plan)."""
+        span (computed once per plan; a cloud refilled in place keeps each batch's ``ext_first``)."""
         if plan.ext_ranges is not None:
             return plan.ext_ranges
         pack, counts = points.packing, points.batches["count"].astype(np.int64)
         first = pack["ext_first"].astype(np.int64)
-        end = first + stream_words(ext_bits_per_point(pack, counts), counts)
+        if points.version is None:
+            end = first + stream_words(ext_bits_per_point(pack, counts), counts)
+        else:  # refilled in place (an LOD arena): a stream's room, which stays put, reaches the next one's
+            order = np.argsort(first, kind="stable")
+            end = np.empty_like(first)
+            end[order] = np.append(first[order][1:], len(points.ext))
         lo = np.full(plan.n_pages, np.iinfo(np.int64).max)
         hi = np.zeros(plan.n_pages, np.int64)
         np.minimum.at(lo, plan.page_of, first)
@@ -354,7 +359,7 @@ class GpuContext:
             raise GigapointError(f"wgpu backend: one dispatch draws at most {MAX_VIEWS} views, got {n_views}")
         usage = self.wgpu.BufferUsage
         # arrays that an LOD arena rewrites between frames: pages are checked against its version
-        self.cache.track(points, (points.low, points.med, points.high, points.color))
+        self.cache.track(points, (points.low, points.med, points.high, points.ext if points.med is None else None, points.color))
         plan = self.plan(points)
         pages = plan.page_of[ids]
         order = np.argsort(pages, kind="stable")  # one run of records per page

@@ -13,7 +13,8 @@ between frames) say so with the two attributes of the PointBuffers contract
 
 Their arrays are registered with ``track``; each use of a page compares the cloud's version
 with the page's, and rewrites in place only the batches written since (the whole page without
-``batch_version``). Any other array changed in place must be dropped with ``forget``.
+``batch_version``). Any other array changed in place must be dropped with ``forget``. A
+compact cloud's ``ext`` is refreshed by its batches' streams (``packing``), not their points.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...core.compact import ext_bits_per_point, stream_words
 from ...errors import GigapointError
 
 
@@ -201,24 +203,36 @@ class BufferCache:
         Queued writes run after the work already submitted and before the work submitted
         next, so earlier dispatches still see the old contents and later ones the new."""
         row_bytes = array.itemsize * int(np.prod(array.shape[1:], dtype=np.int64))
-        for s, e in stale_ranges(owner, entry.version, start, stop):
-            data = np.ascontiguousarray(array[s:e])
-            self.device.queue.write_buffer(entry.buffer, (s - start) * row_bytes, data.view(np.uint8).reshape(-1))
+        for s, e in stale_ranges(owner, entry.version, start, stop, array):
+            # whole 4-byte words (a copy's rule): 16-bit colours of an odd count widen by one
+            b0, b1 = (s - start) * row_bytes // 4 * 4, -(-(e - start) * row_bytes // 4) * 4
+            data = np.ascontiguousarray(array[start + b0 // row_bytes : start + -(-b1 // row_bytes)]).view(np.uint8).reshape(-1)
+            lead = b0 % row_bytes
+            data = data[lead : lead + b1 - b0]
+            if len(data) < b1 - b0:  # the page's end: its buffer is padded
+                data = np.concatenate([data, np.zeros(b1 - b0 - len(data), np.uint8)])
+            self.device.queue.write_buffer(entry.buffer, b0, data)
             self.bytes_uploaded += data.nbytes
         entry.version = version
         self.refreshes += 1
 
 
-def stale_ranges(cloud, since: int, start: int, stop: int) -> list[tuple[int, int]]:
+def stale_ranges(cloud, since: int, start: int, stop: int, array=None) -> list[tuple[int, int]]:
     """Point ranges within start..stop that ``cloud`` wrote after its version ``since``:
     the batches whose ``batch_version`` is newer, merged where they touch (all of start..stop
-    when the cloud has no per-batch versions)."""
+    when the cloud has no per-batch versions). ``array`` the compact layout's ``ext``: ranges
+    of its u64 words, the batches' streams, instead."""
     versions = cloud.batch_version
     if versions is None:
         return [(start, stop)]
     batches = cloud.batches
-    first = batches["first"].astype(np.int64)
-    end = first + batches["count"].astype(np.int64)
+    counts = batches["count"].astype(np.int64)
+    if array is not None and cloud.med is None and array is cloud.ext:
+        first = cloud.packing["ext_first"].astype(np.int64)
+        end = first + stream_words(ext_bits_per_point(cloud.packing, counts), counts)
+    else:
+        first = batches["first"].astype(np.int64)
+        end = first + counts
     hit = np.flatnonzero((np.asarray(versions) > since) & (first < stop) & (end > start) & (end > first))  # an emptied batch: nothing to send
     if not len(hit):
         return []
