@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gigapoint.errors import InputError
-from gigapoint.live.depth import depth_to_points, depth_to_points_reference
+from gigapoint.live.depth import TILE, depth_to_points, depth_to_points_reference, tile_order
 
 K = (365.5, 360.0, 31.5, 23.5)
 
@@ -101,3 +101,44 @@ def test_bad_input_is_one_line(kwargs, message):
     with pytest.raises(InputError) as err:
         depth_to_points(**args)
     assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_tile_order_visits_the_tiles_in_z_order_or_the_rows_in_order():
+    tiles, th, tw = tile_order(4 * TILE, 4 * TILE, True)
+    assert (th, tw) == (TILE, TILE)
+    r, c = tiles.T
+    # 4x4 tiles: the four 2x2 blocks in Z order, each in Z order (column bit first)
+    np.testing.assert_array_equal(r * 4 + c, [0, 1, 4, 5, 2, 3, 6, 7, 8, 9, 12, 13, 10, 11, 14, 15])
+    tiles, th, tw = tile_order(5, 7, False)
+    assert (th, tw) == (1, 7)
+    np.testing.assert_array_equal(tiles, [[v, 0] for v in range(5)])
+    h, w = 424, 512  # a Kinect frame: 27 x 32 tiles, the last row of tiles cut short
+    tiles, _, _ = tile_order(h, w, True)
+    rows, cols = -(-h // TILE), w // TILE
+    np.testing.assert_array_equal(np.sort(tiles[:, 0] * cols + tiles[:, 1]), np.arange(rows * cols))  # every tile once
+
+    def z_key(t):  # the reference: row and column bits interleaved, column first
+        return sum(((int(t[1]) >> b) & 1) << (2 * b) | ((int(t[0]) >> b) & 1) << (2 * b + 1) for b in range(6))
+
+    keys = [z_key(t) for t in tiles]
+    assert keys == sorted(keys)
+
+
+def test_z_order_gives_the_row_major_points_tile_by_tile():
+    """The kernel visiting the image tile by tile in Z order gives the row-major points permuted
+    (tiles in ``tile_order``'s order, row-major inside each), nothing else."""
+    rng = np.random.default_rng(3)
+    d = rng.uniform(0.5, 4.0, (3 * TILE + 5, 4 * TILE + 9)).astype(np.float32)  # partial tiles at the edges
+    d[rng.random(d.shape) < 0.3] = 0  # holes
+    d[20:30, 10:40] = np.nan
+    rgb = rng.integers(0, 255, d.shape + (3,), dtype=np.uint8)
+    rows = depth_to_points(d, K, pose_of(), rgb)
+    z = depth_to_points(d, K, pose_of(), rgb, z_order=True)
+    h, w = d.shape
+    visit = [v * w + u for tr, tc in tile_order(h, w, True)[0] for v in range(tr * TILE, min(h, tr * TILE + TILE)) for u in range(tc * TILE, min(w, tc * TILE + TILE))]
+    rank = np.empty(d.size, np.int64)
+    rank[visit] = np.arange(d.size)
+    perm = np.argsort(rank[rows[3]])
+    for a, b in zip(z, rows):
+        np.testing.assert_array_equal(a, b[perm])
+    assert np.all(np.diff(rank[z[3]]) > 0)

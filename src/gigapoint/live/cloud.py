@@ -3,8 +3,9 @@
 
 A frame (``push``: points in sensor or world coordinates with a 4x4 pose; ``push_depth``: an
 organised depth image turned into points and normals by depth.py's kernel) is put in world
-coordinates, Morton-ordered and cut into batches on arrival by core's own path
-(core/morton.py, core/quantize.py: Morton codes, sort, batches, 30-bit words), outside any lock;
+coordinates, Morton-ordered (a depth frame: in its image's Z order, no sort) and cut into
+batches on arrival by core's own path (core/morton.py, core/quantize.py: Morton codes, sort,
+batches, 30-bit words), outside any lock;
 then its batches are copied into free chunks of the ring (ring.py) under a frames-first lock,
 so a frame appears whole or not at all (no torn frames) and culling and adaptive precision work
 on it unchanged. A frame pushed while another is being drawn waits, batched, in a queue and is
@@ -102,18 +103,23 @@ def _as_points(xyz, name: str) -> np.ndarray:
     return a
 
 
-def batch_frame(pts: np.ndarray, rgba: np.ndarray, attributes: dict, lo, hi, chunk: int) -> PointCloud:
+def batch_frame(pts: np.ndarray, rgba: np.ndarray, attributes: dict, lo, hi, chunk: int, ordered: bool = False) -> PointCloud:
     """One frame in core's layout: Morton codes in its bounding cube, batches of ``chunk``
     points, 30-bit words (core/morton.py, core/quantize.py). The order is numpy's faster sort on
     this CPU (morton.argsort_codes, as the progressive octree sorts its batches): 3-5 ms for a
-    512x424 frame (ties are the same point: their order does not matter)."""
+    512x424 frame (ties are the same point: their order does not matter). ``ordered``: the
+    points come in an order batches can be cut from as they are (a depth frame's image Z order,
+    depth.tile_order): no sort and no gathers."""
+    batches = make_batches(len(pts), chunk)
+    color = np.ascontiguousarray(rgba, np.uint8).view(np.uint32).reshape(-1)
+    if ordered:
+        low, med, high = quantize(pts, np.arange(len(pts)), batches)
+        return PointCloud(batches, low, med, high, color, {a: np.asarray(v) for a, v in attributes.items()}, name="frame")
     origin, edge = cube_of(lo, hi)
     order = argsort_codes(morton_codes(pts, origin, edge))
-    batches = make_batches(len(pts), chunk)
     low, med, high = quantize(pts, order, batches)
-    color = take(np.ascontiguousarray(rgba, np.uint8).view(np.uint32).reshape(-1), order)
     # gathered in parallel: numpy's fancy indexing of the (N, 3) normals alone took ~3 ms a frame
-    return PointCloud(batches, low, med, high, color, {a: take(np.asarray(v), order) for a, v in attributes.items()}, name="frame")
+    return PointCloud(batches, low, med, high, take(color, order), {a: take(np.asarray(v), order) for a, v in attributes.items()}, name="frame")
 
 
 class LiveCloud:
@@ -277,8 +283,8 @@ class LiveCloud:
         pushed_at = _time.perf_counter()
         try:
             p = parse_pose(pose, "push_depth")
-            xyz, nrm, rgba, _ = depth_to_points(depth, intrinsics, p, rgb, depth_scale, max_depth)
-            seq = self._push(xyz, rgba, None, time, None, {}, pushed_at, world_normals=nrm, pose_tag=p)
+            xyz, nrm, rgba, _ = depth_to_points(depth, intrinsics, p, rgb, depth_scale, max_depth, z_order=True)
+            seq = self._push(xyz, rgba, None, time, None, {}, pushed_at, world_normals=nrm, pose_tag=p, ordered=True)
         except GigapointError as exc:
             self.refused(exc)
             raise
@@ -286,7 +292,9 @@ class LiveCloud:
             self.recorder.write_depth(seq, depth, intrinsics, p, rgb, depth_scale, max_depth, self._last_time)
         return seq
 
-    def _push(self, xyz, rgb, pose, time, normals, attributes, pushed_at, world_normals=None, pose_tag=None) -> int:
+    def _push(self, xyz, rgb, pose, time, normals, attributes, pushed_at, world_normals=None, pose_tag=None, ordered=False) -> int:
+        """``ordered``: a depth frame's points in its image's Z order, batched as they come
+        (batch_frame); other frames are sorted by Morton code."""
         name = self.name
         xyz_in = _as_points(xyz, f"{name}: push")
         n = len(xyz_in)
@@ -307,7 +315,7 @@ class LiveCloud:
             if nrm.shape != (n, 3) or nrm.dtype.kind not in "if":
                 raise InputError(f"{name}: push: normals must be (N, 3) numbers like xyz ({n}, 3), got shape {nrm.shape}")
             world_normals = (nrm.astype(np.float64) @ p[:3, :3].T).astype(np.float32)
-        pts = xyz_in.astype(np.float64)
+        pts = np.asarray(xyz_in, np.float64)  # no copy of float64 points (nothing writes into them)
         if pose_tag is None and pose is not None:  # sensor -> world (push_depth's kernel applied it already)
             pts = pts @ p[:3, :3].T + p[:3, 3]
         valid, lo, hi = valid_bounds(pts, MAX_ABS_COORDINATE)  # one parallel pass (the octree's)
@@ -330,7 +338,7 @@ class LiveCloud:
             raise InputError(f"{name}: push: time must be a finite number of seconds, got {time!r}")
         per_point = {"normal": world_normals, "frame_time": np.full(m, arrived, np.float32)}
         per_point.update(attrs)
-        frame = batch_frame(pts, rgba, per_point, lo, hi, self.chunk)
+        frame = batch_frame(pts, rgba, per_point, lo, hi, self.chunk, ordered)
         with self._pending_lock:
             seq = self._seq
             self._seq += 1

@@ -4,14 +4,17 @@
 intrinsics (OpenCV convention: x right, y down, z forward), takes its normal from its image
 neighbours (the cross product of the horizontal and vertical differences: the right/lower
 neighbour where it is valid, else the left/upper one; oriented towards the sensor), and
-applies the sensor's pose, all in one compiled pass over the rows. ``depth_to_points_reference``
-is the same in plain numpy (the tests compare them).
+applies the sensor's pose, all in one compiled pass over the rows (or, for the live cloud, over
+16x16 tiles in the image's Z order: its batches are cut from the points as they come, no sort).
+``depth_to_points_reference`` is the same in plain numpy (the tests compare them).
 
 A pixel is valid when its depth is finite, > 0 and (with ``max_depth``) not beyond it: zeros
 and NaNs are a sensor's holes, skipped; a frame with no valid pixel is refused.
 """
 
 from __future__ import annotations
+
+from functools import lru_cache
 
 import numpy as np
 from numba import njit, prange
@@ -89,83 +92,115 @@ def _metres(depth, v, u, scale, max_depth):
 
 
 @njit(parallel=True, cache=True)
-def depth_kernel(depth, scale, max_depth, fx, fy, cx, cy, pose, rgb, z, xyz, nrm, rgba, pix, counts):
-    """Points of the valid pixels of ``depth``, row by row: world xyz (pose applied), unit normal
-    (world; 0 where no neighbour pair exists), rgba (from ``rgb`` (H*W, 3|4) u8, alpha 255 for 3
-    channels, or left alone when it has no rows) and pixel index. Scratch: ``z`` (H, W) float64 metres (0: invalid), ``counts``
-    (H + 1) the per-row offsets. Returns the number of points."""
+def depth_kernel(depth, scale, max_depth, fx, fy, cx, cy, pose, rgb, tiles, th, tw, z, xyz, nrm, rgba, pix, counts):
+    """Points of the valid pixels of ``depth``, tile by tile in the order of ``tiles`` ((row,
+    column) of each ``th`` x ``tw`` tile: whole rows in order, or ``tile_order``'s Z order),
+    row-major inside a tile: world xyz (pose applied), unit normal (world; 0 where no neighbour
+    pair exists), rgba (from ``rgb`` (H*W, 3|4) u8, alpha 255 for 3 channels, or left alone
+    when it has no rows) and pixel index. Scratch: ``z`` (H, W) float64 metres (0: invalid),
+    ``counts`` (tiles + 1) the tiles' offsets. Returns the number of points."""
     h, w = depth.shape
+    n_tiles = tiles.shape[0]
     counts[0] = 0
-    for v in prange(h):  # pass 1: metres (0 where invalid) and the valid pixels of each row
-        c = 0
+    for v in prange(h):  # pass 1: metres, 0 where invalid (whole rows: ~0.25 ms a frame faster than by tiles)
         for u in range(w):
-            m = _metres(depth, v, u, scale, max_depth)
-            z[v, u] = m
-            c += m > 0.0
-        counts[v + 1] = c
-    for v in range(h):
-        counts[v + 1] += counts[v]
+            z[v, u] = _metres(depth, v, u, scale, max_depth)
+    for t in prange(n_tiles):  # the valid pixels of each tile
+        v0, u0 = tiles[t, 0] * th, tiles[t, 1] * tw
+        c = 0
+        for v in range(v0, min(v0 + th, h)):
+            for u in range(u0, min(u0 + tw, w)):
+                c += z[v, u] > 0.0
+        counts[t + 1] = c
+    for t in range(n_tiles):
+        counts[t + 1] += counts[t]
     has_rgb = rgb.shape[0] > 0
     nc = rgb.shape[1]
     ifx = 1.0 / fx
     ify = 1.0 / fy
-    for v in prange(h):  # pass 2: positions, normals, colors of the valid pixels, in row-major order
-        k = counts[v]
-        ry = (v - cy) * ify
-        for u in range(w):
-            zc = z[v, u]
-            if zc == 0.0:
-                continue
-            rx = (u - cx) * ifx
-            x = rx * zc
-            y = ry * zc
-            # horizontal difference: to the right neighbour, else from the left one
-            hx = hy = hz = 0.0
-            ok_h = False
-            if u + 1 < w and z[v, u + 1] > 0.0:
-                z1 = z[v, u + 1]
-                hx, hy, hz, ok_h = (u + 1 - cx) * ifx * z1 - x, ry * z1 - y, z1 - zc, True
-            elif u > 0 and z[v, u - 1] > 0.0:
-                z1 = z[v, u - 1]
-                hx, hy, hz, ok_h = x - (u - 1 - cx) * ifx * z1, y - ry * z1, zc - z1, True
-            vx = vy = vz = 0.0
-            ok_v = False
-            if v + 1 < h and z[v + 1, u] > 0.0:
-                z1 = z[v + 1, u]
-                vx, vy, vz, ok_v = rx * z1 - x, (v + 1 - cy) * ify * z1 - y, z1 - zc, True
-            elif v > 0 and z[v - 1, u] > 0.0:
-                z1 = z[v - 1, u]
-                vx, vy, vz, ok_v = x - rx * z1, y - (v - 1 - cy) * ify * z1, zc - z1, True
-            nx = ny = nz = 0.0
-            if ok_h and ok_v:
-                nx = hy * vz - hz * vy
-                ny = hz * vx - hx * vz
-                nz = hx * vy - hy * vx
-                length = np.sqrt(nx * nx + ny * ny + nz * nz)
-                if length > 0.0:
-                    if nx * x + ny * y + nz * zc > 0.0:  # towards the sensor (at the origin)
-                        length = -length
-                    nx /= length
-                    ny /= length
-                    nz /= length
-                else:
-                    nx = ny = nz = 0.0
-            for a in range(3):
-                xyz[k, a] = pose[a, 0] * x + pose[a, 1] * y + pose[a, 2] * zc + pose[a, 3]
-                nrm[k, a] = np.float32(pose[a, 0] * nx + pose[a, 1] * ny + pose[a, 2] * nz)
-            if has_rgb:
-                for c in range(nc):
-                    rgba[k, c] = rgb[v * w + u, c]
-                if nc == 3:
-                    rgba[k, 3] = 255
-            pix[k] = v * w + u
-            k += 1
-    return counts[h]
+    for t in prange(n_tiles):  # pass 2: positions, normals, colors of the valid pixels, in tile order
+        k = counts[t]
+        v0, u0 = tiles[t, 0] * th, tiles[t, 1] * tw
+        for v in range(v0, min(v0 + th, h)):
+            ry = (v - cy) * ify
+            for u in range(u0, min(u0 + tw, w)):
+                zc = z[v, u]
+                if zc == 0.0:
+                    continue
+                rx = (u - cx) * ifx
+                x = rx * zc
+                y = ry * zc
+                # horizontal difference: to the right neighbour, else from the left one
+                hx = hy = hz = 0.0
+                ok_h = False
+                if u + 1 < w and z[v, u + 1] > 0.0:
+                    z1 = z[v, u + 1]
+                    hx, hy, hz, ok_h = (u + 1 - cx) * ifx * z1 - x, ry * z1 - y, z1 - zc, True
+                elif u > 0 and z[v, u - 1] > 0.0:
+                    z1 = z[v, u - 1]
+                    hx, hy, hz, ok_h = x - (u - 1 - cx) * ifx * z1, y - ry * z1, zc - z1, True
+                vx = vy = vz = 0.0
+                ok_v = False
+                if v + 1 < h and z[v + 1, u] > 0.0:
+                    z1 = z[v + 1, u]
+                    vx, vy, vz, ok_v = rx * z1 - x, (v + 1 - cy) * ify * z1 - y, z1 - zc, True
+                elif v > 0 and z[v - 1, u] > 0.0:
+                    z1 = z[v - 1, u]
+                    vx, vy, vz, ok_v = x - rx * z1, y - (v - 1 - cy) * ify * z1, zc - z1, True
+                nx = ny = nz = 0.0
+                if ok_h and ok_v:
+                    nx = hy * vz - hz * vy
+                    ny = hz * vx - hx * vz
+                    nz = hx * vy - hy * vx
+                    length = np.sqrt(nx * nx + ny * ny + nz * nz)
+                    if length > 0.0:
+                        if nx * x + ny * y + nz * zc > 0.0:  # towards the sensor (at the origin)
+                            length = -length
+                        nx /= length
+                        ny /= length
+                        nz /= length
+                    else:
+                        nx = ny = nz = 0.0
+                for a in range(3):
+                    xyz[k, a] = pose[a, 0] * x + pose[a, 1] * y + pose[a, 2] * zc + pose[a, 3]
+                    nrm[k, a] = np.float32(pose[a, 0] * nx + pose[a, 1] * ny + pose[a, 2] * nz)
+                if has_rgb:
+                    for c in range(nc):
+                        rgba[k, c] = rgb[v * w + u, c]
+                    if nc == 3:
+                        rgba[k, 3] = 255
+                pix[k] = v * w + u
+                k += 1
+    return counts[n_tiles]
 
 
-def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, max_depth=None, name: str = "push_depth"):
+TILE = 16  # pixels on a side of the tiles of the Z order: a frame's batch (10 240 points) is ~40 of them
+
+
+@lru_cache(maxsize=8)
+def tile_order(h: int, w: int, z_order: bool) -> tuple[np.ndarray, int, int]:
+    """(tiles (n, 2) int64 (row, column) in visiting order, tile height, tile width) of an (h, w)
+    image: its rows one by one, or with ``z_order`` TILE x TILE tiles in Z (Morton) order, each
+    aligned power-of-two square of tiles whole before the next. Computed once per shape."""
+    th, tw = (TILE, TILE) if z_order else (1, w)
+    rows, cols = -(-h // th), -(-w // tw)
+    r, c = np.divmod(np.arange(rows * cols, dtype=np.int64), cols)
+    code = np.zeros(rows * cols, np.int64)
+    for b in range(max(rows, cols).bit_length()):
+        code |= ((c >> b) & 1) << (2 * b) | ((r >> b) & 1) << (2 * b + 1)
+    order = np.argsort(code, kind="stable")
+    tiles = np.stack([r[order], c[order]], axis=1)
+    tiles.flags.writeable = False  # shared by every frame of this shape
+    return tiles, th, tw
+
+
+def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, max_depth=None, name: str = "push_depth", z_order: bool = False):
     """(xyz float64 (N, 3) world, normals float32 (N, 3) world, rgba uint8 (N, 4) or None,
-    pixel index int64 (N,)) of the valid pixels of an (H, W) depth image, in row-major order."""
+    pixel index int64 (N,)) of the valid pixels of an (H, W) depth image, in row-major order, or
+    with ``z_order`` tile by tile in the image's Z order (``tile_order``): consecutive points are
+    neighbours in the image, so the live cloud cuts a frame's batches from them as they come,
+    about as compact as a sort by 3-D Morton code makes them (the image is the sensor's
+    projection of the scene: only depth edges stretch a batch along the view rays), without the sort."""
     d, scale = check_depth(depth, depth_scale, name)
     fx, fy, cx, cy = parse_intrinsics(intrinsics, name)
     p = parse_pose(pose, name)
@@ -185,7 +220,9 @@ def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, ma
     nrm = np.empty((n, 3), np.float32)
     rgba = np.empty((n if rgb is not None else 0, 4), np.uint8)
     pix = np.empty(n, np.int64)
-    k = depth_kernel(d, scale, limit, fx, fy, cx, cy, p, rgb8, np.empty((h, w)), xyz, nrm, rgba, pix, np.empty(h + 1, np.int64))
+    tiles, th, tw = tile_order(h, w, bool(z_order))
+    counts = np.empty(len(tiles) + 1, np.int64)
+    k = depth_kernel(d, scale, limit, fx, fy, cx, cy, p, rgb8, tiles, th, tw, np.empty((h, w)), xyz, nrm, rgba, pix, counts)
     if k == 0:
         raise InputError(f"{name}: the {w}x{h} depth image has no valid pixel (all zero, NaN or beyond max_depth)")
     return xyz[:k], nrm[:k], (rgba[:k] if rgb is not None else None), pix[:k]
