@@ -20,6 +20,7 @@ from collections import defaultdict
 import numpy as np
 
 from ...core.compact import ext_bits_per_point, stream_words
+from ...core.layout import EXT_FULL_BITS
 from ...errors import GigapointError
 from ...render.params import soft_weight
 from ...render.splats import ONE_PIXEL
@@ -328,22 +329,24 @@ class GpuContext:
 
     def ext_ranges(self, points, plan: PagePlan) -> tuple[np.ndarray, np.ndarray]:
         """Per page of a compact cloud: the u64 words lo..hi of ``points.ext`` its batches' streams
-        span (computed once per plan; a cloud refilled in place keeps each batch's ``ext_first``)."""
-        if plan.ext_ranges is not None:
-            return plan.ext_ranges
-        pack, counts = points.packing, points.batches["count"].astype(np.int64)
-        first = pack["ext_first"].astype(np.int64)
+        span. Computed once per plan for a cloud that never changes; for one refilled in place,
+        again whenever its streams move (``in_place_ext_ranges``)."""
+        pack = points.packing
         if points.version is None:
-            end = first + stream_words(ext_bits_per_point(pack, counts), counts)
-        else:  # refilled in place (an LOD arena): a stream's room, which stays put, reaches the next one's
-            order = np.argsort(first, kind="stable")
-            end = np.empty_like(first)
-            end[order] = np.append(first[order][1:], len(points.ext))
-        lo = np.full(plan.n_pages, np.iinfo(np.int64).max)
-        hi = np.zeros(plan.n_pages, np.int64)
-        np.minimum.at(lo, plan.page_of, first)
-        np.maximum.at(hi, plan.page_of, end)
-        plan.ext_ranges = (lo, np.maximum(hi, lo))
+            if plan.ext_ranges is None:
+                counts = points.batches["count"].astype(np.int64)
+                first = pack["ext_first"].astype(np.int64)
+                end = first + stream_words(ext_bits_per_point(pack, counts), counts)
+                lo = np.full(plan.n_pages, np.iinfo(np.int64).max)
+                hi = np.zeros(plan.n_pages, np.int64)
+                np.minimum.at(lo, plan.page_of, first)
+                np.maximum.at(hi, plan.page_of, end)
+                plan.ext_ranges = (lo, np.maximum(hi, lo))
+            return plan.ext_ranges
+        layout = (pack["ext_first"].copy(), pack["code"].copy(), len(points.ext))
+        if plan.ext_ranges is None or plan.ext_layout is None or not _same_layout(plan.ext_layout, layout):
+            plan.ext_ranges = in_place_ext_ranges(pack, points.batches, plan, len(points.ext), plan.ext_ranges)
+            plan.ext_layout = layout
         return plan.ext_ranges
 
     def draw_batches(self, points, views: Views, pass_names, params: dict, footprint, extra) -> None:
@@ -416,3 +419,48 @@ class GpuContext:
                 entries.append((words[0], words[0].size // 16 * 16))  # low again, as vec4 (prefetch)
                 entries.append(footprint)
                 self.dispatch(pass_name, entries + own, r1 - r0, n_views)
+
+
+def _same_layout(a, b) -> bool:
+    return a[2] == b[2] and np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def in_place_ext_ranges(pack, batches, plan: PagePlan, n_words: int, previous=None) -> tuple[np.ndarray, np.ndarray]:
+    """Each page's u64 words lo..hi of the extension streams of a cloud refilled in place (an
+    LOD arena, the progressive octree's pool), whose streams stay where they are while their
+    batches refill but may be handed out as the cloud grows (the pool gives a new point chunk
+    the next stream: ``ext_first`` is ``n_words`` until then, and a voxel chunk has none).
+
+    Only batches with stream bits count. A stream's room reaches the next stream; the last
+    one's (the frontier, where the pool hands out the next) at most a full batch of the widest
+    points (3 x ``EXT_FULL_BITS`` a point). A page's hi never shrinks while its lo stays
+    (``previous``), and a page holding the frontier reaches twice as far as it needs (at most
+    its batches' widest streams): a page that fills chunk by chunk is uploaded again only each
+    time its streams double, not for every new chunk."""
+    counts = batches["count"].astype(np.int64)
+    first = pack["ext_first"].astype(np.int64)
+    has = (ext_bits_per_point(pack, counts) > 0) & (first < n_words)
+    room_points = (plan.ends - batches["first"].astype(np.int64)) if plan.ends is not None else counts
+    widest = stream_words(np.full(len(first), 3 * EXT_FULL_BITS, np.int64), np.maximum(room_points, 1))
+    span = np.zeros(plan.n_pages, np.int64)  # the widest streams a page's batches could hold
+    np.add.at(span, plan.page_of, widest)
+    ids = np.flatnonzero(has)
+    order = ids[np.argsort(first[ids], kind="stable")]
+    nxt = np.append(first[order][1:], n_words)
+    end = np.minimum(nxt, first[order] + widest[order])
+    frontier = nxt >= n_words
+    lo = np.full(plan.n_pages, np.iinfo(np.int64).max)
+    hi = np.zeros(plan.n_pages, np.int64)
+    pages = plan.page_of[order]
+    np.minimum.at(lo, pages, first[order])
+    np.maximum.at(hi, pages, end)
+    growing = np.zeros(plan.n_pages, bool)
+    growing[pages[frontier]] = True
+    used = hi > 0
+    reach = np.where(growing & used, lo + 2 * (hi - lo), hi)
+    hi = np.where(used, np.minimum(np.minimum(reach, lo + span), n_words), hi)
+    if previous is not None:
+        same = used & (previous[0] == lo)
+        hi = np.where(same, np.maximum(hi, previous[1]), hi)
+    lo = np.where(used, lo, 0)
+    return lo, np.maximum(hi, lo)

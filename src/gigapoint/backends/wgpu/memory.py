@@ -47,6 +47,7 @@ class PagePlan:
     page_of: np.ndarray  # int64 page of each batch
     ends: np.ndarray | None = None  # int64 end of each batch as planned (clouds whose batches refill: re-plan when it moves)
     ext_ranges: tuple[np.ndarray, np.ndarray] | None = None  # compact clouds: each page's u64 words of the extension streams
+    ext_layout: tuple | None = None  # clouds refilled in place: (ext_first, code, len(ext)) the ranges were computed for
 
     @property
     def n_pages(self) -> int:
