@@ -515,8 +515,7 @@ def test_the_viewer_redraws_while_it_loads_and_says_how_far():
     "page_chunks",
     [
         None,
-        pytest.param(8, marks=pytest.mark.xfail(reason="the wgpu backend plans a page's stream words once per plan; this pool assigns "
-                                                "streams as it fills (backends/wgpu/context.ext_ranges: see docs/benchmarks.md, #18)")),
+        8,  # several pages: a page's streams are handed out as the pool fills (wgpu context.in_place_ext_ranges)
     ],
 )
 def test_wgpu_draws_the_growing_octree_uploading_only_what_changed(scene, page_chunks):
