@@ -170,6 +170,29 @@ def test_trimming_frees_the_room_and_the_octree_grows_on_the_same(scene, octree)
             _match(a[key][1], b[key][1], 1e-6)
 
 
+def test_trim_cuts_the_pool_in_place_and_growth_copies_it_once(scene, octree):
+    """trim() keeps the pool's arrays (views of their used part: the room cut off was never
+    written), so loading ends without copying the pool; a pool that runs out of chunks grows its
+    streams by the same factor, so the next points need no second copy; the leaves are the same."""
+    xyz, rgba, attrs = scene
+    o = ProgressiveOctree("t", max_leaf=3_000, cube=_cube(xyz), capacity=len(xyz) * 4)
+    o.add(xyz, rgba, **attrs)
+    low, ext = o.pool.low, o.pool.ext
+    o.trim()
+    assert np.shares_memory(o.pool.low, low) and np.shares_memory(o.pool.ext, ext)
+    assert o.pool.n_chunks == o._n_chunks and o.pool.n_streams == o._n_streams
+    small = ProgressiveOctree("t", max_leaf=3_000, cube=_cube(xyz))
+    grown = []
+    for s in range(0, len(xyz), 20_000):
+        pool = small.pool
+        small.add(xyz[s : s + 20_000], rgba[s : s + 20_000], **{a: v[s : s + 20_000] for a, v in attrs.items()})
+        if pool is not None and small.pool is not pool:
+            grown.append((small.pool.n_chunks / pool.n_chunks, small.pool.n_streams / pool.n_streams))
+    assert grown and all(abs(c - st) < 0.01 or st >= c for c, st in grown)  # streams never grow less than chunks
+    keys = [{int(t.key[n]): int(t.count[n]) for n in t.leaves()} for t in (small, octree)]
+    assert keys[0] == keys[1] and small.n_voxels == octree.n_voxels
+
+
 def test_trimmed_memory_is_the_points_and_voxels_in_the_compact_layout(scene, octree):
     """Once trimmed, a point takes its low word, 60 stream bits, colour and attributes; a voxel its
     low word, colour and attributes (no other position words, no build state); beyond them only

@@ -31,7 +31,7 @@ from ..convert.prefetch import prefetch
 SLICE_POINTS = 250_000  # points inserted under one hold of the octree (~20-40 ms) while no frames are drawn
 SLICE_WHILE_DRAWING = 50_000  # ... and while frames are drawn: a waiting frame waits ~5-10 ms at most
 DECODE_CHUNK = 250_000  # points decoded at a time: decoding pauses between chunks while frames draw
-_PRESIZED_BYTES_PER_POINT = 64  # what presizing for one expected point allocates, about (pool room, voxels, table)
+_PRESIZED_BYTES_PER_POINT = 80  # what presizing for one expected point allocates, about (pool room, voxels, table)
 MEMORY_SHARE = 0.5  # the default memory limit: this share of the machine's physical memory
 
 

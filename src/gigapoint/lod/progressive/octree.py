@@ -61,10 +61,11 @@ CHUNK = 2048  # entries a chunk holds (the paper: 1 000)
 MAX_LEAF = 50_000  # points a leaf holds before it splits (the paper's)
 _INITIAL_NODES = 1024
 _INITIAL_CHUNKS = 64
-_ROOM_PER_POINT = 1.6  # pool entries an expected point takes: itself, ~0.3 voxels, half-filled chunks
+_ROOM_PER_POINT = 2.0  # pool entries an expected point takes: itself, 0.3-0.5 voxels, half-filled chunks (room unwritten: address space)
 _STREAMS_PER_POINT = 1.1  # point chunks' streams (CHUNK points each) an expected point takes: itself, half-filled chunks
-_VOXELS_PER_POINT = 0.35  # voxels a point brings, about (the demo town: 0.3; surfaces less)
-_PRESIZE_MAX = 16_000_000  # points presized for at most (~0.6 GB): a 10^9-point input must not allocate 30 GB up front
+_VOXELS_PER_POINT = 0.5  # voxels a point brings, at most about (the demo town: 0.34 in 1 M batches, 0.49 in the loader's 250 k slices)
+_PRESIZE_MAX = 32_000_000  # points the pool is presized for at most (1.5-2.5 GB of address space, written as it fills)
+_PRESIZE_TABLE_MAX = 16_000_000  # ... and the voxel table (filled up front: ~0.2 GB)
 _GROWTH_MAX_CHUNKS = 16_384  # the pool grows by at most this many chunks (32 M entries, ~0.6 GB) beyond doubling small pools
 
 
@@ -129,6 +130,20 @@ class Pool:
         new.batch_version[:k] = self.batch_version[:k]
         new.version = self.version + 1
         new.bounds = self.bounds
+        return new
+
+    def prefix(self, n_chunks: int, n_streams: int) -> Pool:
+        """A pool of this one's first ``n_chunks`` chunks and ``n_streams`` streams, as views: no
+        copy (the room cut off was never written, so it holds address space, not memory)."""
+        new = object.__new__(Pool)
+        new.__dict__.update(self.__dict__)
+        n = n_chunks * self.chunk
+        for name in ("batches", "packing", "chunk_next", "chunk_node", "batch_version"):
+            setattr(new, name, getattr(self, name)[:n_chunks])
+        new.low, new.color = self.low[:n], self.color[:n]
+        new.attributes = {a: v[:n] for a, v in self.attributes.items()}
+        new.ext = self.ext[: n_streams * self.stream]
+        new.version = self.version + 1
         return new
 
     def point_info(self, index: int) -> dict:
@@ -261,6 +276,9 @@ class ProgressiveOctree:
 
         chunks, n_streams = grown(pool.n_chunks, self._n_chunks + extra), grown(pool.n_streams, self._n_streams + streams)
         if (chunks, n_streams) != (pool.n_chunks, pool.n_streams):
+            # both by the same factor: the other runs out soon after, and each growth copies the whole pool
+            f = max(chunks / pool.n_chunks, n_streams / max(pool.n_streams, 1))
+            chunks, n_streams = max(chunks, int(pool.n_chunks * f)), max(n_streams, int(pool.n_streams * f))
             self.pool = pool.grown(chunks, n_streams)
         if len(self._free) < self.pool.n_chunks:
             free = np.zeros(self.pool.n_chunks, np.int64)
@@ -292,7 +310,7 @@ class ProgressiveOctree:
             if self.pool is None:
                 return
             if self._n_chunks < self.pool.n_chunks or self._n_streams < self.pool.n_streams:
-                self.pool = self.pool.grown(max(self._n_chunks, 1), self._n_streams)
+                self.pool = self.pool.prefix(max(self._n_chunks, 1), self._n_streams)
                 self._free = self._free[: self.pool.n_chunks].copy()
             self._drop_voxel_state()
 
@@ -505,7 +523,7 @@ class ProgressiveOctree:
             self.pool = Pool(self.name, max(_INITIAL_CHUNKS, expected), self.chunk, self._attribute_dtypes, max(_INITIAL_CHUNKS, streams))
             if self.capacity:  # room for the expected voxels too: growing their arrays and table copies them
                 self._vox(max(len(self.vox_key), int(self.capacity * _VOXELS_PER_POINT)))
-                self._ensure_hash(int(self.capacity * _VOXELS_PER_POINT))
+                self._ensure_hash(int(min(self.capacity, _PRESIZE_TABLE_MAX) * _VOXELS_PER_POINT))
         if not self._voxel_state:
             self._rebuild_voxel_state()
         if self.origin is None:
