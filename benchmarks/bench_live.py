@@ -8,7 +8,7 @@ Frames come from the synthetic sensor (live/sources.py: 512x424, Kinect v2 intri
 over the demo town), rendered once up front so the producer costs only what a driver would.
 
 - ``depth``: the depth-to-points-and-normals kernel (live/depth.py) per 512x424 frame, and a
-  whole ``push_depth`` (kernel, Morton order, batches, the copy into the ring), medians.
+  whole ``push_depth`` (kernel in the image's Z order, batches, the copy into the ring), medians.
 - ``render``: ``keep`` frames in the ring, median frame time at 1280x720 (the view of the town).
 - ``stream``: a producer thread pushes at ``--fps`` while the main thread renders a 1280x720
   frame whenever the cloud changed (as the viewer's tabs do), for ``--seconds``: frames in/s
@@ -78,7 +78,7 @@ def bench_depth(frames) -> None:
         _push(live, f)
         pushes.append(time.perf_counter() - t)
     print(f"depth -> points + normals, 512x424 ({len(xyz):,} valid pixels): {statistics.median(times) * 1e3:.2f} ms median; "
-          f"whole push_depth (+ Morton order, batches, ring copy): {statistics.median(pushes) * 1e3:.1f} ms median")  # fmt: skip
+          f"whole push_depth (+ batches, ring copy): {statistics.median(pushes) * 1e3:.1f} ms median")  # fmt: skip
 
 
 def _fill(frames, keep):
