@@ -22,6 +22,7 @@ from contextlib import contextmanager
 import numpy as np
 from numba import njit, prange
 
+from ..core.compact import point_words
 from ..core.framelock import FrameLock
 from ..core.layout import BATCH_DTYPE, COORD_BITS, WORD_BITS, WORD_MASK
 from ..core.quantize import dequantize
@@ -176,8 +177,15 @@ class LiveBuffers:
             self.batches[field][ids] = pool.batches[field][chunks]
         src = (chunks[:, None] * mc + np.arange(mc)).reshape(-1)
         dst = src + self.ring_points
-        for a in ("low", "med", "high", "color"):
+        for a in ("low", "color"):
             getattr(self, a)[dst] = getattr(pool, a)[src]
+        if pool.med is not None:
+            self.med[dst] = pool.med[src]
+            self.high[dst] = pool.high[src]
+        else:  # the octree's compact pool (core/compact.py): each chunk's medium and high words decoded from its stream
+            for c, n in zip(chunks.tolist(), pool.batches["count"][chunks].tolist()):
+                f, o = c * mc, self.ring_points + c * mc
+                _, self.med[o : o + n], self.high[o : o + n] = point_words(pool, c, f, f + n)
         for a, v in self.attributes.items():
             if a in pool.attributes:
                 v[dst] = pool.attributes[a][src]
