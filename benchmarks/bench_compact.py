@@ -24,6 +24,13 @@ compact layout)::
 
     .venv/bin/python benchmarks/bench_compact.py --octree --points 5M --rounds 3
 
+``--colors`` measures the colour formats of the compact layout instead (issue #22): RGB565
+against per-batch palettes (core/palette.py, ``colors="palette"``), for autzen_trim and the demo
+town (``gp.demo(n, scale=0.01)``): bytes a point by component, PSNR / largest error against the
+exact colours, the quantizer's speed, and brute-force frames of the two interleaved (ABBA)::
+
+    .venv/bin/python benchmarks/bench_compact.py --colors --points 20M --rounds 7
+
 The demo town has no source scale of its own (its points are floats): it is stored at 1 cm
 here, as a LAS export of it would be (``--scale``). Peak RSS is reported at the end; the
 1 B point figure in docs/benchmarks.md is extrapolated from the bytes a point measured here.
@@ -211,6 +218,76 @@ def octree_part(args) -> None:
     print(f"\npeak RSS {rss / 2**30:.2f} GiB")
 
 
+def color_stats(exact: np.ndarray, got: np.ndarray) -> str:
+    """PSNR (RGB), largest and mean absolute error per channel of ``got`` against ``exact`` (u32 RGBA8)."""
+    a = exact.view(np.uint8).reshape(-1, 4)[:, :3].astype(np.float32)
+    b = got.view(np.uint8).reshape(-1, 4)[:, :3].astype(np.float32)
+    d = np.abs(a - b)
+    mse = float(np.mean(d.astype(np.float64) ** 2))
+    psnr = float("inf") if mse == 0 else 10 * np.log10(255**2 / mse)
+    return f"PSNR {psnr:5.1f} dB, max error {d.max():3.0f}/255, mean {d.mean():.3f}/255"
+
+
+def colors_scene(name: str, exact, args) -> None:
+    """RGB565 against per-batch palettes for one cloud built with exact (u32) colours."""
+    from gigapoint.bench import benchmark_cameras
+    from gigapoint.core.compact import pack_rgb565
+    from gigapoint.core.palette import quantize_palettes
+
+    n = exact.n_points
+    stride = int(exact.batches["count"][0])
+    color = exact.color
+    quantize_palettes(color[: 2 * stride], stride)  # JIT
+    secs = []
+    for _ in range(args.rounds):
+        t = time.perf_counter()
+        pal = quantize_palettes(color, stride)
+        secs.append(time.perf_counter() - t)
+    q = statistics.median(secs)
+    t = time.perf_counter()
+    short = pack_rgb565(color)
+    t565 = time.perf_counter() - t
+    clouds = {"rgb565": dataclasses.replace(exact, color=short), "palette": dataclasses.replace(exact, color=pal)}
+    print(f"\n{name}: {n:,} points, {len(exact.batches):,} batches of {stride:,}")
+    print(f"  {'colors':8} {'positions':>10} {'color':>8} {'(index':>7} {'palette)':>9} {'batches':>8} {'pos+col+batch':>14}   quality against the exact colours")
+    for k, c in (("rgba", exact), *clouds.items()):
+        mem = c.memory()
+        idx, pt = (pal.words.nbytes / n, pal.palette.nbytes / n) if k == "palette" else (mem["color"] / n, 0.0)
+        total = (mem["positions"] + mem["color"] + mem["batches"]) / n
+        quality = "exact" if k == "rgba" else color_stats(color, rgba32(c.color))
+        print(f"  {k:8} {mem['positions'] / n:10.3f} {mem['color'] / n:8.3f} {idx:7.3f} {pt:9.3f} {mem['batches'] / n:8.3f} {total:14.3f}   {quality}")
+    print(
+        f"  quantizer: {q * 1e3:.1f} ms ({n / q / 1e6:.1f} M points/s, median of {args.rounds}, numba threads {gp.RenderSettings().threads or 'all'}); "
+        f"RGB565 packing {t565 * 1e3:.1f} ms"
+    )
+    print(f"  brute-force frames ({args.width}x{args.height}, CPU backend, every point, {args.rounds} interleaved; medians in ms, ratio rgb565 / palette)")
+    decoded = dataclasses.replace(exact, color=rgba32(pal))
+    for view, cam in benchmark_cameras(exact.bounds, args.width, args.height).items():
+        s = gp.RenderSettings(backend="cpu", size_mode="fixed")
+        same = np.array_equal(gp.render_frame(clouds["palette"], cam, s).image, gp.render_frame(decoded, cam, s).image)
+        wall, cpu = interleaved([(clouds["rgb565"], cam, s), (clouds["palette"], cam, s)], args.rounds)
+        w = [statistics.median(x) * 1e3 for x in wall]
+        c = [statistics.median(x) * 1e3 for x in cpu]
+        print(
+            f"  {view:9} wall {w[0]:7.1f} / {w[1]:7.1f} ({w[0] / w[1]:.3f})   CPU {c[0]:7.1f} / {c[1]:7.1f} ({c[0] / c[1]:.3f})   "
+            f"palette image {'= its decoded colours' if same else 'DIFFERS from its decoded colours'}"
+        )
+
+
+def colors_part(args) -> None:
+    from gigapoint.bench import parse_count
+
+    if not args.skip_autzen and AUTZEN.exists():
+        colors_scene("autzen_trim", gp.open(AUTZEN, colors="rgba"), args)
+    n = parse_count(args.points)
+    t = time.perf_counter()
+    town = gp.demo(n, scale=args.scale, colors="rgba")
+    print(f"\n(demo town built in {time.perf_counter() - t:.1f} s)")
+    colors_scene(f"demo town ({n:,}) at {args.scale:g} m", town, args)
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    print(f"\npeak RSS {rss / 2**30:.2f} GiB")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", default="5M", help="demo town size")
@@ -220,6 +297,7 @@ def main(argv=None) -> int:
     ap.add_argument("--height", type=int, default=1080)
     ap.add_argument("--skip-autzen", action="store_true")
     ap.add_argument("--octree", action="store_true", help="the compact octree on disk (format 2) against format 1 instead")
+    ap.add_argument("--colors", action="store_true", help="RGB565 against per-batch palettes (issue #22) instead")
     args = ap.parse_args(argv)
     from gigapoint.bench import cpu_model, parse_count
 
@@ -227,6 +305,9 @@ def main(argv=None) -> int:
     print(f"compact layout vs three words; {cpu}, numba threads {gp.RenderSettings().threads or 'all'}")
     if args.octree:
         octree_part(args)
+        return 0
+    if args.colors:
+        colors_part(args)
         return 0
     ok = True
     if not args.skip_autzen and AUTZEN.exists():

@@ -19,6 +19,7 @@ def demo(
     scale: float | None = None,
     chunked: bool | None = None,
     attributes: bool = True,
+    colors: str = "auto",
 ):
     """The procedural demo scene (terrain, roads, river, buildings, trees) as a PointCloud;
     ``progressive=True``: a ProgressiveOctree returned at once and filled in the background
@@ -30,7 +31,8 @@ def demo(
     array for array, holding only the finished arrays and one partition of ~4 M points; the
     points go through a temporary folder, ~30 bytes a point of disk); None: chunked above
     50 M points. 10⁹ points at ``scale=0.01`` hold ~9 GB (``attributes=False``: ~6 GB, without
-    the intensity and classification)."""
+    the intensity and classification). ``colors``: how colours are held (``core.build_cloud``:
+    "auto", "rgba", "rgb565" or "palette")."""
     from .io.demo import demo_chunks
 
     if progressive:
@@ -41,13 +43,14 @@ def demo(
     from .core.chunked import CHUNKED_ABOVE, build_cloud_chunked
 
     if chunked or (chunked is None and n_points > CHUNKED_ABOVE):
-        return build_cloud_chunked(lambda: demo_chunks(n_points, seed, chunk_size=2_000_000, scale=scale), name=name, attributes=attributes)
+        source = lambda: demo_chunks(n_points, seed, chunk_size=2_000_000, scale=scale)
+        return build_cloud_chunked(source, name=name, attributes=attributes, colors=colors)
     from .core import build_cloud
 
     chunks = demo_chunks(n_points, seed, scale=scale)
     if not attributes:
         chunks = (PointChunk(c.xyz, c.rgba, scale=c.scale) for c in chunks)
-    return build_cloud(chunks, name=name)
+    return build_cloud(chunks, name=name, colors=colors)
 
 
 def open(*paths, progressive: bool = False, **options):

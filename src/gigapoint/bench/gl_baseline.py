@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.compact import rgba32
 from ..errors import GigapointError
 from ..render import Camera
 from .scene import relative_chunks
@@ -106,7 +107,7 @@ class GLBaseline:
         pos = self.ctx.buffer(reserve=n * 12)
         for first, chunk in relative_chunks(cloud, center):
             pos.write(chunk.tobytes(), offset=first * 12)
-        col = self.ctx.buffer(cloud.color)
+        col = self.ctx.buffer(rgba32(cloud.color))  # u32 RGBA8 (decoded from a compact cloud's)
         self._buffers = [pos, col]
         self.vao = self.ctx.vertex_array(self.prog, [(pos, "3f", "in_pos"), (col, "4f1", "in_color")])
         self.n_points = n

@@ -42,6 +42,7 @@ from .cloud import PointCloud, _valid_mask, check_valid_count, finest_scale, gat
 from .compact import compact_positions, ext_bits_per_point, pack_rgb565, stream_words
 from .layout import BATCH_SIZE, PACK_DTYPE
 from .morton import MORTON_BITS_PER_AXIS, counting_order, cube_of, morton_codes, morton_order
+from .palette import PALETTE_SIZE, PaletteColors, palette_into
 from .quantize import make_batches, quantize
 
 #: ``gp.open`` and ``gp.demo`` build clouds of more points than this chunked (``chunked=None``):
@@ -86,7 +87,8 @@ def build_cloud_chunked(
     n, skipped = survey["n"], survey["skipped"]
     check_valid_count(name, n, skipped)
     source_scale = finest_scale(survey["scales"])
-    compact, short = storage_format(name, layout, colors, source_scale, survey["opaque"])
+    compact, color_format = storage_format(name, layout, colors, source_scale, survey["opaque"])
+    short = color_format == "rgb565"  # spilled as RGB565 (palettes: as u32, quantized batch by batch when finalized)
     lo, hi = survey["lo"], survey["hi"]
     origin, edge = cube_of(lo, hi)
     shift = 3 * (MORTON_BITS_PER_AXIS - cell_level)
@@ -102,7 +104,7 @@ def build_cloud_chunked(
                 f"{name}: spilling {n:,} points to {folder} failed: {exc.strerror or exc} (the chunked build needs ~30 bytes a point "
                 f"of free disk there, {30 * n / 1e9:.1f} GB; pass tmpdir= for another place)"
             ) from exc
-        return _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, short, attr_dtypes, batch_size, name, skipped, source_scale)
+        return _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, color_format, attr_dtypes, batch_size, name, skipped, source_scale)
 
 
 # --- the three passes over the source --------------------------------------------------------
@@ -203,15 +205,19 @@ def _spill(source, clean, folder, origin, edge, shift, part_of_cell, n_parts, sh
                     append(int(p), key, values[s:e])
 
 
-def _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, short, attr_dtypes, batch_size, name, skipped, source_scale) -> PointCloud:
+def _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, color_format, attr_dtypes, batch_size, name, skipped, source_scale) -> PointCloud:
     batches = make_batches(n, batch_size)
     low = np.empty(n, np.uint32)
     med = high = None
     if compact is None:
         med, high = np.empty(n, np.uint32), np.empty(n, np.uint32)
     packing = np.zeros(len(batches), PACK_DTYPE) if compact is not None else None
+    short = color_format == "rgb565"
     # an even-length buffer, as pack_rgb565's: rgb565_words views it as u32 without a copy
-    color = np.zeros(n + (n & 1), np.uint16)[:n] if short else np.empty(n, np.uint32)
+    color = np.zeros(n + (n & 1), np.uint16)[:n] if short else np.empty(0 if color_format == "palette" else n, np.uint32)
+    palettes = None
+    if color_format == "palette":  # each partition's whole batches quantized as they are finished
+        palettes = PaletteColors(np.zeros(-(-n // 4), np.uint32), np.zeros(len(batches) * PALETTE_SIZE, np.uint32), batch_size, n)
     attrs = {a: np.empty((n, *shape), dtype) for a, (dtype, shape) in attr_dtypes.items()}
     color_dtype = np.uint16 if short else np.uint32
     ext_path = folder / "ext"
@@ -261,7 +267,10 @@ def _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, short, attr_dty
                 del lw
                 batches["bbox_min"][b0 : b0 + len(local)] = local["bbox_min"]
                 batches["bbox_max"][b0 : b0 + len(local)] = local["bbox_max"]
-                color[done : done + k] = gather(col, head)
+                if palettes is None:
+                    color[done : done + k] = gather(col, head)
+                else:
+                    palette_into(palettes, done, gather(col, head))
                 for a, v in att.items():
                     attrs[a][done : done + k] = gather(v, head)
                 done += k
@@ -277,7 +286,7 @@ def _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, short, attr_dty
         expected = int(stream_words(ext_bits_per_point(packing, counts), counts).sum())
         assert len(ext) == expected == ext_words, (len(ext), expected, ext_words)
     data_bounds = None if compact is None else (np.asarray(lo, np.float64).copy(), np.asarray(hi, np.float64).copy())
-    cloud = PointCloud(batches, low, med, high, color, attrs, name=name, skipped=skipped, ext=ext, packing=packing, data_bounds=data_bounds)
+    cloud = PointCloud(batches, low, med, high, color if palettes is None else palettes, attrs, name=name, skipped=skipped, ext=ext, packing=packing, data_bounds=data_bounds)
     cloud.source_scale = source_scale
     return cloud
 

@@ -19,9 +19,10 @@ from numba import njit, prange
 
 from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError
 from .chunk import PointChunk
-from .compact import compact_positions, full_words, pack_rgb565, point_words, rgba32
+from .compact import colors_at, compact_positions, full_words, pack_rgb565, point_words, rgba32
 from .layout import BATCH_DTYPE, BATCH_SIZE
 from .morton import cube_of, morton_codes, morton_order
+from .palette import PaletteColors, quantize_palettes
 from .quantize import dequantize, make_batches, quantize
 from .renderable import DrawList, MultiViewDrawList, SelectionSettings
 from .selection import View, select_view, select_views, subsample_step
@@ -40,7 +41,9 @@ class PointCloud:
     low: np.ndarray  # u32 per point: bits 20-29 of x, y, z
     med: np.ndarray | None  # u32 per point: bits 10-19 (None in the compact layout)
     high: np.ndarray | None  # u32 per point: bits 0-9 (None in the compact layout)
-    color: np.ndarray  # u32 per point: RGBA8 little-endian (r in the low byte); u16 RGB565 in the compact layout (compact.py)
+    # u32 per point: RGBA8 little-endian (r in the low byte); u16 RGB565 in the compact layout
+    # (compact.py); or per-batch palettes and u8 indices (palette.py: ``colors="palette"``)
+    color: np.ndarray | PaletteColors
     attributes: dict[str, np.ndarray] = field(default_factory=dict)
     name: str = "cloud"
     skipped: int = 0  # invalid input points (NaN, inf, absurd) left out
@@ -148,7 +151,7 @@ class PointCloud:
         if self.source_scale is not None:
             position = [round(float(v), scale_decimals(s)) for v, s in zip(position, self.source_scale)]
         info = {"index": int(index), "position": [float(v) for v in position]}
-        info["rgba"] = rgba32(self.color[index : index + 1]).view(np.uint8).tolist()
+        info["rgba"] = colors_at(self.color, [index]).view(np.uint8).tolist()
         for name, values in self.attributes.items():
             v = values[index]
             info[name] = v.tolist() if hasattr(v, "tolist") else v
@@ -258,7 +261,9 @@ def build_cloud(
     ``layout``: "auto" stores the compact layout (core/compact.py) where every chunk says its
     source scale (LAS files), three u32 words a point otherwise; "words" always the latter;
     "compact" needs a scale. ``colors``: "auto" stores opaque colors of a compact cloud in 16 bits
-    (RGB565, at most 4/255 off a channel), "rgba" always 32 bits (exact), "rgb565" always 16."""
+    (RGB565, at most 4/255 off a channel), "rgba" always 32 bits (exact), "rgb565" always 16,
+    "palette" 8 (a palette of 256 colours per batch, core/palette.py: exact in batches of at
+    most 256 distinct colours; 45.7 dB PSNR on autzen_trim against RGB565's 41.7)."""
     xyz_parts, rgba_parts, attr_parts = [], [], {}
     scales: list[tuple | None] = []
     skipped = 0
@@ -288,8 +293,10 @@ def build_cloud(
     del rgba_parts
     attributes = {a: (v[0] if len(v) == 1 else np.concatenate(v)) for a, v in attr_parts.items() if a in (attr_names or [])}
     source_scale = finest_scale(scales)
-    compact, short = storage_format(name, layout, colors, source_scale, bool((rgba[:, 3] == 255).all()))
-    cloud = cloud_from_points(xyz, rgba, attributes, name=name, skipped=skipped, batch_size=batch_size, bounds=(lo, hi), scale=compact, rgb565=short)
+    compact, color_format = storage_format(name, layout, colors, source_scale, bool((rgba[:, 3] == 255).all()))
+    cloud = cloud_from_points(
+        xyz, rgba, attributes, name=name, skipped=skipped, batch_size=batch_size, bounds=(lo, hi), scale=compact, colors=color_format
+    )
     cloud.source_scale = source_scale
     return cloud
 
@@ -306,7 +313,7 @@ def check_valid_count(name: str, valid: int, skipped: int) -> None:
 
 #: ``build_cloud``'s layouts and color formats
 LAYOUTS = ("auto", "words", "compact")
-COLOR_FORMATS = ("auto", "rgba", "rgb565")
+COLOR_FORMATS = ("auto", "rgba", "rgb565", "palette")
 
 
 def finest_scale(scales) -> tuple[float, float, float] | None:
@@ -318,8 +325,9 @@ def finest_scale(scales) -> tuple[float, float, float] | None:
 
 
 def storage_format(name: str, layout: str, colors: str, source_scale, opaque: bool):
-    """(the compact layout's grid or None: three words, 16-bit colors?) for ``build_cloud``'s
-    ``layout`` and ``colors`` options (and the chunked build's, core/chunked.py)."""
+    """(the compact layout's grid or None: three words, the colors' format: "rgba", "rgb565" or
+    "palette") for ``build_cloud``'s ``layout`` and ``colors`` options (and the chunked build's,
+    core/chunked.py)."""
     if layout not in LAYOUTS:
         raise InputError(f"{name}: layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
     if layout == "compact" and source_scale is None:
@@ -329,13 +337,18 @@ def storage_format(name: str, layout: str, colors: str, source_scale, opaque: bo
     compact = source_scale if layout != "words" else None
     if colors == "rgb565" and not opaque:
         raise InputError(f"{name}: 16-bit colors drop alpha, and some points are not opaque; use colors='rgba'")
-    return compact, colors == "rgb565" or (colors == "auto" and compact is not None and opaque)
+    if colors == "auto":
+        return compact, "rgb565" if compact is not None and opaque else "rgba"
+    return compact, colors
 
 
-def cloud_from_points(xyz, rgba, attributes=None, name="cloud", skipped=0, batch_size=BATCH_SIZE, bounds=None, scale=None, rgb565=False) -> PointCloud:
+def cloud_from_points(
+    xyz, rgba, attributes=None, name="cloud", skipped=0, batch_size=BATCH_SIZE, bounds=None, scale=None, colors: str = "rgba"
+) -> PointCloud:
     """Build a PointCloud from valid float64 xyz (N, 3) and uint8 rgba (N, 4) (``bounds``: their
     (min, max) if already known). ``scale``: the source grid's step per axis: the compact layout,
-    exact on that grid (core/compact.py); None: three u32 words a point. ``rgb565``: 16-bit colors."""
+    exact on that grid (core/compact.py); None: three u32 words a point. ``colors``: "rgba" (u32),
+    "rgb565" (16-bit colors) or "palette" (per-batch palettes, core/palette.py)."""
     if batch_size < 1:
         raise InputError(f"{name}: batch size must be >= 1, got {batch_size}")
     lo, hi = bounds if bounds is not None else scan_points(xyz)[1:]
@@ -350,8 +363,10 @@ def cloud_from_points(xyz, rgba, attributes=None, name="cloud", skipped=0, batch
         med = high = None
     rgba = np.ascontiguousarray(rgba, np.uint8)
     color = gather(rgba.view(np.uint32).reshape(-1), order)  # RGBA8 as one u32 a point
-    if rgb565:
+    if colors == "rgb565":
         color = pack_rgb565(color)
+    elif colors == "palette":
+        color = quantize_palettes(color, batch_size)
     attrs = {a: gather(v, order) for a, v in (attributes or {}).items()}
     data_bounds = None if scale is None else (np.asarray(lo, np.float64).copy(), np.asarray(hi, np.float64).copy())
     return PointCloud(batches, low, med, high, color, attrs, name=name, skipped=skipped, ext=ext, packing=pack, data_bounds=data_bounds)

@@ -38,6 +38,8 @@ import numpy as np
 from numba import njit, prange
 
 from .layout import COMPACT_MIN_BITS, EXT_FULL_BITS, PACK_DTYPE, WORD_BITS, WORD_MASK
+from .palette import PaletteColors
+from .palette import decode as decode_palette
 from .quantize import gather_batch
 
 _SCALE30 = float(1 << 30)
@@ -450,8 +452,11 @@ def _unpack565(c, out):
         out[i] = rgb565_rgba(c[i])
 
 
-def rgba32(colors: np.ndarray) -> np.ndarray:
-    """u32 RGBA8 colors of an array in either format (the same array when already u32)."""
+def rgba32(colors) -> np.ndarray:
+    """u32 RGBA8 colors of an array in either format (the same array when already u32), or of
+    per-batch palettes (core/palette.py)."""
+    if isinstance(colors, PaletteColors):
+        return decode_palette(colors)
     if colors.dtype == np.uint32:
         return colors
     c = np.ascontiguousarray(colors, np.uint16)
@@ -462,3 +467,15 @@ def rgba32(colors: np.ndarray) -> np.ndarray:
     out = np.empty(len(c), np.uint32)
     _unpack565(c, out)
     return out
+
+
+def colors_at(colors, points) -> np.ndarray:
+    """u32 RGBA8 of point indices ``points`` of colors in any format (u32, RGB565, palettes)."""
+    if isinstance(colors, PaletteColors):
+        return decode_palette(colors, points)
+    return rgba32(colors[np.asarray(points, np.int64)])
+
+
+def color_arrays(colors) -> tuple[np.ndarray, ...]:
+    """The arrays colors in any format are held in (what a GPU copies and forgets)."""
+    return colors.arrays() if isinstance(colors, PaletteColors) else (colors,)

@@ -39,7 +39,8 @@ class Passes(Protocol):
 
     def resolve(self, vis, point_colors: np.ndarray, background) -> tuple[Any, int | None]:
         """(u32 RGBA per pixel: the winning point's color or the background, covered pixels
-        when counted on the way, else None)."""
+        when counted on the way, else None). ``point_colors``: u32 RGBA8, u16 RGB565 or per-batch
+        palettes (core/palette.py's PaletteColors), decoded on the way."""
 
     def fill_holes(self, vis, width: int, height: int, level: int, foveated: bool = False):
         """Depth-aware hole filling: a filled copy of the visibility buffer."""

@@ -259,9 +259,9 @@ def point_colors(cloud, settings) -> np.ndarray:
 
 def rgba_point_colors(cloud, settings) -> np.ndarray:
     """``point_colors`` as u32 RGBA8 for the passes that blend colors (HQS, transparency): decoded
-    once from a compact cloud's 16-bit colors (kept in the RenderCache while they are drawn)."""
+    once from a compact cloud's 16-bit colors or palettes (kept in the RenderCache while they are drawn)."""
     colors = point_colors(cloud, settings)
-    if colors.dtype == np.uint32:
+    if isinstance(colors, np.ndarray) and colors.dtype == np.uint32:
         return colors
     cache = render_cache.arrays(cloud)
     out = cache.get("__rgba32__")

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.compact import point_words, rgba32
+from ..core.compact import colors_at, point_words
 from ..core.layout import EMPTY_PIXEL
 from ..core.quantize import unpack_words
 from ..core.selection import select
@@ -89,5 +89,5 @@ def reference_image(cloud, camera: Camera, settings: RenderSettings | None = Non
     out = np.empty(len(vis), np.uint32)
     out[:] = np.array(settings.background, np.uint8).view(np.uint32)[0]
     hit = vis != EMPTY_PIXEL
-    out[hit] = rgba32(cloud.color[(vis[hit] & np.uint64(0xFFFFFFFF)).astype(np.int64)])
+    out[hit] = colors_at(cloud.color, (vis[hit] & np.uint64(0xFFFFFFFF)).astype(np.int64))
     return out.view(np.uint8).reshape(camera.height, camera.width, 4)

@@ -17,6 +17,7 @@ import numba
 import numpy as np
 
 from ...core.compact import full_words, rgb565_table, rgb565_words
+from ...core.palette import PaletteColors
 from ...render.params import (
     AMBIENT,
     DEPTH_GAP,
@@ -41,10 +42,12 @@ def resolve(vis: np.ndarray, point_colors: np.ndarray, background) -> tuple[np.n
     vis = np.ascontiguousarray(vis).reshape(-1)
     bg = np.array(background, np.uint8).view(np.uint32)[0]
     out = np.empty(vis.shape[0], np.uint32)
-    if point_colors.dtype == np.uint16:  # a compact cloud's 16-bit colors
-        covered = raster.resolve_colors(vis, rgb565_words(point_colors), bg, out, rgb565_table())
+    if isinstance(point_colors, PaletteColors):  # per-batch palettes (core/palette.py)
+        covered = raster.resolve_colors(vis, point_colors.words, bg, out, raster.NO_TABLE, point_colors.palette, point_colors.stride)
+    elif point_colors.dtype == np.uint16:  # a compact cloud's 16-bit colors
+        covered = raster.resolve_colors(vis, rgb565_words(point_colors), bg, out, rgb565_table(), raster.NO_TABLE, 1)
     else:
-        covered = raster.resolve_colors(vis, point_colors, bg, out, raster.NO_TABLE)
+        covered = raster.resolve_colors(vis, point_colors, bg, out, raster.NO_TABLE, raster.NO_TABLE, 1)
     return out, int(covered)
 
 

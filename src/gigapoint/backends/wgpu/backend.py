@@ -35,6 +35,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
+from ...core.compact import color_arrays
 from ...errors import BackendUnavailableError, GigapointError
 from ..numba_cpu.passes import CpuPasses
 from .context import DeviceArray, GpuContext, Views
@@ -225,7 +226,7 @@ class WgpuBackend:
         """Drop the GPU copies of point buffers (needed only after changing their arrays in place,
         for buffers without a ``version``: memory.py)."""
         extra = (points.ext,) if points.med is None else ()  # the compact layout's streams (core/compact.py)
-        for a in (points.low, points.med, points.high, *extra, points.color):
+        for a in (points.low, points.med, points.high, *extra, *color_arrays(points.color)):
             if a is not None:
                 self.ctx.cache.forget(a)
         self.ctx.plans.pop(id(points.batches), None)

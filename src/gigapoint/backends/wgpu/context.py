@@ -19,7 +19,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from ...core.compact import ext_bits_per_point, stream_words
+from ...core.compact import color_arrays, ext_bits_per_point, stream_words
 from ...core.layout import EXT_FULL_BITS
 from ...errors import GigapointError
 from ...render.params import soft_weight
@@ -362,7 +362,7 @@ class GpuContext:
             raise GigapointError(f"wgpu backend: one dispatch draws at most {MAX_VIEWS} views, got {n_views}")
         usage = self.wgpu.BufferUsage
         # arrays that an LOD arena rewrites between frames: pages are checked against its version
-        self.cache.track(points, (points.low, points.med, points.high, points.ext if points.med is None else None, points.color))
+        self.cache.track(points, (points.low, points.med, points.high, points.ext if points.med is None else None, *color_arrays(points.color)))
         plan = self.plan(points)
         pages = plan.page_of[ids]
         order = np.argsort(pages, kind="stable")  # one run of records per page

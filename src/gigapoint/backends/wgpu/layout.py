@@ -67,7 +67,11 @@ PARAMS_DTYPE = np.dtype(
         ("specular", "<f4"),
         ("shininess", "<f4"),
         ("step", "<u4"),  # raster: draw every step-th point of each batch (0 or 1: all)
-        ("color_bits", "<u4"),  # resolve: 16 = colors are u16 RGB565 (a compact cloud's), else u32 RGBA8
+        ("color_bits", "<u4"),  # resolve: 16 = colors are u16 RGB565 (a compact cloud's), 8 = u8 palette indices, else u32 RGBA8
+        ("palette_stride", "<u4"),  # resolve (color_bits 8): points a batch, each batch's palette PALETTE_SIZE colours
+        ("palette_first", "<u4"),  # resolve (color_bits 8): global index of the page's palette binding's first entry
+        ("_pad_p0", "<u4"),
+        ("_pad_p1", "<u4"),
         ("views", "<f4", (MAX_VIEWS, 4)),  # raster: view v's (near, far, -, -) (entry 0 repeats near, far)
     ]
 )

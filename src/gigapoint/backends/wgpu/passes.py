@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...core.palette import PALETTE_SIZE, PaletteColors
 from ...render.params import (
     AMBIENT,
     DEPTH_GAP,
@@ -66,8 +67,9 @@ class GpuPasses:
         pixels are not counted on the GPU)."""
         ctx = self.ctx
         with ctx.lock:
-            short = point_colors.dtype == np.uint16  # a compact cloud's RGB565 colors, decoded by the shader
-            color = point_colors if short else np.ascontiguousarray(point_colors, np.uint32)  # the same array (cache key) when already u32
+            indexed = isinstance(point_colors, PaletteColors)  # per-batch palettes (core/palette.py), decoded by the shader
+            short = not indexed and point_colors.dtype == np.uint16  # a compact cloud's RGB565 colors, decoded by the shader
+            color = point_colors if short or indexed else np.ascontiguousarray(point_colors, np.uint32)  # the same array (cache key) when already u32
             n_pixels = int(np.prod(np.shape(vis)))  # np.shape reads a DeviceArray's shape without reading it back
             ctx.check_frame(n_pixels)
             bg = int(np.array(background, np.uint8).view(np.uint32)[0])
@@ -75,12 +77,25 @@ class GpuPasses:
             image, role = ctx.output(_IMAGE_ROLES, "", n_pixels * 4)
             ctx.cache.purge_dead()
             n_colors = len(color)
-            step = ctx.page_points
+            step = ctx.page_points  # a multiple of 4: a page of palette indices is whole u32 words
             for start in range(0, max(n_colors, 1), step):
                 stop = min(start + step, n_colors)
-                colors = ctx.cache.get(color, start, stop, set()) if stop > start else ctx.dummy
-                uniform = ctx.uniform(n_items=n_pixels, page_first=start, page_count=stop - start, background=bg, color_bits=16 if short else 32)
-                ctx.dispatch_screen("resolve", [uniform, (vbuf, n_pixels * 8), (colors, colors.size), (image, n_pixels * 4)], n_pixels)
+                pinned: set = set()
+                pal, pal_first = (ctx.dummy, 16), 0
+                if stop <= start:
+                    colors = ctx.dummy
+                elif indexed:
+                    colors = ctx.cache.get(color.words, start // 4, -(-stop // 4), pinned)
+                    pal_first = start // color.stride * PALETTE_SIZE
+                    buf = ctx.cache.get(color.palette, pal_first, (stop - 1) // color.stride * PALETTE_SIZE + PALETTE_SIZE, pinned)
+                    pal = (buf, buf.size)
+                else:
+                    colors = ctx.cache.get(color, start, stop, pinned)
+                uniform = ctx.uniform(
+                    n_items=n_pixels, page_first=start, page_count=stop - start, background=bg, color_bits=8 if indexed else 16 if short else 32,
+                    palette_stride=color.stride if indexed else 1, palette_first=pal_first,
+                )  # fmt: skip
+                ctx.dispatch_screen("resolve", [uniform, (vbuf, n_pixels * 8), (colors, colors.size), (image, n_pixels * 4), pal], n_pixels)
             return DeviceArray(ctx, role, np.uint32, n_pixels), None
 
     def fill_holes(self, vis, width: int, height: int, level: int, foveated: bool = False, depth_gap: float = DEPTH_GAP):

@@ -1,0 +1,237 @@
+"""Per-batch colour palettes (core/palette.py, ``colors="palette"``): the quantizer's choices
+decode back, batches of at most 256 colours are exact, renders equal the numpy reference and
+the decoded colours' on the CPU and on wgpu, the chunked build equals the in-memory one, and
+autzen_trim holds at most 7 bytes a point."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numba
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint import Camera, RenderSettings
+from gigapoint.core import PointChunk, build_cloud
+from gigapoint.core.chunked import build_cloud_chunked
+from gigapoint.core.compact import colors_at, pack_rgb565, rgba32
+from gigapoint.core.palette import PALETTE_SIZE, PaletteColors, batch_of, decode, quantize_palettes
+from gigapoint.errors import InputError
+from gigapoint.io.demo import demo_chunks
+from gigapoint.render.reference import reference_image
+
+AUTZEN = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "autzen_trim.laz"
+UTM = np.array([636_000.0, 5_012_000.0, 120.0])
+
+
+def expected_decode(pc: PaletteColors) -> np.ndarray:
+    """The format's definition, independent of the kernels: entry ``index`` of the batch's palette."""
+    i = np.arange(pc.n)
+    return pc.palette[(i // pc.stride) * PALETTE_SIZE + pc.index.astype(np.int64)]
+
+
+def random_colors(rng, n, distinct, alpha=False):
+    """n u32 RGBA8 colours drawn from ``distinct`` random ones (opaque unless ``alpha``)."""
+    base = rng.integers(0, 256, (distinct, 4), dtype=np.uint8)
+    if not alpha:
+        base[:, 3] = 255
+    return np.ascontiguousarray(base[rng.integers(0, distinct, n)]).view(np.uint32).reshape(-1)
+
+
+def psnr(a, b) -> float:
+    x = a.view(np.uint8).reshape(-1, 4)[:, :3].astype(np.float64)
+    y = b.view(np.uint8).reshape(-1, 4)[:, :3].astype(np.float64)
+    return float(10 * np.log10(255**2 / np.mean((x - y) ** 2)))
+
+
+# --- the format and the quantizer ------------------------------------------------------------
+@pytest.mark.parametrize(("n", "stride"), [(10_240, 10_240), (5_003, 1000), (1, 7), (257, 256), (4096, 100)])
+def test_every_index_decodes_to_the_colour_the_quantizer_chose(rng, n, stride):
+    color = random_colors(rng, n, 3000)
+    pc = quantize_palettes(color, stride)
+    assert pc.n == n and pc.stride == stride and len(pc.words) == -(-n // 4) and len(pc.palette) == -(-n // stride) * PALETTE_SIZE
+    want = expected_decode(pc)
+    np.testing.assert_array_equal(decode(pc), want)
+    np.testing.assert_array_equal(rgba32(pc), want)
+    some = rng.integers(0, n, 50)
+    np.testing.assert_array_equal(colors_at(pc, some), want[some])
+    # the colour chosen for a box is the rounded mean of the colours of its points
+    ch = color.view(np.uint8).reshape(-1, 4).astype(np.int64)
+    got = want.view(np.uint8).reshape(-1, 4).astype(np.int64)
+    batch = np.arange(n) // stride
+    for b in np.unique(batch)[:3]:
+        for k in np.unique(pc.index[batch == b])[:20]:
+            sel = (batch == b) & (pc.index == k)
+            mean = (2 * ch[sel].sum(axis=0) + sel.sum()) // (2 * sel.sum())
+            np.testing.assert_array_equal(got[sel], np.broadcast_to(mean, got[sel].shape))
+    # unused entries are zero, and no index points at one
+    for b in range(-(-n // stride)):
+        m = min(stride, n - b * stride)
+        used = np.unique(pc.index[b * stride : b * stride + m])
+        assert used.max() < min(PALETTE_SIZE, m)
+    assert quantize_palettes(color, stride).palette.tobytes() == pc.palette.tobytes()  # deterministic
+    assert quantize_palettes(color, stride).words.tobytes() == pc.words.tobytes()
+
+
+@pytest.mark.parametrize("distinct", [1, 2, 17, 255, 256])
+@pytest.mark.parametrize("alpha", [False, True])
+def test_batches_of_at_most_256_colours_are_exact(rng, distinct, alpha):
+    n, stride = 9_000, 2_048  # a ragged last batch
+    color = np.concatenate([random_colors(rng, stride, distinct, alpha) for _ in range(-(-n // stride))])[:n]
+    pc = quantize_palettes(color, stride)
+    np.testing.assert_array_equal(decode(pc), color)
+
+
+def test_more_colours_lose_little(rng):
+    """Smooth colours (an aerial photo's): the palette beats RGB565's rounding."""
+    n = 10_240
+    t = np.linspace(0, 1, n)
+    rgb = np.stack([120 + 100 * np.sin(7 * t), 90 + 80 * np.cos(11 * t), 60 + 50 * t], 1) + rng.normal(0, 2, (n, 3))
+    rgba = np.concatenate([np.clip(np.rint(rgb), 0, 255), np.full((n, 1), 255)], 1).astype(np.uint8)
+    color = rgba.view(np.uint32).reshape(-1)
+    assert len(np.unique(color)) > 1000
+    pc = quantize_palettes(color, n)
+    assert psnr(color, decode(pc)) > psnr(color, rgba32(pack_rgb565(color)))
+    assert np.abs(decode(pc).view(np.uint8).reshape(-1, 4).astype(int) - rgba.astype(int)).max() <= 16
+
+
+@numba.njit(cache=False)
+def _batches(points, stride):
+    out = np.empty(points.shape[0], np.uint64)
+    for k in range(points.shape[0]):
+        out[k] = batch_of(points[k], stride)
+    return out
+
+
+@pytest.mark.parametrize("stride", [1, 2, 3, 7, 1001, 10_240, 65_537, (1 << 31) - 1, (1 << 32) - 5])
+def test_batch_of_is_exact_at_every_batch_end(stride):
+    """The decoder's float multiply equals integer division on both sides of batch ends, up to
+    the visibility buffer's 2^32 points and far beyond."""
+    top = ((1 << 32) - 1) // stride
+    k = np.concatenate([np.arange(max(top - 2000, 0), top + 1), np.arange(0, min(top, 2000))]).astype(np.uint64)
+    ends = np.unique(k * np.uint64(stride))
+    around = np.concatenate([ends, ends + np.uint64(1), ends[ends > 0] - np.uint64(1), np.array([(1 << 32) - 1, (1 << 40) + 7, (1 << 50) - 3], np.uint64)])
+    np.testing.assert_array_equal(_batches(around, stride), around // np.uint64(stride))
+
+
+def test_bad_arrays_are_refused():
+    with pytest.raises(ValueError, match="index words"):
+        PaletteColors(np.zeros(2, np.uint32), np.zeros(256, np.uint32), 10, 10)
+    with pytest.raises(ValueError, match="palette entries"):
+        PaletteColors(np.zeros(3, np.uint32), np.zeros(256, np.uint32), 5, 10)
+
+
+# --- clouds ----------------------------------------------------------------------------------
+def grid_cloud(rng, n, batch_size, colors="palette", distinct=5000):
+    q = rng.integers(0, 4000, (n, 3))
+    xyz = UTM + q * 0.01
+    rgba = random_colors(rng, n, distinct).view(np.uint8).reshape(-1, 4)
+    chunk = PointChunk(xyz, rgba, {}, scale=(0.01,) * 3)
+    return build_cloud([chunk], name="grid", batch_size=batch_size, colors=colors)
+
+
+def test_cloud_in_palettes(rng):
+    cloud = grid_cloud(rng, 12_345, 1000)
+    assert isinstance(cloud.color, PaletteColors) and cloud.color.stride == 1000 and cloud.layout == "compact"
+    assert cloud.memory()["color"] == -(-cloud.n_points // 4) * 4 + len(cloud.batches) * PALETTE_SIZE * 4
+    np.testing.assert_array_equal(cloud.rgba.view(np.uint32).reshape(-1), expected_decode(cloud.color))
+    assert cloud.point_info(4321)["rgba"] == cloud.rgba[4321].tolist()
+    assert np.array_equal(cloud.expanded().color, expected_decode(cloud.color))
+    # at most 200 colours a batch: exact (the same points and colours drawn twice)
+    few = grid_cloud(np.random.default_rng(9), 5_000, 1000, distinct=200)
+    exact = grid_cloud(np.random.default_rng(9), 5_000, 1000, colors="rgba", distinct=200)
+    np.testing.assert_array_equal(few.rgba, exact.rgba)
+    with pytest.raises(InputError, match="palette"):
+        grid_cloud(rng, 100, 10, colors="pallete")
+
+
+def render_pair(cloud, cam, settings):
+    """(image of the palette cloud, image of the same cloud with its decoded u32 colours)."""
+    decoded = dataclasses.replace(cloud, color=rgba32(cloud.color))
+    return gp.render_frame(cloud, cam, settings).image, gp.render_frame(decoded, cam, settings).image
+
+
+@pytest.mark.parametrize("view", ["iso", "top", "front"])
+def test_cpu_render_equals_the_reference(rng, view):
+    cloud = grid_cloud(rng, 30_000, 2048)
+    cam = Camera.fit(cloud.bounds, view=view, width=160, height=120)
+    s = RenderSettings(backend="cpu", size_mode="fixed")
+    image, decoded = render_pair(cloud, cam, s)
+    np.testing.assert_array_equal(image, reference_image(cloud, cam, s))
+    np.testing.assert_array_equal(image, decoded)
+    assert (image[..., :3] != 0).any(axis=2).mean() > 0.2
+    for extra in ({"hqs": True}, {"edl": True}):  # passes that blend RGBA8 colours
+        s = RenderSettings(backend="cpu", size_mode="fixed", **extra)
+        a, b = render_pair(cloud, cam, s)
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize(("batch_size", "partition_points"), [(1000, 20_000), (10_240, 50_000)])
+def test_chunked_equals_in_memory(batch_size, partition_points, tmp_path):
+    def source():
+        return demo_chunks(120_000, seed=5, chunk_size=30_000, scale=0.01)
+
+    want = build_cloud(source(), batch_size=batch_size, colors="palette")
+    got = build_cloud_chunked(source, batch_size=batch_size, colors="palette", partition_points=partition_points, tmpdir=tmp_path)
+    assert isinstance(got.color, PaletteColors) and got.color.stride == want.color.stride == batch_size
+    np.testing.assert_array_equal(got.color.words, want.color.words)
+    np.testing.assert_array_equal(got.color.palette, want.color.palette)
+    np.testing.assert_array_equal(got.low, want.low)
+    assert got.memory() == want.memory()
+
+
+@pytest.mark.skipif(not AUTZEN.exists(), reason="autzen_trim.laz not present")
+def test_autzen_in_at_most_7_bytes_a_point():
+    cloud = gp.open(AUTZEN, colors="palette")
+    exact = gp.open(AUTZEN, colors="rgba")
+    mem = cloud.memory()
+    per_point = (mem["positions"] + mem["color"] + mem["batches"]) / cloud.n_points
+    assert per_point <= 7.0, mem
+    np.testing.assert_array_equal(cloud.low, exact.low)  # positions untouched
+    assert psnr(exact.color, rgba32(cloud.color)) > psnr(exact.color, rgba32(pack_rgb565(exact.color))) + 2.0
+
+
+# --- the GPU (lavapipe in CI) ----------------------------------------------------------------
+def _wgpu(**options):
+    from gigapoint.backends.wgpu import WgpuBackend
+    from gigapoint.errors import BackendUnavailableError
+
+    try:
+        return WgpuBackend(**options)
+    except BackendUnavailableError as exc:
+        pytest.skip(f"no wgpu adapter: {exc}")
+
+
+@pytest.mark.gpu
+def test_wgpu_equals_cpu(rng):
+    _wgpu()
+    cloud = grid_cloud(rng, 30_000, 2048)
+    for view in ("iso", "top"):
+        cam = Camera.fit(cloud.bounds, view=view, width=160, height=120)
+        cpu = gp.render_frame(cloud, cam, RenderSettings(backend="cpu", size_mode="fixed")).image
+        gpu = gp.render_frame(cloud, cam, RenderSettings(backend="wgpu", size_mode="fixed")).image
+        np.testing.assert_array_equal(gpu, cpu)
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize("batch_size", [1001, 256])
+def test_wgpu_resolve_in_pages(rng, batch_size):
+    """Pages of colours smaller and larger than a batch, batches across page ends (1001 points)."""
+    from gigapoint.backends.numba_cpu import NumbaCpuBackend
+    from gigapoint.core.selection import select
+
+    cloud = grid_cloud(rng, 15_015, batch_size)
+    cpu = NumbaCpuBackend()
+    page = 4 * 1001 * 4 + 16
+    paged = _wgpu(page_bytes=page, memory_budget=max(1 << 16, 3 * page))
+    cam = Camera.fit(cloud.bounds, view="iso", width=160, height=120)
+    near, far = cam.clip_range(cloud.bounds)
+    sel = select(cloud.batches, cam.screen_rows(), cam.width, cam.height, near, far, 1e9, True, True)
+    vis = cpu.rasterize(cloud, sel, cam.width, cam.height, near, far)
+    bg = (10, 20, 30, 255)
+    want = cpu.resolve(vis, cloud.color, bg)
+    np.testing.assert_array_equal(np.asarray(paged.resolve(vis, cloud.color, bg)), want)
+    np.testing.assert_array_equal(want, cpu.resolve(vis, rgba32(cloud.color), bg))
+    assert paged.page_points < cloud.n_points // 3
