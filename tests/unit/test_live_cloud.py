@@ -416,3 +416,34 @@ def test_a_depth_frame_is_batched_in_its_images_z_order_and_draws_as_the_sorted_
     # differently move some points by up to a pixel: nearly every covered pixel the same
     a, b = gp.render_frame(live, cam, gp.RenderSettings(size_mode="fixed")), gp.render_frame(sorted_live, cam, gp.RenderSettings(size_mode="fixed"))
     assert (a.empty != b.empty).sum() <= 0.02 * (~b.empty).sum()
+
+
+def test_the_mirror_holds_the_snapshot_pools_entries_after_every_snapshot():
+    """The mirror region is the octree's (compact) pool decoded to three words: the same low,
+    medium and high words, colours and normals per chunk, whether a snapshot filled a new pool
+    (one run of chunks) or changed some chunks of it here and there (a later snapshot)."""
+    from gigapoint.core.compact import point_words
+
+    live = LiveCloud(keep=3)
+    for k in range(3):
+        live.push(*frame(k, n=6000), pose=pose_of(k), normals=np.tile([0.0, 0.0, 1.0], (6000, 1)))
+    live.snapshot()
+    live.prepare(gp.Camera.fit(live.bounds, view="top", width=40, height=40).view(live.bounds), gp.RenderSettings())
+    for k in range(3, 5):
+        live.push(*frame(k, n=6000), pose=pose_of(1), normals=np.tile([0.0, 1.0, 0.0], (6000, 1)))
+    changed_before = live.snapshots.pool.version
+    live.snapshot()
+    pool = live.snapshots.pool
+    assert 0 < int((pool.batch_version > changed_before).sum()) < pool.n_chunks  # some chunks, not all
+    live.prepare(gp.Camera.fit(live.bounds, view="top", width=40, height=40).view(live.bounds), gp.RenderSettings())
+    buf, mc = live.buffers_, pool.chunk
+    used = np.flatnonzero(pool.batches["count"][: pool.n_chunks] > 0)
+    assert len(used) > 4
+    for c in used:
+        n, f, o = int(pool.batches["count"][c]), c * mc, buf.ring_points + c * mc
+        assert int(buf.batches["count"][buf.n_ring + c]) == n
+        for got, want in zip((buf.low[o : o + n], buf.med[o : o + n], buf.high[o : o + n]), point_words(pool, c, f, f + n)):
+            np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(buf.color[o : o + n], pool.color[f : f + n])
+        for k, part in enumerate(("nx", "ny", "nz")):
+            np.testing.assert_array_equal(buf.attributes["normal"][o : o + n, k], pool.attributes[part][f : f + n])
