@@ -262,9 +262,12 @@ def colors_scene(name: str, exact, args) -> None:
     )
     print(f"  brute-force frames ({args.width}x{args.height}, CPU backend, every point, {args.rounds} interleaved; medians in ms, ratio rgb565 / palette)")
     decoded = dataclasses.replace(exact, color=rgba32(pal))
+    resolve_rows = []
     for view, cam in benchmark_cameras(exact.bounds, args.width, args.height).items():
         s = gp.RenderSettings(backend="cpu", size_mode="fixed")
-        same = np.array_equal(gp.render_frame(clouds["palette"], cam, s).image, gp.render_frame(decoded, cam, s).image)
+        frame = gp.render_frame(clouds["palette"], cam, s)
+        same = np.array_equal(frame.image, gp.render_frame(decoded, cam, s).image)
+        resolve_rows.append((view, resolve_times(frame.visibility, (short, pal, color), 10 * args.rounds), int(frame.stats.visible_pixels)))
         wall, cpu = interleaved([(clouds["rgb565"], cam, s), (clouds["palette"], cam, s)], args.rounds)
         w = [statistics.median(x) * 1e3 for x in wall]
         c = [statistics.median(x) * 1e3 for x in cpu]
@@ -272,6 +275,31 @@ def colors_scene(name: str, exact, args) -> None:
             f"  {view:9} wall {w[0]:7.1f} / {w[1]:7.1f} ({w[0] / w[1]:.3f})   CPU {c[0]:7.1f} / {c[1]:7.1f} ({c[0] / c[1]:.3f})   "
             f"palette image {'= its decoded colours' if same else 'DIFFERS from its decoded colours'}"
         )
+    print("  the resolve pass alone (CPU, one thread, the frame's visibility buffer; medians of interleaved runs in ms: rgb565 / palette / u32)")
+    for view, (t565, tpal, t32), covered in resolve_rows:
+        print(f"  {view:9} {t565:6.2f} / {tpal:6.2f} / {t32:6.2f}   ratio rgb565 / palette {t565 / tpal:.3f}   ({covered:,} covered pixels)")
+
+
+def resolve_times(vis, colors, rounds: int) -> list[float]:
+    """Median ms of the CPU resolve of ``vis`` with each colour array, one thread, interleaved ABBA."""
+    import numba
+
+    from gigapoint.backends.numba_cpu.passes import resolve
+
+    previous = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        for c in colors:
+            resolve(vis, c, (0, 0, 0, 255))
+        times: list[list[float]] = [[] for _ in colors]
+        for r in range(rounds):
+            for k in range(len(colors)) if r % 2 == 0 else reversed(range(len(colors))):
+                t = time.perf_counter()
+                resolve(vis, colors[k], (0, 0, 0, 255))
+                times[k].append(time.perf_counter() - t)
+    finally:
+        numba.set_num_threads(previous)
+    return [statistics.median(t) * 1e3 for t in times]
 
 
 def colors_part(args) -> None:

@@ -182,6 +182,15 @@ def test_chunked_equals_in_memory(batch_size, partition_points, tmp_path):
     assert got.memory() == want.memory()
 
 
+def test_demo_in_palettes():
+    a = gp.demo(30_000, scale=0.01, colors="palette")
+    b = gp.demo(30_000, scale=0.01, colors="palette", chunked=True)
+    assert isinstance(a.color, PaletteColors) and isinstance(b.color, PaletteColors)
+    np.testing.assert_array_equal(a.color.words, b.color.words)
+    np.testing.assert_array_equal(a.color.palette, b.color.palette)
+    assert a.memory()["color"] < 1.2 * a.n_points
+
+
 @pytest.mark.skipif(not AUTZEN.exists(), reason="autzen_trim.laz not present")
 def test_autzen_in_at_most_7_bytes_a_point():
     cloud = gp.open(AUTZEN, colors="palette")

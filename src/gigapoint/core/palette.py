@@ -78,7 +78,7 @@ def batch_of(i, stride):
     """``i // stride`` for u64 ``i`` < 2^51, by a float64 multiply (an integer division per pixel
     tripled the resolve's time): (i + 0.5) / stride lies at least 0.5 / stride from an integer,
     and the product's rounding error is below 2^-52 (i + 0.5) / stride, far less."""
-    return np.uint64((np.float64(i) + 0.5) * (1.0 / np.float64(stride)))
+    return np.uint64((np.float64(np.int64(i)) + 0.5) * (1.0 / np.float64(stride)))
 
 
 @njit(inline="always")
