@@ -5,15 +5,18 @@ points (a PointCloud's batches: ``make_batches`` cuts them every ``batch_size`` 
 palette of ``PALETTE_SIZE`` RGBA8 colours and one u8 index a point: 1 byte a point plus
 1024 bytes a batch (0.1 byte a point at 10 240-point batches), against RGB565's 2.
 
-**The quantizer** (``quantize_palettes``) is a greedy variance split (Wu 1991, median cut's
-better-known refinement), deterministic and without iterations: a batch's colours start as
+**The quantizer** (``quantize_palettes``) is a greedy variance split (after Wu 1991: median cut
+that cuts where the squared error is least), deterministic and without iterations: a batch's colours start as
 one box; the box with the largest sum of squared errors (SSE) is cut along its channel of
 largest variance at the value that leaves the smallest SSE in its two halves (a 256-bin
 histogram of that channel gives every cut's SSE in one scan), until 256 boxes or every box
 holds one colour. A point's colour is its box's mean (rounded). A batch with at most 256
 distinct colours therefore keeps every colour exactly; others lose a little (measured in
-docs/benchmarks.md, #22: autzen_trim's PSNR against RGB565's). Batches are quantized in
-parallel (``prange``), ~8 histogram passes over a batch's points.
+docs/benchmarks.md, #22: autzen_trim 45.7 dB PSNR against RGB565's 41.7). The split works on a
+batch's distinct colours (a hash table finds them), weighted by their points: ~8 histogram
+passes over ~2 000 colours instead of 10 240 points; batches are quantized in parallel
+(``prange``): 76 M points/s for the 20 M demo town on two shared cores, autzen_trim's
+11 batches 30 M points/s on one.
 
 **The decoder** is ``palette_rgba`` (point ``i``'s RGBA8: its batch's palette entry of its
 index, the index read from the u32 word ``i >> 2``): the numba resolve kernel
@@ -67,9 +70,6 @@ class PaletteColors:
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """The arrays held (GPU copies are made of these)."""
         return self.words, self.palette
-
-    def copy(self) -> PaletteColors:
-        return PaletteColors(self.words.copy(), self.palette.copy(), self.stride, self.n)
 
 
 # --- the decoder -----------------------------------------------------------------------------
