@@ -168,6 +168,16 @@ def test_cpu_render_equals_the_reference(rng, view):
         np.testing.assert_array_equal(a, b)
 
 
+def test_three_word_layout_and_odd_batches():
+    cloud = build_cloud(demo_chunks(60_000), colors="palette", batch_size=777)  # no scale: three words a point
+    assert cloud.layout == "words" and isinstance(cloud.color, PaletteColors) and cloud.color.stride == 777
+    cam = Camera.fit(cloud.bounds, view="iso", width=160, height=120)
+    s = RenderSettings(backend="cpu", size_mode="fixed")
+    image, decoded = render_pair(cloud, cam, s)
+    np.testing.assert_array_equal(image, reference_image(cloud, cam, s))
+    np.testing.assert_array_equal(image, decoded)
+
+
 @pytest.mark.parametrize(("batch_size", "partition_points"), [(1000, 20_000), (10_240, 50_000)])
 def test_chunked_equals_in_memory(batch_size, partition_points, tmp_path):
     def source():
