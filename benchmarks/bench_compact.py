@@ -25,7 +25,7 @@ compact layout)::
     .venv/bin/python benchmarks/bench_compact.py --octree --points 5M --rounds 3
 
 ``--colors`` measures the colour formats of the compact layout instead (issue #22): RGB565
-against per-batch palettes (core/palette.py, ``colors="palette"``), for autzen_trim and the demo
+against per-block palettes (core/palette.py, ``colors="palette"``), for autzen_trim and the demo
 town (``gp.demo(n, scale=0.01)``): bytes a point by component, PSNR / largest error against the
 exact colours, the quantizer's speed, and brute-force frames of the two interleaved (ABBA)::
 
@@ -229,26 +229,25 @@ def color_stats(exact: np.ndarray, got: np.ndarray) -> str:
 
 
 def colors_scene(name: str, exact, args) -> None:
-    """RGB565 against per-batch palettes for one cloud built with exact (u32) colours."""
+    """RGB565 against per-block palettes for one cloud built with exact (u32) colours."""
     from gigapoint.bench import benchmark_cameras
     from gigapoint.core.compact import pack_rgb565
-    from gigapoint.core.palette import quantize_palettes
+    from gigapoint.core.palette import PALETTE_SHIFT, quantize_palettes
 
     n = exact.n_points
-    stride = int(exact.batches["count"][0])
     color = exact.color
-    quantize_palettes(color[: 2 * stride], stride)  # JIT
+    quantize_palettes(color[: 2 << PALETTE_SHIFT])  # JIT
     secs = []
     for _ in range(args.rounds):
         t = time.perf_counter()
-        pal = quantize_palettes(color, stride)
+        pal = quantize_palettes(color)
         secs.append(time.perf_counter() - t)
     q = statistics.median(secs)
     t = time.perf_counter()
     short = pack_rgb565(color)
     t565 = time.perf_counter() - t
     clouds = {"rgb565": dataclasses.replace(exact, color=short), "palette": dataclasses.replace(exact, color=pal)}
-    print(f"\n{name}: {n:,} points, {len(exact.batches):,} batches of {stride:,}")
+    print(f"\n{name}: {n:,} points, {len(exact.batches):,} batches, palettes of {pal.block:,} points")
     print(f"  {'colors':8} {'positions':>10} {'color':>8} {'(index':>7} {'palette)':>9} {'batches':>8} {'pos+col+batch':>14}   quality against the exact colours")
     for k, c in (("rgba", exact), *clouds.items()):
         mem = c.memory()
@@ -325,7 +324,7 @@ def main(argv=None) -> int:
     ap.add_argument("--height", type=int, default=1080)
     ap.add_argument("--skip-autzen", action="store_true")
     ap.add_argument("--octree", action="store_true", help="the compact octree on disk (format 2) against format 1 instead")
-    ap.add_argument("--colors", action="store_true", help="RGB565 against per-batch palettes (issue #22) instead")
+    ap.add_argument("--colors", action="store_true", help="RGB565 against per-block palettes (issue #22) instead")
     args = ap.parse_args(argv)
     from gigapoint.bench import cpu_model, parse_count
 

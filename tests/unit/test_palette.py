@@ -1,5 +1,5 @@
-"""Per-batch colour palettes (core/palette.py, ``colors="palette"``): the quantizer's choices
-decode back, batches of at most 256 colours are exact, renders equal the numpy reference and
+"""Per-block colour palettes (core/palette.py, ``colors="palette"``): the quantizer's choices
+decode back, blocks of at most 256 colours are exact, renders equal the numpy reference and
 the decoded colours' on the CPU and on wgpu, the chunked build equals the in-memory one, and
 autzen_trim holds at most 7 bytes a point."""
 
@@ -8,7 +8,6 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import numba
 import numpy as np
 import pytest
 
@@ -17,7 +16,7 @@ from gigapoint import Camera, RenderSettings
 from gigapoint.core import PointChunk, build_cloud
 from gigapoint.core.chunked import build_cloud_chunked
 from gigapoint.core.compact import colors_at, pack_rgb565, rgba32
-from gigapoint.core.palette import PALETTE_SIZE, PaletteColors, batch_of, decode, quantize_palettes
+from gigapoint.core.palette import PALETTE_SHIFT, PALETTE_SIZE, PaletteColors, decode, empty_palettes, palette_into, quantize_palettes
 from gigapoint.errors import InputError
 from gigapoint.io.demo import demo_chunks
 from gigapoint.render.reference import reference_image
@@ -27,9 +26,9 @@ UTM = np.array([636_000.0, 5_012_000.0, 120.0])
 
 
 def expected_decode(pc: PaletteColors) -> np.ndarray:
-    """The format's definition, independent of the kernels: entry ``index`` of the batch's palette."""
+    """The format's definition, independent of the kernels: entry ``index`` of the block's palette."""
     i = np.arange(pc.n)
-    return pc.palette[(i // pc.stride) * PALETTE_SIZE + pc.index.astype(np.int64)]
+    return pc.palette[(i // 2**pc.shift) * PALETTE_SIZE + pc.index.astype(np.int64)]
 
 
 def random_colors(rng, n, distinct, alpha=False):
@@ -47,11 +46,13 @@ def psnr(a, b) -> float:
 
 
 # --- the format and the quantizer ------------------------------------------------------------
-@pytest.mark.parametrize(("n", "stride"), [(10_240, 10_240), (5_003, 1000), (1, 7), (257, 256), (4096, 100)])
-def test_every_index_decodes_to_the_colour_the_quantizer_chose(rng, n, stride):
+@pytest.mark.parametrize(("n", "shift"), [(10_240, 13), (5_003, 10), (1, 8), (257, 8), (4096, 9), (20_000, 8), (70_000, 16)])
+def test_every_index_decodes_to_the_colour_the_quantizer_chose(rng, n, shift):
     color = random_colors(rng, n, 3000)
-    pc = quantize_palettes(color, stride)
-    assert pc.n == n and pc.stride == stride and len(pc.words) == -(-n // 4) and len(pc.palette) == -(-n // stride) * PALETTE_SIZE
+    pc = quantize_palettes(color, shift)
+    stride = 2**shift
+    assert pc.n == n and pc.shift == shift and pc.block == stride
+    assert len(pc.words) == -(-n // 4) and len(pc.palette) == -(-n // stride) * PALETTE_SIZE
     want = expected_decode(pc)
     np.testing.assert_array_equal(decode(pc), want)
     np.testing.assert_array_equal(rgba32(pc), want)
@@ -71,16 +72,23 @@ def test_every_index_decodes_to_the_colour_the_quantizer_chose(rng, n, stride):
         m = min(stride, n - b * stride)
         used = np.unique(pc.index[b * stride : b * stride + m])
         assert used.max() < min(PALETTE_SIZE, m)
-    assert quantize_palettes(color, stride).palette.tobytes() == pc.palette.tobytes()  # deterministic
-    assert quantize_palettes(color, stride).words.tobytes() == pc.words.tobytes()
+    assert quantize_palettes(color, shift).palette.tobytes() == pc.palette.tobytes()  # deterministic
+    assert quantize_palettes(color, shift).words.tobytes() == pc.words.tobytes()
+    # block by block, as the chunked build fills them: the same arrays
+    parts = empty_palettes(n, shift)
+    cut = min(n // stride, 2) * stride
+    palette_into(parts, 0, color[:cut])
+    palette_into(parts, cut, color[cut:])
+    np.testing.assert_array_equal(parts.words, pc.words)
+    np.testing.assert_array_equal(parts.palette, pc.palette)
 
 
 @pytest.mark.parametrize("distinct", [1, 2, 17, 255, 256])
 @pytest.mark.parametrize("alpha", [False, True])
-def test_batches_of_at_most_256_colours_are_exact(rng, distinct, alpha):
-    n, stride = 9_000, 2_048  # a ragged last batch
+def test_blocks_of_at_most_256_colours_are_exact(rng, distinct, alpha):
+    n, stride = 20_000, 2**PALETTE_SHIFT  # a ragged last block
     color = np.concatenate([random_colors(rng, stride, distinct, alpha) for _ in range(-(-n // stride))])[:n]
-    pc = quantize_palettes(color, stride)
+    pc = quantize_palettes(color)
     np.testing.assert_array_equal(decode(pc), color)
 
 
@@ -92,35 +100,23 @@ def test_more_colours_lose_little(rng):
     rgba = np.concatenate([np.clip(np.rint(rgb), 0, 255), np.full((n, 1), 255)], 1).astype(np.uint8)
     color = rgba.view(np.uint32).reshape(-1)
     assert len(np.unique(color)) > 1000
-    pc = quantize_palettes(color, n)
+    pc = quantize_palettes(color, 14)
     assert psnr(color, decode(pc)) > psnr(color, rgba32(pack_rgb565(color)))
     assert np.abs(decode(pc).view(np.uint8).reshape(-1, 4).astype(int) - rgba.astype(int)).max() <= 16
 
 
-@numba.njit(cache=False)
-def _batches(points, stride):
-    out = np.empty(points.shape[0], np.uint64)
-    for k in range(points.shape[0]):
-        out[k] = batch_of(points[k], stride)
-    return out
-
-
-@pytest.mark.parametrize("stride", [1, 2, 3, 7, 1001, 10_240, 65_537, (1 << 31) - 1, (1 << 32) - 5])
-def test_batch_of_is_exact_at_every_batch_end(stride):
-    """The decoder's float multiply equals integer division on both sides of batch ends, up to
-    the visibility buffer's 2^32 points and far beyond."""
-    top = ((1 << 32) - 1) // stride
-    k = np.concatenate([np.arange(max(top - 2000, 0), top + 1), np.arange(0, min(top, 2000))]).astype(np.uint64)
-    ends = np.unique(k * np.uint64(stride))
-    around = np.concatenate([ends, ends + np.uint64(1), ends[ends > 0] - np.uint64(1), np.array([(1 << 32) - 1, (1 << 40) + 7, (1 << 50) - 3], np.uint64)])
-    np.testing.assert_array_equal(_batches(around, stride), around // np.uint64(stride))
-
-
 def test_bad_arrays_are_refused():
     with pytest.raises(ValueError, match="index words"):
-        PaletteColors(np.zeros(2, np.uint32), np.zeros(256, np.uint32), 10, 10)
+        PaletteColors(np.zeros(2, np.uint32), np.zeros(256, np.uint32), 8, 10)
     with pytest.raises(ValueError, match="palette entries"):
-        PaletteColors(np.zeros(3, np.uint32), np.zeros(256, np.uint32), 5, 10)
+        PaletteColors(np.zeros(75, np.uint32), np.zeros(256, np.uint32), 8, 300)
+    for shift in (7, 32):
+        with pytest.raises(ValueError, match="shift"):
+            quantize_palettes(np.zeros(4, np.uint32), shift)
+    with pytest.raises(ValueError, match="whole blocks"):
+        palette_into(empty_palettes(1000, 8), 128, np.zeros(256, np.uint32))
+    with pytest.raises(ValueError, match="whole blocks"):
+        palette_into(empty_palettes(1000, 8), 0, np.zeros(300, np.uint32))
 
 
 # --- clouds ----------------------------------------------------------------------------------
@@ -134,8 +130,8 @@ def grid_cloud(rng, n, batch_size, colors="palette", distinct=5000):
 
 def test_cloud_in_palettes(rng):
     cloud = grid_cloud(rng, 12_345, 1000)
-    assert isinstance(cloud.color, PaletteColors) and cloud.color.stride == 1000 and cloud.layout == "compact"
-    assert cloud.memory()["color"] == -(-cloud.n_points // 4) * 4 + len(cloud.batches) * PALETTE_SIZE * 4
+    assert isinstance(cloud.color, PaletteColors) and cloud.color.shift == PALETTE_SHIFT and cloud.layout == "compact"
+    assert cloud.memory()["color"] == -(-cloud.n_points // 4) * 4 + -(-cloud.n_points // 2**PALETTE_SHIFT) * PALETTE_SIZE * 4
     np.testing.assert_array_equal(cloud.rgba.view(np.uint32).reshape(-1), expected_decode(cloud.color))
     assert cloud.point_info(4321)["rgba"] == cloud.rgba[4321].tolist()
     assert np.array_equal(cloud.expanded().color, expected_decode(cloud.color))
@@ -170,7 +166,7 @@ def test_cpu_render_equals_the_reference(rng, view):
 
 def test_three_word_layout_and_odd_batches():
     cloud = build_cloud(demo_chunks(60_000), colors="palette", batch_size=777)  # no scale: three words a point
-    assert cloud.layout == "words" and isinstance(cloud.color, PaletteColors) and cloud.color.stride == 777
+    assert cloud.layout == "words" and isinstance(cloud.color, PaletteColors) and cloud.color.shift == PALETTE_SHIFT
     cam = Camera.fit(cloud.bounds, view="iso", width=160, height=120)
     s = RenderSettings(backend="cpu", size_mode="fixed")
     image, decoded = render_pair(cloud, cam, s)
@@ -185,7 +181,7 @@ def test_chunked_equals_in_memory(batch_size, partition_points, tmp_path):
 
     want = build_cloud(source(), batch_size=batch_size, colors="palette")
     got = build_cloud_chunked(source, batch_size=batch_size, colors="palette", partition_points=partition_points, tmpdir=tmp_path)
-    assert isinstance(got.color, PaletteColors) and got.color.stride == want.color.stride == batch_size
+    assert isinstance(got.color, PaletteColors) and got.color.shift == want.color.shift == PALETTE_SHIFT
     np.testing.assert_array_equal(got.color.words, want.color.words)
     np.testing.assert_array_equal(got.color.palette, want.color.palette)
     np.testing.assert_array_equal(got.low, want.low)
@@ -235,16 +231,18 @@ def test_wgpu_equals_cpu(rng):
 
 
 @pytest.mark.gpu
-@pytest.mark.parametrize("batch_size", [1001, 256])
-def test_wgpu_resolve_in_pages(rng, batch_size):
-    """Pages of colours smaller and larger than a batch, batches across page ends (1001 points)."""
+@pytest.mark.parametrize("shift", [PALETTE_SHIFT, 14, 8])
+def test_wgpu_resolve_in_pages(rng, shift):
+    """Pages of colours smaller and larger than a palette's block (pages of ~4 000 points: 8 192,
+    16 384 and 256 points a palette), batches of 1001 points across page ends."""
     from gigapoint.backends.numba_cpu import NumbaCpuBackend
     from gigapoint.core.selection import select
 
-    cloud = grid_cloud(rng, 15_015, batch_size)
+    cloud = grid_cloud(rng, 15_015, 1001)
+    cloud = dataclasses.replace(cloud, color=quantize_palettes(rgba32(cloud.color), shift))
     cpu = NumbaCpuBackend()
     page = 4 * 1001 * 4 + 16
-    paged = _wgpu(page_bytes=page, memory_budget=max(1 << 16, 3 * page))
+    paged = _wgpu(page_bytes=page, memory_budget=max(1 << 18, 3 * page))
     cam = Camera.fit(cloud.bounds, view="iso", width=160, height=120)
     near, far = cam.clip_range(cloud.bounds)
     sel = select(cloud.batches, cam.screen_rows(), cam.width, cam.height, near, far, 1e9, True, True)

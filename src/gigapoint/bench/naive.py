@@ -70,7 +70,7 @@ def naive_frame(xyz, color, camera: Camera, near: float, far: float, n_threads: 
             if n_threads > 1:  # gigapoint's merge with every tile flagged: the naive loop keeps no flags
                 merge(frame, bufs[1:], np.ones((n_threads, (n_pixels >> TILE_SHIFT) + 1), np.uint8))
             colors = np.empty(n_pixels, np.uint32)
-            resolve_colors(frame, color, np.array(background, np.uint8).view(np.uint32)[0], colors, NO_TABLE, NO_TABLE, 1)
+            resolve_colors(frame, color, np.array(background, np.uint8).view(np.uint32)[0], colors, NO_TABLE, NO_TABLE, 0)
         finally:
             numba.set_num_threads(previous)
     return frame, colors, t1 - t0

@@ -42,7 +42,7 @@ from .cloud import PointCloud, _valid_mask, check_valid_count, finest_scale, gat
 from .compact import compact_positions, ext_bits_per_point, pack_rgb565, stream_words
 from .layout import BATCH_SIZE, PACK_DTYPE
 from .morton import MORTON_BITS_PER_AXIS, counting_order, cube_of, morton_codes, morton_order
-from .palette import PALETTE_SIZE, PaletteColors, palette_into
+from .palette import empty_palettes, palette_into
 from .quantize import make_batches, quantize
 
 #: ``gp.open`` and ``gp.demo`` build clouds of more points than this chunked (``chunked=None``):
@@ -88,7 +88,7 @@ def build_cloud_chunked(
     check_valid_count(name, n, skipped)
     source_scale = finest_scale(survey["scales"])
     compact, color_format = storage_format(name, layout, colors, source_scale, survey["opaque"])
-    short = color_format == "rgb565"  # spilled as RGB565 (palettes: as u32, quantized batch by batch when finalized)
+    short = color_format == "rgb565"  # spilled as RGB565 (palettes: as u32, quantized block by block when finalized)
     lo, hi = survey["lo"], survey["hi"]
     origin, edge = cube_of(lo, hi)
     shift = 3 * (MORTON_BITS_PER_AXIS - cell_level)
@@ -215,9 +215,10 @@ def _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, color_format, a
     short = color_format == "rgb565"
     # an even-length buffer, as pack_rgb565's: rgb565_words views it as u32 without a copy
     color = np.zeros(n + (n & 1), np.uint16)[:n] if short else np.empty(0 if color_format == "palette" else n, np.uint32)
-    palettes = None
-    if color_format == "palette":  # each partition's whole batches quantized as they are finished
-        palettes = PaletteColors(np.zeros(-(-n // 4), np.uint32), np.zeros(len(batches) * PALETTE_SIZE, np.uint32), batch_size, n)
+    palettes = pending = None
+    quantized = 0  # palettes: points quantized (whole blocks); ``pending`` the finished points' colours after them
+    if color_format == "palette":
+        palettes, pending = empty_palettes(n), np.empty(0, np.uint32)
     attrs = {a: np.empty((n, *shape), dtype) for a, (dtype, shape) in attr_dtypes.items()}
     color_dtype = np.uint16 if short else np.uint32
     ext_path = folder / "ext"
@@ -269,8 +270,11 @@ def _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, color_format, a
                 batches["bbox_max"][b0 : b0 + len(local)] = local["bbox_max"]
                 if palettes is None:
                     color[done : done + k] = gather(col, head)
-                else:
-                    palette_into(palettes, done, gather(col, head))
+                else:  # whole palette blocks quantized as they are finished, the rest kept for the next partition
+                    pending = np.concatenate([pending, gather(col, head)])
+                    whole = len(pending) if done + k == n else len(pending) >> palettes.shift << palettes.shift
+                    palette_into(palettes, quantized, pending[:whole])
+                    pending, quantized = pending[whole:].copy(), quantized + whole
                 for a, v in att.items():
                     attrs[a][done : done + k] = gather(v, head)
                 done += k

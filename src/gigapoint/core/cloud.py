@@ -42,7 +42,7 @@ class PointCloud:
     med: np.ndarray | None  # u32 per point: bits 10-19 (None in the compact layout)
     high: np.ndarray | None  # u32 per point: bits 0-9 (None in the compact layout)
     # u32 per point: RGBA8 little-endian (r in the low byte); u16 RGB565 in the compact layout
-    # (compact.py); or per-batch palettes and u8 indices (palette.py: ``colors="palette"``)
+    # (compact.py); or per-block palettes and u8 indices (palette.py: ``colors="palette"``)
     color: np.ndarray | PaletteColors
     attributes: dict[str, np.ndarray] = field(default_factory=dict)
     name: str = "cloud"
@@ -262,8 +262,8 @@ def build_cloud(
     source scale (LAS files), three u32 words a point otherwise; "words" always the latter;
     "compact" needs a scale. ``colors``: "auto" stores opaque colors of a compact cloud in 16 bits
     (RGB565, at most 4/255 off a channel), "rgba" always 32 bits (exact), "rgb565" always 16,
-    "palette" 8 (a palette of 256 colours per batch, core/palette.py: exact in batches of at
-    most 256 distinct colours; 45.7 dB PSNR on autzen_trim against RGB565's 41.7)."""
+    "palette" 8 (a palette of 256 colours per 8 192 points, core/palette.py: exact where those
+    hold at most 256 distinct colours; 46.2 dB PSNR on autzen_trim against RGB565's 41.7)."""
     xyz_parts, rgba_parts, attr_parts = [], [], {}
     scales: list[tuple | None] = []
     skipped = 0
@@ -348,7 +348,7 @@ def cloud_from_points(
     """Build a PointCloud from valid float64 xyz (N, 3) and uint8 rgba (N, 4) (``bounds``: their
     (min, max) if already known). ``scale``: the source grid's step per axis: the compact layout,
     exact on that grid (core/compact.py); None: three u32 words a point. ``colors``: "rgba" (u32),
-    "rgb565" (16-bit colors) or "palette" (per-batch palettes, core/palette.py)."""
+    "rgb565" (16-bit colors) or "palette" (per-block palettes, core/palette.py)."""
     if batch_size < 1:
         raise InputError(f"{name}: batch size must be >= 1, got {batch_size}")
     lo, hi = bounds if bounds is not None else scan_points(xyz)[1:]
@@ -366,7 +366,7 @@ def cloud_from_points(
     if colors == "rgb565":
         color = pack_rgb565(color)
     elif colors == "palette":
-        color = quantize_palettes(color, batch_size)
+        color = quantize_palettes(color)
     attrs = {a: gather(v, order) for a, v in (attributes or {}).items()}
     data_bounds = None if scale is None else (np.asarray(lo, np.float64).copy(), np.asarray(hi, np.float64).copy())
     return PointCloud(batches, low, med, high, color, attrs, name=name, skipped=skipped, ext=ext, packing=pack, data_bounds=data_bounds)

@@ -454,7 +454,7 @@ def _unpack565(c, out):
 
 def rgba32(colors) -> np.ndarray:
     """u32 RGBA8 colors of an array in either format (the same array when already u32), or of
-    per-batch palettes (core/palette.py)."""
+    per-block palettes (core/palette.py)."""
     if isinstance(colors, PaletteColors):
         return decode_palette(colors)
     if colors.dtype == np.uint32:

@@ -1,24 +1,26 @@
-"""Per-batch colour palettes: 8 bits a point of colour (issue #22).
+"""Per-block colour palettes: 8 bits a point of colour (issue #22).
 
-A compact cloud built with ``colors="palette"`` holds, per batch of ``stride`` consecutive
-points (a PointCloud's batches: ``make_batches`` cuts them every ``batch_size`` points), a
-palette of ``PALETTE_SIZE`` RGBA8 colours and one u8 index a point: 1 byte a point plus
-1024 bytes a batch (0.1 byte a point at 10 240-point batches), against RGB565's 2.
+A cloud built with ``colors="palette"`` holds, per block of ``2^shift`` consecutive points
+(``PALETTE_SHIFT`` = 13: 8 192 points, in the cloud's Morton order, so a block is as compact
+in space as a batch), a palette of ``PALETTE_SIZE`` RGBA8 colours and one u8 index a point:
+1 byte a point plus 1024 bytes a block (0.125 byte a point), against RGB565's 2. Blocks are
+a power of two, not the batches (10 240 points), so a point's palette is ``i >> shift``: a
+batch by ``i // batch_size`` cost the resolve an integer division or a float multiply per
+pixel (0.3-0.4 ms of a 1080p frame on one thread; docs/benchmarks.md, #22).
 
 **The quantizer** (``quantize_palettes``) is a greedy variance split (after Wu 1991: median cut
-that cuts where the squared error is least), deterministic and without iterations: a batch's colours start as
+that cuts where the squared error is least), deterministic and without iterations: a block's colours start as
 one box; the box with the largest sum of squared errors (SSE) is cut along its channel of
 largest variance at the value that leaves the smallest SSE in its two halves (a 256-bin
 histogram of that channel gives every cut's SSE in one scan), until 256 boxes or every box
-holds one colour. A point's colour is its box's mean (rounded). A batch with at most 256
+holds one colour. A point's colour is its box's mean (rounded). A block with at most 256
 distinct colours therefore keeps every colour exactly; others lose a little (measured in
-docs/benchmarks.md, #22: autzen_trim 45.7 dB PSNR against RGB565's 41.7). The split works on a
-batch's distinct colours (a hash table finds them), weighted by their points: ~8 histogram
-passes over ~2 000 colours instead of 10 240 points; batches are quantized in parallel
-(``prange``): 76 M points/s for the 20 M demo town on two shared cores, autzen_trim's
-11 batches 30 M points/s on one.
+docs/benchmarks.md, #22: autzen_trim 46.2 dB PSNR against RGB565's 41.7). The split works on a
+block's distinct colours (a hash table finds them), weighted by their points: ~8 histogram
+passes over ~2 000 colours instead of 8 192 points; blocks are quantized in parallel
+(``prange``): 150 M points/s for the 20 M demo town on two shared cores (docs/benchmarks.md).
 
-**The decoder** is ``palette_rgba`` (point ``i``'s RGBA8: its batch's palette entry of its
+**The decoder** is ``palette_rgba`` (point ``i``'s RGBA8: its block's palette entry of its
 index, the index read from the u32 word ``i >> 2``): the numba resolve kernel
 (backends/numba_cpu/raster.py) and ``decode`` here (``rgba32``: every consumer that wants
 RGBA8 per point) use it; backends/wgpu/shaders/resolve.wgsl follows it step by step.
@@ -31,29 +33,41 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-#: colours a batch's palette holds (indices are u8)
+#: colours a block's palette holds (indices are u8)
 PALETTE_SIZE = 256
+#: a palette serves 2^PALETTE_SHIFT consecutive points (8 192)
+PALETTE_SHIFT = 13
+#: blocks of at least 256 points: a page of palettes is never larger than the page's points'
+#: RGBA8 colours would be (the GPU's page sizes hold)
+MIN_SHIFT = 8
 
 
 @dataclass(eq=False)
 class PaletteColors:
-    """A cloud's colours as per-batch palettes and u8 indices (module doc).
+    """A cloud's colours as per-block palettes and u8 indices (module doc).
 
     ``words``: the indices, four a u32 word (point i in byte i & 3 of word i >> 2, little
-    endian), the layout the kernels read; ``palette``: u32 RGBA8, ``PALETTE_SIZE`` per batch
-    (unused entries 0); ``stride``: points per batch (the last may hold fewer); ``n``: points."""
+    endian), the layout the kernels read; ``palette``: u32 RGBA8, ``PALETTE_SIZE`` per block
+    (unused entries 0); ``shift``: a block is 2^shift points (the last may hold fewer); ``n``: points."""
 
     words: np.ndarray
     palette: np.ndarray
-    stride: int
+    shift: int
     n: int
 
     def __post_init__(self) -> None:
-        n_batches = -(-self.n // self.stride) if self.n else 0
+        if not MIN_SHIFT <= self.shift <= 31:
+            raise ValueError(f"palette colours: shift must be {MIN_SHIFT}..31, got {self.shift}")
+        n_blocks = -(-self.n // self.block) if self.n else 0
         if self.words.dtype != np.uint32 or len(self.words) != -(-self.n // 4):
             raise ValueError(f"palette colours: {self.n} points need {-(-self.n // 4)} u32 index words, got {len(self.words)} {self.words.dtype}")
-        if self.palette.dtype != np.uint32 or len(self.palette) != n_batches * PALETTE_SIZE:
-            raise ValueError(f"palette colours: {n_batches} batches need {n_batches * PALETTE_SIZE} u32 palette entries, got {len(self.palette)}")
+        if self.palette.dtype != np.uint32 or len(self.palette) != n_blocks * PALETTE_SIZE:
+            raise ValueError(f"palette colours: {n_blocks} blocks need {n_blocks * PALETTE_SIZE} u32 palette entries, got {len(self.palette)}")
+
+    @property
+    def block(self) -> int:
+        """Points a palette serves."""
+        return 1 << self.shift
 
     @property
     def index(self) -> np.ndarray:
@@ -74,43 +88,35 @@ class PaletteColors:
 
 # --- the decoder -----------------------------------------------------------------------------
 @njit(inline="always")
-def batch_of(i, stride):
-    """``i // stride`` for u64 ``i`` < 2^51, by a float64 multiply (an integer division per pixel
-    tripled the resolve's time): (i + 0.5) / stride lies at least 0.5 / stride from an integer,
-    and the product's rounding error is below 2^-52 (i + 0.5) / stride, far less."""
-    return np.uint64((np.float64(np.int64(i)) + 0.5) * (1.0 / np.float64(stride)))
-
-
-@njit(inline="always")
-def palette_rgba(words, palette, stride, i):
-    """u32 RGBA8 of point ``i`` (u64): entry ``index`` of its batch's palette; resolve.wgsl does the same."""
+def palette_rgba(words, palette, shift, i):
+    """u32 RGBA8 of point ``i`` (u64): entry ``index`` of its block's palette; resolve.wgsl does the same."""
     index = (words[i >> np.uint64(2)] >> np.uint32((i & np.uint64(3)) << np.uint64(3))) & np.uint32(0xFF)
-    return palette[batch_of(i, stride) * np.uint64(PALETTE_SIZE) + np.uint64(index)]
+    return palette[((i >> np.uint64(shift)) << np.uint64(8)) + np.uint64(index)]
 
 
 @njit(parallel=True, cache=True)
-def _decode_all(words, palette, stride, out):
+def _decode_all(words, palette, shift, out):
     for i in prange(out.shape[0]):
-        out[i] = palette_rgba(words, palette, stride, np.uint64(i))
+        out[i] = palette_rgba(words, palette, shift, np.uint64(i))
 
 
 @njit(parallel=True, cache=True)
-def _decode_at(words, palette, stride, points, out):
+def _decode_at(words, palette, shift, points, out):
     for k in prange(points.shape[0]):
-        out[k] = palette_rgba(words, palette, stride, np.uint64(points[k]))
+        out[k] = palette_rgba(words, palette, shift, np.uint64(points[k]))
 
 
 def decode(colors: PaletteColors, points: np.ndarray | None = None) -> np.ndarray:
     """u32 RGBA8 of every point (``points`` None) or of point indices ``points``."""
     if points is None:
         out = np.empty(colors.n, np.uint32)
-        _decode_all(colors.words, colors.palette, colors.stride, out)
+        _decode_all(colors.words, colors.palette, colors.shift, out)
         return out
     points = np.ascontiguousarray(points, np.int64).reshape(-1)
     if len(points) and (points.min() < 0 or points.max() >= colors.n):
         raise IndexError(f"palette colours: point index out of range 0..{colors.n - 1}")
     out = np.empty(len(points), np.uint32)
-    _decode_at(colors.words, colors.palette, colors.stride, points, out)
+    _decode_at(colors.words, colors.palette, colors.shift, points, out)
     return out
 
 
@@ -124,7 +130,7 @@ def _channel(c, k):
 def _distinct(c, uniq, weight, of_point):
     """The distinct colours of ``c`` (into ``uniq``, first seen first), how many points hold each
     (``weight``) and each point's (``of_point``); returns their number. An open-addressing hash
-    table: a batch of 10 240 points of aerial-photo colours holds ~2 000 distinct ones, and the
+    table: a block of 8 192 points of aerial-photo colours holds ~2 000 distinct ones, and the
     split's passes then go over those."""
     m = c.shape[0]
     size = 1
@@ -155,9 +161,9 @@ def _distinct(c, uniq, weight, of_point):
 
 
 @njit(cache=True)
-def _quantize_batch(c, index, palette):
+def _quantize_block(c, index, palette):
     """Palette (``palette``: PALETTE_SIZE u32, written) and u8 indices (``index``) of the u32
-    RGBA8 colours ``c`` of one batch: the module doc's variance split, over its distinct colours
+    RGBA8 colours ``c`` of one block: the module doc's variance split, over its distinct colours
     weighted by their points."""
     m = c.shape[0]
     palette[:] = 0
@@ -295,37 +301,43 @@ def _quantize_batch(c, index, palette):
 
 
 @njit(parallel=True, cache=True)
-def _quantize_all(c, stride, index, palette):
+def _quantize_all(c, block, index, palette):
     n = c.shape[0]
-    for b in prange((n + stride - 1) // stride):
-        s = b * stride
-        e = min(s + stride, n)
-        _quantize_batch(c[s:e], index[s:e], palette[b * PALETTE_SIZE : (b + 1) * PALETTE_SIZE])
+    for b in prange((n + block - 1) // block):
+        s = b * block
+        e = min(s + block, n)
+        _quantize_block(c[s:e], index[s:e], palette[b * PALETTE_SIZE : (b + 1) * PALETTE_SIZE])
 
 
-def quantize_palettes(color: np.ndarray, stride: int) -> PaletteColors:
-    """Per-batch palettes of u32 RGBA8 colours (batches of ``stride`` consecutive points)."""
+def quantize_palettes(color: np.ndarray, shift: int = PALETTE_SHIFT) -> PaletteColors:
+    """Per-block palettes of u32 RGBA8 colours (blocks of 2^shift consecutive points)."""
     c = np.ascontiguousarray(color, np.uint32)
     n = len(c)
-    if stride < 1:
-        raise ValueError(f"palette colours: stride must be >= 1, got {stride}")
-    words = np.zeros(-(-n // 4), np.uint32)
-    palette = np.zeros(-(-n // stride) * PALETTE_SIZE, np.uint32)
+    out = empty_palettes(n, shift)
     if n:
-        _quantize_all(c, int(stride), words.view(np.uint8)[:n], palette)
-    return PaletteColors(words, palette, int(stride), n)
+        _quantize_all(c, out.block, out.words.view(np.uint8)[:n], out.palette)
+    return out
+
+
+def empty_palettes(n: int, shift: int = PALETTE_SHIFT) -> PaletteColors:
+    """PaletteColors of ``n`` points, every index and entry 0 (``palette_into`` fills them)."""
+    if not MIN_SHIFT <= shift <= 31:
+        raise ValueError(f"palette colours: shift must be {MIN_SHIFT}..31, got {shift}")
+    return PaletteColors(np.zeros(-(-n // 4), np.uint32), np.zeros(-(-n >> shift) * PALETTE_SIZE, np.uint32), int(shift), int(n))
 
 
 def palette_into(out: PaletteColors, first: int, color: np.ndarray) -> None:
-    """Quantize the u32 colours of points ``first``.. (whole batches: ``first`` a multiple of
-    ``out.stride``) into ``out``'s arrays (the chunked build, partition by partition)."""
-    if first % out.stride or first + len(color) > out.n:
-        raise ValueError(f"palette colours: points {first}..{first + len(color)} are not whole batches of {out.stride}")
+    """Quantize the u32 colours of points ``first``.. (whole blocks: ``first`` a multiple of
+    ``out.block``, and the count too unless they reach the end) into ``out``'s arrays (the
+    chunked build, partition by partition)."""
+    end = first + len(color)
+    if first % out.block or end > out.n or (end % out.block and end != out.n):
+        raise ValueError(f"palette colours: points {first}..{end} are not whole blocks of {out.block}")
     c = np.ascontiguousarray(color, np.uint32)
     if len(c):
-        b0 = first // out.stride
-        nb = -(-len(c) // out.stride)
-        _quantize_all(c, out.stride, out.words.view(np.uint8)[first : first + len(c)], out.palette[b0 * PALETTE_SIZE : (b0 + nb) * PALETTE_SIZE])
+        b0 = first >> out.shift
+        nb = -(-len(c) >> out.shift)
+        _quantize_all(c, out.block, out.words.view(np.uint8)[first:end], out.palette[b0 * PALETTE_SIZE : (b0 + nb) * PALETTE_SIZE])
 
 
-__all__ = ["PALETTE_SIZE", "PaletteColors", "decode", "palette_into", "palette_rgba", "quantize_palettes"]
+__all__ = ["PALETTE_SHIFT", "PALETTE_SIZE", "PaletteColors", "decode", "empty_palettes", "palette_into", "palette_rgba", "quantize_palettes"]

@@ -48,7 +48,7 @@ class PointBuffers(Protocol):
     # have ``packing`` (PACK_DTYPE per batch) and ``ext`` (the extension streams) instead
     med: np.ndarray | None
     high: np.ndarray | None
-    # u32 RGBA8 per point (u16 RGB565 in a compact cloud; per-batch palettes, core/palette.py's
+    # u32 RGBA8 per point (u16 RGB565 in a compact cloud; per-block palettes, core/palette.py's
     # PaletteColors, in a cloud built with colors="palette": ``compact.rgba32`` decodes any of them)
     color: np.ndarray
     attributes: dict[str, np.ndarray]

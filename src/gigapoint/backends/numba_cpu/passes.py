@@ -42,12 +42,12 @@ def resolve(vis: np.ndarray, point_colors: np.ndarray, background) -> tuple[np.n
     vis = np.ascontiguousarray(vis).reshape(-1)
     bg = np.array(background, np.uint8).view(np.uint32)[0]
     out = np.empty(vis.shape[0], np.uint32)
-    if isinstance(point_colors, PaletteColors):  # per-batch palettes (core/palette.py)
-        covered = raster.resolve_colors(vis, point_colors.words, bg, out, raster.NO_TABLE, point_colors.palette, point_colors.stride)
+    if isinstance(point_colors, PaletteColors):  # per-block palettes (core/palette.py)
+        covered = raster.resolve_colors(vis, point_colors.words, bg, out, raster.NO_TABLE, point_colors.palette, point_colors.shift)
     elif point_colors.dtype == np.uint16:  # a compact cloud's 16-bit colors
-        covered = raster.resolve_colors(vis, rgb565_words(point_colors), bg, out, rgb565_table(), raster.NO_TABLE, 1)
+        covered = raster.resolve_colors(vis, rgb565_words(point_colors), bg, out, rgb565_table(), raster.NO_TABLE, 0)
     else:
-        covered = raster.resolve_colors(vis, point_colors, bg, out, raster.NO_TABLE, raster.NO_TABLE, 1)
+        covered = raster.resolve_colors(vis, point_colors, bg, out, raster.NO_TABLE, raster.NO_TABLE, 0)
     return out, int(covered)
 
 

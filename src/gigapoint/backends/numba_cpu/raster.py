@@ -581,7 +581,7 @@ def merge(frame, scratch, dirty):
 
 
 @njit(parallel=True, cache=True)
-def resolve_colors(frame, color, background, out, rgb565, palette, stride):
+def resolve_colors(frame, color, background, out, rgb565, palette, shift):
     """out[p] = color of the winning point, or the background (u32 RGBA); returns the number of
     covered pixels (what ``count_covered`` says, without reading the frame again).
 
@@ -589,8 +589,8 @@ def resolve_colors(frame, color, background, out, rgb565, palette, stride):
     core/compact.py): ``color`` is their u32 words (``rgb565_words``: two a word) and ``rgb565``
     the RGBA8 of each 16-bit value (``rgb565_table``): 32-bit loads and a table, 1.37 ms a
     1080p frame of one thread against 1.15 for 32-bit colours (the decode's shifts per pixel
-    took 2.5). ``palette`` not empty: per-batch palettes (core/palette.py), ``color`` their u8
-    indices as u32 words (four a word), ``stride`` points a batch, decoded by ``palette_rgba``."""
+    took 2.5). ``palette`` not empty: per-block palettes (core/palette.py), ``color`` their u8
+    indices as u32 words (four a word), a block 2^``shift`` points, decoded by ``palette_rgba``."""
     covered = 0
     half = rgb565.shape[0] > 0
     indexed = palette.shape[0] > 0
@@ -601,7 +601,7 @@ def resolve_colors(frame, color, background, out, rgb565, palette, stride):
         else:
             i = key & np.uint64(0xFFFFFFFF)
             if indexed:
-                out[p] = palette_rgba(color, palette, stride, i)
+                out[p] = palette_rgba(color, palette, shift, i)
             elif half:
                 out[p] = rgb565[(color[i >> np.uint64(1)] >> np.uint32((i & np.uint64(1)) << np.uint64(4))) & np.uint32(0xFFFF)]
             else:

@@ -68,7 +68,7 @@ PARAMS_DTYPE = np.dtype(
         ("shininess", "<f4"),
         ("step", "<u4"),  # raster: draw every step-th point of each batch (0 or 1: all)
         ("color_bits", "<u4"),  # resolve: 16 = colors are u16 RGB565 (a compact cloud's), 8 = u8 palette indices, else u32 RGBA8
-        ("palette_stride", "<u4"),  # resolve (color_bits 8): points a batch, each batch's palette PALETTE_SIZE colours
+        ("palette_shift", "<u4"),  # resolve (color_bits 8): a palette of PALETTE_SIZE colours serves 2^shift points
         ("palette_first", "<u4"),  # resolve (color_bits 8): global index of the page's palette binding's first entry
         ("_pad_p0", "<u4"),
         ("_pad_p1", "<u4"),

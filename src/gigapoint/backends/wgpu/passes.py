@@ -67,7 +67,7 @@ class GpuPasses:
         pixels are not counted on the GPU)."""
         ctx = self.ctx
         with ctx.lock:
-            indexed = isinstance(point_colors, PaletteColors)  # per-batch palettes (core/palette.py), decoded by the shader
+            indexed = isinstance(point_colors, PaletteColors)  # per-block palettes (core/palette.py), decoded by the shader
             short = not indexed and point_colors.dtype == np.uint16  # a compact cloud's RGB565 colors, decoded by the shader
             color = point_colors if short or indexed else np.ascontiguousarray(point_colors, np.uint32)  # the same array (cache key) when already u32
             n_pixels = int(np.prod(np.shape(vis)))  # np.shape reads a DeviceArray's shape without reading it back
@@ -86,14 +86,14 @@ class GpuPasses:
                     colors = ctx.dummy
                 elif indexed:
                     colors = ctx.cache.get(color.words, start // 4, -(-stop // 4), pinned)
-                    pal_first = start // color.stride * PALETTE_SIZE
-                    buf = ctx.cache.get(color.palette, pal_first, (stop - 1) // color.stride * PALETTE_SIZE + PALETTE_SIZE, pinned)
+                    pal_first = (start >> color.shift) * PALETTE_SIZE
+                    buf = ctx.cache.get(color.palette, pal_first, (((stop - 1) >> color.shift) + 1) * PALETTE_SIZE, pinned)
                     pal = (buf, buf.size)
                 else:
                     colors = ctx.cache.get(color, start, stop, pinned)
                 uniform = ctx.uniform(
                     n_items=n_pixels, page_first=start, page_count=stop - start, background=bg, color_bits=8 if indexed else 16 if short else 32,
-                    palette_stride=color.stride if indexed else 1, palette_first=pal_first,
+                    palette_shift=color.shift if indexed else 0, palette_first=pal_first,
                 )  # fmt: skip
                 ctx.dispatch_screen("resolve", [uniform, (vbuf, n_pixels * 8), (colors, colors.size), (image, n_pixels * 4), pal], n_pixels)
             return DeviceArray(ctx, role, np.uint32, n_pixels), None

@@ -8,14 +8,14 @@
 @group(0) @binding(1) var<storage, read> visibility: array<vec2<u32>>;
 @group(0) @binding(2) var<storage, read> colors: array<u32>;
 @group(0) @binding(3) var<storage, read_write> image: array<u32>;
-// per-batch palettes (color_bits 8: core/palette.py) of the page's batches; a dummy otherwise
+// per-block palettes (color_bits 8: core/palette.py) of the page's blocks; a dummy otherwise
 @group(0) @binding(4) var<storage, read> palette: array<u32>;
 
-// RGBA8 of point ``g`` (global index; ``i`` within the page) of per-batch palettes: entry
-// ``index`` of its batch's palette, palette_rgba in core/palette.py.
+// RGBA8 of point ``g`` (global index; ``i`` within the page) of per-block palettes: entry
+// ``index`` of its block's palette, palette_rgba in core/palette.py.
 fn palette_rgba(g: u32, i: u32) -> u32 {
     let index = (colors[i >> 2u] >> (8u * (i & 3u))) & 0xffu;
-    return palette[(g / params.palette_stride) * 256u + index - params.palette_first];
+    return palette[((g >> params.palette_shift) << 8u) + index - params.palette_first];
 }
 
 // RGBA8 (opaque) of an RGB565 color: rgb565_rgba in core/compact.py (bit replication).
