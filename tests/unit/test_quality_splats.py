@@ -55,7 +55,9 @@ def test_a_large_far_splat_does_not_cover_a_near_point():
 
 
 @pytest.mark.parametrize("kw", [{"point_size": 3}, {"point_size": 4, "point_shape": "round"}, {"point_size": 2},
-                                {"point_size": 6, "size_mode": "attenuated", "point_world_size": 40.0}])  # fmt: skip
+                                {"point_size": 6, "size_mode": "attenuated", "point_world_size": 40.0},
+                                # runs longer than one vector write (8 pixels): written 8 at a time
+                                {"point_size": 12}, {"point_size": 11, "point_shape": "round"}])  # fmt: skip
 def test_kernel_equals_reference(kw):
     cloud = gp.demo(5_000, seed=9)
     cam = gp.Camera.fit(cloud.bounds, view=(-40.0, 35.0), width=150, height=90, fov=45.0, margin=0.7)

@@ -302,3 +302,24 @@ print("OTHER SHAPES", sum(len(f.signatures) for f in loops))
     assert out.returncode == 0, out.stderr[-2000:]
     assert "MANY" not in out.stdout, out.stdout
     assert "OTHER SHAPES 0" in out.stdout, out.stdout
+
+
+def test_vector_runs_write_exactly_their_pixels():
+    """simd.min_run8 (the splats' rows): min with the key on lanes < n only; pixels past the run,
+    here past the end of a view into a larger array, stay untouched."""
+    from numba import njit
+
+    from gigapoint.backends.numba_cpu.simd import min_run8
+
+    @njit
+    def run(buf, first, n, key):
+        min_run8(buf, first, n, key)
+
+    rng = np.random.default_rng(3)
+    for n in range(-2, 9):  # n <= 0: nothing
+        for first in (0, 5, 17 - max(n, 0)):
+            big = rng.integers(0, 1000, 32).astype(np.uint64)
+            want = big.copy()
+            want[first : first + max(n, 0)] = np.minimum(want[first : first + max(n, 0)], np.uint64(500))
+            run(big[:17], first, n, np.uint64(500))  # lanes past first + n would reach big[17:]
+            np.testing.assert_array_equal(big, want)
