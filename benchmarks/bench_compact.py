@@ -31,6 +31,15 @@ exact colours, the quantizer's speed, and brute-force frames of the two interlea
 
     .venv/bin/python benchmarks/bench_compact.py --colors --points 20M --rounds 7
 
+``--default`` measures what ``gp.open`` / ``gp.demo(n, scale=0.01)`` hold by default
+(``colors="auto"``: the palette where its PSNR is at least RGB565's, else RGB565): which one
+each scene gets, bytes a point, the cost of the choice in the build (``encode_colors`` "auto"
+against "rgb565" on the same colours, interleaved; autzen_trim's whole ``gp.open`` both ways),
+and brute-force frames of the default cloud interleaved (ABBA) with the 16-byte layout (three
+words, u32 colours: ``colors="rgba"`` expanded) and with RGB565::
+
+    .venv/bin/python benchmarks/bench_compact.py --default --points 20M --rounds 11
+
 The demo town has no source scale of its own (its points are floats): it is stored at 1 cm
 here, as a LAS export of it would be (``--scale``). Peak RSS is reported at the end; the
 1 B point figure in docs/benchmarks.md is extrapolated from the bytes a point measured here.
@@ -315,6 +324,71 @@ def colors_part(args) -> None:
     print(f"\npeak RSS {rss / 2**30:.2f} GiB")
 
 
+def timed_pair(calls: dict, rounds: int) -> dict[str, float]:
+    """Median seconds of each callable, run in turn (ABBA) after one untimed call each."""
+    for f in calls.values():
+        f()
+    times: dict[str, list[float]] = {k: [] for k in calls}
+    keys = list(calls)
+    for r in range(rounds):
+        for k in keys if r % 2 == 0 else reversed(keys):
+            t = time.perf_counter()
+            calls[k]()
+            times[k].append(time.perf_counter() - t)
+    return {k: statistics.median(v) for k, v in times.items()}
+
+
+def default_scene(name: str, default, exact, args, open_calls: dict | None = None) -> None:
+    """The default cloud (``colors="auto"``) against the 16-byte layout and RGB565: bytes, the
+    choice's build cost, brute-force frames interleaved."""
+    from gigapoint.bench import benchmark_cameras
+    from gigapoint.core.cloud import encode_colors
+    from gigapoint.core.compact import pack_rgb565
+
+    n = default.n_points
+    color = exact.color
+    full = exact.expanded()  # three u32 words and a u32 colour a point: 16 bytes
+    short = dataclasses.replace(exact, color=pack_rgb565(color))
+    chosen = "palette" if not isinstance(default.color, np.ndarray) else {2: "rgb565", 4: "rgba"}[default.color.itemsize]
+    print(f"\n{name}: {n:,} points; colors='auto' chose {chosen}")
+    print(f"  {'cloud':10} {'positions':>10} {'color':>8} {'batches':>8} {'pos+col':>8} {'pos+col+batch':>14}   colours against the exact ones")
+    for k, c in (("16-byte", full), ("rgb565", short), ("default", default)):
+        mem = c.memory()
+        quality = "exact" if c is full else color_stats(color, rgba32(c.color))
+        pc = (mem["positions"] + mem["color"]) / n
+        print(f"  {k:10} {mem['positions'] / n:10.3f} {mem['color'] / n:8.3f} {mem['batches'] / n:8.3f} {pc:8.3f} {pc + mem['batches'] / n:14.3f}   {quality}")
+    enc = timed_pair({"auto": lambda: encode_colors(color, "auto"), "rgb565": lambda: encode_colors(color, "rgb565")}, args.rounds)
+    print(
+        f"  colour encoding, median of {args.rounds} interleaved: auto {enc['auto'] * 1e3:.1f} ms ({n / enc['auto'] / 1e6:.1f} M points/s), "
+        f"rgb565 {enc['rgb565'] * 1e3:.1f} ms"
+    )
+    if open_calls:
+        t = timed_pair(open_calls, args.rounds)
+        print("  whole build, median of interleaved: " + ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in t.items()))
+    print(f"  brute-force frames ({args.width}x{args.height}, CPU backend, every point, fixed size, {args.rounds} interleaved ABBA; medians in ms)")
+    print(f"  {'view':9} {'clock':5} {'16-byte':>8} {'rgb565':>8} {'default':>8}  {'16-byte/default':>15} {'rgb565/default':>14}")
+    for view, cam in benchmark_cameras(default.bounds, args.width, args.height).items():
+        s = gp.RenderSettings(backend="cpu", size_mode="fixed")
+        for clock, times in zip(("wall", "cpu"), interleaved([(full, cam, s), (short, cam, s), (default, cam, s)], args.rounds)):
+            a, b, c = (statistics.median(t) * 1e3 for t in times)
+            print(f"  {view:9} {clock:5} {a:8.2f} {b:8.2f} {c:8.2f}  {a / c:15.3f} {b / c:14.3f}")
+
+
+def default_part(args) -> None:
+    from gigapoint.bench import parse_count
+
+    if not args.skip_autzen and AUTZEN.exists():
+        opens = {"auto": lambda: gp.open(AUTZEN), "rgb565": lambda: gp.open(AUTZEN, colors="rgb565")}
+        default_scene("autzen_trim", gp.open(AUTZEN), gp.open(AUTZEN, colors="rgba"), args, opens)
+    n = parse_count(args.points)
+    t = time.perf_counter()
+    town = gp.demo(n, scale=args.scale)
+    print(f"\n(default demo town built in {time.perf_counter() - t:.1f} s)")
+    default_scene(f"demo town ({n:,}) at {args.scale:g} m", town, gp.demo(n, scale=args.scale, colors="rgba"), args)
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    print(f"\npeak RSS {rss / 2**30:.2f} GiB")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", default="5M", help="demo town size")
@@ -325,6 +399,7 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-autzen", action="store_true")
     ap.add_argument("--octree", action="store_true", help="the compact octree on disk (format 2) against format 1 instead")
     ap.add_argument("--colors", action="store_true", help="RGB565 against per-block palettes (issue #22) instead")
+    ap.add_argument("--default", action="store_true", help="the default colours (colors='auto') against the 16-byte layout and RGB565")
     args = ap.parse_args(argv)
     from gigapoint.bench import cpu_model, parse_count
 
@@ -335,6 +410,9 @@ def main(argv=None) -> int:
         return 0
     if args.colors:
         colors_part(args)
+        return 0
+    if args.default:
+        default_part(args)
         return 0
     ok = True
     if not args.skip_autzen and AUTZEN.exists():

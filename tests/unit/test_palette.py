@@ -1,7 +1,8 @@
 """Per-block colour palettes (core/palette.py, ``colors="palette"``): the quantizer's choices
 decode back, blocks of at most 256 colours are exact, renders equal the numpy reference and
-the decoded colours' on the CPU and on wgpu, the chunked build equals the in-memory one, and
-autzen_trim holds at most 7 bytes a point."""
+the decoded colours' on the CPU and on wgpu, the chunked build equals the in-memory one,
+autzen_trim holds at most 7 bytes a point, and ``colors="auto"`` (the default) picks the palette
+exactly where its squared error is at most RGB565's."""
 
 from __future__ import annotations
 
@@ -16,7 +17,17 @@ from gigapoint import Camera, RenderSettings
 from gigapoint.core import PointChunk, build_cloud
 from gigapoint.core.chunked import build_cloud_chunked
 from gigapoint.core.compact import colors_at, pack_rgb565, rgba32
-from gigapoint.core.palette import PALETTE_SHIFT, PALETTE_SIZE, PaletteColors, decode, empty_palettes, palette_into, quantize_palettes
+from gigapoint.core.palette import (
+    PALETTE_SHIFT,
+    PALETTE_SIZE,
+    PaletteColors,
+    block_errors,
+    choose_palette,
+    decode,
+    empty_palettes,
+    palette_into,
+    quantize_palettes,
+)
 from gigapoint.errors import InputError
 from gigapoint.io.demo import demo_chunks
 from gigapoint.render.reference import reference_image
@@ -103,6 +114,71 @@ def test_more_colours_lose_little(rng):
     pc = quantize_palettes(color, 14)
     assert psnr(color, decode(pc)) > psnr(color, rgba32(pack_rgb565(color)))
     assert np.abs(decode(pc).view(np.uint8).reshape(-1, 4).astype(int) - rgba.astype(int)).max() <= 16
+
+
+def sq_error(a, b) -> int:
+    x = a.view(np.uint8).reshape(-1, 4)[:, :3].astype(np.int64)
+    y = b.view(np.uint8).reshape(-1, 4)[:, :3].astype(np.int64)
+    return int(((x - y) ** 2).sum())
+
+
+@pytest.mark.parametrize("shift", [8, PALETTE_SHIFT])
+def test_block_errors_are_the_decoded_colours_errors(rng, shift):
+    """The quantizer's per-block errors (``colors="auto"`` decides on them) are the squared
+    errors of the decoded palette and of RGB565 over every point's R, G and B, block by block."""
+    n = 3 * (1 << shift) + 77
+    color = random_colors(rng, n, 3000)
+    sse = block_errors(n, shift)
+    pc = quantize_palettes(color, shift, sse=sse)
+    got, short = decode(pc), rgba32(pack_rgb565(color))
+    for b in range(len(sse)):
+        s = slice(b << shift, (b + 1) << shift)
+        assert sse[b].tolist() == [sq_error(got[s], color[s]), sq_error(short[s], color[s])]
+    parts, pieces = empty_palettes(n, shift), block_errors(n, shift)
+    palette_into(parts, 0, color[: 2 << shift], pieces)
+    palette_into(parts, 2 << shift, color[2 << shift :], pieces)
+    np.testing.assert_array_equal(pieces, sse)
+
+
+def test_auto_picks_the_more_faithful_format(rng):
+    """Smooth colours of an aerial photo: the palette; random colours: RGB565; translucent ones and
+    clouds without a source scale: 32 bits, as before."""
+    n = 20_000
+    xyz = UTM + rng.integers(0, 3000, (n, 3)) * 0.01
+    t = np.linspace(0, 1, n)
+    rgb = np.stack([120 + 100 * np.sin(7 * t), 90 + 80 * np.cos(11 * t), 60 + 50 * t], 1) + rng.normal(0, 2, (n, 3))
+    smooth = np.concatenate([np.clip(np.rint(rgb), 0, 255), np.full((n, 1), 255)], 1).astype(np.uint8)
+    noisy = random_colors(rng, n, 20_000).view(np.uint8).reshape(-1, 4)
+    for rgba, chosen in ((smooth, PaletteColors), (noisy, np.ndarray)):
+        cloud = build_cloud([PointChunk(xyz, rgba, {}, scale=(0.01,) * 3)])
+        exact = build_cloud([PointChunk(xyz, rgba, {}, scale=(0.01,) * 3)], colors="rgba").color
+        assert isinstance(cloud.color, chosen)
+        palette = rgba32(build_cloud([PointChunk(xyz, rgba, {}, scale=(0.01,) * 3)], colors="palette").color)
+        short = rgba32(pack_rgb565(exact))
+        assert (sq_error(palette, exact) <= sq_error(short, exact)) == (chosen is PaletteColors)
+        np.testing.assert_array_equal(cloud.rgba.view(np.uint32).reshape(-1), palette if chosen is PaletteColors else short)
+    assert build_cloud([PointChunk(xyz, smooth, {})]).color.dtype == np.uint32  # three words: exact colours
+    translucent = smooth.copy()
+    translucent[0, 3] = 254
+    assert build_cloud([PointChunk(xyz, translucent, {}, scale=(0.01,) * 3)]).color.dtype == np.uint32
+    assert choose_palette(np.array([[5, 5]])) and not choose_palette(np.array([[6, 5], [0, 0]]))
+
+
+@pytest.mark.parametrize("noisy", [False, True])
+def test_auto_chunked_equals_in_memory(rng, noisy, tmp_path):
+    """The chunked build decides on the same blocks' errors (an RGB565 copy waits on disk)."""
+
+    def source():
+        for chunk in demo_chunks(60_000, seed=3, chunk_size=20_000, scale=0.01):
+            if noisy:
+                chunk.rgba[:, :3] = np.random.default_rng(len(chunk)).integers(0, 256, (len(chunk), 3))
+            yield chunk
+
+    want = build_cloud(source(), batch_size=1000)
+    got = build_cloud_chunked(source, batch_size=1000, partition_points=15_000, tmpdir=tmp_path)
+    assert isinstance(want.color, np.ndarray if noisy else PaletteColors)
+    np.testing.assert_array_equal(got.rgba, want.rgba)
+    assert type(got.color) is type(want.color) and got.memory() == want.memory()
 
 
 def test_bad_arrays_are_refused():
@@ -195,11 +271,14 @@ def test_demo_in_palettes():
     np.testing.assert_array_equal(a.color.words, b.color.words)
     np.testing.assert_array_equal(a.color.palette, b.color.palette)
     assert a.memory()["color"] < 1.2 * a.n_points
+    assert isinstance(gp.demo(30_000, scale=0.01).color, PaletteColors)  # the default, "auto", picks it for the town
 
 
 @pytest.mark.skipif(not AUTZEN.exists(), reason="autzen_trim.laz not present")
 def test_autzen_in_at_most_7_bytes_a_point():
-    cloud = gp.open(AUTZEN, colors="palette")
+    cloud = gp.open(AUTZEN)  # by default: the palette beats RGB565 on its colours
+    assert isinstance(cloud.color, PaletteColors)
+    np.testing.assert_array_equal(cloud.color.words, gp.open(AUTZEN, colors="palette").color.words)
     exact = gp.open(AUTZEN, colors="rgba")
     mem = cloud.memory()
     per_point = (mem["positions"] + mem["color"] + mem["batches"]) / cloud.n_points

@@ -28,6 +28,7 @@ return, also on an error.
 
 from __future__ import annotations
 
+import os
 import tempfile
 from collections.abc import Callable, Iterable
 from contextlib import ExitStack
@@ -42,7 +43,7 @@ from .cloud import PointCloud, _valid_mask, check_valid_count, finest_scale, gat
 from .compact import compact_positions, ext_bits_per_point, pack_rgb565, stream_words
 from .layout import BATCH_SIZE, PACK_DTYPE
 from .morton import MORTON_BITS_PER_AXIS, counting_order, cube_of, morton_codes, morton_order
-from .palette import empty_palettes, palette_into
+from .palette import block_errors, choose_palette, empty_palettes, palette_into
 from .quantize import make_batches, quantize
 
 #: ``gp.open`` and ``gp.demo`` build clouds of more points than this chunked (``chunked=None``):
@@ -88,7 +89,7 @@ def build_cloud_chunked(
     check_valid_count(name, n, skipped)
     source_scale = finest_scale(survey["scales"])
     compact, color_format = storage_format(name, layout, colors, source_scale, survey["opaque"])
-    short = color_format == "rgb565"  # spilled as RGB565 (palettes: as u32, quantized block by block when finalized)
+    short = color_format == "rgb565"  # spilled as RGB565 (palettes and "auto": as u32, quantized block by block when finalized)
     lo, hi = survey["lo"], survey["hi"]
     origin, edge = cube_of(lo, hi)
     shift = 3 * (MORTON_BITS_PER_AXIS - cell_level)
@@ -213,19 +214,24 @@ def _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, color_format, a
         med, high = np.empty(n, np.uint32), np.empty(n, np.uint32)
     packing = np.zeros(len(batches), PACK_DTYPE) if compact is not None else None
     short = color_format == "rgb565"
+    quantized_colors = color_format in ("palette", "auto")
     # an even-length buffer, as pack_rgb565's: rgb565_words views it as u32 without a copy
-    color = np.zeros(n + (n & 1), np.uint16)[:n] if short else np.empty(0 if color_format == "palette" else n, np.uint32)
-    palettes = pending = None
+    color = np.zeros(n + (n & 1), np.uint16)[:n] if short else np.empty(0 if quantized_colors else n, np.uint32)
+    palettes = pending = sse = None
     quantized = 0  # palettes: points quantized (whole blocks); ``pending`` the finished points' colours after them
-    if color_format == "palette":
-        palettes, pending = empty_palettes(n), np.empty(0, np.uint32)
+    if quantized_colors:
+        palettes, pending, sse = empty_palettes(n), np.empty(0, np.uint32), block_errors(n)
+    # "auto": the RGB565 colours go to a file meanwhile, read back if the palette loses
+    # (choose_palette decides on every block's errors, known only at the end); 2 bytes a point of
+    # disk, not of memory
+    rgb565_path = folder / "rgb565" if color_format == "auto" else None
     attrs = {a: np.empty((n, *shape), dtype) for a, (dtype, shape) in attr_dtypes.items()}
     color_dtype = np.uint16 if short else np.uint32
     ext_path = folder / "ext"
     ext_words = 0
     done = 0  # points written (a multiple of batch_size until the last partition)
     carry = None  # the previous partition's points past its last full batch, in Morton order
-    with open(ext_path, "wb") as ext_file:
+    with open(ext_path, "wb") as ext_file, open(rgb565_path or os.devnull, "wb") as rgb565_file:
         for p in range(n_parts):
             paths = _paths(folder, p, attr_dtypes)
             if not paths["xyz"].exists():
@@ -271,9 +277,13 @@ def _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, color_format, a
                 if palettes is None:
                     color[done : done + k] = gather(col, head)
                 else:  # whole palette blocks quantized as they are finished, the rest kept for the next partition
-                    pending = np.concatenate([pending, gather(col, head)])
+                    finished = gather(col, head)
+                    if rgb565_path is not None:
+                        pack_rgb565(finished).tofile(rgb565_file)
+                    pending = np.concatenate([pending, finished])
+                    del finished
                     whole = len(pending) if done + k == n else len(pending) >> palettes.shift << palettes.shift
-                    palette_into(palettes, quantized, pending[:whole])
+                    palette_into(palettes, quantized, pending[:whole], sse)
                     pending, quantized = pending[whole:].copy(), quantized + whole
                 for a, v in att.items():
                     attrs[a][done : done + k] = gather(v, head)
@@ -283,6 +293,10 @@ def _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, color_format, a
             del xyz, col, att, order
     if done != n:
         raise _changed(name, n)
+    if rgb565_path is not None and not choose_palette(sse):
+        palettes = None
+        color = np.zeros(n + (n & 1), np.uint16)[:n]  # even length, as pack_rgb565's
+        color[:] = np.fromfile(rgb565_path, np.uint16)
     ext = None
     if compact is not None:
         ext = np.fromfile(ext_path, np.uint64)

@@ -22,7 +22,7 @@ from .chunk import PointChunk
 from .compact import colors_at, compact_positions, full_words, pack_rgb565, point_words, rgba32
 from .layout import BATCH_DTYPE, BATCH_SIZE
 from .morton import cube_of, morton_codes, morton_order
-from .palette import PaletteColors, quantize_palettes
+from .palette import PaletteColors, block_errors, choose_palette, quantize_palettes
 from .quantize import dequantize, make_batches, quantize
 from .renderable import DrawList, MultiViewDrawList, SelectionSettings
 from .selection import View, select_view, select_views, subsample_step
@@ -260,10 +260,12 @@ def build_cloud(
 
     ``layout``: "auto" stores the compact layout (core/compact.py) where every chunk says its
     source scale (LAS files), three u32 words a point otherwise; "words" always the latter;
-    "compact" needs a scale. ``colors``: "auto" stores opaque colors of a compact cloud in 16 bits
-    (RGB565, at most 4/255 off a channel), "rgba" always 32 bits (exact), "rgb565" always 16,
-    "palette" 8 (a palette of 256 colours per 8 192 points, core/palette.py: exact where those
-    hold at most 256 distinct colours; 46.2 dB PSNR on autzen_trim against RGB565's 41.7)."""
+    "compact" needs a scale. ``colors``: "rgba" always 32 bits (exact), "rgb565" always 16 (at most
+    4/255 off a channel), "palette" 8 (a palette of 256 colours per 8 192 points, core/palette.py:
+    exact where those hold at most 256 distinct colours; 46.2 dB PSNR on autzen_trim against
+    RGB565's 41.7); "auto" holds opaque colors of a compact cloud as the palette where its PSNR
+    over the cloud's colours is at least RGB565's, else as RGB565 (palette.choose_palette), and
+    32-bit colors otherwise (three-word clouds, translucent colors)."""
     xyz_parts, rgba_parts, attr_parts = [], [], {}
     scales: list[tuple | None] = []
     skipped = 0
@@ -325,8 +327,8 @@ def finest_scale(scales) -> tuple[float, float, float] | None:
 
 
 def storage_format(name: str, layout: str, colors: str, source_scale, opaque: bool):
-    """(the compact layout's grid or None: three words, the colors' format: "rgba", "rgb565" or
-    "palette") for ``build_cloud``'s ``layout`` and ``colors`` options (and the chunked build's,
+    """(the compact layout's grid or None: three words, the colors' format: "rgba", "rgb565",
+    "palette" or "auto": one of the last two, by the colours) for ``build_cloud``'s ``layout`` and ``colors`` options (and the chunked build's,
     core/chunked.py)."""
     if layout not in LAYOUTS:
         raise InputError(f"{name}: layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
@@ -337,8 +339,8 @@ def storage_format(name: str, layout: str, colors: str, source_scale, opaque: bo
     compact = source_scale if layout != "words" else None
     if colors == "rgb565" and not opaque:
         raise InputError(f"{name}: 16-bit colors drop alpha, and some points are not opaque; use colors='rgba'")
-    if colors == "auto":
-        return compact, "rgb565" if compact is not None and opaque else "rgba"
+    if colors == "auto":  # "auto" stays for opaque compact clouds: cloud_from_points decides on the colours
+        return compact, "auto" if compact is not None and opaque else "rgba"
     return compact, colors
 
 
@@ -348,7 +350,8 @@ def cloud_from_points(
     """Build a PointCloud from valid float64 xyz (N, 3) and uint8 rgba (N, 4) (``bounds``: their
     (min, max) if already known). ``scale``: the source grid's step per axis: the compact layout,
     exact on that grid (core/compact.py); None: three u32 words a point. ``colors``: "rgba" (u32),
-    "rgb565" (16-bit colors) or "palette" (per-block palettes, core/palette.py)."""
+    "rgb565" (16-bit colors), "palette" (per-block palettes, core/palette.py) or "auto" (the
+    palette where it is as faithful as RGB565, else RGB565; opaque colors only)."""
     if batch_size < 1:
         raise InputError(f"{name}: batch size must be >= 1, got {batch_size}")
     lo, hi = bounds if bounds is not None else scan_points(xyz)[1:]
@@ -363,13 +366,23 @@ def cloud_from_points(
         med = high = None
     rgba = np.ascontiguousarray(rgba, np.uint8)
     color = gather(rgba.view(np.uint32).reshape(-1), order)  # RGBA8 as one u32 a point
-    if colors == "rgb565":
-        color = pack_rgb565(color)
-    elif colors == "palette":
-        color = quantize_palettes(color)
+    color = encode_colors(color, colors)
     attrs = {a: gather(v, order) for a, v in (attributes or {}).items()}
     data_bounds = None if scale is None else (np.asarray(lo, np.float64).copy(), np.asarray(hi, np.float64).copy())
     return PointCloud(batches, low, med, high, color, attrs, name=name, skipped=skipped, ext=ext, packing=pack, data_bounds=data_bounds)
+
+
+def encode_colors(color: np.ndarray, colors: str) -> np.ndarray | PaletteColors:
+    """u32 RGBA8 colors (Morton order) held as ``colors`` says: "rgba" as they are, "rgb565",
+    "palette", or "auto": the palette if ``choose_palette`` finds it as faithful as RGB565 (the
+    quantizer measures both on every block: a few percent of its time), else RGB565."""
+    if colors == "rgb565":
+        return pack_rgb565(color)
+    if colors in ("palette", "auto"):
+        sse = block_errors(len(color))
+        palettes = quantize_palettes(color, sse=sse)
+        return palettes if colors == "palette" or choose_palette(sse) else pack_rgb565(color)
+    return color
 
 
 def from_arrays(xyz, rgb=None, name: str = "arrays", scale=None, **attributes) -> PointCloud:

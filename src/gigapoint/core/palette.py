@@ -160,13 +160,25 @@ def _distinct(c, uniq, weight, of_point):
     return d
 
 
+@njit(inline="always")
+def _rgb565_error(v, bits):
+    """Squared error of channel value ``v`` (0..255) stored in ``bits`` (5 or 6) bits the way
+    compact.pack_rgb565 rounds it and rgb565_rgba widens it back (bit replication)."""
+    top = (1 << bits) - 1
+    q = (v * top + 127) // 255
+    d = ((q << (8 - bits)) | (q >> (2 * bits - 8))) - v
+    return d * d
+
+
 @njit(cache=True)
-def _quantize_block(c, index, palette):
+def _quantize_block(c, index, palette, errors):
     """Palette (``palette``: PALETTE_SIZE u32, written) and u8 indices (``index``) of the u32
     RGBA8 colours ``c`` of one block: the module doc's variance split, over its distinct colours
-    weighted by their points."""
+    weighted by their points. ``errors`` (2 int64, written): the block's summed squared error over
+    R, G and B of its palette colours and of RGB565 (``choose_palette`` compares them)."""
     m = c.shape[0]
     palette[:] = 0
+    errors[:] = 0
     if m == 0:
         return
     uniq = np.empty(m, np.uint32)
@@ -298,25 +310,53 @@ def _quantize_block(c, index, palette):
             box_of[perm[j]] = np.uint8(b)
     for p in range(m):
         index[p] = box_of[of_point[p]]
+    # the errors, over the distinct colours (weighted): ~2 000 a block, not 8 192 points
+    for u in range(d):
+        col = uniq[u]
+        entry = palette[box_of[u]]
+        w = weight[u]
+        for k in range(3):
+            diff = _channel(entry, k) - _channel(col, k)
+            errors[0] += w * diff * diff
+        errors[1] += w * (_rgb565_error(_channel(col, 0), 5) + _rgb565_error(_channel(col, 1), 6) + _rgb565_error(_channel(col, 2), 5))
 
 
 @njit(parallel=True, cache=True)
-def _quantize_all(c, block, index, palette):
+def _quantize_all(c, block, index, palette, sse):
     n = c.shape[0]
     for b in prange((n + block - 1) // block):
         s = b * block
         e = min(s + block, n)
-        _quantize_block(c[s:e], index[s:e], palette[b * PALETTE_SIZE : (b + 1) * PALETTE_SIZE])
+        _quantize_block(c[s:e], index[s:e], palette[b * PALETTE_SIZE : (b + 1) * PALETTE_SIZE], sse[b])
 
 
-def quantize_palettes(color: np.ndarray, shift: int = PALETTE_SHIFT) -> PaletteColors:
-    """Per-block palettes of u32 RGBA8 colours (blocks of 2^shift consecutive points)."""
+def quantize_palettes(color: np.ndarray, shift: int = PALETTE_SHIFT, sse: np.ndarray | None = None) -> PaletteColors:
+    """Per-block palettes of u32 RGBA8 colours (blocks of 2^shift consecutive points).
+    ``sse``: int64 (blocks, 2), filled with each block's squared error of the palette and of
+    RGB565 (``choose_palette``)."""
     c = np.ascontiguousarray(color, np.uint32)
     n = len(c)
     out = empty_palettes(n, shift)
+    if sse is None:
+        sse = block_errors(n, shift)
     if n:
-        _quantize_all(c, out.block, out.words.view(np.uint8)[:n], out.palette)
+        _quantize_all(c, out.block, out.words.view(np.uint8)[:n], out.palette, sse)
     return out
+
+
+def block_errors(n: int, shift: int = PALETTE_SHIFT) -> np.ndarray:
+    """Zeroed int64 (blocks, 2) for the quantizer's per-block errors of ``n`` points."""
+    return np.zeros((-(-n >> shift), 2), np.int64)
+
+
+def choose_palette(sse: np.ndarray) -> bool:
+    """``colors="auto"``'s rule: the palette where its squared error over every point's R, G and
+    B (its PSNR) is at most RGB565's on the same colours. A cloud-wide sum, so one format holds
+    every point. On aerial-photo colours the palette wins (autzen_trim 46.2 against 41.7 dB, the
+    demo town 59.1); on noisy colours of thousands of distinct values a block it loses (a ramp
+    with noise of 6 levels: 36.9 dB), and RGB565 keeps its bound of 4/255 a channel."""
+    total = np.asarray(sse, np.int64).reshape(-1, 2).sum(axis=0)
+    return bool(total[0] <= total[1])
 
 
 def empty_palettes(n: int, shift: int = PALETTE_SHIFT) -> PaletteColors:
@@ -326,10 +366,10 @@ def empty_palettes(n: int, shift: int = PALETTE_SHIFT) -> PaletteColors:
     return PaletteColors(np.zeros(-(-n // 4), np.uint32), np.zeros(-(-n >> shift) * PALETTE_SIZE, np.uint32), int(shift), int(n))
 
 
-def palette_into(out: PaletteColors, first: int, color: np.ndarray) -> None:
+def palette_into(out: PaletteColors, first: int, color: np.ndarray, sse: np.ndarray | None = None) -> None:
     """Quantize the u32 colours of points ``first``.. (whole blocks: ``first`` a multiple of
     ``out.block``, and the count too unless they reach the end) into ``out``'s arrays (the
-    chunked build, partition by partition)."""
+    chunked build, partition by partition); their blocks' errors into ``sse`` (``block_errors(out.n)``)."""
     end = first + len(color)
     if first % out.block or end > out.n or (end % out.block and end != out.n):
         raise ValueError(f"palette colours: points {first}..{end} are not whole blocks of {out.block}")
@@ -337,7 +377,9 @@ def palette_into(out: PaletteColors, first: int, color: np.ndarray) -> None:
     if len(c):
         b0 = first >> out.shift
         nb = -(-len(c) >> out.shift)
-        _quantize_all(c, out.block, out.words.view(np.uint8)[first:end], out.palette[b0 * PALETTE_SIZE : (b0 + nb) * PALETTE_SIZE])
+        pal = out.palette[b0 * PALETTE_SIZE : (b0 + nb) * PALETTE_SIZE]
+        errors = block_errors(len(c), out.shift) if sse is None else sse[b0 : b0 + nb]
+        _quantize_all(c, out.block, out.words.view(np.uint8)[first:end], pal, errors)
 
 
-__all__ = ["PALETTE_SHIFT", "PALETTE_SIZE", "PaletteColors", "decode", "empty_palettes", "palette_into", "palette_rgba", "quantize_palettes"]
+__all__ = ["PALETTE_SHIFT", "PALETTE_SIZE", "PaletteColors", "block_errors", "choose_palette", "decode", "empty_palettes", "palette_into", "palette_rgba", "quantize_palettes"]
