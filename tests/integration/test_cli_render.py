@@ -208,3 +208,62 @@ def test_ctrl_c_exits_130_with_a_message(tmp_path):
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=20)
     assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted", (p.returncode, err)
+
+
+# --- --colors and --chunked: how the files' points are held (cli/cloud_opts.py) -------------------
+def color_bytes(err: str) -> float:
+    line = next(x for x in err.splitlines() if x.startswith("memory:"))
+    return float(line.split("color ")[1].split(",")[0])
+
+
+@pytest.mark.parametrize(("colors", "per_point"), [("rgba", 4.0), ("rgb565", 2.0), ("palette", 1.14)])
+def test_colors_option_chooses_how_colours_are_held(capsys, tmp_path, small_las, colors, per_point):
+    rc, _, err = run(capsys, "render", small_las, "-o", tmp_path / "c.png", "-W", 64, "-H", 48, "--stats", "--colors", colors)
+    assert rc == 0, err
+    assert color_bytes(err) == pytest.approx(per_point, abs=0.01)
+    rc, out, err = run(capsys, "info", "--memory", "--colors", colors, small_las)
+    assert rc == 0, err
+    assert color_bytes(out) == pytest.approx(per_point, abs=0.01)
+
+
+def test_chunked_option_builds_the_same_image(capsys, tmp_path, small_las):
+    images = []
+    for flag in ("--chunked", "--no-chunked"):
+        out = tmp_path / f"{flag}.png"
+        rc, _, err = run(capsys, "render", small_las, "-o", out, "-W", 96, "-H", 64, flag)
+        assert rc == 0, err
+        images.append(np.asarray(Image.open(out)))
+    np.testing.assert_array_equal(images[0], images[1])
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["render", "{las}", "-o", "{out}", "--colors", "rgb8"], "--colors: unknown colour format 'rgb8'"),
+        (["render", "{las}", "-o", "{out}", "--colors", "rgba", "--progressive"], "--colors: "),
+        (["render", "{las}", "-o", "{out}", "--chunked", "--progressive"], "--chunked: "),
+        (["info", "{las}", "--colors", "palette"], "--colors: only with --memory"),
+        (["info", "{las}", "--memory", "--colors", "PALETTE"], "--colors"),
+        (["demo", "-n", "1000", "-o", "{out}", "--colors", "16bit"], "--colors"),
+        (["view", "--live", "demo", "--colors", "rgba"], "--colors: "),
+        (["view", "--demo", "1000", "--progressive", "--no-chunked"], "--chunked: "),
+        (["view", "{las}", "--colors", "x"], "--colors"),
+    ],
+)
+def test_colors_and_chunked_errors_name_the_option(capsys, tmp_path, small_las, args, message):
+    out = tmp_path / "bad.png"
+    rc, _, err = run(capsys, *(a.format(las=small_las, out=out) for a in args))
+    assert rc == 1
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], err
+    assert not out.exists()
+
+
+def test_colors_option_refuses_an_octree(capsys, tmp_path, small_las):
+    import gigapoint as gp
+
+    octree = tmp_path / "octree"
+    gp.convert([str(small_las)], octree, max_leaf=20_000)
+    rc, _, err = run(capsys, "render", octree, "-o", tmp_path / "o.png", "--colors", "rgb565")
+    assert rc == 1 and len(err.strip().splitlines()) == 1
+    assert "--colors: " in err and "is an octree" in err

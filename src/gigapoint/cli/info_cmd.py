@@ -7,7 +7,9 @@ from pathlib import Path
 
 import typer
 
+from ..errors import GigapointError
 from .app import app
+from .cloud_opts import ChunkedOption, ColorsOption, cloud_options, option_names
 
 
 @app.command()
@@ -17,8 +19,13 @@ def info(
     ),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object per file instead of text."),
     memory: bool = typer.Option(False, "--memory", help="Also load the points and print the bytes a point each component holds in memory."),
+    colors: ColorsOption = "auto",
+    chunked: ChunkedOption = None,
 ) -> None:
     """Show format, point count, bounds, attributes, LAS version/scale/offset and CRS of files."""
+    options = cloud_options(colors, chunked)
+    if options and not memory:  # without --memory nothing is loaded: the option would do nothing
+        raise GigapointError(f"{option_names(options)}: only with --memory (how the loaded points are held)")
     from ..io import expand_paths, file_info, format_info
     from ..lod import is_lod_source, octree_info
 
@@ -37,7 +44,7 @@ def info(
         if memory and not octree:
             import gigapoint as gp
 
-            cloud = gp.open(path)
+            cloud = gp.open(path, **options)
             if as_json:
                 typer.echo(json.dumps({"path": str(path), "layout": cloud.layout, "n_points": cloud.n_points, "memory": cloud.memory()}))
             else:

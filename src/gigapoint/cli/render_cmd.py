@@ -14,6 +14,7 @@ from ..errors import CameraError, GigapointError
 from ..render import VIEWS, Camera, RenderSettings
 from . import compiling
 from .app import app
+from .cloud_opts import ChunkedOption, ColorsOption, check_colors, cloud_options, open_files
 from .info_cmd import memory_line
 from .output import check_output, save_array, save_image
 from .progress import err_console, progress_bar, status
@@ -80,13 +81,14 @@ def make_camera(cloud, width, height, view, camera_text, projection, fov) -> Cam
     return Camera.orbit(target, c["yaw"], c["pitch"], distance, fov=fov, width=width, height=height, **extra)
 
 
-def open_inputs(inputs, point_budget: int, progressive: bool | None = None):
+def open_inputs(inputs, point_budget: int, progressive: bool | None = None, options: dict | None = None):
     """The command's inputs (lod/progressive.open_sized: inputs above the point budget build an
-    LOD octree as they load, and the render waits for it); files show a bar while they are read
-    (on a terminal). A load that stops (a corrupt file, the memory limit) raises its error."""
-    from ..lod.progressive import ProgressiveOctree, open_sized
+    LOD octree as they load, and the render waits for it; ``options``: ``--colors``/``--chunked``,
+    cloud_opts.open_files); files show a bar while they are read (on a terminal). A load that
+    stops (a corrupt file, the memory limit) raises its error."""
+    from ..lod.progressive import ProgressiveOctree
 
-    cloud = open_sized(inputs, point_budget, progressive, progress=err_console().is_terminal)
+    cloud = open_files(inputs, point_budget, progressive, options or {}, progress=err_console().is_terminal)
     if isinstance(cloud, ProgressiveOctree):
         total = cloud.loader.total
         with progress_bar(f"reading {cloud.name} into an LOD octree", total) as advance:
@@ -140,6 +142,8 @@ def render(
             help="Build an LOD octree while reading and render from it (default: for inputs above the point budget).",
         ),
     ] = None,
+    colors: ColorsOption = "auto",
+    chunked: ChunkedOption = None,
 ) -> None:
     """Render point clouds to an image (or a turntable video)."""
     import gigapoint as gp
@@ -158,7 +162,7 @@ def render(
     if view not in VIEWS:
         raise GigapointError(f"--view: unknown view {view!r}; choose one of {', '.join(VIEWS)}")
     check_image_size(width, height, fov)  # before reading anything
-    cloud = open_inputs(inputs, settings.point_budget, progressive)
+    cloud = open_inputs(inputs, settings.point_budget, progressive, cloud_options(colors, chunked))
     prepare_cloud(cloud, settings)
     if turntable is not None:
         from ..render.video import render_turntable
@@ -196,6 +200,7 @@ def demo(
     seed: Annotated[int, typer.Option(help="Seed of the procedural scene.")] = 0,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing output file.")] = False,
     live: Annotated[bool, typer.Option("--live", help="Instead: a synthetic depth sensor flying through the demo town, in the viewer.")] = False,
+    colors: ColorsOption = "auto",
 ) -> None:
     """Generate the procedural demo scene, render it and report how fast each step was."""
     if live:
@@ -217,13 +222,14 @@ def demo(
     check_output(output, overwrite)
     check_image_size(width, height)
     settings = settings_from_options(RenderSettings, {"threads": threads})  # a bad --threads is named
+    check_colors(colors)
     compiled_before = compiling.compiled_seconds()
     t0 = time.perf_counter()
     with status(f"generating the demo scene ({points:,} points)"):
         xyz, rgba, attrs = demo_arrays(points, seed)
     t1 = time.perf_counter()
     with status("Morton sort and batching"):
-        cloud = build_cloud([PointChunk(xyz, rgba, attrs)], name=f"demo({points:,})")
+        cloud = build_cloud([PointChunk(xyz, rgba, attrs)], name=f"demo({points:,})", colors=colors)
     del xyz, rgba, attrs
     t2 = time.perf_counter()
     cam = make_camera(cloud, width, height, view, None, "perspective", 60.0)

@@ -12,6 +12,7 @@ import typer
 
 from ..errors import GigapointError
 from .app import app, prefer_passive_wait
+from .cloud_opts import ChunkedOption, ColorsOption, cloud_options, open_files, option_names
 
 
 def _open_browser(url: str) -> None:
@@ -41,14 +42,19 @@ def view(
     keep: int = typer.Option(100, "--keep", help="Live: frames drawn (the oldest leaves as a new one arrives)."),
     decay: float | None = typer.Option(None, "--decay", help="Live: seconds after which a frame leaves (default: never)."),
     record: Path | None = typer.Option(None, "--record", help="Live: also record the stream into this folder."),
+    colors: ColorsOption = "auto",
+    chunked: ChunkedOption = None,
 ) -> None:
     """Serve an interactive viewer of PATH... in the browser (Ctrl+C stops it)."""
     prefer_passive_wait()
+    options = cloud_options(colors, chunked)
     if live is not None or replay is not None:
         from .live_cmd import check_live_options, view_live
 
         if paths or demo is not None or (live is not None and replay is not None):
             raise GigapointError("view: give one of PATH..., --demo N, --live SOURCE or --replay DIR")
+        if options:
+            raise GigapointError(f"{option_names(options)}: options of a point cloud held in memory, not of a live stream")
         if window:
             raise GigapointError("view: --window does not show live streams yet; use the browser viewer (without --window)")
         check_live_options(keep, decay, 1.0)
@@ -67,16 +73,17 @@ def view(
     if demo is not None:
         if not 1 <= demo <= 2_000_000_000:
             raise GigapointError(f"--demo: point count must be in 1..2e9, got {demo}")
-        cloud = gigapoint.demo(demo, progressive=progressive if progressive is not None else demo > budget)
+        if options and progressive:
+            raise GigapointError(f"{option_names(options)}: options of a point cloud held in memory, not of --progressive")
+        cloud = gigapoint.demo(demo, progressive=progressive if progressive is not None else demo > budget and not options, **options)
     elif paths:
         from ..lod import OctreeDir
         from ..lod.preview import wait_for_preview
-        from ..lod.progressive import open_sized
 
         if len(paths) == 1 and OctreeDir(paths[0]).awaiting_preview:  # `convert` was started a moment ago
             print(f"gigapoint viewer: waiting for the first preview of the conversion into {paths[0]} ...", file=sys.stderr)
             wait_for_preview(paths[0])
-        cloud = open_sized(paths, budget, progressive)  # big: shown while it loads
+        cloud = open_files(paths, budget, progressive, options, progress=False)  # big: shown while it loads
     else:
         raise GigapointError("view: name at least one file or directory (or --demo N)")
     if window:  # native window (rendercanvas + glfw), no server

@@ -1,0 +1,77 @@
+"""``--colors`` and ``--chunked/--no-chunked``: how the commands that open point files hold them
+(``gp.open``'s ``colors`` and ``chunked``; core/cloud.py's colour formats, core/chunked.py).
+
+Given explicitly, either one asks for *one point cloud built from the files*: an input that is
+an octree (a converted folder, COPC, EPT) or ``--progressive`` does not hold points that way,
+so they are refused with a line naming the option instead of being ignored silently.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+from ..core.cloud import COLOR_FORMATS
+from ..errors import GigapointError
+
+ColorsOption = Annotated[
+    str,
+    typer.Option(
+        "--colors",
+        help="How the points' colours are held: auto (per-block palettes where they are as faithful as RGB565, "
+        "else RGB565; 32 bits where the files have no scale), rgba (32 bits, exact), rgb565 (16 bits) or palette (8 bits).",
+    ),
+]
+ChunkedOption = Annotated[
+    bool | None,
+    typer.Option(
+        "--chunked/--no-chunked",
+        help="Build the cloud in bounded memory (the files read three times, ~30 bytes a point of temporary disk; "
+        "the same cloud). Default: when the headers count more than 50 M points.",
+    ),
+]
+
+
+def check_colors(colors: str) -> str:
+    """``colors`` if it names a colour format, else a one-line error naming ``--colors``."""
+    if colors not in COLOR_FORMATS:
+        raise GigapointError(f"--colors: unknown colour format {colors!r}; choose one of {', '.join(COLOR_FORMATS)}")
+    return colors
+
+
+def cloud_options(colors: str, chunked: bool | None) -> dict:
+    """``gp.open`` keywords for the options given (none for the defaults)."""
+    check_colors(colors)
+    options: dict = {}
+    if colors != "auto":
+        options["colors"] = colors
+    if chunked is not None:
+        options["chunked"] = chunked
+    return options
+
+
+def option_names(options: dict) -> str:
+    """'--colors', '--chunked' or both, for messages."""
+    return " and ".join(f"--{k}" for k in options)
+
+
+def open_files(inputs, point_budget: int, progressive: bool | None, options: dict, progress: bool):
+    """What ``render`` and ``view`` open: ``open_sized``'s choice (an octree as itself, big inputs
+    progressively, else one PointCloud); with ``options`` (``cloud_options``) always one
+    PointCloud built with them."""
+    from ..io import open_cloud
+    from ..lod import is_lod_source
+    from ..lod.progressive import open_sized
+
+    if not options:
+        return open_sized(inputs, point_budget, progressive, progress=progress)
+    if progressive:
+        raise GigapointError(f"{option_names(options)}: options of a point cloud held in memory, not of --progressive")
+    octrees = [str(p) for p in inputs if is_lod_source(p)]
+    if octrees:
+        raise GigapointError(f"{option_names(options)}: {octrees[0]} is an octree, drawn as stored; the option applies to point files")
+    return open_cloud(*inputs, progress=progress, **options)
+
+
+__all__ = ["ChunkedOption", "ColorsOption", "check_colors", "cloud_options", "open_files"]
