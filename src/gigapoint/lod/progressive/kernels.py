@@ -59,18 +59,21 @@ def _new_node(parent, d, key, level, parent_of, children, leaf, count, first_chu
 
 @njit(cache=True)
 def distribute(
-    codes, root, key, level, parent_of, children, leaf, count, first_chunk, last_chunk, cmin, edge, n_nodes, leaf_runs, inner_runs
+    codes, roots, key, level, parent_of, children, leaf, count, first_chunk, last_chunk, cmin, edge, n_nodes, leaf_runs, inner_runs
 ):
-    """Route the sorted ``codes`` from ``root`` down to the leaves, creating missing children as
-    empty leaves. Returns (leaf runs, inner runs, nodes): ``leaf_runs[k]`` / ``inner_runs[k]``
-    = (node, lo, hi) of the points each node receives; -1 leaf runs when the node arrays are full."""
+    """Route the sorted ``codes`` down to the leaves, ``roots[j]`` = (node, lo, hi): codes[lo:hi]
+    from that node (disjoint subtrees), creating missing children as empty leaves. Returns (leaf
+    runs, inner runs, nodes): ``leaf_runs[k]`` / ``inner_runs[k]`` = (node, lo, hi) of the points
+    each node receives, parents before children; -1 leaf runs when the node arrays are full."""
     cap = key.shape[0]
-    st_node = np.empty(_STACK, np.int64)
-    st_lo = np.empty(_STACK, np.int64)
-    st_hi = np.empty(_STACK, np.int64)
+    size = _STACK + roots.shape[0]
+    st_node = np.empty(size, np.int64)
+    st_lo = np.empty(size, np.int64)
+    st_hi = np.empty(size, np.int64)
     top = 0
-    st_node[0], st_lo[0], st_hi[0] = root, 0, codes.shape[0]
-    top = 1
+    for j in range(roots.shape[0] - 1, -1, -1):
+        st_node[top], st_lo[top], st_hi[top] = roots[j, 0], roots[j, 1], roots[j, 2]
+        top += 1
     nl = 0
     ni = 0
     while top > 0:
@@ -89,9 +92,10 @@ def distribute(
         shift = np.uint64(3 * (CODE_BITS - lev - 1))
         s = lo
         for d in range(8):
-            # the first code at or past child d + 1's range
+            # the first code at or past child d + 1's range (the last child takes the rest: a
+            # spilled point's code, taken from its decoded position, may round past its leaf's range)
             bound = ((prefix << np.uint64(3)) | np.uint64(d + 1)) << shift
-            a, b = s, hi
+            a, b = (s, hi) if d < 7 else (hi, hi)
             while a < b:
                 m = (a + b) >> 1
                 if codes[m] < bound:
@@ -312,6 +316,8 @@ def allocate(lists, counts, chunk_size, first_chunk, last_chunk, level, leaf, cm
                 if points and n_free > 0:
                     n_free -= 1
                     c = free[n_free]
+                    f = np.int64(ext_first[c])  # a split leaf's chunk: its stream was written (a new one is the pool's zeros)
+                    ext[f : f + stream] = 0
                 else:
                     c = n_chunks
                     n_chunks += 1
@@ -319,9 +325,6 @@ def allocate(lists, counts, chunk_size, first_chunk, last_chunk, level, leaf, cm
                     code[c] = WIDE_CODE if points else 0
                     if points:
                         n_streams += 1
-                if points:
-                    f = np.int64(ext_first[c])
-                    ext[f : f + stream] = 0
                 fill[c] = 0
                 chunk_next[c] = -1
                 chunk_node[c] = node
@@ -481,17 +484,19 @@ def write_voxels(vid, is_new, node, cell, sums, level, slots_of_new, first_new, 
 
 
 @njit(parallel=True, cache=True)
-def dequantize_slots(low, ext, ext_first, code, chunk_size, slots, box_min, edge, out):
-    """float64 positions (30-bit cell centres) of a node's entries at ``slots``, its chunks'
-    box starting at ``box_min``, through the compact layout's decoder (core/compact.py)."""
-    inv = edge / _SCALE30
+def dequantize_slots(low, ext, ext_first, code, chunk_size, slots, chunk_node, box_min, edge, out):
+    """float64 positions (30-bit cell centres) of the entries at pool ``slots``, through the
+    compact layout's decoder (core/compact.py): an entry's chunk belongs to a node, whose chunks'
+    box starts at ``box_min[node]`` with edge ``edge[node]``."""
     for k in prange(slots.shape[0]):
         s = slots[k]
         c = s // chunk_size
+        node = chunk_node[c]
+        inv = edge[node] / _SCALE30
         cd = code[c]
         med, high = tail_words(read_ext(ext, ext_first[c], code_bits(cd), s - c * chunk_size), cd)
         for a in range(3):
             sh = np.uint32(WORD_BITS * a)
             q = (np.int64((low[s] >> sh) & np.uint32(WORD_MASK)) << 20) | (np.int64((med >> sh) & np.uint32(WORD_MASK)) << 10)
             q |= np.int64((high >> sh) & np.uint32(WORD_MASK))
-            out[k, a] = box_min[a] + (q + 0.5) * inv
+            out[k, a] = box_min[node, a] + (q + 0.5) * inv

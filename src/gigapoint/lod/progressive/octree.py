@@ -163,6 +163,30 @@ class Pool:
         return info
 
 
+class _Scratch:
+    """Work arrays kept from insertion to insertion, by name. Fresh ones cost their pages' first
+    touch on every call: on this kind of VM 1-2.5 ms a MB, 60 of sample_runs' 90 ms for a 1 M
+    batch. Views of a name's array are valid until that name is asked for again."""
+
+    def __init__(self):
+        self._arrays: dict[str, np.ndarray] = {}
+
+    def get(self, name: str, n: int, dtype, width: int = 0) -> np.ndarray:
+        """An uninitialised (n,) array, or (n, width) when ``width``."""
+        size = n * max(width, 1)
+        a = self._arrays.get(name)
+        if a is None or a.size < size or a.dtype != dtype:
+            a = self._arrays[name] = np.empty(size + size // 4, dtype)  # some room: batch sizes vary
+        return a[:size].reshape((n, width) if width else n)
+
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in self._arrays.values())
+
+    def clear(self) -> None:
+        self._arrays.clear()
+
+
 def _chunk_of(parts) -> PointChunk:
     xyz = np.concatenate([p[0] for p in parts])
     rgba = np.concatenate([p[1] for p in parts]).view(np.uint8).reshape(-1, 4)
@@ -178,20 +202,22 @@ def _runs(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 class _Set:
-    """Points to be routed from node ``start`` (a batch from the root; a split leaf's points from
-    that leaf): their codes sorted, and ``order``, where sorted point k is in the arrays as given
-    (the kernels read through it: no sorted copy of positions, colours or attributes is made)."""
+    """Points to be routed from the nodes ``starts`` (a batch from the root; the points of the
+    leaves split by a batch, each from its leaf: disjoint subtrees, so one sort and one pass of
+    each kernel serve them all): their codes sorted, and ``order``, where sorted point k is in
+    the arrays as given (the kernels read through it: no sorted copy of positions, colours or
+    attributes is made)."""
 
-    __slots__ = ("attrs", "codes", "order", "rgba", "start", "xyz")
+    __slots__ = ("attrs", "codes", "order", "rgba", "starts", "xyz")
 
-    def __init__(self, start, codes, order, xyz, rgba, attrs):
-        self.start, self.codes, self.order, self.xyz, self.rgba, self.attrs = start, codes, order, xyz, rgba, attrs
+    def __init__(self, starts, codes, order, xyz, rgba, attrs):
+        self.starts, self.codes, self.order, self.xyz, self.rgba, self.attrs = starts, codes, order, xyz, rgba, attrs
 
     @classmethod
-    def of(cls, start: int, xyz, rgba, attrs: dict, origin, edge: float) -> _Set:
+    def of(cls, starts, xyz, rgba, attrs: dict, origin, edge: float) -> _Set:
         codes = point_codes(xyz, origin, edge)
         order = argsort_codes(codes)
-        return cls(start, take(codes, order), order, xyz, rgba, attrs)
+        return cls(np.atleast_1d(np.asarray(starts, np.int64)), take(codes, order), order, xyz, rgba, attrs)
 
 
 class ProgressiveOctree:
@@ -230,6 +256,7 @@ class ProgressiveOctree:
         self._hkeys = np.full(1 << 17, K.EMPTY_KEY, np.uint64)
         self._hvals = np.zeros(1 << 17, np.uint32)
         self._run_lo = self._run_hi = self._ent_start = self._ent_count = np.empty(0, np.int64)  # sample_runs' scratch
+        self._scratch = _Scratch()
         self._free = np.zeros(_INITIAL_CHUNKS, np.int64)
         self._n_free = 0
         self._n_chunks = 0
@@ -316,6 +343,7 @@ class ProgressiveOctree:
 
     def _drop_voxel_state(self) -> None:
         self._voxel_state = False
+        self._scratch.clear()
         self.vox_key, self.vox_slot, self.vox_sum = np.zeros(0, np.uint64), np.zeros(0, np.uint32), np.zeros((0, 5), np.uint32)
         self._hkeys, self._hvals = np.zeros(0, np.uint64), np.zeros(0, np.uint32)
 
@@ -339,7 +367,7 @@ class ProgressiveOctree:
         self._voxel_state = True
         if n:
             st = _Set.of(self.root, *self._all_points(), self.origin, self.edge)
-            _, node, cell, _, sums = self._voxel_cells(st, *self._distribute(st.codes, self.root))
+            _, node, cell, _, sums = self._voxel_cells(st, *self._distribute(st))
             vid = np.empty(len(node), np.int64)
             is_new = np.empty(len(node), np.uint8)
             assert K.voxel_ids(self._hkeys, self._hvals, node, cell, n, vid, is_new) == n  # every cell is a voxel already
@@ -417,7 +445,7 @@ class ProgressiveOctree:
     def memory(self) -> dict[str, int]:
         """Bytes per component: the pool's positions (low words and streams), colours, attributes
         and batch records (points and voxels, with the room kept for growth), the voxels' colour
-        sums and lookup table (build state, none once trimmed), and the nodes."""
+        sums and lookup table and the insertions' work arrays (build state, none once trimmed), and the nodes."""
         def size(*arrays) -> int:
             return int(sum(a.nbytes for a in arrays))
 
@@ -430,6 +458,7 @@ class ProgressiveOctree:
                 "batches": size(pool.batches, pool.packing, pool.chunk_next, pool.chunk_node, pool.batch_version),
             }  # fmt: skip
         m["voxels"] = size(self.vox_key, self.vox_slot, self.vox_sum, self._hkeys, self._hvals)
+        m["scratch"] = self._scratch.nbytes
         m["nodes"] = size(self.key, self.level, self.parent, self.children, self.leaf, self.count, self.first_chunk, self.last_chunk,
                           self.list_count, self.cmin, self.cedge, self._free)  # fmt: skip
         return m
@@ -531,11 +560,12 @@ class ProgressiveOctree:
             self._start(lo - pad, float(np.max(hi - lo)) + 2 * pad)
         while np.any(lo < self.origin) or np.any(hi > self.origin + self.edge):
             self._grow(lo, hi)
-        # The batch and, for every leaf that would overflow, its points (spilled: inserted again
-        # from that leaf down), each sorted by code and routed, until no leaf overflows.
+        # The batch and the points of every leaf that would overflow (spilled: inserted again
+        # from that leaf down, all such leaves' points one set), sorted by code and routed, until
+        # no leaf overflows.
         sets = [_Set.of(self.root, xyz, rgba, attrs, self.origin, self.edge)]
         while True:
-            routes = [self._distribute(st.codes, st.start) for st in sets]
+            routes = [self._distribute(st) for st in sets]
             incoming = np.zeros(self.n_nodes, np.int64)
             for leaf_runs, _ in routes:
                 np.add.at(incoming, leaf_runs[:, 0], leaf_runs[:, 2] - leaf_runs[:, 1])
@@ -543,11 +573,10 @@ class ProgressiveOctree:
             over = hit[(self.count[hit] + incoming[hit] > self.max_leaf) & (self.level[hit] < CODE_BITS)]
             if not len(over):
                 break
-            for node in over.tolist():
-                if self.count[node]:
-                    sets.append(_Set.of(node, *self._split(node), self.origin, self.edge))
-                else:
-                    self.leaf[node] = 0  # created by this batch: nothing stored to spill
+            stored = over[self.count[over] > 0]
+            self.leaf[over[self.count[over] == 0]] = 0  # created by this batch: nothing stored to spill
+            if len(stored):
+                sets.append(_Set.of(stored, *self._split(stored), self.origin, self.edge))
         self.pool.version += 1
         for st, (leaf_runs, inner_runs) in zip(sets, routes):
             self._sample(st, leaf_runs, inner_runs)
@@ -556,35 +585,50 @@ class ProgressiveOctree:
         self.lo, self.hi = np.minimum(self.lo, lo), np.maximum(self.hi, hi)
         self.pool.bounds = self.bounds
 
-    def _distribute(self, codes, start: int) -> tuple[np.ndarray, np.ndarray]:
-        """(leaf runs, inner runs) of sorted codes routed from node ``start``, growing the node
-        arrays as needed."""
+    def _distribute(self, st: _Set) -> tuple[np.ndarray, np.ndarray]:
+        """(leaf runs, inner runs) of a set's sorted codes routed from its start nodes, growing
+        the node arrays as needed."""
+        codes, starts = st.codes, st.starts
+        roots = np.empty((len(starts), 3), np.int64)
+        roots[:, 0] = starts
+        if len(starts) == 1:
+            roots[0, 1:] = 0, len(codes)
+        else:  # each start's codes: one run, the runs in code order and covering every code
+            by_code = np.argsort(self.key[starts] << (np.uint64(3) * (CODE_BITS - self.level[starts]).astype(np.uint64)))
+            roots = roots[by_code]
+            lev = self.level[roots[:, 0]].astype(np.uint64)
+            prefix = self.key[roots[:, 0]] ^ (np.uint64(1) << (np.uint64(3) * lev))
+            first = prefix << (np.uint64(3) * (np.uint64(CODE_BITS) - lev))
+            roots[:, 1] = np.searchsorted(codes, first)
+            roots[0, 1] = 0
+            roots[:-1, 2] = roots[1:, 1]
+            roots[-1, 2] = len(codes)
         while True:
             cap = len(self.key)
             leaf_runs = np.empty((cap, 3), np.int64)
             inner_runs = np.empty((cap, 3), np.int64)
-            nl, ni, n_nodes = K.distribute(codes, start, self.key, self.level, self.parent, self.children, self.leaf, self.count,
+            nl, ni, n_nodes = K.distribute(codes, roots, self.key, self.level, self.parent, self.children, self.leaf, self.count,
                                            self.first_chunk, self.last_chunk, self.cmin, self.cedge, self.n_nodes, leaf_runs, inner_runs)  # fmt: skip
             self.n_nodes = n_nodes
             if nl >= 0:
                 return leaf_runs[:nl], inner_runs[:ni]
             self._nodes(2 * cap)
 
-    def _split(self, node: int):
-        """Turn leaf ``node`` into an (empty) inner node; its points come back, to be inserted again."""
+    def _split(self, nodes: np.ndarray):
+        """Turn the leaves ``nodes`` into (empty) inner nodes; their points come back, to be inserted again."""
         pool = self.pool
-        slots = self._list_slots(node * K.LISTS)
-        k = len(slots)
-        xyz = self._decode(node, slots)
-        rgba = pool.color[slots]
-        attrs = {a: v[slots] for a, v in pool.attributes.items()}
-        self._n_free = K.free_chunks(
-            self.first_chunk, self.last_chunk, pool.chunk_next, pool.batches["count"], node * K.LISTS, self._free, self._n_free
-        )
-        self.list_count[node * K.LISTS] = 0
-        self.leaf[node] = 0
-        self.count[node] = 0
-        self.points -= k  # they are counted again when inserted again
+        slots = np.concatenate([self._list_slots(node * K.LISTS) for node in nodes.tolist()])
+        xyz = self._decode(slots)
+        rgba = take(pool.color, slots)
+        attrs = {a: take(v, slots) for a, v in pool.attributes.items()}
+        for node in nodes.tolist():
+            self._n_free = K.free_chunks(
+                self.first_chunk, self.last_chunk, pool.chunk_next, pool.batches["count"], node * K.LISTS, self._free, self._n_free
+            )
+        self.list_count[nodes * K.LISTS] = 0
+        self.leaf[nodes] = 0
+        self.count[nodes] = 0
+        self.points -= len(slots)  # they are counted again when inserted again
         return xyz, rgba, attrs
 
     def _allocate(self, lists: np.ndarray, counts: np.ndarray, points: bool) -> np.ndarray:
@@ -594,7 +638,7 @@ class ProgressiveOctree:
         extra = K.chunks_needed(lists, counts, pool.chunk, self.last_chunk, pool.batches["count"])
         self._ensure_chunks(extra, extra if points else 0)
         pool = self.pool
-        slots = np.empty(int(counts.sum()), np.int64)
+        slots = self._scratch.get("point_slots" if points else "voxel_slots", int(counts.sum()), np.int64)
         b, pk = pool.batches, pool.packing
         self._n_free, self._n_chunks, self._n_streams = K.allocate(
             lists, counts, pool.chunk, self.first_chunk, self.last_chunk, self.level, self.leaf, self.cmin, self.cedge, b["count"],
@@ -626,10 +670,11 @@ class ProgressiveOctree:
             self._ent_start = np.zeros(len(self.key), np.int64)
             self._ent_count = np.zeros(len(self.key), np.int64)
         cap = 2 * len(st.codes) + 1024
+        scratch = self._scratch
         while True:
-            e_cell, e_local = np.empty(cap, np.uint64), np.empty(cap, np.uint64)
-            e_first, e_node = np.empty(cap, np.int64), np.empty(cap, np.int64)
-            e_sum = np.empty((cap, 5), np.uint32)
+            e_cell, e_local = scratch.get("e_cell", cap, np.uint64), scratch.get("e_local", cap, np.uint64)
+            e_first, e_node = scratch.get("e_first", cap, np.int64), scratch.get("e_node", cap, np.int64)
+            e_sum = scratch.get("e_sum", cap, np.uint32, 5)
             m = K.sample_runs(st.codes, st.rgba, st.order, inner_runs, leaf_runs, self.level, self.leaf, self.children, self._run_lo, self._run_hi,
                               self._ent_start, self._ent_count, e_cell, e_first, e_sum, e_node, e_local)  # fmt: skip
             if m >= 0:
@@ -652,8 +697,8 @@ class ProgressiveOctree:
         if m == 0:
             return
         self._ensure_hash(m)
-        vid = np.empty(m, np.int64)
-        is_new = np.empty(m, np.uint8)
+        vid = self._scratch.get("vid", m, np.int64)
+        is_new = self._scratch.get("is_new", m, np.uint8)
         next_vid = K.voxel_ids(self._hkeys, self._hvals, node, cell, self.n_voxels, vid, is_new)
         if next_vid > len(self.vox_key):
             cap = max(len(self.vox_key), 1)
@@ -702,17 +747,13 @@ class ProgressiveOctree:
         if self.pool is not None and self.points:  # the new root's voxels: every point seen so far passed it
             st = _Set.of(n, *self._all_points(), self.origin, self.edge)
             self.pool.version += 1
-            self._sample(st, *self._distribute(st.codes, n), only=n)
+            self._sample(st, *self._distribute(st), only=n)
 
     def _all_points(self):
         """(xyz, rgba, attributes) of every point in the leaves."""
-        parts = []
         pool = self.pool
-        for node in self.leaves().tolist():
-            slots = self._list_slots(node * K.LISTS)
-            parts.append((self._decode(node, slots), slots))
-        slots = np.concatenate([s for _, s in parts])
-        return np.concatenate([x for x, _ in parts]), pool.color[slots], {a: v[slots] for a, v in pool.attributes.items()}
+        slots = np.concatenate([self._list_slots(node * K.LISTS) for node in self.leaves().tolist()])
+        return self._decode(slots), take(pool.color, slots), {a: take(v, slots) for a, v in pool.attributes.items()}
 
     # ------------------------------------------------------------------ saving
     def chunks(self, points_per_chunk: int = 1_000_000):
@@ -723,7 +764,7 @@ class ProgressiveOctree:
         for node in leaves:
             with self.lock:
                 slots = self._list_slots(node * K.LISTS)
-                part = (self._decode(node, slots), self.pool.color[slots], {a: v[slots] for a, v in self.pool.attributes.items()})
+                part = (self._decode(slots), self.pool.color[slots], {a: v[slots] for a, v in self.pool.attributes.items()})
             parts.append(part)
             held += len(slots)
             if held >= points_per_chunk:
@@ -757,25 +798,19 @@ class ProgressiveOctree:
 
     def positions(self, slots) -> np.ndarray:
         """float64 positions (30-bit cell centres) of entries at pool ``slots``."""
-        pool = self.pool
-        slots = np.asarray(slots, np.int64)
-        out = np.empty((len(slots), 3))
-        chunks = slots // pool.chunk
-        for node in np.unique(pool.chunk_node[chunks]).tolist():
-            m = pool.chunk_node[chunks] == node
-            out[m] = self._decode(node, slots[m])
-        return out
+        return self._decode(np.asarray(slots, np.int64))
 
     def _box_min(self, nodes) -> np.ndarray:
         """The corner of the box of each node's chunks: its cube's, moved by VOXEL_SHIFT for an inner node's voxels."""
         return self.cmin[nodes] - np.where(self.leaf[nodes] == 1, 0.0, K.VOXEL_SHIFT * self.cedge[nodes])[..., None]
 
-    def _decode(self, node: int, slots: np.ndarray) -> np.ndarray:
-        """float64 positions of node ``node``'s entries at pool ``slots``."""
+    def _decode(self, slots: np.ndarray) -> np.ndarray:
+        """float64 positions of the entries at pool ``slots`` (each in its chunk's node's box)."""
         pool = self.pool
         out = np.empty((len(slots), 3))
-        K.dequantize_slots(pool.low, pool.ext, pool.packing["ext_first"], pool.packing["code"], pool.chunk, slots, self._box_min(node),
-                           float(self.cedge[node]), out)  # fmt: skip
+        n = self.n_nodes
+        K.dequantize_slots(pool.low, pool.ext, pool.packing["ext_first"], pool.packing["code"], pool.chunk, slots, pool.chunk_node,
+                           self._box_min(np.arange(n)), self.cedge[:n], out)  # fmt: skip
         return out
 
     # ------------------------------------------------------------------ drawing (Renderable)
