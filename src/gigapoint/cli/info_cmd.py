@@ -45,10 +45,15 @@ def info(
             import gigapoint as gp
 
             cloud = gp.open(path, **options)
+            held = attributes_held(cloud)
             if as_json:
-                typer.echo(json.dumps({"path": str(path), "layout": cloud.layout, "n_points": cloud.n_points, "memory": cloud.memory()}))
+                row = {"path": str(path), "layout": cloud.layout, "n_points": cloud.n_points, "memory": cloud.memory(), "attributes": held}
+                typer.echo(json.dumps(row))
             else:
                 typer.echo(memory_line(cloud))
+                if held:
+                    n = max(cloud.n_points, 1)
+                    typer.echo("attributes held: " + ", ".join(f"{k} {v['bytes'] / n:.2f} ({v['held']})" for k, v in held.items()))
 
 
 def memory_line(cloud) -> str:
@@ -67,6 +72,17 @@ def memory_line(cloud) -> str:
     total = sum(m.values())
     parts = ", ".join(f"{k} {v / n:.2f}" for k, v in m.items())
     return f"memory: {total / 2**20:,.1f} MiB, {total / n:.2f} bytes/point: {parts} ({cloud.layout} layout){tail}"
+
+
+def attributes_held(cloud) -> dict:
+    """Per attribute of a PointCloud: bytes held and how (core/attributes.py: 'uint8 + 1200',
+    'constant 7326', or the dtype as read); {} for other kinds of cloud."""
+    from ..core import PointCloud
+
+    if not isinstance(cloud, PointCloud):
+        return {}
+    a = cloud.attributes
+    return {k: {"bytes": a.nbytes_of(k), "held": a.held_dtype(k)} for k in a}
 
 
 def peak_rss() -> int:

@@ -38,6 +38,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from .attributes import Attributes
 from .chunk import PointChunk
 from .cloud import PointCloud, _valid_mask, check_valid_count, finest_scale, gather, scan_points, storage_format
 from .compact import compact_positions, ext_bits_per_point, pack_rgb565, stream_words
@@ -304,6 +305,7 @@ def _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, color_format, a
         expected = int(stream_words(ext_bits_per_point(packing, counts), counts).sum())
         assert len(ext) == expected == ext_words, (len(ext), expected, ext_words)
     data_bounds = None if compact is None else (np.asarray(lo, np.float64).copy(), np.asarray(hi, np.float64).copy())
+    attrs = Attributes(attrs, packed=True)  # each in its real range (core/attributes.py), as build_cloud's
     cloud = PointCloud(batches, low, med, high, color if palettes is None else palettes, attrs, name=name, skipped=skipped, ext=ext, packing=packing, data_bounds=data_bounds)
     cloud.source_scale = source_scale
     return cloud

@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError
+from .attributes import Attributes
 from .chunk import PointChunk
 from .compact import colors_at, compact_positions, full_words, pack_rgb565, point_words, rgba32
 from .layout import BATCH_DTYPE, BATCH_SIZE
@@ -44,7 +45,9 @@ class PointCloud:
     # u32 per point: RGBA8 little-endian (r in the low byte); u16 RGB565 in the compact layout
     # (compact.py); or per-block palettes and u8 indices (palette.py: ``colors="palette"``)
     color: np.ndarray | PaletteColors
-    attributes: dict[str, np.ndarray] = field(default_factory=dict)
+    # per point, by name; held in their real range where built from points (core/attributes.py),
+    # read back in their own dtype: ``attributes[name]``, ``attributes.at(name, indices)``
+    attributes: Attributes = field(default_factory=Attributes)
     name: str = "cloud"
     skipped: int = 0  # invalid input points (NaN, inf, absurd) left out
     # the resolution the source stored coordinates at, per axis (a LAS file's scale; the finest
@@ -55,6 +58,10 @@ class PointCloud:
     ext: np.ndarray | None = None
     packing: np.ndarray | None = None
     data_bounds: tuple[np.ndarray, np.ndarray] | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.attributes, Attributes):  # a dict of arrays: held as given
+            self.attributes = Attributes(self.attributes)
 
     version: ClassVar[None] = None  # PointBuffers: the arrays never change once built
     batch_version: ClassVar[None] = None
@@ -119,7 +126,7 @@ class PointCloud:
         return {
             "positions": int(pos),
             "color": int(self.color.nbytes),
-            "attributes": int(sum(v.nbytes for v in self.attributes.values())),
+            "attributes": self.attributes.nbytes,
             "batches": int(batches),
         }
 
@@ -129,7 +136,7 @@ class PointCloud:
         if self.packing is None:
             return self
         med, high = full_words(self)
-        return PointCloud(self.batches.copy(), self.low.copy(), med, high, rgba32(self.color), dict(self.attributes), name=self.name,
+        return PointCloud(self.batches.copy(), self.low.copy(), med, high, rgba32(self.color), self.attributes.copy(), name=self.name,
                           skipped=self.skipped, source_scale=self.source_scale, data_bounds=self.data_bounds)  # fmt: skip
 
     @property
@@ -152,8 +159,8 @@ class PointCloud:
             position = [round(float(v), scale_decimals(s)) for v, s in zip(position, self.source_scale)]
         info = {"index": int(index), "position": [float(v) for v in position]}
         info["rgba"] = colors_at(self.color, [index]).view(np.uint8).tolist()
-        for name, values in self.attributes.items():
-            v = values[index]
+        for name in self.attributes:
+            v = self.attributes.at(name, [index])[0]  # one point's, not the whole array decoded
             info[name] = v.tolist() if hasattr(v, "tolist") else v
         return info
 
@@ -367,7 +374,7 @@ def cloud_from_points(
     rgba = np.ascontiguousarray(rgba, np.uint8)
     color = gather(rgba.view(np.uint32).reshape(-1), order)  # RGBA8 as one u32 a point
     color = encode_colors(color, colors)
-    attrs = {a: gather(v, order) for a, v in (attributes or {}).items()}
+    attrs = Attributes({a: gather(v, order) for a, v in (attributes or {}).items()}, packed=True)
     data_bounds = None if scale is None else (np.asarray(lo, np.float64).copy(), np.asarray(hi, np.float64).copy())
     return PointCloud(batches, low, med, high, color, attrs, name=name, skipped=skipped, ext=ext, packing=pack, data_bounds=data_bounds)
 
