@@ -40,13 +40,14 @@ from pathlib import Path
 from typing import Self
 
 import numpy as np
+from numba import types
+from numba.typed import List
 
 from ...core.chunk import PointChunk, colors_for
 from ...core.cloud import MAX_ABS_COORDINATE
 from ...core.compact import point_words, stream_words
 from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE, PACK_DTYPE
-from ...core.morton import argsort_codes
 from ...core.quantize import dequantize
 from ...core.renderable import DrawList, MultiViewDrawList
 from ...core.selection import Selection, View, batch_matrices, precision_for
@@ -69,7 +70,12 @@ _PRESIZE_TABLE_MAX = 16_000_000  # ... and the voxel table (filled up front: ~0.
 _GROWTH_MAX_CHUNKS = 16_384  # the pool grows by at most this many chunks (32 M entries, ~0.6 GB) beyond doubling small pools
 
 
-_UINT_OF_SIZE = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}  # attributes moved as same-width integers
+def _byte_views(arrays) -> List:
+    """Contiguous 1-D arrays as a numba list of their bytes (kernels move attributes of any type as bytes)."""
+    views = List.empty_list(types.uint8[::1])
+    for a in arrays:
+        views.append(a.view(np.uint8))
+    return views
 
 
 class Pool:
@@ -214,10 +220,19 @@ class _Set:
         self.starts, self.codes, self.order, self.xyz, self.rgba, self.attrs = starts, codes, order, xyz, rgba, attrs
 
     @classmethod
-    def of(cls, starts, xyz, rgba, attrs: dict, origin, edge: float) -> _Set:
+    def of(cls, starts, xyz, rgba, attrs: dict, origin, edge: float, scratch: _Scratch | None = None, tag: str = "") -> _Set:
+        """The set sorted; its order and sorted codes in ``scratch`` as ``order<tag>`` and
+        ``codes<tag>`` when given (a batch's sets: alive together, so each its own tag)."""
         codes = point_codes(xyz, origin, edge)
-        order = argsort_codes(codes)
-        return cls(np.atleast_1d(np.asarray(starts, np.int64)), take(codes, order), order, xyz, rgba, attrs)
+        n = len(codes)
+        scratch = scratch or _Scratch()
+        keys = scratch.get("keys", n, np.uint64)
+        index_bits = max(1, (n - 1).bit_length())
+        K.sort_keys(codes, index_bits, keys)
+        keys.sort()
+        order, sorted_codes = scratch.get(f"order{tag}", n, np.int64), scratch.get(f"codes{tag}", n, np.uint64)
+        K.code_order(keys, codes, index_bits, order, sorted_codes)
+        return cls(np.atleast_1d(np.asarray(starts, np.int64)), sorted_codes, order, xyz, rgba, attrs)
 
 
 class ProgressiveOctree:
@@ -563,7 +578,7 @@ class ProgressiveOctree:
         # The batch and the points of every leaf that would overflow (spilled: inserted again
         # from that leaf down, all such leaves' points one set), sorted by code and routed, until
         # no leaf overflows.
-        sets = [_Set.of(self.root, xyz, rgba, attrs, self.origin, self.edge)]
+        sets = [_Set.of(self.root, xyz, rgba, attrs, self.origin, self.edge, self._scratch, "0")]
         while True:
             routes = [self._distribute(st) for st in sets]
             incoming = np.zeros(self.n_nodes, np.int64)
@@ -576,7 +591,7 @@ class ProgressiveOctree:
             stored = over[self.count[over] > 0]
             self.leaf[over[self.count[over] == 0]] = 0  # created by this batch: nothing stored to spill
             if len(stored):
-                sets.append(_Set.of(stored, *self._split(stored), self.origin, self.edge))
+                sets.append(_Set.of(stored, *self._split(stored), self.origin, self.edge, self._scratch, str(len(sets))))
         self.pool.version += 1
         for st, (leaf_runs, inner_runs) in zip(sets, routes):
             self._sample(st, leaf_runs, inner_runs)
@@ -655,11 +670,10 @@ class ProgressiveOctree:
         slots = self._allocate(leaf_runs[:, 0] * K.LISTS, counts, points=True)  # a leaf's points: its list 0
         offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
         pool = self.pool
-        K.write_points(st.xyz, st.rgba, st.order, leaf_runs, offsets, slots, self.cmin, self.cedge, pool.low, pool.ext,
+        src, dst = _byte_views(np.ascontiguousarray(st.attrs[a]) for a in pool.attributes), _byte_views(pool.attributes.values())
+        width = np.array([v.dtype.itemsize for v in pool.attributes.values()], np.int64)
+        K.write_points(st.xyz, st.rgba, src, dst, width, st.order, leaf_runs, offsets, slots, self.cmin, self.cedge, pool.low, pool.ext,
                        pool.packing["ext_first"], pool.chunk, pool.color)  # fmt: skip
-        for a, v in pool.attributes.items():
-            u = _UINT_OF_SIZE[v.dtype.itemsize]
-            K.scatter_runs(np.ascontiguousarray(st.attrs[a]).view(u), st.order, leaf_runs, offsets, slots, v.view(u))
 
     def _voxel_cells(self, st: _Set, leaf_runs, inner_runs, only: int | None = None):
         """(count, list, cell, first point, colour sums) of each voxel cell of the inner nodes
