@@ -162,6 +162,10 @@ def test_auto_picks_the_more_faithful_format(rng):
     translucent[0, 3] = 254
     assert build_cloud([PointChunk(xyz, translucent, {}, scale=(0.01,) * 3)]).color.dtype == np.uint32
     assert choose_palette(np.array([[5, 5]])) and not choose_palette(np.array([[6, 5], [0, 0]]))
+    assert isinstance(gp.from_arrays(xyz, smooth, scale=0.01).color, PaletteColors)  # from_arrays: "auto" too
+    assert gp.from_arrays(xyz, smooth, scale=0.01, colors="rgb565").color.dtype == np.uint16
+    with pytest.raises(InputError, match="colors must be one of"):
+        gp.from_arrays(xyz, smooth, scale=0.01, colors="full")
 
 
 @pytest.mark.parametrize("noisy", [False, True])

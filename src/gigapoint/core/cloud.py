@@ -392,12 +392,13 @@ def encode_colors(color: np.ndarray, colors: str) -> np.ndarray | PaletteColors:
     return color
 
 
-def from_arrays(xyz, rgb=None, name: str = "arrays", scale=None, **attributes) -> PointCloud:
+def from_arrays(xyz, rgb=None, name: str = "arrays", scale=None, colors: str = "auto", **attributes) -> PointCloud:
     """A PointCloud from numpy arrays: float64 (N, 3) positions, (N, 3|4) uint8/uint16/float colors.
 
     ``scale``: the grid the positions were measured on (metres, one value or one per axis, as a
     LAS file's scale): the cloud is then held in the compact layout, exact on that grid
-    (core/compact.py); points off it keep 30 bits a batch."""
+    (core/compact.py); points off it keep 30 bits a batch. ``colors``: how colours are held
+    (``build_cloud``: "auto", "rgba", "rgb565" or "palette")."""
     xyz = np.asarray(xyz)
     if xyz.ndim != 2 or xyz.shape[1] != 3:
         raise InputError(f"{name}: xyz must have shape (N, 3), got {xyz.shape}")
@@ -413,7 +414,7 @@ def from_arrays(xyz, rgb=None, name: str = "arrays", scale=None, **attributes) -
         chunk = PointChunk(xyz, rgb, {k: np.asarray(v) for k, v in attributes.items()}, scale=scale)
     except ValueError as exc:
         raise InputError(f"{name}: {exc}") from None
-    return build_cloud([chunk], name=name)
+    return build_cloud([chunk], name=name, colors=colors)
 
 
 __all__ = ["BATCH_DTYPE", "PointCloud", "build_cloud", "cloud_from_points", "from_arrays"]
