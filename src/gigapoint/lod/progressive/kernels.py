@@ -127,15 +127,19 @@ def sort_keys(codes, index_bits, keys):
 
 
 @njit(parallel=True, cache=True)
-def code_order(keys, codes, index_bits, order, sorted_codes):
-    """From the sorted ``sort_keys``: ``order`` (sorted point k is point order[k]) and the codes
-    sorted, the points whose keys tie (equal code prefixes: a few a million) ordered by their full codes."""
+def code_order(keys, codes, rgba, index_bits, order, sorted_codes, sorted_rgba):
+    """From the sorted ``sort_keys``: ``order`` (sorted point k is point order[k]), the codes
+    sorted, the points whose keys tie (equal code prefixes: a few a million) ordered by their
+    full codes, and the colours sorted (read by sample_runs and write_points in this order: one
+    gather, in parallel)."""
     mask = (np.uint64(1) << np.uint64(index_bits)) - np.uint64(1)
     for k in prange(keys.shape[0]):
         i = np.int64(keys[k] & mask)
         order[k] = i
         sorted_codes[k] = codes[i]
     _break_ties(keys, mask, order, sorted_codes)
+    for k in prange(keys.shape[0]):
+        sorted_rgba[k] = rgba[order[k]]
 
 
 @njit(cache=True)
@@ -219,7 +223,7 @@ def sample_runs(
                         for ch in range(5):
                             e_sum[m, ch] = 0
                         m += 1
-                    _add_color(e_sum, m - 1, rgba[order[i]])
+                    _add_color(e_sum, m - 1, rgba[i])
             else:
                 ccl = min(lev + 1 + GRID_BITS, CODE_BITS)
                 up = np.uint64(3 * (ccl - cl))
@@ -458,7 +462,7 @@ def write_points(xyz, rgba, attr_src, attr_dst, attr_width, order, leaf_runs, ru
     so runs never share a stream word), their colour and attributes (``attr_src[a]`` into
     ``attr_dst[a]``, as bytes, ``attr_width[a]`` (1, 2, 4 or 8) a point: one kernel for any set
     of attribute types, and one parallel region for all of them). The runs index the sorted points, point k
-    of which is xyz[order[k]] (no sorted copies made)."""
+    of which is xyz[order[k]] (no sorted copy of positions made), its colour rgba[k] (sorted)."""
     for r in prange(leaf_runs.shape[0]):
         node, lo, hi = leaf_runs[r, 0], leaf_runs[r, 1], leaf_runs[r, 2]
         inv = _SCALE30 / edge[node]
@@ -476,7 +480,7 @@ def write_points(xyz, rgba, attr_src, attr_dst, attr_width, order, leaf_runs, ru
             ext[w] |= v << sh
             if (p & 63) + WIDE_BITS > 64:
                 ext[w + 1] |= v >> (np.uint64(64) - sh)
-            color[s] = rgba[j]
+            color[s] = rgba[i]
         for a in range(len(attr_src)):
             src, dst, width = attr_src[a], attr_dst[a], attr_width[a]
             if width == 1:

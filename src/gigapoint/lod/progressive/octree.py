@@ -210,9 +210,9 @@ def _runs(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class _Set:
     """Points to be routed from the nodes ``starts`` (a batch from the root; the points of the
     leaves split by a batch, each from its leaf: disjoint subtrees, so one sort and one pass of
-    each kernel serve them all): their codes sorted, and ``order``, where sorted point k is in
-    the arrays as given (the kernels read through it: no sorted copy of positions, colours or
-    attributes is made)."""
+    each kernel serve them all): their codes and colours sorted, and ``order``, where sorted
+    point k is in the arrays as given (the kernels read positions and attributes through it: no
+    sorted copy of them is made)."""
 
     __slots__ = ("attrs", "codes", "order", "rgba", "starts", "xyz")
 
@@ -221,8 +221,8 @@ class _Set:
 
     @classmethod
     def of(cls, starts, xyz, rgba, attrs: dict, origin, edge: float, scratch: _Scratch | None = None, tag: str = "") -> _Set:
-        """The set sorted; its order and sorted codes in ``scratch`` as ``order<tag>`` and
-        ``codes<tag>`` when given (a batch's sets: alive together, so each its own tag)."""
+        """The set sorted; its order, sorted codes and colours in ``scratch`` as ``order<tag>``,
+        ``codes<tag>``, ``rgba<tag>`` when given (a batch's sets: alive together, so each its own tag)."""
         codes = point_codes(xyz, origin, edge)
         n = len(codes)
         scratch = scratch or _Scratch()
@@ -231,8 +231,9 @@ class _Set:
         K.sort_keys(codes, index_bits, keys)
         keys.sort()
         order, sorted_codes = scratch.get(f"order{tag}", n, np.int64), scratch.get(f"codes{tag}", n, np.uint64)
-        K.code_order(keys, codes, index_bits, order, sorted_codes)
-        return cls(np.atleast_1d(np.asarray(starts, np.int64)), sorted_codes, order, xyz, rgba, attrs)
+        sorted_rgba = scratch.get(f"rgba{tag}", n, np.uint32)
+        K.code_order(keys, codes, rgba, index_bits, order, sorted_codes, sorted_rgba)
+        return cls(np.atleast_1d(np.asarray(starts, np.int64)), sorted_codes, order, xyz, sorted_rgba, attrs)
 
 
 class ProgressiveOctree:
