@@ -11,6 +11,7 @@ import pytest
 
 from gigapoint import Camera, RenderSettings, render_frame
 from gigapoint.core import PointChunk
+from gigapoint.core.attributes import Attributes
 from gigapoint.core.layout import EMPTY_PIXEL
 from gigapoint.errors import InputError
 from gigapoint.lod import ConvertError, OctreeCloud, OctreeDir, convert, open_octree
@@ -211,12 +212,60 @@ def test_the_compact_arena_takes_fewer_bytes_a_point(las_pair, rgb565_octree):
         oc = open_octree(path)
         compact = oc.new_arena(50_000)
         words = Arena(compact.n_points, oc.name, oc.bounds)
-        compact.attributes = {}  # attributes are held alike in both
+        compact.attributes = Attributes()  # attributes: test_the_arena_holds_attributes_in_their_range
         room = compact.room * 8 / ARENA_CHUNK
         assert int(oc.ext_bits.max()) < 24 and room == pytest.approx(oc.ext_bits.max() / 8, abs=0.01)
         assert compact.nbytes / compact.n_points == pytest.approx(4 + color_bytes + room)
         assert words.nbytes / words.n_points == 16
         assert compact.nbytes / compact.n_points < 11
+
+
+def test_the_arena_holds_attributes_in_their_range(tmp_path):
+    """A format-2 arena holds integer attributes as ``value - min`` in the narrowest dtype of the
+    octree's range (from the fields' records), a constant one as nothing: the values of every
+    resident node read back exactly, and attribute colour modes draw as the full-width arena's."""
+    rng = np.random.default_rng(11)
+    n = 40_000
+    xyz = np.array([500_000.0, 4_800_000.0, 100.0]) + rng.integers(0, 150_000, (n, 3)) * [0.01, 0.01, 0.001]
+    rgba = np.full((n, 4), 255, np.uint8)
+    attrs = {
+        "intensity": rng.integers(1000, 1100, n).astype(np.uint16),  # u8 + 1000
+        "classification": rng.integers(2, 7, n).astype(np.uint8),  # u8 already
+        "depth": rng.integers(-70_000, -50_000, n).astype(np.int32),  # u16 - 70 000 (the bound: up to twice the range)
+        "point_source_id": np.full(n, 7326, np.uint16),  # constant: nothing held
+        "gps_time": 245_000.0 + rng.random(n),  # float: full width
+    }
+    chunks = [PointChunk(xyz[s : s + 10_000], rgba[s : s + 10_000], {k: v[s : s + 10_000] for k, v in attrs.items()}, scale=(0.01, 0.01, 0.001))
+              for s in range(0, n, 10_000)]  # fmt: skip
+    convert(chunks, tmp_path / "oct", max_leaf=2_000, partition_points=15_000)
+    oc = open_octree(tmp_path / "oct")
+    ranges = oc.attribute_ranges()
+    assert ranges["point_source_id"] == (7326, 7326) and "gps_time" not in ranges
+    for a, (lo, hi) in ranges.items():
+        values = oc.decode_all(a)
+        assert lo <= int(values.min()) and int(values.max()) <= hi, a
+    compact = oc.new_arena(20_000)
+    words = Arena(compact.n_points, oc.name, oc.bounds, oc._attribute_dtypes())
+    held = {a: compact.attributes.held_dtype(a) for a in compact.attributes}
+    assert held["intensity"] == "uint16 in uint8 + 1000" and held["point_source_id"] == "uint16 constant 7326"
+    assert held["depth"].startswith("int32 in uint16 - ") and held["gps_time"] == "float64"
+    assert compact.attributes.nbytes < words.attributes.nbytes
+    s = RenderSettings(backend="cpu", size_mode="fixed", point_budget=12_000, lod_threshold_px=10.0)
+    for make in CAMS:
+        cam = make(oc.bounds)
+        for mode in ("intensity", "classification"):
+            frames = []
+            for arena in (compact, words):
+                oc.arena = arena
+                frames.append(render_frame(oc, cam, s.replace(color_mode=mode)))
+            np.testing.assert_array_equal(frames[0].image, frames[1].image)
+        for nd, slots in compact.resident.items():
+            count = int(oc.nodes["count"][nd])
+            _, attrs = oc.node_payload(nd)
+            for a in compact.attributes:
+                got = np.concatenate([compact.attributes[a][sl * ARENA_CHUNK : sl * ARENA_CHUNK + ARENA_CHUNK] for sl in slots])[:count]
+                assert got.dtype == attrs[a].dtype
+                np.testing.assert_array_equal(got, attrs[a], err_msg=a)
 
 
 def test_without_a_source_grid_the_words_are_the_previous_formats(tmp_path):

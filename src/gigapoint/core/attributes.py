@@ -40,6 +40,11 @@ class Packed:
     def nbytes(self) -> int:
         return 0 if self.stored is None else int(self.stored.nbytes)
 
+    def encode(self, values) -> np.ndarray:
+        """``values`` (within ``offset``.. the stored dtype's range) as stored: ``value - offset``."""
+        wide = np.uint64 if self.dtype == np.uint64 else np.int64
+        return (np.asarray(values).astype(wide) - wide(self.offset)).astype(self.stored.dtype)
+
     def decode(self, indices=None) -> np.ndarray:
         """The original values of every point, or of ``indices``."""
         if self.stored is None:
@@ -53,6 +58,22 @@ class Packed:
         return (stored.astype(wide) + wide(self.offset)).astype(self.dtype)
 
 
+def narrow_dtype(lo: int, hi: int, dtype) -> type | None:
+    """The narrowest unsigned dtype that holds ``hi - lo`` where it is narrower than integer
+    ``dtype`` (None: no narrower one)."""
+    narrow = next((d for d in _NARROW if hi - lo <= np.iinfo(d).max), np.uint64)
+    return narrow if np.dtype(narrow).itemsize < np.dtype(dtype).itemsize else None
+
+
+def packed_range(lo: int, hi: int, dtype, n: int) -> Packed | None:
+    """An empty (zeroed) Packed of ``n`` points for values known to lie in ``lo..hi``: buffers
+    filled later through ``Packed.encode`` (an LOD arena); None where packing saves nothing."""
+    if lo == hi:
+        return Packed(None, lo, np.dtype(dtype), n)
+    narrow = narrow_dtype(lo, hi, dtype)
+    return None if narrow is None else Packed(np.zeros(n, narrow), lo, np.dtype(dtype), n)
+
+
 def pack(values: np.ndarray) -> np.ndarray | Packed:
     """``values`` held in their real range (module doc), or ``values`` itself where packing saves
     nothing (multi-component, bool, already narrowest, float not exactly float32)."""
@@ -63,8 +84,8 @@ def pack(values: np.ndarray) -> np.ndarray | Packed:
         lo, hi = int(v.min()), int(v.max())
         if lo == hi:
             return Packed(None, lo, v.dtype, len(v))
-        narrow = next(d for d in (*_NARROW, np.uint64) if hi - lo <= np.iinfo(d).max)
-        if np.dtype(narrow).itemsize >= v.dtype.itemsize:
+        narrow = narrow_dtype(lo, hi, v.dtype)
+        if narrow is None:
             return values
         wide = np.uint64 if v.dtype == np.uint64 else np.int64
         return Packed((v.astype(wide) - wide(lo)).astype(narrow), lo, v.dtype, len(v))
@@ -104,6 +125,14 @@ class Attributes(MutableMapping):
     def __repr__(self) -> str:
         return f"Attributes({', '.join(f'{k}: {self.held_dtype(k)}' for k in self._held)})"
 
+    def held(self, name: str) -> np.ndarray | Packed:
+        """What holds attribute ``name``: its array, or its Packed (written in place by an arena)."""
+        return self._held[name]
+
+    def hold(self, name: str, holder: np.ndarray | Packed) -> None:
+        """Hold ``name`` as given (an array or a Packed), without packing."""
+        self._held[name] = holder
+
     def at(self, name: str, indices) -> np.ndarray:
         """The original values of points ``indices`` only (no decoding of the rest)."""
         held = self._held[name]
@@ -113,13 +142,14 @@ class Attributes(MutableMapping):
 
     def held_dtype(self, name: str) -> str:
         """How one attribute is held: its dtype, or e.g. 'uint16 in uint8 + 1200', 'uint16
-        constant 7326', 'float64 in float32' where packed."""
+        constant 7326', 'int32 in uint16 - 70000', 'float64 in float32' where packed."""
         held = self._held[name]
         if not isinstance(held, Packed):
             return str(held.dtype)
         if held.stored is None:
             return f"{held.dtype} constant {held.offset}"
-        return f"{held.dtype} in {held.stored.dtype}" + (f" + {held.offset}" if held.offset else "")
+        offset = f" + {held.offset}" if held.offset > 0 else f" - {-held.offset}" if held.offset < 0 else ""
+        return f"{held.dtype} in {held.stored.dtype}{offset}"
 
     def nbytes_of(self, name: str) -> int:
         held = self._held[name]
@@ -137,4 +167,4 @@ class Attributes(MutableMapping):
         return out
 
 
-__all__ = ["Attributes", "Packed", "pack"]
+__all__ = ["Attributes", "Packed", "narrow_dtype", "pack", "packed_range"]

@@ -272,8 +272,28 @@ class CompactOctree(OctreeCloud):
 
     def arena_layout(self) -> dict:
         """The arena holds nodes as stored (``node_payload``): low words, each slot's room for
-        the extension bits of the octree's widest node, colours in the octree's format."""
-        return {"ext_bits": int(self.ext_bits.max()) if len(self.ext_bits) else 0, "color_dtype": self._dtypes["rgba"]}
+        the extension bits of the octree's widest node, colours in the octree's format, integer
+        attributes in their range over the octree (``attribute_ranges``)."""
+        ext_bits = int(self.ext_bits.max()) if len(self.ext_bits) else 0
+        return {"ext_bits": ext_bits, "color_dtype": self._dtypes["rgba"], "attribute_ranges": self.attribute_ranges()}
+
+    def attribute_ranges(self) -> dict[str, tuple[int, int]]:
+        """(min, max) bounds of each integer attribute over all nodes, from the fields' records
+        alone (a node's keys lie in base .. base + 2^bits - 1; keys order as the values do)."""
+        out = {}
+        used = self.counts > 0
+        for a in self.meta.get("attributes", {}):
+            dt = self._dtypes[f"attr.{a}"]
+            if dt.kind not in "iu" or not used.any():
+                continue
+            rec = self.fields[used, self.field_index[f"attr.{a}"]]
+            key_max = np.uint64((1 << (8 * dt.itemsize)) - 1)
+            base, bits = rec["base"].astype(np.uint64), rec["bits"].astype(np.uint64)
+            span = np.where(bits >= 64, key_max, (np.uint64(1) << np.minimum(bits, np.uint64(63))) - np.uint64(1))
+            top = base + np.minimum(span, key_max - np.minimum(base, key_max))  # never past the dtype's largest key
+            lo, hi = from_keys(np.array([base.min(), top.max()], np.uint64), dt).tolist()
+            out[a] = (int(lo), int(hi))
+        return out
 
     def check_node(self, index: int) -> None:
         """A one-line InputError naming the file and the node when node ``index``'s payload

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
+from ..core.attributes import Attributes, Packed, packed_range
 from ..core.compact import point_words, rgba32, stream_words
 from ..core.layout import BATCH_DTYPE, PACK_DTYPE
 from ..core.quantize import dequantize
@@ -216,11 +217,16 @@ class Arena:
     octree's widest node fits; a node's slot j is words 64 t · j.. of its stream, which start
     on a word since 4096 t bits are whole words). Rooms never move, so a GPU page of slots has
     a fixed range of ``ext`` too. ``color_dtype``: u16 for RGB565 colours.
+
+    ``attribute_ranges`` ({name: (min, max)} of an integer attribute over the whole octree, known
+    from a format-2 octree's per-node frames of reference): that attribute is held as ``value -
+    min`` in the narrowest unsigned dtype of its range (core/attributes.py: ``attributes[name]``
+    reads the original values), nodes' values written through ``Packed.encode``.
     """
 
     def __init__(
         self, capacity_points: int, name: str, bounds, attribute_dtypes: dict | None = None, ext_bits: int | None = None,
-        color_dtype=np.uint32,
+        color_dtype=np.uint32, attribute_ranges: dict | None = None,
     ):  # fmt: skip
         n_slots = max(1, -(-int(capacity_points) // ARENA_CHUNK))
         size = n_slots * ARENA_CHUNK
@@ -235,7 +241,11 @@ class Arena:
             self.packing = np.zeros(n_slots, PACK_DTYPE)
             self.packing["ext_first"] = np.arange(n_slots, dtype=np.uint64) * np.uint64(self.room)
         self.color = np.zeros(size, color_dtype)
-        self.attributes = {a: np.zeros(size, dt) for a, dt in (attribute_dtypes or {}).items()}
+        self.attributes = Attributes()
+        for a, dt in (attribute_dtypes or {}).items():
+            known = (attribute_ranges or {}).get(a)
+            packed = packed_range(*known, dt, size) if known is not None else None
+            self.attributes.hold(a, packed if packed is not None else np.zeros(size, dt))
         self.batches = np.zeros(n_slots, BATCH_DTYPE)
         self.batches["first"] = np.arange(n_slots, dtype=np.uint64) * ARENA_CHUNK
         self.resident: OrderedDict[int, np.ndarray] = OrderedDict()
@@ -258,9 +268,9 @@ class Arena:
     @property
     def nbytes(self) -> int:
         """Bytes of its point buffers (positions, colours, attributes; not the slot records)."""
-        arrays = [self.low, self.color, *self.attributes.values()]
+        arrays = [self.low, self.color]
         arrays += [self.med, self.high] if self.med is not None else [self.ext]
-        return sum(a.nbytes for a in arrays)
+        return sum(a.nbytes for a in arrays) + self.attributes.nbytes
 
     def point_info(self, index: int) -> dict:
         """Position (30-bit), color and level of the point in slot position ``index``."""
@@ -286,7 +296,12 @@ class Arena:
             arrays, attrs, first = cloud.node_arrays(nd)  # a Potree node is read and decoded here
             pairs = [(arrays["low"], self.low), (arrays["med"], self.med), (arrays["high"], self.high)]
         pairs.append((arrays["color"] if cloud.filtered_colors else arrays["rgba"], self.color))
-        pairs += [(attrs[a], b) for a, b in self.attributes.items()]
+        for a in self.attributes:
+            held = self.attributes.held(a)
+            if not isinstance(held, Packed):
+                pairs.append((attrs[a], held))
+            elif held.stored is not None:  # packed only for a compact payload: the node's own values (first = 0)
+                pairs.append((held.encode(attrs[a][:count]), held.stored))
         for a, b in pairs:
             _copy_slots(a, first, count, slots, ARENA_CHUNK, b)
 
