@@ -169,30 +169,6 @@ class Pool:
         return info
 
 
-class _Scratch:
-    """Work arrays kept from insertion to insertion, by name. Fresh ones cost their pages' first
-    touch on every call: on this kind of VM 1-2.5 ms a MB, 60 of sample_runs' 90 ms for a 1 M
-    batch. Views of a name's array are valid until that name is asked for again."""
-
-    def __init__(self):
-        self._arrays: dict[str, np.ndarray] = {}
-
-    def get(self, name: str, n: int, dtype, width: int = 0) -> np.ndarray:
-        """An uninitialised (n,) array, or (n, width) when ``width``."""
-        size = n * max(width, 1)
-        a = self._arrays.get(name)
-        if a is None or a.size < size or a.dtype != dtype:
-            a = self._arrays[name] = np.empty(size + size // 4, dtype)  # some room: batch sizes vary
-        return a[:size].reshape((n, width) if width else n)
-
-    @property
-    def nbytes(self) -> int:
-        return sum(a.nbytes for a in self._arrays.values())
-
-    def clear(self) -> None:
-        self._arrays.clear()
-
-
 def _chunk_of(parts) -> PointChunk:
     xyz = np.concatenate([p[0] for p in parts])
     rgba = np.concatenate([p[1] for p in parts]).view(np.uint8).reshape(-1, 4)
@@ -220,18 +196,14 @@ class _Set:
         self.starts, self.codes, self.order, self.xyz, self.rgba, self.attrs = starts, codes, order, xyz, rgba, attrs
 
     @classmethod
-    def of(cls, starts, xyz, rgba, attrs: dict, origin, edge: float, scratch: _Scratch | None = None, tag: str = "") -> _Set:
-        """The set sorted; its order, sorted codes and colours in ``scratch`` as ``order<tag>``,
-        ``codes<tag>``, ``rgba<tag>`` when given (a batch's sets: alive together, so each its own tag)."""
+    def of(cls, starts, xyz, rgba, attrs: dict, origin, edge: float) -> _Set:
         codes = point_codes(xyz, origin, edge)
         n = len(codes)
-        scratch = scratch or _Scratch()
-        keys = scratch.get("keys", n, np.uint64)
+        keys = np.empty(n, np.uint64)
         index_bits = max(1, (n - 1).bit_length())
         K.sort_keys(codes, index_bits, keys)
         keys.sort()
-        order, sorted_codes = scratch.get(f"order{tag}", n, np.int64), scratch.get(f"codes{tag}", n, np.uint64)
-        sorted_rgba = scratch.get(f"rgba{tag}", n, np.uint32)
+        order, sorted_codes, sorted_rgba = np.empty(n, np.int64), np.empty(n, np.uint64), np.empty(n, np.uint32)
         K.code_order(keys, codes, rgba, index_bits, order, sorted_codes, sorted_rgba)
         return cls(np.atleast_1d(np.asarray(starts, np.int64)), sorted_codes, order, xyz, sorted_rgba, attrs)
 
@@ -272,7 +244,6 @@ class ProgressiveOctree:
         self._hkeys = np.full(1 << 17, K.EMPTY_KEY, np.uint64)
         self._hvals = np.zeros(1 << 17, np.uint32)
         self._run_lo = self._run_hi = self._ent_start = self._ent_count = np.empty(0, np.int64)  # sample_runs' scratch
-        self._scratch = _Scratch()
         self._free = np.zeros(_INITIAL_CHUNKS, np.int64)
         self._n_free = 0
         self._n_chunks = 0
@@ -359,7 +330,6 @@ class ProgressiveOctree:
 
     def _drop_voxel_state(self) -> None:
         self._voxel_state = False
-        self._scratch.clear()
         self.vox_key, self.vox_slot, self.vox_sum = np.zeros(0, np.uint64), np.zeros(0, np.uint32), np.zeros((0, 5), np.uint32)
         self._hkeys, self._hvals = np.zeros(0, np.uint64), np.zeros(0, np.uint32)
 
@@ -461,7 +431,7 @@ class ProgressiveOctree:
     def memory(self) -> dict[str, int]:
         """Bytes per component: the pool's positions (low words and streams), colours, attributes
         and batch records (points and voxels, with the room kept for growth), the voxels' colour
-        sums and lookup table and the insertions' work arrays (build state, none once trimmed), and the nodes."""
+        sums and lookup table (build state, none once trimmed), and the nodes."""
         def size(*arrays) -> int:
             return int(sum(a.nbytes for a in arrays))
 
@@ -474,7 +444,6 @@ class ProgressiveOctree:
                 "batches": size(pool.batches, pool.packing, pool.chunk_next, pool.chunk_node, pool.batch_version),
             }  # fmt: skip
         m["voxels"] = size(self.vox_key, self.vox_slot, self.vox_sum, self._hkeys, self._hvals)
-        m["scratch"] = self._scratch.nbytes
         m["nodes"] = size(self.key, self.level, self.parent, self.children, self.leaf, self.count, self.first_chunk, self.last_chunk,
                           self.list_count, self.cmin, self.cedge, self._free)  # fmt: skip
         return m
@@ -579,7 +548,7 @@ class ProgressiveOctree:
         # The batch and the points of every leaf that would overflow (spilled: inserted again
         # from that leaf down, all such leaves' points one set), sorted by code and routed, until
         # no leaf overflows.
-        sets = [_Set.of(self.root, xyz, rgba, attrs, self.origin, self.edge, self._scratch, "0")]
+        sets = [_Set.of(self.root, xyz, rgba, attrs, self.origin, self.edge)]
         while True:
             routes = [self._distribute(st) for st in sets]
             incoming = np.zeros(self.n_nodes, np.int64)
@@ -592,7 +561,7 @@ class ProgressiveOctree:
             stored = over[self.count[over] > 0]
             self.leaf[over[self.count[over] == 0]] = 0  # created by this batch: nothing stored to spill
             if len(stored):
-                sets.append(_Set.of(stored, *self._split(stored), self.origin, self.edge, self._scratch, str(len(sets))))
+                sets.append(_Set.of(stored, *self._split(stored), self.origin, self.edge))
         self.pool.version += 1
         for st, (leaf_runs, inner_runs) in zip(sets, routes):
             self._sample(st, leaf_runs, inner_runs)
@@ -654,7 +623,7 @@ class ProgressiveOctree:
         extra = K.chunks_needed(lists, counts, pool.chunk, self.last_chunk, pool.batches["count"])
         self._ensure_chunks(extra, extra if points else 0)
         pool = self.pool
-        slots = self._scratch.get("point_slots" if points else "voxel_slots", int(counts.sum()), np.int64)
+        slots = np.empty(int(counts.sum()), np.int64)
         b, pk = pool.batches, pool.packing
         self._n_free, self._n_chunks, self._n_streams = K.allocate(
             lists, counts, pool.chunk, self.first_chunk, self.last_chunk, self.level, self.leaf, self.cmin, self.cedge, b["count"],
@@ -685,11 +654,10 @@ class ProgressiveOctree:
             self._ent_start = np.zeros(len(self.key), np.int64)
             self._ent_count = np.zeros(len(self.key), np.int64)
         cap = 2 * len(st.codes) + 1024
-        scratch = self._scratch
         while True:
-            e_cell, e_local = scratch.get("e_cell", cap, np.uint64), scratch.get("e_local", cap, np.uint64)
-            e_first, e_node = scratch.get("e_first", cap, np.int64), scratch.get("e_node", cap, np.int64)
-            e_sum = scratch.get("e_sum", cap, np.uint32, 5)
+            e_cell, e_local = np.empty(cap, np.uint64), np.empty(cap, np.uint64)
+            e_first, e_node = np.empty(cap, np.int64), np.empty(cap, np.int64)
+            e_sum = np.empty((cap, 5), np.uint32)
             m = K.sample_runs(st.codes, st.rgba, st.order, inner_runs, leaf_runs, self.level, self.leaf, self.children, self._run_lo, self._run_hi,
                               self._ent_start, self._ent_count, e_cell, e_first, e_sum, e_node, e_local)  # fmt: skip
             if m >= 0:
@@ -712,8 +680,8 @@ class ProgressiveOctree:
         if m == 0:
             return
         self._ensure_hash(m)
-        vid = self._scratch.get("vid", m, np.int64)
-        is_new = self._scratch.get("is_new", m, np.uint8)
+        vid = np.empty(m, np.int64)
+        is_new = np.empty(m, np.uint8)
         next_vid = K.voxel_ids(self._hkeys, self._hvals, node, cell, self.n_voxels, vid, is_new)
         if next_vid > len(self.vox_key):
             cap = max(len(self.vox_key), 1)
