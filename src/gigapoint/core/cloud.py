@@ -43,7 +43,8 @@ class PointCloud:
     med: np.ndarray | None  # u32 per point: bits 10-19 (None in the compact layout)
     high: np.ndarray | None  # u32 per point: bits 0-9 (None in the compact layout)
     # u32 per point: RGBA8 little-endian (r in the low byte); u16 RGB565 in the compact layout
-    # (compact.py); or per-block palettes and u8 indices (palette.py: ``colors="palette"``)
+    # (compact.py); or per-block palettes and u8 indices (palette.py: ``colors="palette"``, and
+    # ``colors="auto"``'s choice where they are as faithful as RGB565)
     color: np.ndarray | PaletteColors
     # per point, by name; held in their real range where built from points (core/attributes.py),
     # read back in their own dtype: ``attributes[name]``, ``attributes.at(name, indices)``
@@ -335,8 +336,8 @@ def finest_scale(scales) -> tuple[float, float, float] | None:
 
 def storage_format(name: str, layout: str, colors: str, source_scale, opaque: bool):
     """(the compact layout's grid or None: three words, the colors' format: "rgba", "rgb565",
-    "palette" or "auto": one of the last two, by the colours) for ``build_cloud``'s ``layout`` and ``colors`` options (and the chunked build's,
-    core/chunked.py)."""
+    "palette" or "auto": one of the two before, chosen on the colours by ``encode_colors``) for
+    ``build_cloud``'s ``layout`` and ``colors`` options (and the chunked build's, core/chunked.py)."""
     if layout not in LAYOUTS:
         raise InputError(f"{name}: layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
     if layout == "compact" and source_scale is None:
