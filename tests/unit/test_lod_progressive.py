@@ -144,6 +144,28 @@ def test_leaf_contents_do_not_depend_on_batches_or_order(scene, octree, batch, s
     assert other.n_voxels == octree.n_voxels
 
 
+@pytest.mark.parametrize("n", [1, 2, 1_000, 70_000])
+def test_a_set_is_sorted_by_its_full_codes_whatever_its_ties(n):
+    """A set is sorted as keys of (code prefix, index); points whose prefixes tie (a few, or a
+    dense cluster in a wide cube) come in full-code order, their colours with them."""
+    from gigapoint.lod.progressive import kernels as K
+
+    rng = np.random.default_rng(5)
+    codes = rng.integers(0, 1 << 63, n, dtype=np.uint64)
+    codes[: n // 2] &= ~np.uint64((1 << 40) - 1)  # a cluster: its prefixes tie beyond insertion sort's runs
+    codes[n // 4 : n // 3] = codes[0]  # equal codes
+    rgba = rng.integers(0, 1 << 32, n, dtype=np.uint64).astype(np.uint32)
+    bits = max(1, (n - 1).bit_length())
+    keys = np.empty(n, np.uint64)
+    K.sort_keys(codes, bits, keys)
+    keys.sort()
+    order, sorted_codes, sorted_rgba = np.empty(n, np.int64), np.empty(n, np.uint64), np.empty(n, np.uint32)
+    K.code_order(keys, codes, rgba, bits, order, sorted_codes, sorted_rgba)
+    assert np.array_equal(np.sort(order), np.arange(n))
+    assert np.array_equal(sorted_codes, np.sort(codes)) and np.array_equal(codes[order], sorted_codes)
+    assert np.array_equal(rgba[order], sorted_rgba)
+
+
 def test_trimming_frees_the_room_and_the_octree_grows_on_the_same(scene, octree):
     """trim() (when loading ends) gives back the pool's spare chunks and the voxel table; points
     added afterwards land exactly as without it: the same leaves and voxel colours."""

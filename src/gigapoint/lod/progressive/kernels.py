@@ -137,13 +137,12 @@ def code_order(keys, codes, rgba, index_bits, order, sorted_codes, sorted_rgba):
         i = np.int64(keys[k] & mask)
         order[k] = i
         sorted_codes[k] = codes[i]
-    _break_ties(keys, mask, order, sorted_codes)
-    for k in prange(keys.shape[0]):
-        sorted_rgba[k] = rgba[order[k]]
+        sorted_rgba[k] = rgba[i]
+    _break_ties(keys, mask, order, sorted_codes, sorted_rgba)
 
 
 @njit(cache=True)
-def _break_ties(keys, mask, order, sorted_codes):
+def _break_ties(keys, mask, order, sorted_codes, sorted_rgba):
     """Runs of keys with equal prefixes (above ``mask``) sorted by their full codes: an insertion
     sort where a run is a few points (nearly always), else numba's sort (a dense cluster in a wide
     cube). Not in the parallel kernel: numba would make every array expression there a parallel
@@ -158,15 +157,16 @@ def _break_ties(keys, mask, order, sorted_codes):
             by_code = np.argsort(sorted_codes[k:e])
             order[k:e] = order[k:e][by_code]
             sorted_codes[k:e] = sorted_codes[k:e][by_code]
+            sorted_rgba[k:e] = sorted_rgba[k:e][by_code]
             k = e
             continue
         for i in range(k + 1, e):
-            c, o = sorted_codes[i], order[i]
+            c, o, col = sorted_codes[i], order[i], sorted_rgba[i]
             j = i - 1
             while j >= k and sorted_codes[j] > c:
-                sorted_codes[j + 1], order[j + 1] = sorted_codes[j], order[j]
+                sorted_codes[j + 1], order[j + 1], sorted_rgba[j + 1] = sorted_codes[j], order[j], sorted_rgba[j]
                 j -= 1
-            sorted_codes[j + 1], order[j + 1] = c, o
+            sorted_codes[j + 1], order[j + 1], sorted_rgba[j + 1] = c, o, col
         k = e
 
 
