@@ -106,7 +106,7 @@ def _as_points(xyz, name: str) -> np.ndarray:
 def batch_frame(pts: np.ndarray, rgba: np.ndarray, attributes: dict, lo, hi, chunk: int, ordered: bool = False) -> PointCloud:
     """One frame in core's layout: Morton codes in its bounding cube, batches of ``chunk``
     points, 30-bit words (core/morton.py, core/quantize.py). The order is numpy's faster sort on
-    this CPU (morton.argsort_codes, as the progressive octree sorts its batches): 3-5 ms for a
+    this CPU (morton.argsort_codes): 3-5 ms for a
     512x424 frame (ties are the same point: their order does not matter). ``ordered``: the
     points come in an order batches can be cut from as they are (a depth frame's image Z order,
     depth.tile_order): no sort and no gathers."""
