@@ -81,14 +81,12 @@ def pack(values: np.ndarray) -> np.ndarray | Packed:
     if v.ndim != 1 or len(v) == 0:
         return values
     if v.dtype.kind in "iu":
-        lo, hi = int(v.min()), int(v.max())
-        if lo == hi:
-            return Packed(None, lo, v.dtype, len(v))
-        narrow = narrow_dtype(lo, hi, v.dtype)
-        if narrow is None:
+        held = packed_range(int(v.min()), int(v.max()), v.dtype, len(v))
+        if held is None:
             return values
-        wide = np.uint64 if v.dtype == np.uint64 else np.int64
-        return Packed((v.astype(wide) - wide(lo)).astype(narrow), lo, v.dtype, len(v))
+        if held.stored is not None:
+            held.stored[:] = held.encode(v)
+        return held
     if v.dtype == np.float64:
         narrow = v.astype(np.float32)
         if np.array_equal(narrow.astype(np.float64).view(np.uint64), v.view(np.uint64)):  # bit for bit: NaN, -0.0 too
