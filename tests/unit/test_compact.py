@@ -397,3 +397,36 @@ def test_wgpu_pages_of_compact_batches(scene):
             bg = (10, 20, 30, 255)
             np.testing.assert_array_equal(np.asarray(paged.resolve(want, cloud.color, bg)), cpu.resolve(want, cloud.color, bg))
         assert paged.memory["evictions"] > 0
+
+
+@pytest.mark.parametrize("n", [1, 7, 8, 9, 1003, 4096])
+@pytest.mark.parametrize("covered", [0.0, 0.03, 0.5, 1.0])
+def test_resolve_of_compact_colors_by_groups_of_8_pixels(rng, n, covered):
+    """The 16-bit and palette resolve tests 8 pixels at a time (simd.resolve8_*): every pixel
+    equals the decoded colour of its point (numpy), the count is right, and the lanes past the
+    frame's end are neither read (their keys would point past the colours) nor written."""
+    from gigapoint.backends.numba_cpu import raster
+    from gigapoint.core.compact import pack_rgb565, rgb565_table, rgb565_words, rgba32
+    from gigapoint.core.palette import decode, quantize_palettes
+
+    points = 5000
+    rgba = rng.integers(0, 256, (points, 4), dtype=np.uint8)
+    rgba[:, 3] = 255
+    exact = rgba.view(np.uint32).reshape(-1)
+    frame = np.full(n + 8, 0xFFFF_FFFF_FFFF_FFF0, np.uint64)  # beyond n: keys of no point
+    hit = rng.random(n) < covered
+    frame[:n] = np.where(hit, (rng.integers(0, 2**31, n).astype(np.uint64) << np.uint64(32)) | rng.integers(0, points, n).astype(np.uint64), raster.EMPTY)
+    bg = np.uint32(0x11223344)
+    half = pack_rgb565(exact)
+    pal = quantize_palettes(exact, shift=10)
+    cases = {
+        "rgb565": ((rgb565_words(half), rgb565_table(), raster.NO_TABLE, 0), rgba32(half)),
+        "palette": ((pal.words, raster.NO_TABLE, pal.palette, pal.shift), decode(pal)),
+    }
+    for name, ((colors, table, palette, shift), per_point) in cases.items():
+        out = np.full(n + 8, 0xDEADBEEF, np.uint32)
+        got = raster.resolve_colors(frame[:n], colors, bg, out[:n], table, palette, shift)
+        want = np.where(hit, per_point[(frame[:n] & np.uint64(0xFFFFFFFF)).astype(np.int64) % points], bg)
+        np.testing.assert_array_equal(out[:n], want, err_msg=name)
+        assert got == hit.sum(), name
+        assert (out[n:] == 0xDEADBEEF).all(), name

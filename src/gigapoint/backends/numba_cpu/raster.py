@@ -22,8 +22,7 @@ from numba import njit, prange
 from numba.extending import overload
 
 from ...core.compact import expand_tails
-from ...core.palette import palette_rgba
-from .simd import min_run8
+from .simd import min_run8, resolve8_palette, resolve8_rgb565
 
 EMPTY = np.uint64(0xFFFFFFFFFFFFFFFF)
 TILE_SHIFT = 6  # merge bookkeeping: runs of 64 pixels
@@ -589,26 +588,28 @@ def resolve_colors(frame, color, background, out, rgb565, palette, shift):
 
     ``rgb565`` empty: ``color`` is u32 RGBA8 per point. Else 16-bit colors (a compact cloud's,
     core/compact.py): ``color`` is their u32 words (``rgb565_words``: two a word) and ``rgb565``
-    the RGBA8 of each 16-bit value (``rgb565_table``): 32-bit loads and a table, 1.37 ms a
-    1080p frame of one thread against 1.15 for 32-bit colours (the decode's shifts per pixel
-    took 2.5). ``palette`` not empty: per-block palettes (core/palette.py), ``color`` their u8
-    indices as u32 words (four a word), a block 2^``shift`` points, decoded by ``palette_rgba``."""
-    covered = 0
+    the RGBA8 of each 16-bit value (``rgb565_table``). ``palette`` not empty: per-block palettes
+    (core/palette.py), ``color`` their u8 indices as u32 words (four a word), a block 2^``shift``
+    points, decoded as ``palette.palette_rgba`` does."""
+    n = frame.shape[0]
     half = rgb565.shape[0] > 0
     indexed = palette.shape[0] > 0
-    for p in prange(frame.shape[0]):
-        key = frame[p]
-        if key == EMPTY:
-            out[p] = background
-        else:
-            i = key & np.uint64(0xFFFFFFFF)
-            if indexed:
-                out[p] = palette_rgba(color, palette, shift, i)
-            elif half:
-                out[p] = rgb565[(color[i >> np.uint64(1)] >> np.uint32((i & np.uint64(1)) << np.uint64(4))) & np.uint32(0xFFFF)]
+    covered = 0
+    if not (half or indexed):  # one gather a pixel: the loop vectorises and is bound by memory
+        for p in prange(n):
+            key = frame[p]
+            if key == EMPTY:
+                out[p] = background
             else:
-                out[p] = color[i]
-            covered += 1
+                out[p] = color[key & np.uint64(0xFFFFFFFF)]
+                covered += 1
+        return covered
+    for g in prange((n + 7) >> 3):  # two dependent gathers a pixel: an empty group of 8 skips them (simd.py)
+        p = g << 3
+        if indexed:
+            covered += resolve8_palette(frame, p, n - p, out, background, color, palette, shift)
+        else:
+            covered += resolve8_rgb565(frame, p, n - p, out, background, color, rgb565, 0)
     return covered
 
 
