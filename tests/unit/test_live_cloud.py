@@ -447,3 +447,60 @@ def test_the_mirror_holds_the_snapshot_pools_entries_after_every_snapshot():
         np.testing.assert_array_equal(buf.color[o : o + n], pool.color[f : f + n])
         for k, part in enumerate(("nx", "ny", "nz")):
             np.testing.assert_array_equal(buf.attributes["normal"][o : o + n, k], pool.attributes[part][f : f + n])
+
+
+def test_a_snapshot_in_batches_adds_what_one_batch_would_and_keeps_frames_that_leave_meanwhile(monkeypatch):
+    """snapshot() gathers each SNAPSHOT_BATCH of points from the ring when its turn comes: the
+    octree gets the points frame_points gives, cut at the same places, in the same order, with the
+    bounds of all of them up front; frames pushed meanwhile (those that leave the ring then) do
+    not overwrite the chunks it has yet to read."""
+    import gigapoint.live.cloud as live_module
+    from gigapoint.lod.progressive import ProgressiveOctree
+
+    def filled():
+        live = LiveCloud(keep=3)
+        for k in range(3):
+            xyz, rgb = frame(k, n=7000)
+            live.push(xyz, rgb, pose=pose_of(k), intensity=np.arange(7000, dtype=np.uint16) + k)
+        return live
+
+    live = filled()
+    xyz, rgba, attrs = live.frame_points()
+    buf = live.buffers_
+    runs = buf.runs([s for f in live.frames for s in f.chunks])
+    lo, hi = buf.bounds_of(runs)
+    np.testing.assert_array_equal(lo, xyz.min(axis=0))  # exactly: the cube of the first snapshot comes from them
+    np.testing.assert_array_equal(hi, xyz.max(axis=0))
+    out: dict = {}
+    for s, e in ((0, 5000), (5000, 5001), (5001, 21000), (123, 15000)):
+        got = buf.gather(runs, ("frame_time",), s, e, out)
+        np.testing.assert_array_equal(got[0], xyz[s:e])
+        np.testing.assert_array_equal(got[1], rgba[s:e])
+        assert set(got[2]) == set(attrs)
+        for a in attrs:
+            np.testing.assert_array_equal(got[2][a], attrs[a][s:e])
+
+    added = []
+    add = ProgressiveOctree.add
+
+    def add_and_push(self, xyz, rgb=None, **attributes):
+        added.append((xyz.copy(), np.asarray(rgb).copy(), {a: v.copy() for a, v in attributes.items()}))
+        for k in range(10, 13):  # every frame snapshotted leaves the ring: its chunks go to new frames
+            live.push(*frame(k, n=7000), pose=pose_of(k), intensity=np.zeros(7000, np.uint16))
+        return add(self, xyz, rgb, **attributes)
+
+    monkeypatch.setattr(live_module, "SNAPSHOT_BATCH", 4096)
+    monkeypatch.setattr(ProgressiveOctree, "add", add_and_push)
+    assert live.snapshot() == 21000
+    assert [len(a[0]) for a in added] == [4096] * 5 + [21000 - 5 * 4096]
+    np.testing.assert_array_equal(np.concatenate([a[0] for a in added]), xyz)
+    np.testing.assert_array_equal(np.concatenate([a[1] for a in added]), rgba)
+    for a in attrs:
+        np.testing.assert_array_equal(np.concatenate([b[2][a] for b in added]), attrs[a])
+    o = live.snapshots
+    assert o.points == 21000 and np.all(o.origin <= lo) and np.all(o.origin + o.edge >= hi)
+    assert live.n_frames == 3 and [f.seq for f in live.frames] == [18, 19, 20]
+    assert not live._pins and not live._held  # the chunks read are free again
+    assert sorted(live._free + [s for f in live.frames for s in f.chunks]) == list(range(buf.n_ring))
+    live.push(*frame(20, n=7000), pose=pose_of(20))
+    assert live.n_frames == 3

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import weakref
 from contextlib import contextmanager
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit, prange
@@ -41,11 +42,20 @@ def attribute_dtype(values: np.ndarray) -> np.dtype:
     return np.dtype((values.dtype, values.shape[1:])) if values.ndim > 1 else values.dtype
 
 
+@njit(inline="always")
+def _coordinate(lw, mw, hw, a, lo, cell):
+    """Axis ``a`` of a point's 30-bit position (its low, medium and high words) as a float64
+    world coordinate: core/quantize.dequantize at 30 bits, the cell centre lo + (X + 0.5) cell.
+    Non-decreasing in X: the smallest X of a box's points gives their smallest coordinate."""
+    s = WORD_BITS * a
+    q = (((lw >> s) & WORD_MASK) << 20) | (((mw >> s) & WORD_MASK) << 10) | ((hw >> s) & WORD_MASK)
+    return lo + (q + 0.5) * cell
+
+
 @njit(parallel=True, cache=True)
 def _dequantize_runs(low, med, high, firsts, counts, offsets, bbox_min, bbox_max, out):
     """float64 positions of runs of points (run j: ``counts[j]`` points from ``firsts[j]``, in the
-    box of row j) into ``out`` from ``offsets[j]``: core/quantize.dequantize at 30 bits (the cell
-    centre, min + (X + 0.5) size / 2^30), compiled over many batches at once."""
+    box of row j) into ``out`` from ``offsets[j]`` (``_coordinate``), compiled over many batches at once."""
     for j in prange(firsts.shape[0]):
         f = firsts[j]
         o = offsets[j]
@@ -55,15 +65,36 @@ def _dequantize_runs(low, med, high, firsts, counts, offsets, bbox_min, bbox_max
         c2 = (bbox_max[j, 2] - lo2) / _SCALE30
         for k in range(counts[j]):  # a point's three coordinates together: out's rows are written in order
             lw, mw, hw = low[f + k], med[f + k], high[f + k]
-            for a in range(3):
-                s = WORD_BITS * a
-                q = (((lw >> s) & WORD_MASK) << 20) | (((mw >> s) & WORD_MASK) << 10) | ((hw >> s) & WORD_MASK)
-                if a == 0:
-                    out[o + k, 0] = lo0 + (q + 0.5) * c0
-                elif a == 1:
-                    out[o + k, 1] = lo1 + (q + 0.5) * c1
-                else:
-                    out[o + k, 2] = lo2 + (q + 0.5) * c2
+            out[o + k, 0] = _coordinate(lw, mw, hw, 0, lo0, c0)
+            out[o + k, 1] = _coordinate(lw, mw, hw, 1, lo1, c1)
+            out[o + k, 2] = _coordinate(lw, mw, hw, 2, lo2, c2)
+
+
+@njit(parallel=True, cache=True)
+def _bounds_runs(low, med, high, firsts, counts, bbox_min, bbox_max, lo, hi):
+    """Per run (as ``_dequantize_runs``'), the least and greatest float64 coordinate of its points
+    on each axis into ``lo[j]``, ``hi[j]`` (inf, -inf for none), equal to those of the positions
+    ``_dequantize_runs`` writes: X + 0.5 (exact) reduced, then scaled and moved as there
+    (``_coordinate`` is monotonic in X). No positions written."""
+    for j in prange(firsts.shape[0]):
+        f = firsts[j]
+        for a in range(3):
+            x_lo, x_hi = np.inf, -np.inf
+            for k in range(counts[j]):
+                x = _coordinate(low[f + k], med[f + k], high[f + k], a, 0.0, 1.0)
+                x_lo, x_hi = min(x_lo, x), max(x_hi, x)
+            cell = (bbox_max[j, a] - bbox_min[j, a]) / _SCALE30
+            lo[j, a] = bbox_min[j, a] + x_lo * cell if counts[j] else np.inf
+            hi[j, a] = bbox_min[j, a] + x_hi * cell if counts[j] else -np.inf
+
+
+@njit(parallel=True, cache=True)
+def _copy_runs(src, firsts, counts, offsets, out):
+    """out[offsets[j] : offsets[j] + counts[j]] = src[firsts[j] : ...], every run j, in parallel."""
+    for j in prange(firsts.shape[0]):
+        f, o = firsts[j], offsets[j]
+        for k in range(counts[j]):
+            out[o + k] = src[f + k]
 
 
 class LiveLock(FrameLock):
@@ -96,6 +127,35 @@ class LiveLock(FrameLock):
                 yield
         finally:
             self._after()
+
+
+_UINT_OF_SIZE = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}
+
+
+@dataclass(frozen=True)
+class Runs:
+    """The points of some ring chunks, in order: run j is ``counts[j]`` points from buffer entry
+    ``firsts[j]``, in the box ``bbox_min[j]``..``bbox_max[j]``, the ``offsets[j]``-th on."""
+
+    firsts: np.ndarray
+    counts: np.ndarray
+    offsets: np.ndarray
+    bbox_min: np.ndarray
+    bbox_max: np.ndarray
+
+    @property
+    def n_points(self) -> int:
+        return int(self.counts.sum())
+
+    def part(self, start: int = 0, stop: int | None = None):
+        """(firsts, counts, offsets from ``start``, which runs) of the points [start, stop): the runs
+        that hold any of them, cut to them."""
+        stop = self.n_points if stop is None else stop
+        lo = np.maximum(self.offsets, start)
+        hi = np.minimum(self.offsets + self.counts, stop)
+        keep = np.flatnonzero(hi > lo)
+        lo, hi = lo[keep], hi[keep]
+        return self.firsts[keep] + lo - self.offsets[keep], hi - lo, lo - start, keep
 
 
 class LiveBuffers:
@@ -203,31 +263,57 @@ class LiveBuffers:
         f, n = int(rec["first"]), int(rec["count"])
         return dequantize(self.low[f : f + n], self.med[f : f + n], self.high[f : f + n], rec["bbox_min"], rec["bbox_max"], 30)
 
-    def gather(self, slots: list[int], skip=()):
-        """(xyz float64 (N, 3) world, rgba uint8 (N, 4), attributes: the normal as nx, ny, nz) of the
-        points of chunks ``slots``, in order."""
+    def runs(self, slots: list[int]) -> Runs:
+        """Where the points of chunks ``slots`` are, in order (their counts and boxes copied: the
+        chunks may be cleared after)."""
         rec = self.batches[np.asarray(slots, np.int64)]
-        firsts, counts = rec["first"].astype(np.int64), rec["count"].astype(np.int64)
-        offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-        xyz = np.empty((int(counts.sum()), 3))
-        _dequantize_runs(self.low, self.med, self.high, firsts, counts, offsets, rec["bbox_min"].copy(), rec["bbox_max"].copy(), xyz)
-        runs = [(slice(f, f + c), slice(o, o + c)) for f, c, o in zip(firsts.tolist(), counts.tolist(), offsets.tolist())]
+        counts = rec["count"].astype(np.int64)
+        return Runs(rec["first"].astype(np.int64), counts, np.cumsum(counts) - counts, rec["bbox_min"].copy(), rec["bbox_max"].copy())
 
-        def take(values):
-            out = np.empty(len(xyz), values.dtype)
-            for src, dst in runs:
-                out[dst] = values[src]
-            return out
+    def bounds_of(self, runs: Runs) -> tuple[np.ndarray, np.ndarray]:
+        """(min, max) of the world positions ``gather`` gives the points of ``runs``, without them."""
+        lo, hi = np.empty((len(runs.firsts), 3)), np.empty((len(runs.firsts), 3))
+        _bounds_runs(self.low, self.med, self.high, runs.firsts, runs.counts, runs.bbox_min, runs.bbox_max, lo, hi)
+        return lo.min(axis=0, initial=np.inf), hi.max(axis=0, initial=-np.inf)
 
-        rgba = take(self.color).view(np.uint8).reshape(-1, 4)
+    def gather(self, slots, skip=(), start: int = 0, stop: int | None = None, out: dict | None = None):
+        """(xyz float64 (N, 3) world, rgba uint8 (N, 4), attributes: the normal as nx, ny, nz) of the
+        points of chunks ``slots`` (a list, or their ``runs``), in order; of points [start, stop)
+        of them only, when given. ``out``: a dict the arrays are taken from and kept in (first rows
+        of arrays made for the largest range so far: one set of pages for many ranges)."""
+        runs = slots if isinstance(slots, Runs) else self.runs(slots)
+        firsts, counts, offsets, keep = runs.part(start, stop)
+        n = int(counts.sum())
+        out = {} if out is None else out
+
+        def array(name, dtype, shape=()):
+            a = out.get(name)
+            if a is None or len(a) < n or a.dtype != dtype or a.shape[1:] != shape:
+                a = out[name] = np.empty((n, *shape), dtype)
+            return a[:n]
+
+        xyz = array("xyz", np.float64, (3,))
+        _dequantize_runs(self.low, self.med, self.high, firsts, counts, offsets, runs.bbox_min[keep], runs.bbox_max[keep], xyz)
+
+        def take(name, values):
+            dst = array(name, values.dtype)
+            u = _UINT_OF_SIZE.get(values.dtype.itemsize)
+            if u is not None and values.ndim == 1:  # moved as same-width integers: one compiled copy a width
+                _copy_runs(values.view(u), firsts, counts, offsets, dst.view(u))
+            else:
+                for f, c, o in zip(firsts.tolist(), counts.tolist(), offsets.tolist()):
+                    dst[o : o + c] = values[f : f + c]
+            return dst
+
+        rgba = take("color", self.color).view(np.uint8).reshape(-1, 4)
         attrs = {}
         for a, v in self.attributes.items():
             if a in skip:
                 continue
             if a == "normal":  # 1-D parts, as the octree and the file writers take attributes: gathered straight into them
-                attrs.update({part: take(v[:, k]) for k, part in enumerate(NORMAL_PARTS)})
+                attrs.update({part: take(part, v[:, k]) for k, part in enumerate(NORMAL_PARTS)})
             else:
-                attrs[a] = take(v)
+                attrs[a] = take(a, v)
         return xyz, rgba, attrs
 
     def point_info(self, index: int) -> dict:
