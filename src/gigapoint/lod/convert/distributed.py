@@ -57,6 +57,7 @@ import numpy as np
 from ...atomic import atomic_json, atomic_open
 from ...errors import GigapointError
 from ...io._base import ColorScaler, one_line
+from ...io.las import read_las_header
 from ...io.registry import reader_for
 from ..keys import CODE_BITS
 from ..octree_dir import ConvertError, OctreeDir
@@ -67,7 +68,7 @@ from .keep_freed_memory import KeepFreedMemory
 from .partition import COUNT_LEVEL, PartitionPhases, built_name, grid_cells, group_name, partition_lut
 from .phases import BuildPhases, place_set
 from .read import ReadPhase, _point_total, _read_chunks, merge_attributes, spill_chunk
-from .spill import copy_range, load_raw_chunk, raw_chunk_files
+from .spill import copy_range, decode_xyz, load_raw_chunk, raw_chunk_files, raw_xyz_code
 
 READ_CHUNKS = 1  # chunks (``chunk_size`` points, 2 M by default) a read task decodes: one a task
 CHUNK_STRIDE = 1 << 20  # read task t spills chunks t·CHUNK_STRIDE + 0, 1, ...: sorted ids are the input order
@@ -191,7 +192,8 @@ class _Task(PartitionPhases, BuildPhases):
         self.progress = NullProgress()
         self.state = dict(spec["state"])
         self.local_sets = self.format == "gigapoint"  # placed once every set is built (place_set)
-        self.source = source  # a partition's input: ("pieces", [[task, row, rows], ...]), ("raw", chunk ids) or None (its own files)
+        # a partition's input: ("pieces", [[task, row, rows, xyz code], ...]), ("raw", chunk ids) or None (its own files)
+        self.source = source
 
     def save_state(self) -> None:
         pass
@@ -204,15 +206,22 @@ class _Task(PartitionPhases, BuildPhases):
         if kind == "raw":  # the only partition: the spilled chunks (the driver removes them)
             parts = [load_raw_chunk(self.dir.raw, i, attrs) for i in items]
             return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}, []
-        n = sum(rows for _, _, rows in items)
+        n = sum(rows for _, _, rows, _ in items)
         data = {}
         for key, dt in self._dtypes().items():
             width = 3 if key == "xyz" else 1
             arr = np.empty((n, width) if width > 1 else n, dt)
             flat = memoryview(arr.reshape(-1).view(np.uint8))
             row, at = dt.itemsize * width, 0
-            for t, start, rows in items:  # in task order: the input order
-                _read_into(_piece_file(self.dir, t, key), start * row, flat[at * row : (at + rows) * row])
+            coded = [rows for _, _, rows, code in items if code is not None] if key == "xyz" else []
+            buf = np.empty((max(coded, default=0), 3), np.int32)
+            for t, start, rows, code in items:  # in task order: the input order
+                if key == "xyz" and code is not None:  # int32 positions: decoded into place
+                    ints = buf[:rows]
+                    _read_into(_piece_file(self.dir, t, key), start * 12, memoryview(ints.reshape(-1).view(np.uint8)))
+                    decode_xyz(ints, code, arr[at : at + rows])
+                else:
+                    _read_into(_piece_file(self.dir, t, key), start * row, flat[at * row : (at + rows) * row])
                 at += rows
             data[key] = arr
         return data, []
@@ -279,20 +288,22 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
     t·CHUNK_STRIDE + j. ``color_mode``: the file's color decision before ``start``. Its result
     has every ``stride``-th valid point for the preview ("preview"; the driver's, not the state's)."""
     raw = OctreeDir(spec["dir"]).raw
-    scaler = None
+    scaler, xyz_code = None, None
     if start is None:
         chunks = _read_chunks(Path(path), spec["chunk_size"])
     else:
         scaler = ColorScaler()
         scaler.mode = color_mode
         chunks = reader_for(path).read_chunks(Path(path), spec["chunk_size"], start=start, stop=stop, scaler=scaler)
+        hdr = read_las_header(Path(path))  # a range of a LAS/LAZ file: its positions spilled as the file's int32 (spill.encode_xyz)
+        xyz_code = np.array([*hdr.scale, *hdr.offset], np.float64)
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     attrs, n_chunks, n_in, points, skipped, eight = None, 0, 0, 0, 0, False
     sample: list[dict] = []
     for j, chunk in enumerate(chunks):
         if j >= CHUNK_STRIDE:
             raise ConvertError(f"{path}: more than {CHUNK_STRIDE:,} chunks in one read task")
-        xyz, rgba, _, names, invalid, c_lo, c_hi = spill_chunk(raw, t * CHUNK_STRIDE + j, chunk)
+        xyz, rgba, _, names, invalid, c_lo, c_hi = spill_chunk(raw, t * CHUNK_STRIDE + j, chunk, xyz_code)
         pick = slice((-points) % stride, None, stride)
         sample.append({"xyz": np.array(xyz[pick]), "rgba": np.array(rgba[pick])})
         eight |= scaler is not None and scaler.mode == "8"
@@ -330,11 +341,12 @@ def _count_task(spec: dict, ids: list[int]) -> tuple[np.ndarray, np.ndarray]:
     return cells.astype(np.int32), counts[cells]
 
 
-def _distribute_task(spec: dict, t: int, ids: list[int], partitions: list) -> list:
+def _distribute_task(spec: dict, t: int, ids: list[int], partitions: list) -> dict:
     """Task ``t``'s chunks ``ids`` grouped by partition: one file per array, each partition's
     rows together, in partition order (chunks in order within each); the chunks are then
-    removed. Returns [[partition, first row, rows], ...] (also written, last: a repeated task
-    returns it)."""
+    removed. Positions stay int32 when every chunk has them so under one code (spill.encode_xyz).
+    Returns {"pieces": [[partition, first row, rows], ...], "xyz_code": the code or None} (also
+    written, last: a repeated task returns it)."""
     d = OctreeDir(spec["dir"])
     result = _piece_result(d, t)
     if result.exists():
@@ -345,10 +357,13 @@ def _distribute_task(spec: dict, t: int, ids: list[int], partitions: list) -> li
     lut = partition_lut(partitions)
     pieces = []
     try:
-        for i in ids:
-            data = load_raw_chunk(d.raw, i, st["attributes"])
+        codes = [raw_xyz_code(d.raw, i) for i in ids]
+        code = codes[0] if codes and all(c is not None and np.array_equal(c, codes[0]) for c in codes) else None
+        for i, c in zip(ids, codes):
+            data = load_raw_chunk(d.raw, i, st["attributes"], decode=code is None)
             if len(data["xyz"]):
-                pieces.append(w._by_partition(data, lut[grid_cells(data["xyz"], origin, edge)], len(partitions)))
+                xyz = data["xyz"] if code is None else decode_xyz(data["xyz"], c)
+                pieces.append(w._by_partition(data, lut[grid_cells(xyz, origin, edge)], len(partitions)))
     except FileNotFoundError:
         if result.exists():  # the same task, run twice at once (a worker thought dead), finished first
             return json.loads(result.read_text())
@@ -362,7 +377,7 @@ def _distribute_task(spec: dict, t: int, ids: list[int], partitions: list) -> li
                     if cuts[p + 1] > cuts[p]:
                         f.write(memoryview(np.ascontiguousarray(sorted_data[key][cuts[p] : cuts[p + 1]])).cast("B"))
     starts = np.cumsum(per) - per
-    out = [[int(p), int(starts[p]), int(per[p])] for p in touched]
+    out = {"pieces": [[int(p), int(starts[p]), int(per[p])] for p in touched], "xyz_code": None if code is None else code.tolist()}
     atomic_json(result, out)
     for i in ids:
         for f in raw_chunk_files(d.raw, i):
@@ -381,8 +396,15 @@ def _refine_task(spec: dict, lev: int, prefix: int, n: int, items: list) -> tupl
         with atomic_open(path) as f:
             f.truncate(n * row)
             at = 0
-            for t, start, rows in items:
-                copy_range(_piece_file(w.dir, t, key), start * row, f.fileno(), at * row, rows * row)
+            for t, start, rows, code in items:
+                src = _piece_file(w.dir, t, key)
+                if key == "xyz" and code is not None:  # int32 positions: decoded (the partition's files hold float64)
+                    ints = np.fromfile(src, np.int32, rows * 3, offset=start * 12).reshape(rows, 3)
+                    buf, done = memoryview(decode_xyz(ints, code)).cast("B"), 0
+                    while done < len(buf):
+                        done += os.pwrite(f.fileno(), buf[done:], at * row + done)
+                else:
+                    copy_range(src, start * row, f.fileno(), at * row, rows * row)
                 at += rows
     w.state.update(partitions=[[lev, prefix, n]], part_counts=[n], unsplittable=[])
     w._refine()
@@ -464,7 +486,8 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
 
     def fingerprint(self) -> dict | None:
         fp = super().fingerprint()
-        return None if fp is None else {**fp, "engine": "dask"}  # the state's layout differs from a single-process run's
+        # the state's layout differs from a single-process run's (and from that before int32 spills)
+        return None if fp is None else {**fp, "engine": "dask", "spill": "xyz-int32"}
 
     def save_state(self) -> None:
         super().save_state()
@@ -744,9 +767,10 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         counts = [0] * len(parts)
         pieces: dict = {}
         for t in sorted(map(int, results)):  # task order: the input order
-            for pid, start, rows in results[str(t)]:
+            res = results[str(t)]
+            for pid, start, rows in res["pieces"]:
                 counts[pid] += rows
-                pieces.setdefault(built_name(*parts[pid][:2]), []).append([t, start, rows])
+                pieces.setdefault(built_name(*parts[pid][:2]), []).append([t, start, rows, res["xyz_code"]])
         st.update(part_counts=counts, pieces=pieces)
         self.save_state()
         self._refine_pieces()
@@ -797,7 +821,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         self.progress.advance(sum(n for _, _, n in parts) - sum(n for _, _, n in todo))
         refs: dict[int, int] = dict.fromkeys(map(int, st.get("distributed_tasks", {})), 0)
         for lev, prefix, _ in todo:
-            for t, _, _ in pieces.get(built_name(lev, prefix), []):
+            for t, *_ in pieces.get(built_name(lev, prefix), []):
                 refs[t] += 1
         for t in [t for t, r in refs.items() if r == 0]:
             self._remove_pieces(t, refs)
@@ -816,7 +840,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             self.progress.advance(n)
             done_now += 1
             hooks.after_partition_built(done_now)
-            for t, _, _ in pieces.get(built_name(lev, prefix), []):
+            for t, *_ in pieces.get(built_name(lev, prefix), []):
                 refs[t] -= 1
                 if refs[t] == 0:
                     self._remove_pieces(t, refs)

@@ -16,7 +16,7 @@ from ..build import valid_bounds
 from ..preview import PreviewSampler, preview_points
 from .facts import input_facts
 from .prefetch import prefetch
-from .spill import load_raw_chunk, save_raw_chunk
+from .spill import encode_xyz, load_raw_chunk, save_raw_chunk
 from .state import Job
 
 
@@ -31,10 +31,12 @@ def merge_attributes(attrs: dict | None, names: dict) -> dict:
     return names if attrs is None else {a: d for a, d in attrs.items() if names.get(a) == d}
 
 
-def spill_chunk(raw, i: int, chunk) -> tuple:
+def spill_chunk(raw, i: int, chunk, xyz_code=None) -> tuple:
     """Chunk ``i``'s valid points spilled to ``raw`` (spill.save_raw_chunk): its positions, colors
-    and 1-D attributes. Returns (xyz, rgba as u32, {attribute: values}, {attribute: dtype str},
-    invalid points, bounds min, bounds max; the bounds are None without a valid point)."""
+    and 1-D attributes; positions as int32 when ``xyz_code`` (a LAS file's scale and offset,
+    spill.encode_xyz) gives every one of them back exactly. Returns (xyz, rgba as u32,
+    {attribute: values}, {attribute: dtype str}, invalid points, bounds min, bounds max; the
+    bounds are None without a valid point)."""
     n_in = len(chunk)
     valid, c_lo, c_hi = valid_bounds(chunk.xyz, MAX_ABS_COORDINATE)
     n_valid = int(np.count_nonzero(valid))
@@ -43,7 +45,11 @@ def spill_chunk(raw, i: int, chunk) -> tuple:
     names = {a: v.dtype.str for a, v in chunk.attributes.items() if v.ndim == 1}
     rgba = np.ascontiguousarray(chunk.rgba[keep]).view(np.uint32).reshape(-1)
     kept = {a: np.ascontiguousarray(chunk.attributes[a][keep]) for a in names}
-    save_raw_chunk(raw, i, xyz, rgba, kept)
+    ints = None if xyz_code is None else encode_xyz(xyz, xyz_code)
+    if ints is None:
+        save_raw_chunk(raw, i, xyz, rgba, kept)
+    else:
+        save_raw_chunk(raw, i, ints, rgba, kept, xyz_code)
     return xyz, rgba, kept, names, n_in - n_valid, (c_lo if n_valid else None), (c_hi if n_valid else None)
 
 

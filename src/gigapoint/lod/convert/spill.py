@@ -3,10 +3,12 @@ that fill the partitions' files."""
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from ...atomic import atomic_npy
 
@@ -17,17 +19,88 @@ def _raw_path(raw: Path, i: int, key: str) -> Path:
     return raw / f"c{i:06d}.{key}.npy"
 
 
-def save_raw_chunk(raw: Path, i: int, xyz: np.ndarray, rgba: np.ndarray, attributes: dict) -> None:
-    """Chunk ``i``'s valid points: float64 xyz (n, 3), u32 RGBA and 1-D attributes, a file each."""
+# Positions as a LAS file stores them: int32 X, Y, Z (12 bytes a point instead of 24) and the
+# file's scale and offset, from which decode_xyz gives back the float64 positions bit for bit
+# (encode_xyz checks every point). The distributed conversion spills and distributes them so
+# (lod/convert/distributed.py): every byte written goes into page cache that is new, which
+# costs a host fault a page on a VM (docs/scale.md).
+
+
+@njit(inline="always")
+def _decoded(v, scale, offset):
+    return v * scale + offset  # as io/las.py's _scaled_xyz: float64(int32) * scale + offset
+
+
+@njit(cache=True)
+def _encode_xyz(flat, scale, offset, out):
+    """``flat``: x, y, z, x, ... (float64); False when a value does not come back exactly (no
+    early exit: the loop stays vectorized, ~3 ns a point)."""
+    ok = True
+    inv0, inv1, inv2 = 1.0 / scale[0], 1.0 / scale[1], 1.0 / scale[2]
+    for i in range(flat.shape[0] // 3):
+        for a in range(3):
+            inv = inv0 if a == 0 else (inv1 if a == 1 else inv2)
+            x = flat[3 * i + a]
+            q = min(max(np.rint((x - offset[a]) * inv), -2147483648.0), 2147483647.0)
+            v = np.int32(q)
+            d = _decoded(v, scale[a], offset[a])
+            ok &= (d == x) & (math.copysign(1.0, d) == math.copysign(1.0, x))  # the sign too: -0.0
+            out[3 * i + a] = v
+    return ok
+
+
+@njit(cache=True)
+def _decode_xyz(flat, scale, offset, out):
+    for i in range(flat.shape[0] // 3):
+        for a in range(3):
+            out[3 * i + a] = _decoded(flat[3 * i + a], scale[a], offset[a])
+
+
+def encode_xyz(xyz: np.ndarray, code: np.ndarray) -> np.ndarray | None:
+    """float64 positions (n, 3) as int32 under ``code`` ([scale x, y, z, offset x, y, z]), or
+    None when one of them is not exactly ``int * scale + offset`` (decode_xyz would differ)."""
+    out = np.empty(xyz.shape, np.int32)
+    code = np.asarray(code, np.float64)
+    if len(xyz) and not _encode_xyz(np.ascontiguousarray(xyz, np.float64).reshape(-1), code[:3], code[3:], out.reshape(-1)):
+        return None
+    return out
+
+
+def decode_xyz(ints: np.ndarray, code: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """int32 positions (n, 3) under ``code`` back to float64 (into ``out``, C-contiguous, when given)."""
+    out = np.empty(ints.shape, np.float64) if out is None else out
+    if not out.flags.c_contiguous:
+        raise ValueError("decode_xyz: out must be C-contiguous")
+    code = np.asarray(code, np.float64)
+    if len(ints):
+        _decode_xyz(np.ascontiguousarray(ints, np.int32).reshape(-1), code[:3], code[3:], out.reshape(-1))
+    return out
+
+
+def save_raw_chunk(raw: Path, i: int, xyz: np.ndarray, rgba: np.ndarray, attributes: dict, xyz_code: np.ndarray | None = None) -> None:
+    """Chunk ``i``'s valid points: xyz (n, 3), u32 RGBA and 1-D attributes, a file each. xyz:
+    float64, or int32 under ``xyz_code`` (encode_xyz), saved beside it."""
+    if xyz_code is not None:
+        atomic_npy(_raw_path(raw, i, "xyzcode"), np.asarray(xyz_code, np.float64))
     atomic_npy(_raw_path(raw, i, "xyz"), xyz)
     atomic_npy(_raw_path(raw, i, "rgba"), rgba)
     for a, v in attributes.items():
         atomic_npy(_raw_path(raw, i, "attr." + a), v)
 
 
-def load_raw_chunk(raw: Path, i: int, attributes) -> dict:
-    """Chunk ``i`` memory-mapped: {"xyz", "rgba", "attr.<name>" for each of ``attributes``}."""
-    d = {"xyz": np.load(_raw_path(raw, i, "xyz"), mmap_mode="r"), "rgba": np.load(_raw_path(raw, i, "rgba"), mmap_mode="r")}
+def raw_xyz_code(raw: Path, i: int) -> np.ndarray | None:
+    """Chunk ``i``'s position code (encode_xyz) when it was spilled as int32, else None."""
+    path = _raw_path(raw, i, "xyzcode")
+    return np.load(path) if path.exists() else None
+
+
+def load_raw_chunk(raw: Path, i: int, attributes, decode: bool = True) -> dict:
+    """Chunk ``i`` memory-mapped: {"xyz", "rgba", "attr.<name>" for each of ``attributes``};
+    int32 positions decoded to float64 (``decode``: else as spilled, raw_xyz_code tells)."""
+    xyz = np.load(_raw_path(raw, i, "xyz"), mmap_mode="r")
+    if decode and xyz.dtype != np.float64:
+        xyz = decode_xyz(xyz, np.load(_raw_path(raw, i, "xyzcode")))
+    d = {"xyz": xyz, "rgba": np.load(_raw_path(raw, i, "rgba"), mmap_mode="r")}
     for a in attributes:
         d["attr." + a] = np.load(_raw_path(raw, i, "attr." + a), mmap_mode="r")
     return d
