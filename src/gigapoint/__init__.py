@@ -16,7 +16,7 @@ def demo(
     seed: int = 0,
     progressive: bool = False,
     memory_limit: int | None = None,
-    scale: float | None = None,
+    scale: float | None = 0.01,
     chunked: bool | None = None,
     attributes: bool = True,
     colors: str = "auto",
@@ -25,9 +25,10 @@ def demo(
     ``progressive=True``: a ProgressiveOctree returned at once and filled in the background
     (stopping at ``memory_limit`` bytes, by default half the machine's memory).
 
-    ``scale``: positions rounded to a grid of that step in metres (0.01: a LAS export of the
-    town), held in the compact layout, exact at that scale (~5-7 bytes a point of position and
-    colour instead of 16). ``chunked``: built in bounded memory (core/chunked.py: the same cloud,
+    ``scale``: positions rounded to a grid of that step in metres (by default 0.01, as a LAS
+    export of the town would be), held in the compact layout, exact at that scale (~5-7 bytes a
+    point of position and colour instead of 16); None: the generator's float positions, held in
+    three 32-bit words a point. ``chunked``: built in bounded memory (core/chunked.py: the same cloud,
     array for array, holding only the finished arrays and one partition of ~4 M points; the
     points go through a temporary folder, ~30 bytes a point of disk); None: chunked above
     50 M points. 10⁹ points at ``scale=0.01`` hold ~9 GB (``attributes=False``: ~6 GB, without

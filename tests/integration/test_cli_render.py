@@ -155,6 +155,28 @@ def test_demo_command(capsys, tmp_path):
     assert rc == 1 and "--points" in err
 
 
+def test_demo_command_holds_the_town_at_1_cm_in_the_compact_layout(capsys, tmp_path):
+    """By default the town is quantized to 1 cm, as a LAS export holds it: the compact layout and
+    per-block palettes, under 7 bytes a point of position and colour; --scale 0 keeps float
+    positions in three words (16 bytes); a bad --scale is one line and exit 1, no image."""
+    import re
+
+    def pos_color(stdout):
+        m = re.search(r"positions ([0-9.]+), color ([0-9.]+)", " ".join(stdout.split()))
+        return float(m.group(1)) + float(m.group(2))
+
+    rc, stdout, err = run(capsys, "demo", "--points", 200_000, "-o", tmp_path / "a.png", "-W", 160, "-H", 90)
+    assert rc == 0, err
+    assert "compact layout" in " ".join(stdout.split()) and pos_color(stdout) <= 7.0
+    rc, stdout, err = run(capsys, "demo", "--points", 200_000, "-o", tmp_path / "b.png", "-W", 160, "-H", 90, "--scale", 0)
+    assert rc == 0, err
+    assert "words layout" in " ".join(stdout.split()) and pos_color(stdout) == 16.0
+    for bad in ("nan", "-0.01", "1e9"):
+        rc, _, err = run(capsys, "demo", "--points", 1000, "-o", tmp_path / "c.png", "--scale", bad)
+        assert rc == 1 and "--scale" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "c.png").exists()
+
+
 def test_installed_entry_point_exit_codes(tmp_path, small_las):
     ok = subprocess.run([sys.executable, "-m", "gigapoint.cli", "render", str(small_las), "-o", str(tmp_path / "e.png"), "-W", "32", "-H", "32"], capture_output=True, text=True)
     assert ok.returncode == 0, ok.stderr

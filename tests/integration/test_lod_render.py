@@ -17,7 +17,7 @@ N = 300_000
 def scene(tmp_path_factory):
     out = tmp_path_factory.mktemp("lodr") / "oct"
     convert(list(demo_chunks(N, chunk_size=100_000)), out, max_leaf=5_000, partition_points=80_000)
-    return gp.demo(N), out
+    return gp.demo(N, scale=None), out
 
 
 CAMERAS = [

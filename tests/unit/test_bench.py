@@ -153,7 +153,7 @@ def test_table_and_json(bench_run, tmp_path):
 def test_demo_cloud_is_gigapoint_demo():
     timings: dict = {}
     mine = demo_cloud(30_000, seed=3, timings=timings)
-    ref = gigapoint.demo(30_000, seed=3)
+    ref = gigapoint.demo(30_000, seed=3, scale=None)
     assert timings["generate_s"] > 0 and timings["build_s"] > 0
     for name in ("low", "med", "high", "color"):
         np.testing.assert_array_equal(getattr(mine, name), getattr(ref, name))

@@ -65,3 +65,23 @@ def test_prefault_writes_one_byte_a_page_and_nothing_else():
     _prefault(np.empty(0, np.uint8))  # an empty cloud's arrays
     xyz, _, _ = demo_arrays(0)
     assert xyz.shape == (0, 3)
+
+
+def test_gp_demo_holds_the_town_at_1_cm_by_default():
+    """gp.demo quantizes to a 1 cm grid (as a LAS export of the town would) and holds it in the
+    compact layout (under 7 bytes a point of position and colour from ~10⁵ points on: the
+    sparser the town, the wider its batches), every point exact at that grid; scale=None keeps
+    the float positions."""
+    import gigapoint as gp
+    from gigapoint.io.demo import demo_arrays
+
+    cloud = gp.demo(200_000)
+    assert cloud.layout == "compact"
+    mem = cloud.memory()
+    assert (mem["positions"] + mem["color"]) / cloud.n_points <= 7.0
+    xyz, _, _ = demo_arrays(200_000)
+    want = np.sort(np.round(xyz / 0.01).astype(np.int64).view("i8,i8,i8").reshape(-1))
+    got = np.sort(np.round(cloud.positions() / 0.01).astype(np.int64).view("i8,i8,i8").reshape(-1))
+    np.testing.assert_array_equal(got, want)
+    assert np.abs(cloud.positions() / 0.01 - np.round(cloud.positions() / 0.01)).max() < 1e-3
+    assert gp.demo(30_000, scale=None).layout == "words"

@@ -43,7 +43,7 @@ def frame_of(xyz, rgba, cam, **settings):
 
 @pytest.fixture(scope="module")
 def demo():
-    cloud = gp.demo(150_000, seed=1)
+    cloud = gp.demo(150_000, seed=1, scale=None)
     cam = gp.Camera.fit(cloud.bounds, view=(-70.0, 30.0), width=200, height=120, fov=35.0)
     return cloud, cam, gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", size_mode="fixed"))  # one-pixel points
 

@@ -76,7 +76,7 @@ class Faded:
 
 @pytest.fixture(scope="module")
 def demo():
-    cloud = gp.demo(150_000, seed=1)
+    cloud = gp.demo(150_000, seed=1, scale=None)
     cam = gp.Camera.fit(cloud.bounds, view=(-70.0, 30.0), width=160, height=100, fov=35.0)
     return cloud, cam
 

@@ -24,7 +24,7 @@ BG = (10, 20, 30, 255)
 
 @pytest.fixture(scope="module")
 def scene():
-    cloud = gp.demo(60_000, seed=2)
+    cloud = gp.demo(60_000, seed=2, scale=None)
     cam = gp.Camera.fit(cloud.bounds, view=(-60.0, 35.0), width=120, height=80, fov=40.0)
     return cloud, cam
 

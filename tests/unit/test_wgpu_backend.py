@@ -30,7 +30,7 @@ _LOW32 = np.uint64(0xFFFFFFFF)
 
 @pytest.fixture(scope="module")
 def scene():
-    return gigapoint.demo(200_000)
+    return gigapoint.demo(200_000, scale=None)
 
 
 def _cameras(cloud) -> dict[str, Camera]:
@@ -196,7 +196,7 @@ def test_a_batch_larger_than_a_page_is_refused(scene):
 
 def test_second_frame_uploads_nothing_and_dead_clouds_are_freed():
     backend = wgpu_or_skip()
-    cloud = gigapoint.demo(30_000)
+    cloud = gigapoint.demo(30_000, scale=None)
     cam = Camera.fit(cloud.bounds, width=64, height=64)
     sel, args = _frame(cloud, cam, threshold_px=1e-9)  # 30 bits: low, med and high uploaded
     backend.rasterize(cloud, sel, *args)
@@ -206,7 +206,7 @@ def test_second_frame_uploads_nothing_and_dead_clouds_are_freed():
     assert backend.memory["uploaded"] == uploaded
     backend.resolve(np.full(16, EMPTY_PIXEL), cloud.color, (0, 0, 0, 255))
     assert backend.memory["points_resident"] >= 4 * 4 * cloud.n_points  # colors too
-    other = gigapoint.demo(20_000)
+    other = gigapoint.demo(20_000, scale=None)
     del cloud
     gc.collect()
     sel2, args2 = _frame(other, cam)

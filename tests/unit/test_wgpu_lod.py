@@ -229,7 +229,7 @@ def test_a_cloud_with_a_version_only_is_resent_when_it_changes(any_gpu, cpu):
     import gigapoint
     from gigapoint.core.selection import select
 
-    stream = _Frames(gigapoint.demo(40_000))
+    stream = _Frames(gigapoint.demo(40_000, scale=None))
     cam = Camera.fit(stream.bounds, view="iso", width=160, height=120)
     near, far = cam.clip_range(stream.bounds)
     sel = select(stream.batches, cam.screen_rows(), cam.width, cam.height, near, far, 500.0, False)

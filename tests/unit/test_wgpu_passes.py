@@ -35,7 +35,7 @@ BG = (10, 20, 30, 255)
 
 @pytest.fixture(scope="module")
 def scene():
-    cloud = gigapoint.demo(60_000)
+    cloud = gigapoint.demo(60_000, scale=None)
     from gigapoint.render.normals import estimate_normals
 
     estimate_normals(cloud, k=8)

@@ -201,6 +201,9 @@ def demo(
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing output file.")] = False,
     live: Annotated[bool, typer.Option("--live", help="Instead: a synthetic depth sensor flying through the demo town, in the viewer.")] = False,
     colors: ColorsOption = "auto",
+    scale: Annotated[
+        float, typer.Option(help="Grid step of the positions in metres, as a LAS export of the scene holds them (the compact layout); 0: float positions, three 32-bit words a point.")
+    ] = 0.01,
 ) -> None:
     """Generate the procedural demo scene, render it and report how fast each step was."""
     if live:
@@ -213,7 +216,7 @@ def demo(
 
     from ..core import build_cloud
     from ..core.chunk import PointChunk
-    from ..io.demo import demo_arrays
+    from ..io.demo import demo_arrays, round_to_grid
     from ..render import render_frame
 
     console = Console()
@@ -223,13 +226,17 @@ def demo(
     check_image_size(width, height)
     settings = settings_from_options(RenderSettings, {"threads": threads})  # a bad --threads is named
     check_colors(colors)
+    if not (scale == 0 or 1e-6 <= scale <= 1000):  # NaN fails both
+        raise GigapointError(f"--scale must be 0 (float positions) or a grid step between 1e-6 and 1000 metres, got {scale}")
     compiled_before = compiling.compiled_seconds()
     t0 = time.perf_counter()
     with status(f"generating the demo scene ({points:,} points)"):
         xyz, rgba, attrs = demo_arrays(points, seed)
+        if scale:
+            round_to_grid(xyz, scale)
     t1 = time.perf_counter()
     with status("Morton sort and batching"):
-        cloud = build_cloud([PointChunk(xyz, rgba, attrs)], name=f"demo({points:,})", colors=colors)
+        cloud = build_cloud([PointChunk(xyz, rgba, attrs, scale=(scale,) * 3 if scale else None)], name=f"demo({points:,})", colors=colors)
     del xyz, rgba, attrs
     t2 = time.perf_counter()
     cam = make_camera(cloud, width, height, view, None, "perspective", 60.0)
@@ -254,4 +261,5 @@ def demo(
         f"({frame.stats.visible_pixels:,} pixels covered)",
         highlight=False,
     )
+    console.print(memory_line(cloud), highlight=False)
     console.print(f"wrote {output}", highlight=False)

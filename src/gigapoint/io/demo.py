@@ -338,6 +338,13 @@ def demo_arrays(n_points: int, seed: int = 0, start: int = 0, offset=(0.0, 0.0, 
     return xyz, rgba, {"classification": cls, "intensity": inten}
 
 
+def round_to_grid(xyz: np.ndarray, scale: float) -> None:
+    """xyz = np.round(xyz / scale) * scale, in place: the positions a LAS file at ``scale`` holds."""
+    np.divide(xyz, scale, out=xyz)
+    np.round(xyz, out=xyz)
+    np.multiply(xyz, scale, out=xyz)
+
+
 def demo_chunks(n_points: int, seed: int = 0, chunk_size: int = 5_000_000, offset=(0.0, 0.0, 0.0), scale: float | None = None):
     """The demo scene as a stream of PointChunks (bounded memory per chunk). ``scale``: positions
     rounded to a grid of that step (metres), and the chunks say so, as a LAS export of the town
@@ -346,8 +353,6 @@ def demo_chunks(n_points: int, seed: int = 0, chunk_size: int = 5_000_000, offse
 
     for start in range(0, n_points, chunk_size):
         xyz, rgba, attrs = demo_arrays(min(chunk_size, n_points - start), seed, start, offset)
-        if scale is not None:  # np.round(xyz / scale) * scale, in place
-            np.divide(xyz, scale, out=xyz)
-            np.round(xyz, out=xyz)
-            np.multiply(xyz, scale, out=xyz)
+        if scale is not None:
+            round_to_grid(xyz, scale)
         yield PointChunk(xyz, rgba, attrs, scale=None if scale is None else (float(scale),) * 3)
