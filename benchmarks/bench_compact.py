@@ -31,6 +31,13 @@ exact colours, the quantizer's speed, and brute-force frames of the two interlea
 
     .venv/bin/python benchmarks/bench_compact.py --colors --points 20M --rounds 7
 
+``--bitmaps`` compares the thesis's two encodings at the source's precision (lossless): bricks
+of N³ grid cells stored as occupancy bitmaps (N³ bits each non-empty brick) against the same
+bricks holding relative offsets (3·log2 N bits a point), bytes a point, and the points a bitmap
+would lose (two in one cell)::
+
+    .venv/bin/python benchmarks/bench_compact.py --bitmaps --points 5M
+
 ``--default`` measures what ``gp.open`` / ``gp.demo(n, scale=0.01)`` hold by default
 (``colors="auto"``: the palette where its PSNR is at least RGB565's, else RGB565): which one
 each scene gets, bytes a point, the cost of the choice in the build (``encode_colors`` "auto"
@@ -389,6 +396,44 @@ def default_part(args) -> None:
     print(f"\npeak RSS {rss / 2**30:.2f} GiB")
 
 
+def bitmap_rows(name: str, q: np.ndarray, cloud) -> None:
+    """Todoran's comparison (seed 004, 4.1) at the source's precision: bricks of N³ grid cells, each
+    non-empty one a bitmap of N³ bits, against the same bricks holding 3·log2(N) bits a point; both
+    with a brick record of 12 bytes (its corner); and what the compact layout holds now."""
+    n = len(q)
+    mem = cloud.memory()
+    print(f"\n{name}: {n:,} points, grid {(q.max(axis=0) + 1).tolist()} cells; the compact layout holds positions in {mem['positions'] / n:.2f} bytes a point")
+    print(f"  {'N':>4} {'bricks':>10} {'points/brick':>13} {'occupancy':>10} {'bitmap B/pt':>12} {'offsets B/pt':>13} {'bitmap/offsets':>15} {'points a bitmap loses':>22}")
+    for side in (4, 8, 16, 32, 64, 128):
+        brick = q // side
+        keys = (brick[:, 0] << 42) | (brick[:, 1] << 21) | brick[:, 2]
+        cell = ((q[:, 0] % side) * side + q[:, 1] % side) * side + q[:, 2] % side
+        bricks = len(np.unique(keys))
+        distinct = len(np.unique(np.stack([keys, cell], axis=1).view("i8,i8")))
+        bitmap = bricks * (side**3 / 8 + 12) / n
+        offsets = (n * 3 * np.log2(side) / 8 + bricks * 12) / n
+        print(
+            f"  {side:4} {bricks:10,} {n / bricks:13.1f} {distinct / (bricks * side**3):10.2e} {bitmap:12.2f} {offsets:13.2f} {bitmap / offsets:15.1f} "
+            f"{n - distinct:12,} ({(n - distinct) / n:.1%})"
+        )
+
+
+def bitmaps_part(args) -> None:
+    """Bitmaps against relative offsets (issue #22's "measure both"), lossless at the source's grid."""
+    from gigapoint.bench import parse_count
+
+    if not args.skip_autzen and AUTZEN.exists():
+        import laspy
+
+        las = laspy.read(str(AUTZEN))
+        xyz = np.stack([las.X, las.Y, las.Z], axis=1).astype(np.int64)  # the file's integers: its grid
+        bitmap_rows("autzen_trim (0.01 m)", xyz - xyz.min(axis=0), gp.open(AUTZEN))
+    n = parse_count(args.points)
+    town = gp.demo(n, scale=args.scale)
+    q = np.round(town.positions() / args.scale).astype(np.int64)
+    bitmap_rows(f"demo town ({n:,}) at {args.scale:g} m", q - q.min(axis=0), town)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", default="5M", help="demo town size")
@@ -400,6 +445,7 @@ def main(argv=None) -> int:
     ap.add_argument("--octree", action="store_true", help="the compact octree on disk (format 2) against format 1 instead")
     ap.add_argument("--colors", action="store_true", help="RGB565 against per-block palettes (issue #22) instead")
     ap.add_argument("--default", action="store_true", help="the default colours (colors='auto') against the 16-byte layout and RGB565")
+    ap.add_argument("--bitmaps", action="store_true", help="occupancy bitmaps against relative offsets per brick (Todoran 4.1) instead")
     args = ap.parse_args(argv)
     from gigapoint.bench import cpu_model, parse_count
 
@@ -413,6 +459,9 @@ def main(argv=None) -> int:
         return 0
     if args.default:
         default_part(args)
+        return 0
+    if args.bitmaps:
+        bitmaps_part(args)
         return 0
     ok = True
     if not args.skip_autzen and AUTZEN.exists():
