@@ -184,6 +184,33 @@ def _runs(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return values[starts], np.diff(np.append(starts, len(values)))
 
 
+class _Work:
+    """An insertion's work arrays (sort keys, sorted codes, voxel cell entries...), kept for the
+    next one: ``get(name, n, dtype)`` is the first ``n`` rows of array ``name``, made anew only
+    when a batch needs more. On the Intel Xeon VM a page freed and touched again a second later
+    costs nearly what a fresh one does (1-2.5 ms a MB: the guest hands freed memory back to its
+    host): made anew for every 10^6-point batch, they cost a snapshot of 18 M points a median
+    1.4 s of system time, kept 0.8 s (12 runs each, docs/benchmarks.md, #19). Dropped by ``trim``."""
+
+    def __init__(self) -> None:
+        self.arrays: dict[str, np.ndarray] = {}
+
+    def get(self, name: str, n: int, dtype, width: int = 0) -> np.ndarray:
+        a = self.arrays.get(name)
+        if a is None or len(a) < n or a.dtype != dtype:
+            rows = max(n, len(a) * 3 // 2 if a is not None else 0)
+            a = self.arrays[name] = np.empty((rows, width) if width else rows, dtype)
+        return a[:n]
+
+    def rows(self, name: str) -> int:
+        a = self.arrays.get(name)
+        return 0 if a is None else len(a)
+
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in self.arrays.values())
+
+
 class _Set:
     """Points to be routed from the nodes ``starts`` (a batch from the root; the points of the
     leaves split by a batch, each from its leaf: disjoint subtrees, so one sort and one pass of
@@ -197,14 +224,17 @@ class _Set:
         self.starts, self.codes, self.order, self.xyz, self.rgba, self.attrs = starts, codes, order, xyz, rgba, attrs
 
     @classmethod
-    def of(cls, starts, xyz, rgba, attrs: dict, origin, edge: float) -> _Set:
+    def of(cls, starts, xyz, rgba, attrs: dict, origin, edge: float, work: _Work | None = None, tag: str = "") -> _Set:
+        """``work``: where its arrays come from, named with ``tag`` (one per set alive at once)."""
+        work = work or _Work()
         codes = point_codes(xyz, origin, edge)
         n = len(codes)
-        keys = np.empty(n, np.uint64)
+        keys = work.get("keys" + tag, n, np.uint64)
         index_bits = max(1, (n - 1).bit_length())
         K.sort_keys(codes, index_bits, keys)
         keys.sort()
-        order, sorted_codes, sorted_rgba = np.empty(n, np.int64), np.empty(n, np.uint64), np.empty(n, np.uint32)
+        order, sorted_codes = work.get("order" + tag, n, np.int64), work.get("codes" + tag, n, np.uint64)
+        sorted_rgba = work.get("rgba" + tag, n, np.uint32)
         K.code_order(keys, codes, rgba, index_bits, order, sorted_codes, sorted_rgba)
         return cls(np.atleast_1d(np.asarray(starts, np.int64)), sorted_codes, order, xyz, sorted_rgba, attrs)
 
@@ -245,6 +275,7 @@ class ProgressiveOctree:
         self._hkeys = np.full(1 << 17, K.EMPTY_KEY, np.uint64)
         self._hvals = np.zeros(1 << 17, np.uint32)
         self._run_lo = self._run_hi = self._ent_start = self._ent_count = np.empty(0, np.int64)  # sample_runs' scratch
+        self._work = _Work()  # insertions' work arrays, kept until trim
         self._free = np.zeros(_INITIAL_CHUNKS, np.int64)
         self._n_free = 0
         self._n_chunks = 0
@@ -330,7 +361,9 @@ class ProgressiveOctree:
             self._drop_voxel_state()
 
     def _drop_voxel_state(self) -> None:
+        """Drop the voxels' build state, and the insertions' work arrays with it."""
         self._voxel_state = False
+        self._work = _Work()
         self.vox_key, self.vox_slot, self.vox_sum = np.zeros(0, np.uint64), np.zeros(0, np.uint32), np.zeros((0, 5), np.uint32)
         self._hkeys, self._hvals = np.zeros(0, np.uint64), np.zeros(0, np.uint32)
 
@@ -445,6 +478,7 @@ class ProgressiveOctree:
                 "batches": size(pool.batches, pool.packing, pool.chunk_next, pool.chunk_node, pool.batch_version),
             }  # fmt: skip
         m["voxels"] = size(self.vox_key, self.vox_slot, self.vox_sum, self._hkeys, self._hvals)
+        m["work"] = self._work.nbytes  # insertions' work arrays (address space: the rows touched are the largest batch's)
         m["nodes"] = size(self.key, self.level, self.parent, self.children, self.leaf, self.count, self.first_chunk, self.last_chunk,
                           self.list_count, self.cmin, self.cedge, self._free)  # fmt: skip
         return m
@@ -549,7 +583,7 @@ class ProgressiveOctree:
         # The batch and the points of every leaf that would overflow (spilled: inserted again
         # from that leaf down, all such leaves' points one set), sorted by code and routed, until
         # no leaf overflows.
-        sets = [_Set.of(self.root, xyz, rgba, attrs, self.origin, self.edge)]
+        sets = [_Set.of(self.root, xyz, rgba, attrs, self.origin, self.edge, self._work, "0")]
         while True:
             routes = [self._distribute(st) for st in sets]
             incoming = np.zeros(self.n_nodes, np.int64)
@@ -562,7 +596,7 @@ class ProgressiveOctree:
             stored = over[self.count[over] > 0]
             self.leaf[over[self.count[over] == 0]] = 0  # created by this batch: nothing stored to spill
             if len(stored):
-                sets.append(_Set.of(stored, *self._split(stored), self.origin, self.edge))
+                sets.append(_Set.of(stored, *self._split(stored), self.origin, self.edge, self._work, str(len(sets))))
         self.pool.version += 1
         for st, (leaf_runs, inner_runs) in zip(sets, routes):
             self._sample(st, leaf_runs, inner_runs)
@@ -654,11 +688,12 @@ class ProgressiveOctree:
             self._run_hi = np.full(len(self.key), -1, np.int64)
             self._ent_start = np.zeros(len(self.key), np.int64)
             self._ent_count = np.zeros(len(self.key), np.int64)
-        cap = 2 * len(st.codes) + 1024
+        w = self._work
+        cap = max(len(st.codes) + 1024, w.rows("e_cell"))  # entries: 0.3-0.9 a point in 10^6-point batches; more: tried again
         while True:
-            e_cell, e_local = np.empty(cap, np.uint64), np.empty(cap, np.uint64)
-            e_first, e_node = np.empty(cap, np.int64), np.empty(cap, np.int64)
-            e_sum = np.empty((cap, 5), np.uint32)
+            e_cell, e_local = w.get("e_cell", cap, np.uint64), w.get("e_local", cap, np.uint64)
+            e_first, e_node = w.get("e_first", cap, np.int64), w.get("e_node", cap, np.int64)
+            e_sum = w.get("e_sum", cap, np.uint32, 5)
             m = K.sample_runs(st.codes, st.rgba, st.order, inner_runs, leaf_runs, self.level, self.leaf, self.children, self._run_lo, self._run_hi,
                               self._ent_start, self._ent_count, e_cell, e_first, e_sum, e_node, e_local)  # fmt: skip
             if m >= 0:
@@ -681,8 +716,7 @@ class ProgressiveOctree:
         if m == 0:
             return
         self._ensure_hash(m)
-        vid = np.empty(m, np.int64)
-        is_new = np.empty(m, np.uint8)
+        vid, is_new = self._work.get("vid", m, np.int64), self._work.get("is_new", m, np.uint8)
         next_vid = K.voxel_ids(self._hkeys, self._hvals, node, cell, self.n_voxels, vid, is_new)
         if next_vid > len(self.vox_key):
             cap = max(len(self.vox_key), 1)
