@@ -596,7 +596,8 @@ class ProgressiveOctree:
             stored = over[self.count[over] > 0]
             self.leaf[over[self.count[over] == 0]] = 0  # created by this batch: nothing stored to spill
             if len(stored):
-                sets.append(_Set.of(stored, *self._split(stored), self.origin, self.edge, self._work, str(len(sets))))
+                tag = str(len(sets))
+                sets.append(_Set.of(stored, *self._split(stored, tag), self.origin, self.edge, self._work, tag))
         self.pool.version += 1
         for st, (leaf_runs, inner_runs) in zip(sets, routes):
             self._sample(st, leaf_runs, inner_runs)
@@ -634,13 +635,17 @@ class ProgressiveOctree:
                 return leaf_runs[:nl], inner_runs[:ni]
             self._nodes(2 * cap)
 
-    def _split(self, nodes: np.ndarray):
-        """Turn the leaves ``nodes`` into (empty) inner nodes; their points come back, to be inserted again."""
+    def _split(self, nodes: np.ndarray, tag: str):
+        """Turn the leaves ``nodes`` into (empty) inner nodes; their points come back, to be
+        inserted again (in work arrays named with ``tag``)."""
         pool = self.pool
+        w = self._work
         slots = np.concatenate([self._list_slots(node * K.LISTS) for node in nodes.tolist()])
-        xyz = self._decode(slots)
-        rgba = pool.color[slots]  # numpy's gathers: a few 10^5 points, not worth a parallel region each
-        attrs = {a: v[slots] for a, v in pool.attributes.items()}
+        n = len(slots)
+        xyz = self._decode(slots, w.get("xyz" + tag, n, np.float64, 3))
+        # numpy's gathers: a few 10^5 points, not worth a parallel region each ("clip": not buffered)
+        rgba = np.take(pool.color, slots, out=w.get("split_rgba" + tag, n, np.uint32), mode="clip")
+        attrs = {a: np.take(v, slots, out=w.get(f"{a}_{tag}", n, v.dtype), mode="clip") for a, v in pool.attributes.items()}
         for node in nodes.tolist():
             self._n_free = K.free_chunks(
                 self.first_chunk, self.last_chunk, pool.chunk_next, pool.batches["count"], node * K.LISTS, self._free, self._n_free
@@ -822,10 +827,10 @@ class ProgressiveOctree:
         """The corner of the box of each node's chunks: its cube's, moved by VOXEL_SHIFT for an inner node's voxels."""
         return self.cmin[nodes] - np.where(self.leaf[nodes] == 1, 0.0, K.VOXEL_SHIFT * self.cedge[nodes])[..., None]
 
-    def _decode(self, slots: np.ndarray) -> np.ndarray:
-        """float64 positions of the entries at pool ``slots`` (each in its chunk's node's box)."""
+    def _decode(self, slots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """float64 positions of the entries at pool ``slots`` (each in its chunk's node's box), into ``out`` when given."""
         pool = self.pool
-        out = np.empty((len(slots), 3))
+        out = np.empty((len(slots), 3)) if out is None else out
         n = self.n_nodes
         K.dequantize_slots(pool.low, pool.ext, pool.packing["ext_first"], pool.packing["code"], pool.chunk, slots, pool.chunk_node,
                            self._box_min(np.arange(n)), self.cedge[:n], out)  # fmt: skip
