@@ -657,3 +657,26 @@ def test_render_builds_an_octree_for_inputs_above_the_budget_and_waits_for_it(tm
     # below the budget: the plain cloud, every point drawn
     r = _cli("render", f, "-o", tmp_path / "b.png", "--size-mode", "fixed", "-W", 160, "-H", 120, "--stats")
     assert r.returncode == 0 and "60,000 of 60,000 points" in r.stderr, r.stderr
+
+
+def test_work_arrays_held_between_batches_build_the_same_octree_and_are_let_go(scene, octree):
+    """holding_work keeps the insertions' work arrays from one add to the next (a snapshot's
+    batches): a batch must not see the last one's leftovers (sort keys, voxel cell entries, split
+    leaves' points in the same arrays): the pool, nodes and voxels come out as without it."""
+    xyz, rgba, attrs = scene
+    o = ProgressiveOctree("t", max_leaf=3_000, cube=_cube(xyz))
+    with o.holding_work():
+        for s in range(0, len(xyz), 20_000):
+            o.add(xyz[s : s + 20_000], rgba[s : s + 20_000], **{a: v[s : s + 20_000] for a, v in attrs.items()})
+        held = o.memory()["work"]
+    assert held > 0 and o.memory()["work"] == 0
+    assert (o.n_nodes, o.n_voxels, o.points) == (octree.n_nodes, octree.n_voxels, octree.points)
+    n, lists = o.n_nodes, o.n_nodes * 8
+    for a in ("key", "leaf", "count", "first_chunk", "list_count"):
+        np.testing.assert_array_equal(getattr(o, a)[: lists if a in ("first_chunk", "list_count") else n], getattr(octree, a)[: lists if a in ("first_chunk", "list_count") else n])
+    used = o._n_chunks * o.pool.chunk
+    for got, want in [(o.pool.low, octree.pool.low), (o.pool.color, octree.pool.color), (o.vox_sum[: o.n_voxels], octree.vox_sum[: o.n_voxels])]:
+        np.testing.assert_array_equal(got[: len(got) if got.ndim > 1 else used], want[: len(want) if want.ndim > 1 else used])
+    np.testing.assert_array_equal(o.pool.ext[: o._n_streams * o.pool.stream], octree.pool.ext[: octree._n_streams * octree.pool.stream])
+    for a in attrs:
+        np.testing.assert_array_equal(o.pool.attributes[a][:used], octree.pool.attributes[a][:used])

@@ -588,9 +588,10 @@ class LiveCloud:
                 self.snapshots = ProgressiveOctree(name=f"{self.name} snapshots", cube=(centre - edge / 2, edge), capacity=n)
             added = 0
             out: dict = {}
-            for s in range(0, n, SNAPSHOT_BATCH):
-                xyz, rgba, attrs = buf.gather(runs, skip, s, min(s + SNAPSHOT_BATCH, n), out)
-                added += self.snapshots.add(xyz, rgba, **attrs)
+            with self.snapshots.holding_work():  # one set of work arrays for all the batches
+                for s in range(0, n, SNAPSHOT_BATCH):
+                    xyz, rgba, attrs = buf.gather(runs, skip, s, min(s + SNAPSHOT_BATCH, n), out)
+                    added += self.snapshots.add(xyz, rgba, **attrs)
         finally:
             with self.lock.writing():
                 self._unpin(slots)

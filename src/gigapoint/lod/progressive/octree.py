@@ -37,6 +37,7 @@ them up in the voxel table, allocate chunks, and write points and voxels in para
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Self
 
@@ -193,21 +194,27 @@ def _runs(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 class _Work:
-    """An insertion's work arrays (sort keys, sorted codes, voxel cell entries...), kept for the
-    next one: ``get(name, n, dtype)`` is the first ``n`` rows of array ``name``, made anew only
-    when a batch needs more. On the Intel Xeon VM a page freed and touched again a second later
-    costs nearly what a fresh one does (1-2.5 ms a MB: the guest hands freed memory back to its
-    host): made anew for every 10^6-point batch, they cost a snapshot of 18 M points a median
-    1.4 s of system time, kept 0.8 s (12 runs each, docs/benchmarks.md, #19). Dropped by ``trim``."""
+    """An insertion's work arrays (sort keys, sorted codes, voxel cell entries, split leaves'
+    points...): ``get(name, n, dtype)`` makes a new array, or with ``keep`` gives the first ``n``
+    rows of the one kept under ``name``, made anew only when a batch needs more
+    (ProgressiveOctree.holding_work). On the Intel Xeon VM a page freed and touched again a second
+    later costs nearly what a fresh one does (1-2.5 ms a MB: the guest hands freed memory back to
+    its host): made anew for each of its 18 10^6-point batches, they cost an 18 M-point snapshot a
+    median 1.4 s of system time, kept 0.8 s (12 runs each); an 8 M insertion of 8 batches (#18's
+    benchmark) gained nothing (their first touch costs what the faults saved), so ``add`` alone
+    does not keep them (docs/benchmarks.md)."""
 
-    def __init__(self) -> None:
+    def __init__(self, keep: bool = False) -> None:
+        self.keep = keep
         self.arrays: dict[str, np.ndarray] = {}
 
     def get(self, name: str, n: int, dtype, width: int = 0) -> np.ndarray:
         a = self.arrays.get(name)
         if a is None or len(a) < n or a.dtype != dtype:
             rows = max(n, len(a) * 3 // 2 if a is not None else 0)
-            a = self.arrays[name] = np.empty((rows, width) if width else rows, dtype)
+            a = np.empty((rows, width) if width else rows, dtype)
+            if self.keep:
+                self.arrays[name] = a
         return a[:n]
 
     def rows(self, name: str) -> int:
@@ -282,7 +289,8 @@ class ProgressiveOctree:
         self._vox(1 << 16)
         self._hkeys, self._hvals = _voxel_table(1 << 17)
         self._run_lo = self._run_hi = self._ent_start = self._ent_count = np.empty(0, np.int64)  # sample_runs' scratch
-        self._work = _Work()  # insertions' work arrays, kept until trim
+        self._work = _Work()  # insertions' work arrays (kept from one to the next while holding_work)
+        self._holding = 0
         self._free = np.zeros(_INITIAL_CHUNKS, np.int64)
         self._n_free = 0
         self._n_chunks = 0
@@ -368,7 +376,7 @@ class ProgressiveOctree:
     def _drop_voxel_state(self) -> None:
         """Drop the voxels' build state, and the insertions' work arrays with it."""
         self._voxel_state = False
-        self._work = _Work()
+        self._work = _Work(self._work.keep)
         self.vox_key, self.vox_slot, self.vox_sum = np.zeros(0, np.uint64), np.zeros(0, np.uint32), np.zeros((0, 5), np.uint32)
         self._hkeys, self._hvals = np.zeros(0, np.uint64), np.zeros(0, np.uint32)
 
@@ -482,7 +490,7 @@ class ProgressiveOctree:
                 "batches": size(pool.batches, pool.packing, pool.chunk_next, pool.chunk_node, pool.batch_version),
             }  # fmt: skip
         m["voxels"] = size(self.vox_key, self.vox_slot, self.vox_sum, self._hkeys, self._hvals)
-        m["work"] = self._work.nbytes  # insertions' work arrays (address space: the rows touched are the largest batch's)
+        m["work"] = self._work.nbytes  # insertions' work arrays while held (address space: the rows touched are the largest batch's)
         m["nodes"] = size(self.key, self.level, self.parent, self.children, self.leaf, self.count, self.first_chunk, self.last_chunk,
                           self.list_count, self.cmin, self.cedge, self._free)  # fmt: skip
         return m
@@ -551,6 +559,23 @@ class ProgressiveOctree:
                 attrs = {a: v[valid] for a, v in attrs.items()}
             self._insert(xyz, rgba, attrs, lo, hi)
         return n_valid
+
+    @contextmanager
+    def holding_work(self):
+        """Keep the insertions' work arrays from one ``add`` to the next until the block ends (many
+        batches in a row: LiveCloud.snapshot's): their pages are touched once, not once a batch
+        (``_Work``). ``memory()`` counts them as ``work`` meanwhile."""
+        with self.lock:
+            self._holding += 1
+            if self._holding == 1:
+                self._work = _Work(keep=True)
+        try:
+            yield self
+        finally:
+            with self.lock:
+                self._holding -= 1
+                if self._holding == 0:
+                    self._work = _Work()
 
     def reading(self):
         """Held while a frame reads what ``prepare`` returned: no insertion moves it meanwhile
@@ -698,7 +723,7 @@ class ProgressiveOctree:
             self._ent_start = np.zeros(len(self.key), np.int64)
             self._ent_count = np.zeros(len(self.key), np.int64)
         w = self._work
-        cap = max(len(st.codes) + 1024, w.rows("e_cell"))  # entries: 0.3-0.9 a point in 10^6-point batches; more: tried again
+        cap = max(2 * len(st.codes) + 1024, w.rows("e_cell"))  # rows past the entries are never touched
         while True:
             e_cell, e_local = w.get("e_cell", cap, np.uint64), w.get("e_local", cap, np.uint64)
             e_first, e_node = w.get("e_first", cap, np.int64), w.get("e_node", cap, np.int64)
