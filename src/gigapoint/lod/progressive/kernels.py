@@ -263,28 +263,36 @@ def _voxel_key(node, cell):
     return (np.uint64(node) << np.uint64(3 * GRID_BITS)) | cell
 
 
-@njit(cache=True)
+@njit(parallel=True, cache=True)
 def voxel_ids(hkeys, hvals, node, cell, next_vid, vid, is_new):
     """The voxel id of each (list, cell) (a list names its node): found in the open-addressing table, or a new id
-    (``next_vid`` on, in entry order) entered there. The table is kept at most half full by the caller."""
+    (``next_vid`` on, in entry order) entered there. The table is kept at most half full by the caller.
+    A batch's entries never repeat a key, so all are looked up first, in parallel (the table only
+    read), then the new ones entered in order: the ids and the table of one pass in order."""
     mask = np.uint64(hkeys.shape[0] - 1)
-    for e in range(node.shape[0]):
+    for e in prange(node.shape[0]):
         k = _voxel_key(node[e], cell[e])
         h = _hash(k, mask)
         while True:
             hk = hkeys[h]
-            if hk == EMPTY_KEY:
-                hkeys[h] = k
-                hvals[h] = next_vid
-                vid[e] = next_vid
-                is_new[e] = 1
-                next_vid += 1
-                break
             if hk == k:
                 vid[e] = hvals[h]
                 is_new[e] = 0
                 break
+            if hk == EMPTY_KEY:
+                is_new[e] = 1
+                break
             h = (h + np.uint64(1)) & mask
+    for e in range(node.shape[0]):
+        if is_new[e]:
+            k = _voxel_key(node[e], cell[e])
+            h = _hash(k, mask)
+            while hkeys[h] != EMPTY_KEY:
+                h = (h + np.uint64(1)) & mask
+            hkeys[h] = k
+            hvals[h] = next_vid
+            vid[e] = next_vid
+            next_vid += 1
     return next_vid
 
 
