@@ -179,78 +179,138 @@ def _add_color(sums, e, col):
     sums[e, 4] += 1
 
 
+@njit(parallel=True, cache=True)
+def cell_counts(codes, inner_runs, level, counts):
+    """The voxel cells each inner run's points occupy in its node: distinct code prefixes
+    ``GRID_BITS`` levels below it, runs of equal ones in the sorted codes. sample_runs makes one
+    entry for each, so where each node's entries go is known before it runs."""
+    for r in prange(inner_runs.shape[0]):
+        lo, hi = inner_runs[r, 1], inner_runs[r, 2]
+        shift = np.uint64(3 * (CODE_BITS - min(level[inner_runs[r, 0]] + GRID_BITS, CODE_BITS)))
+        c = 1
+        for i in range(lo + 1, hi):
+            c += ((codes[i] ^ codes[i - 1]) >> shift) != 0
+        counts[r] = c
+
+
 @njit(cache=True)
-def sample_runs(
-    codes, rgba, order, inner_runs, leaf_runs, level, leaf, children, run_lo, run_hi, ent_start, ent_count, e_cell, e_first, e_sum, e_node, e_local
-):
+def plan_levels(inner_runs, level, n_bins, tasks, group_start):
+    """sample_runs' order: the inner runs level by level, deepest first (a node's children are a
+    level deeper), each level's spread over ``n_bins`` bins by points, largest first into the least
+    loaded; bin t of group g is tasks[group_start[g * n_bins + t] : group_start[g * n_bins + t + 1]].
+    Returns the number of groups."""
+    ni = inner_runs.shape[0]
+    lev = np.empty(ni, np.int64)
+    for r in range(ni):
+        lev[r] = level[inner_runs[r, 0]]
+    by_level = np.argsort(-lev, kind="mergesort")
+    load = np.zeros(n_bins, np.int64)
+    g = 0
+    k = 0
+    pos = 0
+    while k < ni:
+        e = k
+        while e < ni and lev[by_level[e]] == lev[by_level[k]]:
+            e += 1
+        points = np.empty(e - k, np.int64)
+        for j in range(k, e):
+            points[j - k] = inner_runs[by_level[j], 2] - inner_runs[by_level[j], 1]
+        bin_of = np.empty(e - k, np.int64)
+        load[:] = 0
+        for j in np.argsort(-points):
+            t = np.argmin(load)
+            bin_of[j] = t
+            load[t] += points[j]
+        for t in range(n_bins):
+            group_start[g * n_bins + t] = pos
+            for j in range(e - k):
+                if bin_of[j] == t:
+                    tasks[pos] = by_level[k + j]
+                    pos += 1
+        g += 1
+        k = e
+    group_start[g * n_bins] = pos
+    return g
+
+
+@njit(cache=True)
+def _node_cells(node, level, leaf, children, codes, rgba, order, run_lo, run_hi, ent_start, ent_count, e_cell, e_first, e_sum, e_node, e_local):
+    """The entries of one inner node, at ent_start[node] on, from its leaf children's points and
+    its inner children's entries (made before: a level deeper). (The two loops open entries
+    alike, written out twice on purpose: an inline helper taking the arrays made this 1.9x
+    slower, numba keeping reference counting in the loop.)"""
+    lev = level[node]
+    cl = min(lev + GRID_BITS, CODE_BITS)
+    shift = np.uint64(3 * (CODE_BITS - cl))
+    start = ent_start[node]
+    m = start
+    for d in range(8):
+        c = children[node, d]
+        if c < 0 or run_lo[c] < 0:
+            continue
+        if leaf[c]:
+            for i in range(run_lo[c], run_hi[c]):
+                cell = codes[i] >> shift
+                if m == start or cell != e_cell[m - 1]:
+                    e_cell[m] = cell
+                    e_first[m] = order[i]
+                    for ch in range(5):
+                        e_sum[m, ch] = 0
+                    m += 1
+                _add_color(e_sum, m - 1, rgba[i])
+        else:
+            ccl = min(lev + 1 + GRID_BITS, CODE_BITS)
+            up = np.uint64(3 * (ccl - cl))
+            for k in range(ent_start[c], ent_start[c] + ent_count[c]):
+                cell = e_cell[k] >> up
+                if m == start or cell != e_cell[m - 1]:
+                    e_cell[m] = cell
+                    e_first[m] = e_first[k]
+                    for ch in range(5):
+                        e_sum[m, ch] = 0
+                    m += 1
+                for ch in range(5):
+                    e_sum[m - 1, ch] += e_sum[k, ch]
+    mask = (np.uint64(1) << np.uint64(3 * (cl - lev))) - np.uint64(1)
+    top = np.uint64(3 * (cl - lev - 1))  # the cell's child octant: its highest digit
+    for k in range(start, m):
+        e_local[k] = e_cell[k] & mask
+        e_node[k] = node * LISTS + np.int64((e_local[k] >> top) & np.uint64(7))
+
+
+@njit(parallel=True, cache=True)
+def sample_runs(codes, rgba, order, inner_runs, leaf_runs, ent_start, ent_count, tasks, group_start, n_groups, n_bins, level, leaf, children,
+                run_lo, run_hi, e_cell, e_first, e_sum, e_node, e_local):  # fmt: skip
     """The voxel cells (code prefixes ``GRID_BITS`` levels below the node) that the routed points
     occupy in every inner node they pass, with their first point and colour sums (r, g, b, a, n).
 
     Bottom-up and shared: the cells of a node whose children are leaves come from a linear pass
     over the leaves' points; a node's cells over an inner child are that child's cells (a level
     finer, so consecutive ones merge when shifted by one digit). Each point is read once, not
-    once per level. ``inner_runs`` is in ``distribute``'s order (parents before children);
-    entries of node n end up at e_*[ent_start[n] : ent_start[n] + ent_count[n]], sorted by cell.
-    Returns the number of entries, or -1 when the entry arrays are too small. (The two loops
-    open entries alike, written out twice on purpose: an inline helper taking the arrays made
-    this kernel 1.9x slower, numba keeping reference counting in the loop.)"""
-    cap = e_cell.shape[0]
+    once per level. Entries of node n go to e_*[ent_start[n] : ent_start[n] + ent_count[n]]
+    (cell_counts' counts laid out in ``distribute``'s order reversed, children before parents),
+    sorted by cell. The nodes of a level are independent: plan_levels' bins of each, deepest
+    level first, one thread a bin (``n_bins`` 1: in order, no parallel region)."""
     for r in range(leaf_runs.shape[0]):
         run_lo[leaf_runs[r, 0]] = leaf_runs[r, 1]
         run_hi[leaf_runs[r, 0]] = leaf_runs[r, 2]
     for r in range(inner_runs.shape[0]):
         run_lo[inner_runs[r, 0]] = inner_runs[r, 1]
         run_hi[inner_runs[r, 0]] = inner_runs[r, 2]
-    m = 0
-    for r in range(inner_runs.shape[0] - 1, -1, -1):  # children before parents
-        node = inner_runs[r, 0]
-        lev = level[node]
-        cl = min(lev + GRID_BITS, CODE_BITS)
-        shift = np.uint64(3 * (CODE_BITS - cl))
-        start = m
-        for d in range(8):
-            c = children[node, d]
-            if c < 0 or run_lo[c] < 0:
-                continue
-            if leaf[c]:
-                for i in range(run_lo[c], run_hi[c]):
-                    cell = codes[i] >> shift
-                    if m == start or cell != e_cell[m - 1]:
-                        if m >= cap:
-                            return -1
-                        e_cell[m] = cell
-                        e_first[m] = order[i]
-                        for ch in range(5):
-                            e_sum[m, ch] = 0
-                        m += 1
-                    _add_color(e_sum, m - 1, rgba[i])
-            else:
-                ccl = min(lev + 1 + GRID_BITS, CODE_BITS)
-                up = np.uint64(3 * (ccl - cl))
-                for k in range(ent_start[c], ent_start[c] + ent_count[c]):
-                    cell = e_cell[k] >> up
-                    if m == start or cell != e_cell[m - 1]:
-                        if m >= cap:
-                            return -1
-                        e_cell[m] = cell
-                        e_first[m] = e_first[k]
-                        for ch in range(5):
-                            e_sum[m, ch] = 0
-                        m += 1
-                    for ch in range(5):
-                        e_sum[m - 1, ch] += e_sum[k, ch]
-        ent_start[node] = start
-        ent_count[node] = m - start
-        mask = (np.uint64(1) << np.uint64(3 * (cl - lev))) - np.uint64(1)
-        top = np.uint64(3 * (cl - lev - 1))  # the cell's child octant: its highest digit
-        for k in range(start, m):
-            e_local[k] = e_cell[k] & mask
-            e_node[k] = node * LISTS + np.int64((e_local[k] >> top) & np.uint64(7))
+    if n_bins == 1:
+        for k in range(group_start[n_groups]):
+            _node_cells(inner_runs[tasks[k], 0], level, leaf, children, codes, rgba, order, run_lo, run_hi, ent_start, ent_count, e_cell,
+                        e_first, e_sum, e_node, e_local)  # fmt: skip
+    else:
+        for g in range(n_groups):
+            for t in prange(n_bins):
+                for k in range(group_start[g * n_bins + t], group_start[g * n_bins + t + 1]):
+                    _node_cells(inner_runs[tasks[k], 0], level, leaf, children, codes, rgba, order, run_lo, run_hi, ent_start, ent_count,
+                                e_cell, e_first, e_sum, e_node, e_local)  # fmt: skip
     for r in range(leaf_runs.shape[0]):
         run_lo[leaf_runs[r, 0]] = -1
     for r in range(inner_runs.shape[0]):
         run_lo[inner_runs[r, 0]] = -1
-    return m
 
 
 @njit(inline="always")

@@ -41,6 +41,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Self
 
+import numba
 import numpy as np
 from numba import types
 from numba.typed import List
@@ -67,6 +68,7 @@ _INITIAL_CHUNKS = 64
 _ROOM_PER_POINT = 2.0  # pool entries an expected point takes: itself, 0.3-0.5 voxels, half-filled chunks (room unwritten: address space)
 _STREAMS_PER_POINT = 1.1  # point chunks' streams (CHUNK points each) an expected point takes: itself, half-filled chunks
 _VOXELS_PER_POINT = 0.5  # voxels a point brings, at most about (the demo town: 0.34 in 1 M batches, 0.49 in the loader's 250 k slices)
+_PARALLEL_CELLS = 100_000  # points of a set from which sample_runs spreads each level's nodes over the threads
 _PRESIZE_MAX = 32_000_000  # points the pool is presized for at most (1.5-2.5 GB of address space, written as it fills)
 _PRESIZE_TABLE_MAX = 16_000_000  # ... and the voxel table (filled up front: ~0.2 GB)
 _GROWTH_MAX_CHUNKS = 16_384  # the pool grows by at most this many chunks (32 M entries, ~0.6 GB) beyond doubling small pools
@@ -716,23 +718,28 @@ class ProgressiveOctree:
 
     def _voxel_cells(self, st: _Set, leaf_runs, inner_runs, only: int | None = None):
         """(count, list, cell, first point, colour sums) of each voxel cell of the inner nodes
-        (of node ``only``) the routed points pass (kernels.sample_runs)."""
+        (of node ``only``) the routed points pass (kernels.sample_runs: each level's nodes spread
+        over the threads, their entries' places counted first, kernels.cell_counts)."""
         if len(self._run_lo) < len(self.key):
             self._run_lo = np.full(len(self.key), -1, np.int64)
             self._run_hi = np.full(len(self.key), -1, np.int64)
             self._ent_start = np.zeros(len(self.key), np.int64)
             self._ent_count = np.zeros(len(self.key), np.int64)
         w = self._work
-        cap = max(2 * len(st.codes) + 1024, w.rows("e_cell"))  # rows past the entries are never touched
-        while True:
-            e_cell, e_local = w.get("e_cell", cap, np.uint64), w.get("e_local", cap, np.uint64)
-            e_first, e_node = w.get("e_first", cap, np.int64), w.get("e_node", cap, np.int64)
-            e_sum = w.get("e_sum", cap, np.uint32, 5)
-            m = K.sample_runs(st.codes, st.rgba, st.order, inner_runs, leaf_runs, self.level, self.leaf, self.children, self._run_lo, self._run_hi,
-                              self._ent_start, self._ent_count, e_cell, e_first, e_sum, e_node, e_local)  # fmt: skip
-            if m >= 0:
-                break
-            cap *= 2
+        ni = len(inner_runs)
+        counts = np.empty(ni, np.int64)
+        K.cell_counts(st.codes, inner_runs, self.level, counts)
+        ends = np.cumsum(counts[::-1])[::-1]  # children before parents: a run's entries follow those of the runs after it
+        m = int(ends[0]) if ni else 0
+        self._ent_start[inner_runs[:, 0]], self._ent_count[inner_runs[:, 0]] = ends - counts, counts
+        bins = max(1, numba.get_num_threads()) if len(st.codes) >= _PARALLEL_CELLS else 1
+        tasks, group_start = np.empty(ni, np.int64), np.empty(ni * bins + 1, np.int64)
+        groups = K.plan_levels(inner_runs, self.level, bins, tasks, group_start)
+        e_cell, e_local = w.get("e_cell", m, np.uint64), w.get("e_local", m, np.uint64)
+        e_first, e_node = w.get("e_first", m, np.int64), w.get("e_node", m, np.int64)
+        e_sum = w.get("e_sum", m, np.uint32, 5)
+        K.sample_runs(st.codes, st.rgba, st.order, inner_runs, leaf_runs, self._ent_start, self._ent_count, tasks, group_start, groups, bins,
+                      self.level, self.leaf, self.children, self._run_lo, self._run_hi, e_cell, e_first, e_sum, e_node, e_local)  # fmt: skip
         if only is not None:
             s0, c0 = int(self._ent_start[only]), int(self._ent_count[only])
             entries = slice(s0, s0 + c0)
