@@ -3,6 +3,7 @@ octree_dir.py), its metadata file last."""
 
 from __future__ import annotations
 
+import itertools
 import os
 from pathlib import Path
 
@@ -28,12 +29,22 @@ def point_dtypes(attributes: dict, compact: bool = False) -> dict[str, np.dtype]
     return dtypes
 
 
-def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sampler: str, max_leaf: int, progress) -> int:
+CRC_PARTS = 4  # version 2's checksums: computed in this many calls (ranges of nodes, ~equal points)
+
+
+def run_serially(fn, calls: list) -> list:
+    """``[fn(*args) for args in calls]``: how write_gigapoint runs its independent steps unless
+    told otherwise (the Dask converter runs them as tasks, lod/convert/distributed.py)."""
+    return [fn(*args) for args in calls]
+
+
+def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sampler: str, max_leaf: int, progress, run=run_serially) -> int:
     """Assemble built node sets into the octree folder ``out``; returns the number of nodes.
 
     A node set is a dir with keys.npy and either nodes.npy + span.npy (its points already written
     into ``out.array_in_progress(<array>)`` by the converter: only the node records are gathered
-    here) or counts/xyz/color/rgba/attr.* (quantized and copied here).
+    here) or counts/xyz/color/rgba/attr.* (quantized and copied here). ``run(fn, calls)``: runs
+    independent steps (version 2's stream joins and checksums), like run_serially.
     """
     attrs = st["attributes"]
     origin, edge = np.array(st["origin"]), float(st["edge"])
@@ -97,11 +108,11 @@ def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sa
         raise RuntimeError("internal error: duplicate octree node keys")
     extra = {}
     if plan is not None:
-        extra = write_streams(out, sources, order, attrs, plan)
+        extra = write_streams(out, sources, order, attrs, plan, run)
     atomic_npy(out.array("nodes"), nodes[order])
     atomic_npy(out.array("keys"), keys[order])
     if plan is not None:
-        atomic_npy(out.array("crc"), write_checksums(out, nodes[order], extra["fields"]))
+        atomic_npy(out.array("crc"), write_checksums(out, nodes[order], extra["fields"], run))
     lo, hi = np.array(st["lo"]), np.array(st["hi"])
     meta = {
         "format": FORMAT_NAME,
@@ -124,11 +135,22 @@ def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sa
     return len(keys)
 
 
-def write_checksums(out: OctreeDir, nodes: np.ndarray, names: list[str]) -> np.ndarray:
+def write_checksums(out: OctreeDir, nodes: np.ndarray, names: list[str], run=run_serially) -> np.ndarray:
     """Version 2's ``crc.npy``: per node a CRC-32 of each array's part of it, its record
-    included (compact_octree.node_checksums), from the files as written."""
+    included (compact_octree.node_checksums), from the files as written; in CRC_PARTS ranges of
+    nodes holding about as many points each (``run``)."""
+    ends = np.cumsum(nodes["count"], dtype=np.int64)
+    cuts = [0, *np.searchsorted(ends, np.linspace(0, ends[-1] if len(ends) else 0, CRC_PARTS + 1)[1:-1]).tolist(), len(nodes)]
+    ranges = [(a, b) for a, b in itertools.pairwise(cuts) if b > a]
+    parts = run(checksum_rows, [(str(out.path), nodes[a:b], names, a) for a, b in ranges])
+    return np.concatenate(parts) if parts else np.empty((0, 2 + len(names)), np.uint32)
+
+
+def checksum_rows(out_path: str, nodes: np.ndarray, names: list[str], first: int) -> np.ndarray:
+    """write_checksums' rows of ``nodes``, the octree's nodes ``first``.. (in key order)."""
+    out = OctreeDir(out_path)
     low, ext, pack, fields = (np.load(out.array(k), mmap_mode="r") for k in ("low", "ext", "pack", "fields"))
-    pack, fields = np.asarray(pack), np.asarray(fields)
+    pack, fields = np.asarray(pack[first : first + len(nodes)]), np.asarray(fields[first : first + len(nodes)])
     streams = [np.load(out.array(f"field.{k}"), mmap_mode="r") for k in names]
     bits = ext_bits_per_point(pack, nodes["count"])
     crc = np.empty((len(nodes), 2 + len(names)), np.uint32)
@@ -137,30 +159,45 @@ def write_checksums(out: OctreeDir, nodes: np.ndarray, names: list[str]) -> np.n
     return crc
 
 
-def write_streams(out: OctreeDir, sources: list[Path], order: np.ndarray, attrs: dict, plan: dict) -> dict:
+def _stream_bases(by_points: list[Path], k: str) -> tuple[list[int], int]:
+    """Where each set's stream ``k`` starts in the joined stream, and the joined stream's words."""
+    bases, total = [], 0
+    for src in by_points:
+        bases.append(total)
+        total += int(np.load(src / f"{k}.npy", mmap_mode="r").shape[0])
+    return bases, total
+
+
+def join_stream(out_path: str, k: str, by_points: list[str]) -> None:
+    """Stream ``k`` of the node sets ``by_points`` (in the order of their points) joined into the
+    octree's array ``k``, written under its in-progress name and renamed."""
+    out, sets = OctreeDir(out_path), [Path(p) for p in by_points]
+    bases, total = _stream_bases(sets, k)
+    dest = out.array_in_progress(k)
+    joined = np.lib.format.open_memmap(dest, mode="w+", dtype=np.uint64, shape=(total,))
+    for src, b in zip(sets, bases):
+        part = np.load(src / f"{k}.npy", mmap_mode="r")
+        joined[b : b + len(part)] = part
+    joined.flush()
+    del joined
+    fsync_file(dest)
+    os.replace(dest, out.array(k))
+
+
+def write_streams(out: OctreeDir, sources: list[Path], order: np.ndarray, attrs: dict, plan: dict, run=run_serially) -> dict:
     """Version 2: the node sets' bit streams (ext, field.<name>) joined in the order of their
-    points (span.npy), so the single-process and the Dask converter write the same bytes, and
-    their per-node records (pack, fields; concatenated in ``sources`` order like the node
-    records, then put in key order by ``order``) pointing into them. Returns what octree.json
-    says about them."""
+    points (span.npy), so the single-process and the Dask converter write the same bytes, a
+    stream a call (``run``), and their per-node records (pack, fields; concatenated in
+    ``sources`` order like the node records, then put in key order by ``order``) pointing into
+    them. Returns what octree.json says about them."""
     names = field_names(attrs)
     streams = ["ext", *(f"field.{k}" for k in names)]
     by_points = sorted(sources, key=lambda s: int(np.load(s / "span.npy")[0]))
     base = {}  # (set, stream) -> its first word in the joined stream
     for k in streams:
-        total = 0
-        for src in by_points:
-            base[src, k] = total
-            total += int(np.load(src / f"{k}.npy", mmap_mode="r").shape[0])
-        dest = out.array_in_progress(k)
-        joined = np.lib.format.open_memmap(dest, mode="w+", dtype=np.uint64, shape=(total,))
-        for src in by_points:
-            part = np.load(src / f"{k}.npy", mmap_mode="r")
-            joined[base[src, k] : base[src, k] + len(part)] = part
-        joined.flush()
-        del joined
-        fsync_file(dest)
-        os.replace(dest, out.array(k))
+        for src, b in zip(by_points, _stream_bases(by_points, k)[0]):
+            base[src, k] = b
+    run(join_stream, [(str(out.path), k, [str(s) for s in by_points]) for k in streams])
     packs, fields = [], []
     for src in sources:
         pack, rec = np.load(src / "pack.npy"), np.load(src / "fields.npy")

@@ -9,7 +9,7 @@ def after_partition_built(done: int) -> None:
 
 def task_started(kind: str, name: str) -> None:
     """Called on a Dask worker when a distributed conversion's task starts (distributed.py):
-    ``kind`` is read, count, distribute, refine, build, group, upper or place; ``name`` names it."""
+    ``kind`` is read, count, distribute, refine, build, group, upper, place or write; ``name`` names it."""
 
 
 def task_done(kind: str, name: str) -> None:

@@ -23,7 +23,7 @@ from ..compact_octree import encode_nodes
 from ..copc_write import write_copc_sets
 from ..keys import level_of, point_codes
 from ..potree import write_potree
-from ..writer import point_dtypes, write_gigapoint
+from ..writer import point_dtypes, run_serially, write_gigapoint
 from . import hooks
 from .partition import built_name, group_name, plan_groups, set_name
 from .spill import copy_range, load_raw_chunk, npy_data_offset, raw_chunk_files
@@ -71,6 +71,10 @@ class BuildPhases(Job):
     _outs: dict | None = None
     _next: int | None = None  # next free offset in the output arrays (_next_offset)
     local_sets = False  # gigapoint format: node sets keep their points in their own folder until placed (place_set)
+
+    def _write_steps(self, fn, calls: list) -> list:
+        """How the write phase runs its independent steps (writer.write_gigapoint's ``run``): here; as tasks on Dask."""
+        return run_serially(fn, calls)
 
     # -- phase 4
     def build(self) -> None:
@@ -397,7 +401,7 @@ class BuildPhases(Job):
             n_nodes = write_copc_sets(self.out, self.sources(), st, self.progress)
         else:
             self._close_outputs()
-            n_nodes = write_gigapoint(self.dir, self.sources(), st, self.name, self.sampler, self.max_leaf, self.progress)
+            n_nodes = write_gigapoint(self.dir, self.sources(), st, self.name, self.sampler, self.max_leaf, self.progress, self._write_steps)
         self.dir.remove_partial()
         if self.format == "copc":
             self.dir.path.rmdir()
