@@ -21,52 +21,14 @@ _VEC = ir.VectorType(ir.IntType(64), _LANES)
 _MASK = ir.VectorType(ir.IntType(1), _LANES)
 
 
-def _splat(builder, value):
-    """A vector of _LANES copies of a scalar."""
-    one = builder.insert_element(ir.Constant(_VEC, None), value, ir.Constant(_I32, 0))
-    return builder.shuffle_vector(one, ir.Constant(_VEC, None), ir.Constant(ir.VectorType(_I32, _LANES), [0] * _LANES))
+def _splat(builder, value, vec=_VEC):
+    """A vector (of type ``vec``) of _LANES copies of a scalar."""
+    one = builder.insert_element(ir.Constant(vec, None), value, ir.Constant(_I32, 0))
+    return builder.shuffle_vector(one, ir.Constant(vec, None), ir.Constant(ir.VectorType(_I32, _LANES), [0] * _LANES))
 
 
 def _declare(module, name, fnty):
     return module.globals.get(name) or ir.Function(module, fnty, name)
-
-
-@intrinsic
-def min_run8(typingctx, buf, start, n, key):
-    """buf[start + i] = min(buf[start + i], key) for 0 <= i < n, n <= 8 (nothing for n <= 0; buf: 1-D C-contiguous uint64)."""
-    if not (isinstance(buf, types.Array) and buf.ndim == 1 and buf.layout == "C" and buf.dtype == types.uint64):
-        return None
-    sig = types.void(buf, types.int64, types.int64, types.uint64)
-
-    def codegen(context, builder, signature, args):
-        array, first, count, value = args
-        ptr = builder.gep(context.make_array(signature.args[0])(context, builder, array).data, [first])
-        # the intrinsics' names carry the pointer type: "p0" where LLVM's pointers are opaque
-        # (llvmlite >= 0.45), "p0v8i64" (a pointer to the vector) where they are still typed
-        ptr = builder.bitcast(ptr, _VEC.as_pointer())
-        suffix = "p0" if str(ptr.type) == "ptr" else "p0v8i64"
-        module = builder.module
-        load = _declare(module, f"llvm.masked.load.v8i64.{suffix}", ir.FunctionType(_VEC, [ptr.type, _I32, _MASK, _VEC]))
-        store = _declare(module, f"llvm.masked.store.v8i64.{suffix}", ir.FunctionType(ir.VoidType(), [_VEC, ptr.type, _I32, _MASK]))
-        mask = builder.icmp_signed("<", ir.Constant(_VEC, list(range(_LANES))), _splat(builder, count))
-        align = ir.Constant(_I32, 8)
-        old = builder.call(load, [ptr, align, mask, ir.Constant(_VEC, None)])
-        keys = _splat(builder, value)
-        builder.call(store, [builder.select(builder.icmp_unsigned("<", keys, old), keys, old), ptr, align, mask])
-        return context.get_dummy_value()
-
-    return sig, codegen
-
-
-# --- the resolve pass, 8 pixels at a time -----------------------------------------------------
-# A frame is mostly empty pixels (autzen_trim's overview covers 4 %). Written as a loop, the
-# resolve vectorises into masked gathers, which cost as much with no lane set as with eight.
-# A u32 colour is one gather a group and the loop is bound by memory anyway; a 16-bit or
-# palette colour takes two dependent gathers, and that resolve was 1.3-1.6x the u32 one. Here a
-# group of 8 pixels is tested first (one vector compare) and an empty group is one store of
-# the background; only groups with a point gather their colours.
-_W32 = ir.VectorType(_I32, _LANES)
-_EMPTY = ir.Constant(_VEC, [(1 << 64) - 1] * _LANES)
 
 
 def _lanes_below(builder, count):
@@ -84,6 +46,9 @@ def _vec_name(vec):
 
 
 def _masked_load(builder, ptr, vec, mask, passthru):
+    """LLVM's masked load of ``vec`` at ``ptr``. The intrinsics' names carry the pointer type: "p0"
+    where LLVM's pointers are opaque (llvmlite >= 0.45), "p0v8i64" (a pointer to the vector) where
+    they are still typed."""
     ptr = builder.bitcast(ptr, vec.as_pointer())
     suffix = "p0" if str(ptr.type) == "ptr" else f"p0{_vec_name(vec)}"
     load = _declare(builder.module, f"llvm.masked.load.{_vec_name(vec)}.{suffix}", ir.FunctionType(vec, [ptr.type, _I32, _MASK, vec]))
@@ -95,6 +60,36 @@ def _masked_store(builder, value, ptr, mask):
     suffix = "p0" if str(ptr.type) == "ptr" else f"p0{_vec_name(value.type)}"
     store = _declare(builder.module, f"llvm.masked.store.{_vec_name(value.type)}.{suffix}", ir.FunctionType(ir.VoidType(), [value.type, ptr.type, _I32, _MASK]))
     builder.call(store, [value, ptr, ir.Constant(_I32, value.type.element.width // 8), mask])
+
+
+@intrinsic
+def min_run8(typingctx, buf, start, n, key):
+    """buf[start + i] = min(buf[start + i], key) for 0 <= i < n, n <= 8 (nothing for n <= 0; buf: 1-D C-contiguous uint64)."""
+    if not (isinstance(buf, types.Array) and buf.ndim == 1 and buf.layout == "C" and buf.dtype == types.uint64):
+        return None
+    sig = types.void(buf, types.int64, types.int64, types.uint64)
+
+    def codegen(context, builder, signature, args):
+        array, first, count, value = args
+        ptr = builder.gep(_data(context, builder, signature.args[0], array), [first])
+        mask = _lanes_below(builder, count)
+        old = _masked_load(builder, ptr, _VEC, mask, ir.Constant(_VEC, None))
+        keys = _splat(builder, value)
+        _masked_store(builder, builder.select(builder.icmp_unsigned("<", keys, old), keys, old), ptr, mask)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+# --- the resolve pass, 8 pixels at a time -----------------------------------------------------
+# A frame is mostly empty pixels (autzen_trim's overview covers 4 %). Written as a loop, the
+# resolve vectorises into masked gathers, which cost as much with no lane set as with eight.
+# A u32 colour is one gather a group and the loop is bound by memory anyway; a 16-bit or
+# palette colour takes two dependent gathers, and that resolve was 1.3-1.6x the u32 one. Here a
+# group of 8 pixels is tested first (one vector compare) and an empty group is one store of
+# the background; only groups with a point gather their colours.
+_W32 = ir.VectorType(_I32, _LANES)
+_EMPTY = ir.Constant(_VEC, [(1 << 64) - 1] * _LANES)
 
 
 def _gather32(builder, base, index, mask, passthru):
@@ -131,9 +126,7 @@ def _resolve8(decode):
             lanes = _lanes_below(builder, n)
             keys = _masked_load(builder, builder.gep(_data(context, builder, signature.args[0], frame_a), [first]), _VEC, lanes, _EMPTY)
             hit = builder.icmp_unsigned("!=", keys, _EMPTY)
-            bg_vec = builder.shuffle_vector(
-                builder.insert_element(ir.Constant(_W32, None), bg, ir.Constant(_I32, 0)), ir.Constant(_W32, None), ir.Constant(_W32, [0] * _LANES)
-            )  # fmt: skip
+            bg_vec = _splat(builder, bg, _W32)
             dst = builder.gep(_data(context, builder, signature.args[3], out_a), [first])
             bits = builder.bitcast(hit, ir.IntType(_LANES))
             any_hit = builder.icmp_unsigned("!=", bits, ir.Constant(ir.IntType(_LANES), 0))
