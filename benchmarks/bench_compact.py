@@ -73,11 +73,9 @@ AUTZEN = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "autze
 
 def scaled_demo_chunks(n: int, scale: float):
     """The demo town's chunks with coordinates rounded to ``scale`` metres (a survey's grid)."""
-    from gigapoint.io import demo_chunks
+    from gigapoint.io.demo import demo_chunks
 
-    for chunk in demo_chunks(n):
-        xyz = np.round(chunk.xyz / scale) * scale
-        yield PointChunk(xyz, chunk.rgba, chunk.attributes, scale=(scale,) * 3)
+    return demo_chunks(n, scale=scale)
 
 
 def bytes_row(cloud) -> str:
