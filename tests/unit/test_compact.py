@@ -13,7 +13,15 @@ from hypothesis import strategies as st
 import gigapoint as gp
 from gigapoint import Camera, RenderSettings
 from gigapoint.core import PointChunk, build_cloud
-from gigapoint.core.compact import ext_bits_per_point, wide_batches
+from gigapoint.core.compact import (
+    expand_tails,
+    ext_bits_per_point,
+    pack_code,
+    read_ext,
+    stream_words,
+    tail_words,
+    wide_batches,
+)
 from gigapoint.errors import InputError
 from gigapoint.render.reference import reference_image, reference_visibility
 
@@ -90,6 +98,29 @@ def test_wider_batches_take_the_extension_and_stay_exact(rng):
     code = int(cloud.packing["code"][0])
     assert code & 0xFF == 4 and (code >> 8) & 0xFF == 0 and (code >> 16) & 0xFF == 0
     assert_exact(cloud, xyz, (0.01,) * 3)
+
+
+# fields of 0, 1, 9, 13 and 25 bits (one u32 load: ONE_LOAD_BITS), 26, 57 and 60 (a wide batch: two u64 loads)
+@pytest.mark.parametrize("widths", [(0, 0, 0), (1, 0, 0), (3, 3, 3), (4, 4, 5), (8, 8, 9), (9, 8, 9), (19, 19, 19), (20, 20, 20)])
+def test_expand_tails_decodes_every_field_as_tail_words_does(rng, widths):
+    # expand_tails reads fields of up to ONE_LOAD_BITS with one unaligned u32 load, wider ones
+    # with read_ext's two u64 loads: both against the one-point decoder at every bit offset,
+    # from a stream between two others, whole and strided
+    code = np.uint32(pack_code(*widths))
+    t = sum(widths)
+    n = 4099  # a stream that ends inside a word
+    words = int(stream_words(np.array([t]), np.array([n]))[0])
+    before = 3
+    ext = np.frombuffer(rng.bytes(8 * (before + words + 2)), np.uint64).copy()
+    for start, step in ((0, 1), (5, 1), (1, 3), (0, 7)):
+        count = (n - start + step - 1) // step
+        med, high = np.empty(count, np.uint32), np.empty(count, np.uint32)
+        expand_tails(ext, np.int64(before), code, np.int64(start), count, np.int64(step), med, high, np.empty(count, np.uint64))
+        want = np.array([tail_words(np.uint64(read_ext(ext, before, t, start + j * step)), code) for j in range(count)], np.uint32)
+        np.testing.assert_array_equal(med, want[:, 0])
+        np.testing.assert_array_equal(high, want[:, 1])
+        if t:  # the fields differ: a read at a wrong offset would show
+            assert len(np.unique(want[:, 0])) > 1
 
 
 def test_off_grid_and_huge_batches_are_stored_wide(rng):
