@@ -55,3 +55,36 @@ def test_a_task_thread_reuses_the_memory_its_last_array_freed():
     if faults[0] < 15_000:  # transparent huge pages for every mapping ("always"): too few faults to tell
         pytest.skip(f"the first 88 MB of arrays faulted only {faults[0]} pages in")
     assert max(faults[1:]) < 1_000, faults
+
+
+DRIVER_IMPORTING_GIGAPOINT_FIRST = '''
+import gigapoint  # at the top: every spawned worker imports this script again, numba with it
+
+def compile_in_the_worker(spec):
+    from numba import njit
+
+    @njit
+    def one_more(x):
+        return x + 1
+
+    return one_more(41)
+
+if __name__ == "__main__":
+    from gigapoint.lod.convert.distributed import _task, open_client
+
+    with open_client(1) as client:
+        print("result", client.submit(_task, "read", "probe", {"out": "."}, compile_in_the_worker, pure=False).result())
+'''
+
+
+def test_a_worker_of_a_script_that_imports_gigapoint_first_compiles(tmp_path):
+    """A worker imports the driver script (and numba) before Dask sets its NUMBA_NUM_THREADS=1:
+    its first compile re-read the environment and failed with "Cannot set NUMBA_NUM_THREADS to a
+    different value once the threads have been launched" (a cold numba cache: every kernel)."""
+    import subprocess
+
+    script = tmp_path / "driver.py"
+    script.write_text(DRIVER_IMPORTING_GIGAPOINT_FIRST)
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "result 42" in done.stdout

@@ -115,6 +115,25 @@ def test_truncated_point_data(tmp_path, suffix):
 
 
 @pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_an_error_of_the_decoding_is_not_called_a_corrupt_file(tmp_path, suffix, monkeypatch):
+    """Only laspy's and lazrs's failures mean the file is bad: a Dask worker's numba that could
+    not compile the position kernel was reported as "truncated or corrupt LAS point data"."""
+    from gigapoint.io import las
+
+    p = tmp_path / f"fine{suffix}"
+    write_las(p, n=1000)
+
+    def broken(raw, scale, offset):
+        raise RuntimeError("Cannot set NUMBA_NUM_THREADS to a different value once the threads have been launched")
+
+    monkeypatch.setattr(las, "_positions", broken)
+    with pytest.raises(RuntimeError, match="NUMBA_NUM_THREADS"):
+        list(read_chunks(p))
+    monkeypatch.undo()
+    assert sum(len(c) for c in read_chunks(p)) == 1000
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
 @pytest.mark.parametrize("version,fmt", [("1.2", 3), ("1.4", 6)])
 @pytest.mark.parametrize("claimed", [10**12, 10**9, 1001])
 def test_header_point_count_beyond_data(tmp_path, suffix, version, fmt, claimed):

@@ -7,6 +7,7 @@ allocate or loop on whatever a corrupt header claims.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import math
 import struct
@@ -384,43 +385,52 @@ class LasReader(Reader):
             raise fail(path, f"{kind} file holds no points (header point count is 0)", EmptyCloudError)
         stop = hdr.point_count if stop is None else min(stop, hdr.point_count)
         done = start
-        try:
-            with _laspy_open(path, hdr) as reader:
-                dims = set(reader.header.point_format.dimension_names)
-                attrs = [a for a in LAS_ATTRIBUTES if a in dims]
-                has_rgb = {"red", "green", "blue"} <= dims
-                scale = np.asarray(reader.header.scales, np.float64)
-                stored_scale = tuple(float(abs(s)) for s in scale)  # PointChunk.scale: the resolution the file stores
-                offset = np.asarray(reader.header.offsets, np.float64)
-                scaler = ColorScaler() if scaler is None else scaler
-                total = hdr.point_count
-                if reader.header.point_count != total:  # LAS 1.4 with only the legacy count filled in
-                    reader.header.point_count = total
-                if start:
-                    reader.seek(start)
-                while done < stop:
-                    pts = reader.read_points(min(chunk_size, stop - done))
-                    n = len(pts)
-                    if n == 0:
-                        break
-                    raw = pts.array  # the records as read: fields are strided views, decoded in one pass each
-                    xyz = _positions(raw, scale, offset)
-                    rgba = None
-                    if has_rgb:
-                        rgba = _colors(raw["red"], raw["green"], raw["blue"], scaler)
-                    attributes = {a: np.ascontiguousarray(np.asarray(pts[a])) for a in attrs}
-                    done += n
-                    yield PointChunk(xyz, rgba, attributes, scale=stored_scale)
-        except InputError:
-            raise
-        except MemoryError:
-            raise
-        except Exception as exc:  # noqa: BLE001 - laspy / lazrs / OS errors on corrupt data
-            raise fail(
+
+        def corrupt(exc: Exception) -> InputError:
+            return fail(
                 path,
                 f"truncated or corrupt {kind} point data: reading failed after {done:,} of the {hdr.point_count:,} points "
                 f"the header claims ({one_line(exc) or type(exc).__name__})",
-            ) from None
+            )
+
+        # only laspy's and lazrs's work is in the try blocks: an error of the decoding below
+        # (a kernel that fails to compile, say) is not the file's and keeps its own message
+        with contextlib.ExitStack() as stack:
+            try:
+                reader = stack.enter_context(_laspy_open(path, hdr))
+                dims = set(reader.header.point_format.dimension_names)
+                scale = np.asarray(reader.header.scales, np.float64)
+                offset = np.asarray(reader.header.offsets, np.float64)
+                if reader.header.point_count != hdr.point_count:  # LAS 1.4 with only the legacy count filled in
+                    reader.header.point_count = hdr.point_count
+                if start:
+                    reader.seek(start)
+            except (InputError, MemoryError):
+                raise
+            except Exception as exc:  # noqa: BLE001 - laspy / lazrs / OS errors on corrupt data
+                raise corrupt(exc) from None
+            attrs = [a for a in LAS_ATTRIBUTES if a in dims]
+            has_rgb = {"red", "green", "blue"} <= dims
+            stored_scale = tuple(float(abs(s)) for s in scale)  # PointChunk.scale: the resolution the file stores
+            scaler = ColorScaler() if scaler is None else scaler
+            while done < stop:
+                try:
+                    pts = reader.read_points(min(chunk_size, stop - done))
+                except (InputError, MemoryError):
+                    raise
+                except Exception as exc:  # noqa: BLE001 - as above
+                    raise corrupt(exc) from None
+                n = len(pts)
+                if n == 0:
+                    break
+                raw = pts.array  # the records as read: fields are strided views, decoded in one pass each
+                xyz = _positions(raw, scale, offset)
+                rgba = None
+                if has_rgb:
+                    rgba = _colors(raw["red"], raw["green"], raw["blue"], scaler)
+                attributes = {a: np.ascontiguousarray(np.asarray(pts[a])) for a in attrs}
+                done += n
+                yield PointChunk(xyz, rgba, attributes, scale=stored_scale)
         if done < stop:
             raise fail(path, f"truncated {kind} file: the header claims {hdr.point_count:,} points, only {done:,} could be read")
 

@@ -260,6 +260,24 @@ def _worker_name() -> str:
         return "a Dask worker"
 
 
+def _numba_threads_from_environment() -> None:
+    """numba's config read again before its threads start. A worker spawned from a script that
+    imports gigapoint at its top imports it again (as ``__mp_main__``) before Dask sets the
+    worker's NUMBA_NUM_THREADS=1, so numba kept the default thread count, and the worker's
+    first compile (which re-reads the environment) failed: "Cannot set NUMBA_NUM_THREADS to a
+    different value once the threads have been launched". A worker whose threads already run
+    with another count than its environment says gets that as a one-line error."""
+    from numba.core import config
+
+    try:
+        config.reload_config()
+    except RuntimeError as exc:
+        raise ConvertError(
+            f"Dask worker {_worker_name()}: numba's threads started with another count than NUMBA_NUM_THREADS says ({one_line(exc)}); "
+            "start the workers with NUMBA_NUM_THREADS=1 in their environment"
+        ) from None
+
+
 def _task(kind: str, name: str, spec: dict, fn, *args):
     """Run one task on a worker: numba's kernels on this thread only, freed memory kept while it
     runs (keep_freed_memory.py; for the life of the process in the workers of a LocalCluster
@@ -267,6 +285,7 @@ def _task(kind: str, name: str, spec: dict, fn, *args):
     import numba
 
     hooks.task_started(kind, name)
+    _numba_threads_from_environment()
     numba.set_num_threads(1)
     try:
         if spec.get("own_workers"):  # a worker of ours: freed memory kept for the next task too
