@@ -38,6 +38,21 @@ import json, os, shutil, sys, time
 from pathlib import Path
 from gigapoint.lod import convert
 
+def machine_pages():
+    # pages the kernel handed out and memory it gave back to the VM's host (free page reporting):
+    # machine-wide, so the workers', the scheduler's and the page cache's all count
+    v = dict(line.split() for line in open("/proc/vmstat"))
+    alloc = sum(int(n) for k, n in v.items() if k.startswith("pgalloc_"))
+    try:
+        reported = int(open("/sys/module/page_reporting/parameters/reported_kib").read())
+    except OSError:
+        reported = 0
+    return alloc, reported
+
+def pages_since(before):
+    alloc, reported = machine_pages()
+    return {"alloc_mib": (alloc - before[0]) * 4096 / 2**20, "reported_mib": (reported - before[1]) / 1024}
+
 def main():
     a = json.loads(sys.argv[1])
     work = Path(a["work"])
@@ -47,9 +62,9 @@ def main():
         convert([a["small"]], work / "warm0", **opts)
         out = work / "out0"
         shutil.rmtree(out, ignore_errors=True)
-        t = time.perf_counter()
+        pages, t = machine_pages(), time.perf_counter()
         r = convert([a["input"]], out, **opts)
-        print(json.dumps({"seconds": time.perf_counter() - t, "phases": r.phase_seconds, "nodes": r.nodes, "points": r.points}))
+        print(json.dumps({"seconds": time.perf_counter() - t, "phases": r.phase_seconds, "nodes": r.nodes, "points": r.points, "pages": pages_since(pages)}))
         return
     from distributed import get_task_stream
     from gigapoint.lod.convert.distributed import open_client
@@ -62,9 +77,10 @@ def main():
         out = work / f"out{a['workers']}"
         shutil.rmtree(out, ignore_errors=True)
         with get_task_stream(client) as stream:
-            t, cpu = time.perf_counter(), time.process_time()
+            pages, t, cpu = machine_pages(), time.perf_counter(), time.process_time()
             r = convert([a["input"]], out, client=client, **opts)
             seconds, cpu = time.perf_counter() - t, time.process_time() - cpu  # this process: driver, client and scheduler
+            pages = pages_since(pages)
         tasks = {}
         for d in stream.data:
             kind = str(d["key"]).split("-")[3]
@@ -77,7 +93,7 @@ def main():
             return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
         rss = sorted(client.run(maxrss).values())
         print(json.dumps({"seconds": seconds, "phases": r.phase_seconds, "nodes": r.nodes, "points": r.points,
-                          "startup": startup, "tasks": tasks, "worker_peak_rss": rss, "driver_cpu": cpu}))
+                          "startup": startup, "tasks": tasks, "worker_peak_rss": rss, "driver_cpu": cpu, "pages": pages}))
 
 if __name__ == "__main__":
     main()
@@ -166,7 +182,8 @@ def main() -> None:
                 runs[c].append(res)
                 name = "single process" if c == 0 else f"{c} worker{'s' if c > 1 else ''}"
                 extra = f", cluster start {res['startup']:.1f} s" if c else ""
-                print(f"round {r + 1}: {name}: {res['seconds']:.2f} s ({a.points / res['seconds'] / 1e6:.2f} M points/s){extra}; {res['phases']}")
+                fresh = f"; pages allocated {res['pages']['alloc_mib']:.0f} MiB, given back to the host {res['pages']['reported_mib']:.0f} MiB"
+                print(f"round {r + 1}: {name}: {res['seconds']:.2f} s ({a.points / res['seconds'] / 1e6:.2f} M points/s){extra}; {res['phases']}{fresh}")
             row = {c: runs[c][-1]["seconds"] for c in configs}
             ratios = ", ".join(f"{c}w/single {row[c] / row[0]:.2f}" for c in configs[1:])
             if 1 in row and 2 in row:
