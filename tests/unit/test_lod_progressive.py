@@ -680,3 +680,51 @@ def test_work_arrays_held_between_batches_build_the_same_octree_and_are_let_go(s
     np.testing.assert_array_equal(o.pool.ext[: o._n_streams * o.pool.stream], octree.pool.ext[: octree._n_streams * octree.pool.stream])
     for a in attrs:
         np.testing.assert_array_equal(o.pool.attributes[a][:used], octree.pool.attributes[a][:used])
+
+
+def _voxel_mean(vox_sum: np.ndarray) -> np.ndarray:
+    """kernels._mean_color's rounded mean of each voxel's (r, g, b, a) sums."""
+    n = vox_sum[:, 4:5].astype(np.int64)
+    return (vox_sum[:, :4].astype(np.int64) + n // 2) // n
+
+
+def test_voxel_colour_sums_stay_in_32_bits_past_16_8_million_points():
+    """255 times a voxel's count overflowed its u32 sums past 16.8 M points (a live cloud's
+    snapshots of one scene, taken long enough): its colour became garbage. The sums are halved
+    instead (kernels.VOXEL_WEIGHT_BITS), the mean kept."""
+    from numba import njit
+
+    from gigapoint.lod.progressive import kernels as K
+
+    @njit
+    def add(vox_sum, batches):
+        for e in range(batches.shape[0]):
+            K._add_sums(vox_sum, 0, batches, e)
+
+    n = 1 << 20
+    one = np.array([200, 100, 50, 255, 1], np.uint64) * n  # a batch of 2^20 points of one colour
+    vox = np.zeros((1, 5), np.uint32)
+    add(vox, np.tile(one, (40, 1)))  # 42 M points
+    assert vox[0, 4] < 1 << K.VOXEL_WEIGHT_BITS
+    np.testing.assert_array_equal(_voxel_mean(vox)[0], [200, 100, 50, 255])
+    # two colours in turn, 3 points of the first to 1 of the second: as the rule says (Python's
+    # integers, which do not overflow), near the mean (the points added since the last halving
+    # weigh twice as much as those before)
+    other = np.array([0, 40, 250, 255, 1], np.uint64) * (n // 3)
+    batches = np.tile(np.stack([one, other]), (30, 1))
+    vox[:] = 0
+    add(vox, batches)
+    want = [0] * 5
+    for b in batches.tolist():
+        total = [w + x for w, x in zip(want, b)]
+        k = 0
+        while total[4] >> k >= 1 << K.VOXEL_WEIGHT_BITS:
+            k += 1
+        want = [(t + ((1 << k) >> 1)) >> k for t in total]
+    np.testing.assert_array_equal(vox[0], want)
+    assert np.abs(_voxel_mean(vox)[0, :3] - np.array([150, 85, 100])).max() <= 8
+    # a voxel's sums set at once from a billion points (the build state rebuilt after a trim)
+    billion = (np.array([[17, 34, 51, 255, 1]], np.uint64) * 10**9)
+    vox[:] = 7
+    K.set_voxel_sums(vox, np.zeros(1, np.int64), billion)
+    np.testing.assert_array_equal(_voxel_mean(vox)[0], [17, 34, 51, 255])

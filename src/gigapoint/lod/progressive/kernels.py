@@ -33,6 +33,11 @@ _STACK = 8 * (CODE_BITS + 2)  # a depth-first walk holds at most 8 siblings a le
 WIDE_CODE = EXT_FULL_BITS | EXT_FULL_BITS << 8 | EXT_FULL_BITS << 16
 WIDE_BITS = 3 * EXT_FULL_BITS
 VOXEL_SHIFT = 0.5 / (1 << WORD_BITS)  # of the node's edge
+#: a voxel's colour sums are u32 (r, g, b, a, n: 20 bytes a voxel while it is built): once it
+#: stands for 2^VOXEL_WEIGHT_BITS points they and the count are halved, the mean kept, so that
+#: 255 times the count never overflows (it did past 16.8 M points in one voxel, a live cloud's
+#: snapshots of one scene taken for long enough); the points added later then weigh more.
+VOXEL_WEIGHT_BITS = 23
 _M20 = (1 << EXT_FULL_BITS) - 1
 
 
@@ -562,6 +567,29 @@ def write_points(xyz, rgba, attr_src, attr_dst, attr_width, order, leaf_runs, ru
 
 
 @njit(inline="always")
+def _add_sums(vox_sum, v, sums, e):
+    """vox_sum[v] (u32) += sums[e] (u64: a batch's, any size), halved k times (rounded) where
+    the count reaches 2^VOXEL_WEIGHT_BITS: the mean stays, the u32 sums cannot overflow."""
+    n = np.uint64(vox_sum[v, 4]) + np.uint64(sums[e, 4])
+    k = np.uint64(0)
+    while (n >> k) >= np.uint64(1 << VOXEL_WEIGHT_BITS):
+        k += np.uint64(1)
+    half = (np.uint64(1) << k) >> np.uint64(1)
+    for ch in range(5):
+        vox_sum[v, ch] = np.uint32((np.uint64(vox_sum[v, ch]) + np.uint64(sums[e, ch]) + half) >> k)
+
+
+@njit(cache=True)
+def set_voxel_sums(vox_sum, vid, sums):
+    """vox_sum[vid[e]] = sums[e] (u64, all the points a voxel stands for), fitted as ``_add_sums``
+    fits them (the voxels' build state rebuilt after a trim)."""
+    for e in range(vid.shape[0]):
+        for ch in range(5):
+            vox_sum[vid[e], ch] = 0
+        _add_sums(vox_sum, vid[e], sums, e)
+
+
+@njit(inline="always")
 def _mean_color(sums, v):
     n = sums[v, 4]
     h = n >> np.uint32(1)
@@ -606,8 +634,7 @@ def write_voxels(vid, is_new, node, cell, sums, level, slots_of_new, first_new, 
                 wl |= np.uint32(q & WORD_MASK) << np.uint32(WORD_BITS * a)
             low[s] = wl
         # entries of one batch never share a voxel (one entry per node and cell), so no race
-        for ch in range(5):
-            vox_sum[v, ch] += sums[e, ch]
+        _add_sums(vox_sum, v, sums, e)
         s = vox_slot[v]
         color[s] = _mean_color(vox_sum, v)
         batch_version[s // chunk_size] = version

@@ -405,7 +405,7 @@ class ProgressiveOctree:
             vid = np.empty(len(node), np.int64)
             is_new = np.empty(len(node), np.uint8)
             assert K.voxel_ids(self._hkeys, self._hvals, node, cell, n, vid, is_new) == n  # every cell is a voxel already
-            self.vox_sum[vid] = sums
+            K.set_voxel_sums(self.vox_sum, vid, sums)
 
     def _start(self, origin: np.ndarray, edge: float) -> None:
         """The root cube, and the root: an empty leaf."""
@@ -737,7 +737,7 @@ class ProgressiveOctree:
         groups = K.plan_levels(inner_runs, self.level, bins, tasks, group_start)
         e_cell, e_local = w.get("e_cell", m, np.uint64), w.get("e_local", m, np.uint64)
         e_first, e_node = w.get("e_first", m, np.int64), w.get("e_node", m, np.int64)
-        e_sum = w.get("e_sum", m, np.uint32, 5)
+        e_sum = w.get("e_sum", m, np.uint64, 5)  # a batch may put any number of points in one cell
         K.sample_runs(st.codes, st.rgba, st.order, inner_runs, leaf_runs, self._ent_start, self._ent_count, tasks, group_start, groups, bins,
                       self.level, self.leaf, self.children, self._run_lo, self._run_hi, e_cell, e_first, e_sum, e_node, e_local)  # fmt: skip
         if only is not None:
