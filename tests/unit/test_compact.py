@@ -100,8 +100,11 @@ def test_wider_batches_take_the_extension_and_stay_exact(rng):
     assert_exact(cloud, xyz, (0.01,) * 3)
 
 
-# fields of 0, 1, 9, 13 and 25 bits (one u32 load: ONE_LOAD_BITS), 26, 57 and 60 (a wide batch: two u64 loads)
-@pytest.mark.parametrize("widths", [(0, 0, 0), (1, 0, 0), (3, 3, 3), (4, 4, 5), (8, 8, 9), (9, 8, 9), (19, 19, 19), (20, 20, 20)])
+# fields of 0, 1, 9, 13, 25 and 19 bits (one u32 load: ONE_LOAD_BITS), 26, 57 and 60 (a wide batch:
+# two u64 loads); every axis e <= 9 (the high word is 0) but (10, 0, 9) and the widest three
+@pytest.mark.parametrize(
+    "widths", [(0, 0, 0), (1, 0, 0), (3, 3, 3), (4, 4, 5), (8, 8, 9), (10, 0, 9), (9, 8, 9), (19, 19, 19), (20, 20, 20)]
+)
 def test_expand_tails_decodes_every_field_as_tail_words_does(rng, widths):
     # expand_tails reads fields of up to ONE_LOAD_BITS with one unaligned u32 load, wider ones
     # with read_ext's two u64 loads: both against the one-point decoder at every bit offset,
