@@ -177,15 +177,19 @@ def _quantize_block(c, index, palette, errors):
     weighted by their points. ``errors`` (2 int64, written): the block's summed squared error over
     R, G and B of its palette colours and of RGB565 (``choose_palette`` compares them)."""
     m = c.shape[0]
-    palette[:] = 0
-    errors[:] = 0
+    for b in range(PALETTE_SIZE):  # loops, not slice assignments: those compile numpy's broadcasting (~0.1 s each)
+        palette[b] = 0
+    errors[0] = 0
+    errors[1] = 0
     if m == 0:
         return
     uniq = np.empty(m, np.uint32)
     weight = np.empty(m, np.int64)
     of_point = np.empty(m, np.int32)
     d = _distinct(c, uniq, weight, of_point)
-    perm = np.arange(d).astype(np.int32)
+    perm = np.empty(d, np.int32)
+    for u in range(d):
+        perm[u] = u
     start = np.zeros(PALETTE_SIZE, np.int64)
     end = np.zeros(PALETTE_SIZE, np.int64)
     bn = np.zeros(PALETTE_SIZE, np.int64)  # per box: points
