@@ -38,20 +38,7 @@ import json, os, shutil, sys, time
 from pathlib import Path
 from gigapoint.lod import convert
 
-def machine_pages():
-    # pages the kernel handed out and memory it gave back to the VM's host (free page reporting):
-    # machine-wide, so the workers', the scheduler's and the page cache's all count
-    v = dict(line.split() for line in open("/proc/vmstat"))
-    alloc = sum(int(n) for k, n in v.items() if k.startswith("pgalloc_"))
-    try:
-        reported = int(open("/sys/module/page_reporting/parameters/reported_kib").read())
-    except OSError:
-        reported = 0
-    return alloc, reported
-
-def pages_since(before):
-    alloc, reported = machine_pages()
-    return {"alloc_mib": (alloc - before[0]) * 4096 / 2**20, "reported_mib": (reported - before[1]) / 1024}
+from gigapoint.bench.report import machine_pages, pages_since  # new memory: this VM's host faults it in slowly
 
 def main():
     a = json.loads(sys.argv[1])

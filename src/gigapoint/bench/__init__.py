@@ -8,7 +8,7 @@ package only when ``gigapoint bench`` runs (it pulls in moderngl).
 
 from .gl_baseline import GLBaseline, gl_matrix
 from .naive import naive_frame, naive_matrix, naive_raster
-from .report import cpu_model, parse_count, parse_threads, print_results, results_table, write_results
+from .report import cpu_model, machine_pages, pages_since, parse_count, parse_threads, print_results, results_table, write_results
 from .run import COVERAGE_TOLERANCE, run_render_benchmark
 from .scene import THROUGHPUT_DEFINITION, VIEWS, benchmark_cameras, coverage_iou, demo_cloud, relative_cloud
 
@@ -22,9 +22,11 @@ __all__ = [
     "cpu_model",
     "demo_cloud",
     "gl_matrix",
+    "machine_pages",
     "naive_frame",
     "naive_matrix",
     "naive_raster",
+    "pages_since",
     "parse_count",
     "parse_threads",
     "print_results",

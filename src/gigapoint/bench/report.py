@@ -25,6 +25,32 @@ def cpu_model() -> str:
     return model or platform.processor() or "unknown CPU"
 
 
+def machine_pages() -> tuple[int, int]:
+    """(bytes of pages the kernel has handed out, bytes it has given back to a VM's host), both
+    machine-wide and counted since boot (``/proc/vmstat`` pgalloc_*, free page reporting's
+    ``reported_kib``; 0 where a system has neither). The difference of two readings is the new
+    memory a benchmark needed: on a VM that reports free pages (this project's machines) the
+    host faults such memory in again at ~1 GB/s in all, however many processes ask
+    (docs/benchmarks.md), so a run's time moves with it."""
+    try:
+        with open("/proc/vmstat") as fh:
+            alloc = sum(int(v) for k, v in (line.split() for line in fh) if k.startswith("pgalloc_")) * 4096
+    except OSError:
+        alloc = 0
+    try:
+        with open("/sys/module/page_reporting/parameters/reported_kib") as fh:
+            reported = int(fh.read()) * 1024
+    except (OSError, ValueError):
+        reported = 0
+    return alloc, reported
+
+
+def pages_since(before: tuple[int, int]) -> dict:
+    """MiB of pages handed out and given back to the host since ``machine_pages()`` gave ``before``."""
+    alloc, reported = machine_pages()
+    return {"alloc_mib": (alloc - before[0]) / 2**20, "reported_mib": (reported - before[1]) / 2**20}
+
+
 def parse_count(text) -> int:
     """'20M', '100_000_000', '1e6', '200k' -> a positive int."""
     s = str(text).strip().lower().replace("_", "").replace(",", "")
