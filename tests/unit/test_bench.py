@@ -262,3 +262,17 @@ def test_cpu_model_names_the_processor(monkeypatch):
 
     monkeypatch.setattr(subprocess, "run", missing)
     assert cpu_model()  # the platform's name, or "unknown CPU"
+
+
+@pytest.mark.skipif(not __import__("os").path.exists("/proc/vmstat"), reason="Linux's /proc/vmstat")
+def test_machine_pages_counts_the_memory_a_run_touches():
+    """bench_dask / bench_live print the new pages a run needed (this VM's host faults them in
+    slowly): 96 MB touched in this process is at least 96 MB more of them."""
+    from gigapoint.bench import machine_pages, pages_since
+
+    before = machine_pages()
+    assert before[0] > 0 and before[1] >= 0
+    touched = np.ones(12 << 20)  # 96 MiB of float64, every page written
+    grew = pages_since(before)
+    assert touched.nbytes / 2**20 <= grew["alloc_mib"] < 100_000
+    assert grew["reported_mib"] >= 0
