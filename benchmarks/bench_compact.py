@@ -67,15 +67,9 @@ import numpy as np
 import gigapoint as gp
 from gigapoint.core import PointChunk, build_cloud
 from gigapoint.core.compact import rgba32
+from gigapoint.io import demo_chunks  # scale=: rounded to a survey's grid, the chunks saying so
 
 AUTZEN = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "autzen_trim.laz"
-
-
-def scaled_demo_chunks(n: int, scale: float):
-    """The demo town's chunks with coordinates rounded to ``scale`` metres (a survey's grid)."""
-    from gigapoint.io.demo import demo_chunks
-
-    return demo_chunks(n, scale=scale)
 
 
 def bytes_row(cloud) -> str:
@@ -471,10 +465,10 @@ def main(argv=None) -> int:
         del las, xyz
     n = parse_count(args.points)
     t = time.perf_counter()
-    cloud = build_cloud(scaled_demo_chunks(n, args.scale), name="demo", layout="compact")
+    cloud = build_cloud(demo_chunks(n, scale=args.scale), name="demo", layout="compact")
     print(f"\n(demo town built in {time.perf_counter() - t:.1f} s)")
     # the reference points only for small towns (the check holds a second copy)
-    ref = np.concatenate([c.xyz for c in scaled_demo_chunks(n, args.scale)]) if n <= 5_000_000 else None
+    ref = np.concatenate([c.xyz for c in demo_chunks(n, scale=args.scale)]) if n <= 5_000_000 else None
     ok &= scene(f"demo town at {args.scale:g} m", cloud, ref, args)
     del ref
     mem = cloud.memory()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -264,7 +265,7 @@ def test_cpu_model_names_the_processor(monkeypatch):
     assert cpu_model()  # the platform's name, or "unknown CPU"
 
 
-@pytest.mark.skipif(not __import__("os").path.exists("/proc/vmstat"), reason="Linux's /proc/vmstat")
+@pytest.mark.skipif(not os.path.exists("/proc/vmstat"), reason="Linux's /proc/vmstat")
 def test_machine_pages_counts_the_memory_a_run_touches():
     """bench_dask / bench_live print the new pages a run needed (this VM's host faults them in
     slowly): 96 MB touched in this process is at least 96 MB more of them."""
