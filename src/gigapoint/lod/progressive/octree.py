@@ -46,6 +46,7 @@ import numpy as np
 from numba import types
 from numba.typed import List
 
+from ...core import pages
 from ...core.chunk import PointChunk, colors_for
 from ...core.cloud import MAX_ABS_COORDINATE
 from ...core.compact import point_words, stream_words
@@ -78,7 +79,7 @@ def _voxel_table(size: int) -> tuple[np.ndarray, np.ndarray]:
     """An empty voxel table of ``size`` slots: (keys u64, ids u32), views of one buffer of
     12-byte slots, a slot's id next to its key (kernels.voxel_ids: one cache miss a look-up, not
     two; 1.3x faster than two arrays)."""
-    raw = np.full(12 * size, 0xFF, np.uint8)  # keys EMPTY_KEY
+    raw = pages.full(12 * size, 0xFF, np.uint8)  # keys EMPTY_KEY
     return np.ndarray((size,), np.uint64, raw, 0, (12,)), np.ndarray((size,), np.uint32, raw, 8, (12,))
 
 
@@ -105,12 +106,12 @@ class Pool:
         self.batches = np.zeros(n_chunks, BATCH_DTYPE)
         self.batches["first"] = np.arange(n_chunks, dtype=np.uint64) * chunk
         self.packing = np.zeros(n_chunks, PACK_DTYPE)
-        self.ext = np.zeros(n_streams * self.stream, np.uint64)
+        self.ext = pages.zeros(n_streams * self.stream, np.uint64)
         self.packing["ext_first"] = len(self.ext)  # chunks not in use yet: empty streams at the end (streams follow chunk order)
         n = n_chunks * chunk
-        self.low = np.zeros(n, np.uint32)
-        self.color = np.zeros(n, np.uint32)
-        self.attributes = {a: np.zeros(n, dt) for a, dt in attribute_dtypes.items()}
+        self.low = pages.zeros(n, np.uint32)
+        self.color = pages.zeros(n, np.uint32)
+        self.attributes = {a: pages.zeros(n, dt) for a, dt in attribute_dtypes.items()}
         self.chunk_next = np.full(n_chunks, -1, np.int64)
         self.chunk_node = np.full(n_chunks, -1, np.int64)
         self.batch_version = np.zeros(n_chunks, np.int64)
@@ -214,7 +215,7 @@ class _Work:
         a = self.arrays.get(name)
         if a is None or len(a) < n or a.dtype != dtype:
             rows = max(n, len(a) * 3 // 2 if a is not None else 0)
-            a = np.empty((rows, width) if width else rows, dtype)
+            a = pages.empty((rows, width) if width else rows, dtype)
             if self.keep:
                 self.arrays[name] = a
         return a[:n]
@@ -322,7 +323,7 @@ class ProgressiveOctree:
 
     def _vox(self, cap: int) -> None:
         n = self.n_voxels
-        arrays = {"vox_key": np.zeros(cap, np.uint64), "vox_slot": np.zeros(cap, np.uint32), "vox_sum": np.zeros((cap, 5), np.uint32)}
+        arrays = {"vox_key": pages.zeros(cap, np.uint64), "vox_slot": pages.zeros(cap, np.uint32), "vox_sum": pages.zeros((cap, 5), np.uint32)}
         for name, arr in arrays.items():
             if n:
                 arr[:n] = getattr(self, name)[:n]
