@@ -504,3 +504,34 @@ def test_a_snapshot_in_batches_adds_what_one_batch_would_and_keeps_frames_that_l
     assert sorted(live._free + [s for f in live.frames for s in f.chunks]) == list(range(buf.n_ring))
     live.push(*frame(20, n=7000), pose=pose_of(20))
     assert live.n_frames == 3
+
+
+def test_a_snapshot_shapes_its_tree_from_every_32nd_point_first(monkeypatch):
+    """Above one batch, snapshot() first hands the octree every SNAPSHOT_SAMPLE_STEP-th point of
+    the ring (the positions frame_points gives, exactly) to split the leaves they would overflow
+    (ProgressiveOctree.expect), then adds the points: none of them is spilled where the sample
+    told the tree's shape."""
+    import gigapoint.live.cloud as live_module
+    from gigapoint.lod.progressive import ProgressiveOctree
+
+    live = LiveCloud(keep=3)
+    for k in range(3):
+        live.push(*frame(k, n=7000), pose=pose_of(k))
+    xyz = live.frame_points()[0]
+    seen = []
+    expect = ProgressiveOctree.expect
+
+    def small_leaves(self, sample, weight):
+        self.max_leaf = 500  # leaves that the 21 000 points overflow
+        seen.append((sample.copy(), weight))
+        return expect(self, sample, weight)
+
+    monkeypatch.setattr(live_module, "SNAPSHOT_BATCH", 4096)
+    monkeypatch.setattr(ProgressiveOctree, "expect", small_leaves)
+    assert live.snapshot() == 21000
+    (sample, weight), = seen
+    assert weight == live_module.SNAPSHOT_SAMPLE_STEP == 32
+    np.testing.assert_array_equal(sample, xyz[::32])
+    o = live.snapshots
+    assert o.points == 21000 and int(o.count[o.leaves()].sum()) == 21000 and o.count[o.leaves()].max() <= 500
+    assert o.spilled < 21000 // 10, o.spilled

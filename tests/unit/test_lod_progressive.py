@@ -16,7 +16,7 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.core.layout import EMPTY_PIXEL
-from gigapoint.errors import GigapointError, InputError
+from gigapoint.errors import GigapointError, GigapointWarning, InputError
 from gigapoint.io import demo_arrays
 from gigapoint.lod.keys import CODE_BITS, point_codes
 from gigapoint.lod.progressive import ProgressiveOctree
@@ -142,6 +142,55 @@ def test_leaf_contents_do_not_depend_on_batches_or_order(scene, octree, batch, s
     for key in a:
         _match(a[key], b[key], 1e-6)
     assert other.n_voxels == octree.n_voxels
+
+
+def test_a_tree_shaped_from_all_the_points_is_the_same_and_spills_none(scene, octree):
+    """``expect`` with every point (weight 1) splits up front exactly the leaves the points
+    would overflow: the same leaves and voxels as inserting them without it, and no point is
+    taken out of a leaf to be inserted again."""
+    xyz = scene[0]
+    assert octree.spilled > 0
+    o = ProgressiveOctree("t", max_leaf=3_000, cube=_cube(xyz))
+    assert o.expect(xyz, 1.0) > 0
+    assert o.n_points == 0 and o.n_nodes > 1 and not len(o.leaves())  # nodes, all empty
+    cam = gp.Camera.fit(octree.bounds, view="iso", width=64, height=48)
+    with pytest.warns(GigapointWarning, match="no point is in view"):  # empty nodes draw nothing
+        assert not (gp.render_frame(o, cam, EXACT).visibility != EMPTY_PIXEL).any()
+    _add_all(o, scene, 20_000)
+    assert o.spilled == 0
+
+    def leaves(t):
+        return {int(t.key[n]): t.positions(t.node_entries(n)) for n in t.leaves()}
+
+    a, b = leaves(octree), leaves(o)
+    assert a.keys() == b.keys()
+    for key in a:
+        _match(a[key], b[key], 1e-6)
+    assert o.n_voxels == octree.n_voxels
+
+
+def test_a_tree_shaped_from_a_sample_holds_every_point_and_spills_few(scene, octree):
+    """A sample of every 16th point standing for 16 each: every point in exactly one leaf, no
+    leaf over its limit, the voxels the points' cells and colours; a leaf the sample missed or
+    underestimated splits as usual. Points outside the cube in the sample are left out, a
+    leaf that holds points is not split, and nothing changes without a cube."""
+    xyz = scene[0]
+    o = ProgressiveOctree("t", max_leaf=3_000, cube=_cube(xyz))
+    far = np.array([[1e6, 1e6, 1e6]])
+    assert o.expect(np.concatenate([xyz[::16], far]), 16.0) > 0
+    _add_all(o, scene, 20_000)
+    assert o.spilled < octree.spilled // 4
+    test_every_point_is_in_exactly_one_leaf(scene, o)
+    test_voxels_are_the_occupied_cells_with_their_mean_colour(scene, o)
+    nodes = o.n_nodes
+    assert o.expect(xyz, 1e6) == 0 and o.n_nodes == nodes  # every leaf it reaches holds points
+    assert ProgressiveOctree("t").expect(xyz, 16.0) == 0  # no cube yet
+
+
+def _add_all(o: ProgressiveOctree, scene, batch: int) -> None:
+    xyz, rgba, attrs = scene
+    for s in range(0, len(xyz), batch):
+        o.add(xyz[s : s + batch], rgba[s : s + batch], **{a: v[s : s + batch] for a, v in attrs.items()})
 
 
 def test_points_in_the_last_octant_of_an_odd_node_reach_a_leaf():

@@ -14,6 +14,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from ..core import pages
+
 SCENE_SIZE = 1000.0  # metres
 _LOT = 100.0  # roads every 100 m
 _ROAD_HALF_WIDTH = 6.0
@@ -326,10 +328,10 @@ def demo_arrays(n_points: int, seed: int = 0, start: int = 0, offset=(0.0, 0.0, 
     """Points ``start .. start+n_points`` of the demo scene: (xyz, rgba, attributes)."""
     if n_points < 0:
         raise ValueError(f"n_points must be >= 0, got {n_points}")
-    xyz = np.empty((n_points, 3), np.float64)
-    rgba = np.empty((n_points, 4), np.uint8)
-    cls = np.empty(n_points, np.uint8)
-    inten = np.empty(n_points, np.uint16)
+    xyz = pages.empty((n_points, 3), np.float64)  # written once: small pages (core/pages.py)
+    rgba = pages.empty((n_points, 4), np.uint8)
+    cls = pages.empty(n_points, np.uint8)
+    inten = pages.empty(n_points, np.uint16)
     for array in (xyz, rgba, cls, inten):
         _prefault(array.reshape(-1).view(np.uint8))
     _generate(start, n_points, seed, *_scene_tables(seed), xyz, rgba, cls, inten)

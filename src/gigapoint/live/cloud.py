@@ -51,6 +51,7 @@ from .ring import BASE_ATTRIBUTES, NORMAL_PARTS, LiveBuffers, LiveLock, attribut
 _INITIAL_CHUNKS = 32
 _LATENCIES = 512  # push-to-pixels latencies kept for the median / p99
 SNAPSHOT_BATCH = 1 << 20  # points a snapshot adds to the octree at a time
+SNAPSHOT_SAMPLE_STEP = 32  # every 32nd point shapes the tree first (ProgressiveOctree.expect): ~1 500 for a full leaf
 
 
 @dataclass
@@ -586,6 +587,8 @@ class LiveCloud:
                     lo, hi = np.minimum(lo, self.expected_bounds[0]), np.maximum(hi, self.expected_bounds[1])
                 centre, edge = (lo + hi) / 2, float(np.max(hi - lo)) * 2 + 1e-6  # room to move: growing the root re-samples every point
                 self.snapshots = ProgressiveOctree(name=f"{self.name} snapshots", cube=(centre - edge / 2, edge), capacity=n)
+            if n > SNAPSHOT_BATCH:  # the tree shaped for all of them first: points go to their last leaf, not spilled on the way
+                self.snapshots.expect(buf.sample(runs, SNAPSHOT_SAMPLE_STEP), SNAPSHOT_SAMPLE_STEP)
             added = 0
             out: dict = {}
             with self.snapshots.holding_work():  # one set of work arrays for all the batches

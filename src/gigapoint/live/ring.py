@@ -276,6 +276,17 @@ class LiveBuffers:
         _bounds_runs(self.low, self.med, self.high, runs.firsts, runs.counts, runs.bbox_min, runs.bbox_max, lo, hi)
         return lo.min(axis=0, initial=np.inf), hi.max(axis=0, initial=-np.inf)
 
+    def sample(self, runs: Runs, step: int) -> np.ndarray:
+        """float64 world positions of every ``step``-th point of ``runs`` (as ``gather`` gives
+        them): runs of one point each, through the same kernel."""
+        at = np.arange(0, runs.n_points, max(int(step), 1), dtype=np.int64)
+        run = np.searchsorted(runs.offsets, at, side="right") - 1
+        out = np.empty((len(at), 3))
+        ones = np.ones(len(at), np.int64)
+        _dequantize_runs(self.low, self.med, self.high, runs.firsts[run] + at - runs.offsets[run], ones, np.arange(len(at), dtype=np.int64),
+                         runs.bbox_min[run], runs.bbox_max[run], out)  # fmt: skip
+        return out
+
     def gather(self, slots, skip=(), start: int = 0, stop: int | None = None, out: dict | None = None):
         """(xyz float64 (N, 3) world, rgba uint8 (N, 4), attributes: the normal as nx, ny, nz) of the
         points of chunks ``slots`` (a list, or their ``runs``), in order; of points [start, stop)

@@ -285,6 +285,7 @@ class ProgressiveOctree:
         self.n_voxels = 0
         self.points = 0  # points added (valid ones)
         self.skipped = 0  # invalid points left out (NaN, inf, beyond ±1e12)
+        self.spilled = 0  # points taken out of split leaves to be inserted again, in all
         self.lo = np.full(3, np.inf)
         self.hi = np.full(3, -np.inf)
         self.loader = None  # the background Loader filling it (gigapoint.open(..., progressive=True))
@@ -563,6 +564,34 @@ class ProgressiveOctree:
             self._insert(xyz, rgba, attrs, lo, hi)
         return n_valid
 
+    def expect(self, sample, weight: float) -> int:
+        """Shape the tree for points to come, of which ``sample`` (float64 (N, 3)) is a sample,
+        each of its points standing for ``weight`` of them: the empty leaves they would overflow
+        become inner nodes now, level by level, so that those points go straight to the leaves
+        they end in instead of filling a leaf, spilling out of it and being inserted again (a
+        snapshot of 18 M points spilled 61 % of them). Leaves that hold points are left alone:
+        nothing stored moves, and a leaf the sample underestimates splits as usual. The root
+        cube must be set (given, or by an earlier ``add``); sample points outside it are left
+        out. Returns the leaves split."""
+        sample = np.ascontiguousarray(sample, np.float64)
+        if self.origin is None or sample.ndim != 2 or sample.shape[1:] != (3,) or not len(sample) or weight <= 0:
+            return 0
+        inside = np.all((sample >= self.origin) & (sample <= self.origin + self.edge), axis=1)
+        sample = sample[inside]
+        if not len(sample):
+            return 0
+        split = 0
+        with self.lock.writing():
+            st = _Set.of(self.root, sample, np.zeros(len(sample), np.uint32), {}, self.origin, self.edge)
+            while True:
+                leaf_runs, _ = self._distribute(st)
+                nodes, expected = leaf_runs[:, 0], (leaf_runs[:, 2] - leaf_runs[:, 1]) * weight
+                over = nodes[(expected > self.max_leaf) & (self.count[nodes] == 0) & (self.level[nodes] < CODE_BITS)]
+                if not len(over):
+                    return split
+                self.leaf[over] = 0
+                split += len(over)
+
     @contextmanager
     def holding_work(self):
         """Keep the insertions' work arrays from one ``add`` to the next until the block ends (many
@@ -686,6 +715,7 @@ class ProgressiveOctree:
         self.leaf[nodes] = 0
         self.count[nodes] = 0
         self.points -= len(slots)  # they are counted again when inserted again
+        self.spilled += len(slots)
         return xyz, rgba, attrs
 
     def _allocate(self, lists: np.ndarray, counts: np.ndarray, points: bool) -> np.ndarray:
