@@ -535,3 +535,26 @@ def test_a_snapshot_shapes_its_tree_from_every_32nd_point_first(monkeypatch):
     o = live.snapshots
     assert o.points == 21000 and int(o.count[o.leaves()].sum()) == 21000 and o.count[o.leaves()].max() <= 500
     assert o.spilled < 21000 // 10, o.spilled
+
+
+def test_depth_frames_queued_while_a_frame_draws_keep_their_own_points():
+    """push_depth reuses its positions' arrays from frame to frame (one set per producer thread):
+    frames pushed while a frame is drawn wait in the queue, and each keeps its own points,
+    normals and colours, not those of the frame pushed after it."""
+    from gigapoint.live.depth import depth_to_points
+
+    depth, K, pose = sensor_frame()
+    second = depth.copy()
+    second[second > 0] += 0.5
+    rgb = np.random.default_rng(5).integers(0, 255, (*depth.shape, 3), dtype=np.uint8)
+    live = LiveCloud(keep=4, chunk=1024)
+    with live.reading():  # a frame being drawn: pushes queue
+        live.push_depth(depth, K, pose=pose, rgb=rgb)
+        live.push_depth(second, K, pose=pose, rgb=rgb[::-1].copy())
+        assert live.n_frames == 0
+    assert live.n_frames == 2
+    got, rgba, attrs = live.frame_points()
+    want = [depth_to_points(d, K, pose, c, z_order=True) for d, c in ((depth, rgb), (second, rgb[::-1].copy()))]
+    np.testing.assert_allclose(got, np.concatenate([w[0] for w in want]), rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(np.stack([attrs[p] for p in ("nx", "ny", "nz")], 1), np.concatenate([w[1] for w in want]))
+    np.testing.assert_array_equal(rgba, np.concatenate([w[2] for w in want]))

@@ -142,3 +142,24 @@ def test_z_order_gives_the_row_major_points_tile_by_tile():
     for a, b in zip(z, rows):
         np.testing.assert_array_equal(a, b[perm])
     assert np.all(np.diff(rank[z[3]]) > 0)
+
+
+def test_scratch_arrays_are_reused_from_frame_to_frame_and_give_the_same_points():
+    """``scratch`` keeps the positions, pixel indices and metres between calls (push_depth's, one
+    set per producer thread): the points equal the reference frame after frame, whatever the
+    holes, and a frame of another shape gets arrays of its own."""
+    rng = np.random.default_rng(2)
+    scratch: dict = {}
+    held = []
+    for h, w in ((48, 64), (48, 64), (30, 20), (48, 64)):
+        d = rng.uniform(0.5, 4.0, (h, w)).astype(np.float32)
+        d[rng.random((h, w)) < 0.2] = 0
+        xyz, nrm, _, pix = depth_to_points(d, K, pose_of(), scratch=scratch)
+        rx, rn, ridx = depth_to_points_reference(d, K, pose_of())
+        np.testing.assert_array_equal(pix, ridx)
+        np.testing.assert_allclose(xyz, rx, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(nrm, rn, rtol=0, atol=1e-6)
+        assert np.shares_memory(xyz, scratch["xyz"]) and scratch["xyz"].shape == (h * w, 3)
+        held.append((scratch["xyz"], nrm))
+    assert held[1][0] is held[0][0] and held[2][0] is not held[0][0]  # reused while the shape holds
+    assert not np.shares_memory(held[0][1], held[1][1])  # the normals stay the caller's: the frame keeps them

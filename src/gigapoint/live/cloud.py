@@ -149,6 +149,7 @@ class LiveCloud:
         self.lock = LiveLock(released=self._commit_pending)
         self._pending: deque = deque()  # (frame in core's layout, FrameInfo, attributes) batched, not yet in the ring
         self._pending_lock = threading.Lock()
+        self._depth_scratch = threading.local()  # push_depth's reused arrays, one set per producer thread
         self._attr_dtypes: dict | None = None  # fixed by the first frame (as the octree's attributes)
         self.buffers_: LiveBuffers | None = None
         self._free: list[int] = []
@@ -286,7 +287,8 @@ class LiveCloud:
         pushed_at = _time.perf_counter()
         try:
             p = parse_pose(pose, "push_depth")
-            xyz, nrm, rgba, _ = depth_to_points(depth, intrinsics, p, rgb, depth_scale, max_depth, z_order=True)
+            scratch = self._depth_scratch.__dict__  # this producer thread's (the frame keeps no view of its arrays)
+            xyz, nrm, rgba, _ = depth_to_points(depth, intrinsics, p, rgb, depth_scale, max_depth, z_order=True, scratch=scratch)
             seq = self._push(xyz, rgba, None, time, None, {}, pushed_at, world_normals=nrm, pose_tag=p, ordered=True)
         except GigapointError as exc:
             self.refused(exc)
