@@ -53,17 +53,21 @@ def bench_insert(n: int, batch: int) -> None:
     warm = ProgressiveOctree("warm", cube=cube)
     warm.add(xyz[:300_000], rgba[:300_000], **{a: v[:300_000] for a, v in attrs.items()})
     layout = 16 + sum(v.dtype.itemsize for v in attrs.values())
-    for name, order in (("generator order", np.arange(n)), ("scan order", _scan_order(xyz))):
+    runs = (("generator order", np.arange(n), False), ("scan order", _scan_order(xyz), False),
+            ("generator order, tree shaped first from every 32nd point (expect)", np.arange(n), True))  # fmt: skip
+    for name, order, shaped in runs:
         x, c, at = xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()}
         o = ProgressiveOctree("bench", cube=cube, capacity=n)
         t = time.perf_counter()
+        if shaped:
+            o.expect(x[::32], 32.0)
         for s in range(0, n, batch):
             o.add(x[s : s + batch], c[s : s + batch], **{a: v[s : s + batch] for a, v in at.items()})
         dt = time.perf_counter() - t
         filling = o.nbytes
         o.trim()  # as the loader does when loading ends
         mem = o.nbytes
-        print(f"insert, {name}: {n / dt / 1e6:.2f} M points/s ({dt:.2f} s), {o.n_voxels / n:.2f} voxels a point; memory "
+        print(f"insert, {name}: {n / dt / 1e6:.2f} M points/s ({dt:.2f} s), {o.spilled / n:.2f} spilled and {o.n_voxels / n:.2f} voxels a point; memory "
               f"{filling / n:.1f} bytes a point while filling (presized), {mem / n:.1f} once trimmed = {mem / n / layout:.2f}x "
               f"the quantized layout ({layout} B)")  # fmt: skip
 
