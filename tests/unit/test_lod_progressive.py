@@ -185,6 +185,9 @@ def test_a_tree_shaped_from_a_sample_holds_every_point_and_spills_few(scene, oct
     nodes = o.n_nodes
     assert o.expect(xyz, 1e6) == 0 and o.n_nodes == nodes  # every leaf it reaches holds points
     assert ProgressiveOctree("t").expect(xyz, 16.0) == 0  # no cube yet
+    for sample, weight, message in ((xyz[:, :2], 16.0, "shape"), (xyz, 0, "weight"), (xyz, float("nan"), "weight"), (xyz, "16", "weight")):
+        with pytest.raises(InputError, match=f"t: expect: .*{message}"):
+            o.expect(sample, weight)
 
 
 def _add_all(o: ProgressiveOctree, scene, batch: int) -> None:

@@ -574,7 +574,11 @@ class ProgressiveOctree:
         cube must be set (given, or by an earlier ``add``); sample points outside it are left
         out. Returns the leaves split."""
         sample = np.ascontiguousarray(sample, np.float64)
-        if self.origin is None or sample.ndim != 2 or sample.shape[1:] != (3,) or not len(sample) or weight <= 0:
+        if sample.ndim != 2 or sample.shape[1:] != (3,):
+            raise InputError(f"{self.name}: expect: the sample must have shape (N, 3), got {sample.shape}")
+        if not (isinstance(weight, (int, float, np.integer, np.floating)) and np.isfinite(weight) and weight > 0):
+            raise InputError(f"{self.name}: expect: weight must be a positive finite number of points, got {weight!r}")
+        if self.origin is None or not len(sample):
             return 0
         inside = np.all((sample >= self.origin) & (sample <= self.origin + self.edge), axis=1)
         sample = sample[inside]
