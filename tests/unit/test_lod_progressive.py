@@ -132,16 +132,20 @@ def test_voxels_are_the_occupied_cells_with_their_mean_colour(scene, octree):
 @pytest.mark.parametrize("batch, shuffle", [(7_000, False), (50_000, True), (120_000, False)])
 def test_leaf_contents_do_not_depend_on_batches_or_order(scene, octree, batch, shuffle):
     order = np.random.default_rng(3).permutation(len(scene[0])) if shuffle else None
-    other = _filled(scene, batch=batch, order=order)
+    _assert_same_leaves(octree, _filled(scene, batch=batch, order=order))
+
+
+def _assert_same_leaves(a: ProgressiveOctree, b: ProgressiveOctree) -> None:
+    """The same leaves (keys) holding the same points (as sets), and as many voxels."""
 
     def leaves(o):
         return {int(o.key[n]): o.positions(o.node_entries(n)) for n in o.leaves()}
 
-    a, b = leaves(octree), leaves(other)
-    assert a.keys() == b.keys()
-    for key in a:
-        _match(a[key], b[key], 1e-6)
-    assert other.n_voxels == octree.n_voxels
+    la, lb = leaves(a), leaves(b)
+    assert la.keys() == lb.keys()
+    for key in la:
+        _match(la[key], lb[key], 1e-6)
+    assert a.n_voxels == b.n_voxels
 
 
 def test_a_tree_shaped_from_all_the_points_is_the_same_and_spills_none(scene, octree):
@@ -158,15 +162,7 @@ def test_a_tree_shaped_from_all_the_points_is_the_same_and_spills_none(scene, oc
         assert not (gp.render_frame(o, cam, EXACT).visibility != EMPTY_PIXEL).any()
     _add_all(o, scene, 20_000)
     assert o.spilled == 0
-
-    def leaves(t):
-        return {int(t.key[n]): t.positions(t.node_entries(n)) for n in t.leaves()}
-
-    a, b = leaves(octree), leaves(o)
-    assert a.keys() == b.keys()
-    for key in a:
-        _match(a[key], b[key], 1e-6)
-    assert o.n_voxels == octree.n_voxels
+    _assert_same_leaves(octree, o)
 
 
 def test_a_tree_shaped_from_a_sample_holds_every_point_and_spills_few(scene, octree):
