@@ -5,9 +5,9 @@ pages (``madvise(MADV_HUGEPAGE)``). On a virtual machine that hands its free mem
 its host (virtio-balloon *free page reporting*, as on the Firecracker VMs gigapoint is
 measured on), a free 2 MiB block is exactly what the guest has reported and the host dropped,
 and a huge page fault there cost ~2.5 ms a MB against ~0.4 ms a MB in 4 KiB pages (800 MB
-written once: 2.0 s against 0.34 s, docs/benchmarks.md). The builders' bulk arrays (the
-progressive octree's pool, voxel state and work arrays, a live cloud's ring) are written
-once and read in order, so the TLB reach huge pages buy is worth little to them; there they
+written once: 2.0 s against 0.34 s, docs/benchmarks.md). Bulk arrays written once and read
+in order (the progressive octree's pool, voxel state, voxel table and work arrays; the demo
+generator's output) gain little from the TLB reach of huge pages; there they
 are made with ``zeros`` / ``empty`` / ``full`` of this module, which advise 4 KiB pages
 (``MADV_NOHUGEPAGE``) before the first write. Frame buffers, reused every frame and written
 at random, keep numpy's advice.
