@@ -162,4 +162,8 @@ def test_scratch_arrays_are_reused_from_frame_to_frame_and_give_the_same_points(
         assert np.shares_memory(xyz, scratch["xyz"]) and scratch["xyz"].shape == (h * w, 3)
         held.append((scratch["xyz"], nrm))
     assert held[1][0] is held[0][0] and held[2][0] is not held[0][0]  # reused while the shape holds
+    odd = {"xyz": np.zeros((48 * 64, 3), np.float32), "pix": "not an array", "z": np.zeros((64, 48))}  # replaced, not used
+    xyz, _, _, pix = depth_to_points(d, K, pose_of(), scratch=odd)
+    np.testing.assert_allclose(xyz, depth_to_points_reference(d, K, pose_of())[0], rtol=0, atol=1e-12)
+    assert odd["xyz"].dtype == np.float64 and odd["z"].shape == (48, 64)
     assert not np.shares_memory(held[0][1], held[1][1])  # the normals stay the caller's: the frame keeps them

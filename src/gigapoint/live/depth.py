@@ -227,7 +227,7 @@ def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, ma
 
     def reused(key, shape, dtype):
         a = scratch.get(key)
-        if a is None or a.shape != shape:
+        if not (isinstance(a, np.ndarray) and a.shape == shape and a.dtype == dtype and a.flags.c_contiguous and a.flags.writeable):
             a = scratch[key] = np.empty(shape, dtype)
         return a
 
