@@ -39,3 +39,34 @@ def test_gather_equals_fancy_indexing(rng):
         np.testing.assert_array_equal(gather(values, order), values[order])
     two_d = rng.normal(size=(50_000, 3))
     np.testing.assert_array_equal(gather(two_d, order), two_d[order])
+
+
+def test_chunks_are_joined_with_numpys_dtype_for_them(monkeypatch):
+    """build_cloud joins its chunks' arrays into one (in small pages where asked, core/pages.py):
+    the same values and the dtype numpy's concatenate gives them (an attribute u8 in one file and
+    u16 in the next becomes u16), and every point drawn from its chunk."""
+    from gigapoint.core import build_cloud, pages
+    from gigapoint.core.chunk import PointChunk
+
+    monkeypatch.setenv("GIGAPOINT_SMALL_PAGES", "1")
+    pages._madvise.cache_clear()
+    try:
+        rng = np.random.default_rng(4)
+        parts = [
+            PointChunk(rng.uniform(0, 100, (700_000, 3)), rng.integers(0, 256, (700_000, 4), dtype=np.uint8),
+                       {"intensity": rng.integers(0, 256, 700_000).astype(np.uint8)}),
+            PointChunk(rng.uniform(0, 100, (500, 3)), rng.integers(0, 256, (500, 4), dtype=np.uint8),
+                       {"intensity": rng.integers(256, 60_000, 500).astype(np.uint16)}),
+        ]  # fmt: skip
+        joined = cloud._joined([p.attributes["intensity"] for p in parts])
+        assert joined.dtype == np.uint16
+        np.testing.assert_array_equal(joined, np.concatenate([p.attributes["intensity"] for p in parts]))
+        xyz = cloud._joined([p.xyz for p in parts])
+        np.testing.assert_array_equal(xyz, np.concatenate([p.xyz for p in parts]))
+        assert cloud._joined([parts[0].xyz]) is parts[0].xyz  # one chunk: not copied
+        c = build_cloud(iter(parts), layout="words", colors="rgba")
+        assert c.n_points == 700_500
+        got = np.sort(c.attributes["intensity"][:].astype(np.int64))
+        np.testing.assert_array_equal(got, np.sort(np.concatenate([p.attributes["intensity"] for p in parts]).astype(np.int64)))
+    finally:
+        pages._madvise.cache_clear()

@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError
+from . import pages
 from .attributes import Attributes
 from .chunk import PointChunk
 from .compact import colors_at, compact_positions, full_words, pack_rgb565, point_words, rgba32
@@ -297,11 +298,11 @@ def build_cloud(
             attr_parts.setdefault(a, []).append(values[keep])
         total += len(xyz_parts[-1])
     check_valid_count(name, total, skipped)
-    xyz = xyz_parts[0] if len(xyz_parts) == 1 else np.concatenate(xyz_parts)
+    xyz = _joined(xyz_parts)
     del xyz_parts
-    rgba = rgba_parts[0] if len(rgba_parts) == 1 else np.concatenate(rgba_parts)
+    rgba = _joined(rgba_parts)
     del rgba_parts
-    attributes = {a: (v[0] if len(v) == 1 else np.concatenate(v)) for a, v in attr_parts.items() if a in (attr_names or [])}
+    attributes = {a: _joined(v) for a, v in attr_parts.items() if a in (attr_names or [])}
     source_scale = finest_scale(scales)
     compact, color_format = storage_format(name, layout, colors, source_scale, bool((rgba[:, 3] == 255).all()))
     cloud = cloud_from_points(
@@ -309,6 +310,14 @@ def build_cloud(
     )
     cloud.source_scale = source_scale
     return cloud
+
+
+def _joined(parts: list[np.ndarray]) -> np.ndarray:
+    """The chunks' arrays as one (written once: small pages, core/pages.py)."""
+    if len(parts) == 1:
+        return parts[0]
+    out = pages.empty((sum(len(p) for p in parts), *parts[0].shape[1:]), np.result_type(*parts))  # numpy's dtype for them
+    return np.concatenate(parts, out=out)
 
 
 def check_valid_count(name: str, valid: int, skipped: int) -> None:
