@@ -7,8 +7,8 @@ measured on), a free 2 MiB block is exactly what the guest has reported and the 
 and a huge page fault there cost ~2.5 ms a MB against ~0.4 ms a MB in 4 KiB pages (800 MB
 written once: 2.0 s against 0.34 s, docs/benchmarks.md). Bulk arrays written once and read
 in order (the progressive octree's pool, voxel state, voxel table and work arrays; the demo
-generator's output) gain little from the TLB reach of huge pages; there they
-are made with ``zeros`` / ``empty`` / ``full`` of this module, which advise 4 KiB pages
+generator's output; build_cloud's joined chunks) gain little from the TLB reach of huge
+pages; they are made with ``zeros`` / ``empty`` / ``full`` of this module, which advise 4 KiB pages
 (``MADV_NOHUGEPAGE``) before the first write. Frame buffers, reused every frame and written
 at random, keep numpy's advice.
 
