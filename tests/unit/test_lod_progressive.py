@@ -98,7 +98,8 @@ def test_leaves_cover_their_cubes_and_inner_nodes_hold_no_points(octree):
 
 
 def test_voxels_are_the_occupied_cells_with_their_mean_colour(scene, octree):
-    xyz, rgba, _ = scene
+    """... and each voxel's attributes are those of one of its cell's points (its first)."""
+    xyz, rgba, attrs = scene
     o = octree
     codes = point_codes(xyz, o.origin, o.edge)
     checked = 0
@@ -125,6 +126,9 @@ def test_voxels_are_the_occupied_cells_with_their_mean_colour(scene, octree):
         k = np.searchsorted(uniq, vcell)
         assert np.array_equal(uniq[k], vcell)
         np.testing.assert_array_equal(o.pool.color[slots].view(np.uint8).reshape(-1, 4), mean[k])
+        for a, values in attrs.items():  # (cell, value) of the voxel among those of the cell's points
+            have = (inverse.astype(np.int64) << 32) | values[inside].astype(np.int64)
+            assert np.isin((k.astype(np.int64) << 32) | o.pool.attributes[a][slots].astype(np.int64), have).all(), a
         checked += 1
     assert checked >= 3
 
