@@ -172,8 +172,8 @@ def test_a_tree_shaped_from_all_the_points_is_the_same_and_spills_none(scene, oc
 def test_a_tree_shaped_from_a_sample_holds_every_point_and_spills_few(scene, octree):
     """A sample of every 16th point standing for 16 each: every point in exactly one leaf, no
     leaf over its limit, the voxels the points' cells and colours; a leaf the sample missed or
-    underestimated splits as usual. Points outside the cube in the sample are left out, a
-    leaf that holds points is not split, and nothing changes without a cube."""
+    underestimated splits as usual. Points outside the cube in the sample are left out, and
+    nothing changes without a cube."""
     xyz = scene[0]
     o = ProgressiveOctree("t", max_leaf=3_000, cube=_cube(xyz))
     far = np.array([[1e6, 1e6, 1e6]])
@@ -182,12 +182,34 @@ def test_a_tree_shaped_from_a_sample_holds_every_point_and_spills_few(scene, oct
     assert o.spilled < octree.spilled // 4
     test_every_point_is_in_exactly_one_leaf(scene, o)
     test_voxels_are_the_occupied_cells_with_their_mean_colour(scene, o)
-    nodes = o.n_nodes
-    assert o.expect(xyz, 1e6) == 0 and o.n_nodes == nodes  # every leaf it reaches holds points
     assert ProgressiveOctree("t").expect(xyz, 16.0) == 0  # no cube yet
     for sample, weight, message in ((xyz[:, :2], 16.0, "shape"), (xyz, 0, "weight"), (xyz, float("nan"), "weight"), (xyz, "16", "weight")):
         with pytest.raises(InputError, match=f"t: expect: .*{message}"):
             o.expect(sample, weight)
+
+
+def test_a_tree_that_holds_points_is_shaped_for_as_many_again(scene):
+    """A tree holding the scene, told that as many points again will come (every 4th point,
+    4 each: a second snapshot of the same scene): the leaves they would overflow are split now,
+    their points moved once to the leaves they end in, none lost; the points then added go
+    straight to their leaves (a plain twin spills many times more), and every point is in one
+    leaf, twice, with the voxels of their cells."""
+    xyz = scene[0]
+    o, twin = _filled(scene), _filled(scene)
+    before = o.spilled
+    assert o.expect(xyz[::4], 4.0) > 0
+    moved = o.spilled - before
+    assert moved > 0 and o.n_points == len(xyz) and int(o.count[o.leaves()].sum()) == len(xyz)
+    _add_all(o, scene, 20_000)
+    _add_all(twin, scene, 20_000)
+    assert o.spilled - before - moved < (twin.spilled - before) // 4
+    assert o.n_points == 2 * len(xyz) and int(o.count[o.leaves()].sum()) == 2 * len(xyz)
+    assert o.count[o.leaves()].max() <= o.max_leaf
+    from scipy.spatial import cKDTree
+
+    dist, idx = cKDTree(xyz).query(_leaf_points(o)["xyz"], k=1)
+    assert dist.max() <= np.sqrt(3) * o.edge / 2**30 and (np.bincount(idx, minlength=len(xyz)) == 2).all()
+    test_voxels_are_the_occupied_cells_with_their_mean_colour(scene, o)  # each point twice: the same means
 
 
 def _add_all(o: ProgressiveOctree, scene, batch: int) -> None:

@@ -566,13 +566,13 @@ class ProgressiveOctree:
 
     def expect(self, sample, weight: float) -> int:
         """Shape the tree for points to come, of which ``sample`` (float64 (N, 3)) is a sample,
-        each of its points standing for ``weight`` of them: the empty leaves they would overflow
-        become inner nodes now, level by level, so that those points go straight to the leaves
-        they end in instead of filling a leaf, spilling out of it and being inserted again (a
-        snapshot of 18 M points spilled 61 % of them). Leaves that hold points are left alone:
-        nothing stored moves, and a leaf the sample underestimates splits as usual. The root
-        cube must be set (given, or by an earlier ``add``); sample points outside it are left
-        out. Returns the leaves split."""
+        each of its points standing for ``weight`` of them: the leaves they would overflow are
+        split now, level by level, so that those points go straight to the leaves they end in
+        instead of filling a leaf, spilling out of it and being inserted again (a snapshot of
+        18 M points spilled 61 % of them; a second snapshot into the same tree 65 %). A leaf that
+        holds points has them moved once, to the leaves they end in under the new shape; a leaf
+        the sample underestimates splits as usual later. The root cube must be set (given, or by
+        an earlier ``add``); sample points outside it are left out. Returns the leaves split."""
         sample = np.ascontiguousarray(sample, np.float64)
         if sample.ndim != 2 or sample.shape[1:] != (3,):
             raise InputError(f"{self.name}: expect: the sample must have shape (N, 3), got {sample.shape}")
@@ -584,17 +584,15 @@ class ProgressiveOctree:
         sample = sample[inside]
         if not len(sample):
             return 0
-        split = 0
         with self.lock.writing():
-            st = _Set.of(self.root, sample, np.zeros(len(sample), np.uint32), {}, self.origin, self.edge)
-            while True:
-                leaf_runs, _ = self._distribute(st)
-                nodes, expected = leaf_runs[:, 0], (leaf_runs[:, 2] - leaf_runs[:, 1]) * weight
-                over = nodes[(expected > self.max_leaf) & (self.count[nodes] == 0) & (self.level[nodes] < CODE_BITS)]
-                if not len(over):
-                    return split
-                self.leaf[over] = 0
-                split += len(over)
+            if self.pool is not None and not self._voxel_state:
+                self._rebuild_voxel_state()  # spilled points are sampled into voxels again
+            inner_before = int(np.count_nonzero(self.leaf[: self.n_nodes] == 0))
+            sets = [_Set.of(self.root, sample, np.zeros(len(sample), np.uint32), {}, self.origin, self.edge, _Work(), "s")]
+            routes = self._route(sets, [float(weight)])
+            if len(sets) > 1:  # leaves that held points, split: their points go to the leaves they end in now
+                self._write_sets(sets[1:], routes[1:])
+            return int(np.count_nonzero(self.leaf[: self.n_nodes] == 0)) - inner_before
 
     @contextmanager
     def holding_work(self):
@@ -645,31 +643,39 @@ class ProgressiveOctree:
             self._start(lo - pad, float(np.max(hi - lo)) + 2 * pad)
         while np.any(lo < self.origin) or np.any(hi > self.origin + self.edge):
             self._grow(lo, hi)
-        # The batch and the points of every leaf that would overflow (spilled: inserted again
-        # from that leaf down, all such leaves' points one set), sorted by code and routed, until
-        # no leaf overflows.
         sets = [_Set.of(self.root, xyz, rgba, attrs, self.origin, self.edge, self._work, "0")]
+        self._write_sets(sets, self._route(sets, [1.0]))
+        self.lo, self.hi = np.minimum(self.lo, lo), np.maximum(self.hi, hi)
+        self.pool.bounds = self.bounds
+
+    def _route(self, sets: list, weights: list) -> list:
+        """Route ``sets`` (each of its points standing for ``weights[i]`` points) until no leaf
+        would overflow: a leaf that would is split, and its stored points are spilled, one more
+        set (weight 1, appended to ``sets``) routed from that leaf down; a leaf created on the
+        way holds nothing to spill. Returns every set's (leaf runs, inner runs)."""
         while True:
             routes = [self._distribute(st) for st in sets]
-            incoming = np.zeros(self.n_nodes, np.int64)
-            for leaf_runs, _ in routes:
-                np.add.at(incoming, leaf_runs[:, 0], leaf_runs[:, 2] - leaf_runs[:, 1])
+            incoming = np.zeros(self.n_nodes)
+            for (leaf_runs, _), w in zip(routes, weights):
+                np.add.at(incoming, leaf_runs[:, 0], (leaf_runs[:, 2] - leaf_runs[:, 1]) * w)
             hit = np.flatnonzero(incoming)
             over = hit[(self.count[hit] + incoming[hit] > self.max_leaf) & (self.level[hit] < CODE_BITS)]
             if not len(over):
-                break
+                return routes
             stored = over[self.count[over] > 0]
-            self.leaf[over[self.count[over] == 0]] = 0  # created by this batch: nothing stored to spill
+            self.leaf[over[self.count[over] == 0]] = 0  # created by these sets: nothing stored to spill
             if len(stored):
                 tag = str(len(sets))
                 sets.append(_Set.of(stored, *self._split(stored, tag), self.origin, self.edge, self._work, tag))
+                weights.append(1.0)
+
+    def _write_sets(self, sets: list, routes: list) -> None:
+        """The routed sets' points into their leaves and voxels."""
         self.pool.version += 1
         for st, (leaf_runs, inner_runs) in zip(sets, routes):
             self._sample(st, leaf_runs, inner_runs)
             self._write_points(st, leaf_runs)
-            self.points += len(st.codes)  # the batch and the points spilled from split leaves
-        self.lo, self.hi = np.minimum(self.lo, lo), np.maximum(self.hi, hi)
-        self.pool.bounds = self.bounds
+            self.points += len(st.codes)  # a batch, or the points spilled from split leaves
 
     def _distribute(self, st: _Set) -> tuple[np.ndarray, np.ndarray]:
         """(leaf runs, inner runs) of a set's sorted codes routed from its start nodes, growing
