@@ -154,8 +154,11 @@ def bench_stream(frames, keep, fps, seconds) -> None:
 
 
 def bench_snapshot(frames, keep) -> None:
-    warm = _fill(frames, 2)
+    warm = _fill(frames, 8)  # above one batch (SNAPSHOT_BATCH): the tree shaped first, leaves split; JIT warm-up
     warm.snapshot()
+    for k in range(8):
+        _push(warm, frames[k + 8])
+    warm.snapshot()  # and a second one: stored points moved
     live = _fill(frames, keep)
     from gigapoint.bench.report import machine_pages, pages_since
 
