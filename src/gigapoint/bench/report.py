@@ -29,9 +29,9 @@ def machine_pages() -> tuple[int, int]:
     """(bytes of pages the kernel has handed out, bytes it has given back to a VM's host), both
     machine-wide and counted since boot (``/proc/vmstat`` pgalloc_*, free page reporting's
     ``reported_kib``; 0 where a system has neither). The difference of two readings is the new
-    memory a benchmark needed: on a VM that reports free pages (this project's machines) the
-    host faults such memory in again at ~1 GB/s in all, however many processes ask
-    (docs/benchmarks.md), so a run's time moves with it."""
+    memory a benchmark needed: on a VM that reports free pages (this project's machines) new
+    memory costs ~0.4 ms a MB in 4 KiB pages and ~2.5 ms a MB in numpy's huge pages
+    (core/pages.py, docs/benchmarks.md "Huge pages"), so a run's time moves with it."""
     try:
         with open("/proc/vmstat") as fh:
             alloc = sum(int(v) for k, v in (line.split() for line in fh) if k.startswith("pgalloc_")) * 4096

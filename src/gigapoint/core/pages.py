@@ -35,13 +35,18 @@ _BALLOON_F_REPORTING = 5  # virtio-balloon feature bit: free page reporting
 def _balloon_reports_free_pages(devices: Path = Path("/sys/bus/virtio/devices")) -> bool:
     """Whether a virtio balloon with free page reporting is bound (its features: a string of 0/1 by bit)."""
     try:
-        for dev in devices.iterdir():
-            if (dev / "device").read_text().strip() == _VIRTIO_BALLOON:
-                features = (dev / "features").read_text().strip()
-                if len(features) > _BALLOON_F_REPORTING and features[_BALLOON_F_REPORTING] == "1":
-                    return True
-    except OSError:
-        pass
+        devs = list(devices.iterdir())
+    except OSError:  # no virtio bus (not Linux, not a VM)
+        return False
+    for dev in devs:
+        try:  # a device without these files is not the balloon: look at the next one
+            if (dev / "device").read_text().strip() != _VIRTIO_BALLOON:
+                continue
+            features = (dev / "features").read_text().strip()
+        except OSError:
+            continue
+        if len(features) > _BALLOON_F_REPORTING and features[_BALLOON_F_REPORTING] == "1":
+            return True
     return False
 
 
