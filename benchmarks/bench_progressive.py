@@ -15,6 +15,10 @@
   points (1920x1080), then the loader is closed.
 - ``viewer``: ``gigapoint view --demo 1000000000`` (progressive: above the point budget):
   seconds from a client's connect (as the page does) to its first frame.
+- ``save``: a progressive octree of the points (LAS, scan order, loaded to completion) saved
+  as a gigapoint octree: ``save()`` (its leaves are the conversion's partitions,
+  lod/convert/seeded.py) against converting its points again (``convert(cloud.chunks(), ...)``,
+  what ``save`` did before), the same leaf size, alternately, each into a fresh folder.
 - ``frames``: median frame time at 1920x1080 with a 10 M budget while the demo loads, of the
   same octree once loaded, and of a converted octree of the same points (alternately).
 """
@@ -109,6 +113,40 @@ def bench_load(n: int, rounds: int) -> None:
             print(f"load {suffix.upper()} {n / 1e6:g} M: decode alone {d:.2f} s, progressive to completion {ld:.2f} s = {ld / d:.2f}x")
 
 
+def bench_save(n: int, rounds: int) -> None:
+    import shutil
+
+    from gigapoint.lod import convert
+
+    xyz, rgba, attrs = demo_arrays(n, seed=2)
+    order = _scan_order(xyz)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = _write(Path(tmp) / "town.las", xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()})
+        del xyz, rgba, attrs, order
+        cloud = gp.open(path, progressive=True)
+        cloud.wait()
+        warm = ProgressiveOctree("warm", max_leaf=cloud.max_leaf)  # JIT warm-up of both paths
+        warm.add(cloud.positions(cloud.node_entries(int(cloud.leaves()[0]))))
+        warm.save(Path(tmp) / "w1")
+        convert(warm.chunks(), Path(tmp) / "w2", max_leaf=warm.max_leaf)
+        times: dict[str, list[float]] = {"save (its tree)": [], "convert its points again": []}
+        for r in range(rounds):
+            for name, runs in times.items():
+                out = Path(tmp) / f"out{r}_{len(runs)}_{name[:4]}"
+                t = time.perf_counter()
+                if name.startswith("save"):
+                    cloud.save(out)
+                else:
+                    convert(cloud.chunks(), out, max_leaf=cloud.max_leaf, source_files=cloud.source_files, name=cloud.name)
+                runs.append(time.perf_counter() - t)
+                shutil.rmtree(out)
+        base = statistics.median(times["convert its points again"])
+        for name, runs in times.items():
+            m = statistics.median(runs)
+            print(f"save {n / 1e6:g} M: {name}: {m:.2f} s ({n / m / 1e6:.2f} M points/s), {base / m:.2f}x converting again; runs {[round(t, 2) for t in runs]}")
+        cloud.close()
+
+
 def bench_first(n: int) -> None:
     cam = None
     t = time.perf_counter()
@@ -197,6 +235,8 @@ def main(argv=None) -> int:
         bench_insert(n, parse_count(args.batch))
     if "load" in args.parts:
         bench_load(n, args.rounds)
+    if "save" in args.parts:
+        bench_save(n, args.rounds)
     if "first" in args.parts:
         bench_first(10**9)
     if "viewer" in args.parts:

@@ -152,6 +152,31 @@ def _assert_same_leaves(a: ProgressiveOctree, b: ProgressiveOctree) -> None:
     assert a.n_voxels == b.n_voxels
 
 
+@pytest.mark.parametrize("max_leaf", [3_000, 20_000])
+def test_its_tree_is_the_converters_tree_of_the_same_cube(scene, max_leaf):
+    """The contract one LOD builder rests on (issue #18, item 3; docs/lod.md): in the same cube
+    and with the same leaf size, the octree grown batch by batch has the nodes the converter's
+    split of the sorted codes has (lod/build.split_tree): the same inner nodes, the same leaves,
+    each holding the same points. (Every node split holds more than max_leaf points at the end,
+    and every node holding more must have split.)"""
+    from gigapoint.lod.build import sort_codes, split_tree
+    from gigapoint.lod.keys import ROOT_KEY
+
+    xyz, rgba, _ = scene
+    origin, edge = _cube(xyz)
+    o = _filled((xyz, rgba, {}), batch=7_000, order=np.random.default_rng(5).permutation(len(xyz)), max_leaf=max_leaf)
+    codes, order = sort_codes(point_codes(xyz, origin, edge))
+    tree = split_tree(codes, ROOT_KEY, max_leaf)
+    runs = {int(k): (int(s), int(e)) for k, s, e, leaf in zip(tree.keys, tree.starts, tree.ends, tree.leaf) if leaf and e > s}
+    assert {int(o.key[n]) for n in o.leaves()} == set(runs)
+    assert {int(o.key[n]) for n in o.inner_nodes()} == {int(k) for k, leaf in zip(tree.keys, tree.leaf) if not leaf}
+    assert len(runs) > 4 and sum(e - s for s, e in runs.values()) == len(xyz)
+    for n in o.leaves():
+        s, e = runs[int(o.key[n])]
+        # the same points, at 30 bits in the cube they first landed in: the root's at worst
+        _match(o.positions(o.node_entries(n)), xyz[order[s:e]], edge / 2**29)
+
+
 def test_a_tree_shaped_from_all_the_points_is_the_same_and_spills_none(scene, octree):
     """``expect`` with every point (weight 1) splits up front exactly the leaves the points
     would overflow: the same leaves and voxels as inserting them without it, and no point is
@@ -696,6 +721,55 @@ def test_save_writes_a_converted_octree_of_its_points(scene, octree, tmp_path, f
     assert (a & b).sum() / (a | b).sum() >= 0.95
     with pytest.raises(GigapointError, match="overwrite"):
         octree.save(out, format=fmt)
+
+
+def test_save_keeps_its_tree_and_reads_nothing_again(scene, tmp_path, monkeypatch):
+    """save() converts the octree's own tree (lod/convert/seeded.py): the saved octree's leaves
+    are this octree's leaves, its inner nodes its inner nodes (the converter then samples them
+    from their leaves), every point once, and neither the read spill nor the distribute phase
+    runs. With another leaf size the points are converted from scratch, as before."""
+    import importlib
+
+    partition = importlib.import_module("gigapoint.lod.convert.partition")
+    read = importlib.import_module("gigapoint.lod.convert.read")
+    xyz, rgba, attrs = scene
+    o = _filled(scene, max_leaf=3_000)
+
+    def never(*args, **kwargs):
+        raise AssertionError("a grown tree is not read or distributed again")
+
+    monkeypatch.setattr(read, "spill_chunk", never)
+    monkeypatch.setattr(partition.PartitionPhases, "_append", never)
+    result = o.save(tmp_path / "g")
+    assert result.points == len(xyz)
+    keys = np.load(tmp_path / "g" / "keys.npy")
+    counts = np.load(tmp_path / "g" / "nodes.npy")["count"].astype(np.int64)
+    parents = {int(k) >> 3 for k in keys}
+    saved_leaves = {int(k) for k in keys if int(k) not in parents}
+    assert saved_leaves == {int(o.key[n]) for n in o.leaves()}
+    assert {int(k) for k in keys} - saved_leaves == {int(o.key[n]) for n in o.inner_nodes()}
+    assert counts.sum() == len(xyz)
+    saved = gp.open(tmp_path / "g")
+    points = [saved.node_points(i) for i in range(len(keys))]
+    idx = _match(np.concatenate([p["xyz"] for p in points]), xyz, 1e-3)  # every input point once, at its place
+    assert np.array_equal(np.concatenate([p["rgba"] for p in points]).view(np.uint32).reshape(-1), rgba.view(np.uint32).reshape(-1)[idx])
+    assert np.array_equal(np.concatenate([p["intensity"] for p in points]), attrs["intensity"][idx])
+    with pytest.raises(AssertionError, match="not read or distributed again"):
+        o.save(tmp_path / "other", max_leaf=2_000)  # another leaf size: converted from scratch
+
+
+def test_a_tree_that_grows_while_it_is_saved_is_not_saved_half(scene):
+    """Points added between the plan and the reading of the leaves (a live cloud's snapshot, a
+    program's add) may have split a leaf: the save stops with a one-line error, and no output
+    looks complete (the converter leaves it unfinished)."""
+    xyz, rgba, _ = scene
+    o = _filled((xyz[:60_000], rgba[:60_000], {}), max_leaf=3_000)
+    tree = o.grown()
+    first = tree.points(tree.leaf_keys[:2])
+    assert len(first["xyz"]) == int(tree.leaf_counts[:2].sum())
+    o.add(xyz[60_000:], rgba[60_000:])
+    with pytest.raises(GigapointError, match="added while the octree was being saved; save it again"):
+        tree.points(tree.leaf_keys[:2])
 
 
 def _cli(*args):

@@ -17,6 +17,7 @@ from .options import DEFAULT_MAX_LEAF, ENCODINGS, FORMATS, parse_memory
 from .partition import PartitionPhases
 from .phases import BuildPhases
 from .read import ReadPhase
+from .seeded import GrownTree, SeededPhases
 from .state import local_path
 
 PHASES = ("read", "count", "distribute", "build", "group", "upper", "write")
@@ -94,6 +95,10 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
         )
 
 
+class _SeededConverter(SeededPhases, _Converter):
+    """A conversion of a builder's grown tree (seeded.py): its partitions come from the leaves."""
+
+
 def convert(
     inputs,
     out,
@@ -155,6 +160,10 @@ def convert(
     if out is None or str(out) == "":
         raise ConvertError("convert: no output directory given (-o OUT)")
     cls = _Converter
+    if isinstance(inputs, GrownTree):  # a progressive octree's save: its leaves are the partitions
+        if client is not None:
+            raise ConvertError("convert: a grown tree is converted in this process, not on a Dask client")
+        cls = _SeededConverter
     if client is not None:
         from .distributed import DaskPhases, open_client  # dask is imported only when asked for
 

@@ -55,7 +55,7 @@ from ...core.layout import BATCH_DTYPE, PACK_DTYPE
 from ...core.quantize import dequantize
 from ...core.renderable import DrawList, MultiViewDrawList
 from ...core.selection import Selection, View, batch_matrices, precision_for
-from ...errors import InputError
+from ...errors import GigapointError, InputError
 from ...render.splats import weighted_median
 from ..build import take, valid_bounds
 from ..keys import CODE_BITS, point_codes
@@ -874,13 +874,49 @@ class ProgressiveOctree:
             yield _chunk_of(parts)
 
     def save(self, out, format: str = "gigapoint", overwrite: bool = False, **options):
-        """Write the octree's points as a converted octree folder (gigapoint or potree) through
-        ``gigapoint.convert``; waits for loading to finish first. Returns the ConvertResult."""
+        """Write the octree as a converted octree folder (gigapoint, potree or copc) through
+        ``gigapoint.convert``; waits for loading to finish first. Returns the ConvertResult.
+
+        The converted octree has this one's nodes: its leaves, with their points, are the
+        conversion's partitions as they stand (``grown``; lod/convert/seeded.py), and the
+        converter samples the inner nodes from them. With another ``max_leaf`` or a Dask
+        ``client`` the points are converted again from scratch."""
         from ..convert import convert
 
         self.wait()
         options.setdefault("source_files", self.source_files)  # the files' CRS and LAS grid
-        return convert(self.chunks(), out, format=format, overwrite=overwrite, name=self.name, **options)
+        options.setdefault("max_leaf", self.max_leaf)
+        grown = options["max_leaf"] == self.max_leaf and options.get("client") is None and self.points > 0
+        inputs = self.grown() if grown else self.chunks()
+        return convert(inputs, out, format=format, overwrite=overwrite, name=self.name, **options)
+
+    def grown(self):
+        """The octree as a conversion's input (convert.seeded.GrownTree): its cube, its leaves in
+        key order and a way to read their points."""
+        from ..convert.seeded import GrownTree
+
+        with self.lock:
+            leaves = self.leaves()
+            keys = self.key[leaves]
+            order = np.argsort(keys << (np.uint64(3) * (CODE_BITS - self.level[leaves]).astype(np.uint64)), kind="stable")  # code order
+            leaves = leaves[order]
+            node_of = dict(zip(self.key[leaves].tolist(), leaves.tolist()))
+            stamp = (self.points, self.n_nodes, self.spilled)
+            return GrownTree(self.origin.copy(), float(self.edge), self.lo.copy(), self.hi.copy(), self.skipped,
+                             dict(self._attribute_dtypes or {}), self.key[leaves].copy(), self.count[leaves].copy(),
+                             lambda keys: self._leaf_points([node_of[k] for k in np.asarray(keys).tolist()], stamp))  # fmt: skip
+
+    def _leaf_points(self, nodes: list, stamp: tuple) -> dict:
+        """The points of leaves ``nodes``, leaf by leaf: {"xyz", "rgba" (u32), "attr.<name>"}, as
+        long as the octree is as it was when ``stamp`` was taken (a point added since may have
+        split a leaf, whose list 0 would then hold voxels)."""
+        with self.lock:
+            if (self.points, self.n_nodes, self.spilled) != stamp:
+                raise GigapointError(f"{self.name}: points were added while the octree was being saved; save it again")
+            slots = np.concatenate([self._list_slots(node * K.LISTS) for node in nodes]) if nodes else np.empty(0, np.int64)
+            pool = self.pool
+            return {"xyz": self._decode(slots), "rgba": take(pool.color, slots),
+                    **{f"attr.{a}": take(v, slots) for a, v in pool.attributes.items()}}  # fmt: skip
 
     # ------------------------------------------------------------------ reading
     def node_entries(self, node: int) -> np.ndarray:

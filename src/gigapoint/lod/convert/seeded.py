@@ -1,0 +1,106 @@
+"""A conversion whose tree a builder has grown already: a progressive octree's ``save`` (issue
+#18, item 3: one LOD builder; docs/lod.md, "One LOD builder").
+
+In the same cube and with the same leaf size, a ProgressiveOctree has exactly the nodes the
+converter's split of the sorted codes makes (``build.split_tree``; tested in
+tests/unit/test_lod_progressive.py). So its leaves are the runs the read, count and distribute
+phases would have found: here those three phases are one, which plans the partitions from the
+leaves' counts, in the octree's cube, and the build phase takes each partition's points
+straight from its leaves (no spill, no partition files: a grown tree's conversion does not
+resume, it is in memory already). The build, group, upper and write phases run as for any
+input (Potree, COPC, the compact layout: all theirs).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .facts import input_facts
+from .partition import COUNT_LEVEL, plan_partitions
+from .state import Job
+
+
+@dataclass
+class GrownTree:
+    """What a builder hands a conversion: its root cube, the bounds and count of its points, their
+    attributes, its leaves in key order (u64 keys, point counts) and ``points(keys)``, the
+    points of those leaves ({"xyz" float64 (n, 3), "rgba" u32, "attr.<name>"}, leaf by leaf)."""
+
+    origin: np.ndarray
+    edge: float
+    lo: np.ndarray
+    hi: np.ndarray
+    skipped: int
+    attributes: dict  # name -> numpy dtype
+    leaf_keys: np.ndarray
+    leaf_counts: np.ndarray
+    points: object  # callable: keys -> dict of arrays
+
+
+def _count_grid(keys: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """The count grid (COUNT_LEVEL) of leaves: a leaf at or below the grid's level counts in
+    its cell, a larger one in the first cell of its span. The partition plan never splits a
+    node of at most ``budget`` points, and every leaf holds fewer, so where inside a larger
+    leaf its points are counted does not matter."""
+    grid = np.zeros(8**COUNT_LEVEL, np.int64)
+    for k, n in zip(keys.tolist(), counts.tolist()):
+        lev = (k.bit_length() - 1) // 3
+        prefix = k ^ (1 << 3 * lev)
+        cell = prefix >> 3 * (lev - COUNT_LEVEL) if lev >= COUNT_LEVEL else prefix << 3 * (COUNT_LEVEL - lev)
+        grid[cell] += n
+    return grid
+
+
+def _partition_of(keys: np.ndarray, parts: list) -> list[list[int]]:
+    """The leaves (indices into ``keys``) of each partition: the leaves its root is an ancestor of (or is)."""
+    of: dict[tuple[int, int], int] = {(lev, prefix): p for p, (lev, prefix, _) in enumerate(parts)}
+    members: list[list[int]] = [[] for _ in parts]
+    for i, k in enumerate(keys.tolist()):
+        lev = (k.bit_length() - 1) // 3
+        prefix = k ^ (1 << 3 * lev)
+        for up in range(lev, -1, -1):  # the partition is the leaf or one of its ancestors
+            p = of.get((up, prefix >> 3 * (lev - up)))
+            if p is not None:
+                members[p].append(i)
+                break
+        else:
+            raise AssertionError(f"leaf {k:#x} lies in no partition")
+    return members
+
+
+class SeededPhases(Job):
+    """The read, count and distribute phases from a GrownTree (``self.inputs``)."""
+
+    def read(self) -> None:
+        tree: GrownTree = self.inputs
+        st = self.state
+        total = int(tree.leaf_counts.sum())
+        st["attributes"] = {a: np.dtype(dt).str for a, dt in tree.attributes.items()}
+        st.update(total=total, points=total, skipped=int(tree.skipped), chunks=0, chunk_scale=None, lo=np.asarray(tree.lo).tolist(),
+                  hi=np.asarray(tree.hi).tolist())  # fmt: skip
+        self.progress.phase("read", total)
+        budget = st.setdefault("partition_points", self.partition_points)
+        parts = plan_partitions(_count_grid(tree.leaf_keys, tree.leaf_counts), 0, 0, COUNT_LEVEL, budget)
+        members = _partition_of(tree.leaf_keys, parts)
+        self._leaves_of = {(lev, prefix): tree.leaf_keys[m] for (lev, prefix, _), m in zip(parts, members)}
+        counts = [int(tree.leaf_counts[m].sum()) for m in members]
+        assert sum(counts) == total, (sum(counts), total)
+        self.progress.advance(total)
+        st.setdefault("source", input_facts(self.source_files))  # CRS, LAS grid: for outputs that hold them
+        st["compact"] = self.compact_plan()
+        st.update(origin=np.asarray(tree.origin, np.float64).tolist(), edge=float(tree.edge), partitions=parts, part_counts=counts,
+                  distributed=0, phase="build")  # fmt: skip
+        self.save_state()
+
+    def count(self) -> None:
+        """Done by ``read``: the partitions come from the leaves."""
+
+    def distribute(self) -> None:
+        """Nothing to do: the build phase takes each partition's points from its leaves."""
+
+    def _partition_input(self, lev: int, prefix: int) -> tuple[dict, list]:
+        """A partition's points, from its leaves (no files to remove afterwards)."""
+        data = self.inputs.points(self._leaves_of[(lev, prefix)])
+        return {"xyz": np.ascontiguousarray(data.pop("xyz")), **data}, []
