@@ -18,6 +18,9 @@ Phases (each resumable; the state is saved atomically in the output folder, ``Oc
    ../potree.py); the metadata file is written last, atomically, and only then is the working
    folder removed. The output therefore never looks complete before it is.
 
+A builder's grown tree (seeded.py, a progressive octree's ``save``) replaces phases 1-3: its
+leaves are the partitions, planned from their counts and built from their points in memory.
+
 A re-run after an interruption resumes where the state says (same inputs and options,
 state.py), otherwise it starts clean. converter.py runs the phases in order (``convert``);
 the output folder itself (kind, lock, clearing, state file) is ../octree_dir.py's. With a Dask

@@ -136,6 +136,9 @@ def convert(
     ``source_files``: where ``inputs`` are chunks, the LAS/LAZ/COPC files they came from; their
     headers give the output its CRS and LAS grid (a progressive octree's ``save``).
 
+    ``inputs`` may also be a ``GrownTree`` (seeded.py): a builder's tree whose leaves are the
+    partitions as they stand (``ProgressiveOctree.save``); it is converted in this process.
+
     ``layout`` (gigapoint format): "compact" writes format version 2, node payloads in bit
     streams (../compact_octree.py, about half the bytes; positions exact at the source's scale),
     "words" version 1 (three u32 words and 32-bit colours a point). ``colors`` (version 2):

@@ -912,7 +912,7 @@ class ProgressiveOctree:
         split a leaf, whose list 0 would then hold voxels)."""
         with self.lock:
             if (self.points, self.n_nodes, self.spilled) != stamp:
-                raise GigapointError(f"{self.name}: points were added while the octree was being saved; save it again")
+                raise GigapointError(f"{self.name}: the octree changed while it was being saved (points added, or closed); save it again")
             slots = np.concatenate([self._list_slots(node * K.LISTS) for node in nodes]) if nodes else np.empty(0, np.int64)
             pool = self.pool
             return {"xyz": self._decode(slots), "rgba": take(pool.color, slots),
