@@ -19,6 +19,11 @@
   as a gigapoint octree: ``save()`` (its leaves are the conversion's partitions,
   lod/convert/seeded.py) against converting its points again (``convert(cloud.chunks(), ...)``,
   what ``save`` did before), the same leaf size, alternately, each into a fresh folder.
+- ``convert``: a LAS file (scan order) to a gigapoint octree through the progressive builder
+  (``gigapoint.open(..., progressive=True)``, loaded, then ``save()``), against ``gigapoint
+  convert`` of the same file and, with ``--potree-converter PATH``, PotreeConverter's
+  ``--method random``, alternately (process-internal times for gigapoint, wall time of the
+  PotreeConverter process).
 - ``frames``: median frame time at 1920x1080 with a 10 M budget while the demo loads, of the
   same octree once loaded, and of a converted octree of the same points (alternately).
 """
@@ -147,6 +152,52 @@ def bench_save(n: int, rounds: int) -> None:
         cloud.close()
 
 
+def bench_convert_through_builder(n: int, rounds: int, potree: str | None) -> None:
+    import shutil
+    import sys
+
+    from gigapoint.lod import convert
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_convert import run_potree
+
+    xyz, rgba, attrs = demo_arrays(n, seed=2)
+    order = _scan_order(xyz)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = _write(Path(tmp) / "town.las", xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()})
+        del xyz, rgba, attrs, order
+        small = _write(Path(tmp) / "warm.las", *demo_arrays(20_000, seed=3))
+        warm = gp.open(small, progressive=True)  # JIT warm-up of both paths
+        warm.wait()
+        warm.save(Path(tmp) / "w1")
+        convert([small], Path(tmp) / "w2")
+        warm.close()
+
+        def through_builder(out):
+            cloud = gp.open(path, progressive=True)
+            cloud.wait()
+            cloud.save(out)
+            cloud.close()
+
+        runs = {"through the progressive builder (open, load, save)": through_builder, "gigapoint convert": lambda out: convert([path], out)}
+        if potree:
+            runs["PotreeConverter --method random"] = lambda out: run_potree(potree, path, out, "random")
+        times: dict[str, list[float]] = {k: [] for k in runs}
+        for r in range(rounds):
+            for name, fn in runs.items():
+                out = Path(tmp) / f"out{r}"
+                shutil.rmtree(out, ignore_errors=True)
+                t = time.perf_counter()
+                fn(out)
+                times[name].append(time.perf_counter() - t)
+                shutil.rmtree(out, ignore_errors=True)
+        base = statistics.median(times["gigapoint convert"])
+        for name, ts in times.items():
+            m = statistics.median(ts)
+            print(f"convert {n / 1e6:g} M LAS: {name}: {m:.2f} s ({n / m / 1e6:.2f} M points/s), {base / m:.2f}x gigapoint convert; "
+                  f"runs {[round(t, 2) for t in ts]}")  # fmt: skip
+
+
 def bench_first(n: int) -> None:
     cam = None
     t = time.perf_counter()
@@ -228,6 +279,7 @@ def main(argv=None) -> int:
     ap.add_argument("--batch", default="1M")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--parts", nargs="+", default=["insert", "load", "first", "viewer", "frames"])
+    ap.add_argument("--potree-converter", default=None, help="a PotreeConverter 2 binary for --parts convert (its --method random)")
     args = ap.parse_args(argv)
     n = parse_count(args.points)
     print(f"{_cpu()}, 2 cores; {n:,} points")
@@ -237,6 +289,8 @@ def main(argv=None) -> int:
         bench_load(n, args.rounds)
     if "save" in args.parts:
         bench_save(n, args.rounds)
+    if "convert" in args.parts:
+        bench_convert_through_builder(n, args.rounds, args.potree_converter)
     if "first" in args.parts:
         bench_first(10**9)
     if "viewer" in args.parts:
