@@ -82,3 +82,57 @@ def test_small_arrays_and_neighbours_keep_their_advice(advice):
     assert "nh" not in _vm_flags(big.ctypes.data)
     assert "nh" not in _vm_flags(big.ctypes.data + big.nbytes - 1)
     assert view.base is big
+
+
+def _numpy_advises_huge_pages() -> bool:
+    switch = pages._set_numpy_advice()
+    before = switch(True)
+    switch(before)
+    return bool(before)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="madvise and /proc/self/smaps are Linux's")
+def test_numpy_gives_no_huge_page_advice_inside_the_block_and_again_after(advice):
+    """A conversion's block (converter.convert, Dask tasks): numpy's own advice off while it runs,
+    back after, however blocks of several threads overlap; nothing changes where small pages are not wanted."""
+    assert pages._set_numpy_advice() is not None  # numpy 2.4 has the switch
+    before = _numpy_advises_huge_pages()
+    advice("1")
+    with pages.numpy_small_pages():
+        assert not _numpy_advises_huge_pages()
+        inside = np.zeros(16_000_000, np.uint8)
+        inside[:] = 1
+        assert "hg" not in _vm_flags(inside.ctypes.data + inside.nbytes // 2)
+    assert _numpy_advises_huge_pages() == before
+    outside = np.zeros(16_000_000, np.uint8)
+    if before and "hg" not in _vm_flags(outside.ctypes.data + outside.nbytes // 2):
+        pytest.skip("this kernel takes no huge-page advice (no transparent huge pages)")
+
+    import threading
+
+    a_in, b_in, a_out = threading.Event(), threading.Event(), threading.Event()
+    seen = {}
+
+    def a():
+        with pages.numpy_small_pages():
+            a_in.set()
+            b_in.wait(10)
+        a_out.set()
+
+    def b():
+        with pages.numpy_small_pages():
+            b_in.set()
+            a_out.wait(10)
+            seen["after a left"] = _numpy_advises_huge_pages()
+
+    threads = [threading.Thread(target=a), threading.Thread(target=b)]
+    threads[0].start()
+    a_in.wait(10)
+    threads[1].start()
+    for t in threads:
+        t.join(10)
+    assert seen == {"after a left": False}  # b's block still runs: the advice stays off
+    assert _numpy_advises_huge_pages() == before  # the last one out restores it
+    advice("0")
+    with pages.numpy_small_pages():
+        assert _numpy_advises_huge_pages() == before  # small pages not wanted: numpy's advice stands

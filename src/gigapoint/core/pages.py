@@ -12,6 +12,10 @@ pages; they are made with ``zeros`` / ``empty`` / ``full`` of this module, which
 (``MADV_NOHUGEPAGE``) before the first write. Frame buffers, reused every frame and written
 at random, keep numpy's advice.
 
+``numpy_small_pages()`` turns numpy's own advice off while a block runs (a conversion, whose
+every array is written once or twice and whose reads of a LAS chunk faulted in huge pages:
+its read phase 2.9 -> 2.2 s of 20 M points, docs/benchmarks.md), where the same condition holds.
+
 ``GIGAPOINT_SMALL_PAGES=1`` / ``0`` forces the advice on or off; by default it is on where a
 virtio balloon reports free pages (Linux sysfs), and these functions are numpy's elsewhere.
 """
@@ -20,6 +24,8 @@ from __future__ import annotations
 
 import ctypes
 import os
+import threading
+from contextlib import contextmanager
 from functools import cache
 from pathlib import Path
 
@@ -90,3 +96,43 @@ def full(shape, value, dtype) -> np.ndarray:
     a = small_pages(np.empty(shape, dtype))
     a.fill(value)
     return a
+
+
+_numpy_advice_lock = threading.Lock()
+_numpy_advice_holders = 0
+_numpy_advice_before = True
+
+
+def _set_numpy_advice():
+    """numpy's switch of its huge-page advice (a private function of numpy 1.x and 2.x), or None."""
+    for module in ("numpy._core.multiarray", "numpy.core.multiarray"):
+        try:
+            fn = getattr(__import__(module, fromlist=["_set_madvise_hugepage"]), "_set_madvise_hugepage", None)
+        except ImportError:
+            continue
+        if fn is not None:
+            return fn
+    return None
+
+
+@contextmanager
+def numpy_small_pages():
+    """Inside: numpy's arrays get no huge-page advice where small pages are wanted (``_madvise``);
+    elsewhere, or without numpy's switch, nothing changes. Process-wide, as numpy's switch is:
+    the first of overlapping blocks (any threads) turns the advice off, the last one restores it."""
+    global _numpy_advice_holders, _numpy_advice_before
+    switch = _set_numpy_advice() if _madvise() is not None else None
+    if switch is None:
+        yield
+        return
+    with _numpy_advice_lock:
+        if _numpy_advice_holders == 0:
+            _numpy_advice_before = bool(switch(False))
+        _numpy_advice_holders += 1
+    try:
+        yield
+    finally:
+        with _numpy_advice_lock:
+            _numpy_advice_holders -= 1
+            if _numpy_advice_holders == 0:
+                switch(_numpy_advice_before)

@@ -7,6 +7,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from ...core import pages
 from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
 from ..copc_write import check_output as check_copc_output
@@ -191,5 +192,5 @@ def convert(
     if client is not None:
         with open_client(client, announce=progress) as conv.client:
             return conv.run(overwrite)
-    with KeepFreedMemory():
+    with KeepFreedMemory(), pages.numpy_small_pages():  # both: new pages are the slow part of a conversion here
         return conv.run(overwrite)

@@ -57,6 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from ...atomic import atomic_json, atomic_open
+from ...core import pages
 from ...errors import GigapointError
 from ...io._base import ColorScaler, one_line
 from ...io.las import read_las_header
@@ -291,9 +292,10 @@ def _task(kind: str, name: str, spec: dict, fn, *args):
         if spec.get("own_workers"):  # a worker of ours: freed memory kept for the next task too
             if not _KEPT:
                 _KEPT.append(KeepFreedMemory().__enter__())
-            result = fn(spec, *args)
+            with pages.numpy_small_pages():
+                result = fn(spec, *args)
         else:  # someone else's worker: glibc's settings come back after each task
-            with KeepFreedMemory():
+            with KeepFreedMemory(), pages.numpy_small_pages():
                 result = fn(spec, *args)
         hooks.task_done(kind, name)
         return result
