@@ -767,9 +767,13 @@ def test_a_tree_that_grows_while_it_is_saved_is_not_saved_half(scene):
     tree = o.grown()
     first = tree.points(tree.leaf_keys[:2])
     assert len(first["xyz"]) == int(tree.leaf_counts[:2].sum())
+    chunks = o.chunks(points_per_chunk=1)  # the path of save(max_leaf=...) and of a live cloud's LAS
+    next(chunks)
     o.add(xyz[60_000:], rgba[60_000:])
     with pytest.raises(GigapointError, match="changed while it was being saved"):
         tree.points(tree.leaf_keys[:2])
+    with pytest.raises(GigapointError, match="changed while it was being saved"):
+        next(chunks)
 
 
 def _cli(*args):

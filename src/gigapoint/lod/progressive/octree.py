@@ -857,12 +857,15 @@ class ProgressiveOctree:
 
     # ------------------------------------------------------------------ saving
     def chunks(self, points_per_chunk: int = 1_000_000):
-        """The points of the leaves as PointChunks (positions, colours, attributes), leaf by leaf."""
+        """The points of the leaves as PointChunks (positions, colours, attributes), leaf by leaf;
+        one line of error if the octree changes meanwhile (``_check_unchanged``)."""
         with self.lock:
             leaves = self.leaves().tolist()
+            stamp = self._stamp()
         parts, held = [], 0
         for node in leaves:
             with self.lock:
+                self._check_unchanged(stamp)
                 slots = self._list_slots(node * K.LISTS)
                 part = (self._decode(slots), self.pool.color[slots], {a: v[slots] for a, v in self.pool.attributes.items()})
             parts.append(part)
@@ -901,18 +904,25 @@ class ProgressiveOctree:
             order = np.argsort(keys << (np.uint64(3) * (CODE_BITS - self.level[leaves]).astype(np.uint64)), kind="stable")  # code order
             leaves = leaves[order]
             node_of = dict(zip(self.key[leaves].tolist(), leaves.tolist()))
-            stamp = (self.points, self.n_nodes, self.spilled)
+            stamp = self._stamp()
             return GrownTree(self.origin.copy(), float(self.edge), self.lo.copy(), self.hi.copy(), self.skipped,
                              dict(self._attribute_dtypes or {}), self.key[leaves].copy(), self.count[leaves].copy(),
                              lambda keys: self._leaf_points([node_of[k] for k in np.asarray(keys).tolist()], stamp))  # fmt: skip
 
+    def _stamp(self) -> tuple:
+        return (self.points, self.n_nodes, self.spilled)
+
+    def _check_unchanged(self, stamp: tuple) -> None:
+        """Raise unless the octree is as it was when ``stamp`` was taken: a point added since may
+        have split a leaf, whose list 0 would then hold voxels (call with the lock held)."""
+        if self._stamp() != stamp:
+            raise GigapointError(f"{self.name}: the octree changed while it was being saved (points added, or closed); save it again")
+
     def _leaf_points(self, nodes: list, stamp: tuple) -> dict:
         """The points of leaves ``nodes``, leaf by leaf: {"xyz", "rgba" (u32), "attr.<name>"}, as
-        long as the octree is as it was when ``stamp`` was taken (a point added since may have
-        split a leaf, whose list 0 would then hold voxels)."""
+        long as the octree is unchanged since ``stamp``."""
         with self.lock:
-            if (self.points, self.n_nodes, self.spilled) != stamp:
-                raise GigapointError(f"{self.name}: the octree changed while it was being saved (points added, or closed); save it again")
+            self._check_unchanged(stamp)
             slots = np.concatenate([self._list_slots(node * K.LISTS) for node in nodes]) if nodes else np.empty(0, np.int64)
             pool = self.pool
             return {"xyz": self._decode(slots), "rgba": take(pool.color, slots),
