@@ -96,6 +96,13 @@ def _write(path: Path, xyz, rgba, attrs) -> Path:
     return path
 
 
+def _town_las(path: Path, n: int) -> Path:
+    """The demo town of ``n`` points as a LAS file in scan order (as a scanner writes it)."""
+    xyz, rgba, attrs = demo_arrays(n, seed=2)
+    order = _scan_order(xyz)
+    return _write(path, xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()})
+
+
 def bench_load(n: int, rounds: int) -> None:
     xyz, rgba, attrs = demo_arrays(n, seed=2)
     order = _scan_order(xyz)
@@ -123,11 +130,8 @@ def bench_save(n: int, rounds: int) -> None:
 
     from gigapoint.lod import convert
 
-    xyz, rgba, attrs = demo_arrays(n, seed=2)
-    order = _scan_order(xyz)
     with tempfile.TemporaryDirectory() as tmp:
-        path = _write(Path(tmp) / "town.las", xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()})
-        del xyz, rgba, attrs, order
+        path = _town_las(Path(tmp) / "town.las", n)
         cloud = gp.open(path, progressive=True)
         cloud.wait()
         warm = ProgressiveOctree("warm", max_leaf=cloud.max_leaf)  # JIT warm-up of both paths
@@ -161,11 +165,8 @@ def bench_convert_through_builder(n: int, rounds: int, potree: str | None) -> No
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench_convert import run_potree
 
-    xyz, rgba, attrs = demo_arrays(n, seed=2)
-    order = _scan_order(xyz)
     with tempfile.TemporaryDirectory() as tmp:
-        path = _write(Path(tmp) / "town.las", xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()})
-        del xyz, rgba, attrs, order
+        path = _town_las(Path(tmp) / "town.las", n)
         small = _write(Path(tmp) / "warm.las", *demo_arrays(20_000, seed=3))
         warm = gp.open(small, progressive=True)  # JIT warm-up of both paths
         warm.wait()

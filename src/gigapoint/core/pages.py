@@ -103,6 +103,7 @@ _numpy_advice_holders = 0
 _numpy_advice_before = True
 
 
+@cache
 def _set_numpy_advice():
     """numpy's switch of its huge-page advice (a private function of numpy 1.x and 2.x), or None."""
     for module in ("numpy._core.multiarray", "numpy.core.multiarray"):

@@ -17,16 +17,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..keys import level_of
 from .facts import input_facts
-from .partition import COUNT_LEVEL, plan_partitions
+from .partition import COUNT_LEVEL, partition_lut, plan_partitions
 from .state import Job
 
 
 @dataclass
 class GrownTree:
     """What a builder hands a conversion: its root cube, the bounds and count of its points, their
-    attributes, its leaves in key order (u64 keys, point counts) and ``points(keys)``, the
-    points of those leaves ({"xyz" float64 (n, 3), "rgba" u32, "attr.<name>"}, leaf by leaf)."""
+    attributes, its leaves (u64 keys, point counts) and ``points(keys)``, the points of those
+    leaves ({"xyz" float64 (n, 3), "rgba" u32, "attr.<name>"}, leaf by leaf)."""
 
     origin: np.ndarray
     edge: float
@@ -39,35 +40,18 @@ class GrownTree:
     points: object  # callable: keys -> dict of arrays
 
 
-def _count_grid(keys: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """The count grid (COUNT_LEVEL) of leaves: a leaf at or below the grid's level counts in
-    its cell, a larger one in the first cell of its span. The partition plan never splits a
-    node of at most ``budget`` points, and every leaf holds fewer, so where inside a larger
-    leaf its points are counted does not matter."""
-    grid = np.zeros(8**COUNT_LEVEL, np.int64)
-    for k, n in zip(keys.tolist(), counts.tolist()):
-        lev = (k.bit_length() - 1) // 3
-        prefix = k ^ (1 << 3 * lev)
-        cell = prefix >> 3 * (lev - COUNT_LEVEL) if lev >= COUNT_LEVEL else prefix << 3 * (COUNT_LEVEL - lev)
-        grid[cell] += n
-    return grid
-
-
-def _partition_of(keys: np.ndarray, parts: list) -> list[list[int]]:
-    """The leaves (indices into ``keys``) of each partition: the leaves its root is an ancestor of (or is)."""
-    of: dict[tuple[int, int], int] = {(lev, prefix): p for p, (lev, prefix, _) in enumerate(parts)}
-    members: list[list[int]] = [[] for _ in parts]
-    for i, k in enumerate(keys.tolist()):
-        lev = (k.bit_length() - 1) // 3
-        prefix = k ^ (1 << 3 * lev)
-        for up in range(lev, -1, -1):  # the partition is the leaf or one of its ancestors
-            p = of.get((up, prefix >> 3 * (lev - up)))
-            if p is not None:
-                members[p].append(i)
-                break
-        else:
-            raise AssertionError(f"leaf {k:#x} lies in no partition")
-    return members
+def _grid_cells(keys: np.ndarray) -> np.ndarray:
+    """Each leaf's cell of the count grid (COUNT_LEVEL): a leaf at or below the grid's level is
+    in one cell; a larger one stands in the first cell of its span. The partition plan never
+    splits a node of at most ``budget`` points, and every leaf holds fewer, so a larger leaf's
+    points counted in one cell of it give the plan they would give spread out, and that cell's
+    partition (``partition_lut``) is the leaf's."""
+    keys = np.asarray(keys, np.uint64)
+    lev = level_of(keys).astype(np.int64)
+    prefix = keys ^ (np.uint64(1) << (np.uint64(3) * lev.astype(np.uint64)))
+    down = np.uint64(3) * np.maximum(lev - COUNT_LEVEL, 0).astype(np.uint64)
+    up = np.uint64(3) * np.maximum(COUNT_LEVEL - lev, 0).astype(np.uint64)
+    return ((prefix >> down) << up).astype(np.int64)
 
 
 class SeededPhases(Job):
@@ -82,10 +66,11 @@ class SeededPhases(Job):
                   hi=np.asarray(tree.hi).tolist())  # fmt: skip
         self.progress.phase("read", total)
         budget = st.setdefault("partition_points", self.partition_points)
-        parts = plan_partitions(_count_grid(tree.leaf_keys, tree.leaf_counts), 0, 0, COUNT_LEVEL, budget)
-        members = _partition_of(tree.leaf_keys, parts)
-        self._leaves_of = {(lev, prefix): tree.leaf_keys[m] for (lev, prefix, _), m in zip(parts, members)}
-        counts = [int(tree.leaf_counts[m].sum()) for m in members]
+        cells = _grid_cells(tree.leaf_keys)
+        parts = plan_partitions(np.bincount(cells, tree.leaf_counts, 8**COUNT_LEVEL).astype(np.int64), 0, 0, COUNT_LEVEL, budget)
+        pid = partition_lut(parts)[cells]
+        self._leaves_of = {(lev, prefix): tree.leaf_keys[pid == p] for p, (lev, prefix, _) in enumerate(parts)}
+        counts = np.bincount(pid, tree.leaf_counts, len(parts)).astype(np.int64).tolist()
         assert sum(counts) == total, (sum(counts), total)
         self.progress.advance(total)
         st.setdefault("source", input_facts(self.source_files))  # CRS, LAS grid: for outputs that hold them

@@ -894,15 +894,12 @@ class ProgressiveOctree:
         return convert(inputs, out, format=format, overwrite=overwrite, name=self.name, **options)
 
     def grown(self):
-        """The octree as a conversion's input (convert.seeded.GrownTree): its cube, its leaves in
-        key order and a way to read their points."""
+        """The octree as a conversion's input (convert.seeded.GrownTree): its cube, its leaves and
+        a way to read their points."""
         from ..convert.seeded import GrownTree
 
         with self.lock:
             leaves = self.leaves()
-            keys = self.key[leaves]
-            order = np.argsort(keys << (np.uint64(3) * (CODE_BITS - self.level[leaves]).astype(np.uint64)), kind="stable")  # code order
-            leaves = leaves[order]
             node_of = dict(zip(self.key[leaves].tolist(), leaves.tolist()))
             stamp = self._stamp()
             return GrownTree(self.origin.copy(), float(self.edge), self.lo.copy(), self.hi.copy(), self.skipped,
