@@ -30,6 +30,14 @@ def _interrupt_after(monkeypatch, n):
     monkeypatch.setattr(hooks, "after_partition_built", hook)
 
 
+def _spilling(monkeypatch):
+    """Conversions spill their chunks and partitions to files however small the input (the
+    out-of-core path, which an input that fits the memory limit skips: in_memory.py)."""
+    import importlib
+
+    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.converter"), "fits_in_memory", lambda job: False)
+
+
 @pytest.fixture(scope="module")
 def demo_las(tmp_path_factory, las_writer):
     return las_writer(tmp_path_factory.mktemp("las") / "demo.las", 150_000)
@@ -155,6 +163,7 @@ def test_conversion_killed_while_distributing_resumes_to_the_same_result(demo_la
                 raise KeyboardInterrupt("test interrupt while distributing")
         return real_files(self, level, prefix)
 
+    _spilling(monkeypatch)
     monkeypatch.setattr(C, "distribute", distribute)
     monkeypatch.setattr(C, "_append", append)
     monkeypatch.setattr(C, "_part_files", part_files)
@@ -170,6 +179,95 @@ def test_conversion_killed_while_distributing_resumes_to_the_same_result(demo_la
     res = convert([demo_las], out, **OPTS)
     assert res.resumed
     _assert_same(_snapshot(out), reference)
+
+@pytest.fixture(scope="module")
+def town_and_spot(demo_las, tmp_path_factory):
+    """The demo town and a 30 000-point spot in a 5 cm cube (one count-grid cell): the spot's
+    partition is refined below the count grid."""
+    rng = np.random.default_rng(3)
+    lo = np.array(laspy.read(str(demo_las)).header.mins, np.float64)
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = [0.001] * 3, [0.0] * 3
+    las = laspy.LasData(header)
+    spot = lo + 20.0 + rng.random((30_000, 3)) * 0.05
+    las.x, las.y, las.z = spot.T
+    las.red, las.green, las.blue = rng.integers(0, 65535, (3, 30_000)).astype(np.uint16)
+    las.intensity = np.arange(30_000, dtype=np.uint16)
+    path = tmp_path_factory.mktemp("spot") / "spot.las"
+    las.write(str(path))
+    return [demo_las, path]
+
+
+def _files_of(d: Path) -> dict:
+    return {str(f.relative_to(d)): f.read_bytes() for f in sorted(d.rglob("*")) if f.is_file()}
+
+
+@pytest.mark.parametrize("fmt, opts", [
+    ("gigapoint", OPTS),  # 180 000 points in partitions of 25 000, the spot's refined
+    ("gigapoint", {"max_leaf": 3_000}),  # one partition
+    ("potree", OPTS),
+    ("gigapoint", dict(OPTS, layout="words", sampler="poisson")),
+])  # fmt: skip
+def test_an_input_that_fits_in_memory_converts_to_the_spilled_octree_without_a_file_between(town_and_spot, tmp_path, monkeypatch, fmt, opts):
+    """Byte for byte the out-of-core conversion's output, with no spill and no partition file written."""
+    import importlib
+
+    conv = importlib.import_module("gigapoint.lod.convert.converter")
+    spill = importlib.import_module("gigapoint.lod.convert.spill")
+    kinds = []
+    real_run = conv._Converter.run
+    monkeypatch.setattr(conv._Converter, "run", lambda self, overwrite: kinds.append(type(self).__name__) or real_run(self, overwrite))
+    with monkeypatch.context() as m:
+        _spilling(m)
+        spilled = convert(town_and_spot, tmp_path / "spilled", format=fmt, **opts)
+    for name in ("save_raw_chunk", "append_file"):
+        monkeypatch.setattr(spill, name, lambda *a, **k: pytest.fail("a file was written between the phases"))
+    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.partition"), "append_file", spill.append_file)
+    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.read"), "save_raw_chunk", spill.save_raw_chunk)
+    held = convert(town_and_spot, tmp_path / "held", format=fmt, **opts)
+    assert kinds == ["_Converter", "_InMemoryConverter"]
+    assert held.points == spilled.points == 180_000 and held.nodes == spilled.nodes
+    a, b = _files_of(tmp_path / "spilled"), _files_of(tmp_path / "held")
+    assert a.keys() == b.keys() and [k for k in a if a[k] != b[k]] == []
+    assert set(held.phase_seconds) == {"read", "count", "distribute", "build", "group", "upper", "write"}
+
+
+def test_an_input_beyond_the_memory_limit_is_spilled(demo_las, tmp_path):
+    """The choice: the points held (64 bytes each) and one partition's build within what the
+    conversion may use; chunks of unknown number are always spilled."""
+    import importlib
+
+    conv = importlib.import_module("gigapoint.lod.convert.converter")
+    in_memory = importlib.import_module("gigapoint.lod.convert.in_memory")
+    job = conv._Converter([demo_las], tmp_path / "o", "grid", 8 << 30, "gigapoint", 3_000, 25_000, None, conv.NullProgress(), None)
+    job.usable = 150_000 * in_memory.HELD_BYTES_PER_POINT + 25_000 * in_memory.BYTES_PER_POINT_BUILD
+    assert in_memory.fits_in_memory(job)
+    job.usable -= 1
+    assert not in_memory.fits_in_memory(job)
+    chunks = conv._Converter(iter([]), tmp_path / "o", "grid", 8 << 30, "gigapoint", 3_000, 25_000, None, conv.NullProgress(), None)
+    assert not in_memory.fits_in_memory(chunks)
+
+
+def test_a_conversion_held_in_memory_resumes_by_reading_again_and_builds_only_what_is_missing(town_and_spot, tmp_path, monkeypatch):
+    import importlib
+
+    phases = importlib.import_module("gigapoint.lod.convert.phases")
+    built, real = [], phases.BuildPhases._build_subtree
+    monkeypatch.setattr(phases.BuildPhases, "_build_subtree", lambda self, data, key, *a: built.append(key) or real(self, data, key, *a))
+    whole = convert(town_and_spot, tmp_path / "whole", **OPTS)
+    every, built[:] = sorted(built), []
+    _interrupt_after(monkeypatch, 3)
+    with pytest.raises(KeyboardInterrupt):
+        convert(town_and_spot, tmp_path / "oct", **OPTS)
+    first, built[:] = list(built), []
+    assert len(first) == 3 and json.loads((tmp_path / "oct" / ".partial" / "state.json").read_text())["phase"] == "build"
+    _interrupt_after(monkeypatch, None)
+    res = convert(town_and_spot, tmp_path / "oct", **OPTS)
+    assert res.resumed and res.points == whole.points == 180_000
+    assert len(every) > 6 and sorted(first + built) == every  # each partition built once over the two runs
+    a, b = _files_of(tmp_path / "whole"), _files_of(tmp_path / "oct")
+    assert a.keys() == b.keys() and [k for k in a if a[k] != b[k]] == []
+
 
 def test_killed_conversion_resumes_via_cli(demo_las, tmp_path):
     """SIGKILL in the middle of the build phase, then the same command again: it resumes."""

@@ -13,6 +13,7 @@ from ..compact_octree import COLOR_FORMATS, LAYOUTS
 from ..copc_write import check_output as check_copc_output
 from ..octree_dir import ConvertError
 from ..progress import NullProgress, RichProgress
+from .in_memory import InMemoryPhases, fits_in_memory
 from .keep_freed_memory import KeepFreedMemory
 from .options import DEFAULT_MAX_LEAF, ENCODINGS, FORMATS, parse_memory
 from .partition import PartitionPhases
@@ -63,7 +64,7 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
         resumed = saved is not None
         if resumed and self.dir.preview.is_file():
             self.first_view = 0.0  # the interrupted run's preview: viewable from the start
-        self.state = saved or {"fingerprint": fp, "phase": "read"}
+        self.state = self.resume_state(saved) if resumed else {"fingerprint": fp, "phase": "read"}
         self.save_state()
         self.output_ready()
         steps = {
@@ -98,6 +99,10 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
 
 class _SeededConverter(SeededPhases, _Converter):
     """A conversion of a builder's grown tree (seeded.py): its partitions come from the leaves."""
+
+
+class _InMemoryConverter(InMemoryPhases, _Converter):
+    """A conversion of files that fit its memory limit (in_memory.py): no spill, no partition files."""
 
 
 def convert(
@@ -172,7 +177,7 @@ def convert(
         from .distributed import DaskPhases, open_client  # dask is imported only when asked for
 
         cls = type("_DaskConverter", (DaskPhases, _Converter), {})
-    conv = cls(
+    args = (
         inputs,
         out,
         sampler,
@@ -189,6 +194,9 @@ def convert(
         layout,
         colors,
     )
+    conv = cls(*args)
+    if cls is _Converter and fits_in_memory(conv):
+        conv = _InMemoryConverter(*args)
     if client is not None:
         with open_client(client, announce=progress) as conv.client:
             return conv.run(overwrite)

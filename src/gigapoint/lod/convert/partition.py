@@ -190,12 +190,22 @@ class PartitionPhases(Job):
         st["phase"] = "build"
         self.save_state()
 
+    def _partition_arrays(self, level: int, prefix: int, n: int) -> dict:
+        """The ``n`` points distributed to partition (level, prefix) so far, read through memory maps."""
+        dts = self._dtypes()
+        files = self._part_files(level, prefix)
+        return {k: np.memmap(path, dtype=dts[k], mode="r", shape=(n, 3) if k == "xyz" else (n,)) for k, path in files.items()}
+
+    def _drop_partition(self, level: int, prefix: int) -> None:
+        """Forget partition (level, prefix)'s points (refined into smaller ones, or partial)."""
+        for path in self._part_files(level, prefix).values():
+            path.unlink(missing_ok=True)
+
     def _refine(self) -> None:
         """Split partitions that still exceed the budget (dense spots finer than the count grid)."""
         st = self.state
         origin, edge = np.array(st["origin"]), st["edge"]
         budget = st["partition_points"]
-        dts = self._dtypes()
         unsplittable = st.setdefault("unsplittable", [])
         while True:
             big = [
@@ -211,8 +221,7 @@ class PartitionPhases(Job):
             sub = min(lev + COUNT_LEVEL, CODE_BITS)
             base = np.uint64(prefix << 3 * (sub - lev))
             shift = np.uint64(3 * (CODE_BITS - sub))
-            files = self._part_files(lev, prefix)
-            arrays = {k: np.memmap(path, dtype=dts[k], mode="r", shape=(n, 3) if k == "xyz" else (n,)) for k, path in files.items()}
+            arrays = self._partition_arrays(lev, prefix, n)
             step = self.chunk_size
             counts = np.zeros(8 ** (sub - lev), np.int64)
             for s in range(0, n, step):
@@ -229,8 +238,7 @@ class PartitionPhases(Job):
                 rel0 = pprefix * span - int(base)
                 lut[rel0 : rel0 + span] = pid
             for plev, pprefix, _ in plan:  # a run killed half-way left partial files: start them over
-                for path in self._part_files(plev, pprefix).values():
-                    path.unlink(missing_ok=True)
+                self._drop_partition(plev, pprefix)
             new_counts = [0] * len(plan)
             for s in range(0, n, step):
                 data = {k: np.ascontiguousarray(v[s : s + step]) for k, v in arrays.items()}
@@ -240,5 +248,4 @@ class PartitionPhases(Job):
             st["partitions"][i : i + 1] = plan
             st["part_counts"][i : i + 1] = new_counts
             self.save_state()
-            for path in files.values():
-                path.unlink(missing_ok=True)
+            self._drop_partition(lev, prefix)

@@ -31,12 +31,10 @@ def merge_attributes(attrs: dict | None, names: dict) -> dict:
     return names if attrs is None else {a: d for a, d in attrs.items() if names.get(a) == d}
 
 
-def spill_chunk(raw, i: int, chunk, xyz_code=None) -> tuple:
-    """Chunk ``i``'s valid points spilled to ``raw`` (spill.save_raw_chunk): its positions, colors
-    and 1-D attributes; positions as int32 when ``xyz_code`` (a LAS file's scale and offset,
-    spill.encode_xyz) gives every one of them back exactly. Returns (xyz, rgba as u32,
-    {attribute: values}, {attribute: dtype str}, invalid points, bounds min, bounds max; the
-    bounds are None without a valid point)."""
+def valid_chunk(chunk) -> tuple:
+    """A chunk's valid points: (xyz, rgba as u32, {attribute: values} of its 1-D attributes,
+    {attribute: dtype str}, invalid points, bounds min, bounds max; the bounds are None without
+    a valid point)."""
     n_in = len(chunk)
     valid, c_lo, c_hi = valid_bounds(chunk.xyz, MAX_ABS_COORDINATE)
     n_valid = int(np.count_nonzero(valid))
@@ -45,12 +43,22 @@ def spill_chunk(raw, i: int, chunk, xyz_code=None) -> tuple:
     names = {a: v.dtype.str for a, v in chunk.attributes.items() if v.ndim == 1}
     rgba = np.ascontiguousarray(chunk.rgba[keep]).view(np.uint32).reshape(-1)
     kept = {a: np.ascontiguousarray(chunk.attributes[a][keep]) for a in names}
+    return xyz, rgba, kept, names, n_in - n_valid, (c_lo if n_valid else None), (c_hi if n_valid else None)
+
+
+def spill_chunk(raw, i: int, chunk, xyz_code=None) -> tuple:
+    """Chunk ``i``'s valid points (``valid_chunk``'s results) spilled to ``raw``
+    (spill.save_raw_chunk): its positions, colors and 1-D attributes; positions as int32 when
+    ``xyz_code`` (a LAS file's scale and offset, spill.encode_xyz) gives every one of them back
+    exactly."""
+    taken = valid_chunk(chunk)
+    xyz, rgba, kept = taken[:3]
     ints = None if xyz_code is None else encode_xyz(xyz, xyz_code)
     if ints is None:
         save_raw_chunk(raw, i, xyz, rgba, kept)
     else:
         save_raw_chunk(raw, i, ints, rgba, kept, xyz_code)
-    return xyz, rgba, kept, names, n_in - n_valid, (c_lo if n_valid else None), (c_hi if n_valid else None)
+    return taken
 
 
 def _point_total(paths) -> int | None:
@@ -74,10 +82,14 @@ class ReadPhase(Job):
             for p in self.paths:
                 yield from prefetch(_read_chunks(p, self.chunk_size))
 
+    def _take_chunk(self, i: int, chunk) -> tuple:
+        """Chunk ``i``'s valid points, kept for the later phases: spilled to the raw chunk files
+        (``spill_chunk``'s results; in_memory.py holds them instead)."""
+        return spill_chunk(self.dir.raw, i, chunk)
+
     def read(self) -> None:
         st = self.state
-        raw = self.dir.raw
-        raw.mkdir(exist_ok=True)
+        self.dir.raw.mkdir(exist_ok=True)
         done = st.get("chunks", 0)
         lo = np.array(st.get("lo", [np.inf] * 3))
         hi = np.array(st.get("hi", [-np.inf] * 3))
@@ -91,7 +103,7 @@ class ReadPhase(Job):
             if i < done:
                 self.progress.advance(n_in)
                 continue
-            xyz, rgba, kept, names, invalid, c_lo, c_hi = spill_chunk(raw, i, chunk)
+            xyz, rgba, kept, names, invalid, c_lo, c_hi = self._take_chunk(i, chunk)
             st["skipped"] = st.get("skipped", 0) + int(invalid)
             attrs = merge_attributes(attrs, names)
             sc, prev = getattr(chunk, "scale", None), st.get("chunk_scale", "unset")  # the chunks' grid (compact_plan)

@@ -87,6 +87,7 @@ class Job:
         self.max_leaf = max_leaf
         self.mem = memory_limit
         usable = max(memory_limit - rss_bytes() - (48 << 20), memory_limit // 4)  # what the process already holds is not ours
+        self.usable = usable
         self.partition_points = partition_points or max(50_000, min(MAX_PARTITION_POINTS, usable // BYTES_PER_POINT_BUILD))
         self.partition_override = partition_points  # None: derived from the memory limit (and this process's size)
         self.upper_points = upper_points or self.partition_points  # carried root points the group/upper phases join at once
@@ -120,6 +121,10 @@ class Job:
             "layout": self.layout,
             "colors": self.colors,
         }
+
+    def resume_state(self, saved: dict) -> dict:
+        """The state a run resumes from, given the saved one of an unfinished run with the same fingerprint."""
+        return saved
 
     def compact_plan(self) -> dict | None:
         """How the gigapoint format stores node payloads, decided once the inputs are read

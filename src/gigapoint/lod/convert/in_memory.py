@@ -1,0 +1,113 @@
+"""A conversion whose input fits its memory limit: the read chunks stay in memory and are
+partitioned there, with no spill files and no partition files (docs/lod.md, "Inputs that fit
+in memory").
+
+The phases and their results are the out-of-core ones (read.py, partition.py): the same count
+grid, plan, refinement and partitions, each holding its points in input order, so the octree
+is the same byte for byte. Only where the points wait between phases differs. A run killed
+before its partitions are built resumes by reading the input again (nothing of it was kept on
+disk) and building only the partitions not built yet: the plan is the saved one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .options import BYTES_PER_POINT_BUILD
+from .partition import COUNT_LEVEL, PartitionPhases, built_name, grid_cells, partition_lut
+from .read import ReadPhase, _point_total, valid_chunk
+
+# what a held point costs: float64 position, RGBA, attributes (LAS: up to ~20 bytes), the count
+# grid's cell, and its copy in a partition while the chunks are grouped
+HELD_BYTES_PER_POINT = 64
+
+
+def fits_in_memory(job) -> bool:
+    """Whether ``job``'s input (files whose headers give their point count) is held in memory:
+    its points and one partition's build fit the memory the job may use."""
+    if job.paths is None:
+        return False  # chunks of unknown number: spilled, as they come
+    total = _point_total(job.paths)
+    return total is not None and total * HELD_BYTES_PER_POINT + job.partition_points * BYTES_PER_POINT_BUILD <= job.usable
+
+
+class InMemoryPhases(ReadPhase, PartitionPhases):
+    """The read, count and distribute phases with the points held in memory."""
+
+    _held: list  # the read chunks: {"xyz", "rgba", "attr.<name>"}, then their count-grid cells
+    _pieces: dict  # (level, prefix) -> the partition's points, piece by piece in input order
+
+    def resume_state(self, saved: dict) -> dict:
+        """A run killed before its partitions were all built has nothing but its plan and the
+        partitions it built: it reads the input again under the same plan (``partition_points``)."""
+        if saved["phase"] not in ("read", "count", "distribute", "build"):
+            return saved
+        return {k: saved[k] for k in ("fingerprint", "partition_points") if k in saved} | {"phase": "read"}
+
+    def _take_chunk(self, i: int, chunk) -> tuple:
+        taken = valid_chunk(chunk)
+        xyz, rgba, kept = taken[:3]
+        if i == 0:
+            self._held = []
+        self._held.append({"xyz": xyz, "rgba": rgba, **{"attr." + a: v for a, v in kept.items()}})
+        return taken
+
+    def count(self) -> None:
+        st = self.state
+        origin, edge = np.array(st["origin"]), st["edge"]
+        counts = np.zeros(8**COUNT_LEVEL, np.int64)
+        self.progress.phase("count", st["points"])
+        for chunk in self._held:
+            cells = grid_cells(chunk["xyz"], origin, edge) if len(chunk["xyz"]) else np.zeros(0, np.int64)
+            counts += np.bincount(cells, minlength=len(counts))
+            chunk["cell"] = cells.astype(np.int32)  # for the distribute phase
+            self.progress.advance(len(cells))
+        self._plan(counts)
+
+    def distribute(self) -> None:
+        st = self.state
+        parts = st["partitions"]
+        keys = ["xyz", "rgba", *("attr." + a for a in st["attributes"])]
+        built = self.dir.built
+        self._pieces = {(lev, prefix): [] for lev, prefix, _ in parts}
+        counts = [0] * len(parts)
+        lut = partition_lut(parts)
+        self.progress.phase("distribute", st["points"])
+        while self._held:
+            chunk = self._held.pop(0)  # each chunk freed once it is grouped
+            data = {k: chunk[k] for k in keys}
+            if len(parts) == 1:
+                self._pieces[(parts[0][0], parts[0][1])].append(data)
+                counts[0] += len(data["xyz"])
+            elif len(data["xyz"]):
+                grouped, cuts = self._by_partition(data, lut[chunk["cell"]], len(parts))
+                for p in np.flatnonzero(np.diff(cuts)):
+                    lev, prefix, _ = parts[p]
+                    if not (built / built_name(lev, prefix)).exists():  # a resumed run: built already
+                        self._pieces[(lev, prefix)].append({k: v[cuts[p] : cuts[p + 1]] for k, v in grouped.items()})
+                    counts[p] += int(cuts[p + 1] - cuts[p])
+            self.progress.advance(len(data["xyz"]))
+        st.update(part_counts=counts, distributed=0)
+        self._refine()
+        st["phase"] = "build"
+        self.save_state()
+
+    def _append(self, parts: list, pieces: list, counts: list) -> None:
+        for grouped, cuts in pieces:
+            for p in np.flatnonzero(np.diff(cuts)):
+                self._pieces.setdefault(tuple(parts[p][:2]), []).append({k: v[cuts[p] : cuts[p + 1]] for k, v in grouped.items()})
+                counts[p] += int(cuts[p + 1] - cuts[p])
+
+    def _partition_arrays(self, level: int, prefix: int, n: int) -> dict:
+        pieces = self._pieces.get((level, prefix), [])
+        if len(pieces) == 1:
+            return pieces[0]
+        return {k: np.concatenate([p[k] for p in pieces]) for k in pieces[0]} if pieces else {}
+
+    def _drop_partition(self, level: int, prefix: int) -> None:
+        self._pieces.pop((level, prefix), None)
+
+    def _partition_input(self, lev: int, prefix: int) -> tuple[dict, list]:
+        data = self._partition_arrays(lev, prefix, 0)
+        self._drop_partition(lev, prefix)  # its memory goes once the build has it
+        return data, []
