@@ -7,7 +7,8 @@
   every batch over the whole town, and in scan order: 50 m strips), inserted in batches of 1 M
   with the root cube given (as from LAS headers); JIT warm-up excluded. Reported: points/s,
   voxels per point, memory per point against gigapoint's quantized layout of the same points
-  (16 bytes + the attributes), while filling and once trimmed.
+  (16 bytes + the attributes), while filling and once trimmed; and the converter's split of the
+  same points into the same tree (sort and ``split_tree``) for comparison.
 - ``load``: the same points written as LAZ and LAS (scan order); decoding them alone (every
   chunk of ``gigapoint.io.read_chunks``) against ``gigapoint.open(..., progressive=True)`` to
   completion, alternately, in one process: the ratio is what LOD costs loading.
@@ -61,6 +62,7 @@ def bench_insert(n: int, batch: int) -> None:
     cube = (lo - 0.5, float(np.max(hi - lo)) + 1.0)
     warm = ProgressiveOctree("warm", cube=cube)
     warm.add(xyz[:300_000], rgba[:300_000], **{a: v[:300_000] for a, v in attrs.items()})
+    _converter_split_seconds(xyz[:300_000], cube, warm.max_leaf)  # its kernels compiled
     layout = 16 + sum(v.dtype.itemsize for v in attrs.values())
     runs = (("generator order", np.arange(n), False), ("scan order", _scan_order(xyz), False),
             ("generator order, tree shaped first from every 32nd point (expect)", np.arange(n), True))  # fmt: skip
@@ -79,6 +81,21 @@ def bench_insert(n: int, batch: int) -> None:
         print(f"insert, {name}: {n / dt / 1e6:.2f} M points/s ({dt:.2f} s), {o.spilled / n:.2f} spilled and {o.n_voxels / n:.2f} voxels a point; memory "
               f"{filling / n:.1f} bytes a point while filling (presized), {mem / n:.1f} once trimmed = {mem / n / layout:.2f}x "
               f"the quantized layout ({layout} B)")  # fmt: skip
+        split = _converter_split_seconds(x, cube, o.max_leaf)
+        print(f"  the converter's way to the same tree (lod/build: codes, sort_codes, split_tree; no voxels, nothing stored): "
+              f"{n / split / 1e6:.2f} M points/s, {dt / split:.1f}x faster than the insertion")  # fmt: skip
+
+
+def _converter_split_seconds(xyz, cube, max_leaf: int) -> float:
+    """Seconds the converter's build phase takes to find the progressive octree's tree for
+    ``xyz`` (the same nodes and leaves in the same cube: test_its_tree_is_the_converters_tree_of_the_same_cube)."""
+    from gigapoint.lod.build import sort_codes, split_tree
+    from gigapoint.lod.keys import ROOT_KEY, point_codes
+
+    t = time.perf_counter()
+    codes, _ = sort_codes(point_codes(xyz, cube[0], cube[1]))
+    split_tree(codes, ROOT_KEY, max_leaf)
+    return time.perf_counter() - t
 
 
 def _write(path: Path, xyz, rgba, attrs) -> Path:
