@@ -44,11 +44,13 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
             return saved
         return {k: saved[k] for k in ("fingerprint", "partition_points") if k in saved} | {"phase": "read"}
 
+    def read(self) -> None:
+        self._held = []
+        super().read()
+
     def _take_chunk(self, i: int, chunk) -> tuple:
         taken = valid_chunk(chunk)
         xyz, rgba, kept = taken[:3]
-        if i == 0:
-            self._held = []
         self._held.append({"xyz": xyz, "rgba": rgba, **{"attr." + a: v for a, v in kept.items()}})
         return taken
 
