@@ -75,12 +75,15 @@ def _point_total(paths) -> int | None:
 
 
 class ReadPhase(Job):
+    read_ahead = True  # the next chunk decoded in a thread while this one is spilled
+
     def _chunks(self):
         if self.paths is None:
             yield from self.inputs
         else:
             for p in self.paths:
-                yield from prefetch(_read_chunks(p, self.chunk_size))
+                chunks = _read_chunks(p, self.chunk_size)
+                yield from prefetch(chunks) if self.read_ahead else chunks
 
     def _take_chunk(self, i: int, chunk) -> tuple:
         """Chunk ``i``'s valid points, kept for the later phases: spilled to the raw chunk files
