@@ -212,11 +212,7 @@ def test_an_input_that_fits_in_memory_converts_to_the_spilled_octree_without_a_f
     """Byte for byte the out-of-core conversion's output, with no spill and no partition file written."""
     import importlib
 
-    conv = importlib.import_module("gigapoint.lod.convert.converter")
     spill = importlib.import_module("gigapoint.lod.convert.spill")
-    kinds = []
-    real_run = conv._Converter.run
-    monkeypatch.setattr(conv._Converter, "run", lambda self, overwrite: kinds.append(type(self).__name__) or real_run(self, overwrite))
     with monkeypatch.context() as m:
         _spilling(m)
         spilled = convert(town_and_spot, tmp_path / "spilled", format=fmt, **opts)
@@ -225,7 +221,7 @@ def test_an_input_that_fits_in_memory_converts_to_the_spilled_octree_without_a_f
     monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.partition"), "append_file", spill.append_file)
     monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.read"), "save_raw_chunk", spill.save_raw_chunk)
     held = convert(town_and_spot, tmp_path / "held", format=fmt, **opts)
-    assert kinds == ["_Converter", "_InMemoryConverter"]
+    assert held.in_memory and not spilled.in_memory
     assert held.points == spilled.points == 180_000 and held.nodes == spilled.nodes
     a, b = _files_of(tmp_path / "spilled"), _files_of(tmp_path / "held")
     assert a.keys() == b.keys() and [k for k in a if a[k] != b[k]] == []
@@ -284,7 +280,7 @@ def test_killed_conversion_resumes_via_cli(demo_las, tmp_path):
     assert state["phase"] == "build" and len(state["partitions"]) >= 2
     proc = subprocess.run(argv, capture_output=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stderr.decode()[-2000:]
-    assert "(resumed)" in proc.stdout.decode()
+    assert "(resumed)" in proc.stdout.decode() and "in memory" not in proc.stdout.decode()  # 64M: spilled
     ref = tmp_path / "ref"
     convert([demo_las], ref, max_leaf=3000)  # one partition, in one go
     a, b = open_octree(out), open_octree(ref)
@@ -310,7 +306,8 @@ def test_refuses_to_overwrite(demo_las, tmp_path, capsys):
     out = tmp_path / "oct"
     assert main(["convert", str(demo_las), "-o", str(out), "--quiet", "--max-leaf", "5000"]) == 0
     before = (out / "octree.json").stat().st_mtime_ns
-    capsys.readouterr()
+    said = capsys.readouterr().out.strip().splitlines()[-1]
+    assert "150,000 points" in said and ", in memory;" in said  # it fits the default limit: no spill
     assert main(["convert", str(demo_las), "-o", str(out), "--quiet"]) == 1
     err = capsys.readouterr().err
     assert "--overwrite" in err and err.count("\n") == 1

@@ -18,7 +18,7 @@ def convert(
         ..., "-o", "--output", help="Output directory (created; resumed when a conversion was interrupted), or the .copc.laz file of --format copc."
     ),
     sampler: str = typer.Option("grid", help="grid (first point per cell of a 128³ grid per node) or poisson (minimum distance)."),
-    memory_limit: str | None = typer.Option(None, "--memory-limit", help="Peak memory, e.g. 4G or 512M (default: a quarter of the RAM)."),
+    memory_limit: str | None = typer.Option(None, "--memory-limit", help="Peak memory, e.g. 4G or 512M (default: a quarter of the RAM). An input that fits is converted in memory; a larger one is spilled to OUT/.partial in partitions."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing converted cloud in OUTPUT."),
     format: str = typer.Option(
         "gigapoint",
@@ -71,7 +71,7 @@ def convert(
             progress=not quiet and sys.stderr.isatty(),
             client=client,
         )
-    resumed = " (resumed)" if result.resumed else ""
+    resumed = (" (resumed)" if result.resumed else "") + (", in memory" if result.in_memory else "")
     skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
     print(
         f"{result.out}: {result.points:,} points in {result.nodes:,} nodes ({result.format}, {result.sampler}){skipped}, "

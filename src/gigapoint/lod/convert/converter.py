@@ -37,6 +37,7 @@ class ConvertResult:
     resumed: bool
     phase_seconds: dict | None = None
     first_view_seconds: float | None = None  # until OUT first opened (its preview); 0: a resumed run's was there; None: none
+    in_memory: bool = False  # the points waited between phases in memory (in_memory.py), not in spill files
 
     @property
     def points_per_second(self) -> float:
@@ -94,6 +95,7 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
             resumed,
             timings,
             self.first_view,
+            isinstance(self, InMemoryPhases),
         )
 
 
