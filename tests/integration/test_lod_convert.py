@@ -290,6 +290,26 @@ def test_killed_conversion_resumes_via_cli(demo_las, tmp_path):
     np.testing.assert_array_equal(np.sort(a.arrays["rgba"]), np.sort(b.arrays["rgba"]))
 
 
+def test_chunks_never_resume_another_runs_chunks(tmp_path, monkeypatch):
+    """An interrupted conversion of chunks (no files: no fingerprint), then other chunks into the
+    same folder: a clean start with the new points, never the old run's."""
+    import gigapoint as gp
+
+    out = tmp_path / "oct"
+    _interrupt_after(monkeypatch, 1)
+    with pytest.raises(KeyboardInterrupt):
+        convert(gp.io.demo_chunks(200_000, chunk_size=50_000), out, **OPTS)
+    assert (out / ".partial" / "state.json").exists()
+    _interrupt_after(monkeypatch, None)
+    res = convert(gp.io.demo_chunks(100_000, seed=7, chunk_size=50_000), out, **OPTS)
+    assert not res.resumed and res.points == 100_000
+    xyz = gp.io.demo_arrays(100_000, 7)[0]
+    oc = open_octree(out)
+    assert int(oc.nodes["count"].sum()) == 100_000
+    np.testing.assert_allclose(oc.bounds[0], xyz.min(axis=0), atol=1e-3)  # the new run's points
+    np.testing.assert_allclose(oc.bounds[1], xyz.max(axis=0), atol=1e-3)
+
+
 def test_changed_input_restarts_clean(demo_las, tmp_path, monkeypatch, las_writer):
     src = las_writer(tmp_path / "a.las", 60_000, seed=1)
     out = tmp_path / "oct"

@@ -300,8 +300,8 @@ class OctreeDir:
                 raise OutputExistsError(f"{out}: directory is not empty and is not a gigapoint/Potree output; refusing to write into it")
             if not complete:
                 state = self.read_state()
-                if state and state.get("fingerprint") == fingerprint:
-                    return state
+                if state and fingerprint is not None and state.get("fingerprint") == fingerprint:
+                    return state  # chunks (no fingerprint) are never taken for the chunks of another run
             self.clear()
         self.partial.mkdir(parents=True, exist_ok=True)
         return None
