@@ -230,7 +230,7 @@ def test_an_input_that_fits_in_memory_converts_to_the_spilled_octree_without_a_f
 
 def test_an_input_beyond_the_memory_limit_is_spilled(demo_las, tmp_path):
     """The choice: the points held (64 bytes each) and one partition's build within what the
-    conversion may use; chunks of unknown number are always spilled."""
+    conversion may use; chunks of unknown number are held until they outgrow it (below)."""
     import importlib
 
     conv = importlib.import_module("gigapoint.lod.convert.converter")
@@ -240,8 +240,55 @@ def test_an_input_beyond_the_memory_limit_is_spilled(demo_las, tmp_path):
     assert in_memory.fits_in_memory(job)
     job.usable -= 1
     assert not in_memory.fits_in_memory(job)
+    assert in_memory.held_points(job) == 150_000 - 1 // in_memory.HELD_BYTES_PER_POINT - 1
     chunks = conv._Converter(iter([]), tmp_path / "o", "grid", 8 << 30, "gigapoint", 3_000, 25_000, None, conv.NullProgress(), None)
-    assert not in_memory.fits_in_memory(chunks)
+    assert in_memory.fits_in_memory(chunks)
+
+
+@pytest.mark.parametrize("inputs", ["chunks", "a file without a point count"])
+def test_an_input_that_outgrows_the_memory_while_it_is_read_is_spilled_from_then_on(town_and_spot, tmp_path, monkeypatch, inputs):
+    """Held until the points read exceed what may be held (here 60 000), then every chunk held is
+    spilled and the rest is converted out of core: the same octree as a conversion spilled from
+    the start. A file conversion killed after that resumes out of core (it reads nothing again)."""
+    import importlib
+
+    import gigapoint as gp
+
+    in_memory = importlib.import_module("gigapoint.lod.convert.in_memory")
+    read = importlib.import_module("gigapoint.lod.convert.read")
+
+    def source():
+        if inputs == "chunks":  # the town's chunks, then the spot's
+            return [c for path in town_and_spot for c in gp.io.read_chunks(path, 40_000)]
+        return town_and_spot
+
+    if inputs != "chunks":
+        monkeypatch.setattr(in_memory, "_point_total", lambda paths: None)  # as for a format whose header has no count
+    with monkeypatch.context() as m:
+        _spilling(m)
+        spilled = convert(source(), tmp_path / "spilled", **OPTS)
+    assert not spilled.in_memory
+    monkeypatch.setattr(in_memory, "held_points", lambda job: 60_000)
+    held = convert(source(), tmp_path / "held", **OPTS)
+    assert not held.in_memory and held.points == spilled.points == 180_000
+    a, b = _files_of(tmp_path / "spilled"), _files_of(tmp_path / "held")
+    assert a.keys() == b.keys() and [k for k in a if a[k] != b[k]] == []
+    monkeypatch.setattr(in_memory, "held_points", lambda job: 10**9)
+    assert convert(source(), tmp_path / "all", **OPTS).in_memory  # held to the end when it fits
+    if inputs == "chunks":
+        return
+    monkeypatch.setattr(in_memory, "held_points", lambda job: 60_000)
+    _interrupt_after(monkeypatch, 2)
+    with pytest.raises(KeyboardInterrupt):
+        convert(source(), tmp_path / "killed", **OPTS)
+    state = json.loads((tmp_path / "killed" / ".partial" / "state.json").read_text())
+    assert state["spilled"] and state["phase"] == "build"
+    _interrupt_after(monkeypatch, None)
+    monkeypatch.setattr(read.ReadPhase, "read", lambda self: pytest.fail("read again"))
+    res = convert(source(), tmp_path / "killed", **OPTS)
+    assert res.resumed and not res.in_memory
+    c = _files_of(tmp_path / "killed")
+    assert a.keys() == c.keys() and [k for k in a if a[k] != c[k]] == []
 
 
 def test_a_conversion_held_in_memory_resumes_by_reading_again_and_builds_only_what_is_missing(town_and_spot, tmp_path, monkeypatch):

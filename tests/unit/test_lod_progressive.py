@@ -738,7 +738,7 @@ def test_save_keeps_its_tree_and_reads_nothing_again(scene, tmp_path, monkeypatc
     def never(*args, **kwargs):
         raise AssertionError("a grown tree is not read or distributed again")
 
-    monkeypatch.setattr(read, "spill_chunk", never)
+    monkeypatch.setattr(read.ReadPhase, "read", never)  # the read phase of a conversion of chunks, held or spilled
     monkeypatch.setattr(partition.PartitionPhases, "_append", never)
     result = o.save(tmp_path / "g")
     assert result.points == len(xyz)

@@ -95,7 +95,7 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
             resumed,
             timings,
             self.first_view,
-            isinstance(self, InMemoryPhases),
+            isinstance(self, InMemoryPhases) and not self.spilled,
         )
 
 

@@ -7,6 +7,10 @@ grid, plan, refinement and partitions, each holding its points in input order, s
 is the same byte for byte. Only where the points wait between phases differs. A run killed
 before its partitions are built resumes by reading the input again (nothing of it was kept on
 disk) and building only the partitions not built yet: the plan is the saved one.
+
+Files whose headers give their point count are held only when those points fit. Chunks of
+unknown number (an iterable, or files without a count) are held until they outgrow the memory;
+then every chunk held is spilled, and the conversion goes on (and resumes) out of core.
 """
 
 from __future__ import annotations
@@ -16,23 +20,30 @@ import numpy as np
 from .options import BYTES_PER_POINT_BUILD
 from .partition import COUNT_LEVEL, PartitionPhases, built_name, grid_cells, partition_lut
 from .read import ReadPhase, _point_total, valid_chunk
+from .spill import save_raw_chunk
 
 # what a held point costs: float64 position, RGBA, attributes (LAS: up to ~20 bytes), the count
 # grid's cell, and its copy in a partition while the chunks are grouped
 HELD_BYTES_PER_POINT = 64
 
 
+def held_points(job) -> int:
+    """How many points ``job`` may hold: their bytes and one partition's build within what it may use."""
+    return max(0, job.usable - job.partition_points * BYTES_PER_POINT_BUILD) // HELD_BYTES_PER_POINT
+
+
 def fits_in_memory(job) -> bool:
-    """Whether ``job``'s input (files whose headers give their point count) is held in memory:
-    its points and one partition's build fit the memory the job may use."""
+    """Whether ``job``'s input is converted in memory: files whose headers give a point count
+    that ``held_points`` allows, or chunks of unknown number (held until they exceed it, then
+    spilled: ``InMemoryPhases._take_chunk``)."""
     if job.paths is None:
-        return False  # chunks of unknown number: spilled, as they come
+        return True
     total = _point_total(job.paths)
-    return total is not None and total * HELD_BYTES_PER_POINT + job.partition_points * BYTES_PER_POINT_BUILD <= job.usable
+    return total is None or total <= held_points(job)
 
 
 class InMemoryPhases(ReadPhase, PartitionPhases):
-    """The read, count and distribute phases with the points held in memory."""
+    """The read, count and distribute phases with the points held in memory, until they outgrow it."""
 
     # Decoded here, not in a read-ahead thread: glibc gives that thread its own malloc arena, so
     # the held chunks' memory, once freed, could not be reused by this thread's distribute and
@@ -45,22 +56,39 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
 
     def resume_state(self, saved: dict) -> dict:
         """A run killed before its partitions were all built has nothing but its plan and the
-        partitions it built: it reads the input again under the same plan (``partition_points``)."""
-        if saved["phase"] not in ("read", "count", "distribute", "build"):
+        partitions it built: it reads the input again under the same plan (``partition_points``).
+        One that had spilled resumes out of core."""
+        if saved.get("spilled"):  # it outgrew the memory: it resumes as any out-of-core run
+            self.spilled = True
+        if self.spilled or saved["phase"] not in ("read", "count", "distribute", "build"):
             return saved
         return {k: saved[k] for k in ("fingerprint", "partition_points") if k in saved} | {"phase": "read"}
 
+    spilled = False  # True once the input outgrew the memory: the out-of-core phases from then on
+
     def read(self) -> None:
-        self._held = []
+        self._held, self._held_points = [], 0
         super().read()
 
     def _take_chunk(self, i: int, chunk) -> tuple:
+        """Chunk ``i`` held; once the chunks outgrow ``held_points``, every chunk held so far and
+        every one after is spilled, and the conversion goes on out of core."""
+        if self.spilled:
+            return super()._take_chunk(i, chunk)
         taken = valid_chunk(chunk)
         xyz, rgba, kept = taken[:3]
         self._held.append({"xyz": xyz, "rgba": rgba, **{"attr." + a: v for a, v in kept.items()}})
+        self._held_points += len(xyz)
+        if self._held_points > held_points(self):
+            self.spilled = self.state["spilled"] = True  # saved with this chunk's count
+            for j, held in enumerate(self._held):
+                save_raw_chunk(self.dir.raw, j, held.pop("xyz"), held.pop("rgba"), {k[5:]: v for k, v in held.items()})
+            self._held = []
         return taken
 
     def count(self) -> None:
+        if self.spilled:
+            return super().count()
         st = self.state
         origin, edge = np.array(st["origin"]), st["edge"]
         counts = np.zeros(8**COUNT_LEVEL, np.int64)
@@ -73,6 +101,8 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
         self._plan(counts)
 
     def distribute(self) -> None:
+        if self.spilled:
+            return super().distribute()
         st = self.state
         parts = st["partitions"]
         keys = ["xyz", "rgba", *("attr." + a for a in st["attributes"])]
@@ -101,21 +131,29 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
         self.save_state()
 
     def _append(self, parts: list, pieces: list, counts: list) -> None:
+        if self.spilled:
+            return super()._append(parts, pieces, counts)
         for grouped, cuts in pieces:
             for p in np.flatnonzero(np.diff(cuts)):
                 self._pieces.setdefault(tuple(parts[p][:2]), []).append({k: v[cuts[p] : cuts[p + 1]] for k, v in grouped.items()})
                 counts[p] += int(cuts[p + 1] - cuts[p])
 
     def _partition_arrays(self, level: int, prefix: int, n: int) -> dict:
+        if self.spilled:
+            return super()._partition_arrays(level, prefix, n)
         pieces = self._pieces.get((level, prefix), [])
         if len(pieces) == 1:
             return pieces[0]
         return {k: np.concatenate([p[k] for p in pieces]) for k in pieces[0]} if pieces else {}
 
     def _drop_partition(self, level: int, prefix: int) -> None:
+        if self.spilled:
+            return super()._drop_partition(level, prefix)
         self._pieces.pop((level, prefix), None)
 
     def _partition_input(self, lev: int, prefix: int) -> tuple[dict, list]:
+        if self.spilled:
+            return super()._partition_input(lev, prefix)
         data = self._partition_arrays(lev, prefix, 0)
         self._drop_partition(lev, prefix)  # its memory goes once the build has it
         return data, []
