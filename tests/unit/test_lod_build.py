@@ -253,10 +253,15 @@ def test_dense_spot_is_split_below_the_count_grid(tmp_path, monkeypatch):
     )
 
 
-def test_a_chunk_generator_converts_streaming_like_a_list(tmp_path):
-    """The procedural demo scene goes straight into convert() (no file): each chunk is spilled
-    before the next is generated, and the octree equals the one from the same chunks as a list."""
+def test_a_chunk_generator_converts_streaming_like_a_list(tmp_path, monkeypatch):
+    """The procedural demo scene goes straight into convert() (no file): out of core, each chunk
+    is spilled before the next is generated, and the octree equals the one from the same chunks
+    as a list (held in memory: lod/convert/in_memory.py)."""
+    import importlib
+
     from gigapoint.io import demo_chunks
+
+    converter = importlib.import_module("gigapoint.lod.convert.converter")
 
     raw = tmp_path / "gen" / ".partial" / "raw"
     spilled_before = []
@@ -266,9 +271,12 @@ def test_a_chunk_generator_converts_streaming_like_a_list(tmp_path):
             spilled_before.append(len(list(raw.glob("c*.xyz.npy"))) if raw.exists() else 0)
             yield chunk
 
-    r = convert(gen(), tmp_path / "gen", max_leaf=2_000, partition_points=50_000)
+    with monkeypatch.context() as m:
+        m.setattr(converter, "fits_in_memory", lambda job: False)  # out of core however small
+        r = convert(gen(), tmp_path / "gen", max_leaf=2_000, partition_points=50_000)
     assert r.points == 120_000 and spilled_before == [0, 1, 2, 3]  # chunk i is asked for after chunks 0..i-1 are on disk
-    convert(list(demo_chunks(120_000, seed=4, chunk_size=30_000)), tmp_path / "list", max_leaf=2_000, partition_points=50_000)
+    held = convert(list(demo_chunks(120_000, seed=4, chunk_size=30_000)), tmp_path / "list", max_leaf=2_000, partition_points=50_000)
+    assert held.in_memory and not r.in_memory
     a, b = open_octree(tmp_path / "gen"), open_octree(tmp_path / "list")
     np.testing.assert_array_equal(a.keys, b.keys)
     np.testing.assert_array_equal(a.nodes, b.nodes)
