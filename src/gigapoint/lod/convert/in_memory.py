@@ -50,6 +50,7 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
     # build, which then faulted in new pages (20 M LAS: 6.8 s and 1.85 GB peak against 5.1-5.2 s
     # and 1.4 GB). Nothing here overlapped the decoding much anyway: no spill files to write.
     read_ahead = False
+    spilled = False  # True once the input outgrew the memory: the out-of-core phases from then on
 
     _held: list  # the read chunks: {"xyz", "rgba", "attr.<name>"}, then their count-grid cells
     _pieces: dict  # (level, prefix) -> the partition's points, piece by piece in input order
@@ -63,8 +64,6 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
         if self.spilled or saved["phase"] not in ("read", "count", "distribute", "build"):
             return saved
         return {k: saved[k] for k in ("fingerprint", "partition_points") if k in saved} | {"phase": "read"}
-
-    spilled = False  # True once the input outgrew the memory: the out-of-core phases from then on
 
     def read(self) -> None:
         self._held, self._held_points = [], 0
