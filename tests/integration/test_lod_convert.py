@@ -35,7 +35,7 @@ def _spilling(monkeypatch):
     out-of-core path, which an input that fits the memory limit skips: in_memory.py)."""
     import importlib
 
-    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.converter"), "fits_in_memory", lambda job: False)
+    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.in_memory"), "fits_in_memory", lambda job: False)
 
 
 @pytest.fixture(scope="module")
@@ -263,7 +263,7 @@ def test_an_input_that_outgrows_the_memory_while_it_is_read_is_spilled_from_then
         return town_and_spot
 
     if inputs != "chunks":
-        monkeypatch.setattr(in_memory, "_point_total", lambda paths: None)  # as for a format whose header has no count
+        monkeypatch.setattr(read, "_point_total", lambda paths: None)  # as for a format whose header has no count
     with monkeypatch.context() as m:
         _spilling(m)
         spilled = convert(source(), tmp_path / "spilled", **OPTS)

@@ -261,7 +261,7 @@ def test_a_chunk_generator_converts_streaming_like_a_list(tmp_path, monkeypatch)
 
     from gigapoint.io import demo_chunks
 
-    converter = importlib.import_module("gigapoint.lod.convert.converter")
+    in_memory = importlib.import_module("gigapoint.lod.convert.in_memory")
 
     raw = tmp_path / "gen" / ".partial" / "raw"
     spilled_before = []
@@ -272,7 +272,7 @@ def test_a_chunk_generator_converts_streaming_like_a_list(tmp_path, monkeypatch)
             yield chunk
 
     with monkeypatch.context() as m:
-        m.setattr(converter, "fits_in_memory", lambda job: False)  # out of core however small
+        m.setattr(in_memory, "fits_in_memory", lambda job: False)  # out of core however small
         r = convert(gen(), tmp_path / "gen", max_leaf=2_000, partition_points=50_000)
     assert r.points == 120_000 and spilled_before == [0, 1, 2, 3]  # chunk i is asked for after chunks 0..i-1 are on disk
     held = convert(list(demo_chunks(120_000, seed=4, chunk_size=30_000)), tmp_path / "list", max_leaf=2_000, partition_points=50_000)

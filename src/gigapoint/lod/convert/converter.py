@@ -13,7 +13,7 @@ from ..compact_octree import COLOR_FORMATS, LAYOUTS
 from ..copc_write import check_output as check_copc_output
 from ..octree_dir import ConvertError
 from ..progress import NullProgress, RichProgress
-from .in_memory import InMemoryPhases, fits_in_memory
+from .in_memory import InMemoryPhases
 from .keep_freed_memory import KeepFreedMemory
 from .options import DEFAULT_MAX_LEAF, ENCODINGS, FORMATS, parse_memory
 from .partition import PartitionPhases
@@ -104,7 +104,8 @@ class _SeededConverter(SeededPhases, _Converter):
 
 
 class _InMemoryConverter(InMemoryPhases, _Converter):
-    """A conversion of files that fit its memory limit (in_memory.py): no spill, no partition files."""
+    """A conversion in this process: its points held in memory while they fit the limit, else
+    spilled (in_memory.py)."""
 
 
 def convert(
@@ -170,7 +171,7 @@ def convert(
     mem = parse_memory(memory_limit)
     if out is None or str(out) == "":
         raise ConvertError("convert: no output directory given (-o OUT)")
-    cls = _Converter
+    cls = _InMemoryConverter  # held in memory where it fits, else out of core (in_memory.py)
     if isinstance(inputs, GrownTree):  # a progressive octree's save: its leaves are the partitions
         if client is not None:
             raise ConvertError("convert: a grown tree is converted in this process, not on a Dask client")
@@ -179,7 +180,7 @@ def convert(
         from .distributed import DaskPhases, open_client  # dask is imported only when asked for
 
         cls = type("_DaskConverter", (DaskPhases, _Converter), {})
-    args = (
+    conv = cls(
         inputs,
         out,
         sampler,
@@ -196,9 +197,6 @@ def convert(
         layout,
         colors,
     )
-    conv = cls(*args)
-    if cls is _Converter and fits_in_memory(conv):
-        conv = _InMemoryConverter(*args)
     if client is not None:
         with open_client(client, announce=progress) as conv.client:
             return conv.run(overwrite)

@@ -70,7 +70,7 @@ from . import hooks
 from .keep_freed_memory import KeepFreedMemory
 from .partition import COUNT_LEVEL, PartitionPhases, built_name, grid_cells, group_name, partition_lut
 from .phases import BuildPhases, place_set
-from .read import ReadPhase, _point_total, _read_chunks, merge_attributes, spill_chunk
+from .read import ReadPhase, _read_chunks, merge_attributes, spill_chunk
 from .spill import copy_range, decode_xyz, load_raw_chunk, raw_chunk_files, raw_xyz_code
 
 READ_CHUNKS = 1  # chunks (``chunk_size`` points, 2 M by default) a read task decodes: one a task
@@ -687,7 +687,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             st.update(reads=self._plan_reads(), read_results={})
             self.save_state()
         results = st["read_results"]
-        st["total"] = _point_total(self.paths)
+        st["total"] = self.point_total
         self.progress.phase("read", st["total"])
         for res in results.values():
             self.progress.advance(res["input"])

@@ -19,7 +19,7 @@ import numpy as np
 
 from .options import BYTES_PER_POINT_BUILD
 from .partition import COUNT_LEVEL, PartitionPhases, built_name, grid_cells, partition_lut
-from .read import ReadPhase, _point_total, valid_chunk
+from .read import ReadPhase, valid_chunk
 from .spill import save_raw_chunk
 
 # what a held point costs: float64 position, RGBA, attributes (LAS: up to ~20 bytes), the count
@@ -36,21 +36,22 @@ def fits_in_memory(job) -> bool:
     """Whether ``job``'s input is converted in memory: files whose headers give a point count
     that ``held_points`` allows, or chunks of unknown number (held until they exceed it, then
     spilled: ``InMemoryPhases._take_chunk``)."""
-    if job.paths is None:
-        return True
-    total = _point_total(job.paths)
-    return total is None or total <= held_points(job)
+    return job.point_total is None or job.point_total <= held_points(job)
 
 
 class InMemoryPhases(ReadPhase, PartitionPhases):
     """The read, count and distribute phases with the points held in memory, until they outgrow it."""
 
-    # Decoded here, not in a read-ahead thread: glibc gives that thread its own malloc arena, so
-    # the held chunks' memory, once freed, could not be reused by this thread's distribute and
-    # build, which then faulted in new pages (20 M LAS: 6.8 s and 1.85 GB peak against 5.1-5.2 s
-    # and 1.4 GB). Nothing here overlapped the decoding much anyway: no spill files to write.
-    read_ahead = False
-    spilled = False  # True once the input outgrew the memory: the out-of-core phases from then on
+    spilled = False  # True where the input outgrew the memory (or would): the out-of-core phases
+
+    @property
+    def read_ahead(self) -> bool:
+        """Held chunks are decoded here, not in a read-ahead thread: glibc gives that thread its
+        own malloc arena, so their memory, once freed, could not be reused by this thread's
+        distribute and build, which then faulted in new pages (20 M LAS: 6.8 s and 1.85 GB peak
+        against 5.1-5.2 s and 1.4 GB). With no spill files to write, the read-ahead overlapped
+        little anyway. Spilling, the next file is read ahead again."""
+        return self.spilled
 
     _held: list  # the read chunks: {"xyz", "rgba", "attr.<name>"}, then their count-grid cells
     _pieces: dict  # (level, prefix) -> the partition's points, piece by piece in input order
@@ -66,6 +67,8 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
         return {k: saved[k] for k in ("fingerprint", "partition_points") if k in saved} | {"phase": "read"}
 
     def read(self) -> None:
+        if not self.spilled:  # a fresh run (a spilled one resumes spilled): held while it fits
+            self.spilled = self.state["spilled"] = not fits_in_memory(self)
         self._held, self._held_points = [], 0
         super().read()
 
@@ -105,7 +108,6 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
         st = self.state
         parts = st["partitions"]
         keys = ["xyz", "rgba", *("attr." + a for a in st["attributes"])]
-        built = self.dir.built
         self._pieces = {(lev, prefix): [] for lev, prefix, _ in parts}
         counts = [0] * len(parts)
         lut = partition_lut(parts)
@@ -117,12 +119,7 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
                 self._pieces[(parts[0][0], parts[0][1])].append(data)
                 counts[0] += len(data["xyz"])
             elif len(data["xyz"]):
-                grouped, cuts = self._by_partition(data, lut[chunk["cell"]], len(parts))
-                for p in np.flatnonzero(np.diff(cuts)):
-                    lev, prefix, _ = parts[p]
-                    if not (built / built_name(lev, prefix)).exists():  # a resumed run: built already
-                        self._pieces[(lev, prefix)].append({k: v[cuts[p] : cuts[p + 1]] for k, v in grouped.items()})
-                    counts[p] += int(cuts[p + 1] - cuts[p])
+                self._append(parts, [self._by_partition(data, lut[chunk["cell"]], len(parts))], counts)
             self.progress.advance(len(data["xyz"]))
         st.update(part_counts=counts, distributed=0)
         self._refine()
@@ -134,7 +131,9 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
             return super()._append(parts, pieces, counts)
         for grouped, cuts in pieces:
             for p in np.flatnonzero(np.diff(cuts)):
-                self._pieces.setdefault(tuple(parts[p][:2]), []).append({k: v[cuts[p] : cuts[p + 1]] for k, v in grouped.items()})
+                lev, prefix = parts[p][:2]
+                if not (self.dir.built / built_name(lev, prefix)).exists():  # a resumed run's built partition is not held again
+                    self._pieces.setdefault((lev, prefix), []).append({k: v[cuts[p] : cuts[p + 1]] for k, v in grouped.items()})
                 counts[p] += int(cuts[p + 1] - cuts[p])
 
     def _partition_arrays(self, level: int, prefix: int, n: int) -> dict:

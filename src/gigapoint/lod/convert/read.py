@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from functools import cached_property
 
 import numpy as np
 
@@ -77,6 +78,11 @@ def _point_total(paths) -> int | None:
 class ReadPhase(Job):
     read_ahead = True  # the next chunk decoded in a thread while this one is spilled
 
+    @cached_property
+    def point_total(self) -> int | None:
+        """The input files' points by their headers (None: chunks, or a file that does not say)."""
+        return _point_total(self.paths) if self.paths else None
+
     def _chunks(self):
         if self.paths is None:
             yield from self.inputs
@@ -97,8 +103,7 @@ class ReadPhase(Job):
         lo = np.array(st.get("lo", [np.inf] * 3))
         hi = np.array(st.get("hi", [-np.inf] * 3))
         attrs: dict | None = st.get("attributes")
-        total = _point_total(self.paths) if self.paths else None
-        st["total"] = total
+        total = st["total"] = self.point_total
         preview = self._preview_sampler(total, done, attrs)
         self.progress.phase("read", total)
         for i, chunk in enumerate(self._chunks()):
