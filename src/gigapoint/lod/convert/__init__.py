@@ -20,6 +20,8 @@ Phases (each resumable; the state is saved atomically in the output folder, ``Oc
 
 A builder's grown tree (seeded.py, a progressive octree's ``save``) replaces phases 1-3: its
 leaves are the partitions, planned from their counts and built from their points in memory.
+An input that fits the memory limit waits between phases 1-4 in memory, not in spill and
+partition files (in_memory.py); the octree is the same.
 
 A re-run after an interruption resumes where the state says (same inputs and options,
 state.py), otherwise it starts clean. converter.py runs the phases in order (``convert``);
