@@ -449,3 +449,33 @@ def test_octrees_without_checksums_are_read_unchecked(damaged):
     assert oc.crc is None
     frame = render_frame(oc, Camera.fit(oc.bounds, view="iso", width=200, height=150), RenderSettings(backend="cpu"))
     assert (~frame.empty).sum() > 500
+
+
+def test_checksums_are_each_nodes_crc32_of_its_record_and_slices(las_pair):
+    """crc.npy, written for all the nodes at once (compact_octree.checksum_table), holds per node
+    the zlib CRC-32 of each array's slice, seeded with the CRC of the node's record: computed
+    here node by node from the files, and for any range of rows the same."""
+    import zlib
+
+    from gigapoint.lod.compact_octree import checksum_table, stream_words
+
+    oc = open_octree(las_pair[2])
+    streams = [oc.streams[k] for k in oc.meta["fields"]]
+    assert len(oc.nodes) > 20 and len(streams) >= 3
+    want = []
+    for i, rec in enumerate(oc.nodes):
+        first, count = int(rec["first"]), int(rec["count"])
+        w0 = int(oc.pack["ext_first"][i])
+        row = [
+            zlib.crc32(oc.low[first : first + count], zlib.crc32(oc.nodes[i : i + 1].tobytes())),
+            zlib.crc32(oc.ext[w0 : w0 + int(stream_words(oc.ext_bits[i], count))], zlib.crc32(oc.pack[i : i + 1].tobytes())),
+        ]
+        for j, stream in enumerate(streams):
+            f = oc.fields[i, j]
+            words = int(stream_words(np.int64(f["bits"]), count))
+            row.append(zlib.crc32(stream[int(f["word0"]) : int(f["word0"]) + words], zlib.crc32(oc.fields[i, j : j + 1].tobytes())))
+        want.append(row)
+    want = np.array(want, np.uint32)
+    np.testing.assert_array_equal(oc.crc, want)
+    args = (oc.nodes, oc.low, oc.ext, oc.pack, oc.ext_bits, oc.fields, streams)
+    np.testing.assert_array_equal(checksum_table(*args, 5, 17), want[5:17])

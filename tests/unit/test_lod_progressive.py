@@ -880,3 +880,50 @@ def test_voxel_colour_sums_stay_in_32_bits_past_16_8_million_points():
     vox[:] = 7
     K.set_voxel_sums(vox, np.zeros(1, np.int64), billion)
     np.testing.assert_array_equal(_voxel_mean(vox)[0], [17, 34, 51, 255])
+
+
+@pytest.mark.parametrize("parts", [2, 3, 5])
+def test_voxel_ids_entered_in_parallel_are_those_entered_in_order(parts):
+    """kernels.voxel_ids enters a batch's new keys in parallel, each part of the table taking the
+    keys whose home slot is in it; a key whose probe would run out of its part (or off the
+    table's end, wrapping) is entered after them. The ids are the same as entered in order
+    (entry order), and every key is found again, whichever way it went in."""
+    from gigapoint.lod.progressive import kernels as K
+    from gigapoint.lod.progressive.octree import _voxel_table
+
+    size = 64
+    mask = size - 1
+
+    def home(node, cell):
+        return (((node << 21 | cell) * 0x9E3779B97F4A7C15) % 2**64 >> 32) & mask
+
+    # keys crowding the last slot of part 0 and of the table: their probes must leave the part
+    # (the wrap-around too); then random ones up to two thirds full
+    share = size // parts
+    edge_keys = [(n, c) for n in range(1, 3) for c in range(4000) if home(n, c) in (share - 1, size - 1)][:6]
+    assert len(edge_keys) == 6
+    rng = np.random.default_rng(parts)
+    others = {(int(n), int(c)) for n, c in zip(rng.integers(3, 50, 60), rng.integers(0, 1 << 21, 60))}
+    keys = edge_keys + sorted(others - set(edge_keys))[: 2 * size // 3 - len(edge_keys)]
+    node = np.array([k[0] for k in keys], np.int64)
+    cell = np.array([k[1] for k in keys], np.uint64)
+    first, second = keys[: len(keys) // 2], keys[len(keys) // 2 :]  # two batches: the second finds the first's keys
+    tables = {}
+    for n_parts in (1, parts):
+        hkeys, hvals = _voxel_table(size)
+        got = []
+        next_vid = 100
+        for batch in (first, second, keys):
+            b_node, b_cell = node[[keys.index(k) for k in batch]], cell[[keys.index(k) for k in batch]]
+            vid, is_new = np.empty(len(batch), np.int64), np.empty(len(batch), np.uint8)
+            next_vid = K.voxel_ids(hkeys, hvals, b_node, b_cell, next_vid, vid, is_new, n_parts)
+            got.append((vid.copy(), is_new.copy()))
+        tables[n_parts] = (got, next_vid, int(np.count_nonzero(hkeys != K.EMPTY_KEY)))
+    (want, want_next, want_used), (got, got_next, got_used) = tables[1], tables[parts]
+    assert got_next == want_next == 100 + len(keys) and got_used == want_used == len(keys)
+    for (v1, n1), (v2, n2) in zip(want, got):
+        np.testing.assert_array_equal(v2, v1)
+        np.testing.assert_array_equal(n2, n1)
+    vid_all, new_all = got[2]  # all keys again: all found, with the ids they got in entry order
+    assert not new_all.any()
+    np.testing.assert_array_equal(vid_all, 100 + np.arange(len(keys)))

@@ -183,18 +183,31 @@ def checksum_files(names: list[str]) -> list[str]:
 def node_checksums(index, nodes, low, ext, pack, ext_bits, fields, streams: list) -> np.ndarray:
     """u32 CRC-32 per ``checksum_files`` column of node ``index``: each over the node's record
     (nodes, pack, fields) and its slice of the array, so a flipped byte of either shows."""
-    rec = nodes[index]
-    first, count = int(rec["first"]), int(rec["count"])
-    w0 = int(pack["ext_first"][index])
-    out = [
-        zlib.crc32(low[first : first + count], zlib.crc32(nodes[index : index + 1].tobytes())),
-        zlib.crc32(ext[w0 : w0 + int(stream_words(ext_bits[index], count))], zlib.crc32(pack[index : index + 1].tobytes())),
-    ]
-    for j, stream in enumerate(streams):
-        f = fields[index, j]
-        w = int(f["word0"])
-        out.append(zlib.crc32(stream[w : w + int(stream_words(np.int64(f["bits"]), count))], zlib.crc32(fields[index, j : j + 1].tobytes())))
-    return np.array(out, np.uint32)
+    return checksum_table(nodes, low, ext, pack, ext_bits, fields, streams, index, index + 1)[0]
+
+
+def checksum_table(nodes, low, ext, pack, ext_bits, fields, streams: list, start: int, stop: int) -> np.ndarray:
+    """``node_checksums`` of nodes start..stop-1, a row each: the slices' bounds worked out for
+    all the nodes at once, so a row is its zlib calls alone (3 650 nodes of a 20 M-point octree:
+    0.37 s a node at a time, mostly Python around the CRCs)."""
+    count = nodes["count"][start:stop].astype(np.int64)
+    low_from = nodes["first"][start:stop].astype(np.int64)
+    ext_from = pack["ext_first"][start:stop].astype(np.int64)
+    ext_to = ext_from + stream_words(np.asarray(ext_bits[start:stop], np.int64), count)
+    recs = np.ascontiguousarray(fields[start:stop])  # (nodes, fields)
+    field_from = recs["word0"].astype(np.int64)
+    field_to = field_from + stream_words(recs["bits"].astype(np.int64), count[:, None])
+    node_bytes, pack_bytes, field_bytes = nodes[start:stop].tobytes(), pack[start:stop].tobytes(), recs.tobytes()
+    n_size, p_size, f_size = nodes.dtype.itemsize, pack.dtype.itemsize, fields.dtype.itemsize
+    crc = zlib.crc32
+    out = np.empty((stop - start, 2 + len(streams)), np.uint32)
+    for r, (f0, n, e0, e1) in enumerate(zip(low_from.tolist(), count.tolist(), ext_from.tolist(), ext_to.tolist())):
+        out[r, 0] = crc(low[f0 : f0 + n], crc(node_bytes[r * n_size : (r + 1) * n_size]))
+        out[r, 1] = crc(ext[e0:e1], crc(pack_bytes[r * p_size : (r + 1) * p_size]))
+        for j, stream in enumerate(streams):
+            k = r * len(streams) + j  # record (r, j) of the C-ordered field records
+            out[r, 2 + j] = crc(stream[field_from[r, j] : field_to[r, j]], crc(field_bytes[k * f_size : (k + 1) * f_size]))
+    return out
 
 
 # --------------------------------------------------------------------------- a node set, encoded
@@ -426,6 +439,7 @@ __all__ = [
     "LAYOUTS",
     "CompactOctree",
     "checksum_files",
+    "checksum_table",
     "encode_nodes",
     "field_names",
     "from_keys",

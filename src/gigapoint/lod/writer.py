@@ -13,7 +13,7 @@ from ..atomic import atomic_json, atomic_npy, fsync_file
 from ..core.compact import ext_bits_per_point
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
-from .compact_octree import field_names, node_checksums
+from .compact_octree import checksum_table, field_names
 from .keys import key_cube, level_of
 from .octree_dir import FORMAT_NAME, FORMAT_VERSION, FORMAT_VERSION_WORDS, POINT_ARRAYS, OctreeDir
 
@@ -153,10 +153,7 @@ def checksum_rows(out_path: str, nodes: np.ndarray, names: list[str], first: int
     pack, fields = np.asarray(pack[first : first + len(nodes)]), np.asarray(fields[first : first + len(nodes)])
     streams = [np.load(out.array(f"field.{k}"), mmap_mode="r") for k in names]
     bits = ext_bits_per_point(pack, nodes["count"])
-    crc = np.empty((len(nodes), 2 + len(names)), np.uint32)
-    for i in range(len(nodes)):
-        crc[i] = node_checksums(i, nodes, low, ext, pack, bits, fields, streams)
-    return crc
+    return checksum_table(nodes, low, ext, pack, bits, fields, streams, 0, len(nodes))
 
 
 def _stream_bases(by_points: list[Path], k: str) -> tuple[list[int], int]:
