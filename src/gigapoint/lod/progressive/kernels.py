@@ -575,7 +575,7 @@ _ROWS_A_TASK = 8192
 @njit(parallel=True, cache=True)
 def scatter_rows(attr_src, attr_dst, attr_width, rows, slots):
     """Every attribute's value of row rows[k] into pool slot slots[k] (new voxels take their
-    cell's first point's: numpy's gather and scatter a attribute took 0.3 s of a 20 M-point load)."""
+    cell's first point's: numpy's gather and scatter an attribute took 0.3 s of a 20 M-point load)."""
     n = rows.shape[0]
     for t in prange((n + _ROWS_A_TASK - 1) // _ROWS_A_TASK):
         lo = t * _ROWS_A_TASK
