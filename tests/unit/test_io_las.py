@@ -248,3 +248,33 @@ def test_small_chunks_decode_by_numpy_like_the_kernels(tmp_path, monkeypatch, co
         np.testing.assert_array_equal(xa, xb)
         np.testing.assert_array_equal(ca, cb)
     assert np.ptp(np.concatenate([c for _, c in small])[:, :3]) > 100  # real colors, not a constant
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_records_read_into_a_reused_buffer_are_laspys(tmp_path, monkeypatch, suffix):
+    """LAS/LAZ records are read into one buffer reused chunk after chunk (io/las._Records),
+    not laspy's new bytearray a chunk: the chunks, all held at once, are what laspy's own
+    ``read_points`` gives (the way a point source _Records does not know keeps)."""
+    from gigapoint.io import las
+
+    path = tmp_path / f"r{suffix}"
+    write_las(path, n=5_003, point_format=3)
+    fast = list(read_chunks(path, chunk_size=1_000))
+    made = []
+
+    class LaspysWay(las._Records):
+        def __init__(self, reader, most):
+            super().__init__(reader, most)
+            made.append(self.fill is not None)  # the buffer was in use
+            self.fill = None
+
+    monkeypatch.setattr(las, "_Records", LaspysWay)
+    slow = list(read_chunks(path, chunk_size=1_000))
+    assert made == [True] and [len(c) for c in fast] == [len(c) for c in slow] == [1_000] * 5 + [3]
+    for a, b in zip(fast, slow):
+        np.testing.assert_array_equal(a.xyz, b.xyz)
+        np.testing.assert_array_equal(a.rgba, b.rgba)
+        assert a.attributes.keys() == b.attributes.keys()
+        for k in a.attributes:
+            np.testing.assert_array_equal(a.attributes[k], b.attributes[k])
+            assert a.attributes[k].dtype == b.attributes[k].dtype
