@@ -927,3 +927,61 @@ def test_voxel_ids_entered_in_parallel_are_those_entered_in_order(parts):
     vid_all, new_all = got[2]  # all keys again: all found, with the ids they got in entry order
     assert not new_all.any()
     np.testing.assert_array_equal(vid_all, 100 + np.arange(len(keys)))
+
+
+@pytest.mark.parametrize("cube_given", [True, False])
+def test_every_node_knows_the_box_of_the_points_below_it(scene, cube_given):
+    """Each node keeps the bounding box of the points in its subtree (frames select and cull
+    nodes by it, not by their cubes: a node of a flat town is a thin slab of its cube), through
+    splits (their points inserted again), and a root that grows (no cube given: the first
+    batch's bounds, then points beyond them)."""
+    xyz, rgba, attrs = scene
+    order = np.argsort(np.linalg.norm(xyz - xyz.min(axis=0), axis=1))  # outwards from a corner: without a cube the root grows
+    o = ProgressiveOctree("t", max_leaf=3_000, **({"cube": _cube(xyz)} if cube_given else {}))
+    for s in range(0, len(xyz), 20_000):
+        sl = order[s : s + 20_000]
+        o.add(xyz[sl], rgba[sl], **{a: v[sl] for a, v in attrs.items()})
+    assert o.n_nodes > 50 and o.spilled > 0 and (o.root == 0) == cube_given  # the root grew where no cube was given
+    n = o.n_nodes
+    below = {i: [] for i in range(n)}
+    for leaf in o.leaves().tolist():
+        pts = o.positions(o.node_entries(leaf))
+        node = leaf
+        while node >= 0:
+            below[node].append(pts)
+            node = int(o.parent[node])
+    for node in range(n):
+        if not below[node]:  # no points below (made empty): no box, drawn by its cube
+            assert np.all(o.point_min[node] > o.point_max[node])
+            continue
+        pts = np.concatenate(below[node])
+        tol = o.cedge[node] * 2.0**-28  # positions are stored to 30 bits of their leaf's cube
+        np.testing.assert_allclose(o.point_min[node], pts.min(axis=0), rtol=0, atol=tol)
+        np.testing.assert_allclose(o.point_max[node], pts.max(axis=0), rtol=0, atol=tol)
+    np.testing.assert_allclose(o.point_min[o.root], xyz.min(axis=0), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(o.point_max[o.root], xyz.max(axis=0), rtol=0, atol=1e-6)
+
+
+def test_nodes_selected_by_their_points_box_draw_fewer_points_and_the_same_picture():
+    """Flat ground and one tower in a corner: most nodes' points are a thin slab of their cube
+    (the cloud's bounds do not cut them down: the tower spans them). Selected by the box of
+    their points, nodes project smaller, so a frame draws fewer entries (the LOD rule of a
+    converted octree, whose nodes carry their points' boxes), and the same picture."""
+    rng = np.random.default_rng(3)
+    ground = np.column_stack([rng.uniform(0, 1000, 200_000), rng.uniform(0, 1000, 200_000), rng.uniform(0, 2, 200_000)])
+    tower = np.column_stack([rng.uniform(0, 20, 20_000), rng.uniform(0, 20, 20_000), rng.uniform(0, 600, 20_000)])
+    xyz = np.vstack([ground, tower])
+    o = ProgressiveOctree("ground and tower", max_leaf=3_000)
+    o.add(xyz, rng.integers(0, 256, (len(xyz), 4)).astype(np.uint8))
+    cam = gp.Camera.fit(o.bounds, view="iso", width=320, height=240)
+    frames = {}
+    try:
+        for flag in (True, False):
+            ProgressiveOctree.select_by_points = flag
+            frames[flag] = gp.render_frame(o, cam, EXACT)
+    finally:
+        ProgressiveOctree.select_by_points = True
+    by_box, by_cube = frames[True], frames[False]
+    assert by_box.stats.points_processed < 0.85 * by_cube.stats.points_processed
+    assert abs(int((~by_box.empty).sum()) - int((~by_cube.empty).sum())) <= 0.01 * (~by_cube.empty).sum()
+    assert (by_box.empty == by_cube.empty).mean() > 0.97

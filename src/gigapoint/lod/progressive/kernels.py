@@ -584,22 +584,28 @@ def scatter_rows(attr_src, attr_dst, attr_width, rows, slots):
 
 @njit(parallel=True, cache=True)
 def write_points(xyz, rgba, attr_src, attr_dst, attr_width, order, leaf_runs, run_offsets, slots, cmin, edge, low, ext, ext_first,
-                 chunk_size, color):  # fmt: skip
+                 chunk_size, color, run_min, run_max):  # fmt: skip
     """Each leaf run's points quantized into their leaf's cube (30 bits) at their slots: the low
     word, and 60 bits in their chunk's stream (zeroed when allocated; a leaf's chunks are its own,
     so runs never share a stream word), their colour and attributes (``_scatter_attributes``: one
     parallel region for all of them). The runs index the sorted points, point k
-    of which is xyz[order[k]] (no sorted copy of positions made), its colour rgba[k] (sorted)."""
+    of which is xyz[order[k]] (no sorted copy of positions made), its colour rgba[k] (sorted).
+    Each run's bounding box goes to run_min[r] / run_max[r] (``grow_bounds``)."""
     for r in prange(leaf_runs.shape[0]):
         node, lo, hi = leaf_runs[r, 0], leaf_runs[r, 1], leaf_runs[r, 2]
         inv = _SCALE30 / edge[node]
         mx, my, mz = cmin[node, 0], cmin[node, 1], cmin[node, 2]
         o = run_offsets[r] - lo
         c_start, c_end, c_words = np.int64(0), np.int64(-1), np.int64(0)  # the slots' chunk: slots run on within it
+        lx = ly = lz = np.inf
+        hx = hy = hz = -np.inf
         for i in range(lo, hi):
             s = slots[o + i]
             j = order[i]
-            wl, v = _words(xyz[j, 0], xyz[j, 1], xyz[j, 2], mx, my, mz, inv)
+            x, y, z = xyz[j, 0], xyz[j, 1], xyz[j, 2]
+            lx, ly, lz = min(lx, x), min(ly, y), min(lz, z)
+            hx, hy, hz = max(hx, x), max(hy, y), max(hz, z)
+            wl, v = _words(x, y, z, mx, my, mz, inv)
             low[s] = wl
             if s < c_start or s >= c_end:  # a division a chunk, not a point: 1.2x the kernel's speed
                 c = s // chunk_size
@@ -611,7 +617,29 @@ def write_points(xyz, rgba, attr_src, attr_dst, attr_width, order, leaf_runs, ru
             if (p & 63) + WIDE_BITS > 64:
                 ext[w + 1] |= v >> (np.uint64(64) - sh)
             color[s] = rgba[i]
+        run_min[r, 0], run_min[r, 1], run_min[r, 2] = lx, ly, lz
+        run_max[r, 0], run_max[r, 1], run_max[r, 2] = hx, hy, hz
         _scatter_attributes(attr_src, attr_dst, attr_width, order, slots, o, lo, hi)
+
+
+@njit(cache=True)
+def grow_bounds(leaf_runs, run_min, run_max, parent, point_min, point_max):
+    """Each run's box (write_points') into its leaf's and its ancestors' bounds of the points
+    below them, up to the first that holds it already (its ancestors hold their descendants')."""
+    for r in range(leaf_runs.shape[0]):
+        node = leaf_runs[r, 0]
+        while node >= 0:
+            grew = False
+            for a in range(3):
+                if run_min[r, a] < point_min[node, a]:
+                    point_min[node, a] = run_min[r, a]
+                    grew = True
+                if run_max[r, a] > point_max[node, a]:
+                    point_max[node, a] = run_max[r, a]
+                    grew = True
+            if not grew:
+                break
+            node = parent[node]
 
 
 @njit(inline="always")

@@ -54,7 +54,7 @@ from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE, PACK_DTYPE
 from ...core.quantize import dequantize
 from ...core.renderable import DrawList, MultiViewDrawList
-from ...core.selection import Selection, View, batch_matrices, precision_for
+from ...core.selection import Selection, View, batch_matrices, precision_for, visible_and_size
 from ...errors import GigapointError, InputError
 from ...render.splats import weighted_median
 from ..build import take, valid_bounds
@@ -267,6 +267,10 @@ class ProgressiveOctree:
     """An LOD octree filled by ``add`` (or a background loader: gigapoint.open(..., progressive=True))
     and drawable at any moment (a Renderable: core/renderable.py)."""
 
+    #: frames select and cull nodes by the box of the points below them (kept at insertion),
+    #: else by their cubes (bench_progressive.py --parts select compares the two)
+    select_by_points = True
+
     def __init__(
         self, name: str = "progressive", cube=None, max_leaf: int = MAX_LEAF, chunk: int = CHUNK, attributes: dict | None = None,
         capacity: int = 0,
@@ -321,6 +325,7 @@ class ProgressiveOctree:
             "first_chunk": np.full(cap * K.LISTS, -1, np.int64), "last_chunk": np.full(cap * K.LISTS, -1, np.int64),
             "list_count": np.zeros(cap * K.LISTS, np.int64),
             "cmin": np.zeros((cap, 3)), "cedge": np.zeros(cap),
+            "point_min": np.full((cap, 3), np.inf), "point_max": np.full((cap, 3), -np.inf),  # the box of the points below (none: empty)
         }  # fmt: skip
         for name, arr in arrays.items():
             if old is not None:
@@ -761,8 +766,10 @@ class ProgressiveOctree:
         offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
         pool = self.pool
         src, dst, width = _attribute_views(st, pool)
+        run_min, run_max = np.empty((len(leaf_runs), 3)), np.empty((len(leaf_runs), 3))
         K.write_points(st.xyz, st.rgba, src, dst, width, st.order, leaf_runs, offsets, slots, self.cmin, self.cedge, pool.low, pool.ext,
-                       pool.packing["ext_first"], pool.chunk, pool.color)  # fmt: skip
+                       pool.packing["ext_first"], pool.chunk, pool.color, run_min, run_max)  # fmt: skip
+        K.grow_bounds(leaf_runs, run_min, run_max, self.parent, self.point_min, self.point_max)
 
     def _voxel_cells(self, st: _Set, leaf_runs, inner_runs, only: int | None = None):
         """(count, list, cell, first point, colour sums) of each voxel cell of the inner nodes
@@ -848,6 +855,7 @@ class ProgressiveOctree:
         self.children[n, d] = old
         self._clear_lists(n)
         self.cmin[n], self.cedge[n] = self.origin, self.edge
+        self.point_min[n], self.point_max[n] = self.point_min[old], self.point_max[old]
         self.parent[old] = n
         self.root, self.n_nodes = n, n + 1
         if self.pool is not None and self.points:  # the new root's voxels: every point seen so far passed it
@@ -973,8 +981,16 @@ class ProgressiveOctree:
             return DrawList(pool or Pool(self.name, 1, self.chunk, {}, 0), empty, max(n, 1), nodes=np.empty(0, np.int64))
         lo, hi = self.bounds
         cmin, cedge = self.cmin[:n], self.cedge[:n]
-        box_min = np.clip(cmin, lo, hi)
-        box_size = np.clip(cmin + cedge[:, None], lo, hi) - box_min
+        cube_min = np.clip(cmin, lo, hi)
+        cube_max = np.clip(cmin + cedge[:, None], lo, hi)
+        box_min, box_size = cube_min, cube_max - cube_min
+        if self.select_by_points:
+            # nodes selected and culled by the box of their points (and half a voxel cell more,
+            # where their voxels sit), not their cube: a node of a flat town is a thin slab of it
+            pad = (cedge / (2 << K.GRID_BITS))[:, None]
+            has = (self.point_min[:n, 0] <= self.point_max[:n, 0])[:, None]
+            box_min = np.where(has, np.maximum(self.point_min[:n] - pad, cube_min), cube_min)
+            box_size = np.where(has, np.minimum(self.point_max[:n] + pad, cube_max), cube_max) - box_min
         drawn = np.zeros((n, K.LISTS), np.bool_)
         size_of = np.zeros(n)
         select_octants(
@@ -985,7 +1001,8 @@ class ProgressiveOctree:
         lists = np.flatnonzero(drawn.reshape(-1))
         ids, list_node = np.unique(lists // K.LISTS, return_inverse=True)
         corner = self._box_min(ids)  # the chunks' boxes (the voxels' moved: kernels.VOXEL_SHIFT)
-        size = size_of[ids]
+        # the precision a batch needs follows the projection of its quantization box: its cube
+        _, size = visible_and_size(view.rows, cube_min[ids], cube_max[ids], view.width, view.height, view.near, view.far)
         bits = precision_for(size, settings.precision_threshold_px) if settings.adaptive_precision else np.full(len(ids), 30, np.int32)
         mats = batch_matrices(view.rows, corner, corner + cedge[ids, None])
         chunks = np.empty(int((-(-self.list_count[lists] // pool.chunk)).sum()), np.int64)
