@@ -123,3 +123,56 @@ def test_two_threads_draw_bands_of_rows_like_one_thread(kw):
     _, _, bands = band_plan(draw.selection.matrices, rec["first"].astype(np.int64), rec["count"].astype(np.int64), draw.points.low, 320, 200,
                             splat_for(gp.RenderSettings(point_size=3, size_mode="fixed"), look, draw, view.near), 2)  # fmt: skip
     assert lit.min() > 100 and lit.min() < bands[1] < lit.max()  # the cut lies among them, not at the middle
+
+
+def _band_rows_and_work_numpy(m, firsts, counts, low, height, reach, size, atten, n_samples, point_cost):
+    """``band_plan``'s per-batch part as numpy formulated it before its kernel: the reference."""
+    corners = np.array([[x, y, z, 1.0] for x in (0, 1024) for y in (0, 1024) for z in (0, 1024)])
+    projected = np.einsum("kij,cj->kci", m, corners)
+    w = projected[:, :, 2]
+    seen = (w > 0).all(axis=1)
+    ys = projected[:, :, 1] / np.where(w > 0, w, 1.0)
+    top = np.where(seen, np.floor(ys.min(axis=1)) - reach - 1, 0).clip(0, height - 1).astype(np.int64)
+    bottom = np.where(seen, np.floor(ys.max(axis=1)) + reach + 1, height - 1).clip(0, height - 1).astype(np.int64)
+    picks = firsts[:, None] + (counts[:, None] * (np.arange(n_samples) + 0.5) / n_samples).astype(np.int64)
+    words = low[np.minimum(picks, len(low) - 1)].astype(np.int64)
+    cells = np.stack([words & 1023, (words >> 10) & 1023, (words >> 20) & 1023, np.full_like(words, 1)], axis=-1) + np.array([0.5, 0.5, 0.5, 0.0])
+    sample = np.einsum("kij,ksj->ksi", m, cells)
+    ahead = sample[:, :, 2] > 0
+    row = np.where(ahead, sample[:, :, 1] / np.where(ahead, sample[:, :, 2], 1.0), -1.0)
+    inside = ahead & (row >= 0) & (row < height)
+    depth = np.maximum(sample[:, :, 3], 1e-9)
+    sizes = np.floor(np.minimum(size, np.maximum(1.0, atten / depth))) if atten > 0 else np.full(row.shape, np.floor(size))
+    weight = counts[:, None] / n_samples * (point_cost + sizes * sizes)
+    work = np.bincount(row[inside].astype(np.int64), weight[inside], minlength=height)[:height]
+    return top, bottom, work
+
+
+@pytest.mark.parametrize("where", ["outside", "inside"])
+@pytest.mark.parametrize("atten", [0.0, 40.0])
+def test_band_plan_kernel_is_the_numpy_reference(where, atten):
+    """The band plan's kernel (one loop over batches, corners and sample points) gives each
+    batch the rows and the image the work per row that numpy's stacked products gave, from a
+    camera outside the cloud and from one inside it (corners behind the eye: every row)."""
+    from gigapoint.backends.numba_cpu.backend import BAND_POINT_COST, BAND_SAMPLES, _band_rows_and_work
+
+    cloud = gp.demo(60_000, seed=3)
+    lo, hi = (np.asarray(b) for b in cloud.bounds)
+    centre = (lo + hi) / 2
+    if where == "outside":
+        cam = gp.Camera.orbit(tuple(centre), -70.0, 25.0, float(np.linalg.norm(hi - lo)), width=320, height=200)
+    else:
+        cam = gp.Camera.look_at(tuple(centre + [0, 0, 2.0]), tuple(centre + [50.0, 40.0, 0.0]), up=(0, 0, 1), width=320, height=200)
+    view = cam.view(cloud.bounds)
+    draw = cloud.prepare(view, gp.RenderSettings())
+    rec = draw.points.batches[draw.selection.ids]
+    m = draw.selection.matrices.astype(np.float64)
+    args = (m, rec["first"].astype(np.int64), rec["count"].astype(np.int64), draw.points.low, 200, 3, 4.0, atten, BAND_SAMPLES, BAND_POINT_COST)
+    top, bottom, work = _band_rows_and_work(*args)
+    ref_top, ref_bottom, ref_work = _band_rows_and_work_numpy(*args)
+    if where == "inside":
+        assert (top == 0).any() and (bottom == 199).any() and ((top == 0) & (bottom == 199)).any()
+    assert len(top) > 5 and work.sum() > 0
+    np.testing.assert_array_equal(top, ref_top)
+    np.testing.assert_array_equal(bottom, ref_bottom)
+    np.testing.assert_allclose(work, ref_work, rtol=1e-9, atol=1e-9)

@@ -52,31 +52,53 @@ def band_plan(matrices, firsts, counts, low, width: int, height: int, splat, n_p
     float32 rounding; all rows where a corner is behind the eye."""
     footprint, size, atten = splat
     reach = int(np.abs(footprint[:, 1]).max())
-    m = matrices.astype(np.float64)
-    corners = np.array([[x, y, z, 1.0] for x in (0, 1024) for y in (0, 1024) for z in (0, 1024)])
-    projected = np.einsum("kij,cj->kci", m, corners)  # (k, 8, [x', y', w, depth])
-    w = projected[:, :, 2]
-    seen = (w > 0).all(axis=1)
-    ys = projected[:, :, 1] / np.where(w > 0, w, 1.0)
-    top = np.where(seen, np.floor(ys.min(axis=1)) - reach - 1, 0).clip(0, height - 1).astype(np.int64)
-    bottom = np.where(seen, np.floor(ys.max(axis=1)) + reach + 1, height - 1).clip(0, height - 1).astype(np.int64)
-
-    picks = firsts[:, None] + (counts[:, None] * (np.arange(BAND_SAMPLES) + 0.5) / BAND_SAMPLES).astype(np.int64)
-    words = low[np.minimum(picks, len(low) - 1)].astype(np.int64)  # (k, samples)
-    cells = np.stack([words & 1023, (words >> 10) & 1023, (words >> 20) & 1023, np.full_like(words, 1)], axis=-1) + np.array([0.5, 0.5, 0.5, 0.0])
-    sample = np.einsum("kij,ksj->ksi", m, cells)
-    ahead = sample[:, :, 2] > 0
-    row = np.where(ahead, sample[:, :, 1] / np.where(ahead, sample[:, :, 2], 1.0), -1.0)
-    inside = ahead & (row >= 0) & (row < height)
-    depth = np.maximum(sample[:, :, 3], 1e-9)
-    sizes = np.floor(np.minimum(size, np.maximum(1.0, atten / depth))) if atten > 0 else np.full(row.shape, np.floor(size))
-    weight = counts[:, None] / BAND_SAMPLES * (BAND_POINT_COST + sizes * sizes)
-    above = np.concatenate([[0.0], np.cumsum(np.bincount(row[inside].astype(np.int64), weight[inside], minlength=height)[:height])])
+    top, bottom, work = _band_rows_and_work(
+        np.ascontiguousarray(matrices, np.float64), firsts, counts, low, height, reach, float(size), float(atten), BAND_SAMPLES, BAND_POINT_COST
+    )  # fmt: skip
+    above = np.concatenate([[0.0], np.cumsum(work)])
     cuts = np.searchsorted(above, above[-1] * np.arange(1, n_parts) / n_parts)
     bands = np.concatenate([[0], cuts, [height]]).astype(np.int64)
     parts = [np.nonzero((bottom >= lo) & (top < hi))[0] for lo, hi in itertools.pairwise(bands)]
     starts = np.concatenate([[0], np.cumsum([len(p) for p in parts])]).astype(np.int64)
     return starts, np.concatenate(parts).astype(np.int64), bands
+
+
+@numba.njit(cache=True)
+def _band_rows_and_work(m, firsts, counts, low, height, reach, size, atten, n_samples, point_cost):
+    """``band_plan``'s per-batch part, one loop (numpy's stacked products and temporaries took
+    4-9 ms a frame for a progressive octree's 2 500 batches): each batch's rows (top, bottom)
+    and the estimated work a row, summed over the batches' sample points."""
+    k = firsts.shape[0]
+    top = np.zeros(k, np.int64)
+    bottom = np.full(k, height - 1, np.int64)
+    work = np.zeros(height)
+    for b in range(k):
+        lo_y, hi_y, seen = np.inf, -np.inf, True
+        for c in range(8):  # the grid cube's corners [0, 1024]^3
+            x, y, z = 1024.0 * (c >> 2), 1024.0 * ((c >> 1) & 1), 1024.0 * (c & 1)
+            w = m[b, 2, 0] * x + m[b, 2, 1] * y + m[b, 2, 2] * z + m[b, 2, 3]
+            if w <= 0:
+                seen = False
+                break
+            ys = (m[b, 1, 0] * x + m[b, 1, 1] * y + m[b, 1, 2] * z + m[b, 1, 3]) / w
+            lo_y, hi_y = min(lo_y, ys), max(hi_y, ys)
+        if seen:  # else every row: a corner behind the eye
+            top[b] = min(max(np.int64(np.floor(lo_y)) - reach - 1, 0), height - 1)
+            bottom[b] = min(max(np.int64(np.floor(hi_y)) + reach + 1, 0), height - 1)
+        n_low = low.shape[0]
+        for s in range(n_samples):  # evenly spaced in the batch's Morton order: spread over it
+            word = np.int64(low[min(firsts[b] + np.int64(counts[b] * (s + 0.5) / n_samples), n_low - 1)])
+            x, y, z = (word & 1023) + 0.5, ((word >> 10) & 1023) + 0.5, ((word >> 20) & 1023) + 0.5
+            w = m[b, 2, 0] * x + m[b, 2, 1] * y + m[b, 2, 2] * z + m[b, 2, 3]
+            if w <= 0:
+                continue
+            row = (m[b, 1, 0] * x + m[b, 1, 1] * y + m[b, 1, 2] * z + m[b, 1, 3]) / w
+            if not 0 <= row < height:
+                continue
+            depth = max(m[b, 3, 0] * x + m[b, 3, 1] * y + m[b, 3, 2] * z + m[b, 3, 3], 1e-9)
+            px = np.floor(min(size, max(1.0, atten / depth))) if atten > 0 else np.floor(size)
+            work[np.int64(row)] += counts[b] / n_samples * (point_cost + px * px)
+    return top, bottom, work
 
 
 class NumbaCpuBackend:
