@@ -985,3 +985,19 @@ def test_nodes_selected_by_their_points_box_draw_fewer_points_and_the_same_pictu
     assert by_box.stats.points_processed < 0.85 * by_cube.stats.points_processed
     assert abs(int((~by_box.empty).sum()) - int((~by_cube.empty).sum())) <= 0.01 * (~by_cube.empty).sum()
     assert (by_box.empty == by_cube.empty).mean() > 0.97
+
+
+def test_a_frame_draws_node_by_node_in_the_morton_order_of_their_cubes(scene):
+    """Batches arriving from all over the cloud interleave the nodes' chunks in the pool; a
+    frame still draws each node's chunks together, nodes in the Morton order of their cubes
+    (writes that stay in one part of the image at a time: 1.1-1.6x faster frames of the town)."""
+    xyz = scene[0]
+    o = _filled(scene, batch=5_000, order=np.random.default_rng(2).permutation(len(xyz)))
+    cam = gp.Camera.fit(o.bounds, view="iso", width=1920, height=1080)
+    chunks = o.prepare(cam.view(o.bounds), EXACT.replace(point_budget=10**7, lod_threshold_px=20.0)).selection.ids
+    node = o.pool.chunk_node[chunks].astype(np.int64)
+    runs = node[np.r_[True, node[1:] != node[:-1]]]
+    assert len(runs) == len(np.unique(node)) > 20  # one run of chunks a node
+    assert (np.diff(np.sort(chunks)) > 0).all() and not (np.diff(chunks) > 0).all()  # not the pool's order
+    position = o.key[runs] << (np.uint64(3) * (CODE_BITS - o.level[runs]).astype(np.uint64))
+    assert (np.diff(position.astype(np.float64)) >= 0).all() and (position[1:] >= position[:-1]).all()

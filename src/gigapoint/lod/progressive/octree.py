@@ -999,6 +999,11 @@ class ProgressiveOctree:
             size_of, float(settings.lod_foveation), self.root,
         )  # fmt: skip
         lists = np.flatnonzero(drawn.reshape(-1))
+        # drawn node by node in Morton order of their cubes, not in the pool's order: the pool
+        # interleaves chunks of nodes all over the cloud (as batches arrived), and frames drawn in
+        # that order scatter their writes over the whole image
+        node = lists // K.LISTS
+        lists = lists[np.argsort(self.key[node] << (np.uint64(3) * (CODE_BITS - self.level[node]).astype(np.uint64)), kind="stable")]
         ids, list_node = np.unique(lists // K.LISTS, return_inverse=True)
         corner = self._box_min(ids)  # the chunks' boxes (the voxels' moved: kernels.VOXEL_SHIFT)
         # the precision a batch needs follows the projection of its quantization box: its cube
@@ -1009,8 +1014,6 @@ class ProgressiveOctree:
         owner = np.empty(len(chunks), np.int64)
         k = list_chunks(self.first_chunk, pool.chunk_next, lists, chunks, owner)
         chunks, owner = chunks[:k], list_node[owner[:k]]
-        order = np.argsort(chunks, kind="stable")
-        chunks, owner = chunks[order], owner[order]
         sel = Selection(chunks, bits[owner].astype(np.int32), mats[owner], size[owner], int(n - len(ids)))
         return DrawList(pool, sel, n, nodes=ids, spacing=self._drawn_spacing(lists, box_size))
 
