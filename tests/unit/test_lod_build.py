@@ -10,7 +10,7 @@ from gigapoint.core import PointChunk
 from gigapoint.io import demo_arrays
 from gigapoint.lod import convert, open_octree
 from gigapoint.lod.convert import hooks
-from gigapoint.lod.keys import key_cube, key_name, key_of, level_of, name_key, point_codes
+from gigapoint.lod.keys import CODE_BITS, key_cube, key_name, key_of, level_of, name_key, point_codes
 
 
 def _interrupt_after(monkeypatch, n):
@@ -323,3 +323,23 @@ def test_plan_groups_picks_the_coarsest_level_that_fits():
     carried[(1, 7)] = 50  # a coarser partition stays out of every group
     plan = _plan_groups(carried, 400)
     assert all([1, 7] not in members for _, _, members in plan) and len(plan) == 2
+
+
+def test_a_frame_draws_node_by_node_in_the_morton_order_of_their_cubes(grid_tree):
+    """The arena holds nodes in the order frames first needed them (coarse levels first, then
+    finer ones wherever the camera went); a frame draws each node's slots together, nodes in
+    the Morton order of their cubes (writes that stay in one part of the image at a time)."""
+    import gigapoint as gp
+
+    oc = open_octree(grid_tree[0].path)
+    cam = gp.Camera.fit(oc.bounds, view="iso", width=1920, height=1080)
+    for budget in (5_000, 30_000, 10**7):  # the arena filled level after level
+        gp.render_frame(oc, cam, gp.RenderSettings(backend="cpu", point_budget=budget, lod_threshold_px=20.0))
+    draw = oc.prepare(cam.view(oc.bounds), gp.RenderSettings(point_budget=10**7, lod_threshold_px=20.0))
+    node_of = {int(s): nd for nd, slots in oc.arena.resident.items() for s in slots}
+    node = np.array([node_of[int(s)] for s in draw.selection.ids])
+    runs = node[np.r_[True, node[1:] != node[:-1]]]
+    assert len(runs) == len(np.unique(node)) > 20  # one run of slots a node
+    assert not (np.diff(draw.selection.ids) > 0).all()  # not the arena's order
+    position = oc.keys[runs] << (np.uint64(3) * (CODE_BITS - level_of(oc.keys[runs])).astype(np.uint64))
+    assert (position[1:] >= position[:-1]).all()
