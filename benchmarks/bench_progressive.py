@@ -275,22 +275,27 @@ def bench_frames(n: int) -> None:
     with tempfile.TemporaryDirectory() as tmp:  # the same points converted (gigapoint convert), drawn alternately
         gp.convert(cloud.chunks(), Path(tmp) / "octree")
         converted = gp.open(Path(tmp) / "octree")
+        # and converted with the progressive octree's leaf size: the same tree (its inner nodes
+        # hold sampled points where the progressive octree's hold voxels)
+        gp.convert(cloud.chunks(), Path(tmp) / "same_leaves", max_leaf=cloud.max_leaf)
+        same_leaves = gp.open(Path(tmp) / "same_leaves")
         m, p95 = statistics.median(times), float(np.percentile(times, 95))
         print(f"frames of demo({n:,}) at 1920x1080, 10 M budget: while loading {len(times)} frames, median {m * 1e3:.1f} ms "
               f"({1 / m:.1f} fps), 95th percentile {p95 * 1e3:.1f} ms; loaded in {cloud.loader.finished_at - cloud.loader.started:.1f} s")  # fmt: skip
         for mode in ("auto", "fixed"):  # adaptive sizes (the default) and the one-pixel render
             ms = s.replace(size_mode=mode)
-            after, conv = [], []
+            after, conv, same = [], [], []
             for _ in range(7):
-                for target, out in ((cloud, after), (converted, conv)):
+                for target, out in ((cloud, after), (converted, conv), (same_leaves, same)):
                     gp.render_frame(target, cam, ms)  # each once before timing: caches, arena loads
                     t = time.perf_counter()
                     frame = gp.render_frame(target, cam, ms)
                     out.append(time.perf_counter() - t)
                     out.append(frame.stats.points_processed)
-            a, c = statistics.median(after[::2]), statistics.median(conv[::2])
+            a, c, sl = statistics.median(after[::2]), statistics.median(conv[::2]), statistics.median(same[::2])
             print(f"  once loaded, size_mode {mode}: {a * 1e3:.1f} ms ({1 / a:.1f} fps, {after[1]:,} points); the converted octree of "
-                  f"the same points {c * 1e3:.1f} ms ({1 / c:.1f} fps, {conv[1]:,} points): {c / a:.2f}x its fps")  # fmt: skip
+                  f"the same points {c * 1e3:.1f} ms ({1 / c:.1f} fps, {conv[1]:,} points): {c / a:.2f}x its fps; converted with "
+                  f"{cloud.max_leaf:,}-point leaves {sl * 1e3:.1f} ms ({same[1]:,} points): {sl / a:.2f}x")  # fmt: skip
 
 
 def bench_select(n: int) -> None:
