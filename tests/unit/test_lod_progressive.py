@@ -1001,3 +1001,45 @@ def test_a_frame_draws_node_by_node_in_the_morton_order_of_their_cubes(scene):
     assert (np.diff(np.sort(chunks)) > 0).all() and not (np.diff(chunks) > 0).all()  # not the pool's order
     position = o.key[runs] << (np.uint64(3) * (CODE_BITS - o.level[runs]).astype(np.uint64))
     assert (np.diff(position.astype(np.float64)) >= 0).all() and (position[1:] >= position[:-1]).all()
+
+
+@pytest.mark.parametrize("parts", [1, 2, 3])
+def test_the_radix_sort_of_keys_is_numpys_sort(parts):
+    """``radix_sort`` (the keys' sort where numpy's is slower) sorts like numpy: random keys,
+    keys whose top digits all agree (a set from one leaf: digits skipped), ties of the sorted
+    bits left in their order, and 0, 1, 2 keys."""
+    from gigapoint.lod.progressive.kernels import radix_sort
+
+    rng = np.random.default_rng(parts)
+    n = 300_001
+    index = np.arange(n, dtype=np.uint64)
+    cases = {
+        "random": rng.integers(0, 1 << 45, n, dtype=np.uint64) << np.uint64(19) | index,
+        "one leaf": (np.uint64(0x2B5) << np.uint64(52)) | (rng.integers(0, 1 << 20, n, dtype=np.uint64) << np.uint64(19)) | index,
+        "ties": rng.integers(0, 50, n, dtype=np.uint64) << np.uint64(19) | index,
+        "sorted": np.arange(n, dtype=np.uint64) << np.uint64(19) | index,
+    }
+    for name, keys in cases.items():
+        want = np.sort(keys)
+        got = keys.copy()
+        radix_sort(got, np.empty(n, np.uint64), 19, parts)
+        np.testing.assert_array_equal(got, want, err_msg=name)
+        # only the bits from lo_bit up are sorted on: the index bits' order is kept (stable)
+        shuffled = keys[rng.permutation(n)]
+        got = shuffled.copy()
+        radix_sort(got, np.empty(n, np.uint64), 19, parts)
+        order = np.argsort(shuffled >> np.uint64(19), kind="stable")
+        np.testing.assert_array_equal(got, shuffled[order], err_msg=name)
+    for n in (0, 1, 2):
+        keys = np.array([7 << 20, 3 << 20][:n], np.uint64)
+        radix_sort(keys, np.empty(n, np.uint64), 19, parts)
+        assert keys.tolist() == sorted(keys.tolist())
+
+
+def test_the_tree_is_the_same_by_either_sort_of_the_keys(scene, octree, monkeypatch):
+    """numpy's sort or the radix sort, whichever is faster here: the same octree."""
+    import gigapoint.lod.progressive.octree as octree_module
+
+    for kind in ("numpy", "radix"):
+        monkeypatch.setattr(octree_module, "_KEY_SORT", [kind])
+        _assert_same_leaves(_filled(scene), octree)
