@@ -242,19 +242,19 @@ _KEY_SORT: list = []  # "numpy" or "radix": the faster here, timed once a proces
 def _faster_key_sort() -> str:
     """numpy's sort (x86-simd-sort: 5-7 ms for 10^6 keys on the Intel Xeon, 50-65 on the AMD
     EPYC) or ``kernels.radix_sort`` (13-15 ms on the AMD EPYC), whichever sorts a set's keys
-    faster on this CPU: timed once, on 2^18 random keys (20-70 ms)."""
+    faster on this CPU: timed once, on 2^16 random keys (a few ms: the first image waits for it)."""
     if not _KEY_SORT:
-        n = 1 << 18
-        sample = np.random.default_rng(0).integers(0, 1 << 46, n, dtype=np.uint64) << np.uint64(18) | np.arange(n, dtype=np.uint64)
+        n = 1 << 16
+        sample = np.random.default_rng(0).integers(0, 1 << 48, n, dtype=np.uint64) << np.uint64(16) | np.arange(n, dtype=np.uint64)
         scratch, parts = np.empty(n, np.uint64), max(1, numba.get_num_threads())
-        K.radix_sort(sample.copy(), scratch, 18, parts)  # compiled (or loaded from the cache) before timing
+        K.radix_sort(sample.copy(), scratch, 16, parts)  # compiled (or loaded from the cache) before timing
         best = {}
         for name in ("numpy", "radix"):
             times = []
             for _ in range(3):
                 keys = sample.copy()
                 t = time.perf_counter()
-                keys.sort() if name == "numpy" else K.radix_sort(keys, scratch, 18, parts)
+                keys.sort() if name == "numpy" else K.radix_sort(keys, scratch, 16, parts)
                 times.append(time.perf_counter() - t)
             best[name] = min(times)
         _KEY_SORT.append(min(best, key=best.get))
