@@ -29,6 +29,9 @@
   demo loads, of the same octree once loaded, and of a converted octree of the same points (alternately).
 - ``select``: frames of the loaded demo with nodes selected by the box of their points and by
   their cubes (``ProgressiveOctree.select_by_points``), interleaved.
+- ``sort``: a set's keys sorted by numpy's sort and by ``kernels.radix_sort`` (10^6 keys of the
+  town, best of 5), then the insertion (as ``insert``, both orders) with each, alternately;
+  which one this CPU's insertions use (timed once a process).
 """
 
 from __future__ import annotations
@@ -328,6 +331,47 @@ def bench_select(n: int) -> None:
         ProgressiveOctree.select_by_points = True
 
 
+def bench_sort(n: int, batch: int) -> None:
+    import gigapoint.lod.progressive.octree as octree_module
+    from gigapoint.lod.keys import point_codes
+    from gigapoint.lod.progressive.kernels import radix_sort, sort_keys
+
+    xyz, rgba, attrs = demo_arrays(n, seed=1)
+    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+    cube = (lo - 0.5, float(np.max(hi - lo)) + 1.0)
+    codes = point_codes(xyz[:1_000_000], *cube)
+    index_bits = (len(codes) - 1).bit_length()
+    keys, scratch = np.empty(len(codes), np.uint64), np.empty(len(codes), np.uint64)
+    sort_keys(codes, index_bits, keys)
+    took = {}
+    for name in ("numpy", "radix"):
+        times = []
+        for _ in range(5):
+            k = keys.copy()
+            t = time.perf_counter()
+            k.sort() if name == "numpy" else radix_sort(k, scratch, index_bits, 2)
+            times.append(time.perf_counter() - t)
+        took[name] = min(times)
+    print(f"sort of {len(keys):,} keys: numpy {took['numpy'] * 1e3:.1f} ms, radix {took['radix'] * 1e3:.1f} ms "
+          f"({took['numpy'] / took['radix']:.2f}x); insertions here use {octree_module._faster_key_sort()}")  # fmt: skip
+    order = _scan_order(xyz)
+    for name, idx in (("generator order", np.arange(n)), ("scan order", order)):
+        x, c, at = xyz[idx], rgba[idx], {a: v[idx] for a, v in attrs.items()}
+        rates = {"numpy": [], "radix": []}
+        for _ in range(2):
+            for kind, got in rates.items():
+                octree_module._KEY_SORT[:] = [kind]
+                o = ProgressiveOctree("bench", cube=cube, capacity=n)
+                t = time.perf_counter()
+                for s in range(0, n, batch):
+                    o.add(x[s : s + batch], c[s : s + batch], **{a: v[s : s + batch] for a, v in at.items()})
+                got.append(n / (time.perf_counter() - t) / 1e6)
+                del o
+        print(f"insert, {name}: numpy's sort {' / '.join(f'{r:.2f}' for r in rates['numpy'])} M points/s, the radix sort "
+              f"{' / '.join(f'{r:.2f}' for r in rates['radix'])}")  # fmt: skip
+    octree_module._KEY_SORT.clear()
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", default="8M")
@@ -354,6 +398,8 @@ def main(argv=None) -> int:
         bench_frames(n)
     if "select" in args.parts:
         bench_select(n)
+    if "sort" in args.parts:
+        bench_sort(n, parse_count(args.batch))
     return 0
 
 
