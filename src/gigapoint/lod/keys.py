@@ -51,6 +51,15 @@ def key_range(key: int) -> tuple[int, int, int]:
     return level, prefix << shift, (prefix + 1) << shift
 
 
+def morton_position(keys, levels=None) -> np.ndarray:
+    """Where each node's cube starts in the Morton order of the codes (its first code, the
+    sentinel bit on top): sorting nodes by it sorts them along the curve, a parent just before
+    its first child. ``levels``: the keys' levels, where the caller holds them."""
+    keys = np.asarray(keys, np.uint64)
+    levels = level_of(keys) if levels is None else np.asarray(levels)
+    return keys << (np.uint64(3) * (CODE_BITS - levels).astype(np.uint64))
+
+
 def key_cube(keys, origin, edge: float) -> tuple[np.ndarray, np.ndarray]:
     """(mins (k, 3), edges (k,)) of the cubes of node keys inside the octree cube."""
     keys = np.atleast_1d(np.asarray(keys, np.uint64))

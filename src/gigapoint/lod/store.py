@@ -26,7 +26,7 @@ from ..core.renderable import DrawList, MultiViewDrawList
 from ..core.selection import Selection, View, batch_matrices, box_in_view, precision_for, visible_and_size
 from ..errors import InputError
 from ..render.splats import finest_spacing, union_gain
-from .keys import CODE_BITS, key_cube, level_of
+from .keys import key_cube, morton_position
 from .octree_dir import FORMAT_NAME, FORMAT_VERSION_WORDS, FORMAT_VERSIONS, POINT_ARRAYS, OctreeDir
 
 ARENA_CHUNK = 4096  # points per arena slot (a node spans ceil(count / ARENA_CHUNK) slots)
@@ -367,8 +367,7 @@ class OctreeCloud:
         self._union_gain: np.ndarray | None = None  # adaptive sizes' per-node facts (prepare), made on first use
         self._node_spacing: np.ndarray | None = None
         self.counts = nodes["count"].astype(np.int64)  # node counts never change: widened once, not per frame
-        # each node's place in the Morton order of the cubes: frames draw node after node in it
-        self.morton_rank = np.argsort(np.argsort(self.keys << (np.uint64(3) * (CODE_BITS - level_of(self.keys)).astype(np.uint64)), kind="stable"))
+        self.morton_position = morton_position(self.keys)  # frames draw node after node in this order
         self.cube_min, self.cube_edge = key_cube(self.keys, meta["cube_min"], float(meta["cube_edge"]))
         lo, hi = self.bounds
         self.box_min = np.clip(self.cube_min, lo, hi)
@@ -473,7 +472,7 @@ class OctreeCloud:
         owner = np.repeat(np.arange(len(ids)), n_slots)
         # node by node in the Morton order of their cubes (writes that stay in one part of the
         # image at a time), not in the arena's order, which mixes the levels loaded frame by frame
-        order = np.lexsort((slots, self.morton_rank[ids][owner]))
+        order = np.lexsort((slots, self.morton_position[ids][owner]))
         slots, owner = slots[order], owner[order]
         sel = Selection(slots.astype(np.int64), bits[owner].astype(np.int32), mats[owner], size[owner], int(len(self.keys) - len(ids)))
         spacing = None

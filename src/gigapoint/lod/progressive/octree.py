@@ -37,7 +37,6 @@ them up in the voxel table, allocate chunks, and write points and voxels in para
 
 from __future__ import annotations
 
-import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Self
@@ -53,13 +52,14 @@ from ...core.cloud import MAX_ABS_COORDINATE
 from ...core.compact import point_words, stream_words
 from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE, PACK_DTYPE
+from ...core.morton import fastest
 from ...core.quantize import dequantize
 from ...core.renderable import DrawList, MultiViewDrawList
 from ...core.selection import Selection, View, batch_matrices, precision_for, visible_and_size
 from ...errors import GigapointError, InputError
 from ...render.splats import weighted_median
 from ..build import take, valid_bounds
-from ..keys import CODE_BITS, point_codes
+from ..keys import CODE_BITS, morton_position, point_codes
 from ..store import list_chunks, select_octants
 from . import kernels as K
 
@@ -246,18 +246,18 @@ def _faster_key_sort() -> str:
     if not _KEY_SORT:
         n = 1 << 16
         sample = np.random.default_rng(0).integers(0, 1 << 48, n, dtype=np.uint64) << np.uint64(16) | np.arange(n, dtype=np.uint64)
-        scratch, parts = np.empty(n, np.uint64), max(1, numba.get_num_threads())
-        K.radix_sort(sample.copy(), scratch, 16, parts)  # compiled (or loaded from the cache) before timing
-        best = {}
-        for name in ("numpy", "radix"):
-            times = []
-            for _ in range(3):
-                keys = sample.copy()
-                t = time.perf_counter()
-                keys.sort() if name == "numpy" else K.radix_sort(keys, scratch, 16, parts)
-                times.append(time.perf_counter() - t)
-            best[name] = min(times)
-        _KEY_SORT.append(min(best, key=best.get))
+        keys, scratch, parts = sample.copy(), np.empty(n, np.uint64), max(1, numba.get_num_threads())
+        K.radix_sort(keys, scratch, 16, parts)  # compiled (or loaded from the cache) before timing
+
+        def numpy_sort():
+            keys[:] = sample
+            keys.sort()
+
+        def radix_sort():
+            keys[:] = sample
+            K.radix_sort(keys, scratch, 16, parts)
+
+        _KEY_SORT.append(fastest({"numpy": numpy_sort, "radix": radix_sort}))
     return _KEY_SORT[0]
 
 
@@ -734,7 +734,7 @@ class ProgressiveOctree:
         if len(starts) == 1:
             roots[0, 1:] = 0, len(codes)
         else:  # each start's codes: one run, the runs in code order and covering every code
-            by_code = np.argsort(self.key[starts] << (np.uint64(3) * (CODE_BITS - self.level[starts]).astype(np.uint64)))
+            by_code = np.argsort(morton_position(self.key[starts], self.level[starts]))
             roots = roots[by_code]
             lev = self.level[roots[:, 0]].astype(np.uint64)
             prefix = self.key[roots[:, 0]] ^ (np.uint64(1) << (np.uint64(3) * lev))
@@ -1038,7 +1038,7 @@ class ProgressiveOctree:
         # interleaves chunks of nodes all over the cloud (as batches arrived), and frames drawn in
         # that order scatter their writes over the whole image
         node = lists // K.LISTS
-        lists = lists[np.argsort(self.key[node] << (np.uint64(3) * (CODE_BITS - self.level[node]).astype(np.uint64)), kind="stable")]
+        lists = lists[np.argsort(morton_position(self.key[node], self.level[node]), kind="stable")]
         ids, list_node = np.unique(lists // K.LISTS, return_inverse=True)
         corner = self._box_min(ids)  # the chunks' boxes (the voxels' moved: kernels.VOXEL_SHIFT)
         # the precision a batch needs follows the projection of its quantization box: its cube
