@@ -303,6 +303,54 @@ def test_trimming_frees_the_room_and_the_octree_grows_on_the_same(scene, octree)
             _match(a[key][1], b[key][1], 1e-6)
 
 
+def test_the_voxel_table_is_presized_from_the_second_batch_and_the_tree_is_the_same(scene, octree):
+    """The first batch (the first image waits for it) enters its voxels in a table of its own
+    size; the second presizes the table for the expected points, so that it is not rebuilt
+    while they come; leaves and voxels are those of an octree that was not presized."""
+    xyz, rgba, attrs = scene
+    o = ProgressiveOctree("t", max_leaf=3_000, cube=_cube(xyz), capacity=4_000_000)
+    presized = 3 * int(4_000_000 * 0.5) // 2  # two thirds full with the voxels of the expected points
+    sizes = []
+    for s in range(0, len(xyz), 20_000):
+        o.add(xyz[s : s + 20_000], rgba[s : s + 20_000], **{a: v[s : s + 20_000] for a, v in attrs.items()})
+        sizes.append(len(o._hkeys))
+    assert sizes[0] < presized // 8 <= presized <= sizes[1] == sizes[-1]
+    _assert_same_leaves(o, octree)
+    assert o.n_voxels == octree.n_voxels
+    assert np.array_equal(np.sort(o.vox_key[: o.n_voxels]), np.sort(octree.vox_key[: octree.n_voxels]))
+
+
+_UNCACHED_COMPILES = """
+import gc
+import gigapoint as gp
+from numba.core.caching import NullCache
+from numba.core.dispatcher import Dispatcher
+from gigapoint.io import demo_arrays
+from gigapoint.lod.progressive import ProgressiveOctree
+xyz, rgba, attrs = demo_arrays(20_000, seed=1)
+o = ProgressiveOctree("t", capacity=100_000)
+o.add(xyz, rgba, **attrs)
+o.add(xyz + 1.0, rgba, **attrs)
+cam = gp.Camera.fit(o.bounds, view="iso", width=160, height=120)
+gp.render_frame(o, cam, gp.RenderSettings(backend="cpu"))
+gp.render_frame(o, cam, gp.RenderSettings(backend="cpu", size_mode="adaptive"))
+print([f"{d.py_func.__module__}.{d.py_func.__qualname__}" for d in gc.get_objects()
+       if isinstance(d, Dispatcher) and d.signatures and isinstance(d._cache, NullCache)])
+"""
+
+
+def test_a_new_process_inserts_and_draws_with_nothing_compiled_that_numba_cannot_cache():
+    """The first image waits for every compilation of its process: inserting and drawing must use
+    cached kernels only (numba's typed List made in Python compiled its methods in every process,
+    0.2 s of the first insertion)."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _UNCACHED_COMPILES], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
 def test_trim_cuts_the_pool_in_place_and_growth_copies_it_once(scene, octree):
     """trim() keeps the pool's arrays (views of their used part: the room cut off was never
     written), so loading ends without copying the pool; a pool that runs out of chunks grows its
