@@ -26,9 +26,12 @@
   ``--method random``, alternately (process-internal times for gigapoint, wall time of the
   PotreeConverter process).
 - ``frames``: median (and 95th percentile) frame time at 1920x1080 with a 10 M budget while the
-  demo loads, of the same octree once loaded, and of a converted octree of the same points (alternately).
+  demo loads, of the same octree once loaded, and of a converted octree of the same points
+  (alternately; views iso, close-up and top).
 - ``select``: frames of the loaded demo with nodes selected by the box of their points and by
   their cubes (``ProgressiveOctree.select_by_points``), interleaved.
+- ``sample``: frames of the loaded demo with its leaves' grid samples and with every leaf's
+  points (the samples switched off), and of its converted octree, alternating (views as ``frames``).
 - ``sort``: a set's keys sorted by numpy's sort and by ``kernels.radix_sort`` (10^6 keys of the
   town, best of 5), then the insertion (as ``insert``, both orders) with each, alternately;
   which one this CPU's insertions use (timed once a process).
@@ -274,7 +277,6 @@ def bench_frames(n: int) -> None:
         t = time.perf_counter()
         gp.render_frame(cloud, cam, s)
         times.append(time.perf_counter() - t)
-    cam = gp.Camera.fit(cloud.bounds, view="iso", width=1920, height=1080)
     with tempfile.TemporaryDirectory() as tmp:  # the same points converted (gigapoint convert), drawn alternately
         gp.convert(cloud.chunks(), Path(tmp) / "octree")
         converted = gp.open(Path(tmp) / "octree")
@@ -285,20 +287,21 @@ def bench_frames(n: int) -> None:
         m, p95 = statistics.median(times), float(np.percentile(times, 95))
         print(f"frames of demo({n:,}) at 1920x1080, 10 M budget: while loading {len(times)} frames, median {m * 1e3:.1f} ms "
               f"({1 / m:.1f} fps), 95th percentile {p95 * 1e3:.1f} ms; loaded in {cloud.loader.finished_at - cloud.loader.started:.1f} s")  # fmt: skip
-        for mode in ("auto", "fixed"):  # adaptive sizes (the default) and the one-pixel render
-            ms = s.replace(size_mode=mode)
-            after, conv, same = [], [], []
-            for _ in range(7):
-                for target, out in ((cloud, after), (converted, conv), (same_leaves, same)):
-                    gp.render_frame(target, cam, ms)  # each once before timing: caches, arena loads
-                    t = time.perf_counter()
-                    frame = gp.render_frame(target, cam, ms)
-                    out.append(time.perf_counter() - t)
-                    out.append(frame.stats.points_processed)
-            a, c, sl = statistics.median(after[::2]), statistics.median(conv[::2]), statistics.median(same[::2])
-            print(f"  once loaded, size_mode {mode}: {a * 1e3:.1f} ms ({1 / a:.1f} fps, {after[1]:,} points); the converted octree of "
-                  f"the same points {c * 1e3:.1f} ms ({1 / c:.1f} fps, {conv[1]:,} points): {c / a:.2f}x its fps; converted with "
-                  f"{cloud.max_leaf:,}-point leaves {sl * 1e3:.1f} ms ({same[1]:,} points): {sl / a:.2f}x")  # fmt: skip
+        for view, vcam in _views(cloud.bounds).items():
+            for mode in ("auto", "fixed"):  # adaptive sizes (the default) and the one-pixel render
+                ms = s.replace(size_mode=mode)
+                after, conv, same = [], [], []
+                for _ in range(7):
+                    for target, out in ((cloud, after), (converted, conv), (same_leaves, same)):
+                        gp.render_frame(target, vcam, ms)  # each once before timing: caches, arena loads
+                        t = time.perf_counter()
+                        frame = gp.render_frame(target, vcam, ms)
+                        out.append(time.perf_counter() - t)
+                        out.append(frame.stats.points_processed)
+                a, c, sl = statistics.median(after[::2]), statistics.median(conv[::2]), statistics.median(same[::2])
+                print(f"  once loaded, {view}, size_mode {mode}: {a * 1e3:.1f} ms ({1 / a:.1f} fps, {after[1]:,} points); the converted "
+                      f"octree of the same points {c * 1e3:.1f} ms ({1 / c:.1f} fps, {conv[1]:,} points): {c / a:.2f}x its fps; converted "
+                      f"with {cloud.max_leaf:,}-point leaves {sl * 1e3:.1f} ms ({same[1]:,} points): {sl / a:.2f}x")  # fmt: skip
 
 
 def bench_select(n: int) -> None:
@@ -329,6 +332,52 @@ def bench_select(n: int) -> None:
                       f"cubes {cube * 1e3:.2f} ms ({points[False]:,}): {cube / box:.3f}x")  # fmt: skip
     finally:
         ProgressiveOctree.select_by_points = True
+
+
+def _views(bounds) -> dict:
+    """The frames' cameras, 1920x1080: the whole cloud from the side (iso), a close-up, from above."""
+    lo, hi = bounds
+    centre, span = tuple((lo + hi) / 2), float(np.max(hi - lo))
+    return {"iso": gp.Camera.fit(bounds, view="iso", width=1920, height=1080),
+            "close-up": gp.Camera.orbit(centre, -60.0, 30.0, span * 0.15, width=1920, height=1080),
+            "top": gp.Camera.fit(bounds, view="top", width=1920, height=1080)}  # fmt: skip
+
+
+def bench_sample(n: int) -> None:
+    """Frames of the loaded demo with its leaves' grid samples (ProgressiveOctree.order_leaves)
+    and with every leaf's points (the samples switched off), and of its converted octree,
+    alternating frame by frame in one process."""
+    cloud = gp.demo(n, progressive=True)
+    cloud.wait()
+    sample = cloud.grid_sample.copy()
+
+    def frame(target, cam, s, with_sample):
+        cloud.grid_sample[:] = sample if with_sample else 0
+        try:
+            gp.render_frame(target, cam, s)  # once before timing: caches, arena loads
+            t = time.perf_counter()
+            f = gp.render_frame(target, cam, s)
+            return time.perf_counter() - t, f.stats.points_processed
+        finally:
+            cloud.grid_sample[:] = sample
+
+    with tempfile.TemporaryDirectory() as tmp:
+        gp.convert(cloud.chunks(), Path(tmp) / "octree")
+        converted = gp.open(Path(tmp) / "octree")
+        runs = {"samples": (cloud, True), "all points": (cloud, False), "converted": (converted, True)}
+        for view, cam in _views(cloud.bounds).items():
+            for mode in ("fixed", "auto"):
+                s = gp.RenderSettings(point_budget=10_000_000, size_mode=mode)
+                times, points = {k: [] for k in runs}, {}
+                for _ in range(11):
+                    for k, (target, with_sample) in runs.items():
+                        dt, points[k] = frame(target, cam, s, with_sample)
+                        times[k].append(dt)
+                m = {k: statistics.median(v) for k, v in times.items()}
+                print(f"sample {view}, size_mode {mode}: leaves' samples {m['samples'] * 1e3:.2f} ms ({points['samples']:,} points), every "
+                      f"leaf point {m['all points'] * 1e3:.2f} ms ({points['all points']:,}), converted {m['converted'] * 1e3:.2f} ms "
+                      f"({points['converted']:,}): samples {m['all points'] / m['samples']:.2f}x every point; progressive / converted fps "
+                      f"{m['converted'] / m['samples']:.2f}x (every point: {m['converted'] / m['all points']:.2f}x)")  # fmt: skip
 
 
 def bench_sort(n: int, batch: int) -> None:
@@ -400,6 +449,8 @@ def main(argv=None) -> int:
         bench_select(n)
     if "sort" in args.parts:
         bench_sort(n, parse_count(args.batch))
+    if "sample" in args.parts:
+        bench_sample(n)
     return 0
 
 

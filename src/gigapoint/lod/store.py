@@ -125,7 +125,7 @@ def select_nodes(rows, box_min, box_size, counts, children, width, height, near,
 @njit(cache=True)
 def select_octants(
     rows, box_min, box_size, counts, list_counts, parent, children, width, height, near, far, threshold, budget, drawn, size_of,
-    foveation=0.0, root=0,
+    foveation, root, sampled, sampled_drawn,
 ):  # fmt: skip
     """Node selection for octrees whose inner nodes hold representatives (voxels) of the points
     below them, in one list per child octant, and whose leaves hold every point (SimLOD):
@@ -133,7 +133,11 @@ def select_octants(
     parent's voxels of that octant instead of adding to them, so nothing is drawn twice and a
     budget that covers every point draws exactly the visible leaves. ``list_counts[8 n + o]``:
     entries of node n's list o (a leaf's points are its list 0); ``drawn[n, o]`` is set for
-    every list drawn and ``size_of[n]`` for every node drawn. Returns the entries drawn."""
+    every list drawn and ``size_of[n]`` for every node drawn. ``sampled[n]`` > 0: a leaf whose
+    first that many points are a sample of it on the grid its children would have as inner
+    nodes; where such children would be too small on screen to be drawn (half its size under
+    the threshold), the leaf draws the sample alone (``sampled_drawn[n]``), as a converted
+    octree draws an inner node and not its children. Returns the entries drawn."""
     n = counts.shape[0]
     hp = np.empty(n, np.float64)
     hi = np.empty(n, np.int64)
@@ -144,6 +148,9 @@ def select_octants(
         drawn[root, o] = list_counts[root * 8 + o] > 0
     size_of[root] = s
     total = counts[root]
+    if sampled[root] > 0 and 0.5 * s < threshold * (1.0 + foveation * dist):
+        sampled_drawn[root] = True
+        total = sampled[root]
     hn = 0
     node = root
     while True:
@@ -166,26 +173,37 @@ def select_octants(
             d = 0
             while children[p, d] != node:
                 d += 1
-            cost = counts[node] - list_counts[p * 8 + d]
+            entries = counts[node]
+            as_sample = False
+            if sampled[node] > 0:
+                _, _, dist = _box_test(rows, box_min[node], box_size[node], width, height, near, far)
+                as_sample = 0.5 * s < threshold * (1.0 + foveation * dist)
+                if as_sample:
+                    entries = sampled[node]
+            cost = entries - list_counts[p * 8 + d]
             if total + cost <= budget:
                 break
         drawn[p, d] = False
         for o in range(8):
             drawn[node, o] = list_counts[node * 8 + o] > 0
         size_of[node] = s
+        sampled_drawn[node] = as_sample
         total += cost
 
 
 @njit(cache=True)
-def list_chunks(first_chunk, chunk_next, lists, out, owner):
-    """The chunks of every list in ``lists`` (and the index of its list); returns how many."""
+def list_chunks(first_chunk, chunk_next, lists, out, owner, max_chunks):
+    """The chunks of every list in ``lists`` (and the index of its list), its first
+    ``max_chunks[j]`` at most; returns how many."""
     k = 0
     for j in range(lists.shape[0]):
         c = first_chunk[lists[j]]
-        while c >= 0:
+        left = max_chunks[j]
+        while c >= 0 and left > 0:
             out[k] = c
             owner[k] = j
             k += 1
+            left -= 1
             c = chunk_next[c]
     return k
 

@@ -360,6 +360,7 @@ class ProgressiveOctree:
             "list_count": np.zeros(cap * K.LISTS, np.int64),
             "cmin": np.zeros((cap, 3)), "cedge": np.zeros(cap),
             "point_min": np.full((cap, 3), np.inf), "point_max": np.full((cap, 3), -np.inf),  # the box of the points below (none: empty)
+            "grid_sample": np.zeros(cap, np.int64),  # points of a leaf's grid sample, at the head of its list (kernels.order_leaves; 0: none)
         }  # fmt: skip
         for name, arr in arrays.items():
             if old is not None:
@@ -423,6 +424,35 @@ class ProgressiveOctree:
                 self.pool = self.pool.prefix(max(self._n_chunks, 1), self._n_streams)
                 self._free = self._free[: self.pool.n_chunks].copy()
             self._drop_voxel_state()
+            self._order_leaves()
+
+    def order_leaves(self, max_points: int | None = None) -> bool:
+        """Order leaves whose points changed since they were last ordered (all of them, or about
+        ``max_points`` points' worth) so that they begin with a sample of one point a cell of
+        the leaf's own 128³ grid (kernels.order_leaves): frames draw the sample alone where a
+        leaf is too small on screen for all its points (store.select_octants), as a converted
+        octree draws an inner node of that size and not its children. The loader does it when
+        its points are in, between frames; ``trim`` does the rest. Returns whether leaves are
+        left to order."""
+        with self.lock.writing():
+            return self._order_leaves(max_points)
+
+    def _order_leaves(self, max_points: int | None = None) -> bool:
+        n = self.n_nodes
+        leaves = np.flatnonzero((self.leaf[:n] == 1) & (self.grid_sample[:n] == 0) & (self.count[:n] > self.chunk))
+        if not len(leaves):
+            return False
+        left = False
+        if max_points is not None:
+            take = max(1, int(np.searchsorted(np.cumsum(self.count[leaves]), max_points, side="right")))
+            leaves, left = leaves[:take], take < len(leaves)
+        pool = self.pool
+        pool.version += 1
+        attrs = list(pool.attributes.values())
+        K.order_leaves(leaves, self.first_chunk, pool.batches["count"], pool.chunk_next, pool.chunk, pool.low, pool.ext,
+                       pool.packing["ext_first"], pool.color, _byte_views(attrs), np.array([a.dtype.itemsize for a in attrs], np.int64),
+                       pool.batch_version, pool.version, max(1, numba.get_num_threads()), self.grid_sample)  # fmt: skip
+        return left
 
     def _drop_voxel_state(self) -> None:
         """Drop the voxels' build state, and the insertions' work arrays with it."""
@@ -543,7 +573,7 @@ class ProgressiveOctree:
         m["voxels"] = size(self.vox_key, self.vox_slot, self.vox_sum, self._hkeys, self._hvals)
         m["work"] = self._work.nbytes  # insertions' work arrays while held (address space: the rows touched are the largest batch's)
         m["nodes"] = size(self.key, self.level, self.parent, self.children, self.leaf, self.count, self.first_chunk, self.last_chunk,
-                          self.list_count, self.cmin, self.cedge, self._free)  # fmt: skip
+                          self.list_count, self.cmin, self.cedge, self.grid_sample, self._free)  # fmt: skip
         return m
 
     def __enter__(self) -> Self:
@@ -775,6 +805,7 @@ class ProgressiveOctree:
         self.list_count[nodes * K.LISTS] = 0
         self.leaf[nodes] = 0
         self.count[nodes] = 0
+        self.grid_sample[nodes] = 0
         self.points -= len(slots)  # they are counted again when inserted again
         self.spilled += len(slots)
         return xyz, rgba, attrs
@@ -800,6 +831,7 @@ class ProgressiveOctree:
     def _write_points(self, st: _Set, leaf_runs) -> None:
         """The routed points into their leaves (leaf runs are in code order: slots follow)."""
         counts = leaf_runs[:, 2] - leaf_runs[:, 1]
+        self.grid_sample[leaf_runs[:, 0]] = 0  # new points: the leaf's sample no longer covers them all
         slots = self._allocate(leaf_runs[:, 0] * K.LISTS, counts, points=True)  # a leaf's points: its list 0
         offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
         pool = self.pool
@@ -1031,10 +1063,13 @@ class ProgressiveOctree:
             box_size = np.where(has, np.minimum(self.point_max[:n] + pad, cube_max), cube_max) - box_min
         drawn = np.zeros((n, K.LISTS), np.bool_)
         size_of = np.zeros(n)
+        sample = self.grid_sample[:n]
+        sample = np.where(sample > 0, np.minimum(self.count[:n], -(-sample // pool.chunk) * pool.chunk), 0)  # whole chunks are drawn
+        sampled = np.zeros(n, np.bool_)
         select_octants(
             view.rows, box_min, box_size, self.count[:n], self.list_count, self.parent, self.children[:n], float(view.width),
             float(view.height), float(view.near), float(view.far), float(settings.lod_threshold_px), int(settings.point_budget), drawn,
-            size_of, float(settings.lod_foveation), self.root,
+            size_of, float(settings.lod_foveation), self.root, sample, sampled,
         )  # fmt: skip
         lists = np.flatnonzero(drawn.reshape(-1))
         # drawn node by node in Morton order of their cubes, not in the pool's order: the pool
@@ -1048,27 +1083,31 @@ class ProgressiveOctree:
         _, size = visible_and_size(view.rows, cube_min[ids], cube_max[ids], view.width, view.height, view.near, view.far)
         bits = precision_for(size, settings.precision_threshold_px) if settings.adaptive_precision else np.full(len(ids), 30, np.int32)
         mats = batch_matrices(view.rows, corner, corner + cedge[ids, None])
-        chunks = np.empty(int((-(-self.list_count[lists] // pool.chunk)).sum()), np.int64)
+        node = lists // K.LISTS
+        entries = np.where(sampled[node], sample[node], self.list_count[lists])  # a leaf drawn as its sample: its first chunks
+        max_chunks = -(-entries // pool.chunk)
+        chunks = np.empty(int(max_chunks.sum()), np.int64)
         owner = np.empty(len(chunks), np.int64)
-        k = list_chunks(self.first_chunk, pool.chunk_next, lists, chunks, owner)
+        k = list_chunks(self.first_chunk, pool.chunk_next, lists, chunks, owner, max_chunks)
         chunks, owner = chunks[:k], list_node[owner[:k]]
         sel = Selection(chunks, bits[owner].astype(np.int32), mats[owner], size[owner], int(n - len(ids)))
-        return DrawList(pool, sel, n, nodes=ids, spacing=self._drawn_spacing(lists, box_size))
+        return DrawList(pool, sel, n, nodes=ids, spacing=self._drawn_spacing(lists, box_size, entries, sampled[node]))
 
-    def _drawn_spacing(self, lists: np.ndarray, box_size: np.ndarray) -> float:
+    def _drawn_spacing(self, lists: np.ndarray, box_size: np.ndarray, entries: np.ndarray, sampled: np.ndarray) -> float:
         """Spacing of the drawn entries (adaptive point sizes), from the voxel grids rather than
-        the chunks' boxes (each is its node's whole cube): an octant's voxels sit one cell apart;
-        a leaf's points cover the area its parent's voxels of its octant do (cells x cell area),
-        so their spacing is sqrt(area / points). The median over the drawn entries."""
+        the chunks' boxes (each is its node's whole cube): an octant's voxels sit one cell apart,
+        as a leaf's grid sample (``sampled``) does in its own grid; a leaf's points cover the
+        area its parent's voxels of its octant do (cells x cell area), so their spacing is
+        sqrt(area / points). The median over the drawn ``entries`` of each list."""
         node = lists // K.LISTS
-        counts = self.list_count[lists].astype(np.float64)
+        counts = entries.astype(np.float64)
         keep = counts > 0
         if not keep.any():
             return 0.0
-        node, counts = node[keep], counts[keep]
+        node, counts, sampled = node[keep], counts[keep], sampled[keep]
         cell = self.cedge[: self.n_nodes] / (1 << K.GRID_BITS)
         spacing = cell[node].copy()  # voxels
-        leaf = self.leaf[node] == 1
+        leaf = (self.leaf[node] == 1) & ~sampled
         parent = self.parent[node]
         has = leaf & (parent >= 0)
         if has.any():
