@@ -626,6 +626,35 @@ def test_drawing_while_another_thread_inserts(scene):
     assert not errors and o.n_points == len(xyz) and frames >= 3
 
 
+def test_drawing_while_another_thread_orders_the_leaves(scene):
+    """Leaves are reordered (a grid sample first) a few at a time while frames are drawn: every
+    frame, at any moment, draws the same points (the same depth at every pixel as before any
+    leaf was ordered): no leaf is seen half moved."""
+    o = _filled(scene, max_leaf=3_000)
+    cam = gp.Camera.fit(o.bounds, view="iso", width=160, height=120)
+    every = EXACT.replace(point_budget=10**9, lod_threshold_px=0)  # every point: no leaf drawn as its sample
+    want = gp.render_frame(o, cam, every).visibility >> np.uint64(32)
+    before = {int(n): _leaf_rows(o, n) for n in o.leaves() if o.count[n] > CHUNK}
+    errors = []
+
+    def order():
+        try:
+            while o.order_leaves(max_points=5_000):  # one or two leaves a call
+                pass
+        except BaseException as exc:  # noqa: BLE001 - reported by the test
+            errors.append(exc)
+
+    t = threading.Thread(target=order)
+    t.start()
+    frames = 0
+    while t.is_alive() or frames < 3:
+        np.testing.assert_array_equal(gp.render_frame(o, cam, every).visibility >> np.uint64(32), want)
+        frames += 1
+    t.join()
+    assert not errors and frames >= 3
+    _assert_leaves_begin_with_their_grid_sample(o, before)
+
+
 def test_frames_and_the_loader_take_turns():
     """SimLOD's schedule: a renderer drawing back to back does not stop the loader (one slice a
     frame at least), and while frames are drawn the loader inserts small slices between them."""
