@@ -428,7 +428,9 @@ def test_trimmed_leaves_begin_with_one_point_of_each_cell_of_their_grid(scene, m
     a sample of one point a cell of its own 128³ grid; points added later to a leaf undo its
     sample (until the next trim), and leaves of one chunk are left alone."""
     xyz, rgba, attrs = scene
-    half = len(xyz) // 2
+    n = len(xyz)  # attributes of every width the kernel moves: 1, 2, 4 and 8 bytes
+    attrs = {**attrs, "angle": np.arange(n, dtype=np.float32) * 0.25, "gps_time": np.arange(n) * 1.5 + 1e9}
+    half = n // 2
     o = ProgressiveOctree("t", max_leaf=max_leaf, cube=_cube(xyz))
     o.add(xyz[:half], rgba[:half], **{a: v[:half] for a, v in attrs.items()})
     big = [int(n) for n in o.leaves() if o.count[n] > CHUNK]
