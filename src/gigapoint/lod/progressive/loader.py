@@ -32,8 +32,8 @@ from ..convert.prefetch import prefetch
 
 SLICE_POINTS = 250_000  # points inserted under one hold of the octree (~20-40 ms) while no frames are drawn
 SLICE_WHILE_DRAWING = 50_000  # ... and while frames are drawn: a waiting frame waits ~5-10 ms at most
-ORDER_POINTS = 2_000_000  # points of leaves ordered (octree.order_leaves: ~20 ns a point) under one hold while no frames are drawn
-ORDER_WHILE_DRAWING = 400_000  # ... and while frames are drawn (~8 ms)
+ORDER_POINTS = 2_000_000  # points of leaves ordered (octree.order_leaves: ~10 ns a point) under one hold while no frames are drawn
+ORDER_WHILE_DRAWING = 400_000  # ... and while frames are drawn (~4 ms)
 DECODE_CHUNK = 250_000  # points decoded at a time: decoding pauses between chunks while frames draw
 _PRESIZED_BYTES_PER_POINT = 80  # what presizing for one expected point allocates, about (pool room, voxels, table)
 MEMORY_SHARE = 0.5  # the default memory limit: this share of the machine's physical memory
