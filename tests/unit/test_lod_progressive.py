@@ -614,31 +614,46 @@ def test_drawing_while_another_thread_inserts(scene):
     o = ProgressiveOctree("live", max_leaf=2_000)
     o.add(xyz[:5_000], rgba[:5_000])
     cam = gp.Camera.fit((xyz.min(axis=0), xyz.max(axis=0)), width=160, height=120)
-    errors = []
 
     def insert():
+        for s in range(5_000, len(xyz), 5_000):
+            o.add(xyz[s : s + 5_000], rgba[s : s + 5_000])
+
+    def draw():
+        with o.reading():
+            drawn = o.prepare(cam.view(o.bounds), EXACT.replace(point_budget=10**9, lod_threshold_px=0))
+            ids = drawn.selection.ids
+            b = drawn.points.batches[ids]
+            # no torn node: every drawn chunk belongs to a drawn node and is full but the last
+            assert len(np.unique(ids)) == len(ids)
+            assert int(b["count"].astype(np.int64).sum()) == sum(int(o.count[n]) for n in drawn.nodes)
+        f = gp.render_frame(o, cam, EXACT.replace(point_budget=10**9, lod_threshold_px=0))
+        assert f.stats.points_processed <= o.n_points  # no point drawn twice (nor a voxel with its points)
+
+    assert _draw_while(insert, draw) >= 3 and o.n_points == len(xyz)
+
+
+def _draw_while(write, draw) -> int:
+    """``write`` in another thread while ``draw`` draws frames, until it ends (three frames at
+    least); an exception of ``write`` is raised here. Returns the frames drawn."""
+    errors = []
+
+    def run():
         try:
-            for s in range(5_000, len(xyz), 5_000):
-                o.add(xyz[s : s + 5_000], rgba[s : s + 5_000])
-        except BaseException as exc:  # noqa: BLE001 - reported by the test
+            write()
+        except BaseException as exc:  # noqa: BLE001 - raised in the test's thread
             errors.append(exc)
 
-    t = threading.Thread(target=insert)
+    t = threading.Thread(target=run)
     t.start()
     frames = 0
     while t.is_alive() or frames < 3:
-        with o.reading():
-            draw = o.prepare(cam.view(o.bounds), EXACT.replace(point_budget=10**9, lod_threshold_px=0))
-            ids = draw.selection.ids
-            b = draw.points.batches[ids]
-            # no torn node: every drawn chunk belongs to a drawn node and is full but the last
-            assert len(np.unique(ids)) == len(ids)
-            assert int(b["count"].astype(np.int64).sum()) == sum(int(o.count[n]) for n in draw.nodes)
-        f = gp.render_frame(o, cam, EXACT.replace(point_budget=10**9, lod_threshold_px=0))
-        assert f.stats.points_processed <= o.n_points  # no point drawn twice (nor a voxel with its points)
+        draw()
         frames += 1
     t.join()
-    assert not errors and o.n_points == len(xyz) and frames >= 3
+    if errors:
+        raise errors[0]
+    return frames
 
 
 def test_drawing_while_another_thread_orders_the_leaves(scene):
@@ -650,23 +665,15 @@ def test_drawing_while_another_thread_orders_the_leaves(scene):
     every = EXACT.replace(point_budget=10**9, lod_threshold_px=0)  # every point: no leaf drawn as its sample
     want = gp.render_frame(o, cam, every).visibility >> np.uint64(32)
     before = {int(n): _leaf_rows(o, n) for n in o.leaves() if o.count[n] > CHUNK}
-    errors = []
 
     def order():
-        try:
-            while o.order_leaves(max_points=5_000):  # one or two leaves a call
-                pass
-        except BaseException as exc:  # noqa: BLE001 - reported by the test
-            errors.append(exc)
+        while o.order_leaves(max_points=5_000):  # one or two leaves a call
+            pass
 
-    t = threading.Thread(target=order)
-    t.start()
-    frames = 0
-    while t.is_alive() or frames < 3:
+    def draw():
         np.testing.assert_array_equal(gp.render_frame(o, cam, every).visibility >> np.uint64(32), want)
-        frames += 1
-    t.join()
-    assert not errors and frames >= 3
+
+    assert _draw_while(order, draw) >= 3
     _assert_leaves_begin_with_their_grid_sample(o, before)
 
 
