@@ -266,6 +266,15 @@ def bench_viewer(n: int) -> None:
           f"first frame {t2 - t1:.2f} s after the page connects")  # fmt: skip
 
 
+def _views(bounds) -> dict:
+    """The frames' cameras, 1920x1080: the whole cloud from the side (iso), a close-up, from above."""
+    lo, hi = bounds
+    centre, span = tuple((lo + hi) / 2), float(np.max(hi - lo))
+    return {"iso": gp.Camera.fit(bounds, view="iso", width=1920, height=1080),
+            "close-up": gp.Camera.orbit(centre, -60.0, 30.0, span * 0.15, width=1920, height=1080),
+            "top": gp.Camera.fit(bounds, view="top", width=1920, height=1080)}  # fmt: skip
+
+
 def bench_frames(n: int) -> None:
     cloud = gp.demo(n, progressive=True)
     while cloud.n_points == 0:
@@ -309,12 +318,8 @@ def bench_select(n: int) -> None:
     cubes (ProgressiveOctree.select_by_points), interleaved in one process."""
     cloud = gp.demo(n, progressive=True)
     cloud.wait()
-    lo, hi = cloud.bounds
-    centre, span = tuple((lo + hi) / 2), float(np.max(hi - lo))
-    cams = {"iso": gp.Camera.fit(cloud.bounds, view="iso", width=1920, height=1080),
-            "close-up": gp.Camera.orbit(centre, -60.0, 30.0, span * 0.15, width=1920, height=1080)}  # fmt: skip
     try:
-        for name, cam in cams.items():
+        for name, cam in _views(cloud.bounds).items():
             for mode in ("fixed", "auto"):
                 s = gp.RenderSettings(point_budget=10_000_000, size_mode=mode)
                 times, points = {True: [], False: []}, {}
@@ -332,15 +337,6 @@ def bench_select(n: int) -> None:
                       f"cubes {cube * 1e3:.2f} ms ({points[False]:,}): {cube / box:.3f}x")  # fmt: skip
     finally:
         ProgressiveOctree.select_by_points = True
-
-
-def _views(bounds) -> dict:
-    """The frames' cameras, 1920x1080: the whole cloud from the side (iso), a close-up, from above."""
-    lo, hi = bounds
-    centre, span = tuple((lo + hi) / 2), float(np.max(hi - lo))
-    return {"iso": gp.Camera.fit(bounds, view="iso", width=1920, height=1080),
-            "close-up": gp.Camera.orbit(centre, -60.0, 30.0, span * 0.15, width=1920, height=1080),
-            "top": gp.Camera.fit(bounds, view="top", width=1920, height=1080)}  # fmt: skip
 
 
 def bench_sample(n: int) -> None:

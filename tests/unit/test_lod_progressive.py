@@ -342,12 +342,14 @@ print([f"{d.py_func.__module__}.{d.py_func.__qualname__}" for d in gc.get_object
 def test_a_new_process_inserts_and_draws_with_nothing_compiled_that_numba_cannot_cache():
     """The first image waits for every compilation of its process: inserting and drawing must use
     cached kernels only (numba's typed List made in Python compiled its methods in every process,
-    0.2 s of the first insertion)."""
+    0.2 s of the first insertion). The first process fills numba's cache where it is empty (a
+    kernel compiled there compiles numba's own helpers too); the second must compile nothing."""
     import subprocess
     import sys
 
-    out = subprocess.run([sys.executable, "-c", _UNCACHED_COMPILES], capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr[-2000:]
+    for _ in range(2):
+        out = subprocess.run([sys.executable, "-c", _UNCACHED_COMPILES], capture_output=True, text=True, timeout=600)
+        assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().splitlines()[-1] == "[]"
 
 

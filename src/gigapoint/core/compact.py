@@ -78,6 +78,21 @@ def read_ext(ext, word0, t, j):
     return lo | hi
 
 
+@njit
+def write_ext(ext, word0, t, j, v):
+    """Point j's t (1..60) bits of a batch whose stream starts at u64 word ``word0`` set to
+    ``v`` (its t bits; the neighbours' bits kept): ``read_ext``'s inverse, for rewriting a
+    stream in place (builders write streams once, into zeroed words, by or-ing)."""
+    p = np.uint64(j) * np.uint64(t)
+    k = np.uint64(word0) + (p >> np.uint64(6))
+    s = p & np.uint64(63)
+    mask = (_U1 << np.uint64(t)) - _U1
+    ext[k] = (ext[k] & ~(mask << s)) | (v << s)
+    if s + np.uint64(t) > np.uint64(64):
+        r = np.uint64(64) - s
+        ext[k + _U1] = (ext[k + _U1] & ~(mask >> r)) | (v >> r)
+
+
 #: widest field the one-load reader takes: a u32 read at the field's byte holds 32 - 7 bits past it
 ONE_LOAD_BITS = 25
 

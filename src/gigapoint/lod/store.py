@@ -122,6 +122,13 @@ def select_nodes(rows, box_min, box_size, counts, children, width, height, near,
     return k, total
 
 
+@njit(inline="always")
+def _as_sample(sampled, node, s, dist, threshold, foveation):
+    """Whether a leaf draws its grid sample alone: it has one and its children, were it split,
+    would be too small on screen to be drawn (half its projected size under the threshold)."""
+    return sampled[node] > 0 and 0.5 * s < threshold * (1.0 + foveation * dist)
+
+
 @njit(cache=True)
 def select_octants(
     rows, box_min, box_size, counts, list_counts, parent, children, width, height, near, far, threshold, budget, drawn, size_of,
@@ -148,7 +155,7 @@ def select_octants(
         drawn[root, o] = list_counts[root * 8 + o] > 0
     size_of[root] = s
     total = counts[root]
-    if sampled[root] > 0 and 0.5 * s < threshold * (1.0 + foveation * dist):
+    if _as_sample(sampled, root, s, dist, threshold, foveation):
         sampled_drawn[root] = True
         total = sampled[root]
     hn = 0
@@ -173,14 +180,11 @@ def select_octants(
             d = 0
             while children[p, d] != node:
                 d += 1
-            entries = counts[node]
             as_sample = False
-            if sampled[node] > 0:
+            if sampled[node] > 0:  # its distance from the image centre, again (the heap holds sizes only)
                 _, _, dist = _box_test(rows, box_min[node], box_size[node], width, height, near, far)
-                as_sample = 0.5 * s < threshold * (1.0 + foveation * dist)
-                if as_sample:
-                    entries = sampled[node]
-            cost = entries - list_counts[p * 8 + d]
+                as_sample = _as_sample(sampled, node, s, dist, threshold, foveation)
+            cost = (sampled[node] if as_sample else counts[node]) - list_counts[p * 8 + d]
             if total + cost <= budget:
                 break
         drawn[p, d] = False

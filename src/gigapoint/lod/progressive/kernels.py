@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit, prange, types
 from numba.typed import List
 
-from ...core.compact import code_bits, read_ext, tail_words
+from ...core.compact import code_bits, read_ext, tail_words, write_ext
 from ...core.layout import COORD_BITS, EXT_FULL_BITS, WORD_BITS, WORD_MASK
 from ..keys import CODE_BITS
 
@@ -693,30 +693,6 @@ _WIDE_MASK = np.uint64((1 << WIDE_BITS) - 1)
 
 
 @njit(inline="always")
-def _wide_at(ext, ext_first, chunk_size, s):
-    """(u64 word, bit) where slot s's 60 stream bits start (a point chunk's stream)."""
-    c = s // chunk_size
-    p = (s - c * chunk_size) * WIDE_BITS
-    return np.int64(ext_first[c]) + (p >> 6), np.uint64(p & 63)
-
-
-@njit(inline="always")
-def _read_wide(ext, w, sh):
-    v = ext[w] >> sh
-    if sh + np.uint64(WIDE_BITS) > np.uint64(64):
-        v |= ext[w + 1] << (np.uint64(64) - sh)
-    return v & _WIDE_MASK
-
-
-@njit(inline="always")
-def _write_wide(ext, w, sh, v):
-    ext[w] = (ext[w] & ~(_WIDE_MASK << sh)) | (v << sh)
-    if sh + np.uint64(WIDE_BITS) > np.uint64(64):
-        r = np.uint64(64) - sh
-        ext[w + 1] = (ext[w + 1] & ~(_WIDE_MASK >> r)) | (v >> r)
-
-
-@njit(inline="always")
 def _grid_cell(wl):
     """A point's cell of its leaf's own 128³ grid: the top GRID_BITS of each axis's low-word bits."""
     m = np.uint32((1 << GRID_BITS) - 1)
@@ -735,8 +711,8 @@ def _swap(a, front, back, m):
 
 
 @njit(parallel=True, cache=True)
-def order_leaves(leaves, first_chunk, fill, chunk_next, chunk_size, low, ext, ext_first, color, attr_views, attr_width, batch_version,
-                 version, n_parts, grid_sample):  # fmt: skip
+def order_leaves(leaves, first_chunk, chunk_next, fill, list_count, chunk_size, low, ext, ext_first, color, attr_views, attr_width,
+                 batch_version, version, n_parts, grid_sample):  # fmt: skip
     """Each leaf's entries reordered in place (its chunks are its own) so that they begin with
     one point of every occupied cell of the leaf's own 128³ grid, the first of the cell in the
     list: a prefix of the list is then the grid sample a converted octree's node of that size
@@ -750,19 +726,11 @@ def order_leaves(leaves, first_chunk, fill, chunk_next, chunk_size, low, ext, ex
         seen = np.zeros((1 << (3 * GRID_BITS)) // 64, np.uint64)
         for j in range(t, leaves.shape[0], n_parts):
             lst = leaves[j] * LISTS
-            n = 0
+            slots = np.empty(list_count[lst], np.int64)
+            n = list_slots(first_chunk, chunk_next, fill, chunk_size, lst, slots)
             c = first_chunk[lst]
-            while c >= 0:
-                n += fill[c]
-                c = chunk_next[c]
-            slots = np.empty(n, np.int64)
-            k = 0
-            c = first_chunk[lst]
-            while c >= 0:
+            while c >= 0:  # its chunks change
                 batch_version[c] = version
-                for e in range(fill[c]):
-                    slots[k] = c * chunk_size + e
-                    k += 1
                 c = chunk_next[c]
             cells = np.empty(n, np.int64)
             for i in range(n):  # once, in a loop of their own
@@ -794,12 +762,13 @@ def order_leaves(leaves, first_chunk, fill, chunk_next, chunk_size, low, ext, ex
                 m += 1
                 i += 1
                 k += 1
-            for q in range(m):
-                wa, sa = _wide_at(ext, ext_first, chunk_size, front[q])
-                wb, sb = _wide_at(ext, ext_first, chunk_size, back[q])
-                va, vb = _read_wide(ext, wa, sa), _read_wide(ext, wb, sb)
-                _write_wide(ext, wa, sa, vb)
-                _write_wide(ext, wb, sb, va)
+            for q in range(m):  # the stream bits (a point chunk's: WIDE_BITS a point)
+                ca, cb = front[q] // chunk_size, back[q] // chunk_size
+                ja, jb = front[q] - ca * chunk_size, back[q] - cb * chunk_size
+                va = read_ext(ext, ext_first[ca], WIDE_BITS, ja) & _WIDE_MASK
+                vb = read_ext(ext, ext_first[cb], WIDE_BITS, jb) & _WIDE_MASK
+                write_ext(ext, ext_first[ca], WIDE_BITS, ja, vb)
+                write_ext(ext, ext_first[cb], WIDE_BITS, jb, va)
             _swap(low, front, back, m)
             _swap(color, front, back, m)
             for a in range(len(attr_views)):

@@ -91,10 +91,15 @@ def _byte_views(arrays) -> List:
     return views
 
 
+def _pool_views(pool) -> tuple[List, np.ndarray]:
+    """(the pool's attributes as bytes, their widths in bytes): what kernels move attributes with."""
+    return _byte_views(pool.attributes.values()), np.array([v.dtype.itemsize for v in pool.attributes.values()], np.int64)
+
+
 def _attribute_views(st, pool) -> tuple[List, List, np.ndarray]:
     """(a set's attributes, the pool's, their widths in bytes): what kernels scatter attributes with."""
     src = _byte_views(np.ascontiguousarray(st.attrs[a]) for a in pool.attributes)
-    return src, _byte_views(pool.attributes.values()), np.array([v.dtype.itemsize for v in pool.attributes.values()], np.int64)
+    return src, *_pool_views(pool)
 
 
 class Pool:
@@ -448,10 +453,9 @@ class ProgressiveOctree:
             leaves, left = leaves[:take], take < len(leaves)
         pool = self.pool
         pool.version += 1
-        attrs = list(pool.attributes.values())
-        K.order_leaves(leaves, self.first_chunk, pool.batches["count"], pool.chunk_next, pool.chunk, pool.low, pool.ext,
-                       pool.packing["ext_first"], pool.color, _byte_views(attrs), np.array([a.dtype.itemsize for a in attrs], np.int64),
-                       pool.batch_version, pool.version, max(1, numba.get_num_threads()), self.grid_sample)  # fmt: skip
+        K.order_leaves(leaves, self.first_chunk, pool.chunk_next, pool.batches["count"], self.list_count, pool.chunk, pool.low, pool.ext,
+                       pool.packing["ext_first"], pool.color, *_pool_views(pool), pool.batch_version, pool.version,
+                       max(1, numba.get_num_threads()), self.grid_sample)  # fmt: skip
         return left
 
     def _drop_voxel_state(self) -> None:
@@ -1076,14 +1080,14 @@ class ProgressiveOctree:
         # interleaves chunks of nodes all over the cloud (as batches arrived), and frames drawn in
         # that order scatter their writes over the whole image
         node = lists // K.LISTS
-        lists = lists[np.argsort(morton_position(self.key[node], self.level[node]), kind="stable")]
-        ids, list_node = np.unique(lists // K.LISTS, return_inverse=True)
+        by_curve = np.argsort(morton_position(self.key[node], self.level[node]), kind="stable")
+        lists, node = lists[by_curve], node[by_curve]
+        ids, list_node = np.unique(node, return_inverse=True)
         corner = self._box_min(ids)  # the chunks' boxes (the voxels' moved: kernels.VOXEL_SHIFT)
         # the precision a batch needs follows the projection of its quantization box: its cube
         _, size = visible_and_size(view.rows, cube_min[ids], cube_max[ids], view.width, view.height, view.near, view.far)
         bits = precision_for(size, settings.precision_threshold_px) if settings.adaptive_precision else np.full(len(ids), 30, np.int32)
         mats = batch_matrices(view.rows, corner, corner + cedge[ids, None])
-        node = lists // K.LISTS
         entries = np.where(sampled[node], sample[node], self.list_count[lists])  # a leaf drawn as its sample: its first chunks
         max_chunks = -(-entries // pool.chunk)
         chunks = np.empty(int(max_chunks.sum()), np.int64)
