@@ -401,18 +401,42 @@ class ProgressiveOctree:
             free[: self._n_free] = self._free[: self._n_free]
             self._free = free
 
-    def _ensure_hash(self, extra: int) -> None:
+    def _ensure_hash(self, extra: int, table: tuple | None = None) -> None:
         """The voxel table at most two thirds full after ``extra`` more entries (rebuilt when it
-        grows). Not half: a look-up in its 12-byte slots still reads one cache line nearly always,
-        and a 20 M-point load then fits the presized table (rebuilding it took 0.4 s of 3.3)."""
-        need = 3 * (self.n_voxels + extra) // 2
-        if need <= len(self._hkeys):
+        grows; into ``table``, an empty one made beforehand, where it is large enough). Not half:
+        a look-up in its 12-byte slots still reads one cache line nearly always, and a 20 M-point
+        load then fits the presized table (rebuilding it took 0.4 s of 3.3)."""
+        size = self._table_size(extra)
+        if size is None:
             return
+        self._hkeys, self._hvals = table if table is not None and len(table[0]) >= size else _voxel_table(size)
+        K.rehash(self.vox_key, self.n_voxels, self._hkeys, self._hvals)
+
+    def _table_size(self, extra: int) -> int | None:
+        """The slots the voxel table grows to for ``extra`` more entries (doubling); None: it has room."""
+        need = 3 * (self.n_voxels + extra) // 2
         size = len(self._hkeys)
+        if need <= size:
+            return None
         while size < need:
             size *= 2
-        self._hkeys, self._hvals = _voxel_table(size)
-        K.rehash(self.vox_key, self.n_voxels, self._hkeys, self._hvals)
+        return size
+
+    def _presize_extra(self) -> int:
+        """Entries the voxel table is presized for beyond its voxels: those of the expected points.
+        From the second batch on: filling it takes 0.13 s for 16 M points, which the first image
+        would wait for; the first batch's few voxels are entered again in ~1 ms."""
+        if not (self.capacity and self.points and self._voxel_state):
+            return 0
+        return max(0, int(min(self.capacity, _PRESIZE_TABLE_MAX) * _VOXELS_PER_POINT) - self.n_voxels)
+
+    def _presized_table(self) -> tuple | None:
+        """The presized voxel table, empty, where the next insertion will want it (``_presize_extra``):
+        made by ``add`` before it takes the write lock, so that a frame does not wait for its fill
+        either (it held up the first image of the 10^9 demo by ~0.15 s). None: not wanted."""
+        extra = self._presize_extra()
+        size = self._table_size(extra) if extra else None
+        return None if size is None else _voxel_table(size)
 
     def _drop_hash(self) -> None:
         """Free the voxel table (rebuilt from vox_key by _ensure_hash when points come again)."""
@@ -635,6 +659,7 @@ class ProgressiveOctree:
             attrs[a] = v
         valid, lo, hi = valid_bounds(xyz, MAX_ABS_COORDINATE)
         n_valid = int(np.count_nonzero(valid))
+        table = self._presized_table()  # filled before the lock is taken: frames meanwhile draw
         with self.lock.writing():
             self.skipped += n - n_valid
             if n_valid == 0:
@@ -642,7 +667,7 @@ class ProgressiveOctree:
             if n_valid < n:
                 xyz, rgba = xyz[valid], rgba[valid]
                 attrs = {a: v[valid] for a, v in attrs.items()}
-            self._insert(xyz, rgba, attrs, lo, hi)
+            self._insert(xyz, rgba, attrs, lo, hi, table)
         return n_valid
 
     def expect(self, sample, weight: float) -> int:
@@ -707,7 +732,7 @@ class ProgressiveOctree:
             self._attribute_dtypes = {a: v.dtype for a, v in attrs.items()}
         return {a: (attrs[a].astype(dt, copy=False) if a in attrs else np.zeros(n, dt)) for a, dt in self._attribute_dtypes.items()}
 
-    def _insert(self, xyz, rgba, attrs, lo, hi) -> None:
+    def _insert(self, xyz, rgba, attrs, lo, hi, table: tuple | None = None) -> None:
         n = len(xyz)
         attrs = self._attribute_set(attrs, n)
         if self.pool is None:
@@ -718,11 +743,8 @@ class ProgressiveOctree:
                 self._vox(max(len(self.vox_key), int(self.capacity * _VOXELS_PER_POINT)))
         if not self._voxel_state:
             self._rebuild_voxel_state()
-        elif self.capacity and self.points:
-            # the table presized from the second batch on: filling it takes 0.13 s for 16 M points, which the
-            # first image would wait for; the first batch's few voxels are entered again in ~1 ms
-            presize = int(min(self.capacity, _PRESIZE_TABLE_MAX) * _VOXELS_PER_POINT)
-            self._ensure_hash(max(0, presize - self.n_voxels))
+        else:
+            self._ensure_hash(self._presize_extra(), table)
         if self.origin is None:
             pad = 0.01 * max(float(np.max(hi - lo)), 1e-9)  # a little room: growing the root costs a pass over every point
             self._start(lo - pad, float(np.max(hi - lo)) + 2 * pad)
