@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import mmap
 import sys
 
 import numpy as np
@@ -72,12 +73,17 @@ def test_bulk_arrays_are_advised_into_small_pages_when_asked(advice, make):
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="madvise and /proc/self/smaps are Linux's")
-def test_small_arrays_and_neighbours_keep_their_advice(advice):
+def test_small_arrays_and_neighbours_keep_their_advice(advice, monkeypatch):
     advice("1")
-    small = pages.zeros(1000, np.uint8)  # below numpy's 4 MiB: never advised, no mapping split
-    assert "nh" not in _vm_flags(small.ctypes.data)
-    big = np.zeros(16_000_000, np.uint8)
-    view = pages.small_pages(big[4_000_001:12_000_001])  # whole pages inside the view only
+    real, advised = pages._madvise(), []
+    with monkeypatch.context() as m:  # every advice given, recorded (a heap block's flags tell its history, not this array's)
+        m.setattr(pages, "_madvise", lambda: lambda start, length, how: advised.append((start, length)) or real(start, length, how))
+        pages.zeros(1000, np.uint8)  # below numpy's 4 MiB: never advised, no mapping split
+        assert advised == []
+        big = np.frombuffer(mmap.mmap(-1, 16_000_000), np.uint8)  # a mapping of its own, with no earlier advice
+        view = pages.small_pages(big[4_000_001:12_000_001])  # whole pages inside the view only
+    ((start, length),) = advised
+    assert view.ctypes.data <= start and start + length <= view.ctypes.data + view.nbytes
     assert "nh" in _vm_flags(view.ctypes.data + 8192)
     assert "nh" not in _vm_flags(big.ctypes.data)
     assert "nh" not in _vm_flags(big.ctypes.data + big.nbytes - 1)
