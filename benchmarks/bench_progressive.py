@@ -12,8 +12,14 @@
 - ``load``: the same points written as LAZ and LAS (scan order); decoding them alone (every
   chunk of ``gigapoint.io.read_chunks``) against ``gigapoint.open(..., progressive=True)`` to
   completion, alternately, in one process: the ratio is what LOD costs loading.
-- ``first``: seconds from ``gigapoint.demo(10**9, progressive=True)`` to its first image with
-  points (1920x1080), then the loader is closed.
+- ``first``: seconds from ``gigapoint.demo(10**9, progressive=True)`` (or ``gigapoint.open(FILE,
+  progressive=True)`` with ``--first-source FILE``) to its first image with points (1920x1080),
+  then the loader is closed.
+- ``gil``: how long a thread that sleeps 1 ms at a time waits while another thread decodes a
+  LAZ (laspy/lazrs: it holds the GIL while it decodes a call's points), while it loads one
+  progressively, and while it only sleeps.
+- ``first-files``: ``first`` of the demo and of the town (``--points``) as LAS and as LAZ, each
+  in a new process, alternating.
 - ``viewer``: ``gigapoint view --demo 1000000000`` (progressive: above the point budget):
   seconds from a client's connect (as the page does) to its first frame.
 - ``save``: a progressive octree of the points (LAS, scan order, loaded to completion) saved
@@ -224,10 +230,11 @@ def bench_convert_through_builder(n: int, rounds: int, potree: str | None) -> No
                   f"runs {[round(t, 2) for t in ts]}")  # fmt: skip
 
 
-def bench_first(n: int) -> None:
+def bench_first(source: str | None) -> None:
+    """The first image of ``source`` (a file; None: the demo of 10^9 points), in this process."""
     cam = None
     t = time.perf_counter()
-    cloud = gp.demo(n, progressive=True)
+    cloud = gp.open(source, progressive=True) if source else gp.demo(10**9, progressive=True)
     while True:
         if cloud.n_points:
             cam = cam or gp.Camera.fit(cloud.bounds, view="iso", width=1920, height=1080)
@@ -235,8 +242,69 @@ def bench_first(n: int) -> None:
             if frame.stats.visible_pixels:
                 break
         time.sleep(0.005)
-    print(f"first image of demo({n:,}) progressive: {time.perf_counter() - t:.2f} s after open ({frame.stats.points_processed:,} points drawn)")
+    name = Path(source).name if source else "demo(1,000,000,000)"
+    print(f"first image of {name} progressive: {time.perf_counter() - t:.2f} s after open ({frame.stats.points_processed:,} points drawn)")
     cloud.close()
+
+
+def bench_first_files(n: int, rounds: int) -> None:
+    """The first image of the demo, of a LAS and of a LAZ file of the town (``n`` points), each in
+    a new process (as a user's first image: numba's cache loaded, nothing compiled or warm),
+    alternating; run it with bytecode written (``env -u PYTHONDONTWRITEBYTECODE``)."""
+    import re
+    import sys
+
+    with tempfile.TemporaryDirectory() as tmp:
+        xyz, rgba, attrs = demo_arrays(n, seed=2)
+        order = _scan_order(xyz)
+        files = [_write(Path(tmp) / f"town.{s}", xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()}) for s in ("las", "laz")]
+        del xyz, rgba, attrs
+        sources = {"demo(10^9)": [], **{f.name: [] for f in files}}
+        for r in range(rounds + 1):  # the first round fills numba's cache for these inputs, untimed
+            for name, arg in zip(sources, [[], *(["--first-source", str(f)] for f in files)]):
+                out = subprocess.run([sys.executable, __file__, "--parts", "first", *arg], capture_output=True, text=True, check=True).stdout
+                if r:
+                    sources[name].append(float(re.search(r"progressive: ([0-9.]+) s after open", out).group(1)))
+        for name, ts in sources.items():
+            print(f"first image of {name} progressive, new processes: median {statistics.median(ts):.2f} s after open; runs {ts}")
+
+
+def bench_gil(n: int) -> None:
+    """Whether decoding a LAZ in a thread stops the process's other threads: the town (``n``
+    points) as LAZ, decoded by ``read_chunks`` in a thread while this thread sleeps 1 ms at a
+    time; a sleep that ends late waited for the GIL (or a core). Then the same with a thread
+    that only sleeps, for the baseline, and the progressive load of the file."""
+    import threading
+
+    def stalls(work) -> str:
+        thread = threading.Thread(target=work)
+        thread.start()
+        late = []
+        while thread.is_alive():
+            t = time.perf_counter()
+            time.sleep(0.001)
+            late.append(time.perf_counter() - t - 0.001)
+        ms = np.array(late) * 1000
+        return f"{len(ms)} sleeps, p99 {np.percentile(ms, 99):.1f} ms late, max {ms.max():.0f} ms, {int((ms > 20).sum())} over 20 ms"
+
+    with tempfile.TemporaryDirectory() as tmp:
+        xyz, rgba, attrs = demo_arrays(n, seed=2)
+        order = _scan_order(xyz)
+        path = _write(Path(tmp) / "town.laz", xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()})
+        del xyz, rgba, attrs
+        gp.open(path, progressive=True).wait()  # warm-up
+
+        def decode():
+            for _chunk in read_chunks(path, 250_000):
+                pass
+
+        def load():
+            with gp.open(path, progressive=True) as cloud:
+                cloud.wait()
+
+        print(f"a thread decoding {n / 1e6:g} M points of LAZ (250 k a call): {stalls(decode)}")
+        print(f"a thread loading them progressively: {stalls(load)}")
+        print(f"a thread sleeping 2 s: {stalls(lambda: time.sleep(2.0))}")
 
 
 def bench_viewer(n: int) -> None:
@@ -423,6 +491,7 @@ def main(argv=None) -> int:
     ap.add_argument("--batch", default="1M")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--parts", nargs="+", default=["insert", "load", "first", "viewer", "frames"])
+    ap.add_argument("--first-source", default=None, help="a file for --parts first (default: the demo of 10^9 points)")
     ap.add_argument("--potree-converter", default=None, help="a PotreeConverter 2 binary for --parts convert (its --method random)")
     args = ap.parse_args(argv)
     n = parse_count(args.points)
@@ -436,7 +505,11 @@ def main(argv=None) -> int:
     if "convert" in args.parts:
         bench_convert_through_builder(n, args.rounds, args.potree_converter)
     if "first" in args.parts:
-        bench_first(10**9)
+        bench_first(args.first_source)
+    if "gil" in args.parts:
+        bench_gil(n)
+    if "first-files" in args.parts:
+        bench_first_files(n, args.rounds)
     if "viewer" in args.parts:
         bench_viewer(10**9)
     if "frames" in args.parts:
