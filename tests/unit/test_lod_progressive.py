@@ -10,6 +10,7 @@ a converted octree; a reader drawing while a writer inserts sees consistent fram
 from __future__ import annotations
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -709,6 +710,40 @@ def test_drawing_while_another_thread_orders_the_leaves(scene):
 
     assert _draw_while(order, draw) >= 3
     _assert_leaves_begin_with_their_grid_sample(o, before)
+
+
+def test_the_second_chunk_is_decoded_once_the_first_is_in(scene, monkeypatch):
+    """Decoding holds the GIL (lazrs; the demo generator's kernels): the decoder makes the second
+    chunk only once the first is inserted, so the first insertion, and the first image, do not
+    wait for it; after that it decodes ahead of the insertions as before."""
+    from gigapoint.core.chunk import PointChunk
+    from gigapoint.lod.progressive.loader import open_progressive
+
+    xyz, rgba, _ = scene
+    events = []
+
+    def chunks():
+        for k, s in enumerate(range(0, 40_000, 10_000)):
+            events.append(f"decoded {k}")
+            yield PointChunk(xyz[s : s + 10_000], rgba[s : s + 10_000].view(np.uint8).reshape(-1, 4))
+
+    real_add = ProgressiveOctree.add
+
+    def slow_add(self, *args, **kwargs):
+        if not self.n_points:
+            time.sleep(0.3)  # a slow first insertion: an eager decoder would make chunk 1 meanwhile
+        n = real_add(self, *args, **kwargs)
+        events.append("inserted")
+        return n
+
+    monkeypatch.setattr(ProgressiveOctree, "add", slow_add)
+    cloud = open_progressive([("chunks", chunks)], 40_000, None, "chunks")
+    try:
+        cloud.wait(timeout=60)
+    finally:
+        cloud.close()
+    assert events[:3] == ["decoded 0", "inserted", "decoded 1"], events
+    assert events.count("inserted") == 4 and cloud.n_points == 0  # closed: its memory freed
 
 
 def test_frames_and_the_loader_take_turns():

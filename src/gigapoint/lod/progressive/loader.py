@@ -63,6 +63,7 @@ class Loader:
         self.finished_at: float | None = None
         self._stop = threading.Event()
         self._done = threading.Event()
+        self._first_in = threading.Event()  # the first slice is inserted (the decoder then goes on)
         self._thread = threading.Thread(target=self._run, name=f"gigapoint-load-{octree.name}", daemon=True)
 
     def start(self) -> Loader:
@@ -88,14 +89,19 @@ class Loader:
         return self.read / max(end - self.started, 1e-9)
 
     def _chunks(self) -> Iterator[tuple[str, PointChunk]]:
-        turn = -1
+        turn, made = -1, 0
         for name, make in self.sources:
             chunks = iter(make())
             while True:
                 turn, _ = self.octree.builder_turn(turn)  # decoding, too, waits while a frame draws
+                if made == 1:
+                    # the second chunk waits for the first to be in: decoding holds the GIL (lazrs, the
+                    # demo's kernels), which the first insertion, so the first image, would wait for
+                    self._first_in.wait()
                 chunk = next(chunks, None)
                 if chunk is None:
                     break
+                made += 1
                 yield name, chunk
 
     def _run(self) -> None:
@@ -110,6 +116,7 @@ class Loader:
                     turn, drawing = self.octree.builder_turn(turn)
                     sl = slice(s, min(s + (SLICE_WHILE_DRAWING if drawing else SLICE_POINTS), len(chunk)))
                     self.octree.add(chunk.xyz[sl], chunk.rgba[sl], **{a: v[sl] for a, v in chunk.attributes.items()})
+                    self._first_in.set()
                     s = sl.stop
                     self.read += sl.stop - sl.start
                     if self.octree.nbytes > self.memory_limit:
@@ -126,6 +133,7 @@ class Loader:
         except Exception as exc:  # noqa: BLE001 - any failure of a source ends the load with a one-line error
             self.error = InputError(f"{name}: loading stopped: {' '.join(str(exc).split()) or type(exc).__name__}")
         finally:
+            self._first_in.set()  # (a decoder waiting for it ends with the load)
             if not self._stop.is_set():
                 self.octree.trim()  # the room kept for growth, back
             self.finished_at = time.perf_counter()
@@ -148,6 +156,7 @@ class Loader:
     def close(self) -> None:
         """Stop loading (after the slice in hand) and wait for the thread."""
         self._stop.set()
+        self._first_in.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join()
 
