@@ -93,11 +93,11 @@ class Loader:
         for name, make in self.sources:
             chunks = iter(make())
             while True:
-                turn, _ = self.octree.builder_turn(turn)  # decoding, too, waits while a frame draws
                 if made == 1:
                     # the second chunk waits for the first to be in: decoding holds the GIL (lazrs, the
                     # demo's kernels), which the first insertion, so the first image, would wait for
                     self._first_in.wait()
+                turn, _ = self.octree.builder_turn(turn)  # decoding, too, waits while a frame draws
                 chunk = next(chunks, None)
                 if chunk is None:
                     break
