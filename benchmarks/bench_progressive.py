@@ -127,19 +127,19 @@ def _write(path: Path, xyz, rgba, attrs) -> Path:
     return path
 
 
-def _town_las(path: Path, n: int) -> Path:
-    """The demo town of ``n`` points as a LAS file in scan order (as a scanner writes it)."""
+def _town_files(folder: Path, n: int, suffixes=("las",)) -> list[Path]:
+    """The demo town of ``n`` points as ``folder``/town.<suffix> (LAS or LAZ) files, its points in
+    scan order (as a scanner writes them)."""
     xyz, rgba, attrs = demo_arrays(n, seed=2)
     order = _scan_order(xyz)
-    return _write(path, xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()})
+    xyz, rgba, attrs = xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()}
+    return [_write(Path(folder) / f"town.{suffix}", xyz, rgba, attrs) for suffix in suffixes]
 
 
 def bench_load(n: int, rounds: int) -> None:
-    xyz, rgba, attrs = demo_arrays(n, seed=2)
-    order = _scan_order(xyz)
     with tempfile.TemporaryDirectory() as tmp:
-        for suffix in ("laz", "las"):
-            path = _write(Path(tmp) / f"town.{suffix}", xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()})
+        for path in _town_files(tmp, n, ("laz", "las")):
+            suffix = path.suffix[1:]
             gp.open(path, progressive=True).wait()  # warm-up: JIT, page cache
             decode, load = [], []
             for _ in range(rounds):
@@ -162,7 +162,7 @@ def bench_save(n: int, rounds: int) -> None:
     from gigapoint.lod import convert
 
     with tempfile.TemporaryDirectory() as tmp:
-        path = _town_las(Path(tmp) / "town.las", n)
+        (path,) = _town_files(tmp, n)
         cloud = gp.open(path, progressive=True)
         cloud.wait()
         warm = ProgressiveOctree("warm", max_leaf=cloud.max_leaf)  # JIT warm-up of both paths
@@ -197,7 +197,7 @@ def bench_convert_through_builder(n: int, rounds: int, potree: str | None) -> No
     from bench_convert import run_potree
 
     with tempfile.TemporaryDirectory() as tmp:
-        path = _town_las(Path(tmp) / "town.las", n)
+        (path,) = _town_files(tmp, n)
         small = _write(Path(tmp) / "warm.las", *demo_arrays(20_000, seed=3))
         warm = gp.open(small, progressive=True)  # JIT warm-up of both paths
         warm.wait()
@@ -255,10 +255,7 @@ def bench_first_files(n: int, rounds: int) -> None:
     import sys
 
     with tempfile.TemporaryDirectory() as tmp:
-        xyz, rgba, attrs = demo_arrays(n, seed=2)
-        order = _scan_order(xyz)
-        files = [_write(Path(tmp) / f"town.{s}", xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()}) for s in ("las", "laz")]
-        del xyz, rgba, attrs
+        files = _town_files(tmp, n, ("las", "laz"))
         sources = {"demo(10^9)": [], **{f.name: [] for f in files}}
         for r in range(rounds + 1):  # the first round fills numba's cache for these inputs, untimed
             for name, arg in zip(sources, [[], *(["--first-source", str(f)] for f in files)]):
@@ -288,10 +285,7 @@ def bench_gil(n: int) -> None:
         return f"{len(ms)} sleeps, p99 {np.percentile(ms, 99):.1f} ms late, max {ms.max():.0f} ms, {int((ms > 20).sum())} over 20 ms"
 
     with tempfile.TemporaryDirectory() as tmp:
-        xyz, rgba, attrs = demo_arrays(n, seed=2)
-        order = _scan_order(xyz)
-        path = _write(Path(tmp) / "town.laz", xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()})
-        del xyz, rgba, attrs
+        (path,) = _town_files(tmp, n, ("laz",))
         gp.open(path, progressive=True).wait()  # warm-up
 
         def decode():
