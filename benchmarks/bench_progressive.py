@@ -136,24 +136,55 @@ def _town_files(folder: Path, n: int, suffixes=("las",)) -> list[Path]:
     return [_write(Path(folder) / f"town.{suffix}", xyz, rgba, attrs) for suffix in suffixes]
 
 
+def _laspy_decode(path: Path) -> None:
+    """The file decoded by laspy alone (lazrs in parallel where it is installed), 1 M points a call."""
+    import laspy
+
+    with laspy.open(str(path)) as reader:
+        for _points in reader.chunk_iterator(1_000_000):
+            pass
+
+
 def bench_load(n: int, rounds: int) -> None:
+    """Progressive loads to completion against decoding alone; a LAZ both ways: decoded by the
+    child process (io/laz_process.py, the default) and in this process (GIGAPOINT_LAZ_PROCESS=0),
+    rounds alternating."""
+    import os
+
+    from gigapoint.io import laz_process
+
+    def timed(run) -> float:
+        t = time.perf_counter()
+        run()
+        return time.perf_counter() - t
+
+    def load(path, child: bool) -> None:
+        os.environ[laz_process.ENV_SWITCH] = "1" if child else "0"
+        try:
+            with gp.open(path, progressive=True) as cloud:
+                cloud.wait()
+        finally:
+            os.environ.pop(laz_process.ENV_SWITCH)
+
     with tempfile.TemporaryDirectory() as tmp:
         for path in _town_files(tmp, n, ("laz", "las")):
             suffix = path.suffix[1:]
-            gp.open(path, progressive=True).wait()  # warm-up: JIT, page cache
-            decode, load = [], []
+            runs = {
+                "laspy alone": lambda path=path: _laspy_decode(path),
+                "read_chunks alone": lambda path=path: sum(len(c) for c in read_chunks(path, 1_000_000)),
+                "progressive": lambda path=path: load(path, True),
+            }
+            if suffix == "laz":
+                runs["progressive, decoded in this process"] = lambda path=path: load(path, False)
+            for run in runs.values():  # warm-up: JIT, page cache
+                run()
+            times = {name: [] for name in runs}
             for _ in range(rounds):
-                t = time.perf_counter()
-                for _chunk in read_chunks(path, 1_000_000):
-                    pass
-                decode.append(time.perf_counter() - t)
-                t = time.perf_counter()
-                cloud = gp.open(path, progressive=True)
-                cloud.wait()
-                load.append(time.perf_counter() - t)
-                cloud.close()
-            d, ld = statistics.median(decode), statistics.median(load)
-            print(f"load {suffix.upper()} {n / 1e6:g} M: decode alone {d:.2f} s, progressive to completion {ld:.2f} s = {ld / d:.2f}x")
+                for name, run in runs.items():
+                    times[name].append(timed(run))
+            base = statistics.median(times["laspy alone"])
+            cols = ", ".join(f"{name} {statistics.median(t):.2f} s = {statistics.median(t) / base:.2f}x" for name, t in times.items())
+            print(f"load {suffix.upper()} {n / 1e6:g} M (medians of {rounds}): {cols}")
 
 
 def bench_save(n: int, rounds: int) -> None:
@@ -270,8 +301,13 @@ def bench_gil(n: int) -> None:
     """Whether decoding a LAZ in a thread stops the process's other threads: the town (``n``
     points) as LAZ, decoded by ``read_chunks`` in a thread while this thread sleeps 1 ms at a
     time; a sleep that ends late waited for the GIL (or a core). Then the same with a thread
-    that only sleeps, for the baseline, and the progressive load of the file."""
+    that only sleeps, for the baseline, and the progressive load of the file; decoding and
+    loading both with the LAZ decoded in a child process (io/laz_process.py, the default) and
+    in this process (GIGAPOINT_LAZ_PROCESS=0)."""
+    import os
     import threading
+
+    from gigapoint.io import laz_process
 
     def stalls(work) -> str:
         thread = threading.Thread(target=work)
@@ -296,8 +332,11 @@ def bench_gil(n: int) -> None:
             with gp.open(path, progressive=True) as cloud:
                 cloud.wait()
 
-        print(f"a thread decoding {n / 1e6:g} M points of LAZ (250 k a call): {stalls(decode)}")
-        print(f"a thread loading them progressively: {stalls(load)}")
+        for where, switch in (("in a child process", "1"), ("in this process", "0")):
+            os.environ[laz_process.ENV_SWITCH] = switch
+            print(f"a thread decoding {n / 1e6:g} M points of LAZ (250 k a call), {where}: {stalls(decode)}")
+            print(f"a thread loading them progressively, decoded {where}: {stalls(load)}")
+        os.environ.pop(laz_process.ENV_SWITCH)
         print(f"a thread sleeping 2 s: {stalls(lambda: time.sleep(2.0))}")
 
 

@@ -254,12 +254,14 @@ def test_small_chunks_decode_by_numpy_like_the_kernels(tmp_path, monkeypatch, co
 def test_records_read_into_a_reused_buffer_are_laspys(tmp_path, monkeypatch, suffix):
     """LAS/LAZ records are read into one buffer reused chunk after chunk (io/las._Records),
     not laspy's new bytearray a chunk: the chunks, all held at once, are what laspy's own
-    ``read_points`` gives (the way a point source _Records does not know keeps)."""
-    from gigapoint.io import las
+    ``read_points`` gives (the way a point source _Records does not know keeps). A LAZ's
+    ``fast`` records come from the decoding child process (io/laz_process.py)."""
+    from gigapoint.io import las, laz_process
 
     path = tmp_path / f"r{suffix}"
     write_las(path, n=5_003, point_format=3)
     fast = list(read_chunks(path, chunk_size=1_000))
+    monkeypatch.setenv(laz_process.ENV_SWITCH, "0")  # laspy's way in this process
     made = []
 
     class LaspysWay(las._Records):

@@ -22,6 +22,7 @@ from ..core import pages
 from ..core.chunk import PointChunk
 from ..core.cloud import MAX_ABS_COORDINATE, NUMPY_MAX
 from ..errors import EmptyCloudError, InputError
+from . import laz_process
 from ._base import DEFAULT_CHUNK_SIZE, ColorScaler, Reader, check_chunk_size, check_file, fail, one_line
 
 #: Minimum point record length of each point format (bytes).
@@ -380,6 +381,9 @@ class _Records:
             self.fill = None
         self.buffer = pages.empty(most * self.size if self.fill else 0, np.uint8)
 
+    def close(self) -> None:
+        """Nothing to free (the buffer goes with this object); ``ChildRecords`` stops its process."""
+
     def read(self, n: int):
         """Up to ``n`` records (fewer where the file ends early), as a laspy PackedPointRecord."""
         if self.fill is None:
@@ -438,7 +442,9 @@ class LasReader(Reader):
                 offset = np.asarray(reader.header.offsets, np.float64)
                 if reader.header.point_count != hdr.point_count:  # LAS 1.4 with only the legacy count filled in
                     reader.header.point_count = hdr.point_count
-                if start:
+                decompressor = getattr(reader.point_source, "decompressor", None)
+                in_child = hdr.compressed and laz_process.usable(decompressor)
+                if start and not in_child:  # (a child seeks itself)
                     reader.seek(start)
             except (InputError, MemoryError):
                 raise
@@ -448,7 +454,16 @@ class LasReader(Reader):
             has_rgb = {"red", "green", "blue"} <= dims
             stored_scale = tuple(float(abs(s)) for s in scale)  # PointChunk.scale: the resolution the file stores
             scaler = ColorScaler() if scaler is None else scaler
-            records = _Records(reader, min(chunk_size, stop - done))
+            most = min(chunk_size, stop - done)
+            if in_child:  # decoded by a child process (io/laz_process.py: a crash of lazrs is an error there, and no GIL is held)
+                laszip = next(d for u, r, d in hdr.vlrs if u == LASZIP_USER_ID and r == LASZIP_RECORD_ID)
+                parallel = type(decompressor).__name__ == "ParLasZipDecompressor"
+                records = laz_process.ChildRecords(
+                    path, hdr.offset_to_point_data, laszip, done, stop, most, reader.header.point_format, parallel
+                )
+            else:
+                records = _Records(reader, most)
+            stack.callback(records.close)
             while done < stop:
                 try:
                     pts = records.read(min(chunk_size, stop - done))

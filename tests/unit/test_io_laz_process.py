@@ -1,0 +1,175 @@
+"""LAZ records decoded by a child process (io/laz_process.py, io/_laz_child.py)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.core.layout import EMPTY_PIXEL
+from gigapoint.errors import GigapointError, InputError
+from gigapoint.io import laz_process
+from gigapoint.io.las import LasReader
+
+laspy = pytest.importorskip("laspy")
+
+
+def _write_laz(path, n: int, point_format: int = 3, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    header = laspy.LasHeader(point_format=point_format, version="1.4" if point_format >= 6 else "1.2")
+    header.scales = np.array([0.001] * 3)
+    header.offsets = np.array([500_000.0, 4_000_000.0, 100.0])
+    las = laspy.LasData(header)
+    las.x = 500_000 + rng.uniform(0, 1000, n)
+    las.y = 4_000_000 + rng.uniform(0, 800, n)
+    las.z = 100 + rng.uniform(0, 50, n)
+    las.intensity = rng.integers(0, 65535, n).astype(np.uint16)
+    las.classification = rng.integers(0, 31, n).astype(np.uint8)
+    las.gps_time = rng.uniform(0, 1e6, n)
+    rgb = rng.integers(0, 65536, (n, 3)).astype(np.uint16)
+    las.red, las.green, las.blue = rgb.T
+    las.write(str(path))
+    return path
+
+
+def _corrupted(path, out):
+    """``path`` with 20 kB of 0xFF two thirds into it: lazrs's GPS-time decoder recurses on it
+    until the stack overflows (SIGSEGV in the process that decodes)."""
+    data = bytearray(path.read_bytes())
+    at = len(data) * 2 // 3
+    data[at : at + 20_000] = b"\xff" * 20_000
+    out.write_bytes(bytes(data))
+    return out
+
+
+def read_chunks(path, chunk_size, **kwargs):
+    return LasReader().read_chunks(path, chunk_size, **kwargs)
+
+
+@pytest.fixture
+def children(monkeypatch):
+    """The child processes (Popen) the reads of a test start."""
+    made = []
+    init = laz_process.ChildRecords.__init__
+
+    def recording(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        made.append(self.child)
+
+    monkeypatch.setattr(laz_process.ChildRecords, "__init__", recording)
+    return made
+
+
+def _same_chunks(a, b):
+    assert [len(c) for c in a] == [len(c) for c in b]
+    for x, y in zip(a, b):
+        np.testing.assert_array_equal(x.xyz, y.xyz)
+        np.testing.assert_array_equal(x.rgba, y.rgba)
+        assert x.scale == y.scale
+        assert x.attributes.keys() == y.attributes.keys()
+        for k in x.attributes:
+            np.testing.assert_array_equal(x.attributes[k], y.attributes[k])
+            assert x.attributes[k].dtype == y.attributes[k].dtype
+
+
+@pytest.mark.parametrize("point_format", [3, 7])
+@pytest.mark.parametrize(("chunk_size", "start", "stop"), [(7_000, 0, None), (1 << 20, 0, None), (6_000, 12_345, 40_001)])
+def test_the_child_decodes_the_records_this_process_would(tmp_path, monkeypatch, children, point_format, chunk_size, start, stop):
+    path = _write_laz(tmp_path / "a.laz", 50_003, point_format)
+    child = list(read_chunks(path, chunk_size, start=start, stop=stop))
+    assert len(children) == 1 and children[0].returncode is not None  # it decoded them, and it has ended
+    monkeypatch.setenv(laz_process.ENV_SWITCH, "0")
+    here = list(read_chunks(path, chunk_size, start=start, stop=stop))
+    assert len(children) == 1  # no child this time
+    _same_chunks(child, here)
+    assert sum(len(c) for c in child) == (stop or 50_003) - start
+
+
+def test_a_crash_of_the_decoder_is_a_one_line_error_after_the_points_before_it(tmp_path, children):
+    bad = _corrupted(_write_laz(tmp_path / "good.laz", 200_000), tmp_path / "bad.laz")
+    got = 0
+    with pytest.raises(InputError) as err:
+        for chunk in read_chunks(bad, 10_000):
+            got += len(chunk)
+    message = str(err.value)
+    assert message.startswith(f"{bad}: truncated or corrupt LAZ point data: reading failed after {got:,} of the 200,000 points")
+    assert "\n" not in message
+    assert got >= 50_000  # the LAZ chunks before the damage
+    assert children and children[0].returncode is not None
+
+
+def test_a_progressive_load_of_a_file_that_crashes_the_decoder_keeps_what_it_loaded(tmp_path):
+    bad = _corrupted(_write_laz(tmp_path / "good.laz", 600_000), tmp_path / "bad.laz")
+    cloud = gp.open(bad, progressive=True)  # decoded 250 k points at a time: the first chunk is whole
+    with pytest.raises(GigapointError, match=r"bad\.laz: truncated or corrupt LAZ point data"):
+        cloud.wait(60)
+    assert cloud.n_points >= 250_000
+    cam = gp.Camera.fit(cloud.bounds, view="top", width=64, height=48)
+    frame = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu"))
+    assert np.count_nonzero(frame.visibility != EMPTY_PIXEL) > 0.5 * 64 * 48  # what was loaded is drawn
+    cloud.close()
+
+
+def test_the_cli_says_a_decoder_crash_in_one_line_and_writes_nothing(tmp_path):
+    bad = _corrupted(_write_laz(tmp_path / "good.laz", 200_000), tmp_path / "bad.laz")
+    out = tmp_path / "out.png"
+    run = subprocess.run([sys.executable, "-m", "gigapoint.cli", "render", str(bad), "-o", str(out), "-W", "32", "-H", "32"],
+                         capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert run.returncode not in (0, -signal.SIGSEGV)
+    lines = [ln for ln in run.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "bad.laz" in lines[0] and "corrupt LAZ point data" in lines[0], run.stderr
+    assert not out.exists()
+
+
+def test_closing_the_chunks_stops_the_child(tmp_path, children):
+    path = _write_laz(tmp_path / "a.laz", 50_000)
+    chunks = read_chunks(path, 1_000)
+    next(chunks)
+    assert children[0].poll() is None  # waiting for its slots to be read
+    chunks.close()
+    assert children[0].returncode is not None
+
+
+def _gone(pid: int) -> bool:
+    """Whether process ``pid`` has ended (a zombie nobody reaps counts as ended)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] in ("Z", "X")
+    except FileNotFoundError:
+        return True
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_the_child_ends_when_its_parent_dies(tmp_path):
+    path = _write_laz(tmp_path / "a.laz", 50_000)
+    code = (
+        "import os, signal, sys\n"
+        "from gigapoint.io import laz_process, read_chunks\n"
+        "init = laz_process.ChildRecords.__init__\n"
+        "def recording(self, *a, **k):\n"
+        "    init(self, *a, **k)\n"
+        "    print(self.child.pid, flush=True)\n"
+        "laz_process.ChildRecords.__init__ = recording\n"
+        "next(read_chunks(sys.argv[1], 1_000))\n"
+        "os.kill(os.getpid(), signal.SIGKILL)\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=120)
+    assert run.returncode == -signal.SIGKILL
+    pid = int(run.stdout.split()[0])
+    deadline = time.monotonic() + 20
+    while not _gone(pid) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert _gone(pid)
+
+
+def test_without_memfd_the_records_are_decoded_here(tmp_path, monkeypatch, children):
+    path = _write_laz(tmp_path / "a.laz", 20_000)
+    monkeypatch.delattr(os, "memfd_create")
+    assert sum(len(c) for c in read_chunks(path, 5_000)) == 20_000
+    assert children == []
