@@ -15,6 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import gigapoint as gp
+from gigapoint.core.layout import EMPTY_PIXEL
 from gigapoint.errors import InputError
 from gigapoint.lod import CopcCloud, OctreeCloud, convert, open_octree
 from gigapoint.lod.copc import COPC_INFO_DTYPE, HIERARCHY_ENTRY_DTYPE, INFO_OFFSET, LAS14_HEADER_DTYPE
@@ -449,3 +450,18 @@ def test_extra_bytes_descriptors_are_read_with_their_scale(tmp_path):
         extra_fields([(b"LASF_Spec", 4, d.tobytes()[:-1])])
     with pytest.raises(ValueError, match="smaller than point format 7 and 6 extra bytes"):
         point_dtype(7, 36 + 2, fields)
+
+
+@pytest.mark.parametrize("where", [0.3, 0.4, 0.5])
+def test_damaged_chunks_that_crash_or_panic_lazrs_are_one_line_errors(autzen_octrees, tmp_path, where):
+    """20 kB of 0xFF in a node's compressed points: at 0.3 of the file lazrs's decoder crashes
+    (SIGSEGV: it recurses until the stack overflows), at 0.4 it panics (pyo3's PanicException,
+    a BaseException), at 0.5 it fails. Each is one line naming the file and the node: the nodes
+    are decoded in a child process (io/laz_process.decode_block), which this process outlives."""
+    src = autzen_octrees / "a.copc.laz"
+    before = _draw(src).visibility
+    at = int(src.stat().st_size * where)
+    msg = _one_line_error(_patch(src, tmp_path / "bad.copc.laz", at, b"\xff" * 20_000), r"bad\.copc\.laz: cannot decode node \d+-\d+-\d+-\d+")
+    assert {0.3: "crashed with SIGSEGV", 0.4: "PanicException", 0.5: "LazrsError"}[where] in msg
+    after = _draw(src).visibility  # the undamaged file draws as before, whatever became of the child
+    assert np.count_nonzero(after != EMPTY_PIXEL) > 0 and np.array_equal(after, before)

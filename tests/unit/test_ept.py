@@ -275,3 +275,15 @@ def test_ept_hierarchy_bad_entries(broken):
     _fails(d, "invalid point count")
     (d / "ept-hierarchy" / "0-0-0-0.json").unlink()
     _fails(d, "0-0-0-0.json: no such file")
+
+
+def test_a_damaged_laszip_node_is_a_one_line_error(broken):
+    """A LAZ node whose compressed points are overwritten: lazrs fails (or crashes: it decodes
+    in a child process, io/laz_process.decode_block) and the error names the node."""
+    d = broken("laszip")
+    victim = max((d / "ept-data").iterdir(), key=lambda f: f.stat().st_size)
+    data = bytearray(victim.read_bytes())
+    at = len(data) // 2
+    data[at : at + 4_000] = b"\xff" * 4_000
+    victim.write_bytes(bytes(data))
+    _fails(d, f"cannot decode node {victim.stem}")

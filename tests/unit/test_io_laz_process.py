@@ -173,3 +173,42 @@ def test_without_memfd_the_records_are_decoded_here(tmp_path, monkeypatch, child
     monkeypatch.delattr(os, "memfd_create")
     assert sum(len(c) for c in read_chunks(path, 5_000)) == 20_000
     assert children == []
+
+
+def _block_of(path):
+    """(file bytes, offset of the point data, LASzip VLR data, record bytes) of a LAZ file."""
+    import io
+
+    blob = path.read_bytes()
+    header = laspy.LasHeader.read_from(io.BytesIO(blob))
+    vlr = header.vlrs[header.vlrs.index("LasZipVlr")].record_data
+    return blob, header.offset_to_point_data, vlr, header.point_count * header.point_format.size
+
+
+def test_blocks_decoded_by_the_shared_child_are_laspys_records_even_after_a_crash(tmp_path, monkeypatch):
+    """``decode_block`` (COPC and EPT nodes): the records laspy reads, from several threads at
+    once; a block that crashes the decoder is a RuntimeError and the next block is decoded by a
+    new child."""
+    import threading
+
+    good = _write_laz(tmp_path / "good.laz", 200_000)
+    bad = _corrupted(good, tmp_path / "bad.laz")
+    blob, skip, vlr, size = _block_of(good)
+    expected = np.frombuffer(laspy.read(good).points.array.tobytes(), np.uint8)
+    np.testing.assert_array_equal(laz_process.decode_block(blob, vlr, size, skip=skip), expected)
+    with pytest.raises(RuntimeError, match="the LAZ decoder crashed with SIGSEGV"):
+        laz_process.decode_block(_block_of(bad)[0], vlr, size, skip=skip)
+    results = [None] * 4
+
+    def decode(k):
+        results[k] = laz_process.decode_block(blob, vlr, size, skip=skip)
+
+    threads = [threading.Thread(target=decode, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for r in results:
+        np.testing.assert_array_equal(r, expected)
+    monkeypatch.setenv(laz_process.ENV_SWITCH, "0")  # decoded in this process: the same bytes
+    np.testing.assert_array_equal(laz_process.decode_block(blob, vlr, size, skip=skip), expected)

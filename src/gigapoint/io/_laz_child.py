@@ -1,21 +1,27 @@
-"""The child process of io/laz_process.py: decodes LAZ point records into shared memory.
+"""The child process of io/laz_process.py: decodes LAZ points where a crash of lazrs cannot
+take the caller with it, and without the caller's GIL.
 
 Run as a script (``python -P _laz_child.py``), not as a module of the package: it imports the
 standard library and lazrs only, so it is ready in a few tens of milliseconds (gigapoint's
-own imports take ~0.3 s). It reads one JSON line, the job, from stdin:
+own imports take ~0.3 s). Its first stdin line is the job, JSON with ``"mode"`` and
+``"lazrs"`` (the folder the parent imported lazrs from). Messages go to its original stdout,
+one JSON line each (fd 1 then points at stderr, so that nothing else written can break the
+protocol); any failure of lazrs is ``{"error": "..."}``. It ends at EOF of stdin (the parent
+is gone).
 
-    {"path", "offset" (of the point data), "vlr" (the LASzip VLR's data, hex), "start", "stop",
-     "parallel", "fd" (of the shared memory, inherited), "slots", "slot_bytes", "per_slot",
-     "lazrs" (the folder the parent imported lazrs from)}
-
-and writes one JSON line a decoded slot, ``{"slot": k, "n": n}``, then ``{"end": true}``,
-or ``{"error": "..."}`` where lazrs fails, to its original stdout (fd 1 then points at
-stderr, so that nothing else written can break the protocol). It fills the first slot, waits
-until the parent has read it, then fills the slots in turn, reusing one only once the parent
-has written its number back on stdin. It ends at EOF of stdin (the parent is gone) or of its
-points.
+- ``"records"``: points ``start``..``stop`` of a LAZ file (``path``, ``offset`` of its point
+  data, ``vlr``: the LASzip VLR's data in hex, ``parallel``) into ``slots`` slots of shared
+  memory (``fd``, inherited; ``slot_bytes`` each, ``per_slot`` points), ``{"slot": k, "n": n}``
+  a filled slot, then ``{"end": true}``. It fills the first slot, waits until the parent has
+  read it, then fills the slots in turn, reusing one only once the parent has written its
+  number back on stdin.
+- ``"blocks"``: requests on stdin, each a JSON line ``{"size", "skip", "vlr", "out",
+  "parallel"}`` and ``size`` bytes: a LAZ point block (the 8-byte offset of its chunk table,
+  the chunks, the table) ``skip`` bytes into them; the answer is ``{"ok": out}`` and the
+  ``out`` bytes of records decoded.
 """
 
+import io
 import json
 import mmap
 import os
@@ -23,11 +29,76 @@ import signal
 import sys
 
 
+def _decoder(lazrs, source, vlr: bytes, parallel: bool):
+    return (lazrs.ParLasZipDecompressor if parallel else lazrs.LasZipDecompressor)(source, vlr)
+
+
+def _records(lazrs, job: dict, inp, say) -> None:
+    memory = mmap.mmap(job["fd"], job["slots"] * job["slot_bytes"])
+    source = open(job["path"], "rb")  # noqa: SIM115 - open until the process ends
+    source.seek(job["offset"])
+    vlr = bytes.fromhex(job["vlr"])
+    decoder = _decoder(lazrs, source, vlr, job["parallel"])
+    record = lazrs.LazVlr(vlr).item_size()
+    if job["start"]:
+        decoder.seek(job["start"])
+    # the first slot alone until the parent has read it: decoding ahead would share the cores
+    # with the parent's work on the first chunk (a first image; convert's first view 0.3 s later)
+    free, spare = [0], list(range(1, job["slots"]))
+    done, stop = job["start"], job["stop"]
+    while done < stop:
+        if not free:
+            ack = inp.readline()
+            if not ack:
+                return  # the parent is gone
+            free += [int(ack), *spare]
+            spare = []
+        slot = free.pop(0)
+        n = min(job["per_slot"], stop - done)
+        at = slot * job["slot_bytes"]
+        decoder.decompress_many(memoryview(memory)[at : at + n * record])
+        done += n
+        say({"slot": slot, "n": n})
+    say({"end": True})
+
+
+def _blocks(lazrs, inp, say, out) -> None:
+    while True:
+        line = inp.readline()
+        if not line:
+            return  # the parent is gone
+        ask = json.loads(line)
+        block = inp.read(ask["size"])
+        if len(block) < ask["size"]:
+            return
+        try:
+            source = io.BytesIO(block)
+            source.seek(ask["skip"])
+            records = bytearray(ask["out"])
+            _decoder(lazrs, source, bytes.fromhex(ask["vlr"]), ask["parallel"]).decompress_many(records)
+        except BaseException as exc:  # lazrs's errors and panics (pyo3's PanicException is a BaseException)
+            if isinstance(exc, (SystemExit, KeyboardInterrupt)):
+                raise
+            say({"error": _one_line(exc)})
+            continue
+        say({"ok": len(records)})
+        out.write(records)
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(f"{type(exc).__name__}: {exc}".split())
+
+
 def main() -> int:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C reaches both processes: the parent decides
-    out = os.fdopen(os.dup(1), "w", buffering=1)
+    out = os.fdopen(os.dup(1), "wb", buffering=0)
     os.dup2(2, 1)
-    line = sys.stdin.readline()
+    inp = sys.stdin.buffer
+
+    def say(message: dict) -> None:
+        out.write(json.dumps(message).encode() + b"\n")
+
+    line = inp.readline()
     if not line:
         return 0
     job = json.loads(line)
@@ -36,36 +107,16 @@ def main() -> int:
             sys.path.insert(0, job["lazrs"])  # the parent's lazrs, wherever its sys.path found it
         import lazrs
 
-        memory = mmap.mmap(job["fd"], job["slots"] * job["slot_bytes"])
-        source = open(job["path"], "rb")  # noqa: SIM115 - open until the process ends
-        source.seek(job["offset"])
-        vlr = bytes.fromhex(job["vlr"])
-        decoder = (lazrs.ParLasZipDecompressor if job["parallel"] else lazrs.LasZipDecompressor)(source, vlr)
-        record = lazrs.LazVlr(vlr).item_size()
-        if job["start"]:
-            decoder.seek(job["start"])
-        # the first slot alone until the parent has read it: decoding ahead would share the cores
-        # with the parent's work on the first chunk (a first image; convert's first view 0.3 s later)
-        free, spare = [0], list(range(1, job["slots"]))
-        done, stop = job["start"], job["stop"]
-        while done < stop:
-            if not free:
-                ack = sys.stdin.readline()
-                if not ack:
-                    return 0  # the parent is gone
-                free += [int(ack), *spare]
-                spare = []
-            slot = free.pop(0)
-            n = min(job["per_slot"], stop - done)
-            at = slot * job["slot_bytes"]
-            decoder.decompress_many(memoryview(memory)[at : at + n * record])
-            done += n
-            out.write(json.dumps({"slot": slot, "n": n}) + "\n")
-        out.write('{"end": true}\n')
+        if job["mode"] == "blocks":
+            _blocks(lazrs, inp, say, out)
+        else:
+            _records(lazrs, job, inp, say)
     except BrokenPipeError:
         return 0
-    except Exception as exc:  # noqa: BLE001 - lazrs's and the OS's errors, said in one line to the parent
-        out.write(json.dumps({"error": " ".join(f"{type(exc).__name__}: {exc}".split())}) + "\n")
+    except BaseException as exc:  # lazrs's and the OS's errors (and panics), said in one line to the parent
+        if isinstance(exc, (SystemExit, KeyboardInterrupt)):
+            raise
+        say({"error": _one_line(exc)})
     return 0
 
 

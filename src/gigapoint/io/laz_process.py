@@ -31,6 +31,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -40,75 +41,53 @@ ENV_SWITCH = "GIGAPOINT_LAZ_PROCESS"  # "0": decode LAZ in this process
 _CHILD = Path(__file__).with_name("_laz_child.py")
 
 
+def _wanted() -> bool:
+    """Whether a child may decode here at all (a Python to start it with, and not switched off)."""
+    return Path(sys.executable or "").name.startswith(("python", "pypy")) and os.environ.get(ENV_SWITCH, "1") != "0"
+
+
 def usable(decompressor) -> bool:
     """Whether records that ``decompressor`` (laspy's lazrs decompressor of the file) would
-    decode can be decoded by a child instead."""
-    return (
-        decompressor is not None
-        and hasattr(os, "memfd_create")
-        and Path(sys.executable or "").name.startswith(("python", "pypy"))  # not an app embedding Python
-        and os.environ.get(ENV_SWITCH, "1") != "0"
-    )
+    decode can be decoded by a child instead (``ChildRecords``: it needs a memfd)."""
+    return decompressor is not None and hasattr(os, "memfd_create") and _wanted()
 
 
-class ChildRecords:
-    """Records ``start``..``stop`` of a LAZ file decoded by a child, ``per_read`` at a time."""
+class _Child:
+    """A started ``_laz_child.py`` with ``job``; its stderr goes to a temporary file, for the
+    one line that says why it ended where it ends without a message."""
 
-    def __init__(self, path, offset: int, vlr: bytes, start: int, stop: int, per_read: int, point_format, parallel: bool):
-        import laspy
+    def __init__(self, job: dict, pass_fds=()):
         import lazrs
 
-        self.record = laspy.PackedPointRecord
-        self.point_format = point_format
-        self.dtype = point_format.dtype()
-        self.size = point_format.size
-        self.slot_bytes = -(-per_read * self.size // mmap.PAGESIZE) * mmap.PAGESIZE
-        self.child = None
         self.log = tempfile.TemporaryFile()  # noqa: SIM115 - the child's stderr, closed by close()
-        self._read_slot: int | None = None  # the slot the last read's records are in
-        fd = os.memfd_create("gigapoint-laz")
+        self.child = None
         try:
-            os.ftruncate(fd, SLOTS * self.slot_bytes)
-            self.memory = mmap.mmap(fd, SLOTS * self.slot_bytes)
             self.child = subprocess.Popen(
-                [sys.executable, "-P", str(_CHILD)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.log, pass_fds=(fd,)
+                [sys.executable, "-P", str(_CHILD)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.log, pass_fds=pass_fds
             )
-            job = {"path": str(path), "offset": int(offset), "vlr": bytes(vlr).hex(), "start": int(start), "stop": int(stop),
-                   "parallel": bool(parallel), "fd": fd, "slots": SLOTS, "slot_bytes": self.slot_bytes, "per_slot": int(per_read),
-                   "lazrs": str(Path(lazrs.__file__).resolve().parent.parent)}  # fmt: skip
-            self._send(json.dumps(job))
+            self.send(json.dumps({**job, "lazrs": str(Path(lazrs.__file__).resolve().parent.parent)}).encode())
         except BaseException:
             self.close()
             raise
-        finally:
-            os.close(fd)  # the child has its own, the map stays
 
-    def read(self, n: int):
-        """The next ``n`` records (what the child decoded next: the reader asks for the same
-        counts), as a laspy PackedPointRecord over the slot they are in."""
-        if self._read_slot is not None:  # the last read's records are done with: the child may reuse the slot
-            self._send(str(self._read_slot))
-            self._read_slot = None
+    def send(self, line: bytes, data: bytes = b"") -> None:
+        try:
+            self.child.stdin.write(line + b"\n")
+            if data:
+                self.child.stdin.write(data)
+            self.child.stdin.flush()
+        except BrokenPipeError:  # the child ended: the next message read says why
+            pass
+
+    def message(self) -> dict:
+        """The child's next message; a RuntimeError where it is an error, or where the child ended."""
         line = self.child.stdout.readline()
         if not line:
             raise RuntimeError(self._ended())
         msg = json.loads(line)
         if "error" in msg:
             raise RuntimeError(msg["error"])
-        if msg.get("end"):
-            return self.record(np.empty(0, self.dtype), self.point_format)
-        got = msg["n"]
-        if got != n:
-            raise RuntimeError(f"the LAZ decoding process gave {got:,} records where {n:,} were asked for")
-        self._read_slot = msg["slot"]
-        return self.record(np.frombuffer(self.memory, self.dtype, count=got, offset=msg["slot"] * self.slot_bytes), self.point_format)
-
-    def _send(self, line: str) -> None:
-        try:
-            self.child.stdin.write(line.encode() + b"\n")
-            self.child.stdin.flush()
-        except BrokenPipeError:  # the child ended: the next read says why
-            pass
+        return msg
 
     def _ended(self) -> str:
         """Why the child ended without a message (a crash of the decoder, most likely)."""
@@ -125,8 +104,11 @@ class ChildRecords:
             why = f"the LAZ decoding process ended with status {code}"
         return why + (f": {lines[-1]}" if lines else "")
 
+    def alive(self) -> bool:
+        return self.child is not None and self.child.poll() is None
+
     def close(self) -> None:
-        """Stop the child (if it still runs) and free the shared memory (once no records of it are held)."""
+        """Stop the child, if it still runs."""
         if self.child is not None:
             if self.child.poll() is None:
                 self.child.kill()
@@ -136,7 +118,107 @@ class ChildRecords:
                     f.close()
             self.child = None
         self.log.close()
-        memory = getattr(self, "memory", None)
-        if memory is not None:
+
+
+class ChildRecords(_Child):
+    """Records ``start``..``stop`` of a LAZ file decoded by a child, ``per_read`` at a time."""
+
+    def __init__(self, path, offset: int, vlr: bytes, start: int, stop: int, per_read: int, point_format, parallel: bool):
+        import laspy
+
+        self.record = laspy.PackedPointRecord
+        self.point_format = point_format
+        self.dtype = point_format.dtype()
+        self.size = point_format.size
+        self.slot_bytes = -(-per_read * self.size // mmap.PAGESIZE) * mmap.PAGESIZE
+        self.memory = None
+        self._read_slot: int | None = None  # the slot the last read's records are in
+        fd = os.memfd_create("gigapoint-laz")
+        try:
+            os.ftruncate(fd, SLOTS * self.slot_bytes)
+            self.memory = mmap.mmap(fd, SLOTS * self.slot_bytes)
+            job = {"mode": "records", "path": str(path), "offset": int(offset), "vlr": bytes(vlr).hex(), "start": int(start),
+                   "stop": int(stop), "parallel": bool(parallel), "fd": fd, "slots": SLOTS, "slot_bytes": self.slot_bytes,
+                   "per_slot": int(per_read)}  # fmt: skip
+            super().__init__(job, pass_fds=(fd,))
+        except BaseException:
+            self.close()
+            raise
+        finally:
+            os.close(fd)  # the child has its own, the map stays
+
+    def read(self, n: int):
+        """The next ``n`` records (what the child decoded next: the reader asks for the same
+        counts), as a laspy PackedPointRecord over the slot they are in."""
+        if self._read_slot is not None:  # the last read's records are done with: the child may reuse the slot
+            self.send(str(self._read_slot).encode())
+            self._read_slot = None
+        msg = self.message()
+        if msg.get("end"):
+            return self.record(np.empty(0, self.dtype), self.point_format)
+        got = msg["n"]
+        if got != n:
+            raise RuntimeError(f"the LAZ decoding process gave {got:,} records where {n:,} were asked for")
+        self._read_slot = msg["slot"]
+        return self.record(np.frombuffer(self.memory, self.dtype, count=got, offset=msg["slot"] * self.slot_bytes), self.point_format)
+
+    def close(self) -> None:
+        """Stop the child and free the shared memory (once no records of it are held)."""
+        if getattr(self, "log", None) is not None:
+            super().close()
+        if self.memory is not None:
             with contextlib.suppress(BufferError):  # records still held: freed with the last of them
-                memory.close()
+                self.memory.close()
+
+
+class _BlockDecoder(_Child):
+    """A child that decodes LAZ point blocks on request (``decode_block``)."""
+
+    def __init__(self):
+        super().__init__({"mode": "blocks"})
+
+    def decode(self, block: bytes, skip: int, vlr: bytes, out_bytes: int, parallel: bool) -> np.ndarray:
+        ask = {"size": len(block), "skip": int(skip), "vlr": bytes(vlr).hex(), "out": int(out_bytes), "parallel": bool(parallel)}
+        self.send(json.dumps(ask).encode(), bytes(block))
+        got = self.message()["ok"]
+        records = np.empty(got, np.uint8)
+        view, filled = memoryview(records), 0
+        while filled < got:
+            k = self.child.stdout.readinto(view[filled:])
+            if not k:
+                raise RuntimeError(self._ended())
+            filled += k
+        return records
+
+
+_blocks: _BlockDecoder | None = None
+_blocks_lock = threading.Lock()
+
+
+def decode_block(block: bytes, vlr: bytes, out_bytes: int, skip: int = 0, parallel: bool = True) -> np.ndarray:
+    """``out_bytes`` of point records (uint8) of the LAZ point block ``block[skip:]`` (its chunk
+    table's 8-byte offset, counted from ``block``'s start, its chunks, the table), LASzip VLR
+    data ``vlr``: decoded by one child process this process shares (started on first use,
+    again after a crash), or here where no child can be had. Any failure of the decoder, a
+    crash included, is a RuntimeError with its reason in one line."""
+    global _blocks
+    if not _wanted():
+        return _decode_here(block, skip, vlr, out_bytes, parallel)
+    with _blocks_lock:  # one request at a time on the pipes
+        if _blocks is None or not _blocks.alive():
+            if _blocks is not None:
+                _blocks.close()
+            _blocks = _BlockDecoder()
+        return _blocks.decode(block, skip, vlr, out_bytes, parallel)
+
+
+def _decode_here(block: bytes, skip: int, vlr: bytes, out_bytes: int, parallel: bool) -> np.ndarray:
+    import io
+
+    import lazrs
+
+    source = io.BytesIO(block)
+    source.seek(skip)
+    records = np.empty(out_bytes, np.uint8)
+    (lazrs.ParLasZipDecompressor if parallel else lazrs.LasZipDecompressor)(source, bytes(vlr)).decompress_many(records)
+    return records

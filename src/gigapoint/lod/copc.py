@@ -19,6 +19,7 @@ import io
 import numpy as np
 
 from ..errors import InputError
+from ..io import laz_process
 from ..io.http import ByteSource, open_source
 from ..io.las import _scaled_xyz
 from .voxel_octree import VOXEL_KEY_DTYPE, VoxelOctree, valid_voxels, voxel_name, voxel_to_key
@@ -402,16 +403,12 @@ class CopcCloud(VoxelOctree):
         return self.source.read_many(locators)
 
     def _decode(self, index: int, blob: bytes) -> dict:
-        import lazrs
-
-        n = int(self.counts[index])
-        out = np.zeros(n * self.record.itemsize, np.uint8)
-        lazrs.decompress_points_with_chunk_table(blob, self.laszip, out, [(n, len(blob))])
-        return self._points(out.view(self.record))
+        return self._decode_batch([index], [blob])[0]
 
     def _decode_batch(self, indices: list[int], blobs: list[bytes]) -> list[dict]:
         """The nodes' chunks as one LAZ point block (offset, chunks, chunk table), decoded by
-        lazrs's parallel decompressor (a chunk per thread), then split by node."""
+        lazrs's parallel decompressor (a chunk per thread) in a child process (io/laz_process.py:
+        lazrs crashes on some corrupt data), then split by node."""
         import lazrs
 
         counts = [int(self.counts[i]) for i in indices]
@@ -419,8 +416,7 @@ class CopcCloud(VoxelOctree):
         lazrs.write_chunk_table(table, [(n, len(b)) for n, b in zip(counts, blobs)], lazrs.LazVlr(self.laszip))
         data = b"".join(blobs)
         block = np.int64(8 + len(data)).tobytes() + data + table.getvalue()
-        out = np.zeros(sum(counts) * self.record.itemsize, np.uint8)
-        lazrs.ParLasZipDecompressor(io.BytesIO(block), self.laszip).decompress_many(out)
+        out = laz_process.decode_block(block, self.laszip, sum(counts) * self.record.itemsize)
         rec = out.view(self.record)
         starts = np.concatenate([[0], np.cumsum(counts)])
         return [self._points(rec[starts[k] : starts[k + 1]]) for k in range(len(indices))]

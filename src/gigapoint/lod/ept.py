@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..io import laz_process
 from ..io.http import ByteSource, as_url, open_source
 from ..io.las import _scaled_xyz
 from .voxel_octree import VoxelOctree, parse_voxel_name, voxel_name
@@ -181,14 +182,22 @@ class EptCloud(VoxelOctree):
             return {"xyz": xyz, "rgb": rgb, "attributes": attrs}
         import laspy
 
-        with laspy.open(io.BytesIO(blob)) as r:
-            pts = r.read_points(r.header.point_count)
-            raw = pts.array
-            xyz = np.empty((len(raw), 3), np.float64)
-            _scaled_xyz(
-                raw["X"], raw["Y"], raw["Z"], np.asarray(r.header.scales, np.float64), np.asarray(r.header.offsets, np.float64), xyz
+        # the node's LAZ: its header read here, its points decoded in a child process
+        # (io/laz_process.py: lazrs crashes on some corrupt data)
+        header = laspy.LasHeader.read_from(io.BytesIO(blob))
+        if not header.are_points_compressed:
+            pts = laspy.PackedPointRecord(
+                np.frombuffer(blob, header.point_format.dtype(), count=header.point_count, offset=header.offset_to_point_data),
+                header.point_format,
             )
-            dims = set(r.header.point_format.dimension_names)
+        else:
+            laszip = header.vlrs[header.vlrs.index("LasZipVlr")].record_data
+            records = laz_process.decode_block(blob, laszip, header.point_count * header.point_format.size, skip=header.offset_to_point_data)
+            pts = laspy.PackedPointRecord(records.view(header.point_format.dtype()), header.point_format)
+        raw = pts.array
+        xyz = np.empty((len(raw), 3), np.float64)
+        _scaled_xyz(raw["X"], raw["Y"], raw["Z"], np.asarray(header.scales, np.float64), np.asarray(header.offsets, np.float64), xyz)
+        dims = set(header.point_format.dimension_names)
         rgb = np.stack([pts["red"], pts["green"], pts["blue"]], axis=1).astype(np.uint16) if {"red", "green", "blue"} <= dims else None
         attrs = {a: np.asarray(pts[a]) for a, _ in ATTRIBUTES.values() if a in dims}  # laspy's names are gigapoint's
         return {"xyz": xyz, "rgb": rgb, "attributes": attrs}
