@@ -15,10 +15,11 @@ is gone).
   a filled slot, then ``{"end": true}``. It fills the first slot, waits until the parent has
   read it, then fills the slots in turn, reusing one only once the parent has written its
   number back on stdin.
-- ``"blocks"``: requests on stdin, each a JSON line ``{"size", "skip", "vlr", "out",
-  "parallel"}`` and ``size`` bytes: a LAZ point block (the 8-byte offset of its chunk table,
-  the chunks, the table) ``skip`` bytes into them; the answer is ``{"ok": out}`` and the
-  ``out`` bytes of records decoded.
+- ``"blocks"``: requests on stdin, each a JSON line ``{"size", "skip", "vlr", "at", "out",
+  "total", "parallel"}``: the first ``size`` bytes of the shared memory (``fd``, inherited;
+  ``total`` bytes now: the parent grows it) hold a LAZ point block (the 8-byte offset of its
+  chunk table, the chunks, the table) ``skip`` bytes in; its ``out`` bytes of records go to
+  ``at`` there; the answer is ``{"ok": out}``.
 """
 
 import io
@@ -62,27 +63,28 @@ def _records(lazrs, job: dict, inp, say) -> None:
     say({"end": True})
 
 
-def _blocks(lazrs, inp, say, out) -> None:
+def _blocks(lazrs, job: dict, inp, say) -> None:
+    memory = None
     while True:
         line = inp.readline()
         if not line:
             return  # the parent is gone
         ask = json.loads(line)
-        block = inp.read(ask["size"])
-        if len(block) < ask["size"]:
-            return
+        if memory is None or len(memory) != ask["total"]:  # the parent grew the memfd
+            if memory is not None:
+                memory.close()
+            memory = mmap.mmap(job["fd"], ask["total"])
         try:
-            source = io.BytesIO(block)
+            source = io.BytesIO(memory[: ask["size"]])
             source.seek(ask["skip"])
-            records = bytearray(ask["out"])
-            _decoder(lazrs, source, bytes.fromhex(ask["vlr"]), ask["parallel"]).decompress_many(records)
+            at = ask["at"]
+            _decoder(lazrs, source, bytes.fromhex(ask["vlr"]), ask["parallel"]).decompress_many(memoryview(memory)[at : at + ask["out"]])
         except BaseException as exc:  # lazrs's errors and panics (pyo3's PanicException is a BaseException)
             if isinstance(exc, (SystemExit, KeyboardInterrupt)):
                 raise
             say({"error": _one_line(exc)})
             continue
-        say({"ok": len(records)})
-        out.write(records)
+        say({"ok": ask["out"]})
 
 
 def _one_line(exc: BaseException) -> str:
@@ -108,7 +110,7 @@ def main() -> int:
         import lazrs
 
         if job["mode"] == "blocks":
-            _blocks(lazrs, inp, say, out)
+            _blocks(lazrs, job, inp, say)
         else:
             _records(lazrs, job, inp, say)
     except BrokenPipeError:

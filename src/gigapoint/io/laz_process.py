@@ -172,23 +172,46 @@ class ChildRecords(_Child):
 
 
 class _BlockDecoder(_Child):
-    """A child that decodes LAZ point blocks on request (``decode_block``)."""
+    """A child that decodes LAZ point blocks on request (``decode_block``), through a memfd it
+    inherits: the block, then the records, each from a page boundary (through a pipe, the
+    records of a 1.2 M-point COPC frame took 0.1 s more)."""
 
     def __init__(self):
-        super().__init__({"mode": "blocks"})
+        self.fd = os.memfd_create("gigapoint-laz-blocks")
+        self.memory = None
+        try:
+            super().__init__({"mode": "blocks", "fd": self.fd}, pass_fds=(self.fd,))
+        except BaseException:
+            os.close(self.fd)
+            raise
 
     def decode(self, block: bytes, skip: int, vlr: bytes, out_bytes: int, parallel: bool) -> np.ndarray:
-        ask = {"size": len(block), "skip": int(skip), "vlr": bytes(vlr).hex(), "out": int(out_bytes), "parallel": bool(parallel)}
-        self.send(json.dumps(ask).encode(), bytes(block))
-        got = self.message()["ok"]
-        records = np.empty(got, np.uint8)
-        view, filled = memoryview(records), 0
-        while filled < got:
-            k = self.child.stdout.readinto(view[filled:])
-            if not k:
-                raise RuntimeError(self._ended())
-            filled += k
-        return records
+        at = _pages(len(block))  # where the records go
+        total = at + _pages(out_bytes)
+        if self.memory is None or len(self.memory) < total:  # grown (the file, then this side's map; the child maps it anew)
+            os.ftruncate(self.fd, total)
+            if self.memory is not None:
+                self.memory.close()
+            self.memory = mmap.mmap(self.fd, total)
+        self.memory[: len(block)] = block
+        ask = {"size": len(block), "skip": int(skip), "vlr": bytes(vlr).hex(), "at": at, "out": int(out_bytes),
+               "total": len(self.memory), "parallel": bool(parallel)}  # fmt: skip
+        self.send(json.dumps(ask).encode())
+        self.message()
+        return np.frombuffer(self.memory, np.uint8, count=out_bytes, offset=at).copy()  # the map is the next request's
+
+    def close(self) -> None:
+        super().close()
+        if self.memory is not None:
+            self.memory.close()
+            self.memory = None
+        if self.fd >= 0:
+            os.close(self.fd)
+            self.fd = -1
+
+
+def _pages(n: int) -> int:
+    return -(-int(n) // mmap.PAGESIZE) * mmap.PAGESIZE
 
 
 _blocks: _BlockDecoder | None = None
@@ -200,9 +223,10 @@ def decode_block(block: bytes, vlr: bytes, out_bytes: int, skip: int = 0, parall
     table's 8-byte offset, counted from ``block``'s start, its chunks, the table), LASzip VLR
     data ``vlr``: decoded by one child process this process shares (started on first use,
     again after a crash), or here where no child can be had. Any failure of the decoder, a
-    crash included, is a RuntimeError with its reason in one line."""
+    crash included, is a RuntimeError with its reason in one line (``usable``'s conditions,
+    but for the file's decompressor)."""
     global _blocks
-    if not _wanted():
+    if not (_wanted() and hasattr(os, "memfd_create")):
         return _decode_here(block, skip, vlr, out_bytes, parallel)
     with _blocks_lock:  # one request at a time on the pipes
         if _blocks is None or not _blocks.alive():
