@@ -13,12 +13,12 @@ Why a second process:
 
 ``ChildRecords`` stands in for ``las._Records``: ``read(n)`` gives the next ``n`` records,
 valid until the next ``read``, here as a view of a slot of shared memory (a memfd the child
-inherits) that the child filled. It fills ``SLOTS`` slots in turn and reuses one only once
-this process has said (on the child's stdin) that the records there were read. The child
-imports only the standard library and lazrs, so it is ready in ~40 ms. Where a child cannot
-be had (no ``os.memfd_create``: not Linux; a ``sys.executable`` that is not a Python, in an
-application that embeds one; ``GIGAPOINT_LAZ_PROCESS=0``)
-``usable`` says no and the records are decoded in this process as before: the same bytes.
+inherits) that the child filled. It fills ``SLOTS`` slots in turn (two where they are large)
+and reuses one only once this process has said (on the child's stdin) that the records there
+were read. The child imports only the standard library and lazrs, so it is ready in ~40 ms.
+Where a child cannot be had (no ``os.memfd_create``: not Linux; a ``sys.executable`` that is
+not a Python, in an application that embeds one; ``GIGAPOINT_LAZ_PROCESS=0``) ``usable`` says
+no and the records are decoded in this process as before: the same bytes.
 """
 
 from __future__ import annotations
@@ -37,6 +37,9 @@ from pathlib import Path
 import numpy as np
 
 SLOTS = 3  # the chunk being read here, and two decoded ahead meanwhile
+#: slots larger than this come two at a time (one being read, one decoded ahead): convert's
+#: 2 M-point chunks are 68-134 MB of records a slot, which a third slot would add to its memory
+BIG_SLOT = 16 << 20
 ENV_SWITCH = "GIGAPOINT_LAZ_PROCESS"  # "0": decode LAZ in this process
 _CHILD = Path(__file__).with_name("_laz_child.py")
 
@@ -135,10 +138,11 @@ class ChildRecords(_Child):
         self._read_slot: int | None = None  # the slot the last read's records are in
         fd = os.memfd_create("gigapoint-laz")
         try:
-            os.ftruncate(fd, SLOTS * self.slot_bytes)
-            self.memory = mmap.mmap(fd, SLOTS * self.slot_bytes)
+            slots = SLOTS if self.slot_bytes <= BIG_SLOT else 2
+            os.ftruncate(fd, slots * self.slot_bytes)
+            self.memory = mmap.mmap(fd, slots * self.slot_bytes)
             job = {"mode": "records", "path": str(path), "offset": int(offset), "vlr": bytes(vlr).hex(), "start": int(start),
-                   "stop": int(stop), "parallel": bool(parallel), "fd": fd, "slots": SLOTS, "slot_bytes": self.slot_bytes,
+                   "stop": int(stop), "parallel": bool(parallel), "fd": fd, "slots": slots, "slot_bytes": self.slot_bytes,
                    "per_slot": int(per_read)}  # fmt: skip
             super().__init__(job, pass_fds=(fd,))
         except BaseException:
