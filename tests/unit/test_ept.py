@@ -287,3 +287,16 @@ def test_a_damaged_laszip_node_is_a_one_line_error(broken):
     data[at : at + 4_000] = b"\xff" * 4_000
     victim.write_bytes(bytes(data))
     _fails(d, f"cannot decode node {victim.stem}")
+
+
+def test_a_laszip_node_whose_header_disagrees_with_the_hierarchy(broken):
+    """Checked before its header's count sizes anything (a corrupt count could ask for GBs)."""
+    import laspy
+
+    d = broken("laszip")
+    victim = max((d / "ept-data").iterdir(), key=lambda f: f.stat().st_size)
+    las = laspy.read(victim)
+    n = len(las.points)
+    las.points = las.points[: n - 5]
+    las.write(victim)
+    _fails(d, f"ept-data/{victim.stem}.laz holds {n - 5:,} points, the hierarchy says {n:,}")

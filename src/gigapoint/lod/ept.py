@@ -185,6 +185,10 @@ class EptCloud(VoxelOctree):
         # the node's LAZ: its header read here, its points decoded in a child process
         # (io/laz_process.py: lazrs crashes on some corrupt data)
         header = laspy.LasHeader.read_from(io.BytesIO(blob))
+        if header.point_count != n:  # (before anything is sized by a header's count)
+            raise InputError(
+                f"{self.source.name}: ept-data/{voxel_name(int(self.keys[index]))}.laz holds {header.point_count:,} points, the hierarchy says {n:,}"
+            )
         if not header.are_points_compressed:
             pts = laspy.PackedPointRecord(
                 np.frombuffer(blob, header.point_format.dtype(), count=header.point_count, offset=header.offset_to_point_data),
