@@ -212,3 +212,33 @@ def test_blocks_decoded_by_the_shared_child_are_laspys_records_even_after_a_cras
         np.testing.assert_array_equal(r, expected)
     monkeypatch.setenv(laz_process.ENV_SWITCH, "0")  # decoded in this process: the same bytes
     np.testing.assert_array_equal(laz_process.decode_block(blob, vlr, size, skip=skip), expected)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="fork")
+def test_a_forked_process_starts_its_own_block_decoder(tmp_path):
+    """After a fork both processes decode blocks, each through its own child (the parent's
+    pipes are not the forked process's to use); run in a new process, which has no threads."""
+    path = _write_laz(tmp_path / "a.laz", 30_000)
+    code = (
+        "import io, os, sys, laspy, numpy as np\n"
+        "from gigapoint.io import laz_process\n"
+        "blob = open(sys.argv[1], 'rb').read()\n"
+        "h = laspy.LasHeader.read_from(io.BytesIO(blob))\n"
+        "vlr = h.vlrs[h.vlrs.index('LasZipVlr')].record_data\n"
+        "size = h.point_count * h.point_format.size\n"
+        "expected = np.frombuffer(laspy.read(sys.argv[1]).points.array.tobytes(), np.uint8)\n"
+        "def ok():\n"
+        "    return np.array_equal(laz_process.decode_block(blob, vlr, size, skip=h.offset_to_point_data), expected)\n"
+        "assert ok()\n"
+        "parents = laz_process._blocks.child.pid\n"
+        "pid = os.fork()\n"
+        "if pid == 0:\n"
+        "    good = ok() and laz_process._blocks.child.pid != parents\n"
+        "    os._exit(0 if good else 3)\n"
+        "_, status = os.waitpid(pid, 0)\n"
+        "assert os.waitstatus_to_exitcode(status) == 0, status\n"
+        "assert ok() and laz_process._blocks.child.pid == parents\n"
+        "print('fine')\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0 and run.stdout.strip() == "fine", run.stderr

@@ -201,8 +201,12 @@ class _BlockDecoder(_Child):
         ask = {"size": len(block), "skip": int(skip), "vlr": bytes(vlr).hex(), "at": at, "out": int(out_bytes),
                "total": len(self.memory), "parallel": bool(parallel)}  # fmt: skip
         self.send(json.dumps(ask).encode())
-        self.message()
-        return np.frombuffer(self.memory, np.uint8, count=out_bytes, offset=at).copy()  # the map is the next request's
+        try:
+            self.message()
+            return np.frombuffer(self.memory, np.uint8, count=out_bytes, offset=at).copy()  # the map is the next request's
+        finally:
+            if total > BIG_SLOT and hasattr(mmap, "MADV_REMOVE"):  # a large request's pages go back (the file keeps its
+                self.memory.madvise(mmap.MADV_REMOVE, 0, total)  # size): held for the process's life otherwise
 
     def close(self) -> None:
         super().close()
@@ -220,6 +224,26 @@ def _pages(n: int) -> int:
 
 _blocks: _BlockDecoder | None = None
 _blocks_lock = threading.Lock()
+
+
+def _forget_after_fork() -> None:
+    """In a forked process: the parent's decoder is not this process's to talk to (their
+    messages would mix on the pipes); its copies of the pipes and the memfd are closed, so the
+    parent's child still ends when the parent does, and this process starts its own. The lock
+    is new: a thread of the parent may have held it at the fork, and would never release it here."""
+    global _blocks, _blocks_lock
+    if _blocks is not None and _blocks.child is not None:
+        for f in (_blocks.child.stdin, _blocks.child.stdout):
+            with contextlib.suppress(OSError):
+                f.close()
+        with contextlib.suppress(OSError):
+            os.close(_blocks.fd)
+    _blocks = None
+    _blocks_lock = threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_after_fork)
 
 
 def decode_block(block: bytes, vlr: bytes, out_bytes: int, skip: int = 0, parallel: bool = True) -> np.ndarray:
