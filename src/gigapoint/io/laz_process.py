@@ -23,6 +23,7 @@ no and the records are decoded in this process as before: the same bytes.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import json
 import mmap
@@ -242,6 +243,16 @@ def _forget_after_fork() -> None:
     _blocks_lock = threading.Lock()
 
 
+def _close_blocks() -> None:
+    """At exit: the decoder's child stopped, its pipes and memory closed (else they are left to
+    the interpreter's teardown, which warns about each)."""
+    global _blocks
+    if _blocks is not None:
+        _blocks.close()
+        _blocks = None
+
+
+atexit.register(_close_blocks)
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_forget_after_fork)
 
