@@ -242,3 +242,42 @@ def test_a_forked_process_starts_its_own_block_decoder(tmp_path):
     )
     run = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=120)
     assert run.returncode == 0 and run.stdout.strip() == "fine", run.stderr
+
+
+def test_a_chunk_table_that_makes_lazrs_panic_is_a_one_line_error(tmp_path):
+    """0xFF over a LAZ's chunk table: lazrs panics while it reads the table (in this process,
+    before any decoding), and pyo3's PanicException is a BaseException that ``except Exception``
+    misses. It is the file's one-line error everywhere, and Rust's own panic message is not
+    printed around it."""
+    import struct
+
+    from gigapoint.io import file_info
+    from gigapoint.io.las import read_las_header
+
+    good = _write_laz(tmp_path / "good.laz", 600_000)  # (12 chunks: a smaller table decodes to absurd sizes, said too)
+    data = bytearray(good.read_bytes())
+    (table,) = struct.unpack_from("<q", data, read_las_header(good).offset_to_point_data)
+    data[table + 8 :] = b"\xff" * (len(data) - table - 8)  # after the table's version and chunk count
+    bad = tmp_path / "bad.laz"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(InputError, match=r"bad\.laz: corrupt LAZ chunk table: index out of bounds"):
+        next(read_chunks(bad, 10_000))
+    with pytest.raises(InputError, match="corrupt LAZ chunk table"):
+        file_info(bad)
+    run = subprocess.run([sys.executable, "-m", "gigapoint.cli", "info", str(bad)], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "RUST_BACKTRACE": "1"})  # fmt: skip
+    assert run.returncode == 1
+    assert run.stderr.strip().splitlines() == [f"error: {bad}: corrupt LAZ chunk table: index out of bounds: the len is 18 but the index is 20"]
+
+
+def test_where_no_child_can_be_started_the_records_are_decoded_here(tmp_path, monkeypatch):
+    path = _write_laz(tmp_path / "a.laz", 30_000)
+    monkeypatch.setenv(laz_process.ENV_SWITCH, "0")
+    here = list(read_chunks(path, 4_000, start=5_000))
+    monkeypatch.delenv(laz_process.ENV_SWITCH)
+
+    def no_process(*args, **kwargs):
+        raise OSError("Resource temporarily unavailable")  # as fork() says at the process limit
+
+    monkeypatch.setattr(laz_process.subprocess, "Popen", no_process)
+    _same_chunks(list(read_chunks(path, 4_000, start=5_000)), here)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import io
 import math
+import os
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -188,6 +189,32 @@ def _check_evlrs(path: Path, f, hdr: LasHeader) -> int:
     return start
 
 
+def bad_data(exc: BaseException) -> bool:
+    """Whether ``exc`` is laspy's or lazrs's failure on bad data: any Exception, and a panic of
+    lazrs's Rust code, which pyo3 raises as a PanicException, a BaseException that ``except
+    Exception`` lets through (a corrupt chunk table: a traceback where one line was due)."""
+    return isinstance(exc, Exception) or type(exc).__name__ == "PanicException"
+
+
+@contextlib.contextmanager
+def _rust_panics_unprinted():
+    """fd 2 pointed at /dev/null for a short lazrs call: a panic raises a PanicException, said
+    in the one-line error, but Rust's panic hook first prints it (and, with RUST_BACKTRACE, a
+    backtrace) to stderr itself. Milliseconds: another thread's stderr meanwhile is lost."""
+    try:
+        saved, null = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+    except OSError:  # no fds to spare: printed, then
+        yield
+        return
+    try:
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(null)
+
+
 def _check_laz(path: Path, f, hdr: LasHeader) -> None:
     """Check a LAZ file's chunk table against the file size and the header's point count."""
     import lazrs
@@ -220,9 +247,12 @@ def _check_laz(path: Path, f, hdr: LasHeader) -> None:
         raise fail(path, f"corrupt LAZ file: chunk table lists {n_chunks:,} chunks, the compressed data has room for at most {max_chunks:,}")
     f.seek(start)
     try:
-        table = lazrs.read_chunk_table(f, lazrs.LazVlr(vlr_data))
-    except Exception as exc:  # noqa: BLE001 - lazrs.LazrsError, OSError, ...: a corrupt table, said in one line
-        raise fail(path, f"corrupt LAZ chunk table: {exc}") from None
+        with _rust_panics_unprinted():
+            table = lazrs.read_chunk_table(f, lazrs.LazVlr(vlr_data))
+    except BaseException as exc:  # lazrs.LazrsError, OSError, a panic...: a corrupt table, said in one line
+        if not bad_data(exc):
+            raise
+        raise fail(path, f"corrupt LAZ chunk table: {one_line(exc) or type(exc).__name__}") from None
     if table is None:
         return
     counts = [int(c[0]) for c in table]
@@ -448,20 +478,26 @@ class LasReader(Reader):
                     reader.seek(start)
             except (InputError, MemoryError):
                 raise
-            except Exception as exc:  # noqa: BLE001 - laspy / lazrs / OS errors on corrupt data
+            except BaseException as exc:  # laspy / lazrs / OS errors (and lazrs's panics) on corrupt data
+                if not bad_data(exc):
+                    raise
                 raise corrupt(exc) from None
             attrs = [a for a in LAS_ATTRIBUTES if a in dims]
             has_rgb = {"red", "green", "blue"} <= dims
             stored_scale = tuple(float(abs(s)) for s in scale)  # PointChunk.scale: the resolution the file stores
             scaler = ColorScaler() if scaler is None else scaler
             most = min(chunk_size, stop - done)
+            records = None
             if in_child:  # decoded by a child process (io/laz_process.py: a crash of lazrs is an error there, and no GIL is held)
                 laszip = next(d for u, r, d in hdr.vlrs if u == LASZIP_USER_ID and r == LASZIP_RECORD_ID)
                 parallel = type(decompressor).__name__ == "ParLasZipDecompressor"
-                records = laz_process.ChildRecords(
-                    path, hdr.offset_to_point_data, laszip, done, stop, most, reader.header.point_format, parallel
-                )
-            else:
+                with contextlib.suppress(OSError):  # no process or memory to be had: decoded here, as below
+                    records = laz_process.ChildRecords(
+                        path, hdr.offset_to_point_data, laszip, done, stop, most, reader.header.point_format, parallel
+                    )
+                if records is None and start:
+                    reader.seek(start)
+            if records is None:
                 records = _Records(reader, most)
             stack.callback(records.close)
             while done < stop:
@@ -469,7 +505,9 @@ class LasReader(Reader):
                     pts = records.read(min(chunk_size, stop - done))
                 except (InputError, MemoryError):
                     raise
-                except Exception as exc:  # noqa: BLE001 - as above
+                except BaseException as exc:  # as above
+                    if not bad_data(exc):
+                        raise
                     raise corrupt(exc) from None
                 n = len(pts)
                 if n == 0:
@@ -496,7 +534,9 @@ class LasReader(Reader):
                 creation = header.creation_date.isoformat() if header.creation_date else None
         except InputError:
             raise
-        except Exception as exc:  # noqa: BLE001 - laspy raises many types on corrupt headers
+        except BaseException as exc:  # laspy raises many types on corrupt headers (lazrs panics too)
+            if not bad_data(exc):
+                raise
             raise fail(path, f"corrupt {'LAZ' if hdr.compressed else 'LAS'} header: {exc}") from None
         attrs = [a for a in LAS_ATTRIBUTES if a in dims]
         return {
