@@ -28,6 +28,7 @@ from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
 from ..errors import InputError
 from ..io._base import ColorScaler
+from ..io.las import bad_data
 from .keys import MAX_LEVEL, ROOT_KEY, key_cube, level_of
 from .octree_dir import POINT_ARRAYS
 from .store import OctreeCloud
@@ -295,7 +296,9 @@ class VoxelOctree(OctreeCloud):
                 d = self._decode(index, blob)
             except InputError:
                 raise
-            except Exception as exc:  # noqa: BLE001 - any decoding failure is a corrupt node
+            except BaseException as exc:  # any decoding failure is a corrupt node (lazrs's panics too: io/las.bad_data)
+                if not bad_data(exc):
+                    raise
                 raise InputError(f"{self.source_name}: cannot decode node {voxel_name(key)} ({' '.join(str(exc).split())})") from None
         xyz = d["xyz"]
         if len(xyz) != n:
@@ -331,7 +334,9 @@ class VoxelOctree(OctreeCloud):
         blobs = [self._blobs[j] for j in members]
         try:
             decoded = self._decode_batch(members, blobs)
-        except Exception:  # noqa: BLE001 - decoded again one by one, which reports the node
+        except BaseException as exc:  # decoded again one by one, which reports the node
+            if not bad_data(exc):
+                raise
             decoded = None
         if decoded is None:
             return
