@@ -1,4 +1,5 @@
-"""LAZ point records decoded in a child process (``_laz_child.py``), for ``LasReader.read_chunks``.
+"""LAZ point records decoded in a child process (``_laz_child.py``): ``LasReader.read_chunks``'s
+(``ChildRecords``), and COPC's and EPT's nodes' (``decode_block``).
 
 Why a second process:
 
@@ -18,7 +19,11 @@ and reuses one only once this process has said (on the child's stdin) that the r
 were read. The child imports only the standard library and lazrs, so it is ready in ~40 ms.
 Where a child cannot be had (no ``os.memfd_create``: not Linux; a ``sys.executable`` that is
 not a Python, in an application that embeds one; ``GIGAPOINT_LAZ_PROCESS=0``) ``usable`` says
-no and the records are decoded in this process as before: the same bytes.
+no and the records are decoded in this process as before: the same bytes (also where starting
+the child fails).
+
+``decode_block`` does the same for the LAZ point blocks of COPC and EPT nodes, through one
+child per process that takes requests one at a time.
 """
 
 from __future__ import annotations
