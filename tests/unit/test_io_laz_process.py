@@ -281,3 +281,7 @@ def test_where_no_child_can_be_started_the_records_are_decoded_here(tmp_path, mo
 
     monkeypatch.setattr(laz_process.subprocess, "Popen", no_process)
     _same_chunks(list(read_chunks(path, 4_000, start=5_000)), here)
+    blob, skip, vlr, size = _block_of(path)  # COPC's and EPT's blocks too
+    monkeypatch.setattr(laz_process, "_blocks", None)
+    expected = np.frombuffer(laspy.read(path).points.array.tobytes(), np.uint8)
+    np.testing.assert_array_equal(laz_process.decode_block(blob, vlr, size, skip=skip), expected)

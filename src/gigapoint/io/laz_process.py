@@ -266,7 +266,7 @@ def decode_block(block: bytes, vlr: bytes, out_bytes: int, skip: int = 0, parall
     """``out_bytes`` of point records (uint8) of the LAZ point block ``block[skip:]`` (its chunk
     table's 8-byte offset, counted from ``block``'s start, its chunks, the table), LASzip VLR
     data ``vlr``: decoded by one child process this process shares (started on first use,
-    again after a crash), or here where no child can be had. Any failure of the decoder, a
+    again after a crash), or here where no child can be had or started. Any failure of the decoder, a
     crash included, is a RuntimeError with its reason in one line (``usable``'s conditions,
     but for the file's decompressor)."""
     global _blocks
@@ -276,7 +276,11 @@ def decode_block(block: bytes, vlr: bytes, out_bytes: int, skip: int = 0, parall
         if _blocks is None or not _blocks.alive():
             if _blocks is not None:
                 _blocks.close()
-            _blocks = _BlockDecoder()
+                _blocks = None
+            try:
+                _blocks = _BlockDecoder()
+            except OSError:  # no process or memfd to be had (a process limit, a sandbox): decoded here
+                return _decode_here(block, skip, vlr, out_bytes, parallel)
         return _blocks.decode(block, skip, vlr, out_bytes, parallel)
 
 
