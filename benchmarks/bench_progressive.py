@@ -46,6 +46,8 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import statistics
 import subprocess
 import tempfile
@@ -145,13 +147,23 @@ def _laspy_decode(path: Path) -> None:
             pass
 
 
+@contextlib.contextmanager
+def _laz_decoded(in_child: bool):
+    """LAZ decoded by the child process (io/laz_process.py, the default) or in this process
+    (GIGAPOINT_LAZ_PROCESS=0) within the block."""
+    from gigapoint.io import laz_process
+
+    os.environ[laz_process.ENV_SWITCH] = "1" if in_child else "0"
+    try:
+        yield
+    finally:
+        os.environ.pop(laz_process.ENV_SWITCH)
+
+
 def bench_load(n: int, rounds: int) -> None:
     """Progressive loads to completion against decoding alone; a LAZ both ways: decoded by the
     child process (io/laz_process.py, the default) and in this process (GIGAPOINT_LAZ_PROCESS=0),
     rounds alternating."""
-    import os
-
-    from gigapoint.io import laz_process
 
     def timed(run) -> float:
         t = time.perf_counter()
@@ -159,12 +171,8 @@ def bench_load(n: int, rounds: int) -> None:
         return time.perf_counter() - t
 
     def load(path, child: bool) -> None:
-        os.environ[laz_process.ENV_SWITCH] = "1" if child else "0"
-        try:
-            with gp.open(path, progressive=True) as cloud:
-                cloud.wait()
-        finally:
-            os.environ.pop(laz_process.ENV_SWITCH)
+        with _laz_decoded(child), gp.open(path, progressive=True) as cloud:
+            cloud.wait()
 
     with tempfile.TemporaryDirectory() as tmp:
         for path in _town_files(tmp, n, ("laz", "las")):
@@ -304,10 +312,7 @@ def bench_gil(n: int) -> None:
     that only sleeps, for the baseline, and the progressive load of the file; decoding and
     loading both with the LAZ decoded in a child process (io/laz_process.py, the default) and
     in this process (GIGAPOINT_LAZ_PROCESS=0)."""
-    import os
     import threading
-
-    from gigapoint.io import laz_process
 
     def stalls(work) -> str:
         thread = threading.Thread(target=work)
@@ -332,11 +337,10 @@ def bench_gil(n: int) -> None:
             with gp.open(path, progressive=True) as cloud:
                 cloud.wait()
 
-        for where, switch in (("in a child process", "1"), ("in this process", "0")):
-            os.environ[laz_process.ENV_SWITCH] = switch
-            print(f"a thread decoding {n / 1e6:g} M points of LAZ (250 k a call), {where}: {stalls(decode)}")
-            print(f"a thread loading them progressively, decoded {where}: {stalls(load)}")
-        os.environ.pop(laz_process.ENV_SWITCH)
+        for where, in_child in (("in a child process", True), ("in this process", False)):
+            with _laz_decoded(in_child):
+                print(f"a thread decoding {n / 1e6:g} M points of LAZ (250 k a call), {where}: {stalls(decode)}")
+                print(f"a thread loading them progressively, decoded {where}: {stalls(load)}")
         print(f"a thread sleeping 2 s: {stalls(lambda: time.sleep(2.0))}")
 
 

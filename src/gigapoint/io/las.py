@@ -189,13 +189,6 @@ def _check_evlrs(path: Path, f, hdr: LasHeader) -> int:
     return start
 
 
-def bad_data(exc: BaseException) -> bool:
-    """Whether ``exc`` is laspy's or lazrs's failure on bad data: any Exception, and a panic of
-    lazrs's Rust code, which pyo3 raises as a PanicException, a BaseException that ``except
-    Exception`` lets through (a corrupt chunk table: a traceback where one line was due)."""
-    return isinstance(exc, Exception) or type(exc).__name__ == "PanicException"
-
-
 @contextlib.contextmanager
 def _rust_panics_unprinted():
     """fd 2 pointed at /dev/null for a short lazrs call: a panic raises a PanicException, said
@@ -250,7 +243,7 @@ def _check_laz(path: Path, f, hdr: LasHeader) -> None:
         with _rust_panics_unprinted():
             table = lazrs.read_chunk_table(f, lazrs.LazVlr(vlr_data))
     except BaseException as exc:  # lazrs.LazrsError, OSError, a panic...: a corrupt table, said in one line
-        if not bad_data(exc):
+        if not laz_process.bad_data(exc):
             raise
         raise fail(path, f"corrupt LAZ chunk table: {one_line(exc) or type(exc).__name__}") from None
     if table is None:
@@ -479,7 +472,7 @@ class LasReader(Reader):
             except (InputError, MemoryError):
                 raise
             except BaseException as exc:  # laspy / lazrs / OS errors (and lazrs's panics) on corrupt data
-                if not bad_data(exc):
+                if not laz_process.bad_data(exc):
                     raise
                 raise corrupt(exc) from None
             attrs = [a for a in LAS_ATTRIBUTES if a in dims]
@@ -506,7 +499,7 @@ class LasReader(Reader):
                 except (InputError, MemoryError):
                     raise
                 except BaseException as exc:  # as above
-                    if not bad_data(exc):
+                    if not laz_process.bad_data(exc):
                         raise
                     raise corrupt(exc) from None
                 n = len(pts)
@@ -535,7 +528,7 @@ class LasReader(Reader):
         except InputError:
             raise
         except BaseException as exc:  # laspy raises many types on corrupt headers (lazrs panics too)
-            if not bad_data(exc):
+            if not laz_process.bad_data(exc):
                 raise
             raise fail(path, f"corrupt {'LAZ' if hdr.compressed else 'LAS'} header: {exc}") from None
         attrs = [a for a in LAS_ATTRIBUTES if a in dims]

@@ -50,6 +50,13 @@ ENV_SWITCH = "GIGAPOINT_LAZ_PROCESS"  # "0": decode LAZ in this process
 _CHILD = Path(__file__).with_name("_laz_child.py")
 
 
+def bad_data(exc: BaseException) -> bool:
+    """Whether ``exc`` is laspy's or lazrs's failure on bad data: any Exception, and a panic of
+    lazrs's Rust code, which pyo3 raises as a PanicException, a BaseException that ``except
+    Exception`` lets through (a corrupt chunk table: a traceback where one line was due)."""
+    return isinstance(exc, Exception) or type(exc).__name__ == "PanicException"
+
+
 def _wanted() -> bool:
     """Whether a child may decode here at all (a Python to start it with, and not switched off)."""
     return Path(sys.executable or "").name.startswith(("python", "pypy")) and os.environ.get(ENV_SWITCH, "1") != "0"
@@ -139,7 +146,7 @@ class ChildRecords(_Child):
         self.point_format = point_format
         self.dtype = point_format.dtype()
         self.size = point_format.size
-        self.slot_bytes = -(-per_read * self.size // mmap.PAGESIZE) * mmap.PAGESIZE
+        self.slot_bytes = _pages(per_read * self.size)
         self.memory = None
         self._read_slot: int | None = None  # the slot the last read's records are in
         fd = os.memfd_create("gigapoint-laz")

@@ -189,15 +189,9 @@ class EptCloud(VoxelOctree):
             raise InputError(
                 f"{self.source.name}: ept-data/{voxel_name(int(self.keys[index]))}.laz holds {header.point_count:,} points, the hierarchy says {n:,}"
             )
-        if not header.are_points_compressed:
-            pts = laspy.PackedPointRecord(
-                np.frombuffer(blob, header.point_format.dtype(), count=header.point_count, offset=header.offset_to_point_data),
-                header.point_format,
-            )
-        else:
-            laszip = header.vlrs[header.vlrs.index("LasZipVlr")].record_data
-            records = laz_process.decode_block(blob, laszip, header.point_count * header.point_format.size, skip=header.offset_to_point_data)
-            pts = laspy.PackedPointRecord(records.view(header.point_format.dtype()), header.point_format)
+        laszip = header.vlrs[header.vlrs.index("LasZipVlr")].record_data  # (ValueError, said as the node's: not a LAZ)
+        records = laz_process.decode_block(blob, laszip, header.point_count * header.point_format.size, skip=header.offset_to_point_data)
+        pts = laspy.PackedPointRecord(records.view(header.point_format.dtype()), header.point_format)
         raw = pts.array
         xyz = np.empty((len(raw), 3), np.float64)
         _scaled_xyz(raw["X"], raw["Y"], raw["Z"], np.asarray(header.scales, np.float64), np.asarray(header.offsets, np.float64), xyz)

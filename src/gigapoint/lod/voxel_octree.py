@@ -28,7 +28,7 @@ from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
 from ..errors import InputError
 from ..io._base import ColorScaler
-from ..io.las import bad_data
+from ..io.laz_process import bad_data
 from .keys import MAX_LEVEL, ROOT_KEY, key_cube, level_of
 from .octree_dir import POINT_ARRAYS
 from .store import OctreeCloud
@@ -296,7 +296,7 @@ class VoxelOctree(OctreeCloud):
                 d = self._decode(index, blob)
             except InputError:
                 raise
-            except BaseException as exc:  # any decoding failure is a corrupt node (lazrs's panics too: io/las.bad_data)
+            except BaseException as exc:  # any decoding failure is a corrupt node (lazrs's panics too: io/laz_process.bad_data)
                 if not bad_data(exc):
                     raise
                 raise InputError(f"{self.source_name}: cannot decode node {voxel_name(key)} ({' '.join(str(exc).split())})") from None
