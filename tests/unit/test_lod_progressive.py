@@ -9,6 +9,7 @@ a converted octree; a reader drawing while a writer inserts sees consistent fram
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 
@@ -1061,27 +1062,55 @@ def test_render_builds_an_octree_for_inputs_above_the_budget_and_waits_for_it(tm
     assert r.returncode == 0 and "60,000 of 60,000 points" in r.stderr, r.stderr
 
 
-def test_work_arrays_held_between_batches_build_the_same_octree_and_are_let_go(scene, octree):
-    """holding_work keeps the insertions' work arrays from one add to the next (a snapshot's
-    batches): a batch must not see the last one's leftovers (sort keys, voxel cell entries, split
-    leaves' points in the same arrays): the pool, nodes and voxels come out as without it."""
-    xyz, rgba, attrs = scene
-    o = ProgressiveOctree("t", max_leaf=3_000, cube=_cube(xyz))
-    with o.holding_work():
-        for s in range(0, len(xyz), 20_000):
-            o.add(xyz[s : s + 20_000], rgba[s : s + 20_000], **{a: v[s : s + 20_000] for a, v in attrs.items()})
-        held = o.memory()["work"]
-    assert held > 0 and o.memory()["work"] == 0
-    assert (o.n_nodes, o.n_voxels, o.points) == (octree.n_nodes, octree.n_voxels, octree.points)
+def _same_octree(o: ProgressiveOctree, want: ProgressiveOctree, attrs) -> None:
+    """Pool, nodes and voxels of ``o`` the same as ``want``'s."""
+    assert (o.n_nodes, o.n_voxels, o.points) == (want.n_nodes, want.n_voxels, want.points)
     n, lists = o.n_nodes, o.n_nodes * 8
     for a in ("key", "leaf", "count", "first_chunk", "list_count"):
-        np.testing.assert_array_equal(getattr(o, a)[: lists if a in ("first_chunk", "list_count") else n], getattr(octree, a)[: lists if a in ("first_chunk", "list_count") else n])
+        np.testing.assert_array_equal(getattr(o, a)[: lists if a in ("first_chunk", "list_count") else n], getattr(want, a)[: lists if a in ("first_chunk", "list_count") else n])
     used = o._n_chunks * o.pool.chunk
-    for got, want in [(o.pool.low, octree.pool.low), (o.pool.color, octree.pool.color), (o.vox_sum[: o.n_voxels], octree.vox_sum[: o.n_voxels])]:
-        np.testing.assert_array_equal(got[: len(got) if got.ndim > 1 else used], want[: len(want) if want.ndim > 1 else used])
-    np.testing.assert_array_equal(o.pool.ext[: o._n_streams * o.pool.stream], octree.pool.ext[: octree._n_streams * octree.pool.stream])
+    for got, ref in [(o.pool.low, want.pool.low), (o.pool.color, want.pool.color), (o.vox_sum[: o.n_voxels], want.vox_sum[: want.n_voxels])]:
+        np.testing.assert_array_equal(got[: len(got) if got.ndim > 1 else used], ref[: len(ref) if ref.ndim > 1 else used])
+    np.testing.assert_array_equal(o.pool.ext[: o._n_streams * o.pool.stream], want.pool.ext[: want._n_streams * want.pool.stream])
     for a in attrs:
-        np.testing.assert_array_equal(o.pool.attributes[a][:used], octree.pool.attributes[a][:used])
+        np.testing.assert_array_equal(o.pool.attributes[a][:used], want.pool.attributes[a][:used])
+
+
+@pytest.mark.parametrize("mode", ["kept", "held"])
+def test_work_arrays_kept_between_batches_build_the_same_octree_and_are_let_go(scene, mode):
+    """``add`` keeps its work arrays from one batch to the next (up to keep_work_bytes; all of
+    them within holding_work, a snapshot's batches): a batch must not see the last one's
+    leftovers (sort keys, voxel cell entries, split leaves' points in the same arrays): the pool,
+    nodes and voxels come out as when every batch makes its own. ``trim`` (the loader's end) and
+    the end of holding_work let them go; beyond the bound nothing more is kept."""
+    xyz, rgba, attrs = scene
+
+    def filled(o, block=contextlib.nullcontext()):
+        worked = []
+        with block:
+            for s in range(0, len(xyz), 20_000):
+                o.add(xyz[s : s + 20_000], rgba[s : s + 20_000], **{a: v[s : s + 20_000] for a, v in attrs.items()})
+                worked.append(o.memory()["work"])
+        return worked
+
+    def keeping(limit: int | None) -> ProgressiveOctree:
+        return type("Keeping", (ProgressiveOctree,), {"keep_work_bytes": limit})("t", max_leaf=3_000, cube=_cube(xyz))
+
+    fresh = keeping(0)
+    assert set(filled(fresh)) == {0}
+    o = ProgressiveOctree("t", max_leaf=3_000, cube=_cube(xyz))
+    worked = filled(o, o.holding_work() if mode == "held" else contextlib.nullcontext())
+    assert min(worked) > 0  # kept from the first batch on
+    _same_octree(o, fresh, attrs)
+    if mode == "held":
+        assert o.memory()["work"] == 0
+    else:
+        assert 0 < o.memory()["work"] <= o.keep_work_bytes
+        o.trim()
+        assert o.memory()["work"] == 0
+    bounded = keeping(max(worked) // 3)
+    assert 0 < max(filled(bounded)) <= bounded.keep_work_bytes
+    _same_octree(bounded, fresh, attrs)
 
 
 def _voxel_mean(vox_sum: np.ndarray) -> np.ndarray:

@@ -207,28 +207,32 @@ def _runs(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return values[starts], np.diff(np.append(starts, len(values)))
 
 
+_KEEP_WORK_BYTES = 256 << 20  # work arrays an octree keeps from one insertion to the next (batches up to ~3 M points)
+
+
 class _Work:
     """An insertion's work arrays (sort keys, sorted codes, voxel cell entries, split leaves'
-    points...): ``get(name, n, dtype)`` makes a new array, or with ``keep`` gives the first ``n``
-    rows of the one kept under ``name``, made anew only when a batch needs more
-    (ProgressiveOctree.holding_work). On the Intel Xeon VM a page freed and touched again a second
-    later costs nearly what a fresh one does (1-2.5 ms a MB: the guest hands freed memory back to
-    its host): made anew for each of its 18 10^6-point batches, they cost an 18 M-point snapshot a
-    median 1.4 s of system time, kept 0.8 s (12 runs each); an 8 M insertion of 8 batches (#18's
-    benchmark) gained nothing (their first touch costs what the faults saved), so ``add`` alone
-    does not keep them (docs/benchmarks.md)."""
+    points...): ``get(name, n, dtype)`` gives the first ``n`` rows of the array kept under
+    ``name``, made anew only when a batch needs more, and kept while all kept arrays stay within
+    ``keep_bytes`` (ProgressiveOctree.keep_work_bytes; None: any size, holding_work; 0: none). A large array is an mmap of
+    its own that goes back to the kernel when freed, and on these VMs (the guest hands freed
+    memory back to its host) touching it again costs what fresh memory does (1-2.5 ms a MB):
+    made anew for each 10^6-point batch, they cost a 20 M-point insertion 1-2 s of system time
+    (docs/benchmarks.md, "Ninth session"). ``trim`` and ``close`` let them go."""
 
-    def __init__(self, keep: bool = False) -> None:
-        self.keep = keep
+    def __init__(self, keep_bytes: int | None = 0) -> None:
+        self.keep_bytes = keep_bytes
         self.arrays: dict[str, np.ndarray] = {}
 
     def get(self, name: str, n: int, dtype, width: int = 0) -> np.ndarray:
         a = self.arrays.get(name)
         if a is None or len(a) < n or a.dtype != dtype:
             rows = max(n, len(a) * 3 // 2 if a is not None else 0)
-            a = pages.empty((rows, width) if width else rows, dtype)
-            if self.keep:
-                self.arrays[name] = a
+            new = pages.empty((rows, width) if width else rows, dtype)
+            kept = self.nbytes - (a.nbytes if a is not None else 0) + new.nbytes
+            if self.keep_bytes is None or kept <= self.keep_bytes:
+                self.arrays[name] = new
+            a = new
         return a[:n]
 
     def rows(self, name: str) -> int:
@@ -306,6 +310,8 @@ class ProgressiveOctree:
     """An LOD octree filled by ``add`` (or a background loader: gigapoint.open(..., progressive=True))
     and drawable at any moment (a Renderable: core/renderable.py)."""
 
+    #: bytes of work arrays kept from one insertion to the next (_Work)
+    keep_work_bytes = _KEEP_WORK_BYTES
     #: frames select and cull nodes by the box of the points below them (kept at insertion),
     #: else by their cubes (bench_progressive.py --parts select compares the two)
     select_by_points = True
@@ -342,7 +348,7 @@ class ProgressiveOctree:
         self._vox(1 << 16)
         self._hkeys, self._hvals = _voxel_table(1 << 17)
         self._run_lo = self._run_hi = self._ent_start = self._ent_count = np.empty(0, np.int64)  # sample_runs' scratch
-        self._work = _Work()  # insertions' work arrays (kept from one to the next while holding_work)
+        self._work = _Work(self.keep_work_bytes)  # insertions' work arrays, kept from one to the next
         self._holding = 0
         self._free = np.zeros(_INITIAL_CHUNKS, np.int64)
         self._n_free = 0
@@ -485,7 +491,7 @@ class ProgressiveOctree:
     def _drop_voxel_state(self) -> None:
         """Drop the voxels' build state, and the insertions' work arrays with it."""
         self._voxel_state = False
-        self._work = _Work(self._work.keep)
+        self._work = _Work(self._work.keep_bytes)
         self.vox_key, self.vox_slot, self.vox_sum = np.zeros(0, np.uint64), np.zeros(0, np.uint32), np.zeros((0, 5), np.uint32)
         self._hkeys, self._hvals = np.zeros(0, np.uint64), np.zeros(0, np.uint32)
 
@@ -599,7 +605,7 @@ class ProgressiveOctree:
                 "batches": size(pool.batches, pool.packing, pool.chunk_next, pool.chunk_node, pool.batch_version),
             }  # fmt: skip
         m["voxels"] = size(self.vox_key, self.vox_slot, self.vox_sum, self._hkeys, self._hvals)
-        m["work"] = self._work.nbytes  # insertions' work arrays while held (address space: the rows touched are the largest batch's)
+        m["work"] = self._work.nbytes  # insertions' work arrays kept (address space: the rows touched are the largest batch's)
         m["nodes"] = size(self.key, self.level, self.parent, self.children, self.leaf, self.count, self.first_chunk, self.last_chunk,
                           self.list_count, self.cmin, self.cedge, self.grid_sample, self._free)  # fmt: skip
         return m
@@ -702,20 +708,20 @@ class ProgressiveOctree:
 
     @contextmanager
     def holding_work(self):
-        """Keep the insertions' work arrays from one ``add`` to the next until the block ends (many
-        batches in a row: LiveCloud.snapshot's): their pages are touched once, not once a batch
-        (``_Work``). ``memory()`` counts them as ``work`` meanwhile."""
+        """Keep the insertions' work arrays from one ``add`` to the next, whatever their size (not
+        only up to _KEEP_WORK_BYTES), until the block ends: many large batches in a row
+        (LiveCloud.snapshot's). ``memory()`` counts them as ``work``."""
         with self.lock:
             self._holding += 1
             if self._holding == 1:
-                self._work = _Work(keep=True)
+                self._work = _Work(None)
         try:
             yield self
         finally:
             with self.lock:
                 self._holding -= 1
                 if self._holding == 0:
-                    self._work = _Work()
+                    self._work = _Work(self.keep_work_bytes)
 
     def reading(self):
         """Held while a frame reads what ``prepare`` returned: no insertion moves it meanwhile
