@@ -1085,9 +1085,9 @@ def test_work_arrays_kept_between_batches_build_the_same_octree_and_are_let_go(s
     the end of holding_work let them go; beyond the bound nothing more is kept."""
     xyz, rgba, attrs = scene
 
-    def filled(o, block=contextlib.nullcontext()):
+    def filled(o, block=None):
         worked = []
-        with block:
+        with block or contextlib.nullcontext():
             for s in range(0, len(xyz), 20_000):
                 o.add(xyz[s : s + 20_000], rgba[s : s + 20_000], **{a: v[s : s + 20_000] for a, v in attrs.items()})
                 worked.append(o.memory()["work"])
