@@ -5,7 +5,8 @@
 
 - ``insert``: points already decoded (the demo town, in its generator's order, which spreads
   every batch over the whole town, and in scan order: 50 m strips), inserted in batches of 1 M
-  with the root cube given (as from LAS headers); JIT warm-up excluded. Reported: points/s,
+  with the root cube given (as from LAS headers); JIT warm-up excluded; the orders alternate
+  ``--rounds`` times (medians). Reported: points/s,
   voxels per point, memory per point against gigapoint's quantized layout of the same points
   (16 bytes + the attributes), while filling and once trimmed; and the converter's split of the
   same points into the same tree (sort and ``split_tree``) for comparison.
@@ -72,7 +73,7 @@ def _scan_order(xyz):
     return np.lexsort((xyz[:, 0], np.floor(xyz[:, 1] / 50.0)))
 
 
-def bench_insert(n: int, batch: int) -> None:
+def bench_insert(n: int, batch: int, rounds: int) -> None:
     xyz, rgba, attrs = demo_arrays(n, seed=1)
     lo, hi = xyz.min(axis=0), xyz.max(axis=0)
     cube = (lo - 0.5, float(np.max(hi - lo)) + 1.0)
@@ -82,22 +83,31 @@ def bench_insert(n: int, batch: int) -> None:
     layout = 16 + sum(v.dtype.itemsize for v in attrs.values())
     runs = (("generator order", np.arange(n), False), ("scan order", _scan_order(xyz), False),
             ("generator order, tree shaped first from every 32nd point (expect)", np.arange(n), True))  # fmt: skip
-    for name, order, shaped in runs:
-        x, c, at = xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()}
-        o = ProgressiveOctree("bench", cube=cube, capacity=n)
-        t = time.perf_counter()
-        if shaped:
-            o.expect(x[::32], 32.0)
-        for s in range(0, n, batch):
-            o.add(x[s : s + batch], c[s : s + batch], **{a: v[s : s + batch] for a, v in at.items()})
-        dt = time.perf_counter() - t
-        filling = o.nbytes
-        o.trim()  # as the loader does when loading ends
-        mem = o.nbytes
-        print(f"insert, {name}: {n / dt / 1e6:.2f} M points/s ({dt:.2f} s), {o.spilled / n:.2f} spilled and {o.n_voxels / n:.2f} voxels a point; memory "
-              f"{filling / n:.1f} bytes a point while filling (presized), {mem / n:.1f} once trimmed = {mem / n / layout:.2f}x "
+    inputs = {name: (xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()}, shaped) for name, order, shaped in runs}
+    times, report = {name: [] for name in inputs}, {}
+    # the orders alternate, rounds times: a process's first run of this size pays for memory it
+    # never had (faulted in from the host on these VMs), later ones reuse what the last one freed
+    for _ in range(rounds):
+        for name, (x, c, at, shaped) in inputs.items():
+            o = ProgressiveOctree("bench", cube=cube, capacity=n)
+            t = time.perf_counter()
+            if shaped:
+                o.expect(x[::32], 32.0)
+            for s in range(0, n, batch):
+                o.add(x[s : s + batch], c[s : s + batch], **{a: v[s : s + batch] for a, v in at.items()})
+            times[name].append(time.perf_counter() - t)
+            filling = o.nbytes
+            o.trim()  # as the loader does when loading ends
+            report[name] = (o.spilled / n, o.n_voxels / n, filling / n, o.nbytes / n)
+            del o
+    for name, (x, _c, _at, _shaped) in inputs.items():
+        dt = statistics.median(times[name])
+        spilled, voxels, filling, mem = report[name]
+        each = ", ".join(f"{t:.2f}" for t in times[name])
+        print(f"insert, {name}: {n / dt / 1e6:.2f} M points/s (median {dt:.2f} s of {each}), {spilled:.2f} spilled and {voxels:.2f} voxels a point; "
+              f"memory {filling:.1f} bytes a point while filling (presized, work arrays kept), {mem:.1f} once trimmed = {mem / layout:.2f}x "
               f"the quantized layout ({layout} B)")  # fmt: skip
-        split = _converter_split_seconds(x, cube, o.max_leaf)
+        split = _converter_split_seconds(x, cube, warm.max_leaf)
         print(f"  the converter's way to the same tree (lod/build: codes, sort_codes, split_tree; no voxels, nothing stored): "
               f"{n / split / 1e6:.2f} M points/s, {dt / split:.1f}x faster than the insertion")  # fmt: skip
 
@@ -534,7 +544,7 @@ def main(argv=None) -> int:
     n = parse_count(args.points)
     print(f"{_cpu()}, 2 cores; {n:,} points")
     if "insert" in args.parts:
-        bench_insert(n, parse_count(args.batch))
+        bench_insert(n, parse_count(args.batch), args.rounds)
     if "load" in args.parts:
         bench_load(n, args.rounds)
     if "save" in args.parts:
