@@ -49,6 +49,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import resource
 import statistics
 import subprocess
 import tempfile
@@ -84,29 +85,31 @@ def bench_insert(n: int, batch: int, rounds: int) -> None:
     runs = (("generator order", np.arange(n), False), ("scan order", _scan_order(xyz), False),
             ("generator order, tree shaped first from every 32nd point (expect)", np.arange(n), True))  # fmt: skip
     inputs = {name: (xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()}, shaped) for name, order, shaped in runs}
-    times, report = {name: [] for name in inputs}, {}
+    times, system, report = {name: [] for name in inputs}, {name: [] for name in inputs}, {}
     # the orders alternate, rounds times: a process's first run of this size pays for memory it
     # never had (faulted in from the host on these VMs), later ones reuse what the last one freed
     for _ in range(rounds):
         for name, (x, c, at, shaped) in inputs.items():
             o = ProgressiveOctree("bench", cube=cube, capacity=n)
-            t = time.perf_counter()
+            sys0, t = resource.getrusage(resource.RUSAGE_SELF).ru_stime, time.perf_counter()
             if shaped:
                 o.expect(x[::32], 32.0)
             for s in range(0, n, batch):
                 o.add(x[s : s + batch], c[s : s + batch], **{a: v[s : s + batch] for a, v in at.items()})
             times[name].append(time.perf_counter() - t)
+            system[name].append(resource.getrusage(resource.RUSAGE_SELF).ru_stime - sys0)  # page faults, mostly
             filling = o.nbytes
             o.trim()  # as the loader does when loading ends
-            report[name] = (o.spilled / n, o.n_voxels / n, filling / n, o.nbytes / n)
+            used = o.pool.batches["count"][: o._n_chunks]
+            report[name] = (o.spilled / n, o.n_voxels / n, filling / n, o.nbytes / n, used.sum() / max(1, used.size * o.pool.chunk))
             del o
     for name, (x, _c, _at, _shaped) in inputs.items():
         dt = statistics.median(times[name])
-        spilled, voxels, filling, mem = report[name]
+        spilled, voxels, filling, mem, full = report[name]
         each = ", ".join(f"{t:.2f}" for t in times[name])
-        print(f"insert, {name}: {n / dt / 1e6:.2f} M points/s (median {dt:.2f} s of {each}), {spilled:.2f} spilled and {voxels:.2f} voxels a point; "
-              f"memory {filling:.1f} bytes a point while filling (presized, work arrays kept), {mem:.1f} once trimmed = {mem / layout:.2f}x "
-              f"the quantized layout ({layout} B)")  # fmt: skip
+        print(f"insert, {name}: {n / dt / 1e6:.2f} M points/s (median {dt:.2f} s of {each}; system time {statistics.median(system[name]):.2f} s), "
+              f"{spilled:.2f} spilled and {voxels:.2f} voxels a point; memory {filling:.1f} bytes a point while filling (presized, work arrays "
+              f"kept), {mem:.1f} once trimmed = {mem / layout:.2f}x the quantized layout ({layout} B), its chunks {full:.0%} full")  # fmt: skip
         split = _converter_split_seconds(x, cube, warm.max_leaf)
         print(f"  the converter's way to the same tree (lod/build: codes, sort_codes, split_tree; no voxels, nothing stored): "
               f"{n / split / 1e6:.2f} M points/s, {dt / split:.1f}x faster than the insertion")  # fmt: skip
