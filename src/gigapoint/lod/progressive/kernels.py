@@ -377,29 +377,42 @@ def _voxel_key(node, cell):
 
 
 @njit(parallel=True, cache=True)
-def voxel_ids(hkeys, hvals, node, cell, next_vid, vid, is_new, n_parts):
-    """The voxel id of each (list, cell) (a list names its node): found in the open-addressing table, or a new id
-    (``next_vid`` on, in entry order) entered there. The table is kept at most two thirds full by the caller.
-    A batch's entries never repeat a key, so all are looked up first, in parallel (the table only
-    read), then the new ones numbered in entry order and entered in parallel: part t of
-    ``n_parts`` takes the keys whose home slot lies in its share of the table, a key whose probe
-    would run past that share is left to a pass in order after them (linear probing finds a
-    key wherever it went, as long as no slot is emptied)."""
+def voxel_lookup(hkeys, hvals, node, cell, vid, is_new):
+    """Look each (list, cell) up in the open-addressing table (a list names its node): its voxel
+    id into vid[e], or is_new[e] = 1. Returns how many are new (voxel_enter enters them; the
+    caller first makes the table room for those, not for every entry: a batch in no spatial
+    order has ~2 entries a point, most of them voxels already). The table is only read."""
     mask = np.uint64(hkeys.shape[0] - 1)
     n = node.shape[0]
+    n_new = 0
     for e in prange(n):
         k = _voxel_key(node[e], cell[e])
         h = _hash(k, mask)
+        new = 0
         while True:
             hk = hkeys[h]
             if hk == k:
                 vid[e] = hvals[h]
-                is_new[e] = 0
                 break
             if hk == EMPTY_KEY:
-                is_new[e] = 1
+                new = 1
                 break
             h = (h + np.uint64(1)) & mask
+        is_new[e] = new
+        n_new += new
+    return n_new
+
+
+@njit(parallel=True, cache=True)
+def voxel_enter(hkeys, hvals, node, cell, next_vid, vid, is_new, n_parts):
+    """Number the new entries (voxel_lookup's) ``next_vid`` on, in entry order, and enter them in
+    the table (kept at most two thirds full by the caller), in parallel: a batch's entries never
+    repeat a key, so part t of ``n_parts`` takes the keys whose home slot lies in its share of
+    the table, and a key whose probe would run past that share is left to a pass in order after
+    them (linear probing finds a key wherever it went, as long as no slot is emptied). Returns
+    the next free id."""
+    mask = np.uint64(hkeys.shape[0] - 1)
+    n = node.shape[0]
     for e in range(n):
         if is_new[e]:
             vid[e] = next_vid
@@ -432,6 +445,13 @@ def voxel_ids(hkeys, hvals, node, cell, next_vid, vid, is_new, n_parts):
             hkeys[h] = k
             hvals[h] = vid[e]
     return next_vid
+
+
+@njit(cache=True)
+def voxel_ids(hkeys, hvals, node, cell, next_vid, vid, is_new, n_parts):
+    """voxel_lookup, then voxel_enter, for a table known to have room for every entry."""
+    voxel_lookup(hkeys, hvals, node, cell, vid, is_new)
+    return voxel_enter(hkeys, hvals, node, cell, next_vid, vid, is_new, n_parts)
 
 
 @njit(cache=True)

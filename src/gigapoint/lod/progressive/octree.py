@@ -77,7 +77,7 @@ _GROWTH_MAX_CHUNKS = 16_384  # the pool grows by at most this many chunks (32 M 
 
 def _voxel_table(size: int) -> tuple[np.ndarray, np.ndarray]:
     """An empty voxel table of ``size`` slots: (keys u64, ids u32), views of one buffer of
-    12-byte slots, a slot's id next to its key (kernels.voxel_ids: one cache miss a look-up, not
+    12-byte slots, a slot's id next to its key (kernels.voxel_lookup: one cache miss a look-up, not
     two; 1.3x faster than two arrays)."""
     raw = pages.full(12 * size, 0xFF, np.uint8)  # keys EMPTY_KEY
     return np.ndarray((size,), np.uint64, raw, 0, (12,)), np.ndarray((size,), np.uint32, raw, 8, (12,))
@@ -913,9 +913,10 @@ class ProgressiveOctree:
         m, node, cell, first, sums = self._voxel_cells(st, leaf_runs, inner_runs, only)
         if m == 0:
             return
-        self._ensure_hash(m)
         vid, is_new = self._work.get("vid", m, np.int64), self._work.get("is_new", m, np.uint8)
-        next_vid = K.voxel_ids(self._hkeys, self._hvals, node, cell, self.n_voxels, vid, is_new, max(1, numba.get_num_threads()))
+        n_new = K.voxel_lookup(self._hkeys, self._hvals, node, cell, vid, is_new)
+        self._ensure_hash(n_new)  # room for the new voxels (a rebuilt table keeps every id found)
+        next_vid = K.voxel_enter(self._hkeys, self._hvals, node, cell, self.n_voxels, vid, is_new, max(1, numba.get_num_threads()))
         if next_vid > len(self.vox_key):
             cap = max(len(self.vox_key), 1)
             while cap < next_vid:
