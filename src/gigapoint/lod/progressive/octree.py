@@ -235,10 +235,6 @@ class _Work:
             a = new
         return a[:n]
 
-    def rows(self, name: str) -> int:
-        a = self.arrays.get(name)
-        return 0 if a is None else len(a)
-
     @property
     def nbytes(self) -> int:
         return sum(a.nbytes for a in self.arrays.values())
