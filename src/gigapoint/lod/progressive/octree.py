@@ -232,6 +232,8 @@ class _Work:
             kept = self.nbytes - (a.nbytes if a is not None else 0) + new.nbytes
             if self.keep_bytes is None or kept <= self.keep_bytes:
                 self.arrays[name] = new
+            else:  # too large to keep: neither is the smaller one kept for it (no batch would use it)
+                self.arrays.pop(name, None)
             a = new
         return a[:n]
 
