@@ -13,6 +13,8 @@
 - ``load``: the same points written as LAZ and LAS (scan order); decoding them alone (every
   chunk of ``gigapoint.io.read_chunks``) against ``gigapoint.open(..., progressive=True)`` to
   completion, alternately, in one process: the ratio is what LOD costs loading.
+- ``memory``: bytes a point of the town as a LAS file loaded progressively (on the file's grid
+  once loaded) and while it fills, against three words a point and the plain cloud's layout.
 - ``first``: seconds from ``gigapoint.demo(10**9, progressive=True)`` (or ``gigapoint.open(FILE,
   progressive=True)`` with ``--first-source FILE``) to its first image with points (1920x1080),
   then the loader is closed.
@@ -100,8 +102,7 @@ def bench_insert(n: int, batch: int, rounds: int) -> None:
             system[name].append(resource.getrusage(resource.RUSAGE_SELF).ru_stime - sys0)  # page faults, mostly
             filling = o.nbytes
             o.trim()  # as the loader does when loading ends
-            used = o.pool.batches["count"][: o._n_chunks]
-            report[name] = (o.spilled / n, o.n_voxels / n, filling / n, o.nbytes / n, used.sum() / max(1, used.size * o.pool.chunk))
+            report[name] = (o.spilled / n, o.n_voxels / n, filling / n, o.nbytes / n, _chunk_fill(o))
             del o
     for name, (x, _c, _at, _shaped) in inputs.items():
         dt = statistics.median(times[name])
@@ -206,6 +207,40 @@ def bench_load(n: int, rounds: int) -> None:
             base = statistics.median(times["laspy alone"])
             cols = ", ".join(f"{name} {statistics.median(t):.2f} s = {statistics.median(t) / base:.2f}x" for name, t in times.items())
             print(f"load {suffix.upper()} {n / 1e6:g} M (medians of {rounds}): {cols}")
+
+
+def bench_memory(n: int) -> None:
+    """Bytes a point of the town as a LAS file (scan order, 1 mm) once loaded progressively
+    (trimmed: point chunks on the file's grid, core/compact.py) and while it fills (the same
+    points added in 250 k slices, untrimmed), against the quantized layouts of the same points:
+    three words (16 bytes + the attributes: what points without a grid take) and the plain
+    cloud (``gigapoint.open``: the compact layout with u32 colours, and its default colours)."""
+    from gigapoint.io import open_cloud
+
+    with tempfile.TemporaryDirectory() as tmp:
+        (path,) = _town_files(tmp, n, ("las",))
+        with gp.open(path, progressive=True) as cloud:
+            cloud.wait()
+            mem, voxels, chunks = cloud.memory(), cloud.n_voxels / n, _chunk_fill(cloud)
+            filling = ProgressiveOctree("filling", cube=(cloud.origin, cloud.edge), capacity=n)
+            for chunk in read_chunks(path, 250_000):
+                filling.add(chunk.xyz, chunk.rgba, **chunk.attributes)
+            filling_bytes = filling.nbytes
+            del filling
+        words = 16 + 3  # intensity u16, classification u8
+        plain = open_cloud(path, colors="rgba").nbytes / n
+        default = open_cloud(path).nbytes / n
+    total = sum(mem.values()) / n
+    parts = ", ".join(f"{k} {v / n:.1f}" for k, v in mem.items() if v)
+    print(f"memory, LAS {n / 1e6:g} M at 1 mm: {total:.1f} bytes a point loaded ({parts}; {voxels:.2f} voxels a point, chunks {chunks:.0%} full), "
+          f"{filling_bytes / n:.1f} while filling (60-bit streams, presized room); the quantized layouts: three words {words} B = "
+          f"{total / words:.2f}x, the plain cloud's compact layout with u32 colours {plain:.1f} B = {total / plain:.2f}x, "
+          f"with its default colours {default:.1f} B = {total / default:.2f}x")  # fmt: skip
+
+
+def _chunk_fill(o: ProgressiveOctree) -> float:
+    used = o.pool.batches["count"][: o._n_chunks]
+    return float(used.sum() / max(1, used.size * o.pool.chunk))
 
 
 def bench_save(n: int, rounds: int) -> None:
@@ -550,6 +585,8 @@ def main(argv=None) -> int:
         bench_insert(n, parse_count(args.batch), args.rounds)
     if "load" in args.parts:
         bench_load(n, args.rounds)
+    if "memory" in args.parts:
+        bench_memory(n)
     if "save" in args.parts:
         bench_save(n, args.rounds)
     if "convert" in args.parts:

@@ -958,6 +958,160 @@ def test_wgpu_draws_the_growing_octree_uploading_only_what_changed(scene, page_c
         pool = draw.points
 
 
+_UTM = np.array([500_000.0, 4_000_000.0, 100.0])  # a LAS file's offset: coordinates of UTM size
+_MM = 0.001
+
+
+def _on_grid(scene, shifted: float = 0.0, every: int = 0):
+    """The scene on a millimetre grid through _UTM (as a LAS file holds it); every ``every``-th
+    point moved ``shifted`` grid steps off it along each axis (another file's grid)."""
+    xyz, rgba, attrs = scene
+    xyz = _UTM + np.round(xyz / _MM) * _MM
+    if every:
+        xyz[::every] += shifted * _MM
+    return xyz, rgba, attrs
+
+
+def _grid_filled(points, batch: int = 20_000, rounds=(slice(None),)) -> ProgressiveOctree:
+    xyz, rgba, attrs = points
+    o = ProgressiveOctree("grid", max_leaf=3_000, grid=(_UTM, _MM))
+    for part in rounds:
+        idx = np.arange(len(xyz))[part]
+        for s in range(0, len(idx), batch):
+            sl = idx[s : s + batch]
+            o.add(xyz[sl], rgba[sl], **{a: v[sl] for a, v in attrs.items()})
+        o.trim()
+    return o
+
+
+def _grid_rows(xyz) -> np.ndarray:
+    """Points as integer steps of the millimetre grid through _UTM, sorted (a set with repeats)."""
+    rows = np.round((xyz - _UTM) / _MM).astype(np.int64)
+    return rows[np.lexsort(rows.T)]
+
+
+def _chunk_widths(o: ProgressiveOctree) -> tuple[np.ndarray, np.ndarray]:
+    """(point chunks in use, the stream bits an axis each holds)."""
+    pool = o.pool
+    used = np.flatnonzero((pool.packing["code"] != 0) & (pool.batches["count"] > 0))
+    return used, (pool.packing["code"][used] & 0xFF).astype(np.int64)
+
+
+def test_trim_keeps_points_on_the_source_grid_in_the_bits_it_needs(scene):
+    """With the source's grid (a LAS file's offset and scale) the root cube is 2^B grid steps,
+    aligned to the grid, and trim rewrites every point chunk in the compact layout with the bits
+    its node's cube needs (B - level - 10 an axis, not 20): its stream is that much smaller,
+    each point is its source coordinate again (the cell centre, where quantizing and spilling
+    had moved it by a few 30-bit cells), and frames draw the same image."""
+    from gigapoint.core.compact import stream_words
+
+    xyz, rgba, attrs = points = _on_grid(scene)
+    o = _grid_filled(points, rounds=())
+    for s in range(0, len(xyz), 20_000):
+        o.add(xyz[s : s + 20_000], rgba[s : s + 20_000], **{a: v[s : s + 20_000] for a, v in attrs.items()})
+    steps = (o.origin - _UTM) / _MM + 0.5
+    bits = int(np.log2(o.edge / _MM))
+    assert o.edge == 2.0**bits * _MM and np.abs(steps - np.round(steps)).max() < 1e-6 and np.all(o.origin <= xyz.min(axis=0))
+    cam = gp.Camera.fit(o.bounds, view="iso", width=200, height=150)
+    every = EXACT.replace(point_budget=10**9, lod_threshold_px=0)
+    o.order_leaves()  # as trim does first: the image compared below is of the same order
+    wide_image = gp.render_frame(o, cam, every).image
+    wide_bytes, wide_words = o.pool.ext[: o._n_streams * o.pool.stream].nbytes, o.pool.low.copy()
+    o.trim()
+    used, e = _chunk_widths(o)
+    assert len(used) and np.array_equal(e, bits - o.level[o.pool.chunk_node[used]] - 10)  # every chunk compact, as its cube needs
+    counts = o.pool.batches["count"].astype(np.int64)
+    assert o.pool.ext.nbytes == 8 * int(stream_words(3 * (o.pool.packing["code"] & 0xFF).astype(np.int64), counts).sum())
+    assert o.pool.ext.nbytes < 0.4 * wide_bytes
+    np.testing.assert_array_equal(o.pool.low, wide_words[: len(o.pool.low)])  # the low words stay (trim cuts the room off)
+    got = _leaf_points(o)["xyz"]
+    idx = _match(got, xyz, 1e-3 * _MM)  # each point its own source coordinate (30-bit cell centres: ~1e-4 of a step)
+    np.testing.assert_array_equal(np.round((got - _UTM) / _MM), np.round((xyz[idx] - _UTM) / _MM))
+    np.testing.assert_array_equal(gp.render_frame(o, cam, every).image, wide_image)
+
+
+def test_points_off_the_source_grid_keep_their_chunks_wide(scene):
+    """A chunk holding a point off the grid (another file's offset: 0.37 of a step) stays wide,
+    60 bits a point, and its points where they were; the other chunks are compact."""
+    xyz, rgba, attrs = points = _on_grid(scene, shifted=0.37, every=997)
+    o = _grid_filled(points)
+    used, e = _chunk_widths(o)
+    pos = o.positions(np.concatenate([np.arange(c * CHUNK, c * CHUNK + o.pool.batches["count"][c]) for c in used]))
+    owner = np.repeat(used, o.pool.batches["count"][used].astype(np.int64))
+    frac = (pos - _UTM) / _MM
+    off = np.abs(frac - np.round(frac)).max(axis=1) > 0.1
+    shifted_chunks = np.unique(owner[off])
+    assert off.sum() == len(range(0, len(xyz), 997))
+    assert set(used[e == 20]) == set(shifted_chunks) and np.all(e[~np.isin(used, shifted_chunks)] < 20)
+    _match(_leaf_points(o)["xyz"], xyz, 2e-3 * _MM)  # the wide ones as quantized: within a few 30-bit cells of the root
+
+
+def test_points_added_after_trim_widen_the_streams_and_build_the_same_octree(scene):
+    """An ``add`` after a trim writes wide streams again (every compact chunk widened first, its
+    points the cell centres), and the octree ends as one filled without a trim between."""
+    points = _on_grid(scene)
+    half = len(points[0]) // 2
+    twice = _grid_filled(points, rounds=(slice(0, half), slice(half, None)))
+    once = _grid_filled(points)
+    used, e = _chunk_widths(twice)
+    assert np.all(e < 20) and twice._on_grid
+    assert twice.n_nodes == once.n_nodes and twice.n_voxels == once.n_voxels
+    for o in (twice, once):
+        assert o.n_points == len(points[0])
+    a, b = _leaf_points(twice), _leaf_points(once)
+    for name in a:
+        order_a = np.lexsort(np.column_stack([a["xyz"], a["color"]]).T)
+        order_b = np.lexsort(np.column_stack([b["xyz"], b["color"]]).T)
+        np.testing.assert_allclose(a[name][order_a], b[name][order_b], atol=1e-3 * _MM, rtol=0)
+    twice.add(points[0][:10], points[1][:10], **{k: v[:10] for k, v in points[2].items()})
+    assert not twice._on_grid and np.all(twice.pool.packing["code"][twice.pool.packing["code"] != 0] == 20 | 20 << 8 | 20 << 16)
+    np.testing.assert_array_equal(_grid_rows(_leaf_points(twice)["xyz"]), _grid_rows(np.concatenate([points[0], points[0][:10]])))
+
+
+def test_a_las_file_loads_into_its_own_grid(tmp_path, las_writer):
+    """gigapoint.open(..., progressive=True) of a LAS file takes its grid from the header (offset,
+    scale): once loaded, each point chunk holds the bits the file's millimetres need, and every
+    point is the file's."""
+    import laspy
+
+    f = las_writer(tmp_path / "a.las", 80_000, seed=3)
+    cloud = gp.open(f, progressive=True)
+    cloud.wait(timeout=120)
+    las = laspy.read(str(f))
+    assert cloud.grid is not None and cloud.grid[1] == 0.001 and np.array_equal(cloud.grid[0], las.header.offsets)
+    _, e = _chunk_widths(cloud)
+    assert len(e) and np.all(e < 20)
+    xyz = np.column_stack([las.x, las.y, las.z])
+    got = np.concatenate([c.xyz for c in cloud.chunks()])
+    idx = _match(got, xyz, 1e-6)
+    np.testing.assert_array_equal(np.round(got / 0.001), np.round(xyz[idx] / 0.001))
+    cloud.close()
+
+
+@pytest.mark.gpu
+def test_wgpu_draws_the_octree_on_its_grid_as_the_cpu_does(scene):
+    """The trimmed pool's compact point chunks (and what an add writes after it) through the GPU's
+    decoder: the CPU's image."""
+    from wgpu_support import wgpu_or_skip
+
+    from gigapoint.backends.numba_cpu import NumbaCpuBackend
+
+    gpu, cpu = wgpu_or_skip(), NumbaCpuBackend()
+    points = _on_grid(scene)
+    o = _grid_filled(points, rounds=(slice(0, 100_000),))
+    s = EXACT.replace(point_budget=10**9, lod_threshold_px=0, adaptive_precision=False)  # all three words of every point
+    for k in range(2):
+        assert o._on_grid != bool(k)
+        cam = gp.Camera.fit(o.bounds, view="iso", width=200, height=150)
+        view = cam.view(o.bounds)
+        with o.reading():
+            draw = o.prepare(view, s)
+            args = (draw.points, draw.selection, 200, 150, view.near, view.far)
+            got, want = np.asarray(gpu.rasterize(*args)), cpu.rasterize(*args)
+        assert np.count_nonzero(want != EMPTY_PIXEL) > 1000 and np.count_nonzero(got != want) <= 0.001 * want.size
+        o.add(points[0][100_000:], points[1][100_000:], **{a: v[100_000:] for a, v in points[2].items()})  # widened
+
+
 @pytest.mark.parametrize("fmt", ["gigapoint", "potree", "copc"])
 def test_save_writes_a_converted_octree_of_its_points(scene, octree, tmp_path, fmt):
     out = tmp_path / ("x.copc.laz" if fmt == "copc" else fmt)
@@ -1051,8 +1205,11 @@ def test_render_builds_an_octree_for_inputs_above_the_budget_and_waits_for_it(tm
     cloud.wait(timeout=120)
     assert cloud.n_points == 60_000
     mem = cloud.memory()
-    # a low word an entry, and 60 bits more a point (the voxels' low word holds their position)
-    assert sum(mem.values()) == cloud.nbytes and mem["positions"] >= 4 * (60_000 + cloud.n_voxels) + 7.5 * 60_000
+    # a low word an entry (the voxels' low word holds their position), and a point's bits on the
+    # file's grid once loaded: less than half the 60 bits a point holds while the octree fills
+    low, ext = cloud.pool.low.nbytes, cloud.pool.ext.nbytes
+    assert sum(mem.values()) == cloud.nbytes and mem["positions"] == low + ext
+    assert low >= 4 * (60_000 + cloud.n_voxels) and ext < 7.5 * 60_000 / 2
     cam = make_camera(cloud, 160, 120, "top", None, "perspective", 60.0)
     want = gp.render_frame(cloud, cam, EXACT.replace(point_budget=20_000)).image
     np.testing.assert_array_equal(np.asarray(Image.open(out).convert("RGB")), want[..., :3])

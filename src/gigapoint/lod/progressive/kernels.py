@@ -915,3 +915,89 @@ def dequantize_slots(low, ext, ext_first, code, chunk_size, slots, chunk_node, b
             q = (np.int64((low[s] >> sh) & np.uint32(WORD_MASK)) << 20) | (np.int64((med >> sh) & np.uint32(WORD_MASK)) << 10)
             q |= np.int64((high >> sh) & np.uint32(WORD_MASK))
             out[k, a] = box_min[node, a] + (q + 0.5) * inv
+
+
+# --- streams on the source's grid (ProgressiveOctree.trim) -----------------------------------
+# A point on the source's grid, in a node cube 2^B source steps wide and aligned to that grid
+# (ProgressiveOctree's ``grid``), sits at a cell centre of the cube's 2^B grid: its wide 20 bits
+# an axis are the cell's B - 10 bits, then the half-cell bit and zeros, give or take what its
+# quantization lost: a point spilled from a split leaf is inserted again from its position there
+# (half a 30-bit cell of the first leaf it landed in, at worst the root: 2^(level - 1) cells of
+# its leaf's), and truncation one more. The compact layout (core/compact.py) keeps the B - 10
+# bits and implies the rest, so a trimmed point chunk holds 3 (B - 10) bits a point, not 60,
+# and each point is its grid cell's centre again.
+@njit(parallel=True, cache=True)
+def grid_widths(fill, code, chunk_node, level, root_bits, ext, ext_first, out):
+    """Per chunk, the stream bits an axis it keeps: e = B - 10 (1..10; B = ``root_bits`` -
+    its node's level) where each of its points sits at a cell centre of its node's 2^B grid
+    (the bits under the cell's within 2^level + 2 of the half-cell bit: what quantization may
+    have lost, a 16th of a grid step at most); EXT_FULL_BITS where not (off the grid, B outside
+    11..20, or an empty point chunk); 0 for a chunk without a stream (voxels)."""
+    for c in prange(fill.shape[0]):
+        if code[c] == 0:
+            out[c] = 0
+            continue
+        out[c] = EXT_FULL_BITS
+        lev = level[chunk_node[c]]
+        b = root_bits - lev
+        if fill[c] == 0 or code[c] != WIDE_CODE or b <= WORD_BITS or b > EXT_FULL_BITS:
+            continue
+        s = np.uint64(EXT_FULL_BITS + WORD_BITS - b)  # the bits under the cell's, per axis
+        tolerance = (np.int64(1) << lev) + 2
+        if tolerance << 4 > np.int64(1) << np.int64(s):
+            continue
+        below = (np.uint64(1) << s) - np.uint64(1)
+        half = np.int64(1) << np.int64(s - np.uint64(1))
+        on_grid = True
+        for j in range(fill[c]):
+            v = read_ext(ext, ext_first[c], WIDE_BITS, j)
+            for a in range(3):
+                under = np.int64((v >> np.uint64(EXT_FULL_BITS * a)) & below)
+                if abs(under - half) > tolerance:
+                    on_grid = False
+            if not on_grid:
+                break
+        if on_grid:
+            out[c] = b - WORD_BITS
+
+
+@njit(parallel=True, cache=True)
+def pack_streams(fill, widths, ext, ext_first, out, out_first):
+    """Each point chunk's stream rewritten into ``out`` (zeroed) at ``out_first``: e = widths[c]
+    bits an axis (the compact layout's x y z back to back: a wide chunk's 60 bits as they are,
+    else each axis's cell bits, the bits under them dropped)."""
+    for c in prange(fill.shape[0]):
+        e = widths[c]
+        if e == 0:
+            continue
+        t = 3 * e
+        s = np.uint64(EXT_FULL_BITS - e)
+        mask = (np.uint64(1) << np.uint64(e)) - np.uint64(1)
+        for j in range(fill[c]):
+            v = read_ext(ext, ext_first[c], WIDE_BITS, j) & _WIDE_MASK
+            if e != EXT_FULL_BITS:
+                w = np.uint64(0)
+                for a in range(3):
+                    w |= ((v >> (np.uint64(EXT_FULL_BITS * a) + s)) & mask) << np.uint64(e * a)
+                v = w
+            write_ext(out, out_first[c], t, j, v)
+
+
+@njit(parallel=True, cache=True)
+def widen_streams(fill, code, ext, ext_first, out, out_first):
+    """``pack_streams`` undone: each point chunk's stream (layout ``code``) as a wide one, 60 bits
+    a point, into ``out`` (zeroed) at ``out_first``, through the layout's decoder (``tail_words``:
+    the 20 bits an axis a frame draws)."""
+    m10 = np.uint64(WORD_MASK)
+    for c in prange(fill.shape[0]):
+        cd = code[c]
+        if cd == 0:
+            continue
+        t = code_bits(cd)
+        for j in range(fill[c]):
+            med, high = tail_words(read_ext(ext, ext_first[c], t, j), cd)
+            v = np.uint64(0)
+            for a in range(3):
+                sh = np.uint64(WORD_BITS * a)
+                v |= ((((np.uint64(med) >> sh) & m10) << np.uint64(WORD_BITS)) | ((np.uint64(high) >> sh) & m10)) << np.uint64(EXT_FULL_BITS * a)
+            write_ext(out, out_first[c], WIDE_BITS, j, v)

@@ -161,16 +161,17 @@ class Loader:
             self._thread.join()
 
 
-def file_sources(paths) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray] | None, str]:
-    """(sources, total points, header bounds of all files, name) of files and directories: every
-    file through its reader (io registry), in bounded chunks. Totals and bounds are known when
-    every file's header tells them (LAS/LAZ)."""
+def file_sources(paths) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray] | None, str, tuple | None]:
+    """(sources, total points, header bounds of all files, name, grid) of files and directories:
+    every file through its reader (io registry), in bounded chunks. Totals, bounds and the grid
+    are known when every file's header tells them (LAS/LAZ); the grid (ProgressiveOctree's) is
+    the first file's offset and the finest scale (points of files on other grids stay wide)."""
     from ...io import expand_paths, reader_for
     from ...io._base import DEFAULT_CHUNK_SIZE
 
     files = expand_paths(paths)
     sources, total, lo, hi = [], 0, np.full(3, np.inf), np.full(3, -np.inf)
-    bounds_known = True
+    bounds_known, offsets, scales = True, [], []
     for f in files:
         reader = reader_for(f)
         n = reader.point_count(f)
@@ -181,9 +182,14 @@ def file_sources(paths) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray]
             lo, hi = np.minimum(lo, b["min"]), np.maximum(hi, b["max"])
         else:
             bounds_known = False
+        offsets.append(info.get("offset"))
+        scales.append(info.get("scale"))
         sources.append((str(f), lambda f=f, reader=reader: reader.read_chunks(f, min(DEFAULT_CHUNK_SIZE, DECODE_CHUNK))))
     name = files[0].name if len(files) == 1 else f"{len(files)} files"
-    return sources, total, ((lo, hi) if bounds_known and np.all(lo <= hi) else None), name
+    grid = None
+    if all(o is not None for o in offsets) and all(s is not None for s in scales) and files:
+        grid = (np.asarray(offsets[0], np.float64), float(np.min(np.asarray(scales, np.float64))))
+    return sources, total, ((lo, hi) if bounds_known and np.all(lo <= hi) else None), name, grid
 
 
 def demo_sources(n_points: int, seed: int = 0) -> tuple[list, int, tuple[np.ndarray, np.ndarray] | None, str]:
@@ -193,10 +199,11 @@ def demo_sources(n_points: int, seed: int = 0) -> tuple[list, int, tuple[np.ndar
     return [(f"demo({n_points:,})", lambda: demo_chunks(n_points, seed, chunk_size=DECODE_CHUNK))], n_points, None, f"demo({n_points:,})"
 
 
-def open_progressive(sources, total, bounds, name, max_leaf=None, memory_limit=None):
-    """A ProgressiveOctree filled by a started Loader (bounds: the root cube, when known; loading
-    stops with a MemoryLimitError once the octree holds ``memory_limit`` bytes, by default half
-    the machine's memory)."""
+def open_progressive(sources, total, bounds, name, grid=None, max_leaf=None, memory_limit=None):
+    """A ProgressiveOctree filled by a started Loader (bounds: the root cube, when known; grid:
+    the sources' grid, when they have one: ProgressiveOctree's ``grid``; loading stops with a
+    MemoryLimitError once the octree holds ``memory_limit`` bytes, by default half the
+    machine's memory)."""
     from .octree import MAX_LEAF, ProgressiveOctree
 
     cube = None
@@ -206,7 +213,7 @@ def open_progressive(sources, total, bounds, name, max_leaf=None, memory_limit=N
         cube = (lo - pad, float(np.max(hi - lo)) + 2 * pad)
     memory_limit = int(memory_limit) if memory_limit else default_memory_limit()
     capacity = min(total or 0, memory_limit // _PRESIZED_BYTES_PER_POINT)  # presized no larger than the limit allows
-    octree = ProgressiveOctree(name, cube=cube, max_leaf=max_leaf or MAX_LEAF, capacity=capacity)
+    octree = ProgressiveOctree(name, cube=cube, max_leaf=max_leaf or MAX_LEAF, capacity=capacity, grid=grid)
     octree.source_files = [Path(label) for label, _ in sources if Path(label).is_file()]  # save() takes their CRS
     octree.attach(Loader(octree, sources, total, memory_limit).start())
     return octree
@@ -223,7 +230,7 @@ def open_sized(paths, point_budget: int, progressive: bool | None = None, progre
     if len(paths) == 1 and is_lod_source(paths[0]):
         return open_octree(paths[0])
     if progressive is not False:
-        sources, total, bounds, name = file_sources(paths)
+        sources, total, bounds, name, grid = file_sources(paths)
         if progressive or (total is not None and total > point_budget):
-            return open_progressive(sources, total, bounds, name)
+            return open_progressive(sources, total, bounds, name, grid)
     return open_cloud(*paths, progress=progress)

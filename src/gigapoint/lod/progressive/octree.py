@@ -50,7 +50,7 @@ from ...core.chunk import PointChunk, colors_for
 from ...core.cloud import MAX_ABS_COORDINATE
 from ...core.compact import point_words, stream_words
 from ...core.framelock import FrameLock
-from ...core.layout import BATCH_DTYPE, PACK_DTYPE
+from ...core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE
 from ...core.morton import fastest
 from ...core.quantize import dequantize
 from ...core.renderable import DrawList, MultiViewDrawList
@@ -176,6 +176,15 @@ class Pool:
         new.version = self.version + 1
         return new
 
+    def restreamed(self, ext: np.ndarray, packing: np.ndarray) -> Pool:
+        """This pool with the streams ``ext`` laid out by ``packing`` (the same points: new arrays
+        for the streams and their records, so caches of the old ones are dropped by identity)."""
+        new = object.__new__(Pool)
+        new.__dict__.update(self.__dict__)
+        new.ext, new.packing, new.batches = ext, packing, self.batches[:]
+        new.version = self.version + 1
+        return new
+
     def point_info(self, index: int) -> dict:
         """Position (30-bit), color, level and attributes of the entry at pool slot ``index``."""
         if not 0 <= index < self.n_points:
@@ -191,6 +200,25 @@ class Pool:
         for a, v in self.attributes.items():
             info[a] = v[index].item()
         return info
+
+
+def _checked_grid(name: str, grid) -> tuple[np.ndarray, float] | None:
+    """(anchor (3,), step) of a ``grid`` argument: a point of the grid and its step."""
+    if grid is None:
+        return None
+    anchor, step = np.asarray(grid[0], np.float64).reshape(3), float(grid[1])
+    if not (np.all(np.isfinite(anchor)) and np.isfinite(step) and step > 0):
+        raise InputError(f"{name}: grid must be (a point, a positive step), got {grid!r}")
+    return anchor, step
+
+
+def _grid_cube(origin, edge: float, anchor, step: float) -> tuple[np.ndarray, float]:
+    """The smallest cube holding (origin, edge) that is 2^B grid steps wide, its corner half a
+    step below a grid point: each of its nodes' cubes is then 2^b steps with cell centres on the
+    grid (the compact layout's boxes, core/compact.py)."""
+    corner = anchor + (np.floor((np.asarray(origin, np.float64) - anchor) / step) - 0.5) * step
+    steps = float(np.max(np.asarray(origin) + edge - corner)) / step
+    return corner, 2.0 ** max(1, int(np.ceil(np.log2(steps)))) * step
 
 
 def _chunk_of(parts) -> PointChunk:
@@ -316,11 +344,14 @@ class ProgressiveOctree:
 
     def __init__(
         self, name: str = "progressive", cube=None, max_leaf: int = MAX_LEAF, chunk: int = CHUNK, attributes: dict | None = None,
-        capacity: int = 0,
+        capacity: int = 0, grid=None,
     ):  # fmt: skip
         """``cube``: (origin, edge) of the root, when the bounds are known up front (else the first
         batch's, grown as needed); ``capacity``: the points expected (the pool is sized for them,
-        their voxels and some room, so it need not grow and be copied while it fills)."""
+        their voxels and some room, so it need not grow and be copied while it fills); ``grid``:
+        (a point of the source's grid, its step), where the points lie on one (a LAS file's
+        offset and scale): the root cube is aligned to it, and ``trim`` keeps each leaf's points
+        in the bits the grid needs (core/compact.py), not 30 an axis."""
         if not (isinstance(max_leaf, int) and max_leaf >= 1):
             raise InputError(f"{name}: max_leaf must be a positive integer, got {max_leaf!r}")
         self.name = name
@@ -353,6 +384,8 @@ class ProgressiveOctree:
         self._n_chunks = 0
         self._n_streams = 0
         self._voxel_state = True  # the voxels' build state is there (trim drops it: _rebuild_voxel_state)
+        self.grid = _checked_grid(name, grid)
+        self._on_grid = False  # point chunks' streams hold the grid's bits (trim), not 60 a point: widened before a write
         if cube is not None:
             origin, edge = cube
             self._start(np.asarray(origin, np.float64), float(edge))
@@ -458,6 +491,7 @@ class ProgressiveOctree:
                 self._free = self._free[: self.pool.n_chunks].copy()
             self._drop_voxel_state()
             self._order_leaves()
+            self._streams_on_grid()
 
     def order_leaves(self, max_points: int | None = None) -> bool:
         """Order leaves whose points changed since they were last ordered (all of them, or about
@@ -471,6 +505,7 @@ class ProgressiveOctree:
             return self._order_leaves(max_points)
 
     def _order_leaves(self, max_points: int | None = None) -> bool:
+        self._widen_streams()  # (it moves 60-bit stream entries)
         n = self.n_nodes
         leaves = np.flatnonzero((self.leaf[:n] == 1) & (self.grid_sample[:n] == 0) & (self.count[:n] > self.chunk))
         if not len(leaves):
@@ -485,6 +520,57 @@ class ProgressiveOctree:
                        pool.packing["ext_first"], pool.color, *_pool_views(pool), pool.batch_version, pool.version,
                        max(1, numba.get_num_threads()), self.grid_sample)  # fmt: skip
         return left
+
+    def _grid_bits(self) -> int | None:
+        """B where the root cube is 2^B steps of the source's grid, its corner half a step off
+        the grid (``_start`` aligned it, growing keeps it); None without a grid."""
+        if self.grid is None or self.origin is None:
+            return None
+        anchor, step = self.grid
+        bits = round(np.log2(self.edge / step))
+        steps = (self.origin - anchor) / step + 0.5
+        aligned = abs(self.edge - 2.0**bits * step) <= 1e-9 * self.edge and np.all(np.abs(steps - np.round(steps)) <= 1e-6)
+        return bits if aligned else None
+
+    def _streams_on_grid(self) -> None:
+        """Point chunks whose points all sit on the source's grid keep the bits it needs
+        (kernels.grid_widths, pack_streams: a town at 1 mm keeps 15-18 bits a point, not 60);
+        the others stay wide. The positions drawn stay the same (to the last of 30 bits: the
+        cell centre, not where truncation put a point)."""
+        bits = self._grid_bits()
+        pool = self.pool
+        if bits is None or self._on_grid or self._n_chunks == 0:
+            return
+        fill, pack = pool.batches["count"], pool.packing
+        widths = np.empty(pool.n_chunks, np.int64)
+        K.grid_widths(fill, pack["code"], pool.chunk_node, self.level, bits, pool.ext, pack["ext_first"], widths)
+        if not np.any((widths > 0) & (widths < EXT_FULL_BITS)):
+            return
+        words = stream_words(3 * widths, fill.astype(np.int64))
+        first = np.cumsum(words) - words  # streams follow chunk order; a voxel chunk's is empty, where the next starts
+        ext = pages.zeros(int(words.sum()), np.uint64)
+        K.pack_streams(fill, widths, pool.ext, pack["ext_first"], ext, first)
+        packing = pack.copy()
+        packing["ext_first"], packing["code"] = first, widths | widths << 8 | widths << 16
+        self.pool = pool.restreamed(ext, packing)
+        self._on_grid = True
+
+    def _widen_streams(self) -> None:
+        """Every point chunk's stream back to 60 bits a point and a stream of its own (``stream``
+        words, in chunk order), as insertions write them."""
+        if not self._on_grid:
+            return
+        pool = self.pool
+        fill, pack = pool.batches["count"], pool.packing
+        points = (pack["code"] != 0).astype(np.int64)  # point chunks: compact codes keep e >= 1
+        first = (np.cumsum(points) - points) * pool.stream
+        ext = pages.zeros(int(points.sum()) * pool.stream, np.uint64)
+        K.widen_streams(fill, pack["code"], pool.ext, pack["ext_first"], ext, first)
+        packing = pack.copy()
+        packing["ext_first"], packing["code"] = first, np.where(points == 1, K.WIDE_CODE, 0)
+        self.pool = pool.restreamed(ext, packing)
+        self._n_streams = int(points.sum())
+        self._on_grid = False
 
     def _drop_voxel_state(self) -> None:
         """Drop the voxels' build state, and the insertions' work arrays with it."""
@@ -519,8 +605,11 @@ class ProgressiveOctree:
             K.set_voxel_sums(self.vox_sum, vid, sums)
 
     def _start(self, origin: np.ndarray, edge: float) -> None:
-        """The root cube, and the root: an empty leaf."""
-        self.origin, self.edge = origin, edge if edge > 0 else 1.0
+        """The root cube (aligned to the source's grid where there is one), and the root: an empty leaf."""
+        edge = edge if edge > 0 else 1.0
+        if self.grid is not None:
+            origin, edge = _grid_cube(origin, edge, *self.grid)
+        self.origin, self.edge = origin, edge
         self.key[0], self.level[0], self.leaf[0], self.count[0] = 1, 0, 1, 0
         self.children[0] = -1
         self._clear_lists(0)
@@ -739,6 +828,7 @@ class ProgressiveOctree:
     def _insert(self, xyz, rgba, attrs, lo, hi, table: tuple | None = None) -> None:
         n = len(xyz)
         attrs = self._attribute_set(attrs, n)
+        self._widen_streams()
         if self.pool is None:
             expected = int(self.capacity * _ROOM_PER_POINT) // self.chunk
             streams = int(self.capacity * _STREAMS_PER_POINT) // self.chunk
