@@ -13,8 +13,8 @@
 - ``load``: the same points written as LAZ and LAS (scan order); decoding them alone (every
   chunk of ``gigapoint.io.read_chunks``) against ``gigapoint.open(..., progressive=True)`` to
   completion, alternately, in one process: the ratio is what LOD costs loading.
-- ``memory``: bytes a point of the town as a LAS file loaded progressively (on the file's grid
-  once loaded) and while it fills, against three words a point and the plain cloud's layout.
+- ``memory``: bytes a point of the town as a LAS file loaded progressively (on the file's grid,
+  attributes in their range, once loaded) against three words a point and the plain cloud's layout.
 - ``first``: seconds from ``gigapoint.demo(10**9, progressive=True)`` (or ``gigapoint.open(FILE,
   progressive=True)`` with ``--first-source FILE``) to its first image with points (1920x1080),
   then the loader is closed.
@@ -210,11 +210,11 @@ def bench_load(n: int, rounds: int) -> None:
 
 
 def bench_memory(n: int) -> None:
-    """Bytes a point of the town as a LAS file (scan order, 1 mm) once loaded progressively
-    (trimmed: point chunks on the file's grid, core/compact.py) and while it fills (the same
-    points added in 250 k slices, untrimmed), against the quantized layouts of the same points:
-    three words (16 bytes + the attributes: what points without a grid take) and the plain
-    cloud (``gigapoint.open``: the compact layout with u32 colours, and its default colours)."""
+    """Bytes a point of the town as a LAS file (scan order, 1 mm) loaded progressively (trimmed:
+    point chunks on the file's grid, attributes in their range) against the quantized layouts of
+    the same points: three words a point (16 bytes + the attributes at their dtypes: what points
+    without a grid take) and the plain cloud (``gigapoint.open``: the compact layout, attributes
+    in their range; with u32 colours, as the octree holds them, and with its default colours)."""
     from gigapoint.io import open_cloud
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -222,20 +222,14 @@ def bench_memory(n: int) -> None:
         with gp.open(path, progressive=True) as cloud:
             cloud.wait()
             mem, voxels, chunks = cloud.memory(), cloud.n_voxels / n, _chunk_fill(cloud)
-            filling = ProgressiveOctree("filling", cube=(cloud.origin, cloud.edge), capacity=n)
-            for chunk in read_chunks(path, 250_000):
-                filling.add(chunk.xyz, chunk.rgba, **chunk.attributes)
-            filling_bytes = filling.nbytes
-            del filling
-        words = 16 + 3  # intensity u16, classification u8
+            words = 16 + sum(cloud.attributes[a].dtype.itemsize for a in cloud.attributes)
         plain = open_cloud(path, colors="rgba").nbytes / n
         default = open_cloud(path).nbytes / n
     total = sum(mem.values()) / n
     parts = ", ".join(f"{k} {v / n:.1f}" for k, v in mem.items() if v)
-    print(f"memory, LAS {n / 1e6:g} M at 1 mm: {total:.1f} bytes a point loaded ({parts}; {voxels:.2f} voxels a point, chunks {chunks:.0%} full), "
-          f"{filling_bytes / n:.1f} while filling (60-bit streams, presized room); the quantized layouts: three words {words} B = "
-          f"{total / words:.2f}x, the plain cloud's compact layout with u32 colours {plain:.1f} B = {total / plain:.2f}x, "
-          f"with its default colours {default:.1f} B = {total / default:.2f}x")  # fmt: skip
+    print(f"memory, LAS {n / 1e6:g} M at 1 mm: {total:.1f} bytes a point loaded ({parts}; {voxels:.2f} voxels a point, chunks {chunks:.0%} "
+          f"full); the quantized layouts: three words {words} B = {total / words:.2f}x, the plain cloud's compact layout with u32 colours "
+          f"{plain:.1f} B = {total / plain:.2f}x, with its default colours {default:.1f} B = {total / default:.2f}x")  # fmt: skip
 
 
 def _chunk_fill(o: ProgressiveOctree) -> float:

@@ -36,6 +36,8 @@ def edge_attributes(rng, n) -> dict[str, np.ndarray]:
         "u32_wide": rng.integers(0, 2**32, n, dtype=np.uint64).astype(np.uint32),
         "f64_exact": rng.integers(-1000, 1000, n) / 4.0,  # quarters: exact in float32
         "f64_gps": 245_385.0 + rng.random(n),  # not in float32
+        "f64_constant": np.full(n, 245_385.123),  # a GPS time no one set: one value
+        "f64_negative_zero": np.full(n, -0.0),  # bit for bit: not +0.0
         "f32": rng.random(n).astype(np.float32),
         "flag": rng.random(n) < 0.5,
         "normal": rng.normal(size=(n, 3)).astype(np.float32),
@@ -45,7 +47,7 @@ def edge_attributes(rng, n) -> dict[str, np.ndarray]:
 HELD = {  # what each is held in: packed dtype (None: no array), or unpacked
     "constant": None, "zero": None, "full_u16": "unpacked", "intensity": np.uint8, "negative": np.uint8, "negative32": np.uint16,
     "signed8": "unpacked", "i64_near_max": np.uint16, "i64_span": "unpacked", "u64_high": np.uint32, "u32_wide": "unpacked",
-    "f64_exact": np.float32, "f64_gps": "unpacked", "f32": "unpacked", "flag": "unpacked", "normal": "unpacked",
+    "f64_exact": np.float32, "f64_gps": "unpacked", "f64_constant": None, "f64_negative_zero": None, "f32": "unpacked", "flag": "unpacked", "normal": "unpacked",
 }  # fmt: skip
 
 
@@ -68,6 +70,10 @@ def test_pack_round_trips_every_value_and_picks_the_narrowest(rng):
 def test_float_packing_is_bit_exact():
     v = np.array([0.5, -0.0, np.nan, np.inf, 1e-40])  # 1e-40: a float32 subnormal, not the same float64
     assert pack(v) is v
+    nan = np.full(3, np.nan)
+    assert pack(nan).stored is not None  # a NaN's payload is not kept as a constant: float32 keeps it (or it stays)
+    mixed = np.array([0.0, -0.0, 0.0])  # equal, but not bit for bit
+    assert np.array_equal(pack(mixed).decode().view(np.uint64), mixed.view(np.uint64))
     w = np.array([0.5, -0.0, np.inf, -2.0**-130])
     back = pack(w).decode()
     assert np.array_equal(back.view(np.uint64), w.view(np.uint64))

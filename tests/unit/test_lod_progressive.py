@@ -1024,9 +1024,14 @@ def test_trim_keeps_points_on_the_source_grid_in_the_bits_it_needs(scene):
     assert o.pool.ext.nbytes == 8 * int(stream_words(3 * (o.pool.packing["code"] & 0xFF).astype(np.int64), counts).sum())
     assert o.pool.ext.nbytes < 0.4 * wide_bytes
     np.testing.assert_array_equal(o.pool.low, wide_words[: len(o.pool.low)])  # the low words stay (trim cuts the room off)
-    got = _leaf_points(o)["xyz"]
+    leaf_points = _leaf_points(o)
+    got = leaf_points["xyz"]
     idx = _match(got, xyz, 1e-3 * _MM)  # each point its own source coordinate (30-bit cell centres: ~1e-4 of a step)
     np.testing.assert_array_equal(np.round((got - _UTM) / _MM), np.round((xyz[idx] - _UTM) / _MM))
+    for a, v in attrs.items():  # attributes in their real range (core/attributes.py), read back as they were
+        np.testing.assert_array_equal(leaf_points[a], v[idx])
+        assert o.attributes[a].dtype == v.dtype
+    assert o.memory()["attributes"] == o.attributes.nbytes
     np.testing.assert_array_equal(gp.render_frame(o, cam, every).image, wide_image)
 
 
@@ -1054,7 +1059,7 @@ def test_points_added_after_trim_widen_the_streams_and_build_the_same_octree(sce
     twice = _grid_filled(points, rounds=(slice(0, half), slice(half, None)))
     once = _grid_filled(points)
     used, e = _chunk_widths(twice)
-    assert np.all(e < 20) and twice._on_grid
+    assert np.all(e < 20) and twice._packed
     assert twice.n_nodes == once.n_nodes and twice.n_voxels == once.n_voxels
     for o in (twice, once):
         assert o.n_points == len(points[0])
@@ -1064,7 +1069,7 @@ def test_points_added_after_trim_widen_the_streams_and_build_the_same_octree(sce
         order_b = np.lexsort(np.column_stack([b["xyz"], b["color"]]).T)
         np.testing.assert_allclose(a[name][order_a], b[name][order_b], atol=1e-3 * _MM, rtol=0)
     twice.add(points[0][:10], points[1][:10], **{k: v[:10] for k, v in points[2].items()})
-    assert not twice._on_grid and np.all(twice.pool.packing["code"][twice.pool.packing["code"] != 0] == 20 | 20 << 8 | 20 << 16)
+    assert not twice._packed and np.all(twice.pool.packing["code"][twice.pool.packing["code"] != 0] == 20 | 20 << 8 | 20 << 16)
     np.testing.assert_array_equal(_grid_rows(_leaf_points(twice)["xyz"]), _grid_rows(np.concatenate([points[0], points[0][:10]])))
 
 
@@ -1082,9 +1087,17 @@ def test_a_las_file_loads_into_its_own_grid(tmp_path, las_writer):
     _, e = _chunk_widths(cloud)
     assert len(e) and np.all(e < 20)
     xyz = np.column_stack([las.x, las.y, las.z])
-    got = np.concatenate([c.xyz for c in cloud.chunks()])
+    chunks = list(cloud.chunks())
+    got = np.concatenate([c.xyz for c in chunks])
     idx = _match(got, xyz, 1e-6)
     np.testing.assert_array_equal(np.round(got / 0.001), np.round(xyz[idx] / 0.001))
+    for name in ("intensity", "classification", "return_number", "gps_time", "point_source_id"):  # packed: held in their range
+        np.testing.assert_array_equal(np.concatenate([c.attributes[name] for c in chunks]), np.asarray(las[name])[idx])
+    held = cloud.attributes
+    n = cloud.pool.n_points  # entries: points, voxels and the chunks' room
+    assert held.nbytes_of("return_number") == held.nbytes_of("gps_time") == 0 and held.nbytes_of("intensity") == 2 * n  # one value each
+    info = cloud.pool.point_info(int(cloud.node_entries(cloud.leaves()[0])[0]))
+    assert info["return_number"] == las.return_number[0] and isinstance(info["intensity"], int)
     cloud.close()
 
 
@@ -1101,7 +1114,7 @@ def test_wgpu_draws_the_octree_on_its_grid_as_the_cpu_does(scene):
     o = _grid_filled(points, rounds=(slice(0, 100_000),))
     s = EXACT.replace(point_budget=10**9, lod_threshold_px=0, adaptive_precision=False)  # all three words of every point
     for k in range(2):
-        assert o._on_grid != bool(k)
+        assert o._packed != bool(k)
         cam = gp.Camera.fit(o.bounds, view="iso", width=200, height=150)
         view = cam.view(o.bounds)
         with o.reading():

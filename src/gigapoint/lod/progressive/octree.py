@@ -46,6 +46,7 @@ import numpy as np
 from numba.typed import List
 
 from ...core import pages
+from ...core.attributes import Attributes
 from ...core.chunk import PointChunk, colors_for
 from ...core.cloud import MAX_ABS_COORDINATE
 from ...core.compact import point_words, stream_words
@@ -176,14 +177,21 @@ class Pool:
         new.version = self.version + 1
         return new
 
-    def restreamed(self, ext: np.ndarray, packing: np.ndarray) -> Pool:
-        """This pool with the streams ``ext`` laid out by ``packing`` (the same points: new arrays
-        for the streams and their records, so caches of the old ones are dropped by identity)."""
+    def repacked(self, ext: np.ndarray, packing: np.ndarray, attributes) -> Pool:
+        """This pool with the streams ``ext`` laid out by ``packing`` and ``attributes`` (the same
+        entries, held otherwise: ProgressiveOctree._pack; new arrays for the streams and their
+        records, so caches of the old ones are dropped by identity)."""
         new = object.__new__(Pool)
         new.__dict__.update(self.__dict__)
-        new.ext, new.packing, new.batches = ext, packing, self.batches[:]
+        new.ext, new.packing, new.batches, new.attributes = ext, packing, self.batches[:], attributes
         new.version = self.version + 1
         return new
+
+    def attribute_rows(self, slots: np.ndarray) -> dict:
+        """The attributes of the entries at pool ``slots`` (decoded where they are packed)."""
+        if isinstance(self.attributes, Attributes):
+            return {a: self.attributes.at(a, slots) for a in self.attributes}
+        return {a: take(v, slots) for a, v in self.attributes.items()}
 
     def point_info(self, index: int) -> dict:
         """Position (30-bit), color, level and attributes of the entry at pool slot ``index``."""
@@ -197,8 +205,8 @@ class Pool:
             "level": int(rec["level"]),
             "source": "progressive octree",
         }
-        for a, v in self.attributes.items():
-            info[a] = v[index].item()
+        for a, v in self.attribute_rows(np.array([index])).items():
+            info[a] = v[0].item()
         return info
 
 
@@ -385,7 +393,7 @@ class ProgressiveOctree:
         self._n_streams = 0
         self._voxel_state = True  # the voxels' build state is there (trim drops it: _rebuild_voxel_state)
         self.grid = _checked_grid(name, grid)
-        self._on_grid = False  # point chunks' streams hold the grid's bits (trim), not 60 a point: widened before a write
+        self._packed = False  # held as trim leaves it (_pack): unpacked before a write
         if cube is not None:
             origin, edge = cube
             self._start(np.asarray(origin, np.float64), float(edge))
@@ -491,7 +499,7 @@ class ProgressiveOctree:
                 self._free = self._free[: self.pool.n_chunks].copy()
             self._drop_voxel_state()
             self._order_leaves()
-            self._streams_on_grid()
+            self._pack()
 
     def order_leaves(self, max_points: int | None = None) -> bool:
         """Order leaves whose points changed since they were last ordered (all of them, or about
@@ -505,7 +513,7 @@ class ProgressiveOctree:
             return self._order_leaves(max_points)
 
     def _order_leaves(self, max_points: int | None = None) -> bool:
-        self._widen_streams()  # (it moves 60-bit stream entries)
+        self._unpack()  # (it moves 60-bit stream entries and attribute arrays)
         n = self.n_nodes
         leaves = np.flatnonzero((self.leaf[:n] == 1) & (self.grid_sample[:n] == 0) & (self.count[:n] > self.chunk))
         if not len(leaves):
@@ -532,45 +540,80 @@ class ProgressiveOctree:
         aligned = abs(self.edge - 2.0**bits * step) <= 1e-9 * self.edge and np.all(np.abs(steps - np.round(steps)) <= 1e-6)
         return bits if aligned else None
 
-    def _streams_on_grid(self) -> None:
-        """Point chunks whose points all sit on the source's grid keep the bits it needs
-        (kernels.grid_widths, pack_streams: a town at 1 mm keeps 15-18 bits a point, not 60);
-        the others stay wide. The positions drawn stay the same (to the last of 30 bits: the
-        cell centre, not where truncation put a point)."""
-        bits = self._grid_bits()
-        pool = self.pool
-        if bits is None or self._on_grid or self._n_chunks == 0:
+    def _pack(self) -> None:
+        """The loaded octree held as the plain cloud's layout holds points (``trim``): point chunks
+        on the source's grid in the bits it needs (``_streams_on_grid``), attributes in their real
+        range (core/attributes.py: a constant none, an intensity of a few hundred values a byte).
+        ``_unpack`` undoes it before anything is written."""
+        if self._packed or self._n_chunks == 0:
             return
+        streams, attributes = self._streams_on_grid(), self._packed_attributes()
+        if streams is None and attributes is None:
+            return
+        ext, packing = streams or (self.pool.ext, self.pool.packing)
+        self.pool = self.pool.repacked(ext, packing, attributes or self.pool.attributes)
+        self._packed = True
+
+    def _streams_on_grid(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(streams, their records) with each point chunk whose points all sit on the source's
+        grid in the bits it needs (kernels.grid_widths, pack_streams: a town at 1 mm keeps 15-18
+        bits a point, not 60), the others wide; None where none is. The positions drawn stay the
+        same (to the last of 30 bits: the cell centre, not where truncation put a point)."""
+        bits = self._grid_bits()
+        if bits is None:
+            return None
+        pool = self.pool
         fill, pack = pool.batches["count"], pool.packing
         widths = np.empty(pool.n_chunks, np.int64)
         K.grid_widths(fill, pack["code"], pool.chunk_node, self.level, bits, pool.ext, pack["ext_first"], widths)
         if not np.any((widths > 0) & (widths < EXT_FULL_BITS)):
-            return
+            return None
         words = stream_words(3 * widths, fill.astype(np.int64))
         first = np.cumsum(words) - words  # streams follow chunk order; a voxel chunk's is empty, where the next starts
         ext = pages.zeros(int(words.sum()), np.uint64)
         K.pack_streams(fill, widths, pool.ext, pack["ext_first"], ext, first)
         packing = pack.copy()
         packing["ext_first"], packing["code"] = first, widths | widths << 8 | widths << 16
-        self.pool = pool.restreamed(ext, packing)
-        self._on_grid = True
+        return ext, packing
 
-    def _widen_streams(self) -> None:
-        """Every point chunk's stream back to 60 bits a point and a stream of its own (``stream``
-        words, in chunk order), as insertions write them."""
-        if not self._on_grid:
+    def _packed_attributes(self) -> Attributes | None:
+        """The pool's attributes packed to their real range; the entries no chunk uses (each
+        chunk's room) take a used entry's values first (their zeros would widen the range).
+        None: no attributes."""
+        pool = self.pool
+        count = pool.batches["count"].astype(np.int64)
+        if not pool.attributes or not count.any():
+            return None
+        room = pool.chunk - count
+        has = np.flatnonzero(room)
+        n_room = room[has]
+        ends = np.cumsum(n_room)
+        unused = np.repeat(has * pool.chunk + count[has] - (ends - n_room), n_room) + np.arange(int(ends[-1]) if len(ends) else 0)
+        used = int(np.flatnonzero(count)[0]) * pool.chunk
+        for v in pool.attributes.values():
+            v[unused] = v[used]
+        return Attributes(pool.attributes, packed=True)
+
+    def _unpack(self) -> None:
+        """``_pack`` undone: every point chunk's stream 60 bits a point and a stream of its own
+        (``stream`` words, in chunk order), attributes in arrays of their own dtype, as
+        insertions write them."""
+        if not self._packed:
             return
         pool = self.pool
         fill, pack = pool.batches["count"], pool.packing
-        points = (pack["code"] != 0).astype(np.int64)  # point chunks: compact codes keep e >= 1
-        first = (np.cumsum(points) - points) * pool.stream
-        ext = pages.zeros(int(points.sum()) * pool.stream, np.uint64)
-        K.widen_streams(fill, pack["code"], pool.ext, pack["ext_first"], ext, first)
-        packing = pack.copy()
-        packing["ext_first"], packing["code"] = first, np.where(points == 1, K.WIDE_CODE, 0)
-        self.pool = pool.restreamed(ext, packing)
-        self._n_streams = int(points.sum())
-        self._on_grid = False
+        ext, packing = pool.ext, pool.packing
+        if np.any((pack["code"] != 0) & (pack["code"] != K.WIDE_CODE)):
+            points = (pack["code"] != 0).astype(np.int64)  # point chunks: compact codes keep e >= 1
+            first = (np.cumsum(points) - points) * pool.stream
+            ext = pages.zeros(int(points.sum()) * pool.stream, np.uint64)
+            K.widen_streams(fill, pack["code"], pool.ext, pack["ext_first"], ext, first)
+            packing = pack.copy()
+            packing["ext_first"], packing["code"] = first, np.where(points == 1, K.WIDE_CODE, 0)
+            self._n_streams = int(points.sum())
+        attributes = {a: np.ascontiguousarray(pool.attributes[a]) for a in pool.attributes}  # decoded
+        self.pool = pool.repacked(ext, packing, attributes)
+        self._packed = False
 
     def _drop_voxel_state(self) -> None:
         """Drop the voxels' build state, and the insertions' work arrays with it."""
@@ -688,7 +731,7 @@ class ProgressiveOctree:
         if pool is not None:
             m = {
                 "positions": size(pool.low, pool.ext), "color": size(pool.color),
-                "attributes": size(*pool.attributes.values()),
+                "attributes": pool.attributes.nbytes if isinstance(pool.attributes, Attributes) else size(*pool.attributes.values()),
                 "batches": size(pool.batches, pool.packing, pool.chunk_next, pool.chunk_node, pool.batch_version),
             }  # fmt: skip
         m["voxels"] = size(self.vox_key, self.vox_slot, self.vox_sum, self._hkeys, self._hvals)
@@ -828,7 +871,7 @@ class ProgressiveOctree:
     def _insert(self, xyz, rgba, attrs, lo, hi, table: tuple | None = None) -> None:
         n = len(xyz)
         attrs = self._attribute_set(attrs, n)
-        self._widen_streams()
+        self._unpack()
         if self.pool is None:
             expected = int(self.capacity * _ROOM_PER_POINT) // self.chunk
             streams = int(self.capacity * _STREAMS_PER_POINT) // self.chunk
@@ -1058,7 +1101,7 @@ class ProgressiveOctree:
         """(xyz, rgba, attributes) of every point in the leaves."""
         pool = self.pool
         slots = np.concatenate([self._list_slots(node * K.LISTS) for node in self.leaves().tolist()])
-        return self._decode(slots), take(pool.color, slots), {a: take(v, slots) for a, v in pool.attributes.items()}
+        return self._decode(slots), take(pool.color, slots), pool.attribute_rows(slots)
 
     # ------------------------------------------------------------------ saving
     def chunks(self, points_per_chunk: int = 1_000_000):
@@ -1072,7 +1115,7 @@ class ProgressiveOctree:
             with self.lock:
                 self._check_unchanged(stamp)
                 slots = self._list_slots(node * K.LISTS)
-                part = (self._decode(slots), self.pool.color[slots], {a: v[slots] for a, v in self.pool.attributes.items()})
+                part = (self._decode(slots), self.pool.color[slots], self.pool.attribute_rows(slots))
             parts.append(part)
             held += len(slots)
             if held >= points_per_chunk:
@@ -1128,7 +1171,7 @@ class ProgressiveOctree:
             slots = np.concatenate([self._list_slots(node * K.LISTS) for node in nodes]) if nodes else np.empty(0, np.int64)
             pool = self.pool
             return {"xyz": self._decode(slots), "rgba": take(pool.color, slots),
-                    **{f"attr.{a}": take(v, slots) for a, v in pool.attributes.items()}}  # fmt: skip
+                    **{f"attr.{a}": v for a, v in pool.attribute_rows(slots).items()}}  # fmt: skip
 
     # ------------------------------------------------------------------ reading
     def node_entries(self, node: int) -> np.ndarray:
