@@ -1098,6 +1098,11 @@ def test_a_las_file_loads_into_its_own_grid(tmp_path, las_writer):
     assert held.nbytes_of("return_number") == held.nbytes_of("gps_time") == 0 and held.nbytes_of("intensity") == 2 * n  # one value each
     info = cloud.pool.point_info(int(cloud.node_entries(cloud.leaves()[0])[0]))
     assert info["return_number"] == las.return_number[0] and isinstance(info["intensity"], int)
+    cloud.save(tmp_path / "saved.copc.laz", format="copc")  # the packed pool read leaf by leaf
+    saved = laspy.read(str(tmp_path / "saved.copc.laz"))
+    assert len(saved.points) == len(las.points)
+    for name in ("X", "Y", "Z", "intensity", "classification"):
+        np.testing.assert_array_equal(np.sort(np.asarray(saved[name])), np.sort(np.asarray(las[name])))
     cloud.close()
 
 
