@@ -1068,6 +1068,9 @@ def test_points_added_after_trim_widen_the_streams_and_build_the_same_octree(sce
         order_a = np.lexsort(np.column_stack([a["xyz"], a["color"]]).T)
         order_b = np.lexsort(np.column_stack([b["xyz"], b["color"]]).T)
         np.testing.assert_allclose(a[name][order_a], b[name][order_b], atol=1e-3 * _MM, rtol=0)
+    assert twice.expect(points[0][::10], 40.0) > 0 and not twice._packed  # shaping the tree splits leaves: unpacked first
+    _match(_leaf_points(twice)["xyz"], points[0], 1e-3 * _MM)
+    twice.trim()
     twice.add(points[0][:10], points[1][:10], **{k: v[:10] for k, v in points[2].items()})
     assert not twice._packed and np.all(twice.pool.packing["code"][twice.pool.packing["code"] != 0] == 20 | 20 << 8 | 20 << 16)
     np.testing.assert_array_equal(_grid_rows(_leaf_points(twice)["xyz"]), _grid_rows(np.concatenate([points[0], points[0][:10]])))

@@ -18,7 +18,9 @@ The structure of SimLOD (Schütz, Herzberger, Wimmer 2024, sections 3-5; Wand et
   layout (core/compact.py: a low word, u32 RGBA and the attributes an entry, positions relative
   to the node's cube): a point chunk keeps the 20 bits an axis under the low word in a stream
   of its own (a wide batch, 7.5 bytes a point), a voxel chunk needs nothing more (a voxel sits
-  at its cell's centre on the node's 128³ grid, which the low word holds); a node's entries are a linked list of chunks, so nodes grow without copies, and a split
+  at its cell's centre on the node's 128³ grid, which the low word holds); once loaded (``trim``) a
+  chunk of points on the source's grid keeps only the bits its cube needs at the grid's step, and
+  attributes are held in their range (``_pack``). A node's entries are a linked list of chunks, so nodes grow without copies, and a split
   leaf's chunks go back to a free list. Each chunk is a batch: the renderer draws the pool
   directly (one batch per chunk), with the octree's node selection (largest projected
   first, within the point budget) and per-node precision, and the GPU re-uploads only the
@@ -490,7 +492,8 @@ class ProgressiveOctree:
     def trim(self) -> None:
         """Release the room kept for growth (the loader calls it when loading ends): the pool
         down to the chunks and streams in use, and the voxels' build state (their colour sums,
-        keys, slots and table: the next ``add`` rebuilds it from the points)."""
+        keys, slots and table: the next ``add`` rebuilds it from the points); and pack what is
+        kept (``_pack``: streams on the source's grid, attributes in their range)."""
         with self.lock:
             if self.pool is None:
                 return
@@ -827,6 +830,7 @@ class ProgressiveOctree:
         if not len(sample):
             return 0
         with self.lock.writing():
+            self._unpack()  # split leaves' points are written again
             if self.pool is not None and not self._voxel_state:
                 self._rebuild_voxel_state()  # spilled points are sampled into voxels again
             inner_before = int(np.count_nonzero(self.leaf[: self.n_nodes] == 0))
