@@ -1109,6 +1109,33 @@ def test_a_las_file_loads_into_its_own_grid(tmp_path, las_writer):
     cloud.close()
 
 
+def test_files_on_two_grids_load_exactly(tmp_path):
+    """Two LAS files of one scene whose offsets differ by 0.4 of their millimetre: the octree's
+    grid is the first file's, the second file's points are off it and their chunks stay wide;
+    every point of both is where its file has it."""
+    import laspy
+
+    xyz, rgba, _ = demo_arrays(60_000, seed=5)
+    paths = []
+    for k, offset in enumerate((0.0, 0.0004)):
+        header = laspy.LasHeader(point_format=2, version="1.2")
+        header.scales, header.offsets = [0.001] * 3, [offset] * 3
+        las = laspy.LasData(header)
+        part = xyz[k::2] + (25.0 if k else 0.0)  # the second file beside the first: leaves of their own
+        las.x, las.y, las.z = part[:, 0], part[:, 1], part[:, 2]
+        paths.append(tmp_path / f"{k}.las")
+        las.write(str(paths[-1]))
+    cloud = gp.open(*paths, progressive=True)
+    cloud.wait(timeout=120)
+    assert cloud.grid is not None and np.array_equal(cloud.grid[0], [0.0, 0.0, 0.0])
+    _, e = _chunk_widths(cloud)
+    assert np.any(e == 20) and np.any(e < 20)  # the second file's chunks wide, the first's compact
+    want = np.concatenate([np.column_stack([r.x, r.y, r.z]) for r in (laspy.read(str(p)) for p in paths)])
+    got = np.concatenate([c.xyz for c in cloud.chunks()])
+    _match(got, want, 1e-5)  # within a 30-bit cell of the root (~2e-6 m), where the files have them
+    cloud.close()
+
+
 @pytest.mark.gpu
 def test_wgpu_draws_the_octree_on_its_grid_as_the_cpu_does(scene):
     """The trimmed pool's compact point chunks (and what an add writes after it) through the GPU's
