@@ -1109,6 +1109,29 @@ def test_a_las_file_loads_into_its_own_grid(tmp_path, las_writer):
     cloud.close()
 
 
+def test_a_grown_root_stays_on_the_grid_and_bad_grids_are_refused():
+    """One point, then points ever farther out: the root grows from a cube 2 grid steps wide and
+    stays aligned, so trim still packs and every point is exact; a grid without a positive,
+    finite step or point is a one-line error."""
+    rng = np.random.default_rng(3)
+    o = ProgressiveOctree("grown", max_leaf=500, grid=(_UTM, _MM))
+    first = _UTM + 0.123
+    o.add(first[None, :])
+    parts = [first[None, :]]
+    for radius in (1.0, 30.0, 900.0):
+        part = _UTM + np.round(rng.uniform(-radius, radius, (3_000, 3)) / _MM) * _MM
+        o.add(part)
+        parts.append(part)
+    o.trim()
+    assert o._packed and o._grid_bits() is not None and o.edge > 1800  # grown from 2 steps: ~20 times
+    _, e = _chunk_widths(o)
+    assert np.any(e < 20)
+    np.testing.assert_array_equal(_grid_rows(_leaf_points(o)["xyz"]), _grid_rows(np.concatenate(parts)))
+    for grid in (((0, 0, 0), 0.0), ((0, 0, 0), -1e-3), ((np.nan, 0, 0), 1e-3), ((0, 0, 0), np.inf)):
+        with pytest.raises(InputError, match="grid must be"):
+            ProgressiveOctree("bad", grid=grid)
+
+
 def test_files_on_two_grids_load_exactly(tmp_path):
     """Two LAS files of one scene whose offsets differ by 0.4 of their millimetre: the octree's
     grid is the first file's, the second file's points are off it and their chunks stay wide;
