@@ -1109,6 +1109,40 @@ def test_a_las_file_loads_into_its_own_grid(tmp_path, las_writer):
     cloud.close()
 
 
+def test_trim_packs_outside_the_lock_and_gives_way_to_an_add(scene, monkeypatch):
+    """Packing is worked out while frames can take the lock (0.3 s at 20 M points would stall
+    the viewer once loaded); an ``add`` that comes before it is taken wins: the packed copy is
+    dropped, and the octree holds every point, wide."""
+    xyz, rgba, attrs = points = _on_grid(scene)
+    half = len(xyz) // 2
+    free = []
+    streams_on_grid = ProgressiveOctree._streams_on_grid
+
+    def probe(self, state):
+        def take():
+            got = self.lock.lock.acquire(timeout=5)
+            free.append(got)
+            if got:
+                self.lock.lock.release()
+
+        t = threading.Thread(target=take)
+        t.start()
+        t.join()
+        return streams_on_grid(self, state)
+
+    monkeypatch.setattr(ProgressiveOctree, "_streams_on_grid", probe)
+    o = _grid_filled(points)
+    assert free == [True] and o._packed
+    o = _grid_filled(points, rounds=(slice(0, half),))  # packed, then ...
+    o.add(xyz[:10], rgba[:10], **{a: v[:10] for a, v in attrs.items()})  # ... unpacked by an add
+    with o.lock:
+        state = o._pack_state()
+    o.add(xyz[half:], rgba[half:], **{a: v[half:] for a, v in attrs.items()})
+    o._pack(state)
+    assert not o._packed and o.n_points == len(xyz) + 10
+    np.testing.assert_array_equal(_grid_rows(_leaf_points(o)["xyz"]), _grid_rows(np.concatenate([xyz, xyz[:10]])))
+
+
 def test_a_grown_root_stays_on_the_grid_and_bad_grids_are_refused():
     """One point, then points ever farther out: the root grows from a cube 2 grid steps wide and
     stays aligned, so trim still packs and every point is exact; a grid without a positive,
