@@ -1133,6 +1133,9 @@ def test_trim_packs_outside_the_lock_and_gives_way_to_an_add(scene, monkeypatch)
     monkeypatch.setattr(ProgressiveOctree, "_streams_on_grid", probe)
     o = _grid_filled(points)
     assert free == [True] and o._packed
+    o.close()  # frees the packed pool: points added later start a new one
+    o.add(xyz[:100], rgba[:100], **{a: v[:100] for a, v in attrs.items()})
+    assert o.n_points == 100 and len(_leaf_points(o)["xyz"]) == 100
     o = _grid_filled(points, rounds=(slice(0, half),))  # packed, then ...
     o.add(xyz[:10], rgba[:10], **{a: v[:10] for a, v in attrs.items()})  # ... unpacked by an add
     with o.lock:

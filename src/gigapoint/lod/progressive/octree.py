@@ -728,7 +728,7 @@ class ProgressiveOctree:
         if self.loader is not None:
             self.loader.close()
         with self.lock:
-            self.pool = None
+            self.pool, self._packed = None, False
             self.origin = None
             self.points = self.n_nodes = self.n_voxels = 0
             self._nodes(1)
