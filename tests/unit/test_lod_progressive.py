@@ -1169,6 +1169,20 @@ def test_a_grown_root_stays_on_the_grid_and_bad_grids_are_refused():
             ProgressiveOctree("bad", grid=grid)
 
 
+def test_a_header_without_a_usable_grid_loads_without_one(tmp_path, las_writer, monkeypatch):
+    """A header whose scale is 0 or NaN (a damaged file) gives no grid: the points load wide,
+    as before, with no error about a grid nobody asked for."""
+    from gigapoint.io.las import LasReader
+    from gigapoint.lod.progressive import file_sources
+
+    f = las_writer(tmp_path / "a.las", 5_000, seed=1)
+    assert file_sources([f])[4][1] == 0.001
+    info = LasReader.info
+    for scale in ([0.0] * 3, [np.nan] * 3, [-0.001] * 3):
+        monkeypatch.setattr(LasReader, "info", lambda self, path, scale=scale: {**info(self, path), "scale": scale})
+        assert file_sources([f])[4] is None
+
+
 def test_files_on_two_grids_load_exactly(tmp_path):
     """Two LAS files of one scene whose offsets differ by 0.4 of their millimetre: the octree's
     grid is the first file's, the second file's points are off it and their chunks stay wide;

@@ -187,8 +187,10 @@ def file_sources(paths) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray]
         sources.append((str(f), lambda f=f, reader=reader: reader.read_chunks(f, min(DEFAULT_CHUNK_SIZE, DECODE_CHUNK))))
     name = files[0].name if len(files) == 1 else f"{len(files)} files"
     grid = None
-    if all(o is not None for o in offsets) and all(s is not None for s in scales) and files:
-        grid = (np.asarray(offsets[0], np.float64), float(np.min(np.asarray(scales, np.float64))))
+    if files and all(o is not None for o in offsets) and all(s is not None for s in scales):
+        step = float(np.min(np.asarray(scales, np.float64)))
+        if np.isfinite(step) and step > 0 and np.all(np.isfinite(offsets[0])):  # a header's nonsense: no grid, points kept wide
+            grid = (np.asarray(offsets[0], np.float64), step)
     return sources, total, ((lo, hi) if bounds_known and np.all(lo <= hi) else None), name, grid
 
 
