@@ -1167,6 +1167,11 @@ def test_a_grown_root_stays_on_the_grid_and_bad_grids_are_refused():
     for grid in (((0, 0, 0), 0.0), ((0, 0, 0), -1e-3), ((np.nan, 0, 0), 1e-3), ((0, 0, 0), np.inf)):
         with pytest.raises(InputError, match="grid must be"):
             ProgressiveOctree("bad", grid=grid)
+    far = ProgressiveOctree("far", grid=(_UTM + 1e20, _MM))  # a point float64 cannot reach the data from: no grid
+    far.add(parts[1])
+    far.trim()
+    assert far.grid is None and far.edge < 10 and not far._packed
+    np.testing.assert_array_equal(_grid_rows(_leaf_points(far)["xyz"]), _grid_rows(parts[1]))
 
 
 def test_a_header_without_a_usable_grid_loads_without_one(tmp_path, las_writer, monkeypatch):

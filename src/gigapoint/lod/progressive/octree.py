@@ -222,11 +222,19 @@ def _checked_grid(name: str, grid) -> tuple[np.ndarray, float] | None:
     return anchor, step
 
 
-def _grid_cube(origin, edge: float, anchor, step: float) -> tuple[np.ndarray, float]:
+#: grid steps from the grid's point to the data beyond which float64 no longer places a cube on the grid
+_GRID_REACH = 2.0**50
+
+
+def _grid_cube(origin, edge: float, anchor, step: float) -> tuple[np.ndarray, float] | None:
     """The smallest cube holding (origin, edge) that is 2^B grid steps wide, its corner half a
     step below a grid point: each of its nodes' cubes is then 2^b steps with cell centres on the
-    grid (the compact layout's boxes, core/compact.py)."""
-    corner = anchor + (np.floor((np.asarray(origin, np.float64) - anchor) / step) - 0.5) * step
+    grid (the compact layout's boxes, core/compact.py). None where float64 cannot place it (the
+    grid's point too far from the data, in steps: a header's absurd offset or scale)."""
+    index = np.floor((np.asarray(origin, np.float64) - anchor) / step)
+    if not np.all(np.abs(index) < _GRID_REACH) or edge / step >= _GRID_REACH:
+        return None
+    corner = anchor + (index - 0.5) * step
     steps = float(np.max(np.asarray(origin) + edge - corner)) / step
     return corner, 2.0 ** max(1, int(np.ceil(np.log2(steps)))) * step
 
@@ -555,6 +563,8 @@ class ProgressiveOctree:
         anchor, step = self.grid
         bits = round(np.log2(self.edge / step))
         steps = (self.origin - anchor) / step + 0.5
+        if not np.all(np.abs(steps) < _GRID_REACH):
+            return None
         aligned = abs(self.edge - 2.0**bits * step) <= 1e-9 * self.edge and np.all(np.abs(steps - np.round(steps)) <= 1e-6)
         return bits if aligned else None
 
@@ -672,8 +682,11 @@ class ProgressiveOctree:
     def _start(self, origin: np.ndarray, edge: float) -> None:
         """The root cube (aligned to the source's grid where there is one), and the root: an empty leaf."""
         edge = edge if edge > 0 else 1.0
-        if self.grid is not None:
-            origin, edge = _grid_cube(origin, edge, *self.grid)
+        cube = _grid_cube(origin, edge, *self.grid) if self.grid is not None else None
+        if cube is None:
+            self.grid = None  # (none, or one float64 cannot place this cube on): points stay wide
+        else:
+            origin, edge = cube
         self.origin, self.edge = origin, edge
         self.key[0], self.level[0], self.leaf[0], self.count[0] = 1, 0, 1, 0
         self.children[0] = -1
