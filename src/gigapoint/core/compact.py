@@ -164,6 +164,16 @@ def tail_words(v, code):
 
 
 @njit
+def wide_bits(v, code):
+    """A point's extension bits ``v`` of a batch with layout ``code`` as a wide batch holds them:
+    each axis's 20 bits under the low word (``tail_words``' before they are split into the
+    medium and high words), x y z back to back: 60 bits."""
+    ax, ay, az, _ = tail_constants(code)
+    c20 = np.uint64(20)
+    return _tail(v, ax) | (_tail(v, ay) << c20) | (_tail(v, az) << (c20 + c20))
+
+
+@njit
 def code_bits(code):
     """Bits a point of a batch with layout ``code`` holds in the stream."""
     return _bits_of(code, 0) + _bits_of(code, 1) + _bits_of(code, 2)
@@ -459,6 +469,7 @@ __all__ = [
     "stream_words",
     "tail_words",
     "wide_batches",
+    "wide_bits",
 ]
 
 

@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit, prange, types
 from numba.typed import List
 
-from ...core.compact import code_bits, read_ext, tail_words, write_ext
+from ...core.compact import code_bits, read_ext, tail_words, wide_bits, write_ext
 from ...core.layout import COORD_BITS, EXT_FULL_BITS, WORD_BITS, WORD_MASK
 from ..keys import CODE_BITS
 
@@ -986,18 +986,12 @@ def pack_streams(fill, widths, ext, ext_first, out, out_first):
 @njit(parallel=True, cache=True)
 def widen_streams(fill, code, ext, ext_first, out, out_first):
     """``pack_streams`` undone: each point chunk's stream (layout ``code``) as a wide one, 60 bits
-    a point, into ``out`` (zeroed) at ``out_first``, through the layout's decoder (``tail_words``:
+    a point, into ``out`` (zeroed) at ``out_first``, through the layout's decoder (``wide_bits``:
     the 20 bits an axis a frame draws)."""
-    m10 = np.uint64(WORD_MASK)
     for c in prange(fill.shape[0]):
         cd = code[c]
         if cd == 0:
             continue
         t = code_bits(cd)
         for j in range(fill[c]):
-            med, high = tail_words(read_ext(ext, ext_first[c], t, j), cd)
-            v = np.uint64(0)
-            for a in range(3):
-                sh = np.uint64(WORD_BITS * a)
-                v |= ((((np.uint64(med) >> sh) & m10) << np.uint64(WORD_BITS)) | ((np.uint64(high) >> sh) & m10)) << np.uint64(EXT_FULL_BITS * a)
-            write_ext(out, out_first[c], WIDE_BITS, j, v)
+            write_ext(out, out_first[c], WIDE_BITS, j, wide_bits(read_ext(ext, ext_first[c], t, j), cd))

@@ -166,6 +166,7 @@ def file_sources(paths) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray]
     every file through its reader (io registry), in bounded chunks. Totals, bounds and the grid
     are known when every file's header tells them (LAS/LAZ); the grid (ProgressiveOctree's) is
     the first file's offset and the finest scale (points of files on other grids stay wide)."""
+    from ...core.cloud import finest_scale
     from ...io import expand_paths, reader_for
     from ...io._base import DEFAULT_CHUNK_SIZE
 
@@ -186,9 +187,9 @@ def file_sources(paths) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray]
         scales.append(info.get("scale"))
         sources.append((str(f), lambda f=f, reader=reader: reader.read_chunks(f, min(DEFAULT_CHUNK_SIZE, DECODE_CHUNK))))
     name = files[0].name if len(files) == 1 else f"{len(files)} files"
-    grid = None
-    if files and all(o is not None for o in offsets) and all(s is not None for s in scales):
-        step = float(np.min(np.asarray(scales, np.float64)))
+    grid, scale = None, finest_scale(scales)
+    if scale is not None and all(o is not None for o in offsets):
+        step = float(np.min(scale))  # one step for every axis: the finer axes' grid holds the coarser ones' points
         if np.isfinite(step) and step > 0 and np.all(np.isfinite(offsets[0])):  # a header's nonsense: no grid, points kept wide
             grid = (np.asarray(offsets[0], np.float64), step)
     return sources, total, ((lo, hi) if bounds_known and np.all(lo <= hi) else None), name, grid

@@ -556,17 +556,12 @@ class ProgressiveOctree:
         return left
 
     def _grid_bits(self) -> int | None:
-        """B where the root cube is 2^B steps of the source's grid, its corner half a step off
-        the grid (``_start`` aligned it, growing keeps it); None without a grid."""
+        """B where the root cube is 2^B steps of the source's grid (``_start`` aligned it, growing
+        keeps it; a cube off the grid would only leave chunks wide: kernels.grid_widths checks
+        every point); None without a grid."""
         if self.grid is None or self.origin is None:
             return None
-        anchor, step = self.grid
-        bits = round(np.log2(self.edge / step))
-        steps = (self.origin - anchor) / step + 0.5
-        if not np.all(np.abs(steps) < _GRID_REACH):
-            return None
-        aligned = abs(self.edge - 2.0**bits * step) <= 1e-9 * self.edge and np.all(np.abs(steps - np.round(steps)) <= 1e-6)
-        return bits if aligned else None
+        return round(np.log2(self.edge / self.grid[1]))
 
     def _pack_state(self) -> _PackState | None:
         """What ``_pack`` works from, taken under the lock: the pool, its version, and copies of
