@@ -14,7 +14,8 @@
   chunk of ``gigapoint.io.read_chunks``) against ``gigapoint.open(..., progressive=True)`` to
   completion, alternately, in one process: the ratio is what LOD costs loading.
 - ``memory``: bytes a point of the town as a LAS file loaded progressively (on the file's grid,
-  attributes in their range, once loaded) against three words a point and the plain cloud's layout.
+  attributes in their range, once loaded) against three words a point and the plain cloud's
+  layout; and what the octree held when its last point was in, before ``trim``.
 - ``first``: seconds from ``gigapoint.demo(10**9, progressive=True)`` (or ``gigapoint.open(FILE,
   progressive=True)`` with ``--first-source FILE``) to its first image with points (1920x1080),
   then the loader is closed.
@@ -217,16 +218,29 @@ def bench_memory(n: int) -> None:
     in their range; with u32 colours, as the octree holds them, and with its default colours)."""
     from gigapoint.io import open_cloud
 
+    filled, trim = {}, ProgressiveOctree.trim
+
+    def recorded(octree):  # what the loader's memory limit counts when the last point is in
+        filled.update(octree.memory())
+        trim(octree)
+
     with tempfile.TemporaryDirectory() as tmp:
         (path,) = _town_files(tmp, n, ("las",))
-        with gp.open(path, progressive=True) as cloud:
-            cloud.wait()
-            mem, voxels, chunks = cloud.memory(), cloud.n_voxels / n, _chunk_fill(cloud)
-            words = 16 + sum(cloud.attributes[a].dtype.itemsize for a in cloud.attributes)
+        ProgressiveOctree.trim = recorded
+        try:
+            with gp.open(path, progressive=True) as cloud:
+                cloud.wait()
+                mem, voxels, chunks = cloud.memory(), cloud.n_voxels / n, _chunk_fill(cloud)
+                words = 16 + sum(cloud.attributes[a].dtype.itemsize for a in cloud.attributes)
+        finally:
+            ProgressiveOctree.trim = trim
         plain = open_cloud(path, colors="rgba").nbytes / n
         default = open_cloud(path).nbytes / n
     total = sum(mem.values()) / n
     parts = ", ".join(f"{k} {v / n:.1f}" for k, v in mem.items() if v)
+    while_filling = ", ".join(f"{k} {v / n:.1f}" for k, v in filled.items() if v)
+    print(f"memory, LAS {n / 1e6:g} M at 1 mm: {sum(filled.values()) / n:.1f} bytes a point when the last point is in, before trim "
+          f"({while_filling}; presized room and build state included: what the memory limit counts)")
     print(f"memory, LAS {n / 1e6:g} M at 1 mm: {total:.1f} bytes a point loaded ({parts}; {voxels:.2f} voxels a point, chunks {chunks:.0%} "
           f"full); the quantized layouts: three words {words} B = {total / words:.2f}x, the plain cloud's compact layout with u32 colours "
           f"{plain:.1f} B = {total / plain:.2f}x, with its default colours {default:.1f} B = {total / default:.2f}x")  # fmt: skip

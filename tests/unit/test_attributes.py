@@ -11,7 +11,7 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.core import PointChunk, build_cloud
-from gigapoint.core.attributes import Attributes, Packed, pack
+from gigapoint.core.attributes import Attributes, Packed, encode, fits, holder_for, pack, repacked, resized, stored, widened
 from gigapoint.core.chunked import build_cloud_chunked
 
 AUTZEN = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "autzen_trim.laz"
@@ -65,6 +65,46 @@ def test_pack_round_trips_every_value_and_picks_the_narrowest(rng):
         assert np.array_equal(back.view(np.uint8), v.view(np.uint8)), name  # bit for bit
         idx = rng.integers(0, len(v), 50)
         assert np.array_equal(held.decode(idx), v[idx]), name
+
+
+@pytest.mark.parametrize("order", ["as given", "ascending"])
+def test_a_holder_filled_batch_by_batch_keeps_every_value_and_widens_rarely(rng, order):
+    """An arena filled as points come (the progressive octree's pool): the holder the first batch
+    suggests, widened (its entries so far copied) where a batch does not fit, stores every value
+    bit for bit; ramps widen a few times, not once a batch; ``repacked`` then narrows to the
+    real range and ``resized`` keeps the entries."""
+    n, batch = 6000, 500
+    values = edge_attributes(rng, n)
+    values["ramp_u16"] = (np.arange(n) // 10).astype(np.uint16)  # 0..599: one value, a byte, then its dtype
+    values["ramp_i32"] = (np.arange(n) - 70_000).astype(np.int32)
+    values["later_gps"] = np.where(np.arange(n) < 2000, 5.0, 245_385.0 + rng.random(n))  # one value, then many
+    for name, v in values.items():
+        if order == "ascending" and v.ndim == 1 and v.dtype != bool:
+            v = np.sort(v)
+        held, used, widenings = holder_for(v[:batch], n), 0, 0
+        for s in range(0, n, batch):
+            part = v[s : s + batch]
+            if not fits(held, part):
+                held, widenings = widened(held, part, used), widenings + 1
+            into = stored(held)
+            if into is not None:
+                into[used : used + len(part)] = encode(held, part)
+            used += len(part)
+        got = held.decode() if isinstance(held, Packed) else held
+        assert got.dtype == v.dtype and got.tobytes() == v.tobytes(), name
+        assert widenings <= 3, (name, widenings)
+        tight = repacked(held)
+        assert (tight.decode() if isinstance(tight, Packed) else tight).tobytes() == v.tobytes(), name
+        if name in HELD and HELD[name] != "unpacked":  # as pack holds all of them at once
+            assert isinstance(tight, Packed) and (tight.stored is None if HELD[name] is None else tight.stored.dtype == HELD[name]), name
+        longer = resized(held, n + 10)
+        assert (longer.decode() if isinstance(longer, Packed) else longer)[:n].tobytes() == v.tobytes(), name
+    assert holder_for(np.full(10, 7, np.uint16), 4) == Packed(None, 7, np.dtype(np.uint16), 4)
+    middle = holder_for(np.array([1000, 1100], np.int32), 4)  # the range in the middle of a byte: room either side
+    assert middle.stored.dtype == np.uint8 and fits(middle, np.array([950, 1150], np.int32))
+    assert not fits(middle, np.array([1000, 1300], np.int32))
+    assert holder_for(np.array([0, 10], np.uint16), 4).offset == 0  # not below the dtype's range
+    assert not fits(holder_for(np.full(3, 0.0), 4), np.full(3, -0.0))  # bit for bit
 
 
 def test_float_packing_is_bit_exact():

@@ -1109,6 +1109,59 @@ def test_a_las_file_loads_into_its_own_grid(tmp_path, las_writer):
     cloud.close()
 
 
+def test_attributes_are_held_in_their_range_while_the_octree_fills(scene):
+    """While points come, each attribute is held as the values so far need (core/attributes.py
+    holder_for: one value, an integer range in a narrow dtype, else its dtype), widened where a
+    batch does not fit: a constant costs nothing while loading, and every point (and voxel)
+    keeps its values exactly, through trim and later adds."""
+    xyz, rgba, _ = scene
+    n = len(xyz)
+    rng = np.random.default_rng(5)
+    first_half = np.arange(n) < n // 2
+    attrs = {
+        "source": np.full(n, 7, np.uint16),  # one value throughout
+        "intensity": np.where(first_half, rng.integers(100, 300, n), rng.integers(0, 60_000, n)).astype(np.uint16),
+        "time": np.where(np.arange(n) < n // 3, 5.0, rng.random(n) * 1e6),  # one value, then many
+        "offset": rng.integers(-70_000, -69_900, n).astype(np.int32),  # a byte's range, far from 0
+    }
+    o = ProgressiveOctree("t", max_leaf=3_000, cube=_cube(xyz))
+    forms = []
+    for s in range(0, n, 20_000):
+        sl = slice(s, s + 20_000)
+        o.add(xyz[sl], rgba[sl], **{a: v[sl] for a, v in attrs.items()})
+        forms.append({a: o.pool.attributes.held_dtype(a) for a in attrs})
+    assert forms[0]["source"] == forms[-1]["source"] == "uint16 constant 7"
+    assert forms[0]["intensity"].startswith("uint16 in uint8") and forms[-1]["intensity"] == "uint16"
+    assert forms[0]["time"] == "float64 constant 5.0" and forms[-1]["time"] == "float64"
+    assert all(f["offset"].startswith("int32 in uint8 - ") for f in forms)
+    held, entries = o.pool.attributes, o.pool.n_points
+    assert held.nbytes_of("source") == 0 and held.nbytes_of("offset") == entries and held.nbytes_of("intensity") == 2 * entries
+
+    def check(want):
+        got = _leaf_points(o)
+        match = _match(got["xyz"], xyz, np.sqrt(3) * o.edge / 2**30)
+        for a, v in want.items():
+            np.testing.assert_array_equal(got[a], v[match], err_msg=a)
+        voxels = np.concatenate([o.node_entries(v) for v in o.inner_nodes()])
+        for a, v in o.pool.attribute_rows(voxels).items():  # a voxel's: one of its cell's points'
+            assert np.isin(v, want[a]).all(), a
+
+    check(attrs)
+    o.trim()
+    assert o.pool.attributes.held_dtype("source") == "uint16 constant 7"
+    check(attrs)
+    more = {"source": np.full(1000, 8, np.uint16), "intensity": np.zeros(1000, np.uint16), "time": np.ones(1000),
+            "offset": np.full(1000, 2**30, np.int32)}  # fmt: skip
+    o.add(xyz[:1000] + 0.001, rgba[:1000], **more)
+    assert o.pool.attributes.held_dtype("source").startswith("uint16 in uint8") and o.pool.attributes.held_dtype("offset") == "int32"
+    got = _leaf_points(o)
+    both = {a: np.concatenate([attrs[a], more[a]]) for a in attrs}
+    match = _match(got["xyz"], np.concatenate([xyz, xyz[:1000] + 0.001]), np.sqrt(3) * o.edge / 2**30)
+    for a, v in both.items():
+        np.testing.assert_array_equal(got[a], v[match], err_msg=a)
+    o.close()
+
+
 def test_trim_packs_outside_the_lock_and_gives_way_to_an_add(scene, monkeypatch):
     """Packing is worked out while frames can take the lock (0.3 s at 20 M points would stall
     the viewer once loaded); an ``add`` that comes before it is taken wins: the packed copy is

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .pages import zeros
+
 #: unsigned dtypes tried for ``maximum - minimum``, narrowest first
 _NARROW = (np.uint8, np.uint16, np.uint32)
 #: float64 values checked for float32 this many at a time
@@ -48,16 +50,20 @@ class Packed:
         return (np.asarray(values).astype(wide) - wide(self.offset)).astype(self.stored.dtype)
 
     def decode(self, indices=None) -> np.ndarray:
-        """The original values of every point, or of ``indices``."""
+        """The original values of every point, or of ``indices`` (an array, or a slice)."""
         if self.stored is None:
-            count = self.n if indices is None else len(np.atleast_1d(indices))
+            count = self.n if indices is None else len(range(self.n)[indices] if isinstance(indices, slice) else np.atleast_1d(indices))
             return np.full(count, self.offset, self.dtype)
-        stored = self.stored if indices is None else self.stored[np.atleast_1d(np.asarray(indices, np.int64))]
+        stored = self.stored if indices is None else self.stored[_index(indices)]
         if self.dtype.kind == "f":  # float64 exactly representable as float32
             return stored.astype(self.dtype)
         # in int64 (or u64 for u64 attributes): offset + stored never overflows the original range
         wide = np.uint64 if self.dtype == np.uint64 else np.int64
         return (stored.astype(wide) + wide(self.offset)).astype(self.dtype)
+
+
+def _index(indices):
+    return indices if isinstance(indices, slice) else np.atleast_1d(np.asarray(indices, np.int64))
 
 
 def narrow_dtype(lo: int, hi: int, dtype) -> type | None:
@@ -146,11 +152,11 @@ class Attributes(MutableMapping):
         self._held[name] = holder
 
     def at(self, name: str, indices) -> np.ndarray:
-        """The original values of points ``indices`` only (no decoding of the rest)."""
+        """The original values of points ``indices`` (an array, or a slice) only (no decoding of the rest)."""
         held = self._held[name]
         if isinstance(held, Packed):
             return held.decode(indices)
-        return held[np.atleast_1d(np.asarray(indices, np.int64))]
+        return held[_index(indices)]
 
     def held_dtype(self, name: str) -> str:
         """How one attribute is held: its dtype, or e.g. 'uint16 in uint8 + 1200', 'uint16
@@ -179,4 +185,131 @@ class Attributes(MutableMapping):
         return out
 
 
-__all__ = ["Attributes", "Packed", "narrow_dtype", "pack", "packed_range"]
+# ---------------------------------------------------------------- holders filled batch by batch
+# An arena that fills as points come (the progressive octree's pool) holds each attribute in a
+# form chosen from the values seen so far: one value (no array), an integer range in a narrow
+# dtype with room either side, else the values' dtype. A batch that does not fit widens it once
+# (``widened``), and kernels move the stored arrays as bytes. A 20 M-point LAS file's attributes
+# while it loads: 16 bytes an entry as read, 3 held (docs/lod.md, "Memory").
+
+
+def stored(held) -> np.ndarray | None:
+    """The array an attribute's entries are stored in: an array itself, a Packed's ``stored``
+    (None: a constant, nothing stored)."""
+    return held.stored if isinstance(held, Packed) else held
+
+
+def length(held) -> int:
+    return held.n if isinstance(held, Packed) else len(held)
+
+
+def _one_float(v: np.ndarray) -> bool:
+    """Whether float64 ``v`` is one value, bit for bit (-0.0 is not 0.0), and not NaN."""
+    bits = v.view(np.uint64)
+    return bits.min() == bits.max() and not np.isnan(v[0])
+
+
+def _int_range(lo: int, hi: int, dtype, n: int) -> np.ndarray | Packed:
+    """A zeroed holder of ``n`` entries for integers ``lo..hi`` of ``dtype``: the narrowest
+    unsigned dtype with the range in its middle (values a little beyond fit too), else ``dtype``."""
+    narrow = narrow_dtype(lo, hi, dtype)
+    if narrow is None:
+        return zeros(n, dtype)
+    top, info = int(np.iinfo(narrow).max), np.iinfo(dtype)
+    offset = min(max(lo - (top - (hi - lo)) // 2, int(info.min)), int(info.max) - top)
+    return Packed(zeros(n, narrow), offset, np.dtype(dtype), n)
+
+
+def holder_for(values: np.ndarray, n: int) -> np.ndarray | Packed:
+    """A zeroed holder of ``n`` entries in the form ``values`` suggest (a 1-D batch of them):
+    their one value (integers, float64), their integer range with room, else their dtype."""
+    v = np.asarray(values)
+    if v.ndim == 1 and len(v) and v.dtype.kind in "iu":
+        lo, hi = int(v.min()), int(v.max())
+        return Packed(None, lo, v.dtype, n) if lo == hi else _int_range(lo, hi, v.dtype, n)
+    if v.ndim == 1 and len(v) and v.dtype == np.float64 and _one_float(v):
+        return Packed(None, float(v[0]), v.dtype, n)
+    return zeros((n, *v.shape[1:]), v.dtype)
+
+
+def fits(held, values: np.ndarray) -> bool:
+    """Whether ``held`` stores ``values`` (of its dtype) exactly."""
+    if not isinstance(held, Packed) or not len(values):
+        return True
+    if held.stored is None:
+        if held.dtype.kind == "f":
+            return _one_float(values) and values[0].view(np.uint64) == np.float64(held.offset).view(np.uint64)
+        return values.min() == values.max() == held.offset
+    if held.dtype.kind == "f":  # float64 held as float32 (pack's): exact, bit for bit
+        return np.array_equal(values.astype(np.float32).astype(np.float64).view(np.uint64), values.view(np.uint64))
+    return int(values.min()) >= held.offset and int(values.max()) - held.offset <= np.iinfo(held.stored.dtype).max
+
+
+def encode(held, values: np.ndarray, out: np.ndarray | None = None) -> np.ndarray | None:
+    """``values`` (that ``fits``) as ``held`` stores them, into ``out`` (of the stored dtype) where
+    given; None for a constant (nothing to store)."""
+    if not isinstance(held, Packed):
+        return values
+    if held.stored is None:
+        return None
+    out = np.empty(len(values), held.stored.dtype) if out is None else out
+    if held.dtype.kind == "f":
+        out[:] = values
+    else:  # in the values' own dtype: the difference wraps there but fits the narrow one (as pack)
+        np.subtract(values, values.dtype.type(held.offset), out=out, casting="unsafe")
+    return out
+
+
+def widened(held, values: np.ndarray, used: int) -> np.ndarray | Packed:
+    """A holder as long as ``held`` that stores its first ``used`` entries (copied in, block by
+    block: no temporary of their size) and ``values`` (which ``held`` does not fit): the integer
+    range of both with room, else the dtype."""
+    n = length(held)
+    if held.dtype.kind in "iu":
+        lo, hi = int(values.min()), int(values.max())
+        if isinstance(held, Packed) and used:
+            lo, hi = min(lo, held.offset), max(hi, held.offset)
+            if held.stored is not None:
+                lo, hi = min(lo, held.offset + int(held.stored[:used].min())), max(hi, held.offset + int(held.stored[:used].max()))
+        new = _int_range(lo, hi, held.dtype, n)
+    else:
+        new = zeros(n, held.dtype)
+    for start in range(0, used, _FLOAT_BLOCK * 16):
+        block = slice(start, min(start + _FLOAT_BLOCK * 16, used))
+        old = held.decode(block) if isinstance(held, Packed) else held[block]
+        target = stored(new)[block]
+        encoded = encode(new, old, target)
+        if encoded is not target:
+            target[:] = encoded
+    return new
+
+
+def resized(held, n: int) -> np.ndarray | Packed:
+    """``held`` for ``n`` entries: a view of its first ``n`` where it has as many, else a zeroed
+    one (new memory) with its entries in front."""
+    have = stored(held)
+    if have is not None and n <= len(have):
+        part = have[:n]
+    elif have is not None:
+        part = zeros((n, *have.shape[1:]), have.dtype)
+        part[: len(have)] = have
+    else:
+        part = None
+    return Packed(part, held.offset, held.dtype, n) if isinstance(held, Packed) else part
+
+
+def repacked(held) -> np.ndarray | Packed:
+    """``held`` in the real range of what it stores (``pack``: a filled holder, every entry a
+    value; an integer range's offset and the narrower one's add up)."""
+    if not isinstance(held, Packed):
+        return pack(held)
+    if held.stored is None or held.dtype.kind == "f":
+        return held
+    tighter = pack(held.stored)
+    if not isinstance(tighter, Packed):
+        return held
+    return Packed(tighter.stored, held.offset + int(tighter.offset), held.dtype, held.n)
+
+
+__all__ = ["Attributes", "Packed", "encode", "fits", "holder_for", "narrow_dtype", "pack", "packed_range", "repacked", "resized", "stored",
+           "widened"]

@@ -247,10 +247,10 @@ class LiveBuffers:
                 self.high[d0:d1] = pool.high[s0:s1]
             for a, v in self.attributes.items():
                 if a in pool.attributes:
-                    v[d0:d1] = pool.attributes[a][s0:s1]
+                    v[d0:d1] = pool.attributes.at(a, slice(s0, s1))
                 elif a == "normal" and all(p in pool.attributes for p in NORMAL_PARTS):
                     for k, part in enumerate(NORMAL_PARTS):
-                        v[d0:d1, k] = pool.attributes[part][s0:s1]
+                        v[d0:d1, k] = pool.attributes.at(part, slice(s0, s1))
         if pool.med is None:  # the octree's compact pool (core/compact.py): each chunk's medium and high words decoded from its stream
             for c, n in zip(chunks.tolist(), pool.batches["count"][chunks].tolist()):
                 f, o = c * mc, self.ring_points + c * mc

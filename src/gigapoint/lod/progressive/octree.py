@@ -19,8 +19,10 @@ The structure of SimLOD (Schütz, Herzberger, Wimmer 2024, sections 3-5; Wand et
   to the node's cube): a point chunk keeps the 20 bits an axis under the low word in a stream
   of its own (a wide batch, 7.5 bytes a point), a voxel chunk needs nothing more (a voxel sits
   at its cell's centre on the node's 128³ grid, which the low word holds); once loaded (``trim``) a
-  chunk of points on the source's grid keeps only the bits its cube needs at the grid's step, and
-  attributes are held in their range (``_pack``). A node's entries are a linked list of chunks, so nodes grow without copies, and a split
+  chunk of points on the source's grid keeps only the bits its cube needs at the grid's step
+  (``_pack``). Attributes are held, while points come, in the form their values so far need
+  (core/attributes.py: a constant as one value, an integer range in a narrow dtype; a batch
+  that does not fit widens it: ``_stored_form``), and in their real range once loaded. A node's entries are a linked list of chunks, so nodes grow without copies, and a split
   leaf's chunks go back to a free list. Each chunk is a batch: the renderer draws the pool
   directly (one batch per chunk), with the octree's node selection (largest projected
   first, within the point budget) and per-node precision, and the GPU re-uploads only the
@@ -48,7 +50,8 @@ import numpy as np
 from numba.typed import List
 
 from ...core import pages
-from ...core.attributes import Attributes
+from ...core.attributes import Attributes, encode, fits, holder_for, repacked, resized, widened
+from ...core.attributes import stored as stored_array
 from ...core.chunk import PointChunk, colors_for
 from ...core.cloud import MAX_ABS_COORDINATE
 from ...core.compact import point_words, stream_words
@@ -94,14 +97,22 @@ def _byte_views(arrays) -> List:
     return views
 
 
+def _stored_attributes(pool) -> dict[str, np.ndarray]:
+    """The arrays the pool's attributes are stored in, by name (a constant one has none)."""
+    held = {a: stored_array(pool.attributes.held(a)) for a in pool.attributes}
+    return {a: v for a, v in held.items() if v is not None}
+
+
 def _pool_views(pool) -> tuple[List, np.ndarray]:
-    """(the pool's attributes as bytes, their widths in bytes): what kernels move attributes with."""
-    return _byte_views(pool.attributes.values()), np.array([v.dtype.itemsize for v in pool.attributes.values()], np.int64)
+    """(the pool's stored attributes as bytes, their widths in bytes): what kernels move attributes with."""
+    arrays = _stored_attributes(pool).values()
+    return _byte_views(arrays), np.array([v.dtype.itemsize for v in arrays], np.int64)
 
 
 def _attribute_views(st, pool) -> tuple[List, List, np.ndarray]:
-    """(a set's attributes, the pool's, their widths in bytes): what kernels scatter attributes with."""
-    src = _byte_views(np.ascontiguousarray(st.attrs[a]) for a in pool.attributes)
+    """(a set's attributes, the pool's, their widths in bytes): what kernels scatter attributes
+    with (a set's attributes are as the pool stores them: ProgressiveOctree._stored_form)."""
+    src = _byte_views(np.ascontiguousarray(st.attrs[a]) for a in _stored_attributes(pool))
     return src, *_pool_views(pool)
 
 
@@ -113,7 +124,7 @@ class Pool:
 
     med = high = None  # the compact layout: positions are the low word and the streams
 
-    def __init__(self, name: str, n_chunks: int, chunk: int, attribute_dtypes: dict, n_streams: int):
+    def __init__(self, name: str, n_chunks: int, chunk: int, attribute_forms: dict, n_streams: int):
         self.name = name
         self.chunk = chunk
         self.stream = int(stream_words(np.int64(K.WIDE_BITS), np.int64(chunk)))
@@ -125,7 +136,9 @@ class Pool:
         n = n_chunks * chunk
         self.low = pages.zeros(n, np.uint32)
         self.color = pages.zeros(n, np.uint32)
-        self.attributes = {a: pages.zeros(n, dt) for a, dt in attribute_dtypes.items()}
+        self.attributes = Attributes()  # each held in the form of ``attribute_forms`` (core/attributes.holder_for), zeroed
+        for a, form in attribute_forms.items():
+            self.attributes.hold(a, resized(resized(form, 0), n))
         self.chunk_next = np.full(n_chunks, -1, np.int64)
         self.chunk_node = np.full(n_chunks, -1, np.int64)
         self.batch_version = np.zeros(n_chunks, np.int64)
@@ -147,7 +160,7 @@ class Pool:
     def grown(self, n_chunks: int, n_streams: int) -> Pool:
         """A pool of ``n_chunks`` chunks and ``n_streams`` streams holding this one's contents, or
         its first ones when smaller (new arrays: caches of the old ones are dropped by identity)."""
-        new = Pool(self.name, n_chunks, self.chunk, {a: v.dtype for a, v in self.attributes.items()}, n_streams)
+        new = Pool(self.name, n_chunks, self.chunk, {a: self.attributes.held(a) for a in self.attributes}, n_streams)
         k = min(self.n_chunks, n_chunks)
         n = k * self.chunk
         new.batches[:k] = self.batches[:k]
@@ -156,8 +169,8 @@ class Pool:
         new.ext[:w] = self.ext[:w]
         new.low[:n] = self.low[:n]
         new.color[:n] = self.color[:n]
-        for a, v in self.attributes.items():
-            new.attributes[a][:n] = v[:n]
+        for a, v in _stored_attributes(self).items():
+            stored_array(new.attributes.held(a))[:n] = v[:n]
         new.chunk_next[:k] = self.chunk_next[:k]
         new.chunk_node[:k] = self.chunk_node[:k]
         new.batch_version[:k] = self.batch_version[:k]
@@ -174,7 +187,9 @@ class Pool:
         for name in ("batches", "packing", "chunk_next", "chunk_node", "batch_version"):
             setattr(new, name, getattr(self, name)[:n_chunks])
         new.low, new.color = self.low[:n], self.color[:n]
-        new.attributes = {a: v[:n] for a, v in self.attributes.items()}
+        new.attributes = self.attributes.copy()
+        for a in new.attributes:
+            new.attributes.hold(a, resized(self.attributes.held(a), n))
         new.ext = self.ext[: n_streams * self.stream]
         new.version = self.version + 1
         return new
@@ -190,10 +205,8 @@ class Pool:
         return new
 
     def attribute_rows(self, slots: np.ndarray) -> dict:
-        """The attributes of the entries at pool ``slots`` (decoded where they are packed)."""
-        if isinstance(self.attributes, Attributes):
-            return {a: self.attributes.at(a, slots) for a in self.attributes}
-        return {a: take(v, slots) for a, v in self.attributes.items()}
+        """The attributes of the entries at pool ``slots`` (an array or a slice), decoded."""
+        return {a: self.attributes.at(a, slots) for a in self.attributes}
 
     def point_info(self, index: int) -> dict:
         """Position (30-bit), color, level and attributes of the entry at pool slot ``index``."""
@@ -579,7 +592,7 @@ class ProgressiveOctree:
             ends = np.cumsum(n_room)
             unused = np.repeat(has * pool.chunk + count[has] - (ends - n_room), n_room) + np.arange(int(ends[-1]) if len(ends) else 0)
             used = int(np.flatnonzero(count)[0]) * pool.chunk
-            for v in pool.attributes.values():
+            for v in _stored_attributes(pool).values():
                 v[unused] = v[used]
         return _PackState(pool, pool.version, self._grid_bits(), count, pool.packing.copy(), pool.chunk_node.copy(), self.level.copy())
 
@@ -590,7 +603,11 @@ class ProgressiveOctree:
         Worked out without the lock from ``state``, and taken only if nothing was written since;
         ``_unpack`` undoes it before anything is written."""
         streams = self._streams_on_grid(state)
-        attributes = Attributes(state.pool.attributes, packed=True) if state.pool.attributes and state.fill.any() else None
+        attributes = None
+        if state.pool.attributes and state.fill.any():
+            attributes = state.pool.attributes.copy()
+            for a in attributes:
+                attributes.hold(a, repacked(attributes.held(a)))
         if streams is None and attributes is None:
             return
         with self.lock:
@@ -623,8 +640,8 @@ class ProgressiveOctree:
 
     def _unpack(self) -> None:
         """``_pack`` undone: every point chunk's stream 60 bits a point and a stream of its own
-        (``stream`` words, in chunk order), attributes in arrays of their own dtype, as
-        insertions write them."""
+        (``stream`` words, in chunk order), as insertions write them (attributes stay as they are
+        held: a batch they do not fit widens them, ``_stored_form``)."""
         if not self._packed:
             return
         pool = self.pool
@@ -638,8 +655,7 @@ class ProgressiveOctree:
             packing = pack.copy()
             packing["ext_first"], packing["code"] = first, np.where(points == 1, K.WIDE_CODE, 0)
             self._n_streams = int(points.sum())
-        attributes = {a: np.ascontiguousarray(pool.attributes[a]) for a in pool.attributes}  # decoded
-        self.pool = pool.repacked(ext, packing, attributes)
+        self.pool = pool.repacked(ext, packing, pool.attributes)
         self._packed = False
 
     def _drop_voxel_state(self) -> None:
@@ -761,7 +777,7 @@ class ProgressiveOctree:
         if pool is not None:
             m = {
                 "positions": size(pool.low, pool.ext), "color": size(pool.color),
-                "attributes": pool.attributes.nbytes if isinstance(pool.attributes, Attributes) else size(*pool.attributes.values()),
+                "attributes": pool.attributes.nbytes,
                 "batches": size(pool.batches, pool.packing, pool.chunk_next, pool.chunk_node, pool.batch_version),
             }  # fmt: skip
         m["voxels"] = size(self.vox_key, self.vox_slot, self.vox_sum, self._hkeys, self._hvals)
@@ -906,9 +922,11 @@ class ProgressiveOctree:
         if self.pool is None:
             expected = int(self.capacity * _ROOM_PER_POINT) // self.chunk
             streams = int(self.capacity * _STREAMS_PER_POINT) // self.chunk
-            self.pool = Pool(self.name, max(_INITIAL_CHUNKS, expected), self.chunk, self._attribute_dtypes, max(_INITIAL_CHUNKS, streams))
+            forms = {a: holder_for(v, 0) for a, v in attrs.items()}
+            self.pool = Pool(self.name, max(_INITIAL_CHUNKS, expected), self.chunk, forms, max(_INITIAL_CHUNKS, streams))
             if self.capacity:  # room for the expected voxels too: growing their arrays and table copies them
                 self._vox(max(len(self.vox_key), int(self.capacity * _VOXELS_PER_POINT)))
+        attrs = self._stored_form(attrs, n)
         if not self._voxel_state:
             self._rebuild_voxel_state()
         else:
@@ -922,6 +940,21 @@ class ProgressiveOctree:
         self._write_sets(sets, self._route(sets, [1.0]))
         self.lo, self.hi = np.minimum(self.lo, lo), np.maximum(self.hi, hi)
         self.pool.bounds = self.bounds
+
+    def _stored_form(self, attrs: dict, n: int) -> dict:
+        """A batch's attributes as the pool stores them (core/attributes.py: a holder the batch
+        does not fit is widened first, its entries so far copied once), constant ones left out:
+        what kernels move as bytes."""
+        pool, out = self.pool, {}
+        for a, v in attrs.items():
+            held = pool.attributes.held(a)
+            if not fits(held, v):
+                held = widened(held, v, self._n_chunks * self.chunk)
+                pool.attributes.hold(a, held)
+            s = stored_array(held)
+            if s is not None:
+                out[a] = encode(held, v, self._work.get("attr." + a, n, s.dtype))
+        return out
 
     def _route(self, sets: list, weights: list) -> list:
         """Route ``sets`` (each of its points standing for ``weights[i]`` points) until no leaf
@@ -991,7 +1024,7 @@ class ProgressiveOctree:
         xyz = self._decode(slots, w.get("xyz" + tag, n, np.float64, 3))
         # numpy's gathers: a few 10^5 points, not worth a parallel region each ("clip": not buffered)
         rgba = np.take(pool.color, slots, out=w.get("split_rgba" + tag, n, np.uint32), mode="clip")
-        attrs = {a: np.take(v, slots, out=w.get(f"{a}_{tag}", n, v.dtype), mode="clip") for a, v in pool.attributes.items()}
+        attrs = {a: np.take(v, slots, out=w.get(f"{a}_{tag}", n, v.dtype), mode="clip") for a, v in _stored_attributes(pool).items()}
         for node in nodes.tolist():
             self._n_free = K.free_chunks(
                 self.first_chunk, self.last_chunk, pool.chunk_next, pool.batches["count"], node * K.LISTS, self._free, self._n_free
@@ -1129,10 +1162,10 @@ class ProgressiveOctree:
             self._sample(st, *self._distribute(st), only=n)
 
     def _all_points(self):
-        """(xyz, rgba, attributes) of every point in the leaves."""
+        """(xyz, rgba, attributes as stored) of every point in the leaves."""
         pool = self.pool
         slots = np.concatenate([self._list_slots(node * K.LISTS) for node in self.leaves().tolist()])
-        return self._decode(slots), take(pool.color, slots), pool.attribute_rows(slots)
+        return self._decode(slots), take(pool.color, slots), {a: take(v, slots) for a, v in _stored_attributes(pool).items()}
 
     # ------------------------------------------------------------------ saving
     def chunks(self, points_per_chunk: int = 1_000_000):
