@@ -455,22 +455,25 @@ def voxel_ids(hkeys, hvals, node, cell, next_vid, vid, is_new, n_parts):
 
 
 @njit(cache=True)
-def rehash(vox_key, n_voxels, hkeys, hvals):
-    """Enter the first ``n_voxels`` voxel keys into an empty table."""
+def rehash(old_keys, old_vals, hkeys, hvals):
+    """Enter every (key, voxel id) of the table ``old_keys``/``old_vals`` into the empty, larger
+    table ``hkeys``/``hvals`` (the table is where voxel keys are kept: no array of its own)."""
     mask = np.uint64(hkeys.shape[0] - 1)
-    for v in range(n_voxels):
-        k = vox_key[v]
+    for j in range(old_keys.shape[0]):
+        k = old_keys[j]
+        if k == EMPTY_KEY:
+            continue
         h = _hash(k, mask)
         while hkeys[h] != EMPTY_KEY:
             h = (h + np.uint64(1)) & mask
         hkeys[h] = k
-        hvals[h] = v
+        hvals[h] = old_vals[j]
 
 
 @njit(cache=True)
-def voxel_table(lists, first_chunk, chunk_next, fill, chunk_size, level, low, hkeys, hvals, vox_key, vox_slot):
+def voxel_table(lists, first_chunk, chunk_next, fill, chunk_size, level, low, hkeys, hvals, vox_slot):
     """The voxels of ``lists`` (inner nodes' lists) entered into an empty table, ids in list
-    order, with their keys and slots: a voxel's cell comes from its low word (the cell index
+    order, with their slots: a voxel's cell comes from its low word (the cell index
     per axis is its top bits). Returns the number of voxels."""
     mask = np.uint64(hkeys.shape[0] - 1)
     v = 0
@@ -493,7 +496,6 @@ def voxel_table(lists, first_chunk, chunk_next, fill, chunk_size, level, low, hk
                     h = (h + np.uint64(1)) & mask
                 hkeys[h] = k
                 hvals[h] = v
-                vox_key[v] = k
                 vox_slot[v] = s
                 v += 1
             c = chunk_next[c]
@@ -859,9 +861,9 @@ def _mean_color(sums, v):
 
 
 @njit(parallel=True, cache=True)
-def write_voxels(vid, is_new, node, cell, sums, level, slots_of_new, first_new, vox_sum, vox_slot, vox_key,
+def write_voxels(vid, is_new, node, cell, sums, level, slots_of_new, first_new, vox_sum, vox_slot,
                  low, color, batch_version, chunk_size, version):  # fmt: skip
-    """Add each entry's color sums to its voxel; a new voxel also gets its slot, key and
+    """Add each entry's color sums to its voxel; a new voxel also gets its slot and
     position (its cell's centre: the low word alone, VOXEL_SHIFT); every touched voxel's
     drawn color becomes the rounded mean of the points it stands for. New voxels have the ids
     ``first_new`` on in entry order, so voxel v's slot is slots_of_new[v - first_new]."""
@@ -870,7 +872,6 @@ def write_voxels(vid, is_new, node, cell, sums, level, slots_of_new, first_new, 
         if is_new[e]:
             s = slots_of_new[v - first_new]
             vox_slot[v] = s
-            vox_key[v] = _voxel_key(node[e], cell[e])
             for ch in range(5):
                 vox_sum[v, ch] = 0
             lev = level[node[e] // LISTS]

@@ -455,7 +455,7 @@ class ProgressiveOctree:
 
     def _vox(self, cap: int) -> None:
         n = self.n_voxels
-        arrays = {"vox_key": pages.zeros(cap, np.uint64), "vox_slot": pages.zeros(cap, np.uint32), "vox_sum": pages.zeros((cap, 5), np.uint32)}
+        arrays = {"vox_slot": pages.zeros(cap, np.uint32), "vox_sum": pages.zeros((cap, 5), np.uint32)}  # keys: in the table
         for name, arr in arrays.items():
             if n:
                 arr[:n] = getattr(self, name)[:n]
@@ -489,8 +489,9 @@ class ProgressiveOctree:
         size = self._table_size(extra)
         if size is None:
             return
+        old = self._hkeys, self._hvals
         self._hkeys, self._hvals = table if table is not None and len(table[0]) >= size else _voxel_table(size)
-        K.rehash(self.vox_key, self.n_voxels, self._hkeys, self._hvals)
+        K.rehash(*old, self._hkeys, self._hvals)
 
     def _table_size(self, extra: int) -> int | None:
         """The slots the voxel table grows to for ``extra`` more entries (doubling); None: it has room."""
@@ -517,10 +518,6 @@ class ProgressiveOctree:
         extra = self._presize_extra()
         size = self._table_size(extra) if extra else None
         return None if size is None else _voxel_table(size)
-
-    def _drop_hash(self) -> None:
-        """Free the voxel table (rebuilt from vox_key by _ensure_hash when points come again)."""
-        self._hkeys, self._hvals = _voxel_table(2)
 
     def trim(self) -> None:
         """Release the room kept for growth (the loader calls it when loading ends): the pool
@@ -662,7 +659,7 @@ class ProgressiveOctree:
         """Drop the voxels' build state, and the insertions' work arrays with it."""
         self._voxel_state = False
         self._work = _Work(self._work.keep_bytes)
-        self.vox_key, self.vox_slot, self.vox_sum = np.zeros(0, np.uint64), np.zeros(0, np.uint32), np.zeros((0, 5), np.uint32)
+        self.vox_slot, self.vox_sum = np.zeros(0, np.uint32), np.zeros((0, 5), np.uint32)
         self._hkeys, self._hvals = np.zeros(0, np.uint64), np.zeros(0, np.uint32)
 
     def _rebuild_voxel_state(self) -> None:
@@ -676,10 +673,10 @@ class ProgressiveOctree:
             size *= 2
         self._hkeys, self._hvals = _voxel_table(size)
         cap = max(n, 1)
-        self.vox_key, self.vox_slot, self.vox_sum = np.zeros(cap, np.uint64), np.zeros(cap, np.uint32), np.zeros((cap, 5), np.uint32)
+        self.vox_slot, self.vox_sum = np.zeros(cap, np.uint32), np.zeros((cap, 5), np.uint32)
         pool = self.pool
         got = K.voxel_table(lists, self.first_chunk, pool.chunk_next, pool.batches["count"], pool.chunk, self.level, pool.low, self._hkeys,
-                            self._hvals, self.vox_key, self.vox_slot)  # fmt: skip
+                            self._hvals, self.vox_slot)  # fmt: skip
         assert got == n, (got, n)
         self._voxel_state = True
         if n:
@@ -780,7 +777,7 @@ class ProgressiveOctree:
                 "attributes": pool.attributes.nbytes,
                 "batches": size(pool.batches, pool.packing, pool.chunk_next, pool.chunk_node, pool.batch_version),
             }  # fmt: skip
-        m["voxels"] = size(self.vox_key, self.vox_slot, self.vox_sum, self._hkeys, self._hvals)
+        m["voxels"] = size(self.vox_slot, self.vox_sum, self._hkeys, self._hvals)
         m["work"] = self._work.nbytes  # insertions' work arrays kept (address space: the rows touched are the largest batch's)
         m["nodes"] = size(self.key, self.level, self.parent, self.children, self.leaf, self.count, self.first_chunk, self.last_chunk,
                           self.list_count, self.cmin, self.cedge, self.grid_sample, self._free)  # fmt: skip
@@ -925,7 +922,7 @@ class ProgressiveOctree:
             forms = {a: holder_for(v, 0) for a, v in attrs.items()}
             self.pool = Pool(self.name, max(_INITIAL_CHUNKS, expected), self.chunk, forms, max(_INITIAL_CHUNKS, streams))
             if self.capacity:  # room for the expected voxels too: growing their arrays and table copies them
-                self._vox(max(len(self.vox_key), int(self.capacity * _VOXELS_PER_POINT)))
+                self._vox(max(len(self.vox_slot), int(self.capacity * _VOXELS_PER_POINT)))
         attrs = self._stored_form(attrs, n)
         if not self._voxel_state:
             self._rebuild_voxel_state()
@@ -1112,8 +1109,8 @@ class ProgressiveOctree:
         n_new = K.voxel_lookup(self._hkeys, self._hvals, node, cell, vid, is_new)
         self._ensure_hash(n_new)  # room for the new voxels (a rebuilt table keeps every id found)
         next_vid = K.voxel_enter(self._hkeys, self._hvals, node, cell, self.n_voxels, vid, is_new, max(1, numba.get_num_threads()))
-        if next_vid > len(self.vox_key):
-            cap = max(len(self.vox_key), 1)
+        if next_vid > len(self.vox_slot):
+            cap = max(len(self.vox_slot), 1)
             while cap < next_vid:
                 cap *= 2
             self._vox(cap)
@@ -1124,7 +1121,7 @@ class ProgressiveOctree:
         first_new = self.n_voxels
         self.n_voxels = next_vid
         pool = self.pool
-        K.write_voxels(vid, is_new, node, cell, sums, self.level, slots, first_new, self.vox_sum, self.vox_slot, self.vox_key, pool.low,
+        K.write_voxels(vid, is_new, node, cell, sums, self.level, slots, first_new, self.vox_sum, self.vox_slot, pool.low,
                        pool.color, pool.batch_version, pool.chunk, pool.version)  # fmt: skip
         if len(new) and pool.attributes:  # a new voxel's attributes: its cell's first point's
             K.scatter_rows(*_attribute_views(st, pool), first[new], slots)
