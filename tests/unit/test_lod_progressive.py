@@ -407,7 +407,7 @@ def test_trim_cuts_the_pool_in_place_and_growth_copies_it_once(scene, octree):
     low, ext = o.pool.low, o.pool.ext
     o.trim()
     assert np.shares_memory(o.pool.low, low) and np.shares_memory(o.pool.ext, ext)
-    assert o.pool.n_chunks == o._n_chunks and o.pool.n_streams == o._n_streams
+    assert o.pool.n_chunks == o._n_chunks and o.pool.n_streams == o._streams_in_use()
     small = ProgressiveOctree("t", max_leaf=3_000, cube=_cube(xyz))
     grown = []
     for s in range(0, len(xyz), 20_000):
@@ -994,6 +994,12 @@ def _grid_filled(points, batch: int = 20_000, rounds=(slice(None),)) -> Progress
     return o
 
 
+def _off_grid(xyz) -> np.ndarray:
+    """How far each point is off the millimetre grid through _UTM, in steps (its worst axis)."""
+    steps = (xyz - _UTM) / _MM
+    return np.abs(steps - np.round(steps)).max(axis=1)
+
+
 def _grid_rows(xyz) -> np.ndarray:
     """Points as integer steps of the millimetre grid through _UTM, sorted (a set with repeats)."""
     rows = np.round((xyz - _UTM) / _MM).astype(np.int64)
@@ -1026,7 +1032,7 @@ def test_trim_keeps_points_on_the_source_grid_in_the_bits_it_needs(scene):
     every = EXACT.replace(point_budget=10**9, lod_threshold_px=0)
     o.order_leaves()  # as trim does first: the image compared below is of the same order
     wide_image = gp.render_frame(o, cam, every).image
-    wide_bytes, wide_words = o.pool.ext[: o._n_streams * o.pool.stream].nbytes, o.pool.low.copy()
+    wide_bytes, wide_words = 8 * o.pool.stream * int(np.count_nonzero(o.pool.packing["code"][: o._n_chunks])), o.pool.low.copy()
     o.trim()
     used, e = _chunk_widths(o)
     assert len(used) and np.array_equal(e, bits - o.level[o.pool.chunk_node[used]] - 10)  # every chunk compact, as its cube needs
@@ -1045,6 +1051,36 @@ def test_trim_keeps_points_on_the_source_grid_in_the_bits_it_needs(scene):
     np.testing.assert_array_equal(gp.render_frame(o, cam, every).image, wide_image)
 
 
+def test_points_on_the_grid_are_written_in_the_bits_their_leaves_need_while_the_octree_fills(scene):
+    """With the source's grid, points go into chunks of B - level - 10 bits an axis as they come
+    (kernels.write_points writes each as its grid cell), not 60 bits to be packed at trim: the
+    tree is the one the same points build without a grid, every point is its grid point exactly
+    while the octree fills (spilled points too), and ordering leaves moves each point whole."""
+    xyz, rgba, attrs = points = _on_grid(scene)
+    o = _grid_filled(points, rounds=())
+    for s in range(0, len(xyz), 20_000):
+        o.add(xyz[s : s + 20_000], rgba[s : s + 20_000], **{a: v[s : s + 20_000] for a, v in attrs.items()})
+    wide = ProgressiveOctree("wide", max_leaf=3_000, cube=(o.origin, o.edge))  # the same cube, no grid: wide chunks
+    for s in range(0, len(xyz), 20_000):
+        wide.add(xyz[s : s + 20_000], rgba[s : s + 20_000], **{a: v[s : s + 20_000] for a, v in attrs.items()})
+    assert o._narrow and not o._packed and o.spilled > 10_000  # (points spilled from split leaves: written again)
+    used, e = _chunk_widths(o)
+    bits = int(np.log2(o.edge / _MM))
+    assert len(used) and np.array_equal(e, bits - o.level[o.pool.chunk_node[used]] - 10)
+    assert o._n_words < 0.4 * wide._n_words
+    assert {int(o.key[n]): int(o.count[n]) for n in o.leaves()} == {int(wide.key[n]): int(wide.count[n]) for n in wide.leaves()}
+    assert o.n_voxels == wide.n_voxels
+    got = _leaf_points(o)
+    assert _off_grid(got["xyz"]).max() < 1e-3
+    np.testing.assert_array_equal(_grid_rows(got["xyz"]), _grid_rows(xyz))
+    idx = _match(got["xyz"], xyz, 1e-3 * _MM)
+    np.testing.assert_array_equal(got["color"], rgba.view(np.uint32).reshape(-1)[idx])
+    big = [int(n) for n in o.leaves() if o.count[n] > CHUNK]
+    before = {n: _leaf_rows(o, n) for n in big}
+    o.order_leaves()
+    _assert_leaves_begin_with_their_grid_sample(o, before)
+
+
 def test_points_off_the_source_grid_keep_their_chunks_wide(scene):
     """A chunk holding a point off the grid (another file's offset: 0.37 of a step) stays wide,
     60 bits a point, and its points where they were; the other chunks are compact."""
@@ -1061,9 +1097,11 @@ def test_points_off_the_source_grid_keep_their_chunks_wide(scene):
     _match(_leaf_points(o)["xyz"], xyz, 2e-3 * _MM)  # the wide ones as quantized: within a few 30-bit cells of the root
 
 
-def test_points_added_after_trim_widen_the_streams_and_build_the_same_octree(scene):
-    """An ``add`` after a trim writes wide streams again (every compact chunk widened first, its
-    points the cell centres), and the octree ends as one filled without a trim between."""
+def test_points_added_after_trim_build_the_same_octree_and_a_point_off_the_grid_widens_it(scene):
+    """An ``add`` after a trim writes on: points on the grid into chunks of their levels' bits
+    (each stream given room for a whole chunk again), and the octree ends as one filled without
+    a trim between; a point off the grid then makes every chunk wide (their points the cell
+    centres), itself kept where it was."""
     points = _on_grid(scene)
     half = len(points[0]) // 2
     twice = _grid_filled(points, rounds=(slice(0, half), slice(half, None)))
@@ -1082,8 +1120,14 @@ def test_points_added_after_trim_widen_the_streams_and_build_the_same_octree(sce
     _match(_leaf_points(twice)["xyz"], points[0], 1e-3 * _MM)
     twice.trim()
     twice.add(points[0][:10], points[1][:10], **{k: v[:10] for k, v in points[2].items()})
-    assert not twice._packed and np.all(twice.pool.packing["code"][twice.pool.packing["code"] != 0] == 20 | 20 << 8 | 20 << 16)
+    assert not twice._packed and twice._narrow and np.all(_chunk_widths(twice)[1] < 20)
     np.testing.assert_array_equal(_grid_rows(_leaf_points(twice)["xyz"]), _grid_rows(np.concatenate([points[0], points[0][:10]])))
+    off = points[0][:10] + 0.37 * _MM  # another file's grid
+    twice.add(off, points[1][:10], **{k: v[:10] for k, v in points[2].items()})
+    assert not twice._narrow and np.all(twice.pool.packing["code"][twice.pool.packing["code"] != 0] == 20 | 20 << 8 | 20 << 16)
+    got = _leaf_points(twice)["xyz"]
+    np.testing.assert_array_equal(_grid_rows(got[_off_grid(got) < 0.1]), _grid_rows(np.concatenate([points[0], points[0][:10]])))
+    np.testing.assert_array_equal(_grid_rows(got[_off_grid(got) >= 0.1] - 0.37 * _MM), _grid_rows(points[0][:10]))  # (as quantized)
 
 
 def test_a_las_file_loads_into_its_own_grid(tmp_path, las_writer):
@@ -1418,7 +1462,7 @@ def _same_octree(o: ProgressiveOctree, want: ProgressiveOctree, attrs) -> None:
     used = o._n_chunks * o.pool.chunk
     for got, ref in [(o.pool.low, want.pool.low), (o.pool.color, want.pool.color), (o.vox_sum[: o.n_voxels], want.vox_sum[: want.n_voxels])]:
         np.testing.assert_array_equal(got[: len(got) if got.ndim > 1 else used], ref[: len(ref) if ref.ndim > 1 else used])
-    np.testing.assert_array_equal(o.pool.ext[: o._n_streams * o.pool.stream], want.pool.ext[: want._n_streams * want.pool.stream])
+    np.testing.assert_array_equal(o.pool.ext[: o._n_words], want.pool.ext[: want._n_words])
     for a in attrs:
         np.testing.assert_array_equal(o.pool.attributes[a][:used], want.pool.attributes[a][:used])
 

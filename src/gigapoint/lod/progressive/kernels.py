@@ -515,22 +515,33 @@ def chunks_needed(lists, counts, chunk_size, last_chunk, fill):
     return total
 
 
+@njit(inline="always")
+def _chunk_words(t, chunk_size):
+    """u64 words of a chunk's stream at t bits a point (core/compact.stream_words)."""
+    return (chunk_size * t + 63) // 64 + 1 if t > 0 else 0
+
+
 @njit(cache=True)
 def allocate(lists, counts, chunk_size, first_chunk, last_chunk, level, leaf, cmin, edge, fill, chunk_next, chunk_node, bbox_min, bbox_max,
-             chunk_level, ext_first, code, ext, stream, free, n_free, n_chunks, n_streams, version, batch_version, slots):  # fmt: skip
+             chunk_level, ext_first, code, ext, level_bits, free, n_free, n_chunks, n_words, version, batch_version, slots):  # fmt: skip
     """Append counts[j] entries to list lists[j] (in this order): the pool slot of each entry
     in ``slots`` (entries of list j follow those of j - 1). A list's chunks are linked
-    (first_chunk .. chunk_next .. last_chunk). A leaf's (point) chunk is wide, with its node's
-    cube as box and a zeroed stream of ``stream`` words: it comes from the free list (split
-    leaves' chunks, which keep their streams), else from the unused end of the pool with the
-    next stream, so streams follow chunk order. An inner node's (voxel) chunk is new, of code
-    0 (an empty stream where the next one starts), its box the cube moved by VOXEL_SHIFT. The caller made room (``chunks_needed``). Every
-    chunk written gets batch_version = version. Returns (n_free, n_chunks, n_streams)."""
+    (first_chunk .. chunk_next .. last_chunk). A leaf's (point) chunk has its node's cube as
+    box and a zeroed stream of level_bits[its level] bits an axis (EXT_FULL_BITS: wide; fewer
+    where the points lie on a grid: ProgressiveOctree._level_bits), so a leaf's chunks share
+    one code: it comes from the free list (split leaves' chunks, which keep their streams where
+    those are long enough, else take a new one), else from the unused end of the pool with
+    the next stream (``n_words`` in use: streams follow chunk order). An inner node's (voxel)
+    chunk is new, of code 0 (an empty stream where the next one starts), its box the cube moved
+    by VOXEL_SHIFT. The caller made room (``chunks_needed``; a wide stream for each new chunk).
+    Every chunk written gets batch_version = version. Returns (n_free, n_chunks, n_words)."""
     e = 0
     for j in range(lists.shape[0]):
         lst = lists[j]
         node = lst // LISTS
         points = leaf[node] == 1
+        bits = level_bits[level[node]] if points else 0
+        want = _chunk_words(3 * bits, chunk_size)
         left = counts[j]
         while left > 0:
             c = last_chunk[lst]
@@ -539,14 +550,18 @@ def allocate(lists, counts, chunk_size, first_chunk, last_chunk, level, leaf, cm
                     n_free -= 1
                     c = free[n_free]
                     f = np.int64(ext_first[c])  # a split leaf's chunk: its stream was written (a new one is the pool's zeros)
-                    ext[f : f + stream] = 0
+                    if want <= _chunk_words(code_bits(code[c]), chunk_size):
+                        ext[f : f + want] = 0
+                    else:  # a shorter stream than this leaf's: a new one at the end
+                        ext_first[c] = n_words
+                        n_words += want
+                    code[c] = bits | bits << 8 | bits << 16
                 else:
                     c = n_chunks
                     n_chunks += 1
-                    ext_first[c] = n_streams * stream  # a voxel chunk's empty stream too: streams follow chunk order
-                    code[c] = WIDE_CODE if points else 0
-                    if points:
-                        n_streams += 1
+                    ext_first[c] = n_words  # a voxel chunk's empty stream too: streams follow chunk order
+                    code[c] = bits | bits << 8 | bits << 16
+                    n_words += want
                 fill[c] = 0
                 chunk_next[c] = -1
                 chunk_node[c] = node
@@ -568,7 +583,7 @@ def allocate(lists, counts, chunk_size, first_chunk, last_chunk, level, leaf, cm
             batch_version[c] = version
             e += take
             left -= take
-    return n_free, n_chunks, n_streams
+    return n_free, n_chunks, n_words
 
 
 @njit(cache=True)
@@ -668,10 +683,13 @@ def scatter_rows(attr_src, attr_dst, attr_width, rows, slots):
 
 @njit(parallel=True, cache=True)
 def write_points(xyz, rgba, attr_src, attr_dst, attr_width, order, leaf_runs, run_offsets, slots, cmin, edge, low, ext, ext_first,
-                 chunk_size, color, run_min, run_max):  # fmt: skip
+                 code, chunk_size, color, run_min, run_max):  # fmt: skip
     """Each leaf run's points quantized into their leaf's cube (30 bits) at their slots: the low
-    word, and 60 bits in their chunk's stream (zeroed when allocated; a leaf's chunks are its own,
-    so runs never share a stream word), their colour and attributes (``_scatter_attributes``: one
+    word, and in their chunk's stream (zeroed when allocated; a leaf's chunks are its own, so
+    runs never share a stream word) the 20 bits under it an axis (a wide chunk), or the top e of
+    them in a chunk of code e (e e e: the points lie on a grid of 2^(10 + e) steps an axis of
+    the cube, and each is written as the grid cell it is in, whose centre it then is: the grid
+    point nearest to it), their colour and attributes (``_scatter_attributes``: one
     parallel region for all of them). The runs index the sorted points, point k
     of which is xyz[order[k]] (no sorted copy of positions made), its colour rgba[k] (sorted).
     Each run's bounding box goes to run_min[r] / run_max[r] (``grow_bounds``)."""
@@ -681,6 +699,7 @@ def write_points(xyz, rgba, attr_src, attr_dst, attr_width, order, leaf_runs, ru
         mx, my, mz = cmin[node, 0], cmin[node, 1], cmin[node, 2]
         o = run_offsets[r] - lo
         c_start, c_end, c_words = np.int64(0), np.int64(-1), np.int64(0)  # the slots' chunk: slots run on within it
+        t, e_bits = np.int64(WIDE_BITS), np.int64(EXT_FULL_BITS)
         lx = ly = lz = np.inf
         hx = hy = hz = -np.inf
         block = np.empty((_GATHER_BLOCK, 3))
@@ -699,11 +718,15 @@ def write_points(xyz, rgba, attr_src, attr_dst, attr_width, order, leaf_runs, ru
                 if s < c_start or s >= c_end:  # a division a chunk, not a point: 1.2x the kernel's speed
                     c = s // chunk_size
                     c_start, c_end, c_words = c * chunk_size, (c + 1) * chunk_size, np.int64(ext_first[c])
-                p = (s - c_start) * WIDE_BITS
+                    t = code_bits(code[c])
+                    e_bits = t // 3
+                if e_bits != EXT_FULL_BITS:  # each axis's top e bits: its grid cell
+                    v = _narrowed(v, e_bits)
+                p = (s - c_start) * t
                 w = c_words + (p >> 6)
                 sh = np.uint64(p & 63)
                 ext[w] |= v << sh
-                if (p & 63) + WIDE_BITS > 64:
+                if (p & 63) + t > 64:
                     ext[w + 1] |= v >> (np.uint64(64) - sh)
                 color[s] = rgba[i]
         run_min[r, 0], run_min[r, 1], run_min[r, 2] = lx, ly, lz
@@ -711,7 +734,22 @@ def write_points(xyz, rgba, attr_src, attr_dst, attr_width, order, leaf_runs, ru
         _scatter_attributes(attr_src, attr_dst, attr_width, order, slots, o, lo, hi)
 
 
-_WIDE_MASK = np.uint64((1 << WIDE_BITS) - 1)
+
+
+@njit(inline="always")
+def _narrowed(v, e):
+    """A wide point's 60 stream bits (20 an axis) as e bits an axis: each axis's top e."""
+    s = np.uint64(EXT_FULL_BITS - e)
+    mask = (np.uint64(1) << np.uint64(e)) - np.uint64(1)
+    w = np.uint64(0)
+    for a in range(3):
+        w |= ((v >> (np.uint64(EXT_FULL_BITS * a) + s)) & mask) << np.uint64(e * a)
+    return w
+
+
+@njit(inline="always")
+def _bits(t):
+    return (np.uint64(1) << np.uint64(t)) - np.uint64(1)
 
 
 @njit(inline="always")
@@ -733,7 +771,7 @@ def _swap(a, front, back, m):
 
 
 @njit(parallel=True, cache=True)
-def order_leaves(leaves, first_chunk, chunk_next, fill, list_count, chunk_size, low, ext, ext_first, color, attr_views, attr_width,
+def order_leaves(leaves, first_chunk, chunk_next, fill, list_count, chunk_size, low, ext, ext_first, code, color, attr_views, attr_width,
                  batch_version, version, n_parts, grid_sample):  # fmt: skip
     """Each leaf's entries reordered in place (its chunks are its own) so that they begin with
     one point of every occupied cell of the leaf's own 128³ grid, the first of the cell in the
@@ -784,13 +822,14 @@ def order_leaves(leaves, first_chunk, chunk_next, fill, list_count, chunk_size, 
                 m += 1
                 i += 1
                 k += 1
-            for q in range(m):  # the stream bits (a point chunk's: WIDE_BITS a point)
+            t = code_bits(code[first_chunk[lst]])  # the stream bits a point (a leaf's chunks share one code)
+            for q in range(m):
                 ca, cb = front[q] // chunk_size, back[q] // chunk_size
                 ja, jb = front[q] - ca * chunk_size, back[q] - cb * chunk_size
-                va = read_ext(ext, ext_first[ca], WIDE_BITS, ja) & _WIDE_MASK
-                vb = read_ext(ext, ext_first[cb], WIDE_BITS, jb) & _WIDE_MASK
-                write_ext(ext, ext_first[ca], WIDE_BITS, ja, vb)
-                write_ext(ext, ext_first[cb], WIDE_BITS, jb, va)
+                va = read_ext(ext, ext_first[ca], t, ja) & _bits(t)
+                vb = read_ext(ext, ext_first[cb], t, jb) & _bits(t)
+                write_ext(ext, ext_first[ca], t, ja, vb)
+                write_ext(ext, ext_first[cb], t, jb, va)
             _swap(low, front, back, m)
             _swap(color, front, back, m)
             for a in range(len(attr_views)):
@@ -938,10 +977,13 @@ def grid_widths(fill, code, chunk_node, level, root_bits, ext, ext_first, out):
         if code[c] == 0:
             out[c] = 0
             continue
+        if code[c] != WIDE_CODE:  # written on the grid already (ProgressiveOctree._level_bits)
+            out[c] = np.int64(code[c] & 255)
+            continue
         out[c] = EXT_FULL_BITS
         lev = level[chunk_node[c]]
         b = root_bits - lev
-        if fill[c] == 0 or code[c] != WIDE_CODE or b <= WORD_BITS or b > EXT_FULL_BITS:
+        if fill[c] == 0 or b <= WORD_BITS or b > EXT_FULL_BITS:
             continue
         s = np.uint64(EXT_FULL_BITS + WORD_BITS - b)  # the bits under the cell's, per axis
         tolerance = (np.int64(1) << lev) + 2
@@ -963,36 +1005,50 @@ def grid_widths(fill, code, chunk_node, level, root_bits, ext, ext_first, out):
 
 
 @njit(parallel=True, cache=True)
-def pack_streams(fill, widths, ext, ext_first, out, out_first):
-    """Each point chunk's stream rewritten into ``out`` (zeroed) at ``out_first``: e = widths[c]
-    bits an axis (the compact layout's x y z back to back: a wide chunk's 60 bits as they are,
-    else each axis's cell bits, the bits under them dropped)."""
+def pack_streams(fill, code, widths, ext, ext_first, out, out_first):
+    """Each point chunk's stream (layout ``code``) rewritten into ``out`` (zeroed) at
+    ``out_first``: e = widths[c] bits an axis (the compact layout's x y z back to back: a chunk
+    of that width already as it is, else a wide chunk's each axis's cell bits, the bits under
+    them dropped)."""
     for c in prange(fill.shape[0]):
         e = widths[c]
         if e == 0:
             continue
-        t = 3 * e
-        s = np.uint64(EXT_FULL_BITS - e)
-        mask = (np.uint64(1) << np.uint64(e)) - np.uint64(1)
+        t, held = 3 * e, code_bits(code[c])
         for j in range(fill[c]):
-            v = read_ext(ext, ext_first[c], WIDE_BITS, j) & _WIDE_MASK
-            if e != EXT_FULL_BITS:
-                w = np.uint64(0)
-                for a in range(3):
-                    w |= ((v >> (np.uint64(EXT_FULL_BITS * a) + s)) & mask) << np.uint64(e * a)
-                v = w
+            v = read_ext(ext, ext_first[c], held, j) & _bits(held)
+            if held != t:
+                v = _narrowed(v, e)
             write_ext(out, out_first[c], t, j, v)
 
 
 @njit(parallel=True, cache=True)
-def widen_streams(fill, code, ext, ext_first, out, out_first):
-    """``pack_streams`` undone: each point chunk's stream (layout ``code``) as a wide one, 60 bits
-    a point, into ``out`` (zeroed) at ``out_first``, through the layout's decoder (``wide_bits``:
-    the 20 bits an axis a frame draws)."""
+def on_grid(xyz, point, step, tolerance):
+    """Whether every point lies within ``tolerance`` steps of the grid ``point`` + k ``step`` on
+    each axis (so that writing it as its grid cell, write_points, moves it that little at most)."""
+    off = 0
+    for i in prange(xyz.shape[0]):
+        for a in range(3):
+            r = (xyz[i, a] - point[a]) / step
+            if abs(r - np.round(r)) > tolerance:
+                off += 1
+    return off == 0
+
+
+@njit(parallel=True, cache=True)
+def restream(fill, code, wide, ext, ext_first, out, out_first):
+    """Each point chunk's stream (layout ``code``) into ``out`` (zeroed) at ``out_first``, where
+    each has room for a whole chunk (``pack_streams`` left a stream as long as its points): as
+    it is, or ``wide``, 60 bits a point, through the layout's decoder (``wide_bits``: the 20 bits
+    an axis a frame draws)."""
     for c in prange(fill.shape[0]):
         cd = code[c]
         if cd == 0:
             continue
         t = code_bits(cd)
         for j in range(fill[c]):
-            write_ext(out, out_first[c], WIDE_BITS, j, wide_bits(read_ext(ext, ext_first[c], t, j), cd))
+            v = read_ext(ext, ext_first[c], t, j) & _bits(t)
+            if wide:
+                write_ext(out, out_first[c], WIDE_BITS, j, wide_bits(v, cd))
+            else:
+                write_ext(out, out_first[c], t, j, v)

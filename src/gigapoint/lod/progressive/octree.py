@@ -56,7 +56,7 @@ from ...core.chunk import PointChunk, colors_for
 from ...core.cloud import MAX_ABS_COORDINATE
 from ...core.compact import point_words, stream_words
 from ...core.framelock import FrameLock
-from ...core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE
+from ...core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE, WORD_BITS
 from ...core.morton import fastest
 from ...core.quantize import dequantize
 from ...core.renderable import DrawList, MultiViewDrawList
@@ -78,6 +78,8 @@ _VOXELS_PER_POINT = 0.5  # voxels a point brings, at most about (the demo town: 
 _PARALLEL_CELLS = 100_000  # points of a set from which sample_runs spreads each level's nodes over the threads
 _PRESIZE_MAX = 32_000_000  # points the pool is presized for at most (1.5-2.5 GB of address space, written as it fills)
 _PRESIZE_TABLE_MAX = 16_000_000  # ... and the voxel table (filled up front: ~0.2 GB)
+_NO_BITS = np.zeros(CODE_BITS + 2, np.int64)  # voxel chunks' (no stream)
+_ON_GRID = 1 / 16  # of a grid step: a point this close to the source's grid is written as its grid point (kernels.grid_widths' bound)
 _GROWTH_MAX_CHUNKS = 16_384  # the pool grows by at most this many chunks (32 M entries, ~0.6 GB) beyond doubling small pools
 
 
@@ -425,9 +427,10 @@ class ProgressiveOctree:
         self._free = np.zeros(_INITIAL_CHUNKS, np.int64)
         self._n_free = 0
         self._n_chunks = 0
-        self._n_streams = 0
+        self._n_words = 0  # of the pool's streams in use (``stream`` words a wide chunk, fewer a narrow one)
         self._voxel_state = True  # the voxels' build state is there (trim drops it: _rebuild_voxel_state)
         self.grid = _checked_grid(name, grid)
+        self._narrow = self.grid is not None  # point chunks written on the grid (_level_bits) until a point is off it
         self._packed = False  # held as trim leaves it (_pack): unpacked before a write
         if cube is not None:
             origin, edge = cube
@@ -470,7 +473,7 @@ class ProgressiveOctree:
             # doubling, but by bounded steps: a memory limit is checked between inserts, so overshoot it little
             return have if need <= have else max(need, have + max(1, min(have, _GROWTH_MAX_CHUNKS)))
 
-        chunks, n_streams = grown(pool.n_chunks, self._n_chunks + extra), grown(pool.n_streams, self._n_streams + streams)
+        chunks, n_streams = grown(pool.n_chunks, self._n_chunks + extra), grown(pool.n_streams, self._streams_in_use() + streams)
         if (chunks, n_streams) != (pool.n_chunks, pool.n_streams):
             # both by the same factor: the other runs out soon after, and each growth copies the whole pool
             f = max(chunks / pool.n_chunks, n_streams / max(pool.n_streams, 1))
@@ -480,6 +483,50 @@ class ProgressiveOctree:
             free = np.zeros(self.pool.n_chunks, np.int64)
             free[: self._n_free] = self._free[: self._n_free]
             self._free = free
+
+    def _streams_in_use(self) -> int:
+        """Wide streams' worth of the pool's stream words in use, rounded up."""
+        return -(-self._n_words // self.pool.stream)
+
+    def _level_bits(self) -> np.ndarray:
+        """Stream bits an axis of a leaf's point chunk, by the leaf's level: the bits of its cube's
+        grid under the low word's (e = B - level - 10, where that is 1..10) while every point lies
+        on the source's grid (``_narrow``: 15-18 bits a point at 1 mm, written as grid cells by
+        kernels.write_points, not 60 to be packed later), else EXT_FULL_BITS (wide). B - level
+        does not change as the root grows, so a leaf's chunks keep one code."""
+        bits = np.full(CODE_BITS + 2, EXT_FULL_BITS, np.int64)
+        root_bits = self._grid_bits() if self._narrow else None
+        if root_bits is not None:
+            e = root_bits - np.arange(len(bits)) - WORD_BITS
+            narrow = (e >= 1) & (e <= EXT_FULL_BITS - WORD_BITS)
+            bits[narrow] = e[narrow]
+        return bits
+
+    def _go_wide(self) -> None:
+        """A point off the source's grid came: every point chunk wide from now on (its stream
+        rewritten where it was written on the grid)."""
+        self._narrow = False
+        if self.pool is not None:
+            self._restream(wide=True)
+
+    def _restream(self, wide: bool) -> None:
+        """Every point chunk's stream with room for a whole chunk, in chunk order (as insertions
+        write them: ``_pack`` leaves a stream as long as its points), ``wide`` (60 bits a point)
+        or in its code. Nothing to do to wide streams that were never packed."""
+        pool = self.pool
+        fill, pack = pool.batches["count"], pool.packing
+        if wide and not np.any((pack["code"] != 0) & (pack["code"] != K.WIDE_CODE)):
+            return
+        code = np.where(pack["code"] != 0, K.WIDE_CODE, 0).astype(pack["code"].dtype) if wide else pack["code"]
+        t = sum((code.astype(np.int64) >> shift) & 0xFF for shift in (0, 8, 16))
+        words = stream_words(t, pool.chunk)
+        first = np.cumsum(words) - words
+        ext = pages.zeros(int(words.sum()), np.uint64)
+        K.restream(fill, pack["code"], wide, pool.ext, pack["ext_first"], ext, first)
+        packing = pack.copy()
+        packing["ext_first"], packing["code"] = first, code
+        self._n_words = len(ext)
+        self.pool = pool.repacked(ext, packing, pool.attributes)
 
     def _ensure_hash(self, extra: int, table: tuple | None = None) -> None:
         """The voxel table at most two thirds full after ``extra`` more entries (rebuilt when it
@@ -528,8 +575,8 @@ class ProgressiveOctree:
         with self.lock:
             if self.pool is None:
                 return
-            if self._n_chunks < self.pool.n_chunks or self._n_streams < self.pool.n_streams:
-                self.pool = self.pool.prefix(max(self._n_chunks, 1), self._n_streams)
+            if self._n_chunks < self.pool.n_chunks or self._streams_in_use() < self.pool.n_streams:
+                self.pool = self.pool.prefix(max(self._n_chunks, 1), self._streams_in_use())
                 self._free = self._free[: self.pool.n_chunks].copy()
             self._drop_voxel_state()
             self._order_leaves()
@@ -561,7 +608,7 @@ class ProgressiveOctree:
         pool = self.pool
         pool.version += 1
         K.order_leaves(leaves, self.first_chunk, pool.chunk_next, pool.batches["count"], self.list_count, pool.chunk, pool.low, pool.ext,
-                       pool.packing["ext_first"], pool.color, *_pool_views(pool), pool.batch_version, pool.version,
+                       pool.packing["ext_first"], pool.packing["code"], pool.color, *_pool_views(pool), pool.batch_version, pool.version,
                        max(1, numba.get_num_threads()), self.grid_sample)  # fmt: skip
         return left
 
@@ -613,6 +660,8 @@ class ProgressiveOctree:
                 return
             ext, packing = streams or (pool.ext, pool.packing)
             self.pool = pool.repacked(ext, packing, attributes or pool.attributes)
+            if streams is not None:
+                self._n_words = len(ext)
             self._packed = True
 
     def _streams_on_grid(self, state: _PackState) -> tuple[np.ndarray, np.ndarray] | None:
@@ -630,29 +679,21 @@ class ProgressiveOctree:
         words = stream_words(3 * widths, fill)
         first = np.cumsum(words) - words  # streams follow chunk order; a voxel chunk's is empty, where the next starts
         ext = pages.zeros(int(words.sum()), np.uint64)
-        K.pack_streams(fill, widths, pool.ext, pack["ext_first"], ext, first)
+        K.pack_streams(fill, pack["code"], widths, pool.ext, pack["ext_first"], ext, first)
         packing = pack.copy()
         packing["ext_first"], packing["code"] = first, widths | widths << 8 | widths << 16
         return ext, packing
 
     def _unpack(self) -> None:
-        """``_pack`` undone: every point chunk's stream 60 bits a point and a stream of its own
-        (``stream`` words, in chunk order), as insertions write them (attributes stay as they are
-        held: a batch they do not fit widens them, ``_stored_form``)."""
+        """``_pack`` undone where insertions would not write as it left them: each point chunk's
+        stream room for a whole chunk again, wide unless chunks are written on the grid
+        (``_narrow``: packing kept each leaf's chunks at its level's bits, as ``_level_bits``
+        gives them); attributes stay as they are held (a batch they do not fit widens them,
+        ``_stored_form``)."""
         if not self._packed:
             return
-        pool = self.pool
-        fill, pack = pool.batches["count"], pool.packing
-        ext, packing = pool.ext, pool.packing
-        if np.any((pack["code"] != 0) & (pack["code"] != K.WIDE_CODE)):
-            points = (pack["code"] != 0).astype(np.int64)  # point chunks: compact codes keep e >= 1
-            first = (np.cumsum(points) - points) * pool.stream
-            ext = pages.zeros(int(points.sum()) * pool.stream, np.uint64)
-            K.widen_streams(fill, pack["code"], pool.ext, pack["ext_first"], ext, first)
-            packing = pack.copy()
-            packing["ext_first"], packing["code"] = first, np.where(points == 1, K.WIDE_CODE, 0)
-            self._n_streams = int(points.sum())
-        self.pool = pool.repacked(ext, packing, pool.attributes)
+        self._restream(wide=not self._narrow)
+        self.pool = self.pool.repacked(self.pool.ext, self.pool.packing, self.pool.attributes)
         self._packed = False
 
     def _drop_voxel_state(self) -> None:
@@ -750,6 +791,8 @@ class ProgressiveOctree:
             self.loader.close()
         with self.lock:
             self.pool, self._packed = None, False
+            self._n_chunks = self._n_free = self._n_words = 0
+            self._narrow = self.grid is not None
             self.origin = None
             self.points = self.n_nodes = self.n_voxels = 0
             self._nodes(1)
@@ -918,7 +961,7 @@ class ProgressiveOctree:
         self._unpack()
         if self.pool is None:
             expected = int(self.capacity * _ROOM_PER_POINT) // self.chunk
-            streams = int(self.capacity * _STREAMS_PER_POINT) // self.chunk
+            streams = int(self.capacity * _STREAMS_PER_POINT * (0.5 if self._narrow else 1.0)) // self.chunk  # (narrow: 30 bits a point at most)
             forms = {a: holder_for(v, 0) for a, v in attrs.items()}
             self.pool = Pool(self.name, max(_INITIAL_CHUNKS, expected), self.chunk, forms, max(_INITIAL_CHUNKS, streams))
             if self.capacity:  # room for the expected voxels too: growing their arrays and table copies them
@@ -933,6 +976,8 @@ class ProgressiveOctree:
             self._start(lo - pad, float(np.max(hi - lo)) + 2 * pad)
         while np.any(lo < self.origin) or np.any(hi > self.origin + self.edge):
             self._grow(lo, hi)
+        if self._narrow and (self.grid is None or not K.on_grid(xyz, self.grid[0], self.grid[1], _ON_GRID)):
+            self._go_wide()
         sets = [_Set.of(self.root, xyz, rgba, attrs, self.origin, self.edge, self._work, "0")]
         self._write_sets(sets, self._route(sets, [1.0]))
         self.lo, self.hi = np.minimum(self.lo, lo), np.maximum(self.hi, hi)
@@ -1043,10 +1088,11 @@ class ProgressiveOctree:
         pool = self.pool
         slots = np.empty(int(counts.sum()), np.int64)
         b, pk = pool.batches, pool.packing
-        self._n_free, self._n_chunks, self._n_streams = K.allocate(
+        self._n_free, self._n_chunks, self._n_words = K.allocate(
             lists, counts, pool.chunk, self.first_chunk, self.last_chunk, self.level, self.leaf, self.cmin, self.cedge, b["count"],
-            pool.chunk_next, pool.chunk_node, b["bbox_min"], b["bbox_max"], b["level"], pk["ext_first"], pk["code"], pool.ext, pool.stream,
-            self._free, self._n_free, self._n_chunks, self._n_streams, pool.version, pool.batch_version, slots,
+            pool.chunk_next, pool.chunk_node, b["bbox_min"], b["bbox_max"], b["level"], pk["ext_first"], pk["code"], pool.ext,
+            self._level_bits() if points else _NO_BITS, self._free, self._n_free, self._n_chunks, self._n_words, pool.version,
+            pool.batch_version, slots,
         )  # fmt: skip
         np.add.at(self.list_count, lists, counts)
         np.add.at(self.count, lists // K.LISTS, counts)
@@ -1062,7 +1108,7 @@ class ProgressiveOctree:
         src, dst, width = _attribute_views(st, pool)
         run_min, run_max = np.empty((len(leaf_runs), 3)), np.empty((len(leaf_runs), 3))
         K.write_points(st.xyz, st.rgba, src, dst, width, st.order, leaf_runs, offsets, slots, self.cmin, self.cedge, pool.low, pool.ext,
-                       pool.packing["ext_first"], pool.chunk, pool.color, run_min, run_max)  # fmt: skip
+                       pool.packing["ext_first"], pool.packing["code"], pool.chunk, pool.color, run_min, run_max)  # fmt: skip
         K.grow_bounds(leaf_runs, run_min, run_max, self.parent, self.point_min, self.point_max)
 
     def _voxel_cells(self, st: _Set, leaf_runs, inner_runs, only: int | None = None):
