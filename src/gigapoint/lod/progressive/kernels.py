@@ -516,9 +516,9 @@ def chunks_needed(lists, counts, chunk_size, last_chunk, fill):
 
 
 @njit(inline="always")
-def _chunk_words(t, chunk_size):
-    """u64 words of a chunk's stream at t bits a point (core/compact.stream_words)."""
-    return (chunk_size * t + 63) // 64 + 1 if t > 0 else 0
+def _chunk_words(t, n):
+    """u64 words of a stream of ``n`` points at t bits a point (core/compact.stream_words)."""
+    return (n * t + 63) // 64 + 1 if t > 0 else 0
 
 
 @njit(cache=True)
@@ -1015,6 +1015,10 @@ def pack_streams(fill, code, widths, ext, ext_first, out, out_first):
         if e == 0:
             continue
         t, held = 3 * e, code_bits(code[c])
+        if held == t:  # written in these bits (while filling): its words as they are, cut to its points
+            w = _chunk_words(t, fill[c])
+            out[out_first[c] : out_first[c] + w] = ext[ext_first[c] : ext_first[c] + w]
+            continue
         for j in range(fill[c]):
             v = read_ext(ext, ext_first[c], held, j) & _bits(held)
             if held != t:
