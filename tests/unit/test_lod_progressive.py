@@ -1324,7 +1324,7 @@ def test_files_on_two_grids_load_exactly(tmp_path):
 
 @pytest.mark.gpu
 def test_wgpu_draws_the_octree_on_its_grid_as_the_cpu_does(scene):
-    """The trimmed pool's compact point chunks (and what an add writes after it) through the GPU's
+    """The trimmed pool's compact point chunks (and the chunks an add writes on after it) through the GPU's
     decoder: the CPU's image."""
     from wgpu_support import wgpu_or_skip
 
@@ -1343,7 +1343,7 @@ def test_wgpu_draws_the_octree_on_its_grid_as_the_cpu_does(scene):
             args = (draw.points, draw.selection, 200, 150, view.near, view.far)
             got, want = np.asarray(gpu.rasterize(*args)), cpu.rasterize(*args)
         assert np.count_nonzero(want != EMPTY_PIXEL) > 1000 and np.count_nonzero(got != want) <= 0.001 * want.size
-        o.add(points[0][100_000:], points[1][100_000:], **{a: v[100_000:] for a, v in points[2].items()})  # widened
+        o.add(points[0][100_000:], points[1][100_000:], **{a: v[100_000:] for a, v in points[2].items()})  # written on: streams given room again, each chunk in its level's bits
 
 
 @pytest.mark.parametrize("fmt", ["gigapoint", "potree", "copc"])

@@ -16,11 +16,13 @@ The structure of SimLOD (Schütz, Herzberger, Wimmer 2024, sections 3-5; Wand et
   256 KB a node is more than the voxels of most nodes (a surface fills ~16 k of 2 M cells).
 - **storage**: a pool of fixed-size chunks (``CHUNK`` entries) in gigapoint's compact batch
   layout (core/compact.py: a low word, u32 RGBA and the attributes an entry, positions relative
-  to the node's cube): a point chunk keeps the 20 bits an axis under the low word in a stream
-  of its own (a wide batch, 7.5 bytes a point), a voxel chunk needs nothing more (a voxel sits
-  at its cell's centre on the node's 128³ grid, which the low word holds); once loaded (``trim``) a
-  chunk of points on the source's grid keeps only the bits its cube needs at the grid's step
-  (``_pack``). Attributes are held, while points come, in the form their values so far need
+  to the node's cube): a point chunk keeps the bits under the low word in a stream of its
+  own: where the points lie on the source's grid (a LAS file's offset and scale), the bits
+  its cube needs at the grid's step, each point written as its grid cell as it comes (15-18
+  bits a point at 1 mm: ``_level_bits``), else 20 an axis (a wide batch, 7.5 bytes a point;
+  ``trim`` packs the chunks of those that lie on a grid all the same, ``_pack``); a voxel chunk
+  needs nothing more (a voxel sits at its cell's centre on the node's 128³ grid, which the low
+  word holds). Attributes are held, while points come, in the form their values so far need
   (core/attributes.py: a constant as one value, an integer range in a narrow dtype; a batch
   that does not fit widens it: ``_stored_form``), and in their real range once loaded. A node's entries are a linked list of chunks, so nodes grow without copies, and a split
   leaf's chunks go back to a free list. Each chunk is a batch: the renderer draws the pool
