@@ -18,15 +18,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shutil
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
+
+from gigapoint.bench import run_measured
 
 CHILD = """
 import json, sys, time
@@ -81,29 +80,20 @@ def write_laz(las: Path, laz: Path) -> None:
 
 
 def run_child(args: dict) -> tuple[dict, float, int]:
-    t = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-c", CHILD, json.dumps(args)], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    out = proc.stdout.read()
-    err = proc.stderr.read()
-    _, status, usage = os.wait4(proc.pid, 0)
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    wall = time.perf_counter() - t
-    if proc.returncode != 0:
-        raise SystemExit(f"conversion failed ({proc.returncode}): {err.decode()[-2000:]}")
-    return json.loads(out.decode().strip().splitlines()[-1]), wall, usage.ru_maxrss * 1024
+    """(the conversion's report, wall seconds, peak RSS bytes: gigapoint.bench.run_measured)."""
+    code, out, err, wall, peak = run_measured([sys.executable, "-c", CHILD, json.dumps(args)])
+    if code != 0:
+        raise SystemExit(f"conversion failed ({code}): {err.decode()[-2000:]}")
+    return json.loads(out.decode().strip().splitlines()[-1]), wall, peak
 
 
 def run_potree(binary: str, las: Path, out: Path, method: str) -> tuple[float, int]:
     """(wall seconds, peak RSS bytes) of one PotreeConverter run; its output must hold every point."""
     shutil.rmtree(out, ignore_errors=True)
-    t = time.perf_counter()
-    proc = subprocess.Popen([binary, str(las), "-o", str(out), "--method", method], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    err = proc.stderr.read()
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - t
-    if os.waitstatus_to_exitcode(status) != 0 or not (out / "metadata.json").is_file():
+    code, _, err, wall, peak = run_measured([binary, str(las), "-o", str(out), "--method", method])
+    if code != 0 or not (out / "metadata.json").is_file():
         raise SystemExit(f"PotreeConverter failed: {err.decode(errors='replace')[-2000:]}")
-    return wall, usage.ru_maxrss * 1024
+    return wall, peak
 
 
 def main() -> None:

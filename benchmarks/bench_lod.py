@@ -23,10 +23,11 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
+
+from gigapoint.bench import run_measured
 
 CHILD = """
 import json, sys, tempfile, time
@@ -48,22 +49,13 @@ def _du(path: Path) -> int:
 
 def run_convert(args) -> dict:
     child = {"points": args.points, "out": str(args.out), "memory_limit": args.memory_limit, "chunk": args.chunk}
-    t = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-c", CHILD, json.dumps(child)], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    out, err = proc.communicate()
-    wall = time.perf_counter() - t
-    if proc.returncode != 0:
-        raise SystemExit(f"conversion failed ({proc.returncode}): {err.decode()[-2000:]}")
+    code, out, err, wall, peak = run_measured([sys.executable, "-c", CHILD, json.dumps(child)])  # (peak: gigapoint.bench.run_measured)
+    if code != 0:
+        raise SystemExit(f"conversion failed ({code}): {err.decode()[-2000:]}")
     res = json.loads(out.decode().strip().splitlines()[-1])
-    res["wall"] = wall
+    res["wall"], res["peak_rss"] = wall, peak
     res["size_bytes"] = _du(Path(args.out))
     return res
-
-
-def _peak_child_rss() -> int:
-    import resource
-
-    return resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
 
 
 def views(oc, width: int, height: int):
@@ -158,7 +150,6 @@ def main() -> None:
     result = {}
     if args.convert or both:
         c = run_convert(args)
-        c["peak_rss"] = _peak_child_rss()
         result["convert"] = c
         print(
             f"convert {c['points']:,} points -> {c['nodes']:,} nodes: {c['seconds']:.1f} s in convert() "

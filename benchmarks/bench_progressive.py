@@ -15,7 +15,8 @@
   completion, alternately, in one process: the ratio is what LOD costs loading.
 - ``memory``: bytes a point of the town as a LAS file loaded progressively (on the file's grid,
   attributes in their range, once loaded) against three words a point and the plain cloud's
-  layout; and what the octree held when its last point was in, before ``trim``.
+  layout; what the octree held when its last point was in, before ``trim``; and the peak RSS
+  of a process that only loads the file.
 - ``first``: seconds from ``gigapoint.demo(10**9, progressive=True)`` (or ``gigapoint.open(FILE,
   progressive=True)`` with ``--first-source FILE``) to its first image with points (1920x1080),
   then the loader is closed.
@@ -55,6 +56,7 @@ import os
 import resource
 import statistics
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -210,6 +212,21 @@ def bench_load(n: int, rounds: int) -> None:
             print(f"load {suffix.upper()} {n / 1e6:g} M (medians of {rounds}): {cols}")
 
 
+# VmHWM, not ru_maxrss: a process started from a large one (vfork, exec) reports the parent's
+# high-water mark as its ru_maxrss (Linux keeps it across exec); VmHWM is its own memory's
+_LOAD_ALONE = """
+import sys, time
+import gigapoint as gp
+t = time.perf_counter()
+with gp.open(sys.argv[1], progressive=True) as cloud:
+    cloud.wait()
+    seconds = time.perf_counter() - t
+    with open("/proc/self/status") as f:
+        peak = next((int(line.split()[1]) for line in f if line.startswith("VmHWM:")), 0)
+    print(f"{seconds:.2f} s, peak RSS {peak / 2**10:.0f} MiB (the process's first load)")
+"""
+
+
 def bench_memory(n: int) -> None:
     """Bytes a point of the town as a LAS file (scan order, 1 mm) loaded progressively (trimmed:
     point chunks on the file's grid, attributes in their range) against the quantized layouts of
@@ -236,11 +253,13 @@ def bench_memory(n: int) -> None:
             ProgressiveOctree.trim = trim
         plain = open_cloud(path, colors="rgba").nbytes / n
         default = open_cloud(path).nbytes / n
+        alone = subprocess.run([sys.executable, "-c", _LOAD_ALONE, str(path)], capture_output=True, text=True, check=True).stdout.strip()
     total = sum(mem.values()) / n
     parts = ", ".join(f"{k} {v / n:.1f}" for k, v in mem.items() if v)
     while_filling = ", ".join(f"{k} {v / n:.1f}" for k, v in filled.items() if v)
     print(f"memory, LAS {n / 1e6:g} M at 1 mm: {sum(filled.values()) / n:.1f} bytes a point when the last point is in, before trim "
           f"({while_filling}; presized room and build state included: what the memory limit counts)")
+    print(f"memory, LAS {n / 1e6:g} M at 1 mm, loaded in a process of its own: {alone}")
     print(f"memory, LAS {n / 1e6:g} M at 1 mm: {total:.1f} bytes a point loaded ({parts}; {voxels:.2f} voxels a point, chunks {chunks:.0%} "
           f"full); the quantized layouts: three words {words} B = {total / words:.2f}x, the plain cloud's compact layout with u32 colours "
           f"{plain:.1f} B = {total / plain:.2f}x, with its default colours {default:.1f} B = {total / default:.2f}x")  # fmt: skip

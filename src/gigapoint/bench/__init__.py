@@ -8,7 +8,17 @@ package only when ``gigapoint bench`` runs (it pulls in moderngl).
 
 from .gl_baseline import GLBaseline, gl_matrix
 from .naive import naive_frame, naive_matrix, naive_raster
-from .report import cpu_model, machine_pages, pages_since, parse_count, parse_threads, print_results, results_table, write_results
+from .report import (
+    cpu_model,
+    machine_pages,
+    pages_since,
+    parse_count,
+    parse_threads,
+    print_results,
+    results_table,
+    run_measured,
+    write_results,
+)
 from .run import COVERAGE_TOLERANCE, run_render_benchmark
 from .scene import THROUGHPUT_DEFINITION, VIEWS, benchmark_cameras, coverage_iou, demo_cloud, relative_cloud
 
@@ -32,6 +42,7 @@ __all__ = [
     "print_results",
     "relative_cloud",
     "results_table",
+    "run_measured",
     "run_render_benchmark",
     "write_results",
 ]

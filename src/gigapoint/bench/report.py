@@ -15,6 +15,35 @@ from .scene import THROUGHPUT_DEFINITION
 _SUFFIXES = {"k": 10**3, "m": 10**6, "g": 10**9, "b": 10**9}
 
 
+# The command runs as the child of a small launcher, which reports the command's peak RSS: a
+# process a large one starts (vfork, then exec) takes that one's high-water mark as its own
+# ru_maxrss (Linux keeps it across exec), so wait4 from a benchmark that holds 1.5 GB reports
+# 1.5 GB even for /bin/true; the launcher's own few MB are the floor instead.
+_LAUNCHER = (
+    "import os, subprocess, sys\n"
+    "p = subprocess.Popen(sys.argv[2:])\n"
+    "_, status, usage = os.wait4(p.pid, 0)\n"
+    "open(sys.argv[1], 'w').write(str(usage.ru_maxrss))\n"
+    "sys.exit(os.waitstatus_to_exitcode(status))\n"
+)
+
+
+def run_measured(cmd: list) -> tuple[int, bytes, bytes, float, int]:
+    """Run ``cmd`` (its output captured): (exit code, stdout, stderr, wall seconds, its peak RSS
+    in bytes, measured through a small launcher: see above)."""
+    import sys
+    import tempfile
+    import time
+
+    with tempfile.TemporaryDirectory() as tmp:
+        report = Path(tmp) / "peak_kb"
+        t = time.perf_counter()
+        proc = subprocess.run([sys.executable, "-c", _LAUNCHER, str(report), *map(str, cmd)], capture_output=True, check=False)
+        wall = time.perf_counter() - t
+        peak = int(report.read_text()) * 1024 if report.is_file() else 0
+    return proc.returncode, proc.stdout, proc.stderr, wall, peak
+
+
 def cpu_model() -> str:
     """The CPU's model name (``lscpu``), for every benchmark's figures: the machine changes."""
     try:
