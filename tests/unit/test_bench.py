@@ -277,3 +277,19 @@ def test_machine_pages_counts_the_memory_a_run_touches():
     grew = pages_since(before)
     assert touched.nbytes / 2**20 <= grew["alloc_mib"] < 100_000
     assert grew["reported_mib"] >= 0
+
+
+def test_a_childs_peak_memory_is_its_own_not_the_benchmarks():
+    """run_measured reports the command's peak RSS: not the high-water mark of the (large)
+    process that started it, which Linux hands a child across exec as its ru_maxrss."""
+    import sys
+
+    from gigapoint.bench import run_measured
+
+    held = np.ones(50_000_000)  # 400 MB held (and touched) by the benchmark
+    code, out, _, wall, small = run_measured([sys.executable, "-c", "print('hi')"])
+    assert code == 0 and out.strip() == b"hi" and wall > 0 and small < 200 * 2**20
+    code, _, _, _, large = run_measured([sys.executable, "-c", "import numpy as np; a = np.ones(40_000_000); print(a.sum())"])
+    assert code == 0 and 320 * 2**20 < large < 600 * 2**20  # its 320 MB, not the benchmark's 400 MB on top
+    assert run_measured([sys.executable, "-c", "raise SystemExit(3)"])[0] == 3
+    del held
