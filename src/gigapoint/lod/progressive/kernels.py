@@ -734,8 +734,6 @@ def write_points(xyz, rgba, attr_src, attr_dst, attr_width, order, leaf_runs, ru
         _scatter_attributes(attr_src, attr_dst, attr_width, order, slots, o, lo, hi)
 
 
-
-
 @njit(inline="always")
 def _narrowed(v, e):
     """A wide point's 60 stream bits (20 an axis) as e bits an axis: each axis's top e."""
@@ -1019,11 +1017,8 @@ def pack_streams(fill, code, widths, ext, ext_first, out, out_first):
             w = _chunk_words(t, fill[c])
             out[out_first[c] : out_first[c] + w] = ext[ext_first[c] : ext_first[c] + w]
             continue
-        for j in range(fill[c]):
-            v = read_ext(ext, ext_first[c], held, j) & _bits(held)
-            if held != t:
-                v = _narrowed(v, e)
-            write_ext(out, out_first[c], t, j, v)
+        for j in range(fill[c]):  # a wide chunk's: each point's cell bits
+            write_ext(out, out_first[c], t, j, _narrowed(read_ext(ext, ext_first[c], held, j) & _bits(held), e))
 
 
 @njit(parallel=True, cache=True)
