@@ -4,7 +4,8 @@
     .venv/bin/python benchmarks/bench_progressive.py --points 20M --parts insert load
 
 - ``insert``: points already decoded (the demo town, in its generator's order, which spreads
-  every batch over the whole town, and in scan order: 50 m strips), inserted in batches of 1 M
+  every batch over the whole town, in scan order: 50 m strips, and in scan order as a LAS file
+  holds them: on its 1 mm grid, with its six attributes), inserted in batches of 1 M
   with the root cube given (as from LAS headers); JIT warm-up excluded; the orders alternate
   ``--rounds`` times (medians). Reported: points/s,
   voxels per point, memory per point against gigapoint's quantized layout of the same points
@@ -86,16 +87,25 @@ def bench_insert(n: int, batch: int, rounds: int) -> None:
     warm = ProgressiveOctree("warm", cube=cube)
     warm.add(xyz[:300_000], rgba[:300_000], **{a: v[:300_000] for a, v in attrs.items()})
     _converter_split_seconds(xyz[:300_000], cube, warm.max_leaf)  # its kernels compiled
-    layout = 16 + sum(v.dtype.itemsize for v in attrs.values())
     runs = (("generator order", np.arange(n), False), ("scan order", _scan_order(xyz), False),
             ("generator order, tree shaped first from every 32nd point (expect)", np.arange(n), True))  # fmt: skip
-    inputs = {name: (xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()}, shaped) for name, order, shaped in runs}
+    inputs = {name: (xyz[order], rgba[order], {a: v[order] for a, v in attrs.items()}, shaped, None) for name, order, shaped in runs}
+    # the points as a LAS file holds them (what gp.open(..., progressive=True) of one inserts): on
+    # its 1 mm grid, which the octree is given, and with its attributes, constant ones too
+    offset, order = np.floor(lo), _scan_order(xyz)
+    las = {**attrs, "return_number": np.ones(n, np.uint8), "number_of_returns": np.ones(n, np.uint8),
+           "point_source_id": np.zeros(n, np.uint16), "gps_time": np.zeros(n)}  # fmt: skip
+    inputs["scan order, as a LAS file at 1 mm holds them (its grid given)"] = (
+        offset + np.round((xyz[order] - offset) / 0.001) * 0.001, rgba[order], {a: v[order] for a, v in las.items()}, False, (offset, 0.001)
+    )
+    x, c, at, _, grid = inputs["scan order, as a LAS file at 1 mm holds them (its grid given)"]
+    ProgressiveOctree("warm", cube=cube, grid=grid).add(x[:300_000], c[:300_000], **{a: v[:300_000] for a, v in at.items()})  # its kernels
     times, system, report = {name: [] for name in inputs}, {name: [] for name in inputs}, {}
     # the orders alternate, rounds times: a process's first run of this size pays for memory it
     # never had (faulted in from the host on these VMs), later ones reuse what the last one freed
     for _ in range(rounds):
-        for name, (x, c, at, shaped) in inputs.items():
-            o = ProgressiveOctree("bench", cube=cube, capacity=n)
+        for name, (x, c, at, shaped, grid) in inputs.items():
+            o = ProgressiveOctree("bench", cube=cube, capacity=n, grid=grid)
             sys0, t = resource.getrusage(resource.RUSAGE_SELF).ru_stime, time.perf_counter()
             if shaped:
                 o.expect(x[::32], 32.0)
@@ -107,7 +117,8 @@ def bench_insert(n: int, batch: int, rounds: int) -> None:
             o.trim()  # as the loader does when loading ends
             report[name] = (o.spilled / n, o.n_voxels / n, filling / n, o.nbytes / n, _chunk_fill(o))
             del o
-    for name, (x, _c, _at, _shaped) in inputs.items():
+    for name, (x, _c, at, _shaped, _grid) in inputs.items():
+        layout = 16 + sum(v.dtype.itemsize for v in at.values())
         dt = statistics.median(times[name])
         spilled, voxels, filling, mem, full = report[name]
         each = ", ".join(f"{t:.2f}" for t in times[name])
