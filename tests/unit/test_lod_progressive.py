@@ -655,15 +655,19 @@ def test_a_drawn_child_replaces_its_parents_voxels_of_its_octant(octree):
                 assert int(octree.children[node, d]) not in drawn
 
 
-def test_drawing_while_another_thread_inserts(scene):
-    xyz, rgba, attrs = scene
-    o = ProgressiveOctree("live", max_leaf=2_000)
+@pytest.mark.parametrize("grid", ["none", "on the grid", "off it midway"])
+def test_drawing_while_another_thread_inserts(scene, grid):
+    """... with the points on a grid (chunks in their levels' bits), and with a batch off it
+    midway (every chunk made wide while frames are drawn)."""
+    xyz, rgba, attrs = scene if grid == "none" else _on_grid(scene)
+    o = ProgressiveOctree("live", max_leaf=2_000, grid=None if grid == "none" else (_UTM, _MM))
     o.add(xyz[:5_000], rgba[:5_000])
     cam = gp.Camera.fit((xyz.min(axis=0), xyz.max(axis=0)), width=160, height=120)
 
     def insert():
         for s in range(5_000, len(xyz), 5_000):
-            o.add(xyz[s : s + 5_000], rgba[s : s + 5_000])
+            off = 0.37 * _MM if grid == "off it midway" and s == len(xyz) // 2 else 0.0
+            o.add(xyz[s : s + 5_000] + off, rgba[s : s + 5_000])
 
     def draw():
         with o.reading():
@@ -677,6 +681,7 @@ def test_drawing_while_another_thread_inserts(scene):
         assert f.stats.points_processed <= o.n_points  # no point drawn twice (nor a voxel with its points)
 
     assert _draw_while(insert, draw) >= 3 and o.n_points == len(xyz)
+    assert o._narrow == (grid == "on the grid") and (grid != "on the grid" or np.all(_chunk_widths(o)[1] < 20))
 
 
 def _draw_while(write, draw) -> int:
