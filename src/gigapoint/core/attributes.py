@@ -28,6 +28,8 @@ from .pages import zeros
 _NARROW = (np.uint8, np.uint16, np.uint32)
 #: float64 values checked for float32 this many at a time
 _FLOAT_BLOCK = 1 << 16
+#: entries a widened holder copies at a time (its temporaries stay small)
+_COPY_BLOCK = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -44,10 +46,20 @@ class Packed:
     def nbytes(self) -> int:
         return 0 if self.stored is None else int(self.stored.nbytes)
 
-    def encode(self, values) -> np.ndarray:
-        """``values`` (within ``offset``.. the stored dtype's range) as stored: ``value - offset``."""
-        wide = np.uint64 if self.dtype == np.uint64 else np.int64
-        return (np.asarray(values).astype(wide) - wide(self.offset)).astype(self.stored.dtype)
+    def encode(self, values, out: np.ndarray | None = None) -> np.ndarray:
+        """``values`` (within ``offset``.. the stored dtype's range) as stored, into ``out`` (of the
+        stored dtype) where given: ``value - offset``, or the float32 of a float64."""
+        v = np.asarray(values)
+        v = v if v.dtype == self.dtype else v.astype(self.dtype)
+        out = np.empty(len(v), self.stored.dtype) if out is None else out
+        if self.dtype.kind == "f":
+            out[:] = v
+        else:
+            # one pass, in the values' own dtype: the difference wraps there (signed) but fits the
+            # narrow dtype, so the cast's truncation gives it exactly (an int64 detour costs a pass
+            # and 8 bytes a point more)
+            np.subtract(v, v.dtype.type(self.offset), out=out, casting="unsafe")
+        return out
 
     def decode(self, indices=None) -> np.ndarray:
         """The original values of every point, or of ``indices`` (an array, or a slice)."""
@@ -93,14 +105,10 @@ def pack(values: np.ndarray) -> np.ndarray | Packed:
         if held is None:
             return values
         if held.stored is not None:
-            # one pass, in the values' own dtype: the difference wraps there (signed) but fits the
-            # narrow dtype, so the cast's truncation gives it exactly (encode's int64 detour costs
-            # a pass and 8 bytes a point more)
-            np.subtract(v, v.dtype.type(held.offset), out=held.stored, casting="unsafe")
+            held.encode(v, out=held.stored)
         return held
     if v.dtype == np.float64:
-        bits, first = v.view(np.uint64), v.view(np.uint64)[:_FLOAT_BLOCK]
-        if first.min() == first.max() == bits.min() == bits.max() and not np.isnan(v[0]):  # one value, bit for bit
+        if _one_float(v[:_FLOAT_BLOCK]) and _one_float(v):  # one value, bit for bit (the first block decides most)
             return Packed(None, float(v[0]), v.dtype, len(v))
         # block by block: a real GPS time stops at the first block, and no temporary the size of
         # the values is made (new memory costs more than the work on these machines)
@@ -246,18 +254,12 @@ def fits(held, values: np.ndarray) -> bool:
 
 
 def encode(held, values: np.ndarray, out: np.ndarray | None = None) -> np.ndarray | None:
-    """``values`` (that ``fits``) as ``held`` stores them, into ``out`` (of the stored dtype) where
-    given; None for a constant (nothing to store)."""
+    """``values`` (that ``fits``) as ``held`` stores them (``Packed.encode``), into ``out`` (of the
+    stored dtype) where given; the values themselves where held as they are; None for a
+    constant (nothing to store)."""
     if not isinstance(held, Packed):
         return values
-    if held.stored is None:
-        return None
-    out = np.empty(len(values), held.stored.dtype) if out is None else out
-    if held.dtype.kind == "f":
-        out[:] = values
-    else:  # in the values' own dtype: the difference wraps there but fits the narrow one (as pack)
-        np.subtract(values, values.dtype.type(held.offset), out=out, casting="unsafe")
-    return out
+    return None if held.stored is None else held.encode(values, out)
 
 
 def widened(held, values: np.ndarray, used: int) -> np.ndarray | Packed:
@@ -274,8 +276,8 @@ def widened(held, values: np.ndarray, used: int) -> np.ndarray | Packed:
         new = _int_range(lo, hi, held.dtype, n)
     else:
         new = zeros(n, held.dtype)
-    for start in range(0, used, _FLOAT_BLOCK * 16):
-        block = slice(start, min(start + _FLOAT_BLOCK * 16, used))
+    for start in range(0, used, _COPY_BLOCK):
+        block = slice(start, min(start + _COPY_BLOCK, used))
         old = held.decode(block) if isinstance(held, Packed) else held[block]
         target = stored(new)[block]
         encoded = encode(new, old, target)

@@ -56,7 +56,7 @@ from ...core.attributes import Attributes, encode, fits, holder_for, repacked, r
 from ...core.attributes import stored as stored_array
 from ...core.chunk import PointChunk, colors_for
 from ...core.cloud import MAX_ABS_COORDINATE
-from ...core.compact import point_words, stream_words
+from ...core.compact import GRID_TOLERANCE, ext_bits_per_point, point_words, stream_words
 from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE, WORD_BITS
 from ...core.morton import fastest
@@ -81,7 +81,6 @@ _PARALLEL_CELLS = 100_000  # points of a set from which sample_runs spreads each
 _PRESIZE_MAX = 32_000_000  # points the pool is presized for at most (1.5-2.5 GB of address space, written as it fills)
 _PRESIZE_TABLE_MAX = 16_000_000  # ... and the voxel table (filled up front: ~0.2 GB)
 _NO_BITS = np.zeros(CODE_BITS + 2, np.int64)  # voxel chunks' (no stream)
-_ON_GRID = 1 / 16  # of a grid step: a point this close to the source's grid is written as its grid point (kernels.grid_widths' bound)
 _GROWTH_MAX_CHUNKS = 16_384  # the pool grows by at most this many chunks (32 M entries, ~0.6 GB) beyond doubling small pools
 
 
@@ -519,14 +518,13 @@ class ProgressiveOctree:
         fill, pack = pool.batches["count"], pool.packing
         if wide and not np.any((pack["code"] != 0) & (pack["code"] != K.WIDE_CODE)):
             return
-        code = np.where(pack["code"] != 0, K.WIDE_CODE, 0).astype(pack["code"].dtype) if wide else pack["code"]
-        t = sum((code.astype(np.int64) >> shift) & 0xFF for shift in (0, 8, 16))
-        words = stream_words(t, pool.chunk)
-        first = np.cumsum(words) - words
-        ext = pages.zeros(int(words.sum()), np.uint64)
-        K.restream(fill, pack["code"], wide, pool.ext, pack["ext_first"], ext, first)
         packing = pack.copy()
-        packing["ext_first"], packing["code"] = first, code
+        if wide:
+            packing["code"] = np.where(pack["code"] != 0, K.WIDE_CODE, 0)
+        words = stream_words(ext_bits_per_point(packing, fill), pool.chunk)
+        packing["ext_first"] = np.cumsum(words) - words
+        ext = pages.zeros(int(words.sum()), np.uint64)
+        K.restream(fill, pack["code"], wide, pool.ext, pack["ext_first"], ext, packing["ext_first"])
         self._n_words = len(ext)
         self.pool = pool.repacked(ext, packing, pool.attributes)
 
@@ -695,7 +693,6 @@ class ProgressiveOctree:
         if not self._packed:
             return
         self._restream(wide=not self._narrow)
-        self.pool = self.pool.repacked(self.pool.ext, self.pool.packing, self.pool.attributes)
         self._packed = False
 
     def _drop_voxel_state(self) -> None:
@@ -978,7 +975,7 @@ class ProgressiveOctree:
             self._start(lo - pad, float(np.max(hi - lo)) + 2 * pad)
         while np.any(lo < self.origin) or np.any(hi > self.origin + self.edge):
             self._grow(lo, hi)
-        if self._narrow and (self.grid is None or not K.on_grid(xyz, self.grid[0], self.grid[1], _ON_GRID)):
+        if self._narrow and (self.grid is None or not K.on_grid(xyz, self.grid[0], self.grid[1], GRID_TOLERANCE)):
             self._go_wide()
         sets = [_Set.of(self.root, xyz, rgba, attrs, self.origin, self.edge, self._work, "0")]
         self._write_sets(sets, self._route(sets, [1.0]))
