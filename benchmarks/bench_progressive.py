@@ -37,8 +37,8 @@
   convert`` of the same file and, with ``--potree-converter PATH``, PotreeConverter's
   ``--method random``, alternately (process-internal times for gigapoint, wall time of the
   PotreeConverter process).
-- ``frames``: median (and 95th percentile) frame time at 1920x1080 with a 10 M budget while the
-  demo loads, of the same octree once loaded, and of a converted octree of the same points
+- ``frames``: median (and 95th percentile) frame time at 1920x1080 with a 10 M budget (drawn by
+  ``--backend``; on the GPU, with the bytes uploaded while loading) while the demo loads, of the same octree once loaded, and of a converted octree of the same points
   (alternately; views iso, close-up and top).
 - ``select``: frames of the loaded demo with nodes selected by the box of their points and by
   their cubes (``ProgressiveOctree.select_by_points``), interleaved.
@@ -466,12 +466,17 @@ def _views(bounds) -> dict:
             "top": gp.Camera.fit(bounds, view="top", width=1920, height=1080)}  # fmt: skip
 
 
-def bench_frames(n: int) -> None:
+def bench_frames(n: int, backend: str = "auto") -> None:
+    from gigapoint.render.backend import get_backend
+
+    s = gp.RenderSettings(point_budget=10_000_000, backend=backend)
+    drawer = get_backend(backend)
+    print(f"frames drawn by {drawer.describe()}")
+    uploaded = lambda: getattr(drawer, "memory", {}).get("uploaded", 0)  # bytes sent to the GPU so far; 0 on the CPU
     cloud = gp.demo(n, progressive=True)
     while cloud.n_points == 0:
         time.sleep(0.01)
-    s = gp.RenderSettings(point_budget=10_000_000)
-    times = []
+    times, sent = [], uploaded()
     while cloud.loading:
         cam = gp.Camera.fit(cloud.bounds, view="iso", width=1920, height=1080)
         t = time.perf_counter()
@@ -486,7 +491,8 @@ def bench_frames(n: int) -> None:
         same_leaves = gp.open(Path(tmp) / "same_leaves")
         m, p95 = statistics.median(times), float(np.percentile(times, 95))
         print(f"frames of demo({n:,}) at 1920x1080, 10 M budget: while loading {len(times)} frames, median {m * 1e3:.1f} ms "
-              f"({1 / m:.1f} fps), 95th percentile {p95 * 1e3:.1f} ms; loaded in {cloud.loader.finished_at - cloud.loader.started:.1f} s")  # fmt: skip
+              f"({1 / m:.1f} fps), 95th percentile {p95 * 1e3:.1f} ms; loaded in {cloud.loader.finished_at - cloud.loader.started:.1f} s"
+              + (f"; {(uploaded() - sent) / 2**20:.0f} MiB uploaded to the GPU while loading" if uploaded() else ""))  # fmt: skip
         for view, vcam in _views(cloud.bounds).items():
             for mode in ("auto", "fixed"):  # adaptive sizes (the default) and the one-pixel render
                 ms = s.replace(size_mode=mode)
@@ -616,9 +622,10 @@ def main(argv=None) -> int:
     ap.add_argument("--parts", nargs="+", default=["insert", "load", "first", "viewer", "frames"])
     ap.add_argument("--first-source", default=None, help="a file for --parts first (default: the demo of 10^9 points)")
     ap.add_argument("--potree-converter", default=None, help="a PotreeConverter 2 binary for --parts convert (its --method random)")
+    ap.add_argument("--backend", default="auto", choices=["auto", "cpu", "wgpu"], help="the rasterizer of --parts frames")
     args = ap.parse_args(argv)
     n = parse_count(args.points)
-    print(f"{_cpu()}, 2 cores; {n:,} points")
+    print(f"{_cpu()}, {os.cpu_count()} cores; {n:,} points")
     if "insert" in args.parts:
         bench_insert(n, parse_count(args.batch), args.rounds)
     if "load" in args.parts:
@@ -638,7 +645,7 @@ def main(argv=None) -> int:
     if "viewer" in args.parts:
         bench_viewer(10**9)
     if "frames" in args.parts:
-        bench_frames(n)
+        bench_frames(n, args.backend)
     if "select" in args.parts:
         bench_select(n)
     if "sort" in args.parts:

@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# The GPU checks of one lent device machine (docs/benchmarks.md, "GPU backend"), as one call:
+#   run(command="bash benchmarks/gpu_device.sh", carry=[".gl", ".whl"], timeout_s=600)
+# .gl holds the Vulkan/GL loaders (.deb) and .whl the wheels the machine's image lacks
+# (wgpu, cffi, pycparser, rendercanvas, laspy, lazrs, plyfile), fetched here as the device
+# tool's README says. Everything printed goes to $OUT/log too. Each step has its own time
+# limit, so one that hangs costs only its share of the lease.
+set -u
+LOG=${OUT:-/tmp}/log
+exec > >(tee -a "$LOG") 2>&1
+PY=${PY:-python3}  # the image's Python (PY=.venv/bin/python to try the script here, with the wheels already installed)
+if [ -z "${NO_CARRY:-}" ]; then
+    for f in .gl/*.deb; do dpkg -x "$f" /; done; ldconfig
+    $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1
+fi
+icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+[ -f "$icd" ] && export VK_DRIVER_FILES=$icd
+egl=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
+[ -f "$egl" ] && export __EGL_VENDOR_LIBRARY_FILENAMES=$egl
+export PYTHONPATH=/tmp/site:$PWD/src PYTHONUNBUFFERED=1 NUMBA_CACHE_DIR=/tmp/nbc
+step() { local limit=$1; shift; echo "=== $(date -u +%T) $* (limit ${limit}s)"; timeout "$limit" "$@"; echo "=== exit $?"; }
+nvidia-smi -L; lscpu | grep 'Model name'; nproc
+step 60 $PY -c "
+import numba, numpy, wgpu
+print('numpy', numpy.__version__, 'numba', numba.__version__, 'wgpu', wgpu.__version__)
+for a in wgpu.gpu.enumerate_adapters_sync():
+    print(a.info['device'], a.info['backend_type'], a.info['adapter_type'], 'storage binding', a.limits['max-storage-buffer-binding-size'], 'buffer', a.limits['max-buffer-size'], sorted(f for f in a.features if 'int64' in f))
+from gigapoint.backends.wgpu import WgpuBackend
+print(WgpuBackend(require_hardware=True).describe())
+"
+# brute force, overview and close-up (issue #6): 100 M and 500 M points, the CPU backend on every core beside it
+step ${BRUTE_S:-230} $PY benchmarks/bench_wgpu.py --points ${BRUTE_POINTS:-100M 500M} --views overview closeup --gpu-memory 100G --repeats 10
+# the GPU tier's image checks on real hardware (lavapipe in CI)
+step ${TESTS_S:-170} $PY -m pytest -q -x -p no:cacheprovider --timeout 120 tests/unit/test_wgpu_backend.py tests/unit/test_wgpu_lod.py tests/unit/test_wgpu_passes.py
+# the progressive octree drawn by the GPU while it loads, 1920x1080, 10 M budget (issue #18)
+step ${FRAMES_S:-120} $PY benchmarks/bench_progressive.py --points ${FRAMES_POINTS:-20M} --parts frames --backend wgpu
+echo "=== $(date -u +%T) done"
