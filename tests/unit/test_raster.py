@@ -304,6 +304,44 @@ print("OTHER SHAPES", sum(len(f.signatures) for f in loops))
     assert "OTHER SHAPES 0" in out.stdout, out.stdout
 
 
+def test_kernels_cached_by_different_processes_keep_each_shapes_projection(tmp_path):
+    """Two processes compile project_batch for a perspective and for an orthographic matrix in
+    one numba cache, each the same way (so numba numbers their functions alike); a third loads
+    both from the cache. Each shape's projection loops must stay its own: when every variant had
+    the same name, the third process ran the perspective loops for the orthographic matrix (in
+    the renderer: wrong pixels, writes out of bounds, a segfault)."""
+    import os
+    import subprocess
+    import sys
+
+    script = """
+import hashlib, sys
+import numpy as np
+from gigapoint.backends.numba_cpu import raster
+rng = np.random.default_rng(1)
+low, med, high = (rng.integers(0, 1 << 30, 4096, dtype=np.uint32) for _ in range(3))
+rows = [[0.1, 0.0, 0.05, 20.0], [0.0, 0.1, 0.02, 30.0]]
+mats = {"perspective": np.array(rows + [[0.0, 0.0, 0.01, 5.0], [0.0, 0.0, 0.01, 5.0]], np.float32),
+        "orthographic": np.array(rows + [[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.01, 5.0]], np.float32)}
+for name in sys.argv[1:]:
+    m, pix, depth = mats[name], np.empty(4096, np.int32), np.empty(4096, np.float32)
+    raster.project_batch(low, med, high, 10, m, 200, 150, 1.0, 100.0, pix, depth, True, raster.shape_token(m))
+    print(name, hashlib.sha1(pix.tobytes() + depth.tobytes()).hexdigest(), flush=True)
+"""
+
+    def run(cache, *shapes):
+        env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / cache))
+        out = subprocess.run([sys.executable, "-c", script, *shapes], env=env, capture_output=True, text=True, timeout=600)
+        assert out.returncode == 0, out.stderr[-2000:]
+        return dict(line.split() for line in out.stdout.splitlines())
+
+    alone = {**run("perspective", "perspective"), **run("orthographic", "orthographic")}
+    assert alone["perspective"] != alone["orthographic"]
+    run("shared", "perspective")
+    run("shared", "orthographic")
+    assert run("shared", "perspective", "orthographic") == alone
+
+
 def test_vector_runs_write_exactly_their_pixels():
     """simd.min_run8 (the splats' rows): min with the key on lanes < n only; pixels past the run,
     here past the end of a view into a larger array, stay untouched."""

@@ -130,15 +130,22 @@ def _projection_loop(bits, shape, clip):
     helper chain per variant (``inline="always"``, 18 copies) took 11 s of a 14 s compile, and the
     variants of the other matrix shapes took 2-4 s of the first render (one camera, one shape).
     A GENERAL matrix (neither a perspective nor an orthographic camera's: only hand-made ones)
-    always clips (``_project_impl``), which is exact for a batch inside the frustum too."""
+    always clips (``_project_impl``), which is exact for a batch inside the frustum too.
 
-    @njit(error_model="numpy")
+    Each variant gets a name of its own: numba names a compiled function by its qualified name,
+    its argument types and a counter of the process that compiled it, and every variant has the
+    same argument types. Cached kernels (``project_batch``, ``rasterize``, the passes') carry
+    their variants' code under those names, so two kernels cached by different processes could
+    hold different variants under one name, and a process loading both ran one variant's code
+    for the other (an orthographic frame projected as a perspective one, writing out of bounds)."""
+
     def loop(low, med, high, mt, wf, hf, wi, near, far, pix, depth):
         for j in range(low.shape[0]):
             x, y, z = grid_coords(low, med, high, j, bits)
             pix[j], depth[j] = project_point(mt, x, y, z, wf, hf, wi, near, far, shape, clip)
 
-    return loop
+    loop.__name__ = loop.__qualname__ = f"projection_loop_{bits}bit_shape{shape}_{'clipped' if clip else 'unclipped'}"
+    return njit(error_model="numpy")(loop)
 
 
 # The matrix shape of a frame's batch matrices, a compile-time type: an empty array whose dtype
