@@ -360,8 +360,12 @@ def test_results_survive_the_reuse_of_their_buffer(gpu, cpu, scene):
     want = cpu.resolve(vis, scene.color, BG)
     assert _n_differ(first, want) == 0
     want_lit = eye_dome_lighting(vis, want, w, h)
-    assert _n_differ(lit, want_lit) == 0
-    assert _n_differ(again, eye_dome_lighting(vis, want_lit, w, h)) == 0
+    # EDL's logarithm divides: a GPU's float32 division need not round as the CPU's (Vulkan
+    # allows 2.5 ulps), so a rare channel is one off, as in the EDL tests; a result overwritten
+    # before it was read back would be another image
+    _assert_colors_close(lit, want_lit)
+    _assert_colors_close(again, eye_dome_lighting(vis, want_lit, w, h))
+    assert _n_differ(first, again) > 0.5 * np.count_nonzero(vis != EMPTY_PIXEL)
     # and a DeviceArray from rasterize is a visibility buffer like any other
     dev = gpu.rasterize(scene, sel, w, h, near, far, keep_on_device=True)
     assert isinstance(dev, DeviceArray) and _n_differ(dev, vis) == 0

@@ -3,6 +3,8 @@
 // `//! include common.wgsl`; the structs BatchRecord and Params are generated from numpy
 // dtypes (backends/wgpu/layout.py) and prepended to every shader.
 
+//! include exact.wgsl
+
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> batches: array<BatchRecord>;
 // Struct-of-arrays point words of one page (whole batches), so a 10-bit batch reads
@@ -102,17 +104,22 @@ fn compact_words(word0: u32, code: u32, j: u32) -> vec2<u32> {
     return words;
 }
 
+// One row of a batch matrix times (p, 1): r.x * p.x + r.y * p.y + r.z * p.z + r.w, left to right.
+fn row_dot(r: vec4<f32>, p: vec3<f32>) -> f32 {
+    return product(r.x, p.x) + product(r.y, p.y) + product(r.z, p.z) + r.w;
+}
+
 // (pixel id or NO_PIXEL, float32 depth bits) of a grid-space point: project_point in raster.py,
 // term by term. Depth and w are tested before the divide so no inf/NaN reaches a
 // comparison (GPUs need not honour IEEE NaN rules); the CPU kernel rejects the same points.
 fn project(m: array<vec4<f32>, 4>, p: vec3<f32>, near: f32, far: f32) -> vec2<u32> {
-    let sd = m[3].x * p.x + m[3].y * p.y + m[3].z * p.z + m[3].w;
-    let sw = m[2].x * p.x + m[2].y * p.y + m[2].z * p.z + m[2].w;
+    let sd = row_dot(m[3], p);
+    let sw = row_dot(m[2], p);
     if (!(sd > near && sd < far && sw > 0.0)) {
         return vec2<u32>(NO_PIXEL, 0u);
     }
-    let sx = m[0].x * p.x + m[0].y * p.y + m[0].z * p.z + m[0].w;
-    let sy = m[1].x * p.x + m[1].y * p.y + m[1].z * p.z + m[1].w;
+    let sx = row_dot(m[0], p);
+    let sy = row_dot(m[1], p);
     let px = sx / sw;
     let py = sy / sw;
     if (!(px >= 0.0 && px < f32(params.width) && py >= 0.0 && py < f32(params.height))) {

@@ -2,7 +2,8 @@
 // of the neighbours at the offsets adds max(0, log2 d - log2 d_n) (100 if this pixel is
 // empty); the color is scaled by 2^(sum x edl_scale), 2^y from the exponent bits and a
 // degree-6 Taylor polynomial. The same float32 operations in the same order as the CPU
-// kernel; in place on the image.
+// kernel (products rounded before they are added: exact.wgsl); in place on the image.
+//! include exact.wgsl
 
 @group(0) @binding(0) var<uniform> params: Params;
 // log_depth.wgsl's output: (log2 depth, 1) per pixel, (0, 0) where empty.
@@ -26,19 +27,19 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             let yy = y + offsets[o].y;
             if (xx >= 0 && xx < w && yy >= 0 && yy < h) {
                 let n = logd[u32(yy * w + xx)];
-                let r = ec * EDL_EMPTY_RESPONSE + (1.0 - ec) * max(0.0, c - n.x);
-                acc += n.y * r;  // (1 - empty_n) * r
+                let r = product(ec, EDL_EMPTY_RESPONSE) + product(1.0 - ec, max(0.0, c - n.x));
+                acc += product(n.y, r);  // (1 - empty_n) * r
             }
         }
         let yv = max(acc * params.edl_scale, -126.0);
         let fl = floor(yv);
         let f = yv - fl;
-        let poly = 1.0 + f * (EXP2_C1 + f * (EXP2_C2 + f * (EXP2_C3 + f * (EXP2_C4 + f * (EXP2_C5 + f * EXP2_C6)))));
+        let poly = 1.0 + product(f, EXP2_C1 + product(f, EXP2_C2 + product(f, EXP2_C3 + product(f, EXP2_C4 + product(f, EXP2_C5 + product(f, EXP2_C6))))));
         let shade = poly * bitcast<f32>((i32(fl) + 127) << 23u);
         let col = image[p];
         var res = col & 0xff000000u;
         for (var s = 0u; s < 3u; s++) {
-            res |= u32(f32((col >> (8u * s)) & 255u) * shade + 0.5) << (8u * s);
+            res |= u32(product(f32((col >> (8u * s)) & 255u), shade) + 0.5) << (8u * s);
         }
         image[p] = res;
     }

@@ -1,8 +1,10 @@
 // Eye-dome lighting, step 1 (log_depth in backends/numba_cpu/pass_kernels.py): per pixel
 // (log2 depth, 1) or (0, 0) where empty, so step 2 computes each logarithm once, not once
 // per neighbour. log2 = exponent + atanh series of the mantissa m in [1, 2), from IEEE
-// float32 operations in the CPU kernel's order (constants generated from render/params.py).
+// float32 operations in the CPU kernel's order (constants generated from render/params.py;
+// products rounded before they are added: exact.wgsl).
 //! include keys.wgsl
+//! include exact.wgsl
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> visibility: array<vec2<u32>>;
@@ -21,6 +23,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         let m = bitcast<f32>((k.y & 0x007fffffu) | 0x3f800000u);
         let t = (m - 1.0) / (m + 1.0);
         let t2 = t * t;
-        logd[p] = vec2<f32>(e + t * (LOG2_C1 + t2 * (LOG2_C3 + t2 * (LOG2_C5 + t2 * LOG2_C7))), 1.0);
+        logd[p] = vec2<f32>(e + product(t, LOG2_C1 + product(t2, LOG2_C3 + product(t2, LOG2_C5 + product(t2, LOG2_C7)))), 1.0);
     }
 }
