@@ -30,6 +30,8 @@ print(WgpuBackend(require_hardware=True).describe())
 "
 # brute force, overview and close-up (issue #6): 100 M and 500 M points, the CPU backend on every core beside it
 step ${BRUTE_S:-230} $PY benchmarks/bench_wgpu.py --points ${BRUTE_POINTS:-100M 500M} --views overview closeup --gpu-memory 100G --repeats 10
+# the wgpu visibility buffer against the CPU's, products kept and left to the driver to fuse
+step ${EXACT_S:-90} $PY benchmarks/gpu_exactness.py --timing 20M
 # the GPU tier on real hardware (CI has lavapipe only, whose compiler never fuses a * b + c:
 # the NVIDIA driver's fusing showed only here, exact.wgsl)
 step ${TESTS_S:-170} $PY -m pytest -q -rf -p no:cacheprovider --timeout 120 tests/unit/test_wgpu_backend.py tests/unit/test_wgpu_lod.py \
