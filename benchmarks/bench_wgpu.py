@@ -12,8 +12,10 @@ frame (shader compile + point upload), which is reported on its own. "overhead" 
 frame with no batch selected (clear + read-back only); "w/o overhead" divides by the
 frame time less that; "kept on GPU" is the wgpu frame left on the GPU (as the frame's passes
 read it: ``keep_on_device``), waited for but not read back. ``--gpu-memory`` bounds the point
-data held on the GPU (past it, frames re-upload pages): give a big GPU its size. On a machine without a GPU, wgpu runs on Mesa lavapipe (Vulkan on
-the CPU threads, sharing them with everything else).
+data held on the GPU (past it, frames re-upload pages): give a big GPU its size. On a machine
+without a GPU, wgpu runs on Mesa lavapipe (Vulkan on the CPU threads, sharing them with
+everything else). ``--views``: the fitted overview and the close-up of gigapoint.bench's
+benchmark cameras (``--view`` picks the overview's direction).
 """
 
 from __future__ import annotations

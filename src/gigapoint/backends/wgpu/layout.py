@@ -70,7 +70,7 @@ PARAMS_DTYPE = np.dtype(
         ("color_bits", "<u4"),  # resolve: 16 = colors are u16 RGB565 (a compact cloud's), 8 = u8 palette indices, else u32 RGBA8
         ("palette_shift", "<u4"),  # resolve (color_bits 8): a palette of PALETTE_SIZE colours serves 2^shift points
         ("palette_first", "<u4"),  # resolve (color_bits 8): global index of the page's palette binding's first entry
-        ("opaque_zero", "<u4"),  # raster, HQS: always 0, a value the shader compiler cannot see (common.wgsl, product)
+        ("opaque_zero", "<u4"),  # raster, HQS, EDL: always 0, a value the shader compiler cannot see (exact.wgsl, product)
         ("_pad_p1", "<u4"),
         ("views", "<f4", (MAX_VIEWS, 4)),  # raster: view v's (near, far, -, -) (entry 0 repeats near, far)
     ]
