@@ -21,10 +21,9 @@ import time
 import numpy as np
 
 import gigapoint
-from gigapoint import Camera
 from gigapoint.backends.numba_cpu import NumbaCpuBackend
 from gigapoint.backends.wgpu import WgpuBackend, shaders
-from gigapoint.bench import benchmark_cameras, parse_count
+from gigapoint.bench import benchmark_cameras, comparison_cameras, parse_count
 from gigapoint.core.selection import select
 
 EMPTY = np.uint64(0xFFFFFFFFFFFFFFFF)
@@ -42,27 +41,13 @@ def backend(fusable: bool) -> WgpuBackend:
     try:
         gpu = WgpuBackend(memory_budget=8 << 30)
         warm = gigapoint.demo(20_000, scale=None)
-        for cam in test_cameras(warm).values():
+        for cam in comparison_cameras(warm).values():
             gpu.rasterize(warm, *frame(warm, cam))
         gpu.forget(warm)
         return gpu
     finally:
         shaders._read = read
         shaders.shader_source.cache_clear()
-
-
-def test_cameras(cloud) -> dict[str, Camera]:
-    """The cameras of tests/unit/test_wgpu_backend.py."""
-    lo, hi = cloud.bounds
-    c = (lo + hi) / 2
-    p = cloud.positions([cloud.n_points // 2])[0]
-    return {
-        "iso": Camera.fit(cloud.bounds, width=320, height=240),
-        "top": Camera.fit(cloud.bounds, view="top", width=256, height=256),
-        "inside": Camera.look_at((c[0], c[1], lo[2] + 20), (c[0] + 300, c[1] + 50, lo[2] + 10), width=320, height=200),
-        "closeup": Camera.look_at(tuple(p + [0.4, 0.3, 0.8]), tuple(p), fov=40, width=240, height=180),
-        "ortho": Camera.fit(cloud.bounds, view="front", width=300, height=200, projection="orthographic"),
-    }
 
 
 def frame(cloud, cam):
@@ -90,7 +75,7 @@ def main(argv=None) -> int:
     gpus = {"kept": backend(False), "fusable": backend(True)}
     print(gpus["kept"].describe())
     scenes = [
-        ("200 k", gigapoint.demo(200_000, scale=None), test_cameras),
+        ("200 k", gigapoint.demo(200_000, scale=None), comparison_cameras),
         ("2 M", gigapoint.demo(2_000_000), lambda cl: benchmark_cameras(cl.bounds, 1920, 1080)),
     ]
     for label, cloud, cameras in scenes:

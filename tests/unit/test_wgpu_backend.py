@@ -16,6 +16,7 @@ from wgpu_support import cpu, gpu, gpu32, wgpu_or_skip  # noqa: F401 - fixtures
 import gigapoint
 from gigapoint import Camera, RenderSettings
 from gigapoint.backends.wgpu import WgpuBackend
+from gigapoint.bench import comparison_cameras
 from gigapoint.core.cloud import cloud_from_points
 from gigapoint.core.layout import BATCH_SIZE, EMPTY_PIXEL
 from gigapoint.core.selection import Selection, select
@@ -31,19 +32,6 @@ _LOW32 = np.uint64(0xFFFFFFFF)
 @pytest.fixture(scope="module")
 def scene():
     return gigapoint.demo(200_000, scale=None)
-
-
-def _cameras(cloud) -> dict[str, Camera]:
-    lo, hi = cloud.bounds
-    c = (lo + hi) / 2
-    p = cloud.positions([cloud.n_points // 2])[0]  # a surface point for the close-up
-    return {
-        "iso": Camera.fit(cloud.bounds, width=320, height=240),
-        "top": Camera.fit(cloud.bounds, view="top", width=256, height=256),
-        "inside": Camera.look_at((c[0], c[1], lo[2] + 20), (c[0] + 300, c[1] + 50, lo[2] + 10), width=320, height=200),
-        "closeup": Camera.look_at(tuple(p + [0.4, 0.3, 0.8]), tuple(p), fov=40, width=240, height=180),
-        "ortho": Camera.fit(cloud.bounds, view="front", width=300, height=200, projection="orthographic"),
-    }
 
 
 def _frame(cloud, cam, threshold_px=500.0, adaptive=True):
@@ -67,7 +55,7 @@ def _assert_close(gpu_vis, cpu_vis):
 # --- the visibility buffer ------------------------------------------------------------------------
 @pytest.mark.parametrize("view", ["iso", "top", "inside", "closeup", "ortho"])
 def test_demo_scene_matches_cpu_from_each_camera(gpu, gpu32, cpu, scene, view):
-    cam = _cameras(scene)[view]
+    cam = comparison_cameras(scene)[view]
     sel, args = _frame(scene, cam)
     want = cpu.rasterize(scene, sel, *args)
     got = gpu.rasterize(scene, sel, *args)
@@ -79,7 +67,7 @@ def test_demo_scene_matches_cpu_from_each_camera(gpu, gpu32, cpu, scene, view):
 
 def test_cameras_cover_every_precision(scene):
     bits = set()
-    for cam in _cameras(scene).values():
+    for cam in comparison_cameras(scene).values():
         bits |= set(_frame(scene, cam)[0].bits.tolist())
     assert bits == {10, 20, 30}
 
@@ -87,7 +75,7 @@ def test_cameras_cover_every_precision(scene):
 @pytest.mark.parametrize("threshold_px, bits", [(1e9, 10), (1.0, 20), (1e-9, 30)])
 def test_each_precision_on_every_batch(gpu, cpu, scene, threshold_px, bits):
     """A threshold forcing one precision on all batches exercises each decoder alone."""
-    cam = _cameras(scene)["iso"]
+    cam = comparison_cameras(scene)["iso"]
     sel, args = _frame(scene, cam, threshold_px)
     assert set(sel.bits.tolist()) == {bits}
     _assert_close(gpu.rasterize(scene, sel, *args), cpu.rasterize(scene, sel, *args))
@@ -147,14 +135,14 @@ def test_more_batches_than_one_dispatch_dimension(gpu, cpu):
 
 
 def test_empty_selection_gives_an_empty_buffer(gpu, scene):
-    sel, args = _frame(scene, _cameras(scene)["iso"])
+    sel, args = _frame(scene, comparison_cameras(scene)["iso"])
     none = Selection(sel.ids[:0], sel.bits[:0], sel.matrices[:0], sel.projected_px[:0], len(scene.batches))
     vis = gpu.rasterize(scene, none, *args)
     assert np.all(vis == EMPTY_PIXEL)
 
 
 def test_frame_beyond_one_binding_is_refused(gpu, scene):
-    sel, (_, _, near, far) = _frame(scene, _cameras(scene)["iso"])
+    sel, (_, _, near, far) = _frame(scene, comparison_cameras(scene)["iso"])
     side = int(np.sqrt(gpu.max_binding / 8)) + 2
     with pytest.raises(GigapointError, match="visibility buffer"):
         gpu.rasterize(scene, sel, side, side, near, far)
@@ -167,7 +155,7 @@ def test_paging_gives_the_same_buffer(gpu, scene):
     paged = wgpu_or_skip(page_bytes=page, memory_budget=4 * page)
     assert paged.page_points == 3 * BATCH_SIZE
     for view in ("iso", "inside"):
-        cam = _cameras(scene)[view]
+        cam = comparison_cameras(scene)[view]
         sel, args = _frame(scene, cam, threshold_px=1e-9 if view == "iso" else 500.0)
         assert _n_differ(paged.rasterize(scene, sel, *args), gpu.rasterize(scene, sel, *args)) == 0
     mem = paged.memory
@@ -189,7 +177,7 @@ def test_paging_with_ragged_batches(cpu):
 
 def test_a_batch_larger_than_a_page_is_refused(scene):
     small = wgpu_or_skip(page_bytes=BATCH_SIZE * 2)  # 5120 points
-    sel, args = _frame(scene, _cameras(scene)["iso"])
+    sel, args = _frame(scene, comparison_cameras(scene)["iso"])
     with pytest.raises(GigapointError, match="more than one GPU page"):
         small.rasterize(scene, sel, *args)
 
@@ -216,14 +204,14 @@ def test_second_frame_uploads_nothing_and_dead_clouds_are_freed():
 
 def test_only_needed_words_are_uploaded(scene):
     backend = wgpu_or_skip()
-    sel, args = _frame(scene, _cameras(scene)["iso"], threshold_px=1e9)  # 10 bits everywhere
+    sel, args = _frame(scene, comparison_cameras(scene)["iso"], threshold_px=1e9)  # 10 bits everywhere
     backend.rasterize(scene, sel, *args)
     assert backend.memory["uploaded"] == 4 * scene.n_points  # low words only
 
 
 # --- resolve --------------------------------------------------------------------------------------
 def test_resolve_matches_cpu_on_the_same_buffer(gpu, cpu, scene):
-    sel, args = _frame(scene, _cameras(scene)["top"])
+    sel, args = _frame(scene, comparison_cameras(scene)["top"])
     vis = cpu.rasterize(scene, sel, *args)
     bg = (10, 20, 30, 255)
     want = cpu.resolve(vis, scene.color, bg)
@@ -233,14 +221,14 @@ def test_resolve_matches_cpu_on_the_same_buffer(gpu, cpu, scene):
 
 def test_resolve_with_paged_colors(cpu, scene):
     paged = wgpu_or_skip(page_bytes=BATCH_SIZE * 4 * 2)  # 10 color pages
-    sel, args = _frame(scene, _cameras(scene)["top"])
+    sel, args = _frame(scene, comparison_cameras(scene)["top"])
     vis = cpu.rasterize(scene, sel, *args)
     assert np.array_equal(paged.resolve(vis, scene.color, (0, 0, 0, 255)), cpu.resolve(vis, scene.color, (0, 0, 0, 255)))
 
 
 # --- the facade and the registry ------------------------------------------------------------------
 def test_render_frame_with_backend_wgpu(gpu, scene):
-    cam = _cameras(scene)["iso"]
+    cam = comparison_cameras(scene)["iso"]
     try:
         frame = gigapoint.render_frame(scene, cam, RenderSettings(backend="wgpu", size_mode="fixed"))  # the exact one-pixel render
     except BackendUnavailableError as exc:

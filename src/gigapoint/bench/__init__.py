@@ -20,7 +20,7 @@ from .report import (
     write_results,
 )
 from .run import COVERAGE_TOLERANCE, run_render_benchmark
-from .scene import THROUGHPUT_DEFINITION, VIEWS, benchmark_cameras, coverage_iou, demo_cloud, relative_cloud
+from .scene import THROUGHPUT_DEFINITION, VIEWS, benchmark_cameras, comparison_cameras, coverage_iou, demo_cloud, relative_cloud
 
 __all__ = [
     "COVERAGE_TOLERANCE",
@@ -28,6 +28,7 @@ __all__ = [
     "VIEWS",
     "GLBaseline",
     "benchmark_cameras",
+    "comparison_cameras",
     "coverage_iou",
     "cpu_model",
     "demo_cloud",

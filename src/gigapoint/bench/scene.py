@@ -57,6 +57,22 @@ def benchmark_cameras(bounds, width: int, height: int) -> dict[str, Camera]:
     return {"overview": overview, "closeup": closeup}
 
 
+def comparison_cameras(cloud) -> dict[str, Camera]:
+    """Five small frames of a demo-like ``cloud`` that the GPU tier draws with both backends
+    (tests/unit/test_wgpu_backend.py, benchmarks/gpu_exactness.py): the fitted iso view, from
+    above, from inside the town, a close-up of a surface point (30-bit batches) and orthographic."""
+    lo, hi = cloud.bounds
+    c = (lo + hi) / 2
+    p = cloud.positions([cloud.n_points // 2])[0]  # a surface point for the close-up
+    return {
+        "iso": Camera.fit(cloud.bounds, width=320, height=240),
+        "top": Camera.fit(cloud.bounds, view="top", width=256, height=256),
+        "inside": Camera.look_at((c[0], c[1], lo[2] + 20), (c[0] + 300, c[1] + 50, lo[2] + 10), width=320, height=200),
+        "closeup": Camera.look_at(tuple(p + [0.4, 0.3, 0.8]), tuple(p), fov=40, width=240, height=180),
+        "ortho": Camera.fit(cloud.bounds, view="front", width=300, height=200, projection="orthographic"),
+    }
+
+
 def relative_positions(cloud, center, batch_ids) -> np.ndarray:
     """float32 (k, 3) positions (30-bit decode) minus ``center`` of the points of consecutive batches."""
     b = cloud.batches[batch_ids]
