@@ -29,7 +29,7 @@ from gigapoint.backends.wgpu import WgpuBackend
 print(WgpuBackend(require_hardware=True).describe())
 "
 # brute force, overview and close-up (issue #6): 100 M and 500 M points, the CPU backend on every core beside it
-step ${BRUTE_S:-230} $PY benchmarks/bench_wgpu.py --points ${BRUTE_POINTS:-100M 500M} --views overview closeup --gpu-memory 100G --repeats 10
+step ${BRUTE_S:-230} $PY benchmarks/bench_wgpu.py --points ${BRUTE_POINTS:-100M 500M} --views overview closeup --gpu-memory 100G --repeats 10 --fallback
 # the wgpu visibility buffer against the CPU's, products kept and left to the driver to fuse
 step ${EXACT_S:-90} $PY benchmarks/gpu_exactness.py --timing 20M
 # the GPU tier on real hardware (CI has lavapipe only, whose compiler never fuses a * b + c:
