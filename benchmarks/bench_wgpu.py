@@ -157,7 +157,7 @@ def main(argv=None) -> int:
         backends.append(("wgpu", WgpuBackend(memory_budget=budget), ""))
         if args.fallback:
             backends.append(("wgpu", WgpuBackend(atomics64=False, memory_budget=budget), "two-pass 32-bit"))
-        out.print(f"{cpu_model()}, {numba.get_num_threads()} threads; {backends[-1][1].describe()}")
+        out.print(f"{cpu_model()}, {numba.get_num_threads()} threads; " + "; ".join(b.describe() for name, b, _ in backends if name == "wgpu"))
         for n in sizes:
             bench_scene(n, args, backends, out, err)
     except GigapointError as exc:
