@@ -69,14 +69,17 @@ def differences(got: np.ndarray, want: np.ndarray) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--points", nargs=2, default=["200k", "2M"], metavar=("SMALL", "LARGE"),
+                    help="the demos of the small frames and of the 1920x1080 ones")  # fmt: skip
     ap.add_argument("--timing", default="0", help="points of the demo to time both shader texts on (0: none)")
     args = ap.parse_args(argv)
+    small, large = (parse_count(p) for p in args.points)
     cpu = NumbaCpuBackend()
     gpus = {"kept": backend(False), "fusable": backend(True)}
     print(gpus["kept"].describe())
     scenes = [
-        ("200 k", gigapoint.demo(200_000, scale=None), comparison_cameras),
-        ("2 M", gigapoint.demo(2_000_000), lambda cl: benchmark_cameras(cl.bounds, 1920, 1080)),
+        (args.points[0], gigapoint.demo(small, scale=None), comparison_cameras),
+        (args.points[1], gigapoint.demo(large), lambda cl: benchmark_cameras(cl.bounds, 1920, 1080)),
     ]
     for label, cloud, cameras in scenes:
         for view, cam in cameras(cloud).items():
