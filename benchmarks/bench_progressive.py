@@ -65,7 +65,7 @@ from pathlib import Path
 import numpy as np
 
 import gigapoint as gp
-from gigapoint.bench import parse_count
+from gigapoint.bench import parse_count, run_measured
 from gigapoint.io import demo_arrays, read_chunks
 from gigapoint.lod.progressive import ProgressiveOctree
 
@@ -223,18 +223,15 @@ def bench_load(n: int, rounds: int) -> None:
             print(f"load {suffix.upper()} {n / 1e6:g} M (medians of {rounds}): {cols}")
 
 
-# VmHWM, not ru_maxrss: a process started from a large one (vfork, exec) reports the parent's
-# high-water mark as its ru_maxrss (Linux keeps it across exec); VmHWM is its own memory's
+# its peak RSS through gigapoint.bench.run_measured (this process is large: a child's own
+# ru_maxrss would report this one's)
 _LOAD_ALONE = """
 import sys, time
 import gigapoint as gp
 t = time.perf_counter()
 with gp.open(sys.argv[1], progressive=True) as cloud:
     cloud.wait()
-    seconds = time.perf_counter() - t
-    with open("/proc/self/status") as f:
-        peak = next((int(line.split()[1]) for line in f if line.startswith("VmHWM:")), 0)
-    print(f"{seconds:.2f} s, peak RSS {peak / 2**10:.0f} MiB (the process's first load)")
+    print(f"{time.perf_counter() - t:.2f}")
 """
 
 
@@ -264,7 +261,10 @@ def bench_memory(n: int) -> None:
             ProgressiveOctree.trim = trim
         plain = open_cloud(path, colors="rgba").nbytes / n
         default = open_cloud(path).nbytes / n
-        alone = subprocess.run([sys.executable, "-c", _LOAD_ALONE, str(path)], capture_output=True, text=True, check=True).stdout.strip()
+        code, out, err, _, peak = run_measured([sys.executable, "-c", _LOAD_ALONE, str(path)])
+        if code != 0:
+            raise SystemExit(f"the lone load failed: {err.decode()[-2000:]}")
+        alone = f"{float(out.decode().split()[-1]):.2f} s, peak RSS {peak / 2**20:.0f} MiB (the process's first load)"
     total = sum(mem.values()) / n
     parts = ", ".join(f"{k} {v / n:.1f}" for k, v in mem.items() if v)
     while_filling = ", ".join(f"{k} {v / n:.1f}" for k, v in filled.items() if v)

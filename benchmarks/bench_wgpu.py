@@ -45,14 +45,14 @@ def _time(fn, repeats: int) -> float:
     return statistics.median(times)
 
 
-def _bytes(text: str) -> int:
-    """'64G', '2G', '512M' -> bytes (binary units)."""
-    t = text.strip().upper().removesuffix("B").removesuffix("I")
-    scale = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30}.get(t[-1:], 1)
+def _gpu_memory(text: str) -> int:
+    """--gpu-memory as bytes ('64G', '2G', '512M': gigapoint.lod.parse_memory's units)."""
+    from gigapoint.lod import parse_memory
+
     try:
-        return int(float(t[:-1] if scale > 1 else t) * scale)
-    except ValueError:
-        raise GigapointError(f"--gpu-memory: cannot read {text!r} (use e.g. 2G, 64G)") from None
+        return parse_memory(text)
+    except GigapointError as exc:
+        raise GigapointError(str(exc).replace("--memory-limit", "--gpu-memory")) from None
 
 
 def bench_view(cloud, view: str, cam, args, backends, out, err) -> None:
@@ -152,7 +152,7 @@ def main(argv=None) -> int:
         from gigapoint.backends.wgpu import WgpuBackend
 
         sizes = [parse_count(p) for p in args.points]
-        budget = _bytes(args.gpu_memory)
+        budget = _gpu_memory(args.gpu_memory)
         backends = [] if args.no_cpu else [("cpu", NumbaCpuBackend(), "")]
         backends.append(("wgpu", WgpuBackend(memory_budget=budget), ""))
         if args.fallback:

@@ -1045,9 +1045,9 @@ def restream(fill, code, wide, ext, ext_first, out, out_first):
         if cd == 0:
             continue
         t = code_bits(cd)
+        if not wide:  # the same bits in a longer stream: its words as they are (as pack_streams copies them)
+            w = _chunk_words(t, fill[c])
+            out[out_first[c] : out_first[c] + w] = ext[ext_first[c] : ext_first[c] + w]
+            continue
         for j in range(fill[c]):
-            v = read_ext(ext, ext_first[c], t, j) & _bits(t)
-            if wide:
-                write_ext(out, out_first[c], WIDE_BITS, j, wide_bits(v, cd))
-            else:
-                write_ext(out, out_first[c], t, j, v)
+            write_ext(out, out_first[c], WIDE_BITS, j, wide_bits(read_ext(ext, ext_first[c], t, j) & _bits(t), cd))
