@@ -8,8 +8,9 @@
 #     --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 -d .whl \
 #     wgpu==0.32.0 cffi==2.1.1 pycparser==3.12 rendercanvas==2.7.2 laspy==2.7.0 lazrs==0.8.2 plyfile==1.1.5
 # Everything printed goes to $OUT/log too. Each step has its own time
-# limit, so one that hangs costs only its share of the lease; together they stay under the
-# 600 s a call may run (the first session's run: 334 s, its brute-force step 205 s of them).
+# limit, so one that hangs costs only its share of the lease; all of them together exceed the
+# 600 s a call may run: pick some with STEPS (the first session's run without "early": 334 s,
+# its brute-force step 205 s of them).
 set -u
 LOG=${OUT:-/tmp}/log
 exec > >(tee -a "$LOG") 2>&1
@@ -23,9 +24,15 @@ icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
 egl=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
 [ -f "$egl" ] && export __EGL_VENDOR_LIBRARY_FILENAMES=$egl
 export PYTHONPATH=/tmp/site:$PWD/src PYTHONUNBUFFERED=1 NUMBA_CACHE_DIR=/tmp/nbc
-step() { local limit=$1; shift; echo "=== $(date -u +%T) $* (limit ${limit}s)"; timeout "$limit" "$@"; echo "=== exit $?"; }
+# STEPS: the steps to run (all by default), e.g. STEPS="adapter early" bash benchmarks/gpu_device.sh
+STEPS=${STEPS:-adapter brute early exact tests frames}
+step() {
+    local name=$1 limit=$2; shift 2
+    case " $STEPS " in *" $name "*) ;; *) return 0 ;; esac
+    echo "=== $(date -u +%T) $* (limit ${limit}s)"; timeout "$limit" "$@"; echo "=== exit $?"
+}
 nvidia-smi -L; lscpu | grep 'Model name'; nproc
-step 60 $PY -c "
+step adapter 60 $PY -c "
 import numba, numpy, wgpu
 print('numpy', numpy.__version__, 'numba', numba.__version__, 'wgpu', wgpu.__version__)
 for a in wgpu.gpu.enumerate_adapters_sync():
@@ -34,13 +41,15 @@ from gigapoint.backends.wgpu import WgpuBackend
 print(WgpuBackend(require_hardware=True).describe())
 "
 # brute force, overview and close-up (issue #6): 100 M and 500 M points, the CPU backend on every core beside it
-step ${BRUTE_S:-250} $PY benchmarks/bench_wgpu.py --points ${BRUTE_POINTS:-100M 500M} --views overview closeup --gpu-memory 100G --repeats 10 --fallback
+step brute ${BRUTE_S:-250} $PY benchmarks/bench_wgpu.py --points ${BRUTE_POINTS:-100M 500M} --views overview closeup --gpu-memory 100G --repeats 10 --fallback
+# the early-depth test's variants and front-to-back batch order against the shipped pass
+step early ${EARLY_S:-240} $PY benchmarks/gpu_early_depth.py --points ${EARLY_POINTS:-100M 500M} --gpu-memory 100G --repeats 10 --fallback
 # the wgpu visibility buffer against the CPU's, products kept and left to the driver to fuse
-step ${EXACT_S:-90} $PY benchmarks/gpu_exactness.py --timing 10M
+step exact ${EXACT_S:-90} $PY benchmarks/gpu_exactness.py --timing 10M
 # the GPU tier on real hardware (CI has lavapipe only, whose compiler never fuses a * b + c:
 # the NVIDIA driver's fusing showed only here, exact.wgsl)
-step ${TESTS_S:-140} $PY -m pytest -q -rf -p no:cacheprovider --timeout 120 tests/unit/test_wgpu_backend.py tests/unit/test_wgpu_lod.py \
+step tests ${TESTS_S:-140} $PY -m pytest -q -rf -p no:cacheprovider --timeout 120 tests/unit/test_wgpu_backend.py tests/unit/test_wgpu_lod.py \
     tests/unit/test_wgpu_passes.py tests/unit/test_wgpu_stereo.py tests/unit/test_transparency_wgpu.py tests/unit/test_live_wgpu.py
 # the progressive octree drawn by the GPU while it loads, 1920x1080, 10 M budget (issue #18)
-step ${FRAMES_S:-90} $PY benchmarks/bench_progressive.py --points ${FRAMES_POINTS:-10M} --parts frames --backend wgpu
+step frames ${FRAMES_S:-90} $PY benchmarks/bench_progressive.py --points ${FRAMES_POINTS:-10M} --parts frames --backend wgpu
 echo "=== $(date -u +%T) done"
