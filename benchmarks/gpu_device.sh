@@ -43,7 +43,7 @@ print(WgpuBackend(require_hardware=True).describe())
 # brute force, overview and close-up (issue #6): 100 M and 500 M points, the CPU backend on every core beside it
 step brute ${BRUTE_S:-250} $PY benchmarks/bench_wgpu.py --points ${BRUTE_POINTS:-100M 500M} --views overview closeup --gpu-memory 100G --repeats 10 --fallback
 # the early-depth test's variants and front-to-back batch order against the shipped pass
-step early ${EARLY_S:-240} $PY benchmarks/gpu_early_depth.py --points ${EARLY_POINTS:-100M 500M} --gpu-memory 100G --repeats 10 --fallback
+step early ${EARLY_S:-300} $PY benchmarks/gpu_early_depth.py --points ${EARLY_POINTS:-100M 500M} --gpu-memory 100G --repeats 10 ${EARLY_FLAGS---fallback --front-to-back}
 # the wgpu visibility buffer against the CPU's, products kept and left to the driver to fuse
 step exact ${EXACT_S:-90} $PY benchmarks/gpu_exactness.py --timing 10M
 # the GPU tier on real hardware (CI has lavapipe only, whose compiler never fuses a * b + c:

@@ -76,11 +76,37 @@ VISITS = {
 }
 
 
-def variant_source(name: str) -> str:
-    """raster64's WGSL with ``visit`` replaced by the variant's (and the hint's binding added)."""
+# Thread t of a workgroup draws points t, t + 128, ... (the shipped loops: a warp's lanes read
+# neighbouring words, and in Morton order mostly hit the same few pixels at once); "runs" gives
+# thread t one contiguous run of the batch instead (a warp's lanes hit different pixels; a
+# thread's next point lands where it just wrote).
+_STRIDED_LOOPS = (
+    "for (var q = lid; q < quads; q += WORKGROUP_SIZE) {",
+    "for (var j = tail + lid; j < n; j += WORKGROUP_SIZE) {",
+)
+_RUN_LOOPS = (
+    (
+        "let per_thread = (quads + WORKGROUP_SIZE - 1u) / WORKGROUP_SIZE;\n"
+        "        for (var q = lid * per_thread; q < min(quads, (lid + 1u) * per_thread); q++) {"
+    ),
+    (
+        "let per_thread = (n - tail + WORKGROUP_SIZE - 1u) / WORKGROUP_SIZE;\n"
+        "    for (var j = tail + lid * per_thread; j < min(n, tail + (lid + 1u) * per_thread); j++) {"
+    ),
+)
+
+
+def variant_source(name: str, runs: bool = False) -> str:
+    """raster64's WGSL with ``visit`` replaced by the variant's (and the hint's binding added);
+    ``runs``: each thread draws one contiguous run of its batch."""
     from gigapoint.backends.wgpu.shaders import shader_source
 
     text = shader_source("raster64")
+    if runs:
+        for strided, run in zip(_STRIDED_LOOPS, _RUN_LOOPS):
+            if text.count(strided) != 1:
+                raise GigapointError(f"common.wgsl: expected one loop {strided!r}")
+            text = text.replace(strided, run)
     if VISITS[name] is None:
         return text
     visit = re.compile(r"^fn visit\(.*?^}\n", re.MULTILINE | re.DOTALL)
@@ -102,13 +128,14 @@ def variant_backend(budget: int):
 
     class VariantBackend(WgpuBackend):
         variant = "atomic-load"
+        runs = False
 
         def _draw_views(self, points, views, width, height, splat, step, role):
             ctx = self.ctx
             n_pixels = width * height
-            pass_name = f"raster64_{self.variant}"
+            pass_name = f"raster64_{self.variant}{'_runs' if self.runs else ''}"
             if pass_name not in ctx.modules:
-                ctx.modules[pass_name] = ctx.device.create_shader_module(label=pass_name, code=variant_source(self.variant))
+                ctx.modules[pass_name] = ctx.device.create_shader_module(label=pass_name, code=variant_source(self.variant, self.runs))
             vis = ctx.writable(role, views.n * n_pixels * 8)
             ctx.clear(vis, _EMPTY_WORD)
             own = [(vis, views.n * n_pixels * 8)]
@@ -133,45 +160,51 @@ def front_to_back(sel):
 
 
 def bench_view(cloud, view, cam, args, backend, fallback, out) -> None:
+    """One table: each (visit, loops, batch order) run drawing the view, one frame each a round."""
     near, far = cam.clip_range(cloud.bounds)
     sel = select(cloud.batches, cam.screen_rows(), cam.width, cam.height, near, far)
     drawn = int(cloud.batches["count"][sel.ids].sum())
-    selections = {"": sel, "+f2b": front_to_back(sel), "empty": replace(sel, ids=sel.ids[:0], bits=sel.bits[:0], matrices=sel.matrices[:0], projected_px=sel.projected_px[:0])}
-    runs = [(v, order) for v in VISITS for order in ("", "+f2b")]  # (variant, batch order)
+    empty = replace(sel, ids=sel.ids[:0], bits=sel.bits[:0], matrices=sel.matrices[:0], projected_px=sel.projected_px[:0])
+    selections = {"selection": sel, "front to back": front_to_back(sel), "no batch": empty}
+    orders = ("selection", "front to back") if args.front_to_back else ("selection",)
+    runs = [(v, loops, order) for v in VISITS for loops in ("strided", "runs") for order in orders]
     if fallback is not None:
-        runs += [("two-pass 32-bit", ""), ("two-pass 32-bit", "+f2b")]
+        runs += [("two-pass 32-bit", "strided", order) for order in orders]
+    shipped = ("atomic-load", "strided", "selection")
 
-    def frame(variant, order, keep=True):
+    def frame(variant, loops, order, keep=True):
         s = selections[order]
         if variant == "two-pass 32-bit":
             return fallback.rasterize(cloud, s, cam.width, cam.height, near, far, keep_on_device=keep)
-        backend.variant = variant
+        backend.variant, backend.runs = variant, loops == "runs"
         return backend.rasterize(cloud, s, cam.width, cam.height, near, far, keep_on_device=keep)
 
     reference = None
     same = {}
-    for variant, order in runs:  # compile, upload, and the image each variant draws
-        vis = np.asarray(frame(variant, order, keep=False))
+    for r in runs:  # compile, upload, and the image each run draws
+        vis = np.asarray(frame(*r, keep=False))
         if reference is None:
             reference = vis
         diff = int(np.count_nonzero(vis != reference))
-        same[variant, order] = "identical" if diff == 0 else f"{diff:,} px differ"
-    frame("atomic-load", "empty")
-    runs.append(("atomic-load", "empty"))  # the fixed cost of a frame: clear, submit, wait
-    same["atomic-load", "empty"] = "-"
+        same[r] = "identical" if diff == 0 else f"{diff:,} px differ"
+    fixed = ("atomic-load", "strided", "no batch")  # the fixed cost of a frame: clear, submit, wait
+    frame(*fixed)
+    runs.append(fixed)
+    same[fixed] = "-"
     times = {r: [] for r in runs}
     for _ in range(args.repeats):
         for r in runs:
-            t0 = time.perf_counter()
-            frame(*r)
-            times[r].append(time.perf_counter() - t0)
-    base = statistics.median(times["atomic-load", ""])
-    table = Table(title=f"{view}: {drawn:,} of {cloud.n_points:,} points, {cam.width}x{cam.height}, kept on GPU, median of {args.repeats} rounds")
-    for col in ("variant", "order", "ms", "G points/s", "vs shipped", "image"):
-        table.add_column(col, justify="left" if col in ("variant", "order", "image") else "right")
+            times[r].append(_timed(lambda r=r: frame(*r)))
+    base = statistics.median(times[shipped])
+    table = Table(
+        title=f"{view}: {drawn:,} of {cloud.n_points:,} points, {cam.width}x{cam.height}, kept on GPU, median of {args.repeats} rounds"
+    )
+    for col in ("early-depth test", "loops", "batch order", "ms", "G points/s", "vs shipped", "image"):
+        table.add_column(col, justify="right" if col in ("ms", "G points/s", "vs shipped") else "left")
     for r in runs:
         t = statistics.median(times[r])
-        table.add_row(r[0], {"": "selection", "+f2b": "front to back", "empty": "no batch"}[r[1]], f"{t * 1000:.2f}", "-" if r[1] == "empty" else f"{drawn / t / 1e9:.2f}", f"{base / t:.2f}x", same[r])
+        rate = "-" if r == fixed else f"{drawn / t / 1e9:.2f}"
+        table.add_row(*r, f"{t * 1000:.2f}", rate, f"{base / t:.2f}x", same[r])
     out.print(table)
     ctx = backend.ctx
     vis = ctx.frame_buffers["visibility"]
@@ -193,6 +226,7 @@ def main(argv=None) -> int:
     ap.add_argument("--views", nargs="+", default=["overview", "closeup"], choices=["overview", "closeup"])
     ap.add_argument("--repeats", type=int, default=10, help="rounds (one frame of each variant a round)")
     ap.add_argument("--fallback", action="store_true", help="also the two-pass 32-bit-atomics path")
+    ap.add_argument("--front-to-back", action="store_true", help="also each run with its batches sorted front to back")
     ap.add_argument("--gpu-memory", default="2G", help="GPU memory for point data: e.g. 100G on a big GPU")
     args = ap.parse_args(argv)
     out, err = Console(width=150), Console(stderr=True, width=150)
