@@ -54,6 +54,11 @@ def demo(
     return build_cloud(chunks, name=name, colors=colors)
 
 
+def _flat_paths(paths) -> tuple:
+    """Paths with lists and tuples of them (at any depth) spread out, in order."""
+    return tuple(q for p in paths for q in (_flat_paths(p) if isinstance(p, (list, tuple)) else (p,)))
+
+
 def open(*paths, progressive: bool = False, **options):
     """Read one or more files or directories (LAS/LAZ/PLY/XYZ/CSV/NPY/NPZ) into one PointCloud.
 
@@ -64,7 +69,10 @@ def open(*paths, progressive: bool = False, **options):
     ``progressive=True``: files open as a ProgressiveOctree, returned at once and filled by a
     background loader (``cloud.progress``, ``cloud.wait()``); it draws what is there at any
     moment (SimLOD). Loading stops with a one-line MemoryLimitError once the octree holds
-    ``memory_limit=`` bytes (by default half the machine's memory); what was loaded stays."""
+    ``memory_limit=`` bytes (by default half the machine's memory); what was loaded stays.
+
+    Paths may also come as one list or tuple: ``gp.open([a, b])`` is ``gp.open(a, b)``."""
+    paths = _flat_paths(paths)
     if progressive:
         from .errors import InputError
         from .lod.progressive import file_sources, open_progressive

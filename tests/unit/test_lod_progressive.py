@@ -795,6 +795,63 @@ def test_bad_input_is_a_one_line_error():
     assert o.add(np.empty((0, 3))) == 0
 
 
+def test_add_refuses_attributes_it_cannot_hold_and_changes_nothing():
+    """An attribute outside the first add's set, or values its dtype cannot hold, is a one-line
+    InputError, and the octree is as it was (they were dropped or wrapped silently before)."""
+    o = ProgressiveOctree("attrs")
+    xyz = np.array([[0.0, 0, 0], [1, 2, 3], [np.nan, 0, 0]])
+    assert o.add(xyz, intensity=np.array([1, 2, 3], np.uint16), height=np.array([0.5, 1.5, 2.5], np.float32)) == 2
+    assert o.attribute_names == ("intensity", "height") and o.skipped == 1
+    for bad, match in (
+        ({"foo": np.arange(3)}, "'foo' is not one of this cloud's \\(intensity, height\\)"),
+        ({"intensity": np.array([1.5, 2, 3])}, "'intensity' holds uint16 values"),
+        ({"intensity": np.array([-1, 2, 3])}, "'intensity' holds uint16 values"),
+        ({"intensity": np.array([70_000, 2, 3])}, "'intensity' holds uint16 values"),
+        ({"height": np.array([1e300, 0, 0])}, "'height' holds float32 values"),
+    ):
+        with pytest.raises(InputError, match=match):
+            o.add(xyz, **bad)
+        assert o.n_points == 2 and o.skipped == 1
+    # values the dtype holds exactly, whatever their type; a float rounded to float32; a missing one 0
+    assert o.add(xyz[:2], intensity=np.array([7.0, 65535.0]), height=np.array([0.1, 1e30])) == 2
+    assert o.add(xyz[:1]) == 1
+    got = _leaf_points(o)
+    assert sorted(got["intensity"].tolist()) == [0, 1, 2, 7, 65535]
+    assert sorted(got["height"].tolist()) == sorted(np.float32([0.0, 0.5, 1.5, 0.1, 1e30]).tolist())
+
+
+def test_several_files_keep_the_attributes_they_all_have_in_any_order(tmp_path):
+    """As ``gigapoint.open`` of several files: a file without an attribute drops it for all
+    points (it was kept and filled with zeros when that file came second, and an attribute only
+    a later file had was dropped: the set depended on the order); a list of paths is accepted."""
+    import laspy
+
+    def write(path, fmt, seed):
+        header = laspy.LasHeader(point_format=fmt, version="1.2")
+        header.scales, header.offsets = [0.01] * 3, [0, 0, 0]
+        las = laspy.LasData(header)
+        rng = np.random.default_rng(seed)
+        las.x, las.y, las.z = rng.uniform(0, 100, 3000), rng.uniform(0, 100, 3000), rng.uniform(0, 10, 3000)
+        las.intensity = rng.integers(1, 1000, 3000)
+        if fmt == 1:
+            las.gps_time = rng.uniform(1, 1e5, 3000)
+        las.write(str(path))
+        return path
+
+    plain_only = write(tmp_path / "a.las", 0, 1)  # no GPS time
+    with_time = write(tmp_path / "b.las", 1, 2)
+    want = gp.open(plain_only, with_time)
+    assert "gps_time" not in want.attributes and "intensity" in want.attributes
+    for paths in ([plain_only, with_time], [with_time, plain_only]):
+        cloud = gp.open(paths, progressive=True)  # one list, as gp.open(a, b)
+        assert cloud.wait(timeout=120) and cloud.n_points == 6000
+        assert sorted(cloud.attributes) == sorted(want.attributes)
+        got = _leaf_points(cloud)
+        assert sorted(got["intensity"].tolist()) == sorted(np.asarray(want.attributes["intensity"]).tolist())
+        cloud.close()
+    assert gp.open([plain_only, [with_time]]).n_points == 6000
+
+
 def test_an_empty_octree_draws_nothing_and_a_single_point_draws():
     o = ProgressiveOctree("one")
     cam = gp.Camera.look_at((0, -10, 5), (0, 0, 0), width=32, height=24)

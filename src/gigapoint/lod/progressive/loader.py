@@ -110,12 +110,15 @@ class Loader:
         try:
             for name, chunk in prefetch(self._chunks(), name="gigapoint-decode"):
                 s = 0
+                # the attributes every source has so far: a file without one drops it, one with more brings none
+                self.octree.keep_attributes(chunk.attributes)
                 while s < len(chunk):
                     if self._stop.is_set():
                         return
                     turn, drawing = self.octree.builder_turn(turn)
                     sl = slice(s, min(s + (SLICE_WHILE_DRAWING if drawing else SLICE_POINTS), len(chunk)))
-                    self.octree.add(chunk.xyz[sl], chunk.rgba[sl], **{a: v[sl] for a, v in chunk.attributes.items()})
+                    held = self.octree.attribute_names
+                    self.octree.add(chunk.xyz[sl], chunk.rgba[sl], **{a: v[sl] for a, v in chunk.attributes.items() if held is None or a in held})
                     self._first_in.set()
                     s = sl.stop
                     self.read += sl.stop - sl.start

@@ -100,6 +100,22 @@ def _byte_views(arrays) -> List:
     return views
 
 
+def _as_dtype(name: str, attribute: str, values: np.ndarray, dtype) -> np.ndarray:
+    """``values`` as ``dtype`` (the octree's for that attribute); values it cannot hold (a
+    fraction in an integer, a number out of its range, NaN) are an InputError, not wrapped."""
+    if values.dtype == dtype or np.can_cast(values.dtype, dtype, "safe"):
+        return values.astype(dtype, copy=False)
+    with np.errstate(invalid="ignore", over="ignore"):
+        cast = values.astype(dtype)
+        if np.issubdtype(dtype, np.floating):  # rounding to a narrower float is fine; overflowing to inf is not
+            fits = np.array_equal(np.isfinite(cast), np.isfinite(values)) if np.issubdtype(values.dtype, np.floating) else bool(np.isfinite(cast).all())
+        else:
+            fits = np.array_equal(cast, values)
+    if not fits:
+        raise InputError(f"{name}: attribute {attribute!r} holds {np.dtype(dtype)} values; {values.dtype} values given do not fit it")
+    return cast
+
+
 def _stored_attributes(pool) -> dict[str, np.ndarray]:
     """The arrays the pool's attributes are stored in, by name (a constant one has none)."""
     held = {a: stored_array(pool.attributes.held(a)) for a in pool.attributes}
@@ -847,6 +863,11 @@ class ProgressiveOctree:
         return self.pool.attributes if self.pool is not None else {}
 
     @property
+    def attribute_names(self) -> tuple[str, ...] | None:
+        """The attributes the points hold (fixed by the first ``add``; None before it)."""
+        return None if self._attribute_dtypes is None else tuple(self._attribute_dtypes)
+
+    @property
     def batches(self) -> np.ndarray:
         """One record per node (stats: ``batches_total`` counts nodes, as for a converted octree)."""
         return self.key[: self.n_nodes]
@@ -861,7 +882,8 @@ class ProgressiveOctree:
     def add(self, xyz, rgb=None, **attributes) -> int:
         """Insert points (float64 (N, 3); colors (N, 3|4) uint8/uint16/float; 1-D attributes of
         length N). Invalid points (NaN, inf, beyond ±1e12) are skipped and counted. Returns the
-        number inserted. Attributes are the first call's; later calls fill missing ones with 0."""
+        number inserted. Attributes are the first call's; later calls fill missing ones with 0,
+        and may not bring others or values their dtype cannot hold (InputError)."""
         xyz = np.ascontiguousarray(xyz, np.float64)
         if xyz.ndim != 2 or xyz.shape[1] != 3:
             raise InputError(f"{self.name}: xyz must have shape (N, 3), got {xyz.shape}")
@@ -882,6 +904,7 @@ class ProgressiveOctree:
         n_valid = int(np.count_nonzero(valid))
         table = self._presized_table()  # filled before the lock is taken: frames meanwhile draw
         with self.lock.writing():
+            attrs = self._attribute_set(attrs, n)  # before anything counts: a batch it refuses changes nothing
             self.skipped += n - n_valid
             if n_valid == 0:
                 return 0
@@ -949,14 +972,33 @@ class ProgressiveOctree:
         return self.lock.builder_turn(seen)
 
     def _attribute_set(self, attrs: dict, n: int) -> dict:
-        """The batch's attributes in the octree's set (fixed by the first batch): missing ones 0."""
+        """The batch's attributes in the octree's set (fixed by the first batch): missing ones 0;
+        one outside the set, or with values the set's dtype cannot hold, is an InputError."""
         if self._attribute_dtypes is None:
             self._attribute_dtypes = {a: v.dtype for a, v in attrs.items()}
-        return {a: (attrs[a].astype(dt, copy=False) if a in attrs else np.zeros(n, dt)) for a, dt in self._attribute_dtypes.items()}
+        unknown = sorted(set(attrs) - set(self._attribute_dtypes))
+        if unknown:
+            held = ", ".join(self._attribute_dtypes) or "none"
+            raise InputError(f"{self.name}: attribute {unknown[0]!r} is not one of this cloud's ({held}): the first add() fixes them")
+        return {a: (_as_dtype(self.name, a, attrs[a], dt) if a in attrs else np.zeros(n, dt)) for a, dt in self._attribute_dtypes.items()}
+
+    def keep_attributes(self, names) -> None:
+        """Hold only the attributes among ``names``; points already in lose the others (a loader
+        of several files keeps those every file has, as ``gigapoint.open`` of them does)."""
+        if not any(a not in names for a in self._attribute_dtypes or {}):
+            return
+        with self.lock.writing():
+            gone = [a for a in self._attribute_dtypes if a not in names]
+            for a in gone:
+                del self._attribute_dtypes[a]
+                if self.pool is not None and a in self.pool.attributes:
+                    del self.pool.attributes[a]
+            if gone and self.pool is not None:
+                self.pool.version += 1  # a packing worked out meanwhile held them: it is dropped (_pack)
 
     def _insert(self, xyz, rgba, attrs, lo, hi, table: tuple | None = None) -> None:
+        """Valid points with their attributes in the octree's set (``_attribute_set``) in."""
         n = len(xyz)
-        attrs = self._attribute_set(attrs, n)
         self._unpack()
         if self.pool is None:
             expected = int(self.capacity * _ROOM_PER_POINT) // self.chunk
