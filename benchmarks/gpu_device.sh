@@ -25,7 +25,7 @@ egl=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
 [ -f "$egl" ] && export __EGL_VENDOR_LIBRARY_FILENAMES=$egl
 export PYTHONPATH=/tmp/site:$PWD/src PYTHONUNBUFFERED=1 NUMBA_CACHE_DIR=/tmp/nbc
 # STEPS: the steps to run (all by default), e.g. STEPS="adapter early" bash benchmarks/gpu_device.sh
-STEPS=${STEPS:-adapter brute early exact tests frames}
+STEPS=${STEPS:-adapter brute early exact tests uploads frames}
 step() {
     local name=$1 limit=$2; shift 2
     case " $STEPS " in *" $name "*) ;; *) return 0 ;; esac
@@ -50,6 +50,8 @@ step exact ${EXACT_S:-90} $PY benchmarks/gpu_exactness.py --timing 10M
 # the NVIDIA driver's fusing showed only here, exact.wgsl)
 step tests ${TESTS_S:-140} $PY -m pytest -q -rf -p no:cacheprovider --timeout 120 tests/unit/test_wgpu_backend.py tests/unit/test_wgpu_lod.py \
     tests/unit/test_wgpu_passes.py tests/unit/test_wgpu_stereo.py tests/unit/test_transparency_wgpu.py tests/unit/test_live_wgpu.py
+# frames while the progressive octree loads: changed chunks sent merged across small gaps, and one write a run
+step uploads ${UPLOADS_S:-240} $PY benchmarks/bench_gpu_uploads.py --points ${UPLOADS_POINTS:-10M} --rounds 2
 # the progressive octree drawn by the GPU while it loads, 1920x1080, 10 M budget (issue #18)
 step frames ${FRAMES_S:-90} $PY benchmarks/bench_progressive.py --points ${FRAMES_POINTS:-10M} --parts frames --backend wgpu
 echo "=== $(date -u +%T) done"

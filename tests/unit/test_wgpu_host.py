@@ -134,3 +134,7 @@ def test_stale_ranges_are_the_rewritten_batches_merged_and_never_empty():
     assert stale_ranges(cloud, 2, 150, 450) == [(150, 200), (300, 350), (400, 450)]
     assert stale_ranges(cloud, 5, 0, 500) == []
     assert stale_ranges(SimpleNamespace(batches=b, batch_version=None), 0, 10, 20) == [(10, 20)]
+    # ranges at most ``gap`` rows apart go as one (fewer writes; the rows between are current)
+    assert stale_ranges(cloud, 2, 0, 500, gap=99) == [(100, 200), (300, 500)]
+    assert stale_ranges(cloud, 2, 0, 500, gap=100) == [(100, 500)]
+    assert stale_ranges(cloud, 2, 150, 450, gap=100) == [(150, 450)]

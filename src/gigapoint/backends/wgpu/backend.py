@@ -218,6 +218,7 @@ class WgpuBackend:
             "uploads": cache.uploads,
             "evictions": cache.evictions,
             "refreshes": cache.refreshes,
+            "refresh_writes": cache.refresh_writes,
             "budget": cache.budget,
             "page_points": self.ctx.page_points,
         }
