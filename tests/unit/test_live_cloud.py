@@ -235,6 +235,19 @@ def test_snapshot_holds_the_pushed_points_transformed_by_their_poses_and_draws_w
     assert f2.stats.points_processed >= 3000 + 8000
 
 
+def test_snapshots_with_and_without_normals_keep_the_first_snapshots_attributes():
+    """The snapshot octree's attributes are its first snapshot's: normals=False, then True adds
+    the points without their normals (the octree refuses attributes outside its set)."""
+    live = LiveCloud(keep=1)
+    live.push(*frame(0, n=2000))
+    assert live.snapshot(normals=False) == 2000
+    first = set(live.snapshots.attribute_names)
+    assert "normal" not in first
+    live.push(*frame(1, n=3000))
+    assert live.snapshot(normals=True) == 3000
+    assert live.snapshots.n_points == 5000 and set(live.snapshots.attribute_names) == first
+
+
 @pytest.mark.parametrize("suffix", [".las", ".laz", ".ply"])
 def test_save_writes_the_snapshots(tmp_path, suffix):
     live = LiveCloud()

@@ -596,8 +596,8 @@ class LiveCloud:
             with self.snapshots.holding_work():  # one set of work arrays for all the batches
                 for s in range(0, n, SNAPSHOT_BATCH):
                     xyz, rgba, attrs = buf.gather(runs, skip, s, min(s + SNAPSHOT_BATCH, n), out)
-                    held = self.snapshots.attribute_names  # the first snapshot's (normals=False then True: none)
-                    added += self.snapshots.add(xyz, rgba, **{a: v for a, v in attrs.items() if held is None or a in held})
+                    # the first snapshot's attributes (normals=False, then True: no normals)
+                    added += self.snapshots.add(xyz, rgba, **self.snapshots.held_of(attrs))
         finally:
             with self.lock.writing():
                 self._unpin(slots)

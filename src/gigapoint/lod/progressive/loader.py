@@ -117,8 +117,8 @@ class Loader:
                         return
                     turn, drawing = self.octree.builder_turn(turn)
                     sl = slice(s, min(s + (SLICE_WHILE_DRAWING if drawing else SLICE_POINTS), len(chunk)))
-                    held = self.octree.attribute_names
-                    self.octree.add(chunk.xyz[sl], chunk.rgba[sl], **{a: v[sl] for a, v in chunk.attributes.items() if held is None or a in held})
+                    attrs = self.octree.held_of(chunk.attributes)
+                    self.octree.add(chunk.xyz[sl], chunk.rgba[sl], **{a: v[sl] for a, v in attrs.items()})
                     self._first_in.set()
                     s = sl.stop
                     self.read += sl.stop - sl.start

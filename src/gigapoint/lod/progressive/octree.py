@@ -867,6 +867,12 @@ class ProgressiveOctree:
         """The attributes the points hold (fixed by the first ``add``; None before it)."""
         return None if self._attribute_dtypes is None else tuple(self._attribute_dtypes)
 
+    def held_of(self, attributes: dict) -> dict:
+        """Those of a batch's ``attributes`` the octree holds (all of them before the first
+        ``add``): what a source whose batches may bring others passes to ``add``."""
+        held = self._attribute_dtypes
+        return dict(attributes) if held is None else {a: v for a, v in attributes.items() if a in held}
+
     @property
     def batches(self) -> np.ndarray:
         """One record per node (stats: ``batches_total`` counts nodes, as for a converted octree)."""
