@@ -999,12 +999,17 @@ def test_the_viewer_redraws_while_it_loads_and_says_how_far():
 )
 def test_wgpu_draws_the_growing_octree_uploading_only_what_changed(scene, page_chunks):
     """The pool is in the compact layout: its point chunks' streams are uploaded as they change
-    too, also where the pool spans several GPU pages (``page_chunks`` chunks a page)."""
+    too, also where the pool spans several GPU pages (``page_chunks`` chunks a page). With the
+    changed chunks' runs each sent on its own (merge gap 0) only they are sent; with the
+    default gap, runs close together go as one write: fewer writes, the bytes between them
+    added, the same image."""
     from wgpu_support import wgpu_or_skip
 
     from gigapoint.backends.numba_cpu import NumbaCpuBackend
 
-    gpu = wgpu_or_skip() if page_chunks is None else wgpu_or_skip(page_bytes=2 * page_chunks * CHUNK * 4, memory_budget=1 << 30)
+    options = {} if page_chunks is None else {"page_bytes": 2 * page_chunks * CHUNK * 4, "memory_budget": 1 << 30}
+    gpu, merged = wgpu_or_skip(**options), wgpu_or_skip(**options)
+    gpu.ctx.cache.merge_gap_bytes = 0
     cpu = NumbaCpuBackend()
     xyz, rgba, _ = scene
     strips = np.argsort(xyz[:, 0], kind="stable")  # arriving strip by strip, as a scan does: a batch changes its part of the tree
@@ -1019,14 +1024,20 @@ def test_wgpu_draws_the_growing_octree_uploading_only_what_changed(scene, page_c
         with o.reading():
             draw = o.prepare(view, s)
             args = (draw.points, draw.selection, 200, 150, view.near, view.far)
-            before = gpu.memory["uploaded"]
+            before, merged_before = gpu.memory, merged.memory
             got = np.asarray(gpu.rasterize(*args))
-            sent = gpu.memory["uploaded"] - before
+            sent = gpu.memory["uploaded"] - before["uploaded"]
+            np.testing.assert_array_equal(np.asarray(merged.rasterize(*args)), got)
             want = cpu.rasterize(*args)
         assert np.count_nonzero(got != want) <= 0.001 * want.size
         if k:  # a batch rewrites part of the pool: the rest stays on the GPU
             assert draw.points is pool
             assert 0 < sent < 0.8 * 4 * 4 * int(draw.points.batches["count"].astype(np.int64).sum())
+            writes = gpu.memory["refresh_writes"] - before["refresh_writes"]
+            merged_writes = merged.memory["refresh_writes"] - merged_before["refresh_writes"]
+            assert 0 < merged_writes < writes
+            merged_sent = merged.memory["uploaded"] - merged_before["uploaded"]
+            assert sent <= merged_sent <= sent + writes * merged.ctx.cache.merge_gap_bytes  # at most a gap a merge
         pool = draw.points
 
 

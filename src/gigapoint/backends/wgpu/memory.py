@@ -30,9 +30,9 @@ from ...errors import GigapointError
 
 #: Changed batches this close are sent in one write with the unchanged bytes between them: a
 #: ``write_buffer`` call costs 10-40 us (lavapipe, measured: 41 us for 4 KiB, 22 us for 40 KiB),
-#: about what sending 64 KiB more costs, and a filling progressive octree changes a few thousand
-#: 2048-entry chunks between two frames, scattered over its pool.
-MERGE_GAP_BYTES = 64 << 10
+#: about what sending 32 KiB more costs at 2 GB/s, and a filling progressive octree changes a
+#: few thousand 2048-entry chunks between two frames, scattered over its pool.
+MERGE_GAP_BYTES = 32 << 10
 
 
 @dataclass
@@ -119,6 +119,7 @@ class BufferCache:
         self.evictions = 0
         self.refreshes = 0  # pages of tracked arrays rewritten in place after their cloud changed
         self.refresh_writes = 0  # the write_buffer calls those rewrites took
+        self.merge_gap_bytes = MERGE_GAP_BYTES  # changed batches this close go in one write (0: each run on its own)
         # id(array) -> (weak array, weak cloud): arrays their cloud rewrites in place (see track)
         self._sources: dict[int, tuple[weakref.ref, weakref.ref]] = {}
 
@@ -211,7 +212,7 @@ class BufferCache:
         Queued writes run after the work already submitted and before the work submitted
         next, so earlier dispatches still see the old contents and later ones the new."""
         row_bytes = array.itemsize * int(np.prod(array.shape[1:], dtype=np.int64))
-        for s, e in stale_ranges(owner, entry.version, start, stop, array, gap=MERGE_GAP_BYTES // row_bytes):
+        for s, e in stale_ranges(owner, entry.version, start, stop, array, gap=self.merge_gap_bytes // row_bytes):
             # whole 4-byte words (a copy's rule): 16-bit colours of an odd count widen by one
             b0, b1 = (s - start) * row_bytes // 4 * 4, -(-(e - start) * row_bytes // 4) * 4
             data = np.ascontiguousarray(array[start + b0 // row_bytes : start + -(-b1 // row_bytes)]).view(np.uint8).reshape(-1)
