@@ -16,11 +16,11 @@ from pathlib import Path
 
 from rich.console import Console
 
-from gigapoint.bench import parse_count, parse_threads, print_results, run_render_benchmark, write_results
-from gigapoint.errors import GigapointError
+from gigapoint.bench import one_line_errors, parse_count, parse_threads, print_results, run_render_benchmark, write_results
 
 
-def main(argv=None) -> int:
+@one_line_errors
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", nargs="+", default=["20M", "100M"], help="point counts (e.g. 20M 100M)")
     ap.add_argument("--width", type=int, default=1920)
@@ -33,27 +33,22 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path, help="where to write the JSON results")
     args = ap.parse_args(argv)
     err = Console(stderr=True)
-    try:
-        points = [parse_count(p) for p in args.points]
-        threads = [parse_threads(t) for t in args.threads]
-        json_path = args.json or (args.out / "bench_render.json" if args.out else Path("bench_render.json"))
-        results = run_render_benchmark(
-            points=points,
-            width=args.width,
-            height=args.height,
-            threads=threads,
-            repeats=args.repeats,
-            gl=not args.no_gl,
-            naive=not args.no_naive,
-            out=args.out,
-            progress=lambda m: err.print(f"[dim]{m}[/dim]"),
-        )
-        print_results(results)
-        err.print(f"results written to {write_results(results, json_path)}")
-    except GigapointError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    return 0
+    points = [parse_count(p) for p in args.points]
+    threads = [parse_threads(t) for t in args.threads]
+    json_path = args.json or (args.out / "bench_render.json" if args.out else Path("bench_render.json"))
+    results = run_render_benchmark(
+        points=points,
+        width=args.width,
+        height=args.height,
+        threads=threads,
+        repeats=args.repeats,
+        gl=not args.no_gl,
+        naive=not args.no_naive,
+        out=args.out,
+        progress=lambda m: err.print(f"[dim]{m}[/dim]"),
+    )
+    print_results(results)
+    err.print(f"results written to {write_results(results, json_path)}")
 
 
 if __name__ == "__main__":

@@ -31,7 +31,7 @@ from rich.console import Console
 from rich.table import Table
 
 import gigapoint
-from gigapoint.bench import benchmark_cameras, cpu_model, parse_count
+from gigapoint.bench import benchmark_cameras, cpu_model, one_line_errors, parse_count
 from gigapoint.core.selection import Selection, select
 from gigapoint.errors import GigapointError
 
@@ -134,7 +134,8 @@ def bench_scene(n: int, args, backends, out, err) -> None:
             backend.forget(cloud)  # the next scene's points replace these on the GPU
 
 
-def main(argv=None) -> int:
+@one_line_errors
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", nargs="+", default=["4M"], help="demo scene sizes (e.g. 4M, 100M 500M 1G)")
     ap.add_argument("--width", type=int, default=1920)
@@ -147,23 +148,18 @@ def main(argv=None) -> int:
     ap.add_argument("--no-cpu", action="store_true", help="skip the CPU backend (and the comparison of images)")
     args = ap.parse_args(argv)
     out, err = Console(width=150), Console(stderr=True, width=150)
-    try:
-        from gigapoint.backends.numba_cpu import NumbaCpuBackend
-        from gigapoint.backends.wgpu import WgpuBackend
+    from gigapoint.backends.numba_cpu import NumbaCpuBackend
+    from gigapoint.backends.wgpu import WgpuBackend
 
-        sizes = [parse_count(p) for p in args.points]
-        budget = _gpu_memory(args.gpu_memory)
-        backends = [] if args.no_cpu else [("cpu", NumbaCpuBackend(), "")]
-        backends.append(("wgpu", WgpuBackend(memory_budget=budget), ""))
-        if args.fallback:
-            backends.append(("wgpu", WgpuBackend(atomics64=False, memory_budget=budget), "two-pass 32-bit"))
-        out.print(f"{cpu_model()}, {numba.get_num_threads()} threads; " + "; ".join(b.describe() for name, b, _ in backends if name == "wgpu"))
-        for n in sizes:
-            bench_scene(n, args, backends, out, err)
-    except GigapointError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    return 0
+    sizes = [parse_count(p) for p in args.points]
+    budget = _gpu_memory(args.gpu_memory)
+    backends = [] if args.no_cpu else [("cpu", NumbaCpuBackend(), "")]
+    backends.append(("wgpu", WgpuBackend(memory_budget=budget), ""))
+    if args.fallback:
+        backends.append(("wgpu", WgpuBackend(atomics64=False, memory_budget=budget), "two-pass 32-bit"))
+    out.print(f"{cpu_model()}, {numba.get_num_threads()} threads; " + "; ".join(b.describe() for name, b, _ in backends if name == "wgpu"))
+    for n in sizes:
+        bench_scene(n, args, backends, out, err)
 
 
 if __name__ == "__main__":

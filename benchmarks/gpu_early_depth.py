@@ -39,7 +39,7 @@ from rich.console import Console
 from rich.table import Table
 
 import gigapoint
-from gigapoint.bench import benchmark_cameras, cpu_model, parse_count
+from gigapoint.bench import benchmark_cameras, cpu_model, one_line_errors, parse_count
 from gigapoint.core.selection import select
 from gigapoint.errors import GigapointError
 
@@ -218,7 +218,8 @@ def _timed(fn) -> float:
     return time.perf_counter() - t0
 
 
-def main(argv=None) -> int:
+@one_line_errors
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", nargs="+", default=["2M"], help="demo scene sizes (e.g. 100M 500M)")
     ap.add_argument("--width", type=int, default=1920)
@@ -230,28 +231,23 @@ def main(argv=None) -> int:
     ap.add_argument("--gpu-memory", default="2G", help="GPU memory for point data: e.g. 100G on a big GPU")
     args = ap.parse_args(argv)
     out, err = Console(width=150), Console(stderr=True, width=150)
-    try:
-        from gigapoint.backends.wgpu import WgpuBackend
-        from gigapoint.lod import parse_memory
+    from gigapoint.backends.wgpu import WgpuBackend
+    from gigapoint.lod import parse_memory
 
-        budget = parse_memory(args.gpu_memory)
-        backend = variant_backend(budget)
-        fallback = WgpuBackend(atomics64=False, memory_budget=budget) if args.fallback else None
-        out.print(f"{cpu_model()}; {backend.describe()}")
-        for n in (parse_count(p) for p in args.points):
-            t0 = time.perf_counter()
-            cloud = gigapoint.demo(n)
-            err.print(f"[dim]demo scene of {n:,} points built in {time.perf_counter() - t0:.1f} s[/dim]")
-            cams = benchmark_cameras(cloud.bounds, args.width, args.height)
-            for view in args.views:
-                bench_view(cloud, view, cams[view], args, backend, fallback, out)
-            backend.forget(cloud)
-            if fallback is not None:
-                fallback.forget(cloud)
-    except GigapointError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    return 0
+    budget = parse_memory(args.gpu_memory)
+    backend = variant_backend(budget)
+    fallback = WgpuBackend(atomics64=False, memory_budget=budget) if args.fallback else None
+    out.print(f"{cpu_model()}; {backend.describe()}")
+    for n in (parse_count(p) for p in args.points):
+        t0 = time.perf_counter()
+        cloud = gigapoint.demo(n)
+        err.print(f"[dim]demo scene of {n:,} points built in {time.perf_counter() - t0:.1f} s[/dim]")
+        cams = benchmark_cameras(cloud.bounds, args.width, args.height)
+        for view in args.views:
+            bench_view(cloud, view, cams[view], args, backend, fallback, out)
+        backend.forget(cloud)
+        if fallback is not None:
+            fallback.forget(cloud)
 
 
 if __name__ == "__main__":

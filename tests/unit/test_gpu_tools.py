@@ -38,3 +38,26 @@ def test_bench_wgpu_draws_each_view_with_both_atomics_paths_as_the_cpu_does():
     out = _run("bench_wgpu.py", "--points", "60k", "--views", "overview", "closeup", "--repeats", "1", "--fallback", "--gpu-memory", "1G")
     assert "overview: rasterize 60,000 of 60,000 points" in out and "closeup: rasterize" in out, out
     assert out.count("identical") == 4, out  # the 64-bit and the two-pass path, two views, each equal to the CPU's image
+
+
+def test_gpu_early_depth_draws_every_variant_as_the_shipped_pass_does():
+    """Each early-depth test, loop and batch order (and the 32-bit path) on lavapipe: the images
+    equal the shipped pass's, in both views."""
+    out = _run("gpu_early_depth.py", "--points", "60k", "--width", "320", "--height", "240", "--repeats", "1", "--fallback", "--front-to-back")
+    assert "overview: 60,000 of 60,000 points" in out and "closeup:" in out, out
+    assert out.count("identical") == 2 * (4 * 2 * 2 + 2), out  # per view: 4 tests x 2 loops x 2 orders, the 32-bit path's 2
+    assert "px differ" not in out, out
+
+
+def test_bench_gpu_uploads_sends_fewer_writes_with_changed_chunks_merged():
+    out = _run("bench_gpu_uploads.py", "--points", "600k", "--width", "320", "--height", "240", "--rounds", "1")
+    merged, single = (line for line in out.splitlines() if "changed chunks merged across gaps up to" in line)
+    assert "up to 32 KiB" in merged and "up to 0 KiB" in single, out
+    writes = [float(line.split(" writes ")[0].rsplit(" ", 1)[1]) for line in (merged, single)]
+    assert writes[0] < writes[1], out
+
+
+def test_a_bad_argument_is_one_line_and_status_1():
+    wgpu_or_skip()
+    out = subprocess.run([sys.executable, str(BENCHMARKS / "bench_gpu_uploads.py"), "--points", "lots"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 1 and out.stderr.startswith("error: ") and out.stderr.count("\n") == 1, out.stderr

@@ -11,6 +11,7 @@ from .naive import naive_frame, naive_matrix, naive_raster
 from .report import (
     cpu_model,
     machine_pages,
+    one_line_errors,
     pages_since,
     parse_count,
     parse_threads,
@@ -37,6 +38,7 @@ __all__ = [
     "naive_frame",
     "naive_matrix",
     "naive_raster",
+    "one_line_errors",
     "pages_since",
     "parse_count",
     "parse_threads",

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import platform
 import subprocess
+import sys
 from pathlib import Path
 
 from ..atomic import atomic_bytes
@@ -42,6 +44,21 @@ def run_measured(cmd: list) -> tuple[int, bytes, bytes, float, int]:
         wall = time.perf_counter() - t
         peak = int(report.read_text()) * 1024 if report.is_file() else 0
     return proc.returncode, proc.stdout, proc.stderr, wall, peak
+
+
+def one_line_errors(main):
+    """A benchmark script's ``main(argv)``: its exit status, 0, or 1 with a GigapointError
+    (bad arguments, a missing tool or device) said in one line on stderr, not a traceback."""
+
+    @functools.wraps(main)
+    def run(argv=None) -> int:
+        try:
+            return main(argv) or 0
+        except GigapointError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+
+    return run
 
 
 def cpu_model() -> str:
