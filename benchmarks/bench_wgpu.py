@@ -33,7 +33,7 @@ from rich.table import Table
 import gigapoint
 from gigapoint.bench import benchmark_cameras, cpu_model, one_line_errors, parse_count
 from gigapoint.core.selection import Selection, select
-from gigapoint.errors import GigapointError
+from gigapoint.lod import parse_memory
 
 
 def _time(fn, repeats: int) -> float:
@@ -43,16 +43,6 @@ def _time(fn, repeats: int) -> float:
         fn()
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
-
-
-def _gpu_memory(text: str) -> int:
-    """--gpu-memory as bytes ('64G', '2G', '512M': gigapoint.lod.parse_memory's units)."""
-    from gigapoint.lod import parse_memory
-
-    try:
-        return parse_memory(text)
-    except GigapointError as exc:
-        raise GigapointError(str(exc).replace("--memory-limit", "--gpu-memory")) from None
 
 
 def bench_view(cloud, view: str, cam, args, backends, out, err) -> None:
@@ -152,7 +142,7 @@ def main(argv=None) -> None:
     from gigapoint.backends.wgpu import WgpuBackend
 
     sizes = [parse_count(p) for p in args.points]
-    budget = _gpu_memory(args.gpu_memory)
+    budget = parse_memory(args.gpu_memory, "--gpu-memory")
     backends = [] if args.no_cpu else [("cpu", NumbaCpuBackend(), "")]
     backends.append(("wgpu", WgpuBackend(memory_budget=budget), ""))
     if args.fallback:

@@ -234,7 +234,7 @@ def main(argv=None) -> None:
     from gigapoint.backends.wgpu import WgpuBackend
     from gigapoint.lod import parse_memory
 
-    budget = parse_memory(args.gpu_memory)
+    budget = parse_memory(args.gpu_memory, "--gpu-memory")
     backend = variant_backend(budget)
     fallback = WgpuBackend(atomics64=False, memory_budget=budget) if args.fallback else None
     out.print(f"{cpu_model()}; {backend.describe()}")

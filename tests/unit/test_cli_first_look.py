@@ -229,6 +229,19 @@ def test_convert_says_overwrite_true_to_python_and_overwrite_to_the_command_line
     assert rc == 1 and "already exists; pass --overwrite to replace it" in stderr
 
 
+def test_convert_says_how_to_watch_it_only_once_it_runs(tmp_path, capsys, las_writer):
+    """The hint to watch the output comes once the inputs and OUT are checked: a refused run
+    (OUT holds a conversion, an empty input, a bad option) prints only its one-line error."""
+    src = las_writer(tmp_path / "in.las", 3_000)
+    (tmp_path / "empty.las").write_bytes(b"")
+    out = tmp_path / "oct"
+    rc, _, stderr = run(capsys, "convert", src, "-o", out)
+    assert rc == 0 and f"`gigapoint view {out}` shows what has been read so far" in stderr
+    for args in ((src, "-o", out), (tmp_path / "empty.las", "-o", tmp_path / "b"), (src, "-o", tmp_path / "c", "--memory-limit", "lots")):
+        rc, _, stderr = run(capsys, "convert", *args)
+        assert rc == 1 and stderr.startswith("error: ") and stderr.count("\n") == 1, stderr
+
+
 # --- the Potree writer and info --------------------------------------------------------------------------
 def test_potree_info_lists_its_attributes_and_keeps_the_crs(tmp_path, capsys, autzen_path):
     from gigapoint.lod import octree_info

@@ -49,9 +49,8 @@ def convert(
 
     if dask is not None and workers is not None:
         raise ConvertError("--dask and --workers: give one of them (a running cluster's scheduler, or a local cluster's size)")
-    if not quiet:
-        watch = work_dir(output) if format == "copc" else output  # a COPC output appears only once complete
-        print(f"while this runs, `gigapoint view {watch}` shows what has been read so far", file=sys.stderr)
+    watch = work_dir(output) if format == "copc" else output  # a COPC output appears only once complete
+    hint = None if quiet else lambda: print(f"while this runs, `gigapoint view {watch}` shows what has been read so far", file=sys.stderr)
     cluster = nullcontext(None)
     if dask is not None or workers is not None:
         from ..lod.convert.distributed import open_client
@@ -70,6 +69,7 @@ def convert(
             colors=colors,
             progress=not quiet and sys.stderr.isatty(),
             client=client,
+            on_ready=hint,  # once the inputs and OUT are checked: a refused run says only why
         )
     resumed = (" (resumed)" if result.resumed else "") + (", in memory" if result.in_memory else "")
     skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""

@@ -48,6 +48,8 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
     """One conversion (state.Job) with every phase: read (read.py), count and distribute
     (partition.py), build, group, upper and write (phases.py)."""
 
+    on_ready = None  # convert()'s on_ready: called once the output is prepared (inputs and output checked)
+
     def output_ready(self) -> None:
         """The output folder is prepared and the state saved; the phases come next (distributed.py checks its workers here)."""
 
@@ -68,6 +70,8 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
         self.state = self.resume_state(saved) if resumed else {"fingerprint": fp, "phase": "read"}
         self.save_state()
         self.output_ready()
+        if self.on_ready is not None:
+            self.on_ready()
         steps = {
             "read": self.read,
             "count": self.count,
@@ -127,6 +131,7 @@ def convert(
     source_files=None,
     layout: str = "compact",
     colors: str = "rgba",
+    on_ready=None,
 ) -> ConvertResult:
     """Convert point cloud files (or an iterable of PointChunks) into an LOD octree directory ``out``.
 
@@ -152,6 +157,9 @@ def convert(
     streams (../compact_octree.py, about half the bytes; positions exact at the source's scale),
     "words" version 1 (three u32 words and 32-bit colours a point). ``colors`` (version 2):
     "rgba" keeps colours exact, "rgb565" stores 16 bits (at most 4/255 off a channel).
+
+    ``on_ready``: called with no argument once the inputs and the output are checked and the
+    output prepared, before the points are read (the CLI says then how to watch it fill).
     """
     if sampler not in SAMPLERS:
         raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
@@ -197,6 +205,7 @@ def convert(
         layout,
         colors,
     )
+    conv.on_ready = on_ready
     if client is not None:
         with open_client(client, announce=progress) as conv.client:
             return conv.run(overwrite)

@@ -18,8 +18,9 @@ FORMATS = ("gigapoint", "potree", "copc")
 ENCODINGS = ("DEFAULT", "BROTLI")  # Potree's
 
 
-def parse_memory(value) -> int:
-    """'4G', '512M', '2GiB', '1.5g' or a byte count -> bytes; None -> a quarter of the RAM."""
+def parse_memory(value, option: str = "--memory-limit") -> int:
+    """'4G', '512M', '2GiB', '1.5g' or a byte count -> bytes; None -> a quarter of the RAM.
+    ``option``: the setting errors name."""
     if value is None:
         try:
             total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
@@ -34,9 +35,9 @@ def parse_memory(value) -> int:
         try:
             n = int(float(s[:-1] if s[-1:] in "kmgt" else s) * mult)
         except ValueError:
-            raise ConvertError(f"--memory-limit: cannot read {value!r} (use e.g. 4G, 512M)") from None
+            raise ConvertError(f"{option}: cannot read {value!r} (use e.g. 4G, 512M)") from None
     if n < 64 << 20:
-        raise ConvertError(f"--memory-limit: {value!r} is below the 64M a conversion needs")
+        raise ConvertError(f"{option}: {value!r} is below the 64M minimum")
     return n
 
 
