@@ -855,7 +855,7 @@ def test_several_files_keep_the_attributes_they_all_have_in_any_order(tmp_path):
 def test_an_empty_octree_draws_nothing_and_a_single_point_draws():
     o = ProgressiveOctree("one")
     cam = gp.Camera.look_at((0, -10, 5), (0, 0, 0), width=32, height=24)
-    with pytest.warns(gp.GigapointWarning, match="no point"):
+    with pytest.warns(gp.GigapointWarning, match="no point is in view of the camera \\(it holds none"):
         assert gp.render_frame(o, cam, EXACT).stats.visible_pixels == 0
     o.add(np.array([[0.0, 0.0, 0.0]]), rgb=np.array([[255, 0, 0]], np.uint8))
     f = gp.render_frame(o, cam, EXACT)

@@ -62,7 +62,8 @@ def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) 
     stats = RenderStats.of(draw, counts, cloud.n_points, (time.perf_counter() - t0) * 1000.0, (t2 - t1) * 1000.0, backend.name)
     stats.visible_pixels = covered if covered is not None else int(np.count_nonzero(visibility != EMPTY_PIXEL))
     if stats.visible_pixels == 0:
-        warnings.warn(f"{cloud.name}: no point is in view of the camera; the image shows only the background", GigapointWarning, stacklevel=2)
+        why = " (it holds none: nothing loaded yet, or closed)" if cloud.n_points == 0 else ""
+        warnings.warn(f"{cloud.name}: no point is in view of the camera{why}; the image shows only the background", GigapointWarning, stacklevel=2)
     return Frame(visibility, image, stats, draw.points, draw.generation)
 
 
