@@ -69,17 +69,18 @@ def open(*paths, progressive: bool = False, **options):
     ``progressive=True``: files open as a ProgressiveOctree, returned at once and filled by a
     background loader (``cloud.progress``, ``cloud.wait()``); it draws what is there at any
     moment (SimLOD). Loading stops with a one-line MemoryLimitError once the octree holds
-    ``memory_limit=`` bytes (by default half the machine's memory); what was loaded stays.
+    ``memory_limit=`` bytes or '8G' (by default half the machine's memory); what was loaded stays.
 
     Paths may also come as one list or tuple: ``gp.open([a, b])`` is ``gp.open(a, b)``."""
     paths = _flat_paths(paths)
     if progressive:
         from .errors import InputError
-        from .lod.progressive import file_sources, open_progressive
+        from .lod.progressive import file_sources, memory_limit_bytes, open_progressive
 
         memory_limit = options.pop("memory_limit", None)
         if options:
             raise InputError(f"open(progressive=True) takes memory_limit= only, not {', '.join(sorted(options))}")
+        memory_limit = memory_limit_bytes(memory_limit)  # checked before any file is read
         return open_progressive(*file_sources(paths), memory_limit=memory_limit)
     if len(paths) == 1 and not options:
         from .lod import is_lod_source, open_octree

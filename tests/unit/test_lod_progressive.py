@@ -906,7 +906,10 @@ def test_loading_stops_at_its_memory_limit_and_keeps_what_it_holds():
     ``memory_limit`` bytes (one line saying where and why), and what it holds draws."""
     from gigapoint.errors import MemoryLimitError
 
-    cloud = gp.demo(50_000_000, progressive=True, memory_limit=40 << 20)
+    for bad, match in ((-5, "below the 16M minimum"), (1 << 20, "below the 16M minimum"), ("lots", "cannot read 'lots'")):
+        with pytest.raises(InputError, match=f"^memory_limit: .*{match}"):  # said before anything is read
+            gp.demo(50_000_000, progressive=True, memory_limit=bad)
+    cloud = gp.demo(50_000_000, progressive=True, memory_limit="40M")
     with pytest.raises(MemoryLimitError) as err:
         cloud.wait(timeout=120)
     msg = str(err.value)

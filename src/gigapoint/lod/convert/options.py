@@ -18,9 +18,9 @@ FORMATS = ("gigapoint", "potree", "copc")
 ENCODINGS = ("DEFAULT", "BROTLI")  # Potree's
 
 
-def parse_memory(value, option: str = "--memory-limit") -> int:
+def parse_memory(value, option: str = "--memory-limit", minimum: int = 64 << 20) -> int:
     """'4G', '512M', '2GiB', '1.5g' or a byte count -> bytes; None -> a quarter of the RAM.
-    ``option``: the setting errors name."""
+    ``option``: the setting errors name; ``minimum``: the fewest bytes it may be (a conversion's 64M)."""
     if value is None:
         try:
             total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
@@ -36,8 +36,8 @@ def parse_memory(value, option: str = "--memory-limit") -> int:
             n = int(float(s[:-1] if s[-1:] in "kmgt" else s) * mult)
         except ValueError:
             raise ConvertError(f"{option}: cannot read {value!r} (use e.g. 4G, 512M)") from None
-    if n < 64 << 20:
-        raise ConvertError(f"{option}: {value!r} is below the 64M minimum")
+    if n < minimum:
+        raise ConvertError(f"{option}: {value!r} is below the {minimum >> 20}M minimum")
     return n
 
 

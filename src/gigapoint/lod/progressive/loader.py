@@ -47,6 +47,21 @@ def default_memory_limit() -> int:
         return 8 << 30
 
 
+def memory_limit_bytes(value) -> int:
+    """``memory_limit=`` as bytes: None, half the machine's memory (``default_memory_limit``);
+    else bytes or a size as ``gigapoint convert --memory-limit`` reads it ('8G', '512M'), at
+    least 16M (an empty octree's arrays take a few); anything else a one-line InputError
+    before anything is read."""
+    if value is None:
+        return default_memory_limit()
+    from ..convert.options import parse_memory
+
+    try:
+        return parse_memory(value, "memory_limit", minimum=16 << 20)
+    except GigapointError as exc:
+        raise InputError(str(exc)) from None
+
+
 class Loader:
     """The thread that fills ``octree`` from ``sources``: (name, make_chunks) pairs."""
 
@@ -54,7 +69,7 @@ class Loader:
         self, octree, sources: list[tuple[str, Callable[[], Iterable[PointChunk]]]], total: int | None, memory_limit: int | None = None
     ):
         self.octree = octree
-        self.memory_limit = int(memory_limit) if memory_limit else default_memory_limit()
+        self.memory_limit = memory_limit_bytes(memory_limit)
         self.sources = sources
         self.total = total  # input points, when the sources tell it up front
         self.read = 0  # input points read so far (valid or not)
@@ -217,7 +232,7 @@ def open_progressive(sources, total, bounds, name, grid=None, max_leaf=None, mem
         lo, hi = (np.asarray(b, np.float64) for b in bounds)
         pad = 0.001 * max(float(np.max(hi - lo)), 1e-9)  # headers round their bounds
         cube = (lo - pad, float(np.max(hi - lo)) + 2 * pad)
-    memory_limit = int(memory_limit) if memory_limit else default_memory_limit()
+    memory_limit = memory_limit_bytes(memory_limit)
     capacity = min(total or 0, memory_limit // _PRESIZED_BYTES_PER_POINT)  # presized no larger than the limit allows
     octree = ProgressiveOctree(name, cube=cube, max_leaf=max_leaf or MAX_LEAF, capacity=capacity, grid=grid)
     octree.source_files = [Path(label) for label, _ in sources if Path(label).is_file()]  # save() takes their CRS
