@@ -795,29 +795,26 @@ def test_bad_input_is_a_one_line_error():
     assert o.add(np.empty((0, 3))) == 0
 
 
-def test_add_refuses_attributes_it_cannot_hold_and_changes_nothing():
-    """An attribute outside the first add's set, or values its dtype cannot hold, is a one-line
-    InputError, and the octree is as it was (they were dropped or wrapped silently before)."""
+def test_add_refuses_unknown_attributes_and_widens_a_dtype_a_batch_does_not_fit():
+    """An attribute outside the first add's set is a one-line InputError and changes nothing
+    (it was dropped silently); values an attribute's dtype cannot hold widen it to numpy's dtype
+    for both, every value kept (they were cast: 1.5 -> 1, 70 000 -> 4 464 in uint16)."""
     o = ProgressiveOctree("attrs")
     xyz = np.array([[0.0, 0, 0], [1, 2, 3], [np.nan, 0, 0]])
     assert o.add(xyz, intensity=np.array([1, 2, 3], np.uint16), height=np.array([0.5, 1.5, 2.5], np.float32)) == 2
     assert o.attribute_names == ("intensity", "height") and o.skipped == 1
-    for bad, match in (
-        ({"foo": np.arange(3)}, "'foo' is not one of this cloud's \\(intensity, height\\)"),
-        ({"intensity": np.array([1.5, 2, 3])}, "'intensity' holds uint16 values"),
-        ({"intensity": np.array([-1, 2, 3])}, "'intensity' holds uint16 values"),
-        ({"intensity": np.array([70_000, 2, 3])}, "'intensity' holds uint16 values"),
-        ({"height": np.array([1e300, 0, 0])}, "'height' holds float32 values"),
-    ):
-        with pytest.raises(InputError, match=match):
-            o.add(xyz, **bad)
-        assert o.n_points == 2 and o.skipped == 1
-    # values the dtype holds exactly, whatever their type; a float rounded to float32; a missing one 0
-    assert o.add(xyz[:2], intensity=np.array([7.0, 65535.0]), height=np.array([0.1, 1e30])) == 2
-    assert o.add(xyz[:1]) == 1
+    with pytest.raises(InputError, match="'foo' is not one of this cloud's \\(intensity, height\\)"):
+        o.add(xyz, foo=np.arange(3))
+    assert o.n_points == 2 and o.skipped == 1
+    assert o.add(xyz[:2], intensity=np.array([7, 65535], np.int32)) == 2  # int32 into uint16: widened to int32
+    assert o.add(xyz[:2], intensity=np.array([70_000, -1]), height=np.array([0.1, 1e300])) == 2  # int64; float64
+    assert o.add(xyz[:2], intensity=np.array([1.5, 2.0])) == 2  # a fraction: float64
+    assert o.add(xyz[:1]) == 1  # missing ones: 0
     got = _leaf_points(o)
-    assert sorted(got["intensity"].tolist()) == [0, 1, 2, 7, 65535]
-    assert sorted(got["height"].tolist()) == sorted(np.float32([0.0, 0.5, 1.5, 0.1, 1e30]).tolist())
+    assert np.asarray(got["intensity"]).dtype == np.float64 and np.asarray(got["height"]).dtype == np.float64
+    assert sorted(got["intensity"].tolist()) == sorted([1, 2, 7, 65535, 70_000, -1, 1.5, 2.0, 0])
+    want_height = np.concatenate([np.float32([0.5, 1.5]), np.float32([0, 0]), [0.1, 1e300], [0, 0, 0]])
+    assert sorted(got["height"].tolist()) == sorted(want_height.tolist())
 
 
 def test_several_files_keep_the_attributes_they_all_have_in_any_order(tmp_path):
@@ -850,6 +847,30 @@ def test_several_files_keep_the_attributes_they_all_have_in_any_order(tmp_path):
         assert sorted(got["intensity"].tolist()) == sorted(np.asarray(want.attributes["intensity"]).tolist())
         cloud.close()
     assert gp.open([plain_only, [with_time]]).n_points == 6000
+
+
+def test_files_whose_attribute_dtypes_differ_load_as_the_plain_cloud_holds_them(tmp_path, las_writer):
+    """A LAS file's uint16 intensity and a PLY file's float32 one: the plain cloud holds float32
+    (numpy's dtype for both), and so does the progressive octree, in either order, every value
+    kept (LAS first, the PLY's fractions were cast to uint16 before)."""
+    from plyfile import PlyData, PlyElement
+
+    las = las_writer(tmp_path / "a.las", 2_000, seed=1)
+    rng = np.random.default_rng(2)
+    v = np.zeros(1_500, dtype=[("x", "f8"), ("y", "f8"), ("z", "f8"), ("intensity", "f4")])
+    v["x"], v["y"], v["z"], v["intensity"] = rng.uniform(0, 100, 1_500), rng.uniform(0, 100, 1_500), rng.uniform(0, 10, 1_500), rng.uniform(0, 1, 1_500)
+    ply = tmp_path / "b.ply"
+    PlyData([PlyElement.describe(v, "vertex")]).write(str(ply))
+    plain = gp.open(las, ply)
+    want = np.asarray(plain.attributes["intensity"])
+    assert want.dtype == np.float32 and sorted(plain.attributes) == ["intensity"]
+    for paths in ((las, ply), (ply, las)):
+        cloud = gp.open(*paths, progressive=True)
+        assert cloud.wait(timeout=120) and cloud.n_points == 3_500
+        got = np.asarray(_leaf_points(cloud)["intensity"])
+        assert got.dtype == np.float32 and sorted(cloud.attributes) == ["intensity"]
+        np.testing.assert_array_equal(np.sort(got), np.sort(want))
+        cloud.close()
 
 
 def test_an_empty_octree_draws_nothing_and_a_single_point_draws():

@@ -264,21 +264,25 @@ def encode(held, values: np.ndarray, out: np.ndarray | None = None) -> np.ndarra
 
 def widened(held, values: np.ndarray, used: int) -> np.ndarray | Packed:
     """A holder as long as ``held`` that stores its first ``used`` entries (copied in, block by
-    block: no temporary of their size) and ``values`` (which ``held`` does not fit): the integer
-    range of both with room, else the dtype."""
+    block: no temporary of their size) and ``values`` (which ``held`` does not fit, or of another
+    dtype), in the dtype of both (numpy's ``result_type``: uint16 and float32 give float32, as
+    merging files does): the integer range of both with room, else that dtype."""
     n = length(held)
-    if held.dtype.kind in "iu":
+    dtype = np.result_type(held.dtype, values.dtype)
+    if dtype.kind in "iu":
         lo, hi = int(values.min()), int(values.max())
         if isinstance(held, Packed) and used:
             lo, hi = min(lo, held.offset), max(hi, held.offset)
             if held.stored is not None:
                 lo, hi = min(lo, held.offset + int(held.stored[:used].min())), max(hi, held.offset + int(held.stored[:used].max()))
-        new = _int_range(lo, hi, held.dtype, n)
+        elif used:  # held as its dtype (an integer or bool one narrower than dtype)
+            lo, hi = min(lo, int(held[:used].min())), max(hi, int(held[:used].max()))
+        new = _int_range(lo, hi, dtype, n)
     else:
-        new = zeros(n, held.dtype)
+        new = zeros(n, dtype)
     for start in range(0, used, _COPY_BLOCK):
         block = slice(start, min(start + _COPY_BLOCK, used))
-        old = held.decode(block) if isinstance(held, Packed) else held[block]
+        old = (held.decode(block) if isinstance(held, Packed) else held[block]).astype(dtype, copy=False)
         target = stored(new)[block]
         encoded = encode(new, old, target)
         if encoded is not target:

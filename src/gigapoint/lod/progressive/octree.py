@@ -100,22 +100,6 @@ def _byte_views(arrays) -> List:
     return views
 
 
-def _as_dtype(name: str, attribute: str, values: np.ndarray, dtype) -> np.ndarray:
-    """``values`` as ``dtype`` (the octree's for that attribute); values it cannot hold (a
-    fraction in an integer, a number out of its range, NaN) are an InputError, not wrapped."""
-    if values.dtype == dtype or np.can_cast(values.dtype, dtype, "safe"):
-        return values.astype(dtype, copy=False)
-    with np.errstate(invalid="ignore", over="ignore"):
-        cast = values.astype(dtype)
-        if np.issubdtype(dtype, np.floating):  # rounding to a narrower float is fine; overflowing to inf is not
-            fits = np.array_equal(np.isfinite(cast), np.isfinite(values)) if np.issubdtype(values.dtype, np.floating) else bool(np.isfinite(cast).all())
-        else:
-            fits = np.array_equal(cast, values)
-    if not fits:
-        raise InputError(f"{name}: attribute {attribute!r} holds {np.dtype(dtype)} values; {values.dtype} values given do not fit it")
-    return cast
-
-
 def _stored_attributes(pool) -> dict[str, np.ndarray]:
     """The arrays the pool's attributes are stored in, by name (a constant one has none)."""
     held = {a: stored_array(pool.attributes.held(a)) for a in pool.attributes}
@@ -888,8 +872,10 @@ class ProgressiveOctree:
     def add(self, xyz, rgb=None, **attributes) -> int:
         """Insert points (float64 (N, 3); colors (N, 3|4) uint8/uint16/float; 1-D attributes of
         length N). Invalid points (NaN, inf, beyond ±1e12) are skipped and counted. Returns the
-        number inserted. Attributes are the first call's; later calls fill missing ones with 0,
-        and may not bring others or values their dtype cannot hold (InputError)."""
+        number inserted. Attributes are the first call's; later calls fill missing ones with 0
+        and may not bring others (InputError); an attribute whose dtype cannot hold a batch's
+        widens to numpy's dtype for both (uint16 and float32: float32), as ``gp.open`` of
+        several files does."""
         xyz = np.ascontiguousarray(xyz, np.float64)
         if xyz.ndim != 2 or xyz.shape[1] != 3:
             raise InputError(f"{self.name}: xyz must have shape (N, 3), got {xyz.shape}")
@@ -978,15 +964,20 @@ class ProgressiveOctree:
         return self.lock.builder_turn(seen)
 
     def _attribute_set(self, attrs: dict, n: int) -> dict:
-        """The batch's attributes in the octree's set (fixed by the first batch): missing ones 0;
-        one outside the set, or with values the set's dtype cannot hold, is an InputError."""
+        """The batch's attributes in the octree's set (fixed by the first batch), in its dtypes:
+        missing ones 0; one outside the set is an InputError; a dtype that cannot hold the
+        batch's widens (``_stored_form`` then widens the pool's holder)."""
         if self._attribute_dtypes is None:
             self._attribute_dtypes = {a: v.dtype for a, v in attrs.items()}
         unknown = sorted(set(attrs) - set(self._attribute_dtypes))
         if unknown:
             held = ", ".join(self._attribute_dtypes) or "none"
             raise InputError(f"{self.name}: attribute {unknown[0]!r} is not one of this cloud's ({held}): the first add() fixes them")
-        return {a: (_as_dtype(self.name, a, attrs[a], dt) if a in attrs else np.zeros(n, dt)) for a, dt in self._attribute_dtypes.items()}
+        for a, v in attrs.items():
+            dt = self._attribute_dtypes[a]
+            if v.dtype != dt and not np.can_cast(v.dtype, dt, "safe"):
+                self._attribute_dtypes[a] = np.result_type(dt, v.dtype)
+        return {a: (attrs[a].astype(dt, copy=False) if a in attrs else np.zeros(n, dt)) for a, dt in self._attribute_dtypes.items()}
 
     def keep_attributes(self, names) -> None:
         """Hold only the attributes among ``names``; points already in lose the others (a loader
@@ -1037,7 +1028,7 @@ class ProgressiveOctree:
         pool, out = self.pool, {}
         for a, v in attrs.items():
             held = pool.attributes.held(a)
-            if not fits(held, v):
+            if held.dtype != v.dtype or not fits(held, v):  # (another dtype: _attribute_set widened the set's)
                 held = widened(held, v, self._n_chunks * self.chunk)
                 pool.attributes.hold(a, held)
             s = stored_array(held)
