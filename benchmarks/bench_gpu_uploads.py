@@ -28,35 +28,20 @@ from gigapoint.bench import cpu_model, one_line_errors, parse_count
 
 def frames_while_loading(n: int, width: int, height: int, drawer) -> dict:
     """Per frame drawn while the demo of ``n`` points loads: (seconds, writes, bytes, refresh seconds)."""
-    from gigapoint.backends.wgpu import memory
-
-    refresh = memory.BufferCache._refresh
-    spent = [0.0]
-
-    def timed_refresh(self, *args):
-        t = time.perf_counter()
-        refresh(self, *args)
-        spent[0] += time.perf_counter() - t
-
     settings = gp.RenderSettings(point_budget=10_000_000, backend="wgpu")
+    stats = ("refresh_writes", "uploaded", "refresh_seconds")
     rows = []
-    memory.BufferCache._refresh = timed_refresh
-    try:
-        cloud = gp.demo(n, progressive=True)
-        while cloud.n_points == 0:
-            time.sleep(0.01)
-        while cloud.loading:
-            cam = gp.Camera.fit(cloud.bounds, view="iso", width=width, height=height)
-            m0, s0 = dict(drawer.memory), spent[0]
-            t = time.perf_counter()
-            gp.render_frame(cloud, cam, settings)
-            m1 = drawer.memory
-            rows.append(
-                (time.perf_counter() - t, m1["refresh_writes"] - m0["refresh_writes"], m1["uploaded"] - m0["uploaded"], spent[0] - s0)
-            )
-        cloud.close()
-    finally:
-        memory.BufferCache._refresh = refresh
+    cloud = gp.demo(n, progressive=True)
+    while cloud.n_points == 0:
+        time.sleep(0.01)
+    while cloud.loading:
+        cam = gp.Camera.fit(cloud.bounds, view="iso", width=width, height=height)
+        before = drawer.memory
+        t = time.perf_counter()
+        gp.render_frame(cloud, cam, settings)
+        after = drawer.memory
+        rows.append((time.perf_counter() - t, *(after[k] - before[k] for k in stats)))
+    cloud.close()
     r = np.array(rows) if rows else np.zeros((1, 4))
     # writes and bytes: means (a frame after the pool grew uploads it whole, not as re-sends)
     return {"frames": len(rows), "ms": 1e3 * float(np.median(r[:, 0])), "writes": float(np.mean(r[:, 1])),

@@ -219,6 +219,7 @@ class WgpuBackend:
             "evictions": cache.evictions,
             "refreshes": cache.refreshes,
             "refresh_writes": cache.refresh_writes,
+            "refresh_seconds": cache.refresh_seconds,
             "budget": cache.budget,
             "page_points": self.ctx.page_points,
         }

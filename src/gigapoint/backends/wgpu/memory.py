@@ -19,6 +19,7 @@ compact cloud's ``ext`` is refreshed by its batches' streams (``packing``), not 
 
 from __future__ import annotations
 
+import time
 import weakref
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -119,6 +120,7 @@ class BufferCache:
         self.evictions = 0
         self.refreshes = 0  # pages of tracked arrays rewritten in place after their cloud changed
         self.refresh_writes = 0  # the write_buffer calls those rewrites took
+        self.refresh_seconds = 0.0  # and the time they took (Python and queueing the writes)
         self.merge_gap_bytes = MERGE_GAP_BYTES  # changed batches this close go in one write (0: each run on its own)
         # id(array) -> (weak array, weak cloud): arrays their cloud rewrites in place (see track)
         self._sources: dict[int, tuple[weakref.ref, weakref.ref]] = {}
@@ -211,6 +213,7 @@ class BufferCache:
 
         Queued writes run after the work already submitted and before the work submitted
         next, so earlier dispatches still see the old contents and later ones the new."""
+        t0 = time.perf_counter()
         row_bytes = array.itemsize * int(np.prod(array.shape[1:], dtype=np.int64))
         for s, e in stale_ranges(owner, entry.version, start, stop, array, gap=self.merge_gap_bytes // row_bytes):
             # whole 4-byte words (a copy's rule): 16-bit colours of an odd count widen by one
@@ -225,6 +228,7 @@ class BufferCache:
             self.refresh_writes += 1
         entry.version = version
         self.refreshes += 1
+        self.refresh_seconds += time.perf_counter() - t0
 
 
 def stale_ranges(cloud, since: int, start: int, stop: int, array=None, gap: int = 0) -> list[tuple[int, int]]:
