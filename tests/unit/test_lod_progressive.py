@@ -1313,7 +1313,7 @@ def test_attributes_are_held_in_their_range_while_the_octree_fills(scene):
     o.close()
 
 
-def test_trim_packs_outside_the_lock_and_gives_way_to_an_add(scene, monkeypatch):
+def test_trim_packs_outside_the_lock_and_gives_way_to_an_add(scene, monkeypatch, tmp_path):
     """Packing is worked out while frames can take the lock (0.3 s at 20 M points would stall
     the viewer once loaded); an ``add`` that comes before it is taken wins: the packed copy is
     dropped, and the octree holds every point, wide."""
@@ -1337,9 +1337,13 @@ def test_trim_packs_outside_the_lock_and_gives_way_to_an_add(scene, monkeypatch)
     monkeypatch.setattr(ProgressiveOctree, "_streams_on_grid", probe)
     o = _grid_filled(points)
     assert free == [True] and o._packed
-    o.close()  # frees the packed pool: points added later start a new one
-    o.add(xyz[:100], rgba[:100], **{a: v[:100] for a, v in attrs.items()})
-    assert o.n_points == 100 and len(_leaf_points(o)["xyz"]) == 100
+    o.close()  # frees the packed pool; adding to a closed octree is refused, not a new tree started
+    with pytest.raises(InputError, match="^grid: the octree is closed"):
+        o.add(xyz[:100], rgba[:100], **{a: v[:100] for a, v in attrs.items()})
+    assert o.n_points == 0 and o.pool is None
+    with pytest.raises(InputError, match="^grid: the octree is closed"):
+        o.save(tmp_path / "closed")
+    assert not (tmp_path / "closed").exists()
     o = _grid_filled(points, rounds=(slice(0, half),))  # packed, then ...
     o.add(xyz[:10], rgba[:10], **{a: v[:10] for a, v in attrs.items()})  # ... unpacked by an add
     with o.lock:

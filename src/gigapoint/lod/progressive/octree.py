@@ -415,6 +415,7 @@ class ProgressiveOctree:
         self.n_voxels = 0
         self.points = 0  # points added (valid ones)
         self.skipped = 0  # invalid points left out (NaN, inf, beyond ±1e12)
+        self.closed = False  # close() frees everything; add() then refuses (it would start a new tree)
         self.spilled = 0  # points taken out of split leaves to be inserted again, in all
         self.lo = np.full(3, np.inf)
         self.hi = np.full(3, -np.inf)
@@ -789,6 +790,7 @@ class ProgressiveOctree:
         if self.loader is not None:
             self.loader.close()
         with self.lock:
+            self.closed = True
             self.pool, self._packed = None, False
             self._n_chunks = self._n_free = self._n_words = 0
             self._narrow = self.grid is not None
@@ -896,6 +898,8 @@ class ProgressiveOctree:
         n_valid = int(np.count_nonzero(valid))
         table = self._presized_table()  # filled before the lock is taken: frames meanwhile draw
         with self.lock.writing():
+            if self.closed:
+                raise InputError(f"{self.name}: the octree is closed; open it again to add points")
             attrs = self._attribute_set(attrs, n)  # before anything counts: a batch it refuses changes nothing
             self.skipped += n - n_valid
             if n_valid == 0:
@@ -1280,6 +1284,8 @@ class ProgressiveOctree:
         from ..convert import convert
 
         self.wait()
+        if self.closed:
+            raise InputError(f"{self.name}: the octree is closed (its points were freed); open it again to save it")
         options.setdefault("source_files", self.source_files)  # the files' CRS and LAS grid
         options.setdefault("max_leaf", self.max_leaf)
         grown = options["max_leaf"] == self.max_leaf and options.get("client") is None and self.points > 0
