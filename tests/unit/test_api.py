@@ -34,3 +34,26 @@ def test_estimate_normals_through_the_package_on_a_plane():
     cloud = gp.from_arrays(xyz)
     normals, radii = gp.estimate_normals(cloud, store=False)
     assert normals.shape == (4000, 3) and np.all(normals[:, 2] > 0.999) and np.all(radii > 0)
+
+
+def test_render_without_a_camera_frames_the_cloud_as_fit_cloud_does():
+    """``gp.render(cloud)`` (and ``render_frame``) take ``Camera.fit_cloud(cloud)``: the same
+    pixels as that camera given, the cloud in view; a progressive cloud is framed as it is now."""
+    import numpy as np
+
+    rng = np.random.default_rng(2)
+    xyz = rng.uniform(0, 100, (20_000, 3)) * (1, 1, 0.1) + (5e5, 4e6, 30)  # UTM-sized, flat
+    cloud = gp.from_arrays(xyz)
+    image = gp.render(cloud, size_mode="fixed")
+    want = gp.render(cloud, gp.Camera.fit_cloud(cloud), size_mode="fixed")
+    assert image.shape == (1080, 1920, 4)
+    np.testing.assert_array_equal(image, want)
+    covered = gp.render_frame(cloud).visibility != np.uint64(0xFFFFFFFFFFFFFFFF)
+    assert covered.sum() > 10_000  # the points are in view, not a background
+    from gigapoint.lod.progressive import ProgressiveOctree
+
+    grown = ProgressiveOctree("grown")
+    grown.add(xyz[:10_000])
+    part = gp.render(grown, size_mode="fixed")
+    np.testing.assert_array_equal(part, gp.render(grown, gp.Camera.fit_cloud(grown), size_mode="fixed"))
+    assert (part[..., :3] != image[0, 0, :3]).any(axis=-1).sum() > 5_000

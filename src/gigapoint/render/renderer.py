@@ -33,10 +33,13 @@ def check_renderable(cloud) -> None:
     _RENDERABLE_TYPES.add(type(cloud))
 
 
-def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) -> Frame:
-    """Render ``cloud`` (any Renderable) into a Frame (visibility buffer, image, stats)."""
+def render_frame(cloud, camera: Camera | None = None, settings: RenderSettings | None = None) -> Frame:
+    """Render ``cloud`` (any Renderable) into a Frame (visibility buffer, image, stats). Without a
+    camera: ``Camera.fit_cloud(cloud)`` (1920x1080, the CLI's default view) of what it holds now."""
     settings = settings or RenderSettings()
     check_renderable(cloud)
+    if camera is None:
+        camera = Camera.fit_cloud(cloud)
     if not isinstance(camera, Camera):
         raise GigapointError(f"camera must be a gigapoint.Camera, got {type(camera).__name__}")
     if wants_composite(settings):  # supersampling / stereo: whole renders combined (passes/compose.py)
@@ -67,8 +70,9 @@ def render_frame(cloud, camera: Camera, settings: RenderSettings | None = None) 
     return Frame(visibility, image, stats, draw.points, draw.generation)
 
 
-def render(cloud, camera: Camera, settings: RenderSettings | None = None, return_stats: bool = False, **setting_overrides):
-    """(H, W, 4) uint8 RGBA image of ``cloud`` seen by ``camera`` (and RenderStats if asked)."""
+def render(cloud, camera: Camera | None = None, settings: RenderSettings | None = None, return_stats: bool = False, **setting_overrides):
+    """(H, W, 4) uint8 RGBA image of ``cloud`` seen by ``camera`` (and RenderStats if asked);
+    without a camera, ``Camera.fit_cloud(cloud)`` of what it holds now (1920x1080)."""
     if setting_overrides:
         settings = (settings or RenderSettings()).replace(**setting_overrides)
     frame = render_frame(cloud, camera, settings)
