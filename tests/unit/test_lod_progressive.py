@@ -1860,3 +1860,23 @@ def test_the_tree_is_the_same_by_either_sort_of_the_keys(scene, octree, monkeypa
     for kind in ("numpy", "radix"):
         monkeypatch.setattr(octree_module, "_KEY_SORT", [kind])
         _assert_same_leaves(_filled(scene), octree)
+
+
+@pytest.mark.parametrize("n", [1, 3])
+def test_a_tiny_cloud_is_drawn_where_the_plain_cloud_draws_it(n):
+    """One point (or three within a millimetre), framed by ``Camera.fit_cloud`` from a
+    micrometre away: each node's precision follows its whole cube (where its points are
+    quantized), not the cube clipped to the data, which for one point is a point: 10 bits of the
+    cube put the point off the image (the frame was empty; ``gigapoint render`` of a LAS file of
+    one point drew nothing)."""
+    xyz = np.array([[1.0, 2.0, 3.0], [1.001, 2.0, 3.0], [1.0, 2.002, 3.001]])[:n]
+    plain = gp.from_arrays(xyz)
+    for view, grid in (("auto", None), ("auto", ((0, 0, 0), 0.001)), ("top", ((0, 0, 0), 0.001)), ("iso", None)):
+        octree = ProgressiveOctree("tiny", grid=grid)  # as from a LAS file of one point at scale 0.001
+        octree.add(xyz)
+        cam = gp.Camera.fit_cloud(plain, view=view, width=64, height=48)
+        want = gp.render_frame(plain, cam, gp.RenderSettings(size_mode="fixed")).visibility != EMPTY_PIXEL
+        got = gp.render_frame(octree, cam, gp.RenderSettings(size_mode="fixed")).visibility != EMPTY_PIXEL
+        assert want.sum() >= 1 and got.sum() == want.sum(), view
+        # at this zoom (a pixel is 2e-9 m) float32's matrices may move a point one pixel
+        np.testing.assert_allclose(np.argwhere(got), np.argwhere(want), atol=1, err_msg=view)

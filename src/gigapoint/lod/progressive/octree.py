@@ -1395,8 +1395,10 @@ class ProgressiveOctree:
         lists, node = lists[by_curve], node[by_curve]
         ids, list_node = np.unique(node, return_inverse=True)
         corner = self._box_min(ids)  # the chunks' boxes (the voxels' moved: kernels.VOXEL_SHIFT)
-        # the precision a batch needs follows the projection of its quantization box: its cube
-        _, size = visible_and_size(view.rows, cube_min[ids], cube_max[ids], view.width, view.height, view.near, view.far)
+        # the precision a batch needs follows the projection of its quantization box: its whole
+        # cube, not clipped to the data (a single point's clipped box is a point: 10 bits of a
+        # cube far larger than the close-up that frames it put the point off the image)
+        _, size = visible_and_size(view.rows, cmin[ids], cmin[ids] + cedge[ids, None], view.width, view.height, view.near, view.far)
         bits = precision_for(size, settings.precision_threshold_px) if settings.adaptive_precision else np.full(len(ids), 30, np.int32)
         mats = batch_matrices(view.rows, corner, corner + cedge[ids, None])
         entries = np.where(sampled[node], sample[node], self.list_count[lists])  # a leaf drawn as its sample: its first chunks
