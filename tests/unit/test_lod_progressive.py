@@ -795,6 +795,29 @@ def test_bad_input_is_a_one_line_error():
     assert o.add(np.empty((0, 3))) == 0
 
 
+def test_a_source_without_a_valid_point_ends_as_the_plain_cloud_does(tmp_path, capsys):
+    """Every point NaN: ``wait`` raises the plain cloud's one-line EmptyCloudError (the load
+    ended quietly with an empty octree, and ``gigapoint render --progressive`` wrote a
+    background image and exited 0); a file with some valid points loads them."""
+    from gigapoint.cli import main
+    from gigapoint.errors import EmptyCloudError
+
+    bad, some = tmp_path / "allnan.xyz", tmp_path / "some.xyz"
+    bad.write_text("nan 2 3\nnan 2 3\n")
+    some.write_text("1 2 3\nnan 2 3\n4 5 6\n")
+    with pytest.raises(EmptyCloudError) as plain:
+        gp.open(bad)
+    cloud = gp.open(bad, progressive=True)
+    with pytest.raises(EmptyCloudError) as progressive:
+        cloud.wait()
+    assert str(progressive.value) == str(plain.value) == f"{bad}: no valid points (2 invalid points: NaN, inf or beyond ±1e+12)"
+    cloud = gp.open(some, progressive=True)
+    assert cloud.wait() and cloud.n_points == 2 and cloud.skipped == 1
+    out = tmp_path / "a.png"
+    assert main(["render", str(bad), "-o", str(out), "--progressive"]) != 0
+    assert not out.exists() and f"error: {bad}: no valid points" in capsys.readouterr().err
+
+
 def test_add_refuses_unknown_attributes_and_widens_a_dtype_a_batch_does_not_fit():
     """An attribute outside the first add's set is a one-line InputError and changes nothing
     (it was dropped silently); values an attribute's dtype cannot hold widen it to numpy's dtype

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ...core.chunk import PointChunk
+from ...core.cloud import check_valid_count
 from ...errors import GigapointError, InputError, MemoryLimitError
 from ..convert.prefetch import prefetch
 
@@ -140,6 +141,8 @@ class Loader:
                     if self.octree.nbytes > self.memory_limit:
                         self._stop_for_memory(name)
                         return
+            if self.octree.points == 0:  # every source read, no valid point: the plain cloud's error
+                check_valid_count(", ".join(source for source, _ in self.sources), 0, self.octree.skipped)
             while not self._stop.is_set():  # the leaves' draw order (a grid sample first), between frames
                 turn, drawing = self.octree.builder_turn(turn)
                 if not self.octree.order_leaves(ORDER_WHILE_DRAWING if drawing else ORDER_POINTS):
