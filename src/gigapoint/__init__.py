@@ -72,10 +72,14 @@ def open(*paths, progressive: bool = False, **options):
     ``memory_limit=`` bytes or '8G' (by default half the machine's memory); what was loaded stays.
 
     Paths may also come as one list or tuple: ``gp.open([a, b])`` is ``gp.open(a, b)``."""
+    from .lod.reader import refuse_octrees
+
     paths = _flat_paths(paths)
     if progressive:
         from .errors import InputError
         from .lod.progressive import file_sources, memory_limit_bytes, open_progressive
+
+        refuse_octrees(paths, "progressive=True builds an octree from point files")
 
         memory_limit = options.pop("memory_limit", None)
         if options:
@@ -87,6 +91,7 @@ def open(*paths, progressive: bool = False, **options):
 
         if is_lod_source(paths[0]):
             return open_octree(paths[0])
+    refuse_octrees(paths, f"it takes no options ({', '.join(sorted(options))})" if len(paths) == 1 else "it cannot join other files")
     from .io import open_cloud
 
     return open_cloud(*paths, **options)

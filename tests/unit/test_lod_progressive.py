@@ -1903,3 +1903,31 @@ def test_a_tiny_cloud_is_drawn_where_the_plain_cloud_draws_it(n):
         assert want.sum() >= 1 and got.sum() == want.sum(), view
         # at this zoom (a pixel is 2e-9 m) float32's matrices may move a point one pixel
         np.testing.assert_allclose(np.argwhere(got), np.argwhere(want), atol=1, err_msg=view)
+
+
+def test_an_octree_among_files_or_opened_progressively_is_a_one_line_error(tmp_path, capsys):
+    """A converted folder (or EPT, or a URL) opens alone, as itself: among other files, with
+    ``progressive=True`` or with cloud options it was read as a folder of point files ("holds
+    no supported point cloud file") or a URL as a path ("http:/host/...: no such file")."""
+    from gigapoint.cli import main
+
+    xyz = np.random.default_rng(5).uniform(0, 50, (3000, 3))
+    octree = ProgressiveOctree("small")
+    octree.add(xyz)
+    octree.save(tmp_path / "tree")
+    points = tmp_path / "p.npy"
+    np.save(points, xyz)
+    alone = "tree: a converted octree folder opens alone, drawn level of detail as stored; "
+    cases = [
+        (([tmp_path / "tree", points], {}), alone + "it cannot join other files"),
+        (([tmp_path / "tree"], {"progressive": True}), alone + "progressive=True builds an octree from point files"),
+        (([points, tmp_path / "tree"], {"progressive": True}), alone + "progressive=True builds an octree from point files"),
+        (([tmp_path / "tree"], {"colors": "rgba"}), alone + "it takes no options \\(colors\\)"),
+        ((["http://127.0.0.1:9/a.copc.laz"], {"progressive": True}), "^http://127.0.0.1:9/a.copc.laz: a URL opens alone"),
+    ]
+    for (paths, options), message in cases:
+        with pytest.raises(InputError, match=message):
+            gp.open(paths, **options)
+    assert gp.open(tmp_path / "tree").n_points == 3000  # alone: as itself
+    assert main(["render", str(tmp_path / "tree"), str(points), "-o", str(tmp_path / "a.png")]) != 0
+    assert "tree: a converted octree folder opens alone" in capsys.readouterr().err and not (tmp_path / "a.png").exists()

@@ -50,6 +50,17 @@ def is_lod_source(path) -> bool:
     return lod_source_kind(path) is not None
 
 
+def refuse_octrees(paths, why: str) -> None:
+    """A one-line InputError for the first of ``paths`` that is an octree a point file reader
+    cannot read (a converted folder, an EPT dataset, a URL: each opens alone, as itself),
+    ending in ``why``. A local COPC file passes: it is a LAZ file too."""
+    for path in paths:
+        kind = lod_source_kind(path)
+        if kind in ("folder", "ept") or (kind is not None and as_url(path) is not None):
+            what = {"folder": "a converted octree folder", "ept": "an EPT dataset"}.get(kind, "a URL")
+            raise InputError(f"{path}: {what} opens alone, drawn level of detail as stored; {why}")
+
+
 def open_octree(path) -> OctreeCloud | PointCloud:
     """Open an octree for rendering: an OctreeCloud (gigapoint or Potree 2.0 folder; a COPC file
     or EPT dataset, local or an http(s) URL), or for an unfinished conversion its preview (a
