@@ -813,6 +813,9 @@ def test_a_source_without_a_valid_point_ends_as_the_plain_cloud_does(tmp_path, c
     assert str(progressive.value) == str(plain.value) == f"{bad}: no valid points (2 invalid points: NaN, inf or beyond ±1e+12)"
     cloud = gp.open(some, progressive=True)
     assert cloud.wait() and cloud.n_points == 2 and cloud.skipped == 1
+    with pytest.raises(EmptyCloudError) as converted:  # the converter named the dataset ("allnan"), not the file
+        gp.convert(bad, tmp_path / "tree")
+    assert str(converted.value) == str(plain.value) and not (tmp_path / "tree").exists()
     out = tmp_path / "a.png"
     assert main(["render", str(bad), "-o", str(out), "--progressive"]) != 0
     assert not out.exists() and f"error: {bad}: no valid points" in capsys.readouterr().err

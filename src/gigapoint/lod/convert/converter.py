@@ -3,11 +3,13 @@ lock, prepares it (resume or start clean) and runs the phases in order."""
 
 from __future__ import annotations
 
+import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 from ...core import pages
+from ...errors import InputError
 from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
 from ..copc_write import check_output as check_copc_output
@@ -56,9 +58,17 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
     def run(self, overwrite: bool) -> ConvertResult:
         self.t0 = time.perf_counter()
         fp = self.fingerprint()
+        created = not self.dir.path.exists()
         try:
             with self.dir.lock():
                 return self._run_locked(overwrite, fp)
+        except InputError:
+            # inputs that gave not one point (none valid, or corrupt from the start): the folder this
+            # run made holds nothing a run could resume from, so it goes rather than being left
+            # behind as an "unfinished conversion"
+            if created and not getattr(self, "state", {}).get("points"):
+                shutil.rmtree(self.dir.path, ignore_errors=True)
+            raise
         finally:
             self.progress.close()
 

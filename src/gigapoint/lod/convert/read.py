@@ -134,7 +134,8 @@ class ReadPhase(Job):
         if st.get("points", 0) == 0:
             skipped = st.get("skipped", 0)
             detail = f" ({skipped:,} invalid points: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
-            raise EmptyCloudError(f"{self.name}: no valid points{detail}")
+            files = ", ".join(map(str, self.paths)) if self.paths else self.name  # the files, as the plain cloud names them
+            raise EmptyCloudError(f"{files}: no valid points{detail}")
         if st.get("skipped"):
             warnings.warn(
                 f"{self.name}: skipped {st['skipped']:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})",
