@@ -793,6 +793,15 @@ def test_bad_input_is_a_one_line_error():
         o.add(np.zeros((4, 3)), rgb=np.zeros((3, 3), np.uint8))
     assert o.add(np.array([[np.nan, 0, 0], [1, 2, 3.0]])) == 1 and o.skipped == 1
     assert o.add(np.empty((0, 3))) == 0
+    # attributes are numbers of at most 8 bytes: a complex one was moved as 8 of its 16 bytes,
+    # an object one a TypeError traceback (the plain cloud took all three)
+    for values in (np.ones(2, complex), np.array(["a", "b"]), np.array([None, 1])):
+        message = f"attribute 'label' has dtype {values.dtype}: attributes are numbers"
+        with pytest.raises(InputError, match=f"^bad: {message}"):
+            ProgressiveOctree("bad").add(np.zeros((2, 3)), label=values)
+        with pytest.raises(InputError, match=f"^arrays: {message}"):
+            gp.from_arrays(np.zeros((2, 3)), label=values)
+    assert ProgressiveOctree("ok").add(np.zeros((2, 3)), flag=np.ones(2, bool), h=np.ones(2, np.float16)) == 2
 
 
 def test_a_source_without_a_valid_point_ends_as_the_plain_cloud_does(tmp_path, capsys):

@@ -39,9 +39,22 @@ class PointChunk:
         for name, values in self.attributes.items():
             if len(values) != n:
                 raise ValueError(f"attribute {name!r} has {len(values)} rows, xyz has {n}")
+            problem = attribute_dtype_problem(name, values)
+            if problem:
+                raise ValueError(problem)
 
     def __len__(self) -> int:
         return len(self.xyz)
+
+
+def attribute_dtype_problem(name: str, values: np.ndarray) -> str | None:
+    """Why ``values`` cannot be an attribute, or None: attributes are numbers of at most 8 bytes
+    (the kernels move them as 1, 2, 4 or 8 byte words; strings, objects and complex numbers
+    broke renders and conversions, or were cut to 8 bytes)."""
+    dt = np.asarray(values).dtype
+    if dt.kind in "biuf" and dt.itemsize <= 8:
+        return None
+    return f"attribute {name!r} has dtype {dt}: attributes are numbers (bool, integers, floats of at most 64 bits)"
 
 
 def to_rgba8(colors: np.ndarray) -> np.ndarray:
