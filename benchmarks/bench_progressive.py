@@ -11,9 +11,10 @@
   voxels per point, memory per point against gigapoint's quantized layout of the same points
   (16 bytes + the attributes), while filling and once trimmed; and the converter's split of the
   same points into the same tree (sort and ``split_tree``) for comparison.
-- ``load``: the same points written as LAZ and LAS (scan order); decoding them alone (every
-  chunk of ``gigapoint.io.read_chunks``) against ``gigapoint.open(..., progressive=True)`` to
-  completion, alternately, in one process: the ratio is what LOD costs loading.
+- ``load``: the same points written as LAZ and LAS (scan order); decoding them alone (laspy's
+  records, the baseline; laspy's records with scaled xyz and colours, what a program needs of
+  them; every chunk of ``gigapoint.io.read_chunks``) against ``gigapoint.open(...,
+  progressive=True)`` to completion, alternately, in one process: the ratio is what LOD costs loading.
 - ``memory``: bytes a point of the town as a LAS file loaded progressively (on the file's grid,
   attributes in their range, once loaded) against three words a point and the plain cloud's
   layout; what the octree held when its last point was in, before ``trim``; and the peak RSS
@@ -175,6 +176,18 @@ def _laspy_decode(path: Path) -> None:
             pass
 
 
+def _laspy_points(path: Path) -> None:
+    """The file read by laspy as points a program can use: each chunk's scaled float64 x, y, z
+    (and its colours), 1 M points a call. For a LAS file the records alone are a copy of the
+    file's bytes (``_laspy_decode``), which no use of the points stops at."""
+    import laspy
+
+    with laspy.open(str(path)) as reader:
+        for points in reader.chunk_iterator(1_000_000):
+            np.column_stack([points.x, points.y, points.z])
+            np.column_stack([points.red, points.green, points.blue])
+
+
 @contextlib.contextmanager
 def _laz_decoded(in_child: bool):
     """LAZ decoded by the child process (io/laz_process.py, the default) or in this process
@@ -207,6 +220,7 @@ def bench_load(n: int, rounds: int) -> None:
             suffix = path.suffix[1:]
             runs = {
                 "laspy alone": lambda path=path: _laspy_decode(path),
+                "laspy, scaled xyz and colours": lambda path=path: _laspy_points(path),
                 "read_chunks alone": lambda path=path: sum(len(c) for c in read_chunks(path, 1_000_000)),
                 "progressive": lambda path=path: load(path, True),
             }
