@@ -265,6 +265,31 @@ def test_save_writes_the_snapshots(tmp_path, suffix):
         live.save(out)
 
 
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_save_puts_las_attributes_in_their_fields_and_others_in_extra_bytes(tmp_path, suffix):
+    """Pushed attributes LAS has a field for go to it (clipped to its range, as the COPC writer
+    does); they were declared as extra bytes of the same name too, and laspy refused the file
+    ("field 'intensity' occurs more than once"); others are extra bytes."""
+    import laspy
+
+    live = LiveCloud()
+    xyz, rgb = frame(2, n=3000)
+    n = len(xyz)
+    intensity = np.arange(n, dtype=np.uint16)
+    height = np.linspace(0, 1, n, dtype=np.float32)
+    live.push(xyz, rgb, intensity=intensity, classification=np.full(n, 300), return_number=np.full(n, 20, np.uint8),
+              gps_time=np.linspace(0, 5, n), height=height)  # fmt: skip
+    live.snapshot(normals=False)
+    out = tmp_path / f"a{suffix}"
+    assert live.save(out) == n
+    las = laspy.read(out)
+    assert list(las.point_format.extra_dimension_names) == ["height"]
+    order = np.argsort(np.asarray(las.gps_time))  # the snapshot's order is the octree's
+    np.testing.assert_array_equal(np.asarray(las.intensity)[order], intensity)
+    np.testing.assert_allclose(np.asarray(las.height)[order], height)
+    assert set(np.asarray(las.classification).tolist()) == {255} and set(np.asarray(las.return_number).tolist()) == {15}
+
+
 def test_an_aging_frame_fades_through_the_transparency_pass():
     now = [0.0]
     live = LiveCloud(decay=2.0, clock=lambda: now[0])

@@ -55,18 +55,33 @@ def _write_ply(path: Path, xyz, rgba, attrs) -> None:
 
 
 def _write_las(path: Path, xyz, rgba, attrs) -> None:
+    """Point format 7 (8 with ``nir``), LAS 1.4: attributes the format has a field for go to
+    it, clipped to its range as the COPC writer does (they were added as extra bytes under the
+    field's own name, which laspy refused: "field 'intensity' occurs more than once"); others
+    as extra bytes (lod/copc_write.extra_attributes: booleans as u8, half floats as f4)."""
     import laspy
 
-    header = laspy.LasHeader(point_format=7, version="1.4")
+    from ..lod.copc_write import LAS_FIELD_ATTRIBUTES, choose_point_format, extra_attributes
+
+    header = laspy.LasHeader(point_format=choose_point_format(attrs), version="1.4")
     header.offsets = np.floor(xyz.min(axis=0))
     header.scales = np.array([0.001, 0.001, 0.001])
-    for a, v in attrs.items():
-        header.add_extra_dim(laspy.ExtraBytesParams(name=a, type=v.dtype))
+    extra = extra_attributes({a: v.dtype for a, v in attrs.items()}, where=str(path))
+    for a, dt in extra.items():
+        header.add_extra_dim(laspy.ExtraBytesParams(name=a, type=dt))
     las = laspy.LasData(header)
     las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
     las.red, las.green, las.blue = (rgba[:, k].astype(np.uint16) * 257 for k in range(3))
     for a, v in attrs.items():
-        las[a] = v
+        if a in LAS_FIELD_ATTRIBUTES:
+            field = las[a]
+            if np.issubdtype(field.dtype, np.integer):
+                info = np.iinfo(field.dtype)
+                high = 15 if a in ("return_number", "number_of_returns") else info.max  # 4-bit fields
+                v = np.clip(np.rint(v) if v.dtype.kind == "f" else v, info.min, high)
+            las[a] = v.astype(field.dtype)
+        elif a in extra:
+            las[a] = v.astype(extra[a])
 
     def write(tmp: Path) -> None:
         las.write(str(tmp), do_compress=path.suffix.lower() == ".laz")
