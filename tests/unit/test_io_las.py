@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import gigapoint as gp
 from gigapoint.core.chunk import DEFAULT_COLOR
 from gigapoint.io import file_info, open_cloud, read_chunks
 
@@ -178,18 +179,30 @@ def test_crs_from_geokeys_without_pyproj(tmp_path):
     assert file_info(path)["crs"] == "EPSG:32633"  # from the GeoKey without pyproj, or pyproj's to_epsg()
 
 
-def test_extra_bytes_dimensions_are_tolerated(tmp_path):
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_extra_bytes_are_read_as_attributes(tmp_path, suffix):
+    """Extra bytes of one value a point are attributes (scaled where the file scales them), after
+    the standard ones; arrays are left out. They were dropped: a file's HeightAboveGround or
+    amplitude could not be coloured by, and a live cloud's saved extras did not come back."""
     header = laspy.LasHeader(point_format=3, version="1.4")
     header.add_extra_dim(laspy.ExtraBytesParams(name="height_above_ground", type=np.float32))
+    header.add_extra_dim(laspy.ExtraBytesParams(name="amplitude", type=np.uint16, scales=np.array([0.5]), offsets=np.array([10.0])))
+    header.add_extra_dim(laspy.ExtraBytesParams(name="direction", type="3f8"))
     las = laspy.LasData(header)
     las.x = las.y = las.z = np.arange(20.0)
     las.height_above_ground = np.arange(20, dtype=np.float32)
-    path = tmp_path / "eb.laz"
+    las.amplitude = 10.0 + 0.5 * np.arange(20)
+    las.direction = np.ones((20, 3))
+    path = tmp_path / f"eb{suffix}"
     las.write(str(path))
     _, xyz, _, attrs = collect(path)
     np.testing.assert_array_equal(xyz[:, 0], np.arange(20.0))
-    assert "intensity" in attrs
-    assert "height_above_ground" in file_info(path)["dimensions"]
+    assert list(attrs)[-2:] == ["height_above_ground", "amplitude"] and "intensity" in attrs and "direction" not in attrs
+    np.testing.assert_array_equal(attrs["height_above_ground"], np.arange(20, dtype=np.float32))
+    np.testing.assert_array_equal(attrs["amplitude"], 10.0 + 0.5 * np.arange(20))
+    assert "height_above_ground" in file_info(path)["dimensions"] and file_info(path)["attributes"][-2:] == ["height_above_ground", "amplitude"]
+    cloud = gp.open(path, progressive=True)
+    assert cloud.wait() and cloud.attribute_names[-2:] == ("height_above_ground", "amplitude")
 
 
 @settings(max_examples=25, deadline=None)

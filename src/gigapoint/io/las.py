@@ -41,6 +41,15 @@ LASZIP_RECORD_ID = 22204
 LAS_ATTRIBUTES = ("intensity", "classification", "return_number", "number_of_returns", "point_source_id", "gps_time", "nir")
 
 
+def _attribute_names(point_format) -> list[str]:
+    """The attributes read of a file's points: the standard fields among ``LAS_ATTRIBUTES``,
+    then its extra bytes of one value a point (scaled where the file gives a scale: laspy
+    returns them as floats), in record order; arrays (``3f8``) are left out."""
+    dims = set(point_format.dimension_names)
+    standard = [a for a in LAS_ATTRIBUTES if a in dims]
+    return standard + [d.name for d in point_format.extra_dimensions if d.num_elements == 1 and d.name not in standard]
+
+
 @dataclass
 class LasHeader:
     """The fields of a LAS header gigapoint checks and reports (parsed without laspy)."""
@@ -475,7 +484,7 @@ class LasReader(Reader):
                 if not laz_process.bad_data(exc):
                     raise
                 raise corrupt(exc) from None
-            attrs = [a for a in LAS_ATTRIBUTES if a in dims]
+            attrs = _attribute_names(reader.header.point_format)
             has_rgb = {"red", "green", "blue"} <= dims
             stored_scale = tuple(float(abs(s)) for s in scale)  # PointChunk.scale: the resolution the file stores
             scaler = ColorScaler() if scaler is None else scaler
@@ -531,7 +540,7 @@ class LasReader(Reader):
             if not laz_process.bad_data(exc):
                 raise
             raise fail(path, f"corrupt {'LAZ' if hdr.compressed else 'LAS'} header: {exc}") from None
-        attrs = [a for a in LAS_ATTRIBUTES if a in dims]
+        attrs = _attribute_names(header.point_format)
         return {
             "path": str(path),
             "format": "LAZ" if hdr.compressed else "LAS",
