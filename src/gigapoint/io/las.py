@@ -44,10 +44,12 @@ LAS_ATTRIBUTES = ("intensity", "classification", "return_number", "number_of_ret
 def _attribute_names(point_format) -> list[str]:
     """The attributes read of a file's points: the standard fields among ``LAS_ATTRIBUTES``,
     then its extra bytes of one value a point (scaled where the file gives a scale: laspy
-    returns them as floats), in record order; arrays (``3f8``) are left out."""
+    returns them as floats), in record order; arrays (``3f8``) and bytes the file does not
+    describe are left out."""
     dims = set(point_format.dimension_names)
     standard = [a for a in LAS_ATTRIBUTES if a in dims]
-    return standard + [d.name for d in point_format.extra_dimensions if d.num_elements == 1 and d.name not in standard]
+    described = [d for d in point_format.extra_dimensions if d.name != "ExtraBytes"]  # (laspy's name for bytes no VLR describes)
+    return standard + [d.name for d in described if d.num_elements == 1 and d.name not in standard]
 
 
 @dataclass
