@@ -40,6 +40,23 @@ def test_render_with_quality_options_matches_the_api(npy, tmp_path):
     np.testing.assert_array_equal(np.asarray(Image.open(out)), gp.render(cloud, cam, s))
 
 
+def test_color_attribute_alone_colours_by_that_attribute(tmp_path, capsys):
+    """``--color-attribute NAME`` means ``--color-mode attribute`` too (the schema's ``implies``)."""
+    xyz = gp.demo_arrays(20_000, seed=11)[0]
+    path = tmp_path / "hag.npz"
+    np.savez(path, xyz=xyz, hag=(xyz[:, 2] - xyz[:, 2].min()).astype(np.float32))
+    out = tmp_path / "a.png"
+    assert main(["render", str(path), "-o", str(out), "-W", "96", "-H", "64", "--view", "iso", "--backend", "cpu", "--color-attribute", "hag",
+                 "--colormap", "turbo", "--attribute-range", "0,20"]) == 0  # fmt: skip
+    cloud = gp.open(path)
+    cam = gp.Camera.fit(cloud.bounds, view="iso", width=96, height=64)
+    want = gp.render(cloud, cam, backend="cpu", color_mode="attribute", color_attribute="hag", colormap="turbo", attribute_range=(0, 20))
+    np.testing.assert_array_equal(np.asarray(Image.open(out)), want)
+    assert not np.array_equal(want, gp.render(cloud, cam, backend="cpu"))
+    assert main(["render", str(path), "-o", str(tmp_path / "b.png"), "--color-attribute", "nope"]) == 1
+    assert capsys.readouterr().err.strip() == "error: color_attribute: hag.npz has no attribute 'nope' (attributes: hag)"
+
+
 def test_bad_quality_options_are_one_line_errors(npy, tmp_path, capsys):
     for extra in (["--fill-holes", "7"], ["--color-mode", "rainbow"], ["--elevation-range", "1"], ["--supersample", "3"]):
         assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "32", *extra]) == 1

@@ -62,6 +62,24 @@ def test_intensity_with_contrast_range(scene):
     _check(f, expected)
 
 
+@pytest.mark.parametrize("cmap", ["viridis", "turbo"])
+def test_any_attribute_through_the_colormap(scene, cmap):
+    """color_mode 'attribute' maps ``color_attribute`` (any the cloud holds: here a normal's
+    component) through the colormap over ``attribute_range``, or its 2nd..98th percentile;
+    naming none, or one the cloud lacks, is a one-line error listing what it has."""
+    cloud, cam = scene
+    v = cloud.attributes["nz"].astype(np.float64)
+    for rng in ((-0.5, 0.8), None):
+        f = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", color_mode="attribute", color_attribute="nz", colormap=cmap, attribute_range=rng))
+        lo, hi = rng or np.percentile(v, [2.0, 98.0])
+        i = np.clip(np.rint((v - lo) * 255.0 / (hi - lo)), 0, 255).astype(np.int64)
+        _check(f, colormap_table(cmap)[i])
+    with pytest.raises(SettingsError, match="^color_mode 'attribute': name the attribute with color_attribute .*colors has: classification, intensity"):
+        gp.render(cloud, cam, color_mode="attribute")
+    with pytest.raises(SettingsError, match="^color_attribute: colors has no attribute 'height' \\(attributes: classification"):
+        gp.render(cloud, cam, color_mode="attribute", color_attribute="height")
+
+
 @pytest.mark.parametrize("cmap", ["viridis", "turbo", "terrain", "inferno", "gray"])
 def test_elevation_colormaps(scene, cmap):
     cloud, cam = scene

@@ -69,7 +69,7 @@ def steps(folder: Path):
         cloud = made["las"]
         gp.estimate_normals(cloud, k=8)
         cam = gp.Camera.fit_cloud(cloud, width=160, height=100)
-        for kw in [{"color_mode": mode} for mode in COLOR_MODES] + [{"lighting": True}]:
+        for kw in [{"color_mode": mode} for mode in COLOR_MODES if mode != "attribute"] + [{"lighting": True}]:  # (attribute: as intensity)
             gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", **kw))
 
     def octree():

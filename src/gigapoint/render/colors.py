@@ -118,6 +118,16 @@ def _attribute(cloud, mode: str) -> np.ndarray:
     raise SettingsError(f"color_mode {mode!r}: {cloud.name} has no {mode} attribute (attributes: {have})")
 
 
+def _named_attribute(cloud, name: str | None) -> np.ndarray:
+    """The values of attribute ``name`` (color_mode 'attribute'), as float64 where they are not numbers already."""
+    have = ", ".join(sorted(cloud.attributes)) or "none"
+    if not name:
+        raise SettingsError(f"color_mode 'attribute': name the attribute with color_attribute (--color-attribute); {cloud.name} has: {have}")
+    if name not in cloud.attributes:
+        raise SettingsError(f"color_attribute: {cloud.name} has no attribute {name!r} (attributes: {have})")
+    return np.asarray(cloud.attributes[name])
+
+
 def normals_of(cloud) -> np.ndarray | None:
     """(N, 3) float32 unit normals if the cloud carries them (nx/ny/nz or 'normal'), else None."""
     a = cloud.attributes
@@ -201,6 +211,10 @@ def _compute(cloud, mode: str, settings) -> np.ndarray:
         v = _attribute(cloud, mode)
         lo, hi = settings.intensity_range or _auto_range(v)
         return _ramp(v, lo, hi, colormap_table("gray"))
+    if mode == "attribute":
+        v = _named_attribute(cloud, settings.color_attribute)
+        lo, hi = settings.attribute_range or _auto_range(v)
+        return _ramp(v, lo, hi, colormap_table(settings.colormap))
     if mode == "classification":
         v = _attribute(cloud, mode).astype(np.int64) & 0xFF
         return classification_table().view(np.uint32).reshape(-1)[v]
@@ -246,6 +260,7 @@ def point_colors(cloud, settings) -> np.ndarray:
         settings.colormap if mode == "elevation" else None,
         settings.elevation_range if mode == "elevation" else None,
         settings.intensity_range if mode == "intensity" else None,
+        (settings.color_attribute, settings.attribute_range, settings.colormap) if mode == "attribute" else None,
     )
     cache = render_cache.arrays(cloud)
     colors = cache.get(key)

@@ -23,7 +23,7 @@ from ..errors import SettingsError
 
 # --- the choices (render/colors.py derives COLOR_MODES and COLORMAPS from these) ----------------------
 Backend = Literal["auto", "cpu", "wgpu"]
-ColorMode = Literal["rgb", "intensity", "classification", "elevation", "return_number", "point_source_id", "batch", "level", "normal"]
+ColorMode = Literal["rgb", "intensity", "classification", "elevation", "return_number", "point_source_id", "attribute", "batch", "level", "normal"]
 Colormap = Literal["viridis", "turbo", "terrain", "inferno", "gray"]
 PointShape = Literal["square", "round"]
 SizeMode = Literal["auto", "adaptive", "fixed", "attenuated"]
@@ -140,9 +140,16 @@ class RenderSettings:
     )
     # --- image quality (render/passes, render/colors.py) ---
     color_mode: ColorMode = setting("rgb", "Point colors: the cloud's own, an attribute, the elevation or a debug view.")
-    colormap: Colormap = setting("viridis", "Colormap of the elevation color mode.")
+    color_attribute: str | None = setting(
+        None,
+        "The attribute color mode's attribute: any the cloud holds (a LAS file's extra bytes too), mapped through the colormap "
+        "(on the command line it also means --color-mode attribute).",
+        implies={"color_mode": "attribute"},
+    )
+    colormap: Colormap = setting("viridis", "Colormap of the elevation and attribute color modes.")
     elevation_range: Range | None = setting(None, "'low,high' elevations mapped onto the colormap (default: the cloud's z extent).")
     intensity_range: Range | None = setting(None, "'low,high' intensity contrast range (default: 2nd..98th percentile).")
+    attribute_range: Range | None = setting(None, "'low,high' values of color_attribute mapped onto the colormap (default: 2nd..98th percentile).")
     edl: bool = setting(False, "Eye-dome lighting.")
     edl_strength: float = setting(1.0, "Eye-dome lighting strength.", min=0.0)
     edl_radius: float = setting(1.4, "Eye-dome lighting radius in pixels.", min=0.5, max=16.0)
