@@ -17,9 +17,13 @@ from gigapoint.lod.potree import HIERARCHY_DTYPE, decode_node
 pytest.importorskip("brotli")
 
 
-def _chunks(n=50_000):
+def _chunks(n=50_000, more=False):
     xyz, rgba, attrs = demo_arrays(n, seed=7)
     xyz = np.round(xyz * 1000) / 1000
+    if more:  # attributes beyond intensity and classification: a LAS field under Potree's name, extras, a boolean
+        rng = np.random.default_rng(7)
+        attrs.update(return_number=rng.integers(1, 5, n).astype(np.uint8), gps_time=rng.uniform(0, 1e6, n),
+                     height=rng.uniform(-2, 40, n).astype(np.float32), flag=rng.random(n) < 0.5)  # fmt: skip
     return [PointChunk(xyz, rgba, attrs)]
 
 
@@ -29,7 +33,7 @@ def converted(tmp_path_factory):
     out = {}
     for fmt, enc in (("gigapoint", "DEFAULT"), ("potree", "DEFAULT"), ("potree", "BROTLI")):
         path = d / f"{fmt}_{enc}"
-        convert(_chunks(), path, format=fmt, encoding=enc, max_leaf=3_000, partition_points=20_000)
+        convert(_chunks(more=True), path, format=fmt, encoding=enc, max_leaf=3_000, partition_points=20_000)
         out[(fmt, enc)] = path
     return out
 
@@ -40,7 +44,11 @@ def test_potree_round_trip(converted, encoding):
     pot = open_octree(converted[("potree", encoding)])
     meta = json.loads((converted[("potree", encoding)] / "metadata.json").read_text())
     assert meta["encoding"] == encoding and meta["points"] == ref.n_points
-    assert [a["name"] for a in meta["attributes"]] == ["position", "intensity", "classification", "rgb"]
+    # every attribute, LAS fields under PotreeConverter's names (read back as gigapoint's): the
+    # writer kept intensity and classification only
+    names = ["position", "intensity", "classification", "return number", "gps-time", "height", "flag", "rgb"]
+    assert [a["name"] for a in meta["attributes"]] == names
+    assert [a["type"] for a in meta["attributes"]] == ["int32", "uint16", "uint8", "uint8", "double", "float", "uint8", "uint16"]
     np.testing.assert_array_equal(pot.keys, ref.keys)
     np.testing.assert_array_equal(pot.nodes["count"], ref.nodes["count"])
     for i in range(len(ref.keys)):
@@ -51,8 +59,8 @@ def test_potree_round_trip(converted, encoding):
         order_b = np.lexsort(np.round(b["xyz"] * 1000).T)  # BROTLI permutes points into Morton order
         np.testing.assert_allclose(b["xyz"][order_b], a["xyz"][order_a], atol=1e-6)
         np.testing.assert_array_equal(b["rgba"][order_b], a["rgba"][order_a])
-        np.testing.assert_array_equal(b["intensity"][order_b], a["intensity"][order_a])
-        np.testing.assert_array_equal(b["classification"][order_b], a["classification"][order_a])
+        for name in ("intensity", "classification", "return_number", "gps_time", "height", "flag"):
+            np.testing.assert_array_equal(b[name][order_b], np.asarray(a[name][order_a]).astype(b[name].dtype), err_msg=name)
 
 
 def test_potree_hierarchy_breadth_first(converted):

@@ -36,8 +36,18 @@ _TYPES = {
     "float": "<f4",
     "double": "<f8",
 }
-#: what the writer stores (LAS order): position, intensity, classification, rgb
+#: what the writer stores first (LAS order): position, intensity, classification (zeros where
+#: the points have none: viewers expect them), then every other attribute, then rgb
 WRITE_ATTRIBUTES = (("position", "int32", 3), ("intensity", "uint16", 1), ("classification", "uint8", 1), ("rgb", "uint16", 3))
+#: gigapoint's attribute names as PotreeConverter writes them (the reader maps them back)
+POTREE_NAMES = {"return_number": "return number", "number_of_returns": "number of returns", "point_source_id": "point source id", "gps_time": "gps-time"}
+_TYPE_OF = {np.dtype(t): name for name, t in _TYPES.items()}
+
+
+def _potree_type(dtype) -> str:
+    """The Potree type an attribute of ``dtype`` is written as (booleans as uint8, half floats as float)."""
+    dt = np.dtype(dtype)
+    return _TYPE_OF[np.dtype(np.uint8) if dt == np.bool_ else np.dtype(np.float32) if dt == np.float16 else dt]
 
 
 BROTLI_QUALITY = 5
@@ -75,13 +85,14 @@ def _compact16(m: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- writer
 
 
-def _attribute_entries(scale, offset, stats) -> list[dict]:
+def _attribute_entries(layout: list[tuple[str, str, int]], scale, offset, stats) -> list[dict]:
+    """metadata.json's attribute records of ``layout`` ((name, Potree type, elements) in record order)."""
     out = []
-    for name, typ, n in WRITE_ATTRIBUTES:
+    for name, typ, n in layout:
         size = np.dtype(_TYPES[typ]).itemsize
         lo, hi = stats[name]
         e = {
-            "name": name,
+            "name": POTREE_NAMES.get(name, name),
             "description": "",
             "size": size * n,
             "numElements": n,
@@ -98,18 +109,30 @@ def _attribute_entries(scale, offset, stats) -> list[dict]:
     return out
 
 
-def encode_node(
-    xyz: np.ndarray, rgb16: np.ndarray, intensity: np.ndarray, classification: np.ndarray, scale, offset, encoding: str
-) -> bytes:
-    """One node's octree.bin blob."""
+def write_layout(attributes: dict) -> list[tuple[str, str, int]]:
+    """(name, Potree type, elements) of every field a node's record holds, in order, for points
+    with ``attributes`` ({name: dtype}): ``WRITE_ATTRIBUTES``' position, intensity and
+    classification, the other attributes, rgb."""
+    first, rgb = list(WRITE_ATTRIBUTES[:3]), WRITE_ATTRIBUTES[3]
+    taken = {name for name, _, _ in first}
+    return first + [(a, _potree_type(dt), 1) for a, dt in attributes.items() if a not in taken] + [rgb]
+
+
+def encode_node(xyz: np.ndarray, rgb16: np.ndarray, attributes: dict, layout, scale, offset, encoding: str) -> bytes:
+    """One node's octree.bin blob: its fields in ``layout`` order (``write_layout``; an attribute
+    the points lack is zeros)."""
+    n = len(xyz)
     ixyz = np.floor((xyz - np.asarray(offset)) / np.asarray(scale) + 0.5).astype(np.int64)
     ixyz = np.clip(ixyz, 0, 2**31 - 1).astype(np.int32)
+
+    def values(name, typ):
+        v = attributes.get(name)
+        return np.zeros(n, _TYPES[typ]) if v is None else np.asarray(v).astype(_TYPES[typ])
+
     if encoding == "DEFAULT":
-        rec = np.empty(len(xyz), np.dtype([(n, _TYPES[t], (k,)) if k > 1 else (n, _TYPES[t]) for n, t, k in WRITE_ATTRIBUTES]))
-        rec["position"] = ixyz
-        rec["intensity"] = intensity
-        rec["classification"] = classification
-        rec["rgb"] = rgb16
+        rec = np.empty(n, np.dtype([(a, _TYPES[t], (k,)) if k > 1 else (a, _TYPES[t]) for a, t, k in layout]))
+        for a, t, _ in layout:
+            rec[a] = ixyz if a == "position" else rgb16 if a == "rgb" else values(a, t)
         return rec.tobytes()
     # BROTLI: attribute by attribute, points in Morton order, position and rgb as Morton codes
     u = ixyz.astype(np.uint64)
@@ -120,20 +143,21 @@ def encode_node(
         | _spread16(u[:, 2] >> np.uint64(16)) << np.uint64(2)
     )
     order = np.lexsort((lower, upper))
-    pos = np.empty((len(xyz), 2), np.uint64)
-    pos[:, 0] = upper[order]
-    pos[:, 1] = lower[order]
-    c = rgb16[order].astype(np.uint64)
-    rgbm = _spread16(c[:, 0]) | _spread16(c[:, 1]) << np.uint64(1) | _spread16(c[:, 2]) << np.uint64(2)
-    raw = (
-        pos.astype("<u8").tobytes()
-        + np.asarray(intensity)[order].astype("<u2").tobytes()
-        + np.asarray(classification)[order].astype("u1").tobytes()
-        + rgbm.astype("<u8").tobytes()
-    )
+    parts = []
+    for a, t, _ in layout:
+        if a == "position":
+            pos = np.empty((n, 2), np.uint64)
+            pos[:, 0] = upper[order]
+            pos[:, 1] = lower[order]
+            parts.append(pos.astype("<u8").tobytes())
+        elif a == "rgb":
+            c = rgb16[order].astype(np.uint64)
+            parts.append((_spread16(c[:, 0]) | _spread16(c[:, 1]) << np.uint64(1) | _spread16(c[:, 2]) << np.uint64(2)).astype("<u8").tobytes())
+        else:
+            parts.append(values(a, t)[order].tobytes())
     # quality 5, not the default 11: ~47x faster (1.8 M instead of 0.04 M points/s on one core)
     # for a file ~2 % larger, measured on node-sized payloads
-    return _brotli().compress(raw, quality=BROTLI_QUALITY)
+    return _brotli().compress(b"".join(parts), quality=BROTLI_QUALITY)
 
 
 def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progress, encoding: str = "DEFAULT") -> int:
@@ -144,12 +168,15 @@ def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progr
     scale3 = [scale] * 3
     n_total = 0
     records: dict[int, tuple[int, int, int]] = {}
-    stats = {
-        "position": [[np.inf] * 3, [-np.inf] * 3],
-        "intensity": [[np.inf], [-np.inf]],
-        "classification": [[np.inf], [-np.inf]],
-        "rgb": [[np.inf] * 3, [-np.inf] * 3],
-    }
+    names = list(st.get("attributes") or [])
+    dtypes = {}  # the attributes' dtypes, from the first node set that holds each
+    for src in sources:
+        for a in names:
+            f = src / f"attr.{a}.npy"
+            if a not in dtypes and f.exists():
+                dtypes[a] = np.load(f, mmap_mode="r").dtype
+    layout = write_layout({a: dtypes[a] for a in names if a in dtypes})
+    stats = {a: [[np.inf] * k, [-np.inf] * k] for a, _, k in layout}
 
     pos = 0
     with atomic_open(out.potree_octree, durable=True) as f:  # node by node: never more than one node set in memory
@@ -159,27 +186,26 @@ def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progr
             xyz = np.load(src / "xyz.npy")
             rgba = np.load(src / "rgba.npy").view(np.uint8).reshape(-1, 4)
             n = len(xyz)
-            inten = (
-                np.load(src / "attr.intensity.npy").astype(np.uint16) if (src / "attr.intensity.npy").exists() else np.zeros(n, np.uint16)
-            )
-            cls = (
-                np.load(src / "attr.classification.npy").astype(np.uint8)
-                if (src / "attr.classification.npy").exists()
-                else np.zeros(n, np.uint8)
-            )
+            attrs = {a: np.load(src / f"attr.{a}.npy") for a, _, _ in layout if (src / f"attr.{a}.npy").exists()}
             rgb16 = rgba[:, :3].astype(np.uint16) * np.uint16(257)
             starts = np.concatenate([[0], np.cumsum(counts)])
             for k, key in enumerate(keys.tolist()):
                 s, e = int(starts[k]), int(starts[k + 1])
-                blob = encode_node(xyz[s:e], rgb16[s:e], inten[s:e], cls[s:e], scale3, origin, encoding) if e > s else b""
+                part = {a: v[s:e] for a, v in attrs.items()}
+                blob = encode_node(xyz[s:e], rgb16[s:e], part, layout, scale3, origin, encoding) if e > s else b""
                 f.write(blob)
                 records[key] = (e - s, pos, len(blob))
                 pos += len(blob)
             if n:
-                ip = np.floor((xyz - origin) / scale + 0.5)
-                for nm, arr in (("position", ip), ("intensity", inten[:, None]), ("classification", cls[:, None]), ("rgb", rgb16)):
-                    stats[nm][0] = np.minimum(stats[nm][0], arr.min(axis=0)).tolist()
-                    stats[nm][1] = np.maximum(stats[nm][1], arr.max(axis=0)).tolist()
+                for a, t, _ in layout:
+                    if a == "position":
+                        arr = np.floor((xyz - origin) / scale + 0.5)
+                    elif a == "rgb":
+                        arr = rgb16
+                    else:
+                        arr = attrs[a].astype(_TYPES[t])[:, None] if a in attrs else np.zeros((1, 1))
+                    stats[a][0] = np.minimum(stats[a][0], arr.min(axis=0)).tolist()
+                    stats[a][1] = np.maximum(stats[a][1], arr.max(axis=0)).tolist()
             n_total += n
             progress.advance(n)
     keys = np.array(sorted(records), np.uint64)
@@ -206,7 +232,7 @@ def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progr
         "spacing": edge / 128.0,
         "boundingBox": {"min": list(map(float, origin)), "max": list(map(float, origin + edge))},
         "encoding": encoding,
-        "attributes": _attribute_entries(scale3, list(map(float, origin)), stats),
+        "attributes": _attribute_entries(layout, scale3, list(map(float, origin)), stats),
     }
     atomic_json(out.potree_meta, meta, indent="\t", durable=True)  # last: the folder is complete from here on
     return len(keys)
