@@ -49,6 +49,10 @@ def test_potree_round_trip(converted, encoding):
     names = ["position", "intensity", "classification", "return number", "gps-time", "height", "flag", "rgb"]
     assert [a["name"] for a in meta["attributes"]] == names
     assert [a["type"] for a in meta["attributes"]] == ["int32", "uint16", "uint8", "uint8", "double", "float", "uint8", "uint16"]
+    from gigapoint.lod import octree_info
+
+    # gigapoint info names them as gigapoint does (it said "return number", which --color-attribute does not take)
+    assert octree_info(converted[("potree", encoding)])["attributes"] == ["intensity", "classification", "return_number", "gps_time", "height", "flag"]
     np.testing.assert_array_equal(pot.keys, ref.keys)
     np.testing.assert_array_equal(pot.nodes["count"], ref.nodes["count"])
     for i in range(len(ref.keys)):

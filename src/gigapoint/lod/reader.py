@@ -109,8 +109,8 @@ def octree_info(path) -> dict:
     lo, hi = cloud.bounds
     potree = d.kind == "potree"
     attributes, crs = sorted(cloud.attributes), cloud.meta.get("crs")
-    if potree:  # its nodes are decoded on demand: the metadata names what they hold
-        attributes = [str(a["name"]) for a in cloud.potree_attributes if a.get("name") not in ("position", "rgb")]
+    if potree:  # its nodes are decoded on demand: the metadata names what they hold (as gigapoint names them)
+        attributes = [name for name, _ in cloud.extra.values()]
     levels = int(cloud.nodes["level"].max()) + 1
     sampler, spacing = cloud.meta.get("sampler"), cloud.meta.get("spacing")
     text = f"{len(cloud.keys):,} nodes in {levels} levels"
