@@ -350,3 +350,19 @@ def test_text_with_byte_order_mark(tmp_path):
     p = tmp_path / "bom.csv"
     p.write_bytes("x,y,z\n1,2,3\n".encode("utf-8-sig"))
     np.testing.assert_array_equal(collect(p)[1], [[1, 2, 3]])
+
+
+def test_attribute_names_that_cannot_name_a_file_are_mended_or_refused(tmp_path):
+    """Octrees store an attribute in ``attr.<name>.npy``: a file's own field 'a/b' is read as
+    'a_b' (NPZ, CSV; LAS extra bytes: test_io_las), a program's is a one-line InputError (the
+    NPZ said "internal error: ValueError" and exit 2, a LAS conversion failed on 'attr.a/b.npy')."""
+    import gigapoint as gp
+    from gigapoint.errors import InputError
+
+    np.savez(tmp_path / "a.npz", xyz=np.random.default_rng(1).random((10, 3)), **{"a/b": np.arange(10)})
+    (tmp_path / "a.csv").write_text("x,y,z,a/b\n1,2,3,4\n5,6,7,8\n")
+    assert list(open_cloud(tmp_path / "a.npz").attributes) == ["a_b"]
+    np.testing.assert_array_equal(np.asarray(open_cloud(tmp_path / "a.csv").attributes["a_b"]), [4, 8])
+    for name in ("a/b", "..", "", "x\\y"):
+        with pytest.raises(InputError, match=f"^arrays: attribute name {name!r} cannot be stored".replace("\\", "\\\\")):
+            gp.from_arrays(np.zeros((2, 3)), **{name: np.ones(2)})

@@ -188,6 +188,8 @@ def test_extra_bytes_are_read_as_attributes(tmp_path, suffix):
     header.add_extra_dim(laspy.ExtraBytesParams(name="height_above_ground", type=np.float32))
     header.add_extra_dim(laspy.ExtraBytesParams(name="amplitude", type=np.uint16, scales=np.array([0.5]), offsets=np.array([10.0])))
     header.add_extra_dim(laspy.ExtraBytesParams(name="direction", type="3f8"))
+    header.add_extra_dim(laspy.ExtraBytesParams(name="a/b", type=np.uint8))  # read as a_b: names are file name parts
+    header.add_extra_dim(laspy.ExtraBytesParams(name="..", type=np.uint8))  # left out
     las = laspy.LasData(header)
     las.x = las.y = las.z = np.arange(20.0)
     las.height_above_ground = np.arange(20, dtype=np.float32)
@@ -197,12 +199,14 @@ def test_extra_bytes_are_read_as_attributes(tmp_path, suffix):
     las.write(str(path))
     _, xyz, _, attrs = collect(path)
     np.testing.assert_array_equal(xyz[:, 0], np.arange(20.0))
-    assert list(attrs)[-2:] == ["height_above_ground", "amplitude"] and "intensity" in attrs and "direction" not in attrs
+    assert list(attrs)[-3:] == ["height_above_ground", "amplitude", "a_b"] and "intensity" in attrs and "direction" not in attrs
     np.testing.assert_array_equal(attrs["height_above_ground"], np.arange(20, dtype=np.float32))
     np.testing.assert_array_equal(attrs["amplitude"], 10.0 + 0.5 * np.arange(20))
-    assert "height_above_ground" in file_info(path)["dimensions"] and file_info(path)["attributes"][-2:] == ["height_above_ground", "amplitude"]
+    assert "height_above_ground" in file_info(path)["dimensions"] and file_info(path)["attributes"][-3:] == ["height_above_ground", "amplitude", "a_b"]
     cloud = gp.open(path, progressive=True)
-    assert cloud.wait() and cloud.attribute_names[-2:] == ("height_above_ground", "amplitude")
+    assert cloud.wait() and cloud.attribute_names[-3:] == ("height_above_ground", "amplitude", "a_b")
+    result = gp.convert(path, tmp_path / "octree")  # ('a/b' made the conversion fail on a file 'attr.a/b.npy')
+    assert result.points == 20 and "a_b" in gp.open(tmp_path / "octree").node_points(0)
 
 
 @settings(max_examples=25, deadline=None)

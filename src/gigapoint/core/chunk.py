@@ -39,12 +39,27 @@ class PointChunk:
         for name, values in self.attributes.items():
             if len(values) != n:
                 raise ValueError(f"attribute {name!r} has {len(values)} rows, xyz has {n}")
-            problem = attribute_dtype_problem(name, values)
+            problem = attribute_name_problem(name) or attribute_dtype_problem(name, values)
             if problem:
                 raise ValueError(problem)
 
     def __len__(self) -> int:
         return len(self.xyz)
+
+
+def attribute_name_problem(name) -> str | None:
+    """Why ``name`` cannot name an attribute, or None: octrees store each attribute in a file
+    named after it (``attr.<name>.npy``), so no path separator or NUL, not empty, '.' or '..'."""
+    if not isinstance(name, str) or name in ("", ".", "..") or any(c in name for c in "/\\\0"):
+        return f"attribute name {name!r} cannot be stored (a file name part: not empty, '.' or '..', no /, \\ or NUL)"
+    return None
+
+
+def safe_attribute_name(name: str) -> str | None:
+    """``name`` with path separators and NUL as '_' (a file's own field names, kept rather than
+    refused: an extra bytes field 'a/b' is read as 'a_b'); None for one that stays unusable."""
+    name = "".join("_" if c in "/\\\0" else c for c in name)
+    return None if attribute_name_problem(name) else name
 
 
 def attribute_dtype_problem(name: str, values: np.ndarray) -> str | None:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.chunk import PointChunk, to_rgba8
+from ..core.chunk import PointChunk, safe_attribute_name, to_rgba8
 from ..errors import EmptyCloudError, InputError
 
 #: Points per chunk a reader yields unless told otherwise (about 100 MB of xyz + rgba + attributes).
@@ -171,7 +171,9 @@ def rows_to_chunk(path: Path, names: list[str], columns: list[np.ndarray], scale
     for name, values in zip(lower, columns):
         if name in ("x", "y", "z") or name in used:
             continue
-        attributes[name] = np.ascontiguousarray(values)
+        name = safe_attribute_name(name)  # 'a/b' as 'a_b': a file's own names are kept, not refused
+        if name is not None:
+            attributes[name] = np.ascontiguousarray(values)
     return PointChunk(xyz, rgba, attributes)
 
 

@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..core import pages
-from ..core.chunk import PointChunk
+from ..core.chunk import PointChunk, safe_attribute_name
 from ..core.cloud import MAX_ABS_COORDINATE, NUMPY_MAX
 from ..errors import EmptyCloudError, InputError
 from . import laz_process
@@ -41,15 +41,19 @@ LASZIP_RECORD_ID = 22204
 LAS_ATTRIBUTES = ("intensity", "classification", "return_number", "number_of_returns", "point_source_id", "gps_time", "nir")
 
 
-def _attribute_names(point_format) -> list[str]:
-    """The attributes read of a file's points: the standard fields among ``LAS_ATTRIBUTES``,
+def _attribute_fields(point_format) -> dict[str, str]:
+    """{attribute: record field} of a file's points: the standard fields among ``LAS_ATTRIBUTES``,
     then its extra bytes of one value a point (scaled where the file gives a scale: laspy
-    returns them as floats), in record order; arrays (``3f8``) and bytes the file does not
-    describe are left out."""
+    returns them as floats), in record order, named as the file names them but for path
+    separators ('a/b' is read as 'a_b': core/chunk.safe_attribute_name); arrays (``3f8``) and
+    bytes the file does not describe are left out."""
     dims = set(point_format.dimension_names)
-    standard = [a for a in LAS_ATTRIBUTES if a in dims]
-    described = [d for d in point_format.extra_dimensions if d.name != "ExtraBytes"]  # (laspy's name for bytes no VLR describes)
-    return standard + [d.name for d in described if d.num_elements == 1 and d.name not in standard]
+    fields = {a: a for a in LAS_ATTRIBUTES if a in dims}
+    for d in point_format.extra_dimensions:
+        name = safe_attribute_name(d.name)
+        if d.name != "ExtraBytes" and d.num_elements == 1 and name is not None and name not in fields:  # (ExtraBytes: laspy's name for undescribed bytes)
+            fields[name] = d.name
+    return fields
 
 
 @dataclass
@@ -486,7 +490,7 @@ class LasReader(Reader):
                 if not laz_process.bad_data(exc):
                     raise
                 raise corrupt(exc) from None
-            attrs = _attribute_names(reader.header.point_format)
+            attrs = _attribute_fields(reader.header.point_format)
             has_rgb = {"red", "green", "blue"} <= dims
             stored_scale = tuple(float(abs(s)) for s in scale)  # PointChunk.scale: the resolution the file stores
             scaler = ColorScaler() if scaler is None else scaler
@@ -522,7 +526,7 @@ class LasReader(Reader):
                 if has_rgb:
                     rgba = _colors(raw["red"], raw["green"], raw["blue"], scaler)
                 # copies (a field of the records is a strided view of the reused buffer, a bit field a new array)
-                attributes = {a: np.ascontiguousarray(np.asarray(pts[a])) for a in attrs}
+                attributes = {a: np.ascontiguousarray(np.asarray(pts[f])) for a, f in attrs.items()}
                 done += n
                 yield PointChunk(xyz, rgba, attributes, scale=stored_scale)
         if done < stop:
@@ -542,7 +546,7 @@ class LasReader(Reader):
             if not laz_process.bad_data(exc):
                 raise
             raise fail(path, f"corrupt {'LAZ' if hdr.compressed else 'LAS'} header: {exc}") from None
-        attrs = _attribute_names(header.point_format)
+        attrs = list(_attribute_fields(header.point_format))
         return {
             "path": str(path),
             "format": "LAZ" if hdr.compressed else "LAS",

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.chunk import PointChunk
+from ..core.chunk import PointChunk, safe_attribute_name
 from ..errors import EmptyCloudError
 from ._base import (
     DEFAULT_CHUNK_SIZE,
@@ -246,7 +246,8 @@ class NpzReader(Reader):
             else:
                 xyz = np.column_stack([blocks.pop(lower[a]) for a in "xyz"])
             rgba = scaler(blocks.pop(color_key)) if color_key else None
-            yield PointChunk(xyz.astype(np.float64), rgba, {k: np.array(v) for k, v in blocks.items()})
+            named = ((safe_attribute_name(k), v) for k, v in blocks.items())  # 'a/b' as 'a_b' (core/chunk.py)
+            yield PointChunk(xyz.astype(np.float64), rgba, {k: np.array(v) for k, v in named if k is not None})
 
     def info(self, path: Path) -> dict:
         path = check_file(path)

@@ -54,7 +54,7 @@ from numba.typed import List
 from ...core import pages
 from ...core.attributes import Attributes, encode, fits, holder_for, repacked, resized, widened
 from ...core.attributes import stored as stored_array
-from ...core.chunk import PointChunk, attribute_dtype_problem, colors_for
+from ...core.chunk import PointChunk, attribute_dtype_problem, attribute_name_problem, colors_for
 from ...core.cloud import MAX_ABS_COORDINATE
 from ...core.compact import GRID_TOLERANCE, ext_bits_per_point, point_words, stream_words
 from ...core.framelock import FrameLock
@@ -893,7 +893,7 @@ class ProgressiveOctree:
             v = np.asarray(v)
             if v.ndim != 1 or len(v) != n:
                 raise InputError(f"{self.name}: attribute {a!r} must be 1-D of length {n}, got shape {v.shape}")
-            problem = attribute_dtype_problem(a, v)
+            problem = attribute_name_problem(a) or attribute_dtype_problem(a, v)
             if problem:
                 raise InputError(f"{self.name}: {problem}")
             attrs[a] = v
