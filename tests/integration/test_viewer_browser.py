@@ -160,6 +160,25 @@ def test_panel_change_changes_the_frame(page):
     assert canvas_pixels(page)[2, 2].min() > 225
 
 
+def test_color_attribute_offers_the_clouds_attributes_and_colours_by_one(page):
+    """The colour attribute field lists the cloud's attributes (a datalist); with one named, the
+    'attribute' colour mode draws it (the mode without a name is refused, as any bad setting)."""
+    names = page.eval_on_selector_all("#attribute-names option", "els => els.map(e => e.value)")
+    assert names == ["intensity"]
+    page.locator("#setting-color_attribute").fill("intensity")
+    page.locator("#setting-color_attribute").dispatch_event("change")
+    page.wait_for_function("() => window.gigapoint.settings.color_attribute === 'intensity'", timeout=30_000)
+    before = canvas_pixels(page)
+    n = frame_no(page)
+    page.locator("#setting-color_mode").select_option('"attribute"')
+    wait_full_frame(page, n)
+    page.wait_for_function("() => window.gigapoint.settings.color_mode === 'attribute'", timeout=30_000)
+    t_end = time.monotonic() + 30  # (a frame asked for before the change may arrive after it)
+    while np.array_equal(canvas_pixels(page), before) and time.monotonic() < t_end:
+        time.sleep(0.2)
+    assert not np.array_equal(canvas_pixels(page), before)
+
+
 def test_view_presets_and_fov(page):
     n = frame_no(page)
     page.get_by_role("button", name="top").click()

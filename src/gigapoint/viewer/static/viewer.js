@@ -181,6 +181,11 @@
           if (f.nullable) input.placeholder = "auto";
         } else {
           input = document.createElement("input"); input.type = "text";
+          if (f.name === "color_attribute") {  // the cloud's attributes offered as one types
+            const list = document.createElement("datalist"); list.id = "attribute-names";
+            for (const a of S.cloud.attributes || []) { const o = document.createElement("option"); o.value = a; list.append(o); }
+            input.setAttribute("list", list.id); row.append(list);
+          }
         }
         row.append(input);
       }
