@@ -290,6 +290,21 @@ def test_save_puts_las_attributes_in_their_fields_and_others_in_extra_bytes(tmp_
     assert set(np.asarray(las.classification).tolist()) == {255} and set(np.asarray(las.return_number).tolist()) == {15}
 
 
+def test_close_frees_frames_and_snapshots_and_refuses_later_pushes():
+    """``close`` stopped the source and recording only: frames and snapshots stayed in memory,
+    and a push or snapshot afterwards went on as if open."""
+    live = LiveCloud()
+    live.push(*frame(0, n=2000))
+    live.snapshot()
+    live.push(*frame(1, n=1000))
+    assert live.n_points == 3000 + 2000 and live.snapshots.n_points == 2000  # (a snapshot copies the ring's frames)
+    live.close()
+    assert live.n_points == 0 and live.snapshots.n_points == 0 and live.snapshots.pool is None
+    for what, call in (("push", lambda: live.push(*frame(2, n=10))), ("snapshot", live.snapshot), ("save", lambda: live.save("x.las"))):
+        with pytest.raises(InputError, match=f"^live: {what}: the live cloud is closed"):
+            call()
+
+
 def test_an_aging_frame_fades_through_the_transparency_pass():
     now = [0.0]
     live = LiveCloud(decay=2.0, clock=lambda: now[0])

@@ -161,6 +161,7 @@ class LiveCloud:
         self.points = 0  # points in the ring
         self.stats = LiveStats()
         self.snapshots = None  # the ProgressiveOctree of snapshots (created by the first snapshot)
+        self.closed = False  # close(): frames and snapshots freed, pushes refused
         self._mirror_pool = None
         self._mirror_version = -1
         self._version_pushed: dict[int, float] = {}  # buffers version -> perf_counter of the newest push it holds
@@ -301,6 +302,7 @@ class LiveCloud:
         """``ordered``: a depth frame's points in its image's Z order, batched as they come
         (batch_frame); other frames are sorted by Morton code."""
         name = self.name
+        self._check_open("push")
         xyz_in = _as_points(xyz, f"{name}: push")
         n = len(xyz_in)
         if n == 0:
@@ -571,6 +573,7 @@ class LiveCloud:
         on the Intel Xeon VM). Meanwhile the frames' chunks are pinned (a frame that leaves the
         ring frees them when the snapshot is done), rather than the lock held: frames are drawn
         and pushed as usual."""
+        self._check_open("snapshot")
         with self.lock.reading():
             buf = self.buffers_
             slots = [s for f in self.frames for s in f.chunks]
@@ -620,6 +623,7 @@ class LiveCloud:
         normals), else a gigapoint octree folder. Returns the points written."""
         from .save import save_snapshots
 
+        self._check_open("save")
         if self.snapshots is None or self.snapshots.n_points == 0:
             raise InputError(f"{self.name}: nothing to save: no snapshot taken yet (call snapshot())")
         return save_snapshots(self.snapshots, path, overwrite)
@@ -641,6 +645,16 @@ class LiveCloud:
             rec.stop()
 
     def close(self) -> None:
+        """Stop its source and recording and free its frames and snapshots (it draws nothing
+        afterwards); a later push or snapshot is a one-line InputError."""
         if self.player is not None:
             self.player.stop()
         self.stop_recording()
+        self.closed = True
+        self.clear()
+        if self.snapshots is not None:
+            self.snapshots.close()
+
+    def _check_open(self, what: str) -> None:
+        if self.closed:
+            raise InputError(f"{self.name}: {what}: the live cloud is closed")
