@@ -924,6 +924,7 @@ def test_open_progressive_loads_several_files_in_the_background(tmp_path, las_wr
     cloud = gp.open(a, b, progressive=True)
     assert cloud.wait(timeout=120)
     assert cloud.progress == 1.0 and not cloud.loading and cloud.error is None
+    assert repr(cloud).endswith(" voxels)")
     plain = gp.open(a, b)
     assert cloud.n_points == plain.n_points == 100_000
     assert sorted(cloud.attributes) == sorted(plain.attributes)
@@ -953,8 +954,33 @@ def test_a_source_failing_part_way_keeps_what_was_loaded():
         o.wait(timeout=60)
     assert "tiles/b.laz" in str(err.value) and "\n" not in str(err.value)
     assert o.n_points == 60_000 and o.error is not None and o.progress == pytest.approx(60_000 / 90_000)
+    assert repr(o) == f"ProgressiveOctree('failing', 60,000 points, {o.n_nodes} nodes, {o.n_voxels:,} voxels, loading stopped: {err.value})"
     cam = gp.Camera.fit(o.bounds, width=64, height=48)
     assert gp.render_frame(o, cam, EXACT).stats.visible_pixels > 0
+
+
+def test_the_repr_says_how_far_loading_is():
+    from gigapoint.io import demo_chunks
+    from gigapoint.lod.progressive import Loader
+
+    go = threading.Event()
+
+    def chunks():
+        for i, chunk in enumerate(demo_chunks(90_000, chunk_size=30_000)):
+            if i == 1:
+                go.wait(60)
+            yield chunk
+
+    o = ProgressiveOctree("slow")
+    o.attach(Loader(o, [("slow.las", chunks)], 90_000).start())
+    deadline = time.monotonic() + 60
+    while o.n_points < 30_000 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert repr(o).endswith(", loading: 33% read)")
+    go.set()
+    assert o.wait(60) and repr(o).endswith(" voxels)")
+    o.close()
+    assert repr(o) == "ProgressiveOctree('slow', 0 points, 0 nodes, 0 voxels, closed)"
 
 
 def test_loading_stops_at_its_memory_limit_and_keeps_what_it_holds():

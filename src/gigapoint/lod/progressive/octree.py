@@ -868,7 +868,14 @@ class ProgressiveOctree:
         return self.points
 
     def __repr__(self) -> str:
-        return f"ProgressiveOctree({self.name!r}, {self.points:,} points, {self.n_nodes:,} nodes, {self.n_voxels:,} voxels)"
+        state = ""
+        if self.closed:
+            state = ", closed"
+        elif self.error is not None:
+            state = ", loading stopped: " + str(self.error)
+        elif self.loading:
+            state = f", loading: {self.progress:.0%} read" if self.loader.total else ", loading"
+        return f"ProgressiveOctree({self.name!r}, {self.points:,} points, {self.n_nodes:,} nodes, {self.n_voxels:,} voxels{state})"
 
     # ------------------------------------------------------------------ adding points
     def add(self, xyz, rgb=None, **attributes) -> int:
