@@ -646,7 +646,7 @@ class LiveCloud:
 
     def close(self) -> None:
         """Stop its source and recording and free its frames and snapshots (it draws nothing
-        afterwards); a later push or snapshot is a one-line InputError."""
+        afterwards); a later push, snapshot or save is a one-line InputError."""
         if self.player is not None:
             self.player.stop()
         self.stop_recording()

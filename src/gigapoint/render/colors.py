@@ -119,7 +119,8 @@ def _attribute(cloud, mode: str) -> np.ndarray:
 
 
 def _named_attribute(cloud, name: str | None) -> np.ndarray:
-    """The values of attribute ``name`` (color_mode 'attribute'), as float64 where they are not numbers already."""
+    """The values of attribute ``name`` (color_mode 'attribute'); naming none, or one the cloud
+    lacks, is a one-line SettingsError listing the attributes it has."""
     have = ", ".join(sorted(cloud.attributes)) or "none"
     if not name:
         raise SettingsError(f"color_mode 'attribute': name the attribute with color_attribute (--color-attribute); {cloud.name} has: {have}")
