@@ -18,6 +18,7 @@ import io
 
 import numpy as np
 
+from ..core.chunk import safe_attribute_name
 from ..errors import InputError
 from ..io import laz_process
 from ..io.http import ByteSource, open_source
@@ -196,7 +197,7 @@ def extra_fields(vlrs) -> list[ExtraField]:
         out, seen = [], set()
         for i, d in enumerate(np.frombuffer(data, EXTRA_BYTES_DTYPE)):
             kind, opts = int(d["data_type"]), int(d["options"])
-            name = bytes(d["name"]).split(b"\0")[0].decode("ascii", "replace").strip()
+            name = safe_attribute_name(bytes(d["name"]).split(b"\0")[0].decode("ascii", "replace").strip()) or ""  # 'a/b' as 'a_b'
             if kind == 0:
                 out.append(ExtraField(f"_extra{i}", f"V{max(opts, 1)}"))
                 continue
