@@ -469,3 +469,21 @@ def test_damaged_chunks_that_crash_or_panic_lazrs_are_one_line_errors(autzen_oct
     if where != 0.3:  # decoded in this process (no child: not Linux, or switched off), a panic or error is one line too
         monkeypatch.setenv(laz_process.ENV_SWITCH, "0")
         _one_line_error(tmp_path / "bad.copc.laz", r"bad\.copc\.laz: cannot decode node \d+-\d+-\d+-\d+")
+
+
+def test_an_extra_bytes_name_with_a_slash_is_read_as_the_las_reader_reads_it(tmp_path):
+    """An Extra Bytes field named 'a/b' (another writer's file) is the attribute 'a_b' (octrees
+    store attributes in files named after them: 'attr.a/b.npy' broke conversions)."""
+    from gigapoint.core.chunk import PointChunk
+
+    rng = np.random.default_rng(4)
+    chunk = PointChunk(rng.uniform(0, 50, (2000, 3)), None, {"a_b": np.arange(2000, dtype=np.uint16)})
+    out = tmp_path / "s.copc.laz"
+    gp.convert([chunk], out, format="copc")
+    data = bytearray(out.read_bytes())
+    at = data.find(b"a_b\0")
+    data[at : at + 3] = b"a/b"  # the field's name in the Extra Bytes VLR
+    (tmp_path / "slash.copc.laz").write_bytes(bytes(data))
+    cloud = gp.open(tmp_path / "slash.copc.laz")
+    got = np.concatenate([cloud.node_points(i)["a_b"] for i in range(len(cloud.keys))])
+    assert sorted(got.tolist()) == list(range(2000))
