@@ -76,6 +76,7 @@ def test_ply_round_trip(tmp_path, text, byte_order):
     assert set(attrs) == {"nx", "ny", "nz", "intensity"}
     np.testing.assert_array_equal(attrs["nz"], 1)
     np.testing.assert_array_equal(attrs["intensity"], np.arange(N))
+    assert attrs["nz"].dtype == v.dtype["nz"]  # as declared, text or binary (text gave float64)
     check_chunking(p, N)
     info = file_info(p)
     assert info["format"] == "PLY" and info["point_count"] == N and info["has_color"]

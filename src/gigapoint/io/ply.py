@@ -139,7 +139,10 @@ class PlyReader(Reader):
                     raise fail(path, self._bad_line(lines, lineno, ncols))
                 lineno += len(lines)
                 done += len(arr)
-                cols = [arr[:, i].astype(np.dtype(dt), copy=False) if np.dtype(dt).kind != "f" else arr[:, i] for i, dt in enumerate(dtypes)]
+                # each column in its declared type, as the binary path keeps it; x, y, z as parsed
+                # (float64: the text may hold more digits than a declared float keeps)
+                cols = [arr[:, i] if name.lower() in ("x", "y", "z") else arr[:, i].astype(np.dtype(dt), copy=False)
+                        for i, (name, dt) in enumerate(zip(h.names, dtypes))]  # fmt: skip
                 yield rows_to_chunk(path, h.names, cols, scaler)
         if done < h.count:
             raise fail(path, f"truncated PLY file: the header declares {h.count:,} vertices, only {done:,} lines of them are present")
