@@ -304,6 +304,11 @@ def resized(held, n: int) -> np.ndarray | Packed:
     return Packed(part, held.offset, held.dtype, n) if isinstance(held, Packed) else part
 
 
+def zeroed_like(held, n: int) -> np.ndarray | Packed:
+    """A holder of ``n`` zeroed entries in ``held``'s form (dtype, packing), none of its entries."""
+    return resized(resized(held, 0), n)
+
+
 def repacked(held) -> np.ndarray | Packed:
     """``held`` in the real range of what it stores (``pack``: a filled holder, every entry a
     value; an integer range's offset and the narrower one's add up)."""
@@ -318,4 +323,4 @@ def repacked(held) -> np.ndarray | Packed:
 
 
 __all__ = ["Attributes", "Packed", "encode", "fits", "holder_for", "narrow_dtype", "pack", "packed_range", "repacked", "resized", "stored",
-           "widened"]
+           "widened", "zeroed_like"]

@@ -52,7 +52,7 @@ import numpy as np
 from numba.typed import List
 
 from ...core import pages
-from ...core.attributes import Attributes, encode, fits, holder_for, repacked, resized, widened
+from ...core.attributes import Attributes, encode, fits, holder_for, repacked, resized, widened, zeroed_like
 from ...core.attributes import stored as stored_array
 from ...core.chunk import PointChunk, attribute_dtype_problem, attribute_name_problem, colors_for
 from ...core.cloud import MAX_ABS_COORDINATE
@@ -141,7 +141,7 @@ class Pool:
         self.color = pages.zeros(n, np.uint32)
         self.attributes = Attributes()  # each held in the form of ``attribute_forms`` (core/attributes.holder_for), zeroed
         for a, form in attribute_forms.items():
-            self.attributes.hold(a, resized(resized(form, 0), n))
+            self.attributes.hold(a, zeroed_like(form, n))
         self.chunk_next = np.full(n_chunks, -1, np.int64)
         self.chunk_node = np.full(n_chunks, -1, np.int64)
         self.batch_version = np.zeros(n_chunks, np.int64)
