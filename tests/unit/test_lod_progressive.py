@@ -1969,3 +1969,15 @@ def test_an_octree_among_files_or_opened_progressively_is_a_one_line_error(tmp_p
     assert gp.open(tmp_path / "tree").n_points == 3000  # alone: as itself
     assert main(["render", str(tmp_path / "tree"), str(points), "-o", str(tmp_path / "a.png")]) != 0
     assert "tree: a converted octree folder opens alone" in capsys.readouterr().err and not (tmp_path / "a.png").exists()
+
+
+def test_normals_are_estimated_on_a_cloud_held_in_memory():
+    """``estimate_normals`` of a progressive octree raised a TypeError traceback (its
+    ``positions`` takes slots); it is a one-line error naming what it takes, and lighting's
+    message says where normals can be estimated."""
+    octree = ProgressiveOctree("grown")
+    octree.add(np.random.default_rng(2).uniform(0, 10, (500, 3)))
+    with pytest.raises(GigapointError, match=r"^grown: estimate_normals takes a cloud held in memory \(gigapoint.open\(path\)\), not a ProgressiveOctree$"):
+        gp.estimate_normals(octree)
+    with pytest.raises(GigapointError, match=r"has no normals .* on a cloud held in memory \(gigapoint.open\(path\)\)$"):
+        gp.render(octree, lighting=True)

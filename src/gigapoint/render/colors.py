@@ -242,7 +242,8 @@ def _compute(cloud, mode: str, settings) -> np.ndarray:
         nrm = normals_of(cloud)
         if nrm is None:
             raise SettingsError(
-                f"color_mode 'normal': {cloud.name} has no normals (attributes nx, ny, nz); estimate them with gigapoint.render.normals.estimate_normals"
+                f"color_mode 'normal': {cloud.name} has no normals (attributes nx, ny, nz); estimate them with gigapoint.estimate_normals(cloud) "
+                f"on a cloud held in memory (gigapoint.open(path))"
             )
         out = np.empty((n, 4), np.uint8)
         out[:, :3] = np.clip(np.rint((nrm * 0.5 + 0.5) * 255.0), 0, 255)

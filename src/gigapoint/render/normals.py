@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.cloud import PointCloud
 from ..errors import GigapointError
 from .cache import render_cache
 
@@ -23,6 +24,10 @@ def estimate_normals(cloud, k: int = 16, chunk: int = 200_000, store: bool = Tru
         from scipy.spatial import cKDTree
     except ImportError:
         raise GigapointError("estimate_normals needs scipy (pip install 'gigapoint[quality]')") from None
+    if not isinstance(cloud, PointCloud):  # an octree's points are in its nodes, drawn a few at a time
+        raise GigapointError(
+            f"{cloud.name}: estimate_normals takes a cloud held in memory (gigapoint.open(path)), not a {type(cloud).__name__}"
+        )
     if cloud.n_points < 3:
         raise GigapointError(f"{cloud.name}: estimating normals needs at least 3 points, got {cloud.n_points}")
     k = int(min(max(k, 3), cloud.n_points))

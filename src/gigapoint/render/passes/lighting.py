@@ -26,7 +26,8 @@ def point_normals(points) -> np.ndarray:
         n = normals_of(points)
         if n is None:
             raise SettingsError(
-                f"lighting: {points.name} has no normals (attributes nx, ny, nz); estimate them with gigapoint.render.normals.estimate_normals(cloud)"
+                f"lighting: {points.name} has no normals (attributes nx, ny, nz); estimate them with gigapoint.estimate_normals(cloud) "
+                f"on a cloud held in memory (gigapoint.open(path))"
             )
         n = np.ascontiguousarray(n, np.float32)
         cache["__normals__"] = n
