@@ -86,3 +86,27 @@ def test_autzen_matches_reference_image(autzen):
 def test_demo_matches_reference_image(demo_small):
     image = gp.render(demo_small, Camera.fit(demo_small.bounds, view="iso", width=320, height=180), size_mode="fixed")
     _compare_reference(image, "core_demo_iso.png")
+
+
+def test_a_picked_point_reads_as_the_file_wrote_it_in_every_kind_of_cloud(autzen_path, autzen_original, tmp_path):
+    """``point_info`` of a picked point: its position rounded to the file's centimetres and its
+    LAS attributes, from the plain cloud, the progressive octree and converted octrees alike
+    (the octrees gave 637174.3300006103, and a converted octree's pick no attributes)."""
+    las = laspy.read(autzen_path)
+    by_position = {tuple(np.round(p * 100).astype(np.int64)): i for i, p in enumerate(autzen_original)}
+    progressive = gp.open(autzen_path, progressive=True)
+    assert progressive.wait(120)
+    gp.convert(autzen_path, tmp_path / "g")
+    gp.convert(autzen_path, tmp_path / "p", format="potree")
+    plain = gp.open(autzen_path)
+    cam = Camera.fit_cloud(plain, width=160, height=100)
+    for cloud in (plain, progressive, gp.open(tmp_path / "g"), gp.open(tmp_path / "p")):
+        frame = gp.render_frame(cloud, cam, RenderSettings(size_mode="fixed", lod_threshold_px=0.0))  # every leaf: no voxel picked
+        picked = frame.index[frame.index >= 0][::97][:40]
+        assert len(picked) == 40
+        for index in picked.tolist():
+            info = frame.point_info(index)
+            pos = info["position"]
+            assert pos == [round(v, 2) for v in pos], (type(cloud).__name__, pos)
+            i = by_position[tuple(np.round(np.array(pos) * 100).astype(np.int64))]  # one of the file's points, exactly
+            assert info["intensity"] == int(las.intensity[i]) and info["classification"] == int(las.classification[i]), type(cloud).__name__

@@ -156,10 +156,7 @@ class PointCloud:
             return None
         if not 0 <= index < self.n_points:
             raise PointIndexError(f"{self.name}: point index {index} out of range 0..{self.n_points - 1} (-1: no point)")
-        position = self.positions([index])[0]
-        if self.source_scale is not None:
-            position = [round(float(v), scale_decimals(s)) for v, s in zip(position, self.source_scale)]
-        info = {"index": int(index), "position": [float(v) for v in position]}
+        info = {"index": int(index), "position": at_scale(self.positions([index])[0], self.source_scale)}
         info["rgba"] = colors_at(self.color, [index]).view(np.uint8).tolist()
         for name in self.attributes:
             v = self.attributes.at(name, [index])[0]  # one point's, not the whole array decoded
@@ -184,6 +181,14 @@ class PointCloud:
     def __repr__(self) -> str:
         lo, hi = self.bounds
         return f"PointCloud({self.name!r}, {self.n_points:,} points, {len(self.batches):,} batches, bounds {lo.tolist()} .. {hi.tolist()})"
+
+
+def at_scale(position, scale) -> list[float]:
+    """A position as floats rounded to the resolution its source stored it at (``scale``: a
+    LAS file's, per axis; None: as it is), so it reads as the file wrote it."""
+    if scale is None:
+        return [float(v) for v in position]
+    return [round(float(v), scale_decimals(s)) for v, s in zip(position, scale)]
 
 
 def scale_decimals(scale: float) -> int:

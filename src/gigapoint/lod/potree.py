@@ -393,6 +393,11 @@ class PotreeCloud(OctreeCloud):
     def _attribute_dtypes(self) -> dict:
         return {name: dt for name, dt in self.extra.values()}
 
+    def new_arena(self, points: int):
+        arena = super().new_arena(points)
+        arena.source_scale = self.scale.tolist()  # positions are integers at this scale: point_info rounds to it
+        return arena
+
     def node_arrays(self, index: int) -> tuple[dict, dict, int]:
         """Node ``index`` read from octree.bin, decoded and quantized against its tight bbox
         (which its record takes from now on): (point arrays, attribute arrays, 0)."""

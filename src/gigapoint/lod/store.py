@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit
 
 from ..core.attributes import Attributes, Packed, packed_range
+from ..core.cloud import at_scale
 from ..core.compact import point_words, rgba32, stream_words
 from ..core.layout import BATCH_DTYPE, PACK_DTYPE
 from ..core.quantize import dequantize
@@ -274,6 +275,7 @@ class Arena:
         self.free = list(range(n_slots - 1, -1, -1))
         self.name = name
         self.bounds = bounds
+        self.source_scale = None  # the octree's source grid (a LAS file's scale), which point_info rounds to
         self.loads = 0  # nodes copied in since creation (cache misses)
         # Bumped on every write; per slot, the version that last filled it (GPU backends re-upload those slots)
         self.version = 0
@@ -295,13 +297,17 @@ class Arena:
         return sum(a.nbytes for a in arrays) + self.attributes.nbytes
 
     def point_info(self, index: int) -> dict:
-        """Position (30-bit), color and level of the point in slot position ``index``."""
+        """Position (rounded to ``source_scale``, the octree's source grid, where it has one),
+        color, level and attributes of the point in slot position ``index``."""
         slot = int(np.searchsorted(self.batches["first"], np.uint64(index), side="right") - 1)
         rec = self.batches[slot]
         low, med, high = point_words(self, slot, index, index + 1)
         pos = dequantize(low, med, high, rec["bbox_min"], rec["bbox_max"], 30)[0]
         rgba = rgba32(self.color[index : index + 1]).view(np.uint8).tolist()
-        return {"position": pos.tolist(), "rgba": rgba, "level": int(rec["level"]), "source": "octree"}
+        info = {"position": at_scale(pos, self.source_scale), "rgba": rgba, "level": int(rec["level"]), "source": "octree"}
+        for a in self.attributes:
+            info[a] = self.attributes.at(a, [index])[0].item()
+        return info
 
     def _load(self, nd: int, cloud: OctreeCloud, slots: np.ndarray, count: int) -> None:
         """Node ``nd``'s points into ``slots``, in the arena's layout."""
@@ -470,7 +476,9 @@ class OctreeCloud:
 
     def new_arena(self, points: int) -> Arena:
         """An empty arena of at least ``points`` points for this octree's nodes."""
-        return Arena(points, self.name, self.bounds, self._attribute_dtypes(), **self.arena_layout())
+        arena = Arena(points, self.name, self.bounds, self._attribute_dtypes(), **self.arena_layout())
+        arena.source_scale = self.meta.get("scale")  # (format 2: positions are exact on it)
+        return arena
 
     def prepare(self, view: View, settings) -> DrawList:
         """The frame's nodes made resident in the arena, one batch per arena slot."""

@@ -55,7 +55,7 @@ from ...core import pages
 from ...core.attributes import Attributes, encode, fits, holder_for, repacked, resized, widened, zeroed_like
 from ...core.attributes import stored as stored_array
 from ...core.chunk import PointChunk, attribute_dtype_problem, attribute_name_problem, colors_for
-from ...core.cloud import MAX_ABS_COORDINATE
+from ...core.cloud import MAX_ABS_COORDINATE, at_scale
 from ...core.compact import GRID_TOLERANCE, ext_bits_per_point, point_words, stream_words
 from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE, WORD_BITS
@@ -147,6 +147,7 @@ class Pool:
         self.batch_version = np.zeros(n_chunks, np.int64)
         self.version = 0
         self.bounds = (np.zeros(3), np.zeros(3))
+        self.source_scale = None  # set by the octree each frame: its grid's step while every point is on it
 
     @property
     def n_points(self) -> int:
@@ -212,13 +213,14 @@ class Pool:
         return {a: self.attributes.at(a, slots) for a in self.attributes}
 
     def point_info(self, index: int) -> dict:
-        """Position (30-bit), color, level and attributes of the entry at pool slot ``index``."""
+        """Position (rounded to ``source_scale``, the octree's grid while every point is on it),
+        color, level and attributes of the entry at pool slot ``index``."""
         if not 0 <= index < self.n_points:
             return {}
         rec = self.batches[index // self.chunk]
         pos = dequantize(*point_words(self, index // self.chunk, index, index + 1), rec["bbox_min"], rec["bbox_max"], 30)[0]
         info = {
-            "position": pos.tolist(),
+            "position": at_scale(pos, self.source_scale),
             "rgba": self.color[index : index + 1].view(np.uint8).tolist(),
             "level": int(rec["level"]),
             "source": "progressive octree",
@@ -1374,6 +1376,7 @@ class ProgressiveOctree:
         if pool is None or self.points == 0:
             empty = Selection(np.empty(0, np.int64), np.empty(0, np.int32), np.empty((0, 4, 4), np.float32), np.empty(0), 0)
             return DrawList(pool or Pool(self.name, 1, self.chunk, {}, 0), empty, max(n, 1), nodes=np.empty(0, np.int64))
+        pool.source_scale = (self.grid[1],) * 3 if self.grid is not None and self._narrow else None  # point_info's rounding
         lo, hi = self.bounds
         cmin, cedge = self.cmin[:n], self.cedge[:n]
         cube_min = np.clip(cmin, lo, hi)
