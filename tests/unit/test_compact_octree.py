@@ -183,6 +183,7 @@ def test_the_compact_arena_draws_as_the_three_word_arena(las_pair, rgb565_octree
     oc = open_octree(las_pair[2] if colors == "rgba" else rgb565_octree)
     compact = oc.new_arena(20_000)  # too small for every view: nodes evicted, slots reused
     words = Arena(compact.n_points, oc.name, oc.bounds, oc._attribute_dtypes())
+    words.source_scale = compact.source_scale  # (new_arena's: point_info rounds to the octree's source grid)
     assert compact.med is None and words.med is not None
     assert compact.color.dtype == (np.uint16 if colors == "rgb565" else np.uint32)
     s = RenderSettings(backend="cpu", size_mode="fixed", point_budget=12_000, lod_threshold_px=10.0)
@@ -246,6 +247,7 @@ def test_the_arena_holds_attributes_in_their_range(tmp_path):
         assert lo <= int(values.min()) and int(values.max()) <= hi, a
     compact = oc.new_arena(20_000)
     words = Arena(compact.n_points, oc.name, oc.bounds, oc._attribute_dtypes())
+    words.source_scale = compact.source_scale  # (new_arena's: point_info rounds to the octree's source grid)
     held = {a: compact.attributes.held_dtype(a) for a in compact.attributes}
     assert held["intensity"] == "uint16 in uint8 + 1000" and held["point_source_id"] == "uint16 constant 7326"
     assert held["depth"].startswith("int32 in uint16 - ") and held["gps_time"] == "float64"
