@@ -1981,3 +1981,16 @@ def test_normals_are_estimated_on_a_cloud_held_in_memory():
         gp.estimate_normals(octree)
     with pytest.raises(GigapointError, match=r"has no normals .* on a cloud held in memory \(gigapoint.open\(path\)\)$"):
         gp.render(octree, lighting=True)
+
+
+def test_a_pick_says_whether_it_is_a_voxel():
+    """``point_info`` marks an inner node's voxel (a cell centre with its cell's mean colour),
+    which is not a measured point; a leaf's point is one."""
+    xyz = np.random.default_rng(8).uniform(0, 100, (40_000, 3)) * (1, 1, 0.05)
+    octree = ProgressiveOctree("picks", max_leaf=2_000)
+    octree.add(xyz)
+    cam = gp.Camera.fit_cloud(octree, width=160, height=100)
+    for threshold, voxels in ((5_000.0, True), (0.0, False)):  # only the root's voxels / every leaf drawn
+        frame = gp.render_frame(octree, cam, gp.RenderSettings(size_mode="fixed", lod_threshold_px=threshold))
+        picked = frame.index[frame.index >= 0][::50]
+        assert len(picked) > 20 and {frame.point_info(int(i))["voxel"] for i in picked} == {voxels}

@@ -148,6 +148,7 @@ class Pool:
         self.version = 0
         self.bounds = (np.zeros(3), np.zeros(3))
         self.source_scale = None  # set by the octree each frame: its grid's step while every point is on it
+        self.node_is_leaf = None  # set by the octree each frame (its leaf flags): point_info tells voxels from points
 
     @property
     def n_points(self) -> int:
@@ -225,6 +226,8 @@ class Pool:
             "level": int(rec["level"]),
             "source": "progressive octree",
         }
+        if self.node_is_leaf is not None:  # a voxel: an inner node's cell centre, its cell's mean colour, one of its points' attributes
+            info["voxel"] = not bool(self.node_is_leaf[self.chunk_node[index // self.chunk]])
         for a, v in self.attribute_rows(np.array([index])).items():
             info[a] = v[0].item()
         return info
@@ -1377,6 +1380,7 @@ class ProgressiveOctree:
             empty = Selection(np.empty(0, np.int64), np.empty(0, np.int32), np.empty((0, 4, 4), np.float32), np.empty(0), 0)
             return DrawList(pool or Pool(self.name, 1, self.chunk, {}, 0), empty, max(n, 1), nodes=np.empty(0, np.int64))
         pool.source_scale = (self.grid[1],) * 3 if self.grid is not None and self._narrow else None  # point_info's rounding
+        pool.node_is_leaf = self.leaf  # ... and its voxels
         lo, hi = self.bounds
         cmin, cedge = self.cmin[:n], self.cedge[:n]
         cube_min = np.clip(cmin, lo, hi)
