@@ -61,7 +61,7 @@ def _write_las(path: Path, xyz, rgba, attrs) -> None:
     as extra bytes (lod/copc_write.extra_attributes: booleans as u8, half floats as f4)."""
     import laspy
 
-    from ..lod.copc_write import LAS_FIELD_ATTRIBUTES, choose_point_format, extra_attributes
+    from ..lod.copc_write import LAS_FIELD_ATTRIBUTES, choose_point_format, extra_attributes, las_field_values
 
     header = laspy.LasHeader(point_format=choose_point_format(attrs), version="1.4")
     header.offsets = np.floor(xyz.min(axis=0))
@@ -74,12 +74,7 @@ def _write_las(path: Path, xyz, rgba, attrs) -> None:
     las.red, las.green, las.blue = (rgba[:, k].astype(np.uint16) * 257 for k in range(3))
     for a, v in attrs.items():
         if a in LAS_FIELD_ATTRIBUTES:
-            field = las[a]
-            if np.issubdtype(field.dtype, np.integer):
-                info = np.iinfo(field.dtype)
-                high = 15 if a in ("return_number", "number_of_returns") else info.max  # 4-bit fields
-                v = np.clip(np.rint(v) if v.dtype.kind == "f" else v, info.min, high)
-            las[a] = v.astype(field.dtype)
+            las[a] = las_field_values(a, v).astype(las[a].dtype)
         elif a in extra:
             las[a] = v.astype(extra[a])
 

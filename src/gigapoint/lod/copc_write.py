@@ -75,6 +75,18 @@ def _las_integers(xyz, offset, scale, X, Y, Z, lo, hi) -> bool:
     return True
 
 
+#: the largest value each integer LAS field holds (the return counts: 4 bits in point formats 6-8)
+LAS_FIELD_MAX = {"intensity": 65535, "classification": 255, "return_number": 15, "number_of_returns": 15, "point_source_id": 65535, "nir": 65535}
+
+
+def las_field_values(name: str, values) -> np.ndarray:
+    """An attribute's ``values`` in the range of its LAS field (clipped; gps_time as float64):
+    what the COPC writer and a live cloud's LAS save store."""
+    if name == "gps_time":
+        return np.asarray(values, np.float64)
+    return np.clip(np.asarray(values), 0, LAS_FIELD_MAX[name])
+
+
 def extra_attributes(attributes: dict, where: str = "COPC") -> dict[str, np.dtype]:
     """The attributes ({name: dtype}) that point format 6/7/8 has no field for, as they will be
     stored in extra bytes (LAS 1.4 types: booleans as u8, half floats as f4). An attribute that
@@ -182,27 +194,24 @@ class CopcWriter:
             raise ValueError(
                 f"coordinates do not fit LAS's 32-bit integers with scale {self.scale.tolist()} and offset {self.offset.tolist()}"
             )
-        if "intensity" in attributes:
-            rec["intensity"] = np.clip(attributes["intensity"], 0, 65535)
-        if "classification" in attributes:
-            rec["classification"] = np.clip(attributes["classification"], 0, 255)
-        rn = np.clip(np.asarray(attributes["return_number"], np.int64), 0, 15) if "return_number" in attributes else None
-        nr = np.clip(np.asarray(attributes["number_of_returns"], np.int64), 0, 15) if "number_of_returns" in attributes else None
+        for name in ("intensity", "classification", "point_source_id"):
+            if name in attributes:
+                rec[name] = las_field_values(name, attributes[name])
+        rn = las_field_values("return_number", np.asarray(attributes["return_number"], np.int64)) if "return_number" in attributes else None
+        nr = las_field_values("number_of_returns", np.asarray(attributes["number_of_returns"], np.int64)) if "number_of_returns" in attributes else None
         if rn is not None or nr is not None:
             rec["returns"] = (rn if rn is not None else 0) | ((nr if nr is not None else 0) << 4)
         if rn is not None:
             self.by_return += np.bincount(rn, minlength=16)[1:16].astype(np.uint64)
-        if "point_source_id" in attributes:
-            rec["point_source_id"] = np.clip(attributes["point_source_id"], 0, 65535)
         if "gps_time" in attributes:
-            g = np.asarray(attributes["gps_time"], np.float64)
+            g = las_field_values("gps_time", attributes["gps_time"])
             rec["gps_time"] = g
             self.gps = [min(self.gps[0], float(g.min())), max(self.gps[1], float(g.max()))]
         if self.point_format >= 7 and rgb16 is not None:
             rgb16 = np.asarray(rgb16)
             rec["red"], rec["green"], rec["blue"] = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
         if self.point_format == 8 and "nir" in attributes:
-            rec["nir"] = np.clip(attributes["nir"], 0, 65535)
+            rec["nir"] = las_field_values("nir", attributes["nir"])
         for name in self.extra:
             if name in attributes:
                 rec[name] = attributes[name]

@@ -9,8 +9,8 @@ from functools import cached_property
 
 import numpy as np
 
-from ...core.cloud import MAX_ABS_COORDINATE
-from ...errors import EmptyCloudError, GigapointWarning
+from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
+from ...errors import GigapointWarning
 from ...io import read_chunks
 from ...io.registry import reader_for
 from ..build import valid_bounds
@@ -131,11 +131,8 @@ class ReadPhase(Job):
         """Every input read (points, skipped, attributes saved): the octree's cube from the bounds
         ``lo``..``hi``; no valid point is an error, skipped points a warning."""
         st = self.state
-        if st.get("points", 0) == 0:
-            skipped = st.get("skipped", 0)
-            detail = f" ({skipped:,} invalid points: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
-            files = ", ".join(map(str, self.paths)) if self.paths else self.name  # the files, as the plain cloud names them
-            raise EmptyCloudError(f"{files}: no valid points{detail}")
+        if st.get("points", 0) == 0:  # the plain cloud's error, naming the files as it does
+            check_valid_count(", ".join(map(str, self.paths)) if self.paths else self.name, 0, st.get("skipped", 0))
         if st.get("skipped"):
             warnings.warn(
                 f"{self.name}: skipped {st['skipped']:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})",
