@@ -34,20 +34,28 @@ def demo(
     50 M points. 10⁹ points at ``scale=0.01`` hold ~9 GB (``attributes=False``: ~6 GB, without
     the intensity and classification). ``colors``: how colours are held (``core.build_cloud``:
     "auto", "rgba", "rgb565" or "palette")."""
+    import numpy as np
+
+    from .errors import InputError
     from .io.demo import demo_chunks
 
+    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)):
+        raise InputError(f"demo: n_points must be a whole number, got {n_points!r}")
     if progressive:
         from .lod.progressive import demo_sources, open_progressive
 
         return open_progressive(*demo_sources(n_points, seed), memory_limit=memory_limit)
     name = f"demo({n_points:,})"
-    from .core.chunked import CHUNKED_ABOVE, build_cloud_chunked
+    from .core.chunked import CHUNKED_ABOVE, HELD_BYTES_MIN, IN_MEMORY_BYTES_MIN, SPILLED_BYTES_MIN, build_cloud_chunked, check_room
 
+    instead = ": take fewer points, or progressive=True (an LOD octree filled up to a memory limit)"
     if chunked or (chunked is None and n_points > CHUNKED_ABOVE):
+        check_room(name, n_points, HELD_BYTES_MIN, SPILLED_BYTES_MIN, instead=instead)
         source = lambda: demo_chunks(n_points, seed, chunk_size=2_000_000, scale=scale)
         return build_cloud_chunked(source, name=name, attributes=attributes, colors=colors)
     from .core import build_cloud
 
+    check_room(name, n_points, IN_MEMORY_BYTES_MIN, instead=instead)
     chunks = demo_chunks(n_points, seed, scale=scale)
     if not attributes:
         chunks = (PointChunk(c.xyz, c.rgba, scale=c.scale) for c in chunks)
@@ -55,8 +63,17 @@ def demo(
 
 
 def _flat_paths(paths) -> tuple:
-    """Paths with lists and tuples of them (at any depth) spread out, in order."""
-    return tuple(q for p in paths for q in (_flat_paths(p) if isinstance(p, (list, tuple)) else (p,)))
+    """Paths with lists and tuples of them (at any depth) spread out, in order; anything else
+    that is not a path (None, a number, an array) a one-line InputError."""
+    import os
+
+    from .errors import InputError
+
+    flat = tuple(q for p in paths for q in (_flat_paths(p) if isinstance(p, (list, tuple)) else (p,)))
+    for p in flat:
+        if not isinstance(p, (str, os.PathLike)):
+            raise InputError(f"open: a path (str or pathlib.Path) or a URL is needed, got {type(p).__name__}")
+    return flat
 
 
 def open(*paths, progressive: bool = False, **options):

@@ -40,7 +40,8 @@ class BackendUnavailableError(GigapointError):
 
 
 class MemoryLimitError(GigapointError):
-    """Loading stopped because what was loaded reached its memory limit (what was loaded stays usable)."""
+    """Loading stopped because what was loaded reached its memory limit (what was loaded stays
+    usable), or a cloud cannot be built on this machine (its memory or temporary disk)."""
 
 
 class GigapointWarning(UserWarning):

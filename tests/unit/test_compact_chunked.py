@@ -233,3 +233,54 @@ def test_open_builds_big_files_chunked_by_their_headers(monkeypatch):
     assert_same_cloud(big, small)
     gp.open(AUTZEN, chunked=False)
     assert calls == [1]
+
+
+def test_a_cloud_too_big_for_this_machine_is_refused_before_anything_is_read(monkeypatch, tmp_path):
+    """Without the check, ``gp.demo(10**13)`` generated for hours before being killed for
+    memory, and a file's build spilled two passes' worth before its disk was full: now one
+    line, at once, with the figures and what to do instead."""
+    import shutil
+
+    from gigapoint.core import chunked
+    from gigapoint.errors import MemoryLimitError
+
+    with pytest.raises(MemoryLimitError, match=r"^demo\(10,000,000,000,000\): 10,000,000,000,000 points held in memory take 50.0 TB or more, .*progressive=True"):
+        gp.demo(10**13)  # on any machine: 5 bytes a point at least
+    with pytest.raises(InputError, match=r"n_points must be a whole number, got 2.5"):
+        gp.demo(2.5)
+    # a file (its header's count) against a machine of 1 MB: 110 000 points in memory are more
+    monkeypatch.setattr(chunked, "physical_memory", lambda: 1 << 20)
+    with pytest.raises(MemoryLimitError, match=r"^autzen_trim.laz: 110,000 points held in memory take .* this machine has 0.0 GB: .*chunked=True"):
+        gp.open(AUTZEN)
+    monkeypatch.setattr(chunked, "physical_memory", lambda: 1 << 40)
+    # the bounded-memory build's spill against a disk of 1 MB free, named
+    free = shutil.disk_usage(tmp_path)._replace(free=1 << 20)
+    monkeypatch.setattr(chunked.shutil, "disk_usage", lambda path: free)
+    monkeypatch.setattr(chunked.tempfile, "tempdir", str(tmp_path))
+    with pytest.raises(MemoryLimitError, match=rf"^autzen_trim.laz: building 110,000 points in bounded memory spills .* to {tmp_path}, which has 0.0 GB free \(TMPDIR"):
+        gp.open(AUTZEN, chunked=True)
+    with pytest.raises(MemoryLimitError, match=r"^demo\(60,000,000\): building 60,000,000 points .* spills 1.7 GB or more"):
+        gp.demo(60_000_000)  # chunked above 50 M: refused before a point is generated
+    assert not list(tmp_path.iterdir())
+    monkeypatch.undo()
+    assert gp.open(AUTZEN, chunked=True).n_points == 110_000  # room: built
+
+
+@pytest.mark.parametrize("bad", [None, 5, np.zeros(3)])
+def test_open_of_something_that_is_not_a_path_is_one_line(bad):
+    with pytest.raises(InputError, match=r"^open: a path \(str or pathlib.Path\) or a URL is needed, got (NoneType|int|ndarray)$"):
+        gp.open(bad)
+    with pytest.raises(InputError, match=r"got (NoneType|int|ndarray)$"):
+        gp.open([AUTZEN, bad], progressive=True)
+
+
+def test_the_cli_demo_refuses_more_points_than_memory_holds(monkeypatch, tmp_path, capsys):
+    from gigapoint.cli import main
+    from gigapoint.core import chunked
+
+    monkeypatch.setattr(chunked, "physical_memory", lambda: 1 << 30)
+    out = tmp_path / "d.png"
+    assert main(["demo", "-n", "30000000", "-o", str(out)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == "error: demo(30,000,000): 30,000,000 points held in memory take 1.4 GB or more, and this machine has 1.1 GB: take fewer --points"
+    assert not out.exists()

@@ -216,12 +216,14 @@ def demo(
 
     from ..core import build_cloud
     from ..core.chunk import PointChunk
+    from ..core.chunked import IN_MEMORY_BYTES_MIN, check_room
     from ..io.demo import demo_arrays, round_to_grid
     from ..render import render_frame
 
     console = Console()
     if not 1 <= points <= 4_000_000_000:
         raise GigapointError(f"--points must be between 1 and 4e9, got {points}")
+    check_room(f"demo({points:,})", points, IN_MEMORY_BYTES_MIN, instead=": take fewer --points")
     check_output(output, overwrite)
     check_image_size(width, height)
     settings = settings_from_options(RenderSettings, {"threads": threads})  # a bad --threads is named

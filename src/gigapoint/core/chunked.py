@@ -29,6 +29,7 @@ return, also on an error.
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 from collections.abc import Callable, Iterable
 from contextlib import ExitStack
@@ -37,7 +38,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from ..errors import InputError
+from ..errors import InputError, MemoryLimitError
 from .attributes import Attributes
 from .chunk import PointChunk
 from .cloud import PointCloud, _valid_mask, check_valid_count, finest_scale, gather, scan_points, storage_format
@@ -52,6 +53,52 @@ from .quantize import make_batches, quantize
 CHUNKED_ABOVE = 50_000_000
 
 ChunkSource = Callable[[], Iterable[PointChunk]]
+
+#: the fewest bytes a point takes, what the checks before a build (``check_room``) count: held
+#: once a chunked build is finished (compact positions and a palette colour, attributes on top:
+#: the demo town holds ~8.6), spilled to its temporary folder (float64 xyz and a colour), and
+#: held while ``build_cloud`` sorts in memory (float64 xyz, colour, codes, order: ~55 measured)
+HELD_BYTES_MIN = 5
+SPILLED_BYTES_MIN = 28
+IN_MEMORY_BYTES_MIN = 48
+
+
+def physical_memory() -> int:
+    """Bytes of this machine's physical memory (8 GB where the system does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # not POSIX
+        return 8 << 30
+
+
+def _size(n_bytes: float) -> str:
+    return f"{n_bytes / 1e12:,.1f} TB" if n_bytes >= 1e12 else f"{n_bytes / 1e9:,.1f} GB"
+
+
+def check_room(name: str, n_points: int, held_bytes: int, spilled_bytes: int = 0, tmpdir=None, instead: str = "") -> None:
+    """A one-line MemoryLimitError, before anything is read, where ``n_points`` points cannot be
+    built: ``held_bytes`` a point exceed this machine's physical memory, or their ``spilled_bytes``
+    a point the free disk of ``tmpdir`` (default: the system's temp folder). Without it a build
+    of 10^10 points ran for hours, then was killed for memory or failed on a full disk.
+    ``instead``: what to do instead, said after the figures."""
+    memory = physical_memory()
+    if n_points * held_bytes > memory:
+        raise MemoryLimitError(
+            f"{name}: {n_points:,} points held in memory take {_size(n_points * held_bytes)} or more, and this machine has "
+            f"{_size(memory)}{instead}"
+        )
+    if spilled_bytes:
+        folder = Path(tmpdir if tmpdir is not None else tempfile.gettempdir())
+        try:
+            free = shutil.disk_usage(folder).free
+        except OSError:  # a folder that is not there: the build says so where it makes its own in it
+            return
+        if n_points * spilled_bytes > free:
+            raise MemoryLimitError(
+                f"{name}: building {n_points:,} points in bounded memory spills {_size(n_points * spilled_bytes)} or more to "
+                f"{folder}, which has {_size(free)} free (TMPDIR names another folder){instead}"
+            )
+
 
 #: points a partition holds at most (unless one cell alone holds more): ~60-70 bytes a point of
 #: transient memory while it is sorted and compacted (~130 MB at the default)

@@ -85,11 +85,17 @@ def open_cloud(
         name = files[0].name if len(files) == 1 else f"{len(files)} files"
     several = len(files) > 1
     empty: list[Path] = []
-    if chunked is None:
-        from ..core.chunked import CHUNKED_ABOVE
+    from ..core.chunked import CHUNKED_ABOVE, HELD_BYTES_MIN, IN_MEMORY_BYTES_MIN, SPILLED_BYTES_MIN, check_room
 
-        counts = [reader.point_count(f) for f, reader in plan]
+    counts = [reader.point_count(f) for f, reader in plan]  # None: a text file, counted only when read
+    if chunked is None:
         chunked = None not in counts and sum(counts) > CHUNKED_ABOVE
+    counted = sum(c for c in counts if c)
+    instead = ": open it with progressive=True (an LOD octree filled up to a memory limit) or convert it (gigapoint convert)"
+    if chunked:
+        check_room(name, counted, HELD_BYTES_MIN, SPILLED_BYTES_MIN, instead=instead)
+    else:
+        check_room(name, counted, IN_MEMORY_BYTES_MIN, instead=instead + ", or build it in bounded memory (chunked=True)")
 
     def chunks(bar=None) -> Iterator[PointChunk]:
         for f, reader in plan:

@@ -22,11 +22,9 @@ def parse_memory(value, option: str = "--memory-limit", minimum: int = 64 << 20)
     """'4G', '512M', '2GiB', '1.5g' or a byte count -> bytes; None -> a quarter of the RAM.
     ``option``: the setting errors name; ``minimum``: the fewest bytes it may be (a conversion's 64M)."""
     if value is None:
-        try:
-            total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-        except (ValueError, OSError, AttributeError):
-            total = 8 << 30
-        return max(256 << 20, total // 4)
+        from ...core.chunked import physical_memory
+
+        return max(256 << 20, physical_memory() // 4)
     if isinstance(value, (int, np.integer)):
         n = int(value)
     else:

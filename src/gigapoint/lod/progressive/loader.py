@@ -18,7 +18,6 @@ raises it. ``close`` stops the loader and waits for it.
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -27,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ...core.chunk import PointChunk
+from ...core.chunked import physical_memory
 from ...core.cloud import check_valid_count
 from ...errors import GigapointError, InputError, MemoryLimitError
 from ..convert.prefetch import prefetch
@@ -42,10 +42,7 @@ MEMORY_SHARE = 0.5  # the default memory limit: this share of the machine's phys
 
 def default_memory_limit() -> int:
     """Bytes a progressive octree may hold by default: half the machine's physical memory."""
-    try:
-        return int(MEMORY_SHARE * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-    except (ValueError, OSError, AttributeError):  # not POSIX: 8 GB
-        return 8 << 30
+    return int(MEMORY_SHARE * physical_memory())
 
 
 def memory_limit_bytes(value) -> int:
