@@ -166,6 +166,11 @@ def test_point_info_of_an_empty_pixel_is_none_and_a_bad_index_a_clear_error():
     for bad in (500, -2, 10**9):
         with pytest.raises(PointIndexError, match=r"out of range 0\.\.499 \(-1: no point\)"):
             cloud.point_info(bad)
+    for bad in (3.5, float(hit), "3", None, True):  # 3.5 was read as point 3
+        for where in (cloud, frame):
+            with pytest.raises(PointIndexError, match=r"^point index must be a whole number \(frame.index\[y, x\]\), got "):
+                where.point_info(bad)
+    assert frame.point_info(np.int64(hit))["index"] == hit
     assert issubclass(PointIndexError, IndexError) and issubclass(PointIndexError, GigapointError)
 
 

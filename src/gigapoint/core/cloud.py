@@ -26,7 +26,7 @@ from .layout import BATCH_DTYPE, BATCH_SIZE
 from .morton import cube_of, morton_codes, morton_order
 from .palette import PaletteColors, block_errors, choose_palette, quantize_palettes
 from .quantize import dequantize, make_batches, quantize
-from .renderable import DrawList, MultiViewDrawList, SelectionSettings
+from .renderable import DrawList, MultiViewDrawList, SelectionSettings, check_point_index
 from .selection import View, select_view, select_views, subsample_step
 
 #: Coordinates beyond this magnitude are not of this planet in any CRS: skipped as invalid.
@@ -152,6 +152,7 @@ class PointCloud:
 
         The position is rounded to the source's resolution (``source_scale``: a LAS file's
         scale), so it reads as the file wrote it (636317.71, not 636317.7100002308)."""
+        check_point_index(index)
         if index == -1:
             return None
         if not 0 <= index < self.n_points:

@@ -20,6 +20,15 @@ import numpy as np
 from .selection import Selection, View
 
 
+def check_point_index(index) -> None:
+    """A one-line PointIndexError unless ``index`` (given to ``point_info``) is a whole number:
+    a float such as 3.5 was read as point 3."""
+    from ..errors import PointIndexError
+
+    if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
+        raise PointIndexError(f"point index must be a whole number (frame.index[y, x]), got {index!r}")
+
+
 class SelectionSettings(Protocol):
     """The fields of RenderSettings that choosing what to draw reads."""
 

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.layout import EMPTY_PIXEL
+from ..core.renderable import check_point_index
 from ..errors import GigapointError
 
 MAX_INDEX = 0xFFFFFFFF  # point indices live in the low 32 bits of the visibility buffer
@@ -67,7 +68,9 @@ class Frame:
         """What the frame's point ``index`` is (position, color, attributes), or None for -1
         (an empty pixel: ``frame.index`` holds -1 where no point was drawn) and when the
         buffers have been rewritten since (an octree's arena, by a later frame). Another
-        index outside the buffers raises PointIndexError."""
+        index outside the buffers, or one that is not a whole number (3.5 was read as 3), raises
+        PointIndexError."""
+        check_point_index(index)
         if index == -1 or self.points is None or self.points.version != self.generation:
             return None
         return self.points.point_info(index)
