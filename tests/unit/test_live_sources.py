@@ -279,6 +279,8 @@ def test_replay_plays_at_the_recorded_rate_and_a_frame_written_after_the_index_i
 def test_not_a_recording(tmp_path):
     with pytest.raises(InputError, match="not a live recording"):
         ReplaySource(tmp_path)
+    with pytest.raises(InputError, match=r"missing: no such folder \(a live recording: a folder with index.json\)$"):
+        ReplaySource(tmp_path / "missing")  # said "not a live recording (no index.json)"
     with pytest.raises(InputError, match="no such file"):
         open_source(tmp_path / "missing")
 

@@ -144,6 +144,8 @@ def recording_files(directory) -> list[Path]:
     """The frame files of a recording, in order: index.json's, then any written after it."""
     directory = Path(directory)
     index = directory / INDEX
+    if not directory.exists():
+        raise InputError(f"{directory}: no such folder (a live recording: a folder with {INDEX})")
     if not index.is_file():
         raise InputError(f"{directory}: not a live recording (no {INDEX})")
     try:
