@@ -171,6 +171,12 @@ def test_point_info_of_an_empty_pixel_is_none_and_a_bad_index_a_clear_error():
             with pytest.raises(PointIndexError, match=r"^point index must be a whole number \(frame.index\[y, x\]\), got "):
                 where.point_info(bad)
     assert frame.point_info(np.int64(hit))["index"] == hit
+    for bad in ([10**9], [-1], [0, 500]):  # positions() read past its arrays: a segmentation fault
+        with pytest.raises(PointIndexError, match=rf"point index {bad[-1]} out of range 0\.\.499$"):
+            cloud.positions(bad)
+    with pytest.raises(PointIndexError, match=r"point indices must be whole numbers, got float64$"):
+        cloud.positions([1.5])
+    assert cloud.positions([]).shape == (0, 3) and np.array_equal(cloud.positions([hit, 0]), cloud.positions()[[hit, 0]])
     assert issubclass(PointIndexError, IndexError) and issubclass(PointIndexError, GigapointError)
 
 

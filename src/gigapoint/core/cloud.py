@@ -93,10 +93,19 @@ class PointCloud:
         return np.searchsorted(self.batches["first"], np.asarray(indices, np.uint64), side="right") - 1
 
     def positions(self, indices=None) -> np.ndarray:
-        """float64 (k, 3) world positions (30-bit precision) of point indices (all if None)."""
+        """float64 (k, 3) world positions (30-bit precision) of point indices (all if None); an
+        index that is not a point's a one-line PointIndexError (the kernels read past the arrays:
+        a segmentation fault)."""
         if indices is None:
             indices = np.arange(self.n_points)
-        indices = np.atleast_1d(np.asarray(indices, np.int64))
+        else:
+            indices = np.atleast_1d(np.asarray(indices))
+            if indices.size and indices.dtype.kind not in "iu":
+                raise PointIndexError(f"{self.name}: point indices must be whole numbers, got {indices.dtype}")
+            indices = indices.astype(np.int64, copy=False)
+            outside = indices[(indices < 0) | (indices >= self.n_points)]
+            if len(outside):
+                raise PointIndexError(f"{self.name}: point index {outside[0]} out of range 0..{self.n_points - 1}")
         b = self.batch_of(indices)
         out = np.empty((len(indices), 3))
         for batch in np.unique(b):
