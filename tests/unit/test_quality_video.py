@@ -114,3 +114,23 @@ def test_flythrough_gif_and_errors(cloud, tmp_path):
         render_turntable(cloud, 3, tmp_path / "x.mp4", width=33)
     with pytest.raises(GigapointError, match="positive integer"):
         render_turntable(cloud, 0, tmp_path / "x.mp4")
+
+
+def test_a_flythrough_that_cannot_be_one_video_is_refused_before_a_frame(cloud, tmp_path):
+    """Cameras of two sizes failed in ffmpeg at the second frame with imageio's ValueError and
+    left a part-written temporary file beside the output; now each problem is one line before
+    anything is rendered, and the folder stays as it was."""
+    a, b = turntable_cameras(cloud, 2, 48, 32)
+    small = turntable_cameras(cloud, 2, 32, 32)[0]
+    odd = turntable_cameras(cloud, 2, 47, 32)[0]
+    for cams, path, message in (
+        ([a, small], "two.mp4", r"^video: every camera must have one size: camera 1 is 32x32, camera 0 48x32$"),
+        ([a, small], "two.gif", r"^video: every camera must have one size"),
+        ([a, "iso"], "str.mp4", r"^video: camera 1 must be a gigapoint.Camera, got str$"),
+        ([odd, odd], "odd.mp4", r"odd.mp4: width and height must be even for video encoding, got 47x32$"),
+    ):
+        with pytest.raises(GigapointError, match=message):
+            render_flythrough(cloud, cams, tmp_path / path)
+    assert not list(tmp_path.iterdir())
+    assert render_flythrough(cloud, [odd, odd], tmp_path / "odd.gif").exists()  # a GIF takes any size
+    assert render_flythrough(cloud, [a, b], tmp_path / "ok.mp4").exists()

@@ -162,6 +162,7 @@ def render_flythrough(
     cameras = list(cameras)
     if not cameras:
         raise GigapointError("video: no cameras to render")
+    _check_cameras(cameras, path)  # before any frame: a later one of another size left ffmpeg's part-written file
 
     def write(tmp: Path) -> None:  # a temporary file that replaces ``path`` once the video is complete
         if path.suffix.lower() == ".gif":
@@ -189,6 +190,20 @@ def render_flythrough(
 
     atomic_write(path, write)
     return path
+
+
+def _check_cameras(cameras: list, path: Path) -> None:
+    """One-line errors for what a video cannot hold: something not a Camera, frames of two
+    sizes, odd sizes where ffmpeg encodes (yuv420p)."""
+    for i, cam in enumerate(cameras):
+        if not isinstance(cam, Camera):
+            raise GigapointError(f"video: camera {i} must be a gigapoint.Camera, got {type(cam).__name__}")
+        if (cam.width, cam.height) != (cameras[0].width, cameras[0].height):
+            raise GigapointError(
+                f"video: every camera must have one size: camera {i} is {cam.width}x{cam.height}, camera 0 {cameras[0].width}x{cameras[0].height}"
+            )
+    if path.suffix.lower() != ".gif" and (cameras[0].width % 2 or cameras[0].height % 2):
+        raise GigapointError(f"{path}: width and height must be even for video encoding, got {cameras[0].width}x{cameras[0].height}")
 
 
 def render_turntable(
