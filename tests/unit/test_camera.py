@@ -105,3 +105,10 @@ def test_ray_through_a_pixel_hits_the_projected_point():
     origin, direction = cam.ray(px, py)
     t = np.dot(p - origin, direction)
     np.testing.assert_allclose(origin + t * direction, p, atol=1e-9)
+
+
+def test_fit_refuses_an_unknown_projection():
+    """``Camera.fit(bounds, projection='ortho')`` gave a perspective camera without a word."""
+    with pytest.raises(CameraError, match=r"^camera projection must be 'perspective' or 'orthographic', got 'ortho'$"):
+        Camera.fit((np.zeros(3), np.ones(3)), projection="ortho")
+    assert Camera.fit((np.zeros(3), np.ones(3)), projection="perspective").projection == "perspective"

@@ -239,7 +239,7 @@ class Camera:
             center = center + right * shift_x + up * shift_y
             cx, cy = cx - shift_x, cy - shift_y
             distance = fitting_distance()
-        return cls.orbit(center, yaw, pitch, distance, fov=fov, width=width, height=height, **kw)
+        return cls.orbit(center, yaw, pitch, distance, fov=fov, width=width, height=height, projection=projection, **kw)
 
     @classmethod
     def fit_cloud(cls, cloud, view="auto", **kw) -> Camera:
