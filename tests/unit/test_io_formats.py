@@ -367,3 +367,29 @@ def test_attribute_names_that_cannot_name_a_file_are_mended_or_refused(tmp_path)
     for name in ("a/b", "..", "", "x\\y"):
         with pytest.raises(InputError, match=f"^arrays: attribute name {name!r} cannot be stored".replace("\\", "\\\\")):
             gp.from_arrays(np.zeros((2, 3)), **{name: np.ones(2)})
+
+
+def test_a_file_named_twice_is_read_once(tmp_path):
+    """``gigapoint render a.laz a.laz`` (or a file and its folder) merged its points twice, in
+    clouds, progressive octrees and conversions alike."""
+    import gigapoint as gp
+    from gigapoint.errors import GigapointWarning
+
+    folder = tmp_path / "tiles"
+    folder.mkdir()
+    rng = np.random.default_rng(3)
+    for name in ("a", "b"):
+        np.save(folder / f"{name}.npy", rng.random((50, 3)))
+    a = folder / "a.npy"
+    for paths, want in (([a, a], 50), ([a, folder], 100), ([folder, str(a)], 100), ([a, tmp_path / "tiles" / ".." / "tiles" / "a.npy"], 50)):
+        with pytest.warns(GigapointWarning, match=r"a.npy: named more than once; its points are read once"):
+            cloud = open_cloud(*paths)
+        assert cloud.n_points == want, paths
+    with pytest.warns(GigapointWarning, match="named more than once"):
+        octree = gp.open([a, a], progressive=True)
+    octree.wait()
+    assert octree.n_points == 50
+    octree.close()
+    with pytest.warns(GigapointWarning, match="named more than once"):
+        result = gp.convert([a, folder], tmp_path / "out")
+    assert result.points == 100

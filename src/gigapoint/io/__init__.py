@@ -32,7 +32,9 @@ def read_chunks(path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChu
 
 
 def expand_paths(paths: Iterable) -> list[Path]:
-    """Files named, with each directory replaced by its supported files sorted by name."""
+    """Files named, with each directory replaced by its supported files sorted by name; a file
+    named twice (or also through its folder) is read once, with a warning: its points were
+    merged twice into one cloud or octree."""
     out: list[Path] = []
     for p in paths:
         p = Path(p)
@@ -45,7 +47,16 @@ def expand_paths(paths: Iterable) -> list[Path]:
             out.append(check_file(p))
     if not out:
         raise InputError("open: no file given")
-    return out
+    seen: set[Path] = set()
+    once = []
+    for f in out:
+        key = f.resolve()
+        if key in seen:
+            warnings.warn(f"{f}: named more than once; its points are read once", GigapointWarning, stacklevel=3)
+            continue
+        seen.add(key)
+        once.append(f)
+    return once
 
 
 def _with_progress(path: Path, chunks: Iterator[PointChunk], total: int | None, progress) -> Iterator[PointChunk]:
