@@ -280,3 +280,19 @@ def test_the_range_cache_is_bounded():
     assert cache.held <= 100 and cache.get(9) is not None and cache.get(0) is None
     cache.put("big", bytes(200))  # larger than the whole cache: not kept
     assert cache.get("big") is None and cache.held <= 100
+
+
+def test_urls_gigapoint_does_not_read_are_one_line(tmp_path):
+    """'http://[::1' reached the CLI as "internal error: InvalidURL" (exit 2); 'ftp://h/x.laz' was
+    read as the local path 'ftp:/h/x.laz' ("no such file")."""
+    with pytest.raises(InputError, match=r"^http://\[::1: not a valid URL \(Invalid port"):
+        gp.open("http://[::1")
+    for url in ("ftp://host/x.laz", "s3://bucket/a.copc.laz"):
+        for given in (url, Path(url)):  # (the CLI's typer makes a Path of it)
+            with pytest.raises(InputError, match=rf"^{url}: only http:// and https:// URLs are read \(COPC and EPT octrees\)$"):
+                gp.open(given)
+        with pytest.raises(InputError, match=rf"^{url}: only http://"):
+            gp.open([url], progressive=True)
+    r = subprocess.run([sys.executable, "-m", "gigapoint.cli", "render", "ftp://host/x.laz", "-o", str(tmp_path / "x.png")],
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert r.returncode == 1 and r.stderr.strip() == "error: ftp://host/x.laz: only http:// and https:// URLs are read (COPC and EPT octrees)"

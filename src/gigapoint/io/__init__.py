@@ -12,6 +12,8 @@ that starts with the file's path.
 
 from __future__ import annotations
 
+import os
+import re
 import warnings
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -31,12 +33,19 @@ def read_chunks(path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChu
     return reader.read_chunks(Path(path), chunk_size)
 
 
+#: a URL of a scheme gigapoint does not read (http and https are lod/reader's)
+_OTHER_URL = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]+):/+(.*)$")  # (a Path of 'ftp://h/x' is 'ftp:/h/x'; 'C:/' is a drive)
+
+
 def expand_paths(paths: Iterable) -> list[Path]:
     """Files named, with each directory replaced by its supported files sorted by name; a file
     named twice (or also through its folder) is read once, with a warning: its points were
     merged twice into one cloud or octree."""
     out: list[Path] = []
     for p in paths:
+        url = _OTHER_URL.match(os.fspath(p)) if isinstance(p, (str, os.PathLike)) else None
+        if url and not Path(p).exists():
+            raise InputError(f"{url.group(1)}://{url.group(2)}: only http:// and https:// URLs are read (COPC and EPT octrees)")
         p = Path(p)
         if p.is_dir():
             found = sorted((c for c in p.iterdir() if c.is_file() and is_supported_name(c)), key=lambda c: c.name)

@@ -320,6 +320,8 @@ class HttpClient:
             raise _Transient(f"cannot connect ({_one_line(exc)})") from None
         except httpx.HTTPError as exc:
             raise InputError(f"{url}: {type(exc).__name__}: {_one_line(exc)}") from None
+        except httpx.InvalidURL as exc:  # not an HTTPError: 'http://[::1' reached the CLI as an internal error
+            raise InputError(f"{url}: not a valid URL ({_one_line(exc)})") from None
         if expect is not None and len(body) != expect:
             raise InputError(f"{url}: short read: {len(body):,} of the {expect:,} bytes asked for ({what})")
         self.bytes_read += len(body)
