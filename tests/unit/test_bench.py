@@ -182,7 +182,7 @@ def test_gl_matrix_projects_like_gigapoint(view):
         assert c[2] / c[3] == pytest.approx(z, abs=1e-9)
 
 
-def test_parsers_and_bad_input(tmp_path):
+def test_parsers_and_bad_input(tmp_path, capsys):
     assert parse_count("20M") == 20_000_000 and parse_count("200k") == 200_000 and parse_count("1e6") == 1_000_000
     assert parse_count("5_000_000") == 5_000_000
     assert parse_threads("all") is None and parse_threads("2") == 2
@@ -199,6 +199,16 @@ def test_parsers_and_bad_input(tmp_path):
     afile.write_text("x")
     with pytest.raises(GigapointError, match="directory"):
         run_render_benchmark(points=(1000,), out=afile, gl=False)
+    # refused before any scene is made (they were found minutes into a run: out of memory, or
+    # once every measurement was made: the JSON's folder)
+    with pytest.raises(GigapointError, match=r"^benchmark of 10,000,000,000,000 points: .* take 480.0 TB or more, .*: measure fewer --points$"):
+        run_render_benchmark(points=(1000, 10**13), gl=False)
+    from gigapoint.cli import main
+
+    capsys.readouterr()
+    assert main(["bench", "-n", "1000", "--json", str(tmp_path / "nowhere" / "r.json"), "--no-gl", "--no-naive"]) == 1
+    out, err = capsys.readouterr()
+    assert err.strip().endswith("r.json: directory " + str(tmp_path / "nowhere") + " does not exist") and "points/s" not in out  # nothing measured
 
 
 def test_no_gl_reports_skipped():

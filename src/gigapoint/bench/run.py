@@ -176,6 +176,10 @@ def run_render_benchmark(
         raise GigapointError(f"benchmark views: unknown {unknown}; choose from {', '.join(VIEWS)}")
     if threads is None or isinstance(threads, int):
         threads = (threads,)
+    from ..core.chunked import IN_MEMORY_BYTES_MIN, check_room
+
+    for n in points:  # before any scene is made: 10^10 points ran out of memory minutes into the run
+        check_room(f"benchmark of {n:,} points", n, IN_MEMORY_BYTES_MIN, instead=": measure fewer --points")
     out_dir = None
     if out is not None:
         out_dir = Path(out)

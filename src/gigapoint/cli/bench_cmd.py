@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from ..errors import GigapointError
 from .app import app
 
 
@@ -27,6 +28,8 @@ def bench(
 
     counts = [parse_count(p) for p in points]
     thread_counts = [parse_threads(t) for t in threads]
+    if json_path is not None and not json_path.parent.is_dir():  # said only once every measurement was made
+        raise GigapointError(f"{json_path}: directory {json_path.parent} does not exist")
     err = err_console()
     # the steps it reports: per point count the scene, the GL upload, and per view each thread count, the naive loop, GL
     steps = len(counts) * (1 + gl + len(VIEWS) * (len(thread_counts) + naive + gl))
