@@ -280,3 +280,22 @@ def test_the_viewer_process_prefers_passive_openmp_waits(monkeypatch):
     monkeypatch.setenv("OMP_WAIT_POLICY", "active")
     prefer_passive_wait()
     assert os.environ["OMP_WAIT_POLICY"] == "active"
+
+
+def test_a_bad_pick_is_the_same_one_line_error_in_every_kind_of_cloud(tmp_path):
+    """An octree's frame gave numpy's IndexError or OverflowError for an index outside its
+    arena, a progressive octree's an empty dict; the plain cloud's PointIndexError for all."""
+    from gigapoint.lod.progressive.octree import ProgressiveOctree
+
+    xyz = np.random.default_rng(2).random((3000, 3)) * 10
+    np.save(tmp_path / "p.npy", xyz)
+    gp.convert([tmp_path / "p.npy"], tmp_path / "oct")
+    progressive = ProgressiveOctree("prog")
+    progressive.add(xyz)
+    for cloud in (gp.from_arrays(xyz), gp.open(tmp_path / "oct"), progressive):
+        frame = gp.render_frame(cloud, gp.Camera.fit_cloud(cloud, width=64, height=48))
+        hit = int(frame.index[frame.index >= 0][0])
+        assert frame.point_info(hit)["position"] is not None and frame.point_info(-1) is None
+        for bad in (10**9, -2, 2**40):
+            with pytest.raises(PointIndexError, match=rf": point index {bad} out of range 0\.\.\d+ \(-1: no point\)$"):
+                frame.point_info(bad)
