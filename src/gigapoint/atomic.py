@@ -57,6 +57,16 @@ def fsync_file(path) -> None:
         os.close(fd)
 
 
+def _name_the_file(exc: BaseException, path: Path) -> None:
+    """An OSError raised while writing (a full disk: numpy's "Not enough free space to write
+    ...", a file object's ENOSPC) without a file name gets ``path``'s: the CLI's one line
+    named no file."""
+    if isinstance(exc, OSError) and exc.filename is None:
+        if exc.strerror is None:
+            exc.strerror = str(exc)
+        exc.filename = str(path)
+
+
 def atomic_write(path, write: Callable[[Path], object], *, durable: bool = False) -> Path:
     """Make ``path`` by ``write(tmp)``, which fills the temporary file ``tmp`` (it exists, empty);
     then rename it over ``path``. ``durable``: the content reaches the disk (fsync) before the
@@ -69,8 +79,9 @@ def atomic_write(path, write: Callable[[Path], object], *, durable: bool = False
         if durable:
             fsync_file(tmp)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         tmp.unlink(missing_ok=True)
+        _name_the_file(exc, path)
         raise
     return path
 
@@ -89,8 +100,9 @@ def atomic_open(path, *, durable: bool = False) -> Iterator[BinaryIO]:
                 f.flush()
                 os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         tmp.unlink(missing_ok=True)
+        _name_the_file(exc, path)
         raise
 
 

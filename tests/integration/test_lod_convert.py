@@ -137,6 +137,33 @@ def test_conversion_interrupted_while_grouping_resumes_to_the_same_result(demo_l
 
 
 
+def test_a_full_disk_stops_a_conversion_in_one_line_and_it_resumes(demo_las, tmp_path, monkeypatch):
+    """A write that fails for want of room (an OSError without a file name, as a file object's
+    ENOSPC is) said only "error: No space left on device": now the file or folder, and that the
+    unfinished conversion resumes; run again, it does, to the uninterrupted result."""
+    import errno
+    import importlib
+
+    from gigapoint.lod import ConvertError
+
+    conv = importlib.import_module("gigapoint.lod.convert")
+    opts = dict(OPTS, upper_points=8_000)
+    convert([demo_las], tmp_path / "whole", **opts)
+    join = conv._Converter._join_roots
+
+    def full(self, parts, top, dest):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(conv._Converter, "_join_roots", full)
+    out = tmp_path / "oct"
+    with pytest.raises(ConvertError, match=rf"^{out}: No space left on device; the conversion to {out} stopped unfinished \(run it again .*: it resumes\)$"):
+        convert([demo_las], out, **opts)
+    monkeypatch.setattr(conv._Converter, "_join_roots", join)
+    res = convert([demo_las], out, **opts)
+    assert res.resumed
+    _assert_same(_snapshot(out), _snapshot(tmp_path / "whole"))
+
+
 def test_conversion_killed_while_distributing_resumes_to_the_same_result(demo_las, reference, tmp_path, monkeypatch):
     """Chunks are grouped and written at checkpoints; killed half-way through writing one, the
     re-run cuts the partition files back to the last checkpoint and gives the uninterrupted result."""

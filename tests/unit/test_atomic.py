@@ -42,6 +42,27 @@ def test_a_failed_write_keeps_the_old_file_and_removes_its_temporary(tmp_path, e
     assert sorted(p.name for p in tmp_path.iterdir()) == ["image.png"] and not seen[0].exists()
 
 
+def test_a_write_error_without_a_file_name_gets_the_outputs(tmp_path):
+    """numpy's "Not enough free space to write ..." (a full disk) is an OSError naming no file:
+    the CLI said "error: Not enough free space ..." without saying which output."""
+    path = tmp_path / "depth.npy"
+
+    def write(tmp):
+        raise OSError("Not enough free space to write 48000000 bytes after offset 128")
+
+    with pytest.raises(OSError) as e:
+        atomic_write(path, write)
+    assert e.value.filename == str(path) and e.value.strerror == "Not enough free space to write 48000000 bytes after offset 128"
+    with pytest.raises(OSError) as e:
+        with atomic_open(tmp_path / "x.bin"):
+            raise OSError(28, "No space left on device")
+    assert e.value.filename == str(tmp_path / "x.bin") and e.value.errno == 28
+    assert not list(tmp_path.iterdir())
+    with pytest.raises(FileNotFoundError) as e:  # one that names a file keeps its name
+        atomic_write(path, lambda tmp: open(tmp_path / "nowhere" / "f"))
+    assert e.value.filename == str(tmp_path / "nowhere" / "f")
+
+
 def test_the_temporary_file_is_new_hidden_beside_and_keeps_the_suffix(tmp_path):
     names = []
 

@@ -69,6 +69,11 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
             if created and not getattr(self, "state", {}).get("points"):
                 shutil.rmtree(self.dir.path, ignore_errors=True)
             raise
+        except OSError as exc:  # a full disk most often: the CLI's line named no file, nor what became of the output
+            raise ConvertError(
+                f"{exc.filename or self.dir.path}: {exc.strerror or exc}; the conversion to {self.out} stopped unfinished "
+                f"(run it again once the cause is gone: it resumes)"
+            ) from exc
         finally:
             self.progress.close()
 
