@@ -53,9 +53,8 @@ def test_a_write_error_without_a_file_name_gets_the_outputs(tmp_path):
     with pytest.raises(OSError) as e:
         atomic_write(path, write)
     assert e.value.filename == str(path) and e.value.strerror == "Not enough free space to write 48000000 bytes after offset 128"
-    with pytest.raises(OSError) as e:
-        with atomic_open(tmp_path / "x.bin"):
-            raise OSError(28, "No space left on device")
+    with pytest.raises(OSError) as e, atomic_open(tmp_path / "x.bin"):
+        raise OSError(28, "No space left on device")
     assert e.value.filename == str(tmp_path / "x.bin") and e.value.errno == 28
     assert not list(tmp_path.iterdir())
     with pytest.raises(FileNotFoundError) as e:  # one that names a file keeps its name
