@@ -58,7 +58,7 @@ def test_a_write_error_without_a_file_name_gets_the_outputs(tmp_path):
     assert e.value.filename == str(tmp_path / "x.bin") and e.value.errno == 28
     assert not list(tmp_path.iterdir())
     with pytest.raises(FileNotFoundError) as e:  # one that names a file keeps its name
-        atomic_write(path, lambda tmp: open(tmp_path / "nowhere" / "f"))
+        atomic_write(path, lambda tmp: (tmp_path / "nowhere" / "f").read_bytes())
     assert e.value.filename == str(tmp_path / "nowhere" / "f")
 
 
