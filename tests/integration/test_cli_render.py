@@ -46,10 +46,15 @@ def test_render_writes_a_png_with_stats(capsys, tmp_path, small_las):
 
 
 def test_render_several_files_merge_into_one_scene(capsys, tmp_path, small_las):
-    out = tmp_path / "two.png"
-    rc, _, err = run(capsys, "render", small_las, small_las, "-o", out, "-W", 64, "-H", 64, "--stats")
+    import shutil
+
+    out, copy = tmp_path / "two.png", tmp_path / "copy.las"
+    shutil.copyfile(small_las, copy)  # another file (one named twice is read once)
+    rc, _, err = run(capsys, "render", small_las, copy, "-o", out, "-W", 64, "-H", 64, "--stats")
     assert rc == 0, err
     assert "60,000 of 60,000 points" in err
+    rc, _, err = run(capsys, "render", small_las, small_las, "-o", out, "-W", 64, "-H", 64, "--stats", "--overwrite")
+    assert rc == 0 and "named more than once; its points are read once" in err and "30,000 of 30,000 points" in err, err
 
 
 def test_max_points_previews_a_subsample(capsys, tmp_path, small_las):
