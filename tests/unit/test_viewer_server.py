@@ -476,6 +476,9 @@ def test_viewer_for_jupyter(cloud):
         httpx.get(v.url, timeout=2)
     with pytest.raises(gigapoint.GigapointError):
         gigapoint.Viewer(12345, display=False)
+    for bad in ({"width": 0}, {"height": -5}, {"width": 960.5}, {"height": True}):  # an IFrame of 0 pixels showed nothing
+        with pytest.raises(gigapoint.GigapointError, match=r"^Viewer (width|height) must be an integer in 1\.\.16384 pixels, got "):
+            gigapoint.Viewer(cloud, display=False, **bad)
 
 
 def test_cli_view_serves_and_stops(tmp_path):

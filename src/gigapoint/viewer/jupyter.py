@@ -33,6 +33,9 @@ class Viewer:
     def __init__(self, cloud_or_path, width: int = 960, height: int = 600, host: str = "127.0.0.1", port: int = 0, settings=None, display: bool = True):
         from .server import ViewerServer
 
+        for name, v in (("width", width), ("height", height)):  # the IFrame's: 0 showed nothing, without a word
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 16384:
+                raise GigapointError(f"Viewer {name} must be an integer in 1..16384 pixels, got {v!r}")
         self.cloud = _as_cloud(cloud_or_path)
         self.server = ViewerServer(self.cloud, host=host, port=port, settings=settings).start()
         self.width, self.height = width, height
