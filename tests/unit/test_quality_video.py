@@ -134,3 +134,6 @@ def test_a_flythrough_that_cannot_be_one_video_is_refused_before_a_frame(cloud, 
     assert not list(tmp_path.iterdir())
     assert render_flythrough(cloud, [odd, odd], tmp_path / "odd.gif").exists()  # a GIF takes any size
     assert render_flythrough(cloud, [a, b], tmp_path / "ok.mp4").exists()
+    assert render_turntable(cloud, 2, tmp_path / "odd_turn.gif", width=47, height=33).exists()  # was refused: "must be even"
+    with pytest.raises(GigapointError, match=r"odd_turn.mp4: width and height must be even for video encoding, got 47x33$"):
+        render_turntable(cloud, 2, tmp_path / "odd_turn.mp4", width=47, height=33)

@@ -220,9 +220,8 @@ def render_turntable(
     overwrite: bool = False,
 ) -> Path:
     """A video of the camera orbiting the cloud once in ``n_frames`` frames (``turntable_cameras``).
-    An existing file at ``path`` is replaced only with ``overwrite=True``."""
-    if width % 2 or height % 2:
-        raise GigapointError(f"turntable: width and height must be even for video encoding, got {width}x{height}")
+    An existing file at ``path`` is replaced only with ``overwrite=True``; sizes as
+    ``render_flythrough`` takes them (even, but for a GIF)."""
     _check_path(path, overwrite)  # before any frame is rendered
     cameras = turntable_cameras(cloud, n_frames, width, height, pitch, fov)
     return render_flythrough(cloud, cameras, path, settings, fps, progress, overwrite)
