@@ -129,6 +129,11 @@ def test_estimated_normals_of_planes():
     assert {"nx", "ny", "nz", "radius"} <= set(cloud.attributes)
     with pytest.raises(GigapointError):
         estimate_normals(gp.from_arrays(np.zeros((2, 3)) + [[0, 0, 0], [1, 1, 1]]))
+    for bad in ({"k": -1}, {"k": 2}, {"k": 12.5}, {"chunk": 0}):  # k=-1 was taken as 3 silently, chunk=0 a ValueError
+        with pytest.raises(GigapointError, match=r"^estimate_normals: (k|chunk) must be an integer >= (3|1), got "):
+            estimate_normals(cloud, **bad)
+    small = gp.from_arrays(rng.random((5, 3)))  # k above the cloud's points: every point is a neighbour
+    assert np.array_equal(estimate_normals(small, k=16, store=False)[0], estimate_normals(small, k=5, store=False)[0])
 
 
 def test_lighting_matches_reference_and_needs_normals(scene):
