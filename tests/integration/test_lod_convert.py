@@ -426,6 +426,7 @@ def test_refuses_to_overwrite(demo_las, tmp_path, capsys):
         (["{las}", "--sampler", "random"], "--sampler"),
         (["{las}", "--memory-limit", "lots"], "--memory-limit"),
         (["{las}", "--memory-limit", "1M"], "--memory-limit"),
+        (["{las}", "--memory-limit", "infG"], "--memory-limit: cannot read 'infG'"),  # an internal error (OverflowError) before
         (["{las}", "--format", "ept"], "--format"),
         (["{octree}"], "converted octree"),
     ],

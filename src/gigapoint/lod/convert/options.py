@@ -32,7 +32,7 @@ def parse_memory(value, option: str = "--memory-limit", minimum: int = 64 << 20)
         mult = {"k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}.get(s[-1:], 1)
         try:
             n = int(float(s[:-1] if s[-1:] in "kmgt" else s) * mult)
-        except ValueError:
+        except (ValueError, OverflowError):  # 'abc', 'nanG'; 'infG' (an internal error before)
             raise ConvertError(f"{option}: cannot read {value!r} (use e.g. 4G, 512M)") from None
     if n < minimum:
         raise ConvertError(f"{option}: {value!r} is below the {minimum >> 20}M minimum")
