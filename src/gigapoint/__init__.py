@@ -109,7 +109,15 @@ def open(*paths, progressive: bool = False, **options):
         if is_lod_source(paths[0]):
             return open_octree(paths[0])
     refuse_octrees(paths, f"it takes no options ({', '.join(sorted(options))})" if len(paths) == 1 else "it cannot join other files")
+    import inspect
+
+    from .errors import InputError
     from .io import open_cloud
+
+    known = [p for p in inspect.signature(open_cloud).parameters if p != "paths"]
+    unknown = sorted(set(options) - set(known))
+    if unknown:  # a TypeError naming the internal open_cloud() before
+        raise InputError(f"open: unknown option(s) {', '.join(unknown)}; it takes {', '.join(known)}, progressive=True (with memory_limit=)")
 
     return open_cloud(*paths, **options)
 

@@ -57,3 +57,16 @@ def test_render_without_a_camera_frames_the_cloud_as_fit_cloud_does():
     part = gp.render(grown, size_mode="fixed")
     np.testing.assert_array_equal(part, gp.render(grown, gp.Camera.fit_cloud(grown), size_mode="fixed"))
     assert (part[..., :3] != image[0, 0, :3]).any(axis=-1).sum() > 5_000
+
+
+def test_open_names_an_unknown_option_and_what_it_takes(tmp_path):
+    """``gp.open(path, foo=1)`` was a TypeError naming the internal ``open_cloud()``."""
+    import numpy as np
+    import pytest
+
+    from gigapoint.errors import InputError
+
+    np.save(tmp_path / "p.npy", np.random.default_rng(1).random((20, 3)))
+    with pytest.raises(InputError, match=r"^open: unknown option\(s\) bar, foo; it takes chunk_size, .*colors, chunked, progressive=True"):
+        gp.open(tmp_path / "p.npy", foo=1, bar=2)
+    assert gp.open(tmp_path / "p.npy", chunk_size=7, colors="rgba").n_points == 20
