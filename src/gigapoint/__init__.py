@@ -34,12 +34,10 @@ def demo(
     50 M points. 10⁹ points at ``scale=0.01`` hold ~9 GB (``attributes=False``: ~6 GB, without
     the intensity and classification). ``colors``: how colours are held (``core.build_cloud``:
     "auto", "rgba", "rgb565" or "palette")."""
-    import numpy as np
-
-    from .errors import InputError
+    from .errors import InputError, is_whole_number
     from .io.demo import demo_chunks
 
-    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)):
+    if not is_whole_number(n_points):
         raise InputError(f"demo: n_points must be a whole number, got {n_points!r}")
     if progressive:
         from .lod.progressive import demo_sources, open_progressive
@@ -89,11 +87,11 @@ def open(*paths, progressive: bool = False, **options):
     ``memory_limit=`` bytes or '8G' (by default half the machine's memory); what was loaded stays.
 
     Paths may also come as one list or tuple: ``gp.open([a, b])`` is ``gp.open(a, b)``."""
+    from .errors import InputError
     from .lod.reader import refuse_octrees
 
     paths = _flat_paths(paths)
     if progressive:
-        from .errors import InputError
         from .lod.progressive import file_sources, memory_limit_bytes, open_progressive
 
         refuse_octrees(paths, "progressive=True builds an octree from point files")
@@ -111,7 +109,6 @@ def open(*paths, progressive: bool = False, **options):
     refuse_octrees(paths, f"it takes no options ({', '.join(sorted(options))})" if len(paths) == 1 else "it cannot join other files")
     import inspect
 
-    from .errors import InputError
     from .io import open_cloud
 
     known = [p for p in inspect.signature(open_cloud).parameters if p != "paths"]

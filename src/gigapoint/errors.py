@@ -3,6 +3,14 @@
 from __future__ import annotations
 
 
+def is_whole_number(value) -> bool:
+    """Whether ``value`` is an integer (Python's or numpy's, not a bool): the test behind the
+    one-line errors about counts, sizes and indices (3.5 was read as 3, True as 1)."""
+    import numbers
+
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
 class GigapointError(Exception):
     """Base class of every error gigapoint raises on purpose.
 

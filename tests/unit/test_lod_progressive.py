@@ -828,6 +828,19 @@ def test_a_source_without_a_valid_point_ends_as_the_plain_cloud_does(tmp_path, c
     out = tmp_path / "a.png"
     assert main(["render", str(bad), "-o", str(out), "--progressive"]) != 0
     assert not out.exists() and f"error: {bad}: no valid points" in capsys.readouterr().err
+    # many such files: the first three named, then '...' (a conversion named every one of them)
+    many = [tmp_path / f"nan{i}.xyz" for i in range(5)]
+    for f in many:
+        f.write_text("nan 2 3\n")
+    want = f"{many[0]}, {many[1]}, {many[2]} ...: no valid points (5 invalid points: NaN, inf or beyond ±1e+12)"
+    with pytest.raises(EmptyCloudError) as plain:
+        gp.open(many)
+    cloud = gp.open(many, progressive=True)
+    with pytest.raises(EmptyCloudError) as progressive:
+        cloud.wait()
+    with pytest.raises(EmptyCloudError) as converted:
+        gp.convert(many, tmp_path / "tree")
+    assert str(plain.value) == str(progressive.value) == str(converted.value) == want
 
 
 def test_add_refuses_unknown_attributes_and_widens_a_dtype_a_batch_does_not_fit():

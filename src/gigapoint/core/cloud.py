@@ -161,11 +161,9 @@ class PointCloud:
 
         The position is rounded to the source's resolution (``source_scale``: a LAS file's
         scale), so it reads as the file wrote it (636317.71, not 636317.7100002308)."""
-        check_point_index(index)
+        check_point_index(index, self.n_points, self.name)
         if index == -1:
             return None
-        if not 0 <= index < self.n_points:
-            raise PointIndexError(f"{self.name}: point index {index} out of range 0..{self.n_points - 1} (-1: no point)")
         info = {"index": int(index), "position": at_scale(self.positions([index])[0], self.source_scale)}
         info["rgba"] = colors_at(self.color, [index]).view(np.uint8).tolist()
         for name in self.attributes:

@@ -20,13 +20,16 @@ import numpy as np
 from .selection import Selection, View
 
 
-def check_point_index(index) -> None:
-    """A one-line PointIndexError unless ``index`` (given to ``point_info``) is a whole number:
-    a float such as 3.5 was read as point 3."""
-    from ..errors import PointIndexError
+def check_point_index(index, n_points: int | None = None, name: str = "") -> None:
+    """A one-line PointIndexError unless ``index`` (given to ``point_info``) is a whole number
+    (a float such as 3.5 was read as point 3) and, with ``n_points``, -1 (no point) or one of
+    the buffers' ``n_points`` points (``name``: whose)."""
+    from ..errors import PointIndexError, is_whole_number
 
-    if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
+    if not is_whole_number(index):
         raise PointIndexError(f"point index must be a whole number (frame.index[y, x]), got {index!r}")
+    if n_points is not None and index != -1 and not 0 <= index < n_points:
+        raise PointIndexError(f"{name}: point index {index} out of range 0..{n_points - 1} (-1: no point)")
 
 
 class SelectionSettings(Protocol):

@@ -68,6 +68,13 @@ def expand_paths(paths: Iterable) -> list[Path]:
     return once
 
 
+def files_label(files) -> str:
+    """Files as an error names them: one as it is, several by the first three and '...' (a
+    conversion of thousands of tiles named every one of them in its one line)."""
+    files = [str(f) for f in files]
+    return ", ".join(files[:3]) + (" ..." if len(files) > 3 else "")
+
+
 def _with_progress(path: Path, chunks: Iterator[PointChunk], total: int | None, progress) -> Iterator[PointChunk]:
     task = progress.add_task(path.name, total=total)
     for chunk in chunks:
@@ -118,10 +125,10 @@ def open_cloud(
         check_room(name, counted, IN_MEMORY_BYTES_MIN, instead=instead + ", or build it in bounded memory (chunked=True)")
 
     def chunks(bar=None) -> Iterator[PointChunk]:
-        for f, reader in plan:
+        for (f, reader), count in zip(plan, counts):
             it = reader.read_chunks(f, chunk_size)
             if bar is not None:
-                it = _with_progress(f, it, reader.point_count(f), bar)
+                it = _with_progress(f, it, count, bar)  # (the headers' counts, read once above)
             try:
                 yield from it
             except EmptyCloudError:
@@ -138,9 +145,8 @@ def open_cloud(
                 return build_cloud_chunked(stream, name=name, layout=layout, colors=colors)
             return build_cloud(stream, name=name, layout=layout, colors=colors)
         except EmptyCloudError as exc:
-            where = files[0] if not several else ", ".join(str(f) for f in files[:3]) + (" ..." if len(files) > 3 else "")
             detail = str(exc).split(": ", 1)[-1]
-            raise EmptyCloudError(f"{where}: {detail}") from None
+            raise EmptyCloudError(f"{files_label(files)}: {detail}") from None
 
     if not progress:
         return build(chunks if chunked else chunks())
@@ -236,6 +242,7 @@ __all__ = [
     "demo_chunks",
     "expand_paths",
     "file_info",
+    "files_label",
     "format_info",
     "open_cloud",
     "read_chunks",

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..core.layout import EMPTY_PIXEL
 from ..core.renderable import check_point_index
-from ..errors import GigapointError, PointIndexError
+from ..errors import GigapointError
 
 MAX_INDEX = 0xFFFFFFFF  # point indices live in the low 32 bits of the visibility buffer
 
@@ -73,9 +73,8 @@ class Frame:
         check_point_index(index)
         if index == -1 or self.points is None or self.points.version != self.generation:
             return None
-        n = self.points.n_points
-        if not 0 <= index < n:  # (an octree's arena gave numpy's IndexError, a progressive one {})
-            raise PointIndexError(f"{getattr(self.points, 'name', 'frame')}: point index {index} out of range 0..{n - 1} (-1: no point)")
+        # (outside an octree's arena numpy's IndexError came, outside a progressive one's {})
+        check_point_index(index, self.points.n_points, getattr(self.points, "name", "frame"))
         return self.points.point_info(index)
 
     @property

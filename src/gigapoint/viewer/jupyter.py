@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Self
 
 from ..core.renderable import Renderable
-from ..errors import GigapointError
+from ..errors import GigapointError, is_whole_number
 
 
 def _as_cloud(cloud_or_path):
@@ -31,11 +31,12 @@ class Viewer:
     """
 
     def __init__(self, cloud_or_path, width: int = 960, height: int = 600, host: str = "127.0.0.1", port: int = 0, settings=None, display: bool = True):
+        from ..render.camera import MAX_IMAGE_SIDE
         from .server import ViewerServer
 
         for name, v in (("width", width), ("height", height)):  # the IFrame's: 0 showed nothing, without a word
-            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 16384:
-                raise GigapointError(f"Viewer {name} must be an integer in 1..16384 pixels, got {v!r}")
+            if not is_whole_number(v) or not 1 <= v <= MAX_IMAGE_SIDE:
+                raise GigapointError(f"Viewer {name} must be an integer in 1..{MAX_IMAGE_SIDE} pixels, got {v!r}")
         self.cloud = _as_cloud(cloud_or_path)
         self.server = ViewerServer(self.cloud, host=host, port=port, settings=settings).start()
         self.width, self.height = width, height

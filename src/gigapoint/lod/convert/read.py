@@ -11,7 +11,7 @@ import numpy as np
 
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
 from ...errors import GigapointWarning
-from ...io import read_chunks
+from ...io import files_label, read_chunks
 from ...io.registry import reader_for
 from ..build import valid_bounds
 from ..preview import PreviewSampler, preview_points
@@ -132,7 +132,7 @@ class ReadPhase(Job):
         ``lo``..``hi``; no valid point is an error, skipped points a warning."""
         st = self.state
         if st.get("points", 0) == 0:  # the plain cloud's error, naming the files as it does
-            check_valid_count(", ".join(map(str, self.paths)) if self.paths else self.name, 0, st.get("skipped", 0))
+            check_valid_count(files_label(self.paths) if self.paths else self.name, 0, st.get("skipped", 0))
         if st.get("skipped"):
             warnings.warn(
                 f"{self.name}: skipped {st['skipped']:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})",

@@ -139,7 +139,9 @@ class Loader:
                         self._stop_for_memory(name)
                         return
             if self.octree.points == 0:  # every source read, no valid point: the plain cloud's error
-                check_valid_count(", ".join(source for source, _ in self.sources), 0, self.octree.skipped)
+                from ...io import files_label
+
+                check_valid_count(files_label(source for source, _ in self.sources), 0, self.octree.skipped)
             while not self._stop.is_set():  # the leaves' draw order (a grid sample first), between frames
                 turn, drawing = self.octree.builder_turn(turn)
                 if not self.octree.order_leaves(ORDER_WHILE_DRAWING if drawing else ORDER_POINTS):
