@@ -148,6 +148,29 @@ def test_reader_bad_files_one_line_errors(tmp_path):
         open_octree(tmp_path / "bad4")
 
 
+@pytest.mark.parametrize(
+    "change, problem",
+    [
+        ({"scale": [0.0, 0.0, 0.0]}, r"scale must be positive: \[0.0, 0.0, 0.0\]"),  # every point drawn at the offset
+        ({"scale": [0.001, 0.001]}, r"scale is not three finite numbers"),
+        ({"offset": [0.0, float("nan"), 0.0]}, r"offset is not three finite numbers"),
+        ({"boundingBox": {"min": [1.0, 1.0, 1.0], "max": [0.0, 0.0, 0.0]}}, r"boundingBox.min \[1.0, 1.0, 1.0\] exceeds its max"),
+    ],
+)
+def test_metadata_that_cannot_place_points_is_refused_at_open(converted, tmp_path, change, problem):
+    import shutil
+
+    path = tmp_path / "meta"
+    shutil.copytree(converted[("potree", "DEFAULT")], path)
+    meta = json.loads((path / "metadata.json").read_text())
+    open_octree(path)  # the copy opens before its metadata is changed
+    meta.update(change)
+    (path / "metadata.json").write_text(json.dumps(meta))
+    with pytest.raises(InputError, match=f"invalid Potree hierarchy/metadata \\({problem}") as e:
+        open_octree(path)
+    assert "\n" not in str(e.value) and str(path) in str(e.value)
+
+
 def test_corrupt_brotli_node_fails_in_one_line_when_drawn(converted, tmp_path):
     import shutil
 
