@@ -10,7 +10,7 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.core import PointChunk, PointCloud
-from gigapoint.errors import GigapointWarning
+from gigapoint.errors import GigapointWarning, InputError
 from gigapoint.lod import ConvertError, OctreeDir, OutputExistsError, convert, is_octree_dir
 from gigapoint.lod.convert import hooks
 from gigapoint.lod.preview import ConversionPreview
@@ -134,3 +134,30 @@ def test_an_unfinished_conversion_opens_as_a_conversion_preview(folders):
     assert preview.octree_dir == OctreeDir(folders / "half") and preview.name == "half"
     assert not hasattr(preview, "preview_of")
     assert repr(preview).startswith("PointCloud('half',")
+
+
+@pytest.mark.parametrize(
+    "change, problem",
+    [
+        ({"cube_edge": 0}, "cube_edge must be a positive number: 0"),  # drew nothing, without a word
+        ({"cube_min": [float("nan")] * 3}, r"cube_min is not three finite numbers: \[nan, nan, nan\]"),
+        ({"scale": 0}, "scale is not three finite numbers: 0"),
+        ({"scale": [0.0, 0.01, 0.01]}, r"scale must be positive: \[0.0, 0.01, 0.01\]"),
+        ({"spacing": -1}, "spacing must be a number >= 0: -1"),
+        ({"points": 2.5}, "points is not a count: 2.5"),
+        ({"bounds": [[0, 0, 0], [1, 1, 1]]}, "bounds is not "),  # an internal TypeError before
+        ({"bounds": {"min": [0, 0, 9], "max": [1, 1, 1]}}, r"bounds.min \[0.0, 0.0, 9.0\] exceeds bounds.max"),
+    ],
+)
+def test_octree_metadata_that_cannot_place_points_is_refused_at_open(folders, tmp_path, change, problem):
+    import shutil
+
+    path = tmp_path / "gp"
+    shutil.copytree(folders / "gp", path)
+    meta = json.loads((path / "octree.json").read_text())
+    assert gp.open(path).n_points == 20_000  # the copy opens as it is
+    meta.update(change)
+    (path / "octree.json").write_text(json.dumps(meta))
+    with pytest.raises(InputError, match=f"octree.json: invalid metadata \\({problem}") as e:
+        gp.open(path)
+    assert "\n" not in str(e.value)

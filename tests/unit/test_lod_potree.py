@@ -154,7 +154,7 @@ def test_reader_bad_files_one_line_errors(tmp_path):
         ({"scale": [0.0, 0.0, 0.0]}, r"scale must be positive: \[0.0, 0.0, 0.0\]"),  # every point drawn at the offset
         ({"scale": [0.001, 0.001]}, r"scale is not three finite numbers"),
         ({"offset": [0.0, float("nan"), 0.0]}, r"offset is not three finite numbers"),
-        ({"boundingBox": {"min": [1.0, 1.0, 1.0], "max": [0.0, 0.0, 0.0]}}, r"boundingBox.min \[1.0, 1.0, 1.0\] exceeds its max"),
+        ({"boundingBox": {"min": [1.0, 1.0, 1.0], "max": [0.0, 0.0, 0.0]}}, r"boundingBox.min \[1.0, 1.0, 1.0\] exceeds boundingBox.max"),
     ],
 )
 def test_metadata_that_cannot_place_points_is_refused_at_open(converted, tmp_path, change, problem):

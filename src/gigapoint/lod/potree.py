@@ -21,7 +21,7 @@ from ..core.quantize import quantize
 from ..errors import InputError
 from .keys import MAX_LEVEL, key_cube, level_of
 from .octree_dir import OctreeDir
-from .store import OctreeCloud
+from .store import OctreeCloud, check_placement
 
 HIERARCHY_DTYPE = np.dtype([("type", "u1"), ("mask", "u1"), ("points", "<u4"), ("offset", "<i8"), ("size", "<i8")])
 _TYPES = {
@@ -338,7 +338,11 @@ class PotreeCloud(OctreeCloud):
             _parse_hierarchy(hier, 0, first, 1, info)
             record = _node_dtype(self.potree_attributes)
             lo, hi = _position_range(self.potree_attributes, bmin, bmax)
-            _check_frame(self.scale, self.offset, bmin, bmax)
+            check_placement(
+                {"scale": self.scale, "offset": self.offset, "boundingBox.min": bmin, "boundingBox.max": bmax},
+                positive="scale",
+                box=("boundingBox.min", "boundingBox.max"),
+            )
         except (KeyError, TypeError, ValueError, OSError) as exc:
             raise InputError(f"{p}: invalid Potree hierarchy/metadata ({' '.join(str(exc).split())})") from None
         self.octree_bin = d.potree_octree
@@ -453,19 +457,6 @@ class PotreeCloud(OctreeCloud):
         if full.any():
             meta["bounds"] = {"min": nodes["bbox_min"][full].min(axis=0).tolist(), "max": nodes["bbox_max"][full].max(axis=0).tolist()}
         return OctreeCloud(self.name, meta, nodes, self.keys, arrays, attrs, self.path)
-
-
-def _check_frame(scale: np.ndarray, offset: np.ndarray, bmin: np.ndarray, bmax: np.ndarray) -> None:
-    """Raise ValueError unless the metadata's scale, offset and bounding box can place points:
-    three finite numbers each, a positive scale, min <= max (a scale of 0 drew every point at
-    the offset, in one pixel)."""
-    for name, v in (("scale", scale), ("offset", offset), ("boundingBox.min", bmin), ("boundingBox.max", bmax)):
-        if v.shape != (3,) or not np.all(np.isfinite(v)):
-            raise ValueError(f"{name} is not three finite numbers: {v.tolist()}")
-    if not np.all(scale > 0):
-        raise ValueError(f"scale must be positive: {scale.tolist()}")
-    if not np.all(bmin <= bmax):
-        raise ValueError(f"boundingBox.min {bmin.tolist()} exceeds its max {bmax.tolist()}")
 
 
 def _position_range(attributes: list[dict], bmin: np.ndarray, bmax: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 from collections import OrderedDict
 from pathlib import Path
 
@@ -25,7 +26,7 @@ from ..core.layout import BATCH_DTYPE, PACK_DTYPE
 from ..core.quantize import dequantize
 from ..core.renderable import DrawList, MultiViewDrawList
 from ..core.selection import Selection, View, batch_matrices, box_in_view, precision_for, visible_and_size
-from ..errors import InputError
+from ..errors import InputError, is_whole_number
 from ..render.splats import finest_spacing, union_gain
 from .keys import key_cube, morton_position
 from .octree_dir import FORMAT_NAME, FORMAT_VERSION_WORDS, FORMAT_VERSIONS, POINT_ARRAYS, OctreeDir
@@ -530,7 +531,41 @@ def read_meta(d: OctreeDir) -> dict:
         raise InputError(f"{d.meta}: invalid JSON ({exc})") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME or meta.get("version") not in FORMAT_VERSIONS:
         raise InputError(f"{d.meta}: not a gigapoint octree of version {' or '.join(map(str, FORMAT_VERSIONS))}")
+    try:  # what places and counts the points: a cube of edge 0 drew nothing, bounds as a list failed inside
+        if not is_whole_number(meta["points"]) or meta["points"] < 0:
+            raise ValueError(f"points is not a count: {meta['points']!r}")
+        edge, spacing = float(meta["cube_edge"]), meta.get("spacing")
+        if not (math.isfinite(edge) and edge > 0):
+            raise ValueError(f"cube_edge must be a positive number: {meta['cube_edge']!r}")
+        if spacing is not None and not (math.isfinite(float(spacing)) and spacing >= 0):
+            raise ValueError(f"spacing must be a number >= 0: {spacing!r}")
+        bounds = meta["bounds"]
+        if not isinstance(bounds, dict):
+            raise TypeError(f"bounds is not {{\"min\": [x, y, z], \"max\": [x, y, z]}}: {bounds!r}")
+        frame = {"cube_min": meta["cube_min"], "bounds.min": bounds["min"], "bounds.max": bounds["max"]}
+        if meta.get("scale") is not None:  # the source's grid (LAS inputs), null otherwise
+            frame["scale"] = meta["scale"]
+        check_placement(frame, positive="scale", box=("bounds.min", "bounds.max"))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{d.meta}: invalid metadata ({' '.join(str(exc).split())})") from None
     return meta
+
+
+def check_placement(triples: dict, positive: str = "", box: tuple[str, str] | None = None) -> None:
+    """Raise ValueError unless each of ``triples`` (name: value) is three finite numbers, the one
+    named ``positive`` all above 0, and the ``box`` pair (min name, max name) ordered."""
+    values = {}
+    for name, v in triples.items():
+        try:
+            values[name] = a = np.asarray(v, np.float64)
+        except (TypeError, ValueError):
+            a = None
+        if a is None or a.shape != (3,) or not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} is not three finite numbers: {v!r}")
+    if positive in values and not np.all(values[positive] > 0):
+        raise ValueError(f"{positive} must be positive: {values[positive].tolist()}")
+    if box and not np.all(values[box[0]] <= values[box[1]]):
+        raise ValueError(f"{box[0]} {values[box[0]].tolist()} exceeds {box[1]} {values[box[1]].tolist()}")
 
 
 def read_gigapoint(octree_dir, meta: dict | None = None) -> OctreeCloud:
