@@ -10,7 +10,7 @@ import pytest
 import gigapoint as gp
 from gigapoint.errors import GigapointError
 from gigapoint.render.camera import VIEWS
-from gigapoint.render.video import interpolate_cameras, render_flythrough, render_turntable, turntable_cameras
+from gigapoint.render.video import circular_mean, interpolate_cameras, render_flythrough, render_turntable, turntable_cameras
 
 AUTZEN = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "autzen_trim.laz"
 
@@ -37,6 +37,35 @@ def test_turntable_mp4_has_the_rendered_frames(cloud, tmp_path):
         assert np.abs(blocks(frames[i]) - other).mean() > 2 * np.abs(blocks(frames[i]) - expected).mean()  # its own frame
     assert np.abs(frames[0].astype(float) - frames[3].astype(float)).mean() > 1.0  # the camera moved
     assert not list(tmp_path.glob(".spin.mp4.*"))  # no temporary left behind
+
+
+def test_the_orbits_running_mean_is_the_windows_mean_in_linear_memory():
+    """Targets and distances glide as means over an eighth of the orbit, wrapping around: the
+    same numbers as gathering each frame's window, without the n * n / 8 of them (a 100 000-frame
+    turntable ended in "out of memory")."""
+    import tracemalloc
+
+    rng = np.random.default_rng(1)
+    for n, half in ((1, 0), (7, 3), (50, 3), (400, 25)):
+        v = rng.random((n, 3)) * 100 + [637000.0, 4850000.0, 30.0]  # UTM-sized targets
+        ring = (np.arange(-half, half + 1)[:, None] + np.arange(n)[None, :]) % n
+        np.testing.assert_allclose(circular_mean(v, half), v[ring].mean(axis=0), rtol=0, atol=1e-8)
+        np.testing.assert_allclose(circular_mean(v[:, 0], half), v[ring, 0].mean(axis=0), rtol=0, atol=1e-8)
+    n = 200_000
+    v = rng.random((n, 3))
+    tracemalloc.start()
+    smooth = circular_mean(v, n // 16)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 40 * v.nbytes  # measured ~5x; the windows were 12 500 x 200 000 x 3 numbers (60 GB)
+    assert np.allclose(smooth, v.mean(axis=0), atol=0.01)  # an eighth of the orbit: near the mean of uniform numbers
+
+
+@pytest.mark.parametrize("n_frames", [0, -3, 2.5, True, 100_001, 10**8])
+def test_a_turntable_of_no_or_too_many_frames_is_refused_at_once(cloud, n_frames):
+    """10**8 frames ran out of memory seconds in (and would have been framed for days)."""
+    with pytest.raises(gp.GigapointError, match=f"turntable: number of frames must be an integer from 1 to 100,000, got {n_frames!r}"):
+        turntable_cameras(cloud, n_frames, 64, 48)
 
 
 def test_turntable_cameras_orbit_once(cloud):
@@ -112,7 +141,7 @@ def test_flythrough_gif_and_errors(cloud, tmp_path):
         render_turntable(cloud, 3, tmp_path / "x.png")
     with pytest.raises(GigapointError, match="even"):
         render_turntable(cloud, 3, tmp_path / "x.mp4", width=33)
-    with pytest.raises(GigapointError, match="positive integer"):
+    with pytest.raises(GigapointError, match="an integer from 1 to 100,000"):
         render_turntable(cloud, 0, tmp_path / "x.mp4")
 
 
