@@ -128,6 +128,29 @@ def _pitch(camera) -> float:
     return float(np.degrees(np.arcsin(back[2] / np.linalg.norm(back))))
 
 
+def test_a_flythrough_keeps_its_key_cameras_projection_and_glides_their_fov_and_height():
+    """An orthographic fly-through was drawn in perspective (the keys' projection, height and
+    clip planes were dropped); a fractional frame count was numpy's TypeError."""
+    a = gp.Camera.look_at((0, 0, 10), (0, 0, 0), projection="orthographic", ortho_height=4.0, width=64, height=48, near=0.5, far=50.0)
+    b = gp.Camera.look_at((10, 0, 10), (0, 0, 0), projection="orthographic", ortho_height=8.0, width=64, height=48, near=0.5, far=50.0)
+    cams = interpolate_cameras([a, b], 5)
+    assert [c.projection for c in cams] == ["orthographic"] * 5 and {(c.near, c.far) for c in cams} == {(0.5, 50.0)}
+    np.testing.assert_allclose([c.ortho_height for c in cams], [4, 5, 6, 7, 8])
+    np.testing.assert_allclose([c.eye[0] for c in cams], [0, 2.5, 5, 7.5, 10])
+    wide = gp.Camera.look_at((0, 0, 10), (0, 0, 0), fov=30.0, width=64, height=48)
+    narrow = gp.Camera.look_at((0, 0, 20), (0, 0, 0), fov=90.0, width=64, height=48)
+    np.testing.assert_allclose([c.fov for c in interpolate_cameras([wide, narrow], 3)], [30, 60, 90])
+    for keys, n, problem in (
+        ([a, wide], 3, r"fly-through: the key cameras must have one projection, got \['orthographic', 'perspective'\]"),
+        ([a, "x"], 3, "fly-through: key cameras: camera 1 must be a gigapoint.Camera, got str"),
+        ([wide, gp.Camera.look_at((1, 0, 0), (0, 0, 0), width=32, height=48)], 3, "fly-through: key cameras: every camera must have one size"),
+        ([a, b], 2.5, "fly-through: needs at least 2 key cameras and 2 frames, got 2 and 2.5"),
+        ([a], 5, "fly-through: needs at least 2 key cameras and 2 frames, got 1 and 5"),
+    ):
+        with pytest.raises(GigapointError, match=problem):
+            interpolate_cameras(keys, n)
+
+
 def test_flythrough_gif_and_errors(cloud, tmp_path):
     keys = turntable_cameras(cloud, 4, 48, 32)[:2]
     cams = interpolate_cameras(keys, 5)

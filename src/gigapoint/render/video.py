@@ -128,19 +128,32 @@ def _spread(grid: np.ndarray, combine) -> np.ndarray:
 
 
 def interpolate_cameras(keys: list[Camera], n_frames: int) -> list[Camera]:
-    """n_frames cameras moving linearly (eye and target) through the key cameras."""
-    if len(keys) < 2 or n_frames < 2:
-        raise GigapointError("fly-through: needs at least 2 key cameras and 2 frames")
-    eyes = np.array([k.eye for k in keys])
-    targets = np.array([k.target for k in keys])
-    t = np.linspace(0, len(keys) - 1, n_frames)
+    """n_frames cameras moving linearly through the key cameras: eye, target, field of view and
+    an orthographic camera's height; each keeps its segment's first key's up vector and clip
+    planes, and the keys' projection and size (one of each)."""
+    keys = list(keys)
+    if len(keys) < 2 or not is_whole_number(n_frames) or n_frames < 2:
+        raise GigapointError(f"fly-through: needs at least 2 key cameras and 2 frames, got {len(keys)} and {n_frames!r}")
+    _check_one_kind(keys, "fly-through: key cameras")
+    if len({k.projection for k in keys}) > 1:
+        raise GigapointError(f"fly-through: the key cameras must have one projection, got {sorted({k.projection for k in keys})}")
+    ortho = keys[0].projection == "orthographic"
+    stops = {name: np.array([getattr(k, name) for k in keys], np.float64) for name in ("eye", "target", "fov")}
+    if ortho:
+        stops["ortho_height"] = np.array([k.ortho_height for k in keys], np.float64)
     out = []
-    for u in t:
+    for u in np.linspace(0, len(keys) - 1, n_frames):
         i = min(int(u), len(keys) - 2)
         f = u - i
-        eye = eyes[i] * (1 - f) + eyes[i + 1] * f
-        target = targets[i] * (1 - f) + targets[i + 1] * f
-        out.append(Camera.look_at(tuple(eye), tuple(target), up=keys[i].up, fov=keys[i].fov, width=keys[0].width, height=keys[0].height))
+        at = {name: v[i] * (1 - f) + v[i + 1] * f for name, v in stops.items()}
+        k = keys[i]
+        height = float(at["ortho_height"]) if ortho else None
+        out.append(
+            Camera(
+                eye=tuple(at["eye"]), target=tuple(at["target"]), up=k.up, fov=float(at["fov"]), width=k.width, height=k.height,
+                projection=k.projection, ortho_height=height, near=k.near, far=k.far,
+            )
+        )
     return out
 
 
@@ -203,16 +216,21 @@ def render_flythrough(
     return path
 
 
+def _check_one_kind(cameras: list, what: str) -> None:
+    """One-line errors, starting ``what: ``, unless ``cameras`` are Cameras of one size."""
+    for i, cam in enumerate(cameras):
+        if not isinstance(cam, Camera):
+            raise GigapointError(f"{what}: camera {i} must be a gigapoint.Camera, got {type(cam).__name__}")
+        if (cam.width, cam.height) != (cameras[0].width, cameras[0].height):
+            raise GigapointError(
+                f"{what}: every camera must have one size: camera {i} is {cam.width}x{cam.height}, camera 0 {cameras[0].width}x{cameras[0].height}"
+            )
+
+
 def _check_cameras(cameras: list, path: Path) -> None:
     """One-line errors for what a video cannot hold: something not a Camera, frames of two
     sizes, odd sizes where ffmpeg encodes (yuv420p)."""
-    for i, cam in enumerate(cameras):
-        if not isinstance(cam, Camera):
-            raise GigapointError(f"video: camera {i} must be a gigapoint.Camera, got {type(cam).__name__}")
-        if (cam.width, cam.height) != (cameras[0].width, cameras[0].height):
-            raise GigapointError(
-                f"video: every camera must have one size: camera {i} is {cam.width}x{cam.height}, camera 0 {cameras[0].width}x{cameras[0].height}"
-            )
+    _check_one_kind(cameras, "video")
     if path.suffix.lower() != ".gif" and (cameras[0].width % 2 or cameras[0].height % 2):
         raise GigapointError(f"{path}: width and height must be even for video encoding, got {cameras[0].width}x{cameras[0].height}")
 
