@@ -2,6 +2,8 @@
 
 import inspect
 
+import numpy as np
+
 import gigapoint as gp
 
 
@@ -70,3 +72,28 @@ def test_open_names_an_unknown_option_and_what_it_takes(tmp_path):
     with pytest.raises(InputError, match=r"^open: unknown option\(s\) bar, foo; it takes chunk_size, .*colors, chunked, progressive=True"):
         gp.open(tmp_path / "p.npy", foo=1, bar=2)
     assert gp.open(tmp_path / "p.npy", chunk_size=7, colors="rgba").n_points == 20
+
+
+def test_settings_that_are_not_render_settings_are_one_line_errors(tmp_path):
+    """A dict of settings was an AttributeError ('dict' object has no attribute 'supersample') deep
+    in render, the turntable, the viewer; None still means the defaults."""
+    import pytest
+
+    import gigapoint as gp
+    from gigapoint.render.settings import SettingsError
+
+    cloud = gp.demo(2_000)
+    camera = gp.Camera.fit(cloud.bounds, width=32, height=24)
+    wrong = "settings must be a gigapoint.RenderSettings, got dict"
+    for call in (
+        lambda: gp.render(cloud, camera, settings={"point_size": 3}),
+        lambda: gp.render(cloud, camera, settings={"point_size": 3}, point_size=2),
+        lambda: gp.render_frame(cloud, camera, {"point_size": 3}),
+        lambda: gp.render_turntable(cloud, 2, tmp_path / "t.gif", settings={"point_size": 3}, width=32, height=24),
+        lambda: gp.Viewer(cloud, settings={"point_size": 3}, display=False),
+    ):
+        with pytest.raises(SettingsError, match=wrong):
+            call()
+    assert not list(tmp_path.iterdir())
+    assert gp.render(cloud, camera, settings=None).shape == (24, 32, 4)
+    np.testing.assert_array_equal(gp.render(cloud, camera, settings=None), gp.render(cloud, camera, gp.RenderSettings()))

@@ -59,7 +59,7 @@ def footprint_pixels(x0, y0, sizes, footprint, width: int, height: int):
 
 
 def reference_visibility(cloud, camera: Camera, settings: RenderSettings | None = None) -> np.ndarray:
-    settings = settings or RenderSettings()
+    settings = RenderSettings.of(settings)
     w, h = camera.width, camera.height
     near, far = camera.clip_range(cloud.bounds)
     sel = select(
@@ -84,7 +84,7 @@ def reference_visibility(cloud, camera: Camera, settings: RenderSettings | None 
 
 
 def reference_image(cloud, camera: Camera, settings: RenderSettings | None = None) -> np.ndarray:
-    settings = settings or RenderSettings()
+    settings = RenderSettings.of(settings)
     vis = reference_visibility(cloud, camera, settings).reshape(-1)
     out = np.empty(len(vis), np.uint32)
     out[:] = np.array(settings.background, np.uint8).view(np.uint32)[0]

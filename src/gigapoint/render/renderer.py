@@ -36,7 +36,7 @@ def check_renderable(cloud) -> None:
 def render_frame(cloud, camera: Camera | None = None, settings: RenderSettings | None = None) -> Frame:
     """Render ``cloud`` (any Renderable) into a Frame (visibility buffer, image, stats). Without a
     camera: ``Camera.fit_cloud(cloud)`` (1920x1080, the CLI's default view) of what it holds now."""
-    settings = settings or RenderSettings()
+    settings = RenderSettings.of(settings)
     check_renderable(cloud)
     if camera is None:
         camera = Camera.fit_cloud(cloud)
@@ -74,6 +74,6 @@ def render(cloud, camera: Camera | None = None, settings: RenderSettings | None 
     """(H, W, 4) uint8 RGBA image of ``cloud`` seen by ``camera`` (and RenderStats if asked);
     without a camera, ``Camera.fit_cloud(cloud)`` of what it holds now (1920x1080)."""
     if setting_overrides:
-        settings = (settings or RenderSettings()).replace(**setting_overrides)
+        settings = RenderSettings.of(settings).replace(**setting_overrides)
     frame = render_frame(cloud, camera, settings)
     return (frame.image, frame.stats) if return_stats else frame.image

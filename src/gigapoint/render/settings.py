@@ -218,6 +218,19 @@ class RenderSettings:
             return "attenuated"
         return "fixed" if self.point_size > 1 else "adaptive"
 
+    @classmethod
+    def of(cls, settings) -> RenderSettings:
+        """``settings`` itself, the defaults for None, else a one-line SettingsError (a dict
+        failed later as an AttributeError)."""
+        if settings is None:
+            return cls()
+        if not isinstance(settings, cls):
+            raise SettingsError(
+                f"settings must be a gigapoint.RenderSettings, got {type(settings).__name__} "
+                "(RenderSettings(point_size=3), or the fields as keywords of gigapoint.render)"
+            )
+        return settings
+
     def replace(self, **changes) -> RenderSettings:
         names = {f.name for f in fields(self)}
         unknown = set(changes) - names

@@ -180,7 +180,7 @@ def render_flythrough(
     from .renderer import render
 
     path = _check_path(path, overwrite)
-    settings = settings or RenderSettings()
+    settings = RenderSettings.of(settings)
     if not (math.isfinite(fps) and fps > 0):
         raise GigapointError(f"video fps must be > 0, got {fps!r}")
     cameras = list(cameras)

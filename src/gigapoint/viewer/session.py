@@ -190,7 +190,7 @@ class ViewerCore:
 
     def __init__(self, cloud, settings: RenderSettings | None = None, max_sessions: int = MAX_SESSIONS):
         self.cloud = cloud
-        self.settings = settings or RenderSettings()
+        self.settings = RenderSettings.of(settings)
         self.sessions: dict[str, Session] = {}
         self.max_sessions = max_sessions
         self.lock = threading.Lock()

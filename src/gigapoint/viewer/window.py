@@ -69,7 +69,7 @@ class PointCloudWindow:
     def __init__(self, canvas, cloud, camera: Camera | None = None, settings: RenderSettings | None = None) -> None:
         self.canvas = canvas
         self.cloud = cloud
-        self.settings = settings or RenderSettings()
+        self.settings = RenderSettings.of(settings)
         w, h = canvas.get_physical_size()
         self.home = camera or Camera.fit(cloud.bounds, width=max(w, 1), height=max(h, 1))
         self.orbit = Orbit.from_camera(self.home)
