@@ -502,3 +502,30 @@ def test_the_lock_goes_with_a_killed_conversion(demo_las, tmp_path):
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, check=False)
     assert proc.returncode == -9
     assert convert([demo_las], out, **OPTS).points == 150_000
+
+
+def _octree_points(path) -> np.ndarray:
+    """Every point of a converted octree as rows (x, y, z in cm, intensity), sorted."""
+    oc = open_octree(path)
+    parts = [oc.node_points(i) for i in range(len(oc.nodes))]
+    xyz = np.round(np.concatenate([p["xyz"] for p in parts]) * 100)
+    rows = np.column_stack([xyz, np.concatenate([p["intensity"] for p in parts])])
+    return rows[np.lexsort(rows.T[::-1])]
+
+
+def test_a_cloud_converts_as_the_file_it_was_read_from(autzen_path, tmp_path):
+    """gp.convert(cloud, out) was "'PointCloud' object is not iterable": a cloud in memory (read,
+    generated, made from arrays) converts through its chunks to the same points as its file."""
+    import gigapoint as gp
+
+    path = autzen_path
+    cloud = gp.open(path)
+    assert sum(len(c.xyz) for c in cloud.chunks(50_000)) == cloud.n_points == 110_000
+    np.testing.assert_array_equal(np.concatenate([c.xyz for c in cloud.chunks(50_000)]), cloud.positions())
+    from_cloud = convert(cloud, tmp_path / "from_cloud")
+    convert([path], tmp_path / "from_file")
+    assert from_cloud.points == 110_000
+    np.testing.assert_array_equal(_octree_points(tmp_path / "from_cloud"), _octree_points(tmp_path / "from_file"))
+    assert open_octree(tmp_path / "from_cloud").name == cloud.name
+    with pytest.raises(gp.GigapointError, match="convert: inputs are files, folders, a cloud or PointChunks, got a CompactOctree"):
+        convert(open_octree(tmp_path / "from_file"), tmp_path / "again")

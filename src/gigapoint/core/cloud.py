@@ -120,6 +120,31 @@ class PointCloud:
             out[sel] = dequantize(low[i - lo], med[i - lo], high[i - lo], rec["bbox_min"], rec["bbox_max"], 30)
         return out
 
+    def chunks(self, points_per_chunk: int = 1_000_000):
+        """The points as PointChunks, in the cloud's order, whole batches at a time: positions
+        (30 bits a batch; exact on the source's grid in the compact layout), colours and
+        attributes as they read back. What ``gigapoint.convert(cloud, out)`` converts."""
+        rgba, first, count = self.rgba, self.batches["first"].astype(np.int64), self.batches["count"].astype(np.int64)
+        start = 0
+        while start < len(self.batches):
+            end = start + 1 + int(np.searchsorted(np.cumsum(count[start:]), points_per_chunk))  # batches up to the size
+            end = min(end, len(self.batches))
+            lo, hi = int(first[start]), int(first[end - 1] + count[end - 1])
+            xyz = np.concatenate([self._batch_positions(b) for b in range(start, end)])
+            attributes = {a: self.attributes.at(a, slice(lo, hi)) for a in self.attributes}
+            yield PointChunk(xyz, rgba[lo:hi], attributes, scale=self.source_scale)
+            start = end
+
+    def _batch_positions(self, batch: int) -> np.ndarray:
+        """float64 positions of one batch's points (30-bit precision)."""
+        rec = self.batches[batch]
+        lo, hi = int(rec["first"]), int(rec["first"]) + int(rec["count"])
+        if self.packing is None:
+            low, med, high = self.low[lo:hi], self.med[lo:hi], self.high[lo:hi]
+        else:
+            low, med, high = point_words(self, batch, lo, hi)
+        return dequantize(low, med, high, rec["bbox_min"], rec["bbox_max"], 30)
+
     @property
     def layout(self) -> str:
         """"compact" (core/compact.py) or "words" (three u32 words a point)."""

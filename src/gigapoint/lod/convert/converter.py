@@ -3,6 +3,7 @@ lock, prepares it (resume or start clean) and runs the phases in order."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import time
 from dataclasses import dataclass
@@ -148,7 +149,7 @@ def convert(
     colors: str = "rgba",
     on_ready=None,
 ) -> ConvertResult:
-    """Convert point cloud files (or an iterable of PointChunks) into an LOD octree directory ``out``.
+    """Convert point cloud files (or a cloud, or an iterable of PointChunks) into an LOD octree directory ``out``.
 
     ``sampler``: grid | poisson. ``format``: gigapoint (rendered directly) | potree (Potree 2.0,
     ``encoding`` DEFAULT or BROTLI). ``memory_limit``: bytes or '4G'; bounds partition sizes. Only path
@@ -194,6 +195,14 @@ def convert(
     mem = parse_memory(memory_limit)
     if out is None or str(out) == "":
         raise ConvertError("convert: no output directory given (-o OUT)")
+    if callable(getattr(inputs, "chunks", None)) and not isinstance(inputs, GrownTree):  # a cloud: gp.demo, from_arrays, open
+        if callable(getattr(inputs, "wait", None)):
+            inputs.wait()  # a progressive octree still loading (its save() keeps its own tree, without a new split)
+        name = name or inputs.name
+        source_files = source_files if source_files is not None else getattr(inputs, "source_files", None)
+        inputs = inputs.chunks()
+    elif not isinstance(inputs, (str, os.PathLike, GrownTree)) and not hasattr(inputs, "__iter__"):
+        raise InputError(f"convert: inputs are files, folders, a cloud or PointChunks, got a {type(inputs).__name__}")
     cls = _InMemoryConverter  # held in memory where it fits, else out of core (in_memory.py)
     if isinstance(inputs, GrownTree):  # a progressive octree's save: its leaves are the partitions
         if client is not None:
