@@ -416,6 +416,16 @@ def test_refuses_to_overwrite(demo_las, tmp_path, capsys):
     (foreign / "holiday.jpg").write_bytes(b"x")
     assert main(["convert", str(demo_las), "-o", str(foreign), "--quiet", "--overwrite"]) == 1
     assert sorted(p.name for p in foreign.iterdir()) == ["holiday.jpg"]
+    # nor is an input replaced by its own conversion (a COPC output is one file: it was, with --overwrite)
+    copy = tmp_path / "scan.laz"
+    copy.write_bytes(demo_las.read_bytes())
+    capsys.readouterr()
+    (tmp_path / "sub").mkdir()
+    for argv in (["convert", str(copy)], ["convert", str(demo_las), str(tmp_path)]):
+        assert main([*argv, "-o", f"{tmp_path}/sub/../scan.laz", "--format", "copc", "--overwrite", "--quiet"]) == 1
+        err = capsys.readouterr().err
+        assert err == f"error: {tmp_path}/sub/../scan.laz: is one of the inputs; write the COPC file elsewhere (it would replace the file it is read from)\n"
+        assert copy.read_bytes() == demo_las.read_bytes() and not list(tmp_path.glob("*.work"))
 
 
 @pytest.mark.parametrize(

@@ -16,7 +16,7 @@ from pathlib import Path
 from ...errors import InputError
 from ...io import expand_paths
 from ..copc_write import work_dir as copc_work_dir
-from ..octree_dir import OctreeDir
+from ..octree_dir import OctreeDir, OutputExistsError
 from .options import BYTES_PER_POINT_BUILD, MAX_PARTITION_POINTS, rss_bytes
 
 STATE_VERSION = 1
@@ -52,6 +52,13 @@ def input_paths(inputs) -> list[Path] | None:
         if OctreeDir(p).kind is not None:
             raise InputError(f"{p}: is a converted octree (or a conversion in progress), not an input point cloud")
     return expand_paths(inputs)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 class Job:
@@ -97,6 +104,8 @@ class Job:
         self.progress = progress
         self.inputs = inputs
         self.paths = input_paths(inputs)
+        if format == "copc" and self.paths and self.out.exists() and any(_same_file(self.out, p) for p in self.paths):
+            raise OutputExistsError(f"{self.out}: is one of the inputs; write the COPC file elsewhere (it would replace the file it is read from)")
         self.source_files = list(source_files or [])  # chunk inputs: the files their points came from
         self.name = name or (self.paths[0].stem if self.paths else "cloud")
         self.state: dict = {}
