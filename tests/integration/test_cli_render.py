@@ -82,6 +82,24 @@ def test_camera_options_and_extra_outputs(capsys, tmp_path, small_las):
     assert Image.open(tmp_path / "c.jpg").size == (80, 60)
 
 
+def test_an_output_that_is_an_input_or_another_output_is_refused_before_anything_is_read(capsys, tmp_path):
+    """``--index-out pts.npy --overwrite`` replaced the points it drew with the index buffer."""
+    pts = tmp_path / "tiles" / "pts.npy"
+    pts.parent.mkdir()
+    np.save(pts, np.random.default_rng(0).random((500, 3)))
+    before = pts.read_bytes()
+    for inputs, extra, problem in (
+        ([pts], ["--index-out", pts], f"{pts}: is one of the inputs; write it elsewhere (it would replace the points being read)"),
+        ([pts.parent], ["--depth-out", pts], f"{pts}: is one of the inputs"),  # a point cloud file of a folder named
+        ([pts], ["--depth-out", tmp_path / "d.npy", "--index-out", tmp_path / "tiles" / ".." / "d.npy"], "d.npy: named for two outputs"),
+    ):
+        rc, _, err = run(capsys, "render", *inputs, "-o", tmp_path / "a.png", "-W", 32, "-H", 24, "--overwrite", *extra)
+        assert rc == 1 and err.startswith("error: ") and problem in err and err.count("\n") == 1, err
+        assert pts.read_bytes() == before and not (tmp_path / "a.png").exists()
+    rc, _, err = run(capsys, "render", pts.parent, "-o", tmp_path / "tiles" / "a.png", "-W", 32, "-H", 24, "--index-out", tmp_path / "i.npy")
+    assert rc == 0, err  # an image beside the points it draws is no input
+
+
 def test_never_overwrites_without_asking(capsys, tmp_path, small_las):
     out = tmp_path / "keep.png"
     out.write_bytes(b"precious")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,31 @@ def check_output(path: Path, overwrite: bool, suffixes=IMAGE_SUFFIXES) -> Path:
     if not path.parent.exists():
         raise GigapointError(f"{path}: directory {path.parent} does not exist")
     return path
+
+
+def check_outputs_apart(outputs, inputs) -> None:
+    """One-line errors where an output is an input (a file named, or a point cloud file in a
+    folder named: ``--index-out pts.npy --overwrite`` replaced the points it drew) or two outputs
+    are one file (the second replaced the first)."""
+    from ..io.registry import is_supported_name
+
+    given = [Path(o) for o in outputs if o is not None]
+    for i, out in enumerate(given):
+        if any(out.resolve() == other.resolve() for other in given[:i]):
+            raise GigapointError(f"{out}: named for two outputs")
+        if not out.exists():
+            continue
+        for p in inputs:
+            p = Path(p)
+            if _same_file(out, p) or (p.is_dir() and is_supported_name(out) and _same_file(out.parent, p)):
+                raise GigapointError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # either is missing, or a URL
+        return False
 
 
 def save_image(image: np.ndarray, path: Path) -> None:

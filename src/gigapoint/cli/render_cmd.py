@@ -16,7 +16,7 @@ from . import compiling
 from .app import app
 from .cloud_opts import ChunkedOption, ColorsOption, check_colors, cloud_options, open_files
 from .info_cmd import memory_line
-from .output import check_output, save_array, save_image
+from .output import check_output, check_outputs_apart, save_array, save_image
 from .progress import err_console, progress_bar, status
 from .quality_opts import prepare_cloud
 from .settings_opts import settings_from_options, with_settings_options
@@ -157,6 +157,7 @@ def render(
     for extra in (depth_out, index_out):
         if extra is not None:
             check_output(extra, overwrite, suffixes={".npy"})
+    check_outputs_apart([output, depth_out, index_out], inputs)
     if projection not in ("perspective", "orthographic"):
         raise GigapointError(f"--projection must be perspective or orthographic, got {projection!r}")
     if view not in VIEWS:
