@@ -284,7 +284,9 @@ def test_the_viewer_process_prefers_passive_openmp_waits(monkeypatch):
 
 def test_a_bad_pick_is_the_same_one_line_error_in_every_kind_of_cloud(tmp_path):
     """An octree's frame gave numpy's IndexError or OverflowError for an index outside its
-    arena, a progressive octree's an empty dict; the plain cloud's PointIndexError for all."""
+    arena, a progressive octree's an empty dict; the plain cloud's PointIndexError for all,
+    whether asked of the frame or of the buffers it drew (an arena, a pool, a live ring)."""
+    from gigapoint.live import LiveCloud
     from gigapoint.lod.progressive.octree import ProgressiveOctree
 
     xyz = np.random.default_rng(2).random((3000, 3)) * 10
@@ -292,10 +294,14 @@ def test_a_bad_pick_is_the_same_one_line_error_in_every_kind_of_cloud(tmp_path):
     gp.convert([tmp_path / "p.npy"], tmp_path / "oct")
     progressive = ProgressiveOctree("prog")
     progressive.add(xyz)
-    for cloud in (gp.from_arrays(xyz), gp.open(tmp_path / "oct"), progressive):
+    live = LiveCloud()
+    live.push(xyz)
+    for cloud in (gp.from_arrays(xyz), gp.open(tmp_path / "oct"), progressive, live):
         frame = gp.render_frame(cloud, gp.Camera.fit_cloud(cloud, width=64, height=48))
         hit = int(frame.index[frame.index >= 0][0])
         assert frame.point_info(hit)["position"] is not None and frame.point_info(-1) is None
+        assert frame.points.point_info(hit) == frame.point_info(hit) and frame.points.point_info(-1) is None
         for bad in (10**9, -2, 2**40):
-            with pytest.raises(PointIndexError, match=rf": point index {bad} out of range 0\.\.\d+ \(-1: no point\)$"):
-                frame.point_info(bad)
+            for where in (frame, frame.points):
+                with pytest.raises(PointIndexError, match=rf": point index {bad} out of range 0\.\.\d+ \(-1: no point\)$"):
+                    where.point_info(bad)

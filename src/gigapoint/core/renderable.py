@@ -73,7 +73,7 @@ class PointBuffers(Protocol):
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]: ...
 
-    def point_info(self, index: int) -> dict: ...
+    def point_info(self, index: int) -> dict | None: ...  # None for -1; check_point_index's error for another index outside
 
 
 @dataclass

@@ -27,6 +27,7 @@ from ..core.compact import point_words
 from ..core.framelock import FrameLock
 from ..core.layout import BATCH_DTYPE, COORD_BITS, WORD_BITS, WORD_MASK
 from ..core.quantize import dequantize
+from ..core.renderable import check_point_index
 
 _SCALE30 = float(1 << COORD_BITS)
 
@@ -327,10 +328,12 @@ class LiveBuffers:
                 attrs[a] = take(a, v)
         return xyz, rgba, attrs
 
-    def point_info(self, index: int) -> dict:
-        """Position, colour and attributes of the entry at ``index`` (a live frame's point or a snapshot's)."""
-        if not 0 <= index < self.n_points:
-            return {}
+    def point_info(self, index: int) -> dict | None:
+        """Position, colour and attributes of the entry at ``index`` (a live frame's point or a
+        snapshot's); None for -1 (no point)."""
+        check_point_index(index, self.n_points, self.name)
+        if index == -1:
+            return None
         if index < self.ring_points:
             slot = index // self.chunk
         else:

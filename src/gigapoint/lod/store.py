@@ -24,7 +24,7 @@ from ..core.cloud import at_scale
 from ..core.compact import point_words, rgba32, stream_words
 from ..core.layout import BATCH_DTYPE, PACK_DTYPE
 from ..core.quantize import dequantize
-from ..core.renderable import DrawList, MultiViewDrawList
+from ..core.renderable import DrawList, MultiViewDrawList, check_point_index
 from ..core.selection import Selection, View, batch_matrices, box_in_view, precision_for, visible_and_size
 from ..errors import InputError, is_whole_number
 from ..render.splats import finest_spacing, union_gain
@@ -297,9 +297,12 @@ class Arena:
         arrays += [self.med, self.high] if self.med is not None else [self.ext]
         return sum(a.nbytes for a in arrays) + self.attributes.nbytes
 
-    def point_info(self, index: int) -> dict:
+    def point_info(self, index: int) -> dict | None:
         """Position (rounded to ``source_scale``, the octree's source grid, where it has one),
-        color, level and attributes of the point in slot position ``index``."""
+        color, level and attributes of the point in slot position ``index``; None for -1 (no point)."""
+        check_point_index(index, self.n_points, self.name)
+        if index == -1:
+            return None
         slot = int(np.searchsorted(self.batches["first"], np.uint64(index), side="right") - 1)
         rec = self.batches[slot]
         low, med, high = point_words(self, slot, index, index + 1)

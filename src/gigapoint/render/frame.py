@@ -73,9 +73,7 @@ class Frame:
         check_point_index(index)
         if index == -1 or self.points is None or self.points.version != self.generation:
             return None
-        # (outside an octree's arena numpy's IndexError came, outside a progressive one's {})
-        check_point_index(index, self.points.n_points, getattr(self.points, "name", "frame"))
-        return self.points.point_info(index)
+        return self.points.point_info(index)  # every point buffer checks its own range (check_point_index)
 
     @property
     def empty(self) -> np.ndarray:

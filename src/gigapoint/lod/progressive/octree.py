@@ -61,7 +61,7 @@ from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE, WORD_BITS
 from ...core.morton import fastest
 from ...core.quantize import dequantize
-from ...core.renderable import DrawList, MultiViewDrawList
+from ...core.renderable import DrawList, MultiViewDrawList, check_point_index
 from ...core.selection import Selection, View, batch_matrices, precision_for, visible_and_size
 from ...errors import GigapointError, InputError
 from ...render.splats import weighted_median
@@ -213,11 +213,12 @@ class Pool:
         """The attributes of the entries at pool ``slots`` (an array or a slice), decoded."""
         return {a: self.attributes.at(a, slots) for a in self.attributes}
 
-    def point_info(self, index: int) -> dict:
+    def point_info(self, index: int) -> dict | None:
         """Position (rounded to ``source_scale``, the octree's grid while every point is on it),
-        color, level and attributes of the entry at pool slot ``index``."""
-        if not 0 <= index < self.n_points:
-            return {}
+        color, level and attributes of the entry at pool slot ``index``; None for -1 (no point)."""
+        check_point_index(index, self.n_points, self.name)
+        if index == -1:
+            return None
         rec = self.batches[index // self.chunk]
         pos = dequantize(*point_words(self, index // self.chunk, index, index + 1), rec["bbox_min"], rec["bbox_max"], 30)[0]
         info = {
