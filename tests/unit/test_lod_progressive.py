@@ -1042,6 +1042,10 @@ def test_a_truncated_file_is_refused_at_open(tmp_path, las_writer):
 
 def test_closing_mid_load_stops_the_loader_and_frees_memory():
     cloud = gp.demo(3_000_000, progressive=True)
+    for bad in ("1", float("nan"), True):  # "1" was a TypeError of the comparison inside
+        with pytest.raises(InputError, match=r"^demo\(3,000,000\): wait: timeout must be a number of seconds or None, got "):
+            cloud.wait(bad)
+    assert cloud.wait(0) in (True, False)
     cloud.close()
     assert not cloud.loader._thread.is_alive()
     assert cloud.pool is None and cloud.n_points == 0

@@ -43,6 +43,8 @@ them up in the voxel table, allocate chunks, and write points and voxels in para
 
 from __future__ import annotations
 
+import math
+import numbers
 from contextlib import contextmanager
 from pathlib import Path
 from typing import NamedTuple, Self
@@ -789,6 +791,8 @@ class ProgressiveOctree:
     def wait(self, timeout: float | None = None) -> bool:
         """Until the loader has read everything (True) or ``timeout`` passes (False); raises the
         error that stopped it, if any. What was inserted before an error stays drawable."""
+        if timeout is not None and not (isinstance(timeout, numbers.Real) and not isinstance(timeout, bool) and not math.isnan(timeout)):
+            raise InputError(f"{self.name}: wait: timeout must be a number of seconds or None, got {timeout!r}")
         return True if self.loader is None else self.loader.wait(timeout)
 
     def close(self) -> None:
