@@ -112,11 +112,8 @@ class PointCloud:
             sel = b == batch
             i = indices[sel]
             rec = self.batches[batch]
-            if self.packing is None:
-                out[sel] = dequantize(self.low[i], self.med[i], self.high[i], rec["bbox_min"], rec["bbox_max"], 30)
-                continue
             lo, hi = int(i.min()), int(i.max()) + 1
-            low, med, high = point_words(self, int(batch), lo, hi)
+            low, med, high = self._words(int(batch), lo, hi)
             out[sel] = dequantize(low[i - lo], med[i - lo], high[i - lo], rec["bbox_min"], rec["bbox_max"], 30)
         return out
 
@@ -138,12 +135,14 @@ class PointCloud:
     def _batch_positions(self, batch: int) -> np.ndarray:
         """float64 positions of one batch's points (30-bit precision)."""
         rec = self.batches[batch]
-        lo, hi = int(rec["first"]), int(rec["first"]) + int(rec["count"])
+        lo = int(rec["first"])
+        return dequantize(*self._words(batch, lo, lo + int(rec["count"])), rec["bbox_min"], rec["bbox_max"], 30)
+
+    def _words(self, batch: int, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The three 10-bit-per-axis words of points lo..hi of ``batch`` (decoded in the compact layout)."""
         if self.packing is None:
-            low, med, high = self.low[lo:hi], self.med[lo:hi], self.high[lo:hi]
-        else:
-            low, med, high = point_words(self, batch, lo, hi)
-        return dequantize(low, med, high, rec["bbox_min"], rec["bbox_max"], 30)
+            return self.low[lo:hi], self.med[lo:hi], self.high[lo:hi]
+        return point_words(self, batch, lo, hi)
 
     @property
     def layout(self) -> str:
