@@ -271,6 +271,28 @@ def test_colors_option_chooses_how_colours_are_held(capsys, tmp_path, small_las,
     assert color_bytes(out) == pytest.approx(per_point, abs=0.01)
 
 
+def test_info_of_a_folder_shows_every_file_it_can_read_and_names_the_others(capsys, tmp_path, small_las):
+    """One damaged file stopped info of a folder there: the files after it were never shown."""
+    import json
+    import shutil
+
+    folder = tmp_path / "tiles"
+    folder.mkdir()
+    shutil.copy(small_las, folder / "a.las")
+    (folder / "b.las").write_bytes(b"LASF" + bytes(50))  # damaged
+    shutil.copy(small_las, folder / "c.las")
+    rc, out, err = run(capsys, "info", folder)
+    assert rc == 1 and out.count("points:") == 2 and f"{folder / 'c.las'}" in out
+    lines = err.strip().splitlines()
+    assert len(lines) == 2 and lines[0].startswith(f"error: {folder / 'b.las'}: ") and lines[1] == "error: info: 1 of 3 files could not be read (said above)"
+    rc, out, err = run(capsys, "info", "--json", folder)
+    rows = [json.loads(line) for line in out.strip().splitlines()]
+    assert rc == 1 and [r["path"] for r in rows] == [str(folder / n) for n in ("a.las", "b.las", "c.las")]
+    assert rows[1]["error"].startswith(f"{folder / 'b.las'}: ") and rows[2]["point_count"] == 30_000
+    rc, out, err = run(capsys, "info", folder / "b.las")  # one file: its error alone
+    assert rc == 1 and err.count("\n") == 1 and err.startswith(f"error: {folder / 'b.las'}: ")
+
+
 def test_chunked_option_builds_the_same_image(capsys, tmp_path, small_las):
     images = []
     for flag in ("--chunked", "--no-chunked"):

@@ -33,8 +33,16 @@ def info(
     paths: list[tuple[Path, bool]] = []
     for f in files:
         paths.extend([(f, True)] if is_lod_source(f) else [(p, False) for p in expand_paths([f])])
+    failed = 0
     for i, (path, octree) in enumerate(paths):
-        data = octree_info(path) if octree else file_info(path)
+        try:
+            data = octree_info(path) if octree else file_info(path)
+        except GigapointError as exc:
+            if len(paths) == 1:
+                raise
+            failed += 1  # one damaged tile of a folder: said, and the others still shown
+            typer.echo(json.dumps({"path": str(path), "error": str(exc)}) if as_json else f"error: {exc}", err=not as_json)
+            continue
         if as_json:
             typer.echo(json.dumps(data))
         else:
@@ -54,6 +62,8 @@ def info(
                 if held:
                     n = max(cloud.n_points, 1)
                     typer.echo("attributes held: " + ", ".join(f"{k} {v['bytes'] / n:.2f} ({v['held']})" for k, v in held.items()))
+    if failed:
+        raise GigapointError(f"info: {failed} of {len(paths)} files could not be read (said above)")
 
 
 def memory_line(cloud) -> str:
