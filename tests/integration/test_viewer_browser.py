@@ -290,3 +290,9 @@ def test_a_rejected_setting_shows_an_error_and_the_panel_keeps_the_valid_value(p
     page.locator("#error").wait_for(state="visible")
     assert "precision_threshold_px" in page.locator("#error").inner_text()
     page.wait_for_function("() => document.getElementById('setting-precision_threshold_px').value === '500'", timeout=30_000)
+    field.fill("400")  # a valid value then: taken, and the error about the refused one goes (it stayed 5 s)
+    field.press("Enter")
+    page.locator("#error").wait_for(state="hidden", timeout=3_000)
+    assert page.locator("#setting-precision_threshold_px").input_value() == "400"
+    field.fill("500")  # the module's server as the other tests find it
+    field.press("Enter")

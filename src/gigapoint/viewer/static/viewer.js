@@ -58,10 +58,12 @@
 
   function status(text) { $("status").textContent = text; }
   let errorTimer = null;
-  function showError(text) {
+  let errorFrom = null;  // the message type the shown error replied to: a valid setting clears a setting's error
+  function showError(text, from = null) {
     const e = $("error");
     e.textContent = text;
     e.classList.remove("hidden");
+    errorFrom = from;
     clearTimeout(errorTimer);
     errorTimer = setTimeout(() => e.classList.add("hidden"), 5000);
   }
@@ -85,10 +87,11 @@
     } else if (m.type === "settings") {
       S.settings = m.values;
       syncSettings();
+      if (errorFrom === "settings") $("error").classList.add("hidden");  // the last change was taken
     } else if (m.type === "pick") {
       showPick(m);
     } else if (m.type === "error") {
-      showError(m.message);
+      showError(m.message, m.in_reply_to);
       if (m.in_reply_to === "settings") syncSettings(); // the panel shows what the server kept
     }
   }
