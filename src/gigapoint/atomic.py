@@ -67,6 +67,15 @@ def _name_the_file(exc: BaseException, path: Path) -> None:
         exc.filename = str(path)
 
 
+def same_file(a, b) -> bool:
+    """Whether paths ``a`` and ``b`` name one existing file (links and ``..`` seen through):
+    an output that is an input is refused before it could replace what is being read."""
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):  # either is missing (or a URL)
+        return False
+
+
 def atomic_write(path, write: Callable[[Path], object], *, durable: bool = False) -> Path:
     """Make ``path`` by ``write(tmp)``, which fills the temporary file ``tmp`` (it exists, empty);
     then rename it over ``path``. ``durable``: the content reaches the disk (fsync) before the

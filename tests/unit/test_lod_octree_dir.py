@@ -147,6 +147,7 @@ def test_an_unfinished_conversion_opens_as_a_conversion_preview(folders):
         ({"points": 2.5}, "points is not a count: 2.5"),
         ({"bounds": [[0, 0, 0], [1, 1, 1]]}, "bounds is not "),  # an internal TypeError before
         ({"bounds": {"min": [0, 0, 9], "max": [1, 1, 1]}}, r"bounds.min \[0.0, 0.0, 9.0\] exceeds bounds.max"),
+        ({"cube_edge": "DELETE"}, "no 'cube_edge'"),
     ],
 )
 def test_octree_metadata_that_cannot_place_points_is_refused_at_open(folders, tmp_path, change, problem):
@@ -157,6 +158,7 @@ def test_octree_metadata_that_cannot_place_points_is_refused_at_open(folders, tm
     meta = json.loads((path / "octree.json").read_text())
     assert gp.open(path).n_points == 20_000  # the copy opens as it is
     meta.update(change)
+    meta = {k: v for k, v in meta.items() if v != "DELETE"}
     (path / "octree.json").write_text(json.dumps(meta))
     with pytest.raises(InputError, match=f"octree.json: invalid metadata \\({problem}") as e:
         gp.open(path)

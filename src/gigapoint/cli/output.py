@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_npy, atomic_write
+from ..atomic import atomic_npy, atomic_write, same_file
 from ..errors import GigapointError
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff", ".bmp"}
@@ -41,15 +40,8 @@ def check_outputs_apart(outputs, inputs) -> None:
             continue
         for p in inputs:
             p = Path(p)
-            if _same_file(out, p) or (p.is_dir() and is_supported_name(out) and _same_file(out.parent, p)):
+            if same_file(out, p) or (p.is_dir() and is_supported_name(out) and same_file(out.parent, p)):
                 raise GigapointError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
-
-
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        return os.path.samefile(a, b)
-    except OSError:  # either is missing, or a URL
-        return False
 
 
 def save_image(image: np.ndarray, path: Path) -> None:

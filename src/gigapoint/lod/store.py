@@ -549,7 +549,9 @@ def read_meta(d: OctreeDir) -> dict:
         if meta.get("scale") is not None:  # the source's grid (LAS inputs), null otherwise
             frame["scale"] = meta["scale"]
         check_placement(frame, positive="scale", box=("bounds.min", "bounds.max"))
-    except (KeyError, TypeError, ValueError) as exc:
+    except KeyError as exc:
+        raise InputError(f"{d.meta}: invalid metadata (no {exc.args[0]!r})") from None
+    except (TypeError, ValueError) as exc:
         raise InputError(f"{d.meta}: invalid metadata ({' '.join(str(exc).split())})") from None
     return meta
 

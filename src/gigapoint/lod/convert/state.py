@@ -13,6 +13,7 @@ import urllib.parse
 import urllib.request
 from pathlib import Path
 
+from ...atomic import same_file
 from ...errors import InputError
 from ...io import expand_paths
 from ..copc_write import work_dir as copc_work_dir
@@ -52,13 +53,6 @@ def input_paths(inputs) -> list[Path] | None:
         if OctreeDir(p).kind is not None:
             raise InputError(f"{p}: is a converted octree (or a conversion in progress), not an input point cloud")
     return expand_paths(inputs)
-
-
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return False
 
 
 class Job:
@@ -104,7 +98,7 @@ class Job:
         self.progress = progress
         self.inputs = inputs
         self.paths = input_paths(inputs)
-        if format == "copc" and self.paths and self.out.exists() and any(_same_file(self.out, p) for p in self.paths):
+        if format == "copc" and self.paths and self.out.exists() and any(same_file(self.out, p) for p in self.paths):
             raise OutputExistsError(f"{self.out}: is one of the inputs; write the COPC file elsewhere (it would replace the file it is read from)")
         self.source_files = list(source_files or [])  # chunk inputs: the files their points came from
         self.name = name or (self.paths[0].stem if self.paths else "cloud")
