@@ -276,6 +276,29 @@ def test_replay_plays_at_the_recorded_rate_and_a_frame_written_after_the_index_i
     assert again.n_frames == 3 and time.perf_counter() - t0 >= 0.29  # 0.6 s of stream at twice its rate
 
 
+def test_a_damaged_frame_of_a_recording_is_refused_and_the_rest_play(tmp_path):
+    """A truncated or overwritten frame file ended the replay: BadZipFile was not one of the
+    errors read_frame turned into its one line, so the stream stopped there."""
+    live = LiveCloud(keep=10)
+    live.record(tmp_path / "rec")
+    for k in range(5):
+        live.push(patch(k)[0], time=float(k))
+    live.stop_recording()
+    files = recording_files(tmp_path / "rec")
+    with open(files[1], "r+b") as f:
+        f.truncate(50)
+    with open(files[3], "r+b") as f:
+        f.seek(100)
+        f.write(bytes(range(256)) * 2)
+    frames = list(ReplaySource(tmp_path / "rec").frames())
+    assert [type(f).__name__ for f in frames] == ["RecordedFrame", "InputError", "RecordedFrame", "InputError", "RecordedFrame"]
+    assert str(frames[1]).startswith(f"{files[1]}: not a recorded frame (") and "\n" not in str(frames[3])
+    again = LiveCloud(keep=10)
+    player = Player(ReplaySource(tmp_path / "rec"), again, rate=None)
+    player.run()
+    assert player.error is None and player.errors == 2 and [f.time for f in again.frames] == [0.0, 2.0, 4.0]
+
+
 def test_not_a_recording(tmp_path):
     with pytest.raises(InputError, match="not a live recording"):
         ReplaySource(tmp_path)
