@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from gigapoint.cli import main
-from gigapoint.lod import OctreeDir, OutputExistsError, convert, open_octree
+from gigapoint.lod import ConvertError, OctreeDir, OutputExistsError, convert, open_octree
 from gigapoint.lod.convert import hooks
 
 laspy = pytest.importorskip("laspy")
@@ -106,6 +106,26 @@ def test_interrupted_conversion_resumes_to_the_same_result(demo_las, reference, 
     res = convert([demo_las], out, **OPTS)
     assert res.resumed
     assert not (out / ".partial").exists()
+    _assert_same(_snapshot(out), reference)
+
+
+def test_a_damaged_work_file_stops_the_resume_in_one_line_and_overwrite_starts_over(demo_las, reference, tmp_path, monkeypatch):
+    """A truncated work file (a machine that crashed before the disk had it) was numpy's
+    ValueError part-way through the resume, every time it was run again."""
+    out = tmp_path / "oct"
+    _interrupt_after(monkeypatch, 2)
+    with pytest.raises(KeyboardInterrupt):
+        convert([demo_las], out, **OPTS)
+    _interrupt_after(monkeypatch, None)
+    victim = min((out / ".partial" / "built").rglob("nodes.npy"))
+    with open(victim, "r+b") as f:
+        f.truncate(60)
+    for _ in range(2):  # the same line each time, nothing changed by trying
+        with pytest.raises(ConvertError, match=rf"^{victim}: a work file of the unfinished conversion is damaged \(.*\); run it again with --overwrite to start over$"):
+            convert([demo_las], out, **OPTS)
+    assert victim.exists() and not (out / "octree.json").exists()
+    res = convert([demo_las], out, overwrite=True, **OPTS)
+    assert not res.resumed
     _assert_same(_snapshot(out), reference)
 
 

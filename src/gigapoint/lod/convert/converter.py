@@ -23,7 +23,7 @@ from .partition import PartitionPhases
 from .phases import BuildPhases
 from .read import ReadPhase
 from .seeded import GrownTree, SeededPhases
-from .state import local_path
+from .state import damaged_work_file, local_path
 
 PHASES = ("read", "count", "distribute", "build", "group", "upper", "write")
 
@@ -80,6 +80,13 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
 
     def _run_locked(self, overwrite: bool, fp) -> ConvertResult:
         saved = self.dir.prepare_output(fp, overwrite)
+        damage = damaged_work_file(self.dir) if saved is not None else None
+        if damage and not overwrite:
+            raise ConvertError(f"{damage}; run it again with --overwrite to start over")
+        if damage:  # overwrite: the unfinished conversion goes, this one starts from the inputs
+            self.dir.clear()
+            self.dir.partial.mkdir(parents=True)
+            saved = None
         resumed = saved is not None
         if resumed and self.dir.preview.is_file():
             self.first_view = 0.0  # the interrupted run's preview: viewable from the start

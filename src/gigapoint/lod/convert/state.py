@@ -13,6 +13,8 @@ import urllib.parse
 import urllib.request
 from pathlib import Path
 
+import numpy as np
+
 from ...atomic import same_file
 from ...errors import InputError
 from ...io import expand_paths
@@ -53,6 +55,21 @@ def input_paths(inputs) -> list[Path] | None:
         if OctreeDir(p).kind is not None:
             raise InputError(f"{p}: is a converted octree (or a conversion in progress), not an input point cloud")
     return expand_paths(inputs)
+
+
+def damaged_work_file(d: OctreeDir) -> str | None:
+    """Before a resume: what is wrong with the first array of an unfinished conversion's work
+    folder that does not read whole (its header, and as many bytes as it says), or None. A
+    truncated one (a machine that crashed before the disk had it) was numpy's ValueError
+    part-way through the resume, every time it was run again."""
+    for path in sorted(d.partial.rglob("*.npy")):
+        if any(part.endswith(".tmp") for part in path.relative_to(d.partial).parts[:-1]):
+            continue  # a node set being built when the run stopped: built again
+        try:
+            np.load(path, mmap_mode="r")
+        except (OSError, ValueError, EOFError) as exc:
+            return f"{path}: a work file of the unfinished conversion is damaged ({' '.join(str(exc).split())})"
+    return None
 
 
 class Job:
