@@ -21,6 +21,7 @@ A PTS file's first line (the point count alone) is skipped. Lines starting with 
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import warnings
 from collections.abc import Iterator
@@ -144,20 +145,27 @@ def _layout(path: Path) -> _Layout:
     return _Layout(path, skip, delimiter, names, header_names is not None)
 
 
-def _first_bad_line(path: Path, lines: list[str], first_lineno: int, delimiter: str | None, ncols: int) -> str:
-    """Find and describe the first unparsable line of a chunk (only called after loadtxt failed)."""
+def _first_bad_line(path: Path, lines: list[str], first_lineno: int, delimiter: str | None, ncols: int) -> tuple[int, str]:
+    """The index in ``lines`` of the first unparsable line of a chunk and what is wrong with it
+    (only called after loadtxt failed)."""
     for i, line in enumerate(lines):
         if not line.strip() or _is_comment(line):
             continue
         tokens = _split(line.rstrip("\r\n"), delimiter)
         if len(tokens) != ncols:
-            return f"line {first_lineno + i} has {len(tokens)} columns, expected {ncols}"
+            return i, f"line {first_lineno + i} has {len(tokens)} columns, expected {ncols}"
         for t in tokens:
             try:
                 float(t)
             except ValueError:
-                return f"line {first_lineno + i}: {t[:40]!r} is not a number"
-    return "unparsable data"
+                return i, f"line {first_lineno + i}: {t[:40]!r} is not a number"
+    return 0, "unparsable data"
+
+
+def _parsed(lines: list[str], delimiter: str | None) -> np.ndarray:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "input contained no data" for comment-only chunks
+        return np.loadtxt(lines, delimiter=delimiter, comments=("#", "//"), ndmin=2, dtype=np.float64)
 
 
 def _chunks(path: Path, chunk_size: int, layout: _Layout) -> Iterator[np.ndarray]:
@@ -172,13 +180,17 @@ def _chunks(path: Path, chunk_size: int, layout: _Layout) -> Iterator[np.ndarray
                 if not lines:
                     return
                 try:
-                    with warnings.catch_warnings():
-                        warnings.simplefilter("ignore", UserWarning)  # "input contained no data" for comment-only chunks
-                        arr = np.loadtxt(lines, delimiter=layout.delimiter, comments=("#", "//"), ndmin=2, dtype=np.float64)
+                    arr = _parsed(lines, layout.delimiter)
+                    good = not arr.size or arr.shape[1] == ncols
                 except ValueError:
-                    raise fail(path, _first_bad_line(path, lines, lineno, layout.delimiter, ncols)) from None
-                if arr.size and arr.shape[1] != ncols:
-                    raise fail(path, _first_bad_line(path, lines, lineno, layout.delimiter, ncols))
+                    good = False
+                if not good:  # the lines before the bad one first: a progressive load keeps them
+                    bad, problem = _first_bad_line(path, lines, lineno, layout.delimiter, ncols)
+                    with contextlib.suppress(ValueError):
+                        before = _parsed(lines[:bad], layout.delimiter) if bad else np.empty((0, ncols))
+                        if before.size and before.shape[1] == ncols:
+                            yield before
+                    raise fail(path, problem)
                 lineno += len(lines)
                 if arr.size:
                     yield arr
