@@ -254,3 +254,17 @@ def test_settings_module_imports_no_upper_layer():
     modules = [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
     modules += [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
     assert not [m for m in modules if any(layer in m.split(".") for layer in ("backends", "lod", "viewer", "cli"))], modules
+
+
+@pytest.mark.parametrize("value", ["inf", "nan,1,1", "0.5,0.5,0.5", "300,1,1", "1,2", (1.5, 2, 3)])
+def test_a_colour_of_numbers_that_are_not_whole_bytes_is_refused(value):
+    """'inf' was an internal OverflowError; '0.5,0.5,0.5' (channels as 0..1) was black, silently."""
+    with pytest.raises(SettingsError, match=r"^background: color needs 3 or 4 whole numbers in 0\.\.255, got "):
+        RenderSettings(background=value)
+
+
+def test_colours_read_as_names_hex_and_whole_numbers():
+    assert RenderSettings(background="1,2,3").background == (1, 2, 3, 255)
+    assert RenderSettings(background=(1.0, 2.0, 3.0, 4.0)).background == (1, 2, 3, 4)
+    assert RenderSettings(background="#102030").background == (16, 32, 48, 255)
+    assert RenderSettings(background="white").background == (255, 255, 255, 255)

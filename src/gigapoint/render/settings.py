@@ -63,12 +63,13 @@ def parse_color(value, name: str = "background") -> tuple[int, int, int, int]:
             return tuple(parts + [255] * (4 - len(parts)))  # type: ignore[return-value]
         value = s.split(",")
     try:
-        parts = [int(float(v)) for v in value]
+        numbers = [float(v) for v in value]
     except (TypeError, ValueError):
         raise SettingsError(f"{name}: cannot read color {text!r} (use a name, #rrggbb or r,g,b)") from None
-    if len(parts) not in (3, 4) or not all(0 <= p <= 255 for p in parts):
-        raise SettingsError(f"{name}: color needs 3 or 4 values in 0..255, got {text!r}")
-    return tuple(parts + [255] * (4 - len(parts)))  # type: ignore[return-value]
+    # whole numbers only: 'inf' was an internal OverflowError, '0.5,0.5,0.5' black without a word
+    if len(numbers) not in (3, 4) or not all(0 <= p <= 255 and p == int(p) for p in numbers):
+        raise SettingsError(f"{name}: color needs 3 or 4 whole numbers in 0..255, got {text!r}")
+    return tuple(int(p) for p in numbers) + (255,) * (4 - len(numbers))  # type: ignore[return-value]
 
 
 def format_color(rgba) -> str:
