@@ -557,3 +557,18 @@ def test_viewer_displays_an_iframe_under_ipython(cloud, monkeypatch):
     monkeypatch.setitem(sys.modules, "IPython.display", display_mod)
     with gigapoint.Viewer(cloud, width=700, height=400) as v:
         assert shown == [("iframe", v.url, 700, 400)]
+
+
+@pytest.mark.parametrize("fmt", ["potree", "copc"])
+def test_the_viewer_offers_the_attributes_of_an_octree_read_node_by_node(tmp_path, fmt):
+    """A Potree or COPC octree's ``attributes`` are empty until nodes are read: the viewer's
+    'colour by attribute' list offered nothing for them."""
+    out = tmp_path / ("o.copc.laz" if fmt == "copc" else "o")
+    gigapoint.convert(marker_scene().chunks(), out, format=fmt)
+    octree = gigapoint.open(out)
+    assert not octree.attributes  # nothing read yet
+    core = ViewerCore(octree)
+    try:  # the format's own fields beside (Potree's classification, COPC's LAS fields)
+        assert "intensity" in core.cloud_info()["attributes"] and set(core.cloud_info()["attributes"]) == set(octree.attribute_names)
+    finally:
+        core.close_all()

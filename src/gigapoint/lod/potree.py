@@ -438,6 +438,10 @@ class PotreeCloud(OctreeCloud):
         attrs = {name: (d[a] if a in d else np.zeros(n, dt)) for a, (name, dt) in self.extra.items()}
         return {"low": low, "med": med, "high": high, "color": color, "rgba": color}, attrs, 0
 
+    @property
+    def attribute_names(self) -> list[str]:
+        return sorted(name for name, _ in self.extra.values())
+
     def to_memory(self) -> OctreeCloud:
         """Every node decoded into one in-memory OctreeCloud (small datasets; the eager reading)."""
         total = self.n_points

@@ -434,6 +434,12 @@ class OctreeCloud:
         return np.array(b["min"], np.float64), np.array(b["max"], np.float64)
 
     @property
+    def attribute_names(self) -> list[str]:
+        """The point attributes its nodes carry (those of an octree read node by node are named
+        by its metadata, before any node is read)."""
+        return sorted(self.attributes)
+
+    @property
     def levels(self) -> np.ndarray:
         return self.nodes["level"]
 

@@ -91,6 +91,14 @@ def depth_position(camera, px: float, py: float, depth: float) -> np.ndarray:
     return origin + d * (depth / float(np.dot(d, -back)))
 
 
+def attribute_names(cloud) -> list[str]:
+    """The attributes a cloud's points carry: an octree read node by node (Potree, COPC, EPT)
+    names them before any node is in memory (its ``attributes`` were empty: the viewer offered
+    no attribute to colour by)."""
+    names = getattr(cloud, "attribute_names", None)
+    return list(names) if names is not None else list(cloud.attributes)
+
+
 def point_info(last: LastFrame, index: int, px: int, py: int, depth: float) -> dict:
     """What is known about the point drawn at (px, py) of the last frame, for any kind of cloud.
 
@@ -242,7 +250,7 @@ class ViewerCore:
             "points": int(self.cloud.n_points),
             "batches": len(self.cloud.batches),
             "bounds": [lo.tolist(), hi.tolist()],
-            "attributes": sorted(self.cloud.attributes),
+            "attributes": sorted(attribute_names(self.cloud)),
             "load_progress": float(self.cloud.load_progress),
         }
 
