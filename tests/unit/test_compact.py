@@ -146,6 +146,20 @@ def test_off_grid_and_huge_batches_are_stored_wide(rng):
     np.testing.assert_allclose(back, pts[order], rtol=0, atol=1e-3)  # 30 bits of 100 km: 0.1 mm
 
 
+@pytest.mark.parametrize("step", [1e4, 1e9])
+def test_a_step_far_wider_than_the_points_spread_does_not_move_them(rng, step):
+    """Points a metre apart given a 10 km (or 10^9 m) grid were all within GRID_TOLERANCE of one
+    grid node: stored on it, and drawn up to a metre (476 m at 10^9) from where they are."""
+    xyz = UTM + rng.uniform(0, 1, (3000, 3))
+    cloud = build_cloud([PointChunk(xyz, None, {}, scale=(step,) * 3)], batch_size=1000, layout="compact")
+    assert wide_batches(cloud.packing).all()  # off the grid: 30 bits a batch
+    words = gp.core.cloud_from_points(xyz, cloud.rgba, batch_size=1000)
+    np.testing.assert_array_equal(cloud.positions(), words.positions())
+    arrays = gp.from_arrays(xyz, scale=step)
+    back = arrays.positions()
+    np.testing.assert_allclose(back[np.lexsort(back.T)], xyz[np.lexsort(xyz.T)], rtol=0, atol=1e-6)
+
+
 def test_autzen_is_compact_and_exact():
     if not AUTZEN.exists():
         pytest.skip("shared sample missing")

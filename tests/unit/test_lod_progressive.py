@@ -1297,6 +1297,17 @@ def test_points_off_the_source_grid_keep_their_chunks_wide(scene):
     _match(_leaf_points(o)["xyz"], xyz, 2e-3 * _MM)  # the wide ones as quantized: within a few 30-bit cells of the root
 
 
+def test_a_grid_step_far_wider_than_the_points_spread_finds_them_off_it():
+    """Points a metre apart on a 10 km 'grid' were within GRID_TOLERANCE of one node: on the grid,
+    and written there. The snap must stay within float64 rounding of the points' size."""
+    from gigapoint.core.compact import GRID_TOLERANCE
+
+    xyz = np.asarray(_UTM) + np.random.default_rng(3).uniform(0, 1, (2_000, 3))
+    assert not K.on_grid(xyz, np.asarray(_UTM, np.float64), 1e4, GRID_TOLERANCE)
+    on = np.asarray(_UTM) + np.random.default_rng(3).integers(0, 10**6, (2_000, 3)) * _MM  # a LAS file's millimetres
+    assert K.on_grid(on, np.asarray(_UTM, np.float64), _MM, GRID_TOLERANCE)
+
+
 def test_points_added_after_trim_build_the_same_octree_and_a_point_off_the_grid_widens_it(scene):
     """An ``add`` after a trim writes on: points on the grid into chunks of their levels' bits
     (each stream given room for a whole chunk again), and the octree ends as one filled without

@@ -53,6 +53,19 @@ NUMPY_MAX = 1 << 20
 #: a batch's points must sit on the grid within this fraction of a step (float64 rounding of
 #: UTM-sized values is ~1e-8 of a centimetre step)
 GRID_TOLERANCE = 1e-4
+#: ... and within this share of their own size (at least 1): float64 rounding is ~2e-16 of it.
+#: A step far larger than the points' spread (a scale of 1e4 given for points a metre apart)
+#: put them all within GRID_TOLERANCE of one grid node, and they were drawn there, metres off.
+GRID_SNAP = 1e-9
+
+
+@njit(inline="always")
+def on_the_grid(x, r, q, step, tolerance) -> bool:
+    """Whether coordinate ``x``, ``r`` steps from the grid's origin and rounded to node ``q``,
+    is on the grid: within ``tolerance`` steps of the node, and moved no further than float64
+    rounding could have put it there (``GRID_SNAP``)."""
+    d = abs(r - q)
+    return d <= tolerance and d * step <= GRID_SNAP * max(abs(x), 1.0)
 
 
 def pack_code(ex: int, ey: int, ez: int) -> int:
@@ -330,7 +343,7 @@ def _plan(b, xyz, order, firsts, counts, gmin, scale, tol, qmin, bits, bbox_min,
             fhi[a] = max(fhi[a], x)
             r = (x - g) * inv
             q = np.int64(np.floor(r + 0.5))
-            on_grid &= abs(r - q) <= tol
+            on_grid &= on_the_grid(x, r, q, scale[a], tol)
             lo[a] = min(lo[a], q)
             hi[a] = max(hi[a], q)
     for a in range(3):

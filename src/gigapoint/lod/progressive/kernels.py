@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit, prange, types
 from numba.typed import List
 
-from ...core.compact import code_bits, read_ext, tail_words, wide_bits, write_ext
+from ...core.compact import code_bits, on_the_grid, read_ext, tail_words, wide_bits, write_ext
 from ...core.layout import COORD_BITS, EXT_FULL_BITS, WORD_BITS, WORD_MASK
 from ..keys import CODE_BITS
 
@@ -1029,7 +1029,7 @@ def on_grid(xyz, point, step, tolerance):
     for i in prange(xyz.shape[0]):
         for a in range(3):
             r = (xyz[i, a] - point[a]) / step
-            if abs(r - np.round(r)) > tolerance:
+            if not on_the_grid(xyz[i, a], r, np.round(r), step, tolerance):
                 off += 1
     return off == 0
 
