@@ -39,6 +39,10 @@ def demo(
 
     if not is_whole_number(n_points):
         raise InputError(f"demo: n_points must be a whole number, got {n_points!r}")
+    if not (is_whole_number(seed) and abs(seed) < 2**63):  # a string reached the generator's kernel: numba's TypingError
+        raise InputError(f"demo: seed must be a whole number below 2**63, got {seed!r}")
+    if scale is not None and not (isinstance(scale, (int, float)) and not isinstance(scale, bool) and 1e-6 <= scale <= 1000):
+        raise InputError(f"demo: scale must be None (float positions) or a grid step between 1e-6 and 1000 metres, got {scale!r}")
     if progressive:
         from .lod.progressive import demo_sources, open_progressive
 

@@ -97,3 +97,24 @@ def test_settings_that_are_not_render_settings_are_one_line_errors(tmp_path):
     assert not list(tmp_path.iterdir())
     assert gp.render(cloud, camera, settings=None).shape == (24, 32, 4)
     np.testing.assert_array_equal(gp.render(cloud, camera, settings=None), gp.render(cloud, camera, gp.RenderSettings()))
+
+
+def test_the_demo_refuses_a_seed_or_scale_it_cannot_use_in_one_line():
+    """A string seed was numba's TypingError from the generator's kernel, 2**70 an OverflowError;
+    scale=0 said "no valid points (1,000 invalid points)", scale=-1 a ValueError of the layout."""
+    import pytest
+
+    from gigapoint.errors import InputError
+
+    for kw, problem in (
+        ({"seed": "a"}, r"seed must be a whole number below 2\*\*63, got 'a'"),
+        ({"seed": 2**70}, "seed must be a whole number below"),
+        ({"seed": 2.5}, "seed must be a whole number below"),
+        ({"scale": 0}, r"scale must be None \(float positions\) or a grid step between 1e-6 and 1000 metres, got 0$"),
+        ({"scale": -1}, "scale must be None"),
+        ({"scale": float("nan")}, "scale must be None"),
+        ({"scale": "0.01"}, "scale must be None"),
+    ):
+        with pytest.raises(InputError, match=rf"^demo: {problem}"):
+            gp.demo(1_000, **kw)
+    assert gp.demo(1_000, seed=-1, scale=None).n_points == gp.demo(1_000, scale=0.001).n_points == 1_000
