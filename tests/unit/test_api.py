@@ -99,6 +99,20 @@ def test_settings_that_are_not_render_settings_are_one_line_errors(tmp_path):
     np.testing.assert_array_equal(gp.render(cloud, camera, settings=None), gp.render(cloud, camera, gp.RenderSettings()))
 
 
+def test_open_takes_true_or_false_for_its_switches(tmp_path):
+    """progressive="no" and chunked="no" were taken as true."""
+    import pytest
+
+    from gigapoint.errors import InputError
+
+    np.save(tmp_path / "p.npy", np.random.default_rng(0).random((100, 3)))
+    with pytest.raises(InputError, match=r"^open: progressive must be True or False, got 'no'$"):
+        gp.open(tmp_path / "p.npy", progressive="no")
+    with pytest.raises(InputError, match=r"^open: chunked must be True or False or None, got 'no'$"):
+        gp.open(tmp_path / "p.npy", chunked="no")
+    assert gp.open(tmp_path / "p.npy", chunked=False).n_points == gp.open(tmp_path / "p.npy", progressive=False).n_points == 100
+
+
 def test_the_demo_refuses_a_seed_or_scale_it_cannot_use_in_one_line():
     """A string seed was numba's TypingError from the generator's kernel, 2**70 an OverflowError;
     scale=0 said "no valid points (1,000 invalid points)", scale=-1 a ValueError of the layout."""
