@@ -91,15 +91,12 @@ def open(*paths, progressive: bool = False, **options):
     ``memory_limit=`` bytes or '8G' (by default half the machine's memory); what was loaded stays.
 
     Paths may also come as one list or tuple: ``gp.open([a, b])`` is ``gp.open(a, b)``."""
-    import numpy as np
-
-    from .errors import InputError
+    from .errors import InputError, check_switch
     from .lod.reader import refuse_octrees
 
     paths = _flat_paths(paths)
-    for name, value, allowed in (("progressive", progressive, (True, False)), ("chunked", options.get("chunked"), (True, False, None))):
-        if not (value is None and None in allowed or isinstance(value, (bool, np.bool_, int)) and value in (0, 1)):  # "no" was taken as true
-            raise InputError(f"open: {name} must be {' or '.join(map(str, allowed))}, got {value!r}")
+    check_switch("progressive", progressive, "open")
+    check_switch("chunked", options.get("chunked"), "open", allow_none=True)
     if progressive:
         from .lod.progressive import file_sources, memory_limit_bytes, open_progressive
 

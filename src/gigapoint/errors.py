@@ -11,6 +11,17 @@ def is_whole_number(value) -> bool:
     return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 
 
+def check_switch(name: str, value, where: str, allow_none: bool = False) -> None:
+    """A one-line InputError (``where: name must be ...``) unless ``value`` is True or False
+    (numpy's too; None where ``allow_none``): a string such as "no" was taken as true, and an
+    ``overwrite="no"`` replaced what the user had."""
+    import numpy as np
+
+    if value is None and allow_none or isinstance(value, (bool, np.bool_)):
+        return
+    raise InputError(f"{where}: {name} must be True or False{' or None' if allow_none else ''}, got {value!r}")
+
+
 class GigapointError(Exception):
     """Base class of every error gigapoint raises on purpose.
 

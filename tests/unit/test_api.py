@@ -100,7 +100,8 @@ def test_settings_that_are_not_render_settings_are_one_line_errors(tmp_path):
 
 
 def test_open_takes_true_or_false_for_its_switches(tmp_path):
-    """progressive="no" and chunked="no" were taken as true."""
+    """progressive="no" and chunked="no" were taken as true; so was overwrite="no" in convert,
+    videos and live recordings and snapshots, which replaced what the user had."""
     import pytest
 
     from gigapoint.errors import InputError
@@ -111,6 +112,21 @@ def test_open_takes_true_or_false_for_its_switches(tmp_path):
     with pytest.raises(InputError, match=r"^open: chunked must be True or False or None, got 'no'$"):
         gp.open(tmp_path / "p.npy", chunked="no")
     assert gp.open(tmp_path / "p.npy", chunked=False).n_points == gp.open(tmp_path / "p.npy", progressive=False).n_points == 100
+    assert gp.open(tmp_path / "p.npy", chunked=np.True_).n_points == 100
+    gp.convert([tmp_path / "p.npy"], tmp_path / "octree")
+    (tmp_path / "turn.gif").write_bytes(b"mine")
+    live = gp.LiveCloud()
+    live.push(np.random.default_rng(1).random((50, 3)))
+    live.snapshot()
+    for call, where in (
+        (lambda: gp.convert([tmp_path / "p.npy"], tmp_path / "octree", overwrite="no"), "convert"),
+        (lambda: gp.render_turntable(gp.demo(1_000), 2, tmp_path / "turn.gif", width=32, height=24, overwrite="no"), "video"),
+        (lambda: live.record(tmp_path / "rec", overwrite="false"), "live: record"),
+        (lambda: live.save(tmp_path / "octree", overwrite="no"), "live: save"),
+    ):
+        with pytest.raises(InputError, match=rf"^{where}: overwrite must be True or False, got '(no|false)'$"):
+            call()
+    assert (tmp_path / "turn.gif").read_bytes() == b"mine" and gp.open(tmp_path / "octree").n_points == 100
 
 
 def test_the_demo_refuses_a_seed_or_scale_it_cannot_use_in_one_line():

@@ -41,7 +41,7 @@ from ..core.morton import argsort_codes, cube_of, morton_codes
 from ..core.quantize import make_batches, quantize
 from ..core.renderable import DrawList
 from ..core.selection import Selection, View, select_view, subsample_step
-from ..errors import GigapointError, InputError
+from ..errors import GigapointError, InputError, check_switch
 from ..lod.build import take, valid_bounds
 from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
 from ..render.splats import point_spacing
@@ -624,6 +624,7 @@ class LiveCloud:
         from .save import save_snapshots
 
         self._check_open("save")
+        check_switch("overwrite", overwrite, f"{self.name}: save")
         if self.snapshots is None or self.snapshots.n_points == 0:
             raise InputError(f"{self.name}: nothing to save: no snapshot taken yet (call snapshot())")
         return save_snapshots(self.snapshots, path, overwrite)
@@ -634,6 +635,7 @@ class LiveCloud:
         and time, and index.json); returns the Recorder (``stop()`` or ``live.stop_recording()``)."""
         from .record import Recorder
 
+        check_switch("overwrite", overwrite, f"{self.name}: record")
         if self.recorder is not None:
             raise InputError(f"{self.name}: already recording into {self.recorder.directory}")
         self.recorder = Recorder(directory, overwrite=overwrite)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_write
-from ..errors import GigapointError, is_whole_number
+from ..errors import GigapointError, check_switch, is_whole_number
 from .camera import Camera, auto_view, sample_points
 from .settings import RenderSettings
 
@@ -158,6 +158,7 @@ def interpolate_cameras(keys: list[Camera], n_frames: int) -> list[Camera]:
 
 
 def _check_path(path, overwrite: bool = False) -> Path:
+    check_switch("overwrite", overwrite, "video")
     path = Path(path)
     if path.suffix.lower() not in VIDEO_SUFFIXES:
         raise GigapointError(f"{path}: unsupported video type {path.suffix or '(none)'!r}; use one of {', '.join(sorted(VIDEO_SUFFIXES))}")

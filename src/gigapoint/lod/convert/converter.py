@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ...core import pages
-from ...errors import InputError
+from ...errors import InputError, check_switch
 from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
 from ..copc_write import check_output as check_copc_output
@@ -184,6 +184,7 @@ def convert(
     ``on_ready``: called with no argument once the inputs and the output are checked and the
     output prepared, before the points are read (the CLI says then how to watch it fill).
     """
+    check_switch("overwrite", overwrite, "convert")
     if sampler not in SAMPLERS:
         raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
     if format not in FORMATS:
