@@ -138,8 +138,10 @@ def test_bad_depth_frames_are_refused_and_the_stream_goes_on():
         live.push_depth(np.ones((4, 4)), None)
     with pytest.raises(InputError, match="no valid pixel"):
         live.push_depth(np.zeros((4, 4), np.uint16), (1, 1, 2, 2))
+    with pytest.raises(InputError, match=r"^push_depth: a 8192x4097 depth image is more than a sensor's 33,554,432 pixels; push it in tiles$"):
+        live.push_depth(np.zeros((4097, 8192), np.uint16), (1, 1, 2, 2))  # 20000 x 20000 ran the machine out of memory
     live.push_depth(np.full((4, 4), 1000, np.uint16), (1, 1, 2, 2))
-    assert live.n_points == 16 and live.stats.frames_rejected == 2
+    assert live.n_points == 16 and live.stats.frames_rejected == 3
     np.testing.assert_allclose(live.frame_points()[0][:, 2], 1.0, atol=1e-6)
 
 

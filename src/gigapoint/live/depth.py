@@ -24,6 +24,10 @@ from ..errors import InputError
 #: depth units of integer images when no ``depth_scale`` is given: millimetres (Kinect, RealSense, TUM uses 1/5000)
 DEFAULT_INTEGER_SCALE = 0.001
 
+#: the most pixels one depth frame may have: 8192 x 4096, beyond every depth sensor (a 4K
+#: one has 8.3 M); each pixel costs ~60 bytes while it becomes a point with its normal
+MAX_DEPTH_PIXELS = 8192 * 4096
+
 
 def parse_intrinsics(intrinsics, name: str = "push_depth") -> tuple[float, float, float, float]:
     """(fx, fy, cx, cy) from a 3x3 camera matrix or a 4-sequence; a one-line InputError otherwise."""
@@ -70,6 +74,8 @@ def check_depth(depth, depth_scale, name: str = "push_depth") -> tuple[np.ndarra
         d = d[:, :, 0]
     if d.ndim != 2 or d.shape[0] < 1 or d.shape[1] < 1:
         raise InputError(f"{name}: depth must be an (H, W) image, got shape {d.shape}")
+    if d.size > MAX_DEPTH_PIXELS:  # 20000 x 20000 ran the machine out of memory (~60 bytes a pixel)
+        raise InputError(f"{name}: a {d.shape[1]}x{d.shape[0]} depth image is more than a sensor's {MAX_DEPTH_PIXELS:,} pixels; push it in tiles")
     if d.dtype.kind not in "uif":
         raise InputError(f"{name}: depth must hold numbers (uint16 millimetres or float metres), got dtype {d.dtype}")
     if depth_scale is None:
