@@ -145,6 +145,14 @@ def test_bad_depth_frames_are_refused_and_the_stream_goes_on():
     np.testing.assert_allclose(live.frame_points()[0][:, 2], 1.0, atol=1e-6)
 
 
+@pytest.mark.parametrize("chunk", [0, -5, 2.5, 10**12])
+def test_a_chunk_size_it_cannot_hold_is_refused_at_once(chunk):
+    """0 was a ZeroDivisionError at the first push, -5 numpy's ValueError, 10**12 a MemoryError
+    of 116 TiB, 2.5 read as 2."""
+    with pytest.raises(InputError, match=rf"^live: chunk must be an integer from 1 to 1,048,576 points, got {chunk!r}$"):
+        LiveCloud(chunk=chunk)
+
+
 def test_nan_points_inside_a_frame_are_dropped():
     live = LiveCloud()
     xyz, rgb = frame(0, n=100)

@@ -41,7 +41,7 @@ from ..core.morton import argsort_codes, cube_of, morton_codes
 from ..core.quantize import make_batches, quantize
 from ..core.renderable import DrawList
 from ..core.selection import Selection, View, select_view, subsample_step
-from ..errors import GigapointError, InputError, check_switch
+from ..errors import GigapointError, InputError, check_switch, is_whole_number
 from ..lod.build import take, valid_bounds
 from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
 from ..render.splats import point_spacing
@@ -90,6 +90,9 @@ class LiveStats:
     def latency_ms(self, q: float = 50.0) -> float | None:
         lat = list(self.latencies)
         return float(np.percentile(lat, q) * 1000.0) if lat else None
+
+
+MAX_CHUNK = 1 << 20  # the most points a ring chunk (a drawn batch) may hold
 
 
 def _as_points(xyz, name: str) -> np.ndarray:
@@ -142,6 +145,8 @@ class LiveCloud:
         self.name = name
         self.keep = keep
         self.decay = None if decay is None else float(decay)
+        if not (is_whole_number(chunk) and 1 <= chunk <= MAX_CHUNK):  # 0 divided by zero, 10**12 asked numpy for 116 TiB
+            raise InputError(f"{name}: chunk must be an integer from 1 to {MAX_CHUNK:,} points, got {chunk!r}")
         self.chunk = int(chunk)
         self.clock = clock or _time.monotonic
         self.expected_bounds = None if bounds is None else tuple(np.asarray(b, np.float64).reshape(3) for b in bounds)
