@@ -52,6 +52,7 @@ class Faded:
         self.alpha_of_batch = alpha_of_batch
         self.name = cloud.name
         self.attributes = cloud.attributes
+        self.attribute_names = cloud.attribute_names
         self.load_progress = 1.0
 
     @property

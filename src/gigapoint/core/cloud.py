@@ -145,6 +145,10 @@ class PointCloud:
         return point_words(self, batch, lo, hi)
 
     @property
+    def attribute_names(self) -> list[str]:
+        return list(self.attributes)
+
+    @property
     def layout(self) -> str:
         """"compact" (core/compact.py) or "words" (three u32 words a point)."""
         return "words" if self.packing is None else "compact"

@@ -10,7 +10,7 @@ of layout.py, so one set of kernels draws every kind of cloud.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
@@ -121,6 +121,12 @@ class Renderable(Protocol):
 
     @property
     def n_points(self) -> int: ...
+
+    @property
+    def attribute_names(self) -> Sequence[str]:
+        """The names of its points' attributes, known before any point is in memory (an octree
+        read node by node has none in ``attributes`` until nodes are read)."""
+        ...
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:

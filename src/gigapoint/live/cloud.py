@@ -213,6 +213,10 @@ class LiveCloud:
         return self.buffers_.attributes if self.buffers_ is not None else {}
 
     @property
+    def attribute_names(self) -> list[str]:
+        return list(self.attributes)
+
+    @property
     def batches(self) -> np.ndarray:
         return self.buffers_.batches if self.buffers_ is not None else np.empty(0)
 

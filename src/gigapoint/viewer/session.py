@@ -91,14 +91,6 @@ def depth_position(camera, px: float, py: float, depth: float) -> np.ndarray:
     return origin + d * (depth / float(np.dot(d, -back)))
 
 
-def attribute_names(cloud) -> list[str]:
-    """The attributes a cloud's points carry: an octree read node by node (Potree, COPC, EPT)
-    names them before any node is in memory (its ``attributes`` were empty: the viewer offered
-    no attribute to colour by)."""
-    names = getattr(cloud, "attribute_names", None)
-    return list(names) if names is not None else list(cloud.attributes)
-
-
 def point_info(last: LastFrame, index: int, px: int, py: int, depth: float) -> dict:
     """What is known about the point drawn at (px, py) of the last frame, for any kind of cloud.
 
@@ -250,7 +242,8 @@ class ViewerCore:
             "points": int(self.cloud.n_points),
             "batches": len(self.cloud.batches),
             "bounds": [lo.tolist(), hi.tolist()],
-            "attributes": sorted(attribute_names(self.cloud)),
+            # (an octree read node by node, Potree, COPC, EPT, has none in ``attributes`` before its nodes are read)
+            "attributes": sorted(self.cloud.attribute_names),
             "load_progress": float(self.cloud.load_progress),
         }
 

@@ -859,9 +859,9 @@ class ProgressiveOctree:
         return self.pool.attributes if self.pool is not None else {}
 
     @property
-    def attribute_names(self) -> tuple[str, ...] | None:
-        """The attributes the points hold (fixed by the first ``add``; None before it)."""
-        return None if self._attribute_dtypes is None else tuple(self._attribute_dtypes)
+    def attribute_names(self) -> tuple[str, ...]:
+        """The attributes the points hold (fixed by the first ``add``; none before it)."""
+        return () if self._attribute_dtypes is None else tuple(self._attribute_dtypes)
 
     def held_of(self, attributes: dict) -> dict:
         """Those of a batch's ``attributes`` the octree holds (all of them before the first
