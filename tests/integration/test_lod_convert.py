@@ -561,5 +561,10 @@ def test_a_cloud_converts_as_the_file_it_was_read_from(autzen_path, tmp_path):
     assert from_cloud.points == 110_000
     np.testing.assert_array_equal(_octree_points(tmp_path / "from_cloud"), _octree_points(tmp_path / "from_file"))
     assert open_octree(tmp_path / "from_cloud").name == cloud.name
+    progressive = gp.open(path, progressive=True)  # waited for, converted from its leaves, its file's CRS kept
+    convert(progressive, tmp_path / "from_progressive")
+    np.testing.assert_array_equal(_octree_points(tmp_path / "from_progressive"), _octree_points(tmp_path / "from_file"))
+    assert open_octree(tmp_path / "from_progressive").meta["crs"] == open_octree(tmp_path / "from_file").meta["crs"] is not None
+    progressive.close()
     with pytest.raises(gp.GigapointError, match="convert: inputs are files, folders, a cloud or PointChunks, got a CompactOctree"):
         convert(open_octree(tmp_path / "from_file"), tmp_path / "again")

@@ -68,6 +68,7 @@ class PointCloud:
     version: ClassVar[None] = None  # PointBuffers: the arrays never change once built
     batch_version: ClassVar[None] = None
     load_progress: ClassVar[float] = 1.0  # Renderable: built whole
+    source_files: ClassVar[tuple] = ()  # PointSource: built from points, its files not kept
 
     @property
     def n_points(self) -> int:

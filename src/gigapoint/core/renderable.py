@@ -10,7 +10,7 @@ of layout.py, so one set of kernels draws every kind of cloud.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
@@ -147,4 +147,17 @@ class Renderable(Protocol):
         """Held by the renderer from ``prepare`` until the frame is drawn: a cloud that fills
         while it is drawn (a progressive octree) inserts nothing meanwhile. A cloud whose
         buffers never change returns ``contextlib.nullcontext()``."""
+        ...
+
+
+@runtime_checkable
+class PointSource(Protocol):
+    """A cloud that gives its points back as PointChunks: what ``gigapoint.convert(cloud, out)``
+    converts (a plain cloud, a progressive octree once loaded)."""
+
+    name: str
+    source_files: Sequence  # the files whose headers give a conversion its CRS and LAS grid (none: empty)
+
+    def chunks(self, points_per_chunk: int = 1_000_000) -> Iterator:
+        """Its points, positions, colours and attributes, as bounded PointChunks."""
         ...

@@ -6,10 +6,12 @@ from __future__ import annotations
 import os
 import shutil
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 from ...core import pages
+from ...core.renderable import PointSource
 from ...errors import InputError, check_switch
 from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
@@ -203,13 +205,10 @@ def convert(
     mem = parse_memory(memory_limit)
     if out is None or str(out) == "":
         raise ConvertError("convert: no output directory given (-o OUT)")
-    if callable(getattr(inputs, "chunks", None)) and not isinstance(inputs, GrownTree):  # a cloud: gp.demo, from_arrays, open
-        if callable(getattr(inputs, "wait", None)):
-            inputs.wait()  # a progressive octree still loading (its save() keeps its own tree, without a new split)
-        name = name or inputs.name
-        source_files = source_files if source_files is not None else getattr(inputs, "source_files", None)
+    if isinstance(inputs, PointSource):  # a cloud: gp.demo, from_arrays, open; a progressive octree (its save() keeps its tree)
+        name, source_files = name or inputs.name, list(inputs.source_files) if source_files is None else source_files
         inputs = inputs.chunks()
-    elif not isinstance(inputs, (str, os.PathLike, GrownTree)) and not hasattr(inputs, "__iter__"):
+    elif not isinstance(inputs, (str, os.PathLike, GrownTree, Iterable)):
         raise InputError(f"convert: inputs are files, folders, a cloud or PointChunks, got a {type(inputs).__name__}")
     cls = _InMemoryConverter  # held in memory where it fits, else out of core (in_memory.py)
     if isinstance(inputs, GrownTree):  # a progressive octree's save: its leaves are the partitions

@@ -1274,8 +1274,9 @@ class ProgressiveOctree:
 
     # ------------------------------------------------------------------ saving
     def chunks(self, points_per_chunk: int = 1_000_000):
-        """The points of the leaves as PointChunks (positions, colours, attributes), leaf by leaf;
-        one line of error if the octree changes meanwhile (``_check_unchanged``)."""
+        """The points of the leaves as PointChunks (positions, colours, attributes), leaf by leaf,
+        once loading has finished; one line of error if the octree changes meanwhile (``_check_unchanged``)."""
+        self.wait()
         with self.lock:
             leaves = self.leaves().tolist()
             stamp = self._stamp()
