@@ -885,16 +885,27 @@ def test_several_files_keep_the_attributes_they_all_have_in_any_order(tmp_path):
 
     plain_only = write(tmp_path / "a.las", 0, 1)  # no GPS time
     with_time = write(tmp_path / "b.las", 1, 2)
-    want = gp.open(plain_only, with_time)
+    dropped = r"^2 files: attribute\(s\) gps_time not in every file: left out \(only those all the files have are kept\)$"
+    with pytest.warns(GigapointWarning, match=dropped):  # it went without a word, in every route
+        want = gp.open(plain_only, with_time)
+    with pytest.warns(GigapointWarning, match=dropped):
+        assert sorted(gp.open(with_time, plain_only, chunked=True).attributes) == sorted(want.attributes)
     assert "gps_time" not in want.attributes and "intensity" in want.attributes
-    for paths in ([plain_only, with_time], [with_time, plain_only]):
+
+    def loaded(paths):
         cloud = gp.open(paths, progressive=True)  # one list, as gp.open(a, b)
         assert cloud.wait(timeout=120) and cloud.n_points == 6000
+        return cloud
+
+    for paths in ([plain_only, with_time], [with_time, plain_only]):
+        with pytest.warns(GigapointWarning, match=dropped):
+            cloud = loaded(paths)
         assert sorted(cloud.attributes) == sorted(want.attributes)
         got = _leaf_points(cloud)
         assert sorted(got["intensity"].tolist()) == sorted(np.asarray(want.attributes["intensity"]).tolist())
         cloud.close()
-    assert gp.open([plain_only, [with_time]]).n_points == 6000
+    with pytest.warns(GigapointWarning, match=dropped):
+        assert gp.open([plain_only, [with_time]]).n_points == 6000
 
 
 def test_files_whose_attribute_dtypes_differ_load_as_the_plain_cloud_holds_them(tmp_path, las_writer):

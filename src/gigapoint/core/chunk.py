@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import GigapointWarning, InputError
 
 #: Color given to points of files that carry none (a light grey that reads on black and white).
 DEFAULT_COLOR = (200, 200, 200, 255)
@@ -70,6 +71,26 @@ def attribute_dtype_problem(name: str, values: np.ndarray) -> str | None:
     if dt.kind in "biuf" and dt.itemsize <= 8:
         return None
     return f"attribute {name!r} has dtype {dt}: attributes are numbers (bool, integers, floats of at most 64 bits)"
+
+
+def attributes_in_common(kept: list[str] | None, chunk_attributes, dropped: set[str]) -> list[str]:
+    """The attributes every chunk so far has, with ``chunk_attributes`` (``kept``: None before
+    the first chunk); those one chunk lacks or brings alone are added to ``dropped``."""
+    names = sorted(chunk_attributes)
+    if kept is None:
+        return names
+    dropped.update(set(kept) ^ set(names))
+    return [a for a in kept if a in names]
+
+
+def warn_dropped_attributes(name: str, dropped) -> None:
+    """Say which attributes files of one scene did not all have (they were left out without a word)."""
+    if dropped:
+        warnings.warn(
+            f"{name}: attribute(s) {', '.join(sorted(dropped))} not in every file: left out (only those all the files have are kept)",
+            GigapointWarning,
+            stacklevel=3,
+        )
 
 
 def to_rgba8(colors: np.ndarray) -> np.ndarray:

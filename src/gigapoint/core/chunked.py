@@ -40,7 +40,7 @@ from numba import njit
 
 from ..errors import InputError, MemoryLimitError
 from .attributes import Attributes
-from .chunk import PointChunk
+from .chunk import PointChunk, attributes_in_common, warn_dropped_attributes
 from .cloud import PointCloud, _valid_mask, check_valid_count, finest_scale, gather, scan_points, storage_format
 from .compact import compact_positions, ext_bits_per_point, pack_rgb565, stream_words
 from .layout import BATCH_SIZE, PACK_DTYPE
@@ -132,7 +132,7 @@ def build_cloud_chunked(
         raise InputError(f"{name}: partition_points must be >= 1, got {partition_points}")
     if not 1 <= cell_level <= 8:
         raise InputError(f"{name}: cell_level must be 1..8, got {cell_level}")
-    survey = _survey(source, attributes)
+    survey = _survey(source, attributes, name)
     n, skipped = survey["n"], survey["skipped"]
     check_valid_count(name, n, skipped)
     source_scale = finest_scale(survey["scales"])
@@ -163,10 +163,11 @@ def _kept(chunk: PointChunk, clean: bool):
     return slice(None) if clean else _valid_mask(chunk.xyz)
 
 
-def _survey(source: ChunkSource, keep_attributes: bool) -> dict:
+def _survey(source: ChunkSource, keep_attributes: bool, name: str) -> dict:
     n = skipped = 0
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     names: list[str] | None = None
+    dropped: set[str] = set()
     dtypes: dict[str, tuple] = {}  # name -> (dtype, shape of one point's value)
     scales: list = []
     opaque = True
@@ -175,14 +176,15 @@ def _survey(source: ChunkSource, keep_attributes: bool) -> dict:
         lo, hi = np.minimum(lo, chunk_lo), np.maximum(hi, chunk_hi)
         skipped += n_bad
         n += len(chunk.xyz) - n_bad
-        chunk_names = sorted(chunk.attributes)
-        names = chunk_names if names is None else [a for a in names if a in chunk_names]
+        names = attributes_in_common(names, chunk.attributes, dropped)
         for a, v in chunk.attributes.items():
             dtypes.setdefault(a, (np.asarray(v).dtype, np.asarray(v).shape[1:]))
         scales.append(chunk.scale)
         if opaque and len(chunk.rgba):
             keep = _kept(chunk, n_bad == 0)
             opaque = bool((chunk.rgba[keep, 3] == 255).all())
+    if keep_attributes:
+        warn_dropped_attributes(name, dropped)
     attrs = {a: dtypes[a] for a in (names or [])} if keep_attributes else {}
     return {"n": n, "skipped": skipped, "lo": lo, "hi": hi, "attributes": attrs, "scales": scales, "opaque": opaque}
 

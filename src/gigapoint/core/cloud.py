@@ -20,7 +20,7 @@ from numba import njit, prange
 from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError
 from . import pages
 from .attributes import Attributes
-from .chunk import PointChunk
+from .chunk import PointChunk, attributes_in_common, warn_dropped_attributes
 from .compact import colors_at, compact_positions, full_words, pack_rgb565, point_words, rgba32
 from .layout import BATCH_DTYPE, BATCH_SIZE
 from .morton import cube_of, morton_codes, morton_order
@@ -322,17 +322,14 @@ def build_cloud(
     skipped = 0
     total = 0
     attr_names: list[str] | None = None
+    dropped: set[str] = set()
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for chunk in chunks:
         n_bad, chunk_lo, chunk_hi = scan_points(chunk.xyz)
         lo, hi = np.minimum(lo, chunk_lo), np.maximum(hi, chunk_hi)
         skipped += n_bad
         keep = slice(None) if n_bad == 0 else _valid_mask(chunk.xyz)
-        names = sorted(chunk.attributes)
-        if attr_names is None:
-            attr_names = names
-        elif names != attr_names:  # files of one scene with different attributes: keep the common ones
-            attr_names = [a for a in attr_names if a in names]
+        attr_names = attributes_in_common(attr_names, chunk.attributes, dropped)  # files of one scene: the common ones
         scales.append(chunk.scale)
         xyz_parts.append(chunk.xyz[keep])
         rgba_parts.append(chunk.rgba[keep])
@@ -340,6 +337,7 @@ def build_cloud(
             attr_parts.setdefault(a, []).append(values[keep])
         total += len(xyz_parts[-1])
     check_valid_count(name, total, skipped)
+    warn_dropped_attributes(name, dropped)
     xyz = _joined(xyz_parts)
     del xyz_parts
     rgba = _joined(rgba_parts)

@@ -56,7 +56,7 @@ from numba.typed import List
 from ...core import pages
 from ...core.attributes import Attributes, encode, fits, holder_for, repacked, resized, widened, zeroed_like
 from ...core.attributes import stored as stored_array
-from ...core.chunk import PointChunk, attribute_dtype_problem, attribute_name_problem, colors_for
+from ...core.chunk import PointChunk, attribute_dtype_problem, attribute_name_problem, colors_for, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, at_scale
 from ...core.compact import GRID_TOLERANCE, ext_bits_per_point, point_words, stream_words
 from ...core.framelock import FrameLock
@@ -415,6 +415,7 @@ class ProgressiveOctree:
         self.capacity = min(int(capacity), _PRESIZE_MAX)
         self.lock = FrameLock()
         self._attribute_dtypes = dict(attributes) if attributes is not None else None
+        self._dropped_said: set[str] = set()  # attributes said to be left out (keep_attributes)
         self.pool: Pool | None = None
         self.origin: np.ndarray | None = None
         self.edge = 0.0
@@ -1005,8 +1006,13 @@ class ProgressiveOctree:
 
     def keep_attributes(self, names) -> None:
         """Hold only the attributes among ``names``; points already in lose the others (a loader
-        of several files keeps those every file has, as ``gigapoint.open`` of them does)."""
-        if not any(a not in names for a in self._attribute_dtypes or {}):
+        of several files keeps those every file has, as ``gigapoint.open`` of them does). Those
+        left out, either way, are said once (``warn_dropped_attributes``)."""
+        held = self._attribute_dtypes
+        extra = {a for a in names if held is not None and a not in held} - self._dropped_said
+        self._dropped_said |= extra
+        warn_dropped_attributes(self.name, extra)
+        if not any(a not in names for a in held or {}):
             return
         with self.lock.writing():
             gone = [a for a in self._attribute_dtypes if a not in names]
@@ -1016,6 +1022,8 @@ class ProgressiveOctree:
                     del self.pool.attributes[a]
             if gone and self.pool is not None:
                 self.pool.version += 1  # a packing worked out meanwhile held them: it is dropped (_pack)
+        self._dropped_said |= set(gone)
+        warn_dropped_attributes(self.name, gone)
 
     def _insert(self, xyz, rgba, attrs, lo, hi, table: tuple | None = None) -> None:
         """Valid points with their attributes in the octree's set (``_attribute_set``) in."""
