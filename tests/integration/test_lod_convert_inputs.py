@@ -84,3 +84,28 @@ def test_convert_refuses_an_octree_as_input(mixed_dir, tmp_path, capsys):
     assert main(["convert", str(out), "-o", str(tmp_path / "again"), "--quiet"]) == 1
     err = capsys.readouterr().err
     assert "is a converted octree" in err and err.count("\n") == 1
+
+
+def test_a_conversion_says_which_attributes_not_every_file_has(tmp_path, capsys):
+    """As opening them does: the attributes one file lacks (or brings alone) are left out, with a
+    warning naming them (it went without a word)."""
+    import gigapoint as gp
+    from gigapoint.errors import GigapointWarning
+
+    for name, extra in (("a.las", True), ("b.las", False)):
+        header = laspy.LasHeader(point_format=6, version="1.4")
+        header.scales, header.offsets = [0.01] * 3, [500_000.0, 4_000_000.0, 0.0]
+        if extra:
+            header.add_extra_dim(laspy.ExtraBytesParams(name="height", type=np.float32))
+        las = laspy.LasData(header)
+        x, _ = _points(2_000, len(name) + extra)
+        las.x, las.y, las.z = 500_000.0 + x[:, 0], 4_000_000.0 + x[:, 1], x[:, 2]
+        if extra:
+            las.height = np.ones(2_000, np.float32)
+        las.write(str(tmp_path / name))
+    with pytest.warns(GigapointWarning, match=r"octree: attribute\(s\) height not in every file: left out"):
+        gp.convert([tmp_path / "a.las", tmp_path / "b.las"], tmp_path / "octree")
+    assert "height" not in open_octree(tmp_path / "octree").attribute_names and "intensity" in open_octree(tmp_path / "octree").attribute_names
+    assert main(["convert", str(tmp_path / "b.las"), str(tmp_path / "a.las"), "-o", str(tmp_path / "octree2"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: " in err and "octree2: attribute(s) height not in every file: left out" in err

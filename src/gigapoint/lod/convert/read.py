@@ -9,6 +9,7 @@ from functools import cached_property
 
 import numpy as np
 
+from ...core.chunk import warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
 from ...errors import GigapointWarning
 from ...io import files_label, read_chunks
@@ -105,6 +106,7 @@ class ReadPhase(Job):
         attrs: dict | None = st.get("attributes")
         total = st["total"] = self.point_total
         preview = self._preview_sampler(total, done, attrs)
+        dropped: set[str] = set()
         self.progress.phase("read", total)
         for i, chunk in enumerate(self._chunks()):
             n_in = len(chunk)
@@ -113,7 +115,10 @@ class ReadPhase(Job):
                 continue
             xyz, rgba, kept, names, invalid, c_lo, c_hi = self._take_chunk(i, chunk)
             st["skipped"] = st.get("skipped", 0) + int(invalid)
-            attrs = merge_attributes(attrs, names)
+            merged = merge_attributes(attrs, names)
+            if attrs is not None:  # left out: one chunk lacks it, brings it alone, or in another dtype
+                dropped |= (set(attrs) | set(names)) - set(merged)
+            attrs = merged
             sc, prev = getattr(chunk, "scale", None), st.get("chunk_scale", "unset")  # the chunks' grid (compact_plan)
             st["chunk_scale"] = None if sc is None or prev is None else (list(map(float, sc)) if prev == "unset" else np.minimum(prev, sc).tolist())
             if c_lo is not None:
@@ -125,6 +130,7 @@ class ReadPhase(Job):
             self.save_state()
             self.progress.advance(n_in)
         self._write_preview(preview, force=True)
+        warn_dropped_attributes(str(self.out), dropped)
         self._end_read(lo, hi)
 
     def _end_read(self, lo, hi) -> None:
