@@ -117,7 +117,14 @@ def test_a_damaged_work_file_stops_the_resume_in_one_line_and_overwrite_starts_o
     with pytest.raises(KeyboardInterrupt):
         convert([demo_las], out, **OPTS)
     _interrupt_after(monkeypatch, None)
+    import shutil
+
     victim = min((out / ".partial" / "built").rglob("nodes.npy"))
+    cut = tmp_path / "cut"  # the same run with a write cut by a kill (atomic.py's hidden temporary): no damage
+    shutil.copytree(out, cut)
+    (cut / victim.relative_to(out)).with_name(f".{victim.name}.1a2b3c4d.tmp.npy").write_bytes(b"\x93NUMPY")
+    assert convert([demo_las], cut, **OPTS).resumed
+    _assert_same(_snapshot(cut), reference)
     with open(victim, "r+b") as f:
         f.truncate(60)
     for _ in range(2):  # the same line each time, nothing changed by trying

@@ -63,8 +63,8 @@ def damaged_work_file(d: OctreeDir) -> str | None:
     truncated one (a machine that crashed before the disk had it) was numpy's ValueError
     part-way through the resume, every time it was run again."""
     for path in sorted(d.partial.rglob("*.npy")):
-        if any(part.endswith(".tmp") for part in path.relative_to(d.partial).parts[:-1]):
-            continue  # a node set being built when the run stopped: built again
+        if path.name.startswith(".") or any(part.endswith(".tmp") for part in path.relative_to(d.partial).parts[:-1]):
+            continue  # a write (atomic.py's hidden temporary) or a node set under way when the run stopped: done again
         try:
             np.load(path, mmap_mode="r")
         except (OSError, ValueError, EOFError) as exc:
