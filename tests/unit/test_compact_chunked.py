@@ -120,9 +120,9 @@ def test_invalid_points_mixed_attributes_wide_batches(rng, tmp_path):
         if k != 1:
             attrs["classification"] = rng.integers(0, 20, len(xyz)).astype(np.uint8)
         chunks.append(PointChunk(xyz, rgba, attrs, scale=(0.01, 0.01, 0.01)))
-    with pytest.warns(GigapointWarning, match="skipped"):
+    with pytest.warns(GigapointWarning, match="skipped"), pytest.warns(GigapointWarning, match="classification not in every file"):
         want = build_cloud(chunks, batch_size=2000)
-    with pytest.warns(GigapointWarning, match="skipped"):
+    with pytest.warns(GigapointWarning, match="skipped"), pytest.warns(GigapointWarning, match="classification not in every file"):
         got = build_cloud_chunked(lambda: chunks, batch_size=2000, partition_points=7_000, tmpdir=tmp_path)
     assert got.skipped == want.skipped > 0
     assert sorted(got.attributes) == ["intensity"]

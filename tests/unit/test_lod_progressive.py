@@ -920,12 +920,20 @@ def test_files_whose_attribute_dtypes_differ_load_as_the_plain_cloud_holds_them(
     v["x"], v["y"], v["z"], v["intensity"] = rng.uniform(0, 100, 1_500), rng.uniform(0, 100, 1_500), rng.uniform(0, 10, 1_500), rng.uniform(0, 1, 1_500)
     ply = tmp_path / "b.ply"
     PlyData([PlyElement.describe(v, "vertex")]).write(str(ply))
-    plain = gp.open(las, ply)
+    dropped = "2 files: attribute.s. classification, gps_time, number_of_returns, point_source_id, return_number not in every file"
+    with pytest.warns(GigapointWarning, match=dropped):
+        plain = gp.open(las, ply)
     want = np.asarray(plain.attributes["intensity"])
     assert want.dtype == np.float32 and sorted(plain.attributes) == ["intensity"]
-    for paths in ((las, ply), (ply, las)):
+
+    def loaded(paths):
         cloud = gp.open(*paths, progressive=True)
         assert cloud.wait(timeout=120) and cloud.n_points == 3_500
+        return cloud
+
+    for paths in ((las, ply), (ply, las)):
+        with pytest.warns(GigapointWarning, match=dropped):
+            cloud = loaded(paths)
         got = np.asarray(_leaf_points(cloud)["intensity"])
         assert got.dtype == np.float32 and sorted(cloud.attributes) == ["intensity"]
         np.testing.assert_array_equal(np.sort(got), np.sort(want))
