@@ -134,6 +134,21 @@ def test_a_damaged_work_file_stops_the_resume_in_one_line_and_overwrite_starts_o
     res = convert([demo_las], out, overwrite=True, **OPTS)
     assert not res.resumed
     _assert_same(_snapshot(out), reference)
+    # a work file missing (not truncated) is found only when the resume reads it: said so then and
+    # remembered, so the next run says it at once and --overwrite starts over (it said "run it
+    # again once the cause is gone: it resumes", which failed the same way every time)
+    gone = tmp_path / "gone"
+    _interrupt_after(monkeypatch, 2)
+    with pytest.raises(KeyboardInterrupt):
+        convert([demo_las], gone, **OPTS)
+    _interrupt_after(monkeypatch, None)
+    missing = min((gone / ".partial" / "built").rglob("nodes.npy"))
+    missing.unlink()
+    for _ in range(2):
+        with pytest.raises(ConvertError, match=rf"^{missing}: a work file of the unfinished conversion is missing; run it again with --overwrite to start over$"):
+            convert([demo_las], gone, **OPTS)
+    assert not convert([demo_las], gone, overwrite=True, **OPTS).resumed
+    _assert_same(_snapshot(gone), reference)
 
 
 def test_conversion_interrupted_while_grouping_resumes_to_the_same_result(demo_las, tmp_path, monkeypatch):

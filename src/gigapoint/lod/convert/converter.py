@@ -3,6 +3,8 @@ lock, prepares it (resume or start clean) and runs the phases in order."""
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import os
 import shutil
 import time
@@ -73,6 +75,12 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
                 shutil.rmtree(self.dir.path, ignore_errors=True)
             raise
         except OSError as exc:  # a full disk most often: the CLI's line named no file, nor what became of the output
+            gone = exc.errno == errno.ENOENT and exc.filename and self.dir.partial in Path(exc.filename).parents
+            if gone and getattr(self, "state", None):  # a work file missing: it will be missing next time too
+                damage = f"{exc.filename}: a work file of the unfinished conversion is missing"
+                with contextlib.suppress(OSError):
+                    self.save_state_with(damaged=damage)
+                raise ConvertError(f"{damage}; run it again with --overwrite to start over") from exc
             raise ConvertError(
                 f"{exc.filename or self.dir.path}: {exc.strerror or exc}; the conversion to {self.out} stopped unfinished "
                 f"(run it again once the cause is gone: it resumes)"
@@ -82,7 +90,7 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
 
     def _run_locked(self, overwrite: bool, fp) -> ConvertResult:
         saved = self.dir.prepare_output(fp, overwrite)
-        damage = damaged_work_file(self.dir) if saved is not None else None
+        damage = (saved.get("damaged") or damaged_work_file(self.dir)) if saved is not None else None
         if damage and not overwrite:
             raise ConvertError(f"{damage}; run it again with --overwrite to start over")
         if damage:  # overwrite: the unfinished conversion goes, this one starts from the inputs

@@ -161,3 +161,8 @@ class Job:
 
     def save_state(self) -> None:
         self.dir.write_state(self.state)
+
+    def save_state_with(self, **changes) -> None:
+        """The state saved with ``changes`` (``damaged``: the next run refuses to resume it)."""
+        self.state.update(changes)
+        self.save_state()
