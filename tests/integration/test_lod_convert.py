@@ -111,44 +111,37 @@ def test_interrupted_conversion_resumes_to_the_same_result(demo_las, reference, 
 
 def test_a_damaged_work_file_stops_the_resume_in_one_line_and_overwrite_starts_over(demo_las, reference, tmp_path, monkeypatch):
     """A truncated work file (a machine that crashed before the disk had it) was numpy's
-    ValueError part-way through the resume, every time it was run again."""
-    out = tmp_path / "oct"
-    _interrupt_after(monkeypatch, 2)
-    with pytest.raises(KeyboardInterrupt):
-        convert([demo_las], out, **OPTS)
-    _interrupt_after(monkeypatch, None)
+    ValueError part-way through the resume, every time it was run again; a missing one said
+    "run it again once the cause is gone: it resumes", which failed the same way every time."""
     import shutil
 
-    victim = min((out / ".partial" / "built").rglob("nodes.npy"))
+    def interrupted(out) -> Path:
+        """An unfinished conversion into ``out`` and the first node set's nodes.npy."""
+        _interrupt_after(monkeypatch, 2)
+        with pytest.raises(KeyboardInterrupt):
+            convert([demo_las], out, **OPTS)
+        _interrupt_after(monkeypatch, None)
+        return min((out / ".partial" / "built").rglob("nodes.npy"))
+
+    out = tmp_path / "oct"
+    victim = interrupted(out)
     cut = tmp_path / "cut"  # the same run with a write cut by a kill (atomic.py's hidden temporary): no damage
     shutil.copytree(out, cut)
     (cut / victim.relative_to(out)).with_name(f".{victim.name}.1a2b3c4d.tmp.npy").write_bytes(b"\x93NUMPY")
     assert convert([demo_las], cut, **OPTS).resumed
     _assert_same(_snapshot(cut), reference)
+    # truncated: found before the resume; missing: found when the resume reads it, and remembered
+    missing = interrupted(tmp_path / "gone")
+    missing.unlink()
     with open(victim, "r+b") as f:
         f.truncate(60)
-    for _ in range(2):  # the same line each time, nothing changed by trying
-        with pytest.raises(ConvertError, match=rf"^{victim}: a work file of the unfinished conversion is damaged \(.*\); run it again with --overwrite to start over$"):
-            convert([demo_las], out, **OPTS)
-    assert victim.exists() and not (out / "octree.json").exists()
-    res = convert([demo_las], out, overwrite=True, **OPTS)
-    assert not res.resumed
-    _assert_same(_snapshot(out), reference)
-    # a work file missing (not truncated) is found only when the resume reads it: said so then and
-    # remembered, so the next run says it at once and --overwrite starts over (it said "run it
-    # again once the cause is gone: it resumes", which failed the same way every time)
-    gone = tmp_path / "gone"
-    _interrupt_after(monkeypatch, 2)
-    with pytest.raises(KeyboardInterrupt):
-        convert([demo_las], gone, **OPTS)
-    _interrupt_after(monkeypatch, None)
-    missing = min((gone / ".partial" / "built").rglob("nodes.npy"))
-    missing.unlink()
-    for _ in range(2):
-        with pytest.raises(ConvertError, match=rf"^{missing}: a work file of the unfinished conversion is missing; run it again with --overwrite to start over$"):
-            convert([demo_las], gone, **OPTS)
-    assert not convert([demo_las], gone, overwrite=True, **OPTS).resumed
-    _assert_same(_snapshot(gone), reference)
+    for where, file, problem in ((out, victim, r"damaged \(.*\)"), (missing.parents[3], missing, "missing")):
+        for _ in range(2):  # the same line each time, nothing changed by trying
+            with pytest.raises(ConvertError, match=rf"^{file}: a work file of the unfinished conversion is {problem}; run it again with --overwrite to start over$"):
+                convert([demo_las], where, **OPTS)
+        assert not (where / "octree.json").exists()
+        assert not convert([demo_las], where, overwrite=True, **OPTS).resumed
+        _assert_same(_snapshot(where), reference)
 
 
 def test_conversion_interrupted_while_grouping_resumes_to_the_same_result(demo_las, tmp_path, monkeypatch):
