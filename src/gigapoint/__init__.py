@@ -34,6 +34,8 @@ def demo(
     50 M points. 10⁹ points at ``scale=0.01`` hold ~9 GB (``attributes=False``: ~6 GB, without
     the intensity and classification). ``colors``: how colours are held (``core.build_cloud``:
     "auto", "rgba", "rgb565" or "palette")."""
+    import numbers
+
     from .errors import InputError, is_whole_number
     from .io.demo import demo_chunks
 
@@ -41,7 +43,7 @@ def demo(
         raise InputError(f"demo: n_points must be a whole number, got {n_points!r}")
     if not (is_whole_number(seed) and abs(seed) < 2**63):  # a string reached the generator's kernel: numba's TypingError
         raise InputError(f"demo: seed must be a whole number below 2**63, got {seed!r}")
-    if scale is not None and not (isinstance(scale, (int, float)) and not isinstance(scale, bool) and 1e-6 <= scale <= 1000):
+    if scale is not None and not (isinstance(scale, numbers.Real) and not isinstance(scale, bool) and 1e-6 <= scale <= 1000):
         raise InputError(f"demo: scale must be None (float positions) or a grid step between 1e-6 and 1000 metres, got {scale!r}")
     if progressive:
         from .lod.progressive import demo_sources, open_progressive
@@ -95,8 +97,7 @@ def open(*paths, progressive: bool = False, **options):
     from .lod.reader import refuse_octrees
 
     paths = _flat_paths(paths)
-    check_switch("progressive", progressive, "open")
-    check_switch("chunked", options.get("chunked"), "open", allow_none=True)
+    check_switch("progressive", progressive, "open")  # (chunked= is open_cloud's to check)
     if progressive:
         from .lod.progressive import file_sources, memory_limit_bytes, open_progressive
 

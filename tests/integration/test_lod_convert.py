@@ -567,6 +567,8 @@ def test_a_cloud_converts_as_the_file_it_was_read_from(autzen_path, tmp_path):
     cloud = gp.open(path)
     assert sum(len(c.xyz) for c in cloud.chunks(50_000)) == cloud.n_points == 110_000
     np.testing.assert_array_equal(np.concatenate([c.xyz for c in cloud.chunks(50_000)]), cloud.positions())
+    for held in (cloud, gp.demo(30_000, colors="palette")):  # colours decoded chunk by chunk, in any format
+        np.testing.assert_array_equal(np.concatenate([c.rgba for c in held.chunks(7_000)]), held.rgba)
     words = gp.from_arrays(cloud.positions()[:30_000], intensity=np.arange(30_000))  # the three-word layout
     assert words.layout == "words" and [len(c.xyz) for c in words.chunks(15_000)] == [20_480, 9_520]  # whole batches
     np.testing.assert_array_equal(np.concatenate([c.xyz for c in words.chunks(15_000)]), words.positions())

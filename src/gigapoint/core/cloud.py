@@ -122,7 +122,7 @@ class PointCloud:
         """The points as PointChunks, in the cloud's order, whole batches at a time: positions
         (30 bits a batch; exact on the source's grid in the compact layout), colours and
         attributes as they read back. What ``gigapoint.convert(cloud, out)`` converts."""
-        rgba, first, count = self.rgba, self.batches["first"].astype(np.int64), self.batches["count"].astype(np.int64)
+        first, count = self.batches["first"].astype(np.int64), self.batches["count"].astype(np.int64)
         start = 0
         while start < len(self.batches):
             end = start + 1 + int(np.searchsorted(np.cumsum(count[start:]), points_per_chunk))  # batches up to the size
@@ -130,7 +130,8 @@ class PointCloud:
             lo, hi = int(first[start]), int(first[end - 1] + count[end - 1])
             xyz = np.concatenate([self._batch_positions(b) for b in range(start, end)])
             attributes = {a: self.attributes.at(a, slice(lo, hi)) for a in self.attributes}
-            yield PointChunk(xyz, rgba[lo:hi], attributes, scale=self.source_scale)
+            rgba = colors_at(self.color, np.arange(lo, hi)).view(np.uint8).reshape(-1, 4)  # this chunk's only: not all N x 4 bytes at once
+            yield PointChunk(xyz, rgba, attributes, scale=self.source_scale)
             start = end
 
     def _batch_positions(self, batch: int) -> np.ndarray:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud, scale_decimals
-from ..errors import EmptyCloudError, GigapointWarning, InputError
+from ..errors import EmptyCloudError, GigapointWarning, InputError, check_switch
 from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail
 from .demo import demo_arrays, demo_chunks
 from .registry import is_supported_name, reader_for, readers, register, supported_suffixes
@@ -106,6 +106,7 @@ def open_cloud(
     if not paths:
         raise InputError("open: no file given")
     chunk_size = check_chunk_size(chunk_size)
+    check_switch("chunked", chunked, "open", allow_none=True)  # "no" was taken as true
     files = expand_paths(paths)
     plan = [(f, reader_for(f)) for f in files]
     if name is None:
