@@ -36,13 +36,11 @@ def demo(
     "auto", "rgba", "rgb565" or "palette")."""
     import numbers
 
-    from .errors import InputError, is_whole_number
+    from .errors import InputError, check_whole
     from .io.demo import demo_chunks
 
-    if not is_whole_number(n_points):
-        raise InputError(f"demo: n_points must be a whole number, got {n_points!r}")
-    if not (is_whole_number(seed) and abs(seed) < 2**63):  # a string reached the generator's kernel: numba's TypingError
-        raise InputError(f"demo: seed must be a whole number below 2**63, got {seed!r}")
+    n_points = check_whole("demo", "n_points", n_points)
+    check_whole("demo", "seed", seed, -(2**63) + 1, 2**63 - 1)  # a string reached the generator's kernel: numba's TypingError
     if scale is not None and not (isinstance(scale, numbers.Real) and not isinstance(scale, bool) and 1e-6 <= scale <= 1000):
         raise InputError(f"demo: scale must be None (float positions) or a grid step between 1e-6 and 1000 metres, got {scale!r}")
     if progressive:

@@ -11,6 +11,22 @@ def is_whole_number(value) -> bool:
     return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 
 
+def check_whole(where: str, name: str, value, lo: int | None = None, hi: int | None = None, unit: str = "") -> int:
+    """``value`` as an int, or a one-line InputError (``where: name must be an integer from lo
+    to hi unit, got ...``) unless it is a whole number (``is_whole_number``) in ``lo..hi``
+    (either end None: open). The one check behind the API's counts and sizes (a demo's seed, a
+    turntable's frames, a live cloud's chunk, a viewer's width, a neighbour count)."""
+    if is_whole_number(value) and (lo is None or value >= lo) and (hi is None or value <= hi):
+        return int(value)
+    if lo is not None and hi is not None:
+        rng = f" from {lo:,} to {hi:,}"
+    elif lo is not None:
+        rng = f" >= {lo:,}"
+    else:
+        rng = "" if hi is None else f" <= {hi:,}"
+    raise InputError(f"{where}: {name} must be an integer{rng}{unit}, got {value!r}")
+
+
 def check_switch(name: str, value, where: str, allow_none: bool = False) -> None:
     """A one-line InputError (``where: name must be ...``) unless ``value`` is True or False
     (numpy's too; None where ``allow_none``): a string such as "no" was taken as true, and an

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import threading
 
 import numpy as np
@@ -151,6 +152,22 @@ def test_a_chunk_size_it_cannot_hold_is_refused_at_once(chunk):
     of 116 TiB, 2.5 read as 2."""
     with pytest.raises(InputError, match=rf"^live: chunk must be an integer from 1 to 1,048,576 points, got {chunk!r}$"):
         LiveCloud(chunk=chunk)
+
+
+@pytest.mark.parametrize(
+    ("kw", "problem"),
+    [
+        ({"keep": True}, "live: keep must be an integer >= 1, got True"),  # taken as 1
+        ({"keep": 0}, "live: keep must be an integer >= 1, got 0"),
+        ({"decay": "abc"}, "live: decay must be a positive number of seconds or None, got 'abc'"),  # a ValueError
+        ({"decay": -1.0}, "live: decay must be a positive number of seconds or None, got -1.0"),
+        ({"fade": "no"}, "live: fade must be True or False, got 'no'"),  # taken as true
+        ({"name": 5}, "live: name must be a string, got 5"),
+    ],
+)
+def test_odd_live_cloud_settings_are_refused_in_one_line(kw, problem):
+    with pytest.raises(InputError, match=f"^{re.escape(problem)}$"):
+        LiveCloud(**kw)
 
 
 def test_nan_points_inside_a_frame_are_dropped():

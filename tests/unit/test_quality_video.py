@@ -144,8 +144,9 @@ def test_a_flythrough_keeps_its_key_cameras_projection_and_glides_their_fov_and_
         ([a, wide], 3, r"fly-through: the key cameras must have one projection, got \['orthographic', 'perspective'\]"),
         ([a, "x"], 3, "fly-through: key cameras: camera 1 must be a gigapoint.Camera, got str"),
         ([wide, gp.Camera.look_at((1, 0, 0), (0, 0, 0), width=32, height=48)], 3, "fly-through: key cameras: every camera must have one size"),
-        ([a, b], 2.5, "fly-through: needs at least 2 key cameras and 2 frames, got 2 and 2.5"),
-        ([a], 5, "fly-through: needs at least 2 key cameras and 2 frames, got 1 and 5"),
+        ([a, b], 2.5, "fly-through: number of frames must be an integer from 2 to 100,000, got 2.5"),
+        ([a, b], 10**9, "fly-through: number of frames must be an integer from 2 to 100,000, got 1000000000"),
+        ([a], 5, "fly-through: needs at least 2 key cameras, got 1"),
     ):
         with pytest.raises(GigapointError, match=problem):
             interpolate_cameras(keys, n)

@@ -477,7 +477,7 @@ def test_viewer_for_jupyter(cloud):
     with pytest.raises(gigapoint.GigapointError):
         gigapoint.Viewer(12345, display=False)
     for bad in ({"width": 0}, {"height": -5}, {"width": 960.5}, {"height": True}):  # an IFrame of 0 pixels showed nothing
-        with pytest.raises(gigapoint.GigapointError, match=r"^Viewer (width|height) must be an integer in 1\.\.16384 pixels, got "):
+        with pytest.raises(gigapoint.GigapointError, match=r"^Viewer: (width|height) must be an integer from 1 to 16,384 pixels, got "):
             gigapoint.Viewer(cloud, display=False, **bad)
 
 

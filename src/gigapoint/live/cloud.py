@@ -26,6 +26,7 @@ new frame, falling linearly to 0 at ``decay``; ``fade_alpha``) that the transpar
 from __future__ import annotations
 
 import heapq
+import numbers
 import threading
 import time as _time
 from collections import Counter, deque
@@ -41,7 +42,7 @@ from ..core.morton import argsort_codes, cube_of, morton_codes
 from ..core.quantize import make_batches, quantize
 from ..core.renderable import DrawList
 from ..core.selection import Selection, View, select_view, subsample_step
-from ..errors import GigapointError, InputError, check_switch, is_whole_number
+from ..errors import GigapointError, InputError, check_switch, check_whole
 from ..lod.build import take, valid_bounds
 from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
 from ..render.splats import point_spacing
@@ -137,17 +138,17 @@ class LiveCloud:
         ``bounds``: (min, max) of the region the stream will cover, if known (the viewer frames
         it from the start; the clip range covers it); ``fade``: with ``decay``, frames fade out
         as they age (each drawn batch's ``alpha`` in the DrawList, for the transparency pass)."""
-        if not (isinstance(keep, int) and keep >= 1):
-            raise InputError(f"{name}: keep must be a positive integer, got {keep!r}")
+        if not isinstance(name, str):  # the name every message and file of the cloud starts with
+            raise InputError(f"live: name must be a string, got {name!r}")
+        keep = check_whole(name, "keep", keep, 1)  # True was taken as 1
+        check_switch("fade", fade, name)  # "no" was taken as true
         self.fade = bool(fade)
-        if decay is not None and not (float(decay) > 0):
+        if decay is not None and not (isinstance(decay, numbers.Real) and not isinstance(decay, bool) and decay > 0):  # "abc": a ValueError
             raise InputError(f"{name}: decay must be a positive number of seconds or None, got {decay!r}")
         self.name = name
         self.keep = keep
         self.decay = None if decay is None else float(decay)
-        if not (is_whole_number(chunk) and 1 <= chunk <= MAX_CHUNK):  # 0 divided by zero, 10**12 asked numpy for 116 TiB
-            raise InputError(f"{name}: chunk must be an integer from 1 to {MAX_CHUNK:,} points, got {chunk!r}")
-        self.chunk = int(chunk)
+        self.chunk = check_whole(name, "chunk", chunk, 1, MAX_CHUNK, " points")  # 0 divided by zero, 10**12 asked numpy for 116 TiB
         self.clock = clock or _time.monotonic
         self.expected_bounds = None if bounds is None else tuple(np.asarray(b, np.float64).reshape(3) for b in bounds)
         self.started = self.clock()

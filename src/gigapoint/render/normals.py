@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.cloud import PointCloud
-from ..errors import GigapointError, is_whole_number
+from ..errors import GigapointError, check_whole
 from .cache import render_cache
 
 
@@ -30,10 +30,9 @@ def estimate_normals(cloud, k: int = 16, chunk: int = 200_000, store: bool = Tru
         )
     if cloud.n_points < 3:
         raise GigapointError(f"{cloud.name}: estimating normals needs at least 3 points, got {cloud.n_points}")
-    for name, v, least in (("k", k, 3), ("chunk", chunk, 1)):  # k=-1 was taken as 3 without a word; chunk=0 a ValueError
-        if not is_whole_number(v) or v < least:
-            raise GigapointError(f"estimate_normals: {name} must be an integer >= {least}, got {v!r}")
-    k = int(min(k, cloud.n_points))  # a small cloud: every point is every point's neighbour
+    k = check_whole("estimate_normals", "k", k, 3)  # k=-1 was taken as 3 without a word
+    chunk = check_whole("estimate_normals", "chunk", chunk, 1)  # chunk=0: a ValueError
+    k = min(k, cloud.n_points)  # a small cloud: every point is every point's neighbour
     xyz = cloud.positions()
     xyz -= xyz.mean(axis=0)  # UTM-sized coordinates: centre before squaring
     tree = cKDTree(xyz)

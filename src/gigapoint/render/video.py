@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_write
-from ..errors import GigapointError, check_switch, is_whole_number
+from ..errors import GigapointError, check_switch, check_whole
 from .camera import Camera, auto_view, sample_points
 from .settings import RenderSettings
 
@@ -28,7 +28,7 @@ TURNTABLE_TRIM = 0.01
 TURNTABLE_PITCHES = (25.0, 60.0)
 #: yaws at which ``fill_pitches`` searches (a longer orbit interpolates between them)
 PITCH_SEARCH_YAWS = 36
-#: the most frames a turntable takes: 55 minutes at 30 fps, framed one by one (~5 ms a frame)
+#: the most frames a turntable or fly-through takes: 55 minutes at 30 fps, framed one by one (~5 ms a frame)
 MAX_TURNTABLE_FRAMES = 100_000
 
 
@@ -46,8 +46,7 @@ def turntable_cameras(
     and at least 36 %, against 35 % / 26 % at iso's pitch and 12 % at one distance around the
     box's centre); pitches, distances and targets are running means over an eighth of the
     orbit, so the camera glides instead of jumping."""
-    if not (is_whole_number(n_frames) and 1 <= n_frames <= MAX_TURNTABLE_FRAMES):
-        raise GigapointError(f"turntable: number of frames must be an integer from 1 to {MAX_TURNTABLE_FRAMES:,}, got {n_frames!r}")
+    n_frames = check_whole("turntable", "number of frames", n_frames, 1, MAX_TURNTABLE_FRAMES)
     points = sample_points(cloud)
     start_yaw = auto_view(points, width / height)[0] if start_yaw is None else start_yaw
     yaws = start_yaw + 360.0 * np.arange(n_frames) / n_frames
@@ -132,8 +131,9 @@ def interpolate_cameras(keys: list[Camera], n_frames: int) -> list[Camera]:
     an orthographic camera's height; each keeps its segment's first key's up vector and clip
     planes, and the keys' projection and size (one of each)."""
     keys = list(keys)
-    if len(keys) < 2 or not is_whole_number(n_frames) or n_frames < 2:
-        raise GigapointError(f"fly-through: needs at least 2 key cameras and 2 frames, got {len(keys)} and {n_frames!r}")
+    if len(keys) < 2:
+        raise GigapointError(f"fly-through: needs at least 2 key cameras, got {len(keys)}")
+    n_frames = check_whole("fly-through", "number of frames", n_frames, 2, MAX_TURNTABLE_FRAMES)
     _check_one_kind(keys, "fly-through: key cameras")
     if len({k.projection for k in keys}) > 1:
         raise GigapointError(f"fly-through: the key cameras must have one projection, got {sorted({k.projection for k in keys})}")

@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Self
 
 from ..core.renderable import Renderable
-from ..errors import GigapointError, is_whole_number
+from ..errors import GigapointError, check_whole
 
 
 def _as_cloud(cloud_or_path):
@@ -35,8 +35,7 @@ class Viewer:
         from .server import ViewerServer
 
         for name, v in (("width", width), ("height", height)):  # the IFrame's: 0 showed nothing, without a word
-            if not is_whole_number(v) or not 1 <= v <= MAX_IMAGE_SIDE:
-                raise GigapointError(f"Viewer {name} must be an integer in 1..{MAX_IMAGE_SIDE} pixels, got {v!r}")
+            check_whole("Viewer", name, v, 1, MAX_IMAGE_SIDE, " pixels")
         self.cloud = _as_cloud(cloud_or_path)
         self.server = ViewerServer(self.cloud, host=host, port=port, settings=settings).start()
         self.width, self.height = width, height
