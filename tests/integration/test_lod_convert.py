@@ -578,6 +578,8 @@ def test_a_cloud_converts_as_the_file_it_was_read_from(autzen_path, tmp_path):
     assert from_cloud.points == 110_000
     np.testing.assert_array_equal(_octree_points(tmp_path / "from_cloud"), _octree_points(tmp_path / "from_file"))
     assert open_octree(tmp_path / "from_cloud").name == cloud.name
+    assert open_octree(tmp_path / "from_cloud").meta["crs"] == open_octree(tmp_path / "from_file").meta["crs"] is not None  # its file's
+    assert cloud.source_files == (path,) and words.source_files == ()
     progressive = gp.open(path, progressive=True)  # waited for, converted from its leaves, its file's CRS kept
     convert(progressive, tmp_path / "from_progressive")
     np.testing.assert_array_equal(_octree_points(tmp_path / "from_progressive"), _octree_points(tmp_path / "from_file"))

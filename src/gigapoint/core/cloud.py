@@ -60,6 +60,9 @@ class PointCloud:
     ext: np.ndarray | None = None
     packing: np.ndarray | None = None
     data_bounds: tuple[np.ndarray, np.ndarray] | None = None
+    # PointSource: the files it was read from (io.open_cloud), whose headers give a conversion
+    # of the cloud its CRS and LAS grid; empty where it was built from points
+    source_files: tuple = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.attributes, Attributes):  # a dict of arrays: held as given
@@ -68,7 +71,6 @@ class PointCloud:
     version: ClassVar[None] = None  # PointBuffers: the arrays never change once built
     batch_version: ClassVar[None] = None
     load_progress: ClassVar[float] = 1.0  # Renderable: built whole
-    source_files: ClassVar[tuple] = ()  # PointSource: built from points, its files not kept
 
     @property
     def n_points(self) -> int:

@@ -143,11 +143,14 @@ def open_cloud(
             if chunked:  # ``stream``: a function giving the chunks, called once a pass
                 from ..core.chunked import build_cloud_chunked
 
-                return build_cloud_chunked(stream, name=name, layout=layout, colors=colors)
-            return build_cloud(stream, name=name, layout=layout, colors=colors)
+                cloud = build_cloud_chunked(stream, name=name, layout=layout, colors=colors)
+            else:
+                cloud = build_cloud(stream, name=name, layout=layout, colors=colors)
         except EmptyCloudError as exc:
             detail = str(exc).split(": ", 1)[-1]
             raise EmptyCloudError(f"{files_label(files)}: {detail}") from None
+        cloud.source_files = tuple(files)  # gp.convert(cloud) takes their CRS
+        return cloud
 
     if not progress:
         return build(chunks if chunked else chunks())
