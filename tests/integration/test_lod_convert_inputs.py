@@ -109,3 +109,16 @@ def test_a_conversion_says_which_attributes_not_every_file_has(tmp_path, capsys)
     assert main(["convert", str(tmp_path / "b.las"), str(tmp_path / "a.las"), "-o", str(tmp_path / "octree2"), "--quiet"]) == 0
     err = capsys.readouterr().err
     assert "warning: " in err and "octree2: attribute(s) height not in every file: left out" in err
+
+
+def test_convert_says_how_to_watch_only_once_the_output_shows_points(autzen_path, tmp_path, capsys):
+    """The "while this runs, `gigapoint view OUT` shows what has been read so far" hint came
+    before the first file was read: a file that could not be read got the hint, then its error."""
+    bad = tmp_path / "bad.laz"
+    bad.write_bytes(b"garbage")
+    assert main(["convert", str(bad), "-o", str(tmp_path / "bad_out")]) == 1
+    err = capsys.readouterr().err
+    assert err.strip().splitlines() == [f"error: {bad}: not a LAS/LAZ file (starts with b'garb', expected b'LASF')"]
+    assert not (tmp_path / "bad_out").exists()
+    assert main(["convert", str(autzen_path), "-o", str(tmp_path / "good")]) == 0
+    assert f"while this runs, `gigapoint view {tmp_path / 'good'}` shows what has been read so far" in capsys.readouterr().err

@@ -69,7 +69,7 @@ def convert(
             colors=colors,
             progress=not quiet and sys.stderr.isatty(),
             client=client,
-            on_ready=hint,  # once the inputs and OUT are checked: a refused run says only why
+            on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
         )
     resumed = (" (resumed)" if result.resumed else "") + (", in memory" if result.in_memory else "")
     skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""

@@ -55,8 +55,6 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
     """One conversion (state.Job) with every phase: read (read.py), count and distribute
     (partition.py), build, group, upper and write (phases.py)."""
 
-    on_ready = None  # convert()'s on_ready: called once the output is prepared (inputs and output checked)
-
     def output_ready(self) -> None:
         """The output folder is prepared and the state saved; the phases come next (distributed.py checks its workers here)."""
 
@@ -98,13 +96,11 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
             self.dir.partial.mkdir(parents=True)
             saved = None
         resumed = saved is not None
-        if resumed and self.dir.preview.is_file():
-            self.first_view = 0.0  # the interrupted run's preview: viewable from the start
         self.state = self.resume_state(saved) if resumed else {"fingerprint": fp, "phase": "read"}
         self.save_state()
         self.output_ready()
-        if self.on_ready is not None:
-            self.on_ready()
+        if resumed and self.dir.preview.is_file():
+            self.shows_points(0.0)  # the interrupted run's preview: viewable from the start
         steps = {
             "read": self.read,
             "count": self.count,
@@ -191,8 +187,9 @@ def convert(
     "words" version 1 (three u32 words and 32-bit colours a point). ``colors`` (version 2):
     "rgba" keeps colours exact, "rgb565" stores 16 bits (at most 4/255 off a channel).
 
-    ``on_ready``: called with no argument once the inputs and the output are checked and the
-    output prepared, before the points are read (the CLI says then how to watch it fill).
+    ``on_ready``: called with no argument once the output first shows points (the read phase's
+    first preview; at the start where a resumed run finds one): the CLI says then how to watch
+    it fill, and says nothing of it where the first file cannot be read.
     """
     check_switch("overwrite", overwrite, "convert")
     if sampler not in SAMPLERS:

@@ -78,6 +78,14 @@ def _point_total(paths) -> int | None:
 
 class ReadPhase(Job):
     read_ahead = True  # the next chunk decoded in a thread while this one is spilled
+    on_ready = None  # convert()'s on_ready: called once the output first shows points
+
+    def shows_points(self, seconds: float) -> None:
+        """The output is viewable (its first preview), ``seconds`` after the start: on_ready called, once."""
+        if self.first_view is None:
+            self.first_view = seconds
+            if self.on_ready is not None:
+                self.on_ready()
 
     @cached_property
     def point_total(self) -> int | None:
@@ -170,5 +178,4 @@ class ReadPhase(Job):
                 "stride": preview.stride,
                 "points": preview.held,
             }
-            if self.first_view is None:
-                self.first_view = time.perf_counter() - self.t0
+            self.shows_points(time.perf_counter() - self.t0)
