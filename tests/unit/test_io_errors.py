@@ -13,6 +13,7 @@ from test_io_las import write_las  # tests/unit is on sys.path (pytest rootdir-l
 
 from gigapoint.errors import EmptyCloudError, InputError, UnsupportedFormatError
 from gigapoint.io import file_info, open_cloud, read_chunks
+from gigapoint.io.registry import reader_for
 
 
 def patch(path, offset, fmt, value):
@@ -327,6 +328,10 @@ def test_ply_bad_header(tmp_path):
     raises(InputError, p, match="no 'vertex' element")
     p.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float a\nend_header\n1\n")
     raises(InputError, p, match="no x, y, z")
+    for element in (b"vertex -5", b"face -1\nproperty float q\nelement vertex 1"):  # numpy's "negative dimensions are not allowed"
+        p.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement " + element + b"\nproperty float x\nproperty float y\nproperty float z\nend_header\n")
+        raises(InputError, p, match="corrupt PLY header: element '" + element.split()[0].decode() + "' has a negative count (-")
+        raises(InputError, p, fn=lambda q: reader_for(q).point_count(q), match="negative count")
 
 
 def test_ply_zero_vertices(tmp_path):

@@ -44,6 +44,9 @@ class _Header:
             ply = plyfile.PlyData._parse_header(io.BytesIO(head[: self.data_offset]))
         except Exception as exc:  # noqa: BLE001 - plyfile.PlyHeaderParseError and friends
             raise fail(path, f"corrupt PLY header: {exc}") from None
+        negative = [el for el in ply.elements if el.count < 0]
+        if negative:  # plyfile takes "element vertex -5": numpy's "negative dimensions" came later
+            raise fail(path, f"corrupt PLY header: element {negative[0].name!r} has a negative count ({negative[0].count})")
         self.ply = ply
         self.text = ply.text
         self.byte_order = ply.byte_order
