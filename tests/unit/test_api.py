@@ -1,6 +1,7 @@
 """The public names of the gigapoint package resolve to the documented functions."""
 
 import inspect
+import re
 
 import numpy as np
 
@@ -59,6 +60,28 @@ def test_render_without_a_camera_frames_the_cloud_as_fit_cloud_does():
     part = gp.render(grown, size_mode="fixed")
     np.testing.assert_array_equal(part, gp.render(grown, gp.Camera.fit_cloud(grown), size_mode="fixed"))
     assert (part[..., :3] != image[0, 0, :3]).any(axis=-1).sum() > 5_000
+
+
+def test_render_takes_an_image_size_with_or_without_a_camera():
+    """``gp.render(cloud, width=800, height=600)`` was "unknown render setting(s): height, width":
+    the fitted camera takes the size (the same pixels as ``fit_cloud`` at that size), a given
+    camera is drawn at it; a size it cannot be is a CameraError (Camera.fit: a TypeError for 'a')."""
+    import numpy as np
+    import pytest
+
+    from gigapoint.errors import CameraError
+
+    cloud = gp.demo(20_000)
+    small = gp.render(cloud, width=320, height=200, size_mode="fixed")
+    np.testing.assert_array_equal(small, gp.render(cloud, gp.Camera.fit_cloud(cloud, width=320, height=200), size_mode="fixed"))
+    assert gp.render(cloud, width=320).shape == (1080, 320, 4)
+    cam = gp.Camera.fit_cloud(cloud, width=640, height=400)
+    np.testing.assert_array_equal(gp.render(cloud, cam, height=100, size_mode="fixed"), gp.render(cloud, cam.with_size(640, 100), size_mode="fixed"))
+    for bad in (0, 2.5, "a", 10**6, True):
+        with pytest.raises(CameraError, match=rf"^image width must be an integer in 1\.\.16384, got {re.escape(repr(bad))}$"):
+            gp.render(cloud, width=bad)
+        with pytest.raises(CameraError, match="^image height must be an integer"):
+            gp.Camera.fit(cloud.bounds, height=bad)
 
 
 def test_open_names_an_unknown_option_and_what_it_takes(tmp_path):

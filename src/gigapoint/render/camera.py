@@ -106,6 +106,15 @@ def sample_points(cloud, n: int = 20_000) -> np.ndarray:
     return np.concatenate(parts)
 
 
+def image_side(name: str, v) -> int:
+    """An image's width or height (``name``) as an int in 1..MAX_IMAGE_SIDE (960.0 taken as 960),
+    else a one-line CameraError."""
+    if isinstance(v, float) and v.is_integer():
+        v = int(v)
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= MAX_IMAGE_SIDE:  # True was 1 pixel
+        raise CameraError(f"image {name} must be an integer in 1..{MAX_IMAGE_SIDE}, got {v!r}")
+    return int(v)
+
 @dataclass(frozen=True)
 class Camera:
     eye: tuple[float, float, float]
@@ -124,12 +133,7 @@ class Camera:
         object.__setattr__(self, "target", _vec3(self.target, "target"))
         object.__setattr__(self, "up", _vec3(self.up, "up"))
         for name in ("width", "height"):
-            v = getattr(self, name)
-            if isinstance(v, float) and v.is_integer():
-                v = int(v)
-            if not isinstance(v, (int, np.integer)) or not 1 <= v <= MAX_IMAGE_SIDE:
-                raise CameraError(f"image {name} must be an integer in 1..{MAX_IMAGE_SIDE}, got {v!r}")
-            object.__setattr__(self, name, int(v))
+            object.__setattr__(self, name, image_side(name, getattr(self, name)))
         if self.projection not in ("perspective", "orthographic"):
             raise CameraError(f"camera projection must be 'perspective' or 'orthographic', got {self.projection!r}")
         if not (isinstance(self.fov, (int, float)) and math.isfinite(self.fov) and 0.01 <= self.fov <= 179.0):
@@ -180,6 +184,7 @@ class Camera:
         ``points``: (k, 3) positions to frame instead of the box's corners (``sample_points``;
         ``trim`` (default ``TRIM``) of them at each side may fall outside): the data, not its box, fills the frame.
         ``view='auto'``: the (yaw, pitch) ``auto_view`` gives (of ``points``, else the box)."""
+        width, height = image_side("width", width), image_side("height", height)  # before width / height divides
         lo = np.asarray(_vec3(bounds[0], "bounds min"))
         hi = np.asarray(_vec3(bounds[1], "bounds max"))
         box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])

@@ -70,10 +70,18 @@ def render_frame(cloud, camera: Camera | None = None, settings: RenderSettings |
     return Frame(visibility, image, stats, draw.points, draw.generation)
 
 
-def render(cloud, camera: Camera | None = None, settings: RenderSettings | None = None, return_stats: bool = False, **setting_overrides):
+def render(cloud, camera: Camera | None = None, settings: RenderSettings | None = None, return_stats: bool = False,
+           width: int | None = None, height: int | None = None, **setting_overrides):  # fmt: skip
     """(H, W, 4) uint8 RGBA image of ``cloud`` seen by ``camera`` (and RenderStats if asked);
-    without a camera, ``Camera.fit_cloud(cloud)`` of what it holds now (1920x1080)."""
+    without a camera, ``Camera.fit_cloud(cloud)`` of what it holds now (1920x1080). ``width`` /
+    ``height``: the image's size instead of the camera's (the fitted one's 1920x1080)."""
     if setting_overrides:
         settings = RenderSettings.of(settings).replace(**setting_overrides)
+    if width is not None or height is not None:  # width=... was "unknown render setting(s)"
+        if camera is None:
+            check_renderable(cloud)
+            camera = Camera.fit_cloud(cloud, **{k: v for k, v in (("width", width), ("height", height)) if v is not None})
+        elif isinstance(camera, Camera):
+            camera = camera.with_size(camera.width if width is None else width, camera.height if height is None else height)
     frame = render_frame(cloud, camera, settings)
     return (frame.image, frame.stats) if return_stats else frame.image
