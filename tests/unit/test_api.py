@@ -171,3 +171,31 @@ def test_the_demo_refuses_a_seed_or_scale_it_cannot_use_in_one_line():
         with pytest.raises(InputError, match=rf"^demo: {problem}"):
             gp.demo(1_000, **kw)
     assert gp.demo(1_000, seed=-1, scale=None).n_points == gp.demo(1_000, scale=0.001).n_points == 1_000
+
+
+def test_from_arrays_judges_colours_as_a_file_of_them_is_read(tmp_path):
+    """Float colours of 0..255 given to from_arrays were all white (taken as 0..1 and clipped),
+    the same array saved as .npy read right; a scalar attribute (intensity=5) was a TypeError;
+    name=5 was taken. Colours now go through the readers' ColorScaler (0..1, 0..255, 0..65535)."""
+    import numpy as np
+    import pytest
+
+    from gigapoint.errors import InputError
+
+    rng = np.random.default_rng(4)
+    xyz = rng.random((500, 3))
+    for rgb in (rng.uniform(0, 255, (500, 3)), rng.random((500, 3)), rng.integers(0, 65535, (500, 3)).astype(np.uint16), rng.uniform(0, 65535, (500, 3))):
+        np.save(tmp_path / "p.npy", np.column_stack([xyz, rgb]))
+        from_file = gp.open(tmp_path / "p.npy")
+        np.testing.assert_array_equal(gp.from_arrays(xyz, rgb=rgb, colors="rgba").rgba, gp.open(tmp_path / "p.npy", colors="rgba").rgba)
+        assert from_file.n_points == 500
+    assert 100 < gp.from_arrays(xyz, rgb=np.full((500, 3), 128.0)).rgba[:, :3].mean() < 130  # not 255
+    live = gp.LiveCloud()
+    live.push(xyz, np.full((500, 3), 128.0))  # a frame's colours alike
+    assert (live.frame_points()[1][:, :3] == 128).all()
+    for kw, problem in (
+        ({"intensity": 5}, "arrays: attribute 'intensity' is one value (5), not one per point"),
+        ({"name": 5}, "from_arrays: name must be a string, got 5"),
+    ):
+        with pytest.raises(InputError, match=f"^{re.escape(problem)}$"):
+            gp.from_arrays(xyz, **kw)

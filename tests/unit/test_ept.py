@@ -162,7 +162,7 @@ def test_ept_opens_as_an_octree_with_pages_on_demand(datasets, scene, data_type)
 @pytest.mark.parametrize("adaptive", [False, True])
 def test_ept_and_copc_render_alike_and_like_brute_force(datasets, scene, adaptive):
     clouds = {k: gp.open(p) for k, p in datasets.items()}
-    brute = gp.from_arrays(scene["xyz"], (scene["rgb"] >> 8).astype(np.uint8), scene["attrs"])
+    brute = gp.from_arrays(scene["xyz"], (scene["rgb"] >> 8).astype(np.uint8), **scene["attrs"])
     s = gp.RenderSettings(backend="cpu", adaptive_precision=adaptive, size_mode="fixed")  # one pixel a point: the exact comparison
     for view in ("iso", "top"):
         cam = gp.Camera.fit(brute.bounds, view=view, width=320, height=240)

@@ -38,6 +38,8 @@ class PointChunk:
             if len(self.rgba) != n:
                 raise ValueError(f"rgba has {len(self.rgba)} rows, xyz has {n}")
         for name, values in self.attributes.items():
+            if np.ndim(values) == 0:  # intensity=5: len() of a 0-d array was a TypeError
+                raise ValueError(f"attribute {name!r} is one value ({np.asarray(values).item()!r}), not one per point")
             if len(values) != n:
                 raise ValueError(f"attribute {name!r} has {len(values)} rows, xyz has {n}")
             problem = attribute_name_problem(name) or attribute_dtype_problem(name, values)
@@ -119,12 +121,67 @@ def to_rgba8(colors: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(c8)
 
 
+class ColorScaler:
+    """Turns a file's color columns into uint8, deciding the file's color range once.
+
+    uint8 colors pass through. Other colors are judged on the first chunk that holds a
+    non-zero color: floats all within 0..1 are unit colors (x 255); integer-valued colors
+    above 255 are 16-bit (>> 8); otherwise 8-bit. An 8-bit decision is revised to 16-bit
+    when a later chunk holds values above 255 (never back), so a dark first chunk of a
+    16-bit LAS file does not make the rest of it white.
+    """
+
+    def __init__(self) -> None:
+        self.mode: str | None = None  # "unit", "8", "16"
+
+    def int_shift(self, hi: int) -> int:
+        """Right shift (0 or 8) to 8 bits for unsigned integer colors whose maximum is ``hi``:
+        the decision ``__call__`` makes, for readers that convert their columns themselves."""
+        if self.mode is None and hi > 0:
+            self.mode = "16" if hi > 255 else "8"
+        if self.mode == "8" and hi > 255:
+            self.mode = "16"
+        return 8 if self.mode == "16" else 0
+
+    def __call__(self, colors: np.ndarray) -> np.ndarray:
+        c = np.asarray(colors)
+        if c.dtype == np.uint8:
+            return to_rgba8(c)
+        if c.dtype.kind == "b":
+            c = c.astype(np.uint8) * 255
+            return to_rgba8(c)
+        if c.dtype.kind == "f":
+            c = np.nan_to_num(c, nan=0.0, posinf=0.0, neginf=0.0)
+        if self.mode is None and c.size and np.any(c):
+            hi = float(c.max())
+            if c.dtype.kind == "f" and hi <= 1.0:
+                self.mode = "unit"
+            else:
+                self.mode = "16" if hi > 255 else "8"
+        if self.mode == "unit":
+            return to_rgba8(c.astype(np.float64, copy=False))
+        if c.dtype in (np.uint16, np.uint32, np.uint64) and c.size:  # the PLY fast path (LAS: io/las.py)
+            hi = int(c.max())
+            shift = self.int_shift(hi)
+            c, hi = c >> shift, hi >> shift
+            return to_rgba8(c.astype(np.uint8) if hi <= 255 else np.minimum(c, 255).astype(np.uint8))
+        ci = np.clip(np.rint(c) if c.dtype.kind == "f" else c, 0, 65535).astype(np.int64)
+        if self.mode == "8" and ci.size and ci.max() > 255:
+            self.mode = "16"
+        if self.mode == "16":
+            ci >>= 8
+        return to_rgba8(np.clip(ci, 0, 255).astype(np.uint8))
+
+
 def colors_for(rgb, n: int, where: str) -> np.ndarray:
-    """Colors given with ``n`` points (a frame pushed, points added) as uint8 RGBA (n, 4)
-    (``to_rgba8``); a one-line InputError starting with ``where`` when they are not (N, 3|4)
-    colors or not ``n`` rows."""
+    """Colors given with ``n`` points (from_arrays, a frame pushed, points added) as uint8 RGBA
+    (n, 4), their range judged as a file's (``ColorScaler``: floats of 0..255 were all white);
+    a one-line InputError starting with ``where`` when they are not (N, 3|4) colors or not ``n`` rows."""
     try:
-        rgba = to_rgba8(np.asarray(rgb))
+        rgb = np.asarray(rgb)
+        if rgb.ndim != 2 or rgb.shape[1] not in (3, 4):
+            raise ValueError(f"colors must have shape (N, 3) or (N, 4), got {rgb.shape}")
+        rgba = ColorScaler()(rgb)
     except ValueError as exc:
         raise InputError(f"{where}: {exc}") from None
     if len(rgba) != n:

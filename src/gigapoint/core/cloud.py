@@ -20,7 +20,7 @@ from numba import njit, prange
 from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError
 from . import pages
 from .attributes import Attributes
-from .chunk import PointChunk, attributes_in_common, warn_dropped_attributes
+from .chunk import PointChunk, attributes_in_common, colors_for, warn_dropped_attributes
 from .compact import colors_at, compact_positions, full_words, pack_rgb565, point_words, rgba32
 from .layout import BATCH_DTYPE, BATCH_SIZE
 from .morton import cube_of, morton_codes, morton_order
@@ -452,6 +452,8 @@ def from_arrays(xyz, rgb=None, name: str = "arrays", scale=None, colors: str = "
     LAS file's scale): the cloud is then held in the compact layout, exact on that grid
     (core/compact.py); points off it keep 30 bits a batch. ``colors``: how colours are held
     (``build_cloud``: "auto", "rgba", "rgb565" or "palette")."""
+    if not isinstance(name, str):
+        raise InputError(f"from_arrays: name must be a string, got {name!r}")
     xyz = np.asarray(xyz)
     if xyz.ndim != 2 or xyz.shape[1] != 3:
         raise InputError(f"{name}: xyz must have shape (N, 3), got {xyz.shape}")
@@ -463,8 +465,9 @@ def from_arrays(xyz, rgb=None, name: str = "arrays", scale=None, colors: str = "
         if len(s) not in (1, 3) or not np.all(np.isfinite(s) & (s > 0)):
             raise InputError(f"{name}: scale must be a positive number or three, got {scale!r}")
         scale = tuple(float(v) for v in np.broadcast_to(s, (3,)))
+    rgba = None if rgb is None else colors_for(rgb, len(xyz), name)  # floats of 0..255 as a file's
     try:
-        chunk = PointChunk(xyz, rgb, {k: np.asarray(v) for k, v in attributes.items()}, scale=scale)
+        chunk = PointChunk(xyz, rgba, {k: np.asarray(v) for k, v in attributes.items()}, scale=scale)
     except ValueError as exc:
         raise InputError(f"{name}: {exc}") from None
     return build_cloud([chunk], name=name, colors=colors)

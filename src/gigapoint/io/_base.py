@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.chunk import PointChunk, safe_attribute_name, to_rgba8
+from ..core.chunk import ColorScaler, PointChunk, safe_attribute_name
 from ..errors import EmptyCloudError, InputError
 
 #: Points per chunk a reader yields unless told otherwise (about 100 MB of xyz + rgba + attributes).
@@ -97,58 +97,6 @@ def check_chunk_size(chunk_size: int) -> int:
     if n < 1:
         raise InputError(f"chunk_size: must be a positive integer, got {chunk_size!r}")
     return n
-
-
-class ColorScaler:
-    """Turns a file's color columns into uint8, deciding the file's color range once.
-
-    uint8 colors pass through. Other colors are judged on the first chunk that holds a
-    non-zero color: floats all within 0..1 are unit colors (x 255); integer-valued colors
-    above 255 are 16-bit (>> 8); otherwise 8-bit. An 8-bit decision is revised to 16-bit
-    when a later chunk holds values above 255 (never back), so a dark first chunk of a
-    16-bit LAS file does not make the rest of it white.
-    """
-
-    def __init__(self) -> None:
-        self.mode: str | None = None  # "unit", "8", "16"
-
-    def int_shift(self, hi: int) -> int:
-        """Right shift (0 or 8) to 8 bits for unsigned integer colors whose maximum is ``hi``:
-        the decision ``__call__`` makes, for readers that convert their columns themselves."""
-        if self.mode is None and hi > 0:
-            self.mode = "16" if hi > 255 else "8"
-        if self.mode == "8" and hi > 255:
-            self.mode = "16"
-        return 8 if self.mode == "16" else 0
-
-    def __call__(self, colors: np.ndarray) -> np.ndarray:
-        c = np.asarray(colors)
-        if c.dtype == np.uint8:
-            return to_rgba8(c)
-        if c.dtype.kind == "b":
-            c = c.astype(np.uint8) * 255
-            return to_rgba8(c)
-        if c.dtype.kind == "f":
-            c = np.nan_to_num(c, nan=0.0, posinf=0.0, neginf=0.0)
-        if self.mode is None and c.size and np.any(c):
-            hi = float(c.max())
-            if c.dtype.kind == "f" and hi <= 1.0:
-                self.mode = "unit"
-            else:
-                self.mode = "16" if hi > 255 else "8"
-        if self.mode == "unit":
-            return to_rgba8(c.astype(np.float64, copy=False))
-        if c.dtype in (np.uint16, np.uint32, np.uint64) and c.size:  # the PLY fast path (LAS: io/las.py)
-            hi = int(c.max())
-            shift = self.int_shift(hi)
-            c, hi = c >> shift, hi >> shift
-            return to_rgba8(c.astype(np.uint8) if hi <= 255 else np.minimum(c, 255).astype(np.uint8))
-        ci = np.clip(np.rint(c) if c.dtype.kind == "f" else c, 0, 65535).astype(np.int64)
-        if self.mode == "8" and ci.size and ci.max() > 255:
-            self.mode = "16"
-        if self.mode == "16":
-            ci >>= 8
-        return to_rgba8(np.clip(ci, 0, 255).astype(np.uint8))
 
 
 def rows_to_chunk(path: Path, names: list[str], columns: list[np.ndarray], scaler: ColorScaler) -> PointChunk:

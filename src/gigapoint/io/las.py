@@ -20,11 +20,11 @@ import numpy as np
 from numba import njit, prange
 
 from ..core import pages
-from ..core.chunk import PointChunk, safe_attribute_name
+from ..core.chunk import ColorScaler, PointChunk, safe_attribute_name
 from ..core.cloud import MAX_ABS_COORDINATE, NUMPY_MAX
 from ..errors import EmptyCloudError, InputError
 from . import laz_process
-from ._base import DEFAULT_CHUNK_SIZE, ColorScaler, Reader, check_chunk_size, check_file, fail, one_line
+from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail, one_line
 
 #: Minimum point record length of each point format (bytes).
 RECORD_SIZE = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}

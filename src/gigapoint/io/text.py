@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.chunk import PointChunk
+from ..core.chunk import ColorScaler, PointChunk
 from ..errors import EmptyCloudError
-from ._base import DEFAULT_CHUNK_SIZE, ColorScaler, Reader, check_chunk_size, check_file, color_names, fail, rows_to_chunk, scanned_info
+from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, color_names, fail, rows_to_chunk, scanned_info
 
 _BY_COUNT = {
     3: ["x", "y", "z"],

@@ -23,11 +23,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.chunk import DEFAULT_COLOR
+from ..core.chunk import DEFAULT_COLOR, ColorScaler
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
 from ..errors import InputError
-from ..io._base import ColorScaler
 from ..io.laz_process import bad_data
 from .keys import MAX_LEVEL, ROOT_KEY, key_cube, level_of
 from .octree_dir import POINT_ARRAYS

@@ -58,8 +58,9 @@ import numpy as np
 
 from ...atomic import atomic_json, atomic_open
 from ...core import pages
+from ...core.chunk import ColorScaler
 from ...errors import GigapointError
-from ...io._base import ColorScaler, one_line
+from ...io._base import one_line
 from ...io.las import read_las_header
 from ...io.registry import reader_for
 from ..keys import CODE_BITS
