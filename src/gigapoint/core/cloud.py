@@ -446,7 +446,8 @@ def encode_colors(color: np.ndarray, colors: str) -> np.ndarray | PaletteColors:
 
 
 def from_arrays(xyz, rgb=None, name: str = "arrays", scale=None, colors: str = "auto", **attributes) -> PointCloud:
-    """A PointCloud from numpy arrays: float64 (N, 3) positions, (N, 3|4) uint8/uint16/float colors.
+    """A PointCloud from numpy arrays: float64 (N, 3) positions, (N, 3|4) uint8/uint16/float colors
+    (their range judged as a file's: floats of 0..1, 0..255 or 0..65535; ``ColorScaler``).
 
     ``scale``: the grid the positions were measured on (metres, one value or one per axis, as a
     LAS file's scale): the cloud is then held in the compact layout, exact on that grid

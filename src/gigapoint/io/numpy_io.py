@@ -8,7 +8,7 @@ Layouts understood (NPY, or one array of an NPZ without named keys):
 
 NPZ keys: ``xyz`` / ``positions`` / ``points`` / ``pos`` (N, 3) or separate ``x``, ``y``, ``z``;
 ``rgb`` / ``rgba`` / ``colors`` / ``color``; every other array with N rows is an attribute.
-Colors may be uint8, uint16 or float 0..1.
+Colors may be uint8, uint16 or floats (of 0..1, 0..255 or 0..65535: ``ColorScaler``).
 """
 
 from __future__ import annotations
