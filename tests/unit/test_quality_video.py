@@ -190,3 +190,32 @@ def test_a_flythrough_that_cannot_be_one_video_is_refused_before_a_frame(cloud, 
     assert render_turntable(cloud, 2, tmp_path / "odd_turn.gif", width=47, height=33).exists()  # was refused: "must be even"
     with pytest.raises(GigapointError, match=r"odd_turn.mp4: width and height must be even for video encoding, got 47x33$"):
         render_turntable(cloud, 2, tmp_path / "odd_turn.mp4", width=47, height=33)
+
+
+def test_odd_turntable_and_camera_settings_are_one_line_errors_before_a_frame(cloud, tmp_path):
+    """fps="a" was a TypeError (after every camera was fitted), 1e9 taken; pitch=100 drew the
+    orbit upside down over the top, NaN said "camera eye must be finite"; width="a" was a
+    TypeError of width / height; a path for a cloud an AttributeError. Camera.fit's margin of
+    0 or -1 was framed as if 1.05, trim=5 numpy's ValueError, view=(1,) an unpacking error."""
+    for kw, message in (
+        ({"fps": "a"}, r"^video fps must be a number in \(0, 1000\], got 'a'$"),
+        ({"fps": 1e9}, r"^video fps must be a number in \(0, 1000\], got 1000000000.0$"),
+        ({"pitch": 100}, r"^turntable: pitch must be None or degrees in -90..90, got 100$"),
+        ({"pitch": float("nan")}, r"^turntable: pitch must be None or degrees in -90..90, got nan$"),
+        ({"width": "a"}, r"^image width must be an integer in 1..16384, got 'a'$"),
+    ):
+        with pytest.raises(GigapointError, match=message):
+            render_turntable(cloud, 3, tmp_path / "t.gif", **{"width": 48, "height": 32, **kw})
+    with pytest.raises(GigapointError, match=r"^render: cannot draw a str; give a cloud"):
+        render_turntable("cloud.laz", 3, tmp_path / "t.gif")
+    assert not list(tmp_path.iterdir())
+    for kw, message in (
+        ({"margin": 0}, r"^camera margin must be a number in \(0, 1000\] \(1: the data touches the frame\), got 0$"),
+        ({"margin": -1}, r"^camera margin must be a number"),
+        ({"trim": 5}, r"^camera trim must be a share of the points in \[0, 0.5\), got 5$"),
+        ({"view": (1,)}, r"^camera view must be one of top, front, back, side, left, right, iso, auto or \(yaw, pitch\) degrees, got \(1,\)$"),
+        ({"view": (float("nan"), 0)}, r"^camera view must be one of .* got \(nan, 0\)$"),
+    ):
+        with pytest.raises(GigapointError, match=message):
+            gp.Camera.fit_cloud(cloud, **kw)
+    assert gp.Camera.fit_cloud(cloud, view=(30, 20), margin=1, trim=0).width == 1920

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -106,6 +107,23 @@ def sample_points(cloud, n: int = 20_000) -> np.ndarray:
     return np.concatenate(parts)
 
 
+
+def is_real(v) -> bool:
+    """A finite real number (not a bool, not a string)."""
+    return isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _yaw_pitch(view) -> tuple[float, float]:
+    """A view given as (yaw, pitch) degrees: two finite numbers, else a one-line CameraError
+    ((1,) was a ValueError of the unpacking, NaN a camera eye that "must be finite")."""
+    try:
+        yaw, pitch = view
+    except (TypeError, ValueError):
+        yaw = pitch = None
+    if not (is_real(yaw) and is_real(pitch)):
+        raise CameraError(f"camera view must be one of {', '.join(VIEWS)} or (yaw, pitch) degrees, got {view!r}")
+    return float(yaw), float(pitch)
+
 def image_side(name: str, v) -> int:
     """An image's width or height (``name``) as an int in 1..MAX_IMAGE_SIDE (960.0 taken as 960),
     else a one-line CameraError."""
@@ -200,7 +218,11 @@ class Camera:
             if yaw is None:
                 yaw, pitch = auto_view(points if points is not None else box, width / height)
         else:
-            yaw, pitch = view
+            yaw, pitch = _yaw_pitch(view)
+        if not (is_real(margin) and 0 < margin <= 1000):  # 0 or -1 were framed as if 1.05 (the nearest the eye could be)
+            raise CameraError(f"camera margin must be a number in (0, 1000] (1: the data touches the frame), got {margin!r}")
+        if trim is not None and not (is_real(trim) and 0 <= trim < 0.5):  # 5: numpy's "Quantiles must be in the range [0, 1]"
+            raise CameraError(f"camera trim must be a share of the points in [0, 0.5), got {trim!r}")
         trim = (TRIM if trim is None else float(trim)) if points is not None and len(points) > 8 else 0.0
         if points is not None:
             lo, hi = np.quantile(points, trim, axis=0), np.quantile(points, 1.0 - trim, axis=0)

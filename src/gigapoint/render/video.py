@@ -9,14 +9,13 @@ temporary file that replaces ``path`` only when the video is complete.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
 
 from ..atomic import atomic_write
 from ..errors import GigapointError, check_switch, check_whole
-from .camera import Camera, auto_view, sample_points
+from .camera import Camera, auto_view, image_side, is_real, sample_points
 from .settings import RenderSettings
 
 VIDEO_SUFFIXES = {".mp4", ".webm", ".mkv", ".avi", ".mov", ".gif"}
@@ -30,6 +29,7 @@ TURNTABLE_PITCHES = (25.0, 60.0)
 PITCH_SEARCH_YAWS = 36
 #: the most frames a turntable or fly-through takes: 55 minutes at 30 fps, framed one by one (~5 ms a frame)
 MAX_TURNTABLE_FRAMES = 100_000
+MAX_FPS = 1000  # a GIF's frames last 10 ms at least; a video's frame rate is a few hundred at most
 
 
 def turntable_cameras(
@@ -46,7 +46,14 @@ def turntable_cameras(
     and at least 36 %, against 35 % / 26 % at iso's pitch and 12 % at one distance around the
     box's centre); pitches, distances and targets are running means over an eighth of the
     orbit, so the camera glides instead of jumping."""
+    from .renderer import check_renderable
+
     n_frames = check_whole("turntable", "number of frames", n_frames, 1, MAX_TURNTABLE_FRAMES)
+    check_renderable(cloud)
+    width, height = image_side("width", width), image_side("height", height)  # before width / height divides
+    for name, v, lo, hi in (("pitch", pitch, -90, 90), ("start_yaw", start_yaw, -1e6, 1e6)):  # 100: over the top, upside down
+        if v is not None and not (is_real(v) and lo <= v <= hi):
+            raise GigapointError(f"turntable: {name} must be None or degrees in {lo}..{hi:g}, got {v!r}")
     points = sample_points(cloud)
     start_yaw = auto_view(points, width / height)[0] if start_yaw is None else start_yaw
     yaws = start_yaw + 360.0 * np.arange(n_frames) / n_frames
@@ -171,6 +178,11 @@ def _check_path(path, overwrite: bool = False) -> Path:
     return path
 
 
+def _check_fps(fps) -> None:
+    if not (is_real(fps) and 0 < fps <= MAX_FPS):  # "a": a TypeError
+        raise GigapointError(f"video fps must be a number in (0, {MAX_FPS}], got {fps!r}")
+
+
 def render_flythrough(
     cloud, cameras, path, settings: RenderSettings | None = None, fps: float = 30.0, progress=None, overwrite: bool = False
 ) -> Path:
@@ -182,8 +194,7 @@ def render_flythrough(
 
     path = _check_path(path, overwrite)
     settings = RenderSettings.of(settings)
-    if not (math.isfinite(fps) and fps > 0):
-        raise GigapointError(f"video fps must be > 0, got {fps!r}")
+    _check_fps(fps)
     cameras = list(cameras)
     if not cameras:
         raise GigapointError("video: no cameras to render")
@@ -253,5 +264,6 @@ def render_turntable(
     An existing file at ``path`` is replaced only with ``overwrite=True``; sizes as
     ``render_flythrough`` takes them (even, but for a GIF)."""
     _check_path(path, overwrite)  # before any frame is rendered
+    _check_fps(fps)
     cameras = turntable_cameras(cloud, n_frames, width, height, pitch, fov)
     return render_flythrough(cloud, cameras, path, settings, fps, progress, overwrite)
