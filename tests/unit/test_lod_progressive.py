@@ -849,11 +849,13 @@ def test_add_refuses_unknown_attributes_and_widens_a_dtype_a_batch_does_not_fit(
     for both, every value kept (they were cast: 1.5 -> 1, 70 000 -> 4 464 in uint16)."""
     o = ProgressiveOctree("attrs")
     xyz = np.array([[0.0, 0, 0], [1, 2, 3], [np.nan, 0, 0]])
+    assert o.add(np.full((2, 3), np.nan)) == 0  # no valid point: it fixes no attribute set (then 'intensity' was refused)
+    assert o.skipped == 2
     assert o.add(xyz, intensity=np.array([1, 2, 3], np.uint16), height=np.array([0.5, 1.5, 2.5], np.float32)) == 2
-    assert o.attribute_names == ("intensity", "height") and o.skipped == 1
+    assert o.attribute_names == ("intensity", "height") and o.skipped == 3
     with pytest.raises(InputError, match="'foo' is not one of this cloud's \\(intensity, height\\)"):
         o.add(xyz, foo=np.arange(3))
-    assert o.n_points == 2 and o.skipped == 1
+    assert o.n_points == 2 and o.skipped == 3
     assert o.add(xyz[:2], intensity=np.array([7, 65535], np.int32)) == 2  # int32 into uint16: widened to int32
     assert o.add(xyz[:2], intensity=np.array([70_000, -1]), height=np.array([0.1, 1e300])) == 2  # int64; float64
     assert o.add(xyz[:2], intensity=np.array([1.5, 2.0])) == 2  # a fraction: float64

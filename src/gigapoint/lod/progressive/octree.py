@@ -892,7 +892,7 @@ class ProgressiveOctree:
     def add(self, xyz, rgb=None, **attributes) -> int:
         """Insert points (float64 (N, 3); colors (N, 3|4) uint8/uint16/float; 1-D attributes of
         length N). Invalid points (NaN, inf, beyond ±1e12) are skipped and counted. Returns the
-        number inserted. Attributes are the first call's; later calls fill missing ones with 0
+        number inserted. Attributes are those of the first call with a valid point; later calls fill missing ones with 0
         and may not bring others (InputError); an attribute whose dtype cannot hold a batch's
         widens to numpy's dtype for both (uint16 and float32: float32), as ``gp.open`` of
         several files does."""
@@ -921,6 +921,9 @@ class ProgressiveOctree:
         with self.lock.writing():
             if self.closed:
                 raise InputError(f"{self.name}: the octree is closed; open it again to add points")
+            if n_valid == 0 and self._attribute_dtypes is None:  # an all-NaN first batch fixed no attributes
+                self.skipped += n
+                return 0
             attrs = self._attribute_set(attrs, n)  # before anything counts: a batch it refuses changes nothing
             self.skipped += n - n_valid
             if n_valid == 0:
