@@ -638,3 +638,20 @@ def test_depth_frames_queued_while_a_frame_draws_keep_their_own_points():
     np.testing.assert_allclose(got, np.concatenate([w[0] for w in want]), rtol=0, atol=1e-6)
     np.testing.assert_array_equal(np.stack([attrs[p] for p in ("nx", "ny", "nz")], 1), np.concatenate([w[1] for w in want]))
     np.testing.assert_array_equal(rgba, np.concatenate([w[2] for w in want]))
+
+
+def test_a_later_frame_keeps_to_the_first_frames_attributes():
+    """A frame bringing an attribute the first frame had not was taken and the attribute
+    dropped without a word; now a one-line InputError that leaves the cloud as it was. A frame
+    leaving one out holds 0 for it."""
+    live = LiveCloud()
+    xyz, rgb = frame(0, n=50)
+    live.push(xyz, rgb, intensity=np.arange(50, dtype=np.uint16))
+    with pytest.raises(InputError, match=r"^live: push: attribute 'foo' is not one of this cloud's \(intensity\): the first frame fixes them$"):
+        live.push(xyz, rgb, intensity=np.arange(50, dtype=np.uint16), foo=np.ones(50))
+    assert live.n_points == 50 and live.stats.frames_rejected == 1
+    live.push(xyz + 1, rgb)
+    assert live.n_points == 100
+    frame_a = gp.render_frame(live, gp.Camera.fit_cloud(live, width=64, height=48))
+    seen = [frame_a.point_info(int(i)) for i in np.unique(frame_a.index) if i >= 0]
+    assert {s["intensity"] for s in seen} - set(range(50)) <= {0} and any(s["intensity"] > 0 for s in seen)

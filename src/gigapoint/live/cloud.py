@@ -153,7 +153,7 @@ class LiveCloud:
         self.expected_bounds = None if bounds is None else tuple(np.asarray(b, np.float64).reshape(3) for b in bounds)
         self.started = self.clock()
         self.lock = LiveLock(released=self._commit_pending)
-        self._pending: deque = deque()  # (frame in core's layout, FrameInfo, attributes) batched, not yet in the ring
+        self._pending: deque = deque()  # (frame in core's layout, FrameInfo) batched, not yet in the ring
         self._pending_lock = threading.Lock()
         self._depth_scratch = threading.local()  # push_depth's reused arrays, one set per producer thread
         self._attr_dtypes: dict | None = None  # fixed by the first frame (as the octree's attributes)
@@ -357,9 +357,10 @@ class LiveCloud:
         per_point.update(attrs)
         frame = batch_frame(pts, rgba, per_point, lo, hi, self.chunk, ordered)
         with self._pending_lock:
+            self._attribute_set(attrs)  # in push order: the first frame's set, which later ones keep to
             seq = self._seq
             self._seq += 1
-            self._pending.append((frame, FrameInfo(seq, [], m, t, arrived, p, lo, hi, pushed_at), attrs))
+            self._pending.append((frame, FrameInfo(seq, [], m, t, arrived, p, lo, hi, pushed_at)))
             self._last_time = t
         self._commit_pending()
         if self.recorder is not None and pose_tag is None:
@@ -377,8 +378,7 @@ class LiveCloud:
                     with self._pending_lock:
                         if not self._pending:
                             break
-                        frame, info, attrs = self._pending.popleft()
-                    self._attribute_set(attrs)
+                        frame, info = self._pending.popleft()
                     self._insert(frame, info)
                     self._expire()
                     self.stats.frames_in += 1
@@ -391,8 +391,14 @@ class LiveCloud:
                 self._notify()
 
     def _attribute_set(self, attrs: dict) -> None:
+        """The first frame fixes the attributes; a later frame may leave some out (0 then) but
+        not bring another (an InputError: it was dropped without a word), as the progressive octree's add()."""
         if self._attr_dtypes is None:
             self._attr_dtypes = {**BASE_ATTRIBUTES, **{a: attribute_dtype(v) for a, v in attrs.items()}}
+        unknown = sorted(set(attrs) - set(self._attr_dtypes))
+        if unknown:
+            held = ", ".join(a for a in self._attr_dtypes if a not in BASE_ATTRIBUTES) or "none"
+            raise InputError(f"{self.name}: push: attribute {unknown[0]!r} is not one of this cloud's ({held}): the first frame fixes them")
 
     def _insert(self, frame, info: FrameInfo) -> None:
         k = len(frame.batches)
