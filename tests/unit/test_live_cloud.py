@@ -655,3 +655,9 @@ def test_a_later_frame_keeps_to_the_first_frames_attributes():
     frame_a = gp.render_frame(live, gp.Camera.fit_cloud(live, width=64, height=48))
     seen = [frame_a.point_info(int(i)) for i in np.unique(frame_a.index) if i >= 0]
     assert {s["intensity"] for s in seen} - set(range(50)) <= {0} and any(s["intensity"] > 0 for s in seen)
+    # values the first frame's dtype cannot hold: 1000 in its uint16's place was fine, 70 000 was kept as 4 464
+    live.push(xyz, rgb, intensity=np.full(50, 1000))  # int64 values that fit
+    for values, shown in ((np.full(50, 70_000), "70000"), (np.full(50, 2.5), "2.5"), (np.full(50, -1), "-1")):
+        with pytest.raises(InputError, match=rf"^live: push: attribute 'intensity' holds values its uint16 \(the first frame's\) cannot hold exactly, e.g. {shown}$"):
+            live.push(xyz, rgb, intensity=values)
+    assert live.n_points == 150

@@ -127,6 +127,16 @@ def batch_frame(pts: np.ndarray, rgba: np.ndarray, attributes: dict, lo, hi, chu
     return PointCloud(batches, low, med, high, take(color, order), {a: take(np.asarray(v), order) for a, v in attributes.items()}, name="frame")
 
 
+def _misfits(values: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """Which of ``values`` lose their value in ``dtype`` (integers: not exact; floats: finite
+    turned infinite)."""
+    with np.errstate(all="ignore"):
+        held = values.astype(dtype)
+        if dtype.kind == "f":
+            return np.isfinite(held) != np.isfinite(values)
+        return held.astype(values.dtype) != values
+
+
 class LiveCloud:
     """A cloud fed frame by frame (``push``, ``push_depth``), drawn at any moment (a Renderable)."""
 
@@ -399,6 +409,13 @@ class LiveCloud:
         if unknown:
             held = ", ".join(a for a in self._attr_dtypes if a not in BASE_ATTRIBUTES) or "none"
             raise InputError(f"{self.name}: push: attribute {unknown[0]!r} is not one of this cloud's ({held}): the first frame fixes them")
+        for a, v in attrs.items():  # the ring holds the first frame's dtypes: 1000 in a uint8 was kept as 232
+            dt = self._attr_dtypes[a]
+            bad = _misfits(v, dt) if v.dtype != dt else None
+            if bad is not None and bad.any():
+                raise InputError(
+                    f"{self.name}: push: attribute {a!r} holds values its {dt} (the first frame's) cannot hold exactly, e.g. {v[bad.argmax()].item()!r}"
+                )
 
     def _insert(self, frame, info: FrameInfo) -> None:
         k = len(frame.batches)
