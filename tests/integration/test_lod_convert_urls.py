@@ -36,3 +36,27 @@ def test_other_input_urls_are_a_one_line_error(tmp_path, url):
 def test_another_output_url_is_a_one_line_error(tmp_path):
     with pytest.raises(ConvertError, match="^memory://octree: the output must be a path or a file:// URL"):
         convert([SAMPLE], "memory://octree")
+
+
+def test_the_cli_writes_a_file_url_where_it_points_and_refuses_another_url(tmp_path, monkeypatch, capsys):
+    """``gigapoint convert a.laz -o file:///data/out`` wrote ./file:/data/out, and ``-o
+    s3://bucket/out`` ./s3:/bucket/out (the CLI's Path of a URL: 'file:/data/out'); gp.open and
+    render took no file:// URL ("only http:// and https:// URLs are read") nor '~/a.laz'."""
+    import gigapoint as gp
+    from gigapoint.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "deep" / "out"
+    assert main(["convert", str(SAMPLE), "-o", out.as_uri(), "--quiet"]) == 0
+    assert (out / "octree.json").is_file() and not (tmp_path / "file:").exists()
+    assert main(["convert", str(SAMPLE), "-o", "s3://bucket/out", "--quiet"]) == 1
+    assert capsys.readouterr().err.strip() == "error: s3://bucket/out: the output must be a path or a file:// URL on this machine (a file system every worker shares)"
+    assert not (tmp_path / "s3:").exists()
+    uri = SAMPLE.resolve().as_uri()
+    assert gp.open(uri).n_points == gp.open(Path(uri)).n_points == gp.open(uri.replace("file://", "file://localhost")).n_points == 110_000
+    with pytest.raises(InputError, match=r"^file://otherhost/x.laz: a file:// URL of another machine \(otherhost\); give a path on this one$"):
+        gp.open("file://otherhost/x.laz")
+    monkeypatch.setenv("HOME", str(tmp_path))
+    (tmp_path / "a.laz").write_bytes(SAMPLE.read_bytes())
+    assert gp.open("~/a.laz").source_files == (tmp_path / "a.laz",)
+    assert main(["render", uri, "-o", str(tmp_path / "x.png"), "-W", "64", "-H", "48"]) == 0

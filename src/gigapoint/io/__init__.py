@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import os
 import re
+import urllib.parse
+import urllib.request
 import warnings
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -33,19 +35,35 @@ def read_chunks(path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChu
     return reader.read_chunks(Path(path), chunk_size)
 
 
-#: a URL of a scheme gigapoint does not read (http and https are lod/reader's)
-_OTHER_URL = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]+):/+(.*)$")  # (a Path of 'ftp://h/x' is 'ftp:/h/x'; 'C:/' is a drive)
+#: a URL (scheme, rest); http and https are lod/reader's, file:// is ``file_url_path``'s
+URL_LIKE = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]+):/+(.*)$")  # (a Path of 'ftp://h/x' is 'ftp:/h/x'; 'C:/' is a drive)
+
+
+def file_url_path(text: str) -> Path | None:
+    """The path on this machine a ``file://`` URL names (``file:///data/a.laz``,
+    ``file://localhost/...``; ``file:/data/a.laz``, a Path made of one), None for anything else;
+    one naming another machine's file (``file://host/...``) is a one-line InputError."""
+    if not re.match(r"(?i)^file:/", text):
+        return None
+    u = urllib.parse.urlsplit(text)
+    if u.netloc not in ("", "localhost"):
+        raise InputError(f"{text}: a file:// URL of another machine ({u.netloc}); give a path on this one")
+    return Path(urllib.request.url2pathname(u.path))
 
 
 def expand_paths(paths: Iterable) -> list[Path]:
-    """Files named, with each directory replaced by its supported files sorted by name; a file
-    named twice (or also through its folder) is read once, with a warning: its points were
-    merged twice into one cloud or octree."""
+    """Files named (paths, ``file://`` URLs, ``~/...``), with each directory replaced by its
+    supported files sorted by name; a file named twice (or also through its folder) is read
+    once, with a warning: its points were merged twice into one cloud or octree."""
     out: list[Path] = []
     for p in paths:
-        url = _OTHER_URL.match(os.fspath(p)) if isinstance(p, (str, os.PathLike)) else None
-        if url and not Path(p).exists():
-            raise InputError(f"{url.group(1)}://{url.group(2)}: only http:// and https:// URLs are read (COPC and EPT octrees)")
+        text = os.fspath(p) if isinstance(p, (str, os.PathLike)) else None
+        if text is not None and not Path(p).exists():
+            local = file_url_path(text)  # gp.open("file:///...") was "only http:// and https:// URLs are read"
+            url = URL_LIKE.match(text) if local is None else None
+            if url:
+                raise InputError(f"{url.group(1)}://{url.group(2)}: only http:// and https:// URLs are read (COPC and EPT octrees)")
+            p = local if local is not None else Path(p).expanduser()  # "~/scans/a.laz" from Python (a shell expands it)
         p = Path(p)
         if p.is_dir():
             found = sorted((c for c in p.iterdir() if c.is_file() and is_supported_name(c)), key=lambda c: c.name)

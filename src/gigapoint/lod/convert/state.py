@@ -8,7 +8,6 @@ size, modification time) and the same options; anything else starts clean.
 from __future__ import annotations
 
 import os
-import re
 import urllib.parse
 import urllib.request
 from pathlib import Path
@@ -17,7 +16,7 @@ import numpy as np
 
 from ...atomic import same_file
 from ...errors import InputError
-from ...io import expand_paths
+from ...io import URL_LIKE, expand_paths, file_url_path
 from ..copc_write import work_dir as copc_work_dir
 from ..octree_dir import OctreeDir, OutputExistsError
 from .options import BYTES_PER_POINT_BUILD, MAX_PARTITION_POINTS, rss_bytes
@@ -25,19 +24,18 @@ from .options import BYTES_PER_POINT_BUILD, MAX_PARTITION_POINTS, rss_bytes
 STATE_VERSION = 1
 
 
-_URL = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*://")
-
-
 def local_path(p, what: str, error=InputError):
     """``p`` itself, or the path a ``file://`` URL names. Other URLs (``s3://``, ``memory://``, ...)
     are refused with ``error``: a conversion's workers read the inputs and write the output
     through the file system (on a Dask cluster, one they all share; mount other storage there)."""
-    if isinstance(p, str) and _URL.match(p):
-        u = urllib.parse.urlsplit(p)
-        if u.scheme.lower() != "file" or u.netloc not in ("", "localhost"):
-            raise error(f"{p}: {what} must be a path or a file:// URL on this machine (a file system every worker shares)")
-        return Path(urllib.request.url2pathname(u.path))
-    return p
+    text = os.fspath(p) if isinstance(p, (str, os.PathLike)) else None
+    url = URL_LIKE.match(text) if text is not None else None
+    if url is None:
+        return p
+    # also a Path made of a URL (the CLI's: 'file:/x', 's3:/bucket/x'): -o s3://bucket/x wrote ./s3:/bucket/x
+    if url.group(1).lower() == "file" and urllib.parse.urlsplit(text).netloc in ("", "localhost"):
+        return file_url_path(text)
+    raise error(f"{url.group(1)}://{url.group(2)}: {what} must be a path or a file:// URL on this machine (a file system every worker shares)")
 
 
 def input_paths(inputs) -> list[Path] | None:
