@@ -98,3 +98,28 @@ def test_the_viewer_opens_on_the_auto_view():
         assert iso.yaw == pytest.approx(-135.0)
     finally:
         core.close_all()
+
+
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_a_small_cloud_far_from_the_origin_is_framed_as_at_the_origin(projection):
+    """The fitted camera kept at least 1e-6 of the coordinates' size as the cloud's radius: a
+    cloud 0.1 m across at 1e9 (or 100 m across at 1e11) was framed from ~1000x too far, a few
+    pixels in the middle. float64 places 1e-16 of it: the same image as at the origin; a single
+    point is still drawn wherever it is."""
+    rng = np.random.default_rng(1)
+    xyz = rng.random((20_000, 3)) * [100, 100, 10]
+    rgb = rng.integers(0, 255, (20_000, 3)).astype(np.uint8)
+
+    def image(points):
+        cloud = gp.from_arrays(points, rgb=rgb[: len(points)])
+        return gp.render(cloud, gp.Camera.fit_cloud(cloud, width=160, height=120, view="top", projection=projection), size_mode="fixed")
+
+    at_origin = image(xyz)
+    for offset, spread in ((1e9, 1e-3), (1e11, 1.0)):
+        far = image(xyz * spread + offset)
+        assert (far == at_origin).all(axis=-1).mean() > 0.97, (offset, spread)
+    for p in ([0.0, 0, 0], [1e6, 1e6, 1e6], [9e11, -9e11, 5], [1e-9, 0, 0]):
+        one = gp.from_arrays(np.array([p]))
+        for view in ("auto", "top"):
+            frame = gp.render_frame(one, gp.Camera.fit_cloud(one, width=32, height=24, projection=projection, view=view))
+            assert frame.stats.visible_pixels > 0, (p, view)

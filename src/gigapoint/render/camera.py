@@ -227,8 +227,11 @@ class Camera:
         if points is not None:
             lo, hi = np.quantile(points, trim, axis=0), np.quantile(points, 1.0 - trim, axis=0)
         center = (lo + hi) / 2
-        # a single point or a tiny cloud far from the origin still gets a camera float64 can place
-        radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-6 * max(1.0, float(np.abs(center).max())))
+        # a single point or a tiny cloud far from the origin still gets a camera float64 can place:
+        # at least 1 µm, and 1e-12 of the coordinates' size (1e-6 of it framed 0.1 m at 1e9 from
+        # 1 km away, a few pixels; float64 places 1e-16 of it)
+        size = max(1.0, float(np.abs(center).max()))
+        radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-6, 1e-12 * size)
         aspect = width / height
         # orientation first (distance 1), then the distance at which every corner fits
         probe = cls.orbit(center, yaw, pitch, 1.0, fov=fov, width=width, height=height)
@@ -243,7 +246,7 @@ class Camera:
             return float(np.quantile(a, 1.0 - trim if side > 0 else trim))
 
         if projection == "orthographic":
-            extent_v = max(extreme(np.abs(cy)), extreme(np.abs(cx)) / aspect, radius * 1e-6)
+            extent_v = max(extreme(np.abs(cy)), extreme(np.abs(cx)) / aspect, radius * 1e-6, 1e-13 * size)
             return cls.orbit(
                 center, yaw, pitch, radius * 3, fov=fov, width=width, height=height, projection=projection, ortho_height=2 * extent_v * margin, **kw
             )
