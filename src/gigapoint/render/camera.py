@@ -227,11 +227,12 @@ class Camera:
         if points is not None:
             lo, hi = np.quantile(points, trim, axis=0), np.quantile(points, 1.0 - trim, axis=0)
         center = (lo + hi) / 2
-        # a single point or a tiny cloud far from the origin still gets a camera float64 can place:
-        # at least 1 µm, and 1e-12 of the coordinates' size (1e-6 of it framed 0.1 m at 1e9 from
-        # 1 km away, a few pixels; float64 places 1e-16 of it)
+        # a single point (or identical ones) still gets a camera float64 can place: 1e-6 of the
+        # coordinates' size; a cloud more than 1e-12 of them across is framed by its own size
+        # (that floor framed 0.1 m at 1e9 from 1 km away, a few pixels), at least 1 µm
         size = max(1.0, float(np.abs(center).max()))
-        radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-6, 1e-12 * size)
+        half = float(np.linalg.norm(hi - lo)) / 2
+        radius = max(half, 1e-6) if half > 1e-12 * size else 1e-6 * size
         aspect = width / height
         # orientation first (distance 1), then the distance at which every corner fits
         probe = cls.orbit(center, yaw, pitch, 1.0, fov=fov, width=width, height=height)
