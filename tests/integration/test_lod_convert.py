@@ -587,3 +587,41 @@ def test_a_cloud_converts_as_the_file_it_was_read_from(autzen_path, tmp_path):
     progressive.close()
     with pytest.raises(gp.GigapointError, match="convert: inputs are files, folders, a cloud or PointChunks, got a CompactOctree"):
         convert(open_octree(tmp_path / "from_file"), tmp_path / "again")
+
+
+def test_potree_and_copc_outputs_keep_the_inputs_grid_and_a_small_clouds_shape(tmp_path):
+    """The Potree writer stored every output on a millimetre grid (a LAS file's 0.1 mm points
+    moved up to 0.5 mm) and both it and COPC put float positions without a grid on a millimetre:
+    a cloud 0.1 m across (an object scan) became ~100 steps a side, coverage IoU 0.75 against
+    the plain cloud. The inputs' grid is kept; a grid-less cloud gets 65 536 steps across it."""
+    import laspy
+
+    import gigapoint as gp
+
+    rng = np.random.default_rng(6)
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = np.full(3, 0.0001), np.array([500_000.0, 4_000_000.0, 100.0])
+    las = laspy.LasData(header)
+    xyz = rng.uniform(0, 20, (5_000, 3)) + header.offsets
+    las.x, las.y, las.z = xyz.T
+    las.write(tmp_path / "fine.las")
+    def rows(a):
+        a = np.asarray(a, np.float64)
+        return a[np.lexsort(a.T[::-1])]
+
+    want = rows(laspy.read(tmp_path / "fine.las").xyz)
+    for fmt, out in (("potree", tmp_path / "fine_potree"), ("copc", tmp_path / "fine.copc.laz")):
+        convert([tmp_path / "fine.las"], out, format=fmt, max_leaf=1000)
+        oc = open_octree(out)
+        got = np.concatenate([oc.node_points(i)["xyz"] for i in range(len(oc.nodes))])
+        np.testing.assert_allclose(rows(got), want, atol=1e-6, rtol=0)  # on the 0.1 mm grid: a millimetre's moved them 0.5 mm
+    assert json.loads((tmp_path / "fine_potree" / "metadata.json").read_text())["scale"] == [0.0001] * 3
+
+    small = rng.random((20_000, 3)) * [0.1, 0.1, 0.01] + 1e6  # 10 cm across, float positions
+    plain = gp.from_arrays(small, rgb=rng.integers(0, 255, (20_000, 3)).astype(np.uint8))
+    cam = gp.Camera.fit_cloud(plain, width=160, height=120, view="top")
+    covered = (gp.render(plain, cam, size_mode="fixed")[..., :3] != 0).any(axis=-1)
+    for fmt, out in (("potree", tmp_path / "small_potree"), ("copc", tmp_path / "small.copc.laz")):
+        gp.convert(plain, out, format=fmt)
+        drawn = (gp.render(open_octree(out), cam, size_mode="fixed", point_budget=10**6)[..., :3] != 0).any(axis=-1)
+        assert (drawn & covered).sum() / (drawn | covered).sum() > 0.95, fmt

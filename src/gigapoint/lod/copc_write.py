@@ -45,13 +45,13 @@ from .copc import (
     VLR_HEADER_DTYPE,
     WKT_RECORD,
 )
+from .grid import output_grid
 from .keys import ROOT_KEY, level_of
 from .octree_dir import OutputExistsError
 from .voxel_octree import key_to_voxel
 
 #: Points compressed together (in parallel, one LAZ chunk per node).
 BATCH_POINTS = 1 << 20
-_INT32 = (-(2**31), 2**31 - 1)
 
 
 @njit(cache=True)
@@ -403,8 +403,7 @@ def write_copc_sets(path: Path, sources: list[Path], st: dict, progress, page_le
     src = st.get("source") or {}
     attrs = st.get("attributes") or {}
     origin, edge = np.array(st["origin"], np.float64), float(st["edge"])
-    lo, hi = np.array(st["lo"], np.float64), np.array(st["hi"], np.float64)
-    scale, offset = las_grid(lo, hi, src.get("scale"), src.get("offset"))
+    scale, offset = output_grid(st)
     fmt = choose_point_format(attrs, src.get("has_color", True))
 
     def nodes():
@@ -427,21 +426,6 @@ def write_copc_sets(path: Path, sources: list[Path], st: dict, progress, page_le
         extra=extra_attributes(attrs, str(path)),
     )  # fmt: skip
     return int(summary["nodes"])
-
-
-def las_grid(lo, hi, scale=None, offset=None) -> tuple[np.ndarray, np.ndarray]:
-    """(scale, offset) of LAS integers for points within [lo, hi]: the input's when given and the
-    points fit 32-bit integers on them, else a millimetre grid (coarser where the extent needs
-    it) from a rounded ``lo``."""
-    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-    if scale is not None and offset is not None:
-        s, o = np.asarray(scale, np.float64), np.asarray(offset, np.float64)
-        if np.all(s > 0) and np.all((lo - o) / s > _INT32[0] + 1) and np.all((hi - o) / s < _INT32[1] - 1):
-            return s, o
-    s = np.asarray(scale, np.float64) if scale is not None else np.full(3, 0.001)
-    s = np.maximum(s, (hi - lo) / 2**30)
-    o = np.floor(lo)
-    return s, o
 
 
 def work_dir(out) -> Path:

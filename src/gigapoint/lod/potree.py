@@ -19,6 +19,7 @@ from ..atomic import atomic_bytes, atomic_json, atomic_open
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
 from ..errors import InputError
+from .grid import output_grid
 from .keys import MAX_LEVEL, key_cube, level_of
 from .octree_dir import OctreeDir
 from .store import OctreeCloud, check_placement
@@ -164,8 +165,9 @@ def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progr
     """Assemble built node sets into the Potree 2.0 folder ``out``, its metadata last; returns
     the number of nodes."""
     origin, edge = np.array(st["origin"]), float(st["edge"])
-    scale = max(0.001, edge / 2**30)
-    scale3 = [scale] * 3
+    # the inputs' grid (a LAS file's 0.1 mm was cut to 1 mm), else a fine enough one (grid.py)
+    scale, offset = output_grid(st)
+    scale3 = scale.tolist()
     n_total = 0
     records: dict[int, tuple[int, int, int]] = {}
     names = list(st.get("attributes") or [])
@@ -192,14 +194,14 @@ def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progr
             for k, key in enumerate(keys.tolist()):
                 s, e = int(starts[k]), int(starts[k + 1])
                 part = {a: v[s:e] for a, v in attrs.items()}
-                blob = encode_node(xyz[s:e], rgb16[s:e], part, layout, scale3, origin, encoding) if e > s else b""
+                blob = encode_node(xyz[s:e], rgb16[s:e], part, layout, scale, offset, encoding) if e > s else b""
                 f.write(blob)
                 records[key] = (e - s, pos, len(blob))
                 pos += len(blob)
             if n:
                 for a, t, _ in layout:
                     if a == "position":
-                        arr = np.floor((xyz - origin) / scale + 0.5)
+                        arr = np.floor((xyz - offset) / scale + 0.5)
                     elif a == "rgb":
                         arr = rgb16
                     else:
@@ -217,8 +219,8 @@ def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progr
         hier[i] = (0 if mask else 1, mask, n, off, size)
     atomic_bytes(out.potree_hierarchy, hier.tobytes())
     stats["position"] = [
-        [v * scale + o for v, o in zip(stats["position"][0], origin)],
-        [v * scale + o for v, o in zip(stats["position"][1], origin)],
+        [v * s + o for v, s, o in zip(stats["position"][0], scale, offset)],
+        [v * s + o for v, s, o in zip(stats["position"][1], scale, offset)],
     ]
     meta = {
         "version": "2.0",
@@ -227,12 +229,12 @@ def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progr
         "points": int(n_total),
         "projection": (st.get("source") or {}).get("crs") or "",
         "hierarchy": {"firstChunkSize": int(HIERARCHY_DTYPE.itemsize * len(keys)), "stepSize": 4, "depth": int(level_of(keys).max())},
-        "offset": list(map(float, origin)),
+        "offset": offset.tolist(),
         "scale": scale3,
         "spacing": edge / 128.0,
         "boundingBox": {"min": list(map(float, origin)), "max": list(map(float, origin + edge))},
         "encoding": encoding,
-        "attributes": _attribute_entries(layout, scale3, list(map(float, origin)), stats),
+        "attributes": _attribute_entries(layout, scale3, offset.tolist(), stats),
     }
     atomic_json(out.potree_meta, meta, indent="\t", durable=True)  # last: the folder is complete from here on
     return len(keys)
