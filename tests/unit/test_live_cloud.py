@@ -317,6 +317,23 @@ def test_save_puts_las_attributes_in_their_fields_and_others_in_extra_bytes(tmp_
     assert set(np.asarray(las.classification).tolist()) == {255} and set(np.asarray(las.return_number).tolist()) == {15}
 
 
+def test_save_as_las_takes_a_grid_the_snapshot_fits(tmp_path):
+    """The LAS writer's grid was always a millimetre: a scene 3 000 km across was laspy's
+    OverflowError ("do not fit after applying offset and scale"), a 10 cm object 100 steps a side."""
+    import laspy
+
+    rng = np.random.default_rng(7)
+    for extent, worst in ((0.1, 2e-6), (3e6, 0.01)):
+        live = LiveCloud()
+        pts = rng.random((2000, 3)) * extent + 1000.0
+        live.push(pts)
+        live.snapshot(normals=False)
+        out = tmp_path / f"s{extent:g}.las"
+        assert live.save(out) == 2000
+        got = np.asarray(laspy.read(out).xyz)
+        assert np.abs(np.sort(got, axis=0) - np.sort(pts, axis=0)).max() < worst, extent  # (sorting moves no value further)
+
+
 def test_close_frees_frames_and_snapshots_and_refuses_later_pushes():
     """``close`` stopped the source and recording only: frames and snapshots stayed in memory,
     and a push or snapshot afterwards went on as if open."""

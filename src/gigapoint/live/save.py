@@ -62,10 +62,12 @@ def _write_las(path: Path, xyz, rgba, attrs) -> None:
     import laspy
 
     from ..lod.copc_write import LAS_FIELD_ATTRIBUTES, choose_point_format, extra_attributes, las_field_values
+    from ..lod.grid import las_grid
 
     header = laspy.LasHeader(point_format=choose_point_format(attrs), version="1.4")
-    header.offsets = np.floor(xyz.min(axis=0))
-    header.scales = np.array([0.001, 0.001, 0.001])
+    # a millimetre grid at most, finer for a small scene, coarser where 32-bit integers need it
+    # (a fixed millimetre overflowed them past 2 147 km, and cut a 10 cm object to 100 steps)
+    header.scales, header.offsets = las_grid(xyz.min(axis=0), xyz.max(axis=0))
     extra = extra_attributes({a: v.dtype for a, v in attrs.items()}, where=str(path))
     for a, dt in extra.items():
         header.add_extra_dim(laspy.ExtraBytesParams(name=a, type=dt))
