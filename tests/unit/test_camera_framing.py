@@ -115,7 +115,7 @@ def test_a_small_cloud_far_from_the_origin_is_framed_as_at_the_origin(projection
         return gp.render(cloud, gp.Camera.fit_cloud(cloud, width=160, height=120, view="top", projection=projection), size_mode="fixed")
 
     at_origin = image(xyz)
-    for offset, spread in ((1e9, 1e-3), (1e11, 1.0)):
+    for offset, spread in ((1e9, 1e-3), (1e11, 1.0), (1e11, 1e-3)):  # 0.1 m at 1e11: 1e-12 of it
         far = image(xyz * spread + offset)
         assert (far == at_origin).all(axis=-1).mean() > 0.97, (offset, spread)
     for p in ([0.0, 0, 0], [1e6, 1e6, 1e6], [9e11, -9e11, 5], [1e-9, 0, 0]):

@@ -228,11 +228,11 @@ class Camera:
             lo, hi = np.quantile(points, trim, axis=0), np.quantile(points, 1.0 - trim, axis=0)
         center = (lo + hi) / 2
         # a single point (or identical ones) still gets a camera float64 can place: 1e-6 of the
-        # coordinates' size; a cloud more than 1e-12 of them across is framed by its own size
-        # (that floor framed 0.1 m at 1e9 from 1 km away, a few pixels), at least 1 µm
+        # coordinates' size; a cloud more than 1e-14 of them across (~45 float64 steps) is framed
+        # by its own size (that floor framed 0.1 m at 1e9 from 1 km away, a few pixels), at least 1 µm
         size = max(1.0, float(np.abs(center).max()))
         half = float(np.linalg.norm(hi - lo)) / 2
-        radius = max(half, 1e-6) if half > 1e-12 * size else 1e-6 * size
+        radius = max(half, 1e-6) if half > 1e-14 * size else 1e-6 * size
         aspect = width / height
         # orientation first (distance 1), then the distance at which every corner fits
         probe = cls.orbit(center, yaw, pitch, 1.0, fov=fov, width=width, height=height)
@@ -247,7 +247,7 @@ class Camera:
             return float(np.quantile(a, 1.0 - trim if side > 0 else trim))
 
         if projection == "orthographic":
-            extent_v = max(extreme(np.abs(cy)), extreme(np.abs(cx)) / aspect, radius * 1e-6, 1e-13 * size)
+            extent_v = max(extreme(np.abs(cy)), extreme(np.abs(cx)) / aspect, radius * 1e-6, 1e-14 * size)
             return cls.orbit(
                 center, yaw, pitch, radius * 3, fov=fov, width=width, height=height, projection=projection, ortho_height=2 * extent_v * margin, **kw
             )
