@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -476,6 +477,15 @@ def test_viewer_for_jupyter(cloud):
         httpx.get(v.url, timeout=2)
     with pytest.raises(gigapoint.GigapointError):
         gigapoint.Viewer(12345, display=False)
+    for bad, problem in (
+        ({"host": 5}, "--host must be an address or a host name (127.0.0.1: this machine only), got 5"),  # an AttributeError
+        ({"host": ""}, "--host must be an address or a host name (127.0.0.1: this machine only), got ''"),
+        ({"port": True}, "--port must be in 0..65535, got True"),  # port 1
+        ({"port": 70000}, "--port must be in 0..65535, got 70000"),
+        ({"port": "a"}, "--port must be in 0..65535, got 'a'"),
+    ):
+        with pytest.raises(gigapoint.GigapointError, match=f"^{re.escape(problem)}$"):
+            gigapoint.Viewer(cloud, display=False, **bad)
     for bad in ({"width": 0}, {"height": -5}, {"width": 960.5}, {"height": True}):  # an IFrame of 0 pixels showed nothing
         with pytest.raises(gigapoint.GigapointError, match=r"^Viewer: (width|height) must be an integer from 1 to 16,384 pixels, got "):
             gigapoint.Viewer(cloud, display=False, **bad)

@@ -283,8 +283,10 @@ class ViewerServer:
         _require_starlette()
         import uvicorn
 
-        if not isinstance(port, int) or not 0 <= port <= 65535:
+        if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:  # True was port 1
             raise GigapointError(f"--port must be in 0..65535, got {port!r}")
+        if not isinstance(host, str) or not host.strip():  # 5: an AttributeError; "": "Name or service not known"
+            raise GigapointError(f"--host must be an address or a host name (127.0.0.1: this machine only), got {host!r}")
         self.host = host
         self.loopback = is_loopback(host)
         self.token = token if token is not None else (None if self.loopback else secrets.token_urlsafe(18))
