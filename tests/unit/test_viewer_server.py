@@ -483,9 +483,10 @@ def test_viewer_for_jupyter(cloud):
         ({"port": True}, "--port must be in 0..65535, got True"),  # port 1
         ({"port": 70000}, "--port must be in 0..65535, got 70000"),
         ({"port": "a"}, "--port must be in 0..65535, got 'a'"),
+        ({"display": "no"}, "Viewer: display must be True or False, got 'no'"),
     ):
         with pytest.raises(gigapoint.GigapointError, match=f"^{re.escape(problem)}$"):
-            gigapoint.Viewer(cloud, display=False, **bad)
+            gigapoint.Viewer(cloud, **{"display": False, **bad})
     for bad in ({"width": 0}, {"height": -5}, {"width": 960.5}, {"height": True}):  # an IFrame of 0 pixels showed nothing
         with pytest.raises(gigapoint.GigapointError, match=r"^Viewer: (width|height) must be an integer from 1 to 16,384 pixels, got "):
             gigapoint.Viewer(cloud, display=False, **bad)

@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Self
 
 from ..core.renderable import Renderable
-from ..errors import GigapointError, check_whole
+from ..errors import GigapointError, check_switch, check_whole
 
 
 def _as_cloud(cloud_or_path):
@@ -36,6 +36,7 @@ class Viewer:
 
         for name, v in (("width", width), ("height", height)):  # the IFrame's: 0 showed nothing, without a word
             check_whole("Viewer", name, v, 1, MAX_IMAGE_SIDE, " pixels")
+        check_switch("display", display, "Viewer")  # "no" was taken as true
         self.cloud = _as_cloud(cloud_or_path)
         self.server = ViewerServer(self.cloud, host=host, port=port, settings=settings).start()
         self.width, self.height = width, height
