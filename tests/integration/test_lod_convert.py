@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -625,3 +626,32 @@ def test_potree_and_copc_outputs_keep_the_inputs_grid_and_a_small_clouds_shape(t
         gp.convert(plain, out, format=fmt)
         drawn = (gp.render(open_octree(out), cam, size_mode="fixed", point_budget=10**6)[..., :3] != 0).any(axis=-1)
         assert (drawn & covered).sum() / (drawn | covered).sum() > 0.95, fmt
+
+
+def test_convert_checks_its_name_switches_and_source_files(autzen_path, tmp_path):
+    """source_files='a.laz' was read letter by letter and a missing file skipped (no CRS, no
+    word); name=5 went into octree.json as a number; progress='no' was true. A progressive
+    octree whose file went away since it loaded still saves (without the file's CRS)."""
+    import shutil
+
+    import gigapoint as gp
+
+    cloud = gp.demo(3_000)
+    convert(cloud, tmp_path / "crs", source_files=str(autzen_path))
+    assert open_octree(tmp_path / "crs").meta["crs"] is not None  # one path, not its letters
+    for kw, problem in (
+        ({"source_files": "gone.laz"}, "gone.laz: no such file"),
+        ({"source_files": [5]}, "convert: source_files are paths of the files the points came from, got a int"),
+        ({"name": 5}, "convert: name must be a string, got 5"),
+        ({"progress": "no"}, "convert: progress must be True or False, got 'no'"),
+    ):
+        with pytest.raises(gp.GigapointError, match=f"^{re.escape(problem)}$"):
+            convert(cloud, tmp_path / "x", **kw)
+    assert not (tmp_path / "x").exists()
+    copy = tmp_path / "copy.laz"
+    shutil.copy(autzen_path, copy)
+    grown = gp.open(copy, progressive=True)
+    grown.wait()
+    copy.unlink()
+    assert grown.save(tmp_path / "saved").points == 110_000
+    grown.close()

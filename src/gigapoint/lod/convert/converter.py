@@ -15,6 +15,7 @@ from pathlib import Path
 from ...core import pages
 from ...core.renderable import PointSource
 from ...errors import InputError, check_switch
+from ...io._base import check_file
 from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
 from ..copc_write import check_output as check_copc_output
@@ -141,6 +142,10 @@ class _InMemoryConverter(InMemoryPhases, _Converter):
     spilled (in_memory.py)."""
 
 
+def _not_a_path(p):
+    raise InputError(f"convert: source_files are paths of the files the points came from, got a {type(p).__name__}")
+
+
 def convert(
     inputs,
     out,
@@ -192,6 +197,12 @@ def convert(
     it fill, and says nothing of it where the first file cannot be read.
     """
     check_switch("overwrite", overwrite, "convert")
+    check_switch("progress", progress, "convert")  # "yes"/"no" were both true
+    if name is not None and not isinstance(name, str):  # 5 went into octree.json as a number
+        raise InputError(f"convert: name must be a string, got {name!r}")
+    if source_files is not None:  # a path given alone was read letter by letter, a missing file skipped: no CRS, no word
+        source_files = [source_files] if isinstance(source_files, (str, os.PathLike)) else list(source_files)
+        source_files = [check_file(p) if isinstance(p, (str, os.PathLike)) else _not_a_path(p) for p in source_files]
     if sampler not in SAMPLERS:
         raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
     if format not in FORMATS:

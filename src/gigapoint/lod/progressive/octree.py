@@ -1318,7 +1318,7 @@ class ProgressiveOctree:
         self.wait()
         if self.closed:
             raise InputError(f"{self.name}: the octree is closed (its points were freed); open it again to save it")
-        options.setdefault("source_files", self.source_files)  # the files' CRS and LAS grid
+        options.setdefault("source_files", [p for p in self.source_files if p.is_file()])  # the files' CRS and LAS grid (those still there)
         options.setdefault("max_leaf", self.max_leaf)
         grown = options["max_leaf"] == self.max_leaf and options.get("client") is None and self.points > 0
         inputs = self.grown() if grown else self.chunks()
