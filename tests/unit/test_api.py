@@ -136,6 +136,15 @@ def test_open_takes_true_or_false_for_its_switches(tmp_path):
         gp.open(tmp_path / "p.npy", chunked="no")
     assert gp.open(tmp_path / "p.npy", chunked=False).n_points == gp.open(tmp_path / "p.npy", progressive=False).n_points == 100
     assert gp.open(tmp_path / "p.npy", chunked=np.True_).n_points == 100
+    for kw, problem in (  # progress="no" showed a bar; name=5 named the cloud 5; chunk_size=True read a point a chunk, 2.5 read 2
+        ({"progress": "no"}, "open: progress must be True or False, got 'no'"),
+        ({"name": 5}, "open: name must be a string, got 5"),
+        ({"chunk_size": True}, "open: chunk_size must be an integer >= 1, got True"),
+        ({"chunk_size": 2.5}, "open: chunk_size must be an integer >= 1, got 2.5"),
+    ):
+        with pytest.raises(InputError, match=f"^{re.escape(problem)}$"):
+            gp.open(tmp_path / "p.npy", **kw)
+    assert gp.open(tmp_path / "p.npy", chunk_size=np.int64(30), name="p").n_points == 100
     gp.convert([tmp_path / "p.npy"], tmp_path / "octree")
     (tmp_path / "turn.gif").write_bytes(b"mine")
     live = gp.LiveCloud()

@@ -125,6 +125,9 @@ def open_cloud(
         raise InputError("open: no file given")
     chunk_size = check_chunk_size(chunk_size)
     check_switch("chunked", chunked, "open", allow_none=True)  # "no" was taken as true
+    check_switch("progress", progress, "open")
+    if name is not None and not isinstance(name, str):  # the name every message and output of the cloud starts with
+        raise InputError(f"open: name must be a string, got {name!r}")
     files = expand_paths(paths)
     plan = [(f, reader_for(f)) for f in files]
     if name is None:

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.chunk import ColorScaler, PointChunk, safe_attribute_name
-from ..errors import EmptyCloudError, InputError
+from ..errors import EmptyCloudError, InputError, check_whole
 
 #: Points per chunk a reader yields unless told otherwise (about 100 MB of xyz + rgba + attributes).
 DEFAULT_CHUNK_SIZE = 2_000_000
@@ -90,13 +90,8 @@ def read_head(path: Path, n: int = HEAD_BYTES) -> bytes:
 
 
 def check_chunk_size(chunk_size: int) -> int:
-    try:
-        n = int(chunk_size)
-    except (TypeError, ValueError):
-        raise InputError(f"chunk_size: must be a positive integer, got {chunk_size!r}") from None
-    if n < 1:
-        raise InputError(f"chunk_size: must be a positive integer, got {chunk_size!r}")
-    return n
+    """Points per chunk: a whole number >= 1 (True was 1, a chunk a point; 2.5 read as 2)."""
+    return check_whole("open", "chunk_size", chunk_size, 1)
 
 
 def rows_to_chunk(path: Path, names: list[str], columns: list[np.ndarray], scaler: ColorScaler) -> PointChunk:
