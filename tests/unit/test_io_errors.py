@@ -349,6 +349,26 @@ def test_csv_non_numeric(tmp_path):
     raises(InputError, p, match="line 3: 'abc' is not a number")
 
 
+def test_a_named_text_column_is_left_out_with_a_warning(tmp_path):
+    """A CSV with a column of labels ("x,y,z,intensity,label") was refused whole ("'a' is not a
+    number"): the named text column is left out, said once; the numbers in other columns are
+    still checked on every line, and every line still has every column."""
+    from gigapoint.errors import GigapointWarning
+
+    p = tmp_path / "labels.csv"
+    p.write_text("x,y,z,label,intensity\n1,2,3,tree,10\n4,5,6,roof,20\n")
+    with pytest.warns(GigapointWarning, match=r"labels.csv: column\(s\) label hold text, not numbers: left out"):
+        cloud = open_cloud(p)
+    assert cloud.n_points == 2 and list(cloud.attributes) == ["intensity"]
+    assert sorted(cloud.attributes["intensity"][:].tolist()) == [10, 20]
+    for body, problem in (("7,8,9,car,x\n", "line 4: 'x' is not a number"), ("7,8,9\n", "line 4 has 3 columns, expected 5")):
+        p.write_text("x,y,z,label,intensity\n1,2,3,tree,10\n4,5,6,roof,20\n" + body)
+        with pytest.warns(GigapointWarning):
+            raises(InputError, p, match=problem)
+    p.write_text("x,y,z\nq,2,3\n")  # x, y and z are never left out
+    raises(InputError, p, match="line 2: 'q' is not a number")
+
+
 def test_csv_wrong_column_count(tmp_path):
     p = tmp_path / "bad.xyz"
     p.write_text("1 2 3\n" * 5 + "1 2\n")

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.chunk import ColorScaler, PointChunk
-from ..errors import EmptyCloudError
+from ..errors import EmptyCloudError, GigapointWarning
 from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, color_names, fail, rows_to_chunk, scanned_info
 
 _BY_COUNT = {
@@ -78,8 +78,10 @@ def _names_by_count(k: int) -> list[str]:
 class _Layout:
     """What the first lines of a text file say: lines to skip, delimiter, column names."""
 
-    def __init__(self, path: Path, skip: int, delimiter: str | None, names: list[str], header: bool):
+    def __init__(self, path: Path, skip: int, delimiter: str | None, names: list[str], header: bool, columns: list[int] | None = None):
         self.path, self.skip, self.delimiter, self.names, self.header = path, skip, delimiter, names, header
+        self.n_columns = len(names) if columns is None else None  # the columns every line has (set below)
+        self.columns = columns  # the columns read (None: all); a header's text columns are left out
 
 
 def _layout(path: Path) -> _Layout:
@@ -137,6 +139,16 @@ def _layout(path: Path) -> _Layout:
     if header_names is not None:
         if len(header_names) != len(tokens):
             raise fail(path, f"line {lineno} has {len(tokens)} columns, the header names {len(header_names)}")
+        # a named column of text (a label, a class name) is left out, said once: it refused the whole file
+        text = [i for i, t in enumerate(tokens) if not _numeric([t]) and header_names[i] not in ("x", "y", "z")]
+        if text:
+            warnings.warn(
+                f"{path}: column(s) {', '.join(header_names[i] for i in text)} hold text, not numbers: left out", GigapointWarning, stacklevel=4
+            )
+            kept = [i for i in range(len(tokens)) if i not in text]
+            layout = _Layout(path, skip, delimiter, [header_names[i] for i in kept], True, kept)
+            layout.n_columns = len(tokens)
+            return layout
         names = header_names
     else:
         if len(tokens) < 3:
@@ -145,16 +157,16 @@ def _layout(path: Path) -> _Layout:
     return _Layout(path, skip, delimiter, names, header_names is not None)
 
 
-def _first_bad_line(path: Path, lines: list[str], first_lineno: int, delimiter: str | None, ncols: int) -> tuple[int, str]:
+def _first_bad_line(path: Path, lines: list[str], first_lineno: int, delimiter: str | None, ncols: int, columns=None) -> tuple[int, str]:
     """The index in ``lines`` of the first unparsable line of a chunk and what is wrong with it
-    (only called after loadtxt failed)."""
+    (only called after loadtxt failed); ``columns``: those read (None: all)."""
     for i, line in enumerate(lines):
         if not line.strip() or _is_comment(line):
             continue
         tokens = _split(line.rstrip("\r\n"), delimiter)
         if len(tokens) != ncols:
             return i, f"line {first_lineno + i} has {len(tokens)} columns, expected {ncols}"
-        for t in tokens:
+        for t in tokens if columns is None else [tokens[c] for c in columns]:
             try:
                 float(t)
             except ValueError:
@@ -162,14 +174,14 @@ def _first_bad_line(path: Path, lines: list[str], first_lineno: int, delimiter: 
     return 0, "unparsable data"
 
 
-def _parsed(lines: list[str], delimiter: str | None) -> np.ndarray:
+def _parsed(lines: list[str], delimiter: str | None, columns: list[int] | None = None) -> np.ndarray:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # "input contained no data" for comment-only chunks
-        return np.loadtxt(lines, delimiter=delimiter, comments=("#", "//"), ndmin=2, dtype=np.float64)
+        return np.loadtxt(lines, delimiter=delimiter, comments=("#", "//"), ndmin=2, dtype=np.float64, usecols=columns)
 
 
 def _chunks(path: Path, chunk_size: int, layout: _Layout) -> Iterator[np.ndarray]:
-    ncols = len(layout.names)
+    ncols, used, columns = layout.n_columns, len(layout.names), layout.columns
     try:
         with open(path, encoding="utf-8-sig") as f:
             lineno = layout.skip + 1
@@ -180,15 +192,17 @@ def _chunks(path: Path, chunk_size: int, layout: _Layout) -> Iterator[np.ndarray
                 if not lines:
                     return
                 try:
-                    arr = _parsed(lines, layout.delimiter)
-                    good = not arr.size or arr.shape[1] == ncols
+                    arr = _parsed(lines, layout.delimiter, columns)
+                    good = not arr.size or arr.shape[1] == used
+                    if good and columns is not None:  # usecols reads short lines as long as they reach the columns used
+                        good = all(len(_split(ln.rstrip("\r\n"), layout.delimiter)) == ncols for ln in lines if ln.strip() and not _is_comment(ln))
                 except ValueError:
                     good = False
                 if not good:  # the lines before the bad one first: a progressive load keeps them
-                    bad, problem = _first_bad_line(path, lines, lineno, layout.delimiter, ncols)
+                    bad, problem = _first_bad_line(path, lines, lineno, layout.delimiter, ncols, columns)
                     with contextlib.suppress(ValueError):
-                        before = _parsed(lines[:bad], layout.delimiter) if bad else np.empty((0, ncols))
-                        if before.size and before.shape[1] == ncols:
+                        before = _parsed(lines[:bad], layout.delimiter, columns) if bad else np.empty((0, used))
+                        if before.size and before.shape[1] == used:
                             yield before
                     raise fail(path, problem)
                 lineno += len(lines)
