@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import struct
 import time
+import warnings
 import zipfile
 
 import laspy
@@ -367,6 +368,11 @@ def test_a_named_text_column_is_left_out_with_a_warning(tmp_path):
             raises(InputError, p, match=problem)
     p.write_text("x,y,z\nq,2,3\n")  # x, y and z are never left out
     raises(InputError, p, match="line 2: 'q' is not a number")
+    for text in ('x,y,z,"name"\n"1","2","3","tree"\n"4","5","6","roof"\n', '"1","2","3"\n"4","5","6"\n'):  # a spreadsheet's quotes
+        p.write_text(text)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", GigapointWarning)
+            np.testing.assert_array_equal(open_cloud(p).bounds[1], [4, 5, 6])
 
 
 def test_csv_wrong_column_count(tmp_path):

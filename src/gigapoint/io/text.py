@@ -65,7 +65,7 @@ def _split(line: str, delimiter: str | None) -> list[str]:
 def _numeric(tokens: list[str]) -> bool:
     try:
         for t in tokens:
-            float(t)
+            float(t.strip('"'))  # "1.5": a spreadsheet's quoted number
     except ValueError:
         return False
     return bool(tokens)
@@ -82,6 +82,7 @@ class _Layout:
         self.path, self.skip, self.delimiter, self.names, self.header = path, skip, delimiter, names, header
         self.n_columns = len(names) if columns is None else None  # the columns every line has (set below)
         self.columns = columns  # the columns read (None: all); a header's text columns are left out
+        self.quoted = False  # the data's numbers are in double quotes
 
 
 def _layout(path: Path) -> _Layout:
@@ -136,6 +137,7 @@ def _layout(path: Path) -> _Layout:
     tokens = _split(line, delimiter)
     if header_names is None and not _numeric(tokens):
         raise fail(path, f"line {lineno}: not numeric point data: {line[:80]!r}")
+    quoted = '"' in line
     if header_names is not None:
         if len(header_names) != len(tokens):
             raise fail(path, f"line {lineno} has {len(tokens)} columns, the header names {len(header_names)}")
@@ -147,14 +149,16 @@ def _layout(path: Path) -> _Layout:
             )
             kept = [i for i in range(len(tokens)) if i not in text]
             layout = _Layout(path, skip, delimiter, [header_names[i] for i in kept], True, kept)
-            layout.n_columns = len(tokens)
+            layout.n_columns, layout.quoted = len(tokens), quoted
             return layout
         names = header_names
     else:
         if len(tokens) < 3:
             raise fail(path, f"line {lineno} has {len(tokens)} columns, expected at least 3 (x y z)")
         names = _names_by_count(len(tokens))
-    return _Layout(path, skip, delimiter, names, header_names is not None)
+    layout = _Layout(path, skip, delimiter, names, header_names is not None)
+    layout.quoted = quoted
+    return layout
 
 
 def _first_bad_line(path: Path, lines: list[str], first_lineno: int, delimiter: str | None, ncols: int, columns=None) -> tuple[int, str]:
@@ -168,7 +172,7 @@ def _first_bad_line(path: Path, lines: list[str], first_lineno: int, delimiter: 
             return i, f"line {first_lineno + i} has {len(tokens)} columns, expected {ncols}"
         for t in tokens if columns is None else [tokens[c] for c in columns]:
             try:
-                float(t)
+                float(t.strip('"'))
             except ValueError:
                 return i, f"line {first_lineno + i}: {t[:40]!r} is not a number"
     return 0, "unparsable data"
@@ -191,6 +195,8 @@ def _chunks(path: Path, chunk_size: int, layout: _Layout) -> Iterator[np.ndarray
                 lines = list(itertools.islice(f, chunk_size))
                 if not lines:
                     return
+                if layout.quoted:  # "1.5": a spreadsheet's quoted numbers (loadtxt's quotechar excludes two comment marks)
+                    lines = [ln.replace('"', "") for ln in lines]
                 try:
                     arr = _parsed(lines, layout.delimiter, columns)
                     good = not arr.size or arr.shape[1] == used
