@@ -181,9 +181,10 @@ def test_crs_from_geokeys_without_pyproj(tmp_path):
 
 @pytest.mark.parametrize("suffix", [".las", ".laz"])
 def test_extra_bytes_are_read_as_attributes(tmp_path, suffix):
-    """Extra bytes of one value a point are attributes (scaled where the file scales them), after
-    the standard ones; arrays are left out. They were dropped: a file's HeightAboveGround or
-    amplitude could not be coloured by, and a live cloud's saved extras did not come back."""
+    """Extra bytes are attributes (scaled where the file scales them), after the standard ones; an
+    array of 3 a point is 3 attributes (direction_0..2: it was left out without a word). They
+    were dropped: a file's HeightAboveGround or amplitude could not be coloured by, and a live
+    cloud's saved extras did not come back."""
     header = laspy.LasHeader(point_format=3, version="1.4")
     header.add_extra_dim(laspy.ExtraBytesParams(name="height_above_ground", type=np.float32))
     header.add_extra_dim(laspy.ExtraBytesParams(name="amplitude", type=np.uint16, scales=np.array([0.5]), offsets=np.array([10.0])))
@@ -194,17 +195,19 @@ def test_extra_bytes_are_read_as_attributes(tmp_path, suffix):
     las.x = las.y = las.z = np.arange(20.0)
     las.height_above_ground = np.arange(20, dtype=np.float32)
     las.amplitude = 10.0 + 0.5 * np.arange(20)
-    las.direction = np.ones((20, 3))
+    las.direction = np.arange(60.0).reshape(20, 3)
     path = tmp_path / f"eb{suffix}"
     las.write(str(path))
     _, xyz, _, attrs = collect(path)
     np.testing.assert_array_equal(xyz[:, 0], np.arange(20.0))
-    assert list(attrs)[-3:] == ["height_above_ground", "amplitude", "a_b"] and "intensity" in attrs and "direction" not in attrs
+    assert list(attrs)[-6:] == ["height_above_ground", "amplitude", "direction_0", "direction_1", "direction_2", "a_b"] and "intensity" in attrs
+    for k in range(3):
+        np.testing.assert_array_equal(attrs[f"direction_{k}"], np.arange(60.0).reshape(20, 3)[:, k])
     np.testing.assert_array_equal(attrs["height_above_ground"], np.arange(20, dtype=np.float32))
     np.testing.assert_array_equal(attrs["amplitude"], 10.0 + 0.5 * np.arange(20))
-    assert "height_above_ground" in file_info(path)["dimensions"] and file_info(path)["attributes"][-3:] == ["height_above_ground", "amplitude", "a_b"]
+    assert "height_above_ground" in file_info(path)["dimensions"] and file_info(path)["attributes"][-6:] == list(attrs)[-6:]
     cloud = gp.open(path, progressive=True)
-    assert cloud.wait() and cloud.attribute_names[-3:] == ("height_above_ground", "amplitude", "a_b")
+    assert cloud.wait() and cloud.attribute_names[-6:] == tuple(attrs)[-6:]
     result = gp.convert(path, tmp_path / "octree")  # ('a/b' made the conversion fail on a file 'attr.a/b.npy')
     assert result.points == 20 and "a_b" in gp.open(tmp_path / "octree").node_points(0)
 

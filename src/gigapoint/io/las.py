@@ -41,19 +41,32 @@ LASZIP_RECORD_ID = 22204
 LAS_ATTRIBUTES = ("intensity", "classification", "return_number", "number_of_returns", "point_source_id", "gps_time", "nir")
 
 
-def _attribute_fields(point_format) -> dict[str, str]:
+def _attribute_fields(point_format) -> dict[str, str | tuple[str, int]]:
     """{attribute: record field} of a file's points: the standard fields among ``LAS_ATTRIBUTES``,
-    then its extra bytes of one value a point (scaled where the file gives a scale: laspy
-    returns them as floats), in record order, named as the file names them but for path
-    separators ('a/b' is read as 'a_b': core/chunk.safe_attribute_name); arrays (``3f8``) and
-    bytes the file does not describe are left out."""
+    then its extra bytes (scaled where the file gives a scale: laspy returns them as floats), in
+    record order, named as the file names them but for path separators ('a/b' is read as 'a_b':
+    core/chunk.safe_attribute_name); an array of k values a point (``3f8``, a normal) is k
+    attributes ``name_0`` .. (field, element) (it was left out without a word); bytes the file
+    does not describe are left out."""
     dims = set(point_format.dimension_names)
-    fields = {a: a for a in LAS_ATTRIBUTES if a in dims}
+    fields: dict[str, str | tuple[str, int]] = {a: a for a in LAS_ATTRIBUTES if a in dims}
     for d in point_format.extra_dimensions:
         name = safe_attribute_name(d.name)
-        if d.name != "ExtraBytes" and d.num_elements == 1 and name is not None and name not in fields:  # (ExtraBytes: laspy's name for undescribed bytes)
-            fields[name] = d.name
+        if d.name == "ExtraBytes" or name is None:  # (ExtraBytes: laspy's name for undescribed bytes)
+            continue
+        if d.num_elements == 1:
+            fields.setdefault(name, d.name)
+        else:
+            for k in range(d.num_elements):
+                fields.setdefault(f"{name}_{k}", (d.name, k))
     return fields
+
+
+def _field_values(points, field: str | tuple[str, int]) -> np.ndarray:
+    """One attribute's values (``_attribute_fields``' field) as a contiguous copy."""
+    if isinstance(field, tuple):
+        return np.ascontiguousarray(np.asarray(points[field[0]])[:, field[1]])
+    return np.ascontiguousarray(np.asarray(points[field]))
 
 
 @dataclass
@@ -526,7 +539,7 @@ class LasReader(Reader):
                 if has_rgb:
                     rgba = _colors(raw["red"], raw["green"], raw["blue"], scaler)
                 # copies (a field of the records is a strided view of the reused buffer, a bit field a new array)
-                attributes = {a: np.ascontiguousarray(np.asarray(pts[f])) for a, f in attrs.items()}
+                attributes = {a: _field_values(pts, f) for a, f in attrs.items()}
                 done += n
                 yield PointChunk(xyz, rgba, attributes, scale=stored_scale)
         if done < stop:
