@@ -180,6 +180,8 @@ def test_the_demo_refuses_a_seed_or_scale_it_cannot_use_in_one_line():
         with pytest.raises(InputError, match=rf"^demo: {problem}"):
             gp.demo(1_000, **kw)
     assert gp.demo(1_000, seed=-1, scale=None).n_points == gp.demo(1_000, scale=0.001).n_points == 1_000
+    with pytest.raises(InputError, match=r"^demo: n_points must be an integer >= 1, got 0$"):  # "no valid points"
+        gp.demo(0)
 
 
 def test_from_arrays_judges_colours_as_a_file_of_them_is_read(tmp_path):

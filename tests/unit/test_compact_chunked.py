@@ -246,7 +246,7 @@ def test_a_cloud_too_big_for_this_machine_is_refused_before_anything_is_read(mon
 
     with pytest.raises(MemoryLimitError, match=r"^demo\(10,000,000,000,000\): 10,000,000,000,000 points held in memory take 50.0 TB or more, .*progressive=True"):
         gp.demo(10**13)  # on any machine: 5 bytes a point at least
-    with pytest.raises(InputError, match=r"^demo: n_points must be an integer, got 2.5$"):
+    with pytest.raises(InputError, match=r"^demo: n_points must be an integer >= 1, got 2.5$"):
         gp.demo(2.5)
     # a file (its header's count) against a machine of 1 MB: 110 000 points in memory are more
     monkeypatch.setattr(chunked, "physical_memory", lambda: 1 << 20)

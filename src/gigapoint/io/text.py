@@ -78,11 +78,12 @@ def _names_by_count(k: int) -> list[str]:
 class _Layout:
     """What the first lines of a text file say: lines to skip, delimiter, column names."""
 
-    def __init__(self, path: Path, skip: int, delimiter: str | None, names: list[str], header: bool, columns: list[int] | None = None):
+    def __init__(self, path: Path, skip: int, delimiter: str | None, names: list[str], header: bool, quoted: bool,
+                 columns: list[int] | None = None, n_columns: int | None = None):  # fmt: skip
         self.path, self.skip, self.delimiter, self.names, self.header = path, skip, delimiter, names, header
-        self.n_columns = len(names) if columns is None else None  # the columns every line has (set below)
+        self.quoted = quoted  # the data's numbers are in double quotes (a spreadsheet's CSV)
         self.columns = columns  # the columns read (None: all); a header's text columns are left out
-        self.quoted = False  # the data's numbers are in double quotes
+        self.n_columns = len(names) if n_columns is None else n_columns  # the columns every line has
 
 
 def _layout(path: Path) -> _Layout:
@@ -148,17 +149,13 @@ def _layout(path: Path) -> _Layout:
                 f"{path}: column(s) {', '.join(header_names[i] for i in text)} hold text, not numbers: left out", GigapointWarning, stacklevel=4
             )
             kept = [i for i in range(len(tokens)) if i not in text]
-            layout = _Layout(path, skip, delimiter, [header_names[i] for i in kept], True, kept)
-            layout.n_columns, layout.quoted = len(tokens), quoted
-            return layout
+            return _Layout(path, skip, delimiter, [header_names[i] for i in kept], True, quoted, kept, len(tokens))
         names = header_names
     else:
         if len(tokens) < 3:
             raise fail(path, f"line {lineno} has {len(tokens)} columns, expected at least 3 (x y z)")
         names = _names_by_count(len(tokens))
-    layout = _Layout(path, skip, delimiter, names, header_names is not None)
-    layout.quoted = quoted
-    return layout
+    return _Layout(path, skip, delimiter, names, header_names is not None, quoted)
 
 
 def _first_bad_line(path: Path, lines: list[str], first_lineno: int, delimiter: str | None, ncols: int, columns=None) -> tuple[int, str]:

@@ -107,7 +107,6 @@ def sample_points(cloud, n: int = 20_000) -> np.ndarray:
     return np.concatenate(parts)
 
 
-
 def is_real(v) -> bool:
     """A finite real number (not a bool, not a string)."""
     return isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
@@ -124,6 +123,7 @@ def _yaw_pitch(view) -> tuple[float, float]:
         raise CameraError(f"camera view must be one of {', '.join(VIEWS)} or (yaw, pitch) degrees, got {view!r}")
     return float(yaw), float(pitch)
 
+
 def image_side(name: str, v) -> int:
     """An image's width or height (``name``) as an int in 1..MAX_IMAGE_SIDE (960.0 taken as 960),
     else a one-line CameraError."""
@@ -132,6 +132,7 @@ def image_side(name: str, v) -> int:
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= MAX_IMAGE_SIDE:  # True was 1 pixel
         raise CameraError(f"image {name} must be an integer in 1..{MAX_IMAGE_SIDE}, got {v!r}")
     return int(v)
+
 
 @dataclass(frozen=True)
 class Camera:
