@@ -603,7 +603,7 @@ def test_potree_and_copc_outputs_keep_the_inputs_grid_and_a_small_clouds_shape(t
     header = laspy.LasHeader(point_format=3, version="1.2")
     header.scales, header.offsets = np.full(3, 0.0001), np.array([500_000.0, 4_000_000.0, 100.0])
     las = laspy.LasData(header)
-    xyz = rng.uniform(0, 20, (5_000, 3)) + header.offsets
+    xyz = rng.uniform(-10, 10, (5_000, 3)) + header.offsets  # points below the offset too (negative LAS integers)
     las.x, las.y, las.z = xyz.T
     las.write(tmp_path / "fine.las")
     def rows(a):

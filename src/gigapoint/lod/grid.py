@@ -34,11 +34,16 @@ def las_grid(lo, hi, scale=None, offset=None) -> tuple[np.ndarray, np.ndarray]:
     return s, o
 
 
-def output_grid(state: dict) -> tuple[np.ndarray, np.ndarray]:
+def output_grid(state: dict, unsigned: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """``las_grid`` of a conversion's points (its state: bounds ``lo``/``hi``, the LAS inputs'
-    grid ``source``, else the chunks' own ``chunk_scale``: gp.demo's, from_arrays(scale=))."""
+    grid ``source``, else the chunks' own ``chunk_scale``: gp.demo's, from_arrays(scale=)).
+    ``unsigned`` (Potree's, whose writer keeps integers >= 0): the offset moved to the grid line
+    at or below ``lo`` (a LAS offset above some points made them negative)."""
     src = state.get("source") or {}
     scale = src.get("scale")
     if scale is None and isinstance(state.get("chunk_scale"), list):
         scale = state["chunk_scale"]
-    return las_grid(state["lo"], state["hi"], scale, src.get("offset"))
+    s, o = las_grid(state["lo"], state["hi"], scale, src.get("offset"))
+    if unsigned:
+        o = o + np.floor((np.asarray(state["lo"], np.float64) - o) / s) * s
+    return s, o

@@ -166,7 +166,7 @@ def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progr
     the number of nodes."""
     origin, edge = np.array(st["origin"]), float(st["edge"])
     # the inputs' grid (a LAS file's 0.1 mm was cut to 1 mm), else a fine enough one (grid.py)
-    scale, offset = output_grid(st)
+    scale, offset = output_grid(st, unsigned=True)
     scale3 = scale.tolist()
     n_total = 0
     records: dict[int, tuple[int, int, int]] = {}
