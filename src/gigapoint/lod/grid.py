@@ -43,7 +43,9 @@ def output_grid(state: dict, unsigned: bool = False) -> tuple[np.ndarray, np.nda
     scale = src.get("scale")
     if scale is None and isinstance(state.get("chunk_scale"), list):
         scale = state["chunk_scale"]
-    s, o = las_grid(state["lo"], state["hi"], scale, src.get("offset"))
+    lo, hi = np.asarray(state["lo"], np.float64), np.asarray(state["hi"], np.float64)
+    s, o = las_grid(lo, hi, scale, src.get("offset"))
     if unsigned:
-        o = o + np.floor((np.asarray(state["lo"], np.float64) - o) / s) * s
+        s = np.maximum(s, (hi - lo) / 2**30)  # counted from lo they must fit 31 bits too
+        o = o + np.floor((lo - o) / s) * s
     return s, o
