@@ -487,3 +487,24 @@ def test_an_extra_bytes_name_with_a_slash_is_read_as_the_las_reader_reads_it(tmp
     cloud = gp.open(tmp_path / "slash.copc.laz")
     got = np.concatenate([cloud.node_points(i)["a_b"] for i in range(len(cloud.keys))])
     assert sorted(got.tolist()) == list(range(2000))
+
+
+def test_the_output_grid_keeps_the_inputs_and_fits_potrees_unsigned_integers():
+    """lod/grid.py: a LAS input's grid is kept (COPC: its offset too); Potree's integers count
+    from the grid line at or below the points (a LAS offset above them made them negative, the
+    writer clipped them to 0) and fit 31 bits (an offset in the middle of 300 km at 0.1 mm)."""
+    from gigapoint.lod.grid import default_step, output_grid
+
+    st = {"lo": [99.95, 0, 0], "hi": [110.0, 1, 1], "source": {"scale": [1e-4] * 3, "offset": [100.0, 0, 0]}}
+    s, o = output_grid(st)
+    np.testing.assert_array_equal(s, [1e-4] * 3)
+    np.testing.assert_array_equal(o, [100.0, 0, 0])
+    s, o = output_grid(st, unsigned=True)
+    np.testing.assert_array_equal(s, [1e-4] * 3)
+    assert np.all(o <= st["lo"]) and np.allclose((o - [100.0, 0, 0]) / s, np.round((o - [100.0, 0, 0]) / s))  # on the input's grid
+    wide = {"lo": [0, 0, 0], "hi": [3e5, 1, 1], "source": {"scale": [1e-4] * 3, "offset": [1.5e5, 0, 0]}}
+    s, o = output_grid(wide, unsigned=True)
+    assert np.all((np.array(wide["hi"]) - o) / s < 2**31 - 1) and np.all(o <= wide["lo"])
+    assert default_step([0, 0, 0], [0.1, 0.1, 0.1]) == 0.1 / 2**16 and default_step([0, 0, 0], [500, 1, 1]) == 0.001
+    assert default_step([1e11] * 3, [1e11 + 0.1] * 3) == 2e-15 * (1e11 + 0.1)  # float64 tells no finer steps apart there
+    assert output_grid({"lo": [0, 0, 0], "hi": [1, 1, 1], "chunk_scale": [0.01] * 3})[0].tolist() == [0.01] * 3  # gp.demo's grid
