@@ -232,6 +232,11 @@ def test_ept_unsupported_and_invalid_metadata(broken):
     _fails(d, "dataType 'zstandard' is not supported")
     (d / "ept.json").write_text(json.dumps(dict(meta, schema=[{"name": "X", "type": "complex", "size": 4}])))
     _fails(d, "invalid ept.json")
+    (d / "ept.json").write_text(json.dumps(dict(meta, points=-5)))  # taken as the cloud's count
+    _fails(d, r"points must be a whole number >= 0, got -5")
+    x_at_zero = [dict(dim, scale=0) if dim["name"] == "X" else dim for dim in meta["schema"]]  # every point on one line
+    (d / "ept.json").write_text(json.dumps(dict(meta, schema=x_at_zero)))
+    _fails(d, r"dimension 'X' has scale 0.0 and offset .*: a positive scale and a finite offset are needed")
     (d / "ept.json").write_text("{not json")
     _fails(d, "not valid JSON")
 

@@ -93,6 +93,8 @@ class EptCloud(VoxelOctree):
             b = np.array(meta["bounds"], np.float64).reshape(6)
             tight = np.array(meta.get("boundsConforming", meta["bounds"]), np.float64).reshape(6)
             n_points = int(meta["points"])
+            if n_points < 0 or n_points != meta["points"]:  # -5 was taken as the cloud's count
+                raise ValueError(f"points must be a whole number >= 0, got {meta['points']!r}")
             self._schema(meta["schema"])
         except (TypeError, ValueError, KeyError) as exc:
             raise InputError(f"{name}: invalid ept.json ({' '.join(str(exc).split())})") from None
@@ -125,7 +127,10 @@ class EptCloud(VoxelOctree):
             if t is None:
                 raise ValueError(f"dimension {d.get('name')!r} has an unknown type {d['type']!r} of size {d['size']}")
             fields.append((d["name"], t))
-            self._scales[d["name"]] = (float(d.get("scale", 1.0)), float(d.get("offset", 0.0)))
+            scale, offset = float(d.get("scale", 1.0)), float(d.get("offset", 0.0))
+            if not (np.isfinite(scale) and scale > 0 and np.isfinite(offset)):  # X at scale 0 drew every point on one line
+                raise ValueError(f"dimension {d['name']!r} has scale {scale} and offset {offset}: a positive scale and a finite offset are needed")
+            self._scales[d["name"]] = (scale, offset)
         names = [f for f, _ in fields]
         for axis in ("X", "Y", "Z"):
             if axis not in names:
