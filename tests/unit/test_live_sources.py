@@ -4,6 +4,7 @@ on small files written with the libraries themselves (plyfile, pypcd4, Pillow, r
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -297,6 +298,23 @@ def test_a_damaged_frame_of_a_recording_is_refused_and_the_rest_play(tmp_path):
     player = Player(ReplaySource(tmp_path / "rec"), again, rate=None)
     player.run()
     assert player.error is None and player.errors == 2 and [f.time for f in again.frames] == [0.0, 2.0, 4.0]
+
+
+def test_recording_into_an_odd_folder(tmp_path, monkeypatch):
+    """record(5) was a TypeError, record("") recorded into the current folder; overwrite=True
+    deleted the .npz files of a frames/ folder that held no recording."""
+    live = LiveCloud()
+    monkeypatch.chdir(tmp_path)
+    for bad in (5, ""):
+        with pytest.raises(InputError, match=rf"^record: the recording's folder must be a path, got {re.escape(repr(bad))}$"):
+            live.record(bad)
+    assert not list(tmp_path.iterdir())
+    mine = tmp_path / "work" / "frames"
+    mine.mkdir(parents=True)
+    np.savez(mine / "keep.npz", a=np.arange(3))
+    live.record(tmp_path / "work", overwrite=True)
+    live.stop_recording()
+    assert (mine / "keep.npz").exists()
 
 
 def test_not_a_recording(tmp_path):

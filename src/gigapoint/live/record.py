@@ -10,6 +10,7 @@ intrinsics (replay runs the same kernel again), one pushed as points as its sens
 from __future__ import annotations
 
 import json
+import os
 import threading
 import time
 import zipfile
@@ -54,13 +55,16 @@ class Recorder:
     """Writes the frames a LiveCloud accepts into a recording folder (``LiveCloud.record``)."""
 
     def __init__(self, directory, overwrite: bool = False, index_every_s: float = 1.0):
+        if not isinstance(directory, (str, os.PathLike)) or not os.fspath(directory):  # 5: a TypeError; "": the current folder
+            raise InputError(f"record: the recording's folder must be a path, got {directory!r}")
         self.directory = Path(directory)
-        if (self.directory / INDEX).exists() and not overwrite:
+        held = (self.directory / INDEX).exists()
+        if held and not overwrite:
             raise InputError(f"{self.directory}: holds a recording already; pass overwrite=True to replace it")
         if self.directory.exists() and not self.directory.is_dir():
             raise InputError(f"{self.directory}: exists and is not a folder")
         (self.directory / FRAMES).mkdir(parents=True, exist_ok=True)
-        if overwrite:
+        if overwrite and held:  # a recording's frames only: a folder that held none keeps its files
             for old in (self.directory / FRAMES).glob("*.npz"):
                 old.unlink()
         self.index_every_s = index_every_s
