@@ -334,6 +334,27 @@ def test_save_as_las_takes_a_grid_the_snapshot_fits(tmp_path):
         assert np.abs(np.sort(got, axis=0) - np.sort(pts, axis=0)).max() < worst, extent  # (sorting moves no value further)
 
 
+def test_save_names_what_it_cannot_write_and_writes_copc(tmp_path, monkeypatch):
+    """save(5) was a TypeError, save("") an octree in the current folder, save("scan.xyz") an
+    octree folder named scan.xyz, save("scan.copc.laz") a plain LAZ under a COPC name."""
+    from gigapoint.lod import open_octree
+
+    live = LiveCloud()
+    live.push(np.random.default_rng(8).random((500, 3)))
+    live.snapshot(normals=False)
+    monkeypatch.chdir(tmp_path)
+    for bad, problem in (
+        (5, "save: the output must be a path (.las, .laz, .ply or an octree folder), got 5"),
+        ("", "save: the output must be a path (.las, .laz, .ply or an octree folder), got ''"),
+        ("scan.xyz", "scan.xyz: save writes .las, .laz or .ply files, or an octree folder (a name without a point file's suffix)"),
+    ):
+        with pytest.raises(InputError, match=f"^{re.escape(problem)}$"):
+            live.save(bad)
+    assert not list(tmp_path.iterdir())
+    assert live.save("scan.copc.laz") == 500
+    assert type(open_octree(tmp_path / "scan.copc.laz")).__name__ == "CopcCloud" and open_octree(tmp_path / "scan.copc.laz").n_points == 500
+
+
 def test_close_frees_frames_and_snapshots_and_refuses_later_pushes():
     """``close`` stopped the source and recording only: frames and snapshots stayed in memory,
     and a push or snapshot afterwards went on as if open."""

@@ -653,7 +653,8 @@ class LiveCloud:
 
     def save(self, path, overwrite: bool = False) -> int:
         """Write the accumulated snapshots: ``.las``/``.laz``/``.ply`` (points with colors and
-        normals), else a gigapoint octree folder. Returns the points written."""
+        normals), ``.copc.laz`` (the snapshot octree as COPC), else (a name without a point
+        file's suffix) a gigapoint octree folder. Returns the points written."""
         from .save import save_snapshots
 
         self._check_open("save")

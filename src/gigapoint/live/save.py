@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 
 from ..atomic import atomic_write
 from ..errors import InputError
+from ..io.registry import is_supported_name
 
 
 def _collect(octree):
@@ -21,9 +23,16 @@ def _collect(octree):
 
 def save_snapshots(octree, path, overwrite: bool = False) -> int:
     """Write every point of the snapshot octree to ``path`` (its suffix picks the format:
-    .las, .laz, .ply; anything else a gigapoint octree folder). Returns the points written."""
+    .las, .laz, .ply, .copc.laz (the octree as COPC); a name without a point file's suffix a
+    gigapoint octree folder). Returns the points written."""
+    if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):  # 5: a TypeError; "": an octree in the current folder
+        raise InputError(f"save: the output must be a path (.las, .laz, .ply or an octree folder), got {path!r}")
     path = Path(path)
     suffix = path.suffix.lower()
+    if path.name.lower().endswith(".copc.laz"):  # a COPC file (the octree's), not a plain LAZ under its name
+        return int(octree.save(path, format="copc", overwrite=overwrite).points)
+    if suffix not in (".las", ".laz", ".ply") and is_supported_name(path):  # "scan.xyz" was an octree folder of that name
+        raise InputError(f"{path}: save writes .las, .laz or .ply files, or an octree folder (a name without a point file's suffix)")
     if suffix not in (".las", ".laz", ".ply"):
         return int(octree.save(path, overwrite=overwrite).points)
     if path.exists() and not overwrite:
