@@ -20,10 +20,11 @@ def convert(
     sampler: str = typer.Option("grid", help="grid (first point per cell of a 128³ grid per node) or poisson (minimum distance)."),
     memory_limit: str | None = typer.Option(None, "--memory-limit", help="Peak memory, e.g. 4G or 512M (default: a quarter of the RAM). An input that fits is converted in memory; a larger one is spilled to OUT/.partial in partitions."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing converted cloud in OUTPUT."),
-    format: str = typer.Option(
-        "gigapoint",
+    format: str | None = typer.Option(
+        None,
         "--format",
-        help="gigapoint (rendered directly), potree (Potree 2.0, for Potree's web viewers) or copc (one .copc.laz file, LAS 1.4).",
+        help="gigapoint (rendered directly), potree (Potree 2.0, for Potree's web viewers) or copc (one .copc.laz file, LAS 1.4); "
+        "default: copc for an OUTPUT ending in .copc.laz, else gigapoint.",
     ),
     max_leaf: int = typer.Option(20_000, "--max-leaf", help="Most points a leaf node holds."),
     layout: str = typer.Option(
@@ -49,7 +50,8 @@ def convert(
 
     if dask is not None and workers is not None:
         raise ConvertError("--dask and --workers: give one of them (a running cluster's scheduler, or a local cluster's size)")
-    watch = work_dir(output) if format == "copc" else output  # a COPC output appears only once complete
+    copc = format == "copc" or (format is None and output.name.lower().endswith(".copc.laz"))
+    watch = work_dir(output) if copc else output  # a COPC output appears only once complete
     hint = None if quiet else lambda: print(f"while this runs, `gigapoint view {watch}` shows what has been read so far", file=sys.stderr)
     cluster = nullcontext(None)
     if dask is not None or workers is not None:

@@ -16,6 +16,7 @@ from ...core import pages
 from ...core.renderable import PointSource
 from ...errors import InputError, check_switch
 from ...io._base import check_file
+from ...io.registry import is_supported_name
 from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
 from ..copc_write import check_output as check_copc_output
@@ -153,7 +154,7 @@ def convert(
     sampler: str = "grid",
     memory_limit=None,
     overwrite: bool = False,
-    format: str = "gigapoint",
+    format: str | None = None,
     max_leaf: int = DEFAULT_MAX_LEAF,
     partition_points: int | None = None,
     chunk_size: int | None = None,
@@ -170,7 +171,8 @@ def convert(
     """Convert point cloud files (or a cloud, or an iterable of PointChunks) into an LOD octree directory ``out``.
 
     ``sampler``: grid | poisson. ``format``: gigapoint (rendered directly) | potree (Potree 2.0,
-    ``encoding`` DEFAULT or BROTLI). ``memory_limit``: bytes or '4G'; bounds partition sizes. Only path
+    ``encoding`` DEFAULT or BROTLI) | copc; None: copc for an ``out`` ending in .copc.laz, else
+    gigapoint (a folder, so not named like a point file). ``memory_limit``: bytes or '4G'; bounds partition sizes. Only path
     inputs can resume after an interruption; chunk iterables always start clean.
     ``partition_points``, ``chunk_size`` and ``upper_points`` (the carried root points joined
     at once, default ``partition_points``) are tuning knobs, derived from the memory limit.
@@ -205,9 +207,13 @@ def convert(
         source_files = [check_file(p) if isinstance(p, (str, os.PathLike)) else _not_a_path(p) for p in source_files]
     if sampler not in SAMPLERS:
         raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
+    out = local_path(out, "the output", ConvertError)  # a file:// URL names a path
+    if format is None:  # -o scan.copc.laz without --format was a gigapoint folder of that name
+        format = "copc" if out is not None and str(out).lower().endswith(".copc.laz") else "gigapoint"
     if format not in FORMATS:
         raise ConvertError(f"--format: unknown format {format!r}; choose {' or '.join(FORMATS)}")
-    out = local_path(out, "the output", ConvertError)  # a file:// URL names a path
+    if format != "copc" and out is not None and str(out) != "" and is_supported_name(out):  # -o scan.laz: a folder named so
+        raise ConvertError(f"{out}: a {format} octree is a folder; name it without a point file's suffix, or write --format copc into a .copc.laz file")
     if format == "copc" and out is not None and str(out) != "":
         check_copc_output(out, overwrite)
     if not (isinstance(max_leaf, int) and max_leaf >= 100):

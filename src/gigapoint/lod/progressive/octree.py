@@ -1305,9 +1305,10 @@ class ProgressiveOctree:
         if parts:
             yield _chunk_of(parts)
 
-    def save(self, out, format: str = "gigapoint", overwrite: bool = False, **options):
-        """Write the octree as a converted octree folder (gigapoint, potree or copc) through
-        ``gigapoint.convert``; waits for loading to finish first. Returns the ConvertResult.
+    def save(self, out, format: str | None = None, overwrite: bool = False, **options):
+        """Write the octree as a converted octree folder (gigapoint, potree) or a COPC file
+        through ``gigapoint.convert`` (``format`` None: copc for a .copc.laz ``out``, else
+        gigapoint); waits for loading to finish first. Returns the ConvertResult.
 
         The converted octree has this one's nodes: its leaves, with their points, are the
         conversion's partitions as they stand (``grown``; lod/convert/seeded.py), and the
