@@ -34,14 +34,12 @@ def demo(
     50 M points. 10⁹ points at ``scale=0.01`` hold ~9 GB (``attributes=False``: ~6 GB, without
     the intensity and classification). ``colors``: how colours are held (``core.build_cloud``:
     "auto", "rgba", "rgb565" or "palette")."""
-    import numbers
-
-    from .errors import InputError, check_whole
+    from .errors import InputError, check_whole, is_real
     from .io.demo import demo_chunks
 
     n_points = check_whole("demo", "n_points", n_points, 1)  # 0 or -5: "no valid points"
     check_whole("demo", "seed", seed, -(2**63) + 1, 2**63 - 1)  # a string reached the generator's kernel: numba's TypingError
-    if scale is not None and not (isinstance(scale, numbers.Real) and not isinstance(scale, bool) and 1e-6 <= scale <= 1000):
+    if scale is not None and not (is_real(scale) and 1e-6 <= scale <= 1000):
         raise InputError(f"demo: scale must be None (float positions) or a grid step between 1e-6 and 1000 metres, got {scale!r}")
     if progressive:
         from .lod.progressive import demo_sources, open_progressive

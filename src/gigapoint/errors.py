@@ -11,6 +11,15 @@ def is_whole_number(value) -> bool:
     return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 
 
+def is_real(value) -> bool:
+    """Whether ``value`` is a finite real number (Python's or numpy's, not a bool, not a string):
+    the test behind the one-line errors about sizes, angles and rates ('a' was a TypeError inside)."""
+    import math
+    import numbers
+
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+
+
 def check_whole(where: str, name: str, value, lo: int | None = None, hi: int | None = None, unit: str = "") -> int:
     """``value`` as an int, or a one-line InputError (``where: name must be an integer from lo
     to hi unit, got ...``) unless it is a whole number (``is_whole_number``) in ``lo..hi``

@@ -9,13 +9,12 @@ from __future__ import annotations
 
 import functools
 import math
-import numbers
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..core.selection import View
-from ..errors import CameraError
+from ..errors import CameraError, is_real
 
 MAX_IMAGE_SIDE = 16_384
 VIEWS = {
@@ -105,11 +104,6 @@ def sample_points(cloud, n: int = 20_000) -> np.ndarray:
         lo, hi = (np.asarray(b, np.float64) for b in bounds)
         return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     return np.concatenate(parts)
-
-
-def is_real(v) -> bool:
-    """A finite real number (not a bool, not a string)."""
-    return isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
 
 
 def _yaw_pitch(view) -> tuple[float, float]:

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_write
-from ..errors import GigapointError, check_switch, check_whole
-from .camera import Camera, auto_view, image_side, is_real, sample_points
+from ..errors import GigapointError, check_switch, check_whole, is_real
+from .camera import Camera, auto_view, image_side, sample_points
 from .settings import RenderSettings
 
 VIDEO_SUFFIXES = {".mp4", ".webm", ".mkv", ".avi", ".mov", ".gif"}
