@@ -129,6 +129,10 @@ def test_a_failed_render_leaves_no_output_behind(capsys, tmp_path, small_las):
         (["--camera", "eye=0,0,nan target=0,0,0"], "--camera"),
         (["--camera", "eye=1,1,1 target=1,1,1"], "same point"),
         (["--camera", "yaw=10 eye=1,1,1 target=0,0,0"], "not both"),
+        (["--camera", "target=1,2,3"], "give eye=x,y,z target=x,y,z or yaw=deg pitch=deg"),  # was an internal KeyError
+        (["--camera", "fov=30"], "give eye=x,y,z target=x,y,z or yaw=deg pitch=deg"),
+        (["--camera", "yaw=10 yaw=20 pitch=5"], "yaw is given twice"),
+        (["--camera", "yaw=10 pitch=5 up=1,0,0"], "up goes with eye and target"),
         (["--fov", "0"], "fov"),
         (["--view", "sideways"], "view"),
         (["--background", "chartreuse-ish"], "background"),

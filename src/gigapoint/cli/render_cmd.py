@@ -38,6 +38,8 @@ def parse_camera(text: str) -> dict:
             raise GigapointError(f"--camera: {key} needs numbers, got {raw!r}") from None
         if len(nums) != _CAMERA_KEYS[key] or not all(math.isfinite(v) for v in nums):
             raise GigapointError(f"--camera: {key} needs {_CAMERA_KEYS[key]} finite number(s), got {raw!r}")
+        if key in values:  # 'yaw=10 yaw=20' kept the last one without a word
+            raise GigapointError(f"--camera: {key} is given twice")
         values[key] = nums if len(nums) > 1 else nums[0]
     look_at = "eye" in values
     orbit = any(k in values for k in ("yaw", "pitch", "distance"))
@@ -47,8 +49,12 @@ def parse_camera(text: str) -> dict:
         raise GigapointError("--camera: eye needs a target (eye=x,y,z target=x,y,z)")
     if orbit and not {"yaw", "pitch"} <= set(values):
         raise GigapointError("--camera: orbit needs yaw and pitch (distance and target are optional)")
+    if orbit and "up" in values:  # an orbit's up is the z axis: 'up' was ignored
+        raise GigapointError("--camera: up goes with eye and target; an orbit (yaw, pitch) keeps z up")
     if not values:
         raise GigapointError("--camera: empty camera description")
+    if not (look_at or orbit):  # 'target=...' or 'fov=...' alone was an internal KeyError
+        raise GigapointError("--camera: give eye=x,y,z target=x,y,z or yaw=deg pitch=deg (fov, up, distance and target go with them)")
     return values
 
 
