@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from plyfile import PlyData, PlyElement
@@ -396,3 +398,9 @@ def test_a_file_named_twice_is_read_once(tmp_path):
     with pytest.warns(GigapointWarning, match="named more than once"):
         result = gp.convert([a, folder], tmp_path / "out")
     assert result.points == 100
+    from gigapoint.lod.progressive import open_sized  # what render and view open: it warned twice
+
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        cloud = open_sized([a, a], point_budget=10**6)
+    assert cloud.n_points == 50 and [str(w.message) for w in seen] == [f"{a}: named more than once; its points are read once"]

@@ -160,6 +160,7 @@ def test_missing_attribute_and_bad_settings_are_one_line_errors():
         {"stereo": "vr"},
         {"splat_softness": 1.0},  # needs hqs
         {"edl_strength": float("nan")},
+        {"edl_strength": 1e39},  # inf as the kernels' float32: garbage colours on the CPU, black on the GPU
         {"hqs_depth_tolerance": -0.1},
     )
     for bad in bad_settings:

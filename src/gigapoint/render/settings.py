@@ -152,7 +152,7 @@ class RenderSettings:
     intensity_range: Range | None = setting(None, "'low,high' intensity contrast range (default: 2nd..98th percentile).")
     attribute_range: Range | None = setting(None, "'low,high' values of color_attribute mapped onto the colormap (default: 2nd..98th percentile).")
     edl: bool = setting(False, "Eye-dome lighting.")
-    edl_strength: float = setting(1.0, "Eye-dome lighting strength.", min=0.0)
+    edl_strength: float = setting(1.0, "Eye-dome lighting strength.", min=0.0, max=10_000.0)  # float32 in the kernels: 1e39 was inf
     edl_radius: float = setting(1.4, "Eye-dome lighting radius in pixels.", min=0.5, max=16.0)
     fill_holes: int = setting(0, "Depth-aware hole filling: 0 off, 1/2/3 = 3x3/5x5/7x7 window.", min=0, max=3)
     fill_holes_foveated: bool = setting(

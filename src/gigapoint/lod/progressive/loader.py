@@ -246,13 +246,14 @@ def open_sized(paths, point_budget: int, progressive: bool | None = None, progre
     """What ``gigapoint view`` and ``render`` open: an octree (a converted folder, COPC, EPT) as
     itself; other inputs as a ProgressiveOctree (drawable while it loads) when asked, or when
     their headers count more points than ``point_budget``; else as one PointCloud."""
-    from ...io import open_cloud
+    from ...io import expand_paths, open_cloud
     from ..reader import is_lod_source, open_octree, refuse_octrees
 
     paths = list(paths)
     if len(paths) == 1 and is_lod_source(paths[0]):
         return open_octree(paths[0])
     refuse_octrees(paths, "it cannot join other files")
+    paths = expand_paths(paths)  # once: a file named twice was warned about twice (headers, then the points)
     if progressive is not False:
         sources, total, bounds, name, grid = file_sources(paths)
         if progressive or (total is not None and total > point_budget):
