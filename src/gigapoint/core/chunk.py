@@ -39,7 +39,8 @@ class PointChunk:
                 raise ValueError(f"rgba has {len(self.rgba)} rows, xyz has {n}")
         for name, values in self.attributes.items():
             if np.ndim(values) == 0:  # intensity=5: len() of a 0-d array was a TypeError
-                raise ValueError(f"attribute {name!r} is one value ({np.asarray(values).item()!r}), not one per point")
+                value = " ".join(repr(np.asarray(values).item()).split())  # one line, however long the object
+                raise ValueError(f"attribute {name!r} is one value ({value[:60]}{'...' if len(value) > 60 else ''}), not one per point")
             if len(values) != n:
                 raise ValueError(f"attribute {name!r} has {len(values)} rows, xyz has {n}")
             problem = attribute_name_problem(name) or attribute_dtype_problem(name, values)

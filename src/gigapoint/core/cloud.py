@@ -467,6 +467,9 @@ def from_arrays(xyz, rgb=None, name: str = "arrays", scale=None, colors: str = "
             raise InputError(f"{name}: scale must be a positive number or three, got {scale!r}")
         scale = tuple(float(v) for v in np.broadcast_to(s, (3,)))
     rgba = None if rgb is None else colors_for(rgb, len(xyz), name)  # floats of 0..255 as a file's
+    for key, values in attributes.items():
+        if isinstance(values, dict):  # attributes={"intensity": ...} printed the whole dict over many lines
+            raise InputError(f"{name}: attribute {key!r} is a dict; give attributes as keywords: from_arrays(xyz, rgb, intensity=...) or **{key}")
     try:
         chunk = PointChunk(xyz, rgba, {k: np.asarray(v) for k, v in attributes.items()}, scale=scale)
     except ValueError as exc:
