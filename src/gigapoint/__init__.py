@@ -35,10 +35,10 @@ def demo(
     the intensity and classification). ``colors``: how colours are held (``core.build_cloud``:
     "auto", "rgba", "rgb565" or "palette")."""
     from .errors import InputError, check_whole, is_real
-    from .io.demo import demo_chunks
+    from .io.demo import check_seed, demo_chunks
 
     n_points = check_whole("demo", "n_points", n_points, 1)  # 0 or -5: "no valid points"
-    check_whole("demo", "seed", seed, -(2**63) + 1, 2**63 - 1)  # a string reached the generator's kernel: numba's TypingError
+    check_seed("demo", seed)
     if scale is not None and not (is_real(scale) and 1e-6 <= scale <= 1000):
         raise InputError(f"demo: scale must be None (float positions) or a grid step between 1e-6 and 1000 metres, got {scale!r}")
     if progressive:

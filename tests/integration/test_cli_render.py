@@ -180,6 +180,9 @@ def test_demo_command(capsys, tmp_path):
     assert Image.open(out).size == (160, 90)
     rc, _, err = run(capsys, "demo", "--points", 0, "-o", tmp_path / "z.png")
     assert rc == 1 and "--points" in err
+    rc, _, err = run(capsys, "demo", "--points", 1000, "--seed", 2**64, "-o", tmp_path / "s.png")  # an internal error in the generator
+    assert rc == 1 and err == f"error: --seed: seed must be an integer from -9,223,372,036,854,775,807 to 9,223,372,036,854,775,807, got {2**64}\n"
+    assert not (tmp_path / "s.png").exists()
 
 
 def test_demo_command_holds_the_town_at_1_cm_in_the_compact_layout(capsys, tmp_path):

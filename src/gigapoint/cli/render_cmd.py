@@ -224,12 +224,13 @@ def demo(
     from ..core import build_cloud
     from ..core.chunk import PointChunk
     from ..core.chunked import IN_MEMORY_BYTES_MIN, check_room
-    from ..io.demo import demo_arrays, round_to_grid
+    from ..io.demo import check_seed, demo_arrays, round_to_grid
     from ..render import render_frame
 
     console = Console()
     if not 1 <= points <= 4_000_000_000:
         raise GigapointError(f"--points must be between 1 and 4e9, got {points}")
+    check_seed("--seed", seed)  # 2**64 was an internal error in the generator
     check_room(f"demo({points:,})", points, IN_MEMORY_BYTES_MIN, instead=": take fewer --points")
     check_output(output, overwrite)
     check_image_size(width, height)

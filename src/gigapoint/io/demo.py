@@ -324,6 +324,14 @@ def _scene_tables(seed: int):
     return grid, lots, _tree_table(seed, grid, lots)
 
 
+def check_seed(where: str, seed) -> int:
+    """``seed`` as an int the generator's kernels take (int64), else a one-line InputError: a
+    string was numba's TypingError, 2**64 an internal error from the command line."""
+    from ..errors import check_whole
+
+    return check_whole(where, "seed", seed, -(2**63) + 1, 2**63 - 1)
+
+
 def demo_arrays(n_points: int, seed: int = 0, start: int = 0, offset=(0.0, 0.0, 0.0)):
     """Points ``start .. start+n_points`` of the demo scene: (xyz, rgba, attributes)."""
     if n_points < 0:
