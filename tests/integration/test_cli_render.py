@@ -298,6 +298,11 @@ def test_info_of_a_folder_shows_every_file_it_can_read_and_names_the_others(caps
     assert rows[1]["error"].startswith(f"{folder / 'b.las'}: ") and rows[2]["point_count"] == 30_000
     rc, out, err = run(capsys, "info", folder / "b.las")  # one file: its error alone
     assert rc == 1 and err.count("\n") == 1 and err.startswith(f"error: {folder / 'b.las'}: ")
+    rc, out, err = run(capsys, "info", folder / "nope.las", folder / "a.las")  # a missing name stopped the others being shown
+    assert rc == 1 and out.count("points:") == 1 and f"{folder / 'a.las'}" in out
+    assert err.strip().splitlines() == [f"error: {folder / 'nope.las'}: no such file", "error: info: 1 of 2 files could not be read (said above)"]
+    rc, out, err = run(capsys, "info", folder / "nope.las")
+    assert rc == 1 and err == f"error: {folder / 'nope.las'}: no such file\n"
 
 
 def test_chunked_option_builds_the_same_image(capsys, tmp_path, small_las):

@@ -30,12 +30,17 @@ def info(
     from ..lod import is_lod_source, octree_info
 
     # an octree (folder, COPC file, EPT dataset, URL) is one dataset, not a folder of files
-    paths: list[tuple[Path, bool]] = []
+    paths: list[tuple[Path, bool, GigapointError | None]] = []
     for f in files:
-        paths.extend([(f, True)] if is_lod_source(f) else [(p, False) for p in expand_paths([f])])
-    failed = 0
-    for i, (path, octree) in enumerate(paths):
         try:
+            paths.extend([(f, True, None)] if is_lod_source(f) else [(p, False, None) for p in expand_paths([f])])
+        except GigapointError as exc:  # a missing file among several stopped the others from being shown
+            paths.append((f, False, exc))
+    failed = 0
+    for i, (path, octree, missing) in enumerate(paths):
+        try:
+            if missing is not None:
+                raise missing
             data = octree_info(path) if octree else file_info(path)
         except GigapointError as exc:
             if len(paths) == 1:
