@@ -302,7 +302,8 @@ def test_a_damaged_frame_of_a_recording_is_refused_and_the_rest_play(tmp_path):
 
 def test_recording_into_an_odd_folder(tmp_path, monkeypatch):
     """record(5) was a TypeError, record("") recorded into the current folder; overwrite=True
-    deleted the .npz files of a frames/ folder that held no recording."""
+    deleted the .npz files of a frames/ folder that held no recording, and a folder of other
+    files (a Potree octree, someone's frames/000000.npz) was recorded into, its files replaced."""
     live = LiveCloud()
     monkeypatch.chdir(tmp_path)
     for bad in (5, ""):
@@ -311,10 +312,17 @@ def test_recording_into_an_odd_folder(tmp_path, monkeypatch):
     assert not list(tmp_path.iterdir())
     mine = tmp_path / "work" / "frames"
     mine.mkdir(parents=True)
-    np.savez(mine / "keep.npz", a=np.arange(3))
-    live.record(tmp_path / "work", overwrite=True)
+    np.savez(mine / "000000.npz", a=np.arange(3))
+    for overwrite in (False, True):
+        with pytest.raises(InputError, match=rf"^{re.escape(str(tmp_path / 'work'))}: holds other files, not a recording; record into a new or empty folder$"):
+            live.record(tmp_path / "work", overwrite=overwrite)
+    assert sorted(p.name for p in (tmp_path / "work").rglob("*")) == ["000000.npz", "frames"]
+    np.testing.assert_array_equal(np.load(mine / "000000.npz")["a"], np.arange(3))
+    (tmp_path / "empty").mkdir()
+    live.record(tmp_path / "empty")  # an empty folder is fine
+    live.push(np.zeros((2, 3)))
     live.stop_recording()
-    assert (mine / "keep.npz").exists()
+    assert (tmp_path / "empty" / "index.json").exists()
 
 
 def test_not_a_recording(tmp_path):

@@ -63,8 +63,10 @@ class Recorder:
             raise InputError(f"{self.directory}: holds a recording already; pass overwrite=True to replace it")
         if self.directory.exists() and not self.directory.is_dir():
             raise InputError(f"{self.directory}: exists and is not a folder")
+        if not held and self.directory.is_dir() and any(self.directory.iterdir()):  # its frames/000000.npz was replaced
+            raise InputError(f"{self.directory}: holds other files, not a recording; record into a new or empty folder")
         (self.directory / FRAMES).mkdir(parents=True, exist_ok=True)
-        if overwrite and held:  # a recording's frames only: a folder that held none keeps its files
+        if overwrite and held:  # a recording's frames only
             for old in (self.directory / FRAMES).glob("*.npz"):
                 old.unlink()
         self.index_every_s = index_every_s
