@@ -87,6 +87,10 @@ def test_view_live_a_folder_of_frames_and_bad_sources(tmp_path):
     finally:
         stop(proc)
     for args, message in ((["--live", str(tmp_path / "nowhere")], "no such file"), (["--replay", str(frames)], "not a live recording"),
-                          (["--live", "demo", "--keep", "0"], "--keep")):  # fmt: skip
+                          (["--live", "demo", "--keep", "0"], "--keep"),
+                          (["--live", "demo", "--progressive"], "--progressive: an option of files and --demo, not of a live stream"),
+                          # a file's viewer recorded nothing and kept nothing, without a word
+                          ([str(frames / "0.npy"), "--record", str(tmp_path / "rec2")], "--record: options of a live stream"),
+                          (["--demo", "1000", "--keep", "5", "--decay", "2"], "--keep and --decay: options of a live stream")):  # fmt: skip
         bad = subprocess.run([sys.executable, "-m", "gigapoint.cli", "view", *args, "--no-browser"], capture_output=True, text=True, timeout=60)
         assert bad.returncode == 1 and message in bad.stderr and len(bad.stderr.strip().splitlines()) == 1, bad.stderr

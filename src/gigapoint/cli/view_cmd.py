@@ -39,7 +39,7 @@ def view(
         None, "--live", help="Show a live stream: 'demo' (a synthetic depth sensor), a TUM RGB-D folder, a ROS bag, a folder of frames.",
     ),
     replay: Path | None = typer.Option(None, "--replay", help="Play back a stream recorded with --record (or LiveCloud.record) at its rate."),
-    keep: int = typer.Option(100, "--keep", help="Live: frames drawn (the oldest leaves as a new one arrives)."),
+    keep: int | None = typer.Option(None, "--keep", help="Live: frames drawn (the oldest leaves as a new one arrives). [default: 100]"),
     decay: float | None = typer.Option(None, "--decay", help="Live: seconds after which a frame leaves (default: never)."),
     record: Path | None = typer.Option(None, "--record", help="Live: also record the stream into this folder."),
     colors: ColorsOption = "auto",
@@ -57,6 +57,9 @@ def view(
             raise GigapointError(f"{option_names(options)}: options of a point cloud held in memory, not of a live stream")
         if window:
             raise GigapointError("view: --window does not show live streams yet; use the browser viewer (without --window)")
+        if progressive is not None:
+            raise GigapointError("--progressive: an option of files and --demo, not of a live stream")
+        keep = 100 if keep is None else keep
         check_live_options(keep, decay, 1.0)
         view_live(str(replay) if replay is not None else live, replay=replay is not None, keep=keep, decay=decay, record=record,
                   host=host, port=port, browser=browser, open_browser=_open_browser)  # fmt: skip
@@ -69,6 +72,9 @@ def view(
 
     if demo is not None and paths:
         raise GigapointError("view: give either PATH... or --demo N, not both")
+    live_only = [name for name, value in (("--keep", keep), ("--decay", decay), ("--record", record)) if value is not None]
+    if live_only:  # `view a.laz --record rec` recorded nothing, without a word
+        raise GigapointError(f"{' and '.join(live_only)}: options of a live stream (--live SOURCE or --replay DIR)")
     budget = RenderSettings().point_budget
     if demo is not None:
         if not 1 <= demo <= 2_000_000_000:
