@@ -75,6 +75,24 @@ def test_turntable_option_writes_a_video(npy, tmp_path):
     assert main(["render", str(npy), "-o", str(tmp_path / "spin.png"), "--turntable", "4"]) == 1
 
 
+def test_options_a_turntable_or_a_still_image_would_drop_are_refused(npy, tmp_path, capsys):
+    """--depth-out with --turntable wrote no depth file, --camera/--view/--projection/--stats were
+    dropped, and --fps without --turntable too, each without a word."""
+    gif = tmp_path / "spin.gif"
+    for extra, problem in (
+        (["--depth-out", str(tmp_path / "d.npy")], "--depth-out"),
+        (["--camera", "yaw=10 pitch=20", "--view", "top"], "--camera, --view"),
+        (["--projection", "orthographic", "--stats"], "--projection, --stats"),
+    ):
+        assert main(["render", str(npy), "-o", str(gif), "-W", "32", "-H", "24", "--turntable", "2", *extra]) == 1
+        assert capsys.readouterr().err == f"error: {problem}: options of a still image, not of --turntable (it orbits the cloud at its own distance)\n"
+    assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "24", "--fps", "5"]) == 1
+    assert capsys.readouterr().err == "error: --fps: an option of --turntable videos\n"
+    assert not list(tmp_path.iterdir())
+    assert main(["render", str(npy), "-o", str(gif), "-W", "32", "-H", "24", "--turntable", "2", "--fps", "5", "--backend", "cpu"]) == 0
+    assert gif.exists()
+
+
 def _render(npy, out, *extra):
     assert main(["render", str(npy), "-o", str(out), "-W", "80", "-H", "56", "--view", "iso", "--backend", "cpu", *extra]) == 0
     return np.asarray(Image.open(out))

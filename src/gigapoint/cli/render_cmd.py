@@ -140,7 +140,7 @@ def render(
     turntable: Annotated[
         int | None, typer.Option(help="Write a video of N frames orbiting the cloud instead of an image (-o out.mp4).")
     ] = None,
-    fps: Annotated[float, typer.Option(help="Frames per second of --turntable videos.")] = 30.0,
+    fps: Annotated[float | None, typer.Option(help="Frames per second of --turntable videos. [default: 30]")] = None,
     progressive: Annotated[
         bool | None,
         typer.Option(
@@ -158,7 +158,14 @@ def render(
         from ..render.video import VIDEO_SUFFIXES
 
         check_output(output, overwrite, suffixes=VIDEO_SUFFIXES)
+        ignored = [name for name, given in (("--depth-out", depth_out is not None), ("--index-out", index_out is not None),
+                   ("--camera", camera is not None), ("--view", view != "auto"), ("--projection", projection != "perspective"),
+                   ("--stats", stats)) if given]  # fmt: skip
+        if ignored:  # each was dropped without a word: no depth file, the turntable's own orbit
+            raise GigapointError(f"{', '.join(ignored)}: options of a still image, not of --turntable (it orbits the cloud at its own distance)")
     else:
+        if fps is not None:
+            raise GigapointError("--fps: an option of --turntable videos")
         check_output(output, overwrite)
     for extra in (depth_out, index_out):
         if extra is not None:
@@ -176,7 +183,7 @@ def render(
 
         with progress_bar(f"turntable {output.name}", turntable) as advance:
             render_turntable(
-                cloud, turntable, output, settings, width=width, height=height, fov=fov, fps=fps, overwrite=overwrite,
+                cloud, turntable, output, settings, width=width, height=height, fov=fov, fps=30.0 if fps is None else fps, overwrite=overwrite,
                 progress=lambda done, total: advance(done),
             )  # fmt: skip
         typer.echo(f"wrote {output} ({turntable} frames, {width}x{height}, {cloud.n_points:,} points)")
