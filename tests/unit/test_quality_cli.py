@@ -75,6 +75,12 @@ def test_turntable_option_writes_a_video(npy, tmp_path):
     assert main(["render", str(npy), "-o", str(tmp_path / "spin.png"), "--turntable", "4"]) == 1
 
 
+def test_a_native_window_refuses_the_servers_options(capsys):
+    """`view --window --port 8080` showed a window and listened on nothing, without a word."""
+    assert main(["view", "--demo", "100", "--window", "--port", "8080", "--host", "0.0.0.0"]) == 1
+    assert capsys.readouterr().err == "error: --host and --port: options of the browser viewer, not of --window\n"
+
+
 def test_options_a_turntable_or_a_still_image_would_drop_are_refused(npy, tmp_path, capsys):
     """--depth-out with --turntable wrote no depth file, --camera/--view/--projection/--stats were
     dropped, and --fps without --turntable too, each without a word."""

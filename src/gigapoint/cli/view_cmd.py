@@ -72,6 +72,9 @@ def view(
 
     if demo is not None and paths:
         raise GigapointError("view: give either PATH... or --demo N, not both")
+    served = [name for name, given in (("--host", host != "127.0.0.1"), ("--port", port != 0)) if given]
+    if window and served:  # a native window listens on nothing: they were dropped without a word
+        raise GigapointError(f"{' and '.join(served)}: options of the browser viewer, not of --window")
     live_only = [name for name, value in (("--keep", keep), ("--decay", decay), ("--record", record)) if value is not None]
     if live_only:  # `view a.laz --record rec` recorded nothing, without a word
         raise GigapointError(f"{' and '.join(live_only)}: options of a live stream (--live SOURCE or --replay DIR)")
