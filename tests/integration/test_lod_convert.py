@@ -475,6 +475,10 @@ def test_refuses_to_overwrite(demo_las, tmp_path, capsys):
         (["{las}", "--memory-limit", "infG"], "--memory-limit: cannot read 'infG'"),  # an internal error (OverflowError) before
         (["{las}", "--format", "ept"], "--format"),
         (["{octree}"], "converted octree"),
+        # each was dropped without a word: Potree's own layout, 32-bit colours
+        (["{las}", "--format", "potree", "--layout", "words"], "error: --layout: an option of the gigapoint format, not of potree"),
+        (["{las}", "--format", "copc", "--layout", "compact", "--colors", "rgb565"], "--layout and --colors: options of the gigapoint format, not of copc"),
+        (["{las}", "--layout", "words", "--colors", "rgb565"], "--colors rgb565: an option of the compact layout; words holds 32-bit colours"),
     ],
 )
 def test_bad_input_one_line_errors(demo_las, tmp_path, capsys, args, message):
@@ -488,6 +492,19 @@ def test_bad_input_one_line_errors(demo_las, tmp_path, capsys, args, message):
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1 and err.startswith("error: "), err
     assert not (tmp_path / "out" / "octree.json").exists()
+
+
+def test_options_of_one_format_are_refused_for_another(tmp_path):
+    from gigapoint.io import demo_arrays
+
+    xyz, rgba, _ = demo_arrays(2_000)
+    cloud = __import__("gigapoint").from_arrays(xyz, rgba)
+    with pytest.raises(ConvertError, match=r"^encoding: an option of the potree format, not of gigapoint$"):
+        convert(cloud, tmp_path / "g", encoding="BROTLI")
+    with pytest.raises(ConvertError, match=r"^--colors: an option of the gigapoint format, not of potree$"):
+        convert(cloud, tmp_path / "p", format="potree", colors="rgb565")
+    assert not list(tmp_path.iterdir())
+    assert convert(cloud, tmp_path / "w", layout="words", colors="rgba").points == 2_000  # words holds rgba: consistent
 
 
 def test_autzen_laz_converts_and_renders(tmp_path):

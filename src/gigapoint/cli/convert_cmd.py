@@ -27,10 +27,10 @@ def convert(
         "default: copc for an OUTPUT ending in .copc.laz, else gigapoint.",
     ),
     max_leaf: int = typer.Option(20_000, "--max-leaf", help="Most points a leaf node holds."),
-    layout: str = typer.Option(
-        "compact", "--layout", help="gigapoint format: compact (version 2, ~half the bytes, exact at the source's scale) or words (version 1)."
+    layout: str | None = typer.Option(
+        None, "--layout", help="gigapoint format: compact (version 2, ~half the bytes, exact at the source's scale; the default) or words (version 1)."
     ),
-    colors: str = typer.Option("rgba", "--colors", help="compact layout's colours: rgba (exact) or rgb565 (16 bits, at most 4/255 off)."),
+    colors: str | None = typer.Option(None, "--colors", help="compact layout's colours: rgba (exact; the default) or rgb565 (16 bits, at most 4/255 off)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
     dask: str | None = typer.Option(
         None,

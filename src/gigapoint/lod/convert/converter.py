@@ -160,18 +160,18 @@ def convert(
     chunk_size: int | None = None,
     progress: bool = False,
     name: str | None = None,
-    encoding: str = "DEFAULT",
+    encoding: str | None = None,
     upper_points: int | None = None,
     client=None,
     source_files=None,
-    layout: str = "compact",
-    colors: str = "rgba",
+    layout: str | None = None,
+    colors: str | None = None,
     on_ready=None,
 ) -> ConvertResult:
     """Convert point cloud files (or a cloud, or an iterable of PointChunks) into an LOD octree directory ``out``.
 
     ``sampler``: grid | poisson. ``format``: gigapoint (rendered directly) | potree (Potree 2.0,
-    ``encoding`` DEFAULT or BROTLI) | copc; None: copc for an ``out`` ending in .copc.laz, else
+    ``encoding`` DEFAULT (the default) or BROTLI) | copc; None: copc for an ``out`` ending in .copc.laz, else
     gigapoint (a folder, so not named like a point file). ``memory_limit``: bytes or '4G'; bounds partition sizes. Only path
     inputs can resume after an interruption; chunk iterables always start clean.
     ``partition_points``, ``chunk_size`` and ``upper_points`` (the carried root points joined
@@ -192,7 +192,8 @@ def convert(
     ``layout`` (gigapoint format): "compact" writes format version 2, node payloads in bit
     streams (../compact_octree.py, about half the bytes; positions exact at the source's scale),
     "words" version 1 (three u32 words and 32-bit colours a point). ``colors`` (version 2):
-    "rgba" keeps colours exact, "rgb565" stores 16 bits (at most 4/255 off a channel).
+    "rgba" keeps colours exact, "rgb565" stores 16 bits (at most 4/255 off a channel). None:
+    "compact" and "rgba"; given with another format (or rgb565 with "words") they are refused.
 
     ``on_ready``: called with no argument once the output first shows points (the read phase's
     first preview; at the start where a resumed run finds one): the CLI says then how to watch
@@ -216,6 +217,14 @@ def convert(
         raise ConvertError(f"{out}: a {format} octree is a folder; name it without a point file's suffix, or write --format copc into a .copc.laz file")
     if format == "copc" and out is not None and str(out) != "":
         check_copc_output(out, overwrite)
+    given = [f"--{n}" for n, v in (("layout", layout), ("colors", colors)) if v is not None]
+    if given and format != "gigapoint":  # --format potree --layout words wrote Potree's own layout, without a word
+        raise ConvertError(f"{' and '.join(given)}: {'options' if len(given) > 1 else 'an option'} of the gigapoint format, not of {format}")
+    if encoding is not None and format != "potree":
+        raise ConvertError(f"encoding: an option of the potree format, not of {format}")
+    if layout == "words" and colors == "rgb565":  # version 1 holds 32-bit colours
+        raise ConvertError("--colors rgb565: an option of the compact layout; words holds 32-bit colours")
+    layout, colors, encoding = layout or "compact", colors or "rgba", encoding or "DEFAULT"
     if not (isinstance(max_leaf, int) and max_leaf >= 100):
         raise ConvertError(f"max_leaf must be an integer >= 100, got {max_leaf!r}")
     if encoding not in ENCODINGS:
