@@ -36,6 +36,17 @@ def check_whole(where: str, name: str, value, lo: int | None = None, hi: int | N
     raise InputError(f"{where}: {name} must be an integer{rng}{unit}, got {value!r}")
 
 
+def check_timeout(where: str, timeout) -> float | None:
+    """``timeout`` (seconds; None or inf: no limit; below 0: none at all) as waits take it, else
+    a one-line InputError: NaN waited forever, a string was a TypeError inside the wait."""
+    import math
+    import numbers
+
+    if timeout is None or isinstance(timeout, numbers.Real) and not isinstance(timeout, bool) and not math.isnan(timeout):
+        return None if timeout is None or timeout == math.inf else float(timeout)
+    raise InputError(f"{where}: timeout must be a number of seconds or None, got {timeout!r}")
+
+
 def check_switch(name: str, value, where: str, allow_none: bool = False) -> None:
     """A one-line InputError (``where: name must be ...``) unless ``value`` is True or False
     (numpy's too; None where ``allow_none``): a string such as "no" was taken as true, and an

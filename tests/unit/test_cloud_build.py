@@ -1,10 +1,14 @@
 """The compiled point scan and gather used by build_cloud, against numpy."""
 
+import re
+
 import numpy as np
 import pytest
 
+import gigapoint as gp
 from gigapoint.core import cloud
 from gigapoint.core.cloud import MAX_ABS_COORDINATE, _valid_mask, gather, scan_points
+from gigapoint.errors import InputError
 
 
 @pytest.fixture(autouse=True, params=["numpy below the threshold", "the compiled kernels"])
@@ -70,3 +74,12 @@ def test_chunks_are_joined_with_numpys_dtype_for_them(monkeypatch):
         np.testing.assert_array_equal(got, np.sort(np.concatenate([p.attributes["intensity"] for p in parts]).astype(np.int64)))
     finally:
         pages._madvise.cache_clear()
+
+
+def test_chunks_refuse_an_odd_size():
+    """cloud.chunks(0), chunks(-1) and chunks(2.5) were taken (one batch a chunk, whatever was asked)."""
+    cloud = gp.from_arrays(np.random.default_rng(0).random((3000, 3)), name="c")
+    for bad in (0, -1, 2.5, "a"):
+        with pytest.raises(InputError, match=rf"^c: chunks: points_per_chunk must be an integer >= 1, got {re.escape(repr(bad))}$"):
+            list(cloud.chunks(bad))
+    assert sum(len(c) for c in cloud.chunks(1000)) == 3000

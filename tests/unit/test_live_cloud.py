@@ -118,6 +118,7 @@ def test_frames_culled_outside_the_view_and_dropped_frames_not_drawn():
         ((np.zeros((4, 3)),), {"nx": np.zeros(4)}, "reserved"),
         ((np.zeros((4, 3)),), {"normals": np.zeros((4, 2))}, "normals must be"),
         ((np.zeros((4, 3)),), {"time": float("nan")}, "time must be"),
+        ((np.zeros((4, 3)),), {"time": "a"}, "live: push: time must be a finite number of seconds, got 'a'"),  # float()'s ValueError
     ],
 )
 def test_a_bad_frame_is_one_line_and_the_stream_goes_on(args, kwargs, message):
@@ -699,3 +700,18 @@ def test_a_later_frame_keeps_to_the_first_frames_attributes():
         with pytest.raises(InputError, match=rf"^live: push: attribute 'intensity' holds values its uint16 \(the first frame's\) cannot hold exactly, e.g. {shown}$"):
             live.push(xyz, rgb, intensity=values)
     assert live.n_points == 150
+
+
+def test_waits_and_snapshots_refuse_odd_arguments():
+    """wait_frame(timeout=NaN) waited forever, wait_frame("a") was a TypeError inside the wait,
+    snapshot("no") kept the normals."""
+    live = LiveCloud()
+    live.push(*frame(0))
+    for kw, problem in (({"seen": 10**6, "timeout": float("nan")}, "timeout must be a number of seconds or None, got nan"),
+                        ({"seen": "a", "timeout": 0.01}, "seen must be an integer, got 'a'")):  # fmt: skip
+        with pytest.raises(InputError, match=rf"^live: wait_frame: {re.escape(problem)}$"):
+            live.wait_frame(**kw)
+    assert live.wait_frame(10**6, timeout=0.01) == live.changes  # a number still times out
+    assert live.wait_frame(0, timeout=float("inf")) == live.changes  # inf: no limit (one change is there)
+    with pytest.raises(InputError, match=r"^live: snapshot: normals must be True or False, got 'no'$"):
+        live.snapshot("no")

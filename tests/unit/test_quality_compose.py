@@ -132,6 +132,11 @@ def test_estimated_normals_of_planes():
     for bad in ({"k": -1}, {"k": 2}, {"k": 12.5}, {"chunk": 0}):  # k=-1 was taken as 3 silently, chunk=0 a ValueError
         with pytest.raises(GigapointError, match=r"^estimate_normals: (k|chunk) must be an integer >= (3|1), got "):
             estimate_normals(cloud, **bad)
+    with pytest.raises(GigapointError, match=r"^estimate_normals: store must be True or False, got 'no'$"):
+        estimate_normals(small_cloud := gp.from_arrays(rng.random((50, 3))), store="no")  # "no" stored them
+    assert "nx" not in small_cloud.attributes
+    with pytest.raises(GigapointError, match=r"^estimate_normals takes a cloud held in memory \(gigapoint.open\(path\)\), not a NoneType$"):
+        estimate_normals(None)  # an AttributeError on None.name
     small = gp.from_arrays(rng.random((5, 3)))  # k above the cloud's points: every point is a neighbour
     assert np.array_equal(estimate_normals(small, k=16, store=False)[0], estimate_normals(small, k=5, store=False)[0])
 

@@ -17,7 +17,7 @@ from typing import ClassVar
 import numpy as np
 from numba import njit, prange
 
-from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError
+from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError, check_whole
 from . import pages
 from .attributes import Attributes
 from .chunk import PointChunk, attributes_in_common, colors_for, warn_dropped_attributes
@@ -124,6 +124,7 @@ class PointCloud:
         """The points as PointChunks, in the cloud's order, whole batches at a time: positions
         (30 bits a batch; exact on the source's grid in the compact layout), colours and
         attributes as they read back. What ``gigapoint.convert(cloud, out)`` converts."""
+        check_whole(f"{self.name}: chunks", "points_per_chunk", points_per_chunk, 1)  # 0, -1 and 2.5 were taken
         first, count = self.batches["first"].astype(np.int64), self.batches["count"].astype(np.int64)
         start = 0
         while start < len(self.batches):

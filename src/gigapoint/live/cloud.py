@@ -42,7 +42,7 @@ from ..core.morton import argsort_codes, cube_of, morton_codes
 from ..core.quantize import make_batches, quantize
 from ..core.renderable import DrawList
 from ..core.selection import Selection, View, select_view, subsample_step
-from ..errors import GigapointError, InputError, check_switch, check_whole
+from ..errors import GigapointError, InputError, check_switch, check_timeout, check_whole, is_real
 from ..lod.build import take, valid_bounds
 from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
 from ..render.splats import point_spacing
@@ -268,6 +268,8 @@ class LiveCloud:
     def wait_frame(self, seen: int, timeout: float | None = None) -> int:
         """Wait until the cloud changed (a frame accepted, a snapshot, a clear) more than ``seen``
         times, or ``timeout`` passes; returns the count of changes."""
+        check_whole(f"{self.name}: wait_frame", "seen", seen)  # 'a' was a TypeError inside the wait
+        timeout = check_timeout(f"{self.name}: wait_frame", timeout)  # NaN waited forever
         with self._changed:
             self._changed.wait_for(lambda: self.changes > seen, timeout)
             return self.changes
@@ -360,6 +362,8 @@ class LiveCloud:
         if world_normals is None:
             world_normals = np.zeros((m, 3), np.float32)
         arrived = self.now()
+        if time is not None and not is_real(time):  # "a" was float()'s ValueError
+            raise InputError(f"{name}: push: time must be a finite number of seconds, got {time!r}")
         t = float(time) if time is not None else self.clock()
         if not np.isfinite(t):
             raise InputError(f"{name}: push: time must be a finite number of seconds, got {time!r}")
@@ -607,6 +611,7 @@ class LiveCloud:
         ring frees them when the snapshot is done), rather than the lock held: frames are drawn
         and pushed as usual."""
         self._check_open("snapshot")
+        check_switch("normals", normals, f"{self.name}: snapshot")  # "no" kept the normals
         with self.lock.reading():
             buf = self.buffers_
             slots = [s for f in self.frames for s in f.chunks]

@@ -19,7 +19,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit, prange
 
-from ..errors import InputError
+from ..errors import InputError, is_real
 
 #: depth units of integer images when no ``depth_scale`` is given: millimetres (Kinect, RealSense, TUM uses 1/5000)
 DEFAULT_INTEGER_SCALE = 0.001
@@ -227,6 +227,8 @@ def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, ma
             raise InputError(f"{name}: rgb must be an ({h}, {w}, 3|4) image matching the depth, got shape {c.shape}")
         rgb8 = c.reshape(h * w, c.shape[2])
         rgb8 = np.ascontiguousarray(rgb8) if rgb8.dtype == np.uint8 else to_rgba8(rgb8)  # 8-bit RGB(A) read as it is
+    if max_depth is not None and not (is_real(max_depth) and max_depth > 0 or max_depth == np.inf):  # -1: "no valid pixel"
+        raise InputError(f"{name}: max_depth must be a positive number of metres or None, got {max_depth!r}")
     limit = np.inf if max_depth is None else float(max_depth)
     n = h * w
     scratch = {} if scratch is None else scratch

@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.cloud import PointCloud
-from ..errors import GigapointError, check_whole
+from ..core.renderable import Renderable
+from ..errors import GigapointError, check_switch, check_whole
 from .cache import render_cache
 
 
@@ -25,9 +26,9 @@ def estimate_normals(cloud, k: int = 16, chunk: int = 200_000, store: bool = Tru
     except ImportError:
         raise GigapointError("estimate_normals needs scipy (pip install 'gigapoint[quality]')") from None
     if not isinstance(cloud, PointCloud):  # an octree's points are in its nodes, drawn a few at a time
-        raise GigapointError(
-            f"{cloud.name}: estimate_normals takes a cloud held in memory (gigapoint.open(path)), not a {type(cloud).__name__}"
-        )
+        named = f"{cloud.name}: " if isinstance(cloud, Renderable) else ""  # None: an AttributeError on .name
+        raise GigapointError(f"{named}estimate_normals takes a cloud held in memory (gigapoint.open(path)), not a {type(cloud).__name__}")
+    check_switch("store", store, "estimate_normals")  # "no" stored them
     if cloud.n_points < 3:
         raise GigapointError(f"{cloud.name}: estimating normals needs at least 3 points, got {cloud.n_points}")
     k = check_whole("estimate_normals", "k", k, 3)  # k=-1 was taken as 3 without a word

@@ -43,8 +43,6 @@ them up in the voxel table, allocate chunks, and write points and voxels in para
 
 from __future__ import annotations
 
-import math
-import numbers
 from contextlib import contextmanager
 from pathlib import Path
 from typing import NamedTuple, Self
@@ -65,7 +63,7 @@ from ...core.morton import fastest
 from ...core.quantize import dequantize
 from ...core.renderable import DrawList, MultiViewDrawList, check_point_index
 from ...core.selection import Selection, View, batch_matrices, precision_for, visible_and_size
-from ...errors import GigapointError, InputError
+from ...errors import GigapointError, InputError, check_timeout
 from ...render.splats import weighted_median
 from ..build import take, valid_bounds
 from ..keys import CODE_BITS, morton_position, point_codes
@@ -792,8 +790,7 @@ class ProgressiveOctree:
     def wait(self, timeout: float | None = None) -> bool:
         """Until the loader has read everything (True) or ``timeout`` passes (False); raises the
         error that stopped it, if any. What was inserted before an error stays drawable."""
-        if timeout is not None and not (isinstance(timeout, numbers.Real) and not isinstance(timeout, bool) and not math.isnan(timeout)):
-            raise InputError(f"{self.name}: wait: timeout must be a number of seconds or None, got {timeout!r}")
+        timeout = check_timeout(f"{self.name}: wait", timeout)
         return True if self.loader is None else self.loader.wait(timeout)
 
     def close(self) -> None:
