@@ -471,6 +471,14 @@ def test_viewer_for_jupyter(cloud):
         assert png[:8] == b"\x89PNG\r\n\x1a\n" and Image.open(io.BytesIO(png)).size == (240, 180)
         img = np.asarray(Image.open(io.BytesIO(png)))
         assert (img[..., 1] > 120).mean() > 0.05  # the ground is in it
+        for bad, problem in (  # "a" was int()'s ValueError, 100.5 cut to 100, scale 3 taken (the page refuses it)
+            ({"width": "a"}, "width must be an integer from 1 to 8,192 pixels, got 'a'"),
+            ({"height": 100.5}, "height must be an integer from 1 to 8,192 pixels, got 100.5"),
+            ({"scale": 3}, "scale must be 1, 2 or 4, got 3"),
+        ):
+            with pytest.raises(gigapoint.GigapointError, match=f"^Viewer.screenshot: {re.escape(problem)}$"):
+                v.screenshot(**bad)
+        assert Image.open(io.BytesIO(v.screenshot(scale=2))).size == (2560, 1440)
     finally:
         v.close()
     with pytest.raises(httpx.TransportError):

@@ -6,7 +6,8 @@ from pathlib import Path
 from typing import Self
 
 from ..core.renderable import Renderable
-from ..errors import GigapointError, check_switch, check_whole
+from ..errors import GigapointError, InputError, check_switch, check_whole
+from .protocol import MAX_SHOT_SIDE
 
 
 def _as_cloud(cloud_or_path):
@@ -66,6 +67,11 @@ class Viewer:
 
     def screenshot(self, width: int | None = None, height: int | None = None, scale: int = 1) -> bytes:
         """PNG bytes of the current view at width x height (default: the tab's size x scale, else 1280x720)."""
+        for name, value in (("width", width), ("height", height)):  # "a" was int()'s ValueError, 100.5 cut to 100
+            if value is not None:
+                check_whole("Viewer.screenshot", name, value, 1, MAX_SHOT_SIDE, " pixels")
+        if scale not in (1, 2, 4) or isinstance(scale, bool):  # the page's rule: 3 was taken here
+            raise InputError(f"Viewer.screenshot: scale must be 1, 2 or 4, got {scale!r}")
         core = self.server.core
         active = core.last_active
         return core.screenshot(active.id if active is not None and active.id in core.sessions else None, width, height, scale)
