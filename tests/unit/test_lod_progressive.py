@@ -10,6 +10,8 @@ a converted octree; a reader drawing while a writer inserts sees consistent fram
 from __future__ import annotations
 
 import contextlib
+import json
+import re
 import threading
 import time
 
@@ -1596,6 +1598,11 @@ def test_save_writes_a_converted_octree_of_its_points(scene, octree, tmp_path, f
     assert (a & b).sum() / (a | b).sum() >= 0.95
     with pytest.raises(GigapointError, match="overwrite"):
         octree.save(out, format=fmt)
+    with pytest.raises(InputError, match=rf"^{re.escape(octree.name)}: save: unknown option\(s\) banana; it takes chunk_size, client, "):
+        octree.save(tmp_path / "b", banana=1)  # a TypeError inside
+    if fmt == "gigapoint":  # name= another was "multiple values for keyword argument 'name'"
+        octree.save(tmp_path / "named", name="my scan")
+        assert json.loads((tmp_path / "named" / "octree.json").read_text())["name"] == "my scan"
 
 
 def test_save_keeps_its_tree_and_reads_nothing_again(scene, tmp_path, monkeypatch):

@@ -1311,16 +1311,23 @@ class ProgressiveOctree:
         conversion's partitions as they stand (``grown``; lod/convert/seeded.py), and the
         converter samples the inner nodes from them. With another ``max_leaf`` or a Dask
         ``client`` the points are converted again from scratch."""
+        import inspect
+
         from ..convert import convert
 
+        taken = set(inspect.signature(convert).parameters) - {"inputs", "out", "format", "overwrite"}
+        unknown = sorted(set(options) - taken)
+        if unknown:  # banana=1 was a TypeError inside
+            raise InputError(f"{self.name}: save: unknown option(s) {', '.join(unknown)}; it takes {', '.join(sorted(taken))}")
         self.wait()
         if self.closed:
             raise InputError(f"{self.name}: the octree is closed (its points were freed); open it again to save it")
         options.setdefault("source_files", [p for p in self.source_files if p.is_file()])  # the files' CRS and LAS grid (those still there)
         options.setdefault("max_leaf", self.max_leaf)
+        options.setdefault("name", self.name)  # name= another was "multiple values for keyword argument"
         grown = options["max_leaf"] == self.max_leaf and options.get("client") is None and self.points > 0
         inputs = self.grown() if grown else self.chunks()
-        return convert(inputs, out, format=format, overwrite=overwrite, name=self.name, **options)
+        return convert(inputs, out, format=format, overwrite=overwrite, **options)
 
     def grown(self):
         """The octree as a conversion's input (convert.seeded.GrownTree): its cube, its leaves and
