@@ -208,8 +208,8 @@ def test_from_arrays_judges_colours_as_a_file_of_them_is_read(tmp_path):
         ({"intensity": 5}, "arrays: attribute 'intensity' is one value (5), not one per point"),
         ({"name": 5}, "from_arrays: name must be a string, got 5"),
         # a dict as an attribute printed its whole repr over many lines
-        ({"attributes": {"intensity": np.arange(500)}}, "arrays: attribute 'attributes' is a dict; give attributes as keywords: "
-         "from_arrays(xyz, rgb, intensity=...) or **attributes"),
+        ({"attributes": {"intensity": np.arange(500)}}, ("arrays: attribute 'attributes' is a dict; give attributes as keywords: "
+         "from_arrays(xyz, rgb, intensity=...) or **attributes")),
         ({"label": "roof " * 100}, "arrays: attribute 'label' is one value ('roof roof roof roof roof roof roof roof roof roof roof roof...), not one per point"),
     ):
         with pytest.raises(InputError, match=f"^{re.escape(problem)}$"):
