@@ -1081,6 +1081,45 @@ def test_a_billion_point_input_allocates_for_what_it_holds_not_its_total():
         cloud.close()
 
 
+def test_an_error_inserting_the_first_slice_ends_the_load_instead_of_hanging(monkeypatch):
+    """The decoder waits for the first slice to be in before it decodes the second; an error
+    inserting that slice left the loader waiting for the decoder and the decoder for the slice:
+    wait() never returned (a LAS header's zero bounds did it)."""
+    def refuse(self, *args, **kwargs):
+        time.sleep(0.3)  # as an insertion takes: the decoder is then waiting for it (at once, its turn was cancelled)
+        raise InputError(f"{self.name}: refused on purpose")
+
+    monkeypatch.setattr(ProgressiveOctree, "add", refuse)
+    cloud = gp.demo(3_000_000, progressive=True)
+    with pytest.raises(InputError, match=r"^demo\(3,000,000\): refused on purpose$"):
+        cloud.wait(timeout=60)
+    cloud.loader._thread.join(10)
+    assert cloud.loader.done and not cloud.loader._thread.is_alive()
+    cloud.close()
+
+
+@pytest.mark.parametrize("mins, maxs", [((0, 0, 0), (0, 0, 0)), ((-1e12,) * 3, (1e12,) * 3), ((5, 5, 5), (1, 1, 1))])
+def test_a_headers_wrong_bounds_do_not_spoil_the_octree(tmp_path, las_writer, mins, maxs):
+    """A LAS header's bounds make the root cube up front: zeros (some writers) hung the load
+    (the points spanned more levels than the octree has, then the hang above), 1e12 (beyond what
+    its integers reach) drew the points 25 % off. Bounds the points cannot have are left out, and
+    a cube that misses the first points is started again from them."""
+    import struct
+
+    path = las_writer(tmp_path / "h.las", 30_000, seed=4)
+    data = bytearray(path.read_bytes())
+    struct.pack_into("<6d", data, 179, maxs[0], mins[0], maxs[1], mins[1], maxs[2], mins[2])  # max x, min x, max y, ...
+    path.write_bytes(bytes(data))
+    plain = gp.open(path)
+    cloud = gp.open(path, progressive=True)
+    assert cloud.wait(timeout=60) and cloud.n_points == plain.n_points
+    cam = gp.Camera.fit_cloud(plain, width=160, height=120)
+    a = gp.render_frame(plain, cam, EXACT).visibility != EMPTY_PIXEL
+    b = gp.render_frame(cloud, cam, EXACT.replace(point_budget=10**9, lod_threshold_px=0)).visibility != EMPTY_PIXEL
+    assert (a & b).sum() / (a | b).sum() >= 0.97
+    assert int(cloud.level[: cloud.n_nodes].max()) <= 6  # a root of the points' size, not of the header's
+
+
 def test_a_truncated_file_is_refused_at_open(tmp_path, las_writer):
     bad = las_writer(tmp_path / "b.las", 50_000, seed=2)
     bad.write_bytes(bad.read_bytes()[:-300_000])

@@ -120,8 +120,9 @@ class Loader:
     def _run(self) -> None:
         name = self.octree.name
         turn = -1
+        chunks = prefetch(self._chunks(), name="gigapoint-decode")  # held here: closed below, after the decoder is let go
         try:
-            for name, chunk in prefetch(self._chunks(), name="gigapoint-decode"):
+            for name, chunk in chunks:
                 s = 0
                 # the attributes every source has so far: a file without one drops it, one with more brings none
                 self.octree.keep_attributes(chunk.attributes)
@@ -153,7 +154,10 @@ class Loader:
         except Exception as exc:  # noqa: BLE001 - any failure of a source ends the load with a one-line error
             self.error = InputError(f"{name}: loading stopped: {' '.join(str(exc).split()) or type(exc).__name__}")
         finally:
-            self._first_in.set()  # (a decoder waiting for it ends with the load)
+            # the decoder may wait for the first slice: let it go before closing the prefetch, which
+            # waits for it (an error inserting the first slice hung the load here for good)
+            self._first_in.set()
+            chunks.close()
             if not self._stop.is_set():
                 self.octree.trim()  # the room kept for growth, back
             self.finished_at = time.perf_counter()
@@ -181,6 +185,19 @@ class Loader:
             self._thread.join()
 
 
+def _reachable(bounds: dict, offset, scale) -> bool:
+    """Whether a LAS header's bounds are ones its points can have: finite, low <= high, within
+    what its 32-bit integer coordinates reach. A header of 1e12 drew its points 30 % wrong (a root
+    cube past the octree's levels); such bounds are left out, and the points make the root."""
+    lo, hi = (np.asarray(bounds[k], np.float64) for k in ("min", "max"))
+    if offset is None or scale is None:
+        return bool(np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi))
+    reach = np.abs(np.asarray(scale, np.float64)) * 2.0**31 * (1 + 1e-9)
+    low, high = np.asarray(offset, np.float64) - reach, np.asarray(offset, np.float64) + reach
+    with np.errstate(invalid="ignore"):  # NaN fails every comparison
+        return bool(np.all(lo <= hi) and np.all(lo >= low) and np.all(hi <= high))
+
+
 def file_sources(paths) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray] | None, str, tuple | None]:
     """(sources, total points, header bounds of all files, name, grid) of files and directories:
     every file through its reader (io registry), in bounded chunks. Totals, bounds and the grid
@@ -199,7 +216,7 @@ def file_sources(paths) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray]
         total = None if total is None or n is None else total + n
         info = reader.info(f) if bounds_known and n is not None else {}  # a header read, not a scan
         b = info.get("bounds") or {}
-        if info.get("bounds_source") == "header" and b.get("min") is not None:
+        if info.get("bounds_source") == "header" and b.get("min") is not None and _reachable(b, info.get("offset"), info.get("scale")):
             lo, hi = np.minimum(lo, b["min"]), np.maximum(hi, b["max"])
         else:
             bounds_known = False

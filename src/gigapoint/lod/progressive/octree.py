@@ -1041,7 +1041,8 @@ class ProgressiveOctree:
             self._rebuild_voxel_state()
         else:
             self._ensure_hash(self._presize_extra(), table)
-        if self.origin is None:
+        outside = self.origin is not None and (np.any(lo < self.origin) or np.any(hi > self.origin + self.edge))
+        if self.origin is None or outside and self.points == 0 and self.n_nodes == 1:  # (a header's zeros: the cube given misses the points)
             pad = 0.01 * max(float(np.max(hi - lo)), 1e-9)  # a little room: growing the root costs a pass over every point
             self._start(lo - pad, float(np.max(hi - lo)) + 2 * pad)
         while np.any(lo < self.origin) or np.any(hi > self.origin + self.edge):
