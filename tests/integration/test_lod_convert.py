@@ -507,6 +507,33 @@ def test_options_of_one_format_are_refused_for_another(tmp_path):
     assert convert(cloud, tmp_path / "w", layout="words", colors="rgba").points == 2_000  # words holds rgba: consistent
 
 
+@pytest.mark.parametrize("fmt", ["gigapoint", "potree", "copc"])
+def test_a_las_file_with_a_negative_scale_converts_like_it_reads(demo_las, tmp_path, fmt):
+    """A negative LAS scale (a mirrored axis; the reader takes it) was an internal "source scale
+    must be finite and positive" in every conversion, and the finest-scale pick took the most
+    negative one."""
+    import struct
+
+    import gigapoint as gp
+
+    data = bytearray(demo_las.read_bytes())
+    scale = struct.unpack_from("<3d", data, 131)
+    struct.pack_into("<3d", data, 131, -scale[0], scale[1], -scale[2])  # (the header's bounds now lie: they keep their sign)
+    mirrored = tmp_path / "m.las"
+    mirrored.write_bytes(bytes(data))
+    plain = gp.open(mirrored)
+    out = tmp_path / ("m.copc.laz" if fmt == "copc" else "m_out")
+    assert convert([mirrored], out, format=fmt, **OPTS).points == plain.n_points
+    cam = gp.Camera.fit_cloud(plain, width=160, height=120)
+    a = gp.render(plain, cam, backend="cpu")[..., :3].sum(-1) > 0
+    b = gp.render(gp.open(out), cam, backend="cpu", point_budget=10**9, lod_threshold_px=0)[..., :3].sum(-1) > 0
+    assert (a & b).sum() / (a | b).sum() >= 0.95
+    progressive = gp.open(mirrored, progressive=True)
+    assert progressive.wait(timeout=60) and progressive.grid is not None and progressive.grid[1] == abs(scale[0])  # on the file's grid
+    c = gp.render(progressive, cam, backend="cpu", point_budget=10**9, lod_threshold_px=0)[..., :3].sum(-1) > 0
+    assert (a & c).sum() / (a | c).sum() >= 0.95
+
+
 def test_autzen_laz_converts_and_renders(tmp_path):
     autzen = SHARED / "autzen_trim.laz"
     if not autzen.exists():

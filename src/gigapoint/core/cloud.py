@@ -381,9 +381,9 @@ COLOR_FORMATS = ("auto", "rgba", "rgb565", "palette")
 
 def finest_scale(scales) -> tuple[float, float, float] | None:
     """The finest of the chunks' scales per axis (rounding to it loses nothing any file holds);
-    None where any chunk has none."""
+    None where any chunk has none. A LAS header's negative scale (a mirrored axis) is its step's size."""
     if scales and all(s is not None for s in scales):
-        return tuple(float(v) for v in np.min(np.array(scales, np.float64), axis=0))
+        return tuple(float(v) for v in np.min(np.abs(np.array(scales, np.float64)), axis=0))
     return None
 
 

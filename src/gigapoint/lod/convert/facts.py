@@ -43,7 +43,7 @@ def input_facts(paths) -> dict:
             continue
         info = reader.info(p)
         has_color = bool(has_color) or bool(info.get("has_color"))
-        s = np.asarray(info["scale"], np.float64)
+        s = np.abs(np.asarray(info["scale"], np.float64))  # a negative scale (a mirrored axis) was "source scale must be positive" inside
         scale = s if scale is None else np.minimum(scale, s)
         offset = np.asarray(info["offset"], np.float64) if offset is None else offset
         text = info.get("crs")
