@@ -1567,9 +1567,10 @@ def test_a_header_without_a_usable_grid_loads_without_one(tmp_path, las_writer, 
     f = las_writer(tmp_path / "a.las", 5_000, seed=1)
     assert file_sources([f])[4][1] == 0.001
     info = LasReader.info
-    for scale in ([0.0] * 3, [np.nan] * 3, [-0.001] * 3):
+    for scale, step in (([0.0] * 3, None), ([np.nan] * 3, None), ([-0.001] * 3, 0.001)):  # a negative scale: a mirrored axis, its step 0.001
         monkeypatch.setattr(LasReader, "info", lambda self, path, scale=scale: {**info(self, path), "scale": scale})
-        assert file_sources([f])[4] is None
+        grid = file_sources([f])[4]
+        assert grid is None if step is None else grid[1] == step
 
 
 def test_files_on_two_grids_load_exactly(tmp_path):
