@@ -309,6 +309,24 @@ def test_truncated_hierarchy_page(paged, tmp_path):
     _one_line_error(cut, "past the end of the file")
 
 
+def test_an_info_vlr_cube_that_does_not_hold_the_points(autzen_octrees, tmp_path):
+    """A COPC info VLR whose cube misses the header's bounds (a 1 m cube, or one at the origin)
+    culled every node: a blank image and "no point is in view". A cube too large for its nodes'
+    keys draws what is decoded, and says once that the cubes do not match the points."""
+    from gigapoint.errors import GigapointWarning
+
+    path = autzen_octrees / "a.copc.laz"
+    b, hdr, info, root = _info(path)
+    center, half = info["center"].tolist(), float(info["halfsize"])
+    at = INFO_OFFSET + COPC_INFO_DTYPE.fields["center"][1]
+    for k, (c, h) in enumerate(((center, 1.0), ([0.0, 0.0, 0.0], half))):
+        bad = _patch(path, tmp_path / f"c{k}.copc.laz", at, np.array([*c, h], np.float64).tobytes())
+        _one_line_error(bad, r"corrupt COPC file \(header bounds, info VLR cube\): the points' bounds \[636002\.\.637179, .*\] lie outside the octree's cube")
+    big = _patch(path, tmp_path / "big.copc.laz", at, np.array([*center, 1e15], np.float64).tobytes())
+    with pytest.warns(GigapointWarning, match=r"big.copc.laz: node .*'s points \[.*\] lie outside its cube \[.*\]: the octree's cube does not match its points"):
+        _draw(big)
+
+
 def test_chunk_offsets_past_the_end_of_the_file(paged, tmp_path):
     path, _ = paged
     b, hdr, info, root = _info(path)

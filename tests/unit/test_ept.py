@@ -241,6 +241,20 @@ def test_ept_unsupported_and_invalid_metadata(broken):
     _fails(d, "not valid JSON")
 
 
+def test_an_ept_cube_beside_its_points(broken):
+    """ept.json's cube (bounds) beside its points (boundsConforming) culled every node: a blank
+    image and "no point is in view". Conforming bounds of zeros (missing) still open."""
+    d = broken()
+    meta = json.loads((d / "ept.json").read_text())
+    b = meta["bounds"]
+    edge = b[3] - b[0]
+    moved = [b[0] + 10 * edge, b[1], b[2], b[3] + 10 * edge, b[4], b[5]]  # the cube moved away along x
+    (d / "ept.json").write_text(json.dumps(dict(meta, bounds=moved)))
+    _fails(d, r"corrupt ept.json \(boundsConforming, bounds\): the points' bounds \[.*\] lie outside the octree's cube \[.*\]; one of them is wrong$")
+    (d / "ept.json").write_text(json.dumps(dict(meta, boundsConforming=[0, 0, 0, 0, 0, 0])))
+    assert gp.open(d).bounds[0].tolist() == b[:3]  # the cube stands in
+
+
 def test_ept_hierarchy_that_refers_to_itself(broken):
     d = broken()
     root = json.loads((d / "ept-hierarchy" / "0-0-0-0.json").read_text())

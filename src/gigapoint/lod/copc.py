@@ -23,7 +23,7 @@ from ..errors import InputError
 from ..io import laz_process
 from ..io.http import ByteSource, open_source
 from ..io.las import _scaled_xyz
-from .voxel_octree import VOXEL_KEY_DTYPE, VoxelOctree, valid_voxels, voxel_name, voxel_to_key
+from .voxel_octree import VOXEL_KEY_DTYPE, VoxelOctree, tight_bounds, valid_voxels, voxel_name, voxel_to_key
 
 # --------------------------------------------------------------------------- layouts
 
@@ -314,14 +314,7 @@ class CopcCloud(VoxelOctree):
             raise InputError(f"{name}: corrupt COPC header: scale {self.scale.tolist()}, offset {self.offset.tolist()}")
         cube_min = center - half
         n_points = int(hdr["point_count"]) or int(hdr["legacy_point_count"])
-        if not (
-            np.all(np.isfinite(lo))
-            and np.all(np.isfinite(hi))
-            and np.all(lo <= hi)
-            and np.all(lo <= center + half)
-            and np.all(hi >= cube_min)
-        ):
-            lo, hi = cube_min, center + half  # header bounds missing or beside the octree: its cube stands in
+        lo, hi = tight_bounds(name, "COPC file (header bounds, info VLR cube)", lo, hi, cube_min, 2.0 * half, float(np.max(np.abs(self.scale))))
         self.data_start = data_start
         self.file_size = file_size
         self.point_format = fmt

@@ -23,7 +23,7 @@ from ..errors import InputError
 from ..io import laz_process
 from ..io.http import ByteSource, as_url, open_source
 from ..io.las import _scaled_xyz
-from .voxel_octree import VoxelOctree, parse_voxel_name, voxel_name
+from .voxel_octree import VoxelOctree, parse_voxel_name, tight_bounds, voxel_name
 
 EPT_FILE = "ept.json"
 DATA_TYPES = {"laszip": ".laz", "binary": ".bin"}
@@ -101,9 +101,7 @@ class EptCloud(VoxelOctree):
         if not (np.all(np.isfinite(b)) and np.all(b[3:] > b[:3])):
             raise InputError(f"{name}: invalid ept.json bounds {b.tolist()}")
         cube_min, edge = b[:3], float(np.max(b[3:] - b[:3]))
-        lo, hi = tight[:3], tight[3:]
-        if not (np.all(np.isfinite(tight)) and np.all(lo <= hi) and np.all(lo <= cube_min + edge) and np.all(hi >= cube_min)):
-            lo, hi = cube_min, cube_min + edge  # conforming bounds missing or beside the octree: its cube stands in
+        lo, hi = tight_bounds(name, "ept.json (boundsConforming, bounds)", tight[:3], tight[3:], cube_min, edge)
         cloud_meta = {
             "format": "ept",
             "points": n_points,
