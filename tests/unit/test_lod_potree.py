@@ -171,6 +171,23 @@ def test_metadata_that_cannot_place_points_is_refused_at_open(converted, tmp_pat
     assert "\n" not in str(e.value) and str(path) in str(e.value)
 
 
+def test_a_bounding_box_beside_the_points_is_refused_at_open(converted, tmp_path):
+    """A boundingBox beside the position attribute's min/max culled every node: a blank image
+    and "no point is in view"."""
+    import shutil
+
+    path = tmp_path / "moved"
+    shutil.copytree(converted[("potree", "DEFAULT")], path)
+    meta = json.loads((path / "metadata.json").read_text())
+    box = meta["boundingBox"]
+    edge = box["max"][0] - box["min"][0]
+    meta["boundingBox"] = {k: [v[0] + 10 * edge, v[1], v[2]] for k, v in box.items()}
+    (path / "metadata.json").write_text(json.dumps(meta))
+    with pytest.raises(InputError, match=r"metadata.json: corrupt Potree metadata \(position min/max, boundingBox\): the points' bounds .* "
+                       r"lie outside the octree's cube .*; one of them is wrong$"):  # fmt: skip
+        open_octree(path)
+
+
 def test_corrupt_brotli_node_fails_in_one_line_when_drawn(converted, tmp_path):
     import shutil
 

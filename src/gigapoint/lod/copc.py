@@ -23,7 +23,8 @@ from ..errors import InputError
 from ..io import laz_process
 from ..io.http import ByteSource, open_source
 from ..io.las import _scaled_xyz
-from .voxel_octree import VOXEL_KEY_DTYPE, VoxelOctree, tight_bounds, valid_voxels, voxel_name, voxel_to_key
+from .store import tight_bounds
+from .voxel_octree import VOXEL_KEY_DTYPE, VoxelOctree, valid_voxels, voxel_name, voxel_to_key
 
 # --------------------------------------------------------------------------- layouts
 

@@ -23,7 +23,8 @@ from ..errors import InputError
 from ..io import laz_process
 from ..io.http import ByteSource, as_url, open_source
 from ..io.las import _scaled_xyz
-from .voxel_octree import VoxelOctree, parse_voxel_name, tight_bounds, voxel_name
+from .store import tight_bounds
+from .voxel_octree import VoxelOctree, parse_voxel_name, voxel_name
 
 EPT_FILE = "ept.json"
 DATA_TYPES = {"laszip": ".laz", "binary": ".bin"}

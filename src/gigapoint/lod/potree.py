@@ -22,7 +22,7 @@ from ..errors import InputError
 from .grid import output_grid
 from .keys import MAX_LEVEL, key_cube, level_of
 from .octree_dir import OctreeDir
-from .store import OctreeCloud, check_placement
+from .store import OctreeCloud, check_placement, tight_bounds
 
 HIERARCHY_DTYPE = np.dtype([("type", "u1"), ("mask", "u1"), ("points", "<u4"), ("offset", "<i8"), ("size", "<i8")])
 _TYPES = {
@@ -339,12 +339,12 @@ class PotreeCloud(OctreeCloud):
             info: dict[int, tuple[int, int, int]] = {}
             _parse_hierarchy(hier, 0, first, 1, info)
             record = _node_dtype(self.potree_attributes)
-            lo, hi = _position_range(self.potree_attributes, bmin, bmax)
             check_placement(
                 {"scale": self.scale, "offset": self.offset, "boundingBox.min": bmin, "boundingBox.max": bmax},
                 positive="scale",
                 box=("boundingBox.min", "boundingBox.max"),
             )
+            lo, hi = _position_range(str(d.potree_meta), self.potree_attributes, bmin, bmax)
         except (KeyError, TypeError, ValueError, OSError) as exc:
             raise InputError(f"{p}: invalid Potree hierarchy/metadata ({' '.join(str(exc).split())})") from None
         self.octree_bin = d.potree_octree
@@ -465,18 +465,18 @@ class PotreeCloud(OctreeCloud):
         return OctreeCloud(self.name, meta, nodes, self.keys, arrays, attrs, self.path)
 
 
-def _position_range(attributes: list[dict], bmin: np.ndarray, bmax: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _position_range(name: str, attributes: list[dict], bmin: np.ndarray, bmax: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The points' bounds: the ``position`` attribute's min/max (world coordinates, as
-    PotreeConverter 2 and our writer store them) when they are sane, else the bounding box."""
+    PotreeConverter 2 and our writer store them) when they are there, else the bounding box; a
+    bounding box beside them is a one-line error (it culled every node: a blank image)."""
     for a in attributes:
         if a.get("name") == "position":
             try:
                 lo, hi = np.array(a["min"], np.float64), np.array(a["max"], np.float64)
             except (KeyError, TypeError, ValueError):
                 break
-            slack = 1e-6 * max(float(np.max(bmax - bmin)), 1.0)
-            if lo.shape == hi.shape == (3,) and np.all(lo <= hi) and np.all(lo >= bmin - slack) and np.all(hi <= bmax + slack):
-                return lo, hi
+            if lo.shape == hi.shape == (3,):
+                return tight_bounds(name, "Potree metadata (position min/max, boundingBox)", lo, hi, bmin, float(np.max(bmax - bmin)))
             break
     return bmin, bmax
 

@@ -601,3 +601,27 @@ def read_gigapoint(octree_dir, meta: dict | None = None) -> OctreeCloud:
     if any(len(a) != n for a in arrays.values()) or int(nodes["count"].astype(np.int64).sum()) != n:
         raise InputError(f"{p}: point arrays hold a different number of points than {d.meta.name} says ({n:,})")
     return OctreeCloud(meta.get("name", p.name), meta, nodes, keys, arrays, attributes, p)
+
+
+def tight_bounds(name: str, what: str, lo, hi, cube_min, edge: float, step: float = 0.0):
+    """(lo, hi): the points' bounds a dataset states (a COPC file's LAS header, EPT's
+    ``boundsConforming``), or its cube where they are missing, not finite, or all zero. Bounds
+    beyond the cube (more than ``step``, the coordinates' grid, and float rounding) are a one-line
+    InputError: one of the two is wrong, and a cube beside the points culled every node: a blank
+    image and "no point is in view"."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    cube_min, cube_max = np.asarray(cube_min, np.float64), np.asarray(cube_min, np.float64) + edge
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)) or not (np.any(lo) or np.any(hi)):
+        return cube_min, cube_max  # missing, or a writer's zeros: the cube stands in
+    tol = 2.0 * abs(step) + 1e-6 * edge + 1e-12 * float(np.max(np.abs(np.concatenate([cube_min, cube_max]))))
+    if np.any(lo < cube_min - tol) or np.any(hi > cube_max + tol):
+        raise InputError(
+            f"{name}: corrupt {what}: the points' bounds {box_text(lo, hi)} lie outside the octree's cube {box_text(cube_min, cube_max)}; "
+            "one of them is wrong"
+        )
+    return lo, hi
+
+
+def box_text(lo, hi) -> str:
+    """'[x0..x1, y0..y1, z0..z1]' of a box, for messages."""
+    return "[" + ", ".join(f"{a:.6g}..{b:.6g}" for a, b in zip(lo.tolist(), hi.tolist())) + "]"

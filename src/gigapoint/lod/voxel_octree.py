@@ -32,7 +32,7 @@ from ..errors import GigapointWarning, InputError
 from ..io.laz_process import bad_data
 from .keys import MAX_LEVEL, ROOT_KEY, key_cube, level_of
 from .octree_dir import POINT_ARRAYS
-from .store import OctreeCloud
+from .store import OctreeCloud, box_text
 
 #: Points of the fetched nodes decoded together (``VoxelOctree._decode_batch``).
 DECODE_GROUP_POINTS = 1 << 20
@@ -104,29 +104,6 @@ def in_subtree(keys: np.ndarray, root: int) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- the octree
-
-
-def tight_bounds(name: str, what: str, lo, hi, cube_min, edge: float, step: float = 0.0):
-    """(lo, hi): the points' bounds a dataset states (a COPC file's LAS header, EPT's
-    ``boundsConforming``), or its cube where they are missing, not finite, or all zero. Bounds
-    beyond the cube (more than ``step``, the coordinates' grid, and float rounding) are a one-line
-    InputError: one of the two is wrong, and a cube beside the points culled every node: a blank
-    image and "no point is in view"."""
-    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-    cube_min, cube_max = np.asarray(cube_min, np.float64), np.asarray(cube_min, np.float64) + edge
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)) or not (np.any(lo) or np.any(hi)):
-        return cube_min, cube_max  # missing, or a writer's zeros: the cube stands in
-    tol = 2.0 * abs(step) + 1e-6 * edge + 1e-12 * float(np.max(np.abs(np.concatenate([cube_min, cube_max]))))
-    if np.any(lo < cube_min - tol) or np.any(hi > cube_max + tol):
-        raise InputError(
-            f"{name}: corrupt {what}: the points' bounds {_box(lo, hi)} lie outside the octree's cube {_box(cube_min, cube_max)}; "
-            "one of them is wrong"
-        )
-    return lo, hi
-
-
-def _box(lo, hi) -> str:
-    return "[" + ", ".join(f"{a:.6g}..{b:.6g}" for a, b in zip(lo.tolist(), hi.tolist())) + "]"
 
 
 class VoxelOctree(OctreeCloud):
@@ -335,8 +312,8 @@ class VoxelOctree(OctreeCloud):
         if not self._misplaced_said and (np.any(xyz.min(axis=0) < cube_min - tol) or np.any(xyz.max(axis=0) > cube_max + tol)):
             self._misplaced_said = True  # drawn where they are, but the other nodes are culled by cubes that may be as wrong
             warnings.warn(
-                f"{self.source_name}: node {voxel_name(key)}'s points {_box(xyz.min(axis=0), xyz.max(axis=0))} lie outside its cube "
-                f"{_box(cube_min, cube_max)}: the octree's cube does not match its points; nodes may be missing from views",
+                f"{self.source_name}: node {voxel_name(key)}'s points {box_text(xyz.min(axis=0), xyz.max(axis=0))} lie outside its cube "
+                f"{box_text(cube_min, cube_max)}: the octree's cube does not match its points; nodes may be missing from views",
                 GigapointWarning,
                 stacklevel=2,
             )
