@@ -223,7 +223,7 @@ def test_a_bad_value_names_its_option(spec, tmp_path, capsys):
 
 def test_text_a_number_option_cannot_read_is_a_one_line_error_too(tmp_path, capsys):
     assert main(["render", str(tmp_path / "missing.npy"), "-o", str(tmp_path / "x.png"), "--edl-strength", "lots"]) == 1
-    assert capsys.readouterr().err == "error: --edl-strength: edl_strength must be a number >= 0.0, got 'lots'\n"
+    assert capsys.readouterr().err == "error: --edl-strength: edl_strength must be a number in [0.0, 10000.0], got 'lots'\n"
 
 
 def test_image_size_errors_name_their_option(tmp_path, capsys):
