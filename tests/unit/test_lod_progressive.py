@@ -2090,6 +2090,10 @@ def test_an_octree_among_files_or_opened_progressively_is_a_one_line_error(tmp_p
     assert gp.open(tmp_path / "tree").n_points == 3000  # alone: as itself
     assert main(["render", str(tmp_path / "tree"), str(points), "-o", str(tmp_path / "a.png")]) != 0
     assert "tree: a converted octree folder opens alone" in capsys.readouterr().err and not (tmp_path / "a.png").exists()
+    for command in ("render", "view"):  # --progressive of a converted folder drew it as stored, without a word
+        extra = ["-o", str(tmp_path / "b.png")] if command == "render" else ["--no-browser"]
+        assert main([command, str(tmp_path / "tree"), "--progressive", *extra]) == 1
+        assert capsys.readouterr().err == f"error: {tmp_path / 'tree'}: a converted octree folder opens alone, drawn level of detail as stored; --progressive builds an octree from point files\n"
 
 
 def test_normals_are_estimated_on_a_cloud_held_in_memory():

@@ -267,9 +267,10 @@ def open_sized(paths, point_budget: int, progressive: bool | None = None, progre
     from ..reader import is_lod_source, open_octree, refuse_octrees
 
     paths = list(paths)
-    if len(paths) == 1 and is_lod_source(paths[0]):
+    if len(paths) == 1 and is_lod_source(paths[0]) and not progressive:
         return open_octree(paths[0])
-    refuse_octrees(paths, "it cannot join other files")
+    # (--progressive of a converted folder drew it as stored, without a word; a local COPC file is read as LAZ)
+    refuse_octrees(paths, "it cannot join other files" if len(paths) > 1 else "--progressive builds an octree from point files")
     paths = expand_paths(paths)  # once: a file named twice was warned about twice (headers, then the points)
     if progressive is not False:
         sources, total, bounds, name, grid = file_sources(paths)
