@@ -346,3 +346,18 @@ def test_colors_option_refuses_an_octree(capsys, tmp_path, small_las):
     rc, _, err = run(capsys, "render", octree, "-o", tmp_path / "o.png", "--colors", "rgb565")
     assert rc == 1 and len(err.strip().splitlines()) == 1
     assert "--colors: " in err and "is an octree" in err
+
+
+def test_info_memory_of_an_octree_says_why_there_is_no_figure(capsys, tmp_path, small_las):
+    """``info OCTREE --memory`` printed nothing of memory, without a word."""
+    import json
+
+    import gigapoint as gp
+
+    octree = tmp_path / "octree"
+    gp.convert([str(small_las)], octree, max_leaf=20_000)
+    why = "an octree is read node by node as views need them; --memory measures point files"
+    rc, out, _ = run(capsys, "info", octree, "--memory")
+    assert rc == 0 and out.strip().splitlines()[-1] == f"memory: {why}"
+    rc, out, _ = run(capsys, "info", octree, "--memory", "--json")
+    assert rc == 0 and json.loads(out.strip().splitlines()[-1]) == {"path": str(octree), "memory": None, "why": why}

@@ -54,7 +54,10 @@ def info(
             if i:
                 typer.echo("")
             typer.echo(format_info(data))
-        if memory and not octree:
+        if memory and octree:  # it printed nothing of memory, without a word
+            why = "an octree is read node by node as views need them; --memory measures point files"
+            typer.echo(json.dumps({"path": str(path), "memory": None, "why": why}) if as_json else f"memory: {why}")
+        elif memory:
             import gigapoint as gp
 
             cloud = gp.open(path, **options)
