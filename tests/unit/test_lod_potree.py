@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+import gigapoint as gp
 from gigapoint.core import PointChunk
 from gigapoint.errors import InputError
 from gigapoint.io import demo_arrays
@@ -186,6 +187,10 @@ def test_a_bounding_box_beside_the_points_is_refused_at_open(converted, tmp_path
     with pytest.raises(InputError, match=r"metadata.json: corrupt Potree metadata \(position min/max, boundingBox\): the points' bounds .* "
                        r"lie outside the octree's cube .*; one of them is wrong$"):  # fmt: skip
         open_octree(path)
+    # float positions: the writer chooses its cube, then rounds the points to its grid, a step beyond at most
+    xyz = np.random.default_rng(0).random((5000, 3)) * 100
+    convert(gp.from_arrays(xyz), tmp_path / "floats", format="potree")
+    assert open_octree(tmp_path / "floats").n_points == 5000
 
 
 def test_corrupt_brotli_node_fails_in_one_line_when_drawn(converted, tmp_path):

@@ -306,6 +306,7 @@ class CopcCloud(VoxelOctree):
         self.laszip = laszip[0]
         self.scale = np.array(hdr["scale"], np.float64)
         self.offset = np.array(hdr["offset"], np.float64)
+        self.coordinate_step = float(np.max(np.abs(self.scale)))
         center, half = np.array(info["center"], np.float64), float(info["halfsize"])
         lo = np.array([hdr["min_x"], hdr["min_y"], hdr["min_z"]], np.float64)
         hi = np.array([hdr["max_x"], hdr["max_y"], hdr["max_z"]], np.float64)
@@ -315,7 +316,7 @@ class CopcCloud(VoxelOctree):
             raise InputError(f"{name}: corrupt COPC header: scale {self.scale.tolist()}, offset {self.offset.tolist()}")
         cube_min = center - half
         n_points = int(hdr["point_count"]) or int(hdr["legacy_point_count"])
-        lo, hi = tight_bounds(name, "COPC file (header bounds, info VLR cube)", lo, hi, cube_min, 2.0 * half, float(np.max(np.abs(self.scale))))
+        lo, hi = tight_bounds(name, "COPC file (header bounds, info VLR cube)", lo, hi, cube_min, 2.0 * half, self.coordinate_step)
         self.data_start = data_start
         self.file_size = file_size
         self.point_format = fmt

@@ -97,12 +97,13 @@ class EptCloud(VoxelOctree):
             if n_points < 0 or n_points != meta["points"]:  # -5 was taken as the cloud's count
                 raise ValueError(f"points must be a whole number >= 0, got {meta['points']!r}")
             self._schema(meta["schema"])
+            self.coordinate_step = max(self._scales.get(axis, (0.0, 0.0))[0] for axis in "XYZ")
         except (TypeError, ValueError, KeyError) as exc:
             raise InputError(f"{name}: invalid ept.json ({' '.join(str(exc).split())})") from None
         if not (np.all(np.isfinite(b)) and np.all(b[3:] > b[:3])):
             raise InputError(f"{name}: invalid ept.json bounds {b.tolist()}")
         cube_min, edge = b[:3], float(np.max(b[3:] - b[:3]))
-        lo, hi = tight_bounds(name, "ept.json (boundsConforming, bounds)", tight[:3], tight[3:], cube_min, edge)
+        lo, hi = tight_bounds(name, "ept.json (boundsConforming, bounds)", tight[:3], tight[3:], cube_min, edge, self.coordinate_step)
         cloud_meta = {
             "format": "ept",
             "points": n_points,

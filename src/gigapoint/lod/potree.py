@@ -344,7 +344,7 @@ class PotreeCloud(OctreeCloud):
                 positive="scale",
                 box=("boundingBox.min", "boundingBox.max"),
             )
-            lo, hi = _position_range(str(d.potree_meta), self.potree_attributes, bmin, bmax)
+            lo, hi = _position_range(str(d.potree_meta), self.potree_attributes, bmin, bmax, float(np.max(np.abs(self.scale))))
         except (KeyError, TypeError, ValueError, OSError) as exc:
             raise InputError(f"{p}: invalid Potree hierarchy/metadata ({' '.join(str(exc).split())})") from None
         self.octree_bin = d.potree_octree
@@ -465,7 +465,7 @@ class PotreeCloud(OctreeCloud):
         return OctreeCloud(self.name, meta, nodes, self.keys, arrays, attrs, self.path)
 
 
-def _position_range(name: str, attributes: list[dict], bmin: np.ndarray, bmax: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _position_range(name: str, attributes: list[dict], bmin: np.ndarray, bmax: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
     """The points' bounds: the ``position`` attribute's min/max (world coordinates, as
     PotreeConverter 2 and our writer store them) when they are there, else the bounding box; a
     bounding box beside them is a one-line error (it culled every node: a blank image)."""
@@ -476,7 +476,8 @@ def _position_range(name: str, attributes: list[dict], bmin: np.ndarray, bmax: n
             except (KeyError, TypeError, ValueError):
                 break
             if lo.shape == hi.shape == (3,):
-                return tight_bounds(name, "Potree metadata (position min/max, boundingBox)", lo, hi, bmin, float(np.max(bmax - bmin)))
+                # (its step: our writer's cube is chosen before positions are rounded to the grid, a step beyond at most)
+                return tight_bounds(name, "Potree metadata (position min/max, boundingBox)", lo, hi, bmin, float(np.max(bmax - bmin)), step)
             break
     return bmin, bmax
 

@@ -116,6 +116,8 @@ class VoxelOctree(OctreeCloud):
     "attributes": {name: array}}``; then call ``_open(name, meta, root_page_locator)``.
     """
 
+    coordinate_step = 0.0  # the grid its coordinates are stored on (COPC: the LAS scale; EPT: its X/Y/Z scales)
+
     source = None
     _attr_dtypes: dict  # attribute name -> dtype (set by the subclass)
 
@@ -308,7 +310,8 @@ class VoxelOctree(OctreeCloud):
         if not np.isfinite(xyz).all():
             raise InputError(f"{self.source_name}: node {voxel_name(key)} holds non-finite coordinates")
         cube_min, cube_max = self.nodes["bbox_min"][index], self.nodes["bbox_max"][index]  # its cube, until the tight box below
-        tol = 1e-3 * float(np.max(cube_max - cube_min)) + 1e-9 * float(np.max(np.abs(cube_max)))
+        # writers round positions to their grid after choosing the cubes: a step or so beyond is theirs
+        tol = 2.0 * self.coordinate_step + 1e-3 * float(np.max(cube_max - cube_min)) + 1e-9 * float(np.max(np.abs(cube_max)))
         if not self._misplaced_said and (np.any(xyz.min(axis=0) < cube_min - tol) or np.any(xyz.max(axis=0) > cube_max + tol)):
             self._misplaced_said = True  # drawn where they are, but the other nodes are culled by cubes that may be as wrong
             warnings.warn(
