@@ -606,14 +606,14 @@ def read_gigapoint(octree_dir, meta: dict | None = None) -> OctreeCloud:
 def tight_bounds(name: str, what: str, lo, hi, cube_min, edge: float, step: float = 0.0):
     """(lo, hi): the points' bounds a dataset states (a COPC file's LAS header, EPT's
     ``boundsConforming``), or its cube where they are missing, not finite, or all zero. Bounds
-    beyond the cube (more than ``step``, the coordinates' grid, and float rounding) are a one-line
+    beyond the cube (more than two ``step``s, the coordinates' grid, and 0.1 % of the cube) are a one-line
     InputError: one of the two is wrong, and a cube beside the points culled every node: a blank
     image and "no point is in view"."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     cube_min, cube_max = np.asarray(cube_min, np.float64), np.asarray(cube_min, np.float64) + edge
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)) or not (np.any(lo) or np.any(hi)):
         return cube_min, cube_max  # missing, or a writer's zeros: the cube stands in
-    tol = 2.0 * abs(step) + 1e-6 * edge + 1e-12 * float(np.max(np.abs(np.concatenate([cube_min, cube_max]))))
+    tol = 2.0 * abs(step) + 1e-3 * edge + 1e-12 * float(np.max(np.abs(np.concatenate([cube_min, cube_max]))))
     if np.any(lo < cube_min - tol) or np.any(hi > cube_max + tol):
         raise InputError(
             f"{name}: corrupt {what}: the points' bounds {box_text(lo, hi)} lie outside the octree's cube {box_text(cube_min, cube_max)}; "
