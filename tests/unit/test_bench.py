@@ -209,6 +209,17 @@ def test_parsers_and_bad_input(tmp_path, capsys):
     assert main(["bench", "-n", "1000", "--json", str(tmp_path / "nowhere" / "r.json"), "--no-gl", "--no-naive"]) == 1
     out, err = capsys.readouterr()
     assert err.strip().endswith("r.json: directory " + str(tmp_path / "nowhere") + " does not exist") and "points/s" not in out  # nothing measured
+    scan = tmp_path / "scan.laz"  # --json scan.laz replaced the user's file with the results, without a word
+    scan.write_bytes(b"precious")
+    results = tmp_path / "r.json"
+    results.write_text("[]")
+    for path, problem in ((scan, "unsupported output type '.laz'; use one of .json"), (results, "already exists; pass --overwrite to replace it")):
+        assert main(["bench", "-n", "1000", "--json", str(path), "--no-gl", "--no-naive", "--repeats", "1"]) == 1
+        out, err = capsys.readouterr()
+        assert err == f"error: {path}: {problem}\n" and "points/s" not in out
+    assert scan.read_bytes() == b"precious" and results.read_text() == "[]"
+    assert main(["bench", "-n", "1000", "--json", str(results), "--no-gl", "--no-naive", "--repeats", "1", "--threads", "1", "--overwrite"]) == 0
+    assert json.loads(results.read_text())[0]["kind"] == "environment"
 
 
 def test_no_gl_reports_skipped():

@@ -6,7 +6,6 @@ from pathlib import Path
 
 import typer
 
-from ..errors import GigapointError
 from .app import app
 
 
@@ -21,15 +20,18 @@ def bench(
     naive: bool = typer.Option(True, "--naive/--no-naive", help="Also time a naive numba loop over the same points."),
     out: Path | None = typer.Option(None, "--out", help="Directory for the frames as PNG and bench_render.json."),
     json_path: Path | None = typer.Option(None, "--json", help="Where to write the JSON results (default: <out>/bench_render.json)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing JSON results file."),
 ) -> None:
     """Measure brute-force rendering (points/s) of the demo scene, overview and close-up, against GL_POINTS and a naive loop."""
     from ..bench import VIEWS, parse_count, parse_threads, print_results, run_render_benchmark, write_results
+    from .output import check_output
     from .progress import err_console, progress_bar
 
     counts = [parse_count(p) for p in points]
     thread_counts = [parse_threads(t) for t in threads]
-    if json_path is not None and not json_path.parent.is_dir():  # said only once every measurement was made
-        raise GigapointError(f"{json_path}: directory {json_path.parent} does not exist")
+    target = json_path or (out / "bench_render.json" if out is not None else None)
+    if target is not None:  # before any measurement: its folder was said only at the end; --json a.laz replaced the scan
+        check_output(target, overwrite, suffixes={".json"})
     err = err_console()
     # the steps it reports: per point count the scene, the GL upload, and per view each thread count, the naive loop, GL
     steps = len(counts) * (1 + gl + len(VIEWS) * (len(thread_counts) + naive + gl))
@@ -47,6 +49,5 @@ def bench(
             progress=lambda m: advance(min(next(step, steps), steps), m),
         )
     print_results(results)
-    target = json_path or (out / "bench_render.json" if out is not None else None)
     if target is not None:
         err.print(f"results written to {write_results(results, target)}")
