@@ -475,6 +475,7 @@ def test_viewer_for_jupyter(cloud):
             ({"width": "a"}, "width must be an integer from 1 to 8,192 pixels, got 'a'"),
             ({"height": 100.5}, "height must be an integer from 1 to 8,192 pixels, got 100.5"),
             ({"scale": 3}, "scale must be 1, 2 or 4, got 3"),
+            ({"scale": 2.0}, "scale must be 1, 2 or 4, got 2.0"),
         ):
             with pytest.raises(gigapoint.GigapointError, match=f"^Viewer.screenshot: {re.escape(problem)}$"):
                 v.screenshot(**bad)

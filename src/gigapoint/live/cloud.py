@@ -362,11 +362,9 @@ class LiveCloud:
         if world_normals is None:
             world_normals = np.zeros((m, 3), np.float32)
         arrived = self.now()
-        if time is not None and not is_real(time):  # "a" was float()'s ValueError
+        if time is not None and not is_real(time):  # (NaN and inf; "a" was float()'s ValueError)
             raise InputError(f"{name}: push: time must be a finite number of seconds, got {time!r}")
         t = float(time) if time is not None else self.clock()
-        if not np.isfinite(t):
-            raise InputError(f"{name}: push: time must be a finite number of seconds, got {time!r}")
         per_point = {"normal": world_normals, "frame_time": np.full(m, arrived, np.float32)}
         per_point.update(attrs)
         frame = batch_frame(pts, rgba, per_point, lo, hi, self.chunk, ordered)

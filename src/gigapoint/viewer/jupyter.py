@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Self
 
 from ..core.renderable import Renderable
-from ..errors import GigapointError, InputError, check_switch, check_whole
+from ..errors import GigapointError, InputError, check_switch, check_whole, is_whole_number
 from .protocol import MAX_SHOT_SIDE
 
 
@@ -70,7 +70,7 @@ class Viewer:
         for name, value in (("width", width), ("height", height)):  # "a" was int()'s ValueError, 100.5 cut to 100
             if value is not None:
                 check_whole("Viewer.screenshot", name, value, 1, MAX_SHOT_SIDE, " pixels")
-        if scale not in (1, 2, 4) or isinstance(scale, bool):  # the page's rule: 3 was taken here
+        if not is_whole_number(scale) or scale not in (1, 2, 4):  # the page's rule: 3 was taken here (2.0 made a float size)
             raise InputError(f"Viewer.screenshot: scale must be 1, 2 or 4, got {scale!r}")
         core = self.server.core
         active = core.last_active

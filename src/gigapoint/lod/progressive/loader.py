@@ -187,8 +187,8 @@ class Loader:
 
 def _reachable(bounds: dict, offset, scale) -> bool:
     """Whether a LAS header's bounds are ones its points can have: finite, low <= high, within
-    what its 32-bit integer coordinates reach. A header of 1e12 drew its points 30 % wrong (a root
-    cube past the octree's levels); such bounds are left out, and the points make the root."""
+    what its 32-bit integer coordinates reach. A header's 1e12 drew a quarter of the image wrong (a
+    root cube past the octree's levels); such bounds are left out, and the points make the root."""
     lo, hi = (np.asarray(bounds[k], np.float64) for k in ("min", "max"))
     if offset is None or scale is None:
         return bool(np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi))
