@@ -702,6 +702,7 @@ def test_a_later_frame_keeps_to_the_first_frames_attributes():
     assert live.n_points == 150
 
 
+@pytest.mark.timeout(60)  # (a NaN timeout waited forever)
 def test_waits_and_snapshots_refuse_odd_arguments():
     """wait_frame(timeout=NaN) waited forever, wait_frame("a") was a TypeError inside the wait,
     snapshot("no") kept the normals."""

@@ -1081,6 +1081,7 @@ def test_a_billion_point_input_allocates_for_what_it_holds_not_its_total():
         cloud.close()
 
 
+@pytest.mark.timeout(120)  # (it hung for good)
 def test_an_error_inserting_the_first_slice_ends_the_load_instead_of_hanging(monkeypatch):
     """The decoder waits for the first slice to be in before it decodes the second; an error
     inserting that slice left the loader waiting for the decoder and the decoder for the slice:
@@ -1098,6 +1099,7 @@ def test_an_error_inserting_the_first_slice_ends_the_load_instead_of_hanging(mon
     cloud.close()
 
 
+@pytest.mark.timeout(120)  # (it hung for good)
 @pytest.mark.parametrize("mins, maxs", [((0, 0, 0), (0, 0, 0)), ((-1e12,) * 3, (1e12,) * 3), ((5, 5, 5), (1, 1, 1))])
 def test_a_headers_wrong_bounds_do_not_spoil_the_octree(tmp_path, las_writer, mins, maxs):
     """A LAS header's bounds make the root cube up front: zeros (some writers) hung the load
