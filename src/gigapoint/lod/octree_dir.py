@@ -216,8 +216,10 @@ class OctreeDir:
         return state if isinstance(state, dict) else None
 
     def write_state(self, state: dict) -> None:
-        """Save the conversion state, atomically and durably (a killed run resumes from it)."""
-        atomic_json(self.state_file, state, durable=True)
+        """Save the conversion state, atomically and durably (a killed run resumes from it);
+        compact JSON: json's C encoder (an indented one is pure Python: 2 000 tiles' fingerprint
+        took 13 ms a save)."""
+        atomic_json(self.state_file, state, indent=None, durable=True)
 
     def status(self) -> dict:
         """What an unfinished conversion's state says: phase, points read, input total, preview

@@ -62,7 +62,7 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
 
     def run(self, overwrite: bool) -> ConvertResult:
         self.t0 = time.perf_counter()
-        fp = self.fingerprint()
+        fp = self.fingerprint_key()
         created = not self.dir.path.exists()
         try:
             with self.dir.lock():

@@ -403,9 +403,8 @@ def _distribute_task(spec: dict, t: int, ids: list[int], partitions: list) -> di
     starts = np.cumsum(per) - per
     out = {"pieces": [[int(p), int(starts[p]), int(per[p])] for p in touched], "xyz_code": None if code is None else code.tolist()}
     atomic_json(result, out)
-    for i in ids:
-        for f in raw_chunk_files(d.raw, i):
-            f.unlink(missing_ok=True)
+    for f in raw_chunk_files(d.raw, ids):
+        f.unlink(missing_ok=True)
     return out
 
 

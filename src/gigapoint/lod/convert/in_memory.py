@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from .options import BYTES_PER_POINT_BUILD
-from .partition import COUNT_LEVEL, PartitionPhases, built_name, grid_cells, partition_lut
+from .partition import CellCounts, PartitionPhases, built_name, grid_cells, partition_lut
 from .read import ReadPhase, valid_chunk
 from .spill import save_raw_chunk
 
@@ -93,14 +93,14 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
             return super().count()
         st = self.state
         origin, edge = np.array(st["origin"]), st["edge"]
-        counts = np.zeros(8**COUNT_LEVEL, np.int64)
+        counts = CellCounts()
         self.progress.phase("count", st["points"])
         for chunk in self._held:
             cells = grid_cells(chunk["xyz"], origin, edge) if len(chunk["xyz"]) else np.zeros(0, np.int64)
-            counts += np.bincount(cells, minlength=len(counts))
             chunk["cell"] = cells.astype(np.int32)  # for the distribute phase
+            counts.add(chunk["cell"])
             self.progress.advance(len(cells))
-        self._plan(counts)
+        self._plan(counts.total())
 
     def distribute(self) -> None:
         if self.spilled:

@@ -93,19 +93,46 @@ def set_name(level: int, prefix: int, kind: str) -> str:
     return (built_name if kind == "p" else group_name)(level, prefix)
 
 
+class CellCounts:
+    """Points per cell of the count grid (8^COUNT_LEVEL cells). Small chunks' cells are counted
+    together: a bincount a chunk, of 2M bins, took 1.7 s for 2 000 small tiles."""
+
+    TOGETHER = 1 << 20  # points whose cells one bincount counts
+
+    def __init__(self):
+        self.counts = np.zeros(8**COUNT_LEVEL, np.int64)
+        self._pending: list[np.ndarray] = []
+        self._held = 0
+
+    def add(self, cells: np.ndarray) -> None:
+        self._pending.append(cells)
+        self._held += len(cells)
+        if self._held >= self.TOGETHER:
+            self._flush()
+
+    def _flush(self) -> None:
+        if self._pending:
+            self.counts += np.bincount(np.concatenate(self._pending), minlength=len(self.counts))
+        self._pending, self._held = [], 0
+
+    def total(self) -> np.ndarray:
+        self._flush()
+        return self.counts
+
+
 class PartitionPhases(Job):
     # -- phase 2
     def count(self) -> None:
         st = self.state
         origin, edge = np.array(st["origin"]), st["edge"]
-        counts = np.zeros(8**COUNT_LEVEL, np.int64)
+        counts = CellCounts()
         self.progress.phase("count", st["points"])
         for i in range(st["chunks"]):
             xyz = load_raw_chunk(self.dir.raw, i, [])["xyz"]
             if len(xyz):
-                counts += np.bincount(grid_cells(xyz, origin, edge), minlength=len(counts))
+                counts.add(grid_cells(xyz, origin, edge))
             self.progress.advance(len(xyz))
-        self._plan(counts)
+        self._plan(counts.total())
 
     def _plan(self, counts: np.ndarray) -> None:
         """The partitions of the count grid ``counts`` (saved in the state): the distribute phase is next."""
@@ -182,9 +209,8 @@ class PartitionPhases(Job):
                     first = st["distributed"]
                     st["distributed"] = i + 1
                     self.save_state()
-                    for j in range(first, i + 1):
-                        for f in raw_chunk_files(self.dir.raw, j):
-                            f.unlink()
+                    for f in raw_chunk_files(self.dir.raw, range(first, i + 1)):
+                        f.unlink()
                 self.progress.advance(len(xyz))
         self._refine()
         st["phase"] = "build"

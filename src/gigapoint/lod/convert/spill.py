@@ -106,9 +106,14 @@ def load_raw_chunk(raw: Path, i: int, attributes, decode: bool = True) -> dict:
     return d
 
 
-def raw_chunk_files(raw: Path, i: int | None = None) -> list[Path]:
-    """The files of chunk ``i`` (of every chunk when None)."""
-    return list(raw.glob("c*.npy" if i is None else f"c{i:06d}.*"))
+def raw_chunk_files(raw: Path, chunks=None) -> list[Path]:
+    """The files of chunk ``chunks`` (an index, or several; every chunk's when None), from one
+    listing of the folder: a listing a chunk made deleting 2 000 small tiles' spills quadratic (2.7 s)."""
+    files = raw.glob("c*.npy")
+    if chunks is None:
+        return list(files)
+    wanted = {f"c{i:06d}" for i in ([chunks] if isinstance(chunks, int) else chunks)}
+    return [f for f in files if f.name.split(".", 1)[0] in wanted]
 
 
 def append_file(path: Path, arrays: list) -> None:

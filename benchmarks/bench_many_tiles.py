@@ -1,0 +1,66 @@
+"""Converting many small tiles against one file of the same points: what each input file costs.
+
+    .venv/bin/python benchmarks/bench_many_tiles.py                  # 2 000 tiles of 50 points
+    .venv/bin/python benchmarks/bench_many_tiles.py --tiles 4000 --points 100 --memory-limit 64M
+
+The demo town's points, cut into ``--tiles`` NPY files of ``--points`` each and saved once
+more as one NPY file; both converted with ``gigapoint.convert`` in this process, alternately
+(``--rounds``, medians; the first, numba's warm-up, a round of its own, not counted), held in
+memory or, with a small ``--memory-limit``, spilled. Reported: seconds, points/s and the tiles'
+time over the one file's: a cost that grows faster than the tiles (the state's fingerprint of
+every tile written with each tile's chunk, a bincount of 8^7 cells a chunk, a listing of the
+spill folder a chunk) shows as a ratio that grows with ``--tiles``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gigapoint.bench import cpu_model
+from gigapoint.io import demo_arrays
+from gigapoint.lod import convert
+
+
+def _timed(inputs, out: Path, memory_limit) -> float:
+    t = time.perf_counter()
+    convert(inputs, out, memory_limit=memory_limit)
+    return time.perf_counter() - t
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--tiles", type=int, default=2000)
+    ap.add_argument("--points", type=int, default=50, help="points a tile")
+    ap.add_argument("--memory-limit", default=None, help="e.g. 64M: spilled; default: held in memory")
+    ap.add_argument("--rounds", type=int, default=2)
+    args = ap.parse_args(argv)
+    xyz, _, _ = demo_arrays(args.tiles * args.points, seed=3)
+    with tempfile.TemporaryDirectory() as tmp:
+        tiles, one = Path(tmp) / "tiles", Path(tmp) / "one"
+        tiles.mkdir()
+        one.mkdir()
+        for k in range(args.tiles):
+            np.save(tiles / f"t{k:06d}.npy", xyz[k * args.points : (k + 1) * args.points])
+        np.save(one / "all.npy", xyz)
+        _timed([one], Path(tmp) / "warm", args.memory_limit)  # numba's compile: not counted
+        times: dict[str, list[float]] = {"tiles": [], "one file": []}
+        for r in range(args.rounds):
+            times["tiles"].append(_timed([tiles], Path(tmp) / f"t{r}", args.memory_limit))
+            times["one file"].append(_timed([one], Path(tmp) / f"o{r}", args.memory_limit))
+    n = len(xyz)
+    print(f"{cpu_model()}; {args.tiles:,} tiles of {args.points} points ({n:,}), {'memory limit ' + args.memory_limit if args.memory_limit else 'held in memory'}")
+    med = {k: statistics.median(v) for k, v in times.items()}
+    for k, s in med.items():
+        print(f"  {k:9s} {s:6.2f} s (median of {args.rounds}), {n / s / 1e6:.3f} M points/s")
+    print(f"  tiles / one file: {med['tiles'] / med['one file']:.1f}x, {(med['tiles'] - med['one file']) / args.tiles * 1e3:.2f} ms a tile")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
