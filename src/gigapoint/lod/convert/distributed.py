@@ -69,7 +69,7 @@ from ..preview import PreviewSampler, preview_points
 from ..progress import NullProgress
 from . import hooks
 from .keep_freed_memory import KeepFreedMemory
-from .partition import COUNT_LEVEL, PartitionPhases, built_name, grid_cells, group_name, partition_lut
+from .partition import COUNT_LEVEL, CellCounts, PartitionPhases, built_name, grid_cells, group_name, partition_lut
 from .phases import BuildPhases, place_set
 from .read import ReadPhase, _read_chunks, merge_attributes, spill_chunk
 from .spill import copy_range, decode_xyz, load_raw_chunk, raw_chunk_files, raw_xyz_code
@@ -356,11 +356,12 @@ def _count_task(spec: dict, ids: list[int]) -> tuple[np.ndarray, np.ndarray]:
     """The count grid of chunks ``ids``: (cells, points) of its non-empty cells."""
     st = spec["state"]
     raw = OctreeDir(spec["dir"]).raw
-    counts = np.zeros(8**COUNT_LEVEL, np.int64)
+    counting = CellCounts()
     for i in ids:
         xyz = load_raw_chunk(raw, i, [])["xyz"]
         if len(xyz):
-            counts += np.bincount(grid_cells(xyz, np.array(st["origin"]), st["edge"]), minlength=len(counts))
+            counting.add(grid_cells(xyz, np.array(st["origin"]), st["edge"]))
+    counts = counting.total()
     cells = np.flatnonzero(counts)
     return cells.astype(np.int32), counts[cells]
 
