@@ -46,11 +46,11 @@ def convert(
     """Convert point clouds into a level-of-detail octree, out of core, resumable."""
     from ..lod import ConvertError
     from ..lod import convert as run
-    from ..lod.copc_write import work_dir
+    from ..lod.copc_write import is_copc_name, work_dir
 
     if dask is not None and workers is not None:
         raise ConvertError("--dask and --workers: give one of them (a running cluster's scheduler, or a local cluster's size)")
-    copc = format == "copc" or (format is None and output.name.lower().endswith(".copc.laz"))
+    copc = format == "copc" or (format is None and is_copc_name(output))  # (convert's own default)
     watch = work_dir(output) if copc else output  # a COPC output appears only once complete
     hint = None if quiet else lambda: print(f"while this runs, `gigapoint view {watch}` shows what has been read so far", file=sys.stderr)
     cluster = nullcontext(None)

@@ -10,6 +10,7 @@ import numpy as np
 from ..atomic import atomic_write
 from ..errors import InputError
 from ..io.registry import is_supported_name
+from ..lod.copc_write import is_copc_name
 
 
 def _collect(octree):
@@ -29,8 +30,8 @@ def save_snapshots(octree, path, overwrite: bool = False) -> int:
         raise InputError(f"save: the output must be a path (.las, .laz, .ply or an octree folder), got {path!r}")
     path = Path(path)
     suffix = path.suffix.lower()
-    if path.name.lower().endswith(".copc.laz"):  # a COPC file (the octree's), not a plain LAZ under its name
-        return int(octree.save(path, format="copc", overwrite=overwrite).points)
+    if is_copc_name(path):  # a COPC file (the octree's, convert's default for the name), not a plain LAZ under its name
+        return int(octree.save(path, overwrite=overwrite).points)
     if suffix not in (".las", ".laz", ".ply") and is_supported_name(path):  # "scan.xyz" was an octree folder of that name
         raise InputError(f"{path}: save writes .las, .laz or .ply files, or an octree folder (a name without a point file's suffix)")
     if suffix not in (".las", ".laz", ".ply"):

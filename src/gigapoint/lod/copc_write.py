@@ -428,6 +428,12 @@ def write_copc_sets(path: Path, sources: list[Path], st: dict, progress, page_le
     return int(summary["nodes"])
 
 
+def is_copc_name(out) -> bool:
+    """Whether ``out`` is named as a COPC file (``*.copc.laz``): what a conversion (or a live
+    cloud's save) without a format writes as COPC."""
+    return out is not None and Path(out).name.lower().endswith(".copc.laz")
+
+
 def work_dir(out) -> Path:
     """The folder a conversion into the COPC file ``out`` works in (an OctreeDir: its state,
     preview and node sets; removed once ``out`` is written): ``<out>.work`` beside it."""

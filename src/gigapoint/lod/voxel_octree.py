@@ -309,21 +309,22 @@ class VoxelOctree(OctreeCloud):
             raise InputError(f"{self.source_name}: node {voxel_name(key)} holds {len(xyz):,} points, the hierarchy says {n:,}")
         if not np.isfinite(xyz).all():
             raise InputError(f"{self.source_name}: node {voxel_name(key)} holds non-finite coordinates")
-        cube_min, cube_max = self.nodes["bbox_min"][index], self.nodes["bbox_max"][index]  # its cube, until the tight box below
+        cube_min, cube_max = self.nodes["bbox_min"][index].copy(), self.nodes["bbox_max"][index].copy()  # its cube until now
+        rec = self.nodes[index : index + 1].copy()
+        rec["first"] = 0
+        low, med, high = quantize(xyz, np.arange(n, dtype=np.int64), rec)
+        lo, hi = rec[0]["bbox_min"], rec[0]["bbox_max"]  # the points' tight box, which its record holds from now on
+        self.nodes[index]["bbox_min"], self.nodes[index]["bbox_max"] = lo, hi
         # writers round positions to their grid after choosing the cubes: a step or so beyond is theirs
         tol = 2.0 * self.coordinate_step + 1e-3 * float(np.max(cube_max - cube_min)) + 1e-9 * float(np.max(np.abs(cube_max)))
-        if not self._misplaced_said and (np.any(xyz.min(axis=0) < cube_min - tol) or np.any(xyz.max(axis=0) > cube_max + tol)):
+        if not self._misplaced_said and (np.any(lo < cube_min - tol) or np.any(hi > cube_max + tol)):
             self._misplaced_said = True  # drawn where they are, but the other nodes are culled by cubes that may be as wrong
             warnings.warn(
-                f"{self.source_name}: node {voxel_name(key)}'s points {box_text(xyz.min(axis=0), xyz.max(axis=0))} lie outside its cube "
+                f"{self.source_name}: node {voxel_name(key)}'s points {box_text(lo, hi)} lie outside its cube "
                 f"{box_text(cube_min, cube_max)}: the octree's cube does not match its points; nodes may be missing from views",
                 GigapointWarning,
                 stacklevel=2,
             )
-        rec = self.nodes[index : index + 1].copy()
-        rec["first"] = 0
-        low, med, high = quantize(xyz, np.arange(n, dtype=np.int64), rec)
-        self.nodes[index]["bbox_min"], self.nodes[index]["bbox_max"] = rec[0]["bbox_min"], rec[0]["bbox_max"]
         self._decoded.add(key)
         rgba = np.empty((n, 4), np.uint8)
         rgba[:] = DEFAULT_COLOR

@@ -20,6 +20,7 @@ from ...io.registry import is_supported_name
 from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
 from ..copc_write import check_output as check_copc_output
+from ..copc_write import is_copc_name
 from ..octree_dir import ConvertError
 from ..progress import NullProgress, RichProgress
 from .in_memory import InMemoryPhases
@@ -210,7 +211,7 @@ def convert(
         raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
     out = local_path(out, "the output", ConvertError)  # a file:// URL names a path
     if format is None:  # -o scan.copc.laz without --format was a gigapoint folder of that name
-        format = "copc" if out is not None and str(out).lower().endswith(".copc.laz") else "gigapoint"
+        format = "copc" if is_copc_name(out) else "gigapoint"
     if format not in FORMATS:
         raise ConvertError(f"--format: unknown format {format!r}; choose {' or '.join(FORMATS)}")
     if format != "copc" and out is not None and str(out) != "" and is_supported_name(out):  # -o scan.laz: a folder named so
