@@ -1,7 +1,8 @@
-"""Converting many small tiles against one file of the same points: what each input file costs.
+"""Converting (or opening) many small tiles against one file of the same points: what each input file costs.
 
     .venv/bin/python benchmarks/bench_many_tiles.py                  # 2 000 tiles of 50 points
     .venv/bin/python benchmarks/bench_many_tiles.py --tiles 4000 --points 100 --memory-limit 64M
+    .venv/bin/python benchmarks/bench_many_tiles.py --open           # gigapoint.open of the tiles, plain and progressive
 
 The demo town's points, cut into ``--tiles`` NPY files of ``--points`` each and saved once
 more as one NPY file; both converted with ``gigapoint.convert`` in this process, alternately
@@ -9,7 +10,9 @@ more as one NPY file; both converted with ``gigapoint.convert`` in this process,
 memory or, with a small ``--memory-limit``, spilled. Reported: seconds, points/s and the tiles'
 time over the one file's: a cost that grows faster than the tiles (the state's fingerprint of
 every tile written with each tile's chunk, a bincount of 8^7 cells a chunk, a listing of the
-spill folder a chunk) shows as a ratio that grows with ``--tiles``.
+spill folder a chunk) shows as a ratio that grows with ``--tiles``. With ``--open`` the tiles
+are opened instead: ``gigapoint.open`` as one plain cloud against a progressive octree loaded
+to the end (``wait``), alternately.
 """
 
 from __future__ import annotations
@@ -33,12 +36,24 @@ def _timed(inputs, out: Path, memory_limit) -> float:
     return time.perf_counter() - t
 
 
+def _opened(tiles: Path, progressive: bool) -> float:
+    import gigapoint
+
+    t = time.perf_counter()
+    cloud = gigapoint.open(tiles, progressive=progressive)
+    if progressive:
+        cloud.wait()
+        cloud.close()
+    return time.perf_counter() - t
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tiles", type=int, default=2000)
     ap.add_argument("--points", type=int, default=50, help="points a tile")
     ap.add_argument("--memory-limit", default=None, help="e.g. 64M: spilled; default: held in memory")
     ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--open", action="store_true", help="time gigapoint.open of the tiles, plain and progressive, instead")
     args = ap.parse_args(argv)
     xyz, _, _ = demo_arrays(args.tiles * args.points, seed=3)
     with tempfile.TemporaryDirectory() as tmp:
@@ -48,6 +63,8 @@ def main(argv=None) -> int:
         for k in range(args.tiles):
             np.save(tiles / f"t{k:06d}.npy", xyz[k * args.points : (k + 1) * args.points])
         np.save(one / "all.npy", xyz)
+        if args.open:
+            return _compare_opens(tiles, args)
         _timed([one], Path(tmp) / "warm", args.memory_limit)  # numba's compile: not counted
         times: dict[str, list[float]] = {"tiles": [], "one file": []}
         for r in range(args.rounds):
@@ -59,6 +76,21 @@ def main(argv=None) -> int:
     for k, s in med.items():
         print(f"  {k:9s} {s:6.2f} s (median of {args.rounds}), {n / s / 1e6:.3f} M points/s")
     print(f"  tiles / one file: {med['tiles'] / med['one file']:.1f}x, {(med['tiles'] - med['one file']) / args.tiles * 1e3:.2f} ms a tile")
+    return 0
+
+
+def _compare_opens(tiles: Path, args) -> int:
+    _opened(tiles, True)  # numba's compile: not counted
+    times: dict[str, list[float]] = {"plain": [], "progressive": []}
+    for _ in range(args.rounds):
+        times["plain"].append(_opened(tiles, False))
+        times["progressive"].append(_opened(tiles, True))
+    n = args.tiles * args.points
+    print(f"{cpu_model()}; gigapoint.open of {args.tiles:,} tiles of {args.points} points ({n:,})")
+    med = {k: statistics.median(v) for k, v in times.items()}
+    for k, s in med.items():
+        print(f"  {k:11s} {s:6.2f} s (median of {args.rounds}), {n / s / 1e6:.3f} M points/s")
+    print(f"  progressive / plain: {med['progressive'] / med['plain']:.2f}x")
     return 0
 
 

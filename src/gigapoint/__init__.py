@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+from .core.threads import prefer_openmp
+
+prefer_openmp()  # before any kernel runs: numba's TBB layer slowed small kernels down (core/threads.py)
+
 from . import backends as _backends  # noqa: F401  (registers the cpu and wgpu backends with render)
 from .core import PointChunk, PointCloud, from_arrays
 from .errors import GigapointError, GigapointWarning

@@ -10,6 +10,7 @@ from numba import njit, prange
 
 from ..backends.numba_cpu import NumbaCpuBackend
 from ..backends.numba_cpu.raster import NO_TABLE, TILE_SHIFT, fill_empty, merge, resolve_colors
+from ..core.threads import numba_threads
 from ..render import Camera
 
 
@@ -53,26 +54,17 @@ def naive_matrix(camera: Camera, center) -> np.ndarray:
 def naive_frame(xyz, color, camera: Camera, near: float, far: float, n_threads: int, background=(0, 0, 0, 255), center=(0.0, 0.0, 0.0)):
     """(visibility (H*W,) u64, colors (H*W,) u32, seconds in ``naive_raster``) of one naive frame:
     clear the per-thread buffers, the loop, the merge, and gigapoint's own colour resolve."""
-    import numba
-
     n_pixels = camera.width * camera.height
-    with NumbaCpuBackend.lock:  # numba's parallel kernels: one caller at a time
-        previous = numba.get_num_threads()
-        numba.set_num_threads(n_threads)
-        try:
-            bufs = np.empty((n_threads, n_pixels), np.uint64)
-            for b in bufs:
-                fill_empty(b)
-            t0 = time.perf_counter()
-            naive_raster(xyz, naive_matrix(camera, center), camera.width, camera.height, np.float32(near), np.float32(far), bufs)
-            t1 = time.perf_counter()
-            frame = bufs[0]
-            if n_threads > 1:  # gigapoint's merge with every tile flagged: the naive loop keeps no flags
-                merge(frame, bufs[1:], np.ones((n_threads, (n_pixels >> TILE_SHIFT) + 1), np.uint8))
-            colors = np.empty(n_pixels, np.uint32)
-            resolve_colors(frame, color, np.array(background, np.uint8).view(np.uint32)[0], colors, NO_TABLE, NO_TABLE, 0)
-        finally:
-            numba.set_num_threads(previous)
+    with NumbaCpuBackend.lock, numba_threads(n_threads):  # numba's parallel kernels: one caller at a time
+        bufs = np.empty((n_threads, n_pixels), np.uint64)
+        for b in bufs:
+            fill_empty(b)
+        t0 = time.perf_counter()
+        naive_raster(xyz, naive_matrix(camera, center), camera.width, camera.height, np.float32(near), np.float32(far), bufs)
+        t1 = time.perf_counter()
+        frame = bufs[0]
+        if n_threads > 1:  # gigapoint's merge with every tile flagged: the naive loop keeps no flags
+            merge(frame, bufs[1:], np.ones((n_threads, (n_pixels >> TILE_SHIFT) + 1), np.uint8))
+        colors = np.empty(n_pixels, np.uint32)
+        resolve_colors(frame, color, np.array(background, np.uint8).view(np.uint32)[0], colors, NO_TABLE, NO_TABLE, 0)
     return frame, colors, t1 - t0
-
-

@@ -51,6 +51,14 @@ class PointChunk:
         return len(self.xyz)
 
 
+def join_chunks(chunks: list[PointChunk]) -> PointChunk:
+    """One chunk of ``chunks``' points, in order, with the first's attributes (every chunk has them)."""
+    if len(chunks) == 1:
+        return chunks[0]
+    attrs = {a: np.concatenate([c.attributes[a] for c in chunks]) for a in chunks[0].attributes}
+    return PointChunk(np.concatenate([c.xyz for c in chunks]), np.concatenate([c.rgba for c in chunks]), attrs)
+
+
 def attribute_name_problem(name) -> str | None:
     """Why ``name`` cannot name an attribute, or None: octrees store each attribute in a file
     named after it (``attr.<name>.npy``), so no path separator or NUL, not empty, '.' or '..'."""

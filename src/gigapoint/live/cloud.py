@@ -42,6 +42,7 @@ from ..core.morton import argsort_codes, cube_of, morton_codes
 from ..core.quantize import make_batches, quantize
 from ..core.renderable import DrawList
 from ..core.selection import Selection, View, select_view, subsample_step
+from ..core.threads import threads_for
 from ..errors import GigapointError, InputError, check_switch, check_timeout, check_whole, is_real
 from ..lod.build import take, valid_bounds
 from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
@@ -329,6 +330,11 @@ class LiveCloud:
         n = len(xyz_in)
         if n == 0:
             raise InputError(f"{name}: push: the frame has no points")
+        with threads_for(n):  # a small frame on this thread alone: waking the others costs more (core/threads.py)
+            return self._push_points(xyz_in, rgb, pose, time, normals, attributes, pushed_at, world_normals, pose_tag, ordered)
+
+    def _push_points(self, xyz_in, rgb, pose, time, normals, attributes, pushed_at, world_normals, pose_tag, ordered) -> int:
+        name, n = self.name, len(xyz_in)
         p = parse_pose(pose, f"{name}: push") if pose_tag is None else pose_tag
         rgba = colors_for(rgb, n, f"{name}: push") if rgb is not None else None
         attrs = {}

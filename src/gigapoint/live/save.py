@@ -8,18 +8,15 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_write
+from ..core.chunk import join_chunks
 from ..errors import InputError
 from ..io.registry import is_supported_name
 from ..lod.copc_write import is_copc_name
 
 
 def _collect(octree):
-    chunks = list(octree.chunks())
-    xyz = np.concatenate([c.xyz for c in chunks])
-    rgba = np.concatenate([c.rgba for c in chunks])
-    names = chunks[0].attributes.keys()
-    attrs = {a: np.concatenate([c.attributes[a] for c in chunks]) for a in names}
-    return xyz, rgba, attrs
+    points = join_chunks(list(octree.chunks()))
+    return points.xyz, points.rgba, points.attributes
 
 
 def save_snapshots(octree, path, overwrite: bool = False) -> int:

@@ -9,6 +9,7 @@ import threading
 import numba
 import numpy as np
 
+from ...core.threads import numba_threads
 from ...render.splats import ONE_PIXEL
 from . import raster
 from .passes import CpuPasses
@@ -179,9 +180,7 @@ class NumbaCpuBackend:
         for frame in frames:
             raster.fill_empty(frame)
         scratch, dirty = self._scratch_for(n_views, n_threads, width * height)
-        previous = numba.get_num_threads()
-        numba.set_num_threads(n_threads)
-        try:
+        with numba_threads(n_threads):
             raster.rasterize(
                 firsts,
                 counts,
@@ -208,8 +207,6 @@ class NumbaCpuBackend:
             if n_threads > 1 and len(bands) == 0:  # (bands: every thread drew into the frame)
                 for v in range(n_views):
                     raster.merge(frames[v], scratch[v], dirty[v])
-        finally:
-            numba.set_num_threads(previous)
         return frames
 
     def resolve(self, visibility: np.ndarray, color: np.ndarray, background_rgba) -> np.ndarray:

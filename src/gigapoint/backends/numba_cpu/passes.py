@@ -18,6 +18,7 @@ import numpy as np
 
 from ...core.compact import full_words, rgb565_table, rgb565_words
 from ...core.palette import PaletteColors
+from ...core.threads import numba_threads
 from ...render.params import (
     AMBIENT,
     DEPTH_GAP,
@@ -221,15 +222,12 @@ def _banding(points, sel, width, height, threads, bands, step):
 def _banded_run(n_threads: int, scratch: dict):
     """Run a banded kernel on ``n_threads`` threads; if it fails half-way its ``scratch`` buffers
     are dirty (not back to their empty state): drop them."""
-    previous = numba.get_num_threads()
-    numba.set_num_threads(n_threads)
-    try:
-        yield
-    except BaseException:
-        scratch.clear()
-        raise
-    finally:
-        numba.set_num_threads(previous)
+    with numba_threads(n_threads):
+        try:
+            yield
+        except BaseException:
+            scratch.clear()
+            raise
 
 
 def hqs_colors(

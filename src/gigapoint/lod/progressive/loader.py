@@ -25,9 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ...core.chunk import PointChunk
+from ...core.chunk import PointChunk, join_chunks
 from ...core.chunked import physical_memory
 from ...core.cloud import check_valid_count
+from ...core.threads import SMALL_BATCH
 from ...errors import GigapointError, InputError, MemoryLimitError
 from ..convert.prefetch import prefetch
 
@@ -122,7 +123,7 @@ class Loader:
         turn = -1
         chunks = prefetch(self._chunks(), name="gigapoint-decode")  # held here: closed below, after the decoder is let go
         try:
-            for name, chunk in chunks:
+            for name, chunk in _joined(chunks, SMALL_BATCH):
                 s = 0
                 # the attributes every source has so far: a file without one drops it, one with more brings none
                 self.octree.keep_attributes(chunk.attributes)
@@ -183,6 +184,44 @@ class Loader:
         self._first_in.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join()
+
+
+def _joined(chunks: Iterator[tuple[str, PointChunk]], least: int) -> Iterator[tuple[str, PointChunk]]:
+    """``chunks`` with runs of small ones (fewer than ``least`` points: many small files) joined
+    into chunks of ``least`` points or more, where their attributes are the same: an insertion
+    costs ~0.1 ms whatever its size (2 000 files of 50 points loaded in 1.7 s, one by one). The
+    first chunk goes in as it is (the first image; the decoder waits for it), and a source's
+    error comes after the points read before it are given (they stay drawable)."""
+    held: list[PointChunk] = []
+    name, first = "", True
+
+    def kind(chunk: PointChunk) -> list:
+        return [(a, v.dtype) for a, v in chunk.attributes.items()]
+
+    while True:
+        try:
+            item = next(chunks, None)
+        except BaseException:
+            if held:
+                yield name, join_chunks(held)
+            raise
+        if item is not None and first:
+            first = False
+            yield item
+            continue
+        if held and (item is None or kind(item[1]) != kind(held[0])):
+            yield name, join_chunks(held)
+            held = []
+        if item is None:
+            return
+        if len(item[1]) >= least and not held:
+            yield item
+            continue
+        name = item[0]  # (the last file of a join: an error inserting it names one of them)
+        held.append(item[1])
+        if sum(map(len, held)) >= least:
+            yield name, join_chunks(held)
+            held = []
 
 
 def _reachable(bounds: dict, offset, scale) -> bool:

@@ -63,6 +63,7 @@ from ...core.morton import fastest
 from ...core.quantize import dequantize
 from ...core.renderable import DrawList, MultiViewDrawList, check_point_index
 from ...core.selection import Selection, View, batch_matrices, precision_for, visible_and_size
+from ...core.threads import threads_for
 from ...errors import GigapointError, InputError, check_timeout
 from ...render.splats import weighted_median
 from ..build import take, valid_bounds
@@ -899,6 +900,11 @@ class ProgressiveOctree:
         n = len(xyz)
         if n == 0:
             return 0
+        with threads_for(n):  # a small batch on this thread alone: waking the others costs more (core/threads.py)
+            return self._add(xyz, rgb, attributes)
+
+    def _add(self, xyz, rgb, attributes: dict) -> int:
+        n = len(xyz)
         if rgb is None:
             rgba = np.full(n, np.array([200, 200, 200, 255], np.uint8).view(np.uint32)[0], np.uint32)
         else:
