@@ -209,12 +209,12 @@ def _joined(chunks: Iterator[tuple[str, PointChunk]], least: int) -> Iterator[tu
             first = False
             yield item
             continue
-        if held and (item is None or kind(item[1]) != kind(held[0])):
+        if held and (item is None or kind(item[1]) != kind(held[0]) or len(item[1]) >= least):
             yield name, join_chunks(held)
             held = []
         if item is None:
             return
-        if len(item[1]) >= least and not held:
+        if len(item[1]) >= least:
             yield item
             continue
         name = item[0]  # (the last file of a join: an error inserting it names one of them)
