@@ -12,8 +12,12 @@ loads, numba goes on to TBB, then its own workqueue.
 A parallel kernel wakes numba's sleeping worker threads, and on a virtual machine that wake-up
 costs ~0.1 ms a kernel (measured on 2 vCPUs with numba's TBB, OpenMP and workqueue layers),
 more than a small batch's work: an insertion of 50 points into the progressive octree runs ~10
-parallel kernels and took ~1-2.5 ms, ~0.1 ms on one thread. ``threads_for`` runs batches below
-``SMALL_BATCH`` points on the calling thread alone (benchmarks/bench_small_batches.py).
+parallel kernels and took ~1-2.5 ms, ~0.15 ms on one thread. ``threads_for`` runs batches below
+``SMALL_BATCH`` points on the calling thread alone. OpenMP's threads spin a while before they
+sleep unless ``OMP_WAIT_POLICY=passive`` (set by ``gigapoint view``): spinning, they wake at
+once, and a progressive insertion of 500-5 000 points ran 0.74-0.93x as fast on one thread
+while a live push still gained 1.15-1.3x: a caller says whether its batches gain on one thread
+then too (``when_spinning``). Figures: benchmarks/bench_small_batches.py, docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -40,10 +44,22 @@ def numba_threads(n_threads: int):
         numba.set_num_threads(previous)
 
 
-def threads_for(n_points: int):
+def threads_spin() -> bool:
+    """Whether numba's idle threads spin (OpenMP without ``OMP_WAIT_POLICY=passive``) rather than
+    sleep (passive OpenMP, TBB, workqueue; and before numba has loaded a layer)."""
+    try:
+        layer = numba.threading_layer()
+    except ValueError:  # no parallel kernel has run yet
+        return False
+    return layer == "omp" and os.environ.get("OMP_WAIT_POLICY", "").strip().lower() != "passive"
+
+
+def threads_for(n_points: int, when_spinning: bool = True):
     """The block's kernels on one thread for a batch below SMALL_BATCH points, else on as many as
-    numba has now."""
-    return numba_threads(1 if n_points < SMALL_BATCH else numba.get_num_threads())
+    numba has now; ``when_spinning`` False: on as many whatever the batch where idle threads
+    spin (``threads_spin``: they wake at once)."""
+    small = n_points < SMALL_BATCH and (when_spinning or not threads_spin())
+    return numba_threads(1 if small else numba.get_num_threads())
 
 
 def prefer_openmp() -> None:
