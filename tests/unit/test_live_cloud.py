@@ -752,3 +752,25 @@ def test_a_small_frame_is_pushed_on_the_calling_thread_alone(monkeypatch):
     b = gp.render_frame(every, cam, gp.RenderSettings(size_mode="fixed"))
     np.testing.assert_array_equal(a.image, b.image)
     assert a.stats.points_processed == 3_000 + len(big[0])
+
+
+def test_frame_points_of_a_frame_that_left_the_ring_is_an_error_not_another_frames_points():
+    """frame_points(frames) read the chunks a FrameInfo named: once the frame had left the ring
+    they held a newer frame's points, given as its own without a word."""
+    live = LiveCloud(keep=2)
+    live.push(np.full((100, 3), 1.0))
+    first = list(live.frames)
+    np.testing.assert_array_equal(live.frame_points(first)[0], np.full((100, 3), 1.0))
+    for k in range(3):
+        live.push(np.full((100, 3), 10.0 + k))
+    with pytest.raises(InputError, match=r"^live: frame_points: frame 0 is not in the ring \(it has left it"):
+        live.frame_points(first)
+    newest = list(live.frames)[-1:]
+    np.testing.assert_array_equal(live.frame_points(newest)[0], np.full((100, 3), 12.0))
+    other = LiveCloud(keep=2)
+    other.push(np.zeros((5, 3)))
+    with pytest.raises(InputError, match="frame 0 is not in the ring"):
+        live.frame_points(list(other.frames))
+    for bad in ([1], newest[0], "frames"):
+        with pytest.raises(InputError, match="frames must be"):
+            live.frame_points(bad)

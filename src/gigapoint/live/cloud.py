@@ -593,14 +593,29 @@ class LiveCloud:
             self._mirror_pool, self._mirror_version = pool, pool.version
 
     def frame_points(self, frames: list[FrameInfo] | None = None):
-        """(xyz float64 world, rgba uint8 (N, 4), attributes) of the frames in the ring (30-bit positions)."""
+        """(xyz float64 world, rgba uint8 (N, 4), attributes) of the frames in the ring (30-bit
+        positions), or of ``frames``, FrameInfo of ``cloud.frames`` still in it: a frame that has
+        left the ring is a one-line InputError (its chunks hold newer frames' points: they were
+        given as its own)."""
         with self.lock.reading():
-            frames = list(self.frames) if frames is None else frames
+            frames = list(self.frames) if frames is None else self._frames_in_ring(frames)
             buf = self.buffers_
             slots = [s for f in frames for s in f.chunks]
             if not slots:
                 return np.empty((0, 3)), np.empty((0, 4), np.uint8), {}
             return buf.gather(slots, skip=("frame_time",))
+
+    def _frames_in_ring(self, frames) -> list[FrameInfo]:
+        where = f"{self.name}: frame_points"
+        if isinstance(frames, FrameInfo) or not isinstance(frames, (list, tuple, deque)):
+            raise InputError(f"{where}: frames must be a list of FrameInfo (of cloud.frames), got {type(frames).__name__}")
+        held = {id(f) for f in self.frames}
+        for f in frames:
+            if not isinstance(f, FrameInfo):
+                raise InputError(f"{where}: frames must be FrameInfo (of cloud.frames), got {f!r:.60}")
+            if id(f) not in held:
+                raise InputError(f"{where}: frame {f.seq} is not in the ring (it has left it, or is another cloud's): take frames from cloud.frames")
+        return list(frames)
 
     def snapshot(self, normals: bool = True) -> int:
         """Freeze the frames now in the ring (world coordinates: their poses applied) into the
