@@ -484,6 +484,9 @@ def test_viewer_for_jupyter(cloud):
         v.close()
     with pytest.raises(httpx.TransportError):
         httpx.get(v.url, timeout=2)
+    with pytest.raises(gigapoint.GigapointError, match=r"^Viewer of '.*': closed, its server stopped; open a new Viewer"):
+        v.display()  # (it showed the frame of a server that was gone)
+    assert repr(v).endswith(", closed)")
     with pytest.raises(gigapoint.GigapointError):
         gigapoint.Viewer(12345, display=False)
     for bad, problem in (

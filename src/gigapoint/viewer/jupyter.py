@@ -40,6 +40,7 @@ class Viewer:
         check_switch("display", display, "Viewer")  # "no" was taken as true
         self.cloud = _as_cloud(cloud_or_path)
         self.server = ViewerServer(self.cloud, host=host, port=port, settings=settings).start()
+        self.closed = False
         self.width, self.height = width, height
         if display:
             self.display()
@@ -56,6 +57,8 @@ class Viewer:
 
     def display(self) -> None:
         """Show the IFrame when running under IPython (a no-op elsewhere)."""
+        if self.closed:  # (it showed a frame of a server that was gone)
+            raise InputError(f"Viewer of {self.cloud.name!r}: closed, its server stopped; open a new Viewer to show the cloud")
         try:
             from IPython import get_ipython
             from IPython.display import IFrame, display
@@ -78,6 +81,7 @@ class Viewer:
 
     def close(self) -> None:
         self.server.close()
+        self.closed = True
 
     def __enter__(self) -> Self:
         return self
@@ -86,4 +90,4 @@ class Viewer:
         self.close()
 
     def __repr__(self) -> str:
-        return f"Viewer({self.cloud.name!r}, {self.url})"
+        return f"Viewer({self.cloud.name!r}, {self.url}{', closed' if self.closed else ''})"
