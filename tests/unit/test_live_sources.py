@@ -300,6 +300,34 @@ def test_a_damaged_frame_of_a_recording_is_refused_and_the_rest_play(tmp_path):
     assert player.error is None and player.errors == 2 and [f.time for f in again.frames] == [0.0, 2.0, 4.0]
 
 
+def test_a_damaged_index_reads_only_its_own_frames_and_a_leap_in_time_is_not_waited_for(tmp_path):
+    """A recording's index.json whose frame entry was not a file name (5) or whose frames were
+    not a list was a TypeError; an entry naming a file outside the recording (/etc/hostname)
+    was read as a frame. A frame stamped 1e12 s after the last stalled the replay for good."""
+    import time
+
+    live = LiveCloud(keep=10)
+    live.record(tmp_path / "rec")
+    for k, t in enumerate((0.0, 0.1, 1e12, 1e12 + 0.1)):
+        live.push(patch(k)[0], time=t)
+    live.stop_recording()
+    index = tmp_path / "rec" / "index.json"
+    meta = json.loads(index.read_text())
+    outside = tmp_path / "outside.npz"
+    np.savez(outside, kind="points", time=0.5, xyz=np.zeros((3, 3)))
+    index.write_text(json.dumps({**meta, "frames": [{"file": 5}, {"file": str(outside)}, {"file": "../outside.npz"}] + meta["frames"]}))
+    assert recording_files(tmp_path / "rec") == [tmp_path / "rec" / e["file"] for e in meta["frames"]]
+    again = LiveCloud(keep=10)
+    player = Player(ReplaySource(tmp_path / "rec"), again, rate=1.0).start()
+    t0 = time.perf_counter()
+    assert player.join(timeout=30), "the replay stalled at the leap"
+    assert time.perf_counter() - t0 < 5 and player.errors == 0 and [f.time for f in again.frames] == [0.0, 0.1, 1e12, 1e12 + 0.1]
+    assert re.fullmatch(r".*rec: the time stamps jump 1,000,000,000,000 s ahead at frame 2: played on at once", again.stats.last_error)
+    index.write_text(json.dumps({**meta, "frames": 7}))
+    with pytest.raises(InputError, match=r"index.json: damaged: its frames are not a list$"):
+        ReplaySource(tmp_path / "rec")
+
+
 def test_recording_into_an_odd_folder(tmp_path, monkeypatch):
     """record(5) was a TypeError, record("") recorded into the current folder; overwrite=True
     deleted the .npz files of a frames/ folder that held no recording, and a folder of other

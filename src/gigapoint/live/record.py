@@ -162,7 +162,13 @@ def recording_files(directory) -> list[Path]:
         raise InputError(f"{index}: unreadable ({exc})") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise InputError(f"{index}: not a gigapoint live recording index")
-    listed = [directory / e["file"] for e in meta.get("frames", []) if isinstance(e, dict) and "file" in e]
+    entries = meta.get("frames", [])
+    if not isinstance(entries, list):  # (7 was a TypeError)
+        raise InputError(f"{index}: damaged: its frames are not a list")
+    inside = directory.resolve()
+    # an entry that is not a file name inside the recording (5 was a TypeError; "/etc/hostname" was read) is left out as a missing file is
+    named = [e["file"] for e in entries if isinstance(e, dict) and isinstance(e.get("file"), str)]
+    listed = [p for p in (directory / f for f in named) if p.resolve().is_relative_to(inside)]
     seen = {p.name for p in listed}
     later = sorted(p for p in (directory / FRAMES).glob("[0-9]*.npz") if p.name not in seen)
     return [p for p in listed if p.is_file()] + later

@@ -429,9 +429,13 @@ def open_source(spec, **options) -> Source:
     raise InputError(f"{path}: not a live source (a recording, a .bag, a TUM sequence or a folder of frames)")
 
 
+MAX_WAIT_S = 60.0  # the longest pause between two frames a Player keeps: a longer one is played on at once, and said
+
+
 class Player:
     """Plays a source into a LiveCloud from a thread, at the stream's rate (``rate`` times its
-    time stamps; None: as fast as frames come). Bad frames are counted and skipped."""
+    time stamps; None: as fast as frames come). Bad frames are counted and skipped; a pause of
+    more than MAX_WAIT_S between two frames is not waited for (the HUD says so)."""
 
     def __init__(self, source: Source, live, rate: float | None = 1.0, loop: bool = False):
         self.source, self.live, self.rate, self.loop = source, live, rate, loop
@@ -473,7 +477,7 @@ class Player:
             self.done.set()
 
     def _play_once(self) -> None:
-        t0_wall = t0_stream = None
+        t0_wall = t0_stream = last_stamp = None
         for k, frame in enumerate(self.source.frames()):
             if self._stop.is_set():
                 return
@@ -483,8 +487,13 @@ class Player:
                 continue
             if self.rate:
                 stamp = frame.time if self.source.rate_hz is None else k / self.source.rate_hz
+                if t0_wall is not None and (stamp - last_stamp) / self.rate > MAX_WAIT_S:
+                    # a clock reset or a damaged stamp: a frame 1e12 s on stalled the stream for good, without a word
+                    self.live.stats.last_error = f"{self.source.name}: the time stamps jump {stamp - last_stamp:,.0f} s ahead at frame {k}: played on at once"
+                    t0_wall = None
                 if t0_wall is None:
                     t0_wall, t0_stream = time.perf_counter(), stamp
+                last_stamp = stamp
                 wait = (stamp - t0_stream) / self.rate - (time.perf_counter() - t0_wall)
                 if wait > 0 and self._stop.wait(wait):
                     return
