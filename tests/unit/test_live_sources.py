@@ -155,6 +155,51 @@ def test_tum_association_file(tmp_path):
     assert len(frames) == 1 and frames[0].time == pytest.approx(1.01) and frames[0].rgb[0, 0, 0] == 9
 
 
+def _tum(tmp_path, depth_txt="1.0 depth/a.png\n", gt="1.0 0 0 0 0 0 0 1\n"):
+    from PIL import Image
+
+    (tmp_path / "depth").mkdir(exist_ok=True)
+    Image.fromarray(np.full((8, 8), 5000, np.uint16)).save(tmp_path / "depth" / "a.png")
+    (tmp_path / "depth.txt").write_text(depth_txt)
+    (tmp_path / "groundtruth.txt").unlink(missing_ok=True)
+    if gt is not None:
+        (tmp_path / "groundtruth.txt").write_text(gt)
+    return tmp_path
+
+
+def _played(source) -> tuple[int, list[str]]:
+    live = LiveCloud()
+    player = Player(source, live, rate=None)
+    player.run()
+    return live.n_points, [str(f) for f in source.frames() if isinstance(f, GigapointError)]
+
+
+def test_a_tum_sequence_without_poses_plays_in_the_sensors_frame_and_bad_lists_are_one_line(tmp_path):
+    """Without groundtruth.txt every frame was skipped (nothing played, without a word), as when
+    no frame had a pose near its time; a depth.txt line 'abc ...' was float()'s ValueError, a
+    line of one column an IndexError, a quaternion of zeros or a NaN translation named no file,
+    a list of no image played nothing."""
+    seq = _tum(tmp_path, gt=None)
+    assert _played(TumSequence(seq)) == (64, [])  # one 8x8 plane, where the sensor saw it
+    live = LiveCloud()
+    Player(TumSequence(seq), live, rate=None).run()
+    np.testing.assert_allclose(live.frame_points()[0][:, 2], 1.0, atol=1e-6)  # 5000 units: 1 m in front of it
+    _tum(tmp_path, gt="100.0 0 0 0 0 0 0 1\n")
+    assert _played(TumSequence(seq)) == (
+        0, [f"{seq / 'groundtruth.txt'}: no depth image has a pose within 20 ms of its time stamp: nothing to place"]
+    )
+    for depth_txt, gt, problem in (
+        ("abc depth/a.png\n", None, "depth.txt: lines must be 'timestamp file'"),
+        ("1.0\n", None, "depth.txt: lines must be 'timestamp file'"),
+        ("# none\n", None, ": a TUM RGB-D sequence that lists no depth image"),
+        ("1.0 depth/a.png\n", "1.0 0 0 0 0 0 0 0\n", "groundtruth.txt: quaternion ['0', '0', '0', '0'] is not a rotation"),
+        ("1.0 depth/a.png\n", "1.0 nan 0 0 0 0 0 1\n", "groundtruth.txt: translation ['nan', '0', '0'] is not finite"),
+    ):
+        _tum(tmp_path, depth_txt, gt)
+        with pytest.raises(InputError, match=f"^{re.escape(str(tmp_path))}.*{re.escape(problem)}$"):
+            TumSequence(seq)
+
+
 # ---------------------------------------------------------------------- ROS bags
 def _pointcloud2(typestore, xyz, rgb, stamp_ns, ros1):
     PointCloud2 = typestore.types["sensor_msgs/msg/PointCloud2"]

@@ -223,6 +223,14 @@ def _stamped_lines(path: Path) -> list[list[str]]:
     return out
 
 
+def _timed_files(path: Path) -> list[tuple[float, str]]:
+    """(time, file) of each line of a TUM list (``rgb.txt``, ``depth.txt``)."""
+    try:
+        return [(float(r[0]), r[1]) for r in _stamped_lines(path)]
+    except (ValueError, IndexError):  # ("abc" was float()'s ValueError, a line of one column an IndexError)
+        raise InputError(f"{path}: lines must be 'timestamp file'") from None
+
+
 def quaternion_pose(t, q) -> np.ndarray:
     """4x4 from a translation and a unit quaternion (qx, qy, qz, qw)."""
     x, y, z, w = (float(v) for v in q)
@@ -237,6 +245,8 @@ def quaternion_pose(t, q) -> np.ndarray:
         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
     ]
     pose[:3, 3] = [float(v) for v in t]
+    if not np.isfinite(pose[:3, 3]).all():  # (NaN was refused frame by frame, naming no file)
+        raise InputError(f"translation {list(t)} is not finite")
     return pose
 
 
@@ -252,20 +262,27 @@ class TumSequence(Source):
     """A TUM RGB-D sequence folder: depth (and rgb) PNGs paired by an association file
     (``associations.txt``/``associate.txt``: ``t_rgb rgb/... t_depth depth/...``) or by nearest
     time stamps (within 20 ms), posed by ``groundtruth.txt`` (``t tx ty tz qx qy qz qw``, the
-    nearest within 20 ms; frames without a pose are skipped)."""
+    nearest within 20 ms; frames without a pose are skipped, and if every frame is, that is
+    one error at the end). Without ``groundtruth.txt`` the frames are drawn where the sensor
+    saw them (its own frame: a camera that stood still)."""
 
     def __init__(self, path, intrinsics=TUM_DEFAULT, depth_scale: float = TUM_DEPTH_SCALE, max_dt: float = 0.02):
         self.path = Path(path)
         self.name = str(self.path)
         self.intrinsics, self.depth_scale, self.max_dt = intrinsics, depth_scale, max_dt
         pairs = self._pairs()
-        gt = self.path / "groundtruth.txt"
-        rows = _stamped_lines(gt) if gt.is_file() else []
+        gt = self.gt_file = self.path / "groundtruth.txt"
+        self.posed = gt.is_file()  # (without it every frame was skipped: nothing played, without a word)
+        rows = _stamped_lines(gt) if self.posed else []
         try:
             self.gt_times = np.array([float(r[0]) for r in rows])
             self.gt_poses = [quaternion_pose(r[1:4], r[4:8]) for r in rows]
         except (ValueError, IndexError):
             raise InputError(f"{gt}: lines must be 'timestamp tx ty tz qx qy qz qw'") from None
+        except InputError as exc:  # (a quaternion of zeros: the message named no file)
+            raise InputError(f"{gt}: {exc}") from None
+        if not pairs:
+            raise InputError(f"{self.path}: a TUM RGB-D sequence that lists no depth image")
         self.pairs = pairs
 
     def _pairs(self) -> list[tuple[float, str, str | None]]:
@@ -280,9 +297,9 @@ class TumSequence(Source):
         depth_txt = self.path / "depth.txt"
         if not depth_txt.is_file():
             raise InputError(f"{self.path}: not a TUM RGB-D sequence (no depth.txt or association file)")
-        depth = [(float(r[0]), r[1]) for r in _stamped_lines(depth_txt)]
+        depth = _timed_files(depth_txt)
         rgb_txt = self.path / "rgb.txt"
-        rgb = [(float(r[0]), r[1]) for r in _stamped_lines(rgb_txt)] if rgb_txt.is_file() else []
+        rgb = _timed_files(rgb_txt) if rgb_txt.is_file() else []
         rgb_times = np.array([t for t, _ in rgb])
         out = []
         for t, f in depth:
@@ -293,10 +310,12 @@ class TumSequence(Source):
     def frames(self):
         from PIL import Image
 
+        posed = 0
         for t, depth_file, rgb_file in self.pairs:
-            k = _nearest(self.gt_times, t, self.max_dt)
-            if k is None:
+            k = _nearest(self.gt_times, t, self.max_dt) if self.posed else None
+            if k is None and self.posed:
                 continue
+            posed += 1
             try:
                 depth = np.asarray(Image.open(self.path / depth_file))
                 rgb = np.asarray(Image.open(self.path / rgb_file).convert("RGB")) if rgb_file else None
@@ -305,8 +324,10 @@ class TumSequence(Source):
                 continue
             if rgb is not None and rgb.shape[:2] != depth.shape[:2]:
                 rgb = None
-            yield RecordedFrame("depth", t, self.gt_poses[k], rgb=rgb, depth=depth, intrinsics=np.array(self.intrinsics, np.float64),
-                                depth_scale=self.depth_scale)  # fmt: skip
+            yield RecordedFrame("depth", t, self.gt_poses[k] if k is not None else None, rgb=rgb, depth=depth,
+                                intrinsics=np.array(self.intrinsics, np.float64), depth_scale=self.depth_scale)  # fmt: skip
+        if not posed:
+            yield InputError(f"{self.gt_file}: no depth image has a pose within {self.max_dt * 1000:g} ms of its time stamp: nothing to place")
 
 
 # ---------------------------------------------------------------------- ROS bags
