@@ -1,9 +1,11 @@
 """The public names of the gigapoint package resolve to the documented functions."""
 
 import inspect
+import os
 import re
 
 import numpy as np
+import pytest
 
 import gigapoint as gp
 
@@ -214,3 +216,21 @@ def test_from_arrays_judges_colours_as_a_file_of_them_is_read(tmp_path):
     ):
         with pytest.raises(InputError, match=f"^{re.escape(problem)}$"):
             gp.from_arrays(xyz, **kw)
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes")
+def test_a_named_pipe_is_refused_at_once_not_read_for_good(tmp_path, capsys):
+    """A FIFO named x.las hung gp.open, `info`, `render` and `convert`: the COPC sniff read its
+    head, waiting for a writer for good, before the check that it is a regular file."""
+    from gigapoint.cli import main
+
+    pipe = tmp_path / "pipe.las"
+    os.mkfifo(pipe)
+    for kw in ({}, {"progressive": True}):
+        with pytest.raises(gp.GigapointError, match=f"^{re.escape(str(pipe))}: is not a regular file$"):
+            gp.open(pipe, **kw)
+    for args in (["info", str(pipe)], ["render", str(pipe), "-o", str(tmp_path / "x.png")], ["convert", str(pipe), "-o", str(tmp_path / "o")]):
+        assert main(args) == 1, args
+        assert "pipe.las: is not a regular file" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pipe.las"]

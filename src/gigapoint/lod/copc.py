@@ -15,6 +15,7 @@ draws them (voxel_octree.py), a chunk decoded with lazrs into the layouts below.
 from __future__ import annotations
 
 import io
+import os
 
 import numpy as np
 
@@ -226,6 +227,8 @@ def is_copc_head(head: bytes) -> bool:
 
 def is_copc_file(path) -> bool:
     """A local file that starts as a COPC file does (``is_copc_head``)."""
+    if not os.path.isfile(path):  # a FIFO named x.las: reading it waited for a writer for good
+        return False
     try:
         with open(path, "rb") as f:
             return is_copc_head(f.read(MAGIC_END))
