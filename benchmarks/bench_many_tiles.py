@@ -72,11 +72,17 @@ def main(argv=None) -> int:
             times["one file"].append(_timed([one], Path(tmp) / f"o{r}", args.memory_limit))
     n = len(xyz)
     print(f"{cpu_model()}; {args.tiles:,} tiles of {args.points} points ({n:,}), {'memory limit ' + args.memory_limit if args.memory_limit else 'held in memory'}")
-    med = {k: statistics.median(v) for k, v in times.items()}
-    for k, s in med.items():
-        print(f"  {k:9s} {s:6.2f} s (median of {args.rounds}), {n / s / 1e6:.3f} M points/s")
+    med = _medians(times, n)
     print(f"  tiles / one file: {med['tiles'] / med['one file']:.1f}x, {(med['tiles'] - med['one file']) / args.tiles * 1e3:.2f} ms a tile")
     return 0
+
+
+def _medians(times: dict[str, list[float]], n: int) -> dict[str, float]:
+    """Each way's median seconds, printed with its points/s."""
+    med = {k: statistics.median(v) for k, v in times.items()}
+    for k, s in med.items():
+        print(f"  {k:11s} {s:6.2f} s (median of {len(times[k])}), {n / s / 1e6:.3f} M points/s")
+    return med
 
 
 def _compare_opens(tiles: Path, args) -> int:
@@ -87,9 +93,7 @@ def _compare_opens(tiles: Path, args) -> int:
         times["progressive"].append(_opened(tiles, True))
     n = args.tiles * args.points
     print(f"{cpu_model()}; gigapoint.open of {args.tiles:,} tiles of {args.points} points ({n:,})")
-    med = {k: statistics.median(v) for k, v in times.items()}
-    for k, s in med.items():
-        print(f"  {k:11s} {s:6.2f} s (median of {args.rounds}), {n / s / 1e6:.3f} M points/s")
+    med = _medians(times, n)
     print(f"  progressive / plain: {med['progressive'] / med['plain']:.2f}x")
     return 0
 
