@@ -806,6 +806,31 @@ def test_bad_input_is_a_one_line_error():
     assert ProgressiveOctree("ok").add(np.zeros((2, 3)), flag=np.ones(2, bool), h=np.ones(2, np.float16)) == 2
 
 
+@pytest.mark.parametrize(
+    "kw, problem",
+    [
+        ({"chunk": 0}, "chunk must be an integer from 16 to 1,048,576 points, got 0"),  # a ZeroDivisionError
+        ({"chunk": -5}, "chunk must be an integer from 16 to 1,048,576 points, got -5"),  # an OverflowError
+        ({"chunk": 10**9}, "chunk must be an integer from 16 to 1,048,576 points, got 1000000000"),  # a 447 GiB allocation
+        ({"capacity": "a"}, "capacity must be an integer >= 0 points, got 'a'"),  # int()'s ValueError
+        ({"capacity": -5}, "capacity must be an integer >= 0 points, got -5"),
+        ({"cube": 5}, "cube must be (origin x, y, z; edge), got 5"),  # a TypeError
+        ({"cube": ((0, 0), 1.0)}, "cube must be (origin x, y, z; edge), got ((0, 0), 1.0)"),
+        ({"cube": ((0, 0, 0), -1.0)}, "cube must have a finite origin and a positive finite edge, got ((0, 0, 0), -1.0)"),  # taken
+        ({"cube": ((np.nan, 0, 0), 1.0)}, "cube must have a finite origin and a positive finite edge, got ((nan, 0, 0), 1.0)"),
+        ({"attributes": 5}, "attributes must be a dict of names and dtypes, got int"),
+    ],
+)
+def test_odd_octree_settings_are_one_line_errors(kw, problem):
+    with pytest.raises(InputError, match=f"^bad: {re.escape(problem)}$"):
+        ProgressiveOctree("bad", **kw)
+
+
+@pytest.mark.parametrize("chunk", [16, 100, 5_000])
+def test_any_chunk_size_holds_the_same_leaves(scene, octree, chunk):
+    _assert_same_leaves(octree, _filled(scene, chunk=chunk), tol=3**0.5 * octree.edge / 2**30)
+
+
 def test_a_source_without_a_valid_point_ends_as_the_plain_cloud_does(tmp_path, capsys):
     """Every point NaN: ``wait`` raises the plain cloud's one-line EmptyCloudError (the load
     ended quietly with an empty octree, and ``gigapoint render --progressive`` wrote a

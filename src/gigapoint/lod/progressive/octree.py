@@ -64,7 +64,7 @@ from ...core.quantize import dequantize
 from ...core.renderable import DrawList, MultiViewDrawList, check_point_index
 from ...core.selection import Selection, View, batch_matrices, precision_for, visible_and_size
 from ...core.threads import threads_for
-from ...errors import GigapointError, InputError, check_timeout
+from ...errors import GigapointError, InputError, check_timeout, check_whole
 from ...render.splats import weighted_median
 from ..build import take, valid_bounds
 from ..keys import CODE_BITS, morton_position, point_codes
@@ -249,6 +249,21 @@ def _checked_grid(name: str, grid) -> tuple[np.ndarray, float] | None:
 _GRID_REACH = 2.0**50
 
 
+def _checked_cube(name: str, cube) -> tuple[np.ndarray, float] | None:
+    """``cube`` as (origin float64 (3,), edge), or a one-line InputError: three finite numbers and
+    a positive finite edge (5 was a TypeError; an edge of -1 or NaN was taken)."""
+    if cube is None:
+        return None
+    try:
+        origin, edge = cube
+        origin, edge = np.asarray(origin, np.float64).reshape(3), float(edge)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: cube must be (origin x, y, z; edge), got {cube!r:.80}") from None
+    if not (np.isfinite(origin).all() and np.isfinite(edge) and edge > 0):
+        raise InputError(f"{name}: cube must have a finite origin and a positive finite edge, got {cube!r:.80}")
+    return origin, edge
+
+
 def _grid_cube(origin, edge: float, anchor, step: float) -> tuple[np.ndarray, float] | None:
     """The smallest cube holding (origin, edge) that is 2^B grid steps wide, its corner half a
     step below a grid point: each of its nodes' cubes is then 2^b steps with cell centres on the
@@ -407,6 +422,12 @@ class ProgressiveOctree:
         in the bits the grid needs (core/compact.py), not 30 an axis."""
         if not (isinstance(max_leaf, int) and max_leaf >= 1):
             raise InputError(f"{name}: max_leaf must be a positive integer, got {max_leaf!r}")
+        # (chunk 0 was a ZeroDivisionError, -5 an OverflowError, 10**9 a 447 GiB allocation; capacity "a" a ValueError)
+        chunk = check_whole(name, "chunk", chunk, 16, 1 << 20, " points")
+        capacity = check_whole(name, "capacity", capacity, 0, None, " points")
+        if attributes is not None and not isinstance(attributes, dict):
+            raise InputError(f"{name}: attributes must be a dict of names and dtypes, got {type(attributes).__name__}")
+        cube = _checked_cube(name, cube)
         self.name = name
         self.max_leaf = max_leaf
         self.source_files: list[Path] = []  # the files a loader reads (open_progressive): save() takes their CRS
@@ -443,8 +464,7 @@ class ProgressiveOctree:
         self._narrow = self.grid is not None  # point chunks written on the grid (_level_bits) until a point is off it
         self._packed = False  # held as trim leaves it (_pack): unpacked before a write
         if cube is not None:
-            origin, edge = cube
-            self._start(np.asarray(origin, np.float64), float(edge))
+            self._start(*cube)
 
     # ------------------------------------------------------------------ storage
     def _nodes(self, cap: int) -> None:
