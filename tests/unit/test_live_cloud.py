@@ -366,6 +366,7 @@ def test_close_frees_frames_and_snapshots_and_refuses_later_pushes():
     assert live.n_points == 3000 + 2000 and live.snapshots.n_points == 2000  # (a snapshot copies the ring's frames)
     live.close()
     assert live.n_points == 0 and live.snapshots.n_points == 0 and live.snapshots.pool is None
+    assert repr(live) == "LiveCloud('live', 0 of 100 frames, 0 live points, 0 snapshot points, closed)"
     for what, call in (("push", lambda: live.push(*frame(2, n=10))), ("snapshot", live.snapshot), ("save", lambda: live.save("x.las"))):
         with pytest.raises(InputError, match=f"^live: {what}: the live cloud is closed"):
             call()

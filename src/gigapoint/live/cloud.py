@@ -241,7 +241,8 @@ class LiveCloud:
 
     def __repr__(self) -> str:
         snap = f", {self.snapshots.n_points:,} snapshot points" if self.snapshots is not None else ""
-        return f"LiveCloud({self.name!r}, {len(self.frames)} of {self.keep} frames, {self.points:,} live points{snap})"
+        closed = ", closed" if self.closed else ""  # (as ProgressiveOctree's: the empty cloud said nothing of why)
+        return f"LiveCloud({self.name!r}, {len(self.frames)} of {self.keep} frames, {self.points:,} live points{snap}{closed})"
 
     def now(self) -> float:
         """Seconds since the cloud started (the clock of ``frame_time``)."""
