@@ -105,6 +105,10 @@ def test_ray_through_a_pixel_hits_the_projected_point():
     origin, direction = cam.ray(px, py)
     t = np.dot(p - origin, direction)
     np.testing.assert_allclose(origin + t * direction, p, atol=1e-9)
+    for bad in ((np.nan, 0), (0, np.inf), ("a", 0), (None, 1)):  # NaN gave a NaN ray, "a" a TypeError
+        with pytest.raises(CameraError, match=r"^ray: pixel coordinates must be finite numbers, got \("):
+            cam.ray(*bad)
+    assert np.isfinite(cam.ray(np.int64(3), 2)[1]).all()
 
 
 def test_fit_refuses_an_unknown_projection():

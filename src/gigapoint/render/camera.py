@@ -361,6 +361,8 @@ class Camera:
 
     def ray(self, px: float, py: float) -> tuple[np.ndarray, np.ndarray]:
         """World-space origin and unit direction through pixel coordinates (px, py)."""
+        if not (is_real(px) and is_real(py)):  # (NaN gave a NaN ray, "a" a TypeError)
+            raise CameraError(f"ray: pixel coordinates must be finite numbers, got ({px!r}, {py!r})")
         right, up, back = self.basis()
         nx = (px / self.width) * 2 - 1
         ny = 1 - (py / self.height) * 2
