@@ -176,6 +176,10 @@ def test_point_info_of_an_empty_pixel_is_none_and_a_bad_index_a_clear_error():
             cloud.positions(bad)
     with pytest.raises(PointIndexError, match=r"point indices must be whole numbers, got float64$"):
         cloud.positions([1.5])
+    for bad in ([-1], [0, 500], [10**9]):  # batch_of(-1) was an OverflowError, one past the end the last batch
+        with pytest.raises(PointIndexError, match=rf"point index {bad[-1]} out of range 0\.\.499$"):
+            cloud.batch_of(bad)
+    assert cloud.batch_of([0, 499]).tolist() == [0, len(cloud.batches) - 1]
     assert cloud.positions([]).shape == (0, 3) and np.array_equal(cloud.positions([hit, 0]), cloud.positions()[[hit, 0]])
     assert issubclass(PointIndexError, IndexError) and issubclass(PointIndexError, GigapointError)
 

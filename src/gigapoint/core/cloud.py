@@ -91,25 +91,32 @@ class PointCloud:
         """(N, 4) uint8 colors (a view of u32 colors, decoded from 16-bit ones)."""
         return rgba32(self.color).view(np.uint8).reshape(-1, 4)
 
+    def _point_indices(self, indices) -> np.ndarray:
+        """``indices`` as int64 point indices (1-D), or a one-line PointIndexError for one that is
+        not a point's."""
+        indices = np.atleast_1d(np.asarray(indices))
+        if indices.size and indices.dtype.kind not in "iu":
+            raise PointIndexError(f"{self.name}: point indices must be whole numbers, got {indices.dtype}")
+        indices = indices.astype(np.int64, copy=False)
+        outside = indices[(indices < 0) | (indices >= self.n_points)]
+        if len(outside):
+            raise PointIndexError(f"{self.name}: point index {outside[0]} out of range 0..{self.n_points - 1}")
+        return indices
+
     def batch_of(self, indices) -> np.ndarray:
-        """Batch number of each point index."""
-        return np.searchsorted(self.batches["first"], np.asarray(indices, np.uint64), side="right") - 1
+        """Batch number of each point index (an index that is not a point's: a one-line
+        PointIndexError; -1 was an OverflowError, one past the end the last batch's)."""
+        return self._batches_of(self._point_indices(indices))
+
+    def _batches_of(self, indices: np.ndarray) -> np.ndarray:
+        return np.searchsorted(self.batches["first"], indices.astype(np.uint64), side="right") - 1
 
     def positions(self, indices=None) -> np.ndarray:
         """float64 (k, 3) world positions (30-bit precision) of point indices (all if None); an
         index that is not a point's a one-line PointIndexError (the kernels read past the arrays:
         a segmentation fault)."""
-        if indices is None:
-            indices = np.arange(self.n_points)
-        else:
-            indices = np.atleast_1d(np.asarray(indices))
-            if indices.size and indices.dtype.kind not in "iu":
-                raise PointIndexError(f"{self.name}: point indices must be whole numbers, got {indices.dtype}")
-            indices = indices.astype(np.int64, copy=False)
-            outside = indices[(indices < 0) | (indices >= self.n_points)]
-            if len(outside):
-                raise PointIndexError(f"{self.name}: point index {outside[0]} out of range 0..{self.n_points - 1}")
-        b = self.batch_of(indices)
+        indices = np.arange(self.n_points) if indices is None else self._point_indices(indices)
+        b = self._batches_of(indices)
         out = np.empty((len(indices), 3))
         for batch in np.unique(b):
             sel = b == batch
