@@ -38,11 +38,14 @@ def demo(
     50 M points. 10⁹ points at ``scale=0.01`` hold ~9 GB (``attributes=False``: ~6 GB, without
     the intensity and classification). ``colors``: how colours are held (``core.build_cloud``:
     "auto", "rgba", "rgb565" or "palette")."""
-    from .errors import InputError, check_whole, is_real
+    from .errors import InputError, check_switch, check_whole, is_real
     from .io.demo import check_seed, demo_chunks
 
     n_points = check_whole("demo", "n_points", n_points, 1)  # 0 or -5: "no valid points"
     check_seed("demo", seed)
+    for switch, value in (("progressive", progressive), ("attributes", attributes)):  # "no" was taken as true
+        check_switch(switch, value, "demo")
+    check_switch("chunked", chunked, "demo", allow_none=True)
     if scale is not None and not (is_real(scale) and 1e-6 <= scale <= 1000):
         raise InputError(f"demo: scale must be None (float positions) or a grid step between 1e-6 and 1000 metres, got {scale!r}")
     if progressive:

@@ -234,3 +234,21 @@ def test_a_named_pipe_is_refused_at_once_not_read_for_good(tmp_path, capsys):
         assert main(args) == 1, args
         assert "pipe.las: is not a regular file" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pipe.las"]
+
+
+def test_the_demo_and_render_take_true_or_false_for_their_switches():
+    """gp.demo(progressive="yes") loaded progressively, attributes="no" kept them and
+    chunked="x" built in bounded memory; gp.render(return_stats="no") gave the stats too."""
+    for kw, problem in (
+        ({"progressive": "yes"}, "progressive must be True or False, got 'yes'"),
+        ({"attributes": "no"}, "attributes must be True or False, got 'no'"),
+        ({"chunked": "x"}, "chunked must be True or False or None, got 'x'"),
+    ):
+        with pytest.raises(gp.GigapointError, match=f"^demo: {re.escape(problem)}$"):
+            gp.demo(1_000, **kw)
+    cloud = gp.demo(1_000, chunked=None, attributes=np.bool_(False))
+    assert list(cloud.attribute_names) == []
+    with pytest.raises(gp.GigapointError, match=r"^render: return_stats must be True or False, got 'no'$"):
+        gp.render(cloud, return_stats="no", width=32, height=24)
+    image, stats = gp.render(cloud, return_stats=True, width=32, height=24)
+    assert image.shape == (24, 32, 4) and stats.points_total == 1_000

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..core.layout import EMPTY_PIXEL
 from ..core.renderable import Renderable
-from ..errors import GigapointError, GigapointWarning
+from ..errors import GigapointError, GigapointWarning, check_switch
 from .backend import get_backend
 from .camera import Camera
 from .frame import Frame, RenderStats, check_indexable
@@ -75,6 +75,7 @@ def render(cloud, camera: Camera | None = None, settings: RenderSettings | None 
     """(H, W, 4) uint8 RGBA image of ``cloud`` seen by ``camera`` (and RenderStats if asked);
     without a camera, ``Camera.fit_cloud(cloud)`` of what it holds now (1920x1080). ``width`` /
     ``height``: the image's size instead of the camera's (the fitted one's 1920x1080)."""
+    check_switch("return_stats", return_stats, "render")  # "no" gave the stats too
     if setting_overrides:
         settings = RenderSettings.of(settings).replace(**setting_overrides)
     if width is not None or height is not None:  # width=... was "unknown render setting(s)"
