@@ -165,10 +165,10 @@ def recording_files(directory) -> list[Path]:
     entries = meta.get("frames", [])
     if not isinstance(entries, list):  # (7 was a TypeError)
         raise InputError(f"{index}: damaged: its frames are not a list")
-    inside = directory.resolve()
-    # an entry that is not a file name inside the recording (5 was a TypeError; "/etc/hostname" was read) is left out as a missing file is
-    named = [e["file"] for e in entries if isinstance(e, dict) and isinstance(e.get("file"), str)]
-    listed = [p for p in (directory / f for f in named) if p.resolve().is_relative_to(inside)]
+    # an entry that is not a relative name inside the recording (5 was a TypeError; "/etc/hostname" was read) is left out
+    # as a missing file is: judged by its name, not a resolve (a stat a component) for each of thousands of frames
+    named = [Path(e["file"]) for e in entries if isinstance(e, dict) and isinstance(e.get("file"), str)]
+    listed = [directory / f for f in named if not f.is_absolute() and ".." not in f.parts]
     seen = {p.name for p in listed}
     later = sorted(p for p in (directory / FRAMES).glob("[0-9]*.npz") if p.name not in seen)
     return [p for p in listed if p.is_file()] + later

@@ -613,13 +613,21 @@ def tight_bounds(name: str, what: str, lo, hi, cube_min, edge: float, step: floa
     cube_min, cube_max = np.asarray(cube_min, np.float64), np.asarray(cube_min, np.float64) + edge
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)) or not (np.any(lo) or np.any(hi)):
         return cube_min, cube_max  # missing, or a writer's zeros: the cube stands in
-    tol = 2.0 * abs(step) + 1e-3 * edge + 1e-12 * float(np.max(np.abs(np.concatenate([cube_min, cube_max]))))
-    if np.any(lo < cube_min - tol) or np.any(hi > cube_max + tol):
+    if outside_cube(lo, hi, cube_min, cube_max, step):
         raise InputError(
             f"{name}: corrupt {what}: the points' bounds {box_text(lo, hi)} lie outside the octree's cube {box_text(cube_min, cube_max)}; "
             "one of them is wrong"
         )
     return lo, hi
+
+
+def outside_cube(lo, hi, cube_min, cube_max, step: float) -> bool:
+    """Whether the box lo..hi lies beyond the cube by more than writers' rounding: two ``step``s
+    (the coordinates' grid: a writer chooses its cubes before it rounds positions to the grid),
+    0.1 % of the cube's edge and the coordinates' float rounding."""
+    cube_min, cube_max = np.asarray(cube_min, np.float64), np.asarray(cube_max, np.float64)
+    tol = 2.0 * abs(step) + 1e-3 * float(np.max(cube_max - cube_min)) + 1e-9 * float(np.max(np.abs(np.concatenate([cube_min, cube_max]))))
+    return bool(np.any(np.asarray(lo) < cube_min - tol) or np.any(np.asarray(hi) > cube_max + tol))
 
 
 def box_text(lo, hi) -> str:

@@ -32,7 +32,7 @@ from ..errors import GigapointWarning, InputError
 from ..io.laz_process import bad_data
 from .keys import MAX_LEVEL, ROOT_KEY, key_cube, level_of
 from .octree_dir import POINT_ARRAYS
-from .store import OctreeCloud, box_text
+from .store import OctreeCloud, box_text, outside_cube
 
 #: Points of the fetched nodes decoded together (``VoxelOctree._decode_batch``).
 DECODE_GROUP_POINTS = 1 << 20
@@ -315,9 +315,7 @@ class VoxelOctree(OctreeCloud):
         low, med, high = quantize(xyz, np.arange(n, dtype=np.int64), rec)
         lo, hi = rec[0]["bbox_min"], rec[0]["bbox_max"]  # the points' tight box, which its record holds from now on
         self.nodes[index]["bbox_min"], self.nodes[index]["bbox_max"] = lo, hi
-        # writers round positions to their grid after choosing the cubes: a step or so beyond is theirs
-        tol = 2.0 * self.coordinate_step + 1e-3 * float(np.max(cube_max - cube_min)) + 1e-9 * float(np.max(np.abs(cube_max)))
-        if not self._misplaced_said and (np.any(lo < cube_min - tol) or np.any(hi > cube_max + tol)):
+        if not self._misplaced_said and outside_cube(lo, hi, cube_min, cube_max, self.coordinate_step):
             self._misplaced_said = True  # drawn where they are, but the other nodes are culled by cubes that may be as wrong
             warnings.warn(
                 f"{self.source_name}: node {voxel_name(key)}'s points {box_text(lo, hi)} lie outside its cube "

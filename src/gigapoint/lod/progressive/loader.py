@@ -193,7 +193,7 @@ def _joined(chunks: Iterator[tuple[str, PointChunk]], least: int) -> Iterator[tu
     first chunk goes in as it is (the first image; the decoder waits for it), and a source's
     error comes after the points read before it are given (they stay drawable)."""
     held: list[PointChunk] = []
-    name, first = "", True
+    held_points, name, first = 0, "", True
 
     def kind(chunk: PointChunk) -> list:
         return [(a, v.dtype) for a, v in chunk.attributes.items()]
@@ -211,7 +211,7 @@ def _joined(chunks: Iterator[tuple[str, PointChunk]], least: int) -> Iterator[tu
             continue
         if held and (item is None or kind(item[1]) != kind(held[0]) or len(item[1]) >= least):
             yield name, join_chunks(held)
-            held = []
+            held, held_points = [], 0
         if item is None:
             return
         if len(item[1]) >= least:
@@ -219,9 +219,10 @@ def _joined(chunks: Iterator[tuple[str, PointChunk]], least: int) -> Iterator[tu
             continue
         name = item[0]  # (the last file of a join: an error inserting it names one of them)
         held.append(item[1])
-        if sum(map(len, held)) >= least:
+        held_points += len(item[1])
+        if held_points >= least:
             yield name, join_chunks(held)
-            held = []
+            held, held_points = [], 0
 
 
 def _reachable(bounds: dict, offset, scale) -> bool:
