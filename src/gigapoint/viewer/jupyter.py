@@ -40,7 +40,6 @@ class Viewer:
         check_switch("display", display, "Viewer")  # "no" was taken as true
         self.cloud = _as_cloud(cloud_or_path)
         self.server = ViewerServer(self.cloud, host=host, port=port, settings=settings).start()
-        self.closed = False
         self.width, self.height = width, height
         if display:
             self.display()
@@ -79,9 +78,12 @@ class Viewer:
         active = core.last_active
         return core.screenshot(active.id if active is not None and active.id in core.sessions else None, width, height, scale)
 
+    @property
+    def closed(self) -> bool:
+        return self.server.closed
+
     def close(self) -> None:
         self.server.close()
-        self.closed = True
 
     def __enter__(self) -> Self:
         return self

@@ -352,6 +352,11 @@ class ViewerServer:
             time.sleep(0.01)
         return self
 
+    @property
+    def closed(self) -> bool:
+        """Whether ``close`` was called (the server stops, or has)."""
+        return bool(self.server.should_exit)
+
     def close(self) -> None:
         self.server.should_exit = True
         if self.thread is not None:
