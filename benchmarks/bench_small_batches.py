@@ -1,15 +1,16 @@
 """Small batches into the progressive octree (``add``) and a live cloud (``push``): what a call costs.
 
-    OMP_WAIT_POLICY=passive .venv/bin/python benchmarks/bench_small_batches.py
     .venv/bin/python benchmarks/bench_small_batches.py --sizes 50,1000,20000 --points 200000
+    NUMBA_THREADING_LAYER=omp OMP_WAIT_POLICY=passive .venv/bin/python benchmarks/bench_small_batches.py
 
 A program producing points (a sensor's packets, a simulation's steps) hands them over in
 batches of ``--sizes`` points, ``--points`` in all; each size is timed as gigapoint runs it
 (batches below ``core/threads.SMALL_BATCH`` on the calling thread alone, but for ``add`` where
-OpenMP's idle threads spin) and as before that rule (every batch on all of numba's threads:
+idle threads take up work at once: spinning OpenMP, TBB) and as before that rule (every batch on all of numba's threads:
 SMALL_BATCH 0), alternately, ``--rounds`` times (medians; numba's compile before, not
-counted). Reported: points/s and the ratio. Run it with and without ``OMP_WAIT_POLICY=passive``
-(``gigapoint view`` sets it; a Python program has OpenMP's default, spinning a while).
+counted). Reported: points/s and the ratio. On OpenMP (``NUMBA_THREADING_LAYER=omp``: where
+the tbb wheel is missing) run it with and without ``OMP_WAIT_POLICY=passive`` (``gigapoint
+view`` sets it; a Python program has OpenMP's default, spinning a while).
 """
 
 from __future__ import annotations
@@ -63,7 +64,7 @@ def main(argv=None) -> int:
     for fill in (_fill_octree, _fill_live):  # numba's compile: not counted
         fill(xyz[:20_000], rgb[:20_000], 5_000)
         fill(xyz[:20_000], rgb[:20_000], 20_000)
-    idle = "spin" if threads.threads_spin() else "sleep"
+    idle = "take up work at once" if threads.threads_awake() else "sleep"
     print(f"{cpu_model()}; numba {numba.threading_layer()} layer, {numba.get_num_threads()} threads whose idle ones {idle}; SMALL_BATCH {threads.SMALL_BATCH:,}")
     for name, fill in (("ProgressiveOctree.add", _fill_octree), ("LiveCloud.push", _fill_live)):
         for size in sizes:

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from .core.threads import prefer_openmp
+from .core.threads import choose_threading_layer
 
-prefer_openmp()  # before any kernel runs: numba's TBB layer slowed small kernels down (core/threads.py)
+choose_threading_layer()  # before any kernel runs: TBB from its wheel, else OpenMP (core/threads.py)
 
 from . import backends as _backends  # noqa: F401  (registers the cpu and wgpu backends with render)
 from .core import PointChunk, PointCloud, from_arrays

@@ -2167,14 +2167,14 @@ def test_a_small_batch_is_inserted_on_the_calling_thread_alone(scene, monkeypatc
     batch's work (50 points an add: 2.5 ms a call, 0.15 ms on one thread): a batch below
     SMALL_BATCH points runs on the calling thread, a larger one on all, and the count is back
     after the add, whether it inserted or raised. The tree is the same either way. Where
-    OpenMP's idle threads spin (they wake at once) every batch runs on all."""
+    idle threads take up work at once (spinning OpenMP, TBB) every batch runs on all."""
     import numba
 
     from gigapoint.core import threads
     from gigapoint.core.threads import SMALL_BATCH
 
     xyz, rgba, attrs = scene
-    monkeypatch.setattr(threads, "threads_spin", lambda: False)
+    monkeypatch.setattr(threads, "threads_awake", lambda: False)
     seen = _threads_seen(monkeypatch, K, "write_points")
     before = numba.get_num_threads()
     small = _filled(scene, batch=1_000)
@@ -2186,7 +2186,7 @@ def test_a_small_batch_is_inserted_on_the_calling_thread_alone(scene, monkeypatc
     with pytest.raises(InputError, match="is not one of this cloud's"):
         small.add(xyz[:10], rgba[:10], banana=np.zeros(10))
     assert numba.get_num_threads() == before
-    monkeypatch.setattr(threads, "threads_spin", lambda: True)
+    monkeypatch.setattr(threads, "threads_awake", lambda: True)
     seen.clear()
     small.add(xyz[:100], rgba[:100], **{a: v[:100] for a, v in attrs.items()})
     assert set(seen) == {before}

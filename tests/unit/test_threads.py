@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import importlib.metadata
 import os
+import platform
 import subprocess
 import sys
 
@@ -16,8 +18,11 @@ _LAYER = (
     "import sys, numpy as np, gigapoint, numba\n"
     "from gigapoint.core.morton import morton_codes\n"
     "morton_codes(np.zeros((10, 3)), np.zeros(3), 1.0)\n"  # a parallel kernel: numba loads its layer
-    "from gigapoint.core.threads import threads_spin\n"
-    "print(numba.threading_layer(), threads_spin())\n"
+    "from gigapoint.core.threads import threads_awake\n"
+    "print(numba.threading_layer(), threads_awake())\n"
+    "import os\n"  # where the library named LIBRARY was loaded from
+    "lib = os.environ.get('LIBRARY')\n"
+    "lib and print(next(os.path.realpath(l.split()[-1]) for l in open('/proc/self/maps') if l.rstrip().endswith(lib)))\n"
 )
 
 
@@ -27,16 +32,50 @@ def _layer(**env) -> str:
     return run.stdout.strip() if run.returncode == 0 else f"failed: {run.stderr.strip().splitlines()[-1:]}"
 
 
-def test_openmp_is_numbas_layer_unless_the_user_chose_one():
-    """numba loads TBB before OpenMP where both are installed, and on TBB small kernels slowed
-    down as a process went on: gigapoint puts OpenMP first where it loads; a layer the user
-    names is the one loaded."""
+def _wheel_tbb_expected() -> bool:
+    """The platforms pyproject.toml names the ``tbb`` wheel a dependency for."""
+    return (sys.platform, platform.machine()) in {("linux", "x86_64"), ("win32", "AMD64")}
+
+
+def test_tbb_of_its_wheel_is_numbas_layer_else_openmp_unless_the_user_chose_one():
+    """With the tbb wheel (a dependency where PyPI has one) numba runs on its TBB, loaded by
+    path from the environment; without it, OpenMP before an older system TBB (on Debian's 2021.8
+    small kernels slowed down as a process went on); a layer the user names is the one loaded."""
+    if _wheel_tbb_expected():
+        assert threads.load_wheel_tbb(), "the tbb wheel (a dependency here) is not installed"
+    default = "tbb True" if threads.load_wheel_tbb() else "omp True"  # idle threads take up work at once (OpenMP's spin a while by default)
+    assert _layer() == default
+    if default.startswith("tbb") and sys.platform == "linux":  # the wheel's library, also where the user named TBB (not a system one)
+        wheel = next(str(f.locate().resolve()) for f in importlib.metadata.files("tbb") if f.name == "libtbb.so.12")
+        for env in ({}, {"NUMBA_THREADING_LAYER": "tbb"}):
+            assert _layer(**env, LIBRARY="libtbb.so.12").endswith(wheel)
     if _layer(NUMBA_THREADING_LAYER="omp") != "omp True":
         pytest.skip("no OpenMP runtime loads here")
-    assert _layer() == "omp True"  # OpenMP's default: idle threads spin a while
-    assert _layer(OMP_WAIT_POLICY="PASSIVE") == "omp False"
+    assert _layer(NUMBA_THREADING_LAYER="omp", OMP_WAIT_POLICY="PASSIVE") == "omp False"
     assert _layer(NUMBA_THREADING_LAYER="workqueue") == "workqueue False"
     assert _layer(NUMBA_THREADING_LAYER_PRIORITY="workqueue omp tbb") == "workqueue False"
+
+
+_FORKED = (
+    "import os, numpy as np, gigapoint as gp, numba\n"
+    "cloud = gp.demo(20_000)\n"
+    "image = gp.render(cloud, width=160, height=120)\n"
+    "pid = os.fork()\n"
+    "if pid == 0:\n"
+    "    os._exit(0 if np.array_equal(gp.render(cloud, width=160, height=120), image) else 3)\n"
+    "print(numba.threading_layer(), os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]))\n"
+)
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="no fork() on Windows")
+def test_a_process_forked_after_drawing_draws_the_same_image():
+    """multiprocessing's default start on Linux (before Python 3.14) forks: on TBB the child draws
+    as its parent; GNU OpenMP terminates it ("fork() called from a process already using GNU OpenMP")."""
+    if not threads.load_wheel_tbb():
+        pytest.skip("no tbb wheel here: numba runs on OpenMP, which is not fork-safe")
+    clean = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_THREADING_LAYER")}
+    run = subprocess.run([sys.executable, "-c", _FORKED], env=clean, capture_output=True, text=True, timeout=300)
+    assert run.stdout.strip() == "tbb 0", run.stderr[-800:]
 
 
 def test_a_block_runs_on_the_threads_asked_and_gives_the_count_back(monkeypatch):
@@ -47,11 +86,11 @@ def test_a_block_runs_on_the_threads_asked_and_gives_the_count_back(monkeypatch)
     with pytest.raises(ValueError, match="boom"), numba_threads(1):
         raise ValueError("boom")
     assert numba.get_num_threads() == before
-    for spin in (False, True):
-        monkeypatch.setattr(threads, "threads_spin", lambda spin=spin: spin)
+    for awake in (False, True):
+        monkeypatch.setattr(threads, "threads_awake", lambda awake=awake: awake)
         with threads_for(SMALL_BATCH - 1):
             assert numba.get_num_threads() == 1
-        with threads_for(SMALL_BATCH - 1, when_spinning=False):
-            assert numba.get_num_threads() == (before if spin else 1)
+        with threads_for(SMALL_BATCH - 1, when_awake=False):
+            assert numba.get_num_threads() == (before if awake else 1)
         with threads_for(SMALL_BATCH):
             assert numba.get_num_threads() == before

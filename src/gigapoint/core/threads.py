@@ -1,28 +1,35 @@
 """numba's threading layer and thread count for a block of work.
 
-numba picks Intel TBB before OpenMP where both are installed (``pip install tbb``, Debian's
-libtbb12): gigapoint's kernels were tuned on OpenMP, and on TBB (2021.8, numba 0.68) repeated
-small parallel kernels slowed down as a process went on (a 50-point kernel 23 -> 257 us a call
-over 18 000 calls, a 200 000-point one 0.6 -> 1.9 ms; OpenMP: 2 us and 0.5 ms throughout), and
-a live stream of 100 000-point frames went 16 M points/s on OpenMP, 5 on TBB
-(bench_small_batches.py). ``prefer_openmp`` puts OpenMP first unless the user chose a layer
-(``NUMBA_THREADING_LAYER`` / ``NUMBA_THREADING_LAYER_PRIORITY``); where no OpenMP runtime
-loads, numba goes on to TBB, then its own workqueue.
+numba's layers are TBB, OpenMP and its own workqueue; it takes the first that loads, TBB first.
+gigapoint depends on PyPI's ``tbb`` wheel where PyPI has one (Linux x86-64 with glibc 2.28 on,
+Windows x86-64) and loads its library by path at import (``load_wheel_tbb``: numba opens
+``libtbb.so.12`` by name, and the wheel puts it off the loader's path). On that TBB (2023.2)
+a forked process draws (GNU OpenMP terminates a child forked after drawing: "fork() called
+from a process already using GNU OpenMP"), and small kernels cost least (a 50-point kernel
+2.9 us a call against OpenMP's 3.1 spinning, 50-56 passive). Without it, OpenMP goes first
+(``choose_threading_layer``): an older system TBB (Debian's 2021.8, numba 0.68) slowed
+repeated small kernels down as a process went on (a 50-point kernel 23 -> 257 us a call over
+18 000 calls; OpenMP 2 us throughout). A layer the user names (``NUMBA_THREADING_LAYER`` /
+``NUMBA_THREADING_LAYER_PRIORITY``) is the one used (TBB then the wheel's, where installed).
 
 A parallel kernel wakes numba's sleeping worker threads, and on a virtual machine that wake-up
-costs ~0.1 ms a kernel (measured on 2 vCPUs with numba's TBB, OpenMP and workqueue layers),
-more than a small batch's work: an insertion of 50 points into the progressive octree runs ~10
-parallel kernels and took ~1-2.5 ms, ~0.15 ms on one thread. ``threads_for`` runs batches below
-``SMALL_BATCH`` points on the calling thread alone. OpenMP's threads spin a while before they
-sleep unless ``OMP_WAIT_POLICY=passive`` (set by ``gigapoint view``): spinning, they wake at
-once, and a progressive insertion of 500-5 000 points ran 0.74-0.93x as fast on one thread
-while a live push still gained 1.15-1.3x: a caller says whether its batches gain on one thread
-then too (``when_spinning``). Figures: benchmarks/bench_small_batches.py, docs/benchmarks.md.
+costs ~0.1 ms a kernel (measured on 2 vCPUs with numba's passive OpenMP, workqueue and
+Debian's TBB), more than a small batch's work: an insertion of 50 points into the progressive
+octree runs ~10 parallel kernels and took ~1-2.5 ms, ~0.15 ms on one thread. ``threads_for``
+runs batches below ``SMALL_BATCH`` points on the calling thread alone. Where idle threads take
+up work at once (OpenMP's spin a while unless ``OMP_WAIT_POLICY=passive``, which ``gigapoint
+view`` sets; the wheel's TBB), a progressive insertion of 1 000-5 000 points ran 0.74-0.95x as
+fast on one thread while a live push still gained 1.04-1.3x: a caller says whether its batches
+gain on one thread then too (``when_awake``). Figures: benchmarks/bench_small_batches.py,
+docs/benchmarks.md.
 """
 
 from __future__ import annotations
 
+import ctypes
+import importlib.metadata
 import os
+import sys
 from contextlib import contextmanager
 
 import numba
@@ -44,27 +51,59 @@ def numba_threads(n_threads: int):
         numba.set_num_threads(previous)
 
 
-def threads_spin() -> bool:
-    """Whether numba's idle threads spin (OpenMP without ``OMP_WAIT_POLICY=passive``) rather than
-    sleep (passive OpenMP, TBB, workqueue; and before numba has loaded a layer)."""
+def threads_awake() -> bool:
+    """Whether numba's idle threads take up new work at once: OpenMP's spin a while (but with
+    ``OMP_WAIT_POLICY=passive``), TBB's (the wheel's 2023.2: a 50-point kernel 2.9 us a call)
+    are woken cheaply; passive OpenMP's and workqueue's sleep (~0.1 ms a kernel to wake). False
+    before numba has loaded a layer."""
     try:
         layer = numba.threading_layer()
     except ValueError:  # no parallel kernel has run yet
         return False
-    return layer == "omp" and os.environ.get("OMP_WAIT_POLICY", "").strip().lower() != "passive"
+    return layer == "tbb" or (layer == "omp" and os.environ.get("OMP_WAIT_POLICY", "").strip().lower() != "passive")
 
 
-def threads_for(n_points: int, when_spinning: bool = True):
+def threads_for(n_points: int, when_awake: bool = True):
     """The block's kernels on one thread for a batch below SMALL_BATCH points, else on as many as
-    numba has now; ``when_spinning`` False: on as many whatever the batch where idle threads
-    spin (``threads_spin``: they wake at once)."""
-    small = n_points < SMALL_BATCH and (when_spinning or not threads_spin())
+    numba has now; ``when_awake`` False: on as many whatever the batch where idle threads take
+    up work at once (``threads_awake``)."""
+    small = n_points < SMALL_BATCH and (when_awake or not threads_awake())
     return numba_threads(1 if small else numba.get_num_threads())
 
 
-def prefer_openmp() -> None:
-    """numba's threading layers in the order OpenMP, TBB, workqueue (its default: TBB first),
-    unless the user set one in the environment. Before any parallel kernel runs (at import):
-    numba loads its layer once, at the first."""
-    if not any(os.environ.get(v) for v in ("NUMBA_THREADING_LAYER", "NUMBA_THREADING_LAYER_PRIORITY")):
-        numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
+#: the file name numba loads TBB by (numba/np/ufunc/parallel.py), per platform
+_TBB_LIBRARY = {"linux": "libtbb.so.12", "win32": "tbb12.dll", "darwin": "libtbb.12.dylib"}
+
+
+def load_wheel_tbb() -> bool:
+    """Load the TBB of the ``tbb`` wheel (a dependency where PyPI has one) by its path, so that
+    numba's TBB layer finds it: numba opens the library by name, and the wheel puts it in the
+    environment's ``lib`` folder, off the loader's path; once loaded, that name means it (and not
+    an older system TBB). False where the wheel or its library is missing."""
+    name = _TBB_LIBRARY.get(sys.platform)
+    try:
+        files = importlib.metadata.files("tbb") or []
+    except importlib.metadata.PackageNotFoundError:
+        return False
+    for f in files:
+        if f.name == name:
+            try:
+                ctypes.CDLL(str(f.locate()), mode=ctypes.RTLD_GLOBAL)
+            except OSError:
+                return False
+            return True
+    return False
+
+
+def choose_threading_layer() -> str:
+    """numba's threading layers in the order gigapoint runs best on, unless the user set one in
+    the environment; before any parallel kernel runs (at import: numba loads its layer once, at
+    the first). With the ``tbb`` wheel: TBB first (numba's own order); else OpenMP first (an
+    older system TBB would come first otherwise). Returns the layer put first ("" where the
+    user chose)."""
+    wheel = load_wheel_tbb()  # whatever the user chose: a choice of TBB means the wheel's too
+    if any(os.environ.get(v) for v in ("NUMBA_THREADING_LAYER", "NUMBA_THREADING_LAYER_PRIORITY")):
+        return ""
+    first = "tbb" if wheel else "omp"
+    numba.config.THREADING_LAYER_PRIORITY = [first] + [layer for layer in ("omp", "tbb", "workqueue") if layer != first]
+    return first

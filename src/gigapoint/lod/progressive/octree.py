@@ -920,7 +920,7 @@ class ProgressiveOctree:
         n = len(xyz)
         if n == 0:
             return 0
-        with threads_for(n, when_spinning=False):  # a small batch on this thread alone: waking the others costs more (core/threads.py)
+        with threads_for(n, when_awake=False):  # a small batch on this thread alone: waking the others costs more (core/threads.py)
             return self._add(xyz, rgb, attributes)
 
     def _add(self, xyz, rgb, attributes: dict) -> int:
