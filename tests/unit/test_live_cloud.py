@@ -469,7 +469,7 @@ def test_adaptive_spacing_is_kept_between_pushes_and_measured_again_as_frames_tu
     calls = []
     real = live_cloud.point_spacing
     monkeypatch.setattr(live_cloud, "point_spacing", lambda buf, step: calls.append(step) or real(buf, step))
-    live = LiveCloud(keep=20)
+    live = LiveCloud(keep=20, chunk=2048)  # frames above half a chunk: a chunk each (packed, these overlapping frames are denser)
     cam = gp.Camera.look_at((30, -8, 6), (30, 0, 0), width=160, height=120)  # close: points of several pixels
     adaptive = gp.RenderSettings()  # size_mode "auto": adaptive sizes
     for k in range(40):
@@ -587,7 +587,7 @@ def test_a_snapshot_in_batches_adds_what_one_batch_would_and_keeps_frames_that_l
     live = filled()
     xyz, rgba, attrs = live.frame_points()
     buf = live.buffers_
-    runs = buf.runs([s for f in live.frames for s in f.chunks])
+    runs = live._runs(live.frames)
     lo, hi = buf.bounds_of(runs)
     np.testing.assert_array_equal(lo, xyz.min(axis=0))  # exactly: the cube of the first snapshot comes from them
     np.testing.assert_array_equal(hi, xyz.max(axis=0))
@@ -775,3 +775,142 @@ def test_frame_points_of_a_frame_that_left_the_ring_is_an_error_not_another_fram
     for bad in ([1], newest[0], "frames"):
         with pytest.raises(InputError, match="frames must be"):
             live.frame_points(bad)
+
+
+def moving_patch(k: int, n: int = 50):
+    """Frame k of a slowly moving sensor's small packets: n points in a 2 x 2 x 0.5 m patch that
+    moves 1 cm a frame (packets near each other, as a scanner's are)."""
+    rng = np.random.default_rng(100 + k)
+    return rng.uniform(-1, 1, (n, 3)) * [1, 1, 0.25] + [0.01 * k, 0, 0], np.full((n, 3), k % 250, np.uint8)
+
+
+def test_small_frames_share_chunks_and_each_keeps_its_own_points():
+    """A chunk a frame held 3 357 bytes a point for frames of 50 points (2 000 frames: 336 MB):
+    frames of at most half a chunk are packed one after another into shared chunks, and each
+    frame's points, colours and order are still its own (frame_points), the ring's those of the
+    frames it keeps, in arrival order, as frames leave it from the front of their chunks."""
+    live = LiveCloud(keep=2000)
+    frames = [moving_patch(k) for k in range(2000)]
+    for xyz, rgb in frames:
+        live.push(xyz, rgb)
+    buf = live.buffers_
+    used = int((buf.batches["count"][: buf.n_ring] > 0).sum())
+    assert live.n_points == 100_000 and used <= 11 and buf.n_ring == 32  # 100 000 points in 10 240-point chunks; never grown
+    assert buf.low.nbytes + buf.attributes["normal"].nbytes <= 32 * 10_240 * 16
+    for k in (0, 1, 777, 1999):
+        xyz, rgba, _ = live.frame_points([live.frames[k]])
+        np.testing.assert_allclose(xyz, frames[k][0], rtol=0, atol=1e-7)  # 30-bit cells of a box of a few metres
+        assert (rgba[:, :3] == frames[k][1]).all()
+    for k in range(2000, 2300):  # 300 frames leave from the chunks' fronts
+        live.push(*moving_patch(k))
+    kept = [moving_patch(k) for k in range(300, 2300)]
+    xyz, rgba, _ = live.frame_points()
+    np.testing.assert_allclose(xyz, np.concatenate([x for x, _ in kept]), rtol=0, atol=1e-7)
+    np.testing.assert_array_equal(rgba[:, :3], np.concatenate([c for _, c in kept]))
+    assert live.n_points == int(buf.batches["count"].sum()) == 100_000
+    rec = live.buffers_.batches[: live.buffers_.n_ring]
+    for slot in np.flatnonzero(rec["count"] > 0):  # every point drawn is inside its chunk's box: the words were made in it
+        pos = live.buffers_.positions(int(slot))
+        assert (pos >= rec["bbox_min"][slot]).all() and (pos <= rec["bbox_max"][slot]).all()
+
+
+def test_packed_positions_are_quantized_once_from_the_pushed_points():
+    """A frame that widens its chunk's box makes the chunk's words anew from the positions pushed
+    (kept while the chunk is open), not from the words: each point is what quantizing the chunk's
+    points in their box at once gives, however many frames widened it."""
+    from gigapoint.core.quantize import dequantize, make_batches, quantize
+
+    live = LiveCloud(keep=100)
+    pushed = [moving_patch(k, n=40)[0] * (1 + 0.05 * k) for k in range(100)]  # each frame wider than the last
+    for xyz in pushed:
+        live.push(xyz)
+    buf = live.buffers_
+    slot = live.frames[0].chunks[0]
+    here = [x for f, x in zip(live.frames, pushed) if f.chunks[0] == slot]
+    assert len(here) > 10
+    allpts = np.concatenate(here)
+    one = make_batches(len(allpts), len(allpts))
+    want = dequantize(*quantize(allpts, np.arange(len(allpts)), one), one[0]["bbox_min"], one[0]["bbox_max"], 30)
+    np.testing.assert_array_equal(buf.positions(slot), want)
+
+
+def test_frames_far_apart_or_of_other_times_are_not_packed_together():
+    """A batch's box is what culling and adaptive precision see, and a chunk has one fade: a small
+    frame far from the open chunk's frames, or (fading) arrived a PACK_SPAN-th of ``decay`` after
+    its first, starts a new chunk."""
+    from gigapoint.live.cloud import PACK_SPAN
+
+    live = LiveCloud(keep=10)
+    live.push(moving_patch(0)[0])
+    live.push(moving_patch(1)[0])
+    live.push(moving_patch(2)[0] + [500.0, 0, 0])
+    assert [f.chunks[0] for f in live.frames][:2] == [live.frames[0].chunks[0]] * 2 and live.frames[2].chunks != live.frames[0].chunks
+    now = [0.0]
+    fading = LiveCloud(keep=100, decay=3.2, clock=lambda: now[0])
+    for k in range(40):
+        now[0] = 0.02 * k
+        fading.push(moving_patch(k)[0])
+    by_chunk: dict = {}
+    for f in fading.frames:
+        by_chunk.setdefault(f.chunks[0], []).append(f.arrived)
+    assert len(by_chunk) > 1 and max(len(t) for t in by_chunk.values()) > 1
+    assert all(max(t) - min(t) <= 3.2 / PACK_SPAN + 1e-9 for t in by_chunk.values())
+
+
+def test_a_snapshot_of_small_frames_holds_the_ring_while_frames_are_packed_meanwhile(monkeypatch):
+    """Frames packed while a snapshot reads the ring neither widen the chunks it reads (their
+    words would move) nor reuse those left: it holds exactly the ring's points at its start."""
+    import gigapoint.live.cloud as live_module
+    from gigapoint.lod.progressive import ProgressiveOctree
+
+    live = LiveCloud(keep=300)
+    for k in range(300):
+        live.push(*moving_patch(k))
+    want = sorted_rows(live.frame_points()[0])
+    add = ProgressiveOctree.add
+
+    def add_and_push(self, xyz, rgb=None, **attributes):
+        for k in range(1000, 1100):  # frames that widen the open chunk's box: the snapshot's frames leave the ring
+            live.push(moving_patch(299)[0] * [1, 1, 1 + 0.01 * (k - 999)])  # (taller each: the open chunk's box grows in z)
+        return add(self, xyz, rgb, **attributes)
+
+    monkeypatch.setattr(ProgressiveOctree, "add", add_and_push)
+    monkeypatch.setattr(live_module, "SNAPSHOT_BATCH", 4000)  # read in four parts, frames pushed between them
+    assert live.snapshot() == 15_000
+    got = np.concatenate([c.xyz for c in live.snapshots.chunks()])
+    np.testing.assert_allclose(sorted_rows(got), want, rtol=0, atol=1e-7)  # (the octree's own 30-bit cells)
+    assert [f.seq for f in live.frames] == list(range(400, 700))  # the snapshot's frames left meanwhile (4 x 100 pushed)
+
+
+def test_growing_the_ring_keeps_packed_chunks_and_the_mirror_where_they_are():
+    """A ring that grows copies each chunk's record: a packed chunk's first (past its frames that
+    left), and the mirror's records at the new ring's end (their firsts are the new region's)."""
+    live = LiveCloud(keep=45)
+    for k in range(30):
+        live.push(*moving_patch(k, n=400))
+    live.snapshot()
+    cam = gp.Camera.fit(live.bounds, view="top", width=64, height=64)
+    gp.render_frame(live, cam)  # the mirror filled
+    for k in range(30, 40):
+        live.push(*moving_patch(k, n=400))
+    n_ring = live.buffers_.n_ring
+    for k in range(20):  # 3 chunks each: from the 6th on the oldest small frames leave their chunks' fronts, at the 11th the ring grows
+        live.push(*frame(k, n=30_000))
+    buf = live.buffers_
+    assert buf.n_ring > n_ring
+    mirror = buf.batches[buf.n_ring :]
+    np.testing.assert_array_equal(mirror["first"], buf.ring_points + np.arange(buf.n_mirror) * buf.mirror_chunk)
+    xyz, rgba, _ = live.frame_points(list(live.frames)[:25])
+    np.testing.assert_allclose(xyz, np.concatenate([moving_patch(k, n=400)[0] for k in range(15, 40)]), rtol=0, atol=1e-7)
+    drawn = {}  # what each ring chunk draws: its kept frames' parts, one run
+    for fr in live.frames:
+        for slot, first, count in zip(fr.chunks, fr.firsts, fr.counts):
+            lo, hi = drawn.get(slot, (first, first))
+            assert hi == first  # frames one after another
+            drawn[slot] = (lo, first + count)
+    ring = buf.batches[: buf.n_ring]
+    assert sorted(drawn) == np.flatnonzero(ring["count"] > 0).tolist()
+    for slot, (lo, hi) in drawn.items():
+        assert (int(ring["first"][slot]), int(ring["first"][slot] + ring["count"][slot])) == (lo, hi)
+    f = gp.render_frame(live, gp.Camera.fit(live.bounds, view="top", width=64, height=64))
+    assert f.stats.points_processed == live.n_points == 25 * 400 + 20 * 30_000 + 30 * 400

@@ -48,9 +48,12 @@ from ..lod.build import take, valid_bounds
 from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
 from ..render.splats import point_spacing
 from .depth import depth_to_points, parse_pose
-from .ring import BASE_ATTRIBUTES, NORMAL_PARTS, LiveBuffers, LiveLock, attribute_dtype
+from .ring import BASE_ATTRIBUTES, NORMAL_PARTS, LiveBuffers, LiveLock, Runs, attribute_dtype
 
 _INITIAL_CHUNKS = 32
+PACK_LIMIT = 0.5  # frames of at most this share of a chunk are packed into shared chunks (LiveCloud._pack)
+PACK_SPAN = 32  # with fading, small frames packed into one chunk arrived within decay / PACK_SPAN (its alpha is its first's)
+PACK_GROWTH, PACK_NEAR = 2.0, 16.0  # packed frames lie near each other: LiveCloud._near
 _LATENCIES = 512  # push-to-pixels latencies kept for the median / p99
 SNAPSHOT_BATCH = 1 << 20  # points a snapshot adds to the octree at a time
 SNAPSHOT_SAMPLE_STEP = 32  # every 32nd point shapes the tree first (ProgressiveOctree.expect): ~1 500 for a full leaf
@@ -61,7 +64,7 @@ class FrameInfo:
     """One frame in the ring."""
 
     seq: int  # 0, 1, 2... in arrival order
-    chunks: list[int]
+    chunks: list[int]  # the ring chunks holding its points (a small frame shares one with others: _pack)
     n_points: int
     time: float  # the sensor's time stamp (seconds), or the arrival clock's
     arrived: float  # seconds since the cloud's start (the frame_time of its points)
@@ -69,6 +72,33 @@ class FrameInfo:
     lo: np.ndarray
     hi: np.ndarray
     pushed_at: float = 0.0  # perf_counter when push was called (latency)
+    firsts: list[int] = field(default_factory=list)  # per chunk, the buffer entry of its first point there
+    counts: list[int] = field(default_factory=list)  # per chunk, its points there
+
+
+@dataclass
+class SmallFrame:
+    """A frame of at most half a chunk, kept as it came (world positions, colours as u32 words,
+    per-point attributes, copies): packed into the ring's open chunk with the frames before it."""
+
+    xyz: np.ndarray
+    color: np.ndarray
+    attributes: dict
+
+
+@dataclass
+class OpenChunk:
+    """The ring chunk small frames are packed into (``_pack``): the world positions of every
+    point written to it (its words are quantized afresh from them when a frame widens its box),
+    how many, and the arrival of its first frame (its fade)."""
+
+    slot: int
+    xyz: np.ndarray
+    written: int
+    opened: float
+    lo: np.ndarray  # the box of its frames
+    hi: np.ndarray
+    widest: float  # the largest edge of one of its frames' boxes
 
 
 @dataclass
@@ -170,6 +200,8 @@ class LiveCloud:
         self._attr_dtypes: dict | None = None  # fixed by the first frame (as the octree's attributes)
         self.buffers_: LiveBuffers | None = None
         self._free: list[int] = []
+        self._open: OpenChunk | None = None  # the chunk small frames are packed into (_pack)
+        self._seen = None  # (min, max) of every small frame's box so far (_near)
         self._pins: Counter = Counter()  # ring chunks snapshots are reading: not reused meanwhile
         self._held: list[int] = []  # chunks of frames gone, freed when no snapshot reads them
         self.frames: deque[FrameInfo] = deque()
@@ -374,7 +406,11 @@ class LiveCloud:
         t = float(time) if time is not None else self.clock()
         per_point = {"normal": world_normals, "frame_time": np.full(m, arrived, np.float32)}
         per_point.update(attrs)
-        frame = batch_frame(pts, rgba, per_point, lo, hi, self.chunk, ordered)
+        if m <= PACK_LIMIT * self.chunk:  # copies: push_depth's arrays are its thread's scratch, reused by its next frame
+            color = np.ascontiguousarray(rgba, np.uint8).view(np.uint32).reshape(-1)
+            frame = SmallFrame(np.array(pts, np.float64), color.copy(), {a: np.array(v) for a, v in per_point.items()})
+        else:
+            frame = batch_frame(pts, rgba, per_point, lo, hi, self.chunk, ordered)
         with self._pending_lock:
             self._attribute_set(attrs)  # in push order: the first frame's set, which later ones keep to
             seq = self._seq
@@ -427,7 +463,25 @@ class LiveCloud:
                 )
 
     def _insert(self, frame, info: FrameInfo) -> None:
-        k = len(frame.batches)
+        if isinstance(frame, SmallFrame):
+            self._pack(frame, info)
+        else:
+            buf = self._room(len(frame.batches))
+            buf.version += 1
+            for rec in frame.batches:
+                slot = heapq.heappop(self._free)
+                f, c = int(rec["first"]), int(rec["count"])
+                attrs = {a: (frame.attributes[a][f : f + c] if a in frame.attributes else 0) for a in buf.attributes}
+                buf.write_chunk(slot, rec, frame.low[f : f + c], frame.med[f : f + c], frame.high[f : f + c], frame.color[f : f + c], attrs)
+                info.chunks.append(slot)
+                info.firsts.append(slot * self.chunk)
+                info.counts.append(c)
+            self._chunk_time[info.chunks] = info.arrived
+        self.frames.append(info)
+        self.points += info.n_points
+
+    def _room(self, k: int) -> LiveBuffers:
+        """The buffers, made or grown to have ``k`` free ring chunks (lock held)."""
         if self.buffers_ is None:
             self.buffers_ = LiveBuffers(self.name, max(_INITIAL_CHUNKS, 2 * k), self.chunk, 0, SNAPSHOT_CHUNK, self._attr_dtypes)
             self._free = list(range(self.buffers_.n_ring))
@@ -437,17 +491,39 @@ class LiveCloud:
             buf = self.buffers_ = buf.grown(max(2 * old, old + k), buf.n_mirror)
             for s in range(old, buf.n_ring):
                 heapq.heappush(self._free, s)
-        buf.version += 1
-        for j, rec in enumerate(frame.batches):
-            slot = heapq.heappop(self._free)
-            f, c = int(rec["first"]), int(rec["count"])
-            attrs = {a: (frame.attributes[a][f : f + c] if a in frame.attributes else 0) for a in buf.attributes}
-            buf.write_chunk(slot, rec, frame.low[f : f + c], frame.med[f : f + c], frame.high[f : f + c], frame.color[f : f + c], attrs)
-            info.chunks.append(slot)
         self._chunk_time = self._sized(self._chunk_time, buf.n_ring)
-        self._chunk_time[info.chunks] = info.arrived
-        self.frames.append(info)
-        self.points += info.n_points
+        return buf
+
+    def _pack(self, frame: SmallFrame, info: FrameInfo) -> None:
+        """A small frame goes after the frames before it in the open chunk, all of whose points
+        are then quantized afresh in the box of them all (from their positions: no rounding of
+        rounded words); a chunk per frame held 6 712 bytes a point of ring arrays for 2 000
+        frames of 50 points (a sensor's packets), packed 105. Frames leave in arrival order, so a chunk's live points stay one run
+        (``_expire`` moves its first on). A new chunk opens when the frame does not fit, when a
+        snapshot reads the open one (its words must not move) and, with fading, when the open
+        chunk's first frame is older than a ``PACK_SPAN``-th of ``decay`` (a chunk has one alpha),
+        and when the frame lies far from the chunk's (``_near``: a batch's box is what culling and
+        adaptive precision see)."""
+        m = len(frame.xyz)
+        o = self._open
+        edge = float(np.max(info.hi - info.lo))
+        self._seen = (info.lo, info.hi) if self._seen is None else (np.minimum(self._seen[0], info.lo), np.maximum(self._seen[1], info.hi))
+        if (o is None or o.written + m > self.chunk or self._pins[o.slot] > 0 or not self._near(o, info, edge)
+                or (self.decay is not None and self.fade and info.arrived - o.opened > self.decay / PACK_SPAN)):  # fmt: skip
+            buf = self._room(1)
+            o = self._open = OpenChunk(heapq.heappop(self._free), np.empty((self.chunk, 3)), 0, info.arrived, info.lo, info.hi, edge)
+            buf.start_chunk(o.slot)
+            self._chunk_time[o.slot] = info.arrived
+        o.lo, o.hi, o.widest = np.minimum(o.lo, info.lo), np.maximum(o.hi, info.hi), max(o.widest, edge)
+        buf = self.buffers_
+        buf.version += 1
+        o.xyz[o.written : o.written + m] = frame.xyz
+        at = o.slot * self.chunk + o.written
+        o.written += m
+        buf.pack_into(o.slot, o.xyz[: o.written], m, frame.color, frame.attributes)
+        info.chunks.append(o.slot)
+        info.firsts.append(at)
+        info.counts.append(m)
 
     @staticmethod
     def _sized(a: np.ndarray, n: int) -> np.ndarray:
@@ -468,9 +544,12 @@ class LiveCloud:
         buf = self.buffers_
         buf.version += 1
         for f in drop:
-            buf.clear_chunks(f.chunks)
-            self._chunk_time[f.chunks] = np.nan
-            for s in f.chunks:
+            for s, c in zip(f.chunks, f.counts):
+                if buf.drop_first(s, c):  # the chunk's other points are newer frames' (packed): it stays
+                    continue
+                self._chunk_time[s] = np.nan
+                if self._open is not None and self._open.slot == s:
+                    self._open = None
                 if self._pins[s] > 0:  # a snapshot reads it: free when that is done (_unpin)
                     self._held.append(s)
                 else:
@@ -600,11 +679,21 @@ class LiveCloud:
         given as its own)."""
         with self.lock.reading():
             frames = list(self.frames) if frames is None else self._frames_in_ring(frames)
-            buf = self.buffers_
-            slots = [s for f in frames for s in f.chunks]
-            if not slots:
+            if not frames:
                 return np.empty((0, 3)), np.empty((0, 4), np.uint8), {}
-            return buf.gather(slots, skip=("frame_time",))
+            return self.buffers_.gather(self._runs(frames), skip=("frame_time",))
+
+    def _near(self, o: OpenChunk, info: FrameInfo, edge: float) -> bool:
+        """Whether a frame may join open chunk ``o``: the box of them both is at most PACK_GROWTH
+        times the largest of its frames' boxes, or a PACK_NEAR-th of the region frames have
+        covered so far (frames of a point or two: a track of single points packs along it)."""
+        joined = float(np.max(np.maximum(o.hi, info.hi) - np.minimum(o.lo, info.lo)))
+        return joined <= max(PACK_GROWTH * max(o.widest, edge), float(np.max(self._seen[1] - self._seen[0])) / PACK_NEAR)
+
+    def _runs(self, frames) -> Runs:
+        """Where the points of ``frames`` (in the ring) are, in order (lock held)."""
+        parts = [(s, f0, c) for f in frames for s, f0, c in zip(f.chunks, f.firsts, f.counts)]
+        return self.buffers_.runs(*(list(p) for p in zip(*parts)))
 
     def _frames_in_ring(self, frames) -> list[FrameInfo]:
         where = f"{self.name}: frame_points"
@@ -635,7 +724,7 @@ class LiveCloud:
         with self.lock.reading():
             buf = self.buffers_
             slots = [s for f in self.frames for s in f.chunks]
-            runs = buf.runs(slots) if slots else None
+            runs = self._runs(self.frames) if slots else None
             if runs is None or not runs.n_points:
                 return 0
             self._pins.update(slots)

@@ -4,7 +4,9 @@ Two regions share the arrays (core/renderable.PointBuffers):
 
 - the **ring**: chunks of ``chunk`` (BATCH_SIZE) entries; a frame's Morton-ordered batches
   go into free chunks when it arrives and the chunks go back to the free list when the frame
-  leaves the ring (``keep``, ``decay``). A chunk holding no frame has count 0.
+  leaves the ring (``keep``, ``decay``). Frames of at most half a chunk share one, one after
+  another (``pack_into``), and leave it from its front (``drop_first``): a chunk's points are
+  the entries ``first``..``first + count`` of its span. A chunk holding no frame has count 0.
 - the **mirror**: a copy of the snapshot octree's pool (lod.progressive.Pool, chunks of its
   own size), refreshed chunk by chunk from its ``batch_version`` so the renderer draws live
   frames and snapshots from one set of buffers in one pass.
@@ -26,7 +28,7 @@ from numba import njit, prange
 from ..core.compact import point_words
 from ..core.framelock import FrameLock
 from ..core.layout import BATCH_DTYPE, COORD_BITS, WORD_BITS, WORD_MASK
-from ..core.quantize import dequantize
+from ..core.quantize import dequantize, make_batches, quantize
 from ..core.renderable import check_point_index
 
 _SCALE30 = float(1 << COORD_BITS)
@@ -204,6 +206,7 @@ class LiveBuffers:
         for field in ("count", "level", "bbox_min", "bbox_max"):
             new.batches[field][:r] = self.batches[field][:r]
             new.batches[field][n_ring : n_ring + m] = self.batches[field][self.n_ring : self.n_ring + m]
+        new.batches["first"][:r] = self.batches["first"][:r]  # where a ring chunk's live points start (packed: past its oldest frames')
         new.batch_version[:] = self.version + 1
         new.version = self.version + 1
         new.bounds = self.bounds
@@ -214,7 +217,7 @@ class LiveBuffers:
         n = len(low)
         f = slot * self.chunk
         b = self.batches[slot]
-        b["count"], b["level"], b["bbox_min"], b["bbox_max"] = n, 0, record["bbox_min"], record["bbox_max"]
+        b["first"], b["count"], b["level"], b["bbox_min"], b["bbox_max"] = f, n, 0, record["bbox_min"], record["bbox_max"]
         self.low[f : f + n] = low
         self.med[f : f + n] = med
         self.high[f : f + n] = high
@@ -223,10 +226,36 @@ class LiveBuffers:
             v[f : f + n] = attributes[a]
         self.batch_version[slot] = self.version
 
-    def clear_chunks(self, slots) -> None:
-        """Chunks ``slots`` hold nothing from now on (not drawn; their words stay until a frame
-        refills them, which is the write ``batch_version`` records)."""
-        self.batches["count"][slots] = 0
+    def start_chunk(self, slot: int) -> None:
+        """Ring chunk ``slot`` is empty, to be packed from its start (``pack_into``)."""
+        self.batches["first"][slot] = slot * self.chunk
+        self.batches["count"][slot] = 0
+
+    def pack_into(self, slot: int, xyz: np.ndarray, m: int, color: np.ndarray, attributes: dict) -> None:
+        """Ring chunk ``slot``'s span holds the world positions ``xyz`` from its start, the last
+        ``m`` of them (with ``color`` and ``attributes``) new: those ``m`` are written and every
+        position quantized afresh (30 bits) in their box, the chunk's box from now on; its live
+        points run from its first on to the new ones' end."""
+        n = len(xyz)
+        f = slot * self.chunk
+        one = make_batches(n, n)
+        self.low[f : f + n], self.med[f : f + n], self.high[f : f + n] = quantize(xyz, np.arange(n), one)
+        self.color[f + n - m : f + n] = color
+        for a, v in self.attributes.items():
+            v[f + n - m : f + n] = attributes.get(a, 0)
+        b = self.batches[slot]
+        b["count"], b["level"], b["bbox_min"], b["bbox_max"] = f + n - int(b["first"]), 0, one[0]["bbox_min"], one[0]["bbox_max"]
+        self.batch_version[slot] = self.version
+
+    def drop_first(self, slot: int, n: int) -> int:
+        """The first ``n`` live points of ring chunk ``slot`` leave it (their frame left the ring;
+        frames leave in arrival order, so they are its oldest): the points it has left. Their
+        words stay (as an emptied chunk's do until it is refilled, the write ``batch_version``
+        records): what is drawn is the rest, unchanged."""
+        b = self.batches[slot]
+        left = int(b["count"]) - n
+        b["first"], b["count"] = int(b["first"]) + n, left
+        return left
 
     def mirror_from(self, pool, chunks: np.ndarray) -> None:
         """Copy chunks ``chunks`` of the snapshot octree's pool into the mirror region."""
@@ -264,12 +293,12 @@ class LiveBuffers:
         f, n = int(rec["first"]), int(rec["count"])
         return dequantize(self.low[f : f + n], self.med[f : f + n], self.high[f : f + n], rec["bbox_min"], rec["bbox_max"], 30)
 
-    def runs(self, slots: list[int]) -> Runs:
-        """Where the points of chunks ``slots`` are, in order (their counts and boxes copied: the
-        chunks may be cleared after)."""
+    def runs(self, slots: list[int], firsts: list[int], counts: list[int]) -> Runs:
+        """Runs of ``counts[j]`` points from buffer entry ``firsts[j]`` in ring chunk ``slots[j]``,
+        in order (frames' parts: FrameInfo; the chunks' boxes copied: they may be refilled after)."""
         rec = self.batches[np.asarray(slots, np.int64)]
-        counts = rec["count"].astype(np.int64)
-        return Runs(rec["first"].astype(np.int64), counts, np.cumsum(counts) - counts, rec["bbox_min"].copy(), rec["bbox_max"].copy())
+        counts = np.asarray(counts, np.int64)
+        return Runs(np.asarray(firsts, np.int64), counts, np.cumsum(counts) - counts, rec["bbox_min"].copy(), rec["bbox_max"].copy())
 
     def bounds_of(self, runs: Runs) -> tuple[np.ndarray, np.ndarray]:
         """(min, max) of the world positions ``gather`` gives the points of ``runs``, without them."""
@@ -288,12 +317,11 @@ class LiveBuffers:
                          runs.bbox_min[run], runs.bbox_max[run], out)  # fmt: skip
         return out
 
-    def gather(self, slots, skip=(), start: int = 0, stop: int | None = None, out: dict | None = None):
+    def gather(self, runs: Runs, skip=(), start: int = 0, stop: int | None = None, out: dict | None = None):
         """(xyz float64 (N, 3) world, rgba uint8 (N, 4), attributes: the normal as nx, ny, nz) of the
-        points of chunks ``slots`` (a list, or their ``runs``), in order; of points [start, stop)
-        of them only, when given. ``out``: a dict the arrays are taken from and kept in (first rows
-        of arrays made for the largest range so far: one set of pages for many ranges)."""
-        runs = slots if isinstance(slots, Runs) else self.runs(slots)
+        points of ``runs``, in order; of points [start, stop) of them only, when given. ``out``: a
+        dict the arrays are taken from and kept in (first rows of arrays made for the largest
+        range so far: one set of pages for many ranges)."""
         firsts, counts, offsets, keep = runs.part(start, stop)
         n = int(counts.sum())
         out = {} if out is None else out
