@@ -3,8 +3,9 @@
     .venv/bin/python benchmarks/bench_many_tiles.py                  # 2 000 tiles of 50 points
     .venv/bin/python benchmarks/bench_many_tiles.py --tiles 4000 --points 100 --memory-limit 64M
     .venv/bin/python benchmarks/bench_many_tiles.py --open           # gigapoint.open of the tiles, plain and progressive
+    .venv/bin/python benchmarks/bench_many_tiles.py --open --format las
 
-The demo town's points, cut into ``--tiles`` NPY files of ``--points`` each and saved once
+The demo town's points, cut into ``--tiles`` NPY (or ``--format las``: LAS 1.2, millimetres) files of ``--points`` each and saved once
 more as one NPY file; both converted with ``gigapoint.convert`` in this process, alternately
 (``--rounds``, medians; the first, numba's warm-up, a round of its own, not counted), held in
 memory or, with a small ``--memory-limit``, spilled. Reported: seconds, points/s and the tiles'
@@ -54,6 +55,7 @@ def main(argv=None) -> int:
     ap.add_argument("--memory-limit", default=None, help="e.g. 64M: spilled; default: held in memory")
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--open", action="store_true", help="time gigapoint.open of the tiles, plain and progressive, instead")
+    ap.add_argument("--format", choices=("npy", "las"), default="npy", help="the tiles' (and the one file's) format")
     args = ap.parse_args(argv)
     xyz, _, _ = demo_arrays(args.tiles * args.points, seed=3)
     with tempfile.TemporaryDirectory() as tmp:
@@ -61,8 +63,8 @@ def main(argv=None) -> int:
         tiles.mkdir()
         one.mkdir()
         for k in range(args.tiles):
-            np.save(tiles / f"t{k:06d}.npy", xyz[k * args.points : (k + 1) * args.points])
-        np.save(one / "all.npy", xyz)
+            _write(tiles / f"t{k:06d}.{args.format}", xyz[k * args.points : (k + 1) * args.points])
+        _write(one / f"all.{args.format}", xyz)
         if args.open:
             return _compare_opens(tiles, args)
         _timed([one], Path(tmp) / "warm", args.memory_limit)  # numba's compile: not counted
@@ -75,6 +77,19 @@ def main(argv=None) -> int:
     med = _medians(times, n)
     print(f"  tiles / one file: {med['tiles'] / med['one file']:.1f}x, {(med['tiles'] - med['one file']) / args.tiles * 1e3:.2f} ms a tile")
     return 0
+
+
+def _write(path: Path, xyz: np.ndarray) -> None:
+    if path.suffix == ".npy":
+        np.save(path, xyz)
+        return
+    import laspy
+
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = [0.001] * 3, [0.0] * 3
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    las.write(str(path))
 
 
 def _medians(times: dict[str, list[float]], n: int) -> dict[str, float]:
@@ -92,7 +107,7 @@ def _compare_opens(tiles: Path, args) -> int:
         times["plain"].append(_opened(tiles, False))
         times["progressive"].append(_opened(tiles, True))
     n = args.tiles * args.points
-    print(f"{cpu_model()}; gigapoint.open of {args.tiles:,} tiles of {args.points} points ({n:,})")
+    print(f"{cpu_model()}; gigapoint.open of {args.tiles:,} {args.format.upper()} tiles of {args.points} points ({n:,})")
     med = _medians(times, n)
     print(f"  progressive / plain: {med['progressive'] / med['plain']:.2f}x")
     return 0

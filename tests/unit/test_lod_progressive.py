@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import re
 import threading
 import time
@@ -1593,9 +1594,9 @@ def test_a_header_without_a_usable_grid_loads_without_one(tmp_path, las_writer, 
 
     f = las_writer(tmp_path / "a.las", 5_000, seed=1)
     assert file_sources([f])[4][1] == 0.001
-    info = LasReader.info
+    header = LasReader.header
     for scale, step in (([0.0] * 3, None), ([np.nan] * 3, None), ([-0.001] * 3, 0.001)):  # a negative scale: a mirrored axis, its step 0.001
-        monkeypatch.setattr(LasReader, "info", lambda self, path, scale=scale: {**info(self, path), "scale": scale})
+        monkeypatch.setattr(LasReader, "header", lambda self, path, scale=scale: {**header(self, path), "scale": scale})
         grid = file_sources([f])[4]
         assert grid is None if step is None else grid[1] == step
 
@@ -2215,6 +2216,36 @@ def test_many_small_files_load_in_joined_batches(tmp_path, monkeypatch):
     assert len(got) == len(xyz)
     _match(got, xyz, 1e-6)
     cloud.close()
+
+
+def test_a_progressive_open_reads_each_file_once_and_las_headers_give_the_cube(tmp_path, las_writer, monkeypatch):
+    """file_sources asked every file's reader for info(): an NPY (or PLY, text) file's info reads
+    all its points for its bounds, so a large one was read whole before open returned, then again
+    by the loader; a LAS file's opened it with laspy (VLRs, CRS) for what its header holds. Now
+    each file's points are read once, by the loader, and LAS headers still give the root cube."""
+    from gigapoint.io.numpy_io import NpyReader
+    from gigapoint.lod.progressive.loader import file_sources
+
+    xyz = demo_arrays(30_000, seed=4)[0]
+    np.save(tmp_path / "a.npy", xyz[:20_000])
+    np.save(tmp_path / "c.npy", xyz[20_000:])
+    las = las_writer(tmp_path / "b.las", 10_000, seed=5)
+    reads, real_chunks = [], NpyReader.read_chunks
+
+    def counting_chunks(self, path, *args, **kwargs):
+        reads.append(os.path.basename(path))
+        return real_chunks(self, path, *args, **kwargs)
+
+    monkeypatch.setattr(NpyReader, "read_chunks", counting_chunks)
+    cloud = gp.open([tmp_path / "a.npy", tmp_path / "c.npy"], progressive=True)
+    assert cloud.wait(timeout=60) and cloud.n_points == 30_000
+    assert reads == ["a.npy", "c.npy"]
+    cloud.close()
+    _, total, bounds, _, grid = file_sources([las])
+    points = gp.open(las).positions()
+    assert total == 10_000 and grid is not None
+    np.testing.assert_allclose(bounds[0], points.min(axis=0), atol=0.01)  # the header's (its grid's rounding)
+    np.testing.assert_allclose(bounds[1], points.max(axis=0), atol=0.01)
 
 
 def test_joined_chunks_keep_their_order_attributes_and_the_points_before_an_error():

@@ -46,6 +46,13 @@ class Reader:
         """Number of points when the header tells it cheaply, else None (used for progress bars)."""
         return None
 
+    def header(self, path: Path) -> dict:
+        """What the file's header tells without reading its points: ``point_count`` (None when
+        it does not), and where the format's header holds them ``bounds`` ((min, max) of its
+        points, as the header says), ``offset`` and ``scale`` (its integer grid). ``info`` may
+        read every point (text, NPY: ``bounds_source`` "scan"); this never does."""
+        return {"point_count": self.point_count(path)}
+
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name}>"
 

@@ -454,6 +454,10 @@ class LasReader(Reader):
     def point_count(self, path: Path) -> int | None:
         return read_las_header(path).point_count
 
+    def header(self, path: Path) -> dict:
+        hdr = read_las_header(path)  # (info opens the file with laspy too: its VLRs, CRS, dimensions)
+        return {"point_count": hdr.point_count, "bounds": (list(hdr.mins), list(hdr.maxs)), "offset": list(hdr.offset), "scale": list(hdr.scale)}
+
     #: ``read_chunks`` takes ``start``/``stop``/``scaler``: one file read in parts (lod/convert/distributed.py)
     reads_ranges = True
 

@@ -225,11 +225,11 @@ def _joined(chunks: Iterator[tuple[str, PointChunk]], least: int) -> Iterator[tu
             held, held_points = [], 0
 
 
-def _reachable(bounds: dict, offset, scale) -> bool:
+def _reachable(bounds: tuple, offset, scale) -> bool:
     """Whether a LAS header's bounds are ones its points can have: finite, low <= high, within
     what its 32-bit integer coordinates reach. A header's 1e12 drew a quarter of the image wrong (a
     root cube past the octree's levels); such bounds are left out, and the points make the root."""
-    lo, hi = (np.asarray(bounds[k], np.float64) for k in ("min", "max"))
+    lo, hi = (np.asarray(b, np.float64) for b in bounds)
     if offset is None or scale is None:
         return bool(np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi))
     reach = np.abs(np.asarray(scale, np.float64)) * 2.0**31 * (1 + 1e-9)
@@ -252,16 +252,16 @@ def file_sources(paths) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray]
     bounds_known, offsets, scales = True, [], []
     for f in files:
         reader = reader_for(f)
-        n = reader.point_count(f)
+        head = reader.header(f)  # not info(): an NPY file's info read all its points before the loader began
+        n = head["point_count"]
         total = None if total is None or n is None else total + n
-        info = reader.info(f) if bounds_known and n is not None else {}  # a header read, not a scan
-        b = info.get("bounds") or {}
-        if info.get("bounds_source") == "header" and b.get("min") is not None and _reachable(b, info.get("offset"), info.get("scale")):
-            lo, hi = np.minimum(lo, b["min"]), np.maximum(hi, b["max"])
+        b = head.get("bounds")
+        if b is not None and _reachable(b, head.get("offset"), head.get("scale")):
+            lo, hi = np.minimum(lo, b[0]), np.maximum(hi, b[1])
         else:
             bounds_known = False
-        offsets.append(info.get("offset"))
-        scales.append(info.get("scale"))
+        offsets.append(head.get("offset"))
+        scales.append(head.get("scale"))
         sources.append((str(f), lambda f=f, reader=reader: reader.read_chunks(f, min(DEFAULT_CHUNK_SIZE, DECODE_CHUNK))))
     name = files[0].name if len(files) == 1 else f"{len(files)} files"
     grid, scale = None, finest_scale(scales)
