@@ -857,6 +857,24 @@ def test_frames_far_apart_or_of_other_times_are_not_packed_together():
     assert all(max(t) - min(t) <= 3.2 / PACK_SPAN + 1e-9 for t in by_chunk.values())
 
 
+def test_two_sensors_interleaved_packets_fill_a_chunk_each():
+    """Frames far apart do not share a chunk, but a sensor's packets need not arrive in a run:
+    two sensors 500 m apart whose packets interleave pack into chunks of their own (up to
+    PACK_OPEN chunks are open at once), each frame's points still its own."""
+    live = LiveCloud(keep=400)
+    pushed = []
+    for k in range(400):
+        xyz = moving_patch(k)[0] + ([500.0, 0, 0] if k % 2 else 0.0)
+        live.push(xyz)
+        pushed.append(xyz)
+    ring = live.buffers_.batches[: live.buffers_.n_ring]
+    assert int((ring["count"] > 0).sum()) == 2  # 200 frames of 50 points a sensor: 10 000 points, one chunk each
+    assert all((ring["bbox_max"][s] - ring["bbox_min"][s]).max() < 10 for s in np.flatnonzero(ring["count"] > 0))
+    for k in (0, 1, 398, 399):
+        np.testing.assert_allclose(live.frame_points([live.frames[k]])[0], pushed[k], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(live.frame_points()[0], np.concatenate(pushed), rtol=0, atol=1e-6)
+
+
 def test_a_snapshot_of_small_frames_holds_the_ring_while_frames_are_packed_meanwhile(monkeypatch):
     """Frames packed while a snapshot reads the ring neither widen the chunks it reads (their
     words would move) nor reuse those left: it holds exactly the ring's points at its start."""

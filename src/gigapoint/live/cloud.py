@@ -8,7 +8,9 @@ batches on arrival by core's own path (core/morton.py, core/quantize.py: Morton 
 batches, 30-bit words), outside any lock;
 then its batches are copied into free chunks of the ring (ring.py) under a frames-first lock,
 so a frame appears whole or not at all (no torn frames) and culling and adaptive precision work
-on it unchanged. A frame pushed while another is being drawn waits, batched, in a queue and is
+on it unchanged. A frame of at most half a chunk (PACK_LIMIT) is kept as it came instead and
+packed after the frames before it into a shared chunk (``_pack``): a chunk each made frames of
+50 points hold 6 712 bytes of ring arrays a point. A frame pushed while another is being drawn waits, batched, in a queue and is
 copied in when the drawing lets go of the lock: producers never wait for the renderer. Frames beyond ``keep`` (or older than ``decay``
 seconds) leave the ring and their chunks are reused: memory stays flat over a long stream.
 
@@ -54,6 +56,7 @@ _INITIAL_CHUNKS = 32
 PACK_LIMIT = 0.5  # frames of at most this share of a chunk are packed into shared chunks (LiveCloud._pack)
 PACK_SPAN = 32  # with fading, small frames packed into one chunk arrived within decay / PACK_SPAN (its alpha is its first's)
 PACK_GROWTH, PACK_NEAR = 2.0, 16.0  # packed frames lie near each other: LiveCloud._near
+PACK_OPEN = 8  # chunks open to small frames at once (sensors whose packets interleave: one each)
 _LATENCIES = 512  # push-to-pixels latencies kept for the median / p99
 SNAPSHOT_BATCH = 1 << 20  # points a snapshot adds to the octree at a time
 SNAPSHOT_SAMPLE_STEP = 32  # every 32nd point shapes the tree first (ProgressiveOctree.expect): ~1 500 for a full leaf
@@ -200,7 +203,7 @@ class LiveCloud:
         self._attr_dtypes: dict | None = None  # fixed by the first frame (as the octree's attributes)
         self.buffers_: LiveBuffers | None = None
         self._free: list[int] = []
-        self._open: OpenChunk | None = None  # the chunk small frames are packed into (_pack)
+        self._open: list[OpenChunk] = []  # the chunks small frames are packed into, newest first (_pack)
         self._seen = None  # (min, max) of every small frame's box so far (_near)
         self._pins: Counter = Counter()  # ring chunks snapshots are reading: not reused meanwhile
         self._held: list[int] = []  # chunks of frames gone, freed when no snapshot reads them
@@ -495,23 +498,27 @@ class LiveCloud:
         return buf
 
     def _pack(self, frame: SmallFrame, info: FrameInfo) -> None:
-        """A small frame goes after the frames before it in the open chunk, all of whose points
+        """A small frame goes after the frames before it in an open chunk, all of whose points
         are then quantized afresh in the box of them all (from their positions: no rounding of
         rounded words); a chunk per frame held 6 712 bytes a point of ring arrays for 2 000
-        frames of 50 points (a sensor's packets), packed 105. Frames leave in arrival order, so a chunk's live points stay one run
-        (``_expire`` moves its first on). A new chunk opens when the frame does not fit, when a
-        snapshot reads the open one (its words must not move) and, with fading, when the open
-        chunk's first frame is older than a ``PACK_SPAN``-th of ``decay`` (a chunk has one alpha),
-        and when the frame lies far from the chunk's (``_near``: a batch's box is what culling and
-        adaptive precision see)."""
+        frames of 50 points (a sensor's packets), packed 105. A chunk's frames arrived in that
+        order, and frames leave in arrival order, so its live points stay one run (``_expire``
+        moves its first on). A frame joins the newest of up to PACK_OPEN open chunks that it
+        fits, that lies near it (``_near``: a batch's box is what culling and adaptive precision
+        see; two sensors' interleaved packets fill a chunk each), that no snapshot reads (its
+        words must not move) and, with fading, whose first frame arrived at most a
+        ``PACK_SPAN``-th of ``decay`` before (a chunk has one alpha); else it opens a new one."""
         m = len(frame.xyz)
-        o = self._open
         edge = float(np.max(info.hi - info.lo))
         self._seen = (info.lo, info.hi) if self._seen is None else (np.minimum(self._seen[0], info.lo), np.maximum(self._seen[1], info.hi))
-        if (o is None or o.written + m > self.chunk or self._pins[o.slot] > 0 or not self._near(o, info, edge)
-                or (self.decay is not None and self.fade and info.arrived - o.opened > self.decay / PACK_SPAN)):  # fmt: skip
+        self._open = [o for o in self._open if self._pins[o.slot] == 0 and o.written < self.chunk]  # (read by a snapshot, full: closed)
+        fading = self.decay is not None and self.fade
+        o = next((o for o in self._open if o.written + m <= self.chunk and self._near(o, info, edge)
+                  and not (fading and info.arrived - o.opened > self.decay / PACK_SPAN)), None)  # fmt: skip
+        if o is None:
             buf = self._room(1)
-            o = self._open = OpenChunk(heapq.heappop(self._free), np.empty((self.chunk, 3)), 0, info.arrived, info.lo, info.hi, edge)
+            o = OpenChunk(heapq.heappop(self._free), np.empty((self.chunk, 3)), 0, info.arrived, info.lo, info.hi, edge)
+            self._open = [o, *self._open[: PACK_OPEN - 1]]
             buf.start_chunk(o.slot)
             self._chunk_time[o.slot] = info.arrived
         o.lo, o.hi, o.widest = np.minimum(o.lo, info.lo), np.maximum(o.hi, info.hi), max(o.widest, edge)
@@ -548,8 +555,7 @@ class LiveCloud:
                 if buf.drop_first(s, c):  # the chunk's other points are newer frames' (packed): it stays
                     continue
                 self._chunk_time[s] = np.nan
-                if self._open is not None and self._open.slot == s:
-                    self._open = None
+                self._open = [o for o in self._open if o.slot != s]
                 if self._pins[s] > 0:  # a snapshot reads it: free when that is done (_unpin)
                     self._held.append(s)
                 else:
