@@ -857,6 +857,22 @@ def test_frames_far_apart_or_of_other_times_are_not_packed_together():
     assert all(max(t) - min(t) <= 3.2 / PACK_SPAN + 1e-9 for t in by_chunk.values())
 
 
+def test_a_large_chunk_packs_at_most_a_batch_of_small_frames():
+    """Each packed frame quantizes its chunk's points afresh: with ``chunk=2**20`` frames of 50
+    points would each redo up to a million (quadratic time); a chunk packs up to PACK_FILL
+    (10 240) points, whatever its size, and frames above half that go in as they did."""
+    from gigapoint.live.cloud import PACK_FILL
+
+    live = LiveCloud(keep=1000, chunk=2**20)
+    for k in range(300):
+        live.push(*moving_patch(k))
+    live.push(*frame(0, n=PACK_FILL))
+    ring = live.buffers_.batches[: live.buffers_.n_ring]
+    full = PACK_FILL // 50 * 50  # whole frames of 50 points
+    assert sorted(ring["count"][ring["count"] > 0].tolist()) == [15_000 - full, full, PACK_FILL]  # two packed chunks, the large frame's
+    np.testing.assert_allclose(live.frame_points([live.frames[299]])[0], moving_patch(299)[0], rtol=0, atol=1e-7)
+
+
 def test_two_sensors_interleaved_packets_fill_a_chunk_each():
     """Frames far apart do not share a chunk, but a sensor's packets need not arrive in a run:
     two sensors 500 m apart whose packets interleave pack into chunks of their own (up to

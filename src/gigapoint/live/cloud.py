@@ -54,6 +54,7 @@ from .ring import BASE_ATTRIBUTES, NORMAL_PARTS, LiveBuffers, LiveLock, Runs, at
 
 _INITIAL_CHUNKS = 32
 PACK_LIMIT = 0.5  # frames of at most this share of a chunk are packed into shared chunks (LiveCloud._pack)
+PACK_FILL = BATCH_SIZE  # points packed into one chunk at most (LiveCloud._pack_fill)
 PACK_SPAN = 32  # with fading, small frames packed into one chunk arrived within decay / PACK_SPAN (its alpha is its first's)
 PACK_GROWTH, PACK_NEAR = 2.0, 16.0  # packed frames lie near each other: LiveCloud._near
 PACK_OPEN = 8  # chunks open to small frames at once (sensors whose packets interleave: one each)
@@ -409,7 +410,7 @@ class LiveCloud:
         t = float(time) if time is not None else self.clock()
         per_point = {"normal": world_normals, "frame_time": np.full(m, arrived, np.float32)}
         per_point.update(attrs)
-        if m <= PACK_LIMIT * self.chunk:  # copies: push_depth's arrays are its thread's scratch, reused by its next frame
+        if m <= PACK_LIMIT * self._pack_fill:  # copies: push_depth's arrays are its thread's scratch, reused by its next frame
             color = np.ascontiguousarray(rgba, np.uint8).view(np.uint32).reshape(-1)
             frame = SmallFrame(np.array(pts, np.float64), color.copy(), {a: np.array(v) for a, v in per_point.items()})
         else:
@@ -497,6 +498,12 @@ class LiveCloud:
         self._chunk_time = self._sized(self._chunk_time, buf.n_ring)
         return buf
 
+    @property
+    def _pack_fill(self) -> int:
+        """Points packed into a chunk at most: its size, up to PACK_FILL (each frame quantizes its
+        chunk's points afresh: in a chunk of 2^20, frames of 50 points would cost quadratic time)."""
+        return min(self.chunk, PACK_FILL)
+
     def _pack(self, frame: SmallFrame, info: FrameInfo) -> None:
         """A small frame goes after the frames before it in an open chunk, all of whose points
         are then quantized afresh in the box of them all (from their positions: no rounding of
@@ -511,13 +518,14 @@ class LiveCloud:
         m = len(frame.xyz)
         edge = float(np.max(info.hi - info.lo))
         self._seen = (info.lo, info.hi) if self._seen is None else (np.minimum(self._seen[0], info.lo), np.maximum(self._seen[1], info.hi))
-        self._open = [o for o in self._open if self._pins[o.slot] == 0 and o.written < self.chunk]  # (read by a snapshot, full: closed)
+        fill = self._pack_fill
+        self._open = [o for o in self._open if self._pins[o.slot] == 0 and o.written < fill]  # (read by a snapshot, full: closed)
         fading = self.decay is not None and self.fade
-        o = next((o for o in self._open if o.written + m <= self.chunk and self._near(o, info, edge)
+        o = next((o for o in self._open if o.written + m <= fill and self._near(o, info, edge)
                   and not (fading and info.arrived - o.opened > self.decay / PACK_SPAN)), None)  # fmt: skip
         if o is None:
             buf = self._room(1)
-            o = OpenChunk(heapq.heappop(self._free), np.empty((self.chunk, 3)), 0, info.arrived, info.lo, info.hi, edge)
+            o = OpenChunk(heapq.heappop(self._free), np.empty((fill, 3)), 0, info.arrived, info.lo, info.hi, edge)
             self._open = [o, *self._open[: PACK_OPEN - 1]]
             buf.start_chunk(o.slot)
             self._chunk_time[o.slot] = info.arrived
