@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.metadata
 import os
 import platform
 import subprocess
@@ -42,11 +41,11 @@ def test_tbb_of_its_wheel_is_numbas_layer_else_openmp_unless_the_user_chose_one(
     path from the environment; without it, OpenMP before an older system TBB (on Debian's 2021.8
     small kernels slowed down as a process went on); a layer the user names is the one loaded."""
     if _wheel_tbb_expected():
-        assert threads.load_wheel_tbb(), "the tbb wheel (a dependency here) is not installed"
-    default = "tbb True" if threads.load_wheel_tbb() else "omp True"  # idle threads take up work at once (OpenMP's spin a while by default)
+        assert threads.wheel_tbb_library(), "the tbb wheel (a dependency here) is not installed"
+    default = "tbb True" if threads.wheel_tbb_library() else "omp True"  # idle threads take up work at once (OpenMP's spin a while by default)
     assert _layer() == default
     if default.startswith("tbb") and sys.platform == "linux":  # the wheel's library, also where the user named TBB (not a system one)
-        wheel = next(str(f.locate().resolve()) for f in importlib.metadata.files("tbb") if f.name == "libtbb.so.12")
+        wheel = os.path.realpath(threads.wheel_tbb_library())
         for env in ({}, {"NUMBA_THREADING_LAYER": "tbb"}):
             assert _layer(**env, LIBRARY="libtbb.so.12").endswith(wheel)
     if _layer(NUMBA_THREADING_LAYER="omp") != "omp True":
@@ -71,7 +70,7 @@ _FORKED = (
 def test_a_process_forked_after_drawing_draws_the_same_image():
     """multiprocessing's default start on Linux (before Python 3.14) forks: on TBB the child draws
     as its parent; GNU OpenMP terminates it ("fork() called from a process already using GNU OpenMP")."""
-    if not threads.load_wheel_tbb():
+    if not threads.wheel_tbb_library():
         pytest.skip("no tbb wheel here: numba runs on OpenMP, which is not fork-safe")
     clean = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_THREADING_LAYER")}
     run = subprocess.run([sys.executable, "-c", _FORKED], env=clean, capture_output=True, text=True, timeout=300)
@@ -94,3 +93,26 @@ def test_a_block_runs_on_the_threads_asked_and_gives_the_count_back(monkeypatch)
             assert numba.get_num_threads() == (before if awake else 1)
         with threads_for(SMALL_BATCH):
             assert numba.get_num_threads() == before
+
+
+_KERNEL_FIRST = (
+    "import os, numba, numpy as np\n"
+    "@numba.njit(parallel=True)\n"
+    "def bump(a):\n"
+    "    for i in numba.prange(len(a)):\n"
+    "        a[i] += 1\n"
+    "bump(np.zeros(10))\n"  # numba loads its layer before gigapoint is imported
+    "import gigapoint as gp\n"
+    "from gigapoint.core import threads\n"
+    "tbbs = {os.path.realpath(l.split()[-1]) for l in open('/proc/self/maps') if 'libtbb.so' in l}\n"
+    "print(threads.load_wheel_tbb(), len(tbbs) <= 1, gp.render(gp.demo(2000), width=32, height=24).shape)\n"
+)
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="reads /proc/self/maps")
+def test_a_layer_numba_loaded_before_gigapoint_is_kept_and_no_second_tbb_is_loaded():
+    """A program that ran a parallel kernel before importing gigapoint has numba's layer (perhaps
+    a system TBB) loaded: gigapoint loads no second TBB beside it, and draws."""
+    clean = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_THREADING_LAYER")}
+    run = subprocess.run([sys.executable, "-c", _KERNEL_FIRST], env=clean, capture_output=True, text=True, timeout=300)
+    assert run.stdout.strip() == "False True (24, 32, 4)", run.stderr[-800:]

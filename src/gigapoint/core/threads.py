@@ -75,24 +75,36 @@ def threads_for(n_points: int, when_awake: bool = True):
 _TBB_LIBRARY = {"linux": "libtbb.so.12", "win32": "tbb12.dll", "darwin": "libtbb.12.dylib"}
 
 
-def load_wheel_tbb() -> bool:
-    """Load the TBB of the ``tbb`` wheel (a dependency where PyPI has one) by its path, so that
-    numba's TBB layer finds it: numba opens the library by name, and the wheel puts it in the
-    environment's ``lib`` folder, off the loader's path; once loaded, that name means it (and not
-    an older system TBB). False where the wheel or its library is missing."""
+def wheel_tbb_library() -> str | None:
+    """The path of the ``tbb`` wheel's library numba loads (None: no wheel here)."""
     name = _TBB_LIBRARY.get(sys.platform)
     try:
         files = importlib.metadata.files("tbb") or []
     except importlib.metadata.PackageNotFoundError:
+        return None
+    return next((str(f.locate()) for f in files if f.name == name), None)
+
+
+def load_wheel_tbb() -> bool:
+    """Load the TBB of the ``tbb`` wheel (a dependency where PyPI has one) by its path, so that
+    numba's TBB layer finds it: numba opens the library by name, and the wheel puts it in the
+    environment's ``lib`` folder, off the loader's path; once loaded, that name means it (and not
+    an older system TBB). False where the wheel or its library is missing, or where numba has
+    loaded its layer already (a parallel kernel ran before gigapoint was imported: a second TBB
+    beside the one numba may hold is not to be had)."""
+    try:
+        numba.threading_layer()
         return False
-    for f in files:
-        if f.name == name:
-            try:
-                ctypes.CDLL(str(f.locate()), mode=ctypes.RTLD_GLOBAL)
-            except OSError:
-                return False
-            return True
-    return False
+    except ValueError:  # no layer loaded yet: the wheel's TBB can be the one numba finds
+        pass
+    path = wheel_tbb_library()
+    if path is None:
+        return False
+    try:
+        ctypes.CDLL(path, mode=ctypes.RTLD_GLOBAL)
+    except OSError:
+        return False
+    return True
 
 
 def choose_threading_layer() -> str:
