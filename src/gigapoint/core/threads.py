@@ -5,8 +5,10 @@ gigapoint depends on PyPI's ``tbb`` wheel where PyPI has one (Linux x86-64 with 
 Windows x86-64) and loads its library by path at import (``load_wheel_tbb``: numba opens
 ``libtbb.so.12`` by name, and the wheel puts it off the loader's path). On that TBB (2023.2)
 a forked process draws (GNU OpenMP terminates a child forked after drawing: "fork() called
-from a process already using GNU OpenMP"), and small kernels cost least (a 50-point kernel
-2.9 us a call against OpenMP's 3.1 spinning, 50-56 passive). Without it, OpenMP goes first
+from a process already using GNU OpenMP"), and small kernels cost what they do on spinning
+OpenMP (a 50-point kernel 2.9 us a call against 3.1; passive OpenMP 50-56). Insertion, loading
+and drawing ran level with OpenMP, conversion 4-11 % slower (docs/benchmarks.md). Without the
+wheel, or where numba loaded a layer before gigapoint's import, no TBB is loaded; OpenMP goes first
 (``choose_threading_layer``): an older system TBB (Debian's 2021.8, numba 0.68) slowed
 repeated small kernels down as a process went on (a 50-point kernel 23 -> 257 us a call over
 18 000 calls; OpenMP 2 us throughout). A layer the user names (``NUMBA_THREADING_LAYER`` /
