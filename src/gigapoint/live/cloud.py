@@ -10,8 +10,9 @@ then its batches are copied into free chunks of the ring (ring.py) under a frame
 so a frame appears whole or not at all (no torn frames) and culling and adaptive precision work
 on it unchanged. A frame of at most half a chunk (PACK_LIMIT) is kept as it came instead and
 packed after the frames before it into a shared chunk (``_pack``): a chunk each made frames of
-50 points hold 6 712 bytes of ring arrays a point. A frame pushed while another is being drawn waits, batched, in a queue and is
-copied in when the drawing lets go of the lock: producers never wait for the renderer. Frames beyond ``keep`` (or older than ``decay``
+50 points hold 6 712 bytes of ring arrays a point. A frame pushed while another is being drawn
+waits, batched, in a queue and is copied in when the drawing lets go of the lock: producers
+never wait for the renderer. Frames beyond ``keep`` (or older than ``decay``
 seconds) leave the ring and their chunks are reused: memory stays flat over a long stream.
 
 ``snapshot()`` freezes the frames in the ring into a ProgressiveOctree (lod.progressive, its
