@@ -428,6 +428,25 @@ def test_npy_bad_shape_and_dtype(tmp_path):
     raises(InputError, p, match="without x, y, z")
 
 
+def test_npy_and_npz_garbled_headers(tmp_path):
+    """A garbled NPY header was numpy's tokenize.TokenError (a traceback naming no file), in an
+    NPY file and an NPZ member alike, from reading its points, counting them, opening it
+    progressively or asking for its info."""
+    import gigapoint as gp
+
+    p = tmp_path / "g.npy"
+    np.save(p, np.zeros((100, 3)))
+    data = p.read_bytes()
+    p.write_bytes(data[:10] + b"garbage" + data[17:])
+    raises(InputError, p, match="not an NPY header")
+    raises(InputError, p, fn=file_info, match="not an NPY header")
+    raises(InputError, p, fn=lambda q: gp.open(q, progressive=True).wait(), match="not an NPY header")
+    q = tmp_path / "g.npz"
+    with zipfile.ZipFile(q, "w") as zf:
+        zf.writestr("xyz.npy", p.read_bytes())
+    raises(InputError, q, match="not an NPY header")
+
+
 def test_npy_zero_rows(tmp_path):
     p = tmp_path / "z.npy"
     np.save(p, np.zeros((0, 3)))

@@ -13,6 +13,7 @@ Colors may be uint8, uint16 or floats (of 0..1, 0..255 or 0..65535: ``ColorScale
 
 from __future__ import annotations
 
+import tokenize
 import zipfile
 import zlib
 from collections.abc import Iterator
@@ -41,11 +42,16 @@ COLOR_KEYS = ("rgb", "rgba", "colors", "color", "colours")
 
 
 def _read_npy_header(f) -> tuple[tuple, bool, np.dtype]:
-    """(shape, fortran_order, dtype) of the NPY stream at its start; leaves f at the data."""
+    """(shape, fortran_order, dtype) of the NPY stream at its start; leaves f at the data. A
+    header that is not one is a ValueError (numpy's parse of a garbled one raised tokenize's
+    TokenError, a traceback instead of a line naming the file)."""
     version = np.lib.format.read_magic(f)
-    if version == (1, 0):
-        return np.lib.format.read_array_header_1_0(f)
-    return np.lib.format.read_array_header_2_0(f)  # 2.0 and 3.0 (utf-8 names) share the layout
+    try:
+        if version == (1, 0):
+            return np.lib.format.read_array_header_1_0(f)
+        return np.lib.format.read_array_header_2_0(f)  # 2.0 and 3.0 (utf-8 names) share the layout
+    except (SyntaxError, tokenize.TokenError, TypeError) as exc:
+        raise ValueError(f"its header is not an NPY header ({type(exc).__name__}: {exc})") from None
 
 
 def _layout_names(path: Path, what: str, dtype: np.dtype, shape: tuple) -> list[str]:
@@ -79,7 +85,10 @@ class NpyReader(Reader):
     def sniff(self, head: bytes) -> bool:
         return head[:6] == NPY_MAGIC
 
-    def _open(self, path: Path) -> np.ndarray:
+    def _shape(self, path: Path) -> tuple:
+        """The array's shape from its header, after checking the header, the dtype and that the
+        data the header declares is all there (no memory map: counting 2 000 tiles' points
+        mapped each, 0.18 ms a file)."""
         try:
             with open(path, "rb") as f:
                 if f.read(6) != NPY_MAGIC:
@@ -91,18 +100,26 @@ class NpyReader(Reader):
                 raise fail(path, f"NPY array holds Python objects (dtype {dtype}), which gigapoint does not unpickle")
             nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
             have = path.stat().st_size - data_start
-            if nbytes > have:
-                raise fail(path, f"truncated NPY file: its header declares shape {tuple(shape)} ({nbytes:,} bytes) but only {have:,} bytes follow")
-            arr = np.load(path, mmap_mode="r", allow_pickle=False)
-        except ValueError as exc:  # bad header, truncated data ("mmap length is greater than file size"), object arrays
+        except ValueError as exc:  # bad header
             raise fail(path, f"corrupt or truncated NPY file: {exc}") from None
         except OSError as exc:
             raise fail(path, exc.strerror or exc) from None
-        return arr
+        if nbytes > have:
+            raise fail(path, f"truncated NPY file: its header declares shape {tuple(shape)} ({nbytes:,} bytes) but only {have:,} bytes follow")
+        return tuple(shape)
+
+    def _open(self, path: Path) -> np.ndarray:
+        self._shape(path)
+        try:
+            return np.load(path, mmap_mode="r", allow_pickle=False)
+        except ValueError as exc:  # truncated data ("mmap length is greater than file size"), object arrays
+            raise fail(path, f"corrupt or truncated NPY file: {exc}") from None
+        except OSError as exc:
+            raise fail(path, exc.strerror or exc) from None
 
     def point_count(self, path: Path) -> int | None:
-        arr = self._open(check_file(path))
-        return arr.shape[0] if arr.ndim else None
+        shape = self._shape(check_file(path))
+        return shape[0] if shape else None
 
     def read_chunks(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
         chunk_size = check_chunk_size(chunk_size)
