@@ -467,6 +467,12 @@ def test_npz_problems(tmp_path):
     with zipfile.ZipFile(q, "w") as zf:  # header claims 10^12 rows
         zf.writestr("xyz.npy", b"\x93NUMPY\x01\x00v\x00{'descr': '<f8', 'fortran_order': False, 'shape': (1000000000000, 3), }".ljust(128, b" ")[:127] + b"\n" + bytes(48))
     raises(InputError, q, match="1000000000000")
+    np.savez(p, xyz=np.zeros((50, 3)))  # a damaged member header (its magic, its name): zipfile's BadZipFile, a traceback
+    data = p.read_bytes()
+    for damaged in (b"PKxx" + data[4:], data[:30] + b"q" + data[31:]):
+        p.write_bytes(damaged)
+        raises(InputError, p, match="corrupt NPZ (zip) member 'xyz'")
+        raises(InputError, p, fn=file_info, match="corrupt NPZ (zip) member 'xyz'")
 
 
 def test_bad_chunk_size(tmp_path):

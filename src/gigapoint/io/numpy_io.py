@@ -149,12 +149,15 @@ class _Member:
         self.path, self.zf, self.name = path, zf, name
         self.key = name.removesuffix(".npy")
         info = zf.getinfo(name)
-        with zf.open(name) as m:
-            try:
-                shape, fortran, dtype = _read_npy_header(m)
-                header_len = m.tell() if m.seekable() else None
-            except ValueError as exc:
-                raise fail(path, f"NPZ member {self.key!r} is not a valid NPY array: {exc}") from None
+        try:
+            with zf.open(name) as m:
+                try:
+                    shape, fortran, dtype = _read_npy_header(m)
+                    header_len = m.tell() if m.seekable() else None
+                except ValueError as exc:
+                    raise fail(path, f"NPZ member {self.key!r} is not a valid NPY array: {exc}") from None
+        except (zipfile.BadZipFile, zlib.error, EOFError) as exc:  # a damaged member's zip header or data (was zipfile's traceback)
+            raise fail(path, f"corrupt NPZ (zip) member {self.key!r}: {exc}") from None
         if dtype.hasobject:
             raise fail(path, f"NPZ member {self.key!r} holds Python objects (dtype {dtype}), which gigapoint does not unpickle")
         self.shape, self.fortran, self.dtype = tuple(shape), fortran, dtype
