@@ -369,6 +369,12 @@ def _fewer_records(path: Path) -> None:
     np.save(path, a[:-1])
 
 
+def _garbled_header(path: Path) -> None:
+    """Bytes 10-16 of the NPY header (its dict) garbled: numpy's parse raised tokenize's TokenError."""
+    data = path.read_bytes()
+    path.write_bytes(data[:10] + b"garbage" + data[17:])
+
+
 def _wrong_count(d: OctreeDir) -> None:
     meta = json.loads(d.meta.read_text())
     meta["points"] += 1
@@ -393,6 +399,8 @@ DAMAGE = {
     "bad layout code": ("code", lambda d: _bad_code(d.array("pack")), "pack.npy"),
     "missing stream": ("missing", lambda d: d.array("field.color").unlink(), "field.color.npy"),
     "checksums missing": ("crc", lambda d: _fewer_records(d.array("crc")), "crc.npy"),
+    "garbled attribute header": ("header", lambda d: _garbled_header(d.array("field.attr.intensity")), "field.attr.intensity.npy"),
+    "garbled nodes header": ("header", lambda d: _garbled_header(d.array("nodes")), "nodes.npy"),
 }
 
 
@@ -404,6 +412,20 @@ def test_corrupt_payloads_are_one_line_errors_naming_the_file(damaged, case):
         open_octree(damaged.path)
     msg = str(err.value)
     assert "\n" not in msg and name in msg, msg
+
+
+@pytest.mark.parametrize("name", ["nodes", "med", "attr.intensity"])
+def test_a_version_1_folders_garbled_array_is_one_line_naming_it(las_pair, tmp_path, name):
+    """The words layout's arrays (version 1): a garbled NPY header was tokenize's TokenError."""
+    import shutil
+
+    _, p1, _ = las_pair
+    d = OctreeDir(shutil.copytree(p1, tmp_path / "v1"))
+    _garbled_header(d.array(name))
+    with pytest.raises(InputError) as err:
+        open_octree(d.path)
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith(f"{d.array(name)}: cannot read it"), msg
 
 
 def _flip_in_node(d: OctreeDir, name: str) -> int:

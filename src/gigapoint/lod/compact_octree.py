@@ -378,14 +378,6 @@ class CompactOctree(OctreeCloud):
         return field(f"attr.{name}")
 
 
-def _load(d: OctreeDir, name: str, mmap: bool = True) -> np.ndarray:
-    path = d.array(name)
-    try:
-        return np.load(path, mmap_mode="r" if mmap else None)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{path}: cannot read it ({' '.join(str(exc).split())})") from None
-
-
 def read_compact(d: OctreeDir, meta: dict) -> CompactOctree:
     """A version 2 octree folder opened (``reader.open_octree`` dispatches here): its arrays
     memory-mapped and checked against each other, so a damaged file is an error naming it now,
@@ -395,7 +387,7 @@ def read_compact(d: OctreeDir, meta: dict) -> CompactOctree:
     names = meta.get("fields")
     if not isinstance(names, list) or names != field_names(meta.get("attributes", {})) or set(names) - set(meta.get("field_dtypes", {})):
         raise InputError(f"{d.meta}: its fields do not match its attributes")
-    nodes, keys, pack, fields = (_load(d, k, mmap=False) for k in ("nodes", "keys", "pack", "fields"))
+    nodes, keys, pack, fields = (d.load(k, mmap=False) for k in ("nodes", "keys", "pack", "fields"))
     if nodes.dtype != BATCH_DTYPE or keys.ndim != 1 or len(nodes) != len(keys):
         raise InputError(f"{d.array('nodes')}: does not match {d.array('keys').name} ({len(nodes):,} and {len(keys):,} nodes)")
     if pack.dtype != PACK_DTYPE or len(pack) != len(nodes):
@@ -406,10 +398,10 @@ def read_compact(d: OctreeDir, meta: dict) -> CompactOctree:
     ends = nodes["first"].astype(np.int64) + counts
     if int(counts.sum()) != n or (len(ends) and int(ends.max()) > n):
         raise InputError(f"{d.array('nodes')}: its nodes hold {int(counts.sum()):,} points, {d.meta.name} says {n:,}")
-    low = _load(d, "low")
+    low = d.load("low")
     if low.dtype != np.uint32 or low.shape != (n,):
         raise InputError(f"{d.array('low')}: holds {low.shape[0] if low.ndim else 0:,} points, {d.meta.name} says {n:,}")
-    ext = _load(d, "ext")
+    ext = d.load("ext")
     code = pack["code"].astype(np.int64)
     widths = np.stack([(code >> s) & 0xFF for s in (0, 8, 16)], axis=1)
     if np.any(widths > EXT_FULL_BITS):
@@ -419,7 +411,7 @@ def read_compact(d: OctreeDir, meta: dict) -> CompactOctree:
         raise InputError(f"{d.array('ext')}: the bit stream is shorter ({len(ext):,} words) than its nodes need ({int(need.max()):,})")
     streams = {}
     for j, k in enumerate(names):
-        s = _load(d, f"field.{k}")
+        s = d.load(f"field.{k}")
         rec = fields[:, j]
         need = rec["word0"].astype(np.int64) + field_words(rec, counts)
         if s.dtype != np.uint64 or np.any(rec["bits"] > 64) or (len(need) and int(need.max()) > len(s)):
@@ -427,7 +419,7 @@ def read_compact(d: OctreeDir, meta: dict) -> CompactOctree:
         streams[k] = np.asarray(s)
     crc = None
     if d.array("crc").exists():  # octrees written before checksums have none: not checked
-        crc = _load(d, "crc", mmap=False)
+        crc = d.load("crc", mmap=False)
         if crc.dtype != np.uint32 or crc.shape != (len(nodes), len(names) + 2):
             raise InputError(f"{d.array('crc')}: holds {crc.shape} checksums for {len(nodes):,} nodes and {len(names) + 2} arrays")
     return CompactOctree(meta.get("name", p.name), meta, nodes, keys, low, np.asarray(ext), pack, fields, streams, p, crc)

@@ -40,11 +40,14 @@ import json
 import os
 import shutil
 import time
+import tokenize
 from pathlib import Path
 from typing import Literal, Self
 
+import numpy as np
+
 from ..atomic import atomic_json, temp_files
-from ..errors import GigapointError
+from ..errors import GigapointError, InputError
 
 GIGAPOINT_META = "octree.json"
 FORMAT_NAME = "gigapoint-octree"  # octree.json's "format"
@@ -135,6 +138,16 @@ class OctreeDir:
         """A gigapoint octree's array ``name``: nodes, keys, one of POINT_ARRAYS, attr.<attribute>,
         or (version 2) one of COMPACT_ARRAYS or field.<name>."""
         return self.path / f"{name}.npy"
+
+    def load(self, name: str, mmap: bool = True) -> np.ndarray:
+        """Array ``name`` read (memory-mapped unless ``mmap`` is False); a missing, short or
+        garbled file is a one-line InputError naming it (numpy's parse of a garbled header
+        raised tokenize's TokenError or a SyntaxError: a traceback)."""
+        path = self.array(name)
+        try:
+            return np.load(path, mmap_mode="r" if mmap else None, allow_pickle=False)
+        except (OSError, ValueError, SyntaxError, tokenize.TokenError) as exc:
+            raise InputError(f"{path}: cannot read it ({' '.join(str(exc).split())})") from None
 
     def array_in_progress(self, name: str) -> Path:
         """Array ``name`` while a conversion fills it (renamed to ``array(name)`` by the write phase)."""

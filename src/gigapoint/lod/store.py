@@ -588,13 +588,10 @@ def read_gigapoint(octree_dir, meta: dict | None = None) -> OctreeCloud:
     meta = read_meta(d) if meta is None else meta
     if meta["version"] != FORMAT_VERSION_WORDS:
         raise InputError(f"{d.meta}: a version {meta['version']} octree; open it with gigapoint.open")
-    try:
-        nodes = np.load(d.array("nodes"))
-        keys = np.load(d.array("keys"))
-        arrays = {k: np.load(d.array(k), mmap_mode="r") for k in POINT_ARRAYS}
-        attributes = {a: np.load(d.array(f"attr.{a}"), mmap_mode="r") for a in meta.get("attributes", {})}
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{p}: cannot read octree data ({' '.join(str(exc).split())})") from None
+    nodes = d.load("nodes", mmap=False)
+    keys = d.load("keys", mmap=False)
+    arrays = {k: d.load(k) for k in POINT_ARRAYS}
+    attributes = {a: d.load(f"attr.{a}") for a in meta.get("attributes", {})}
     if nodes.dtype != BATCH_DTYPE or len(nodes) != len(keys):
         raise InputError(f"{p}: nodes.npy / keys.npy do not match the gigapoint layout")
     n = int(meta["points"])
