@@ -327,6 +327,15 @@ def test_an_info_vlr_cube_that_does_not_hold_the_points(autzen_octrees, tmp_path
         _draw(big)
 
 
+def test_an_absurd_scale_is_a_corrupt_header(autzen_octrees, tmp_path):
+    """A damaged scale (2e277 for z, found by flipping bytes) passed the finite check: its points
+    decoded to z of 1e286 and drawing them gave NaN distances (an error naming no file)."""
+    path = autzen_octrees / "a.copc.laz"
+    at = LAS14_HEADER_DTYPE.fields["scale"][1] + 16  # the z scale
+    bad = _patch(path, tmp_path / "s.copc.laz", at, np.array([2.269e277]).tobytes())
+    _one_line_error(bad, r"corrupt COPC file \(header bounds, info VLR cube\): its coordinates' step 2\.269e\+277 \(their scale\) is beyond any coordinate \(±1e\+12\)")
+
+
 def test_chunk_offsets_past_the_end_of_the_file(paged, tmp_path):
     path, _ = paged
     b, hdr, info, root = _info(path)

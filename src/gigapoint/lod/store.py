@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from ..core.attributes import Attributes, Packed, packed_range
-from ..core.cloud import at_scale
+from ..core.cloud import MAX_ABS_COORDINATE, at_scale
 from ..core.compact import point_words, rgba32, stream_words
 from ..core.layout import BATCH_DTYPE, PACK_DTYPE
 from ..core.quantize import dequantize
@@ -605,9 +605,12 @@ def tight_bounds(name: str, what: str, lo, hi, cube_min, edge: float, step: floa
     ``boundsConforming``), or its cube where they are missing, not finite, or all zero. Bounds
     beyond the cube (more than two ``step``s, the coordinates' grid, and 0.1 % of the cube) are a one-line
     InputError: one of the two is wrong, and a cube beside the points culled every node: a blank
-    image and "no point is in view"."""
+    image and "no point is in view". So is a ``step`` beyond MAX_ABS_COORDINATE: every point off
+    the grid's origin would be absurd (a damaged scale of 2e277 decoded z of 1e286, drawn as NaN)."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     cube_min, cube_max = np.asarray(cube_min, np.float64), np.asarray(cube_min, np.float64) + edge
+    if not abs(step) <= MAX_ABS_COORDINATE:
+        raise InputError(f"{name}: corrupt {what}: its coordinates' step {abs(step):g} (their scale) is beyond any coordinate (±{MAX_ABS_COORDINATE:g})")
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)) or not (np.any(lo) or np.any(hi)):
         return cube_min, cube_max  # missing, or a writer's zeros: the cube stands in
     if outside_cube(lo, hi, cube_min, cube_max, step):
