@@ -317,6 +317,20 @@ def test_ply_binary_truncated_and_huge_count(tmp_path):
     raises(InputError, p, match="truncated PLY")
     p.write_bytes(data.replace(b"element vertex 1000", b"element vertex 999999999999"))
     raises(InputError, p, match="truncated PLY")
+    # opening it whole was refused for the memory 10^12 points would take ("open it with
+    # progressive=True"), which then found it truncated: the header's count is checked first
+    raises(InputError, p, fn=open_cloud, match="truncated PLY file: the header declares 999,999,999,999 vertices")
+
+
+def test_ply_ascii_count_beyond_its_bytes(tmp_path):
+    """An ASCII header's count that the file's bytes cannot hold (6 bytes a vertex at least) is
+    refused before the points are read; a file whose last line ends without a newline is not."""
+    p = tmp_path / "a.ply"
+    head = "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+    p.write_text(head.format(999_999_999_999) + "0 0 0\n1 1 1\n")
+    raises(InputError, p, fn=open_cloud, match="truncated PLY file: the header declares 999,999,999,999 vertices but only 12 bytes follow (room for 2 at most)")
+    p.write_text(head.format(2) + "0 0 0\n1 1 1")
+    assert len(open_cloud(p)) == 2
 
 
 def test_ply_bad_header(tmp_path):

@@ -72,6 +72,10 @@ def _vertex_columns(data: np.ndarray) -> tuple[list[str], list[np.ndarray]]:
     return names, [np.asarray(data[n]) for n in names]
 
 
+#: bytes an ASCII vertex takes at least: three one-digit numbers, two spaces and a newline
+_LEAST_ASCII_VERTEX = 6
+
+
 class PlyReader(Reader):
     name = "PLY"
     suffixes = (".ply",)
@@ -80,7 +84,19 @@ class PlyReader(Reader):
         return head[:4] in (b"ply\n", b"ply\r")
 
     def point_count(self, path: Path) -> int | None:
-        return _Header(check_file(path)).count
+        """The header's vertex count, after checking the file can hold that many: a binary file's
+        bytes exactly, an ASCII one's at 6 bytes a vertex at least ("0 0 0\\n"). A count of 10^12
+        in 45 kB was refused for the memory it would take, with advice to load it progressively."""
+        path = check_file(path)
+        h = _Header(path)
+        if not h.has_lists and h.text:
+            have = h.file_size - h.data_offset
+            if h.count * _LEAST_ASCII_VERTEX - 1 > have:  # (the last line may end without its newline)
+                raise fail(path, f"truncated PLY file: the header declares {h.count:,} vertices but only {max(have, 0):,} bytes follow "
+                                 f"(room for {(max(have, 0) + 1) // _LEAST_ASCII_VERTEX:,} at most)")  # fmt: skip
+        elif not h.has_lists:
+            self._binary_span(path, h)
+        return h.count
 
     def read_chunks(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
         chunk_size = check_chunk_size(chunk_size)
@@ -96,7 +112,9 @@ class PlyReader(Reader):
         else:
             yield from self._read_binary(path, h, chunk_size, scaler)
 
-    def _read_binary(self, path, h: _Header, chunk_size, scaler) -> Iterator[PointChunk]:
+    @staticmethod
+    def _binary_span(path, h: _Header) -> tuple[int, np.dtype]:
+        """(offset, record dtype) of a binary file's vertices, after checking they are all there."""
         offset = h.data_offset + sum(el.count * el.dtype(h.byte_order).itemsize for el in h.before)
         dtype = h.vertex.dtype(h.byte_order)
         need = h.count * dtype.itemsize
@@ -107,6 +125,10 @@ class PlyReader(Reader):
                 f"truncated PLY file: the header declares {h.count:,} vertices ({need:,} bytes) "
                 f"but only {max(have, 0):,} bytes follow (room for {max(have, 0) // dtype.itemsize:,})",
             )
+        return offset, dtype
+
+    def _read_binary(self, path, h: _Header, chunk_size, scaler) -> Iterator[PointChunk]:
+        offset, dtype = self._binary_span(path, h)
         mm = np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=(h.count,))
         try:
             for start in range(0, h.count, chunk_size):
