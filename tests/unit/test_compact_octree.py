@@ -428,6 +428,28 @@ def test_a_version_1_folders_garbled_array_is_one_line_naming_it(las_pair, tmp_p
     assert "\n" not in msg and msg.startswith(f"{d.array(name)}: cannot read it"), msg
 
 
+def _bounds_far_off(meta: dict) -> None:
+    meta["bounds"]["min"][1] = -1e308
+
+
+@pytest.mark.parametrize(
+    "change, problem",
+    [  # found by a fuzzer: each was a traceback (numpy's dtype TypeError, a NaN camera)
+        (lambda m: m["field_dtypes"].update({"attr.intensity": "u0"}), r"field 'attr.intensity' has dtype 'u0', not a number type"),
+        (lambda m: m["field_dtypes"].update({"color": "<f8"}), r"field 'color' has dtype '<f8', not an unsigned integer type"),
+        (lambda m: m.update(attributes=5), r"invalid metadata \(attributes is not \{name: dtype\}: 5\)"),
+        (_bounds_far_off, r"corrupt metadata \(bounds, cube\): the points' bounds .* lie outside the octree's cube"),
+    ],
+)
+def test_metadata_that_does_not_describe_the_arrays_is_refused_at_open(damaged, change, problem):
+    meta = json.loads(damaged.meta.read_text())
+    change(meta)
+    damaged.meta.write_text(json.dumps(meta))
+    with pytest.raises(InputError, match=problem) as err:
+        open_octree(damaged.path)
+    assert "\n" not in str(err.value) and str(damaged.meta) in str(err.value)
+
+
 def _flip_in_node(d: OctreeDir, name: str) -> int:
     """Flip one bit inside a node's part of array ``name`` (a node that holds bits there);
     returns the node."""

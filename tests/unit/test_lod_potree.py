@@ -172,6 +172,29 @@ def test_metadata_that_cannot_place_points_is_refused_at_open(converted, tmp_pat
     assert "\n" not in str(e.value) and str(path) in str(e.value)
 
 
+@pytest.mark.parametrize(
+    "change, problem",
+    [  # found by a fuzzer: each was a traceback (KeyError 'position' when a node was drawn; inf and NaN cameras)
+        ({"attributes": "renamed"}, r"invalid Potree hierarchy/metadata \(its attributes hold no 'position' of three numbers\)"),
+        ({"offset": [0.0, 0.0, 1e308]}, r"corrupt Potree metadata: scale \[.*\] and offset \[0.0, 0.0, 1e\+308\] put its points beyond any coordinate"),
+        ({"scale": [0.001, 0.001, 2.269e277]}, r"corrupt Potree metadata: scale \[0.001, 0.001, 2.269e\+277\] and offset"),
+    ],
+)
+def test_metadata_whose_points_cannot_be_drawn_is_refused_at_open(converted, tmp_path, change, problem):
+    import shutil
+
+    path = tmp_path / "meta"
+    shutil.copytree(converted[("potree", "DEFAULT")], path)
+    meta = json.loads((path / "metadata.json").read_text())
+    if change.get("attributes") == "renamed":
+        change = {"attributes": [dict(a, name="where") if a["name"] == "position" else a for a in meta["attributes"]]}
+    meta.update(change)
+    (path / "metadata.json").write_text(json.dumps(meta))
+    with pytest.raises(InputError, match=problem) as e:
+        open_octree(path)
+    assert "\n" not in str(e.value) and str(path) in str(e.value)
+
+
 def test_a_bounding_box_beside_the_points_is_refused_at_open(converted, tmp_path):
     """A boundingBox beside the position attribute's min/max culled every node: a blank image
     and "no point is in view"."""

@@ -384,9 +384,16 @@ def read_compact(d: OctreeDir, meta: dict) -> CompactOctree:
     not a crash or garbage when its node is drawn."""
     p = d.path
     n = int(meta["points"])
-    names = meta.get("fields")
-    if not isinstance(names, list) or names != field_names(meta.get("attributes", {})) or set(names) - set(meta.get("field_dtypes", {})):
+    names, dtypes = meta.get("fields"), meta.get("field_dtypes")
+    if not isinstance(names, list) or not isinstance(dtypes, dict) or names != field_names(meta.get("attributes", {})) or set(names) - set(dtypes):
         raise InputError(f"{d.meta}: its fields do not match its attributes")
+    for k, v in dtypes.items():  # a damaged one was numpy's TypeError ("data type 'u0' not understood")
+        try:
+            dt = np.dtype(v)
+        except (TypeError, ValueError):
+            dt = None
+        if dt is None or dt.kind not in ("u" if k in ("rgba", "color") else "biuf") or dt.shape:  # (colours: unsigned words)
+            raise InputError(f"{d.meta}: field {k!r} has dtype {v!r}, not {'an unsigned integer' if k in ('rgba', 'color') else 'a number'} type")
     nodes, keys, pack, fields = (d.load(k, mmap=False) for k in ("nodes", "keys", "pack", "fields"))
     if nodes.dtype != BATCH_DTYPE or keys.ndim != 1 or len(nodes) != len(keys):
         raise InputError(f"{d.array('nodes')}: does not match {d.array('keys').name} ({len(nodes):,} and {len(keys):,} nodes)")

@@ -24,7 +24,7 @@ from ..errors import InputError
 from ..io import laz_process
 from ..io.http import ByteSource, open_source
 from ..io.las import _scaled_xyz
-from .store import tight_bounds
+from .store import check_grid, tight_bounds
 from .voxel_octree import VOXEL_KEY_DTYPE, VoxelOctree, valid_voxels, voxel_name, voxel_to_key
 
 # --------------------------------------------------------------------------- layouts
@@ -317,6 +317,7 @@ class CopcCloud(VoxelOctree):
             raise InputError(f"{name}: corrupt COPC info VLR: octree centre {center.tolist()} and half size {half!r}")
         if not (np.all(np.isfinite(self.scale)) and np.all(self.scale != 0) and np.all(np.isfinite(self.offset))):
             raise InputError(f"{name}: corrupt COPC header: scale {self.scale.tolist()}, offset {self.offset.tolist()}")
+        check_grid(name, "COPC header", self.scale, self.offset)
         cube_min = center - half
         n_points = int(hdr["point_count"]) or int(hdr["legacy_point_count"])
         lo, hi = tight_bounds(name, "COPC file (header bounds, info VLR cube)", lo, hi, cube_min, 2.0 * half, self.coordinate_step)

@@ -23,7 +23,7 @@ from ..errors import InputError
 from ..io import laz_process
 from ..io.http import ByteSource, as_url, open_source
 from ..io.las import _scaled_xyz
-from .store import tight_bounds
+from .store import check_grid, tight_bounds
 from .voxel_octree import VoxelOctree, parse_voxel_name, voxel_name
 
 EPT_FILE = "ept.json"
@@ -102,6 +102,7 @@ class EptCloud(VoxelOctree):
             raise InputError(f"{name}: invalid ept.json ({' '.join(str(exc).split())})") from None
         if not (np.all(np.isfinite(b)) and np.all(b[3:] > b[:3])):
             raise InputError(f"{name}: invalid ept.json bounds {b.tolist()}")
+        check_grid(name, "ept.json schema", [self._scales[a][0] for a in "XYZ"], [self._scales[a][1] for a in "XYZ"])
         cube_min, edge = b[:3], float(np.max(b[3:] - b[:3]))
         lo, hi = tight_bounds(name, "ept.json (boundsConforming, bounds)", tight[:3], tight[3:], cube_min, edge, self.coordinate_step)
         cloud_meta = {

@@ -22,7 +22,7 @@ from ..errors import InputError
 from .grid import output_grid
 from .keys import MAX_LEVEL, key_cube, level_of
 from .octree_dir import OctreeDir
-from .store import OctreeCloud, check_placement, tight_bounds
+from .store import OctreeCloud, check_grid, check_placement, tight_bounds
 
 HIERARCHY_DTYPE = np.dtype([("type", "u1"), ("mask", "u1"), ("points", "<u4"), ("offset", "<i8"), ("size", "<i8")])
 _TYPES = {
@@ -339,6 +339,8 @@ class PotreeCloud(OctreeCloud):
             info: dict[int, tuple[int, int, int]] = {}
             _parse_hierarchy(hier, 0, first, 1, info)
             record = _node_dtype(self.potree_attributes)
+            if "position" not in (record.names or ()) or record["position"].shape != (3,):  # (each node's KeyError when drawn)
+                raise ValueError("its attributes hold no 'position' of three numbers")
             check_placement(
                 {"scale": self.scale, "offset": self.offset, "boundingBox.min": bmin, "boundingBox.max": bmax},
                 positive="scale",
@@ -347,6 +349,7 @@ class PotreeCloud(OctreeCloud):
             lo, hi = _position_range(str(d.potree_meta), self.potree_attributes, bmin, bmax, float(np.max(np.abs(self.scale))))
         except (KeyError, TypeError, ValueError, OSError) as exc:
             raise InputError(f"{p}: invalid Potree hierarchy/metadata ({' '.join(str(exc).split())})") from None
+        check_grid(str(d.potree_meta), "Potree metadata", self.scale, self.offset)
         self.octree_bin = d.potree_octree
         try:
             bin_size = self.octree_bin.stat().st_size

@@ -548,6 +548,9 @@ def read_meta(d: OctreeDir) -> dict:
             raise ValueError(f"cube_edge must be a positive number: {meta['cube_edge']!r}")
         if spacing is not None and not (math.isfinite(float(spacing)) and spacing >= 0):
             raise ValueError(f"spacing must be a number >= 0: {spacing!r}")
+        attributes = meta.get("attributes", {})
+        if not isinstance(attributes, dict) or not all(isinstance(a, str) for a in attributes):  # 5 was a TypeError
+            raise TypeError(f"attributes is not {{name: dtype}}: {str(attributes)[:60]}")
         bounds = meta["bounds"]
         if not isinstance(bounds, dict):
             raise TypeError(f"bounds is not {{\"min\": [x, y, z], \"max\": [x, y, z]}}: {bounds!r}")
@@ -555,6 +558,8 @@ def read_meta(d: OctreeDir) -> dict:
         if meta.get("scale") is not None:  # the source's grid (LAS inputs), null otherwise
             frame["scale"] = meta["scale"]
         check_placement(frame, positive="scale", box=("bounds.min", "bounds.max"))
+        step = float(np.max(frame["scale"])) if "scale" in frame else 0.0
+        tight_bounds(str(d.meta), "metadata (bounds, cube)", bounds["min"], bounds["max"], meta["cube_min"], edge, step)  # (bounds of 1e308 drew NaN)
     except KeyError as exc:
         raise InputError(f"{d.meta}: invalid metadata (no {exc.args[0]!r})") from None
     except (TypeError, ValueError) as exc:
@@ -600,17 +605,26 @@ def read_gigapoint(octree_dir, meta: dict | None = None) -> OctreeCloud:
     return OctreeCloud(meta.get("name", p.name), meta, nodes, keys, arrays, attributes, p)
 
 
+def check_grid(name: str, what: str, scale, offset) -> None:
+    """A one-line InputError unless a dataset's integer grid (its scale and offset per axis) can
+    place points among drawable coordinates: a scale or offset beyond MAX_ABS_COORDINATE puts
+    every point (off the grid's origin) beyond any (a damaged z scale of 2e277, finite and
+    positive, decoded z of 1e286 and drew NaN; an offset of 1e308 drew inf)."""
+    scale, offset = np.asarray(scale, np.float64), np.asarray(offset, np.float64)
+    if not (np.all(np.abs(scale) <= MAX_ABS_COORDINATE) and np.all(np.abs(offset) <= MAX_ABS_COORDINATE)):
+        raise InputError(
+            f"{name}: corrupt {what}: scale {scale.tolist()} and offset {offset.tolist()} put its points beyond any coordinate (±{MAX_ABS_COORDINATE:g})"
+        )
+
+
 def tight_bounds(name: str, what: str, lo, hi, cube_min, edge: float, step: float = 0.0):
     """(lo, hi): the points' bounds a dataset states (a COPC file's LAS header, EPT's
     ``boundsConforming``), or its cube where they are missing, not finite, or all zero. Bounds
     beyond the cube (more than two ``step``s, the coordinates' grid, and 0.1 % of the cube) are a one-line
     InputError: one of the two is wrong, and a cube beside the points culled every node: a blank
-    image and "no point is in view". So is a ``step`` beyond MAX_ABS_COORDINATE: every point off
-    the grid's origin would be absurd (a damaged scale of 2e277 decoded z of 1e286, drawn as NaN)."""
+    image and "no point is in view"."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     cube_min, cube_max = np.asarray(cube_min, np.float64), np.asarray(cube_min, np.float64) + edge
-    if not abs(step) <= MAX_ABS_COORDINATE:
-        raise InputError(f"{name}: corrupt {what}: its coordinates' step {abs(step):g} (their scale) is beyond any coordinate (±{MAX_ABS_COORDINATE:g})")
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)) or not (np.any(lo) or np.any(hi)):
         return cube_min, cube_max  # missing, or a writer's zeros: the cube stands in
     if outside_cube(lo, hi, cube_min, cube_max, step):
