@@ -295,6 +295,8 @@ def test_ept_hierarchy_bad_entries(broken):
     _fails(d, "outside the octree")
     (d / "ept-hierarchy" / "0-0-0-0.json").write_text(json.dumps(dict(root, **{"0-0-0-0": "many"})))
     _fails(d, "invalid point count")
+    (d / "ept-hierarchy" / "0-0-0-0.json").write_text(json.dumps(dict(root, **{"0-0-0-0": 2**63})))  # an OverflowError (found by a fuzzer)
+    _fails(d, "node 0-0-0-0 has an invalid point count 9223372036854775808")
     (d / "ept-hierarchy" / "0-0-0-0.json").unlink()
     _fails(d, "0-0-0-0.json: no such file")
 

@@ -68,6 +68,9 @@ def _srs_text(srs) -> str | None:
     return srs.get("wkt") or None
 
 
+MAX_NODE_POINTS = 2**40  # a node's point count beyond this is a damaged hierarchy, not a node
+
+
 class EptCloud(VoxelOctree):
     """An EPT dataset opened as an octree: ``ept.json`` and the root hierarchy file at open,
     deeper hierarchy files and node files when a frame draws them. ``meta`` holds ``crs``,
@@ -158,7 +161,7 @@ class EptCloud(VoxelOctree):
                 key = parse_voxel_name(node)
             except ValueError as exc:
                 raise InputError(f"{self.source.name}: {where}: {exc}") from None
-            if not isinstance(count, int) or isinstance(count, bool) or count < -1:
+            if not isinstance(count, int) or isinstance(count, bool) or not -1 <= count <= MAX_NODE_POINTS:  # (2**63: an OverflowError)
                 raise InputError(f"{self.source.name}: {where}: node {node} has an invalid point count {count!r}")
             if count == -1:
                 pages[key] = node
