@@ -144,7 +144,7 @@ def read_frame(path: Path) -> RecordedFrame:
                 raise InputError(f"{path}: unknown frame kind {kind!r} (points or depth)")
             attrs = {k[5:]: z[k] for k in z.files if k.startswith("attr_")}
             return RecordedFrame("points", t, pose, xyz=z["xyz"], rgb=rgb, normals=z.get("normals", None), attributes=attrs)
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # a truncated or damaged npz
+    except (OSError, ValueError, TypeError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # a truncated or damaged npz (TypeError: a time of several values)
         raise InputError(f"{path}: not a recorded frame ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
 
 
