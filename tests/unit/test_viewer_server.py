@@ -145,7 +145,9 @@ def test_screenshot_sizes(client, core):
         assert Image.open(io.BytesIO(r.content)).size == (640, 400)
         r = client.get(f"/screenshot?session={hello['session']}&width=320")
         assert Image.open(io.BytesIO(r.content)).size == (320, 200)  # the view's aspect
-    for bad in ["width=0&height=10", "width=99999&height=10", "scale=3", "width=-5", "width=1e3", "session=nope", "width=8000&height=8000"]:
+    # "²" passed isdigit() and failed int(): an internal server error (500); "٣" was taken as 3
+    for bad in ["width=0&height=10", "width=99999&height=10", "scale=3", "width=-5", "width=1e3", "session=nope", "width=8000&height=8000",
+                "width=²", "scale=²", "width=٣"]:
         r = client.get(f"/screenshot?{bad}")
         assert r.status_code == 400, bad
         assert "screenshot" in r.text

@@ -125,7 +125,7 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
         try:
             args = {k: q.get(k) for k in ("width", "height", "scale")}
             for k, v in args.items():
-                if v is not None and not (v.isdigit() and len(v) <= 6):
+                if v is not None and not (v.isascii() and v.isdigit() and len(v) <= 6):  # ("²".isdigit(): int() failed, a 500)
                     raise P.ProtocolError(f"screenshot: {k} must be a positive integer")
             scale = int(args["scale"] or 1)
             if scale not in (1, 2, 4):
