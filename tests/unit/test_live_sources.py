@@ -432,6 +432,9 @@ def test_wire_round_trip_and_malformed_messages():
         b"GPL1" + (5).to_bytes(4, "little") + b"{oops",
         "text",
     ]
+    for shape in ([2**62, 4], [1e20, 3], [0, 2**63]):  # numpy's int64 product wrapped or overflowed: a ValueError, the producer's connection lost
+        head = json.dumps({"type": "points", "arrays": [{"name": "xyz", "dtype": "<f8", "shape": shape}]}).encode()
+        bad.append(b"GPL1" + len(head).to_bytes(4, "little") + head + bytes(24))
     for message in bad:
         with pytest.raises(InputError) as err:
             decode_frame(message)

@@ -11,6 +11,7 @@ stream going). ``PushClient`` (websockets' sync client) sends frames and reads e
 from __future__ import annotations
 
 import json
+import math
 import struct
 
 import numpy as np
@@ -76,12 +77,13 @@ def decode_frame(data: bytes) -> RecordedFrame:
             raise InputError("push: each array needs a name, a dtype and a shape") from None
         if name not in _ARRAYS[kind]:
             raise InputError(f"push: a {kind} frame has no array {str(name)[:30]!r} (only {', '.join(_ARRAYS[kind])})")
-        if dtype not in _DTYPES or len(shape) > 3 or any(s < 0 for s in shape):
-            raise InputError(f"push: array {name}: unsupported dtype {str(dtype)[:10]!r} or shape {shape}")
-        size = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+        if dtype not in _DTYPES or len(shape) > 3 or any(not 0 <= s <= MAX_PUSH_BYTES for s in shape):
+            raise InputError(f"push: array {name}: unsupported dtype {str(dtype)[:10]!r} or shape {str(shape)[:60]}")
+        count = math.prod(shape)  # Python's integers: numpy's int64 product of [2**62, 4] wrapped to 0 (a ValueError, the connection lost)
+        size = count * np.dtype(dtype).itemsize
         if offset + size > len(data):
             raise InputError(f"push: array {name} ({size:,} bytes) runs past the end of the message (a frame cut short)")
-        arrays[name] = np.frombuffer(data, dtype, int(np.prod(shape, dtype=np.int64)), offset).reshape(shape)
+        arrays[name] = np.frombuffer(data, dtype, count, offset).reshape(shape)
         offset += size
     if offset != len(data):
         raise InputError(f"push: {len(data) - offset} bytes after the last array")
