@@ -103,6 +103,22 @@ def test_push_needs_the_token_and_a_malformed_frame_does_not_stop_the_stream(liv
         assert live.stats.frames_in == 3 and live.n_points == 2000 + 2000 + 24 and live.stats.frames_rejected == 3
 
 
+def test_a_frame_that_fails_in_a_way_nobody_foresaw_does_not_cost_the_producer_its_connection(live_core, monkeypatch):
+    """A pushed frame that raised anything but a GigapointError (a wire message with a shape of
+    [2**62, 4] did: numpy's product wrapped) ended the producer's connection; it is answered as
+    an error, as /ws answers a message that fails, and the stream goes on."""
+    import gigapoint.live.wire as wire
+
+    real = wire.decode_frame
+    monkeypatch.setattr(wire, "decode_frame", lambda data: (_ for _ in ()).throw(ValueError("boom")) if data == b"BUG!" else real(data))
+    live, core = live_core
+    with TestClient(create_app(core)) as client, client.websocket_connect(f"/push?push_token={core.push_token}") as ws:
+        ws.send_bytes(b"BUG!")
+        assert json.loads(ws.receive_text()) == {"type": "error", "message": "internal error: boom"}
+        ws.send_bytes(encode_frame("points", xyz=patch(8)[0]))
+        assert json.loads(ws.receive_text())["type"] == "ack"
+
+
 def test_a_plain_cloud_has_no_push_route(live_core):
     import gigapoint as gp
 

@@ -257,6 +257,9 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
                     reply = {"type": "ack", "seq": seq}
                 except GigapointError as exc:
                     reply = {"type": "error", "message": str(exc)[:500]}
+                except Exception as exc:  # a bug must not cost the producer its connection (as /ws: the message fails, the stream goes on)
+                    log.exception("viewer: a pushed frame failed")
+                    reply = {"type": "error", "message": f"internal error: {exc}"[:300]}
                 await websocket.send_text(json.dumps(reply))
         except (WebSocketDisconnect, RuntimeError, OSError, asyncio.CancelledError):
             pass  # a producer gone mid-frame: nothing of its frame was pushed (frames are pushed whole)
