@@ -107,7 +107,7 @@ def test_a_frame_that_fails_in_a_way_nobody_foresaw_does_not_cost_the_producer_i
     """A pushed frame that raised anything but a GigapointError (a wire message with a shape of
     [2**62, 4] did: numpy's product wrapped) ended the producer's connection; it is answered as
     an error, as /ws answers a message that fails, and the stream goes on."""
-    import gigapoint.live.wire as wire
+    from gigapoint.live import wire
 
     real = wire.decode_frame
     monkeypatch.setattr(wire, "decode_frame", lambda data: (_ for _ in ()).throw(ValueError("boom")) if data == b"BUG!" else real(data))
