@@ -237,6 +237,11 @@ def test_cli_workers_option_starts_a_local_cluster(inputs, tmp_path, capsys):
     _assert_identical(ref, out)
     assert main(["convert", str(inputs[1]), "-o", str(tmp_path / "x"), "--workers", "1", "--dask", "tcp://127.0.0.1:9"]) == 1
     assert "give one of them" in capsys.readouterr().err
+    many = 4 * (os.cpu_count() or 1) + 1  # (1000 started 1000 processes on 2 cores: the run never came back)
+    assert main(["convert", str(inputs[1]), "-o", str(tmp_path / "y"), "--workers", str(many)]) == 1
+    err = capsys.readouterr().err
+    assert f"--workers: {many} local worker processes on a machine of {os.cpu_count()} cores" in err and "--dask" in err
+    assert not (tmp_path / "y").exists()
 
 
 def test_16bit_colors_dark_after_bright_read_in_parts_are_the_single_process_colors(client, tmp_path):

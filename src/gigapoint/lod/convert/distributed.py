@@ -131,6 +131,9 @@ def dashboard_link(client, local: bool = False) -> str | None:
     return client.dashboard_link
 
 
+MAX_WORKERS_PER_CORE = 4  # local worker processes a core at most (each single-threaded)
+
+
 @contextmanager
 def open_client(client, announce: bool = False):
     """A ``distributed.Client`` for ``client``: a Client (used as it is), a scheduler address
@@ -145,6 +148,12 @@ def open_client(client, announce: bool = False):
     if isinstance(client, int) and not isinstance(client, bool):
         if client < 1:
             raise ConvertError(f"--workers: needs at least 1 worker, got {client}")
+        cores = os.cpu_count() or 1
+        if client > MAX_WORKERS_PER_CORE * cores:  # 1000 started 1000 processes on 2 cores: the run never came back
+            raise ConvertError(
+                f"--workers: {client} local worker processes on a machine of {cores} cores (at most {MAX_WORKERS_PER_CORE * cores}: each "
+                "runs one thread); for more, start a Dask cluster and give its scheduler's address with --dask"
+            )
         import dask
 
         # glibc reads MALLOC_* when a process starts: Dask sets them before it spawns the workers
