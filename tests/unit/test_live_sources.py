@@ -155,6 +155,29 @@ def test_tum_association_file(tmp_path):
     assert len(frames) == 1 and frames[0].time == pytest.approx(1.01) and frames[0].rgb[0, 0, 0] == 9
 
 
+def test_tum_images_pillow_cannot_read_are_refused_naming_them_and_the_rest_play(tmp_path):
+    """A depth PNG whose IHDR length is damaged made Pillow raise ValueError ("Truncated IHDR
+    chunk"), which ended the replay (found by a fuzzer); an unreadable colour image was reported
+    as its depth image."""
+    from PIL import Image
+
+    (tmp_path / "depth").mkdir()
+    (tmp_path / "rgb").mkdir()
+    for k in range(3):
+        Image.fromarray(np.full((8, 8), 5000, np.uint16)).save(tmp_path / "depth" / f"{k}.png")
+        Image.fromarray(np.full((8, 8, 3), 9, np.uint8)).save(tmp_path / "rgb" / f"{k}.png")
+    damaged = bytearray((tmp_path / "depth" / "0.png").read_bytes())
+    damaged[8:12] = (5).to_bytes(4, "big")  # the IHDR chunk's length
+    (tmp_path / "depth" / "0.png").write_bytes(bytes(damaged))
+    (tmp_path / "rgb" / "1.png").write_bytes(b"not a png")
+    (tmp_path / "depth.txt").write_text("".join(f"{k}.0 depth/{k}.png\n" for k in range(3)))
+    (tmp_path / "rgb.txt").write_text("".join(f"{k}.0 rgb/{k}.png\n" for k in range(3)))
+    n, errors = _played(TumSequence(tmp_path))
+    assert n == 64  # the third frame
+    assert [e.split(":")[0] for e in errors] == [str(tmp_path / "depth" / "0.png"), str(tmp_path / "rgb" / "1.png")]
+    assert all("unreadable image" in e and "\n" not in e for e in errors)
+
+
 def _tum(tmp_path, depth_txt="1.0 depth/a.png\n", gt="1.0 0 0 0 0 0 0 1\n"):
     from PIL import Image
 

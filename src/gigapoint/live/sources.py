@@ -250,6 +250,20 @@ def quaternion_pose(t, q) -> np.ndarray:
     return pose
 
 
+def _image(path: Path, mode: str | None = None) -> np.ndarray:
+    """An image file's pixels (``mode``: Pillow's conversion first); a file Pillow cannot read is
+    a one-line InputError naming it. Pillow raises OSError, ValueError ("Truncated IHDR chunk"),
+    SyntaxError or DecompressionBombError on bad files (the ValueError stopped a TUM replay; an
+    unreadable colour image was reported as its depth image)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            return np.asarray(im.convert(mode) if mode else im)
+    except Exception as exc:  # noqa: BLE001 - Pillow's errors on a bad file: one line naming it
+        raise InputError(f"{path}: unreadable image ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+
+
 def _nearest(times: np.ndarray, t: float, limit: float) -> int | None:
     if not len(times):
         return None
@@ -308,8 +322,6 @@ class TumSequence(Source):
         return out
 
     def frames(self):
-        from PIL import Image
-
         posed = 0
         for t, depth_file, rgb_file in self.pairs:
             k = _nearest(self.gt_times, t, self.max_dt) if self.posed else None
@@ -317,10 +329,10 @@ class TumSequence(Source):
                 continue
             posed += 1
             try:
-                depth = np.asarray(Image.open(self.path / depth_file))
-                rgb = np.asarray(Image.open(self.path / rgb_file).convert("RGB")) if rgb_file else None
-            except OSError as exc:
-                yield InputError(f"{self.path / depth_file}: unreadable image ({exc})")
+                depth = _image(self.path / depth_file)
+                rgb = _image(self.path / rgb_file, "RGB") if rgb_file else None
+            except InputError as exc:
+                yield exc
                 continue
             if rgb is not None and rgb.shape[:2] != depth.shape[:2]:
                 rgb = None
