@@ -221,6 +221,11 @@ def test_a_tum_sequence_without_poses_plays_in_the_sensors_frame_and_bad_lists_a
         _tum(tmp_path, depth_txt, gt)
         with pytest.raises(InputError, match=f"^{re.escape(str(tmp_path))}.*{re.escape(problem)}$"):
             TumSequence(seq)
+    for name in ("groundtruth.txt", "depth.txt"):  # a byte of binary junk: a UnicodeDecodeError, a traceback (found by a fuzzer)
+        _tum(tmp_path)
+        (seq / name).write_bytes(b"1.0 depth/a.png 0 0 \xd0 0 0 1\n")
+        with pytest.raises(InputError, match=f"^{re.escape(str(seq / name))}: not a readable text file \\('utf-8' codec can't decode"):
+            TumSequence(seq)
 
 
 # ---------------------------------------------------------------------- ROS bags

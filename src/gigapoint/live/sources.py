@@ -215,8 +215,12 @@ class FramesDir(Source):
 
 # ---------------------------------------------------------------------- TUM RGB-D
 def _stamped_lines(path: Path) -> list[list[str]]:
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:  # (a byte of binary junk in groundtruth.txt was a UnicodeDecodeError, a traceback)
+        raise InputError(f"{path}: not a readable text file ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
     out = []
-    for line in path.read_text().splitlines():
+    for line in text.splitlines():
         line = line.strip()
         if line and not line.startswith("#"):
             out.append(line.split())
