@@ -3,6 +3,13 @@
 from __future__ import annotations
 
 
+def first_line(exc: BaseException) -> str:
+    """An exception's message for a one-line error: its first line, or its type's name where it
+    has none (a library's error on a bad file, quoted after the file's name)."""
+    text = str(exc)
+    return text.splitlines()[0] if text.strip() else type(exc).__name__
+
+
 def is_whole_number(value) -> bool:
     """Whether ``value`` is an integer (Python's or numpy's, not a bool): the test behind the
     one-line errors about counts, sizes and indices (3.5 was read as 3, True as 1)."""

@@ -53,15 +53,20 @@ def numba_threads(n_threads: int):
         numba.set_num_threads(previous)
 
 
+def _loaded_layer() -> str | None:
+    """The threading layer numba has loaded, None before its first parallel kernel."""
+    try:
+        return numba.threading_layer()
+    except ValueError:
+        return None
+
+
 def threads_awake() -> bool:
     """Whether numba's idle threads take up new work at once: OpenMP's spin a while (but with
     ``OMP_WAIT_POLICY=passive``), TBB's (the wheel's 2023.2: a 50-point kernel 2.9 us a call)
     are woken cheaply; passive OpenMP's and workqueue's sleep (~0.1 ms a kernel to wake). False
     before numba has loaded a layer."""
-    try:
-        layer = numba.threading_layer()
-    except ValueError:  # no parallel kernel has run yet
-        return False
+    layer = _loaded_layer()
     return layer == "tbb" or (layer == "omp" and os.environ.get("OMP_WAIT_POLICY", "").strip().lower() != "passive")
 
 
@@ -94,11 +99,8 @@ def load_wheel_tbb() -> bool:
     an older system TBB). False where the wheel or its library is missing, or where numba has
     loaded its layer already (a parallel kernel ran before gigapoint was imported: a second TBB
     beside the one numba may hold is not to be had)."""
-    try:
-        numba.threading_layer()
+    if _loaded_layer() is not None:
         return False
-    except ValueError:  # no layer loaded yet: the wheel's TBB can be the one numba finds
-        pass
     path = wheel_tbb_library()
     if path is None:
         return False

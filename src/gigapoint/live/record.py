@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_json, atomic_open
-from ..errors import InputError
+from ..errors import InputError, first_line
 
 FORMAT = "gigapoint-live-recording"
 INDEX = "index.json"
@@ -145,7 +145,7 @@ def read_frame(path: Path) -> RecordedFrame:
             attrs = {k[5:]: z[k] for k in z.files if k.startswith("attr_")}
             return RecordedFrame("points", t, pose, xyz=z["xyz"], rgb=rgb, normals=z.get("normals", None), attributes=attrs)
     except (OSError, ValueError, TypeError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # a truncated or damaged npz (TypeError: a time of several values)
-        raise InputError(f"{path}: not a recorded frame ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+        raise InputError(f"{path}: not a recorded frame ({first_line(exc)})") from None
 
 
 def recording_files(directory) -> list[Path]:

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from ..errors import GigapointError, InputError
+from ..errors import GigapointError, InputError, first_line
 from .record import RecordedFrame, is_recording, read_frame, recording_files
 
 KINECT_V2 = (365.5, 365.5, 256.0, 212.0)  # fx, fy, cx, cy of a Kinect v2's 512x424 depth camera
@@ -188,7 +188,7 @@ def read_points_file(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     except GigapointError:
         raise
     except Exception as exc:  # noqa: BLE001 - a library's error on a bad file: one line naming it
-        raise InputError(f"{path}: unreadable {suffix[1:].upper()} frame ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+        raise InputError(f"{path}: unreadable {suffix[1:].upper()} frame ({first_line(exc)})") from None
     raise InputError(f"{path}: not a frame file ({', '.join(FRAME_SUFFIXES)})")
 
 
@@ -218,7 +218,7 @@ def _stamped_lines(path: Path) -> list[list[str]]:
     try:
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as exc:  # (a byte of binary junk in groundtruth.txt was a UnicodeDecodeError, a traceback)
-        raise InputError(f"{path}: not a readable text file ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+        raise InputError(f"{path}: not a readable text file ({first_line(exc)})") from None
     out = []
     for line in text.splitlines():
         line = line.strip()
@@ -265,7 +265,7 @@ def _image(path: Path, mode: str | None = None) -> np.ndarray:
         with Image.open(path) as im:
             return np.asarray(im.convert(mode) if mode else im)
     except Exception as exc:  # noqa: BLE001 - Pillow's errors on a bad file: one line naming it
-        raise InputError(f"{path}: unreadable image ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+        raise InputError(f"{path}: unreadable image ({first_line(exc)})") from None
 
 
 def _nearest(times: np.ndarray, t: float, limit: float) -> int | None:
@@ -400,7 +400,7 @@ class BagSource(Source):
             reader = AnyReader([self.path])
             reader.open()
         except Exception as exc:  # noqa: BLE001 - rosbags' own errors: one line naming the bag
-            raise InputError(f"{self.path}: not a readable ROS bag ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+            raise InputError(f"{self.path}: not a readable ROS bag ({first_line(exc)})") from None
         try:
             conns = [c for c in reader.connections if self.topic is None or c.topic == self.topic]
             if self.topic is not None and not conns:
@@ -422,7 +422,7 @@ class BagSource(Source):
                     yield InputError(f"{self.path}: message at {stamp}: {exc}")
                     continue
                 except Exception as exc:  # noqa: BLE001
-                    yield InputError(f"{self.path}: message at {stamp} is not a PointCloud2 ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})")
+                    yield InputError(f"{self.path}: message at {stamp} is not a PointCloud2 ({first_line(exc)})")
                     continue
                 yield RecordedFrame("points", t, None, xyz=xyz, rgb=rgb)
         finally:

@@ -16,7 +16,7 @@ import struct
 
 import numpy as np
 
-from ..errors import GigapointError, InputError
+from ..errors import GigapointError, InputError, first_line
 from .record import RecordedFrame
 
 MAGIC = b"GPL1"
@@ -125,7 +125,7 @@ class PushClient:
             self._connection = connect(ws_url, max_size=1 << 20, open_timeout=timeout)
             self.ws = self._connection.__enter__()  # websockets >= 15 wants it entered as a context
         except Exception as exc:  # noqa: BLE001 - refused handshake (wrong token), no server...
-            raise GigapointError(f"push: {base} refused the connection ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+            raise GigapointError(f"push: {base} refused the connection ({first_line(exc)})") from None
         self.timeout = timeout
 
     def send(self, message: bytes) -> dict:
