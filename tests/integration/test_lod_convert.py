@@ -110,6 +110,27 @@ def test_interrupted_conversion_resumes_to_the_same_result(demo_las, reference, 
     _assert_same(_snapshot(out), reference)
 
 
+def test_a_set_written_part_way_into_the_streams_is_written_again_in_its_place(demo_las, reference, tmp_path, monkeypatch):
+    """Node sets append their bit streams to one file each (writer.append_streams). A run killed
+    while a set was writing leaves words past the finished sets' ends: the resumed run writes
+    that set again in their place, and the finished octree holds no stray word."""
+    out = tmp_path / "oct"
+    _interrupt_after(monkeypatch, 2)
+    with pytest.raises(KeyboardInterrupt):
+        convert([demo_las], out, **OPTS)
+    streams = sorted((out / ".partial").glob("*.stream.npy"))
+    assert [p.name for p in streams][:1] == ["ext.stream.npy"] and len(streams) > 2
+    for p in streams:  # a third set's words, written part-way when the process died
+        with open(p, "ab") as f:
+            f.write(np.full(300_000, 0xDEADBEEF, np.uint64).tobytes())  # past where the streams end
+    _interrupt_after(monkeypatch, None)
+    assert convert([demo_las], out, **OPTS).resumed
+    _assert_same(_snapshot(out), reference)
+    ext = np.load(out / "ext.npy")
+    assert ext.dtype == np.uint64 and not np.any(ext == 0xDEADBEEF)
+    assert os.path.getsize(out / "ext.npy") == 128 + 8 * len(ext)
+
+
 def test_a_damaged_work_file_stops_the_resume_in_one_line_and_overwrite_starts_over(demo_las, reference, tmp_path, monkeypatch):
     """A truncated work file (a machine that crashed before the disk had it) was numpy's
     ValueError part-way through the resume, every time it was run again; a missing one said

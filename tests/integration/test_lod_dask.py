@@ -218,6 +218,28 @@ def test_a_killed_run_resumes_its_finished_partitions(inputs, reference, client,
     _assert_identical(reference, out)
 
 
+def test_a_run_interrupted_here_starts_over_on_dask_to_the_same_bytes(inputs, reference, client, tmp_path, monkeypatch):
+    """Sets built here wrote their bit streams in place (writer.append_streams), those the Dask
+    workers build keep their own: a Dask run does not take up a single-process run's state
+    (its layout differs), and nothing of it is left in the octree."""
+    from gigapoint.lod.convert import hooks
+
+    out = tmp_path / "oct"
+
+    def stop(done):
+        if done == 3:
+            raise KeyboardInterrupt("test")
+
+    monkeypatch.setattr(hooks, "after_partition_built", stop)
+    with pytest.raises(KeyboardInterrupt):
+        convert(inputs, out, **OPTS)
+    monkeypatch.setattr(hooks, "after_partition_built", lambda done: None)
+    assert list((out / ".partial").glob("*.stream.npy")), "the sets built here wrote their streams in place"
+    res = convert(inputs, out, client=client, **OPTS)
+    assert not res.resumed
+    _assert_identical(reference, out)
+
+
 def test_cli_dask_option_gives_the_single_process_output(inputs, client, tmp_path, capsys):
     """Defaults (one partition: the build reads the spilled chunks) through `gigapoint convert --dask`."""
     ref, out = tmp_path / "ref", tmp_path / "oct"

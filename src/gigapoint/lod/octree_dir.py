@@ -153,6 +153,11 @@ class OctreeDir:
         """Array ``name`` while a conversion fills it (renamed to ``array(name)`` by the write phase)."""
         return self.path / f"{name}.tmp.npy"
 
+    def stream_in_progress(self, name: str) -> Path:
+        """Version 2's bit stream ``name`` (ext, field.<name>) while the build appends each node
+        set's words to it (lod/writer.py, ``append_streams``); moved to ``array(name)`` once complete."""
+        return self.partial / f"{name}.stream.npy"
+
     @property
     def partial(self) -> Path:
         """An unfinished conversion's working folder (removed once the octree is complete)."""

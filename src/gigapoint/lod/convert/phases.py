@@ -23,7 +23,7 @@ from ..compact_octree import encode_nodes
 from ..copc_write import write_copc_sets
 from ..keys import level_of, point_codes
 from ..potree import write_potree
-from ..writer import point_dtypes, run_serially, write_gigapoint
+from ..writer import append_streams, point_dtypes, run_serially, streams_end, write_gigapoint
 from . import hooks
 from .partition import built_name, group_name, plan_groups, set_name
 from .spill import copy_range, load_raw_chunk, npy_data_offset, raw_chunk_files
@@ -70,6 +70,7 @@ class BuildPhases(Job):
 
     _outs: dict | None = None
     _next: int | None = None  # next free offset in the output arrays (_next_offset)
+    _ends: dict | None = None  # next free word of each stream (_stream_ends)
     local_sets = False  # gigapoint format: node sets keep their points in their own folder until placed (place_set)
 
     def _write_steps(self, fn, calls: list) -> list:
@@ -205,6 +206,14 @@ class BuildPhases(Job):
             self._next = max(ends, default=0)
         return self._next
 
+    def _stream_ends(self) -> dict:
+        """Where the next node set's streams go (writer.append_streams): after every finished set's.
+        Read from the finished sets once per process (as ``_next_offset``), then kept."""
+        if self._ends is None:
+            built = self.dir.built
+            self._ends = streams_end(p.parent for p in built.glob("*/span.npy") if not p.parent.name.endswith(".tmp"))
+        return self._ends
+
     def _save_nodes(self, dest: Path, keys, counts, inner, xyz, data, idx, colors) -> None:
         """One node set: nodes ``keys`` holding ``counts`` points each, in order: the points
         ``xyz[idx]``, ``data[k][idx]``, with colors ``filtered_colors(*colors)``.
@@ -248,8 +257,11 @@ class BuildPhases(Job):
                 attrs, plan["colors"],
             )  # fmt: skip
             outs["low"][sl] = low
-            for k, v in {"ext": ext, "pack": pack, "fields": fields, **{f"field.{f}": v for f, v in streams.items()}}.items():
+            streams = {"ext": ext, **{f"field.{f}": v for f, v in streams.items()}}
+            for k, v in {"pack": pack, "fields": fields, **(streams if self.local_sets else {})}.items():
                 atomic_npy(dest / f"{k}.npy", v)
+            if not self.local_sets:
+                append_streams(self.dir, dest, streams, self._stream_ends())
             del outs, low
             self._finish_set(dest, nodes, first, off, n)
             return
