@@ -121,3 +121,54 @@ def test_atomic_open_keeps_the_old_file_when_the_block_fails(tmp_path):
     with atomic_open(path, durable=True) as f:
         f.write(b"new")
     assert path.read_bytes() == b"new" and sorted(p.name for p in tmp_path.iterdir()) == ["state.json"]
+
+
+@pytest.mark.parametrize(
+    "array",
+    [
+        np.arange(1 << 20, dtype=np.uint64),  # 8 MB: through a memory map
+        np.zeros((1 << 18, 3)),
+        np.zeros(1 << 19, dtype=[("a", "<u4"), ("b", "<f8")]),
+        np.arange(3 << 20).reshape(-1, 3)[:, :2],  # not contiguous: np.save
+        np.asfortranarray(np.ones((1 << 10, 1 << 10))),  # Fortran order: np.save
+        np.arange(10, dtype=np.int16),
+    ],
+)
+def test_atomic_npy_writes_the_bytes_np_save_writes(tmp_path, array):
+    import io
+
+    atomic_npy(tmp_path / "a.npy", array)
+    saved = io.BytesIO()
+    np.save(saved, array)
+    assert (tmp_path / "a.npy").read_bytes() == saved.getvalue()
+    assert [p.name for p in tmp_path.iterdir()] == ["a.npy"]
+
+
+def test_a_full_disk_before_a_mapped_write_is_an_oserror_naming_the_file(tmp_path, monkeypatch):
+    """Files filled through memory maps have their space reserved first (posix_fallocate): a full
+    disk raises here, naming the file, where a store into the map would kill the process (SIGBUS).
+    A large atomic_npy keeps the old file and leaves no temporary."""
+    import errno
+
+    from gigapoint.atomic import mapped_npy
+
+    def full(fd, offset, length):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "posix_fallocate", full)
+    with pytest.raises(OSError) as err:
+        mapped_npy(tmp_path / "m.npy", np.uint64, (1000,))
+    assert err.value.errno == errno.ENOSPC and err.value.filename == str(tmp_path / "m.npy")
+    atomic_bytes(tmp_path / "x.npy", b"old")
+    with pytest.raises(OSError, match="No space left") as err:
+        atomic_npy(tmp_path / "x.npy", np.zeros(1 << 20))
+    assert err.value.filename == str(tmp_path / "x.npy")
+    assert (tmp_path / "x.npy").read_bytes() == b"old" and not list(temp_files(tmp_path))
+
+
+def test_a_short_write_says_how_much_was_written():
+    from gigapoint.atomic import _name_the_file
+
+    exc = OSError("26979 requested and 13296 written")  # numpy's tofile on a full disk: no errno, no file
+    _name_the_file(exc, "/out/carry.xyz.npy")
+    assert str(exc) == "[Errno None] only 13296 of 26979 bytes written (is the disk full?): '/out/carry.xyz.npy'"

@@ -20,10 +20,13 @@ def cloud():
     return gp.demo(30_000, seed=4)
 
 
-def test_turntable_mp4_has_the_rendered_frames(cloud, tmp_path):
+@pytest.mark.parametrize("suffix", [".mp4", ".webm", ".mkv", ".mov", ".avi"])
+def test_turntable_video_has_the_rendered_frames(cloud, tmp_path, suffix):
+    """Every video suffix the CLI offers (.webm failed each time: imageio's default H.264 is not
+    allowed in WebM, which gets VP9 now)."""
     iio = pytest.importorskip("imageio.v2")
     pytest.importorskip("imageio_ffmpeg")
-    out = render_turntable(cloud, 6, tmp_path / "spin.mp4", width=96, height=64, settings=gp.RenderSettings(backend="cpu"))
+    out = render_turntable(cloud, 6, tmp_path / f"spin{suffix}", width=96, height=64, settings=gp.RenderSettings(backend="cpu"))
     frames = [f for f in iio.get_reader(out)]
     assert len(frames) == 6 and frames[0].shape == (64, 96, 3)
     cams = turntable_cameras(cloud, 6, 96, 64)
@@ -36,7 +39,31 @@ def test_turntable_mp4_has_the_rendered_frames(cloud, tmp_path):
         other = blocks(gp.render(cloud, cams[3 - i], backend="cpu")[..., :3])
         assert np.abs(blocks(frames[i]) - other).mean() > 2 * np.abs(blocks(frames[i]) - expected).mean()  # its own frame
     assert np.abs(frames[0].astype(float) - frames[3].astype(float)).mean() > 1.0  # the camera moved
-    assert not list(tmp_path.glob(".spin.mp4.*"))  # no temporary left behind
+    assert not list(tmp_path.glob(f".spin{suffix}.*"))  # no temporary left behind
+
+
+_FULL = """
+import resource, sys
+from gigapoint.cli import main
+resource.setrlimit(resource.RLIMIT_FSIZE, (60_000, 60_000))  # files stop at 60 kB: a full disk for ffmpeg
+sys.exit(main(["render", sys.argv[1], "-o", sys.argv[2], "--turntable", "30", "--width", "320", "--height", "240"]))
+"""
+
+
+@pytest.mark.parametrize("suffix", [".mp4", ".webm"])
+def test_a_video_ffmpeg_could_not_write_whole_is_an_error_and_no_file(tmp_path, suffix):
+    """imageio-ffmpeg does not look at ffmpeg's exit status: an .mp4 cut short by a full disk (no
+    index: unreadable) was reported written, with ffmpeg's errors over many lines."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("imageio_ffmpeg")
+    out = tmp_path / f"spin{suffix}"
+    proc = subprocess.run([sys.executable, "-c", _FULL, str(AUTZEN), str(out)], capture_output=True, text=True, timeout=300)
+    err = proc.stderr.strip()
+    assert proc.returncode == 1 and "\n" not in err, err
+    assert err.startswith(f"error: {out}: ffmpeg could not write the video (") and ("of 30 frames" in err or "no readable video" in err), err
+    assert list(tmp_path.iterdir()) == []  # neither the cut video nor its temporary
 
 
 def test_the_orbits_running_mean_is_the_windows_mean_in_linear_memory():

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_json, atomic_npy, fsync_file
+from ..atomic import atomic_json, atomic_npy, fsync_file, mapped_npy, reserve
 from ..core.compact import ext_bits_per_point
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
@@ -63,7 +63,7 @@ def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sa
         outs = {}
     else:
         total = sum(int(np.load(src / "xyz.npy", mmap_mode="r").shape[0]) for src in sources)
-        outs = {k: np.lib.format.open_memmap(tmp_paths[k], mode="w+", dtype=dtypes[k], shape=(total,)) for k in dtypes}
+        outs = {k: mapped_npy(tmp_paths[k], dtypes[k], (total,)) for k in dtypes}
     all_nodes, all_keys = [], []
     offset = 0
     for src in sources:
@@ -183,8 +183,14 @@ def append_streams(out: OctreeDir, dest: Path, streams: dict, next_words: dict) 
         with open(path, "r+b" if path.exists() else "w+b") as f:
             if first == 0:
                 f.write(_npy_header(0))  # the real length is written by finish_stream
-            f.seek(STREAM_HEADER + 8 * first)
-            np.ascontiguousarray(words, np.uint64).tofile(f)
+            # through a memory map of the file made long enough, not write(): 4x faster here
+            # (160 MB in 17 sets: 0.14 against 0.57-0.68 s); a killed run's words past the end go
+            f.truncate(STREAM_HEADER + 8 * (first + len(words)))
+            if len(words):
+                reserve(path, STREAM_HEADER + 8 * first, 8 * len(words))
+                mapped = np.memmap(f, dtype=np.uint64, mode="r+", offset=STREAM_HEADER + 8 * first, shape=(len(words),))
+                mapped[:] = words
+                del mapped
         places[k] = [first, first + len(words)]
         next_words[k] = first + len(words)
     atomic_json(dest / WORDS, places)
@@ -215,7 +221,7 @@ def join_stream(out_path: str, k: str, by_points: list[str]) -> None:
     out, sets = OctreeDir(out_path), [Path(p) for p in by_points]
     bases, total = _stream_bases(sets, k)
     dest = out.array_in_progress(k)
-    joined = np.lib.format.open_memmap(dest, mode="w+", dtype=np.uint64, shape=(total,))
+    joined = mapped_npy(dest, np.uint64, (total,))
     for src, b in zip(sets, bases):
         part = np.load(src / f"{k}.npy", mmap_mode="r")
         joined[b : b + len(part)] = part

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_npy, fsync_file
+from ...atomic import atomic_npy, fsync_file, mapped_npy
 from ...core.layout import BATCH_DTYPE
 from ...core.quantize import _quantize_batches
 from ..build import color_sums, filtered_colors, init_ownlevel, owned_order, sample_tree, sort_codes, split_tree, take, upper_tree
@@ -171,7 +171,7 @@ class BuildPhases(Job):
                 path = self.dir.array_in_progress(k)
                 arr = np.load(path, mmap_mode="r") if path.exists() else None
                 if arr is None or arr.shape != (total,) or arr.dtype != dt:
-                    arr = np.lib.format.open_memmap(path, mode="w+", dtype=dt, shape=(total,))
+                    arr = mapped_npy(path, dt, (total,))
                 self._outs[k] = (path, dt, arr.offset)
                 del arr
         return self._outs
@@ -237,7 +237,7 @@ class BuildPhases(Job):
             off = 0
             dts = self._output_dtypes()
             if n:
-                outs = {k: np.lib.format.open_memmap(dest / f"{LOCAL}{k}.npy", mode="w+", dtype=dt, shape=(n,)) for k, dt in dts.items()}
+                outs = {k: mapped_npy(dest / f"{LOCAL}{k}.npy", dt, (n,)) for k, dt in dts.items()}
             else:
                 outs = {k: np.empty(0, dt) for k, dt in dts.items()}
         else:
@@ -283,7 +283,7 @@ class BuildPhases(Job):
             atomic_npy(dest / f"{LOCAL}nodes.npy", nodes)
             return
         atomic_npy(dest / "nodes.npy", nodes)
-        np.save(dest / "span.npy", np.array([off, off + n], np.int64))
+        atomic_npy(dest / "span.npy", np.array([off, off + n], np.int64))  # (a full disk's error names it)
         self._next = off + n
 
     # -- phase 5
