@@ -124,7 +124,10 @@ def append_file(path: Path, arrays: list) -> None:
     try:
         while views:
             batch = views[:_IOV_MAX]
-            written = os.writev(fd, batch)
+            try:
+                written = os.writev(fd, batch)
+            except OSError as exc:  # (a full disk named only the output folder)
+                raise OSError(exc.errno, exc.strerror, str(path)) from None
             for v in batch:  # a short write (a signal, a nearly full disk) resumes where it stopped
                 if written >= len(v):
                     written -= len(v)
