@@ -428,6 +428,46 @@ def test_recording_into_an_odd_folder(tmp_path, monkeypatch):
     assert (tmp_path / "empty" / "index.json").exists()
 
 
+def test_a_full_disk_stops_the_recording_once_and_the_stream_goes_on(tmp_path, monkeypatch):
+    """Frame 5 cannot be written (a full disk): every push after raised OSError although its
+    frame was in, and index.json listed 40 frames of which 5 existed. Now the recording stops
+    with one warning, the pushes go on, and the recording replays the 5 frames written."""
+    import errno
+    import warnings
+
+    from gigapoint.errors import GigapointWarning
+    from gigapoint.live import record as rec_module
+    from gigapoint.live.record import read_frame
+
+    live = LiveCloud()
+    rec = live.record(tmp_path / "rec")
+    savez, calls = np.savez, []
+
+    def filling(f, **arrays):
+        calls.append(1)
+        if len(calls) > 5:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        savez(f, **arrays)
+
+    monkeypatch.setattr(rec_module.np, "savez", filling)
+    frames = [patch(k, 50)[0] for k in range(40)]
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        for xyz in frames:
+            live.push(xyz)
+    said = [str(w.message) for w in seen if issubclass(w.category, GigapointWarning)]
+    assert said == [f"{tmp_path / 'rec'}: recording stopped after 5 frames: [Errno 28] No space left on device: '{tmp_path / 'rec' / 'frames' / '000005.npz'}'"]
+    assert live.n_points == 40 * 50 and len(calls) == 6  # every frame drawn; no write tried after the failure
+    live.stop_recording()
+    monkeypatch.setattr(rec_module.np, "savez", savez)
+    files = recording_files(tmp_path / "rec")
+    assert [f.name for f in files] == [f"{k:06d}.npz" for k in range(5)] and rec.n_frames == 5
+    assert len(json.loads((tmp_path / "rec" / "index.json").read_text())["frames"]) == 5
+    for k, f in enumerate(files):
+        np.testing.assert_array_equal(read_frame(f).xyz, frames[k])
+    assert not [p for p in (tmp_path / "rec" / "frames").iterdir() if p.name.startswith(".")]  # no temporary left
+
+
 def test_not_a_recording(tmp_path):
     with pytest.raises(InputError, match="not a live recording"):
         ReplaySource(tmp_path)

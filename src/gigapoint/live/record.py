@@ -13,6 +13,7 @@ import json
 import os
 import threading
 import time
+import warnings
 import zipfile
 import zlib
 from dataclasses import dataclass, field
@@ -21,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_json, atomic_open
-from ..errors import InputError, first_line
+from ..errors import GigapointWarning, InputError, first_line
 
 FORMAT = "gigapoint-live-recording"
 INDEX = "index.json"
@@ -70,21 +71,45 @@ class Recorder:
             for old in (self.directory / FRAMES).glob("*.npz"):
                 old.unlink()
         self.index_every_s = index_every_s
-        self.entries: list[dict] = []
+        self.entries: list[dict] = []  # the frames written, in the order they were numbered
+        self.error: InputError | None = None  # why the recording stopped early (a full disk), else None
+        self._numbered = 0
         self._lock = threading.Lock()
         self._written_at = 0.0
         self.started = time.time()
         self._write_index()
+        if self.error is not None:  # not even its index could be written
+            raise self.error
 
     def _write(self, arrays: dict, kind: str, t: float) -> None:
+        """Frame ``arrays`` written as the next file. A frame that cannot be written (a full disk)
+        stops the recording, said once (a GigapointWarning; ``error``): the stream goes on, and
+        the recording keeps the frames before it (a push raised OSError for every frame after,
+        though its frame was in, and index.json listed frames never written)."""
         with self._lock:
-            k = len(self.entries)
-            name = f"{FRAMES}/{k:06d}.npz"
+            if self.error is not None:
+                return
+            k = self._numbered
+            self._numbered += 1
+        name = f"{FRAMES}/{k:06d}.npz"
+        try:
+            with atomic_open(self.directory / name) as f:
+                np.savez(f, kind=np.array(kind), time=np.array(t, np.float64), **arrays)
+        except OSError as exc:
+            self._stop_for(exc)
+            return
+        with self._lock:
             self.entries.append({"file": name, "time": t, "kind": kind})
-        with atomic_open(self.directory / name) as f:
-            np.savez(f, kind=np.array(kind), time=np.array(t, np.float64), **arrays)
         if time.monotonic() - self._written_at > self.index_every_s:
             self._write_index()
+
+    def _stop_for(self, exc: OSError) -> None:
+        with self._lock:
+            if self.error is not None:
+                return
+            self.error = InputError(f"{self.directory}: recording stopped after {len(self.entries)} frames: {first_line(exc)}")
+        warnings.warn(str(self.error), GigapointWarning, stacklevel=2)
+        self._write_index()  # the frames written so far, if there is room for that
 
     def write_points(self, seq, xyz, rgb, pose, t, normals, attributes) -> None:
         arrays = {"xyz": np.asarray(xyz)}
@@ -110,8 +135,13 @@ class Recorder:
 
     def _write_index(self) -> None:
         with self._lock:
-            entries = list(self.entries)
-        atomic_json(self.directory / INDEX, {"format": FORMAT, "version": 1, "frames": entries})
+            entries = sorted(self.entries, key=lambda e: e["file"])  # (producers on several threads finish out of order)
+        try:
+            atomic_json(self.directory / INDEX, {"format": FORMAT, "version": 1, "frames": entries})
+        except OSError as exc:  # the last index written stays; a replay also finds the frames written after it
+            if self.error is None:
+                self._stop_for(exc)
+            return
         self._written_at = time.monotonic()
 
     def stop(self) -> None:
