@@ -643,6 +643,33 @@ def test_partition_appends_survive_short_writes(tmp_path, monkeypatch):
     assert path.read_bytes() == b"head" + b"".join(a.tobytes() for a in arrays)
 
 
+def test_large_partition_appends_go_through_a_map_and_a_full_disk_leaves_the_file_as_it_was(tmp_path, monkeypatch):
+    """1 MB or more is appended through a memory map of the file's new part, its space reserved
+    first: a full disk is an OSError naming the file (a store into the map would be a SIGBUS),
+    and the file keeps its length."""
+    import errno
+    import importlib
+
+    conv = importlib.import_module("gigapoint.lod.convert")
+    rng = np.random.default_rng(3)
+    arrays = [rng.random((40_000, 3)), np.zeros(0, np.uint32), rng.integers(0, 2**31, 300_001).astype(np.uint32)]  # 2.2 MB
+    path = tmp_path / "part.bin"
+    path.write_bytes(b"odd head")  # the map starts inside a page
+    conv._append_file(path, arrays)
+    conv._append_file(path, arrays[::-1])
+    whole = b"".join(a.tobytes() for a in arrays)
+    assert path.read_bytes() == b"odd head" + whole + b"".join(a.tobytes() for a in arrays[::-1])
+
+    def full(fd, offset, length):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "posix_fallocate", full)
+    size = path.stat().st_size
+    with pytest.raises(OSError, match="No space left on device") as err:
+        conv._append_file(path, arrays)
+    assert err.value.filename == str(path) and path.stat().st_size == size
+
+
 def test_a_second_conversion_into_the_same_directory_stops_at_once(demo_las, reference, tmp_path, capsys):
     """Two conversions into one OUT would clear or interleave each other's files: the second one
     is refused while the first holds OUT (here: this process holding its lock), and once the
