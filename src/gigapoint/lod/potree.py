@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_bytes, atomic_json, atomic_open
+from ..atomic import atomic_bytes, atomic_json, atomic_open, atomic_write, reserve
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
 from ..errors import InputError
@@ -119,9 +119,15 @@ def write_layout(attributes: dict) -> list[tuple[str, str, int]]:
     return first + [(a, _potree_type(dt), 1) for a, dt in attributes.items() if a not in taken] + [rgb]
 
 
-def encode_node(xyz: np.ndarray, rgb16: np.ndarray, attributes: dict, layout, scale, offset, encoding: str) -> bytes:
+def record_dtype(layout) -> np.dtype:
+    """A point's record in a DEFAULT-encoded octree.bin: the fields of ``layout``, packed."""
+    return np.dtype([(a, _TYPES[t], (k,)) if k > 1 else (a, _TYPES[t]) for a, t, k in layout])
+
+
+def encode_node(xyz: np.ndarray, rgb16: np.ndarray, attributes: dict, layout, scale, offset, encoding: str, out=None) -> bytes | None:
     """One node's octree.bin blob: its fields in ``layout`` order (``write_layout``; an attribute
-    the points lack is zeros)."""
+    the points lack is zeros). DEFAULT with ``out`` (the node's records, ``record_dtype``): filled
+    in place, None returned."""
     n = len(xyz)
     ixyz = np.floor((xyz - np.asarray(offset)) / np.asarray(scale) + 0.5).astype(np.int64)
     ixyz = np.clip(ixyz, 0, 2**31 - 1).astype(np.int32)
@@ -131,10 +137,10 @@ def encode_node(xyz: np.ndarray, rgb16: np.ndarray, attributes: dict, layout, sc
         return np.zeros(n, _TYPES[typ]) if v is None else np.asarray(v).astype(_TYPES[typ])
 
     if encoding == "DEFAULT":
-        rec = np.empty(n, np.dtype([(a, _TYPES[t], (k,)) if k > 1 else (a, _TYPES[t]) for a, t, k in layout]))
+        rec = np.empty(n, record_dtype(layout)) if out is None else out
         for a, t, _ in layout:
             rec[a] = ixyz if a == "position" else rgb16 if a == "rgb" else values(a, t)
-        return rec.tobytes()
+        return None if out is not None else rec.tobytes()
     # BROTLI: attribute by attribute, points in Morton order, position and rgb as Morton codes
     u = ixyz.astype(np.uint64)
     lower = _spread16(u[:, 0]) | _spread16(u[:, 1]) << np.uint64(1) | _spread16(u[:, 2]) << np.uint64(2)
@@ -161,6 +167,27 @@ def encode_node(xyz: np.ndarray, rgb16: np.ndarray, attributes: dict, layout, sc
     return _brotli().compress(b"".join(parts), quality=BROTLI_QUALITY)
 
 
+def _add_stats(stats: dict, layout, xyz, rgb16, attrs: dict, scale, offset) -> None:
+    """A node set's minimum and maximum of each field as written, into ``stats``: positions from
+    the set's extremes (rounding to the grid keeps their order), not from every point's integers
+    (1.5 of a 20 M-point write's 5 s)."""
+    def columns(v):  # column by column: numpy's min(axis=0) of (n, 3) runs an inner loop of 3 (10x slower)
+        return np.array([v[:, j].min() for j in range(3)]), np.array([v[:, j].max() for j in range(3)])
+
+    for a, t, _ in layout:
+        if a == "position":
+            lo, hi = (np.floor((v - offset) / scale + 0.5) for v in columns(xyz))
+        elif a == "rgb":
+            lo, hi = columns(rgb16)
+        elif a in attrs:
+            v = attrs[a] if attrs[a].dtype == np.dtype(_TYPES[t]) else attrs[a].astype(_TYPES[t])
+            lo, hi = np.array([v.min()]), np.array([v.max()])
+        else:
+            lo = hi = np.zeros(1)
+        stats[a][0] = np.minimum(stats[a][0], lo).tolist()
+        stats[a][1] = np.maximum(stats[a][1], hi).tolist()
+
+
 def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progress, encoding: str = "DEFAULT") -> int:
     """Assemble built node sets into the Potree 2.0 folder ``out``, its metadata last; returns
     the number of nodes."""
@@ -180,36 +207,61 @@ def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progr
     layout = write_layout({a: dtypes[a] for a in names if a in dtypes})
     stats = {a: [[np.inf] * k, [-np.inf] * k] for a, _, k in layout}
 
-    pos = 0
-    with atomic_open(out.potree_octree, durable=True) as f:  # node by node: never more than one node set in memory
+    def node_sets():
+        """Each node set's arrays, one set in memory at a time; its statistics into ``stats``."""
         for src in sources:
             keys = np.load(src / "keys.npy")
             counts = np.load(src / "counts.npy")
             xyz = np.load(src / "xyz.npy")
             rgba = np.load(src / "rgba.npy").view(np.uint8).reshape(-1, 4)
-            n = len(xyz)
             attrs = {a: np.load(src / f"attr.{a}.npy") for a, _, _ in layout if (src / f"attr.{a}.npy").exists()}
             rgb16 = rgba[:, :3].astype(np.uint16) * np.uint16(257)
-            starts = np.concatenate([[0], np.cumsum(counts)])
-            for k, key in enumerate(keys.tolist()):
-                s, e = int(starts[k]), int(starts[k + 1])
-                part = {a: v[s:e] for a, v in attrs.items()}
-                blob = encode_node(xyz[s:e], rgb16[s:e], part, layout, scale, offset, encoding) if e > s else b""
-                f.write(blob)
-                records[key] = (e - s, pos, len(blob))
-                pos += len(blob)
-            if n:
-                for a, t, _ in layout:
-                    if a == "position":
-                        arr = np.floor((xyz - offset) / scale + 0.5)
-                    elif a == "rgb":
-                        arr = rgb16
-                    else:
-                        arr = attrs[a].astype(_TYPES[t])[:, None] if a in attrs else np.zeros((1, 1))
-                    stats[a][0] = np.minimum(stats[a][0], arr.min(axis=0)).tolist()
-                    stats[a][1] = np.maximum(stats[a][1], arr.max(axis=0)).tolist()
-            n_total += n
-            progress.advance(n)
+            if len(xyz):
+                _add_stats(stats, layout, xyz, rgb16, attrs, scale, offset)
+            yield keys, counts, xyz, rgb16, attrs
+
+    def nodes(keys, counts, xyz, rgb16, attrs):
+        starts = np.concatenate([[0], np.cumsum(counts)])
+        for k, key in enumerate(keys.tolist()):
+            s, e = int(starts[k]), int(starts[k + 1])
+            yield key, xyz[s:e], rgb16[s:e], {a: v[s:e] for a, v in attrs.items()}
+
+    if encoding == "DEFAULT":  # records of known size: copied into a memory map of the file (4x faster than write() here)
+        rec_dt = record_dtype(layout)
+        total = sum(int(np.load(src / "counts.npy").sum()) for src in sources)
+
+        def fill(tmp: Path) -> None:
+            nonlocal n_total
+            with open(tmp, "r+b") as f:
+                f.truncate(total * rec_dt.itemsize)
+            reserve(tmp, 0, total * rec_dt.itemsize)  # a full disk: an OSError here, not a SIGBUS later
+            mapped = np.memmap(tmp, np.uint8, mode="r+", shape=(total * rec_dt.itemsize,)) if total else np.empty(0, np.uint8)
+            scratch = np.empty(0, rec_dt)  # a node's records are made here, field by field, then copied at once:
+            for node_set in node_sets():  # made in the map, each field's pass faulted its pages (slower than write())
+                for key, xyz, rgb16, part in nodes(*node_set):
+                    n = len(xyz)
+                    if n > len(scratch):
+                        scratch = np.empty(max(n, 2 * len(scratch)), rec_dt)
+                    encode_node(xyz, rgb16, part, layout, scale, offset, encoding, out=scratch[:n])
+                    # as bytes: a copy of records (a structured dtype) went field by field, 2.9 s for 20 M points
+                    mapped[n_total * rec_dt.itemsize : (n_total + n) * rec_dt.itemsize] = scratch[:n].view(np.uint8)
+                    records[key] = (n, n_total * rec_dt.itemsize, n * rec_dt.itemsize)
+                    n_total += n
+                progress.advance(len(node_set[2]))
+            del mapped
+
+        atomic_write(out.potree_octree, fill, durable=True)
+    else:
+        pos = 0
+        with atomic_open(out.potree_octree, durable=True) as f:  # node by node: never more than one node set in memory
+            for node_set in node_sets():
+                for key, xyz, rgb16, part in nodes(*node_set):
+                    blob = encode_node(xyz, rgb16, part, layout, scale, offset, encoding) if len(xyz) else b""
+                    f.write(blob)
+                    records[key] = (len(xyz), pos, len(blob))
+                    pos += len(blob)
+                n_total += len(node_set[2])
+                progress.advance(len(node_set[2]))
     keys = np.array(sorted(records), np.uint64)
     key_set = set(records)
     hier = np.zeros(len(keys), HIERARCHY_DTYPE)
