@@ -33,6 +33,22 @@ def rng():
     return np.random.default_rng(12345)
 
 
+@pytest.fixture
+def stop_conversion_after(monkeypatch):
+    """``stop_conversion_after(n)``: conversions in this process raise KeyboardInterrupt once they
+    have built ``n`` partitions in a run (lod/convert/hooks.py); ``None``: they run through."""
+    from gigapoint.lod.convert import hooks
+
+    def arm(n: int | None) -> None:
+        def hook(done: int) -> None:
+            if done == n:
+                raise KeyboardInterrupt(f"test interrupt after {done} partitions")
+
+        monkeypatch.setattr(hooks, "after_partition_built", hook)
+
+    return arm
+
+
 def write_demo_las(path: Path, n: int, seed: int = 0) -> Path:
     """The demo scene's first n points as a LAS 1.2 file (point format 3, millimetre scale)."""
     import laspy

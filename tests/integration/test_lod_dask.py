@@ -218,22 +218,15 @@ def test_a_killed_run_resumes_its_finished_partitions(inputs, reference, client,
     _assert_identical(reference, out)
 
 
-def test_a_run_interrupted_here_starts_over_on_dask_to_the_same_bytes(inputs, reference, client, tmp_path, monkeypatch):
+def test_a_run_interrupted_here_starts_over_on_dask_to_the_same_bytes(inputs, reference, client, tmp_path, stop_conversion_after):
     """Sets built here wrote their bit streams in place (writer.append_streams), those the Dask
     workers build keep their own: a Dask run does not take up a single-process run's state
     (its layout differs), and nothing of it is left in the octree."""
-    from gigapoint.lod.convert import hooks
-
     out = tmp_path / "oct"
-
-    def stop(done):
-        if done == 3:
-            raise KeyboardInterrupt("test")
-
-    monkeypatch.setattr(hooks, "after_partition_built", stop)
+    stop_conversion_after(3)
     with pytest.raises(KeyboardInterrupt):
         convert(inputs, out, **OPTS)
-    monkeypatch.setattr(hooks, "after_partition_built", lambda done: None)
+    stop_conversion_after(None)
     assert list((out / ".partial").glob("*.stream.npy")), "the sets built here wrote their streams in place"
     res = convert(inputs, out, client=client, **OPTS)
     assert not res.resumed

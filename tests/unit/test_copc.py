@@ -396,22 +396,15 @@ def test_cli_convert_copc_info_and_render(tmp_path):
     assert (tmp_path / "x.png").stat().st_size > 500
 
 
-def test_interrupted_copc_conversion_leaves_no_file_and_resumes(tmp_path, monkeypatch):
+def test_interrupted_copc_conversion_leaves_no_file_and_resumes(tmp_path, stop_conversion_after):
     if not AUTZEN.exists():
         pytest.skip("shared sample not present")
-    from gigapoint.lod.convert import hooks
-
     out = tmp_path / "r.copc.laz"
-
-    def stop(done):
-        if done == 1:
-            raise KeyboardInterrupt("test")
-
-    monkeypatch.setattr(hooks, "after_partition_built", stop)
+    stop_conversion_after(1)
     with pytest.raises(KeyboardInterrupt):
         convert([AUTZEN], out, format="copc", max_leaf=3_000, partition_points=20_000)
     assert not out.exists() and (tmp_path / "r.copc.laz.work").is_dir()
-    monkeypatch.setattr(hooks, "after_partition_built", lambda done: None)
+    stop_conversion_after(None)
     res = convert([AUTZEN], out, format="copc", max_leaf=3_000, partition_points=20_000)
     assert res.resumed and out.is_file() and not (tmp_path / "r.copc.laz.work").exists()
     assert [p.name for p in tmp_path.iterdir()] == ["r.copc.laz"]
