@@ -132,6 +132,27 @@ def test_a_set_written_part_way_into_the_streams_is_written_again_in_its_place(d
     assert os.path.getsize(out / "ext.npy") == 128 + 8 * len(ext)
 
 
+@pytest.mark.parametrize("encoding", ["DEFAULT", "BROTLI"])
+def test_a_potree_conversion_resumes_to_the_same_files_with_its_nodes_placed_by_the_build(demo_las, tmp_path, stop_conversion_after, encoding):
+    """The build encodes each node set into the octree.bin being built (potree.place_node_set),
+    at the next free byte after the finished sets'; a set written part-way by a killed run is
+    written again in its place, the bytes past the end cut off."""
+    opts = dict(OPTS, format="potree", encoding=encoding)
+    whole = tmp_path / "whole"
+    convert([demo_las], whole, **opts)
+    out = tmp_path / "oct"
+    stop_conversion_after(2)
+    with pytest.raises(KeyboardInterrupt):
+        convert([demo_las], out, **opts)
+    with open(out / ".partial" / "octree.bin", "ab") as f:  # a third set's bytes, half written when the process died
+        f.write(b"\xab" * 3_000_000)  # past where the whole octree.bin ends
+    stop_conversion_after(None)
+    assert convert([demo_las], out, **opts).resumed
+    assert sorted(p.name for p in out.iterdir()) == ["hierarchy.bin", "metadata.json", "octree.bin"]
+    for name in ("hierarchy.bin", "metadata.json", "octree.bin"):
+        assert (out / name).read_bytes() == (whole / name).read_bytes(), name
+
+
 def test_a_damaged_work_file_stops_the_resume_in_one_line_and_overwrite_starts_over(demo_las, reference, tmp_path, monkeypatch):
     """A truncated work file (a machine that crashed before the disk had it) was numpy's
     ValueError part-way through the resume, every time it was run again; a missing one said
@@ -247,7 +268,8 @@ def small_disk(tmp_path):
         subprocess.run(["umount", str(where)], capture_output=True)
 
 
-def test_a_full_disk_at_any_point_of_a_conversion_is_one_line_and_it_resumes(small_disk, tmp_path):
+@pytest.mark.parametrize("fmt, sizes_kb", [("gigapoint", (4800, 5000, 5600, 6200, 7000, 7200)), ("potree", (5000, 6000, 8000))])
+def test_a_full_disk_at_any_point_of_a_conversion_is_one_line_and_it_resumes(small_disk, tmp_path, fmt, sizes_kb):
     """A real full disk (a small tmpfs), at sizes that run out in each phase: the build's files
     filled through memory maps (the output's low words, the bit streams) killed the process
     with SIGBUS before their space was reserved (atomic.reserve), with no word said, and
@@ -258,10 +280,10 @@ def test_a_full_disk_at_any_point_of_a_conversion_is_one_line_and_it_resumes(sma
     if not autzen.exists():
         pytest.skip("../shared/data/autzen_trim.laz is not here")
     ref = tmp_path / "ref"
-    convert([autzen], ref, max_leaf=2000)
-    cmd = [sys.executable, "-m", "gigapoint.cli", "convert", str(autzen), "--max-leaf", "2000", "-o"]
+    convert([autzen], ref, max_leaf=2000, format=fmt)
+    cmd = [sys.executable, "-m", "gigapoint.cli", "convert", str(autzen), "--max-leaf", "2000", "--format", fmt, "-o"]
     failed_in = []
-    for size_kb in (4800, 5000, 5600, 6200, 7000, 7200):  # autzen_trim's octree needs ~7.5 MB at its peak
+    for size_kb in sizes_kb:  # autzen_trim's octree needs ~7.5 MB at its peak (Potree's ~8.5)
         disk = small_disk(size_kb)
         out = disk / f"oct{size_kb}"
         proc = subprocess.run([*cmd, str(out)], capture_output=True, text=True, timeout=300)
@@ -277,7 +299,7 @@ def test_a_full_disk_at_any_point_of_a_conversion_is_one_line_and_it_resumes(sma
             assert (out / f.name).read_bytes() == f.read_bytes(), f"{size_kb} kB: {f.name} differs"
         assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in ref.iterdir())
         sh.rmtree(out)
-    assert any(".stream.npy" in f or "low.tmp.npy" in f for f in failed_in), failed_in  # the mapped files' sizes were among them
+    assert any(".stream.npy" in f or "low.tmp.npy" in f or ".partial/octree.bin" in f for f in failed_in), failed_in  # the mapped files' sizes were among them
 
 
 def test_conversion_killed_while_distributing_resumes_to_the_same_result(demo_las, reference, tmp_path, monkeypatch):

@@ -153,6 +153,12 @@ class OctreeDir:
         """Array ``name`` while a conversion fills it (renamed to ``array(name)`` by the write phase)."""
         return self.path / f"{name}.tmp.npy"
 
+    @property
+    def potree_octree_in_progress(self) -> Path:
+        """Potree's octree.bin while the build places each node set's nodes in it (lod/potree.py,
+        ``place_node_set``); moved to ``potree_octree`` by the write phase."""
+        return self.partial / "octree.bin"
+
     def stream_in_progress(self, name: str) -> Path:
         """Version 2's bit stream ``name`` (ext, field.<name>) while the build appends each node
         set's words to it (lod/writer.py, ``append_streams``); moved to ``array(name)`` once complete."""

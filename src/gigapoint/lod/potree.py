@@ -11,11 +11,12 @@ in bounded memory.
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_bytes, atomic_json, atomic_open, atomic_write, reserve
+from ..atomic import atomic_bytes, atomic_json, atomic_npy, atomic_open, atomic_write, fsync_file, reserve, write_at
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
 from ..errors import InputError
@@ -167,6 +168,53 @@ def encode_node(xyz: np.ndarray, rgb16: np.ndarray, attributes: dict, layout, sc
     return _brotli().compress(b"".join(parts), quality=BROTLI_QUALITY)
 
 
+PLACED = "potree.npy"  # a node set whose nodes the build placed in octree.bin: (byte offset, size) a node
+PLACED_STATS = "potree_stats.json"  # ... and its fields' minimum and maximum, as written
+
+
+def potree_plan(st: dict) -> tuple[list, np.ndarray, np.ndarray]:
+    """(write_layout, scale, offset) of the Potree octree a conversion's state makes."""
+    scale, offset = output_grid(st, unsigned=True)
+    return write_layout({a: np.dtype(d) for a, d in (st.get("attributes") or {}).items()}), scale, offset
+
+
+def place_node_set(out: OctreeDir, at: int, dest: Path, xyz, rgba, attributes: dict, counts, plan, encoding: str) -> int:
+    """A node set's nodes (``counts`` points each, in order: ``xyz``, u32 ``rgba``, ``attributes``)
+    encoded straight into the octree.bin being built (``out.potree_octree_in_progress``) from
+    byte ``at`` on, instead of kept in float64 for the write phase to encode and write again
+    (a 20 M-point Potree conversion wrote 44 bytes a point twice); their places and statistics
+    into ``dest`` (PLACED, PLACED_STATS). Returns where the next set goes."""
+    layout, scale, offset = plan
+    rgb16 = np.asarray(rgba).view(np.uint8).reshape(-1, 4)[:, :3].astype(np.uint16) * np.uint16(257)
+    stats = {a: [[np.inf] * k, [-np.inf] * k] for a, _, k in layout}
+    if len(xyz):
+        _add_stats(stats, layout, xyz, rgb16, attributes, scale, offset)
+    counts = np.asarray(counts, np.int64)
+    if encoding == "DEFAULT":  # a point's record is all there is: the set's records at once, nodes one after another
+        rec = np.empty(len(xyz), record_dtype(layout))
+        encode_node(xyz, rgb16, attributes, layout, scale, offset, encoding, out=rec)
+        payload, sizes = [rec.view(np.uint8)], counts * rec.dtype.itemsize
+    else:
+        ends = np.cumsum(counts)
+        payload = [encode_node(xyz[e - c : e], rgb16[e - c : e], {a: v[e - c : e] for a, v in attributes.items()}, layout, scale, offset, encoding)
+                   if c else b"" for c, e in zip(counts.tolist(), ends.tolist())]  # fmt: skip
+        sizes = np.array([len(b) for b in payload], np.int64)
+    end = write_at(out.potree_octree_in_progress, at, payload)
+    atomic_json(dest / PLACED_STATS, stats)
+    atomic_npy(dest / PLACED, np.stack([at + np.cumsum(sizes) - sizes, sizes], axis=1).astype(np.int64).reshape(-1, 2))
+    return end
+
+
+def placed_end(sets) -> int:
+    """Where the next node set's nodes go in the octree.bin being built: after the finished ``sets``'."""
+    end = 0
+    for src in sets:
+        if (src / PLACED).exists():
+            placed = np.load(src / PLACED)
+            end = max(end, int((placed[:, 0] + placed[:, 1]).max(initial=0)))
+    return end
+
+
 def _add_stats(stats: dict, layout, xyz, rgb16, attrs: dict, scale, offset) -> None:
     """A node set's minimum and maximum of each field as written, into ``stats``: positions from
     the set's extremes (rounding to the grid keeps their order), not from every point's integers
@@ -191,21 +239,40 @@ def _add_stats(stats: dict, layout, xyz, rgb16, attrs: dict, scale, offset) -> N
 def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progress, encoding: str = "DEFAULT") -> int:
     """Assemble built node sets into the Potree 2.0 folder ``out``, its metadata last; returns
     the number of nodes."""
-    origin, edge = np.array(st["origin"]), float(st["edge"])
     # the inputs' grid (a LAS file's 0.1 mm was cut to 1 mm), else a fine enough one (grid.py)
-    scale, offset = output_grid(st, unsigned=True)
-    scale3 = scale.tolist()
+    layout, scale, offset = potree_plan(st)
     n_total = 0
     records: dict[int, tuple[int, int, int]] = {}
-    names = list(st.get("attributes") or [])
-    dtypes = {}  # the attributes' dtypes, from the first node set that holds each
-    for src in sources:
-        for a in names:
-            f = src / f"attr.{a}.npy"
-            if a not in dtypes and f.exists():
-                dtypes[a] = np.load(f, mmap_mode="r").dtype
-    layout = write_layout({a: dtypes[a] for a in names if a in dtypes})
+    placed = [(src / PLACED).exists() for src in sources]
+    if not any(placed):  # the attributes the node sets' files hold, in the dtypes of the first set that holds each
+        names = list(st.get("attributes") or [])
+        dtypes = {}
+        for src in sources:
+            for a in names:
+                f = src / f"attr.{a}.npy"
+                if a not in dtypes and f.exists():
+                    dtypes[a] = np.load(f, mmap_mode="r").dtype
+        layout = write_layout({a: dtypes[a] for a in names if a in dtypes})
     stats = {a: [[np.inf] * k, [-np.inf] * k] for a, _, k in layout}
+
+    if any(placed):  # the build placed every node in octree.bin (place_node_set): their places and statistics
+        if not all(placed):
+            raise RuntimeError("internal error: Potree node sets placed by the build and kept in files")
+        for src in sources:
+            at, counts = np.load(src / PLACED), np.load(src / "counts.npy")
+            for key, n, (off, size) in zip(np.load(src / "keys.npy").tolist(), counts.tolist(), at.tolist()):
+                records[key] = (n, off, size)
+            for a, (lo, hi) in json.loads((src / PLACED_STATS).read_text()).items():
+                stats[a] = [np.minimum(stats[a][0], lo).tolist(), np.maximum(stats[a][1], hi).tolist()]
+            n_total += int(counts.sum())
+            progress.advance(int(counts.sum()))
+        part = out.potree_octree_in_progress
+        if part.exists() or not out.potree_octree.exists():  # (not: a write phase resumed after the move)
+            with open(part, "r+b") as f:
+                f.truncate(max((off + size for _, off, size in records.values()), default=0))  # a killed set's bytes past the end
+            fsync_file(part)
+            os.replace(part, out.potree_octree)
+        return _finish_potree(out, records, stats, layout, st, name, scale, offset, encoding)
 
     def node_sets():
         """Each node set's arrays, one set in memory at a time; its statistics into ``stats``."""
@@ -262,6 +329,14 @@ def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progr
                     pos += len(blob)
                 n_total += len(node_set[2])
                 progress.advance(len(node_set[2]))
+    return _finish_potree(out, records, stats, layout, st, name, scale, offset, encoding)
+
+
+def _finish_potree(out: OctreeDir, records: dict, stats: dict, layout, st: dict, name: str, scale, offset, encoding: str) -> int:
+    """octree.bin written: the hierarchy and, last, the metadata; returns the number of nodes."""
+    origin, edge = np.array(st["origin"]), float(st["edge"])
+    scale3 = scale.tolist()
+    n_total = sum(n for n, _, _ in records.values())
     keys = np.array(sorted(records), np.uint64)
     key_set = set(records)
     hier = np.zeros(len(keys), HIERARCHY_DTYPE)

@@ -205,6 +205,7 @@ class _Task(PartitionPhases, BuildPhases):
         self.progress = NullProgress()
         self.state = dict(spec["state"])
         self.local_sets = self.format == "gigapoint"  # placed once every set is built (place_set)
+        self.potree_in_place = False  # workers write their node sets' files; the driver writes octree.bin
         # a partition's input: ("pieces", [[task, row, rows, xyz code], ...]), ("raw", chunk ids) or None (its own files)
         self.source = source
 
@@ -506,6 +507,8 @@ def _probe(out: str, token: str) -> str | None:
 class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
     """The phases run as Dask tasks; the driver's side. converter.py puts it in front of its
     ``_Converter`` (which runs the phases in order) when ``convert`` gets a client."""
+
+    potree_in_place = False  # the workers build the node sets (_Task)
 
     client = None  # set by convert() before run()
 

@@ -22,7 +22,7 @@ from ..build import color_sums, filtered_colors, init_ownlevel, owned_order, sam
 from ..compact_octree import encode_nodes
 from ..copc_write import write_copc_sets
 from ..keys import level_of, point_codes
-from ..potree import write_potree
+from ..potree import place_node_set, placed_end, potree_plan, write_potree
 from ..writer import append_streams, point_dtypes, run_serially, streams_end, write_gigapoint
 from . import hooks
 from .partition import built_name, group_name, plan_groups, set_name
@@ -72,6 +72,8 @@ class BuildPhases(Job):
     _next: int | None = None  # next free offset in the output arrays (_next_offset)
     _ends: dict | None = None  # next free word of each stream (_stream_ends)
     local_sets = False  # gigapoint format: node sets keep their points in their own folder until placed (place_set)
+    potree_in_place = True  # Potree format: the build encodes node sets into octree.bin (potree.place_node_set); not on Dask
+    _potree: list | None = None  # [plan, next byte of octree.bin] (potree_plan, placed_end)
 
     def _write_steps(self, fn, calls: list) -> list:
         """How the write phase runs its independent steps (writer.write_gigapoint's ``run``): here; as tasks on Dask."""
@@ -227,6 +229,14 @@ class BuildPhases(Job):
         atomic_npy(dest / "keys.npy", keys)
         atomic_npy(dest / "counts.npy", counts)
         n = len(idx)
+        if self.format == "potree" and self.potree_in_place:
+            if self._potree is None:  # (its plan, where the next set goes: after the finished sets', read once per process)
+                built = self.dir.built
+                self._potree = [potree_plan(self.state), placed_end(p.parent for p in built.glob("*/keys.npy") if not p.parent.name.endswith(".tmp"))]
+            attrs = {a: take(data[f"attr.{a}"], idx) for a in self.state["attributes"]}
+            self._potree[1] = place_node_set(self.dir, self._potree[1], dest, take(xyz, idx), take(data["rgba"], idx), attrs, counts, self._potree[0],
+                                             self.encoding)  # fmt: skip
+            return
         if self.format != "gigapoint":
             atomic_npy(dest / "xyz.npy", take(xyz, idx))
             atomic_npy(dest / "color.npy", filtered_colors(*colors))
@@ -398,17 +408,23 @@ class BuildPhases(Job):
         os.replace(tmp, built / "upper")
 
     # -- phase 7
-    def sources(self) -> list[Path]:
+    def sources(self, built_order: bool = False) -> list[Path]:
+        """The built node sets: the upper nodes, the groups, the partitions; ``built_order``: in
+        the order this process builds them (the partitions, the groups round by round, the upper
+        nodes), where Potree's build places them in octree.bin, so that a Dask conversion's write
+        phase, writing them in this order, writes the same bytes."""
         built = self.dir.built
         groups = [built / group_name(level, prefix) for level, prefix in self.state.get("groups", [])]
         parts = [built / built_name(lev, prefix) for lev, prefix, _ in self.state["partitions"]]
+        if built_order:
+            return [p for p in parts + groups if p.exists()] + [built / "upper"]
         return [built / "upper"] + [p for p in groups + parts if p.exists()]
 
     def write(self) -> int:
         st = self.state
         self.progress.phase("write", st["points"])
         if self.format == "potree":
-            n_nodes = write_potree(self.dir, self.sources(), st, self.name, self.progress, self.encoding)
+            n_nodes = write_potree(self.dir, self.sources(built_order=True), st, self.name, self.progress, self.encoding)
         elif self.format == "copc":  # one file beside the working folder, which goes once it is written
             n_nodes = write_copc_sets(self.out, self.sources(), st, self.progress)
         else:
