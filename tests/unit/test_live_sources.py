@@ -467,6 +467,19 @@ def test_a_full_disk_stops_the_recording_once_and_the_stream_goes_on(tmp_path, m
         np.testing.assert_array_equal(read_frame(f).xyz, frames[k])
     assert not [p for p in (tmp_path / "rec" / "frames").iterdir() if p.name.startswith(".")]  # no temporary left
 
+    def no_room(path, obj, **kw):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    json_writer = rec_module.atomic_json
+    monkeypatch.setattr(rec_module, "atomic_json", no_room)  # not even the index: refused in one line, nothing left behind
+    with pytest.raises(InputError, match=rf"^{re.escape(str(tmp_path / 'new'))}: cannot record into it: \[Errno 28\] No space left on device"):
+        live.record(tmp_path / "new")
+    assert not (tmp_path / "new").exists()
+    monkeypatch.setattr(rec_module, "atomic_json", json_writer)
+    live.record(tmp_path / "new")  # once there is room
+    live.stop_recording()
+    assert (tmp_path / "new" / "index.json").is_file()
+
 
 def test_not_a_recording(tmp_path):
     with pytest.raises(InputError, match="not a live recording"):

@@ -9,6 +9,7 @@ intrinsics (replay runs the same kernel again), one pushed as points as its sens
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import threading
@@ -66,6 +67,7 @@ class Recorder:
             raise InputError(f"{self.directory}: exists and is not a folder")
         if not held and self.directory.is_dir() and any(self.directory.iterdir()):  # its frames/000000.npz was replaced
             raise InputError(f"{self.directory}: holds other files, not a recording; record into a new or empty folder")
+        created = not self.directory.exists()
         (self.directory / FRAMES).mkdir(parents=True, exist_ok=True)
         if overwrite and held:  # a recording's frames only
             for old in (self.directory / FRAMES).glob("*.npz"):
@@ -77,9 +79,14 @@ class Recorder:
         self._lock = threading.Lock()
         self._written_at = 0.0
         self.started = time.time()
-        self._write_index()
-        if self.error is not None:  # not even its index could be written
-            raise self.error
+        try:
+            atomic_json(self.directory / INDEX, self._index())
+        except OSError as exc:  # (a full disk: nothing recorded yet, and no folder left to refuse a second try)
+            with contextlib.suppress(OSError):
+                (self.directory / FRAMES).rmdir()
+                if created:
+                    self.directory.rmdir()
+            raise InputError(f"{self.directory}: cannot record into it: {first_line(exc)}") from None
 
     def _write(self, arrays: dict, kind: str, t: float) -> None:
         """Frame ``arrays`` written as the next file. A frame that cannot be written (a full disk)
@@ -133,11 +140,14 @@ class Recorder:
         arrays["max_depth"] = np.array(np.nan if max_depth is None else max_depth, np.float64)
         self._write(arrays, "depth", t)
 
-    def _write_index(self) -> None:
+    def _index(self) -> dict:
         with self._lock:
             entries = sorted(self.entries, key=lambda e: e["file"])  # (producers on several threads finish out of order)
+        return {"format": FORMAT, "version": 1, "frames": entries}
+
+    def _write_index(self) -> None:
         try:
-            atomic_json(self.directory / INDEX, {"format": FORMAT, "version": 1, "frames": entries})
+            atomic_json(self.directory / INDEX, self._index())
         except OSError as exc:  # the last index written stays; a replay also finds the frames written after it
             if self.error is None:
                 self._stop_for(exc)
