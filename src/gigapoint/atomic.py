@@ -46,6 +46,9 @@ def _create_temp(path: Path) -> tuple[Path, int]:
             return tmp, os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
         except FileExistsError:
             continue
+        except OSError as exc:  # (a read-only or full file system: the user asked for ``path``, not the hidden name)
+            _name_the_file(exc, path, tmp)
+            raise
     raise FileExistsError(f"{path}: cannot create a temporary file beside it")  # pragma: no cover - 100 random clashes
 
 

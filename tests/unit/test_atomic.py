@@ -62,6 +62,28 @@ def test_a_write_error_without_a_file_name_gets_the_outputs(tmp_path):
     assert e.value.filename == str(tmp_path / "nowhere" / "f")
 
 
+@pytest.mark.parametrize("kind", ["atomic_write", "atomic_npy", "atomic_bytes"])
+def test_a_folder_that_takes_no_new_file_names_the_output_not_its_temporary(tmp_path, monkeypatch, kind):
+    """A read-only (or full) file system refuses the temporary file itself: the CLI said
+    "error: /out/.x.png.3e4ec217.tmp.png: Read-only file system", a name the user never gave."""
+    import errno
+
+    real_open = os.open
+
+    def read_only(path, flags, mode=0o777, **kw):
+        if flags & os.O_CREAT:
+            raise OSError(errno.EROFS, "Read-only file system", str(path))
+        return real_open(path, flags, mode, **kw)
+
+    monkeypatch.setattr(os, "open", read_only)
+    out = tmp_path / "x.png"
+    write = {"atomic_write": lambda: atomic_write(out, lambda tmp: None), "atomic_npy": lambda: atomic_npy(out, np.zeros(3)),
+             "atomic_bytes": lambda: atomic_bytes(out, b"png")}[kind]  # fmt: skip
+    with pytest.raises(OSError) as e:
+        write()
+    assert e.value.filename == str(out) and e.value.errno == errno.EROFS
+
+
 def test_the_temporary_file_is_new_hidden_beside_and_keeps_the_suffix(tmp_path):
     names = []
 
