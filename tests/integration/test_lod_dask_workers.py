@@ -88,3 +88,28 @@ def test_a_worker_of_a_script_that_imports_gigapoint_first_compiles(tmp_path):
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "result 42" in done.stdout
+
+
+_FILES_STOP_AT_1_MB = """
+import resource, sys
+resource.setrlimit(resource.RLIMIT_FSIZE, (1_000_000, 1_000_000))  # a file stops at 1 MB (workers inherit it): a full disk
+from gigapoint.cli import main
+sys.exit(main(["convert", sys.argv[1], "-o", sys.argv[2], "--workers", "2"]))
+"""
+
+
+def test_a_task_that_fails_on_our_own_workers_is_one_line(tmp_path):
+    """A task failing on the workers ``--workers 2`` started (here: a raw chunk cut at 1 MB) is
+    the conversion's one line naming the file; Dask's workers also logged it, seven lines of
+    "Compute Failed", key, state, task, exception, traceback."""
+    import subprocess
+    from pathlib import Path
+
+    autzen = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "autzen_trim.laz"
+    if not autzen.exists():
+        pytest.skip("../shared/data/autzen_trim.laz is not here")
+    out = tmp_path / "oct"
+    proc = subprocess.run([sys.executable, "-c", _FILES_STOP_AT_1_MB, str(autzen), str(out)], capture_output=True, text=True, timeout=170)
+    said = [line for line in proc.stderr.splitlines() if not line.startswith("while this runs")]
+    assert proc.returncode == 1 and len(said) == 1, proc.stderr[-3000:]
+    assert said[0].startswith(f"error: {out}/.partial/") and "bytes written (is the disk full?) (on Dask worker " in said[0], said

@@ -164,7 +164,8 @@ def open_client(client, announce: bool = False):
                 threads_per_worker=1,
                 processes=True,
                 dashboard_address=":0",  # any free port (another cluster may hold 8787)
-                silence_logs=logging.ERROR,
+                silence_logs=logging.CRITICAL,  # a task's failure comes back as the conversion's one line, not also as
+                # the worker's "Compute Failed" log of seven (a full disk, a damaged input)
                 env={"NUMBA_NUM_THREADS": "1"},  # one core a worker: numba's kernels run on the task's thread
             )
         c = dd.Client(cluster)
