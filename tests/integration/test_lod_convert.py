@@ -247,8 +247,6 @@ def test_a_full_disk_stops_a_conversion_in_one_line_and_it_resumes(demo_las, tmp
 def small_disk(tmp_path):
     """mount(size_kb) -> a tmpfs of that size (remounted at each call), unmounted at the end;
     skipped where this process may not mount (not root, or a container without the right)."""
-    import shutil as sh
-
     where = tmp_path / "disk"
     where.mkdir()
     mounted = []
@@ -292,9 +290,9 @@ def test_a_full_disk_at_any_point_of_a_conversion_is_one_line_and_it_resumes(sma
         if proc.returncode == 1:
             assert len(err) == 1 and re.match(rf"error: {disk}/\S+: (No space left on device|only \d+ of \d+ bytes written)", err[0]), err
             failed_in.append(err[0].split(":")[1])
-        small_disk(40_000)
-        proc = subprocess.run([*cmd, str(out)], capture_output=True, text=True, timeout=300)
-        assert proc.returncode == 0, proc.stderr
+            small_disk(40_000)
+            proc = subprocess.run([*cmd, str(out)], capture_output=True, text=True, timeout=300)
+            assert proc.returncode == 0, proc.stderr
         for f in ref.iterdir():
             assert (out / f.name).read_bytes() == f.read_bytes(), f"{size_kb} kB: {f.name} differs"
         assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in ref.iterdir())
