@@ -32,7 +32,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-__all__ = ["atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "fsync_file", "mapped_npy", "reserve", "temp_files", "write_at"]
+__all__ = ["atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "fsync_file", "mapped_npy", "reserve", "temp_files", "write_at", "write_failure"]
 
 _SHORT_WRITE = re.compile(r"(\d+) requested and (\d+) written")
 _TEMP_NAME = re.compile(r"\..+\.[0-9a-f]{8}\.tmp(\.[^.]+)?")  # what ``_create_temp`` names a file
@@ -66,10 +66,17 @@ def _name_the_file(exc: BaseException, path: Path, tmp: Path | None = None) -> N
     ...", a file object's ENOSPC) without a file name, or naming the temporary file ``tmp``,
     gets ``path``'s: the CLI's one line named no file, or a hidden one the user never asked for."""
     if isinstance(exc, OSError) and (exc.filename is None or (tmp is not None and exc.filename == str(tmp))):
-        if exc.strerror is None:
-            short = _SHORT_WRITE.fullmatch(str(exc))  # numpy's tofile: "26979 requested and 13296 written"
-            exc.strerror = f"only {short[2]} of {short[1]} bytes written (is the disk full?)" if short else str(exc)
+        exc.strerror = write_failure(exc)
         exc.filename = str(path)
+
+
+def write_failure(exc: OSError) -> str:
+    """What went wrong in a failed write, in words: its strerror, or numpy's short write
+    ("26979 requested and 13296 written", no errno) as "only 13296 of 26979 bytes written (is the disk full?)"."""
+    if exc.strerror is not None:
+        return exc.strerror
+    short = _SHORT_WRITE.fullmatch(str(exc))  # numpy's tofile
+    return f"only {short[2]} of {short[1]} bytes written (is the disk full?)" if short else str(exc)
 
 
 def same_file(a, b) -> bool:

@@ -216,6 +216,13 @@ def test_a_full_disk_while_spilling_is_one_line_naming_the_folder(monkeypatch, t
         chunked.build_cloud_chunked(source, name="full", tmpdir=tmp_path)
     assert not list(tmp_path.iterdir())
 
+    def short(*args, **kwargs):  # numpy's tofile on a full disk: no errno, its own numbers
+        raise OSError("26454 requested and 2560 written")
+
+    monkeypatch.setattr(chunked, "_spill", short)
+    with pytest.raises(InputError, match=r"failed: only 2560 of 26454 bytes written \(is the disk full\?\) \(the chunked build needs"):
+        chunked.build_cloud_chunked(source, name="full", tmpdir=tmp_path)
+
 
 def test_open_builds_big_files_chunked_by_their_headers(monkeypatch):
     """``gp.open`` (``chunked=None``) takes the bounded-memory build when the files' headers

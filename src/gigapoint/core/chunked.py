@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
+from ..atomic import write_failure
 from ..errors import InputError, MemoryLimitError
 from .attributes import Attributes
 from .chunk import PointChunk, attributes_in_common, warn_dropped_attributes
@@ -150,7 +151,7 @@ def build_cloud_chunked(
             _spill(source, clean, folder, origin, edge, shift, part_of_cell, n_parts, short, attr_dtypes)
         except OSError as exc:  # a full disk, most likely: say where and how much it needs
             raise InputError(
-                f"{name}: spilling {n:,} points to {folder} failed: {exc.strerror or exc} (the chunked build needs ~30 bytes a point "
+                f"{name}: spilling {n:,} points to {folder} failed: {write_failure(exc)} (the chunked build needs ~30 bytes a point "
                 f"of free disk there, {30 * n / 1e9:.1f} GB; pass tmpdir= for another place)"
             ) from exc
         return _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, color_format, attr_dtypes, batch_size, name, skipped, source_scale)
