@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_bytes, atomic_json, atomic_npy, atomic_open, atomic_write, fsync_file, reserve, write_at
+from ..atomic import atomic_bytes, atomic_json, atomic_npy, fsync_file, write_at
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
 from ..errors import InputError
@@ -126,9 +126,10 @@ def record_dtype(layout) -> np.dtype:
 
 
 def encode_node(xyz: np.ndarray, rgb16: np.ndarray, attributes: dict, layout, scale, offset, encoding: str, out=None) -> bytes | None:
-    """One node's octree.bin blob: its fields in ``layout`` order (``write_layout``; an attribute
-    the points lack is zeros). DEFAULT with ``out`` (the node's records, ``record_dtype``): filled
-    in place, None returned."""
+    """Points as octree.bin holds them: their fields in ``layout`` order (``write_layout``; an
+    attribute the points lack is zeros). DEFAULT: into ``out``, their records (``record_dtype``:
+    a node's blob is its points' records, so a node set's are made at once), None returned;
+    BROTLI: one node's blob."""
     n = len(xyz)
     ixyz = np.floor((xyz - np.asarray(offset)) / np.asarray(scale) + 0.5).astype(np.int64)
     ixyz = np.clip(ixyz, 0, 2**31 - 1).astype(np.int32)
@@ -138,10 +139,9 @@ def encode_node(xyz: np.ndarray, rgb16: np.ndarray, attributes: dict, layout, sc
         return np.zeros(n, _TYPES[typ]) if v is None else np.asarray(v).astype(_TYPES[typ])
 
     if encoding == "DEFAULT":
-        rec = np.empty(n, record_dtype(layout)) if out is None else out
         for a, t, _ in layout:
-            rec[a] = ixyz if a == "position" else rgb16 if a == "rgb" else values(a, t)
-        return None if out is not None else rec.tobytes()
+            out[a] = ixyz if a == "position" else rgb16 if a == "rgb" else values(a, t)
+        return None
     # BROTLI: attribute by attribute, points in Morton order, position and rgb as Morton codes
     u = ixyz.astype(np.uint64)
     lower = _spread16(u[:, 0]) | _spread16(u[:, 1]) << np.uint64(1) | _spread16(u[:, 2]) << np.uint64(2)
@@ -238,97 +238,33 @@ def _add_stats(stats: dict, layout, xyz, rgb16, attrs: dict, scale, offset) -> N
 
 def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progress, encoding: str = "DEFAULT") -> int:
     """Assemble built node sets into the Potree 2.0 folder ``out``, its metadata last; returns
-    the number of nodes."""
-    # the inputs' grid (a LAS file's 0.1 mm was cut to 1 mm), else a fine enough one (grid.py)
-    layout, scale, offset = potree_plan(st)
-    n_total = 0
+    the number of nodes. Node sets the build placed in the octree.bin being built
+    (``place_node_set``) are taken as they are; those kept in files (built on Dask workers) are
+    placed now, in ``sources`` order, the build's: a single process's bytes."""
+    plan = potree_plan(st)  # the inputs' grid (a LAS file's 0.1 mm was cut to 1 mm), else a fine enough one (grid.py)
+    layout, scale, offset = plan
+    part = out.potree_octree_in_progress
+    moved = not part.exists() and out.potree_octree.exists()  # a write phase resumed after the move: every set was placed
+    if not moved:
+        at = placed_end(sources)
+        for src in sources:
+            if not (src / PLACED).exists():  # (a resumed write phase placed those before it)
+                attrs = {a: np.load(src / f"attr.{a}.npy") for a in st.get("attributes") or {} if (src / f"attr.{a}.npy").exists()}
+                at = place_node_set(out, at, src, np.load(src / "xyz.npy"), np.load(src / "rgba.npy"), attrs, np.load(src / "counts.npy"), plan, encoding)
     records: dict[int, tuple[int, int, int]] = {}
-    placed = [(src / PLACED).exists() for src in sources]
-    if not any(placed):  # the attributes the node sets' files hold, in the dtypes of the first set that holds each
-        names = list(st.get("attributes") or [])
-        dtypes = {}
-        for src in sources:
-            for a in names:
-                f = src / f"attr.{a}.npy"
-                if a not in dtypes and f.exists():
-                    dtypes[a] = np.load(f, mmap_mode="r").dtype
-        layout = write_layout({a: dtypes[a] for a in names if a in dtypes})
     stats = {a: [[np.inf] * k, [-np.inf] * k] for a, _, k in layout}
-
-    if any(placed):  # the build placed every node in octree.bin (place_node_set): their places and statistics
-        if not all(placed):
-            raise RuntimeError("internal error: Potree node sets placed by the build and kept in files")
-        for src in sources:
-            at, counts = np.load(src / PLACED), np.load(src / "counts.npy")
-            for key, n, (off, size) in zip(np.load(src / "keys.npy").tolist(), counts.tolist(), at.tolist()):
-                records[key] = (n, off, size)
-            for a, (lo, hi) in json.loads((src / PLACED_STATS).read_text()).items():
-                stats[a] = [np.minimum(stats[a][0], lo).tolist(), np.maximum(stats[a][1], hi).tolist()]
-            n_total += int(counts.sum())
-            progress.advance(int(counts.sum()))
-        part = out.potree_octree_in_progress
-        if part.exists() or not out.potree_octree.exists():  # (not: a write phase resumed after the move)
-            with open(part, "r+b") as f:
-                f.truncate(max((off + size for _, off, size in records.values()), default=0))  # a killed set's bytes past the end
-            fsync_file(part)
-            os.replace(part, out.potree_octree)
-        return _finish_potree(out, records, stats, layout, st, name, scale, offset, encoding)
-
-    def node_sets():
-        """Each node set's arrays, one set in memory at a time; its statistics into ``stats``."""
-        for src in sources:
-            keys = np.load(src / "keys.npy")
-            counts = np.load(src / "counts.npy")
-            xyz = np.load(src / "xyz.npy")
-            rgba = np.load(src / "rgba.npy").view(np.uint8).reshape(-1, 4)
-            attrs = {a: np.load(src / f"attr.{a}.npy") for a, _, _ in layout if (src / f"attr.{a}.npy").exists()}
-            rgb16 = rgba[:, :3].astype(np.uint16) * np.uint16(257)
-            if len(xyz):
-                _add_stats(stats, layout, xyz, rgb16, attrs, scale, offset)
-            yield keys, counts, xyz, rgb16, attrs
-
-    def nodes(keys, counts, xyz, rgb16, attrs):
-        starts = np.concatenate([[0], np.cumsum(counts)])
-        for k, key in enumerate(keys.tolist()):
-            s, e = int(starts[k]), int(starts[k + 1])
-            yield key, xyz[s:e], rgb16[s:e], {a: v[s:e] for a, v in attrs.items()}
-
-    if encoding == "DEFAULT":  # records of known size: copied into a memory map of the file (4x faster than write() here)
-        rec_dt = record_dtype(layout)
-        total = sum(int(np.load(src / "counts.npy").sum()) for src in sources)
-
-        def fill(tmp: Path) -> None:
-            nonlocal n_total
-            with open(tmp, "r+b") as f:
-                f.truncate(total * rec_dt.itemsize)
-            reserve(tmp, 0, total * rec_dt.itemsize)  # a full disk: an OSError here, not a SIGBUS later
-            mapped = np.memmap(tmp, np.uint8, mode="r+", shape=(total * rec_dt.itemsize,)) if total else np.empty(0, np.uint8)
-            scratch = np.empty(0, rec_dt)  # a node's records are made here, field by field, then copied at once:
-            for node_set in node_sets():  # made in the map, each field's pass faulted its pages (slower than write())
-                for key, xyz, rgb16, part in nodes(*node_set):
-                    n = len(xyz)
-                    if n > len(scratch):
-                        scratch = np.empty(max(n, 2 * len(scratch)), rec_dt)
-                    encode_node(xyz, rgb16, part, layout, scale, offset, encoding, out=scratch[:n])
-                    # as bytes: a copy of records (a structured dtype) went field by field, 2.9 s for 20 M points
-                    mapped[n_total * rec_dt.itemsize : (n_total + n) * rec_dt.itemsize] = scratch[:n].view(np.uint8)
-                    records[key] = (n, n_total * rec_dt.itemsize, n * rec_dt.itemsize)
-                    n_total += n
-                progress.advance(len(node_set[2]))
-            del mapped
-
-        atomic_write(out.potree_octree, fill, durable=True)
-    else:
-        pos = 0
-        with atomic_open(out.potree_octree, durable=True) as f:  # node by node: never more than one node set in memory
-            for node_set in node_sets():
-                for key, xyz, rgb16, part in nodes(*node_set):
-                    blob = encode_node(xyz, rgb16, part, layout, scale, offset, encoding) if len(xyz) else b""
-                    f.write(blob)
-                    records[key] = (len(xyz), pos, len(blob))
-                    pos += len(blob)
-                n_total += len(node_set[2])
-                progress.advance(len(node_set[2]))
+    for src in sources:  # every node's place and the sets' statistics
+        at, counts = np.load(src / PLACED), np.load(src / "counts.npy")
+        for key, n, (off, size) in zip(np.load(src / "keys.npy").tolist(), counts.tolist(), at.tolist()):
+            records[key] = (n, off, size)
+        for a, (lo, hi) in json.loads((src / PLACED_STATS).read_text()).items():
+            stats[a] = [np.minimum(stats[a][0], lo).tolist(), np.maximum(stats[a][1], hi).tolist()]
+        progress.advance(int(counts.sum()))
+    if not moved:
+        with open(part, "r+b") as f:
+            f.truncate(max((off + size for _, off, size in records.values()), default=0))  # a killed set's bytes past the end
+        fsync_file(part)
+        os.replace(part, out.potree_octree)
     return _finish_potree(out, records, stats, layout, st, name, scale, offset, encoding)
 
 

@@ -59,6 +59,13 @@ def is_loopback(host: str) -> bool:
         return False
 
 
+def _internal_error(what: str, exc: Exception) -> dict:
+    """The reply to a message that failed for a bug (logged with its traceback): an error for
+    that message only, the connection kept (``/ws`` and ``/push`` alike)."""
+    log.exception("viewer: %s failed", what)
+    return {"type": "error", "message": f"internal error: {exc}"[:300]}
+
+
 def _load_static() -> dict[str, bytes]:
     root = resources.files("gigapoint.viewer") / "static"
     out = {name: (root / name).read_bytes() for name in STATIC_TYPES}
@@ -215,9 +222,8 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
                     reply = session.handle(msg)
                 except P.ProtocolError as exc:
                     reply = {"type": "error", "message": str(exc), "in_reply_to": kind}
-                except Exception as exc:
-                    log.exception("viewer: message %s failed", kind)
-                    reply = {"type": "error", "message": f"internal error: {exc}"[:300], "in_reply_to": kind}
+                except Exception as exc:  # noqa: BLE001 - a bug: this message fails, the session goes on
+                    reply = {**_internal_error(f"message {kind}", exc), "in_reply_to": kind}
                 if reply is not None:
                     await send("json", reply)
         except (WebSocketDisconnect, RuntimeError, OSError, asyncio.CancelledError):
@@ -257,9 +263,8 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
                     reply = {"type": "ack", "seq": seq}
                 except GigapointError as exc:
                     reply = {"type": "error", "message": str(exc)[:500]}
-                except Exception as exc:  # a bug must not cost the producer its connection (as /ws: the message fails, the stream goes on)
-                    log.exception("viewer: a pushed frame failed")
-                    reply = {"type": "error", "message": f"internal error: {exc}"[:300]}
+                except Exception as exc:  # noqa: BLE001 - a bug must not cost the producer its connection (as /ws)
+                    reply = _internal_error("a pushed frame", exc)
                 await websocket.send_text(json.dumps(reply))
         except (WebSocketDisconnect, RuntimeError, OSError, asyncio.CancelledError):
             pass  # a producer gone mid-frame: nothing of its frame was pushed (frames are pushed whole)
