@@ -252,22 +252,59 @@ def test_las14_with_only_the_legacy_count(tmp_path):
     assert file_info(path)["point_count"] == 321
 
 
+def _with_extra_bytes(path, point_format, version, color16, n=3000):
+    """``write_las``'s file with extra bytes of every size and kind added (a scaled one, an
+    array of 3, signed, unsigned, float), random values; returns laspy's view of the points."""
+    write_las(path, n=n, point_format=point_format, version=version, color16=color16, offset=(636_000.0, 849_000.0, 400.0), scale=0.01)
+    las = laspy.read(str(path))
+    rng = np.random.default_rng(point_format)
+    extras = {"i8": np.int8, "u16": np.uint16, "i32": np.int32, "f32": np.float32, "u64": np.uint64, "normal": "3f8"}
+    for name, t in extras.items():
+        las.add_extra_dim(laspy.ExtraBytesParams(name=name, type=t))
+        values = rng.integers(-100, 100, (n, 3)) * 0.25 if name == "normal" else rng.integers(0, 120, n).astype(t) - (t is np.int8) * 60
+        setattr(las, name, values)
+    las.add_extra_dim(laspy.ExtraBytesParams(name="amplitude", type=np.uint16, scales=np.array([0.5]), offsets=np.array([10.0])))
+    las.amplitude = 10.0 + 0.5 * rng.integers(0, 1000, n)
+    las.write(str(path))
+    return laspy.read(str(path))
+
+
 @pytest.mark.parametrize("color16", [True, False])
-def test_small_chunks_decode_by_numpy_like_the_kernels(tmp_path, monkeypatch, color16):
-    """Chunks up to NUMPY_MAX points are decoded by numpy (a small file's first open compiles no
-    kernel); the parallel kernels decode larger ones: both give the same positions and colors."""
+@pytest.mark.parametrize("point_format,version", [(0, "1.2"), (1, "1.0"), (3, "1.2"), (5, "1.3"), (6, "1.4"), (8, "1.4"), (10, "1.4")])
+def test_small_chunks_decode_by_numpy_like_the_kernel(tmp_path, monkeypatch, color16, point_format, version):
+    """Chunks up to NUMPY_MAX points are decoded by numpy and laspy, a field at a time (a small
+    file's first open compiles no kernel); larger ones by one parallel pass over the records
+    (io/las._decode_records): both give laspy's positions, colours and attributes, bit fields
+    and extra bytes of every size included, with laspy's dtypes, in the same order."""
     from gigapoint.io import las
 
     path = tmp_path / "a.las"
-    write_las(path, n=3000, point_format=3, color16=color16, offset=(636_000.0, 849_000.0, 400.0), scale=0.01)
-    small = [(c.xyz.copy(), c.rgba.copy()) for c in read_chunks(path, chunk_size=1000)]
+    if version == "1.0":  # (laspy writes no 1.0 with extra bytes)
+        write_las(path, n=3000, point_format=point_format, version=version, color16=color16, offset=(636_000.0, 849_000.0, 400.0), scale=0.01)
+        ref = laspy.read(str(path))
+    else:
+        ref = _with_extra_bytes(path, point_format, version, color16)
+    small = list(read_chunks(path, chunk_size=1000))
     monkeypatch.setattr(las, "NUMPY_MAX", 0)
-    large = [(c.xyz, c.rgba) for c in read_chunks(path, chunk_size=1000)]
+    large = list(read_chunks(path, chunk_size=1000))
     assert len(small) == len(large) == 3
-    for (xa, ca), (xb, cb) in zip(small, large):
-        np.testing.assert_array_equal(xa, xb)
-        np.testing.assert_array_equal(ca, cb)
-    assert np.ptp(np.concatenate([c for _, c in small])[:, :3]) > 100  # real colors, not a constant
+    for a, b in zip(small, large):
+        np.testing.assert_array_equal(a.xyz, b.xyz)
+        np.testing.assert_array_equal(a.rgba, b.rgba)
+        assert list(a.attributes) == list(b.attributes)
+        for k, v in b.attributes.items():
+            assert v.dtype == a.attributes[k].dtype and np.array_equal(v, a.attributes[k]), k
+    got = {k: np.concatenate([c.attributes[k] for c in large]) for k in large[0].attributes}
+    np.testing.assert_array_equal(np.concatenate([c.xyz for c in large]), np.column_stack([ref.x, ref.y, ref.z]))
+    for k, v in got.items():
+        want = np.asarray(ref[k[:-2]])[:, int(k[-1])] if k.startswith("normal_") else np.asarray(ref[k])
+        assert v.dtype == want.dtype and np.array_equal(v, want), k
+    if version != "1.0":
+        assert list(got)[-9:] == ["i8", "u16", "i32", "f32", "u64", "normal_0", "normal_1", "normal_2", "amplitude"]
+        assert np.ptp(got["i8"]) > 50 and got["i8"].min() < 0 and got["amplitude"].dtype == np.float64
+    if point_format in COLOR_FORMATS:
+        assert np.ptp(np.concatenate([c.rgba for c in small])[:, :3]) > 100  # real colors, not a constant
+    assert np.ptp(got["return_number"]) > 0 and np.ptp(got["classification"]) > 10
 
 
 @pytest.mark.parametrize("suffix", [".las", ".laz"])
