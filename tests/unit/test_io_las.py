@@ -271,8 +271,8 @@ def _with_extra_bytes(path, point_format, version, color16, n=3000):
 
 @pytest.mark.parametrize("color16", [True, False])
 @pytest.mark.parametrize("point_format,version", [(0, "1.2"), (1, "1.0"), (3, "1.2"), (5, "1.3"), (6, "1.4"), (8, "1.4"), (10, "1.4")])
-def test_small_chunks_decode_by_numpy_like_the_kernel(tmp_path, monkeypatch, color16, point_format, version):
-    """Chunks up to NUMPY_MAX points are decoded by numpy and laspy, a field at a time (a small
+def test_small_files_decode_by_numpy_like_the_kernel(tmp_path, monkeypatch, color16, point_format, version):
+    """Files up to NUMPY_MAX points are decoded by numpy and laspy, a field at a time (a small
     file's first open compiles no kernel); larger ones by one parallel pass over the records
     (io/las._decode_records): both give laspy's positions, colours and attributes, bit fields
     and extra bytes of every size included, with laspy's dtypes, in the same order."""

@@ -458,7 +458,7 @@ def _rgb8(r, g, b, shift, out):
 
 
 def _positions(raw, scale, offset) -> np.ndarray:
-    """float64 (N, 3) positions of records (fields X, Y, Z) by numpy, for chunks up to
+    """float64 (N, 3) positions of records (fields X, Y, Z) by numpy, for files up to
     ``NUMPY_MAX`` points (milliseconds; a small file's first open compiles no kernel). Larger
     ones are ``_decode_records``': the same operations, so the same values."""
     xyz = np.empty((len(raw), 3), np.float64)
@@ -613,12 +613,12 @@ class LasReader(Reader):
                 if n == 0:
                     break
                 raw = pts.array  # the records as read (valid until the next read)
-                if n > NUMPY_MAX:  # one parallel pass over the records
+                if stop - start > NUMPY_MAX:  # one parallel pass over the records (chunks of any size: a progressive load's are small)
                     plan = plan or _RecordPlan(reader.header.point_format, attrs, has_rgb)
                     xyz, rgb, decoded = plan.decode(raw, scale, offset)
                     rgba = _colors(*rgb, scaler) if has_rgb else None
                     attributes = {a: decoded[a] if a in decoded else _field_values(pts, f) for a, f in attrs.items()}
-                else:  # numpy, a field at a time: a small file's first open compiles no kernel
+                else:  # numpy and laspy, a field at a time: a small file's first open compiles no kernel
                     xyz = _positions(raw, scale, offset)
                     rgba = _colors(raw["red"], raw["green"], raw["blue"], scaler) if has_rgb else None
                     # copies (a field of the records is a strided view of the reused buffer, a bit field a new array)
