@@ -379,9 +379,9 @@ def test_an_input_that_fits_in_memory_converts_to_the_spilled_octree_without_a_f
     with monkeypatch.context() as m:
         _spilling(m)
         spilled = convert(town_and_spot, tmp_path / "spilled", format=fmt, **opts)
-    for name in ("save_raw_chunk", "append_file"):
-        monkeypatch.setattr(spill, name, lambda *a, **k: pytest.fail("a file was written between the phases"))
-    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.partition"), "append_file", spill.append_file)
+    for name in ("save_raw_chunk", "append_file"):  # partition.py's appends (atomic.append_file)
+        module = spill if name == "save_raw_chunk" else importlib.import_module("gigapoint.lod.convert.partition")
+        monkeypatch.setattr(module, name, lambda *a, **k: pytest.fail("a file was written between the phases"))
     monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.read"), "save_raw_chunk", spill.save_raw_chunk)
     held = convert(town_and_spot, tmp_path / "held", format=fmt, **opts)
     assert held.in_memory and not spilled.in_memory
@@ -651,15 +651,14 @@ def test_autzen_laz_converts_and_renders(tmp_path):
 
 def test_partition_appends_survive_short_writes(tmp_path, monkeypatch):
     """writev may write less than asked (a signal, a nearly full disk): the rest follows, in order."""
-    import importlib
+    from gigapoint.atomic import append_file
 
-    conv = importlib.import_module("gigapoint.lod.convert")
     real = os.writev
     monkeypatch.setattr(os, "writev", lambda fd, bufs: real(fd, [bytes(memoryview(bufs[0]))[:5]]))  # 5 bytes a call
     arrays = [np.arange(7, dtype=np.float64).reshape(-1, 1)[2:5], np.zeros(0, np.uint32), np.arange(3, dtype=np.uint16)]
     path = tmp_path / "part.bin"
     path.write_bytes(b"head")
-    conv._append_file(path, arrays)
+    append_file(path, arrays)
     assert path.read_bytes() == b"head" + b"".join(a.tobytes() for a in arrays)
 
 
@@ -668,15 +667,15 @@ def test_large_partition_appends_go_through_a_map_and_a_full_disk_leaves_the_fil
     first: a full disk is an OSError naming the file (a store into the map would be a SIGBUS),
     and the file keeps its length."""
     import errno
-    import importlib
 
-    conv = importlib.import_module("gigapoint.lod.convert")
+    from gigapoint.atomic import append_file
+
     rng = np.random.default_rng(3)
     arrays = [rng.random((40_000, 3)), np.zeros(0, np.uint32), rng.integers(0, 2**31, 300_001).astype(np.uint32)]  # 2.2 MB
     path = tmp_path / "part.bin"
     path.write_bytes(b"odd head")  # the map starts inside a page
-    conv._append_file(path, arrays)
-    conv._append_file(path, arrays[::-1])
+    append_file(path, arrays)
+    append_file(path, arrays[::-1])
     whole = b"".join(a.tobytes() for a in arrays)
     assert path.read_bytes() == b"odd head" + whole + b"".join(a.tobytes() for a in arrays[::-1])
 
@@ -686,7 +685,7 @@ def test_large_partition_appends_go_through_a_map_and_a_full_disk_leaves_the_fil
     monkeypatch.setattr(os, "posix_fallocate", full)
     size = path.stat().st_size
     with pytest.raises(OSError, match="No space left on device") as err:
-        conv._append_file(path, arrays)
+        append_file(path, arrays)
     assert err.value.filename == str(path) and path.stat().st_size == size
 
 

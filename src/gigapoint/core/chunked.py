@@ -32,17 +32,16 @@ import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterable
-from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 from numba import njit
 
-from ..atomic import write_failure
+from ..atomic import append_file, write_failure
 from ..errors import InputError, MemoryLimitError
 from .attributes import Attributes
 from .chunk import PointChunk, attributes_in_common, warn_dropped_attributes
-from .cloud import PointCloud, _valid_mask, check_valid_count, finest_scale, gather, scan_points, storage_format
+from .cloud import PointCloud, _valid_mask, check_valid_count, finest_scale, gather, scan_points, storage_format, take
 from .compact import compact_positions, ext_bits_per_point, pack_rgb565, stream_words
 from .layout import BATCH_SIZE, PACK_DTYPE
 from .morton import MORTON_BITS_PER_AXIS, counting_order, cube_of, morton_codes, morton_order
@@ -226,35 +225,29 @@ def _paths(folder: Path, p: int, attr_dtypes) -> dict[str, Path]:
 
 
 def _spill(source, clean, folder, origin, edge, shift, part_of_cell, n_parts, short, attr_dtypes) -> None:
-    with ExitStack() as files:
-        handles: dict[tuple[int, str], object] = {}
-
-        def append(p: int, key: str, values: np.ndarray) -> None:
-            f = handles.get((p, key))
-            if f is None:
-                f = handles[(p, key)] = files.enter_context(open(_paths(folder, p, attr_dtypes)[key], "ab"))
-            values.tofile(f)
-
-        for chunk in source():
-            keep = _kept(chunk, clean)
-            xyz = np.ascontiguousarray(chunk.xyz[keep], np.float64)
-            if len(xyz) == 0:
-                continue
-            part = part_of_cell[(morton_codes(xyz, origin, edge) >> np.uint64(shift)).astype(np.int64)]
-            order, per_part = counting_order(part, n_parts)
-            starts = np.concatenate([[0], np.cumsum(per_part)])
-            del part
-            color = np.ascontiguousarray(chunk.rgba[keep], np.uint8).view(np.uint32).reshape(-1)
-            if short:
-                color = pack_rgb565(color)
-            fields = {"xyz": xyz[order], "color": gather(color, order)}
-            for a, (dtype, _) in attr_dtypes.items():
-                fields[f"a_{a}"] = gather(np.ascontiguousarray(chunk.attributes[a][keep], dtype), order)
-            del xyz, color, order
-            for p in np.flatnonzero(np.diff(starts)):
-                s, e = starts[p], starts[p + 1]
-                for key, values in fields.items():
-                    append(int(p), key, values[s:e])
+    """Every chunk's points appended to their partitions' files (``atomic.append_file``: large
+    appends through reserved memory maps, 4x faster than write() on the project's VMs; a full
+    disk an OSError naming the file)."""
+    for chunk in source():
+        keep = _kept(chunk, clean)
+        xyz = np.ascontiguousarray(chunk.xyz[keep], np.float64)
+        if len(xyz) == 0:
+            continue
+        part = part_of_cell[(morton_codes(xyz, origin, edge) >> np.uint64(shift)).astype(np.int64)]
+        order, per_part = counting_order(part, n_parts)
+        starts = np.concatenate([[0], np.cumsum(per_part)])
+        del part
+        color = np.ascontiguousarray(chunk.rgba[keep], np.uint8).view(np.uint32).reshape(-1)
+        if short:
+            color = pack_rgb565(color)
+        fields = {"xyz": take(xyz, order), "color": gather(color, order)}
+        for a, (dtype, _) in attr_dtypes.items():
+            fields[f"a_{a}"] = gather(np.ascontiguousarray(chunk.attributes[a][keep], dtype), order)
+        del xyz, color, order
+        for p in np.flatnonzero(np.diff(starts)):
+            s, e = starts[p], starts[p + 1]
+            for key, path in _paths(folder, int(p), attr_dtypes).items():
+                append_file(path, [fields[key][s:e]])
 
 
 def _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, color_format, attr_dtypes, batch_size, name, skipped, source_scale) -> PointCloud:

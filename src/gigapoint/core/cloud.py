@@ -301,18 +301,52 @@ def scan_points(xyz: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
 
 
 @njit(parallel=True, cache=True)
-def _gather(src, order, out):
-    for i in prange(order.shape[0]):
-        out[i] = src[order[i]]
+def _take1(src, idx, out):
+    for i in prange(idx.shape[0]):
+        out[i] = src[idx[i]]
+
+
+@njit(parallel=True, cache=True)
+def _take2(src, idx, out):
+    for i in prange(idx.shape[0]):
+        for j in range(src.shape[1]):
+            out[i, j] = src[idx[i], j]
+
+
+_UINT_OF_SIZE = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}
+
+
+def take(src: np.ndarray, idx: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """src[idx] along the first axis, in parallel (numpy's fancy indexing is single-threaded),
+    into ``out`` when given (e.g. a slice of a memory-mapped output file).
+
+    Values are moved as same-width unsigned integers, so the kernels compile for 4 types only.
+    """
+    src = np.ascontiguousarray(src)
+    if out is None:
+        out = np.empty((len(idx),) + src.shape[1:], src.dtype)
+    else:
+        out = np.asarray(out)
+    u = _UINT_OF_SIZE.get(src.dtype.itemsize)
+    idx = np.asarray(idx)
+    if idx.dtype not in (np.int64, np.uint32, np.int32):  # sort orders are u32: gathered as they are, not widened
+        idx = idx.astype(np.int64)
+    idx = np.ascontiguousarray(idx)
+    if u is not None and src.ndim == 1:
+        _take1(src.view(u), idx, out.view(u))
+    elif u is not None and src.ndim == 2:
+        _take2(src.view(u), idx, out.view(u))
+    else:
+        out[:] = src[idx]
+    return out
 
 
 def gather(values: np.ndarray, order: np.ndarray) -> np.ndarray:
-    """values[order] along the first axis, on all cores (numpy's take is single-threaded)."""
-    if values.ndim != 1 or not values.flags.c_contiguous or len(order) <= NUMPY_MAX:
+    """values[order] along the first axis: numpy up to ``NUMPY_MAX`` points (a small cloud's
+    first load compiles no kernel), ``take`` on all cores beyond."""
+    if len(order) <= NUMPY_MAX:
         return np.ascontiguousarray(values[order])
-    out = np.empty(len(order), values.dtype)
-    _gather(values, order, out)
-    return out
+    return take(values, order)
 
 
 def build_cloud(

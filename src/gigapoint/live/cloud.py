@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.chunk import colors_for
-from ..core.cloud import MAX_ABS_COORDINATE, PointCloud
+from ..core.cloud import MAX_ABS_COORDINATE, PointCloud, take
 from ..core.layout import BATCH_SIZE
 from ..core.morton import argsort_codes, cube_of, morton_codes
 from ..core.quantize import make_batches, quantize
@@ -47,7 +47,7 @@ from ..core.renderable import DrawList
 from ..core.selection import Selection, View, select_view, subsample_step
 from ..core.threads import threads_for
 from ..errors import GigapointError, InputError, check_switch, check_timeout, check_whole, is_real
-from ..lod.build import take, valid_bounds
+from ..lod.build import valid_bounds
 from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
 from ..render.splats import point_spacing
 from .depth import depth_to_points, parse_pose

@@ -262,19 +262,6 @@ def owned_order(tree: Tree, ownlevel) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(parallel=True, cache=True)
-def _take1(src, idx, out):
-    for i in prange(idx.shape[0]):
-        out[i] = src[idx[i]]
-
-
-@njit(parallel=True, cache=True)
-def _take2(src, idx, out):
-    for i in prange(idx.shape[0]):
-        for j in range(src.shape[1]):
-            out[i, j] = src[idx[i], j]
-
-
-@njit(parallel=True, cache=True)
 def _valid_bounds(xyz, limit, valid, lo, hi):
     """valid[i] = finite and within ±limit; per-thread-slice min/max of the valid points into lo/hi (T, 3)."""
     n = xyz.shape[0]
@@ -303,34 +290,6 @@ def valid_bounds(xyz: np.ndarray, limit: float) -> tuple[np.ndarray, np.ndarray,
     hi = np.full((n_threads, 3), -np.inf)
     _valid_bounds(np.ascontiguousarray(xyz, np.float64), float(limit), valid, lo, hi)
     return valid, lo.min(axis=0), hi.max(axis=0)
-
-
-_UINT_OF_SIZE = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}
-
-
-def take(src: np.ndarray, idx: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """src[idx] along the first axis, in parallel (numpy's fancy indexing is single-threaded),
-    into ``out`` when given (e.g. a slice of a memory-mapped output file).
-
-    Values are moved as same-width unsigned integers, so the kernels compile for 4 types only.
-    """
-    src = np.ascontiguousarray(src)
-    if out is None:
-        out = np.empty((len(idx),) + src.shape[1:], src.dtype)
-    else:
-        out = np.asarray(out)
-    u = _UINT_OF_SIZE.get(src.dtype.itemsize)
-    idx = np.asarray(idx)
-    if idx.dtype not in (np.int64, np.uint32, np.int32):  # sort orders are u32: gathered as they are, not widened
-        idx = idx.astype(np.int64)
-    idx = np.ascontiguousarray(idx)
-    if u is not None and src.ndim == 1:
-        _take1(src.view(u), idx, out.view(u))
-    elif u is not None and src.ndim == 2:
-        _take2(src.view(u), idx, out.view(u))
-    else:
-        out[:] = src[idx]
-    return out
 
 
 @njit(parallel=True, cache=True)

@@ -34,7 +34,6 @@ from .converter import ConvertResult, _Converter, convert
 from .options import DEFAULT_MAX_LEAF, FORMATS, parse_memory
 from .partition import plan_groups as _plan_groups  # the names tests use
 from .partition import plan_partitions as _plan_partitions
-from .spill import append_file as _append_file
 
 __all__ = [
     "DEFAULT_MAX_LEAF",
@@ -43,7 +42,6 @@ __all__ = [
     "ConvertResult",
     "OutputExistsError",
     "_Converter",
-    "_append_file",
     "_plan_groups",
     "_plan_partitions",
     "convert",

@@ -10,10 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ...atomic import append_file
+from ...core.cloud import take
 from ...core.morton import counting_order
-from ..build import take
 from ..keys import CODE_BITS, point_codes
-from .spill import append_file, load_raw_chunk, raw_chunk_files
+from .spill import load_raw_chunk, raw_chunk_files
 from .state import Job
 
 COUNT_LEVEL = 7  # the count grid: 128³ cells of the cube

@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from ...atomic import atomic_npy, fsync_file, mapped_npy
+from ...core.cloud import take
 from ...core.layout import BATCH_DTYPE
 from ...core.quantize import _quantize_batches
-from ..build import color_sums, filtered_colors, init_ownlevel, owned_order, sample_tree, sort_codes, split_tree, take, upper_tree
+from ..build import color_sums, filtered_colors, init_ownlevel, owned_order, sample_tree, sort_codes, split_tree, upper_tree
 from ..compact_octree import encode_nodes
 from ..copc_write import write_copc_sets
 from ..keys import level_of, point_codes

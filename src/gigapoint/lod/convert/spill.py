@@ -1,5 +1,5 @@
-"""Spill files: the read phase's raw input chunks (``OctreeDir.raw``) and the gathering appends
-that fill the partitions' files."""
+"""Spill files: the read phase's raw input chunks (``OctreeDir.raw``); the partitions' files
+are filled by ``atomic.append_file``."""
 
 from __future__ import annotations
 
@@ -10,9 +10,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from ...atomic import atomic_npy, write_at
-
-_IOV_MAX = min(1024, os.sysconf("SC_IOV_MAX")) if hasattr(os, "sysconf") else 16  # buffers per writev
+from ...atomic import atomic_npy
 
 
 def _raw_path(raw: Path, i: int, key: str) -> Path:
@@ -114,38 +112,6 @@ def raw_chunk_files(raw: Path, chunks=None) -> list[Path]:
         return list(files)
     wanted = {f"c{i:06d}" for i in ([chunks] if isinstance(chunks, int) else chunks)}
     return [f for f in files if f.name.split(".", 1)[0] in wanted]
-
-
-MAPPED_APPEND_BYTES = 1 << 20  # append_file copies this much or more through a memory map
-
-
-def append_file(path: Path, arrays: list) -> None:
-    """Append contiguous arrays to ``path``. 1 MB or more: the file is made that much longer,
-    its space reserved (atomic.reserve: a full disk is an OSError naming it, not a SIGBUS) and
-    the arrays copied through a memory map of the new part: 4x faster than write() on the
-    project's VMs (a 20 M-point out-of-core conversion's distribute phase: 2.8 -> 1.7 s). Less:
-    gathering writes (writev), one system call per 1 024 arrays. No concatenated copy either way."""
-    views = [memoryview(a).cast("B") for a in arrays if a.nbytes]
-    if sum(len(v) for v in views) >= MAPPED_APPEND_BYTES:
-        write_at(path, path.stat().st_size if path.exists() else 0, views)
-        return
-    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
-    try:
-        while views:
-            batch = views[:_IOV_MAX]
-            try:
-                written = os.writev(fd, batch)
-            except OSError as exc:  # (a full disk named only the output folder)
-                raise OSError(exc.errno, exc.strerror, str(path)) from None
-            for v in batch:  # a short write (a signal, a nearly full disk) resumes where it stopped
-                if written >= len(v):
-                    written -= len(v)
-                    views.pop(0)
-                else:
-                    views[0] = v[written:]
-                    break
-    finally:
-        os.close(fd)
 
 
 def npy_data_offset(path: Path) -> int:

@@ -55,7 +55,7 @@ from ...core import pages
 from ...core.attributes import Attributes, encode, fits, holder_for, repacked, resized, widened, zeroed_like
 from ...core.attributes import stored as stored_array
 from ...core.chunk import PointChunk, attribute_dtype_problem, attribute_name_problem, colors_for, warn_dropped_attributes
-from ...core.cloud import MAX_ABS_COORDINATE, at_scale
+from ...core.cloud import MAX_ABS_COORDINATE, at_scale, take
 from ...core.compact import GRID_TOLERANCE, ext_bits_per_point, point_words, stream_words
 from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE, WORD_BITS
@@ -66,7 +66,7 @@ from ...core.selection import Selection, View, batch_matrices, precision_for, vi
 from ...core.threads import threads_for
 from ...errors import GigapointError, InputError, check_timeout, check_whole
 from ...render.splats import weighted_median
-from ..build import take, valid_bounds
+from ..build import valid_bounds
 from ..keys import CODE_BITS, morton_position, point_codes
 from ..store import list_chunks, select_octants
 from . import kernels as K
