@@ -101,7 +101,7 @@ class _RecordPlan:
                 continue
             at = off + k * base.itemsize
             self.rows[a] = add(base.itemsize, (at, 0, 0xFF) if base.itemsize == 1 else at, base)
-        self.rgb = [add(2, fields[c][1], np.dtype(np.uint16)) for c in ("red", "green", "blue")] if has_rgb else []
+        self.rgb = np.array([fields[c][1] for c in ("red", "green", "blue")] if has_rgb else [], np.int64)  # their own array: freed once made RGBA
         self.specs = {
             size: np.array(v, np.int64).reshape((-1, 3) if size == 1 else (-1,)) for size, v in specs.items()
         }
@@ -113,9 +113,9 @@ class _RecordPlan:
         rec = np.ascontiguousarray(raw).view(np.uint8).reshape(n, -1)
         xyz = np.empty((n, 3), np.float64)
         outs = {size: np.empty((len(spec), n), f"<u{size}") for size, spec in self.specs.items()}
-        _decode_records(rec, scale, offset, xyz, self.specs[1], outs[1], self.specs[2], outs[2], self.specs[4], outs[4], self.specs[8], outs[8])
-        rgb = [outs[size][row] for size, row, _ in self.rgb]
-        return xyz, rgb, {a: outs[size][row].view(dtype) for a, (size, row, dtype) in self.rows.items()}
+        rgb = np.empty((len(self.rgb), n), np.uint16)
+        _decode_records(rec, scale, offset, xyz, self.rgb, rgb, self.specs[1], outs[1], self.specs[2], outs[2], self.specs[4], outs[4], self.specs[8], outs[8])
+        return xyz, list(rgb), {a: outs[size][row].view(dtype) for a, (size, row, dtype) in self.rows.items()}
 
 
 @njit(inline="always")
@@ -128,16 +128,19 @@ def _le_bytes(r, o, size):
 
 
 @njit(parallel=True, cache=True)
-def _decode_records(rec, scale, offset, xyz, spec1, out1, spec2, out2, spec4, out4, spec8, out8):
+def _decode_records(rec, scale, offset, xyz, rgb_at, rgb, spec1, out1, spec2, out2, spec4, out4, spec8, out8):
     """One pass over point records (rows of bytes): positions ``X * scale + offset`` (int32 X, Y,
-    Z at bytes 0, 4, 8; as ``_scaled_xyz``) and the fields of ``spec<k>`` (byte offsets; for one
-    byte also a shift and a mask) into the rows of ``out<k>``. Each field read from its own strided
+    Z at bytes 0, 4, 8; as ``_scaled_xyz``), the 16-bit colour channels at ``rgb_at`` into the
+    rows of ``rgb``, and the fields of ``spec<k>`` (byte offsets; for one byte also a shift and a
+    mask) into the rows of ``out<k>``. Each field read from its own strided
     view was one pass over all the records' bytes a field (20 M LAS points, 6 attributes: 0.45 s)."""
     for i in prange(rec.shape[0]):
         r = rec[i]
         for a in range(3):
             v = np.int32(np.uint32(_le_bytes(r, 4 * a, 4)))
             xyz[i, a] = v * scale[a] + offset[a]
+        for k in range(rgb_at.shape[0]):
+            rgb[k, i] = _le_bytes(r, rgb_at[k], 2)
         for k in range(spec1.shape[0]):
             out1[k, i] = (r[spec1[k, 0]] >> spec1[k, 1]) & spec1[k, 2]
         for k in range(spec2.shape[0]):
