@@ -70,10 +70,10 @@ def _field_values(points, field: str | tuple[str, int]) -> np.ndarray:
 
 
 class _RecordPlan:
-    """Where a point format's values lie in its records, for ``_decode_records``: the colours
-    and every attribute stored as plain little-endian bytes (1, 2, 4 or 8 of them, a bit field
-    of one byte), grouped by size. Scaled extra bytes (laspy computes their floats) and fields
-    of other sizes stay laspy's: not in ``rows``."""
+    """Where a point format's values lie in its records, for ``_decode_records``: every attribute
+    stored as plain little-endian bytes (1, 2, 4 or 8 of them, a bit field of one byte), grouped
+    by size, and the colour channels. Scaled extra bytes (laspy computes their floats) and
+    fields of other sizes stay laspy's: not in ``rows``."""
 
     def __init__(self, point_format, attrs: dict, has_rgb: bool):
         from laspy.point.dims import get_sub_fields_dict
@@ -107,8 +107,9 @@ class _RecordPlan:
         }
 
     def decode(self, raw, scale, offset) -> tuple[np.ndarray, list, dict]:
-        """``raw``'s positions (float64, as ``_positions``), its 16-bit colour channels and its
-        attributes of ``rows`` (each a row of one array a size), in one parallel pass."""
+        """``raw``'s positions (float64, as ``_positions``), its 16-bit colour channels (rows of
+        their own array) and its attributes of ``rows`` (rows of one array a size), in one
+        parallel pass."""
         n = len(raw)
         rec = np.ascontiguousarray(raw).view(np.uint8).reshape(n, -1)
         xyz = np.empty((n, 3), np.float64)
@@ -132,8 +133,8 @@ def _decode_records(rec, scale, offset, xyz, rgb_at, rgb, spec1, out1, spec2, ou
     """One pass over point records (rows of bytes): positions ``X * scale + offset`` (int32 X, Y,
     Z at bytes 0, 4, 8; as ``_scaled_xyz``), the 16-bit colour channels at ``rgb_at`` into the
     rows of ``rgb``, and the fields of ``spec<k>`` (byte offsets; for one byte also a shift and a
-    mask) into the rows of ``out<k>``. Each field read from its own strided
-    view was one pass over all the records' bytes a field (20 M LAS points, 6 attributes: 0.45 s)."""
+    mask) into the rows of ``out<k>``. Each field read from its own strided view was one pass
+    over all the records' bytes a field (20 M LAS points, 6 attributes: 0.45 s)."""
     for i in prange(rec.shape[0]):
         r = rec[i]
         for a in range(3):
