@@ -83,3 +83,25 @@ def test_chunks_refuse_an_odd_size():
         with pytest.raises(InputError, match=rf"^c: chunks: points_per_chunk must be an integer >= 1, got {re.escape(repr(bad))}$"):
             list(cloud.chunks(bad))
     assert sum(len(c) for c in cloud.chunks(1000)) == 3000
+
+
+@pytest.mark.parametrize("dtype", [np.bool_, np.int8, np.uint16, np.float32, np.float64, np.complex128])
+@pytest.mark.parametrize("shape", [(), (3,)])
+def test_take_and_gather_are_numpys_fancy_indexing(dtype, shape):
+    """``take`` (the parallel gather of the converter, the octrees and the chunked cloud) and
+    ``gather`` (numpy up to NUMPY_MAX rows, take beyond; both by the fixture) give
+    ``values[order]``: 1-D and rows of 3, any item size (moved as same-width integers; others by
+    numpy), indices of any integer type, a strided source, into a slice of a larger output."""
+    rng = np.random.default_rng(5)
+    n = 5_000
+    values = (rng.standard_normal((2 * n, *shape)) * 100).astype(dtype)[::2]  # strided
+    order = rng.permutation(n)[: n - 7]
+    want = values[order]
+    for idx in (order, order.astype(np.uint32), order.astype(np.int32), order.astype(np.int16)):
+        got = cloud.take(values, idx)
+        assert got.dtype == want.dtype and got.shape == want.shape and np.array_equal(got, want)
+    out = np.zeros((len(order) + 10, *shape), dtype)
+    cloud.take(values, order, out=out[5:-5])
+    assert np.array_equal(out[5:-5], want) and not out[:5].any() and not out[-5:].any()
+    got = gather(values, order)
+    assert got.dtype == want.dtype and np.array_equal(got, want) and got.flags.c_contiguous
