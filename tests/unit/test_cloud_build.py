@@ -105,3 +105,35 @@ def test_take_and_gather_are_numpys_fancy_indexing(dtype, shape):
     assert np.array_equal(out[5:-5], want) and not out[:5].any() and not out[-5:].any()
     got = gather(values, order)
     assert got.dtype == want.dtype and np.array_equal(got, want) and got.flags.c_contiguous
+
+
+def test_the_chunks_are_let_go_once_joined(monkeypatch):
+    """build_cloud joins the chunks' arrays, then sorts and quantizes the joined ones: the chunks'
+    own arrays (the last chunk's and the attributes' included) are no longer held by then. Held
+    to the end, they were a second copy of every attribute through the sort (a 20 M-point LAS
+    opened: peak 2 015 -> 1 645 MiB)."""
+    import gc
+    import weakref
+
+    from gigapoint.core.chunk import PointChunk
+
+    alive = []
+
+    def chunk(i):
+        rng = np.random.default_rng(i)
+        xyz, rgba = rng.uniform(0, 100, (1000, 3)), rng.integers(0, 255, (1000, 4), dtype=np.uint8)
+        attrs = {"intensity": rng.integers(0, 9, 1000).astype(np.uint16), "gps_time": rng.uniform(0, 1, 1000)}
+        alive.extend(weakref.ref(a) for a in (xyz, rgba, *attrs.values()))
+        return PointChunk(xyz, rgba, attrs)
+
+    seen = []
+    real = cloud.cloud_from_points
+
+    def sorting(*args, **kwargs):
+        gc.collect()
+        seen.append(sum(r() is not None for r in alive))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(cloud, "cloud_from_points", sorting)
+    built = cloud.build_cloud((chunk(i) for i in range(3)), name="three")
+    assert len(built) == 3000 and seen == [0]
