@@ -375,14 +375,16 @@ def test_an_input_that_fits_in_memory_converts_to_the_spilled_octree_without_a_f
     """Byte for byte the out-of-core conversion's output, with no spill and no partition file written."""
     import importlib
 
-    spill = importlib.import_module("gigapoint.lod.convert.spill")
     with monkeypatch.context() as m:
         _spilling(m)
         spilled = convert(town_and_spot, tmp_path / "spilled", format=fmt, **opts)
-    for name in ("save_raw_chunk", "append_file"):  # partition.py's appends (atomic.append_file)
-        module = spill if name == "save_raw_chunk" else importlib.import_module("gigapoint.lod.convert.partition")
-        monkeypatch.setattr(module, name, lambda *a, **k: pytest.fail("a file was written between the phases"))
-    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.read"), "save_raw_chunk", spill.save_raw_chunk)
+
+    def written(*args, **kwargs):
+        pytest.fail("a file was written between the phases")
+
+    for module in ("read", "in_memory"):  # raw chunks
+        monkeypatch.setattr(importlib.import_module(f"gigapoint.lod.convert.{module}"), "save_raw_chunk", written)
+    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.partition"), "append_file", written)  # partitions
     held = convert(town_and_spot, tmp_path / "held", format=fmt, **opts)
     assert held.in_memory and not spilled.in_memory
     assert held.points == spilled.points == 180_000 and held.nodes == spilled.nodes

@@ -41,7 +41,7 @@ from ..atomic import append_file, write_failure
 from ..errors import InputError, MemoryLimitError
 from .attributes import Attributes
 from .chunk import PointChunk, attributes_in_common, warn_dropped_attributes
-from .cloud import PointCloud, _valid_mask, check_valid_count, finest_scale, gather, scan_points, storage_format, take
+from .cloud import PointCloud, _valid_mask, check_valid_count, finest_scale, gather, scan_points, storage_format
 from .compact import compact_positions, ext_bits_per_point, pack_rgb565, stream_words
 from .layout import BATCH_SIZE, PACK_DTYPE
 from .morton import MORTON_BITS_PER_AXIS, counting_order, cube_of, morton_codes, morton_order
@@ -240,7 +240,7 @@ def _spill(source, clean, folder, origin, edge, shift, part_of_cell, n_parts, sh
         color = np.ascontiguousarray(chunk.rgba[keep], np.uint8).view(np.uint32).reshape(-1)
         if short:
             color = pack_rgb565(color)
-        fields = {"xyz": take(xyz, order), "color": gather(color, order)}
+        fields = {"xyz": gather(xyz, order), "color": gather(color, order)}
         for a, (dtype, _) in attr_dtypes.items():
             fields[f"a_{a}"] = gather(np.ascontiguousarray(chunk.attributes[a][keep], dtype), order)
         del xyz, color, order
