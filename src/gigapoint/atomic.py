@@ -22,6 +22,8 @@ A bottom-layer module: it imports only the standard library and numpy.
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import json
 import os
 import re
@@ -32,7 +34,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-__all__ = ["append_file", "atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "fsync_file", "mapped_npy", "reserve", "temp_files", "write_at", "write_failure"]
+__all__ = ["append_file", "atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "fsync_file", "mapped_npy", "reserve", "start_writeback", "temp_files", "write_at", "write_failure"]
 
 _IOV_MAX = min(1024, os.sysconf("SC_IOV_MAX")) if hasattr(os, "sysconf") else 16  # buffers per writev
 _SHORT_WRITE = re.compile(r"(\d+) requested and (\d+) written")
@@ -58,6 +60,36 @@ def fsync_file(path) -> None:
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+@functools.cache
+def _sync_file_range():
+    """libc's ``sync_file_range`` (Linux), None where there is none."""
+    try:
+        f = ctypes.CDLL(None, use_errno=True).sync_file_range
+    except (OSError, AttributeError):
+        return None
+    f.argtypes = [ctypes.c_int, ctypes.c_int64, ctypes.c_int64, ctypes.c_uint]
+    return f
+
+
+_SYNC_FILE_RANGE_WRITE = 2  # start writing the range's dirty pages, wait for nothing
+
+
+def start_writeback(path, offset: int, length: int) -> None:
+    """The disk starts writing bytes ``offset``..``offset + length`` of ``path`` now, while the
+    caller goes on (Linux's sync_file_range; elsewhere nothing): a file written through memory
+    maps part by part is otherwise written back by the kernel only once ``fsync_file`` asks,
+    all of it while the caller waits (a 20 M-point conversion's output: ~0.4 s of fsyncs at
+    its end). No durability promise: ``fsync_file`` still makes the file durable."""
+    sync = _sync_file_range()
+    if sync is None or length <= 0:
+        return
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        sync(fd, offset, length, _SYNC_FILE_RANGE_WRITE)  # (an error here only means a later fsync waits longer)
     finally:
         os.close(fd)
 

@@ -9,7 +9,8 @@ import stat
 import numpy as np
 import pytest
 
-from gigapoint.atomic import atomic_bytes, atomic_json, atomic_npy, atomic_open, atomic_write, temp_files
+from gigapoint import atomic
+from gigapoint.atomic import atomic_bytes, atomic_json, atomic_npy, atomic_open, atomic_write, start_writeback, temp_files
 
 
 def test_writes_replace_the_file_and_leave_nothing_else(tmp_path):
@@ -194,3 +195,24 @@ def test_a_short_write_says_how_much_was_written():
     exc = OSError("26979 requested and 13296 written")  # numpy's tofile on a full disk: no errno, no file
     _name_the_file(exc, "/out/carry.xyz.npy")
     assert str(exc) == "[Errno None] only 13296 of 26979 bytes written (is the disk full?): '/out/carry.xyz.npy'"
+
+
+@pytest.mark.parametrize("libc", [True, False])
+def test_start_writeback_changes_no_byte_and_needs_no_libc(tmp_path, monkeypatch, libc):
+    """Writeback started on a range of a file written through a memory map (Linux's
+    sync_file_range; nothing where there is none) leaves every byte as written, and a later
+    fsync makes it durable as before."""
+    if not libc:
+        monkeypatch.setattr(atomic, "_sync_file_range", lambda: None)
+    elif atomic._sync_file_range() is None:
+        pytest.skip("no sync_file_range here")
+    data = np.random.default_rng(0).integers(0, 255, 3 << 20, dtype=np.uint8)
+    path = tmp_path / "a.bin"
+    path.write_bytes(b"\0" * len(data))
+    mapped = np.memmap(path, np.uint8, mode="r+")
+    mapped[:] = data
+    del mapped
+    start_writeback(path, 4096, 2 << 20)
+    start_writeback(path, 0, 0)
+    atomic.fsync_file(path)
+    assert np.array_equal(np.fromfile(path, np.uint8), data)

@@ -91,6 +91,29 @@ def test_the_child_decodes_the_records_this_process_would(tmp_path, monkeypatch,
     assert sum(len(c) for c in child) == (stop or 50_003) - start
 
 
+@pytest.mark.parametrize("kernel", [True, False])
+def test_numba_is_set_up_while_the_child_decodes_the_first_records(tmp_path, monkeypatch, kernel):
+    """A file the decoding kernel reads (over NUMPY_MAX points) sets numba up (its first kernel
+    call's ~0.45 s) before this process waits on the child for the first records, not after
+    them while the child waits for this process; a small file (numpy's) not at all."""
+    from gigapoint.io import las
+
+    events = []
+    monkeypatch.setattr(las, "prepare_kernel_calls", lambda: events.append("numba"))
+    read = laz_process.ChildRecords.read
+
+    def reading(self, n):
+        events.append("read")
+        return read(self, n)
+
+    monkeypatch.setattr(laz_process.ChildRecords, "read", reading)
+    monkeypatch.setattr(las, "NUMPY_MAX", 10_000 if kernel else 1 << 30)
+    path = _write_laz(tmp_path / "a.laz", 30_000)
+    chunks = list(read_chunks(path, 7_000))
+    assert sum(len(c) for c in chunks) == 30_000
+    assert events == (["numba"] if kernel else []) + ["read"] * 5  # a read a chunk
+
+
 def test_a_crash_of_the_decoder_is_a_one_line_error_after_the_points_before_it(tmp_path, children):
     bad = _corrupted(_write_laz(tmp_path / "good.laz", 200_000), tmp_path / "bad.laz")
     got = 0

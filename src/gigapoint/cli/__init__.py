@@ -15,7 +15,7 @@ import warnings
 from ..errors import GigapointError, GigapointWarning
 from .app import app
 
-__all__ = ["app", "main", "run"]
+__all__ = ["app", "exit_without_teardown", "main", "run"]
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
@@ -80,7 +80,14 @@ def run() -> None:
     1 M point file (benchmarks/bench_cli.py). Everything a command owns is closed by the time
     ``main`` returns; atexit handlers still run, and a command that left a thread running
     exits the normal way, which waits for it."""
-    code = main()
+    exit_without_teardown(main())
+
+
+def exit_without_teardown(code: int) -> None:
+    """``run``'s exit (also a benchmark's child process that times a command as the CLI runs it):
+    atexit handlers run and output is flushed, then the process ends with ``code``, numba's and
+    LLVM's objects left to the OS (the interpreter's garbage collections at teardown). A thread
+    still running makes it the normal exit, which waits for it."""
     if any(t.is_alive() and not t.daemon for t in threading.enumerate() if t is not threading.main_thread()):
         sys.exit(code)
     atexit._run_exitfuncs()  # then clears them

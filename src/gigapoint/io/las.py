@@ -22,6 +22,7 @@ from numba import njit, prange
 from ..core import pages
 from ..core.chunk import ColorScaler, PointChunk, safe_attribute_name
 from ..core.cloud import MAX_ABS_COORDINATE, NUMPY_MAX
+from ..core.threads import prepare_kernel_calls
 from ..errors import EmptyCloudError, InputError
 from . import laz_process
 from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail, one_line
@@ -604,6 +605,8 @@ class LasReader(Reader):
             if records is None:
                 records = _Records(reader, most)
             stack.callback(records.close)
+            if stop - start > NUMPY_MAX and isinstance(records, laz_process.ChildRecords):
+                prepare_kernel_calls()  # the decoding kernel's first call sets numba up: now, while the child decodes
             while done < stop:
                 try:
                     pts = records.read(min(chunk_size, stop - done))
