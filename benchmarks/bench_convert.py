@@ -29,7 +29,9 @@ from gigapoint.bench import run_measured
 
 CHILD = """
 import json, sys, time
+from gigapoint.core.threads import skip_blas_check
 from gigapoint.lod import convert
+skip_blas_check()  # as `gigapoint convert` does (cli.main)
 args = json.loads(sys.argv[1])
 t = time.perf_counter()
 r = convert([args["input"]], args["out"], sampler=args["sampler"], memory_limit=args["memory_limit"], format=args["format"])

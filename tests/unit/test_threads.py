@@ -116,3 +116,44 @@ def test_a_layer_numba_loaded_before_gigapoint_is_kept_and_no_second_tbb_is_load
     clean = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_THREADING_LAYER")}
     run = subprocess.run([sys.executable, "-c", _KERNEL_FIRST], env=clean, capture_output=True, text=True, timeout=300)
     assert run.stdout.strip() == "False True (24, 32, 4)", run.stderr[-800:]
+
+
+_BLAS = """
+import sys, numpy as np, numba
+from gigapoint.core.threads import skip_blas_check
+skip_blas_check()
+from gigapoint.core.morton import morton_codes
+morton_codes(np.zeros((10, 3)), np.zeros(3), 1.0)
+first = "scipy.linalg" in sys.modules
+a, v = np.arange(7.0), np.array([1.0, -2.0, 0.5])
+conv = numba.njit(lambda a, v: np.convolve(a, v))(a, v)
+assert np.allclose(conv, np.convolve(a, v))
+try:
+    import scipy.linalg  # noqa: F401
+except ImportError:
+    print(first, "no scipy")
+else:
+    dot = numba.njit(lambda a, b: np.dot(a, b))(np.ones((3, 4)), np.ones((4, 2)))
+    assert np.allclose(dot, 4.0)
+    print(first, "dot")
+"""
+
+
+def test_the_cli_runs_kernels_without_scipys_blas_and_numba_still_computes():
+    """skip_blas_check (cli.main): a kernel call imports no scipy.linalg (0.26 s), and numba's
+    convolution (its own loop then) and np.dot (scipy's BLAS, imported when compiled) still
+    give numpy's results."""
+    run = subprocess.run([sys.executable, "-c", _BLAS], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split()[0] == "False"
+
+
+def test_a_cli_render_imports_no_scipy_linalg(tmp_path):
+    code = (
+        "import sys\nfrom gigapoint.cli import main\n"
+        f"assert main(['demo', '-n', '20000', '-o', {str(tmp_path / 'a.png')!r}, '-W', '64', '--height', '48']) == 0\n"
+        "print('scipy.linalg' in sys.modules)\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split()[-1] == "False" and (tmp_path / "a.png").exists()

@@ -66,6 +66,29 @@ def prepare_kernel_calls() -> None:
         cpu_target.typing_context.refresh()
 
 
+def skip_blas_check() -> None:
+    """numba's one check for a BLAS (``numba.np.arraymath._HAVE_BLAS``, made when a process's
+    first kernel call imports that module) answered "none" without importing scipy.linalg,
+    which it imports where scipy is installed: 0.26 s of the first kernel call on the AMD EPYC.
+    For processes that run only gigapoint's kernels, which use no BLAS (the CLI): numba then
+    computes np.correlate and np.convolve with its own loop (the check's only use); np.dot and
+    np.linalg still import scipy when they are compiled. Nothing is done once the check ran."""
+    if "numba.np.arraymath" in sys.modules:
+        return
+    from numba.core.compiler_lock import global_compiler_lock
+    from numba.np import linalg
+
+    def no_blas():
+        raise ImportError("gigapoint: BLAS check skipped")
+
+    with global_compiler_lock:  # no compilation asks linalg for a BLAS meanwhile
+        real, linalg.ensure_blas = linalg.ensure_blas, no_blas
+        try:
+            import numba.np.arraymath  # noqa: F401 - its import makes the check, with no_blas bound
+        finally:
+            linalg.ensure_blas = real
+
+
 def _loaded_layer() -> str | None:
     """The threading layer numba has loaded, None before its first parallel kernel."""
     try:
