@@ -59,17 +59,17 @@ def assert_same_images(got, want):
 
 
 @pytest.mark.parametrize(
-    ("scale", "batch_size", "partition_points"),
-    [(0.01, 1000, 20_000), (0.01, 10_240, 50_000), (None, 777, 30_000)],
+    ("scale", "batch_size", "partition_points", "read_once"),
+    [(0.01, 1000, 20_000, False), (0.01, 10_240, 50_000, False), (None, 777, 30_000, False), (0.01, 1000, 20_000, True), (None, 777, 30_000, True)],
 )
-def test_equals_build_cloud(scale, batch_size, partition_points, tmp_path):
+def test_equals_build_cloud(scale, batch_size, partition_points, read_once, tmp_path):
     n = 250_000
 
     def source():
         return demo_chunks(n, seed=3, chunk_size=60_000, scale=scale)
 
     want = build_cloud(source(), name="town", batch_size=batch_size)
-    got = build_cloud_chunked(source, name="town", batch_size=batch_size, partition_points=partition_points, tmpdir=tmp_path)
+    got = build_cloud_chunked(source, name="town", batch_size=batch_size, partition_points=partition_points, tmpdir=tmp_path, read_once=read_once)
     assert want.layout == ("words" if scale is None else "compact")
     assert_same_cloud(got, want)
     assert_same_images(got, want)
@@ -104,7 +104,8 @@ def test_large_partitions_take_the_parallel_sort(tmp_path):
     assert_same_cloud(got, build_cloud(source()))
 
 
-def test_invalid_points_mixed_attributes_wide_batches(rng, tmp_path):
+@pytest.mark.parametrize("read_once", [False, True])
+def test_invalid_points_mixed_attributes_wide_batches(rng, tmp_path, read_once):
     """NaN/inf points skipped and counted, only the attributes every chunk has kept, a chunk off
     the grid (wide batches), non-opaque colours kept 32-bit: all as build_cloud does."""
     utm = np.array([636_000.0, 5_012_000.0, 120.0])
@@ -123,12 +124,92 @@ def test_invalid_points_mixed_attributes_wide_batches(rng, tmp_path):
     with pytest.warns(GigapointWarning, match="skipped"), pytest.warns(GigapointWarning, match="classification not in every file"):
         want = build_cloud(chunks, batch_size=2000)
     with pytest.warns(GigapointWarning, match="skipped"), pytest.warns(GigapointWarning, match="classification not in every file"):
-        got = build_cloud_chunked(lambda: chunks, batch_size=2000, partition_points=7_000, tmpdir=tmp_path)
+        got = build_cloud_chunked(lambda: chunks, batch_size=2000, partition_points=7_000, tmpdir=tmp_path, read_once=read_once)
     assert got.skipped == want.skipped > 0
     assert sorted(got.attributes) == ["intensity"]
     assert got.color.dtype == np.uint32  # not opaque: 32-bit colours
     assert ((got.packing["code"] & 0xFF) == 20).any()  # some wide batches
     assert_same_cloud(got, want)
+
+
+def test_a_source_read_once_is_called_once_and_its_copy_never_outgrows_the_points(rng, tmp_path, monkeypatch):
+    """read_once: the source is called once (the survey), its chunks as read (2-D attributes,
+    an empty chunk, a byte-sized attribute before an 8-byte one: aligned views) kept in the
+    build's folder for the later passes, which give the cloud the source gives; the spill pass
+    removes each chunk file once read, so the folder never holds much more than the points once."""
+    from gigapoint.core import chunked
+
+    chunks = []
+    for k in range(5):
+        m = 0 if k == 3 else 20_000 + 7 * k
+        attrs = {"flag": rng.integers(0, 2, m).astype(np.uint8), "t": rng.random(m), "rg": rng.integers(0, 999, (m, 2)).astype(np.uint16)}
+        chunks.append(PointChunk(np.round(rng.random((m, 3)) * 500.0, 2), rng.integers(0, 256, (m, 4), dtype=np.uint8), attrs, scale=(0.01,) * 3))
+    calls = []
+
+    def source():
+        calls.append(1)
+        return iter(chunks)
+
+    folder_bytes = []
+    spill = chunked._spill
+
+    def spilling(src, *args):
+        def watched():
+            for chunk in src():
+                folder_bytes.append(sum(f.stat().st_size for f in Path(args[1]).iterdir()))
+                yield chunk
+
+        return spill(watched, *args)
+
+    monkeypatch.setattr(chunked, "_spill", spilling)
+    got = build_cloud_chunked(source, batch_size=3000, partition_points=9_000, tmpdir=tmp_path, read_once=True)
+    assert len(calls) == 1
+    assert_same_cloud(got, build_cloud(iter(chunks), batch_size=3000))
+    assert got.attributes["rg"].shape == (sum(len(c) for c in chunks), 2)
+    point_bytes = sum(c.xyz.nbytes + c.rgba.nbytes + sum(v.nbytes for v in c.attributes.values()) for c in chunks)
+    assert len(folder_bytes) == 5 and max(folder_bytes) <= point_bytes + 64 * 5  # (each chunk file's padding)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(not AUTZEN.exists(), reason="shared sample missing")
+def test_open_decodes_a_laz_file_once_when_chunked(monkeypatch, tmp_path):
+    """gp.open(LAZ, chunked=True) decodes the file once (io.Reader.reads_slowly), not once a
+    pass, and gives the cloud a plain open gives; a LAS file is read a pass at a time still."""
+    from gigapoint.io.las import LasReader
+
+    reads = []
+    read_chunks = LasReader.read_chunks
+
+    def counting(self, path, *args, **kwargs):
+        reads.append(path)
+        return read_chunks(self, path, *args, **kwargs)
+
+    monkeypatch.setattr(LasReader, "read_chunks", counting)
+    got = gp.open(AUTZEN, chunked=True, chunk_size=30_000)
+    assert len(reads) == 1
+    assert_same_cloud(got, gp.open(AUTZEN))
+    import laspy
+
+    las = tmp_path / "autzen.las"
+    laspy.read(str(AUTZEN)).write(str(las))
+    reads.clear()
+    gp.open(las, chunked=True, chunk_size=30_000)
+    assert len(reads) == 3
+
+
+def test_a_full_disk_while_keeping_a_source_read_once_is_one_line(monkeypatch, tmp_path):
+    import errno
+
+    from gigapoint.core import chunked
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(chunked, "append_file", full)
+    points = np.random.default_rng(1).uniform(0, 10, (1000, 3))
+    with pytest.raises(InputError, match=r"full: spilling points to .*gigapoint_chunked_.* failed: No space left on device \(the chunked build needs ~30 bytes a point of free disk there; pass tmpdir="):
+        chunked.build_cloud_chunked(lambda: iter([PointChunk(points, None)]), name="full", tmpdir=tmp_path, read_once=True)
+    assert not list(tmp_path.iterdir())
 
 
 def test_options_and_errors(tmp_path):

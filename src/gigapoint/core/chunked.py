@@ -6,7 +6,8 @@ before it quantizes or compacts. ``build_cloud_chunked`` gives the same cloud, a
 only the finished arrays (4-6 bytes a point of positions in the compact layout, 2 of colour,
 the attributes) and one bounded partition at a time. It reads its source three times, so the
 source is a function returning a fresh iterable of PointChunks (a demo generator, a file
-reader):
+reader); a source costly to read (a LAZ file's decoding, text) is read once instead
+(``read_once``: its chunks kept in the spill folder for the later passes, ``_ReadOnce``):
 
 1. **survey**: point count, invalid points, bounds (hence the Morton cube), the attributes
    every chunk has, the finest scale, whether all colours are opaque;
@@ -32,6 +33,7 @@ import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterable
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -117,6 +119,7 @@ def build_cloud_chunked(
     partition_points: int = PARTITION_POINTS,
     cell_level: int = CELL_LEVEL,
     tmpdir: str | Path | None = None,
+    read_once: bool = False,
 ) -> PointCloud:
     """``build_cloud(source(), name, batch_size, layout, colors)`` in bounded memory (module doc).
 
@@ -125,35 +128,101 @@ def build_cloud_chunked(
     attributes out (3 bytes a point for the demo town's intensity and classification).
     ``partition_points``, ``cell_level``: the partitions' size (memory) and the cells they are
     cut from. ``tmpdir``: where the spill folder goes (default: the system's temp folder); it
-    needs ~29-31 bytes a point of disk (float64 xyz, colour, attributes)."""
+    needs ~29-31 bytes a point of disk (float64 xyz, colour, attributes). ``read_once``: call
+    ``source`` once and keep its chunks in that folder for the later passes (``_ReadOnce``: for
+    sources whose reading costs far more than a copy, a LAZ file's decoding); the same disk."""
     if batch_size < 1:
         raise InputError(f"{name}: batch size must be >= 1, got {batch_size}")
     if partition_points < 1:
         raise InputError(f"{name}: partition_points must be >= 1, got {partition_points}")
     if not 1 <= cell_level <= 8:
         raise InputError(f"{name}: cell_level must be 1..8, got {cell_level}")
-    survey = _survey(source, attributes, name)
-    n, skipped = survey["n"], survey["skipped"]
-    check_valid_count(name, n, skipped)
-    source_scale = finest_scale(survey["scales"])
-    compact, color_format = storage_format(name, layout, colors, source_scale, survey["opaque"])
-    short = color_format == "rgb565"  # spilled as RGB565 (palettes and "auto": as u32, quantized block by block when finalized)
-    lo, hi = survey["lo"], survey["hi"]
-    origin, edge = cube_of(lo, hi)
-    shift = 3 * (MORTON_BITS_PER_AXIS - cell_level)
-    clean = skipped == 0
-    part_of_cell, n_parts = _cut_partitions(_histogram(source, clean, origin, edge, shift, cell_level), partition_points)
-    attr_dtypes = survey["attributes"]
     with tempfile.TemporaryDirectory(prefix="gigapoint_chunked_", dir=tmpdir) as tmp:
         folder = Path(tmp)
-        try:
-            _spill(source, clean, folder, origin, edge, shift, part_of_cell, n_parts, short, attr_dtypes)
-        except OSError as exc:  # a full disk, most likely: say where and how much it needs
-            raise InputError(
-                f"{name}: spilling {n:,} points to {folder} failed: {write_failure(exc)} (the chunked build needs ~30 bytes a point "
-                f"of free disk there, {30 * n / 1e9:.1f} GB; pass tmpdir= for another place)"
-            ) from exc
+        passes = _ReadOnce(source, folder) if read_once else None
+        with _spilling(name, folder, lambda: None):  # (the chunks kept by _ReadOnce)
+            survey = _survey(passes.first if passes else source, attributes, name)
+        n, skipped = survey["n"], survey["skipped"]
+        check_valid_count(name, n, skipped)
+        source_scale = finest_scale(survey["scales"])
+        compact, color_format = storage_format(name, layout, colors, source_scale, survey["opaque"])
+        short = color_format == "rgb565"  # spilled as RGB565 (palettes and "auto": as u32, quantized block by block when finalized)
+        lo, hi = survey["lo"], survey["hi"]
+        origin, edge = cube_of(lo, hi)
+        shift = 3 * (MORTON_BITS_PER_AXIS - cell_level)
+        clean = skipped == 0
+        part_of_cell, n_parts = _cut_partitions(_histogram(passes.again if passes else source, clean, origin, edge, shift, cell_level), partition_points)
+        attr_dtypes = survey["attributes"]
+        with _spilling(name, folder, lambda: n):
+            _spill(passes.last if passes else source, clean, folder, origin, edge, shift, part_of_cell, n_parts, short, attr_dtypes)
         return _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, color_format, attr_dtypes, batch_size, name, skipped, source_scale)
+
+
+@contextmanager
+def _spilling(name: str, folder: Path, points):
+    """An OSError writing to ``folder`` (a full disk, most likely) as one line that says where and
+    how much the build needs (``points()``: the points, where known)."""
+    try:
+        yield
+    except OSError as exc:
+        n = points()
+        need = f", {30 * n / 1e9:.1f} GB" if n is not None else ""
+        raise InputError(
+            f"{name}: spilling {'' if n is None else f'{n:,} '}points to {folder} failed: {write_failure(exc)} (the chunked build needs "
+            f"~30 bytes a point of free disk there{need}; pass tmpdir= for another place)"
+        ) from exc
+
+
+class _ReadOnce:
+    """A source read once: the first pass (the survey) reads it and writes every chunk, as read,
+    to a file of the build's folder; the later passes read those files instead of the source
+    (a LAZ file's decoding, ~0.3 us a point, is then paid once instead of three times), and the
+    last removes each file once read, so the folder holds at most the points once (the spill
+    grows as the chunk files go). A chunk file holds its arrays back to back, each from a
+    multiple of 8 bytes (aligned views of one read)."""
+
+    def __init__(self, source: ChunkSource, folder: Path):
+        self.source, self.folder = source, folder
+        self.chunks: list[tuple] = []  # (file, points, scale, [(attribute, dtype, shape of a value, byte offset)], rgba offset)
+
+    def first(self):
+        for k, chunk in enumerate(self.source()):
+            arrays = [chunk.xyz, chunk.rgba, *chunk.attributes.values()]
+            parts, at, places = [], 0, []
+            for a in arrays:
+                a = np.ascontiguousarray(a)
+                places.append(at)
+                parts.append(a)
+                at += a.nbytes
+                if at % 8:
+                    parts.append(np.zeros(8 - at % 8, np.uint8))
+                    at += 8 - at % 8
+            path = self.folder / f"source.{k}"
+            append_file(path, parts)
+            attrs = [(a, v.dtype, v.shape[1:], off) for (a, v), off in zip(chunk.attributes.items(), places[2:])]
+            self.chunks.append((path, len(chunk), chunk.scale, attrs, places[1]))
+            yield chunk
+
+    def again(self, remove: bool = False):
+        for path, n, scale, attrs, rgba_at in self.chunks:
+            data = np.fromfile(path, np.uint8)
+            if remove:
+                path.unlink()
+
+            yield PointChunk(
+                _view(data, np.float64, (n, 3), 0),
+                _view(data, np.uint8, (n, 4), rgba_at),
+                {a: _view(data, dtype, (n, *shape), at) for a, dtype, shape, at in attrs},
+                scale=scale,
+            )
+
+    def last(self):
+        return self.again(remove=True)
+
+
+def _view(data: np.ndarray, dtype, shape: tuple, at: int) -> np.ndarray:
+    """The array of ``shape`` at byte ``at`` of ``data`` (no copy)."""
+    return np.frombuffer(data, dtype, int(np.prod(shape, dtype=np.int64)), at).reshape(shape)
 
 
 # --- the three passes over the source --------------------------------------------------------

@@ -117,8 +117,8 @@ def open_cloud(
     Several files are merged (attributes they all have are kept). With several files, a file
     without any point is skipped with a warning; one file without points raises EmptyCloudError.
     ``progress=True`` shows a progress bar on stderr (rich). ``chunked=True``: built in bounded
-    memory (core/chunked.py: the files read three times, the points spilled to a temporary
-    folder; the same cloud), for files whose points do not fit in memory as floats; None (the
+    memory (core/chunked.py: the files read three times, LAZ and text files decoded once and
+    their points kept for the later passes; the points spilled to a temporary folder; the same cloud), for files whose points do not fit in memory as floats; None (the
     default): chunked when the files' headers say they hold more than ``CHUNKED_ABOVE`` (50 M).
     """
     if not paths:
@@ -164,7 +164,8 @@ def open_cloud(
             if chunked:  # ``stream``: a function giving the chunks, called once a pass
                 from ..core.chunked import build_cloud_chunked
 
-                cloud = build_cloud_chunked(stream, name=name, layout=layout, colors=colors)
+                read_once = any(reader.reads_slowly(f) for f, reader in plan)  # LAZ, text: decoded once, not three times
+                cloud = build_cloud_chunked(stream, name=name, layout=layout, colors=colors, read_once=read_once)
             else:
                 cloud = build_cloud(stream, name=name, layout=layout, colors=colors)
         except EmptyCloudError as exc:

@@ -46,6 +46,12 @@ class Reader:
         """Number of points when the header tells it cheaply, else None (used for progress bars)."""
         return None
 
+    def reads_slowly(self, path: Path) -> bool:
+        """Whether reading the file's points costs far more than copying them (decompression,
+        text parsing): a build that reads its source more than once (core/chunked.py) then
+        reads it once and keeps the points it read."""
+        return False
+
     def header(self, path: Path) -> dict:
         """What the file's header tells without reading its points: ``point_count`` (None when
         it does not), and where the format's header holds them ``bounds`` ((min, max) of its

@@ -83,6 +83,9 @@ class PlyReader(Reader):
     def sniff(self, head: bytes) -> bool:
         return head[:4] in (b"ply\n", b"ply\r")
 
+    def reads_slowly(self, path: Path) -> bool:
+        return _Header(check_file(path)).text  # ASCII: every value parsed
+
     def point_count(self, path: Path) -> int | None:
         """The header's vertex count, after checking the file can hold that many: a binary file's
         bytes exactly, an ASCII one's at 6 bytes a vertex at least ("0 0 0\\n"). A count of 10^12

@@ -219,6 +219,9 @@ class TextReader(Reader):
     name = "XYZ/TXT/CSV"
     suffixes = (".xyz", ".txt", ".csv", ".pts", ".asc", ".xyzrgb")
 
+    def reads_slowly(self, path: Path) -> bool:
+        return True  # every value parsed
+
     def weak_sniff(self, head: bytes) -> bool:
         try:
             text = head.decode("utf-8")
