@@ -211,6 +211,15 @@ def test_a_full_disk_while_keeping_a_source_read_once_is_one_line(monkeypatch, t
         chunked.build_cloud_chunked(lambda: iter([PointChunk(points, None)]), name="full", tmpdir=tmp_path, read_once=True)
     assert not list(tmp_path.iterdir())
 
+    def failing():  # the source's own error is not the spill's
+        yield PointChunk(points, None)
+        raise OSError(errno.EIO, "Input/output error", "in.laz")
+
+    monkeypatch.undo()
+    with pytest.raises(OSError, match="Input/output error") as caught:
+        chunked.build_cloud_chunked(failing, name="bad", tmpdir=tmp_path, read_once=True)
+    assert not isinstance(caught.value, InputError) and not list(tmp_path.iterdir())
+
 
 def test_options_and_errors(tmp_path):
     def source():

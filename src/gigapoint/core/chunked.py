@@ -139,9 +139,8 @@ def build_cloud_chunked(
         raise InputError(f"{name}: cell_level must be 1..8, got {cell_level}")
     with tempfile.TemporaryDirectory(prefix="gigapoint_chunked_", dir=tmpdir) as tmp:
         folder = Path(tmp)
-        passes = _ReadOnce(source, folder) if read_once else None
-        with _spilling(name, folder, lambda: None):  # (the chunks kept by _ReadOnce)
-            survey = _survey(passes.first if passes else source, attributes, name)
+        passes = _ReadOnce(source, folder, name) if read_once else None
+        survey = _survey(passes.first if passes else source, attributes, name)
         n, skipped = survey["n"], survey["skipped"]
         check_valid_count(name, n, skipped)
         source_scale = finest_scale(survey["scales"])
@@ -153,19 +152,18 @@ def build_cloud_chunked(
         clean = skipped == 0
         part_of_cell, n_parts = _cut_partitions(_histogram(passes.again if passes else source, clean, origin, edge, shift, cell_level), partition_points)
         attr_dtypes = survey["attributes"]
-        with _spilling(name, folder, lambda: n):
+        with _spilling(name, folder, n):
             _spill(passes.last if passes else source, clean, folder, origin, edge, shift, part_of_cell, n_parts, short, attr_dtypes)
         return _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, color_format, attr_dtypes, batch_size, name, skipped, source_scale)
 
 
 @contextmanager
-def _spilling(name: str, folder: Path, points):
+def _spilling(name: str, folder: Path, n: int | None):
     """An OSError writing to ``folder`` (a full disk, most likely) as one line that says where and
-    how much the build needs (``points()``: the points, where known)."""
+    how much the build needs (``n``: the points, where known)."""
     try:
         yield
     except OSError as exc:
-        n = points()
         need = f", {30 * n / 1e9:.1f} GB" if n is not None else ""
         raise InputError(
             f"{name}: spilling {'' if n is None else f'{n:,} '}points to {folder} failed: {write_failure(exc)} (the chunked build needs "
@@ -181,8 +179,8 @@ class _ReadOnce:
     grows as the chunk files go). A chunk file holds its arrays back to back, each from a
     multiple of 8 bytes (aligned views of one read)."""
 
-    def __init__(self, source: ChunkSource, folder: Path):
-        self.source, self.folder = source, folder
+    def __init__(self, source: ChunkSource, folder: Path, name: str):
+        self.source, self.folder, self.name = source, folder, name
         self.chunks: list[tuple] = []  # (file, points, scale, [(attribute, dtype, shape of a value, byte offset)], rgba offset)
 
     def first(self):
@@ -198,7 +196,8 @@ class _ReadOnce:
                     parts.append(np.zeros(8 - at % 8, np.uint8))
                     at += 8 - at % 8
             path = self.folder / f"source.{k}"
-            append_file(path, parts)
+            with _spilling(self.name, self.folder, None):  # (not the source's own errors)
+                append_file(path, parts)
             attrs = [(a, v.dtype, v.shape[1:], off) for (a, v), off in zip(chunk.attributes.items(), places[2:])]
             self.chunks.append((path, len(chunk), chunk.scale, attrs, places[1]))
             yield chunk
