@@ -422,6 +422,41 @@ def test_the_output_arrays_go_to_the_disk_while_the_build_writes_them(demo_las, 
     assert not [p for p in sent if "/oct/" in p]  # no other output file
 
 
+@pytest.mark.parametrize("code", ["files", "off the grid at the 3rd chunk"])
+def test_held_las_positions_are_int32_and_the_octree_is_the_spilled_ones(town_and_spot, tmp_path, monkeypatch, code):
+    """An input held in memory whose files share a LAS grid holds its positions as int32 (12
+    bytes a point, not 24), decoded a partition at a time for the build (and for the refinement's
+    codes): the octree is the out-of-core conversion's byte for byte. A chunk off that grid turns
+    every held chunk back to float64 and the rest are held so, to the same octree."""
+    import importlib
+
+    in_memory = importlib.import_module("gigapoint.lod.convert.in_memory")
+    with monkeypatch.context() as m:
+        _spilling(m)
+        convert(town_and_spot, tmp_path / "spilled", **OPTS)
+    if code != "files":  # encode_xyz finds the 3rd chunk off the grid
+        encode, calls = in_memory.encode_xyz, []
+
+        def encoding(xyz, c):
+            calls.append(1)
+            return None if len(calls) == 3 else encode(xyz, c)
+
+        monkeypatch.setattr(in_memory, "encode_xyz", encoding)
+    dtypes = []
+    count = in_memory.InMemoryPhases.count
+
+    def counting(self):
+        dtypes.extend(c["xyz"].dtype for c in self._held)
+        return count(self)
+
+    monkeypatch.setattr(in_memory.InMemoryPhases, "count", counting)
+    held = convert(town_and_spot, tmp_path / "held", **OPTS)
+    assert held.in_memory and len(dtypes) == 5  # 150 000 points in chunks of 40 000, then the spot
+    assert set(dtypes) == ({np.dtype(np.int32)} if code == "files" else {np.dtype(np.float64)})
+    a, b = _files_of(tmp_path / "spilled"), _files_of(tmp_path / "held")
+    assert a.keys() == b.keys() and [k for k in a if a[k] != b[k]] == []
+
+
 def test_an_input_beyond_the_memory_limit_is_spilled(demo_las, tmp_path):
     """The choice: the points held (64 bytes each) and one partition's build within what the
     conversion may use; chunks of unknown number are held until they outgrow it (below)."""

@@ -17,10 +17,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...io.registry import reader_for
 from .options import BYTES_PER_POINT_BUILD
 from .partition import CellCounts, PartitionPhases, built_name, grid_cells, partition_lut
 from .read import ReadPhase, valid_chunk
-from .spill import save_raw_chunk
+from .spill import decode_xyz, encode_xyz, save_raw_chunk
 
 # what a held point costs: float64 position, RGBA, attributes (LAS: up to ~20 bytes), the count
 # grid's cell, and its copy in a partition while the chunks are grouped
@@ -55,6 +56,10 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
 
     _held: list  # the read chunks: {"xyz", "rgba", "attr.<name>"}, then their count-grid cells
     _pieces: dict  # (level, prefix) -> the partition's points, piece by piece in input order
+    #: the LAS files' [scale, offset] (every input file's the same) under which the held positions
+    #: are int32 (spill.encode_xyz: 12 bytes a point, not 24; 240 MB of a 20 M-point conversion),
+    #: decoded a partition at a time for its build; None: float64
+    _xyz_code = None
 
     def resume_state(self, saved: dict) -> dict:
         """A run killed before its partitions were all built has nothing but its plan and the
@@ -70,6 +75,7 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
         if not self.spilled:  # a fresh run (a spilled one resumes spilled): held while it fits
             self.spilled = self.state["spilled"] = not fits_in_memory(self)
         self._held, self._held_points = [], 0
+        self._xyz_code = None if self.spilled else _shared_las_code(self.paths)
         super().read()
 
     def _take_chunk(self, i: int, chunk) -> tuple:
@@ -79,14 +85,26 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
             return super()._take_chunk(i, chunk)
         taken = valid_chunk(chunk)
         xyz, rgba, kept = taken[:3]
-        self._held.append({"xyz": xyz, "rgba": rgba, **{"attr." + a: v for a, v in kept.items()}})
+        held_xyz = xyz
+        if self._xyz_code is not None:
+            held_xyz = encode_xyz(xyz, self._xyz_code)
+            if held_xyz is None:  # a point off the grid (not from the file's integers): floats from now on
+                for held in self._held:
+                    held["xyz"] = decode_xyz(held["xyz"], self._xyz_code)
+                self._xyz_code, held_xyz = None, xyz
+        self._held.append({"xyz": held_xyz, "rgba": rgba, **{"attr." + a: v for a, v in kept.items()}})
         self._held_points += len(xyz)
         if self._held_points > held_points(self):
             self.spilled = self.state["spilled"] = True  # saved with this chunk's count
             for j, held in enumerate(self._held):
-                save_raw_chunk(self.dir.raw, j, held.pop("xyz"), held.pop("rgba"), {k[5:]: v for k, v in held.items()})
+                save_raw_chunk(self.dir.raw, j, held.pop("xyz"), held.pop("rgba"), {k[5:]: v for k, v in held.items()}, self._xyz_code)
             self._held = []
         return taken
+
+    def _positions(self, xyz):
+        if self.spilled or self._xyz_code is None:
+            return super()._positions(xyz)
+        return decode_xyz(xyz, self._xyz_code)
 
     def count(self) -> None:
         if self.spilled:
@@ -96,7 +114,7 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
         counts = CellCounts()
         self.progress.phase("count", st["points"])
         for chunk in self._held:
-            cells = grid_cells(chunk["xyz"], origin, edge) if len(chunk["xyz"]) else np.zeros(0, np.int64)
+            cells = grid_cells(self._positions(chunk["xyz"]), origin, edge) if len(chunk["xyz"]) else np.zeros(0, np.int64)
             chunk["cell"] = cells.astype(np.int32)  # for the distribute phase
             counts.add(chunk["cell"])
             self.progress.advance(len(cells))
@@ -154,4 +172,23 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
             return super()._partition_input(lev, prefix)
         data = self._partition_arrays(lev, prefix, 0)
         self._drop_partition(lev, prefix)  # its memory goes once the build has it
+        if "xyz" in data:
+            data = {**data, "xyz": self._positions(data["xyz"])}
         return data, []
+
+
+def _shared_las_code(paths) -> np.ndarray | None:
+    """[scale x, y, z, offset x, y, z] of the input files where every one is a LAS/LAZ file with
+    the same, else None (chunks given, other formats, several grids)."""
+    codes = set()
+    for p in paths or [None]:
+        if p is None:
+            return None
+        try:
+            head = reader_for(p).header(p)
+        except Exception:  # noqa: BLE001 - only a memory saving: the read phase says what is wrong with a file
+            return None
+        if head.get("scale") is None or head.get("offset") is None:
+            return None
+        codes.add((*map(float, head["scale"]), *map(float, head["offset"])))
+    return np.array(codes.pop(), np.float64) if len(codes) == 1 else None

@@ -223,6 +223,10 @@ class PartitionPhases(Job):
         files = self._part_files(level, prefix)
         return {k: np.memmap(path, dtype=dts[k], mode="r", shape=(n, 3) if k == "xyz" else (n,)) for k, path in files.items()}
 
+    def _positions(self, xyz):
+        """Held or spilled positions as float64 (in_memory.py holds a LAS file's as int32)."""
+        return xyz
+
     def _drop_partition(self, level: int, prefix: int) -> None:
         """Forget partition (level, prefix)'s points (refined into smaller ones, or partial)."""
         for path in self._part_files(level, prefix).values():
@@ -252,7 +256,7 @@ class PartitionPhases(Job):
             step = self.chunk_size
             counts = np.zeros(8 ** (sub - lev), np.int64)
             for s in range(0, n, step):
-                rel = (point_codes(np.ascontiguousarray(arrays["xyz"][s : s + step]), origin, edge) >> shift) - base
+                rel = (point_codes(np.ascontiguousarray(self._positions(arrays["xyz"][s : s + step])), origin, edge) >> shift) - base
                 counts += np.bincount(rel.astype(np.int64), minlength=len(counts))
             plan = plan_partitions(counts, lev, prefix, sub - lev, budget)
             if len(plan) == 1 and plan[0][0] == lev:
@@ -269,7 +273,7 @@ class PartitionPhases(Job):
             new_counts = [0] * len(plan)
             for s in range(0, n, step):
                 data = {k: np.ascontiguousarray(v[s : s + step]) for k, v in arrays.items()}
-                rel = (point_codes(data["xyz"], origin, edge) >> shift) - base
+                rel = (point_codes(np.ascontiguousarray(self._positions(data["xyz"])), origin, edge) >> shift) - base
                 self._append(plan, [self._by_partition(data, lut[rel.astype(np.int64)], len(plan))], new_counts)
             del arrays
             st["partitions"][i : i + 1] = plan
