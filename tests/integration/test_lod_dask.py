@@ -105,6 +105,14 @@ def test_dask_output_is_the_single_process_output(inputs, reference, client, tmp
     assert not OctreeDir(out).partial.exists()
 
 
+def test_dask_words_layout_is_the_single_process_output(inputs, client, tmp_path):
+    """The words layout (no compact streams) built by workers into their sets' own files and
+    placed: the single process's bytes (a worker's set once touched the shared output arrays)."""
+    convert(inputs, tmp_path / "one", layout="words", **OPTS)
+    convert(inputs, tmp_path / "dask", client=client, layout="words", **OPTS)
+    _assert_identical(tmp_path / "one", tmp_path / "dask")
+
+
 @pytest.mark.parametrize("fmt", ["potree", "copc"])
 def test_dask_potree_and_copc_outputs_are_the_single_process_outputs(inputs, client, tmp_path, fmt):
     name = "oct.copc.laz" if fmt == "copc" else "oct"

@@ -118,7 +118,8 @@ def open_cloud(
     without any point is skipped with a warning; one file without points raises EmptyCloudError.
     ``progress=True`` shows a progress bar on stderr (rich). ``chunked=True``: built in bounded
     memory (core/chunked.py: the files read three times, LAZ and text files decoded once and
-    their points kept for the later passes; the points spilled to a temporary folder; the same cloud), for files whose points do not fit in memory as floats; None (the
+    their points kept for the later passes; the points spilled to a temporary folder; the same
+    cloud), for files whose points do not fit in memory as floats; None (the
     default): chunked when the files' headers say they hold more than ``CHUNKED_ABOVE`` (50 M).
     """
     if not paths:

@@ -287,7 +287,8 @@ class BuildPhases(Job):
         for k, v in data.items():
             take(v, idx, out=outs[k][sl])
         del outs, low, med, high  # unmapped; a killed process's writes stay in the page cache
-        self._write_back(off, n)
+        if not self.local_sets:
+            self._write_back(off, n)
         self._finish_set(dest, nodes, first, off, n)
 
     def _write_back(self, off: int, n: int) -> None:
