@@ -172,56 +172,40 @@ def _spilling(name: str, folder: Path, n: int | None):
 
 
 class _ReadOnce:
-    """A source read once: the first pass (the survey) reads it and writes every chunk, as read,
-    to a file of the build's folder; the later passes read those files instead of the source
-    (a LAZ file's decoding, ~0.3 us a point, is then paid once instead of three times), and the
-    last removes each file once read, so the folder holds at most the points once (the spill
-    grows as the chunk files go). A chunk file holds its arrays back to back, each from a
-    multiple of 8 bytes (aligned views of one read)."""
+    """A source read once: the first pass (the survey) reads it and appends every chunk, as read,
+    to files of the build's folder (a file a field, as the partitions' files: ``_read`` reads
+    them back); the later passes read those files instead of the source (a LAZ file's
+    decoding, ~0.3 us a point, is then paid once instead of three times), and the last removes
+    each chunk's files once read, so the folder holds at most the points once (the spill grows
+    as the chunk files go)."""
 
     def __init__(self, source: ChunkSource, folder: Path, name: str):
         self.source, self.folder, self.name = source, folder, name
-        self.chunks: list[tuple] = []  # (file, points, scale, [(attribute, dtype, shape of a value, byte offset)], rgba offset)
+        self.chunks: list[tuple] = []  # (points, scale, {field: (dtype, shape of a value)})
+
+    def _path(self, k: int, field: str) -> Path:
+        return self.folder / f"source.{k}.{field}"
 
     def first(self):
         for k, chunk in enumerate(self.source()):
-            arrays = [chunk.xyz, chunk.rgba, *chunk.attributes.values()]
-            parts, at, places = [], 0, []
-            for a in arrays:
-                a = np.ascontiguousarray(a)
-                places.append(at)
-                parts.append(a)
-                at += a.nbytes
-                if at % 8:
-                    parts.append(np.zeros(8 - at % 8, np.uint8))
-                    at += 8 - at % 8
-            path = self.folder / f"source.{k}"
+            fields = {"xyz": chunk.xyz, "rgba": chunk.rgba, **{f"a_{a}": v for a, v in chunk.attributes.items()}}
             with _spilling(self.name, self.folder, None):  # (not the source's own errors)
-                append_file(path, parts)
-            attrs = [(a, v.dtype, v.shape[1:], off) for (a, v), off in zip(chunk.attributes.items(), places[2:])]
-            self.chunks.append((path, len(chunk), chunk.scale, attrs, places[1]))
+                for key, v in fields.items():
+                    append_file(self._path(k, key), [np.ascontiguousarray(v)])
+            self.chunks.append((len(chunk), chunk.scale, {key: (v.dtype, v.shape[1:]) for key, v in fields.items()}))
             yield chunk
 
     def again(self, remove: bool = False):
-        for path, n, scale, attrs, rgba_at in self.chunks:
-            data = np.fromfile(path, np.uint8)
-            if remove:
-                path.unlink()
-
-            yield PointChunk(
-                _view(data, np.float64, (n, 3), 0),
-                _view(data, np.uint8, (n, 4), rgba_at),
-                {a: _view(data, dtype, (n, *shape), at) for a, dtype, shape, at in attrs},
-                scale=scale,
-            )
+        for k, (n, scale, fields) in enumerate(self.chunks):
+            arrays = {}
+            for key, (dtype, shape) in fields.items():
+                arrays[key] = _read(self._path(k, key), (n, *shape), dtype, None)
+                if remove:
+                    self._path(k, key).unlink()
+            yield PointChunk(arrays.pop("xyz"), arrays.pop("rgba"), {key[2:]: v for key, v in arrays.items()}, scale=scale)
 
     def last(self):
         return self.again(remove=True)
-
-
-def _view(data: np.ndarray, dtype, shape: tuple, at: int) -> np.ndarray:
-    """The array of ``shape`` at byte ``at`` of ``data`` (no copy)."""
-    return np.frombuffer(data, dtype, int(np.prod(shape, dtype=np.int64)), at).reshape(shape)
 
 
 # --- the three passes over the source --------------------------------------------------------
@@ -431,7 +415,7 @@ def _read(path: Path, shape: tuple, dtype, head: np.ndarray | None) -> np.ndarra
     with open(path, "rb") as f:
         view = memoryview(out[c:].reshape(-1).view(np.uint8))
         if f.readinto(view) != len(view):
-            raise InputError(f"{path}: the spilled partition is shorter than expected")
+            raise InputError(f"{path}: the spilled file is shorter than expected")
     return out
 
 

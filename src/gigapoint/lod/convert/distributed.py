@@ -61,7 +61,6 @@ from ...core import pages
 from ...core.chunk import ColorScaler
 from ...errors import GigapointError
 from ...io._base import one_line
-from ...io.las import read_las_header
 from ...io.registry import reader_for
 from ..keys import CODE_BITS
 from ..octree_dir import ConvertError, OctreeDir
@@ -72,7 +71,7 @@ from .keep_freed_memory import KeepFreedMemory
 from .partition import COUNT_LEVEL, CellCounts, PartitionPhases, built_name, grid_cells, group_name, partition_lut
 from .phases import BuildPhases, place_set
 from .read import ReadPhase, _read_chunks, merge_attributes, spill_chunk
-from .spill import copy_range, decode_xyz, load_raw_chunk, raw_chunk_files, raw_xyz_code
+from .spill import copy_range, decode_xyz, las_xyz_code, load_raw_chunk, raw_chunk_files, raw_xyz_code
 
 READ_CHUNKS = 1  # chunks (``chunk_size`` points, 2 M by default) a read task decodes: one a task
 CHUNK_STRIDE = 1 << 20  # read task t spills chunks t·CHUNK_STRIDE + 0, 1, ...: sorted ids are the input order
@@ -330,8 +329,7 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
         scaler = ColorScaler()
         scaler.mode = color_mode
         chunks = reader_for(path).read_chunks(Path(path), spec["chunk_size"], start=start, stop=stop, scaler=scaler)
-        hdr = read_las_header(Path(path))  # a range of a LAS/LAZ file: its positions spilled as the file's int32 (spill.encode_xyz)
-        xyz_code = np.array([*hdr.scale, *hdr.offset], np.float64)
+        xyz_code = las_xyz_code(path)  # a range of a LAS/LAZ file: its positions spilled as the file's int32 (spill.encode_xyz)
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     attrs, n_chunks, n_in, points, skipped, eight = None, 0, 0, 0, 0, False
     sample: list[dict] = []

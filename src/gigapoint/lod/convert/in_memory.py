@@ -17,11 +17,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...io.registry import reader_for
 from .options import BYTES_PER_POINT_BUILD
 from .partition import CellCounts, PartitionPhases, built_name, grid_cells, partition_lut
 from .read import ReadPhase, valid_chunk
-from .spill import decode_xyz, encode_xyz, save_raw_chunk
+from .spill import decode_xyz, encode_xyz, las_xyz_code, save_raw_chunk
 
 # what a held point costs: float64 position, RGBA, attributes (LAS: up to ~20 bytes), the count
 # grid's cell, and its copy in a partition while the chunks are grouped
@@ -178,17 +177,15 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
 
 
 def _shared_las_code(paths) -> np.ndarray | None:
-    """[scale x, y, z, offset x, y, z] of the input files where every one is a LAS/LAZ file with
-    the same, else None (chunks given, other formats, several grids)."""
+    """The input files' LAS grid (spill.las_xyz_code) where every one is a LAS/LAZ file with the
+    same, else None (chunks given, other formats, several grids)."""
     codes = set()
     for p in paths or [None]:
-        if p is None:
-            return None
         try:
-            head = reader_for(p).header(p)
+            code = None if p is None else las_xyz_code(p)
         except Exception:  # noqa: BLE001 - only a memory saving: the read phase says what is wrong with a file
+            code = None
+        if code is None:
             return None
-        if head.get("scale") is None or head.get("offset") is None:
-            return None
-        codes.add((*map(float, head["scale"]), *map(float, head["offset"])))
+        codes.add(tuple(code.tolist()))
     return np.array(codes.pop(), np.float64) if len(codes) == 1 else None

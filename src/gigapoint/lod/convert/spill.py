@@ -11,6 +11,7 @@ import numpy as np
 from numba import njit
 
 from ...atomic import atomic_npy
+from ...io.registry import reader_for
 
 
 def _raw_path(raw: Path, i: int, key: str) -> Path:
@@ -52,6 +53,15 @@ def _decode_xyz(flat, scale, offset, out):
     for i in range(flat.shape[0] // 3):
         for a in range(3):
             out[3 * i + a] = _decoded(flat[3 * i + a], scale[a], offset[a])
+
+
+def las_xyz_code(path) -> np.ndarray | None:
+    """A LAS/LAZ file's integer grid as ``encode_xyz`` takes it: [scale x, y, z, offset x, y, z]
+    (from its header); None for a file of another format."""
+    head = reader_for(path).header(path)
+    if head.get("scale") is None or head.get("offset") is None:
+        return None
+    return np.array([*head["scale"], *head["offset"]], np.float64)
 
 
 def encode_xyz(xyz: np.ndarray, code: np.ndarray) -> np.ndarray | None:
