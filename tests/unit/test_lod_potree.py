@@ -347,3 +347,54 @@ def test_potree_on_demand_images_equal_eager_decoding(big_potree, encoding):
             assert (~a.empty).sum() > 1000
             np.testing.assert_array_equal(a.image, b.image)
             np.testing.assert_array_equal(a.depth, b.depth)
+
+
+def test_pack_records_are_numpys_records_and_statistics():
+    """pack_records (one pass from the unsorted inputs, what the build writes into octree.bin) =
+    the points gathered and encoded field by field in numpy, byte for byte, and its minimum and
+    maximum of each field = numpy's, for every attribute type, a field the points lack (zeros),
+    a float attribute with a NaN (it wins, as in numpy's min), several of its tasks."""
+    from gigapoint.lod.potree import _TYPES, pack_records, record_dtype, write_layout
+
+    rng = np.random.default_rng(3)
+    m, n = 40_000, 30_000
+    xyz = rng.uniform(0, 500, (m, 3)) + [1000.0, 2000.0, 0.0]
+    rgba = rng.integers(0, 2**32, m, dtype=np.uint32)
+    attrs = {
+        "classification": rng.integers(0, 32, m).astype(np.uint8),  # (no intensity: written as zeros)
+        "small": rng.integers(-128, 128, m).astype(np.int8),
+        "short": rng.integers(-30000, 30000, m).astype(np.int16),
+        "word": rng.integers(0, 2**32, m, dtype=np.uint32),
+        "signed": rng.integers(-(2**31), 2**31, m).astype(np.int32),
+        "big": rng.integers(-(2**62), 2**62, m, dtype=np.int64),
+        "huge": rng.integers(0, 2**64 - 1, m, dtype=np.uint64),
+        "height": rng.uniform(-5, 40, m).astype(np.float32),
+        "gps_time": rng.uniform(0, 1e6, m),
+        "flag": rng.random(m) < 0.5,
+    }
+    attrs["gps_time"][7] = np.nan
+    idx = rng.choice(m, n, replace=False)
+    layout = write_layout({a: v.dtype for a, v in attrs.items()})
+    scale, offset = np.array([0.001, 0.002, 0.01]), np.array([999.0, 1999.5, -1.0])
+    out = np.zeros(n * record_dtype(layout).itemsize, np.uint8)
+    stats = pack_records(xyz, rgba, attrs, idx, layout, scale, offset, out)
+
+    ref = np.zeros(n, record_dtype(layout))
+    q = np.floor((xyz[idx] - offset) / scale + 0.5)
+    ref["position"] = np.clip(q.astype(np.int64), 0, 2**31 - 1)
+    rgb16 = rgba[idx].view(np.uint8).reshape(-1, 4)[:, :3].astype(np.uint16) * np.uint16(257)
+    ref["rgb"] = rgb16
+    expected = {"position": [q.min(axis=0).tolist(), q.max(axis=0).tolist()], "rgb": [rgb16.min(axis=0).tolist(), rgb16.max(axis=0).tolist()]}
+    for a, t, _ in layout:
+        if a in ("position", "rgb"):
+            continue
+        v = attrs[a][idx].astype(_TYPES[t]) if a in attrs else np.zeros(n, _TYPES[t])
+        ref[a] = v
+        expected[a] = [[float(v.min())], [float(v.max())]]
+    assert out.tobytes() == ref.tobytes()
+    assert stats.keys() == expected.keys()
+    for a in stats:
+        np.testing.assert_array_equal(np.array(stats[a], float), np.array(expected[a], float), err_msg=a)
+    assert np.isnan(stats["gps_time"][0][0]) and np.isnan(stats["gps_time"][1][0])
+    assert stats["intensity"] == [[0.0], [0.0]]
+    assert stats["huge"][1][0] == float(attrs["huge"][idx].max())  # above 2^53: rounded as numpy rounds its maximum

@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, types
+from numba.typed import List
 
 from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError, check_whole
 from . import pages
@@ -311,6 +312,28 @@ def _take2(src, idx, out):
     for i in prange(idx.shape[0]):
         for j in range(src.shape[1]):
             out[i, j] = src[idx[i], j]
+
+
+@njit(cache=True)
+def _new_byte_views():
+    """An empty numba list of byte arrays. Made here, not with ``List.empty_list`` in Python:
+    that compiles the list's methods in every process (0.2 s of a progressive load's first
+    insertion, so of its first image); cached kernels are loaded instead."""
+    return List.empty_list(types.uint8[::1])
+
+
+@njit(cache=True)
+def _append_byte_view(views, view):
+    views.append(view)
+
+
+def byte_views(arrays) -> List:
+    """Contiguous 1-D arrays as a numba list of their bytes: what kernels take attributes of any
+    types as, one compiled kernel for every set of attribute types."""
+    views = _new_byte_views()
+    for a in arrays:
+        _append_byte_view(views, a.view(np.uint8))
+    return views
 
 
 _UINT_OF_SIZE = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}

@@ -15,10 +15,12 @@ import os
 from pathlib import Path
 
 import numpy as np
+from numba import njit, prange
 
 from ..atomic import atomic_bytes, atomic_json, atomic_npy, fsync_file, write_at
+from ..core.cloud import byte_views
 from ..core.layout import BATCH_DTYPE
-from ..core.quantize import quantize
+from ..core.quantize import gather_batch, quantize
 from ..errors import InputError
 from .grid import output_grid
 from .keys import MAX_LEVEL, key_cube, level_of
@@ -125,25 +127,152 @@ def record_dtype(layout) -> np.dtype:
     return np.dtype([(a, _TYPES[t], (k,)) if k > 1 else (a, _TYPES[t]) for a, t, k in layout])
 
 
-def encode_node(xyz: np.ndarray, rgb16: np.ndarray, attributes: dict, layout, scale, offset, encoding: str, out=None) -> bytes | None:
-    """Points as octree.bin holds them: their fields in ``layout`` order (``write_layout``; an
-    attribute the points lack is zeros). DEFAULT: into ``out``, their records (``record_dtype``:
-    a node's blob is its points' records, so a node set's are made at once), None returned;
-    BROTLI: one node's blob."""
-    n = len(xyz)
-    ixyz = np.floor((xyz - np.asarray(offset)) / np.asarray(scale) + 0.5).astype(np.int64)
-    ixyz = np.clip(ixyz, 0, 2**31 - 1).astype(np.int32)
+_RECORDS_A_TASK = 8192  # a task's records stay in the cache while it writes them field by field
 
-    def values(name, typ):
-        v = attributes.get(name)
-        return np.zeros(n, _TYPES[typ]) if v is None else np.asarray(v).astype(_TYPES[typ])
 
-    if encoding == "DEFAULT":
-        for a, t, _ in layout:
-            out[a] = ixyz if a == "position" else rgb16 if a == "rgb" else values(a, t)
-        return None
-    # BROTLI: attribute by attribute, points in Morton order, position and rgb as Morton codes
-    u = ixyz.astype(np.uint64)
+@njit(parallel=True, cache=True)
+def _pack_records(xyz, rgba, idx, offset, scale, pos_at, rgb_at, attr_src, attr_stride, attr_width, attr_at, attr_kind, rec_size, out, lo, hi):
+    """Record j of ``out`` (u8, ``rec_size`` bytes a point, little-endian) from point idx[j], no
+    gathered copies of the inputs: its position on the grid (int32, clipped at 0 and 2^31 - 1),
+    its attributes (``attr_src[a]``'s bytes from idx[j] * attr_stride[a]: a stride 0 reads a
+    value of zeros, for a field the points lack), its colour (8 to 16 bits a channel: x 257).
+    Task t's minimum and maximum of each field as written go to lo[t], hi[t]: the position
+    (3, as float grid steps), the attributes (attr_kind 0 unsigned, 1 signed, 2 float; a NaN
+    wins, as numpy's min), the colour (3). A task goes field by field, each field's values
+    gathered first in a loop of independent loads (they overlap their cache misses; a loop
+    that also encodes does not), and fetches a numba list's item once, not once a point."""
+    n = idx.shape[0]
+    n_attr = len(attr_src)
+    for t in prange((n + _RECORDS_A_TASK - 1) // _RECORDS_A_TASK):
+        j0, j1 = t * _RECORDS_A_TASK, min(n, (t + 1) * _RECORDS_A_TASK)
+        tlo, thi = lo[t], hi[t]
+        pts = gather_batch(xyz, idx, j0, j1 - j0)
+        for a in range(3):
+            q_lo, q_hi, o, sc = np.inf, -np.inf, offset[a], scale[a]  # (in registers, not through lo and hi a point)
+            for j in range(j0, j1):
+                q = np.floor((pts[j - j0, a] - o) / sc + 0.5)  # as numpy computed it: the same bits
+                q_lo, q_hi = min(q_lo, q), max(q_hi, q)
+                _put(out, j * rec_size + pos_at + 4 * a, np.uint64(min(max(np.int64(q), 0), 2**31 - 1)), 4)
+            tlo[a], thi[a] = q_lo, q_hi
+        vals = np.empty(j1 - j0, np.uint64)
+        for a in range(n_attr):
+            _gather_values(attr_src[a], attr_stride[a], attr_width[a], idx, j0, j1, vals)
+            _pack_field(vals, attr_width[a], attr_at[a], attr_kind[a], j0, j1, rec_size, out, tlo, thi, 3 + a)
+        for j in range(j0, j1):
+            vals[j - j0] = rgba[idx[j]]
+        for ch in range(3):
+            c_lo, c_hi = np.uint64(0xFFFF), np.uint64(0)
+            for j in range(j0, j1):
+                v16 = ((vals[j - j0] >> np.uint64(8 * ch)) & np.uint64(0xFF)) * np.uint64(257)
+                c_lo, c_hi = min(c_lo, v16), max(c_hi, v16)
+                _put(out, j * rec_size + rgb_at + 2 * ch, v16, 2)
+            tlo[3 + n_attr + ch], thi[3 + n_attr + ch] = np.float64(c_lo), np.float64(c_hi)
+
+
+@njit(inline="always")
+def _gather_values(src, stride, w, idx, j0, j1, vals):
+    """vals[j - j0] = the w-byte value of ``src`` (bytes) at row idx[j], j in j0..j1; 0 where
+    ``stride`` is 0 (a field the points lack)."""
+    if stride == 0:
+        vals[:] = 0
+    elif w == 1:
+        for j in range(j0, j1):
+            vals[j - j0] = src[idx[j]]
+    elif w == 2:
+        v2 = src.view(np.uint16)
+        for j in range(j0, j1):
+            vals[j - j0] = v2[idx[j]]
+    elif w == 4:
+        v4 = src.view(np.uint32)
+        for j in range(j0, j1):
+            vals[j - j0] = v4[idx[j]]
+    else:
+        v8 = src.view(np.uint64)
+        for j in range(j0, j1):
+            vals[j - j0] = v8[idx[j]]
+
+
+@njit(inline="always")
+def _pack_field(vals, w, at, kind, j0, j1, rec_size, out, tlo, thi, f):
+    """One attribute's values (``_gather_values``) into records j0..j1 (``_pack_records``), their
+    minimum and maximum as numbers into tlo[f], thi[f]."""
+    bits64 = np.empty(1, np.uint64)  # a value's bits read back as a float
+    bits32 = np.empty(1, np.uint32)
+    as64, as32 = bits64.view(np.float64), bits32.view(np.float32)
+    v_lo, v_hi = tlo[f], thi[f]
+    for j in range(j0, j1):
+        u = vals[j - j0]
+        if w == 1:  # (constant widths: each _put one store)
+            _put(out, j * rec_size + at, u, 1)
+        elif w == 2:
+            _put(out, j * rec_size + at, u, 2)
+        elif w == 4:
+            _put(out, j * rec_size + at, u, 4)
+        else:
+            _put(out, j * rec_size + at, u, 8)
+        if kind == 0:
+            v = np.float64(u)
+        elif kind == 1:
+            v = np.float64(np.int64(u) - (np.int64(1) << (8 * w)) if w < 8 and u >> np.uint64(8 * w - 1) else np.int64(u))
+        elif w == 4:
+            bits32[0] = np.uint32(u)
+            v = np.float64(as32[0])
+        else:
+            bits64[0] = u
+            v = as64[0]
+        if v < v_lo or np.isnan(v):  # (once NaN, it stays)
+            v_lo = v
+        if v > v_hi or np.isnan(v):
+            v_hi = v
+    tlo[f], thi[f] = v_lo, v_hi
+
+
+@njit(inline="always")
+def _put(out, at, v, width):
+    for k in range(width):
+        out[at + k] = np.uint8((v >> np.uint64(8 * k)) & np.uint64(0xFF))
+
+
+def pack_records(xyz, rgba, attributes: dict, idx, layout, scale, offset, out: np.ndarray) -> dict:
+    """Records of the points ``idx`` of ``xyz``, u32 ``rgba`` and ``attributes`` ({name: values},
+    all rows in input order), in that order, into ``out`` (u8, ``record_dtype(layout)``'s size a
+    point: a DEFAULT octree.bin's bytes), positions on the grid ``offset`` + ``scale`` steps.
+    Returns the written fields' minimum and maximum ({field: [lo list, hi list]}; positions in
+    grid steps), as metadata.json states them."""
+    rec = record_dtype(layout)
+    fields = [(a, t) for a, t, _ in layout if a not in ("position", "rgb")]
+    n = len(idx)
+    src, stride, width, at, kind = [], [], [], [], []
+    for a, t in fields:
+        dt = np.dtype(_TYPES[t])
+        v = attributes.get(a)
+        present = v is not None
+        src.append(np.ascontiguousarray(np.asarray(v).astype(dt, copy=False)) if present else np.zeros(1, dt))
+        stride.append(dt.itemsize if present else 0)
+        width.append(dt.itemsize)
+        at.append(rec.fields[a][1])
+        kind.append({"u": 0, "i": 1, "f": 2}[dt.kind])
+    n_tasks = (n + _RECORDS_A_TASK - 1) // _RECORDS_A_TASK
+    n_fields = 3 + len(fields) + 3
+    lo, hi = np.full((n_tasks, n_fields), np.inf), np.full((n_tasks, n_fields), -np.inf)
+    if n:
+        _pack_records(np.ascontiguousarray(xyz, np.float64), np.ascontiguousarray(rgba, np.uint32), np.ascontiguousarray(idx, np.int64),
+                      np.asarray(offset, np.float64), np.asarray(scale, np.float64), rec.fields["position"][1], rec.fields["rgb"][1],
+                      byte_views(src), np.array(stride, np.int64), np.array(width, np.int64), np.array(at, np.int64),
+                      np.array(kind, np.int64), rec.itemsize, out, lo, hi)  # fmt: skip
+    lo, hi = lo.min(axis=0, initial=np.inf), hi.max(axis=0, initial=-np.inf)
+    stats, f = {}, 3
+    for a, _, k in layout:
+        cols = slice(0, 3) if a == "position" else slice(3 + len(fields), n_fields) if a == "rgb" else slice(f, f + 1)
+        f += a not in ("position", "rgb")
+        stats[a] = [lo[cols].tolist(), hi[cols].tolist()]
+    return stats
+
+
+def _brotli_node(rec: np.ndarray, layout) -> bytes:
+    """A BROTLI node's blob from its points' records (``pack_records``): attribute by attribute,
+    points in Morton order, position and rgb as Morton codes."""
+    u = rec["position"].astype(np.uint64)
     lower = _spread16(u[:, 0]) | _spread16(u[:, 1]) << np.uint64(1) | _spread16(u[:, 2]) << np.uint64(2)
     upper = (
         _spread16(u[:, 0] >> np.uint64(16))
@@ -152,17 +281,17 @@ def encode_node(xyz: np.ndarray, rgb16: np.ndarray, attributes: dict, layout, sc
     )
     order = np.lexsort((lower, upper))
     parts = []
-    for a, t, _ in layout:
+    for a, _, _ in layout:
         if a == "position":
-            pos = np.empty((n, 2), np.uint64)
+            pos = np.empty((len(rec), 2), np.uint64)
             pos[:, 0] = upper[order]
             pos[:, 1] = lower[order]
             parts.append(pos.astype("<u8").tobytes())
         elif a == "rgb":
-            c = rgb16[order].astype(np.uint64)
+            c = rec["rgb"][order].astype(np.uint64)
             parts.append((_spread16(c[:, 0]) | _spread16(c[:, 1]) << np.uint64(1) | _spread16(c[:, 2]) << np.uint64(2)).astype("<u8").tobytes())
         else:
-            parts.append(values(a, t)[order].tobytes())
+            parts.append(rec[a][order].tobytes())
     # quality 5, not the default 11: ~47x faster (1.8 M instead of 0.04 M points/s on one core)
     # for a file ~2 % larger, measured on node-sized payloads
     return _brotli().compress(b"".join(parts), quality=BROTLI_QUALITY)
@@ -178,26 +307,25 @@ def potree_plan(st: dict) -> tuple[list, np.ndarray, np.ndarray]:
     return write_layout({a: np.dtype(d) for a, d in (st.get("attributes") or {}).items()}), scale, offset
 
 
-def place_node_set(out: OctreeDir, at: int, dest: Path, xyz, rgba, attributes: dict, counts, plan, encoding: str) -> int:
-    """A node set's nodes (``counts`` points each, in order: ``xyz``, u32 ``rgba``, ``attributes``)
-    encoded straight into the octree.bin being built (``out.potree_octree_in_progress``) from
-    byte ``at`` on, instead of kept in float64 for the write phase to encode and write again
-    (a 20 M-point Potree conversion wrote 44 bytes a point twice); their places and statistics
-    into ``dest`` (PLACED, PLACED_STATS). Returns where the next set goes."""
+def place_node_set(out: OctreeDir, at: int, dest: Path, xyz, rgba, attributes: dict, counts, plan, encoding: str, idx=None) -> int:
+    """A node set's nodes (``counts`` points each: the points ``idx`` of ``xyz``, u32 ``rgba``
+    and ``attributes``, in that order; None: all of them, in order) encoded straight into the
+    octree.bin being built (``out.potree_octree_in_progress``) from byte ``at`` on, instead of
+    kept in float64 for the write phase to encode and write again (a 20 M-point Potree
+    conversion wrote 44 bytes a point twice); their places and statistics into ``dest``
+    (PLACED, PLACED_STATS). The records are made from the unsorted inputs in one pass
+    (``pack_records``) and copied into the file at once (made there through its memory map,
+    they took 5x as long: stores spread over fresh file pages). Returns where the next set goes."""
     layout, scale, offset = plan
-    rgb16 = np.asarray(rgba).view(np.uint8).reshape(-1, 4)[:, :3].astype(np.uint16) * np.uint16(257)
-    stats = {a: [[np.inf] * k, [-np.inf] * k] for a, _, k in layout}
-    if len(xyz):
-        _add_stats(stats, layout, xyz, rgb16, attributes, scale, offset)
+    idx = np.arange(len(xyz)) if idx is None else idx
     counts = np.asarray(counts, np.int64)
-    if encoding == "DEFAULT":  # a point's record is all there is: the set's records at once, nodes one after another
-        rec = np.empty(len(xyz), record_dtype(layout))
-        encode_node(xyz, rgb16, attributes, layout, scale, offset, encoding, out=rec)
-        payload, sizes = [rec.view(np.uint8)], counts * rec.dtype.itemsize
+    rec = np.empty(len(idx), record_dtype(layout))
+    stats = pack_records(xyz, rgba, attributes, idx, layout, scale, offset, rec.view(np.uint8))
+    if encoding == "DEFAULT":  # a point's record is all there is: a node's blob is its points' records
+        payload, sizes = [rec], counts * rec.dtype.itemsize
     else:
         ends = np.cumsum(counts)
-        payload = [encode_node(xyz[e - c : e], rgb16[e - c : e], {a: v[e - c : e] for a, v in attributes.items()}, layout, scale, offset, encoding)
-                   if c else b"" for c, e in zip(counts.tolist(), ends.tolist())]  # fmt: skip
+        payload = [_brotli_node(rec[e - c : e], layout) if c else b"" for c, e in zip(counts.tolist(), ends.tolist())]
         sizes = np.array([len(b) for b in payload], np.int64)
     end = write_at(out.potree_octree_in_progress, at, payload)
     atomic_json(dest / PLACED_STATS, stats)
@@ -213,27 +341,6 @@ def placed_end(sets) -> int:
             placed = np.load(src / PLACED)
             end = max(end, int((placed[:, 0] + placed[:, 1]).max(initial=0)))
     return end
-
-
-def _add_stats(stats: dict, layout, xyz, rgb16, attrs: dict, scale, offset) -> None:
-    """A node set's minimum and maximum of each field as written, into ``stats``: positions from
-    the set's extremes (rounding to the grid keeps their order), not from every point's integers
-    (1.5 of a 20 M-point write's 5 s)."""
-    def columns(v):  # column by column: numpy's min(axis=0) of (n, 3) runs an inner loop of 3 (10x slower)
-        return np.array([v[:, j].min() for j in range(3)]), np.array([v[:, j].max() for j in range(3)])
-
-    for a, t, _ in layout:
-        if a == "position":
-            lo, hi = (np.floor((v - offset) / scale + 0.5) for v in columns(xyz))
-        elif a == "rgb":
-            lo, hi = columns(rgb16)
-        elif a in attrs:
-            v = attrs[a] if attrs[a].dtype == np.dtype(_TYPES[t]) else attrs[a].astype(_TYPES[t])
-            lo, hi = np.array([v.min()]), np.array([v.max()])
-        else:
-            lo = hi = np.zeros(1)
-        stats[a][0] = np.minimum(stats[a][0], lo).tolist()
-        stats[a][1] = np.maximum(stats[a][1], hi).tolist()
 
 
 def write_potree(out: OctreeDir, sources: list[Path], st: dict, name: str, progress, encoding: str = "DEFAULT") -> int:

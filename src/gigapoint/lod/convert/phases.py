@@ -234,9 +234,8 @@ class BuildPhases(Job):
             if self._potree is None:  # (its plan, where the next set goes: after the finished sets', read once per process)
                 built = self.dir.built
                 self._potree = [potree_plan(self.state), placed_end(p.parent for p in built.glob("*/keys.npy") if not p.parent.name.endswith(".tmp"))]
-            attrs = {a: take(data[f"attr.{a}"], idx) for a in self.state["attributes"]}
-            self._potree[1] = place_node_set(self.dir, self._potree[1], dest, take(xyz, idx), take(data["rgba"], idx), attrs, counts, self._potree[0],
-                                             self.encoding)  # fmt: skip
+            attrs = {a: data[f"attr.{a}"] for a in self.state["attributes"]}
+            self._potree[1] = place_node_set(self.dir, self._potree[1], dest, xyz, data["rgba"], attrs, counts, self._potree[0], self.encoding, idx)
             return
         if self.format != "gigapoint":
             atomic_npy(dest / "xyz.npy", take(xyz, idx))

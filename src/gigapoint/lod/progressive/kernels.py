@@ -10,8 +10,7 @@ a linear pass per run, with no hash lookups per point.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange, types
-from numba.typed import List
+from numba import njit, prange
 
 from ...core.compact import code_bits, on_the_grid, read_ext, tail_words, wide_bits, write_ext
 from ...core.layout import COORD_BITS, EXT_FULL_BITS, WORD_BITS, WORD_MASK
@@ -629,19 +628,6 @@ def _words(x, y, z, mx, my, mz, inv):
         wl |= np.uint32((q >> 20) & WORD_MASK) << np.uint32(WORD_BITS * a)
         v |= np.uint64(q & _M20) << np.uint64(EXT_FULL_BITS * a)
     return wl, v
-
-
-@njit(cache=True)
-def new_byte_views():
-    """An empty numba list of byte arrays (what kernels take attributes as). Made here, not with
-    ``List.empty_list`` in Python: that compiles the list's methods in every process (0.2 s of
-    the first insertion, so of the first image); cached kernels are loaded instead."""
-    return List.empty_list(types.uint8[::1])
-
-
-@njit(cache=True)
-def append_byte_view(views, view):
-    views.append(view)
 
 
 @njit(inline="always")

@@ -55,7 +55,7 @@ from ...core import pages
 from ...core.attributes import Attributes, encode, fits, holder_for, repacked, resized, widened, zeroed_like
 from ...core.attributes import stored as stored_array
 from ...core.chunk import PointChunk, attribute_dtype_problem, attribute_name_problem, colors_for, warn_dropped_attributes
-from ...core.cloud import MAX_ABS_COORDINATE, at_scale, take
+from ...core.cloud import MAX_ABS_COORDINATE, at_scale, byte_views, take
 from ...core.compact import GRID_TOLERANCE, ext_bits_per_point, point_words, stream_words
 from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE, WORD_BITS
@@ -93,14 +93,6 @@ def _voxel_table(size: int) -> tuple[np.ndarray, np.ndarray]:
     return np.ndarray((size,), np.uint64, raw, 0, (12,)), np.ndarray((size,), np.uint32, raw, 8, (12,))
 
 
-def _byte_views(arrays) -> List:
-    """Contiguous 1-D arrays as a numba list of their bytes (kernels move attributes of any type as bytes)."""
-    views = K.new_byte_views()
-    for a in arrays:
-        K.append_byte_view(views, a.view(np.uint8))
-    return views
-
-
 def _stored_attributes(pool) -> dict[str, np.ndarray]:
     """The arrays the pool's attributes are stored in, by name (a constant one has none)."""
     held = {a: stored_array(pool.attributes.held(a)) for a in pool.attributes}
@@ -110,13 +102,13 @@ def _stored_attributes(pool) -> dict[str, np.ndarray]:
 def _pool_views(pool) -> tuple[List, np.ndarray]:
     """(the pool's stored attributes as bytes, their widths in bytes): what kernels move attributes with."""
     arrays = _stored_attributes(pool).values()
-    return _byte_views(arrays), np.array([v.dtype.itemsize for v in arrays], np.int64)
+    return byte_views(arrays), np.array([v.dtype.itemsize for v in arrays], np.int64)
 
 
 def _attribute_views(st, pool) -> tuple[List, List, np.ndarray]:
     """(a set's attributes, the pool's, their widths in bytes): what kernels scatter attributes
     with (a set's attributes are as the pool stores them: ProgressiveOctree._stored_form)."""
-    src = _byte_views(np.ascontiguousarray(st.attrs[a]) for a in _stored_attributes(pool))
+    src = byte_views(np.ascontiguousarray(st.attrs[a]) for a in _stored_attributes(pool))
     return src, *_pool_views(pool)
 
 
