@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit, prange
 
-from ..atomic import atomic_bytes, atomic_json, atomic_npy, fsync_file, write_at
+from ..atomic import atomic_bytes, atomic_json, atomic_npy, fsync_file, start_writeback, write_at
 from ..core.cloud import byte_views
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import gather_batch, quantize
@@ -328,6 +328,7 @@ def place_node_set(out: OctreeDir, at: int, dest: Path, xyz, rgba, attributes: d
         payload = [_brotli_node(rec[e - c : e], layout) if c else b"" for c, e in zip(counts.tolist(), ends.tolist())]
         sizes = np.array([len(b) for b in payload], np.int64)
     end = write_at(out.potree_octree_in_progress, at, payload)
+    start_writeback(out.potree_octree_in_progress, at, end - at)  # on its way to the disk: the write phase's fsync waits for less
     atomic_json(dest / PLACED_STATS, stats)
     atomic_npy(dest / PLACED, np.stack([at + np.cumsum(sizes) - sizes, sizes], axis=1).astype(np.int64).reshape(-1, 2))
     return end
