@@ -132,8 +132,8 @@ _RECORDS_A_TASK = 8192  # a task's records stay in the cache while it writes the
 
 @njit(parallel=True, cache=True)
 def _pack_records(xyz, rgba, idx, offset, scale, pos_at, rgb_at, attr_src, attr_stride, attr_width, attr_at, attr_kind, rec_size, out, lo, hi):
-    """Record j of ``out`` (u8, ``rec_size`` bytes a point, little-endian) from point idx[j], no
-    gathered copies of the inputs: its position on the grid (int32, clipped at 0 and 2^31 - 1),
+    """Record j of ``out`` (u8, ``rec_size`` bytes a point, little-endian) from point idx[j], with
+    no gathered copy of the inputs (a task's values only): its position on the grid (int32, clipped at 0 and 2^31 - 1),
     its attributes (``attr_src[a]``'s bytes from idx[j] * attr_stride[a]: a stride 0 reads a
     value of zeros, for a field the points lack), its colour (8 to 16 bits a channel: x 257).
     Task t's minimum and maximum of each field as written go to lo[t], hi[t]: the position
@@ -229,6 +229,7 @@ def _pack_field(vals, w, at, kind, j0, j1, rec_size, out, tlo, thi, f):
 
 @njit(inline="always")
 def _put(out, at, v, width):
+    """The low ``width`` bytes of ``v`` at out[at:], little-endian."""
     for k in range(width):
         out[at + k] = np.uint8((v >> np.uint64(8 * k)) & np.uint64(0xFF))
 
@@ -314,8 +315,8 @@ def place_node_set(out: OctreeDir, at: int, dest: Path, xyz, rgba, attributes: d
     kept in float64 for the write phase to encode and write again (a 20 M-point Potree
     conversion wrote 44 bytes a point twice); their places and statistics into ``dest``
     (PLACED, PLACED_STATS). The records are made from the unsorted inputs in one pass
-    (``pack_records``) and copied into the file at once (made there through its memory map,
-    they took 5x as long: stores spread over fresh file pages). Returns where the next set goes."""
+    (``pack_records``) and copied into the file at once (made in its memory map instead, they
+    took longer: every store a fresh file page's). Returns where the next set goes."""
     layout, scale, offset = plan
     idx = np.arange(len(xyz)) if idx is None else idx
     counts = np.asarray(counts, np.int64)
