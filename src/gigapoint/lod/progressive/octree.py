@@ -1060,7 +1060,15 @@ class ProgressiveOctree:
         else:
             self._ensure_hash(self._presize_extra(), table)
         outside = self.origin is not None and (np.any(lo < self.origin) or np.any(hi > self.origin + self.edge))
-        if self.origin is None or outside and self.points == 0 and self.n_nodes == 1:  # (a header's zeros: the cube given misses the points)
+        if self.origin is None or outside and self.n_nodes == 1:
+            # the root is one leaf still: a cube around its points and these (a header's zeros: the cube given misses
+            # the points; a first batch of one point: a cube 2e-11 wide, still 4e-5 wide once grown its CODE_BITS
+            # levels, so a point a metre away was refused)
+            if self.points:
+                held_xyz, held_rgba, held_attrs = self._split(np.array([self.root]), "r")
+                xyz, rgba = np.concatenate([held_xyz, xyz]), np.concatenate([held_rgba, rgba])
+                attrs = {a: np.concatenate([held_attrs[a], v]) for a, v in attrs.items()}
+                lo, hi = np.minimum(lo, self.lo), np.maximum(hi, self.hi)
             pad = 0.01 * max(float(np.max(hi - lo)), 1e-9)  # a little room: growing the root costs a pass over every point
             self._start(lo - pad, float(np.max(hi - lo)) + 2 * pad)
         while np.any(lo < self.origin) or np.any(hi > self.origin + self.edge):
