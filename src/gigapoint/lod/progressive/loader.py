@@ -140,10 +140,10 @@ class Loader:
                     if self.octree.nbytes > self.memory_limit:
                         self._stop_for_memory(name)
                         return
-            if self.octree.points == 0:  # every source read, no valid point: the plain cloud's error
-                from ...io import files_label
+            # every source read: no valid point is the plain cloud's error, invalid points skipped its warning
+            from ...io import files_label
 
-                check_valid_count(files_label(source for source, _ in self.sources), 0, self.octree.skipped)
+            check_valid_count(files_label(source for source, _ in self.sources), self.octree.points, self.octree.skipped)
             while not self._stop.is_set():  # the leaves' draw order (a grid sample first), between frames
                 turn, drawing = self.octree.builder_turn(turn)
                 if not self.octree.order_leaves(ORDER_WHILE_DRAWING if drawing else ORDER_POINTS):
