@@ -400,6 +400,37 @@ def test_a_new_process_inserts_and_draws_with_nothing_compiled_that_numba_cannot
     assert out.stdout.strip().splitlines()[-1] == "[]"
 
 
+_FORK_AFTER_LOADING = """
+import multiprocessing, sys
+import numba, numpy as np
+import gigapoint as gp
+np.save(sys.argv[1], np.random.default_rng(0).random((20_000, 3)))
+cloud = gp.open(sys.argv[1], progressive=True)
+assert cloud.wait(timeout=300) and cloud.n_points == 20_000
+process = multiprocessing.get_context("fork").Process(target=print, args=("child",))
+process.start()
+process.join(60)
+print(numba.threading_layer(), process.exitcode)
+"""
+
+
+def test_a_process_forked_after_a_progressive_load_gets_a_sound_tbb(tmp_path):
+    """The loader thread's first kernel started numba's threads: TBB shuts them down before a
+    fork only from the thread that started them, so every fork of the main thread afterwards
+    (ffmpeg for ``gigapoint render --turntable``, multiprocessing) printed "Numba: Attempted to
+    fork from a non-main thread, the TBB library may be in an invalid state in the child
+    process." The thread that opens the octree starts them."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _FORK_AFTER_LOADING, str(tmp_path / "p.npy")], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    layer, exitcode = out.stdout.split()[-2:]
+    if layer != "tbb":
+        pytest.skip(f"numba's threading layer is {layer}: the check is TBB's")
+    assert exitcode == "0" and "Attempted to fork" not in out.stderr, out.stderr[-2000:]
+
+
 def test_trim_cuts_the_pool_in_place_and_growth_copies_it_once(scene, octree):
     """trim() keeps the pool's arrays (views of their used part: the room cut off was never
     written), so loading ends without copying the pool; a pool that runs out of chunks grows its

@@ -23,6 +23,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from ...core.chunk import PointChunk, join_chunks
@@ -81,6 +82,10 @@ class Loader:
         self._thread = threading.Thread(target=self._run, name=f"gigapoint-load-{octree.name}", daemon=True)
 
     def start(self) -> Loader:
+        # numba's threads started by this thread, not by the loader's first kernel: TBB shuts them down
+        # before a fork only from the thread that started them (numba's atfork handler), and each later fork
+        # of this one (ffmpeg for a video, multiprocessing) printed "Numba: Attempted to fork from a non-main thread"
+        numba.get_num_threads()
         self._thread.start()
         return self
 
