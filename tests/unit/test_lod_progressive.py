@@ -622,6 +622,20 @@ def test_the_root_grows_to_take_points_outside_it(scene):
     assert root_cells > 0 and o.level[o.root] == 0
 
 
+def test_a_point_beyond_the_roots_reach_is_refused_before_the_root_grows(scene):
+    """A batch with a point the root cannot grow to take is a one-line InputError that changes
+    nothing: the root grew as far as its levels allowed first (a 1 km cube 2**19 times as wide,
+    every leaf 19 levels deeper, able to split twice more at most, the voxels of 19 new roots)."""
+    xyz, _, _ = scene
+    o = ProgressiveOctree("far", max_leaf=2_000)
+    o.add(xyz[:50_000])
+    before = (o.origin.copy(), o.edge, o.n_nodes, o.n_voxels, o.level[: o.n_nodes].copy())
+    with pytest.raises(InputError, match=r"^far: points span more than the octree's 21 levels resolve"):
+        o.add(np.array([[1e11, 1e11, 1e11]]))
+    assert o.origin.tolist() == before[0].tolist() and (o.edge, o.n_nodes, o.n_voxels) == before[1:4]
+    assert o.level[: o.n_nodes].tolist() == before[4].tolist() and o.n_points == 50_000
+
+
 def test_renders_like_brute_force_at_a_budget_covering_every_point(scene, octree):
     xyz, rgba, attrs = scene
     cloud = gp.from_arrays(xyz, rgba, **attrs)

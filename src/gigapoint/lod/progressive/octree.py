@@ -939,6 +939,8 @@ class ProgressiveOctree:
             if n_valid == 0 and self._attribute_dtypes is None:  # an all-NaN first batch fixed no attributes
                 self.skipped += n
                 return 0
+            if n_valid:
+                self._check_reach(lo, hi)  # before the root grows as far as it can: a batch refused changes nothing
             attrs = self._attribute_set(attrs, n)  # before anything counts: a batch it refuses changes nothing
             self.skipped += n - n_valid
             if n_valid == 0:
@@ -1269,10 +1271,19 @@ class ProgressiveOctree:
         if len(new) and pool.attributes:  # a new voxel's attributes: its cell's first point's
             K.scatter_rows(*_attribute_views(st, pool), first[new], slots)
 
+    def _check_reach(self, lo, hi) -> None:
+        """A one-line InputError unless the root can grow (``_grow``, as often as its deepest node
+        allows) to take ``lo..hi``."""
+        if self.origin is None or self.n_nodes == 1:  # a root that is one leaf is made again around the points (_insert)
+            return
+        origin, edge, grows = self.origin, self.edge, 0
+        while np.any(lo < origin) or np.any(hi > origin + edge):
+            origin, edge, grows = origin - edge * (lo < origin), edge * 2.0, grows + 1
+        if grows and int(self.level[: self.n_nodes].max()) + grows > CODE_BITS:
+            raise InputError(f"{self.name}: points span more than the octree's {CODE_BITS} levels resolve; give the bounds up front")
+
     def _grow(self, lo, hi) -> None:
         """A root twice the size with the old one as a child, towards the points outside."""
-        if int(self.level[: self.n_nodes].max()) >= CODE_BITS:
-            raise InputError(f"{self.name}: points span more than the octree's {CODE_BITS} levels resolve; give the bounds up front")
         below = lo < self.origin
         d = int(below[0]) << 2 | int(below[1]) << 1 | int(below[2])
         n = self.n_nodes
