@@ -74,6 +74,7 @@ class Loader:
         self.total = total  # input points, when the sources tell it up front
         self.read = 0  # input points read so far (valid or not)
         self.error: GigapointError | None = None
+        self.complete = False  # every source read (not stopped by close, an error or the memory limit)
         self.started = time.perf_counter()
         self.finished_at: float | None = None
         self._stop = threading.Event()
@@ -95,8 +96,9 @@ class Loader:
 
     @property
     def progress(self) -> float:
-        """0..1: points read of the total (0 until done where no total is known; short of 1 after an error)."""
-        if self._done.is_set() and self.error is None:
+        """0..1: points read of the total (0 until done where no total is known; short of 1 after an error
+        or a close part-way)."""
+        if self._done.is_set() and self.complete and self.error is None:
             return 1.0
         if self.total:
             return min(1.0, self.read / self.total)
@@ -149,6 +151,7 @@ class Loader:
             from ...io import files_label
 
             check_valid_count(files_label(source for source, _ in self.sources), self.octree.points, self.octree.skipped)
+            self.complete = True
             while not self._stop.is_set():  # the leaves' draw order (a grid sample first), between frames
                 turn, drawing = self.octree.builder_turn(turn)
                 if not self.octree.order_leaves(ORDER_WHILE_DRAWING if drawing else ORDER_POINTS):
