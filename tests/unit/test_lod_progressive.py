@@ -1107,6 +1107,34 @@ def test_a_source_failing_part_way_keeps_what_was_loaded():
     assert gp.render_frame(o, cam, EXACT).stats.visible_pixels > 0
 
 
+def test_gigapoint_view_says_on_the_terminal_that_loading_stopped(tmp_path, capsys, monkeypatch):
+    """``gigapoint view`` of a file found bad part-way went on serving the points before the bad
+    line, and only the viewer's HUD said why: the terminal showed "0 points" and the URL. It
+    prints the one-line error too (the viewer keeps serving what was loaded)."""
+    import threading
+
+    from gigapoint.cli import main
+    from gigapoint.viewer.server import ViewerServer
+
+    xyz = np.round(np.random.default_rng(5).random((2_000, 3)) * 100, 3)
+    lines = [f"{x},{y},{z}\n" for x, y, z in xyz]
+    lines[1_500] = "garbage,line\n"
+    path = tmp_path / "mid.csv"
+    path.write_text("x,y,z\n" + "".join(lines))
+
+    def serve_until_loaded(self):  # instead of serving until Ctrl+C
+        with contextlib.suppress(GigapointError):
+            self.core.cloud.wait(60)
+        for thread in threading.enumerate():
+            if thread.name == "gigapoint-load-report":
+                thread.join(10)
+
+    monkeypatch.setattr(ViewerServer, "serve_forever", serve_until_loaded)
+    assert main(["view", str(path), "--progressive", "--no-browser"]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: loading stopped: {path}: line 1502 has 2 columns, expected 3; showing the 1,500 points loaded\n" in err, err
+
+
 def test_a_text_file_bad_part_way_keeps_the_points_before_its_bad_line(tmp_path):
     """The text reader parsed a chunk of lines (a million) whole: a bad line 150 000 lines in lost
     them all, so a progressive load of a 200 000-line CSV kept nothing. Now the lines before the

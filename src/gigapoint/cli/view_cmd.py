@@ -23,6 +23,15 @@ def _open_browser(url: str) -> None:
     threading.Timer(0.3, webbrowser.open, args=(url,)).start()
 
 
+def _report_load_error(cloud) -> None:
+    """The error that stops a progressive load, on the terminal as in the viewer's HUD (the
+    terminal said nothing; the viewer goes on showing the points loaded before it)."""
+    try:
+        cloud.wait()
+    except GigapointError as exc:
+        print(f"warning: loading stopped: {exc}; showing the {cloud.n_points:,} points loaded", file=sys.stderr, flush=True)
+
+
 @app.command("view")
 def view(
     paths: list[Path] | None = typer.Argument(None, help="Point cloud files or directories (several tiles make one scene)."),
@@ -107,6 +116,8 @@ def view(
             time.sleep(0.02)
     server = ViewerServer(cloud, host=host, port=port)
     print(f"gigapoint viewer: {cloud.name}, {cloud.n_points:,} points", file=sys.stderr)
+    if isinstance(cloud, ProgressiveOctree):
+        threading.Thread(target=_report_load_error, args=(cloud,), name="gigapoint-load-report", daemon=True).start()
     if not server.loopback:
         print(f"warning: listening on {host}, reachable from the network; the URL's token is the only key", file=sys.stderr)
     print(server.url, flush=True)
