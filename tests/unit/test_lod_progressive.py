@@ -850,6 +850,15 @@ def test_bad_input_is_a_one_line_error():
         with pytest.raises(InputError, match=f"^arrays: {message}"):
             gp.from_arrays(np.zeros((2, 3)), label=values)
     assert ProgressiveOctree("ok").add(np.zeros((2, 3)), flag=np.ones(2, bool), h=np.ones(2, np.float16)) == 2
+    # positions or colours that are not numbers: a ValueError or UFuncTypeError traceback (the colours in from_arrays too)
+    with pytest.raises(InputError, match="^bad: xyz: could not convert string to float"):
+        o.add([["a", "b", "c"]])
+    with pytest.raises(InputError, match=r"^bad: xyz must have shape \(N, 3\), got \(\)$"):  # (said (1,))
+        o.add(None)
+    for make in (lambda rgb: o.add(np.zeros((2, 3)), rgb=rgb), lambda rgb: gp.from_arrays(np.zeros((2, 3)), rgb)):
+        with pytest.raises(InputError, match=r": colors must be numbers, got dtype <U1$"):
+            make([["r", "g", "b"]] * 2)
+    assert o.n_points == 1
 
 
 @pytest.mark.parametrize(

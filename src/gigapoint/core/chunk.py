@@ -190,6 +190,8 @@ def colors_for(rgb, n: int, where: str) -> np.ndarray:
         rgb = np.asarray(rgb)
         if rgb.ndim != 2 or rgb.shape[1] not in (3, 4):
             raise ValueError(f"colors must have shape (N, 3) or (N, 4), got {rgb.shape}")
+        if rgb.dtype.kind not in "biuf":  # strings were a UFuncTypeError traceback of the range check
+            raise ValueError(f"colors must be numbers, got dtype {rgb.dtype}")
         rgba = ColorScaler()(rgb)
     except ValueError as exc:
         raise InputError(f"{where}: {exc}") from None

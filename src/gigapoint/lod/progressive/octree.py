@@ -906,9 +906,13 @@ class ProgressiveOctree:
         and may not bring others (InputError); an attribute whose dtype cannot hold a batch's
         widens to numpy's dtype for both (uint16 and float32: float32), as ``gp.open`` of
         several files does."""
-        xyz = np.ascontiguousarray(xyz, np.float64)
+        xyz = np.asarray(xyz)  # (its shape first: ascontiguousarray makes None one NaN of shape (1,))
         if xyz.ndim != 2 or xyz.shape[1] != 3:
             raise InputError(f"{self.name}: xyz must have shape (N, 3), got {xyz.shape}")
+        try:
+            xyz = np.ascontiguousarray(xyz, np.float64)
+        except (TypeError, ValueError) as exc:  # strings, objects: from_arrays' one line, not a traceback
+            raise InputError(f"{self.name}: xyz: {exc}") from None
         n = len(xyz)
         if n == 0:
             return 0
