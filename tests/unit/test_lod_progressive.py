@@ -776,6 +776,25 @@ def test_drawing_while_another_thread_orders_the_leaves(scene):
     _assert_leaves_begin_with_their_grid_sample(o, before)
 
 
+def test_an_empty_first_chunk_does_not_hold_the_load_up():
+    """The second chunk waits for the first slice to be in: a source whose first chunk held no
+    point inserted no slice, and the load waited for good (wait() timed out, 0 points)."""
+    from gigapoint.core.chunk import PointChunk
+    from gigapoint.io import demo_chunks
+    from gigapoint.lod.progressive import Loader
+
+    def chunks():
+        yield PointChunk(np.empty((0, 3)), np.empty((0, 4), np.uint8), {})
+        yield from demo_chunks(60_000, chunk_size=20_000)
+
+    o = ProgressiveOctree("empty first")
+    o.attach(Loader(o, [("src", chunks)], None).start())
+    try:
+        assert o.wait(timeout=60) and o.n_points == 60_000
+    finally:
+        o.close()  # (lets a held-up loader go)
+
+
 def test_the_second_chunk_is_decoded_once_the_first_is_in(scene, monkeypatch):
     """Decoding holds the GIL (lazrs; the demo generator's kernels): the decoder makes the second
     chunk only once the first is inserted, so the first insertion, and the first image, do not

@@ -122,6 +122,8 @@ class Loader:
                 chunk = next(chunks, None)
                 if chunk is None:
                     break
+                if not len(chunk):  # no slice to insert: the next chunk would wait for a first slice for good
+                    continue
                 made += 1
                 yield name, chunk
 
