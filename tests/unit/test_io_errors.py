@@ -489,6 +489,26 @@ def test_npz_problems(tmp_path):
         raises(InputError, p, fn=file_info, match="corrupt NPZ (zip) member 'xyz'")
 
 
+@pytest.mark.parametrize("way", ALL_WAYS)
+def test_npz_members_that_disagree_with_the_positions(tmp_path, way):
+    """x, y, z of different lengths were an internal KeyError; colours of another row count (or
+    not (N, 3)/(N, 4)) were dropped without a word, the cloud drawn grey."""
+    p = tmp_path / "m.npz"
+    x = np.arange(20.0)
+    np.savez(p, x=x, y=x[:10], z=x)
+    raises(InputError, p, way, "NPZ member 'y' has 10 rows, 'x' has 20")
+    np.savez(p, x=x, y=x, z=np.zeros((20, 2)))
+    raises(InputError, p, way, "NPZ member 'z' must be a numeric (N,) array")
+    np.savez(p, xyz=np.zeros((20, 3)), rgb=np.zeros((5, 3), np.uint8))
+    raises(InputError, p, way, "NPZ member 'rgb' has 5 rows, 'xyz' has 20")
+    np.savez(p, x=x, y=x, z=x, colors=np.zeros((20, 2), np.uint8))
+    raises(InputError, p, way, "NPZ member 'colors' must be an (N, 3) or (N, 4) colour array")
+    np.savez(p, xyz=np.zeros((20, 3)), rgb=np.zeros((20, 3), np.uint8), other=np.zeros(7))  # other arrays: not per point, left out
+    assert sum(len(c) for c in read_chunks(p)) == 20
+    np.savez(p, xyz=np.zeros((20, 3)), color=np.arange(20))  # one value a point: an attribute, as before
+    assert [sorted(c.attributes) for c in read_chunks(p)] == [["color"]]
+
+
 def test_bad_chunk_size(tmp_path):
     p = tmp_path / "a.xyz"
     p.write_text("1 2 3\n")

@@ -186,6 +186,18 @@ class _Member:
                 done += n
 
 
+def _check_colors(path: Path, members: dict[str, _Member], positions: _Member) -> None:
+    """A colour member that does not fit the points is an error: left out with the other arrays
+    of another row count, it drew the cloud in the default colour without a word."""
+    for m in members.values():
+        if m.key.lower() not in COLOR_KEYS:
+            continue
+        if m.rows != positions.rows:
+            raise fail(path, f"NPZ member {m.key!r} has {m.rows:,} rows, {positions.key!r} has {positions.rows:,}")
+        if len(m.shape) != 1 and (m.shape[1:] not in ((3,), (4,)) or m.dtype.kind not in "biuf"):  # (N,): an attribute
+            raise fail(path, f"NPZ member {m.key!r} must be an (N, 3) or (N, 4) colour array, got shape {m.shape} dtype {m.dtype}")
+
+
 def _npz_plan(path: Path, zf: zipfile.ZipFile) -> tuple[dict[str, _Member], list[str] | None, dict[str, _Member]]:
     """(members by key, names when one member is a whole point table else None, members to read)."""
     members = {}
@@ -197,8 +209,15 @@ def _npz_plan(path: Path, zf: zipfile.ZipFile) -> tuple[dict[str, _Member], list
     lower = {k.lower(): k for k in members}
     xyz_key = next((lower[k] for k in XYZ_KEYS if k in lower), None)
     if xyz_key is None and {"x", "y", "z"} <= set(lower):
-        n = members[lower["x"]].rows
-        use = {k: m for k, m in members.items() if m.rows == n and len(m.shape) in (1, 2)}
+        first = members[lower["x"]]
+        for a in "xyz":  # (one of another length was dropped below, then a KeyError)
+            m = members[lower[a]]
+            if len(m.shape) != 1 or m.dtype.kind not in "biuf":
+                raise fail(path, f"NPZ member {m.key!r} must be a numeric (N,) array, got shape {m.shape} dtype {m.dtype}")
+            if m.rows != first.rows:
+                raise fail(path, f"NPZ member {m.key!r} has {m.rows:,} rows, {first.key!r} has {first.rows:,}")
+        use = {k: m for k, m in members.items() if m.rows == first.rows and len(m.shape) in (1, 2)}
+        _check_colors(path, members, first)
         return members, None, use
     if xyz_key is None:
         if len(members) == 1:
@@ -210,6 +229,7 @@ def _npz_plan(path: Path, zf: zipfile.ZipFile) -> tuple[dict[str, _Member], list
         if len(members) == 1 or xm.dtype.names:
             return members, _layout_names(path, f"NPZ member {xm.key!r}", xm.dtype, xm.shape), {xm.key: xm}
         raise fail(path, f"NPZ member {xyz_key!r} must be a numeric (N, 3) array, got shape {xm.shape} dtype {xm.dtype}")
+    _check_colors(path, members, xm)
     use = {xyz_key: xm}
     for k, m in members.items():
         if k != xyz_key and m.rows == xm.rows and len(m.shape) in (1, 2) and m.dtype.kind in "biuf":
