@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
@@ -223,6 +225,10 @@ def test_invalid_points_skipped_with_warning(tmp_path):
     assert res.points == 2 and res.skipped == 2
     with pytest.raises(EmptyCloudError, match="no valid points"):
         convert([PointChunk(np.full((3, 3), np.nan))], tmp_path / "o2")
+    bad = tmp_path / "bad.npy"  # a file's warning names the file, as a render's does (it said "bad")
+    np.save(bad, xyz)
+    with pytest.warns(GigapointWarning, match=f"^{re.escape(str(bad))}: skipped 2 invalid points"):
+        convert(bad, tmp_path / "o3")
 
 
 def test_dense_spot_is_split_below_the_count_grid(tmp_path, monkeypatch):

@@ -148,8 +148,8 @@ class ReadPhase(Job):
         if st.get("points", 0) == 0:  # the plain cloud's error, naming the files as it does
             check_valid_count(files_label(self.paths) if self.paths else self.name, 0, st.get("skipped", 0))
         if st.get("skipped"):
-            warnings.warn(
-                f"{self.name}: skipped {st['skipped']:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})",
+            warnings.warn(  # named as the error above names them (self.name is a file's stem)
+                f"{files_label(self.paths) if self.paths else self.name}: skipped {st['skipped']:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})",
                 GigapointWarning,
                 stacklevel=4,
             )
