@@ -324,3 +324,13 @@ def test_a_laszip_node_whose_header_disagrees_with_the_hierarchy(broken):
     las.points = las.points[: n - 5]
     las.write(victim)
     _fails(d, f"ept-data/{victim.stem}.laz holds {n - 5:,} points, the hierarchy says {n:,}")
+
+
+def test_an_ept_dataset_given_to_convert_is_named_as_one(datasets, tmp_path):
+    """Its folder was 'holds no supported point cloud file', its ept.json 'unknown point cloud
+    format (suffix .json)': as for a converted folder, the error says what it is."""
+    for given in (datasets["binary"], datasets["binary"] / "ept.json"):
+        with pytest.raises(InputError) as e:
+            gp.convert(given, tmp_path / "out")
+        assert str(e.value) == f"{given}: is an EPT dataset (an octree: open or render it as it is), not an input point cloud"
+    assert not (tmp_path / "out").exists()

@@ -20,6 +20,7 @@ from ...atomic import same_file
 from ...errors import InputError
 from ...io import URL_LIKE, expand_paths, file_url_path
 from ..copc_write import work_dir as copc_work_dir
+from ..ept import ept_location
 from ..octree_dir import OctreeDir, OutputExistsError
 from .options import BYTES_PER_POINT_BUILD, MAX_PARTITION_POINTS, rss_bytes
 
@@ -54,6 +55,8 @@ def input_paths(inputs) -> list[Path] | None:
     for p in inputs:
         if OctreeDir(p).kind is not None:
             raise InputError(f"{p}: is a converted octree (or a conversion in progress), not an input point cloud")
+        if ept_location(p) is not None:  # (was "holds no supported point cloud file", or an unknown .json)
+            raise InputError(f"{p}: is an EPT dataset (an octree: open or render it as it is), not an input point cloud")
     return expand_paths(inputs)
 
 
