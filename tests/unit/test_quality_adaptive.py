@@ -142,3 +142,18 @@ def test_wgpu_draws_adaptive_points_like_the_cpu():
     cpu = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu"))
     assert cpu.stats.visible_pixels > 0.3 * cpu.visibility.size
     assert np.count_nonzero(gpu.visibility != cpu.visibility) <= 0.01 * gpu.visibility.size  # pixel-edge rounding only
+
+
+@pytest.mark.parametrize("settings", [{}, {"point_world_size": 0.5, "point_size": 8}], ids=["adaptive", "attenuated"])
+def test_points_in_the_plane_of_the_eye_are_clipped_not_a_crash(settings):
+    """Points at depth 0 exactly (the eye on the points' grid looking along an axis: a render of a
+    LAS file with --camera "eye=637086.94,849200,440 target=637186.94,849200,440" where a point
+    has x = 637086.94) stopped the CPU kernel with a ZeroDivisionError in its size loop (atten /
+    depth of clipped points): 'internal error: SystemError'. They are behind the near plane."""
+    g = np.stack(np.meshgrid(*[np.arange(30.0)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    cloud = gp.from_arrays(g + [1000.0, 2000.0, 100.0], name="lattice")
+    cam = gp.Camera.look_at((1010.0, 2014.5, 114.5), (1020.0, 2014.5, 114.5), width=96, height=64)
+    s = gp.RenderSettings(backend="cpu", **settings)
+    frame = gp.render_frame(cloud, cam, s)
+    np.testing.assert_array_equal(frame.visibility, reference_visibility(cloud, cam, s))
+    assert (frame.visibility != EMPTY_PIXEL).mean() > 0.8  # the points in front fill most of the view

@@ -386,7 +386,7 @@ def uniform_runs(spans, rows, width):
     return out
 
 
-@njit
+@njit(error_model="numpy")  # a clipped point at depth 0 (in the eye's plane) sized atten / 0 = inf, not a ZeroDivisionError
 def _write_splats(first, step, pix, depth, depth_bits, buf, dirty, width, height, spans, rows, uniform, size, atten, mark, row_lo, row_hi):
     """``write_batch`` of points larger than a pixel (its arguments): only rows row_lo..row_hi - 1."""
     r = spans.shape[1] // 2
