@@ -404,3 +404,34 @@ def test_a_file_named_twice_is_read_once(tmp_path):
         warnings.simplefilter("always")
         cloud = open_sized([a, a], point_budget=10**6)
     assert cloud.n_points == 50 and [str(w.message) for w in seen] == [f"{a}: named more than once; its points are read once"]
+
+
+def test_field_names_are_listed_as_read_and_two_of_one_lower_case_name_are_an_error(tmp_path):
+    """PLY and NPY fields are read in lower case ('scalar_Intensity' -> 'scalar_intensity'), but
+    info listed the file's spelling, which --color-attribute then refused; and two fields of one
+    name in lower case ('Intensity' and 'intensity', 'X' and 'x') were one: the last kept, the
+    other lost without a word."""
+    from gigapoint.errors import InputError
+
+    PLY_XYZ = "property float x\nproperty float y\nproperty float z\n"
+    p = tmp_path / "cc.ply"
+    p.write_text("ply\nformat ascii 1.0\nelement vertex 2\n" + PLY_XYZ + "property float scalar_Intensity\nend_header\n1 2 3 7\n4 5 6 8\n")
+    assert file_info(p)["attributes"] == list(open_cloud(p).attributes) == ["scalar_intensity"]
+    n = tmp_path / "s.npy"
+    rec = np.zeros(2, [("X", "f8"), ("Y", "f8"), ("Z", "f8"), ("Return_Number", "u1")])
+    np.save(n, rec)
+    assert file_info(n)["attributes"] == list(open_cloud(n).attributes) == ["return_number"]
+    clash = {
+        "c.csv": ("x,y,z,Intensity,intensity\n1,2,3,10,20\n4,5,6,30,40\n", "'Intensity' and 'intensity'"),
+        "red.csv": ("x,y,z,red,R,g,b\n1,2,3,10,20,1,1\n", "'red' and 'R'"),
+        "c.ply": ("ply\nformat ascii 1.0\nelement vertex 1\n" + PLY_XYZ + "property float Q\nproperty float q\nend_header\n1 2 3 4 5\n", "'Q' and 'q'"),
+    }
+    for name, (text, both) in clash.items():
+        (tmp_path / name).write_text(text)
+    np.save(tmp_path / "x.npy", np.zeros(2, [("x", "f8"), ("y", "f8"), ("z", "f8"), ("X", "f8")]))
+    clash["x.npy"] = (None, "'x' and 'X'")
+    for name, (_, both) in clash.items():
+        for way in (open_cloud, file_info):
+            with pytest.raises(InputError) as e:
+                way(tmp_path / name)
+            assert str(e.value).startswith(f"{tmp_path / name}: ") and f"fields {both} are one name" in str(e.value), str(e.value)

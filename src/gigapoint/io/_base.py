@@ -107,8 +107,25 @@ def check_chunk_size(chunk_size: int) -> int:
     return check_whole("open", "chunk_size", chunk_size, 1)
 
 
+def check_distinct_names(path: Path, names: list[str], keys: list[str] | None = None) -> None:
+    """Fields are read by their name in lower case (``keys``: those, default ``names`` lowered):
+    two of one key ('Intensity' and 'intensity', 'X' and 'x') were one, the last kept without a word."""
+    seen: dict[str, str] = {}
+    for name, key in zip(names, keys or [n.lower() for n in names]):
+        if key in seen:
+            raise fail(path, f"fields {seen[key]!r} and {name!r} are one name read in lower case ({key!r}); rename one")
+        seen[key] = name
+
+
+def attribute_names(names: list[str], colors: list[str]) -> list[str]:
+    """The attributes ``rows_to_chunk`` makes of fields ``names`` (``colors``: color_names'), as it names them."""
+    out = (safe_attribute_name(n.lower()) for n in names if n.lower() not in ("x", "y", "z") and n.lower() not in colors)
+    return [n for n in out if n is not None]
+
+
 def rows_to_chunk(path: Path, names: list[str], columns: list[np.ndarray], scaler: ColorScaler) -> PointChunk:
     """A PointChunk from named 1-D columns: x y z, red green blue [alpha] (or r g b [a]), the rest attributes."""
+    check_distinct_names(path, names)
     lower = [n.lower() for n in names]
     col = dict(zip(lower, columns))
     try:

@@ -27,6 +27,7 @@ from ._base import (
     DEFAULT_CHUNK_SIZE,
     ColorScaler,
     Reader,
+    attribute_names,
     check_chunk_size,
     check_file,
     color_names,
@@ -137,7 +138,7 @@ class NpyReader(Reader):
         arr = self._open(path)
         names = _layout_names(path, "NPY array", arr.dtype, arr.shape)
         cols = color_names(names)
-        attributes = [c for c in names if c.lower() not in ("x", "y", "z") and c.lower() not in cols]
+        attributes = attribute_names(names, cols)  # as read: in lower case
         chunks = self.read_chunks(path) if len(arr) else None
         return scanned_info(path, "NPY", chunks, bool(cols), attributes, dtype=str(arr.dtype), shape=list(arr.shape))
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..core.chunk import ColorScaler, PointChunk
 from ..errors import EmptyCloudError
-from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, color_names, fail, rows_to_chunk, scan_bounds
+from ._base import DEFAULT_CHUNK_SIZE, Reader, attribute_names, check_chunk_size, check_file, color_names, fail, rows_to_chunk, scan_bounds
 
 _MAX_HEADER = 1 << 20
 
@@ -216,7 +216,7 @@ class PlyReader(Reader):
             "bounds": {"min": lo, "max": hi},
             "bounds_source": "data",
             "has_color": bool(cols),
-            "attributes": [c for c in h.names if c.lower() not in ("x", "y", "z") and c.lower() not in cols],
+            "attributes": attribute_names(h.names, cols),  # as read: in lower case
             "elements": {el.name: el.count for el in h.ply.elements},
             "file_size": h.file_size,
         }

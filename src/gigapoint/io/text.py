@@ -31,7 +31,17 @@ import numpy as np
 
 from ..core.chunk import ColorScaler, PointChunk
 from ..errors import EmptyCloudError, GigapointWarning
-from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, color_names, fail, rows_to_chunk, scanned_info
+from ._base import (
+    DEFAULT_CHUNK_SIZE,
+    Reader,
+    check_chunk_size,
+    check_distinct_names,
+    check_file,
+    color_names,
+    fail,
+    rows_to_chunk,
+    scanned_info,
+)
 
 _BY_COUNT = {
     3: ["x", "y", "z"],
@@ -114,6 +124,7 @@ def _layout(path: Path) -> _Layout:
         tokens = _split(body, _sniff_delimiter(body))
         lowered = [_ALIASES.get(t.strip("'\"").lower(), t.strip("'\"").lower()) for t in tokens]
         if not _numeric(tokens) and {"x", "y", "z"} <= set(lowered):
+            check_distinct_names(path, [t.strip("'\"") for t in tokens], lowered)
             header_names = lowered
             skip = lineno
             candidates = candidates[i + 1 :]
