@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+import gigapoint as gp
 from gigapoint.core import PointChunk
 from gigapoint.io import demo_arrays
 from gigapoint.lod import convert, open_octree
@@ -349,3 +350,15 @@ def test_a_frame_draws_node_by_node_in_the_morton_order_of_their_cubes(grid_tree
     assert not (np.diff(draw.selection.ids) > 0).all()  # not the arena's order
     position = oc.keys[runs] << (np.uint64(3) * (CODE_BITS - level_of(oc.keys[runs])).astype(np.uint64))
     assert (position[1:] >= position[:-1]).all()
+
+
+def test_an_iterable_of_what_is_not_a_point_chunk_is_a_one_line_error(tmp_path):
+    """convert([cloud], out), or a list of paths and clouds, was an AttributeError ('PointCloud'
+    object has no attribute 'xyz') from deep in the read phase."""
+    from gigapoint.errors import InputError
+
+    cloud = gp.from_arrays(np.random.default_rng(0).random((100, 3)))
+    for inputs, what in (([cloud], "item 0 is a PointCloud"), ([PointChunk(np.zeros((5, 3))), "a.laz", cloud], "item 1 is a str")):
+        with pytest.raises(InputError) as e:
+            convert(inputs, tmp_path / "o")
+        assert str(e.value) == f"convert: inputs are files and folders, a cloud, or PointChunks; {what}"

@@ -9,9 +9,9 @@ from functools import cached_property
 
 import numpy as np
 
-from ...core.chunk import warn_dropped_attributes
+from ...core.chunk import PointChunk, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
-from ...errors import GigapointWarning
+from ...errors import GigapointWarning, InputError
 from ...io import files_label, read_chunks
 from ...io.registry import reader_for
 from ..build import valid_bounds
@@ -94,7 +94,10 @@ class ReadPhase(Job):
 
     def _chunks(self):
         if self.paths is None:
-            yield from self.inputs
+            for i, chunk in enumerate(self.inputs):
+                if not isinstance(chunk, PointChunk):  # [cloud] was an AttributeError ('no attribute xyz') further on
+                    raise InputError(f"convert: inputs are files and folders, a cloud, or PointChunks; item {i} is a {type(chunk).__name__}")
+                yield chunk
         else:
             for p in self.paths:
                 chunks = _read_chunks(p, self.chunk_size)
