@@ -93,6 +93,19 @@ def test_lock_and_running(tmp_path):
         OctreeDir(tmp_path / "f").lock()
 
 
+
+@pytest.mark.parametrize("name", ["sub", "sub.copc.laz"])
+def test_an_output_under_a_file_is_refused_without_promising_a_resume(tmp_path, name):
+    """-o notes/sub where notes is a file said "Not a directory; the conversion to notes/sub
+    stopped unfinished (run it again once the cause is gone: it resumes)": nothing had begun."""
+    (tmp_path / "notes").write_text("keep")
+    out = tmp_path / "notes" / name
+    with pytest.raises(ConvertError) as e:
+        convert([PointChunk(np.zeros((10, 3)))], out)
+    assert str(e.value) == f"{out.parent / name}{'.work' if name.endswith('.laz') else ''}: Not a directory"
+    assert (tmp_path / "notes").read_text() == "keep"
+
+
 def test_prepare_output_resumes_clears_or_refuses(tmp_path):
     d = OctreeDir(tmp_path / "out")
     assert d.prepare_output({"v": 1}, overwrite=False) is None and d.partial.is_dir()

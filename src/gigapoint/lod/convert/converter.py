@@ -76,6 +76,9 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
                 shutil.rmtree(self.dir.path, ignore_errors=True)
             raise
         except OSError as exc:  # a full disk most often: the CLI's line named no file, nor what became of the output
+            if created and not self.state:  # nothing began (OUT under a file: ENOTDIR): nothing to resume
+                shutil.rmtree(self.dir.path, ignore_errors=True)
+                raise ConvertError(f"{exc.filename or self.dir.path}: {exc.strerror or exc}") from exc
             gone = exc.errno == errno.ENOENT and exc.filename and self.dir.partial in Path(exc.filename).parents
             if gone and getattr(self, "state", None):  # a work file missing: it will be missing next time too
                 damage = f"{exc.filename}: a work file of the unfinished conversion is missing"
