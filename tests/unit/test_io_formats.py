@@ -435,3 +435,19 @@ def test_field_names_are_listed_as_read_and_two_of_one_lower_case_name_are_an_er
             with pytest.raises(InputError) as e:
                 way(tmp_path / name)
             assert str(e.value).startswith(f"{tmp_path / name}: ") and f"fields {both} are one name" in str(e.value), str(e.value)
+
+
+def test_a_vertex_list_property_is_left_out_quietly_and_not_listed(tmp_path):
+    """A list property inside the vertex element (its points read by plyfile, the list left out)
+    was listed by info as an attribute the cloud did not have, and an empty list printed
+    plyfile's "warning: loadtxt: input contained no data"."""
+    p = tmp_path / "l.ply"
+    p.write_text(
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+        + "property list uchar float feat\nproperty float q\nend_header\n1 2 3 2 0.5 0.5 7\n4 5 6 0 8\n7 8 9 1 1.0 9\n"
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        cloud = open_cloud(p)
+        info = file_info(p)
+    assert cloud.n_points == 3 and list(cloud.attributes) == info["attributes"] == ["q"]

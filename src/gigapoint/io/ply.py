@@ -61,6 +61,7 @@ class _Header:
         if self.vertex is None:
             raise fail(path, f"PLY file has no 'vertex' element (elements: {', '.join(e.name for e in ply.elements) or 'none'})")
         self.names = [p.name for p in self.vertex.properties]
+        self.scalar_names = [p.name for p in self.vertex.properties if not isinstance(p, plyfile.PlyListProperty)]  # lists are left out
         if not {"x", "y", "z"} <= {n.lower() for n in self.names}:
             raise fail(path, f"PLY vertex element has no x, y, z properties (has {', '.join(self.names)})")
         self.count = self.vertex.count
@@ -192,7 +193,9 @@ class PlyReader(Reader):
         import plyfile
 
         try:
-            ply = plyfile.PlyData.read(str(path))
+            with warnings.catch_warnings():  # numpy's "input contained no data" of an empty list: a valid file
+                warnings.filterwarnings("ignore", "loadtxt: input contained no data", UserWarning)
+                ply = plyfile.PlyData.read(str(path))
             data = ply["vertex"].data
         except Exception as exc:  # noqa: BLE001 - plyfile raises many types on corrupt data
             raise fail(path, f"corrupt PLY data: {exc}") from None
@@ -216,7 +219,7 @@ class PlyReader(Reader):
             "bounds": {"min": lo, "max": hi},
             "bounds_source": "data",
             "has_color": bool(cols),
-            "attributes": attribute_names(h.names, cols),  # as read: in lower case
+            "attributes": attribute_names(h.scalar_names, cols),  # as read: in lower case, no list property
             "elements": {el.name: el.count for el in h.ply.elements},
             "file_size": h.file_size,
         }
