@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import warnings
 
 import numpy as np
@@ -398,6 +399,10 @@ def test_a_file_named_twice_is_read_once(tmp_path):
     with pytest.warns(GigapointWarning, match="named more than once"):
         result = gp.convert([a, folder], tmp_path / "out")
     assert result.points == 100
+    linked = tmp_path / "same.npy"  # a hard link (or one file through two mounts): another path, the same file
+    os.link(a, linked)
+    with pytest.warns(GigapointWarning, match="same.npy: named more than once"):
+        assert open_cloud(a, linked).n_points == 50
     from gigapoint.lod.progressive import open_sized  # what render and view open: it warned twice
 
     with warnings.catch_warnings(record=True) as seen:

@@ -74,10 +74,14 @@ def expand_paths(paths: Iterable) -> list[Path]:
             out.append(check_file(p))
     if not out:
         raise InputError("open: no file given")
-    seen: set[Path] = set()
+    seen: set = set()
     once = []
     for f in out:
-        key = f.resolve()
+        try:  # one file: also through a hard link or a second mount, which resolve() tells apart
+            st = f.stat()
+            key = (st.st_dev, st.st_ino) if st.st_ino else f.resolve()  # (0: a file system without inode numbers)
+        except OSError:
+            key = f.resolve()
         if key in seen:
             warnings.warn(f"{f}: named more than once; its points are read once", GigapointWarning, stacklevel=3)
             continue
