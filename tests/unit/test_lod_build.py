@@ -362,3 +362,19 @@ def test_an_iterable_of_what_is_not_a_point_chunk_is_a_one_line_error(tmp_path):
         with pytest.raises(InputError) as e:
             convert(inputs, tmp_path / "o")
         assert str(e.value) == f"convert: inputs are files and folders, a cloud, or PointChunks; {what}"
+
+
+@pytest.mark.parametrize("memory_limit", [None, "64M"], ids=["in_memory", "spilled"])
+def test_an_empty_file_among_several_is_skipped_as_a_render_skips_it(tmp_path, memory_limit):
+    """A folder of tiles with one empty tile rendered (the tile skipped with a warning) but did not
+    convert: 'e.npy: NPY array holds no points (0 rows)', exit 1. Alone it is still an error."""
+    from gigapoint.errors import EmptyCloudError, GigapointWarning
+
+    a, e = tmp_path / "a.npy", tmp_path / "e.npy"
+    np.save(a, np.random.default_rng(0).random((500, 3)))
+    np.save(e, np.zeros((0, 3)))
+    with pytest.warns(GigapointWarning, match=f"^{re.escape(str(e))}: holds no points, skipped$"):
+        res = convert([e, a], tmp_path / "o", memory_limit=memory_limit)
+    assert res.points == 500 and open_octree(tmp_path / "o").n_points == 500
+    with pytest.raises(EmptyCloudError, match="holds no points"):
+        convert([e], tmp_path / "o2", memory_limit=memory_limit)

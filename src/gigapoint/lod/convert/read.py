@@ -11,7 +11,7 @@ import numpy as np
 
 from ...core.chunk import PointChunk, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
-from ...errors import GigapointWarning, InputError
+from ...errors import EmptyCloudError, GigapointWarning, InputError
 from ...io import files_label, read_chunks
 from ...io.registry import reader_for
 from ..build import valid_bounds
@@ -25,6 +25,17 @@ from .state import Job
 def _read_chunks(path, chunk_size: int):
     """The chunks of one input file (any format gigapoint.io reads); a seam the tests stop."""
     return read_chunks(path, chunk_size)
+
+
+def _skipped_if_empty(path, chunks, several: bool):
+    """``chunks``, but a file without points among several is skipped with a warning, as
+    gp.open (and so render) skips it: a folder of tiles with an empty one was refused."""
+    try:
+        yield from chunks
+    except EmptyCloudError:
+        if not several:
+            raise
+        warnings.warn(f"{path}: holds no points, skipped", GigapointWarning, stacklevel=2)
 
 
 def merge_attributes(attrs: dict | None, names: dict) -> dict:
@@ -100,7 +111,7 @@ class ReadPhase(Job):
                 yield chunk
         else:
             for p in self.paths:
-                chunks = _read_chunks(p, self.chunk_size)
+                chunks = _skipped_if_empty(p, _read_chunks(p, self.chunk_size), len(self.paths) > 1)
                 yield from prefetch(chunks) if self.read_ahead else chunks
 
     def _take_chunk(self, i: int, chunk) -> tuple:
