@@ -380,3 +380,13 @@ def test_chunk_inputs_cannot_go_to_workers(client, tmp_path):
     with pytest.raises(ConvertError, match="reads files"):
         convert(demo_chunks(1000), tmp_path / "oct", client=client)
     assert not (tmp_path / "oct").exists()
+
+
+def test_an_empty_las_tile_among_several_is_skipped_as_in_one_process(inputs, client, tmp_path):
+    """Its whole-file read task failed on a worker: 'LAS file holds no points', the run stopped."""
+    from gigapoint.errors import GigapointWarning
+
+    empty = _write_las(tmp_path / "empty.las", np.zeros((0, 3)), np.zeros((0, 3), np.uint16))
+    with pytest.warns(GigapointWarning, match=f"{empty}: holds no points, skipped"):
+        res = convert([inputs[1], empty], tmp_path / "oct", client=client, **OPTS)
+    assert res.points == 30_000

@@ -50,6 +50,7 @@ import sys
 import tempfile
 import threading
 import time
+import warnings
 import weakref
 from contextlib import contextmanager
 from pathlib import Path
@@ -59,7 +60,7 @@ import numpy as np
 from ...atomic import atomic_json, atomic_open
 from ...core import pages
 from ...core.chunk import ColorScaler
-from ...errors import GigapointError
+from ...errors import GigapointError, GigapointWarning
 from ...io._base import one_line
 from ...io.registry import reader_for
 from ..keys import CODE_BITS
@@ -683,6 +684,9 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         for f, p in enumerate(self.paths):
             reader = reader_for(p)
             n = reader.point_count(p) if getattr(reader, "reads_ranges", False) else None
+            if n == 0 and len(self.paths) > 1:  # an empty tile: skipped, as one process skips it (read._skipped_if_empty)
+                warnings.warn(f"{p}: holds no points, skipped", GigapointWarning, stacklevel=2)
+                continue
             if n:
                 reads += [[f, s, min(s + step, n), None] for s in range(0, n, step)]
             else:
