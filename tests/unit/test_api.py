@@ -124,6 +124,25 @@ def test_settings_that_are_not_render_settings_are_one_line_errors(tmp_path):
     np.testing.assert_array_equal(gp.render(cloud, camera, settings=None), gp.render(cloud, camera, gp.RenderSettings()))
 
 
+def test_render_frame_takes_settings_as_keywords_as_render_does():
+    """gp.render_frame(cloud, camera, point_size=3) was a TypeError (render takes the keywords):
+    now the frame of those settings; an unknown one is render's one-line error."""
+    import pytest
+
+    import gigapoint as gp
+    from gigapoint.render.settings import SettingsError
+
+    cloud = gp.demo(5_000)
+    camera = gp.Camera.fit(cloud.bounds, width=48, height=32)
+    by_keyword = gp.render_frame(cloud, camera, point_size=3, size_mode="fixed")
+    given = gp.render_frame(cloud, camera, gp.RenderSettings(point_size=3, size_mode="fixed"))
+    np.testing.assert_array_equal(by_keyword.image, given.image)
+    np.testing.assert_array_equal(by_keyword.image, gp.render(cloud, camera, point_size=3, size_mode="fixed"))
+    assert not np.array_equal(by_keyword.image, gp.render_frame(cloud, camera, size_mode="fixed").image)  # (the size took)
+    with pytest.raises(SettingsError, match="unknown render setting"):
+        gp.render_frame(cloud, camera, pointsize=3)
+
+
 def test_open_takes_true_or_false_for_its_switches(tmp_path):
     """progressive="no" and chunked="no" were taken as true; so was overwrite="no" in convert,
     videos and live recordings and snapshots, which replaced what the user had."""

@@ -33,10 +33,13 @@ def check_renderable(cloud) -> None:
     _RENDERABLE_TYPES.add(type(cloud))
 
 
-def render_frame(cloud, camera: Camera | None = None, settings: RenderSettings | None = None) -> Frame:
+def render_frame(cloud, camera: Camera | None = None, settings: RenderSettings | None = None, **setting_overrides) -> Frame:
     """Render ``cloud`` (any Renderable) into a Frame (visibility buffer, image, stats). Without a
-    camera: ``Camera.fit_cloud(cloud)`` (1920x1080, the CLI's default view) of what it holds now."""
+    camera: ``Camera.fit_cloud(cloud)`` (1920x1080, the CLI's default view) of what it holds now.
+    Settings as ``render`` takes them: ``settings`` and/or keywords (``point_size=3``)."""
     settings = RenderSettings.of(settings)
+    if setting_overrides:  # (size_mode=... was a TypeError here, a setting in render)
+        settings = settings.replace(**setting_overrides)
     check_renderable(cloud)
     if camera is None:
         camera = Camera.fit_cloud(cloud)
