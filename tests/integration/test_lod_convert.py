@@ -8,6 +8,7 @@ import re
 import shutil as sh
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -831,7 +832,13 @@ def test_a_cloud_converts_as_the_file_it_was_read_from(autzen_path, tmp_path):
     assert words.layout == "words" and [len(c.xyz) for c in words.chunks(15_000)] == [20_480, 9_520]  # whole batches
     np.testing.assert_array_equal(np.concatenate([c.xyz for c in words.chunks(15_000)]), words.positions())
     np.testing.assert_array_equal(np.concatenate([c.attributes["intensity"] for c in words.chunks()]), words.attributes["intensity"])
-    from_cloud = convert(cloud, tmp_path / "from_cloud")
+    assert not cloud.colors_exact  # gp.open's colors="auto": a palette or RGB565, which the conversion is told of
+    with pytest.warns(gp.GigapointWarning, match=r"holds its colours approximated .*convert its files \(.*autzen_trim.laz\) or open them with colors='rgba'"):
+        from_cloud = convert(cloud, tmp_path / "from_cloud")
+    exact = gp.open(path, colors="rgba")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # colours as the file's: no word
+        convert(exact, tmp_path / "exact")
     convert([path], tmp_path / "from_file")
     assert from_cloud.points == 110_000
     np.testing.assert_array_equal(_octree_points(tmp_path / "from_cloud"), _octree_points(tmp_path / "from_file"))
@@ -839,7 +846,10 @@ def test_a_cloud_converts_as_the_file_it_was_read_from(autzen_path, tmp_path):
     assert open_octree(tmp_path / "from_cloud").meta["crs"] == open_octree(tmp_path / "from_file").meta["crs"] is not None  # its file's
     assert cloud.source_files == (path,) and words.source_files == ()
     progressive = gp.open(path, progressive=True)  # waited for, converted from its leaves, its file's CRS kept
-    convert(progressive, tmp_path / "from_progressive")
+    assert progressive.colors_exact
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        convert(progressive, tmp_path / "from_progressive")
     np.testing.assert_array_equal(_octree_points(tmp_path / "from_progressive"), _octree_points(tmp_path / "from_file"))
     assert open_octree(tmp_path / "from_progressive").meta["crs"] == open_octree(tmp_path / "from_file").meta["crs"] is not None
     progressive.close()

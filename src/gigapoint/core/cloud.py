@@ -69,6 +69,12 @@ class PointCloud:
         if not isinstance(self.attributes, Attributes):  # a dict of arrays: held as given
             self.attributes = Attributes(self.attributes)
 
+    @property
+    def colors_exact(self) -> bool:
+        """PointSource: its colours are 32-bit RGBA, as given; RGB565 and palettes (``colors=``,
+        "auto"'s choice) hold approximations, which ``chunks()`` and so a conversion give back."""
+        return isinstance(self.color, np.ndarray) and self.color.dtype == np.uint32
+
     version: ClassVar[None] = None  # PointBuffers: the arrays never change once built
     batch_version: ClassVar[None] = None
     load_progress: ClassVar[float] = 1.0  # Renderable: built whole

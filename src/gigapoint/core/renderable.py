@@ -157,6 +157,7 @@ class PointSource(Protocol):
 
     name: str
     source_files: Sequence  # the files whose headers give a conversion its CRS and LAS grid (none: empty)
+    colors_exact: bool  # chunks() gives the colours it was given (not RGB565's or a palette's approximations)
 
     def chunks(self, points_per_chunk: int = 1_000_000) -> Iterator:
         """Its points, positions, colours and attributes, as bounded PointChunks."""

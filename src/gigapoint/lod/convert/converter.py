@@ -8,13 +8,14 @@ import errno
 import os
 import shutil
 import time
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 from ...core import pages
 from ...core.renderable import PointSource
-from ...errors import InputError, check_switch
+from ...errors import GigapointWarning, InputError, check_switch
 from ...io._base import check_file
 from ...io.registry import is_supported_name
 from ..build import SAMPLERS
@@ -242,6 +243,11 @@ def convert(
         raise ConvertError("convert: no output directory given (-o OUT)")
     if isinstance(inputs, PointSource):  # a cloud: gp.demo, from_arrays, open; a progressive octree (its save() keeps its tree)
         name, source_files = name or inputs.name, list(inputs.source_files) if source_files is None else source_files
+        if not inputs.colors_exact:  # gp.open's colors="auto": its octree's colours were up to 12/255 off the file's, without a word
+            files = ", ".join(str(f) for f in inputs.source_files)
+            exact = f"convert its files ({files}) or open them with colors='rgba'" if files else "make the cloud with colors='rgba'"
+            warnings.warn(f"{inputs.name}: the cloud holds its colours approximated (RGB565 or a palette), so the octree gets those; "
+                          f"{exact} for exact colours", GigapointWarning, stacklevel=2)  # fmt: skip
         inputs = inputs.chunks()
     elif not isinstance(inputs, (str, os.PathLike, GrownTree, Iterable)):
         raise InputError(f"convert: inputs are files, folders, a cloud or PointChunks, got a {type(inputs).__name__}")

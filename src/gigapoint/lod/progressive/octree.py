@@ -423,6 +423,7 @@ class ProgressiveOctree:
         self.name = name
         self.max_leaf = max_leaf
         self.source_files: list[Path] = []  # the files a loader reads (open_progressive): save() takes their CRS
+        self.colors_exact = True  # PointSource: leaves hold the points' own 32-bit colours
         self.chunk = chunk
         self.capacity = min(int(capacity), _PRESIZE_MAX)
         self.lock = FrameLock()
