@@ -134,7 +134,7 @@ def render(
     projection: Annotated[str, typer.Option(help="perspective or orthographic.")] = "perspective",
     fov: Annotated[float, typer.Option(help="Vertical field of view in degrees.")] = 60.0,
     depth_out: Annotated[Path | None, typer.Option(help="Also write the depth buffer (.npy, float32, inf = empty).")] = None,
-    index_out: Annotated[Path | None, typer.Option(help="Also write the point index buffer (.npy, int64, -1 = empty).")] = None,
+    index_out: Annotated[Path | None, typer.Option(help="Also write the point index buffer (.npy, int64, -1 = empty): each pixel's point as gigapoint holds the cloud (a file read into memory: gp.open(FILE).point_info(i)), not the file's row.")] = None,
     stats: Annotated[bool, typer.Option("--stats", help="Print render statistics.")] = False,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace existing output files.")] = False,
     turntable: Annotated[
