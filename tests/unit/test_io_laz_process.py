@@ -139,6 +139,49 @@ def test_a_progressive_load_of_a_file_that_crashes_the_decoder_keeps_what_it_loa
     cloud.close()
 
 
+def _with_a_bad_laz_chunk(path, out, chunk: int):
+    """``path`` (a LAZ file) with 400 random bytes 100 kB into its LAZ chunk ``chunk``: lazrs
+    fails on that chunk (it runs out of the chunk's bytes), not on the others."""
+    import laspy
+    import lazrs
+
+    with laspy.open(path) as reader:
+        vlr = next(v for v in reader.header.vlrs if v.record_id == 22204).record_data_bytes()
+        offset = reader.header.offset_to_point_data
+    with open(path, "rb") as f:
+        f.seek(offset)
+        table = lazrs.read_chunk_table(f, lazrs.LazVlr(vlr))
+    at = offset + 8 + sum(size for _, size in table[:chunk]) + 100_000
+    data = bytearray(path.read_bytes())
+    data[at : at + 400] = np.random.default_rng(0).integers(0, 256, 400, dtype=np.uint8).tobytes()
+    out.write_bytes(bytes(data))
+    return out, sum(points for points, _ in table[:chunk])
+
+
+@pytest.mark.parametrize("chunk_size", [20_000, 250_000, 2_000_000])
+def test_a_bad_laz_chunk_loses_itself_not_the_points_read_with_it(tmp_path, autzen_path, chunk_size):
+    """A LAZ chunk lazrs fails on was the end of the whole slot the child decodes (a progressive
+    load's 250 000 points, a conversion's 2 M): autzen_trim's 110 000 points, all lost with its
+    second chunk. The child decodes that slot again chunk by chunk: the points before the bad
+    chunk come, exactly the file's, then the one-line error."""
+    import laspy
+
+    bad, before = _with_a_bad_laz_chunk(autzen_path, tmp_path / "bad.laz", 1)
+    assert before == 50_000
+    got = []
+    with pytest.raises(InputError) as err:
+        for chunk in read_chunks(bad, chunk_size):
+            got.append(chunk.xyz)
+    assert str(err.value).startswith(f"{bad}: truncated or corrupt LAZ point data: reading failed after 50,000 of the 110,000 points")
+    file = laspy.read(autzen_path)
+    np.testing.assert_array_equal(np.concatenate(got), np.c_[file.x, file.y, file.z][:50_000])
+    cloud = gp.open(bad, progressive=True)
+    with pytest.raises(GigapointError, match=r"bad\.laz: truncated or corrupt LAZ point data"):
+        cloud.wait(60)
+    assert cloud.n_points == 50_000
+    cloud.close()
+
+
 def test_the_cli_says_a_decoder_crash_in_one_line_and_writes_nothing(tmp_path):
     bad = _corrupted(_write_laz(tmp_path / "good.laz", 200_000), tmp_path / "bad.laz")
     out = tmp_path / "out.png"

@@ -12,7 +12,8 @@ is gone).
 - ``"records"``: points ``start``..``stop`` of a LAZ file (``path``, ``offset`` of its point
   data, ``vlr``: the LASzip VLR's data in hex, ``parallel``) into ``slots`` slots of shared
   memory (``fd``, inherited; ``slot_bytes`` each, ``per_slot`` points), ``{"slot": k, "n": n}``
-  a filled slot, then ``{"end": true}``. It fills the first slot, waits until the parent has
+  a filled slot, then ``{"end": true}``. A slot that fails to decode: the points of it that
+  decode LAZ chunk by chunk, ``{"slot": k, "n": m, "partial": true}``, then the error. It fills the first slot, waits until the parent has
   read it, then fills the slots in turn, reusing one only once the parent has written its
   number back on stdin.
 - ``"blocks"``: requests on stdin, each a JSON line ``{"size", "skip", "vlr", "at", "out",
@@ -57,10 +58,48 @@ def _records(lazrs, job: dict, inp, say) -> None:
         slot = free.pop(0)
         n = min(job["per_slot"], stop - done)
         at = slot * job["slot_bytes"]
-        decoder.decompress_many(memoryview(memory)[at : at + n * record])
+        try:
+            decoder.decompress_many(memoryview(memory)[at : at + n * record])
+        except BaseException as exc:  # lazrs's errors and panics: the slot's points before the bad LAZ chunk go first
+            if isinstance(exc, (SystemExit, KeyboardInterrupt)):
+                raise
+            good = _salvage(lazrs, job, vlr, memoryview(memory)[at : at + n * record], done, n, record)
+            if good:
+                say({"slot": slot, "n": good, "partial": True})
+            raise
         done += n
         say({"slot": slot, "n": n})
     say({"end": True})
+
+
+def _salvage(lazrs, job: dict, vlr: bytes, out, first: int, n: int, record: int) -> int:
+    """Points first..first + n of the file decoded again into ``out``, a LAZ chunk at a time
+    (its chunk table's) with a fresh decoder, up to the first chunk that fails and no further
+    than the table's points: how many did. A slot that failed lost every point in it (a file of
+    up to 250 000 points: all of them); a chunk is the most a bad one takes now. 0 where the
+    table cannot be read, or where the whole slot decodes this time (nothing to trust then)."""
+    good = 0
+    try:
+        with open(job["path"], "rb") as source:
+            source.seek(job["offset"])
+            table = lazrs.read_chunk_table(source, lazrs.LazVlr(vlr))  # [(points, bytes)] a chunk
+            source.seek(job["offset"])
+            decoder = _decoder(lazrs, source, vlr, True)  # (the parallel one gives a chunk its own bytes only: a bad one fails, the
+            decoder.seek(first)  # sequential one read on into the next chunk's and gave garbage points without a word)
+            end = 0
+            for points, _ in table:
+                end += points
+                step = min(end, first + n) - (first + good)
+                if step <= 0:
+                    continue
+                decoder.decompress_many(out[good * record : (good + step) * record])
+                good += step
+                if good == n:
+                    break
+    except BaseException as exc:
+        if isinstance(exc, (SystemExit, KeyboardInterrupt)):
+            raise
+    return good if good < n else 0
 
 
 def _blocks(lazrs, job: dict, inp, say) -> None:

@@ -174,7 +174,7 @@ class ChildRecords(_Child):
         if msg.get("end"):
             return self.record(np.empty(0, self.dtype), self.point_format)
         got = msg["n"]
-        if got != n:
+        if got != n and not (msg.get("partial") and got < n):  # (partial: the points before a bad chunk; the error comes next)
             raise RuntimeError(f"the LAZ decoding process gave {got:,} records where {n:,} were asked for")
         self._read_slot = msg["slot"]
         return self.record(np.frombuffer(self.memory, self.dtype, count=got, offset=msg["slot"] * self.slot_bytes), self.point_format)
