@@ -903,7 +903,7 @@ def test_convert_checks_its_name_switches_and_source_files(autzen_path, tmp_path
 
     import gigapoint as gp
 
-    cloud = gp.demo(3_000)
+    cloud = gp.demo(3_000, colors="rgba")  # (colours as made: no warning of approximated ones)
     convert(cloud, tmp_path / "crs", source_files=str(autzen_path))
     assert open_octree(tmp_path / "crs").meta["crs"] is not None  # one path, not its letters
     for kw, problem in (
