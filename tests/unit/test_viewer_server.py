@@ -597,3 +597,25 @@ def test_the_viewer_offers_the_attributes_of_an_octree_read_node_by_node(tmp_pat
         assert "intensity" in core.cloud_info()["attributes"] and set(core.cloud_info()["attributes"]) == set(octree.attribute_names)
     finally:
         core.close_all()
+
+
+HUGE = "1" * 400  # a JSON integer past float's range: math.isfinite raised OverflowError
+
+
+def test_integers_past_float_range_are_protocol_errors(client, caplog):
+    """A huge integer is answered like any out-of-range number (was 'internal error: int too
+    large to convert to float' and a logged traceback), and a huge ?w= no longer kills the socket."""
+    with client.websocket_connect(f"/ws?w={HUGE}&h=64") as ws:
+        hello = receive(ws, reply("hello"))
+        assert hello["session"]
+        for text in (
+            f'{{"type": "orbit", "dyaw": {HUGE}, "dpitch": 0}}',
+            f'{{"type": "camera", "target": [{HUGE}, 0, 0]}}',
+            f'{{"type": "settings", "values": {{"point_budget": -{HUGE}}}}}',
+        ):
+            ws.send_text(text)
+            err = receive(ws, reply("error"))
+            assert "must be in" in err["message"] and "internal" not in err["message"], err["message"]
+        ws.send_json({"type": "ping", "t": 3})
+        assert receive(ws, reply("pong"))["t"] == 3
+    assert not [r for r in caplog.records if r.exc_info]

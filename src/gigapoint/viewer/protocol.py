@@ -38,10 +38,10 @@ def number(msg: dict, key: str, lo: float, hi: float, default=None) -> float:
     v = msg.get(key, default)
     if v is None:
         raise ProtocolError(f"{msg.get('type')}: missing number {key!r}")
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (isinstance(v, float) and not math.isfinite(v)):
         raise ProtocolError(f"{msg.get('type')}: {key} must be a finite number, got {v!r}"[:200])
-    if not lo <= v <= hi:
-        raise ProtocolError(f"{msg.get('type')}: {key} must be in [{lo:g}, {hi:g}], got {v!r}")
+    if not lo <= v <= hi:  # ints compared exactly: math.isfinite(10**400), a JSON integer, raised OverflowError
+        raise ProtocolError(f"{msg.get('type')}: {key} must be in [{lo:g}, {hi:g}], got {v!r}"[:200])
     return float(v)
 
 
