@@ -187,3 +187,38 @@ def test_the_push_url_works_on_a_server_off_loopback():
     finally:
         srv.sock.close()
         srv.core.close_all()
+
+
+def _pushed(header: bytes, body: bytes) -> bytes:
+    import struct
+
+    return b"GPL1" + struct.pack("<I", len(header)) + header + body
+
+
+HUGE = b"1" * 400  # a JSON integer past float's range
+XYZ = b'"arrays":[{"name":"xyz","dtype":"<f4","shape":[2,3]}]'
+DEPTH = b'"arrays":[{"name":"depth","dtype":"<f4","shape":[2,3]}]'
+ODD_HEADERS = [
+    b'{"type":"points",' + XYZ + b',"time":' + HUGE + b"}",
+    b'{"type":"points",' + XYZ + b',"pose":[' + HUGE + b",0,0,0,0,0,0,0,0,0,0,0,0,0,0,0]}",
+    b'{"type":"depth",' + DEPTH + b',"intrinsics":[1,1,1,' + HUGE + b"]}",
+    b'{"type":"points","arrays":[{"name":"xyz","dtype":"<f4","shape":[1e400,3]}]}',
+    b'{"type":"points","arrays":[{"name":"xyz","dtype":["<f4"],"shape":[2,3]}]}',
+    b'{"type":["points"],' + XYZ + b"}",
+]
+
+
+def test_odd_push_headers_are_one_line_input_errors_counted_on_the_hud(live_core, caplog):
+    """A JSON integer past float's range, an infinite shape or a list where a name belongs was an
+    'internal error' (OverflowError, TypeError: unhashable list) with a logged traceback, and
+    the frame was not counted as refused."""
+    live, core = live_core
+    with TestClient(create_app(core)) as client, client.websocket_connect(f"/push?push_token={core.push_token}") as ws:
+        for header in ODD_HEADERS:
+            ws.send_bytes(_pushed(header, np.zeros(6, np.float32).tobytes()))
+            reply = json.loads(ws.receive_text())
+            assert reply["type"] == "error" and reply["message"].startswith("push") and "internal" not in reply["message"], (header[:60], reply)
+        ws.send_bytes(encode_frame("points", xyz=patch(8)[0]))
+        assert json.loads(ws.receive_text())["type"] == "ack"
+    assert live.stats.frames_rejected == len(ODD_HEADERS)
+    assert not [r for r in caplog.records if r.exc_info]

@@ -64,7 +64,7 @@ def decode_frame(data: bytes) -> RecordedFrame:
     if not isinstance(header, dict):
         raise InputError("push: the header must be a JSON object")
     kind = header.get("type")
-    if kind not in _ARRAYS:
+    if not isinstance(kind, str) or kind not in _ARRAYS:  # (a list: unhashable, an internal error)
         raise InputError(f"push: unknown frame type {str(kind)[:30]!r} (points or depth)")
     arrays, offset = {}, 8 + n
     specs = header.get("arrays")
@@ -73,8 +73,10 @@ def decode_frame(data: bytes) -> RecordedFrame:
     for spec in specs:
         try:
             name, dtype, shape = spec["name"], spec["dtype"], tuple(int(s) for s in spec["shape"])
-        except (TypeError, KeyError, ValueError):
+        except (TypeError, KeyError, ValueError, OverflowError):  # (1e400 in JSON is inf: int() overflows)
             raise InputError("push: each array needs a name, a dtype and a shape") from None
+        if not isinstance(name, str) or not isinstance(dtype, str):  # (lists: unhashable)
+            raise InputError("push: each array's name and dtype must be strings")
         if name not in _ARRAYS[kind]:
             raise InputError(f"push: a {kind} frame has no array {str(name)[:30]!r} (only {', '.join(_ARRAYS[kind])})")
         if dtype not in _DTYPES or len(shape) > 3 or any(not 0 <= s <= MAX_PUSH_BYTES for s in shape):
@@ -91,18 +93,21 @@ def decode_frame(data: bytes) -> RecordedFrame:
     if "pose" in header:
         try:
             pose = np.asarray(header["pose"], np.float64).reshape(4, 4)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):  # JSON integers have no bound: 10**400 overflows a float
             raise InputError("push: 'pose' must be 16 numbers (a 4x4 matrix, row-major)") from None
     try:
         t = float(header["time"]) if "time" in header else None
         scale = float(header["depth_scale"]) if "depth_scale" in header else None
         max_depth = float(header["max_depth"]) if "max_depth" in header else None
-    except (TypeError, ValueError):
-        raise InputError("push: time, depth_scale and max_depth must be numbers") from None
+        intrinsics = header.get("intrinsics")
+        if intrinsics is not None:
+            intrinsics = np.asarray(intrinsics, np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError("push: time, depth_scale, max_depth and intrinsics must be numbers") from None
     if kind == "depth":
         if "depth" not in arrays:
             raise InputError("push: a depth frame needs a 'depth' array")
-        return RecordedFrame("depth", t, pose, rgb=arrays.get("rgb"), depth=arrays["depth"], intrinsics=header.get("intrinsics"),
+        return RecordedFrame("depth", t, pose, rgb=arrays.get("rgb"), depth=arrays["depth"], intrinsics=intrinsics,
                              depth_scale=scale, max_depth=max_depth)  # fmt: skip
     if "xyz" not in arrays:
         raise InputError("push: a points frame needs an 'xyz' array")
