@@ -164,6 +164,11 @@ def test_a_chunk_size_it_cannot_hold_is_refused_at_once(chunk):
         ({"decay": -1.0}, "live: decay must be a positive number of seconds or None, got -1.0"),
         ({"fade": "no"}, "live: fade must be True or False, got 'no'"),  # taken as true
         ({"name": 5}, "live: name must be a string, got 5"),
+        # a ValueError from reshape, or accepted and failing at the first snapshot ("cube must have a finite origin")
+        ({"bounds": ([0, 0], [1, 1])}, "live: bounds must be (min, max): two (x, y, z) of finite numbers with min <= max, got ([0, 0], [1, 1])"),
+        ({"bounds": "ab"}, "live: bounds must be (min, max): two (x, y, z) of finite numbers with min <= max, got 'ab'"),
+        ({"bounds": ([0, 0, np.nan], [1, 1, 1])}, "live: bounds must be (min, max): two (x, y, z) of finite numbers with min <= max, got ([0, 0, nan], [1, 1, 1])"),
+        ({"bounds": ([1, 1, 1], [0, 0, 0])}, "live: bounds must be (min, max): two (x, y, z) of finite numbers with min <= max, got ([1, 1, 1], [0, 0, 0])"),
     ],
 )
 def test_odd_live_cloud_settings_are_refused_in_one_line(kw, problem):

@@ -196,7 +196,7 @@ class LiveCloud:
         self.decay = None if decay is None else float(decay)
         self.chunk = check_whole(name, "chunk", chunk, 1, MAX_CHUNK, " points")  # 0 divided by zero, 10**12 asked numpy for 116 TiB
         self.clock = clock or _time.monotonic
-        self.expected_bounds = None if bounds is None else tuple(np.asarray(b, np.float64).reshape(3) for b in bounds)
+        self.expected_bounds = None if bounds is None else self._check_bounds(bounds)
         self.started = self.clock()
         self.lock = LiveLock(released=self._commit_pending)
         self._pending: deque = deque()  # (frame in core's layout, FrameInfo) batched, not yet in the ring
@@ -227,6 +227,18 @@ class LiveCloud:
         self.recorder = None
         self._last_time = 0.0
         self.player = None  # a source feeding it (sources.Player), if any
+
+    def _check_bounds(self, bounds) -> tuple[np.ndarray, np.ndarray]:
+        """(min, max) as two float64 (3,) arrays; NaN or min > max failed only at the first
+        snapshot (the octree's cube), a wrong shape with numpy's ValueError."""
+        try:
+            lo, hi = (np.asarray(b, np.float64).reshape(3) for b in bounds)
+            ok = bool(np.isfinite(lo).all() and np.isfinite(hi).all() and (lo <= hi).all())
+        except (TypeError, ValueError, OverflowError):
+            ok = False
+        if not ok:
+            raise InputError(f"{self.name}: bounds must be (min, max): two (x, y, z) of finite numbers with min <= max, got {bounds!r}"[:300])
+        return lo, hi
 
     # ------------------------------------------------------------------ facts (Renderable)
     load_progress = 1.0
