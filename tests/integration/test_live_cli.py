@@ -94,3 +94,33 @@ def test_view_live_a_folder_of_frames_and_bad_sources(tmp_path):
                           (["--demo", "1000", "--keep", "5", "--decay", "2"], "--keep and --decay: options of a live stream")):  # fmt: skip
         bad = subprocess.run([sys.executable, "-m", "gigapoint.cli", "view", *args, "--no-browser"], capture_output=True, text=True, timeout=60)
         assert bad.returncode == 1 and message in bad.stderr and len(bad.stderr.strip().splitlines()) == 1, bad.stderr
+
+
+def test_record_into_a_recording_asks_for_an_option_view_has_and_a_bad_port_records_nothing(tmp_path):
+    """`view --live S --record DIR` on a recording said 'pass --overwrite', an option `view` did
+    not have; and a --port it cannot use failed only after the stream had been recording into DIR."""
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    np.save(frames / "0.npy", np.random.default_rng(0).uniform(0, 5, (300, 3)))
+
+    def view(*args):
+        return subprocess.run([sys.executable, "-m", "gigapoint.cli", "view", "--live", str(frames), *args, "--no-browser"],
+                              capture_output=True, text=True, timeout=60)  # fmt: skip
+
+    fresh = tmp_path / "fresh"
+    bad = view("--record", str(fresh), "--port", "99999")
+    assert bad.returncode == 1 and "--port must be in 0..65535" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1, bad.stderr
+    assert not fresh.exists()  # nothing recorded for a command that failed
+    live = LiveCloud()
+    live.record(tmp_path / "rec")
+    live.push(np.random.default_rng(1).uniform(0, 5, (50, 3)))
+    live.stop_recording()
+    before = sorted((p.name, p.stat().st_size) for p in (tmp_path / "rec").rglob("*"))
+    held = view("--record", str(tmp_path / "rec"))
+    assert held.returncode == 1 and "pass --overwrite to replace it" in held.stderr, held.stderr
+    bad = view("--record", str(tmp_path / "rec"), "--overwrite", "--port", "99999")  # the option exists; the recording is kept
+    assert bad.returncode == 1 and "--port must be in 0..65535" in bad.stderr, bad.stderr
+    assert sorted((p.name, p.stat().st_size) for p in (tmp_path / "rec").rglob("*")) == before
+    lone = subprocess.run([sys.executable, "-m", "gigapoint.cli", "view", "--live", str(frames), "--overwrite", "--no-browser"],
+                          capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert lone.returncode == 1 and "--overwrite: replaces a recording in --record DIR" in lone.stderr, lone.stderr

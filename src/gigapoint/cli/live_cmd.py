@@ -10,7 +10,7 @@ from pathlib import Path
 from ..errors import GigapointError
 
 
-def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: float | None = None, record: Path | None = None,
+def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: float | None = None, record: Path | None = None, overwrite: bool = False,
               rate: float | None = 1.0, loop: bool = False, host: str = "127.0.0.1", port: int = 0, browser: bool = True,
               open_browser=None) -> None:  # fmt: skip
     """Play ``source`` into a LiveCloud and serve the viewer on it until Ctrl+C."""
@@ -19,8 +19,9 @@ def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: floa
     prefer_passive_wait()  # `gigapoint demo --live` comes here without `view`
     from ..live import LiveCloud
     from ..live.sources import Player, ReplaySource, SyntheticSensor, open_source
-    from ..viewer.server import ViewerServer
+    from ..viewer.server import ViewerServer, check_address
 
+    check_address(host, port)  # before anything plays or records: a bad --port failed with a recording made
     src = ReplaySource(source) if replay else open_source(source)
     bounds = None
     if isinstance(src, SyntheticSensor):
@@ -29,14 +30,18 @@ def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: floa
         bounds = ((0.0, 0.0, -30.0), (SCENE_SIZE, SCENE_SIZE, 60.0))  # frame the town from the start
     live = LiveCloud(keep=keep, decay=decay, name=f"live: {src.name}", bounds=bounds)
     if record is not None:
-        live.record(record)
+        live.record(record, overwrite=overwrite)
     player = Player(src, live, rate=rate, loop=loop).start()
     deadline = time.monotonic() + 10.0
     while live.n_frames == 0 and not player.done.is_set() and time.monotonic() < deadline:  # the first view frames a first frame
         time.sleep(0.02)
-    if player.error is not None:
-        raise player.error
-    server = ViewerServer(live, host=host, port=port)
+    try:
+        if player.error is not None:
+            raise player.error
+        server = ViewerServer(live, host=host, port=port)  # (a port in use)
+    except BaseException:
+        live.close()  # the player stops and the recording is closed with its index
+        raise
     print(f"gigapoint viewer: {live.name} (keep {keep} frames{f', decay {decay:g} s' if decay else ''})", file=sys.stderr)
     if not server.loopback:
         print(f"warning: listening on {host}, reachable from the network; the URL's token is the only key", file=sys.stderr)

@@ -51,6 +51,7 @@ def view(
     keep: int | None = typer.Option(None, "--keep", help="Live: frames drawn (the oldest leaves as a new one arrives). [default: 100]"),
     decay: float | None = typer.Option(None, "--decay", help="Live: seconds after which a frame leaves (default: never)."),
     record: Path | None = typer.Option(None, "--record", help="Live: also record the stream into this folder."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Live: replace a recording already in the --record folder."),
     colors: ColorsOption = "auto",
     chunked: ChunkedOption = None,
 ) -> None:
@@ -68,10 +69,12 @@ def view(
             raise GigapointError("view: --window does not show live streams yet; use the browser viewer (without --window)")
         if progressive is not None:
             raise GigapointError("--progressive: an option of files and --demo, not of a live stream")
+        if overwrite and record is None:
+            raise GigapointError("--overwrite: replaces a recording in --record DIR; give --record too")
         keep = 100 if keep is None else keep
         check_live_options(keep, decay, 1.0)
         view_live(str(replay) if replay is not None else live, replay=replay is not None, keep=keep, decay=decay, record=record,
-                  host=host, port=port, browser=browser, open_browser=_open_browser)  # fmt: skip
+                  overwrite=overwrite, host=host, port=port, browser=browser, open_browser=_open_browser)  # fmt: skip
         return
     import gigapoint
 
@@ -84,7 +87,7 @@ def view(
     served = [name for name, given in (("--host", host != "127.0.0.1"), ("--port", port != 0)) if given]
     if window and served:  # a native window listens on nothing: they were dropped without a word
         raise GigapointError(f"{' and '.join(served)}: options of the browser viewer, not of --window")
-    live_only = [name for name, value in (("--keep", keep), ("--decay", decay), ("--record", record)) if value is not None]
+    live_only = [name for name, value in (("--keep", keep), ("--decay", decay), ("--record", record), ("--overwrite", overwrite or None)) if value is not None]
     if live_only:  # `view a.laz --record rec` recorded nothing, without a word
         raise GigapointError(f"{' and '.join(live_only)}: options of a live stream (--live SOURCE or --replay DIR)")
     budget = RenderSettings().point_budget

@@ -284,6 +284,15 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
     return app
 
 
+def check_address(host, port) -> None:
+    """The checks of ``ViewerServer``'s host and port that need no socket (the live CLI makes them
+    before its stream starts playing and recording)."""
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:  # True was port 1
+        raise GigapointError(f"--port must be in 0..65535, got {port!r}")
+    if not isinstance(host, str) or not host.strip():  # 5: an AttributeError; "": "Name or service not known"
+        raise GigapointError(f"--host must be an address or a host name (127.0.0.1: this machine only), got {host!r}")
+
+
 class ViewerServer:
     """The viewer bound to a socket: run it in the foreground (CLI) or in a background thread (Jupyter)."""
 
@@ -291,10 +300,7 @@ class ViewerServer:
         _require_starlette()
         import uvicorn
 
-        if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:  # True was port 1
-            raise GigapointError(f"--port must be in 0..65535, got {port!r}")
-        if not isinstance(host, str) or not host.strip():  # 5: an AttributeError; "": "Name or service not known"
-            raise GigapointError(f"--host must be an address or a host name (127.0.0.1: this machine only), got {host!r}")
+        check_address(host, port)
         self.host = host
         self.loopback = is_loopback(host)
         self.token = token if token is not None else (None if self.loopback else secrets.token_urlsafe(18))
