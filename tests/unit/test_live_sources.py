@@ -542,3 +542,27 @@ def test_a_source_that_breaks_stops_the_player_with_one_line():
     player.run()
     assert live.n_frames == 1 and player.done.is_set()
     assert str(player.error) == "broken: the stream stopped (ZeroDivisionError: boom)"
+
+
+@pytest.mark.parametrize(("kw", "problem"), [
+    ({"rate": 0}, "rate must be a positive number (times the stream's speed) or None (as fast as frames come), got 0"),
+    ({"rate": -2.0}, "rate must be a positive number (times the stream's speed) or None (as fast as frames come), got -2.0"),
+    ({"rate": float("nan")}, "rate must be a positive number (times the stream's speed) or None (as fast as frames come), got nan"),
+    ({"rate": "fast"}, "rate must be a positive number (times the stream's speed) or None (as fast as frames come), got 'fast'"),
+    ({"loop": "no"}, "loop must be True or False, got 'no'"),
+])  # fmt: skip
+def test_a_player_refuses_odd_rates_in_one_line(kw, problem):
+    """rate 0, -2 and NaN played as fast as frames came, without a word; 'fast' stopped the
+    stream at its second frame with a TypeError; loop='no' looped."""
+    from gigapoint.live.sources import Source
+
+    class Nothing(Source):
+        name = "nothing"
+
+        def frames(self):
+            return iter(())
+
+    live = LiveCloud()
+    with pytest.raises(InputError, match=re.escape(problem)):
+        Player(Nothing(), live, **kw)
+    assert live.player is None

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from ..errors import GigapointError, InputError, first_line
+from ..errors import GigapointError, InputError, check_switch, first_line, is_real
 from .record import RecordedFrame, is_recording, read_frame, recording_files
 
 KINECT_V2 = (365.5, 365.5, 256.0, 212.0)  # fx, fy, cx, cy of a Kinect v2's 512x424 depth camera
@@ -475,6 +475,10 @@ class Player:
     more than MAX_WAIT_S between two frames is not waited for (the HUD says so)."""
 
     def __init__(self, source: Source, live, rate: float | None = 1.0, loop: bool = False):
+        # 0, -2 and NaN played as fast as frames came, without a word; "fast" broke the stream at its second frame
+        if rate is not None and not (is_real(rate) and rate > 0):
+            raise InputError(f"{source.name}: Player: rate must be a positive number (times the stream's speed) or None (as fast as frames come), got {rate!r}")
+        check_switch("loop", loop, f"{source.name}: Player")  # "no" looped
         self.source, self.live, self.rate, self.loop = source, live, rate, loop
         self.frames = 0
         self.errors = 0
