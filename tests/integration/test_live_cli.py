@@ -124,3 +124,11 @@ def test_record_into_a_recording_asks_for_an_option_view_has_and_a_bad_port_reco
     lone = subprocess.run([sys.executable, "-m", "gigapoint.cli", "view", "--live", str(frames), "--overwrite", "--no-browser"],
                           capture_output=True, text=True, timeout=60)  # fmt: skip
     assert lone.returncode == 1 and "--overwrite: replaces a recording in --record DIR" in lone.stderr, lone.stderr
+
+
+def test_demo_live_refuses_the_options_of_the_image_it_does_not_render(tmp_path):
+    """`demo --live -o x.png --points 5 --seed 3` served the live demo and dropped every other option without a word."""
+    bad = subprocess.run([sys.executable, "-m", "gigapoint.cli", "demo", "--live", "-o", str(tmp_path / "x.png"), "--points", "5", "--seed", "3"],
+                         capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert bad.returncode == 1 and len(bad.stderr.strip().splitlines()) == 1, bad.stderr
+    assert "--points and --output and --seed: options of the demo image, not of --live" in bad.stderr, bad.stderr

@@ -222,6 +222,13 @@ def demo(
     """Generate the procedural demo scene, render it and report how fast each step was."""
     if live:
         from .live_cmd import view_live
+
+        given = (("--points", points, 20_000_000), ("--output", output, Path("demo.png")), ("--width", width, 1920), ("--height", height, 1080),
+                 ("--view", view, "auto"), ("--threads", threads, None), ("--seed", seed, 0), ("--overwrite", overwrite, False),
+                 ("--colors", colors, "auto"), ("--scale", scale, 0.01))  # fmt: skip
+        dropped = [name for name, value, default in given if value != default]
+        if dropped:  # they were dropped without a word (the image is not written; the live demo has its own scene)
+            raise GigapointError(f"{' and '.join(dropped)}: options of the demo image, not of --live")
         from .view_cmd import _open_browser
 
         view_live("demo", open_browser=_open_browser)
