@@ -116,3 +116,31 @@ def test_fit_refuses_an_unknown_projection():
     with pytest.raises(CameraError, match=r"^camera projection must be 'perspective' or 'orthographic', got 'ortho'$"):
         Camera.fit((np.zeros(3), np.ones(3)), projection="ortho")
     assert Camera.fit((np.zeros(3), np.ones(3)), projection="perspective").projection == "perspective"
+
+
+def test_fit_cloud_takes_a_view_given_as_a_numpy_pair():
+    """``fit_cloud(cloud, view=np.array([30, 40]))`` raised numpy's "truth value of an array ...
+    is ambiguous" (``view == "auto"`` compared element-wise); ``fit`` takes the same pair."""
+    import gigapoint as gp
+
+    rng = np.random.default_rng(0)
+    cloud = gp.from_arrays(rng.random((500, 3)) * (10, 4, 2))
+    cam = Camera.fit_cloud(cloud, view=np.array([30.0, 40.0]), width=64, height=48)
+    assert cam == Camera.fit(cloud.bounds, view=(30.0, 40.0), width=64, height=48)
+
+
+@pytest.mark.parametrize("kw", [{"yaw": "a"}, {"pitch": None}, {"distance": "5"}, {"yaw": np.nan}])
+def test_orbit_refuses_non_numbers_in_one_line(kw):
+    """``Camera.orbit(target, 'a', 10, 5)`` was a TypeError ("must be real number, not str"), a
+    NaN yaw a camera eye that "must be finite"."""
+    args = {"yaw": 30.0, "pitch": 10.0, "distance": 5.0} | kw
+    name, value = next(iter(kw.items()))
+    with pytest.raises(CameraError, match=rf"^orbit {name} must be a finite number, got {value!r}$"):
+        Camera.orbit((0, 0, 0), **args)
+
+
+@pytest.mark.parametrize("bounds", [((0, 0, 0),), (0, 1), None, "ab"])
+def test_fit_refuses_bounds_that_are_not_a_min_max_pair(bounds):
+    """``Camera.fit(((0, 0, 0),))`` was an IndexError ("tuple index out of range")."""
+    with pytest.raises(CameraError, match=r"^camera bounds (must be \(min, max\), two points of three numbers|min must be three numbers), got "):
+        Camera.fit(bounds)

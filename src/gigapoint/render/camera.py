@@ -175,7 +175,10 @@ class Camera:
     @classmethod
     def orbit(cls, target, yaw, pitch, distance, up=(0, 0, 1), fov=60.0, width=1920, height=1080, **kw) -> Camera:
         """Camera at ``distance`` from ``target``, at (yaw, pitch) degrees (z-up world)."""
-        if not (math.isfinite(distance) and distance > 0):
+        for name, v in (("yaw", yaw), ("pitch", pitch), ("distance", distance)):
+            if not is_real(v):  # 'a' was math's TypeError, a NaN yaw an eye that "must be finite"
+                raise CameraError(f"orbit {name} must be a finite number, got {v!r}")
+        if not distance > 0:
             raise CameraError(f"orbit distance must be > 0, got {distance!r}")
         target = np.asarray(_vec3(target, "target"))
         yaw_r, pitch_r = math.radians(yaw), math.radians(pitch)
@@ -198,8 +201,12 @@ class Camera:
         ``trim`` (default ``TRIM``) of them at each side may fall outside): the data, not its box, fills the frame.
         ``view='auto'``: the (yaw, pitch) ``auto_view`` gives (of ``points``, else the box)."""
         width, height = image_side("width", width), image_side("height", height)  # before width / height divides
-        lo = np.asarray(_vec3(bounds[0], "bounds min"))
-        hi = np.asarray(_vec3(bounds[1], "bounds max"))
+        try:
+            lo_in, hi_in = bounds  # ((0, 0, 0),) was an IndexError
+        except (TypeError, ValueError):
+            raise CameraError(f"camera bounds must be (min, max), two points of three numbers, got {bounds!r}") from None
+        lo = np.asarray(_vec3(lo_in, "bounds min"))
+        hi = np.asarray(_vec3(hi_in, "bounds max"))
         box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         if points is not None:
             points = np.asarray(points, np.float64).reshape(-1, 3)
@@ -271,7 +278,8 @@ class Camera:
     def fit_cloud(cls, cloud, view="auto", **kw) -> Camera:
         """``fit`` for a cloud (any Renderable): the 'auto' view frames its points (``sample_points``),
         so its data, not its bounding box, fills the frame; other views frame its box."""
-        return cls.fit(cloud.bounds, view=view, points=sample_points(cloud) if view == "auto" else None, **kw)
+        auto = isinstance(view, str) and view == "auto"  # (a numpy pair compared element-wise: "ambiguous truth value")
+        return cls.fit(cloud.bounds, view=view, points=sample_points(cloud) if auto else None, **kw)
 
     def with_size(self, width: int, height: int) -> Camera:
         return replace(self, width=width, height=height)
