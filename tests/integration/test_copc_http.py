@@ -41,6 +41,7 @@ class RangeServer:
         self.fail_after = 0
         self.requests = 0
         self.ranges: list[str] = []
+        self.paths: list[str] = []  # as requested, with any query
         self.ports: set[int] = set()
         self.delay = 0.0  # seconds each answer waits (so that concurrent requests overlap)
         self.inflight = self.max_inflight = 0
@@ -59,6 +60,7 @@ class RangeServer:
                     server.ports.add(self.client_address[1])
                     n = server.requests
                     server.ranges.append(self.headers.get("Range", ""))
+                    server.paths.append(self.path)
                     server.inflight += 1
                     server.max_inflight = max(server.max_inflight, server.inflight)
                 try:
@@ -223,6 +225,21 @@ def test_ept_over_http_renders_like_the_local_dataset(data, server, folder):
         np.testing.assert_array_equal(a.image, b.image)
         assert all(r == "" for r in server.ranges)  # whole files, no range
         c.close()
+
+
+def test_ept_url_with_a_query_string(data, server):
+    """``…/ept.json?sig=…`` (a shared-access token, GitHub's ``?raw=true``) was taken for a COPC
+    file ("not a COPC file (a file that starts with b'{"bo')"); the token goes on to the
+    hierarchy and node files beside it, as a container-wide token needs."""
+    for name in ("ept_laz/ept.json?sig=a%2Fb&v=2", "ept_laz/?sig=a%2Fb&v=2"):
+        server.paths.clear()
+        c = gp.open(server.url(name))
+        assert isinstance(c, EptCloud) and c.n_points == 20_000
+        assert _frame(c, point_budget=10**9, lod_threshold_px=0.0).stats.points_processed == 20_000
+        assert server.paths[0] == "/ept_laz/ept.json?sig=a%2Fb&v=2"
+        assert len(server.paths) > 3 and all(p.endswith("?sig=a%2Fb&v=2") for p in server.paths)
+        c.close()
+    assert gphttp.HttpFile("http://h/e/ept.json?t=1").sibling("ept-data/0-0-0-0.laz?x=2").url == "http://h/e/ept-data/0-0-0-0.laz?x=2"
 
 
 # --------------------------------------------------------------------------- failures

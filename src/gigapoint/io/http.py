@@ -26,7 +26,7 @@ import time
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from urllib.parse import urljoin
+from urllib.parse import urljoin, urlsplit
 
 from ..errors import InputError
 
@@ -389,7 +389,11 @@ class HttpFile(ByteSource):
         return self.client.map(lambda s: s.read_all(), list(sources))
 
     def sibling(self, relative: str) -> HttpFile:
-        return HttpFile(urljoin(self.url, relative), self.client)
+        url = urljoin(self.url, relative)
+        query = urlsplit(self.url).query
+        if query and not urlsplit(relative).query:  # a token in the query (a container's SAS) reads the files beside it too
+            url = f"{url}?{query}"
+        return HttpFile(url, self.client)
 
     def close(self) -> None:
         self.client.close()

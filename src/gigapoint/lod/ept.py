@@ -16,6 +16,7 @@ from __future__ import annotations
 import io
 import json
 from pathlib import Path
+from urllib.parse import urlsplit, urlunsplit
 
 import numpy as np
 
@@ -48,9 +49,14 @@ def ept_location(path) -> str | Path | None:
     ``ept.json`` or ``/``), else None."""
     url = as_url(path)
     if url is not None:
-        if url.endswith("/"):
-            return url + EPT_FILE
-        return url if url.rsplit("/", 1)[-1].endswith(".json") else None
+        # the URL's path, not its query: '.../ept.json?sig=...' was taken for a COPC file
+        try:
+            parts = urlsplit(url)
+        except ValueError:  # 'http://[::1': the HTTP client says so, naming the URL
+            return None
+        if parts.path.endswith("/"):
+            return urlunsplit(parts._replace(path=parts.path + EPT_FILE))
+        return url if parts.path.rsplit("/", 1)[-1].endswith(".json") else None
     p = Path(path)
     if p.is_dir() and (p / EPT_FILE).is_file():
         return p / EPT_FILE
