@@ -227,6 +227,22 @@ def test_ept_over_http_renders_like_the_local_dataset(data, server, folder):
         c.close()
 
 
+def test_an_ept_folder_url_through_the_cli(data, server, tmp_path):
+    """``gigapoint info http://host/ept/`` was "http://host/ept: HTTP 404 Not Found for bytes
+    0..65,536": typer's Path drops the folder's '/', and the URL was read as a COPC file. A URL
+    whose last part has no suffix that is not a file (404) is now tried as an EPT folder."""
+    url = server.url("ept_laz/")
+    r = subprocess.run([sys.executable, "-m", "gigapoint.cli", "info", url], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "EPT (laszip)" in r.stdout and "20,000" in r.stdout
+    for name in ("ept_bin", "ept_bin?t=1"):  # the folder without its '/' in Python too
+        c = gp.open(server.url(name))
+        assert isinstance(c, EptCloud) and c.n_points == 20_000
+        c.close()
+    with pytest.raises(InputError, match=r"/nothing: HTTP 404 Not Found for bytes 0\.\.65,536$"):
+        gp.open(server.url("nothing"))  # neither: the first error, naming the URL as given
+
+
 def test_ept_url_with_a_query_string(data, server):
     """``…/ept.json?sig=…`` (a shared-access token, GitHub's ``?raw=true``) was taken for a COPC
     file ("not a COPC file (a file that starts with b'{"bo')"); the token goes on to the

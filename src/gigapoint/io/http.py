@@ -276,7 +276,8 @@ class HttpClient:
                 if status == 416:
                     raise InputError(f"{url}: {what} lie past the end of the file (HTTP 416 Range Not Satisfiable)")
                 if status >= 400:
-                    raise InputError(f"{url}: HTTP {status} {r.reason_phrase} for {what}")
+                    error = HttpNotFound if status == 404 else InputError
+                    raise error(f"{url}: HTTP {status} {r.reason_phrase} for {what}")
                 expect = size
                 if start is not None:
                     if status == 200:
@@ -326,6 +327,10 @@ class HttpClient:
             raise InputError(f"{url}: short read: {len(body):,} of the {expect:,} bytes asked for ({what})")
         self.bytes_read += len(body)
         return bytes(body)
+
+
+class HttpNotFound(InputError):
+    """HTTP 404: the URL names no file (an EPT folder whose '/' was dropped is tried as one)."""
 
 
 class _Transient(Exception):

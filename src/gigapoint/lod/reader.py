@@ -6,12 +6,13 @@ info`` says about one."""
 from __future__ import annotations
 
 from pathlib import Path
+from urllib.parse import urlsplit, urlunsplit
 
 import numpy as np
 
 from ..core.cloud import PointCloud
 from ..errors import InputError
-from ..io.http import as_url
+from ..io.http import HttpNotFound, as_url
 from .compact_octree import read_compact
 from .copc import is_copc_file, open_copc
 from .ept import ept_location, open_ept
@@ -67,7 +68,22 @@ def open_octree(path) -> OctreeCloud | PointCloud:
     ConversionPreview, with a warning)."""
     kind = lod_source_kind(path)
     if kind == "copc":
-        return open_copc(path)
+        url = as_url(path)
+        try:
+            parts = urlsplit(url) if url is not None else None
+        except ValueError:  # 'http://[::1': the HTTP client says so, naming the URL
+            parts = None
+        if parts is None or "." in parts.path.rsplit("/", 1)[-1]:
+            return open_copc(path)
+        try:
+            return open_copc(path)
+        except HttpNotFound as exc:
+            # no file there: an EPT folder given without its '/' (typer's Path drops it:
+            # `gigapoint info https://host/ept/` asked for https://host/ept as a COPC file)
+            try:
+                return open_ept(urlunsplit(parts._replace(path=parts.path + "/")))
+            except HttpNotFound:
+                raise exc from None
     if kind == "ept":
         return open_ept(path)
     d = OctreeDir(path)
