@@ -276,7 +276,11 @@ class CopcCloud(VoxelOctree):
         name = source.name
         head = source.read_head(HEAD_READ)
         if not is_copc_head(head):
-            what = "LAS 1.4 file without the COPC info VLR first" if head[:4] == b"LASF" else f"file that starts with {head[:4]!r}"
+            if head[:4] == b"LASF" and len(head) > 104:  # its own version and kind: every LAS file was "a LAS 1.4 file"
+                kind = "LAZ" if head[104] & 0x80 else "LAS"
+                what = f"{kind} {head[24]}.{head[25]} file without the COPC info VLR first"
+            else:
+                what = "LAS file without the COPC info VLR first" if head[:4] == b"LASF" else f"file that starts with {head[:4]!r}"
             raise InputError(f"{name}: not a COPC file (a {what}); gigapoint reads COPC (.copc.laz) and EPT (ept.json) as octrees")
         if len(head) < INFO_OFFSET + COPC_INFO_DTYPE.itemsize:
             raise InputError(f"{name}: truncated COPC file ({len(head)} bytes: no room for the COPC info VLR)")
