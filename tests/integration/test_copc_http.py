@@ -97,6 +97,12 @@ class RangeServer:
                         self.end_headers()
                         return
                     b = min(b, len(data) - 1)
+                    if mode == "whole_200" and a == 0 and b == len(data) - 1:  # the range is the whole file: 200
+                        self.send_response(200)
+                        self.send_header("Content-Length", str(len(data)))
+                        self.end_headers()
+                        self.wfile.write(data)
+                        return
                     if mode == "wrong_range":
                         a, b = a + 1, min(b + 1, len(data) - 1)
                     if mode == "short_206":
@@ -241,6 +247,29 @@ def test_an_ept_folder_url_through_the_cli(data, server, tmp_path):
         c.close()
     with pytest.raises(InputError, match=r"/nothing: HTTP 404 Not Found for bytes 0\.\.65,536$"):
         gp.open(server.url("nothing"))  # neither: the first error, naming the URL as given
+
+
+def test_a_small_copc_file_answered_whole_with_200(server, tmp_path):
+    """A COPC file shorter than the head read (64 KiB): servers may answer a range that covers
+    the whole file with 200 and the file, as RFC 9110 allows; that was "the server ignored the
+    range request" and the file could not be opened."""
+    rng = np.random.default_rng(1)
+    xyz = rng.random((400, 3)) * (50, 40, 10) + (1000, 2000, 30)
+    small = server.root / "small.copc.laz"
+    convert(gp.from_arrays(xyz), small, format="copc")
+    assert small.stat().st_size < gphttp_head()
+    server.mode = "whole_200"
+    c = gp.open(server.url("small.copc.laz"))
+    assert isinstance(c, CopcCloud) and c.n_points == 400
+    assert _frame(c, point_budget=10**9, lod_threshold_px=0.0).stats.points_processed == 400
+    c.close()
+    small.unlink()
+
+
+def gphttp_head() -> int:
+    from gigapoint.lod.copc import HEAD_READ
+
+    return HEAD_READ
 
 
 def test_ept_url_with_a_query_string(data, server):
