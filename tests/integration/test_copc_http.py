@@ -272,6 +272,18 @@ def gphttp_head() -> int:
     return HEAD_READ
 
 
+def test_a_potree_metadata_url_is_named_as_one(server):
+    """``gp.open('http://host/potree/metadata.json')`` said "ept.json lacks 'bounds', 'dataType',
+    ..." of a file that is no ept.json: Potree octrees open from local folders only."""
+    d = server.root / "potree"
+    d.mkdir(exist_ok=True)
+    (d / "metadata.json").write_text('{"version": "2.0", "name": "x", "points": 5, "hierarchy": {}, "encoding": "DEFAULT"}')
+    url = server.url("potree/metadata.json")
+    with pytest.raises(InputError) as e:
+        gp.open(url)
+    assert str(e.value) == f"{url}: a Potree metadata.json; Potree octrees open from a local folder (over HTTP: COPC files and EPT datasets)"
+
+
 def test_ept_url_with_a_query_string(data, server):
     """``…/ept.json?sig=…`` (a shared-access token, GitHub's ``?raw=true``) was taken for a COPC
     file ("not a COPC file (a file that starts with b'{"bo')"); the token goes on to the

@@ -92,6 +92,8 @@ class EptCloud(VoxelOctree):
         if not isinstance(meta, dict):
             raise InputError(f"{name}: not an EPT ept.json (expected a JSON object)")
         missing = [k for k in ("bounds", "points", "dataType", "hierarchyType", "schema") if k not in meta]
+        if missing and "hierarchy" in meta and "encoding" in meta:  # (a URL's any .json is taken for EPT's)
+            raise InputError(f"{name}: a Potree metadata.json; Potree octrees open from a local folder (over HTTP: COPC files and EPT datasets)")
         if missing:
             raise InputError(f"{name}: ept.json lacks {', '.join(repr(k) for k in missing)}")
         self.data_type = meta["dataType"]
