@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import math
 import re
 import time
@@ -223,10 +224,8 @@ def demo(
     if live:
         from .live_cmd import view_live
 
-        given = (("--points", points, 20_000_000), ("--output", output, Path("demo.png")), ("--width", width, 1920), ("--height", height, 1080),
-                 ("--view", view, "auto"), ("--threads", threads, None), ("--seed", seed, 0), ("--overwrite", overwrite, False),
-                 ("--colors", colors, "auto"), ("--scale", scale, 0.01))  # fmt: skip
-        dropped = [name for name, value, default in given if value != default]
+        given = locals()  # (the options' values: every one but --live is the image's)
+        dropped = [f"--{name}" for name, p in inspect.signature(demo).parameters.items() if name != "live" and given[name] != p.default]
         if dropped:  # they were dropped without a word (the image is not written; the live demo has its own scene)
             raise GigapointError(f"{' and '.join(dropped)}: options of the demo image, not of --live")
         from .view_cmd import _open_browser

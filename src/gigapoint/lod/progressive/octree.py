@@ -269,6 +269,12 @@ def _grid_cube(origin, edge: float, anchor, step: float) -> tuple[np.ndarray, fl
     return corner, 2.0 ** max(1, int(np.ceil(np.log2(steps)))) * step
 
 
+def _grown_cube(origin, edge: float, lo) -> tuple[np.ndarray, float]:
+    """The root cube twice the size, towards the axes where ``lo`` lies below it (what ``_grow``
+    makes and ``_check_reach`` counts ahead)."""
+    return origin - edge * (lo < origin), edge * 2.0
+
+
 class _PackState(NamedTuple):
     """ProgressiveOctree._pack_state: the pool as trim left it, and copies of what packing reads."""
 
@@ -1283,7 +1289,8 @@ class ProgressiveOctree:
             return
         origin, edge, grows = self.origin, self.edge, 0
         while np.any(lo < origin) or np.any(hi > origin + edge):
-            origin, edge, grows = origin - edge * (lo < origin), edge * 2.0, grows + 1
+            origin, edge = _grown_cube(origin, edge, lo)
+            grows += 1
         if grows and int(self.level[: self.n_nodes].max()) + grows > CODE_BITS:
             raise InputError(f"{self.name}: points span more than the octree's {CODE_BITS} levels resolve; give the bounds up front")
 
@@ -1302,8 +1309,7 @@ class ProgressiveOctree:
         if n >= len(self.key):
             self._nodes(2 * len(self.key))
         old = self.root
-        self.origin = self.origin - self.edge * below
-        self.edge *= 2.0
+        self.origin, self.edge = _grown_cube(self.origin, self.edge, lo)
         self.key[n], self.level[n], self.leaf[n], self.count[n], self.parent[n] = 1, 0, 0, 0, -1
         self.children[n] = -1
         self.children[n, d] = old
