@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from test_io_las import write_las  # tests/unit is on sys.path (pytest rootdir-less import)
 
-from gigapoint.errors import EmptyCloudError, InputError, UnsupportedFormatError
+import gigapoint as gp
+from gigapoint.errors import EmptyCloudError, GigapointError, InputError, UnsupportedFormatError
 from gigapoint.io import file_info, open_cloud, read_chunks
 from gigapoint.io.registry import reader_for
 
@@ -514,3 +515,33 @@ def test_bad_chunk_size(tmp_path):
     p.write_text("1 2 3\n")
     with pytest.raises(InputError, match="chunk_size"):
         list(read_chunks(p, chunk_size=0))
+
+
+def test_a_ply_file_cut_off_gives_the_vertices_before_the_cut(tmp_path):
+    """``read_salvaged`` (a progressive load's) of a binary PLY file cut off: the vertices before
+    the cut, exactly the file's, then the one-line error; the plain reader still refuses it.
+    (An ASCII one already gave the chunks before its cut line, then that line's error.)"""
+    from plyfile import PlyData, PlyElement
+
+    from gigapoint.io.ply import PlyReader
+
+    v = np.zeros(1000, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4")])
+    v["x"], v["y"], v["z"] = np.arange(1000), np.arange(1000) * 2, 7
+    p = tmp_path / "b.ply"
+    PlyData([PlyElement.describe(v, "vertex")]).write(str(p))
+    data = p.read_bytes()
+    p.write_bytes(data[: len(data) - 12 * 400 - 5])  # 599 vertices and 7 bytes of the 600th
+    raises(InputError, p, match="truncated PLY")
+    assert PlyReader().header(p, salvage=True)["truncated"].startswith("truncated PLY file: the header declares 1,000 vertices")
+    got = []
+    with pytest.raises(InputError, match=r"b\.ply: truncated PLY file: the header declares 1,000 vertices"):
+        for chunk in PlyReader().read_salvaged(p, 250):
+            got.append(chunk.xyz)
+    xyz = np.concatenate(got)
+    assert len(xyz) == 599
+    np.testing.assert_array_equal(xyz, np.c_[v["x"], v["y"], v["z"]][: len(xyz)])
+    cloud = gp.open(p, progressive=True)
+    with pytest.raises(GigapointError, match=r"b\.ply: truncated PLY file"):
+        cloud.wait(60)
+    assert cloud.n_points == len(xyz)
+    cloud.close()

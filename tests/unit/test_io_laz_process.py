@@ -351,3 +351,57 @@ def test_where_no_child_can_be_started_the_records_are_decoded_here(tmp_path, mo
     monkeypatch.setattr(laz_process, "_blocks", None)
     expected = np.frombuffer(laspy.read(path).points.array.tobytes(), np.uint8)
     np.testing.assert_array_equal(laz_process.decode_block(blob, vlr, size, skip=skip), expected)
+
+
+def _chunks_before(path, cut: int) -> int:
+    """Points of the LAZ chunks of ``path`` whose bytes all lie before byte ``cut``."""
+    import lazrs
+
+    with laspy.open(path) as reader:
+        vlr = next(v for v in reader.header.vlrs if v.record_id == 22204).record_data_bytes()
+        offset = reader.header.offset_to_point_data
+    with open(path, "rb") as f:
+        f.seek(offset)
+        table = lazrs.read_chunk_table(f, lazrs.LazVlr(vlr))
+    end, points = offset + 8, 0
+    for n, size in table:
+        end += size
+        if end > cut:
+            break
+        points += n
+    return points
+
+
+@pytest.mark.parametrize("point_format", [3, 7])
+@pytest.mark.parametrize("share", [0.45, 0.7, 0.97])
+def test_a_laz_file_cut_off_gives_the_points_before_the_cut(tmp_path, point_format, share):
+    """A LAZ file cut off (a download or a copy that stopped) lost its chunk table with its tail:
+    lazrs reads the table before any point, so nothing of it could be read. A progressive load
+    (``read_salvaged``) decodes the chunks before the cut, exactly the file's points, at most a
+    few thousand short of every chunk that lies before it, then says where the file ends; the
+    plain reader still refuses the file up front."""
+    full = _write_laz(tmp_path / "full.laz", 150_000, point_format)
+    data = full.read_bytes()
+    cut = int(len(data) * share)
+    bad = tmp_path / "cut.laz"
+    bad.write_bytes(data[:cut])
+    with laspy.open(full) as reader:
+        table = int.from_bytes(data[reader.header.offset_to_point_data :][:8], "little")
+    with pytest.raises(InputError, match=r"cut\.laz: truncated or corrupt LAZ file: chunk table offset"):
+        list(LasReader().read_chunks(bad))
+    expected = np.c_[laspy.read(full).x, laspy.read(full).y, laspy.read(full).z]
+    for chunk_size in (20_000, 250_000):
+        got = []
+        with pytest.raises(InputError) as err:
+            for chunk in LasReader().read_salvaged(bad, chunk_size):
+                got.append(chunk.xyz)
+        n = sum(len(x) for x in got)
+        assert str(err.value) == f"{bad}: truncated LAZ file: its chunk table (at byte {table:,}) is past its end ({cut:,} bytes): {n:,} of its 150,000 points read"
+        assert _chunks_before(full, cut) - 5_000 <= n < 150_000
+        assert n > 0
+        np.testing.assert_array_equal(np.concatenate(got), expected[:n])
+    cloud = gp.open(bad, progressive=True)
+    with pytest.raises(GigapointError, match=r"cut\.laz: truncated LAZ file"):
+        cloud.wait(60)
+    assert cloud.n_points == n and cloud.progress == pytest.approx(n / 150_000)
+    cloud.close()

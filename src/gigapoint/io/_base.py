@@ -52,12 +52,21 @@ class Reader:
         reads it once and keeps the points it read."""
         return False
 
-    def header(self, path: Path) -> dict:
+    def header(self, path: Path, salvage: bool = False) -> dict:
         """What the file's header tells without reading its points: ``point_count`` (None when
         it does not), and where the format's header holds them ``bounds`` ((min, max) of its
         points, as the header says), ``offset`` and ``scale`` (its integer grid). ``info`` may
-        read every point (text, NPY: ``bounds_source`` "scan"); this never does."""
+        read every point (text, NPY: ``bounds_source`` "scan"); this never does. ``salvage``:
+        a file cut off is not refused here (``read_salvaged`` gives what it holds):
+        ``truncated`` says why it is short."""
         return {"point_count": self.point_count(path)}
+
+    def read_salvaged(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
+        """``read_chunks`` of a file that may be cut off or damaged: the points it still holds,
+        then its error (what a progressive load keeps drawable). Readers that find damage as
+        they read give the chunks before it anyway; one that refuses a short file up front
+        (LAS/LAZ: its header's counts) reads up to the cut here."""
+        return self.read_chunks(path, chunk_size)
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name}>"

@@ -13,7 +13,10 @@ is gone).
   data, ``vlr``: the LASzip VLR's data in hex, ``parallel``) into ``slots`` slots of shared
   memory (``fd``, inherited; ``slot_bytes`` each, ``per_slot`` points), ``{"slot": k, "n": n}``
   a filled slot, then ``{"end": true}``. A slot that fails to decode: the points of it that
-  decode LAZ chunk by chunk, ``{"slot": k, "n": m, "partial": true}``, then the error. It fills the first slot, waits until the parent has
+  decode LAZ chunk by chunk, ``{"slot": k, "n": m, "partial": true}``, then the error.
+  ``cut``: the file ends at that byte, its chunk table gone with its tail: the sequential
+  decoder reads the chunks before the cut (``_CutFile``), then a slot's points before it are
+  ``partial`` and the error says where the file ends. It fills the first slot, waits until the parent has
   read it, then fills the slots in turn, reusing one only once the parent has written its
   number back on stdin.
 - ``"blocks"``: requests on stdin, each a JSON line ``{"size", "skip", "vlr", "at", "out",
@@ -35,13 +38,70 @@ def _decoder(lazrs, source, vlr: bytes, parallel: bool):
     return (lazrs.ParLasZipDecompressor if parallel else lazrs.LasZipDecompressor)(source, vlr)
 
 
+class _CutFile(io.RawIOBase):
+    """A LAZ file cut off at byte ``cut`` as a decoder can read it: lazrs reads a chunk table
+    before any point, and this one's is gone, so one is made up past the cut (its chunks' sizes
+    unknown: the sequential decoder of chunks of a fixed size never reads them) and the offset
+    at the start of the point data points there. ``high``: the furthest byte handed out; points
+    are real only while it stays before the cut (the decoder of the chunk across it reads on
+    into the made-up table)."""
+
+    def __init__(self, path: str, offset: int, cut: int, table: bytes):
+        self.file = open(path, "rb")  # noqa: SIM115 - closed with this one
+        self.patches = [(offset, cut.to_bytes(8, "little", signed=True)), (cut, table)]
+        self.end = cut + len(table)
+        self.pos = self.high = 0
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return True
+
+    def seek(self, pos: int, whence: int = 0) -> int:
+        self.pos = pos if whence == 0 else self.pos + pos if whence == 1 else self.end + pos
+        return self.pos
+
+    def tell(self) -> int:
+        return self.pos
+
+    def readinto(self, b) -> int:
+        n = max(0, min(len(b), self.end - self.pos))
+        self.file.seek(self.pos)
+        got = self.file.readinto(memoryview(b)[:n])
+        for at, data in self.patches:  # the made-up bytes over the file's (past the cut: none)
+            lo, hi = max(at, self.pos), min(at + len(data), self.pos + n)
+            if lo < hi:
+                memoryview(b)[lo - self.pos : hi - self.pos] = data[lo - at : hi - at]
+                got = max(got, hi - self.pos)
+        self.pos += got
+        self.high = max(self.high, self.pos)
+        return got
+
+    def close(self) -> None:
+        self.file.close()
+        super().close()
+
+
+CUT_STEP = 5_000  # points decoded a call in a file cut off: the most of them lost at the cut
+
+
 def _records(lazrs, job: dict, inp, say) -> None:
     memory = mmap.mmap(job["fd"], job["slots"] * job["slot_bytes"])
-    source = open(job["path"], "rb")  # noqa: SIM115 - open until the process ends
-    source.seek(job["offset"])
     vlr = bytes.fromhex(job["vlr"])
-    decoder = _decoder(lazrs, source, vlr, job["parallel"])
-    record = lazrs.LazVlr(vlr).item_size()
+    laz_vlr = lazrs.LazVlr(vlr)
+    cut = job.get("cut")
+    if cut is not None:
+        table = io.BytesIO()
+        lazrs.write_chunk_table(table, [(laz_vlr.chunk_size(), 1)] * (-(-job["stop"] // laz_vlr.chunk_size())), laz_vlr)
+        source = _CutFile(job["path"], job["offset"], cut, table.getvalue())
+    else:
+        source = open(job["path"], "rb")  # noqa: SIM115 - open until the process ends
+    source.seek(job["offset"])
+    decoder = _decoder(lazrs, source, vlr, job["parallel"] and cut is None)
+    if cut is not None:
+        source.high = 0  # (the decoder read the made-up table first: points count from here)
+    record = laz_vlr.item_size()
     if job["start"]:
         decoder.seek(job["start"])
     # the first slot alone until the parent has read it: decoding ahead would share the cores
@@ -58,6 +118,15 @@ def _records(lazrs, job: dict, inp, say) -> None:
         slot = free.pop(0)
         n = min(job["per_slot"], stop - done)
         at = slot * job["slot_bytes"]
+        if cut is not None:
+            good = _before_cut(decoder, source, cut, memoryview(memory)[at : at + n * record], n, record)
+            if good < n:
+                if good:
+                    say({"slot": slot, "n": good, "partial": True})
+                raise EOFError(f"the file ends at byte {cut:,}, {done + good:,} points in")
+            done += n
+            say({"slot": slot, "n": n})
+            continue
         try:
             decoder.decompress_many(memoryview(memory)[at : at + n * record])
         except BaseException as exc:  # lazrs's errors and panics: the slot's points before the bad LAZ chunk go first
@@ -70,6 +139,24 @@ def _records(lazrs, job: dict, inp, say) -> None:
         done += n
         say({"slot": slot, "n": n})
     say({"end": True})
+
+
+def _before_cut(decoder, source: _CutFile, cut: int, out, n: int, record: int) -> int:
+    """Up to ``n`` points into ``out``, CUT_STEP a call, while the decoder reads only bytes
+    before the cut: how many."""
+    good = 0
+    while good < n:
+        step = min(CUT_STEP, n - good)
+        try:
+            decoder.decompress_many(out[good * record : (good + step) * record])
+        except BaseException as exc:  # the cut: lazrs's "failed to fill whole buffer" (or a panic on what lies past it)
+            if isinstance(exc, (SystemExit, KeyboardInterrupt)):
+                raise
+            return good
+        if source.high > cut:
+            return good
+        good += step
+    return good
 
 
 def _salvage(lazrs, job: dict, vlr: bytes, out, first: int, n: int, record: int) -> int:

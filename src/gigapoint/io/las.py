@@ -174,14 +174,20 @@ class LasHeader:
     number_of_evlrs: int = 0
     generating_software: str = ""
     vlrs: list[tuple[bytes, int, bytes]] = field(default_factory=list)  # (user_id, record_id, data)
+    #: why the file's point data ends early (read_las_header(salvage=True): a file cut off, its
+    #: points before the cut readable), else None
+    truncated: str | None = None
 
 
 def _u(fmt: str, buf: bytes, off: int):
     return struct.unpack_from("<" + fmt, buf, off)
 
 
-def read_las_header(path: Path) -> LasHeader:
-    """Parse and validate a LAS/LAZ header against the file size; raise InputError on any inconsistency."""
+def read_las_header(path: Path, salvage: bool = False) -> LasHeader:
+    """Parse and validate a LAS/LAZ header against the file size; raise InputError on any
+    inconsistency. ``salvage``: a file whose point data is cut off (a LAS short of records, a
+    LAZ whose chunk table at its end is gone with the tail) is not an error: ``truncated`` says
+    why (the points before the cut can be read: LasReader.read_chunks(salvage=True))."""
     path = check_file(path)
     with open(path, "rb") as f:
         f.seek(0, 2)
@@ -269,17 +275,18 @@ def read_las_header(path: Path) -> LasHeader:
         if n_evlrs:
             data_end = _check_evlrs(path, f, hdr)
         if compressed:
-            _check_laz(path, f, hdr)
+            _check_laz(path, f, hdr, salvage)
         else:
             have = data_end - offset_to_data
             need_bytes = point_count * record_length
             if need_bytes > have:
                 fits = have // record_length
-                raise fail(
-                    path,
+                hdr.truncated = (
                     f"truncated LAS file: the header claims {point_count:,} points ({need_bytes:,} bytes) "
-                    f"but only {have:,} bytes of point data follow (room for {fits:,} points)",
+                    f"but only {have:,} bytes of point data follow (room for {fits:,} points)"
                 )
+                if not salvage:
+                    raise fail(path, hdr.truncated)
     return hdr
 
 
@@ -320,8 +327,10 @@ def _rust_panics_unprinted():
         os.close(null)
 
 
-def _check_laz(path: Path, f, hdr: LasHeader) -> None:
-    """Check a LAZ file's chunk table against the file size and the header's point count."""
+def _check_laz(path: Path, f, hdr: LasHeader, salvage: bool = False) -> None:
+    """Check a LAZ file's chunk table against the file size and the header's point count
+    (``salvage``: a table past the end of the file, in chunks of a fixed size, is a file cut
+    off: ``hdr.truncated``)."""
     import lazrs
 
     laszip = [d for u, r, d in hdr.vlrs if u == LASZIP_USER_ID and r == LASZIP_RECORD_ID]
@@ -342,6 +351,9 @@ def _check_laz(path: Path, f, hdr: LasHeader) -> None:
     if table_offset == -1:  # written by a streaming writer: the offset is in the last 8 bytes
         f.seek(hdr.file_size - 8)
         (table_offset,) = _u("q", f.read(8), 0)
+    if table_offset > hdr.file_size - 8 and salvage and chunk_size != 0xFFFFFFFF:  # (variable chunks: the table tells their points)
+        hdr.truncated = f"truncated LAZ file: its chunk table (at byte {table_offset:,}) is past its end ({hdr.file_size:,} bytes)"
+        return
     if not start + 8 <= table_offset <= hdr.file_size - 8:
         raise fail(path, f"truncated or corrupt LAZ file: chunk table offset {table_offset:,} lies outside the file's point data (bytes {start + 8:,}..{hdr.file_size:,})")
     f.seek(table_offset)
@@ -400,6 +412,14 @@ class _Las10AsLas11(io.RawIOBase):
     def close(self) -> None:
         self._f.close()
         super().close()
+
+
+def _laspy_header(path: Path):
+    """laspy's header of the file (its point format, scales, offsets), its points left unopened."""
+    import laspy
+
+    with open(path, "rb") as f:
+        return laspy.LasHeader.read_from(f)
 
 
 def _laspy_open(path: Path, hdr: LasHeader):
@@ -534,9 +554,10 @@ class LasReader(Reader):
     def point_count(self, path: Path) -> int | None:
         return read_las_header(path).point_count
 
-    def header(self, path: Path) -> dict:
-        hdr = read_las_header(path)  # (info opens the file with laspy too: its VLRs, CRS, dimensions)
-        return {"point_count": hdr.point_count, "bounds": (list(hdr.mins), list(hdr.maxs)), "offset": list(hdr.offset), "scale": list(hdr.scale)}
+    def header(self, path: Path, salvage: bool = False) -> dict:
+        hdr = read_las_header(path, salvage)  # (info opens the file with laspy too: its VLRs, CRS, dimensions)
+        head = {"point_count": hdr.point_count, "bounds": (list(hdr.mins), list(hdr.maxs)), "offset": list(hdr.offset), "scale": list(hdr.scale)}
+        return head if hdr.truncated is None else {**head, "truncated": hdr.truncated}
 
     def reads_slowly(self, path: Path) -> bool:
         return read_las_header(path).compressed  # LAZ: decompression, ~0.3 us a point on 2 cores
@@ -552,11 +573,14 @@ class LasReader(Reader):
         start: int = 0,
         stop: int | None = None,
         scaler: ColorScaler | None = None,
+        salvage: bool = False,
     ) -> Iterator[PointChunk]:
         """Chunks of points ``start``..``stop`` (default: all) of the file. ``scaler``: the color
-        decision of the points before ``start`` (a new one by default); it is updated chunk by chunk."""
+        decision of the points before ``start`` (a new one by default); it is updated chunk by chunk.
+        ``salvage``: a file cut off yields the points before the cut, then its error (read_salvaged)."""
         chunk_size = check_chunk_size(chunk_size)
-        hdr = read_las_header(path)
+        hdr = read_las_header(path, salvage)
+        cut_laz = hdr.truncated is not None and hdr.compressed  # no chunk table: laspy cannot open its points
         kind = "LAZ" if hdr.compressed else "LAS"
         if hdr.point_count == 0:
             raise fail(path, f"{kind} file holds no points (header point count is 0)", EmptyCloudError)
@@ -574,14 +598,22 @@ class LasReader(Reader):
         # (a kernel that fails to compile, say) is not the file's and keeps its own message
         with contextlib.ExitStack() as stack:
             try:
-                reader = stack.enter_context(_laspy_open(path, hdr))
-                dims = set(reader.header.point_format.dimension_names)
-                scale = np.asarray(reader.header.scales, np.float64)
-                offset = np.asarray(reader.header.offsets, np.float64)
-                if reader.header.point_count != hdr.point_count:  # LAS 1.4 with only the legacy count filled in
-                    reader.header.point_count = hdr.point_count
-                decompressor = getattr(reader.point_source, "decompressor", None)
-                in_child = hdr.compressed and laz_process.usable(decompressor)
+                if cut_laz:
+                    if start or not laz_process.available():  # only a child decodes a file without its table
+                        raise fail(path, hdr.truncated)
+                    reader, decompressor, in_child = None, None, True
+                    header = _laspy_header(path)
+                else:
+                    reader = stack.enter_context(_laspy_open(path, hdr))
+                    header = reader.header
+                if header.point_count != hdr.point_count:  # LAS 1.4 with only the legacy count filled in (before laspy
+                    header.point_count = hdr.point_count  # makes its point source: of 0 points, an empty one)
+                if reader is not None:
+                    decompressor = getattr(reader.point_source, "decompressor", None)
+                    in_child = hdr.compressed and laz_process.usable(decompressor)
+                dims = set(header.point_format.dimension_names)
+                scale = np.asarray(header.scales, np.float64)
+                offset = np.asarray(header.offsets, np.float64)
                 if start and not in_child:  # (a child seeks itself)
                     reader.seek(start)
             except (InputError, MemoryError):
@@ -590,7 +622,7 @@ class LasReader(Reader):
                 if not laz_process.bad_data(exc):
                     raise
                 raise corrupt(exc) from None
-            attrs = _attribute_fields(reader.header.point_format)
+            attrs = _attribute_fields(header.point_format)
             has_rgb = {"red", "green", "blue"} <= dims
             stored_scale = tuple(float(abs(s)) for s in scale)  # PointChunk.scale: the resolution the file stores
             scaler = ColorScaler() if scaler is None else scaler
@@ -601,8 +633,11 @@ class LasReader(Reader):
                 parallel = type(decompressor).__name__ == "ParLasZipDecompressor"
                 with contextlib.suppress(OSError):  # no process or memory to be had: decoded here, as below
                     records = laz_process.ChildRecords(
-                        path, hdr.offset_to_point_data, laszip, done, stop, most, reader.header.point_format, parallel
-                    )
+                        path, hdr.offset_to_point_data, laszip, done, stop, most, header.point_format, parallel,
+                        cut=hdr.file_size if cut_laz else None,
+                    )  # fmt: skip
+                if records is None and cut_laz:
+                    raise fail(path, hdr.truncated)
                 if records is None and start:
                     reader.seek(start)
             if records is None:
@@ -618,13 +653,15 @@ class LasReader(Reader):
                 except BaseException as exc:  # as above
                     if not laz_process.bad_data(exc):
                         raise
+                    if cut_laz:  # the cut, found: the points before it were given
+                        raise fail(path, f"{hdr.truncated}: {done:,} of its {hdr.point_count:,} points read") from None
                     raise corrupt(exc) from None
                 n = len(pts)
                 if n == 0:
                     break
                 raw = pts.array  # the records as read (valid until the next read)
                 if stop - start > NUMPY_MAX:  # one parallel pass over the records (chunks of any size: a progressive load's are small)
-                    plan = plan or _RecordPlan(reader.header.point_format, attrs, has_rgb)
+                    plan = plan or _RecordPlan(header.point_format, attrs, has_rgb)
                     xyz, rgb, decoded = plan.decode(raw, scale, offset)
                     rgba = _colors(*rgb, scaler) if has_rgb else None
                     attributes = {a: decoded[a] if a in decoded else _field_values(pts, f) for a, f in attrs.items()}
@@ -637,6 +674,9 @@ class LasReader(Reader):
                 yield PointChunk(xyz, rgba, attributes, scale=stored_scale)
         if done < stop:
             raise fail(path, f"truncated {kind} file: the header claims {hdr.point_count:,} points, only {done:,} could be read")
+
+    def read_salvaged(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
+        return self.read_chunks(path, chunk_size, salvage=True)
 
     def info(self, path: Path) -> dict:
         hdr = read_las_header(path)

@@ -62,10 +62,15 @@ def _wanted() -> bool:
     return Path(sys.executable or "").name.startswith(("python", "pypy")) and os.environ.get(ENV_SWITCH, "1") != "0"
 
 
+def available() -> bool:
+    """Whether a child can decode here (``ChildRecords``: it needs a memfd)."""
+    return hasattr(os, "memfd_create") and _wanted()
+
+
 def usable(decompressor) -> bool:
     """Whether records that ``decompressor`` (laspy's lazrs decompressor of the file) would
-    decode can be decoded by a child instead (``ChildRecords``: it needs a memfd)."""
-    return decompressor is not None and hasattr(os, "memfd_create") and _wanted()
+    decode can be decoded by a child instead."""
+    return decompressor is not None and available()
 
 
 class _Child:
@@ -137,9 +142,11 @@ class _Child:
 
 
 class ChildRecords(_Child):
-    """Records ``start``..``stop`` of a LAZ file decoded by a child, ``per_read`` at a time."""
+    """Records ``start``..``stop`` of a LAZ file decoded by a child, ``per_read`` at a time
+    (``cut``: the file ends there, its chunk table gone: the child decodes the points before it,
+    then says where they end, _laz_child.py)."""
 
-    def __init__(self, path, offset: int, vlr: bytes, start: int, stop: int, per_read: int, point_format, parallel: bool):
+    def __init__(self, path, offset: int, vlr: bytes, start: int, stop: int, per_read: int, point_format, parallel: bool, cut: int | None = None):
         import laspy
 
         self.record = laspy.PackedPointRecord
@@ -156,7 +163,7 @@ class ChildRecords(_Child):
             self.memory = mmap.mmap(fd, slots * self.slot_bytes)
             job = {"mode": "records", "path": str(path), "offset": int(offset), "vlr": bytes(vlr).hex(), "start": int(start),
                    "stop": int(stop), "parallel": bool(parallel), "fd": fd, "slots": slots, "slot_bytes": self.slot_bytes,
-                   "per_slot": int(per_read)}  # fmt: skip
+                   "per_slot": int(per_read), "cut": cut}  # fmt: skip
             super().__init__(job, pass_fds=(fd,))
         except BaseException:
             self.close()

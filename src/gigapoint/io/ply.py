@@ -91,18 +91,28 @@ class PlyReader(Reader):
         """The header's vertex count, after checking the file can hold that many: a binary file's
         bytes exactly, an ASCII one's at 6 bytes a vertex at least ("0 0 0\\n"). A count of 10^12
         in 45 kB was refused for the memory it would take, with advice to load it progressively."""
+        return self.header(path)["point_count"]
+
+    def header(self, path: Path, salvage: bool = False) -> dict:
         path = check_file(path)
         h = _Header(path)
+        short = None
         if not h.has_lists and h.text:
             have = h.file_size - h.data_offset
             if h.count * _LEAST_ASCII_VERTEX - 1 > have:  # (the last line may end without its newline)
-                raise fail(path, f"truncated PLY file: the header declares {h.count:,} vertices but only {max(have, 0):,} bytes follow "
-                                 f"(room for {(max(have, 0) + 1) // _LEAST_ASCII_VERTEX:,} at most)")  # fmt: skip
+                short = (f"truncated PLY file: the header declares {h.count:,} vertices but only {max(have, 0):,} bytes follow "
+                         f"(room for {(max(have, 0) + 1) // _LEAST_ASCII_VERTEX:,} at most)")  # fmt: skip
         elif not h.has_lists:
-            self._binary_span(path, h)
-        return h.count
+            short = self._binary_span(path, h)[2]
+        if short and not salvage:
+            raise fail(path, short)
+        return {"point_count": h.count} if short is None else {"point_count": h.count, "truncated": short}
 
-    def read_chunks(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
+    def read_salvaged(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
+        return self.read_chunks(path, chunk_size, salvage=True)
+
+    def read_chunks(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE, salvage: bool = False) -> Iterator[PointChunk]:
+        """``salvage``: a file cut off gives the vertices before the cut, then its error (``read_salvaged``)."""
         chunk_size = check_chunk_size(chunk_size)
         path = check_file(path)
         h = _Header(path)
@@ -114,34 +124,37 @@ class PlyReader(Reader):
         elif h.text:
             yield from self._read_ascii(path, h, chunk_size, scaler)
         else:
-            yield from self._read_binary(path, h, chunk_size, scaler)
+            yield from self._read_binary(path, h, chunk_size, scaler, salvage)
 
     @staticmethod
-    def _binary_span(path, h: _Header) -> tuple[int, np.dtype]:
-        """(offset, record dtype) of a binary file's vertices, after checking they are all there."""
+    def _binary_span(path, h: _Header) -> tuple[int, np.dtype, str | None]:
+        """(offset, record dtype, why the vertices are not all there or None) of a binary file's vertices."""
         offset = h.data_offset + sum(el.count * el.dtype(h.byte_order).itemsize for el in h.before)
         dtype = h.vertex.dtype(h.byte_order)
         need = h.count * dtype.itemsize
         have = h.file_size - offset
+        short = None
         if need > have:
-            raise fail(
-                path,
-                f"truncated PLY file: the header declares {h.count:,} vertices ({need:,} bytes) "
-                f"but only {max(have, 0):,} bytes follow (room for {max(have, 0) // dtype.itemsize:,})",
-            )
-        return offset, dtype
+            short = (f"truncated PLY file: the header declares {h.count:,} vertices ({need:,} bytes) "
+                     f"but only {max(have, 0):,} bytes follow (room for {max(have, 0) // dtype.itemsize:,})")  # fmt: skip
+        return offset, dtype, short
 
-    def _read_binary(self, path, h: _Header, chunk_size, scaler) -> Iterator[PointChunk]:
-        offset, dtype = self._binary_span(path, h)
-        mm = np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=(h.count,))
+    def _read_binary(self, path, h: _Header, chunk_size, scaler, salvage: bool = False) -> Iterator[PointChunk]:
+        offset, dtype, short = self._binary_span(path, h)
+        if short and not salvage:
+            raise fail(path, short)
+        present = h.count if short is None else max(h.file_size - offset, 0) // dtype.itemsize
+        mm = np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=(present,)) if present else np.empty(0, dtype)
         try:
-            for start in range(0, h.count, chunk_size):
+            for start in range(0, present, chunk_size):
                 block = np.array(mm[start : start + chunk_size])  # copy out of the map
                 native = block.astype(block.dtype.newbyteorder("="), copy=False)
                 names, cols = _vertex_columns(native)
                 yield rows_to_chunk(path, names, cols, scaler)
         finally:
             del mm
+        if short:
+            raise fail(path, short)
 
     def _read_ascii(self, path, h: _Header, chunk_size, scaler) -> Iterator[PointChunk]:
         ncols = len(h.names)

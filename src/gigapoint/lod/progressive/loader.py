@@ -248,9 +248,10 @@ def _reachable(bounds: tuple, offset, scale) -> bool:
         return bool(np.all(lo <= hi) and np.all(lo >= low) and np.all(hi <= high))
 
 
-def file_sources(paths) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray] | None, str, tuple | None]:
+def file_sources(paths, cut_off: list | None = None) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray] | None, str, tuple | None]:
     """(sources, total points, header bounds of all files, name, grid) of files and directories:
-    every file through its reader (io registry), in bounded chunks. Totals, bounds and the grid
+    every file through its reader (io registry), in bounded chunks; a file cut off gives the
+    points before the cut, then its error (``read_salvaged``; its name appended to ``cut_off``). Totals, bounds and the grid
     are known when every file's header tells them (LAS/LAZ); the grid (ProgressiveOctree's) is
     the first file's offset and the finest scale (points of files on other grids stay wide)."""
     from ...core.cloud import finest_scale
@@ -262,8 +263,10 @@ def file_sources(paths) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray]
     bounds_known, offsets, scales = True, [], []
     for f in files:
         reader = reader_for(f)
-        head = reader.header(f)  # not info(): an NPY file's info read all its points before the loader began
+        head = reader.header(f, salvage=True)  # not info(): an NPY file's info read all its points before the loader began
         n = head["point_count"]
+        if head.get("truncated") and cut_off is not None:
+            cut_off.append(str(f))
         total = None if total is None or n is None else total + n
         b = head.get("bounds")
         if b is not None and _reachable(b, head.get("offset"), head.get("scale")):
@@ -272,7 +275,7 @@ def file_sources(paths) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray]
             bounds_known = False
         offsets.append(head.get("offset"))
         scales.append(head.get("scale"))
-        sources.append((str(f), lambda f=f, reader=reader: reader.read_chunks(f, min(DEFAULT_CHUNK_SIZE, DECODE_CHUNK))))
+        sources.append((str(f), lambda f=f, reader=reader: reader.read_salvaged(f, min(DEFAULT_CHUNK_SIZE, DECODE_CHUNK))))
     name = files[0].name if len(files) == 1 else f"{len(files)} files"
     grid, scale = None, finest_scale(scales)
     if scale is not None and all(o is not None for o in offsets):
@@ -312,7 +315,8 @@ def open_progressive(sources, total, bounds, name, grid=None, max_leaf=None, mem
 def open_sized(paths, point_budget: int, progressive: bool | None = None, progress: bool = False):
     """What ``gigapoint view`` and ``render`` open: an octree (a converted folder, COPC, EPT) as
     itself; other inputs as a ProgressiveOctree (drawable while it loads) when asked, or when
-    their headers count more points than ``point_budget``; else as one PointCloud."""
+    their headers count more points than ``point_budget``, or when one is cut off (what it
+    holds drawn, its error said); else as one PointCloud."""
     from ...io import expand_paths, open_cloud
     from ..reader import is_lod_source, open_octree, refuse_octrees
 
@@ -323,7 +327,9 @@ def open_sized(paths, point_budget: int, progressive: bool | None = None, progre
     refuse_octrees(paths, "it cannot join other files" if len(paths) > 1 else "--progressive builds an octree from point files")
     paths = expand_paths(paths)  # once: a file named twice was warned about twice (headers, then the points)
     if progressive is not False:
-        sources, total, bounds, name, grid = file_sources(paths)
-        if progressive or (total is not None and total > point_budget):
+        cut_off = []
+        sources, total, bounds, name, grid = file_sources(paths, cut_off)
+        # (a file cut off, too: what it holds is drawn, with its error, where the plain cloud only refuses it)
+        if progressive or cut_off or (total is not None and total > point_budget):
             return open_progressive(sources, total, bounds, name, grid)
     return open_cloud(*paths, progress=progress)
