@@ -1334,6 +1334,35 @@ def test_closing_mid_load_stops_the_loader_and_frees_memory():
     assert cloud.pool is None and cloud.n_points == 0
 
 
+@pytest.mark.timeout(180)  # (render's wait loop, on wait() alone, would spin for good)
+def test_a_load_closed_part_way_does_not_count_as_finished(tmp_path, monkeypatch):
+    """wait() said True after a close part-way, as though every point were read: save() went on
+    (a close from another thread between its wait and its check saved part of the input as the
+    whole), and ``gigapoint render`` drew the freed octree."""
+    from gigapoint.cli import render_cmd
+
+    cloud = gp.demo(50_000_000, progressive=True)
+    while cloud.n_points == 0:
+        cloud.wait(timeout=0.01)
+    cloud.loader.close()  # the loader stopped, the octree not freed yet: a close() under way in another thread
+    assert cloud.n_points > 0 and cloud.wait() is False and cloud.wait(timeout=1) is False
+    with pytest.raises(InputError, match=r"^demo\(50,000,000\): the octree is closed \(its points were freed\); open it again to save it$"):
+        cloud.save(tmp_path / "part")
+    assert not (tmp_path / "part").exists()
+    cloud.close()
+    assert cloud.wait() is False
+
+    def closed_while_read(*args, **kwargs):
+        loading = gp.demo(50_000_000, progressive=True)
+        threading.Timer(0.5, loading.close).start()
+        return loading
+
+    monkeypatch.setattr(render_cmd, "open_files", closed_while_read)
+    stopped = r"^demo\(50,000,000\): loading was stopped before every point was read \(the octree was closed\)$"
+    with pytest.raises(GigapointError, match=stopped):
+        render_cmd.open_inputs(["unused"], 1_000)
+
+
 def test_the_viewer_redraws_while_it_loads_and_says_how_far():
     import time
 

@@ -99,8 +99,11 @@ def open_inputs(inputs, point_budget: int, progressive: bool | None = None, opti
     if isinstance(cloud, ProgressiveOctree):
         total = cloud.loader.total
         with progress_bar(f"reading {cloud.name} into an LOD octree", total) as advance:
-            while not cloud.wait(timeout=0.1):
+            while cloud.loading:  # (not `until wait()`: a load closed part-way never says it finished)
+                cloud.wait(timeout=0.1)
                 advance(cloud.loader.read)
+        if not cloud.wait():  # closed part-way: its points freed, not drawn as though the whole input
+            raise GigapointError(f"{cloud.name}: loading was stopped before every point was read (the octree was closed)")
     return cloud
 
 

@@ -182,11 +182,13 @@ class Loader:
         )
 
     def wait(self, timeout: float | None = None) -> bool:
-        """Until the load ends (True) or ``timeout`` seconds pass (False); raises the load's error."""
+        """Until the load ends: True once every source is read; False when ``timeout`` seconds pass
+        first, or when ``close`` stopped the load part-way (it said True, as though complete);
+        raises the load's error."""
         finished = self._done.wait(timeout)
         if self.error is not None:
             raise self.error
-        return finished
+        return finished and self.complete
 
     def close(self) -> None:
         """Stop loading (after the slice in hand) and wait for the thread."""

@@ -808,8 +808,9 @@ class ProgressiveOctree:
         return None if self.loader is None else self.loader.error
 
     def wait(self, timeout: float | None = None) -> bool:
-        """Until the loader has read everything (True) or ``timeout`` passes (False); raises the
-        error that stopped it, if any. What was inserted before an error stays drawable."""
+        """Until the loader has read everything (True) or ``timeout`` passes, or ``close`` stopped
+        it part-way (False); raises the error that stopped it, if any. What was inserted before an
+        error stays drawable."""
         timeout = check_timeout(f"{self.name}: wait", timeout)
         return True if self.loader is None else self.loader.wait(timeout)
 
@@ -1333,7 +1334,7 @@ class ProgressiveOctree:
     def chunks(self, points_per_chunk: int = 1_000_000):
         """The points of the leaves as PointChunks (positions, colours, attributes), leaf by leaf,
         once loading has finished; one line of error if the octree changes meanwhile (``_check_unchanged``)."""
-        self.wait()
+        self._check_loaded("read its points")
         with self.lock:
             leaves = self.leaves().tolist()
             stamp = self._stamp()
@@ -1368,15 +1369,19 @@ class ProgressiveOctree:
         unknown = sorted(set(options) - taken)
         if unknown:  # banana=1 was a TypeError inside
             raise InputError(f"{self.name}: save: unknown option(s) {', '.join(unknown)}; it takes {', '.join(sorted(taken))}")
-        self.wait()
-        if self.closed:
-            raise InputError(f"{self.name}: the octree is closed (its points were freed); open it again to save it")
+        self._check_loaded("save it")
         options.setdefault("source_files", [p for p in self.source_files if p.is_file()])  # the files' CRS and LAS grid (those still there)
         options.setdefault("max_leaf", self.max_leaf)
         options.setdefault("name", self.name)  # name= another was "multiple values for keyword argument"
         grown = options["max_leaf"] == self.max_leaf and options.get("client") is None and self.points > 0
         inputs = self.grown() if grown else self.chunks()
         return convert(inputs, out, format=format, overwrite=overwrite, **options)
+
+    def _check_loaded(self, to: str) -> None:
+        """Wait for loading to finish; a one-line InputError where the octree is closed, or a
+        close stopped its load part-way (its points were then saved as though the whole input)."""
+        if not self.wait() or self.closed:
+            raise InputError(f"{self.name}: the octree is closed (its points were freed); open it again to {to}")
 
     def grown(self):
         """The octree as a conversion's input (convert.seeded.GrownTree): its cube, its leaves and
