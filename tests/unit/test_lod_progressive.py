@@ -1060,6 +1060,23 @@ def test_files_whose_attribute_dtypes_differ_load_as_the_plain_cloud_holds_them(
         cloud.close()
 
 
+def test_an_error_inserting_a_files_points_names_that_file(tmp_path):
+    """An error the octree raises inserting a chunk named the octree, "2 files", not the file
+    the chunk came from: a second NPZ file whose 'normal' is (N, 3) where the first's is 1-D;
+    the first file's points stay drawable."""
+    rng = np.random.default_rng(5)
+    a, b = tmp_path / "a.npz", tmp_path / "b.npz"
+    np.savez(a, xyz=rng.uniform(0, 10, (500, 3)), normal=rng.random(500).astype(np.float32))
+    np.savez(b, xyz=rng.uniform(0, 10, (400, 3)), normal=rng.random((400, 3)).astype(np.float32))
+    cloud = gp.open(a, b, progressive=True)
+    try:
+        with pytest.raises(InputError, match=rf"^{re.escape(str(b))}: attribute 'normal' must be 1-D of length 400, got shape \(400, 3\)$"):
+            cloud.wait(timeout=120)
+        assert cloud.n_points == 500 and str(cloud.error).startswith(str(b))
+    finally:
+        cloud.close()
+
+
 def test_an_empty_octree_draws_nothing_and_a_single_point_draws():
     o = ProgressiveOctree("one")
     cam = gp.Camera.look_at((0, -10, 5), (0, 0, 0), width=32, height=24)

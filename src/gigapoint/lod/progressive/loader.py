@@ -142,7 +142,10 @@ class Loader:
                     turn, drawing = self.octree.builder_turn(turn)
                     sl = slice(s, min(s + (SLICE_WHILE_DRAWING if drawing else SLICE_POINTS), len(chunk)))
                     attrs = self.octree.held_of(chunk.attributes)
-                    self.octree.add(chunk.xyz[sl], chunk.rgba[sl], **{a: v[sl] for a, v in attrs.items()})
+                    try:
+                        self.octree.add(chunk.xyz[sl], chunk.rgba[sl], **{a: v[sl] for a, v in attrs.items()})
+                    except InputError as exc:
+                        raise _of_source(exc, self.octree.name, name) from None
                     self._first_in.set()
                     s = sl.stop
                     self.read += sl.stop - sl.start
@@ -196,6 +199,12 @@ class Loader:
         self._first_in.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join()
+
+
+def _of_source(exc: InputError, label: str, source: str) -> InputError:
+    """An insertion's error naming ``source``, the file its points came from: the octree's names
+    the octree (``label``), which for several files said only "2 files"."""
+    return type(exc)(f"{source}: {str(exc).removeprefix(f'{label}: ')}")
 
 
 def _joined(chunks: Iterator[tuple[str, PointChunk]], least: int) -> Iterator[tuple[str, PointChunk]]:
