@@ -78,6 +78,27 @@ def test_tabs_redraw_when_frames_arrive_and_latency_is_measured(live_core):
         assert "latency" in core.note and "frames/s in" in core.note
 
 
+def test_the_panels_cloud_line_follows_a_live_cloud(live_core):
+    """The panel's cloud line (points, batches) was hello's alone and went stale as frames were
+    pushed: a frame's header carries it again once it changed, and only then."""
+    live, core = live_core
+    with TestClient(create_app(core)) as client, client.websocket_connect("/ws?w=64&h=48") as ws:
+        hello = json.loads(ws.receive_text())
+        assert hello["cloud"]["points"] == 2000
+        header, _ = frames_from(ws)[0]
+        assert "cloud" not in header  # unchanged since hello
+        live.push(*patch(1))
+        deadline, lines = time.monotonic() + 10, []
+        while header["points_total"] != 4000 and time.monotonic() < deadline:
+            header, _ = frames_from(ws)[0]
+            lines += [header["cloud"]] if "cloud" in header else []
+        assert header["points_total"] == 4000 and [line["points"] for line in lines] == [4000] == [live.n_points]
+        assert lines[0]["name"] == hello["cloud"]["name"] and lines[0]["batches"] == len(live.batches)
+        ws.send_text(json.dumps({"type": "orbit", "dyaw": 0.1, "dpitch": 0.0}))
+        header, _ = frames_from(ws)[0]
+        assert "cloud" not in header  # said once
+
+
 def test_push_needs_the_token_and_a_malformed_frame_does_not_stop_the_stream(live_core):
     live, core = live_core
     with TestClient(create_app(core)) as client:

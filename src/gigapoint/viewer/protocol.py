@@ -2,7 +2,8 @@
 
 Client -> server: JSON text messages ``{"type": ..., ...}`` (at most MAX_MESSAGE bytes).
 Server -> client: JSON text messages (hello, settings, pick, error, pong) and binary frames:
-``b"GPF1" + u32 little-endian header length + JSON header + JPEG bytes``.
+``b"GPF1" + u32 little-endian header length + JSON header + JPEG bytes``; a frame's header
+has ``cloud`` (hello's cloud line) again when that changed since the tab last got it.
 
 Every check here raises ProtocolError with a one-line message; the server answers it with
 ``{"type": "error", "message": ...}`` and keeps the connection.

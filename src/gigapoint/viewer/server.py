@@ -203,7 +203,7 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
                 {
                     "type": "hello",
                     "session": session.id,
-                    "cloud": core.cloud_info(),
+                    "cloud": session.cloud_shown,
                     "schema": P.settings_schema(type(core.settings)),
                     "settings": P.settings_values(settings),
                     "camera": state.as_dict(),

@@ -307,6 +307,7 @@ class Session:
         self.state = core.default_state(width, height)
         self.settings = core.settings
         self.good_settings = self.settings
+        self.cloud_shown = core.cloud_info()  # the panel's cloud line, as hello sent it; a frame carries it again once it changes
         self.version = 0  # bumped by every change
         self.seq = 0  # the client's latest input sequence number
         self.last_motion = 0.0
@@ -536,6 +537,9 @@ class Session:
                 "note": self.core.note,
                 "camera": state.as_dict(),
             }
+            info = self.core.cloud_info()
+            if info != self.cloud_shown:  # a live or loading cloud grew: the line hello sent went stale (only when it changes)
+                header["cloud"] = self.cloud_shown = info
             if not self.send("bytes", P.pack_frame(header, jpeg)):
                 return
 

@@ -68,19 +68,24 @@
     errorTimer = setTimeout(() => e.classList.add("hidden"), 5000);
   }
 
+  function showCloud(cloud) {
+    S.cloud = cloud;
+    const info = $("cloudinfo");  // "name · N points · M batches": a count and its unit never split over lines
+    info.textContent = `${cloud.name} · `;
+    for (const [i, part] of [`${cloud.points.toLocaleString()} points`, `${cloud.batches.toLocaleString()} batches`].entries()) {
+      const span = document.createElement("span");
+      span.className = "nowrap";
+      span.textContent = part;
+      info.append(...(i ? [" · ", span] : [span]));
+    }
+  }
+
   function onJson(m) {
     if (m.type === "hello") {
-      S.session = m.session; S.cloud = m.cloud; S.schema = m.schema; S.settings = m.settings; S.camera = m.camera;
+      S.session = m.session; S.schema = m.schema; S.settings = m.settings; S.camera = m.camera;
       const b = m.cloud.bounds;
       S.sceneRadius = Math.hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]) / 2 || 1;
-      const info = $("cloudinfo");  // "name · N points · M batches": a count and its unit never split over lines
-      info.textContent = `${m.cloud.name} · `;
-      for (const [i, part] of [`${m.cloud.points.toLocaleString()} points`, `${m.cloud.batches.toLocaleString()} batches`].entries()) {
-        const span = document.createElement("span");
-        span.className = "nowrap";
-        span.textContent = part;
-        info.append(...(i ? [" · ", span] : [span]));
-      }
+      showCloud(m.cloud);
       buildSettings();
       updateSpeedLabel();
       setFov(m.camera.fov, false);
@@ -102,6 +107,7 @@
     const dv = new DataView(buf);
     const n = dv.getUint32(4, true);
     const header = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 8, n)));
+    if (header.cloud) showCloud(header.cloud);  // sent again when it changed (a live or loading cloud), whether or not this image is drawn
     const blob = new Blob([new Uint8Array(buf, 8 + n)], { type: "image/jpeg" });
     const now = performance.now();
     if (header.seq != null && S.sentAt.has(header.seq)) {
