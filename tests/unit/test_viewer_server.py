@@ -488,6 +488,8 @@ def test_viewer_for_jupyter(cloud):
         httpx.get(v.url, timeout=2)
     with pytest.raises(gigapoint.GigapointError, match=r"^Viewer of '.*': closed, its server stopped; open a new Viewer"):
         v.display()  # (it showed the frame of a server that was gone)
+    with pytest.raises(gigapoint.GigapointError, match=r"^Viewer of '.*': closed, its server stopped; open a new Viewer to take a screenshot$"):
+        v.screenshot(64, 48)  # (it still rendered the default view)
     assert repr(v).endswith(", closed)")
     with pytest.raises(gigapoint.GigapointError):
         gigapoint.Viewer(12345, display=False)

@@ -56,8 +56,7 @@ class Viewer:
 
     def display(self) -> None:
         """Show the IFrame when running under IPython (a no-op elsewhere)."""
-        if self.closed:  # (it showed a frame of a server that was gone)
-            raise InputError(f"Viewer of {self.cloud.name!r}: closed, its server stopped; open a new Viewer to show the cloud")
+        self._check_open("show the cloud")  # (it showed a frame of a server that was gone)
         try:
             from IPython import get_ipython
             from IPython.display import IFrame, display
@@ -69,6 +68,7 @@ class Viewer:
 
     def screenshot(self, width: int | None = None, height: int | None = None, scale: int = 1) -> bytes:
         """PNG bytes of the current view at width x height (default: the tab's size x scale, else 1280x720)."""
+        self._check_open("take a screenshot")  # (it still rendered the default view after close())
         for name, value in (("width", width), ("height", height)):  # "a" was int()'s ValueError, 100.5 cut to 100
             if value is not None:
                 check_whole("Viewer.screenshot", name, value, 1, MAX_SHOT_SIDE, " pixels")
@@ -81,6 +81,10 @@ class Viewer:
     @property
     def closed(self) -> bool:
         return self.server.closed
+
+    def _check_open(self, to: str) -> None:
+        if self.closed:
+            raise InputError(f"Viewer of {self.cloud.name!r}: closed, its server stopped; open a new Viewer to {to}")
 
     def close(self) -> None:
         self.server.close()
