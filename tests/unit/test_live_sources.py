@@ -375,6 +375,31 @@ def test_a_damaged_frame_of_a_recording_is_refused_and_the_rest_play(tmp_path):
     assert player.error is None and player.errors == 3 and [f.time for f in again.frames] == [0.0, 2.0]
 
 
+def test_a_junk_file_among_a_recordings_frames_is_said_to_be_no_frame(tmp_path):
+    """Files in frames/ that a recording did not write were reported with numpy's reasons: a
+    note or an .npy of objects with its pickle message ("This file contains pickled (object)
+    data...", "Object arrays cannot be loaded when allow_pickle=False"), an NPZ of one's own
+    with "'kind is not a file in the archive'"; the frames around them play."""
+    live = LiveCloud(keep=10)
+    live.record(tmp_path / "rec")
+    for k in range(2):
+        live.push(patch(k)[0], time=float(k))
+    live.stop_recording()
+    frames = tmp_path / "rec" / "frames"
+    (frames / "000005.npz").write_text("my notes on this take\n")
+    np.save(frames / "000006.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True)
+    (frames / "000006.npy").rename(frames / "000006.npz")
+    np.savez(frames / "000007.npz", labels=np.array([{"a": 1}], dtype=object))
+    got = list(ReplaySource(tmp_path / "rec").frames())
+    assert [f.time for f in got[:2]] == [0.0, 1.0]
+    no_archive = "not a recorded frame (not an NPZ archive, which a recording writes)"
+    assert [str(e) for e in got[2:]] == [
+        f"{frames / '000005.npz'}: {no_archive}",
+        f"{frames / '000006.npz'}: {no_archive}",
+        f"{frames / '000007.npz'}: not a recorded frame (an NPZ archive without a frame's kind and time)",
+    ]
+
+
 def test_a_damaged_index_reads_only_its_own_frames_and_a_leap_in_time_is_not_waited_for(tmp_path):
     """A recording's index.json whose frame entry was not a file name (5) or whose frames were
     not a list was a TypeError; an entry naming a file outside the recording (/etc/hostname)

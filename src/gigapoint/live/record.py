@@ -28,6 +28,7 @@ from ..errors import GigapointWarning, InputError, first_line
 FORMAT = "gigapoint-live-recording"
 INDEX = "index.json"
 FRAMES = "frames"
+_NPZ_MAGIC = b"PK\x03\x04"  # a zip archive's first bytes: every frame file np.savez writes
 
 
 @dataclass
@@ -172,20 +173,32 @@ def _opt(z, name):
 def read_frame(path: Path) -> RecordedFrame:
     """One recorded frame (an npz written by Recorder)."""
     try:
-        with np.load(path, allow_pickle=False) as z:
-            kind = str(z["kind"])
-            t = float(z["time"])
-            pose = z.get("pose", None)
-            rgb = z.get("rgb", None)
-            if kind == "depth":
-                return RecordedFrame("depth", t, pose, rgb=rgb, depth=z["depth"], intrinsics=z["intrinsics"],
-                                     depth_scale=_opt(z, "depth_scale"), max_depth=_opt(z, "max_depth"))  # fmt: skip
-            if kind != "points":
-                raise InputError(f"{path}: unknown frame kind {kind!r} (points or depth)")
-            attrs = {k[5:]: z[k] for k in z.files if k.startswith("attr_")}
-            return RecordedFrame("points", t, pose, xyz=z["xyz"], rgb=rgb, normals=z.get("normals", None), attributes=attrs)
+        with open(path, "rb") as f:
+            # another file (notes, an .npy): numpy's reason was a pickle's ("allow_pickle=False"), of no frame
+            if f.read(len(_NPZ_MAGIC)) != _NPZ_MAGIC:
+                raise InputError(f"{path}: not a recorded frame (not an NPZ archive, which a recording writes)")
+            f.seek(0)
+            with np.load(f, allow_pickle=False) as z:
+                return _frame_of(path, z)
     except (OSError, ValueError, TypeError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # a truncated or damaged npz (TypeError: a time of several values)
         raise InputError(f"{path}: not a recorded frame ({first_line(exc)})") from None
+
+
+def _frame_of(path: Path, z) -> RecordedFrame:
+    """The frame an open NPZ archive ``z`` of ``path`` holds."""
+    if "kind" not in z.files or "time" not in z.files:  # another NPZ archive (its own arrays, objects among them)
+        raise InputError(f"{path}: not a recorded frame (an NPZ archive without a frame's kind and time)")
+    kind = str(z["kind"])
+    t = float(z["time"])
+    pose = z.get("pose", None)
+    rgb = z.get("rgb", None)
+    if kind == "depth":
+        return RecordedFrame("depth", t, pose, rgb=rgb, depth=z["depth"], intrinsics=z["intrinsics"],
+                             depth_scale=_opt(z, "depth_scale"), max_depth=_opt(z, "max_depth"))  # fmt: skip
+    if kind != "points":
+        raise InputError(f"{path}: unknown frame kind {kind!r} (points or depth)")
+    attrs = {k[5:]: z[k] for k in z.files if k.startswith("attr_")}
+    return RecordedFrame("points", t, pose, xyz=z["xyz"], rgb=rgb, normals=z.get("normals", None), attributes=attrs)
 
 
 def recording_files(directory) -> list[Path]:
