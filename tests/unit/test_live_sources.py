@@ -11,7 +11,7 @@ import pytest
 
 from gigapoint.errors import GigapointError, InputError
 from gigapoint.live import LiveCloud
-from gigapoint.live.record import RecordedFrame, recording_files
+from gigapoint.live.record import RecordedFrame, is_recording, recording_files
 from gigapoint.live.sources import (
     BagSource,
     FramesDir,
@@ -428,6 +428,27 @@ def test_a_damaged_index_reads_only_its_own_frames_and_a_leap_in_time_is_not_wai
         ReplaySource(tmp_path / "rec")
 
 
+def test_a_folder_with_someones_own_index_json_is_no_recording_and_is_not_overwritten(tmp_path):
+    """A recording is known by its index.json's format: a folder holding only a user's own
+    index.json counted as one, so overwrite=True replaced that file with a recording's."""
+    theirs = tmp_path / "mine"
+    theirs.mkdir()
+    (theirs / "index.json").write_text('{"pages": [1, 2, 3]}')
+    assert not is_recording(theirs)
+    live = LiveCloud()
+    for overwrite in (False, True):
+        not_ours = rf"^{re.escape(str(theirs))}: holds other files, not a gigapoint recording: not overwritten; record into a new or empty folder$"
+        with pytest.raises(InputError, match=not_ours):
+            live.record(theirs, overwrite=overwrite)
+    assert sorted(p.name for p in theirs.iterdir()) == ["index.json"] and json.loads((theirs / "index.json").read_text()) == {"pages": [1, 2, 3]}
+    live.record(tmp_path / "rec")  # a recording's own folder is one, and is replaced when asked
+    live.push(np.zeros((2, 3)), time=1.0)
+    live.stop_recording()
+    assert is_recording(tmp_path / "rec")
+    LiveCloud().record(tmp_path / "rec", overwrite=True).stop()
+    assert json.loads((tmp_path / "rec" / "index.json").read_text())["frames"] == []
+
+
 def test_recording_into_an_odd_folder(tmp_path, monkeypatch):
     """record(5) was a TypeError, record("") recorded into the current folder; overwrite=True
     deleted the .npz files of a frames/ folder that held no recording, and a folder of other
@@ -442,7 +463,7 @@ def test_recording_into_an_odd_folder(tmp_path, monkeypatch):
     mine.mkdir(parents=True)
     np.savez(mine / "000000.npz", a=np.arange(3))
     for overwrite in (False, True):
-        with pytest.raises(InputError, match=rf"^{re.escape(str(tmp_path / 'work'))}: holds other files, not a recording; record into a new or empty folder$"):
+        with pytest.raises(InputError, match=rf"^{re.escape(str(tmp_path / 'work'))}: holds other files, not a gigapoint recording: not overwritten; record into a new or empty folder$"):
             live.record(tmp_path / "work", overwrite=overwrite)
     assert sorted(p.name for p in (tmp_path / "work").rglob("*")) == ["000000.npz", "frames"]
     np.testing.assert_array_equal(np.load(mine / "000000.npz")["a"], np.arange(3))

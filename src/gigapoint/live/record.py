@@ -61,13 +61,13 @@ class Recorder:
         if not isinstance(directory, (str, os.PathLike)) or not os.fspath(directory):  # 5: a TypeError; "": the current folder
             raise InputError(f"record: the recording's folder must be a path, got {directory!r}")
         self.directory = Path(directory)
-        held = (self.directory / INDEX).exists()
+        held = is_recording(self.directory)  # by its index's format: someone's own index.json was replaced
         if held and not overwrite:
             raise InputError(f"{self.directory}: holds a recording already; pass overwrite=True to replace it")
         if self.directory.exists() and not self.directory.is_dir():
             raise InputError(f"{self.directory}: exists and is not a folder")
         if not held and self.directory.is_dir() and any(self.directory.iterdir()):  # its frames/000000.npz was replaced
-            raise InputError(f"{self.directory}: holds other files, not a recording; record into a new or empty folder")
+            raise InputError(f"{self.directory}: holds other files, not a gigapoint recording: not overwritten; record into a new or empty folder")
         created = not self.directory.exists()
         (self.directory / FRAMES).mkdir(parents=True, exist_ok=True)
         if overwrite and held:  # a recording's frames only
@@ -201,9 +201,9 @@ def _frame_of(path: Path, z) -> RecordedFrame:
     return RecordedFrame("points", t, pose, xyz=z["xyz"], rgb=rgb, normals=z.get("normals", None), attributes=attrs)
 
 
-def recording_files(directory) -> list[Path]:
-    """The frame files of a recording, in order: index.json's, then any written after it."""
-    directory = Path(directory)
+def _read_index(directory: Path) -> dict:
+    """A recording's index.json, read; a one-line InputError where there is none, or it is not
+    a recording's (its ``format``)."""
     index = directory / INDEX
     if not directory.exists():
         raise InputError(f"{directory}: no such folder (a live recording: a folder with {INDEX})")
@@ -215,7 +215,14 @@ def recording_files(directory) -> list[Path]:
         raise InputError(f"{index}: unreadable ({exc})") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise InputError(f"{index}: not a gigapoint live recording index")
-    entries = meta.get("frames", [])
+    return meta
+
+
+def recording_files(directory) -> list[Path]:
+    """The frame files of a recording, in order: index.json's, then any written after it."""
+    directory = Path(directory)
+    index = directory / INDEX
+    entries = _read_index(directory).get("frames", [])
     if not isinstance(entries, list):  # (7 was a TypeError)
         raise InputError(f"{index}: damaged: its frames are not a list")
     # an entry that is not a relative name inside the recording (5 was a TypeError; "/etc/hostname" was read) is left out
@@ -228,4 +235,10 @@ def recording_files(directory) -> list[Path]:
 
 
 def is_recording(path) -> bool:
-    return (Path(path) / INDEX).is_file()
+    """Whether ``path`` is a recording's folder: its index.json is a recording's (its ``format``),
+    not anyone's index.json."""
+    try:
+        _read_index(Path(path))
+    except InputError:
+        return False
+    return True
