@@ -309,3 +309,14 @@ def test_a_bad_pick_is_the_same_one_line_error_in_every_kind_of_cloud(tmp_path):
             for where in (frame, frame.points):
                 with pytest.raises(PointIndexError, match=rf": point index {bad} out of range 0\.\.\d+ \(-1: no point\)$"):
                     where.point_info(bad)
+
+
+def test_info_of_a_copc_output_still_being_converted_names_its_work_folder(capsys, tmp_path):
+    """A COPC file appears only once its conversion completes; until then ``<out>.work`` holds
+    the partial work. info named only a missing file, as if the conversion had never run."""
+    out = tmp_path / "out.copc.laz"
+    (tmp_path / "out.copc.laz.work").mkdir()
+    rc, _, err = run(capsys, "info", out)
+    assert rc == 1
+    assert err.count("\n") == 1 and f"{out}: no such file yet: a conversion to it is unfinished" in err, err
+    assert f"work folder {out}.work" in err and "run the same convert command again to resume it" in err, err

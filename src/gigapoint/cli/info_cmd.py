@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from ..errors import GigapointError
+from ..errors import GigapointError, InputError
 from .app import app
 from .cloud_opts import ChunkedOption, ColorsOption, cloud_options, option_names
 
@@ -28,11 +28,14 @@ def info(
         raise GigapointError(f"{option_names(options)}: only with --memory (how the loaded points are held)")
     from ..io import expand_paths, file_info, format_info
     from ..lod import is_lod_source, octree_info
+    from ..lod.copc_write import work_dir
 
     # an octree (folder, COPC file, EPT dataset, URL) is one dataset, not a folder of files
     paths: list[tuple[Path, bool, GigapointError | None]] = []
     for f in files:
         try:
+            if not f.exists() and work_dir(f).is_dir():  # "no such file" sent users looking for a file a conversion is still making
+                raise InputError(f"{f}: no such file yet: a conversion to it is unfinished (its work folder {work_dir(f)} is there); run the same convert command again to resume it")
             paths.extend([(f, True, None)] if is_lod_source(f) else [(p, False, None) for p in expand_paths([f])])
         except GigapointError as exc:  # a missing file among several stopped the others from being shown
             paths.append((f, False, exc))
