@@ -5,6 +5,7 @@ one line naming the file."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -313,6 +314,16 @@ def test_a_damaged_laszip_node_is_a_one_line_error(broken):
     _fails(d, f"cannot decode node {victim.stem}")
 
 
+@pytest.mark.parametrize("data_type", ["laszip", "binary"])
+def test_a_truncated_node_file_is_named_not_ept_json(broken, data_type):
+    """The error began with ept.json's path; the damaged file is the node's."""
+    d = broken(data_type)
+    victim = max((d / "ept-data").iterdir(), key=lambda f: f.stat().st_size)
+    victim.write_bytes(victim.read_bytes()[: victim.stat().st_size // 2])
+    msg = _fails(d, f"^{re.escape(str(victim))}: ")
+    assert f"ept-data/{victim.name}: " in msg and "ept.json" not in msg, msg
+
+
 def test_a_laszip_node_whose_header_disagrees_with_the_hierarchy(broken):
     """Checked before its header's count sizes anything (a corrupt count could ask for GBs)."""
     import laspy
@@ -323,7 +334,7 @@ def test_a_laszip_node_whose_header_disagrees_with_the_hierarchy(broken):
     n = len(las.points)
     las.points = las.points[: n - 5]
     las.write(victim)
-    _fails(d, f"ept-data/{victim.stem}.laz holds {n - 5:,} points, the hierarchy says {n:,}")
+    _fails(d, f"^{re.escape(str(victim))}: holds {n - 5:,} points, the hierarchy says {n:,}")
 
 
 def test_an_ept_dataset_given_to_convert_is_named_as_one(datasets, tmp_path):

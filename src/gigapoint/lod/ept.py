@@ -178,15 +178,21 @@ class EptCloud(VoxelOctree):
         return entries, pages
 
     def _fetch_nodes(self, locators: list) -> list[bytes]:
-        ext = DATA_TYPES[self.data_type]
-        return self.source.read_all_many([self.source.sibling(f"ept-data/{n}{ext}") for n in locators])
+        return self.source.read_all_many([self.source.sibling(self._node_path(n)) for n in locators])
+
+    def _node_path(self, name: str) -> str:
+        return f"ept-data/{name}{DATA_TYPES[self.data_type]}"
+
+    def node_file(self, key: int) -> str:
+        """The node's own file (path or URL): a damaged one was said as ept.json's."""
+        return self.source.sibling(self._node_path(voxel_name(key))).name
 
     def _decode(self, index: int, blob: bytes) -> dict:
         n = int(self.counts[index])
         if self.data_type == "binary":
             if len(blob) != n * self.record.itemsize:
                 raise InputError(
-                    f"{self.source.name}: ept-data/{voxel_name(int(self.keys[index]))}.bin holds {len(blob):,} bytes, "
+                    f"{self.node_file(int(self.keys[index]))}: holds {len(blob):,} bytes, "
                     f"{n:,} points of {self.record.itemsize} bytes need {n * self.record.itemsize:,}"
                 )
             rec = np.frombuffer(blob, self.record)
@@ -204,7 +210,7 @@ class EptCloud(VoxelOctree):
         header = laspy.LasHeader.read_from(io.BytesIO(blob))
         if header.point_count != n:  # (before anything is sized by a header's count)
             raise InputError(
-                f"{self.source.name}: ept-data/{voxel_name(int(self.keys[index]))}.laz holds {header.point_count:,} points, the hierarchy says {n:,}"
+                f"{self.node_file(int(self.keys[index]))}: holds {header.point_count:,} points, the hierarchy says {n:,}"
             )
         laszip = header.vlrs[header.vlrs.index("LasZipVlr")].record_data  # (ValueError, said as the node's: not a LAZ)
         records = laz_process.decode_block(blob, laszip, header.point_count * header.point_format.size, skip=header.offset_to_point_data)

@@ -153,6 +153,11 @@ class VoxelOctree(OctreeCloud):
     def source_name(self) -> str:
         return self.source.name if self.source is not None else self._name
 
+    def node_file(self, key: int) -> str:
+        """What a message about node ``key``'s points names: the dataset (a COPC file holds
+        every node); EPT names the node's own file."""
+        return self.source_name
+
     def close(self) -> None:
         """Close the connections of a remote source (a local one holds nothing open)."""
         if self.source is not None:
@@ -303,12 +308,12 @@ class VoxelOctree(OctreeCloud):
             except BaseException as exc:  # any decoding failure is a corrupt node (lazrs's panics too: io/laz_process.bad_data)
                 if not bad_data(exc):
                     raise
-                raise InputError(f"{self.source_name}: cannot decode node {voxel_name(key)} ({' '.join(str(exc).split())})") from None
+                raise InputError(f"{self.node_file(key)}: cannot decode node {voxel_name(key)} ({' '.join(str(exc).split())})") from None
         xyz = d["xyz"]
         if len(xyz) != n:
-            raise InputError(f"{self.source_name}: node {voxel_name(key)} holds {len(xyz):,} points, the hierarchy says {n:,}")
+            raise InputError(f"{self.node_file(key)}: node {voxel_name(key)} holds {len(xyz):,} points, the hierarchy says {n:,}")
         if not np.isfinite(xyz).all():
-            raise InputError(f"{self.source_name}: node {voxel_name(key)} holds non-finite coordinates")
+            raise InputError(f"{self.node_file(key)}: node {voxel_name(key)} holds non-finite coordinates")
         cube_min, cube_max = self.nodes["bbox_min"][index].copy(), self.nodes["bbox_max"][index].copy()  # its cube until now
         rec = self.nodes[index : index + 1].copy()
         rec["first"] = 0
