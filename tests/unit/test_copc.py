@@ -529,3 +529,34 @@ def test_the_output_grid_keeps_the_inputs_and_fits_potrees_unsigned_integers():
     assert default_step([0, 0, 0], [0.1, 0.1, 0.1]) == 0.1 / 2**16 and default_step([0, 0, 0], [500, 1, 1]) == 0.001
     assert default_step([1e11] * 3, [1e11 + 0.1] * 3) == 2e-15 * (1e11 + 0.1)  # float64 tells no finer steps apart there
     assert output_grid({"lo": [0, 0, 0], "hi": [1, 1, 1], "chunk_scale": [0.01] * 3})[0].tolist() == [0.01] * 3  # gp.demo's grid
+
+
+def test_nir_without_colors_is_format_6_with_nir_in_extra_bytes(tmp_path):
+    """Points with NIR but no colors were written as format 8, every point grey (info: 'color:
+    yes'): now format 6, NIR an extra bytes field read back under its name."""
+    rng = np.random.default_rng(8)
+    n = 20_000
+    xyz = np.round(rng.uniform(0, 100, (n, 3)), 3)
+    nir = rng.integers(0, 65535, n).astype(np.uint16)
+    from plyfile import PlyData, PlyElement
+
+    v = np.zeros(n, [("x", "f8"), ("y", "f8"), ("z", "f8"), ("nir", "u2")])
+    v["x"], v["y"], v["z"], v["nir"] = *xyz.T, nir
+    PlyData([PlyElement.describe(v, "vertex")]).write(str(tmp_path / "nir.ply"))
+    out = tmp_path / "nir.copc.laz"
+    convert([tmp_path / "nir.ply"], out, format="copc", **OPTS)
+    with laspy.CopcReader.open(out) as r:
+        assert r.header.point_format.id == 6 and "red" not in r.header.point_format.dimension_names
+        pts = r.query()
+        got_xyz, got_nir = np.stack([pts.x, pts.y, pts.z], axis=1), np.asarray(pts["nir"])
+    mm = lambda a: np.rint(a * 1000).astype(np.int64).T
+    np.testing.assert_array_equal(got_nir[np.lexsort(mm(got_xyz))], nir[np.lexsort(mm(xyz))])
+    from gigapoint.lod import octree_info
+
+    info = octree_info(out)
+    assert info["point_format"] == 6 and info["has_color"] is False
+    c = gp.open(out)
+    assert "nir" in c.attribute_names
+    parts = [c.node_points(i) for i in np.flatnonzero(c.counts > 0).tolist()]
+    mine = np.concatenate([p["xyz"] for p in parts])
+    np.testing.assert_array_equal(np.concatenate([p["nir"] for p in parts])[np.lexsort(mm(mine))], nir[np.lexsort(mm(xyz))])

@@ -122,6 +122,12 @@ class NpyReader(Reader):
         shape = self._shape(check_file(path))
         return shape[0] if shape else None
 
+    def header(self, path: Path) -> dict:
+        """Also ``has_color``: whether its columns hold colors (a COPC output of points without
+        them is written without colors)."""
+        arr = self._open(check_file(path))  # (memory-mapped: only its header is read)
+        return {"point_count": len(arr) if arr.ndim else None, "has_color": bool(color_names(_layout_names(path, "NPY array", arr.dtype, arr.shape)))}
+
     def read_chunks(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
         chunk_size = check_chunk_size(chunk_size)
         path = check_file(path)

@@ -87,6 +87,11 @@ class PlyReader(Reader):
     def reads_slowly(self, path: Path) -> bool:
         return _Header(check_file(path)).text  # ASCII: every value parsed
 
+    def header(self, path: Path) -> dict:
+        """Also ``has_color``: whether its vertices have color properties (a COPC output of
+        points without them is written without colors)."""
+        return {"point_count": self.point_count(path), "has_color": bool(color_names(_Header(check_file(path)).names))}
+
     def point_count(self, path: Path) -> int | None:
         """The header's vertex count, after checking the file can hold that many: a binary file's
         bytes exactly, an ASCII one's at 6 bytes a vertex at least ("0 0 0\\n"). A count of 10^12

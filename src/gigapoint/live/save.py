@@ -68,21 +68,23 @@ def _write_las(path: Path, xyz, rgba, attrs) -> None:
     as extra bytes (lod/copc_write.extra_attributes: booleans as u8, half floats as f4)."""
     import laspy
 
-    from ..lod.copc_write import LAS_FIELD_ATTRIBUTES, choose_point_format, extra_attributes, las_field_values
+    from ..lod.copc import field_attributes
+    from ..lod.copc_write import choose_point_format, extra_attributes, las_field_values
     from ..lod.grid import las_grid
 
-    header = laspy.LasHeader(point_format=choose_point_format(attrs), version="1.4")
+    fmt = choose_point_format(attrs)
+    header = laspy.LasHeader(point_format=fmt, version="1.4")
     # a millimetre grid at most, finer for a small scene, coarser where 32-bit integers need it
     # (a fixed millimetre overflowed them past 2 147 km, and cut a 10 cm object to 100 steps)
     header.scales, header.offsets = las_grid(xyz.min(axis=0), xyz.max(axis=0))
-    extra = extra_attributes({a: v.dtype for a, v in attrs.items()}, where=str(path))
+    extra = extra_attributes({a: v.dtype for a, v in attrs.items()}, where=str(path), point_format=fmt)
     for a, dt in extra.items():
         header.add_extra_dim(laspy.ExtraBytesParams(name=a, type=dt))
     las = laspy.LasData(header)
     las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
     las.red, las.green, las.blue = (rgba[:, k].astype(np.uint16) * 257 for k in range(3))
     for a, v in attrs.items():
-        if a in LAS_FIELD_ATTRIBUTES:
+        if a in field_attributes(fmt):
             las[a] = las_field_values(a, v).astype(las[a].dtype)
         elif a in extra:
             las[a] = v.astype(extra[a])

@@ -116,6 +116,12 @@ ATTRIBUTE_DTYPES = {
 #: Attributes point format 6/7/8 has a field for (nir: 8 only); the writer stores any other in extra bytes.
 LAS_FIELD_ATTRIBUTES = frozenset({*ATTRIBUTE_DTYPES, "nir"})
 
+
+def field_attributes(point_format: int) -> frozenset:
+    """The attributes point format 6/7/8 has a field for: nir in 8 only (in 6 and 7 it is
+    extra bytes, read and written under its name)."""
+    return LAS_FIELD_ATTRIBUTES if point_format == 8 else LAS_FIELD_ATTRIBUTES - {"nir"}
+
 COPC_USER_ID = b"copc"
 COPC_INFO_RECORD = 1
 COPC_HIERARCHY_RECORD = 1000
@@ -187,7 +193,7 @@ class ExtraField:
         return v * (1.0 if self.scale is None else self.scale) + (0.0 if self.offset is None else self.offset)
 
 
-def extra_fields(vlrs) -> list[ExtraField]:
+def extra_fields(vlrs, point_format: int = 8) -> list[ExtraField]:
     """The named, typed fields of a LAS 1.4 file's Extra Bytes VLR (LASF_Spec 4), in record order.
     Untyped bytes, and fields whose name is empty, repeated or a standard attribute's, become
     ``_extra<i>`` fields that only hold their place."""
@@ -205,7 +211,7 @@ def extra_fields(vlrs) -> list[ExtraField]:
                 continue
             if kind not in EXTRA_BYTES_TYPES:
                 raise ValueError(f"its extra bytes field {name!r} has data type {kind}, which LAS 1.4 R15 no longer defines (1-10)")
-            if not name or name in seen or name in LAS_FIELD_ATTRIBUTES:
+            if not name or name in seen or name in field_attributes(point_format):
                 out.append(ExtraField(f"_extra{i}", EXTRA_BYTES_TYPES[kind]))
                 continue
             seen.add(name)
@@ -301,7 +307,7 @@ class CopcCloud(VoxelOctree):
         except ValueError as exc:
             raise InputError(f"{name}: corrupt COPC file: {exc}") from None
         try:
-            fields = extra_fields(vlrs)
+            fields = extra_fields(vlrs, fmt)
             self.record = point_dtype(fmt, rec_len, fields)
             self.extra = [f for f in fields if not f.name.startswith("_extra")]  # the named ones: attributes
         except ValueError as exc:

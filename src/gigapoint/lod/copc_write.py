@@ -37,13 +37,13 @@ from .copc import (
     EXTRA_BYTES_USER_ID,
     HIERARCHY_ENTRY_DTYPE,
     LAS14_HEADER_DTYPE,
-    LAS_FIELD_ATTRIBUTES,
     LASZIP_RECORD,
     LASZIP_USER_ID,
     POINT_DTYPES,
     PROJECTION_USER_ID,
     VLR_HEADER_DTYPE,
     WKT_RECORD,
+    field_attributes,
 )
 from .grid import output_grid
 from .keys import ROOT_KEY, level_of
@@ -87,14 +87,14 @@ def las_field_values(name: str, values) -> np.ndarray:
     return np.clip(np.asarray(values), 0, LAS_FIELD_MAX[name])
 
 
-def extra_attributes(attributes: dict, where: str = "COPC") -> dict[str, np.dtype]:
-    """The attributes ({name: dtype}) that point format 6/7/8 has no field for, as they will be
+def extra_attributes(attributes: dict, where: str = "COPC", point_format: int = 8) -> dict[str, np.dtype]:
+    """The attributes ({name: dtype}) that ``point_format`` (6/7/8) has no field for, as they will be
     stored in extra bytes (LAS 1.4 types: booleans as u8, half floats as f4). An attribute that
     cannot be stored (a name that is not ASCII or longer than 32 bytes, a non-scalar dtype) is
     left out with a warning."""
     out = {}
     for name, dt in attributes.items():
-        if name in LAS_FIELD_ATTRIBUTES:
+        if name in field_attributes(point_format):
             continue
         dt = np.dtype(dt)
         stored = np.dtype(np.uint8) if dt == np.bool_ else np.dtype(np.float32) if dt == np.float16 else dt.newbyteorder("<")
@@ -120,10 +120,11 @@ def _extra_bytes_vlr(extra: dict[str, np.dtype]) -> bytes:
 
 
 def choose_point_format(attributes, has_color: bool = True) -> int:
-    """6 (no color), 7 (RGB) or 8 (RGB + NIR), as the points' attributes need."""
-    if "nir" in attributes:
-        return 8
-    return 7 if has_color else 6
+    """6 (no color), 7 (RGB) or 8 (RGB + NIR), as the points' attributes need: NIR without
+    colors is format 6 with NIR in extra bytes (format 8 gave every point a grey color)."""
+    if not has_color:
+        return 6
+    return 8 if "nir" in attributes else 7
 
 
 def _vlr(user: bytes, record: int, data: bytes, description: str) -> bytes:
@@ -423,7 +424,7 @@ def write_copc_sets(path: Path, sources: list[Path], st: dict, progress, page_le
     summary = write_copc(
         path, nodes(), scale=scale, offset=offset, cube_min=origin, cube_edge=edge, point_format=fmt,
         wkt=src.get("wkt"), spacing=edge / 128.0, page_level=page_level, overwrite=overwrite,
-        extra=extra_attributes(attrs, str(path)),
+        extra=extra_attributes(attrs, str(path), fmt),
     )  # fmt: skip
     return int(summary["nodes"])
 

@@ -38,8 +38,12 @@ def input_facts(paths) -> dict:
             reader = reader_for(p)
         except Exception:  # noqa: BLE001 - the read phase reports unreadable inputs itself
             reader = None
-        if not isinstance(reader, LasReader):
-            has_color = True if has_color is None else has_color
+        if not isinstance(reader, LasReader):  # colors where its header says so (PLY, NPY), else assumed
+            try:
+                colored = True if reader is None else reader.header(p).get("has_color", True)
+            except Exception:  # noqa: BLE001 - as above
+                colored = True
+            has_color = bool(has_color) or colored
             continue
         info = reader.info(p)
         has_color = bool(has_color) or bool(info.get("has_color"))
