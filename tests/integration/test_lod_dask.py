@@ -390,3 +390,29 @@ def test_an_empty_las_tile_among_several_is_skipped_as_in_one_process(inputs, cl
     with pytest.warns(GigapointWarning, match=f"{empty}: holds no points, skipped"):
         res = convert([inputs[1], empty], tmp_path / "oct", client=client, **OPTS)
     assert res.points == 30_000
+
+
+def test_empty_npy_ply_and_text_files_among_several_are_skipped_as_in_one_process(client, tmp_path):
+    """Only LAS/LAZ tiles were counted before their read task: an empty NPY, PLY or text file
+    failed on a worker ('NPY array holds no points') and stopped the run; one process skips
+    them with a warning."""
+    from plyfile import PlyData, PlyElement
+
+    from gigapoint.errors import GigapointWarning
+
+    rng = np.random.default_rng(4)
+    full = tmp_path / "full.npy"
+    np.save(full, rng.random((20_000, 3)) * 50)
+    np.save(tmp_path / "empty.npy", np.zeros((0, 3)))
+    PlyData([PlyElement.describe(np.zeros(0, [("x", "f4"), ("y", "f4"), ("z", "f4")]), "vertex")]).write(str(tmp_path / "empty.ply"))
+    (tmp_path / "empty.xyz").write_text("# x y z\n")
+    empties = [tmp_path / n for n in ("empty.npy", "empty.ply", "empty.xyz")]
+    counts = []
+    for name, kw in (("one", {}), ("dask", {"client": client})):
+        with pytest.warns(GigapointWarning) as said:
+            res = convert([full, *empties], tmp_path / name, **OPTS, **kw)
+        text = [str(w.message) for w in said]
+        for e in empties:
+            assert f"{e}: holds no points, skipped" in text, (name, text)
+        counts.append(res.points)
+    assert counts == [20_000, 20_000]

@@ -71,7 +71,7 @@ from . import hooks
 from .keep_freed_memory import KeepFreedMemory
 from .partition import COUNT_LEVEL, CellCounts, PartitionPhases, built_name, grid_cells, group_name, partition_lut
 from .phases import BuildPhases, place_set
-from .read import ReadPhase, _read_chunks, merge_attributes, spill_chunk
+from .read import ReadPhase, _read_chunks, _skipped_if_empty, merge_attributes, skipped_message, spill_chunk
 from .spill import copy_range, decode_xyz, las_xyz_code, load_raw_chunk, raw_chunk_files, raw_xyz_code
 
 READ_CHUNKS = 1  # chunks (``chunk_size`` points, 2 M by default) a read task decodes: one a task
@@ -323,9 +323,9 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
     t·CHUNK_STRIDE + j. ``color_mode``: the file's color decision before ``start``. Its result
     has every ``stride``-th valid point for the preview ("preview"; the driver's, not the state's)."""
     raw = OctreeDir(spec["dir"]).raw
-    scaler, xyz_code = None, None
-    if start is None:
-        chunks = _read_chunks(Path(path), spec["chunk_size"])
+    scaler, xyz_code, empty = None, None, []
+    if start is None:  # an empty file among several (one whose header has no count: text) skipped, said by the driver
+        chunks = _skipped_if_empty(Path(path), _read_chunks(Path(path), spec["chunk_size"]), spec["several"], empty)
     else:
         scaler = ColorScaler()
         scaler.mode = color_mode
@@ -350,6 +350,7 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
         "input": n_in,
         "points": points,
         "skipped": skipped,
+        "empty": bool(empty),
         "lo": lo.tolist(),
         "hi": hi.tolist(),
         "attributes": attrs,
@@ -551,6 +552,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             "max_leaf": self.max_leaf,
             "encoding": self.encoding,
             "chunk_size": self.chunk_size,
+            "several": len(self.paths) > 1,
             "memory_limit": self.mem,
             "own_workers": self.client in _OWN_WORKERS,
             "state": {k: st[k] for k in keep if k in st},
@@ -683,11 +685,11 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         step = READ_CHUNKS * self.chunk_size
         for f, p in enumerate(self.paths):
             reader = reader_for(p)
-            n = reader.point_count(p) if getattr(reader, "reads_ranges", False) else None
-            if n == 0 and len(self.paths) > 1:  # an empty tile: skipped, as one process skips it (read._skipped_if_empty)
-                warnings.warn(f"{p}: holds no points, skipped", GigapointWarning, stacklevel=2)
+            n = reader.point_count(p)  # (the header's; None where it has none: text)
+            if n == 0 and len(self.paths) > 1:  # an empty tile of any format: skipped, as one process skips it (read._skipped_if_empty)
+                warnings.warn(skipped_message(p), GigapointWarning, stacklevel=2)
                 continue
-            if n:
+            if n and getattr(reader, "reads_ranges", False):
                 reads += [[f, s, min(s + step, n), None] for s in range(0, n, step)]
             else:
                 reads.append([f, None, None, None])
@@ -717,6 +719,8 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             def done(i, res, todo=todo, again=again):
                 sample = res.pop("preview")
                 results[str(todo[i])] = res
+                if res.get("empty"):  # a file that had no count in its header
+                    warnings.warn(skipped_message(self.paths[st["reads"][todo[i]][0]]), GigapointWarning, stacklevel=2)
                 if not again:
                     self.progress.advance(res["input"])
                     if sample is not None:

@@ -27,15 +27,24 @@ def _read_chunks(path, chunk_size: int):
     return read_chunks(path, chunk_size)
 
 
-def _skipped_if_empty(path, chunks, several: bool):
+def _skipped_if_empty(path, chunks, several: bool, skipped: list | None = None):
     """``chunks``, but a file without points among several is skipped with a warning, as
-    gp.open (and so render) skips it: a folder of tiles with an empty one was refused."""
+    gp.open (and so render) skips it: a folder of tiles with an empty one was refused.
+    ``skipped``: the file is added to it instead, for the caller to say (a Dask worker's
+    warning does not reach the user)."""
     try:
         yield from chunks
     except EmptyCloudError:
         if not several:
             raise
-        warnings.warn(f"{path}: holds no points, skipped", GigapointWarning, stacklevel=2)
+        if skipped is not None:
+            skipped.append(str(path))
+        else:
+            warnings.warn(skipped_message(path), GigapointWarning, stacklevel=2)
+
+
+def skipped_message(path) -> str:
+    return f"{path}: holds no points, skipped"
 
 
 def merge_attributes(attrs: dict | None, names: dict) -> dict:
