@@ -124,13 +124,16 @@ def test_gigapoint_reads_its_copc_back_point_for_point(autzen_octrees):
     np.testing.assert_array_equal(c.keys, g.keys)
     np.testing.assert_array_equal(c.counts, g.counts)
     src = gp.open(AUTZEN)  # the flat reading of the input: its attributes are what COPC must carry
-    assert c.attribute_names == sorted(src.attributes)
+    # under point format 7's names: format 3's scan angle in degrees is scan_angle, 0.006 degree units
+    assert c.attribute_names == sorted({*src.attributes, "scan_angle", "overlap", "scanner_channel"} - {"scan_angle_rank"})
     for i in np.flatnonzero(g.counts > 0).tolist():
         a, b = g.node_points(i), c.node_points(i)
         np.testing.assert_array_equal(b["xyz"], a["xyz"])  # same points, same order, same tight bbox
         np.testing.assert_array_equal(b["rgba"], a["rgba"])
-        for k in src.attributes:
+        for k in set(src.attributes) - {"scan_angle_rank"}:
             np.testing.assert_array_equal(b[k], a[k], err_msg=k)
+        np.testing.assert_array_equal(b["scan_angle"], np.rint(a["scan_angle_rank"] / 0.006).astype(np.int16))
+        assert not b["overlap"].any() and not b["scanner_channel"].any()
     np.testing.assert_array_equal(c.nodes["bbox_min"], g.nodes["bbox_min"])
 
 
@@ -560,3 +563,50 @@ def test_nir_without_colors_is_format_6_with_nir_in_extra_bytes(tmp_path):
     parts = [c.node_points(i) for i in np.flatnonzero(c.counts > 0).tolist()]
     mine = np.concatenate([p["xyz"] for p in parts])
     np.testing.assert_array_equal(np.concatenate([p["nir"] for p in parts])[np.lexsort(mm(mine))], nir[np.lexsort(mm(xyz))])
+
+
+@pytest.mark.parametrize("point_format,version", [(1, "1.2"), (6, "1.4")])
+def test_scan_angle_user_data_and_flags_survive_a_copc_conversion(tmp_path, point_format, version):
+    """The LAS reader read no scan angle, user data or flags, and the COPC writer wrote them all
+    0: now read back by laspy as written (formats 0-5's scan_angle_rank, degrees, as LAS 1.4's
+    scan_angle, 0.006 degree units), and by gigapoint's COPC reader under LAS 1.4's names."""
+    rng = np.random.default_rng(point_format)
+    n = 20_000
+    header = laspy.LasHeader(point_format=point_format, version=version)
+    header.scales, header.offsets = [0.001] * 3, [0.0] * 3
+    las = laspy.LasData(header)
+    xyz = np.round(rng.uniform(0, 100, (n, 3)), 3)
+    las.x, las.y, las.z = xyz.T
+    flags = ["scan_direction_flag", "edge_of_flight_line", "synthetic", "key_point", "withheld"] + (["overlap"] if point_format >= 6 else [])
+    want = {f: rng.integers(0, 2, n).astype(np.uint8) for f in flags}
+    want["user_data"] = rng.integers(0, 256, n).astype(np.uint8)
+    if point_format >= 6:
+        want["scanner_channel"] = rng.integers(0, 4, n).astype(np.uint8)
+        want["scan_angle"] = rng.integers(-30_000, 30_001, n).astype(np.int16)
+        for name, v in want.items():
+            las[name] = v
+    else:
+        rank = rng.integers(-90, 91, n).astype(np.int8)
+        for name, v in want.items():
+            las[name] = v
+        las.scan_angle_rank = rank
+        want["scan_angle"] = np.rint(rank / 0.006).astype(np.int16)  # degrees in 0.006 degree units (LAS 1.4)
+        assert want["scan_angle"][rank == 18].tolist()[:1] == [3000]
+    src = tmp_path / "in.las"
+    las.write(str(src))
+    out = tmp_path / "out.copc.laz"
+    convert([src], out, format="copc", **OPTS)
+    with laspy.CopcReader.open(out) as r:
+        pts = r.query()
+        got_xyz = np.stack([pts.x, pts.y, pts.z], axis=1)
+        got = {name: np.asarray(pts[name]) for name in want}
+    mm = lambda a: np.rint(a * 1000).astype(np.int64).T
+    order, got_order = np.lexsort(mm(xyz)), np.lexsort(mm(got_xyz))
+    assert len(got_xyz) == n and np.count_nonzero(want["scan_angle"]) > n // 2
+    for name, v in want.items():
+        np.testing.assert_array_equal(got[name][got_order], v[order], err_msg=name)
+    c = gp.open(out)  # gigapoint's COPC reader: the same values
+    parts = [c.node_points(i) for i in np.flatnonzero(c.counts > 0).tolist()]
+    mine_order = np.lexsort(mm(np.concatenate([p["xyz"] for p in parts])))
+    for name, v in want.items():
+        np.testing.assert_array_equal(np.concatenate([p[name] for p in parts])[mine_order], v[order], err_msg=name)

@@ -40,6 +40,8 @@ def write_las(path, n=1000, point_format=3, version="1.2", scale=0.001, offset=(
     if point_format in GPS_FORMATS:
         ref["gps_time"] = rng.uniform(0, 1e6, n)
         las.gps_time = ref["gps_time"]
+    for name, values in scan_fields(point_format, n, rng).items():
+        las[name] = ref[name] = values
     if point_format in COLOR_FORMATS:
         rgb8 = rng.integers(0, 256, (n, 3)).astype(np.uint16)
         rgb = rgb8 * 257 if color16 else rgb8
@@ -51,6 +53,24 @@ def write_las(path, n=1000, point_format=3, version="1.2", scale=0.001, offset=(
             f.seek(25)
             f.write(b"\x00")
     return ref
+
+
+def scan_fields(point_format, n, rng) -> dict:
+    """Random values of the scan angle, user data and flag fields of ``point_format``, as laspy names them."""
+    out = {"user_data": rng.integers(0, 256, n).astype(np.uint8)}
+    flags = ["scan_direction_flag", "edge_of_flight_line", "synthetic", "key_point", "withheld"]
+    if point_format >= 6:
+        out["scan_angle"] = rng.integers(-15_000, 15_001, n).astype(np.int16)
+        out["scanner_channel"] = rng.integers(0, 4, n).astype(np.uint8)
+        flags.append("overlap")
+    else:
+        out["scan_angle_rank"] = rng.integers(-90, 91, n).astype(np.int8)
+    out.update({f: rng.integers(0, 2, n).astype(np.uint8) for f in flags})
+    return out
+
+
+SCAN_FIELDS = ("scan_angle_rank", "scan_angle", "user_data", "scan_direction_flag", "edge_of_flight_line", "synthetic", "key_point",
+               "withheld", "overlap", "scanner_channel")  # fmt: skip
 
 
 def collect(path, chunk_size=10_000_000):
@@ -84,6 +104,15 @@ def test_round_trip_all_point_formats(tmp_path, point_format, version, suffix):
         np.testing.assert_array_equal(attrs["gps_time"], ref["gps_time"])
     else:
         assert "gps_time" not in attrs
+    # the scan angle, user data and flags: lost before, in every conversion
+    assert {k for k in attrs if k in SCAN_FIELDS} == {k for k in ref if k in SCAN_FIELDS}
+    for name in SCAN_FIELDS:
+        if name in ref:
+            assert attrs[name].dtype == ref[name].dtype and ref[name].min() < ref[name].max(), name
+            np.testing.assert_array_equal(attrs[name], ref[name], err_msg=name)
+    picked = gp.open(path).point_info(123)  # (the cloud's order is its own: the written point found by position)
+    i = int(np.argmin(np.abs(ref["xyz"] - picked["position"]).sum(axis=1)))
+    assert {k: picked[k] for k in SCAN_FIELDS if k in ref} == {k: int(ref[k][i]) for k in SCAN_FIELDS if k in ref}
     info = file_info(path)
     assert info["format"] == ("LAZ" if suffix == ".laz" else "LAS")
     assert info["las_version"] == version

@@ -1040,7 +1040,10 @@ def test_files_whose_attribute_dtypes_differ_load_as_the_plain_cloud_holds_them(
     v["x"], v["y"], v["z"], v["intensity"] = rng.uniform(0, 100, 1_500), rng.uniform(0, 100, 1_500), rng.uniform(0, 10, 1_500), rng.uniform(0, 1, 1_500)
     ply = tmp_path / "b.ply"
     PlyData([PlyElement.describe(v, "vertex")]).write(str(ply))
-    dropped = "2 files: attribute.s. classification, gps_time, number_of_returns, point_source_id, return_number not in every file"
+    dropped = (
+        "2 files: attribute.s. classification, edge_of_flight_line, gps_time, key_point, number_of_returns, point_source_id, return_number, "
+        "scan_angle_rank, scan_direction_flag, synthetic, user_data, withheld not in every file"
+    )
     with pytest.warns(GigapointWarning, match=dropped):
         plain = gp.open(las, ply)
     want = np.asarray(plain.attributes["intensity"])

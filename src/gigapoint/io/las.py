@@ -38,8 +38,15 @@ EVLR_HEADER = 60
 LASZIP_USER_ID = b"laszip encoded"
 LASZIP_RECORD_ID = 22204
 
-#: Attributes read from every point format that has them (laspy dimension name -> gigapoint name).
-LAS_ATTRIBUTES = ("intensity", "classification", "return_number", "number_of_returns", "point_source_id", "gps_time", "nir")
+#: Attributes read from every point format that has them (laspy's dimension names are gigapoint's):
+#: scan_angle_rank is formats 0-5's (int8 degrees), scan_angle 6-10's (int16, 0.006 degrees);
+#: the flags are 0/1 (scanner_channel 0-3), uint8. A field all zero costs no memory once held
+#: (core/attributes.py: a constant is no array).
+LAS_ATTRIBUTES = (
+    "intensity", "classification", "return_number", "number_of_returns", "point_source_id", "gps_time", "nir",
+    "scan_angle_rank", "scan_angle", "user_data", "scan_direction_flag", "edge_of_flight_line",
+    "synthetic", "key_point", "withheld", "overlap", "scanner_channel",
+)  # fmt: skip
 
 
 def _attribute_fields(point_format) -> dict[str, str | tuple[str, int]]:

@@ -69,7 +69,7 @@ def _write_las(path: Path, xyz, rgba, attrs) -> None:
     import laspy
 
     from ..lod.copc import field_attributes
-    from ..lod.copc_write import choose_point_format, extra_attributes, las_field_values
+    from ..lod.copc_write import LAS_FIELD_OF, choose_point_format, extra_attributes, las_field_values
     from ..lod.grid import las_grid
 
     fmt = choose_point_format(attrs)
@@ -85,7 +85,7 @@ def _write_las(path: Path, xyz, rgba, attrs) -> None:
     las.red, las.green, las.blue = (rgba[:, k].astype(np.uint16) * 257 for k in range(3))
     for a, v in attrs.items():
         if a in field_attributes(fmt):
-            las[a] = las_field_values(a, v).astype(las[a].dtype)
+            las[LAS_FIELD_OF.get(a, a)] = las_field_values(a, v).astype(las[LAS_FIELD_OF.get(a, a)].dtype)
         elif a in extra:
             las[a] = v.astype(extra[a])
 

@@ -112,9 +112,16 @@ ATTRIBUTE_DTYPES = {
     "number_of_returns": np.dtype(np.uint8),
     "point_source_id": np.dtype(np.uint16),
     "gps_time": np.dtype(np.float64),
-}
-#: Attributes point format 6/7/8 has a field for (nir: 8 only); the writer stores any other in extra bytes.
-LAS_FIELD_ATTRIBUTES = frozenset({*ATTRIBUTE_DTYPES, "nir"})
+    "user_data": np.dtype(np.uint8),
+    "scan_angle": np.dtype(np.int16),  # 0.006 degrees
+    **dict.fromkeys(("scan_direction_flag", "edge_of_flight_line", "synthetic", "key_point", "withheld", "overlap", "scanner_channel"),
+                    np.dtype(np.uint8)),
+}  # fmt: skip
+#: The bits of the ``flags`` byte (of formats 6-10) each flag is stored at (scanner_channel: 2 bits).
+FLAG_BITS = {"synthetic": 0, "key_point": 1, "withheld": 2, "overlap": 3, "scanner_channel": 4, "scan_direction_flag": 6, "edge_of_flight_line": 7}
+#: Attributes point format 6/7/8 has a field for (nir: 8 only; scan_angle_rank, formats 0-5's
+#: degrees, is written to scan_angle); the writer stores any other in extra bytes.
+LAS_FIELD_ATTRIBUTES = frozenset({*ATTRIBUTE_DTYPES, "nir", "scan_angle_rank"})
 
 
 def field_attributes(point_format: int) -> frozenset:
@@ -442,7 +449,11 @@ class CopcCloud(VoxelOctree):
             "number_of_returns": rec["returns"] >> np.uint8(4),
             "point_source_id": rec["point_source_id"],
             "gps_time": rec["gps_time"],
+            "user_data": rec["user_data"],
+            "scan_angle": rec["scan_angle"],
         }
+        for name, bit in FLAG_BITS.items():
+            attrs[name] = (rec["flags"] >> np.uint8(bit)) & np.uint8(3 if name == "scanner_channel" else 1)
         rgb = None
         if self.point_format >= 7:
             rgb = np.stack([rec["red"], rec["green"], rec["blue"]], axis=1)

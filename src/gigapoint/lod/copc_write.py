@@ -35,6 +35,7 @@ from .copc import (
     EXTRA_BYTES_RECORD,
     EXTRA_BYTES_TYPES,
     EXTRA_BYTES_USER_ID,
+    FLAG_BITS,
     HIERARCHY_ENTRY_DTYPE,
     LAS14_HEADER_DTYPE,
     LASZIP_RECORD,
@@ -75,16 +76,26 @@ def _las_integers(xyz, offset, scale, X, Y, Z, lo, hi) -> bool:
     return True
 
 
-#: the largest value each integer LAS field holds (the return counts: 4 bits in point formats 6-8)
-LAS_FIELD_MAX = {"intensity": 65535, "classification": 255, "return_number": 15, "number_of_returns": 15, "point_source_id": 65535, "nir": 65535}
+#: the range of each integer LAS field (the return counts: 4 bits in point formats 6-8; scan_angle:
+#: ±180 degrees in 0.006 degree steps, as LAS 1.4 says)
+LAS_FIELD_RANGE = {
+    "intensity": (0, 65535), "classification": (0, 255), "return_number": (0, 15), "number_of_returns": (0, 15),
+    "point_source_id": (0, 65535), "nir": (0, 65535), "user_data": (0, 255), "scan_angle": (-30000, 30000), "scanner_channel": (0, 3),
+    **{flag: (0, 1) for flag in FLAG_BITS if flag != "scanner_channel"},
+}  # fmt: skip
+#: Attributes written to a field of another name: formats 0-5's scan angle, in degrees
+LAS_FIELD_OF = {"scan_angle_rank": "scan_angle"}
 
 
 def las_field_values(name: str, values) -> np.ndarray:
-    """An attribute's ``values`` in the range of its LAS field (clipped; gps_time as float64):
-    what the COPC writer and a live cloud's LAS save store."""
+    """An attribute's ``values`` in the range of its LAS field (clipped; gps_time as float64;
+    scan_angle_rank, degrees, in scan_angle's 0.006 degree units): what the COPC writer and a
+    live cloud's LAS save store (in field ``LAS_FIELD_OF.get(name, name)``)."""
     if name == "gps_time":
         return np.asarray(values, np.float64)
-    return np.clip(np.asarray(values), 0, LAS_FIELD_MAX[name])
+    if name == "scan_angle_rank":
+        return las_field_values("scan_angle", np.rint(np.asarray(values, np.float64) / 0.006)).astype(np.int16)
+    return np.clip(np.asarray(values), *LAS_FIELD_RANGE[name])
 
 
 def extra_attributes(attributes: dict, where: str = "COPC", point_format: int = 8) -> dict[str, np.dtype]:
@@ -180,7 +191,8 @@ class CopcWriter:
     def add(self, key: int, xyz: np.ndarray, rgb16: np.ndarray | None = None, attributes: dict | None = None) -> None:
         """One node: ``key`` (keys.py), its points (float64 (n, 3)), 16-bit colors (n, 3) and
         attributes (intensity, classification, return_number, number_of_returns,
-        point_source_id, gps_time, nir, and the writer's ``extra`` ones: the rest is not stored)."""
+        point_source_id, gps_time, nir, user_data, scan_angle (or scan_angle_rank), the flags
+        of FLAG_BITS, and the writer's ``extra`` ones: the rest is not stored)."""
         key = int(key)
         if key in self.entries or key in self._batch_keys:
             raise ValueError(f"node key {key} given twice")
@@ -195,9 +207,12 @@ class CopcWriter:
             raise ValueError(
                 f"coordinates do not fit LAS's 32-bit integers with scale {self.scale.tolist()} and offset {self.offset.tolist()}"
             )
-        for name in ("intensity", "classification", "point_source_id"):
+        for name in ("intensity", "classification", "point_source_id", "user_data", "scan_angle_rank", "scan_angle"):
+            if name in attributes:  # (scan_angle after scan_angle_rank: the finer one where both are given)
+                rec[LAS_FIELD_OF.get(name, name)] = las_field_values(name, attributes[name])
+        for name, bit in FLAG_BITS.items():
             if name in attributes:
-                rec[name] = las_field_values(name, attributes[name])
+                rec["flags"] |= las_field_values(name, attributes[name]).astype(np.uint8) << np.uint8(bit)
         rn = las_field_values("return_number", np.asarray(attributes["return_number"], np.int64)) if "return_number" in attributes else None
         nr = las_field_values("number_of_returns", np.asarray(attributes["number_of_returns"], np.int64)) if "number_of_returns" in attributes else None
         if rn is not None or nr is not None:
