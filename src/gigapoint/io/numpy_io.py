@@ -122,7 +122,7 @@ class NpyReader(Reader):
         shape = self._shape(check_file(path))
         return shape[0] if shape else None
 
-    def header(self, path: Path) -> dict:
+    def header(self, path: Path, salvage: bool = False) -> dict:
         """Also ``has_color``: whether its columns hold colors (a COPC output of points without
         them is written without colors)."""
         arr = self._open(check_file(path))  # (memory-mapped: only its header is read)

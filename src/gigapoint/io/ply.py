@@ -87,11 +87,6 @@ class PlyReader(Reader):
     def reads_slowly(self, path: Path) -> bool:
         return _Header(check_file(path)).text  # ASCII: every value parsed
 
-    def header(self, path: Path) -> dict:
-        """Also ``has_color``: whether its vertices have color properties (a COPC output of
-        points without them is written without colors)."""
-        return {"point_count": self.point_count(path), "has_color": bool(color_names(_Header(check_file(path)).names))}
-
     def point_count(self, path: Path) -> int | None:
         """The header's vertex count, after checking the file can hold that many: a binary file's
         bytes exactly, an ASCII one's at 6 bytes a vertex at least ("0 0 0\\n"). A count of 10^12
@@ -99,6 +94,8 @@ class PlyReader(Reader):
         return self.header(path)["point_count"]
 
     def header(self, path: Path, salvage: bool = False) -> dict:
+        """Also ``has_color``: whether its vertices have color properties (a COPC output of
+        points without them is written without colors)."""
         path = check_file(path)
         h = _Header(path)
         short = None
@@ -111,7 +108,8 @@ class PlyReader(Reader):
             short = self._binary_span(path, h)[2]
         if short and not salvage:
             raise fail(path, short)
-        return {"point_count": h.count} if short is None else {"point_count": h.count, "truncated": short}
+        head = {"point_count": h.count, "has_color": bool(color_names(h.names))}
+        return head if short is None else {**head, "truncated": short}
 
     def read_salvaged(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
         return self.read_chunks(path, chunk_size, salvage=True)
