@@ -545,3 +545,13 @@ def test_a_ply_file_cut_off_gives_the_vertices_before_the_cut(tmp_path):
         cloud.wait(60)
     assert cloud.n_points == len(xyz)
     cloud.close()
+
+
+def test_an_attribute_of_other_shapes_in_two_files_is_one_line(tmp_path):
+    """Two NPZ files whose ``normal`` is one value a point in one and three in the other: numpy's
+    "all the input arrays must have same number of dimensions" when the cloud joined them."""
+    n = 10
+    np.savez(tmp_path / "a.npz", x=np.arange(n, dtype=float), y=np.zeros(n), z=np.zeros(n), normal=np.zeros(n))
+    np.savez(tmp_path / "b.npz", x=np.arange(n, dtype=float), y=np.ones(n), z=np.zeros(n), normal=np.zeros((n, 3)))
+    with pytest.raises(InputError, match=r"^2 files: attribute 'normal' holds 1 value a point in one file and 3 values in another$"):
+        gp.open([tmp_path / "a.npz", tmp_path / "b.npz"])

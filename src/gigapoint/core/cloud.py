@@ -408,7 +408,10 @@ def build_cloud(
         xyz_parts.append(chunk.xyz[keep])
         rgba_parts.append(chunk.rgba[keep])
         for a, values in chunk.attributes.items():
-            attr_parts.setdefault(a, []).append(values[keep])
+            held = attr_parts.setdefault(a, [])
+            if held and held[0].shape[1:] != values.shape[1:]:  # (numpy's "must have same number of dimensions" at the join)
+                raise InputError(f"{name}: attribute {a!r} holds {_per_point(held[0])} a point in one file and {_per_point(values)} in another")
+            held.append(values[keep])
         total += len(xyz_parts[-1])
     chunk = values = None  # (the last chunk's arrays go with the parts, once joined)
     check_valid_count(name, total, skipped)
@@ -426,6 +429,11 @@ def build_cloud(
     )
     cloud.source_scale = source_scale
     return cloud
+
+
+def _per_point(values: np.ndarray) -> str:
+    k = int(np.prod(values.shape[1:]))
+    return "1 value" if k == 1 and values.ndim == 1 else f"{k} values"
 
 
 def _joined(parts: list[np.ndarray]) -> np.ndarray:
