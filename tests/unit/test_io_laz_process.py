@@ -387,7 +387,7 @@ def test_a_laz_file_cut_off_gives_the_points_before_the_cut(tmp_path, point_form
     bad.write_bytes(data[:cut])
     with laspy.open(full) as reader:
         table = int.from_bytes(data[reader.header.offset_to_point_data :][:8], "little")
-    with pytest.raises(InputError, match=r"cut\.laz: truncated or corrupt LAZ file: chunk table offset"):
+    with pytest.raises(InputError, match=r"cut\.laz: truncated or corrupt LAZ file: chunk table offset .* lies past the end of the file .*; `gigapoint view` shows the points before the cut"):
         list(LasReader().read_chunks(bad))
     expected = np.c_[laspy.read(full).x, laspy.read(full).y, laspy.read(full).z]
     for chunk_size in (20_000, 250_000):
@@ -396,12 +396,27 @@ def test_a_laz_file_cut_off_gives_the_points_before_the_cut(tmp_path, point_form
             for chunk in LasReader().read_salvaged(bad, chunk_size):
                 got.append(chunk.xyz)
         n = sum(len(x) for x in got)
-        assert str(err.value) == f"{bad}: truncated LAZ file: its chunk table (at byte {table:,}) is past its end ({cut:,} bytes): {n:,} of its 150,000 points read"
+        assert str(err.value) == f"{bad}: truncated or corrupt LAZ file: chunk table offset {table:,} lies past the end of the file ({cut:,} bytes): {n:,} of its 150,000 points read"
         assert _chunks_before(full, cut) - 5_000 <= n < 150_000
         assert n > 0
         np.testing.assert_array_equal(np.concatenate(got), expected[:n])
     cloud = gp.open(bad, progressive=True)
-    with pytest.raises(GigapointError, match=r"cut\.laz: truncated LAZ file"):
+    with pytest.raises(GigapointError, match=r"cut\.laz: truncated or corrupt LAZ file"):
         cloud.wait(60)
     assert cloud.n_points == n and cloud.progress == pytest.approx(n / 150_000)
     cloud.close()
+
+
+def test_a_laz_whose_chunk_table_offset_is_damaged_loads_whole_progressively(tmp_path):
+    """The same way in for a LAZ whose data is whole but whose chunk table offset points past
+    the end (a damaged header field): every point, exactly the file's, and no error."""
+    full = _write_laz(tmp_path / "full.laz", 120_000, 7)
+    data = bytearray(full.read_bytes())
+    with laspy.open(full) as reader:
+        start = reader.header.offset_to_point_data
+    data[start : start + 8] = (10**15).to_bytes(8, "little")
+    bad = tmp_path / "bad.laz"
+    bad.write_bytes(bytes(data))
+    got = np.concatenate([c.xyz for c in LasReader().read_salvaged(bad, 50_000)])
+    las = laspy.read(full)
+    np.testing.assert_array_equal(got, np.c_[las.x, las.y, las.z])

@@ -14,6 +14,10 @@ from ..errors import EmptyCloudError, InputError, check_whole
 #: Points per chunk a reader yields unless told otherwise (about 100 MB of xyz + rgba + attributes).
 DEFAULT_CHUNK_SIZE = 2_000_000
 
+#: What a reader's refusal of a file cut off adds: where the points before the cut can be seen
+#: (``Reader.read_salvaged``).
+SALVAGE_HINT = "; `gigapoint view` shows the points before the cut (gigapoint.open(..., progressive=True))"
+
 #: Bytes of a file's beginning that readers' ``sniff`` sees.
 HEAD_BYTES = 4096
 

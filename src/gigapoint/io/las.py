@@ -25,7 +25,7 @@ from ..core.cloud import MAX_ABS_COORDINATE, NUMPY_MAX
 from ..core.threads import prepare_kernel_calls
 from ..errors import EmptyCloudError, InputError
 from . import laz_process
-from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail, one_line
+from ._base import DEFAULT_CHUNK_SIZE, SALVAGE_HINT, Reader, check_chunk_size, check_file, fail, one_line
 
 #: Minimum point record length of each point format (bytes).
 RECORD_SIZE = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}
@@ -293,7 +293,7 @@ def read_las_header(path: Path, salvage: bool = False) -> LasHeader:
                     f"but only {have:,} bytes of point data follow (room for {fits:,} points)"
                 )
                 if not salvage:
-                    raise fail(path, hdr.truncated)
+                    raise fail(path, hdr.truncated + SALVAGE_HINT)
     return hdr
 
 
@@ -358,8 +358,10 @@ def _check_laz(path: Path, f, hdr: LasHeader, salvage: bool = False) -> None:
     if table_offset == -1:  # written by a streaming writer: the offset is in the last 8 bytes
         f.seek(hdr.file_size - 8)
         (table_offset,) = _u("q", f.read(8), 0)
-    if table_offset > hdr.file_size - 8 and salvage and chunk_size != 0xFFFFFFFF:  # (variable chunks: the table tells their points)
-        hdr.truncated = f"truncated LAZ file: its chunk table (at byte {table_offset:,}) is past its end ({hdr.file_size:,} bytes)"
+    if table_offset > hdr.file_size - 8 and chunk_size != 0xFFFFFFFF:  # (variable chunks: the table tells their points)
+        hdr.truncated = f"truncated or corrupt LAZ file: chunk table offset {table_offset:,} lies past the end of the file ({hdr.file_size:,} bytes)"
+        if not salvage:
+            raise fail(path, hdr.truncated + SALVAGE_HINT)
         return
     if not start + 8 <= table_offset <= hdr.file_size - 8:
         raise fail(path, f"truncated or corrupt LAZ file: chunk table offset {table_offset:,} lies outside the file's point data (bytes {start + 8:,}..{hdr.file_size:,})")

@@ -20,7 +20,18 @@ import numpy as np
 
 from ..core.chunk import ColorScaler, PointChunk
 from ..errors import EmptyCloudError
-from ._base import DEFAULT_CHUNK_SIZE, Reader, attribute_names, check_chunk_size, check_file, color_names, fail, rows_to_chunk, scan_bounds
+from ._base import (
+    DEFAULT_CHUNK_SIZE,
+    SALVAGE_HINT,
+    Reader,
+    attribute_names,
+    check_chunk_size,
+    check_file,
+    color_names,
+    fail,
+    rows_to_chunk,
+    scan_bounds,
+)
 
 _MAX_HEADER = 1 << 20
 
@@ -107,7 +118,7 @@ class PlyReader(Reader):
         elif not h.has_lists:
             short = self._binary_span(path, h)[2]
         if short and not salvage:
-            raise fail(path, short)
+            raise fail(path, short + SALVAGE_HINT)
         head = {"point_count": h.count, "has_color": bool(color_names(h.names))}
         return head if short is None else {**head, "truncated": short}
 
@@ -145,7 +156,7 @@ class PlyReader(Reader):
     def _read_binary(self, path, h: _Header, chunk_size, scaler, salvage: bool = False) -> Iterator[PointChunk]:
         offset, dtype, short = self._binary_span(path, h)
         if short and not salvage:
-            raise fail(path, short)
+            raise fail(path, short + SALVAGE_HINT)
         present = h.count if short is None else max(h.file_size - offset, 0) // dtype.itemsize
         mm = np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=(present,)) if present else np.empty(0, dtype)
         try:
