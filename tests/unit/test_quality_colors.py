@@ -167,3 +167,24 @@ def test_missing_attribute_and_bad_settings_are_one_line_errors():
         with pytest.raises(SettingsError) as err:
             gp.RenderSettings(**bad)
         assert "\n" not in str(err.value) and next(iter(bad)).split("_")[0] in str(err.value)
+
+
+def test_nan_attribute_values_are_grey_and_the_rest_keep_the_range():
+    """An attribute with NaN (no value) colours those points grey and maps the others over the
+    finite values' 2nd..98th percentile; was numpy's IndexError (NaN cast to an index). All NaN: all grey."""
+    n = 4000
+    rng = np.random.default_rng(2)
+    v = rng.random(n) * 10.0
+    v[::4] = np.nan
+    cloud = gp.from_arrays(np.c_[rng.random((n, 2)) * 10.0, np.zeros(n)], name="gaps", h=v, none=np.full(n, np.nan))
+    cam = gp.Camera.fit(cloud.bounds, view="top", width=80, height=80)
+    f = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", color_mode="attribute", color_attribute="h", colormap="viridis"))
+    v = cloud.attributes["h"].astype(np.float64)  # in the cloud's (Morton) order, as frame.index counts
+    lo, hi = np.nanpercentile(v, [2.0, 98.0])
+    expected = colormap_table("viridis")[np.clip(np.rint((np.nan_to_num(v) - lo) * 255.0 / (hi - lo)), 0, 255).astype(np.int64)]
+    expected[np.isnan(v)] = (128, 128, 128, 255)
+    _check(f, expected)
+    assert np.isnan(v[f.index[f.index >= 0]]).any()  # some grey points are in view
+    f = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", color_mode="attribute", color_attribute="none"))
+    hit = f.index >= 0
+    assert hit.sum() > 1000 and (f.image[hit] == (128, 128, 128, 255)).all()

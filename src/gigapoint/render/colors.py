@@ -162,11 +162,20 @@ def _hsv_to_rgba(h, s, v) -> np.ndarray:
     return out
 
 
+NO_VALUE = (128, 128, 128, 255)  # a point whose attribute is NaN (no value): grey, not the colormap's low end
+
+
 def _ramp(values: np.ndarray, lo: float, hi: float, table: np.ndarray) -> np.ndarray:
-    """u32 colors of values mapped linearly from [lo, hi] onto a (256, 4) table (clamped)."""
+    """u32 colors of values mapped linearly from [lo, hi] onto a (256, 4) table (clamped);
+    NaN values get ``NO_VALUE`` (their cast to an index was an IndexError)."""
     scale = 255.0 / (hi - lo) if hi > lo else 0.0
-    i = np.clip(np.rint((np.asarray(values, np.float64) - lo) * scale), 0, 255).astype(np.intp)
-    return table.view(np.uint32).reshape(-1)[i]
+    x = (np.asarray(values, np.float64) - lo) * scale
+    missing = np.isnan(x)
+    i = np.clip(np.rint(np.where(missing, 0.0, x)), 0, 255).astype(np.intp)
+    colors = table.view(np.uint32).reshape(-1)[i]
+    if missing.any():
+        colors[missing] = np.array(NO_VALUE, np.uint8).view(np.uint32)[0]
+    return colors
 
 
 @njit(parallel=True, cache=True)
@@ -198,9 +207,14 @@ def elevations(cloud) -> np.ndarray:
 
 
 def _auto_range(values: np.ndarray) -> tuple[float, float]:
-    """2nd..98th percentile (robust to a few outliers), on a subsample for big clouds."""
+    """2nd..98th percentile (robust to a few outliers), on a subsample for big clouds, of the
+    finite values (a NaN or inf made the range NaN); (0, 1) where none is finite."""
     v = values if len(values) <= 1_000_000 else values[:: len(values) // 1_000_000]
-    lo, hi = np.percentile(v.astype(np.float64), [2.0, 98.0])
+    v = v.astype(np.float64)
+    v = v[np.isfinite(v)]
+    if len(v) == 0:
+        return 0.0, 1.0
+    lo, hi = np.percentile(v, [2.0, 98.0])
     if not hi > lo:
         lo, hi = float(v.min()), float(v.max())
     return float(lo), float(hi)
