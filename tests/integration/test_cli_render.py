@@ -82,6 +82,26 @@ def test_camera_options_and_extra_outputs(capsys, tmp_path, small_las):
     assert Image.open(tmp_path / "c.jpg").size == (80, 60)
 
 
+def test_an_eye_and_target_camera_keeps_the_orthographic_projection(capsys, tmp_path, small_las):
+    """--projection orthographic with --camera eye=.. target=.. drew a perspective image (the
+    projection was dropped); its height is the perspective view's at the target."""
+    import gigapoint as gp
+
+    cloud = gp.open(small_las)
+    eye, target = (637_000.0, 851_000.0, 150.0), (637_000.0, 851_000.0, 0.0)
+    images = {}
+    for projection in ("perspective", "orthographic"):
+        out = tmp_path / f"{projection}.png"
+        rc, _, err = run(capsys, "render", small_las, "-o", out, "-W", 80, "-H", 60, "--size-mode", "fixed", "--projection", projection,
+                         "--camera", "eye=637000,851000,150 target=637000,851000,0 up=0,1,0")  # fmt: skip
+        assert rc == 0, err
+        images[projection] = np.asarray(Image.open(out))
+    cam = gp.Camera.look_at(eye, target, up=(0, 1, 0), width=80, height=60, projection="orthographic", ortho_height=2 * 150 * np.tan(np.radians(30)))
+    np.testing.assert_array_equal(images["orthographic"], gp.render(cloud, cam, size_mode="fixed"))
+    assert (images["orthographic"][..., :3] != 0).any(axis=2).mean() > 0.03  # points in view
+    assert (images["orthographic"] != images["perspective"]).any()
+
+
 def test_an_output_that_is_an_input_or_another_output_is_refused_before_anything_is_read(capsys, tmp_path):
     """``--index-out pts.npy --overwrite`` replaced the points it drew with the index buffer."""
     pts = tmp_path / "tiles" / "pts.npy"
@@ -127,7 +147,8 @@ def test_a_failed_render_leaves_no_output_behind(capsys, tmp_path, small_las):
         (["--camera", "banana"], "--camera"),
         (["--camera", "eye=a,b,c target=0,0,0"], "--camera"),
         (["--camera", "eye=0,0,nan target=0,0,0"], "--camera"),
-        (["--camera", "eye=1,1,1 target=1,1,1"], "same point"),
+        (["--camera", "eye=1,1,1 target=1,1,1"], "--camera: camera eye and target are the same point"),
+        (["--camera", "yaw=10 pitch=5 distance=0"], "--camera: orbit distance must be > 0"),
         (["--camera", "yaw=10 eye=1,1,1 target=0,0,0"], "not both"),
         (["--camera", "target=1,2,3"], "give eye=x,y,z target=x,y,z or yaw=deg pitch=deg"),  # was an internal KeyError
         (["--camera", "fov=30"], "give eye=x,y,z target=x,y,z or yaw=deg pitch=deg"),

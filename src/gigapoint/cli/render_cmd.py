@@ -75,13 +75,24 @@ def make_camera(cloud, width, height, view, camera_text, projection, fov) -> Cam
     bounds = cloud.bounds
     if camera_text is None:  # 'auto' frames the cloud's points (the data fills the frame), the others its box
         return Camera.fit_cloud(cloud, view=view, width=width, height=height, fov=fov, projection=projection)
-    c = parse_camera(camera_text)
-    fov = c.get("fov", fov)
-    if "eye" in c:
-        return Camera.look_at(c["eye"], c["target"], up=c.get("up", (0, 0, 1)), fov=fov, width=width, height=height)
-    fitted = Camera.fit(bounds, view=(c["yaw"], c["pitch"]), width=width, height=height, fov=fov, projection=projection)
+    try:
+        return _described_camera(bounds, parse_camera(camera_text), width, height, projection, fov)
+    except CameraError as exc:  # 'camera eye and target are the same point' named no option
+        raise CameraError(f"--camera: {exc}") from None
+
+
+def _described_camera(bounds, c: dict, width, height, projection, fov) -> Camera:
+    """The camera of a parsed ``--camera`` description."""
     import numpy as np
 
+    fov = c.get("fov", fov)
+    if "eye" in c:
+        extra = {}
+        if projection == "orthographic":  # (was dropped: a perspective image) as tall as the perspective view at the target
+            distance = float(np.linalg.norm(np.subtract(c["eye"], c["target"])))
+            extra = {"projection": projection, "ortho_height": 2 * distance * math.tan(math.radians(fov) / 2)}
+        return Camera.look_at(c["eye"], c["target"], up=c.get("up", (0, 0, 1)), fov=fov, width=width, height=height, **extra)
+    fitted = Camera.fit(bounds, view=(c["yaw"], c["pitch"]), width=width, height=height, fov=fov, projection=projection)
     target = c.get("target", fitted.target)
     distance = c.get("distance", float(np.linalg.norm(np.subtract(fitted.eye, fitted.target))))
     extra = {"projection": projection, "ortho_height": fitted.ortho_height} if projection == "orthographic" else {}
