@@ -184,6 +184,13 @@ def test_missing_input_and_missing_output_dir(capsys, tmp_path, small_las):
     assert rc == 1 and "nope.laz" in err and len(err.strip().splitlines()) == 1
     rc, _, err = run(capsys, "render", small_las, "-o", tmp_path / "no" / "such" / "o.png")
     assert rc == 1 and "does not exist" in err
+    afile = tmp_path / "afile"  # a file where the folder should be: was "Not a directory" once the render was done
+    afile.write_bytes(b"x")
+    for bad, args in ((afile / "o.png", []), (afile / "o.mp4", ["--turntable", 2]), (afile / "d.npy", ["--depth-out", afile / "d.npy"])):
+        out = bad if not args or args[0] == "--turntable" else tmp_path / "o.png"
+        rc, _, err = run(capsys, "render", small_las, "-o", out, *args, "-W", 32, "-H", 24)
+        assert rc == 1 and err.strip().splitlines() == [f"error: {bad}: {afile} is a file, not a directory"], err
+        assert not out.exists()
 
 
 def test_camera_looking_away_warns_and_renders_background(capsys, tmp_path, small_las):

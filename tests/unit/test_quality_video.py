@@ -194,6 +194,9 @@ def test_flythrough_gif_and_errors(cloud, tmp_path):
         render_turntable(cloud, 3, tmp_path / "x.mp4", width=33)
     with pytest.raises(GigapointError, match="an integer from 1 to 100,000"):
         render_turntable(cloud, 0, tmp_path / "x.mp4")
+    (tmp_path / "afile").write_bytes(b"x")  # a file as the folder: was "Not a directory" once every frame was drawn
+    with pytest.raises(GigapointError, match=f"^{tmp_path / 'afile' / 'x.mp4'}: {tmp_path / 'afile'} is a file, not a directory$"):
+        render_turntable(cloud, 3, tmp_path / "afile" / "x.mp4", progress=lambda done, total: pytest.fail("a frame was drawn"))
 
 
 def test_a_flythrough_that_cannot_be_one_video_is_refused_before_a_frame(cloud, tmp_path):

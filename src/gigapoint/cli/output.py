@@ -23,6 +23,8 @@ def check_output(path: Path, overwrite: bool, suffixes=IMAGE_SUFFIXES) -> Path:
         raise GigapointError(f"{path}: already exists; pass --overwrite to replace it")
     if not path.parent.exists():
         raise GigapointError(f"{path}: directory {path.parent} does not exist")
+    if not path.parent.is_dir():  # a file there: "Not a directory" only once the work was done
+        raise GigapointError(f"{path}: {path.parent} is a file, not a directory")
     return path
 
 

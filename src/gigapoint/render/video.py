@@ -177,6 +177,8 @@ def _check_path(path, overwrite: bool = False) -> Path:
         raise GigapointError(f"{path}: unsupported video type {path.suffix or '(none)'!r}; use one of {', '.join(sorted(VIDEO_SUFFIXES))}")
     if not path.parent.exists():
         raise GigapointError(f"{path}: directory {path.parent} does not exist")
+    if not path.parent.is_dir():  # a file there: "Not a directory" only once every frame was drawn
+        raise GigapointError(f"{path}: {path.parent} is a file, not a directory")
     if path.is_dir():
         raise GigapointError(f"{path}: is a directory, not a video file")
     if path.exists() and not overwrite:
