@@ -82,6 +82,10 @@ def test_clip_range_encloses_bounds_and_handles_camera_inside():
         {"projection": "fisheye"},
         {"projection": "orthographic"},
         {"near": 10, "far": 1},
+        {"fov": True},  # was a 1 degree view
+        {"near": "1"},  # these three were math's TypeError "must be real number, not str"
+        {"far": "100"},
+        {"projection": "orthographic", "ortho_height": "10"},
     ],
 )
 def test_impossible_cameras_raise_one_line_errors(kwargs):

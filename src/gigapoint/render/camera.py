@@ -149,20 +149,20 @@ class Camera:
             object.__setattr__(self, name, image_side(name, getattr(self, name)))
         if self.projection not in ("perspective", "orthographic"):
             raise CameraError(f"camera projection must be 'perspective' or 'orthographic', got {self.projection!r}")
-        if not (isinstance(self.fov, (int, float)) and math.isfinite(self.fov) and 0.01 <= self.fov <= 179.0):
+        if not (is_real(self.fov) and 0.01 <= self.fov <= 179.0):  # (True was a 1 degree view)
             raise CameraError(f"camera fov must be between 0.01 and 179 degrees, got {self.fov!r}")
         d = np.subtract(self.target, self.eye)
         if not np.linalg.norm(d) > 0:
             raise CameraError("camera eye and target are the same point")
         if self.projection == "orthographic":
             h = self.ortho_height
-            if h is None or not (math.isfinite(h) and h > 0):
+            if not (is_real(h) and h > 0):  # ("10" was math's TypeError)
                 raise CameraError(f"orthographic camera needs ortho_height > 0, got {h!r}")
         if np.linalg.norm(self.up) == 0:
             raise CameraError("camera up vector is zero")
         for name in ("near", "far"):
             v = getattr(self, name)
-            if v is not None and not (math.isfinite(v) and v > 0):
+            if v is not None and not (is_real(v) and v > 0):
                 raise CameraError(f"camera {name} must be > 0, got {v!r}")
         if self.near is not None and self.far is not None and self.near >= self.far:
             raise CameraError(f"camera near ({self.near}) must be less than far ({self.far})")
