@@ -179,6 +179,19 @@ def test_bad_output_type(capsys, tmp_path, small_las, suffix):
     assert rc == 1 and "unsupported output type" in err
 
 
+def test_an_image_its_format_cannot_hold_is_refused_before_the_render(capsys, tmp_path, small_las):
+    """A WebP 16 384 pixels wide was an 'internal error: ValueError: encoding error 5' once the
+    render was done (libwebp's limit is 16 383); side-by-side stereo writes twice --width, and
+    'wrote' says so (it said --width)."""
+    out = tmp_path / "wide.webp"
+    for args, size in ((["-W", 16_384, "-H", 8], "16384x8"), (["-W", 9000, "-H", 8, "--stereo", "side-by-side"], "18000x8")):
+        rc, _, err = run(capsys, "render", small_las, "-o", out, *args)
+        assert rc == 1 and err.strip().splitlines() == [f"error: {out}: a WebP image is at most 16,383 pixels a side, this one would be {size}; write .png or .tif"], err
+        assert not out.exists()
+    rc, out_text, err = run(capsys, "render", small_las, "-o", tmp_path / "s.webp", "-W", 40, "-H", 20, "--stereo", "side-by-side")
+    assert rc == 0 and Image.open(tmp_path / "s.webp").size == (80, 20) and "(80x20, 30,000 points)" in out_text, err
+
+
 def test_missing_input_and_missing_output_dir(capsys, tmp_path, small_las):
     rc, _, err = run(capsys, "render", tmp_path / "nope.laz", "-o", tmp_path / "o.png")
     assert rc == 1 and "nope.laz" in err and len(err.strip().splitlines()) == 1

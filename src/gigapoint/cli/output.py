@@ -28,6 +28,17 @@ def check_output(path: Path, overwrite: bool, suffixes=IMAGE_SUFFIXES) -> Path:
     return path
 
 
+WEBP_MAX_SIDE = 16_383  # libwebp's limit (an image may be 16 384 wide): its "encoding error" came once the render was done
+
+
+def check_image_fits(path: Path, width: int, height: int) -> None:
+    """A one-line error, before anything is drawn, where ``path``'s format cannot hold a
+    ``width`` x ``height`` image."""
+    path = Path(path)
+    if path.suffix.lower() == ".webp" and max(width, height) > WEBP_MAX_SIDE:
+        raise GigapointError(f"{path}: a WebP image is at most {WEBP_MAX_SIDE:,} pixels a side, this one would be {width}x{height}; write .png or .tif")
+
+
 def check_outputs_apart(outputs, inputs) -> None:
     """One-line errors where an output is an input (a file named, or a point cloud file in a
     folder named: ``--index-out pts.npy --overwrite`` replaced the points it drew) or two outputs

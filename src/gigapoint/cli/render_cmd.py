@@ -17,7 +17,7 @@ from . import compiling
 from .app import app
 from .cloud_opts import ChunkedOption, ColorsOption, check_colors, cloud_options, open_files
 from .info_cmd import memory_line
-from .output import check_output, check_outputs_apart, save_array, save_image
+from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_image
 from .progress import err_console, progress_bar, status
 from .quality_opts import prepare_cloud
 from .settings_opts import settings_from_options, with_settings_options
@@ -191,6 +191,8 @@ def render(
     if view not in VIEWS:
         raise GigapointError(f"--view: unknown view {view!r}; choose one of {', '.join(VIEWS)}")
     check_image_size(width, height, fov)  # before reading anything
+    if turntable is None:  # (side-by-side stereo writes both eyes: twice the width)
+        check_image_fits(output, width * (2 if settings.stereo == "side-by-side" else 1), height)
     cloud = open_inputs(inputs, settings.point_budget, progressive, cloud_options(colors, chunked))
     prepare_cloud(cloud, settings)
     if turntable is not None:
@@ -215,7 +217,7 @@ def render(
     if stats:
         print_stats(frame.stats, compiled_s=compiled)
         err_console().print(memory_line(cloud), highlight=False)
-    typer.echo(f"wrote {output} ({width}x{height}, {cloud.n_points:,} points)")
+    typer.echo(f"wrote {output} ({frame.image.shape[1]}x{frame.image.shape[0]}, {cloud.n_points:,} points)")  # (side-by-side stereo: both eyes)
 
 
 @app.command()
@@ -261,6 +263,7 @@ def demo(
     check_room(f"demo({points:,})", points, IN_MEMORY_BYTES_MIN, instead=": take fewer --points")
     check_output(output, overwrite)
     check_image_size(width, height)
+    check_image_fits(output, width, height)
     settings = settings_from_options(RenderSettings, {"threads": threads})  # a bad --threads is named
     check_colors(colors)
     if not (scale == 0 or 1e-6 <= scale <= 1000):  # NaN fails both
