@@ -75,6 +75,20 @@ def test_turntable_option_writes_a_video(npy, tmp_path):
     assert main(["render", str(npy), "-o", str(tmp_path / "spin.png"), "--turntable", "4"]) == 1
 
 
+def test_a_bad_turntable_is_refused_before_the_inputs_are_read(tmp_path, capsys):
+    """--fps 0, an odd --width of an MP4 and --turntable 0 were told only once the inputs were
+    read (minutes for a large file); here the input is missing, so it is told first only if read."""
+    missing = tmp_path / "big.laz"
+    for extra, problem in (
+        (["--turntable", "2", "--fps", "0"], "video fps must be a number in (0, 1000], got 0.0"),
+        (["--turntable", "2", "-W", "33"], f"{tmp_path / 'spin.mp4'}: width and height must be even for video encoding, got 33x24"),
+        (["--turntable", "0"], "turntable: number of frames must be an integer from 1 to 100,000, got 0"),
+    ):
+        assert main(["render", str(missing), "-o", str(tmp_path / "spin.mp4"), "-W", "32", "-H", "24", *extra]) == 1
+        assert capsys.readouterr().err == f"error: {problem}\n"
+    assert not list(tmp_path.iterdir())
+
+
 def test_a_native_window_refuses_the_servers_options(capsys):
     """`view --window --port 8080` showed a window and listened on nothing, without a word."""
     assert main(["view", "--demo", "100", "--window", "--port", "8080", "--host", "0.0.0.0"]) == 1

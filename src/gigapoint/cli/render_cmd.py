@@ -191,7 +191,11 @@ def render(
     if view not in VIEWS:
         raise GigapointError(f"--view: unknown view {view!r}; choose one of {', '.join(VIEWS)}")
     check_image_size(width, height, fov)  # before reading anything
-    if turntable is None:  # (side-by-side stereo writes both eyes: twice the width)
+    if turntable is not None:
+        from ..render.video import check_turntable
+
+        check_turntable(output, turntable, width, height, 30.0 if fps is None else fps, overwrite)
+    else:  # (side-by-side stereo writes both eyes: twice the width)
         check_image_fits(output, width * (2 if settings.stereo == "side-by-side" else 1), height)
     cloud = open_inputs(inputs, settings.point_budget, progressive, cloud_options(colors, chunked))
     prepare_cloud(cloud, settings)

@@ -278,6 +278,18 @@ def _check_cameras(cameras: list, path: Path) -> None:
         raise GigapointError(f"{path}: width and height must be even for video encoding, got {cameras[0].width}x{cameras[0].height}")
 
 
+def check_turntable(path, n_frames, width, height, fps, overwrite: bool = False) -> None:
+    """The one-line errors of a turntable that need no cloud: the path, the number of frames,
+    the image size (even but for a GIF) and fps; `gigapoint render --turntable` asks before it
+    reads its inputs (a bad --fps or an odd --width was told once a large file was read)."""
+    path = _check_path(path, overwrite)
+    check_whole("turntable", "number of frames", n_frames, 1, MAX_TURNTABLE_FRAMES)
+    width, height = image_side("width", width), image_side("height", height)
+    _check_fps(fps)
+    if path.suffix.lower() != ".gif" and (width % 2 or height % 2):
+        raise GigapointError(f"{path}: width and height must be even for video encoding, got {width}x{height}")
+
+
 def render_turntable(
     cloud,
     n_frames: int,
@@ -294,7 +306,6 @@ def render_turntable(
     """A video of the camera orbiting the cloud once in ``n_frames`` frames (``turntable_cameras``).
     An existing file at ``path`` is replaced only with ``overwrite=True``; sizes as
     ``render_flythrough`` takes them (even, but for a GIF)."""
-    _check_path(path, overwrite)  # before any frame is rendered
-    _check_fps(fps)
+    check_turntable(path, n_frames, width, height, fps, overwrite)  # before any frame is rendered
     cameras = turntable_cameras(cloud, n_frames, width, height, pitch, fov)
     return render_flythrough(cloud, cameras, path, settings, fps, progress, overwrite)
