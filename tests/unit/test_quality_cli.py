@@ -75,6 +75,22 @@ def test_turntable_option_writes_a_video(npy, tmp_path):
     assert main(["render", str(npy), "-o", str(tmp_path / "spin.png"), "--turntable", "4"]) == 1
 
 
+def test_a_colour_option_the_color_mode_does_not_read_is_refused(npy, tmp_path, capsys):
+    """--colormap turbo alone drew the cloud's own colours, --color-attribute x with --color-mode
+    elevation the elevation: each option was dropped without a word."""
+    for extra, problem in (
+        (["--colormap", "turbo"], "--colormap: colours only --color-mode elevation or attribute, not rgb"),
+        (["--color-mode", "elevation", "--color-attribute", "z"], "--color-attribute: colours only --color-mode attribute, not elevation"),
+        (["--color-mode", "intensity", "--elevation-range", "0,5"], "--elevation-range: colours only --color-mode elevation, not intensity"),
+        (["--color-mode", "elevation", "--intensity-range", "0,5"], "--intensity-range: colours only --color-mode intensity, not elevation"),
+        (["--attribute-range", "0,5"], "--attribute-range: colours only --color-mode attribute, not rgb"),
+    ):
+        assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "24", *extra]) == 1
+        assert capsys.readouterr().err == f"error: {problem} (it would be ignored)\n"
+    assert not list(tmp_path.iterdir())
+    assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "24", "--color-mode", "elevation", "--colormap", "turbo"]) == 0
+
+
 def test_a_bad_turntable_is_refused_before_the_inputs_are_read(tmp_path, capsys):
     """--fps 0, an odd --width of an MP4 and --turntable 0 were told only once the inputs were
     read (minutes for a large file); here the input is missing, so it is told first only if read."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 from ..core.cloud import PointCloud
+from ..errors import SettingsError
 from ..render.settings import RenderSettings
 from .settings_opts import option_of
 
@@ -17,6 +18,27 @@ def _quality_fields() -> list[str]:
 # every image-quality field of RenderSettings -> the `gigapoint render` option that sets it
 _OPTIONS = option_of(RenderSettings)
 OPTION_OF = {name: _OPTIONS[name] for name in _quality_fields()}
+
+
+# the colour options that only a color mode reads: (field, the modes that read it)
+_MODE_OPTIONS = (
+    ("color_attribute", ("attribute",)),
+    ("colormap", ("elevation", "attribute")),
+    ("elevation_range", ("elevation",)),
+    ("intensity_range", ("intensity",)),
+    ("attribute_range", ("attribute",)),
+)
+
+
+def check_color_options(settings) -> None:
+    """A one-line SettingsError for a colour option the image's color mode does not read
+    (``--colormap turbo`` alone, ``--color-attribute x --color-mode elevation``): each was
+    dropped without a word. The viewer keeps them (its modes change while it runs)."""
+    defaults = RenderSettings()
+    for name, modes in _MODE_OPTIONS:
+        if getattr(settings, name) != getattr(defaults, name) and settings.color_mode not in modes:
+            uses = " or ".join(modes)
+            raise SettingsError(f"{OPTION_OF[name]}: colours only --color-mode {uses}, not {settings.color_mode} (it would be ignored)")
 
 
 def prepare_cloud(cloud, settings) -> None:
