@@ -74,6 +74,20 @@ def test_stereo_equals_two_renders_with_shifted_cameras(scene):
     np.testing.assert_array_equal(ana[..., 1:3], f.image[:, w:, 1:3])
 
 
+@pytest.mark.parametrize("kw", [{}, {"supersample": 2}])
+def test_a_stereo_frame_picks_the_points_it_shows(scene, kw):
+    """frame.point_info of a stereo frame was None for every pixel (its Frame named no buffers);
+    now each pixel's point, in either eye, is the cloud's point there."""
+    cloud, cam = scene
+    for stereo in ("side-by-side", "anaglyph"):
+        f = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", stereo=stereo, ipd=40.0, **kw))
+        picked = f.index[f.index >= 0]
+        assert len(picked) > 1000
+        for i in picked[:: len(picked) // 5].tolist():
+            assert f.point_info(i) == cloud.point_info(i)
+            assert f.point_info(i)["index"] == i
+
+
 @pytest.mark.parametrize("kw", [{"threads": 1}, {"threads": 2, "point_size": 3}, {"edl": True, "fill_holes": 1, "hqs": True}])
 def test_one_pass_stereo_equals_separate_renders(scene, kw):
     from gigapoint.render.passes import compose

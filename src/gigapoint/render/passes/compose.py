@@ -167,7 +167,11 @@ def stereo_frame(cloud, camera, settings, render_one) -> Frame:
         image[..., 0] = shift_columns(frames[0].image, -h, bg)[..., 0]
         vis = np.minimum(shift_columns(frames[0].visibility, -h, EMPTY_PIXEL), shift_columns(frames[1].visibility, h, EMPTY_PIXEL))
     stats.visible_pixels = int((vis != EMPTY_PIXEL).sum())
-    return Frame(vis, image, stats)
+    # the buffers both eyes' indices name (point_info was None for every pixel); none where an
+    # octree's arena was refilled between the eyes (the first eye's indices name other points now)
+    left, right = frames
+    same = left.points is right.points and left.generation == right.generation
+    return Frame(vis, image, stats, right.points if same else None, right.generation if same else None)
 
 
 def composite_frame(cloud, camera, settings, render_one) -> Frame:
