@@ -188,3 +188,14 @@ def test_nan_attribute_values_are_grey_and_the_rest_keep_the_range():
     f = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", color_mode="attribute", color_attribute="none"))
     hit = f.index >= 0
     assert hit.sum() > 1000 and (f.image[hit] == (128, 128, 128, 255)).all()
+
+
+def test_an_attribute_of_several_values_a_point_is_a_one_line_error():
+    """color_attribute='normal' of an NPZ's (N, 3) normals was numba's many-line TypingError."""
+    rng = np.random.default_rng(3)
+    cloud = gp.from_arrays(rng.random((800, 3)), name="npz", normal=rng.random((800, 3)).astype(np.float32))
+    cam = gp.Camera.fit(cloud.bounds, width=32, height=24)
+    with pytest.raises(SettingsError) as err:
+        gp.render(cloud, cam, color_mode="attribute", color_attribute="normal")
+    assert str(err.value) == "color_attribute: 'normal' of npz holds 3 values a point; colour by an attribute of one value a point (normals: color_mode 'normal')"
+    assert (gp.render(cloud, cam, color_mode="normal", size_mode="fixed")[..., :3] != 0).any()  # those normals colour by color_mode 'normal'

@@ -126,7 +126,13 @@ def _named_attribute(cloud, name: str | None) -> np.ndarray:
         raise SettingsError(f"color_mode 'attribute': name the attribute with color_attribute (--color-attribute); {cloud.name} has: {have}")
     if name not in cloud.attributes:
         raise SettingsError(f"color_attribute: {cloud.name} has no attribute {name!r} (attributes: {have})")
-    return np.asarray(cloud.attributes[name])
+    values = np.asarray(cloud.attributes[name])
+    if values.ndim != 1:  # an NPZ's normal (N, 3): numba's TypingError in the resolve
+        raise SettingsError(
+            f"color_attribute: {name!r} of {cloud.name} holds {int(np.prod(values.shape[1:]))} values a point; "
+            f"colour by an attribute of one value a point (normals: color_mode 'normal')"
+        )
+    return values
 
 
 def normals_of(cloud) -> np.ndarray | None:
