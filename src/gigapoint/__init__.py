@@ -51,7 +51,13 @@ def demo(
     if progressive:
         from .lod.progressive import demo_sources, open_progressive
 
+        # the octree's loader takes none of these: each was dropped without a word (as gp.open refuses them)
+        dropped = [name for name, kept in (("scale", scale == 0.01), ("chunked", chunked is None), ("attributes", attributes is True), ("colors", colors == "auto")) if not kept]
+        if dropped:
+            raise InputError(f"demo(progressive=True) takes memory_limit= only, not {', '.join(dropped)}")
         return open_progressive(*demo_sources(n_points, seed), memory_limit=memory_limit)
+    if memory_limit is not None:  # (dropped without a word: the limit of a progressive octree's loading)
+        raise InputError("demo: memory_limit= goes with progressive=True (where loading stops); a PointCloud is built whole")
     name = f"demo({n_points:,})"
     from .core.chunked import CHUNKED_ABOVE, HELD_BYTES_MIN, IN_MEMORY_BYTES_MIN, SPILLED_BYTES_MIN, build_cloud_chunked, check_room
 

@@ -85,3 +85,18 @@ def test_gp_demo_holds_the_town_at_1_cm_by_default():
     np.testing.assert_array_equal(got, want)
     assert np.abs(cloud.positions() / 0.01 - np.round(cloud.positions() / 0.01)).max() < 1e-3
     assert gp.demo(30_000, scale=None).layout == "words"
+
+
+def test_gp_demo_refuses_options_it_would_drop():
+    """memory_limit= without progressive=True, and colors=/scale=/chunked=/attributes= with it,
+    were dropped without a word (gp.open refuses the same)."""
+    import pytest
+
+    import gigapoint as gp
+    from gigapoint.errors import InputError
+
+    with pytest.raises(InputError, match=r"^demo: memory_limit= goes with progressive=True"):
+        gp.demo(1000, memory_limit="1G")
+    for kw, named in (({"colors": "rgba"}, "colors"), ({"scale": None, "attributes": False}, "scale, attributes"), ({"chunked": True}, "chunked")):
+        with pytest.raises(InputError, match=f"^demo\\(progressive=True\\) takes memory_limit= only, not {named}$"):
+            gp.demo(1000, progressive=True, **kw)
