@@ -65,6 +65,25 @@ def test_max_points_previews_a_subsample(capsys, tmp_path, small_las):
     assert (np.asarray(Image.open(out))[..., :3] != 0).any(axis=2).mean() > 0.05
 
 
+def test_max_points_caps_what_an_octree_draws(capsys, tmp_path, small_las):
+    """`render octree/ --max-points N` (and a file above the point budget, read into an octree
+    progressively) drew the whole budget: the option was dropped without a word. Now it caps
+    the point budget, as the viewer's cap does (the root node is always drawn)."""
+    import re
+
+    import gigapoint as gp
+
+    gp.convert(small_las, tmp_path / "oct")
+    drawn = {}
+    for cap in (None, 20_000):
+        out = tmp_path / f"{cap}.png"
+        rc, _, err = run(capsys, "render", tmp_path / "oct", "-o", out, "-W", 320, "-H", 240, "--stats", *(["--max-points", cap] if cap else []))
+        assert rc == 0, err
+        drawn[cap] = int(re.match(r"([\d,]+) of", err).group(1).replace(",", ""))
+        assert (np.asarray(Image.open(out))[..., :3] != 0).any(axis=2).mean() > 0.05
+    assert drawn[None] == 30_000 and drawn[20_000] <= 20_000
+
+
 def test_camera_options_and_extra_outputs(capsys, tmp_path, small_las):
     depth, index = tmp_path / "d.npy", tmp_path / "i.npy"
     rc, _, err = run(

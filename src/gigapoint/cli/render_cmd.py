@@ -11,6 +11,7 @@ from typing import Annotated
 
 import typer
 
+from ..core.cloud import PointCloud
 from ..errors import CameraError, GigapointError
 from ..render import VIEWS, Camera, RenderSettings
 from . import compiling
@@ -200,6 +201,11 @@ def render(
         check_image_fits(output, width * (2 if settings.stereo == "side-by-side" else 1), height)
     cloud = open_inputs(inputs, settings.point_budget, progressive, cloud_options(colors, chunked))
     prepare_cloud(cloud, settings)
+    if settings.max_points and not isinstance(cloud, PointCloud):
+        # an octree (a converted folder, or inputs above the point budget read progressively, as
+        # `render huge.laz --max-points N` is) draws at most that many too, as the viewer's cap
+        # does: the option was dropped without a word
+        settings = settings.replace(point_budget=min(settings.point_budget, settings.max_points))
     if turntable is not None:
         from ..render.video import render_turntable
 
