@@ -88,6 +88,20 @@ def test_a_stereo_frame_picks_the_points_it_shows(scene, kw):
             assert f.point_info(i)["index"] == i
 
 
+def test_an_empty_stereo_frame_warns_like_a_plain_one():
+    """A stereo frame that shows no point (a camera looking away; eyes an ipd apart that is wide
+    for a 1 cm scene, each image moved off the frame) was the background without a word."""
+    cloud = gp.from_arrays(np.random.default_rng(0).random((1000, 3)) * 0.01, name="pebble")
+    cam = gp.Camera.fit_cloud(cloud, width=64, height=48)
+    with pytest.warns(gp.GigapointWarning, match=r"^pebble: no point is in view of the stereo camera \(each eye's image moves 101 px of 64: ipd 0.065 world units is wide"):
+        f = gp.render_frame(cloud, cam, stereo="anaglyph")
+    assert f.stats.visible_pixels == 0
+    away = gp.Camera.look_at((5, 5, 5), (6, 6, 6), width=64, height=48)
+    with pytest.warns(gp.GigapointWarning, match=r"^pebble: no point is in view of the stereo camera; the image shows only the background$"):
+        gp.render_frame(cloud, away, stereo="side-by-side")
+    assert gp.render_frame(cloud, cam, stereo="anaglyph", ipd=0.0005).stats.visible_pixels > 100  # an ipd for its size
+
+
 @pytest.mark.parametrize("kw", [{"threads": 1}, {"threads": 2, "point_size": 3}, {"edl": True, "fill_holes": 1, "hqs": True}])
 def test_one_pass_stereo_equals_separate_renders(scene, kw):
     from gigapoint.render.passes import compose

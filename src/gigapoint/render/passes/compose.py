@@ -18,12 +18,13 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import replace
 
 import numpy as np
 
 from ...core.layout import EMPTY_PIXEL
-from ...errors import SettingsError
+from ...errors import GigapointWarning, SettingsError
 from ..backend import get_backend
 from ..camera import MAX_IMAGE_SIDE
 from ..frame import Frame, RenderStats, check_indexable
@@ -167,6 +168,11 @@ def stereo_frame(cloud, camera, settings, render_one) -> Frame:
         image[..., 0] = shift_columns(frames[0].image, -h, bg)[..., 0]
         vis = np.minimum(shift_columns(frames[0].visibility, -h, EMPTY_PIXEL), shift_columns(frames[1].visibility, h, EMPTY_PIXEL))
     stats.visible_pixels = int((vis != EMPTY_PIXEL).sum())
+    # an empty pair was a background image without the plain frame's warning (one eye drawn by
+    # render_one and empty has said it already)
+    if stats.visible_pixels == 0 and (multi is not None or all(f.stats.visible_pixels for f in frames)):
+        why = f" (each eye's image moves {abs(h)} px of {w}: ipd {settings.ipd:g} world units is wide for this scene)" if abs(h) >= w else ""
+        warnings.warn(f"{cloud.name}: no point is in view of the stereo camera{why}; the image shows only the background", GigapointWarning, stacklevel=4)
     # the buffers both eyes' indices name (point_info was None for every pixel); none where an
     # octree's arena was refilled between the eyes (the first eye's indices name other points now)
     left, right = frames
