@@ -2,6 +2,7 @@
 
 import subprocess
 import sys
+from unittest.mock import patch
 
 import laspy
 import numpy as np
@@ -243,6 +244,9 @@ def test_demo_command(capsys, tmp_path):
     rc, _, err = run(capsys, "demo", "--points", 1000, "--seed", 2**64, "-o", tmp_path / "s.png")  # an internal error in the generator
     assert rc == 1 and err == f"error: --seed: seed must be an integer from -9,223,372,036,854,775,807 to 9,223,372,036,854,775,807, got {2**64}\n"
     assert not (tmp_path / "s.png").exists()
+    with patch("gigapoint.io.demo.demo_arrays", side_effect=AssertionError("the scene was generated")):
+        rc, _, err = run(capsys, "demo", "--points", 1000, "--view", "sideways", "-o", tmp_path / "v.png")  # said once the scene was made, without --view
+    assert rc == 1 and err == "error: --view: unknown view 'sideways'; choose one of top, front, back, side, left, right, iso, auto\n"
 
 
 def test_demo_command_holds_the_town_at_1_cm_in_the_compact_layout(capsys, tmp_path):

@@ -275,6 +275,8 @@ def demo(
     check_output(output, overwrite)
     check_image_size(width, height)
     check_image_fits(output, width, height)
+    if view not in VIEWS:  # (told only once the scene was generated and sorted, without naming --view)
+        raise GigapointError(f"--view: unknown view {view!r}; choose one of {', '.join(VIEWS)}")
     settings = settings_from_options(RenderSettings, {"threads": threads})  # a bad --threads is named
     check_colors(colors)
     if not (scale == 0 or 1e-6 <= scale <= 1000):  # NaN fails both
