@@ -188,6 +188,9 @@ def test_bad_options_give_one_line_errors(capsys, tmp_path, small_las, args, mes
     out = tmp_path / "bad.png"
     rc, _, err = run(capsys, "render", small_las, "-o", out, *args)
     assert rc != 0
+    if args[0] == "--camera":  # told before the inputs are read (it was once a large file was): a missing one is not reached
+        rc, _, err_first = run(capsys, "render", tmp_path / "missing.laz", "-o", out, *args)
+        assert rc == 1 and err_first == err, err_first
     lines = err.strip().splitlines()
     assert len(lines) == 1 and message in lines[0], err
     assert "Traceback" not in err and not out.exists()

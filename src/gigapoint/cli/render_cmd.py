@@ -76,8 +76,19 @@ def make_camera(cloud, width, height, view, camera_text, projection, fov) -> Cam
     bounds = cloud.bounds
     if camera_text is None:  # 'auto' frames the cloud's points (the data fills the frame), the others its box
         return Camera.fit_cloud(cloud, view=view, width=width, height=height, fov=fov, projection=projection)
+    return described_camera(camera_text, width, height, projection, fov, bounds)
+
+
+def described_camera(camera_text, width, height, projection, fov, bounds=None) -> Camera | None:
+    """The camera ``--camera`` describes; without ``bounds`` (before the inputs are read: a bad
+    one was told once a large file was), what it can check without them: the text, and an
+    eye/target camera whole (an orbit's distance and target default from the bounds: None)."""
     try:
-        return _described_camera(bounds, parse_camera(camera_text), width, height, projection, fov)
+        c = parse_camera(camera_text)
+        if bounds is None and "eye" not in c:  # its angles, distance and fov checked by an orbit about the origin
+            Camera.orbit((0, 0, 0), c["yaw"], c["pitch"], c.get("distance", 1.0), fov=c.get("fov", fov), width=width, height=height)
+            return None
+        return _described_camera(bounds, c, width, height, projection, fov)
     except CameraError as exc:  # 'camera eye and target are the same point' named no option
         raise CameraError(f"--camera: {exc}") from None
 
@@ -193,6 +204,8 @@ def render(
         raise GigapointError(f"--view: unknown view {view!r}; choose one of {', '.join(VIEWS)}")
     check_image_size(width, height, fov)  # before reading anything
     check_color_options(settings)
+    if camera is not None:
+        described_camera(camera, width, height, projection, fov)
     if turntable is not None:
         from ..render.video import check_turntable
 
