@@ -205,6 +205,8 @@ def render(
     check_image_size(width, height, fov)  # before reading anything
     check_color_options(settings)
     if camera is not None:
+        if view != "auto":  # the view was dropped without a word: --camera places the eye itself
+            raise GigapointError(f"--view {view} and --camera: give one (--camera 'yaw=.. pitch=..' is a view of any angle)")
         described_camera(camera, width, height, projection, fov)
     if turntable is not None:
         from ..render.video import check_turntable
