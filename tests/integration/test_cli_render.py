@@ -170,6 +170,7 @@ def test_a_failed_render_leaves_no_output_behind(capsys, tmp_path, small_las):
         (["--camera", "eye=1,1,1 target=1,1,1"], "--camera: camera eye and target are the same point"),
         (["--camera", "yaw=10 pitch=5 distance=0"], "--camera: orbit distance must be > 0"),
         (["--camera", "yaw=10 pitch=5", "--view", "top"], "--view top and --camera: give one"),  # --view was dropped
+        (["--camera", "yaw=10 pitch=5 fov=30", "--fov", "40"], "--fov and --camera fov=: give one"),  # --fov was dropped
         (["--camera", "yaw=10 eye=1,1,1 target=0,0,0"], "not both"),
         (["--camera", "target=1,2,3"], "give eye=x,y,z target=x,y,z or yaw=deg pitch=deg"),  # was an internal KeyError
         (["--camera", "fov=30"], "give eye=x,y,z target=x,y,z or yaw=deg pitch=deg"),

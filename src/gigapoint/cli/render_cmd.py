@@ -207,6 +207,8 @@ def render(
     if camera is not None:
         if view != "auto":  # the view was dropped without a word: --camera places the eye itself
             raise GigapointError(f"--view {view} and --camera: give one (--camera 'yaw=.. pitch=..' is a view of any angle)")
+        if fov != 60.0 and "fov" in parse_camera(camera):  # --fov was dropped without a word
+            raise GigapointError("--fov and --camera fov=: give one")
         described_camera(camera, width, height, projection, fov)
     if turntable is not None:
         from ..render.video import check_turntable
