@@ -312,7 +312,8 @@ def test_conversion_killed_while_distributing_resumes_to_the_same_result(demo_la
     seen = {"append": 0, "files": 0, "groups": []}
 
     def distribute(self):
-        self.distribute_bytes = 150_000 * 40 // 3  # a checkpoint every second chunk
+        point = sum(dt.itemsize * (3 if k == "xyz" else 1) for k, dt in self._dtypes().items())
+        self.distribute_bytes = int(1.5 * OPTS["chunk_size"] * point)  # a checkpoint every second chunk (of its bytes a point)
         return real_distribute(self)
 
     def append(self, parts, pieces, counts):
@@ -477,6 +478,37 @@ def test_held_las_positions_are_int32_and_the_octree_is_the_spilled_ones(town_an
     assert set(dtypes) == ({np.dtype(np.int32)} if code == "files" else {np.dtype(np.float64)})
     a, b = _files_of(tmp_path / "spilled"), _files_of(tmp_path / "held")
     assert a.keys() == b.keys() and [k for k in a if a[k] != b[k]] == []
+
+
+def test_held_constant_attributes_are_not_held_a_point_at_a_time(town_and_spot, tmp_path, monkeypatch):
+    """An attribute every point holds the same value of (a LAS file's flags, its user_data) is
+    not held a point at a time once the input is read (7 bytes a point of the LAS flags: 140 MB
+    of a 20 M-point conversion); each partition's build gets it made again: the octree is the
+    out-of-core conversion's byte for byte."""
+    import importlib
+
+    in_memory = importlib.import_module("gigapoint.lod.convert.in_memory")
+    with monkeypatch.context() as m:
+        _spilling(m)
+        convert(town_and_spot, tmp_path / "spilled", **OPTS)
+    held_keys, constant = set(), {}
+    distribute = in_memory.InMemoryPhases.distribute
+
+    def distributing(self):
+        for c in self._held:
+            held_keys.update(c)
+        constant.update(self._constant)
+        return distribute(self)
+
+    monkeypatch.setattr(in_memory.InMemoryPhases, "distribute", distributing)
+    held = convert(town_and_spot, tmp_path / "held", **OPTS)
+    assert held.in_memory
+    assert {"synthetic", "withheld", "user_data", "scan_direction_flag"} <= set(constant) and constant["user_data"] == 0
+    assert "attr.intensity" in held_keys and "intensity" not in constant and "classification" not in constant  # (they vary)
+    assert not {"attr." + a for a in constant} & held_keys
+    a, b = _files_of(tmp_path / "spilled"), _files_of(tmp_path / "held")
+    assert a.keys() == b.keys() and [k for k in a if a[k] != b[k]] == []
+    assert "synthetic" in open_octree(tmp_path / "held").attribute_names
 
 
 def test_an_input_beyond_the_memory_limit_is_spilled(demo_las, tmp_path):

@@ -59,6 +59,10 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
     #: are int32 (spill.encode_xyz: 12 bytes a point, not 24; 240 MB of a 20 M-point conversion),
     #: decoded a partition at a time for its build; None: float64
     _xyz_code = None
+    #: attribute -> the one value every held point has so far (None: values differ): a constant
+    #: one (a LAS file's flags, its user_data, often) is not held a point at a time once read
+    #: (``count``) but made again for each partition's build (``_partition_input``)
+    _constant: dict
 
     def resume_state(self, saved: dict) -> dict:
         """A run killed before its partitions were all built has nothing but its plan and the
@@ -73,7 +77,7 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
     def read(self) -> None:
         if not self.spilled:  # a fresh run (a spilled one resumes spilled): held while it fits
             self.spilled = self.state["spilled"] = not fits_in_memory(self)
-        self._held, self._held_points = [], 0
+        self._held, self._held_points, self._constant = [], 0, {}
         self._xyz_code = None if self.spilled else _shared_las_code(self.paths)
         super().read()
 
@@ -92,6 +96,8 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
                     held["xyz"] = decode_xyz(held["xyz"], self._xyz_code)
                 self._xyz_code, held_xyz = None, xyz
         self._held.append({"xyz": held_xyz, "rgba": rgba, **{"attr." + a: v for a, v in kept.items()}})
+        for a, v in kept.items():
+            self._constant[a] = _still_constant(self._constant.get(a, _UNSEEN), v)
         self._held_points += len(xyz)
         if self._held_points > held_points(self):
             self.spilled = self.state["spilled"] = True  # saved with this chunk's count
@@ -109,6 +115,10 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
         if self.spilled:
             return super().count()
         st = self.state
+        self._constant = {a: c for a, c in self._constant.items() if c is not None and c is not _UNSEEN and a in st["attributes"]}
+        for chunk in self._held:  # a constant attribute's arrays go: ~7 bytes a point of a LAS file's flags
+            for a in self._constant:
+                del chunk["attr." + a]
         origin, edge = np.array(st["origin"]), st["edge"]
         counts = CellCounts()
         self.progress.phase("count", st["points"])
@@ -124,7 +134,7 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
             return super().distribute()
         st = self.state
         parts = st["partitions"]
-        keys = ["xyz", "rgba", *("attr." + a for a in st["attributes"])]
+        keys = ["xyz", "rgba", *("attr." + a for a in st["attributes"] if a not in self._constant)]
         self._pieces = {(lev, prefix): [] for lev, prefix, _ in parts}
         counts = [0] * len(parts)
         lut = partition_lut(parts)
@@ -173,7 +183,22 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
         self._drop_partition(lev, prefix)  # its memory goes once the build has it
         if "xyz" in data:
             data = {**data, "xyz": self._positions(data["xyz"])}
+            data.update({"attr." + a: np.full(len(data["xyz"]), c) for a, c in self._constant.items()})  # (c: a numpy scalar, its dtype)
         return data, []
+
+
+_UNSEEN = object()
+
+
+def _still_constant(value, values: np.ndarray):
+    """The one value of ``values`` where it is ``value`` too (``_UNSEEN``: any), of the same
+    dtype, else None."""
+    if value is None or not len(values):
+        return value
+    first = values[0]
+    if value is not _UNSEEN and (value.dtype != first.dtype or value != first):
+        return None
+    return first if not np.any(values != first) else None  # (NaN: never equal, never constant)
 
 
 def _shared_las_code(paths) -> np.ndarray | None:
