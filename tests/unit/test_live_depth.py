@@ -94,6 +94,8 @@ def test_rgb_follows_the_pixels():
         ({"pose": np.full((4, 4), np.nan)}, "NaN"),
         ({"rgb": np.zeros((3, 3, 3), np.uint8)}, "rgb must be"),
         ({"depth_scale": -1.0}, "depth_scale"),
+        ({"depth_scale": "mm"}, "depth_scale must be a positive number, got 'mm'"),  # was float()'s ValueError
+        ({"depth_scale": True}, "depth_scale must be a positive number, got True"),  # was taken as 1
         ({"max_depth": -1.0}, "max_depth must be a positive number of metres or None, got -1.0"),  # was "no valid pixel"
         ({"max_depth": "far"}, "max_depth must be a positive number of metres or None, got 'far'"),
     ],

@@ -80,9 +80,9 @@ def check_depth(depth, depth_scale, name: str = "push_depth") -> tuple[np.ndarra
         raise InputError(f"{name}: depth must hold numbers (uint16 millimetres or float metres), got dtype {d.dtype}")
     if depth_scale is None:
         depth_scale = DEFAULT_INTEGER_SCALE if d.dtype.kind in "ui" else 1.0
+    if not (is_real(depth_scale) and depth_scale > 0):  # "a" was float()'s ValueError traceback, True taken as 1
+        raise InputError(f"{name}: depth_scale must be a positive number, got {depth_scale!r}")
     depth_scale = float(depth_scale)
-    if not (np.isfinite(depth_scale) and depth_scale > 0):
-        raise InputError(f"{name}: depth_scale must be a positive number, got {depth_scale}")
     if d.dtype not in (np.uint16, np.float32, np.float64):
         d = d.astype(np.float64)
     return np.ascontiguousarray(d), depth_scale
