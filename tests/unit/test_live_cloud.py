@@ -323,6 +323,32 @@ def test_save_puts_las_attributes_in_their_fields_and_others_in_extra_bytes(tmp_
     assert set(np.asarray(las.classification).tolist()) == {255} and set(np.asarray(las.return_number).tolist()) == {15}
 
 
+def test_save_as_ply_writes_64_bit_integers_that_fit_in_32_and_refuses_others(tmp_path):
+    """PLY has no 64-bit integers, half floats or booleans: numpy's default int64 attribute (a
+    label pushed as np.arange) was plyfile's ValueError traceback "field type 'u8' not in [...]"."""
+    from plyfile import PlyData
+
+    live = LiveCloud()
+    n = 500
+    xyz = np.random.default_rng(9).random((n, 3))
+    live.push(xyz, label=np.arange(n), far=np.arange(n, dtype=np.uint64) + 2**31, half=np.full(n, 1.5, np.float16), flag=np.arange(n) % 2 == 0)
+    live.snapshot(normals=False)
+    assert live.save(tmp_path / "a.ply") == n
+    v = PlyData.read(tmp_path / "a.ply")["vertex"].data
+    order = np.argsort(v["label"])
+    np.testing.assert_array_equal(v["label"][order], np.arange(n))
+    np.testing.assert_array_equal(v["far"][order], np.arange(n) + 2**31)
+    np.testing.assert_array_equal(v["flag"][order], np.arange(n) % 2 == 0)
+    assert set(v["half"].tolist()) == {1.5}
+    live = LiveCloud()
+    live.push(xyz, big=np.full(n, -(2**63)))
+    live.snapshot(normals=False)
+    problem = "holds int64 values PLY cannot hold (it has no 64-bit integers), e.g. -9223372036854775808; save as .las, .laz or an octree folder"
+    with pytest.raises(InputError, match=f"b.ply: attribute 'big' {re.escape(problem)}$"):
+        live.save(tmp_path / "b.ply")
+    assert not (tmp_path / "b.ply").exists()
+
+
 def test_save_as_las_takes_a_grid_the_snapshot_fits(tmp_path):
     """The LAS writer's grid was always a millimetre: a scene 3 000 km across was laspy's
     OverflowError ("do not fit after applying offset and scale"), a 10 cm object 100 steps a side."""

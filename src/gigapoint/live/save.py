@@ -49,7 +49,7 @@ def _write_ply(path: Path, xyz, rgba, attrs) -> None:
     from plyfile import PlyData, PlyElement
 
     fields = [("x", "f8"), ("y", "f8"), ("z", "f8"), ("red", "u1"), ("green", "u1"), ("blue", "u1")]
-    fields += [(a, v.dtype.str) for a, v in attrs.items()]
+    fields += [(a, _ply_type(path, a, v)) for a, v in attrs.items()]
     data = np.empty(len(xyz), fields)
     for k, a in enumerate("xyz"):
         data[a] = xyz[:, k]
@@ -59,6 +59,25 @@ def _write_ply(path: Path, xyz, rgba, attrs) -> None:
         data[a] = v
     ply = PlyData([PlyElement.describe(data, "vertex")])
     atomic_write(path, lambda tmp: ply.write(str(tmp)))
+
+
+def _ply_type(path: Path, name: str, values: np.ndarray) -> str:
+    """The PLY type that holds an attribute exactly: PLY has no 64-bit integers, half floats or
+    booleans (plyfile refused them with a ValueError traceback, numpy's default int64 among
+    them), so 64-bit integers go to 32 bits when every value fits, and are refused otherwise."""
+    dt = values.dtype
+    if dt == np.bool_:
+        return "u1"
+    if dt.kind == "f":
+        return "f8" if dt.itemsize == 8 else "f4"
+    if dt.itemsize < 8:
+        return dt.str
+    for narrow in ("i4", "u4"):
+        info = np.iinfo(narrow)
+        if not len(values) or (int(values.min()) >= info.min and int(values.max()) <= info.max):
+            return narrow
+    far = values[np.argmax(np.abs(values.astype(np.float64)))].item()
+    raise InputError(f"{path}: attribute {name!r} holds {dt} values PLY cannot hold (it has no 64-bit integers), e.g. {far}; save as .las, .laz or an octree folder")
 
 
 def _write_las(path: Path, xyz, rgba, attrs) -> None:
