@@ -296,6 +296,10 @@ def test_save_writes_the_snapshots(tmp_path, suffix):
     assert_same_points(back.positions(), xyz @ pose_of(2)[:3, :3].T + pose_of(2)[:3, 3], 2e-3)  # LAS: millimetres
     with pytest.raises(InputError, match="exists"):
         live.save(out)
+    (tmp_path / f"d{suffix}").mkdir()  # a folder of that name: overwrite=True was os.replace's IsADirectoryError
+    with pytest.raises(InputError, match=f"d{suffix}: is a directory, not a {suffix[1:].upper()} file; not replaced$"):
+        live.save(tmp_path / f"d{suffix}", overwrite=True)
+    assert (tmp_path / f"d{suffix}").is_dir()
 
 
 @pytest.mark.parametrize("suffix", [".las", ".laz"])

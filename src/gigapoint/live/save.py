@@ -33,6 +33,8 @@ def save_snapshots(octree, path, overwrite: bool = False) -> int:
         raise InputError(f"{path}: save writes .las, .laz or .ply files, or an octree folder (a name without a point file's suffix)")
     if suffix not in (".las", ".laz", ".ply"):
         return int(octree.save(path, overwrite=overwrite).points)
+    if path.is_dir():  # overwrite=True was os.replace's IsADirectoryError: a folder is never replaced by a file
+        raise InputError(f"{path}: is a directory, not a {suffix[1:].upper()} file; not replaced")
     if path.exists() and not overwrite:
         raise InputError(f"{path}: exists; pass overwrite=True to replace it")
     if not path.parent.is_dir():
