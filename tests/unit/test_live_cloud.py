@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -433,6 +434,42 @@ def test_save_without_a_point_cloud_suffix_writes_an_octree_folder(tmp_path):
     assert live.save(tmp_path / "octree") == 6000
     back = gp.open(tmp_path / "octree")
     assert back.n_points == 6000
+
+
+def test_a_frame_waiting_gets_the_lock_while_producers_keep_pushing():
+    """The producer copying queued frames into the ring went on while the queue had any: with
+    producers pushing faster than that (three on two cores), a renderer's or snapshot's
+    ``reading`` waited for ever. It lets go after the frame it is copying; the rest land when
+    the frame is drawn."""
+    live = LiveCloud(keep=3)
+    live.push(*frame(0, n=1000))
+    more = frame(1, n=1000)
+    arrived, seen_by_reader = [0], []
+    def read():
+        with live.reading():
+            seen_by_reader.append(live.stats.frames_in)
+
+    reader = threading.Thread(target=read)
+    insert = live._insert
+
+    def insert_while_producers_push(f, info):
+        insert(f, info)
+        if arrived[0] == 0:  # a frame starts to wait for the lock
+            reader.start()
+            deadline = time.monotonic() + 10
+            while not live.lock.frame_waiting() and time.monotonic() < deadline:
+                time.sleep(0.001)
+        if arrived[0] < 100 and not seen_by_reader:  # and another producer's frame arrives meanwhile, every time
+            arrived[0] += 1
+            live.push(*more)
+
+    live._insert = insert_while_producers_push
+    live.push(*more)
+    reader.join(10)
+    assert not reader.is_alive()
+    assert seen_by_reader and seen_by_reader[0] <= 3, seen_by_reader  # the reader got in at once, not after 100 frames
+    n = 2 + arrived[0]
+    assert live.stats.frames_in == n and [f.seq for f in live.frames] == [n - 3, n - 2, n - 1]  # every frame landed, in order
 
 
 def test_a_push_during_a_frame_returns_at_once_and_lands_when_the_frame_is_drawn():

@@ -73,13 +73,20 @@ class FrameLock:
                 self._turn.wait(0.05)
             return self._frames_drawn, time.perf_counter() - self._frame_end < FRAMES_RECENT_S
 
-    def try_write(self) -> bool:
-        """Take the lock for a writer that must not wait: True if no frame draws or waits to
-        (then ``release`` it), else False at once."""
+    def frame_waiting(self) -> bool:
+        """Whether a frame waits for the lock: a writer holding it for a run of writes lets go
+        between two of them (frames first)."""
+        with self._turn:
+            return self._readers_waiting > 0
+
+    def try_write(self, behind_writers: bool = False) -> bool:
+        """Take the lock for a writer that must not wait for frames: True if no frame draws or
+        waits to (then ``release`` it), else False at once. ``behind_writers``: held by another
+        writer, wait for it (a short write) rather than give up."""
         with self._turn:
             if self._readers_waiting or self._drawing:
                 return False
-        if not self.lock.acquire(blocking=False):
+        if not self.lock.acquire(blocking=behind_writers):
             return False
         if self._drawing:  # this thread is drawing a frame (the lock is reentrant): not now
             self.lock.release()

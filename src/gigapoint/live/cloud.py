@@ -442,25 +442,34 @@ class LiveCloud:
     def _commit_pending(self) -> None:
         """Copy the frames waiting in ``_pending`` into the ring, in push order, whenever the lock
         is free: by the producer at once, else by whoever holds the lock (a frame being drawn)
-        when it lets go (LiveLock's ``released``). A producer never waits for a frame to be drawn."""
-        while self._pending and self.lock.try_write():
-            committed = 0
-            try:
-                while True:
-                    with self._pending_lock:
-                        if not self._pending:
-                            break
-                        frame, info = self._pending.popleft()
-                    self._insert(frame, info)
-                    self._expire()
-                    self.stats.frames_in += 1
-                    self.stats.points_in += info.n_points
-                    self.stats.arrivals.append(_time.perf_counter())
-                    committed += 1
-            finally:
-                self.lock.release()
-            if committed:
-                self._notify()
+        when it lets go (LiveLock's ``released``). A producer never waits for a frame to be drawn;
+        one that finds another producer copying waits for it, then copies its own.
+
+        A call copies only the frames waiting when it took the lock, and stops early for a frame
+        that waits for it (the frame's ``released`` copies the rest): copying until the queue
+        was empty, while producers pushed faster than that (three on two cores), kept a renderer
+        or snapshot from the lock, or in its ``released``, for ever."""
+        if not (self._pending and self.lock.try_write(behind_writers=True)):
+            return
+        committed = 0
+        try:
+            with self._pending_lock:
+                waiting = len(self._pending)  # (only the lock's holder takes frames out: they stay)
+            for _ in range(waiting):
+                with self._pending_lock:
+                    frame, info = self._pending.popleft()
+                self._insert(frame, info)
+                self._expire()
+                self.stats.frames_in += 1
+                self.stats.points_in += info.n_points
+                self.stats.arrivals.append(_time.perf_counter())
+                committed += 1
+                if self.lock.frame_waiting():
+                    break
+        finally:
+            self.lock.release()
+        if committed:
+            self._notify()
 
     def _attribute_set(self, attrs: dict) -> None:
         """The first frame fixes the attributes; a later frame may leave some out (0 then) but
