@@ -93,6 +93,9 @@ def test_rgb_follows_the_pixels():
         ({"pose": np.eye(3)}, "pose must be a 4x4"),
         ({"pose": np.full((4, 4), np.nan)}, "NaN"),
         ({"rgb": np.zeros((3, 3, 3), np.uint8)}, "rgb must be"),
+        ({"depth": [[1.0, 2.0], [3.0]]}, "depth must be an (H, W) image of numbers, got a ragged list"),  # numpy's ValueError
+        ({"rgb": np.full((4, 4, 3), "a")}, "rgb must hold numbers (uint8, uint16 or float colors), got dtype <U1"),  # int()'s ValueError
+        ({"rgb": np.ones((4, 4, 3), complex)}, "rgb must hold numbers (uint8, uint16 or float colors), got dtype complex128"),  # a ComplexWarning
         ({"depth_scale": -1.0}, "depth_scale"),
         ({"depth_scale": "mm"}, "depth_scale must be a positive number, got 'mm'"),  # was float()'s ValueError
         ({"depth_scale": True}, "depth_scale must be a positive number, got True"),  # was taken as 1

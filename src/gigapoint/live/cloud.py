@@ -144,6 +144,14 @@ def _as_points(xyz, name: str) -> np.ndarray:
     return a
 
 
+def _array(values, where: str) -> np.ndarray:
+    """``values`` as an array; a ragged list (numpy's "inhomogeneous shape" ValueError) is a one-line InputError."""
+    try:
+        return np.asarray(values)
+    except (TypeError, ValueError):
+        raise InputError(f"{where} must be an array of numbers, got a ragged {type(values).__name__}") from None
+
+
 def batch_frame(pts: np.ndarray, rgba: np.ndarray, attributes: dict, lo, hi, chunk: int, ordered: bool = False) -> PointCloud:
     """One frame in core's layout: Morton codes in its bounding cube, batches of ``chunk``
     points, 30-bit words (core/morton.py, core/quantize.py). The order is numpy's faster sort on
@@ -389,14 +397,14 @@ class LiveCloud:
         rgba = colors_for(rgb, n, f"{name}: push") if rgb is not None else None
         attrs = {}
         for a, v in attributes.items():
-            v = np.asarray(v)
+            v = _array(v, f"{name}: push: attribute {a!r}")
             if v.ndim != 1 or len(v) != n or v.dtype.kind not in "biuf":
                 raise InputError(f"{name}: push: attribute {a!r} must be 1-D numbers of length {n}, got shape {v.shape} dtype {v.dtype}")
             if a in BASE_ATTRIBUTES or a in NORMAL_PARTS:
                 raise InputError(f"{name}: push: attribute name {a!r} is reserved (give normals=...)")
             attrs[a] = v
         if normals is not None:
-            nrm = np.asarray(normals)
+            nrm = _array(normals, f"{name}: push: normals")
             if nrm.shape != (n, 3) or nrm.dtype.kind not in "if":
                 raise InputError(f"{name}: push: normals must be (N, 3) numbers like xyz ({n}, 3), got shape {nrm.shape}")
             world_normals = (nrm.astype(np.float64) @ p[:3, :3].T).astype(np.float32)

@@ -69,7 +69,10 @@ def parse_pose(pose, name: str = "push") -> np.ndarray:
 
 def check_depth(depth, depth_scale, name: str = "push_depth") -> tuple[np.ndarray, float]:
     """The depth image as a 2-D array and its scale to metres."""
-    d = np.asarray(depth)
+    try:
+        d = np.asarray(depth)
+    except (TypeError, ValueError):  # a ragged list: numpy's "inhomogeneous shape" traceback
+        raise InputError(f"{name}: depth must be an (H, W) image of numbers, got a ragged {type(depth).__name__}") from None
     if d.ndim == 3 and d.shape[2] == 1:
         d = d[:, :, 0]
     if d.ndim != 2 or d.shape[0] < 1 or d.shape[1] < 1:
@@ -222,9 +225,14 @@ def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, ma
     if rgb is not None:
         from ..core.chunk import to_rgba8
 
-        c = np.asarray(rgb)
+        try:
+            c = np.asarray(rgb)
+        except (TypeError, ValueError):  # a ragged list
+            c = np.empty(0)
         if c.shape[:2] != (h, w) or c.ndim != 3 or c.shape[2] not in (3, 4):
             raise InputError(f"{name}: rgb must be an ({h}, {w}, 3|4) image matching the depth, got shape {c.shape}")
+        if c.dtype.kind not in "biuf":  # strings were int()'s ValueError traceback, complex a ComplexWarning
+            raise InputError(f"{name}: rgb must hold numbers (uint8, uint16 or float colors), got dtype {c.dtype}")
         rgb8 = c.reshape(h * w, c.shape[2])
         rgb8 = np.ascontiguousarray(rgb8) if rgb8.dtype == np.uint8 else to_rgba8(rgb8)  # 8-bit RGB(A) read as it is
     if max_depth is not None and not (is_real(max_depth) and max_depth > 0 or max_depth == np.inf):  # -1: "no valid pixel"
