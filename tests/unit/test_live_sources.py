@@ -101,6 +101,17 @@ def test_a_bad_file_in_a_frames_dir_is_skipped_with_a_message(tmp_path):
     assert "c.npy" in live.stats.last_error and "\n" not in live.stats.last_error
 
 
+@pytest.mark.parametrize("fps", [0, -10.0, float("nan"), "10"])
+def test_a_frame_rate_that_is_not_a_positive_number_is_refused_at_once(tmp_path, fps):
+    """fps=0 was a ZeroDivisionError in the player's thread, reported only as "the stream
+    stopped"; "10" a ValueError; -10 and NaN played every frame at once."""
+    np.save(tmp_path / "a.npy", patch(0)[0])
+    with pytest.raises(InputError, match=f"^{re.escape(str(tmp_path))}: fps must be a positive number of frames a second, got {re.escape(repr(fps))}$"):
+        FramesDir(tmp_path, fps=fps)
+    with pytest.raises(InputError, match=r"^synthetic sensor \(512x424, demo town\): fps must be a positive number"):
+        SyntheticSensor(n_frames=1, fps=fps, scene_points=10)
+
+
 # ---------------------------------------------------------------------- TUM RGB-D
 def test_tum_sequence_pairs_depth_rgb_and_poses(tmp_path):
     from PIL import Image

@@ -97,6 +97,14 @@ def look_pose(eye, forward) -> np.ndarray:
     return pose
 
 
+def _frame_rate(where: str, fps) -> float:
+    """``fps`` as a positive float: 0 was a ZeroDivisionError in the player's thread ("the stream
+    stopped"), "10" a ValueError, -10 and NaN played every frame at once."""
+    if not (is_real(fps) and fps > 0):
+        raise InputError(f"{where}: fps must be a positive number of frames a second, got {fps!r}")
+    return float(fps)
+
+
 class SyntheticSensor(Source):
     """A depth camera circling the demo town at ``altitude`` metres, ``fps`` frames a second
     (frame k's pose and image are pure functions of k and ``seed``: deterministic)."""
@@ -106,7 +114,7 @@ class SyntheticSensor(Source):
         if n_frames is not None and n_frames < 0:
             raise InputError(f"synthetic sensor: n_frames must be >= 0, got {n_frames}")
         self.name = f"synthetic sensor ({width}x{height}, demo town)"
-        self.n_frames, self.rate_hz, self.width, self.height = n_frames, float(fps), int(width), int(height)
+        self.n_frames, self.rate_hz, self.width, self.height = n_frames, _frame_rate(self.name, fps), int(width), int(height)
         self.altitude, self.radius, self.speed, self.max_depth = altitude, radius, speed, max_depth
         s = width / 512.0
         self.intrinsics = (KINECT_V2[0] * s, KINECT_V2[1] * s, (width - 1) / 2.0, (height - 1) / 2.0)
@@ -198,7 +206,7 @@ class FramesDir(Source):
     def __init__(self, path, fps: float = 10.0):
         self.path = Path(path)
         self.name = str(self.path)
-        self.rate_hz = float(fps)
+        self.rate_hz = _frame_rate(self.name, fps)
         self.files = sorted(p for p in self.path.iterdir() if p.suffix.lower() in FRAME_SUFFIXES and p.is_file())
         if not self.files:
             raise InputError(f"{self.path}: no frame files ({', '.join(FRAME_SUFFIXES)})")
