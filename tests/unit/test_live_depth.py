@@ -92,6 +92,8 @@ def test_rgb_follows_the_pixels():
         ({"depth": np.full((4, 4), np.nan)}, "no valid pixel"),
         ({"pose": np.eye(3)}, "pose must be a 4x4"),
         ({"pose": np.full((4, 4), np.nan)}, "NaN"),
+        ({"pose": np.diag([0.0, 0.0, 0.0, 1.0])}, "pose's 3x3 rotation part is singular (it would flatten the frame): [[0.0, 0.0, 0.0], "),  # all one point
+        ({"pose": np.diag([1.0, 1.0, 0.0, 1.0])}, "pose's 3x3 rotation part is singular"),  # flat
         ({"rgb": np.zeros((3, 3, 3), np.uint8)}, "rgb must be"),
         ({"depth": [[1.0, 2.0], [3.0]]}, "depth must be an (H, W) image of numbers, got a ragged list"),  # numpy's ValueError
         ({"rgb": np.full((4, 4, 3), "a")}, "rgb must hold numbers (uint8, uint16 or float colors), got dtype <U1"),  # int()'s ValueError

@@ -64,6 +64,9 @@ def parse_pose(pose, name: str = "push") -> np.ndarray:
         raise InputError(f"{name}: pose holds NaN or inf")
     if not np.allclose(p[3], [0.0, 0.0, 0.0, 1.0]):
         raise InputError(f"{name}: pose's last row must be (0, 0, 0, 1), got {p[3].tolist()}")
+    r = p[:3, :3]  # a singular one (zeros, a repeated axis) flattened the frame onto a plane or a point, without a word
+    if not abs(np.linalg.det(r)) > 1e-9 * np.prod(np.linalg.norm(r, axis=0)):
+        raise InputError(f"{name}: pose's 3x3 rotation part is singular (it would flatten the frame): {np.round(r, 6).tolist()}")
     return np.ascontiguousarray(p)
 
 
