@@ -410,6 +410,24 @@ def test_close_frees_frames_and_snapshots_and_refuses_later_pushes():
             call()
 
 
+def test_a_nan_normal_is_an_unknown_one_and_the_point_is_still_lit():
+    """Pushed normals with NaN (a sensor's unknown ones) were kept: lighting and
+    color_mode="normal" drew those points black."""
+    g = np.stack(np.meshgrid(np.linspace(0, 10, 20), np.linspace(0, 10, 20)), -1).reshape(-1, 2)
+    xyz = np.column_stack([g, np.zeros(len(g))])
+    normals = np.tile([0.0, 0.0, 1.0], (len(xyz), 1))
+    normals[::2] = np.nan
+    normals[1::4, 2] = np.inf
+    live = LiveCloud()
+    live.push(xyz, np.tile([200, 0, 0], (len(xyz), 1)).astype(np.uint8), normals=normals)
+    _, _, attrs = live.frame_points()
+    got = np.column_stack([attrs["nx"], attrs["ny"], attrs["nz"]])
+    assert np.isfinite(got).all() and int((got == 0).all(axis=1).sum()) == 300
+    cam = gp.Camera.fit(live.bounds, view="top", width=64, height=64)
+    image = gp.render(live, cam, gp.RenderSettings(size_mode="fixed", background=(0, 0, 0), lighting=True))
+    assert int((image[..., 0] > 0).sum()) == 400  # every point drawn in colour (NaN ones were black)
+
+
 def test_an_aging_frame_fades_through_the_transparency_pass():
     now = [0.0]
     live = LiveCloud(decay=2.0, clock=lambda: now[0])

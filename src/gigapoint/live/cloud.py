@@ -407,7 +407,11 @@ class LiveCloud:
             nrm = _array(normals, f"{name}: push: normals")
             if nrm.shape != (n, 3) or nrm.dtype.kind not in "if":
                 raise InputError(f"{name}: push: normals must be (N, 3) numbers like xyz ({n}, 3), got shape {nrm.shape}")
-            world_normals = (nrm.astype(np.float64) @ p[:3, :3].T).astype(np.float32)
+            with np.errstate(invalid="ignore"):  # (inf times 0)
+                world_normals = (nrm.astype(np.float64) @ p[:3, :3].T).astype(np.float32)
+            # a NaN or inf normal is an unknown one: 0 (as the module doc says); lighting and
+            # color_mode="normal" drew a point with NaN in it black
+            world_normals[~np.isfinite(world_normals).all(axis=1)] = 0.0
         pts = np.asarray(xyz_in, np.float64)  # no copy of float64 points (nothing writes into them)
         if pose_tag is None and pose is not None:  # sensor -> world (push_depth's kernel applied it already)
             pts = pts @ p[:3, :3].T + p[:3, 3]
