@@ -86,8 +86,10 @@ class FrameLock:
         with self._turn:
             if self._readers_waiting or self._drawing:
                 return False
-        if not self.lock.acquire(blocking=behind_writers):
-            return False
+        while not self.lock.acquire(timeout=0.002 if behind_writers else -1, blocking=behind_writers):
+            with self._turn:  # held: by another writer, waited for; by a frame that came meanwhile, not
+                if not behind_writers or self._readers_waiting or self._drawing:
+                    return False
         if self._drawing:  # this thread is drawing a frame (the lock is reentrant): not now
             self.lock.release()
             return False
