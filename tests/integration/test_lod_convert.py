@@ -480,30 +480,39 @@ def test_held_las_positions_are_int32_and_the_octree_is_the_spilled_ones(town_an
     assert a.keys() == b.keys() and [k for k in a if a[k] != b[k]] == []
 
 
-def test_held_constant_attributes_are_not_held_a_point_at_a_time(town_and_spot, tmp_path, monkeypatch):
+@pytest.mark.parametrize("varies", [False, True])
+def test_held_constant_attributes_are_not_held_a_point_at_a_time(town_and_spot, tmp_path, monkeypatch, varies):
     """An attribute every point holds the same value of (a LAS file's flags, its user_data) is
-    not held a point at a time once the input is read (7 bytes a point of the LAS flags: 140 MB
-    of a 20 M-point conversion); each partition's build gets it made again: the octree is the
-    out-of-core conversion's byte for byte."""
+    held as that value, not a point at a time (7 bytes a point of the LAS flags: 140 MB of a
+    20 M-point conversion); each partition's build gets it made again: the octree is the
+    out-of-core conversion's byte for byte. ``varies``: a last file whose user_data is 5 (the
+    chunks before then hold it a point at a time)."""
     import importlib
 
     in_memory = importlib.import_module("gigapoint.lod.convert.in_memory")
+    if varies:
+        las = laspy.read(str(town_and_spot[1]))
+        las.user_data = np.full(len(las.points), 5, np.uint8)
+        town_and_spot = [*town_and_spot, tmp_path / "five.las"]
+        las.write(str(town_and_spot[-1]))
     with monkeypatch.context() as m:
         _spilling(m)
         convert(town_and_spot, tmp_path / "spilled", **OPTS)
     held_keys, constant = set(), {}
-    distribute = in_memory.InMemoryPhases.distribute
+    count = in_memory.InMemoryPhases.count
 
-    def distributing(self):
+    def counting(self):  # what the read held, at its end
         for c in self._held:
-            held_keys.update(c)
+            held_keys.update(k for k, v in c.items() if len(v))
+        result = count(self)
         constant.update(self._constant)
-        return distribute(self)
+        return result
 
-    monkeypatch.setattr(in_memory.InMemoryPhases, "distribute", distributing)
+    monkeypatch.setattr(in_memory.InMemoryPhases, "count", counting)
     held = convert(town_and_spot, tmp_path / "held", **OPTS)
     assert held.in_memory
-    assert {"synthetic", "withheld", "user_data", "scan_direction_flag"} <= set(constant) and constant["user_data"] == 0
+    assert {"synthetic", "withheld", "scan_direction_flag"} <= set(constant)
+    assert ("user_data" not in constant and "attr.user_data" in held_keys) if varies else constant["user_data"] == 0
     assert "attr.intensity" in held_keys and "intensity" not in constant and "classification" not in constant  # (they vary)
     assert not {"attr." + a for a in constant} & held_keys
     a, b = _files_of(tmp_path / "spilled"), _files_of(tmp_path / "held")

@@ -60,8 +60,9 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
     #: decoded a partition at a time for its build; None: float64
     _xyz_code = None
     #: attribute -> the one value every held point has so far (None: values differ): a constant
-    #: one (a LAS file's flags, its user_data, often) is not held a point at a time once read
-    #: (``count``) but made again for each partition's build (``_partition_input``)
+    #: one (a LAS file's flags, its user_data, often: ~7 bytes a point) is held as that value
+    #: alone, a point at a time only once it varies (``_hold_constant``) or the chunks spill,
+    #: and made again for each partition's build (``_partition_input``)
     _constant: dict
 
     def resume_state(self, saved: dict) -> dict:
@@ -95,16 +96,30 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
                 for held in self._held:
                     held["xyz"] = decode_xyz(held["xyz"], self._xyz_code)
                 self._xyz_code, held_xyz = None, xyz
-        self._held.append({"xyz": held_xyz, "rgba": rgba, **{"attr." + a: v for a, v in kept.items()}})
+        held = {"xyz": held_xyz, "rgba": rgba}
         for a, v in kept.items():
-            self._constant[a] = _still_constant(self._constant.get(a, _UNSEEN), v)
+            was = self._constant.get(a, _UNSEEN)
+            now = self._constant[a] = _still_constant(was, v)
+            if now is None or now is _UNSEEN:  # (constant so far: its value alone is held)
+                if now is None and was is not None and was is not _UNSEEN:
+                    self._hold_constant(a, was)  # it varies from this chunk on: the chunks before hold it too
+                held["attr." + a] = v
+        self._held.append(held)
         self._held_points += len(xyz)
         if self._held_points > held_points(self):
             self.spilled = self.state["spilled"] = True  # saved with this chunk's count
+            for a, c in self._constant.items():
+                if c is not None and c is not _UNSEEN:
+                    self._hold_constant(a, c)
             for j, held in enumerate(self._held):
                 save_raw_chunk(self.dir.raw, j, held.pop("xyz"), held.pop("rgba"), {k[5:]: v for k, v in held.items()}, self._xyz_code)
             self._held = []
         return taken
+
+    def _hold_constant(self, a: str, value) -> None:
+        """Attribute ``a`` held a point at a time (``value``) in the held chunks that held only its value."""
+        for held in self._held:
+            held.setdefault("attr." + a, np.full(len(held["xyz"]), value))
 
     def _positions(self, xyz):
         if self.spilled or self._xyz_code is None:
@@ -116,9 +131,9 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
             return super().count()
         st = self.state
         self._constant = {a: c for a, c in self._constant.items() if c is not None and c is not _UNSEEN and a in st["attributes"]}
-        for chunk in self._held:  # a constant attribute's arrays go: ~7 bytes a point of a LAS file's flags
+        for chunk in self._held:  # (an empty chunk's empty arrays)
             for a in self._constant:
-                del chunk["attr." + a]
+                chunk.pop("attr." + a, None)
         origin, edge = np.array(st["origin"]), st["edge"]
         counts = CellCounts()
         self.progress.phase("count", st["points"])
