@@ -139,10 +139,8 @@ def test_a_progressive_load_of_a_file_that_crashes_the_decoder_keeps_what_it_loa
     cloud.close()
 
 
-def _with_a_bad_laz_chunk(path, out, chunk: int):
-    """``path`` (a LAZ file) with 400 random bytes 100 kB into its LAZ chunk ``chunk``: lazrs
-    fails on that chunk (it runs out of the chunk's bytes), not on the others."""
-    import laspy
+def _chunk_table(path) -> tuple[int, list]:
+    """(where the point data starts, [(points, bytes)] a chunk) of a LAZ file."""
     import lazrs
 
     with laspy.open(path) as reader:
@@ -150,7 +148,13 @@ def _with_a_bad_laz_chunk(path, out, chunk: int):
         offset = reader.header.offset_to_point_data
     with open(path, "rb") as f:
         f.seek(offset)
-        table = lazrs.read_chunk_table(f, lazrs.LazVlr(vlr))
+        return offset, lazrs.read_chunk_table(f, lazrs.LazVlr(vlr))
+
+
+def _with_a_bad_laz_chunk(path, out, chunk: int):
+    """``path`` (a LAZ file) with 400 random bytes 100 kB into its LAZ chunk ``chunk``: lazrs
+    fails on that chunk (it runs out of the chunk's bytes), not on the others."""
+    offset, table = _chunk_table(path)
     at = offset + 8 + sum(size for _, size in table[:chunk]) + 100_000
     data = bytearray(path.read_bytes())
     data[at : at + 400] = np.random.default_rng(0).integers(0, 256, 400, dtype=np.uint8).tobytes()
@@ -355,14 +359,7 @@ def test_where_no_child_can_be_started_the_records_are_decoded_here(tmp_path, mo
 
 def _chunks_before(path, cut: int) -> int:
     """Points of the LAZ chunks of ``path`` whose bytes all lie before byte ``cut``."""
-    import lazrs
-
-    with laspy.open(path) as reader:
-        vlr = next(v for v in reader.header.vlrs if v.record_id == 22204).record_data_bytes()
-        offset = reader.header.offset_to_point_data
-    with open(path, "rb") as f:
-        f.seek(offset)
-        table = lazrs.read_chunk_table(f, lazrs.LazVlr(vlr))
+    offset, table = _chunk_table(path)
     end, points = offset + 8, 0
     for n, size in table:
         end += size
