@@ -274,8 +274,13 @@ def _check_cameras(cameras: list, path: Path) -> None:
     """One-line errors for what a video cannot hold: something not a Camera, frames of two
     sizes, odd sizes where ffmpeg encodes (yuv420p)."""
     _check_one_kind(cameras, "video")
-    if path.suffix.lower() != ".gif" and (cameras[0].width % 2 or cameras[0].height % 2):
-        raise GigapointError(f"{path}: width and height must be even for video encoding, got {cameras[0].width}x{cameras[0].height}")
+    _check_even(path, cameras[0].width, cameras[0].height)
+
+
+def _check_even(path: Path, width: int, height: int) -> None:
+    """ffmpeg encodes yuv420p: even sizes but for a GIF."""
+    if path.suffix.lower() != ".gif" and (width % 2 or height % 2):
+        raise GigapointError(f"{path}: width and height must be even for video encoding, got {width}x{height}")
 
 
 def check_turntable(path, n_frames, width, height, fps, overwrite: bool = False) -> None:
@@ -286,8 +291,7 @@ def check_turntable(path, n_frames, width, height, fps, overwrite: bool = False)
     check_whole("turntable", "number of frames", n_frames, 1, MAX_TURNTABLE_FRAMES)
     width, height = image_side("width", width), image_side("height", height)
     _check_fps(fps)
-    if path.suffix.lower() != ".gif" and (width % 2 or height % 2):
-        raise GigapointError(f"{path}: width and height must be even for video encoding, got {width}x{height}")
+    _check_even(path, width, height)
 
 
 def render_turntable(
