@@ -413,7 +413,7 @@ def build_cloud(
                 raise InputError(f"{name}: attribute {a!r} holds {_per_point(held[0])} a point in one file and {_per_point(values)} in another")
             held.append(values[keep])
         total += len(xyz_parts[-1])
-    chunk = values = None  # (the last chunk's arrays go with the parts, once joined)
+    chunk = values = held = None  # (the last chunk's arrays go with the parts, once joined)
     check_valid_count(name, total, skipped)
     warn_dropped_attributes(name, dropped)
     xyz = _joined(xyz_parts)
