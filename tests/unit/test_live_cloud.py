@@ -138,15 +138,17 @@ def test_a_bad_frame_is_one_line_and_the_stream_goes_on(args, kwargs, message):
 
 
 def test_bad_depth_frames_are_refused_and_the_stream_goes_on():
-    live = LiveCloud()
-    with pytest.raises(InputError, match="intrinsics are missing"):
+    live = LiveCloud(name="cam1")
+    with pytest.raises(InputError, match="^cam1: push_depth: intrinsics are missing"):  # (the cloud named: several may refuse)
         live.push_depth(np.ones((4, 4)), None)
+    with pytest.raises(InputError, match=r"^cam1: push_depth: intrinsics must be a 3x3 matrix or \(fx, fy, cx, cy\), got tuple$"):
+        live.push_depth(np.ones((4, 4)), (True, True, 1, 1))  # (was fx = fy = 1)
     with pytest.raises(InputError, match="no valid pixel"):
         live.push_depth(np.zeros((4, 4), np.uint16), (1, 1, 2, 2))
-    with pytest.raises(InputError, match=r"^push_depth: a 8192x4097 depth image is more than a sensor's 33,554,432 pixels; push it in tiles$"):
+    with pytest.raises(InputError, match=r"^cam1: push_depth: a 8192x4097 depth image is more than a sensor's 33,554,432 pixels; push it in tiles$"):
         live.push_depth(np.zeros((4097, 8192), np.uint16), (1, 1, 2, 2))  # 20000 x 20000 ran the machine out of memory
     live.push_depth(np.full((4, 4), 1000, np.uint16), (1, 1, 2, 2))
-    assert live.n_points == 16 and live.stats.frames_rejected == 3
+    assert live.n_points == 16 and live.stats.frames_rejected == 4
     np.testing.assert_allclose(live.frame_points()[0][:, 2], 1.0, atol=1e-6)
 
 

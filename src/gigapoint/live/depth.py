@@ -34,7 +34,11 @@ def parse_intrinsics(intrinsics, name: str = "push_depth") -> tuple[float, float
     if intrinsics is None:
         raise InputError(f"{name}: intrinsics are missing: give a 3x3 camera matrix or (fx, fy, cx, cy)")
     try:
-        k = np.asarray(intrinsics, np.float64)
+        k = np.asarray(intrinsics)
+        listed = () if isinstance(intrinsics, np.ndarray) else np.asarray(intrinsics, object).ravel()
+        if k.dtype.kind not in "iuf" or any(isinstance(v, (bool, np.bool_)) for v in listed):
+            raise TypeError  # ((True, True, 1, 1) was fx = fy = 1: numpy made them numbers)
+        k = k.astype(np.float64)
     except (TypeError, ValueError):
         raise InputError(f"{name}: intrinsics must be a 3x3 matrix or (fx, fy, cx, cy), got {type(intrinsics).__name__}") from None
     if k.shape == (3, 3):
