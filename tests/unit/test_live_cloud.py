@@ -122,6 +122,7 @@ def test_frames_culled_outside_the_view_and_dropped_frames_not_drawn():
         ((np.zeros((4, 3)),), {"time": "a"}, "live: push: time must be a finite number of seconds, got 'a'"),  # float()'s ValueError
         ((np.zeros((2, 3)),), {"a": [[1], [2, 3]]}, "live: push: attribute 'a' must be an array of numbers, got a ragged list"),  # numpy's ValueError
         ((np.zeros((2, 3)),), {"normals": [[1], [2, 3]]}, "live: push: normals must be an array of numbers, got a ragged list"),
+        ((np.zeros((2, 3)), [[1], [2, 3]]), {}, "live: push: colors must have shape (N, 3) or (N, 4), got a ragged list"),  # numpy's message
     ],
 )
 def test_a_bad_frame_is_one_line_and_the_stream_goes_on(args, kwargs, message):

@@ -187,7 +187,10 @@ def colors_for(rgb, n: int, where: str) -> np.ndarray:
     (n, 4), their range judged as a file's (``ColorScaler``: floats of 0..255 were all white);
     a one-line InputError starting with ``where`` when they are not (N, 3|4) colors or not ``n`` rows."""
     try:
-        rgb = np.asarray(rgb)
+        try:
+            rgb = np.asarray(rgb)
+        except ValueError:  # a ragged list: numpy's "setting an array element with a sequence. The requested array ..."
+            raise ValueError(f"colors must have shape (N, 3) or (N, 4), got a ragged {type(rgb).__name__}") from None
         if rgb.ndim != 2 or rgb.shape[1] not in (3, 4):
             raise ValueError(f"colors must have shape (N, 3) or (N, 4), got {rgb.shape}")
         if rgb.dtype.kind not in "biuf":  # strings were a UFuncTypeError traceback of the range check
