@@ -72,6 +72,15 @@ def check_image_size(width, height, fov=60.0) -> None:
         raise
 
 
+TURNTABLE_FPS = 30.0  # --fps's default
+
+
+def check_view(view: str) -> None:
+    """A one-line error for a --view that is none of VIEWS, before anything is read or made."""
+    if view not in VIEWS:
+        raise GigapointError(f"--view: unknown view {view!r}; choose one of {', '.join(VIEWS)}")
+
+
 def make_camera(cloud, width, height, view, camera_text, projection, fov) -> Camera:
     bounds = cloud.bounds
     if camera_text is None:  # 'auto' frames the cloud's points (the data fills the frame), the others its box
@@ -200,8 +209,7 @@ def render(
     check_outputs_apart([output, depth_out, index_out], inputs)
     if projection not in ("perspective", "orthographic"):
         raise GigapointError(f"--projection must be perspective or orthographic, got {projection!r}")
-    if view not in VIEWS:
-        raise GigapointError(f"--view: unknown view {view!r}; choose one of {', '.join(VIEWS)}")
+    check_view(view)
     check_image_size(width, height, fov)  # before reading anything
     check_color_options(settings)
     if camera is not None:
@@ -213,7 +221,8 @@ def render(
     if turntable is not None:
         from ..render.video import check_turntable
 
-        check_turntable(output, turntable, width, height, 30.0 if fps is None else fps, overwrite)
+        fps = TURNTABLE_FPS if fps is None else fps
+        check_turntable(output, turntable, width, height, fps, overwrite)
     else:  # (side-by-side stereo writes both eyes: twice the width)
         check_image_fits(output, width * (2 if settings.stereo == "side-by-side" else 1), height)
     cloud = open_inputs(inputs, settings.point_budget, progressive, cloud_options(colors, chunked))
@@ -228,7 +237,7 @@ def render(
 
         with progress_bar(f"turntable {output.name}", turntable) as advance:
             render_turntable(
-                cloud, turntable, output, settings, width=width, height=height, fov=fov, fps=30.0 if fps is None else fps, overwrite=overwrite,
+                cloud, turntable, output, settings, width=width, height=height, fov=fov, fps=fps, overwrite=overwrite,
                 progress=lambda done, total: advance(done),
             )  # fmt: skip
         typer.echo(f"wrote {output} ({turntable} frames, {width}x{height}, {cloud.n_points:,} points)")
@@ -292,8 +301,7 @@ def demo(
     check_output(output, overwrite)
     check_image_size(width, height)
     check_image_fits(output, width, height)
-    if view not in VIEWS:  # (told only once the scene was generated and sorted, without naming --view)
-        raise GigapointError(f"--view: unknown view {view!r}; choose one of {', '.join(VIEWS)}")
+    check_view(view)  # (told only once the scene was generated and sorted, without naming --view)
     settings = settings_from_options(RenderSettings, {"threads": threads})  # a bad --threads is named
     check_colors(colors)
     if not (scale == 0 or 1e-6 <= scale <= 1000):  # NaN fails both
