@@ -220,6 +220,7 @@ def test_without_decay_no_alpha_is_given():
     assert getattr(draw, "alpha", None) is None
 
 
+@pytest.mark.filterwarnings("ignore:live. frames arrive faster")  # (two producers may outpace the copies: frames dropped unseen)
 def test_producers_push_while_frames_render_and_no_frame_is_torn():
     live = LiveCloud(keep=4)
     sizes = {k: 4000 + 311 * k for k in range(40)}
@@ -249,7 +250,7 @@ def test_producers_push_while_frames_render_and_no_frame_is_torn():
     stop.set()
     for t in threads:
         t.join()
-    assert not errors and live.stats.frames_in == 40 and live.n_frames == 4
+    assert not errors and live.stats.frames_in + live.stats.frames_dropped == 40 and live.n_frames == 4  # every frame landed or was dropped unseen
 
 
 def test_snapshot_holds_the_pushed_points_transformed_by_their_poses_and_draws_with_the_ring():
@@ -1043,3 +1044,50 @@ def test_growing_the_ring_keeps_packed_chunks_and_the_mirror_where_they_are():
         assert (int(ring["first"][slot]), int(ring["first"][slot] + ring["count"][slot])) == (lo, hi)
     f = gp.render_frame(live, gp.Camera.fit(live.bounds, view="top", width=64, height=64))
     assert f.stats.points_processed == live.n_points == 25 * 400 + 20 * 30_000 + 30 * 400
+
+
+def test_frames_waiting_for_a_held_lock_are_bounded_by_keep_and_the_dropped_counted():
+    """A renderer holding the lock long (or a producer outpacing the copies) grew the queue of
+    waiting frames without end: 200 pushes held 200 frames for a ring of 3. At most ``keep``
+    wait (an older one would leave the ring unseen once copied in): the rest are dropped,
+    counted and said once, and the ring ends as it would have."""
+    import warnings
+
+    live = LiveCloud(keep=3, name="cam1")
+    with live.reading(), warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for k in range(20):
+            live.push(*frame(k % 4, n=100 + k))
+            assert len(live._pending) == min(k + 1, 3)  # waiting: at most keep
+        assert live.n_frames == 0 and live.stats.frames_dropped == 17
+    said = ("cam1: frames arrive faster than they are copied into the ring (the lock held long): "
+            "more than keep=3 waited, the oldest are dropped unseen (stats.frames_dropped)")  # fmt: skip
+    assert [str(w.message) for w in caught if w.category is gp.GigapointWarning] == [said]  # once, not per frame
+    assert caught[0].filename == __file__  # the caller's push
+    assert [f.seq for f in live.frames] == [17, 18, 19] and [f.n_points for f in live.frames] == [117, 118, 119]
+    assert live.stats.frames_in == 3 and live.stats.frames_dropped == 17
+    assert "17 dropped unseen" in live.hud()
+
+
+def test_a_frame_pushed_while_the_ring_is_cleared_waits_and_lands():
+    """clear() emptied the ring by setting ``keep`` to 0 meanwhile: a push in that moment saw a
+    queue bound of 0 and its frame was dropped unseen."""
+    live = LiveCloud(keep=3)
+    live.push(*frame(0, n=100))
+    expire = live._expire
+
+    threads = []
+
+    def expire_while_pushed(*args, **kwargs):
+        if not threads:  # clear's (not the pushed frame's own commit, once clear lets go)
+            threads.append(threading.Thread(target=live.push, args=frame(1, n=100)))
+            threads[0].start()
+            deadline = time.monotonic() + 10
+            while not (live._pending or live.stats.frames_dropped) and time.monotonic() < deadline:
+                time.sleep(0.001)
+        expire(*args, **kwargs)
+
+    live._expire = expire_while_pushed
+    live.clear()
+    threads[0].join(10)
+    assert live.stats.frames_dropped == 0 and [f.seq for f in live.frames] == [1]

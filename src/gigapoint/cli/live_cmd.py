@@ -54,7 +54,7 @@ def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: floa
     finally:
         live.close()
         if record is not None:
-            print(f"recorded {live.stats.frames_in} frames into {record}", file=sys.stderr)
+            print(f"recorded {live.stats.frames_in + live.stats.frames_dropped} frames into {record}", file=sys.stderr)  # (dropped unseen: recorded)
 
 
 def check_live_options(keep: int, decay: float | None, rate: float | None) -> None:

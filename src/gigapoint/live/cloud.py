@@ -12,7 +12,9 @@ on it unchanged. A frame of at most half a chunk (PACK_LIMIT) is kept as it came
 packed after the frames before it into a shared chunk (``_pack``): a chunk each made frames of
 50 points hold 6 712 bytes of ring arrays a point. A frame pushed while another is being drawn
 waits, batched, in a queue and is copied in when the drawing lets go of the lock: producers
-never wait for the renderer. Frames beyond ``keep`` (or older than ``decay``
+never wait for the renderer. At most ``keep`` frames wait: an older one would leave the ring as
+soon as it was copied in, never drawn, so it is dropped (``stats.frames_dropped``, a warning
+once) and the queue holds no more than a full ring. Frames beyond ``keep`` (or older than ``decay``
 seconds) leave the ring and their chunks are reused: memory stays flat over a long stream.
 
 ``snapshot()`` freezes the frames in the ring into a ProgressiveOctree (lod.progressive, its
@@ -32,6 +34,7 @@ import heapq
 import numbers
 import threading
 import time as _time
+import warnings
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -46,7 +49,7 @@ from ..core.quantize import make_batches, quantize
 from ..core.renderable import DrawList
 from ..core.selection import Selection, View, select_view, subsample_step
 from ..core.threads import threads_for
-from ..errors import GigapointError, InputError, check_switch, check_timeout, check_whole, is_real
+from ..errors import GigapointError, GigapointWarning, InputError, check_switch, check_timeout, check_whole, is_real
 from ..lod.build import valid_bounds
 from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
 from ..render.splats import point_spacing
@@ -108,8 +111,9 @@ class OpenChunk:
 
 @dataclass
 class LiveStats:
-    frames_in: int = 0  # frames accepted
+    frames_in: int = 0  # frames copied into the ring
     frames_rejected: int = 0
+    frames_dropped: int = 0  # frames accepted but dropped unseen: more than ``keep`` waited for the lock
     points_in: int = 0
     last_error: str | None = None
     arrivals: deque = field(default_factory=lambda: deque(maxlen=120))  # perf_counter of recent arrivals
@@ -447,6 +451,17 @@ class LiveCloud:
             self._seq += 1
             self._pending.append((frame, FrameInfo(seq, [], m, t, arrived, p, lo, hi, pushed_at)))
             self._last_time = t
+            # the queue's bound: behind ``keep`` newer frames, a waiting frame would leave the ring
+            # as soon as it was copied in (a renderer holding the lock, a producer outpacing the
+            # copies: the queue grew without end); producers still never wait
+            dropped = max(0, len(self._pending) - self.keep)
+            for _ in range(dropped):
+                self._pending.popleft()
+            first_drop = dropped and not self.stats.frames_dropped  # said once
+            self.stats.frames_dropped += dropped
+        if first_drop:  # (stacklevel: the caller of push)
+            warnings.warn(f"{name}: frames arrive faster than they are copied into the ring (the lock held long): "
+                          f"more than keep={self.keep} waited, the oldest are dropped unseen (stats.frames_dropped)", GigapointWarning, stacklevel=4)  # fmt: skip
         self._commit_pending()
         if self.recorder is not None and pose_tag is None:
             self.recorder.write_points(seq, xyz_in, rgb, pose, t, normals, attributes)
@@ -467,9 +482,11 @@ class LiveCloud:
         committed = 0
         try:
             with self._pending_lock:
-                waiting = len(self._pending)  # (only the lock's holder takes frames out: they stay)
+                waiting = len(self._pending)  # (pushes drop from the front at most: no more than these are taken)
             for _ in range(waiting):
                 with self._pending_lock:
+                    if not self._pending:  # a push dropped waiting frames meanwhile (the queue's bound)
+                        break
                     frame, info = self._pending.popleft()
                 self._insert(frame, info)
                 self._expire()
@@ -583,11 +600,12 @@ class LiveCloud:
         out[: len(a)] = a
         return out
 
-    def _expire(self) -> None:
-        """Frames beyond ``keep`` or older than ``decay`` leave the ring (lock held)."""
+    def _expire(self, keep: int | None = None) -> None:
+        """Frames beyond ``keep`` (the cloud's by default) or older than ``decay`` leave the ring (lock held)."""
+        keep = self.keep if keep is None else keep
         now = self.now()
         drop = []
-        while len(self.frames) > self.keep or (self.decay is not None and self.frames and now - self.frames[0].arrived > self.decay):
+        while len(self.frames) > keep or (self.decay is not None and self.frames and now - self.frames[0].arrived > self.decay):
             drop.append(self.frames.popleft())
         if not drop:
             return
@@ -608,11 +626,7 @@ class LiveCloud:
     def clear(self) -> None:
         """Drop every frame from the ring (snapshots stay)."""
         with self.lock.writing():
-            keep, self.keep = self.keep, 0
-            try:
-                self._expire()
-            finally:
-                self.keep = keep
+            self._expire(keep=0)  # (not self.keep = 0 meanwhile: a push then dropped every waiting frame)
         self._notify()
 
     # ------------------------------------------------------------------ drawing (Renderable)
@@ -692,7 +706,8 @@ class LiveCloud:
         latency = f", latency {lat:.0f} ms (p99 {p99:.0f})" if lat is not None else ""
         snap = f", {self.snapshots.n_points:,} snapshot points" if self.snapshots is not None else ""
         err = f"; last bad frame: {s.last_error}" if s.last_error else ""
-        return f"live: {s.frames_per_second():.1f} frames/s in, {len(self.frames)} frames, {self.points:,} live points{snap}{latency}{err}"[:400]
+        dropped = f", {s.frames_dropped} dropped unseen" if s.frames_dropped else ""
+        return f"live: {s.frames_per_second():.1f} frames/s in{dropped}, {len(self.frames)} frames, {self.points:,} live points{snap}{latency}{err}"[:400]
 
     # ------------------------------------------------------------------ snapshots
     def _sync_mirror(self) -> None:
