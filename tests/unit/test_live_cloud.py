@@ -1091,3 +1091,21 @@ def test_a_frame_pushed_while_the_ring_is_cleared_waits_and_lands():
     live.clear()
     threads[0].join(10)
     assert live.stats.frames_dropped == 0 and [f.seq for f in live.frames] == [1]
+
+
+@pytest.mark.parametrize("dtype", [np.int16, np.int32])
+def test_negative_integer_depths_are_refused_not_made_holes(dtype):
+    """uint16 millimetres read as int16 show depths beyond 32.767 m as negative: they were holes,
+    dropped without a word (15 of 16 points)."""
+    depth = np.full((4, 4), 1000, np.uint16)
+    depth[1, 2] = 40000  # 40 m
+    signed = depth.view(np.int16).astype(dtype)
+    live = LiveCloud(name="cam1")
+    with pytest.raises(InputError) as err:
+        live.push_depth(signed, (1, 1, 2, 2))
+    assert str(err.value) == (f"cam1: push_depth: depth holds negative values (e.g. -25536 at row 1, column 2): integer depths must be >= 0 "
+                              f"(0 marks a hole); was an unsigned image read as {np.dtype(dtype)}?")  # fmt: skip
+    assert live.n_points == 0 and live.stats.frames_rejected == 1
+    signed[1, 2] = 0  # a hole, as a sensor marks it
+    live.push_depth(signed, (1, 1, 2, 2))
+    assert live.n_points == 15

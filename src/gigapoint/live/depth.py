@@ -9,7 +9,9 @@ applies the sensor's pose, all in one compiled pass over the rows (or, for the l
 ``depth_to_points_reference`` is the same in plain numpy (the tests compare them).
 
 A pixel is valid when its depth is finite, > 0 and (with ``max_depth``) not beyond it: zeros
-and NaNs are a sensor's holes, skipped; a frame with no valid pixel is refused.
+and NaNs are a sensor's holes, skipped; a frame with no valid pixel is refused. An integer image
+with a negative depth is refused: no sensor marks holes so (they write 0), and it is what
+uint16 millimetres read as int16 show beyond 32.767 m (they were dropped without a word).
 """
 
 from __future__ import annotations
@@ -88,6 +90,10 @@ def check_depth(depth, depth_scale, name: str = "push_depth") -> tuple[np.ndarra
         raise InputError(f"{name}: a {d.shape[1]}x{d.shape[0]} depth image is more than a sensor's {MAX_DEPTH_PIXELS:,} pixels; push it in tiles")
     if d.dtype.kind not in "uif":
         raise InputError(f"{name}: depth must hold numbers (uint16 millimetres or float metres), got dtype {d.dtype}")
+    if d.dtype.kind == "i" and d.min() < 0:  # (float images: -inf is a sensor's "too close", a hole)
+        r, c = np.unravel_index(d.argmin(), d.shape)
+        raise InputError(f"{name}: depth holds negative values (e.g. {d[r, c]} at row {r}, column {c}): integer depths must be >= 0 "
+                         f"(0 marks a hole); was an unsigned image read as {d.dtype}?")  # fmt: skip
     if depth_scale is None:
         depth_scale = DEFAULT_INTEGER_SCALE if d.dtype.kind in "ui" else 1.0
     if not (is_real(depth_scale) and depth_scale > 0):  # "a" was float()'s ValueError traceback, True taken as 1
