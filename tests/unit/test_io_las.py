@@ -366,3 +366,45 @@ def test_records_read_into_a_reused_buffer_are_laspys(tmp_path, monkeypatch, suf
         for k in a.attributes:
             np.testing.assert_array_equal(a.attributes[k], b.attributes[k])
             assert a.attributes[k].dtype == b.attributes[k].dtype
+
+
+def test_files_of_point_formats_0_5_and_6_10_keep_one_scan_angle(tmp_path):
+    """Formats 0-5 hold the scan angle as scan_angle_rank (int8 degrees), 6-10 as scan_angle
+    (int16, 0.006 degrees): merged, neither name was in every file and the scan angle was left
+    out. Now the former is read as scan_angle where files differ: through gp.open of both, a
+    progressive load and a COPC conversion, every point's angle kept; files that agree keep their name."""
+    a = write_las(tmp_path / "a.las", n=500, point_format=3, seed=1)
+    b = write_las(tmp_path / "b.las", n=400, point_format=7, version="1.4", seed=2)
+    write_las(tmp_path / "c.las", n=300, point_format=1, seed=3)
+    assert a["scan_angle_rank"][a["scan_angle_rank"] == 18].size and b["scan_angle"].min() < -1000
+    xyz = np.concatenate([a["xyz"], b["xyz"]])
+    angle = np.concatenate([np.rint(a["scan_angle_rank"] / 0.006), b["scan_angle"]]).astype(np.int16)  # 18 degrees: 3000
+    mm = lambda p: np.lexsort(np.rint(np.asarray(p) * 1000).astype(np.int64).T)  # points matched by position
+    want = angle[mm(xyz)]
+    dropped = r": attribute\(s\) overlap, scanner_channel not in every file"
+    for paths in (("a.las", "b.las"), ("b.las", "a.las")):
+        with pytest.warns(gp.GigapointWarning, match=dropped):
+            cloud = gp.open(*(tmp_path / p for p in paths))
+        got = np.asarray(cloud.attributes["scan_angle"])
+        assert "scan_angle_rank" not in cloud.attributes and got.dtype == np.int16
+        np.testing.assert_array_equal(got[mm(cloud.positions())], want)
+    def loaded(*paths):
+        cloud = gp.open(*paths, progressive=True)
+        assert cloud.wait(timeout=120)
+        return cloud
+
+    with pytest.warns(gp.GigapointWarning, match=dropped):
+        live = loaded(tmp_path / "a.las", tmp_path / "b.las")
+    assert live.n_points == 900
+    slots = np.concatenate([live.node_entries(n) for n in live.leaves()])
+    assert "scan_angle_rank" not in live.attribute_names
+    np.testing.assert_array_equal(np.asarray(live.attributes["scan_angle"])[slots][mm(live.positions(slots))], want)
+    live.close()
+    with pytest.warns(gp.GigapointWarning, match=dropped):
+        gp.convert([tmp_path / "a.las", tmp_path / "b.las"], tmp_path / "out.copc.laz", format="copc")
+    copc = gp.open(tmp_path / "out.copc.laz")
+    parts = [copc.node_points(i) for i in np.flatnonzero(copc.counts > 0).tolist()]
+    got_xyz = np.concatenate([p["xyz"] for p in parts])
+    np.testing.assert_array_equal(np.concatenate([p["scan_angle"] for p in parts])[mm(got_xyz)], want)
+    # formats that agree: each file's own name, in degrees
+    assert np.asarray(gp.open(tmp_path / "a.las", tmp_path / "c.las").attributes["scan_angle_rank"]).dtype == np.int8

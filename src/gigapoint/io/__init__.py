@@ -25,6 +25,7 @@ from ..core.cloud import PointCloud, build_cloud, scale_decimals
 from ..errors import EmptyCloudError, GigapointWarning, InputError, check_switch
 from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail
 from .demo import demo_arrays, demo_chunks
+from .las import LasReader, read_las_header, with_scan_angle
 from .registry import is_supported_name, reader_for, readers, register, supported_suffixes
 
 
@@ -97,6 +98,14 @@ def files_label(files) -> str:
     return ", ".join(files[:3]) + (" ..." if len(files) > 3 else "")
 
 
+def scan_angles_differ(files) -> bool:
+    """Whether LAS/LAZ files of one scene name their scan angle both ways (point formats 0-5
+    ``scan_angle_rank``, 6-10 ``scan_angle``): kept apart, neither was in every file and the
+    scan angle was left out; such files are read through ``las.with_scan_angle``."""
+    las = [f for f in files if isinstance(reader_for(f), LasReader)]
+    return len(las) > 1 and len({read_las_header(f, salvage=True).point_format >= 6 for f in las}) == 2
+
+
 def _with_progress(path: Path, chunks: Iterator[PointChunk], total: int | None, progress) -> Iterator[PointChunk]:
     task = progress.add_task(path.name, total=total)
     for chunk in chunks:
@@ -151,9 +160,13 @@ def open_cloud(
     else:
         check_room(name, counted, IN_MEMORY_BYTES_MIN, instead=instead + ", or build it in bounded memory (chunked=True)")
 
+    one_angle = scan_angles_differ(files)
+
     def chunks(bar=None) -> Iterator[PointChunk]:
         for (f, reader), count in zip(plan, counts):
             it = reader.read_chunks(f, chunk_size)
+            if one_angle:
+                it = with_scan_angle(it)
             if bar is not None:
                 it = _with_progress(f, it, count, bar)  # (the headers' counts, read once above)
             try:

@@ -49,6 +49,24 @@ LAS_ATTRIBUTES = (
 )  # fmt: skip
 
 
+def scan_angle_units(degrees) -> np.ndarray:
+    """Formats 0-5's scan angle (``scan_angle_rank``, degrees) in formats 6-10's ``scan_angle``
+    units: int16 steps of 0.006 degrees, within ±180 degrees as LAS 1.4 says."""
+    return np.clip(np.rint(np.asarray(degrees, np.float64) / 0.006), -30000, 30000).astype(np.int16)
+
+
+def with_scan_angle(chunks: Iterator[PointChunk]) -> Iterator[PointChunk]:
+    """``chunks`` with ``scan_angle_rank`` as ``scan_angle`` (``scan_angle_units``), in its place:
+    a file merged with files of point formats 6-10 (io's ``scan_angles_differ``)."""
+    for chunk in chunks:
+        if "scan_angle_rank" in chunk.attributes:
+            chunk.attributes = {
+                ("scan_angle" if a == "scan_angle_rank" else a): (scan_angle_units(v) if a == "scan_angle_rank" else v)
+                for a, v in chunk.attributes.items()
+            }
+        yield chunk
+
+
 def _attribute_fields(point_format) -> dict[str, str | tuple[str, int]]:
     """{attribute: record field} of a file's points: the standard fields among ``LAS_ATTRIBUTES``,
     then its extra bytes (scaled where the file gives a scale: laspy returns them as floats), in

@@ -25,6 +25,7 @@ from numba import njit
 
 from ..atomic import atomic_open
 from ..errors import GigapointWarning
+from ..io.las import scan_angle_units
 from .copc import (
     COPC_HIERARCHY_RECORD,
     COPC_INFO_DTYPE,
@@ -94,7 +95,7 @@ def las_field_values(name: str, values) -> np.ndarray:
     if name == "gps_time":
         return np.asarray(values, np.float64)
     if name == "scan_angle_rank":
-        return las_field_values("scan_angle", np.rint(np.asarray(values, np.float64) / 0.006)).astype(np.int16)
+        return scan_angle_units(values)
     return np.clip(np.asarray(values), *LAS_FIELD_RANGE[name])
 
 

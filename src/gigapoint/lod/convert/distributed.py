@@ -62,6 +62,7 @@ from ...core import pages
 from ...core.chunk import ColorScaler
 from ...errors import GigapointError, GigapointWarning
 from ...io._base import one_line
+from ...io.las import with_scan_angle
 from ...io.registry import reader_for
 from ..keys import CODE_BITS
 from ..octree_dir import ConvertError, OctreeDir
@@ -331,6 +332,8 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
         scaler.mode = color_mode
         chunks = reader_for(path).read_chunks(Path(path), spec["chunk_size"], start=start, stop=stop, scaler=scaler)
         xyz_code = las_xyz_code(path)  # a range of a LAS/LAZ file: its positions spilled as the file's int32 (spill.encode_xyz)
+    if spec["one_angle"]:
+        chunks = with_scan_angle(chunks)
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     attrs, n_chunks, n_in, points, skipped, eight = None, 0, 0, 0, 0, False
     sample: list[dict] = []
@@ -553,6 +556,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             "encoding": self.encoding,
             "chunk_size": self.chunk_size,
             "several": len(self.paths) > 1,
+            "one_angle": self.one_angle,
             "memory_limit": self.mem,
             "own_workers": self.client in _OWN_WORKERS,
             "state": {k: st[k] for k in keep if k in st},

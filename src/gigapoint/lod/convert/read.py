@@ -12,7 +12,8 @@ import numpy as np
 from ...core.chunk import PointChunk, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
 from ...errors import EmptyCloudError, GigapointWarning, InputError
-from ...io import files_label, read_chunks
+from ...io import files_label, read_chunks, scan_angles_differ
+from ...io.las import with_scan_angle
 from ...io.registry import reader_for
 from ..build import valid_bounds
 from ..preview import PreviewSampler, preview_points
@@ -108,6 +109,11 @@ class ReadPhase(Job):
                 self.on_ready()
 
     @cached_property
+    def one_angle(self) -> bool:
+        """Whether the input files hold the scan angle under both LAS names (io's ``scan_angles_differ``: formats 0-5's then read as scan_angle)."""
+        return bool(self.paths) and scan_angles_differ(self.paths)
+
+    @cached_property
     def point_total(self) -> int | None:
         """The input files' points by their headers (None: chunks, or a file that does not say)."""
         return _point_total(self.paths) if self.paths else None
@@ -121,6 +127,7 @@ class ReadPhase(Job):
         else:
             for p in self.paths:
                 chunks = _skipped_if_empty(p, _read_chunks(p, self.chunk_size), len(self.paths) > 1)
+                chunks = with_scan_angle(chunks) if self.one_angle else chunks
                 yield from prefetch(chunks) if self.read_ahead else chunks
 
     def _take_chunk(self, i: int, chunk) -> tuple:
