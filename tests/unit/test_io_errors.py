@@ -519,8 +519,7 @@ def test_bad_chunk_size(tmp_path):
 
 def test_a_ply_file_cut_off_gives_the_vertices_before_the_cut(tmp_path):
     """``read_salvaged`` (a progressive load's) of a binary PLY file cut off: the vertices before
-    the cut, exactly the file's, then the one-line error; the plain reader still refuses it.
-    (An ASCII one already gave the chunks before its cut line, then that line's error.)"""
+    the cut, exactly the file's, then the one-line error; the plain reader still refuses it."""
     from plyfile import PlyData, PlyElement
 
     from gigapoint.io.ply import PlyReader
@@ -544,6 +543,32 @@ def test_a_ply_file_cut_off_gives_the_vertices_before_the_cut(tmp_path):
     with pytest.raises(GigapointError, match=r"b\.ply: truncated PLY file"):
         cloud.wait(60)
     assert cloud.n_points == len(xyz)
+    cloud.close()
+
+
+@pytest.mark.parametrize("drop", [2, 15])
+def test_an_ascii_ply_file_cut_mid_line_gives_every_whole_line_before_the_cut(tmp_path, drop):
+    """An ASCII PLY file cut part-way through a vertex line (a download cut off): every whole line
+    before it, then the one-line truncation error. The cut line's chunk was lost to "line 608 has
+    1 values" (``drop`` 15: "600.2" of "600.25 1200.5 7.125"), or the line read as a vertex of
+    z 7.12 (``drop`` 2: three values, the last cut short)."""
+    from gigapoint.io.ply import PlyReader
+
+    n = 1000
+    xyz = np.c_[np.arange(n) + 0.25, np.arange(n) * 2 + 0.5, np.full(n, 7.125)]
+    lines = [f"{x} {y} {z}\n" for x, y, z in xyz]
+    text = PLY_ASCII.format(n=n) + "".join(lines[:600])
+    p = tmp_path / "a.ply"
+    p.write_text(text + lines[600][: len(lines[600]) - drop])
+    got = []
+    with pytest.raises(InputError, match=r"^\S*a\.ply: truncated PLY file: the header declares 1,000 vertices, only 600 lines of them are present \(the file ends part-way through the next\)$"):
+        for chunk in PlyReader().read_salvaged(p, 250):
+            got.append(chunk.xyz)
+    np.testing.assert_array_equal(np.concatenate(got), xyz[:600])
+    cloud = gp.open(p, progressive=True)
+    with pytest.raises(GigapointError, match=r"a\.ply: truncated PLY file"):
+        cloud.wait(60)
+    assert cloud.n_points == 600
     cloud.close()
 
 

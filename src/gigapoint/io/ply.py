@@ -180,9 +180,12 @@ class PlyReader(Reader):
             lineno = h.header_lines + 1  # number of the first data line
             for _ in itertools.islice(f, skip):
                 lineno += 1
-            done = 0
+            done, cut = 0, ""
             while done < h.count:
                 lines = list(itertools.islice(f, min(chunk_size, h.count - done)))
+                if lines and not lines[-1].endswith("\n") and done + len(lines) < h.count:
+                    lines.pop()  # the file ends mid-line before its last vertex: a cut, not a vertex (its error below)
+                    cut = " (the file ends part-way through the next)"
                 if not lines:
                     break
                 try:
@@ -201,7 +204,7 @@ class PlyReader(Reader):
                         for i, (name, dt) in enumerate(zip(h.names, dtypes))]  # fmt: skip
                 yield rows_to_chunk(path, h.names, cols, scaler)
         if done < h.count:
-            raise fail(path, f"truncated PLY file: the header declares {h.count:,} vertices, only {done:,} lines of them are present")
+            raise fail(path, f"truncated PLY file: the header declares {h.count:,} vertices, only {done:,} lines of them are present{cut}")
 
     @staticmethod
     def _bad_line(lines, first_lineno, ncols) -> str:
