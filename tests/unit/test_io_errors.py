@@ -228,6 +228,48 @@ def test_evlr_longer_than_file(tmp_path):
     raises(InputError, p, match="EVLR")
 
 
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_a_las_14_file_cut_before_its_evlrs_gives_the_points_before_the_cut(tmp_path, suffix):
+    """A LAS 1.4 file with EVLRs after its points, cut off: its EVLRs' check refused it up front,
+    where a progressive load reads other cut files up to the cut. Now ``read_salvaged`` gives
+    the points before the cut (LAZ: of its whole chunks, as test_io_laz_process's cut files),
+    exactly the file's, then the one-line error; cut just before its EVLRs, every point, then
+    theirs. The plain reader still refuses both."""
+    from laspy.vlrs.vlrlist import VLRList
+
+    from gigapoint.io.las import LasReader, read_las_header
+
+    n = 60_000
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales, header.offsets = [0.001] * 3, [0.0] * 3
+    las = laspy.LasData(header)
+    xyz = np.round(np.random.default_rng(5).uniform(0, 1000, (n, 3)), 3)
+    las.x, las.y, las.z = xyz.T
+    las.evlrs = VLRList([laspy.VLR(user_id="test", record_id=1, record_data=b"x" * 100)])
+    whole = tmp_path / f"whole{suffix}"
+    las.write(str(whole))
+    data, hdr = whole.read_bytes(), read_las_header(whole)
+    first, evlrs = hdr.offset_to_point_data, hdr.start_of_first_evlr
+    mid, p = first + (evlrs - first) * 11 // 12, tmp_path / f"cut{suffix}"  # (LAZ: in its second chunk, of 10,000 points)
+    points = "truncated or corrupt LAZ file: chunk table offset" if suffix == ".laz" else "truncated LAS file: the header claims 60,000 points"
+    for end, problem in [(mid, points), (evlrs, f"truncated LAS file: its 1 EVLRs, said to start at byte {evlrs:,}, lie past the end of the file")]:
+        p.write_bytes(data[:end])
+        raises(InputError, p, match="EVLRs said to start")
+        got = []
+        with pytest.raises(InputError, match=f"^{p}: {problem}"):
+            for chunk in LasReader().read_salvaged(p, 20_000):
+                got.append(chunk.xyz)
+        got = np.concatenate(got)
+        want = n if end == evlrs else (mid - first) // 30 if suffix == ".las" else 50_000
+        assert want - (5_000 if suffix == ".laz" else 0) <= len(got) <= want
+        np.testing.assert_allclose(got, xyz[: len(got)], atol=1e-9)
+        cloud = gp.open(p, progressive=True)
+        with pytest.raises(GigapointError, match=f"{p}: {problem}"):
+            cloud.wait(60)
+        assert cloud.n_points == len(got)
+        cloud.close()
+
+
 def test_laz_chunk_table_absurd(tmp_path):
     p = tmp_path / "ct.laz"
     write_las(p, n=1000)

@@ -202,6 +202,8 @@ class LasHeader:
     #: why the file's point data ends early (read_las_header(salvage=True): a file cut off, its
     #: points before the cut readable), else None
     truncated: str | None = None
+    #: why the EVLRs after the point data are not there (salvage=True: a file cut before them), else None
+    evlrs_cut: str | None = None
 
 
 def _u(fmt: str, buf: bytes, off: int):
@@ -297,7 +299,9 @@ def read_las_header(path: Path, salvage: bool = False) -> LasHeader:
             vlrs=vlrs,
         )
         data_end = size
-        if n_evlrs:
+        if n_evlrs and salvage and start_evlr >= size:  # cut before its EVLRs: its points up to the cut read, as any cut file's
+            hdr.evlrs_cut = f"truncated LAS file: its {n_evlrs:,} EVLRs, said to start at byte {start_evlr:,}, lie past the end of the file ({size:,} bytes)"
+        elif n_evlrs:
             data_end = _check_evlrs(path, f, hdr)
         if compressed:
             _check_laz(path, f, hdr, salvage)
@@ -450,11 +454,13 @@ def _laspy_header(path: Path):
 
 
 def _laspy_open(path: Path, hdr: LasHeader):
+    """laspy's reader of the file; its EVLRs read only where they are all there (a file cut
+    before them is read up to the cut: read_las_header(salvage=True))."""
     import laspy
 
     if hdr.version == "1.0":
         return laspy.open(io.BufferedReader(_Las10AsLas11(path)), closefd=True)
-    return laspy.open(str(path))
+    return laspy.open(str(path), read_evlrs=hdr.evlrs_cut is None)
 
 
 def _parse_crs(header) -> str | None:
@@ -584,7 +590,8 @@ class LasReader(Reader):
     def header(self, path: Path, salvage: bool = False) -> dict:
         hdr = read_las_header(path, salvage)  # (info opens the file with laspy too: its VLRs, CRS, dimensions)
         head = {"point_count": hdr.point_count, "bounds": (list(hdr.mins), list(hdr.maxs)), "offset": list(hdr.offset), "scale": list(hdr.scale)}
-        return head if hdr.truncated is None else {**head, "truncated": hdr.truncated}
+        cut = hdr.truncated or hdr.evlrs_cut
+        return head if cut is None else {**head, "truncated": cut}
 
     def reads_slowly(self, path: Path) -> bool:
         return read_las_header(path).compressed  # LAZ: decompression, ~0.3 us a point on 2 cores
@@ -701,6 +708,8 @@ class LasReader(Reader):
                 yield PointChunk(xyz, rgba, attributes, scale=stored_scale)
         if done < stop:
             raise fail(path, f"truncated {kind} file: the header claims {hdr.point_count:,} points, only {done:,} could be read")
+        if hdr.evlrs_cut is not None:  # every point there, the EVLRs after them cut off
+            raise fail(path, hdr.evlrs_cut)
 
     def read_salvaged(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
         return self.read_chunks(path, chunk_size, salvage=True)
