@@ -371,8 +371,8 @@ def test_records_read_into_a_reused_buffer_are_laspys(tmp_path, monkeypatch, suf
 def test_files_of_point_formats_0_5_and_6_10_keep_one_scan_angle(tmp_path):
     """Formats 0-5 hold the scan angle as scan_angle_rank (int8 degrees), 6-10 as scan_angle
     (int16, 0.006 degrees): merged, neither name was in every file and the scan angle was left
-    out. Now the former is read as scan_angle where files differ: through gp.open of both, a
-    progressive load and a COPC conversion, every point's angle kept; files that agree keep their name."""
+    out. Now the former is read as scan_angle where files differ: through gp.open of both (also
+    chunked), a progressive load and a COPC conversion, every point's angle kept; files that agree keep their name."""
     a = write_las(tmp_path / "a.las", n=500, point_format=3, seed=1)
     b = write_las(tmp_path / "b.las", n=400, point_format=7, version="1.4", seed=2)
     write_las(tmp_path / "c.las", n=300, point_format=1, seed=3)
@@ -382,9 +382,9 @@ def test_files_of_point_formats_0_5_and_6_10_keep_one_scan_angle(tmp_path):
     mm = lambda p: np.lexsort(np.rint(np.asarray(p) * 1000).astype(np.int64).T)  # points matched by position
     want = angle[mm(xyz)]
     dropped = r": attribute\(s\) overlap, scanner_channel not in every file"
-    for paths in (("a.las", "b.las"), ("b.las", "a.las")):
+    for paths, chunked in ((("a.las", "b.las"), False), (("b.las", "a.las"), False), (("a.las", "b.las"), True)):
         with pytest.warns(gp.GigapointWarning, match=dropped):
-            cloud = gp.open(*(tmp_path / p for p in paths))
+            cloud = gp.open(*(tmp_path / p for p in paths), chunked=chunked)
         got = np.asarray(cloud.attributes["scan_angle"])
         assert "scan_angle_rank" not in cloud.attributes and got.dtype == np.int16
         np.testing.assert_array_equal(got[mm(cloud.positions())], want)
