@@ -505,7 +505,7 @@ def test_held_constant_attributes_are_not_held_a_point_at_a_time(town_and_spot, 
         for c in self._held:
             held_keys.update(k for k, v in c.items() if len(v))
         result = count(self)
-        constant.update(self._constant)
+        constant.update(self._constants())
         return result
 
     monkeypatch.setattr(in_memory.InMemoryPhases, "count", counting)
@@ -518,6 +518,70 @@ def test_held_constant_attributes_are_not_held_a_point_at_a_time(town_and_spot, 
     a, b = _files_of(tmp_path / "spilled"), _files_of(tmp_path / "held")
     assert a.keys() == b.keys() and [k for k in a if a[k] != b[k]] == []
     assert "synthetic" in open_octree(tmp_path / "held").attribute_names
+
+
+@pytest.mark.parametrize("varies", [False, True])
+def test_spilled_constant_attributes_are_saved_as_their_value_alone(town_and_spot, tmp_path, monkeypatch, varies):
+    """Out of core, an attribute every point holds one value of is spilled as that value: no
+    byte a point in the raw chunks or the partitions' files (a LAS file's flags and user_data:
+    ~7 bytes a point), made again for each partition's build: the octree is the in-memory
+    conversion's byte for byte. ``varies``: a last file whose user_data is 5: each chunk still
+    spills it as its value, the partitions a point at a time."""
+    import importlib
+
+    spill, partition = (importlib.import_module(f"gigapoint.lod.convert.{m}") for m in ("spill", "partition"))
+    if varies:
+        las = laspy.read(str(town_and_spot[1]))
+        las.user_data = np.full(len(las.points), 5, np.uint8)
+        town_and_spot = [*town_and_spot, tmp_path / "five.las"]
+        las.write(str(town_and_spot[-1]))
+    assert convert(town_and_spot, tmp_path / "held", **OPTS).in_memory
+    raw, parts = {}, {}
+    save, append = spill.atomic_npy, partition.append_file
+
+    def saving(path, array, **kw):  # bytes of each spilled array, by name ("attr.intensity.npy")
+        raw[path.name.split(".", 1)[1]] = raw.get(path.name.split(".", 1)[1], 0) + array.nbytes
+        return save(path, array, **kw)
+
+    def appending(path, arrays):  # bytes of each partition array, by name ("attr.intensity")
+        parts[path.name.split(".", 1)[1]] = parts.get(path.name.split(".", 1)[1], 0) + sum(a.nbytes for a in arrays)
+        return append(path, arrays)
+
+    monkeypatch.setattr(spill, "atomic_npy", saving)
+    monkeypatch.setattr(partition, "append_file", appending)
+    _spilling(monkeypatch)
+    spilled = convert(town_and_spot, tmp_path / "spilled", **OPTS)
+    n = spilled.points
+    assert not spilled.in_memory and n == (210_000 if varies else 180_000)
+    attrs = open_octree(tmp_path / "spilled").attributes
+    constant = {a for a, v in attrs.items() if np.all(np.asarray(v) == np.asarray(v)[0])}
+    assert {"synthetic", "withheld", "scan_direction_flag"} <= constant and "intensity" not in constant
+    assert ("user_data" not in constant) if varies else ("user_data" in constant)
+    for a in constant:  # a value a chunk (5 chunks: 4 of the town, the spot; 6 with the five)
+        assert "attr." + a + ".npy" not in raw and raw["const." + a + ".npy"] == (6 if varies else 5) * attrs[a].dtype.itemsize, a
+        assert "attr." + a not in parts, a
+    assert raw["attr.intensity.npy"] == 2 * n and parts["attr.intensity"] >= 2 * n  # (the refined spot: its points twice)
+    assert "attr.user_data.npy" not in raw and (parts["attr.user_data"] >= n if varies else "attr.user_data" not in parts)
+    a, b = _files_of(tmp_path / "spilled"), _files_of(tmp_path / "held")
+    assert a.keys() == b.keys() and [k for k in a if a[k] != b[k]] == []
+
+
+@pytest.mark.parametrize("spilled", [False, True])
+def test_an_attribute_of_zeros_and_one_minus_zero_is_not_held_as_a_constant(tmp_path, monkeypatch, spilled):
+    """One value is one value bit for bit: float zeros with a -0.0 among them were held as the
+    constant 0.0 in memory (``==`` finds -0.0 equal), and the octree lost its -0.0."""
+    from gigapoint.core.chunk import PointChunk
+
+    rng = np.random.default_rng(1)
+    height = np.zeros(20_000)
+    height[1234] = -0.0
+    chunks = [PointChunk(rng.random((10_000, 3)) * 100, rng.integers(0, 255, (10_000, 4), np.uint8), {"height": h}) for h in np.split(height, 2)]
+    if spilled:
+        _spilling(monkeypatch)
+    res = convert(chunks, tmp_path / "oct", **OPTS)
+    assert res.in_memory != spilled
+    held = np.asarray(open_octree(tmp_path / "oct").attributes["height"])
+    assert len(held) == 20_000 and int(np.signbit(held).sum()) == 1
 
 
 def test_an_input_beyond_the_memory_limit_is_spilled(demo_las, tmp_path):

@@ -241,6 +241,24 @@ def test_a_run_interrupted_here_starts_over_on_dask_to_the_same_bytes(inputs, re
     _assert_identical(reference, out)
 
 
+def test_dask_pieces_hold_constant_attributes_as_their_value_alone(inputs, reference, client, tmp_path, stop_conversion_after):
+    """The read tasks note the attributes every point holds one value of (a LAS file's flags,
+    its user_data: ~7 bytes a point); the distribute tasks' pieces leave them out and each
+    build makes them again: the single-process output, byte for byte, after a resume too."""
+    out = tmp_path / "oct"
+    stop_conversion_after(1)
+    with pytest.raises(KeyboardInterrupt):
+        convert(inputs, out, client=client, **OPTS)
+    stop_conversion_after(None)
+    state = OctreeDir(out).read_state()
+    constant = {a for a, c in state["constant"].items() if c is not None}
+    assert {"synthetic", "withheld", "user_data"} <= constant and not {"intensity", "classification"} & constant
+    arrays = {p.name.split(".", 1)[1] for p in OctreeDir(out).parts.glob("t*") if p.suffix != ".json"}
+    assert arrays == {"xyz", "rgba", *("attr." + a for a in state["attributes"] if a not in constant)}
+    convert(inputs, out, client=client, **OPTS)
+    _assert_identical(reference, out)
+
+
 def test_cli_dask_option_gives_the_single_process_output(inputs, client, tmp_path, capsys):
     """Defaults (one partition: the build reads the spilled chunks) through `gigapoint convert --dask`."""
     ref, out = tmp_path / "ref", tmp_path / "oct"

@@ -79,3 +79,22 @@ def test_a_spilled_chunk_keeps_int32_positions_and_loads_as_float(tmp_path: Path
     # without a code (the single-process converter), float64 as before
     spill_chunk(tmp_path, 6, PointChunk(_las_positions(ints, code), rgba, {}))
     assert raw_xyz_code(tmp_path, 6) is None and load_raw_chunk(tmp_path, 6, [])["xyz"].dtype == np.float64
+
+
+def test_a_constant_attribute_is_spilled_as_its_value_alone(tmp_path: Path):
+    """An attribute every point of a chunk holds one value of (a LAS file's flags, its user_data)
+    is spilled as that value, not a point at a time, and loads as the values it was. One value
+    is bit for bit: a -0.0 among 0.0 keeps the values a point at a time."""
+    xyz = np.arange(3000, dtype=np.float64).reshape(1000, 3)
+    rgba = np.full((1000, 4), 200, np.uint8)
+    height = np.zeros(1000)
+    height[7] = -0.0
+    attrs = {"flags": np.zeros(1000, np.uint8), "gps": np.full(1000, 2.5), "intensity": np.arange(1000, dtype=np.uint16), "height": height}
+    spill_chunk(tmp_path, 3, PointChunk(xyz, rgba, attrs))
+    sizes = {p.name.split(".", 1)[1]: p.stat().st_size for p in raw_chunk_files(tmp_path, 3)}
+    assert set(sizes) == {"xyz.npy", "rgba.npy", "const.flags.npy", "const.gps.npy", "attr.intensity.npy", "attr.height.npy"}
+    header = sizes["const.flags.npy"] - 1  # (one uint8)
+    assert sizes["const.gps.npy"] == header + 8 and sizes["attr.intensity.npy"] == header + 2000 and sizes["attr.height.npy"] == header + 8000
+    loaded = load_raw_chunk(tmp_path, 3, list(attrs))
+    for a, v in attrs.items():
+        assert loaded["attr." + a].dtype == v.dtype and loaded["attr." + a].tobytes() == v.tobytes(), a

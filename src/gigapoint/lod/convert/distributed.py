@@ -72,7 +72,16 @@ from . import hooks
 from .keep_freed_memory import KeepFreedMemory
 from .partition import COUNT_LEVEL, CellCounts, PartitionPhases, built_name, grid_cells, group_name, partition_lut
 from .phases import BuildPhases, place_set
-from .read import ReadPhase, _read_chunks, _skipped_if_empty, merge_attributes, skipped_message, spill_chunk
+from .read import (
+    ReadPhase,
+    _read_chunks,
+    _skipped_if_empty,
+    chunk_constants,
+    merge_attributes,
+    merge_constants,
+    skipped_message,
+    spill_chunk,
+)
 from .spill import copy_range, decode_xyz, las_xyz_code, load_raw_chunk, raw_chunk_files, raw_xyz_code
 
 READ_CHUNKS = 1  # chunks (``chunk_size`` points, 2 M by default) a read task decodes: one a task
@@ -218,10 +227,9 @@ class _Task(PartitionPhases, BuildPhases):
         if self.source is None:  # a refined partition: files of its own, removed once built
             return super()._partition_input(lev, prefix)
         kind, items = self.source
-        attrs = self.state["attributes"]
         if kind == "raw":  # the only partition: the spilled chunks (the driver removes them)
-            parts = [load_raw_chunk(self.dir.raw, i, attrs) for i in items]
-            return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}, []
+            parts = [load_raw_chunk(self.dir.raw, i, self._varying()) for i in items]
+            return self._with_constants({k: np.concatenate([p[k] for p in parts]) for k in parts[0]}), []
         n = sum(rows for _, _, rows, _ in items)
         data = {}
         for key, dt in self._dtypes().items():
@@ -240,7 +248,7 @@ class _Task(PartitionPhases, BuildPhases):
                     _read_into(_piece_file(self.dir, t, key), start * row, flat[at * row : (at + rows) * row])
                 at += rows
             data[key] = arr
-        return data, []
+        return self._with_constants(data), []
 
 
 def _read_into(path: Path, offset: int, buf: memoryview) -> None:
@@ -335,12 +343,13 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
     if spec["one_angle"]:
         chunks = with_scan_angle(chunks)
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-    attrs, n_chunks, n_in, points, skipped, eight = None, 0, 0, 0, 0, False
+    attrs, constant, n_chunks, n_in, points, skipped, eight = None, {}, 0, 0, 0, 0, False
     sample: list[dict] = []
     for j, chunk in enumerate(chunks):
         if j >= CHUNK_STRIDE:
             raise ConvertError(f"{path}: more than {CHUNK_STRIDE:,} chunks in one read task")
-        xyz, rgba, _, names, invalid, c_lo, c_hi = spill_chunk(raw, t * CHUNK_STRIDE + j, chunk, xyz_code)
+        xyz, rgba, kept, names, invalid, c_lo, c_hi = spill_chunk(raw, t * CHUNK_STRIDE + j, chunk, xyz_code)
+        merge_constants(constant, chunk_constants(kept))
         pick = slice((-points) % stride, None, stride)
         sample.append({"xyz": np.array(xyz[pick]), "rgba": np.array(rgba[pick])})
         eight |= scaler is not None and scaler.mode == "8"
@@ -357,6 +366,7 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
         "lo": lo.tolist(),
         "hi": hi.tolist(),
         "attributes": attrs,
+        "constant": constant,  # (read.merge_constants)
         "ends16": scaler is not None and scaler.mode == "16",
         "eight": eight,  # a chunk was decoded as 8-bit colors: wrong if an earlier part of the file was 16-bit
         # positions as float32 offsets from the task's corner, no attributes: what the driver takes in is a third
@@ -399,7 +409,7 @@ def _distribute_task(spec: dict, t: int, ids: list[int], partitions: list) -> di
         codes = [raw_xyz_code(d.raw, i) for i in ids]
         code = codes[0] if codes and all(c is not None and np.array_equal(c, codes[0]) for c in codes) else None
         for i, c in zip(ids, codes):
-            data = load_raw_chunk(d.raw, i, st["attributes"], decode=code is None)
+            data = load_raw_chunk(d.raw, i, w._varying(), decode=code is None)
             if len(data["xyz"]):
                 xyz = data["xyz"] if code is None else decode_xyz(data["xyz"], c)
                 pieces.append(w._by_partition(data, lut[grid_cells(xyz, origin, edge)], len(partitions)))
@@ -546,7 +556,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
 
     def _spec(self) -> dict:
         st = self.state
-        keep = ("origin", "edge", "attributes", "partition_points", "compact")
+        keep = ("origin", "edge", "attributes", "constant", "partition_points", "compact")
         return {
             "out": str(self.out),
             "dir": str(self.dir.path),
@@ -746,12 +756,13 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
                 del results[str(t)]
             again = True
         self._last_preview = preview  # its last write waits for the distribute tasks to be under way (distribute)
-        lo, hi, attrs = np.full(3, np.inf), np.full(3, -np.inf), None
+        lo, hi, attrs, constant = np.full(3, np.inf), np.full(3, -np.inf), None, {}
         for t in range(len(st["reads"])):
             res = results[str(t)]
             lo, hi = np.minimum(lo, res["lo"]), np.maximum(hi, res["hi"])
             if res["attributes"] is not None:
                 attrs = merge_attributes(attrs, res["attributes"])
+            merge_constants(constant, res.get("constant", dict.fromkeys(res["attributes"] or {})))  # (none noted: a run from before)
         st.update(
             chunks=sum(r["chunks"] for r in results.values()),
             points=sum(r["points"] for r in results.values()),
@@ -759,6 +770,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             lo=lo.tolist(),
             hi=hi.tolist(),
             attributes=attrs or {},
+            constant=constant,
         )
         self._end_read(lo, hi)
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from .options import BYTES_PER_POINT_BUILD
 from .partition import CellCounts, PartitionPhases, built_name, grid_cells, partition_lut
-from .read import ReadPhase, valid_chunk
+from .read import ReadPhase, constant_value, valid_chunk
 from .spill import decode_xyz, encode_xyz, las_xyz_code, save_raw_chunk
 
 # what a held point costs: float64 position, RGBA, attributes (LAS: up to ~20 bytes), the count
@@ -59,11 +59,10 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
     #: are int32 (spill.encode_xyz: 12 bytes a point, not 24; 240 MB of a 20 M-point conversion),
     #: decoded a partition at a time for its build; None: float64
     _xyz_code = None
-    #: attribute -> the one value every held point has so far (None: values differ): a constant
-    #: one (a LAS file's flags, its user_data, often: ~7 bytes a point) is held as that value
-    #: alone, a point at a time only once it varies (``_hold_constant``) or the chunks spill,
-    #: and made again for each partition's build (``_partition_input``)
-    _constant: dict
+    # An attribute every point read so far holds one value of (the state's ``constant``,
+    # ReadPhase._note_constants: a LAS file's flags, its user_data, often: ~7 bytes a point) is
+    # held as that value alone, a point at a time only once it varies (``_hold_constant``), and
+    # made again for each partition's build (``_with_constants``); spilled, as that value too.
 
     def resume_state(self, saved: dict) -> dict:
         """A run killed before its partitions were all built has nothing but its plan and the
@@ -78,7 +77,7 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
     def read(self) -> None:
         if not self.spilled:  # a fresh run (a spilled one resumes spilled): held while it fits
             self.spilled = self.state["spilled"] = not fits_in_memory(self)
-        self._held, self._held_points, self._constant = [], 0, {}
+        self._held, self._held_points = [], 0
         self._xyz_code = None if self.spilled else _shared_las_code(self.paths)
         super().read()
 
@@ -97,22 +96,21 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
                     held["xyz"] = decode_xyz(held["xyz"], self._xyz_code)
                 self._xyz_code, held_xyz = None, xyz
         held = {"xyz": held_xyz, "rgba": rgba}
+        was = self._note_constants(kept)
+        now = self.state["constant"]
         for a, v in kept.items():
-            was = self._constant.get(a, _UNSEEN)
-            now = self._constant[a] = _still_constant(was, v)
-            if now is None or now is _UNSEEN:  # (constant so far: its value alone is held)
-                if now is None and was is not None and was is not _UNSEEN:
-                    self._hold_constant(a, was)  # it varies from this chunk on: the chunks before hold it too
+            if now.get(a, 0) is None or not len(v):  # it varies (constant so far: its value alone is held)
+                if now.get(a) is None and was.get(a) is not None:
+                    self._hold_constant(a, constant_value(was[a]))  # it varies from this chunk on: the chunks before hold it too
                 held["attr." + a] = v
         self._held.append(held)
         self._held_points += len(xyz)
         if self._held_points > held_points(self):
             self.spilled = self.state["spilled"] = True  # saved with this chunk's count
-            for a, c in self._constant.items():
-                if c is not None and c is not _UNSEEN:
-                    self._hold_constant(a, c)
-            for j, held in enumerate(self._held):
-                save_raw_chunk(self.dir.raw, j, held.pop("xyz"), held.pop("rgba"), {k[5:]: v for k, v in held.items()}, self._xyz_code)
+            constant = {a: constant_value(c) for a, c in now.items() if c is not None}
+            for j, held in enumerate(self._held):  # (a constant one spilled as its value alone)
+                values = constant | {k[5:]: v for k, v in held.items() if k.startswith("attr.")}
+                save_raw_chunk(self.dir.raw, j, held.pop("xyz"), held.pop("rgba"), values, self._xyz_code)
             self._held = []
         return taken
 
@@ -130,9 +128,9 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
         if self.spilled:
             return super().count()
         st = self.state
-        self._constant = {a: c for a, c in self._constant.items() if c is not None and c is not _UNSEEN and a in st["attributes"]}
+        constants = self._constants()
         for chunk in self._held:  # (an empty chunk's empty arrays)
-            for a in self._constant:
+            for a in constants:
                 chunk.pop("attr." + a, None)
         origin, edge = np.array(st["origin"]), st["edge"]
         counts = CellCounts()
@@ -149,7 +147,7 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
             return super().distribute()
         st = self.state
         parts = st["partitions"]
-        keys = ["xyz", "rgba", *("attr." + a for a in st["attributes"] if a not in self._constant)]
+        keys = list(self._dtypes())
         self._pieces = {(lev, prefix): [] for lev, prefix, _ in parts}
         counts = [0] * len(parts)
         lut = partition_lut(parts)
@@ -197,23 +195,8 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
         data = self._partition_arrays(lev, prefix, 0)
         self._drop_partition(lev, prefix)  # its memory goes once the build has it
         if "xyz" in data:
-            data = {**data, "xyz": self._positions(data["xyz"])}
-            data.update({"attr." + a: np.full(len(data["xyz"]), c) for a, c in self._constant.items()})  # (c: a numpy scalar, its dtype)
+            data = self._with_constants({**data, "xyz": self._positions(data["xyz"])})
         return data, []
-
-
-_UNSEEN = object()
-
-
-def _still_constant(value, values: np.ndarray):
-    """The one value of ``values`` where it is ``value`` too (``_UNSEEN``: any), of the same
-    dtype, else None."""
-    if value is None or not len(values):
-        return value
-    first = values[0]
-    if value is not _UNSEEN and (value.dtype != first.dtype or value != first):
-        return None
-    return first if not np.any(values != first) else None  # (NaN: never equal, never constant)
 
 
 def _shared_las_code(paths) -> np.ndarray | None:

@@ -14,6 +14,7 @@ from ...atomic import append_file
 from ...core.cloud import take
 from ...core.morton import counting_order
 from ..keys import CODE_BITS, point_codes
+from .read import constant_value
 from .spill import load_raw_chunk, raw_chunk_files
 from .state import Job
 
@@ -144,19 +145,33 @@ class PartitionPhases(Job):
         self.save_state()
 
     # -- phase 3
+    def _constants(self) -> dict:
+        """The attributes every point holds one value of (the read's ``constant``): {name: that
+        value, a numpy scalar}. Partitions hold them as that value alone, not a point at a time."""
+        st = self.state
+        return {a: constant_value(c) for a, c in st.get("constant", {}).items() if c is not None and st["attributes"].get(a) == c[0]}
+
+    def _with_constants(self, data: dict) -> dict:
+        """A partition's points ``data`` with its constant attributes made, a point at a time, for its build."""
+        return data | {"attr." + a: np.full(len(data["xyz"]), c, c.dtype) for a, c in self._constants().items()}
+
     def _part_files(self, level: int, prefix: int) -> dict[str, Path]:
         d = self.dir.parts
         stem = built_name(level, prefix)  # named by node key: refined partitions never clash
-        files = {"xyz": d / f"{stem}.xyz", "rgba": d / f"{stem}.rgba"}
-        for a in self.state["attributes"]:
-            files["attr." + a] = d / f"{stem}.attr.{a}"
-        return files
+        return {k: d / f"{stem}.{k}" for k in self._dtypes()}
 
     def _dtypes(self) -> dict[str, np.dtype]:
+        """The arrays a partition holds a point at a time, and their dtypes."""
         dts = {"xyz": np.dtype(np.float64), "rgba": np.dtype(np.uint32)}
+        constants = self._constants()
         for a, dt in self.state["attributes"].items():
-            dts["attr." + a] = np.dtype(dt)
+            if a not in constants:
+                dts["attr." + a] = np.dtype(dt)
         return dts
+
+    def _varying(self) -> list[str]:
+        """The attributes a partition holds a point at a time (``_dtypes``)."""
+        return [k[5:] for k in self._dtypes() if k.startswith("attr.")]
 
     @staticmethod
     def _by_partition(data: dict, pid: np.ndarray, n_parts: int) -> tuple[dict, np.ndarray]:
@@ -197,7 +212,7 @@ class PartitionPhases(Job):
             self.progress.phase("distribute", st["points"])
             pieces, held = [], 0  # chunks grouped since the last checkpoint, and their bytes
             for i in range(st["distributed"], st["chunks"]):
-                data = load_raw_chunk(self.dir.raw, i, st["attributes"])
+                data = load_raw_chunk(self.dir.raw, i, self._varying())
                 xyz = np.ascontiguousarray(data["xyz"])
                 if len(xyz):
                     pieces.append(self._by_partition(data, lut[grid_cells(xyz, origin, edge)], len(parts)))

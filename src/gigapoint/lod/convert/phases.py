@@ -125,13 +125,13 @@ class BuildPhases(Job):
         files they were read from (removed once it is built)."""
         st = self.state
         if st.get("from_raw"):  # one partition: the spilled chunks themselves
-            parts = [load_raw_chunk(self.dir.raw, i, st["attributes"]) for i in range(st["chunks"])]
-            return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}, raw_chunk_files(self.dir.raw)
+            parts = [load_raw_chunk(self.dir.raw, i, self._varying()) for i in range(st["chunks"])]
+            return self._with_constants({k: np.concatenate([p[k] for p in parts]) for k in parts[0]}), raw_chunk_files(self.dir.raw)
         files = self._part_files(lev, prefix)
         dts = self._dtypes()
         data = {k: np.fromfile(path, dtype=dts[k]) for k, path in files.items()}
         data["xyz"] = data["xyz"].reshape(-1, 3)
-        return data, list(files.values())
+        return self._with_constants(data), list(files.values())
 
     def _build_subtree(self, data: dict, root_key: int, origin, edge, dest: Path) -> None:
         xyz = data.pop("xyz")

@@ -19,7 +19,7 @@ from ..build import valid_bounds
 from ..preview import PreviewSampler, preview_points
 from .facts import input_facts
 from .prefetch import prefetch
-from .spill import encode_xyz, load_raw_chunk, save_raw_chunk
+from .spill import encode_xyz, load_raw_chunk, one_value, save_raw_chunk
 from .state import Job
 
 
@@ -52,6 +52,30 @@ def merge_attributes(attrs: dict | None, names: dict) -> dict:
     """The attributes every chunk so far has (``attrs``; None before the first) and this one's
     (``names``: {name: dtype str}) have alike, in the first chunk's order."""
     return names if attrs is None else {a: d for a, d in attrs.items() if names.get(a) == d}
+
+
+def chunk_constants(kept: dict) -> dict:
+    """A chunk's attributes ``kept`` ({name: values}) as ``merge_constants`` takes them: [dtype
+    str, the one value] where every point holds one (``one_value``), else None; none for no point."""
+    found = {a: one_value(v) for a, v in kept.items() if len(v)}
+    return {a: None if c is None else [c.dtype.str, c.item()] for a, c in found.items()}
+
+
+def merge_constants(constant: dict, found: dict) -> dict:
+    """``constant`` (attribute -> [dtype str, the one value every point so far holds]; None: its
+    values differ; absent: no point yet), a JSON-able part of the state, updated in place with
+    the next points' (``chunk_constants``, or a read task's ``constant``); returned."""
+    for a, c in found.items():
+        if a not in constant:
+            constant[a] = c
+        elif constant[a] is not None and (c is None or c[0] != constant[a][0] or constant_value(c).tobytes() != constant_value(constant[a]).tobytes()):
+            constant[a] = None  # (bit for bit: -0.0 is not 0.0)
+    return constant
+
+
+def constant_value(entry: list) -> np.generic:
+    """A ``merge_constants`` entry's value, a numpy scalar of its dtype."""
+    return np.array(entry[1], np.dtype(entry[0]))[()]
 
 
 def valid_chunk(chunk) -> tuple:
@@ -133,7 +157,17 @@ class ReadPhase(Job):
     def _take_chunk(self, i: int, chunk) -> tuple:
         """Chunk ``i``'s valid points, kept for the later phases: spilled to the raw chunk files
         (``spill_chunk``'s results; in_memory.py holds them instead)."""
-        return spill_chunk(self.dir.raw, i, chunk)
+        taken = spill_chunk(self.dir.raw, i, chunk)
+        self._note_constants(taken[2])
+        return taken
+
+    def _note_constants(self, kept: dict) -> dict:
+        """The attributes of one value so far (the state's ``constant``, ``merge_constants``) with
+        a chunk's ``kept``: the partitions hold those as that value alone. Returns them as they were before."""
+        constant = self.state.setdefault("constant", {})
+        before = dict(constant)
+        merge_constants(constant, chunk_constants(kept))
+        return before
 
     def read(self) -> None:
         st = self.state
@@ -142,6 +176,8 @@ class ReadPhase(Job):
         lo = np.array(st.get("lo", [np.inf] * 3))
         hi = np.array(st.get("hi", [-np.inf] * 3))
         attrs: dict | None = st.get("attributes")
+        if done and "constant" not in st:  # a run from before constants were noted: its chunks hold every attribute a point at a time
+            st["constant"] = dict.fromkeys(attrs or {})
         total = st["total"] = self.point_total
         preview = self._preview_sampler(total, done, attrs)
         dropped: set[str] = set()

@@ -85,15 +85,33 @@ def decode_xyz(ints: np.ndarray, code: np.ndarray, out: np.ndarray | None = None
     return out
 
 
+def one_value(values: np.ndarray):
+    """The value every entry of 1-D ``values`` holds, bit for bit (-0.0 is not 0.0), as a numpy
+    scalar of their dtype; None where they differ, are empty or NaN, or are not numbers."""
+    if not len(values) or values.dtype.kind not in "biuf" or values.dtype.itemsize not in (1, 2, 4, 8):
+        return None
+    first = values[0]
+    if values.dtype.kind == "f" and np.isnan(first):  # (a NaN's payload would not survive the state's JSON)
+        return None
+    bits = np.ascontiguousarray(values).view(f"u{values.dtype.itemsize}")
+    return None if np.any(bits != bits[0]) else first
+
+
 def save_raw_chunk(raw: Path, i: int, xyz: np.ndarray, rgba: np.ndarray, attributes: dict, xyz_code: np.ndarray | None = None) -> None:
     """Chunk ``i``'s valid points: xyz (n, 3), u32 RGBA and 1-D attributes, a file each. xyz:
-    float64, or int32 under ``xyz_code`` (encode_xyz), saved beside it."""
+    float64, or int32 under ``xyz_code`` (encode_xyz), saved beside it. An attribute of one value
+    (``one_value``, or given as a numpy scalar) is saved as that value alone (``const.<name>``):
+    a LAS file's flags, its user_data, ... are ~7 bytes a point of zeros."""
     if xyz_code is not None:
         atomic_npy(_raw_path(raw, i, "xyzcode"), np.asarray(xyz_code, np.float64))
     atomic_npy(_raw_path(raw, i, "xyz"), xyz)
     atomic_npy(_raw_path(raw, i, "rgba"), rgba)
     for a, v in attributes.items():
-        atomic_npy(_raw_path(raw, i, "attr." + a), v)
+        c = v if np.ndim(v) == 0 else one_value(v)
+        if c is None:
+            atomic_npy(_raw_path(raw, i, "attr." + a), v)
+        else:
+            atomic_npy(_raw_path(raw, i, "const." + a), np.asarray(c).reshape(1))
 
 
 def raw_xyz_code(raw: Path, i: int) -> np.ndarray | None:
@@ -104,13 +122,19 @@ def raw_xyz_code(raw: Path, i: int) -> np.ndarray | None:
 
 def load_raw_chunk(raw: Path, i: int, attributes, decode: bool = True) -> dict:
     """Chunk ``i`` memory-mapped: {"xyz", "rgba", "attr.<name>" for each of ``attributes``};
-    int32 positions decoded to float64 (``decode``: else as spilled, raw_xyz_code tells)."""
+    int32 positions decoded to float64 (``decode``: else as spilled, raw_xyz_code tells); an
+    attribute saved as its value alone made again, a point at a time."""
     xyz = np.load(_raw_path(raw, i, "xyz"), mmap_mode="r")
     if decode and xyz.dtype != np.float64:
         xyz = decode_xyz(xyz, np.load(_raw_path(raw, i, "xyzcode")))
     d = {"xyz": xyz, "rgba": np.load(_raw_path(raw, i, "rgba"), mmap_mode="r")}
     for a in attributes:
-        d["attr." + a] = np.load(_raw_path(raw, i, "attr." + a), mmap_mode="r")
+        path = _raw_path(raw, i, "attr." + a)
+        if path.exists():
+            d["attr." + a] = np.load(path, mmap_mode="r")
+        else:
+            c = np.load(_raw_path(raw, i, "const." + a))
+            d["attr." + a] = np.full(len(xyz), c[0], c.dtype)
     return d
 
 
