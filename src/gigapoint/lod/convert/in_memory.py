@@ -22,8 +22,14 @@ from .partition import CellCounts, PartitionPhases, built_name, grid_cells, part
 from .read import ReadPhase, constant_value, valid_chunk
 from .spill import decode_xyz, encode_xyz, las_xyz_code, save_raw_chunk
 
-# what a held point costs: float64 position, RGBA, attributes (LAS: up to ~20 bytes), the count
-# grid's cell, and its copy in a partition while the chunks are grouped
+# what a held point costs at the peak (the read's end): its position (int32 for a LAS file's), RGBA,
+# the attributes that vary (a constant one is held as its value), the next chunk being decoded and
+# what the allocator keeps of the chunks before. Measured as the growth of the peak anonymous
+# memory (RssAnon, sampled) from 2.5 M to 5 M points of a LAS file (format 3), converted in
+# memory with partitions of 500 000: 52 bytes a point where 11 of its 13 attributes are constant
+# (23 bytes a point held), 58 where every one varies (42 held); the peak RSS, with the write
+# phase's file pages, grows 59 and 71. Not derived from the attributes: the choice is made from
+# the header's count, before a point is read.
 HELD_BYTES_PER_POINT = 64
 
 
