@@ -216,7 +216,7 @@ def test_many_small_files_convert_in_time_linear_in_the_files(tmp_path, monkeypa
     raw = tmp_path / "raw"
     raw.mkdir()
     for i in range(5):
-        spill.save_raw_chunk(raw, i, np.zeros((2, 3)), np.zeros(2, np.uint32), {"a.b": np.zeros(2)})
+        spill.save_raw_chunk(raw, i, np.zeros((2, 3)), np.zeros(2, np.uint32), {"a.b": np.arange(2.0)})  # (varies: a point at a time)
     assert sorted(f.name for f in spill.raw_chunk_files(raw, range(1, 3))) == sorted(
         f"c{i:06d}.{k}.npy" for i in (1, 2) for k in ("xyz", "rgba", "attr.a.b")
     )
