@@ -49,6 +49,27 @@ def test_point_spacing_of_a_regular_grid():
     assert point_spacing(gp.from_arrays(np.zeros((10, 3)))) == 0.0
 
 
+def test_a_cloud_without_extent_has_no_spacing_in_either_layout():
+    """An axis the points do not spread along has no extent, whatever the batch's box: a compact
+    layout's box is a grid cell of at least 1024 steps (one point read as 10.24 m apart, a 16 px
+    splat, where the same point of the words layout drew one pixel)."""
+    one, line, same = np.zeros((1, 3)), np.array([[0.0, 0, 0], [1, 0, 0]]), np.full((7, 3), 2.5)
+    for xyz in (one, line, same):
+        compact = gp.from_arrays(xyz, scale=0.01)
+        assert compact.layout == "compact"
+        assert point_spacing(compact) == point_spacing(gp.from_arrays(xyz)) == 0.0
+
+
+def test_a_single_point_draws_one_pixel_whatever_its_layout():
+    """One point (and two on a line: no spacing either) draws as many pixels as it has points."""
+    line = np.array([[0.0, 0, 0], [1, 0, 0]])
+    clouds = [gp.demo(1), gp.from_arrays(np.zeros((1, 3))), gp.from_arrays(np.zeros((1, 3)), scale=0.01)]
+    for cloud in [*clouds, gp.from_arrays(line), gp.from_arrays(line, scale=0.01)]:
+        img = np.asarray(gp.render(cloud, width=64, height=64, settings=gp.RenderSettings(backend="cpu")))
+        background = img[0, 0]
+        assert (img != background).any(axis=-1).sum() == cloud.n_points, cloud.name
+
+
 def test_point_spacing_of_uneven_real_and_random_data():
     """Uniform random points on a plane: sqrt(area / points) within 5 %; autzen_trim: near the
     occupied area's (1.65-1.85 m from 2-4 m cells of its plan) and well under the batch boxes' 3.2 m."""

@@ -99,15 +99,19 @@ def batch_spacings(
     idx = rec["first"][ids].astype(np.int64)[owner] + j * n[owner] // np.maximum(m[owner], 1)  # every (n/m)-th point
     low = np.asarray(points.low[idx]).astype(np.int64)
     ext = (rec["bbox_max"][ids] - rec["bbox_min"][ids]).astype(np.float64)
-    sides = np.sort(ext, axis=1)
+    q = np.stack([(low >> (10 * axis)) & 1023 for axis in range(3)], axis=1)
+    starts = np.cumsum(m) - m
+    spread = np.maximum.reduceat(q, starts) > np.minimum.reduceat(q, starts) if len(ids) else q[:0] > 0
+    # an axis the points do not spread along has no extent, whatever the box: a compact layout's
+    # box is a grid cell of >= 1024 steps (10.24 m at 1 cm), one point's too (read as its spacing)
+    sides = np.sort(np.where(spread, ext, 0.0), axis=1)
     cell = np.sqrt(sides[:, 2] * sides[:, 1] / np.maximum(m, 1))
     # cells no finer than the low word's grid (1024 a side): indices below 2^11 an axis
     cell = np.where(cell > 0, np.maximum(cell, sides[:, 2] / 1024.0), np.inf)
     scale = ext / (1024.0 * cell[:, None])  # 10-bit grid units -> cells
     key = owner.astype(np.int64)
     for axis in range(3):
-        q = (low >> (10 * axis)) & 1023
-        key = (key << 11) | np.minimum(((q + 0.5) * scale[owner, axis]).astype(np.int64), 2047)
+        key = (key << 11) | np.minimum(((q[:, axis] + 0.5) * scale[owner, axis]).astype(np.int64), 2047)
     voxels = np.bincount(np.unique(key) >> 33, minlength=len(ids)).astype(np.float64)
     drawn = np.ceil(n / max(1, step))
     return ids, np.where(np.isfinite(cell), cell, 0.0) * np.sqrt(voxels / drawn), drawn  # sqrt(voxels x cell^2 / drawn)
