@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 import gigapoint as gp
 from gigapoint.core.chunk import DEFAULT_COLOR
-from gigapoint.io import file_info, open_cloud, read_chunks
+from gigapoint.io import file_info, open_cloud, read_chunks, reader_for
 
 RNG = np.random.default_rng(7)
 COLOR_FORMATS = {2, 3, 5, 7, 8, 10}
@@ -235,6 +235,7 @@ def test_extra_bytes_are_read_as_attributes(tmp_path, suffix):
     np.testing.assert_array_equal(attrs["height_above_ground"], np.arange(20, dtype=np.float32))
     np.testing.assert_array_equal(attrs["amplitude"], 10.0 + 0.5 * np.arange(20))
     assert "height_above_ground" in file_info(path)["dimensions"] and file_info(path)["attributes"][-6:] == list(attrs)[-6:]
+    assert reader_for(path).header(path)["attributes"] == list(attrs)  # before reading (render --color-attribute's check)
     cloud = gp.open(path, progressive=True)
     assert cloud.wait() and cloud.attribute_names[-6:] == tuple(attrs)[-6:]
     result = gp.convert(path, tmp_path / "octree")  # ('a/b' made the conversion fail on a file 'attr.a/b.npy')

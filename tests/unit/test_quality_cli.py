@@ -57,6 +57,40 @@ def test_color_attribute_alone_colours_by_that_attribute(tmp_path, capsys):
     assert capsys.readouterr().err.strip() == "error: color_attribute: hag.npz has no attribute 'nope' (attributes: hag)"
 
 
+def test_a_missing_color_attribute_is_refused_before_the_inputs_are_read(tmp_path, capsys, monkeypatch):
+    """It was told once every input was read (minutes for a large file): now from the headers of
+    LAS/LAZ, PLY, NPY and text files (their attributes as the read cloud names them); of several
+    files, those they all have (what the merged cloud keeps)."""
+    import laspy
+
+    from gigapoint.cli import render_cmd
+    from gigapoint.io import reader_for
+
+    xyz = np.arange(12.0).reshape(4, 3)
+    header = laspy.LasHeader(point_format=1, version="1.4")
+    header.add_extra_dim(laspy.ExtraBytesParams(name="hag", type=np.float32))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz.T
+    las.write(str(tmp_path / "a.laz"))
+    (tmp_path / "b.ply").write_text("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+                                    "property float Hag\nend_header\n1 2 3 7\n")  # fmt: skip
+    np.save(tmp_path / "c.npy", np.c_[xyz, np.ones(4)])  # (N, 4): x y z intensity
+    (tmp_path / "d.csv").write_text("x,y,z,hag,a/b\n1,2,3,4,5\n")
+    for name in ("a.laz", "b.ply", "c.npy", "d.csv"):
+        path = tmp_path / name
+        assert reader_for(path).header(path)["attributes"] == list(gp.open(path).attribute_names), name
+    monkeypatch.setattr(render_cmd, "open_inputs", lambda *a: pytest.fail("the inputs were read"))
+    for inputs, problem in (
+        (["a.laz"], ("a.laz has no attribute 'nope' (attributes: classification, edge_of_flight_line, gps_time, hag, intensity, key_point, "
+                     "number_of_returns, point_source_id, return_number, scan_angle_rank, scan_direction_flag, synthetic, user_data, withheld)")),
+        (["c.npy"], "c.npy has no attribute 'nope' (attributes: intensity)"),
+        (["b.ply", "d.csv"], "2 files has no attribute 'nope' (attributes: hag)"),
+    ):  # fmt: skip
+        args = [str(tmp_path / f) for f in inputs]
+        assert main(["render", *args, "-o", str(tmp_path / "x.png"), "--color-attribute", "nope"]) == 1
+        assert capsys.readouterr().err == f"error: color_attribute: {problem}\n"
+
+
 def test_bad_quality_options_are_one_line_errors(npy, tmp_path, capsys):
     for extra in (["--fill-holes", "7"], ["--color-mode", "rainbow"], ["--elevation-range", "1"], ["--supersample", "3"]):
         assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "32", *extra]) == 1

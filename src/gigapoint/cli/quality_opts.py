@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 from ..core.cloud import PointCloud
 from ..errors import SettingsError
@@ -39,6 +40,26 @@ def check_color_options(settings) -> None:
         if getattr(settings, name) != getattr(defaults, name) and settings.color_mode not in modes:
             uses = " or ".join(modes)
             raise SettingsError(f"{OPTION_OF[name]}: colours only --color-mode {uses}, not {settings.color_mode} (it would be ignored)")
+
+
+def check_color_attribute(inputs, settings) -> None:
+    """A --color-attribute that no input file has, told from the files' headers before any is
+    read (``missing_attribute``'s line: it came once every input was read). Octrees, and files
+    whose headers do not list their attributes, are checked once read, as before."""
+    from ..io import cloud_name, expand_paths, reader_for
+    from ..lod import is_lod_source
+    from ..render.colors import missing_attribute
+
+    name = settings.color_attribute
+    if settings.color_mode != "attribute" or not name or any(is_lod_source(p) for p in inputs):
+        return
+    with warnings.catch_warnings():  # a file named twice is warned about once, when read
+        warnings.simplefilter("ignore")
+        files = expand_paths(inputs)
+    heads = [reader_for(f).header(f, salvage=True).get("attributes") for f in files]  # salvage: a cut-off file is drawn
+    if None in heads or any(name in head for head in heads):
+        return
+    raise missing_attribute(cloud_name(files), name, set(heads[0]).intersection(*heads[1:]))  # a merge keeps the shared ones
 
 
 def prepare_cloud(cloud, settings) -> None:

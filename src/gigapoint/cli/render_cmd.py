@@ -20,7 +20,7 @@ from .cloud_opts import ChunkedOption, ColorsOption, check_colors, cloud_options
 from .info_cmd import memory_line
 from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_image
 from .progress import err_console, progress_bar, status
-from .quality_opts import check_color_options, prepare_cloud
+from .quality_opts import check_color_attribute, check_color_options, prepare_cloud
 from .settings_opts import settings_from_options, with_settings_options
 
 _CAMERA_KEYS = {"eye": 3, "target": 3, "up": 3, "yaw": 1, "pitch": 1, "distance": 1, "fov": 1}
@@ -212,6 +212,7 @@ def render(
     check_view(view)
     check_image_size(width, height, fov)  # before reading anything
     check_color_options(settings)
+    check_color_attribute(inputs, settings)
     if camera is not None:
         if view != "auto":  # the view was dropped without a word: --camera places the eye itself
             raise GigapointError(f"--view {view} and --camera: give one (--camera 'yaw=.. pitch=..' is a view of any angle)")

@@ -91,6 +91,11 @@ def expand_paths(paths: Iterable) -> list[Path]:
     return once
 
 
+def cloud_name(files) -> str:
+    """The name of the cloud read from ``files`` (expand_paths'): the file's, or 'N files'."""
+    return files[0].name if len(files) == 1 else f"{len(files)} files"
+
+
 def files_label(files) -> str:
     """Files as an error names them: one as it is, several by the first three and '...' (a
     conversion of thousands of tiles named every one of them in its one line)."""
@@ -145,7 +150,7 @@ def open_cloud(
     files = expand_paths(paths)
     plan = [(f, reader_for(f)) for f in files]
     if name is None:
-        name = files[0].name if len(files) == 1 else f"{len(files)} files"
+        name = cloud_name(files)
     several = len(files) > 1
     empty: list[Path] = []
     from ..core.chunked import CHUNKED_ABOVE, HELD_BYTES_MIN, IN_MEMORY_BYTES_MIN, SPILLED_BYTES_MIN, check_room
@@ -282,6 +287,7 @@ def _human_bytes(n: int) -> str:
 __all__ = [
     "DEFAULT_CHUNK_SIZE",
     "Reader",
+    "cloud_name",
     "demo_arrays",
     "demo_chunks",
     "expand_paths",

@@ -62,7 +62,8 @@ class Reader:
         points, as the header says), ``offset`` and ``scale`` (its integer grid). ``info`` may
         read every point (text, NPY: ``bounds_source`` "scan"); this never does. ``salvage``:
         a file cut off is not refused here (``read_salvaged`` gives what it holds):
-        ``truncated`` says why it is short."""
+        ``truncated`` says why it is short. ``attributes``: the names ``read_chunks`` gives its
+        points' attributes, where the header tells them (absent: known once read)."""
         return {"point_count": self.point_count(path)}
 
     def read_salvaged(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:

@@ -88,6 +88,25 @@ def _attribute_fields(point_format) -> dict[str, str | tuple[str, int]]:
     return fields
 
 
+def _header_attributes(hdr: LasHeader) -> list[str] | None:
+    """``_attribute_fields`` of the header's point format and extra-bytes VLR (laspy's parse of
+    the record, no file opened); None where the records hold bytes described elsewhere (an EVLR)."""
+    import laspy
+    from laspy.vlrs.known import ExtraBytesVlr
+
+    fmt = laspy.PointFormat(hdr.point_format)
+    for user_id, record_id, data in hdr.vlrs:
+        if user_id == b"LASF_Spec" and record_id == 4:
+            vlr = ExtraBytesVlr()
+            try:
+                vlr.parse_record_data(data)
+                for param in vlr.type_of_extra_dims():
+                    fmt.add_extra_dimension(param)
+            except (ValueError, TypeError):  # a damaged record: told when the points are read
+                return None
+    return list(_attribute_fields(fmt)) if fmt.size == hdr.record_length else None
+
+
 def _field_values(points, field: str | tuple[str, int]) -> np.ndarray:
     """One attribute's values (``_attribute_fields``' field) as a contiguous copy."""
     if isinstance(field, tuple):
@@ -590,6 +609,9 @@ class LasReader(Reader):
     def header(self, path: Path, salvage: bool = False) -> dict:
         hdr = read_las_header(path, salvage)  # (info opens the file with laspy too: its VLRs, CRS, dimensions)
         head = {"point_count": hdr.point_count, "bounds": (list(hdr.mins), list(hdr.maxs)), "offset": list(hdr.offset), "scale": list(hdr.scale)}
+        attributes = _header_attributes(hdr)
+        if attributes is not None:
+            head["attributes"] = attributes
         cut = hdr.truncated or hdr.evlrs_cut
         return head if cut is None else {**head, "truncated": cut}
 

@@ -126,7 +126,9 @@ class NpyReader(Reader):
         """Also ``has_color``: whether its columns hold colors (a COPC output of points without
         them is written without colors)."""
         arr = self._open(check_file(path))  # (memory-mapped: only its header is read)
-        return {"point_count": len(arr) if arr.ndim else None, "has_color": bool(color_names(_layout_names(path, "NPY array", arr.dtype, arr.shape)))}
+        names = _layout_names(path, "NPY array", arr.dtype, arr.shape)
+        cols = color_names(names)
+        return {"point_count": len(arr) if arr.ndim else None, "has_color": bool(cols), "attributes": attribute_names(names, cols)}
 
     def read_chunks(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
         chunk_size = check_chunk_size(chunk_size)

@@ -119,7 +119,8 @@ class PlyReader(Reader):
             short = self._binary_span(path, h)[2]
         if short and not salvage:
             raise fail(path, short + SALVAGE_HINT)
-        head = {"point_count": h.count, "has_color": bool(color_names(h.names))}
+        cols = color_names(h.names)
+        head = {"point_count": h.count, "has_color": bool(cols), "attributes": attribute_names(h.scalar_names, cols)}
         return head if short is None else {**head, "truncated": short}
 
     def read_salvaged(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:

@@ -34,6 +34,7 @@ from ..errors import EmptyCloudError, GigapointWarning
 from ._base import (
     DEFAULT_CHUNK_SIZE,
     Reader,
+    attribute_names,
     check_chunk_size,
     check_distinct_names,
     check_file,
@@ -256,6 +257,11 @@ class TextReader(Reader):
             yield rows_to_chunk(path, layout.names, [arr[:, i] for i in range(arr.shape[1])], scaler)
         if total == 0:
             raise fail(path, "holds no points", EmptyCloudError)
+
+    def header(self, path: Path, salvage: bool = False) -> dict:
+        """Its columns from its first lines; the points are counted only when read."""
+        names = _layout(check_file(path)).names
+        return {"point_count": None, "attributes": attribute_names(names, color_names(names))}
 
     def info(self, path: Path) -> dict:
         path = check_file(path)

@@ -118,6 +118,12 @@ def _attribute(cloud, mode: str) -> np.ndarray:
     raise SettingsError(f"color_mode {mode!r}: {cloud.name} has no {mode} attribute (attributes: {have})")
 
 
+def missing_attribute(cloud_name: str, name: str, have) -> SettingsError:
+    """The error of a color_attribute the cloud lacks (also told from the files' headers, before
+    they are read: cli/quality_opts.check_color_attribute)."""
+    return SettingsError(f"color_attribute: {cloud_name} has no attribute {name!r} (attributes: {', '.join(sorted(have)) or 'none'})")
+
+
 def _named_attribute(cloud, name: str | None) -> np.ndarray:
     """The values of attribute ``name`` (color_mode 'attribute'); naming none, or one the cloud
     lacks, is a one-line SettingsError listing the attributes it has."""
@@ -125,7 +131,7 @@ def _named_attribute(cloud, name: str | None) -> np.ndarray:
     if not name:
         raise SettingsError(f"color_mode 'attribute': name the attribute with color_attribute (--color-attribute); {cloud.name} has: {have}")
     if name not in cloud.attributes:
-        raise SettingsError(f"color_attribute: {cloud.name} has no attribute {name!r} (attributes: {have})")
+        raise missing_attribute(cloud.name, name, cloud.attributes)
     values = np.asarray(cloud.attributes[name])
     if values.ndim != 1:  # an NPZ's normal (N, 3): numba's TypingError in the resolve
         raise SettingsError(

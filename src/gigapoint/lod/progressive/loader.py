@@ -266,7 +266,7 @@ def file_sources(paths, cut_off: list | None = None) -> tuple[list, int | None, 
     are known when every file's header tells them (LAS/LAZ); the grid (ProgressiveOctree's) is
     the first file's offset and the finest scale (points of files on other grids stay wide)."""
     from ...core.cloud import finest_scale
-    from ...io import expand_paths, reader_for, scan_angles_differ
+    from ...io import cloud_name, expand_paths, reader_for, scan_angles_differ
     from ...io._base import DEFAULT_CHUNK_SIZE
     from ...io.las import with_scan_angle
 
@@ -289,7 +289,7 @@ def file_sources(paths, cut_off: list | None = None) -> tuple[list, int | None, 
         offsets.append(head.get("offset"))
         scales.append(head.get("scale"))
         sources.append((str(f), lambda f=f, reader=reader: read(reader.read_salvaged(f, min(DEFAULT_CHUNK_SIZE, DECODE_CHUNK)))))
-    name = files[0].name if len(files) == 1 else f"{len(files)} files"
+    name = cloud_name(files)
     grid, scale = None, finest_scale(scales)
     if scale is not None and all(o is not None for o in offsets):
         step = float(np.min(scale))  # one step for every axis: the finer axes' grid holds the coarser ones' points
