@@ -7,6 +7,7 @@ from __future__ import annotations
 import ast
 import dataclasses
 import enum
+import re
 from pathlib import Path
 from typing import Literal, get_args
 
@@ -129,6 +130,22 @@ def test_new_fields_are_validated_from_type_and_metadata():
     with pytest.raises(SettingsError, match=r"^rim_color: cannot read color"):
         Extended(rim_color="no-such-color")
     assert Extended(glint_passes=4.0).glint_passes == 4 and type(Extended(glint_passes=4.0).glint_passes) is int
+
+
+def test_every_boolean_setting_takes_python_and_numpy_booleans_only():
+    """edl=2 was taken (and kept as 2) while the check meant true or false; numpy's booleans (a
+    mask's value) are taken, as Python's bool."""
+    import numpy as np
+
+    names = [spec.name for spec in settings_fields(RenderSettings) if spec.kind == "bool"]
+    assert {"edl", "hqs", "lighting", "adaptive_precision", "frustum_culling", "fill_holes_foveated"} <= set(names)
+    for name in names:
+        for value in (True, np.True_, False, np.False_):
+            got = getattr(RenderSettings(**{name: value}), name)
+            assert got is bool(value), name  # (numpy's made Python's)
+        for bad in (2, 1, 0, "no", None, 1.0):
+            with pytest.raises(SettingsError, match=rf"^{name} must be true or false, got {re.escape(repr(bad))}$"):
+                RenderSettings(**{name: bad})
 
 
 def test_a_field_whose_annotation_cannot_be_resolved_falls_back_to_its_default():

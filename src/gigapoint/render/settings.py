@@ -19,6 +19,8 @@ import typing
 from dataclasses import MISSING, dataclass, field, fields, replace
 from typing import Literal, get_args
 
+import numpy as np
+
 from ..errors import SettingsError
 
 # --- the choices (render/colors.py derives COLOR_MODES and COLORMAPS from these) ----------------------
@@ -274,10 +276,10 @@ class SettingSpec:
         if value is None and self.nullable:
             return None
         name, kind = self.name, self.kind
-        if kind == "bool":
-            if not isinstance(value, (bool, int)):
+        if kind == "bool":  # numpy's too (a mask's value); an int (edl=2) or a string ("no") is refused
+            if not isinstance(value, (bool, np.bool_)):
                 raise SettingsError(f"{name} must be true or false, got {value!r}")
-            return value
+            return bool(value)
         if kind in ("int", "float"):
             _number(name, value, self.min, self.max, integer=kind == "int", lo_open=self.exclusive_min)
             return value if kind == "float" or type(value) is int else int(value)
