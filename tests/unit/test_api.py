@@ -76,14 +76,38 @@ def test_render_takes_an_image_size_with_or_without_a_camera():
     cloud = gp.demo(20_000)
     small = gp.render(cloud, width=320, height=200, size_mode="fixed")
     np.testing.assert_array_equal(small, gp.render(cloud, gp.Camera.fit_cloud(cloud, width=320, height=200), size_mode="fixed"))
-    assert gp.render(cloud, width=320).shape == (1080, 320, 4)
     cam = gp.Camera.fit_cloud(cloud, width=640, height=400)
-    np.testing.assert_array_equal(gp.render(cloud, cam, height=100, size_mode="fixed"), gp.render(cloud, cam.with_size(640, 100), size_mode="fixed"))
+    np.testing.assert_array_equal(gp.render(cloud, cam, height=100, size_mode="fixed"), gp.render(cloud, cam.with_size(160, 100), size_mode="fixed"))
     for bad in (0, 2.5, "a", 10**6, True):
         with pytest.raises(CameraError, match=rf"^image width must be an integer in 1\.\.16384, got {re.escape(repr(bad))}$"):
             gp.render(cloud, width=bad)
         with pytest.raises(CameraError, match="^image height must be an integer"):
             gp.Camera.fit(cloud.bounds, height=bad)
+
+
+def test_one_side_of_the_image_size_alone_keeps_the_aspect_in_render_and_render_frame():
+    """``gp.render(cloud, width=33)`` was 33x1080 and ``render_frame(cloud, width=33)`` "unknown
+    render setting(s): width": the side not given follows the camera's aspect (the fitted one's
+    16:9), to the nearest pixel (half up), at least 1; render and render_frame draw the same."""
+    import numpy as np
+    import pytest
+
+    from gigapoint.errors import CameraError
+
+    cloud = gp.demo(2_000)
+    for size, shape in (({"width": 33}, (19, 33)), ({"height": 90}, (90, 160)), ({"width": 8}, (5, 8)), ({"width": 1}, (1, 1)),
+                        ({"height": 1}, (1, 2)), ({"width": 48, "height": 48}, (48, 48))):  # fmt: skip
+        image = gp.render(cloud, size_mode="fixed", **size)
+        assert image.shape == (*shape, 4), size
+        np.testing.assert_array_equal(gp.render_frame(cloud, size_mode="fixed", **size).image, image)
+    cam = gp.Camera.fit_cloud(cloud, width=640, height=400)  # a given camera: its own aspect
+    assert gp.render_frame(cloud, cam, width=64).image.shape == (40, 64, 4)
+    assert (cam.width, cam.height) == (640, 400)
+    for call in (gp.render, gp.render_frame):
+        with pytest.raises(CameraError, match=r"^image width must be an integer in 1\.\.16384, got 0$"):
+            call(cloud, width=0)
+        with pytest.raises(CameraError, match=r"^image width would be 29127 \(height 16384 at 1920x1080's aspect\), over 16384: give both sides$"):
+            call(cloud, height=16384)
 
 
 def test_open_names_an_unknown_option_and_what_it_takes(tmp_path):

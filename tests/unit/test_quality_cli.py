@@ -91,6 +91,18 @@ def test_a_missing_color_attribute_is_refused_before_the_inputs_are_read(tmp_pat
         assert capsys.readouterr().err == f"error: color_attribute: {problem}\n"
 
 
+def test_width_or_height_alone_keeps_16_by_9(npy, tmp_path, capsys):
+    """``render --width 33`` was 33x1080 (the other option's default): the side not given follows
+    16:9 as in gp.render; ``demo`` the same."""
+    for extra, size in ((["-W", "33"], (33, 19)), (["-H", "90"], (160, 90)), (["-W", "40", "-H", "40"], (40, 40))):
+        out = tmp_path / f"{size[0]}x{size[1]}.png"
+        assert main(["render", str(npy), "-o", str(out), "--backend", "cpu", *extra]) == 0
+        assert Image.open(out).size == size
+        assert f"wrote {out} ({size[0]}x{size[1]}, 20,000 points)" in capsys.readouterr().out
+    assert main(["demo", "-n", "1000", "-o", str(tmp_path / "demo.png"), "-H", "36"]) == 0
+    assert Image.open(tmp_path / "demo.png").size == (64, 36)
+
+
 def test_bad_quality_options_are_one_line_errors(npy, tmp_path, capsys):
     for extra in (["--fill-holes", "7"], ["--color-mode", "rainbow"], ["--elevation-range", "1"], ["--supersample", "3"]):
         assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "32", *extra]) == 1

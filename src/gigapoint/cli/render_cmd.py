@@ -14,6 +14,7 @@ import typer
 from ..core.cloud import PointCloud
 from ..errors import CameraError, GigapointError
 from ..render import VIEWS, Camera, RenderSettings
+from ..render.camera import image_size
 from . import compiling
 from .app import app
 from .cloud_opts import ChunkedOption, ColorsOption, check_colors, cloud_options, open_files
@@ -60,10 +61,13 @@ def parse_camera(text: str) -> dict:
     return values
 
 
-def check_image_size(width, height, fov=60.0) -> None:
-    """The image size and field of view checked as a camera would; a bad one names its option."""
+def check_image_size(width, height, fov=60.0) -> tuple[int, int]:
+    """The image size (``image_size``: --width or --height alone, the other at 16:9) and field of
+    view checked as a camera would; a bad one names its option."""
     try:
+        width, height = image_size(width, height)
         Camera.look_at((0, 0, 1), (0, 0, 0), up=(0, 1, 0), width=width, height=height, fov=fov)
+        return width, height
     except CameraError as exc:
         text = str(exc)
         for words, option in (("image width", "--width"), ("image height", "--height"), ("camera fov", "--fov")):
@@ -73,6 +77,7 @@ def check_image_size(width, height, fov=60.0) -> None:
 
 
 TURNTABLE_FPS = 30.0  # --fps's default
+SIZE_HELP = "Image {} in pixels (default {}); given one side alone, the other follows 16:9."
 
 
 def check_view(view: str) -> None:
@@ -161,8 +166,8 @@ def render(
     inputs: Annotated[list[Path], typer.Argument(help="Point cloud files, directories or converted octrees (merged into one scene).")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Image to write (.png, .jpg, .webp, .tif).")],
     settings: RenderSettings,  # one option per RenderSettings field (cli/settings_opts.py)
-    width: Annotated[int, typer.Option("--width", "-W", help="Image width in pixels.")] = 1920,
-    height: Annotated[int, typer.Option("--height", "-H", help="Image height in pixels.")] = 1080,
+    width: Annotated[int | None, typer.Option("--width", "-W", help=SIZE_HELP.format("width", 1920))] = None,
+    height: Annotated[int | None, typer.Option("--height", "-H", help=SIZE_HELP.format("height", 1080))] = None,
     view: Annotated[str, typer.Option(help=f"Named view: {', '.join(VIEWS)} (auto: iso, or turned so a long cloud fills the frame).")] = "auto",
     camera: Annotated[
         str | None, typer.Option(help=r"'eye=x,y,z target=x,y,z \[up=x,y,z]' or 'yaw=deg pitch=deg \[distance=m] \[target=x,y,z]'.")
@@ -210,7 +215,7 @@ def render(
     if projection not in ("perspective", "orthographic"):
         raise GigapointError(f"--projection must be perspective or orthographic, got {projection!r}")
     check_view(view)
-    check_image_size(width, height, fov)  # before reading anything
+    width, height = check_image_size(width, height, fov)  # before reading anything
     check_color_options(settings)
     check_color_attribute(inputs, settings)
     if camera is not None:
@@ -262,8 +267,8 @@ def render(
 def demo(
     points: Annotated[int, typer.Option("--points", "-n", help="Points in the procedural demo scene.")] = 20_000_000,
     output: Annotated[Path, typer.Option("-o", "--output", help="Image to write.")] = Path("demo.png"),
-    width: Annotated[int, typer.Option("--width", "-W", help="Image width in pixels.")] = 1920,
-    height: Annotated[int, typer.Option("--height", "-H", help="Image height in pixels.")] = 1080,
+    width: Annotated[int | None, typer.Option("--width", "-W", help=SIZE_HELP.format("width", 1920))] = None,
+    height: Annotated[int | None, typer.Option("--height", "-H", help=SIZE_HELP.format("height", 1080))] = None,
     view: Annotated[str, typer.Option(help=f"Named view: {', '.join(VIEWS)}.")] = "auto",
     threads: Annotated[int | None, typer.Option(help="CPU threads (default: all cores).")] = None,
     seed: Annotated[int, typer.Option(help="Seed of the procedural scene.")] = 0,
@@ -300,7 +305,7 @@ def demo(
     check_seed("--seed", seed)  # 2**64 was an internal error in the generator
     check_room(f"demo({points:,})", points, IN_MEMORY_BYTES_MIN, instead=": take fewer --points")
     check_output(output, overwrite)
-    check_image_size(width, height)
+    width, height = check_image_size(width, height)
     check_image_fits(output, width, height)
     check_view(view)  # (told only once the scene was generated and sorted, without naming --view)
     settings = settings_from_options(RenderSettings, {"threads": threads})  # a bad --threads is named

@@ -17,6 +17,7 @@ from ..core.selection import View
 from ..errors import CameraError, is_real
 
 MAX_IMAGE_SIDE = 16_384
+DEFAULT_SIZE = (1920, 1080)  # a fitted camera's image (16:9)
 VIEWS = {
     # name: (yaw, pitch) in degrees
     "top": (-90.0, 90.0),
@@ -126,6 +127,31 @@ def image_side(name: str, v) -> int:
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= MAX_IMAGE_SIDE:  # True was 1 pixel
         raise CameraError(f"image {name} must be an integer in 1..{MAX_IMAGE_SIDE}, got {v!r}")
     return int(v)
+
+
+def image_size(width, height, like: tuple[int, int] = DEFAULT_SIZE) -> tuple[int, int]:
+    """(width, height) of an image asked for by either side or both (None: not given); the side not
+    given follows ``like``'s aspect (a camera's, by default 16:9), to the nearest pixel, at least 1
+    (width=33 was 33x1080). Each side checked as ``image_side`` does; neither given: ``like``."""
+    if width is None and height is None:
+        return like
+    if width is not None:
+        width = image_side("width", width)
+    if height is not None:
+        height = image_side("height", height)
+    if height is None:
+        return width, _following("height", width * like[1] / like[0], f"width {width}", like)
+    if width is None:
+        return _following("width", height * like[0] / like[1], f"height {height}", like), height
+    return width, height
+
+
+def _following(name: str, exact: float, given: str, like: tuple[int, int]) -> int:
+    """The side of ``image_size`` that follows the aspect (half a pixel rounds up)."""
+    side = max(1, math.floor(exact + 0.5))
+    if side > MAX_IMAGE_SIDE:
+        raise CameraError(f"image {name} would be {side} ({given} at {like[0]}x{like[1]}'s aspect), over {MAX_IMAGE_SIDE}: give both sides")
+    return side
 
 
 @dataclass(frozen=True)

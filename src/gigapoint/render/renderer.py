@@ -15,7 +15,7 @@ from ..core.layout import EMPTY_PIXEL
 from ..core.renderable import Renderable
 from ..errors import GigapointError, GigapointWarning, check_switch
 from .backend import get_backend
-from .camera import Camera
+from .camera import Camera, image_size
 from .frame import Frame, RenderStats, check_indexable
 from .passes import finish_frame, splat_for, wants_composite
 from .passes.compose import composite_frame
@@ -33,16 +33,22 @@ def check_renderable(cloud) -> None:
     _RENDERABLE_TYPES.add(type(cloud))
 
 
-def render_frame(cloud, camera: Camera | None = None, settings: RenderSettings | None = None, **setting_overrides) -> Frame:
+def render_frame(cloud, camera: Camera | None = None, settings: RenderSettings | None = None,
+                 width: int | None = None, height: int | None = None, **setting_overrides) -> Frame:  # fmt: skip
     """Render ``cloud`` (any Renderable) into a Frame (visibility buffer, image, stats). Without a
     camera: ``Camera.fit_cloud(cloud)`` (1920x1080, the CLI's default view) of what it holds now.
+    ``width`` / ``height``: the image's size instead of the camera's; one side alone: the other
+    follows the camera's aspect (the fitted one's 16:9: width=800 is 800x450; ``image_size``).
     Settings as ``render`` takes them: ``settings`` and/or keywords (``point_size=3``)."""
     settings = RenderSettings.of(settings)
     if setting_overrides:  # (size_mode=... was a TypeError here, a setting in render)
         settings = settings.replace(**setting_overrides)
     check_renderable(cloud)
     if camera is None:
-        camera = Camera.fit_cloud(cloud)
+        fit_width, fit_height = image_size(width, height)
+        camera = Camera.fit_cloud(cloud, width=fit_width, height=fit_height)
+    elif isinstance(camera, Camera) and (width is not None or height is not None):  # (width=... was "unknown render setting(s)" here)
+        camera = camera.with_size(*image_size(width, height, (camera.width, camera.height)))
     if not isinstance(camera, Camera):
         raise GigapointError(f"camera must be a gigapoint.Camera, got {type(camera).__name__}")
     if wants_composite(settings):  # supersampling / stereo: whole renders combined (passes/compose.py)
@@ -77,15 +83,8 @@ def render(cloud, camera: Camera | None = None, settings: RenderSettings | None 
            width: int | None = None, height: int | None = None, **setting_overrides):  # fmt: skip
     """(H, W, 4) uint8 RGBA image of ``cloud`` seen by ``camera`` (and RenderStats if asked);
     without a camera, ``Camera.fit_cloud(cloud)`` of what it holds now (1920x1080). ``width`` /
-    ``height``: the image's size instead of the camera's (the fitted one's 1920x1080)."""
+    ``height``: the image's size instead of the camera's; one side alone: the other follows the
+    camera's aspect (the fitted one's 16:9: width=800 is 800x450), as in ``render_frame``."""
     check_switch("return_stats", return_stats, "render")  # "no" gave the stats too
-    if setting_overrides:
-        settings = RenderSettings.of(settings).replace(**setting_overrides)
-    if width is not None or height is not None:  # width=... was "unknown render setting(s)"
-        if camera is None:
-            check_renderable(cloud)
-            camera = Camera.fit_cloud(cloud, **{k: v for k, v in (("width", width), ("height", height)) if v is not None})
-        elif isinstance(camera, Camera):
-            camera = camera.with_size(camera.width if width is None else width, camera.height if height is None else height)
-    frame = render_frame(cloud, camera, settings)
+    frame = render_frame(cloud, camera, settings, width, height, **setting_overrides)
     return (frame.image, frame.stats) if return_stats else frame.image
