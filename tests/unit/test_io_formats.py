@@ -316,6 +316,13 @@ def test_format_info_text(tmp_path):
     assert "points:      2" in text and "intensity" in text and "comma" in text
 
 
+def test_info_of_a_text_file_names_attributes_as_reading_does(tmp_path):
+    # info said "Foo/Bar" where the cloud read holds "foo_bar" (and --color-attribute takes that)
+    p = tmp_path / "a.xyz"
+    p.write_text("x y z Foo/Bar\n1 2 3 4\n4 5 6 8\n")
+    assert file_info(p)["attributes"] == list(open_cloud(p).attributes) == ["foo_bar"]
+
+
 def test_registry_takes_a_new_reader(tmp_path, monkeypatch):
     from gigapoint.core.chunk import PointChunk
     from gigapoint.io import registry

@@ -272,7 +272,7 @@ class TextReader(Reader):
             "text",
             self.read_chunks(path),
             bool(cols),
-            [c for c in layout.names if c not in ("x", "y", "z") and c not in cols],
+            attribute_names(layout.names, cols),  # as read names them (foo/bar: foo_bar)
             columns=layout.names,
             delimiter={None: "whitespace", ",": "comma", ";": "semicolon"}[layout.delimiter],
             header_line=layout.header,
