@@ -59,7 +59,7 @@ import numpy as np
 
 from ...atomic import atomic_json, atomic_open
 from ...core import pages
-from ...core.chunk import ColorScaler
+from ...core.chunk import ColorScaler, warn_dropped_attributes
 from ...errors import GigapointError, GigapointWarning
 from ...io._base import one_line
 from ...io.las import with_scan_angle
@@ -756,12 +756,15 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
                 del results[str(t)]
             again = True
         self._last_preview = preview  # its last write waits for the distribute tasks to be under way (distribute)
-        lo, hi, attrs, constant = np.full(3, np.inf), np.full(3, -np.inf), None, {}
+        lo, hi, attrs, constant, dropped = np.full(3, np.inf), np.full(3, -np.inf), None, {}, set()
         for t in range(len(st["reads"])):
             res = results[str(t)]
             lo, hi = np.minimum(lo, res["lo"]), np.maximum(hi, res["hi"])
             if res["attributes"] is not None:
-                attrs = merge_attributes(attrs, res["attributes"])
+                merged = merge_attributes(attrs, res["attributes"])
+                if attrs is not None:  # (left out without a word, where one process says so: ReadPhase.read)
+                    dropped |= (set(attrs) | set(res["attributes"])) - set(merged)
+                attrs = merged
             merge_constants(constant, res.get("constant", dict.fromkeys(res["attributes"] or {})))  # (none noted: a run from before)
         st.update(
             chunks=sum(r["chunks"] for r in results.values()),
@@ -772,6 +775,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             attributes=attrs or {},
             constant=constant,
         )
+        warn_dropped_attributes(str(self.out), dropped)
         self._end_read(lo, hi)
 
     def _color_redo(self) -> list[int]:
