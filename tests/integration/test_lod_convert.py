@@ -480,6 +480,30 @@ def test_held_las_positions_are_int32_and_the_octree_is_the_spilled_ones(town_an
     assert a.keys() == b.keys() and [k for k in a if a[k] != b[k]] == []
 
 
+@pytest.mark.filterwarnings("ignore:.*not in every file")  # (the text file has no attributes)
+def test_spilled_las_positions_are_int32_and_the_octree_the_same(town_and_spot, tmp_path, monkeypatch):
+    """Out of core in one process, the chunks of LAS files spill their positions as each file's
+    int32 (12 bytes a point, not 24: 60 MB of a 5 M-point conversion), as Dask's read tasks do;
+    a text file's stay float64. The octree is the float64 spill's byte for byte."""
+    import importlib
+
+    read, spill = (importlib.import_module(f"gigapoint.lod.convert.{m}") for m in ("read", "spill"))
+    text = tmp_path / "more.xyz"
+    np.savetxt(text, np.asarray(laspy.read(str(town_and_spot[1])).xyz)[:500] + 1.0, fmt="%.3f")
+    inputs = [*town_and_spot, text]
+    _spilling(monkeypatch)
+    with monkeypatch.context() as m:
+        m.setattr(read.ReadPhase, "_spill_code", None)
+        m.setattr(read, "_grid_of", lambda path: None)  # as before: float64 positions
+        convert(inputs, tmp_path / "wide", **OPTS)
+    saved, save = [], spill.save_raw_chunk
+    monkeypatch.setattr(read, "save_raw_chunk", lambda raw, i, xyz, *a: (saved.append(xyz.dtype), save(raw, i, xyz, *a))[1])
+    convert(inputs, tmp_path / "ints", **OPTS)
+    assert saved == [np.dtype(np.int32)] * (len(saved) - 1) + [np.dtype(np.float64)] and len(saved) == 6  # 4 + 1 LAS chunks, the text's
+    a, b = _files_of(tmp_path / "wide"), _files_of(tmp_path / "ints")
+    assert a.keys() == b.keys() and [k for k in a if a[k] != b[k]] == []
+
+
 @pytest.mark.parametrize("varies", [False, True])
 def test_held_constant_attributes_are_not_held_a_point_at_a_time(town_and_spot, tmp_path, monkeypatch, varies):
     """An attribute every point holds the same value of (a LAS file's flags, its user_data) is

@@ -11,7 +11,7 @@ import numpy as np
 
 from ...core.chunk import PointChunk, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
-from ...errors import EmptyCloudError, GigapointWarning, InputError
+from ...errors import EmptyCloudError, GigapointError, GigapointWarning, InputError
 from ...io import files_label, read_chunks, scan_angles_differ
 from ...io.las import with_scan_angle
 from ...io.registry import reader_for
@@ -19,7 +19,7 @@ from ..build import valid_bounds
 from ..preview import PreviewSampler, preview_points
 from .facts import input_facts
 from .prefetch import prefetch
-from .spill import encode_xyz, load_raw_chunk, one_value, save_raw_chunk
+from .spill import encode_xyz, las_xyz_code, load_raw_chunk, one_value, save_raw_chunk
 from .state import Job
 
 
@@ -108,6 +108,15 @@ def spill_chunk(raw, i: int, chunk, xyz_code=None) -> tuple:
     return taken
 
 
+def _grid_of(path) -> np.ndarray | None:
+    """``path``'s LAS grid (spill.las_xyz_code), None for other formats and where its header
+    fails (an empty file among several is skipped; a broken one's error comes from reading it)."""
+    try:
+        return las_xyz_code(path)
+    except GigapointError:
+        return None
+
+
 def _point_total(paths) -> int | None:
     try:
         total = 0
@@ -150,14 +159,19 @@ class ReadPhase(Job):
                 yield chunk
         else:
             for p in self.paths:
+                self._spill_code = _grid_of(p)  # (set as the first of p's chunks is asked for: the ones taken next are p's)
                 chunks = _skipped_if_empty(p, _read_chunks(p, self.chunk_size), len(self.paths) > 1)
                 chunks = with_scan_angle(chunks) if self.one_angle else chunks
                 yield from prefetch(chunks) if self.read_ahead else chunks
 
+    #: the LAS grid of the file whose chunks are being read (spill.las_xyz_code): their positions
+    #: spilled as its int32 where they are on it (12 bytes a point, not 24), as on Dask; None: float64
+    _spill_code = None
+
     def _take_chunk(self, i: int, chunk) -> tuple:
         """Chunk ``i``'s valid points, kept for the later phases: spilled to the raw chunk files
         (``spill_chunk``'s results; in_memory.py holds them instead)."""
-        taken = spill_chunk(self.dir.raw, i, chunk)
+        taken = spill_chunk(self.dir.raw, i, chunk, self._spill_code)
         self._note_constants(taken[2])
         return taken
 
