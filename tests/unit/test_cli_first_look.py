@@ -124,6 +124,19 @@ def test_help_lists_no_bool_type_for_flags_and_no_braced_arguments(capsys, monke
         assert re.search(r"\[OPTIONS\] [A-Z]+\.\.\.", usage), usage
 
 
+@pytest.mark.parametrize(("command", "option", "text"), [
+    ("convert", "--dask", "(needs gigapoint[dask])"), ("convert", "--workers", "(needs gigapoint[dask])"),
+    ("render", "--fps", "[default: 30]"), ("view", "--keep", "[default: 100]"),
+])
+def test_help_keeps_bracketed_words(capsys, monkeypatch, command, option, text):
+    # rich read '[dask]' and '[default: 30]' as markup and dropped them from --help
+    monkeypatch.setenv("COLUMNS", "400")
+    rc, out, err = run(capsys, command, "--help")
+    assert rc == 0, err
+    line = next(line for line in out.splitlines() if f" {option} " in line)
+    assert text in line, line
+
+
 # --- info formatted from the file's scale -------------------------------------------------------------
 def test_info_prints_bounds_with_the_decimals_of_the_scale(capsys, las_writer, tmp_path):
     path = las_writer(tmp_path / "mm.las", 5_000)  # scale 0.001

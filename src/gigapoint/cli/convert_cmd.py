@@ -37,10 +37,10 @@ def convert(
         "--dask",
         metavar="ADDRESS",
         help="Convert on a running Dask cluster, e.g. tcp://host:8786; its workers read the inputs and write OUTPUT, "
-        "which must be on a file system they all share (needs gigapoint[dask]).",
+        "which must be on a file system they all share (needs gigapoint\\[dask]).",  # \[: rich would take [dask] for markup and drop it
     ),
     workers: int | None = typer.Option(
-        None, "--workers", min=1, help="Convert on a local Dask cluster of N single-threaded worker processes (needs gigapoint[dask])."
+        None, "--workers", min=1, help="Convert on a local Dask cluster of N single-threaded worker processes (needs gigapoint\\[dask])."
     ),
 ) -> None:
     """Convert point clouds into a level-of-detail octree, out of core, resumable."""

@@ -48,7 +48,7 @@ def view(
         None, "--live", help="Show a live stream: 'demo' (a synthetic depth sensor), a TUM RGB-D folder, a ROS bag, a folder of frames.",
     ),
     replay: Path | None = typer.Option(None, "--replay", help="Play back a stream recorded with --record (or LiveCloud.record) at its rate."),
-    keep: int | None = typer.Option(None, "--keep", help="Live: frames drawn (the oldest leaves as a new one arrives; default 100)."),
+    keep: int | None = typer.Option(None, "--keep", help=r"Live: frames drawn (the oldest leaves as a new one arrives). \[default: 100]"),
     decay: float | None = typer.Option(None, "--decay", help="Live: seconds after which a frame leaves (default: never)."),
     record: Path | None = typer.Option(None, "--record", help="Live: also record the stream into this folder."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Live: replace a recording already in the --record folder."),
