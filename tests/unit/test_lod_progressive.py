@@ -1245,6 +1245,7 @@ def test_loading_stops_at_its_memory_limit_and_keeps_what_it_holds():
         cloud.wait(timeout=120)
     msg = str(err.value)
     assert "\n" not in msg and "demo(50,000,000): loading stopped at" in msg and "of 50,000,000 points" in msg
+    assert re.search(r"the octree holds \d+\.\d MiB, its memory limit \(40\.0 MiB;", msg), msg  # was "0.0 GiB ... (0.0 GiB"
     assert 0 < cloud.n_points < 50_000_000 and cloud.progress < 1
     # one slice at most beyond the limit, and a pool step: far below the 50 M points' ~1.5 GB
     assert cloud.nbytes < 200 << 20

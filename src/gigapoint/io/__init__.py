@@ -272,11 +272,11 @@ def format_info(info: dict) -> str:
         lines.append(f"  {label + ':':<13}{text}")
     size = info.get("file_size")
     if size is not None:
-        lines.append(f"  file size:   {_human_bytes(size)}")
+        lines.append(f"  file size:   {human_bytes(size)}")
     return "\n".join(lines)
 
 
-def _human_bytes(n: int) -> str:
+def human_bytes(n: int) -> str:
     for unit in ("bytes", "KiB", "MiB", "GiB", "TiB"):
         if n < 1024 or unit == "TiB":
             return f"{n:,} {unit}" if unit == "bytes" else f"{n:,.1f} {unit}"

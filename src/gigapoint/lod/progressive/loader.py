@@ -31,6 +31,7 @@ from ...core.chunked import physical_memory
 from ...core.cloud import check_valid_count
 from ...core.threads import SMALL_BATCH
 from ...errors import GigapointError, InputError, MemoryLimitError
+from ...io import human_bytes
 from ..convert.prefetch import prefetch
 
 SLICE_POINTS = 250_000  # points inserted under one hold of the octree (~20-40 ms) while no frames are drawn
@@ -179,9 +180,9 @@ class Loader:
 
     def _stop_for_memory(self, name: str) -> None:
         of = f" of {self.total:,}" if self.total else ""
-        self.error = MemoryLimitError(
-            f"{name}: loading stopped at {self.read:,}{of} points: the octree holds {self.octree.nbytes / 2**30:.1f} GiB, its memory "
-            f"limit ({self.memory_limit / 2**30:.1f} GiB; pass memory_limit=, or convert the input with `gigapoint convert` to view all of it)"
+        self.error = MemoryLimitError(  # sizes in a unit that fits them: in GiB, a 40M limit read "0.0 GiB"
+            f"{name}: loading stopped at {self.read:,}{of} points: the octree holds {human_bytes(self.octree.nbytes)}, its memory "
+            f"limit ({human_bytes(self.memory_limit)}; pass memory_limit=, or convert the input with `gigapoint convert` to view all of it)"
         )
 
     def wait(self, timeout: float | None = None) -> bool:
