@@ -22,7 +22,7 @@ from .info_cmd import memory_line
 from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_image
 from .progress import err_console, progress_bar, status
 from .quality_opts import check_color_attribute, check_color_options, prepare_cloud
-from .settings_opts import settings_from_options, with_settings_options
+from .settings_opts import options_named, settings_from_options, with_settings_options
 
 _CAMERA_KEYS = {"eye": 3, "target": 3, "up": 3, "yaw": 1, "pitch": 1, "distance": 1, "fov": 1}
 
@@ -217,7 +217,8 @@ def render(
     check_view(view)
     width, height = check_image_size(width, height, fov)  # before reading anything
     check_color_options(settings)
-    check_color_attribute(inputs, settings)
+    with options_named():  # (--color-attribute: the files' headers lack it)
+        check_color_attribute(inputs, settings)
     if camera is not None:
         if view != "auto":  # the view was dropped without a word: --camera places the eye itself
             raise GigapointError(f"--view {view} and --camera: give one (--camera 'yaw=.. pitch=..' is a view of any angle)")
@@ -232,7 +233,8 @@ def render(
     else:  # (side-by-side stereo writes both eyes: twice the width)
         check_image_fits(output, width * (2 if settings.stereo == "side-by-side" else 1), height)
     cloud = open_inputs(inputs, settings.point_budget, progressive, cloud_options(colors, chunked))
-    prepare_cloud(cloud, settings)
+    with options_named():  # drawing's errors name the option (--color-attribute NAME that the file lacks)
+        prepare_cloud(cloud, settings)
     if settings.max_points and not isinstance(cloud, PointCloud):
         # an octree (a converted folder, or inputs above the point budget read progressively, as
         # `render huge.laz --max-points N` is) draws at most that many too, as the viewer's cap
@@ -241,7 +243,7 @@ def render(
     if turntable is not None:
         from ..render.video import render_turntable
 
-        with progress_bar(f"turntable {output.name}", turntable) as advance:
+        with progress_bar(f"turntable {output.name}", turntable) as advance, options_named():
             render_turntable(
                 cloud, turntable, output, settings, width=width, height=height, fov=fov, fps=fps, overwrite=overwrite,
                 progress=lambda done, total: advance(done),
@@ -250,7 +252,8 @@ def render(
         return
     cam = make_camera(cloud, width, height, view, camera, projection, fov)
     compiled = compiling.compiled_seconds()
-    frame = gp.render_frame(cloud, cam, settings)
+    with options_named():
+        frame = gp.render_frame(cloud, cam, settings)
     compiled = compiling.compiled_seconds() - compiled
     save_image(frame.image, output)
     if depth_out is not None:

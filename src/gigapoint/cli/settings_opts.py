@@ -14,6 +14,7 @@ import dataclasses
 import enum
 import functools
 import inspect
+from contextlib import contextmanager
 from typing import Annotated, Any, Literal
 
 import typer
@@ -178,12 +179,28 @@ def settings_from_options(cls: type, values: dict, given: frozenset | set = froz
     try:
         return cls(**kwargs)
     except SettingsError as exc:
-        message = str(exc)
-        name = message.split(" ", 1)[0].rstrip(":")
-        if name in blame:
-            rest = message[len(name) + 1 :].lstrip() if message.startswith(f"{name}:") else message
-            raise SettingsError(f"{blame[name]}: {rest}") from None
-        raise
+        raise named_option(exc, blame) from None
+
+
+@contextmanager
+def options_named(cls: type = RenderSettings):
+    """A SettingsError raised within (while drawing: ``color_attribute: scan.laz has no attribute
+    ...``) names the option, as a bad value does."""
+    try:
+        yield
+    except SettingsError as exc:
+        raise named_option(exc, option_of(cls)) from None
+
+
+def named_option(exc: SettingsError, blame: dict[str, str]) -> SettingsError:
+    """``exc`` with the field its message starts with (``color_attribute: ...``) told as the
+    option that set it (``blame``: field -> option, e.g. ``option_of()``); unchanged otherwise."""
+    message = str(exc)
+    name = message.split(" ", 1)[0].rstrip(":")
+    if name not in blame:
+        return exc
+    rest = message[len(name) + 1 :].lstrip() if message.startswith(f"{name}:") else message
+    return SettingsError(f"{blame[name]}: {rest}")
 
 
 def with_settings_options(cls: type = RenderSettings, param: str = "settings"):
