@@ -90,7 +90,7 @@ def test_a_missing_color_attribute_is_refused_before_the_inputs_are_read(tmp_pat
     ):  # fmt: skip
         args = [str(tmp_path / f) for f in inputs]
         assert main(["render", *args, "-o", str(tmp_path / "x.png"), "--color-attribute", "nope"]) == 1
-        assert capsys.readouterr().err == f"error: color_attribute: {problem}\n"
+        assert capsys.readouterr().err == f"error: --color-attribute: {problem}\n"
 
 
 def test_width_or_height_alone_keeps_16_by_9(npy, tmp_path, capsys):
