@@ -76,6 +76,21 @@ def test_point_budget_and_threshold_limit_what_is_drawn(scene):
     assert coarse < fine
 
 
+def test_an_octrees_stats_count_nodes_drawn_and_culled_of_its_nodes(scene):
+    """An octree's batches are its nodes: drawn + culled = total, for a converted octree and a
+    progressive one (drawn counted its arena slots or pool chunks: 27 + 7 of 31)."""
+    cloud, path = scene
+    cam = CAMERAS[2](cloud.bounds)  # inside: some nodes culled
+    progressive = gp.demo(N, progressive=True)
+    progressive.wait()
+    for oc in (open_octree(path), progressive):
+        for budget in (60_000, 10**9):
+            frame = render_frame(oc, cam, RenderSettings(backend="cpu", point_budget=budget))
+            st = frame.stats
+            assert st.batches_culled > 0 and st.batches_rendered > 0
+            assert st.batches_rendered + st.batches_culled == st.batches_total, (type(oc).__name__, budget, st)
+
+
 def test_arena_reused_between_frames(scene):
     cloud, path = scene
     oc = open_octree(path)

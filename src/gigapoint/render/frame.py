@@ -38,7 +38,9 @@ class RenderStats:
             points_total=points_total,
             batches_total=draw.n_batches,
             batches_culled=sel.n_culled,
-            batches_rendered=len(sel.ids),
+            # an octree's batches are its nodes (total and culled count them): its nodes drawn, not
+            # the chunks or arena slots they fill (culled + drawn was over the total)
+            batches_rendered=len(sel.ids) if draw.nodes is None else len(draw.nodes),
             points_processed=int(counts.sum()),
             precision_histogram={b: int(counts[sel.bits == b].sum()) for b in (10, 20, 30)},
             time_ms=time_ms,
