@@ -434,3 +434,16 @@ def test_a_buffer_of_the_wrong_size_is_refused(gpu):
     vis = gpu.passes.fill_holes(np.full(12, EMPTY_PIXEL), 4, 3, 1)
     with pytest.raises(GigapointError, match="needs 20 values of uint64"):
         gpu.passes.fill_holes(vis, 5, 4, 1)
+
+
+def test_hqs_of_a_frame_whose_sums_exceed_one_binding_is_the_cpus(gpu, cpu):
+    """HQS sums 20 bytes a pixel: past one binding (lavapipe's 128 MiB: 2592 x 2592) the CPU pass
+    draws it, not a GPUValidationError."""
+    side = int(np.sqrt(gpu.max_binding / 20)) + 2
+    if side * side * 8 > gpu.max_binding:
+        pytest.skip("the visibility buffer does not fit one binding either")
+    cloud = gigapoint.demo(5_000, scale=None)
+    cam = Camera.fit(cloud.bounds, width=side, height=side)
+    frames = {b.name: gigapoint.render_frame(cloud, cam, RenderSettings(hqs=True, point_size=2), backend=b.name) for b in (gpu, cpu)}
+    assert np.count_nonzero(frames["cpu"].visibility != EMPTY_PIXEL) > 5_000
+    assert np.array_equal(frames["wgpu"].image, frames["cpu"].image)

@@ -13,7 +13,7 @@ in place and ``np.asarray`` reads back once. The visibility buffer ``rasterize``
 recognised too, so a frame uploads nothing between passes. Passes write into one of two
 buffers per kind (ping-pong): an input is never overwritten by the pass reading it, and a
 result still referenced when its buffer is reused is read back first. Where the adapter
-cannot run a pass (HQS needs 9 storage bindings; lighting's per-pixel view directions must
+cannot run a pass (HQS needs 9 storage bindings and its sums in one; lighting's per-pixel view directions must
 fit one), the ``fallback`` (the CPU's passes) runs it on read-back buffers.
 """
 
@@ -134,7 +134,9 @@ class GpuPasses:
         u32 atomic sums per channel: exact up to 2^24 points a pixel (2^24 / 15 with soft
         splats), the CPU pass's bound too. ``threads`` is unused."""
         ctx = self.ctx
-        if not ctx.hqs_on_gpu:  # the adapter binds fewer than 9 storage buffers: the CPU pass
+        # the CPU pass where the adapter binds fewer than 9 storage buffers, or the sums (20 bytes
+        # a pixel) exceed one binding (lavapipe's 128 MiB: 6.7 M pixels, under 4K)
+        if not ctx.hqs_on_gpu or int(width) * int(height) * 20 > ctx.max_binding:
             return self.fallback.hqs_colors(points, sel, np.asarray(vis), width, height, near, far, point_colors, np.asarray(fallback),
                                             tolerance, threads, splat, softness)  # fmt: skip
         with ctx.lock:
