@@ -447,3 +447,16 @@ def test_hqs_of_a_frame_whose_sums_exceed_one_binding_is_the_cpus(gpu, cpu):
     frames = {b.name: gigapoint.render_frame(cloud, cam, RenderSettings(hqs=True, point_size=2), backend=b.name) for b in (gpu, cpu)}
     assert np.count_nonzero(frames["cpu"].visibility != EMPTY_PIXEL) > 5_000
     assert np.array_equal(frames["wgpu"].image, frames["cpu"].image)
+
+
+def test_passes_draw_the_visibility_buffer_as_its_holder_changed_it(gpu, cpu, scene):
+    """rasterize's numpy buffer, changed in place, is what the passes read (they used the GPU's
+    copy of the unchanged buffer: cleared pixels still showed their points)."""
+    cam = _cameras(scene)["iso"]
+    sel, (w, h, near, far) = _frame(scene, cam)
+    vis = gpu.rasterize(scene, sel, w, h, near, far)
+    vis[: len(vis) // 2] = EMPTY_PIXEL  # the top half cleared
+    assert np.count_nonzero(vis != EMPTY_PIXEL) > 1000
+    want = cpu.resolve(vis, scene.color, BG)
+    assert _n_differ(gpu.resolve(vis, scene.color, BG), want) == 0
+    _assert_colors_close(gpu.passes.eye_dome_lighting(vis, want, w, h), eye_dome_lighting(vis, want, w, h))

@@ -254,9 +254,7 @@ class WgpuBackend:
             if keep_on_device:
                 ctx.read_back(vis, np.uint64, 1)  # wait for the GPU, so the caller's raster time is real
                 return DeviceArray(ctx, "visibility", np.uint64, n_pixels)
-            out = ctx.read_back(vis, np.uint64, n_pixels)
-            ctx.remember_host_copy("visibility", out)
-            return out
+            return ctx.read_back(vis, np.uint64, n_pixels)
 
     def rasterize_views(self, points, ids, bits, matrices, width, height, nears, fars, threads=None, splat=None, step=1) -> np.ndarray:
         """(V, height * width) visibility buffers of V views drawn in ONE pass over batches ``ids``

@@ -150,7 +150,6 @@ class GpuContext:
         # A role's generation goes up each time its buffer is written; DeviceArrays of an older one are stale.
         self.generation: dict[str, int] = defaultdict(int)
         self.arrays: weakref.WeakSet = weakref.WeakSet()
-        self.host_copies: dict[str, tuple] = {}  # role -> (weakref to the numpy array it equals, generation)
 
     # ------------------------------------------------------------------ pipelines and dispatch
     def pipeline(self, pass_name: str, views: int = 1):
@@ -252,26 +251,17 @@ class GpuContext:
             if array.role == role:
                 array.materialise()
         self.generation[role] += 1
-        self.host_copies.pop(role, None)
         usage = self.wgpu.BufferUsage
         return self.frame_buffer(role, nbytes, usage.STORAGE | usage.COPY_SRC | usage.COPY_DST)
 
-    def remember_host_copy(self, role: str, array: np.ndarray) -> None:
-        """``array`` (just read back) equals the role's buffer: passes given it use the buffer."""
-        self.host_copies[role] = (weakref.ref(array), self.generation[role])
-
     def device_input(self, x, roles: tuple[str, str], dtype, n: int) -> tuple[object, str]:
         """(buffer, role) holding ``x`` (n items of ``dtype``): its own buffer if it is a
-        DeviceArray or the array rasterize returned, else uploaded into the first of ``roles``
-        (the pass then writes the second)."""
+        DeviceArray, else uploaded into the first of ``roles`` (the pass then writes the second)."""
         if isinstance(x, DeviceArray) and x.ctx is self and x.valid:
             if x.shape != (n,) or x.dtype != np.dtype(dtype):
                 raise GigapointError(f"wgpu backend: a pass needs {n:,} values of {np.dtype(dtype)}, got {x.shape} {x.dtype}")
             return self.frame_buffers[x.role], x.role
-        if isinstance(x, np.ndarray):
-            for role, (ref, generation) in self.host_copies.items():
-                if ref() is x and self.generation[role] == generation and role in self.frame_buffers:
-                    return self.frame_buffers[role], role
+        # a numpy array is uploaded, even the one rasterize returned: its holder may have changed it
         host = np.ascontiguousarray(np.asarray(x), dtype).reshape(-1)
         if host.shape != (n,):
             raise GigapointError(f"wgpu backend: a pass needs {n:,} values, got {host.shape[0]:,}")

@@ -9,8 +9,9 @@ float64 on the CPU). On Mesa lavapipe all of them are bit for bit. Tables and co
 come from gigapoint.render.params, as the CPU's do.
 
 Results stay on the GPU: a method returns a :class:`DeviceArray`, which the next pass reads
-in place and ``np.asarray`` reads back once. The visibility buffer ``rasterize`` returned is
-recognised too, so a frame uploads nothing between passes. Passes write into one of two
+in place and ``np.asarray`` reads back once; so does ``rasterize(keep_on_device=True)``'s
+visibility buffer, so a frame uploads nothing between passes (a numpy array is uploaded: its
+holder may have changed it). Passes write into one of two
 buffers per kind (ping-pong): an input is never overwritten by the pass reading it, and a
 result still referenced when its buffer is reused is read back first. Where the adapter
 cannot run a pass (HQS needs 9 storage bindings and its sums in one; lighting's per-pixel view directions must
