@@ -149,6 +149,19 @@ def test_frame_beyond_one_binding_is_refused(gpu, scene):
 
 
 # --- pages and memory ---------------------------------------------------------------------------
+def test_a_big_frames_buffers_are_freed_by_the_small_frames_after_it(gpu, cpu, scene):
+    """A 3000 x 3000 frame's 72 MB visibility buffer was held through every small frame after it;
+    its result, still on the GPU, reads back whole after they free it."""
+    sel, (_, _, near, far) = _frame(scene, comparison_cameras(scene)["iso"])
+    big = gpu.rasterize(scene, sel, 3000, 3000, near, far, keep_on_device=True)
+    held = gpu.memory["frame_buffers"]  # (and what earlier tests left)
+    assert held > 70e6
+    small_sel, small = _frame(scene, comparison_cameras(scene)["top"])
+    _assert_close(gpu.rasterize(scene, small_sel, *small), cpu.rasterize(scene, small_sel, *small))
+    assert gpu.memory["frame_buffers"] < held - 70e6
+    _assert_close(np.asarray(big), cpu.rasterize(scene, sel, 3000, 3000, near, far))
+
+
 def test_paging_gives_the_same_buffer(gpu, scene):
     """Pages of 3 batches and a budget of 4 page-words: 7 pages, evictions every frame."""
     page = 3 * BATCH_SIZE * 4

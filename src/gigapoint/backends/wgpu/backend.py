@@ -288,6 +288,7 @@ class WgpuBackend:
         if points.n_points > 0xFFFFFFFF:
             raise GigapointError(f"{points.name}: {points.n_points:,} points exceed the 2^32 a visibility buffer can index")
         ctx = self.ctx
+        ctx.trim(n_pixels)  # each frame starts here
         vis = ctx.writable(role, views.n * n_pixels * 8)
         ctx.cache.purge_dead()
         ctx.clear(vis, _EMPTY_WORD)  # to EMPTY (all ones) on the GPU rather than uploading a full frame

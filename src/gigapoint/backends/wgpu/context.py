@@ -33,6 +33,8 @@ _LINEAR_WORKGROUP = 256  # clear / resolve workgroup size
 # Clear / resolve loop over their items (grid stride): 1024 x 256 threads fill any GPU,
 # and CPU drivers pay per workgroup (lavapipe: clear 3-4x faster than with 65535).
 _LINEAR_GROUPS_MAX = 1024
+#: Frame buffers up to this size are kept whatever the frame size (GpuContext.trim).
+_TRIM_FLOOR = 64 << 20
 
 
 class DeviceArray:
@@ -247,12 +249,27 @@ class GpuContext:
     def writable(self, role: str, nbytes: int):
         """The role's buffer, about to be overwritten: results still reading it are read
         back first (DeviceArray), so no array ever changes under its holder."""
+        self._retire(role)
+        usage = self.wgpu.BufferUsage
+        return self.frame_buffer(role, nbytes, usage.STORAGE | usage.COPY_SRC | usage.COPY_DST)
+
+    def _retire(self, role: str) -> None:
+        """Read back the results still in the role's buffer: it is about to change or go."""
         for array in list(self.arrays):
             if array.role == role:
                 array.materialise()
         self.generation[role] += 1
-        usage = self.wgpu.BufferUsage
-        return self.frame_buffer(role, nbytes, usage.STORAGE | usage.COPY_SRC | usage.COPY_DST)
+
+    def trim(self, n_pixels: int) -> None:
+        """Free the frame buffers over 64 MiB and over twice what a frame of ``n_pixels`` needs
+        (64 bytes a pixel at most: transparency's layers, 8 stereo views), so one big frame's
+        buffers (a 4K export) are not held through every small frame after it; the floor spares
+        a viewer's full-resolution buffers while it draws small frames in motion."""
+        limit = max(_TRIM_FLOOR, 128 * n_pixels)
+        for role in [r for r, b in self.frame_buffers.items() if b.size > limit]:
+            self._retire(role)  # reading back may make the staging buffer big: freed below
+        for role in [r for r, b in self.frame_buffers.items() if b.size > limit]:
+            self.frame_buffers.pop(role).destroy()
 
     def device_input(self, x, roles: tuple[str, str], dtype, n: int) -> tuple[object, str]:
         """(buffer, role) holding ``x`` (n items of ``dtype``): its own buffer if it is a
