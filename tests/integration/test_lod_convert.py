@@ -307,11 +307,13 @@ def test_conversion_killed_while_distributing_resumes_to_the_same_result(demo_la
     import importlib
 
     conv = importlib.import_module("gigapoint.lod.convert")
+    partition = importlib.import_module("gigapoint.lod.convert.partition")
     C = conv._Converter
     real_distribute, real_append, real_files = C.distribute, C._append, C._part_files
     seen = {"append": 0, "files": 0, "groups": []}
 
     def distribute(self):
+        self.state["part_code"] = partition._shared_code(self.dir.raw, self.state["chunks"])  # (what distribute decides: int32 positions)
         point = sum(dt.itemsize * (3 if k == "xyz" else 1) for k, dt in self._dtypes().items())
         self.distribute_bytes = int(1.5 * OPTS["chunk_size"] * point)  # a checkpoint every second chunk (of its bytes a point)
         return real_distribute(self)
@@ -500,6 +502,26 @@ def test_spilled_las_positions_are_int32_and_the_octree_the_same(town_and_spot, 
     monkeypatch.setattr(read, "save_raw_chunk", lambda raw, i, xyz, *a: (saved.append(xyz.dtype), save(raw, i, xyz, *a))[1])
     convert(inputs, tmp_path / "ints", **OPTS)
     assert saved == [np.dtype(np.int32)] * (len(saved) - 1) + [np.dtype(np.float64)] and len(saved) == 6  # 4 + 1 LAS chunks, the text's
+    a, b = _files_of(tmp_path / "wide"), _files_of(tmp_path / "ints")
+    assert a.keys() == b.keys() and [k for k in a if a[k] != b[k]] == []
+
+
+def test_partitions_of_one_las_grid_hold_int32_positions(demo_las, tmp_path, monkeypatch):
+    """Partition files of inputs on one LAS grid hold their positions as its int32 (12 bytes a
+    point, not 24), decoded for each partition's refinement and build: the octree is the float64
+    partitions' byte for byte."""
+    import importlib
+
+    partition = importlib.import_module("gigapoint.lod.convert.partition")
+    _spilling(monkeypatch)
+    with monkeypatch.context() as m:
+        m.setattr(partition, "_shared_code", lambda raw, n: None)  # as before: float64 partitions
+        convert([demo_las], tmp_path / "wide", **OPTS)
+    sizes, append = [], partition.append_file
+    monkeypatch.setattr(partition, "append_file", lambda path, arrays: (sizes.append((path.name, arrays[0].dtype)), append(path, arrays))[1])
+    convert([demo_las], tmp_path / "ints", **OPTS)
+    xyz = {dt for name, dt in sizes if name.endswith(".xyz")}
+    assert xyz == {np.dtype(np.int32)} and len(sizes) > 10
     a, b = _files_of(tmp_path / "wide"), _files_of(tmp_path / "ints")
     assert a.keys() == b.keys() and [k for k in a if a[k] != b[k]] == []
 

@@ -15,7 +15,7 @@ from ...core.cloud import take
 from ...core.morton import counting_order
 from ..keys import CODE_BITS, point_codes
 from .read import constant_value
-from .spill import load_raw_chunk, raw_chunk_files
+from .spill import decode_xyz, load_raw_chunk, raw_chunk_files, raw_xyz_code
 from .state import Job
 
 COUNT_LEVEL = 7  # the count grid: 128³ cells of the cube
@@ -64,6 +64,15 @@ def plan_groups(carried: dict, budget: int) -> list[list]:
         if all(n <= budget for n, _ in groups.values()):
             break
     return best or []
+
+
+def _shared_code(raw: Path, n_chunks: int) -> list | None:
+    """The LAS grid every spilled chunk's positions are on (spill.raw_xyz_code: one file's, or
+    several files' of one scale and offset), as the state keeps it; None: float64 partitions."""
+    codes = [raw_xyz_code(raw, i) for i in range(n_chunks)]
+    if not codes or any(c is None or not np.array_equal(c, codes[0]) for c in codes):
+        return None
+    return codes[0].tolist()
 
 
 def grid_cells(xyz: np.ndarray, origin, edge: float) -> np.ndarray:
@@ -161,8 +170,9 @@ class PartitionPhases(Job):
         return {k: d / f"{stem}.{k}" for k in self._dtypes()}
 
     def _dtypes(self) -> dict[str, np.dtype]:
-        """The arrays a partition holds a point at a time, and their dtypes."""
-        dts = {"xyz": np.dtype(np.float64), "rgba": np.dtype(np.uint32)}
+        """The arrays a partition holds a point at a time, and their dtypes (positions int32 under
+        the state's ``part_code``: ``distribute``)."""
+        dts = {"xyz": np.dtype(np.int32 if self.state.get("part_code") is not None else np.float64), "rgba": np.dtype(np.uint32)}
         constants = self._constants()
         for a, dt in self.state["attributes"].items():
             if a not in constants:
@@ -202,6 +212,8 @@ class PartitionPhases(Job):
             self.save_state()
             return
         if st["distributed"] < st["chunks"]:
+            if not st["distributed"]:  # (a run resumed part-way keeps what its files were written with)
+                st["part_code"] = _shared_code(self.dir.raw, st["chunks"])
             lut = partition_lut(parts)
             dts = self._dtypes()
             # a chunk interrupted half-way: cut every partition file back to the last checkpoint
@@ -212,10 +224,10 @@ class PartitionPhases(Job):
             self.progress.phase("distribute", st["points"])
             pieces, held = [], 0  # chunks grouped since the last checkpoint, and their bytes
             for i in range(st["distributed"], st["chunks"]):
-                data = load_raw_chunk(self.dir.raw, i, self._varying())
+                data = load_raw_chunk(self.dir.raw, i, self._varying(), decode=st.get("part_code") is None)
                 xyz = np.ascontiguousarray(data["xyz"])
                 if len(xyz):
-                    pieces.append(self._by_partition(data, lut[grid_cells(xyz, origin, edge)], len(parts)))
+                    pieces.append(self._by_partition(data, lut[grid_cells(self._positions(xyz), origin, edge)], len(parts)))
                     held += sum(v.nbytes for v in pieces[-1][0].values())
                 del data
                 if held >= self.distribute_bytes or i == st["chunks"] - 1:
@@ -239,8 +251,12 @@ class PartitionPhases(Job):
         return {k: np.memmap(path, dtype=dts[k], mode="r", shape=(n, 3) if k == "xyz" else (n,)) for k, path in files.items()}
 
     def _positions(self, xyz):
-        """Held or spilled positions as float64 (in_memory.py holds a LAS file's as int32)."""
-        return xyz
+        """Held or spilled positions as float64 (partition files of one LAS grid hold them as its
+        int32: ``part_code``; in_memory.py holds a LAS file's so too)."""
+        code = self.state.get("part_code")
+        if code is None or xyz.dtype == np.float64:
+            return xyz
+        return decode_xyz(np.ascontiguousarray(xyz), np.asarray(code, np.float64))
 
     def _drop_partition(self, level: int, prefix: int) -> None:
         """Forget partition (level, prefix)'s points (refined into smaller ones, or partial)."""

@@ -130,7 +130,7 @@ class BuildPhases(Job):
         files = self._part_files(lev, prefix)
         dts = self._dtypes()
         data = {k: np.fromfile(path, dtype=dts[k]) for k, path in files.items()}
-        data["xyz"] = data["xyz"].reshape(-1, 3)
+        data["xyz"] = self._positions(data["xyz"].reshape(-1, 3))  # (int32 of the inputs' LAS grid: decoded)
         return self._with_constants(data), list(files.values())
 
     def _build_subtree(self, data: dict, root_key: int, origin, edge, dest: Path) -> None:
