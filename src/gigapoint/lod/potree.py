@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..atomic import atomic_bytes, atomic_json, atomic_npy, fsync_file, start_writeback, write_at
+from ..core.chunk import ColorScaler
 from ..core.cloud import byte_views
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import gather_batch, quantize
@@ -435,12 +436,18 @@ def _parse_hierarchy(data: bytes, offset: int, size: int, first_key: int, out: d
                 keys.append(key << 3 | c)
 
 
+def _read_type(a: dict) -> np.dtype:
+    """The dtype attribute ``a``'s values are read as."""
+    t = _TYPES.get(a["type"])
+    if t is None:
+        raise ValueError(f"unknown attribute type {a['type']!r}")
+    return np.dtype(t)
+
+
 def _node_dtype(attributes: list[dict]) -> np.dtype:
     fields = []
     for a in attributes:
-        t = _TYPES.get(a["type"])
-        if t is None:
-            raise ValueError(f"unknown attribute type {a['type']!r}")
+        t = _read_type(a)
         n = int(a.get("numElements", 1))
         fields.append((a["name"], t, (n,)) if n > 1 else (a["name"], t))
     return np.dtype(fields)
@@ -476,7 +483,7 @@ def decode_node(blob: bytes, n: int, attributes: list[dict], encoding: str) -> d
             off += 8 * n
             out[name] = np.stack([_compact16(m >> np.uint64(k)) for k in range(3)], axis=1).astype(np.uint16)
         else:
-            dt = np.dtype(_TYPES[a["type"]])
+            dt = _read_type(a)
             k = int(a.get("numElements", 1))
             v = np.frombuffer(raw, dt, count=n * k, offset=off)
             off += dt.itemsize * n * k
@@ -511,6 +518,12 @@ class PotreeCloud(OctreeCloud):
             info: dict[int, tuple[int, int, int]] = {}
             _parse_hierarchy(hier, 0, first, 1, info)
             record = _node_dtype(self.potree_attributes)
+            # the file's colour range decided once, from rgb's stated maximum, as a LAS file's
+            # is (16-bit when over 255): one value at a time, dark 16-bit colours (under 256) came out bright
+            self.colors = ColorScaler()
+            for a in self.potree_attributes:
+                if a["name"] == "rgb" and a.get("max"):
+                    self.colors.int_shift(int(max(a["max"])))
             if "position" not in (record.names or ()) or record["position"].shape != (3,):  # (each node's KeyError when drawn)
                 raise ValueError("its attributes hold no 'position' of three numbers")
             check_placement(
@@ -553,7 +566,7 @@ class PotreeCloud(OctreeCloud):
         nodes["bbox_min"] = np.where(nonempty[:, None], np.clip(cmin, lo, hi), cmin)
         nodes["bbox_max"] = np.where(nonempty[:, None], np.clip(cmin + cedge[:, None], lo, hi), cmin + cedge[:, None])
         self.extra = {  # decoded name -> (gigapoint attribute name, dtype)
-            a["name"]: (a["name"].replace(" ", "_").replace("-", "_"), np.dtype(_TYPES[a["type"]]))
+            a["name"]: (a["name"].replace(" ", "_").replace("-", "_"), _read_type(a))
             for a in self.potree_attributes
             if a["name"] not in ("position", "rgb") and int(a.get("numElements", 1)) == 1
         }
@@ -609,8 +622,8 @@ class PotreeCloud(OctreeCloud):
         self.nodes[index]["bbox_min"], self.nodes[index]["bbox_max"] = rec[0]["bbox_min"], rec[0]["bbox_max"]
         rgba = np.full((n, 4), 255, np.uint8)
         if "rgb" in d:
-            c = d["rgb"].astype(np.int64)
-            rgba[:, :3] = np.clip(np.where(c > 255, c // 256, c), 0, 255)
+            c = d["rgb"]
+            rgba[:, :3] = np.minimum(c >> self.colors.int_shift(int(c.max())), 255)  # (no stated maximum: the first node decides)
         color = rgba.view(np.uint32).reshape(-1)
         attrs = {name: (d[a] if a in d else np.zeros(n, dt)) for a, (name, dt) in self.extra.items()}
         return {"low": low, "med": med, "high": high, "color": color, "rgba": color}, attrs, 0
