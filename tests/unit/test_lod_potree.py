@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -398,3 +399,41 @@ def test_pack_records_are_numpys_records_and_statistics():
     assert np.isnan(stats["gps_time"][0][0]) and np.isnan(stats["gps_time"][1][0])
     assert stats["intensity"] == [[0.0], [0.0]]
     assert stats["huge"][1][0] == float(attrs["huge"][idx].max())  # above 2^53: rounded as numpy rounds its maximum
+
+
+# PotreeConverter 2.1.1's output (data/potree_converter/make.py says how it was made): 1200
+# points of the demo town in town.laz, a fifth with dark 16-bit colours, signed scan angle ranks
+POTREE_CONVERTER = Path(__file__).parent / "data" / "potree_converter"
+
+
+@pytest.mark.parametrize("encoding", ["DEFAULT", "BROTLI"])
+def test_potree_converter_output_reads_back_as_its_input(encoding):
+    import laspy
+
+    src = laspy.read(POTREE_CONVERTER / "town.laz")
+    pot = gp.open(POTREE_CONVERTER / f"town_{encoding}")
+    meta = json.loads((POTREE_CONVERTER / f"town_{encoding}" / "metadata.json").read_text())
+    assert pot.n_points == meta["points"] == len(src.points) == 1200
+    got = [pot.node_points(i) for i in range(len(pot.keys)) if pot.nodes["count"][i]]
+    got = {k: np.concatenate([g[k] for g in got]) for k in got[0]}
+    # positions as PotreeConverter stores them: truncated to its grid, one step up in BROTLI
+    # (its Morton codes count from a node minimum that starts at int32(INT64_MAX) = -1)
+    scale, offset = np.array(meta["scale"]), np.array(meta["offset"])
+    want = ((np.stack([src.x, src.y, src.z], 1) - offset) / scale).astype(np.int32) + (encoding == "BROTLI")
+    have = np.round((got["xyz"] - offset) / scale).astype(np.int64)
+    i, j = np.lexsort(want.T), np.lexsort(have.T)
+    np.testing.assert_array_equal(have[j], want[i])  # every point once
+    # colours as gigapoint reads the LAS file: 16-bit (>> 8) for all, the dark ones (under 256) too
+    rgb16 = np.stack([src.red, src.green, src.blue], 1)[i]
+    assert (rgb16.max(axis=1) < 256).sum() == 244
+    np.testing.assert_array_equal(got["rgba"].view(np.uint8).reshape(-1, 4)[j, :3], rgb16 >> 8)
+    # every LAS field and extra byte PotreeConverter wrote, as the file's values (the scan angle rank signed)
+    assert pot.attribute_names == ["classification", "gps_time", "height_above_ground", "intensity", "number_of_returns",
+                                   "point_source_id", "quality", "return_number", "scan_angle_rank", "tilt", "user_data"]  # fmt: skip
+    for name in pot.attribute_names:
+        values = np.asarray(src[name.replace("height_above_ground", "height above ground")])[i]
+        assert got[name].dtype == values.dtype, name
+        np.testing.assert_array_equal(got[name][j], values, err_msg=name)
+    assert got["scan_angle_rank"].min() == -90
+    np.testing.assert_allclose(pot.meta["bounds"]["min"], src.header.mins)
+    np.testing.assert_allclose(pot.meta["bounds"]["max"], src.header.maxs)

@@ -437,11 +437,16 @@ def _parse_hierarchy(data: bytes, offset: int, size: int, first_key: int, out: d
 
 
 def _read_type(a: dict) -> np.dtype:
-    """The dtype attribute ``a``'s values are read as."""
+    """The dtype attribute ``a``'s values are read as: its type's, signed where the type is
+    unsigned but its stated minimum is negative (PotreeConverter 2.1.1 writes LAS's signed
+    scan angle rank as "uint8", with min -18: read as uint8 it was 238)."""
     t = _TYPES.get(a["type"])
     if t is None:
         raise ValueError(f"unknown attribute type {a['type']!r}")
-    return np.dtype(t)
+    dt = np.dtype(t)
+    if dt.kind == "u" and min(a.get("min") or [0]) < 0:
+        dt = np.dtype(dt.str.replace("u", "i"))
+    return dt
 
 
 def _node_dtype(attributes: list[dict]) -> np.dtype:
