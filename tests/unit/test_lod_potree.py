@@ -129,6 +129,8 @@ def test_reader_follows_proxy_chunks(tmp_path):
     assert oc.nodes["count"].tolist() == [2, 1]
     np.testing.assert_allclose(oc.node_points(1)["xyz"], [[16.0, 22.0, 32.0]], atol=1e-6)
     np.testing.assert_allclose(oc.node_points(0)["xyz"], [[10, 20, 30], [11, 21, 31]], atol=1e-6)
+    # no rgb attribute (PotreeConverter --attributes intensity): the grey of a LAS file without colours, not white
+    assert oc.node_points(0)["rgba"].view(np.uint8).reshape(-1, 4).tolist() == [[200, 200, 200, 255]] * 2
 
 
 def test_reader_bad_files_one_line_errors(tmp_path):

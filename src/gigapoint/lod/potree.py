@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..atomic import atomic_bytes, atomic_json, atomic_npy, fsync_file, start_writeback, write_at
-from ..core.chunk import ColorScaler
+from ..core.chunk import DEFAULT_COLOR, ColorScaler
 from ..core.cloud import byte_views
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import gather_batch, quantize
@@ -625,7 +625,8 @@ class PotreeCloud(OctreeCloud):
         rec["first"] = 0
         low, med, high = quantize(d["position"] * self.scale + self.offset, np.arange(n, dtype=np.int64), rec)
         self.nodes[index]["bbox_min"], self.nodes[index]["bbox_max"] = rec[0]["bbox_min"], rec[0]["bbox_max"]
-        rgba = np.full((n, 4), 255, np.uint8)
+        rgba = np.empty((n, 4), np.uint8)
+        rgba[:] = DEFAULT_COLOR  # no rgb (PotreeConverter --attributes intensity): a colourless LAS file's grey, not white
         if "rgb" in d:
             c = d["rgb"]
             rgba[:, :3] = np.minimum(c >> self.colors.int_shift(int(c.max())), 255)  # (no stated maximum: the first node decides)
