@@ -45,7 +45,8 @@ _TYPES = {
 #: the points have none: viewers expect them), then every other attribute, then rgb
 WRITE_ATTRIBUTES = (("position", "int32", 3), ("intensity", "uint16", 1), ("classification", "uint8", 1), ("rgb", "uint16", 3))
 #: gigapoint's attribute names as PotreeConverter writes them (the reader maps them back)
-POTREE_NAMES = {"return_number": "return number", "number_of_returns": "number of returns", "point_source_id": "point source id", "gps_time": "gps-time"}
+POTREE_NAMES = {"return_number": "return number", "number_of_returns": "number of returns", "point_source_id": "point source id",
+                "gps_time": "gps-time", "scan_angle_rank": "scan angle rank", "user_data": "user data", "scan_angle": "scan angle"}  # fmt: skip
 _TYPE_OF = {np.dtype(t): name for name, t in _TYPES.items()}
 
 
