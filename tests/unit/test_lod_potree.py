@@ -456,3 +456,23 @@ def test_our_potree_metadata_names_las_fields_as_potree_converter_does(tmp_path)
     for a, b in ((ours["offset"], theirs["offset"]), (ours["boundingBox"]["min"], theirs["boundingBox"]["min"]),
                  (ours["boundingBox"]["max"], theirs["boundingBox"]["max"])):  # fmt: skip
         np.testing.assert_allclose(a, b, atol=0.0101)  # (ours may start a grid step lower)
+
+
+def test_info_says_what_a_potree_converter_directory_holds(tmp_path):
+    """No rgb attribute (PotreeConverter --attributes intensity): no colour; more points in the
+    nodes than the metadata counts (its poisson_average: copies in inner nodes): said."""
+    from gigapoint.lod import octree_info
+
+    pts = np.array([[0, 0, 0], [2, 2, 2], [12, 4, 4]], "<i4")
+    _write_potree(tmp_path / "p", np.array([(1, 0, 3, 0, 36)], HIERARCHY_DTYPE).tobytes(), 22, pts.tobytes())
+    info = octree_info(tmp_path / "p")
+    assert info["point_count"] == 3 and info["has_color"] is False and "copies" not in info["details"]["octree"]
+    meta = json.loads((tmp_path / "p" / "metadata.json").read_text())
+    meta["points"] = 2
+    meta["attributes"].append({"name": "rgb", "type": "uint16", "numElements": 3, "size": 6, "elementSize": 2})
+    (tmp_path / "p" / "metadata.json").write_text(json.dumps(meta))
+    (tmp_path / "p" / "octree.bin").write_bytes(np.zeros(3, [("position", "<i4", (3,)), ("rgb", "<u2", (3,))]).tobytes())
+    (tmp_path / "p" / "hierarchy.bin").write_bytes(np.array([(1, 0, 3, 0, 54)], HIERARCHY_DTYPE).tobytes())
+    info = octree_info(tmp_path / "p")
+    assert info["point_count"] == 3 and info["has_color"] is True
+    assert info["details"]["octree"].endswith("; 1 of the points are copies of the metadata's 2 in inner nodes (PotreeConverter's poisson_average)")

@@ -586,6 +586,7 @@ class PotreeCloud(OctreeCloud):
             "encoding": self.encoding,
             "spacing": meta.get("spacing"),
             "crs": meta.get("projection") or None,
+            "source_points": meta.get("points"),  # (PotreeConverter's poisson_average stores more: copies in inner nodes)
         }
         super().__init__(meta.get("name") or p.name, cloud_meta, nodes, keys, {}, {}, p)
         self.node_reads = 0

@@ -125,19 +125,24 @@ def octree_info(path) -> dict:
     lo, hi = cloud.bounds
     potree = d.kind == "potree"
     attributes, crs = sorted(cloud.attributes), cloud.meta.get("crs")
-    if potree:  # its nodes are decoded on demand: the metadata names what they hold (as gigapoint names them)
-        attributes = [name for name, _ in cloud.extra.values()]
     levels = int(cloud.nodes["level"].max()) + 1
     sampler, spacing = cloud.meta.get("sampler"), cloud.meta.get("spacing")
     text = f"{len(cloud.keys):,} nodes in {levels} levels"
     text += (f", {sampler} sampler" if sampler else "") + (f", spacing {spacing:.6g}" if spacing else "")
+    has_color = True
+    if potree:  # its nodes are decoded on demand: the metadata names what they hold (as gigapoint names them)
+        attributes = [name for name, _ in cloud.extra.values()]
+        has_color = any(a["name"] == "rgb" for a in cloud.potree_attributes)  # (PotreeConverter --attributes intensity: none)
+        source = cloud.meta.get("source_points")
+        if isinstance(source, int) and 0 < source < cloud.n_points:
+            text += f"; {cloud.n_points - source:,} of the points are copies of the metadata's {source:,} in inner nodes (PotreeConverter's poisson_average)"
     return {
         "path": str(p),
         "format": "Potree 2.0 octree" if potree else f"gigapoint octree {cloud.meta.get('version')}",
         "encoding": cloud.meta.get("encoding") if potree else None,
         "point_count": int(cloud.n_points),
         "bounds": {"min": np.asarray(lo).tolist(), "max": np.asarray(hi).tolist()},
-        "has_color": True,
+        "has_color": has_color,
         "attributes": attributes,
         "crs": crs,
         "scale": None if potree else cloud.meta.get("scale"),  # the source's grid (LAS inputs): bounds print at its decimals
