@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..atomic import atomic_bytes, atomic_json, atomic_npy, fsync_file, start_writeback, write_at
-from ..core.chunk import DEFAULT_COLOR, ColorScaler
+from ..core.chunk import DEFAULT_COLOR, ColorScaler, safe_attribute_name
 from ..core.cloud import byte_views
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import gather_batch, quantize
@@ -572,9 +572,9 @@ class PotreeCloud(OctreeCloud):
         nodes["bbox_min"] = np.where(nonempty[:, None], np.clip(cmin, lo, hi), cmin)
         nodes["bbox_max"] = np.where(nonempty[:, None], np.clip(cmin + cedge[:, None], lo, hi), cmin + cedge[:, None])
         self.extra = {  # decoded name -> (gigapoint attribute name, dtype)
-            a["name"]: (a["name"].replace(" ", "_").replace("-", "_"), _read_type(a))
+            a["name"]: (_gigapoint_name(a["name"]), _read_type(a))
             for a in self.potree_attributes
-            if a["name"] not in ("position", "rgb") and int(a.get("numElements", 1)) == 1
+            if a["name"] not in ("position", "rgb") and int(a.get("numElements", 1)) == 1 and _gigapoint_name(a["name"])
         }
         cloud_meta = {
             "format": "potree-2.0",
@@ -659,6 +659,13 @@ class PotreeCloud(OctreeCloud):
         if full.any():
             meta["bounds"] = {"min": nodes["bbox_min"][full].min(axis=0).tolist(), "max": nodes["bbox_max"][full].max(axis=0).tolist()}
         return OctreeCloud(self.name, meta, nodes, self.keys, arrays, attrs, self.path)
+
+
+def _gigapoint_name(name: str) -> str | None:
+    """A Potree attribute's name in gigapoint: a LAS field's as the LAS reader names it ('gps-time':
+    gps_time), any other (extra bytes) kept, as the LAS reader keeps it ('height above ground'
+    was 'height_above_ground' from PotreeConverter's output, and from our own); None: unusable."""
+    return {v: k for k, v in POTREE_NAMES.items()}.get(name) or safe_attribute_name(name)
 
 
 def _position_range(name: str, attributes: list[dict], bmin: np.ndarray, bmax: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
