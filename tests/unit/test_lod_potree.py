@@ -480,3 +480,34 @@ def test_info_says_what_a_potree_converter_directory_holds(tmp_path):
     info = octree_info(tmp_path / "p")
     assert info["point_count"] == 3 and info["has_color"] is True
     assert info["details"]["octree"].endswith("; 1 of the points are copies of the metadata's 2 in inner nodes (PotreeConverter's poisson_average)")
+
+
+@pytest.mark.parametrize("encoding", ["DEFAULT", "BROTLI"])
+def test_an_attribute_of_several_numbers_is_one_attribute_a_number(tmp_path, encoding):
+    """A 3-float extra bytes field (a LAS '3f4' normal, which PotreeConverter keeps as one
+    attribute of numElements 3) reads as normal_0 .. normal_2, as gigapoint's LAS reader reads it."""
+    import brotli
+
+    pts = np.array([[0, 0, 0], [2, 2, 2], [12, 4, 4]], "<i4")
+    normal = np.array([[0.5, -1, 2], [3, 4, 5], [-6, 7, 8.25]], "<f4")
+    rec = np.zeros(3, [("position", "<i4", (3,)), ("normal", "<f4", (3,)), ("quality", "u1")])
+    rec["position"], rec["normal"], rec["quality"] = pts, normal, [7, 8, 9]
+    # BROTLI: attribute by attribute; positions as Morton codes (hand-made: x, y, z bits interleaved)
+    morton = [sum(((int(p[a]) >> b) & 1) << (3 * b + a) for b in range(16) for a in range(3)) for p in pts]
+    blob = rec.tobytes() if encoding == "DEFAULT" else brotli.compress(
+        np.array([[0, m] for m in morton], "<u8").tobytes() + normal.tobytes() + rec["quality"].tobytes())  # fmt: skip
+    _write_potree(tmp_path / "p", np.array([(1, 0, 3, 0, len(blob))], HIERARCHY_DTYPE).tobytes(), 22, blob)
+    meta = json.loads((tmp_path / "p" / "metadata.json").read_text())
+    meta["encoding"] = encoding
+    meta["attributes"] += [{"name": "normal", "type": "float", "numElements": 3, "size": 12, "elementSize": 4},
+                           {"name": "quality", "type": "uint8", "numElements": 1, "size": 1, "elementSize": 1}]  # fmt: skip
+    (tmp_path / "p" / "metadata.json").write_text(json.dumps(meta))
+    oc = gp.open(tmp_path / "p")
+    assert oc.attribute_names == ["normal_0", "normal_1", "normal_2", "quality"]
+    got = oc.node_points(0)
+    order = np.lexsort(np.round(got["xyz"]).T)  # (BROTLI: Morton order)
+    want = np.lexsort((pts * 0.5 + [10, 20, 30]).T)
+    for k in range(3):
+        assert got[f"normal_{k}"].dtype == np.float32
+        np.testing.assert_array_equal(got[f"normal_{k}"][order], normal[want, k])
+    np.testing.assert_array_equal(got["quality"][order], np.array([7, 8, 9])[want])

@@ -571,11 +571,15 @@ class PotreeCloud(OctreeCloud):
         nonempty = counts > 0  # until decoded: the cube clipped to the bounds (an empty node keeps its cube)
         nodes["bbox_min"] = np.where(nonempty[:, None], np.clip(cmin, lo, hi), cmin)
         nodes["bbox_max"] = np.where(nonempty[:, None], np.clip(cmin + cedge[:, None], lo, hi), cmin + cedge[:, None])
-        self.extra = {  # decoded name -> (gigapoint attribute name, dtype)
-            a["name"]: (_gigapoint_name(a["name"]), _read_type(a))
-            for a in self.potree_attributes
-            if a["name"] not in ("position", "rgb") and int(a.get("numElements", 1)) == 1 and _gigapoint_name(a["name"])
-        }
+        # gigapoint attribute name -> (decoded name, element or None, dtype); an attribute of k
+        # numbers a point is k attributes name_0 .. (as the LAS reader reads a 3f4 normal; it was left out)
+        self.extra = {}
+        for a in self.potree_attributes:
+            name, k = _gigapoint_name(a["name"]), int(a.get("numElements", 1))
+            if a["name"] in ("position", "rgb") or not name:
+                continue
+            for e in [None] if k == 1 else range(k):
+                self.extra[name if e is None else f"{name}_{e}"] = (a["name"], e, _read_type(a))
         cloud_meta = {
             "format": "potree-2.0",
             "points": int(counts.sum()),
@@ -593,7 +597,7 @@ class PotreeCloud(OctreeCloud):
         self.bytes_read = 0
 
     def _attribute_dtypes(self) -> dict:
-        return {name: dt for name, dt in self.extra.values()}
+        return {name: dt for name, (_, _, dt) in self.extra.items()}
 
     def new_arena(self, points: int):
         arena = super().new_arena(points)
@@ -633,12 +637,15 @@ class PotreeCloud(OctreeCloud):
             c = d["rgb"]
             rgba[:, :3] = np.minimum(c >> self.colors.int_shift(int(c.max())), 255)  # (no stated maximum: the first node decides)
         color = rgba.view(np.uint32).reshape(-1)
-        attrs = {name: (d[a] if a in d else np.zeros(n, dt)) for a, (name, dt) in self.extra.items()}
+        attrs = {
+            name: np.zeros(n, dt) if a not in d else d[a] if e is None else np.ascontiguousarray(d[a][:, e])
+            for name, (a, e, dt) in self.extra.items()
+        }
         return {"low": low, "med": med, "high": high, "color": color, "rgba": color}, attrs, 0
 
     @property
     def attribute_names(self) -> list[str]:
-        return sorted(name for name, _ in self.extra.values())
+        return sorted(self.extra)
 
     def to_memory(self) -> OctreeCloud:
         """Every node decoded into one in-memory OctreeCloud (small datasets; the eager reading)."""

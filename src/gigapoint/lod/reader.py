@@ -131,7 +131,7 @@ def octree_info(path) -> dict:
     text += (f", {sampler} sampler" if sampler else "") + (f", spacing {spacing:.6g}" if spacing else "")
     has_color = True
     if potree:  # its nodes are decoded on demand: the metadata names what they hold (as gigapoint names them)
-        attributes = [name for name, _ in cloud.extra.values()]
+        attributes = list(cloud.extra)
         has_color = any(a["name"] == "rgb" for a in cloud.potree_attributes)  # (PotreeConverter --attributes intensity: none)
         source = cloud.meta.get("source_points")
         if isinstance(source, int) and 0 < source < cloud.n_points:
