@@ -44,6 +44,7 @@ class RangeServer:
         self.paths: list[str] = []  # as requested, with any query
         self.ports: set[int] = set()
         self.delay = 0.0  # seconds each answer waits (so that concurrent requests overlap)
+        self.etag = None  # sent with each file's bytes when set
         self.inflight = self.max_inflight = 0
         self.lock = threading.Lock()
         server = self
@@ -114,6 +115,8 @@ class RangeServer:
                     body = data
                     self.send_response(200)
                 self.send_header("Content-Length", str(len(body)))
+                if server.etag:
+                    self.send_header("ETag", server.etag)
                 self.end_headers()
                 if mode == "short":
                     self.wfile.write(body[: len(body) // 2])
@@ -336,6 +339,32 @@ def test_a_failure_while_drawing_raises_instead_of_a_partial_image(server, quick
     server.mode = "ok"  # the server recovers: the same cloud draws completely
     f = _frame(c, point_budget=10**9, lod_threshold_px=0.0)
     assert f.stats.points_processed == 110_000
+
+
+def test_a_file_changed_on_the_server_while_it_is_read(data, server):
+    """A COPC file replaced on the server after it was opened: the new bytes were decoded with
+    the old header and hierarchy (a longer file drew without a word, a rewritten one failed as
+    "cannot decode node"); another size or ETag than the first answer's is now named."""
+    f = server.root / "changing.copc.laz"
+    f.write_bytes((data / "autzen.copc.laz").read_bytes())
+    url = server.url("changing.copc.laz")
+    size = f.stat().st_size
+    for change, message in (("size", f"its size went from {size:,} to {size + 10:,} bytes"), ("etag", 'ETag "v1" became "v2"')):
+        server.etag = '"v1"'
+        c = gp.open(url)
+        if change == "size":
+            f.write_bytes(f.read_bytes() + bytes(10))
+        else:
+            server.etag = '"v2"'
+        with pytest.raises(InputError) as e:
+            _frame(c, point_budget=10**9, lod_threshold_px=0.0)
+        assert str(e.value) == f"{url}: the file changed on the server while it was read ({message}); open it again"
+        c.close()
+    c = gp.open(url)  # opened again: the new file draws
+    assert _frame(c, point_budget=10**9, lod_threshold_px=0.0).stats.points_processed == 110_000
+    c.close()
+    f.unlink()
+    server.etag = None
 
 
 @pytest.mark.timeout(60)

@@ -12,7 +12,8 @@ request, so that a server that stalls or trickles never hangs a frame, a bounded
 LRU cache of the ranges read, and two retries of transient failures (connection errors,
 HTTP 502/503/504). Whatever goes wrong is a one-line ``InputError`` naming the URL: an HTTP
 error status, a short read, a server that ignores ``Range`` (200 with the whole file) or
-answers another range than asked, a range past the end of the file, a timeout.
+answers another range than asked, a range past the end of the file, a timeout, a file that
+changed on the server since its first answer (size, ETag or Last-Modified).
 
 httpx is an optional dependency (``pip install 'gigapoint[http]'``).
 """
@@ -217,6 +218,7 @@ class HttpClient:
         self._pool: ThreadPoolExecutor | None = None
         self._pool_lock = threading.Lock()
         self.sizes: dict[str, int] = {}  # file sizes learnt from Content-Range
+        self.versions: dict[str, str] = {}  # each file's first ETag (else Last-Modified): a change is noticed
         self.requests = 0  # requests sent (cache misses), for tests and benchmarks
         self.bytes_read = 0
 
@@ -300,8 +302,7 @@ class HttpClient:
                             f"{url}: answer to a range request has no valid Content-Range header ({r.headers.get('content-range')!r})"
                         )
                     a, b, total = int(m.group(1)), int(m.group(2)), m.group(3)
-                    if total != "*":
-                        self.sizes[url] = int(total)
+                    self._same_file(url, r.headers, None if total == "*" else int(total))
                     if allow_short and total != "*" and a == start and b == min(start + size, int(total)) - 1:
                         expect = b - a + 1
                     elif a != start or b != start + size - 1:
@@ -309,6 +310,8 @@ class HttpClient:
                         raise InputError(f"{url}: the server answered bytes {a:,}..{b + 1:,} to a request for {what}{end}")
                 elif status != 200:
                     raise InputError(f"{url}: unexpected HTTP {status} {r.reason_phrase}")
+                if status == 200:
+                    self._same_file(url, r.headers, int(length) if length.isdigit() else None)
                 body = bytearray()
                 for part in r.iter_bytes():
                     body += part
@@ -335,11 +338,29 @@ class HttpClient:
         if whole:
             if len(body) != int(length):
                 raise InputError(f"{url}: short read: {len(body):,} of the {int(length):,} bytes of the file")
-            self.sizes[url] = len(body)
         elif expect is not None and len(body) != expect:
             raise InputError(f"{url}: short read: {len(body):,} of the {expect:,} bytes asked for ({what})")
         self.bytes_read += len(body)
         return bytes(body)
+
+
+    def _same_file(self, url: str, headers, size: int | None) -> None:
+        """Note the file's size and version (ETag, else Last-Modified) from its first answer; a
+        later answer with another is a one-line InputError: the ranges read before belong to the
+        old file (a changed COPC decoded to garbage or failed as "cannot decode node")."""
+        version = headers.get("etag") or headers.get("last-modified")
+        known, seen = self.sizes.get(url), self.versions.get(url)
+        change = None
+        if size is not None and known is not None and size != known:
+            change = f"its size went from {known:,} to {size:,} bytes"
+        elif version and seen and version != seen:
+            change = f"{'ETag' if headers.get('etag') else 'Last-Modified'} {seen} became {version}"
+        if change:
+            raise InputError(f"{url}: the file changed on the server while it was read ({change}); open it again")
+        if size is not None:
+            self.sizes[url] = size
+        if version and not seen:
+            self.versions[url] = version
 
 
 class HttpNotFound(InputError):
