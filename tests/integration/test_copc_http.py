@@ -252,6 +252,18 @@ def test_an_ept_folder_url_through_the_cli(data, server, tmp_path):
         gp.open(server.url("nothing"))  # neither: the first error, naming the URL as given
 
 
+def test_a_copc_url_with_a_trailing_slash(server):
+    """``gp.open("http://host/scan.copc.laz/")`` was "…/scan.copc.laz/ept.json: HTTP 404" (a '/'
+    names an EPT folder) while ``gigapoint info`` of the same URL opened the file (typer's Path
+    drops the '/'); the file is now tried too, and the first error kept when it is not there."""
+    for name in ("autzen.copc.laz/", "autzen.copc.laz/?t=1"):
+        c = gp.open(server.url(name))
+        assert isinstance(c, CopcCloud) and c.n_points == 110_000
+        c.close()
+    with pytest.raises(InputError, match=r"/nothing\.copc\.laz/ept\.json: HTTP 404 Not Found for the file$"):
+        gp.open(server.url("nothing.copc.laz/"))
+
+
 def test_a_small_copc_file_answered_whole_with_200(server, tmp_path):
     """A COPC file shorter than the head read (64 KiB): servers may answer a range that covers
     the whole file with 200 and the file, as RFC 9110 allows; that was "the server ignored the

@@ -85,7 +85,19 @@ def open_octree(path) -> OctreeCloud | PointCloud:
             except HttpNotFound:
                 raise exc from None
     if kind == "ept":
-        return open_ept(path)
+        try:
+            return open_ept(path)
+        except HttpNotFound as exc:
+            # '…/scan.copc.laz/': a file's URL with a '/' after it (no ept.json there); the CLI's
+            # Path drops the '/' and opened the file while gp.open said ".../ept.json: HTTP 404"
+            parts = urlsplit(as_url(path) or "")
+            name = parts.path.rstrip("/").rsplit("/", 1)[-1]
+            if not parts.path.endswith("/") or "." not in name:
+                raise
+            try:
+                return open_copc(urlunsplit(parts._replace(path=parts.path.rstrip("/"))))
+            except HttpNotFound:
+                raise exc from None
     d = OctreeDir(path)
     if not d.path.is_dir():
         raise InputError(f"{d.path}: not a directory (an octree is a directory made by `gigapoint convert`)")
