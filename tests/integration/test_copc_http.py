@@ -379,6 +379,39 @@ def test_a_file_changed_on_the_server_while_it_is_read(data, server):
     server.etag = None
 
 
+@pytest.mark.timeout(30)
+def test_a_server_trickling_its_headers_is_given_up_on(quick):
+    """A server that sends a header line every 0.2 s and never ends them: httpx's timeouts are per
+    read, and the deadline was checked only between the body's parts, so this hung forever."""
+    import socket
+
+    listener = socket.create_server(("127.0.0.1", 0))
+    stop = threading.Event()
+
+    def trickle():
+        conn, _ = listener.accept()
+        with conn:
+            conn.recv(65536)
+            conn.sendall(b"HTTP/1.1 206 Partial Content\r\n")
+            while not stop.wait(0.2):
+                try:
+                    conn.sendall(b"X-Slow: 1\r\n")
+                except OSError:
+                    return
+
+    threading.Thread(target=trickle, daemon=True).start()
+    url = f"http://127.0.0.1:{listener.getsockname()[1]}/x.copc.laz"
+    t = time.perf_counter()
+    try:
+        with pytest.raises(InputError) as e:
+            gp.open(url)
+    finally:
+        stop.set()
+        listener.close()
+    assert str(e.value) == f"{url}: bytes 0..65,536 did not arrive within 1.5 s"
+    assert time.perf_counter() - t < 5
+
+
 @pytest.mark.timeout(60)
 def test_missing_files_over_http(server, quick):
     with pytest.raises(InputError, match="HTTP 404") as e:

@@ -268,6 +268,30 @@ class HttpClient:
         raise AssertionError("unreachable")  # pragma: no cover
 
     def _get_once(self, httpx, url, start, size, headers, allow_short, what) -> bytes:
+        """``_request`` in a daemon thread, given up on after the deadline: httpx's timeouts are per
+        read, so a server that sent its headers a line every few seconds was waited on forever
+        (the body's deadline is checked between its parts). A thread given up on ends with the
+        connection; a daemon one does not keep the process from exiting."""
+        out: list = []
+        done = threading.Event()
+
+        def work() -> None:
+            try:
+                out.append(self._request(httpx, url, start, size, headers, allow_short, what))
+            except BaseException as exc:  # noqa: BLE001 - raised in the caller's thread
+                out.append(exc)
+            finally:
+                done.set()
+
+        threading.Thread(target=work, daemon=True, name="gigapoint-http-request").start()
+        limit = DEADLINE_FACTOR * self.timeout
+        if not done.wait(limit + 1.0):  # (the body's own deadline fires first and names its bytes)
+            raise InputError(f"{url}: {what} did not arrive within {limit:g} s")
+        if isinstance(out[0], BaseException):
+            raise out[0]
+        return out[0]
+
+    def _request(self, httpx, url, start, size, headers, allow_short, what) -> bytes:
         deadline = time.monotonic() + DEADLINE_FACTOR * self.timeout
         self.requests += 1
         try:
