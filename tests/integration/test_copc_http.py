@@ -45,6 +45,7 @@ class RangeServer:
         self.ports: set[int] = set()
         self.delay = 0.0  # seconds each answer waits (so that concurrent requests overlap)
         self.etag = None  # sent with each file's bytes when set
+        self.rate = 0  # bytes a second each answer's body is sent at (0: at once)
         self.inflight = self.max_inflight = 0
         self.lock = threading.Lock()
         server = self
@@ -122,7 +123,12 @@ class RangeServer:
                     self.wfile.write(body[: len(body) // 2])
                     self.close_connection = True
                     return
-                self.wfile.write(body)
+                step = max(1, server.rate // 20) if server.rate else len(body) + 1
+                for i in range(0, len(body), step):  # (a slow link)
+                    self.wfile.write(body[i : i + step])
+                    if server.rate:
+                        self.wfile.flush()
+                        time.sleep(0.05)
 
         self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
         self.httpd.daemon_threads = True
@@ -379,8 +385,26 @@ def test_a_file_changed_on_the_server_while_it_is_read(data, server):
     server.etag = None
 
 
+@pytest.mark.timeout(60)
+def test_a_slow_link_is_given_time_by_the_bytes_asked(data, server, quick, monkeypatch):
+    """Each request had 30 s (3 x TIMEOUT) whatever its size, and a frame's requests share the
+    link: a frame of 10 M points (~120 MB) failed under 32 Mbit/s. Here, scaled down: 3 x 0.5 s,
+    nodes of up to 1 MB at 400 KB/s a connection."""
+    server.rate = 400_000
+    monkeypatch.setattr(gphttp, "MIN_RATE", 200_000)  # half the link: 1 MB may take 1.5 + 5 s
+    c = gp.open(server.url("autzen.copc.laz"))
+    assert _frame(c, point_budget=10**9, lod_threshold_px=0.0).stats.points_processed == 110_000
+    c.close()
+    monkeypatch.setattr(gphttp, "MIN_RATE", 10_000_000)  # far faster than the link: a node is cut off
+    c = gp.open(server.url("autzen.copc.laz"))
+    with pytest.raises(InputError, match=r"autzen\.copc\.laz: bytes [\d,]+\.\.[\d,]+ did not arrive within \d\.\d s$"):
+        _frame(c, point_budget=10**9, lod_threshold_px=0.0)
+    c.close()
+    server.rate = 0
+
+
 @pytest.mark.timeout(30)
-def test_a_server_trickling_its_headers_is_given_up_on(quick):
+def test_a_server_trickling_its_headers_is_given_up_on(quick, monkeypatch):
     """A server that sends a header line every 0.2 s and never ends them: httpx's timeouts are per
     read, and the deadline was checked only between the body's parts, so this hung forever."""
     import socket
@@ -400,6 +424,7 @@ def test_a_server_trickling_its_headers_is_given_up_on(quick):
                     return
 
     threading.Thread(target=trickle, daemon=True).start()
+    monkeypatch.setattr(gphttp, "MIN_RATE", 1 << 30)  # the deadline: 3 x 0.5 s, whatever the size
     url = f"http://127.0.0.1:{listener.getsockname()[1]}/x.copc.laz"
     t = time.perf_counter()
     try:

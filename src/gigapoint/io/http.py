@@ -32,9 +32,12 @@ from urllib.parse import urljoin, urlsplit
 from ..errors import InputError
 
 #: Seconds to connect and for each read of a request; a request's whole answer must come
-#: within ``DEADLINE_FACTOR`` times this (a server trickling bytes is cut off too).
+#: within ``DEADLINE_FACTOR`` times this plus its bytes at ``MIN_RATE`` bytes a second (a server
+#: trickling bytes is cut off too; a frame's MBs over an ordinary link are not: its requests
+#: share the link, and a frame of 10 M points, ~120 MB, took longer than 30 s under 32 Mbit/s).
 TIMEOUT = 10.0
 DEADLINE_FACTOR = 3.0
+MIN_RATE = 16 << 10
 #: Requests in flight at once (``read_many``).
 WORKERS = 6
 #: Bytes of ranges kept in memory (least recently used dropped first).
@@ -274,25 +277,30 @@ class HttpClient:
         connection; a daemon one does not keep the process from exiting."""
         out: list = []
         done = threading.Event()
+        t0 = time.monotonic()
+        limit = [self._limit(size)]  # seconds; a whole file's grows once its Content-Length is known
 
         def work() -> None:
             try:
-                out.append(self._request(httpx, url, start, size, headers, allow_short, what))
+                out.append(self._request(httpx, url, start, size, headers, allow_short, what, t0, limit))
             except BaseException as exc:  # noqa: BLE001 - raised in the caller's thread
                 out.append(exc)
             finally:
                 done.set()
 
         threading.Thread(target=work, daemon=True, name="gigapoint-http-request").start()
-        limit = DEADLINE_FACTOR * self.timeout
-        if not done.wait(limit + 1.0):  # (the body's own deadline fires first and names its bytes)
-            raise InputError(f"{url}: {what} did not arrive within {limit:g} s")
+        while not done.wait(max(0.0, t0 + limit[0] + 1.0 - time.monotonic())):  # (the body's own deadline fires first)
+            if time.monotonic() >= t0 + limit[0] + 1.0:
+                raise InputError(f"{url}: {what} did not arrive within {limit[0]:g} s")
         if isinstance(out[0], BaseException):
             raise out[0]
         return out[0]
 
-    def _request(self, httpx, url, start, size, headers, allow_short, what) -> bytes:
-        deadline = time.monotonic() + DEADLINE_FACTOR * self.timeout
+    def _limit(self, size: int | None) -> float:
+        """Seconds a request's whole answer may take (``size`` bytes; None: not known yet)."""
+        return round(DEADLINE_FACTOR * self.timeout + (size or 0) / MIN_RATE, 1)
+
+    def _request(self, httpx, url, start, size, headers, allow_short, what, t0, limit) -> bytes:
         self.requests += 1
         try:
             with self.client.stream("GET", url, headers=headers) as r:
@@ -336,6 +344,8 @@ class HttpClient:
                     raise InputError(f"{url}: unexpected HTTP {status} {r.reason_phrase}")
                 if status == 200:
                     self._same_file(url, r.headers, int(length) if length.isdigit() else None)
+                    if start is None and length.isdigit():
+                        limit[0] = self._limit(int(length))
                 body = bytearray()
                 for part in r.iter_bytes():
                     body += part
@@ -343,8 +353,8 @@ class HttpClient:
                         raise InputError(ignored)
                     if expect is not None and len(body) > expect:
                         raise InputError(f"{url}: the server sent more than the {expect:,} bytes asked for ({what})")
-                    if time.monotonic() > deadline:
-                        raise InputError(f"{url}: {what} did not arrive within {DEADLINE_FACTOR * self.timeout:g} s")
+                    if time.monotonic() > t0 + limit[0]:
+                        raise InputError(f"{url}: {what} did not arrive within {limit[0]:g} s")
         except InputError:
             raise
         except _Transient:
