@@ -377,7 +377,6 @@ class HttpClient:
         self.bytes_read += len(body)
         return bytes(body)
 
-
     def _same_file(self, url: str, headers, size: int | None) -> None:
         """Note the file's size and version (ETag, else Last-Modified) from its first answer; a
         later answer with another is a one-line InputError: the ranges read before belong to the
