@@ -434,6 +434,23 @@ def test_twenty_clients_at_once(live):
     assert not live.core.sessions
 
 
+def test_websocket_origin_must_match_host_and_port(live):
+    """Cross-site WebSocket hijacking from a page served on another port of the same host
+    (any local dev server): its Origin names the host but not the port, and was let in."""
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    port = live.port
+    for origin in [f"http://127.0.0.1:{port + 1}", "http://127.0.0.1", f"http://localhost:{port}",
+                   f"http://127.0.0.1:{port}x", "null"]:  # fmt: skip
+        with pytest.raises(InvalidStatus) as exc, connect(ws_url(live, 32, 32), origin=origin, open_timeout=10):
+            pass
+        assert exc.value.response.status_code == 403, origin
+    for origin in [f"http://127.0.0.1:{port}", None]:  # the page itself; a client that is no browser sends none
+        with connect(ws_url(live, 32, 32), origin=origin, open_timeout=10) as ws:
+            assert json.loads(ws.recv(timeout=10))["type"] == "hello"
+
+
 def test_disconnect_mid_frame_never_wedges(live):
     from websockets.sync.client import connect
 

@@ -4,7 +4,7 @@ Routes: ``/`` the page, ``/static/<name>`` a fixed whitelist of assets held in m
 client path ever reaches the file system), ``/ws`` the tab's WebSocket, ``/screenshot`` a
 PNG rendered server-side, ``/api/info`` the cloud and settings schema. With a token (always
 on a non-loopback bind) every route needs ``?token=...``; on a loopback bind the Host header
-must name the loopback (no DNS rebinding) and a WebSocket's Origin must match its Host.
+must name the loopback (no DNS rebinding) and a WebSocket's Origin must match its Host, port included.
 """
 
 from __future__ import annotations
@@ -81,6 +81,17 @@ def _host_name(value: str) -> str:
         return ""
 
 
+def _same_origin(origin: str, host: str) -> bool:
+    """Whether a WebSocket's Origin is the server's own, port included (a page served from
+    another port of the same host is another origin: comparing host names let it in)."""
+    try:
+        o, h = urlsplit(origin), urlsplit("//" + host)
+        default = {"http": 80, "https": 443}.get(o.scheme)  # (a Host header without a port: the scheme's default)
+        return bool(o.hostname) and o.hostname == h.hostname and (o.port or default) == (h.port or default)
+    except ValueError:  # a port that is not a number
+        return False
+
+
 def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
     """The Starlette app serving ``core``; ``allowed_hosts`` None accepts any Host header."""
     _require_starlette()
@@ -150,7 +161,7 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
 
     async def ws_endpoint(websocket):
         origin = websocket.headers.get("origin")
-        if not authorized(websocket) or (origin and _host_name(urlsplit(origin).netloc) != _host_name(websocket.headers.get("host", ""))):
+        if not authorized(websocket) or (origin and not _same_origin(origin, websocket.headers.get("host", ""))):
             await websocket.close(code=1008)
             return
         await websocket.accept()
