@@ -451,6 +451,23 @@ def test_websocket_origin_must_match_host_and_port(live):
             assert json.loads(ws.recv(timeout=10))["type"] == "hello"
 
 
+def test_other_sites_pages_cannot_make_the_server_render(live):
+    """On loopback any page the user visits could ask for /screenshot (an <img>: 8192x4882
+    pixels rendered for seconds under the lock the tabs need); browsers say where from."""
+    import httpx
+
+    base = f"http://127.0.0.1:{live.port}"
+    for site in ["cross-site", "same-site"]:  # same-site: another port of 127.0.0.1
+        for path in ["/screenshot?width=64&height=48", "/api/info"]:
+            r = httpx.get(base + path, headers={"Sec-Fetch-Site": site}, timeout=30)
+            assert (r.status_code, r.text) == (403, "forbidden: a request from another site's page"), (site, path)
+    for headers in [{"Sec-Fetch-Site": "same-origin"}, {"Sec-Fetch-Site": "none"}, {}]:  # the viewer's download link; a typed URL; curl
+        r = httpx.get(base + "/screenshot?width=64&height=48", headers=headers, timeout=30)
+        assert r.status_code == 200 and Image.open(io.BytesIO(r.content)).size == (64, 48)
+        assert httpx.get(base + "/api/info", headers=headers, timeout=30).json()["cloud"]["name"] == "marker"
+    assert httpx.get(base + "/", headers={"Sec-Fetch-Site": "cross-site"}, timeout=30).status_code == 200  # Jupyter's iframe
+
+
 def test_disconnect_mid_frame_never_wedges(live):
     from websockets.sync.client import connect
 

@@ -5,6 +5,7 @@ client path ever reaches the file system), ``/ws`` the tab's WebSocket, ``/scree
 PNG rendered server-side, ``/api/info`` the cloud and settings schema. With a token (always
 on a non-loopback bind) every route needs ``?token=...``; on a loopback bind the Host header
 must name the loopback (no DNS rebinding) and a WebSocket's Origin must match its Host, port included.
+``/screenshot`` and ``/api/info`` refuse what another site's page asks for (Sec-Fetch-Site).
 """
 
 from __future__ import annotations
@@ -116,6 +117,11 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
     def denied():
         return PlainTextResponse("forbidden: wrong or missing token", status_code=403)
 
+    def cross_site(request) -> bool:
+        # another site's page (an <img> of /screenshot at 8192 px) made the server render for
+        # seconds each, holding the render lock the tabs need; the viewer's own page is same-origin
+        return request.headers.get("sec-fetch-site", "same-origin") not in ("same-origin", "none")
+
     headers = {"Cache-Control": "no-store", "X-Content-Type-Options": "nosniff", "Referrer-Policy": "no-referrer"}
 
     async def page(request):
@@ -134,11 +140,15 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
     async def info(request):
         if not authorized(request):
             return denied()
+        if cross_site(request):
+            return PlainTextResponse("forbidden: a request from another site's page", status_code=403)
         return JSONResponse(P.json_safe({"cloud": core.cloud_info(), "schema": P.settings_schema(type(core.settings))}), headers=headers)
 
     async def screenshot(request):
         if not authorized(request):
             return denied()
+        if cross_site(request):
+            return PlainTextResponse("forbidden: a request from another site's page", status_code=403)
         q = request.query_params
         try:
             args = {k: q.get(k) for k in ("width", "height", "scale")}
