@@ -468,6 +468,18 @@ def test_other_sites_pages_cannot_make_the_server_render(live):
     assert httpx.get(base + "/", headers={"Sec-Fetch-Site": "cross-site"}, timeout=30).status_code == 200  # Jupyter's iframe
 
 
+def test_a_server_on_another_loopback_address_answers_its_own_url(cloud):
+    import httpx
+
+    srv = ViewerServer(cloud, host="127.0.0.2").start()
+    try:
+        assert srv.token is None and srv.url.startswith("http://127.0.0.2:")
+        assert httpx.get(srv.url, timeout=30).status_code == 200  # was 403: its Host was not a loopback name
+        assert httpx.get(srv.url, headers={"Host": "evil.example.com"}, timeout=30).status_code == 403
+    finally:
+        srv.close()
+
+
 def test_disconnect_mid_frame_never_wedges(live):
     from websockets.sync.client import connect
 

@@ -326,7 +326,8 @@ class ViewerServer:
         self.loopback = is_loopback(host)
         self.token = token if token is not None else (None if self.loopback else secrets.token_urlsafe(18))
         self.core = ViewerCore(cloud, settings)
-        allowed = LOOPBACK_HOSTS if self.loopback and self.token is None else None
+        # the address bound is allowed too: --host 127.0.0.2 answered its own URL with 403
+        allowed = LOOPBACK_HOSTS | {host.strip("[]").lower()} if self.loopback and self.token is None else None
         self.app = create_app(self.core, self.token, allowed)
         try:
             family, kind, proto, _, addr = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
