@@ -118,6 +118,8 @@ def test_frames_culled_outside_the_view_and_dropped_frames_not_drawn():
         ((np.zeros((4, 3)),), {"intensity": np.zeros(3)}, "attribute 'intensity'"),
         ((np.zeros((4, 3)),), {"nx": np.zeros(4)}, "reserved"),
         ((np.zeros((4, 3)),), {"normals": np.zeros((4, 2))}, "normals must be"),
+        # the dtype was left out: "must be (N, 3) numbers like xyz (4, 3), got shape (4, 3)" named no problem
+        ((np.zeros((4, 3)),), {"normals": np.zeros((4, 3), np.uint8)}, "live: push: normals must be (4, 3) floats or signed integers, got shape (4, 3) dtype uint8"),
         ((np.zeros((4, 3)),), {"time": float("nan")}, "time must be"),
         ((np.zeros((4, 3)),), {"time": "a"}, "live: push: time must be a finite number of seconds, got 'a'"),  # float()'s ValueError
         ((np.zeros((2, 3)),), {"a": [[1], [2, 3]]}, "live: push: attribute 'a' must be an array of numbers, got a ragged list"),  # numpy's ValueError

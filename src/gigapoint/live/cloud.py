@@ -411,7 +411,7 @@ class LiveCloud:
         if normals is not None:
             nrm = _array(normals, f"{name}: push: normals")
             if nrm.shape != (n, 3) or nrm.dtype.kind not in "if":
-                raise InputError(f"{name}: push: normals must be (N, 3) numbers like xyz ({n}, 3), got shape {nrm.shape}")
+                raise InputError(f"{name}: push: normals must be ({n}, 3) floats or signed integers, got shape {nrm.shape} dtype {nrm.dtype}")
             with np.errstate(invalid="ignore"):  # (inf times 0)
                 world_normals = (nrm.astype(np.float64) @ p[:3, :3].T).astype(np.float32)
             # a NaN or inf normal is an unknown one: 0 (as the module doc says); lighting and
