@@ -243,3 +243,41 @@ def test_odd_push_headers_are_one_line_input_errors_counted_on_the_hud(live_core
         assert json.loads(ws.receive_text())["type"] == "ack"
     assert live.stats.frames_rejected == len(ODD_HEADERS)
     assert not [r for r in caplog.records if r.exc_info]
+
+
+def test_producers_past_the_limit_are_refused_with_a_message():
+    """/push had no limit: 300 producers each holding a 64 MB frame ask for 19 GB (/ws has one)."""
+    from websockets.exceptions import ConnectionClosed
+    from websockets.sync.client import connect
+
+    from gigapoint.viewer.server import ViewerServer
+
+    live = LiveCloud(keep=2, bounds=((-12, -12, -2), (12, 12, 2)))
+    srv = ViewerServer(live).start()
+    url = srv.push_url
+    try:
+        producers = [connect(url, open_timeout=10) for _ in range(8)]  # MAX_PUSHERS
+        with connect(url, open_timeout=10) as extra:
+            assert json.loads(extra.recv(timeout=10)) == {"type": "error", "message": "push: too many producers connected (limit 8)"}
+            with pytest.raises(ConnectionClosed):
+                extra.recv(timeout=10)
+            assert extra.close_code == 1013
+        producers[0].send(encode_frame("points", xyz=patch(1)[0]))
+        assert json.loads(producers[0].recv(timeout=10)) == {"type": "ack", "seq": 0}
+        producers.pop().close()  # one leaves: a new one gets in
+        deadline = time.monotonic() + 10
+        while True:  # (the server may not have seen the close yet)
+            try:
+                with connect(url, open_timeout=10) as again:
+                    again.send(encode_frame("points", xyz=patch(2)[0]))
+                    reply = json.loads(again.recv(timeout=10))
+            except ConnectionClosed:
+                reply = {"type": "closed"}
+            if reply["type"] == "ack" or time.monotonic() > deadline:
+                break
+            time.sleep(0.05)
+        assert reply == {"type": "ack", "seq": 1}
+        for p in producers:
+            p.close()
+    finally:
+        srv.close()

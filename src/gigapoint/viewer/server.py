@@ -36,6 +36,7 @@ STATIC_TYPES = {
     "viewer.css": "text/css; charset=utf-8",
     "favicon.svg": "image/svg+xml",
 }
+MAX_PUSHERS = 8  # /push connections at once: each may hold a frame of up to MAX_PUSH_BYTES (300 of them: 19 GB)
 LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
 CSP = (
     "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' blob: data:; "
@@ -106,6 +107,7 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
     query = f"?token={quote(token)}" if token else ""
     index = static.pop("index.html").replace(b"{{QUERY}}", query.encode())
     allowed = None if allowed_hosts is None else {h.lower() for h in allowed_hosts}
+    pushers = set()  # the open /push connections (touched on the event loop only)
 
     def authorized(conn) -> bool:
         if allowed is not None and _host_name(conn.headers.get("host", "")) not in allowed:
@@ -266,6 +268,11 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
             await websocket.close(code=1008)  # unknown token: refused before anything is read
             return
         await websocket.accept()
+        if len(pushers) >= MAX_PUSHERS:  # refused as /ws refuses a tab past its limit
+            await websocket.send_text(json.dumps({"type": "error", "message": f"push: too many producers connected (limit {MAX_PUSHERS})"}))
+            await websocket.close(code=1013)
+            return
+        pushers.add(websocket)
         try:
             while True:
                 message = await websocket.receive()
@@ -289,6 +296,8 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
                 await websocket.send_text(json.dumps(reply))
         except (WebSocketDisconnect, RuntimeError, OSError, asyncio.CancelledError):
             pass  # a producer gone mid-frame: nothing of its frame was pushed (frames are pushed whole)
+        finally:
+            pushers.discard(websocket)
 
     routes = [
         Route("/", page),
