@@ -109,15 +109,20 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
     allowed = None if allowed_hosts is None else {h.lower() for h in allowed_hosts}
     pushers = set()  # the open /push connections (touched on the event loop only)
 
-    def authorized(conn) -> bool:
+    def refusal(conn) -> str | None:
+        """Why ``conn`` is refused (a loopback server without a token was refused for its Host
+        with 'wrong or missing token'), or None."""
         if allowed is not None and _host_name(conn.headers.get("host", "")) not in allowed:
-            return False
-        if token is None:
-            return True
-        return hmac.compare_digest(conn.query_params.get("token", "").encode(), token.encode())
+            return "forbidden: the Host header must name this machine's loopback address (127.0.0.1, localhost)"
+        if token is not None and not hmac.compare_digest(conn.query_params.get("token", "").encode(), token.encode()):
+            return "forbidden: wrong or missing token"
+        return None
 
-    def denied():
-        return PlainTextResponse("forbidden: wrong or missing token", status_code=403)
+    def authorized(conn) -> bool:
+        return refusal(conn) is None
+
+    def denied(request):
+        return PlainTextResponse(refusal(request), status_code=403)
 
     def cross_site(request) -> bool:
         # another site's page (an <img> of /screenshot at 8192 px) made the server render for
@@ -128,12 +133,12 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
 
     async def page(request):
         if not authorized(request):
-            return denied()
+            return denied(request)
         return Response(index, media_type="text/html; charset=utf-8", headers={**headers, "Content-Security-Policy": CSP})
 
     async def asset(request):
         if not authorized(request):
-            return denied()
+            return denied(request)
         name = request.path_params["name"]
         if name not in STATIC_TYPES:  # a fixed whitelist: nothing from the client reaches the file system
             return PlainTextResponse("not found", status_code=404)
@@ -141,14 +146,14 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
 
     async def info(request):
         if not authorized(request):
-            return denied()
+            return denied(request)
         if cross_site(request):
             return PlainTextResponse("forbidden: a request from another site's page", status_code=403)
         return JSONResponse(P.json_safe({"cloud": core.cloud_info(), "schema": P.settings_schema(type(core.settings))}), headers=headers)
 
     async def screenshot(request):
         if not authorized(request):
-            return denied()
+            return denied(request)
         if cross_site(request):
             return PlainTextResponse("forbidden: a request from another site's page", status_code=403)
         q = request.query_params
