@@ -331,6 +331,46 @@ def test_ctrl_c_exits_130_with_a_message(tmp_path):
     assert p.returncode == 130 and err.strip().splitlines()[-1] == "interrupted", (p.returncode, err)
 
 
+def test_sigterm_exits_143_and_removes_the_half_written_file(tmp_path):
+    """SIGTERM (kill, a batch system's stop) unwinds as Ctrl+C does: the temporary file of the
+    output being written goes (a killed turntable left a playable half video beside OUT)."""
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "out" / "video.mp4"
+    out.parent.mkdir()
+    code = (
+        "import sys, time, gigapoint.cli as c\n"
+        "from gigapoint.atomic import atomic_write\n"
+        "@c.app.command('slow-write-test')\n"
+        "def slow():\n"
+        "    atomic_write(sys.argv[1], lambda tmp: (tmp.write_bytes(b'half'), print('ready', flush=True), time.sleep(30)))\n"
+        "raise SystemExit(c.main(['slow-write-test']))\n"
+    )
+    p = subprocess.Popen([sys.executable, "-c", code, str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "ready"
+    assert len(list(out.parent.iterdir())) == 1  # the temporary file, half written
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=20)
+    assert (p.returncode, err.strip().splitlines()[-1:]) == (143, ["terminated"]), (p.returncode, err)
+    assert list(out.parent.iterdir()) == []
+
+
+def test_main_gives_back_the_callers_sigterm_handler():
+    import signal
+
+    from gigapoint.cli import main
+
+    mine = signal.signal(signal.SIGTERM, lambda *a: None)
+    try:
+        handler = signal.getsignal(signal.SIGTERM)
+        assert main(["--help"]) == 0
+        assert signal.getsignal(signal.SIGTERM) is handler
+    finally:
+        signal.signal(signal.SIGTERM, mine)
+
+
 # --- --colors and --chunked: how the files' points are held (cli/cloud_opts.py) -------------------
 def color_bytes(err: str) -> float:
     line = next(x for x in err.splitlines() if x.startswith("memory:"))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import atexit
 import os
+import signal
 import sys
 import threading
 import warnings
@@ -20,6 +21,16 @@ __all__ = ["app", "exit_without_teardown", "main", "run"]
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
     print(f"warning: {message}", file=sys.stderr)
+
+
+class _Terminated(SystemExit):
+    """SIGTERM (``kill``, a batch system's stop) raised as an exception: it unwinds as Ctrl+C
+    does, so an atomic write removes its temporary file (a killed ``render -o x.mp4`` left a
+    playable half video, hidden beside it) and a conversion's lock and state are left clean."""
+
+
+def _terminate(signum, frame):
+    raise _Terminated(128 + signum)
 
 
 def _compile_watch():
@@ -38,6 +49,8 @@ def main(argv: list[str] | None = None) -> int:
 
     warnings.showwarning = _show_warning
     warnings.simplefilter("default", GigapointWarning)
+    main_thread = threading.current_thread() is threading.main_thread()  # (the only one that may set a handler)
+    before = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     try:
         with _compile_watch():  # a spinner while numba compiles kernels (first run after an install)
             rv = app(args=argv, standalone_mode=False)
@@ -54,6 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except _Terminated as exc:
+        print("terminated", file=sys.stderr)
+        return exc.code
     except MemoryError:
         print("error: out of memory", file=sys.stderr)
         return 1
@@ -73,6 +89,9 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"internal error: {type(exc).__name__}: {exc} (set GIGAPOINT_DEBUG=1 for the traceback)", file=sys.stderr)
         return 2
+    finally:
+        if main_thread:  # (main() called from Python, a test: its own handler back)
+            signal.signal(signal.SIGTERM, signal.SIG_DFL if before is None else before)
     return 0
 
 
