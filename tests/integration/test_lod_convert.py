@@ -244,6 +244,28 @@ def test_a_full_disk_stops_a_conversion_in_one_line_and_it_resumes(demo_las, tmp
     _assert_same(_snapshot(out), _snapshot(tmp_path / "whole"))
 
 
+
+def test_a_cloud_conversion_stopped_by_a_full_disk_leaves_no_work_behind(tmp_path, monkeypatch):
+    """A conversion of chunks from Python (a cloud, a progressive octree's or a live cloud's
+    save) cannot resume: stopped by a full disk, its folder was left (holding the disk) as an
+    "unfinished conversion" that `gigapoint info` said to resume, and the error said "it
+    resumes". Its work goes; a folder that was there before stays."""
+    import errno
+
+    import gigapoint as gp
+
+    def full(done):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(hooks, "after_partition_built", full)
+    cloud = gp.demo(5_000, colors="rgba")
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    for out in (tmp_path / "new", mine):
+        with pytest.raises(ConvertError, match=rf"^{out}: No space left on device; the conversion to {out} stopped unfinished \(its work was removed: run it again once the cause is gone\)$"):
+            convert(cloud, out, max_leaf=1_000)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine"] and list(mine.iterdir()) == []
+
 @pytest.fixture
 def small_disk(tmp_path):
     """mount(size_kb) -> a tmpfs of that size (remounted at each call), unmounted at the end;

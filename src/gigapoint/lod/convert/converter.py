@@ -66,9 +66,15 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
         self.t0 = time.perf_counter()
         fp = self.fingerprint_key()
         created = not self.dir.path.exists()
+        self.prepared = False  # the output folder is this run's (prepare_output passed)
         try:
             with self.dir.lock():
-                return self._run_locked(overwrite, fp)
+                try:
+                    return self._run_locked(overwrite, fp)
+                except Exception:  # (an interrupt leaves its preview to look at, as a kill does)
+                    if fp is None and self.prepared:  # chunks from Python (a cloud's save): no rerun resumes them, so their work goes
+                        self.discard(created)
+                    raise
         except InputError:
             # inputs that gave not one point (none valid, or corrupt from the start): the folder this
             # run made holds nothing a run could resume from, so it goes rather than being left
@@ -81,20 +87,26 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
                 shutil.rmtree(self.dir.path, ignore_errors=True)
                 raise ConvertError(f"{exc.filename or self.dir.path}: {exc.strerror or exc}") from exc
             gone = exc.errno == errno.ENOENT and exc.filename and self.dir.partial in Path(exc.filename).parents
-            if gone and getattr(self, "state", None):  # a work file missing: it will be missing next time too
+            if gone and fp is not None and getattr(self, "state", None):  # a work file missing: it will be missing next time too
                 damage = f"{exc.filename}: a work file of the unfinished conversion is missing"
                 with contextlib.suppress(OSError):
                     self.save_state_with(damaged=damage)
                 raise ConvertError(f"{damage}; run it again with --overwrite to start over") from exc
-            raise ConvertError(
-                f"{exc.filename or self.dir.path}: {exc.strerror or exc}; the conversion to {self.out} stopped unfinished "
-                f"(run it again once the cause is gone: it resumes)"
-            ) from exc
+            again = "run it again once the cause is gone: it resumes" if fp is not None else "its work was removed: run it again once the cause is gone"
+            raise ConvertError(f"{exc.filename or self.dir.path}: {exc.strerror or exc}; the conversion to {self.out} stopped unfinished ({again})") from exc
         finally:
             self.progress.close()
 
+    def discard(self, created: bool) -> None:
+        """Remove what this run wrote: the folder where it made it, else only the conversion's own files."""
+        if created:
+            shutil.rmtree(self.dir.path, ignore_errors=True)
+        else:
+            self.dir.clear()
+
     def _run_locked(self, overwrite: bool, fp) -> ConvertResult:
         saved = self.dir.prepare_output(fp, overwrite)
+        self.prepared = True
         damage = (saved.get("damaged") or damaged_work_file(self.dir)) if saved is not None else None
         if damage and not overwrite:
             raise ConvertError(f"{damage}; run it again with --overwrite to start over")
