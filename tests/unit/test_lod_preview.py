@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import re
 import time
 import warnings
 
@@ -206,6 +207,19 @@ def test_unfinished_conversion_without_a_preview_is_a_clear_error(tmp_path):
     assert main(["render", str(out), "-o", str(tmp_path / "x.png")]) == 1
     assert not (tmp_path / "x.png").exists()
 
+
+def test_a_stopped_conversion_of_chunks_says_it_cannot_resume(tmp_path, monkeypatch, capsys):
+    """Chunks given from Python leave no state a rerun could resume from: `info` and `gp.open`
+    said "run `gigapoint convert` again to resume it" of a cloud's interrupted save."""
+    out = tmp_path / "half"
+    _interrupt_after(monkeypatch, 1)
+    with pytest.raises(KeyboardInterrupt):
+        convert(gp.demo(20_000, colors="rgba"), out, max_leaf=1_000, partition_points=5_000)
+    hint = "its points were given from Python (a cloud's save), so it cannot resume: save the cloud again"
+    assert main(["info", str(out)]) == 0
+    assert f"stopped: {hint}" in capsys.readouterr().out
+    with pytest.warns(GigapointWarning, match=re.escape(f"it has stopped: {hint}")):
+        gp.open(out)
 
 def test_info_describes_octrees_and_unfinished_conversions(las_file, tmp_path, monkeypatch, capsys):
     path, _ = las_file

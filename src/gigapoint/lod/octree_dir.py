@@ -63,6 +63,7 @@ PARTIAL = ".partial"
 STATE = "state.json"
 PREVIEW = "preview.npz"
 RESUME_HINT = "run `gigapoint convert` again to resume it"  # what a stopped conversion needs
+NO_RESUME_HINT = "its points were given from Python (a cloud's save), so it cannot resume: save the cloud again"  # what a stopped one of chunks needs
 
 # what --overwrite clears besides .partial, attr.*.npy and temporary files (never anything else)
 _OWN_FILES = (GIGAPOINT_META, POTREE_META, POTREE_HIERARCHY, POTREE_OCTREE, "nodes.npy", "keys.npy", *(f"{a}.npy" for a in POINT_ARRAYS + COMPACT_ARRAYS[1:]))
@@ -261,6 +262,13 @@ class OctreeDir:
             "attributes": sorted(st.get("attributes") or {}),
             "running": self.running,
         }
+
+    @property
+    def resume_hint(self) -> str:
+        """What the stopped conversion here needs: run again (file inputs: it resumes), or, its
+        chunks given from Python (a state without a fingerprint: nothing to resume from), a new save."""
+        st = self.read_state() or {}
+        return NO_RESUME_HINT if "fingerprint" in st and st["fingerprint"] is None else RESUME_HINT
 
     # ------------------------------------------------------------------ lock
 

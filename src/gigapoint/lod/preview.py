@@ -22,7 +22,7 @@ from ..atomic import atomic_open
 from ..core.cloud import PointCloud
 from ..errors import GigapointWarning, InputError
 from ..io import open_cloud
-from .octree_dir import RESUME_HINT, OctreeDir
+from .octree_dir import OctreeDir
 
 PREVIEW_BYTES_PER_POINT = 48  # xyz, rgba and a few attributes, held twice while a file is written
 MAX_PREVIEW_POINTS = 2_000_000  # renders brute force in a few ms: enough to look at, cheap to write
@@ -129,12 +129,12 @@ def open_preview(octree_dir) -> ConversionPreview:
     d = OctreeDir(octree_dir)
     out = d.path
     if not d.preview.is_file():
-        raise InputError(f"{out}: conversion not finished and no preview written yet ({RESUME_HINT})")
+        raise InputError(f"{out}: conversion not finished and no preview written yet ({d.resume_hint})")
     s = d.status()
     read = f"{s['points']:,} of {s['total']:,} points read" if s.get("total") else f"{s.get('points', 0):,} points read"
     if s.get("phase") not in (None, "read"):
         read = f"all {s['points']:,} points read, now in phase {s['phase']}"
-    stopped = f"; it has stopped: {RESUME_HINT}" if s.get("running") is False else ""
+    stopped = f"; it has stopped: {d.resume_hint}" if s.get("running") is False else ""
     warnings.warn(f"{out}: conversion not finished ({read}); showing its preview{stopped}", GigapointWarning, stacklevel=3)
     cloud = open_cloud(d.preview, name=out.name)
     return ConversionPreview(**{f.name: getattr(cloud, f.name) for f in fields(PointCloud) if f.init}, octree_dir=d)

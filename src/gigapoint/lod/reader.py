@@ -16,7 +16,7 @@ from ..io.http import HttpNotFound, as_url
 from .compact_octree import read_compact
 from .copc import is_copc_file, open_copc
 from .ept import ept_location, open_ept
-from .octree_dir import FORMAT_VERSION, RESUME_HINT, OctreeDir
+from .octree_dir import FORMAT_VERSION, OctreeDir
 from .potree import read_potree
 from .preview import open_preview
 from .store import OctreeCloud, read_gigapoint, read_meta
@@ -131,7 +131,7 @@ def octree_info(path) -> dict:
             "attributes": s.get("attributes", []),
             "conversion": s,
             "file_size": size,
-            "details": _conversion_details(s),
+            "details": _conversion_details(s, d.resume_hint),
         }
     cloud = open_octree(p)
     lo, hi = cloud.bounds
@@ -224,11 +224,11 @@ def _voxel_info(path) -> dict:
         cloud.close()
 
 
-def _conversion_details(s: dict) -> dict:
+def _conversion_details(s: dict, hint: str) -> dict:
     total = f" of {s['total']:,}" if s.get("total") else ""
     lines = {
         "conversion": f"phase {s.get('phase') or '?'}, {s.get('points', 0):,}{total} points read, preview of {s.get('preview_points', 0):,} points"
     }
     if s.get("running") is not None:
-        lines["state"] = "a conversion is writing into it" if s["running"] else f"stopped: {RESUME_HINT}"
+        lines["state"] = "a conversion is writing into it" if s["running"] else f"stopped: {hint}"
     return lines

@@ -16,7 +16,7 @@ import warnings
 from typing import Self
 
 from ..errors import GigapointError, GigapointWarning
-from ..lod.octree_dir import RESUME_HINT, OctreeDir
+from ..lod.octree_dir import OctreeDir
 
 
 def preview_note(folder: OctreeDir) -> str:
@@ -24,7 +24,7 @@ def preview_note(folder: OctreeDir) -> str:
     s = folder.status()
     if not s:
         return "preview of an unfinished conversion"
-    stopped = f"; conversion stopped ({RESUME_HINT})" if s.get("running") is False else ""
+    stopped = f"; conversion stopped ({folder.resume_hint})" if s.get("running") is False else ""
     if s.get("phase") in (None, "read"):
         of = f" of {s['total']:,}" if s.get("total") else ""
         return f"preview: {s.get('points', 0):,}{of} points read, {s.get('preview_points', 0):,} shown{stopped}"
