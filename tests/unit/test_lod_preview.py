@@ -220,6 +220,11 @@ def test_a_stopped_conversion_of_chunks_says_it_cannot_resume(tmp_path, monkeypa
     assert f"stopped: {hint}" in capsys.readouterr().out
     with pytest.warns(GigapointWarning, match=re.escape(f"it has stopped: {hint}")):
         gp.open(out)
+    copc = tmp_path / "half.copc.laz"  # its work folder, named by info
+    with pytest.raises(KeyboardInterrupt):
+        convert(gp.demo(20_000, colors="rgba"), copc, max_leaf=1_000, partition_points=5_000)
+    assert main(["info", str(copc)]) == 1
+    assert capsys.readouterr().err.strip().endswith(f"(its work folder {copc}.work is there); {hint}")
 
 def test_info_describes_octrees_and_unfinished_conversions(las_file, tmp_path, monkeypatch, capsys):
     path, _ = las_file

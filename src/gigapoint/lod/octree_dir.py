@@ -264,11 +264,16 @@ class OctreeDir:
         }
 
     @property
-    def resume_hint(self) -> str:
-        """What the stopped conversion here needs: run again (file inputs: it resumes), or, its
-        chunks given from Python (a state without a fingerprint: nothing to resume from), a new save."""
+    def resumable(self) -> bool:
+        """False where the stopped conversion here was of chunks given from Python (a cloud's
+        save: its state has no fingerprint), which no run resumes."""
         st = self.read_state() or {}
-        return NO_RESUME_HINT if "fingerprint" in st and st["fingerprint"] is None else RESUME_HINT
+        return not ("fingerprint" in st and st["fingerprint"] is None)
+
+    @property
+    def resume_hint(self) -> str:
+        """What the stopped conversion here needs: run again (it resumes), or a new save."""
+        return RESUME_HINT if self.resumable else NO_RESUME_HINT
 
     # ------------------------------------------------------------------ lock
 
