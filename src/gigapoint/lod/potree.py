@@ -47,6 +47,7 @@ WRITE_ATTRIBUTES = (("position", "int32", 3), ("intensity", "uint16", 1), ("clas
 #: gigapoint's attribute names as PotreeConverter writes them (the reader maps them back)
 POTREE_NAMES = {"return_number": "return number", "number_of_returns": "number of returns", "point_source_id": "point source id",
                 "gps_time": "gps-time", "scan_angle_rank": "scan angle rank", "user_data": "user data", "scan_angle": "scan angle"}  # fmt: skip
+_FROM_POTREE = {v: k for k, v in POTREE_NAMES.items()}
 _TYPE_OF = {np.dtype(t): name for name, t in _TYPES.items()}
 
 
@@ -672,7 +673,7 @@ def _gigapoint_name(name: str) -> str | None:
     """A Potree attribute's name in gigapoint: a LAS field's as the LAS reader names it ('gps-time':
     gps_time), any other (extra bytes) kept, as the LAS reader keeps it ('height above ground'
     was 'height_above_ground' from PotreeConverter's output, and from our own); None: unusable."""
-    return {v: k for k, v in POTREE_NAMES.items()}.get(name) or safe_attribute_name(name)
+    return _FROM_POTREE.get(name) or safe_attribute_name(name)
 
 
 def _position_range(name: str, attributes: list[dict], bmin: np.ndarray, bmax: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:

@@ -76,7 +76,6 @@ from .read import (
     ReadPhase,
     _read_chunks,
     _skipped_if_empty,
-    chunk_constants,
     merge_attributes,
     merge_constants,
     skipped_message,
@@ -348,8 +347,8 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
     for j, chunk in enumerate(chunks):
         if j >= CHUNK_STRIDE:
             raise ConvertError(f"{path}: more than {CHUNK_STRIDE:,} chunks in one read task")
-        xyz, rgba, kept, names, invalid, c_lo, c_hi = spill_chunk(raw, t * CHUNK_STRIDE + j, chunk, xyz_code)
-        merge_constants(constant, chunk_constants(kept))
+        (xyz, rgba, _, names, invalid, c_lo, c_hi), found = spill_chunk(raw, t * CHUNK_STRIDE + j, chunk, xyz_code)
+        merge_constants(constant, found)
         pick = slice((-points) % stride, None, stride)
         sample.append({"xyz": np.array(xyz[pick]), "rgba": np.array(rgba[pick])})
         eight |= scaler is not None and scaler.mode == "8"

@@ -19,7 +19,7 @@ import numpy as np
 
 from .options import BYTES_PER_POINT_BUILD
 from .partition import CellCounts, PartitionPhases, built_name, grid_cells, partition_lut
-from .read import ReadPhase, constant_value, valid_chunk
+from .read import ReadPhase, chunk_constants, constant_value, valid_chunk
 from .spill import decode_xyz, encode_xyz, las_xyz_code, save_raw_chunk
 
 # what a held point costs at the peak (the read's end): its position (int32 for a LAS file's), RGBA,
@@ -102,7 +102,7 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
                     held["xyz"] = decode_xyz(held["xyz"], self._xyz_code)
                 self._xyz_code, held_xyz = None, xyz
         held = {"xyz": held_xyz, "rgba": rgba}
-        was = self._note_constants(kept)
+        was = self._note_constants(chunk_constants(kept))
         now = self.state["constant"]
         for a, v in kept.items():
             if now.get(a, 0) is None or not len(v):  # it varies (constant so far: its value alone is held)

@@ -97,15 +97,18 @@ def spill_chunk(raw, i: int, chunk, xyz_code=None) -> tuple:
     """Chunk ``i``'s valid points (``valid_chunk``'s results) spilled to ``raw``
     (spill.save_raw_chunk): its positions, colors and 1-D attributes; positions as int32 when
     ``xyz_code`` (a LAS file's scale and offset, spill.encode_xyz) gives every one of them back
-    exactly."""
+    exactly; an attribute of one value as that value alone. Returns (``valid_chunk``'s results,
+    the chunk's ``chunk_constants``: found once, for the spill and the state alike)."""
     taken = valid_chunk(chunk)
     xyz, rgba, kept = taken[:3]
+    found = chunk_constants(kept)
+    values = {a: v if found.get(a) is None else constant_value(found[a]) for a, v in kept.items()}
     ints = None if xyz_code is None else encode_xyz(xyz, xyz_code)
     if ints is None:
-        save_raw_chunk(raw, i, xyz, rgba, kept)
+        save_raw_chunk(raw, i, xyz, rgba, values)
     else:
-        save_raw_chunk(raw, i, ints, rgba, kept, xyz_code)
-    return taken
+        save_raw_chunk(raw, i, ints, rgba, values, xyz_code)
+    return taken, found
 
 
 def _grid_of(path) -> np.ndarray | None:
@@ -171,16 +174,17 @@ class ReadPhase(Job):
     def _take_chunk(self, i: int, chunk) -> tuple:
         """Chunk ``i``'s valid points, kept for the later phases: spilled to the raw chunk files
         (``spill_chunk``'s results; in_memory.py holds them instead)."""
-        taken = spill_chunk(self.dir.raw, i, chunk, self._spill_code)
-        self._note_constants(taken[2])
+        taken, found = spill_chunk(self.dir.raw, i, chunk, self._spill_code)
+        self._note_constants(found)
         return taken
 
-    def _note_constants(self, kept: dict) -> dict:
+    def _note_constants(self, found: dict) -> dict:
         """The attributes of one value so far (the state's ``constant``, ``merge_constants``) with
-        a chunk's ``kept``: the partitions hold those as that value alone. Returns them as they were before."""
+        a chunk's (``found``: its ``chunk_constants``): the partitions hold those as that value
+        alone. Returns them as they were before."""
         constant = self.state.setdefault("constant", {})
         before = dict(constant)
-        merge_constants(constant, chunk_constants(kept))
+        merge_constants(constant, found)
         return before
 
     def read(self) -> None:

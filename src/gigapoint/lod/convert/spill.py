@@ -99,19 +99,18 @@ def one_value(values: np.ndarray):
 
 def save_raw_chunk(raw: Path, i: int, xyz: np.ndarray, rgba: np.ndarray, attributes: dict, xyz_code: np.ndarray | None = None) -> None:
     """Chunk ``i``'s valid points: xyz (n, 3), u32 RGBA and 1-D attributes, a file each. xyz:
-    float64, or int32 under ``xyz_code`` (encode_xyz), saved beside it. An attribute of one value
-    (``one_value``, or given as a numpy scalar) is saved as that value alone (``const.<name>``):
-    a LAS file's flags, its user_data, ... are ~7 bytes a point of zeros."""
+    float64, or int32 under ``xyz_code`` (encode_xyz), saved beside it. An attribute given as a
+    numpy scalar (its one value: read.spill_chunk finds them) is saved as that value alone
+    (``const.<name>``): a LAS file's flags, its user_data, ... are ~7 bytes a point of zeros."""
     if xyz_code is not None:
         atomic_npy(_raw_path(raw, i, "xyzcode"), np.asarray(xyz_code, np.float64))
     atomic_npy(_raw_path(raw, i, "xyz"), xyz)
     atomic_npy(_raw_path(raw, i, "rgba"), rgba)
     for a, v in attributes.items():
-        c = v if np.ndim(v) == 0 else one_value(v)
-        if c is None:
+        if np.ndim(v):
             atomic_npy(_raw_path(raw, i, "attr." + a), v)
         else:
-            atomic_npy(_raw_path(raw, i, "const." + a), np.asarray(c).reshape(1))
+            atomic_npy(_raw_path(raw, i, "const." + a), np.asarray(v).reshape(1))
 
 
 def raw_xyz_code(raw: Path, i: int) -> np.ndarray | None:
