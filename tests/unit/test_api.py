@@ -167,6 +167,24 @@ def test_render_frame_takes_settings_as_keywords_as_render_does():
         gp.render_frame(cloud, camera, pointsize=3)
 
 
+def test_render_keywords_draw_what_their_command_line_options_draw():
+    """gp.render(c, point_world_size=2) drew 1-px points and gp.render(c, color_attribute=...)
+    the rgb colours: each means what its option means (--point-world-size: attenuated, at most
+    16 px; --color-attribute: that attribute's colours)."""
+    from gigapoint.cli.settings_opts import settings_from_options
+
+    cloud = gp.demo(5_000)
+    camera = gp.Camera.fit(cloud.bounds, width=96, height=64)
+    as_option = settings_from_options(gp.RenderSettings, {"point_world_size": 60.0}, {"point_world_size"})
+    big = gp.render(cloud, camera, point_world_size=60.0)  # (~15 m a pixel)
+    np.testing.assert_array_equal(big, gp.render(cloud, camera, as_option))
+    assert not np.array_equal(big, gp.render(cloud, camera, size_mode="fixed"))  # (wider than 1 px)
+    name = next(iter(cloud.attributes))
+    by_attribute = gp.render(cloud, camera, color_attribute=name)
+    np.testing.assert_array_equal(by_attribute, gp.render(cloud, camera, color_mode="attribute", color_attribute=name))
+    assert not np.array_equal(by_attribute, gp.render(cloud, camera))
+
+
 def test_open_takes_true_or_false_for_its_switches(tmp_path):
     """progressive="no" and chunked="no" were taken as true; so was overwrite="no" in convert,
     videos and live recordings and snapshots, which replaced what the user had."""

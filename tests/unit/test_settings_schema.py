@@ -265,6 +265,22 @@ def test_point_world_size_alone_means_attenuated_points_of_at_most_16_px():
     assert settings_from_options(RenderSettings, {"point_world_size": 0.5}).size_mode == "auto"
 
 
+def test_render_keywords_imply_what_their_options_do():
+    # gp.render(c, point_world_size=20) drew 1-px points (attenuated, at most point_size 1) where
+    # --point-world-size 20 drew up to 16 px; color_attribute="intensity" kept the rgb colours
+    base = RenderSettings()
+    s = base.given(point_world_size=0.5)
+    assert (s.point_sizing, s.point_world_size, s.point_size) == ("attenuated", 0.5, 16)
+    assert base.given(point_world_size=0.5, point_size=4).point_size == 4  # given too: kept
+    assert base.given(color_attribute="intensity").color_mode == "attribute"
+    assert base.given(color_attribute="intensity", color_mode="elevation").color_mode == "elevation"
+    held = RenderSettings(color_mode="intensity", point_size=3)  # already set away from the defaults: kept
+    assert held.given(color_attribute="intensity").color_mode == "intensity"
+    assert held.given(point_world_size=0.5).point_size == 3
+    assert base.given(color_attribute=None, point_world_size=0.0) == base  # a default given implies nothing
+    assert base.replace(color_attribute="intensity").color_mode == "rgb"  # replace (the viewer's) sets the field alone
+
+
 # --- layering -------------------------------------------------------------------------------------
 def test_settings_module_imports_no_upper_layer():
     tree = ast.parse((SRC / "render" / "settings.py").read_text())

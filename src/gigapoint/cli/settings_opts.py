@@ -21,7 +21,7 @@ import typer
 from rich.markup import escape
 
 from ..errors import SettingsError
-from ..render.settings import GROUPS, RenderSettings, SettingSpec, format_color, settings_fields
+from ..render.settings import GROUPS, RenderSettings, SettingSpec, format_color, implied_fields, settings_fields
 
 PANELS = {"execution": "Execution", "lod": "Precision, culling and level of detail", "appearance": "Appearance"}
 _MAX_METAVAR = 30
@@ -171,11 +171,10 @@ def settings_from_options(cls: type, values: dict, given: frozenset | set = froz
         if name not in opts:
             raise SettingsError(f"unknown render setting(s): {name}")
         kwargs[name] = _pair(blame[name], value) if opts[name].spec.kind == "range" else value
-    for name in (n for n in opts if n in given):  # e.g. --point-world-size: attenuated points, 16 px at most
-        for target, value in opts[name].spec.implies:
-            if target in opts and target not in given:
-                kwargs[target] = value
-                blame[target] = blame[name]
+    for target, (value, source) in implied_fields(cls, given).items():  # e.g. --point-world-size: attenuated points, 16 px at most
+        if target in opts:
+            kwargs[target] = value
+            blame[target] = blame[source]
     try:
         return cls(**kwargs)
     except SettingsError as exc:

@@ -42,7 +42,7 @@ def render_frame(cloud, camera: Camera | None = None, settings: RenderSettings |
     Settings as ``render`` takes them: ``settings`` and/or keywords (``point_size=3``)."""
     settings = RenderSettings.of(settings)
     if setting_overrides:  # (size_mode=... was a TypeError here, a setting in render)
-        settings = settings.replace(**setting_overrides)
+        settings = settings.given(**setting_overrides)
     check_renderable(cloud)
     if camera is None:
         fit_width, fit_height = image_size(width, height)

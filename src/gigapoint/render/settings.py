@@ -146,7 +146,7 @@ class RenderSettings:
     color_attribute: str | None = setting(
         None,
         "The attribute color mode's attribute: any the cloud holds (a LAS file's extra bytes too), mapped through the colormap "
-        "(on the command line it also means --color-mode attribute).",
+        "(given on the command line or as a keyword of render, it also means color mode attribute).",
         implies={"color_mode": "attribute"},
     )
     colormap: Colormap = setting("viridis", "Colormap of the elevation and attribute color modes.")
@@ -174,7 +174,8 @@ class RenderSettings:
     )
     point_world_size: float = setting(
         0.0,
-        "Attenuated points: size in world units (on the command line it also means --size-mode attenuated, --point-size 16).",
+        "Attenuated points: size in world units (given on the command line or as a keyword of render, it also means size mode "
+        "attenuated, point size 16).",
         min=0.0,
         implies={"size_mode": "attenuated", "point_size": 16},
     )
@@ -240,6 +241,16 @@ class RenderSettings:
         if unknown:
             raise SettingsError(f"unknown render setting(s): {', '.join(sorted(unknown))}")
         return replace(self, **changes)
+
+    def given(self, **changes) -> RenderSettings:
+        """``replace`` as render's keywords give settings: as on the command line, a field given
+        also sets the fields it implies (``color_attribute`` means ``color_mode='attribute'``,
+        ``point_world_size`` attenuated points of at most 16 px; ``implied_fields``), unless they
+        are given too or already set away from their defaults."""
+        implying = {spec.name: spec.default for spec in settings_fields(type(self)) if spec.implies}
+        named = {n for n, v in changes.items() if n in implying and v is not None and v != implying[n]}  # (given its default: nothing)
+        implied = implied_fields(type(self), named, self)
+        return self.replace(**{target: value for target, (value, _) in implied.items() if target not in changes}, **changes)
 
 
 # --- the schema, read from types and metadata ----------------------------------------------------
@@ -415,6 +426,19 @@ def _spec(f, tp) -> SettingSpec:
 
 
 _SPECS: dict[type, tuple[SettingSpec, ...]] = {}
+
+
+def implied_fields(cls: type, given, current=None) -> dict[str, tuple[object, str]]:
+    """{field: (value, the given field implying it)} of the fields that the fields named in
+    ``given`` imply (their metadata's ``implies``), leaving out those given too and, with
+    ``current`` (settings), those it holds away from their defaults."""
+    specs = {spec.name: spec for spec in settings_fields(cls)}
+    out = {}
+    for name in (n for n in specs if n in given):
+        for target, value in specs[name].implies:
+            if target in specs and target not in given and (current is None or getattr(current, target) == specs[target].default):
+                out[target] = (value, name)
+    return out
 
 
 def settings_fields(cls: type = RenderSettings) -> tuple[SettingSpec, ...]:
