@@ -249,3 +249,22 @@ def test_odd_turntable_and_camera_settings_are_one_line_errors_before_a_frame(cl
         with pytest.raises(GigapointError, match=message):
             gp.Camera.fit_cloud(cloud, **kw)
     assert gp.Camera.fit_cloud(cloud, view=(30, 20), margin=1, trim=0).width == 1920
+
+
+def test_videos_take_settings_as_keywords_as_render_does(cloud, tmp_path):
+    """render_turntable(cloud, 4, "t.gif", edl=True) was a TypeError: settings are keywords
+    there as in render (a keyword means what its option means; a wrong one is told before any frame)."""
+    from PIL import Image
+
+    cams = turntable_cameras(cloud, 3, 48, 32)
+    out = render_turntable(cloud, 3, tmp_path / "t.gif", width=48, height=32, backend="cpu", color_mode="elevation", point_size=3)
+    with Image.open(out) as gif:
+        gif.seek(1)
+        second = np.asarray(gif.convert("RGB"))
+    expected = gp.render(cloud, cams[1], backend="cpu", color_mode="elevation", point_size=3)[..., :3]
+    plain = gp.render(cloud, cams[1], backend="cpu")[..., :3]
+    # (a GIF's palette shifts colours a little)
+    assert np.abs(second.astype(float) - expected).mean() < 0.5 * np.abs(second.astype(float) - plain).mean()
+    with pytest.raises(GigapointError, match="unknown render setting"):
+        render_flythrough(cloud, cams, tmp_path / "f.gif", pointsize=3)
+    assert not (tmp_path / "f.gif").exists()

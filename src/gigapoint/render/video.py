@@ -192,16 +192,18 @@ def _check_fps(fps) -> None:
 
 
 def render_flythrough(
-    cloud, cameras, path, settings: RenderSettings | None = None, fps: float = 30.0, progress=None, overwrite: bool = False
+    cloud, cameras, path, settings: RenderSettings | None = None, fps: float = 30.0, progress=None, overwrite: bool = False,
+    **setting_overrides,
 ) -> Path:
     """Render ``cameras`` one after another into the video ``path``; returns the path.
 
     An existing file at ``path`` is replaced only with ``overwrite=True``. ``progress(done,
-    total)`` is called after each frame."""
+    total)`` is called after each frame. Settings as ``render`` takes them: ``settings`` and/or
+    keywords (``edl=True``)."""
     from .renderer import render
 
     path = _check_path(path, overwrite)
-    settings = RenderSettings.of(settings)
+    settings = RenderSettings.of(settings).given(**setting_overrides)  # (before any frame: a bad one is told at once)
     _check_fps(fps)
     cameras = list(cameras)
     if not cameras:
@@ -306,10 +308,12 @@ def render_turntable(
     fps=30.0,
     progress=None,
     overwrite: bool = False,
+    **setting_overrides,
 ) -> Path:
     """A video of the camera orbiting the cloud once in ``n_frames`` frames (``turntable_cameras``).
     An existing file at ``path`` is replaced only with ``overwrite=True``; sizes as
-    ``render_flythrough`` takes them (even, but for a GIF)."""
+    ``render_flythrough`` takes them (even, but for a GIF); settings as ``render`` takes them."""
     check_turntable(path, n_frames, width, height, fps, overwrite)  # before any frame is rendered
+    settings = RenderSettings.of(settings).given(**setting_overrides)
     cameras = turntable_cameras(cloud, n_frames, width, height, pitch, fov)
     return render_flythrough(cloud, cameras, path, settings, fps, progress, overwrite)
