@@ -113,3 +113,5 @@ def test_a_task_that_fails_on_our_own_workers_is_one_line(tmp_path):
     said = [line for line in proc.stderr.splitlines() if not line.startswith("while this runs")]
     assert proc.returncode == 1 and len(said) == 1, proc.stderr[-3000:]
     assert said[0].startswith(f"error: {out}/.partial/") and "bytes written (is the disk full?) (on Dask worker " in said[0], said
+    # what became of the output, as one process says it (it was left out)
+    assert said[0].endswith(f"; the conversion to {out} stopped unfinished (run it again once the cause is gone: it resumes)"), said

@@ -63,6 +63,7 @@ PARTIAL = ".partial"
 STATE = "state.json"
 PREVIEW = "preview.npz"
 RESUME_HINT = "run `gigapoint convert` again to resume it"  # what a stopped conversion needs
+STOPPED_RESUMES = "run it again once the cause is gone: it resumes"  # how a run stopped by an error (a full disk) goes on
 NO_RESUME_HINT = "its points were given from Python (a cloud's save), so it cannot resume: save the cloud again"  # what a stopped one of chunks needs
 
 # what --overwrite clears besides .partial, attr.*.npy and temporary files (never anything else)

@@ -22,7 +22,7 @@ from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
 from ..copc_write import check_output as check_copc_output
 from ..copc_write import is_copc_name
-from ..octree_dir import ConvertError
+from ..octree_dir import STOPPED_RESUMES, ConvertError
 from ..progress import NullProgress, RichProgress
 from .in_memory import InMemoryPhases
 from .keep_freed_memory import KeepFreedMemory
@@ -92,7 +92,7 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
                 with contextlib.suppress(OSError):
                     self.save_state_with(damaged=damage)
                 raise ConvertError(f"{damage}; run it again with --overwrite to start over") from exc
-            again = "run it again once the cause is gone: it resumes" if fp is not None else "its work was removed: run it again once the cause is gone"
+            again = STOPPED_RESUMES if fp is not None else "its work was removed: run it again once the cause is gone"
             raise ConvertError(f"{exc.filename or self.dir.path}: {exc.strerror or exc}; the conversion to {self.out} stopped unfinished ({again})") from exc
         finally:
             self.progress.close()

@@ -65,7 +65,7 @@ from ...io._base import one_line
 from ...io.las import with_scan_angle
 from ...io.registry import reader_for
 from ..keys import CODE_BITS
-from ..octree_dir import ConvertError, OctreeDir
+from ..octree_dir import STOPPED_RESUMES, ConvertError, OctreeDir
 from ..preview import PreviewSampler, preview_points
 from ..progress import NullProgress
 from . import hooks
@@ -323,7 +323,10 @@ def _task(kind: str, name: str, spec: dict, fn, *args):
         raise
     except OSError as exc:
         where = exc.filename or spec["out"]
-        raise ConvertError(f"{where}: {exc.strerror or one_line(exc)} (on Dask worker {_worker_name()}, {kind} task {name})") from None
+        raise ConvertError(
+            f"{where}: {exc.strerror or one_line(exc)} (on Dask worker {_worker_name()}, {kind} task {name}); "
+            f"the conversion to {spec['out']} stopped unfinished ({STOPPED_RESUMES})"  # (as one process says it)
+        ) from None
 
 
 def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | None, color_mode: str | None, stride: int) -> dict:
