@@ -13,7 +13,7 @@ import pytest
 from test_io_las import write_las  # tests/unit is on sys.path (pytest rootdir-less import)
 
 import gigapoint as gp
-from gigapoint.errors import EmptyCloudError, GigapointError, InputError, UnsupportedFormatError
+from gigapoint.errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, UnsupportedFormatError
 from gigapoint.io import file_info, open_cloud, read_chunks
 from gigapoint.io.registry import reader_for
 
@@ -209,7 +209,8 @@ def test_absurd_vlr_count(tmp_path):
 
 
 def test_evlr_longer_than_file(tmp_path):
-    """An EVLR whose u64 length is absurd must not make laspy allocate it."""
+    """An EVLR whose u64 length is absurd must not make laspy allocate it: its points, all
+    before it, are read without it, with the one-line warning of an EVLR cut off."""
     header = laspy.LasHeader(point_format=6, version="1.4")
     las = laspy.LasData(header)
     las.x = las.y = las.z = np.arange(10.0)
@@ -223,51 +224,98 @@ def test_evlr_longer_than_file(tmp_path):
         f.seek(235)
         start = struct.unpack("<Q", f.read(8))[0]
     patch(p, start + 20, "Q", 2**60)
-    raises(InputError, p, match="EVLR")
+    with pytest.warns(GigapointWarning, match=f"^{p}: truncated LAS file: its extended VLRs are cut .EVLR 1 of 1 .1,152,921,504,606,846,976 bytes. runs past"):
+        assert sum(len(c) for c in read_chunks(p)) == 10
+    patch(p, start + 20, "Q", 100)
     patch(p, 243, "I", 1_000_000)  # more EVLRs than fit
-    raises(InputError, p, match="EVLR")
+    with pytest.warns(GigapointWarning, match=r"EVLR 2 of 1,000,000 is cut off at byte [\d,]+: at least 60 bytes missing\); the points are whole$"):
+        assert sum(len(c) for c in read_chunks(p)) == 10
 
 
-@pytest.mark.parametrize("suffix", [".las", ".laz"])
-def test_a_las_14_file_cut_before_its_evlrs_gives_the_points_before_the_cut(tmp_path, suffix):
-    """A LAS 1.4 file with EVLRs after its points, cut off: its EVLRs' check refused it up front,
-    where a progressive load reads other cut files up to the cut. Now ``read_salvaged`` gives
-    the points before the cut (LAZ: of its whole chunks, as test_io_laz_process's cut files),
-    exactly the file's, then the one-line error; cut just before its EVLRs, every point, then
-    theirs. The plain reader still refuses both."""
+def _las14_with_evlrs(tmp_path, suffix, n):
+    """A LAS 1.4 file (point format 6) of ``n`` points with two 100-byte EVLRs after them: (path, xyz)."""
     from laspy.vlrs.vlrlist import VLRList
 
-    from gigapoint.io.las import LasReader, read_las_header
-
-    n = 60_000
     header = laspy.LasHeader(point_format=6, version="1.4")
     header.scales, header.offsets = [0.001] * 3, [0.0] * 3
     las = laspy.LasData(header)
     xyz = np.round(np.random.default_rng(5).uniform(0, 1000, (n, 3)), 3)
     las.x, las.y, las.z = xyz.T
-    las.evlrs = VLRList([laspy.VLR(user_id="test", record_id=1, record_data=b"x" * 100)])
+    las.evlrs = VLRList([laspy.VLR(user_id="test", record_id=r, record_data=b"x" * 100) for r in (1, 2)])
     whole = tmp_path / f"whole{suffix}"
     las.write(str(whole))
+    return whole, xyz
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_a_las_14_file_cut_before_its_evlrs_gives_the_points_before_the_cut(tmp_path, suffix):
+    """A LAS 1.4 file with EVLRs after its points, cut off in its points: its EVLRs' check
+    refused it up front, where a progressive load reads other cut files up to the cut. Now
+    ``read_salvaged`` gives the points before the cut (LAZ: of its whole chunks, as
+    test_io_laz_process's cut files), exactly the file's, then the one-line error. The plain
+    reader still refuses it."""
+    from gigapoint.io.las import LasReader, read_las_header
+
+    n = 60_000
+    whole, xyz = _las14_with_evlrs(tmp_path, suffix, n)
     data, hdr = whole.read_bytes(), read_las_header(whole)
     first, evlrs = hdr.offset_to_point_data, hdr.start_of_first_evlr
     mid, p = first + (evlrs - first) * 11 // 12, tmp_path / f"cut{suffix}"  # (LAZ: in its second chunk, of 10,000 points)
-    points = "truncated or corrupt LAZ file: chunk table offset" if suffix == ".laz" else "truncated LAS file: the header claims 60,000 points"
-    for end, problem in [(mid, points), (evlrs, f"truncated LAS file: its 1 EVLRs, said to start at byte {evlrs:,}, lie past the end of the file")]:
+    problem = "truncated or corrupt LAZ file: chunk table offset" if suffix == ".laz" else "truncated LAS file: the header claims 60,000 points"
+    p.write_bytes(data[:mid])
+    raises(InputError, p, match=problem)
+    got = []
+    with pytest.raises(InputError, match=f"^{p}: {problem}"):
+        for chunk in LasReader().read_salvaged(p, 20_000):
+            got.append(chunk.xyz)
+    got = np.concatenate(got)
+    want = (mid - first) // 30 if suffix == ".las" else 50_000
+    assert want - (5_000 if suffix == ".laz" else 0) <= len(got) <= want
+    np.testing.assert_allclose(got, xyz[: len(got)], atol=1e-9)
+    cloud = gp.open(p, progressive=True)
+    with pytest.raises(GigapointError, match=f"{p}: {problem}"):
+        cloud.wait(60)
+    assert cloud.n_points == len(got)
+    cloud.close()
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_a_las_14_file_cut_inside_its_evlrs_reads_every_point_with_a_warning(tmp_path, suffix):
+    """A LAS 1.4 file cut before or inside its EVLRs (every point whole) was refused whole
+    ("EVLR 1 of 2 ... runs past the end of the file"; cut just before them, drawn progressively
+    with an error). Now every point is read, plain or progressive, with a one-line warning of
+    what is missing; its EVLRs are left out (``gigapoint info`` warns too)."""
+    from gigapoint.io.las import LasReader, read_las_header
+
+    n = 3_000
+    whole, xyz = _las14_with_evlrs(tmp_path, suffix, n)
+    data, evlrs = whole.read_bytes(), read_las_header(whole).start_of_first_evlr
+    p = tmp_path / f"cut{suffix}"
+    said = "^{p}: truncated LAS file: its extended VLRs are cut \\({what}\\); the points are whole$"
+    cuts = {
+        evlrs: f"its 2 EVLRs, said to start at byte {evlrs:,}, lie past the end of the file \\({evlrs:,} bytes\\)",
+        evlrs + 30: f"EVLR 1 of 2 is cut off at byte {evlrs + 30:,}: at least 30 bytes missing",
+        evlrs + 60 + 40: f"EVLR 1 of 2 \\(100 bytes\\) runs past the end of the file \\({evlrs + 100:,} bytes\\): 60 bytes missing",
+        evlrs + 160 + 59: f"EVLR 2 of 2 is cut off at byte {evlrs + 219:,}: at least 1 bytes missing",
+        len(data) - 1: f"EVLR 2 of 2 \\(100 bytes\\) runs past the end of the file \\({len(data) - 1:,} bytes\\): 1 bytes missing",
+    }
+    for end, what in cuts.items():
         p.write_bytes(data[:end])
-        raises(InputError, p, match="EVLRs said to start")
-        got = []
-        with pytest.raises(InputError, match=f"^{p}: {problem}"):
-            for chunk in LasReader().read_salvaged(p, 20_000):
-                got.append(chunk.xyz)
-        got = np.concatenate(got)
-        want = n if end == evlrs else (mid - first) // 30 if suffix == ".las" else 50_000
-        assert want - (5_000 if suffix == ".laz" else 0) <= len(got) <= want
-        np.testing.assert_allclose(got, xyz[: len(got)], atol=1e-9)
+        match = said.format(p=p, what=what)
+        with pytest.warns(GigapointWarning, match=match):
+            got = np.concatenate([c.xyz for c in read_chunks(p, 1_000)])
+        np.testing.assert_allclose(got, xyz, atol=1e-9)
+        with pytest.warns(GigapointWarning, match=match):
+            assert len(list(LasReader().read_salvaged(p, 1_000))) == 3
+        with pytest.warns(GigapointWarning, match=match):
+            assert gp.open(p).n_points == n
+        with pytest.warns(GigapointWarning, match=match):
+            assert file_info(p)["point_count"] == n
+    with pytest.warns(GigapointWarning, match=said.format(p=p, what=what)):
         cloud = gp.open(p, progressive=True)
-        with pytest.raises(GigapointError, match=f"{p}: {problem}"):
-            cloud.wait(60)
-        assert cloud.n_points == len(got)
-        cloud.close()
+        assert cloud.wait(60)
+    assert cloud.n_points == n
+    cloud.close()
 
 
 def test_laz_chunk_table_absurd(tmp_path):

@@ -12,6 +12,7 @@ import io
 import math
 import os
 import struct
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,7 +24,7 @@ from ..core import pages
 from ..core.chunk import ColorScaler, PointChunk, safe_attribute_name
 from ..core.cloud import MAX_ABS_COORDINATE, NUMPY_MAX
 from ..core.threads import prepare_kernel_calls
-from ..errors import EmptyCloudError, InputError
+from ..errors import EmptyCloudError, GigapointWarning, InputError
 from . import laz_process
 from ._base import DEFAULT_CHUNK_SIZE, SALVAGE_HINT, Reader, check_chunk_size, check_file, fail, one_line
 
@@ -221,7 +222,8 @@ class LasHeader:
     #: why the file's point data ends early (read_las_header(salvage=True): a file cut off, its
     #: points before the cut readable), else None
     truncated: str | None = None
-    #: why the EVLRs after the point data are not there (salvage=True: a file cut before them), else None
+    #: why the EVLRs after the point data are not all there (a file cut before or inside them: its
+    #: points read, with this warning; none of its EVLRs), else None
     evlrs_cut: str | None = None
 
 
@@ -318,8 +320,9 @@ def read_las_header(path: Path, salvage: bool = False) -> LasHeader:
             vlrs=vlrs,
         )
         data_end = size
-        if n_evlrs and salvage and start_evlr >= size:  # cut before its EVLRs: its points up to the cut read, as any cut file's
-            hdr.evlrs_cut = f"truncated LAS file: its {n_evlrs:,} EVLRs, said to start at byte {start_evlr:,}, lie past the end of the file ({size:,} bytes)"
+        if n_evlrs and start_evlr >= size:  # cut before its EVLRs: its points checked below, as any cut file's
+            cut = f"its {n_evlrs:,} EVLRs, said to start at byte {start_evlr:,}, lie past the end of the file ({size:,} bytes)"
+            hdr.evlrs_cut = f"truncated LAS file: its extended VLRs are cut ({cut}); the points are whole"
         elif n_evlrs:
             data_end = _check_evlrs(path, f, hdr)
         if compressed:
@@ -339,20 +342,26 @@ def read_las_header(path: Path, salvage: bool = False) -> LasHeader:
 
 
 def _check_evlrs(path: Path, f, hdr: LasHeader) -> int:
-    """Check that every EVLR lies inside the file; return where the EVLRs start (end of point data)."""
+    """Check that every EVLR lies inside the file; return where the EVLRs start (end of point
+    data). An EVLR cut off by the file's end is no error (the points before it are whole, read
+    with a warning): ``hdr.evlrs_cut`` says what is missing."""
     start, n, size = hdr.start_of_first_evlr, hdr.number_of_evlrs, hdr.file_size
-    if start < hdr.offset_to_point_data or start + n * EVLR_HEADER > size:
+    if start < hdr.offset_to_point_data:
         raise fail(path, f"truncated or corrupt LAS file: {n:,} EVLRs said to start at byte {start:,} do not fit in the file ({size:,} bytes)")
-    pos = start
-    for i in range(n):
+    pos, cut = start, None
+    for i in range(n):  # (at most size / 60 turns: a read past the end is short)
         f.seek(pos)
         buf = f.read(EVLR_HEADER)
         if len(buf) < EVLR_HEADER:
-            raise fail(path, f"truncated LAS file: EVLR {i + 1} of {n} is cut off at byte {size:,}")
+            cut = f"EVLR {i + 1} of {n:,} is cut off at byte {size:,}", f"at least {pos + EVLR_HEADER - size:,}"  # (its length unknown)
+            break
         (length,) = _u("Q", buf, 20)
         pos += EVLR_HEADER + length
         if pos > size:
-            raise fail(path, f"truncated LAS file: EVLR {i + 1} of {n} ({length:,} bytes) runs past the end of the file ({size:,} bytes)")
+            cut = f"EVLR {i + 1} of {n:,} ({length:,} bytes) runs past the end of the file ({size:,} bytes)", f"{pos - size:,}"
+            break
+    if cut is not None:
+        hdr.evlrs_cut = f"truncated LAS file: its extended VLRs are cut ({cut[0]}: {cut[1]} bytes missing); the points are whole"
     return start
 
 
@@ -404,6 +413,9 @@ def _check_laz(path: Path, f, hdr: LasHeader, salvage: bool = False) -> None:
         if not salvage:
             raise fail(path, hdr.truncated + SALVAGE_HINT)
         return
+    if table_offset > hdr.file_size - 8 and start + 8 <= table_offset:  # (a COPC file's nodes: each chunk's points are in the table only)
+        raise fail(path, f"truncated LAZ file: its chunk table (at byte {table_offset:,}) lies past the end of the file ({hdr.file_size:,} bytes), "
+                         "and its chunks are of variable size: without the table no point can be read")  # fmt: skip
     if not start + 8 <= table_offset <= hdr.file_size - 8:
         raise fail(path, f"truncated or corrupt LAZ file: chunk table offset {table_offset:,} lies outside the file's point data (bytes {start + 8:,}..{hdr.file_size:,})")
     f.seek(table_offset)
@@ -612,8 +624,7 @@ class LasReader(Reader):
         attributes = _header_attributes(hdr)
         if attributes is not None:
             head["attributes"] = attributes
-        cut = hdr.truncated or hdr.evlrs_cut
-        return head if cut is None else {**head, "truncated": cut}
+        return head if hdr.truncated is None else {**head, "truncated": hdr.truncated}  # (EVLRs cut: every point read, with a warning)
 
     def reads_slowly(self, path: Path) -> bool:
         return read_las_header(path).compressed  # LAZ: decompression, ~0.3 us a point on 2 cores
@@ -730,14 +741,16 @@ class LasReader(Reader):
                 yield PointChunk(xyz, rgba, attributes, scale=stored_scale)
         if done < stop:
             raise fail(path, f"truncated {kind} file: the header claims {hdr.point_count:,} points, only {done:,} could be read")
-        if hdr.evlrs_cut is not None:  # every point there, the EVLRs after them cut off
-            raise fail(path, hdr.evlrs_cut)
+        if hdr.evlrs_cut is not None and stop == hdr.point_count:  # every point there, the EVLRs after them cut off
+            warnings.warn(f"{path}: {hdr.evlrs_cut}", GigapointWarning, stacklevel=2)
 
     def read_salvaged(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
         return self.read_chunks(path, chunk_size, salvage=True)
 
     def info(self, path: Path) -> dict:
         hdr = read_las_header(path)
+        if hdr.evlrs_cut is not None:  # (its VLRs shown, not its EVLRs)
+            warnings.warn(f"{path}: {hdr.evlrs_cut}", GigapointWarning, stacklevel=2)
         try:
             with _laspy_open(path, hdr) as reader:
                 header = reader.header
