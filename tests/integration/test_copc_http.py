@@ -469,3 +469,37 @@ def test_urls_gigapoint_does_not_read_are_one_line(tmp_path):
     r = subprocess.run([sys.executable, "-m", "gigapoint.cli", "render", "ftp://host/x.laz", "-o", str(tmp_path / "x.png")],
                        capture_output=True, text=True, timeout=120)  # fmt: skip
     assert r.returncode == 1 and r.stderr.strip() == "error: ftp://host/x.laz: only http:// and https:// URLs are read (COPC and EPT octrees)"
+
+
+def test_a_copc_file_cut_short_on_the_server(server, tmp_path):
+    """A server whose COPC file is shorter than its header says (an upload stopped part-way):
+    as a local file cut there (test_copc_cut.py), the nodes before the cut are drawn with one
+    warning naming the URL, and a cut before the hierarchy is one line naming the URL and both
+    sizes; never a hang or a traceback."""
+    import re
+
+    from test_copc_cut import _drawn, _hierarchy_first, _layout, _whole_points, _write
+
+    from gigapoint.errors import GigapointWarning
+
+    flat = _write(tmp_path / "flat.copc.laz")
+    b = _hierarchy_first(flat, tmp_path / "first.copc.laz").read_bytes()
+    hdr, info, _ = _layout(b)
+    data, evlr = int(hdr["offset_to_point_data"]), int(hdr["start_of_first_evlr"])
+    end = (data + evlr) // 2
+    want, _ = _whole_points(b, end)
+    (server.root / "first_cut.copc.laz").write_bytes(b[:end])
+    whole = flat.read_bytes()
+    (server.root / "flat_cut.copc.laz").write_bytes(whole[:end])
+    try:
+        url = server.url("first_cut.copc.laz")
+        with pytest.warns(GigapointWarning, match=rf"^{re.escape(url)}: truncated COPC file: it has {end:,} bytes, its header says at least {evlr + 60:,}: [\d,]+ points in \d+ nodes past the cut are left out$"):
+            c = gp.open(url)
+        assert 0 < want and _drawn(c) == want
+        c.close()
+        url = server.url("flat_cut.copc.laz")
+        with pytest.raises(InputError, match=rf"^{re.escape(url)}: truncated COPC file: it has {end:,} bytes, its header says at least {len(whole):,} \(its hierarchy, .* is cut off: no node can be found\)$"):
+            gp.open(url)
+    finally:
+        (server.root / "first_cut.copc.laz").unlink()
+        (server.root / "flat_cut.copc.laz").unlink()

@@ -9,21 +9,24 @@ one LAZ chunk per octree node, the LAZ chunk table, and the hierarchy EVLR (user
 record 1000): pages of 32-byte entries (VoxelKey, offset, byte size, point count; count -1: the
 node's entry and subtree are in the child page at offset). Opening reads the header and VLRs
 (one request), then the root hierarchy page; pages below and node chunks are read when a frame
-draws them (voxel_octree.py), a chunk decoded with lazrs into the layouts below.
+draws them (voxel_octree.py), a chunk decoded with lazrs into the layouts below. A file cut off
+(shorter than its header and hierarchy EVLR say) gives the nodes and pages before the cut, with
+one warning; cut before its root page (the hierarchy comes last), it is a one-line error.
 """
 
 from __future__ import annotations
 
 import io
 import os
+import warnings
 
 import numpy as np
 
 from ..core.chunk import safe_attribute_name
-from ..errors import InputError
+from ..errors import GigapointWarning, InputError
 from ..io import laz_process
-from ..io.http import ByteSource, open_source
-from ..io.las import _scaled_xyz
+from ..io.http import ByteSource, LocalFile, open_source
+from ..io.las import _scaled_xyz, read_las_header
 from .store import check_grid, tight_bounds
 from .voxel_octree import VOXEL_KEY_DTYPE, VoxelOctree, valid_voxels, voxel_name, voxel_to_key
 
@@ -359,9 +362,43 @@ class CopcCloud(VoxelOctree):
             "generating_software": bytes(hdr["generating_software"]).split(b"\0")[0].decode("ascii", "replace").strip(),
         }
         root = (int(info["root_hier_offset"]), int(info["root_hier_size"]))
+        self._evlrs = (int(hdr["start_of_first_evlr"]), int(hdr["number_of_evlrs"]))
+        self._root, self._expected, self._cut_said = root, None, False
+        if file_size is not None and root[0] + root[1] > file_size and self._cut():
+            raise InputError(
+                f"{name}: truncated COPC file: it has {file_size:,} bytes, its header says at least {self._expected:,} "
+                f"(its hierarchy, at bytes {root[0]:,}..{root[0] + root[1]:,}, is cut off: no node can be found){self._as_laz()}"
+            )
         self._check_range(root[0], root[1], "the root hierarchy page")
         stem = name.rstrip("/").rsplit("/", 1)[-1]
         self._open(stem, meta, root, path=None)
+
+    def _cut(self) -> bool:
+        """Whether the file is shorter than its header says: its hierarchy (an EVLR, after the
+        points: the last thing a COPC file holds) and root page end past its end. Then nodes and
+        pages past the cut are left out (``_parse_page``), where in a whole file they are an
+        error. Asked when something lies past the end (the EVLR's header read then, if there)."""
+        if self._expected is None:
+            (start, n), (off, size) = self._evlrs, self._root
+            self._expected = off + size
+            if n and start >= self.data_start:
+                self._expected = max(self._expected, start + EVLR_HEADER_DTYPE.itemsize)
+                if start + EVLR_HEADER_DTYPE.itemsize <= self.file_size:
+                    head = np.frombuffer(self.source.read(start, EVLR_HEADER_DTYPE.itemsize), EVLR_HEADER_DTYPE)[0]
+                    self._expected = max(self._expected, start + EVLR_HEADER_DTYPE.itemsize + int(head["record_length"]))
+        return self.file_size < self._expected
+
+    def _as_laz(self) -> str:
+        """What a cut file whose hierarchy is gone still offers: a local one whose LAZ chunk table
+        is whole (cut in its EVLRs) is read as plain LAZ, every point; else nothing (its table,
+        after the points, is gone too, and its chunks are of variable size: no point can be read)."""
+        if not isinstance(self.source, LocalFile):
+            return ""
+        try:
+            whole = read_las_header(self.source.path).truncated is None
+        except InputError:
+            return ""
+        return "; its points can still be read as a plain LAZ file (`gigapoint view --progressive`, gigapoint.open(..., progressive=True))" if whole else ""
 
     def _check_range(self, offset: int, size: int, what: str) -> None:
         if offset < 0 or size < 0 or (self.file_size is not None and offset + size > self.file_size):
@@ -397,6 +434,20 @@ class CopcCloud(VoxelOctree):
         page, chunk = counts == -1, counts > 0
         end = offs + sizes
         beyond = (end > self.file_size) if self.file_size is not None else np.zeros(len(keys), bool)
+        if beyond.any() and self._cut():  # nodes and pages past the cut left out, said once
+            lost, gone = chunk & beyond & (offs >= self.data_start), page & beyond & (offs >= 0) & (sizes > 0)
+            if (lost.any() or gone.any()) and not self._cut_said:
+                self._cut_said = True
+                what = [f"{int(counts[lost].sum()):,} points in {lost.sum():,} nodes past the cut"] if lost.any() else []
+                what += [f"the nodes below {gone.sum():,} hierarchy pages past it"] if gone.any() else []
+                warnings.warn(
+                    f"{name}: truncated COPC file: it has {self.file_size:,} bytes, its header says at least {self._expected:,}: "
+                    f"{' and '.join(what)} are left out",
+                    GigapointWarning,
+                    stacklevel=2,
+                )
+            self._meta["points"] -= int(counts[lost].sum())
+            counts[lost], chunk, page = 0, chunk & ~lost, page & ~gone
         problems = (
             (counts < -1, "has an invalid point count {c} in the hierarchy"),
             (
