@@ -108,6 +108,7 @@ def open(*paths, progressive: bool = False, **options):
     paths = _flat_paths(paths)
     check_switch("progressive", progressive, "open")  # (chunked= is open_cloud's to check)
     if progressive:
+        from .io._base import headers_once
         from .lod.progressive import file_sources, memory_limit_bytes, open_progressive
 
         refuse_octrees(paths, "progressive=True builds an octree from point files")
@@ -116,7 +117,8 @@ def open(*paths, progressive: bool = False, **options):
         if options:
             raise InputError(f"open(progressive=True) takes memory_limit= only, not {', '.join(sorted(options))}")
         memory_limit = memory_limit_bytes(memory_limit)  # checked before any file is read
-        return open_progressive(*file_sources(paths), memory_limit=memory_limit)
+        with headers_once():  # each file's header read once: by file_sources, then by the loader thread (it takes them along)
+            return open_progressive(*file_sources(paths), memory_limit=memory_limit)
     if len(paths) == 1 and not options:
         from .lod import is_lod_source, open_octree
 

@@ -23,7 +23,7 @@ from pathlib import Path
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud, scale_decimals
 from ..errors import EmptyCloudError, GigapointWarning, InputError, check_switch
-from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail
+from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail, headers_once
 from .demo import demo_arrays, demo_chunks
 from .las import LasReader, read_las_header, with_scan_angle
 from .registry import is_supported_name, reader_for, readers, register, supported_suffixes
@@ -118,6 +118,7 @@ def _with_progress(path: Path, chunks: Iterator[PointChunk], total: int | None, 
         yield chunk
 
 
+@headers_once()  # counts, scan angles, then the points: each file's header read once
 def open_cloud(
     *paths,
     chunk_size: int = DEFAULT_CHUNK_SIZE,

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from contextvars import ContextVar
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
@@ -20,6 +23,39 @@ SALVAGE_HINT = "; `gigapoint view` shows the points before the cut (gigapoint.op
 
 #: Bytes of a file's beginning that readers' ``sniff`` sees.
 HEAD_BYTES = 4096
+
+T = TypeVar("T")
+
+#: what the operation under way (``headers_once``) has read of its files: {(kind, path): result}; None outside one
+_kept: ContextVar[dict | None] = ContextVar("gigapoint_headers", default=None)
+
+
+@contextlib.contextmanager
+def headers_once():
+    """Within it (one operation: an open, a conversion), each file's header is read once and
+    kept (``read_once``): the operation's steps (point counts, scan angles, the LAS grid, then
+    the points) each read it again, 3-6 times a file, a seek or a request each for a folder of
+    2 000 tiles or files on a network. Threads the operation starts take it along
+    (contextvars.copy_context). Nested: the outermost one's. Also a decorator."""
+    if _kept.get() is not None:
+        yield
+        return
+    token = _kept.set({})
+    try:
+        yield
+    finally:
+        _kept.reset(token)
+
+
+def read_once(kind: str, path, read: Callable[[], T]) -> T:
+    """``read()``, or within ``headers_once`` what it gave for (``kind``, ``path``) before (an error is not kept)."""
+    kept = _kept.get()
+    if kept is None:
+        return read()
+    key = (kind, str(path))
+    if key not in kept:
+        kept[key] = read()
+    return kept[key]
 
 
 class Reader:

@@ -26,7 +26,7 @@ from ..core.cloud import MAX_ABS_COORDINATE, NUMPY_MAX
 from ..core.threads import prepare_kernel_calls
 from ..errors import EmptyCloudError, GigapointWarning, InputError
 from . import laz_process
-from ._base import DEFAULT_CHUNK_SIZE, SALVAGE_HINT, Reader, check_chunk_size, check_file, fail, one_line
+from ._base import DEFAULT_CHUNK_SIZE, SALVAGE_HINT, Reader, check_chunk_size, check_file, fail, one_line, read_once
 
 #: Minimum point record length of each point format (bytes).
 RECORD_SIZE = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}
@@ -235,7 +235,15 @@ def read_las_header(path: Path, salvage: bool = False) -> LasHeader:
     """Parse and validate a LAS/LAZ header against the file size; raise InputError on any
     inconsistency. ``salvage``: a file whose point data is cut off (a LAS short of records, a
     LAZ whose chunk table at its end is gone with the tail) is not an error: ``truncated`` says
-    why (the points before the cut can be read: LasReader.read_chunks(salvage=True))."""
+    why (the points before the cut can be read: LasReader.read_chunks(salvage=True)).
+    Within ``headers_once`` a file's header is read once (callers do not change it)."""
+    hdr = read_once("las", path, lambda: _read_las_header(path, salvage))
+    if not salvage and (hdr.truncated or hdr.evlrs_cut):  # kept from a salvaging read: refused as a plain read refuses it
+        return _read_las_header(path)
+    return hdr
+
+
+def _read_las_header(path: Path, salvage: bool = False) -> LasHeader:
     path = check_file(path)
     with open(path, "rb") as f:
         f.seek(0, 2)

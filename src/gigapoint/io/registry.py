@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import UnsupportedFormatError
-from ._base import Reader, check_file, fail, read_head
+from ._base import Reader, check_file, fail, read_head, read_once
 
 _READERS: list[Reader] = []
 
@@ -41,7 +41,7 @@ def reader_by_name(name: str) -> Reader:
 def reader_for(path: Path | str) -> Reader:
     """The reader for a file: a magic number in its first bytes wins, then its suffix, then a content guess."""
     p = check_file(path)
-    head = read_head(p)
+    head = read_once("head", p, lambda: read_head(p))  # (an operation asks several times a file: headers_once)
     all_readers = readers()
     for r in all_readers:
         if r.sniff(head):

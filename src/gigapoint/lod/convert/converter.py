@@ -16,7 +16,7 @@ from pathlib import Path
 from ...core import pages
 from ...core.renderable import PointSource
 from ...errors import GigapointWarning, InputError, check_switch
-from ...io._base import check_file
+from ...io._base import check_file, headers_once
 from ...io.registry import is_supported_name
 from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
@@ -164,6 +164,7 @@ def _not_a_path(p):
     raise InputError(f"convert: source_files are paths of the files the points came from, got a {type(p).__name__}")
 
 
+@headers_once()  # each input's header read once, by the read phase's steps and facts alike
 def convert(
     inputs,
     out,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Generator, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from contextvars import copy_context
 from typing import TypeVar
 
 T = TypeVar("T")
@@ -21,10 +22,11 @@ def prefetch(items: Iterable[T], name: str = "gigapoint-read") -> Iterator[T]:
     """
     it = iter(items)
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=name)
+    ctx = copy_context()  # the caller's: the headers it read (io headers_once) are not read again in the thread
     try:
-        pending = pool.submit(next, it, _END)
+        pending = pool.submit(ctx.run, next, it, _END)
         while (item := pending.result()) is not _END:
-            pending = pool.submit(next, it, _END)
+            pending = pool.submit(ctx.run, next, it, _END)
             yield item
     finally:
         pool.shutdown(wait=True, cancel_futures=True)  # no thread is left inside ``it``

@@ -18,6 +18,7 @@ raises it. ``close`` stops the loader and waits for it.
 
 from __future__ import annotations
 
+import contextvars
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -32,6 +33,7 @@ from ...core.cloud import check_valid_count
 from ...core.threads import SMALL_BATCH
 from ...errors import GigapointError, InputError, MemoryLimitError
 from ...io import human_bytes
+from ...io._base import headers_once
 from ..convert.prefetch import prefetch
 
 SLICE_POINTS = 250_000  # points inserted under one hold of the octree (~20-40 ms) while no frames are drawn
@@ -81,7 +83,8 @@ class Loader:
         self._stop = threading.Event()
         self._done = threading.Event()
         self._first_in = threading.Event()  # the first slice is inserted (the decoder then goes on)
-        self._thread = threading.Thread(target=self._run, name=f"gigapoint-load-{octree.name}", daemon=True)
+        # run in the caller's context: the headers file_sources read (io headers_once) are not read again
+        self._thread = threading.Thread(target=contextvars.copy_context().run, args=(self._run,), name=f"gigapoint-load-{octree.name}", daemon=True)
 
     def start(self) -> Loader:
         # numba's threads started by this thread, not by the loader's first kernel: TBB shuts them down
@@ -326,6 +329,7 @@ def open_progressive(sources, total, bounds, name, grid=None, max_leaf=None, mem
     return octree
 
 
+@headers_once()  # the headers file_sources reads, read once: its loader thread takes them along
 def open_sized(paths, point_budget: int, progressive: bool | None = None, progress: bool = False):
     """What ``gigapoint view`` and ``render`` open: an octree (a converted folder, COPC, EPT) as
     itself; other inputs as a ProgressiveOctree (drawable while it loads) when asked, or when

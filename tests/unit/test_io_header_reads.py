@@ -1,0 +1,99 @@
+"""Each LAS/LAZ file's header is read once per operation (io headers_once): counts, scan angles,
+the LAS grid and the points each read it again before, 3-6 times a file (a seek or a request
+each, for a folder of 2 000 tiles or files on a network)."""
+
+from __future__ import annotations
+
+import builtins
+from collections import Counter
+
+import laspy
+import pytest
+from test_io_las import write_las
+
+import gigapoint as gp
+from gigapoint.errors import InputError
+from gigapoint.io import _base, las
+
+N_TILES = 4
+
+
+@pytest.fixture
+def tiles(tmp_path):
+    """A folder of LAS and LAZ tiles, of point formats 3 and 6 (the scan angle under both names)."""
+    folder = tmp_path / "tiles"
+    folder.mkdir()
+    for i in range(N_TILES):
+        write_las(folder / f"t{i}.{'laz' if i % 2 else 'las'}", n=3000, point_format=3 if i < 2 else 6, version="1.2" if i < 2 else "1.4", seed=i)
+    return folder
+
+
+@pytest.fixture
+def reads(monkeypatch, tiles):
+    """Counters of the tiles' opens ({file name: count}): ``header`` by gigapoint's header
+    parser (io/las.py's ``open``), ``head`` by the format sniff (io/_base.py's read_head), ``laspy``
+    by laspy for the points."""
+    counts = {"header": Counter(), "head": Counter(), "laspy": Counter()}
+
+    def counting(kind, real):
+        def opener(file, *args, **kwargs):
+            name = str(file)
+            if name.startswith(str(tiles)):
+                counts[kind][name.rsplit("/", 1)[-1]] += 1
+            return real(file, *args, **kwargs)
+
+        return opener
+
+    monkeypatch.setattr(las, "open", counting("header", builtins.open), raising=False)
+    monkeypatch.setattr(_base, "open", counting("head", builtins.open), raising=False)
+    monkeypatch.setattr(laspy, "open", counting("laspy", laspy.open))
+    return counts
+
+
+#: one open a tile
+ONCE = {f"t{i}.{'laz' if i % 2 else 'las'}": 1 for i in range(N_TILES)}
+
+
+def test_open_reads_each_header_once(tiles, reads):
+    cloud = gp.open(tiles)
+    assert cloud.n_points == N_TILES * 3000
+    assert reads["header"] == ONCE and reads["head"] == ONCE
+    assert reads["laspy"] == ONCE  # the points, once
+
+
+def test_progressive_open_reads_each_header_once(tiles, reads):
+    octree = gp.open(tiles, progressive=True)
+    assert octree.wait(timeout=120)
+    assert octree.n_points == N_TILES * 3000
+    assert reads["header"] == ONCE and reads["head"] == ONCE  # file_sources, then the loader thread
+
+
+@pytest.mark.parametrize("memory_limit", [None, "64M"], ids=["in-memory", "out-of-core"])
+def test_convert_reads_each_header_once(tiles, reads, tmp_path, memory_limit):
+    gp.convert(tiles, tmp_path / "out", memory_limit=memory_limit)
+    assert reads["header"] == ONCE and reads["head"] == ONCE  # (out of core: read in prefetch's thread)
+
+
+def test_info_reads_each_header_once(tiles, reads, capsys):
+    from gigapoint.cli import main
+
+    assert main(["info", str(tiles)]) == 0
+    assert capsys.readouterr().out.count("points:      3,000") == N_TILES
+    assert reads["header"] == ONCE and reads["head"] == ONCE
+
+
+def test_kept_header_of_a_cut_file_still_refused_by_a_plain_read(tmp_path):
+    """A header kept from a salvaging read (a file cut off: its points up to the cut) is refused
+    by a plain read as without headers_once, with the same message."""
+    from gigapoint.io._base import headers_once
+
+    path = tmp_path / "cut.las"
+    write_las(path, n=1000)
+    path.write_bytes(path.read_bytes()[:-100])
+    with pytest.raises(InputError) as plain:
+        las.read_las_header(path)
+    with headers_once():
+        assert "truncated LAS file" in las.read_las_header(path, salvage=True).truncated
+        with pytest.raises(InputError) as kept:
+            las.read_las_header(path)
+    assert str(kept.value) == str(plain.value)
