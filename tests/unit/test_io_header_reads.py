@@ -82,6 +82,14 @@ def test_info_reads_each_header_once(tiles, reads, capsys):
     assert reads["header"] == ONCE and reads["head"] == ONCE
 
 
+def test_render_reads_each_header_once(tiles, reads, tmp_path):
+    """``gigapoint render`` (open_sized: the headers, then the cloud or a progressive octree)."""
+    from gigapoint.cli import main
+
+    assert main(["render", str(tiles), "-o", str(tmp_path / "a.png"), "--width", "64", "--height", "48"]) == 0
+    assert reads["header"] == ONCE and reads["head"] == ONCE
+
+
 def test_kept_header_of_a_cut_file_still_refused_by_a_plain_read(tmp_path):
     """A header kept from a salvaging read (a file cut off: its points up to the cut) is refused
     by a plain read as without headers_once, with the same message."""
