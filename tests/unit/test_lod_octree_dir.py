@@ -117,7 +117,10 @@ def test_prepare_output_resumes_clears_or_refuses(tmp_path):
     d.meta.write_text("{}")
     with pytest.raises(OutputExistsError, match=r"overwrite=True"):  # a Python caller's keyword (the CLI says --overwrite)
         d.prepare_output({"v": 2}, overwrite=False)
-    assert d.prepare_output({"v": 2}, overwrite=True) is None and not d.meta.exists()
+    d.write_state({"fingerprint": {"v": 2}, "phase": "count"})  # a replacement stopped part-way: resumed with overwrite only
+    assert d.prepare_output({"v": 2}, overwrite=True) == {"fingerprint": {"v": 2}, "phase": "count"}
+    assert d.prepare_output({"v": 3}, overwrite=True) is None and d.meta.read_text() == "{}"  # replaced once the new one is complete
+    assert d.read_state() is None and d.partial.is_dir()
     foreign = OctreeDir(tmp_path / "photos")
     foreign.path.mkdir()
     (foreign.path / "holiday.jpg").write_bytes(b"x")

@@ -27,6 +27,12 @@ An octree folder ``OUT`` is made by ``gigapoint convert`` (or PotreeConverter) a
   node sets). A gigapoint conversion also fills ``<array>.tmp.npy`` in ``OUT`` itself; the
   write phase renames them.
 
+A conversion with overwrite leaves the complete octree it replaces in place, beside its
+``.partial``, until its write phase: that moves the old files into ``.partial/old``
+(``set_aside``), metadata first, and the new octree's metadata, written last, completes the
+swap; a write phase that fails puts them back (``restore``). So the old octree opens until the
+new one is complete, at the cost of the disk of both at once.
+
 A conversion holds an exclusive ``flock`` on the folder itself for as long as it runs
 (``lock``); ``running`` probes it. The kernel drops the lock when the process ends, even
 killed, so a stopped conversion is told apart from a running one.
@@ -66,7 +72,7 @@ RESUME_HINT = "run `gigapoint convert` again to resume it"  # what a stopped con
 STOPPED_RESUMES = "run it again once the cause is gone: it resumes"  # how a run stopped by an error (a full disk) goes on
 NO_RESUME_HINT = "its points were given from Python (a cloud's save), so it cannot resume: save the cloud again"  # what a stopped one of chunks needs
 
-# what --overwrite clears besides .partial, attr.*.npy and temporary files (never anything else)
+# an octree's files besides attr.*.npy and field.*.npy, metadata first: what a conversion replaces (never anything else)
 _OWN_FILES = (GIGAPOINT_META, POTREE_META, POTREE_HIERARCHY, POTREE_OCTREE, "nodes.npy", "keys.npy", *(f"{a}.npy" for a in POINT_ARRAYS + COMPACT_ARRAYS[1:]))
 
 Kind = Literal["gigapoint", "potree", "unfinished"]
@@ -170,6 +176,12 @@ class OctreeDir:
     def partial(self) -> Path:
         """An unfinished conversion's working folder (removed once the octree is complete)."""
         return self.path / PARTIAL
+
+    @property
+    def old(self) -> Path:
+        """The complete octree a conversion with overwrite replaces, moved here by its write phase
+        (``set_aside``) and removed with ``partial`` once the new one is complete."""
+        return self.partial / "old"
 
     @property
     def state_file(self) -> Path:
@@ -327,22 +339,24 @@ class OctreeDir:
     def prepare_output(self, fingerprint, overwrite: bool) -> dict | None:
         """Make the folder ready for a conversion whose inputs and options are ``fingerprint``:
         the saved state when an unfinished conversion with the same fingerprint can resume,
-        else None, the folder cleared (a complete octree only with ``overwrite``) and
-        ``.partial`` created. A folder that is not an octree is written into only when empty."""
+        else None, the conversion's work cleared and ``.partial`` created. A complete octree is
+        replaced only with ``overwrite``, and stays until the new one is complete (``set_aside``);
+        a folder that is not an octree is written into only when empty."""
         out = self.path
         if out.exists() and not out.is_dir():
             raise OutputExistsError(f"{out}: exists and is not a directory")
         if out.exists():
+            state = self.read_state()
+            same = state and fingerprint is not None and state.get("fingerprint") == fingerprint  # (chunks never resume)
+            if same and (overwrite or not self.complete):  # an unfinished conversion, or replacement, resumes
+                return state
+            self.restore()  # a replacement killed in its write phase: the octree it was to replace is back
             complete = self.complete
             if complete and not overwrite:
                 raise OutputExistsError(f"{out}: already holds a converted point cloud; pass overwrite=True to replace it")
             if not complete and self.kind is None and any(out.iterdir()):
                 raise OutputExistsError(f"{out}: directory is not empty and is not a gigapoint/Potree output; refusing to write into it")
-            if not complete:
-                state = self.read_state()
-                if state and fingerprint is not None and state.get("fingerprint") == fingerprint:
-                    return state  # chunks (no fingerprint) are never taken for the chunks of another run
-            self.clear()
+            self.start_over()
         self.partial.mkdir(parents=True, exist_ok=True)
         return None
 
@@ -350,11 +364,52 @@ class OctreeDir:
         """Remove an unfinished conversion's working folder (once the octree is complete)."""
         shutil.rmtree(self.partial, ignore_errors=True)
 
-    def clear(self) -> None:
-        """Remove what a conversion writes here (for --overwrite or a fresh start); nothing else."""
+    def _octree_files(self) -> list[Path]:
+        """The octree's files here (either format's), metadata first; no work or temporary file."""
+        found = [self.path / f for f in _OWN_FILES] + sorted({*self.path.glob("attr.*.npy"), *self.path.glob("field.*.npy")})
+        return [p for p in found if p.is_file() and not p.name.endswith(".tmp.npy")]
+
+    def set_aside(self) -> None:
+        """Move the octree here into ``old``, for a write phase to put the new one in its place:
+        metadata first, so a stop part-way leaves an unfinished folder, never a mix of two."""
+        for p in self._octree_files():
+            self.old.mkdir(exist_ok=True)
+            os.replace(p, self.old / p.name)
+
+    def restore(self) -> bool:
+        """Put the octree set aside in ``old`` back, metadata last, where the new one's write phase
+        did not finish; the new files that took its place go (where the state says they were being
+        written), and so does the conversion's work, which no longer resumes. False where nothing
+        is set aside."""
+        metas = (GIGAPOINT_META, POTREE_META)
+        if not any((self.old / m).is_file() for m in metas):
+            return False
+        if (self.read_state() or {}).get("aside"):
+            for p in self._octree_files():
+                p.unlink()
+        for p in sorted(self.old.iterdir(), key=lambda p: p.name in metas):
+            os.replace(p, self.path / p.name)
+        self.clear_work()
+        return True
+
+    def start_over(self) -> None:
+        """Clear the folder for a conversion from the inputs: a complete octree (put back where
+        a replacement had set it aside) stays, for the conversion to replace once complete."""
+        self.restore()
+        if self.complete:
+            self.clear_work()
+        else:
+            self.clear()
+
+    def clear_work(self) -> None:
+        """Remove an unfinished conversion's work (its folder and temporary files); nothing else."""
         shutil.rmtree(self.partial, ignore_errors=True)
-        for f in _OWN_FILES:
-            (self.path / f).unlink(missing_ok=True)
-        stale = {*self.path.glob("attr.*.npy"), *self.path.glob("field.*.npy"), *self.path.glob("*.tmp"), *self.path.glob("*.tmp.npy"), *temp_files(self.path)}
+        stale = {*self.path.glob("*.tmp"), *self.path.glob("*.tmp.npy"), *temp_files(self.path)}
         for p in stale:
             p.unlink(missing_ok=True)
+
+    def clear(self) -> None:
+        """Remove what a conversion writes here (a fresh start); nothing else."""
+        self.clear_work()
+        for p in self._octree_files():
+            p.unlink()

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ...core import pages
 from ...core.renderable import PointSource
-from ...errors import GigapointWarning, InputError, check_switch
+from ...errors import GigapointError, GigapointWarning, InputError, check_switch
 from ...io._base import check_file, headers_once
 from ...io.registry import is_supported_name
 from ..build import SAMPLERS
@@ -75,12 +75,14 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
                     if fp is None and self.prepared:  # chunks from Python (a cloud's save): no rerun resumes them, so their work goes
                         self.discard(created)
                     raise
-        except InputError:
+        except GigapointError as exc:
             # inputs that gave not one point (none valid, or corrupt from the start): the folder this
             # run made holds nothing a run could resume from, so it goes rather than being left
             # behind as an "unfinished conversion"
-            if created and not getattr(self, "state", {}).get("points"):
+            if isinstance(exc, InputError) and created and not getattr(self, "state", {}).get("points"):
                 shutil.rmtree(self.dir.path, ignore_errors=True)
+            if self.replacing:
+                exc.args = (f"{exc}; {self.kept()}",)
             raise
         except OSError as exc:  # a full disk most often: the CLI's line named no file, nor what became of the output
             if created and not self.state:  # nothing began (OUT under a file: ENOTDIR): nothing to resume
@@ -92,26 +94,34 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
                 with contextlib.suppress(OSError):
                     self.save_state_with(damaged=damage)
                 raise ConvertError(f"{damage}; run it again with --overwrite to start over") from exc
+            if self.replacing:
+                raise ConvertError(f"{exc.filename or self.dir.path}: {exc.strerror or exc}; {self.kept()}") from exc
             again = STOPPED_RESUMES if fp is not None else "its work was removed: run it again once the cause is gone"
             raise ConvertError(f"{exc.filename or self.dir.path}: {exc.strerror or exc}; the conversion to {self.out} stopped unfinished ({again})") from exc
         finally:
             self.progress.close()
+
+    def kept(self) -> str:
+        """What a replacement that stopped left: the octree it was to replace, and whether a rerun resumes."""
+        again = "it resumes" if self.dir.state_file.is_file() and self.dir.resumable else "it starts over"
+        return f"{self.out} still holds the octree it was to replace (run it again with overwrite=True once the cause is gone: {again})"
 
     def discard(self, created: bool) -> None:
         """Remove what this run wrote: the folder where it made it, else only the conversion's own files."""
         if created:
             shutil.rmtree(self.dir.path, ignore_errors=True)
         else:
-            self.dir.clear()
+            self.dir.start_over()
 
     def _run_locked(self, overwrite: bool, fp) -> ConvertResult:
         saved = self.dir.prepare_output(fp, overwrite)
         self.prepared = True
+        self.replacing = self.dir.complete  # (prepare_output let it stay: overwrite)
         damage = (saved.get("damaged") or damaged_work_file(self.dir)) if saved is not None else None
         if damage and not overwrite:
             raise ConvertError(f"{damage}; run it again with --overwrite to start over")
         if damage:  # overwrite: the unfinished conversion goes, this one starts from the inputs
-            self.dir.clear()
+            self.dir.start_over()
             self.dir.partial.mkdir(parents=True)
             saved = None
         resumed = saved is not None

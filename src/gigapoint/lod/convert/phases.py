@@ -433,13 +433,21 @@ class BuildPhases(Job):
     def write(self) -> int:
         st = self.state
         self.progress.phase("write", st["points"])
-        if self.format == "potree":
-            n_nodes = write_potree(self.dir, self.sources(built_order=True), st, self.name, self.progress, self.encoding)
-        elif self.format == "copc":  # one file beside the working folder, which goes once it is written
-            n_nodes = write_copc_sets(self.out, self.sources(), st, self.progress)
-        else:
-            self._close_outputs()
-            n_nodes = write_gigapoint(self.dir, self.sources(), st, self.name, self.sampler, self.max_leaf, self.progress, self._write_steps)
+        try:
+            if self.format != "copc" and not st.get("aside"):  # an octree being replaced opened until now; its files go aside
+                self.dir.set_aside()
+                st["aside"] = True  # (from here on, the octree's names hold the new files)
+                self.save_state()
+            if self.format == "potree":
+                n_nodes = write_potree(self.dir, self.sources(built_order=True), st, self.name, self.progress, self.encoding)
+            elif self.format == "copc":  # one file beside the working folder, which goes once it is written
+                n_nodes = write_copc_sets(self.out, self.sources(), st, self.progress)
+            else:
+                self._close_outputs()
+                n_nodes = write_gigapoint(self.dir, self.sources(), st, self.name, self.sampler, self.max_leaf, self.progress, self._write_steps)
+        except BaseException:
+            self.dir.restore()  # the octree being replaced back in place, if this run had set it aside
+            raise
         self.dir.remove_partial()
         if self.format == "copc":
             self.dir.path.rmdir()

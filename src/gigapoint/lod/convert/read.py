@@ -136,10 +136,12 @@ def _point_total(paths) -> int | None:
 class ReadPhase(Job):
     read_ahead = True  # the next chunk decoded in a thread while this one is spilled
     on_ready = None  # convert()'s on_ready: called once the output first shows points
+    replacing = False  # a complete octree in the output is being replaced (converter.py): it opens until the new one is complete
 
     def shows_points(self, seconds: float) -> None:
-        """The output is viewable (its first preview), ``seconds`` after the start: on_ready called, once."""
-        if self.first_view is None:
+        """The output is viewable (its first preview), ``seconds`` after the start: on_ready called, once.
+        Not where a complete octree is being replaced: the output opens as that one until the end."""
+        if self.first_view is None and not self.replacing:
             self.first_view = seconds
             if self.on_ready is not None:
                 self.on_ready()
