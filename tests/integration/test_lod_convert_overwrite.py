@@ -95,6 +95,23 @@ def test_a_replacement_stopped_by_a_corrupt_input_keeps_the_old_octree(inputs, t
     assert {k: v for k, v in _files(out).items() if not k.startswith(".partial")} == files and _points(out) == points
 
 
+def test_a_copc_file_is_replaced_only_once_the_new_one_is_complete(inputs, tmp_path, monkeypatch):
+    """A COPC output is written under a temporary name and renamed (atomic_open): a failed
+    replacement leaves the old file, and says so."""
+    old, new = inputs
+    out = tmp_path / "scan.copc.laz"
+    convert([old], out, **OPTS)
+    before = out.read_bytes()
+    _fail_in_build(monkeypatch, OSError(errno.ENOSPC, "No space left on device", str(tmp_path / "x")))
+    with pytest.raises(ConvertError, match=rf"; {out} still holds the octree it was to replace \(.*: it resumes\)$"):
+        convert([new], out, overwrite=True, **OPTS)
+    assert out.read_bytes() == before and gp.open(out).n_points == 60_000
+    monkeypatch.setattr(hooks, "after_partition_built", lambda done: None)
+    ready = []
+    assert convert([new], out, overwrite=True, on_ready=lambda: ready.append(1), **OPTS).points == 90_000
+    assert gp.open(out).n_points == 90_000 and ready == [1]  # the work folder's preview was there to watch
+
+
 def _reference(new: Path, tmp_path: Path, fmt: str) -> dict:
     ref = tmp_path / f"ref-{fmt}"
     if not ref.exists():

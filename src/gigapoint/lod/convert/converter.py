@@ -116,7 +116,8 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
     def _run_locked(self, overwrite: bool, fp) -> ConvertResult:
         saved = self.dir.prepare_output(fp, overwrite)
         self.prepared = True
-        self.replacing = self.dir.complete  # (prepare_output let it stay: overwrite)
+        # what OUT holds stays until the new one is complete (prepare_output let it, or atomic_open's rename for COPC)
+        self.replacing = self.dir.complete or (self.format == "copc" and self.out.is_file())
         damage = (saved.get("damaged") or damaged_work_file(self.dir)) if saved is not None else None
         if damage and not overwrite:
             raise ConvertError(f"{damage}; run it again with --overwrite to start over")

@@ -140,8 +140,9 @@ class ReadPhase(Job):
 
     def shows_points(self, seconds: float) -> None:
         """The output is viewable (its first preview), ``seconds`` after the start: on_ready called, once.
-        Not where a complete octree is being replaced: the output opens as that one until the end."""
-        if self.first_view is None and not self.replacing:
+        Not where a complete octree folder is being replaced: it opens as that one until the end
+        (a COPC output's preview is in its work folder)."""
+        if self.first_view is None and not (self.replacing and self.format != "copc"):
             self.first_view = seconds
             if self.on_ready is not None:
                 self.on_ready()
