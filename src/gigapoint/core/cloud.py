@@ -38,7 +38,9 @@ MAX_ABS_COORDINATE = 1e12
 class PointCloud:
     """A renderable point cloud (unstructured: batches of consecutive Morton-ordered points).
 
-    It is its own point buffers (renderable.py): built once, never rewritten in place."""
+    It is its own point buffers (renderable.py). Its colours change through ``set_colors``;
+    anything else changed in place (``rgba``'s view, an attribute replaced) is announced with
+    ``changed()``, so every backend and cache draws the new values."""
 
     batches: np.ndarray  # BATCH_DTYPE records
     low: np.ndarray  # u32 per point: bits 20-29 of x, y, z
@@ -75,8 +77,10 @@ class PointCloud:
         "auto"'s choice) hold approximations, which ``chunks()`` and so a conversion give back."""
         return isinstance(self.color, np.ndarray) and self.color.dtype == np.uint32
 
-    version: ClassVar[None] = None  # PointBuffers: the arrays never change once built
-    batch_version: ClassVar[None] = None
+    # PointBuffers: None while the arrays are as built; ``changed()`` makes it a counter and marks
+    # the batches it names in ``batch_version`` (the GPU then re-sends those, caches recompute)
+    version: int | None = field(default=None, init=False, repr=False, compare=False)
+    batch_version: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
     load_progress: ClassVar[float] = 1.0  # Renderable: built whole
 
     @property
@@ -95,8 +99,40 @@ class PointCloud:
 
     @property
     def rgba(self) -> np.ndarray:
-        """(N, 4) uint8 colors (a view of u32 colors, decoded from 16-bit ones)."""
+        """(N, 4) uint8 colors in the cloud's order (a view of u32 colors: call ``changed()``
+        after writing to it; a decoded copy of 16-bit colors or palettes). ``set_colors`` writes any."""
         return rgba32(self.color).view(np.uint8).reshape(-1, 4)
+
+    def set_colors(self, rgb, indices=None) -> None:
+        """Colours of points ``indices`` (all if None; the cloud's order, as ``positions()``'s) set to
+        ``rgb``: (k, 3|4) colours as ``from_arrays`` takes them, or one colour. Held in the cloud's
+        format (RGB565 and palettes approximate them); every backend draws them from the next frame."""
+        idx = slice(None) if indices is None else self._point_indices(indices)
+        n = self.n_points if indices is None else len(idx)
+        if np.ndim(rgb) == 1:  # one colour for all of them
+            rgb = np.broadcast_to(rgb, (n, len(rgb)))
+        new = colors_for(rgb, n, f"{self.name}: set_colors").view(np.uint32).reshape(-1)
+        if isinstance(self.color, PaletteColors):  # palettes are chosen per block: quantized again
+            full = rgba32(self.color)  # (a decoded copy)
+            full[idx] = new
+            self.color = encode_colors(full, "palette")
+        elif self.color.dtype == np.uint32:
+            self.color[idx] = new
+        elif not (new >> 24 == 255).all():
+            raise InputError(f"{self.name}: set_colors: 16-bit colors drop alpha, and some given are not opaque")
+        else:
+            self.color[idx] = pack_rgb565(new)
+        self.changed(indices)
+
+    def changed(self, indices=None) -> None:
+        """Say that the arrays of points ``indices`` (all if None) were changed in place (``rgba``'s
+        view written, an attribute replaced): the GPU sends their batches again and colours derived
+        from them (colour modes) are computed again. Frames drawn before no longer pick points."""
+        batches = slice(None) if indices is None else np.unique(self.batch_of(indices))
+        if self.batch_version is None:
+            self.batch_version = np.zeros(len(self.batches), np.int64)
+        self.version = (self.version or 0) + 1
+        self.batch_version[batches] = self.version
 
     def _point_indices(self, indices) -> np.ndarray:
         """``indices`` as int64 point indices (1-D), or a one-line PointIndexError for one that is
@@ -226,7 +262,7 @@ class PointCloud:
         return DrawList(self, sel, len(self.batches), step)
 
     def reading(self) -> contextlib.nullcontext:
-        """Nothing to hold: the buffers never change."""
+        """Nothing to hold: the buffers change only where the program changes them, between frames."""
         return contextlib.nullcontext()
 
     def prepare_views(self, views: list[View], settings: SelectionSettings) -> MultiViewDrawList:

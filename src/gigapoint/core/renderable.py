@@ -48,7 +48,8 @@ class SelectionSettings(Protocol):
 class PointBuffers(Protocol):
     """Point arrays in the batch layout (layout.py) that backends draw and passes read.
 
-    ``version`` is None for buffers that never change after they are built (a PointCloud);
+    ``version`` is None for buffers that never changed after they were built (a PointCloud
+    until its ``changed()`` or ``set_colors``);
     buffers rewritten in place between frames (an octree's arena) bump it on every write
     and record in ``batch_version`` the version that last wrote each batch, so caches of
     derived arrays (render's RenderCache, the GPU's copies) know what is stale."""
