@@ -196,6 +196,16 @@ def test_copc_over_http_renders_like_the_local_file(data, server):
     c.close()
 
 
+def test_a_closed_url_cloud_says_so_when_a_frame_needs_more_of_it(server):
+    c = gp.open(server.url("autzen.copc.laz"))
+    _frame(c, point_budget=5_000)
+    c.close()
+    before = server.requests
+    with pytest.raises(InputError, match=r"^http://127\.0\.0\.1:\d+/autzen\.copc\.laz: bytes [\d,]+\.\.[\d,]+ not read: the cloud was closed \(close\(\)\); open it again to read more of it$"):
+        _frame(c, point_budget=10**9, lod_threshold_px=0.0)  # (httpx's RuntimeError: "Cannot send a request, as the client has been closed.")
+    assert server.requests == before
+
+
 def test_several_requests_in_flight(server, monkeypatch):
     monkeypatch.setattr(gphttp, "MERGE_GAP", -1)  # one request per node
     c = gp.open(server.url("autzen.copc.laz"))

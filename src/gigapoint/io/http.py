@@ -224,6 +224,7 @@ class HttpClient:
         self.versions: dict[str, str] = {}  # each file's first ETag (else Last-Modified): a change is noticed
         self.requests = 0  # requests sent (cache misses), for tests and benchmarks
         self.bytes_read = 0
+        self.closed = False  # (httpx's own "Cannot send a request" was a RuntimeError traceback)
 
     def map(self, fn, items: list) -> list:
         """``fn(item)`` of each item, several at once; the first failure is raised."""
@@ -235,6 +236,7 @@ class HttpClient:
         return list(self._pool.map(fn, items))
 
     def close(self) -> None:
+        self.closed = True
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
             self._pool = None
@@ -252,6 +254,8 @@ class HttpClient:
         what = f"bytes {start:,}..{start + size:,}" if start is not None else "the file"
         if start is not None and size <= 0:
             return b""
+        if self.closed:
+            raise InputError(f"{url}: {what} not read: the cloud was closed (close()); open it again to read more of it")
         known = self.sizes.get(url)
         if start is not None and not allow_short and known is not None and start + size > known:
             raise InputError(f"{url}: {what} lie past the end of the file ({known:,} bytes)")
