@@ -555,6 +555,30 @@ def test_viewer_for_jupyter(cloud):
             gigapoint.Viewer(cloud, display=False, **bad)
 
 
+def test_viewer_redraw_shows_colours_the_program_changed():
+    pytest.importorskip("websockets")
+    from websockets.sync.client import connect
+
+    cloud = marker_scene()
+    with gigapoint.Viewer(cloud, display=False) as v, connect(ws_url(v.server, 160, 120)) as ws:
+
+        def next_frame(timeout):
+            while True:
+                m = ws.recv(timeout=timeout)
+                if isinstance(m, bytes) and P.unpack_frame(m)[0]["full"]:
+                    return jpeg_pixels(P.unpack_frame(m)[1])
+
+        assert (next_frame(30)[..., 1] > 120).mean() > 0.05  # the green ground
+        cloud.set_colors([0, 0, 255])
+        with pytest.raises(TimeoutError):
+            next_frame(1.0)  # the tab does not watch the cloud
+        v.redraw()
+        img = next_frame(30)
+        assert (img[..., 2] > 200).mean() > 0.05 and (img[..., 1] > 120).mean() < 0.001  # blue, no green left
+    with pytest.raises(gigapoint.GigapointError, match=r"^Viewer of 'marker': closed, its server stopped; open a new Viewer to redraw the cloud$"):
+        v.redraw()
+
+
 def test_cli_view_serves_and_stops(tmp_path):
     env = {**os.environ, "BROWSER": "true"}
     bad = subprocess.run([sys.executable, "-m", "gigapoint.cli", "view"], check=False, capture_output=True, text=True, timeout=60, env=env)

@@ -78,6 +78,12 @@ class Viewer:
         active = core.last_active
         return core.screenshot(active.id if active is not None and active.id in core.sessions else None, width, height, scale)
 
+    def redraw(self) -> None:
+        """Every tab draws the cloud again, its view kept: after the program changed it
+        (``cloud.set_colors``, ``cloud.changed()``), which the tabs do not watch."""
+        self._check_open("redraw the cloud")
+        self.server.core.redraw()
+
     @property
     def closed(self) -> bool:
         return self.server.closed
