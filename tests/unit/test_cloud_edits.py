@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -57,7 +59,7 @@ def test_set_colors_takes_one_colour_for_all_and_floats():
 
 def test_set_colors_refuses_bad_colours_and_indices_in_one_line():
     cloud, _, _ = edit_scene(scale=0.001, colors="rgb565")
-    with pytest.raises(InputError, match=r"^arrays: set_colors: rgb has 2 rows, xyz has 3$"):
+    with pytest.raises(InputError, match=r"^arrays: set_colors: 2 colours for 3 points$"):
         cloud.set_colors(np.zeros((2, 3), np.uint8), [0, 1, 2])
     with pytest.raises(InputError, match=r"^arrays: set_colors: 16-bit colors drop alpha, and some given are not opaque$"):
         cloud.set_colors([10, 20, 30, 128], [5])
@@ -84,3 +86,32 @@ def test_changed_after_replacing_an_attribute_recolours_its_colour_mode():
     cloud.changed()
     after = gp.render(cloud, cam, by_attribute)
     assert pixel_colors(after) == {BLACK, (255, 255, 255, 255)}  # (black: the background too)
+
+
+@pytest.mark.parametrize(
+    "values, problem",
+    [
+        (np.zeros(5, np.uint16), "attribute 'bad' has 5 rows for 20,000 points"),  # the CPU drew colours read past them, the GPU black
+        ([1, 2, 3], "attribute 'bad' has 3 rows for 20,000 points"),
+        (np.array(["a"] * 20_000), "attribute 'bad' has dtype <U1: attributes are numbers (bool, integers, floats of at most 64 bits)"),
+        (7, "attribute 'bad' is one value (7), not one per point"),
+    ],
+)
+def test_an_attribute_the_program_adds_is_checked_as_from_arrays_checks_it(values, problem):
+    cloud, _, _ = edit_scene()
+    with pytest.raises(InputError, match=rf"^arrays: {re.escape(problem)}$"):
+        cloud.attributes["bad"] = values
+    assert "bad" not in cloud.attributes
+    with pytest.raises(InputError, match=r"^arrays: attribute name 'a/b' cannot be stored"):
+        cloud.attributes["a/b"] = np.zeros(cloud.n_points)
+    cloud.attributes["good"] = np.arange(cloud.n_points, dtype=np.float32)  # one a point: held (packed)
+    assert cloud.point_info(7)["good"] == 7.0 and cloud.attributes.held_dtype("good") == "float32"
+
+
+@pytest.mark.parametrize("kw", FORMATS[1:], ids=lambda kw: kw["colors"])
+def test_rgba_of_16_bit_colours_or_palettes_is_a_read_only_copy(kw):
+    cloud, _, _ = edit_scene(**kw)
+    with pytest.raises(ValueError, match="read-only"):  # (written, it changed nothing, without a word)
+        cloud.rgba[0] = BLUE
+    cloud.set_colors([BLUE], [0])
+    assert cloud.rgba[0].tolist() == list(BLUE)

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
+from .chunk import attribute_problem
 from .pages import zeros
 
 #: unsigned dtypes tried for ``maximum - minimum``, narrowest first
@@ -128,6 +130,7 @@ class Attributes(MutableMapping):
     def __init__(self, arrays: Mapping | None = None, packed: bool = False) -> None:
         self._held: dict[str, np.ndarray | Packed] = {}
         self._pack = packed
+        self._owner: tuple[str, int] | None = None  # (cloud name, points): what ``belong_to`` checks against
         for name, values in (arrays or {}).items():
             self[name] = values
         self._pack = True  # attributes stored later (normals) are packed
@@ -137,7 +140,17 @@ class Attributes(MutableMapping):
         return held.decode() if isinstance(held, Packed) else held
 
     def __setitem__(self, name: str, values) -> None:
+        if self._owner is not None:  # a program's own: 5 values for 20 000 points read past them in a render
+            values = np.asarray(values)
+            problem = attribute_problem(name, values, self._owner[1])
+            if problem:
+                raise InputError(f"{self._owner[0]}: {problem}")
         self._held[name] = pack(values) if self._pack else values
+
+    def belong_to(self, cloud_name: str, n_points: int) -> None:
+        """Check attributes stored from now on as a chunk's are (one number a point, ``n_points``):
+        a cloud's, to which the program may add its own."""
+        self._owner = (cloud_name, n_points)
 
     def __delitem__(self, name: str) -> None:
         del self._held[name]
@@ -189,7 +202,7 @@ class Attributes(MutableMapping):
     def copy(self) -> Attributes:
         """Another mapping over the same held arrays (no decoding)."""
         out = Attributes()
-        out._held = dict(self._held)
+        out._held, out._owner = dict(self._held), self._owner
         return out
 
 

@@ -38,12 +38,7 @@ class PointChunk:
             if len(self.rgba) != n:
                 raise ValueError(f"rgba has {len(self.rgba)} rows, xyz has {n}")
         for name, values in self.attributes.items():
-            if np.ndim(values) == 0:  # intensity=5: len() of a 0-d array was a TypeError
-                value = " ".join(repr(np.asarray(values).item()).split())  # one line, however long the object
-                raise ValueError(f"attribute {name!r} is one value ({value[:60]}{'...' if len(value) > 60 else ''}), not one per point")
-            if len(values) != n:
-                raise ValueError(f"attribute {name!r} has {len(values)} rows, xyz has {n}")
-            problem = attribute_name_problem(name) or attribute_dtype_problem(name, values)
+            problem = attribute_problem(name, values, n)
             if problem:
                 raise ValueError(problem)
 
@@ -57,6 +52,17 @@ def join_chunks(chunks: list[PointChunk]) -> PointChunk:
         return chunks[0]
     attrs = {a: np.concatenate([c.attributes[a] for c in chunks]) for a in chunks[0].attributes}
     return PointChunk(np.concatenate([c.xyz for c in chunks]), np.concatenate([c.rgba for c in chunks]), attrs)
+
+
+def attribute_problem(name, values, n: int) -> str | None:
+    """Why ``values`` cannot be attribute ``name`` of ``n`` points (a chunk's, or a cloud's stored
+    later by the program), or None."""
+    if np.ndim(values) == 0:  # intensity=5: len() of a 0-d array was a TypeError
+        value = " ".join(repr(np.asarray(values).item()).split())  # one line, however long the object
+        return f"attribute {name!r} is one value ({value[:60]}{'...' if len(value) > 60 else ''}), not one per point"
+    if len(values) != n:
+        return f"attribute {name!r} has {len(values):,} rows for {n:,} points"
+    return attribute_name_problem(name) or attribute_dtype_problem(name, values)
 
 
 def attribute_name_problem(name) -> str | None:

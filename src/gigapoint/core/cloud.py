@@ -70,6 +70,7 @@ class PointCloud:
     def __post_init__(self) -> None:
         if not isinstance(self.attributes, Attributes):  # a dict of arrays: held as given
             self.attributes = Attributes(self.attributes)
+        self.attributes.belong_to(self.name, self.n_points)
 
     @property
     def colors_exact(self) -> bool:
@@ -100,8 +101,11 @@ class PointCloud:
     @property
     def rgba(self) -> np.ndarray:
         """(N, 4) uint8 colors in the cloud's order (a view of u32 colors: call ``changed()``
-        after writing to it; a decoded copy of 16-bit colors or palettes). ``set_colors`` writes any."""
-        return rgba32(self.color).view(np.uint8).reshape(-1, 4)
+        after writing to it; a read-only decoded copy of 16-bit colors or palettes). ``set_colors`` writes any."""
+        colors = rgba32(self.color)
+        if colors is not self.color:  # a copy: writes to it changed nothing, without a word
+            colors.flags.writeable = False
+        return colors.view(np.uint8).reshape(-1, 4)
 
     def set_colors(self, rgb, indices=None) -> None:
         """Colours of points ``indices`` (all if None; the cloud's order, as ``positions()``'s) set to
@@ -111,6 +115,8 @@ class PointCloud:
         n = self.n_points if indices is None else len(idx)
         if np.ndim(rgb) == 1:  # one colour for all of them
             rgb = np.broadcast_to(rgb, (n, len(rgb)))
+        elif np.ndim(rgb) == 2 and len(rgb) != n:  # (colors_for's "xyz has")
+            raise InputError(f"{self.name}: set_colors: {len(rgb):,} colours for {n:,} points")
         new = colors_for(rgb, n, f"{self.name}: set_colors").view(np.uint32).reshape(-1)
         if isinstance(self.color, PaletteColors):  # palettes are chosen per block: quantized again
             full = rgba32(self.color)  # (a decoded copy)
