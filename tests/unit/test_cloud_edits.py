@@ -65,6 +65,8 @@ def test_set_colors_refuses_bad_colours_and_indices_in_one_line():
         cloud.set_colors([10, 20, 30, 128], [5])
     with pytest.raises(PointIndexError, match=r"^arrays: point index 20000 out of range 0..19999$"):
         cloud.set_colors([1, 2, 3], [20_000])
+    with pytest.raises(PointIndexError, match=r"^arrays: point indices must be whole numbers, got float64$"):
+        cloud.changed([1.5])
     assert cloud.version is None  # nothing was changed
 
 
