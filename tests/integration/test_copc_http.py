@@ -42,6 +42,7 @@ class RangeServer:
         self.requests = 0
         self.ranges: list[str] = []
         self.paths: list[str] = []  # as requested, with any query
+        self.auths: list[str] = []  # Authorization headers (a URL's user:password@)
         self.ports: set[int] = set()
         self.delay = 0.0  # seconds each answer waits (so that concurrent requests overlap)
         self.etag = None  # sent with each file's bytes when set
@@ -63,6 +64,7 @@ class RangeServer:
                     n = server.requests
                     server.ranges.append(self.headers.get("Range", ""))
                     server.paths.append(self.path)
+                    server.auths.append(self.headers.get("Authorization", ""))
                     server.inflight += 1
                     server.max_inflight = max(server.max_inflight, server.inflight)
                 try:
@@ -513,3 +515,66 @@ def test_a_copc_file_cut_short_on_the_server(server, tmp_path):
     finally:
         (server.root / "first_cut.copc.laz").unlink()
         (server.root / "flat_cut.copc.laz").unlink()
+
+
+# --------------------------------------------------------------------------- secrets in URLs
+
+SECRET_URL = "http://reader:hunter2@127.0.0.1:{port}/{name}?sig=SIG%2Fsecret&se=2031"
+
+
+def _no_secret(text: str, port: int, name: str) -> None:
+    assert "hunter2" not in text and "SIG" not in text and "2031" not in text, text
+    assert f"reader:***@127.0.0.1:{port}/{name}" in text, text
+
+
+def test_shown_url_hides_passwords_and_query_values():
+    s = gphttp.shown_url
+    assert s("https://user:secret@host/x.copc.laz") == "https://user:***@host/x.copc.laz"
+    assert s("https://u:p@ss@h:8/e/ept.json?X-Amz-Signature=ab%2F&token=t&raw#k=v") == "https://u:***@h:8/e/ept.json?X-Amz-Signature=***&token=***&***#k=***"
+    assert s(Path("https://u:pw@h/a.laz?key=k")) == "https:/u:***@h/a.laz?key=***"  # (the CLI's Path of a URL)
+    for same in ("https://user@h/x", "http://h/x?", "http://[::1", "/data/a?b=1.laz", "C:/x?y=1", "scan.laz"):
+        assert s(same) == same
+
+
+def test_a_url_with_a_password_and_a_token_is_never_shown_whole(data, server, quick, capsys, tmp_path):
+    """``https://user:secret@host/x.copc.laz?sig=...`` (how signed COPC files are shared) was echoed
+    whole in errors, ``gigapoint info``, the viewer's name and the cloud's repr; the request still
+    goes to the URL itself (its query and its credentials as Basic auth)."""
+    from gigapoint.cli import main
+
+    port = server.httpd.server_address[1]
+    url = SECRET_URL.format(port=port, name="autzen.copc.laz")
+    c = gp.open(url)
+    assert server.paths[0] == "/autzen.copc.laz?sig=SIG%2Fsecret&se=2031"
+    assert server.auths[0] == "Basic cmVhZGVyOmh1bnRlcjI="  # reader:hunter2
+    assert c.name == "autzen.copc.laz"
+    _no_secret(repr(c) + c.source_name, port, "autzen.copc.laz?sig=***&se=***")
+    c.close()
+    c = gp.open(SECRET_URL.format(port=port, name="ept_bin/"))
+    assert c.name == "ept_bin" and server.paths[-1] == "/ept_bin/ept-hierarchy/0-0-0-0.json?sig=SIG%2Fsecret&se=2031"
+    _no_secret(c.node_file(int(c.keys[0])), port, "ept_bin/ept-data/0-0-0-0.bin?sig=***&se=***")
+    c.close()
+    assert main(["info", url]) == 0
+    out = capsys.readouterr().out
+    _no_secret(out, port, "autzen.copc.laz?sig=***&se=***")
+    assert "COPC 1.4" in out
+    assert main(["info", "--json", url, SECRET_URL.format(port=port, name="nothing.copc.laz")]) == 1
+    out, err = capsys.readouterr()
+    _no_secret(out.splitlines()[-1], port, "nothing.copc.laz")
+    _no_secret(err + out, port, "")
+    for name, mode, match in (("nothing.copc.laz", "ok", "HTTP 404"), ("autzen.copc.laz", "error", "HTTP 500"), ("e/ept.json", "ok", "HTTP 404")):
+        server.mode = mode
+        with pytest.raises(InputError, match=match) as e:
+            gp.open(SECRET_URL.format(port=port, name=name))
+        _no_secret(str(e.value), port, f"{name}?sig=***&se=***")
+    server.mode = "ok"
+    with pytest.raises(InputError, match="a URL opens alone") as e:
+        gp.open(url, progressive=True)
+    _no_secret(str(e.value), port, "autzen.copc.laz?sig=***&se=***")
+    for other in ("ftp", "s3"):
+        with pytest.raises(InputError, match="only http") as e:
+            gp.open(url.replace("http", other, 1))
+        _no_secret(str(e.value), port, "autzen.copc.laz?sig=***&se=***")
+    with pytest.raises(InputError, match="an input must be a path") as e:
+        convert([url], tmp_path / "o")
+    _no_secret(str(e.value), port, "autzen.copc.laz?sig=***&se=***")

@@ -26,7 +26,7 @@ def info(
     options = cloud_options(colors, chunked)
     if options and not memory:  # without --memory nothing is loaded: the option would do nothing
         raise GigapointError(f"{option_names(options)}: only with --memory (how the loaded points are held)")
-    from ..io import expand_paths, file_info, format_info
+    from ..io import expand_paths, file_info, format_info, shown_url
     from ..lod import is_lod_source, octree_info
     from ..lod.copc_write import work_dir
     from ..lod.octree_dir import NO_RESUME_HINT, OctreeDir
@@ -51,7 +51,7 @@ def info(
             if len(paths) == 1:
                 raise
             failed += 1  # one damaged tile of a folder: said, and the others still shown
-            typer.echo(json.dumps({"path": str(path), "error": str(exc)}) if as_json else f"error: {exc}", err=not as_json)
+            typer.echo(json.dumps({"path": shown_url(path), "error": str(exc)}) if as_json else f"error: {exc}", err=not as_json)
             continue
         if as_json:
             typer.echo(json.dumps(data))
@@ -61,14 +61,14 @@ def info(
             typer.echo(format_info(data))
         if memory and octree:  # it printed nothing of memory, without a word
             why = "an octree is read node by node as views need them; --memory measures point files"
-            typer.echo(json.dumps({"path": str(path), "memory": None, "why": why}) if as_json else f"memory: {why}")
+            typer.echo(json.dumps({"path": shown_url(path), "memory": None, "why": why}) if as_json else f"memory: {why}")
         elif memory:
             import gigapoint as gp
 
             cloud = gp.open(path, **options)
             held = attributes_held(cloud)
             if as_json:
-                row = {"path": str(path), "layout": cloud.layout, "n_points": cloud.n_points, "memory": cloud.memory(), "attributes": held}
+                row = {"path": shown_url(path), "layout": cloud.layout, "n_points": cloud.n_points, "memory": cloud.memory(), "attributes": held}
                 typer.echo(json.dumps(row))
             else:
                 typer.echo(memory_line(cloud))

@@ -25,6 +25,7 @@ from ..core.cloud import PointCloud, build_cloud, scale_decimals
 from ..errors import EmptyCloudError, GigapointWarning, InputError, check_switch
 from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail, headers_once
 from .demo import demo_arrays, demo_chunks
+from .http import shown_url
 from .las import LasReader, read_las_header, with_scan_angle
 from .registry import is_supported_name, reader_for, readers, register, supported_suffixes
 
@@ -48,7 +49,7 @@ def file_url_path(text: str) -> Path | None:
         return None
     u = urllib.parse.urlsplit(text)
     if u.netloc not in ("", "localhost"):
-        raise InputError(f"{text}: a file:// URL of another machine ({u.netloc}); give a path on this one")
+        raise InputError(f"{shown_url(text)}: a file:// URL of another machine ({u.netloc.rpartition('@')[2]}); give a path on this one")
     return Path(urllib.request.url2pathname(u.path))
 
 
@@ -63,7 +64,7 @@ def expand_paths(paths: Iterable) -> list[Path]:
             local = file_url_path(text)  # gp.open("file:///...") was "only http:// and https:// URLs are read"
             url = URL_LIKE.match(text) if local is None else None
             if url:
-                raise InputError(f"{url.group(1)}://{url.group(2)}: only http:// and https:// URLs are read (COPC and EPT octrees)")
+                raise InputError(f"{shown_url(f'{url.group(1)}://{url.group(2)}')}: only http:// and https:// URLs are read (COPC and EPT octrees)")
             p = local if local is not None else Path(p).expanduser()  # "~/scans/a.laz" from Python (a shell expands it)
         p = Path(p)
         if p.is_dir():

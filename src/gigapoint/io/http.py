@@ -50,6 +50,8 @@ MERGE_GAP = 64 << 10
 MERGE_MAX = 8 << 20
 _RETRY_STATUS = (502, 503, 504)
 _URL = re.compile(r"^(https?):/+(.+)$", re.IGNORECASE)
+#: a URL (a Path of one has lost a '/'): scheme, user info and host, path, ?query, #fragment
+_SHOWN = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]+:/+)([^/?#]*)([^?#]*)(\?[^#]*|)(#.*|)$", re.DOTALL)
 _CONTENT_RANGE = re.compile(r"^\s*bytes\s+(\d+)-(\d+)/(\d+|\*)\s*$", re.IGNORECASE)
 
 
@@ -68,6 +70,30 @@ def as_url(source) -> str | None:
     if m is None:
         return None
     return f"{m.group(1).lower()}://{m.group(2)}"
+
+
+def shown_url(text) -> str:
+    """``text`` (a URL or a path) as messages, ``info`` and the viewer show it: a URL's password and
+    the values of its query as *** (``https://user:***@host/a.copc.laz?sig=***&se=***``). Signed
+    and credentialed URLs are how COPC files are shared, and what is shown ends up in logs and
+    issues; requests use the URL itself. Anything else is given back as it is."""
+    text = os.fspath(text) if isinstance(text, os.PathLike) else str(text)
+    m = _SHOWN.match(text)
+    if m is None:
+        return text
+    scheme, netloc, path, query, fragment = m.groups()
+    user, at, host = netloc.rpartition("@")  # (the last '@': a password may hold one)
+    if at and ":" in user:
+        netloc = f"{user.split(':', 1)[0]}:***@{host}"
+    return scheme + netloc + path + _hidden_values(query) + _hidden_values(fragment)
+
+
+def _hidden_values(part: str) -> str:
+    """'?a=1&b' -> '?a=***&***': the names of a query (or fragment) kept, its values hidden."""
+    if len(part) <= 1:
+        return part
+    items = part[1:].split("&")
+    return part[0] + "&".join(kv.split("=", 1)[0] + "=***" if "=" in kv else "***" if kv else "" for kv in items)
 
 
 def _one_line(exc: object) -> str:
@@ -258,7 +284,7 @@ class HttpClient:
             raise InputError(f"{url}: {what} not read: the cloud was closed (close()); open it again to read more of it")
         known = self.sizes.get(url)
         if start is not None and not allow_short and known is not None and start + size > known:
-            raise InputError(f"{url}: {what} lie past the end of the file ({known:,} bytes)")
+            raise InputError(f"{shown_url(url)}: {what} lie past the end of the file ({known:,} bytes)")
         headers = {"Range": f"bytes={start}-{start + size - 1}"} if start is not None else {}
         for attempt in range(self.retries + 1):
             last = attempt == self.retries
@@ -266,7 +292,7 @@ class HttpClient:
                 data = self._get_once(httpx, url, start, size, headers, allow_short, what)
             except _Transient as exc:
                 if last:
-                    raise InputError(f"{url}: {exc} (after {self.retries + 1} attempts)") from None
+                    raise InputError(f"{shown_url(url)}: {exc} (after {self.retries + 1} attempts)") from None
                 time.sleep(0.05 * 2**attempt)
                 continue
             if cache:
@@ -295,7 +321,7 @@ class HttpClient:
         threading.Thread(target=work, daemon=True, name="gigapoint-http-request").start()
         while not done.wait(max(0.0, t0 + limit[0] + 1.0 - time.monotonic())):  # (the body's own deadline fires first)
             if time.monotonic() >= t0 + limit[0] + 1.0:
-                raise InputError(f"{url}: {what} did not arrive within {limit[0]:g} s")
+                raise InputError(f"{shown_url(url)}: {what} did not arrive within {limit[0]:g} s")
         if isinstance(out[0], BaseException):
             raise out[0]
         return out[0]
@@ -312,14 +338,14 @@ class HttpClient:
                 if status in _RETRY_STATUS:
                     raise _Transient(f"HTTP {status} {r.reason_phrase} for {what}")
                 if status == 416:
-                    raise InputError(f"{url}: {what} lie past the end of the file (HTTP 416 Range Not Satisfiable)")
+                    raise InputError(f"{shown_url(url)}: {what} lie past the end of the file (HTTP 416 Range Not Satisfiable)")
                 if status >= 400:
                     error = HttpNotFound if status == 404 else InputError
-                    raise error(f"{url}: HTTP {status} {r.reason_phrase} for {what}")
+                    raise error(f"{shown_url(url)}: HTTP {status} {r.reason_phrase} for {what}")
                 expect = size
                 whole = False  # a 200 with the whole file, taken as the head of a small file
                 ignored = (
-                    f"{url}: the server ignored the range request for {what} (HTTP 200 with the whole file); "
+                    f"{shown_url(url)}: the server ignored the range request for {what} (HTTP 200 with the whole file); "
                     "COPC and EPT over HTTP need a server that answers Range requests (HTTP 206)"
                 )
                 length = r.headers.get("content-length", "")
@@ -331,11 +357,11 @@ class HttpClient:
                     if status == 200:
                         raise InputError(ignored)
                     if status != 206:
-                        raise InputError(f"{url}: unexpected HTTP {status} {r.reason_phrase} for {what}")
+                        raise InputError(f"{shown_url(url)}: unexpected HTTP {status} {r.reason_phrase} for {what}")
                     m = _CONTENT_RANGE.match(r.headers.get("content-range", ""))
                     if m is None:
                         raise InputError(
-                            f"{url}: answer to a range request has no valid Content-Range header ({r.headers.get('content-range')!r})"
+                            f"{shown_url(url)}: answer to a range request has no valid Content-Range header ({r.headers.get('content-range')!r})"
                         )
                     a, b, total = int(m.group(1)), int(m.group(2)), m.group(3)
                     self._same_file(url, r.headers, None if total == "*" else int(total))
@@ -343,9 +369,9 @@ class HttpClient:
                         expect = b - a + 1
                     elif a != start or b != start + size - 1:
                         end = f" (the file has {int(total):,} bytes)" if total != "*" else ""
-                        raise InputError(f"{url}: the server answered bytes {a:,}..{b + 1:,} to a request for {what}{end}")
+                        raise InputError(f"{shown_url(url)}: the server answered bytes {a:,}..{b + 1:,} to a request for {what}{end}")
                 elif status != 200:
-                    raise InputError(f"{url}: unexpected HTTP {status} {r.reason_phrase}")
+                    raise InputError(f"{shown_url(url)}: unexpected HTTP {status} {r.reason_phrase}")
                 if status == 200:
                     self._same_file(url, r.headers, int(length) if length.isdigit() else None)
                     if start is None and length.isdigit():
@@ -356,28 +382,28 @@ class HttpClient:
                     if whole and len(body) > expect:
                         raise InputError(ignored)
                     if expect is not None and len(body) > expect:
-                        raise InputError(f"{url}: the server sent more than the {expect:,} bytes asked for ({what})")
+                        raise InputError(f"{shown_url(url)}: the server sent more than the {expect:,} bytes asked for ({what})")
                     if time.monotonic() > t0 + limit[0]:
-                        raise InputError(f"{url}: {what} did not arrive within {limit[0]:g} s")
+                        raise InputError(f"{shown_url(url)}: {what} did not arrive within {limit[0]:g} s")
         except InputError:
             raise
         except _Transient:
             raise
         except httpx.TimeoutException:
-            raise InputError(f"{url}: no answer within {self.timeout:g} s for {what} (timed out)") from None
+            raise InputError(f"{shown_url(url)}: no answer within {self.timeout:g} s for {what} (timed out)") from None
         except (httpx.RemoteProtocolError, httpx.ReadError) as exc:
             raise _Transient(f"short read of {what}: the connection broke off ({_one_line(exc)})") from None
         except (httpx.ConnectError, httpx.WriteError) as exc:
             raise _Transient(f"cannot connect ({_one_line(exc)})") from None
         except httpx.HTTPError as exc:
-            raise InputError(f"{url}: {type(exc).__name__}: {_one_line(exc)}") from None
+            raise InputError(f"{shown_url(url)}: {type(exc).__name__}: {_one_line(exc)}") from None
         except httpx.InvalidURL as exc:  # not an HTTPError: 'http://[::1' reached the CLI as an internal error
-            raise InputError(f"{url}: not a valid URL ({_one_line(exc)})") from None
+            raise InputError(f"{shown_url(url)}: not a valid URL ({_one_line(exc)})") from None
         if whole:
             if len(body) != int(length):
-                raise InputError(f"{url}: short read: {len(body):,} of the {int(length):,} bytes of the file")
+                raise InputError(f"{shown_url(url)}: short read: {len(body):,} of the {int(length):,} bytes of the file")
         elif expect is not None and len(body) != expect:
-            raise InputError(f"{url}: short read: {len(body):,} of the {expect:,} bytes asked for ({what})")
+            raise InputError(f"{shown_url(url)}: short read: {len(body):,} of the {expect:,} bytes asked for ({what})")
         self.bytes_read += len(body)
         return bytes(body)
 
@@ -393,7 +419,7 @@ class HttpClient:
         elif version and seen and version != seen:
             change = f"{'ETag' if headers.get('etag') else 'Last-Modified'} {seen} became {version}"
         if change:
-            raise InputError(f"{url}: the file changed on the server while it was read ({change}); open it again")
+            raise InputError(f"{shown_url(url)}: the file changed on the server while it was read ({change}); open it again")
         if size is not None:
             self.sizes[url] = size
         if version and not seen:
@@ -413,7 +439,7 @@ class HttpFile(ByteSource):
 
     def __init__(self, url: str, client: HttpClient | None = None):
         self.url = url
-        self.name = url
+        self.name = shown_url(url)  # what messages say (the URL itself is what is requested)
         self.client = client or HttpClient()
 
     def size(self) -> int | None:

@@ -25,7 +25,7 @@ import numpy as np
 from ..core.chunk import safe_attribute_name
 from ..errors import GigapointWarning, InputError
 from ..io import laz_process
-from ..io.http import ByteSource, LocalFile, open_source
+from ..io.http import ByteSource, HttpFile, LocalFile, open_source
 from ..io.las import _scaled_xyz, read_las_header
 from .store import check_grid, tight_bounds
 from .voxel_octree import VOXEL_KEY_DTYPE, VoxelOctree, valid_voxels, voxel_name, voxel_to_key
@@ -370,7 +370,8 @@ class CopcCloud(VoxelOctree):
                 f"(its hierarchy, at bytes {root[0]:,}..{root[0] + root[1]:,}, is cut off: no node can be found){self._as_laz()}"
             )
         self._check_range(root[0], root[1], "the root hierarchy page")
-        stem = name.rstrip("/").rsplit("/", 1)[-1]
+        path = name.split("?")[0].split("#")[0] if isinstance(source, HttpFile) else name  # (a URL's token is no part of its name)
+        stem = path.rstrip("/").rsplit("/", 1)[-1]
         self._open(stem, meta, root, path=None)
 
     def _cut(self) -> bool:

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io import laz_process
-from ..io.http import ByteSource, as_url, open_source
+from ..io.http import ByteSource, as_url, open_source, shown_url
 from ..io.las import _scaled_xyz
 from .store import check_grid, tight_bounds
 from .voxel_octree import VoxelOctree, parse_voxel_name, voxel_name
@@ -228,5 +228,5 @@ def open_ept(path_or_url) -> EptCloud:
     """An EPT dataset (its ``ept.json``, its folder, or their URL) as an octree (EptCloud)."""
     loc = ept_location(path_or_url)
     if loc is None:
-        raise InputError(f"{path_or_url}: not an EPT dataset (no ept.json)")
+        raise InputError(f"{shown_url(path_or_url)}: not an EPT dataset (no ept.json)")
     return EptCloud(open_source(loc))

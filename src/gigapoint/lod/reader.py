@@ -12,7 +12,7 @@ import numpy as np
 
 from ..core.cloud import PointCloud
 from ..errors import InputError
-from ..io.http import HttpNotFound, as_url
+from ..io.http import HttpNotFound, as_url, shown_url
 from .compact_octree import read_compact
 from .copc import is_copc_file, open_copc
 from .ept import ept_location, open_ept
@@ -59,7 +59,7 @@ def refuse_octrees(paths, why: str) -> None:
         kind = lod_source_kind(path)
         if kind in ("folder", "ept") or (kind is not None and as_url(path) is not None):
             what = {"folder": "a converted octree folder", "ept": "an EPT dataset"}.get(kind, "a URL")
-            raise InputError(f"{path}: {what} opens alone, drawn level of detail as stored; {why}")
+            raise InputError(f"{shown_url(path)}: {what} opens alone, drawn level of detail as stored; {why}")
 
 
 def open_octree(path) -> OctreeCloud | PointCloud:
@@ -201,7 +201,7 @@ def _voxel_info(path) -> dict:
             "per level": ", ".join(f"{lv}: {n:,}" for lv, n in enumerate(per_level)),
         }
         return {
-            "path": str(url or path),
+            "path": shown_url(url or path),  # (a URL's password and token not printed)
             "format": "COPC" if copc else f"EPT ({meta.get('data_type')})",
             "las_version": meta.get("las_version"),
             "point_format": meta.get("point_format"),

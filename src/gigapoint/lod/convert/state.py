@@ -18,7 +18,7 @@ import numpy as np
 
 from ...atomic import same_file
 from ...errors import InputError
-from ...io import URL_LIKE, expand_paths, file_url_path
+from ...io import URL_LIKE, expand_paths, file_url_path, shown_url
 from ..copc_write import work_dir as copc_work_dir
 from ..ept import ept_location
 from ..octree_dir import OctreeDir, OutputExistsError
@@ -38,7 +38,7 @@ def local_path(p, what: str, error=InputError):
     # also a Path made of a URL (the CLI's: 'file:/x', 's3:/bucket/x'): -o s3://bucket/x wrote ./s3:/bucket/x
     if url.group(1).lower() == "file" and urllib.parse.urlsplit(text).netloc in ("", "localhost"):
         return file_url_path(text)
-    raise error(f"{url.group(1)}://{url.group(2)}: {what} must be a path or a file:// URL on this machine (a file system every worker shares)")
+    raise error(f"{shown_url(f'{url.group(1)}://{url.group(2)}')}: {what} must be a path or a file:// URL on this machine (a file system every worker shares)")
 
 
 def input_paths(inputs) -> list[Path] | None:
