@@ -692,3 +692,69 @@ def test_integers_past_float_range_are_protocol_errors(client, caplog):
         ws.send_json({"type": "ping", "t": 3})
         assert receive(ws, reply("pong"))["t"] == 3
     assert not [r for r in caplog.records if r.exc_info]
+
+
+def _closed_after(sock, limit: float = 5.0) -> float | None:
+    """Seconds until the server closed ``sock`` while it was sent a byte every 0.1 s (None: still open)."""
+    sock.settimeout(0.1)
+    t = time.monotonic()
+    while time.monotonic() - t < limit:
+        try:
+            sock.sendall(b"X")
+            if sock.recv(1 << 16) == b"":
+                return time.monotonic() - t
+        except TimeoutError:
+            pass
+        except OSError:
+            return time.monotonic() - t
+    return None
+
+
+def _eof(sock) -> bool:
+    try:
+        return sock.recv(1) == b""
+    except TimeoutError:
+        return False
+
+
+def test_a_client_trickling_its_request_head_is_cut_off(cloud, monkeypatch):
+    """uvicorn timed only the idle wait between requests: a client sending a header byte a second
+    held its connection for ever, and 1,100 of them used up a usual limit of 1,024 open files, so
+    the page no longer loaded. Each head now has HEAD_TIMEOUT_S and at most MAX_WAITING wait at
+    once (the longest waiting closed); requests being answered and WebSockets are not cut."""
+    import socket
+
+    import httpx
+    from websockets.sync.client import connect
+
+    from gigapoint.viewer import server as server_module
+
+    monkeypatch.setattr(server_module, "HEAD_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(server_module, "MAX_WAITING", 4)
+    srv = ViewerServer(cloud).start()
+    try:
+        base = f"http://127.0.0.1:{srv.port}"
+        s = socket.create_connection(("127.0.0.1", srv.port), timeout=5)
+        s.sendall(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n")
+        assert 0.9 < _closed_after(s) < 2.5
+        s = socket.create_connection(("127.0.0.1", srv.port), timeout=5)  # kept alive, then the next head trickled
+        s.sendall(b"GET /api/info HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+        assert s.recv(100).startswith(b"HTTP/1.1 200")
+        assert 0.9 < _closed_after(s) < 2.5
+        idle = [socket.create_connection(("127.0.0.1", srv.port), timeout=5) for _ in range(7)]
+        time.sleep(0.3)
+        for c in idle:
+            c.settimeout(0.05)
+        assert sum(_eof(c) for c in idle) == 3  # the 4 waiting at most stay (within their second)
+        assert httpx.get(base + "/", timeout=5).status_code == 200  # a real client meanwhile
+        slow = srv.core.screenshot
+        monkeypatch.setattr(srv.core, "screenshot", lambda *a: time.sleep(1.5) or slow(*a))
+        assert httpx.get(base + "/screenshot?width=32&height=24", timeout=10).status_code == 200  # answered past the deadline
+        with connect(f"ws://127.0.0.1:{srv.port}/ws?w=64&h=48", open_timeout=10) as ws:
+            assert json.loads(ws.recv(timeout=10))["type"] == "hello"
+            time.sleep(1.5)
+            ws.send(json.dumps({"type": "orbit", "dyaw": 1.0, "seq": 1}))
+            while not isinstance(m := ws.recv(timeout=10), bytes) or P.unpack_frame(m)[0]["seq"] != 1:
+                pass
+    finally:
+        srv.close()

@@ -36,6 +36,8 @@ STATIC_TYPES = {
     "viewer.css": "text/css; charset=utf-8",
     "favicon.svg": "image/svg+xml",
 }
+HEAD_TIMEOUT_S = 10.0  # seconds a request's head may take, from connecting or from the previous answer
+MAX_WAITING = 256  # connections waiting for a request head at once; past it the one waiting longest is closed
 MAX_PUSHERS = 8  # /push connections at once: each may hold a frame of up to MAX_PUSH_BYTES (300 of them: 19 GB)
 LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
 CSP = (
@@ -319,6 +321,56 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
     return app
 
 
+def _head_deadline_protocol():
+    """uvicorn's h11 protocol with a deadline on each request's head and a bound on the
+    connections waiting for one (one class a server: its own waiting list). uvicorn times only
+    the idle wait between requests: a client sending a header byte a second held its connection
+    for ever, and 1,100 of them used up the usual limit of 1,024 open files (the page no longer
+    loaded). A real client's head comes at once, so it is never the one waiting longest."""
+    from collections import OrderedDict
+
+    from uvicorn.protocols.http.h11_impl import H11Protocol
+
+    waiting: OrderedDict = OrderedDict()  # protocol -> its deadline's timer, the longest waiting first
+
+    class HeadDeadline(H11Protocol):
+        def connection_made(self, transport) -> None:
+            super().connection_made(transport)
+            self._wait()
+
+        def data_received(self, data: bytes) -> None:
+            super().data_received(data)
+            if self.transport.get_protocol() is not self or (self.cycle is not None and not self.cycle.response_complete):
+                self._stop_waiting()  # a request is answered, or the connection became a WebSocket
+
+        def on_response_complete(self) -> None:
+            super().on_response_complete()
+            if not self.transport.is_closing() and (self.cycle is None or self.cycle.response_complete):
+                self._wait()  # the next request's head (kept-alive connection)
+
+        def connection_lost(self, exc) -> None:
+            self._stop_waiting()
+            super().connection_lost(exc)
+
+        def _wait(self) -> None:
+            self._stop_waiting()
+            while len(waiting) >= MAX_WAITING:
+                waiting.popitem(last=False)[0]._give_up()
+            waiting[self] = self.loop.call_later(HEAD_TIMEOUT_S, self._give_up)
+
+        def _stop_waiting(self) -> None:
+            timer = waiting.pop(self, None)
+            if timer is not None:
+                timer.cancel()
+
+        def _give_up(self) -> None:
+            self._stop_waiting()
+            if not self.transport.is_closing():
+                self.transport.close()
+
+    return HeadDeadline
+
+
 def check_address(host, port) -> None:
     """The checks of ``ViewerServer``'s host and port that need no socket (the live CLI makes them
     before its stream starts playing and recording)."""
@@ -350,7 +402,7 @@ class ViewerServer:
             self.sock.bind(addr)
         except OSError as exc:
             raise GigapointError(f"--host {host} --port {port}: cannot listen there ({exc.strerror or exc})") from None
-        self.sock.listen(128)
+        self.sock.listen(128)  # (uvicorn listens again with its backlog)
         self.sock.setblocking(False)
         self.port = self.sock.getsockname()[1]
         config = uvicorn.Config(
@@ -362,6 +414,8 @@ class ViewerServer:
             ws_ping_timeout=20.0,
             timeout_graceful_shutdown=2,
             access_log=False,
+            http=_head_deadline_protocol(),
+            backlog=128,  # also the connections accepted at once: 2048 opened more files than a usual limit (1024) before any was closed
         )
         self.server = uvicorn.Server(config)
         self.thread: threading.Thread | None = None
