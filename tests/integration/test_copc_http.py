@@ -578,3 +578,7 @@ def test_a_url_with_a_password_and_a_token_is_never_shown_whole(data, server, qu
     with pytest.raises(InputError, match="an input must be a path") as e:
         convert([url], tmp_path / "o")
     _no_secret(str(e.value), port, "autzen.copc.laz?sig=***&se=***")
+    assert main(["render", url, "--chunked", "-o", str(tmp_path / "x.png")]) == 1
+    err = capsys.readouterr().err
+    assert "is an octree, drawn as stored" in err
+    _no_secret(err, port, "autzen.copc.laz?sig=***&se=***")

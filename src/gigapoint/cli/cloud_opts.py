@@ -60,7 +60,7 @@ def open_files(inputs, point_budget: int, progressive: bool | None, options: dic
     """What ``render`` and ``view`` open: ``open_sized``'s choice (an octree as itself, big inputs
     progressively, else one PointCloud); with ``options`` (``cloud_options``) always one
     PointCloud built with them."""
-    from ..io import open_cloud
+    from ..io import open_cloud, shown_url
     from ..lod import is_lod_source
     from ..lod.progressive import open_sized
 
@@ -68,7 +68,7 @@ def open_files(inputs, point_budget: int, progressive: bool | None, options: dic
         return open_sized(inputs, point_budget, progressive, progress=progress)
     if progressive:
         raise GigapointError(f"{option_names(options)}: options of a point cloud held in memory, not of --progressive")
-    octrees = [str(p) for p in inputs if is_lod_source(p)]
+    octrees = [shown_url(p) for p in inputs if is_lod_source(p)]
     if octrees:
         raise GigapointError(f"{option_names(options)}: {octrees[0]} is an octree, drawn as stored; the option applies to point files")
     return open_cloud(*inputs, progress=progress, **options)
