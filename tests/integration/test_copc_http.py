@@ -532,8 +532,13 @@ def test_shown_url_hides_passwords_and_query_values():
     assert s("https://user:secret@host/x.copc.laz") == "https://user:***@host/x.copc.laz"
     assert s("https://u:p@ss@h:8/e/ept.json?X-Amz-Signature=ab%2F&token=t&raw#k=v") == "https://u:***@h:8/e/ept.json?X-Amz-Signature=***&token=***&***#k=***"
     assert s(Path("https://u:pw@h/a.laz?key=k")) == "https:/u:***@h/a.laz?key=***"  # (the CLI's Path of a URL)
-    for same in ("https://user@h/x", "http://h/x?", "http://[::1", "/data/a?b=1.laz", "C:/x?y=1", "scan.laz"):
+    assert s("http://user:sec/ret@h:1/x") == "http://user:***@h:1/x"  # a raw '/' in the password
+    assert s("http://u:1234@[::1]:80/x") == "http://u:***@[::1]:80/x"
+    for same in ("https://user@h/x", "http://h/x?", "http://[::1", "http://[::1]:80/a@b", "http://h:8080/a@b", "http://h/a:b@c", "/data/a?b=1.laz", "C:/x?y=1", "scan.laz"):
         assert s(same) == same
+    with pytest.raises(InputError) as e:  # httpx: "Invalid port: 'sec'", a piece of the password
+        gp.open("http://user:sec/ret@127.0.0.1:1/x.copc.laz")
+    assert str(e.value) == "http://user:***@127.0.0.1:1/x.copc.laz: not a valid URL"
 
 
 def test_a_url_with_a_password_and_a_token_is_never_shown_whole(data, server, quick, capsys, tmp_path):

@@ -51,7 +51,9 @@ MERGE_MAX = 8 << 20
 _RETRY_STATUS = (502, 503, 504)
 _URL = re.compile(r"^(https?):/+(.+)$", re.IGNORECASE)
 #: a URL (a Path of one has lost a '/'): scheme, user info and host, path, ?query, #fragment
-_SHOWN = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]+:/+)([^/?#]*)([^?#]*)(\?[^#]*|)(#.*|)$", re.DOTALL)
+_SHOWN = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]+:/+)([^?#]*)(\?[^#]*|)(#.*|)$", re.DOTALL)
+#: 'user:password@' before the host: up to the last '@' (a password may hold a raw '@' or '/'); 'host:8080/a@b' is a port
+_USER_INFO = re.compile(r"^([^/:@\[\]]*):(?!\d*(?:/|$))(.*)@(?=[^@]*$)", re.DOTALL)
 _CONTENT_RANGE = re.compile(r"^\s*bytes\s+(\d+)-(\d+)/(\d+|\*)\s*$", re.IGNORECASE)
 
 
@@ -81,11 +83,8 @@ def shown_url(text) -> str:
     m = _SHOWN.match(text)
     if m is None:
         return text
-    scheme, netloc, path, query, fragment = m.groups()
-    user, at, host = netloc.rpartition("@")  # (the last '@': a password may hold one)
-    if at and ":" in user:
-        netloc = f"{user.split(':', 1)[0]}:***@{host}"
-    return scheme + netloc + path + _hidden_values(query) + _hidden_values(fragment)
+    scheme, rest, query, fragment = m.groups()
+    return scheme + _USER_INFO.sub(r"\1:***@", rest, count=1) + _hidden_values(query) + _hidden_values(fragment)
 
 
 def _hidden_values(part: str) -> str:
@@ -398,7 +397,8 @@ class HttpClient:
         except httpx.HTTPError as exc:
             raise InputError(f"{shown_url(url)}: {type(exc).__name__}: {_one_line(exc)}") from None
         except httpx.InvalidURL as exc:  # not an HTTPError: 'http://[::1' reached the CLI as an internal error
-            raise InputError(f"{shown_url(url)}: not a valid URL ({_one_line(exc)})") from None
+            why = f" ({_one_line(exc)})" if shown_url(url) == url else ""  # ('Invalid port: ...' may be part of a password)
+            raise InputError(f"{shown_url(url)}: not a valid URL{why}") from None
         if whole:
             if len(body) != int(length):
                 raise InputError(f"{shown_url(url)}: short read: {len(body):,} of the {int(length):,} bytes of the file")
