@@ -758,3 +758,29 @@ def test_a_client_trickling_its_request_head_is_cut_off(cloud, monkeypatch):
                 pass
     finally:
         srv.close()
+
+
+def test_the_page_token_is_not_logged(cloud):
+    """uvicorn at log_level 'info' logged each WebSocket as '"WebSocket /ws?token=..." [accepted]':
+    the key to the viewer in a terminal or a log file; the query's values are hidden now."""
+    import logging
+
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    lines = []
+    handler = logging.Handler()
+    handler.emit = lambda record: lines.append(record.getMessage())
+    srv = ViewerServer(cloud, token="TOKSECRET", log_level="info").start()
+    logging.getLogger("uvicorn.error").addHandler(handler)
+    try:
+        with connect(f"ws://127.0.0.1:{srv.port}/ws?w=64&h=48&token=TOKSECRET", open_timeout=10) as ws:
+            assert json.loads(ws.recv(timeout=10))["type"] == "hello"
+        with pytest.raises(InvalidStatus), connect(f"ws://127.0.0.1:{srv.port}/ws?token=WRONGSECRET", open_timeout=10):
+            pass
+    finally:
+        srv.close()
+        logging.getLogger("uvicorn.error").removeHandler(handler)
+    said = "\n".join(lines)
+    assert '"WebSocket /ws?w=***&h=***&token=***" [accepted]' in said and '"WebSocket /ws?token=***" 403' in said, said
+    assert "SECRET" not in said

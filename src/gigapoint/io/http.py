@@ -50,10 +50,12 @@ MERGE_GAP = 64 << 10
 MERGE_MAX = 8 << 20
 _RETRY_STATUS = (502, 503, 504)
 _URL = re.compile(r"^(https?):/+(.+)$", re.IGNORECASE)
-#: a URL (a Path of one has lost a '/'): scheme, user info and host, path, ?query, #fragment
-_SHOWN = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]+:/+)([^?#]*)(\?[^#]*|)(#.*|)$", re.DOTALL)
-#: 'user:password@' before the host: up to the last '@' (a password may hold a raw '@' or '/'); 'host:8080/a@b' is a port
-_USER_INFO = re.compile(r"^([^/:@\[\]]*):(?!\d*(?:/|$))(.*)@(?=[^@]*$)", re.DOTALL)
+#: a URL's scheme (a Path of one has lost a '/') and the rest; a path or request target's ?query and #fragment
+_SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]+:/+)(.*)$", re.DOTALL)
+_QUERY = re.compile(r"^([^?#]*)(\?[^#]*|)(#.*|)$", re.DOTALL)
+#: 'user:password@' before the host: up to the last '@' before the query (a password may hold a raw '@' or '/');
+#: 'host:8080/a@b' is a port
+_USER_INFO = re.compile(r"^([^/:@\[\]?#]*):(?!\d*(?:[/?#]|$))([^?#]*)@(?=[^@?#]*(?:[?#]|$))", re.DOTALL)
 _CONTENT_RANGE = re.compile(r"^\s*bytes\s+(\d+)-(\d+)/(\d+|\*)\s*$", re.IGNORECASE)
 
 
@@ -80,11 +82,17 @@ def shown_url(text) -> str:
     and credentialed URLs are how COPC files are shared, and what is shown ends up in logs and
     issues; requests use the URL itself. Anything else is given back as it is."""
     text = os.fspath(text) if isinstance(text, os.PathLike) else str(text)
-    m = _SHOWN.match(text)
+    m = _SCHEME.match(text)
     if m is None:
         return text
-    scheme, rest, query, fragment = m.groups()
-    return scheme + _USER_INFO.sub(r"\1:***@", rest, count=1) + _hidden_values(query) + _hidden_values(fragment)
+    return m.group(1) + _USER_INFO.sub(r"\1:***@", hidden_query(m.group(2)), count=1)
+
+
+def hidden_query(target: str) -> str:
+    """'/ws?w=64&token=t' -> '/ws?w=***&token=***': a path's (a request target's) query and
+    fragment with their names kept and their values hidden."""
+    main, query, fragment = _QUERY.match(target).groups()
+    return main + _hidden_values(query) + _hidden_values(fragment)
 
 
 def _hidden_values(part: str) -> str:

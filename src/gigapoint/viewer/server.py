@@ -25,6 +25,7 @@ from importlib import resources
 from urllib.parse import quote, urlsplit
 
 from ..errors import GigapointError
+from ..io.http import hidden_query
 from ..live.wire import MAX_PUSH_BYTES
 from . import protocol as P
 from .session import SEND_TIMEOUT_S, ViewerCore
@@ -321,6 +322,19 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
     return app
 
 
+class _HiddenQueries(logging.Filter):
+    """uvicorn at log_level 'info' (or 'debug') logs each WebSocket's path with its query: the
+    page's token and the push token went to the terminal or a log file; their values hidden."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if isinstance(record.args, tuple):
+            record.args = tuple(hidden_query(a) if isinstance(a, str) and a.startswith("/") else a for a in record.args)
+        return True
+
+
+_HIDDEN_QUERIES = _HiddenQueries()
+
+
 def _head_deadline_protocol():
     """uvicorn's h11 protocol with a deadline on each request's head and a bound on the
     connections waiting for one (one class a server: its own waiting list). uvicorn times only
@@ -417,6 +431,8 @@ class ViewerServer:
             http=_head_deadline_protocol(),
             backlog=128,  # also the connections accepted at once: 2048 opened more files than a usual limit (1024) before any was closed
         )
+        for name in ("uvicorn.error", "uvicorn.access"):  # (once: the same filter)
+            logging.getLogger(name).addFilter(_HIDDEN_QUERIES)
         self.server = uvicorn.Server(config)
         self.thread: threading.Thread | None = None
 
