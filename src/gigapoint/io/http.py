@@ -13,7 +13,9 @@ LRU cache of the ranges read, and two retries of transient failures (connection 
 HTTP 502/503/504). Whatever goes wrong is a one-line ``InputError`` naming the URL: an HTTP
 error status, a short read, a server that ignores ``Range`` (200 with the whole file) or
 answers another range than asked, a range past the end of the file, a timeout, a file that
-changed on the server since its first answer (size, ETag or Last-Modified).
+changed on the server since its first answer (size, ETag or Last-Modified). Messages name a URL
+as ``shown_url`` gives it: its password and query values as *** (signed URLs are how COPC files
+are shared); requests use the URL itself.
 
 httpx is an optional dependency (``pip install 'gigapoint[http]'``).
 """

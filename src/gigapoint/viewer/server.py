@@ -6,6 +6,8 @@ PNG rendered server-side, ``/api/info`` the cloud and settings schema. With a to
 on a non-loopback bind) every route needs ``?token=...``; on a loopback bind the Host header
 must name the loopback (no DNS rebinding) and a WebSocket's Origin must match its Host, port included.
 ``/screenshot`` and ``/api/info`` refuse what another site's page asks for (Sec-Fetch-Site).
+Each request head must arrive within HEAD_TIMEOUT_S, and at most MAX_WAITING connections wait
+for one (clients that trickle their headers); uvicorn's log lines show queries without their values.
 """
 
 from __future__ import annotations
