@@ -290,7 +290,7 @@ class HttpClient:
         if start is not None and size <= 0:
             return b""
         if self.closed:
-            raise InputError(f"{url}: {what} not read: the cloud was closed (close()); open it again to read more of it")
+            raise InputError(f"{shown_url(url)}: {what} not read: the cloud was closed (close()); open it again to read more of it")
         known = self.sizes.get(url)
         if start is not None and not allow_short and known is not None and start + size > known:
             raise InputError(f"{shown_url(url)}: {what} lie past the end of the file ({known:,} bytes)")
