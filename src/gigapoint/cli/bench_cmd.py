@@ -18,8 +18,8 @@ def bench(
     repeats: int = typer.Option(5, help="Timed frames per measurement (the median is reported)."),
     gl: bool = typer.Option(True, "--gl/--no-gl", help="Also time GL_POINTS through OpenGL (Mesa llvmpipe via EGL)."),
     naive: bool = typer.Option(True, "--naive/--no-naive", help="Also time a naive numba loop over the same points."),
-    out: Path | None = typer.Option(None, "--out", help="Directory for the frames as PNG and bench_render.json."),
-    json_path: Path | None = typer.Option(None, "--json", help="Where to write the JSON results (default: <out>/bench_render.json)."),
+    out: Path | None = typer.Option(None, "--out", readable=False, help="Directory for the frames as PNG and bench_render.json."),
+    json_path: Path | None = typer.Option(None, "--json", readable=False, help="Where to write the JSON results (default: <out>/bench_render.json)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing JSON results file."),
 ) -> None:
     """Measure brute-force rendering (points/s) of the demo scene, overview and close-up, against GL_POINTS and a naive loop."""

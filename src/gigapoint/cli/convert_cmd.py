@@ -13,9 +13,9 @@ from .app import app
 
 @app.command()
 def convert(
-    inputs: list[Path] = typer.Argument(..., help="Input files or directories (every supported point cloud file inside, as for render)."),
+    inputs: list[Path] = typer.Argument(..., readable=False, help="Input files or directories (every supported point cloud file inside, as for render)."),
     output: Path = typer.Option(
-        ..., "-o", "--output", help="Output directory (created; resumed when a conversion was interrupted), or the .copc.laz file of --format copc."
+        ..., "-o", "--output", readable=False, help="Output directory (created; resumed when a conversion was interrupted), or the .copc.laz file of --format copc."
     ),
     sampler: str = typer.Option("grid", help="grid (first point per cell of a 128³ grid per node) or poisson (minimum distance)."),
     memory_limit: str | None = typer.Option(None, "--memory-limit", help="Peak memory, e.g. 4G or 512M (default: a quarter of the RAM). An input that fits is converted in memory; a larger one is spilled to OUT/.partial in partitions."),

@@ -163,8 +163,8 @@ def print_stats(stats, console=None, compiled_s: float = 0.0) -> None:
 @app.command()
 @with_settings_options(RenderSettings)
 def render(
-    inputs: Annotated[list[Path], typer.Argument(help="Point cloud files, directories or converted octrees (merged into one scene).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Image to write (.png, .jpg, .webp, .tif).")],
+    inputs: Annotated[list[Path], typer.Argument(readable=False, help="Point cloud files, directories or converted octrees (merged into one scene).")],
+    output: Annotated[Path, typer.Option("-o", "--output", readable=False, help="Image to write (.png, .jpg, .webp, .tif).")],
     settings: RenderSettings,  # one option per RenderSettings field (cli/settings_opts.py)
     width: Annotated[int | None, typer.Option("--width", "-W", help=SIZE_HELP.format("width", 1920))] = None,
     height: Annotated[int | None, typer.Option("--height", "-H", help=SIZE_HELP.format("height", 1080))] = None,
@@ -174,8 +174,8 @@ def render(
     ] = None,
     projection: Annotated[str, typer.Option(help="perspective or orthographic.")] = "perspective",
     fov: Annotated[float, typer.Option(help="Vertical field of view in degrees.")] = 60.0,
-    depth_out: Annotated[Path | None, typer.Option(help="Also write the depth buffer (.npy, float32, inf = empty).")] = None,
-    index_out: Annotated[Path | None, typer.Option(help="Also write the point index buffer (.npy, int64, -1 = empty): each pixel's point as gigapoint holds the cloud (a file read into memory: gp.open(FILE).point_info(i)), not the file's row.")] = None,
+    depth_out: Annotated[Path | None, typer.Option(readable=False, help="Also write the depth buffer (.npy, float32, inf = empty).")] = None,
+    index_out: Annotated[Path | None, typer.Option(readable=False, help="Also write the point index buffer (.npy, int64, -1 = empty): each pixel's point as gigapoint holds the cloud (a file read into memory: gp.open(FILE).point_info(i)), not the file's row.")] = None,
     stats: Annotated[bool, typer.Option("--stats", help="Print render statistics.")] = False,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace existing output files.")] = False,
     turntable: Annotated[
@@ -269,7 +269,7 @@ def render(
 @app.command()
 def demo(
     points: Annotated[int, typer.Option("--points", "-n", help="Points in the procedural demo scene.")] = 20_000_000,
-    output: Annotated[Path, typer.Option("-o", "--output", help="Image to write.")] = Path("demo.png"),
+    output: Annotated[Path, typer.Option("-o", "--output", readable=False, help="Image to write.")] = Path("demo.png"),
     width: Annotated[int | None, typer.Option("--width", "-W", help=SIZE_HELP.format("width", 1920))] = None,
     height: Annotated[int | None, typer.Option("--height", "-H", help=SIZE_HELP.format("height", 1080))] = None,
     view: Annotated[str, typer.Option(help=f"Named view: {', '.join(VIEWS)}.")] = "auto",

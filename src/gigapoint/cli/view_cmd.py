@@ -34,7 +34,7 @@ def _report_load_error(cloud) -> None:
 
 @app.command("view")
 def view(
-    paths: list[Path] | None = typer.Argument(None, help="Point cloud files or directories (several tiles make one scene)."),
+    paths: list[Path] | None = typer.Argument(None, readable=False, help="Point cloud files or directories (several tiles make one scene)."),
     demo: int | None = typer.Option(None, "--demo", help="View the procedural demo scene with this many points instead."),
     port: int = typer.Option(0, "--port", help="Port to listen on (0: a free one)."),
     host: str = typer.Option("127.0.0.1", "--host", help="Address to listen on; anything but loopback requires a token in the URL."),
@@ -47,10 +47,10 @@ def view(
     live: str | None = typer.Option(
         None, "--live", help="Show a live stream: 'demo' (a synthetic depth sensor), a TUM RGB-D folder, a ROS bag, a folder of frames.",
     ),
-    replay: Path | None = typer.Option(None, "--replay", help="Play back a stream recorded with --record (or LiveCloud.record) at its rate."),
+    replay: Path | None = typer.Option(None, "--replay", readable=False, help="Play back a stream recorded with --record (or LiveCloud.record) at its rate."),
     keep: int | None = typer.Option(None, "--keep", help=r"Live: frames drawn (the oldest leaves as a new one arrives). \[default: 100]"),
     decay: float | None = typer.Option(None, "--decay", help="Live: seconds after which a frame leaves (default: never)."),
-    record: Path | None = typer.Option(None, "--record", help="Live: also record the stream into this folder."),
+    record: Path | None = typer.Option(None, "--record", readable=False, help="Live: also record the stream into this folder."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Live: replace a recording already in the --record folder."),
     colors: ColorsOption = "auto",
     chunked: ChunkedOption = None,
