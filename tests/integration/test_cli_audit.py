@@ -4,6 +4,7 @@ run, options named in their errors."""
 
 from __future__ import annotations
 
+import errno
 import os
 import shutil
 import subprocess
@@ -52,3 +53,43 @@ def test_an_unreadable_input_is_one_line_for_every_command(cloud_file, tmp_path)
         done = unprivileged(*args)
         assert (done.returncode, done.stderr) == (1, f"error: {locked}: permission denied\n"), args
     assert not (tmp_path / "x.png").exists() and not (tmp_path / "oct").exists()
+
+
+def test_an_unwritable_folder_is_refused_before_anything_is_written(cloud_file, tmp_path):
+    """--depth-out into a read-only folder failed once the image was written: the image stayed,
+    and the same command again said it already exists."""
+    locked = tmp_path / "readonly"
+    locked.mkdir()
+    locked.chmod(0o555)
+    image = tmp_path / "x.png"
+    done = unprivileged("render", cloud_file, "-o", image, *SIZE, "--depth-out", locked / "d.npy")
+    assert (done.returncode, done.stderr) == (1, f"error: {locked / 'd.npy'}: cannot write into {locked} (permission denied)\n")
+    assert not image.exists()
+    done = unprivileged("render", cloud_file, "-o", locked / "x.png", *SIZE)
+    assert (done.returncode, done.stderr) == (1, f"error: {locked / 'x.png'}: cannot write into {locked} (permission denied)\n")
+
+
+def test_a_side_output_that_fails_takes_the_image_with_it(cloud_file, tmp_path, capsys, monkeypatch):
+    """A disk that fills while the index buffer is written: no image and depth left without it."""
+    from gigapoint.cli import render_cmd
+
+    save = render_cmd.save_array
+
+    def full_disk(array, path):
+        if path.name == "index.npy":
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        save(array, path)
+
+    monkeypatch.setattr(render_cmd, "save_array", full_disk)
+    out = [tmp_path / "x.png", "--depth-out", tmp_path / "depth.npy", "--index-out", tmp_path / "index.npy"]
+    rc, stdout, err = run(capsys, "render", cloud_file, "-o", *out, *SIZE)
+    assert (rc, stdout, err) == (1, "", f"error: {tmp_path / 'index.npy'}: No space left on device\n")
+    assert sorted(os.listdir(tmp_path)) == []
+
+
+def test_a_folder_named_as_the_output_says_so(cloud_file, tmp_path, capsys):
+    """-o FOLDER said "unsupported output type '(none)'"."""
+    folder = tmp_path / "shots"
+    folder.mkdir()
+    rc, _, err = run(capsys, "render", cloud_file, "-o", folder, *SIZE)
+    assert (rc, err) == (1, f"error: {folder}: is a directory, not an output file\n")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -15,16 +16,18 @@ IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff", ".bmp"}
 def check_output(path: Path, overwrite: bool, suffixes=IMAGE_SUFFIXES) -> Path:
     """Validate an output path before any work is done."""
     path = Path(path)
+    if path.is_dir():  # (before the suffix: 'unsupported output type (none)' hid what was wrong)
+        raise GigapointError(f"{path}: is a directory, not an output file")
     if suffixes is not None and path.suffix.lower() not in suffixes:
         raise GigapointError(f"{path}: unsupported output type {path.suffix or '(none)'!r}; use one of {', '.join(sorted(suffixes))}")
-    if path.is_dir():
-        raise GigapointError(f"{path}: is a directory, not an output file")
     if path.exists() and not overwrite:
         raise GigapointError(f"{path}: already exists; pass --overwrite to replace it")
     if not path.parent.exists():
         raise GigapointError(f"{path}: directory {path.parent} does not exist")
     if not path.parent.is_dir():  # a file there: "Not a directory" only once the work was done
         raise GigapointError(f"{path}: {path.parent} is a file, not a directory")
+    if not os.access(path.parent, os.W_OK):  # "Permission denied" came once the render was done
+        raise GigapointError(f"{path}: cannot write into {path.parent} (permission denied)")
     return path
 
 

@@ -255,11 +255,16 @@ def render(
     with options_named():
         frame = gp.render_frame(cloud, cam, settings)
     compiled = compiling.compiled_seconds() - compiled
-    save_image(frame.image, output)
-    if depth_out is not None:
-        save_array(frame.depth, depth_out)
-    if index_out is not None:
-        save_array(frame.index, index_out)
+    written = []
+    try:
+        for save, data, path in ((save_image, frame.image, output), (save_array, frame.depth, depth_out), (save_array, frame.index, index_out)):
+            if path is not None:
+                save(data, path)
+                written.append(path)
+    except BaseException:  # (a full disk, Ctrl+C) the image stayed without the depth asked for beside it
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
     if stats:
         print_stats(frame.stats, compiled_s=compiled)
         err_console().print(memory_line(cloud), highlight=False)
