@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import errno
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -85,6 +86,26 @@ def test_a_side_output_that_fails_takes_the_image_with_it(cloud_file, tmp_path, 
     rc, stdout, err = run(capsys, "render", cloud_file, "-o", *out, *SIZE)
     assert (rc, stdout, err) == (1, "", f"error: {tmp_path / 'index.npy'}: No space left on device\n")
     assert sorted(os.listdir(tmp_path)) == []
+
+
+def test_the_convert_hint_is_a_command_a_shell_runs(cloud_file, tmp_path, capsys):
+    """`gigapoint view my scans` named two paths: the hint quotes an output with a space."""
+    out = tmp_path / "my octree ü"
+    rc, _, err = run(capsys, "convert", cloud_file, "-o", out)
+    assert rc == 0, err
+    assert f"while this runs, `gigapoint view '{out}'` shows what has been read so far" in err
+    assert shlex.split(f"gigapoint view {shlex.quote(str(out))}")[2] == str(out)
+
+
+def test_bench_out_makes_its_folder(tmp_path, capsys):
+    """--out NEW (a folder the benchmark makes) was refused: 'NEW/bench_render.json: directory
+    NEW does not exist'."""
+    out = tmp_path / "new" / "run"
+    rc, _, err = run(capsys, "bench", "-n", "2k", "--threads", "1", "--repeats", "1", "--no-gl", "--no-naive", "--out", out, "-W", 64, "-H", 48)
+    assert rc == 0, err
+    assert sorted(p.name for p in out.iterdir()) == ["bench_render.json", "gigapoint_2000_closeup.png", "gigapoint_2000_overview.png"]
+    rc, _, err = run(capsys, "bench", "-n", "2k", "--threads", "1", "--repeats", "1", "--no-gl", "--no-naive", "--out", out)
+    assert (rc, err) == (1, f"error: {out / 'bench_render.json'}: already exists; pass --overwrite to replace it\n")
 
 
 def test_a_folder_named_as_the_output_says_so(cloud_file, tmp_path, capsys):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 import sys
 from contextlib import nullcontext
 from pathlib import Path
@@ -52,7 +53,8 @@ def convert(
         raise ConvertError("--dask and --workers: give one of them (a running cluster's scheduler, or a local cluster's size)")
     copc = format == "copc" or (format is None and is_copc_name(output))  # (convert's own default)
     watch = work_dir(output) if copc else output  # a COPC output appears only once complete
-    hint = None if quiet else lambda: print(f"while this runs, `gigapoint view {watch}` shows what has been read so far", file=sys.stderr)
+    # quoted as a shell needs it: `gigapoint view my scans` named two paths
+    hint = None if quiet else lambda: print(f"while this runs, `gigapoint view {shlex.quote(str(watch))}` shows what has been read so far", file=sys.stderr)
     cluster = nullcontext(None)
     if dask is not None or workers is not None:
         from ..lod.convert.distributed import open_client
