@@ -108,6 +108,17 @@ def test_bench_out_makes_its_folder(tmp_path, capsys):
     assert (rc, err) == (1, f"error: {out / 'bench_render.json'}: already exists; pass --overwrite to replace it\n")
 
 
+def test_turntable_errors_name_their_options(cloud_file, tmp_path, capsys):
+    video = tmp_path / "turntable.mp4"
+    rc, _, err = run(capsys, "render", cloud_file, "-o", video, "--turntable", 3, "--fps", 0)
+    assert (rc, err) == (1, "error: --fps: video fps must be a number in (0, 1000], got 0.0\n")
+    rc, _, err = run(capsys, "render", cloud_file, "-o", video, "--turntable", 0)
+    assert (rc, err) == (1, "error: --turntable: number of frames must be an integer from 1 to 100,000, got 0\n")
+    video.write_bytes(b"mine")  # a file named turntable.mp4 is not the --turntable option
+    rc, _, err = run(capsys, "render", cloud_file, "-o", video, "--turntable", 3)
+    assert (rc, err) == (1, f"error: {video}: already exists; pass --overwrite to replace it\n")
+
+
 def test_a_folder_named_as_the_output_says_so(cloud_file, tmp_path, capsys):
     """-o FOLDER said "unsupported output type '(none)'"."""
     folder = tmp_path / "shots"

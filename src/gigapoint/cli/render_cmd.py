@@ -22,7 +22,7 @@ from .info_cmd import memory_line
 from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_image
 from .progress import err_console, progress_bar, status
 from .quality_opts import check_color_attribute, check_color_options, prepare_cloud
-from .settings_opts import options_named, settings_from_options, with_settings_options
+from .settings_opts import named_option, options_named, settings_from_options, with_settings_options
 
 _CAMERA_KEYS = {"eye": 3, "target": 3, "up": 3, "yaw": 1, "pitch": 1, "distance": 1, "fov": 1}
 
@@ -69,11 +69,7 @@ def check_image_size(width, height, fov=60.0) -> tuple[int, int]:
         Camera.look_at((0, 0, 1), (0, 0, 0), up=(0, 1, 0), width=width, height=height, fov=fov)
         return width, height
     except CameraError as exc:
-        text = str(exc)
-        for words, option in (("image width", "--width"), ("image height", "--height"), ("camera fov", "--fov")):
-            if text.startswith(words):
-                raise CameraError(f"{option}: {text}") from None
-        raise
+        raise named_option(exc, {"image width": "--width", "image height": "--height", "camera fov": "--fov"}) from None
 
 
 TURNTABLE_FPS = 30.0  # --fps's default
@@ -229,7 +225,10 @@ def render(
         from ..render.video import check_turntable
 
         fps = TURNTABLE_FPS if fps is None else fps
-        check_turntable(output, turntable, width, height, fps, overwrite)
+        try:
+            check_turntable(output, turntable, width, height, fps, overwrite)
+        except GigapointError as exc:  # the library's words ('video fps must be ...') named no option
+            raise named_option(exc, {"turntable": "--turntable", "video fps": "--fps"}) from None
     else:  # (side-by-side stereo writes both eyes: twice the width)
         check_image_fits(output, width * (2 if settings.stereo == "side-by-side" else 1), height)
     cloud = open_inputs(inputs, settings.point_budget, progressive, cloud_options(colors, chunked))

@@ -20,7 +20,7 @@ from typing import Annotated, Any, Literal
 import typer
 from rich.markup import escape
 
-from ..errors import SettingsError
+from ..errors import GigapointError, SettingsError
 from ..render.settings import GROUPS, RenderSettings, SettingSpec, format_color, implied_fields, settings_fields
 
 PANELS = {"execution": "Execution", "lod": "Precision, culling and level of detail", "appearance": "Appearance"}
@@ -191,15 +191,15 @@ def options_named(cls: type = RenderSettings):
         raise named_option(exc, option_of(cls)) from None
 
 
-def named_option(exc: SettingsError, blame: dict[str, str]) -> SettingsError:
-    """``exc`` with the field its message starts with (``color_attribute: ...``) told as the
-    option that set it (``blame``: field -> option, e.g. ``option_of()``); unchanged otherwise."""
+def named_option(exc: GigapointError, blame: dict[str, str]) -> GigapointError:
+    """``exc`` with the field its message starts with (``color_attribute: ...``, ``video fps
+    must ...``) told as the option that set it (``blame``: field or words -> option, e.g.
+    ``option_of()``); unchanged otherwise."""
     message = str(exc)
-    name = message.split(" ", 1)[0].rstrip(":")
-    if name not in blame:
-        return exc
-    rest = message[len(name) + 1 :].lstrip() if message.startswith(f"{name}:") else message
-    return SettingsError(f"{blame[name]}: {rest}")
+    for name, option in blame.items():
+        if message.startswith((f"{name}:", f"{name} ")):  # (not a file named turntable.mp4)
+            return type(exc)(f"{option}: {message.removeprefix(f'{name}:').lstrip()}")
+    return exc
 
 
 def with_settings_options(cls: type = RenderSettings, param: str = "settings"):
