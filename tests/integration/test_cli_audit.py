@@ -125,3 +125,24 @@ def test_a_folder_named_as_the_output_says_so(cloud_file, tmp_path, capsys):
     folder.mkdir()
     rc, _, err = run(capsys, "render", cloud_file, "-o", folder, *SIZE)
     assert (rc, err) == (1, f"error: {folder}: is a directory, not an output file\n")
+
+
+def test_an_interrupted_convert_says_it_resumes(cloud_file, tmp_path, capsys, monkeypatch):
+    """Ctrl+C said only 'interrupted': whether OUT was lost or half-done was left to guess."""
+    import functools
+
+    import gigapoint.lod
+    from gigapoint.lod.convert import hooks
+
+    def stop(done):
+        raise KeyboardInterrupt
+
+    convert, built = gigapoint.lod.convert, hooks.after_partition_built
+    monkeypatch.setattr(gigapoint.lod, "convert", functools.partial(convert, partition_points=1_000))  # partitions to stop after
+    monkeypatch.setattr(hooks, "after_partition_built", stop)
+    out = tmp_path / "oct"
+    rc, _, err = run(capsys, "convert", cloud_file, "-o", out, "--quiet")
+    assert (rc, err) == (130, f"{out}: kept unfinished; run the same convert command again to resume it\ninterrupted\n")
+    monkeypatch.setattr(hooks, "after_partition_built", built)
+    rc, stdout, err = run(capsys, "convert", cloud_file, "-o", out, "--quiet")
+    assert rc == 0 and "3,000 points" in stdout and "(resumed)" in stdout, err

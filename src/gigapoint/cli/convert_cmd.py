@@ -48,6 +48,7 @@ def convert(
     from ..lod import ConvertError
     from ..lod import convert as run
     from ..lod.copc_write import is_copc_name, work_dir
+    from ..lod.octree_dir import OctreeDir
 
     if dask is not None and workers is not None:
         raise ConvertError("--dask and --workers: give one of them (a running cluster's scheduler, or a local cluster's size)")
@@ -60,21 +61,26 @@ def convert(
         from ..lod.convert.distributed import open_client
 
         cluster = open_client(dask if dask is not None else workers, announce=not quiet)  # prints the dashboard's address
-    with cluster as client:
-        result = run(
-            [str(p) for p in inputs],
-            output,
-            sampler=sampler,
-            memory_limit=memory_limit,
-            overwrite=overwrite,
-            format=format,
-            max_leaf=max_leaf,
-            layout=layout,
-            colors=colors,
-            progress=not quiet and sys.stderr.isatty(),
-            client=client,
-            on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
-        )
+    try:
+        with cluster as client:
+            result = run(
+                [str(p) for p in inputs],
+                output,
+                sampler=sampler,
+                memory_limit=memory_limit,
+                overwrite=overwrite,
+                format=format,
+                max_leaf=max_leaf,
+                layout=layout,
+                colors=colors,
+                progress=not quiet and sys.stderr.isatty(),
+                client=client,
+                on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
+            )
+    except (KeyboardInterrupt, SystemExit):  # (Ctrl+C, SIGTERM) a bare "interrupted" left the user to guess whether OUT was lost
+        if OctreeDir(watch).read_state() is not None:
+            print(f"{watch}: kept unfinished; run the same convert command again to resume it", file=sys.stderr)
+        raise
     resumed = (" (resumed)" if result.resumed else "") + (", in memory" if result.in_memory else "")
     skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
     print(
