@@ -146,3 +146,17 @@ def test_an_interrupted_convert_says_it_resumes(cloud_file, tmp_path, capsys, mo
     monkeypatch.setattr(hooks, "after_partition_built", built)
     rc, stdout, err = run(capsys, "convert", cloud_file, "-o", out, "--quiet")
     assert rc == 0 and "3,000 points" in stdout and "(resumed)" in stdout, err
+
+
+
+@pytest.mark.parametrize("args, problem", [
+    (["--max-leaf", 0], "--max-leaf: max_leaf must be an integer >= 100, got 0"),
+    (["--workers", 0], "--workers: needs at least 1 worker, got 0"),
+])  # fmt: skip
+def test_convert_option_errors_are_one_line_naming_the_option(cloud_file, tmp_path, capsys, args, problem):
+    """--max-leaf 0 said 'max_leaf must be ...'; --workers 0 was a four-line usage error (exit 2)."""
+    if args[0] == "--workers":
+        pytest.importorskip("distributed")  # (without it: 'needs gigapoint[dask]')
+    rc, _, err = run(capsys, "convert", cloud_file, "-o", tmp_path / "oct", *args)
+    assert (rc, err) == (1, f"error: {problem}\n")
+    assert not (tmp_path / "oct").exists()

@@ -10,6 +10,7 @@ from pathlib import Path
 import typer
 
 from .app import app
+from .settings_opts import named_option
 
 
 @app.command()
@@ -41,7 +42,7 @@ def convert(
         "which must be on a file system they all share (needs gigapoint\\[dask]).",  # \[: rich would take [dask] for markup and drop it
     ),
     workers: int | None = typer.Option(
-        None, "--workers", min=1, help="Convert on a local Dask cluster of N single-threaded worker processes (needs gigapoint\\[dask])."
+        None, "--workers", help="Convert on a local Dask cluster of N single-threaded worker processes (needs gigapoint\\[dask])."
     ),
 ) -> None:
     """Convert point clouds into a level-of-detail octree, out of core, resumable."""
@@ -77,6 +78,8 @@ def convert(
                 client=client,
                 on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
             )
+    except ConvertError as exc:  # 'max_leaf must be ...' named no option
+        raise named_option(exc, {"max_leaf": "--max-leaf"}) from None
     except (KeyboardInterrupt, SystemExit):  # (Ctrl+C, SIGTERM) a bare "interrupted" left the user to guess whether OUT was lost
         if OctreeDir(watch).read_state() is not None:
             print(f"{watch}: kept unfinished; run the same convert command again to resume it", file=sys.stderr)
