@@ -160,3 +160,12 @@ def test_convert_option_errors_are_one_line_naming_the_option(cloud_file, tmp_pa
     rc, _, err = run(capsys, "convert", cloud_file, "-o", tmp_path / "oct", *args)
     assert (rc, err) == (1, f"error: {problem}\n")
     assert not (tmp_path / "oct").exists()
+
+
+@pytest.mark.parametrize("args, problem", [
+    (["-W", 0], "--width: image width must be an integer in 1..16384, got 0"),
+    (["--repeats", 0], "--repeats: benchmark repeats must be >= 1, got 0"),
+])  # fmt: skip
+def test_bench_errors_name_their_option(capsys, args, problem):
+    rc, _, err = run(capsys, "bench", "-n", "1k", "--no-gl", "--no-naive", *args)
+    assert (rc, err) == (1, f"error: {problem}\n")

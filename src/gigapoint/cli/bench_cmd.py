@@ -6,7 +6,9 @@ from pathlib import Path
 
 import typer
 
+from ..errors import GigapointError
 from .app import app
+from .settings_opts import named_option
 
 
 @app.command()
@@ -38,17 +40,20 @@ def bench(
     steps = len(counts) * (1 + gl + len(VIEWS) * (len(thread_counts) + naive + gl))
     with progress_bar("bench", steps, err) as advance:
         step = iter(range(steps + 1))
-        results = run_render_benchmark(
-            points=counts,
-            width=width,
-            height=height,
-            threads=thread_counts,
-            repeats=repeats,
-            gl=gl,
-            naive=naive,
-            out=out,
-            progress=lambda m: advance(min(next(step, steps), steps), m),
-        )
+        try:
+            results = run_render_benchmark(
+                points=counts,
+                width=width,
+                height=height,
+                threads=thread_counts,
+                repeats=repeats,
+                gl=gl,
+                naive=naive,
+                out=out,
+                progress=lambda m: advance(min(next(step, steps), steps), m),
+            )
+        except GigapointError as exc:  # 'image width must be ...' named no option
+            raise named_option(exc, {"image width": "--width", "image height": "--height", "benchmark repeats": "--repeats"}) from None
     print_results(results)
     if target is not None:
         err.print(f"results written to {write_results(results, target)}")
