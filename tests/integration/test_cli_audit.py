@@ -169,3 +169,15 @@ def test_convert_option_errors_are_one_line_naming_the_option(cloud_file, tmp_pa
 def test_bench_errors_name_their_option(capsys, args, problem):
     rc, _, err = run(capsys, "bench", "-n", "1k", "--no-gl", "--no-naive", *args)
     assert (rc, err) == (1, f"error: {problem}\n")
+
+
+def test_an_orbit_distance_is_from_the_clouds_centre(autzen_path, tmp_path, capsys):
+    """--camera 'yaw=30 pitch=45 distance=100' orbited the framing's target, moved to centre the
+    box's image: 150 m under autzen, so the eye was under the ground and the image empty."""
+    from PIL import Image
+
+    out = tmp_path / "near.png"
+    rc, _, err = run(capsys, "render", autzen_path, "-o", out, *SIZE, "--camera", "yaw=30 pitch=45 distance=100", "--stats")
+    assert rc == 0 and "no point is in view" not in err, err
+    img = np.asarray(Image.open(out))
+    assert (img[..., :3] > 0).any(axis=2).mean() > 0.5  # close over the ground: most of the frame is points

@@ -114,7 +114,9 @@ def _described_camera(bounds, c: dict, width, height, projection, fov) -> Camera
             distance = float(np.linalg.norm(np.subtract(c["eye"], c["target"])))
             extra = {"projection": projection, "ortho_height": 2 * distance * math.tan(math.radians(fov) / 2)}
         return Camera.look_at(c["eye"], c["target"], up=c.get("up", (0, 0, 1)), fov=fov, width=width, height=height, **extra)
-    fitted = Camera.fit(bounds, view=(c["yaw"], c["pitch"]), width=width, height=height, fov=fov, projection=projection)
+    # a given distance is from the box's centre (recenter=False): the framing's target, moved to
+    # centre the box's image, lay 150 m under autzen at pitch 45, and 'distance=100' showed nothing
+    fitted = Camera.fit(bounds, view=(c["yaw"], c["pitch"]), width=width, height=height, fov=fov, projection=projection, recenter="distance" not in c)
     target = c.get("target", fitted.target)
     distance = c.get("distance", float(np.linalg.norm(np.subtract(fitted.eye, fitted.target))))
     extra = {"projection": projection, "ortho_height": fitted.ortho_height} if projection == "orthographic" else {}
