@@ -181,3 +181,13 @@ def test_an_orbit_distance_is_from_the_clouds_centre(autzen_path, tmp_path, caps
     assert rc == 0 and "no point is in view" not in err, err
     img = np.asarray(Image.open(out))
     assert (img[..., :3] > 0).any(axis=2).mean() > 0.5  # close over the ground: most of the frame is points
+
+
+@pytest.mark.parametrize("mode", ["fixed", "adaptive"])
+def test_a_world_size_the_size_mode_ignores_is_refused(cloud_file, tmp_path, capsys, mode):
+    """--size-mode fixed --point-world-size 2 drew 16-pixel points (the size's implied
+    --point-size), the world size ignored without a word."""
+    rc, _, err = run(capsys, "render", cloud_file, "-o", tmp_path / "x.png", *SIZE, "--size-mode", mode, "--point-world-size", 2)
+    assert (rc, err) == (1, f"error: --point-world-size: sizes attenuated points, not --size-mode {mode} (it would be ignored)\n")
+    assert not (tmp_path / "x.png").exists()
+    assert run(capsys, "render", cloud_file, "-o", tmp_path / "x.png", *SIZE, "--size-mode", "attenuated", "--point-world-size", 2)[0] == 0

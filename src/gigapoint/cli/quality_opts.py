@@ -33,13 +33,16 @@ _MODE_OPTIONS = (
 
 def check_color_options(settings) -> None:
     """A one-line SettingsError for a colour option the image's color mode does not read
-    (``--colormap turbo`` alone, ``--color-attribute x --color-mode elevation``): each was
-    dropped without a word. The viewer keeps them (its modes change while it runs)."""
+    (``--colormap turbo`` alone, ``--color-attribute x --color-mode elevation``), or a
+    ``--point-world-size`` that the size mode does not: each was dropped without a word. The
+    viewer keeps them (its modes change while it runs)."""
     defaults = RenderSettings()
     for name, modes in _MODE_OPTIONS:
         if getattr(settings, name) != getattr(defaults, name) and settings.color_mode not in modes:
             uses = " or ".join(modes)
             raise SettingsError(f"{OPTION_OF[name]}: colours only --color-mode {uses}, not {settings.color_mode} (it would be ignored)")
+    if settings.point_world_size > 0 and settings.size_mode in ("fixed", "adaptive"):  # (drew 16-pixel points, the size ignored)
+        raise SettingsError(f"--point-world-size: sizes attenuated points, not --size-mode {settings.size_mode} (it would be ignored)")
 
 
 def check_color_attribute(inputs, settings) -> None:
