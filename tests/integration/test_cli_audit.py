@@ -191,3 +191,10 @@ def test_a_world_size_the_size_mode_ignores_is_refused(cloud_file, tmp_path, cap
     assert (rc, err) == (1, f"error: --point-world-size: sizes attenuated points, not --size-mode {mode} (it would be ignored)\n")
     assert not (tmp_path / "x.png").exists()
     assert run(capsys, "render", cloud_file, "-o", tmp_path / "x.png", *SIZE, "--size-mode", "attenuated", "--point-world-size", 2)[0] == 0
+
+
+def test_a_video_name_without_turntable_says_which_option_makes_one(cloud_file, tmp_path, capsys):
+    """-o spin.mp4 alone said "unsupported output type '.mp4'; use one of .bmp, ...", the
+    option that writes a video left to be found."""
+    rc, _, err = run(capsys, "render", cloud_file, "-o", tmp_path / "spin.MP4", *SIZE)
+    assert (rc, err) == (1, f"error: {tmp_path / 'spin.MP4'}: a video needs --turntable N (its number of frames); a still image is .png, .jpg, .webp or .tif\n")

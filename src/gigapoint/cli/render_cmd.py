@@ -193,9 +193,9 @@ def render(
     """Render point clouds to an image (or a turntable video)."""
     import gigapoint as gp
 
-    if turntable is not None:
-        from ..render.video import VIDEO_SUFFIXES
+    from ..render.video import VIDEO_SUFFIXES
 
+    if turntable is not None:
         check_output(output, overwrite, suffixes=VIDEO_SUFFIXES)
         ignored = [name for name, given in (("--depth-out", depth_out is not None), ("--index-out", index_out is not None),
                    ("--camera", camera is not None), ("--view", view != "auto"), ("--projection", projection != "perspective"),
@@ -205,6 +205,8 @@ def render(
     else:
         if fps is not None:
             raise GigapointError("--fps: an option of --turntable videos")
+        if output.suffix.lower() in VIDEO_SUFFIXES:  # 'unsupported output type' left the video option to be found
+            raise GigapointError(f"{output}: a video needs --turntable N (its number of frames); a still image is .png, .jpg, .webp or .tif")
         check_output(output, overwrite)
     for extra in (depth_out, index_out):
         if extra is not None:
