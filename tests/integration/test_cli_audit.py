@@ -198,3 +198,9 @@ def test_a_video_name_without_turntable_says_which_option_makes_one(cloud_file, 
     option that writes a video left to be found."""
     rc, _, err = run(capsys, "render", cloud_file, "-o", tmp_path / "spin.MP4", *SIZE)
     assert (rc, err) == (1, f"error: {tmp_path / 'spin.MP4'}: a video needs --turntable N (its number of frames); a still image is .png, .jpg, .webp or .tif\n")
+
+
+def test_version(capsys):
+    import gigapoint
+
+    assert run(capsys, "--version") == (0, f"gigapoint {gigapoint.__version__}\n", "")

@@ -65,6 +65,21 @@ app = App(
 )
 
 
+def _print_version(given: bool) -> None:
+    if given:
+        from .. import __version__
+
+        typer.echo(f"gigapoint {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(
+    version: bool = typer.Option(False, "--version", is_eager=True, callback=_print_version, help="Show gigapoint's version and exit."),
+) -> None:
+    """The options of ``gigapoint`` itself (``--version``: a bug report's first line; it was 'No such option')."""
+
+
 def prefer_passive_wait() -> None:
     """For the viewer's process, before any kernel runs: numba's OpenMP threads sleep at their
     barriers instead of spinning (``OMP_WAIT_POLICY=passive``) unless the user chose otherwise.
