@@ -168,7 +168,7 @@ def render(
     height: Annotated[int | None, typer.Option("--height", "-H", help=SIZE_HELP.format("height", 1080))] = None,
     view: Annotated[str, typer.Option(help=f"Named view: {', '.join(VIEWS)} (auto: iso, or turned so a long cloud fills the frame).")] = "auto",
     camera: Annotated[
-        str | None, typer.Option(help=r"'eye=x,y,z target=x,y,z \[up=x,y,z]' or 'yaw=deg pitch=deg \[distance=m] \[target=x,y,z]'.")
+        str | None, typer.Option(help=r"'eye=x,y,z target=x,y,z \[up=x,y,z]' or 'yaw=deg pitch=deg \[distance=m] \[target=x,y,z]' (distance from the target, by default the cloud's centre; without it the cloud fills the frame).")
     ] = None,
     projection: Annotated[str, typer.Option(help="perspective or orthographic.")] = "perspective",
     fov: Annotated[float, typer.Option(help="Vertical field of view in degrees.")] = 60.0,
