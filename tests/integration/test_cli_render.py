@@ -60,9 +60,10 @@ def test_render_several_files_merge_into_one_scene(capsys, tmp_path, small_las):
 
 def test_max_points_previews_a_subsample(capsys, tmp_path, small_las):
     out = tmp_path / "preview.png"
-    rc, _, err = run(capsys, "render", small_las, "-o", out, "-W", 160, "-H", 100, "--stats", "--max-points", 15_000)
+    rc, stdout, err = run(capsys, "render", small_las, "-o", out, "-W", 160, "-H", 100, "--stats", "--max-points", 15_000)
     assert rc == 0, err
     assert "15,000 of 30,000 points" in err  # every second point of each batch
+    assert stdout.strip() == f"wrote {out} (160x100, 15,000 of 30,000 points drawn)"  # (it said '30,000 points', the cloud's)
     assert (np.asarray(Image.open(out))[..., :3] != 0).any(axis=2).mean() > 0.05
 
 
@@ -83,6 +84,7 @@ def test_max_points_caps_what_an_octree_draws(capsys, tmp_path, small_las):
         drawn[cap] = int(re.match(r"([\d,]+) of", err).group(1).replace(",", ""))
         assert (np.asarray(Image.open(out))[..., :3] != 0).any(axis=2).mean() > 0.05
     assert drawn[None] == 30_000 and drawn[20_000] <= 20_000
+    assert "memory: peak RSS" in err and "Octree" not in err  # (it said 'CompactOctree has no breakdown', a class's name)
 
 
 def test_camera_options_and_extra_outputs(capsys, tmp_path, small_las):

@@ -89,8 +89,8 @@ def memory_line(cloud) -> str:
     n = max(int(cloud.n_points), 1)
     rss = peak_rss()
     tail = f", peak RSS {rss / 2**20:,.0f} MiB" if rss else ""
-    if not isinstance(cloud, (PointCloud, ProgressiveOctree)):
-        return f"memory: {type(cloud).__name__} has no breakdown{tail}"
+    if not isinstance(cloud, (PointCloud, ProgressiveOctree)):  # ('CompactOctree has no breakdown' named a class)
+        return f"memory: {tail.removeprefix(', ') or 'not known'} (bytes per component are given for clouds held in memory, not octrees read by node)"
     m = cloud.memory()
     total = sum(m.values())
     parts = ", ".join(f"{k} {v / n:.2f}" for k, v in m.items())

@@ -271,7 +271,9 @@ def render(
     if stats:
         print_stats(frame.stats, compiled_s=compiled)
         err_console().print(memory_line(cloud), highlight=False)
-    typer.echo(f"wrote {output} ({frame.image.shape[1]}x{frame.image.shape[0]}, {cloud.n_points:,} points)")  # (side-by-side stereo: both eyes)
+    drawn = frame.stats.points_processed  # (a budget, --max-points, culling: fewer than the cloud's; '110,000 points' said the cloud's)
+    points = f"{cloud.n_points:,} points" if drawn >= cloud.n_points else f"{drawn:,} of {cloud.n_points:,} points drawn"
+    typer.echo(f"wrote {output} ({frame.image.shape[1]}x{frame.image.shape[0]}, {points})")  # (side-by-side stereo: both eyes)
 
 
 @app.command()
