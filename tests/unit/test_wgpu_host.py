@@ -138,3 +138,13 @@ def test_stale_ranges_are_the_rewritten_batches_merged_and_never_empty():
     assert stale_ranges(cloud, 2, 0, 500, gap=99) == [(100, 200), (300, 500)]
     assert stale_ranges(cloud, 2, 0, 500, gap=100) == [(100, 500)]
     assert stale_ranges(cloud, 2, 150, 450, gap=100) == [(150, 450)]
+
+
+@pytest.mark.parametrize(("value", "off"), [("1", True), ("yes", True), ("0", False), ("", False)])
+def test_no_gpu_switch_reads_its_value(monkeypatch, value, off):
+    from gigapoint.backends.wgpu import backend
+
+    monkeypatch.setattr(backend.glob, "glob", lambda pattern: ["/dev/dri/renderD128"])  # a device node, on any host
+    monkeypatch.setattr(backend.sys, "platform", "linux")
+    monkeypatch.setenv("GIGAPOINT_NO_GPU", value)
+    assert backend.gpu_device_present() is (not off)

@@ -62,8 +62,8 @@ DEFAULT_MEMORY_BUDGET = 2 << 30
 
 def gpu_device_present() -> bool:
     """Cheap check for a GPU before asking wgpu (enumerating adapters takes ~1 s).
-    ``GIGAPOINT_NO_GPU=1`` makes ``auto`` use the CPU."""
-    if os.environ.get("GIGAPOINT_NO_GPU"):
+    ``GIGAPOINT_NO_GPU=1`` makes ``auto`` use the CPU; unset, empty or 0 leaves it to the device."""
+    if os.environ.get("GIGAPOINT_NO_GPU", "").strip() not in ("", "0"):  # "0" turned the GPU off too
         return False
     if not sys.platform.startswith("linux"):
         return True  # Metal / DX12: let wgpu decide
