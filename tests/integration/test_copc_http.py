@@ -33,7 +33,8 @@ class RangeServer:
     500), "ignore_range" (200 with the whole file), "short" (closes before the promised body
     ends), "short_206" (a 206 whose body and Content-Length are shorter than asked), "wrong_range"
     (another range than asked), "hang" (never answers). ``fail_after``: behave for that many
-    requests first. Counts requests and connections."""
+    requests first. ``route(path)``: (status, Location or None) answered instead of the file
+    (redirects, refusals), or None. Counts requests and connections."""
 
     def __init__(self, root: Path):
         self.root = root
@@ -48,6 +49,7 @@ class RangeServer:
         self.etag = None  # sent with each file's bytes when set
         self.rate = 0  # bytes a second each answer's body is sent at (0: at once)
         self.inflight = self.max_inflight = 0
+        self.route = None
         self.lock = threading.Lock()
         server = self
 
@@ -76,6 +78,14 @@ class RangeServer:
 
             def answer(self, n):
                 mode = server.mode if n > server.fail_after else "ok"
+                routed = server.route(self.path) if server.route else None
+                if routed is not None:
+                    self.send_response(routed[0])
+                    if routed[1]:
+                        self.send_header("Location", routed[1])
+                    self.send_header("Content-Length", "0")
+                    self.end_headers()
+                    return
                 path = server.root / unquote(self.path.split("?")[0].lstrip("/"))
                 if mode == "hang":
                     time.sleep(5)
@@ -587,3 +597,126 @@ def test_a_url_with_a_password_and_a_token_is_never_shown_whole(data, server, qu
     err = capsys.readouterr().err
     assert "is an octree, drawn as stored" in err
     _no_secret(err, port, "autzen.copc.laz?sig=***&se=***")
+
+
+# --------------------------------------------------------------------------- redirects
+
+
+def _moved(prefix: str, to: str, only: str | None = None):
+    """A route: paths under ``prefix`` (only ``only`` when given) 302 to the same under ``to``."""
+    return lambda path: (302, to + path[len(prefix) :]) if path.startswith(prefix) and (only is None or path == only) else None
+
+
+def test_an_ept_json_redirected_alone_has_its_files_where_it_led(data, server):
+    """``/latest/ept.json`` -> ``/v3/ept.json`` with only ept.json redirected: the hierarchy and
+    data files were asked beside the URL given ("…/latest/ept-hierarchy/0-0-0-0.json: HTTP 404");
+    they are beside where the redirect led, each asked once."""
+    server.route = _moved("/latest/", "/ept_laz/", only="/latest/ept.json")
+    c = gp.open(server.url("latest/ept.json"))
+    assert isinstance(c, EptCloud) and c.n_points == 20_000
+    a = _frame(gp.open(data / "ept_laz"), point_budget=10**9, lod_threshold_px=0.0)
+    b = _frame(c, point_budget=10**9, lod_threshold_px=0.0)
+    np.testing.assert_array_equal(a.image, b.image)
+    assert server.paths[:2] == ["/latest/ept.json", "/ept_laz/ept.json"]
+    assert len(server.paths) > 4 and all(p.startswith("/ept_laz/") for p in server.paths[1:])
+    assert c.node_file(int(c.keys[0])) == server.url("ept_laz/ept-data/0-0-0-0.laz")
+    c.close()
+
+
+def test_a_moved_ept_tree_is_read_where_it_went_without_a_redirect_per_file(data, server):
+    """``/old/*`` -> ``/ept_laz/*``, the query kept: worked before at two requests a file (each
+    redirected); now one redirect, for ept.json."""
+    server.route = _moved("/old/", "/ept_laz/")
+    c = gp.open(server.url("old/ept.json?t=1"))
+    assert _frame(c, point_budget=10**9, lod_threshold_px=0.0).stats.points_processed == 20_000
+    files = len(set(server.paths)) - 1
+    assert server.paths[:2] == ["/old/ept.json?t=1", "/ept_laz/ept.json?t=1"] and files > 4
+    assert server.requests == files + 1  # (before: 2 x files)
+    assert all(p.startswith("/ept_laz/") and p.endswith("?t=1") for p in server.paths[1:])
+    c.close()
+
+
+def test_a_redirect_to_signed_urls_is_followed_afresh_for_every_file(data, server):
+    """``/s/ept.json`` -> ``/ept_laz/ept.json?sig=…`` (a store's signed URL: one signature a file,
+    and the store refuses the others, 403): the files beside are asked beside the URL given, each
+    redirected to its own signed URL; a signed COPC file's ranges are asked at the URL given every
+    time (a signature expires), not at the signed URL of its first answer."""
+    import zlib
+
+    def store(to):  # "/s/x" -> "<to>x?sig=<crc of x>"; under <to>, another signature is refused
+        def route(path):
+            if path.startswith("/s/"):
+                return 302, f"{to}{path[3:]}?sig={zlib.crc32(path[3:].encode())}"
+            name, _, sig = path[len(to) :].partition("?sig=")
+            return None if sig == str(zlib.crc32(name.encode())) else (403, None)
+
+        return route
+
+    server.route = store("/ept_laz/")
+    c = gp.open(server.url("s/ept.json"))
+    assert _frame(c, point_budget=10**9, lod_threshold_px=0.0).stats.points_processed == 20_000
+    given = sorted(p[3:] for p in server.paths if p.startswith("/s/"))
+    signed = sorted(p.split("?")[0][9:] for p in server.paths if not p.startswith("/s/"))
+    assert given == signed and len(given) > 4 and len(set(given)) == len(given)  # each file once, redirected
+    c.close()
+    server.paths.clear()
+    server.route = store("/")
+    c = gp.open(server.url("s/autzen.copc.laz"))
+    _frame(c, point_budget=30_000)
+    n = len(server.paths) // 2  # each range redirected and signed afresh
+    assert n > 2 and sorted(server.paths) == ["/autzen.copc.laz?sig=1766382414"] * n + ["/s/autzen.copc.laz"] * n
+    c.close()
+
+
+def test_a_moved_copc_file_is_read_where_it_went(data, server):
+    """A COPC file's every range request went to the URL given and was redirected again: now the
+    first is, and the later ones go where it led."""
+    server.route = _moved("/moved/", "/")
+    c = gp.open(server.url("moved/autzen.copc.laz"))
+    assert _frame(c, point_budget=10**9, lod_threshold_px=0.0).stats.points_processed == 110_000
+    assert server.paths[:2] == ["/moved/autzen.copc.laz", "/autzen.copc.laz"]
+    assert len(server.paths) > 4 and server.paths[2:] == ["/autzen.copc.laz"] * (len(server.paths) - 2)
+    c.close()
+
+
+@pytest.mark.timeout(60)
+def test_bad_redirects_are_one_line_naming_the_url(server, quick):
+    server.route = lambda path: {
+        "/loop.copc.laz": (302, "/loop.copc.laz"),
+        "/ftp.copc.laz": (302, "ftp://host/x.copc.laz?sig=secret"),
+        "/nowhere.copc.laz": (302, None),
+    }.get(path)
+    url = server.url("loop.copc.laz")
+    with pytest.raises(InputError) as e:
+        gp.open(url)  # (httpx: "TooManyRedirects: Exceeded maximum allowed redirects.")
+    assert str(e.value) == f"{url}: too many redirects (more than 20: a redirect loop?) for bytes 0..65,536"
+    url = server.url("ftp.copc.laz")
+    with pytest.raises(InputError) as e:
+        gp.open(url)  # (httpx: "UnsupportedProtocol: Request URL has an unsupported protocol 'ftp://'.")
+    assert str(e.value) == f"{url}: redirected to ftp://host/x.copc.laz?sig=***: only http:// and https:// URLs are read"
+    url = server.url("nowhere.copc.laz")
+    with pytest.raises(InputError) as e:
+        gp.open(url)
+    assert str(e.value) == f"{url}: unexpected HTTP 302 Found for bytes 0..65,536"
+
+
+def test_a_redirect_from_https_to_http_is_not_followed():
+    """httpx follows https -> http: the answer (and a signed URL's signature) in the clear."""
+    import httpx
+
+    asked = []
+
+    def store(request):
+        asked.append(str(request.url))
+        if request.url.host == "cdn.example":
+            return httpx.Response(404)
+        return httpx.Response(302, headers={"Location": "http://cdn.example/x.copc.laz?sig=s"})
+
+    client = gphttp.HttpClient()
+    client.client._transport = httpx.MockTransport(store)  # (no TLS server here)
+    url = "https://user:pw@store.example/x.copc.laz"
+    with pytest.raises(InputError) as e:
+        gphttp.HttpFile(url, client).read_head(100)
+    assert str(e.value) == "https://user:***@store.example/x.copc.laz: redirected from https to http://cdn.example/x.copc.laz?sig=***: not followed (the answer would travel unencrypted)"
+    assert asked == [url]
+    client.close()

@@ -13,9 +13,17 @@ LRU cache of the ranges read, and two retries of transient failures (connection 
 HTTP 502/503/504). Whatever goes wrong is a one-line ``InputError`` naming the URL: an HTTP
 error status, a short read, a server that ignores ``Range`` (200 with the whole file) or
 answers another range than asked, a range past the end of the file, a timeout, a file that
-changed on the server since its first answer (size, ETag or Last-Modified). Messages name a URL
+changed on the server since its first answer (size, ETag or Last-Modified), too many redirects,
+a redirect from https to http or to another scheme (not followed). Messages name a URL
 as ``shown_url`` gives it: its password and query values as *** (signed URLs are how COPC files
 are shared); requests use the URL itself.
+
+Redirects: a redirect that keeps the URL's query (a moved file or dataset, ``/latest/`` ->
+``/v3/``) is remembered: the file's later ranges are asked where it led, and its siblings are
+the files beside where it led (an EPT's ``ept.json`` alone redirected has its hierarchy and data
+there). A redirect to another query (a signed URL: ``/ept.json`` -> ``/bucket/ept.json?sig=...``)
+is followed afresh at every request (a signature is for one file and expires), and siblings
+are beside the URL as given, each redirected and signed by the server on its own.
 
 httpx is an optional dependency (``pip install 'gigapoint[http]'``).
 """
@@ -251,12 +259,14 @@ class HttpClient:
             limits=httpx.Limits(max_connections=2 * self.workers, max_keepalive_connections=self.workers),
             follow_redirects=True,
             headers={"User-Agent": "gigapoint", "Accept-Encoding": "identity"},
+            event_hooks={"response": [_check_redirect]},
         )
         self.cache = _LruBytes(CACHE_BYTES if cache_bytes is None else cache_bytes)
         self._pool: ThreadPoolExecutor | None = None
         self._pool_lock = threading.Lock()
         self.sizes: dict[str, int] = {}  # file sizes learnt from Content-Range
         self.versions: dict[str, str] = {}  # each file's first ETag (else Last-Modified): a change is noticed
+        self.moved: dict[str, str] = {}  # URL -> where a redirect that kept its query led (see the module's docstring)
         self.requests = 0  # requests sent (cache misses), for tests and benchmarks
         self.bytes_read = 0
         self.closed = False  # (httpx's own "Cannot send a request" was a RuntimeError traceback)
@@ -342,7 +352,9 @@ class HttpClient:
     def _request(self, httpx, url, start, size, headers, allow_short, what, t0, limit) -> bytes:
         self.requests += 1
         try:
-            with self.client.stream("GET", url, headers=headers) as r:
+            with self.client.stream("GET", self.moved.get(url, url), headers=headers) as r:
+                if r.history and urlsplit(str(r.url)).query == urlsplit(url).query:  # moved, not signed
+                    self.moved[url] = str(r.url)  # (no redirect per range, and a /latest/ that moves on stays put)
                 status = r.status_code
                 if status in _RETRY_STATUS:
                     raise _Transient(f"HTTP {status} {r.reason_phrase} for {what}")
@@ -398,6 +410,10 @@ class HttpClient:
             raise
         except _Transient:
             raise
+        except _BadRedirect as exc:
+            raise InputError(f"{shown_url(url)}: {exc}") from None
+        except httpx.TooManyRedirects:
+            raise InputError(f"{shown_url(url)}: too many redirects (more than {self.client.max_redirects}: a redirect loop?) for {what}") from None
         except httpx.TimeoutException:
             raise InputError(f"{shown_url(url)}: no answer within {self.timeout:g} s for {what} (timed out)") from None
         except (httpx.RemoteProtocolError, httpx.ReadError) as exc:
@@ -434,6 +450,25 @@ class HttpClient:
             self.sizes[url] = size
         if version and not seen:
             self.versions[url] = version
+
+
+class _BadRedirect(Exception):
+    """A redirect not followed (its text becomes the InputError's, which names the URL asked)."""
+
+
+def _check_redirect(response) -> None:
+    """httpx's response hook: a redirect from https to http (the answer, and any signature in the
+    URL, in the clear) or to another scheme than http(s) is refused (httpx follows the first and
+    failed on the second as "UnsupportedProtocol")."""
+    if not response.has_redirect_location:
+        return
+    old = response.request.url
+    new = old.join(response.headers["location"])
+    where = shown_url(str(new))
+    if new.scheme not in ("http", "https"):
+        raise _BadRedirect(f"redirected to {where}: only http:// and https:// URLs are read")
+    if old.scheme == "https" and new.scheme == "http":
+        raise _BadRedirect(f"redirected from https to {where}: not followed (the answer would travel unencrypted)")
 
 
 class HttpNotFound(InputError):
@@ -501,7 +536,7 @@ class HttpFile(ByteSource):
         return self.client.map(lambda s: s.read_all(), list(sources))
 
     def sibling(self, relative: str) -> HttpFile:
-        url = urljoin(self.url, relative)
+        url = urljoin(self.client.moved.get(self.url, self.url), relative)  # beside where a move led (it kept the query)
         query = urlsplit(self.url).query
         if query and not urlsplit(relative).query:  # a token in the query (a container's SAS) reads the files beside it too
             url = f"{url}?{query}"
