@@ -23,7 +23,9 @@ Redirects: a redirect that keeps the URL's query (a moved file or dataset, ``/la
 the files beside where it led (an EPT's ``ept.json`` alone redirected has its hierarchy and data
 there). A redirect to another query (a signed URL: ``/ept.json`` -> ``/bucket/ept.json?sig=...``)
 is followed afresh at every request (a signature is for one file and expires), and siblings
-are beside the URL as given, each redirected and signed by the server on its own.
+are beside the URL as given, each redirected and signed by the server on its own (a dataset
+whose ept.json alone redirects to a signed URL opens from that URL itself where its token reads
+the whole folder, as ``sibling`` carries a URL's query on).
 
 httpx is an optional dependency (``pip install 'gigapoint[http]'``).
 """
