@@ -720,3 +720,26 @@ def test_a_redirect_from_https_to_http_is_not_followed():
     assert str(e.value) == "https://user:***@store.example/x.copc.laz: redirected from https to http://cdn.example/x.copc.laz?sig=***: not followed (the answer would travel unencrypted)"
     assert asked == [url]
     client.close()
+
+
+def test_an_ept_folder_url_that_the_server_redirects_to_its_slash(server):
+    """``gigapoint info https://host/ept/``: typer's Path drops the '/', and servers answer a folder
+    without its '/' with 301 to it (nginx, Apache), then 403 or an index page: that was "…/ept_laz:
+    HTTP 403 Forbidden for bytes 0..65,536", a COPC file being expected. A redirect to the URL's
+    own path and '/' says it is a folder: it is tried as an EPT folder, as a 404 is."""
+
+    def route(path):
+        folder, _, query = path.partition("?")
+        if folder == "/ept_laz":
+            return 301, "/ept_laz/" + (f"?{query}" if query else "")
+        return (403, None) if folder == "/ept_laz/" else None
+
+    server.route = route
+    for name in ("ept_laz", "ept_laz?t=1"):
+        c = gp.open(server.url(name))
+        assert isinstance(c, EptCloud) and c.n_points == 20_000
+        c.close()
+    server.route = lambda path: (301, "/nothing/") if path == "/nothing" else None
+    with pytest.raises(InputError) as e:
+        gp.open(server.url("nothing"))
+    assert str(e.value) == f"{server.url('nothing')}: a folder, not a file (the server redirected to {server.url('nothing/')})"

@@ -355,6 +355,8 @@ class HttpClient:
         self.requests += 1
         try:
             with self.client.stream("GET", self.moved.get(url, url), headers=headers) as r:
+                if r.history and urlsplit(str(r.url)).path == urlsplit(url).path + "/":  # (nginx's answer to a folder's URL)
+                    raise HttpNotFound(f"{shown_url(url)}: a folder, not a file (the server redirected to {shown_url(str(r.url))})")
                 if r.history and urlsplit(str(r.url)).query == urlsplit(url).query:  # moved, not signed
                     self.moved[url] = str(r.url)  # (no redirect per range, and a /latest/ that moves on stays put)
                 status = r.status_code
@@ -474,7 +476,8 @@ def _check_redirect(response) -> None:
 
 
 class HttpNotFound(InputError):
-    """HTTP 404: the URL names no file (an EPT folder whose '/' was dropped is tried as one)."""
+    """HTTP 404 or a redirect to the URL and '/': the URL names no file (an EPT folder whose '/'
+    was dropped is tried as one)."""
 
 
 class _Transient(Exception):
