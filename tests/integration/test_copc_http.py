@@ -743,3 +743,16 @@ def test_an_ept_folder_url_that_the_server_redirects_to_its_slash(server):
     with pytest.raises(InputError) as e:
         gp.open(server.url("nothing"))
     assert str(e.value) == f"{server.url('nothing')}: a folder, not a file (the server redirected to {server.url('nothing/')})"
+
+
+def test_a_moved_dataset_behind_a_password_keeps_it(server):
+    """A same-host redirect to an absolute Location without the URL's user:password: httpx sends
+    the credentials along, and the files then asked where it led must have them too."""
+    port = server.httpd.server_address[1]
+    server.route = lambda path: (302, f"http://127.0.0.1:{port}/ept_laz/{path[5:]}") if path.startswith("/old/") else None
+    c = gp.open(f"http://reader:hunter2@127.0.0.1:{port}/old/ept.json")
+    assert _frame(c, point_budget=10**9, lod_threshold_px=0.0).stats.points_processed == 20_000
+    assert len(server.paths) > 4 and all(p.startswith("/ept_laz/") for p in server.paths[1:])
+    assert server.auths == ["Basic cmVhZGVyOmh1bnRlcjI="] * len(server.paths)
+    _no_secret(c.node_file(int(c.keys[0])), port, "ept_laz/ept-data/0-0-0-0.laz")
+    c.close()

@@ -358,7 +358,7 @@ class HttpClient:
                 if r.history and urlsplit(str(r.url)).path == urlsplit(url).path + "/":  # (nginx's answer to a folder's URL)
                     raise HttpNotFound(f"{shown_url(url)}: a folder, not a file (the server redirected to {shown_url(str(r.url))})")
                 if r.history and urlsplit(str(r.url)).query == urlsplit(url).query:  # moved, not signed
-                    self.moved[url] = str(r.url)  # (no redirect per range, and a /latest/ that moves on stays put)
+                    self.moved[url] = _led_to(r)  # (no redirect per range, and a /latest/ that moves on stays put)
                 status = r.status_code
                 if status in _RETRY_STATUS:
                     raise _Transient(f"HTTP {status} {r.reason_phrase} for {what}")
@@ -473,6 +473,15 @@ def _check_redirect(response) -> None:
         raise _BadRedirect(f"redirected to {where}: only http:// and https:// URLs are read")
     if old.scheme == "https" and new.scheme == "http":
         raise _BadRedirect(f"redirected from https to {where}: not followed (the answer would travel unencrypted)")
+
+
+def _led_to(response) -> str:
+    """The URL a redirected request ended at, with the user:password of the URL asked where httpx
+    sent them along (the same host): its ``url`` has them only when the Location had them."""
+    first = response.history[0].request.url
+    if first.userinfo and not response.url.userinfo and "authorization" in response.request.headers:
+        return str(response.url.copy_with(userinfo=first.userinfo))
+    return str(response.url)
 
 
 class HttpNotFound(InputError):
