@@ -101,6 +101,28 @@ def test_a_bad_file_in_a_frames_dir_is_skipped_with_a_message(tmp_path):
     assert "c.npy" in live.stats.last_error and "\n" not in live.stats.last_error
 
 
+def test_pcl_colours_read_right_from_ascii_pcd_and_rgba_fields(tmp_path):
+    """PCL writes a float rgb field of an ASCII PCD as the integer of its 32 bits (0xFFRRGGBB:
+    alpha 255), which were read as the float's bits: every colour wrong. An rgba field
+    (PointXYZRGBA, in PCD files and PointCloud2 messages) was not read at all: no colours."""
+    pytest.importorskip("pypcd4")
+    from gigapoint.live.sources import pointcloud2_arrays, read_points_file
+
+    rgb = np.array([[255, 0, 0], [0, 255, 0], [10, 49, 51], [0, 0, 0]], np.uint8)
+    bits = (0xFF << 24) | (rgb[:, 0].astype(np.uint64) << 16) | (rgb[:, 1].astype(np.uint64) << 8) | rgb[:, 2]
+    head = "VERSION 0.7\nFIELDS x y z {0}\nSIZE 4 4 4 4\nTYPE F F F {1}\nCOUNT 1 1 1 1\nWIDTH 4\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 4\nDATA ascii\n"
+    rows = "".join(f"{k} 1 2 {b}\n" for k, b in enumerate(bits.tolist()))
+    for name, kind in (("rgb", "F"), ("rgba", "U")):
+        (tmp_path / f"{name}.pcd").write_text("# .PCD v0.7 - Point Cloud Data file format\n" + head.format(name, kind) + rows)
+        xyz, got = read_points_file(tmp_path / f"{name}.pcd")
+        np.testing.assert_array_equal(xyz[:, 0], [0, 1, 2, 3])
+        np.testing.assert_array_equal(got, rgb)
+    typesys = pytest.importorskip("rosbags.typesys")
+    msg = _pointcloud2(typesys.get_typestore(typesys.Stores.ROS2_HUMBLE), patch(0, 4)[0], rgb, 0, False)
+    msg.fields[-1].name = "rgba"  # PointXYZRGBA's field
+    np.testing.assert_array_equal(pointcloud2_arrays(msg)[1], rgb)
+
+
 @pytest.mark.parametrize("fps", [0, -10.0, float("nan"), "10"])
 def test_a_frame_rate_that_is_not_a_positive_number_is_refused_at_once(tmp_path, fps):
     """fps=0 was a ZeroDivisionError in the player's thread, reported only as "the stream

@@ -161,12 +161,31 @@ def _xyz_rgb_of_table(path, names, column):
         if all(c in lower for c in (r, g, b)):
             rgb = np.stack([np.asarray(column(lower[c])) for c in (r, g, b)], axis=1)
             break
-    if rgb is None and "rgb" in lower:  # PCL's packed float/u32 rgb
-        packed = np.ascontiguousarray(column(lower["rgb"]))
+    name = lower.get("rgb", lower.get("rgba"))  # PCL's packed float/u32 rgb, or rgba (PointXYZRGBA: its colour was dropped)
+    if rgb is None and name is not None:
+        packed = np.ascontiguousarray(column(name))
         if packed.dtype.itemsize == 4:
             v = packed.view(np.uint32)
             rgb = np.stack([(v >> 16) & 255, (v >> 8) & 255, v & 255], axis=1).astype(np.uint8)
     return xyz, rgb
+
+
+def _pcl_ascii_colors(path: Path, names: list[str], arr: np.ndarray) -> np.ndarray | None:
+    """The packed colours of an ASCII PCD's float ``rgb``/``rgba`` field as PCL writes them, or
+    None: PCL writes that float's 32 bits as an integer there (pcd_io.cpp: a colour's bits can
+    be a NaN), which pypcd4 reads as a float32 number (rounding 0xFFRRGGBB), and its bits were
+    every colour wrong. Integers are read again exactly from the file's column."""
+    name = next((n for n in names if n.lower() in ("rgb", "rgba")), None)
+    if name is None or arr.dtype[name].kind != "f" or not len(arr):
+        return None
+    lines = path.read_bytes().splitlines()
+    data = next((k for k, line in enumerate(lines) if line.startswith(b"DATA")), None)
+    if data is None or lines[data].split()[1:] != [b"ascii"]:
+        return None
+    values = np.loadtxt(lines[data + 1 :], usecols=names.index(name), dtype=np.float64, ndmin=1)
+    if not ((values >= 0) & (values < 2**32) & (values == np.round(values))).all():
+        return None  # the float's own values (a NaN or a fraction: not PCL's integers)
+    return values.astype(np.uint32)
 
 
 def read_points_file(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
@@ -183,9 +202,10 @@ def read_points_file(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
                 from pypcd4 import PointCloud
             except ImportError:
                 raise InputError(f"{path}: reading PCD needs pypcd4 (pip install 'gigapoint[live]')") from None
-            pc = PointCloud.from_path(path)
-            arr = pc.pc_data
-            return _xyz_rgb_of_table(path, list(arr.dtype.names), lambda n: arr[n])
+            arr = PointCloud.from_path(path).pc_data
+            names = list(arr.dtype.names)
+            ints = _pcl_ascii_colors(path, names, arr)
+            return _xyz_rgb_of_table(path, names, lambda n: ints if ints is not None and n.lower() in ("rgb", "rgba") else arr[n])
         if suffix == ".npy":
             a = np.load(path, allow_pickle=False)
             if a.dtype.names:
