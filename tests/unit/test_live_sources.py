@@ -123,6 +123,30 @@ def test_pcl_colours_read_right_from_ascii_pcd_and_rgba_fields(tmp_path):
     np.testing.assert_array_equal(pointcloud2_arrays(msg)[1], rgb)
 
 
+def test_a_frame_the_cloud_refuses_is_said_with_its_file_or_message(tmp_path):
+    """A frame read fine but refused by push (every point NaN: an organised PCL cloud that saw
+    nothing; an empty PointCloud2) was said as "live: push: ...", naming no file or message."""
+    np.save(tmp_path / "a.npy", patch(0)[0])
+    np.save(tmp_path / "b.npy", np.full((4, 3), np.nan))
+    live = LiveCloud()
+    player = Player(FramesDir(tmp_path), live, rate=None)
+    player.run()
+    assert player.frames == 1 and player.errors == 1 and live.stats.frames_rejected == 1
+    assert live.stats.last_error == f"{tmp_path / 'b.npy'}: live: push: none of the frame's 4 points is valid (NaN, inf or beyond ±1e+12)"
+    pytest.importorskip("rosbags")
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    typestore = get_typestore(Stores.ROS2_HUMBLE)
+    with Writer(tmp_path / "bag", version=8) as writer:
+        conn = writer.add_connection("/points", "sensor_msgs/msg/PointCloud2", typestore=typestore)
+        for k, n in enumerate((0, 5)):
+            msg = _pointcloud2(typestore, *patch(k, n), 10**9, False)
+            writer.write(conn, 10**9 + k, typestore.serialize_cdr(msg, "sensor_msgs/msg/PointCloud2"))
+    Player(BagSource(tmp_path / "bag"), live, rate=None).run()
+    assert live.stats.last_error == f"{tmp_path / 'bag'}: message at {10**9}: live: push: the frame has no points" and live.n_frames == 2
+
+
 @pytest.mark.parametrize("fps", [0, -10.0, float("nan"), "10"])
 def test_a_frame_rate_that_is_not_a_positive_number_is_refused_at_once(tmp_path, fps):
     """fps=0 was a ZeroDivisionError in the player's thread, reported only as "the stream

@@ -46,6 +46,7 @@ class RecordedFrame:
     intrinsics: np.ndarray | None = None
     depth_scale: float | None = None
     max_depth: float | None = None
+    origin: str | None = None  # its file or message, for a refused frame's message
 
     def push_into(self, live) -> int:
         """Push this frame into a LiveCloud (``push`` or ``push_depth``)."""
@@ -179,7 +180,9 @@ def read_frame(path: Path) -> RecordedFrame:
                 raise InputError(f"{path}: not a recorded frame (not an NPZ archive, which a recording writes)")
             f.seek(0)
             with np.load(f, allow_pickle=False) as z:
-                return _frame_of(path, z)
+                frame = _frame_of(path, z)
+                frame.origin = str(path)
+                return frame
     except (OSError, ValueError, TypeError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # a truncated or damaged npz (TypeError: a time of several values)
         raise InputError(f"{path}: not a recorded frame ({first_line(exc)})") from None
 

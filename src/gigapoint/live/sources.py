@@ -238,7 +238,7 @@ class FramesDir(Source):
             except GigapointError as exc:
                 yield exc  # the Player counts it and goes on
                 continue
-            yield RecordedFrame("points", k / self.rate_hz, None, xyz=xyz, rgb=rgb)
+            yield RecordedFrame("points", k / self.rate_hz, None, xyz=xyz, rgb=rgb, origin=str(p))
 
 
 # ---------------------------------------------------------------------- TUM RGB-D
@@ -369,7 +369,8 @@ class TumSequence(Source):
             if rgb is not None and rgb.shape[:2] != depth.shape[:2]:
                 rgb = None
             yield RecordedFrame("depth", t, self.gt_poses[k] if k is not None else None, rgb=rgb, depth=depth,
-                                intrinsics=np.array(self.intrinsics, np.float64), depth_scale=self.depth_scale)  # fmt: skip
+                                intrinsics=np.array(self.intrinsics, np.float64), depth_scale=self.depth_scale,
+                                origin=str(self.path / depth_file))  # fmt: skip
         if not posed:
             yield InputError(f"{self.gt_file}: no depth image has a pose within {self.max_dt * 1000:g} ms of its time stamp: nothing to place")
 
@@ -452,7 +453,7 @@ class BagSource(Source):
                 except Exception as exc:  # noqa: BLE001
                     yield InputError(f"{self.path}: message at {stamp} is not a PointCloud2 ({first_line(exc)})")
                     continue
-                yield RecordedFrame("points", t, None, xyz=xyz, rgb=rgb)
+                yield RecordedFrame("points", t, None, xyz=xyz, rgb=rgb, origin=f"{self.path}: message at {stamp}")
         finally:
             reader.close()
 
@@ -569,5 +570,7 @@ class Player:
             try:
                 frame.push_into(self.live)
                 self.frames += 1
-            except GigapointError:
-                self.errors += 1  # counted by the cloud too (stats.frames_rejected, last_error)
+            except GigapointError as exc:
+                self.errors += 1  # counted by the cloud too (stats.frames_rejected)
+                # which file or message (the cloud's message named only itself: "live: push: the frame has no points")
+                self.live.stats.last_error = f"{frame.origin or f'{self.source.name}: frame {k}'}: {exc}"
