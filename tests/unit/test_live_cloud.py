@@ -400,6 +400,45 @@ def test_save_names_what_it_cannot_write_and_writes_copc(tmp_path, monkeypatch):
     assert type(open_octree(tmp_path / "scan.copc.laz")).__name__ == "CopcCloud" and open_octree(tmp_path / "scan.copc.laz").n_points == 500
 
 
+_SAVE_ON_A_FULL_DISK = """
+import resource, signal, sys
+from pathlib import Path
+import numpy as np
+from gigapoint.errors import InputError
+from gigapoint.live import LiveCloud
+
+out = Path(sys.argv[1])
+live = LiveCloud()
+live.push(np.random.default_rng(3).random((20000, 3)) * 100, np.full((20000, 3), 9, np.uint8))
+live.snapshot()
+for suffix in (".las", ".laz", ".ply"):
+    live.save(out / f"warm{suffix}")  # every kernel compiled (and cached) before the limit
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit: EFBIG, as a full disk's ENOSPC
+resource.setrlimit(resource.RLIMIT_FSIZE, (4000, resource.RLIM_INFINITY))
+for suffix in (".las", ".laz", ".ply"):
+    try:
+        live.save(out / f"scan{suffix}")
+    except InputError as exc:
+        print(exc)
+"""
+
+
+def test_save_on_a_full_disk_is_one_line_naming_the_file_and_leaves_nothing(tmp_path):
+    """A LAZ that could not be written (a full disk; here a file size limit) was lazrs'
+    "IoError: Failed to call write", naming no file, and no OSError (the CLI's "internal error")."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("resource")
+    run = subprocess.run([sys.executable, "-c", _SAVE_ON_A_FULL_DISK, str(tmp_path)], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    lines = run.stdout.splitlines()
+    assert [line.split(" (")[0] for line in lines] == [f"{tmp_path / f'scan{s}'}: not written" for s in (".las", ".laz", ".ply")]
+    assert all(line.endswith("); nothing was left there") for line in lines)
+    assert "File too large" in lines[0] and "Failed to call write" in lines[1] and "File too large" in lines[2]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["warm.las", "warm.laz", "warm.ply"]  # no scan.*, no temporary file
+
+
 def test_close_frees_frames_and_snapshots_and_refuses_later_pushes():
     """``close`` stopped the source and recording only: frames and snapshots stayed in memory,
     and a push or snapshot afterwards went on as if open."""

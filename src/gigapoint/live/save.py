@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write
+from ..atomic import atomic_write, write_failure
 from ..core.chunk import join_chunks
-from ..errors import InputError
+from ..errors import InputError, first_line
 from ..io.registry import is_supported_name
 from ..lod.copc_write import is_copc_name
 
@@ -40,10 +40,16 @@ def save_snapshots(octree, path, overwrite: bool = False) -> int:
     if not path.parent.is_dir():
         raise InputError(f"{path}: the folder {path.parent} does not exist")
     xyz, rgba, attrs = _collect(octree)
-    if suffix == ".ply":
-        _write_ply(path, xyz, rgba, attrs)
-    else:
-        _write_las(path, xyz, rgba, attrs)
+    from lazrs import LazrsError
+
+    try:
+        if suffix == ".ply":
+            _write_ply(path, xyz, rgba, attrs)
+        else:
+            _write_las(path, xyz, rgba, attrs)
+    except (OSError, LazrsError) as exc:  # a full disk: lazrs said "IoError: Failed to call write", naming no file, not an OSError
+        reason = write_failure(exc) if isinstance(exc, OSError) else first_line(exc)
+        raise InputError(f"{path}: not written ({reason}); nothing was left there") from None
     return len(xyz)
 
 
