@@ -439,6 +439,24 @@ def test_save_on_a_full_disk_is_one_line_naming_the_file_and_leaves_nothing(tmp_
     assert sorted(p.name for p in tmp_path.iterdir()) == ["warm.las", "warm.laz", "warm.ply"]  # no scan.*, no temporary file
 
 
+def test_frames_per_second_follows_a_changing_and_a_slow_stream_and_says_when_it_stopped():
+    """Over the last 120 arrivals, 4 s at 30 frames/s then 10 s at 1 frame/s read 8.7 frames/s,
+    and a steady frame every 3 s read 0 (a stopped stream) from 2 s after each frame."""
+    from gigapoint.live.cloud import LiveStats
+
+    s = LiveStats()
+    assert s.frames_per_second(now=0.0) == 0.0
+    s.arrivals.extend(np.arange(120) / 30.0)
+    assert s.frames_per_second(now=4.0) == pytest.approx(30.0)
+    s.arrivals.extend(4.0 + np.arange(1, 11))
+    assert s.frames_per_second(now=14.5) == pytest.approx(1.0)
+    assert s.frames_per_second(now=16.5) == 0.0  # no frame for 2.5 s: stopped
+    slow = LiveStats()
+    slow.arrivals.extend([0.0, 3.0, 6.0, 9.0])
+    assert slow.frames_per_second(now=11.5) == pytest.approx(1 / 3)
+    assert slow.frames_per_second(now=15.5) == 0.0  # no frame for 6.5 s, twice its interval: stopped
+
+
 def test_close_frees_frames_and_snapshots_and_refuses_later_pushes():
     """``close`` stopped the source and recording only: frames and snapshots stayed in memory,
     and a push or snapshot afterwards went on as if open."""

@@ -120,13 +120,21 @@ class LiveStats:
     latencies: deque = field(default_factory=lambda: deque(maxlen=_LATENCIES))  # seconds, push -> drawn
 
     def frames_per_second(self, now: float | None = None) -> float:
+        """Frames in a second over the last 2 s of arrivals (the last interval for a slower
+        stream); 0 once no frame came for twice that interval (at least 2 s): the stream stopped.
+        (Over the last 120 arrivals, a 30 -> 1 frames/s stream still read 8.7 after 10 s, and a
+        steady 0.4 frames/s one read 0 two seconds after each frame.)"""
         a = list(self.arrivals)
         if len(a) < 2:
             return 0.0
         now = _time.perf_counter() if now is None else now
-        if now - a[-1] > 2.0:  # the stream stopped
+        recent = [t for t in a if t >= a[-1] - 2.0]
+        if len(recent) < 2:
+            recent = a[-2:]
+        interval = max(recent[-1] - recent[0], 1e-9) / (len(recent) - 1)
+        if now - a[-1] > max(2.0, 2.0 * interval):  # the stream stopped
             return 0.0
-        return (len(a) - 1) / max(a[-1] - a[0], 1e-9)
+        return 1.0 / interval
 
     def latency_ms(self, q: float = 50.0) -> float | None:
         lat = list(self.latencies)
