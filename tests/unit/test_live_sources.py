@@ -569,6 +569,12 @@ def test_a_full_disk_stops_the_recording_once_and_the_stream_goes_on(tmp_path, m
     for k, f in enumerate(files):
         np.testing.assert_array_equal(read_frame(f).xyz, frames[k])
     assert not [p for p in (tmp_path / "rec" / "frames").iterdir() if p.name.startswith(".")]  # no temporary left
+    # a replay plays the 5 frames and then says the recording was cut short (it looked whole)
+    replay = LiveCloud()
+    player = Player(ReplaySource(tmp_path / "rec"), replay, rate=None)
+    player.run()
+    assert player.frames == 5 and replay.n_points == 5 * 50
+    assert replay.stats.last_error == f"{tmp_path / 'rec'}: the recording ends early: {said[0]}"
 
     def no_room(path, obj, **kw):
         raise OSError(errno.ENOSPC, "No space left on device", str(path))

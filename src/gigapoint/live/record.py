@@ -145,7 +145,10 @@ class Recorder:
     def _index(self) -> dict:
         with self._lock:
             entries = sorted(self.entries, key=lambda e: e["file"])  # (producers on several threads finish out of order)
-        return {"format": FORMAT, "version": 1, "frames": entries}
+        index = {"format": FORMAT, "version": 1, "frames": entries}
+        if self.error is not None:  # (a recording cut short by a full disk looked like a whole one)
+            index["stopped_early"] = str(self.error)
+        return index
 
     def _write_index(self) -> None:
         try:
@@ -235,6 +238,12 @@ def recording_files(directory) -> list[Path]:
     seen = {p.name for p in listed}
     later = sorted(p for p in (directory / FRAMES).glob("[0-9]*.npz") if p.name not in seen)
     return [p for p in listed if p.is_file()] + later
+
+
+def stopped_early(directory) -> str | None:
+    """Why a recording stopped before its stream did (a full disk), as its index says, else None."""
+    why = _read_index(Path(directory)).get("stopped_early")
+    return why if isinstance(why, str) else None
 
 
 def is_recording(path) -> bool:

@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import GigapointError, InputError, check_switch, first_line, is_real
-from .record import RecordedFrame, is_recording, read_frame, recording_files
+from .record import RecordedFrame, is_recording, read_frame, recording_files, stopped_early
 
 KINECT_V2 = (365.5, 365.5, 256.0, 212.0)  # fx, fy, cx, cy of a Kinect v2's 512x424 depth camera
 TUM_DEFAULT = (525.0, 525.0, 319.5, 239.5)  # the TUM benchmark's default (ROS) intrinsics
@@ -466,6 +466,7 @@ class ReplaySource(Source):
         self.path = Path(path)
         self.name = str(self.path)
         self.files = recording_files(self.path)
+        self.stopped_early = stopped_early(self.path)
 
     def frames(self):
         for p in self.files:
@@ -473,6 +474,8 @@ class ReplaySource(Source):
                 yield read_frame(p)
             except GigapointError as exc:
                 yield exc
+        if self.stopped_early:  # said once its frames are played, as a bad frame is (the HUD's last line)
+            yield InputError(f"{self.path}: the recording ends early: {self.stopped_early}")
 
 
 def open_source(spec, **options) -> Source:
