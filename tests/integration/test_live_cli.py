@@ -126,6 +126,47 @@ def test_record_into_a_recording_asks_for_an_option_view_has_and_a_bad_port_reco
     assert lone.returncode == 1 and "--overwrite: replaces a recording in --record DIR" in lone.stderr, lone.stderr
 
 
+_VIEW_ON_A_FILLING_DISK = """
+import errno, sys
+import numpy as np
+from gigapoint.cli import main
+from gigapoint.live import record
+
+savez, calls = np.savez, []
+
+def filling(f, **arrays):  # frame 3 on finds the disk full
+    calls.append(1)
+    if len(calls) > 3:
+        raise OSError(errno.ENOSPC, "No space left on device")
+    savez(f, **arrays)
+
+record.np.savez = filling
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_view_live_says_how_many_frames_a_recording_cut_short_holds(tmp_path):
+    """`view --live S --record DIR` said "recorded 8 frames" of a recording a full disk had
+    stopped after 3: the frames in, not the frames written."""
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for k in range(8):
+        np.save(frames / f"{k}.npy", np.random.default_rng(k).uniform(0, 5, (100, 3)))
+    rec = tmp_path / "rec"
+    proc = subprocess.Popen([sys.executable, "-c", _VIEW_ON_A_FILLING_DISK, "view", "--live", str(frames), "--record", str(rec), "--no-browser"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        url = proc.stdout.readline().strip()
+        for _ in range(100):  # the 8 frames at 10 a second
+            if httpx.get(url.rstrip("/") + "/api/info", timeout=10).json()["cloud"]["points"] == 800:
+                break
+    finally:
+        stop(proc)
+    said = [line for line in proc.stderr.read().splitlines() if line.startswith("recorded")]
+    assert said == [f"recorded 3 frames into {rec} ({rec}: recording stopped after 3 frames: [Errno 28] No space left on device: '{rec / 'frames' / '000003.npz'}')"]
+    assert len(list((rec / "frames").iterdir())) == 3
+
+
 def test_demo_live_refuses_the_options_of_the_image_it_does_not_render(tmp_path):
     """`demo --live -o x.png --points 5 --seed 3` served the live demo and dropped every other option without a word."""
     bad = subprocess.run([sys.executable, "-m", "gigapoint.cli", "demo", "--live", "-o", str(tmp_path / "x.png"), "--points", "5", "--seed", "3"],

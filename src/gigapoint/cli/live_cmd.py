@@ -29,8 +29,7 @@ def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: floa
 
         bounds = ((0.0, 0.0, -30.0), (SCENE_SIZE, SCENE_SIZE, 60.0))  # frame the town from the start
     live = LiveCloud(keep=keep, decay=decay, name=f"live: {src.name}", bounds=bounds)
-    if record is not None:
-        live.record(record, overwrite=overwrite)
+    recorder = live.record(record, overwrite=overwrite) if record is not None else None
     player = Player(src, live, rate=rate, loop=loop).start()
     deadline = time.monotonic() + 10.0
     while live.n_frames == 0 and not player.done.is_set() and time.monotonic() < deadline:  # the first view frames a first frame
@@ -53,8 +52,8 @@ def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: floa
         server.serve_forever()
     finally:
         live.close()
-        if record is not None:
-            print(f"recorded {live.stats.frames_in + live.stats.frames_dropped} frames into {record}", file=sys.stderr)  # (dropped unseen: recorded)
+        if recorder is not None:  # the frames written (dropped unseen ones too); every frame in was said when a full disk stopped it
+            print(f"recorded {recorder.n_frames} frames into {record}" + (f" ({recorder.error})" if recorder.error else ""), file=sys.stderr)
 
 
 def check_live_options(keep: int, decay: float | None, rate: float | None) -> None:
