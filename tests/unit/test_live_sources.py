@@ -104,7 +104,8 @@ def test_a_bad_file_in_a_frames_dir_is_skipped_with_a_message(tmp_path):
 def test_pcl_colours_read_right_from_ascii_pcd_and_rgba_fields(tmp_path):
     """PCL writes a float rgb field of an ASCII PCD as the integer of its 32 bits (0xFFRRGGBB:
     alpha 255), which were read as the float's bits: every colour wrong. An rgba field
-    (PointXYZRGBA, in PCD files and PointCloud2 messages) was not read at all: no colours."""
+    (PointXYZRGBA, in PCD files and PointCloud2 messages) was not read at all: no colours; and
+    a big-endian PointCloud2's packed colours were byte-swapped."""
     pytest.importorskip("pypcd4")
     from gigapoint.live.sources import pointcloud2_arrays, read_points_file
 
@@ -121,6 +122,13 @@ def test_pcl_colours_read_right_from_ascii_pcd_and_rgba_fields(tmp_path):
     msg = _pointcloud2(typesys.get_typestore(typesys.Stores.ROS2_HUMBLE), patch(0, 4)[0], rgb, 0, False)
     msg.fields[-1].name = "rgba"  # PointXYZRGBA's field
     np.testing.assert_array_equal(pointcloud2_arrays(msg)[1], rgb)
+    # a big-endian message: its packed colours were read byte-swapped ((16, 32, 48) as (48, 32, 16))
+    big = np.zeros(4, [("x", ">f4"), ("y", ">f4"), ("z", ">f4"), ("pad", ">f4"), ("rgba", ">u4")])
+    big["x"], big["rgba"] = [0, 1, 2, 3], bits
+    msg.is_bigendian, msg.data = True, big.view(np.uint8)
+    xyz, got = pointcloud2_arrays(msg)
+    np.testing.assert_array_equal(xyz[:, 0], [0, 1, 2, 3])
+    np.testing.assert_array_equal(got, rgb)
 
 
 def test_a_frame_the_cloud_refuses_is_said_with_its_file_or_message(tmp_path):

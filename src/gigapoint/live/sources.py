@@ -165,7 +165,7 @@ def _xyz_rgb_of_table(path, names, column):
     if rgb is None and name is not None:
         packed = np.ascontiguousarray(column(name))
         if packed.dtype.itemsize == 4:
-            v = packed.view(np.uint32)
+            v = packed.view(np.dtype(np.uint32).newbyteorder(packed.dtype.byteorder))  # a big-endian message's colours were byte-swapped
             rgb = np.stack([(v >> 16) & 255, (v >> 8) & 255, v & 255], axis=1).astype(np.uint8)
     return xyz, rgb
 
