@@ -55,22 +55,30 @@ ONCE = {f"t{i}.{'laz' if i % 2 else 'las'}": 1 for i in range(N_TILES)}
 
 
 def test_open_reads_each_header_once(tiles, reads):
-    cloud = gp.open(tiles)
+    with pytest.warns(gp.GigapointWarning, match="scanner_channel not in every file"):
+        cloud = gp.open(tiles)
     assert cloud.n_points == N_TILES * 3000
     assert reads["header"] == ONCE and reads["head"] == ONCE
     assert reads["laspy"] == ONCE  # the points, once
 
 
 def test_progressive_open_reads_each_header_once(tiles, reads):
-    octree = gp.open(tiles, progressive=True)
-    assert octree.wait(timeout=120)
+    with pytest.warns(gp.GigapointWarning, match="scanner_channel not in every file"):
+        octree = gp.open(tiles, progressive=True)
+        assert octree.wait(timeout=120)
     assert octree.n_points == N_TILES * 3000
     assert reads["header"] == ONCE and reads["head"] == ONCE  # file_sources, then the loader thread
 
 
-@pytest.mark.parametrize("memory_limit", [None, "64M"], ids=["in-memory", "out-of-core"])
-def test_convert_reads_each_header_once(tiles, reads, tmp_path, memory_limit):
-    gp.convert(tiles, tmp_path / "out", memory_limit=memory_limit)
+@pytest.mark.parametrize("spilled", [False, True], ids=["in-memory", "out-of-core"])
+def test_convert_reads_each_header_once(tiles, reads, tmp_path, monkeypatch, spilled):
+    import importlib
+
+    if spilled:  # (12 000 points fit any memory limit)
+        monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.in_memory"), "fits_in_memory", lambda job: False)
+    with pytest.warns(gp.GigapointWarning, match="scanner_channel not in every file"):  # (point formats 3 and 6)
+        result = gp.convert(tiles, tmp_path / "out")
+    assert result.in_memory is not spilled
     assert reads["header"] == ONCE and reads["head"] == ONCE  # (out of core: read in prefetch's thread)
 
 
