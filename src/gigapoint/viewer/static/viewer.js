@@ -35,13 +35,15 @@
     const ws = new WebSocket(u);
     ws.binaryType = "arraybuffer";
     S.ws = ws;
-    status("connecting…");
-    ws.onopen = () => { S.retry = 0; status("connected"); sendResize(true); };
+    let opened = false;
+    ws.onopen = () => { opened = true; S.retry = 0; status("connected"); sendResize(true); };
     ws.onmessage = (ev) => (typeof ev.data === "string" ? onJson(JSON.parse(ev.data)) : onFrame(ev.data));
     ws.onclose = () => {
       S.ws = null;
-      status("disconnected — reconnecting…");
       S.retry = Math.min(S.retry + 1, 10);
+      // the picture and the HUD stay as the server last sent them: dimmed, so they do not pass for live
+      canvas.classList.add("stale");
+      status(opened ? "disconnected — reconnecting…" : `no answer from the viewer server (stopped?) — retrying every ${(0.3 * S.retry).toFixed(1)} s`);
       setTimeout(connect, 300 * S.retry);
     };
   }
@@ -82,6 +84,10 @@
 
   function onJson(m) {
     if (m.type === "hello") {
+      // a reconnect to the same cloud (the server restarted, the network dropped) keeps this tab's view and settings
+      const same = S.cloud && S.cloud.name === m.cloud.name && JSON.stringify(S.cloud.bounds) === JSON.stringify(m.cloud.bounds);
+      const kept = same && S.camera ? { camera: S.camera, settings: S.settings } : null;
+      drawing = 0;  // the new session numbers its frames from 1: the old count dropped them all
       S.session = m.session; S.schema = m.schema; S.settings = m.settings; S.camera = m.camera;
       const b = m.cloud.bounds;
       S.sceneRadius = Math.hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]) / 2 || 1;
@@ -89,6 +95,15 @@
       buildSettings();
       updateSpeedLabel();
       setFov(m.camera.fov, false);
+      canvas.classList.remove("stale");
+      status("connected — drawing the view…");  // the first frame can take seconds (a big cloud, a first run's compile)
+      S.awaitingFrame = true;
+      sendQuality();  // the panel's values, which a reload or a reconnect kept, not the new session's defaults
+      if (kept) {
+        send({ type: "camera", ...kept.camera }, true);
+        const changed = Object.fromEntries(Object.entries(kept.settings).filter(([k, v]) => JSON.stringify(v) !== JSON.stringify(m.settings[k])));
+        if (Object.keys(changed).length) send({ type: "settings", values: changed }, true);
+      }
     } else if (m.type === "settings") {
       S.settings = m.values;
       syncSettings();
@@ -123,6 +138,7 @@
       ctx.drawImage(bmp, 0, 0, canvas.width, canvas.height);
       bmp.close();
       S.header = header; S.camera = header.camera; S.lastFrame = header.frame;
+      if (S.awaitingFrame) { S.awaitingFrame = false; status("connected"); }
       S.frameTimes.push(performance.now());
       S.renderTimes.push(header.render_ms);  // the profiler line: the last 100 frames
       if (S.renderTimes.length > 100) S.renderTimes.shift();

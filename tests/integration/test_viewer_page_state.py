@@ -1,0 +1,105 @@
+"""The viewer page's own state in a real headless Chromium: the HUD's long lines, the status
+while the first view is drawn, a stopped server and a reconnect."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import pytest
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(180)]  # the browser: tests/integration/conftest.py
+pytest.importorskip("starlette")
+pytest.importorskip("uvicorn")
+
+import gigapoint
+from gigapoint.viewer import session
+from gigapoint.viewer.server import ViewerServer
+
+VIEWPORT = {"width": 290 + 640, "height": 480}  # the panel is 290 px wide: the canvas is 640 x 480
+
+
+@pytest.fixture(scope="module")
+def cloud():
+    return gigapoint.demo(20_000)
+
+
+@pytest.fixture()
+def server(cloud):
+    srv = ViewerServer(cloud).start()
+    yield srv
+    srv.close()
+
+
+@pytest.fixture()
+def page(browser):
+    ctx = browser.new_context(viewport=VIEWPORT)
+    pg = ctx.new_page()
+    errors = []
+    pg.on("pageerror", lambda e: errors.append(str(e)))
+    yield pg
+    ctx.close()
+    assert not errors, errors
+
+
+def wait_full_frame(pg, after: int = 0) -> int:
+    pg.wait_for_function(
+        "(n) => { const c = document.getElementById('canvas'); return Number(c.dataset.frame || 0) > n && c.dataset.full === 'true'; }",
+        arg=after,
+        timeout=30_000,
+    )
+    return int(pg.evaluate("() => Number(document.getElementById('canvas').dataset.frame)"))
+
+
+def test_a_long_hud_line_wraps_inside_the_view(page, server):
+    # a progressive load's error names its file: the line ran on under the panel, its end unread
+    server.core.note = "loading stopped: /data/" + "survey_tile_" * 20 + ".laz: truncated or corrupt LAZ file; showing the 60,000 points loaded"
+    page.goto(server.url)
+    wait_full_frame(page)
+    page.wait_for_function("() => document.getElementById('stats').textContent.includes('points loaded')", timeout=30_000)
+    stats, view = (page.locator(s).bounding_box() for s in ("#stats", "#canvas"))
+    assert stats["x"] + stats["width"] <= view["x"] + view["width"], (stats, view)
+    assert page.evaluate("() => { const e = document.getElementById('stats'); return e.scrollWidth <= e.clientWidth; }")
+
+
+def test_the_status_says_the_view_is_being_drawn_until_it_is(page, server):
+    with session.RENDER_LOCK:  # the first frame takes seconds (a big cloud, a first run's compile)
+        page.goto(server.url)
+        page.wait_for_function("() => window.gigapoint.session", timeout=30_000)
+        assert page.locator("#status").inner_text() == "connected — drawing the view…"
+    wait_full_frame(page)
+    assert page.locator("#status").inner_text() == "connected"
+
+
+def test_a_stopped_server_is_said_and_a_restarted_one_keeps_the_tabs_view(page, cloud):
+    srv = ViewerServer(cloud).start()
+    try:
+        page.goto(srv.url)
+        n = wait_full_frame(page)
+        page.get_by_role("button", name="top").click()
+        page.locator("#setting-color_mode").select_option(json.dumps("elevation"))
+        page.wait_for_function("() => window.gigapoint.camera.pitch > 89 && window.gigapoint.settings.color_mode === 'elevation'", timeout=30_000)
+        for view in ("front", "side", "iso", "front", "side", "top"):  # frames: a new session's 1, 2, ... were dropped as old
+            page.get_by_role("button", name=view).click()
+            n = wait_full_frame(page, n)
+        page.locator("#jpeg").fill("40")
+        page.locator("#jpeg").dispatch_event("change")
+    finally:
+        srv.close()
+    page.wait_for_function("() => document.getElementById('status').textContent.startsWith('no answer from the viewer server')", timeout=30_000)
+    assert page.evaluate("() => getComputedStyle(document.getElementById('canvas')).opacity") == "0.45"  # the last picture, dimmed
+    again = ViewerServer(cloud, port=srv.port).start()  # the same address: the page reconnects by itself
+    try:
+        page.wait_for_function("() => document.getElementById('status').textContent === 'connected'", timeout=30_000)
+        t_end = time.monotonic() + 30
+        while time.monotonic() < t_end and not (len(again.core.sessions) == 1 and next(iter(again.core.sessions.values())).jpeg_quality == 40):
+            time.sleep(0.1)
+        tab = next(iter(again.core.sessions.values()))
+        state, settings, _ = tab.snapshot()
+        assert state.pitch == pytest.approx(90.0) and settings.color_mode == "elevation" and tab.jpeg_quality == 40
+        assert page.evaluate("() => getComputedStyle(document.getElementById('canvas')).opacity") == "1"
+        assert page.evaluate("() => window.gigapoint.settings.color_mode") == "elevation"
+        page.get_by_role("button", name="front").click()  # the new session's frames are drawn
+        page.wait_for_function("() => Math.abs(window.gigapoint.camera.pitch) < 1", timeout=30_000)
+    finally:
+        again.close()
