@@ -103,3 +103,17 @@ def test_a_stopped_server_is_said_and_a_restarted_one_keeps_the_tabs_view(page, 
         page.wait_for_function("() => Math.abs(window.gigapoint.camera.pitch) < 1", timeout=30_000)
     finally:
         again.close()
+
+
+def test_a_view_wider_than_the_largest_frame_keeps_its_aspect(browser, server):
+    # 2 device pixels a CSS pixel: the canvas is 2310 x 600 CSS px, 4620 x 1200 device px, past the 4096 a side
+    ctx = browser.new_context(viewport={"width": 290 + 2310, "height": 600}, device_scale_factor=2)
+    try:
+        pg = ctx.new_page()
+        pg.goto(server.url)
+        wait_full_frame(pg)
+        header = pg.evaluate("() => window.gigapoint.header")
+        assert (header["width"], header["height"]) == (4096, 1064)  # 4620 x 1200 scaled by 4096 / 4620, not squeezed to 4096 x 1200
+        assert pg.evaluate("() => [canvas.width, canvas.height]") == [4096, 1064]
+    finally:
+        ctx.close()

@@ -25,7 +25,9 @@
   function deviceSize() {
     const r = canvas.getBoundingClientRect();
     const dpr = Math.min(window.devicePixelRatio || 1, 2);
-    return [Math.max(1, Math.min(4096, Math.round(r.width * dpr))), Math.max(1, Math.min(4096, Math.round(r.height * dpr)))];
+    // one factor for both sides: each capped at 4096 on its own stretched a wide view (a 5K screen's)
+    const k = dpr * Math.min(1, 4096 / Math.max(r.width * dpr, r.height * dpr, 1));
+    return [Math.max(1, Math.min(4096, Math.round(r.width * k))), Math.max(1, Math.min(4096, Math.round(r.height * k)))];
   }
 
   function connect() {
