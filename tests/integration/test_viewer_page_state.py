@@ -117,3 +117,29 @@ def test_a_view_wider_than_the_largest_frame_keeps_its_aspect(browser, server):
         assert pg.evaluate("() => [canvas.width, canvas.height]") == [4096, 1064]
     finally:
         ctx.close()
+
+
+def test_the_keys_and_the_reload_do_what_the_help_says(page, server):
+    page.goto(server.url)
+    n = wait_full_frame(page)
+    help_keys = page.locator("#help-keys").inner_text()
+    assert "R reset" in help_keys and "1–5 top, front, side, iso, auto" in help_keys and "+/− fly speed" in help_keys
+    assert "reloading the page starts again from the first view and the default settings" in help_keys
+    first = page.evaluate("() => window.gigapoint.camera")
+    page.locator("#canvas").focus()
+    page.keyboard.press("3")  # side
+    page.wait_for_function("() => Math.abs(window.gigapoint.camera.pitch) < 0.01 && Math.abs(window.gigapoint.camera.yaw) < 0.01", timeout=30_000)
+    speed = page.locator("#speed-value").inner_text()
+    page.keyboard.press("+")
+    assert float(page.locator("#speed-value").inner_text().rstrip("/s")) == pytest.approx(float(speed.rstrip("/s")) * 2 ** 0.5, rel=1e-2)
+    page.keyboard.press("f")
+    assert page.locator("#fly").is_checked()
+    page.keyboard.press("r")
+    page.wait_for_function("(yaw) => window.gigapoint.camera.yaw === yaw", arg=first["yaw"], timeout=30_000)
+    page.locator("#setting-color_mode").select_option(json.dumps("elevation"))
+    page.wait_for_function("() => window.gigapoint.settings.color_mode === 'elevation'", timeout=30_000)
+    n = wait_full_frame(page, n)
+    page.reload()
+    wait_full_frame(page)
+    assert page.evaluate("() => window.gigapoint.settings.color_mode") == "rgb"
+    assert page.evaluate("() => window.gigapoint.camera") == first
