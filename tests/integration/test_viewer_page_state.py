@@ -143,3 +143,17 @@ def test_the_keys_and_the_reload_do_what_the_help_says(page, server):
     wait_full_frame(page)
     assert page.evaluate("() => window.gigapoint.settings.color_mode") == "rgb"
     assert page.evaluate("() => window.gigapoint.camera") == first
+
+
+def test_the_jpeg_quality_field_shows_the_quality_used(page, server):
+    page.goto(server.url)
+    wait_full_frame(page)
+    (tab,) = server.core.sessions.values()
+    for typed, used in (("40", 40), ("", 85), ("500", 100), ("3", 10)):  # emptied: 10 was used, the field blank
+        page.locator("#jpeg").fill(typed)
+        page.locator("#jpeg").dispatch_event("change")
+        page.wait_for_function("(q) => document.getElementById('jpeg').value === String(q)", arg=used, timeout=5_000)
+        t_end = time.monotonic() + 10
+        while tab.jpeg_quality != used and time.monotonic() < t_end:
+            time.sleep(0.05)
+        assert tab.jpeg_quality == used, typed

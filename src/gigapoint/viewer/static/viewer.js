@@ -403,8 +403,11 @@
   $("fly").addEventListener("change", (e) => setFly(e.target.checked));
   $("speed").addEventListener("input", (e) => { S.speedExp = Number(e.target.value); updateSpeedLabel(); });
   const sendQuality = () => {
-    const q = Math.round(Number($("jpeg").value));
-    send({ type: "quality", adaptive: $("adaptive").checked, jpeg_quality: Number.isFinite(q) ? Math.max(10, Math.min(100, q)) : 85 }, true);
+    // an emptied field was Number("") = 0: quality 10 while it showed nothing; the field shows the quality used
+    const q = $("jpeg").value === "" ? NaN : Math.round(Number($("jpeg").value));
+    const jpeg = Number.isFinite(q) ? Math.max(10, Math.min(100, q)) : 85;
+    $("jpeg").value = jpeg;
+    send({ type: "quality", adaptive: $("adaptive").checked, jpeg_quality: jpeg }, true);
   };
   $("adaptive").addEventListener("change", sendQuality);
   $("jpeg").addEventListener("change", sendQuality);
