@@ -177,6 +177,21 @@ def test_options_a_turntable_or_a_still_image_would_drop_are_refused(npy, tmp_pa
     assert gif.exists()
 
 
+def test_ipd_is_automatic_unless_given(npy, tmp_path):
+    """--ipd was a fixed 0.065 world units by default; now the default is the 1/30 rule (target
+    distance / 30) and --ipd 0.1 draws eyes 0.1 apart, both as the API draws them."""
+    cloud = gp.open(npy)
+    cam = gp.Camera.fit(cloud.bounds, view="iso", width=80, height=56)
+    s = gp.RenderSettings(backend="cpu", stereo="anaglyph")
+    auto = _render(npy, tmp_path / "a.png", "--stereo", "anaglyph")
+    np.testing.assert_array_equal(auto, gp.render(cloud, cam, s))
+    rule = float(np.linalg.norm(np.subtract(cam.target, cam.eye))) / 30.0
+    np.testing.assert_array_equal(auto, gp.render(cloud, cam, s.replace(ipd=rule)))
+    given = _render(npy, tmp_path / "b.png", "--stereo", "anaglyph", "--ipd", "0.1")
+    np.testing.assert_array_equal(given, gp.render(cloud, cam, s.replace(ipd=0.1)))
+    assert not np.array_equal(auto, given)
+
+
 def _render(npy, out, *extra):
     assert main(["render", str(npy), "-o", str(out), "-W", "80", "-H", "56", "--view", "iso", "--backend", "cpu", *extra]) == 0
     return np.asarray(Image.open(out))

@@ -94,12 +94,82 @@ def test_an_empty_stereo_frame_warns_like_a_plain_one():
     cloud = gp.from_arrays(np.random.default_rng(0).random((1000, 3)) * 0.01, name="pebble")
     cam = gp.Camera.fit_cloud(cloud, width=64, height=48)
     with pytest.warns(gp.GigapointWarning, match=r"^pebble: no point is in view of the stereo camera \(each eye's image moves 101 px of 64: ipd 0.065 world units is wide"):
-        f = gp.render_frame(cloud, cam, stereo="anaglyph")
+        f = gp.render_frame(cloud, cam, stereo="anaglyph", ipd=0.065)
     assert f.stats.visible_pixels == 0
     away = gp.Camera.look_at((5, 5, 5), (6, 6, 6), width=64, height=48)
     with pytest.warns(gp.GigapointWarning, match=r"^pebble: no point is in view of the stereo camera; the image shows only the background$"):
         gp.render_frame(cloud, away, stereo="side-by-side")
     assert gp.render_frame(cloud, cam, stereo="anaglyph", ipd=0.0005).stats.visible_pixels > 100  # an ipd for its size
+
+
+def test_the_default_stereo_pair_of_a_pebble_shows_it():
+    """The default ipd was a fixed 0.065 world units: a 1 cm pebble's stereo frame was blank (each
+    eye's image moved 101 px off a 64 px frame). The automatic ipd scales with the scene."""
+    cloud = gp.from_arrays(np.random.default_rng(0).random((1000, 3)) * 0.01, name="pebble")
+    cam = gp.Camera.fit_cloud(cloud, width=64, height=48)
+    plain = gp.render_frame(cloud, cam).stats.visible_pixels
+    f = gp.render_frame(cloud, cam, stereo="anaglyph")
+    assert f.stats.visible_pixels > 0.8 * plain > 100
+
+
+def _near_and_far(scale):
+    """A red cube at 0.6 and a green one at 1.5 times the target distance 2 * scale, seen along +y."""
+    rng = np.random.default_rng(7)
+    cube = (rng.random((4000, 3)) - 0.5) * 0.1
+    xyz = np.concatenate([cube + (-0.3, -0.8, 0.0), cube + (0.5, 1.0, 0.0)]) * scale
+    rgb = np.repeat(np.array([[255, 0, 0], [0, 255, 0]], np.uint8), 4000, axis=0)
+    cam = gp.Camera.look_at((0.0, -2.0 * scale, 0.0), (0.0, 0.0, 0.0), fov=60.0, width=160, height=120)
+    return gp.from_arrays(xyz, rgb, name="pair"), cam
+
+
+def _disparity(frame, channel):
+    """Centroid x of the pixels of one color in the left eye minus that in the right eye (side-by-side)."""
+    w = frame.image.shape[1] // 2
+    xs = [np.nonzero(frame.image[:, k * w : (k + 1) * w, channel] > 200)[1] for k in (0, 1)]
+    assert all(len(x) > 20 for x in xs)
+    return xs[0].mean() - xs[1].mean()
+
+
+@pytest.mark.parametrize("scale", [0.15, 1500.0])  # a 30 cm object, a 3 km scene
+def test_the_default_ipd_gives_any_scene_the_same_depth(scale):
+    """The default ipd was a fixed 0.065 world units: the disparity between the near and the far
+    cube (the depth the viewer sees) was 14 % of the image width for a 30 cm object, and 0 px for a
+    3 km scene. Auto ipd, convergence / 30 (the stereographers' 1/30 rule): fx / 30 (2.2 % of
+    the width here) whatever the units."""
+    cloud, cam = _near_and_far(scale)
+    s = gp.RenderSettings(backend="cpu", stereo="side-by-side", size_mode="fixed", point_size=2)
+    f = gp.render_frame(cloud, cam, s)
+    depth = _disparity(f, 0) - _disparity(f, 1)  # near (red) minus far (green)
+    fx = 60.0 / np.tan(np.radians(30.0))
+    assert depth / cam.width == pytest.approx(fx / 30.0 / cam.width, abs=0.002)  # 0.0217
+    assert _disparity(f, 0) > 0.5 > -0.5 > _disparity(f, 1)  # near pops out, far recedes: zero parallax at the target
+    assert f.stats.visible_pixels > 0.9 * 2 * gp.render_frame(cloud, cam, s.replace(stereo="none")).stats.visible_pixels
+    # the rule, as an explicit ipd: the same pixels; an explicit convergence sets the auto ipd too
+    np.testing.assert_array_equal(f.image, gp.render(cloud, cam, s.replace(ipd=2.0 * scale / 30.0)))
+    conv = s.replace(convergence=1.5 * scale)
+    np.testing.assert_array_equal(gp.render(cloud, cam, conv), gp.render(cloud, cam, conv.replace(ipd=1.5 * scale / 30.0)))
+
+
+def test_the_default_ipd_of_an_orthographic_camera_is_0():
+    """Parallel rays see no parallax: eyes moved apart only doubled a small object's image (red
+    and cyan copies 0.065 world units apart). The automatic ipd of an orthographic camera is 0."""
+    cloud, _ = _near_and_far(0.15)
+    cam = gp.Camera.fit(cloud.bounds, view="front", width=160, height=120, projection="orthographic")
+    plain = gp.render(cloud, cam, backend="cpu")
+    np.testing.assert_array_equal(gp.render(cloud, cam, backend="cpu", stereo="anaglyph"), plain)
+    assert not np.array_equal(gp.render(cloud, cam, backend="cpu", stereo="anaglyph", ipd=0.065), plain)
+
+
+def test_an_explicit_ipd_is_drawn_as_given(scene):
+    cloud, cam = scene
+    s = gp.RenderSettings(backend="cpu", stereo="anaglyph", ipd=0.1)
+    np.testing.assert_array_equal(gp.render(cloud, cam, backend="cpu", stereo="anaglyph", ipd=0.1), gp.render(cloud, cam, s))
+    left, right = eye_cameras(cam, 0.1)
+    plain = [gp.render(cloud, c, backend="cpu") for c in (left, right)]  # h is 0 px at this distance
+    assert convergence_shift(cam, 0.1, None) == 0
+    np.testing.assert_array_equal(gp.render(cloud, cam, s)[..., 0], plain[0][..., 0])
+    np.testing.assert_array_equal(gp.render(cloud, cam, s)[..., 1:3], plain[1][..., 1:3])
+    assert not np.array_equal(gp.render(cloud, cam, s), gp.render(cloud, cam, s.replace(ipd=None)))
 
 
 @pytest.mark.parametrize("kw", [{"threads": 1}, {"threads": 2, "point_size": 3}, {"edl": True, "fill_holes": 1, "hqs": True}])

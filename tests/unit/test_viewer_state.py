@@ -197,6 +197,20 @@ def test_apply_settings_accepts_and_round_trips():
     assert P.apply_settings(RenderSettings(), values) == s  # what the server sends can be sent back
 
 
+def test_the_automatic_ipd_round_trips_through_the_viewer():
+    """ipd None (auto, the 1/30 rule) is shown as an empty field and sent back as null."""
+    field = next(d for d in P.settings_schema(RenderSettings) if d["name"] == "ipd")
+    assert (field["kind"], field["nullable"], field["min"]) == ("float", True, 0.0)
+    assert "1/30" in field["help"]
+    assert P.settings_values(RenderSettings())["ipd"] is None
+    s = P.apply_settings(RenderSettings(), {"ipd": 0.1})
+    assert s.ipd == 0.1 and P.settings_values(s)["ipd"] == 0.1
+    assert P.apply_settings(s, {"ipd": None}).ipd is None
+    assert P.apply_settings(RenderSettings(), P.settings_values(s)) == s
+    with pytest.raises(P.ProtocolError, match="^settings: ipd must be a number >= 0.0, got -1"):
+        P.apply_settings(RenderSettings(), {"ipd": -1})
+
+
 def test_point_budget_1e12_is_rejected_when_present():
     if "point_budget" not in {f.name for f in dataclasses.fields(RenderSettings)}:
         pytest.skip("RenderSettings has no point_budget yet")

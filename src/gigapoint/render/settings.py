@@ -193,7 +193,12 @@ class RenderSettings:
     supersample: Supersample = setting(1, "Anti-aliasing: render 1, 2 or 4 times larger and filter down.")
     supersample_filter: SupersampleFilter = setting("box", "Supersampling filter: box (exact block mean) or lanczos (Pillow).")
     stereo: Stereo = setting("none", "Stereo pair: none, side-by-side or anaglyph.")
-    ipd: float = setting(0.065, "Stereo eye distance in world units.", min=0.0)
+    ipd: float | None = setting(
+        None,
+        "Stereo eye distance in world units (default: auto, the zero-parallax distance / 30, the stereographers' 1/30 rule, "
+        "so a 30 cm object and a city both show depth; 0 for an orthographic camera; 0 = both eyes alike).",
+        min=0.0,
+    )
     convergence: float | None = setting(
         None, "Stereo zero-parallax distance in world units (default: the camera's target distance).", min=0.0, exclusive_min=True
     )

@@ -7,8 +7,11 @@ closest key of each s x s block, so depth and picking stay meaningful.
 Stereo uses parallel eyes ``ipd`` apart along the camera's right vector and a horizontal
 image translation that puts zero parallax at ``convergence`` (default: the camera's
 target distance): each eye's image moves by fx * ipd / (2 * convergence) pixels, the
-uncovered columns show the background. ``side-by-side`` puts the eyes next to each other
-(2W x H); ``anaglyph`` takes red from the left eye and green and blue from the right.
+uncovered columns show the background. The default ``ipd`` follows the stereographers'
+1/30 rule, convergence / 30: a fixed 6.5 cm put the eyes of a 30 cm scan wider apart than
+the object and gave a city no depth; scaled with the scene, a point at the convergence
+distance is fx / 30 pixels apart in the two eyes whatever the units. ``side-by-side``
+puts the eyes next to each other (2W x H); ``anaglyph`` takes red from the left eye and green and blue from the right.
 
 Each whole render is ``render_one(cloud, camera, settings)`` (the renderer's render_frame,
 handed in by it).
@@ -83,11 +86,24 @@ def eye_cameras(camera, ipd: float):
     return left, rite
 
 
+def convergence_distance(camera, convergence: float | None) -> float:
+    """The zero-parallax distance: ``convergence``, else the camera's target distance."""
+    return convergence if convergence is not None else float(np.linalg.norm(np.subtract(camera.target, camera.eye)))
+
+
+def stereo_ipd(camera, settings) -> float:
+    """The eye distance drawn: ``settings.ipd``; when None (auto) the 1/30 rule, or 0 for an
+    orthographic camera (its parallel rays see no parallax: moved eyes only double the image)."""
+    if settings.ipd is not None:
+        return settings.ipd
+    return convergence_distance(camera, settings.convergence) / 30.0 if camera.projection == "perspective" else 0.0
+
+
 def convergence_shift(camera, ipd: float, convergence: float | None) -> int:
     """Pixels each eye's image moves (left eye to the left, right eye to the right)."""
     if camera.projection != "perspective" or ipd == 0:
         return 0
-    c = convergence if convergence is not None else float(np.linalg.norm(np.subtract(camera.target, camera.eye)))
+    c = convergence_distance(camera, convergence)
     fx = (camera.width / 2.0) / (math.tan(math.radians(camera.fov) / 2.0) * camera.aspect)
     return round(fx * ipd / (2.0 * c))
 
@@ -142,14 +158,15 @@ def render_views(cloud, cameras, settings, backend, multi) -> list[Frame]:
 def stereo_frame(cloud, camera, settings, render_one) -> Frame:
     """Render both eyes (one pass over the points where the cloud can) into one stereo Frame."""
     inner = _inner(settings, stereo="none")
-    cams = eye_cameras(camera, settings.ipd)
+    ipd = stereo_ipd(camera, settings)
+    cams = eye_cameras(camera, ipd)
     with cloud.reading():
         multi = cloud.prepare_views([cam.view(cloud.bounds) for cam in cams], inner) if inner.supersample == 1 else None
         if multi is not None:
             frames = render_views(cloud, cams, inner, get_backend(inner.backend), multi)
     if multi is None:  # supersampled eyes, octrees (their nodes differ per eye): two renders
         frames = [render_one(cloud, cam, inner) for cam in cams]
-    h = convergence_shift(camera, settings.ipd, settings.convergence)
+    h = convergence_shift(camera, ipd, settings.convergence)
     bg = np.array(settings.background, np.uint8)
     stats = replace(frames[0].stats)
     for f in frames[1:]:
@@ -169,9 +186,11 @@ def stereo_frame(cloud, camera, settings, render_one) -> Frame:
         vis = np.minimum(shift_columns(frames[0].visibility, -h, EMPTY_PIXEL), shift_columns(frames[1].visibility, h, EMPTY_PIXEL))
     stats.visible_pixels = int((vis != EMPTY_PIXEL).sum())
     # an empty pair was a background image without the plain frame's warning (one eye drawn by
-    # render_one and empty has said it already)
+    # render_one and empty has said it already); the auto ipd moves each image fx / 60 px (a
+    # fraction of the width at any usual fov), so only an explicit ipd is named as too wide
     if stats.visible_pixels == 0 and (multi is not None or all(f.stats.visible_pixels for f in frames)):
-        why = f" (each eye's image moves {abs(h)} px of {w}: ipd {settings.ipd:g} world units is wide for this scene)" if abs(h) >= w else ""
+        wide = settings.ipd is not None and abs(h) >= w
+        why = f" (each eye's image moves {abs(h)} px of {w}: ipd {ipd:g} world units is wide for this scene)" if wide else ""
         warnings.warn(f"{cloud.name}: no point is in view of the stereo camera{why}; the image shows only the background", GigapointWarning, stacklevel=4)
     # the buffers both eyes' indices name (point_info was None for every pixel); none where an
     # octree's arena was refilled between the eyes (the first eye's indices name other points now)
