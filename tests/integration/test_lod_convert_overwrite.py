@@ -216,3 +216,16 @@ def test_a_replacement_that_succeeds_is_a_fresh_conversion(inputs, tmp_path):
         res = convert([new], out, format=fmt, overwrite=True, **OPTS)
         assert not res.resumed and res.points == 90_000
         assert _files(out) == _reference(new, tmp_path, fmt)
+
+
+def test_an_interrupted_cloud_save_over_an_octree_leaves_only_the_old_octree(tmp_path, monkeypatch):
+    """Ctrl+C in a cloud's save (chunks from Python: no run resumes them) left its .partial
+    beside the old octree until the next save cleared it."""
+    out = tmp_path / "oct"
+    convert(gp.demo(30_000, seed=1, colors="rgba"), out, **OPTS)
+    files, points = _files(out), _points(out)
+    _fail_in_build(monkeypatch, KeyboardInterrupt("test"))
+    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.in_memory"), "fits_in_memory", lambda job: False)
+    with pytest.raises(KeyboardInterrupt):
+        convert(gp.demo(50_000, seed=2, colors="rgba"), out, overwrite=True, **OPTS)
+    assert _files(out) == files and _points(out) == points  # no .partial, and it opens as before

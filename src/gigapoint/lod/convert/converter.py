@@ -71,8 +71,11 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
             with self.dir.lock():
                 try:
                     return self._run_locked(overwrite, fp)
-                except Exception:  # (an interrupt leaves its preview to look at, as a kill does)
-                    if fp is None and self.prepared:  # chunks from Python (a cloud's save): no rerun resumes them, so their work goes
+                except BaseException as exc:
+                    # chunks from Python (a cloud's save): no rerun resumes them, so their work goes; on an interrupt
+                    # too where it replaces an octree (that one opens, and the next save found the .partial beside it);
+                    # a new one interrupted leaves its preview to look at, as a kill does
+                    if fp is None and self.prepared and (isinstance(exc, Exception) or self.replacing):
                         self.discard(created)
                     raise
         except GigapointError as exc:
