@@ -70,6 +70,7 @@ STATE = "state.json"
 PREVIEW = "preview.npz"
 RESUME_HINT = "run `gigapoint convert` again to resume it"  # what a stopped conversion needs
 STOPPED_RESUMES = "run it again once the cause is gone: it resumes"  # how a run stopped by an error (a full disk) goes on
+STOPPED_BY_INPUT = "run it again once that file is whole, or without it: it starts over"  # what a run stopped by a bad input needs (a rerun with it, unchanged, stops the same way)
 NO_RESUME_HINT = "its points were given from Python (a cloud's save), so it cannot resume: save the cloud again"  # what a stopped one of chunks needs
 
 # an octree's files besides attr.*.npy and field.*.npy, metadata first: what a conversion replaces (never anything else)
@@ -285,7 +286,11 @@ class OctreeDir:
 
     @property
     def resume_hint(self) -> str:
-        """What the stopped conversion here needs: run again (it resumes), or a new save."""
+        """What the stopped conversion here needs: run again (it resumes), or a new save; where an
+        input stopped it (``stopped_by``, converter.py), that input's error and what to do instead."""
+        stopped_by = (self.read_state() or {}).get("stopped_by")
+        if isinstance(stopped_by, str):
+            return f"{stopped_by}; {STOPPED_BY_INPUT}"
         return RESUME_HINT if self.resumable else NO_RESUME_HINT
 
     # ------------------------------------------------------------------ lock

@@ -22,7 +22,7 @@ from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
 from ..copc_write import check_output as check_copc_output
 from ..copc_write import is_copc_name
-from ..octree_dir import STOPPED_RESUMES, ConvertError
+from ..octree_dir import STOPPED_BY_INPUT, STOPPED_RESUMES, ConvertError
 from ..progress import NullProgress, RichProgress
 from .in_memory import InMemoryPhases
 from .keep_freed_memory import KeepFreedMemory
@@ -84,6 +84,13 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
             # behind as an "unfinished conversion"
             if isinstance(exc, InputError) and created and not getattr(self, "state", {}).get("points"):
                 shutil.rmtree(self.dir.path, ignore_errors=True)
+            elif isinstance(exc, InputError) and fp is not None and self.state.get("phase") == "read":
+                # a bad input: a rerun with it unchanged (the same fingerprint) stops the same way, and one
+                # without it or with it mended starts over; saved, for info, gp.open and the viewer to say why
+                with contextlib.suppress(OSError):
+                    self.save_state_with(stopped_by=str(exc))
+                if not self.replacing:
+                    exc.args = (f"{exc}; the conversion to {self.out} stopped unfinished: {STOPPED_BY_INPUT}",)
             if self.replacing:
                 exc.args = (f"{exc}; {self.kept()}",)
             raise
@@ -106,6 +113,8 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
 
     def kept(self) -> str:
         """What a replacement that stopped left: the octree it was to replace, and whether a rerun resumes."""
+        if self.state.get("stopped_by"):  # a bad input: unchanged, it stops the run again
+            return f"{self.out} still holds the octree it was to replace (run it again with overwrite=True once that file is whole, or without it: it starts over)"
         again = "it resumes" if self.dir.state_file.is_file() and self.dir.resumable else "it starts over"
         return f"{self.out} still holds the octree it was to replace (run it again with overwrite=True once the cause is gone: {again})"
 
@@ -130,6 +139,7 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
             saved = None
         resumed = saved is not None
         self.state = self.resume_state(saved) if resumed else {"fingerprint": fp, "phase": "read"}
+        self.state.pop("stopped_by", None)  # the last run's cause: this run says its own, if any
         self.save_state()
         self.output_ready()
         if resumed and self.dir.preview.is_file():
