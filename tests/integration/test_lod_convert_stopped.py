@@ -86,3 +86,16 @@ def test_a_resumed_run_forgets_the_cause_that_stopped_the_last_one(inputs, tmp_p
     with pytest.raises(KeyboardInterrupt):
         convert([whole, other], out, **OPTS)
     assert "stopped_by" not in OctreeDir(out).read_state() and OctreeDir(out).resume_hint == RESUME_HINT
+
+
+def test_info_of_a_copc_output_stopped_by_a_truncated_input_says_why(inputs, tmp_path, capsys):
+    """The COPC file is not there yet: info named its work folder and said to resume it."""
+    whole, cut = inputs
+    out = tmp_path / "o.copc.laz"
+    with pytest.raises(InputError):
+        convert([whole, cut], out, **OPTS)
+    capsys.readouterr()
+    assert main(["info", str(out)]) == 1
+    assert capsys.readouterr().err == (
+        f"error: {out}: no such file yet: a conversion to it is unfinished (its work folder {out}.work is there); {_cause(cut)}; {AGAIN}\n"
+    )

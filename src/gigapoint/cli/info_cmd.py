@@ -29,14 +29,15 @@ def info(
     from ..io import expand_paths, file_info, format_info, shown_url
     from ..lod import is_lod_source, octree_info
     from ..lod.copc_write import work_dir
-    from ..lod.octree_dir import NO_RESUME_HINT, OctreeDir
+    from ..lod.octree_dir import RESUME_HINT, OctreeDir
 
     # an octree (folder, COPC file, EPT dataset, URL) is one dataset, not a folder of files
     paths: list[tuple[Path, bool, GigapointError | None]] = []
     for f in files:
         try:
             if not f.exists() and work_dir(f).is_dir():  # "no such file" sent users looking for a file a conversion is still making
-                again = "run the same convert command again to resume it" if OctreeDir(work_dir(f)).resumable else NO_RESUME_HINT
+                hint = OctreeDir(work_dir(f)).resume_hint  # (a bad input that stopped it: its error, and what to do)
+                again = "run the same convert command again to resume it" if hint == RESUME_HINT else hint
                 raise InputError(f"{f}: no such file yet: a conversion to it is unfinished (its work folder {work_dir(f)} is there); {again}")
             paths.extend([(f, True, None)] if is_lod_source(f) else [(p, False, None) for p in expand_paths([f])])
         except GigapointError as exc:  # a missing file among several stopped the others from being shown
