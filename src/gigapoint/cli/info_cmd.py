@@ -15,7 +15,7 @@ from .cloud_opts import ChunkedOption, ColorsOption, cloud_options, option_names
 @app.command()
 def info(
     files: list[Path] = typer.Argument(
-        ..., readable=False, help="Point cloud files (LAS/LAZ/PLY/XYZ/TXT/CSV/PTS/NPY/NPZ), directories, octrees, COPC/EPT files or URLs."
+        ..., readable=False, help="Point cloud files (LAS/LAZ/PLY/XYZ/XYZRGB/TXT/CSV/PTS/ASC/NPY/NPZ), directories, octrees, COPC/EPT files or URLs."
     ),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object per file instead of text."),
     memory: bool = typer.Option(False, "--memory", help="Also load the points and print the bytes a point each component holds in memory."),
