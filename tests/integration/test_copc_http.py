@@ -522,6 +522,11 @@ def test_a_copc_file_cut_short_on_the_server(server, tmp_path):
         url = server.url("flat_cut.copc.laz")
         with pytest.raises(InputError, match=rf"^{re.escape(url)}: truncated COPC file: it has {end:,} bytes, its header says at least {len(whole):,} \(its hierarchy, .* is cut off: no node can be found\)$"):
             gp.open(url)
+        # cut in its hierarchy, its points whole: a local file reads as plain LAZ, a URL (no LAZ reader) stays this error
+        end = int(_layout(whole)[1]["root_hier_offset"]) + 40
+        (server.root / "flat_cut.copc.laz").write_bytes(whole[:end])
+        with pytest.raises(InputError, match=rf"^{re.escape(url)}: truncated COPC file: it has {end:,} bytes, .* no node can be found\)$"):
+            gp.open(url)
     finally:
         (server.root / "first_cut.copc.laz").unlink()
         (server.root / "flat_cut.copc.laz").unlink()

@@ -6,6 +6,8 @@ one-line error naming the file, its size and the size its header says."""
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
 import warnings
 
 import numpy as np
@@ -13,13 +15,18 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.errors import GigapointWarning, InputError
-from gigapoint.lod.copc import COPC_INFO_DTYPE, HIERARCHY_ENTRY_DTYPE, INFO_OFFSET, LAS14_HEADER_DTYPE, CopcCloud
+from gigapoint.lod.copc import COPC_INFO_DTYPE, HIERARCHY_ENTRY_DTYPE, INFO_OFFSET, LAS14_HEADER_DTYPE, CopcCloud, open_copc
 from gigapoint.lod.copc_write import write_copc
 from gigapoint.lod.voxel_octree import key_to_voxel
 
 EDGE, CUBE_MIN = 64.0, np.array([1000.0, 2000.0, 30.0])
 #: The root, its eight children, and four children of each of two of them (a child page each, page_level=1).
 KEYS = [1, *range(8, 16), *range(64, 68), *range(72, 76)]
+#: The one warning of a file cut in its hierarchy whose points are whole (read as plain LAZ).
+CUT_HIERARCHY = (
+    r"truncated COPC file: its hierarchy is cut off \(EVLR 1 of 1 (\([\d,]+ bytes\) runs past the end of the file \([\d,]+ bytes\)|is cut off at byte [\d,]+): "
+    r"(at least )?[\d,]+ bytes missing\), so it is read as a plain LAZ file, without its level of detail; the points are whole"
+)
 
 
 def _nodes():
@@ -145,8 +152,11 @@ def test_a_cut_before_the_hierarchy_says_the_size_the_header_expects(files, tmp_
         gp.open(mid, progressive=True).wait(60)
     for end in (evlr + 20, root + 40):
         p = _cut(flat, tmp_path / f"h{end}.copc.laz", end)
-        _error(p, rf"truncated COPC file: it has {end:,} bytes, its header says at least {size} {where}; its points can still be read as a plain LAZ file")
-        with pytest.warns(GigapointWarning, match=r"truncated LAS file: its extended VLRs are cut .*; the points are whole$"):
+        with pytest.raises(InputError, match=rf"truncated COPC file: it has {end:,} bytes, its header says at least {size} {where}; its points can still be read as a plain LAZ file"):
+            open_copc(p)  # (as an octree: gp.open reads it as LAZ, below)
+        with pytest.warns(GigapointWarning, match=rf"{re.escape(str(p))}: {CUT_HIERARCHY}$"):
+            assert gp.open(p).n_points == total  # a PointCloud, every point
+        with pytest.warns(GigapointWarning, match=rf"{re.escape(str(p))}: {CUT_HIERARCHY}$"):
             cloud = _loaded(gp.open(p, progressive=True))
         assert cloud.n_points == total
         cloud.close()
@@ -192,3 +202,48 @@ def test_a_cut_in_the_points_of_a_file_with_its_hierarchy_first_reads_every_whol
         warnings.simplefilter("error")  # said once
         assert _drawn(cloud) == want
 
+
+
+# --------------------------------------------------------------------------- cut in its hierarchy: read as LAZ
+
+
+@pytest.fixture(scope="module")
+def autzen_cut(autzen_path, tmp_path_factory):
+    """Autzen converted to COPC and cut inside its hierarchy EVLR (after the points: the LAZ chunk table whole)."""
+    whole = tmp_path_factory.mktemp("autzen_cut") / "whole.copc.laz"
+    gp.convert(autzen_path, whole)
+    b = whole.read_bytes()
+    _, info, _ = _layout(b)
+    return _cut(whole, whole.with_name("cut.copc.laz"), int(info["root_hier_offset"]) + 40)
+
+
+def _grid_points(cloud) -> np.ndarray:
+    """The positions on the files' 0.01 grid, sorted: the cloud's points as a set."""
+    xyz = np.round(cloud.positions(), 2)
+    return xyz[np.lexsort(xyz.T[::-1])]
+
+
+def test_a_copc_file_cut_in_its_hierarchy_opens_as_the_plain_laz_file_it_still_is(autzen_cut, autzen_path):
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        cloud = gp.open(autzen_cut)
+    said = [str(w.message) for w in said if issubclass(w.category, GigapointWarning)]
+    assert len(said) == 1 and re.fullmatch(f"{re.escape(str(autzen_cut))}: {CUT_HIERARCHY}", said[0]), said
+    assert isinstance(cloud, gp.PointCloud) and cloud.n_points == 110_000
+    np.testing.assert_array_equal(_grid_points(cloud), _grid_points(gp.open(autzen_path)))
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "gigapoint.cli", *map(str, args)], capture_output=True, text=True, timeout=300)
+
+
+def test_cli_render_and_info_read_a_copc_file_cut_in_its_hierarchy_as_laz(autzen_cut, tmp_path):
+    warning = rf"warning: {re.escape(str(autzen_cut))}: {CUT_HIERARCHY}"
+    r = _cli("render", autzen_cut, "-o", tmp_path / "x.png", "--width", "64", "--height", "48")
+    assert r.returncode == 0, r.stderr
+    assert len(re.findall(warning, r.stderr)) == 1, r.stderr
+    assert "wrote" in r.stdout and "110,000 points" in r.stdout and (tmp_path / "x.png").stat().st_size > 200
+    r = _cli("info", autzen_cut)
+    assert r.returncode == 0, r.stderr
+    assert re.fullmatch(warning + "\n", r.stderr), r.stderr
+    assert "format:      LAZ 1.4, point format 7" in r.stdout and "points:      110,000" in r.stdout

@@ -330,7 +330,7 @@ def _read_las_header(path: Path, salvage: bool = False) -> LasHeader:
         data_end = size
         if n_evlrs and start_evlr >= size:  # cut before its EVLRs: its points checked below, as any cut file's
             cut = f"its {n_evlrs:,} EVLRs, said to start at byte {start_evlr:,}, lie past the end of the file ({size:,} bytes)"
-            hdr.evlrs_cut = f"truncated LAS file: its extended VLRs are cut ({cut}); the points are whole"
+            hdr.evlrs_cut = _evlrs_cut(hdr, cut)
         elif n_evlrs:
             data_end = _check_evlrs(path, f, hdr)
         if compressed:
@@ -369,8 +369,16 @@ def _check_evlrs(path: Path, f, hdr: LasHeader) -> int:
             cut = f"EVLR {i + 1} of {n:,} ({length:,} bytes) runs past the end of the file ({size:,} bytes)", f"{pos - size:,}"
             break
     if cut is not None:
-        hdr.evlrs_cut = f"truncated LAS file: its extended VLRs are cut ({cut[0]}: {cut[1]} bytes missing); the points are whole"
+        hdr.evlrs_cut = _evlrs_cut(hdr, f"{cut[0]}: {cut[1]} bytes missing")
     return start
+
+
+def _evlrs_cut(hdr: LasHeader, cut: str) -> str:
+    """Why ``hdr``'s EVLRs are not all there (``cut``), said as a COPC file's where it is one
+    (its COPC info VLR first): its hierarchy is an EVLR, so gigapoint reads it as plain LAZ."""
+    if hdr.vlrs and hdr.vlrs[0][:2] == (b"copc", 1):
+        return f"truncated COPC file: its hierarchy is cut off ({cut}), so it is read as a plain LAZ file, without its level of detail; the points are whole"
+    return f"truncated LAS file: its extended VLRs are cut ({cut}); the points are whole"
 
 
 @contextlib.contextmanager

@@ -11,7 +11,8 @@ node's entry and subtree are in the child page at offset). Opening reads the hea
 (one request), then the root hierarchy page; pages below and node chunks are read when a frame
 draws them (voxel_octree.py), a chunk decoded with lazrs into the layouts below. A file cut off
 (shorter than its header and hierarchy EVLR say) gives the nodes and pages before the cut, with
-one warning; cut before its root page (the hierarchy comes last), it is a one-line error.
+one warning; cut before its root page (the hierarchy comes last), it is a one-line error (a local
+one whose points are whole is read as plain LAZ instead: ``is_cut_copc_laz``).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from __future__ import annotations
 import io
 import os
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -249,6 +251,27 @@ def is_copc_file(path) -> bool:
         with open(path, "rb") as f:
             return is_copc_head(f.read(MAGIC_END))
     except OSError:
+        return False
+
+
+def is_cut_copc_laz(path) -> bool:
+    """A local COPC file cut in its EVLRs, after the points: its root hierarchy page is gone (no
+    node can be found) but its LAZ chunk table is whole, so it reads as the plain LAZ file it
+    still is, every point (``lod_source_kind`` sends it to the LAS reader, which warns)."""
+    end = INFO_OFFSET + COPC_INFO_DTYPE.itemsize
+    try:
+        with open(path, "rb") as f:
+            head, size = f.read(end), os.fstat(f.fileno()).st_size
+    except OSError:
+        return False
+    if len(head) < end or not is_copc_head(head):
+        return False
+    info = np.frombuffer(head, COPC_INFO_DTYPE, count=1, offset=INFO_OFFSET)[0]
+    if int(info["root_hier_offset"]) + int(info["root_hier_size"]) <= size:
+        return False
+    try:  # (a whole file whose info VLR points past its end stays COPC's error)
+        return read_las_header(Path(path)).evlrs_cut is not None
+    except InputError:  # its points cut too: COPC's error says what is left
         return False
 
 
@@ -535,6 +558,7 @@ __all__ = [
     "extra_fields",
     "is_copc_file",
     "is_copc_head",
+    "is_cut_copc_laz",
     "open_copc",
     "point_dtype",
 ]
