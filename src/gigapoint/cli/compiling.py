@@ -15,13 +15,10 @@ import time
 
 from numba.core import event
 
+from ..core.kernel_cache import is_ours as _is_ours
+
 MESSAGE = "compiling render kernels, once per install…"
 _GRACE_S = 0.6  # the spinner stays this long after a compilation ends (the next one often follows)
-
-
-def _is_ours(dispatcher) -> bool:
-    """A gigapoint kernel (numba's own helpers compile only inside one of ours)."""
-    return getattr(getattr(dispatcher, "py_func", None), "__module__", "").startswith("gigapoint")
 
 
 class CompileWatch(event.Listener):
