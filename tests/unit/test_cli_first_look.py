@@ -103,6 +103,19 @@ def test_compile_command_reports_each_step(capsys, monkeypatch):
     assert rc == 0 and out.splitlines()[-1].startswith("every kernel was compiled already")
 
 
+def test_compile_command_promises_no_cache_where_numba_could_not_save(capsys, monkeypatch):
+    """A read-only install (or a full disk) compiles in memory: "later runs load them" was untrue."""
+    from gigapoint.cli import compile_cmd
+    from gigapoint.core import kernel_cache
+
+    kernel = fresh_kernel()
+    monkeypatch.setattr(compile_cmd, "steps", lambda folder: [("a kernel", lambda: kernel(1))])
+    monkeypatch.setattr(kernel_cache, "_done", kernel_cache._done | {"save"})  # as after a failed save
+    rc, out, err = run(capsys, "compile")
+    assert rc == 0, err
+    assert out.splitlines()[-1].endswith("; numba could not save them in its cache: later runs compile them again")
+
+
 def test_the_real_compile_steps_cover_every_pass(tmp_path):
     from gigapoint.cli.compile_cmd import steps
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import typer
 
+from ..core.kernel_cache import later_runs
 from . import compiling
 from .app import app
 from .progress import err_console, progress_bar
@@ -119,7 +120,7 @@ def compile_kernels() -> None:
     for name, kernels, spent in report:
         typer.echo(f"  {name:28} {f'compiled in {spent:.1f} s' if kernels else 'cached'}")
     if any(kernels for _, kernels, _ in report):
-        typer.echo(f"compiled the kernels in {total:.0f} s ({time.perf_counter() - t0:.0f} s in all); later runs load them from numba's cache")
+        typer.echo(f"compiled the kernels in {total:.0f} s ({time.perf_counter() - t0:.0f} s in all); {later_runs()}")
     else:
         typer.echo(f"every kernel was compiled already ({time.perf_counter() - t0:.1f} s)")
     if watch is not None:

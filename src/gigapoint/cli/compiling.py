@@ -16,6 +16,7 @@ import time
 from numba.core import event
 
 from ..core.kernel_cache import is_ours as _is_ours
+from ..core.kernel_cache import later_runs
 
 MESSAGE = "compiling render kernels, once per install…"
 _GRACE_S = 0.6  # the spinner stays this long after a compilation ends (the next one often follows)
@@ -128,4 +129,4 @@ def watching(console=None):
         watch.hide()
         _current = previous
         if watch.console is not None and watch.enabled and watch.seconds >= 1.0:
-            watch.console.print(f"[dim]compiled the kernels in {watch.seconds:.0f} s; later runs load them from numba's cache[/dim]", highlight=False)
+            watch.console.print(f"[dim]compiled the kernels in {watch.seconds:.0f} s; {later_runs()}[/dim]", highlight=False)

@@ -30,6 +30,13 @@ def is_ours(dispatcher) -> bool:
     return getattr(getattr(dispatcher, "py_func", None), "__module__", "").startswith("gigapoint.")
 
 
+def later_runs() -> str:
+    """What a run that compiled kernels may promise the next ones (the CLI's closing lines)."""
+    if {"listening", "save"} & _done:  # a kernel found no cache folder, or its save failed
+        return "numba could not save them in its cache: later runs compile them again"
+    return "later runs load them from numba's cache"
+
+
 def _warn_once(key: str, message: str) -> None:
     if key not in _done:
         _done.add(key)
