@@ -64,7 +64,10 @@ def compile_where_uncachable() -> None:
     if "installed" in _done:
         return
     _done.add("installed")
-    enable, save = dispatcher.Dispatcher.enable_caching, caching.Cache.save_overload
+    try:
+        enable, save = dispatcher.Dispatcher.enable_caching, caching.Cache.save_overload
+    except AttributeError:  # a numba that names them otherwise: its own behaviour, not an import that fails
+        return
 
     def enable_caching(self):
         try:
