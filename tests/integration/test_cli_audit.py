@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 import shlex
 import shutil
 import subprocess
@@ -204,3 +205,31 @@ def test_version(capsys):
     import gigapoint
 
     assert run(capsys, "--version") == (0, f"gigapoint {gigapoint.__version__}\n", "")
+
+
+# --- polish (fix-cli-polish) ---
+FIELD_NAME = re.compile(r"\b[a-z]+(?:_[a-z]+)+\b")
+
+
+def test_help_texts_name_options_not_python_names(capsys, monkeypatch):
+    """--attribute-range said 'values of color_attribute', --size-mode 'fixed: point_size
+    pixels' (the Python names); bench's -W and -H had no help at all."""
+    import typer
+
+    from gigapoint.cli import app, commands  # noqa: F401  (commands registers them)
+    from gigapoint.render.settings import RenderSettings, settings_fields
+
+    fields = {spec.name for spec in settings_fields(RenderSettings)}
+    group = typer.main.get_command(app)
+    for name in ("render", "view", "convert", "bench"):
+        for param in group.commands[name].params:
+            assert param.help, (name, param.name)  # every option says what it does
+            assert not fields & set(FIELD_NAME.findall(param.help)), (name, param.name, param.help)
+    monkeypatch.setenv("COLUMNS", "400")  # one line an option
+    rc, out, _ = run(capsys, "render", "--help")
+    assert rc == 0
+    assert "'low,high' values of --color-attribute mapped onto the colormap" in out
+    assert "fixed: --point-size pixels (with --point-size 1: the exact one-pixel render); attenuated: --point-world-size, at most --point-size pixels" in out
+    assert "it also means --size-mode attenuated, --point-size 16)" in out
+    rc, out, _ = run(capsys, "bench", "--help")
+    assert "Image width in pixels. [default: 1920]" in out and "Image height in pixels. [default: 1080]" in out

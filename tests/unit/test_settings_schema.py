@@ -19,7 +19,7 @@ from gigapoint.cli import main, render_cmd
 from gigapoint.cli.settings_opts import settings_from_options, settings_options, with_settings_options
 from gigapoint.errors import SettingsError
 from gigapoint.render.colors import COLOR_MODES, COLORMAPS
-from gigapoint.render.settings import Colormap, ColorMode, field_types, format_color, setting, settings_fields
+from gigapoint.render.settings import Colormap, ColorMode, field_types, format_color, help_text, setting, settings_fields
 from gigapoint.viewer import protocol as P
 
 SRC = Path(render_cmd.__file__).parents[1]
@@ -171,7 +171,7 @@ def test_every_field_is_a_render_option_with_its_help_default_choices_and_range(
     for spec in settings_fields(RenderSettings):
         p = params[spec.name]
         assert spec.option in p.opts, spec.name
-        assert spec.help.replace("[", "\\[") in p.help
+        assert help_text(RenderSettings, spec, lambda other: other.option).replace("[", "\\[") in p.help
         if spec.kind == "enum":
             assert [c.value for c in p.shell_complete(ctx, "")] == [str(c) for c in spec.choices]
             assert spec.choices == get_args(field_types(RenderSettings)[spec.name])
@@ -301,3 +301,12 @@ def test_colours_read_as_names_hex_and_whole_numbers():
     assert RenderSettings(background=(1.0, 2.0, 3.0, 4.0)).background == (1, 2, 3, 4)
     assert RenderSettings(background="#102030").background == (16, 32, 48, 255)
     assert RenderSettings(background="white").background == (255, 255, 255, 255)
+
+
+def test_the_viewer_panel_names_fields_by_their_labels():
+    """The panel's tooltips said 'values of color_attribute' and 'fixed: point_size pixels'."""
+    helps = {d["name"]: d["help"] for d in P.settings_schema(RenderSettings)}
+    assert helps["attribute_range"] == "'low,high' values of color attribute mapped onto the colormap (default: 2nd..98th percentile)."
+    assert "fixed: point size pixels (with point size 1: the exact one-pixel render); attenuated: point world size, at most point size" in helps["size_mode"]
+    names = {spec.name for spec in settings_fields(RenderSettings)}
+    assert not [(n, h) for n, h in helps.items() if names & set(re.findall(r"\b[a-z]+(?:_[a-z]+)+\b", h))]

@@ -14,14 +14,14 @@ from .settings_opts import named_option
 @app.command()
 def bench(
     points: list[str] = typer.Option(["20M", "100M"], "--points", "-n", help="Point counts of the demo scene (repeat: -n 20M -n 100M)."),
-    width: int = typer.Option(1920, "--width", "-W"),
-    height: int = typer.Option(1080, "--height", "-H"),
+    width: int = typer.Option(1920, "--width", "-W", help="Image width in pixels."),
+    height: int = typer.Option(1080, "--height", "-H", help="Image height in pixels."),
     threads: list[str] = typer.Option(["1", "all"], "--threads", help="Thread counts to measure (repeat; 'all' = every core)."),
     repeats: int = typer.Option(5, help="Timed frames per measurement (the median is reported)."),
     gl: bool = typer.Option(True, "--gl/--no-gl", help="Also time GL_POINTS through OpenGL (Mesa llvmpipe via EGL)."),
     naive: bool = typer.Option(True, "--naive/--no-naive", help="Also time a naive numba loop over the same points."),
     out: Path | None = typer.Option(None, "--out", readable=False, help="Directory for the frames as PNG and bench_render.json."),
-    json_path: Path | None = typer.Option(None, "--json", readable=False, help="Where to write the JSON results (default: <out>/bench_render.json)."),
+    json_path: Path | None = typer.Option(None, "--json", readable=False, help="Where to write the JSON results (default: bench_render.json in the --out folder)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing JSON results file."),
 ) -> None:
     """Measure brute-force rendering (points/s) of the demo scene, overview and close-up, against GL_POINTS and a naive loop."""

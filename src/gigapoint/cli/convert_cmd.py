@@ -20,7 +20,7 @@ def convert(
         ..., "-o", "--output", readable=False, help="Output directory (created; resumed when a conversion was interrupted), or the .copc.laz file of --format copc."
     ),
     sampler: str = typer.Option("grid", help="grid (first point per cell of a 128³ grid per node) or poisson (minimum distance)."),
-    memory_limit: str | None = typer.Option(None, "--memory-limit", help="Peak memory, e.g. 4G or 512M (default: a quarter of the RAM). An input that fits is converted in memory; a larger one is spilled to OUT/.partial in partitions."),
+    memory_limit: str | None = typer.Option(None, "--memory-limit", help="Peak memory, e.g. 4G or 512M (default: a quarter of the RAM). An input that fits is converted in memory; a larger one is spilled to OUTPUT/.partial in partitions."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing converted cloud in OUTPUT."),
     format: str | None = typer.Option(
         None,

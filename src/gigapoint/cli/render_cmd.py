@@ -184,7 +184,7 @@ def render(
         bool | None,
         typer.Option(
             "--progressive/--no-progressive",
-            help="Build an LOD octree while reading and render from it (default: for inputs above the point budget).",
+            help="Build an LOD octree while reading and render from it (default: for inputs above --point-budget points).",
         ),
     ] = None,
     colors: ColorsOption = "auto",

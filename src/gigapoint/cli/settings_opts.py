@@ -21,7 +21,7 @@ import typer
 from rich.markup import escape
 
 from ..errors import GigapointError, SettingsError
-from ..render.settings import GROUPS, RenderSettings, SettingSpec, format_color, implied_fields, settings_fields
+from ..render.settings import GROUPS, RenderSettings, SettingSpec, format_color, help_text, implied_fields, settings_fields
 
 PANELS = {"execution": "Execution", "lod": "Precision, culling and level of detail", "appearance": "Appearance"}
 _MAX_METAVAR = 30
@@ -66,8 +66,8 @@ def _range_text(v) -> str | None:
     return None if v is None else f"{v[0]:g},{v[1]:g}"
 
 
-def setting_option(spec: SettingSpec) -> SettingOption | None:
-    """The option of one field, or None for a field of a type no option can set."""
+def setting_option(spec: SettingSpec, cls: type = RenderSettings) -> SettingOption | None:
+    """The option of one field of ``cls``, or None for a field of a type no option can set."""
     kind, default, nullable = spec.kind, spec.default, spec.nullable
     if kind == "other" or default is dataclasses.MISSING:
         return None
@@ -91,13 +91,14 @@ def setting_option(spec: SettingSpec) -> SettingOption | None:
     if nullable or default is None:
         annotation = annotation | None
     listed = kind == "enum" and len("|".join(map(str, spec.choices))) > _MAX_METAVAR  # too long for the type column
-    text = " ".join(filter(None, [spec.help, f"One of: {', '.join(map(str, spec.choices))}." if listed else "", _bounds(spec)]))
+    helped = help_text(cls, spec, lambda other: other.option)  # 'values of color_attribute' -> '--color-attribute'
+    text = " ".join(filter(None, [helped, f"One of: {', '.join(map(str, spec.choices))}." if listed else "", _bounds(spec)]))
     return SettingOption(spec, decl, annotation, default, escape(text), PANELS.get(spec.group, spec.group.title()), not listed)
 
 
 def settings_options(cls: type = RenderSettings) -> list[SettingOption]:
     """One option per field of the settings dataclass ``cls``: by group (GROUPS order), then in field order."""
-    opts = [o for o in map(setting_option, settings_fields(cls)) if o is not None]
+    opts = [o for o in (setting_option(spec, cls) for spec in settings_fields(cls)) if o is not None]
     return sorted(opts, key=lambda o: GROUPS.index(o.spec.group) if o.spec.group in GROUPS else len(GROUPS))
 
 

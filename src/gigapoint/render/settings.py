@@ -13,6 +13,7 @@ from __future__ import annotations
 import enum
 import math
 import numbers
+import re
 import sys
 import types
 import typing
@@ -146,7 +147,7 @@ class RenderSettings:
     color_attribute: str | None = setting(
         None,
         "The attribute color mode's attribute: any the cloud holds (a LAS file's extra bytes too), mapped through the colormap "
-        "(given on the command line or as a keyword of render, it also means color mode attribute).",
+        "(given on the command line or as a keyword of render, it also means color_mode attribute).",
         implies={"color_mode": "attribute"},
     )
     colormap: Colormap = setting("viridis", "Colormap of the elevation and attribute color modes.")
@@ -174,8 +175,8 @@ class RenderSettings:
     )
     point_world_size: float = setting(
         0.0,
-        "Attenuated points: size in world units (given on the command line or as a keyword of render, it also means size mode "
-        "attenuated, point size 16).",
+        "Attenuated points: size in world units (given on the command line or as a keyword of render, it also means size_mode "
+        "attenuated, point_size 16).",
         min=0.0,
         implies={"size_mode": "attenuated", "point_size": 16},
     )
@@ -444,6 +445,14 @@ def implied_fields(cls: type, given, current=None) -> dict[str, tuple[object, st
             if target in specs and target not in given and (current is None or getattr(current, target) == specs[target].default):
                 out[target] = (value, name)
     return out
+
+
+def help_text(cls: type, spec: SettingSpec, name) -> str:
+    """``spec.help`` with the other fields it names (``point_size``) told as ``name(their spec)``:
+    the CLI shows its option (--point-size), the viewer its label. Only names with an underscore
+    are taken for fields (plain words like lighting or colormap stay words)."""
+    specs = {s.name: s for s in settings_fields(cls)}
+    return re.sub(r"\b[a-z]+(?:_[a-z]+)+\b", lambda m: name(specs[m[0]]) if m[0] in specs else m[0], spec.help)
 
 
 def settings_fields(cls: type = RenderSettings) -> tuple[SettingSpec, ...]:

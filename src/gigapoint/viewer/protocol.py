@@ -19,7 +19,7 @@ import struct
 
 from ..errors import GigapointError
 from ..render.camera import VIEWS
-from ..render.settings import RenderSettings, SettingSpec, parse_color, settings_fields
+from ..render.settings import RenderSettings, SettingSpec, help_text, parse_color, settings_fields
 
 MAX_MESSAGE = 16_384  # bytes of one client message
 MAX_VIEW_SIDE = 4096  # pixels of the live view
@@ -109,10 +109,11 @@ VIEW_NAMES = tuple(VIEWS)
 _SCHEMAS: dict[type, list[dict]] = {}
 
 
-def _describe(spec: SettingSpec) -> dict | None:
+def _describe(cls: type, spec: SettingSpec) -> dict | None:
     if not spec.viewer or spec.kind == "other" or spec.default is dataclasses.MISSING:
         return None  # hidden, or a type the panel cannot edit
-    d = {"name": spec.name, "label": spec.label, "help": spec.help, "nullable": spec.nullable, "kind": spec.kind}
+    helped = help_text(cls, spec, lambda other: other.label)  # the fields it names as the panel shows them
+    d = {"name": spec.name, "label": spec.label, "help": helped, "nullable": spec.nullable, "kind": spec.kind}
     if spec.kind == "enum":
         d["choices"] = list(spec.choices)
     elif spec.kind in ("int", "float"):
@@ -132,7 +133,7 @@ def settings_schema(cls: type = RenderSettings) -> list[dict]:
     without changes here; ``viewer=False`` in its metadata hides it.
     """
     if cls not in _SCHEMAS:
-        _SCHEMAS[cls] = [d for d in map(_describe, settings_fields(cls)) if d is not None]
+        _SCHEMAS[cls] = [d for d in (_describe(cls, spec) for spec in settings_fields(cls)) if d is not None]
     return _SCHEMAS[cls]
 
 
