@@ -233,3 +233,40 @@ def test_help_texts_name_options_not_python_names(capsys, monkeypatch):
     assert "it also means --size-mode attenuated, --point-size 16)" in out
     rc, out, _ = run(capsys, "bench", "--help")
     assert "Image width in pixels. [default: 1920]" in out and "Image height in pixels. [default: 1080]" in out
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="display check is for Linux")
+def test_view_window_without_a_display_is_the_error_alone():
+    """It printed 'gigapoint window: demo(1,000), 1,000 points (drag: orbit ...)' first."""
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    done = subprocess.run([sys.executable, "-m", "gigapoint.cli", "view", "--window", "--demo", "1000"], capture_output=True, text=True, env=env, timeout=120)
+    hint = "install with: pip install 'gigapoint[window]' (rendercanvas + glfw) and run on a desktop with a display"
+    assert (done.returncode, done.stdout, done.stderr) == (1, "", f"error: native window: no display (DISPLAY / WAYLAND_DISPLAY unset); {hint}\n")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="display check is for Linux")
+def test_view_window_without_a_display_loads_nothing(capsys, monkeypatch):
+    """No display was found out only once the cloud was loaded (minutes for a large one)."""
+    import gigapoint
+
+    def load(*args, **kwargs):
+        raise AssertionError("loaded the cloud")
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr(gigapoint, "demo", load)
+    rc, out, err = run(capsys, "view", "--window", "--demo", 1000)
+    assert (rc, out) == (1, "") and err.startswith("error: native window: no display (DISPLAY / WAYLAND_DISPLAY unset); ")
+
+
+def test_view_window_that_cannot_open_is_the_error_alone(capsys, monkeypatch):
+    """With a display, a window that failed to open (glfw, no GUI backend) came after the title line too."""
+    from gigapoint.errors import BackendUnavailableError
+    from gigapoint.viewer import window
+
+    def refuse(cloud, *args, **kwargs):
+        raise BackendUnavailableError("cannot open a window (no GLX)")
+
+    monkeypatch.setenv("DISPLAY", ":99")
+    monkeypatch.setattr(window, "open_window", refuse)
+    assert run(capsys, "view", "--window", "--demo", 1000) == (1, "", "error: cannot open a window (no GLX)\n")

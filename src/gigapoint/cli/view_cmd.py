@@ -90,6 +90,10 @@ def view(
     live_only = [name for name, value in (("--keep", keep), ("--decay", decay), ("--record", record), ("--overwrite", overwrite or None)) if value is not None]
     if live_only:  # `view a.laz --record rec` recorded nothing, without a word
         raise GigapointError(f"{' and '.join(live_only)}: options of a live stream (--live SOURCE or --replay DIR)")
+    if window:  # before loading: no display is said alone, not after minutes of reading
+        from ..viewer.window import check_display
+
+        check_display()
     budget = RenderSettings().point_budget
     if demo is not None:
         if not 1 <= demo <= 2_000_000_000:
@@ -108,10 +112,11 @@ def view(
     else:
         raise GigapointError("view: name at least one file or directory (or --demo N)")
     if window:  # native window (rendercanvas + glfw), no server
-        from ..viewer.window import run_window
+        from ..viewer.window import open_window, run_loop
 
+        open_window(cloud)  # first: a window that cannot open is said alone, not after the title line
         print(f"gigapoint window: {cloud.name}, {cloud.n_points:,} points (drag: orbit, right drag: pan, wheel: zoom)", file=sys.stderr)
-        run_window(cloud)
+        run_loop()
         return
     if isinstance(cloud, ProgressiveOctree):  # a first slice of points, so that the first view frames them
         deadline = time.monotonic() + 5.0

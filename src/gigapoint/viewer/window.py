@@ -114,14 +114,19 @@ class PointCloudWindow:
         self.canvas.request_draw()
 
 
+def check_display() -> None:
+    """A one-line BackendUnavailableError on Linux without a display (glfw would abort the
+    process: an assertion, not an exception)."""
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise BackendUnavailableError(f"native window: no display (DISPLAY / WAYLAND_DISPLAY unset); {_HINT}")
+
+
 def open_window(
     cloud, camera: Camera | None = None, settings: RenderSettings | None = None, *, size=(1280, 720), canvas=None
 ) -> PointCloudWindow:
     """A window (or the given rendercanvas ``canvas``) showing ``cloud``; run the loop to see it."""
     if canvas is None:
-        if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-            # glfw aborts the process (an assertion, not an exception) without a display
-            raise BackendUnavailableError(f"native window: no display (DISPLAY / WAYLAND_DISPLAY unset); {_HINT}")
+        check_display()
         try:
             from rendercanvas.auto import RenderCanvas
         except Exception as exc:  # noqa: BLE001 - rendercanvas raises several types when no GUI backend works
@@ -136,6 +141,11 @@ def open_window(
 def run_window(cloud, camera: Camera | None = None, settings: RenderSettings | None = None, *, size=(1280, 720)) -> None:
     """Open a window on ``cloud`` and block until it is closed."""
     open_window(cloud, camera, settings, size=size)
+    run_loop()
+
+
+def run_loop() -> None:
+    """Block until the windows opened are closed."""
     from rendercanvas.auto import loop
 
     loop.run()
