@@ -270,3 +270,23 @@ def test_view_window_that_cannot_open_is_the_error_alone(capsys, monkeypatch):
     monkeypatch.setenv("DISPLAY", ":99")
     monkeypatch.setattr(window, "open_window", refuse)
     assert run(capsys, "view", "--window", "--demo", 1000) == (1, "", "error: cannot open a window (no GLX)\n")
+
+
+def test_convert_prints_the_output_as_given(cloud_file, tmp_path, capsys, monkeypatch):
+    """--workers 2 printed '/abs/path/oct: 3,000 points ...' (the Dask run resolves OUTPUT for
+    its workers) where the one-process run printed 'oct: ...'."""
+    import dataclasses
+
+    import gigapoint.lod
+
+    convert = gigapoint.lod.convert
+
+    def as_a_dask_run(*args, **kwargs):  # its result: OUTPUT absolute
+        result = convert(*args, **kwargs)
+        return dataclasses.replace(result, out=result.out.resolve())
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(gigapoint.lod, "convert", as_a_dask_run)
+    rc, out, err = run(capsys, "convert", cloud_file, "-o", "oct", "--quiet")
+    assert rc == 0, err
+    assert out.startswith("oct: 3,000 points in 1 nodes (gigapoint, grid), ")
