@@ -921,9 +921,14 @@ def test_a_source_without_a_valid_point_ends_as_the_plain_cloud_does(tmp_path, c
     with pytest.raises(EmptyCloudError) as progressive:
         cloud.wait()
     assert str(progressive.value) == str(plain.value) == f"{bad}: no valid points (2 invalid points: NaN, inf or beyond ±1e+12)"
-    cloud = gp.open(some, progressive=True)
+    def loaded():  # (opened inside the catch: the loader's thread warns as soon as it is done, maybe before wait)
+        cloud = gp.open(some, progressive=True)
+        assert cloud.wait()
+        return cloud
+
     with pytest.warns(GigapointWarning, match="skipped 1 invalid points"):
-        assert cloud.wait() and cloud.n_points == 2 and cloud.skipped == 1
+        cloud = loaded()
+    assert cloud.n_points == 2 and cloud.skipped == 1
     with pytest.raises(EmptyCloudError) as converted:  # the converter named the dataset ("allnan"), not the file
         gp.convert(bad, tmp_path / "tree")
     assert str(converted.value) == str(plain.value) and not (tmp_path / "tree").exists()
@@ -952,9 +957,14 @@ def test_invalid_points_skipped_while_loading_are_warned_of_as_the_plain_cloud_d
 
     some = tmp_path / "some.xyz"
     some.write_text("1 2 3\nnan 2 3\n4 5 6\n")
-    cloud = gp.open(some, progressive=True)
+    def loaded():  # (opened inside the catch: the loader's thread warns as soon as it is done, maybe before wait)
+        cloud = gp.open(some, progressive=True)
+        assert cloud.wait(timeout=120)
+        return cloud
+
     with pytest.warns(GigapointWarning) as caught:
-        assert cloud.wait(timeout=120) and cloud.n_points == 2
+        cloud = loaded()
+    assert cloud.n_points == 2
     assert [str(w.message) for w in caught] == [f"{some}: skipped 1 invalid points (NaN, inf or beyond ±1e+12)"]
     out = tmp_path / "a.png"
     assert main(["render", str(some), "-o", str(out), "--progressive", "-W", "32", "-H", "24"]) == 0
