@@ -335,3 +335,21 @@ def test_wgpu_resolve_in_pages(rng, shift):
     np.testing.assert_array_equal(np.asarray(paged.resolve(vis, cloud.color, bg)), want)
     np.testing.assert_array_equal(want, cpu.resolve(vis, rgba32(cloud.color), bg))
     assert paged.page_points < cloud.n_points // 3
+
+
+def test_point_info_says_when_a_colour_is_held_approximately():
+    """gp.open's colors="auto" may hold RGB565 or palettes: the pick showed 173 where the file
+    held 170, as if it were the file's colour."""
+    rng = np.random.default_rng(4)
+    xyz = UTM + rng.uniform(0, 50, (20_000, 3))
+    rgb = rng.integers(0, 256, (20_000, 3)).astype(np.uint8)  # 20 000 colours: palettes cannot keep them all
+    rgb[0] = [170, 85, 0]
+    said = {}
+    for colors in ("rgba", "rgb565", "palette"):
+        cloud = gp.from_arrays(xyz, rgb, colors=colors)
+        i = int(np.argmin(np.abs(cloud.positions() - xyz[0]).sum(axis=1)))  # the cloud's own order
+        info = cloud.point_info(i)
+        said[colors] = (info["rgba"], info.get("rgba_approx"))
+    assert said["rgba"] == ([170, 85, 0, 255], None)
+    assert said["rgb565"] == ([173, 85, 0, 255], "colours held in 16 bits (RGB565)")
+    assert said["palette"][1] == "colours held as 256-colour palettes"

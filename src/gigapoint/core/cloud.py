@@ -246,7 +246,8 @@ class PointCloud:
 
     def point_info(self, index: int) -> dict | None:
         """Everything known about one point: position, color and attributes; None for index -1
-        (what ``Frame.index`` holds where a pixel shows no point).
+        (what ``Frame.index`` holds where a pixel shows no point). Colours held approximately
+        (RGB565, palettes: ``colors_exact`` False) add ``rgba_approx``, saying how they are held.
 
         The position is rounded to the source's resolution (``source_scale``: a LAS file's
         scale), so it reads as the file wrote it (636317.71, not 636317.7100002308)."""
@@ -255,6 +256,8 @@ class PointCloud:
             return None
         info = {"index": int(index), "position": at_scale(self.positions([index])[0], self.source_scale)}
         info["rgba"] = colors_at(self.color, [index]).view(np.uint8).tolist()
+        if not self.colors_exact:  # the source's own colour is not held (gp.open's colors="auto"): say this one is near it
+            info["rgba_approx"] = "colours held as 256-colour palettes" if isinstance(self.color, PaletteColors) else "colours held in 16 bits (RGB565)"
         for name in self.attributes:
             v = self.attributes.at(name, [index])[0]  # one point's, not the whole array decoded
             info[name] = v.tolist() if hasattr(v, "tolist") else v
