@@ -1,11 +1,13 @@
 """The viewer page's own state in a real headless Chromium: the HUD's long lines, the status
-while the first view is drawn, a stopped server and a reconnect."""
+while the first view is drawn, a stopped server and a reconnect, the pick box."""
 
 from __future__ import annotations
 
 import json
+import re
 import time
 
+import numpy as np
 import pytest
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(180)]  # the browser: tests/integration/conftest.py
@@ -157,3 +159,59 @@ def test_the_jpeg_quality_field_shows_the_quality_used(page, server):
         while tab.jpeg_quality != used and time.monotonic() < t_end:
             time.sleep(0.05)
         assert tab.jpeg_quality == used, typed
+
+
+def pick_replies(pg) -> list:
+    """The pick messages the server sends the page, as they arrive."""
+    replies = []
+
+    def on_socket(ws):
+        ws.on("framereceived", lambda payload: isinstance(payload, str) and '"pick"' in payload and replies.append(json.loads(payload)))
+
+    pg.on("websocket", on_socket)
+    return replies
+
+
+def test_the_pick_box_of_an_octree_says_point_or_voxel(page):
+    # an octree's entries have no index: the box's first line was "point " with nothing after it
+    from gigapoint.lod.progressive.octree import ProgressiveOctree
+
+    octree = ProgressiveOctree("prog", max_leaf=500)
+    octree.add(np.random.default_rng(3).random((20_000, 3)) * 10)
+    gigapoint.render_frame(octree, gigapoint.Camera.fit_cloud(octree, width=64, height=48))  # its kernels compiled outside the page's waits
+    srv = ViewerServer(octree).start()
+    try:
+        replies = pick_replies(page)
+        page.goto(srv.url)
+        wait_full_frame(page)
+        for budget, word in ((None, "point"), (2_000, "voxel")):  # few points a frame: inner nodes' voxels drawn
+            if budget:
+                n = int(page.evaluate("() => Number(document.getElementById('canvas').dataset.frame)"))
+                page.locator("#setting-point_budget").fill(str(budget))
+                page.locator("#setting-point_budget").dispatch_event("change")
+                wait_full_frame(page, n)
+            replies.clear()
+            box = page.locator("#canvas").bounding_box()
+            page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+            page.wait_for_function("() => !document.getElementById('pickinfo').classList.contains('hidden')", timeout=10_000)
+            t_end = time.monotonic() + 10
+            while not replies and time.monotonic() < t_end:
+                page.wait_for_timeout(50)
+            (reply,) = replies
+            assert reply["found"] and reply["info"]["voxel"] is (word == "voxel")
+            page.wait_for_function("(w) => document.getElementById('pickinfo').textContent.split('\\n')[0] === w", arg=word, timeout=10_000)
+            assert "voxel" not in page.locator("#pickinfo").text_content().split("\n", 1)[1]  # said once, in the first line
+    finally:
+        srv.close()
+
+
+def test_a_colour_held_approximately_is_said_in_the_pick_box(page, server):
+    # the demo cloud's colours are held as palettes (colors="auto"): the box showed them as the file's
+    page.goto(server.url)
+    wait_full_frame(page)
+    box = page.locator("#canvas").bounding_box()
+    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.wait_for_function("() => /^rgba /m.test(document.getElementById('pickinfo').textContent)", timeout=10_000)
+    (rgba,) = [line for line in page.locator("#pickinfo").text_content().split("\n") if line.startswith("rgba")]
+    assert re.fullmatch(r"rgba \d+, \d+, \d+, 255 \(approx\.: colours held as 256-colour palettes\)", rgba), rgba
+

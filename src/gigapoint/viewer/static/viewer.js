@@ -258,9 +258,11 @@
     if (!m.found) { box.textContent = "no point here"; box.classList.remove("hidden"); return; }
     const i = m.info;
     // coordinates as the server sends them: a file's points rounded to its scale (PointCloud.point_info)
-    const lines = [`point ${i.index == null ? "" : "#" + i.index}${m.pivot ? "  (new pivot)" : ""}`, `x ${String(i.position[0])}`, `y ${String(i.position[1])}`, `z ${String(i.position[2])}`];
-    if (i.rgba) lines.push(`rgba ${i.rgba.join(", ")}`);
-    for (const [k, v] of Object.entries(i)) if (!["index", "position", "rgba"].includes(k)) lines.push(`${k} ${Array.isArray(v) ? v.join(", ") : v}`);
+    // an octree's entries have no index: what was picked, a point or (a progressive octree's inner node) a voxel
+    const what = [i.voxel ? "voxel" : "point", ...(i.index == null ? [] : ["#" + i.index])].join(" ");
+    const lines = [`${what}${m.pivot ? "  (new pivot)" : ""}`, `x ${String(i.position[0])}`, `y ${String(i.position[1])}`, `z ${String(i.position[2])}`];
+    if (i.rgba) lines.push(`rgba ${i.rgba.join(", ")}${i.rgba_approx ? ` (approx.: ${i.rgba_approx})` : ""}`);
+    for (const [k, v] of Object.entries(i)) if (!["index", "position", "rgba", "rgba_approx", "voxel"].includes(k)) lines.push(`${k} ${Array.isArray(v) ? v.join(", ") : v}`);
     box.textContent = lines.join("\n");
     box.dataset.index = String(i.index);
     box.classList.remove("hidden");
