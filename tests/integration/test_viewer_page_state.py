@@ -1,5 +1,5 @@
 """The viewer page's own state in a real headless Chromium: the HUD's long lines, the status
-while the first view is drawn, a stopped server and a reconnect, the pick box."""
+while the first view is drawn, a stopped server and a reconnect, the pick box, a half-filled range."""
 
 from __future__ import annotations
 
@@ -214,4 +214,21 @@ def test_a_colour_held_approximately_is_said_in_the_pick_box(page, server):
     page.wait_for_function("() => /^rgba /m.test(document.getElementById('pickinfo').textContent)", timeout=10_000)
     (rgba,) = [line for line in page.locator("#pickinfo").text_content().split("\n") if line.startswith("rgba")]
     assert re.fullmatch(r"rgba \d+, \d+, \d+, 255 \(approx\.: colours held as 256-colour palettes\)", rgba), rgba
+
+
+def test_half_an_elevation_range_is_said_not_dropped(page, server):
+    page.goto(server.url)
+    wait_full_frame(page)
+    low, high = page.locator("#setting-elevation_range input").all()
+    low.fill("1")
+    low.dispatch_event("change")
+    page.wait_for_function("() => !document.getElementById('error').classList.contains('hidden')", timeout=5_000)
+    assert page.locator("#error").text_content() == "elevation range: give both low and high (both empty: the default)"
+    assert "invalid" in high.get_attribute("class") and "invalid" not in (low.get_attribute("class") or "")
+    high.fill("4")
+    high.dispatch_event("change")
+    page.wait_for_function("() => JSON.stringify(window.gigapoint.settings.elevation_range) === '[1,4]'", timeout=10_000)
+    assert "invalid" not in (high.get_attribute("class") or "") and page.locator("#error").is_hidden()
+    (tab,) = server.core.sessions.values()
+    assert tab.snapshot()[1].elevation_range == (1.0, 4.0)
 

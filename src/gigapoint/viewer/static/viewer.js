@@ -232,7 +232,7 @@
       if (f.kind === "bool") input.checked = !!v;
       else if (f.kind === "enum") input.value = JSON.stringify(v);
       else if (f.kind === "color") input.value = toHex(v);
-      else if (f.kind === "range") { const [a, b] = input.querySelectorAll("input"); a.value = v ? v[0] : ""; b.value = v ? v[1] : ""; }
+      else if (f.kind === "range") { const [a, b] = input.querySelectorAll("input"); a.value = v ? v[0] : ""; b.value = v ? v[1] : ""; a.classList.remove("invalid"); b.classList.remove("invalid"); }
       else input.value = v == null ? "" : String(v);
     }
   }
@@ -244,7 +244,13 @@
     else if (f.kind === "color") { const a = (S.settings[f.name] || [0, 0, 0, 255])[3]; v = [1, 3, 5].map((i) => parseInt(input.value.slice(i, i + 2), 16)).concat([a]); }
     else if (f.kind === "range") {
       const [a, b] = input.querySelectorAll("input");
-      if (a.value === "" && b.value === "") v = null; else if (a.value === "" || b.value === "") return; else v = [Number(a.value), Number(b.value)];
+      if (a.value === "" && b.value === "") v = null;
+      else if (a.value === "" || b.value === "") {  // half a range: nothing sent, so say what is missing
+        const empty = a.value === "" ? a : b;
+        empty.classList.add("invalid");
+        showError(`${f.label}: give both low and high (both empty: the default)`, "settings");
+        return;
+      } else v = [Number(a.value), Number(b.value)];
     } else if (f.kind === "int" || f.kind === "float") {
       if (input.value === "") { if (!f.nullable) { input.classList.add("invalid"); return; } v = null; }
       else { v = Number(input.value); if (!Number.isFinite(v)) { input.classList.add("invalid"); return; } }
