@@ -60,7 +60,8 @@ def test_the_hud_keeps_the_last_rate_when_idle(page):
     page.wait_for_function("() => /fps \\d+/.test(document.getElementById('stats').textContent)", timeout=30_000)
     time.sleep(2.5)  # no new frame for more than a second
     text = page.locator("#stats").inner_text()
-    assert "fps 0" not in text and re.search(r"idle \(last fps \d+\)", text), text
+    # the latency as well: it was shown as now's ("idle (last fps 52)   latency 12 ms")
+    assert "fps 0" not in text and re.match(r"idle \(last fps \d+, latency \d+ ms\)\n", text), text
 
 
 def test_the_cloud_line_breaks_between_words(page):

@@ -15,7 +15,7 @@
 
   const S = {
     ws: null, session: null, cloud: null, schema: [], settings: {}, camera: null,
-    seq: 0, sentAt: new Map(), lastFrame: 0, frameTimes: [], fps: null, latency: 0, renderTimes: [],
+    seq: 0, sentAt: new Map(), lastFrame: 0, frameTimes: [], fps: null, latency: null, renderTimes: [],
     header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0,
     pending: { orbit: null, look: null, pan: null, zoom: null }, retry: 0,
   };
@@ -159,9 +159,10 @@
     // the rate of the frames of the last second; idle (no new frame), the last rate measured, or nothing
     const n = S.frameTimes.length;
     if (n >= 2) S.fps = (n - 1) * 1000 / Math.max(S.frameTimes[n - 1] - S.frameTimes[0], 1);
-    const fps = S.fps == null ? "" : n >= 2 ? `fps ${S.fps.toFixed(0)}   ` : `idle (last fps ${S.fps.toFixed(0)})   `;
+    // the latency too: idle, the one measured last is marked as such, not shown as now's
+    const rates = [...(S.fps == null ? [] : [`fps ${S.fps.toFixed(0)}`]), ...(S.latency == null ? [] : [`latency ${S.latency.toFixed(0)} ms`])];
     const lines = [
-      `${fps}latency ${S.latency.toFixed(0)} ms`,
+      n >= 2 ? rates.join("   ") : rates.length ? `idle (last ${rates.join(", ")})` : "idle",
       `frame ${h.render_ms.toFixed(1)} ms render + ${h.encode_ms.toFixed(1)} ms jpeg`,
       `last ${S.renderTimes.length}: avg ${(S.renderTimes.reduce((a, b) => a + b, 0) / Math.max(S.renderTimes.length, 1)).toFixed(1)} ms, worst ${Math.max(0, ...S.renderTimes).toFixed(1)} ms`,
       `${h.width}×${h.height}${h.full ? "" : "  (1/" + h.scale + " while moving)"}`,
