@@ -117,3 +117,19 @@ def test_kept_header_of_a_cut_file_still_refused_by_a_plain_read(tmp_path):
         with pytest.raises(InputError) as kept:
             las.read_las_header(path)
     assert str(kept.value) == str(plain.value)
+
+
+def test_a_file_cut_in_its_evlrs_has_its_header_read_once(tmp_path, monkeypatch):
+    """Its points are whole (read with a warning), so a plain read takes the header kept: it was
+    parsed again at every step, as a salvaging read's header of a file cut in its points is."""
+    import os
+
+    from test_io_errors import _las14_with_evlrs
+
+    path, _ = _las14_with_evlrs(tmp_path, ".las", 3000)
+    os.truncate(path, os.path.getsize(path) - 50)
+    parses, real = [], las._read_las_header
+    monkeypatch.setattr(las, "_read_las_header", lambda *a, **k: parses.append(a) or real(*a, **k))
+    with pytest.warns(gp.GigapointWarning, match="extended VLRs are cut"):
+        cloud = gp.open(path)
+    assert cloud.n_points == 3000 and len(parses) == 1

@@ -238,7 +238,7 @@ def read_las_header(path: Path, salvage: bool = False) -> LasHeader:
     why (the points before the cut can be read: LasReader.read_chunks(salvage=True)).
     Within ``headers_once`` a file's header is read once (callers do not change it)."""
     hdr = read_once("las", path, lambda: _read_las_header(path, salvage))
-    if not salvage and (hdr.truncated or hdr.evlrs_cut):  # kept from a salvaging read: refused as a plain read refuses it
+    if not salvage and hdr.truncated:  # kept from a salvaging read: refused as a plain read refuses it (EVLRs cut: read alike)
         return _read_las_header(path)
     return hdr
 

@@ -79,6 +79,11 @@ _OWN_FILES = (GIGAPOINT_META, POTREE_META, POTREE_HIERARCHY, POTREE_OCTREE, "nod
 Kind = Literal["gigapoint", "potree", "unfinished"]
 
 
+def _resumable(state: dict) -> bool:
+    """A stopped conversion's state that a run resumes: not one of chunks given from Python (no fingerprint)."""
+    return not ("fingerprint" in state and state["fingerprint"] is None)
+
+
 class ConvertError(GigapointError):
     """A conversion that cannot start or go on (bad options, output in the way)."""
 
@@ -281,17 +286,16 @@ class OctreeDir:
     def resumable(self) -> bool:
         """False where the stopped conversion here was of chunks given from Python (a cloud's
         save: its state has no fingerprint), which no run resumes."""
-        st = self.read_state() or {}
-        return not ("fingerprint" in st and st["fingerprint"] is None)
+        return _resumable(self.read_state() or {})
 
     @property
     def resume_hint(self) -> str:
         """What the stopped conversion here needs: run again (it resumes), or a new save; where an
         input stopped it (``stopped_by``, converter.py), that input's error and what to do instead."""
-        stopped_by = (self.read_state() or {}).get("stopped_by")
-        if isinstance(stopped_by, str):
-            return f"{stopped_by}; {STOPPED_BY_INPUT}"
-        return RESUME_HINT if self.resumable else NO_RESUME_HINT
+        st = self.read_state() or {}  # (once: resumable would read it again)
+        if isinstance(st.get("stopped_by"), str):
+            return f"{st['stopped_by']}; {STOPPED_BY_INPUT}"
+        return RESUME_HINT if _resumable(st) else NO_RESUME_HINT
 
     # ------------------------------------------------------------------ lock
 
