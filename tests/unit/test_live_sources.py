@@ -131,6 +131,32 @@ def test_pcl_colours_read_right_from_ascii_pcd_and_rgba_fields(tmp_path):
     np.testing.assert_array_equal(got, rgb)
 
 
+
+def test_an_ascii_pcd_frame_is_read_once(tmp_path, monkeypatch):
+    """pypcd4 parses the file's bytes, and PCL's integer colours are taken from those same bytes
+    (the file was read a second time for them)."""
+    pytest.importorskip("pypcd4")
+    import builtins
+    import io
+
+    from gigapoint.live.sources import read_points_file
+
+    path = tmp_path / "a.pcd"
+    path.write_text("FIELDS x y z rgb\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\n0 1 2 4278190335\n3 4 5 4294901760\n")
+    real, opened = builtins.open, []
+
+    def counting(file, *args, **kwargs):
+        opened.append(file)
+        return real(file, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", counting)  # pypcd4's open
+    monkeypatch.setattr(io, "open", counting)  # pathlib's
+    xyz, rgb = read_points_file(path)
+    monkeypatch.undo()
+    assert [str(f) for f in opened].count(str(path)) == 1
+    np.testing.assert_array_equal(xyz, [[0, 1, 2], [3, 4, 5]])
+    np.testing.assert_array_equal(rgb, [[0, 0, 255], [255, 0, 0]])
+
 def test_a_frame_the_cloud_refuses_is_said_with_its_file_or_message(tmp_path):
     """A frame read fine but refused by push (every point NaN: an organised PCL cloud that saw
     nothing; an empty PointCloud2) was said as "live: push: ...", naming no file or message."""

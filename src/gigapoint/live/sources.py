@@ -19,6 +19,7 @@ bad frame (one-line GigapointError) is counted and skipped: the stream goes on.
 
 from __future__ import annotations
 
+import io
 import math
 import threading
 import time
@@ -170,15 +171,15 @@ def _xyz_rgb_of_table(path, names, column):
     return xyz, rgb
 
 
-def _pcl_ascii_colors(path: Path, names: list[str], arr: np.ndarray) -> np.ndarray | None:
+def _pcl_ascii_colors(data: bytes, names: list[str], arr: np.ndarray) -> np.ndarray | None:
     """The packed colours of an ASCII PCD's float ``rgb``/``rgba`` field as PCL writes them, or
     None: PCL writes that float's 32 bits as an integer there (pcd_io.cpp: a colour's bits can
     be a NaN), which pypcd4 reads as a float32 number (rounding 0xFFRRGGBB), and its bits were
-    every colour wrong. Integers are read again exactly from the file's column."""
+    every colour wrong. Integers are read again exactly from the column of the file's ``data``."""
     name = next((n for n in names if n.lower() in ("rgb", "rgba")), None)
     if name is None or arr.dtype[name].kind != "f" or not len(arr):
         return None
-    lines = path.read_bytes().splitlines()
+    lines = data.splitlines()
     data = next((k for k, line in enumerate(lines) if line.startswith(b"DATA")), None)
     if data is None or lines[data].split()[1:] != [b"ascii"]:
         return None
@@ -202,9 +203,10 @@ def read_points_file(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
                 from pypcd4 import PointCloud
             except ImportError:
                 raise InputError(f"{path}: reading PCD needs pypcd4 (pip install 'gigapoint[live]')") from None
-            arr = PointCloud.from_path(path).pc_data
+            data = path.read_bytes()  # read once: pypcd4 parses it, and an ASCII file's colours are taken from it again
+            arr = PointCloud.from_fileobj(io.BytesIO(data)).pc_data
             names = list(arr.dtype.names)
-            ints = _pcl_ascii_colors(path, names, arr)
+            ints = _pcl_ascii_colors(data, names, arr)
             return _xyz_rgb_of_table(path, names, lambda n: ints if ints is not None and n.lower() in ("rgb", "rgba") else arr[n])
         if suffix == ".npy":
             a = np.load(path, allow_pickle=False)
