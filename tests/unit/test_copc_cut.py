@@ -9,6 +9,7 @@ import re
 import subprocess
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -247,3 +248,25 @@ def test_cli_render_and_info_read_a_copc_file_cut_in_its_hierarchy_as_laz(autzen
     assert r.returncode == 0, r.stderr
     assert re.fullmatch(warning + "\n", r.stderr), r.stderr
     assert "format:      LAZ 1.4, point format 7" in r.stdout and "points:      110,000" in r.stdout
+
+
+def test_telling_a_local_copc_file_from_a_cut_one_reads_its_head_once(files, tmp_path, monkeypatch):
+    """``lod_source_kind`` of a local COPC file: one read of its head tells a COPC file and one cut
+    in its hierarchy (read as LAZ) apart (is_copc_file, then is_cut_copc_laz read it twice)."""
+    import builtins
+
+    from gigapoint.lod import copc
+    from gigapoint.lod.reader import lod_source_kind
+
+    flat = files[0]
+    _, info, _ = _layout(flat.read_bytes())
+    cut = _cut(flat, tmp_path / "cut.copc.laz", int(info["root_hier_offset"]) + 40)
+    opened = []
+
+    def counting(file, *args, **kwargs):
+        opened.append(Path(file).name)
+        return builtins.open(file, *args, **kwargs)
+
+    monkeypatch.setattr(copc, "open", counting, raising=False)
+    assert [lod_source_kind(p) for p in (flat, cut)] == ["copc", None]
+    assert opened == ["flat.copc.laz", "cut.copc.laz"]

@@ -12,7 +12,7 @@ node's entry and subtree are in the child page at offset). Opening reads the hea
 draws them (voxel_octree.py), a chunk decoded with lazrs into the layouts below. A file cut off
 (shorter than its header and hierarchy EVLR say) gives the nodes and pages before the cut, with
 one warning; cut before its root page (the hierarchy comes last), it is a one-line error (a local
-one whose points are whole is read as plain LAZ instead: ``is_cut_copc_laz``).
+one whose points are whole is read as plain LAZ instead: ``copc_file_kind``).
 """
 
 from __future__ import annotations
@@ -243,36 +243,31 @@ def is_copc_head(head: bytes) -> bool:
     return vlr["user_id"].rstrip(b"\0") == COPC_USER_ID and int(vlr["record_id"]) == COPC_INFO_RECORD
 
 
-def is_copc_file(path) -> bool:
-    """A local file that starts as a COPC file does (``is_copc_head``)."""
+def copc_file_kind(path) -> str | None:
+    """A local file's kind, from one read of its head: "copc" (it starts as a COPC file does,
+    ``is_copc_head``), "laz" (a COPC file cut in its EVLRs, after the points: its root hierarchy
+    page is gone, so no node can be found, but its LAZ chunk table is whole: it reads as the
+    plain LAZ file it still is, every point; ``lod_source_kind`` sends it to the LAS reader,
+    which warns) or None (not a COPC file)."""
     if not os.path.isfile(path):  # a FIFO named x.las: reading it waited for a writer for good
-        return False
-    try:
-        with open(path, "rb") as f:
-            return is_copc_head(f.read(MAGIC_END))
-    except OSError:
-        return False
-
-
-def is_cut_copc_laz(path) -> bool:
-    """A local COPC file cut in its EVLRs, after the points: its root hierarchy page is gone (no
-    node can be found) but its LAZ chunk table is whole, so it reads as the plain LAZ file it
-    still is, every point (``lod_source_kind`` sends it to the LAS reader, which warns)."""
+        return None
     end = INFO_OFFSET + COPC_INFO_DTYPE.itemsize
     try:
         with open(path, "rb") as f:
             head, size = f.read(end), os.fstat(f.fileno()).st_size
     except OSError:
-        return False
-    if len(head) < end or not is_copc_head(head):
-        return False
+        return None
+    if not is_copc_head(head):
+        return None
+    if len(head) < end:  # its info VLR cut: COPC's error says so
+        return "copc"
     info = np.frombuffer(head, COPC_INFO_DTYPE, count=1, offset=INFO_OFFSET)[0]
     if int(info["root_hier_offset"]) + int(info["root_hier_size"]) <= size:
-        return False
+        return "copc"
     try:  # (a whole file whose info VLR points past its end stays COPC's error)
-        return read_las_header(Path(path)).evlrs_cut is not None
+        return "laz" if read_las_header(Path(path)).evlrs_cut is not None else "copc"
     except InputError:  # its points cut too: COPC's error says what is left
-        return False
+        return "copc"
 
 
 def read_vlrs(data: bytes, start: int, count: int, end: int) -> list[tuple[bytes, int, bytes]]:
@@ -555,10 +550,9 @@ __all__ = [
     "VLR_HEADER_DTYPE",
     "CopcCloud",
     "ExtraField",
+    "copc_file_kind",
     "extra_fields",
-    "is_copc_file",
     "is_copc_head",
-    "is_cut_copc_laz",
     "open_copc",
     "point_dtype",
 ]

@@ -14,7 +14,7 @@ from ..core.cloud import PointCloud
 from ..errors import InputError
 from ..io.http import HttpNotFound, as_url, shown_url
 from .compact_octree import read_compact
-from .copc import is_copc_file, is_cut_copc_laz, open_copc
+from .copc import copc_file_kind, open_copc
 from .ept import ept_location, open_ept
 from .octree_dir import FORMAT_VERSION, OctreeDir
 from .potree import read_potree
@@ -34,7 +34,7 @@ def lod_source_kind(path) -> str | None:
     """What ``path`` opens as an octree: "folder" (is_octree_dir), "copc" (a file with the COPC
     info VLR, or an http(s) URL that is not EPT's), "ept" (an ept.json, its folder or their
     URL), or None (a file or folder of point cloud files; a COPC file whose hierarchy is cut
-    off but whose points are whole: is_cut_copc_laz)."""
+    off but whose points are whole: copc_file_kind's "laz")."""
     if as_url(path) is not None:
         return "ept" if ept_location(path) is not None else "copc"
     try:
@@ -42,7 +42,7 @@ def lod_source_kind(path) -> str | None:
             return "folder"
         if ept_location(path) is not None:
             return "ept"
-        return "copc" if is_copc_file(path) and not is_cut_copc_laz(path) else None
+        return "copc" if copc_file_kind(path) == "copc" else None
     except (TypeError, OSError):
         return None
 
