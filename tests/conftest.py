@@ -76,6 +76,34 @@ def las_writer():
     return write_demo_las
 
 
+@pytest.fixture
+def cli(capsys):
+    """``cli(*args)``: ``gigapoint ARGS`` run in this process -> (exit status, stdout, stderr);
+    each argument is passed as ``str(arg)``."""
+    from gigapoint.cli import main
+
+    def run(*args):
+        rc = main([str(a) for a in args])
+        out, err = capsys.readouterr()
+        return rc, out, err
+
+    return run
+
+
+@pytest.fixture(scope="session")
+def loaded():
+    """``loaded(*paths)``: ``gp.open(*paths, progressive=True)`` once its loader is done (it
+    fails the test if the load does not finish in 2 minutes). Call it inside a
+    ``pytest.warns``: the loader's thread warns as soon as it is done, maybe before the wait."""
+
+    def load(*paths):
+        cloud = gp.open(*paths, progressive=True)
+        assert cloud.wait(timeout=120)
+        return cloud
+
+    return load
+
+
 def pytest_report_header(config):
     import numba
 

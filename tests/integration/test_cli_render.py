@@ -9,14 +9,6 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from gigapoint.cli import main
-
-
-def run(capsys, *args):
-    rc = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return rc, out, err
-
 
 @pytest.fixture(scope="module")
 def small_las(tmp_path_factory):
@@ -35,9 +27,9 @@ def small_las(tmp_path_factory):
     return path
 
 
-def test_render_writes_a_png_with_stats(capsys, tmp_path, small_las):
+def test_render_writes_a_png_with_stats(cli, tmp_path, small_las):
     out = tmp_path / "town.png"
-    rc, stdout, err = run(capsys, "render", small_las, "-o", out, "--width", 320, "--height", 200, "--stats", "--background", "white")
+    rc, stdout, err = cli("render", small_las, "-o", out, "--width", 320, "--height", 200, "--stats", "--background", "white")
     assert rc == 0, err
     img = np.asarray(Image.open(out))
     assert img.shape == (200, 320, 4)
@@ -46,28 +38,28 @@ def test_render_writes_a_png_with_stats(capsys, tmp_path, small_las):
     assert "wrote" in stdout
 
 
-def test_render_several_files_merge_into_one_scene(capsys, tmp_path, small_las):
+def test_render_several_files_merge_into_one_scene(cli, tmp_path, small_las):
     import shutil
 
     out, copy = tmp_path / "two.png", tmp_path / "copy.las"
     shutil.copyfile(small_las, copy)  # another file (one named twice is read once)
-    rc, _, err = run(capsys, "render", small_las, copy, "-o", out, "-W", 64, "-H", 64, "--stats")
+    rc, _, err = cli("render", small_las, copy, "-o", out, "-W", 64, "-H", 64, "--stats")
     assert rc == 0, err
     assert "60,000 of 60,000 points" in err
-    rc, _, err = run(capsys, "render", small_las, small_las, "-o", out, "-W", 64, "-H", 64, "--stats", "--overwrite")
+    rc, _, err = cli("render", small_las, small_las, "-o", out, "-W", 64, "-H", 64, "--stats", "--overwrite")
     assert rc == 0 and "named more than once; its points are read once" in err and "30,000 of 30,000 points" in err, err
 
 
-def test_max_points_previews_a_subsample(capsys, tmp_path, small_las):
+def test_max_points_previews_a_subsample(cli, tmp_path, small_las):
     out = tmp_path / "preview.png"
-    rc, stdout, err = run(capsys, "render", small_las, "-o", out, "-W", 160, "-H", 100, "--stats", "--max-points", 15_000)
+    rc, stdout, err = cli("render", small_las, "-o", out, "-W", 160, "-H", 100, "--stats", "--max-points", 15_000)
     assert rc == 0, err
     assert "15,000 of 30,000 points" in err  # every second point of each batch
     assert stdout.strip() == f"wrote {out} (160x100, 15,000 of 30,000 points drawn)"  # (it said '30,000 points', the cloud's)
     assert (np.asarray(Image.open(out))[..., :3] != 0).any(axis=2).mean() > 0.05
 
 
-def test_max_points_caps_what_an_octree_draws(capsys, tmp_path, small_las):
+def test_max_points_caps_what_an_octree_draws(cli, tmp_path, small_las):
     """`render octree/ --max-points N` (and a file above the point budget, read into an octree
     progressively) drew the whole budget: the option was dropped without a word. Now it caps
     the point budget, as the viewer's cap does (the root node is always drawn)."""
@@ -79,7 +71,7 @@ def test_max_points_caps_what_an_octree_draws(capsys, tmp_path, small_las):
     drawn = {}
     for cap in (None, 20_000):
         out = tmp_path / f"{cap}.png"
-        rc, _, err = run(capsys, "render", tmp_path / "oct", "-o", out, "-W", 320, "-H", 240, "--stats", *(["--max-points", cap] if cap else []))
+        rc, _, err = cli("render", tmp_path / "oct", "-o", out, "-W", 320, "-H", 240, "--stats", *(["--max-points", cap] if cap else []))
         assert rc == 0, err
         drawn[cap] = int(re.match(r"([\d,]+) of", err).group(1).replace(",", ""))
         assert (np.asarray(Image.open(out))[..., :3] != 0).any(axis=2).mean() > 0.05
@@ -87,24 +79,24 @@ def test_max_points_caps_what_an_octree_draws(capsys, tmp_path, small_las):
     assert "memory: peak RSS" in err and "Octree" not in err  # (it said 'CompactOctree has no breakdown', a class's name)
 
 
-def test_camera_options_and_extra_outputs(capsys, tmp_path, small_las):
+def test_camera_options_and_extra_outputs(cli, tmp_path, small_las):
     depth, index = tmp_path / "d.npy", tmp_path / "i.npy"
-    rc, _, err = run(
-        capsys, "render", small_las, "-o", tmp_path / "a.png", "-W", 80, "-H", 60,
+    rc, _, err = cli(
+        "render", small_las, "-o", tmp_path / "a.png", "-W", 80, "-H", 60,
         "--camera", "eye=637500,850500,400 target=637500,851500,0", "--depth-out", depth, "--index-out", index,
     )  # fmt: skip
     assert rc == 0, err
     d, i = np.load(depth), np.load(index)
     assert d.shape == (60, 80) and i.shape == (60, 80)
     assert np.isfinite(d[i >= 0]).all() and np.isinf(d[i < 0]).all()
-    rc, _, err = run(capsys, "render", small_las, "-o", tmp_path / "b.png", "-W", 80, "-H", 60, "--camera", "yaw=30;pitch=60")
+    rc, _, err = cli("render", small_las, "-o", tmp_path / "b.png", "-W", 80, "-H", 60, "--camera", "yaw=30;pitch=60")
     assert rc == 0, err
-    rc, _, err = run(capsys, "render", small_las, "-o", tmp_path / "c.jpg", "-W", 80, "-H", 60, "--view", "top", "--projection", "orthographic")
+    rc, _, err = cli("render", small_las, "-o", tmp_path / "c.jpg", "-W", 80, "-H", 60, "--view", "top", "--projection", "orthographic")
     assert rc == 0, err
     assert Image.open(tmp_path / "c.jpg").size == (80, 60)
 
 
-def test_an_eye_and_target_camera_keeps_the_orthographic_projection(capsys, tmp_path, small_las):
+def test_an_eye_and_target_camera_keeps_the_orthographic_projection(cli, tmp_path, small_las):
     """--projection orthographic with --camera eye=.. target=.. drew a perspective image (the
     projection was dropped); its height is the perspective view's at the target."""
     import gigapoint as gp
@@ -114,7 +106,7 @@ def test_an_eye_and_target_camera_keeps_the_orthographic_projection(capsys, tmp_
     images = {}
     for projection in ("perspective", "orthographic"):
         out = tmp_path / f"{projection}.png"
-        rc, _, err = run(capsys, "render", small_las, "-o", out, "-W", 80, "-H", 60, "--size-mode", "fixed", "--projection", projection,
+        rc, _, err = cli("render", small_las, "-o", out, "-W", 80, "-H", 60, "--size-mode", "fixed", "--projection", projection,
                          "--camera", "eye=637000,851000,150 target=637000,851000,0 up=0,1,0")  # fmt: skip
         assert rc == 0, err
         images[projection] = np.asarray(Image.open(out))
@@ -124,7 +116,7 @@ def test_an_eye_and_target_camera_keeps_the_orthographic_projection(capsys, tmp_
     assert (images["orthographic"] != images["perspective"]).any()
 
 
-def test_an_output_that_is_an_input_or_another_output_is_refused_before_anything_is_read(capsys, tmp_path):
+def test_an_output_that_is_an_input_or_another_output_is_refused_before_anything_is_read(cli, tmp_path):
     """``--index-out pts.npy --overwrite`` replaced the points it drew with the index buffer."""
     pts = tmp_path / "tiles" / "pts.npy"
     pts.parent.mkdir()
@@ -135,26 +127,26 @@ def test_an_output_that_is_an_input_or_another_output_is_refused_before_anything
         ([pts.parent], ["--depth-out", pts], f"{pts}: is one of the inputs"),  # a point cloud file of a folder named
         ([pts], ["--depth-out", tmp_path / "d.npy", "--index-out", tmp_path / "tiles" / ".." / "d.npy"], "d.npy: named for two outputs"),
     ):
-        rc, _, err = run(capsys, "render", *inputs, "-o", tmp_path / "a.png", "-W", 32, "-H", 24, "--overwrite", *extra)
+        rc, _, err = cli("render", *inputs, "-o", tmp_path / "a.png", "-W", 32, "-H", 24, "--overwrite", *extra)
         assert rc == 1 and err.startswith("error: ") and problem in err and err.count("\n") == 1, err
         assert pts.read_bytes() == before and not (tmp_path / "a.png").exists()
-    rc, _, err = run(capsys, "render", pts.parent, "-o", tmp_path / "tiles" / "a.png", "-W", 32, "-H", 24, "--index-out", tmp_path / "i.npy")
+    rc, _, err = cli("render", pts.parent, "-o", tmp_path / "tiles" / "a.png", "-W", 32, "-H", 24, "--index-out", tmp_path / "i.npy")
     assert rc == 0, err  # an image beside the points it draws is no input
 
 
-def test_never_overwrites_without_asking(capsys, tmp_path, small_las):
+def test_never_overwrites_without_asking(cli, tmp_path, small_las):
     out = tmp_path / "keep.png"
     out.write_bytes(b"precious")
-    rc, _, err = run(capsys, "render", small_las, "-o", out)
+    rc, _, err = cli("render", small_las, "-o", out)
     assert rc == 1 and "already exists" in err and "--overwrite" in err
     assert out.read_bytes() == b"precious"
-    rc, _, err = run(capsys, "render", small_las, "-o", out, "-W", 32, "-H", 32, "--overwrite")
+    rc, _, err = cli("render", small_las, "-o", out, "-W", 32, "-H", 32, "--overwrite")
     assert rc == 0 and Image.open(out).size == (32, 32)
 
 
-def test_a_failed_render_leaves_no_output_behind(capsys, tmp_path, small_las):
+def test_a_failed_render_leaves_no_output_behind(cli, tmp_path, small_las):
     out = tmp_path / "x.png"
-    rc, _, err = run(capsys, "render", small_las, "-o", out, "--camera", "eye=1,2,3")
+    rc, _, err = cli("render", small_las, "-o", out, "--camera", "eye=1,2,3")
     assert rc == 1 and not out.exists()
     assert not list(tmp_path.glob(".x.png*"))  # no temporary left either
 
@@ -188,12 +180,12 @@ def test_a_failed_render_leaves_no_output_behind(capsys, tmp_path, small_las):
         (["--point-budget", "0"], "point_budget"),
     ],
 )
-def test_bad_options_give_one_line_errors(capsys, tmp_path, small_las, args, message):
+def test_bad_options_give_one_line_errors(cli, tmp_path, small_las, args, message):
     out = tmp_path / "bad.png"
-    rc, _, err = run(capsys, "render", small_las, "-o", out, *args)
+    rc, _, err = cli("render", small_las, "-o", out, *args)
     assert rc != 0
     if args[0] == "--camera":  # told before the inputs are read (it was once a large file was): a missing one is not reached
-        rc, _, err_first = run(capsys, "render", tmp_path / "missing.laz", "-o", out, *args)
+        rc, _, err_first = cli("render", tmp_path / "missing.laz", "-o", out, *args)
         assert rc == 1 and err_first == err, err_first
     lines = err.strip().splitlines()
     assert len(lines) == 1 and message in lines[0], err
@@ -201,62 +193,62 @@ def test_bad_options_give_one_line_errors(capsys, tmp_path, small_las, args, mes
 
 
 @pytest.mark.parametrize("suffix", [".gif2", ".txt", ""])
-def test_bad_output_type(capsys, tmp_path, small_las, suffix):
-    rc, _, err = run(capsys, "render", small_las, "-o", tmp_path / f"out{suffix}")
+def test_bad_output_type(cli, tmp_path, small_las, suffix):
+    rc, _, err = cli("render", small_las, "-o", tmp_path / f"out{suffix}")
     assert rc == 1 and "unsupported output type" in err
 
 
-def test_an_image_its_format_cannot_hold_is_refused_before_the_render(capsys, tmp_path, small_las):
+def test_an_image_its_format_cannot_hold_is_refused_before_the_render(cli, tmp_path, small_las):
     """A WebP 16 384 pixels wide was an 'internal error: ValueError: encoding error 5' once the
     render was done (libwebp's limit is 16 383); side-by-side stereo writes twice --width, and
     'wrote' says so (it said --width)."""
     out = tmp_path / "wide.webp"
     for args, size in ((["-W", 16_384, "-H", 8], "16384x8"), (["-W", 9000, "-H", 8, "--stereo", "side-by-side"], "18000x8")):
-        rc, _, err = run(capsys, "render", small_las, "-o", out, *args)
+        rc, _, err = cli("render", small_las, "-o", out, *args)
         assert rc == 1 and err.strip().splitlines() == [f"error: {out}: a WebP image is at most 16,383 pixels a side, this one would be {size}; write .png or .tif"], err
         assert not out.exists()
-    rc, out_text, err = run(capsys, "render", small_las, "-o", tmp_path / "s.webp", "-W", 40, "-H", 20, "--stereo", "side-by-side")
+    rc, out_text, err = cli("render", small_las, "-o", tmp_path / "s.webp", "-W", 40, "-H", 20, "--stereo", "side-by-side")
     assert rc == 0 and Image.open(tmp_path / "s.webp").size == (80, 20) and "(80x20, 30,000 points)" in out_text, err
 
 
-def test_missing_input_and_missing_output_dir(capsys, tmp_path, small_las):
-    rc, _, err = run(capsys, "render", tmp_path / "nope.laz", "-o", tmp_path / "o.png")
+def test_missing_input_and_missing_output_dir(cli, tmp_path, small_las):
+    rc, _, err = cli("render", tmp_path / "nope.laz", "-o", tmp_path / "o.png")
     assert rc == 1 and "nope.laz" in err and len(err.strip().splitlines()) == 1
-    rc, _, err = run(capsys, "render", small_las, "-o", tmp_path / "no" / "such" / "o.png")
+    rc, _, err = cli("render", small_las, "-o", tmp_path / "no" / "such" / "o.png")
     assert rc == 1 and "does not exist" in err
     afile = tmp_path / "afile"  # a file where the folder should be: was "Not a directory" once the render was done
     afile.write_bytes(b"x")
     for bad, args in ((afile / "o.png", []), (afile / "o.mp4", ["--turntable", 2]), (afile / "d.npy", ["--depth-out", afile / "d.npy"])):
         out = bad if not args or args[0] == "--turntable" else tmp_path / "o.png"
-        rc, _, err = run(capsys, "render", small_las, "-o", out, *args, "-W", 32, "-H", 24)
+        rc, _, err = cli("render", small_las, "-o", out, *args, "-W", 32, "-H", 24)
         assert rc == 1 and err.strip().splitlines() == [f"error: {bad}: {afile} is a file, not a directory"], err
         assert not out.exists()
 
 
-def test_camera_looking_away_warns_and_renders_background(capsys, tmp_path, small_las):
+def test_camera_looking_away_warns_and_renders_background(cli, tmp_path, small_las):
     out = tmp_path / "away.png"
-    rc, _, err = run(capsys, "render", small_las, "-o", out, "-W", 40, "-H", 30, "--camera", "eye=0,0,0 target=-1,-1,0")
+    rc, _, err = cli("render", small_las, "-o", out, "-W", 40, "-H", 30, "--camera", "eye=0,0,0 target=-1,-1,0")
     assert rc == 0 and "no point is in view" in err
     assert (np.asarray(Image.open(out))[..., :3] == 0).all()
 
 
-def test_demo_command(capsys, tmp_path):
+def test_demo_command(cli, tmp_path):
     out = tmp_path / "demo.png"
-    rc, stdout, err = run(capsys, "demo", "--points", 50_000, "-o", out, "-W", 160, "-H", 90)
+    rc, stdout, err = cli("demo", "--points", 50_000, "-o", out, "-W", 160, "-H", 90)
     assert rc == 0, err
     assert "M points/s" in stdout and "Morton sort" in stdout
     assert Image.open(out).size == (160, 90)
-    rc, _, err = run(capsys, "demo", "--points", 0, "-o", tmp_path / "z.png")
+    rc, _, err = cli("demo", "--points", 0, "-o", tmp_path / "z.png")
     assert rc == 1 and "--points" in err
-    rc, _, err = run(capsys, "demo", "--points", 1000, "--seed", 2**64, "-o", tmp_path / "s.png")  # an internal error in the generator
+    rc, _, err = cli("demo", "--points", 1000, "--seed", 2**64, "-o", tmp_path / "s.png")  # an internal error in the generator
     assert rc == 1 and err == f"error: --seed: seed must be an integer from -9,223,372,036,854,775,807 to 9,223,372,036,854,775,807, got {2**64}\n"
     assert not (tmp_path / "s.png").exists()
     with patch("gigapoint.io.demo.demo_arrays", side_effect=AssertionError("the scene was generated")):
-        rc, _, err = run(capsys, "demo", "--points", 1000, "--view", "sideways", "-o", tmp_path / "v.png")  # said once the scene was made, without --view
+        rc, _, err = cli("demo", "--points", 1000, "--view", "sideways", "-o", tmp_path / "v.png")  # said once the scene was made, without --view
     assert rc == 1 and err == "error: --view: unknown view 'sideways'; choose one of top, front, back, side, left, right, iso, auto\n"
 
 
-def test_demo_command_holds_the_town_at_1_cm_in_the_compact_layout(capsys, tmp_path):
+def test_demo_command_holds_the_town_at_1_cm_in_the_compact_layout(cli, tmp_path):
     """By default the town is quantized to 1 cm, as a LAS export holds it: the compact layout and
     per-block palettes, under 7 bytes a point of position and colour; --scale 0 keeps float
     positions in three words (16 bytes); a bad --scale is one line and exit 1, no image."""
@@ -266,14 +258,14 @@ def test_demo_command_holds_the_town_at_1_cm_in_the_compact_layout(capsys, tmp_p
         m = re.search(r"positions ([0-9.]+), color ([0-9.]+)", " ".join(stdout.split()))
         return float(m.group(1)) + float(m.group(2))
 
-    rc, stdout, err = run(capsys, "demo", "--points", 200_000, "-o", tmp_path / "a.png", "-W", 160, "-H", 90)
+    rc, stdout, err = cli("demo", "--points", 200_000, "-o", tmp_path / "a.png", "-W", 160, "-H", 90)
     assert rc == 0, err
     assert "compact layout" in " ".join(stdout.split()) and pos_color(stdout) <= 7.0
-    rc, stdout, err = run(capsys, "demo", "--points", 200_000, "-o", tmp_path / "b.png", "-W", 160, "-H", 90, "--scale", 0)
+    rc, stdout, err = cli("demo", "--points", 200_000, "-o", tmp_path / "b.png", "-W", 160, "-H", 90, "--scale", 0)
     assert rc == 0, err
     assert "words layout" in " ".join(stdout.split()) and pos_color(stdout) == 16.0
     for bad in ("nan", "-0.01", "1e9"):
-        rc, _, err = run(capsys, "demo", "--points", 1000, "-o", tmp_path / "c.png", "--scale", bad)
+        rc, _, err = cli("demo", "--points", 1000, "-o", tmp_path / "c.png", "--scale", bad)
         assert rc == 1 and "--scale" in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "c.png").exists()
 
@@ -380,16 +372,16 @@ def color_bytes(err: str) -> float:
 
 
 @pytest.mark.parametrize(("colors", "per_point"), [("rgba", 4.0), ("rgb565", 2.0), ("palette", 1.14)])
-def test_colors_option_chooses_how_colours_are_held(capsys, tmp_path, small_las, colors, per_point):
-    rc, _, err = run(capsys, "render", small_las, "-o", tmp_path / "c.png", "-W", 64, "-H", 48, "--stats", "--colors", colors)
+def test_colors_option_chooses_how_colours_are_held(cli, tmp_path, small_las, colors, per_point):
+    rc, _, err = cli("render", small_las, "-o", tmp_path / "c.png", "-W", 64, "-H", 48, "--stats", "--colors", colors)
     assert rc == 0, err
     assert color_bytes(err) == pytest.approx(per_point, abs=0.01)
-    rc, out, err = run(capsys, "info", "--memory", "--colors", colors, small_las)
+    rc, out, err = cli("info", "--memory", "--colors", colors, small_las)
     assert rc == 0, err
     assert color_bytes(out) == pytest.approx(per_point, abs=0.01)
 
 
-def test_info_of_a_folder_shows_every_file_it_can_read_and_names_the_others(capsys, tmp_path, small_las):
+def test_info_of_a_folder_shows_every_file_it_can_read_and_names_the_others(cli, tmp_path, small_las):
     """One damaged file stopped info of a folder there: the files after it were never shown."""
     import json
     import shutil
@@ -399,28 +391,28 @@ def test_info_of_a_folder_shows_every_file_it_can_read_and_names_the_others(caps
     shutil.copy(small_las, folder / "a.las")
     (folder / "b.las").write_bytes(b"LASF" + bytes(50))  # damaged
     shutil.copy(small_las, folder / "c.las")
-    rc, out, err = run(capsys, "info", folder)
+    rc, out, err = cli("info", folder)
     assert rc == 1 and out.count("points:") == 2 and f"{folder / 'c.las'}" in out
     lines = err.strip().splitlines()
     assert len(lines) == 2 and lines[0].startswith(f"error: {folder / 'b.las'}: ") and lines[1] == "error: info: 1 of 3 files could not be read (said above)"
-    rc, out, err = run(capsys, "info", "--json", folder)
+    rc, out, err = cli("info", "--json", folder)
     rows = [json.loads(line) for line in out.strip().splitlines()]
     assert rc == 1 and [r["path"] for r in rows] == [str(folder / n) for n in ("a.las", "b.las", "c.las")]
     assert rows[1]["error"].startswith(f"{folder / 'b.las'}: ") and rows[2]["point_count"] == 30_000
-    rc, out, err = run(capsys, "info", folder / "b.las")  # one file: its error alone
+    rc, out, err = cli("info", folder / "b.las")  # one file: its error alone
     assert rc == 1 and err.count("\n") == 1 and err.startswith(f"error: {folder / 'b.las'}: ")
-    rc, out, err = run(capsys, "info", folder / "nope.las", folder / "a.las")  # a missing name stopped the others being shown
+    rc, out, err = cli("info", folder / "nope.las", folder / "a.las")  # a missing name stopped the others being shown
     assert rc == 1 and out.count("points:") == 1 and f"{folder / 'a.las'}" in out
     assert err.strip().splitlines() == [f"error: {folder / 'nope.las'}: no such file", "error: info: 1 of 2 files could not be read (said above)"]
-    rc, out, err = run(capsys, "info", folder / "nope.las")
+    rc, out, err = cli("info", folder / "nope.las")
     assert rc == 1 and err == f"error: {folder / 'nope.las'}: no such file\n"
 
 
-def test_chunked_option_builds_the_same_image(capsys, tmp_path, small_las):
+def test_chunked_option_builds_the_same_image(cli, tmp_path, small_las):
     images = []
     for flag in ("--chunked", "--no-chunked"):
         out = tmp_path / f"{flag}.png"
-        rc, _, err = run(capsys, "render", small_las, "-o", out, "-W", 96, "-H", 64, flag)
+        rc, _, err = cli("render", small_las, "-o", out, "-W", 96, "-H", 64, flag)
         assert rc == 0, err
         images.append(np.asarray(Image.open(out)))
     np.testing.assert_array_equal(images[0], images[1])
@@ -440,26 +432,26 @@ def test_chunked_option_builds_the_same_image(capsys, tmp_path, small_las):
         (["view", "{las}", "--colors", "x"], "--colors"),
     ],
 )
-def test_colors_and_chunked_errors_name_the_option(capsys, tmp_path, small_las, args, message):
+def test_colors_and_chunked_errors_name_the_option(cli, tmp_path, small_las, args, message):
     out = tmp_path / "bad.png"
-    rc, _, err = run(capsys, *(a.format(las=small_las, out=out) for a in args))
+    rc, _, err = cli(*(a.format(las=small_las, out=out) for a in args))
     assert rc == 1
     lines = err.strip().splitlines()
     assert len(lines) == 1 and message in lines[0], err
     assert not out.exists()
 
 
-def test_colors_option_refuses_an_octree(capsys, tmp_path, small_las):
+def test_colors_option_refuses_an_octree(cli, tmp_path, small_las):
     import gigapoint as gp
 
     octree = tmp_path / "octree"
     gp.convert([str(small_las)], octree, max_leaf=20_000)
-    rc, _, err = run(capsys, "render", octree, "-o", tmp_path / "o.png", "--colors", "rgb565")
+    rc, _, err = cli("render", octree, "-o", tmp_path / "o.png", "--colors", "rgb565")
     assert rc == 1 and len(err.strip().splitlines()) == 1
     assert "--colors: " in err and "is an octree" in err
 
 
-def test_info_memory_of_an_octree_says_why_there_is_no_figure(capsys, tmp_path, small_las):
+def test_info_memory_of_an_octree_says_why_there_is_no_figure(cli, tmp_path, small_las):
     """``info OCTREE --memory`` printed nothing of memory, without a word."""
     import json
 
@@ -468,7 +460,7 @@ def test_info_memory_of_an_octree_says_why_there_is_no_figure(capsys, tmp_path, 
     octree = tmp_path / "octree"
     gp.convert([str(small_las)], octree, max_leaf=20_000)
     why = "an octree is read node by node as views need them; --memory measures point files"
-    rc, out, _ = run(capsys, "info", octree, "--memory")
+    rc, out, _ = cli("info", octree, "--memory")
     assert rc == 0 and out.strip().splitlines()[-1] == f"memory: {why}"
-    rc, out, _ = run(capsys, "info", octree, "--memory", "--json")
+    rc, out, _ = cli("info", octree, "--memory", "--json")
     assert rc == 0 and json.loads(out.strip().splitlines()[-1]) == {"path": str(octree), "memory": None, "why": why}

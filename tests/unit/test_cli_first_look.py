@@ -13,15 +13,9 @@ import pytest
 from rich.console import Console
 
 import gigapoint as gp
-from gigapoint.cli import compiling, main
+from gigapoint.cli import compiling
 from gigapoint.cli.progress import progress_bar
 from gigapoint.errors import GigapointError, PointIndexError
-
-
-def run(capsys, *args):
-    rc = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return rc, out, err
 
 
 def terminal() -> tuple[Console, io.StringIO]:
@@ -89,21 +83,21 @@ def test_a_progress_bar_on_a_terminal_only_and_the_compile_notice_inside_it():
     assert watch.sink is None and watch.kernels == 1
 
 
-def test_compile_command_reports_each_step(capsys, monkeypatch):
+def test_compile_command_reports_each_step(cli, monkeypatch):
     from gigapoint.cli import compile_cmd
 
     kernel = fresh_kernel()
     monkeypatch.setattr(compile_cmd, "steps", lambda folder: [("a kernel", lambda: kernel(1)), ("the same again", lambda: kernel(2))])
-    rc, out, err = run(capsys, "compile")
+    rc, out, err = cli("compile")
     assert rc == 0, err
     lines = out.splitlines()
     assert re.match(r"\s+a kernel\s+compiled in \d+\.\d s$", lines[0]) and re.match(r"\s+the same again\s+cached$", lines[1])
     assert "later runs load them from numba's cache" in lines[-1]
-    rc, out, _ = run(capsys, "compile")
+    rc, out, _ = cli("compile")
     assert rc == 0 and out.splitlines()[-1].startswith("every kernel was compiled already")
 
 
-def test_compile_command_promises_no_cache_where_numba_could_not_save(capsys, monkeypatch):
+def test_compile_command_promises_no_cache_where_numba_could_not_save(cli, monkeypatch):
     """A read-only install (or a full disk) compiles in memory: "later runs load them" was untrue."""
     from gigapoint.cli import compile_cmd
     from gigapoint.core import kernel_cache
@@ -111,7 +105,7 @@ def test_compile_command_promises_no_cache_where_numba_could_not_save(capsys, mo
     kernel = fresh_kernel()
     monkeypatch.setattr(compile_cmd, "steps", lambda folder: [("a kernel", lambda: kernel(1))])
     monkeypatch.setattr(kernel_cache, "_done", kernel_cache._done | {"save"})  # as after a failed save
-    rc, out, err = run(capsys, "compile")
+    rc, out, err = cli("compile")
     assert rc == 0, err
     assert out.splitlines()[-1].endswith("; numba could not save them in its cache: later runs compile them again")
 
@@ -126,9 +120,9 @@ def test_the_real_compile_steps_cover_every_pass(tmp_path):
 
 # --- --help ----------------------------------------------------------------------------------------
 @pytest.mark.parametrize("command", [[], ["render"], ["info"], ["convert"], ["view"], ["bench"], ["demo"], ["compile"]])
-def test_help_lists_no_bool_type_for_flags_and_no_braced_arguments(capsys, monkeypatch, command):
+def test_help_lists_no_bool_type_for_flags_and_no_braced_arguments(cli, monkeypatch, command):
     monkeypatch.setenv("COLUMNS", "160")
-    rc, out, err = run(capsys, *command, "--help")
+    rc, out, err = cli(*command, "--help")
     assert rc == 0, err
     assert "<bool>" not in out and not re.search(r"\{\w+\}", out), out
     assert re.search(r"--help\s+Show this message", out)
@@ -141,19 +135,19 @@ def test_help_lists_no_bool_type_for_flags_and_no_braced_arguments(capsys, monke
     ("convert", "--dask", "(needs gigapoint[dask])"), ("convert", "--workers", "(needs gigapoint[dask])"),
     ("render", "--fps", "[default: 30]"), ("view", "--keep", "[default: 100]"),
 ])
-def test_help_keeps_bracketed_words(capsys, monkeypatch, command, option, text):
+def test_help_keeps_bracketed_words(cli, monkeypatch, command, option, text):
     # rich read '[dask]' and '[default: 30]' as markup and dropped them from --help
     monkeypatch.setenv("COLUMNS", "400")
-    rc, out, err = run(capsys, command, "--help")
+    rc, out, err = cli(command, "--help")
     assert rc == 0, err
     line = next(line for line in out.splitlines() if f" {option} " in line)
     assert text in line, line
 
 
 # --- info formatted from the file's scale -------------------------------------------------------------
-def test_info_prints_bounds_with_the_decimals_of_the_scale(capsys, las_writer, tmp_path):
+def test_info_prints_bounds_with_the_decimals_of_the_scale(cli, las_writer, tmp_path):
     path = las_writer(tmp_path / "mm.las", 5_000)  # scale 0.001
-    rc, out, err = run(capsys, "info", path)
+    rc, out, err = cli("info", path)
     assert rc == 0, err
     for label in ("bounds min", "bounds max", "extent"):
         values = next(line for line in out.splitlines() if line.strip().startswith(label + ":")).split(":", 1)[1]
@@ -161,19 +155,19 @@ def test_info_prints_bounds_with_the_decimals_of_the_scale(capsys, las_writer, t
         assert len(values) == 3 and all(re.fullmatch(r"-?\d+\.\d{3}", v) for v in values), values  # no 1,234 separators
 
 
-def test_info_on_real_utm_data(capsys, autzen_path):
-    rc, out, _ = run(capsys, "info", autzen_path)
+def test_info_on_real_utm_data(cli, autzen_path):
+    rc, out, _ = cli("info", autzen_path)
     assert rc == 0
     assert "bounds min:  636001.76, 848935.20, 406.26 (header)" in out
     assert "extent:      1177.46, 562.70, 114.25" in out
 
 
-def test_info_of_a_converted_octree_prints_bounds_at_the_source_scale(capsys, autzen_path, tmp_path):
+def test_info_of_a_converted_octree_prints_bounds_at_the_source_scale(cli, autzen_path, tmp_path):
     """A gigapoint octree records its LAS grid (format 2): info prints its bounds at that scale's
     decimals, not float noise (848935.2000000001) or a fixed 3."""
     out = tmp_path / "oct"
     gp.convert([autzen_path], out)
-    rc, text, err = run(capsys, "info", out)
+    rc, text, err = cli("info", out)
     assert rc == 0, err
     assert "bounds min:  636001.76, 848935.20, 406.26" in text and "extent:      1177.46, 562.70, 114.25" in text, text
     assert "scale:       0.01, 0.01, 0.01" in text and "offset:" not in text
@@ -254,7 +248,7 @@ def test_turntable_does_not_replace_a_file_silently(tmp_path):
     assert out.read_bytes()[:3] == b"GIF" and frames == [(1, 2), (2, 2)]
 
 
-def test_convert_says_overwrite_true_to_python_and_overwrite_to_the_command_line(tmp_path, capsys, las_writer):
+def test_convert_says_overwrite_true_to_python_and_overwrite_to_the_command_line(tmp_path, cli, las_writer):
     from gigapoint.lod import OutputExistsError
 
     src = las_writer(tmp_path / "in.las", 3_000)
@@ -263,28 +257,28 @@ def test_convert_says_overwrite_true_to_python_and_overwrite_to_the_command_line
     with pytest.raises(OutputExistsError, match=r"pass overwrite=True to replace it") as err:
         gp.convert([src], out)
     assert "--overwrite" not in str(err.value)
-    rc, _, stderr = run(capsys, "convert", src, "-o", out, "--quiet")
+    rc, _, stderr = cli("convert", src, "-o", out, "--quiet")
     assert rc == 1 and "pass --overwrite to replace it" in stderr and "overwrite=True" not in stderr
-    assert run(capsys, "render", src, "-o", tmp_path / "x.png", "-W", 64, "-H", 48)[0] == 0
-    rc, _, stderr = run(capsys, "render", src, "-o", tmp_path / "x.png", "-W", 64, "-H", 48)  # again: the image exists
+    assert cli("render", src, "-o", tmp_path / "x.png", "-W", 64, "-H", 48)[0] == 0
+    rc, _, stderr = cli("render", src, "-o", tmp_path / "x.png", "-W", 64, "-H", 48)  # again: the image exists
     assert rc == 1 and "already exists; pass --overwrite to replace it" in stderr
 
 
-def test_convert_says_how_to_watch_it_only_once_it_runs(tmp_path, capsys, las_writer):
+def test_convert_says_how_to_watch_it_only_once_it_runs(tmp_path, cli, las_writer):
     """The hint to watch the output comes once the inputs and OUT are checked: a refused run
     (OUT holds a conversion, an empty input, a bad option) prints only its one-line error."""
     src = las_writer(tmp_path / "in.las", 3_000)
     (tmp_path / "empty.las").write_bytes(b"")
     out = tmp_path / "oct"
-    rc, _, stderr = run(capsys, "convert", src, "-o", out)
+    rc, _, stderr = cli("convert", src, "-o", out)
     assert rc == 0 and f"`gigapoint view {out}` shows what has been read so far" in stderr
     for args in ((src, "-o", out), (tmp_path / "empty.las", "-o", tmp_path / "b"), (src, "-o", tmp_path / "c", "--memory-limit", "lots")):
-        rc, _, stderr = run(capsys, "convert", *args)
+        rc, _, stderr = cli("convert", *args)
         assert rc == 1 and stderr.startswith("error: ") and stderr.count("\n") == 1, stderr
 
 
 # --- the Potree writer and info --------------------------------------------------------------------------
-def test_potree_info_lists_its_attributes_and_keeps_the_crs(tmp_path, capsys, autzen_path):
+def test_potree_info_lists_its_attributes_and_keeps_the_crs(tmp_path, cli, autzen_path):
     from gigapoint.lod import octree_info
 
     out = tmp_path / "potree"
@@ -293,7 +287,7 @@ def test_potree_info_lists_its_attributes_and_keeps_the_crs(tmp_path, capsys, au
     assert "NAD_1983_HARN_Lambert_Conformal_Conic" in meta["projection"]
     info = octree_info(out)
     assert {"intensity", "classification"} <= set(info["attributes"]) and "NAD_1983" in info["crs"]
-    rc, text, _ = run(capsys, "info", out)
+    rc, text, _ = cli("info", out)
     assert rc == 0 and "attributes:  none" not in text and "intensity" in text and "crs:" in text and "NAD_1983" in text
 
 
@@ -337,12 +331,12 @@ def test_a_bad_pick_is_the_same_one_line_error_in_every_kind_of_cloud(tmp_path):
                     where.point_info(bad)
 
 
-def test_info_of_a_copc_output_still_being_converted_names_its_work_folder(capsys, tmp_path):
+def test_info_of_a_copc_output_still_being_converted_names_its_work_folder(cli, tmp_path):
     """A COPC file appears only once its conversion completes; until then ``<out>.work`` holds
     the partial work. info named only a missing file, as if the conversion had never run."""
     out = tmp_path / "out.copc.laz"
     (tmp_path / "out.copc.laz.work").mkdir()
-    rc, _, err = run(capsys, "info", out)
+    rc, _, err = cli("info", out)
     assert rc == 1
     assert err.count("\n") == 1 and f"{out}: no such file yet: a conversion to it is unfinished" in err, err
     assert f"work folder {out}.work" in err and "run the same convert command again to resume it" in err, err

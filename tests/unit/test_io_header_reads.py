@@ -62,14 +62,9 @@ def test_open_reads_each_header_once(tiles, reads):
     assert reads["laspy"] == ONCE  # the points, once
 
 
-def test_progressive_open_reads_each_header_once(tiles, reads):
-    def loaded():
-        octree = gp.open(tiles, progressive=True)
-        assert octree.wait(timeout=120)
-        return octree
-
+def test_progressive_open_reads_each_header_once(tiles, reads, loaded):
     with pytest.warns(gp.GigapointWarning, match="scanner_channel not in every file"):  # (said by the loader's thread)
-        octree = loaded()
+        octree = loaded(tiles)
     assert octree.n_points == N_TILES * 3000
     assert reads["header"] == ONCE and reads["head"] == ONCE  # file_sources, then the loader thread
 

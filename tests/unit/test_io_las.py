@@ -369,7 +369,7 @@ def test_records_read_into_a_reused_buffer_are_laspys(tmp_path, monkeypatch, suf
             assert a.attributes[k].dtype == b.attributes[k].dtype
 
 
-def test_files_of_point_formats_0_5_and_6_10_keep_one_scan_angle(tmp_path):
+def test_files_of_point_formats_0_5_and_6_10_keep_one_scan_angle(tmp_path, loaded):
     """Formats 0-5 hold the scan angle as scan_angle_rank (int8 degrees), 6-10 as scan_angle
     (int16, 0.006 degrees): merged, neither name was in every file and the scan angle was left
     out. Now the former is read as scan_angle where files differ: through gp.open of both (also
@@ -389,10 +389,6 @@ def test_files_of_point_formats_0_5_and_6_10_keep_one_scan_angle(tmp_path):
         got = np.asarray(cloud.attributes["scan_angle"])
         assert "scan_angle_rank" not in cloud.attributes and got.dtype == np.int16
         np.testing.assert_array_equal(got[mm(cloud.positions())], want)
-    def loaded(*paths):
-        cloud = gp.open(*paths, progressive=True)
-        assert cloud.wait(timeout=120)
-        return cloud
 
     with pytest.warns(gp.GigapointWarning, match=dropped):
         live = loaded(tmp_path / "a.las", tmp_path / "b.las")

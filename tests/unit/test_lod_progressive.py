@@ -905,7 +905,7 @@ def test_any_chunk_size_holds_the_same_leaves(scene, octree, chunk):
     _assert_same_leaves(octree, _filled(scene, chunk=chunk), tol=3**0.5 * octree.edge / 2**30)
 
 
-def test_a_source_without_a_valid_point_ends_as_the_plain_cloud_does(tmp_path, capsys):
+def test_a_source_without_a_valid_point_ends_as_the_plain_cloud_does(tmp_path, capsys, loaded):
     """Every point NaN: ``wait`` raises the plain cloud's one-line EmptyCloudError (the load
     ended quietly with an empty octree, and ``gigapoint render --progressive`` wrote a
     background image and exited 0); a file with some valid points loads them."""
@@ -921,13 +921,8 @@ def test_a_source_without_a_valid_point_ends_as_the_plain_cloud_does(tmp_path, c
     with pytest.raises(EmptyCloudError) as progressive:
         cloud.wait()
     assert str(progressive.value) == str(plain.value) == f"{bad}: no valid points (2 invalid points: NaN, inf or beyond ±1e+12)"
-    def loaded():  # (opened inside the catch: the loader's thread warns as soon as it is done, maybe before wait)
-        cloud = gp.open(some, progressive=True)
-        assert cloud.wait()
-        return cloud
-
     with pytest.warns(GigapointWarning, match="skipped 1 invalid points"):
-        cloud = loaded()
+        cloud = loaded(some)
     assert cloud.n_points == 2 and cloud.skipped == 1
     with pytest.raises(EmptyCloudError) as converted:  # the converter named the dataset ("allnan"), not the file
         gp.convert(bad, tmp_path / "tree")
@@ -950,20 +945,15 @@ def test_a_source_without_a_valid_point_ends_as_the_plain_cloud_does(tmp_path, c
     assert str(plain.value) == str(progressive.value) == str(converted.value) == want
 
 
-def test_invalid_points_skipped_while_loading_are_warned_of_as_the_plain_cloud_does(tmp_path, capsys):
+def test_invalid_points_skipped_while_loading_are_warned_of_as_the_plain_cloud_does(tmp_path, capsys, loaded):
     """A file with some invalid points: the plain cloud, the converter and ``gigapoint render``
     warn that they were skipped; the progressive load left them out without a word."""
     from gigapoint.cli import main
 
     some = tmp_path / "some.xyz"
     some.write_text("1 2 3\nnan 2 3\n4 5 6\n")
-    def loaded():  # (opened inside the catch: the loader's thread warns as soon as it is done, maybe before wait)
-        cloud = gp.open(some, progressive=True)
-        assert cloud.wait(timeout=120)
-        return cloud
-
     with pytest.warns(GigapointWarning) as caught:
-        cloud = loaded()
+        cloud = loaded(some)
     assert cloud.n_points == 2
     assert [str(w.message) for w in caught] == [f"{some}: skipped 1 invalid points (NaN, inf or beyond ±1e+12)"]
     out = tmp_path / "a.png"
@@ -995,7 +985,7 @@ def test_add_refuses_unknown_attributes_and_widens_a_dtype_a_batch_does_not_fit(
     assert sorted(got["height"].tolist()) == sorted(want_height.tolist())
 
 
-def test_several_files_keep_the_attributes_they_all_have_in_any_order(tmp_path):
+def test_several_files_keep_the_attributes_they_all_have_in_any_order(tmp_path, loaded):
     """As ``gigapoint.open`` of several files: a file without an attribute drops it for all
     points (it was kept and filled with zeros when that file came second, and an attribute only
     a later file had was dropped: the set depended on the order); a list of paths is accepted."""
@@ -1022,15 +1012,10 @@ def test_several_files_keep_the_attributes_they_all_have_in_any_order(tmp_path):
         assert sorted(gp.open(with_time, plain_only, chunked=True).attributes) == sorted(want.attributes)
     assert "gps_time" not in want.attributes and "intensity" in want.attributes
 
-    def loaded(paths):
-        cloud = gp.open(paths, progressive=True)  # one list, as gp.open(a, b)
-        assert cloud.wait(timeout=120) and cloud.n_points == 6000
-        return cloud
-
     for paths in ([plain_only, with_time], [with_time, plain_only]):
         with pytest.warns(GigapointWarning, match=dropped):
-            cloud = loaded(paths)
-        assert sorted(cloud.attributes) == sorted(want.attributes)
+            cloud = loaded(paths)  # one list, as gp.open(a, b)
+        assert cloud.n_points == 6000 and sorted(cloud.attributes) == sorted(want.attributes)
         got = _leaf_points(cloud)
         assert sorted(got["intensity"].tolist()) == sorted(np.asarray(want.attributes["intensity"]).tolist())
         cloud.close()
@@ -1038,7 +1023,7 @@ def test_several_files_keep_the_attributes_they_all_have_in_any_order(tmp_path):
         assert gp.open([plain_only, [with_time]]).n_points == 6000
 
 
-def test_files_whose_attribute_dtypes_differ_load_as_the_plain_cloud_holds_them(tmp_path, las_writer):
+def test_files_whose_attribute_dtypes_differ_load_as_the_plain_cloud_holds_them(tmp_path, las_writer, loaded):
     """A LAS file's uint16 intensity and a PLY file's float32 one: the plain cloud holds float32
     (numpy's dtype for both), and so does the progressive octree, in either order, every value
     kept (LAS first, the PLY's fractions were cast to uint16 before)."""
@@ -1059,14 +1044,10 @@ def test_files_whose_attribute_dtypes_differ_load_as_the_plain_cloud_holds_them(
     want = np.asarray(plain.attributes["intensity"])
     assert want.dtype == np.float32 and sorted(plain.attributes) == ["intensity"]
 
-    def loaded(paths):
-        cloud = gp.open(*paths, progressive=True)
-        assert cloud.wait(timeout=120) and cloud.n_points == 3_500
-        return cloud
-
     for paths in ((las, ply), (ply, las)):
         with pytest.warns(GigapointWarning, match=dropped):
-            cloud = loaded(paths)
+            cloud = loaded(*paths)
+        assert cloud.n_points == 3_500
         got = np.asarray(_leaf_points(cloud)["intensity"])
         assert got.dtype == np.float32 and sorted(cloud.attributes) == ["intensity"]
         np.testing.assert_array_equal(np.sort(got), np.sort(want))
