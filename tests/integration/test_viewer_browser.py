@@ -296,3 +296,19 @@ def test_a_rejected_setting_shows_an_error_and_the_panel_keeps_the_valid_value(p
     assert page.locator("#setting-precision_threshold_px").input_value() == "400"
     field.fill("500")  # the module's server as the other tests find it
     field.press("Enter")
+
+
+def test_the_viewer_draws_in_an_iframe_of_a_page_of_any_scheme(browser, server, tmp_path):
+    """gp.Viewer's IFrame inside a notebook page: one from file:// (a saved notebook) or a webview
+    (VS Code's vscode-webview://) was blocked ('frame-ancestors *' admits http(s) parents only)."""
+    parent = tmp_path / "notebook.html"
+    parent.write_text(f'<iframe src="{server.url}" width="930" height="480"></iframe>')
+    ctx = browser.new_context(viewport=VIEWPORT)
+    try:
+        pg = ctx.new_page()
+        pg.goto(parent.as_uri())
+        viewer = pg.wait_for_selector("iframe").content_frame()
+        wait_full_frame(viewer, 0)
+        assert (canvas_pixels(viewer).sum(axis=2) > 60).mean() > 0.05  # the ground is drawn
+    finally:
+        ctx.close()

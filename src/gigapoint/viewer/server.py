@@ -45,8 +45,8 @@ MAX_PUSHERS = 8  # /push connections at once: each may hold a frame of up to MAX
 LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
 CSP = (
     "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' blob: data:; "
-    "connect-src 'self' ws: wss:; frame-ancestors *; base-uri 'none'; form-action 'none'"
-)
+    "connect-src 'self' ws: wss:; base-uri 'none'; form-action 'none'"
+)  # no frame-ancestors: '*' admits http(s) parents only, and gp.Viewer's IFrame sits in notebooks of any scheme (vscode-webview:, file:)
 
 
 def _require_starlette():
