@@ -72,6 +72,11 @@ class GigapointError(Exception):
     so the CLI can print it as it is.
     """
 
+    def _render_traceback_(self) -> list[str]:
+        """What IPython/Jupyter shows for it: the one line, as the CLI does (a missing file was a
+        38-line traceback through gigapoint's internals); ``%debug`` still walks the stack."""
+        return [f"{type(self).__name__}: {self}"]
+
 
 class InputError(GigapointError):
     """A file or array that cannot be read: missing, truncated, corrupt, wrong format."""
