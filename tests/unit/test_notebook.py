@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 import gigapoint as gp
@@ -26,3 +28,19 @@ def test_a_gigapoint_error_in_a_cell_is_one_line(shell, capsys, tmp_path):
     assert capsys.readouterr().out.strip().splitlines() == ["CameraError: image width must be an integer in 1..16384, got 0"]
     result = shell.run_cell("1 / 0")  # other errors keep their traceback
     assert "ZeroDivisionError" in capsys.readouterr().out and isinstance(result.error_in_exec, ZeroDivisionError)
+
+
+def test_a_frame_shows_as_its_image_and_reads_in_one_line(shell):
+    """A Frame's repr printed its visibility buffer (18446744073709551615 ...) and the whole cloud;
+    a notebook showed no image of it."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    frame = gp.render_frame(gp.demo(5000), width=320, height=200, background="white")
+    assert re.fullmatch(r"Frame\(320x200, 5,000 points drawn, [\d,]+ pixels covered, \w+, [\d.]+ ms\)", repr(frame))
+    data, _ = shell.display_formatter.format(frame)
+    assert data["text/plain"] == repr(frame)
+    shown = np.asarray(Image.open(io.BytesIO(data["image/png"])))
+    np.testing.assert_array_equal(shown, frame.image)  # the frame's pixels, exactly

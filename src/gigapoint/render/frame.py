@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -55,7 +56,18 @@ class RenderStats:
         return d
 
 
-@dataclass
+def encode_image(image: np.ndarray, fmt: str = "JPEG", quality: int = 85) -> bytes:
+    from PIL import Image
+
+    buf = io.BytesIO()
+    if fmt == "JPEG":
+        Image.fromarray(np.ascontiguousarray(image[..., :3])).save(buf, "JPEG", quality=quality)
+    else:
+        Image.fromarray(np.ascontiguousarray(image)).save(buf, "PNG", compress_level=3)
+    return buf.getvalue()
+
+
+@dataclass(repr=False)  # the dataclass's repr printed the visibility buffer and the whole cloud
 class Frame:
     visibility: np.ndarray  # (H, W) u64: depth bits << 32 | point index; all ones = empty
     image: np.ndarray  # (H, W, 4) uint8 RGBA
@@ -94,6 +106,15 @@ class Frame:
         idx = (self.visibility & np.uint64(0xFFFFFFFF)).astype(np.int64)
         idx[self.empty] = -1
         return idx
+
+    def __repr__(self) -> str:
+        h, w = self.image.shape[:2]
+        s = self.stats
+        return f"Frame({w}x{h}, {s.points_processed:,} points drawn, {s.visible_pixels:,} pixels covered, {s.backend or '?'}, {s.time_ms:.1f} ms)"
+
+    def _repr_png_(self) -> bytes:
+        """The image, as a notebook shows the frame (``gp.render``'s array needs PIL to be seen)."""
+        return encode_image(self.image, "PNG")
 
 
 def check_indexable(points) -> None:

@@ -11,7 +11,6 @@ renders would only fight (and share those buffers).
 
 from __future__ import annotations
 
-import io
 import os
 import secrets
 import threading
@@ -24,7 +23,7 @@ import numpy as np
 from ..core.layout import EMPTY_PIXEL
 from ..errors import GigapointError, GigapointWarning
 from ..render.camera import sample_points
-from ..render.frame import Frame
+from ..render.frame import Frame, encode_image
 from ..render.renderer import render_frame
 from ..render.settings import RenderSettings
 from . import protocol as P
@@ -59,17 +58,6 @@ def cloud_bytes(cloud) -> int:
     from ..core import PointCloud
 
     return cloud.nbytes if isinstance(cloud, PointCloud) else 0
-
-
-def encode_image(image: np.ndarray, fmt: str = "JPEG", quality: int = 85) -> bytes:
-    from PIL import Image
-
-    buf = io.BytesIO()
-    if fmt == "JPEG":
-        Image.fromarray(np.ascontiguousarray(image[..., :3])).save(buf, "JPEG", quality=quality)
-    else:
-        Image.fromarray(np.ascontiguousarray(image)).save(buf, "PNG", compress_level=3)
-    return buf.getvalue()
 
 
 # "no point is in view" is normal while flying around; render_frame attributes it to this module
