@@ -279,8 +279,9 @@ class PointCloud:
         return MultiViewDrawList(self, ids, bits, matrices, [DrawList(self, sel, len(self.batches)) for sel in sels])
 
     def __repr__(self) -> str:
-        lo, hi = self.bounds
-        return f"PointCloud({self.name!r}, {self.n_points:,} points, {len(self.batches):,} batches, bounds {lo.tolist()} .. {hi.tolist()})"
+        lo, hi = (at_scale(b, self.source_scale) for b in self.bounds)  # as the file wrote them: 848935.2, not 848935.2000000001
+        n = len(self.batches)
+        return f"PointCloud({self.name!r}, {self.n_points:,} points, {n:,} batch{'' if n == 1 else 'es'}, bounds {lo} .. {hi})"
 
 
 def at_scale(position, scale) -> list[float]:
