@@ -157,6 +157,14 @@ def __getattr__(name):
     raise AttributeError(f"module 'gigapoint' has no attribute {name!r}")
 
 
+def __dir__():
+    """The public names and the subpackages loaded: tab completion offered none of the lazy
+    names (gp.Viewer, gp.convert, ...) but ``annotations`` and ``choose_threading_layer``."""
+    import types
+
+    return sorted({*__all__, *(n for n, v in globals().items() if isinstance(v, types.ModuleType) and not n.startswith("_"))})
+
+
 __all__ = [
     "Camera",
     "Frame",

@@ -56,3 +56,14 @@ def test_a_cloud_reads_its_bounds_as_its_file_wrote_them():
     numbers = re.findall(r"-?\d+\.\d+", text.split("bounds")[1])
     assert len(numbers) == 6 and all(len(n.split(".")[1]) <= 2 for n in numbers)
     np.testing.assert_allclose([float(n) for n in numbers], np.concatenate(cloud.bounds), atol=1e-9)
+
+
+def test_tab_completion_offers_the_public_names(shell):
+    """gp.Vi<tab> offered nothing (Viewer, convert, LiveCloud, ... are imported on first use), gp.<tab> offered 'annotations'."""
+    from IPython.core.completer import provisionalcompleter
+
+    assert set(gp.__all__) <= set(dir(gp)) and {"core", "io", "errors"} <= set(dir(gp))
+    assert not {"annotations", "choose_threading_layer"} & set(dir(gp))
+    with provisionalcompleter():
+        for typed, offered in (("gp.Vi", "Viewer"), ("gp.conv", "convert"), ("gp.LiveC", "LiveCloud"), ("gp.render_t", "render_turntable")):
+            assert offered in [c.text for c in shell.Completer.completions(typed, len(typed))], typed
