@@ -67,3 +67,18 @@ def test_tab_completion_offers_the_public_names(shell):
     with provisionalcompleter():
         for typed, offered in (("gp.Vi", "Viewer"), ("gp.conv", "convert"), ("gp.LiveC", "LiveCloud"), ("gp.render_t", "render_turntable")):
             assert offered in [c.text for c in shell.Completer.completions(typed, len(typed))], typed
+
+
+def test_a_viewer_screenshot_shows_as_an_image_not_as_bytes(shell):
+    """v.screenshot() in a cell printed the repr of its bytes: 470 KB of text for 1280x720."""
+    import io
+
+    from PIL import Image
+
+    pytest.importorskip("starlette")
+    with gp.Viewer(gp.demo(5000), display=False) as v:
+        png = v.screenshot(320, 200)
+    assert isinstance(png, bytes) and png[:8] == b"\x89PNG\r\n\x1a\n"  # still bytes, to write to a file
+    data, _ = shell.display_formatter.format(png)
+    assert data["text/plain"] == f"<PNG, {len(png):,} bytes>"
+    assert data["image/png"] == png and Image.open(io.BytesIO(data["image/png"])).size == (320, 200)

@@ -22,6 +22,17 @@ def _as_cloud(cloud_or_path):
     return open_cloud(*paths)
 
 
+class PNG(bytes):
+    """PNG bytes that a notebook shows as the image: as plain bytes, ``v.screenshot()`` in a
+    cell printed their repr (470 KB of text for a 1280x720 view)."""
+
+    def _repr_png_(self) -> bytes:
+        return bytes(self)
+
+    def __repr__(self) -> str:
+        return f"<PNG, {len(self):,} bytes>"
+
+
 class Viewer:
     """Serve ``cloud_or_path`` (a PointCloud, a path or a list of paths) and show it.
 
@@ -76,7 +87,7 @@ class Viewer:
             raise InputError(f"Viewer.screenshot: scale must be 1, 2 or 4, got {scale!r}")
         core = self.server.core
         active = core.last_active
-        return core.screenshot(active.id if active is not None and active.id in core.sessions else None, width, height, scale)
+        return PNG(core.screenshot(active.id if active is not None and active.id in core.sessions else None, width, height, scale))
 
     def redraw(self) -> None:
         """Every tab draws the cloud again, its view kept: after the program changed it
