@@ -82,3 +82,27 @@ def test_a_viewer_screenshot_shows_as_an_image_not_as_bytes(shell):
     data, _ = shell.display_formatter.format(png)
     assert data["text/plain"] == f"<PNG, {len(png):,} bytes>"
     assert data["image/png"] == png and Image.open(io.BytesIO(data["image/png"])).size == (320, 200)
+
+
+def test_running_a_cell_again_closes_the_viewers_its_last_run_made(shell):
+    """Each run of `v = gp.Viewer(cloud)` started one more server, each holding its cloud, until the kernel stopped."""
+    import httpx
+
+    pytest.importorskip("starlette")
+    shell.user_ns["cloud"] = gp.demo(5000)
+    shell.run_cell("v = gp.Viewer(cloud, display=False)", cell_id="cell-a")
+    first = shell.user_ns["v"]
+    shell.run_cell("w = gp.Viewer(cloud, display=False)", cell_id="cell-b")
+    shell.run_cell("u = gp.Viewer(cloud, display=False)")  # a frontend that names no cell: kept
+    shell.run_cell("v = gp.Viewer(cloud, display=False)", cell_id="cell-a")
+    second, other, unnamed = shell.user_ns["v"], shell.user_ns["w"], shell.user_ns["u"]
+    try:
+        assert first.closed and not second.closed and not other.closed and not unnamed.closed
+        with pytest.raises(httpx.TransportError):
+            httpx.get(first.url, timeout=2)  # its port is free
+        assert httpx.get(second.url, timeout=10).status_code == 200
+        shell.run_cell("1", cell_id="cell-b")  # cell b runs again, without a viewer
+        assert other.closed and not second.closed
+    finally:
+        for v in (second, other, unnamed):
+            v.close()

@@ -646,7 +646,7 @@ def test_viewer_displays_an_iframe_under_ipython(cloud, monkeypatch):
 
     shown = []
     ipython = types.ModuleType("IPython")
-    ipython.get_ipython = lambda: object()  # "inside IPython"
+    ipython.get_ipython = lambda: types.SimpleNamespace(displayhook=types.SimpleNamespace(exec_result=None))  # "inside IPython", no cell running
     display_mod = types.ModuleType("IPython.display")
     display_mod.IFrame = lambda url, width, height: ("iframe", url, width, height)
     display_mod.display = shown.append

@@ -22,6 +22,32 @@ def _as_cloud(cloud_or_path):
     return open_cloud(*paths)
 
 
+_MADE_BY_CELL: dict[str, list] = {}  # a notebook cell's id -> the Viewers its last run made
+
+
+def _close_earlier_runs(info) -> None:
+    """IPython's pre_run_cell: a cell runs again, so the Viewers its last run made are closed (their
+    IFrames leave its output; each kept a server and its cloud until the kernel stopped)."""
+    for viewer in _MADE_BY_CELL.pop(info.cell_id, []):
+        viewer.close()
+
+
+def _owned_by_cell(viewer) -> None:
+    """Note the notebook cell that made ``viewer`` (where the frontend names its cells: JupyterLab,
+    Notebook 7, VS Code); elsewhere nothing is done."""
+    try:
+        from IPython import get_ipython
+    except ImportError:
+        return
+    ip = get_ipython()
+    run = ip.displayhook.exec_result if ip is not None else None  # the cell running, None outside one
+    if run is None or run.info.cell_id is None:
+        return
+    if _close_earlier_runs not in ip.events.callbacks["pre_run_cell"]:
+        ip.events.register("pre_run_cell", _close_earlier_runs)
+    _MADE_BY_CELL.setdefault(run.info.cell_id, []).append(viewer)
+
+
 class PNG(bytes):
     """PNG bytes that a notebook shows as the image: as plain bytes, ``v.screenshot()`` in a
     cell printed their repr (470 KB of text for a 1280x720 view)."""
@@ -39,7 +65,8 @@ class Viewer:
     The server runs in a background thread on 127.0.0.1 (a free port unless ``port``);
     in IPython/Jupyter the viewer is displayed as an IFrame. ``screenshot()`` renders the
     view of the most recently used tab (or the default view) to PNG bytes; ``close()``
-    stops the server. Usable as a context manager.
+    stops the server. Usable as a context manager. Running a notebook cell again closes the
+    Viewers its last run made.
     """
 
     def __init__(self, cloud_or_path, width: int = 960, height: int = 600, host: str = "127.0.0.1", port: int = 0, settings=None, display: bool = True):
@@ -52,6 +79,7 @@ class Viewer:
         self.cloud = _as_cloud(cloud_or_path)
         self.server = ViewerServer(self.cloud, host=host, port=port, settings=settings).start()
         self.width, self.height = width, height
+        _owned_by_cell(self)
         if display:
             self.display()
 
