@@ -106,3 +106,16 @@ def test_running_a_cell_again_closes_the_viewers_its_last_run_made(shell):
     finally:
         for v in (second, other, unnamed):
             v.close()
+
+
+def test_a_viewer_closed_is_not_kept_alive_by_its_cell(shell):
+    """The note of the cell that made a viewer must not hold it (and its cloud) once it is closed."""
+    import gc
+    import weakref
+
+    pytest.importorskip("starlette")
+    shell.user_ns["cloud"] = gp.demo(5000)
+    shell.run_cell("v = gp.Viewer(cloud, display=False); v.close()", cell_id="cell-c")
+    gone = weakref.ref(shell.user_ns.pop("v"))
+    gc.collect()
+    assert gone() is None

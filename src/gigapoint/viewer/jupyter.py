@@ -133,6 +133,9 @@ class Viewer:
 
     def close(self) -> None:
         self.server.close()
+        for made in _MADE_BY_CELL.values():  # its cell no longer keeps it (and its cloud) alive
+            if self in made:
+                made.remove(self)
 
     def __enter__(self) -> Self:
         return self
