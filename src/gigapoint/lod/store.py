@@ -444,8 +444,8 @@ class OctreeCloud:
         return self.nodes["level"]
 
     def __repr__(self) -> str:
-        lo, hi = self.bounds
-        return f"OctreeCloud({self.name!r}, {self.n_points:,} points, {len(self.nodes):,} nodes, depth {int(self.levels.max())}, bounds {lo.tolist()} .. {hi.tolist()})"
+        lo, hi = (at_scale(b, self.meta.get("scale")) for b in self.bounds)  # at the source's grid, as PointCloud's
+        return f"OctreeCloud({self.name!r}, {self.n_points:,} points, {len(self.nodes):,} nodes, depth {int(self.levels.max())}, bounds {lo} .. {hi})"
 
     def node_arrays(self, index: int) -> tuple[dict, dict, int]:
         """(point arrays ``low``, ``med``, ``high``, ``color``, ``rgba``; attribute arrays; where node
