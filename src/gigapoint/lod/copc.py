@@ -445,10 +445,14 @@ class CopcCloud(VoxelOctree):
             raise InputError(
                 f"{name}: invalid node key {k['level'][i]}-{k['x'][i]}-{k['y'][i]}-{k['z'][i]} in the hierarchy page at byte {offset:,}"
             )
-        keys = voxel_to_key(k["level"], k["x"], k["y"], k["z"]).tolist()
-        if len(set(keys)) != len(keys):
-            raise InputError(f"{name}: the hierarchy page at byte {offset:,} lists a node twice")
+        voxels = voxel_to_key(k["level"], k["x"], k["y"], k["z"])
+        keys = voxels.tolist()
         counts, offs, sizes = e["point_count"].astype(np.int64), e["offset"].astype(np.int64), e["byte_size"].astype(np.int64)
+        # a key may be listed once as a node and once as the pointer to the page below it
+        # (copc-lib writes a page's key so: the node's own entry stays in the parent page)
+        for kind in (counts == -1, counts != -1):
+            if len(np.unique(voxels[kind])) != int(kind.sum()):
+                raise InputError(f"{name}: the hierarchy page at byte {offset:,} lists a node twice")
         # checked all at once (a page may hold 10^5 entries); the first bad entry is named
         page, chunk = counts == -1, counts > 0
         end = offs + sizes

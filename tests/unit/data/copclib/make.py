@@ -19,9 +19,11 @@ its writer offers, for tests/unit/test_copc_interop.py (which needs no copclib):
 
 copclib writes the points first (in AddNode's order), then each hierarchy page as an EVLR of its
 own (copc 1000, the page's key as description), child pages before their parents, the root page
-last but one; the WKT goes into an EVLR too (LASF_Projection 2112), the last one.
+last but one; the WKT goes into an EVLR too (LASF_Projection 2112), the last one. nodes.json: the
+nodes (d-x-y-z: points) and pages copclib's reader finds in each file.
 """
 
+import json
 from pathlib import Path
 
 import copclib as c
@@ -102,12 +104,16 @@ def write(name, fmt, offset, pad, page_of, eb=0, first=0, deepest_first=False):
     w.Close()
     r = c.FileReader(str(HERE / name))
     assert sum(n.point_count for n in r.GetAllNodes()) == N
-    pages = len(r.GetPageList())
-    print(f"{name}: {(HERE / name).stat().st_size:,} bytes, {len(nodes)} nodes, {pages} pages")
+    pages = [f"{k.d}-{k.x}-{k.y}-{k.z}" for k in r.GetPageList()]
+    found = {f"{n.key.d}-{n.key.x}-{n.key.y}-{n.key.z}": n.point_count for n in r.GetAllNodes()}
+    MANIFEST[name] = {"nodes": dict(sorted(found.items())), "pages": sorted(pages)}
+    print(f"{name}: {(HERE / name).stat().st_size:,} bytes, {len(nodes)} nodes, {len(pages)} pages")
 
 
+MANIFEST = {}  # what copclib's reader finds in each file: nodes.json
 root = (0, 0, 0, 0)
 write("one_page.copc.laz", 7, [0.0, 0.0, 0.0], 1.0, lambda k: root)
 write("shared_keys.copc.laz", 7, [636000.0, 849000.0, 0.0], 1.0, lambda k: root if k[0] < 2 else ancestor(k, k[0] - 1))
 write("own_pages.copc.laz", 6, [636500.25, 849200.5, 400.0], 2.0, lambda k: root if k[0] == 0 else ancestor(k, 1))
 write("nir_extra.copc.laz", 8, [637000.0, 849000.0, 500.0], 1.0, lambda k: root, eb=2, first=1, deepest_first=True)
+(HERE / "nodes.json").write_text(json.dumps(MANIFEST, indent=1) + "\n")
