@@ -761,3 +761,21 @@ def test_a_moved_dataset_behind_a_password_keeps_it(server):
     assert server.auths == ["Basic cmVhZGVyOmh1bnRlcjI="] * len(server.paths)
     _no_secret(c.node_file(int(c.keys[0])), port, "ept_laz/ept-data/0-0-0-0.laz")
     c.close()
+
+
+@pytest.mark.parametrize("name", ["shared_keys.copc.laz", "own_pages.copc.laz"])
+def test_copclib_files_over_http_render_like_the_local_files(name):
+    """copc-lib's paged layouts (tests/unit/data/copclib) read over HTTP: the pages a frame
+    needs, then every node's points, drawn as the local file draws them."""
+    root = Path(__file__).resolve().parents[1] / "unit" / "data" / "copclib"
+    s = RangeServer(root)
+    try:
+        c, local = gp.open(s.url(name)), gp.open(root / name)
+        assert c.n_points == 20_000 and s.requests == 2 and c.pending_pages > 0
+        for kw in ({"point_budget": 5_000}, {"point_budget": 10**9, "lod_threshold_px": 0.0}):
+            a, b = _frame(local, **kw), _frame(c, **kw)
+            assert a.stats.points_processed == b.stats.points_processed
+            np.testing.assert_array_equal(a.image, b.image)
+        assert b.stats.points_processed == 20_000 and c.pending_pages == 0
+    finally:
+        s.close()
