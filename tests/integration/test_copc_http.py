@@ -771,7 +771,8 @@ def test_copclib_files_over_http_render_like_the_local_files(name):
     s = RangeServer(root)
     try:
         c, local = gp.open(s.url(name)), gp.open(root / name)
-        assert c.n_points == 20_000 and s.requests == 2 and c.pending_pages > 0
+        assert c.n_points == 20_000 and s.requests == 3 and c.pending_pages > 0  # the head, the EVLRs (a CRS?), the root page
+        assert c.meta["crs"] == local.meta["crs"] and (name == "shared_keys.copc.laz") == (c.meta["crs"] is not None)
         for kw in ({"point_budget": 5_000}, {"point_budget": 10**9, "lod_threshold_px": 0.0}):
             a, b = _frame(local, **kw), _frame(c, **kw)
             assert a.stats.points_processed == b.stats.points_processed

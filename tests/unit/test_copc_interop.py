@@ -185,3 +185,21 @@ def test_a_key_twice_of_the_same_kind_is_still_an_error(tmp_path, pointer):
     (tmp_path / "bad.copc.laz").write_bytes(bytes(b))
     with pytest.raises(InputError, match=rf"bad\.copc\.laz: the hierarchy page at byte {off:,} lists a node twice"):
         gp.open(tmp_path / "bad.copc.laz")
+
+
+def test_the_crs_copclib_writes_in_an_evlr_is_read_and_carried(tmp_path):
+    """copclib writes its WKT as an EVLR (LASF_Projection 2112), not a VLR: the octree's meta,
+    ``info`` and a conversion of the file all have it."""
+    from gigapoint.lod import octree_info
+
+    path = DATA / "one_page.copc.laz"
+    header = laspy.read(path).header
+    assert not header.vlrs.get("WktCoordinateSystemVlr")
+    want = header.evlrs.get("WktCoordinateSystemVlr")[0].string.strip("\0")
+    assert want.startswith('PROJCS["NAD_1983_HARN_Lambert_Conformal_Conic"')
+    assert gp.open(path).meta["crs"] == want and octree_info(path)["crs"] == want
+    assert gp.open(DATA / "own_pages.copc.laz").meta["crs"] is None  # (written without one)
+    convert([path], tmp_path / "again.copc.laz", format="copc")
+    with laspy.open(tmp_path / "again.copc.laz") as r:  # gigapoint's COPC: a WKT VLR
+        assert r.header.vlrs.get("WktCoordinateSystemVlr")[0].string.strip("\0") == want
+    assert gp.open(tmp_path / "again.copc.laz").meta["crs"] == want

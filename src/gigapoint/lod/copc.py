@@ -169,6 +169,7 @@ HEADER_SIZE = LAS14_HEADER_DTYPE.itemsize  # 375
 INFO_OFFSET = HEADER_SIZE + VLR_HEADER_DTYPE.itemsize  # the info VLR's data: byte 429
 MAGIC_END = INFO_OFFSET  # bytes needed to tell a COPC file
 HEAD_READ = 64 << 10  # the first request reads this much (the header and VLRs, usually)
+EVLR_READ = 1 << 20  # the most EVLR bytes read at open for a CRS in them (CopcCloud._evlr_wkt)
 
 
 def point_dtype(point_format: int, record_length: int, extra: list[ExtraField] | None = None) -> np.dtype:
@@ -270,15 +271,16 @@ def copc_file_kind(path) -> str | None:
         return "copc"
 
 
-def read_vlrs(data: bytes, start: int, count: int, end: int) -> list[tuple[bytes, int, bytes]]:
-    """(user id, record id, data) of ``count`` VLRs from byte ``start`` of ``data`` (ending by ``end``)."""
+def read_vlrs(data: bytes, start: int, count: int, end: int, header=VLR_HEADER_DTYPE) -> list[tuple[bytes, int, bytes]]:
+    """(user id, record id, data) of ``count`` VLRs from byte ``start`` of ``data`` (ending by
+    ``end``); EVLRs with ``header=EVLR_HEADER_DTYPE``."""
     out, pos = [], start
     for i in range(count):
-        if pos + VLR_HEADER_DTYPE.itemsize > end:
+        if pos + header.itemsize > end:
             raise ValueError(f"VLR {i + 1} of {count} runs into the point data")
-        h = np.frombuffer(data, VLR_HEADER_DTYPE, count=1, offset=pos)[0]
+        h = np.frombuffer(data, header, count=1, offset=pos)[0]
         n = int(h["record_length"])
-        pos += VLR_HEADER_DTYPE.itemsize
+        pos += header.itemsize
         if pos + n > end:
             raise ValueError(f"VLR {i + 1} of {count} ({n} bytes) runs into the point data")
         out.append((bytes(h["user_id"]).rstrip(b"\0"), int(h["record_id"]), data[pos : pos + n]))
@@ -364,7 +366,8 @@ class CopcCloud(VoxelOctree):
         self.point_format = fmt
         self._attr_dtypes = dict(ATTRIBUTE_DTYPES, **({"nir": np.dtype(np.uint16)} if fmt == 8 else {}))
         self._attr_dtypes.update({f.name: f.value_dtype for f in self.extra})
-        crs = wkt_of(vlrs)
+        self._evlrs = (int(hdr["start_of_first_evlr"]), int(hdr["number_of_evlrs"]))
+        crs = wkt_of(vlrs) or self._evlr_wkt(data_start)
         meta = {
             "format": "copc",
             "points": n_points,
@@ -380,7 +383,6 @@ class CopcCloud(VoxelOctree):
             "generating_software": bytes(hdr["generating_software"]).split(b"\0")[0].decode("ascii", "replace").strip(),
         }
         root = (int(info["root_hier_offset"]), int(info["root_hier_size"]))
-        self._evlrs = (int(hdr["start_of_first_evlr"]), int(hdr["number_of_evlrs"]))
         self._root, self._expected, self._cut_said = root, None, False
         if file_size is not None and root[0] + root[1] > file_size and self._cut():
             raise InputError(
@@ -391,6 +393,19 @@ class CopcCloud(VoxelOctree):
         path = name.split("?")[0].split("#")[0] if isinstance(source, HttpFile) else name  # (a URL's token is no part of its name)
         stem = path.rstrip("/").rsplit("/", 1)[-1]
         self._open(stem, meta, root, path=None)
+
+    def _evlr_wkt(self, data_start: int) -> str | None:
+        """The WKT of a LASF_Projection EVLR (copc-lib writes its CRS so, after the hierarchy
+        pages), read in one request where the EVLRs end the file within ``EVLR_READ`` bytes
+        (a hierarchy of up to 30 000 nodes); None without one, or in a cut file."""
+        start, n = self._evlrs
+        size = (self.file_size or 0) - start
+        if not n or start < data_start or not 0 < size <= EVLR_READ:
+            return None
+        try:
+            return wkt_of(read_vlrs(self.source.read(start, size), 0, n, size, EVLR_HEADER_DTYPE))
+        except ValueError:  # cut: _parse_page says what is missing
+            return None
 
     def _cut(self) -> bool:
         """Whether the file is shorter than its header says: its hierarchy (an EVLR, after the

@@ -15,10 +15,11 @@ from ...io.registry import reader_for
 from ..copc import wkt_of
 
 
-def _wkt_from_epsg(text: str | None) -> str | None:
-    """WKT of an 'EPSG:n' CRS through pyproj when it is installed, else None."""
+def _wkt_of(text: str | None) -> str | None:
+    """WKT of the LAS reader's CRS: an 'EPSG:n' through pyproj when it is installed (else None);
+    any other is WKT already (one found in an EVLR, where copc-lib writes it)."""
     if not text or not text.upper().startswith("EPSG:"):
-        return None
+        return text or None
     try:
         import pyproj
 
@@ -55,7 +56,7 @@ def input_facts(paths) -> dict:
             crs_seen.add(text)
             if crs is None:
                 crs = text
-                wkt = wkt_of(read_las_header(p).vlrs) or _wkt_from_epsg(text)  # the header's VLRs: the first CRS's file only
+                wkt = wkt_of(read_las_header(p).vlrs) or _wkt_of(text)  # the header's VLRs: the first CRS's file only
     if len(crs_seen) > 1:
         warnings.warn(
             f"the inputs have {len(crs_seen)} different CRSs; the output takes the first ({crs[:60]})", GigapointWarning, stacklevel=3
