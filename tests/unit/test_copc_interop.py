@@ -203,3 +203,15 @@ def test_the_crs_copclib_writes_in_an_evlr_is_read_and_carried(tmp_path):
     with laspy.open(tmp_path / "again.copc.laz") as r:  # gigapoint's COPC: a WKT VLR
         assert r.header.vlrs.get("WktCoordinateSystemVlr")[0].string.strip("\0") == want
     assert gp.open(tmp_path / "again.copc.laz").meta["crs"] == want
+
+
+def test_a_hierarchy_without_a_root_node_draws_at_any_size():
+    """nir_extra's hierarchy starts at depth 1 (no root entry: an empty root); a small view,
+    whose depth-1 cubes are under the LOD threshold, still draws them, not an empty image."""
+    c = gp.open(DATA / "nir_extra.copc.laz")
+    assert c.counts[0] == 0 and int(c.keys[0]) == 1
+    depth1 = sum(v for k, v in MANIFEST["nir_extra.copc.laz"]["nodes"].items() if k.startswith("1-"))
+    cam = gp.Camera.fit(c.bounds, width=64, height=48)
+    s = gp.RenderSettings(backend="cpu", lod_threshold_px=100.0)
+    f = gp.render_frame(c, cam, s)
+    assert f.stats.points_processed == depth1 == 6_496 and (~f.empty).sum() > 300

@@ -78,7 +78,8 @@ def _heap_place(hp, hi, n, j, p, item):
 
 @njit(cache=True)
 def select_nodes(rows, box_min, box_size, counts, children, width, height, near, far, threshold, budget, out_ids, out_size, foveation=0.0):
-    """Largest-projected-first traversal: visible nodes of ≥ threshold px (the root always), within budget.
+    """Largest-projected-first traversal: visible nodes of ≥ threshold px (the root always, and
+    the children of a node without points), within budget.
 
     ``foveation`` f > 0 raises the threshold away from the image centre: threshold · (1 + f·d),
     d = 0 at the centre .. 1 in the corners (the 2022 paper's 100/200/300 px is f = 2).
@@ -117,7 +118,8 @@ def select_nodes(rows, box_min, box_size, counts, children, width, height, near,
             if ch < 0:
                 continue
             vis, s, dist = _box_test(rows, box_min[ch], box_size[ch], width, height, near, far)
-            if not vis or s < threshold * (1.0 + foveation * dist):
+            # the children of a node without points, whatever their size (a COPC root may hold none)
+            if not vis or (cnt > 0 and s < threshold * (1.0 + foveation * dist)):
                 continue
             hn += 1
             _heap_place(hp, hi, hn, hn - 1, s, ch)  # push: into the new hole at the end
