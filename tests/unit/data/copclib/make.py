@@ -15,7 +15,8 @@ its writer offers, for tests/unit/test_copc_interop.py (which needs no copclib):
   around the points (offset, twice as big).
 - nir_extra.copc.laz: format 8 (8-bit values in the 16-bit colour fields, as autzen has; NIR)
   with two extra-byte fields (copclib's EbVlr(2): FIELD_0, FIELD_1, unsigned char); no root
-  node (the hierarchy starts at depth 1) and nodes written deepest first.
+  node (the hierarchy starts at depth 1), nodes written deepest first, and copclib's extended
+  stats (VLRs copc 10000 and rock_robotic 10001, between the info VLR and the others).
 
 copclib writes the points first (in AddNode's order), then each hierarchy page as an EVLR of its
 own (copc 1000, the page's key as description), child pages before their parents, the root page
@@ -92,7 +93,7 @@ def write(name, fmt, offset, pad, page_of, eb=0, first=0, deepest_first=False):
     edge = float((hi - lo).max()) * pad
     cmin = lo - (edge - (hi - lo)) / 2  # the points in the middle of the cube
     nodes = octree(xyz, cmin, edge, first=first)
-    cfg = c.CopcConfigWriter(fmt, c.Vector3(*scale), c.Vector3(*offset), WKT if fmt == 7 else "", c.EbVlr(eb))
+    cfg = c.CopcConfigWriter(fmt, c.Vector3(*scale), c.Vector3(*offset), WKT if fmt == 7 else "", c.EbVlr(eb), eb > 0)  # extents VLR
     w = c.FileWriter(str(HERE / name), cfg)
     h, info = w.copc_config.las_header, w.copc_config.copc_info
     info.center_x, info.center_y, info.center_z = (cmin + edge / 2).tolist()
