@@ -54,6 +54,10 @@ def test_copclib_file_reads_point_for_point_by_nodes(name):
     las = laspy.read(path)
     c = gp.open(path)
     assert isinstance(c, CopcCloud) and c.n_points == len(las.points) == N
+    assert c.meta["spacing"] == c.meta["cube_edge"] / 128  # make.py's halfsize / 64
+    edge = (las.header.maxs - las.header.mins).max() * (2 if name == "own_pages.copc.laz" else 1)  # the cube around the points
+    np.testing.assert_allclose(c.meta["cube_edge"], edge)
+    np.testing.assert_allclose(np.add(c.meta["cube_min"], edge / 2), (las.header.mins + las.header.maxs) / 2)
     nodes = _all_nodes(c)
     assert c.pending_pages == 0 and c.pages_read == len(MANIFEST[name]["pages"])
     assert {voxel_name(int(c.keys[i])): int(c.counts[i]) for i in nodes} == MANIFEST[name]["nodes"]
