@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
+import warnings
+from contextvars import ContextVar
+
+# warnings kept for another thread to issue (``warn``): set in a progressive load's threads
+_kept: ContextVar[list | None] = ContextVar("gigapoint_kept_warnings", default=None)
+
 
 def first_line(exc: BaseException) -> str:
     """An exception's message for a one-line error: its first line, or its type's name where it
@@ -113,3 +119,21 @@ class MemoryLimitError(GigapointError):
 
 class GigapointWarning(UserWarning):
     """Warnings about degenerate but valid input (skipped points, empty views)."""
+
+
+def warn(message: str, category: type[Warning] = GigapointWarning, stacklevel: int = 1) -> None:
+    """``warnings.warn`` as gigapoint warns; but in a thread that keeps its warnings (``keep_warnings``:
+    a progressive load's) the warning is appended to its list, for the caller's thread to issue
+    (Loader.issue_warnings): Python's filters, ``catch_warnings``, pytest.warns and ``-W error`` are
+    process-wide and not thread-safe, so a warning issued on the loader's thread escaped a catch
+    around ``wait()`` and printed at a random moment."""
+    kept = _kept.get()
+    if kept is None:
+        warnings.warn(message, category, stacklevel=stacklevel + 1)
+    else:
+        kept.append((message, category))
+
+
+def keep_warnings(kept: list) -> None:
+    """From now on, in this context (a thread started with its own), ``warn`` appends to ``kept``."""
+    _kept.set(kept)

@@ -25,11 +25,19 @@ def _open_browser(url: str) -> None:
 
 def _report_load_error(cloud) -> None:
     """The error that stops a progressive load, on the terminal as in the viewer's HUD (the
-    terminal said nothing; the viewer goes on showing the points loaded before it)."""
+    terminal said nothing; the viewer goes on showing the points loaded before it); ``wait``
+    issues the load's warnings, which the CLI prints (they are kept until then: Loader)."""
     try:
         cloud.wait()
     except GigapointError as exc:
         print(f"warning: loading stopped: {exc}; showing the {cloud.n_points:,} points loaded", file=sys.stderr, flush=True)
+
+
+def _report_load(cloud) -> None:
+    from ..lod.progressive import ProgressiveOctree
+
+    if isinstance(cloud, ProgressiveOctree):  # (the window's, too: its load's warnings were said by no one)
+        threading.Thread(target=_report_load_error, args=(cloud,), name="gigapoint-load-report", daemon=True).start()
 
 
 @app.command("view")
@@ -116,6 +124,7 @@ def view(
 
         open_window(cloud)  # first: a window that cannot open is said alone, not after the title line
         print(f"gigapoint window: {cloud.name}, {cloud.n_points:,} points (drag: orbit, right drag: pan, wheel: zoom)", file=sys.stderr)
+        _report_load(cloud)
         run_loop()
         return
     if isinstance(cloud, ProgressiveOctree):  # a first slice of points, so that the first view frames them
@@ -124,8 +133,7 @@ def view(
             time.sleep(0.02)
     server = ViewerServer(cloud, host=host, port=port)
     print(f"gigapoint viewer: {cloud.name}, {cloud.n_points:,} points", file=sys.stderr)
-    if isinstance(cloud, ProgressiveOctree):
-        threading.Thread(target=_report_load_error, args=(cloud,), name="gigapoint-load-report", daemon=True).start()
+    _report_load(cloud)
     if not server.loopback:
         print(f"warning: listening on {host}, reachable from the network; the URL's token is the only key", file=sys.stderr)
     print(server.url, flush=True)

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import GigapointWarning, InputError
+from ..errors import GigapointWarning, InputError, warn
 
 #: Color given to points of files that carry none (a light grey that reads on black and white).
 DEFAULT_COLOR = (200, 200, 200, 255)
@@ -103,7 +102,7 @@ def attributes_in_common(kept: list[str] | None, chunk_attributes, dropped: set[
 def warn_dropped_attributes(name: str, dropped) -> None:
     """Say which attributes files of one scene did not all have (they were left out without a word)."""
     if dropped:
-        warnings.warn(
+        warn(
             f"{name}: attribute(s) {', '.join(sorted(dropped))} not in every file: left out (only those all the files have are kept)",
             GigapointWarning,
             stacklevel=3,

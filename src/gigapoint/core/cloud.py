@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -18,7 +17,7 @@ import numpy as np
 from numba import njit, prange, types
 from numba.typed import List
 
-from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError, check_whole
+from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError, check_whole, warn
 from . import pages
 from .attributes import Attributes
 from .chunk import PointChunk, attributes_in_common, colors_for, warn_dropped_attributes
@@ -497,7 +496,7 @@ def check_valid_count(name: str, valid: int, skipped: int) -> None:
         detail = f" ({skipped:,} invalid points: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
         raise EmptyCloudError(f"{name}: no valid points{detail}")
     if skipped:
-        warnings.warn(f"{name}: skipped {skipped:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})", GigapointWarning, stacklevel=3)
+        warn(f"{name}: skipped {skipped:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})", GigapointWarning, stacklevel=3)
 
 
 #: ``build_cloud``'s layouts and color formats

@@ -15,11 +15,10 @@ from __future__ import annotations
 
 import inspect
 import os
-import warnings
 
 from numba.core import caching, config, dispatcher, event
 
-from ..errors import GigapointWarning
+from ..errors import GigapointWarning, warn
 
 FIX = "set NUMBA_CACHE_DIR to a writable folder to keep them"
 _done: set[str] = set()  # what is done once a process: the patch, the listener, each warning
@@ -40,7 +39,7 @@ def later_runs() -> str:
 def _warn_once(key: str, message: str) -> None:
     if key not in _done:
         _done.add(key)
-        warnings.warn(message, GigapointWarning, stacklevel=3)
+        warn(message, GigapointWarning, stacklevel=3)
 
 
 class _SayUncached(event.Listener):

@@ -16,13 +16,12 @@ import os
 import re
 import urllib.parse
 import urllib.request
-import warnings
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud, scale_decimals
-from ..errors import EmptyCloudError, GigapointWarning, InputError, check_switch
+from ..errors import EmptyCloudError, GigapointWarning, InputError, check_switch, warn
 from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail, headers_once
 from .demo import demo_arrays, demo_chunks
 from .http import shown_url
@@ -85,7 +84,7 @@ def expand_paths(paths: Iterable) -> list[Path]:
         except OSError:
             key = f.resolve()
         if key in seen:
-            warnings.warn(f"{f}: named more than once; its points are read once", GigapointWarning, stacklevel=3)
+            warn(f"{f}: named more than once; its points are read once", GigapointWarning, stacklevel=3)
             continue
         seen.add(key)
         once.append(f)
@@ -182,7 +181,7 @@ def open_cloud(
                 if not several:
                     raise
                 empty.append(f)
-                warnings.warn(f"{f}: holds no points, skipped", GigapointWarning, stacklevel=4)
+                warn(f"{f}: holds no points, skipped", GigapointWarning, stacklevel=4)
 
     def build(stream) -> PointCloud:
         try:

@@ -12,7 +12,6 @@ import io
 import math
 import os
 import struct
-import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,7 +23,7 @@ from ..core import pages
 from ..core.chunk import ColorScaler, PointChunk, safe_attribute_name
 from ..core.cloud import MAX_ABS_COORDINATE, NUMPY_MAX
 from ..core.threads import prepare_kernel_calls
-from ..errors import EmptyCloudError, GigapointWarning, InputError
+from ..errors import EmptyCloudError, GigapointWarning, InputError, warn
 from . import laz_process
 from ._base import DEFAULT_CHUNK_SIZE, SALVAGE_HINT, Reader, check_chunk_size, check_file, fail, one_line, read_once
 
@@ -758,7 +757,7 @@ class LasReader(Reader):
         if done < stop:
             raise fail(path, f"truncated {kind} file: the header claims {hdr.point_count:,} points, only {done:,} could be read")
         if hdr.evlrs_cut is not None and stop == hdr.point_count:  # every point there, the EVLRs after them cut off
-            warnings.warn(f"{path}: {hdr.evlrs_cut}", GigapointWarning, stacklevel=2)
+            warn(f"{path}: {hdr.evlrs_cut}", GigapointWarning, stacklevel=2)
 
     def read_salvaged(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
         return self.read_chunks(path, chunk_size, salvage=True)
@@ -766,7 +765,7 @@ class LasReader(Reader):
     def info(self, path: Path) -> dict:
         hdr = read_las_header(path)
         if hdr.evlrs_cut is not None:  # (its VLRs shown, not its EVLRs)
-            warnings.warn(f"{path}: {hdr.evlrs_cut}", GigapointWarning, stacklevel=2)
+            warn(f"{path}: {hdr.evlrs_cut}", GigapointWarning, stacklevel=2)
         try:
             with _laspy_open(path, hdr) as reader:
                 header = reader.header

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.chunk import ColorScaler, PointChunk
-from ..errors import EmptyCloudError, GigapointWarning
+from ..errors import EmptyCloudError, GigapointWarning, warn
 from ._base import (
     DEFAULT_CHUNK_SIZE,
     Reader,
@@ -157,7 +157,7 @@ def _layout(path: Path) -> _Layout:
         # a named column of text (a label, a class name) is left out, said once: it refused the whole file
         text = [i for i, t in enumerate(tokens) if not _numeric([t]) and header_names[i] not in ("x", "y", "z")]
         if text:
-            warnings.warn(
+            warn(
                 f"{path}: column(s) {', '.join(header_names[i] for i in text)} hold text, not numbers: left out", GigapointWarning, stacklevel=4
             )
             kept = [i for i in range(len(tokens)) if i not in text]

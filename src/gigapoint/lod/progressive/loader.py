@@ -13,7 +13,9 @@ slices between frames too, before the load counts as done.
 
 A source that fails part-way (a truncated or corrupt file) stops the loader: what was
 inserted stays drawable, ``error`` holds the one-line error naming the file, and ``wait``
-raises it. ``close`` stops the loader and waits for it.
+raises it. The loader's warnings (a file's EVLRs cut, invalid points skipped, attributes not in
+every file) are kept, not issued on its threads (errors.warn), in ``warnings``; ``wait`` and
+``close`` issue each once, in order, in the caller's thread. ``close`` stops the loader and waits for it.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from __future__ import annotations
 import contextvars
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
@@ -31,7 +34,7 @@ from ...core.chunk import PointChunk, join_chunks
 from ...core.chunked import physical_memory
 from ...core.cloud import check_valid_count
 from ...core.threads import SMALL_BATCH
-from ...errors import GigapointError, InputError, MemoryLimitError
+from ...errors import GigapointError, InputError, MemoryLimitError, keep_warnings
 from ...io import human_bytes
 from ...io._base import headers_once
 from ..convert.prefetch import prefetch
@@ -77,6 +80,9 @@ class Loader:
         self.total = total  # input points, when the sources tell it up front
         self.read = 0  # input points read so far (valid or not)
         self.error: GigapointError | None = None
+        self.warnings: list[tuple[str, type[Warning]]] = []  # (message, category) of the warnings of the load, in order
+        self._issued = 0  # of them issued in a caller's thread (issue_warnings)
+        self._issuing = threading.Lock()
         self.complete = False  # every source read (not stopped by close, an error or the memory limit)
         self.started = time.perf_counter()
         self.finished_at: float | None = None
@@ -134,6 +140,7 @@ class Loader:
     def _run(self) -> None:
         name = self.octree.name
         turn = -1
+        keep_warnings(self.warnings)  # this thread's context, which the decoder's copies (prefetch)
         chunks = prefetch(self._chunks(), name="gigapoint-decode")  # held here: closed below, after the decoder is let go
         try:
             for name, chunk in _joined(chunks, SMALL_BATCH):
@@ -191,8 +198,9 @@ class Loader:
     def wait(self, timeout: float | None = None) -> bool:
         """Until the load ends: True once every source is read; False when ``timeout`` seconds pass
         first, or when ``close`` stopped the load part-way (it said True, as though complete);
-        raises the load's error."""
+        raises the load's error, after issuing its warnings (``issue_warnings``)."""
         finished = self._done.wait(timeout)
+        self.issue_warnings(stacklevel=3)  # (at the line that called the octree's wait)
         if self.error is not None:
             raise self.error
         return finished and self.complete
@@ -203,6 +211,16 @@ class Loader:
         self._first_in.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join()
+        self.issue_warnings(stacklevel=3)
+
+    def issue_warnings(self, stacklevel: int = 1) -> None:
+        """Issue the load's warnings not issued yet, each once and in order, in this (the caller's)
+        thread, where its filters and catches apply."""
+        with self._issuing:
+            new = self.warnings[self._issued :]
+            self._issued += len(new)
+        for message, category in new:
+            warnings.warn(message, category, stacklevel=stacklevel + 1)
 
 
 def _of_source(exc: InputError, label: str, source: str) -> InputError:

@@ -807,6 +807,12 @@ class ProgressiveOctree:
         """The error that stopped loading (one line, naming the file), or None."""
         return None if self.loader is None else self.loader.error
 
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """The load's warnings so far (one line each, naming the file), in order; ``wait`` and
+        ``close`` issue them in the caller's thread, each once."""
+        return () if self.loader is None else tuple(message for message, _ in self.loader.warnings)
+
     def wait(self, timeout: float | None = None) -> bool:
         """Until the loader has read everything (True) or ``timeout`` passes, or ``close`` stopped
         it part-way (False); raises the error that stopped it, if any. What was inserted before an

@@ -1,0 +1,102 @@
+"""A progressive load's warnings reach the caller as its errors do: kept by the loader, issued
+by ``wait`` (and ``close``) in the caller's thread, each once, and listed in ``cloud.warnings``.
+They were issued on the loader's thread: Python's warning filters and catches are process-wide,
+so a catch around ``wait()`` missed them and they printed at a random moment."""
+
+from __future__ import annotations
+
+import threading
+import time
+import warnings
+
+import pytest
+
+import gigapoint as gp
+from gigapoint.errors import GigapointWarning
+
+
+@pytest.fixture
+def nan_file(tmp_path):
+    path = tmp_path / "some.xyz"
+    path.write_text("1 2 3\nnan 2 3\n4 5 6\n")
+    return path
+
+
+def _skipped(path) -> str:
+    return f"{path}: skipped 1 invalid points (NaN, inf or beyond ±1e+12)"
+
+
+def _loaded(cloud):
+    """Until the loader is done, without ``wait`` (which issues the warnings)."""
+    deadline = time.monotonic() + 60
+    while cloud.loading and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert not cloud.loading
+    return cloud
+
+
+def test_wait_issues_the_load_s_warning_once_in_the_caller_s_thread(nan_file):
+    with warnings.catch_warnings(record=True) as meanwhile:
+        warnings.simplefilter("always")
+        cloud = _loaded(gp.open(nan_file, progressive=True))
+    assert meanwhile == []  # none issued while it loaded (on the loader's thread)
+    assert cloud.warnings == (_skipped(nan_file),) and cloud.error is None
+    with pytest.warns(GigapointWarning) as caught:
+        assert cloud.wait()
+    assert [(str(w.message), w.filename) for w in caught] == [(_skipped(nan_file), __file__)]  # at the line that waited
+    with warnings.catch_warnings(record=True) as again:
+        warnings.simplefilter("always")
+        assert cloud.wait()
+        cloud.close()
+    assert again == [] and cloud.warnings == (_skipped(nan_file),)
+
+
+def test_a_caller_s_error_filter_applies_at_wait_not_to_the_loader(nan_file):
+    """``-W error`` (here a filter) turned the loader's warning into an exception on its thread:
+    the load stopped with "loading stopped: ...". Now ``wait`` raises the warning and the load is whole."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GigapointWarning)
+        cloud = _loaded(gp.open(nan_file, progressive=True))
+        assert cloud.error is None and cloud.n_points == 2
+        with pytest.raises(GigapointWarning, match="skipped 1 invalid points"):
+            cloud.wait()
+        assert cloud.wait()  # (issued once: the second wait says nothing)
+    cloud.close()
+
+
+def test_close_issues_the_warnings_no_wait_issued(nan_file):
+    cloud = _loaded(gp.open(nan_file, progressive=True))
+    with pytest.warns(GigapointWarning) as caught:
+        cloud.close()
+    assert [str(w.message) for w in caught] == [_skipped(nan_file)]
+
+
+def test_gigapoint_render_prints_the_load_s_warning_once(nan_file, tmp_path, capsys):
+    from gigapoint.cli import main
+
+    out = tmp_path / "a.png"
+    assert main(["render", str(nan_file), "-o", str(out), "--progressive", "-W", "32", "-H", "24"]) == 0
+    err = capsys.readouterr().err
+    assert err.count(_skipped(nan_file)) == 1 and f"\nwarning: {_skipped(nan_file)}\n" in "\n" + err, err
+
+
+@pytest.mark.parametrize("window", [False, True])
+def test_gigapoint_view_prints_the_load_s_warning_once(nan_file, capsys, monkeypatch, window):
+    """The browser viewer and the native window (whose load's warnings, once kept for ``wait``,
+    no one issued: it had no thread reporting the load)."""
+    from gigapoint.cli import main
+    from gigapoint.viewer import window as native
+    from gigapoint.viewer.server import ViewerServer
+
+    def until_reported(*args):  # instead of serving, or a window's loop, until Ctrl+C
+        for thread in threading.enumerate():
+            if thread.name == "gigapoint-load-report":
+                thread.join(60)
+
+    monkeypatch.setattr(ViewerServer, "serve_forever", until_reported)
+    monkeypatch.setattr(native, "check_display", lambda: None)
+    monkeypatch.setattr(native, "open_window", lambda cloud: None)
+    monkeypatch.setattr(native, "run_loop", until_reported)
+    assert main(["view", str(nan_file), "--progressive", "--no-browser", *(["--window"] if window else [])]) == 0
+    err = capsys.readouterr().err
+    assert err.count(_skipped(nan_file)) == 1 and f"\nwarning: {_skipped(nan_file)}\n" in "\n" + err, err
