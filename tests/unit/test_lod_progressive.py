@@ -905,7 +905,7 @@ def test_any_chunk_size_holds_the_same_leaves(scene, octree, chunk):
     _assert_same_leaves(octree, _filled(scene, chunk=chunk), tol=3**0.5 * octree.edge / 2**30)
 
 
-def test_a_source_without_a_valid_point_ends_as_the_plain_cloud_does(tmp_path, capsys, loaded):
+def test_a_source_without_a_valid_point_ends_as_the_plain_cloud_does(tmp_path, capsys):
     """Every point NaN: ``wait`` raises the plain cloud's one-line EmptyCloudError (the load
     ended quietly with an empty octree, and ``gigapoint render --progressive`` wrote a
     background image and exited 0); a file with some valid points loads them."""
@@ -921,8 +921,9 @@ def test_a_source_without_a_valid_point_ends_as_the_plain_cloud_does(tmp_path, c
     with pytest.raises(EmptyCloudError) as progressive:
         cloud.wait()
     assert str(progressive.value) == str(plain.value) == f"{bad}: no valid points (2 invalid points: NaN, inf or beyond ±1e+12)"
-    with pytest.warns(GigapointWarning, match="skipped 1 invalid points"):
-        cloud = loaded(some)
+    cloud = gp.open(some, progressive=True)
+    with pytest.warns(GigapointWarning, match="skipped 1 invalid points"):  # (issued by wait, in this thread)
+        assert cloud.wait()
     assert cloud.n_points == 2 and cloud.skipped == 1
     with pytest.raises(EmptyCloudError) as converted:  # the converter named the dataset ("allnan"), not the file
         gp.convert(bad, tmp_path / "tree")
@@ -945,15 +946,16 @@ def test_a_source_without_a_valid_point_ends_as_the_plain_cloud_does(tmp_path, c
     assert str(plain.value) == str(progressive.value) == str(converted.value) == want
 
 
-def test_invalid_points_skipped_while_loading_are_warned_of_as_the_plain_cloud_does(tmp_path, capsys, loaded):
+def test_invalid_points_skipped_while_loading_are_warned_of_as_the_plain_cloud_does(tmp_path, capsys):
     """A file with some invalid points: the plain cloud, the converter and ``gigapoint render``
     warn that they were skipped; the progressive load left them out without a word."""
     from gigapoint.cli import main
 
     some = tmp_path / "some.xyz"
     some.write_text("1 2 3\nnan 2 3\n4 5 6\n")
-    with pytest.warns(GigapointWarning) as caught:
-        cloud = loaded(some)
+    cloud = gp.open(some, progressive=True)
+    with pytest.warns(GigapointWarning) as caught:  # (issued by wait, in this thread)
+        assert cloud.wait(timeout=120)
     assert cloud.n_points == 2
     assert [str(w.message) for w in caught] == [f"{some}: skipped 1 invalid points (NaN, inf or beyond ±1e+12)"]
     out = tmp_path / "a.png"
@@ -985,7 +987,7 @@ def test_add_refuses_unknown_attributes_and_widens_a_dtype_a_batch_does_not_fit(
     assert sorted(got["height"].tolist()) == sorted(want_height.tolist())
 
 
-def test_several_files_keep_the_attributes_they_all_have_in_any_order(tmp_path, loaded):
+def test_several_files_keep_the_attributes_they_all_have_in_any_order(tmp_path):
     """As ``gigapoint.open`` of several files: a file without an attribute drops it for all
     points (it was kept and filled with zeros when that file came second, and an attribute only
     a later file had was dropped: the set depended on the order); a list of paths is accepted."""
@@ -1013,9 +1015,10 @@ def test_several_files_keep_the_attributes_they_all_have_in_any_order(tmp_path, 
     assert "gps_time" not in want.attributes and "intensity" in want.attributes
 
     for paths in ([plain_only, with_time], [with_time, plain_only]):
-        with pytest.warns(GigapointWarning, match=dropped):
-            cloud = loaded(paths)  # one list, as gp.open(a, b)
-        assert cloud.n_points == 6000 and sorted(cloud.attributes) == sorted(want.attributes)
+        cloud = gp.open(paths, progressive=True)  # one list, as gp.open(a, b)
+        with pytest.warns(GigapointWarning, match=dropped):  # (issued by wait, in this thread)
+            assert cloud.wait(timeout=120) and cloud.n_points == 6000
+        assert sorted(cloud.attributes) == sorted(want.attributes)
         got = _leaf_points(cloud)
         assert sorted(got["intensity"].tolist()) == sorted(np.asarray(want.attributes["intensity"]).tolist())
         cloud.close()
