@@ -100,3 +100,50 @@ def test_gigapoint_view_prints_the_load_s_warning_once(nan_file, capsys, monkeyp
     assert main(["view", str(nan_file), "--progressive", "--no-browser", *(["--window"] if window else [])]) == 0
     err = capsys.readouterr().err
     assert err.count(_skipped(nan_file)) == 1 and f"\nwarning: {_skipped(nan_file)}\n" in "\n" + err, err
+
+
+@pytest.mark.parametrize("name, text", [
+    ("a.xyz", "1 2 3\n4 5 6\n"),
+    ("a.ply", "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n4 5 6\n"),
+])  # fmt: skip
+def test_reading_text_on_the_decoder_s_thread_leaves_a_caller_s_catch_as_it_was(tmp_path, monkeypatch, name, text):
+    """The text and ASCII PLY readers wrapped loadtxt in ``catch_warnings`` (its "no data"
+    warning) on the decoder's thread: a caller's catch entered meanwhile had its recording undone
+    when the reader's ended (here: made to end inside it), and its filters left behind."""
+    import numpy as np
+
+    from gigapoint.io import read_chunks
+
+    path = tmp_path / name
+    path.write_text(text)
+    inside, go, loadtxt = threading.Event(), threading.Event(), np.loadtxt
+
+    def held(*args, **kw):  # the reader's loadtxt waits until the caller's catch is entered
+        inside.set()
+        go.wait(10)
+        return loadtxt(*args, **kw)
+
+    monkeypatch.setattr(np, "loadtxt", held)
+    got = []
+    reader = threading.Thread(target=lambda: got.extend(read_chunks(path, 1_000)))
+    filters = list(warnings.filters)
+    reader.start()
+    assert inside.wait(10)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        go.set()
+        reader.join(10)
+        warnings.warn("the caller's", UserWarning)
+    assert [str(w.message) for w in seen] == ["the caller's"] and warnings.filters == filters
+    assert sum(len(c) for c in got) == 2
+
+
+def test_a_chunk_of_comments_only_reads_on_without_a_word(tmp_path):
+    from gigapoint.io import read_chunks
+
+    path = tmp_path / "c.xyz"
+    path.write_text("1 2 3\n# a\n# b\n\n4 5 6\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = [c.xyz.tolist() for c in read_chunks(path, 2)]
+    assert got == [[[1.0, 2.0, 3.0]], [[4.0, 5.0, 6.0]]]

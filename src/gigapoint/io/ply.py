@@ -189,10 +189,10 @@ class PlyReader(Reader):
                     cut = " (the file ends part-way through the next)"
                 if not lines:
                     break
+                if not any(ln.strip() for ln in lines):  # blank: loadtxt's "no data" warning, not silenced by a catch_warnings
+                    raise fail(path, self._bad_line(lines, lineno, ncols))  # (process-wide: it swapped a caller's filters meanwhile)
                 try:
-                    with warnings.catch_warnings():
-                        warnings.simplefilter("ignore", UserWarning)
-                        arr = np.loadtxt(lines, ndmin=2, dtype=np.float64, comments=None)
+                    arr = np.loadtxt(lines, ndmin=2, dtype=np.float64, comments=None)
                 except ValueError:
                     raise fail(path, self._bad_line(lines, lineno, ncols)) from None
                 if len(arr) != len(lines) or (arr.size and arr.shape[1] != ncols):

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import contextlib
 import itertools
-import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -188,9 +187,12 @@ def _first_bad_line(path: Path, lines: list[str], first_lineno: int, delimiter: 
 
 
 def _parsed(lines: list[str], delimiter: str | None, columns: list[int] | None = None) -> np.ndarray:
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # "input contained no data" for comment-only chunks
-        return np.loadtxt(lines, delimiter=delimiter, comments=("#", "//"), ndmin=2, dtype=np.float64, usecols=columns)
+    # a chunk of comments and blank lines is not given to loadtxt, which warns "input contained no data":
+    # a catch_warnings here, on a progressive load's decoder thread, swapped the process's filters
+    # under the caller's own catch (its records lost, its filters left behind)
+    if not any(ln.strip() and not _is_comment(ln) for ln in lines):
+        return np.empty((0, 0))
+    return np.loadtxt(lines, delimiter=delimiter, comments=("#", "//"), ndmin=2, dtype=np.float64, usecols=columns)
 
 
 def _chunks(path: Path, chunk_size: int, layout: _Layout) -> Iterator[np.ndarray]:
