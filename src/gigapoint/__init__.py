@@ -97,8 +97,8 @@ def open(*paths, progressive: bool = False, **options):
     (``ept.json`` or its folder), local or an ``http(s)://`` URL (read by range requests).
 
     ``progressive=True``: files open as a ProgressiveOctree, returned at once and filled by a
-    background loader (``cloud.progress``, ``cloud.wait()``); it draws what is there at any
-    moment (SimLOD). Loading stops with a one-line MemoryLimitError once the octree holds
+    background loader (``cloud.progress``, ``cloud.wait()``, which raises its error and issues its
+    warnings, also listed in ``cloud.warnings``); it draws what is there at any moment (SimLOD). Loading stops with a one-line MemoryLimitError once the octree holds
     ``memory_limit=`` bytes or '8G' (by default half the machine's memory); what was loaded stays.
 
     Paths may also come as one list or tuple: ``gp.open([a, b])`` is ``gp.open(a, b)``."""

@@ -107,3 +107,15 @@ def test_no_capability_probes_and_no_state_on_foreign_objects():
                 if not (isinstance(target, ast.Name) and target.id == "self"):
                     found.append(f"{path.relative_to(SRC)}:{call.lineno} object.__setattr__ on {ast.unparse(target) if target else '?'}")
     assert not found, "\n".join(found)
+
+
+def test_code_a_progressive_load_runs_warns_through_errors_warn():
+    """The readers, the core and the progressive octree run on a progressive load's threads: a
+    warning there goes through ``errors.warn``, which keeps it for the caller's thread (``wait``
+    issues it); ``warnings.warn`` issued it on the loader's, past the caller's filters and catches."""
+    found = []
+    for path in [*sorted((SRC / "io").rglob("*.py")), *sorted((SRC / "core").rglob("*.py")), SRC / "lod/progressive/octree.py"]:
+        for call in _calls(ast.parse(path.read_text(encoding="utf-8"))):
+            if ast.unparse(call.func) == "warnings.warn":
+                found.append(f"{path.relative_to(SRC)}:{call.lineno}")
+    assert not found, "\n".join(found)
