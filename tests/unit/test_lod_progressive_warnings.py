@@ -147,3 +147,20 @@ def test_a_chunk_of_comments_only_reads_on_without_a_word(tmp_path):
         warnings.simplefilter("error")
         got = [c.xyz.tolist() for c in read_chunks(path, 2)]
     assert got == [[[1.0, 2.0, 3.0]], [[4.0, 5.0, 6.0]]]
+
+
+def test_the_viewer_s_line_on_a_finished_load_says_its_warnings(nan_file, tmp_path):
+    """The HUD's line on a finished load said how many points, not that some were skipped."""
+    from gigapoint.viewer.watch import load_note
+
+    cloud = _loaded(gp.open(nan_file, progressive=True))
+    assert load_note(cloud, 0.0).endswith(f" s; warning: {_skipped(nan_file)}")
+    with pytest.warns(GigapointWarning):
+        cloud.close()
+    other = tmp_path / "other.xyz"
+    other.write_text("7 8 9 1\n")  # an intensity the first file has not
+    two = _loaded(gp.open(nan_file, other, progressive=True))
+    dropped = "2 files: attribute(s) intensity not in every file: left out (only those all the files have are kept)"
+    assert len(two.warnings) == 2 and load_note(two, 0.0).endswith(f" s; warning: {dropped} (and 1 more)")
+    with pytest.warns(GigapointWarning):
+        two.close()

@@ -95,8 +95,11 @@ def load_note(cloud, rate: float) -> str:
     if cloud.error is not None:
         return f"loading stopped: {cloud.error}; showing the {cloud.n_points:,} points loaded"
     total = f" of {cloud.loader.total:,}" if cloud.loader.total else ""
-    if not cloud.loading:
-        return f"loaded {cloud.n_points:,} points in {cloud.loader.finished_at - cloud.loader.started:.1f} s"
+    if not cloud.loading:  # its warnings said here too: the terminal may be another machine's
+        said = cloud.warnings
+        more = f" (and {len(said) - 1} more)" if len(said) > 1 else ""
+        warned = f"; warning: {said[0]}{more}" if said else ""
+        return f"loaded {cloud.n_points:,} points in {cloud.loader.finished_at - cloud.loader.started:.1f} s{warned}"
     return f"loading: {cloud.loader.read:,}{total} points read, {rate / 1e6:.1f} M points/s"
 
 
