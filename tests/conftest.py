@@ -93,8 +93,8 @@ def cli(capsys):
 @pytest.fixture(scope="session")
 def loaded():
     """``loaded(*paths)``: ``gp.open(*paths, progressive=True)`` once its loader is done (it
-    fails the test if the load does not finish in 2 minutes). Call it inside a
-    ``pytest.warns``: the loader's thread warns as soon as it is done, maybe before the wait."""
+    fails the test if the load does not finish in 2 minutes). The load's warnings are issued by
+    its wait, so a ``pytest.warns`` around the call sees them."""
 
     def load(*paths):
         cloud = gp.open(*paths, progressive=True)
