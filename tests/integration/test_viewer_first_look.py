@@ -86,3 +86,15 @@ def test_a_picked_point_reads_as_the_file_wrote_it(page, las_cloud):
     assert set(coords) == {"x", "y", "z"}, text
     for v in coords.values():
         assert re.fullmatch(r"\d+(\.\d{1,2})?", v), text  # 636317.71, never 636317.7100002308
+
+
+def test_a_cloud_of_one_batch_reads_one_batch(browser):
+    srv = ViewerServer(gigapoint.demo(5_000)).start()  # fewer points than a batch holds
+    pg = browser.new_page()
+    try:
+        pg.goto(srv.url)
+        pg.wait_for_function("() => document.getElementById('cloudinfo').textContent.includes('points')", timeout=30_000)
+        assert pg.locator("#cloudinfo").inner_text().endswith("5,000 points · 1 batch")  # was "1 batches"
+    finally:
+        pg.close()
+        srv.close()

@@ -1226,6 +1226,12 @@ def test_the_repr_says_how_far_loading_is():
     assert repr(o) == "ProgressiveOctree('slow', 0 points, 0 nodes, 0 voxels, closed)"
 
 
+def test_a_one_node_octree_reads_one_node():
+    o = ProgressiveOctree("tiny")
+    o.add(np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]]))
+    assert repr(o) == "ProgressiveOctree('tiny', 2 points, 1 node, 0 voxels)"
+
+
 def test_loading_stops_at_its_memory_limit_and_keeps_what_it_holds():
     """A source larger than memory allows: the loader stops once the octree holds
     ``memory_limit`` bytes (one line saying where and why), and what it holds draws."""

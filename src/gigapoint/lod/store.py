@@ -447,7 +447,7 @@ class OctreeCloud:
 
     def __repr__(self) -> str:
         lo, hi = (at_scale(b, self.meta.get("scale")) for b in self.bounds)  # at the source's grid, as PointCloud's
-        return f"OctreeCloud({self.name!r}, {self.n_points:,} points, {len(self.nodes):,} nodes, depth {int(self.levels.max())}, bounds {lo} .. {hi})"
+        return f"OctreeCloud({self.name!r}, {self.n_points:,} points, {len(self.nodes):,} node{'' if len(self.nodes) == 1 else 's'}, depth {int(self.levels.max())}, bounds {lo} .. {hi})"
 
     def node_arrays(self, index: int) -> tuple[dict, dict, int]:
         """(point arrays ``low``, ``med``, ``high``, ``color``, ``rgba``; attribute arrays; where node

@@ -910,7 +910,7 @@ class ProgressiveOctree:
             state = ", loading stopped: " + str(self.error)
         elif self.loading:
             state = f", loading: {self.progress:.0%} read" if self.loader.total else ", loading"
-        return f"ProgressiveOctree({self.name!r}, {self.points:,} points, {self.n_nodes:,} nodes, {self.n_voxels:,} voxels{state})"
+        return f"ProgressiveOctree({self.name!r}, {self.points:,} points, {self.n_nodes:,} node{'' if self.n_nodes == 1 else 's'}, {self.n_voxels:,} voxels{state})"
 
     # ------------------------------------------------------------------ adding points
     def add(self, xyz, rgb=None, **attributes) -> int:

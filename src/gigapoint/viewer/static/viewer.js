@@ -76,7 +76,7 @@
     S.cloud = cloud;
     const info = $("cloudinfo");  // "name · N points · M batches": a count and its unit never split over lines
     info.textContent = `${cloud.name} · `;
-    for (const [i, part] of [`${cloud.points.toLocaleString()} points`, `${cloud.batches.toLocaleString()} batches`].entries()) {
+    for (const [i, part] of [`${cloud.points.toLocaleString()} points`, `${cloud.batches.toLocaleString()} batch${cloud.batches === 1 ? "" : "es"}`].entries()) {
       const span = document.createElement("span");
       span.className = "nowrap";
       span.textContent = part;
