@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import sys
 import warnings
+from contextlib import contextmanager
 from contextvars import ContextVar
 
 # warnings kept for another thread to issue (``warn``): set in a progressive load's threads
@@ -121,15 +124,32 @@ class GigapointWarning(UserWarning):
     """Warnings about degenerate but valid input (skipped points, empty views)."""
 
 
-def warn(message: str, category: type[Warning] = GigapointWarning, stacklevel: int = 1) -> None:
-    """``warnings.warn`` as gigapoint warns; but in a thread that keeps its warnings (``keep_warnings``:
-    a progressive load's) the warning is appended to its list, for the caller's thread to issue
-    (Loader.issue_warnings): Python's filters, ``catch_warnings``, pytest.warns and ``-W error`` are
-    process-wide and not thread-safe, so a warning issued on the loader's thread escaped a catch
-    around ``wait()`` and printed at a random moment."""
+# gigapoint's files and Python's own (contextlib's, threading's: between gigapoint's frames)
+_NOT_THE_USERS = (os.path.dirname(os.path.abspath(__file__)) + os.sep, os.path.dirname(os.__file__) + os.sep)
+
+
+def outside_stacklevel() -> int:
+    """``warnings.warn``'s stacklevel, for its caller, that names the first frame outside
+    gigapoint (and Python's library): the user's line (a notebook cell, a script), not
+    gigapoint's own (``renderer.py:78: ... warnings.warn(f"{cloud.name}: ...")``), however deep
+    the warning arose and by whichever way it was reached; the caller's caller where there is
+    none (a thread of gigapoint's)."""
+    frame, level = sys._getframe(2), 2
+    while frame is not None and frame.f_code.co_filename.startswith(_NOT_THE_USERS):
+        frame, level = frame.f_back, level + 1
+    return level if frame is not None else 2
+
+
+def warn(message: str, category: type[Warning] = GigapointWarning) -> None:
+    """``warnings.warn`` as gigapoint warns: at the first line outside gigapoint
+    (``outside_stacklevel``); but in a context that keeps its warnings (``keep_warnings``: a
+    progressive load's threads; ``warnings_kept``) the warning is appended to its list instead,
+    for the caller's thread to issue (Loader.issue_warnings): Python's filters, ``catch_warnings``,
+    pytest.warns and ``-W error`` are process-wide and not thread-safe, so a warning issued on the
+    loader's thread escaped a catch around ``wait()`` and printed at a random moment."""
     kept = _kept.get()
     if kept is None:
-        warnings.warn(message, category, stacklevel=stacklevel + 1)
+        warnings.warn(message, category, stacklevel=outside_stacklevel())
     else:
         kept.append((message, category))
 
@@ -137,3 +157,15 @@ def warn(message: str, category: type[Warning] = GigapointWarning, stacklevel: i
 def keep_warnings(kept: list) -> None:
     """From now on, in this context (a thread started with its own), ``warn`` appends to ``kept``."""
     _kept.set(kept)
+
+
+@contextmanager
+def warnings_kept():
+    """``warn``'s warnings in the block appended to the list it gives, not issued (for the caller
+    to sort: the viewer drops "no point is in view", normal while flying around)."""
+    kept: list = []
+    token = _kept.set(kept)
+    try:
+        yield kept
+    finally:
+        _kept.reset(token)

@@ -105,7 +105,6 @@ def warn_dropped_attributes(name: str, dropped) -> None:
         warn(
             f"{name}: attribute(s) {', '.join(sorted(dropped))} not in every file: left out (only those all the files have are kept)",
             GigapointWarning,
-            stacklevel=3,
         )
 
 

@@ -496,7 +496,7 @@ def check_valid_count(name: str, valid: int, skipped: int) -> None:
         detail = f" ({skipped:,} invalid points: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
         raise EmptyCloudError(f"{name}: no valid points{detail}")
     if skipped:
-        warn(f"{name}: skipped {skipped:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})", GigapointWarning, stacklevel=3)
+        warn(f"{name}: skipped {skipped:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})", GigapointWarning)
 
 
 #: ``build_cloud``'s layouts and color formats

@@ -39,7 +39,7 @@ def later_runs() -> str:
 def _warn_once(key: str, message: str) -> None:
     if key not in _done:
         _done.add(key)
-        warn(message, GigapointWarning, stacklevel=3)
+        warn(message, GigapointWarning)
 
 
 class _SayUncached(event.Listener):

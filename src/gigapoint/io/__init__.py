@@ -84,7 +84,7 @@ def expand_paths(paths: Iterable) -> list[Path]:
         except OSError:
             key = f.resolve()
         if key in seen:
-            warn(f"{f}: named more than once; its points are read once", GigapointWarning, stacklevel=3)
+            warn(f"{f}: named more than once; its points are read once", GigapointWarning)
             continue
         seen.add(key)
         once.append(f)
@@ -181,7 +181,7 @@ def open_cloud(
                 if not several:
                     raise
                 empty.append(f)
-                warn(f"{f}: holds no points, skipped", GigapointWarning, stacklevel=4)
+                warn(f"{f}: holds no points, skipped", GigapointWarning)
 
     def build(stream) -> PointCloud:
         try:

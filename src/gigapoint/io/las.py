@@ -757,7 +757,7 @@ class LasReader(Reader):
         if done < stop:
             raise fail(path, f"truncated {kind} file: the header claims {hdr.point_count:,} points, only {done:,} could be read")
         if hdr.evlrs_cut is not None and stop == hdr.point_count:  # every point there, the EVLRs after them cut off
-            warn(f"{path}: {hdr.evlrs_cut}", GigapointWarning, stacklevel=2)
+            warn(f"{path}: {hdr.evlrs_cut}", GigapointWarning)
 
     def read_salvaged(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
         return self.read_chunks(path, chunk_size, salvage=True)
@@ -765,7 +765,7 @@ class LasReader(Reader):
     def info(self, path: Path) -> dict:
         hdr = read_las_header(path)
         if hdr.evlrs_cut is not None:  # (its VLRs shown, not its EVLRs)
-            warn(f"{path}: {hdr.evlrs_cut}", GigapointWarning, stacklevel=2)
+            warn(f"{path}: {hdr.evlrs_cut}", GigapointWarning)
         try:
             with _laspy_open(path, hdr) as reader:
                 header = reader.header

@@ -157,7 +157,7 @@ def _layout(path: Path) -> _Layout:
         text = [i for i, t in enumerate(tokens) if not _numeric([t]) and header_names[i] not in ("x", "y", "z")]
         if text:
             warn(
-                f"{path}: column(s) {', '.join(header_names[i] for i in text)} hold text, not numbers: left out", GigapointWarning, stacklevel=4
+                f"{path}: column(s) {', '.join(header_names[i] for i in text)} hold text, not numbers: left out", GigapointWarning
             )
             kept = [i for i in range(len(tokens)) if i not in text]
             return _Layout(path, skip, delimiter, [header_names[i] for i in kept], True, quoted, kept, len(tokens))

@@ -34,7 +34,6 @@ import heapq
 import numbers
 import threading
 import time as _time
-import warnings
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -49,7 +48,7 @@ from ..core.quantize import make_batches, quantize
 from ..core.renderable import DrawList
 from ..core.selection import Selection, View, select_view, subsample_step
 from ..core.threads import threads_for
-from ..errors import GigapointError, GigapointWarning, InputError, check_switch, check_timeout, check_whole, is_real
+from ..errors import GigapointError, GigapointWarning, InputError, check_switch, check_timeout, check_whole, is_real, warn
 from ..lod.build import valid_bounds
 from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
 from ..render.splats import point_spacing
@@ -467,9 +466,9 @@ class LiveCloud:
                 self._pending.popleft()
             first_drop = dropped and not self.stats.frames_dropped  # said once
             self.stats.frames_dropped += dropped
-        if first_drop:  # (stacklevel: the caller of push)
-            warnings.warn(f"{name}: frames arrive faster than they are copied into the ring (the lock held long): "
-                          f"more than keep={self.keep} waited, the oldest are dropped unseen (stats.frames_dropped)", GigapointWarning, stacklevel=4)  # fmt: skip
+        if first_drop:
+            warn(f"{name}: frames arrive faster than they are copied into the ring (the lock held long): "
+                 f"more than keep={self.keep} waited, the oldest are dropped unseen (stats.frames_dropped)", GigapointWarning)  # fmt: skip
         self._commit_pending()
         if self.recorder is not None and pose_tag is None:
             self.recorder.write_points(seq, xyz_in, rgb, pose, t, normals, attributes)

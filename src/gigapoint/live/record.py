@@ -14,7 +14,6 @@ import json
 import os
 import threading
 import time
-import warnings
 import zipfile
 import zlib
 from dataclasses import dataclass, field
@@ -23,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_json, atomic_open
-from ..errors import GigapointWarning, InputError, first_line
+from ..errors import GigapointWarning, InputError, first_line, warn
 
 FORMAT = "gigapoint-live-recording"
 INDEX = "index.json"
@@ -117,7 +116,7 @@ class Recorder:
             if self.error is not None:
                 return
             self.error = InputError(f"{self.directory}: recording stopped after {len(self.entries)} frames: {first_line(exc)}")
-        warnings.warn(str(self.error), GigapointWarning, stacklevel=2)
+        warn(str(self.error), GigapointWarning)
         self._write_index()  # the frames written so far, if there is room for that
 
     def write_points(self, seq, xyz, rgb, pose, t, normals, attributes) -> None:

@@ -19,13 +19,12 @@ from __future__ import annotations
 
 import io
 import os
-import warnings
 from pathlib import Path
 
 import numpy as np
 
 from ..core.chunk import safe_attribute_name
-from ..errors import GigapointWarning, InputError
+from ..errors import GigapointWarning, InputError, warn
 from ..io import laz_process
 from ..io.http import ByteSource, HttpFile, LocalFile, open_source
 from ..io.las import _scaled_xyz, read_las_header
@@ -478,11 +477,10 @@ class CopcCloud(VoxelOctree):
                 self._cut_said = True
                 what = [f"{int(counts[lost].sum()):,} points in {lost.sum():,} nodes past the cut"] if lost.any() else []
                 what += [f"the nodes below {gone.sum():,} hierarchy pages past it"] if gone.any() else []
-                warnings.warn(
+                warn(
                     f"{name}: truncated COPC file: it has {self.file_size:,} bytes, its header says at least {self._expected:,}: "
                     f"{' and '.join(what)} are left out",
                     GigapointWarning,
-                    stacklevel=2,
                 )
             self._meta["points"] -= int(counts[lost].sum())
             counts[lost], chunk, page = 0, chunk & ~lost, page & ~gone

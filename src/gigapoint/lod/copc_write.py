@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import datetime
 import io
-import warnings
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -24,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from ..atomic import atomic_open
-from ..errors import GigapointWarning
+from ..errors import GigapointWarning, warn
 from ..io.las import scan_angle_units
 from .copc import (
     COPC_HIERARCHY_RECORD,
@@ -116,7 +115,7 @@ def extra_attributes(attributes: dict, where: str = "COPC", point_format: int = 
         elif stored not in EXTRA_BYTES_TYPES.values():
             problem = f"its dtype {dt} is not a LAS extra bytes type (8-64-bit integers and floats)"
         if problem:
-            warnings.warn(f"{where}: attribute {name!r} is not written: {problem}", GigapointWarning, stacklevel=3)
+            warn(f"{where}: attribute {name!r} is not written: {problem}", GigapointWarning)
             continue
         out[name] = stored
     return out

@@ -11,7 +11,6 @@ octree is complete; the viewer swaps in the octree when it appears (viewer/watch
 from __future__ import annotations
 
 import time
-import warnings
 import zipfile
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -20,7 +19,7 @@ import numpy as np
 
 from ..atomic import atomic_open
 from ..core.cloud import PointCloud
-from ..errors import GigapointWarning, InputError
+from ..errors import GigapointWarning, InputError, warn
 from ..io import open_cloud
 from .octree_dir import OctreeDir
 
@@ -135,7 +134,7 @@ def open_preview(octree_dir) -> ConversionPreview:
     if s.get("phase") not in (None, "read"):
         read = f"all {s['points']:,} points read, now in phase {s['phase']}"
     stopped = f"; it has stopped: {d.resume_hint}" if s.get("running") is False else ""
-    warnings.warn(f"{out}: conversion not finished ({read}); showing its preview{stopped}", GigapointWarning, stacklevel=3)
+    warn(f"{out}: conversion not finished ({read}); showing its preview{stopped}", GigapointWarning)
     cloud = open_cloud(d.preview, name=out.name)
     return ConversionPreview(**{f.name: getattr(cloud, f.name) for f in fields(PointCloud) if f.init}, octree_dir=d)
 

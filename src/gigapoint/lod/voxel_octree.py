@@ -21,14 +21,12 @@ read twice (a hierarchy that refers to itself), so a bad file fails in one line 
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
 from ..core.chunk import DEFAULT_COLOR, ColorScaler
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
-from ..errors import GigapointWarning, InputError
+from ..errors import GigapointWarning, InputError, warn
 from ..io.laz_process import bad_data
 from .keys import MAX_LEVEL, ROOT_KEY, key_cube, level_of
 from .octree_dir import POINT_ARRAYS
@@ -322,11 +320,10 @@ class VoxelOctree(OctreeCloud):
         self.nodes[index]["bbox_min"], self.nodes[index]["bbox_max"] = lo, hi
         if not self._misplaced_said and outside_cube(lo, hi, cube_min, cube_max, self.coordinate_step):
             self._misplaced_said = True  # drawn where they are, but the other nodes are culled by cubes that may be as wrong
-            warnings.warn(
+            warn(
                 f"{self.source_name}: node {voxel_name(key)}'s points {box_text(lo, hi)} lie outside its cube "
                 f"{box_text(cube_min, cube_max)}: the octree's cube does not match its points; nodes may be missing from views",
                 GigapointWarning,
-                stacklevel=2,
             )
         self._decoded.add(key)
         rgba = np.empty((n, 4), np.uint8)

@@ -13,7 +13,6 @@ Passes (and a line in passes/__init__.finish_frame that calls it).
 from __future__ import annotations
 
 import threading
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -22,7 +21,7 @@ import numpy as np
 
 from ..core.renderable import PointBuffers
 from ..core.selection import Selection
-from ..errors import BackendUnavailableError, GigapointWarning
+from ..errors import BackendUnavailableError, GigapointWarning, warn
 
 #: (footprint (k, 3) int32 rows dx, dy, need; size float32; atten float32): points larger
 #: than a pixel (passes/splats.py); None draws one pixel per point.
@@ -159,7 +158,7 @@ def _pick_auto() -> Backend:
             failures.append(str(exc))
             continue
         except Exception as exc:  # noqa: BLE001 - a broken driver must never stop a render
-            warnings.warn(f"{entry.name} backend failed to start ({exc}); trying the next", GigapointWarning, stacklevel=4)
+            warn(f"{entry.name} backend failed to start ({exc}); trying the next", GigapointWarning)
             continue
         if not entry.auto_options:  # the same object serves its own name
             _instances[entry.name] = backend

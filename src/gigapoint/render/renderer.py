@@ -7,13 +7,12 @@ nor the backend (any Backend: backend.py).
 from __future__ import annotations
 
 import time
-import warnings
 
 import numpy as np
 
 from ..core.layout import EMPTY_PIXEL
 from ..core.renderable import Renderable
-from ..errors import GigapointError, GigapointWarning, check_switch
+from ..errors import GigapointError, GigapointWarning, check_switch, warn
 from .backend import get_backend
 from .camera import Camera, image_size
 from .frame import Frame, RenderStats, check_indexable
@@ -75,7 +74,7 @@ def render_frame(cloud, camera: Camera | None = None, settings: RenderSettings |
     stats.visible_pixels = covered if covered is not None else int(np.count_nonzero(visibility != EMPTY_PIXEL))
     if stats.visible_pixels == 0:
         why = " (it holds none: nothing loaded yet, or closed)" if cloud.n_points == 0 else ""
-        warnings.warn(f"{cloud.name}: no point is in view of the camera{why}; the image shows only the background", GigapointWarning, stacklevel=2)
+        warn(f"{cloud.name}: no point is in view of the camera{why}; the image shows only the background", GigapointWarning)
     return Frame(visibility, image, stats, draw.points, draw.generation)
 
 

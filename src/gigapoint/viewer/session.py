@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.layout import EMPTY_PIXEL
-from ..errors import GigapointError, GigapointWarning
+from ..errors import GigapointError, warnings_kept
 from ..render.camera import sample_points
 from ..render.frame import Frame, encode_image
 from ..render.renderer import render_frame
@@ -60,16 +60,22 @@ def cloud_bytes(cloud) -> int:
     return cloud.nbytes if isinstance(cloud, PointCloud) else 0
 
 
-# "no point is in view" is normal while flying around; render_frame attributes it to this module
-warnings.filterwarnings("ignore", message=".*no point is in view", category=GigapointWarning, module=__name__)
+def view_frame(cloud, camera, settings) -> Frame:
+    """render_frame for a viewer: "no point is in view" is normal while flying around, not said."""
+    with warnings_kept() as said:
+        frame = render_frame(cloud, camera, settings)
+    for message, category in said:
+        if "no point is in view" not in message:
+            warnings.warn(message, category, stacklevel=2)
+    return frame
 
 
 def render_locked(cloud, camera, settings, cancelled=None):
-    """render_frame under the process-wide lock; None if ``cancelled()`` turned true while waiting for it."""
+    """view_frame under the process-wide lock; None if ``cancelled()`` turned true while waiting for it."""
     with RENDER_LOCK:
         if cancelled is not None and cancelled():
             return None
-        return render_frame(cloud, camera, settings)
+        return view_frame(cloud, camera, settings)
 
 
 def depth_position(camera, px: float, py: float, depth: float) -> np.ndarray:

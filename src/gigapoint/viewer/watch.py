@@ -12,10 +12,9 @@ from __future__ import annotations
 
 import threading
 import time
-import warnings
 from typing import Self
 
-from ..errors import GigapointError, GigapointWarning
+from ..errors import GigapointError, warnings_kept
 from ..lod.octree_dir import OctreeDir
 
 
@@ -81,8 +80,7 @@ class ConversionWatcher(_Watcher):
                 self.core.note = preview_note(self.folder)
                 stamp = _stamp(self.folder.preview)
                 if stamp is not None and stamp != self.seen:
-                    with warnings.catch_warnings():
-                        warnings.simplefilter("ignore", GigapointWarning)
+                    with warnings_kept():  # not said: the viewer's note says it (catch_warnings is not for threads)
                         cloud = open_preview(self.folder)
                     self.seen = stamp
                     self.core.replace_cloud(cloud)

@@ -19,8 +19,8 @@ import numpy as np
 
 from ..errors import BackendUnavailableError
 from ..render.camera import Camera
-from ..render.renderer import render_frame
 from ..render.settings import RenderSettings
+from .session import view_frame
 
 _HINT = "install with: pip install 'gigapoint[window]' (rendercanvas + glfw) and run on a desktop with a display"
 
@@ -81,7 +81,7 @@ class PointCloudWindow:
 
     def draw(self) -> None:
         w, h = self.canvas.get_physical_size()
-        frame = render_frame(self.cloud, self.orbit.camera(max(w, 1), max(h, 1)), self.settings)
+        frame = view_frame(self.cloud, self.orbit.camera(max(w, 1), max(h, 1)), self.settings)
         self.last_frame = frame
         self._context.set_bitmap(frame.image)
         s = frame.stats

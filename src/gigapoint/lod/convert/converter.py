@@ -8,14 +8,13 @@ import errno
 import os
 import shutil
 import time
-import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 from ...core import pages
 from ...core.renderable import PointSource
-from ...errors import GigapointError, GigapointWarning, InputError, check_switch
+from ...errors import GigapointError, GigapointWarning, InputError, check_switch, warn
 from ...io._base import check_file, headers_once
 from ...io.registry import is_supported_name
 from ..build import SAMPLERS
@@ -283,8 +282,8 @@ def convert(
         if not inputs.colors_exact:  # gp.open's colors="auto": its octree's colours were up to 12/255 off the file's, without a word
             files = ", ".join(str(f) for f in inputs.source_files)
             exact = f"convert its files ({files}) or open them with colors='rgba'" if files else "make the cloud with colors='rgba'"
-            warnings.warn(f"{inputs.name}: the cloud holds its colours approximated (RGB565 or a palette), so the octree gets those; "
-                          f"{exact} for exact colours", GigapointWarning, stacklevel=2)  # fmt: skip
+            warn(f"{inputs.name}: the cloud holds its colours approximated (RGB565 or a palette), so the octree gets those; "
+                          f"{exact} for exact colours", GigapointWarning)  # fmt: skip
         inputs = inputs.chunks()
     elif not isinstance(inputs, (str, os.PathLike, GrownTree, Iterable)):
         raise InputError(f"convert: inputs are files, folders, a cloud or PointChunks, got a {type(inputs).__name__}")

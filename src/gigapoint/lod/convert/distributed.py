@@ -50,7 +50,6 @@ import sys
 import tempfile
 import threading
 import time
-import warnings
 import weakref
 from contextlib import contextmanager
 from pathlib import Path
@@ -60,7 +59,7 @@ import numpy as np
 from ...atomic import atomic_json, atomic_open
 from ...core import pages
 from ...core.chunk import ColorScaler, warn_dropped_attributes
-from ...errors import GigapointError, GigapointWarning
+from ...errors import GigapointError, GigapointWarning, warn
 from ...io._base import one_line
 from ...io.las import with_scan_angle
 from ...io.registry import reader_for
@@ -703,7 +702,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             reader = reader_for(p)
             n = reader.point_count(p)  # (the header's; None where it has none: text)
             if n == 0 and len(self.paths) > 1:  # an empty tile of any format: skipped, as one process skips it (read._skipped_if_empty)
-                warnings.warn(skipped_message(p), GigapointWarning, stacklevel=2)
+                warn(skipped_message(p), GigapointWarning)
                 continue
             if n and getattr(reader, "reads_ranges", False):
                 reads += [[f, s, min(s + step, n), None] for s in range(0, n, step)]
@@ -736,7 +735,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
                 sample = res.pop("preview")
                 results[str(todo[i])] = res
                 if res.get("empty"):  # a file that had no count in its header
-                    warnings.warn(skipped_message(self.paths[st["reads"][todo[i]][0]]), GigapointWarning, stacklevel=2)
+                    warn(skipped_message(self.paths[st["reads"][todo[i]][0]]), GigapointWarning)
                 if not again:
                     self.progress.advance(res["input"])
                     if sample is not None:

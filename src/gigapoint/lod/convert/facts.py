@@ -5,11 +5,9 @@ in the state (``state["source"]``)."""
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
-from ...errors import GigapointWarning
+from ...errors import GigapointWarning, warn
 from ...io.las import LasReader, read_las_header
 from ...io.registry import reader_for
 from ..copc import wkt_of
@@ -58,8 +56,8 @@ def input_facts(paths) -> dict:
                 crs = text
                 wkt = wkt_of(read_las_header(p).vlrs) or _wkt_of(text)  # the header's VLRs: the first CRS's file only
     if len(crs_seen) > 1:
-        warnings.warn(
-            f"the inputs have {len(crs_seen)} different CRSs; the output takes the first ({crs[:60]})", GigapointWarning, stacklevel=3
+        warn(
+            f"the inputs have {len(crs_seen)} different CRSs; the output takes the first ({crs[:60]})", GigapointWarning
         )
     return {
         "crs": crs,

@@ -4,14 +4,13 @@ conversion's preview sampled on the way (../preview.py)."""
 from __future__ import annotations
 
 import time
-import warnings
 from functools import cached_property
 
 import numpy as np
 
 from ...core.chunk import PointChunk, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
-from ...errors import EmptyCloudError, GigapointError, GigapointWarning, InputError
+from ...errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, warn
 from ...io import files_label, read_chunks, scan_angles_differ
 from ...io.las import with_scan_angle
 from ...io.registry import reader_for
@@ -41,7 +40,7 @@ def _skipped_if_empty(path, chunks, several: bool, skipped: list | None = None):
         if skipped is not None:
             skipped.append(str(path))
         else:
-            warnings.warn(skipped_message(path), GigapointWarning, stacklevel=2)
+            warn(skipped_message(path), GigapointWarning)
 
 
 def skipped_message(path) -> str:
@@ -235,10 +234,9 @@ class ReadPhase(Job):
         if st.get("points", 0) == 0:  # the plain cloud's error, naming the files as it does
             check_valid_count(files_label(self.paths) if self.paths else self.name, 0, st.get("skipped", 0))
         if st.get("skipped"):
-            warnings.warn(  # named as the error above names them (self.name is a file's stem)
+            warn(  # named as the error above names them (self.name is a file's stem)
                 f"{files_label(self.paths) if self.paths else self.name}: skipped {st['skipped']:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})",
                 GigapointWarning,
-                stacklevel=4,
             )
         edge = float(np.max(hi - lo))
         st.setdefault("source", input_facts(self.paths or self.source_files))  # CRS, LAS grid, colors: for outputs that hold them

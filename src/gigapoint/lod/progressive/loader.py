@@ -34,7 +34,7 @@ from ...core.chunk import PointChunk, join_chunks
 from ...core.chunked import physical_memory
 from ...core.cloud import check_valid_count
 from ...core.threads import SMALL_BATCH
-from ...errors import GigapointError, InputError, MemoryLimitError, keep_warnings
+from ...errors import GigapointError, InputError, MemoryLimitError, keep_warnings, outside_stacklevel
 from ...io import human_bytes
 from ...io._base import headers_once
 from ..convert.prefetch import prefetch
@@ -200,7 +200,7 @@ class Loader:
         first, or when ``close`` stopped the load part-way (it said True, as though complete);
         raises the load's error, after issuing its warnings (``issue_warnings``)."""
         finished = self._done.wait(timeout)
-        self.issue_warnings(stacklevel=3)  # (at the line that called the octree's wait)
+        self.issue_warnings()
         if self.error is not None:
             raise self.error
         return finished and self.complete
@@ -211,16 +211,16 @@ class Loader:
         self._first_in.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join()
-        self.issue_warnings(stacklevel=3)
+        self.issue_warnings()
 
-    def issue_warnings(self, stacklevel: int = 1) -> None:
+    def issue_warnings(self) -> None:
         """Issue the load's warnings not issued yet, each once and in order, in this (the caller's)
-        thread, where its filters and catches apply."""
+        thread, where its filters and catches apply, at the caller's line (errors.outside_stacklevel)."""
         with self._issuing:
             new = self.warnings[self._issued :]
             self._issued += len(new)
         for message, category in new:
-            warnings.warn(message, category, stacklevel=stacklevel + 1)
+            warnings.warn(message, category, stacklevel=outside_stacklevel())
 
 
 def _of_source(exc: InputError, label: str, source: str) -> InputError:

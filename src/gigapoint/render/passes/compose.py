@@ -21,13 +21,12 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 from dataclasses import replace
 
 import numpy as np
 
 from ...core.layout import EMPTY_PIXEL
-from ...errors import GigapointWarning, SettingsError
+from ...errors import GigapointWarning, SettingsError, warn
 from ..backend import get_backend
 from ..camera import MAX_IMAGE_SIDE
 from ..frame import Frame, RenderStats, check_indexable
@@ -191,7 +190,7 @@ def stereo_frame(cloud, camera, settings, render_one) -> Frame:
     if stats.visible_pixels == 0 and (multi is not None or all(f.stats.visible_pixels for f in frames)):
         wide = settings.ipd is not None and abs(h) >= w
         why = f" (each eye's image moves {abs(h)} px of {w}: ipd {ipd:g} world units is wide for this scene)" if wide else ""
-        warnings.warn(f"{cloud.name}: no point is in view of the stereo camera{why}; the image shows only the background", GigapointWarning, stacklevel=4)
+        warn(f"{cloud.name}: no point is in view of the stereo camera{why}; the image shows only the background", GigapointWarning)
     # the buffers both eyes' indices name (point_info was None for every pixel); none where an
     # octree's arena was refilled between the eyes (the first eye's indices name other points now)
     left, right = frames
