@@ -15,13 +15,12 @@ import os
 import secrets
 import threading
 import time
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..core.layout import EMPTY_PIXEL
-from ..errors import GigapointError, warnings_kept
+from ..errors import GigapointError, warn, warnings_kept
 from ..render.camera import sample_points
 from ..render.frame import Frame, encode_image
 from ..render.renderer import render_frame
@@ -66,7 +65,7 @@ def view_frame(cloud, camera, settings) -> Frame:
         frame = render_frame(cloud, camera, settings)
     for message, category in said:
         if "no point is in view" not in message:
-            warnings.warn(message, category, stacklevel=2)
+            warn(message, category)
     return frame
 
 

@@ -23,7 +23,6 @@ from __future__ import annotations
 import contextvars
 import threading
 import time
-import warnings
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
@@ -34,7 +33,7 @@ from ...core.chunk import PointChunk, join_chunks
 from ...core.chunked import physical_memory
 from ...core.cloud import check_valid_count
 from ...core.threads import SMALL_BATCH
-from ...errors import GigapointError, InputError, MemoryLimitError, keep_warnings, outside_stacklevel
+from ...errors import GigapointError, InputError, MemoryLimitError, keep_warnings, warn
 from ...io import human_bytes
 from ...io._base import headers_once
 from ..convert.prefetch import prefetch
@@ -220,7 +219,7 @@ class Loader:
             new = self.warnings[self._issued :]
             self._issued += len(new)
         for message, category in new:
-            warnings.warn(message, category, stacklevel=outside_stacklevel())
+            warn(message, category)
 
 
 def _of_source(exc: InputError, label: str, source: str) -> InputError:
