@@ -288,7 +288,19 @@ def at_scale(position, scale) -> list[float]:
     LAS file's, per axis; None: as it is), so it reads as the file wrote it."""
     if scale is None:
         return [float(v) for v in position]
-    return [round(float(v), scale_decimals(s)) for v, s in zip(position, scale)]
+    return [round(float(v), value_decimals(float(v), s)) for v, s in zip(position, scale)]
+
+
+def value_decimals(value: float, scale: float) -> int:
+    """Decimals that show ``value``, a coordinate stored at resolution ``scale``: the scale's
+    (scale_decimals), more where the value lies off that decimal grid by over 1e-4 of a
+    step: its file's offset does (PDAL's offset 'auto', 637000.123456 at scale 0.001 was shown
+    rounded to 3 decimals, up to half a step from the file's value)."""
+    scale = abs(scale)
+    d = scale_decimals(scale)
+    while d < 12 and abs(round(value, d) - value) > 1e-4 * scale:  # (positions held compact are within 2e-5 steps)
+        d += 1
+    return d
 
 
 def scale_decimals(scale: float) -> int:

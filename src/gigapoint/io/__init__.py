@@ -20,12 +20,12 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from ..core.chunk import PointChunk
-from ..core.cloud import PointCloud, build_cloud, scale_decimals
-from ..errors import EmptyCloudError, GigapointWarning, InputError, check_switch, warn
-from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail, headers_once
+from ..core.cloud import PointCloud, build_cloud, value_decimals
+from ..errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, check_switch, warn
+from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail, headers_once, read_once
 from .demo import demo_arrays, demo_chunks
 from .http import shown_url
-from .las import LasReader, read_las_header, with_scan_angle
+from .las import LasReader, read_las_header, vlrs_crs, with_scan_angle
 from .registry import is_supported_name, reader_for, readers, register, supported_suffixes
 
 
@@ -111,6 +111,38 @@ def scan_angles_differ(files) -> bool:
     return len(las) > 1 and len({read_las_header(f, salvage=True).point_format >= 6 for f in las}) == 2
 
 
+#: The EPSG code a WKT CRS ends with (WKT1 AUTHORITY, WKT2 ID): the whole CRS's, not a part's
+WKT_EPSG = re.compile(r'(?:AUTHORITY|ID)\[\s*"EPSG"\s*,\s*"?(\d+)"?\s*\]\s*\]\s*$', re.IGNORECASE)
+
+#: The name a WKT CRS starts with (PROJCS["WGS 84 / UTM zone 10N",...)
+WKT_NAME = re.compile(r'\s*[A-Z_]+\[\s*"([^"]+)"')
+
+
+def warn_mixed_crs(files, then: str = "") -> None:
+    """Warn where LAS/LAZ files read as one cloud name different CRSs: their coordinates are used
+    as they are, nothing is reprojected, so such tiles do not line up (``then``: what follows,
+    added to the message). Once an operation (``headers_once``: open_sized reads the files twice)."""
+    if len(files) < 2:
+        return
+    first: dict = {}  # CRS (its EPSG code where a WKT ends with one): the first file naming it
+    for f in files:
+        try:  # (the header the read uses: no second open; salvage: as scan_angles_differ)
+            crs = vlrs_crs(read_las_header(f, salvage=True).vlrs) if isinstance(reader_for(f), LasReader) else None
+        except GigapointError:  # a bad file: reading its points says so, in its own words
+            continue
+        if crs:
+            code = WKT_EPSG.search(crs)  # the same CRS as WKT in one tile, as GeoTIFF keys in another
+            first.setdefault(f"EPSG:{code.group(1)}" if code else crs, f)
+    if len(first) < 2:
+        return
+    named = "; ".join(f"{Path(f).name}: {crs[:60]}" for crs, f in list(first.items())[:3])
+    message = (
+        f"the files name {len(first)} different CRSs ({named}{'; ...' if len(first) > 3 else ''}): "
+        f"their coordinates are used as they are, not reprojected, so they do not line up{then}"
+    )
+    read_once("mixed CRSs", "\n".join(map(str, files)), lambda: warn(message, GigapointWarning))
+
+
 def _with_progress(path: Path, chunks: Iterator[PointChunk], total: int | None, progress) -> Iterator[PointChunk]:
     task = progress.add_task(path.name, total=total)
     for chunk in chunks:
@@ -167,6 +199,7 @@ def open_cloud(
         check_room(name, counted, IN_MEMORY_BYTES_MIN, instead=instead + ", or build it in bounded memory (chunked=True)")
 
     one_angle = scan_angles_differ(files)
+    warn_mixed_crs(files)
 
     def chunks(bar=None) -> Iterator[PointChunk]:
         for (f, reader), count in zip(plan, counts):
@@ -228,7 +261,7 @@ def _coords(values, scale=None) -> str:
     for axis, v in enumerate(values):
         v = float(v)
         if scale is not None:
-            out.append(f"{v:.{scale_decimals(abs(float(scale[axis])))}f}")
+            out.append(f"{v:.{value_decimals(v, float(scale[axis]))}f}")
         else:
             out.append(f"{v:.3f}" if abs(v) >= 1 or v == 0 else f"{v:.6g}")
     return ", ".join(out)
@@ -257,13 +290,14 @@ def format_info(info: dict) -> str:
     attrs = info.get("attributes") or []
     lines.append(f"  attributes:  {', '.join(attrs) if attrs else 'none'}")
     if info.get("scale") is not None:
-        lines.append(f"  scale:       {', '.join(f'{v:g}' for v in info['scale'])}")
+        lines.append(f"  scale:       {', '.join(f'{v:.15g}' for v in info['scale'])}")
     if info.get("offset") is not None:
-        lines.append(f"  offset:      {', '.join(f'{v:.10g}' for v in info['offset'])}")
+        lines.append(f"  offset:      {', '.join(f'{v:.15g}' for v in info['offset'])}")
     if info.get("crs") or info.get("las_version"):
         crs = info.get("crs")
-        if crs and len(crs) > 100:
-            crs = crs[:97] + "..."
+        name, code = WKT_NAME.match(crs or ""), WKT_EPSG.search(crs or "")
+        if name:  # a WKT: its name and EPSG code (the code ends it, past where 100 characters cut it)
+            crs = f"{name.group(1)} ({f'EPSG:{code.group(1)}' if code else 'WKT'})"
         lines.append(f"  crs:         {crs or 'unknown'}")
     if info.get("generating_software"):
         lines.append(f"  software:    {info['generating_software']}")
@@ -301,4 +335,5 @@ __all__ = [
     "readers",
     "register",
     "supported_suffixes",
+    "warn_mixed_crs",
 ]

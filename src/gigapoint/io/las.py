@@ -509,6 +509,38 @@ def _laspy_open(path: Path, hdr: LasHeader):
     return laspy.open(str(path), read_evlrs=hdr.evlrs_cut is None)
 
 
+PROJECTION_USER_ID = b"LASF_Projection"
+WKT_RECORD = 2112
+GEOKEYS_RECORD = 34735
+
+
+def wkt_of(vlrs) -> str | None:
+    """The WKT CRS of a LAS 1.4 file's VLRs ((user_id, record_id, data) each: LASF_Projection 2112), None without one."""
+    for user, rec, data in vlrs:
+        if user == PROJECTION_USER_ID and rec == WKT_RECORD:
+            text = data.split(b"\0")[0].decode("utf-8", "replace").strip()
+            if text:
+                return text
+    return None
+
+
+def vlrs_crs(vlrs) -> str | None:
+    """The CRS VLRs name (as wkt_of's): their WKT, else 'EPSG:n' of their GeoTIFF keys' projected
+    or geographic CRS code; None without either."""
+    wkt = wkt_of(vlrs)
+    if wkt:
+        return wkt
+    for user, rec, data in vlrs:
+        if user == PROJECTION_USER_ID and rec == GEOKEYS_RECORD and len(data) >= 8:
+            n = min(_u("H", data, 6)[0], len(data) // 8 - 1)  # (the key count after 3 version words)
+            keys = {k: (loc, value) for k, loc, _, value in struct.iter_unpack("<4H", data[8 : 8 + 8 * n])}
+            for key_id in (3072, 2048):  # ProjectedCSTypeGeoKey, GeographicTypeGeoKey
+                loc, value = keys.get(key_id, (1, 0))
+                if loc == 0 and 0 < value < 32767:  # (a value held in place; 32767: user-defined)
+                    return f"EPSG:{value}"
+    return None
+
+
 def _parse_crs(header) -> str | None:
     """CRS of a laspy header as 'EPSG:n' or WKT; through pyproj when installed, else from the VLRs."""
     try:
@@ -523,22 +555,8 @@ def _parse_crs(header) -> str | None:
         if crs is not None:
             epsg = crs.to_epsg()
             return f"EPSG:{epsg}" if epsg else crs.to_wkt()
-    records = list(header.vlrs)
-    if header.evlrs is not None:
-        records += list(header.evlrs)
-    for rec in records:
-        if type(rec).__name__ == "WktCoordinateSystemVlr":
-            text = rec.string.strip("\0 ").strip()
-            if text:
-                return text
-    for rec in records:
-        if type(rec).__name__ == "GeoKeyDirectoryVlr":
-            keys = {k.id: k for k in rec.geo_keys}
-            for key_id in (3072, 2048):  # ProjectedCSTypeGeoKey, GeographicTypeGeoKey
-                k = keys.get(key_id)
-                if k is not None and k.tiff_tag_location == 0 and 0 < k.value_offset < 32767:
-                    return f"EPSG:{k.value_offset}"
-    return None
+    records = [r for r in list(header.vlrs) + list(header.evlrs or []) if r.user_id == PROJECTION_USER_ID.decode()]  # (laspy writes no COPC record)
+    return vlrs_crs([(PROJECTION_USER_ID, r.record_id, r.record_data_bytes()) for r in records])
 
 
 @njit(parallel=True, cache=True)

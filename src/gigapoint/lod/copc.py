@@ -27,7 +27,7 @@ from ..core.chunk import safe_attribute_name
 from ..errors import GigapointWarning, InputError, warn
 from ..io import laz_process
 from ..io.http import ByteSource, HttpFile, LocalFile, open_source
-from ..io.las import _scaled_xyz, read_las_header
+from ..io.las import _scaled_xyz, read_las_header, wkt_of
 from .store import check_grid, tight_bounds
 from .voxel_octree import VOXEL_KEY_DTYPE, VoxelOctree, valid_voxels, voxel_name, voxel_to_key
 
@@ -138,8 +138,6 @@ COPC_INFO_RECORD = 1
 COPC_HIERARCHY_RECORD = 1000
 LASZIP_USER_ID = b"laszip encoded"
 LASZIP_RECORD = 22204
-PROJECTION_USER_ID = b"LASF_Projection"
-WKT_RECORD = 2112
 EXTRA_BYTES_USER_ID = b"LASF_Spec"
 EXTRA_BYTES_RECORD = 4
 #: One Extra Bytes descriptor (LAS 1.4 R15 section 2.5.4: 192 bytes), naming bytes that follow
@@ -285,16 +283,6 @@ def read_vlrs(data: bytes, start: int, count: int, end: int, header=VLR_HEADER_D
         out.append((bytes(h["user_id"]).rstrip(b"\0"), int(h["record_id"]), data[pos : pos + n]))
         pos += n
     return out
-
-
-def wkt_of(vlrs) -> str | None:
-    """The WKT CRS of a LAS 1.4 file's VLRs (LASF_Projection 2112), None without one."""
-    for user, rec, data in vlrs:
-        if user == PROJECTION_USER_ID and rec == WKT_RECORD:
-            text = data.split(b"\0")[0].decode("utf-8", "replace").strip()
-            if text:
-                return text
-    return None
 
 
 # --------------------------------------------------------------------------- reader

@@ -24,7 +24,7 @@ from numba import njit
 
 from ..atomic import atomic_open
 from ..errors import GigapointWarning, warn
-from ..io.las import scan_angle_units
+from ..io.las import PROJECTION_USER_ID, WKT_RECORD, scan_angle_units
 from .copc import (
     COPC_HIERARCHY_RECORD,
     COPC_INFO_DTYPE,
@@ -41,9 +41,7 @@ from .copc import (
     LASZIP_RECORD,
     LASZIP_USER_ID,
     POINT_DTYPES,
-    PROJECTION_USER_ID,
     VLR_HEADER_DTYPE,
-    WKT_RECORD,
     field_attributes,
 )
 from .grid import output_grid
@@ -421,6 +419,12 @@ def write_copc_sets(path: Path, sources: list[Path], st: dict, progress, page_le
     origin, edge = np.array(st["origin"], np.float64), float(st["edge"])
     scale, offset = output_grid(st)
     fmt = choose_point_format(attrs, src.get("has_color", True))
+    if src.get("crs") and not src.get("wkt"):  # LAS 1.2 GeoTIFF keys: their EPSG code, no WKT, and no pyproj to make one
+        warn(
+            f"{path}: the inputs' CRS ({src['crs'][:60]}) is not written: COPC holds a CRS as WKT only, and making WKT "
+            "of an EPSG code needs pyproj (pip install pyproj)",
+            GigapointWarning,
+        )
 
     def nodes():
         for d in sources:

@@ -5,12 +5,14 @@ in the state (``state["source"]``)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from ...errors import GigapointWarning, warn
-from ...io.las import LasReader, read_las_header
+from ...io import warn_mixed_crs
+from ...io.las import LasReader, read_las_header, wkt_of
 from ...io.registry import reader_for
-from ..copc import wkt_of
 
 
 def _wkt_of(text: str | None) -> str | None:
@@ -26,12 +28,33 @@ def _wkt_of(text: str | None) -> str | None:
         return None
 
 
-def input_facts(paths) -> dict:
+def _warn_off_grid(grids, scale, offset) -> None:
+    """Warn where LAS files' points are not on the output's grid (``scale``, ``offset``): whole
+    multiples of it, counted from the offset (PDAL's offset 'auto' gives each tile its own)."""
+
+    def steps_off(v):  # how far from a whole number of output steps, per axis
+        return np.abs(v / scale - np.round(v / scale))
+
+    off = [p for p, s, o in grids if np.any(steps_off(o - offset) > 1e-3) or np.any(steps_off(s) > 1e-3)]
+    if off:
+        first = Path(grids[0][0]).name
+        names = ", ".join(Path(p).name for p in off[:3]) + (f" and {len(off) - 3} more" if len(off) > 3 else "")
+        warn(
+            f"{names}: off the LAS grid the output stores every point on (scale {', '.join(f'{v:g}' for v in scale)}, "
+            f"offset {', '.join(f'{v:.15g}' for v in offset)}: {first}'s): their points move to it, by up to half a step "
+            f"({float(np.max(scale)) / 2:g})",
+            GigapointWarning,
+        )
+
+
+def input_facts(paths, one_grid: bool = False) -> dict:
     """{crs: 'EPSG:n' or WKT or None, wkt: WKT or None, scale, offset: the LAS inputs' grid (the
-    finest scale; the first file's offset) or None, has_color}. Read from headers only."""
+    finest scale; the first file's offset) or None, has_color}. Read from headers only.
+    ``one_grid``: the output holds every point as integers on that grid (Potree, COPC): a file
+    on another one (an offset off it by a fraction of a step) is warned about."""
     crs = wkt = scale = offset = None
     has_color = None
-    crs_seen = set()
+    grids = []  # (file, scale, offset) of the LAS inputs
     for p in paths or []:
         try:
             reader = reader_for(p)
@@ -49,16 +72,14 @@ def input_facts(paths) -> dict:
         s = np.abs(np.asarray(info["scale"], np.float64))  # a negative scale (a mirrored axis) was "source scale must be positive" inside
         scale = s if scale is None else np.minimum(scale, s)
         offset = np.asarray(info["offset"], np.float64) if offset is None else offset
+        grids.append((p, s, np.asarray(info["offset"], np.float64)))
         text = info.get("crs")
-        if text:
-            crs_seen.add(text)
-            if crs is None:
-                crs = text
-                wkt = wkt_of(read_las_header(p).vlrs) or _wkt_of(text)  # the header's VLRs: the first CRS's file only
-    if len(crs_seen) > 1:
-        warn(
-            f"the inputs have {len(crs_seen)} different CRSs; the output takes the first ({crs[:60]})", GigapointWarning
-        )
+        if text and crs is None:
+            crs = text
+            wkt = wkt_of(read_las_header(p).vlrs) or _wkt_of(text)  # the header's VLRs: the first CRS's file only
+    warn_mixed_crs(paths or [], then="; the output takes the first one's CRS")
+    if one_grid and grids:
+        _warn_off_grid(grids, scale, offset)
     return {
         "crs": crs,
         "wkt": wkt,

@@ -239,7 +239,7 @@ class ReadPhase(Job):
                 GigapointWarning,
             )
         edge = float(np.max(hi - lo))
-        st.setdefault("source", input_facts(self.paths or self.source_files))  # CRS, LAS grid, colors: for outputs that hold them
+        st.setdefault("source", input_facts(self.paths or self.source_files, one_grid=self.format != "gigapoint"))  # CRS, LAS grid, colors: for outputs that hold them
         st["compact"] = self.compact_plan()
         st.update(origin=lo.tolist(), edge=edge if edge > 0 else 1.0, phase="count")
         self.save_state()

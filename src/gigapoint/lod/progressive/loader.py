@@ -287,11 +287,12 @@ def file_sources(paths, cut_off: list | None = None) -> tuple[list, int | None, 
     are known when every file's header tells them (LAS/LAZ); the grid (ProgressiveOctree's) is
     the first file's offset and the finest scale (points of files on other grids stay wide)."""
     from ...core.cloud import finest_scale
-    from ...io import cloud_name, expand_paths, reader_for, scan_angles_differ
+    from ...io import cloud_name, expand_paths, reader_for, scan_angles_differ, warn_mixed_crs
     from ...io._base import DEFAULT_CHUNK_SIZE
     from ...io.las import with_scan_angle
 
     files = expand_paths(paths)
+    warn_mixed_crs(files)
     read = with_scan_angle if scan_angles_differ(files) else iter
     sources, total, lo, hi = [], 0, np.full(3, np.inf), np.full(3, -np.inf)
     bounds_known, offsets, scales = True, [], []

@@ -1,0 +1,194 @@
+"""Real-world coordinates: tiles with different CRSs opened or converted together are warned
+about (nothing is reprojected), tiles on different LAS grids merge at the files' values."""
+
+from __future__ import annotations
+
+import struct
+import warnings
+
+import laspy
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.errors import GigapointWarning
+
+UTM10_WKT = (
+    'PROJCS["WGS 84 / UTM zone 10N",GEOGCS["WGS 84",DATUM["WGS_1984",SPHEROID["WGS 84",6378137,298.257223563]],'
+    'PRIMEM["Greenwich",0],UNIT["degree",0.0174532925199433]],PROJECTION["Transverse_Mercator"],'
+    'PARAMETER["central_meridian",-123],PARAMETER["scale_factor",0.9996],PARAMETER["false_easting",500000],'
+    'UNIT["metre",1],AUTHORITY["EPSG","32610"]]'
+)
+
+
+def geokeys(epsg: int) -> laspy.VLR:
+    """A LAS 1.2 GeoTIFF key directory naming a projected CRS by its EPSG code."""
+    keys = [(1024, 0, 1, 1), (3072, 0, 1, epsg)]  # model type projected; ProjectedCSTypeGeoKey
+    data = struct.pack("<4H", 1, 1, 0, len(keys)) + b"".join(struct.pack("<4H", *k) for k in keys)
+    return laspy.VLR("LASF_Projection", 34735, "GeoKeyDirectoryTag", data)
+
+
+def write_tile(path, xyz, scale, offset, crs=None, version="1.2"):
+    header = laspy.LasHeader(point_format=6 if version == "1.4" else 0, version=version)
+    header.scales, header.offsets = np.array([scale] * 3), np.array(offset, np.float64)
+    if crs is not None:
+        header.vlrs.append(crs)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz.T
+    las.write(str(path))
+    return np.column_stack([las.x, las.y, las.z])  # the file's values: on its grid
+
+
+def tile_points(seed, x0):
+    rng = np.random.default_rng(seed)
+    return rng.uniform(0, 50, (2000, 3)) * [1, 1, 0.1] + [x0, 4_800_000.0, 100.0]
+
+
+def crs_warnings(caught) -> list[str]:
+    return [str(w.message) for w in caught if issubclass(w.category, GigapointWarning) and "CRS" in str(w.message)]
+
+
+@pytest.mark.parametrize("progressive", [False, True])
+def test_tiles_with_different_crs_are_warned_about(tmp_path, progressive):
+    """Two UTM zones' tiles drawn in one space: said once, with each file's CRS (it was silent)."""
+    write_tile(tmp_path / "a.las", tile_points(0, 500_000.0), 0.001, (500_000, 4_800_000, 0), geokeys(32610))
+    write_tile(tmp_path / "b.las", tile_points(1, 500_050.0), 0.001, (500_000, 4_800_000, 0), geokeys(32611))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cloud = gp.open(tmp_path, progressive=progressive)
+        if progressive:
+            cloud.wait()
+    assert cloud.n_points == 4000
+    said = crs_warnings(caught)
+    assert len(said) == 1, said
+    assert "2 different CRSs (a.las: EPSG:32610; b.las: EPSG:32611)" in said[0] and "not reprojected" in said[0]
+
+
+def test_one_crs_as_wkt_and_as_geokeys_is_not_warned_about(tmp_path):
+    """The same CRS (EPSG 32610) as a LAS 1.4 WKT in one tile and GeoTIFF keys in the other."""
+    wkt = laspy.VLR("LASF_Projection", 2112, "OGC WKT", UTM10_WKT.encode() + b"\0")
+    write_tile(tmp_path / "a.las", tile_points(0, 500_000.0), 0.001, (500_000, 4_800_000, 0), wkt, version="1.4")
+    write_tile(tmp_path / "b.las", tile_points(1, 500_050.0), 0.001, (500_000, 4_800_000, 0), geokeys(32610))
+    assert gp.io.file_info(tmp_path / "a.las")["crs"].startswith('PROJCS["WGS 84 / UTM zone 10N"')
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gp.open(tmp_path)
+    assert crs_warnings(caught) == []
+
+
+def test_convert_of_tiles_with_different_crs_warns_once(tmp_path):
+    write_tile(tmp_path / "a.las", tile_points(0, 500_000.0), 0.001, (500_000, 4_800_000, 0), geokeys(32610))
+    write_tile(tmp_path / "b.las", tile_points(1, 500_050.0), 0.001, (500_000, 4_800_000, 0), geokeys(32611))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gp.convert([tmp_path / "a.las", tmp_path / "b.las"], tmp_path / "out")
+    said = crs_warnings(caught)
+    assert len(said) == 1 and "a.las: EPSG:32610; b.las: EPSG:32611" in said[0] and "the output takes the first one's CRS" in said[0]
+
+
+def test_tiles_on_different_las_grids_merge_at_the_files_values(tmp_path):
+    """Same CRS, different scales and offsets: every point where its file puts it (to 1e-7 m)."""
+    a = write_tile(tmp_path / "a.las", tile_points(0, 637_000.0), 0.001, (637_000, 4_800_000, 0), geokeys(32610))
+    b = write_tile(tmp_path / "b.las", tile_points(1, 637_050.0), 0.0001, (637_049.12345, 4_799_999.5, 99.98765), geokeys(32610))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        got = gp.open(tmp_path).positions()
+    assert crs_warnings(caught) == []
+    want = np.concatenate([a, b])
+    got, want = got[np.lexsort(got.T)], want[np.lexsort(want.T)]
+    assert np.abs(got - want).max() < 1e-7
+
+
+def test_copc_of_a_geotiff_keyed_file_keeps_its_crs_or_says_why(tmp_path):
+    """COPC holds a CRS as WKT only: a LAS 1.2 file's GeoTIFF keys (EPSG:32610) become WKT through
+    pyproj; without it the output had no CRS and nothing said so."""
+    try:
+        import pyproj
+    except ImportError:
+        pyproj = None
+    write_tile(tmp_path / "a.las", tile_points(0, 500_000.0), 0.001, (500_000, 4_800_000, 0), geokeys(32610))
+    out = tmp_path / "a.copc.laz"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gp.convert([tmp_path / "a.las"], out)
+    said = [str(w.message) for w in caught if "is not written" in str(w.message)]
+    if pyproj is not None:
+        assert said == [] and "32610" in gp.open(out).meta["crs"]
+    else:
+        assert gp.open(out).meta["crs"] is None
+        assert len(said) == 1 and "the inputs' CRS (EPSG:32610) is not written" in said[0] and "pip install pyproj" in said[0]
+
+
+def test_info_shows_offsets_to_the_scale_and_a_wkt_crs_by_name_and_code(tmp_path):
+    """An ECEF offset at 0.1 mm printed whole (10 digits cut 4200000.1234 to 4200000.123); a WKT
+    CRS by its name and EPSG code (the first 100 characters of the WKT cut the code off)."""
+    from gigapoint.io import file_info, format_info
+
+    ecef = write_tile(tmp_path / "ecef.las", tile_points(0, 0.0) - [0, 4_800_000, 0] + [4_200_000.5, 900_000.5, 4_700_000.5], 0.0001,
+                      (4_200_000.1234, 900_000.5678, 4_700_000.9012))  # fmt: skip
+    text = format_info(file_info(tmp_path / "ecef.las"))
+    assert "offset:      4200000.1234, 900000.5678, 4700000.9012" in text
+    assert f"bounds min:  {ecef[:, 0].min():.4f}, " in text and "crs:         unknown" in text
+    wkt = laspy.VLR("LASF_Projection", 2112, "OGC WKT", UTM10_WKT.encode() + b"\0")
+    write_tile(tmp_path / "utm.las", tile_points(0, 500_000.0), 0.001, (500_000, 4_800_000, 0), wkt, version="1.4")
+    assert "crs:         WGS 84 / UTM zone 10N (EPSG:32610)\n" in format_info(file_info(tmp_path / "utm.las"))
+
+
+@pytest.mark.parametrize("progressive", [False, True])
+def test_picked_position_is_the_files_value_where_its_offset_is_off_the_scales_decimals(tmp_path, progressive):
+    """PDAL's offset 'auto' (the data's minimum: 637000.123456 at scale 0.001): a pick showed the
+    position rounded to 3 decimals, up to half a step (0.5 mm) from the file's value."""
+    from gigapoint.io import file_info, format_info
+
+    written = write_tile(tmp_path / "auto.las", tile_points(3, 637_000.0), 0.001, (637_000.123456, 4_800_000.654321, 100.0123))
+    cloud = gp.open(tmp_path / "auto.las", progressive=progressive)
+    if progressive:
+        cloud.wait()
+    frame = gp.render_frame(cloud, width=160, height=120, size_mode="fixed")
+    picked = [frame.point_info(i)["position"] for i in np.unique(frame.index[frame.index >= 0])[:200]]
+    assert len(picked) == 200
+    for p in picked:  # each the file's value as its float prints (no noise digits), none rounded off it
+        assert np.abs(written - p).max(axis=1).min() < 1e-9, p
+        assert all(len(repr(v).split(".")[1]) <= 6 for v in p), p
+    lo = written.min(axis=0)
+    assert f"bounds min:  {lo[0]:.6f}, {lo[1]:.6f}, {lo[2]:.4f} (header)" in format_info(file_info(tmp_path / "auto.las"))
+
+
+@pytest.mark.parametrize("fmt", ["potree", "copc", "gigapoint"])
+def test_convert_says_where_a_tile_is_off_the_outputs_las_grid(tmp_path, fmt):
+    """Potree and COPC hold every point as integers on one grid (the finest scale, the first
+    file's offset): a tile whose offset is off it by a fraction of a step (PDAL's offset 'auto')
+    has its points moved up to half a step, which was silent. The gigapoint format keeps them."""
+    write_tile(tmp_path / "a.las", tile_points(0, 637_000.0), 0.001, (637_000.123456, 4_800_000.654321, 100.0123))
+    write_tile(tmp_path / "b.las", tile_points(1, 637_050.0), 0.001, (637_050.987654, 4_800_000.111111, 100.00077))
+    write_tile(tmp_path / "c.las", tile_points(2, 637_100.0), 0.0001, (637_100.123456, 4_800_000.154321, 100.0124))  # on a's grid
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gp.convert([tmp_path / "a.las", tmp_path / "b.las", tmp_path / "c.las"], tmp_path / ("out.copc.laz" if fmt == "copc" else "out"), format=fmt)
+    said = [str(w.message) for w in caught if "LAS grid" in str(w.message)]
+    if fmt == "gigapoint":
+        assert said == []
+    else:
+        want = (
+            "b.las: off the LAS grid the output stores every point on (scale 0.0001, 0.0001, 0.0001, offset 637000.123456, "
+            "4800000.654321, 100.0123: a.las's): their points move to it, by up to half a step (5e-05)"
+        )
+        assert said == [want]
+
+
+def test_an_object_at_ecef_coordinates_renders_as_at_the_origin(tmp_path):
+    """A 1 m sheet sampled at 1 cm, 0.1 mm scale, at (4.2e6, 0.9e6, 4.7e6) and at the origin, seen
+    from 0.3 m: the same pixels (float64 camera-relative matrices: no jitter, no coarser grid)."""
+    g = np.arange(0, 1.0001, 0.01)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    sheet = np.column_stack([x.ravel(), y.ravel(), 0.05 * np.sin(12 * x.ravel())])
+    shift = np.array([4_200_000.12, 900_000.57, 4_700_000.9])
+    write_tile(tmp_path / "origin.las", sheet, 0.0001, (0, 0, 0))
+    write_tile(tmp_path / "ecef.las", sheet + shift, 0.0001, np.floor(shift))
+    frames = []
+    for name, at in (("origin", 0.0), ("ecef", shift)):
+        cam = gp.Camera.look_at(np.add((0.3, 0.2, 0.3), at), np.add((0.35, 0.3, 0.0), at), up=(0, 0, 1), width=200, height=150)
+        frames.append(gp.render_frame(gp.open(tmp_path / f"{name}.las"), cam, size_mode="fixed"))
+    assert (frames[0].index >= 0).sum() > 500
+    np.testing.assert_array_equal(frames[0].index >= 0, frames[1].index >= 0)
+    np.testing.assert_array_equal(frames[0].depth, frames[1].depth)
