@@ -110,6 +110,45 @@ def test_ply_16bit_and_float_colors(tmp_path):
     np.testing.assert_array_equal(collect(p)[2][:, :3], rgb)
 
 
+@pytest.mark.parametrize("text,byte_order,kind", [(False, "<", "f4"), (False, ">", "f4"), (True, "=", "f4"), (False, "<", "u4")])
+def test_ply_pcl_packed_rgb_is_the_colour(tmp_path, text, byte_order, kind):
+    """PCL writes a PointXYZRGB's colour as one 4-byte 'rgb' (0x00RRGGBB: a float32's bits) or
+    a uint 'rgba': they were an attribute of nonsense numbers, the points drawn grey."""
+    xyz, rgb = ref_points(40)
+    name = "rgb" if kind == "f4" else "rgba"
+    v = np.zeros(40, [("x", "f4"), ("y", "f4"), ("z", "f4"), (name, kind)])
+    v["x"], v["y"], v["z"] = xyz.T
+    packed = (rgb[:, 0].astype(np.uint32) << 16) | (rgb[:, 1].astype(np.uint32) << 8) | rgb[:, 2] | (np.uint32(255) << 24 if kind == "u4" else 0)
+    v[name] = packed.view(np.dtype(kind))
+    p = tmp_path / "pcl.ply"
+    PlyData([PlyElement.describe(v, "vertex")], text=text, byte_order=byte_order).write(str(p))
+    _, _, rgba, attrs = collect(p)
+    np.testing.assert_array_equal(rgba[:, :3], rgb)
+    assert (rgba[:, 3] == 255).all() and attrs == {}
+    info = file_info(p)
+    assert info["has_color"] and info["attributes"] == []
+    assert reader_for(p).header(p) == {"point_count": 40, "has_color": True, "attributes": []}
+
+
+def test_ply_gaussian_splat_drawn_in_its_f_dc_colours(tmp_path):
+    """A 3D Gaussian splat PLY (f_dc_0..2, opacity, scale_*, rot_*, f_rest_*) was drawn grey: its
+    colour is 0.5 + 0.28209479 * f_dc, clamped to 0..1; every field stays an attribute."""
+    fields = ["nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", *(f"f_rest_{i}" for i in range(45)), "opacity",
+              "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]  # fmt: skip
+    v = np.zeros(5, [("x", "f4"), ("y", "f4"), ("z", "f4"), *((f, "f4") for f in fields)])
+    v["x"] = np.arange(5)
+    v["f_dc_0"] = [-2, -1, 0, 1, 2]  # 0.5 + 0.282 * f_dc: -0.06 0.22 0.5 0.78 1.06
+    v["f_dc_1"] = np.nan  # (a NaN: 0.5)
+    v["f_dc_2"] = 1.7724539  # 1 / (2 * 0.28209479): exactly 1
+    v["opacity"] = 3.5
+    p = tmp_path / "splat.ply"
+    PlyData([PlyElement.describe(v, "vertex")]).write(str(p))
+    chunks, _, rgba, attrs = collect(p)
+    np.testing.assert_array_equal(rgba, [[0, 128, 255, 255], [56, 128, 255, 255], [128, 128, 255, 255], [199, 128, 255, 255], [255, 128, 255, 255]])
+    assert list(attrs) == fields and (attrs["opacity"] == 3.5).all() and attrs["f_dc_0"][0] == -2
+    assert file_info(p)["has_color"] and file_info(p)["attributes"] == fields
+
+
 def test_ply_list_property_in_vertex_falls_back_to_plyfile(tmp_path):
     xyz, _ = ref_points(30)
     v = np.zeros(30, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("tags", "O")])

@@ -200,6 +200,17 @@ def rows_to_chunk(path: Path, names: list[str], columns: list[np.ndarray], scale
     return PointChunk(xyz, rgba, attributes)
 
 
+def unpack_rgb(packed: np.ndarray) -> np.ndarray | None:
+    """(N, 3) uint8 of PCL's packed colours, a 4-byte ``rgb``/``rgba`` field holding 0x..RRGGBB
+    (a float32's bits in a float field; the top byte, rgba's alpha, left out: opaque points),
+    or None for a field of another size."""
+    packed = np.ascontiguousarray(packed)
+    if packed.dtype.itemsize != 4:
+        return None
+    v = packed.view(np.dtype(np.uint32).newbyteorder(packed.dtype.byteorder))  # a big-endian message's colours were byte-swapped
+    return np.stack([(v >> 16) & 255, (v >> 8) & 255, v & 255], axis=1).astype(np.uint8)
+
+
 def color_names(names: list[str]) -> list[str]:
     lower = [n.lower() for n in names]
     for keys in (("red", "green", "blue", "alpha"), ("r", "g", "b", "a"), ("diffuse_red", "diffuse_green", "diffuse_blue", "diffuse_alpha")):

@@ -5,7 +5,8 @@ properties is memory-mapped and copied chunk by chunk; ascii vertex lines are pa
 chunk by chunk with numpy.loadtxt. Anything else (list properties before or inside the
 vertex element) falls back to plyfile reading the whole file.
 Vertex properties: x y z, red green blue [alpha] (also r g b, diffuse_*), the rest
-(nx ny nz, intensity, scalar_*...) become attributes.
+(nx ny nz, intensity, scalar_*...) become attributes. Without those, colours come from PCL's
+packed 4-byte ``rgb``/``rgba`` (consumed) or a 3D Gaussian splat's ``f_dc_0..2`` (kept).
 """
 
 from __future__ import annotations
@@ -31,9 +32,13 @@ from ._base import (
     fail,
     rows_to_chunk,
     scan_bounds,
+    unpack_rgb,
 )
 
 _MAX_HEADER = 1 << 20
+
+#: 3D Gaussian splats' degree-0 spherical harmonic, 1 / (2 sqrt(pi)): colour = 0.5 + SH_C0 * f_dc
+SH_C0 = 0.28209479177387814
 
 
 class _Header:
@@ -76,12 +81,29 @@ class _Header:
         if not {"x", "y", "z"} <= {n.lower() for n in self.names}:
             raise fail(path, f"PLY vertex element has no x, y, z properties (has {', '.join(self.names)})")
         self.count = self.vertex.count
+        self.colors = color_names(self.names)
+        lower = [n.lower() for n in self.scalar_names]
+        self.packed = self.splat = None  # where colours come from without red green blue (a field name; f_dc's names)
+        if not self.colors:
+            self.packed = next((p.name for p in self.vertex.properties if p.name in self.scalar_names
+                                and p.name.lower() in ("rgb", "rgba") and np.dtype(p.val_dtype).itemsize == 4), None)  # fmt: skip
+            if self.packed is None and {"f_dc_0", "f_dc_1", "f_dc_2"} <= set(lower):
+                self.splat = [self.scalar_names[lower.index(f"f_dc_{k}")] for k in range(3)]
+        self.has_color = bool(self.colors or self.packed or self.splat)
+        self.attributes = attribute_names([n for n in self.scalar_names if n != self.packed], self.colors)
         self.has_lists = any(isinstance(p, plyfile.PlyListProperty) for el in [*self.before, self.vertex] for p in el.properties)
 
-
-def _vertex_columns(data: np.ndarray) -> tuple[list[str], list[np.ndarray]]:
-    names = list(data.dtype.names)
-    return names, [np.asarray(data[n]) for n in names]
+    def chunk(self, names: list[str], cols: list[np.ndarray], scaler: ColorScaler) -> PointChunk:
+        """rows_to_chunk of the vertices' columns, with red green blue made of a packed ``rgb`` or ``f_dc_0..2``."""
+        if self.packed or self.splat:
+            col = dict(zip(names, cols))
+            if self.packed:
+                rgb = unpack_rgb(col.pop(self.packed))
+            else:  # (as splat viewers draw them: the view-independent colour, clamped)
+                dc = np.column_stack([col[n] for n in self.splat]).astype(np.float64)
+                rgb = (np.clip(0.5 + SH_C0 * np.nan_to_num(dc), 0, 1) * 255 + 0.5).astype(np.uint8)
+            names, cols = [*col, "red", "green", "blue"], [*col.values(), *rgb.T]
+        return rows_to_chunk(self.path, names, cols, scaler)
 
 
 #: bytes an ASCII vertex takes at least: three one-digit numbers, two spaces and a newline
@@ -119,8 +141,7 @@ class PlyReader(Reader):
             short = self._binary_span(path, h)[2]
         if short and not salvage:
             raise fail(path, short + SALVAGE_HINT)
-        cols = color_names(h.names)
-        head = {"point_count": h.count, "has_color": bool(cols), "attributes": attribute_names(h.scalar_names, cols)}
+        head = {"point_count": h.count, "has_color": h.has_color, "attributes": h.attributes}
         return head if short is None else {**head, "truncated": short}
 
     def read_salvaged(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
@@ -164,8 +185,7 @@ class PlyReader(Reader):
             for start in range(0, present, chunk_size):
                 block = np.array(mm[start : start + chunk_size])  # copy out of the map
                 native = block.astype(block.dtype.newbyteorder("="), copy=False)
-                names, cols = _vertex_columns(native)
-                yield rows_to_chunk(path, names, cols, scaler)
+                yield h.chunk(h.names, [np.asarray(native[n]) for n in h.names], scaler)
         finally:
             del mm
         if short:
@@ -203,7 +223,7 @@ class PlyReader(Reader):
                 # (float64: the text may hold more digits than a declared float keeps)
                 cols = [arr[:, i] if name.lower() in ("x", "y", "z") else arr[:, i].astype(np.dtype(dt), copy=False)
                         for i, (name, dt) in enumerate(zip(h.names, dtypes))]  # fmt: skip
-                yield rows_to_chunk(path, h.names, cols, scaler)
+                yield h.chunk(h.names, cols, scaler)
         if done < h.count:
             raise fail(path, f"truncated PLY file: the header declares {h.count:,} vertices, only {done:,} lines of them are present{cut}")
 
@@ -235,13 +255,12 @@ class PlyReader(Reader):
         keep = [n for n in data.dtype.names if data.dtype[n].kind != "O"]
         for start in range(0, len(data), chunk_size):
             block = data[start : start + chunk_size]
-            yield rows_to_chunk(path, keep, [np.asarray(block[n]) for n in keep], scaler)
+            yield h.chunk(keep, [np.asarray(block[n]) for n in keep], scaler)
 
     def info(self, path: Path) -> dict:
         path = check_file(path)
         h = _Header(path)
         n, lo, hi = scan_bounds(self.read_chunks(path)) if h.count else (0, None, None)
-        cols = color_names(h.names)
         return {
             "path": str(path),
             "format": "PLY",
@@ -249,8 +268,8 @@ class PlyReader(Reader):
             "point_count": n,
             "bounds": {"min": lo, "max": hi},
             "bounds_source": "data",
-            "has_color": bool(cols),
-            "attributes": attribute_names(h.scalar_names, cols),  # as read: in lower case, no list property
+            "has_color": h.has_color,
+            "attributes": h.attributes,  # as read: in lower case, no list property
             "elements": {el.name: el.count for el in h.ply.elements},
             "file_size": h.file_size,
         }

@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import GigapointError, InputError, check_switch, first_line, is_real
+from ..io._base import unpack_rgb
 from .record import RecordedFrame, is_recording, read_frame, recording_files, stopped_early
 
 KINECT_V2 = (365.5, 365.5, 256.0, 212.0)  # fx, fy, cx, cy of a Kinect v2's 512x424 depth camera
@@ -164,10 +165,7 @@ def _xyz_rgb_of_table(path, names, column):
             break
     name = lower.get("rgb", lower.get("rgba"))  # PCL's packed float/u32 rgb, or rgba (PointXYZRGBA: its colour was dropped)
     if rgb is None and name is not None:
-        packed = np.ascontiguousarray(column(name))
-        if packed.dtype.itemsize == 4:
-            v = packed.view(np.dtype(np.uint32).newbyteorder(packed.dtype.byteorder))  # a big-endian message's colours were byte-swapped
-            rgb = np.stack([(v >> 16) & 255, (v >> 8) & 255, v & 255], axis=1).astype(np.uint8)
+        rgb = unpack_rgb(column(name))
     return xyz, rgb
 
 
