@@ -149,6 +149,23 @@ def test_ply_gaussian_splat_drawn_in_its_f_dc_colours(tmp_path):
     assert file_info(p)["has_color"] and file_info(p)["attributes"] == fields
 
 
+@pytest.mark.parametrize("ending", [b"end_header \n", b"end_header\r\n", b"end_header\t\r\n"])
+def test_ply_header_with_blanks_or_crlf_on_some_lines(tmp_path, ending):
+    """plyfile takes the line end from a header's first line and no blank after a line's words:
+    "end_header \n", or "end_header\r\n" after "ply\n", was "corrupt PLY header: line 8:
+    early end-of-file" (binary, ASCII, and a vertex list read by plyfile)."""
+    head = b"ply\nformat %s 1.0 \ncomment x \nelement vertex 2\nproperty float x\nproperty float y\nproperty float z \n%s" + ending
+    p = tmp_path / "h.ply"
+    xyz = np.array([[1, 2, 3], [4, 5, 6]], np.float32)
+    p.write_bytes(head % (b"binary_little_endian", b"") + xyz.tobytes())
+    np.testing.assert_array_equal(collect(p)[1], xyz)
+    p.write_bytes(head % (b"ascii", b"") + b"1 2 3\n4 5 6\n")
+    np.testing.assert_array_equal(collect(p)[1], xyz)
+    p.write_bytes(head % (b"ascii", b"property list uchar float feat\n") + b"1 2 3 1 0.5\n4 5 6 0\n")
+    np.testing.assert_array_equal(collect(p)[1], xyz)
+    assert file_info(p)["point_count"] == 2
+
+
 def test_ply_list_property_in_vertex_falls_back_to_plyfile(tmp_path):
     xyz, _ = ref_points(30)
     v = np.zeros(30, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("tags", "O")])

@@ -56,8 +56,11 @@ class _Header:
             raise fail(path, "truncated or corrupt PLY header (no 'end_header' line)")
         self.data_offset = nl + 1
         self.header_lines = head[: self.data_offset].count(b"\n")
+        # plyfile takes the line end from the first line and no blank after a line's words:
+        # "end_header \n", or "end_header\r\n" after "ply\n", was "early end-of-file" (other readers take them)
+        self.header_text = b"".join(line.rstrip() + b"\n" for line in head[: self.data_offset].splitlines())
         try:
-            ply = plyfile.PlyData._parse_header(io.BytesIO(head[: self.data_offset]))
+            ply = plyfile.PlyData._parse_header(io.BytesIO(self.header_text))
         except Exception as exc:  # noqa: BLE001 - plyfile.PlyHeaderParseError and friends
             raise fail(path, f"corrupt PLY header: {exc}") from None
         negative = [el for el in ply.elements if el.count < 0]
@@ -246,7 +249,9 @@ class PlyReader(Reader):
         try:
             with warnings.catch_warnings():  # numpy's "input contained no data" of an empty list: a valid file
                 warnings.filterwarnings("ignore", "loadtxt: input contained no data", UserWarning)
-                ply = plyfile.PlyData.read(str(path))
+                with open(path, "rb") as f:  # (the header as _Header took it)
+                    f.seek(h.data_offset)
+                    ply = plyfile.PlyData.read(io.BytesIO(h.header_text + f.read()))
             data = ply["vertex"].data
         except Exception as exc:  # noqa: BLE001 - plyfile raises many types on corrupt data
             raise fail(path, f"corrupt PLY data: {exc}") from None
