@@ -153,8 +153,9 @@ def test_ply_gaussian_splat_drawn_in_its_f_dc_colours(tmp_path):
 def test_ply_header_with_blanks_or_crlf_on_some_lines(tmp_path, ending):
     """plyfile takes the line end from a header's first line and no blank after a line's words:
     "end_header \n", or "end_header\r\n" after "ply\n", was "corrupt PLY header: line 8:
-    early end-of-file" (binary, ASCII, and a vertex list read by plyfile)."""
-    head = b"ply\nformat %s 1.0 \ncomment x \nelement vertex 2\nproperty float x\nproperty float y\nproperty float z \n%s" + ending
+    early end-of-file", "ply \n" (a writer's first line) "unexpected characters after 'ply'"
+    (binary, ASCII, and a vertex list read by plyfile)."""
+    head = b"ply \nformat %s 1.0 \ncomment x \nelement vertex 2\nproperty float x\nproperty float y\nproperty float z \n%s" + ending
     p = tmp_path / "h.ply"
     xyz = np.array([[1, 2, 3], [4, 5, 6]], np.float32)
     p.write_bytes(head % (b"binary_little_endian", b"") + xyz.tobytes())
