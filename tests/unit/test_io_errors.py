@@ -418,6 +418,24 @@ def test_ply_binary_truncated_and_huge_count(tmp_path):
     raises(InputError, p, fn=open_cloud, match="truncated PLY file: the header declares 999,999,999,999 vertices")
 
 
+def test_ply_with_a_vertex_list_cut_off_is_truncated(tmp_path):
+    """A PLY file whose vertices hold a list (read by plyfile) cut off, or whose header claims
+    more vertices than it holds, said "corrupt PLY data: element 'vertex': row 27: property 'x':
+    early end-of-file"; the other PLY paths say "truncated PLY file"."""
+    from plyfile import PlyData, PlyElement
+
+    v = np.zeros(30, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("tags", "O")])
+    for i in range(30):
+        v["tags"][i] = np.arange(i % 3, dtype=np.int32)
+    p = tmp_path / "l.ply"
+    PlyData([PlyElement.describe(v, "vertex")]).write(str(p))
+    data = p.read_bytes()
+    p.write_bytes(data[:-50])  # rows are 13 + 4 x (i % 3) bytes: 15 1/3 on average
+    raises(InputError, p, match="truncated PLY file: 27 of 30 vertices present")
+    p.write_bytes(data.replace(b"element vertex 30", b"element vertex 40"))
+    raises(InputError, p, fn=open_cloud, match="truncated PLY file: 30 of 40 vertices present")
+
+
 def test_ply_ascii_count_beyond_its_bytes(tmp_path):
     """An ASCII header's count that the file's bytes cannot hold (6 bytes a vertex at least) is
     refused before the points are read; a file whose last line ends without a newline is not."""

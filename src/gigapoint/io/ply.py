@@ -253,6 +253,11 @@ class PlyReader(Reader):
                     f.seek(h.data_offset)
                     ply = plyfile.PlyData.read(io.BytesIO(h.header_text + f.read()))
             data = ply["vertex"].data
+        except plyfile.PlyElementParseError as exc:
+            if exc.message == "early end-of-file" and exc.element is not None and exc.row is not None:  # a cut, said as the other paths say it
+                what = "vertices" if exc.element.name == "vertex" else f"{exc.element.name!r} elements"
+                raise fail(path, f"truncated PLY file: {exc.row:,} of {exc.element.count:,} {what} present") from None
+            raise fail(path, f"corrupt PLY data: {exc}") from None
         except Exception as exc:  # noqa: BLE001 - plyfile raises many types on corrupt data
             raise fail(path, f"corrupt PLY data: {exc}") from None
         if len(data) < h.count:
