@@ -4,7 +4,8 @@ beside it, local or over HTTP, opened as an octree (EptCloud).
 ``ept.json``: ``bounds`` (the octree's cube: xmin, ymin, zmin, xmax, ymax, zmax),
 ``boundsConforming`` (the points' bounds), ``points``, ``dataType`` (``laszip``: every node a
 LAZ file ``ept-data/d-x-y-z.laz``; ``binary``: the schema's dimensions packed in order,
-little-endian, ``ept-data/d-x-y-z.bin``), ``hierarchyType`` (``json``), ``schema`` (name, type
+little-endian, ``ept-data/d-x-y-z.bin``; ``zstandard``: binary compressed with Zstandard,
+``ept-data/d-x-y-z.zst``, read with the zstandard package), ``hierarchyType`` (``json``), ``schema`` (name, type
 signed/unsigned/float, size, scale and offset per dimension) and ``srs`` (wkt, authority,
 horizontal). The hierarchy: ``ept-hierarchy/0-0-0-0.json`` maps node names to point counts,
 -1 for a node whose subtree is in ``ept-hierarchy/<name>.json``, read when a frame draws it
@@ -28,7 +29,7 @@ from .store import check_grid, tight_bounds
 from .voxel_octree import VoxelOctree, parse_voxel_name, voxel_name
 
 EPT_FILE = "ept.json"
-DATA_TYPES = {"laszip": ".laz", "binary": ".bin"}
+DATA_TYPES = {"laszip": ".laz", "binary": ".bin", "zstandard": ".zst"}
 _TYPES = {("signed", 1): "i1", ("signed", 2): "<i2", ("signed", 4): "<i4", ("signed", 8): "<i8"}
 _TYPES.update({("unsigned", 1): "u1", ("unsigned", 2): "<u2", ("unsigned", 4): "<u4", ("unsigned", 8): "<u8"})
 _TYPES.update({("float", 4): "<f4", ("float", 8): "<f8"})
@@ -98,7 +99,12 @@ class EptCloud(VoxelOctree):
             raise InputError(f"{name}: ept.json lacks {', '.join(repr(k) for k in missing)}")
         self.data_type = meta["dataType"]
         if self.data_type not in DATA_TYPES:
-            raise InputError(f"{name}: EPT dataType {self.data_type!r} is not supported (laszip or binary)")
+            raise InputError(f"{name}: EPT dataType {self.data_type!r} is not supported (laszip, binary or zstandard)")
+        if self.data_type == "zstandard":
+            try:
+                import zstandard  # noqa: F401  (said at open, not at the first frame)
+            except ImportError:
+                raise InputError(f"{name}: EPT dataType 'zstandard' needs the zstandard package (pip install 'gigapoint[lod]')") from None
         if meta["hierarchyType"] != "json":
             raise InputError(f"{name}: EPT hierarchyType {meta['hierarchyType']!r} is not supported (json)")
         try:
@@ -189,11 +195,19 @@ class EptCloud(VoxelOctree):
 
     def _decode(self, index: int, blob: bytes) -> dict:
         n = int(self.counts[index])
-        if self.data_type == "binary":
-            if len(blob) != n * self.record.itemsize:
+        need = n * self.record.itemsize
+        held = f"{len(blob):,} bytes"
+        if self.data_type == "zstandard":
+            import zstandard
+
+            # frames need not say their size (Entwine's do not): read at most one byte past the
+            # records the hierarchy counts, so a damaged count or frame can't ask for GBs
+            blob = zstandard.ZstdDecompressor().stream_reader(io.BytesIO(blob)).read(need + 1)
+            held = f"more than {need:,} bytes unpacked" if len(blob) > need else f"{len(blob):,} bytes unpacked"
+        if self.data_type != "laszip":
+            if len(blob) != need:
                 raise InputError(
-                    f"{self.node_file(int(self.keys[index]))}: holds {len(blob):,} bytes, "
-                    f"{n:,} points of {self.record.itemsize} bytes need {n * self.record.itemsize:,}"
+                    f"{self.node_file(int(self.keys[index]))}: holds {held}, {n:,} points of {self.record.itemsize} bytes need {need:,}"
                 )
             rec = np.frombuffer(blob, self.record)
             xyz = np.empty((n, 3), np.float64)
