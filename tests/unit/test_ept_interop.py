@@ -23,6 +23,9 @@ DATA = Path(__file__).resolve().parent / "data" / "pdal_ept"
 COPC = ["1.2-with-color.copc.laz", "autzen_clip_native.copc.laz", "autzen_clip_4326.copc.laz"]
 # full precision: the brute-force draw is of float64 positions (adaptive precision moves a
 # point of a small node by up to a pixel, by design)
+#: gigapoint's names of the LAS fields an EPT schema holds (binary: the same in PDAL's CamelCase)
+LAS_FIELDS = ("intensity", "classification", "return_number", "number_of_returns", "point_source_id", "gps_time",
+              "user_data", "scan_direction_flag", "edge_of_flight_line")  # fmt: skip
 SETTINGS = gp.RenderSettings(backend="cpu", size_mode="fixed", point_budget=10**9, lod_threshold_px=0.0, adaptive_precision=False)
 
 
@@ -81,8 +84,11 @@ def test_entwine_laszip_reads_point_for_point_and_draws_like_its_points():
     las = laspy.read(path / "ept-data" / "0-0-0-0.laz")
     got, h = _all_points(c), las.header
     _assert_on_grid(got["xyz"], [las.X, las.Y, las.Z], h.scales, h.offsets)
-    for k in ("intensity", "classification", "return_number", "number_of_returns", "point_source_id", "gps_time"):
+    for k in LAS_FIELDS:
         np.testing.assert_array_equal(got[k], np.asarray(las[k]), err_msg=k)
+    assert np.asarray(las.user_data).max() == 149 and np.asarray(las.scan_direction_flag).sum() == 567
+    # degrees (format 3's scan_angle_rank) in LAS 1.4's 0.006 degree steps, as COPC's scan_angle
+    np.testing.assert_array_equal(got["scan_angle"], np.rint(np.asarray(las.scan_angle_rank) / 0.006))
     rgb = _rgb8(np.stack([np.asarray(las[k]) for k in ("red", "green", "blue")], 1))
     np.testing.assert_array_equal(got["rgba"].view(np.uint8).reshape(-1, 4)[:, :3], rgb)
     _renders_like(gp.open(path), np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], 1), rgb)
@@ -116,8 +122,10 @@ def test_entwine_binary_and_zstandard_read_point_for_point(name):
     assert c.n_points == len(rec) == 2_000 and c.meta["crs"] == "EPSG:3857"
     got = _all_points(c)
     _assert_on_grid(got["xyz"], [rec["X"], rec["Y"], rec["Z"]], scales, offsets)
-    for k, dim in (("intensity", "Intensity"), ("classification", "Classification"), ("gps_time", "GpsTime"), ("return_number", "ReturnNumber")):
-        np.testing.assert_array_equal(got[k], rec[dim], err_msg=k)
+    for k in LAS_FIELDS:
+        np.testing.assert_array_equal(got[k], rec["".join(w.title() for w in k.split("_"))], err_msg=k)
+    assert rec["EdgeOfFlightLine"].sum() > 0 and np.ptp(rec["ScanAngleRank"]) > 50
+    np.testing.assert_array_equal(got["scan_angle"], np.rint(rec["ScanAngleRank"] / 0.006))  # (float degrees)
     rgb = _rgb8(np.stack([rec["Red"], rec["Green"], rec["Blue"]], 1))
     np.testing.assert_array_equal(got["rgba"].view(np.uint8).reshape(-1, 4)[:, :3], rgb)
     _renders_like(gp.open(DATA / name), xyz, rgb)

@@ -24,7 +24,7 @@ import numpy as np
 from ..errors import InputError
 from ..io import laz_process
 from ..io.http import ByteSource, as_url, open_source, shown_url
-from ..io.las import _scaled_xyz
+from ..io.las import _scaled_xyz, scan_angle_units
 from .store import check_grid, tight_bounds
 from .voxel_octree import VoxelOctree, parse_voxel_name, voxel_name
 
@@ -42,6 +42,10 @@ ATTRIBUTES = {
     "PointSourceId": ("point_source_id", np.uint16),
     "GpsTime": ("gps_time", np.float64),
     "Infrared": ("nir", np.uint16),
+    "UserData": ("user_data", np.uint8),
+    "ScanDirectionFlag": ("scan_direction_flag", np.uint8),
+    "EdgeOfFlightLine": ("edge_of_flight_line", np.uint8),
+    "ScanAngleRank": ("scan_angle", np.int16),  # PDAL's degrees (any format's) in LAS 1.4 units, as COPC's
 }
 
 
@@ -216,6 +220,8 @@ class EptCloud(VoxelOctree):
                 xyz[:, i] = rec[axis].astype(np.float64) * s + o
             rgb = np.stack([rec["Red"], rec["Green"], rec["Blue"]], axis=1).astype(np.uint16) if self._has_rgb else None
             attrs = {a: rec[d] for d, (a, _) in ATTRIBUTES.items() if d in self.record.names}
+            if "ScanAngleRank" in self.record.names:
+                attrs["scan_angle"] = scan_angle_units(rec["ScanAngleRank"])
             return {"xyz": xyz, "rgb": rgb, "attributes": attrs}
         import laspy
 
@@ -235,6 +241,8 @@ class EptCloud(VoxelOctree):
         dims = set(header.point_format.dimension_names)
         rgb = np.stack([pts["red"], pts["green"], pts["blue"]], axis=1).astype(np.uint16) if {"red", "green", "blue"} <= dims else None
         attrs = {a: np.asarray(pts[a]) for a, _ in ATTRIBUTES.values() if a in dims}  # laspy's names are gigapoint's
+        if "scan_angle_rank" in dims:  # formats 0-5 (Entwine's): degrees
+            attrs["scan_angle"] = scan_angle_units(pts["scan_angle_rank"])
         return {"xyz": xyz, "rgb": rgb, "attributes": attrs}
 
 
