@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from PIL import Image
 
 import gigapoint as gp
 from gigapoint.errors import InputError
@@ -162,7 +163,7 @@ def test_a_damaged_zstandard_node_is_one_line(tmp_path):
     assert str(e.value) == f"{node}: holds 88,000 bytes unpacked, 2,001 points of 44 bytes need 88,044"
 
 
-def test_bcbf_one_point_a_level_with_no_scale():
+def test_bcbf_one_point_a_level_with_no_scale(tmp_path):
     """PDAL's toy set: XYZ only, no scale or offset (1 and 0), five nodes down to depth 4, each
     one point at 1, 1, 999."""
     c = gp.open(DATA / "bcbf")
@@ -175,6 +176,12 @@ def test_bcbf_one_point_a_level_with_no_scale():
     brute = gp.render_frame(gp.from_arrays(got["xyz"]), cam, SETTINGS)
     assert f.stats.points_processed == 5 and (~f.empty).sum() == (~brute.empty).sum() >= 1
     np.testing.assert_array_equal(f.empty, brute.empty)
+    # 'auto' frames a sample of the points: five at one spot framed the eye 5e-5 from them, in
+    # front of the near plane that the 2 km cube sets (a blank image, "no point is in view")
+    r = subprocess.run([sys.executable, "-m", "gigapoint.cli", "render", str(DATA / "bcbf"), "-o", str(tmp_path / "b.png"), "-W", "64", "-H", "48"],
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    assert (np.asarray(Image.open(tmp_path / "b.png"))[..., :3] > 0).any(axis=2).sum() >= 1
 
 
 @pytest.mark.parametrize(

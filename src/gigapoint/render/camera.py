@@ -237,7 +237,9 @@ class Camera:
         if points is not None:
             points = np.asarray(points, np.float64).reshape(-1, 3)
             points = points[np.all(np.isfinite(points), axis=1)]
-            if len(points) == 0:
+            # a sample far smaller than the box (PDAL's bcbf EPT: one point at 1, 1, 999 in a 2 km
+            # cube) frames the box: framed at the sample, the eye came nearer than the box's near plane
+            if len(points) == 0 or np.ptp(points, axis=0).max() < 1e-5 * np.ptp(box, axis=0).max():
                 points = None
         if isinstance(view, str):
             if view not in VIEWS:
