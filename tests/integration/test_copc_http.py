@@ -264,6 +264,25 @@ def test_ept_over_http_renders_like_the_local_dataset(data, server, folder):
         c.close()
 
 
+@pytest.mark.parametrize("name", ["1.2-with-color", "ellipsoid-binary-2k", "ellipsoid-zstandard-2k", "bcbf", "1.2-with-color.copc.laz"])
+def test_pdals_datasets_over_http_render_like_the_local_ones(name):
+    """Entwine's and PDAL's (tests/unit/data/pdal_ept): the same pixels over HTTP."""
+    if "zstandard" in name:
+        pytest.importorskip("zstandard")
+    root = Path(__file__).resolve().parents[1] / "unit" / "data" / "pdal_ept"
+    s = RangeServer(root)
+    try:
+        local, c = gp.open(root / name), gp.open(s.url(name if name.endswith(".laz") else f"{name}/"))
+        assert c.n_points == local.n_points and c.meta["crs"] == local.meta["crs"]
+        a = _frame(local, point_budget=10**9, lod_threshold_px=0.0)
+        b = _frame(c, point_budget=10**9, lod_threshold_px=0.0)
+        assert b.stats.points_processed == a.stats.points_processed > 0
+        np.testing.assert_array_equal(a.image, b.image)
+        c.close()
+    finally:
+        s.close()
+
+
 def test_an_ept_folder_url_through_the_cli(data, server, tmp_path):
     """``gigapoint info http://host/ept/`` was "http://host/ept: HTTP 404 Not Found for bytes
     0..65,536": typer's Path drops the folder's '/', and the URL was read as a COPC file. A URL
