@@ -227,7 +227,11 @@ class EptCloud(VoxelOctree):
 
         # the node's LAZ: its header read here, its points decoded in a child process
         # (io/laz_process.py: lazrs crashes on some corrupt data)
-        header = laspy.LasHeader.read_from(io.BytesIO(blob))
+        try:
+            header = laspy.LasHeader.read_from(io.BytesIO(blob))
+        except (laspy.errors.LaspyException, ValueError) as exc:  # random bytes after 'LASF' (PDAL's lone-star-invalid-tile): only "'utf-8' codec can't decode"
+            key = int(self.keys[index])
+            raise InputError(f"{self.node_file(key)}: cannot decode node {voxel_name(key)}: no readable LAS header ({' '.join(str(exc).split())})") from None
         if header.point_count != n:  # (before anything is sized by a header's count)
             raise InputError(
                 f"{self.node_file(int(self.keys[index]))}: holds {header.point_count:,} points, the hierarchy says {n:,}"
