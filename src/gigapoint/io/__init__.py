@@ -26,7 +26,7 @@ from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fai
 from .demo import demo_arrays, demo_chunks
 from .http import shown_url
 from .las import LasReader, read_las_header, vlrs_crs, with_scan_angle
-from .registry import is_supported_name, reader_for, readers, register, supported_suffixes
+from .registry import in_folder, is_supported_name, reader_for, readers, register, supported_suffixes
 
 
 def read_chunks(path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
@@ -67,7 +67,12 @@ def expand_paths(paths: Iterable) -> list[Path]:
             p = local if local is not None else Path(p).expanduser()  # "~/scans/a.laz" from Python (a shell expands it)
         p = Path(p)
         if p.is_dir():
-            found = sorted((c for c in p.iterdir() if c.is_file() and is_supported_name(c)), key=lambda c: c.name)
+            found = []
+            for c in sorted((c for c in p.iterdir() if c.is_file() and is_supported_name(c)), key=lambda c: c.name):
+                if in_folder(c):
+                    found.append(c)
+                elif not c.name.startswith("."):  # hidden files quietly: macOS leaves one beside every tile
+                    warn(f"{c}: no point rows at its beginning (a readme?), skipped", GigapointWarning)
             if not found:
                 raise fail(p, f"directory holds no supported point cloud file ({', '.join(supported_suffixes())})", EmptyCloudError)
             out.extend(found)

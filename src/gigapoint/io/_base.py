@@ -69,6 +69,9 @@ class Reader:
 
     name: str = ""
     suffixes: tuple[str, ...] = ()
+    #: suffixes that other files share (a README.txt, a spreadsheet .csv, an ASCII grid .asc):
+    #: in a folder, such a file is taken only where ``weak_sniff`` finds points in its beginning
+    shared_suffixes: tuple[str, ...] = ()
 
     def sniff(self, head: bytes) -> bool:
         return False

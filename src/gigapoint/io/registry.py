@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import UnsupportedFormatError
+from ..errors import InputError, UnsupportedFormatError
 from ._base import Reader, check_file, fail, read_head, read_once
 
 _READERS: list[Reader] = []
@@ -29,6 +29,23 @@ def is_supported_name(path: Path | str) -> bool:
     """True when the file's suffix belongs to a registered reader (used to pick files in a directory)."""
     name = Path(path).name.lower()
     return any(name.endswith(s) for s in supported_suffixes())
+
+
+def in_folder(path: Path) -> bool:
+    """Whether a file found in a folder is one of its point files: a supported suffix, not
+    hidden (macOS's ._tile.laz and .DS_Store beside every tile), and, for a suffix other files
+    share (a tile folder's README.txt), points in its beginning (``Reader.shared_suffixes``)."""
+    name = path.name.lower()
+    if name.startswith(".") or not is_supported_name(name):
+        return False
+    shared = [r for r in readers() if any(name.endswith(s) for s in r.shared_suffixes)]
+    if not shared:
+        return True
+    try:
+        head = read_once("head", path, lambda: read_head(path))
+    except InputError:
+        return True  # (unreadable: its reader says so, as of any other file)
+    return any(r.weak_sniff(head) for r in shared)
 
 
 def reader_by_name(name: str) -> Reader:

@@ -232,6 +232,7 @@ def _chunks(path: Path, chunk_size: int, layout: _Layout) -> Iterator[np.ndarray
 class TextReader(Reader):
     name = "XYZ/TXT/CSV"
     suffixes = (".xyz", ".txt", ".csv", ".pts", ".asc", ".xyzrgb")
+    shared_suffixes = (".txt", ".csv", ".asc")
 
     def reads_slowly(self, path: Path) -> bool:
         return True  # every value parsed

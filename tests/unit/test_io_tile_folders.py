@@ -1,0 +1,55 @@
+"""A folder of LAS/LAZ tiles as a city delivers it: hundreds of tiles, and files beside them."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.errors import GigapointWarning
+
+laspy = pytest.importorskip("laspy")
+
+
+def write_tiles(folder: Path, n: int, points: int = 50, suffix: str = ".laz", cols: int = 10) -> list[Path]:
+    """``n`` tiles of ``points`` points on a grid of 100 m tiles, one scale and offset."""
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(0)
+    out = []
+    for i in range(n):
+        r, c = divmod(i, cols)
+        header = laspy.LasHeader(point_format=3, version="1.2")
+        header.scales, header.offsets = [0.01] * 3, [500000.0, 4000000.0, 0.0]
+        las = laspy.LasData(header)
+        las.x = 500000 + c * 100 + rng.random(points) * 100
+        las.y = 4000000 + r * 100 + rng.random(points) * 100
+        las.z = 100 + rng.random(points) * 10
+        out.append(folder / f"tile_{r:02d}_{c:02d}{suffix}")
+        las.write(out[-1])
+    return out
+
+
+def test_a_tile_folder_skips_its_readme_lax_and_hidden_files_and_reads_point_rows(tmp_path):
+    """A README.txt beside the tiles stopped every command ("line 1: not numeric point data"),
+    and so did macOS's hidden ._tile.laz / .x.csv; .lax index files were and are skipped."""
+    tiles = write_tiles(tmp_path, 6)
+    (tmp_path / "README.txt").write_text("City of X aerial LiDAR 2024, EPSG:32610\ncontact: gis@x.org\n")
+    (tmp_path / "grid.asc").write_text("ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\n1 2\n3 4\n")
+    for t in tiles:
+        t.with_suffix(".lax").write_bytes(b"LASX" + bytes(60))
+    (tmp_path / "._tile_00_00.laz").write_bytes(b"\x00\x05\x16\x07" + bytes(200))  # macOS AppleDouble
+    (tmp_path / ".notes.csv").write_text("x,y,z\n")
+    (tmp_path / "extra.csv").write_text("x,y,z\n500000,4000000,100\n500001,4000001,101\n")  # point rows: read
+    (tmp_path / "sub").mkdir()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cloud = gp.open(tmp_path)
+    assert cloud.n_points == 6 * 50 + 2
+    said = sorted(str(w.message) for w in caught if issubclass(w.category, GigapointWarning) and "skipped" in str(w.message))
+    assert said == [
+        f"{tmp_path / 'README.txt'}: no point rows at its beginning (a readme?), skipped",
+        f"{tmp_path / 'grid.asc'}: no point rows at its beginning (a readme?), skipped",
+    ]
