@@ -54,7 +54,9 @@ def read_chunks(path, chunk_size, **kwargs):
 
 @pytest.fixture
 def children(monkeypatch):
-    """The child processes (Popen) the reads of a test start."""
+    """The child processes (Popen) the reads of a test start, one a file (not the one small
+    files share: laz_process.SHARED_MAX)."""
+    monkeypatch.setattr(laz_process, "SHARED_MAX", 0)
     made = []
     init = laz_process.ChildRecords.__init__
 
@@ -100,6 +102,7 @@ def test_numba_is_set_up_while_the_child_decodes_the_first_records(tmp_path, mon
 
     events = []
     monkeypatch.setattr(las, "prepare_kernel_calls", lambda: events.append("numba"))
+    monkeypatch.setattr(laz_process, "SHARED_MAX", 0)  # the file's own child
     read = laz_process.ChildRecords.read
 
     def reading(self, n):
@@ -226,6 +229,7 @@ def test_the_child_ends_when_its_parent_dies(tmp_path):
         "    init(self, *a, **k)\n"
         "    print(self.child.pid, flush=True)\n"
         "laz_process.ChildRecords.__init__ = recording\n"
+        "laz_process.SHARED_MAX = 0\n"
         "next(read_chunks(sys.argv[1], 1_000))\n"
         "os.kill(os.getpid(), signal.SIGKILL)\n"
     )

@@ -731,8 +731,10 @@ class LasReader(Reader):
             if in_child:  # decoded by a child process (io/laz_process.py: a crash of lazrs is an error there, and no GIL is held)
                 laszip = next(d for u, r, d in hdr.vlrs if u == LASZIP_USER_ID and r == LASZIP_RECORD_ID)
                 parallel = type(decompressor).__name__ == "ParLasZipDecompressor"
+                if not cut_laz and (start, stop) == (0, hdr.point_count):  # a small file: by the child all files share
+                    records = laz_process.decode_file(path, hdr.file_size, hdr.offset_to_point_data, laszip, stop, header.point_format, parallel)
                 with contextlib.suppress(OSError):  # no process or memory to be had: decoded here, as below
-                    records = laz_process.ChildRecords(
+                    records = records if records is not None else laz_process.ChildRecords(
                         path, hdr.offset_to_point_data, laszip, done, stop, most, header.point_format, parallel,
                         cut=hdr.file_size if cut_laz else None,
                     )  # fmt: skip
