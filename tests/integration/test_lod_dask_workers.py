@@ -115,3 +115,35 @@ def test_a_task_that_fails_on_our_own_workers_is_one_line(tmp_path):
     assert said[0].startswith(f"error: {out}/.partial/") and "bytes written (is the disk full?) (on Dask worker " in said[0], said
     # what became of the output, as one process says it (it was left out)
     assert said[0].endswith(f"; the conversion to {out} stopped unfinished (run it again once the cause is gone: it resumes)"), said
+
+
+_OPEN_FILES_LIMITED = """
+import resource, sys
+resource.setrlimit(resource.RLIMIT_NOFILE, (96, 96))  # workers inherit it (a login's is 1 024)
+from gigapoint.cli import main
+sys.exit(main(["convert", sys.argv[1], "-o", sys.argv[2], "--workers", "2"]))
+"""
+
+
+def test_a_folder_of_many_tiles_converts_on_workers_within_the_open_files_limit(tmp_path):
+    """``convert TILES/ --workers 2`` of 1 500 tiles of 2 000 points stopped with "Too many open
+    files (on Dask worker ..., build task p1)": the one partition's build mapped every tile's
+    spilled chunk at once (peak 1 017 files open in a worker, a process's limit 1 024). Here 200
+    tiles under a limit of 96 (a worker holds ~45 files of its own)."""
+    import subprocess
+
+    laspy = pytest.importorskip("laspy")
+    import numpy as np
+
+    tiles = tmp_path / "tiles"
+    tiles.mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(200):
+        las = laspy.LasData(laspy.LasHeader(point_format=3, version="1.2"))
+        las.header.scales, las.header.offsets = [0.01] * 3, [0.0] * 3
+        las.x, las.y, las.z = (i % 20) * 10 + rng.random(20) * 10, (i // 20) * 10 + rng.random(20) * 10, rng.random(20)
+        las.write(tiles / f"t{i:03d}.laz")
+    out = tmp_path / "oct"
+    proc = subprocess.run([sys.executable, "-c", _OPEN_FILES_LIMITED, str(tiles), str(out)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert f"{out}: 4,000 points in " in proc.stdout, proc.stdout

@@ -80,7 +80,7 @@ from .read import (
     skipped_message,
     spill_chunk,
 )
-from .spill import copy_range, decode_xyz, las_xyz_code, load_raw_chunk, raw_chunk_files, raw_xyz_code
+from .spill import copy_range, decode_xyz, las_xyz_code, load_raw_chunk, load_raw_chunks, raw_chunk_files, raw_xyz_code
 
 READ_CHUNKS = 1  # chunks (``chunk_size`` points, 2 M by default) a read task decodes: one a task
 CHUNK_STRIDE = 1 << 20  # read task t spills chunks t·CHUNK_STRIDE + 0, 1, ...: sorted ids are the input order
@@ -226,8 +226,7 @@ class _Task(PartitionPhases, BuildPhases):
             return super()._partition_input(lev, prefix)
         kind, items = self.source
         if kind == "raw":  # the only partition: the spilled chunks (the driver removes them)
-            parts = [load_raw_chunk(self.dir.raw, i, self._varying()) for i in items]
-            return self._with_constants({k: np.concatenate([p[k] for p in parts]) for k in parts[0]}), []
+            return self._with_constants(load_raw_chunks(self.dir.raw, items, self._varying())), []
         n = sum(rows for _, _, rows, _ in items)
         data = {}
         for key, dt in self._dtypes().items():

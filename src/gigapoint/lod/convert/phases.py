@@ -27,7 +27,7 @@ from ..potree import place_node_set, placed_end, potree_plan, write_potree
 from ..writer import append_streams, point_dtypes, run_serially, streams_end, write_gigapoint
 from . import hooks
 from .partition import built_name, group_name, plan_groups, set_name
-from .spill import copy_range, load_raw_chunk, npy_data_offset, raw_chunk_files
+from .spill import copy_range, load_raw_chunks, npy_data_offset, raw_chunk_files
 from .state import Job
 
 LOCAL = "local."  # prefix of a node set's own copy of its output arrays and records (local_sets), until place_set
@@ -125,8 +125,7 @@ class BuildPhases(Job):
         files they were read from (removed once it is built)."""
         st = self.state
         if st.get("from_raw"):  # one partition: the spilled chunks themselves
-            parts = [load_raw_chunk(self.dir.raw, i, self._varying()) for i in range(st["chunks"])]
-            return self._with_constants({k: np.concatenate([p[k] for p in parts]) for k in parts[0]}), raw_chunk_files(self.dir.raw)
+            return self._with_constants(load_raw_chunks(self.dir.raw, range(st["chunks"]), self._varying())), raw_chunk_files(self.dir.raw)
         files = self._part_files(lev, prefix)
         dts = self._dtypes()
         data = {k: np.fromfile(path, dtype=dts[k]) for k, path in files.items()}
