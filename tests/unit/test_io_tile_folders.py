@@ -80,3 +80,24 @@ def test_small_laz_tiles_share_one_decoding_process(tmp_path, monkeypatch):
     monkeypatch.setenv(laz_process.ENV_SWITCH, "0")  # decoded in this process: the same points
     here = gp.open(tmp_path)
     assert np.array_equal(cloud.positions(), here.positions()) and np.array_equal(cloud.rgba, here.rgba)
+
+
+def test_info_of_a_folder_of_many_tiles_is_one_block_and_names_the_damaged_ones(cli, tmp_path):
+    """``gigapoint info`` of 1 500 tiles printed 21 000 lines, a block a tile; now one block
+    (--each: a block a file), what the tiles do not share said, a damaged tile named."""
+    tiles = write_tiles(tmp_path, 14)
+    las = laspy.read(tiles[13])
+    las.header.scales = [0.001] * 3  # one tile of another grid
+    las.write(tiles[13])
+    tiles[12].write_bytes(tiles[12].read_bytes()[:600])  # cut off
+    rc, out, err = cli("info", tmp_path)
+    assert rc == 1 and out.count("points:") == 1
+    lines = out.splitlines()
+    assert lines[0] == f"{tmp_path} (13 files)" and "  points:      650" in lines
+    lo = np.min([laspy.open(t).header.mins for t in tiles if t != tiles[12]], axis=0)  # (3 decimals: the scales differ)
+    assert lines[3] == f"  bounds min:  {lo[0]:.3f}, {lo[1]:.3f}, {lo[2]:.3f} (header)"
+    assert "  scales:      0.01, 0.01, 0.01 (12 files); 0.001, 0.001, 0.001 (1 file)" in lines
+    said = err.strip().splitlines()
+    assert len(said) == 2 and said[0].startswith(f"error: {tiles[12]}: ") and said[1] == "error: info: 1 of 14 files could not be read (said above)"
+    rc, out, err = cli("info", "--each", tmp_path)
+    assert rc == 1 and out.count("points:") == 13

@@ -11,6 +11,9 @@ from ..errors import GigapointError, InputError
 from .app import app
 from .cloud_opts import ChunkedOption, ColorsOption, cloud_options, option_names
 
+#: a folder of more files than this is shown as one block (a city's 1 500 tiles were 21 000 lines)
+FOLDER_LISTED = 10
+
 
 @app.command()
 def info(
@@ -18,6 +21,7 @@ def info(
         ..., readable=False, help="Point cloud files (LAS/LAZ/PLY/XYZ/XYZRGB/TXT/CSV/PTS/ASC/NPY/NPZ), directories, octrees, COPC/EPT files or URLs."
     ),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object per file instead of text."),
+    each: bool = typer.Option(False, "--each", help=f"Show each file of a folder of more than {FOLDER_LISTED} files (by default summed up in one block)."),
     memory: bool = typer.Option(False, "--memory", help="Also load the points and print the bytes a point each component holds in memory."),
     colors: ColorsOption = "auto",
     chunked: ChunkedOption = None,
@@ -26,24 +30,29 @@ def info(
     options = cloud_options(colors, chunked)
     if options and not memory:  # without --memory nothing is loaded: the option would do nothing
         raise GigapointError(f"{option_names(options)}: only with --memory (how the loaded points are held)")
-    from ..io import expand_paths, file_info, format_info, shown_url
+    from ..io import expand_paths, file_info, folder_info, format_info, shown_url
     from ..lod import is_lod_source, octree_info
     from ..lod.copc_write import work_dir
     from ..lod.octree_dir import RESUME_HINT, OctreeDir
 
-    # an octree (folder, COPC file, EPT dataset, URL) is one dataset, not a folder of files
-    paths: list[tuple[Path, bool, GigapointError | None]] = []
+    # an octree (folder, COPC file, EPT dataset, URL) is one dataset, not a folder of files;
+    # (path, octree?, its error, the folder argument it is summed up in or None)
+    paths: list[tuple[Path, bool, GigapointError | None, Path | None]] = []
     for f in files:
         try:
             if not f.exists() and work_dir(f).is_dir():  # "no such file" sent users looking for a file a conversion is still making
                 hint = OctreeDir(work_dir(f)).resume_hint  # (a bad input that stopped it: its error, and what to do)
                 again = "run the same convert command again to resume it" if hint == RESUME_HINT else hint
                 raise InputError(f"{f}: no such file yet: a conversion to it is unfinished (its work folder {work_dir(f)} is there); {again}")
-            paths.extend([(f, True, None)] if is_lod_source(f) else [(p, False, None) for p in expand_paths([f])])
+            found = [] if is_lod_source(f) else expand_paths([f])
+            summed = f if len(found) > FOLDER_LISTED and f.is_dir() and not (each or as_json or memory) else None
+            paths.extend([(f, True, None, None)] if is_lod_source(f) else [(p, False, None, summed) for p in found])
         except GigapointError as exc:  # a missing file among several stopped the others from being shown
-            paths.append((f, False, exc))
-    failed = 0
-    for i, (path, octree, missing) in enumerate(paths):
+            paths.append((f, False, exc, None))
+    failed = shown = 0
+    infos: list[dict] = []  # those of the folder being summed up, so far
+    for i, (path, octree, missing, folder) in enumerate(paths):
+        data = None
         try:
             if missing is not None:
                 raise missing
@@ -53,13 +62,20 @@ def info(
                 raise
             failed += 1  # one damaged tile of a folder: said, and the others still shown
             typer.echo(json.dumps({"path": shown_url(path), "error": str(exc)}) if as_json else f"error: {exc}", err=not as_json)
+        if folder is not None:  # shown once its last file is read
+            infos += [data] if data is not None else []
+            if (i + 1 < len(paths) and paths[i + 1][3] is folder) or not infos:
+                continue
+            data, infos = folder_info(folder, infos), []
+        if data is None:
             continue
         if as_json:
             typer.echo(json.dumps(data))
         else:
-            if i:
+            if shown:
                 typer.echo("")
             typer.echo(format_info(data))
+        shown += 1
         if memory and octree:  # it printed nothing of memory, without a word
             why = "an octree is read node by node as views need them; --memory measures point files"
             typer.echo(json.dumps({"path": shown_url(path), "memory": None, "why": why}) if as_json else f"memory: {why}")

@@ -19,6 +19,8 @@ import urllib.request
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
+import numpy as np
+
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud, value_decimals
 from ..errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, check_switch, warn
@@ -259,6 +261,52 @@ def file_info(path) -> dict:
     return info
 
 
+def folder_info(folder, infos: list[dict]) -> dict:
+    """One ``file_info`` dict of a folder's files (``infos``: theirs) for ``format_info``:
+    points and sizes summed, bounds joined, the attributes they all have; what they do not
+    share is said in ``details`` (a city's 1 500 tiles were 21 000 lines of ``gigapoint info``)."""
+    n = len(infos)
+    out = {"path": f"{folder} ({n:,} files)", "point_count": sum(i.get("point_count") or 0 for i in infos)}
+    details = {}
+
+    def shared(label: str, text) -> bool:
+        """Whether every file's ``text(info)`` is the same; where not, the most common ones, counted, in ``details``."""
+        kinds: dict = {}
+        for i in infos:
+            kinds[text(i)] = kinds.get(text(i), 0) + 1
+        if len(kinds) > 1:
+            ranked = sorted(kinds.items(), key=lambda kv: -kv[1])
+            details[label] = "; ".join(f"{k} ({c:,} file{'s' * (c > 1)})" for k, c in ranked[:3]) + (" ..." if len(ranked) > 3 else "")
+        return len(kinds) == 1
+
+    def numbers(key: str, form: str):
+        return lambda i: "none" if i.get(key) is None else ", ".join(f"{x:{form}}" for x in i[key])
+
+    first = infos[0]
+    out["format"] = first.get("format", "?")
+    if shared("formats", lambda i: f"{i.get('format', '?')} {i.get('las_version') or ''} point format {i.get('point_format')}"):
+        out.update(las_version=first.get("las_version"), point_format=first.get("point_format"))
+    elif not shared("format", lambda i: i.get("format", "?")):
+        out["format"] = "mixed"
+    spans = [i["bounds"] for i in infos if i.get("point_count") and (i.get("bounds") or {}).get("min") is not None]  # (an empty tile's header: 0, 0, 0)
+    if spans:
+        out["bounds"] = {"min": np.min([b["min"] for b in spans], axis=0).tolist(), "max": np.max([b["max"] for b in spans], axis=0).tolist()}
+        out["bounds_source"] = "header" if all(i.get("bounds_source") == "header" for i in infos) else "data"
+    colored = sum(bool(i.get("has_color")) for i in infos)
+    out["has_color"] = colored == n
+    if 0 < colored < n:
+        details["colored"] = f"{colored:,} of the {n:,} files (the others: default color)"
+    out["attributes"] = [a for a in first.get("attributes") or [] if all(a in (i.get("attributes") or []) for i in infos)]
+    for key, label, text in (("scale", "scales", numbers("scale", "g")), ("offset", "offsets", numbers("offset", ".10g")),
+                             ("crs", "crs differs", lambda i: i.get("crs") or "unknown"),
+                             ("generating_software", "software", lambda i: i.get("generating_software") or "unknown")):  # fmt: skip
+        if shared(label, text):
+            out[key] = first.get(key)
+    out["details"] = details
+    out["file_size"] = sum(i.get("file_size") or 0 for i in infos)
+    return out
+
+
 def _coords(values, scale=None) -> str:
     """'636001.76, 848935.20, 406.26': each axis with the decimals of its stored resolution (a
     LAS scale), else 3 (6 significant digits below 1); no thousands separators in the list."""
@@ -333,6 +381,7 @@ __all__ = [
     "expand_paths",
     "file_info",
     "files_label",
+    "folder_info",
     "format_info",
     "open_cloud",
     "read_chunks",
