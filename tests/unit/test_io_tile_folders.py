@@ -101,3 +101,16 @@ def test_info_of_a_folder_of_many_tiles_is_one_block_and_names_the_damaged_ones(
     assert len(said) == 2 and said[0].startswith(f"error: {tiles[12]}: ") and said[1] == "error: info: 1 of 14 files could not be read (said above)"
     rc, out, err = cli("info", "--each", tmp_path)
     assert rc == 1 and out.count("points:") == 13
+
+
+def test_an_empty_tile_is_skipped_by_a_progressive_load_as_by_open(tmp_path, loaded):
+    """An empty tile (0 points) among many: gp.open and convert skip it with a warning, but a
+    progressive load (``view``, ``render --progressive``) stopped on it ("LAZ file holds no points")."""
+    write_tiles(tmp_path, 5)
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    laspy.LasData(header).write(tmp_path / "tile_00_05.laz")
+    for progressive in (False, True):
+        with pytest.warns(GigapointWarning) as caught:
+            cloud = loaded(tmp_path) if progressive else gp.open(tmp_path)
+        assert cloud.n_points == 250
+        assert f"{tmp_path / 'tile_00_05.laz'}: holds no points, skipped" in [str(w.message) for w in caught]

@@ -33,7 +33,7 @@ from ...core.chunk import PointChunk, join_chunks
 from ...core.chunked import physical_memory
 from ...core.cloud import check_valid_count
 from ...core.threads import SMALL_BATCH
-from ...errors import GigapointError, InputError, MemoryLimitError, keep_warnings, warn
+from ...errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, MemoryLimitError, keep_warnings, warn
 from ...io import human_bytes
 from ...io._base import headers_once
 from ..convert.prefetch import prefetch
@@ -287,7 +287,7 @@ def file_sources(paths, cut_off: list | None = None) -> tuple[list, int | None, 
     are known when every file's header tells them (LAS/LAZ); the grid (ProgressiveOctree's) is
     the first file's offset and the finest scale (points of files on other grids stay wide)."""
     from ...core.cloud import finest_scale
-    from ...io import cloud_name, expand_paths, reader_for, scan_angles_differ, warn_mixed_crs
+    from ...io import cloud_name, expand_paths, files_label, reader_for, scan_angles_differ, warn_mixed_crs
     from ...io._base import DEFAULT_CHUNK_SIZE
     from ...io.las import with_scan_angle
 
@@ -300,6 +300,9 @@ def file_sources(paths, cut_off: list | None = None) -> tuple[list, int | None, 
         reader = reader_for(f)
         head = reader.header(f, salvage=True)  # not info(): an NPY file's info read all its points before the loader began
         n = head["point_count"]
+        if n == 0 and len(files) > 1:  # as gp.open and convert: an empty tile among several is skipped, said
+            warn(f"{f}: holds no points, skipped", GigapointWarning)
+            continue
         if head.get("truncated") and cut_off is not None:
             cut_off.append(str(f))
         total = None if total is None or n is None else total + n
@@ -311,6 +314,8 @@ def file_sources(paths, cut_off: list | None = None) -> tuple[list, int | None, 
         offsets.append(head.get("offset"))
         scales.append(head.get("scale"))
         sources.append((str(f), lambda f=f, reader=reader: read(reader.read_salvaged(f, min(DEFAULT_CHUNK_SIZE, DECODE_CHUNK)))))
+    if not sources:
+        raise EmptyCloudError(f"{files_label(files)}: no file holds any point")
     name = cloud_name(files)
     grid, scale = None, finest_scale(scales)
     if scale is not None and all(o is not None for o in offsets):
