@@ -44,9 +44,10 @@ def info(
                 hint = OctreeDir(work_dir(f)).resume_hint  # (a bad input that stopped it: its error, and what to do)
                 again = "run the same convert command again to resume it" if hint == RESUME_HINT else hint
                 raise InputError(f"{f}: no such file yet: a conversion to it is unfinished (its work folder {work_dir(f)} is there); {again}")
-            found = [] if is_lod_source(f) else expand_paths([f])
+            lod = is_lod_source(f)
+            found = [] if lod else expand_paths([f])
             summed = f if len(found) > FOLDER_LISTED and f.is_dir() and not (each or as_json or memory) else None
-            paths.extend([(f, True, None, None)] if is_lod_source(f) else [(p, False, None, summed) for p in found])
+            paths.extend([(f, True, None, None)] if lod else [(p, False, None, summed) for p in found])
         except GigapointError as exc:  # a missing file among several stopped the others from being shown
             paths.append((f, False, exc, None))
     failed = shown = 0
