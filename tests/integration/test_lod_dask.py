@@ -459,3 +459,37 @@ def test_las_point_formats_0_5_and_6_10_keep_one_scan_angle_as_in_one_process(cl
         convert(paths, tmp_path / "dask", client=client, **OPTS)  # (Dask said no word of them)
     _assert_identical(tmp_path / "one", tmp_path / "dask")
     assert "scan_angle" in gp.open(tmp_path / "dask").attribute_names
+
+
+@pytest.fixture(scope="module")
+def thread_client():
+    """A cluster of threads in this process, for what does not need worker processes."""
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=":0", silence_logs=40)
+    c = distributed.Client(cluster)
+    yield c
+    c.close()
+    cluster.close()
+
+
+def test_a_rerun_waits_for_a_task_its_interrupted_driver_left_running(thread_client, tmp_path, las_writer, monkeypatch):
+    """A driver's Ctrl+C (or death) releases its tasks: the scheduler forgets a running one at once,
+    but the worker runs it to its end, writing into OUT. A re-run must not start beside it."""
+    from gigapoint.lod.convert import distributed as gd
+    from gigapoint.lod.convert import hooks
+
+    src = las_writer(tmp_path / "a.las", 20_000)
+    out = (tmp_path / "oct").resolve()
+    started, ended = [], []
+    monkeypatch.setattr(hooks, "task_started", lambda kind, name: started.append(time.monotonic()))
+    monkeypatch.setattr(hooks, "task_done", lambda kind, name: name == "p0" and ended.append(time.monotonic()))
+
+    def left_running(spec):
+        time.sleep(2.0)
+
+    spec = {"tag": gd.output_tag(out), "out": str(out)}
+    orphan = thread_client.submit(gd._task, "build", "p0", spec, left_running, pure=False)
+    while not started:
+        time.sleep(0.02)
+    thread_client.cancel(orphan)  # as the interrupted driver's client does
+    convert([src], out, client=thread_client, max_leaf=3_000)
+    assert ended and len(started) > 1 and started[1] > ended[0], (started, ended)

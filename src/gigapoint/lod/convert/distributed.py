@@ -109,6 +109,21 @@ WORKER_MALLOC_ENV = {"MALLOC_ARENA_MAX": "1"}
 OWN_CLUSTER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "500ms"}
 _OWN_WORKERS: weakref.WeakSet = weakref.WeakSet()  # clients of the LocalClusters open_client started
 _KEPT: list = []  # in a worker of such a cluster: the KeepFreedMemory entered for the process's life
+# In a worker: the tasks of each output (output_tag) running now. A task whose driver was
+# interrupted or died runs on to its end, but the scheduler forgets it at once (processing()
+# no longer lists it): a re-run into that output asks the workers themselves (_running).
+_RUNNING: dict[str, int] = {}
+_RUNNING_LOCK = threading.Lock()
+
+
+def output_tag(out: Path) -> str:
+    """The part of a task's key, and of _RUNNING, that names its output (an absolute path)."""
+    return hashlib.sha1(str(out).encode()).hexdigest()[:10]
+
+
+def _running(tag: str) -> int:
+    """On a worker: how many tasks into the output ``tag`` run now."""
+    return _RUNNING.get(tag, 0)
 
 
 def _distributed():
@@ -300,7 +315,18 @@ def _numba_threads_from_environment() -> None:
 def _task(kind: str, name: str, spec: dict, fn, *args):
     """Run one task on a worker: numba's kernels on this thread only, freed memory kept while it
     runs (keep_freed_memory.py; for the life of the process in the workers of a LocalCluster
-    that open_client started), an OSError turned into a one-line error naming the worker."""
+    that open_client started), an OSError turned into a one-line error naming the worker; counted
+    in _RUNNING while it runs."""
+    with _RUNNING_LOCK:
+        _RUNNING[spec["tag"]] = _RUNNING.get(spec["tag"], 0) + 1
+    try:
+        return _run_task(kind, name, spec, fn, *args)
+    finally:
+        with _RUNNING_LOCK:
+            _RUNNING[spec["tag"]] -= 1
+
+
+def _run_task(kind: str, name: str, spec: dict, fn, *args):
     import numba
 
     hooks.task_started(kind, name)
@@ -533,7 +559,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         self.out = self.out.resolve()  # workers get absolute paths
         self.dir = OctreeDir(self.dir.path.resolve())
         self.paths = [p.resolve() for p in self.paths]
-        self._out_tag = hashlib.sha1(str(self.out).encode()).hexdigest()[:10]
+        self._out_tag = output_tag(self.out)
         self._run_tag = os.urandom(4).hex()
         self._saved_at = 0.0
         self._tasks_run = 0  # in this run: each task's key is unique
@@ -559,6 +585,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         keep = ("origin", "edge", "attributes", "constant", "partition_points", "compact")
         return {
             "out": str(self.out),
+            "tag": self._out_tag,
             "dir": str(self.dir.path),
             "sampler": self.sampler,
             "format": self.format,
@@ -680,10 +707,9 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
     def _wait_for_earlier_run(self) -> None:
         """A killed driver's tasks that had started run to their end on the workers; its re-run
         waits for them, so that no two tasks write the same files at once."""
-        prefix = f"gigapoint-{self._out_tag}-"
         t0 = time.monotonic()
         while True:
-            busy = [k for keys in self.client.processing().values() for k in keys if str(k).startswith(prefix)]
+            busy = [n for n in self.client.run(_running, self._out_tag, on_error="return").values() if isinstance(n, int) and n]
             if not busy:
                 return
             if time.monotonic() - t0 > EARLIER_RUN_S:
