@@ -336,6 +336,22 @@ def test_an_unreachable_scheduler_is_a_one_line_error(inputs, tmp_path, capsys, 
     assert not (tmp_path / "oct").exists()
 
 
+def test_a_port_where_no_scheduler_answers_is_a_one_line_error_in_time(inputs, tmp_path, capsys, monkeypatch):
+    """A server that takes the connection but never answers (the dashboard's HTTP port): Dask's
+    Client waited for its handshake for good."""
+    import socket
+
+    from gigapoint.lod.convert import distributed as gd
+
+    monkeypatch.setattr(gd, "CONNECT_TIMEOUT_S", 1.0)
+    with socket.create_server(("127.0.0.1", 0)) as silent:  # the kernel accepts; nobody answers
+        t = time.perf_counter()
+        code = main(["convert", str(inputs[0]), "-o", str(tmp_path / "oct"), "--dask", f"tcp://127.0.0.1:{silent.getsockname()[1]}", "-q"])
+    err = capsys.readouterr().err
+    assert code == 1 and time.perf_counter() - t < 10
+    assert "does not answer as a Dask scheduler within 1 s (the dashboard's port?" in err and err.count("\n") == 1, err
+
+
 def test_a_scheduler_without_workers_is_a_one_line_error(inputs, tmp_path, monkeypatch):
     from gigapoint.lod.convert import distributed as gd
 

@@ -195,7 +195,10 @@ def open_client(client, announce: bool = False):
         _OWN_WORKERS.add(c)
     elif isinstance(client, str) and client.strip():
         try:
+            _handshake(dd, client)
             c = dd.Client(client, timeout=CONNECT_TIMEOUT_S)
+        except ConvertError:
+            raise
         except Exception as exc:  # noqa: BLE001 - OSError, TimeoutError, ValueError (a bad address) alike
             raise ConvertError(f"--dask {client}: cannot reach a Dask scheduler there ({one_line(exc) or type(exc).__name__})") from None
     else:
@@ -208,6 +211,31 @@ def open_client(client, announce: bool = False):
         c.close()
         if cluster is not None:
             cluster.close()
+
+
+def _handshake(dd, address: str) -> None:
+    """A Dask handshake with ``address`` within CONNECT_TIMEOUT_S. Client() waits for the other
+    end's answer without end once the connection is made: the dashboard's port (an HTTP server
+    that waits for a request) hung the run for good; another service's bytes gave a MemoryError."""
+    import asyncio
+    from concurrent.futures import ThreadPoolExecutor
+
+    async def hello() -> None:
+        try:
+            comm = await asyncio.wait_for(dd.comm.connect(address, timeout=CONNECT_TIMEOUT_S), CONNECT_TIMEOUT_S)
+        except TimeoutError:  # (asyncio.wait_for's; an OSError too, so first) connected, no answer
+            raise ConvertError(
+                f"--dask {address}: something listens there but does not answer as a Dask scheduler within {CONNECT_TIMEOUT_S:.0f} s "
+                "(the dashboard's port? a scheduler listens on 8786 unless told otherwise)"
+            ) from None
+        except (OSError, ValueError):  # nothing listens there (Dask's message says so), a bad address
+            raise
+        except Exception as exc:  # noqa: BLE001 - another service's bytes decoded as Dask's
+            raise ConvertError(f"--dask {address}: something listens there but does not speak Dask's protocol ({one_line(exc)})") from None
+        await comm.close()
+
+    with ThreadPoolExecutor(1) as pool:  # a loop of its own: the caller's thread may run one (Jupyter)
+        pool.submit(asyncio.run, hello()).result()
 
 
 # ---------------------------------------------------------------------------------------- workers
