@@ -509,3 +509,17 @@ def test_a_rerun_waits_for_a_task_its_interrupted_driver_left_running(thread_cli
     thread_client.cancel(orphan)  # as the interrupted driver's client does
     convert([src], out, client=thread_client, max_leaf=3_000)
     assert ended and len(started) > 1 and started[1] > ended[0], (started, ended)
+
+
+def test_an_input_a_worker_does_not_see_is_named_as_such(thread_client, tmp_path, las_writer, monkeypatch):
+    """On a cluster the workers are other machines: an input only the driver sees (gone here
+    once its read task starts) is named with what to do, not as a bare "no such file"."""
+    from gigapoint.lod.convert import hooks
+
+    src = las_writer(tmp_path / "a.las", 20_000)
+    monkeypatch.setattr(hooks, "task_started", lambda kind, name: kind == "read" and src.unlink(missing_ok=True))
+    with pytest.raises(InputError) as err:
+        convert([src], tmp_path / "oct", client=thread_client)
+    msg = str(err.value)
+    assert msg.startswith(f"{src.resolve()}: Dask worker inproc://") and "does not see this input, which the driver does" in msg, msg
+    assert "every worker shares" in msg and "\n" not in msg

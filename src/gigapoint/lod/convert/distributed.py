@@ -59,7 +59,7 @@ import numpy as np
 from ...atomic import atomic_json, atomic_open
 from ...core import pages
 from ...core.chunk import ColorScaler, warn_dropped_attributes
-from ...errors import GigapointError, GigapointWarning, warn
+from ...errors import GigapointError, GigapointWarning, InputError, warn
 from ...io._base import one_line
 from ...io.las import with_scan_angle
 from ...io.registry import reader_for
@@ -385,6 +385,11 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
     """Read task ``t``: points start..stop of ``path`` (None: the whole file) spilled to raw chunks
     t·CHUNK_STRIDE + j. ``color_mode``: the file's color decision before ``start``. Its result
     has every ``stride``-th valid point for the preview ("preview"; the driver's, not the state's)."""
+    if not os.path.exists(path):  # the driver saw it when it planned this task: this worker is elsewhere
+        raise InputError(
+            f"{path}: Dask worker {_worker_name()} does not see this input, which the driver does "
+            "(inputs must be at the same path on a file system every worker shares)"
+        )
     raw = OctreeDir(spec["dir"]).raw
     scaler, xyz_code, empty = None, None, []
     if start is None:  # an empty file among several (one whose header has no count: text) skipped, said by the driver
