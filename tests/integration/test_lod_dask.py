@@ -518,8 +518,21 @@ def test_an_input_a_worker_does_not_see_is_named_as_such(thread_client, tmp_path
 
     src = las_writer(tmp_path / "a.las", 20_000)
     monkeypatch.setattr(hooks, "task_started", lambda kind, name: kind == "read" and src.unlink(missing_ok=True))
-    with pytest.raises(InputError) as err:
+    with pytest.raises(ConvertError) as err:
         convert([src], tmp_path / "oct", client=thread_client)
     msg = str(err.value)
     assert msg.startswith(f"{src.resolve()}: Dask worker inproc://") and "does not see this input, which the driver does" in msg, msg
-    assert "every worker shares" in msg and "\n" not in msg
+    assert "every worker shares); the conversion to" in msg and msg.endswith("it resumes)") and "\n" not in msg
+
+
+def test_a_worker_running_other_gigapoint_code_is_a_one_line_error(inputs, client, tmp_path, monkeypatch):
+    """Workers import their own gigapoint: another release or a stale checkout would write other
+    bytes (or fail on a task it does not know). Here the driver's code is the odd one."""
+    from gigapoint.lod.convert import distributed as gd
+
+    monkeypatch.setattr(gd, "_CODE_VERSION", "0.0.1+000000000000")
+    with pytest.raises(ConvertError) as err:
+        convert(inputs[:1], tmp_path / "oct", client=client, **OPTS)
+    msg = str(err.value)
+    assert msg.startswith(f"{(tmp_path / 'oct').resolve()}: Dask worker tcp://") and "\n" not in msg, msg
+    assert ", the driver 0.0.1+000000000000 (version+digest of the source): install the same gigapoint on every worker" in msg, msg

@@ -59,7 +59,7 @@ import numpy as np
 from ...atomic import atomic_json, atomic_open
 from ...core import pages
 from ...core.chunk import ColorScaler, warn_dropped_attributes
-from ...errors import GigapointError, GigapointWarning, InputError, warn
+from ...errors import GigapointError, GigapointWarning, warn
 from ...io._base import one_line
 from ...io.las import with_scan_angle
 from ...io.registry import reader_for
@@ -386,9 +386,9 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
     t·CHUNK_STRIDE + j. ``color_mode``: the file's color decision before ``start``. Its result
     has every ``stride``-th valid point for the preview ("preview"; the driver's, not the state's)."""
     if not os.path.exists(path):  # the driver saw it when it planned this task: this worker is elsewhere
-        raise InputError(
-            f"{path}: Dask worker {_worker_name()} does not see this input, which the driver does "
-            "(inputs must be at the same path on a file system every worker shares)"
+        raise ConvertError(  # (not an InputError: the file is fine, and the run resumes once the workers see it)
+            f"{path}: Dask worker {_worker_name()} does not see this input, which the driver does (inputs must be at the "
+            f"same path on a file system every worker shares); the conversion to {spec['out']} stopped unfinished ({STOPPED_RESUMES})"
         )
     raw = OctreeDir(spec["dir"]).raw
     scaler, xyz_code, empty = None, None, []
@@ -559,8 +559,32 @@ def _call_task(spec: dict, fn, *args):
     return fn(*args)
 
 
-def _probe(out: str, token: str) -> str | None:
-    """On each worker before the tasks: does it see the driver's output folder, and may it write there?"""
+def code_version() -> str:
+    """gigapoint's version and a digest of its source files (12 ms): a worker that imports other
+    code than the driver (another release, a stale checkout) writes other bytes, or fails."""
+    global _CODE_VERSION
+    if _CODE_VERSION is None:
+        import gigapoint
+
+        root = Path(gigapoint.__file__).parent
+        h = hashlib.sha1()
+        for f in sorted(root.rglob("*.py")):
+            h.update(f"{f.relative_to(root).as_posix()}\0".encode() + f.read_bytes())
+        _CODE_VERSION = f"{gigapoint.__version__}+{h.hexdigest()[:12]}"
+    return _CODE_VERSION
+
+
+_CODE_VERSION: str | None = None
+
+
+def _probe(out: str, token: str, version: str) -> str | None:
+    """On each worker before the tasks: does it run the driver's code (``version``), does it see
+    the driver's output folder, and may it write there?"""
+    if version != code_version():
+        return (
+            f"runs gigapoint {code_version()}, the driver {version} (version+digest of the source): "
+            "install the same gigapoint on every worker and restart them"
+        )
     d = OctreeDir(out)
     st = d.read_state()
     if st is None or st.get("run") != token:
@@ -726,14 +750,14 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         return super().run(overwrite)
 
     def output_ready(self) -> None:
-        """Before the first task: every worker sees the output folder and may write into it."""
+        """Before the first task: every worker runs this code, sees the output folder and may write into it."""
         token = os.urandom(8).hex()
         self.state["run"] = token
         self.save_state()
-        answers = self.client.run(_probe, str(self.dir.path), token, on_error="return")
+        answers = self.client.run(_probe, str(self.dir.path), token, code_version(), on_error="return")
         for worker, problem in sorted(answers.items()):
-            if isinstance(problem, BaseException):
-                problem = one_line(problem)
+            if isinstance(problem, BaseException):  # (gigapoint missing there, an older one's _probe)
+                problem = f"failed the driver's check ({one_line(problem)}): install the driver's gigapoint on every worker"
             if problem:
                 raise ConvertError(f"{self.out}: Dask worker {worker} {problem}")
 
