@@ -536,3 +536,28 @@ def test_a_worker_running_other_gigapoint_code_is_a_one_line_error(inputs, clien
     msg = str(err.value)
     assert msg.startswith(f"{(tmp_path / 'oct').resolve()}: Dask worker tcp://") and "\n" not in msg, msg
     assert ", the driver 0.0.1+000000000000 (version+digest of the source): install the same gigapoint on every worker" in msg, msg
+
+
+def test_ctrl_c_waits_for_the_tasks_running_on_the_workers(thread_client, tmp_path, las_writer, monkeypatch, stop_conversion_after, capsys):
+    """Dask cannot stop a running task: after Ctrl+C the driver waits for its running tasks,
+    so that nothing writes into OUT once it has returned (then a re-run resumes)."""
+    from gigapoint.lod.convert import hooks
+
+    src = las_writer(tmp_path / "a.las", 120_000)
+    builds = {"started": 0, "done": 0}
+
+    def started(kind, name):
+        if kind == "build":
+            builds["started"] += 1
+            time.sleep(1.0)  # a build that takes a while
+
+    monkeypatch.setattr(hooks, "task_started", started)
+    monkeypatch.setattr(hooks, "task_done", lambda kind, name: kind == "build" and builds.__setitem__("done", builds["done"] + 1))
+    stop_conversion_after(1)
+    with pytest.raises(KeyboardInterrupt):
+        convert([src], tmp_path / "oct", client=thread_client, **OPTS)
+    assert builds["started"] >= 2 and builds["done"] == builds["started"], builds
+    assert "Dask tasks still run into the output: waiting for them to end (Ctrl+C again leaves them" in capsys.readouterr().err
+    stop_conversion_after(None)
+    monkeypatch.setattr(hooks, "task_started", lambda kind, name: None)
+    assert convert([src], tmp_path / "oct", client=thread_client, **OPTS).resumed

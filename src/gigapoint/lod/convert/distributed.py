@@ -709,6 +709,12 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
                 f.release()
                 if more:
                     completed.update(submit(*more))
+        except KeyboardInterrupt:  # (Ctrl+C) the cancelled tasks that run go on writing into OUT: not after we return
+            stop.set()
+            self.client.cancel(list(futures))
+            say = "{} Dask tasks still run into the output: waiting for them to end (Ctrl+C again leaves them; a re-run waits for them)"
+            self._wait_for_running(say, EARLIER_RUN_S)
+            raise
         finally:
             stop.set()
             if futures:
@@ -764,14 +770,21 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
     def _wait_for_earlier_run(self) -> None:
         """A killed driver's tasks that had started run to their end on the workers; its re-run
         waits for them, so that no two tasks write the same files at once."""
+        if self._wait_for_running("{} Dask tasks of an earlier run into the output still run: waiting for them to end", EARLIER_RUN_S):
+            raise ConvertError(f"{self.out}: tasks of an earlier conversion into it are still running on the Dask cluster")
+
+    def _wait_for_running(self, say: str, limit_s: float) -> bool:
+        """Until no task into this output runs on a worker, ``say`` (its count in {}) said on stderr
+        once if any does; True if some still run after ``limit_s``."""
         t0 = time.monotonic()
-        while True:
-            busy = [n for n in self.client.run(_running, self._out_tag, on_error="return").values() if isinstance(n, int) and n]
-            if not busy:
-                return
-            if time.monotonic() - t0 > EARLIER_RUN_S:
-                raise ConvertError(f"{self.out}: tasks of an earlier conversion into it are still running on the Dask cluster")
+        while busy := sum(n for n in self.client.run(_running, self._out_tag, on_error="return").values() if isinstance(n, int)):
+            if say:
+                print(say.format(busy), file=sys.stderr)
+                say = ""
+            if time.monotonic() - t0 > limit_s:
+                return True
             time.sleep(POLL_S)
+        return False
 
     # ------------------------------------------------------------------ read
 
