@@ -564,13 +564,17 @@ def code_version() -> str:
     code than the driver (another release, a stale checkout) writes other bytes, or fails."""
     global _CODE_VERSION
     if _CODE_VERSION is None:
-        import gigapoint
+        from importlib import metadata
 
-        root = Path(gigapoint.__file__).parent
+        root = Path(__file__).parents[2]  # the gigapoint package (not imported: lod sits below it)
         h = hashlib.sha1()
         for f in sorted(root.rglob("*.py")):
             h.update(f"{f.relative_to(root).as_posix()}\0".encode() + f.read_bytes())
-        _CODE_VERSION = f"{gigapoint.__version__}+{h.hexdigest()[:12]}"
+        try:
+            release = metadata.version("gigapoint")
+        except metadata.PackageNotFoundError:  # a source tree on the path
+            release = "(source)"
+        _CODE_VERSION = f"{release}+{h.hexdigest()[:12]}"
     return _CODE_VERSION
 
 
