@@ -50,7 +50,7 @@ def test_a_task_thread_reuses_the_memory_its_last_array_freed():
     from gigapoint.lod.convert.distributed import _task, open_client
 
     with open_client(1) as client:
-        spec = {"own_workers": True, "out": "."}
+        spec = {"own_workers": True, "out": ".", "tag": "probe"}
         faults = client.submit(_task, "read", "probe", spec, _faults_of_a_second_array, pure=False).result()
     if faults[0] < 15_000:  # transparent huge pages for every mapping ("always"): too few faults to tell
         pytest.skip(f"the first 88 MB of arrays faulted only {faults[0]} pages in")
@@ -73,7 +73,7 @@ if __name__ == "__main__":
     from gigapoint.lod.convert.distributed import _task, open_client
 
     with open_client(1) as client:
-        print("result", client.submit(_task, "read", "probe", {"out": "."}, compile_in_the_worker, pure=False).result())
+        print("result", client.submit(_task, "read", "probe", {"out": ".", "tag": "probe"}, compile_in_the_worker, pure=False).result())
 '''
 
 
