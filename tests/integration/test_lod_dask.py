@@ -336,6 +336,19 @@ def test_an_unreachable_scheduler_is_a_one_line_error(inputs, tmp_path, capsys, 
     assert not (tmp_path / "oct").exists()
 
 
+def test_a_port_where_nothing_listens_is_said_at_once(inputs, tmp_path, capsys):
+    """Dask retries a refused connection until its 10 s timeout (a typo in the port waited it out)."""
+    import socket
+
+    with socket.create_server(("127.0.0.1", 0)) as s:
+        port = s.getsockname()[1]  # free once closed
+    t = time.perf_counter()
+    code = main(["convert", str(inputs[0]), "-o", str(tmp_path / "oct"), "--dask", f"tcp://127.0.0.1:{port}", "-q"])
+    err = capsys.readouterr().err
+    assert code == 1 and time.perf_counter() - t < 5
+    assert err == f"error: --dask tcp://127.0.0.1:{port}: cannot reach a Dask scheduler there (nothing listens on that port)\n", err
+
+
 def test_a_port_where_no_scheduler_answers_is_a_one_line_error_in_time(inputs, tmp_path, capsys, monkeypatch):
     """A server that takes the connection but never answers (the dashboard's HTTP port): Dask's
     Client waited for its handshake for good."""

@@ -218,7 +218,19 @@ def _handshake(dd, address: str) -> None:
     end's answer without end once the connection is made: the dashboard's port (an HTTP server
     that waits for a request) hung the run for good; another service's bytes gave a MemoryError."""
     import asyncio
+    import socket
     from concurrent.futures import ThreadPoolExecutor
+
+    scheme, where = dd.comm.parse_address(address)
+    if scheme == "tcp":  # Dask retries a refused connection, an unknown host, until its timeout: they are said at once
+        try:
+            host, port = dd.comm.parse_host_port(where)  # (ValueError: no port)
+            if not 0 < port < 65536:  # (the resolver wraps it)
+                raise ValueError(f"port {port} is not a TCP port")
+            socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+        except (OSError, ValueError) as exc:
+            why = "nothing listens on that port" if isinstance(exc, ConnectionRefusedError) else one_line(exc) or type(exc).__name__
+            raise ConvertError(f"--dask {address}: cannot reach a Dask scheduler there ({why})") from None
 
     async def hello() -> None:
         try:
