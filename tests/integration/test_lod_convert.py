@@ -669,6 +669,23 @@ def test_an_input_beyond_the_memory_limit_is_spilled(demo_las, tmp_path):
     assert in_memory.fits_in_memory(chunks)
 
 
+def test_the_plan_comes_from_the_memory_limit_not_from_what_the_process_holds(demo_las, tmp_path):
+    """The same limit plans the same partitions in a process holding 200 MB more (it was the
+    limit less the process's size: 3.7 M points a partition here, 2.7 M with the 200 MB)."""
+    import importlib
+
+    conv = importlib.import_module("gigapoint.lod.convert.converter")
+
+    def plan():
+        job = conv._Converter([demo_las], tmp_path / "o", "grid", 1 << 30, "gigapoint", 3_000, None, None, conv.NullProgress(), None)
+        return job.partition_points, job.upper_points, job.usable, job.distribute_bytes
+
+    before = plan()
+    ballast = np.ones(200 << 20, np.uint8)  # resident: every page written
+    assert plan() == before == (3_965_523, 3_965_523, (1 << 30) - (192 << 20), 109_051_904)
+    del ballast
+
+
 @pytest.mark.parametrize("inputs", ["chunks", "a file without a point count"])
 def test_an_input_that_outgrows_the_memory_while_it_is_read_is_spilled_from_then_on(town_and_spot, tmp_path, monkeypatch, inputs):
     """Held until the points read exceed what may be held (here 60 000), then every chunk held is

@@ -285,6 +285,33 @@ def test_cli_workers_option_starts_a_local_cluster(inputs, tmp_path, capsys):
     assert not (tmp_path / "y").exists()
 
 
+def test_a_memory_limit_gives_one_process_and_workers_the_same_partitions_and_bytes(tmp_path):
+    """`--memory-limit 300M` plans partitions of <= 514 747 points (the limit less a fixed
+    allowance for the runtime) in one process as with `--workers 2`. The plan came from each
+    process's own size: 622 000 points a partition in one process, 507 000 in a `--workers`
+    driver (Dask loaded), so the octant holding 575 000 of these 1.1 M points was one partition
+    in one process and 8 on Dask, and 9 of the octree's files differed. Both run as `gigapoint
+    convert` in processes of their own, as a user runs them."""
+    rng = np.random.default_rng(3)
+    xyz = rng.random((1_100_000, 3)) * 100
+    xyz[:500_000] /= 2  # 500 000 more points in the first octant
+    src = _write_las(tmp_path / "in.las", xyz, rng.integers(0, 65535, (len(xyz), 3)).astype(np.uint16))
+    code = (  # `gigapoint ARGS`, saying how many partitions it built
+        "import sys; from gigapoint.cli import main; from gigapoint.lod.convert import hooks\n"
+        "built = []; hooks.after_partition_built = built.append\n"
+        "rc = main(sys.argv[1:]); print('partitions', max(built)); sys.exit(rc)\n"
+    )
+    parts = {}
+    for name, more in (("one", []), ("dask", ["--workers", "2"])):
+        args = ["convert", str(src), "-o", str(tmp_path / name), "--memory-limit", "300M", "-q", *more]
+        proc = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=150)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        assert "1,100,000 points" in proc.stdout
+        parts[name] = proc.stdout.split()[-1]
+    _assert_identical(tmp_path / "one", tmp_path / "dask")
+    assert parts == {"one": "15", "dask": "15"}  # the dense octant in 8
+
+
 def test_16bit_colors_dark_after_bright_read_in_parts_are_the_single_process_colors(client, tmp_path):
     """io's color decision never goes back from 16-bit: a dark part of a 16-bit file read by its
     own task decides 8-bit, is found out once the parts before it are read, and is read again."""

@@ -213,7 +213,9 @@ def convert(
 
     ``sampler``: grid | poisson. ``format``: gigapoint (rendered directly) | potree (Potree 2.0,
     ``encoding`` DEFAULT (the default) or BROTLI) | copc; None: copc for an ``out`` ending in .copc.laz, else
-    gigapoint (a folder, so not named like a point file). ``memory_limit``: bytes or '4G'; bounds partition sizes. Only path
+    gigapoint (a folder, so not named like a point file). ``memory_limit``: bytes or '4G'; bounds partition sizes
+    (the limit less a fixed allowance for the runtime, not less what this process holds: the plan is
+    the same wherever it is made, so a process holding much else wants a smaller limit). Only path
     inputs can resume after an interruption; chunk iterables always start clean.
     ``partition_points``, ``chunk_size`` and ``upper_points`` (the carried root points joined
     at once, default ``partition_points``) are tuning knobs, derived from the memory limit.

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from ..octree_dir import ConvertError
@@ -13,6 +11,12 @@ BYTES_PER_POINT_BUILD = 220  # peak working set per point of a partition build
 # 20 M points on the 2-core project machine convert at 1.2 M points/s as one partition, 2.5 M
 # points/s in 4 M-point ones (page faults on a larger working set, cache misses in the sort).
 MAX_PARTITION_POINTS = 4_000_000
+# What a converting process holds besides the conversion: Python, numpy, numba, gigapoint (121 MB
+# measured at the plan in `gigapoint convert`, 145 MB in a `--workers` driver, Dask loaded) and a
+# margin. A constant, not the process's measured size: the plan (``partition_points``) must be
+# the same wherever and whenever it is made, or the octree is not (one process against a Dask
+# driver, whose size says nothing of its workers').
+RUNTIME_BYTES = 192 << 20
 DEFAULT_MAX_LEAF = 20_000
 FORMATS = ("gigapoint", "potree", "copc")
 ENCODINGS = ("DEFAULT", "BROTLI")  # Potree's
@@ -37,12 +41,3 @@ def parse_memory(value, option: str = "--memory-limit", minimum: int = 64 << 20)
     if n < minimum:
         raise ConvertError(f"{option}: {value!r} is below the {minimum >> 20}M minimum")
     return n
-
-
-def rss_bytes() -> int:
-    """This process's resident memory (0 where /proc is not there)."""
-    try:
-        with open("/proc/self/statm") as f:
-            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
-    except (OSError, ValueError, IndexError, AttributeError):
-        return 0

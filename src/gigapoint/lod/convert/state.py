@@ -22,7 +22,7 @@ from ...io import URL_LIKE, expand_paths, file_url_path, shown_url
 from ..copc_write import work_dir as copc_work_dir
 from ..ept import ept_location
 from ..octree_dir import OctreeDir, OutputExistsError
-from .options import BYTES_PER_POINT_BUILD, MAX_PARTITION_POINTS, rss_bytes
+from .options import BYTES_PER_POINT_BUILD, MAX_PARTITION_POINTS, RUNTIME_BYTES
 
 STATE_VERSION = 1
 
@@ -107,10 +107,10 @@ class Job:
         self.format = format
         self.max_leaf = max_leaf
         self.mem = memory_limit
-        usable = max(memory_limit - rss_bytes() - (48 << 20), memory_limit // 4)  # what the process already holds is not ours
+        usable = max(memory_limit - RUNTIME_BYTES, memory_limit // 4)  # from the options alone: the same plan anywhere
         self.usable = usable
         self.partition_points = partition_points or max(50_000, min(MAX_PARTITION_POINTS, usable // BYTES_PER_POINT_BUILD))
-        self.partition_override = partition_points  # None: derived from the memory limit (and this process's size)
+        self.partition_override = partition_points  # None: derived from the memory limit
         self.upper_points = upper_points or self.partition_points  # carried root points the group/upper phases join at once
         # chunks grouped between checkpoints (more: page faults on fresh memory cost more than the opens saved)
         self.distribute_bytes = int(min(256 << 20, max(64 << 20, usable // 8)))
