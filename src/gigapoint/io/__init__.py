@@ -297,7 +297,7 @@ def folder_info(folder, infos: list[dict]) -> dict:
     if 0 < colored < n:
         details["colored"] = f"{colored:,} of the {n:,} files (the others: default color)"
     out["attributes"] = [a for a in first.get("attributes") or [] if all(a in (i.get("attributes") or []) for i in infos)]
-    for key, label, text in (("scale", "scales", numbers("scale", "g")), ("offset", "offsets", numbers("offset", ".10g")),
+    for key, label, text in (("scale", "scales", numbers("scale", ".15g")), ("offset", "offsets", numbers("offset", ".15g")),
                              ("crs", "crs differs", lambda i: i.get("crs") or "unknown"),
                              ("generating_software", "software", lambda i: i.get("generating_software") or "unknown")):  # fmt: skip
         if shared(label, text):
