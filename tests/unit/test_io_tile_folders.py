@@ -114,3 +114,14 @@ def test_an_empty_tile_is_skipped_by_a_progressive_load_as_by_open(tmp_path, loa
             cloud = loaded(tmp_path) if progressive else gp.open(tmp_path)
         assert cloud.n_points == 250
         assert f"{tmp_path / 'tile_00_05.laz'}: holds no points, skipped" in [str(w.message) for w in caught]
+
+
+def test_info_of_a_folder_tells_offsets_apart_as_one_files_info_prints_them(cli, tmp_path):
+    """Offsets that differ in their 11th digit (PDAL's offset 'auto': each tile its own) were
+    counted as one offset in the folder's block, printed to 10 digits."""
+    tiles = write_tiles(tmp_path, 12)
+    las = laspy.read(tiles[11])
+    las.header.offsets = [500000.0001, 4000000.0, 0.0]
+    las.write(tiles[11])
+    rc, out, _ = cli("info", tmp_path)
+    assert rc == 0 and "  offsets:     500000, 4000000, 0 (11 files); 500000.0001, 4000000, 0 (1 file)" in out.splitlines()
