@@ -121,7 +121,7 @@ def test_info_of_a_folder_tells_offsets_apart_as_one_files_info_prints_them(cli,
     counted as one offset in the folder's block, printed to 10 digits."""
     tiles = write_tiles(tmp_path, 12)
     las = laspy.read(tiles[11])
-    las.header.offsets = [500000.0001, 4000000.0, 0.0]
+    las.header.offsets = [500000.00001, 4000000.0, 0.0]
     las.write(tiles[11])
     rc, out, _ = cli("info", tmp_path)
-    assert rc == 0 and "  offsets:     500000, 4000000, 0 (11 files); 500000.0001, 4000000, 0 (1 file)" in out.splitlines()
+    assert rc == 0 and "  offsets:     500000, 4000000, 0 (11 files); 500000.00001, 4000000, 0 (1 file)" in out.splitlines()
