@@ -90,7 +90,6 @@ WORKER_WAIT_S = 60.0  # for a first worker to join the scheduler
 NO_WORKER_S = 120.0  # a run whose cluster has had no worker this long fails
 EARLIER_RUN_S = 600.0  # for tasks of an earlier, killed run into the same output to end
 POLL_S = 0.5
-SAVE_EVERY_S = 1.0  # the state is saved (fsynced) at most this often while tasks finish, and at every phase's end
 
 
 # A worker runs its tasks on a thread of its own, whose allocations glibc serves from a thread
@@ -634,7 +633,6 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         self.paths = [p.resolve() for p in self.paths]
         self._out_tag = output_tag(self.out)
         self._run_tag = os.urandom(4).hex()
-        self._saved_at = 0.0
         self._tasks_run = 0  # in this run: each task's key is unique
         self._last_preview = None  # the read phase's preview sample, written in full while the distribute tasks run
 
@@ -642,14 +640,6 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         fp = super().fingerprint()
         # the state's layout differs from a single-process run's (and from that before int32 spills)
         return None if fp is None else {**fp, "engine": "dask", "spill": "xyz-int32"}
-
-    def save_state(self) -> None:
-        super().save_state()
-        self._saved_at = time.monotonic()
-
-    def _save_soon(self) -> None:
-        if time.monotonic() - self._saved_at >= SAVE_EVERY_S:
-            self.save_state()
 
     # ------------------------------------------------------------------ running tasks
 
@@ -853,7 +843,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
                         corner, xyz, rgba = sample
                         preview.add(xyz.astype(np.float64) + corner, rgba, {})
                         self._write_preview(preview)
-                self._save_soon()
+                self.save_state_soon()
 
             calls = []
             for t in todo:
@@ -949,7 +939,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         def done(i, res):
             results[str(todo[i])] = res
             self.progress.advance(st["read_results"][str(todo[i])]["points"])
-            self._save_soon()
+            self.save_state_soon()
 
         self._run("distribute", [(f"t{t}", _distribute_task, (t, self._chunk_ids(t), parts), 0) for t in todo], done, meanwhile=self._final_preview)
         counts = [0] * len(parts)

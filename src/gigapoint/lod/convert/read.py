@@ -220,8 +220,10 @@ class ReadPhase(Job):
                 hi = np.maximum(hi, c_hi)
             preview.add(xyz, rgba, {a: kept[a] for a in attrs})
             st.update(chunks=i + 1, lo=lo.tolist(), hi=hi.tolist(), attributes=attrs, points=st.get("points", 0) + len(xyz))
-            self._write_preview(preview)
-            self.save_state()
+            if self._write_preview(preview):  # the state names the preview file's chunks: saved with it
+                self.save_state()
+            else:
+                self.save_state_soon()
             self.progress.advance(n_in)
         self._write_preview(preview, force=True)
         warn_dropped_attributes(str(self.out), dropped)
@@ -255,12 +257,15 @@ class ReadPhase(Job):
                 preview.add(d["xyz"], d["rgba"], {a: d["attr." + a] for a in attrs or {}})
         return preview
 
-    def _write_preview(self, preview: PreviewSampler, force: bool = False) -> None:
-        if preview.maybe_write(force):
-            self.state["preview"] = {
-                "chunks": self.state.get("chunks", 0),
-                "seen": preview.seen,
-                "stride": preview.stride,
-                "points": preview.held,
-            }
-            self.shows_points(time.perf_counter() - self.t0)
+    def _write_preview(self, preview: PreviewSampler, force: bool = False) -> bool:
+        """The preview written if due (``force``: if it changed); True when it was."""
+        if not preview.maybe_write(force):
+            return False
+        self.state["preview"] = {
+            "chunks": self.state.get("chunks", 0),
+            "seen": preview.seen,
+            "stride": preview.stride,
+            "points": preview.held,
+        }
+        self.shows_points(time.perf_counter() - self.t0)
+        return True

@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import time
 import urllib.parse
 import urllib.request
 from pathlib import Path
@@ -25,6 +26,7 @@ from ..octree_dir import OctreeDir, OutputExistsError
 from .options import BYTES_PER_POINT_BUILD, MAX_PARTITION_POINTS, RUNTIME_BYTES
 
 STATE_VERSION = 1
+SAVE_EVERY_S = 1.0  # the state is saved (fsynced) at most this often while chunks or tasks finish (save_state_soon)
 
 
 def local_path(p, what: str, error=InputError):
@@ -168,8 +170,18 @@ class Job:
             scale = st.get("chunk_scale")
         return {"scale": scale if isinstance(scale, list) else None, "colors": self.colors}
 
+    _saved_at = float("-inf")  # time.monotonic() of the last save_state
+
     def save_state(self) -> None:
         self.dir.write_state(self.state)
+        self._saved_at = time.monotonic()
+
+    def save_state_soon(self) -> None:
+        """The state saved if SAVE_EVERY_S passed since the last save: a save is an fsync (~2 ms
+        here), once per chunk it was 3.5 of 23 s reading 1 500 tiles of 2 000 points. A stopped
+        run resumes from the last save, reading again the chunks after it."""
+        if time.monotonic() - self._saved_at >= SAVE_EVERY_S:
+            self.save_state()
 
     def save_state_with(self, **changes) -> None:
         """The state saved with ``changes`` (``damaged``: the next run refuses to resume it)."""
