@@ -112,12 +112,13 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
         self._held.append(held)
         self._held_points += len(xyz)
         if self._held_points > held_points(self):
-            self.spilled = self.state["spilled"] = True  # saved with this chunk's count
+            self.spilled = True
             constant = {a: constant_value(c) for a, c in now.items() if c is not None}
             for j, held in enumerate(self._held):  # (a constant one spilled as its value alone)
                 values = constant | {k[5:]: v for k, v in held.items() if k.startswith("attr.")}
                 save_raw_chunk(self.dir.raw, j, held.pop("xyz"), held.pop("rgba"), values, self._xyz_code)
             self._held = []
+            self.state["spilled"] = True  # once every held chunk is spilled (a run stopped in between saves its state)
         return taken
 
     def _hold_constant(self, a: str, value) -> None:

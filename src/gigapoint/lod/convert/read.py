@@ -3,6 +3,7 @@ conversion's preview sampled on the way (../preview.py)."""
 
 from __future__ import annotations
 
+import contextlib
 import time
 from functools import cached_property
 
@@ -202,29 +203,33 @@ class ReadPhase(Job):
         preview = self._preview_sampler(total, done, attrs)
         dropped: set[str] = set()
         self.progress.phase("read", total)
-        for i, chunk in enumerate(self._chunks()):
-            n_in = len(chunk)
-            if i < done:
+        try:
+            for i, chunk in enumerate(self._chunks()):
+                n_in = len(chunk)
+                if i < done:
+                    self.progress.advance(n_in)
+                    continue
+                xyz, rgba, kept, names, invalid, c_lo, c_hi = self._take_chunk(i, chunk)
+                merged = merge_attributes(attrs, names)
+                if attrs is not None:  # left out: one chunk lacks it, brings it alone, or in another dtype
+                    dropped |= (set(attrs) | set(names)) - set(merged)
+                attrs = merged
+                sc, prev = getattr(chunk, "scale", None), st.get("chunk_scale", "unset")  # the chunks' grid (compact_plan)
+                st["chunk_scale"] = None if sc is None or prev is None else (list(map(float, sc)) if prev == "unset" else np.minimum(prev, sc).tolist())
+                if c_lo is not None:
+                    lo = np.minimum(lo, c_lo)
+                    hi = np.maximum(hi, c_hi)
+                preview.add(xyz, rgba, {a: kept[a] for a in attrs})
+                st.update(chunks=i + 1, lo=lo.tolist(), hi=hi.tolist(), attributes=attrs, points=st.get("points", 0) + len(xyz), skipped=st.get("skipped", 0) + int(invalid))
+                if self._write_preview(preview):  # the state names the preview file's chunks: saved with it
+                    self.save_state()
+                else:
+                    self.save_state_soon()
                 self.progress.advance(n_in)
-                continue
-            xyz, rgba, kept, names, invalid, c_lo, c_hi = self._take_chunk(i, chunk)
-            st["skipped"] = st.get("skipped", 0) + int(invalid)
-            merged = merge_attributes(attrs, names)
-            if attrs is not None:  # left out: one chunk lacks it, brings it alone, or in another dtype
-                dropped |= (set(attrs) | set(names)) - set(merged)
-            attrs = merged
-            sc, prev = getattr(chunk, "scale", None), st.get("chunk_scale", "unset")  # the chunks' grid (compact_plan)
-            st["chunk_scale"] = None if sc is None or prev is None else (list(map(float, sc)) if prev == "unset" else np.minimum(prev, sc).tolist())
-            if c_lo is not None:
-                lo = np.minimum(lo, c_lo)
-                hi = np.maximum(hi, c_hi)
-            preview.add(xyz, rgba, {a: kept[a] for a in attrs})
-            st.update(chunks=i + 1, lo=lo.tolist(), hi=hi.tolist(), attributes=attrs, points=st.get("points", 0) + len(xyz))
-            if self._write_preview(preview):  # the state names the preview file's chunks: saved with it
+        except BaseException:  # stopped (Ctrl+C, a bad input): saved as it stands, a rerun resumes after the last chunk read
+            with contextlib.suppress(OSError):
                 self.save_state()
-            else:
-                self.save_state_soon()
-            self.progress.advance(n_in)
+            raise
         self._write_preview(preview, force=True)
         warn_dropped_attributes(str(self.out), dropped)
         self._end_read(lo, hi)
