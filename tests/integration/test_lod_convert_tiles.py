@@ -8,10 +8,11 @@ import json
 
 import pytest
 
+from gigapoint.errors import GigapointWarning, InputError
 from gigapoint.lod import OctreeDir, convert
 from gigapoint.lod.convert import state as state_mod
 
-OPTS = {"max_leaf": 500, "partition_points": 2_000}
+OPTS = {"max_leaf": 500, "partition_points": 2_000, "chunk_size": 1_000}  # tiles of 150 points: joined 6 a chunk
 N_TILES = 40
 
 
@@ -56,7 +57,7 @@ def test_a_run_stopped_part_way_through_many_tiles_resumes_to_the_same_output(ti
     monkeypatch.setattr(read, "_read_chunks", stops)
     with pytest.raises(KeyboardInterrupt):
         convert(tiles, out, **OPTS)
-    assert OctreeDir(out).read_state()["chunks"] == 25  # a stop saves the state as it stands
+    assert OctreeDir(out).read_state()["chunks"] == 4  # a stop saves the state as it stands: tiles 0-23 joined 6 a chunk
     monkeypatch.setattr(read, "_read_chunks", real)
     res = convert(tiles, out, **OPTS)
     assert (res.resumed, res.points) == (True, whole.points) and whole.points == N_TILES * 150
@@ -81,9 +82,44 @@ def test_a_run_killed_between_two_saves_reads_the_tiles_after_the_last_again(til
     with pytest.raises(KeyboardInterrupt):
         convert(tiles, out, **OPTS)
     # as a kill leaves it: the last save before the stop (the first chunk's preview's, often), not the stop's own
-    last = [s for s in saved if 1 <= json.loads(s).get("chunks", 0) < 25][-1]
+    last = [s for s in saved[:-1] if json.loads(s).get("chunks")][-1]
     (out / ".partial" / "state.json").write_text(last)
     monkeypatch.setattr(read, "_read_chunks", real)
     res = convert(tiles, out, **OPTS)
     assert (res.resumed, res.points) == (True, whole.points)
     assert _files(out) == _files(tmp_path / "whole")
+
+
+def test_small_tiles_are_spilled_joined_up_to_a_chunk(tiles, tmp_path, monkeypatch, out_of_core):
+    read = importlib.import_module("gigapoint.lod.convert.read")
+    real, sizes = read.spill_chunk, []
+    monkeypatch.setattr(read, "spill_chunk", lambda raw, i, chunk, code=None: (sizes.append(len(chunk)), real(raw, i, chunk, code))[1])
+    res = convert(tiles, tmp_path / "oct", **OPTS)
+    assert sizes == [900] * 6 + [600] and res.points == N_TILES * 150  # was 40 chunks of 150
+
+
+def _copy(tiles, d):
+    d.mkdir()
+    for p in sorted(tiles.iterdir()):
+        (d / p.name).write_bytes(p.read_bytes())
+    return d
+
+
+def test_an_empty_tile_among_joined_ones_is_skipped(tiles, tmp_path, las_writer, out_of_core):
+    d = _copy(tiles, tmp_path / "in")
+    las_writer(d / "t10b.las", 0)  # (sorted between t10 and t11)
+    with pytest.warns(GigapointWarning, match=f"{d / 't10b.las'}: holds no points, skipped"):
+        res = convert(d, tmp_path / "oct", **OPTS)
+    whole = convert(tiles, tmp_path / "whole", **OPTS)
+    assert res.points == whole.points == N_TILES * 150
+    assert _files(tmp_path / "oct") == _files(tmp_path / "whole")
+
+
+def test_a_damaged_tile_among_joined_ones_is_named(tiles, tmp_path, out_of_core):
+    d = _copy(tiles, tmp_path / "in")
+    cut = d / "t10.las"
+    cut.write_bytes(cut.read_bytes()[:-1000])
+    with pytest.raises(InputError) as err:
+        convert(d, tmp_path / "oct", **OPTS)
+    assert str(err.value).startswith(f"{cut}: truncated LAS file: the header claims 150 points") and "\n" not in str(err.value)
+    assert OctreeDir(tmp_path / "oct").read_state()["chunks"] == 1  # tiles 0-5; 6-9 were held for the next chunk

@@ -9,7 +9,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ...core.chunk import PointChunk, warn_dropped_attributes
+from ...core.chunk import PointChunk, join_chunks, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
 from ...errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, warn
 from ...io import files_label, read_chunks, scan_angles_differ
@@ -111,6 +111,41 @@ def spill_chunk(raw, i: int, chunk, xyz_code=None) -> tuple:
     return taken, found
 
 
+def _same(a, b) -> bool:
+    """Whether ``a`` and ``b`` (arrays, tuples or None) hold the same values."""
+    return (a is None) == (b is None) and (a is None or np.array_equal(a, b))
+
+
+def _alike(a: tuple, b: tuple) -> bool:
+    """Whether chunks (LAS grid, PointChunk) ``a`` and ``b`` may be joined: the same grid, scale and attributes."""
+    kinds = [{k: (v.dtype, v.shape[1:]) for k, v in c.attributes.items()} for c in (a[1], b[1])]
+    return _same(a[0], b[0]) and _same(a[1].scale, b[1].scale) and kinds[0] == kinds[1]
+
+
+def _joined(items, size: int):
+    """Chunks (LAS grid, PointChunk), in order, with consecutive alike ones (small files') joined
+    into one of up to ``size`` points. A chunk a file was ~16 spill files, written, read twice
+    and removed: a folder of 1 500 tiles of 2 000 points took 23 s out of core, one file 5 s."""
+    held, n = [], 0
+    for item in items:
+        if held and (n + len(item[1]) > size or not _alike(held[0], item)):
+            yield _join(held)
+            held, n = [], 0
+        held.append(item)
+        n += len(item[1])
+        if n >= size:
+            yield _join(held)
+            held, n = [], 0
+    if held:
+        yield _join(held)
+
+
+def _join(held: list) -> tuple:
+    chunk = join_chunks([c for _, c in held])
+    chunk.scale = held[0][1].scale  # (alike: every one's)
+    return held[0][0], chunk
+
+
 def _grid_of(path) -> np.ndarray | None:
     """``path``'s LAS grid (spill.las_xyz_code), None for other formats and where its header
     fails (an empty file among several is skipped; a broken one's error comes from reading it)."""
@@ -164,14 +199,21 @@ class ReadPhase(Job):
                     raise InputError(f"convert: inputs are files and folders, a cloud, or PointChunks; item {i} is a {type(chunk).__name__}")
                 yield chunk
         else:
-            for p in self.paths:
-                self._spill_code = _grid_of(p)  # (set as the first of p's chunks is asked for: the ones taken next are p's)
-                chunks = _skipped_if_empty(p, _read_chunks(p, self.chunk_size), len(self.paths) > 1)
-                chunks = with_scan_angle(chunks) if self.one_angle else chunks
-                yield from prefetch(chunks) if self.read_ahead else chunks
+            for code, chunk in _joined(self._file_chunks(), self.chunk_size):
+                self._spill_code = code
+                yield chunk
 
-    #: the LAS grid of the file whose chunks are being read (spill.las_xyz_code): their positions
-    #: spilled as its int32 where they are on it (12 bytes a point, not 24), as on Dask; None: float64
+    def _file_chunks(self):
+        """The input files' chunks, each with its file's LAS grid (``_grid_of``)."""
+        for p in self.paths:
+            code = _grid_of(p)
+            chunks = _skipped_if_empty(p, _read_chunks(p, self.chunk_size), len(self.paths) > 1)
+            chunks = with_scan_angle(chunks) if self.one_angle else chunks
+            for chunk in prefetch(chunks) if self.read_ahead else chunks:
+                yield code, chunk
+
+    #: the LAS grid of the chunk being taken (spill.las_xyz_code): its positions spilled as its
+    #: int32 where they are on it (12 bytes a point, not 24), as on Dask; None: float64
     _spill_code = None
 
     def _take_chunk(self, i: int, chunk) -> tuple:

@@ -145,6 +145,7 @@ class Job:
             "chunk_size": self.chunk_size,
             "layout": self.layout,
             "colors": self.colors,
+            "chunks": "joined",  # small files' chunks joined (read._joined): a state of one chunk a file reads otherwise
         }
 
     def fingerprint_key(self) -> str | None:
