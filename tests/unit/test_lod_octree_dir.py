@@ -204,7 +204,7 @@ def test_many_small_files_convert_in_time_linear_in_the_files(tmp_path, monkeypa
         sizes.clear()
         result = convert([tiles], tmp_path / name, memory_limit=limit)
         assert result.points == len(xyz) and result.in_memory == (limit is None)
-        assert len(sizes) >= 300 and max(sizes) < 3000  # (it grew to ~40 kB with 300 tiles' fingerprint)
+        assert sizes and max(sizes) < 3000  # (it grew to ~40 kB with 300 tiles' fingerprint; saved once a tile then, at most once a second now)
         octree = gp.open(tmp_path / name)
         cam = gp.Camera.fit(octree.bounds, view="top", width=120, height=120)
         img = gp.render(octree, cam, backend="cpu", point_budget=10**9, lod_threshold_px=0, size_mode="fixed")
