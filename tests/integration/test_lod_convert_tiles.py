@@ -123,3 +123,22 @@ def test_a_damaged_tile_among_joined_ones_is_named(tiles, tmp_path, out_of_core)
         convert(d, tmp_path / "oct", **OPTS)
     assert str(err.value).startswith(f"{cut}: truncated LAS file: the header claims 150 points") and "\n" not in str(err.value)
     assert OctreeDir(tmp_path / "oct").read_state()["chunks"] == 1  # tiles 0-5; 6-9 were held for the next chunk
+
+
+def test_dask_batches_small_tiles_into_few_tasks_with_the_same_output(tiles, tmp_path, monkeypatch):
+    """A Dask task a tile cost ~39 ms: read tasks are batched up to a chunk's points, and so the
+    count and distribute tasks that follow them."""
+    distributed = pytest.importorskip("distributed")
+    from gigapoint.lod.convert.distributed import DaskPhases
+
+    runs = []
+    real = DaskPhases._run
+    monkeypatch.setattr(DaskPhases, "_run", lambda self, kind, calls, *a, **k: (runs.append((kind, len(calls))), real(self, kind, calls, *a, **k))[1])
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=":0", silence_logs=40)
+    with distributed.Client(cluster) as client:
+        res = convert(tiles, tmp_path / "dask", client=client, **OPTS)
+    cluster.close()
+    convert(tiles, tmp_path / "one", **OPTS)
+    assert res.points == N_TILES * 150
+    assert [r for r in runs if r[0] in ("read", "count", "distribute")] == [("read", 7), ("count", 7), ("distribute", 7)]  # was 40 each
+    assert _files(tmp_path / "dask") == _files(tmp_path / "one")
