@@ -122,7 +122,8 @@ def test_a_damaged_tile_among_joined_ones_is_named(tiles, tmp_path, out_of_core)
     with pytest.raises(InputError) as err:
         convert(d, tmp_path / "oct", **OPTS)
     assert str(err.value).startswith(f"{cut}: truncated LAS file: the header claims 150 points") and "\n" not in str(err.value)
-    assert OctreeDir(tmp_path / "oct").read_state()["chunks"] == 1  # tiles 0-5; 6-9 were held for the next chunk
+    st = OctreeDir(tmp_path / "oct").read_state()  # tiles 0-5 joined, then 6-9, taken before the stop
+    assert (st["chunks"], st["points"], st["stopped_by"].split(":")[0]) == (2, 10 * 150, str(cut))
 
 
 def test_dask_batches_small_tiles_into_few_tasks_with_the_same_output(tiles, tmp_path, monkeypatch):

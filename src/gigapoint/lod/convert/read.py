@@ -126,8 +126,16 @@ def _joined(items, size: int):
     """Chunks (LAS grid, PointChunk), in order, with consecutive alike ones (small files') joined
     into one of up to ``size`` points. A chunk a file was ~16 spill files, written, read twice
     and removed: a folder of 1 500 tiles of 2 000 points took 23 s out of core, one file 5 s."""
-    held, n = [], 0
-    for item in items:
+    held, n, items = [], 0, iter(items)
+    while True:
+        try:
+            item = next(items, None)
+        except Exception:  # a bad file: the files before it taken first, as they were alone (the stop then names it)
+            if held:
+                yield _join(held)
+            raise
+        if item is None:
+            break
         if held and (n + len(item[1]) > size or not _alike(held[0], item)):
             yield _join(held)
             held, n = [], 0
