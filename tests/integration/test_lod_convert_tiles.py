@@ -136,9 +136,15 @@ def test_dask_batches_small_tiles_into_few_tasks_with_the_same_output(tiles, tmp
     real = DaskPhases._run
     monkeypatch.setattr(DaskPhases, "_run", lambda self, kind, calls, *a, **k: (runs.append((kind, len(calls))), real(self, kind, calls, *a, **k))[1])
     cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=":0", silence_logs=40)
+    d = _copy(tiles, tmp_path / "in")
+    cut = d / "t10.las"
+    cut.write_bytes(cut.read_bytes()[:-1000])
     with distributed.Client(cluster) as client:
         res = convert(tiles, tmp_path / "dask", client=client, **OPTS)
+        with pytest.raises(InputError) as err:  # a damaged tile in a batch: named, in one line
+            convert(d, tmp_path / "bad", client=client, **OPTS)
     cluster.close()
+    assert str(err.value).startswith(f"{cut}: truncated LAS file: the header claims 150 points") and "\n" not in str(err.value)
     convert(tiles, tmp_path / "one", **OPTS)
     assert res.points == N_TILES * 150
     assert [r for r in runs if r[0] in ("read", "count", "distribute")] == [("read", 7), ("count", 7), ("distribute", 7)]  # was 40 each
