@@ -15,7 +15,7 @@ from ...io.las import LasReader, read_las_header, wkt_of
 from ...io.registry import reader_for
 
 
-def _wkt_of(text: str | None) -> str | None:
+def _as_wkt(text: str | None) -> str | None:
     """WKT of the LAS reader's CRS: an 'EPSG:n' through pyproj when it is installed (else None);
     any other is WKT already (one found in an EVLR, where copc-lib writes it)."""
     if not text or not text.upper().startswith("EPSG:"):
@@ -76,7 +76,7 @@ def input_facts(paths, one_grid: bool = False) -> dict:
         text = info.get("crs")
         if text and crs is None:
             crs = text
-            wkt = wkt_of(read_las_header(p).vlrs) or _wkt_of(text)  # the header's VLRs: the first CRS's file only
+            wkt = wkt_of(read_las_header(p).vlrs) or _as_wkt(text)  # the header's VLRs: the first CRS's file only
     warn_mixed_crs(paths or [], then="; the output takes the first one's CRS")
     if one_grid and grids:
         _warn_off_grid(grids, scale, offset)
