@@ -9,6 +9,8 @@ import warnings
 import laspy
 import numpy as np
 import pytest
+from laspy.vlrs.known import WktCoordinateSystemVlr
+from laspy.vlrs.vlrlist import VLRList
 
 import gigapoint as gp
 from gigapoint.errors import GigapointWarning
@@ -28,12 +30,15 @@ def geokeys(epsg: int) -> laspy.VLR:
     return laspy.VLR("LASF_Projection", 34735, "GeoKeyDirectoryTag", data)
 
 
-def write_tile(path, xyz, scale, offset, crs=None, version="1.2"):
+def write_tile(path, xyz, scale, offset, crs=None, version="1.2", evlrs=()):
+    """A LAS tile; ``crs``: a VLR; ``evlrs``: LAS 1.4 EVLRs after the points."""
     header = laspy.LasHeader(point_format=6 if version == "1.4" else 0, version=version)
     header.scales, header.offsets = np.array([scale] * 3), np.array(offset, np.float64)
     if crs is not None:
         header.vlrs.append(crs)
     las = laspy.LasData(header)
+    if evlrs:
+        las.evlrs = VLRList(list(evlrs))
     las.x, las.y, las.z = xyz.T
     las.write(str(path))
     return np.column_stack([las.x, las.y, las.z])  # the file's values: on its grid
@@ -83,7 +88,47 @@ def test_convert_of_tiles_with_different_crs_warns_once(tmp_path):
         warnings.simplefilter("always")
         gp.convert([tmp_path / "a.las", tmp_path / "b.las"], tmp_path / "out")
     said = crs_warnings(caught)
-    assert len(said) == 1 and "a.las: EPSG:32610; b.las: EPSG:32611" in said[0] and "the output takes the first one's CRS" in said[0]
+    assert len(said) == 1 and "a.las: EPSG:32610; b.las: EPSG:32611" in said[0] and "the output takes the first CRS named" in said[0]
+
+
+@pytest.mark.parametrize("how", ["open", "progressive", "convert"])
+def test_tiles_without_a_crs_among_tiles_with_one_are_named(tmp_path, how):
+    """One tile names EPSG:32610, four name none (VLRs lost, or another CRS unsaid): that was
+    silent. Said once, naming three of the four; a conversion's output takes the CRS named."""
+    write_tile(tmp_path / "a.las", tile_points(0, 500_000.0), 0.001, (500_000, 4_800_000, 0), geokeys(32610))
+    for i, name in enumerate("bcde"):
+        write_tile(tmp_path / f"{name}.las", tile_points(i + 1, 500_050.0 + 50 * i), 0.001, (500_000, 4_800_000, 0))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if how == "convert":
+            gp.convert(sorted(tmp_path.glob("*.las")), tmp_path / "out")
+        else:
+            cloud = gp.open(tmp_path, progressive=how == "progressive")
+            if how == "progressive":
+                cloud.wait()
+    said = crs_warnings(caught)
+    assert len(said) == 1, said
+    assert said[0].startswith("b.las, c.las, d.las and 1 more name no CRS, where a.las names EPSG:32610: ")
+    assert said[0].endswith("not reprojected, so they may not line up" + ("; the output takes the first CRS named" if how == "convert" else ""))
+    if how == "convert":
+        assert gp.lod.octree_info(tmp_path / "out")["crs"] == "EPSG:32610"
+
+
+def test_a_wkt_in_an_evlr_counts_as_the_files_crs(tmp_path):
+    """LAS 1.4 may keep its WKT in an EVLR (laspy writes it there, its WKT bit unset): the
+    mixed-CRS check read the VLRs only, so a tile of another CRS beside it was not warned about."""
+    other = laspy.VLR("test", 1, "before the WKT", b"x" * 100)  # (the header walk skips its data)
+    write_tile(tmp_path / "a.las", tile_points(0, 500_000.0), 0.001, (500_000, 4_800_000, 0), version="1.4",
+               evlrs=[other, WktCoordinateSystemVlr(UTM10_WKT)])  # fmt: skip
+    write_tile(tmp_path / "b.las", tile_points(1, 500_050.0), 0.001, (500_000, 4_800_000, 0), geokeys(32611))
+    assert gp.io.file_info(tmp_path / "a.las")["crs"] == UTM10_WKT
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gp.open(tmp_path)
+        gp.convert([tmp_path / "a.las"], tmp_path / "a.copc.laz")
+    said = crs_warnings(caught)
+    assert len(said) == 1 and "2 different CRSs (a.las: EPSG:32610; b.las: EPSG:32611)" in said[0], said
+    assert gp.open(tmp_path / "a.copc.laz").meta["crs"] == UTM10_WKT
 
 
 def test_tiles_on_different_las_grids_merge_at_the_files_values(tmp_path):

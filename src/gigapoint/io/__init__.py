@@ -27,7 +27,7 @@ from ..errors import EmptyCloudError, GigapointError, GigapointWarning, InputErr
 from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail, headers_once, read_once
 from .demo import demo_arrays, demo_chunks
 from .http import shown_url
-from .las import LasReader, read_las_header, vlrs_crs, with_scan_angle
+from .las import LasReader, read_las_header, with_scan_angle
 from .registry import in_folder, is_supported_name, reader_for, readers, register, supported_suffixes
 
 
@@ -110,6 +110,11 @@ def files_label(files) -> str:
     return ", ".join(files[:3]) + (" ..." if len(files) > 3 else "")
 
 
+def file_names(files) -> str:
+    """Files as a warning lists them: the first three's names, then 'and N more'."""
+    return ", ".join(Path(f).name for f in files[:3]) + (f" and {len(files) - 3} more" if len(files) > 3 else "")
+
+
 def scan_angles_differ(files) -> bool:
     """Whether LAS/LAZ files of one scene name their scan angle both ways (point formats 0-5
     ``scan_angle_rank``, 6-10 ``scan_angle``): kept apart, neither was in every file and the
@@ -126,27 +131,39 @@ WKT_NAME = re.compile(r'\s*[A-Z_]+\[\s*"([^"]+)"')
 
 
 def warn_mixed_crs(files, then: str = "") -> None:
-    """Warn where LAS/LAZ files read as one cloud name different CRSs: their coordinates are used
-    as they are, nothing is reprojected, so such tiles do not line up (``then``: what follows,
+    """Warn where LAS/LAZ files read as one cloud name different CRSs, or some name one and
+    others none (lost with their VLRs, or another CRS unsaid): their coordinates are used as
+    they are, nothing is reprojected, so such tiles may not line up (``then``: what follows,
     added to the message). Once an operation (``headers_once``: open_sized reads the files twice)."""
     if len(files) < 2:
         return
     first: dict = {}  # CRS (its EPSG code where a WKT ends with one): the first file naming it
+    have, none = 0, []  # how many LAS files name a CRS; those naming none
     for f in files:
         try:  # (the header the read uses: no second open; salvage: as scan_angles_differ)
-            crs = vlrs_crs(read_las_header(f, salvage=True).vlrs) if isinstance(reader_for(f), LasReader) else None
+            if not isinstance(reader_for(f), LasReader):  # (no CRS to name: not said to lack one)
+                continue
+            crs = read_las_header(f, salvage=True).crs()
         except GigapointError:  # a bad file: reading its points says so, in its own words
             continue
         if crs:
             code = WKT_EPSG.search(crs)  # the same CRS as WKT in one tile, as GeoTIFF keys in another
             first.setdefault(f"EPSG:{code.group(1)}" if code else crs, f)
-    if len(first) < 2:
+            have += 1
+        else:
+            none.append(f)
+    lacking = f"{file_names(none)} {'names' if len(none) == 1 else 'name'} no CRS"
+    if len(first) > 1:
+        named = "; ".join(f"{Path(f).name}: {crs[:60]}" for crs, f in list(first.items())[:3])
+        said = f"the files name {len(first)} different CRSs ({named}{'; ...' if len(first) > 3 else ''}){'; ' + lacking if none else ''}"
+        line_up = "so they do not line up"
+    elif first and none:  # (the others' points probably in another CRS, or their VLRs lost)
+        crs, f = next(iter(first.items()))
+        others = f"{Path(f).name} names" if have == 1 else f"{Path(f).name} and {have - 1} more name"
+        said, line_up = f"{lacking}, where {others} {crs[:60]}", "so they may not line up"
+    else:
         return
-    named = "; ".join(f"{Path(f).name}: {crs[:60]}" for crs, f in list(first.items())[:3])
-    message = (
-        f"the files name {len(first)} different CRSs ({named}{'; ...' if len(first) > 3 else ''}): "
-        f"their coordinates are used as they are, not reprojected, so they do not line up{then}"
-    )
+    message = f"{said}: their coordinates are used as they are, not reprojected, {line_up}{then}"
     read_once("mixed CRSs", "\n".join(map(str, files)), lambda: warn(message, GigapointWarning))
 
 

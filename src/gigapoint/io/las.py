@@ -218,12 +218,18 @@ class LasHeader:
     number_of_evlrs: int = 0
     generating_software: str = ""
     vlrs: list[tuple[bytes, int, bytes]] = field(default_factory=list)  # (user_id, record_id, data)
+    #: its EVLRs' WKT CRS record (LAS 1.4 may keep it there), as ``vlrs``: the one EVLR whose data is read
+    evlrs: list[tuple[bytes, int, bytes]] = field(default_factory=list)
     #: why the file's point data ends early (read_las_header(salvage=True): a file cut off, its
     #: points before the cut readable), else None
     truncated: str | None = None
     #: why the EVLRs after the point data are not all there (a file cut before or inside them: its
     #: points read, with this warning; none of its EVLRs), else None
     evlrs_cut: str | None = None
+
+    def crs(self) -> str | None:
+        """The CRS its VLRs or EVLRs name (vlrs_crs'), None without one."""
+        return vlrs_crs(self.vlrs + self.evlrs)
 
 
 def _u(fmt: str, buf: bytes, off: int):
@@ -355,21 +361,36 @@ def _check_evlrs(path: Path, f, hdr: LasHeader) -> int:
     start, n, size = hdr.start_of_first_evlr, hdr.number_of_evlrs, hdr.file_size
     if start < hdr.offset_to_point_data:
         raise fail(path, f"truncated or corrupt LAS file: {n:,} EVLRs said to start at byte {start:,} do not fit in the file ({size:,} bytes)")
-    pos, cut = start, None
-    for i in range(n):  # (at most size / 60 turns: a read past the end is short)
-        f.seek(pos)
-        buf = f.read(EVLR_HEADER)
-        if len(buf) < EVLR_HEADER:
+    cut = None
+    for i, pos, user, rec, length in evlr_headers(lambda o, k: (f.seek(o), f.read(k))[1], start, n, size):
+        if length is None:
             cut = f"EVLR {i + 1} of {n:,} is cut off at byte {size:,}", f"at least {pos + EVLR_HEADER - size:,}"  # (its length unknown)
             break
-        (length,) = _u("Q", buf, 20)
-        pos += EVLR_HEADER + length
-        if pos > size:
-            cut = f"EVLR {i + 1} of {n:,} ({length:,} bytes) runs past the end of the file ({size:,} bytes)", f"{pos - size:,}"
+        if pos + EVLR_HEADER + length > size:
+            cut = f"EVLR {i + 1} of {n:,} ({length:,} bytes) runs past the end of the file ({size:,} bytes)", f"{pos + EVLR_HEADER + length - size:,}"
             break
+        if (user, rec) == (PROJECTION_USER_ID, WKT_RECORD) and not hdr.evlrs:  # (only its bytes read: not a COPC hierarchy's)
+            f.seek(pos + EVLR_HEADER)
+            hdr.evlrs.append((user, rec, f.read(length)))
     if cut is not None:
         hdr.evlrs_cut = _evlrs_cut(hdr, f"{cut[0]}: {cut[1]} bytes missing")
     return start
+
+
+def evlr_headers(read, start: int, n: int, size: int) -> Iterator[tuple[int, int, bytes, int, int | None]]:
+    """(number, offset, user_id, record_id, data length) of each of the ``n`` EVLRs from byte
+    ``start`` of a ``size``-byte file, their 60-byte headers read through ``read(offset, size)``
+    (their data skipped: a COPC hierarchy may be large, or a request away). Ends after one whose
+    header is cut off by the file's end (its length None); one whose data is cut is the caller's."""
+    pos = start
+    for i in range(n):  # (at most size / 60 turns: each header lies inside the file)
+        if pos + EVLR_HEADER > size:
+            yield i, pos, b"", 0, None
+            return
+        buf = read(pos, EVLR_HEADER)
+        (record_id, length) = _u("HQ", buf, 18)
+        yield i, pos, buf[2:18].rstrip(b"\0"), record_id, length
+        pos += EVLR_HEADER + length
 
 
 def _evlrs_cut(hdr: LasHeader, cut: str) -> str:
@@ -541,8 +562,9 @@ def vlrs_crs(vlrs) -> str | None:
     return None
 
 
-def _parse_crs(header) -> str | None:
-    """CRS of a laspy header as 'EPSG:n' or WKT; through pyproj when installed, else from the VLRs."""
+def _parse_crs(header, hdr: LasHeader) -> str | None:
+    """CRS of a laspy header as 'EPSG:n' or WKT through pyproj when installed, else ``hdr.crs()``
+    (gigapoint's header parse, as warn_mixed_crs and convert see it)."""
     try:
         import pyproj
     except ImportError:
@@ -555,8 +577,7 @@ def _parse_crs(header) -> str | None:
         if crs is not None:
             epsg = crs.to_epsg()
             return f"EPSG:{epsg}" if epsg else crs.to_wkt()
-    records = [r for r in list(header.vlrs) + list(header.evlrs or []) if r.user_id == PROJECTION_USER_ID.decode()]  # (laspy writes no COPC record)
-    return vlrs_crs([(PROJECTION_USER_ID, r.record_id, r.record_data_bytes()) for r in records])
+    return hdr.crs()
 
 
 @njit(parallel=True, cache=True)
@@ -790,7 +811,7 @@ class LasReader(Reader):
             with _laspy_open(path, hdr) as reader:
                 header = reader.header
                 dims = list(header.point_format.dimension_names)
-                crs = _parse_crs(header)
+                crs = _parse_crs(header, hdr)
                 creation = header.creation_date.isoformat() if header.creation_date else None
         except InputError:
             raise

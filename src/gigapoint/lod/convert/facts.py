@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import GigapointWarning, warn
-from ...io import warn_mixed_crs
+from ...io import file_names, warn_mixed_crs
 from ...io.las import LasReader, read_las_header, wkt_of
 from ...io.registry import reader_for
 
@@ -38,9 +38,8 @@ def _warn_off_grid(grids, scale, offset) -> None:
     off = [p for p, s, o in grids if np.any(steps_off(o - offset) > 1e-3) or np.any(steps_off(s) > 1e-3)]
     if off:
         first = Path(grids[0][0]).name
-        names = ", ".join(Path(p).name for p in off[:3]) + (f" and {len(off) - 3} more" if len(off) > 3 else "")
         warn(
-            f"{names}: off the LAS grid the output stores every point on (scale {', '.join(f'{v:g}' for v in scale)}, "
+            f"{file_names(off)}: off the LAS grid the output stores every point on (scale {', '.join(f'{v:g}' for v in scale)}, "
             f"offset {', '.join(f'{v:.15g}' for v in offset)}: {first}'s): their points move to it, by up to half a step "
             f"({float(np.max(scale)) / 2:g})",
             GigapointWarning,
@@ -76,8 +75,9 @@ def input_facts(paths, one_grid: bool = False) -> dict:
         text = info.get("crs")
         if text and crs is None:
             crs = text
-            wkt = wkt_of(read_las_header(p).vlrs) or _as_wkt(text)  # the header's VLRs: the first CRS's file only
-    warn_mixed_crs(paths or [], then="; the output takes the first one's CRS")
+            hdr = read_las_header(p)  # (its (E)VLRs: the first CRS's file only)
+            wkt = wkt_of(hdr.vlrs + hdr.evlrs) or _as_wkt(text)
+    warn_mixed_crs(paths or [], then="; the output takes the first CRS named")
     if one_grid and grids:
         _warn_off_grid(grids, scale, offset)
     return {
