@@ -25,6 +25,7 @@ pytest.importorskip("httpx")
 
 AUTZEN = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "autzen_trim.laz"
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "unit"))
+from test_copc_interop import crs_past_a_mib  # a copc-lib file with its WKT EVLR past 1 MiB of EVLRs
 from test_ept import make_scene, write_ept  # the EPT trees of the unit tests
 
 
@@ -797,5 +798,20 @@ def test_copclib_files_over_http_render_like_the_local_files(name):
             assert a.stats.points_processed == b.stats.points_processed
             np.testing.assert_array_equal(a.image, b.image)
         assert b.stats.points_processed == 20_000 and c.pending_pages == 0
+    finally:
+        s.close()
+
+
+def test_a_crs_past_the_first_mib_of_evlrs_over_http(tmp_path):
+    """The WKT EVLR 1.2 MiB past the hierarchy's (more than the one request of EVLRs read at
+    open): found by reading the EVLRs' headers (60 bytes a request) and the WKT's bytes, never
+    the 1.2 MiB between (it had no CRS)."""
+    path = crs_past_a_mib(tmp_path)
+    s = RangeServer(tmp_path)
+    try:
+        c = gp.open(s.url(path.name))
+        assert (c.meta["crs"] or "").startswith('PROJCS["NAD_1983_HARN') and c.meta["crs"] == gp.open(path).meta["crs"]
+        spans = [int(b) - int(a) + 1 for a, b in (r.removeprefix("bytes=").split("-") for r in s.ranges)]
+        assert s.requests == 6 and spans.count(60) == 3 and max(spans) < 100_000, spans  # head, 3 EVLR headers, the WKT, the root page
     finally:
         s.close()

@@ -209,6 +209,37 @@ def test_the_crs_copclib_writes_in_an_evlr_is_read_and_carried(tmp_path):
     assert gp.open(tmp_path / "again.copc.laz").meta["crs"] == want
 
 
+def crs_past_a_mib(folder) -> Path:
+    """one_page.copc.laz with a 1.2 MiB EVLR put between its hierarchy EVLR and its WKT EVLR
+    (the EVLRs' count 2 -> 3; nothing moves before it): its CRS lies past the first MiB of EVLRs."""
+    data = bytearray((DATA / "one_page.copc.laz").read_bytes())
+    start = int.from_bytes(data[235:243], "little")
+    wkt_at = start + 60 + int.from_bytes(data[start + 20 : start + 28], "little")
+    filler = 1_200_000
+    head = (b"\0\0" + b"filler".ljust(16, b"\0") + (1).to_bytes(2, "little") + filler.to_bytes(8, "little") + b"\0" * 32)
+    data[243:247] = (3).to_bytes(4, "little")
+    path = Path(folder) / "far_crs.copc.laz"
+    path.write_bytes(bytes(data[:wkt_at]) + head + b"x" * filler + bytes(data[wkt_at:]))
+    return path
+
+
+def test_a_crs_past_the_first_mib_of_evlrs_is_found_in_a_local_file(tmp_path, monkeypatch):
+    """The WKT EVLR 1.2 MiB past the hierarchy's: the octree had no CRS (its EVLRs read in one
+    go only within 1 MiB). A local file's EVLR headers are read one by one, then the WKT's bytes
+    (not the filler's); the LAS header parse (mixed CRSs, convert) finds it too."""
+    from gigapoint.io.http import LocalFile
+    from gigapoint.io.las import read_las_header
+
+    want = laspy.read(DATA / "one_page.copc.laz").header.evlrs.get("WktCoordinateSystemVlr")[0].string.strip("\0")
+    path = crs_past_a_mib(tmp_path)
+    assert laspy.read(path).header.evlrs.get("WktCoordinateSystemVlr")[0].string.strip("\0") == want  # (a valid file)
+    sizes, read = [], LocalFile.read
+    monkeypatch.setattr(LocalFile, "read", lambda self, o, k: sizes.append(k) or read(self, o, k))
+    assert gp.open(path).meta["crs"] == want
+    assert max(sizes) < 100_000, sizes
+    assert read_las_header(path).crs() == want and gp.io.file_info(path)["crs"] == want
+
+
 def test_a_hierarchy_without_a_root_node_draws_at_any_size():
     """nir_extra's hierarchy starts at depth 1 (no root entry: an empty root); a small view,
     whose depth-1 cubes are under the LOD threshold, still draws them, not an empty image."""

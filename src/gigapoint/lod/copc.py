@@ -27,7 +27,7 @@ from ..core.chunk import safe_attribute_name
 from ..errors import GigapointWarning, InputError, warn
 from ..io import laz_process
 from ..io.http import ByteSource, HttpFile, LocalFile, open_source
-from ..io.las import _scaled_xyz, read_las_header, wkt_of
+from ..io.las import EVLR_HEADER, PROJECTION_USER_ID, WKT_RECORD, _scaled_xyz, evlr_headers, read_las_header, wkt_of
 from .store import check_grid, tight_bounds
 from .voxel_octree import VOXEL_KEY_DTYPE, VoxelOctree, valid_voxels, voxel_name, voxel_to_key
 
@@ -166,7 +166,8 @@ HEADER_SIZE = LAS14_HEADER_DTYPE.itemsize  # 375
 INFO_OFFSET = HEADER_SIZE + VLR_HEADER_DTYPE.itemsize  # the info VLR's data: byte 429
 MAGIC_END = INFO_OFFSET  # bytes needed to tell a COPC file
 HEAD_READ = 64 << 10  # the first request reads this much (the header and VLRs, usually)
-EVLR_READ = 1 << 20  # the most EVLR bytes read at open for a CRS in them (CopcCloud._evlr_wkt)
+EVLR_READ = 1 << 20  # the most EVLR bytes read at open over HTTP for a CRS in them, in one request (CopcCloud._evlr_wkt)
+EVLR_WALK = 4  # past it, the most EVLR headers read over HTTP (a request each) to find the CRS's
 
 
 def point_dtype(point_format: int, record_length: int, extra: list[ExtraField] | None = None) -> np.dtype:
@@ -383,16 +384,25 @@ class CopcCloud(VoxelOctree):
 
     def _evlr_wkt(self, data_start: int) -> str | None:
         """The WKT of a LASF_Projection EVLR (copc-lib writes its CRS so, after the hierarchy
-        pages), read in one request where the EVLRs end the file within ``EVLR_READ`` bytes
-        (a hierarchy of up to 30 000 nodes); None without one, or in a cut file."""
-        start, n = self._evlrs
-        size = (self.file_size or 0) - start
-        if not n or start < data_start or not 0 < size <= EVLR_READ:
+        pages). Over HTTP read in one request where the EVLRs end the file within ``EVLR_READ``
+        bytes (a hierarchy of up to 30 000 nodes); else each EVLR's header is read (a local file:
+        all of them; over HTTP: the first ``EVLR_WALK``, a request each), then only the WKT's
+        bytes. None without one, in a cut file, or over HTTP past those."""
+        (start, n), end = self._evlrs, self.file_size or 0
+        remote = not isinstance(self.source, LocalFile)
+        if not n or start < data_start or end <= start:
             return None
-        try:
-            return wkt_of(read_vlrs(self.source.read(start, size), 0, n, size, EVLR_HEADER_DTYPE))
-        except ValueError:  # cut: _parse_page says what is missing
-            return None
+        if remote and end - start <= EVLR_READ:
+            try:
+                return wkt_of(read_vlrs(self.source.read(start, end - start), 0, n, end - start, EVLR_HEADER_DTYPE))
+            except ValueError:  # cut: _parse_page says what is missing
+                return None
+        for i, pos, user, record, length in evlr_headers(self.source.read, start, n, end):
+            if (remote and i >= EVLR_WALK) or length is None or pos + EVLR_HEADER + length > end:  # (cut: as above)
+                return None
+            if (user, record) == (PROJECTION_USER_ID, WKT_RECORD):
+                return wkt_of([(user, record, self.source.read(pos + EVLR_HEADER, length))])
+        return None
 
     def _cut(self) -> bool:
         """Whether the file is shorter than its header says: its hierarchy (an EVLR, after the
