@@ -114,6 +114,20 @@ def test_tiles_without_a_crs_among_tiles_with_one_are_named(tmp_path, how):
         assert gp.lod.octree_info(tmp_path / "out")["crs"] == "EPSG:32610"
 
 
+def test_tiles_of_two_crss_and_one_without_are_said_in_one_warning(tmp_path):
+    write_tile(tmp_path / "a.las", tile_points(0, 500_000.0), 0.001, (500_000, 4_800_000, 0), geokeys(32610))
+    write_tile(tmp_path / "b.las", tile_points(1, 500_050.0), 0.001, (500_000, 4_800_000, 0), geokeys(32611))
+    write_tile(tmp_path / "c.las", tile_points(2, 500_100.0), 0.001, (500_000, 4_800_000, 0))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gp.open(tmp_path)
+    want = (
+        "the files name 2 different CRSs (a.las: EPSG:32610; b.las: EPSG:32611); c.las names no CRS: their coordinates "
+        "are used as they are, not reprojected, so they do not line up"
+    )
+    assert crs_warnings(caught) == [want]
+
+
 def test_a_wkt_in_an_evlr_counts_as_the_files_crs(tmp_path):
     """LAS 1.4 may keep its WKT in an EVLR (laspy writes it there, its WKT bit unset): the
     mixed-CRS check read the VLRs only, so a tile of another CRS beside it was not warned about."""
