@@ -601,3 +601,53 @@ def test_ctrl_c_waits_for_the_tasks_running_on_the_workers(thread_client, tmp_pa
     stop_conversion_after(None)
     monkeypatch.setattr(hooks, "task_started", lambda kind, name: None)
     assert convert([src], tmp_path / "oct", client=thread_client, **OPTS).resumed
+
+
+def test_sigterm_to_the_cli_driver_waits_for_running_tasks_and_the_rerun_resumes(inputs, client, tmp_path):
+    """SIGTERM (a batch system's stop) to `gigapoint convert --dask` once a partition is built:
+    as after Ctrl+C, the driver waits for the builds running on the workers, exits 143 saying
+    OUT is kept, and the same command resumes to the octree of an uninterrupted run."""
+    import cloudpickle
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    marks = tmp_path / "marks"
+    marks.mkdir()
+
+    def slow_builds(marks=str(marks)):
+        from gigapoint.lod.convert import hooks
+
+        def mark(state):
+            def hook(kind, name):
+                if kind == "build":
+                    Path(marks, f"{state}-{name}").touch()
+                    if state == "started":
+                        time.sleep(2.0)  # a build still running when the driver gets SIGTERM
+
+            return hook
+
+        hooks.task_started, hooks.task_done = mark("started"), mark("done")
+
+    out = tmp_path / "oct"
+    opts = ["--memory-limit", "64M", "--max-leaf", "3000", "-q"]  # partitions of ~76 000 points: 4 or more
+    code = (
+        "import os, signal, sys; from gigapoint.cli import main; from gigapoint.lod.convert import hooks\n"
+        "hooks.after_partition_built = lambda done: done == 1 and os.kill(os.getpid(), signal.SIGTERM)\n"
+        "sys.exit(main(sys.argv[1:]))\n"
+    )
+    args = ["convert", *map(str, inputs), "-o", str(out), "--dask", client.scheduler.address, *opts]
+    client.run(slow_builds)
+    try:
+        proc = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=120)
+    finally:
+        _uninstall(client)
+    started = {p.name.split("-", 1)[1] for p in marks.glob("started-*")}
+    done = {p.name.split("-", 1)[1] for p in marks.glob("done-*")}
+    assert proc.returncode == 143, proc.stderr[-2000:]
+    assert len(started) >= 2 and done == started, (started, done)  # nothing ran on once the driver had gone
+    lines = proc.stderr.splitlines()
+    assert lines[0].endswith("Dask tasks still run into the output: waiting for them to end (Ctrl+C again leaves them; a re-run waits for them)")
+    assert lines[1:] == [f"{out}: kept unfinished; run the same convert command again to resume it", "terminated"], lines
+    res = convert(inputs, out, client=client, memory_limit="64M", max_leaf=3000)
+    assert res.resumed
+    convert(inputs, tmp_path / "ref", client=client, memory_limit="64M", max_leaf=3000)
+    _assert_identical(tmp_path / "ref", out)

@@ -720,7 +720,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
                 f.release()
                 if more:
                     completed.update(submit(*more))
-        except KeyboardInterrupt:  # (Ctrl+C) the cancelled tasks that run go on writing into OUT: not after we return
+        except (KeyboardInterrupt, SystemExit):  # (Ctrl+C, the CLI's SIGTERM) the cancelled tasks that run go on writing into OUT
             stop.set()
             self.client.cancel(list(futures))
             say = "{} Dask tasks still run into the output: waiting for them to end (Ctrl+C again leaves them; a re-run waits for them)"
