@@ -216,6 +216,28 @@ def test_conversion_interrupted_while_grouping_resumes_to_the_same_result(demo_l
     _assert_same(_snapshot(tmp_path / "oct"), _snapshot(tmp_path / "whole"))
 
 
+def test_another_upper_points_resumes_an_interrupted_grouping_to_the_same_octree(demo_las, tmp_path, monkeypatch):
+    """upper_points only sizes the groups (phases.group): any grouping gives the same octree, byte
+    for byte, so it is left out of the fingerprint and a re-run with another value resumes the
+    groups the first one planned. Were it to change the output, this resume would mix two."""
+    import importlib
+
+    conv = importlib.import_module("gigapoint.lod.convert")
+    convert([demo_las], tmp_path / "whole", **OPTS)  # upper_points 25 000: no groups at all
+    join = conv._Converter._join_roots
+
+    def stop(self, parts, top, dest):
+        raise KeyboardInterrupt("test interrupt while grouping")
+
+    monkeypatch.setattr(conv._Converter, "_join_roots", stop)
+    with pytest.raises(KeyboardInterrupt):
+        convert([demo_las], tmp_path / "oct", **dict(OPTS, upper_points=8_000))
+    assert OctreeDir(tmp_path / "oct").read_state()["round"], "groups planned"
+    monkeypatch.setattr(conv._Converter, "_join_roots", join)
+    res = convert([demo_las], tmp_path / "oct", **dict(OPTS, upper_points=20_000))
+    assert res.resumed and "group" in res.phase_seconds
+    _assert_same(_snapshot(tmp_path / "oct"), _snapshot(tmp_path / "whole"))
+
 
 def test_a_full_disk_stops_a_conversion_in_one_line_and_it_resumes(demo_las, tmp_path, monkeypatch):
     """A write that fails for want of room (an OSError without a file name, as a file object's

@@ -141,7 +141,7 @@ class Job:
             "encoding": self.encoding,
             "max_leaf": self.max_leaf,
             "memory_limit": self.mem,
-            "partition_points": self.partition_override,
+            "partition_points": self.partition_override,  # (not upper_points: any grouping gives the same octree)
             "chunk_size": self.chunk_size,
             "layout": self.layout,
             "colors": self.colors,
