@@ -651,3 +651,31 @@ def test_sigterm_to_the_cli_driver_waits_for_running_tasks_and_the_rerun_resumes
     assert res.resumed
     convert(inputs, tmp_path / "ref", client=client, memory_limit="64M", max_leaf=3000)
     _assert_identical(tmp_path / "ref", out)
+
+
+def test_a_bad_input_read_after_others_keeps_out_as_one_process_does(thread_client, tmp_path, las_writer, monkeypatch):
+    """A read task that fails on a bad file once other read tasks have finished: the driver
+    counted no points until the read phase ended, so OUT was removed as if no input had given
+    a point, and the error did not say what became of it. Now, as in one process, OUT stays
+    (its state says why it stopped) and the line says so; a run without the file starts over."""
+    from gigapoint.lod.convert import hooks
+
+    good = [las_writer(tmp_path / f"{n}.las", 20_000, seed=i) for i, n in enumerate("ab")]
+    lines = [f"{x:.3f} {y:.3f} {z:.3f}" for x, y, z in laspy.read(str(good[0])).xyz[:5000]]
+    lines[3000] = "1.0 oops 3.0"
+    bad = tmp_path / "bad.xyz"
+    bad.write_text("\n".join(lines) + "\n")
+    monkeypatch.setattr(hooks, "task_started", lambda kind, name: name.startswith("bad") and time.sleep(1.0))  # read last
+    out = tmp_path / "oct"
+    with pytest.raises(InputError) as err:
+        convert([*good, bad], out, client=thread_client, **OPTS)
+    msg = str(err.value)
+    assert msg == (
+        f"{bad.resolve()}: line 3001: 'oops' is not a number; the conversion to {out.resolve()} stopped unfinished: "
+        "run it again once that file is whole, or without it: it starts over"
+    ), msg
+    state = OctreeDir(out).read_state()
+    assert state["points"] == 40_000 and state["stopped_by"].startswith(f"{bad.resolve()}: line 3001"), state
+    monkeypatch.setattr(hooks, "task_started", lambda kind, name: None)
+    res = convert(good, out, client=thread_client, **OPTS)
+    assert res.points == 40_000 and not res.resumed

@@ -864,6 +864,8 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
                     if res.get("empty"):  # a file that had no count in its header
                         warn(skipped_message(self.paths[st["reads"][t][0]]), GigapointWarning)
                     if not again:
+                        # points read so far, as one process counts them: a bad input then keeps OUT (converter.run) and info shows them
+                        st["points"] = st.get("points", 0) + res["points"]
                         self.progress.advance(res["input"])
                         if sample is not None:
                             corner, xyz, rgba = sample
