@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 import warnings
 from contextlib import contextmanager
 from contextvars import ContextVar
 
-# warnings kept for another thread to issue (``warn``): set in a progressive load's threads
+# warnings kept for another thread to issue (``warn``, ``route_warnings``): set in gigapoint's threads (a
+# progressive load's, a live Player's, a prefetch worker's)
 _kept: ContextVar[list | None] = ContextVar("gigapoint_kept_warnings", default=None)
 
 
@@ -144,7 +146,7 @@ def warn(message: str, category: type[Warning] = GigapointWarning) -> None:
     """``warnings.warn`` as gigapoint warns: at the first line outside gigapoint
     (``outside_stacklevel``); but in a context that keeps its warnings (``keep_warnings``: a
     progressive load's threads; ``warnings_kept``) the warning is appended to its list instead,
-    for the caller's thread to issue (Loader.issue_warnings): Python's filters, ``catch_warnings``,
+    for the caller's thread to issue (KeptWarnings.issue): Python's filters, ``catch_warnings``,
     pytest.warns and ``-W error`` are process-wide and not thread-safe, so a warning issued on the
     loader's thread escaped a catch around ``wait()`` and printed at a random moment."""
     kept = _kept.get()
@@ -154,9 +156,67 @@ def warn(message: str, category: type[Warning] = GigapointWarning) -> None:
         kept.append((message, category))
 
 
+class KeptWarnings(list):
+    """(message, category) of the warnings a thread of gigapoint's kept (``keep_warnings``), in
+    order, for a caller's thread to ``issue``."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._issued = 0  # of them issued
+        self._issuing = threading.Lock()
+
+    def issue(self) -> None:
+        """Issue those not issued yet, each once and in order, in this (the caller's) thread, where
+        its filters and catches apply, at the caller's line (``warn``); in a context that keeps
+        warnings itself (a load's thread taking a prefetch's items), into its list."""
+        with self._issuing:
+            new = self[self._issued :]
+            self._issued += len(new)
+        for message, category in new:
+            warn(message, category)
+
+
 def keep_warnings(kept: list) -> None:
-    """From now on, in this context (a thread started with its own), ``warn`` appends to ``kept``."""
+    """From now on, in this context (a thread started with its own), ``warn`` appends to ``kept``,
+    and so do other libraries' warnings (numpy's, laspy's) where ``route_warnings`` was called."""
     _kept.set(kept)
+
+
+# Other libraries' warnings on gigapoint's threads (numpy's RuntimeWarning, laspy's) go through
+# Python's machinery, whose filters and catch_warnings are process-wide (Python 3.11): a catch
+# around wait() missed them, a caller's "error" filter raised them inside a decoder and stopped
+# the load. So, thread-safely: a filter first in the list that matches in a keeping context only
+# (its message "pattern" asks the contextvar) says "always" there, past the caller's filters and
+# the once-registry, and Python's display hook (``_showwarnmsg``, which catch_warnings(record=True)
+# and pytest leave in place, unlike ``showwarning``) keeps what such a context warns; everywhere
+# else both step aside. The kept warning is issued again in the caller's thread
+# (KeptWarnings.issue), where the caller's filters, once-registry and catches decide.
+class _KeepingContext:
+    def match(self, text: str) -> bool:  # (a filter's message pattern: warnings calls its match)
+        return _kept.get() is not None
+
+
+_KEEP_FILTER = ("always", _KeepingContext(), Warning, None, 0)
+_show = warnings._showwarnmsg  # Python's
+
+
+def _show_or_keep(msg: warnings.WarningMessage) -> None:
+    kept, said = _kept.get(), (str(msg.message), msg.category)
+    if kept is None:
+        _show(msg)
+    elif said not in kept:  # once a context ("always" there: numpy warns once a chunk, each kept)
+        kept.append(said)
+
+
+def route_warnings() -> None:
+    """Before starting a thread that keeps warnings, in the starting thread: other libraries'
+    warnings there kept too (the hook installed, the filter put first in the filters in force)."""
+    warnings._showwarnmsg = _show_or_keep
+    if warnings.filters[:1] != [_KEEP_FILTER]:
+        if _KEEP_FILTER in warnings.filters:
+            warnings.filters.remove(_KEEP_FILTER)
+        warnings.filters.insert(0, _KEEP_FILTER)
+        warnings._filters_mutated()
 
 
 @contextmanager

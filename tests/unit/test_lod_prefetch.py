@@ -62,3 +62,28 @@ def test_stopping_early_waits_for_the_worker_and_closes_the_source():
         for item in prefetch(source()):
             raise KeyboardInterrupt
     assert not _workers()
+
+
+def test_a_warning_of_the_source_is_issued_in_the_caller_s_thread_with_its_item():
+    """A library's warning in the worker (numpy's, decoding a chunk) went through Python's
+    machinery from that thread, at any moment; now kept and issued at the caller's line when it
+    takes the item (once: numpy warns for each chunk)."""
+    import inspect
+    import warnings
+
+    import numpy as np
+
+    def source():
+        for i in range(3):
+            np.array([np.nan]).astype(np.uint8)  # RuntimeWarning: invalid value encountered in cast
+            yield i
+
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        items = prefetch(source())
+        line = inspect.currentframe().f_lineno + 1
+        got = [(next(items), len(seen))]
+        got += [(i, len(seen)) for i in items]
+    assert got == [(0, 1), (1, 1), (2, 1)]
+    assert [(str(w.message), w.filename, w.lineno) for w in seen] == [("invalid value encountered in cast", __file__, line)]
+    assert not _workers()

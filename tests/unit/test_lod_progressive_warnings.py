@@ -164,3 +164,60 @@ def test_the_viewer_s_line_on_a_finished_load_says_its_warnings(nan_file, tmp_pa
     assert len(two.warnings) == 2 and load_note(two, 0.0).endswith(f" s; warning: {dropped} (and 1 more)")
     with pytest.warns(GigapointWarning):
         two.close()
+
+
+# other libraries' warnings on the load's threads (errors.route_warnings): numpy's cast of a NaN
+# intensity in an ASCII PLY warns on the decoder's thread
+_CAST = "invalid value encountered in cast"
+
+
+@pytest.fixture
+def cast_file(tmp_path):
+    path = tmp_path / "cast.ply"
+    head = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nproperty uchar intensity\nend_header\n"
+    path.write_text(head + "0 0 0 1\n1 1 1 nan\n2 2 2 3\n")
+    return path
+
+
+def test_a_library_s_warning_on_the_decoder_s_thread_is_issued_at_wait(cast_file):
+    """numpy's RuntimeWarning went through Python's machinery from the decoder's thread: past the
+    caller's catch, printed at a random moment. Now kept, and issued by ``wait`` at the caller's line."""
+    with warnings.catch_warnings(record=True) as meanwhile:
+        warnings.simplefilter("always")
+        cloud = _loaded(gp.open(cast_file, progressive=True))
+    assert meanwhile == [] and cloud.warnings == (_CAST,)
+    with pytest.warns(RuntimeWarning, match=_CAST) as caught:
+        assert cloud.wait()
+    assert [(str(w.message), w.filename) for w in caught] == [(_CAST, __file__)]
+    cloud.close()
+
+
+def test_a_caller_s_error_filter_does_not_stop_the_load_on_a_library_s_warning(cast_file):
+    """With ``simplefilter("error")`` numpy's warning was raised inside the decoder: the load
+    stopped with "cast.ply: loading stopped: invalid value encountered in cast". Now the load is
+    whole and ``wait`` raises the warning."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        cloud = _loaded(gp.open(cast_file, progressive=True))
+        assert cloud.error is None and cloud.n_points == 3
+        with pytest.raises(RuntimeWarning, match=_CAST):
+            cloud.wait()
+        assert cloud.wait()
+    cloud.close()
+
+
+def test_the_caller_s_filters_decide_when_a_kept_warning_is_issued(cast_file):
+    """The decoder's thread keeps every warning it makes (its own filter says "always" there, so
+    no once-registry of numpy's swallows a second load's); the caller's filters decide at ``wait``:
+    "once" says it once for two loads, "ignore" not at all, and each load lists it."""
+    clouds = [_loaded(gp.open(cast_file, progressive=True)) for _ in range(3)]
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("once")
+        clouds[0].wait()
+        clouds[1].wait()
+        warnings.simplefilter("ignore")
+        clouds[2].wait()
+    assert [str(w.message) for w in seen] == [_CAST]
+    assert [c.warnings for c in clouds] == [(_CAST,)] * 3
+    for c in clouds:
+        c.close()

@@ -7,6 +7,8 @@ from concurrent.futures import ThreadPoolExecutor
 from contextvars import copy_context
 from typing import TypeVar
 
+from ...errors import KeptWarnings, keep_warnings, route_warnings
+
 T = TypeVar("T")
 _END = object()
 
@@ -16,16 +18,29 @@ def prefetch(items: Iterable[T], name: str = "gigapoint-read") -> Iterator[T]:
     on item k: decoding a LAS/LAZ chunk and writing the previous one to disk both release the
     GIL, so they overlap. One item of extra memory.
 
-    An exception raised by ``items`` reaches the caller where its item would have. When the
-    caller stops early (``break``, an exception, closing this generator), the item in flight is
-    waited for and a generator ``items`` is closed (its ``finally`` blocks run, files close).
+    An exception raised by ``items`` reaches the caller where its item would have, and the
+    warnings made with an item (any library's: kept in the worker, errors.route_warnings) are
+    issued in the caller's thread when it takes the item (kept there where the caller's context
+    keeps warnings: a progressive load's thread). When the caller stops early (``break``, an
+    exception, closing this generator), the item in flight is waited for and a generator
+    ``items`` is closed (its ``finally`` blocks run, files close).
     """
     it = iter(items)
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=name)
     ctx = copy_context()  # the caller's: the headers it read (io headers_once) are not read again in the thread
+    kept = KeptWarnings()  # the worker's warnings, issued by ``take``
+    route_warnings()
+    ctx.run(keep_warnings, kept)
+
+    def take():
+        try:
+            return pending.result()
+        finally:
+            kept.issue()
+
     try:
         pending = pool.submit(ctx.run, next, it, _END)
-        while (item := pending.result()) is not _END:
+        while (item := take()) is not _END:
             pending = pool.submit(ctx.run, next, it, _END)
             yield item
     finally:

@@ -14,7 +14,8 @@ slices between frames too, before the load counts as done.
 A source that fails part-way (a truncated or corrupt file) stops the loader: what was
 inserted stays drawable, ``error`` holds the one-line error naming the file, and ``wait``
 raises it. The loader's warnings (a file's EVLRs cut, invalid points skipped, attributes not in
-every file) are kept, not issued on its threads (errors.warn), in ``warnings``; ``wait`` and
+every file), and other libraries' on its threads (numpy's, laspy's: errors.route_warnings), are
+kept, not issued on its threads (errors.warn), in ``warnings``; ``wait`` and
 ``close`` issue each once, in order, in the caller's thread. ``close`` stops the loader and waits for it.
 """
 
@@ -33,7 +34,17 @@ from ...core.chunk import PointChunk, join_chunks
 from ...core.chunked import physical_memory
 from ...core.cloud import check_valid_count
 from ...core.threads import SMALL_BATCH
-from ...errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, MemoryLimitError, keep_warnings, warn
+from ...errors import (
+    EmptyCloudError,
+    GigapointError,
+    GigapointWarning,
+    InputError,
+    KeptWarnings,
+    MemoryLimitError,
+    keep_warnings,
+    route_warnings,
+    warn,
+)
 from ...io import human_bytes
 from ...io._base import headers_once
 from ..convert.prefetch import prefetch
@@ -79,9 +90,7 @@ class Loader:
         self.total = total  # input points, when the sources tell it up front
         self.read = 0  # input points read so far (valid or not)
         self.error: GigapointError | None = None
-        self.warnings: list[tuple[str, type[Warning]]] = []  # (message, category) of the warnings of the load, in order
-        self._issued = 0  # of them issued in a caller's thread (issue_warnings)
-        self._issuing = threading.Lock()
+        self.warnings = KeptWarnings()  # (message, category) of the warnings of the load, in order
         self.complete = False  # every source read (not stopped by close, an error or the memory limit)
         self.started = time.perf_counter()
         self.finished_at: float | None = None
@@ -96,6 +105,7 @@ class Loader:
         # before a fork only from the thread that started them (numba's atfork handler), and each later fork
         # of this one (ffmpeg for a video, multiprocessing) printed "Numba: Attempted to fork from a non-main thread"
         numba.get_num_threads()
+        route_warnings()  # numpy's, laspy's... warnings on its threads kept too (errors.py)
         self._thread.start()
         return self
 
@@ -215,11 +225,7 @@ class Loader:
     def issue_warnings(self) -> None:
         """Issue the load's warnings not issued yet, each once and in order, in this (the caller's)
         thread, where its filters and catches apply, at the caller's line (errors.outside_stacklevel)."""
-        with self._issuing:
-            new = self.warnings[self._issued :]
-            self._issued += len(new)
-        for message, category in new:
-            warn(message, category)
+        self.warnings.issue()
 
 
 def _of_source(exc: InputError, label: str, source: str) -> InputError:
