@@ -709,3 +709,27 @@ def test_a_player_refuses_odd_rates_in_one_line(kw, problem):
     with pytest.raises(InputError, match=re.escape(problem)):
         Player(Nothing(), live, **kw)
     assert live.player is None
+
+
+@pytest.mark.parametrize("then", ["join", "snapshot", "close"])
+def test_a_warning_on_the_player_s_thread_reaches_the_caller_at_its_next_call(tmp_path, then):
+    """The cloud's "frames arrive faster" (said by the push of the player's thread) went through
+    Python's machinery from that thread: past the caller's catch, at any moment. Now kept, as the
+    player's errors are, and issued by ``player.join`` (or the cloud's snapshot, save, close) at the caller's line."""
+    import warnings
+
+    from gigapoint.errors import GigapointWarning
+
+    for k in range(3):
+        np.save(tmp_path / f"{k}.npy", patch(k)[0])
+    live = LiveCloud(keep=1, name="cam")
+    with warnings.catch_warnings(record=True) as meanwhile:
+        warnings.simplefilter("always")
+        with live.reading():  # the lock held: frames wait for it, the oldest dropped
+            player = Player(FramesDir(tmp_path), live, rate=None).start()
+            assert player.done.wait(30)
+    assert meanwhile == [] and live.stats.frames_dropped == 2 and len(live.warnings) == 1
+    with pytest.warns(GigapointWarning, match="^cam: frames arrive faster than they are copied into the ring") as caught:
+        {"join": player.join, "snapshot": live.snapshot, "close": live.close}[then]()
+    assert [w.filename for w in caught] == [__file__]
+    live.close()

@@ -48,7 +48,7 @@ from ..core.quantize import make_batches, quantize
 from ..core.renderable import DrawList
 from ..core.selection import Selection, View, select_view, subsample_step
 from ..core.threads import threads_for
-from ..errors import GigapointError, GigapointWarning, InputError, check_switch, check_timeout, check_whole, is_real, warn
+from ..errors import GigapointError, GigapointWarning, InputError, KeptWarnings, check_switch, check_timeout, check_whole, is_real, warn
 from ..lod.build import valid_bounds
 from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
 from ..render.splats import point_spacing
@@ -246,6 +246,7 @@ class LiveCloud:
         self.recorder = None
         self._last_time = 0.0
         self.player = None  # a source feeding it (sources.Player), if any
+        self.warnings = KeptWarnings()  # its player's thread's warnings, for snapshot, save, close (or player.join) to issue
 
     def _check_bounds(self, bounds) -> tuple[np.ndarray, np.ndarray]:
         """(min, max) as two float64 (3,) arrays; NaN or min > max failed only at the first
@@ -790,6 +791,7 @@ class LiveCloud:
         on the Intel Xeon VM). Meanwhile the frames' chunks are pinned (a frame that leaves the
         ring frees them when the snapshot is done), rather than the lock held: frames are drawn
         and pushed as usual."""
+        self.warnings.issue()  # (its player's thread's, in the user's: as save and close)
         self._check_open("snapshot")
         check_switch("normals", normals, f"{self.name}: snapshot")  # "no" kept the normals
         with self.lock.reading():
@@ -842,6 +844,7 @@ class LiveCloud:
         file's suffix) a gigapoint octree folder. Returns the points written."""
         from .save import save_snapshots
 
+        self.warnings.issue()
         self._check_open("save")
         check_switch("overwrite", overwrite, f"{self.name}: save")
         if self.snapshots is None or self.snapshots.n_points == 0:
@@ -875,6 +878,7 @@ class LiveCloud:
         self.clear()
         if self.snapshots is not None:
             self.snapshots.close()
+        self.warnings.issue()
 
     def _check_open(self, what: str) -> None:
         if self.closed:

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from ..errors import GigapointError, InputError, check_switch, first_line, is_real
+from ..errors import GigapointError, InputError, check_switch, first_line, is_real, keep_warnings, route_warnings
 from ..io._base import unpack_rgb
 from .record import RecordedFrame, is_recording, read_frame, recording_files, stopped_early
 
@@ -517,10 +517,11 @@ class Player:
         self.error: GigapointError | None = None  # the error that ended the stream (not a bad frame)
         self.done = threading.Event()
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="gigapoint-live-player", daemon=True)
+        self._thread = threading.Thread(target=self._run_keeping, name="gigapoint-live-player", daemon=True)
         live.player = self
 
     def start(self) -> Player:
+        route_warnings()  # numpy's, a reader's... warnings on its thread kept too (errors.py)
         self._thread.start()
         return self
 
@@ -528,10 +529,20 @@ class Player:
         self._stop.set()
 
     def join(self, timeout: float | None = None) -> bool:
-        return self.done.wait(timeout)
+        """Until the stream ends (True) or ``timeout`` passes; issues the warnings its thread kept."""
+        done = self.done.wait(timeout)
+        self.live.warnings.issue()
+        return done
 
     def run(self) -> None:
         """Play in this thread."""
+        self._run()
+
+    def _run_keeping(self) -> None:
+        # its thread's warnings (a frame's, the cloud's "frames arrive faster") kept, as its errors are, for
+        # the user's thread: join, the cloud's snapshot, save and close issue them (Python's filters and
+        # catches are process-wide: issued here, they escaped a caller's catch and printed at any moment)
+        keep_warnings(self.live.warnings)
         self._run()
 
     def _run(self) -> None:
