@@ -220,10 +220,11 @@ def route_warnings() -> None:
 
 
 @contextmanager
-def warnings_kept():
-    """``warn``'s warnings in the block appended to the list it gives, not issued (for the caller
-    to sort: the viewer drops "no point is in view", normal while flying around)."""
-    kept: list = []
+def warnings_kept(kept: list | None = None):
+    """``warn``'s warnings in the block appended to ``kept`` (a new list by default), which it
+    gives, not issued (for the caller to sort: the viewer drops "no point is in view", normal
+    while flying around; or to issue in another thread: a frame pushed into a live cloud)."""
+    kept = [] if kept is None else kept
     token = _kept.set(kept)
     try:
         yield kept

@@ -283,3 +283,28 @@ def test_producers_past_the_limit_are_refused_with_a_message():
             p.close()
     finally:
         srv.close()
+
+
+def test_a_warning_of_a_pushed_frame_reaches_the_user_at_the_cloud_s_next_call():
+    """The cloud's "frames arrive faster" of a frame pushed over /push was warned on the server's
+    thread: past the user's catch, at any moment. Now kept in ``live.warnings``, as a Player's,
+    and issued by the user's next snapshot, save or close, at the user's line."""
+    from gigapoint.errors import GigapointWarning
+
+    live = LiveCloud(keep=1, name="cam", bounds=((-12, -12, -2), (12, 12, 2)))
+    core = ViewerCore(live)
+    try:
+        with warnings.catch_warnings(record=True) as meanwhile:
+            warnings.simplefilter("always")
+            # the lock held: the pushed frames wait for it, the oldest dropped
+            with TestClient(create_app(core)) as client, client.websocket_connect(f"/push?push_token={core.push_token}") as ws, live.reading():
+                for k in range(3):
+                    ws.send_bytes(encode_frame("points", xyz=patch(k)[0]))
+                    assert json.loads(ws.receive_text()) == {"type": "ack", "seq": k}
+        assert [str(w.message) for w in meanwhile if w.category is GigapointWarning] == []
+        assert live.stats.frames_dropped == 2 and len(live.warnings) == 1
+        with pytest.warns(GigapointWarning, match="^cam: frames arrive faster than they are copied into the ring") as caught:
+            live.close()
+        assert [w.filename for w in caught] == [__file__]
+    finally:
+        core.close_all()

@@ -26,7 +26,7 @@ import time
 from importlib import resources
 from urllib.parse import quote, urlsplit
 
-from ..errors import GigapointError
+from ..errors import GigapointError, route_warnings, warnings_kept
 from ..io.http import hidden_query
 from ..live.wire import MAX_PUSH_BYTES
 from . import protocol as P
@@ -97,6 +97,14 @@ def _same_origin(origin: str, host: str) -> bool:
         return bool(o.hostname) and o.hostname == h.hostname and (o.port or default) == (h.port or default)
     except ValueError:  # a port that is not a number
         return False
+
+
+def _push_kept(frame, live) -> int:
+    """``frame`` pushed into ``live`` on a thread of the server's: its warnings (the cloud's "frames
+    arrive faster", numpy's) kept in ``live.warnings`` for the user's thread to issue (snapshot,
+    save, close), as a Player's are: issued here they escaped the user's catch, at any moment."""
+    with warnings_kept(live.warnings):
+        return frame.push_into(live)
 
 
 def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
@@ -283,6 +291,7 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
             await websocket.close(code=1013)
             return
         pushers.add(websocket)
+        route_warnings()  # numpy's... warnings on the pushing threads kept too (_push_kept)
         try:
             while True:
                 message = await websocket.receive()
@@ -297,7 +306,7 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
                     except GigapointError as exc:
                         core.cloud.refused(exc)  # counted, shown on the HUD; push counts its own
                         raise
-                    seq = await run_in_threadpool(frame.push_into, core.cloud)
+                    seq = await run_in_threadpool(_push_kept, frame, core.cloud)
                     reply = {"type": "ack", "seq": seq}
                 except GigapointError as exc:
                     reply = {"type": "error", "message": str(exc)[:500]}
