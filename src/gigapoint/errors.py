@@ -9,7 +9,7 @@ import warnings
 from contextlib import contextmanager
 from contextvars import ContextVar
 
-# warnings kept for another thread to issue (``warn``, ``route_warnings``): set in gigapoint's threads (a
+# warnings kept for another thread to issue (``warn``): set in gigapoint's threads (a
 # progressive load's, a live Player's, a prefetch worker's)
 _kept: ContextVar[list | None] = ContextVar("gigapoint_kept_warnings", default=None)
 
@@ -177,46 +177,8 @@ class KeptWarnings(list):
 
 
 def keep_warnings(kept: list) -> None:
-    """From now on, in this context (a thread started with its own), ``warn`` appends to ``kept``,
-    and so do other libraries' warnings (numpy's, laspy's) where ``route_warnings`` was called."""
+    """From now on, in this context (a thread started with its own), ``warn`` appends to ``kept``."""
     _kept.set(kept)
-
-
-# Other libraries' warnings on gigapoint's threads (numpy's RuntimeWarning, laspy's) go through
-# Python's machinery, whose filters and catch_warnings are process-wide (Python 3.11): a catch
-# around wait() missed them, a caller's "error" filter raised them inside a decoder and stopped
-# the load. So, thread-safely: a filter first in the list that matches in a keeping context only
-# (its message "pattern" asks the contextvar) says "always" there, past the caller's filters and
-# the once-registry, and Python's display hook (``_showwarnmsg``, which catch_warnings(record=True)
-# and pytest leave in place, unlike ``showwarning``) keeps what such a context warns; everywhere
-# else both step aside. The kept warning is issued again in the caller's thread
-# (KeptWarnings.issue), where the caller's filters, once-registry and catches decide.
-class _KeepingContext:
-    def match(self, text: str) -> bool:  # (a filter's message pattern: warnings calls its match)
-        return _kept.get() is not None
-
-
-_KEEP_FILTER = ("always", _KeepingContext(), Warning, None, 0)
-_show = warnings._showwarnmsg  # Python's
-
-
-def _show_or_keep(msg: warnings.WarningMessage) -> None:
-    kept, said = _kept.get(), (str(msg.message), msg.category)
-    if kept is None:
-        _show(msg)
-    elif said not in kept:  # once a context ("always" there: numpy warns once a chunk, each kept)
-        kept.append(said)
-
-
-def route_warnings() -> None:
-    """Before starting a thread that keeps warnings, in the starting thread: other libraries'
-    warnings there kept too (the hook installed, the filter put first in the filters in force)."""
-    warnings._showwarnmsg = _show_or_keep
-    if warnings.filters[:1] != [_KEEP_FILTER]:
-        if _KEEP_FILTER in warnings.filters:
-            warnings.filters.remove(_KEEP_FILTER)
-        warnings.filters.insert(0, _KEEP_FILTER)
-        warnings._filters_mutated()
 
 
 @contextmanager

@@ -65,17 +65,18 @@ def test_stopping_early_waits_for_the_worker_and_closes_the_source():
 
 
 def test_a_warning_of_the_source_is_issued_in_the_caller_s_thread_with_its_item():
-    """A library's warning in the worker (numpy's, decoding a chunk) went through Python's
+    """gigapoint's warning in the worker (a reader's, decoding a chunk) went through Python's
     machinery from that thread, at any moment; now kept and issued at the caller's line when it
-    takes the item (once: numpy warns for each chunk)."""
+    takes the item."""
     import inspect
     import warnings
 
-    import numpy as np
+    from gigapoint.errors import GigapointWarning, warn
 
     def source():
         for i in range(3):
-            np.array([np.nan]).astype(np.uint8)  # RuntimeWarning: invalid value encountered in cast
+            if i == 0:
+                warn("invalid value encountered in cast", GigapointWarning)
             yield i
 
     with warnings.catch_warnings(record=True) as seen:

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from ..errors import GigapointError, InputError, check_switch, first_line, is_real, keep_warnings, route_warnings
+from ..errors import GigapointError, InputError, check_switch, first_line, is_real, keep_warnings
 from ..io._base import unpack_rgb
 from .record import RecordedFrame, is_recording, read_frame, recording_files, stopped_early
 
@@ -521,7 +521,6 @@ class Player:
         live.player = self
 
     def start(self) -> Player:
-        route_warnings()  # numpy's, a reader's... warnings on its thread kept too (errors.py)
         self._thread.start()
         return self
 

@@ -26,7 +26,7 @@ import time
 from importlib import resources
 from urllib.parse import quote, urlsplit
 
-from ..errors import GigapointError, route_warnings, warnings_kept
+from ..errors import GigapointError, warnings_kept
 from ..io.http import hidden_query
 from ..live.wire import MAX_PUSH_BYTES
 from . import protocol as P
@@ -101,7 +101,7 @@ def _same_origin(origin: str, host: str) -> bool:
 
 def _push_kept(frame, live) -> int:
     """``frame`` pushed into ``live`` on a thread of the server's: its warnings (the cloud's "frames
-    arrive faster", numpy's) kept in ``live.warnings`` for the user's thread to issue (snapshot,
+    arrive faster") kept in ``live.warnings`` for the user's thread to issue (snapshot,
     save, close), as a Player's are: issued here they escaped the user's catch, at any moment."""
     with warnings_kept(live.warnings):
         return frame.push_into(live)
@@ -291,7 +291,6 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
             await websocket.close(code=1013)
             return
         pushers.add(websocket)
-        route_warnings()  # numpy's... warnings on the pushing threads kept too (_push_kept)
         try:
             while True:
                 message = await websocket.receive()

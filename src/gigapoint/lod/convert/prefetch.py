@@ -7,7 +7,7 @@ from concurrent.futures import ThreadPoolExecutor
 from contextvars import copy_context
 from typing import TypeVar
 
-from ...errors import KeptWarnings, keep_warnings, route_warnings
+from ...errors import KeptWarnings, keep_warnings
 
 T = TypeVar("T")
 _END = object()
@@ -19,7 +19,7 @@ def prefetch(items: Iterable[T], name: str = "gigapoint-read") -> Iterator[T]:
     GIL, so they overlap. One item of extra memory.
 
     An exception raised by ``items`` reaches the caller where its item would have, and the
-    warnings made with an item (any library's: kept in the worker, errors.route_warnings) are
+    warnings gigapoint makes with an item (kept in the worker: errors.keep_warnings) are
     issued in the caller's thread when it takes the item (kept there where the caller's context
     keeps warnings: a progressive load's thread). When the caller stops early (``break``, an
     exception, closing this generator), the item in flight is waited for and a generator
@@ -29,7 +29,6 @@ def prefetch(items: Iterable[T], name: str = "gigapoint-read") -> Iterator[T]:
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=name)
     ctx = copy_context()  # the caller's: the headers it read (io headers_once) are not read again in the thread
     kept = KeptWarnings()  # the worker's warnings, issued by ``take``
-    route_warnings()
     ctx.run(keep_warnings, kept)
 
     def take():

@@ -14,8 +14,7 @@ slices between frames too, before the load counts as done.
 A source that fails part-way (a truncated or corrupt file) stops the loader: what was
 inserted stays drawable, ``error`` holds the one-line error naming the file, and ``wait``
 raises it. The loader's warnings (a file's EVLRs cut, invalid points skipped, attributes not in
-every file), and other libraries' on its threads (numpy's, laspy's: errors.route_warnings), are
-kept, not issued on its threads (errors.warn), in ``warnings``; ``wait`` and
+every file) are kept, not issued on its threads (errors.warn), in ``warnings``; ``wait`` and
 ``close`` issue each once, in order, in the caller's thread. ``close`` stops the loader and waits for it.
 """
 
@@ -42,7 +41,6 @@ from ...errors import (
     KeptWarnings,
     MemoryLimitError,
     keep_warnings,
-    route_warnings,
     warn,
 )
 from ...io import human_bytes
@@ -105,7 +103,6 @@ class Loader:
         # before a fork only from the thread that started them (numba's atfork handler), and each later fork
         # of this one (ffmpeg for a video, multiprocessing) printed "Numba: Attempted to fork from a non-main thread"
         numba.get_num_threads()
-        route_warnings()  # numpy's, laspy's... warnings on its threads kept too (errors.py)
         self._thread.start()
         return self
 
