@@ -693,3 +693,18 @@ def test_an_attribute_of_other_shapes_in_two_files_is_one_line(tmp_path):
     np.savez(tmp_path / "b.npz", x=np.arange(n, dtype=float), y=np.ones(n), z=np.zeros(n), normal=np.zeros((n, 3)))
     with pytest.raises(InputError, match=r"^2 files: attribute 'normal' holds 1 value a point in one file and 3 values in another$"):
         gp.open([tmp_path / "a.npz", tmp_path / "b.npz"])
+
+
+@pytest.mark.parametrize(("value", "shown"), [("nan", "nan"), ("300", "300"), ("-1", "-1"), ("1.5", "1.5")])
+def test_ply_ascii_integer_property_that_its_type_cannot_hold(tmp_path, value, shown):
+    """A value an ASCII PLY's integer property cannot hold was cast as numpy casts: 300 wrapped
+    to 44 in a uchar, a NaN became any number (numpy's warning, on a progressive load's thread).
+    Now the line, the property and its declared type, as plyfile refuses such a file; x, y, z
+    stay as parsed whatever their declared type."""
+    p = tmp_path / "cast.ply"
+    head = "ply\nformat ascii 1.0\nelement vertex 3\nproperty int x\nproperty float y\nproperty float z\nproperty uchar intensity\nend_header\n"
+    p.write_text(head + f"0 0 0 1\n1.5 1 1 {value}\n2 2 2 3\n")
+    raises(InputError, p, fn=open_cloud, match=f"line 10: intensity is {shown}, not a uchar as the header declares")
+    p.write_text(head + "0 0 0 1\n1.5 1 1 255\n2 2 2 0\n")
+    cloud = open_cloud(p)
+    assert sorted(cloud.attributes["intensity"].tolist()) == [0, 1, 255] and sorted(cloud.positions()[:, 0].round(6).tolist()) == [0, 1.5, 2]

@@ -220,6 +220,8 @@ class PlyReader(Reader):
                     raise fail(path, self._bad_line(lines, lineno, ncols)) from None
                 if len(arr) != len(lines) or (arr.size and arr.shape[1] != ncols):
                     raise fail(path, self._bad_line(lines, lineno, ncols))
+                for i, prop in enumerate(h.vertex.properties):
+                    self._check_integers(path, arr[:, i], prop, lineno)
                 lineno += len(lines)
                 done += len(arr)
                 # each column in its declared type, as the binary path keeps it; x, y, z as parsed
@@ -229,6 +231,21 @@ class PlyReader(Reader):
                 yield h.chunk(h.names, cols, scaler)
         if done < h.count:
             raise fail(path, f"truncated PLY file: the header declares {h.count:,} vertices, only {done:,} lines of them are present{cut}")
+
+    @staticmethod
+    def _check_integers(path, values: np.ndarray, prop, first_lineno: int) -> None:
+        """An integer property's values are whole and in its type's range: a cast wrapped 300 to 44
+        in a uchar and made a NaN any number (numpy's warning on the loader's thread, no error;
+        plyfile refuses such a file too)."""
+        dtype = np.dtype(prop.val_dtype)
+        if dtype.kind not in "iu" or prop.name.lower() in ("x", "y", "z"):  # (x, y, z kept as parsed, below)
+            return
+        info = np.iinfo(dtype)
+        bad = ~((values >= info.min) & (values <= info.max) & (values == np.round(values)))  # (NaN: every comparison False)
+        if bad.any():
+            i = int(np.argmax(bad))
+            declared = str(prop).split()[-2]  # ("property uchar intensity")
+            raise fail(path, f"line {first_lineno + i}: {prop.name} is {values[i]:g}, not a {declared} as the header declares")
 
     @staticmethod
     def _bad_line(lines, first_lineno, ncols) -> str:
