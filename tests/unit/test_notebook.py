@@ -121,3 +121,90 @@ def test_a_viewer_closed_is_not_kept_alive_by_its_cell(shell):
     gone = weakref.ref(shell.user_ns.pop("v"))
     gc.collect()
     assert gone() is None
+
+
+def test_a_render_shows_as_its_image_and_reads_in_one_line(shell):
+    """gp.render(cloud) as a cell's last line printed its (H, W, 4) array: 8 million numbers for 1920x1080."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    image = gp.render(gp.demo(5000), width=320, height=200, background="white")
+    assert repr(image) == "Image(320x200 RGBA, uint8)"
+    data, _ = shell.display_formatter.format(image)
+    assert data["text/plain"] == repr(image)
+    np.testing.assert_array_equal(np.asarray(Image.open(io.BytesIO(data["image/png"]))), image)  # its pixels, exactly
+    assert repr(image[..., :3]) == "Image(320x200 RGB, uint8)" and repr(image[50:150, :100]) == "Image(100x100 RGBA, uint8)"
+    frame = gp.render_frame(gp.demo(5000), width=64, height=48)
+    assert repr(frame.image) == "Image(64x48 RGBA, uint8)"  # a frame's image and a stereo pair's too
+    assert repr(gp.render(gp.demo(5000), width=64, height=48, stereo="side-by-side")) == "Image(128x48 RGBA, uint8)"
+
+
+def test_a_render_is_the_array_it_was_to_numpy_pil_and_imageio(tmp_path):
+    """Everything an array did with the image gives the same numbers; what is no longer a
+    picture (a pixel, a channel, a float array, a sum) is a plain ndarray or a number."""
+    import pickle
+
+    import imageio.v3 as iio
+    import numpy as np
+    from PIL import Image
+
+    image = gp.render(gp.demo(5000), width=80, height=60)
+    plain = np.asarray(image)
+    assert type(plain) is np.ndarray and np.shares_memory(plain, image)
+    for kept in (image.copy(), image[10:20, ::2], image[..., :3], 255 - image, pickle.loads(pickle.dumps(image))):
+        assert type(kept) is type(image) and kept.dtype == np.uint8 and kept.ndim == 3
+    for result, expected in (
+        (image[5, 7], plain[5, 7]),
+        (image[..., 0], plain[..., 0]),
+        (image / 255.0, plain / 255.0),
+        (image == plain[::-1], plain == plain[::-1]),
+        (image.max(axis=2), plain.max(axis=2)),
+        (image[image > 3], plain[plain > 3]),
+    ):
+        assert type(result) is np.ndarray
+        np.testing.assert_array_equal(result, expected)
+    assert type(image.sum()) is np.uint64 and image.sum() == plain.sum() and np.mean(image) == plain.mean()
+    assert np.array_equal(image, plain) and np.array_equal(pickle.loads(pickle.dumps(image)), plain)
+    assert Image.fromarray(image).tobytes() == Image.fromarray(plain).tobytes()
+    iio.imwrite(tmp_path / "a.png", image)
+    iio.imwrite(tmp_path / "b.png", plain)
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
+    assert repr(image.astype(np.float32)).startswith("Image([[[")  # cast by a method: numpy's repr, not a picture's
+
+
+def test_the_command_line_writes_the_same_bytes_for_an_image_as_for_its_array(tmp_path):
+    """The CLI's writer and the viewer's encoder see the Image as the array it views."""
+    import numpy as np
+
+    from gigapoint.cli.output import save_image
+    from gigapoint.render.frame import encode_image
+
+    image = gp.render(gp.demo(5000), width=80, height=60)
+    for suffix in (".png", ".jpg"):
+        save_image(image, tmp_path / f"image{suffix}")
+        save_image(np.asarray(image).copy(), tmp_path / f"plain{suffix}")
+        assert (tmp_path / f"image{suffix}").read_bytes() == (tmp_path / f"plain{suffix}").read_bytes()
+    assert encode_image(image, "PNG") == encode_image(np.asarray(image), "PNG") == image._repr_png_()
+
+
+def test_a_render_as_a_cells_last_line_is_a_png_in_a_jupyter_kernel():
+    """What a notebook gets from a real kernel: image/png, and one line of text/plain."""
+    import base64
+    import io
+    from pathlib import Path
+
+    from PIL import Image
+
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+    src = Path(gp.__file__).parents[1]  # the kernel imports this gigapoint, not an installed one
+    code = f"import sys; sys.path.insert(0, {str(src)!r})\nimport gigapoint as gp\ngp.render(gp.demo(2000), width=64, height=48)"
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(code)])
+    nbclient.NotebookClient(nb, timeout=300, kernel_name="python3").execute()
+    (output,) = nb.cells[0].outputs
+    assert output.output_type == "execute_result"
+    assert output.data["text/plain"] == "Image(64x48 RGBA, uint8)"
+    assert Image.open(io.BytesIO(base64.b64decode(output.data["image/png"]))).size == (64, 48)

@@ -67,6 +67,47 @@ def encode_image(image: np.ndarray, fmt: str = "JPEG", quality: int = 85) -> byt
     return buf.getvalue()
 
 
+class Image(np.ndarray):
+    """An (H, W, 4) uint8 RGBA picture (3 channels: RGB) that a notebook shows as a PNG and a
+    terminal as one line; otherwise the plain array it views. What indexing, arithmetic and
+    numpy's functions make of it stays an Image while still a uint8 picture of that shape, and
+    is a plain ndarray (or a number) else: a pixel, a channel, a float array, a mean."""
+
+    def __getitem__(self, key):  # (a view keeps its class: image[0, 0] was an Image)
+        return _as_image_if_one(super().__getitem__(key))
+
+    def __array_wrap__(self, array, context=None, return_scalar=False):  # ufuncs: arithmetic, ==, reductions
+        # (numpy 1.26's takes no return_scalar: a 0-d result is made a number below)
+        return _as_image_if_one(super().__array_wrap__(array, context))
+
+    def __array_function__(self, func, types, args, kwargs):  # np.mean, np.concatenate, ...
+        return _as_image_if_one(super().__array_function__(func, types, args, kwargs))
+
+    def __repr__(self) -> str:  # a 1920x1080 image printed 8 million numbers
+        if not _is_picture(self):  # (reshaped or cast by a method: numpy's repr)
+            return super().__repr__()
+        h, w, c = self.shape
+        return f"Image({w}x{h} {'RGBA' if c == 4 else 'RGB'}, uint8)"
+
+    def _repr_png_(self) -> bytes | None:
+        return encode_image(self, "PNG") if _is_picture(self) else None
+
+
+def _is_picture(a: np.ndarray) -> bool:
+    return a.ndim == 3 and a.shape[2] in (3, 4) and a.dtype == np.uint8 and min(a.shape[:2]) > 0
+
+
+def _as_image_if_one(a):
+    """``a`` as an Image while it is a picture, else a plain ndarray; a 0-d one a number (a.sum())."""
+    if not isinstance(a, np.ndarray):
+        return a
+    if a.ndim == 0 and type(a) is Image:
+        return a.view(np.ndarray)[()]
+    if _is_picture(a):
+        return a if type(a) is Image else a.view(Image)
+    return a.view(np.ndarray) if type(a) is Image else a
+
+
 @dataclass(repr=False)  # the dataclass's repr printed the visibility buffer and the whole cloud
 class Frame:
     visibility: np.ndarray  # (H, W) u64: depth bits << 32 | point index; all ones = empty
@@ -77,6 +118,9 @@ class Frame:
     # point this frame drew (``point_info``).
     points: object = None
     generation: int | None = None
+
+    def __post_init__(self):
+        self.image = self.image.view(Image)  # shown as a picture where a user looks at it
 
     def point_info(self, index: int) -> dict | None:
         """What the frame's point ``index`` is (position, color, attributes), or None for -1
@@ -113,7 +157,7 @@ class Frame:
         return f"Frame({w}x{h}, {s.points_processed:,} points drawn, {s.visible_pixels:,} pixels covered, {s.backend or '?'}, {s.time_ms:.1f} ms)"
 
     def _repr_png_(self) -> bytes:
-        """The image, as a notebook shows the frame (``gp.render``'s array needs PIL to be seen)."""
+        """The image, as a notebook shows the frame."""
         return encode_image(self.image, "PNG")
 
 

@@ -80,8 +80,8 @@ def render_frame(cloud, camera: Camera | None = None, settings: RenderSettings |
 
 def render(cloud, camera: Camera | None = None, settings: RenderSettings | None = None, return_stats: bool = False,
            width: int | None = None, height: int | None = None, **setting_overrides):  # fmt: skip
-    """(H, W, 4) uint8 RGBA image of ``cloud`` seen by ``camera`` (and RenderStats if asked);
-    without a camera, ``Camera.fit_cloud(cloud)`` of what it holds now (1920x1080). ``width`` /
+    """(H, W, 4) uint8 RGBA image of ``cloud`` seen by ``camera`` (and RenderStats if asked), an
+    ``Image``: the array, shown as the picture in a notebook (frame.py); without a camera, ``Camera.fit_cloud(cloud)`` of what it holds now (1920x1080). ``width`` /
     ``height``: the image's size instead of the camera's; one side alone: the other follows the
     camera's aspect (the fitted one's 16:9: width=800 is 800x450), as in ``render_frame``."""
     check_switch("return_stats", return_stats, "render")  # "no" gave the stats too
