@@ -151,17 +151,18 @@ class _RecordPlan:
             size: np.array(v, np.int64).reshape((-1, 3) if size == 1 else (-1,)) for size, v in specs.items()
         }
 
-    def decode(self, raw, scale, offset) -> tuple[np.ndarray, list, dict]:
+    def decode(self, raw, scale, offset, limits) -> tuple[np.ndarray, list, dict, int]:
         """``raw``'s positions (float64, as ``_positions``), its 16-bit colour channels (rows of
-        their own array) and its attributes of ``rows`` (rows of one array a size), in one
-        parallel pass."""
+        their own array), its attributes of ``rows`` (rows of one array a size) and
+        ``_first_outside`` ``limits``, in one parallel pass."""
         n = len(raw)
         rec = np.ascontiguousarray(raw).view(np.uint8).reshape(n, -1)
         xyz = np.empty((n, 3), np.float64)
         outs = {size: np.empty((len(spec), n), f"<u{size}") for size, spec in self.specs.items()}
         rgb = np.empty((len(self.rgb), n), np.uint16)
-        _decode_records(rec, scale, offset, xyz, self.rgb, rgb, self.specs[1], outs[1], self.specs[2], outs[2], self.specs[4], outs[4], self.specs[8], outs[8])
-        return xyz, list(rgb), {a: outs[size][row].view(dtype) for a, (size, row, dtype) in self.rows.items()}
+        first = _decode_records(rec, scale, offset, limits, xyz, self.rgb, rgb, self.specs[1], outs[1], self.specs[2], outs[2], self.specs[4], outs[4], self.specs[8], outs[8])
+        attributes = {a: outs[size][row].view(dtype) for a, (size, row, dtype) in self.rows.items()}
+        return xyz, list(rgb), attributes, first if first < n else -1
 
 
 @njit(inline="always")
@@ -174,17 +175,22 @@ def _le_bytes(r, o, size):
 
 
 @njit(parallel=True, cache=True)
-def _decode_records(rec, scale, offset, xyz, rgb_at, rgb, spec1, out1, spec2, out2, spec4, out4, spec8, out8):
+def _decode_records(rec, scale, offset, limits, xyz, rgb_at, rgb, spec1, out1, spec2, out2, spec4, out4, spec8, out8):
     """One pass over point records (rows of bytes): positions ``X * scale + offset`` (int32 X, Y,
     Z at bytes 0, 4, 8; as ``_scaled_xyz``), the 16-bit colour channels at ``rgb_at`` into the
     rows of ``rgb``, and the fields of ``spec<k>`` (byte offsets; for one byte also a shift and a
     mask) into the rows of ``out<k>``. Each field read from its own strided view was one pass
-    over all the records' bytes a field (20 M LAS points, 6 attributes: 0.45 s)."""
+    over all the records' bytes a field (20 M LAS points, 6 attributes: 0.45 s). Returns the
+    first record whose X, Y or Z lies outside ``limits`` (``_first_outside``), else ``len(rec)``:
+    found here at no cost (a pass of its own took 8 ms of 2 M LAS points' 100 ms)."""
+    first = rec.shape[0]
     for i in prange(rec.shape[0]):
         r = rec[i]
         for a in range(3):
             v = np.int32(np.uint32(_le_bytes(r, 4 * a, 4)))
             xyz[i, a] = v * scale[a] + offset[a]
+            if v < limits[a, 0] or v > limits[a, 1]:
+                first = min(first, i)
         for k in range(rgb_at.shape[0]):
             rgb[k, i] = _le_bytes(r, rgb_at[k], 2)
         for k in range(spec1.shape[0]):
@@ -195,6 +201,27 @@ def _decode_records(rec, scale, offset, xyz, rgb_at, rgb, spec1, out1, spec2, ou
             out4[k, i] = _le_bytes(r, spec4[k], 4)
         for k in range(spec8.shape[0]):
             out8[k, i] = _le_bytes(r, spec8[k], 8)
+    return first
+
+
+def _first_outside(raw, limits: np.ndarray) -> int:
+    """Index of the first record whose X, Y or Z lies outside ``limits`` (``_record_limits``), -1
+    where none does: LAZ's decoder does not notice damaged bytes, it decodes them into garbage
+    (integers up to ±2e9) without a word. By numpy (``_decode_records`` finds it in its pass)."""
+    out = np.zeros(len(raw), bool)
+    for a, axis in enumerate("XYZ"):
+        out |= (raw[axis] < limits[a, 0]) | (raw[axis] > limits[a, 1])
+    return int(np.argmax(out)) if out.any() else -1
+
+
+#: what a header's bounds may be off by, of their widest extent (headers round them)
+BOUNDS_SLACK = 0.001
+
+
+def header_slack(lo, hi) -> float:
+    """How far points may lie outside header bounds ``lo``..``hi`` (``BOUNDS_SLACK``): a damaged
+    file's check (``_record_limits``) and a progressive load's root cube allow that much."""
+    return BOUNDS_SLACK * max(float(np.max(np.asarray(hi, np.float64) - np.asarray(lo, np.float64))), 1e-9)
 
 
 @dataclass
@@ -226,6 +253,8 @@ class LasHeader:
     #: why the EVLRs after the point data are not all there (a file cut before or inside them: its
     #: points read, with this warning; none of its EVLRs), else None
     evlrs_cut: str | None = None
+    #: points in each LAZ chunk (its chunk table), where a damaged point's chunk is named
+    laz_chunks: list[int] | None = None
 
     def crs(self) -> str | None:
         """The CRS its VLRs or EVLRs name (vlrs_crs'), None without one."""
@@ -470,7 +499,7 @@ def _check_laz(path: Path, f, hdr: LasHeader, salvage: bool = False) -> None:
         raise fail(path, f"corrupt LAZ chunk table: {one_line(exc) or type(exc).__name__}") from None
     if table is None:
         return
-    counts = [int(c[0]) for c in table]
+    counts = hdr.laz_chunks = [int(c[0]) for c in table]
     sizes = [int(c[1]) for c in table]
     if sum(sizes) > table_offset - start:  # chunks lie between the 8-byte table offset and the table
         raise fail(path, f"truncated LAZ file: the chunk table lists {sum(sizes):,} bytes of compressed points, only {table_offset - start:,} are present")
@@ -480,6 +509,46 @@ def _check_laz(path: Path, f, hdr: LasHeader, salvage: bool = False) -> None:
         capacity = sum(counts)
     if hdr.point_count > capacity:
         raise fail(path, f"truncated or corrupt LAZ file: the header claims {hdr.point_count:,} points but the compressed chunks hold at most {capacity:,}")
+
+
+def _record_limits(hdr: LasHeader) -> np.ndarray:
+    """(3, 2) int64: the least and greatest stored X, Y, Z the header's bounds allow, half a
+    scale step and ``header_slack`` wider; every int32 where the bounds are none to go by (not
+    finite, min above max, all 0: never filled in, or out of the integers' reach)."""
+    lo, hi = np.array(hdr.mins), np.array(hdr.maxs)
+    every = np.array([[-(2**31), 2**31 - 1]] * 3, np.int64)
+    if not (np.all(np.isfinite(lo) & np.isfinite(hi) & (lo <= hi)) and (lo.any() or hi.any())):
+        return every
+    scale, offset = np.array(hdr.scale), np.array(hdr.offset)
+    pad = np.abs(scale) / 2 + header_slack(lo, hi)
+    ends = np.sort([(lo - pad - offset) / scale, (hi + pad - offset) / scale], axis=0)
+    if np.any(ends[0] > 2**31 - 1) or np.any(ends[1] < -(2**31)):
+        return every
+    return np.stack([np.ceil(ends[0]), np.floor(ends[1])], 1).clip(every[0, 0], every[0, 1]).astype(np.int64)
+
+
+def _outside_bounds(kind: str, hdr: LasHeader, record, i: int, scale, offset, limits) -> str:
+    """What ``read_chunks`` says of point ``i`` (``record``), found outside the header's bounds."""
+    a = next(a for a, axis in enumerate("XYZ") if not limits[a, 0] <= record[axis] <= limits[a, 1])
+    first, end = _damaged_span(hdr, i)
+    span = f"; its LAZ chunk, points {first:,}..{end - 1:,}, is damaged" if hdr.compressed else ""
+    return (
+        f"corrupt {kind} point data: point {i:,} lies outside the header's bounds "
+        f"({'xyz'[a]} {record['XYZ'[a]] * scale[a] + offset[a]:,.3f}, bounds {hdr.mins[a]:,.3f}..{hdr.maxs[a]:,.3f}){span}"
+    )
+
+
+def _damaged_span(hdr: LasHeader, i: int) -> tuple[int, int]:
+    """(first, end) of the points a damage found at point ``i`` may have spoilt: its LAZ chunk
+    (chunks decode apart; the chunk table's, else the LASzip VLR's fixed size), a LAS record alone."""
+    if not hdr.compressed:
+        return i, i + 1
+    if hdr.laz_chunks:
+        ends = np.cumsum(hdr.laz_chunks)
+        k = min(int(np.searchsorted(ends, i, side="right")), len(ends) - 1)
+        return int(ends[k]) - hdr.laz_chunks[k], int(ends[k])
+    size = next(_u("I", d, 12)[0] for u, r, d in hdr.vlrs if u == LASZIP_USER_ID and r == LASZIP_RECORD_ID)
+    return i - i % size, i - i % size + size
 
 
 class _Las10AsLas11(io.RawIOBase):
@@ -768,6 +837,7 @@ class LasReader(Reader):
             stack.callback(records.close)
             if stop - start > NUMPY_MAX and isinstance(records, laz_process.ChildRecords):
                 prepare_kernel_calls()  # the decoding kernel's first call sets numba up: now, while the child decodes
+            limits, damage = _record_limits(hdr), None
             while done < stop:
                 try:
                     pts = records.read(min(chunk_size, stop - done))
@@ -783,9 +853,21 @@ class LasReader(Reader):
                 if n == 0:
                     break
                 raw = pts.array  # the records as read (valid until the next read)
-                if stop - start > NUMPY_MAX:  # one parallel pass over the records (chunks of any size: a progressive load's are small)
+                large = stop - start > NUMPY_MAX  # one parallel pass over the records (chunks of any size: a progressive load's are small)
+                if large:
                     plan = plan or _RecordPlan(header.point_format, attrs, has_rgb)
-                    xyz, rgb, decoded = plan.decode(raw, scale, offset)
+                    xyz, rgb, decoded, bad = plan.decode(raw, scale, offset, limits)
+                else:
+                    bad = _first_outside(raw, limits)
+                if bad >= 0:  # damage: the points before its LAZ chunk are given, then the error
+                    damage = _outside_bounds(kind, hdr, raw[bad], done + bad, scale, offset, limits)
+                    pts = pts[: max(0, _damaged_span(hdr, done + bad)[0] - done)]
+                    raw, n = pts.array, len(pts)
+                    if n == 0:
+                        break
+                    if large:  # (those kept, decoded again: rare)
+                        xyz, rgb, decoded, _ = plan.decode(raw, scale, offset, limits)
+                if large:
                     rgba = _colors(*rgb, scaler) if has_rgb else None
                     attributes = {a: decoded[a] if a in decoded else _field_values(pts, f) for a, f in attrs.items()}
                 else:  # numpy and laspy, a field at a time: a small file's first open compiles no kernel
@@ -795,6 +877,10 @@ class LasReader(Reader):
                     attributes = {a: _field_values(pts, f) for a, f in attrs.items()}
                 done += n
                 yield PointChunk(xyz, rgba, attributes, scale=stored_scale)
+                if damage is not None:
+                    break
+        if damage is not None:  # (the child stopped with the reader: it decodes no garbage for nothing)
+            raise fail(path, f"{damage}: {done:,} of the {hdr.point_count:,} points read")
         if done < stop:
             raise fail(path, f"truncated {kind} file: the header claims {hdr.point_count:,} points, only {done:,} could be read")
         if hdr.evlrs_cut is not None and stop == hdr.point_count:  # every point there, the EVLRs after them cut off

@@ -45,6 +45,7 @@ from ...errors import (
 )
 from ...io import human_bytes
 from ...io._base import headers_once
+from ...io.las import header_slack
 from ..convert.prefetch import prefetch
 
 SLICE_POINTS = 250_000  # points inserted under one hold of the octree (~20-40 ms) while no frames are drawn
@@ -345,7 +346,7 @@ def open_progressive(sources, total, bounds, name, grid=None, max_leaf=None, mem
     cube = None
     if bounds is not None:
         lo, hi = (np.asarray(b, np.float64) for b in bounds)
-        pad = 0.001 * max(float(np.max(hi - lo)), 1e-9)  # headers round their bounds
+        pad = header_slack(lo, hi)  # headers round their bounds
         cube = (lo - pad, float(np.max(hi - lo)) + 2 * pad)
     memory_limit = memory_limit_bytes(memory_limit)
     capacity = min(total or 0, memory_limit // _PRESIZED_BYTES_PER_POINT)  # presized no larger than the limit allows
