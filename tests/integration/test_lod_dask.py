@@ -328,6 +328,22 @@ def test_16bit_colors_dark_after_bright_read_in_parts_are_the_single_process_col
     _assert_identical(ref, out)
 
 
+def test_a_damaged_laz_fails_the_run_naming_its_damaged_chunk_as_in_one_process(autzen_path, client, tmp_path):
+    """lazrs decodes damaged bytes into points far outside the header's bounds without a word
+    (test_io_las.damaged_autzen): a worker's read names the first of them and its LAZ chunk,
+    and the run stops with the single-process converter's line (which adds that it stopped)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "unit"))
+    from test_io_las import DAMAGE, damaged_autzen
+
+    path = damaged_autzen(autzen_path, tmp_path)
+    errors = []
+    for run, dask in (("one", None), ("dask", client)):
+        with pytest.raises(InputError) as err:
+            convert(path, tmp_path / run, client=dask, **OPTS)
+        errors.append(str(err.value).replace(str(tmp_path / run), "OUT"))
+    assert errors[0].startswith(f"{path}: {DAMAGE}; the conversion to OUT stopped unfinished") and errors[1] == f"{path}: {DAMAGE}"
+
+
 @pytest.mark.parametrize("kind", ["truncated LAS", "bad text line"])
 def test_a_corrupt_file_among_many_fails_the_run_naming_it(inputs, client, tmp_path, kind):
     """A truncated LAS is found by the driver's look at the headers; a text file with a bad line
