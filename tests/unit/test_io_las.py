@@ -497,3 +497,18 @@ def test_header_bounds_a_hair_off_are_not_damage(tmp_path, autzen_path):
         struct.pack_into("<6d", data, 179, *bounds)  # max x, min x, max y, ...
         (tmp_path / "a.laz").write_bytes(bytes(data))
         assert sum(len(c) for c in read_chunks(tmp_path / "a.laz")) == 110_000
+
+
+def test_a_damaged_points_chunk_is_found_in_chunks_of_any_size(autzen_path):
+    """The chunk a damaged point spoils: the chunk table's (COPC's nodes are chunks of variable
+    size), the LASzip VLR's fixed size without one, the record alone in a LAS file."""
+    import dataclasses
+
+    from gigapoint.io.las import _damaged_span, read_las_header
+
+    hdr = read_las_header(autzen_path)
+    assert hdr.laz_chunks == [50_000] * 3 and _damaged_span(hdr, 52_450) == (50_000, 100_000)
+    odd = dataclasses.replace(hdr, laz_chunks=[10, 5, 20])
+    assert [_damaged_span(odd, i) for i in (0, 9, 10, 14, 15, 34)] == [(0, 10), (0, 10), (10, 15), (10, 15), (15, 35), (15, 35)]
+    assert _damaged_span(dataclasses.replace(hdr, laz_chunks=None), 100_001) == (100_000, 150_000)
+    assert _damaged_span(dataclasses.replace(hdr, compressed=False), 7) == (7, 8)
