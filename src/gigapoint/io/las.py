@@ -512,15 +512,18 @@ def _check_laz(path: Path, f, hdr: LasHeader, salvage: bool = False) -> None:
 
 
 def _record_limits(hdr: LasHeader) -> np.ndarray:
-    """(3, 2) int64: the least and greatest stored X, Y, Z the header's bounds allow, half a
-    scale step and ``header_slack`` wider; every int32 where the bounds are none to go by (not
-    finite, min above max, all 0: never filled in, or out of the integers' reach)."""
+    """(3, 2) int64: the least and greatest stored X, Y, Z the header's bounds allow: an axis's
+    extent wider each way (at least ``header_slack``), and half a scale step; every int32 where
+    the bounds are none to go by (not finite, min above max, all 0: never filled in, or out of
+    the integers' reach). So wide because a header's bounds may be stale (a writer that did not
+    update them): such a file reads as other tools read it, where damaged LAZ bytes decode into
+    points kilometres away (integers up to ±2e9)."""
     lo, hi = np.array(hdr.mins), np.array(hdr.maxs)
     every = np.array([[-(2**31), 2**31 - 1]] * 3, np.int64)
     if not (np.all(np.isfinite(lo) & np.isfinite(hi) & (lo <= hi)) and (lo.any() or hi.any())):
         return every
     scale, offset = np.array(hdr.scale), np.array(hdr.offset)
-    pad = np.abs(scale) / 2 + header_slack(lo, hi)
+    pad = np.abs(scale) / 2 + np.maximum(hi - lo, header_slack(lo, hi))
     ends = np.sort([(lo - pad - offset) / scale, (hi + pad - offset) / scale], axis=0)
     if np.any(ends[0] > 2**31 - 1) or np.any(ends[1] < -(2**31)):
         return every
@@ -533,7 +536,7 @@ def _outside_bounds(kind: str, hdr: LasHeader, record, i: int, scale, offset, li
     first, end = _damaged_span(hdr, i)
     span = f"; its LAZ chunk, points {first:,}..{end - 1:,}, is damaged" if hdr.compressed else ""
     return (
-        f"corrupt {kind} point data: point {i:,} lies outside the header's bounds "
+        f"corrupt {kind} point data: point {i:,} lies far outside the header's bounds "
         f"({'xyz'[a]} {record['XYZ'[a]] * scale[a] + offset[a]:,.3f}, bounds {hdr.mins[a]:,.3f}..{hdr.maxs[a]:,.3f}){span}"
     )
 
