@@ -101,12 +101,22 @@ def open(*paths, progressive: bool = False, **options):
     warnings, also listed in ``cloud.warnings``); it draws what is there at any moment (SimLOD). Loading stops with a one-line MemoryLimitError once the octree holds
     ``memory_limit=`` bytes or '8G' (by default half the machine's memory); what was loaded stays.
 
+    A folder is read without its subfolders (``raw/`` and ``classified/`` copies of the same tiles
+    would be read twice); ``recursive=True`` reads every point file below it, depth first in name
+    order (hidden folders and octrees left out).
+
     Paths may also come as one list or tuple: ``gp.open([a, b])`` is ``gp.open(a, b)``."""
     from .errors import InputError, check_switch
     from .lod.reader import refuse_octrees
 
     paths = _flat_paths(paths)
     check_switch("progressive", progressive, "open")  # (chunked= is open_cloud's to check)
+    recursive = options.pop("recursive", False)
+    check_switch("recursive", recursive, "open")
+    if recursive:
+        from .io import with_subfolders
+
+        paths = tuple(with_subfolders(paths))
     if progressive:
         from .io._base import headers_once
         from .lod.progressive import file_sources, memory_limit_bytes, open_progressive
@@ -132,7 +142,7 @@ def open(*paths, progressive: bool = False, **options):
     known = [p for p in inspect.signature(open_cloud).parameters if p != "paths"]
     unknown = sorted(set(options) - set(known))
     if unknown:  # a TypeError naming the internal open_cloud() before
-        raise InputError(f"open: unknown option(s) {', '.join(unknown)}; it takes {', '.join(known)}, progressive=True (with memory_limit=)")
+        raise InputError(f"open: unknown option(s) {', '.join(unknown)}; it takes {', '.join(known)}, recursive=True, progressive=True (with memory_limit=)")
 
     return open_cloud(*paths, **options)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import warnings
 from pathlib import Path
 
@@ -103,6 +104,7 @@ def test_info_of_a_folder_of_many_tiles_is_one_block_and_names_the_damaged_ones(
     assert rc == 1 and out.count("points:") == 13
 
 
+
 def test_an_empty_tile_is_skipped_by_a_progressive_load_as_by_open(tmp_path, loaded):
     """An empty tile (0 points) among many: gp.open and convert skip it with a warning, but a
     progressive load (``view``, ``render --progressive``) stopped on it ("LAZ file holds no points")."""
@@ -125,3 +127,73 @@ def test_info_of_a_folder_tells_offsets_apart_as_one_files_info_prints_them(cli,
     las.write(tiles[11])
     rc, out, _ = cli("info", tmp_path)
     assert rc == 0 and "  offsets:     500000, 4000000, 0 (11 files); 500000.00001, 4000000, 0 (1 file)" in out.splitlines()
+
+
+def city_of_subfolders(root: Path) -> Path:
+    """city/north (2 tiles), city/south (1 tile), and what must not be read: a hidden folder's
+    tile, a symlink from north back to city (a loop), an EPT dataset's folder."""
+    write_tiles(root / "city" / "north", 2, suffix=".las")
+    write_tiles(root / "city" / "south", 1, suffix=".las")
+    write_tiles(root / "city" / ".trash", 1, suffix=".las")
+    (root / "city" / "north" / "loop").symlink_to(root / "city", target_is_directory=True)
+    (root / "city" / "ept").mkdir()
+    (root / "city" / "ept" / "ept.json").write_text("{}")
+    return root / "city"
+
+
+def test_a_folder_of_subfolders_of_tiles_names_them_and_recursive_reads_every_tile_below(tmp_path, cli):
+    """city/north/*.las and city/south/*.las: every command said "directory holds no supported
+    point cloud file", not that its subfolders do, nor how to read them."""
+    from gigapoint.errors import EmptyCloudError, InputError
+
+    city = city_of_subfolders(tmp_path)
+    said = (f"{city}: holds no point cloud file, but its subfolders north, south do: read every file below it "
+            f"with --recursive (recursive=True in Python), or name them ({city}/*/)")  # fmt: skip
+    with pytest.raises(EmptyCloudError) as caught:
+        gp.open(city)
+    assert str(caught.value) == said
+    assert cli("info", city) == (1, "", f"error: {said}\n")
+    with pytest.warns(GigapointWarning) as caught:  # the EPT folder is an octree, not tiles
+        cloud = gp.open(city, recursive=True)
+    assert [str(w.message) for w in caught] == [f"{city / 'ept'}: an octree, not read with the point files around it (open it alone)"]
+    assert cloud.n_points == 150 and cloud.name == "3 files"
+    assert [f.relative_to(city).as_posix() for f in cloud.source_files] == ["north/tile_00_00.las", "north/tile_00_01.las", "south/tile_00_00.las"]
+    rc, out, _ = cli("info", "--recursive", "--json", city)
+    assert rc == 0 and [json.loads(line)["path"] for line in out.splitlines()] == [str(f) for f in cloud.source_files]
+    assert gp.open(city / "north", city / "south").n_points == 150  # the shell's city/*/ (no glob of gigapoint's own)
+    with pytest.raises(InputError, match=r"^open: recursive must be True or False, got 'yes'$"):
+        gp.open(city, recursive="yes")
+    for name in "abc":
+        write_tiles(city / name, 1, suffix=".las")
+    with pytest.raises(EmptyCloudError, match=r": holds no point cloud file, but its subfolders a, b, c and 2 more do: "):
+        gp.open(city)
+
+
+def test_recursive_is_an_option_of_render_view_and_convert(tmp_path, cli, monkeypatch):
+    from gigapoint.viewer.server import ViewerServer
+
+    city = city_of_subfolders(tmp_path)
+    rc, out, _ = cli("render", "--recursive", city, "-o", tmp_path / "x.png", "-W", 64, "-H", 48)
+    assert rc == 0 and out == f"wrote {tmp_path / 'x.png'} (64x48, 150 points)\n"
+    monkeypatch.setattr(ViewerServer, "serve_forever", lambda self: None)  # (not until Ctrl+C)
+    rc, _, err = cli("view", "--recursive", "--no-browser", city)
+    assert rc == 0 and "gigapoint viewer: 3 files, 150 points\n" in err
+    rc, out, _ = cli("convert", "-q", "--recursive", city, "-o", tmp_path / "oct")
+    assert rc == 0 and out.startswith(f"{tmp_path / 'oct'}: 150 points in ")
+    result = gp.convert(city, tmp_path / "oct2", recursive=True)
+    assert result.points == 150
+
+
+def test_a_folder_with_its_own_tiles_and_subfolders_of_tiles_warns_once_that_they_are_not_read(tmp_path, cli):
+    """Tiles beside raw/ and classified/ copies of them: only the folder's own are read (the
+    copies would double every point), but the subfolders were passed over without a word."""
+    write_tiles(tmp_path, 2, suffix=".las")
+    write_tiles(tmp_path / "raw", 2, suffix=".las")
+    write_tiles(tmp_path / "classified", 2, suffix=".las")
+    said = (f"{tmp_path}: its subfolders classified, raw hold point files too, not read: read every file below it "
+            f"with --recursive (recursive=True in Python), or name them")  # fmt: skip
+    with pytest.warns(GigapointWarning) as caught:
+        cloud = gp.open(tmp_path)
+    assert cloud.n_points == 100 and [str(w.message) for w in caught] == [said]
+    rc, _, err = cli("render", tmp_path, "-o", tmp_path / "x.png", "-W", 64, "-H", 48)
+    assert rc == 0 and err == f"warning: {said}\n"

@@ -32,6 +32,22 @@ ChunkedOption = Annotated[
     ),
 ]
 
+RecursiveOption = Annotated[
+    bool,
+    typer.Option(
+        "--recursive",
+        help="Read every point file below a folder, its subfolders' too (hidden ones and octrees left out); "
+        "by default a folder's own files only (raw/ and classified/ copies of the same tiles would be read twice).",
+    ),
+]
+
+
+def subfolders_read(paths, recursive: bool) -> list:
+    """The inputs as ``--recursive`` has them read: each folder by every point file below it."""
+    from ..io import with_subfolders
+
+    return with_subfolders(paths) if recursive else list(paths)
+
 
 def check_colors(colors: str) -> str:
     """``colors`` if it names a colour format, else a one-line error naming ``--colors``."""
@@ -74,4 +90,4 @@ def open_files(inputs, point_budget: int, progressive: bool | None, options: dic
     return open_cloud(*inputs, progress=progress, **options)
 
 
-__all__ = ["ChunkedOption", "ColorsOption", "check_colors", "cloud_options", "open_files"]
+__all__ = ["ChunkedOption", "ColorsOption", "RecursiveOption", "check_colors", "cloud_options", "open_files", "subfolders_read"]

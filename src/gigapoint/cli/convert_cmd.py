@@ -10,6 +10,7 @@ from pathlib import Path
 import typer
 
 from .app import app
+from .cloud_opts import RecursiveOption
 from .settings_opts import named_option
 
 
@@ -44,6 +45,7 @@ def convert(
     workers: int | None = typer.Option(
         None, "--workers", help="Convert on a local Dask cluster of N single-threaded worker processes (needs gigapoint\\[dask])."
     ),
+    recursive: RecursiveOption = False,
 ) -> None:
     """Convert point clouds into a level-of-detail octree, out of core, resumable."""
     from ..lod import ConvertError
@@ -76,6 +78,7 @@ def convert(
                 colors=colors,
                 progress=not quiet and sys.stderr.isatty(),
                 client=client,
+                recursive=recursive,
                 on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
             )
     except ConvertError as exc:  # 'max_leaf must be ...' named no option

@@ -9,7 +9,7 @@ import typer
 
 from ..errors import GigapointError, InputError
 from .app import app
-from .cloud_opts import ChunkedOption, ColorsOption, cloud_options, option_names
+from .cloud_opts import ChunkedOption, ColorsOption, RecursiveOption, cloud_options, option_names
 
 #: a folder of more files than this is shown as one block (a city's 1 500 tiles were 21 000 lines)
 FOLDER_LISTED = 10
@@ -22,6 +22,7 @@ def info(
     ),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object per file instead of text."),
     each: bool = typer.Option(False, "--each", help=f"Show each file of a folder of more than {FOLDER_LISTED} files (by default summed up in one block)."),
+    recursive: RecursiveOption = False,
     memory: bool = typer.Option(False, "--memory", help="Also load the points and print the bytes a point each component holds in memory."),
     colors: ColorsOption = "auto",
     chunked: ChunkedOption = None,
@@ -45,7 +46,7 @@ def info(
                 again = "run the same convert command again to resume it" if hint == RESUME_HINT else hint
                 raise InputError(f"{f}: no such file yet: a conversion to it is unfinished (its work folder {work_dir(f)} is there); {again}")
             lod = is_lod_source(f)
-            found = [] if lod else expand_paths([f])
+            found = [] if lod else expand_paths([f], recursive=recursive)
             summed = f if len(found) > FOLDER_LISTED and f.is_dir() and not (each or as_json or memory) else None
             paths.extend([(f, True, None, None)] if lod else [(p, False, None, summed) for p in found])
         except GigapointError as exc:  # a missing file among several stopped the others from being shown

@@ -17,7 +17,7 @@ from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from . import compiling
 from .app import app
-from .cloud_opts import ChunkedOption, ColorsOption, check_colors, cloud_options, open_files
+from .cloud_opts import ChunkedOption, ColorsOption, RecursiveOption, check_colors, cloud_options, open_files, subfolders_read
 from .info_cmd import memory_line
 from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_image
 from .progress import err_console, progress_bar, status
@@ -189,6 +189,7 @@ def render(
     ] = None,
     colors: ColorsOption = "auto",
     chunked: ChunkedOption = None,
+    recursive: RecursiveOption = False,
 ) -> None:
     """Render point clouds to an image (or a turntable video)."""
     import gigapoint as gp
@@ -217,6 +218,7 @@ def render(
     check_view(view)
     width, height = check_image_size(width, height, fov)  # before reading anything
     check_color_options(settings)
+    inputs = subfolders_read(inputs, recursive)
     with options_named():  # (--color-attribute: the files' headers lack it)
         check_color_attribute(inputs, settings)
     if camera is not None:

@@ -12,7 +12,7 @@ import typer
 
 from ..errors import GigapointError
 from .app import app, prefer_passive_wait
-from .cloud_opts import ChunkedOption, ColorsOption, cloud_options, open_files, option_names
+from .cloud_opts import ChunkedOption, ColorsOption, RecursiveOption, cloud_options, open_files, option_names, subfolders_read
 
 
 def _open_browser(url: str) -> None:
@@ -62,6 +62,7 @@ def view(
     overwrite: bool = typer.Option(False, "--overwrite", help="Live: replace a recording already in the --record folder."),
     colors: ColorsOption = "auto",
     chunked: ChunkedOption = None,
+    recursive: RecursiveOption = False,
 ) -> None:
     """Serve an interactive viewer of PATH... in the browser (Ctrl+C stops it)."""
     prefer_passive_wait()
@@ -116,7 +117,7 @@ def view(
         if len(paths) == 1 and OctreeDir(paths[0]).awaiting_preview:  # `convert` was started a moment ago
             print(f"gigapoint viewer: waiting for the first preview of the conversion into {paths[0]} ...", file=sys.stderr)
             wait_for_preview(paths[0])
-        cloud = open_files(paths, budget, progressive, options, progress=False)  # big: shown while it loads
+        cloud = open_files(subfolders_read(paths, recursive), budget, progressive, options, progress=False)  # big: shown while it loads
     else:
         raise GigapointError("view: name at least one file or directory (or --demo N)")
     if window:  # native window (rendercanvas + glfw), no server

@@ -28,7 +28,7 @@ from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fai
 from .demo import demo_arrays, demo_chunks
 from .http import shown_url
 from .las import LasReader, read_las_header, with_scan_angle
-from .registry import in_folder, is_supported_name, reader_for, readers, register, supported_suffixes
+from .registry import in_folder, is_dataset_folder, is_supported_name, reader_for, readers, register, supported_suffixes
 
 
 def read_chunks(path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
@@ -54,29 +54,100 @@ def file_url_path(text: str) -> Path | None:
     return Path(urllib.request.url2pathname(u.path))
 
 
-def expand_paths(paths: Iterable) -> list[Path]:
+def _local(p) -> Path:
+    """A path as given, a ``file://`` URL's or ``~/...`` expanded; another URL a one-line InputError."""
+    text = os.fspath(p) if isinstance(p, (str, os.PathLike)) else None
+    if text is not None and not Path(p).exists():
+        local = file_url_path(text)  # gp.open("file:///...") was "only http:// and https:// URLs are read"
+        url = URL_LIKE.match(text) if local is None else None
+        if url:
+            raise InputError(f"{shown_url(f'{url.group(1)}://{url.group(2)}')}: only http:// and https:// URLs are read (COPC and EPT octrees)")
+        p = local if local is not None else Path(p).expanduser()  # "~/scans/a.laz" from Python (a shell expands it)
+    return Path(p)
+
+
+def _listed(folder: Path) -> list[Path]:
+    """A folder's entries sorted by name; one that cannot be listed a one-line InputError."""
+    try:
+        return sorted(folder.iterdir(), key=lambda c: c.name)
+    except OSError as exc:
+        raise fail(folder, f"cannot list the folder ({exc.strerror or exc})") from None
+
+
+def _point_files(folder: Path, quiet: bool = False) -> list[Path]:
+    """A folder's own point files (``in_folder``), sorted by name; a readme beside them skipped
+    with a warning (unless ``quiet``), hidden files quietly (macOS leaves one beside every tile)."""
+    found = []
+    for c in _listed(folder):
+        if not (c.is_file() and is_supported_name(c)):
+            continue
+        if in_folder(c):
+            found.append(c)
+        elif not quiet and not c.name.startswith("."):
+            warn(f"{c}: no point rows at its beginning (a readme?), skipped", GigapointWarning)
+    return found
+
+
+def _subfolders(folder: Path, octrees: list | None = None) -> list[Path]:
+    """A folder's subfolders, sorted by name, but hidden ones and octrees (a conversion's output
+    beside its tiles: its .npy arrays are no points; appended to ``octrees``)."""
+    out = []
+    for c in _listed(folder):
+        if c.is_dir() and not c.name.startswith("."):
+            if not is_dataset_folder(c):
+                out.append(c)
+            elif octrees is not None:
+                octrees.append(c)
+    return out
+
+
+def _folders_below(folder: Path, octrees: list | None = None) -> Iterator[Path]:
+    """``folder`` and every folder below it (``_subfolders``), depth first in name order; a folder
+    reached again through a symlink (a link to a parent: a loop) is left out."""
+    seen: set = set()
+    todo = [folder]
+    while todo:
+        d = todo.pop()
+        if d.resolve() in seen:
+            continue
+        seen.add(d.resolve())
+        yield d
+        todo.extend(reversed(_subfolders(d, octrees)))
+
+
+def _holds_points(folder: Path) -> bool:
+    """Whether a point file is anywhere below ``folder``."""
+    return any(_point_files(d, quiet=True) for d in _folders_below(folder))
+
+
+#: how to read a folder's subfolders, said where they are not read
+READ_SUBFOLDERS = "read every file below it with --recursive (recursive=True in Python), or name them"
+
+
+def expand_paths(paths: Iterable, recursive: bool = False) -> list[Path]:
     """Files named (paths, ``file://`` URLs, ``~/...``), with each directory replaced by its
-    supported files sorted by name; a file named twice (or also through its folder) is read
-    once, with a warning: its points were merged twice into one cloud or octree."""
+    supported files sorted by name (``recursive``: also those of its subfolders, depth first, but
+    hidden ones and octrees); a file named twice (or also through its folder) is read once, with
+    a warning: its points were merged twice into one cloud or octree. Subfolders holding point
+    files are not read otherwise (a folder's raw/ and classified/ copies of its tiles would be
+    read twice): said in the error of a folder with no file of its own, else in a warning."""
     out: list[Path] = []
     for p in paths:
-        text = os.fspath(p) if isinstance(p, (str, os.PathLike)) else None
-        if text is not None and not Path(p).exists():
-            local = file_url_path(text)  # gp.open("file:///...") was "only http:// and https:// URLs are read"
-            url = URL_LIKE.match(text) if local is None else None
-            if url:
-                raise InputError(f"{shown_url(f'{url.group(1)}://{url.group(2)}')}: only http:// and https:// URLs are read (COPC and EPT octrees)")
-            p = local if local is not None else Path(p).expanduser()  # "~/scans/a.laz" from Python (a shell expands it)
-        p = Path(p)
+        p = _local(p)
         if p.is_dir():
-            found = []
-            for c in sorted((c for c in p.iterdir() if c.is_file() and is_supported_name(c)), key=lambda c: c.name):
-                if in_folder(c):
-                    found.append(c)
-                elif not c.name.startswith("."):  # hidden files quietly: macOS leaves one beside every tile
-                    warn(f"{c}: no point rows at its beginning (a readme?), skipped", GigapointWarning)
+            octrees: list[Path] = []
+            found = [f for d in (_folders_below(p, octrees) if recursive else [p]) for f in _point_files(d)]
+            below = [] if recursive else [s for s in _subfolders(p) if _holds_points(s)]
+            if below and not found:
+                raise fail(p, f"holds no point cloud file, but its subfolders {file_names(below)} do: {READ_SUBFOLDERS} ({p / '*'}/)", EmptyCloudError)
+            if below:  # once an operation (headers_once): each of its steps expands the paths again
+                said = f"{p}: its subfolders {file_names(below)} hold point files too, not read: {READ_SUBFOLDERS}"
+                read_once("subfolders", p, lambda said=said: warn(said, GigapointWarning))
+            for o in octrees:
+                read_once("octree below", o, lambda o=o: warn(f"{o}: an octree, not read with the point files around it (open it alone)", GigapointWarning))
             if not found:
-                raise fail(p, f"directory holds no supported point cloud file ({', '.join(supported_suffixes())})", EmptyCloudError)
+                what = "directory and its subfolders hold" if recursive else "directory holds"
+                raise fail(p, f"{what} no supported point cloud file ({', '.join(supported_suffixes())})", EmptyCloudError)
             out.extend(found)
         else:
             out.append(check_file(p))
@@ -96,6 +167,23 @@ def expand_paths(paths: Iterable) -> list[Path]:
         seen.add(key)
         once.append(f)
     return once
+
+
+def with_subfolders(paths) -> list:
+    """``paths`` with each folder of point files (not an octree) replaced by every point file
+    below it (``expand_paths(recursive=True)``): what ``recursive=True`` and ``--recursive`` read;
+    anything else as given (a file, an octree, a URL: its reader says what it is)."""
+    out: list = []
+    for p in paths:
+        try:
+            q = _local(p) if isinstance(p, (str, os.PathLike)) else None
+        except InputError:  # (a URL: an octree's, read as one)
+            q = None
+        if q is not None and q.is_dir() and not is_dataset_folder(q):
+            out.extend(expand_paths([q], recursive=True))
+        else:
+            out.append(p)
+    return out
 
 
 def cloud_name(files) -> str:
@@ -407,4 +495,5 @@ __all__ = [
     "register",
     "supported_suffixes",
     "warn_mixed_crs",
+    "with_subfolders",
 ]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from ..errors import InputError, UnsupportedFormatError
@@ -29,6 +30,19 @@ def is_supported_name(path: Path | str) -> bool:
     """True when the file's suffix belongs to a registered reader (used to pick files in a directory)."""
     name = Path(path).name.lower()
     return any(name.endswith(s) for s in supported_suffixes())
+
+
+#: tests of a folder that is one dataset, not a folder of tiles (an octree: lod/reader.py registers
+#: its own, as io cannot import lod); a folder walk (``--recursive``) leaves such subfolders out
+_DATASET_FOLDERS: list[Callable[[Path], bool]] = []
+
+
+def register_dataset_folder(test: Callable[[Path], bool]) -> None:
+    _DATASET_FOLDERS.append(test)
+
+
+def is_dataset_folder(path: Path) -> bool:
+    return any(test(path) for test in _DATASET_FOLDERS)
 
 
 def in_folder(path: Path) -> bool:

@@ -15,6 +15,7 @@ from pathlib import Path
 from ...core import pages
 from ...core.renderable import PointSource
 from ...errors import GigapointError, GigapointWarning, InputError, check_switch, warn
+from ...io import with_subfolders
 from ...io._base import check_file, headers_once
 from ...io.registry import is_supported_name
 from ..build import SAMPLERS
@@ -208,6 +209,7 @@ def convert(
     layout: str | None = None,
     colors: str | None = None,
     on_ready=None,
+    recursive: bool = False,
 ) -> ConvertResult:
     """Convert point cloud files (or a cloud, or an iterable of PointChunks) into an LOD octree directory ``out``.
 
@@ -241,8 +243,14 @@ def convert(
     ``on_ready``: called with no argument once the output first shows points (the read phase's
     first preview; at the start where a resumed run finds one): the CLI says then how to watch
     it fill, and says nothing of it where the first file cannot be read.
+
+    ``recursive=True``: a folder stands for every point file below it, not only its own
+    (``io.with_subfolders``, as ``gp.open``'s).
     """
     check_switch("overwrite", overwrite, "convert")
+    check_switch("recursive", recursive, "convert")
+    if recursive and isinstance(inputs, (str, os.PathLike, list, tuple)):
+        inputs = with_subfolders([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
     check_switch("progress", progress, "convert")  # "yes"/"no" were both true
     if name is not None and not isinstance(name, str):  # 5 went into octree.json as a number
         raise InputError(f"convert: name must be a string, got {name!r}")
