@@ -102,7 +102,16 @@ def test_info_of_a_folder_of_many_tiles_is_one_block_and_names_the_damaged_ones(
     assert len(said) == 2 and said[0].startswith(f"error: {tiles[12]}: ") and said[1] == "error: info: 1 of 14 files could not be read (said above)"
     rc, out, err = cli("info", "--each", tmp_path)
     assert rc == 1 and out.count("points:") == 13
-
+    # --json: the same block as one object (it printed a line a file, as --each does)
+    rc, out, err = cli("info", "--json", tmp_path)
+    damaged, summed = map(json.loads, out.splitlines())
+    assert rc == 1 and damaged["path"] == str(tiles[12]) and damaged["error"].startswith(f"{tiles[12]}: ")
+    assert {k: summed[k] for k in ("path", "files", "point_count", "format", "las_version", "crs")} == {
+        "path": str(tmp_path), "files": 13, "point_count": 650, "format": "LAZ", "las_version": "1.2", "crs": None}
+    assert summed["bounds"]["min"] == lo.tolist() and "scale" not in summed and summed["offset"] == [500000.0, 4000000.0, 0.0]
+    assert summed["details"] == {"scales": "0.01, 0.01, 0.01 (12 files); 0.001, 0.001, 0.001 (1 file)"}
+    rc, out, err = cli("info", "--json", "--each", tmp_path)
+    assert rc == 1 and [json.loads(line).get("point_count") for line in out.splitlines()] == [50] * 12 + [None, 50]
 
 
 def test_an_empty_tile_is_skipped_by_a_progressive_load_as_by_open(tmp_path, loaded):

@@ -20,7 +20,7 @@ def info(
     files: list[Path] = typer.Argument(
         ..., readable=False, help="Point cloud files (LAS/LAZ/PLY/XYZ/XYZRGB/TXT/CSV/PTS/ASC/NPY/NPZ), directories, octrees, COPC/EPT files or URLs."
     ),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object per file instead of text."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of text: an object per file, or per folder summed up."),
     each: bool = typer.Option(False, "--each", help=f"Show each file of a folder of more than {FOLDER_LISTED} files (by default summed up in one block)."),
     recursive: RecursiveOption = False,
     memory: bool = typer.Option(False, "--memory", help="Also load the points and print the bytes a point each component holds in memory."),
@@ -47,7 +47,7 @@ def info(
                 raise InputError(f"{f}: no such file yet: a conversion to it is unfinished (its work folder {work_dir(f)} is there); {again}")
             lod = is_lod_source(f)
             found = [] if lod else expand_paths([f], recursive=recursive)
-            summed = f if len(found) > FOLDER_LISTED and f.is_dir() and not (each or as_json or memory) else None
+            summed = f if len(found) > FOLDER_LISTED and f.is_dir() and not (each or memory) else None
             paths.extend([(f, True, None, None)] if lod else [(p, False, None, summed) for p in found])
         except GigapointError as exc:  # a missing file among several stopped the others from being shown
             paths.append((f, False, exc, None))

@@ -369,9 +369,10 @@ def file_info(path) -> dict:
 def folder_info(folder, infos: list[dict]) -> dict:
     """One ``file_info`` dict of a folder's files (``infos``: theirs) for ``format_info``:
     points and sizes summed, bounds joined, the attributes they all have; what they do not
-    share is said in ``details`` (a city's 1 500 tiles were 21 000 lines of ``gigapoint info``)."""
+    share is said in ``details`` (a city's 1 500 tiles were 21 000 lines of ``gigapoint info``);
+    ``files``: how many (``info --json`` prints the dict as it is)."""
     n = len(infos)
-    out = {"path": f"{folder} ({n:,} files)", "point_count": sum(i.get("point_count") or 0 for i in infos)}
+    out = {"path": str(folder), "files": n, "point_count": sum(i.get("point_count") or 0 for i in infos)}
     details = {}
 
     def shared(label: str, text) -> bool:
@@ -428,7 +429,7 @@ def _coords(values, scale=None) -> str:
 def format_info(info: dict) -> str:
     """Human-readable text of a ``file_info`` dict (what ``gigapoint info`` prints); a
     ``details`` entry ({label: text}) adds lines as they are."""
-    lines = [f"{info.get('path', '?')}"]
+    lines = [f"{info.get('path', '?')}" + (f" ({info['files']:,} files)" if "files" in info else "")]  # (a folder's: folder_info)
     fmt = info.get("format", "?")
     if info.get("las_version"):
         fmt += f" {info['las_version']}, point format {info.get('point_format')}"
