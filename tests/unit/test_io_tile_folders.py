@@ -206,3 +206,33 @@ def test_a_folder_with_its_own_tiles_and_subfolders_of_tiles_warns_once_that_the
     assert cloud.n_points == 100 and [str(w.message) for w in caught] == [said]
     rc, _, err = cli("render", tmp_path, "-o", tmp_path / "x.png", "-W", 64, "-H", 48)
     assert rc == 0 and err == f"warning: {said}\n"
+
+
+def test_a_subfolder_that_cannot_be_listed_stops_only_a_recursive_read(tmp_path, monkeypatch):
+    """A folder's own tiles are read whatever its subfolders are (a root-owned lost+found); with
+    recursive=True a subfolder that cannot be listed is a one-line error naming it."""
+    from gigapoint.errors import InputError
+
+    write_tiles(tmp_path, 2, suffix=".las")
+    (tmp_path / "lost+found").mkdir()
+    listing = Path.iterdir
+
+    def iterdir(self):
+        if self.name == "lost+found":
+            raise PermissionError(13, "Permission denied")
+        return listing(self)
+
+    monkeypatch.setattr(Path, "iterdir", iterdir)
+    assert gp.open(tmp_path).n_points == 100
+    with pytest.raises(InputError) as caught:
+        gp.open(tmp_path, recursive=True)
+    assert str(caught.value) == f"{tmp_path / 'lost+found'}: cannot list the folder (Permission denied)"
+
+
+def test_view_refuses_recursive_without_paths(cli, monkeypatch):
+    """``view --demo N --recursive`` dropped the option without a word (as --live and --replay did)."""
+    from gigapoint.viewer.server import ViewerServer
+
+    monkeypatch.setattr(ViewerServer, "serve_forever", lambda self: None)  # (without the check: not until Ctrl+C)
+    said = "error: --recursive: reads the subfolders of the folders given as PATH...; none is given\n"
+    assert cli("view", "--recursive", "--no-browser", "--demo", 1000) == (1, "", said)

@@ -67,6 +67,8 @@ def view(
     """Serve an interactive viewer of PATH... in the browser (Ctrl+C stops it)."""
     prefer_passive_wait()
     options = cloud_options(colors, chunked)
+    if recursive and not paths:  # (dropped without a word by --demo, --live and --replay)
+        raise GigapointError("--recursive: reads the subfolders of the folders given as PATH...; none is given")
     if live is not None or replay is not None:
         from .live_cmd import check_live_options, view_live
 

@@ -117,7 +117,10 @@ def _folders_below(folder: Path, octrees: list | None = None) -> Iterator[Path]:
 
 def _holds_points(folder: Path) -> bool:
     """Whether a point file is anywhere below ``folder``."""
-    return any(_point_files(d, quiet=True) for d in _folders_below(folder))
+    try:
+        return any(_point_files(d, quiet=True) for d in _folders_below(folder))
+    except InputError:  # a subfolder that cannot be listed (a root-owned lost+found) is not read: not a reason to fail
+        return False
 
 
 #: how to read a folder's subfolders, said where they are not read
