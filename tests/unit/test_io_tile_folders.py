@@ -179,6 +179,7 @@ def test_a_folder_of_subfolders_of_tiles_names_them_and_recursive_reads_every_ti
 
 
 def test_recursive_is_an_option_of_render_view_and_convert(tmp_path, cli, monkeypatch):
+    from gigapoint.errors import InputError
     from gigapoint.viewer.server import ViewerServer
 
     city = city_of_subfolders(tmp_path)
@@ -191,6 +192,8 @@ def test_recursive_is_an_option_of_render_view_and_convert(tmp_path, cli, monkey
     assert rc == 0 and out.startswith(f"{tmp_path / 'oct'}: 150 points in ")
     result = gp.convert(city, tmp_path / "oct2", recursive=True)
     assert result.points == 150
+    with pytest.raises(InputError, match=r"^convert: recursive=True reads the subfolders of folders; the inputs are a cloud or PointChunks$"):
+        gp.convert(gp.open(city / "south"), tmp_path / "oct3", recursive=True)
 
 
 def test_a_folder_with_its_own_tiles_and_subfolders_of_tiles_warns_once_that_they_are_not_read(tmp_path, cli):

@@ -249,8 +249,12 @@ def convert(
     """
     check_switch("overwrite", overwrite, "convert")
     check_switch("recursive", recursive, "convert")
-    if recursive and isinstance(inputs, (str, os.PathLike, list, tuple)):
-        inputs = with_subfolders([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
+    if recursive and isinstance(inputs, (str, os.PathLike)):
+        inputs = [inputs]
+    if recursive and not (isinstance(inputs, (list, tuple)) and all(isinstance(p, (str, os.PathLike)) for p in inputs)):
+        raise InputError("convert: recursive=True reads the subfolders of folders; the inputs are a cloud or PointChunks")  # (dropped without a word)
+    if recursive:
+        inputs = with_subfolders(inputs)
     check_switch("progress", progress, "convert")  # "yes"/"no" were both true
     if name is not None and not isinstance(name, str):  # 5 went into octree.json as a number
         raise InputError(f"convert: name must be a string, got {name!r}")
