@@ -132,50 +132,127 @@ def sort_keys(codes, index_bits, keys):
         keys[i] = ((codes[i] >> drop) << np.uint64(index_bits)) | np.uint64(i)
 
 
-RADIX_BITS = 11  # a digit of radix_sort: 2 048 buckets a thread, its counts in L1
+RADIX_BITS = 11  # radix_sort's first digit: 2 048 buckets a thread, its counts in L1
+_BUCKET_BITS = 11  # the digits a bucket is sorted by after it: 11 bits, or 8 in a bucket of under 4 096 keys
+_BUCKET_SMALL_BITS = 8  # (256 counts: a small bucket's passes are then mostly its keys)
+_SMALL_BUCKET = 32  # buckets of at most this many keys: an insertion sort
 
 
 @njit(parallel=True, cache=True)
 def radix_sort(keys, scratch, lo_bit, n_parts):
     """``keys`` sorted in place by their bits lo_bit..63, stably: keys equal there keep their
     order, so ``sort_keys``' keys (the index under bit ``index_bits``, ascending as given) come
-    out as a plain sort of them would leave them. Least significant digit first, each digit
-    counted and scattered by ``n_parts`` threads, each its block of keys; a digit all keys share
-    (a set from a few leaves: their codes' top bits) is skipped. ``scratch``: as large as keys."""
+    out as a plain sort of them would leave them. Most significant digit first: the highest 11
+    bits in which keys differ (those above, all keys share: a set from a few leaves) scatter the
+    keys into 2 048 buckets (counted and scattered by ``n_parts`` threads, each its block of
+    keys), then each bucket, in cache, is sorted by the bits under them least significant digit
+    first (a digit its keys share skipped), the buckets spread over the threads by keys: one pass
+    over memory, not one a digit (14.8 -> ~8 ms for 10^6 keys on the AMD EPYC).
+    ``scratch``: as large as keys."""
     n = keys.shape[0]
+    if n < 2:
+        return
+    block = (n + n_parts - 1) // n_parts
+    differ = np.zeros(n_parts, np.uint64)
+    for p in prange(n_parts):
+        d = np.uint64(0)
+        for i in range(p * block, min(n, (p + 1) * block)):
+            d |= keys[i] ^ keys[0]
+        differ[p] = d
+    d = np.uint64(0)
+    for p in range(n_parts):
+        d |= differ[p]
+    top = lo_bit  # one past the highest bit of the sorted ones in which keys differ
+    d >>= np.uint64(lo_bit)
+    while d:
+        top += 1
+        d >>= np.uint64(1)
+    if top == lo_bit:
+        return
+    shift = max(lo_bit, top - RADIX_BITS)
+    sh = np.uint64(shift)
     n_buckets = 1 << RADIX_BITS
     mask = np.uint64(n_buckets - 1)
-    block = (n + n_parts - 1) // n_parts
     place = np.zeros((n_parts, n_buckets), np.int64)
-    src, dst = keys, scratch
-    in_scratch = False
-    for shift in range(lo_bit, 64, RADIX_BITS):
+    for p in prange(n_parts):
+        counts = place[p]
+        for i in range(p * block, min(n, (p + 1) * block)):
+            counts[(keys[i] >> sh) & mask] += 1
+    start = np.empty(n_buckets + 1, np.int64)
+    at = 0
+    for b in range(n_buckets):  # where each part's keys of each digit go: digit-major, parts in order
+        start[b] = at
+        for p in range(n_parts):
+            c = place[p, b]
+            place[p, b] = at
+            at += c
+    start[n_buckets] = n
+    for p in prange(n_parts):
+        to = place[p]
+        for i in range(p * block, min(n, (p + 1) * block)):
+            k = keys[i]
+            d = (k >> sh) & mask
+            scratch[to[d]] = k
+            to[d] += 1
+    # the buckets back into keys, sorted by the bits under the digit; part p takes those starting in its share of keys
+    first = np.empty(n_parts + 1, np.int64)
+    b = 0
+    for p in range(n_parts):
+        first[p] = b
+        while b < n_buckets and start[b] < (p + 1) * block:
+            b += 1
+    first[n_parts] = n_buckets
+    for p in prange(n_parts):
+        counts = np.empty(1 << _BUCKET_BITS, np.int64)
+        for b in range(first[p], first[p + 1]):
+            _sort_bucket(scratch, keys, start[b], start[b + 1], lo_bit, shift, counts)
+
+
+@njit(inline="always")
+def _sort_bucket(src, dst, lo, hi, lo_bit, hi_bit, counts):
+    """src[lo:hi] into dst[lo:hi] sorted stably by bits lo_bit..hi_bit (8 a pass, least
+    significant first, the two slices taking turns; a digit all share skipped)."""
+    m = hi - lo
+    if m <= _SMALL_BUCKET:
+        below = np.uint64(lo_bit)
+        for i in range(lo, hi):
+            k = src[i]
+            j = i - 1
+            while j >= lo and (dst[j] >> below) > (k >> below):
+                dst[j + 1] = dst[j]
+                j -= 1
+            dst[j + 1] = k
+        return
+    d = np.uint64(0)
+    for i in range(lo, hi):
+        d |= src[i] ^ src[lo]
+    a, z = src, dst
+    in_dst = False
+    bits = _BUCKET_BITS if m >= 4096 else _BUCKET_SMALL_BITS
+    for shift in range(lo_bit, hi_bit, bits):
         sh = np.uint64(shift)
-        for p in prange(n_parts):
-            counts = place[p]
-            counts[:] = 0
-            for i in range(p * block, min(n, (p + 1) * block)):
-                counts[(src[i] >> sh) & mask] += 1
-        if place.sum(axis=0).max() == n:
+        width = min(bits, hi_bit - shift)
+        mask = np.uint64((1 << width) - 1)
+        if ((d >> sh) & mask) == 0:
             continue
-        at = 0
-        for b in range(n_buckets):  # where each part's keys of each digit go: digit-major, parts in order
-            for p in range(n_parts):
-                c = place[p, b]
-                place[p, b] = at
-                at += c
-        for p in prange(n_parts):
-            to = place[p]
-            for i in range(p * block, min(n, (p + 1) * block)):
-                k = src[i]
-                d = (k >> sh) & mask
-                dst[to[d]] = k
-                to[d] += 1
-        src, dst = dst, src
-        in_scratch = not in_scratch
-    if in_scratch:
-        for i in prange(n):
-            keys[i] = src[i]
+        counts[:] = 0
+        for i in range(lo, hi):
+            counts[(a[i] >> sh) & mask] += 1
+        at = lo
+        for c in range(1 << width):
+            k = counts[c]
+            counts[c] = at
+            at += k
+        for i in range(lo, hi):
+            k = a[i]
+            c = (k >> sh) & mask
+            z[counts[c]] = k
+            counts[c] += 1
+        a, z = z, a
+        in_dst = not in_dst
+    if not in_dst:
+        for i in range(lo, hi):
+            dst[i] = src[i]
 
 
 @njit(parallel=True, cache=True)
@@ -365,9 +442,16 @@ def sample_runs(codes, rgba, order, inner_runs, leaf_runs, ent_start, ent_count,
         run_lo[inner_runs[r, 0]] = -1
 
 
+_NEAR_CELLS = 6  # a voxel key's lowest bits (the finest digits of its cell) kept as the low bits of its home slot
+
+
 @njit(inline="always")
 def _hash(k, mask):
-    return ((k * _HASH_MUL) >> np.uint64(32)) & mask
+    """A key's home slot: the 2^_NEAR_CELLS cells of one block of a node's grid (one Morton code
+    prefix) get neighbouring slots, the blocks scattered: a batch's entries come sorted by cell,
+    so neighbours found or entered one after the other share cache lines."""
+    near = np.uint64(_NEAR_CELLS)
+    return ((((k >> near) * _HASH_MUL) >> np.uint64(32 - _NEAR_CELLS)) & ~((np.uint64(1) << near) - np.uint64(1)) | (k & ((np.uint64(1) << near) - np.uint64(1)))) & mask
 
 
 @njit(inline="always")
@@ -873,14 +957,26 @@ def set_voxel_sums(vox_sum, vid, sums):
 
 
 @njit(inline="always")
+def _chunk_of(slot, per_chunk):
+    """slot // chunk_size, ``per_chunk`` its reciprocal: a product, not a 64-bit division (~40
+    cycles). Exact: slots are u32 and chunks at most 2^20 entries, so (slot + 0.5) / chunk_size
+    lies at least 2^-21 from an integer, and the product's error is under 2^-24."""
+    return np.int64((np.float64(slot) + 0.5) * per_chunk)
+
+
+@njit(inline="always")
 def _mean_color(sums, v):
+    """The rounded mean, (sum + n / 2) // n a channel, by one reciprocal, not four integer
+    divisions (~40 cycles each: a third of write_voxels): the mean is at most 255 and n < 2^24,
+    so a quotient's fraction is 0 or at least 2^-24 from an integer, and the product's error
+    (under 2^-43) plus 2^-32 never crosses one."""
     n = sums[v, 4]
-    h = n >> np.uint32(1)
-    r = (sums[v, 0] + h) // n
-    g = (sums[v, 1] + h) // n
-    b = (sums[v, 2] + h) // n
-    a = (sums[v, 3] + h) // n
-    return np.uint32(r) | (np.uint32(g) << np.uint32(8)) | (np.uint32(b) << np.uint32(16)) | (np.uint32(a) << np.uint32(24))
+    h = np.float64(n >> np.uint32(1)) + 2.0**-32 * np.float64(n)
+    inv = 1.0 / np.float64(n)
+    c = np.uint32(0)
+    for ch in range(4):
+        c |= np.uint32((np.float64(sums[v, ch]) + h) * inv) << np.uint32(8 * ch)
+    return c
 
 
 @njit(parallel=True, cache=True)
@@ -890,6 +986,7 @@ def write_voxels(vid, is_new, node, cell, sums, level, slots_of_new, first_new, 
     position (its cell's centre: the low word alone, VOXEL_SHIFT); every touched voxel's
     drawn color becomes the rounded mean of the points it stands for. New voxels have the ids
     ``first_new`` on in entry order, so voxel v's slot is slots_of_new[v - first_new]."""
+    per_chunk = 1.0 / chunk_size
     for e in prange(vid.shape[0]):
         v = vid[e]
         if is_new[e]:
@@ -915,11 +1012,11 @@ def write_voxels(vid, is_new, node, cell, sums, level, slots_of_new, first_new, 
                 q = (ia << shift) | (np.int64(1) << (shift - 1))
                 wl |= np.uint32(q & WORD_MASK) << np.uint32(WORD_BITS * a)
             low[s] = wl
+        else:  # its chunk changes (a new voxel's got its version where allocate gave it its slot)
+            batch_version[_chunk_of(vox_slot[v], per_chunk)] = version
         # entries of one batch never share a voxel (one entry per node and cell), so no race
         _add_sums(vox_sum, v, sums, e)
-        s = vox_slot[v]
-        color[s] = _mean_color(vox_sum, v)
-        batch_version[s // chunk_size] = version
+        color[vox_slot[v]] = _mean_color(vox_sum, v)
 
 
 @njit(parallel=True, cache=True)
