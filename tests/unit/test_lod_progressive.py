@@ -2256,13 +2256,22 @@ def test_the_radix_sort_of_keys_is_numpys_sort(parts):
     from gigapoint.lod.progressive.kernels import radix_sort
 
     rng = np.random.default_rng(parts)
-    n = 300_001
+    for n in (300_001, 3_001):  # (its buckets sorted by 8-bit digits; by insertion where a few keys)
+        _sorts_like_numpy(radix_sort, rng, n, parts)
+    for n in (0, 1, 2):
+        keys = np.array([7 << 20, 3 << 20][:n], np.uint64)
+        radix_sort(keys, np.empty(n, np.uint64), 19, parts)
+        assert keys.tolist() == sorted([7 << 20, 3 << 20][:n])
+
+
+def _sorts_like_numpy(radix_sort, rng, n, parts):
     index = np.arange(n, dtype=np.uint64)
     cases = {
         "random": rng.integers(0, 1 << 45, n, dtype=np.uint64) << np.uint64(19) | index,
         "one leaf": (np.uint64(0x2B5) << np.uint64(52)) | (rng.integers(0, 1 << 20, n, dtype=np.uint64) << np.uint64(19)) | index,
         "ties": rng.integers(0, 50, n, dtype=np.uint64) << np.uint64(19) | index,
         "sorted": np.arange(n, dtype=np.uint64) << np.uint64(19) | index,
+        "clustered": (rng.integers(0, 8, n, dtype=np.uint64) << np.uint64(58)) | (rng.integers(0, 1 << 12, n, dtype=np.uint64) << np.uint64(30)) | index,
     }
     for name, keys in cases.items():
         want = np.sort(keys)
@@ -2275,10 +2284,41 @@ def test_the_radix_sort_of_keys_is_numpys_sort(parts):
         radix_sort(got, np.empty(n, np.uint64), 19, parts)
         order = np.argsort(shuffled >> np.uint64(19), kind="stable")
         np.testing.assert_array_equal(got, shuffled[order], err_msg=name)
-    for n in (0, 1, 2):
-        keys = np.array([7 << 20, 3 << 20][:n], np.uint64)
-        radix_sort(keys, np.empty(n, np.uint64), 19, parts)
-        assert keys.tolist() == sorted(keys.tolist())
+
+
+def test_a_voxels_mean_colour_and_a_slots_chunk_are_the_integer_divisions():
+    """write_voxels' mean colour (one reciprocal, not four integer divisions) and a slot's chunk
+    (a product, not a division) are exactly (sum + n // 2) // n and slot // chunk_size: sums at
+    and next to every rounding boundary, counts up to 2^24, slots up to 2^32, chunks 16..2^20."""
+    from numba import njit
+
+    from gigapoint.lod.progressive.kernels import _chunk_of, _mean_color
+
+    @njit
+    def mismatches(sums, slots, chunk_sizes):
+        bad = 0
+        for v in range(sums.shape[0]):
+            n = sums[v, 4]
+            want = np.uint32(0)
+            for ch in range(4):
+                want |= np.uint32((sums[v, ch] + (n >> np.uint32(1))) // n) << np.uint32(8 * ch)
+            bad += _mean_color(sums, v) != want
+        for c in chunk_sizes:
+            for s in slots:
+                bad += _chunk_of(s, 1.0 / c) != s // c
+        return bad
+
+    rng = np.random.default_rng(5)
+    m = 400_000
+    n = np.concatenate([rng.integers(1, 1 << 24, m // 2), rng.integers(1, 300, m // 2)]).astype(np.uint32)
+    k = rng.integers(0, 256, (m, 4))
+    sums = np.empty((m, 5), np.uint32)
+    sums[:, :4] = np.clip(k * n[:, None] - (n[:, None] >> 1) + rng.integers(-2, 3, (m, 4)), 0, 255 * n[:, None])
+    sums[:, 4] = n
+    chunk_sizes = np.array([16, 2048, 3000, 1 << 20], np.int64)
+    near = (rng.integers(0, (1 << 32) // (1 << 20), 20_000) * (1 << 20))[:, None] + np.arange(-2, 3) * 1
+    slots = np.clip(np.concatenate([near.ravel(), rng.integers(0, 1 << 32, 20_000), [0, (1 << 32) - 1]]), 0, (1 << 32) - 1).astype(np.uint32)
+    assert mismatches(sums, slots, chunk_sizes) == 0
 
 
 def test_the_tree_is_the_same_by_either_sort_of_the_keys(scene, octree, monkeypatch):
