@@ -11,6 +11,9 @@
   voxels per point, memory per point against gigapoint's quantized layout of the same points
   (16 bytes + the attributes), while filling and once trimmed; and the converter's split of the
   same points into the same tree (sort and ``split_tree``) for comparison.
+- ``insert-ab``: the insertion of this revision against ``--base``'s (its package exported as
+  ``gigapoint_base``, as bench_ab.py does), alternating ``--rounds`` times in one process, both
+  orders: points/s and CPU seconds.
 - ``load``: the same points written as LAZ and LAS (scan order); decoding them alone (laspy's
   records, the baseline; laspy's records with scaled xyz and colours, what a program needs of
   them; every chunk of ``gigapoint.io.read_chunks``) against ``gigapoint.open(...,
@@ -628,6 +631,42 @@ def bench_sort(n: int, batch: int) -> None:
     octree_module._KEY_SORT.clear()
 
 
+def bench_insert_ab(n: int, batch: int, rounds: int, base_rev: str) -> None:
+    """The insertion of this revision against ``base_rev``'s (bench_ab.load_base: its package as
+    ``gigapoint_base``), alternating in one process, generator and scan order: points/s and the
+    process's CPU seconds (less sensitive than wall time to a busy host)."""
+    from bench_ab import load_base
+
+    with tempfile.TemporaryDirectory() as tmp:
+        base = load_base(base_rev, Path(tmp))
+        import gigapoint_base.lod.progressive as base_progressive  # (a package of its own: its kernels too)
+
+        xyz, rgba, attrs = demo_arrays(n, seed=1)
+        lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+        cube = (lo - 0.5, float(np.max(hi - lo)) + 1.0)
+        codes = {"base": base_progressive.ProgressiveOctree, "new": ProgressiveOctree}
+        for name, idx in (("generator order", np.arange(n)), ("scan order", _scan_order(xyz))):
+            x, c, at = xyz[idx], rgba[idx], {a: v[idx] for a, v in attrs.items()}
+            for cls in codes.values():  # compiled (or loaded from the cache) first
+                cls("warm", cube=cube).add(x[:300_000], c[:300_000], **{a: v[:300_000] for a, v in at.items()})
+            rate, cpu = {k: [] for k in codes}, {k: [] for k in codes}
+            for r in range(rounds):
+                for k in codes if r % 2 == 0 else reversed(codes):
+                    o = codes[k]("bench", cube=cube, capacity=n)
+                    t, t_cpu = time.perf_counter(), time.process_time()
+                    for s in range(0, n, batch):
+                        o.add(x[s : s + batch], c[s : s + batch], **{a: v[s : s + batch] for a, v in at.items()})
+                    rate[k].append(n / (time.perf_counter() - t) / 1e6)
+                    cpu[k].append(time.process_time() - t_cpu)
+                    del o
+            med = {k: statistics.median(v) for k, v in rate.items()}
+            med_cpu = {k: statistics.median(v) for k, v in cpu.items()}
+            print(f"insert, {name}: {base_rev} {med['base']:.2f} M points/s (CPU {med_cpu['base']:.2f} s), this revision {med['new']:.2f} "
+                  f"(CPU {med_cpu['new']:.2f} s): {med['new'] / med['base']:.3f}x (CPU {med_cpu['base'] / med_cpu['new']:.3f}x), "
+                  f"medians of {rounds}, alternating")  # fmt: skip
+        del base
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", default="8M")
@@ -637,11 +676,14 @@ def main(argv=None) -> int:
     ap.add_argument("--first-source", default=None, help="a file for --parts first (default: the demo of 10^9 points)")
     ap.add_argument("--potree-converter", default=None, help="a PotreeConverter 2 binary for --parts convert (its --method random)")
     ap.add_argument("--backend", default="auto", choices=["auto", "cpu", "wgpu"], help="the rasterizer of --parts frames")
+    ap.add_argument("--base", default="HEAD~1", help="the revision --parts insert-ab compares this one with")
     args = ap.parse_args(argv)
     n = parse_count(args.points)
     print(f"{_cpu()}, {os.cpu_count()} cores; {n:,} points")
     if "insert" in args.parts:
         bench_insert(n, parse_count(args.batch), args.rounds)
+    if "insert-ab" in args.parts:
+        bench_insert_ab(n, parse_count(args.batch), args.rounds, args.base)
     if "load" in args.parts:
         bench_load(n, args.rounds)
     if "memory" in args.parts:
