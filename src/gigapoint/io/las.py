@@ -512,8 +512,8 @@ def _check_laz(path: Path, f, hdr: LasHeader, salvage: bool = False) -> None:
 
 
 def _record_limits(hdr: LasHeader) -> np.ndarray:
-    """(3, 2) int64: the least and greatest stored X, Y, Z the header's bounds allow: an axis's
-    extent wider each way (at least ``header_slack``), and half a scale step; every int32 where
+    """(3, 2) int64: the least and greatest stored X, Y, Z the header's bounds allow: twice an
+    axis's extent wider each way (at least ``header_slack``), and half a scale step; every int32 where
     the bounds are none to go by (not finite, min above max, all 0: never filled in, or out of
     the integers' reach). So wide because a header's bounds may be stale (a writer that did not
     update them): such a file reads as other tools read it, where damaged LAZ bytes decode into
@@ -523,7 +523,7 @@ def _record_limits(hdr: LasHeader) -> np.ndarray:
     if not (np.all(np.isfinite(lo) & np.isfinite(hi) & (lo <= hi)) and (lo.any() or hi.any())):
         return every
     scale, offset = np.array(hdr.scale), np.array(hdr.offset)
-    pad = np.abs(scale) / 2 + np.maximum(hi - lo, header_slack(lo, hi))
+    pad = np.abs(scale) / 2 + np.maximum(2 * (hi - lo), header_slack(lo, hi))  # (2: a mirrored axis's stale bounds)
     ends = np.sort([(lo - pad - offset) / scale, (hi + pad - offset) / scale], axis=0)
     if np.any(ends[0] > 2**31 - 1) or np.any(ends[1] < -(2**31)):
         return every
