@@ -364,8 +364,9 @@ class Arena:
             k = -(-count // ARENA_CHUNK)
             slots = np.array([self.free.pop() for _ in range(k)], np.int64)
             self._load(nd, cloud, slots, count)
+            count = int(cloud.nodes["count"][nd])  # 0: found damaged as it was read (voxel_octree.py), its slots left empty
             b = self.batches[slots]
-            b["count"] = np.minimum(ARENA_CHUNK, count - np.arange(k) * ARENA_CHUNK)
+            b["count"] = np.clip(count - np.arange(k) * ARENA_CHUNK, 0, ARENA_CHUNK)
             b["level"] = rec["level"]
             b["bbox_min"] = rec["bbox_min"]
             b["bbox_max"] = rec["bbox_max"]

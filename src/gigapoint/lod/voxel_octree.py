@@ -27,6 +27,7 @@ from ..core.chunk import DEFAULT_COLOR, ColorScaler
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
 from ..errors import GigapointWarning, InputError, warn
+from ..io import file_names
 from ..io.laz_process import bad_data
 from .keys import MAX_LEVEL, ROOT_KEY, key_cube, level_of
 from .octree_dir import POINT_ARRAYS
@@ -126,6 +127,9 @@ class VoxelOctree(OctreeCloud):
         self._pages_read: set = set()
         self._decoded: set[int] = set()  # keys whose record holds their tight bbox
         self._misplaced_said = False  # a node's points outside its cube: said once
+        self._damaged: list[int] = []  # keys of the nodes whose points decoded far outside their cubes
+        self._damage_text = ""  # what the first of them decoded to
+        self._damage_said = False  # said once (``_say_damaged``)
         self._blobs: dict[int, bytes] = {}  # fetched ahead for the frame being prepared
         self._ahead: dict[int, dict] = {}  # decoded ahead (a group of the fetched ones)
         self._group_of: dict[int, list[int]] = {}  # fetched node -> the group it is decoded with
@@ -269,6 +273,7 @@ class VoxelOctree(OctreeCloud):
             return super().prepare(view, settings)
         finally:
             self._blobs, self._ahead, self._group_of = {}, {}, {}
+            self._say_damaged()
 
     def _attribute_dtypes(self) -> dict:
         return dict(self._attr_dtypes)
@@ -283,12 +288,7 @@ class VoxelOctree(OctreeCloud):
         quantized against its tight bbox (which its record holds from now on)."""
         n = int(self.nodes["count"][index])
         if n == 0:
-            empty = np.empty(0, np.uint32)
-            return (
-                dict.fromkeys(POINT_ARRAYS, empty),
-                {a: np.empty(0, dt) for a, dt in self._attr_dtypes.items()},
-                0,
-            )
+            return self._blank(0)
         key = int(self.keys[index])
         if index not in self._ahead and len(self._group_of.get(index, ())) > 1:
             self._decode_ahead(self._group_of[index])
@@ -313,6 +313,11 @@ class VoxelOctree(OctreeCloud):
         if not np.isfinite(xyz).all():
             raise InputError(f"{self.node_file(key)}: node {voxel_name(key)} holds non-finite coordinates")
         cube_min, cube_max = self.nodes["bbox_min"][index].copy(), self.nodes["bbox_max"][index].copy()  # its cube until now
+        if self._far_outside(key, xyz, cube_min, cube_max):  # damaged: the node is left empty from now on
+            self._entries[key] = (0, None)  # (kept so when more pages are read: _install)
+            self.nodes["count"][index] = self.counts[index] = 0
+            self._meta["points"] -= n
+            return self._blank(n)  # (n points of nothing: the arena, which asked for n, keeps none of them)
         rec = self.nodes[index : index + 1].copy()
         rec["first"] = 0
         low, med, high = quantize(xyz, np.arange(n, dtype=np.int64), rec)
@@ -338,6 +343,48 @@ class VoxelOctree(OctreeCloud):
         got = d.get("attributes", {})
         attrs = {a: (np.asarray(got[a]).astype(dt, copy=False) if a in got else np.zeros(n, dt)) for a, dt in self._attr_dtypes.items()}
         return {"low": low, "med": med, "high": high, "color": color, "rgba": color}, attrs, 0
+
+    def node_points(self, index: int) -> dict:
+        """As OctreeCloud's; a damaged node (``_far_outside``) is said, and holds none."""
+        try:
+            return super().node_points(index)
+        finally:
+            self._say_damaged()
+
+    def _blank(self, n: int) -> tuple[dict, dict, int]:
+        """``node_arrays`` of ``n`` zero points (an empty node, a damaged one)."""
+        zero = np.zeros(n, np.uint32)
+        return dict.fromkeys(POINT_ARRAYS, zero), {a: np.zeros(n, dt) for a, dt in self._attr_dtypes.items()}, 0
+
+    def _far_outside(self, key: int, xyz: np.ndarray, cube_min, cube_max) -> bool:
+        """Whether node ``key``'s points lie beyond its cube by more than the octree's cube edge
+        (noted for ``_say_damaged``): LAZ's decoder turns damaged bytes into garbage kilometres
+        away without an error. A cube a little off (a writer's rounding, a too large cube) is no
+        damage: ``node_arrays`` draws those points and says the cube is wrong."""
+        lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+        beyond = np.maximum(cube_min - lo, hi - cube_max)
+        a = int(np.argmax(beyond))
+        if not beyond[a] > float(self._meta["cube_edge"]):
+            return False
+        if not self._damaged:
+            v = lo[a] if cube_min[a] - lo[a] >= hi[a] - cube_max[a] else hi[a]
+            self._damage_text = f"{'xyz'[a]} {v:,.3f}, its cube {cube_min[a]:,.3f}..{cube_max[a]:,.3f}"
+        self._damaged.append(key)
+        return True
+
+    def _say_damaged(self) -> None:
+        """The damaged nodes found (``_far_outside``), said once an octree, after the frame (or
+        ``to_memory``) that read them."""
+        if self._damaged and not self._damage_said:
+            self._damage_said = True
+            many = len(self._damaged) > 1
+            warn(
+                f"{self.source_name}: corrupt point data: {'nodes' if many else 'node'} {file_names([voxel_name(k) for k in self._damaged])} "
+                f"{'decode' if many else 'decodes'} to points far outside {'their cubes' if many else 'its cube'} "
+                f"({f'node {voxel_name(self._damaged[0])}: ' if many else ''}{self._damage_text}); "
+                f"{'their' if many else 'its'} data is damaged and is not drawn",
+                GigapointWarning,
+            )
 
     def _decode_ahead(self, group: list[int]) -> None:
         """The fetched nodes of ``group`` decoded together (``_decode_batch``); on any failure
@@ -376,13 +423,14 @@ class VoxelOctree(OctreeCloud):
         arrays["rgba"] = arrays["color"]
         attrs = {name: np.zeros(total, dt) for name, dt in self._attr_dtypes.items()}
         for i in np.flatnonzero(self.counts > 0).tolist():
-            src, src_attrs, _ = self.node_arrays(i)
             s = slice(int(self.nodes["first"][i]), int(self.nodes["first"][i]) + int(self.counts[i]))
+            src, src_attrs, _ = self.node_arrays(i)  # (a damaged node's: zeros, its count 0 from now on)
             for k in ("low", "med", "high", "color"):
                 arrays[k][s] = src[k]
             for a, v in src_attrs.items():
                 attrs[a][s] = v
-        meta = dict(self.meta, points=total)
+        meta = dict(self.meta, points=int(self.counts.sum()))  # (less the damaged nodes')
+        self._say_damaged()
         oc = OctreeCloud(self.name, meta, self.nodes.copy(), self.keys, arrays, attrs, self.path)
         oc.filtered_colors = False
         return oc
