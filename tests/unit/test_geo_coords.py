@@ -145,6 +145,19 @@ def test_a_wkt_in_an_evlr_counts_as_the_files_crs(tmp_path):
     assert gp.open(tmp_path / "a.copc.laz").meta["crs"] == UTM10_WKT
 
 
+def test_info_of_a_folder_of_tiles_of_two_crss_does_not_call_the_crs_unknown(tmp_path):
+    """A folder's summed ``info`` printed "crs: unknown" above "crs differs: ...": known, and they
+    differ. Now the one line that says which (a WKT by its name, not its 400 characters)."""
+    wkt = laspy.VLR("LASF_Projection", 2112, "OGC WKT", UTM10_WKT.encode() + b"\0")
+    write_tile(tmp_path / "a.las", tile_points(0, 500_000.0), 0.001, (500_000, 4_800_000, 0), wkt, version="1.4")
+    write_tile(tmp_path / "b.las", tile_points(1, 500_050.0), 0.001, (500_000, 4_800_000, 0), geokeys(32611), version="1.4")
+    summed = gp.io.folder_info(tmp_path, [gp.io.file_info(tmp_path / f) for f in ("a.las", "b.las")])
+    assert summed["las_version"] == "1.4" and "crs" not in summed  # (``info --json``: no "crs": null)
+    assert summed["details"]["crs differs"] == "WGS 84 / UTM zone 10N (EPSG:32610) (1 file); EPSG:32611 (1 file)"
+    lines = gp.io.format_info(summed).splitlines()
+    assert [line for line in lines if "crs" in line] == ["  crs differs: WGS 84 / UTM zone 10N (EPSG:32610) (1 file); EPSG:32611 (1 file)"]
+
+
 def test_tiles_on_different_las_grids_merge_at_the_files_values(tmp_path):
     """Same CRS, different scales and offsets: every point where its file puts it (to 1e-7 m)."""
     a = write_tile(tmp_path / "a.las", tile_points(0, 637_000.0), 0.001, (637_000, 4_800_000, 0), geokeys(32610))

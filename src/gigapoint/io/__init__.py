@@ -221,6 +221,15 @@ WKT_EPSG = re.compile(r'(?:AUTHORITY|ID)\[\s*"EPSG"\s*,\s*"?(\d+)"?\s*\]\s*\]\s*
 WKT_NAME = re.compile(r'\s*[A-Z_]+\[\s*"([^"]+)"')
 
 
+def crs_name(crs: str | None) -> str:
+    """A CRS as ``gigapoint info`` says it: a WKT by its name and EPSG code (the code ends it,
+    past where 100 characters cut it), 'unknown' where none is named."""
+    name, code = WKT_NAME.match(crs or ""), WKT_EPSG.search(crs or "")
+    if name:
+        return f"{name.group(1)} ({f'EPSG:{code.group(1)}' if code else 'WKT'})"
+    return crs or "unknown"
+
+
 def warn_mixed_crs(files, then: str = "") -> None:
     """Warn where LAS/LAZ files read as one cloud name different CRSs, or some name one and
     others none (lost with their VLRs, or another CRS unsaid): their coordinates are used as
@@ -407,7 +416,7 @@ def folder_info(folder, infos: list[dict]) -> dict:
         details["colored"] = f"{colored:,} of the {n:,} files (the others: default color)"
     out["attributes"] = [a for a in first.get("attributes") or [] if all(a in (i.get("attributes") or []) for i in infos)]
     for key, label, text in (("scale", "scales", numbers("scale", ".15g")), ("offset", "offsets", numbers("offset", ".15g")),
-                             ("crs", "crs differs", lambda i: i.get("crs") or "unknown"),
+                             ("crs", "crs differs", lambda i: crs_name(i.get("crs"))),
                              ("generating_software", "software", lambda i: i.get("generating_software") or "unknown")):  # fmt: skip
         if shared(label, text):
             out[key] = first.get(key)
@@ -455,12 +464,8 @@ def format_info(info: dict) -> str:
         lines.append(f"  scale:       {', '.join(f'{v:.15g}' for v in info['scale'])}")
     if info.get("offset") is not None:
         lines.append(f"  offset:      {', '.join(f'{v:.15g}' for v in info['offset'])}")
-    if info.get("crs") or info.get("las_version"):
-        crs = info.get("crs")
-        name, code = WKT_NAME.match(crs or ""), WKT_EPSG.search(crs or "")
-        if name:  # a WKT: its name and EPSG code (the code ends it, past where 100 characters cut it)
-            crs = f"{name.group(1)} ({f'EPSG:{code.group(1)}' if code else 'WKT'})"
-        lines.append(f"  crs:         {crs or 'unknown'}")
+    if (info.get("crs") or info.get("las_version")) and "crs differs" not in (info.get("details") or {}):  # (a folder's tiles': said below)
+        lines.append(f"  crs:         {crs_name(info.get('crs'))}")
     if info.get("generating_software"):
         lines.append(f"  software:    {info['generating_software']}")
     if info.get("columns"):
