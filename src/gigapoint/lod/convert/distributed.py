@@ -81,6 +81,7 @@ from .read import (
     spill_chunk,
 )
 from .spill import copy_range, decode_xyz, las_xyz_code, load_raw_chunk, load_raw_chunks, raw_chunk_files, raw_xyz_code
+from .state import code_version
 
 READ_CHUNKS = 1  # chunks (``chunk_size`` points, 2 M by default) a read task decodes: one a task
 CHUNK_STRIDE = 1 << 20  # read task t spills chunks t·CHUNK_STRIDE + 0, 1, ...: sorted ids are the input order
@@ -573,28 +574,6 @@ def _place_task(spec: dict, sets: list, outputs: dict) -> int:
 def _call_task(spec: dict, fn, *args):
     """A step of the write phase (writer.py's ``run``): ``fn(*args)``."""
     return fn(*args)
-
-
-def code_version() -> str:
-    """gigapoint's version and a digest of its source files (12 ms): a worker that imports other
-    code than the driver (another release, a stale checkout) writes other bytes, or fails."""
-    global _CODE_VERSION
-    if _CODE_VERSION is None:
-        from importlib import metadata
-
-        root = Path(__file__).parents[2]  # the gigapoint package (not imported: lod sits below it)
-        h = hashlib.sha1()
-        for f in sorted(root.rglob("*.py")):
-            h.update(f"{f.relative_to(root).as_posix()}\0".encode() + f.read_bytes())
-        try:
-            release = metadata.version("gigapoint")
-        except metadata.PackageNotFoundError:  # a source tree on the path
-            release = "(source)"
-        _CODE_VERSION = f"{release}+{h.hexdigest()[:12]}"
-    return _CODE_VERSION
-
-
-_CODE_VERSION: str | None = None
 
 
 def _probe(out: str, token: str, version: str) -> str | None:

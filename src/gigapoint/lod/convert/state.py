@@ -2,7 +2,8 @@
 the fingerprint of its inputs and options, and its saved state (``OctreeDir.write_state``).
 
 A re-run resumes only when its fingerprint equals the saved one: the same input files (path,
-size, modification time) and the same options; anything else starts clean.
+size, modification time), the same options and the same gigapoint code (``code_version``);
+anything else starts clean.
 """
 
 from __future__ import annotations
@@ -27,6 +28,29 @@ from .options import BYTES_PER_POINT_BUILD, MAX_PARTITION_POINTS, RUNTIME_BYTES
 
 STATE_VERSION = 1
 SAVE_EVERY_S = 1.0  # the state is saved (fsynced) at most this often while chunks or tasks finish (save_state_soon)
+
+
+def code_version() -> str:
+    """gigapoint's version and a digest of its source files (12 ms): a worker that imports other
+    code than the driver (another release, a stale checkout) writes other bytes, or fails; a
+    resume under other code than the run it resumes mixes two versions' work files (fingerprint)."""
+    global _CODE_VERSION
+    if _CODE_VERSION is None:
+        from importlib import metadata
+
+        root = Path(__file__).parents[2]  # the gigapoint package (not imported: lod sits below it)
+        h = hashlib.sha1()
+        for f in sorted(root.rglob("*.py")):
+            h.update(f"{f.relative_to(root).as_posix()}\0".encode() + f.read_bytes())
+        try:
+            release = metadata.version("gigapoint")
+        except metadata.PackageNotFoundError:  # a source tree on the path
+            release = "(source)"
+        _CODE_VERSION = f"{release}+{h.hexdigest()[:12]}"
+    return _CODE_VERSION
+
+
+_CODE_VERSION: str | None = None
 
 
 def local_path(p, what: str, error=InputError):
@@ -135,6 +159,7 @@ class Job:
         files = [[str(p.resolve()), p.stat().st_size, p.stat().st_mtime_ns] for p in self.paths]
         return {
             "version": STATE_VERSION,
+            "code": code_version(),  # a run resumed after an upgrade mixed two versions' work files
             "inputs": files,
             "sampler": self.sampler,
             "format": self.format,
