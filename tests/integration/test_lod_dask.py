@@ -8,6 +8,7 @@ from __future__ import annotations
 import filecmp
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -668,6 +669,25 @@ def test_sigterm_to_the_cli_driver_waits_for_running_tasks_and_the_rerun_resumes
     assert res.resumed
     convert(inputs, tmp_path / "ref", client=client, memory_limit="64M", max_leaf=3000)
     _assert_identical(tmp_path / "ref", out)
+
+
+def test_a_bad_input_and_the_output_are_named_as_given_as_one_process_names_them(thread_client, tmp_path, las_writer, monkeypatch):
+    """On Dask the error named the input and the output by their absolute paths (the workers'),
+    where one process names them as the user gave them: now the same line either way."""
+    from gigapoint.lod.convert import hooks
+
+    las_writer(tmp_path / "a.las", 20_000)
+    (tmp_path / "bad.xyz").write_text("1 2 3\n4 oops 6\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(hooks, "task_started", lambda kind, name: name.startswith("bad") and time.sleep(1.0))  # read last, as one process does
+    said = []
+    for client in (None, thread_client):
+        with pytest.raises(InputError) as err:
+            convert([Path("a.las"), Path("bad.xyz")], Path("oct"), client=client, **OPTS)
+        said.append(str(err.value))
+        shutil.rmtree("oct", ignore_errors=True)
+    assert said[0].startswith("bad.xyz: line 2: 'oops' is not a number; the conversion to oct stopped unfinished: "), said[0]
+    assert said[1] == said[0]
 
 
 def test_a_bad_input_read_after_others_keeps_out_as_one_process_does(thread_client, tmp_path, las_writer, monkeypatch):

@@ -612,13 +612,22 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         super().__init__(*args, **kwargs)
         if self.paths is None:
             raise ConvertError("client: a distributed conversion reads files (its workers open them); got point chunks")
-        self.out = self.out.resolve()  # workers get absolute paths
+        # workers get absolute paths; errors and warnings name them as given, as one process does (_as_given)
+        self._given = {str(p.resolve()): str(p) for p in (self.out, self.dir.path, *self.paths)}
+        self.out = self.out.resolve()
         self.dir = OctreeDir(self.dir.path.resolve())
         self.paths = [p.resolve() for p in self.paths]
         self._out_tag = output_tag(self.out)
         self._run_tag = os.urandom(4).hex()
         self._tasks_run = 0  # in this run: each task's key is unique
         self._last_preview = None  # the read phase's preview sample, written in full while the distribute tasks run
+
+    def _as_given(self, text: str) -> str:
+        """``text`` with the output's and inputs' absolute paths as the user gave them (the longest
+        first: a work file's path under OUT's becomes OUT as given and the rest)."""
+        for full in sorted(self._given, key=len, reverse=True):
+            text = text.replace(full, self._given[full])
+        return text
 
     def fingerprint(self) -> dict | None:
         fp = super().fingerprint()
@@ -734,6 +743,14 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         earlier run into this output, if any are still running, have ended: before the output
         folder is prepared (a fresh start clears it) and before any task writes into it."""
         try:
+            self._cluster_ready()
+            return super().run(overwrite)
+        except GigapointError as exc:  # (a worker's names the absolute paths it was given)
+            exc.args = (self._as_given(str(exc)),)
+            raise
+
+    def _cluster_ready(self) -> None:
+        try:
             try:
                 self.client.wait_for_workers(1, timeout=WORKER_WAIT_S)
             except TimeoutError:
@@ -743,7 +760,6 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         except BaseException:
             self.progress.close()  # super().run closes it otherwise
             raise
-        return super().run(overwrite)
 
     def output_ready(self) -> None:
         """Before the first task: every worker runs this code, sees the output folder and may write into it."""
@@ -787,7 +803,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             reader = reader_for(p)
             n = reader.point_count(p)  # (the header's; None where it has none: text)
             if n == 0 and len(self.paths) > 1:  # an empty tile of any format: skipped, as one process skips it (read._skipped_if_empty)
-                warn(skipped_message(p), GigapointWarning)
+                warn(self._as_given(skipped_message(p)), GigapointWarning)
                 continue
             if n and getattr(reader, "reads_ranges", False):
                 reads += [[f, s, min(s + step, n), None] for s in range(0, n, step)]
@@ -841,7 +857,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
                     sample = res.pop("preview")
                     results[str(t)] = res
                     if res.get("empty"):  # a file that had no count in its header
-                        warn(skipped_message(self.paths[st["reads"][t][0]]), GigapointWarning)
+                        warn(self._as_given(skipped_message(self.paths[st["reads"][t][0]])), GigapointWarning)
                     if not again:
                         # points read so far, as one process counts them: a bad input then keeps OUT (converter.run) and info shows them
                         st["points"] = st.get("points", 0) + res["points"]
@@ -884,7 +900,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             attributes=attrs or {},
             constant=constant,
         )
-        warn_dropped_attributes(str(self.out), dropped)
+        warn_dropped_attributes(self._as_given(str(self.out)), dropped)
         self._end_read(lo, hi)
 
     def _color_redo(self) -> list[int]:
