@@ -10,6 +10,7 @@ import pytest
 from plyfile import PlyData, PlyElement
 
 from gigapoint.core.chunk import DEFAULT_COLOR
+from gigapoint.errors import InputError
 from gigapoint.io import file_info, format_info, open_cloud, read_chunks, reader_for
 
 RNG = np.random.default_rng(3)
@@ -520,3 +521,22 @@ def test_a_vertex_list_property_is_left_out_quietly_and_not_listed(tmp_path):
         cloud = open_cloud(p)
         info = file_info(p)
     assert cloud.n_points == 3 and list(cloud.attributes) == info["attributes"] == ["q"]
+
+
+def test_an_ascii_ply_s_lists_are_left_out_of_its_lines_and_a_line_they_do_not_fit_is_named(tmp_path):
+    """An ASCII file's lists (before or inside the vertex element) were read by plyfile, its empty
+    list's loadtxt warning hidden by a catch_warnings (process-wide: not for a loader's thread).
+    Now they are left out of each line: every vertex as written, no warning; a bad line named."""
+    head = "ply\nformat ascii 1.0\nelement face 2\nproperty list uchar int idx\nelement vertex 3\n"
+    head += "property float x\nproperty float y\nproperty float z\n"
+    p = tmp_path / "l.ply"
+    p.write_text(head + "property list uchar float feat\nproperty uchar q\nend_header\n0\n3 1 2 3\n1 2 3 2 0.5 0.5 7\n4 5 6 0 8\n7 8 9 1 1.0 9\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        chunks = list(read_chunks(p))
+    assert np.concatenate([c.xyz for c in chunks]).tolist() == [[1, 2, 3], [4, 5, 6], [7, 8, 9]]
+    assert np.concatenate([c.attributes["q"] for c in chunks]).tolist() == [7, 8, 9]
+    p.write_text(head + "property list uchar float feat\nproperty uchar q\nend_header\n0\n0\n1 2 3 0 7\n4 5 6 5 0.5 8\n7 8 9 0 9\n")
+    with pytest.raises(InputError) as e:
+        open_cloud(p)
+    assert str(e.value) == f"{p}: line 15 has 6 values, the vertex element declares 4 besides its list feat (a length, then that many values)"

@@ -105,6 +105,8 @@ def test_gigapoint_view_prints_the_load_s_warning_once(nan_file, capsys, monkeyp
 @pytest.mark.parametrize("name, text", [
     ("a.xyz", "1 2 3\n4 5 6\n"),
     ("a.ply", "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n4 5 6\n"),
+    ("lists.ply", ("ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n"
+                   "property list uchar int tags\nend_header\n1 2 3 0\n4 5 6 1 7\n")),  # (plyfile read it, its empty list in a catch_warnings)
 ])  # fmt: skip
 def test_reading_text_on_the_decoder_s_thread_leaves_a_caller_s_catch_as_it_was(tmp_path, monkeypatch, name, text):
     """The text and ASCII PLY readers wrapped loadtxt in ``catch_warnings`` (its "no data"

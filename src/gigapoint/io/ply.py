@@ -2,8 +2,8 @@
 
 plyfile parses the header (element and property types). Binary vertex data without list
 properties is memory-mapped and copied chunk by chunk; ascii vertex lines are parsed
-chunk by chunk with numpy.loadtxt. Anything else (list properties before or inside the
-vertex element) falls back to plyfile reading the whole file.
+chunk by chunk with numpy.loadtxt (a list property's values left out of each line). Binary
+list properties before or inside the vertex element fall back to plyfile reading the whole file.
 Vertex properties: x y z, red green blue [alpha] (also r g b, diffuse_*), the rest
 (nx ny nz, intensity, scalar_*...) become attributes. Without those, colours come from PCL's
 packed 4-byte ``rgb``/``rgba`` (consumed) or a 3D Gaussian splat's ``f_dc_0..2`` (kept).
@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import io
 import itertools
-import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -39,6 +38,23 @@ _MAX_HEADER = 1 << 20
 
 #: 3D Gaussian splats' degree-0 spherical harmonic, 1 / (2 sqrt(pi)): colour = 0.5 + SH_C0 * f_dc
 SH_C0 = 0.28209479177387814
+
+
+def _without_lists(line: str, props, lists: set) -> str:
+    """An ASCII vertex line without its list properties' values (a length, then that many):
+    the points leave them out. A line they do not fit stays as it is, for the column check to name."""
+    tokens, kept, i = line.split(), [], 0
+    for p in props:
+        if i >= len(tokens):
+            return line
+        if p.name in lists:
+            if not tokens[i].isdigit():
+                return line
+            i += 1 + int(tokens[i])
+        else:
+            kept.append(tokens[i])
+            i += 1
+    return " ".join(kept) + "\n" if i == len(tokens) else line
 
 
 class _Header:
@@ -158,10 +174,10 @@ class PlyReader(Reader):
         if h.count == 0:
             raise fail(path, "PLY file holds no points (vertex count is 0)", EmptyCloudError)
         scaler = ColorScaler()
-        if h.has_lists:
-            yield from self._read_plyfile(path, h, chunk_size, scaler)
-        elif h.text:
+        if h.text:
             yield from self._read_ascii(path, h, chunk_size, scaler)
+        elif h.has_lists:
+            yield from self._read_plyfile(path, h, chunk_size, scaler)
         else:
             yield from self._read_binary(path, h, chunk_size, scaler, salvage)
 
@@ -195,8 +211,10 @@ class PlyReader(Reader):
             raise fail(path, short)
 
     def _read_ascii(self, path, h: _Header, chunk_size, scaler) -> Iterator[PointChunk]:
-        ncols = len(h.names)
-        dtypes = [p.val_dtype for p in h.vertex.properties]
+        props = [p for p in h.vertex.properties if p.name in h.scalar_names]
+        lists = {p.name for p in h.vertex.properties} - set(h.scalar_names)
+        ncols = len(props)
+        dtypes = [p.val_dtype for p in props]
         with open(path, "rb") as raw:
             raw.seek(h.data_offset)
             f = io.TextIOWrapper(raw, encoding="ascii", errors="replace")
@@ -212,23 +230,25 @@ class PlyReader(Reader):
                     cut = " (the file ends part-way through the next)"
                 if not lines:
                     break
+                if lists:  # (plyfile's loadtxt of an empty list warned "no data": a catch_warnings is process-wide)
+                    lines = [_without_lists(ln, h.vertex.properties, lists) for ln in lines]
                 if not any(ln.strip() for ln in lines):  # blank: loadtxt's "no data" warning, not silenced by a catch_warnings
-                    raise fail(path, self._bad_line(lines, lineno, ncols))  # (process-wide: it swapped a caller's filters meanwhile)
+                    raise fail(path, self._bad_line(lines, lineno, ncols, lists))  # (process-wide: it swapped a caller's filters meanwhile)
                 try:
                     arr = np.loadtxt(lines, ndmin=2, dtype=np.float64, comments=None)
                 except ValueError:
-                    raise fail(path, self._bad_line(lines, lineno, ncols)) from None
+                    raise fail(path, self._bad_line(lines, lineno, ncols, lists)) from None
                 if len(arr) != len(lines) or (arr.size and arr.shape[1] != ncols):
-                    raise fail(path, self._bad_line(lines, lineno, ncols))
-                for i, prop in enumerate(h.vertex.properties):
+                    raise fail(path, self._bad_line(lines, lineno, ncols, lists))
+                for i, prop in enumerate(props):
                     self._check_integers(path, arr[:, i], prop, lineno)
                 lineno += len(lines)
                 done += len(arr)
                 # each column in its declared type, as the binary path keeps it; x, y, z as parsed
                 # (float64: the text may hold more digits than a declared float keeps)
                 cols = [arr[:, i] if name.lower() in ("x", "y", "z") else arr[:, i].astype(np.dtype(dt), copy=False)
-                        for i, (name, dt) in enumerate(zip(h.names, dtypes))]  # fmt: skip
-                yield h.chunk(h.names, cols, scaler)
+                        for i, (name, dt) in enumerate(zip(h.scalar_names, dtypes))]  # fmt: skip
+                yield h.chunk(h.scalar_names, cols, scaler)
         if done < h.count:
             raise fail(path, f"truncated PLY file: the header declares {h.count:,} vertices, only {done:,} lines of them are present{cut}")
 
@@ -248,11 +268,12 @@ class PlyReader(Reader):
             raise fail(path, f"line {first_lineno + i}: {prop.name} is {values[i]:g}, not a {declared} as the header declares")
 
     @staticmethod
-    def _bad_line(lines, first_lineno, ncols) -> str:
+    def _bad_line(lines, first_lineno, ncols, lists=()) -> str:
         for i, line in enumerate(lines):
             tokens = line.split()
-            if len(tokens) != ncols:
-                return f"line {first_lineno + i} has {len(tokens)} values, the vertex element declares {ncols}"
+            if len(tokens) != ncols:  # (a line with lists its lengths do not fit: as it was, _without_lists)
+                declared = f"{ncols} besides its list {', '.join(sorted(lists))} (a length, then that many values)" if lists else ncols
+                return f"line {first_lineno + i} has {len(tokens)} values, the vertex element declares {declared}"
             for t in tokens:
                 try:
                     float(t)
@@ -261,14 +282,13 @@ class PlyReader(Reader):
         return "corrupt vertex data"
 
     def _read_plyfile(self, path, h: _Header, chunk_size, scaler) -> Iterator[PointChunk]:
+        """A binary file with list properties (an ASCII one's are left out of its lines: _read_ascii)."""
         import plyfile
 
         try:
-            with warnings.catch_warnings():  # numpy's "input contained no data" of an empty list: a valid file
-                warnings.filterwarnings("ignore", "loadtxt: input contained no data", UserWarning)
-                with open(path, "rb") as f:  # (the header as _Header took it)
-                    f.seek(h.data_offset)
-                    ply = plyfile.PlyData.read(io.BytesIO(h.header_text + f.read()))
+            with open(path, "rb") as f:  # (the header as _Header took it)
+                f.seek(h.data_offset)
+                ply = plyfile.PlyData.read(io.BytesIO(h.header_text + f.read()))
             data = ply["vertex"].data
         except plyfile.PlyElementParseError as exc:
             if exc.message == "early end-of-file" and exc.element is not None and exc.row is not None:  # a cut, said as the other paths say it
