@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import dataclasses
-import warnings
 
 from ..core.cloud import PointCloud
-from ..errors import SettingsError
+from ..errors import SettingsError, warnings_kept
 from ..render.settings import RenderSettings
 from .settings_opts import option_of
 
@@ -56,8 +55,7 @@ def check_color_attribute(inputs, settings) -> None:
     name = settings.color_attribute
     if settings.color_mode != "attribute" or not name or any(is_lod_source(p) for p in inputs):
         return
-    with warnings.catch_warnings():  # a file named twice is warned about once, when read
-        warnings.simplefilter("ignore")
+    with warnings_kept():  # a file named twice is warned about once, when read (not here: kept, dropped)
         files = expand_paths(inputs)
     heads = [reader_for(f).header(f, salvage=True).get("attributes") for f in files]  # salvage: a cut-off file is drawn
     if None in heads or any(name in head for head in heads):
