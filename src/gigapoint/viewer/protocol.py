@@ -1,7 +1,7 @@
 """The viewer's wire protocol: message validation, the settings schema, frame packing.
 
 Client -> server: JSON text messages ``{"type": ..., ...}`` (at most MAX_MESSAGE bytes).
-Server -> client: JSON text messages (hello, settings, pick, error, pong) and binary frames:
+Server -> client: JSON text messages (hello, settings, pick, measure, error, pong) and binary frames:
 ``b"GPF1" + u32 little-endian header length + JSON header + JPEG bytes``; a frame's header
 has ``cloud`` (hello's cloud line) again when that changed since the tab last got it.
 
@@ -97,6 +97,11 @@ MESSAGE_TYPES = {
     "reset",
     "fov",  # value (degrees)
     "pick",  # x, y (0..1), pivot (bool), id (echoed)
+    # action: add (x, y: the point picked there joins the measurement) | undo (drops the last) |
+    # clear; id echoed. Reply {"type": "measure", "id", "added", "points", "segments": [{length,
+    # horizontal, vertical}], "total": {the same, summed}} in the cloud's units (viewer/measure.py);
+    # a click on no point adds nothing: added false and a "message". Frames draw the polyline.
+    "measure",
     "settings",  # values: {field: value}
     "quality",  # adaptive (bool), jpeg_quality (int)
     "ping",  # t (echoed)

@@ -25,6 +25,7 @@ from ..render.camera import sample_points
 from ..render.frame import Frame, encode_image
 from ..render.renderer import render_frame
 from ..render.settings import RenderSettings
+from . import measure as M
 from . import protocol as P
 from .state import OrbitState
 
@@ -276,6 +277,7 @@ class ViewerCore:
         else:
             vw, vh = 1280, 720
             state, settings = self.default_state(vw, vh), self.settings
+        points = list(s.measure) if s is not None else []  # a tab's measurement is in its screenshot too
         if width is not None and height is None:  # one side given: keep the view's aspect
             height = max(1, round(int(width) * vh / vw))
         elif height is not None and width is None:
@@ -284,8 +286,9 @@ class ViewerCore:
         h = int(height) if height is not None else vh * scale
         if not (1 <= w <= P.MAX_SHOT_SIDE and 1 <= h <= P.MAX_SHOT_SIDE and w * h <= P.MAX_SHOT_PIXELS):
             raise P.ProtocolError(f"screenshot: {w}x{h} is outside 1..{P.MAX_SHOT_SIDE} per side / {P.MAX_SHOT_PIXELS:,} pixels")
-        frame = render_locked(self.cloud, state.camera(w, h), settings)
-        return encode_image(frame.image, "PNG")
+        cam = state.camera(w, h)
+        frame = render_locked(self.cloud, cam, settings)
+        return encode_image(M.draw(frame.image, cam, points), "PNG")
 
 
 class Session:
@@ -308,6 +311,7 @@ class Session:
         self.jpeg_quality = 85
         self.closed = False
         self.last: LastFrame | None = None
+        self.measure: list[list[float]] = []  # the measuring tool's points (world), drawn over each frame
         self.scales = ScaleControl()
         self.budget = MovingBudget()
         self.frames = 0
@@ -386,6 +390,11 @@ class Session:
                 motion = pivot
                 if not pivot:
                     return reply
+            elif kind == "measure":
+                reply = self._measure(msg)
+                if reply is None:
+                    return {"type": "measure", "id": msg.get("id"), "added": False, "message": "no point here: nothing added", **M.summary(self.measure)}
+                motion = False
             elif kind == "settings":
                 self.settings = P.apply_settings(self.settings, msg.get("values"))
                 motion = False
@@ -447,9 +456,28 @@ class Session:
             self.state.set_pivot(info["position"])
         return {"type": "pick", "id": pick_id, "found": True, "pivot": pivot, "info": P.json_safe(info)}
 
+    def _measure(self, msg) -> dict | None:
+        """Apply a measure message (add a picked point, undo the last, clear); None: a click on nothing."""
+        action = msg.get("action")
+        if action == "add":
+            if len(self.measure) >= M.MAX_POINTS:
+                raise P.ProtocolError(f"measure: at most {M.MAX_POINTS} points; clear the measurement first")
+            hit = self._hit(P.number(msg, "x", 0, 1), P.number(msg, "y", 0, 1))
+            if hit is None:
+                return None
+            index, depth, _, px, py = hit
+            self.measure.append([float(v) for v in point_info(self.last, index, px, py, depth)["position"]])
+        elif action == "undo":
+            self.measure = self.measure[:-1]
+        elif action == "clear":
+            self.measure = []
+        else:
+            raise P.ProtocolError(f"measure: action must be add, undo or clear, got {str(action)[:20]!r}")
+        return {"type": "measure", "id": msg.get("id"), "added": action == "add", **M.summary(self.measure)}
+
     # --- the worker ----------------------------------------------------------------------
     def _next_job(self):
-        """Wait for work; returns (version, seq, state, settings, size, scale_level, quality) or None when closed."""
+        """Wait for work; returns (version, seq, state, settings, size, scale_level, quality, moving, measure points) or None when closed."""
         with self.cond:
             while True:
                 if self.closed:
@@ -468,14 +496,14 @@ class Session:
                 self.cond.wait()
             st = self.state
             job_state = OrbitState(st.target.copy(), st.yaw, st.pitch, st.distance, st.fov, st.scene_radius)
-            return self.version, self.seq, job_state, self.settings, (self.width, self.height), level, self.jpeg_quality, moving
+            return self.version, self.seq, job_state, self.settings, (self.width, self.height), level, self.jpeg_quality, moving, list(self.measure)
 
     def _run(self) -> None:
         while True:
             job = self._next_job()
             if job is None:
                 return
-            version, seq, state, settings, (w, h), level, quality, moving = job
+            version, seq, state, settings, (w, h), level, quality, moving, measure = job
             scale = SCALES[level]
             t0 = time.perf_counter()
             cloud = self.core.cloud
@@ -496,7 +524,7 @@ class Session:
                 continue
             t1 = time.perf_counter()
             self.budget.record(frame.stats.points_processed, frame.stats.time_ms / 1000.0)
-            jpeg = encode_image(frame.image, "JPEG", quality if level == 0 else min(quality, 75))
+            jpeg = encode_image(M.draw(frame.image, cam, measure), "JPEG", quality if level == 0 else min(quality, 75))
             t2 = time.perf_counter()
             if cloud is self.core.live:  # a live cloud measures push-to-pixels latency
                 cloud.drawn(frame)
