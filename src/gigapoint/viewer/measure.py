@@ -7,6 +7,7 @@ the camera that frame was drawn with, so the lines sit exactly on the points as 
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -79,11 +80,11 @@ def draw(image: np.ndarray, camera, points) -> np.ndarray:
     h, w = out.shape[:2]
     pad = POINT_RADIUS + 2
     lines = []
-    for a, b in zip(q[:-1], q[1:]):
+    for a, b in itertools.pairwise(q):
         seen = _clip_depth(a, b)
         seen = seen and _clip_rect(*seen, -pad, np.array([w + pad, h + pad], np.float64))
         if seen:
-            n = int(math.ceil(np.abs(seen[1] - seen[0]).max())) + 1
+            n = math.ceil(np.abs(seen[1] - seen[0]).max()) + 1
             lines.append(np.linspace(seen[0], seen[1], n))
     front = q[q[:, 3] > 0]
     ends = front[:, :2] / front[:, 2:3]
