@@ -223,6 +223,48 @@ def test_pick_shows_the_coordinates_of_the_marker_and_double_click_sets_the_pivo
     assert camera(page)["target"] == cloud.positions([index])[0].tolist()
 
 
+def test_measure_lists_the_lengths_between_clicked_points(page, server):
+    n = frame_no(page)
+    page.get_by_role("button", name="top").click()
+    page.wait_for_function("() => window.gigapoint.camera.pitch > 89", timeout=30_000)
+    wait_full_frame(page, n)
+    x, y = marker_css_position(page, server)
+    b = canvas_box(page)
+    page.locator("#canvas").focus()
+    page.keyboard.press("m")
+    box = page.locator("#measureinfo")
+    assert "click a point to start" in box.inner_text() and "measure" in page.locator("#help-keys").inner_text()
+    page.mouse.click(x, y)
+    page.wait_for_function("() => document.getElementById('measureinfo').dataset.points === '1'", timeout=30_000)
+    page.mouse.click(b["x"] + b["width"] * 0.3, b["y"] + b["height"] * 0.6)  # the ground
+    page.wait_for_function("() => document.getElementById('measureinfo').dataset.points === '2'", timeout=30_000)
+    (session,) = server.core.sessions.values()
+    p, q = np.array(session.measure)
+    assert np.allclose(p, MARKER, atol=1e-6)  # the first click picked the marker
+    d = q - p
+    text = box.inner_text()  # the synthetic cloud has no file scale: 3 decimals
+    assert f"1: {np.linalg.norm(d):.3f}   horizontal {np.hypot(d[0], d[1]):.3f}   height {d[2]:.3f}" in text, text
+    assert f"total {np.linalg.norm(d):.3f}" in text and d[2] < -15
+    page.wait_for_function("() => window.gigapoint.header.seq === window.gigapoint.seq && window.gigapoint.header.full", timeout=30_000)
+    cam = session.last.camera  # the frame drawn since has the segment where the camera puts its middle
+    mx, my, mw, _ = cam.screen_rows() @ np.append((p + q) / 2, 1.0)
+    shot = np.asarray(Image.open(io.BytesIO(page.screenshot(clip=b))).convert("RGB"))
+    r, g, bl = (int(v) for v in shot[int(my / mw / cam.height * shot.shape[0]), int(mx / mw / cam.width * shot.shape[1])])
+    assert r > 180 and g > 150 and bl < 110, (r, g, bl)  # the measuring yellow
+    page.mouse.click(b["x"] + 3, b["y"] + 3)  # the sky of the top view's corner
+    page.wait_for_function("() => document.getElementById('measureinfo').textContent.includes('no point here: nothing added')", timeout=30_000)
+    assert box.get_attribute("data-points") == "2"
+    page.keyboard.press("Backspace")
+    page.wait_for_function("() => document.getElementById('measureinfo').dataset.points === '1'", timeout=30_000)
+    assert len(session.measure) == 1
+    page.keyboard.press("Escape")
+    box.wait_for(state="hidden")
+    t_end = time.monotonic() + 10
+    while session.measure and time.monotonic() < t_end:
+        time.sleep(0.05)
+    assert session.measure == []
+
+
 def test_keyboard_fly_moves_the_camera(page):
     before = camera(page)
     page.locator("#canvas").focus()

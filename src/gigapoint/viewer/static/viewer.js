@@ -16,7 +16,7 @@
   const S = {
     ws: null, session: null, cloud: null, schema: [], settings: {}, camera: null,
     seq: 0, sentAt: new Map(), lastFrame: 0, frameTimes: [], fps: null, latency: null, renderTimes: [],
-    header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0,
+    header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0, measuring: false,
     pending: { orbit: null, look: null, pan: null, zoom: null }, retry: 0,
   };
   window.gigapoint = S; // for tests and the curious
@@ -94,6 +94,7 @@
       const b = m.cloud.bounds;
       S.sceneRadius = Math.hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]) / 2 || 1;
       showCloud(m.cloud);
+      showMeasure({ points: [], segments: [] });  // a new session measures nothing yet
       buildSettings();
       updateSpeedLabel();
       setFov(m.camera.fov, false);
@@ -112,6 +113,8 @@
       if (errorFrom === "settings") $("error").classList.add("hidden");  // the last change was taken
     } else if (m.type === "pick") {
       showPick(m);
+    } else if (m.type === "measure") {
+      showMeasure(m);
     } else if (m.type === "error") {
       showError(m.message, m.in_reply_to);
       if (m.in_reply_to === "settings") syncSettings(); // the panel shows what the server kept
@@ -275,6 +278,31 @@
     box.classList.remove("hidden");
   }
 
+  // ---------------------------------------------------------------- measuring (the server draws the polyline into the frames)
+  function setMeasuring(on) {
+    if (S.measuring && !on) send({ type: "measure", action: "clear" }, true);
+    S.measuring = on;
+    $("btn-measure").classList.toggle("active", on);
+    canvas.classList.toggle("measuring", on);
+    $("measureinfo").classList.toggle("hidden", !on);
+    if (on) showMeasure({ points: [], segments: [] });
+  }
+
+  function showMeasure(m) {
+    if (!S.measuring) return;  // the reply to the clear that ended it
+    // lengths to the decimals of the positions (a file's points come at its scale: 0.01 m -> 2), 2 to 3
+    const dec = Math.max(2, Math.min(3, ...m.points.flat().map((v) => (String(v).split(".")[1] || "").length)));
+    const f = (v) => v.toFixed(dec), dz = (v) => (v >= 0 ? "+" : "") + f(v);
+    const lines = ["measure (the cloud's units): 3D, horizontal, height"];
+    m.segments.forEach((s, i) => lines.push(`${i + 1}: ${f(s.length)}   horizontal ${f(s.horizontal)}   height ${dz(s.vertical)}`));
+    if (m.segments.length) lines.push(`total ${f(m.total.length)}   horizontal ${f(m.total.horizontal)}   height ${dz(m.total.vertical)}`);
+    if (m.points.length < 2) lines.push(m.points.length ? "1 point: click the next" : "click a point to start");
+    if (m.message) lines.push(m.message);  // a click on empty sky
+    lines.push("Backspace removes the last point · Esc or M ends");
+    $("measureinfo").textContent = lines.join("\n");
+    $("measureinfo").dataset.points = String(m.points.length);
+  }
+
   function relPos(ev) {
     const r = canvas.getBoundingClientRect();
     return [Math.min(1, Math.max(0, (ev.clientX - r.left) / r.width)), Math.min(1, Math.max(0, (ev.clientY - r.top) / r.height))];
@@ -330,7 +358,8 @@
     canvas.classList.remove("dragging");
     if (drag && drag.moved < 4 && e.type === "pointerup" && (drag.button === 0 || e.pointerType === "touch")) {
       const [x, y] = relPos(e);
-      send({ type: "pick", x, y, id: ++S.pickId });
+      if (S.measuring) send({ type: "measure", action: "add", x, y, id: ++S.pickId }, true);
+      else send({ type: "pick", x, y, id: ++S.pickId });
     }
     if (pointers.size < 2) pinch = null;
     drag = null;
@@ -360,6 +389,9 @@
     const k = e.key.toLowerCase();
     if ("wasdqe".includes(k) && k.length === 1) { S.keys.add(k); e.preventDefault(); }
     else if (k === "f") setFly(!S.fly);
+    else if (k === "m") setMeasuring(!S.measuring);
+    else if (k === "escape" && S.measuring) setMeasuring(false);
+    else if (k === "backspace" && S.measuring) { e.preventDefault(); send({ type: "measure", action: "undo" }, true); }
     else if (k === "r") send({ type: "reset" }, true);
     else if (k >= "1" && k <= "5") send({ type: "view", name: ["top", "front", "side", "iso", "auto"][Number(k) - 1] }, true);
     else if (k === "+" || k === "=") adjustSpeed(0.5);
@@ -410,6 +442,7 @@
   }
   $("fov").addEventListener("input", (e) => setFov(e.target.value, true));
   $("fly").addEventListener("change", (e) => setFly(e.target.checked));
+  $("btn-measure").addEventListener("click", () => setMeasuring(!S.measuring));
   $("speed").addEventListener("input", (e) => { S.speedExp = Number(e.target.value); updateSpeedLabel(); });
   const sendQuality = () => {
     // an emptied field was Number("") = 0: quality 10 while it showed nothing; the field shows the quality used
