@@ -372,6 +372,7 @@
     return { dist: Math.hypot(a[0] - b[0], a[1] - b[1]), cx: (a[0] + b[0]) / 2, cy: (a[1] + b[1]) / 2 };
   }
   canvas.addEventListener("dblclick", (e) => {
+    if (S.measuring) return;  // its clicks measure: no pivot
     const [x, y] = relPos(e);
     send({ type: "pick", x, y, pivot: true, id: ++S.pickId }, true);
   });
