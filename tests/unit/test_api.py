@@ -118,7 +118,7 @@ def test_open_names_an_unknown_option_and_what_it_takes(tmp_path):
     from gigapoint.errors import InputError
 
     np.save(tmp_path / "p.npy", np.random.default_rng(1).random((20, 3)))
-    with pytest.raises(InputError, match=r"^open: unknown option\(s\) bar, foo; it takes chunk_size, .*colors, chunked, progressive=True"):
+    with pytest.raises(InputError, match=r"^open: unknown option\(s\) bar, foo; it takes chunk_size, .*colors, chunked, recursive=True, progressive=True"):
         gp.open(tmp_path / "p.npy", foo=1, bar=2)
     assert gp.open(tmp_path / "p.npy", chunk_size=7, colors="rgba").n_points == 20
 
