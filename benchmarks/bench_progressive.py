@@ -612,7 +612,7 @@ def bench_sort(n: int, batch: int) -> None:
             times.append(time.perf_counter() - t)
         took[name] = min(times)
     print(f"sort of {len(keys):,} keys: numpy {took['numpy'] * 1e3:.1f} ms, radix {took['radix'] * 1e3:.1f} ms "
-          f"({took['numpy'] / took['radix']:.2f}x); insertions here use {octree_module._faster_key_sort()}")  # fmt: skip
+          f"({took['numpy'] / took['radix']:.2f}x); insertions here use {octree_module._faster_key_sort(keys.copy(), index_bits, scratch)}")  # fmt: skip
     order = _scan_order(xyz)
     for name, idx in (("generator order", np.arange(n)), ("scan order", order)):
         x, c, at = xyz[idx], rgba[idx], {a: v[idx] for a, v in attrs.items()}

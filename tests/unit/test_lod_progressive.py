@@ -2532,3 +2532,22 @@ def test_joined_chunks_keep_their_order_attributes_and_the_points_before_an_erro
             got.append((name, len(c), sorted(c.attributes), c.xyz[:, 0].tolist()))
     assert [(n, k, a) for n, k, a, _ in got] == [("a", 5, []), ("c", 10, []), ("d", 5, ["intensity"]), ("e", 20, []), ("f", 5, [])]
     assert [x for *_, xs in got for x in xs] == list(range(45))  # every point once, in order
+
+
+def test_the_faster_key_sort_is_timed_on_the_first_large_set_which_comes_sorted(monkeypatch):
+    """Which sort serves the keys is timed once, on the first set of at least _TIME_SORT_FROM
+    keys (real keys: the radix sort's speed depends on the digits they share, which random keys
+    never do), and that set comes out sorted; smaller sets before it take numpy's, untimed."""
+    import gigapoint.lod.progressive.octree as octree_module
+    from gigapoint.lod.progressive.octree import _TIME_SORT_FROM, sort_keys_in_place
+
+    monkeypatch.setattr(octree_module, "_KEY_SORT", [])
+    rng = np.random.default_rng(3)
+    for n in (1000, _TIME_SORT_FROM):
+        bits = (n - 1).bit_length()
+        keys = rng.integers(0, 1 << 40, n, dtype=np.uint64) << np.uint64(bits) | np.arange(n, dtype=np.uint64)
+        want = np.sort(keys)
+        sort_keys_in_place(keys, bits, np.empty(n, np.uint64))
+        np.testing.assert_array_equal(keys, want)
+        assert len(octree_module._KEY_SORT) == (1 if n >= _TIME_SORT_FROM else 0)  # timed at the large set only
+    assert octree_module._KEY_SORT[0] in ("numpy", "radix")

@@ -336,35 +336,38 @@ class _Work:
         return sum(a.nbytes for a in self.arrays.values())
 
 
-_KEY_SORT: list = []  # "numpy" or "radix": the faster here, timed once a process
+_KEY_SORT: list = []  # "numpy" or "radix": the faster here, timed once a process on a real set's keys
+_TIME_SORT_FROM = 1 << 18  # keys of the first set timed (the loader's slices: 250 000 points)
 
 
-def _faster_key_sort() -> str:
-    """numpy's sort (x86-simd-sort: 5-7 ms for 10^6 keys on the Intel Xeon, 50-65 on the AMD
-    EPYC) or ``kernels.radix_sort`` (13-15 ms on the AMD EPYC), whichever sorts a set's keys
-    faster on this CPU: timed once, on 2^16 random keys (a few ms: the first image waits for it)."""
-    if not _KEY_SORT:
-        n = 1 << 16
-        sample = np.random.default_rng(0).integers(0, 1 << 48, n, dtype=np.uint64) << np.uint64(16) | np.arange(n, dtype=np.uint64)
-        keys, scratch, parts = sample.copy(), np.empty(n, np.uint64), max(1, numba.get_num_threads())
-        K.radix_sort(keys, scratch, 16, parts)  # compiled (or loaded from the cache) before timing
+def _faster_key_sort(keys: np.ndarray | None = None, index_bits: int = 0, scratch: np.ndarray | None = None) -> str:
+    """numpy's sort or ``kernels.radix_sort``, whichever sorts a set's keys faster on this CPU:
+    timed once, on the first set of at least _TIME_SORT_FROM keys (``keys``: sorted by the
+    faster meanwhile); numpy's until then (small sets: the first image does not wait for it).
+    On real keys, not random ones: the radix sort skips the digits a bucket's keys share, which
+    random keys never do (AMD EPYC Zen 2, 10^6 keys: random numpy 15.0 / radix 15.2 ms, the
+    town's 14.2 / 9.7 ms; the Intel Xeon's numpy 5-7 ms)."""
+    if not _KEY_SORT and keys is not None and len(keys) >= _TIME_SORT_FROM:
+        given, parts = keys.copy(), max(1, numba.get_num_threads())
 
         def numpy_sort():
-            keys[:] = sample
+            keys[:] = given
             keys.sort()
 
         def radix_sort():
-            keys[:] = sample
-            K.radix_sort(keys, scratch, 16, parts)
+            keys[:] = given
+            K.radix_sort(keys, scratch, index_bits, parts)
 
-        _KEY_SORT.append(fastest({"numpy": numpy_sort, "radix": radix_sort}))
-    return _KEY_SORT[0]
+        _KEY_SORT.append(fastest({"numpy": numpy_sort, "radix": radix_sort}, repeats=2))  # (keys: sorted by the last)
+    return _KEY_SORT[0] if _KEY_SORT else "numpy"
 
 
 def sort_keys_in_place(keys: np.ndarray, index_bits: int, scratch: np.ndarray) -> None:
     """``kernels.sort_keys``' keys sorted ascending, by the faster sort here (the same result: the
     keys are unique, and the radix sort leaves ties of their top bits in index order)."""
-    if _faster_key_sort() == "numpy":
+    if not _KEY_SORT and len(keys) >= _TIME_SORT_FROM:
+        _faster_key_sort(keys, index_bits, scratch)  # (they come sorted)
+    elif _faster_key_sort() == "numpy":
         keys.sort()
     else:
         K.radix_sort(keys, scratch, index_bits, max(1, numba.get_num_threads()))
