@@ -33,8 +33,8 @@ The structure of SimLOD (Schütz, Herzberger, Wimmer 2024, sections 3-5; Wand et
   e.g. from LAS headers); a point outside it makes the tree grow upwards: a new root twice
   the size takes the old one as a child, and samples every point into its own voxels.
 
-An insertion runs SimLOD's passes on the CPU: sort the batch by point code (numpy's SIMD sort
-of packed (code prefix, index) keys), route it down the tree in one pass over the sorted codes
+An insertion runs SimLOD's passes on the CPU: sort the batch by point code (packed (code
+prefix, index) keys, by numpy's sort or a radix sort, whichever is faster here), route it down the tree in one pass over the sorted codes
 (``kernels.distribute``: a node's points are one contiguous run), split overflowing leaves
 (their points one more set, sorted and routed from their leaves) and route again, then find the voxel
 cells of every inner node the runs pass, bottom-up and shared (``kernels.sample_runs``), look
