@@ -158,6 +158,17 @@ def test_info_of_a_folder_of_tiles_of_two_crss_does_not_call_the_crs_unknown(tmp
     assert [line for line in lines if "crs" in line] == ["  crs differs: WGS 84 / UTM zone 10N (EPSG:32610) (1 file); EPSG:32611 (1 file)"]
 
 
+def test_info_of_a_folder_counts_one_crs_as_wkt_and_as_geotiff_keys_once(tmp_path):
+    """EPSG:32610 as WKT in one tile and as GeoTIFF keys in another is one CRS, as the mixed-CRS
+    warning counts it (io.crs_identity); the folder's summary said "crs differs"."""
+    wkt = laspy.VLR("LASF_Projection", 2112, "OGC WKT", UTM10_WKT.encode() + b"\0")
+    write_tile(tmp_path / "a.las", tile_points(0, 500_000.0), 0.001, (500_000, 4_800_000, 0), wkt, version="1.4")
+    write_tile(tmp_path / "b.las", tile_points(1, 500_050.0), 0.001, (500_000, 4_800_000, 0), geokeys(32610), version="1.4")
+    summed = gp.io.folder_info(tmp_path, [gp.io.file_info(tmp_path / f) for f in ("a.las", "b.las")])
+    assert "crs differs" not in summed["details"] and summed["crs"] == gp.io.file_info(tmp_path / "a.las")["crs"]
+    assert "  crs:         WGS 84 / UTM zone 10N (EPSG:32610)" in gp.io.format_info(summed).splitlines()
+
+
 def test_tiles_on_different_las_grids_merge_at_the_files_values(tmp_path):
     """Same CRS, different scales and offsets: every point where its file puts it (to 1e-7 m)."""
     a = write_tile(tmp_path / "a.las", tile_points(0, 637_000.0), 0.001, (637_000, 4_800_000, 0), geokeys(32610))

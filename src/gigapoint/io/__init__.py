@@ -230,6 +230,13 @@ def crs_name(crs: str | None) -> str:
     return crs or "unknown"
 
 
+def crs_identity(crs: str) -> str:
+    """What tells two CRSs apart: 'EPSG:n' where a WKT ends with its code (the same CRS as WKT in
+    one tile, as GeoTIFF keys in another), else the text. warn_mixed_crs and folder_info compare by it."""
+    code = WKT_EPSG.search(crs)
+    return f"EPSG:{code.group(1)}" if code else crs
+
+
 def warn_mixed_crs(files, then: str = "") -> None:
     """Warn where LAS/LAZ files read as one cloud name different CRSs, or some name one and
     others none (lost with their VLRs, or another CRS unsaid): their coordinates are used as
@@ -247,8 +254,7 @@ def warn_mixed_crs(files, then: str = "") -> None:
         except GigapointError:  # a bad file: reading its points says so, in its own words
             continue
         if crs:
-            code = WKT_EPSG.search(crs)  # the same CRS as WKT in one tile, as GeoTIFF keys in another
-            first.setdefault(f"EPSG:{code.group(1)}" if code else crs, f)
+            first.setdefault(crs_identity(crs), f)
             have += 1
         else:
             none.append(f)
@@ -400,6 +406,11 @@ def folder_info(folder, infos: list[dict]) -> dict:
     def numbers(key: str, form: str):
         return lambda i: "none" if i.get(key) is None else ", ".join(f"{x:{form}}" for x in i[key])
 
+    named: dict = {}  # a CRS's identity -> its name as the first file gives it (WKT and GeoTIFF keys of one EPSG: one CRS)
+
+    def crs_text(i) -> str:
+        return named.setdefault(crs_identity(i["crs"]), crs_name(i["crs"])) if i.get("crs") else crs_name(None)
+
     first = infos[0]
     out["format"] = first.get("format", "?")
     if shared("formats", lambda i: f"{i.get('format', '?')} {i.get('las_version') or ''} point format {i.get('point_format')}"):
@@ -416,7 +427,7 @@ def folder_info(folder, infos: list[dict]) -> dict:
         details["colored"] = f"{colored:,} of the {n:,} files (the others: default color)"
     out["attributes"] = [a for a in first.get("attributes") or [] if all(a in (i.get("attributes") or []) for i in infos)]
     for key, label, text in (("scale", "scales", numbers("scale", ".15g")), ("offset", "offsets", numbers("offset", ".15g")),
-                             ("crs", "crs differs", lambda i: crs_name(i.get("crs"))),
+                             ("crs", "crs differs", crs_text),
                              ("generating_software", "software", lambda i: i.get("generating_software") or "unknown")):  # fmt: skip
         if shared(label, text):
             out[key] = first.get(key)
