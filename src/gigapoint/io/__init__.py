@@ -74,11 +74,11 @@ def _listed(folder: Path) -> list[Path]:
         raise fail(folder, f"cannot list the folder ({exc.strerror or exc})") from None
 
 
-def _point_files(folder: Path, quiet: bool = False) -> list[Path]:
-    """A folder's own point files (``in_folder``), sorted by name; a readme beside them skipped
-    with a warning (unless ``quiet``), hidden files quietly (macOS leaves one beside every tile)."""
+def _point_files(entries: list[Path], quiet: bool = False) -> list[Path]:
+    """A folder's own point files (``in_folder``) of its ``entries`` (``_listed``); a readme beside
+    them skipped with a warning (unless ``quiet``), hidden files quietly (macOS leaves one beside every tile)."""
     found = []
-    for c in _listed(folder):
+    for c in entries:
         if not (c.is_file() and is_supported_name(c)):
             continue
         if in_folder(c):
@@ -88,11 +88,11 @@ def _point_files(folder: Path, quiet: bool = False) -> list[Path]:
     return found
 
 
-def _subfolders(folder: Path, octrees: list | None = None) -> list[Path]:
-    """A folder's subfolders, sorted by name, but hidden ones and octrees (a conversion's output
-    beside its tiles: its .npy arrays are no points; appended to ``octrees``)."""
+def _subfolders(entries: list[Path], octrees: list | None = None) -> list[Path]:
+    """A folder's subfolders of its ``entries`` (``_listed``), but hidden ones and octrees (a
+    conversion's output beside its tiles: its .npy arrays are no points; appended to ``octrees``)."""
     out = []
-    for c in _listed(folder):
+    for c in entries:
         if c.is_dir() and not c.name.startswith("."):
             if not is_dataset_folder(c):
                 out.append(c)
@@ -101,9 +101,10 @@ def _subfolders(folder: Path, octrees: list | None = None) -> list[Path]:
     return out
 
 
-def _folders_below(folder: Path, octrees: list | None = None) -> Iterator[Path]:
-    """``folder`` and every folder below it (``_subfolders``), depth first in name order; a folder
-    reached again through a symlink (a link to a parent: a loop) is left out."""
+def _folders_below(folder: Path, octrees: list | None = None) -> Iterator[list[Path]]:
+    """The entries (``_listed``) of ``folder`` and of every folder below it (``_subfolders``),
+    depth first in name order; a folder reached again through a symlink (a link to a parent: a
+    loop) is left out."""
     seen: set = set()
     todo = [folder]
     while todo:
@@ -111,16 +112,27 @@ def _folders_below(folder: Path, octrees: list | None = None) -> Iterator[Path]:
         if d.resolve() in seen:
             continue
         seen.add(d.resolve())
-        yield d
-        todo.extend(reversed(_subfolders(d, octrees)))
+        entries = _listed(d)
+        yield entries
+        todo.extend(reversed(_subfolders(entries, octrees)))
 
 
 def _holds_points(folder: Path) -> bool:
     """Whether a point file is anywhere below ``folder``."""
     try:
-        return any(_point_files(d, quiet=True) for d in _folders_below(folder))
+        return any(_point_files(entries, quiet=True) for entries in _folders_below(folder))
     except InputError:  # a subfolder that cannot be listed (a root-owned lost+found) is not read: not a reason to fail
         return False
+
+
+def _folder_files(folder: Path, recursive: bool) -> tuple[list[Path], list[Path], list[Path]]:
+    """(its point files, or every one below it where ``recursive``; else its subfolders that hold
+    some, not read; the octrees below it, not read), each folder listed once."""
+    octrees: list[Path] = []
+    if recursive:
+        return [f for entries in _folders_below(folder, octrees) for f in _point_files(entries)], [], octrees
+    entries = _listed(folder)
+    return _point_files(entries), [s for s in _subfolders(entries) if _holds_points(s)], octrees
 
 
 #: how to read a folder's subfolders, said where they are not read
@@ -137,13 +149,11 @@ def expand_paths(paths: Iterable, recursive: bool = False) -> list[Path]:
     out: list[Path] = []
     for p in paths:
         p = _local(p)
-        if p.is_dir():
-            octrees: list[Path] = []
-            found = [f for d in (_folders_below(p, octrees) if recursive else [p]) for f in _point_files(d)]
-            below = [] if recursive else [s for s in _subfolders(p) if _holds_points(s)]
+        if p.is_dir():  # (once an operation, headers_once: each of its steps expands the paths again; a walk below is not cheap)
+            found, below, octrees = read_once("recursive folder" if recursive else "folder", p, lambda p=p: _folder_files(p, recursive))
             if below and not found:
                 raise fail(p, f"holds no point cloud file, but its subfolders {file_names(below)} do: {READ_SUBFOLDERS} ({p / '*'}/)", EmptyCloudError)
-            if below:  # once an operation (headers_once): each of its steps expands the paths again
+            if below:  # once an operation
                 said = f"{p}: its subfolders {file_names(below)} hold point files too, not read: {READ_SUBFOLDERS}"
                 read_once("subfolders", p, lambda said=said: warn(said, GigapointWarning))
             for o in octrees:
