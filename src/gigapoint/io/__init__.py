@@ -12,6 +12,7 @@ that starts with the file's path.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import urllib.parse
@@ -27,7 +28,7 @@ from ..errors import EmptyCloudError, GigapointError, GigapointWarning, InputErr
 from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail, headers_once, read_once
 from .demo import demo_arrays, demo_chunks
 from .http import shown_url
-from .las import LasReader, read_las_header, with_scan_angle
+from .las import LasReader, geokeys, read_las_header, with_scan_angle
 from .registry import in_folder, is_dataset_folder, is_supported_name, reader_for, readers, register, supported_suffixes
 
 
@@ -245,6 +246,105 @@ def crs_identity(crs: str) -> str:
     one tile, as GeoTIFF keys in another), else the text. warn_mixed_crs and folder_info compare by it."""
     code = WKT_EPSG.search(crs)
     return f"EPSG:{code.group(1)}" if code else crs
+
+
+#: Symbols of the length units coordinates come in, by their size in metres (WKT names one unit
+#: many ways: "US survey foot", "Foot_US"); another unit is shown by its name
+LENGTH_SYMBOLS = ((1.0, "m"), (0.3048, "ft"), (1200 / 3937, "US ft"))
+#: The length units of GeoTIFF keys (ProjLinearUnitsGeoKey, VerticalUnitsGeoKey) by EPSG code
+EPSG_LENGTH_UNITS = {9001: ("metre", 1.0), 9002: ("foot", 0.3048), 9003: ("US survey foot", 1200 / 3937)}
+_WKT_TOKEN = re.compile(r'\s*(?:"((?:[^"]|"")*)"|([\[\](),])|([^\[\](),"\s]+))')
+_WKT_KINDS = {  # the CRS keywords of WKT1 and WKT2 whose axes' units are read
+    "PROJCS": "projected", "PROJCRS": "projected", "PROJECTEDCRS": "projected",
+    "GEOGCS": "geographic", "GEOGCRS": "geographic", "GEOGRAPHICCRS": "geographic",
+    "VERT_CS": "vertical", "VERTCRS": "vertical", "VERTICALCRS": "vertical",
+}  # fmt: skip
+
+
+def _wkt_tree(text: str) -> list | None:
+    """A WKT as nested lists, KEYWORD[a, b, ...] -> [KEYWORD, a, b, ...] (numbers and enum words
+    as text); None where the text is not WKT ('EPSG:2992')."""
+    stack = [[]]
+    for quoted, bracket, word in _WKT_TOKEN.findall(text):
+        if bracket in ("[", "("):
+            if not stack[-1] or not isinstance(stack[-1][-1], str):
+                return None
+            node = [stack[-1].pop().upper()]
+            stack[-1].append(node)
+            stack.append(node)
+        elif bracket in ("]", ")"):
+            if len(stack) < 2:
+                return None
+            stack.pop()
+        elif bracket != ",":
+            stack[-1].append(word or quoted)
+    root = stack[0][0] if len(stack) == 1 and len(stack[0]) == 1 else None
+    return root if isinstance(root, list) else None
+
+
+def _wkt_unit(node: list, angle: bool) -> dict | None:
+    """{name, symbol, metres} of a UNIT / LENGTHUNIT / ANGLEUNIT node; an angle's metres are None."""
+    try:
+        name, size = str(node[1]), float(node[2])
+    except (IndexError, ValueError):
+        return None
+    if angle or node[0] == "ANGLEUNIT":
+        return {"name": name, "symbol": "°" if name.lower().startswith("deg") else name, "metres": None}
+    return {"name": name, "symbol": next((s for m, s in LENGTH_SYMBOLS if math.isclose(size, m, rel_tol=1e-9)), name), "metres": size}
+
+
+def _wkt_units(crs: list) -> tuple[dict | None, dict | None]:
+    """(horizontal, vertical) units of one WKT CRS (a compound CRS's parts' in turn): those of its
+    own axes (WKT2 may give each AXIS its unit; else the one UNIT for all), not its base CRS's."""
+    kind = _WKT_KINDS.get(crs[0])
+    if kind is None:  # a compound CRS: its parts; any other (geocentric, engineering): unknown
+        parts = [_wkt_units(p) for p in crs[1:] if isinstance(p, list)] if crs[0] in ("COMPD_CS", "COMPOUNDCRS") else []
+        return next((h for h, _ in parts if h), None), next((v for _, v in parts if v), None)
+    nodes = [c for c in crs[1:] if isinstance(c, list)]
+    units = [u for a in nodes if a[0] == "AXIS" for u in a if isinstance(u, list) and u[0].endswith("UNIT")]
+    units = [_wkt_unit(u, kind == "geographic" and u[0] != "LENGTHUNIT") for u in units or [c for c in nodes if c[0].endswith("UNIT")]]
+    if kind == "vertical":
+        return None, units[0] if units else None
+    if kind == "geographic":  # a 3D one's ellipsoidal height has a length unit
+        return (units[0] if units else None), next((u for u in units if u and u["metres"] is not None), None)
+    return (units[0] if units else None), (units[2] if len(units) == 3 else None)
+
+
+def crs_units(crs: str | None, geokeys: dict[int, int] | None = None) -> dict:
+    """The units of a CRS's coordinates, for lengths measured in them: {"horizontal": U,
+    "vertical": U, "vertical_assumed": bool}, each U {name, symbol, metres} or None (unknown).
+
+    From a WKT (``crs``: the projected CRS's axes' UNIT, a compound CRS's vertical part's), else
+    from LAS GeoTIFF keys (``geokeys``: ProjLinearUnitsGeoKey 3076, VerticalUnitsGeoKey 4099); an
+    'EPSG:n' alone says none (no pyproj to look it up). A geographic CRS's horizontal unit is an
+    angle (metres None: its x and y are no lengths). Where a CRS names no vertical unit, heights
+    are taken to be in the horizontal length unit (LAS files are; ``vertical_assumed`` says so).
+    """
+    tree = _wkt_tree(crs or "")
+    horizontal, vertical = _wkt_units(tree) if tree else (None, None)
+    keys = geokeys or {}
+    if horizontal is None and keys.get(1024) == 2:  # GTModelTypeGeoKey: geographic
+        horizontal = {"name": "degree", "symbol": "°", "metres": None}
+    elif horizontal is None and keys.get(3076) in EPSG_LENGTH_UNITS:
+        horizontal = _wkt_unit(["UNIT", *EPSG_LENGTH_UNITS[keys[3076]]], angle=False)
+    if vertical is None and keys.get(4099) in EPSG_LENGTH_UNITS:
+        vertical = _wkt_unit(["UNIT", *EPSG_LENGTH_UNITS[keys[4099]]], angle=False)
+    assumed = vertical is None and horizontal is not None and horizontal["metres"] is not None
+    return {"horizontal": horizontal, "vertical": horizontal if assumed else vertical, "vertical_assumed": assumed}
+
+
+def files_units(files) -> dict:
+    """``crs_units`` of the first LAS/LAZ file of ``files`` that names a CRS (its WKT, else its
+    GeoTIFF keys; warn_mixed_crs warns where files differ); all unknown without one."""
+    for f in files:
+        try:
+            if isinstance(reader_for(f), LasReader):
+                hdr = read_las_header(f, salvage=True)
+                if hdr.crs():
+                    return crs_units(hdr.crs(), geokeys(hdr.vlrs))
+        except (GigapointError, OSError):  # a file gone or damaged since it was read: no word from it
+            continue
+    return crs_units(None)
 
 
 def warn_mixed_crs(files, then: str = "") -> None:
@@ -511,11 +611,13 @@ __all__ = [
     "DEFAULT_CHUNK_SIZE",
     "Reader",
     "cloud_name",
+    "crs_units",
     "demo_arrays",
     "demo_chunks",
     "expand_paths",
     "file_info",
     "files_label",
+    "files_units",
     "folder_info",
     "format_info",
     "open_cloud",

@@ -623,15 +623,21 @@ def vlrs_crs(vlrs) -> str | None:
     wkt = wkt_of(vlrs)
     if wkt:
         return wkt
+    keys = geokeys(vlrs)
+    for key_id in (3072, 2048):  # ProjectedCSTypeGeoKey, GeographicTypeGeoKey
+        if 0 < keys.get(key_id, 0) < 32767:  # (32767: user-defined)
+            return f"EPSG:{keys[key_id]}"
+    return None
+
+
+def geokeys(vlrs) -> dict[int, int]:
+    """The GeoTIFF keys of LAS VLRs (LASF_Projection 34735) whose values are held in place
+    (EPSG codes of a CRS, of a unit): {key id: value}; empty without them."""
     for user, rec, data in vlrs:
         if user == PROJECTION_USER_ID and rec == GEOKEYS_RECORD and len(data) >= 8:
             n = min(_u("H", data, 6)[0], len(data) // 8 - 1)  # (the key count after 3 version words)
-            keys = {k: (loc, value) for k, loc, _, value in struct.iter_unpack("<4H", data[8 : 8 + 8 * n])}
-            for key_id in (3072, 2048):  # ProjectedCSTypeGeoKey, GeographicTypeGeoKey
-                loc, value = keys.get(key_id, (1, 0))
-                if loc == 0 and 0 < value < 32767:  # (a value held in place; 32767: user-defined)
-                    return f"EPSG:{value}"
-    return None
+            return {k: value for k, loc, _, value in struct.iter_unpack("<4H", data[8 : 8 + 8 * n]) if loc == 0}
+    return {}
 
 
 def _parse_crs(header, hdr: LasHeader) -> str | None:

@@ -1,0 +1,99 @@
+"""The length units of a cloud's CRS (io.crs_units), from real WKT strings and LAS GeoTIFF keys."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+import gigapoint as gp
+from gigapoint.io import crs_units, files_units
+from gigapoint.io.las import geokeys, read_las_header
+
+DATA = Path(__file__).parent / "data" / "pdal_ept"
+US_FOOT = 0.304800609601219  # as EPSG's WKT writes it (1200 / 3937)
+
+FOOT = {"name": "foot", "symbol": "ft", "metres": 0.3048}
+METRE = {"name": "metre", "symbol": "m", "metres": 1.0}
+UNKNOWN = {"horizontal": None, "vertical": None, "vertical_assumed": False}
+
+# PROJ's WKT2:2019 of EPSG:2927: the base CRS in degrees, the conversion's parameters in both
+# units, each axis its own LENGTHUNIT
+WASHINGTON_SOUTH_FTUS = (
+    'PROJCRS["NAD83(HARN) / Washington South (ftUS)",BASEGEOGCRS["NAD83(HARN)",DATUM["NAD83 (High Accuracy Reference Network)",'
+    'ELLIPSOID["GRS 1980",6378137,298.257222101,LENGTHUNIT["metre",1]]],PRIMEM["Greenwich",0,ANGLEUNIT["degree",0.0174532925199433]],'
+    'ID["EPSG",4152]],CONVERSION["SPCS83 Washington South zone (US Survey feet)",METHOD["Lambert Conic Conformal (2SP)",ID["EPSG",9802]],'
+    'PARAMETER["Latitude of false origin",45.3333333333333,ANGLEUNIT["degree",0.0174532925199433],ID["EPSG",8821]],'
+    'PARAMETER["Easting at false origin",1640416.667,LENGTHUNIT["US survey foot",0.304800609601219],ID["EPSG",8826]],'
+    'PARAMETER["Northing at false origin",0,LENGTHUNIT["US survey foot",0.304800609601219],ID["EPSG",8827]]],'
+    'CS[Cartesian,2],AXIS["easting (X)",east,ORDER[1],LENGTHUNIT["US survey foot",0.304800609601219]],'
+    'AXIS["northing (Y)",north,ORDER[2],LENGTHUNIT["US survey foot",0.304800609601219]],'
+    'USAGE[SCOPE["Engineering survey, topographic mapping."],AREA["United States (USA) - Washington - counties south of 47\u00b030\'N"],'
+    'BBOX[45.54,-124.79,47.61,-116.91]],ID["EPSG",2927]]'
+)
+# PROJ's WKT2:2019 of EPSG:6339+6360: metres east and north, heights in US survey feet
+UTM10_NAVD88_FTUS = (
+    'COMPOUNDCRS["NAD83(2011) / UTM zone 10N + NAVD88 height (ftUS)",PROJCRS["NAD83(2011) / UTM zone 10N",'
+    'BASEGEOGCRS["NAD83(2011)",DATUM["NAD83 (National Spatial Reference System 2011)",ELLIPSOID["GRS 1980",6378137,298.257222101,'
+    'LENGTHUNIT["metre",1]]],PRIMEM["Greenwich",0,ANGLEUNIT["degree",0.0174532925199433]],ID["EPSG",6318]],'
+    'CONVERSION["UTM zone 10N",METHOD["Transverse Mercator",ID["EPSG",9807]],PARAMETER["Longitude of natural origin",-123,'
+    'ANGLEUNIT["degree",0.0174532925199433],ID["EPSG",8802]],PARAMETER["False easting",500000,LENGTHUNIT["metre",1],ID["EPSG",8806]]],'
+    'CS[Cartesian,2],AXIS["easting (E)",east,ORDER[1],LENGTHUNIT["metre",1]],AXIS["northing (N)",north,ORDER[2],LENGTHUNIT["metre",1]]],'
+    'VERTCRS["NAVD88 height (ftUS)",VDATUM["North American Vertical Datum 1988"],CS[vertical,1],'
+    'AXIS["gravity-related height (H)",up,LENGTHUNIT["US survey foot",0.304800609601219]],ID["EPSG",6360]],'
+    'USAGE[SCOPE["Engineering survey, topographic mapping."],AREA["United States (USA) - between 126\u00b0W and 120\u00b0W"],BBOX[30.54,-126,49.09,-119.99]]]'
+)
+# PROJ's WKT2:2019 of EPSG:4979 (3D: latitude and longitude in degrees, ellipsoidal height in metres)
+WGS84_3D = (
+    'GEOGCRS["WGS 84",ENSEMBLE["World Geodetic System 1984 ensemble",MEMBER["World Geodetic System 1984 (Transit)"],'
+    'MEMBER["World Geodetic System 1984 (G2139)"],ELLIPSOID["WGS 84",6378137,298.257223563,LENGTHUNIT["metre",1]],ENSEMBLEACCURACY[2.0]],'
+    'PRIMEM["Greenwich",0,ANGLEUNIT["degree",0.0174532925199433]],CS[ellipsoidal,3],'
+    'AXIS["geodetic latitude (Lat)",north,ORDER[1],ANGLEUNIT["degree",0.0174532925199433]],'
+    'AXIS["geodetic longitude (Lon)",east,ORDER[2],ANGLEUNIT["degree",0.0174532925199433]],'
+    'AXIS["ellipsoidal height (h)",up,ORDER[3],LENGTHUNIT["metre",1]],USAGE[SCOPE["Geodesy."],AREA["World."],BBOX[-90,-180,90,180]],ID["EPSG",4979]]'
+)
+# GDAL's WKT1 of EPSG:4326
+WGS84_WKT1 = (
+    'GEOGCS["WGS 84",DATUM["WGS_1984",SPHEROID["WGS 84",6378137,298.257223563,AUTHORITY["EPSG","7030"]],AUTHORITY["EPSG","6326"]],'
+    'PRIMEM["Greenwich",0,AUTHORITY["EPSG","8901"]],UNIT["degree",0.0174532925199433,AUTHORITY["EPSG","9122"]],'
+    'AXIS["Latitude",NORTH],AXIS["Longitude",EAST],AUTHORITY["EPSG","4326"]]'
+)
+
+
+def test_autzen_is_in_feet_by_its_wkt_and_by_its_geotiff_keys_alone(autzen_path):
+    hdr = read_las_header(autzen_path)
+    said = {"horizontal": FOOT, "vertical": FOOT, "vertical_assumed": True}  # its WKT names no vertical CRS: heights as x and y
+    assert hdr.crs().startswith('PROJCS["NAD_1983_HARN_Lambert_Conformal_Conic"') and 'UNIT["foot",0.3048' in hdr.crs()
+    assert crs_units(hdr.crs()) == said
+    keys = geokeys(hdr.vlrs)
+    assert keys[3076] == 9002 and 4099 not in keys  # ProjLinearUnitsGeoKey: foot; no VerticalUnitsGeoKey
+    assert crs_units(None, keys) == crs_units("EPSG:2992", keys) == said
+    assert files_units([autzen_path]) == said
+
+
+def test_a_compound_crs_gives_its_vertical_parts_unit():
+    copc = gp.open(DATA / "autzen_clip_native.copc.laz")  # PDAL's COPC of autzen: WKT1 COMPD_CS, metres and US survey feet
+    assert copc.meta["crs"].startswith('COMPD_CS["NAD83 / Oregon LCC (m) + NAVD88 height (ftUS)"')
+    us_foot = {"name": "US survey foot", "symbol": "US ft", "metres": US_FOOT}
+    assert crs_units(copc.meta["crs"]) == {"horizontal": METRE, "vertical": us_foot, "vertical_assumed": False}
+    assert crs_units(UTM10_NAVD88_FTUS) == {"horizontal": METRE, "vertical": us_foot, "vertical_assumed": False}  # WKT2
+    ftus = crs_units(WASHINGTON_SOUTH_FTUS)  # WKT2: each axis's unit, not the base CRS's degrees
+    assert ftus["horizontal"] == us_foot and ftus["vertical_assumed"]
+
+
+def test_metres_of_real_ept_and_geographic_crss_in_degrees():
+    mercator = json.loads((DATA / "ellipsoid-binary-2k" / "ept.json").read_text())["srs"]["wkt"]
+    assert crs_units(mercator) == {"horizontal": METRE, "vertical": METRE, "vertical_assumed": True}
+    degree = {"name": "degree", "symbol": "°", "metres": None}
+    assert crs_units(WGS84_WKT1) == {"horizontal": degree, "vertical": None, "vertical_assumed": False}  # heights: not said
+    assert crs_units(WGS84_3D) == {"horizontal": degree, "vertical": METRE, "vertical_assumed": False}
+    assert crs_units(None, {1024: 2, 2048: 4326}) == {"horizontal": degree, "vertical": None, "vertical_assumed": False}
+    assert crs_units(None, {1024: 1, 3072: 32610, 3076: 9001, 4099: 9003})["vertical"]["symbol"] == "US ft"
+
+
+@pytest.mark.parametrize("crs", [None, "", "EPSG:2992", "+proj=geocent +R=1000 +units=m +no_defs", 'PROJCS["cut off', "LOCAL_CS[]"])
+def test_units_unknown(crs):
+    assert crs_units(crs) == UNKNOWN
+    assert crs_units(crs, {1024: 1, 3072: 32767, 3076: 9036}) == UNKNOWN  # a unit code not known here
+
