@@ -265,6 +265,43 @@ def test_measure_lists_the_lengths_between_clicked_points(page, server):
     assert session.measure == []
 
 
+def test_measure_in_feet_says_so_and_survives_a_lost_connection(browser, autzen_path):
+    """autzen_trim.laz is in feet: the HUD writes "ft" by each number and the totals in metres
+    too; after the connection drops, the page's new session has the measurement again."""
+    srv = ViewerServer(gigapoint.open(autzen_path)).start()
+    ctx = browser.new_context(viewport=VIEWPORT)
+    pg = ctx.new_page()
+    try:
+        pg.goto(srv.url)
+        n = wait_full_frame(pg, 0)
+        pg.get_by_role("button", name="top").click()
+        pg.wait_for_function("() => window.gigapoint.camera.pitch > 89", timeout=30_000)
+        wait_full_frame(pg, n)
+        b = canvas_box(pg)
+        pg.locator("#canvas").focus()
+        pg.keyboard.press("m")
+        for k, (fx, fy) in enumerate([(0.45, 0.5), (0.6, 0.4)], start=1):  # two points of the town, seen from above
+            pg.mouse.click(b["x"] + b["width"] * fx, b["y"] + b["height"] * fy)
+            pg.wait_for_function("(k) => document.getElementById('measureinfo').dataset.points === String(k)", arg=k, timeout=30_000)
+        (session,) = srv.core.sessions.values()
+        p, q = np.array(session.measure)
+        d = q - p
+        text = pg.locator("#measureinfo").inner_text()  # the file's 0.01 ft grid: 2 decimals
+        length, across = np.linalg.norm(d), np.hypot(d[0], d[1])
+        assert "units: ft (heights taken as ft: the CRS names no vertical unit)" in text, text
+        assert f"1: {length:.2f} ft   horizontal {across:.2f} ft   height {d[2]:+.2f} ft" in text, text
+        assert f"total {length:.2f} ft ({length * 0.3048:.2f} m)   horizontal {across:.2f} ft ({across * 0.3048:.2f} m)" in text, text
+        pg.evaluate("() => window.gigapoint.ws.close()")  # the connection drops: the page connects again
+        pg.wait_for_function("(old) => window.gigapoint.session && window.gigapoint.session !== old", arg=session.id, timeout=30_000)
+        pg.wait_for_function("() => document.getElementById('measureinfo').dataset.points === '2'", timeout=30_000)
+        (again,) = srv.core.sessions.values()
+        assert again is not session and again.measure == [p.tolist(), q.tolist()]
+        assert pg.locator("#measureinfo").inner_text() == text
+    finally:
+        ctx.close()
+        srv.close()
+
+
 def test_keyboard_fly_moves_the_camera(page):
     before = camera(page)
     page.locator("#canvas").focus()

@@ -1,8 +1,10 @@
-"""The length units of a cloud's CRS (io.crs_units), from real WKT strings and LAS GeoTIFF keys."""
+"""The length units of a cloud's CRS (io.crs_units), from real WKT strings and LAS GeoTIFF keys:
+what the viewer's measuring tool says its numbers are in."""
 
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -10,6 +12,7 @@ import pytest
 import gigapoint as gp
 from gigapoint.io import crs_units, files_units
 from gigapoint.io.las import geokeys, read_las_header
+from gigapoint.viewer import measure as M
 
 DATA = Path(__file__).parent / "data" / "pdal_ept"
 US_FOOT = 0.304800609601219  # as EPSG's WKT writes it (1200 / 3937)
@@ -97,3 +100,12 @@ def test_units_unknown(crs):
     assert crs_units(crs) == UNKNOWN
     assert crs_units(crs, {1024: 1, 3072: 32767, 3076: 9036}) == UNKNOWN  # a unit code not known here
 
+
+def test_measured_lengths_in_the_crs_units():
+    us_foot = crs_units(UTM10_NAVD88_FTUS)
+    s = M.summary([[0, 0, 0], [30, 40, 10 / US_FOOT]], us_foot)  # 50 m across, 10 m up (in US feet)
+    assert s["units"] == us_foot
+    assert s["total"]["horizontal"] == 50.0 and math.isclose(s["total"]["length"], math.hypot(50, 10), rel_tol=1e-12)
+    assert math.isclose(s["total"]["vertical"], 32.80833333, rel_tol=1e-9)  # heights stay in their own unit
+    s = M.summary([[-123.0, 45.0, 10.0], [-123.001, 45.0, 12.0]], crs_units(WGS84_3D))
+    assert s["segments"] == [{"length": None, "horizontal": None, "vertical": 2.0}]  # degrees are no length

@@ -77,6 +77,7 @@ def test_measuring_two_picked_points_gives_their_lengths(client):
         assert m["points"] == [A.tolist(), B.tolist()]
         assert m["segments"] == [{"length": math.sqrt(2725.0), "horizontal": 50.0, "vertical": 15.0}]
         assert m["total"] == {"length": math.sqrt(2725.0), "horizontal": 50.0, "vertical": 15.0}
+        assert m["units"] == hello["cloud"]["units"] == {"horizontal": None, "vertical": None, "vertical_assumed": False}  # arrays: no CRS
         ws.send_json({"type": "measure", "action": "add", "x": 0.01, "y": 0.99})  # empty sky
         sky = receive(ws, reply("measure"))
         assert sky["added"] is False and sky["message"] == "no point here: nothing added" and len(sky["points"]) == 2
@@ -85,9 +86,59 @@ def test_measuring_two_picked_points_gives_their_lengths(client):
         ws.send_json({"type": "measure", "action": "clear"})
         assert receive(ws, reply("measure"))["points"] == []
         ws.send_json({"type": "measure", "action": "erase"})
-        assert receive(ws, reply("error"))["message"] == "measure: action must be add, undo or clear, got 'erase'"
+        assert receive(ws, reply("error"))["message"] == "measure: action must be add, restore, undo or clear, got 'erase'"
         ws.send_json({"type": "measure", "action": "add", "x": 2})
         assert receive(ws, reply("error"))["message"] == "measure: x must be in [0, 1], got 2"
+
+
+def test_a_measurement_in_feet_says_so(autzen_path):
+    """A LAS file's CRS in feet: hello's cloud and each measure reply name the unit (the HUD's)."""
+    from starlette.testclient import TestClient
+
+    core = ViewerCore(gigapoint.open(autzen_path), gigapoint.RenderSettings(point_size=3))
+    feet = {"horizontal": {"name": "foot", "symbol": "ft", "metres": 0.3048}, "vertical": {"name": "foot", "symbol": "ft", "metres": 0.3048}, "vertical_assumed": True}
+    try:
+        with TestClient(create_app(core)) as c, c.websocket_connect("/ws?w=160&h=120") as ws:
+            assert receive(ws, reply("hello"))["cloud"]["units"] == feet
+            ws.send_json({"type": "view", "name": "top", "seq": 1})
+            receive(ws, full_frame(1))
+            ws.send_json({"type": "measure", "action": "add", "x": 0.5, "y": 0.5})  # the middle of the town, seen from above
+            m = receive(ws, reply("measure"))
+            assert m["added"] and m["units"] == feet
+            p = m["points"][0]
+            ws.send_json({"type": "measure", "action": "restore", "points": [[p[0] + 300, p[1] + 400, p[2] - 12]]})
+            m = receive(ws, reply("measure"))
+            assert m["units"] == feet and m["total"]["horizontal"] == pytest.approx(500.0) and m["total"]["vertical"] == pytest.approx(-12.0)
+    finally:
+        core.close_all()
+
+
+def test_a_reconnected_page_gets_its_measurement_back(client):
+    """The page re-sends its points after a lost connection (viewer.js, hello): the new session
+    draws and measures them as the old one did."""
+    c, core = client
+    with c.websocket_connect("/ws?w=240&h=180") as ws:
+        hello = receive(ws, reply("hello"))
+        ws.send_json({"type": "view", "name": "top", "seq": 1})
+        receive(ws, full_frame(1))
+        cam = core.sessions[hello["session"]].last.camera
+        measure_at(ws, cam, A)
+        before = measure_at(ws, cam, B)
+    with c.websocket_connect("/ws?w=240&h=180") as ws:  # a new session: it measures nothing yet
+        hello = receive(ws, reply("hello"))
+        session = core.sessions[hello["session"]]
+        assert session.measure == []
+        ws.send_json({"type": "measure", "action": "restore", "points": before["points"], "seq": 2})
+        after = receive(ws, reply("measure"))
+        assert after["points"] == [A.tolist(), B.tolist()] and after["segments"] == before["segments"] and after["total"] == before["total"]
+        _, jpeg = receive(ws, full_frame(2))
+        cam = session.last.camera
+        assert yellow(jpeg_pixels(jpeg), (screen(cam, A) + screen(cam, B)) / 2)  # drawn again
+        ws.send_json({"type": "measure", "action": "restore", "points": [[1, 2]]})
+        assert receive(ws, reply("error"))["message"] == "measure: point must be a list of three numbers"
+        ws.send_json({"type": "measure", "action": "restore", "points": [[0, 0, 0]] * M.MAX_POINTS})
+        assert receive(ws, reply("error"))["message"] == f"measure: points must be a list of at most {M.MAX_POINTS} points in all"
+        assert session.measure == [A.tolist(), B.tolist()]  # a refused restore adds nothing
 
 
 def yellow(img, xy) -> bool:

@@ -12,22 +12,37 @@ import math
 
 import numpy as np
 
+from ..io import crs_units
+
 MAX_POINTS = 1000
 COLOR = (255, 214, 0)  # yellow, with a black edge so it reads on any ground
 LINE_RADIUS = 1  # pixels either side of a segment's centre: 3 px wide
 POINT_RADIUS = 3  # a point is a 7 x 7 square
 
 
-def summary(points) -> dict:
+def summary(points, units: dict | None = None) -> dict:
     """The lengths of the polyline through ``points``: per segment its 3D length, its
     horizontal (xy) length and its height difference (z, signed: up is positive); the total
-    of each (the total height difference is the last point's z minus the first's)."""
+    of each (the total height difference is the last point's z minus the first's).
+
+    ``units`` (crs_units of the cloud's CRS, carried in the reply): heights in another length
+    unit than x and y (a compound CRS: metres, heights in US feet) count in the 3D length in
+    the horizontal unit; where x and y are angles (a geographic CRS) the 3D and horizontal
+    lengths are None: degrees are no length."""
+    units = units or crs_units(None)
+    h, v = units["horizontal"], units["vertical"]
     p = np.asarray(points, np.float64).reshape(-1, 3)
     d = np.diff(p, axis=0)
-    length, horizontal, vertical = np.linalg.norm(d, axis=1), np.hypot(d[:, 0], d[:, 1]), d[:, 2]
-    segments = [{"length": float(a), "horizontal": float(b), "vertical": float(c)} for a, b, c in zip(length, horizontal, vertical)]
-    total = {"length": float(length.sum()), "horizontal": float(horizontal.sum()), "vertical": float(vertical.sum())}
-    return {"points": p.tolist(), "segments": segments, "total": total}
+    z_in_xy_unit = v["metres"] / h["metres"] if h and v and h["metres"] and v["metres"] else 1.0
+    horizontal, vertical = np.hypot(d[:, 0], d[:, 1]), d[:, 2]
+    length = np.hypot(horizontal, vertical * z_in_xy_unit)
+    angular = h is not None and h["metres"] is None
+
+    def lengths(a, b, c) -> dict:
+        return {"length": None if angular else float(a), "horizontal": None if angular else float(b), "vertical": float(c)}
+
+    segments = [lengths(a, b, c) for a, b, c in zip(length, horizontal, vertical)]
+    return {"points": p.tolist(), "segments": segments, "total": lengths(length.sum(), horizontal.sum(), vertical.sum()), "units": units}
 
 
 def _clip_depth(a: np.ndarray, b: np.ndarray):

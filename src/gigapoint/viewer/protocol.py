@@ -4,6 +4,8 @@ Client -> server: JSON text messages ``{"type": ..., ...}`` (at most MAX_MESSAGE
 Server -> client: JSON text messages (hello, settings, pick, measure, error, pong) and binary frames:
 ``b"GPF1" + u32 little-endian header length + JSON header + JPEG bytes``; a frame's header
 has ``cloud`` (hello's cloud line) again when that changed since the tab last got it.
+Hello's ``cloud`` (ViewerCore.cloud_info): name, points, batches, bounds, attributes,
+load_progress, and units: the length units of its CRS, what measured lengths are in (see "measure").
 
 Every check here raises ProtocolError with a one-line message; the server answers it with
 ``{"type": "error", "message": ...}`` and keeps the connection.
@@ -97,10 +99,15 @@ MESSAGE_TYPES = {
     "reset",
     "fov",  # value (degrees)
     "pick",  # x, y (0..1), pivot (bool), id (echoed)
-    # action: add (x, y: the point picked there joins the measurement) | undo (drops the last) |
+    # action: add (x, y: the point picked there joins the measurement) | restore (points: world
+    # [x, y, z] lists appended: what a page that reconnected had measured) | undo (drops the last) |
     # clear; id echoed. Reply {"type": "measure", "id", "added", "points", "segments": [{length,
-    # horizontal, vertical}], "total": {the same, summed}} in the cloud's units (viewer/measure.py);
-    # a click on no point adds nothing: added false and a "message". Frames draw the polyline.
+    # horizontal, vertical}], "total": {the same, summed}, "units"} in the cloud's units, which
+    # "units" names (as hello's cloud: io.crs_units, {"horizontal": U, "vertical": U,
+    # "vertical_assumed"}, U {name, symbol, metres} or null: unknown; a geographic CRS's horizontal
+    # U has metres null and length and horizontal are null: degrees are no length); the 3D length
+    # counts heights in the horizontal unit (viewer/measure.py). A click on no point adds nothing:
+    # added false and a "message". Frames draw the polyline.
     "measure",
     "settings",  # values: {field: value}
     "quality",  # adaptive (bool), jpeg_quality (int)

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..core.layout import EMPTY_PIXEL
 from ..errors import GigapointError, warn, warnings_kept
+from ..io import crs_units, files_units
 from ..render.camera import sample_points
 from ..render.frame import Frame, encode_image
 from ..render.renderer import render_frame
@@ -58,6 +59,19 @@ def cloud_bytes(cloud) -> int:
     from ..core import PointCloud
 
     return cloud.nbytes if isinstance(cloud, PointCloud) else 0
+
+
+def cloud_units(cloud) -> dict:
+    """io.crs_units of the cloud's CRS: an octree's metadata names it (COPC, EPT, converted), a
+    cloud read from LAS/LAZ files their headers; unknown for any other (arrays, a live stream)."""
+    from ..core.renderable import PointSource
+    from ..lod.store import OctreeCloud
+
+    if isinstance(cloud, OctreeCloud):
+        return crs_units(cloud.meta.get("crs"))
+    if isinstance(cloud, PointSource):  # a plain cloud, a progressive octree: the files it was read from
+        return files_units(cloud.source_files)
+    return crs_units(None)
 
 
 def view_frame(cloud, camera, settings) -> Frame:
@@ -192,6 +206,7 @@ class ViewerCore:
         lo, hi = cloud.bounds
         self.bounds = (np.asarray(lo, np.float64), np.asarray(hi, np.float64))
         self.framing = sample_points(cloud)  # what the 'auto' view frames: the data, not its box
+        self.units = cloud_units(cloud)  # its CRS's: what measured lengths are in (read once: a file's header)
         self.watcher = None
         self.note = ""  # a line for the HUD (what a conversion preview shows)
         self.push_token: str | None = None  # a live cloud's: the key of the /push WebSocket
@@ -218,6 +233,7 @@ class ViewerCore:
     def replace_cloud(self, cloud) -> None:
         """Draw ``cloud`` from now on (a newer preview, or the finished octree); every tab redraws, views stay."""
         self.framing = sample_points(cloud)  # before it is drawn: no frame reads its buffers yet
+        self.units = cloud_units(cloud)
         self.cloud = cloud
         self.redraw()
 
@@ -239,6 +255,7 @@ class ViewerCore:
             # (an octree read node by node, Potree, COPC, EPT, has none in ``attributes`` before its nodes are read)
             "attributes": sorted(self.cloud.attribute_names),
             "load_progress": float(self.cloud.load_progress),
+            "units": self.units,
         }
 
     def open_session(self, send, width: int = 1280, height: int = 720) -> Session:
@@ -393,7 +410,7 @@ class Session:
             elif kind == "measure":
                 reply = self._measure(msg)
                 if reply is None:
-                    return {"type": "measure", "id": msg.get("id"), "added": False, "message": "no point here: nothing added", **M.summary(self.measure)}
+                    return {"type": "measure", "id": msg.get("id"), "added": False, "message": "no point here: nothing added", **M.summary(self.measure, self.core.units)}
                 motion = False
             elif kind == "settings":
                 self.settings = P.apply_settings(self.settings, msg.get("values"))
@@ -457,9 +474,14 @@ class Session:
         return {"type": "pick", "id": pick_id, "found": True, "pivot": pivot, "info": P.json_safe(info)}
 
     def _measure(self, msg) -> dict | None:
-        """Apply a measure message (add a picked point, undo the last, clear); None: a click on nothing."""
+        """Apply a measure message (add a picked point, restore points, undo the last, clear); None: a click on nothing."""
         action = msg.get("action")
-        if action == "add":
+        if action == "restore":  # a reconnected page's measurement (world points): the new session had none
+            points = msg.get("points")
+            if not isinstance(points, list) or len(self.measure) + len(points) > M.MAX_POINTS:
+                raise P.ProtocolError(f"measure: points must be a list of at most {M.MAX_POINTS} points in all")
+            self.measure = self.measure + [P.vec3({"type": "measure", "point": p}, "point") for p in points]
+        elif action == "add":
             if len(self.measure) >= M.MAX_POINTS:
                 raise P.ProtocolError(f"measure: at most {M.MAX_POINTS} points; clear the measurement first")
             hit = self._hit(P.number(msg, "x", 0, 1), P.number(msg, "y", 0, 1))
@@ -472,8 +494,8 @@ class Session:
         elif action == "clear":
             self.measure = []
         else:
-            raise P.ProtocolError(f"measure: action must be add, undo or clear, got {str(action)[:20]!r}")
-        return {"type": "measure", "id": msg.get("id"), "added": action == "add", **M.summary(self.measure)}
+            raise P.ProtocolError(f"measure: action must be add, restore, undo or clear, got {str(action)[:20]!r}")
+        return {"type": "measure", "id": msg.get("id"), "added": action == "add", **M.summary(self.measure, self.core.units)}
 
     # --- the worker ----------------------------------------------------------------------
     def _next_job(self):

@@ -16,7 +16,7 @@
   const S = {
     ws: null, session: null, cloud: null, schema: [], settings: {}, camera: null,
     seq: 0, sentAt: new Map(), lastFrame: 0, frameTimes: [], fps: null, latency: null, renderTimes: [],
-    header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0, measuring: false,
+    header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0, measuring: false, measure: [],
     pending: { orbit: null, look: null, pan: null, zoom: null }, retry: 0,
   };
   window.gigapoint = S; // for tests and the curious
@@ -88,13 +88,13 @@
     if (m.type === "hello") {
       // a reconnect to the same cloud (the server restarted, the network dropped) keeps this tab's view and settings
       const same = S.cloud && S.cloud.name === m.cloud.name && JSON.stringify(S.cloud.bounds) === JSON.stringify(m.cloud.bounds);
-      const kept = same && S.camera ? { camera: S.camera, settings: S.settings } : null;
+      const kept = same && S.camera ? { camera: S.camera, settings: S.settings, measure: S.measure } : null;
       drawing = 0;  // the new session numbers its frames from 1: the old count dropped them all
       S.session = m.session; S.schema = m.schema; S.settings = m.settings; S.camera = m.camera;
       const b = m.cloud.bounds;
       S.sceneRadius = Math.hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]) / 2 || 1;
       showCloud(m.cloud);
-      showMeasure({ points: [], segments: [] });  // a new session measures nothing yet
+      showMeasure({ points: [], segments: [] });  // a new session measures nothing yet (a reconnect's points are sent back below)
       buildSettings();
       updateSpeedLabel();
       setFov(m.camera.fov, false);
@@ -106,6 +106,8 @@
         send({ type: "camera", ...kept.camera }, true);
         const changed = Object.fromEntries(Object.entries(kept.settings).filter(([k, v]) => JSON.stringify(v) !== JSON.stringify(m.settings[k])));
         if (Object.keys(changed).length) send({ type: "settings", values: changed }, true);
+        // the measurement too, in world coordinates; 100 points a message stays under the message limit
+        for (let i = 0; i < kept.measure.length; i += 100) send({ type: "measure", action: "restore", points: kept.measure.slice(i, i + 100) }, true);
       }
     } else if (m.type === "settings") {
       S.settings = m.values;
@@ -280,7 +282,7 @@
 
   // ---------------------------------------------------------------- measuring (the server draws the polyline into the frames)
   function setMeasuring(on) {
-    if (S.measuring && !on) send({ type: "measure", action: "clear" }, true);
+    if (S.measuring && !on) { send({ type: "measure", action: "clear" }, true); S.measure = []; }  // (its reply is not shown)
     S.measuring = on;
     $("btn-measure").classList.toggle("active", on);
     canvas.classList.toggle("measuring", on);
@@ -288,14 +290,33 @@
     if (on) showMeasure({ points: [], segments: [] });
   }
 
+  // the units of the measured numbers (io.crs_units of the cloud's CRS, in the reply and hello's cloud): a line saying them
+  function unitsLine(u) {
+    const h = u.horizontal, v = u.vertical;
+    const heights = v ? `heights in ${v.symbol}` : "heights in unknown units";
+    if (!h) return v ? `x, y in unknown units (no 3D or horizontal unit); ${heights}` : "units unknown (the cloud names no CRS unit)";
+    if (h.metres == null) return `x, y in ${h.name}s (a geographic CRS): no 3D or horizontal length; ${heights}`;
+    if (u.vertical_assumed) return `units: ${h.symbol} (heights taken as ${h.symbol}: the CRS names no vertical unit)`;
+    return v.symbol === h.symbol ? `units: ${h.symbol}` : `units: ${h.symbol}, ${heights} (the 3D length in ${h.symbol})`;
+  }
+
   function showMeasure(m) {
     if (!S.measuring) return;  // the reply to the clear that ended it
+    S.measure = m.points;  // kept for a reconnect: its new session gets them back
+    const u = m.units || (S.cloud && S.cloud.units) || {};
+    const h = u.horizontal && u.horizontal.metres != null ? u.horizontal : null, v = u.vertical;  // (degrees: no length unit)
     // lengths to the decimals of the positions (a file's points come at its scale: 0.01 m -> 2), 2 to 3
-    const dec = Math.max(2, Math.min(3, ...m.points.flat().map((v) => (String(v).split(".")[1] || "").length)));
-    const f = (v) => v.toFixed(dec), dz = (v) => (v >= 0 ? "+" : "") + f(v);
-    const lines = ["measure (the cloud's units): 3D, horizontal, height"];
-    m.segments.forEach((s, i) => lines.push(`${i + 1}: ${f(s.length)}   horizontal ${f(s.horizontal)}   height ${dz(s.vertical)}`));
-    if (m.segments.length) lines.push(`total ${f(m.total.length)}   horizontal ${f(m.total.horizontal)}   height ${dz(m.total.vertical)}`);
+    const dec = Math.max(2, Math.min(3, ...m.points.flat().map((x) => (String(x).split(".")[1] || "").length)));
+    // a number with its unit ("—": not a length, degrees); in metres too where asked and its unit is another (a surveyor's metric plans)
+    const f = (x, unit, metric = false, sign = "") => {
+      if (x == null) return "—";
+      const shown = `${sign}${x.toFixed(dec)}${unit ? " " + unit.symbol : ""}`;
+      return metric && unit && unit.metres !== 1 ? `${shown} (${sign}${(x * unit.metres).toFixed(dec)} m)` : shown;
+    };
+    const dz = (x, metric) => f(x, v, metric, x >= 0 ? "+" : "");
+    const lines = ["measure: 3D, horizontal, height", unitsLine(u)];
+    m.segments.forEach((s, i) => lines.push(`${i + 1}: ${f(s.length, h)}   horizontal ${f(s.horizontal, h)}   height ${dz(s.vertical)}`));
+    if (m.segments.length) lines.push(`total ${f(m.total.length, h, true)}   horizontal ${f(m.total.horizontal, h, true)}   height ${dz(m.total.vertical, true)}`);
     if (m.points.length < 2) lines.push(m.points.length ? "1 point: click the next" : "click a point to start");
     if (m.message) lines.push(m.message);  // a click on empty sky
     lines.push("Backspace removes the last point · Esc or M ends");
