@@ -9,8 +9,22 @@ choose_threading_layer()  # before any kernel runs: TBB from its wheel, else Ope
 from . import backends as _backends  # noqa: F401  (registers the cpu and wgpu backends with render)
 from .core import PointChunk, PointCloud, from_arrays
 from .errors import GigapointError, GigapointWarning
+from .io import registry as _registry
 from .io.demo import demo_arrays
 from .render import Camera, Frame, RenderSettings, RenderStats, render, render_frame
+
+
+def _is_octree(path) -> bool:
+    """lod's test of an octree, for io's folder walks (io cannot import lod). Registered here,
+    as every import of gigapoint runs this first: registered by lod/reader.py, a walk before
+    anything imported gigapoint.lod (``render --recursive``, ``io.expand_paths``) read a
+    conversion's .npy arrays beside the tiles as points. lod is imported on the first test."""
+    from .lod.reader import is_lod_source
+
+    return is_lod_source(path)
+
+
+_registry.register_dataset_folder(_is_octree)
 
 __version__ = "0.1.0"
 

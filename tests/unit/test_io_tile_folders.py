@@ -196,6 +196,29 @@ def test_recursive_is_an_option_of_render_view_and_convert(tmp_path, cli, monkey
         gp.convert(gp.open(city / "south"), tmp_path / "oct3", recursive=True)
 
 
+def test_recursive_leaves_out_an_octree_beside_the_tiles_whatever_was_imported_first(tmp_path):
+    """A conversion's output beside its tiles was left out of a recursive read only once
+    gigapoint.lod was imported (lod/reader.py registered its octree test then): ``render
+    --recursive`` and io.with_subfolders read its .npy arrays as points. In a fresh process."""
+    import os
+    import subprocess
+    import sys
+
+    city = city_of_subfolders(tmp_path)
+    gp.convert(city / "south", city / "octree")
+    read = (
+        "import sys; from pathlib import Path; from gigapoint.io import with_subfolders; "
+        "assert 'gigapoint.lod' not in sys.modules; city = Path(sys.argv[1]); "
+        "print(*[f.relative_to(city).as_posix() for f in with_subfolders([city])])"
+    )
+    src = str(Path(gp.__file__).parents[1])
+    done = subprocess.run([sys.executable, "-c", read, city], capture_output=True, text=True, env={**os.environ, "PYTHONPATH": src})
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == "north/tile_00_00.las north/tile_00_01.las south/tile_00_00.las\n"
+    skipped = [line.split(" GigapointWarning: ")[1] for line in done.stderr.splitlines() if " GigapointWarning: " in line]
+    assert skipped == [f"{city / o}: an octree, not read with the point files around it (open it alone)" for o in ("ept", "octree")]
+
+
 def test_a_folder_with_its_own_tiles_and_subfolders_of_tiles_warns_once_that_they_are_not_read(tmp_path, cli):
     """Tiles beside raw/ and classified/ copies of them: only the folder's own are read (the
     copies would double every point), but the subfolders were passed over without a word."""

@@ -32,8 +32,8 @@ def is_supported_name(path: Path | str) -> bool:
     return any(name.endswith(s) for s in supported_suffixes())
 
 
-#: tests of a folder that is one dataset, not a folder of tiles (an octree: lod/reader.py registers
-#: its own, as io cannot import lod); a folder walk (``--recursive``) leaves such subfolders out
+#: tests of a folder that is one dataset, not a folder of tiles (an octree: gigapoint/__init__.py
+#: registers lod's, as io cannot import lod); a folder walk (``--recursive``) leaves such subfolders out
 _DATASET_FOLDERS: list[Callable[[Path], bool]] = []
 
 

@@ -13,7 +13,6 @@ import numpy as np
 from ..core.cloud import PointCloud
 from ..errors import InputError
 from ..io.http import HttpNotFound, as_url, shown_url
-from ..io.registry import register_dataset_folder
 from .compact_octree import read_compact
 from .copc import copc_file_kind, open_copc
 from .ept import ept_location, open_ept
@@ -51,9 +50,6 @@ def lod_source_kind(path) -> str | None:
 def is_lod_source(path) -> bool:
     """Opens as one octree (``open_octree``): an octree folder, a COPC file, an EPT dataset, a URL."""
     return lod_source_kind(path) is not None
-
-
-register_dataset_folder(is_lod_source)  # (an octree below a folder of tiles is not read as tiles)
 
 
 def refuse_octrees(paths, why: str) -> None:
