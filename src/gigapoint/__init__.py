@@ -119,6 +119,9 @@ def open(*paths, progressive: bool = False, **options):
     would be read twice); ``recursive=True`` reads every point file below it, depth first in name
     order (hidden folders and octrees left out).
 
+    A glob pattern (``"tiles/*.laz"``, ``"city/**/*.laz"`` at any depth) stands for the files and
+    folders it matches, in name order (``io.pattern_matches``); a file of that very name is read as itself.
+
     Paths may also come as one list or tuple: ``gp.open([a, b])`` is ``gp.open(a, b)``."""
     from .errors import InputError, check_switch
     from .lod.reader import refuse_octrees

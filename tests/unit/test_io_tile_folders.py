@@ -11,6 +11,7 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.errors import GigapointWarning
+from gigapoint.io import READ_SUBFOLDERS
 
 laspy = pytest.importorskip("laspy")
 
@@ -169,13 +170,71 @@ def test_a_folder_of_subfolders_of_tiles_names_them_and_recursive_reads_every_ti
     assert [f.relative_to(city).as_posix() for f in cloud.source_files] == ["north/tile_00_00.las", "north/tile_00_01.las", "south/tile_00_00.las"]
     rc, out, _ = cli("info", "--recursive", "--json", city)
     assert rc == 0 and [json.loads(line)["path"] for line in out.splitlines()] == [str(f) for f in cloud.source_files]
-    assert gp.open(city / "north", city / "south").n_points == 150  # the shell's city/*/ (no glob of gigapoint's own)
+    assert gp.open(city / "north", city / "south").n_points == 150  # the shell's city/*/
     with pytest.raises(InputError, match=r"^open: recursive must be True or False, got 'yes'$"):
         gp.open(city, recursive="yes")
     for name in "abc":
         write_tiles(city / name, 1, suffix=".las")
     with pytest.raises(EmptyCloudError, match=r": holds no point cloud file, but its subfolders a, b, c and 2 more do: "):
         gp.open(city)
+
+
+def test_a_quoted_glob_pattern_reads_the_files_it_matches_in_name_order(tmp_path, cli):
+    """gigapoint view "tiles/*.laz" (quoted: Windows' shells, scripts, Makefiles) and
+    gp.open("tiles/*.laz") said "no such file": no shell had expanded the pattern."""
+    from gigapoint.errors import InputError
+    from gigapoint.io import expand_paths
+
+    tiles = tmp_path / "tiles"
+    write_tiles(tiles, 3)
+    write_tiles(tiles / "sub" / "deeper", 1, points=20, suffix=".las")
+    write_tiles(tiles / "sub", 2, points=10, suffix=".las")
+    (tiles / "tile_00_00.laz").rename(tiles / "scan[1].laz")  # a real file named with glob characters
+    write_tiles(tmp_path / "other", 1, points=7)[0].rename(tiles / "scan1.laz")  # what scan[1].laz matches as a pattern
+
+    def names(cloud):
+        return [f.relative_to(tiles).as_posix() for f in cloud.source_files]
+
+    cloud = gp.open(str(tiles / "*.laz"))
+    assert names(cloud) == ["scan1.laz", "scan[1].laz", "tile_00_01.laz", "tile_00_02.laz"] and cloud.n_points == 157
+    assert names(gp.open(tiles / "scan[1].laz")) == ["scan[1].laz"]  # the file of that name, not scan1.laz
+    assert names(gp.open(str(tiles / "scan?.laz"))) == ["scan1.laz"]
+    cloud = gp.open(str(tiles / "**" / "*.las"))  # ** : any depth of folders, none included
+    assert names(cloud) == ["sub/deeper/tile_00_00.las", "sub/tile_00_00.las", "sub/tile_00_01.las"] and cloud.n_points == 40
+    assert cloud.name == "3 files"
+    missing = tiles / "*.ply"
+    with pytest.raises(InputError) as caught:
+        gp.open(str(missing))
+    assert str(caught.value) == f"{missing}: matches no file"
+    assert cli("info", missing) == (1, "", f"error: {missing}: matches no file\n")
+    rc, out, _ = cli("render", tiles / "t*.laz", "-o", tmp_path / "x.png", "-W", 64, "-H", 48)
+    assert rc == 0 and out == f"wrote {tmp_path / 'x.png'} (64x48, 100 points)\n"
+    assert gp.convert(str(tiles / "sub" / "*.las"), tmp_path / "oct").points == 20
+    with pytest.raises(InputError) as caught:  # a URL is never a pattern (not "matches no file")
+        expand_paths(["ftp://host/tiles/*.laz"])
+    assert str(caught.value) == "ftp://host/tiles/*.laz: only http:// and https:// URLs are read (COPC and EPT octrees)"
+
+
+def test_a_glob_pattern_matching_folders_reads_each_as_a_folder_named(tmp_path, cli):
+    """city/*: north and south read as folders (recursive=True: every file below each); an
+    octree it matches is left out as one below a folder is; a hidden folder is not matched."""
+    city = city_of_subfolders(tmp_path)
+    (city / "north" / "loop").unlink()
+    write_tiles(city / "south" / "deep", 1, points=5, suffix=".las")
+    octree = "an octree, not read with the point files around it (open it alone)"
+    pattern = str(city / "*")
+    with pytest.warns(GigapointWarning) as caught:
+        cloud = gp.open(pattern)
+    assert [f.relative_to(city).as_posix() for f in cloud.source_files] == ["north/tile_00_00.las", "north/tile_00_01.las", "south/tile_00_00.las"]
+    said = [f"{city / 'ept'}: {octree}", f"{city / 'south'}: its subfolders deep hold point files too, not read: {READ_SUBFOLDERS}"]
+    assert [str(w.message) for w in caught] == said
+    with pytest.warns(GigapointWarning) as caught:
+        cloud = gp.open(pattern, recursive=True)
+    assert [f.relative_to(city).as_posix() for f in cloud.source_files] == [
+        "north/tile_00_00.las", "north/tile_00_01.las", "south/tile_00_00.las", "south/deep/tile_00_00.las"]  # fmt: skip
+    assert [str(w.message) for w in caught] == [f"{city / 'ept'}: {octree}"] and cloud.n_points == 155
+    rc, out, err = cli("convert", "-q", "--recursive", pattern, "-o", tmp_path / "oct")
+    assert rc == 0 and out.startswith(f"{tmp_path / 'oct'}: 155 points in ") and err == f"warning: {city / 'ept'}: {octree}\n"
 
 
 def test_recursive_is_an_option_of_render_view_and_convert(tmp_path, cli, monkeypatch):

@@ -16,7 +16,7 @@ from .settings_opts import named_option
 
 @app.command()
 def convert(
-    inputs: list[Path] = typer.Argument(..., readable=False, help="Input files or directories (every supported point cloud file inside, as for render)."),
+    inputs: list[Path] = typer.Argument(..., readable=False, help="Input files or directories (every supported point cloud file inside, as for render). A quoted glob pattern ('tiles/*.laz', 'city/**/*.laz') stands for what it matches."),
     output: Path = typer.Option(
         ..., "-o", "--output", readable=False, help="Output directory (created; resumed when a conversion was interrupted), or the .copc.laz file of --format copc."
     ),

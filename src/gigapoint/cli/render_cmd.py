@@ -161,7 +161,7 @@ def print_stats(stats, console=None, compiled_s: float = 0.0) -> None:
 @app.command()
 @with_settings_options(RenderSettings)
 def render(
-    inputs: Annotated[list[Path], typer.Argument(readable=False, help="Point cloud files, directories or converted octrees (merged into one scene).")],
+    inputs: Annotated[list[Path], typer.Argument(readable=False, help="Point cloud files, directories or converted octrees (merged into one scene). A quoted glob pattern ('tiles/*.laz', 'city/**/*.laz') stands for what it matches.")],
     output: Annotated[Path, typer.Option("-o", "--output", readable=False, help="Image to write (.png, .jpg, .webp, .tif).")],
     settings: RenderSettings,  # one option per RenderSettings field (cli/settings_opts.py)
     width: Annotated[int | None, typer.Option("--width", "-W", help=SIZE_HELP.format("width", 1920))] = None,

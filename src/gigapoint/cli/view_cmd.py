@@ -42,7 +42,7 @@ def _report_load(cloud) -> None:
 
 @app.command("view")
 def view(
-    paths: list[Path] | None = typer.Argument(None, readable=False, help="Point cloud files or directories (several tiles make one scene)."),
+    paths: list[Path] | None = typer.Argument(None, readable=False, help="Point cloud files or directories (several tiles make one scene). A quoted glob pattern ('tiles/*.laz', 'city/**/*.laz') stands for what it matches."),
     demo: int | None = typer.Option(None, "--demo", help="View the procedural demo scene with this many points instead."),
     port: int = typer.Option(0, "--port", help="Port to listen on (0: a free one)."),
     host: str = typer.Option("127.0.0.1", "--host", help="Address to listen on; anything but loopback requires a token in the URL."),

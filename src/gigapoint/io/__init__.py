@@ -12,6 +12,7 @@ that starts with the file's path.
 
 from __future__ import annotations
 
+import glob
 import math
 import os
 import re
@@ -65,6 +66,40 @@ def _local(p) -> Path:
             raise InputError(f"{shown_url(f'{url.group(1)}://{url.group(2)}')}: only http:// and https:// URLs are read (COPC and EPT octrees)")
         p = local if local is not None else Path(p).expanduser()  # "~/scans/a.laz" from Python (a shell expands it)
     return Path(p)
+
+
+#: the characters that make a path a glob pattern: *, ? and [...] (``**``: any depth of folders)
+GLOB_CHARS = re.compile(r"[*?[]")
+
+
+def pattern_matches(p) -> list[Path] | None:
+    """What a glob pattern matches (Python's glob, ``**`` any depth of folders; hidden files left
+    out, as the shell does), in name order; None where ``p`` is no pattern: a path without glob
+    characters, a file or folder of that very name (scan[1].laz), a URL (its ? starts a query).
+    A quoted "tiles/*.laz" (Windows' shells, scripts, Makefiles, Python) was "no such file".
+    A pattern matching nothing is a one-line InputError naming it."""
+    text = os.fspath(p) if isinstance(p, (str, os.PathLike)) else None
+    if text is None or not GLOB_CHARS.search(text) or URL_LIKE.match(text) or Path(os.path.expanduser(text)).exists():
+        return None
+    found = glob.glob(os.path.expanduser(text), recursive=True)
+    if not found:
+        raise InputError(f"{text}: matches no file")
+    return sorted((Path(f) for f in found), key=lambda f: f.parts)
+
+
+def _named(paths: Iterable) -> Iterator[tuple[object, bool]]:
+    """(path, whether a pattern matched it) of each of ``paths``, patterns by their matches."""
+    for p in paths:
+        matches = pattern_matches(p)
+        if matches is None:
+            yield p, False
+        else:
+            yield from ((m, True) for m in matches)
+
+
+def _octree_skipped(octree: Path) -> None:
+    """Say that an octree among point files is not read (once an operation)."""
+    read_once("octree skipped", octree, lambda: warn(f"{octree}: an octree, not read with the point files around it (open it alone)", GigapointWarning))
 
 
 def _listed(folder: Path) -> list[Path]:
@@ -141,16 +176,19 @@ READ_SUBFOLDERS = "read every file below it with --recursive (recursive=True in 
 
 
 def expand_paths(paths: Iterable, recursive: bool = False) -> list[Path]:
-    """Files named (paths, ``file://`` URLs, ``~/...``), with each directory replaced by its
-    supported files sorted by name (``recursive``: also those of its subfolders, depth first, but
-    hidden ones and octrees); a file named twice (or also through its folder) is read once, with
+    """Files named (paths, ``file://`` URLs, ``~/...``, glob patterns: ``pattern_matches``), with
+    each directory replaced by its supported files sorted by name (``recursive``: also those of
+    its subfolders, depth first, but hidden ones and octrees; an octree a pattern matches is left
+    out too); a file named twice (or also through its folder) is read once, with
     a warning: its points were merged twice into one cloud or octree. Subfolders holding point
     files are not read otherwise (a folder's raw/ and classified/ copies of its tiles would be
     read twice): said in the error of a folder with no file of its own, else in a warning."""
     out: list[Path] = []
-    for p in paths:
+    for p, matched in _named(paths):
         p = _local(p)
-        if p.is_dir():  # (once an operation, headers_once: each of its steps expands the paths again; a walk below is not cheap)
+        if matched and p.is_dir() and is_dataset_folder(p):  # ("tiles/*": a conversion's output beside the tiles)
+            _octree_skipped(p)
+        elif p.is_dir():  # (once an operation, headers_once: each of its steps expands the paths again; a walk below is not cheap)
             found, below, octrees = read_once("recursive folder" if recursive else "folder", p, lambda p=p: _folder_files(p, recursive))
             if below and not found:
                 raise fail(p, f"holds no point cloud file, but its subfolders {file_names(below)} do: {READ_SUBFOLDERS} ({p / '*'}/)", EmptyCloudError)
@@ -158,7 +196,7 @@ def expand_paths(paths: Iterable, recursive: bool = False) -> list[Path]:
                 said = f"{p}: its subfolders {file_names(below)} hold point files too, not read: {READ_SUBFOLDERS}"
                 read_once("subfolders", p, lambda said=said: warn(said, GigapointWarning))
             for o in octrees:
-                read_once("octree below", o, lambda o=o: warn(f"{o}: an octree, not read with the point files around it (open it alone)", GigapointWarning))
+                _octree_skipped(o)
             if not found:
                 what = "directory and its subfolders hold" if recursive else "directory holds"
                 raise fail(p, f"{what} no supported point cloud file ({', '.join(supported_suffixes())})", EmptyCloudError)
@@ -186,15 +224,18 @@ def expand_paths(paths: Iterable, recursive: bool = False) -> list[Path]:
 def with_subfolders(paths) -> list:
     """``paths`` with each folder of point files (not an octree) replaced by every point file
     below it (``expand_paths(recursive=True)``): what ``recursive=True`` and ``--recursive`` read;
+    a glob pattern by its matches (an octree among them left out, as ``expand_paths`` does);
     anything else as given (a file, an octree, a URL: its reader says what it is)."""
     out: list = []
-    for p in paths:
+    for p, matched in _named(paths):
         try:
             q = _local(p) if isinstance(p, (str, os.PathLike)) else None
         except InputError:  # (a URL: an octree's, read as one)
             q = None
         if q is not None and q.is_dir() and not is_dataset_folder(q):
             out.extend(expand_paths([q], recursive=True))
+        elif matched and q is not None and q.is_dir():
+            _octree_skipped(q)
         else:
             out.append(p)
     return out
