@@ -125,6 +125,7 @@ def test_an_output_that_is_an_input_or_another_output_is_refused_before_anything
     for inputs, extra, problem in (
         ([pts], ["--index-out", pts], f"{pts}: is one of the inputs; write it elsewhere (it would replace the points being read)"),
         ([pts.parent], ["--depth-out", pts], f"{pts}: is one of the inputs"),  # a point cloud file of a folder named
+        ([pts.parent / "*.npy"], ["--index-out", pts], f"{pts}: is one of the inputs"),  # a file a quoted pattern matches
         ([pts], ["--depth-out", tmp_path / "d.npy", "--index-out", tmp_path / "tiles" / ".." / "d.npy"], "d.npy: named for two outputs"),
     ):
         rc, _, err = cli("render", *inputs, "-o", tmp_path / "a.png", "-W", 32, "-H", 24, "--overwrite", *extra)

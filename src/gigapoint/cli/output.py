@@ -45,9 +45,11 @@ def check_image_fits(path: Path, width: int, height: int) -> None:
 def check_outputs_apart(outputs, inputs) -> None:
     """One-line errors where an output is an input (a file named, or a point cloud file in a
     folder named: ``--index-out pts.npy --overwrite`` replaced the points it drew) or two outputs
-    are one file (the second replaced the first)."""
+    are one file (the second replaced the first). A glob pattern stands for the files it matches."""
+    from ..io import pattern_matches
     from ..io.registry import is_supported_name
 
+    inputs = [m for p in inputs for m in (pattern_matches(p) or [p])]  # ("tiles/*.npy" --index-out tiles/pts.npy)
     given = [Path(o) for o in outputs if o is not None]
     for i, out in enumerate(given):
         if any(out.resolve() == other.resolve() for other in given[:i]):
