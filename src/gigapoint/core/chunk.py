@@ -99,11 +99,12 @@ def attributes_in_common(kept: list[str] | None, chunk_attributes, dropped: set[
     return [a for a in kept if a in names]
 
 
-def warn_dropped_attributes(name: str, dropped) -> None:
-    """Say which attributes files of one scene did not all have (they were left out without a word)."""
+def warn_dropped_attributes(name: str, dropped, parts: str = "files") -> None:
+    """Say which attributes files of one scene (``parts``: the scans of one E57 file) did not all
+    have (they were left out without a word)."""
     if dropped:
         warn(
-            f"{name}: attribute(s) {', '.join(sorted(dropped))} not in every file: left out (only those all the files have are kept)",
+            f"{name}: attribute(s) {', '.join(sorted(dropped))} not in every {parts[:-1]}: left out (only those all the {parts} have are kept)",
             GigapointWarning,
         )
 

@@ -101,12 +101,13 @@ def _load_builtin() -> None:
     if _loaded:
         return
     _loaded = True
+    from .e57 import E57Reader
     from .las import LasReader
     from .numpy_io import NpyReader, NpzReader
     from .ply import PlyReader
     from .text import TextReader
 
     # registered last = tried first; order only matters for suffix ties (there are none)
-    for reader in (TextReader(), NpzReader(), NpyReader(), PlyReader(), LasReader()):
+    for reader in (TextReader(), NpzReader(), NpyReader(), PlyReader(), E57Reader(), LasReader()):
         if not any(type(r) is type(reader) for r in _READERS):
             _READERS.append(reader)
