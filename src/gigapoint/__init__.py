@@ -104,7 +104,7 @@ def _flat_paths(paths) -> tuple:
 
 
 def open(*paths, progressive: bool = False, **options):
-    """Read one or more files or directories (LAS/LAZ/PLY/XYZ/XYZRGB/TXT/CSV/PTS/ASC/NPY/NPZ) into one PointCloud.
+    """Read one or more files or directories (LAS/LAZ/PLY/E57/XYZ/XYZRGB/TXT/CSV/PTS/ASC/NPY/NPZ) into one PointCloud.
 
     One octree opens as an OctreeCloud drawn level of detail: a converted directory (gigapoint
     or Potree 2.0), a COPC file (``.copc.laz``, told by its COPC info VLR) or an EPT dataset

@@ -57,7 +57,7 @@ class App(typer.Typer):
 
 app = App(
     name="gigapoint",
-    help="Render massive point clouds fast: LAS/LAZ/PLY/XYZ/NPY to images, octrees and a browser viewer.",
+    help="Render massive point clouds fast: LAS/LAZ/PLY/E57/XYZ/NPY to images, octrees and a browser viewer.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,

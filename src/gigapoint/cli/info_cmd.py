@@ -18,7 +18,7 @@ FOLDER_LISTED = 10
 @app.command()
 def info(
     files: list[Path] = typer.Argument(
-        ..., readable=False, help="Point cloud files (LAS/LAZ/PLY/XYZ/XYZRGB/TXT/CSV/PTS/ASC/NPY/NPZ), directories, octrees, COPC/EPT files or URLs. A quoted glob pattern ('tiles/*.laz', 'city/**/*.laz') stands for what it matches."
+        ..., readable=False, help="Point cloud files (LAS/LAZ/PLY/E57/XYZ/XYZRGB/TXT/CSV/PTS/ASC/NPY/NPZ), directories, octrees, COPC/EPT files or URLs. A quoted glob pattern ('tiles/*.laz', 'city/**/*.laz') stands for what it matches."
     ),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of text: an object per file, or per folder summed up."),
     each: bool = typer.Option(False, "--each", help=f"Show each file of a folder of more than {FOLDER_LISTED} files (by default summed up in one block)."),

@@ -1,4 +1,4 @@
-"""Sources of points: readers of LAS/LAZ, PLY, XYZ/TXT/CSV/PTS, NPY, NPZ files and the procedural
+"""Sources of points: readers of LAS/LAZ, PLY, E57, XYZ/TXT/CSV/PTS, NPY, NPZ files and the procedural
 demo town (demo.py), all yielding bounded PointChunks.
 
 >>> for chunk in read_chunks("tile.laz", chunk_size=1_000_000): ...   # never loads the file whole
