@@ -653,6 +653,8 @@ def test_viewer_displays_an_iframe_under_ipython(cloud, monkeypatch):
     ipython.display = display_mod
     monkeypatch.setitem(sys.modules, "IPython", ipython)
     monkeypatch.setitem(sys.modules, "IPython.display", display_mod)
+    for name in ("GIGAPOINT_VIEWER_URL", "JUPYTERHUB_SERVICE_PREFIX", "SSH_CONNECTION"):  # a local notebook (test_viewer_where_shown.py: the others)
+        monkeypatch.delenv(name, raising=False)
     with gigapoint.Viewer(cloud, width=700, height=400) as v:
         assert shown == [("iframe", v.url, 700, 400)]
 

@@ -4,7 +4,9 @@ Routes: ``/`` the page, ``/static/<name>`` a fixed whitelist of assets held in m
 client path ever reaches the file system), ``/ws`` the tab's WebSocket, ``/screenshot`` a
 PNG rendered server-side, ``/api/info`` the cloud and settings schema. With a token (always
 on a non-loopback bind) every route needs ``?token=...``; on a loopback bind the Host header
-must name the loopback (no DNS rebinding) and a WebSocket's Origin must match its Host, port included.
+must name the loopback (no DNS rebinding) and a WebSocket's Origin must match its Host, port included
+(a token, which another site's page cannot know, lets a reverse proxy in: gp.Viewer behind a JupyterHub's).
+Every address the page uses is relative to the page, so it works under any prefix a proxy strips.
 ``/screenshot`` and ``/api/info`` refuse what another site's page asks for (Sec-Fetch-Site).
 Each request head must arrive within HEAD_TIMEOUT_S, and at most MAX_WAITING connections wait
 for one (clients that trickle their headers); uvicorn's log lines show queries without their values.
@@ -191,7 +193,9 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
 
     async def ws_endpoint(websocket):
         origin = websocket.headers.get("origin")
-        if not authorized(websocket) or (origin and not _same_origin(origin, websocket.headers.get("host", ""))):
+        # without a token, only the page's own origin (another site's page cannot set it); with one,
+        # the token proves the page, and a proxy in between (nginx, Colab's) may name the server in Host
+        if not authorized(websocket) or (token is None and origin and not _same_origin(origin, websocket.headers.get("host", ""))):
             await websocket.close(code=1008)
             return
         await websocket.accept()

@@ -45,7 +45,7 @@
       S.retry = Math.min(S.retry + 1, 10);
       // the picture and the HUD stay as the server last sent them: dimmed, so they do not pass for live
       canvas.classList.add("stale");
-      status(opened ? "disconnected — reconnecting…" : `no answer from the viewer server (stopped?) — retrying every ${(0.3 * S.retry).toFixed(1)} s`);
+      status(opened ? "disconnected — reconnecting…" : `no answer from the viewer server (stopped? or a proxy that does not pass WebSockets) — retrying every ${(0.3 * S.retry).toFixed(1)} s`);
       setTimeout(connect, 300 * S.retry);
     };
   }
