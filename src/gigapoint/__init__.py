@@ -122,14 +122,22 @@ def open(*paths, progressive: bool = False, **options):
     A glob pattern (``"tiles/*.laz"``, ``"city/**/*.laz"`` at any depth) stands for the files and
     folders it matches, in name order (``io.pattern_matches``); a file of that very name is read as itself.
 
+    Only some points are read with ``classes=[2, 6]`` (those LAS classes), ``drop_classes=[7, 18]``
+    (all but those: noise) and ``clip=(xmin, ymin, xmax, ymax)`` (any z) or ``(xmin, ymin, zmin,
+    xmax, ymax, zmax)``, in the files' coordinates, bounds included; a point must pass all those given.
+
     Paths may also come as one list or tuple: ``gp.open([a, b])`` is ``gp.open(a, b)``."""
     from .errors import InputError, check_switch
+    from .io.filters import point_filter
     from .lod.reader import refuse_octrees
 
     paths = _flat_paths(paths)
     check_switch("progressive", progressive, "open")  # (chunked= is open_cloud's to check)
     recursive = options.pop("recursive", False)
     check_switch("recursive", recursive, "open")
+    keep = point_filter(options.pop("classes", None), options.pop("drop_classes", None), options.pop("clip", None), "open")
+    if keep is not None:  # (an octree was drawn whole, without a word)
+        refuse_octrees(paths, f"the filter ({keep.describe()}) applies to point files")
     if recursive:
         from .io import with_subfolders
 
@@ -145,8 +153,8 @@ def open(*paths, progressive: bool = False, **options):
             raise InputError(f"open(progressive=True) takes memory_limit= only, not {', '.join(sorted(options))}")
         memory_limit = memory_limit_bytes(memory_limit)  # checked before any file is read
         with headers_once():  # each file's header read once: by file_sources, then by the loader thread (it takes them along)
-            return open_progressive(*file_sources(paths), memory_limit=memory_limit)
-    if len(paths) == 1 and not options:
+            return open_progressive(*file_sources(paths, point_filter=keep), memory_limit=memory_limit, point_filter=keep)
+    if len(paths) == 1 and not options and keep is None:
         from .lod import is_lod_source, open_octree
 
         if is_lod_source(paths[0]):
@@ -156,12 +164,15 @@ def open(*paths, progressive: bool = False, **options):
 
     from .io import open_cloud
 
-    known = [p for p in inspect.signature(open_cloud).parameters if p != "paths"]
+    known = [p for p in inspect.signature(open_cloud).parameters if p not in ("paths", "point_filter")]
     unknown = sorted(set(options) - set(known))
     if unknown:  # a TypeError naming the internal open_cloud() before
-        raise InputError(f"open: unknown option(s) {', '.join(unknown)}; it takes {', '.join(known)}, recursive=True, progressive=True (with memory_limit=)")
+        raise InputError(
+            f"open: unknown option(s) {', '.join(unknown)}; it takes {', '.join(known)}, recursive=True, "
+            "progressive=True (with memory_limit=), classes=, drop_classes=, clip="
+        )
 
-    return open_cloud(*paths, **options)
+    return open_cloud(*paths, point_filter=keep, **options)
 
 
 # Imported on first use: they pull in heavier packages (Starlette/uvicorn, imageio, scipy).

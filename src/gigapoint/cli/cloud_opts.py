@@ -42,6 +42,37 @@ RecursiveOption = Annotated[
 ]
 
 
+ClassesOption = Annotated[
+    str | None,
+    typer.Option(
+        "--classes",
+        metavar="2,6",
+        help="Read only the points of these LAS classes (2 ground, 6 building, ...); a file without classification is an error.",
+    ),
+]
+DropClassesOption = Annotated[
+    str | None,
+    typer.Option("--drop-classes", metavar="7,18", help="Read all points but those of these LAS classes (7 low noise, 18 high noise, ...)."),
+]
+ClipOption = Annotated[
+    str | None,
+    typer.Option(
+        "--clip",
+        metavar="XMIN,YMIN,XMAX,YMAX",
+        help="Read only the points inside this box, in the files' coordinates, bounds included: "
+        "xmin,ymin,xmax,ymax (any z) or xmin,ymin,zmin,xmax,ymax,zmax.",
+    ),
+]
+
+
+def filter_options(classes: str | None, drop_classes: str | None, clip: str | None, where: str):
+    """The PointFilter (io/filters.py) of ``--classes``, ``--drop-classes`` and ``--clip``, None
+    without them; a bad value a one-line error naming the option, before anything is read."""
+    from ..io.filters import cli_point_filter
+
+    return cli_point_filter(classes, drop_classes, clip, where)
+
+
 def subfolders_read(paths, recursive: bool) -> list:
     """The inputs as ``--recursive`` has them read: each folder by every point file below it."""
     from ..io import with_subfolders
@@ -72,22 +103,35 @@ def option_names(options: dict) -> str:
     return " and ".join(f"--{k}" for k in options)
 
 
-def open_files(inputs, point_budget: int, progressive: bool | None, options: dict, progress: bool):
+def open_files(inputs, point_budget: int, progressive: bool | None, options: dict, progress: bool, point_filter=None):
     """What ``render`` and ``view`` open: ``open_sized``'s choice (an octree as itself, big inputs
     progressively, else one PointCloud); with ``options`` (``cloud_options``) always one
-    PointCloud built with them."""
+    PointCloud built with them. ``point_filter`` (``filter_options``): only the points it keeps
+    are read, whichever way (an octree is refused: it is drawn as stored)."""
     from ..io import open_cloud, shown_url
     from ..lod import is_lod_source
     from ..lod.progressive import open_sized
 
     if not options:
-        return open_sized(inputs, point_budget, progressive, progress=progress)
+        return open_sized(inputs, point_budget, progressive, progress=progress, point_filter=point_filter)
     if progressive:
         raise GigapointError(f"{option_names(options)}: options of a point cloud held in memory, not of --progressive")
     octrees = [shown_url(p) for p in inputs if is_lod_source(p)]
     if octrees:
         raise GigapointError(f"{option_names(options)}: {octrees[0]} is an octree, drawn as stored; the option applies to point files")
-    return open_cloud(*inputs, progress=progress, **options)
+    return open_cloud(*inputs, progress=progress, point_filter=point_filter, **options)
 
 
-__all__ = ["ChunkedOption", "ColorsOption", "RecursiveOption", "check_colors", "cloud_options", "open_files", "subfolders_read"]
+__all__ = [
+    "ChunkedOption",
+    "ClassesOption",
+    "ClipOption",
+    "ColorsOption",
+    "DropClassesOption",
+    "RecursiveOption",
+    "check_colors",
+    "cloud_options",
+    "filter_options",
+    "open_files",
+    "subfolders_read",
+]

@@ -17,7 +17,19 @@ from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from . import compiling
 from .app import app
-from .cloud_opts import ChunkedOption, ColorsOption, RecursiveOption, check_colors, cloud_options, open_files, subfolders_read
+from .cloud_opts import (
+    ChunkedOption,
+    ClassesOption,
+    ClipOption,
+    ColorsOption,
+    DropClassesOption,
+    RecursiveOption,
+    check_colors,
+    cloud_options,
+    filter_options,
+    open_files,
+    subfolders_read,
+)
 from .info_cmd import memory_line
 from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_image
 from .progress import err_console, progress_bar, status
@@ -123,14 +135,15 @@ def _described_camera(bounds, c: dict, width, height, projection, fov) -> Camera
     return Camera.orbit(target, c["yaw"], c["pitch"], distance, fov=fov, width=width, height=height, **extra)
 
 
-def open_inputs(inputs, point_budget: int, progressive: bool | None = None, options: dict | None = None):
+def open_inputs(inputs, point_budget: int, progressive: bool | None = None, options: dict | None = None, point_filter=None):
     """The command's inputs (lod/progressive.open_sized: inputs above the point budget build an
     LOD octree as they load, and the render waits for it; ``options``: ``--colors``/``--chunked``,
-    cloud_opts.open_files); files show a bar while they are read (on a terminal). A load that
-    stops (a corrupt file, the memory limit) raises its error."""
+    ``point_filter``: ``--classes``/``--drop-classes``/``--clip``, cloud_opts.open_files); files
+    show a bar while they are read (on a terminal). A load that stops (a corrupt file, the memory
+    limit) raises its error."""
     from ..lod.progressive import ProgressiveOctree
 
-    cloud = open_files(inputs, point_budget, progressive, options or {}, progress=err_console().is_terminal)
+    cloud = open_files(inputs, point_budget, progressive, options or {}, progress=err_console().is_terminal, point_filter=point_filter)
     if isinstance(cloud, ProgressiveOctree):
         total = cloud.loader.total
         with progress_bar(f"reading {cloud.name} into an LOD octree", total) as advance:
@@ -190,6 +203,9 @@ def render(
     colors: ColorsOption = "auto",
     chunked: ChunkedOption = None,
     recursive: RecursiveOption = False,
+    classes: ClassesOption = None,
+    drop_classes: DropClassesOption = None,
+    clip: ClipOption = None,
 ) -> None:
     """Render point clouds to an image (or a turntable video)."""
     import gigapoint as gp
@@ -218,6 +234,7 @@ def render(
     check_view(view)
     width, height = check_image_size(width, height, fov)  # before reading anything
     check_color_options(settings)
+    point_filter = filter_options(classes, drop_classes, clip, "render")
     inputs = subfolders_read(inputs, recursive)
     with options_named():  # (--color-attribute: the files' headers lack it)
         check_color_attribute(inputs, settings)
@@ -237,7 +254,7 @@ def render(
             raise named_option(exc, {"turntable": "--turntable", "video fps": "--fps"}) from None
     else:  # (side-by-side stereo writes both eyes: twice the width)
         check_image_fits(output, width * (2 if settings.stereo == "side-by-side" else 1), height)
-    cloud = open_inputs(inputs, settings.point_budget, progressive, cloud_options(colors, chunked))
+    cloud = open_inputs(inputs, settings.point_budget, progressive, cloud_options(colors, chunked), point_filter)
     with options_named():  # drawing's errors name the option (--color-attribute NAME that the file lacks)
         prepare_cloud(cloud, settings)
     if settings.max_points and not isinstance(cloud, PointCloud):

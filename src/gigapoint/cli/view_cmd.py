@@ -12,7 +12,19 @@ import typer
 
 from ..errors import GigapointError
 from .app import app, prefer_passive_wait
-from .cloud_opts import ChunkedOption, ColorsOption, RecursiveOption, cloud_options, open_files, option_names, subfolders_read
+from .cloud_opts import (
+    ChunkedOption,
+    ClassesOption,
+    ClipOption,
+    ColorsOption,
+    DropClassesOption,
+    RecursiveOption,
+    cloud_options,
+    filter_options,
+    open_files,
+    option_names,
+    subfolders_read,
+)
 
 
 def _open_browser(url: str) -> None:
@@ -63,12 +75,18 @@ def view(
     colors: ColorsOption = "auto",
     chunked: ChunkedOption = None,
     recursive: RecursiveOption = False,
+    classes: ClassesOption = None,
+    drop_classes: DropClassesOption = None,
+    clip: ClipOption = None,
 ) -> None:
     """Serve an interactive viewer of PATH... in the browser (Ctrl+C stops it)."""
     prefer_passive_wait()
     options = cloud_options(colors, chunked)
     if recursive and not paths:  # (dropped without a word by --demo, --live and --replay)
         raise GigapointError("--recursive: reads the subfolders of the folders given as PATH...; none is given")
+    point_filter = filter_options(classes, drop_classes, clip, "view")
+    if point_filter is not None and not paths:  # (as --recursive: --demo, --live and --replay read no file)
+        raise GigapointError("--classes, --drop-classes and --clip: filter the points of the files given as PATH...; none is given")
     if live is not None or replay is not None:
         from .live_cmd import check_live_options, view_live
 
@@ -119,7 +137,7 @@ def view(
         if len(paths) == 1 and OctreeDir(paths[0]).awaiting_preview:  # `convert` was started a moment ago
             print(f"gigapoint viewer: waiting for the first preview of the conversion into {paths[0]} ...", file=sys.stderr)
             wait_for_preview(paths[0])
-        cloud = open_files(subfolders_read(paths, recursive), budget, progressive, options, progress=False)  # big: shown while it loads
+        cloud = open_files(subfolders_read(paths, recursive), budget, progressive, options, progress=False, point_filter=point_filter)  # big: shown while it loads
     else:
         raise GigapointError("view: name at least one file or directory (or --demo N)")
     if window:  # native window (rendercanvas + glfw), no server

@@ -28,6 +28,7 @@ from ..core.cloud import PointCloud, build_cloud, value_decimals
 from ..errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, check_switch, warn
 from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail, headers_once, read_once
 from .demo import demo_arrays, demo_chunks
+from .filters import PointFilter, filtered
 from .http import shown_url
 from .las import LasReader, geokeys, read_las_header, with_scan_angle
 from .registry import in_folder, is_dataset_folder, is_supported_name, reader_for, readers, register, supported_suffixes
@@ -440,6 +441,7 @@ def open_cloud(
     layout: str = "auto",
     colors: str = "auto",
     chunked: bool | None = None,
+    point_filter: PointFilter | None = None,
 ) -> PointCloud:
     """Read files and/or directories (all supported files inside, sorted by name) into one PointCloud.
 
@@ -453,6 +455,8 @@ def open_cloud(
     their points kept for the later passes; the points spilled to a temporary folder; the same
     cloud), for files whose points do not fit in memory as floats; None (the
     default): chunked when the files' headers say they hold more than ``CHUNKED_ABOVE`` (50 M).
+    ``point_filter``: only the points it keeps are read (io/filters.py; gp.open's ``classes``,
+    ``drop_classes`` and ``clip``); the headers' counts are then upper bounds.
     """
     if not paths:
         raise InputError("open: no file given")
@@ -483,19 +487,22 @@ def open_cloud(
     warn_mixed_crs(files)
 
     def chunks(bar=None) -> Iterator[PointChunk]:
+        passing = point_filter.fresh() if point_filter is not None else None  # counted again each pass (chunked: three)
         for (f, reader), count in zip(plan, counts):
             it = reader.read_chunks(f, chunk_size)
             if one_angle:
                 it = with_scan_angle(it)
             if bar is not None:
-                it = _with_progress(f, it, count, bar)  # (the headers' counts, read once above)
+                it = _with_progress(f, it, count, bar)  # (the headers' counts, read once above: the points read, not kept)
             try:
-                yield from it
+                yield from filtered(it, f, passing)
             except EmptyCloudError:
                 if not several:
                     raise
                 empty.append(f)
                 warn(f"{f}: holds no points, skipped", GigapointWarning)
+        if passing is not None:  # not "no valid points": the filter left none
+            passing.check_passed(files_label(files))
 
     def build(stream) -> PointCloud:
         try:

@@ -45,6 +45,7 @@ from ...errors import (
 )
 from ...io import human_bytes
 from ...io._base import headers_once
+from ...io.filters import PointFilter, filtered
 from ...io.las import header_slack
 from ..convert.prefetch import prefetch
 
@@ -81,13 +82,19 @@ class Loader:
     """The thread that fills ``octree`` from ``sources``: (name, make_chunks) pairs."""
 
     def __init__(
-        self, octree, sources: list[tuple[str, Callable[[], Iterable[PointChunk]]]], total: int | None, memory_limit: int | None = None
+        self,
+        octree,
+        sources: list[tuple[str, Callable[[], Iterable[PointChunk]]]],
+        total: int | None,
+        memory_limit: int | None = None,
+        point_filter: PointFilter | None = None,
     ):
         self.octree = octree
         self.memory_limit = memory_limit_bytes(memory_limit)
         self.sources = sources
-        self.total = total  # input points, when the sources tell it up front
-        self.read = 0  # input points read so far (valid or not)
+        self.total = total  # input points, when the sources tell it up front (with a filter: at most that many kept)
+        self.inserted = 0  # points inserted so far (valid or not)
+        self.point_filter = point_filter  # the one the sources' chunks went through (file_sources): it counts the points read
         self.error: GigapointError | None = None
         self.warnings = KeptWarnings()  # (message, category) of the warnings of the load, in order
         self.complete = False  # every source read (not stopped by close, an error or the memory limit)
@@ -110,6 +117,13 @@ class Loader:
     @property
     def done(self) -> bool:
         return self._done.is_set()
+
+    @property
+    def read(self) -> int:
+        """Input points read so far: inserted, and with a filter those it left out too (``total`` counts them)."""
+        if self.point_filter is None:
+            return self.inserted
+        return self.point_filter.read  # (the decoder's count: at most a chunk ahead of the insertion)
 
     @property
     def progress(self) -> float:
@@ -166,13 +180,15 @@ class Loader:
                         raise _of_source(exc, self.octree.name, name) from None
                     self._first_in.set()
                     s = sl.stop
-                    self.read += sl.stop - sl.start
+                    self.inserted += sl.stop - sl.start
                     if self.octree.nbytes > self.memory_limit:
                         self._stop_for_memory(name)
                         return
             # every source read: no valid point is the plain cloud's error, invalid points skipped its warning
             from ...io import files_label
 
+            if self.point_filter is not None:  # not "no valid points": the filter left none
+                self.point_filter.check_passed(files_label(source for source, _ in self.sources))
             check_valid_count(files_label(source for source, _ in self.sources), self.octree.points, self.octree.skipped)
             self.complete = True
             while not self._stop.is_set():  # the leaves' draw order (a grid sample first), between frames
@@ -284,12 +300,14 @@ def _reachable(bounds: tuple, offset, scale) -> bool:
         return bool(np.all(lo <= hi) and np.all(lo >= low) and np.all(hi <= high))
 
 
-def file_sources(paths, cut_off: list | None = None) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray] | None, str, tuple | None]:
+def file_sources(paths, cut_off: list | None = None, point_filter: PointFilter | None = None) -> tuple[list, int | None, tuple[np.ndarray, np.ndarray] | None, str, tuple | None]:
     """(sources, total points, header bounds of all files, name, grid) of files and directories:
     every file through its reader (io registry), in bounded chunks; a file cut off gives the
     points before the cut, then its error (``read_salvaged``; its name appended to ``cut_off``). Totals, bounds and the grid
     are known when every file's header tells them (LAS/LAZ); the grid (ProgressiveOctree's) is
-    the first file's offset and the finest scale (points of files on other grids stay wide)."""
+    the first file's offset and the finest scale (points of files on other grids stay wide).
+    ``point_filter``: each chunk goes through it as it is read (the total, then, counts points
+    read, not kept; the bounds are cut to its clip box)."""
     from ...core.cloud import finest_scale
     from ...io import cloud_name, expand_paths, files_label, reader_for, scan_angles_differ, warn_mixed_crs
     from ...io._base import DEFAULT_CHUNK_SIZE
@@ -317,9 +335,11 @@ def file_sources(paths, cut_off: list | None = None) -> tuple[list, int | None, 
             bounds_known = False
         offsets.append(head.get("offset"))
         scales.append(head.get("scale"))
-        sources.append((str(f), lambda f=f, reader=reader: read(reader.read_salvaged(f, min(DEFAULT_CHUNK_SIZE, DECODE_CHUNK)))))
+        sources.append((str(f), lambda f=f, reader=reader: filtered(read(reader.read_salvaged(f, min(DEFAULT_CHUNK_SIZE, DECODE_CHUNK))), f, point_filter)))
     if not sources:
         raise EmptyCloudError(f"{files_label(files)}: no file holds any point")
+    if point_filter is not None:  # the root cube of the points kept: a clip box of a corner of the survey is not drawn tiny
+        lo, hi = point_filter.clipped_bounds(lo, hi)
     name = cloud_name(files)
     grid, scale = None, finest_scale(scales)
     if scale is not None and all(o is not None for o in offsets):
@@ -336,11 +356,12 @@ def demo_sources(n_points: int, seed: int = 0) -> tuple[list, int, tuple[np.ndar
     return [(f"demo({n_points:,})", lambda: demo_chunks(n_points, seed, chunk_size=DECODE_CHUNK))], n_points, None, f"demo({n_points:,})"
 
 
-def open_progressive(sources, total, bounds, name, grid=None, max_leaf=None, memory_limit=None):
+def open_progressive(sources, total, bounds, name, grid=None, max_leaf=None, memory_limit=None, point_filter=None):
     """A ProgressiveOctree filled by a started Loader (bounds: the root cube, when known; grid:
     the sources' grid, when they have one: ProgressiveOctree's ``grid``; loading stops with a
     MemoryLimitError once the octree holds ``memory_limit`` bytes, by default half the
-    machine's memory)."""
+    machine's memory; ``point_filter``: the one ``file_sources`` was given, which counts the
+    points read and says where it left none)."""
     from .octree import MAX_LEAF, ProgressiveOctree
 
     cube = None
@@ -352,29 +373,32 @@ def open_progressive(sources, total, bounds, name, grid=None, max_leaf=None, mem
     capacity = min(total or 0, memory_limit // _PRESIZED_BYTES_PER_POINT)  # presized no larger than the limit allows
     octree = ProgressiveOctree(name, cube=cube, max_leaf=max_leaf or MAX_LEAF, capacity=capacity, grid=grid)
     octree.source_files = [Path(label) for label, _ in sources if Path(label).is_file()]  # save() takes their CRS
-    octree.attach(Loader(octree, sources, total, memory_limit).start())
+    octree.attach(Loader(octree, sources, total, memory_limit, point_filter).start())
     return octree
 
 
 @headers_once()  # the headers file_sources reads, read once: its loader thread takes them along
-def open_sized(paths, point_budget: int, progressive: bool | None = None, progress: bool = False):
+def open_sized(paths, point_budget: int, progressive: bool | None = None, progress: bool = False, point_filter=None):
     """What ``gigapoint view`` and ``render`` open: an octree (a converted folder, COPC, EPT) as
     itself; other inputs as a ProgressiveOctree (drawable while it loads) when asked, or when
     their headers count more points than ``point_budget``, or when one is cut off (what it
-    holds drawn, its error said); else as one PointCloud."""
+    holds drawn, its error said); else as one PointCloud. ``point_filter`` (io/filters.py):
+    only the points it keeps are read; an octree is then refused (it is drawn as stored)."""
     from ...io import expand_paths, open_cloud
     from ..reader import is_lod_source, open_octree, refuse_octrees
 
     paths = list(paths)
-    if len(paths) == 1 and is_lod_source(paths[0]) and not progressive:
+    if len(paths) == 1 and is_lod_source(paths[0]) and not progressive and point_filter is None:
         return open_octree(paths[0])
+    if point_filter is not None:
+        refuse_octrees(paths, f"the filter ({point_filter.describe()}) applies to point files")
     # (--progressive of a converted folder drew it as stored, without a word; a local COPC file is read as LAZ)
     refuse_octrees(paths, "it cannot join other files" if len(paths) > 1 else "--progressive builds an octree from point files")
     paths = expand_paths(paths)  # once: a file named twice was warned about twice (headers, then the points)
     if progressive is not False:
         cut_off = []
-        sources, total, bounds, name, grid = file_sources(paths, cut_off)
+        sources, total, bounds, name, grid = file_sources(paths, cut_off, point_filter)
         # (a file cut off, too: what it holds is drawn, with its error, where the plain cloud only refuses it)
         if progressive or cut_off or (total is not None and total > point_budget):
-            return open_progressive(sources, total, bounds, name, grid)
-    return open_cloud(*paths, progress=progress)
+            return open_progressive(sources, total, bounds, name, grid, point_filter=point_filter)
+    return open_cloud(*paths, progress=progress, point_filter=point_filter)

@@ -1,0 +1,187 @@
+"""Read-time point filters: keep or drop LAS classes, keep a clip box (PDAL's filters.range,
+LAStools' -keep_class, -drop_class, -keep_xy).
+
+One ``PointFilter`` is made from the options (``point_filter``: every bad value a one-line
+error before anything is read) and applied to each chunk right after its reader gives it, by
+every read path: ``gp.open`` (in memory, chunked and progressive), ``gp.convert`` (one process
+and its Dask tasks, which get it as ``as_spec``). A filter counts the points it saw and let
+pass, so that a filter that lets nothing pass says so (``check_passed``) rather than the
+generic "no valid points". Header point counts are then upper bounds: progress bars and
+presizing may use them, nothing may expect that many points.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core.chunk import PointChunk
+from ..errors import EmptyCloudError, InputError, is_whole_number
+
+#: The option names as Python's keywords and the CLI's options say them
+PYTHON_NAMES = {"classes": "classes=", "drop_classes": "drop_classes=", "clip": "clip="}
+CLI_NAMES = {"classes": "--classes ", "drop_classes": "--drop-classes ", "clip": "--clip "}
+
+
+@dataclass
+class PointFilter:
+    """Which points of a chunk are kept: those of ``classes`` (empty: any), not of
+    ``drop_classes``, inside ``clip`` ((xmin, ymin, xmax, ymax): any z, or (xmin, ymin, zmin,
+    xmax, ymax, zmax); bounds included; empty: anywhere). ``read``/``passed``: points seen and
+    kept so far (one operation's: ``fresh`` gives a copy at zero)."""
+
+    classes: tuple[int, ...] = ()
+    drop_classes: tuple[int, ...] = ()
+    clip: tuple[float, ...] = ()
+    read: int = field(default=0, compare=False)
+    passed: int = field(default=0, compare=False)
+
+    def fresh(self) -> PointFilter:
+        """This filter with its counts at zero (a pass of a read that reads the files again)."""
+        return PointFilter(self.classes, self.drop_classes, self.clip)
+
+    def describe(self) -> str:
+        """'classes 2, 6; clip 1, 2, 3, 4': what the messages say of it."""
+        parts = [
+            f"{label} {', '.join(f'{v:.15g}' for v in values)}"
+            for label, values in (("classes", self.classes), ("drop classes", self.drop_classes), ("clip", self.clip))
+            if values
+        ]
+        return "; ".join(parts)
+
+    def as_spec(self) -> dict:
+        """JSON-able: for a conversion's fingerprint and its Dask tasks (``from_spec``)."""
+        return {"classes": list(self.classes), "drop_classes": list(self.drop_classes), "clip": list(self.clip)}
+
+    @classmethod
+    def from_spec(cls, spec: dict | None) -> PointFilter | None:
+        return None if spec is None else cls(tuple(spec["classes"]), tuple(spec["drop_classes"]), tuple(spec["clip"]))
+
+    def kept(self, chunk: PointChunk, path) -> PointChunk:
+        """The points of ``chunk`` (read from ``path``) the filter keeps, counted."""
+        keep = np.ones(len(chunk), bool)
+        if self.classes or self.drop_classes:
+            classification = chunk.attributes.get("classification")
+            if classification is None:
+                raise InputError(f"{path}: holds no classification, which the filter ({self.describe()}) needs")
+            if self.classes:
+                keep &= np.isin(classification, self.classes)
+            if self.drop_classes:
+                keep &= ~np.isin(classification, self.drop_classes)
+        if self.clip:
+            axes = len(self.clip) // 2  # 2: x and y (any z), 3: x, y and z
+            lo, hi = np.array(self.clip[:axes]), np.array(self.clip[axes:])
+            xyz = chunk.xyz[:, :axes]
+            keep &= np.all((xyz >= lo) & (xyz <= hi), axis=1)  # (NaN positions fail both: left out)
+        n = int(np.count_nonzero(keep))
+        self.read += len(chunk)
+        self.passed += n
+        if n == len(chunk):
+            return chunk
+        attributes = {a: v[keep] for a, v in chunk.attributes.items()}
+        return PointChunk(chunk.xyz[keep], chunk.rgba[keep], attributes, scale=chunk.scale)
+
+    def apply(self, chunks: Iterable[PointChunk], path) -> Iterator[PointChunk]:
+        """``chunks`` of ``path`` with only the points kept; a chunk left without any is not given."""
+        for chunk in chunks:
+            chunk = self.kept(chunk, path)
+            if len(chunk):
+                yield chunk
+
+    def check_passed(self, label: str) -> None:
+        """An EmptyCloudError naming ``label`` (the files) where points were read and none passed."""
+        if self.passed == 0 and self.read:  # (no point read at all: the readers' own errors say so)
+            raise EmptyCloudError(f"{label}: no point passes the filter ({self.describe()}): {self.read:,} points read")
+
+    def clipped_bounds(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds ``lo``..``hi`` (a header's) cut to the clip box: where the kept points can be."""
+        if not self.clip:
+            return lo, hi
+        axes = len(self.clip) // 2
+        lo, hi = np.array(lo, np.float64), np.array(hi, np.float64)
+        lo[:axes] = np.maximum(lo[:axes], self.clip[:axes])
+        hi[:axes] = np.minimum(hi[:axes], self.clip[axes:])
+        return lo, hi
+
+
+def filtered(chunks: Iterable[PointChunk], path, point_filter: PointFilter | None) -> Iterable[PointChunk]:
+    """``chunks`` through ``point_filter`` (``PointFilter.apply``); as they are without one."""
+    return chunks if point_filter is None else point_filter.apply(chunks, path)
+
+
+def point_filter(classes=None, drop_classes=None, clip=None, where: str = "open", names: dict = PYTHON_NAMES) -> PointFilter | None:
+    """The PointFilter of the options given (None for none), or a one-line InputError naming the
+    bad one (``where``: the operation, ``names``: how the options are spelt, ``PYTHON_NAMES`` or
+    ``CLI_NAMES``): a class outside 0..255 or not an integer, a class both kept and dropped, a
+    clip box of other than 4 or 6 numbers, NaN or infinite, or with a min above its max."""
+    keep = _classes(classes, "classes", where, names)
+    drop = _classes(drop_classes, "drop_classes", where, names)
+    both = sorted(set(keep) & set(drop))
+    if both:
+        raise InputError(f"{where}: {names['classes'].strip()} and {names['drop_classes'].strip()} both name class {', '.join(map(str, both))}; keep it or drop it")
+    box = _clip(clip, where, names)
+    if not (keep or drop or box):
+        return None
+    return PointFilter(keep, drop, box)
+
+
+def _given(value) -> str:
+    return value if isinstance(value, str) else repr(value)
+
+
+def _classes(value, name: str, where: str, names: dict) -> tuple[int, ...]:
+    """``classes``/``drop_classes`` (an integer, or integers) as a sorted tuple of class numbers."""
+    if value is None:
+        return ()
+    values = [value] if is_whole_number(value) else value
+    problem = f"{where}: {names[name]}{_given(value)}: class numbers are integers from 0 to 255 (LAS classes)"
+    if isinstance(values, (str, bytes)) or not isinstance(values, Iterable):
+        raise InputError(problem)
+    values = list(values)
+    bad = [v for v in values if not (is_whole_number(v) and 0 <= v <= 255)]
+    if bad or not values:
+        raise InputError(problem + (f", got {bad[0]!r}" if bad else ", got none"))
+    return tuple(sorted({int(v) for v in values}))
+
+
+def _clip(value, where: str, names: dict) -> tuple[float, ...]:
+    """``clip`` as a tuple of 4 (x and y) or 6 (x, y and z) finite numbers, mins before maxes."""
+    if value is None:
+        return ()
+    label = f"{where}: {names['clip']}{_given(value)}"
+    shape = "xmin, ymin, xmax, ymax (any z) or xmin, ymin, zmin, xmax, ymax, zmax"
+    if isinstance(value, (str, bytes)) or not isinstance(value, Iterable):
+        raise InputError(f"{label}: a clip box is {shape}")
+    values = list(value)
+    if len(values) not in (4, 6):
+        raise InputError(f"{label}: a clip box is {shape}; got {len(values)} numbers")
+    if not all(isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) for v in values):
+        raise InputError(f"{label}: a clip box's bounds are finite numbers")
+    axes = len(values) // 2
+    for axis in range(axes):
+        if values[axis] > values[axis + axes]:
+            raise InputError(f"{label}: {'xyz'[axis]}min {values[axis]:.15g} is above {'xyz'[axis]}max {values[axis + axes]:.15g}")
+    return tuple(float(v) for v in values)
+
+
+def cli_point_filter(classes: str | None, drop_classes: str | None, clip: str | None, where: str = "filter") -> PointFilter | None:
+    """``point_filter`` of the CLI's ``--classes 2,6``, ``--drop-classes 7,18`` and ``--clip
+    x0,y0,x1,y1``: comma-separated numbers (one that is not a number: a one-line error)."""
+
+    def numbers_of(text: str | None, name: str, kind):
+        if text is None:
+            return None
+        try:
+            return [kind(t) for t in text.split(",")]
+        except ValueError:
+            what = "integers from 0 to 255" if kind is int else "numbers"
+            raise InputError(f"{where}: {CLI_NAMES[name]}{text}: give {what}, separated by commas") from None
+
+    return point_filter(numbers_of(classes, "classes", int), numbers_of(drop_classes, "drop_classes", int), numbers_of(clip, "clip", float), where, CLI_NAMES)
+
+
+__all__ = ["PointFilter", "cli_point_filter", "filtered", "point_filter"]
