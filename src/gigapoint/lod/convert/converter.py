@@ -17,6 +17,7 @@ from ...core.renderable import PointSource
 from ...errors import GigapointError, GigapointWarning, InputError, check_switch, warn
 from ...io import with_subfolders
 from ...io._base import check_file, headers_once
+from ...io.filters import point_filter
 from ...io.registry import is_supported_name
 from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
@@ -184,6 +185,13 @@ class _InMemoryConverter(InMemoryPhases, _Converter):
     spilled (in_memory.py)."""
 
 
+def _are_paths(inputs) -> bool:
+    """Whether ``inputs`` name files and folders (a path, or a list or tuple of them)."""
+    if isinstance(inputs, (str, os.PathLike)):
+        return True
+    return isinstance(inputs, (list, tuple)) and all(isinstance(p, (str, os.PathLike)) for p in inputs)
+
+
 def _not_a_path(p):
     raise InputError(f"convert: source_files are paths of the files the points came from, got a {type(p).__name__}")
 
@@ -210,6 +218,9 @@ def convert(
     colors: str | None = None,
     on_ready=None,
     recursive: bool = False,
+    classes=None,
+    drop_classes=None,
+    clip=None,
 ) -> ConvertResult:
     """Convert point cloud files (or a cloud, or an iterable of PointChunks) into an LOD octree directory ``out``.
 
@@ -246,15 +257,21 @@ def convert(
 
     ``recursive=True``: a folder stands for every point file below it, not only its own
     (``io.with_subfolders``, as ``gp.open``'s).
+
+    ``classes``, ``drop_classes``, ``clip``: only the points of the input files that pass them are
+    read, as ``gp.open``'s (io/filters.py); a conversion resumes only under the same filter.
     """
     check_switch("overwrite", overwrite, "convert")
     check_switch("recursive", recursive, "convert")
     if recursive and isinstance(inputs, (str, os.PathLike)):
         inputs = [inputs]
-    if recursive and not (isinstance(inputs, (list, tuple)) and all(isinstance(p, (str, os.PathLike)) for p in inputs)):
+    if recursive and not _are_paths(inputs):
         raise InputError("convert: recursive=True reads the subfolders of folders; the inputs are a cloud or PointChunks")  # (dropped without a word)
     if recursive:
         inputs = with_subfolders(inputs)
+    keep = point_filter(classes, drop_classes, clip, "convert")  # before anything is read
+    if keep is not None and not _are_paths(inputs):  # (a cloud's or chunks' points are not read here)
+        raise InputError(f"convert: the filter ({keep.describe()}) applies to the points read from files; the inputs are a cloud or PointChunks")
     check_switch("progress", progress, "convert")  # "yes"/"no" were both true
     if name is not None and not isinstance(name, str):  # 5 went into octree.json as a number
         raise InputError(f"convert: name must be a string, got {name!r}")
@@ -328,6 +345,7 @@ def convert(
         colors,
     )
     conv.on_ready = on_ready
+    conv.point_filter = keep
     if client is not None:
         with open_client(client, announce=progress) as conv.client:
             return conv.run(overwrite)

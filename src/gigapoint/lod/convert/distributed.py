@@ -61,6 +61,7 @@ from ...core import pages
 from ...core.chunk import ColorScaler, warn_dropped_attributes
 from ...errors import GigapointError, GigapointWarning, warn
 from ...io._base import one_line
+from ...io.filters import PointFilter, filtered
 from ...io.las import with_scan_angle
 from ...io.registry import reader_for
 from ..keys import CODE_BITS
@@ -413,6 +414,8 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
         xyz_code = las_xyz_code(path)  # a range of a LAS/LAZ file: its positions spilled as the file's int32 (spill.encode_xyz)
     if spec["one_angle"]:
         chunks = with_scan_angle(chunks)
+    passing = PointFilter.from_spec(spec["filter"])  # the driver's filter, as the task's own count
+    chunks = filtered(chunks, path, passing)
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     attrs, constant, n_chunks, n_in, points, skipped, eight = None, {}, 0, 0, 0, 0, False
     sample: list[dict] = []
@@ -430,7 +433,8 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
         n_chunks, n_in, points, skipped = j + 1, n_in + len(chunk), points + len(xyz), skipped + int(invalid)
     return {
         "chunks": n_chunks,
-        "input": n_in,
+        "input": n_in if passing is None else passing.read,  # points read (the progress total's), the filter's left out too
+        "passed": None if passing is None else passing.passed,
         "points": points,
         "skipped": skipped,
         "empty": bool(empty),
@@ -650,6 +654,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             "chunk_size": self.chunk_size,
             "several": len(self.paths) > 1,
             "one_angle": self.one_angle,
+            "filter": None if self.point_filter is None else self.point_filter.as_spec(),
             "memory_limit": self.mem,
             "own_workers": self.client in _OWN_WORKERS,
             "state": {k: st[k] for k in keep if k in st},
@@ -900,6 +905,8 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             attributes=attrs or {},
             constant=constant,
         )
+        if self.point_filter is not None:  # (ReadPhase._end_read: "no point passes the filter" where it left none)
+            st.update(filter_read=sum(r["input"] for r in results.values()), filter_passed=sum(r["passed"] for r in results.values()))
         warn_dropped_attributes(self._as_given(str(self.out)), dropped)
         self._end_read(lo, hi)
 

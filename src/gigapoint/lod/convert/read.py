@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+from dataclasses import replace
 from functools import cached_property
 
 import numpy as np
@@ -13,6 +14,7 @@ from ...core.chunk import PointChunk, join_chunks, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
 from ...errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, warn
 from ...io import files_label, read_chunks, scan_angles_differ
+from ...io.filters import filtered
 from ...io.las import with_scan_angle
 from ...io.registry import reader_for
 from ..build import valid_bounds
@@ -211,11 +213,14 @@ class ReadPhase(Job):
                 self._spill_code = code
                 yield chunk
 
+    #: the conversion's filter as this run counts it (``point_filter``'s fresh copy, read()); None: no filter
+    _passing = None
+
     def _file_chunks(self):
-        """The input files' chunks, each with its file's LAS grid (``_grid_of``)."""
+        """The input files' chunks, each with its file's LAS grid (``_grid_of``), through the filter."""
         for p in self.paths:
             code = _grid_of(p)
-            chunks = _skipped_if_empty(p, _read_chunks(p, self.chunk_size), len(self.paths) > 1)
+            chunks = _skipped_if_empty(p, filtered(_read_chunks(p, self.chunk_size), p, self._passing), len(self.paths) > 1)
             chunks = with_scan_angle(chunks) if self.one_angle else chunks
             for chunk in prefetch(chunks) if self.read_ahead else chunks:
                 yield code, chunk
@@ -249,14 +254,16 @@ class ReadPhase(Job):
         attrs: dict | None = st.get("attributes")
         if done and "constant" not in st:  # a run from before constants were noted: its chunks hold every attribute a point at a time
             st["constant"] = dict.fromkeys(attrs or {})
-        total = st["total"] = self.point_total
+        total = st["total"] = self.point_total  # (with a filter: an upper bound of the points kept)
         preview = self._preview_sampler(total, done, attrs)
         dropped: set[str] = set()
         self.progress.phase("read", total)
+        self._passing = self.point_filter.fresh() if self.point_filter is not None else None
+        self._counted = 0
         try:
             for i, chunk in enumerate(self._chunks()):
-                n_in = len(chunk)
-                if i < done:
+                n_in = self._points_read(len(chunk))
+                if i < done:  # (read again, from the start: the filter counts those too)
                     self.progress.advance(n_in)
                     continue
                 xyz, rgba, kept, names, invalid, c_lo, c_hi = self._take_chunk(i, chunk)
@@ -282,12 +289,27 @@ class ReadPhase(Job):
             raise
         self._write_preview(preview, force=True)
         warn_dropped_attributes(str(self.out), dropped)
+        if self._passing is not None:
+            st.update(filter_read=self._passing.read, filter_passed=self._passing.passed)
         self._end_read(lo, hi)
+
+    _counted = 0  # the points read that the progress bar has been told of (``_points_read``)
+
+    def _points_read(self, taken: int) -> int:
+        """The points read since the last chunk, of which a chunk of ``taken`` points was kept: the
+        progress total counts the points in the files, the filter's left out too."""
+        if self._passing is None:
+            return taken
+        new = self._passing.read - self._counted
+        self._counted = self._passing.read
+        return new
 
     def _end_read(self, lo, hi) -> None:
         """Every input read (points, skipped, attributes saved): the octree's cube from the bounds
         ``lo``..``hi``; no valid point is an error, skipped points a warning."""
         st = self.state
+        if self.point_filter is not None and "filter_passed" in st:  # not "no valid points" where the filter left none
+            replace(self.point_filter, read=st["filter_read"], passed=st["filter_passed"]).check_passed(files_label(self.paths))
         if st.get("points", 0) == 0:  # the plain cloud's error, naming the files as it does
             check_valid_count(files_label(self.paths) if self.paths else self.name, 0, st.get("skipped", 0))
         if st.get("skipped"):

@@ -152,6 +152,9 @@ class Job:
         self.t0 = 0.0  # perf_counter() at the start of the run
         self.first_view: float | None = None  # seconds from the start until the first preview was written
 
+    #: only the points it keeps are read (io/filters.py; convert's classes, drop_classes, clip); None: every point
+    point_filter = None
+
     def fingerprint(self) -> dict | None:
         """The inputs and options a saved state must match to be resumed (None: chunk inputs)."""
         if self.paths is None:
@@ -171,6 +174,8 @@ class Job:
             "layout": self.layout,
             "colors": self.colors,
             "chunks": "joined",  # small files' chunks joined (read._joined): a state of one chunk a file reads otherwise
+            # a run resumed under another filter mixed points kept by one and by the other
+            "filter": None if self.point_filter is None else self.point_filter.as_spec(),
         }
 
     def fingerprint_key(self) -> str | None:
