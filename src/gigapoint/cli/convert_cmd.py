@@ -10,7 +10,7 @@ from pathlib import Path
 import typer
 
 from .app import app
-from .cloud_opts import RecursiveOption
+from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, RecursiveOption, filter_options
 from .settings_opts import named_option
 
 
@@ -46,6 +46,9 @@ def convert(
         None, "--workers", help="Convert on a local Dask cluster of N single-threaded worker processes (needs gigapoint\\[dask])."
     ),
     recursive: RecursiveOption = False,
+    classes: ClassesOption = None,
+    drop_classes: DropClassesOption = None,
+    clip: ClipOption = None,
 ) -> None:
     """Convert point clouds into a level-of-detail octree, out of core, resumable."""
     from ..lod import ConvertError
@@ -55,6 +58,7 @@ def convert(
 
     if dask is not None and workers is not None:
         raise ConvertError("--dask and --workers: give one of them (a running cluster's scheduler, or a local cluster's size)")
+    point_filter = filter_options(classes, drop_classes, clip, "convert")  # its errors name the options, before a cluster starts
     copc = format == "copc" or (format is None and is_copc_name(output))  # (convert's own default)
     watch = work_dir(output) if copc else output  # a COPC output appears only once complete
     # quoted as a shell needs it: `gigapoint view my scans` named two paths
@@ -79,6 +83,7 @@ def convert(
                 progress=not quiet and sys.stderr.isatty(),
                 client=client,
                 recursive=recursive,
+                **(point_filter.as_spec() if point_filter is not None else {}),
                 on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
             )
     except ConvertError as exc:  # 'max_leaf must be ...' named no option

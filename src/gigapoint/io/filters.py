@@ -54,12 +54,13 @@ class PointFilter:
         return "; ".join(parts)
 
     def as_spec(self) -> dict:
-        """JSON-able: for a conversion's fingerprint and its Dask tasks (``from_spec``)."""
-        return {"classes": list(self.classes), "drop_classes": list(self.drop_classes), "clip": list(self.clip)}
+        """JSON-able, as the keywords of ``point_filter`` (and gp.open's, gp.convert's; None: not
+        given): for a conversion's fingerprint, its Dask tasks (``from_spec``), the CLI's calls."""
+        return {name: list(values) or None for name, values in (("classes", self.classes), ("drop_classes", self.drop_classes), ("clip", self.clip))}
 
     @classmethod
     def from_spec(cls, spec: dict | None) -> PointFilter | None:
-        return None if spec is None else cls(tuple(spec["classes"]), tuple(spec["drop_classes"]), tuple(spec["clip"]))
+        return None if spec is None else cls(*(tuple(spec[name] or ()) for name in ("classes", "drop_classes", "clip")))
 
     def kept(self, chunk: PointChunk, path) -> PointChunk:
         """The points of ``chunk`` (read from ``path``) the filter keeps, counted."""
@@ -113,32 +114,32 @@ def filtered(chunks: Iterable[PointChunk], path, point_filter: PointFilter | Non
     return chunks if point_filter is None else point_filter.apply(chunks, path)
 
 
-def point_filter(classes=None, drop_classes=None, clip=None, where: str = "open", names: dict = PYTHON_NAMES) -> PointFilter | None:
+def point_filter(classes=None, drop_classes=None, clip=None, where: str = "open", names: dict = PYTHON_NAMES, shown: dict | None = None) -> PointFilter | None:
     """The PointFilter of the options given (None for none), or a one-line InputError naming the
     bad one (``where``: the operation, ``names``: how the options are spelt, ``PYTHON_NAMES`` or
-    ``CLI_NAMES``): a class outside 0..255 or not an integer, a class both kept and dropped, a
-    clip box of other than 4 or 6 numbers, NaN or infinite, or with a min above its max."""
-    keep = _classes(classes, "classes", where, names)
-    drop = _classes(drop_classes, "drop_classes", where, names)
+    ``CLI_NAMES``; ``shown``: the values as given, where not their repr): a class outside 0..255
+    or not an integer, a class both kept and dropped, a clip box of other than 4 or 6 numbers,
+    NaN or infinite, or with a min above its max."""
+    given = {"classes": classes, "drop_classes": drop_classes, "clip": clip}
+    label = {name: f"{where}: {names[name]}{(shown or {}).get(name) or repr(value)}" for name, value in given.items()}
+    keep = _classes(classes, label["classes"])
+    drop = _classes(drop_classes, label["drop_classes"])
     both = sorted(set(keep) & set(drop))
     if both:
         raise InputError(f"{where}: {names['classes'].strip()} and {names['drop_classes'].strip()} both name class {', '.join(map(str, both))}; keep it or drop it")
-    box = _clip(clip, where, names)
+    box = _clip(clip, label["clip"])
     if not (keep or drop or box):
         return None
     return PointFilter(keep, drop, box)
 
 
-def _given(value) -> str:
-    return value if isinstance(value, str) else repr(value)
-
-
-def _classes(value, name: str, where: str, names: dict) -> tuple[int, ...]:
-    """``classes``/``drop_classes`` (an integer, or integers) as a sorted tuple of class numbers."""
+def _classes(value, label: str) -> tuple[int, ...]:
+    """``classes``/``drop_classes`` (an integer, or integers) as a sorted tuple of class numbers
+    (``label``: the option and its value, as errors start)."""
     if value is None:
         return ()
     values = [value] if is_whole_number(value) else value
-    problem = f"{where}: {names[name]}{_given(value)}: class numbers are integers from 0 to 255 (LAS classes)"
+    problem = f"{label}: class numbers are integers from 0 to 255 (LAS classes)"
     if isinstance(values, (str, bytes)) or not isinstance(values, Iterable):
         raise InputError(problem)
     values = list(values)
@@ -148,11 +149,10 @@ def _classes(value, name: str, where: str, names: dict) -> tuple[int, ...]:
     return tuple(sorted({int(v) for v in values}))
 
 
-def _clip(value, where: str, names: dict) -> tuple[float, ...]:
+def _clip(value, label: str) -> tuple[float, ...]:
     """``clip`` as a tuple of 4 (x and y) or 6 (x, y and z) finite numbers, mins before maxes."""
     if value is None:
         return ()
-    label = f"{where}: {names['clip']}{_given(value)}"
     shape = "xmin, ymin, xmax, ymax (any z) or xmin, ymin, zmin, xmax, ymax, zmax"
     if isinstance(value, (str, bytes)) or not isinstance(value, Iterable):
         raise InputError(f"{label}: a clip box is {shape}")
@@ -181,7 +181,9 @@ def cli_point_filter(classes: str | None, drop_classes: str | None, clip: str | 
             what = "integers from 0 to 255" if kind is int else "numbers"
             raise InputError(f"{where}: {CLI_NAMES[name]}{text}: give {what}, separated by commas") from None
 
-    return point_filter(numbers_of(classes, "classes", int), numbers_of(drop_classes, "drop_classes", int), numbers_of(clip, "clip", float), where, CLI_NAMES)
+    shown = {"classes": classes, "drop_classes": drop_classes, "clip": clip}
+    keep, drop, box = numbers_of(classes, "classes", int), numbers_of(drop_classes, "drop_classes", int), numbers_of(clip, "clip", float)
+    return point_filter(keep, drop, box, where, CLI_NAMES, shown)
 
 
 __all__ = ["PointFilter", "cli_point_filter", "filtered", "point_filter"]
