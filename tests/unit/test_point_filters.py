@@ -1,0 +1,174 @@
+"""Read-time point filters (io/filters.py): gp.open's ``classes``, ``drop_classes`` and ``clip``,
+in memory and progressive, and render's ``--classes``/``--drop-classes``/``--clip``, checked
+against numpy on autzen's classification; every bad value is a one-line error before reading."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import gigapoint as gp
+from gigapoint.errors import EmptyCloudError, InputError
+from gigapoint.io import read_chunks
+
+CLIP_2D = (636_500.0, 849_000.0, 637_000.0, 849_300.0)
+CLIP_3D = (636_500.0, 849_000.0, 420.0, 637_000.0, 849_300.0, 440.0)
+
+
+@pytest.fixture(scope="module")
+def autzen(autzen_path):
+    """autzen's positions and classification as the reader gives them (the numpy reference)."""
+    chunks = list(read_chunks(autzen_path))
+    return np.concatenate([c.xyz for c in chunks]), np.concatenate([c.attributes["classification"] for c in chunks])
+
+
+def _in_box(xyz: np.ndarray, box) -> np.ndarray:
+    axes = len(box) // 2
+    return np.all((xyz[:, :axes] >= box[:axes]) & (xyz[:, :axes] <= box[axes:]), axis=1)
+
+
+def test_open_keeps_only_the_classes_given(autzen_path, autzen):
+    _, classification = autzen
+    cloud = gp.open(autzen_path, classes=[2])
+    assert cloud.n_points == np.count_nonzero(np.isin(classification, [2])) == 26_107
+    assert set(np.unique(cloud.attributes["classification"])) == {2}
+    assert gp.open(autzen_path, classes=[1, 2, 6]).n_points == 110_000  # (classes the file lacks keep nothing more)
+
+
+def test_open_drops_the_classes_given(autzen_path, autzen):
+    _, classification = autzen
+    cloud = gp.open(autzen_path, drop_classes=2)  # one class as an integer
+    assert cloud.n_points == np.count_nonzero(~np.isin(classification, [2])) == 83_893
+    assert set(np.unique(cloud.attributes["classification"])) == {1}
+
+
+@pytest.mark.parametrize("box", [CLIP_2D, CLIP_3D], ids=["2d", "3d"])
+def test_open_keeps_the_points_in_the_clip_box(autzen_path, autzen, box):
+    xyz, classification = autzen
+    inside = _in_box(xyz, box)
+    cloud = gp.open(autzen_path, clip=box)
+    assert cloud.n_points == np.count_nonzero(inside) > 0
+    kept = cloud.positions()
+    assert np.all(_in_box(kept, box))
+    both = gp.open(autzen_path, clip=box, classes=[2])  # a point passes every option given
+    assert both.n_points == np.count_nonzero(inside & (classification == 2))
+
+
+def test_progressive_open_reads_the_points_the_filter_keeps(autzen_path, autzen):
+    xyz, classification = autzen
+    cloud = gp.open(autzen_path, progressive=True, drop_classes=[2], clip=CLIP_2D)
+    assert cloud.wait(timeout=120)
+    assert cloud.n_points == np.count_nonzero(~np.isin(classification, [2]) & _in_box(xyz, CLIP_2D))
+    # the header's total is an upper bound: the load counts the points read, the filter's left out too
+    assert (cloud.loader.read, cloud.loader.total, cloud.progress) == (110_000, 110_000, 1.0)
+
+
+def test_a_filter_that_keeps_nothing_says_so(autzen_path):
+    said = f"{autzen_path}: no point passes the filter (classes 6, 7): 110,000 points read"
+    with pytest.raises(EmptyCloudError) as err:
+        gp.open(autzen_path, classes=[7, 6])
+    assert str(err.value) == said
+    with pytest.raises(EmptyCloudError) as err:
+        gp.open(autzen_path, chunked=True, classes=[7, 6])  # three passes over the files: counted once
+    assert str(err.value) == said
+    cloud = gp.open(autzen_path, progressive=True, classes=[6, 7])
+    with pytest.raises(EmptyCloudError) as err:
+        cloud.wait(timeout=120)
+    assert str(err.value) == said
+    with pytest.raises(EmptyCloudError) as err:
+        gp.open(autzen_path, clip=(0, 0, 1, 1))
+    assert str(err.value) == f"{autzen_path}: no point passes the filter (clip 0, 0, 1, 1): 110,000 points read"
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"classes": [2, 300]}, "open: classes=[2, 300]: class numbers are integers from 0 to 255 (LAS classes), got 300"),
+        ({"classes": [-1]}, "open: classes=[-1]: class numbers are integers from 0 to 255 (LAS classes), got -1"),
+        ({"classes": 2.5}, "open: classes=2.5: class numbers are integers from 0 to 255 (LAS classes)"),
+        ({"drop_classes": ["7"]}, "open: drop_classes=['7']: class numbers are integers from 0 to 255 (LAS classes), got '7'"),
+        ({"classes": []}, "open: classes=[]: class numbers are integers from 0 to 255 (LAS classes), got none"),
+        ({"classes": [2, 6], "drop_classes": [6, 7]}, "open: classes= and drop_classes= both name class 6; keep it or drop it"),
+        ({"clip": (1, 2, 3, 4, 5)}, "open: clip=(1, 2, 3, 4, 5): a clip box is xmin, ymin, xmax, ymax (any z) or xmin, ymin, zmin, xmax, ymax, zmax; got 5 numbers"),
+        ({"clip": (3, 0, 1, 1)}, "open: clip=(3, 0, 1, 1): xmin 3 is above xmax 1"),
+        ({"clip": (0, 0, 0, 1, 1, -1)}, "open: clip=(0, 0, 0, 1, 1, -1): zmin 0 is above zmax -1"),
+        ({"clip": (0, 0, float("nan"), 1)}, "open: clip=(0, 0, nan, 1): a clip box's bounds are finite numbers"),
+        ({"clip": "0,0,1,1"}, "open: clip='0,0,1,1': a clip box is xmin, ymin, xmax, ymax (any z) or xmin, ymin, zmin, xmax, ymax, zmax"),
+    ],
+)
+@pytest.mark.parametrize("progressive", [False, True])
+def test_bad_filter_values_are_one_line_errors_before_anything_is_read(tmp_path, options, message, progressive):
+    missing = tmp_path / "missing.laz"  # read first, it would be "no such file"
+    with pytest.raises(InputError) as err:
+        gp.open(missing, progressive=progressive, **options)
+    assert str(err.value) == message
+
+
+def test_a_file_without_classification_given_classes_is_an_error_naming_it(tmp_path):
+    f = tmp_path / "plain.xyz"
+    np.savetxt(f, np.random.default_rng(1).random((100, 3)))
+    with pytest.raises(InputError) as err:
+        gp.open(f, drop_classes=[7, 18])
+    assert str(err.value) == f"{f}: holds no classification, which the filter (drop classes 7, 18) needs"
+    assert gp.open(f, clip=(0, 0, 0.5, 0.5)).n_points > 0  # (a clip box needs none)
+
+
+def test_an_octree_given_a_filter_is_refused(demo_small, tmp_path):
+    out = tmp_path / "oct"
+    gp.convert(demo_small, out)
+    with pytest.raises(InputError) as err:
+        gp.open(out, classes=[2])
+    assert str(err.value) == f"{out}: a converted octree folder opens alone, drawn level of detail as stored; the filter (classes 2) applies to point files"
+
+
+# ---------------------------------------------------------------------------------------- CLI
+
+CAMERA = "eye=636590,849216,1100 target=636590,849216,460 up=0,1,0"  # straight down over the survey
+
+
+def test_render_drop_classes_draws_only_the_points_kept(cli, tmp_path, autzen_path, autzen):
+    _, classification = autzen
+    size = ("-W", 240, "-H", 160, "--camera", CAMERA)
+    rc, out, err = cli("render", autzen_path, "-o", tmp_path / "all.png", "--index-out", tmp_path / "all.npy", *size)
+    assert rc == 0, err
+    rc, out, err = cli("render", autzen_path, "-o", tmp_path / "ground.png", "--index-out", tmp_path / "ground.npy", "--drop-classes", "1", *size)
+    assert rc == 0, err
+    ground = np.count_nonzero(classification != 1)
+    assert out.strip() == f"wrote {tmp_path / 'ground.png'} (240x160, {ground:,} points)" and ground == 26_107
+    everything, kept = np.load(tmp_path / "all.npy") >= 0, np.load(tmp_path / "ground.npy") >= 0  # pixels a point covers
+    # the ground's pixels are the whole cloud's (but a few: adaptive point sizes follow the density), and far fewer
+    assert np.count_nonzero(kept & ~everything) <= kept.sum() // 1000
+    assert 0.5 * everything.sum() < kept.sum() < 0.8 * everything.sum()  # (12,201 of 16,667 here)
+    rc, out, err = cli("render", autzen_path, "-o", tmp_path / "prog.png", "--drop-classes", "1", "--progressive", *size)
+    assert rc == 0, err
+    assert out.strip() == f"wrote {tmp_path / 'prog.png'} (240x160, 26,107 points)"  # the octree built of the points kept
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--classes", "2,x"], "error: render: --classes 2,x: give integers from 0 to 255, separated by commas"),
+        (["--classes", "2,256"], "error: render: --classes 2,256: class numbers are integers from 0 to 255 (LAS classes), got 256"),
+        (["--classes", "2,6", "--drop-classes", "6"], "error: render: --classes and --drop-classes both name class 6; keep it or drop it"),
+        (["--clip", "1,2,3,4,5"], "error: render: --clip 1,2,3,4,5: a clip box is xmin, ymin, xmax, ymax (any z) or xmin, ymin, zmin, xmax, ymax, zmax; got 5 numbers"),
+        (["--clip", "0,0,nan,1"], "error: render: --clip 0,0,nan,1: a clip box's bounds are finite numbers"),
+        (["--clip", "0,0,a,1"], "error: render: --clip 0,0,a,1: give numbers, separated by commas"),
+    ],
+)
+def test_render_bad_filter_values_are_one_line_errors(cli, tmp_path, args, message):
+    rc, _, err = cli("render", tmp_path / "missing.laz", "-o", tmp_path / "x.png", *args)
+    assert rc != 0
+    assert err.strip() == message
+
+
+def test_render_says_when_the_filter_keeps_nothing(cli, tmp_path, autzen_path):
+    rc, _, err = cli("render", autzen_path, "-o", tmp_path / "x.png", "--classes", "7,18")
+    assert rc != 0
+    assert err.strip() == f"error: {autzen_path}: no point passes the filter (classes 7, 18): 110,000 points read"
+
+
+def test_view_filter_options_need_files(cli):
+    rc, _, err = cli("view", "--demo", 100, "--classes", "2")
+    assert rc != 0
+    assert err.strip() == "error: --classes, --drop-classes and --clip: filter the points of the files given as PATH...; none is given"
