@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from PIL import Image
 
 import gigapoint as gp
 from gigapoint.errors import EmptyCloudError, InputError

@@ -1374,7 +1374,8 @@ class ProgressiveOctree:
 
         from ..convert import convert
 
-        taken = set(inspect.signature(convert).parameters) - {"inputs", "out", "format", "overwrite"}
+        # (not the point filter's classes, drop_classes, clip: they filter points read from files, not an octree's)
+        taken = set(inspect.signature(convert).parameters) - {"inputs", "out", "format", "overwrite", "classes", "drop_classes", "clip"}
         unknown = sorted(set(options) - taken)
         if unknown:  # banana=1 was a TypeError inside
             raise InputError(f"{self.name}: save: unknown option(s) {', '.join(unknown)}; it takes {', '.join(sorted(taken))}")
