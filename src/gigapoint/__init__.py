@@ -131,7 +131,9 @@ def open(*paths, progressive: bool = False, **options):
     from .io.filters import point_filter
     from .lod.reader import refuse_octrees
 
-    paths = _flat_paths(paths)
+    from .io import lone_match
+
+    paths = tuple(lone_match(_flat_paths(paths)))  # (a pattern matching one octree opens it)
     check_switch("progressive", progressive, "open")  # (chunked= is open_cloud's to check)
     recursive = options.pop("recursive", False)
     check_switch("recursive", recursive, "open")

@@ -321,3 +321,14 @@ def test_view_refuses_recursive_without_paths(cli, monkeypatch):
     monkeypatch.setattr(ViewerServer, "serve_forever", lambda self: None)  # (without the check: not until Ctrl+C)
     said = "error: --recursive: reads the subfolders of the folders given as PATH...; none is given\n"
     assert cli("view", "--recursive", "--no-browser", "--demo", 1000) == (1, "", said)
+
+
+def test_a_glob_pattern_matching_one_octree_opens_it(tmp_path, cli):
+    """"out/city*" matching a converted octree alone: the octree, as when named (the point files'
+    expansion leaves octrees out: it was "open: no file given"); among tiles it is still left out."""
+    tiles = write_tiles(tmp_path / "tiles", 2, points=20, suffix=".las")
+    result = gp.convert(tiles, tmp_path / "out" / "city_octree")
+    cloud = gp.open(str(tmp_path / "out" / "city*"))
+    assert type(cloud).__name__ != "PointCloud" and cloud.n_points == result.points == 40
+    rc, out, err = cli("render", str(tmp_path / "out" / "city*"), "-o", tmp_path / "x.png", "-W", 64, "-H", 48)
+    assert rc == 0 and out.startswith(f"wrote {tmp_path / 'x.png'} (64x48, ") and err == ""

@@ -88,6 +88,18 @@ def pattern_matches(p) -> list[Path] | None:
     return sorted((Path(f) for f in found), key=lambda f: f.parts)
 
 
+def lone_match(paths) -> list:
+    """``paths``, but a glob pattern given alone that matches one path as that path: an octree it
+    matches ("out/city*") is then opened as one, as when named (the point files' expansion leaves
+    octrees out, and "out/city*" was "no file given")."""
+    paths = list(paths)
+    if len(paths) == 1:
+        matches = pattern_matches(paths[0])
+        if matches is not None and len(matches) == 1:
+            return matches
+    return paths
+
+
 def _named(paths: Iterable) -> Iterator[tuple[object, bool]]:
     """(path, whether a pattern matched it) of each of ``paths``, patterns by their matches."""
     for p in paths:
@@ -666,6 +678,7 @@ __all__ = [
     "file_info",
     "files_label",
     "files_units",
+    "lone_match",
     "folder_info",
     "format_info",
     "open_cloud",

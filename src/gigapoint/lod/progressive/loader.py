@@ -384,10 +384,10 @@ def open_sized(paths, point_budget: int, progressive: bool | None = None, progre
     their headers count more points than ``point_budget``, or when one is cut off (what it
     holds drawn, its error said); else as one PointCloud. ``point_filter`` (io/filters.py):
     only the points it keeps are read; an octree is then refused (it is drawn as stored)."""
-    from ...io import expand_paths, open_cloud
+    from ...io import expand_paths, lone_match, open_cloud
     from ..reader import is_lod_source, open_octree, refuse_octrees
 
-    paths = list(paths)
+    paths = lone_match(paths)  # (a pattern matching one octree opens it)
     if len(paths) == 1 and is_lod_source(paths[0]) and not progressive and point_filter is None:
         return open_octree(paths[0])
     if point_filter is not None:
