@@ -128,10 +128,9 @@ def open(*paths, progressive: bool = False, **options):
 
     Paths may also come as one list or tuple: ``gp.open([a, b])`` is ``gp.open(a, b)``."""
     from .errors import InputError, check_switch
+    from .io import lone_match
     from .io.filters import point_filter
     from .lod.reader import refuse_octrees
-
-    from .io import lone_match
 
     paths = tuple(lone_match(_flat_paths(paths)))  # (a pattern matching one octree opens it)
     check_switch("progressive", progressive, "open")  # (chunked= is open_cloud's to check)
