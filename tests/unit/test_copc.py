@@ -518,7 +518,8 @@ def test_the_output_grid_keeps_the_inputs_and_fits_potrees_unsigned_integers():
     """lod/grid.py: a LAS input's grid is kept (COPC: its offset too); Potree's integers count
     from the grid line at or below the points (a LAS offset above them made them negative, the
     writer clipped them to 0) and fit 31 bits (an offset in the middle of 300 km at 0.1 mm)."""
-    from gigapoint.lod.grid import default_step, output_grid
+    from gigapoint.io.las_fields import default_step
+    from gigapoint.lod.grid import output_grid
 
     st = {"lo": [99.95, 0, 0], "hi": [110.0, 1, 1], "source": {"scale": [1e-4] * 3, "offset": [100.0, 0, 0]}}
     s, o = output_grid(st)

@@ -28,6 +28,7 @@ from ..errors import GigapointWarning, InputError, warn
 from ..io import laz_process
 from ..io.http import ByteSource, HttpFile, LocalFile, open_source
 from ..io.las import EVLR_HEADER, PROJECTION_USER_ID, WKT_RECORD, _scaled_xyz, evlr_headers, read_las_header, wkt_of
+from ..io.las_fields import ATTRIBUTE_DTYPES, EXTRA_BYTES_TYPES, FLAG_BITS, field_attributes
 from .store import check_grid, tight_bounds
 from .voxel_octree import VOXEL_KEY_DTYPE, VoxelOctree, valid_voxels, voxel_name, voxel_to_key
 
@@ -108,30 +109,6 @@ POINT_DTYPES = {
     7: np.dtype([*_PDRF6, ("red", "<u2"), ("green", "<u2"), ("blue", "<u2")]),
     8: np.dtype([*_PDRF6, ("red", "<u2"), ("green", "<u2"), ("blue", "<u2"), ("nir", "<u2")]),
 }
-#: Point attributes gigapoint reads from (and writes to) these formats, as the LAS reader names them.
-ATTRIBUTE_DTYPES = {
-    "intensity": np.dtype(np.uint16),
-    "classification": np.dtype(np.uint8),
-    "return_number": np.dtype(np.uint8),
-    "number_of_returns": np.dtype(np.uint8),
-    "point_source_id": np.dtype(np.uint16),
-    "gps_time": np.dtype(np.float64),
-    "user_data": np.dtype(np.uint8),
-    "scan_angle": np.dtype(np.int16),  # 0.006 degrees
-    **dict.fromkeys(("scan_direction_flag", "edge_of_flight_line", "synthetic", "key_point", "withheld", "overlap", "scanner_channel"),
-                    np.dtype(np.uint8)),
-}  # fmt: skip
-#: The bits of the ``flags`` byte (of formats 6-10) each flag is stored at (scanner_channel: 2 bits).
-FLAG_BITS = {"synthetic": 0, "key_point": 1, "withheld": 2, "overlap": 3, "scanner_channel": 4, "scan_direction_flag": 6, "edge_of_flight_line": 7}
-#: Attributes point format 6/7/8 has a field for (nir: 8 only; scan_angle_rank, formats 0-5's
-#: degrees, is written to scan_angle); the writer stores any other in extra bytes.
-LAS_FIELD_ATTRIBUTES = frozenset({*ATTRIBUTE_DTYPES, "nir", "scan_angle_rank"})
-
-
-def field_attributes(point_format: int) -> frozenset:
-    """The attributes point format 6/7/8 has a field for: nir in 8 only (in 6 and 7 it is
-    extra bytes, read and written under its name)."""
-    return LAS_FIELD_ATTRIBUTES if point_format == 8 else LAS_FIELD_ATTRIBUTES - {"nir"}
 
 COPC_USER_ID = b"copc"
 COPC_INFO_RECORD = 1
@@ -158,10 +135,6 @@ EXTRA_BYTES_DTYPE = np.dtype(
         ("description", "S32"),
     ]
 )
-EXTRA_BYTES_TYPES = {
-    1: np.dtype("u1"), 2: np.dtype("i1"), 3: np.dtype("<u2"), 4: np.dtype("<i2"), 5: np.dtype("<u4"),
-    6: np.dtype("<i4"), 7: np.dtype("<u8"), 8: np.dtype("<i8"), 9: np.dtype("<f4"), 10: np.dtype("<f8"),
-}  # fmt: skip
 HEADER_SIZE = LAS14_HEADER_DTYPE.itemsize  # 375
 INFO_OFFSET = HEADER_SIZE + VLR_HEADER_DTYPE.itemsize  # the info VLR's data: byte 429
 MAGIC_END = INFO_OFFSET  # bytes needed to tell a COPC file

@@ -24,7 +24,15 @@ from numba import njit
 
 from ..atomic import atomic_open
 from ..errors import GigapointWarning, warn
-from ..io.las import PROJECTION_USER_ID, WKT_RECORD, scan_angle_units
+from ..io.las import PROJECTION_USER_ID, WKT_RECORD
+from ..io.las_fields import (
+    EXTRA_BYTES_TYPES,
+    FLAG_BITS,
+    LAS_FIELD_OF,
+    choose_point_format,
+    extra_attributes,
+    las_field_values,
+)
 from .copc import (
     COPC_HIERARCHY_RECORD,
     COPC_INFO_DTYPE,
@@ -33,16 +41,13 @@ from .copc import (
     EVLR_HEADER_DTYPE,
     EXTRA_BYTES_DTYPE,
     EXTRA_BYTES_RECORD,
-    EXTRA_BYTES_TYPES,
     EXTRA_BYTES_USER_ID,
-    FLAG_BITS,
     HIERARCHY_ENTRY_DTYPE,
     LAS14_HEADER_DTYPE,
     LASZIP_RECORD,
     LASZIP_USER_ID,
     POINT_DTYPES,
     VLR_HEADER_DTYPE,
-    field_attributes,
 )
 from .grid import output_grid
 from .keys import ROOT_KEY, level_of
@@ -74,49 +79,6 @@ def _las_integers(xyz, offset, scale, X, Y, Z, lo, hi) -> bool:
     return True
 
 
-#: the range of each integer LAS field (the return counts: 4 bits in point formats 6-8; scan_angle:
-#: ±180 degrees in 0.006 degree steps, as LAS 1.4 says)
-LAS_FIELD_RANGE = {
-    "intensity": (0, 65535), "classification": (0, 255), "return_number": (0, 15), "number_of_returns": (0, 15),
-    "point_source_id": (0, 65535), "nir": (0, 65535), "user_data": (0, 255), "scan_angle": (-30000, 30000), "scanner_channel": (0, 3),
-    **{flag: (0, 1) for flag in FLAG_BITS if flag != "scanner_channel"},
-}  # fmt: skip
-#: Attributes written to a field of another name: formats 0-5's scan angle, in degrees
-LAS_FIELD_OF = {"scan_angle_rank": "scan_angle"}
-
-
-def las_field_values(name: str, values) -> np.ndarray:
-    """An attribute's ``values`` in the range of its LAS field (clipped; gps_time as float64;
-    scan_angle_rank, degrees, in scan_angle's 0.006 degree units): what the COPC writer and a
-    live cloud's LAS save store (in field ``LAS_FIELD_OF.get(name, name)``)."""
-    if name == "gps_time":
-        return np.asarray(values, np.float64)
-    if name == "scan_angle_rank":
-        return scan_angle_units(values)
-    return np.clip(np.asarray(values), *LAS_FIELD_RANGE[name])
-
-
-def extra_attributes(attributes: dict, where: str = "COPC", point_format: int = 8) -> dict[str, np.dtype]:
-    """The attributes ({name: dtype}) that ``point_format`` (6/7/8) has no field for, as they will be
-    stored in extra bytes (LAS 1.4 types: booleans as u8, half floats as f4). An attribute that
-    cannot be stored (a name that is not ASCII or longer than 32 bytes, a non-scalar dtype) is
-    left out with a warning."""
-    out = {}
-    for name, dt in attributes.items():
-        if name in field_attributes(point_format):
-            continue
-        dt = np.dtype(dt)
-        stored = np.dtype(np.uint8) if dt == np.bool_ else np.dtype(np.float32) if dt == np.float16 else dt.newbyteorder("<")
-        problem = None
-        if not name.isascii() or not 0 < len(name) <= 32:
-            problem = "its name is not 1-32 ASCII characters"
-        elif stored not in EXTRA_BYTES_TYPES.values():
-            problem = f"its dtype {dt} is not a LAS extra bytes type (8-64-bit integers and floats)"
-        if problem:
-            warn(f"{where}: attribute {name!r} is not written: {problem}", GigapointWarning)
-            continue
-        out[name] = stored
-    return out
 
 
 def _extra_bytes_vlr(extra: dict[str, np.dtype]) -> bytes:
@@ -126,14 +88,6 @@ def _extra_bytes_vlr(extra: dict[str, np.dtype]) -> bytes:
     for i, (name, dt) in enumerate(extra.items()):
         d[i]["data_type"], d[i]["name"], d[i]["description"] = code[np.dtype(dt)], name.encode(), b"gigapoint attribute"
     return _vlr(EXTRA_BYTES_USER_ID, EXTRA_BYTES_RECORD, d.tobytes(), "Extra Bytes")
-
-
-def choose_point_format(attributes, has_color: bool = True) -> int:
-    """6 (no color), 7 (RGB) or 8 (RGB + NIR), as the points' attributes need: NIR without
-    colors is format 6 with NIR in extra bytes (format 8 gave every point a grey color)."""
-    if not has_color:
-        return 6
-    return 8 if "nir" in attributes else 7
 
 
 def _vlr(user: bytes, record: int, data: bytes, description: str) -> bytes:

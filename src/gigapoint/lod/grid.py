@@ -5,33 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-_INT32 = (-(2**31), 2**31 - 1)
-
-
-def default_step(lo, hi) -> float:
-    """The grid step for points that came without one (float positions): a millimetre, finer for
-    a cloud under 65.5 m across (at least 65 536 steps across it: a 10 cm object kept its shape,
-    not 100 mm-steps), and never below what float64 tells apart at its coordinates (2e-15 of
-    them: ~8 of its steps) or 1 nm."""
-    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-    extent = float(np.max(hi - lo))
-    return max(min(0.001, extent / 2**16), 2e-15 * max(1.0, float(np.abs(lo).max()), float(np.abs(hi).max())), 1e-9)
-
-
-def las_grid(lo, hi, scale=None, offset=None) -> tuple[np.ndarray, np.ndarray]:
-    """(scale, offset) per axis of 32-bit integers for points within [lo, hi]: the input's when
-    both are given and the points fit on them; else ``scale`` (a grid the points lie on, from 0:
-    the offset a multiple of it) or ``default_step``, coarser where the extent needs it, from
-    the grid line at or below ``lo``."""
-    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-    if scale is not None and offset is not None:
-        s, o = np.asarray(scale, np.float64), np.asarray(offset, np.float64)
-        if np.all(s > 0) and np.all((lo - o) / s > _INT32[0] + 1) and np.all((hi - o) / s < _INT32[1] - 1):
-            return s, o
-    s = np.broadcast_to(np.asarray(scale, np.float64), (3,)) if scale is not None else np.full(3, default_step(lo, hi))
-    s = np.maximum(s, (hi - lo) / 2**30)
-    o = np.floor(lo / s) * s
-    return s, o
+from ..io.las_fields import las_grid
 
 
 def output_grid(state: dict, unsigned: bool = False) -> tuple[np.ndarray, np.ndarray]:

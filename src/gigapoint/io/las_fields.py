@@ -1,0 +1,125 @@
+"""The LAS 1.4 point record as gigapoint writes it (point formats 6, 7 and 8): which attribute
+goes to which field, in which range, which go to extra bytes and as what type, and the integer
+grid positions are stored on. Shared by every LAS-style writer: a cloud's save (io/write.py), a
+live cloud's, and COPC (lod/copc_write.py), whose reader (lod/copc.py) decodes the same fields."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import GigapointWarning, warn
+from .las import scan_angle_units
+
+#: Point attributes gigapoint reads from (and writes to) these formats, as the LAS reader names them.
+ATTRIBUTE_DTYPES = {
+    "intensity": np.dtype(np.uint16),
+    "classification": np.dtype(np.uint8),
+    "return_number": np.dtype(np.uint8),
+    "number_of_returns": np.dtype(np.uint8),
+    "point_source_id": np.dtype(np.uint16),
+    "gps_time": np.dtype(np.float64),
+    "user_data": np.dtype(np.uint8),
+    "scan_angle": np.dtype(np.int16),  # 0.006 degrees
+    **dict.fromkeys(("scan_direction_flag", "edge_of_flight_line", "synthetic", "key_point", "withheld", "overlap", "scanner_channel"),
+                    np.dtype(np.uint8)),
+}  # fmt: skip
+#: The bits of the ``flags`` byte (of formats 6-10) each flag is stored at (scanner_channel: 2 bits).
+FLAG_BITS = {"synthetic": 0, "key_point": 1, "withheld": 2, "overlap": 3, "scanner_channel": 4, "scan_direction_flag": 6, "edge_of_flight_line": 7}
+#: Attributes point format 6/7/8 has a field for (nir: 8 only; scan_angle_rank, formats 0-5's
+#: degrees, is written to scan_angle); the writer stores any other in extra bytes.
+LAS_FIELD_ATTRIBUTES = frozenset({*ATTRIBUTE_DTYPES, "nir", "scan_angle_rank"})
+
+
+def field_attributes(point_format: int) -> frozenset:
+    """The attributes point format 6/7/8 has a field for: nir in 8 only (in 6 and 7 it is
+    extra bytes, read and written under its name)."""
+    return LAS_FIELD_ATTRIBUTES if point_format == 8 else LAS_FIELD_ATTRIBUTES - {"nir"}
+
+
+#: The scalar types of extra bytes by their data_type code (LAS 1.4 R15, section 2.5.4).
+EXTRA_BYTES_TYPES = {
+    1: np.dtype("u1"), 2: np.dtype("i1"), 3: np.dtype("<u2"), 4: np.dtype("<i2"), 5: np.dtype("<u4"),
+    6: np.dtype("<i4"), 7: np.dtype("<u8"), 8: np.dtype("<i8"), 9: np.dtype("<f4"), 10: np.dtype("<f8"),
+}  # fmt: skip
+
+
+#: the range of each integer LAS field (the return counts: 4 bits in point formats 6-8; scan_angle:
+#: ±180 degrees in 0.006 degree steps, as LAS 1.4 says)
+LAS_FIELD_RANGE = {
+    "intensity": (0, 65535), "classification": (0, 255), "return_number": (0, 15), "number_of_returns": (0, 15),
+    "point_source_id": (0, 65535), "nir": (0, 65535), "user_data": (0, 255), "scan_angle": (-30000, 30000), "scanner_channel": (0, 3),
+    **{flag: (0, 1) for flag in FLAG_BITS if flag != "scanner_channel"},
+}  # fmt: skip
+#: Attributes written to a field of another name: formats 0-5's scan angle, in degrees
+LAS_FIELD_OF = {"scan_angle_rank": "scan_angle"}
+
+
+def las_field_values(name: str, values) -> np.ndarray:
+    """An attribute's ``values`` in the range of its LAS field (clipped; gps_time as float64;
+    scan_angle_rank, degrees, in scan_angle's 0.006 degree units): what the COPC writer and a
+    live cloud's LAS save store (in field ``LAS_FIELD_OF.get(name, name)``)."""
+    if name == "gps_time":
+        return np.asarray(values, np.float64)
+    if name == "scan_angle_rank":
+        return scan_angle_units(values)
+    return np.clip(np.asarray(values), *LAS_FIELD_RANGE[name])
+
+
+def extra_attributes(attributes: dict, where: str = "COPC", point_format: int = 8) -> dict[str, np.dtype]:
+    """The attributes ({name: dtype}) that ``point_format`` (6/7/8) has no field for, as they will be
+    stored in extra bytes (LAS 1.4 types: booleans as u8, half floats as f4). An attribute that
+    cannot be stored (a name that is not ASCII or longer than 32 bytes, a non-scalar dtype) is
+    left out with a warning."""
+    out = {}
+    for name, dt in attributes.items():
+        if name in field_attributes(point_format):
+            continue
+        dt = np.dtype(dt)
+        stored = np.dtype(np.uint8) if dt == np.bool_ else np.dtype(np.float32) if dt == np.float16 else dt.newbyteorder("<")
+        problem = None
+        if not name.isascii() or not 0 < len(name) <= 32:
+            problem = "its name is not 1-32 ASCII characters"
+        elif stored not in EXTRA_BYTES_TYPES.values():
+            problem = f"its dtype {dt} is not a LAS extra bytes type (8-64-bit integers and floats)"
+        if problem:
+            warn(f"{where}: attribute {name!r} is not written: {problem}", GigapointWarning)
+            continue
+        out[name] = stored
+    return out
+
+
+def choose_point_format(attributes, has_color: bool = True) -> int:
+    """6 (no color), 7 (RGB) or 8 (RGB + NIR), as the points' attributes need: NIR without
+    colors is format 6 with NIR in extra bytes (format 8 gave every point a grey color)."""
+    if not has_color:
+        return 6
+    return 8 if "nir" in attributes else 7
+
+
+_INT32 = (-(2**31), 2**31 - 1)
+
+
+def default_step(lo, hi) -> float:
+    """The grid step for points that came without one (float positions): a millimetre, finer for
+    a cloud under 65.5 m across (at least 65 536 steps across it: a 10 cm object kept its shape,
+    not 100 mm-steps), and never below what float64 tells apart at its coordinates (2e-15 of
+    them: ~8 of its steps) or 1 nm."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    extent = float(np.max(hi - lo))
+    return max(min(0.001, extent / 2**16), 2e-15 * max(1.0, float(np.abs(lo).max()), float(np.abs(hi).max())), 1e-9)
+
+
+def las_grid(lo, hi, scale=None, offset=None) -> tuple[np.ndarray, np.ndarray]:
+    """(scale, offset) per axis of 32-bit integers for points within [lo, hi]: the input's when
+    both are given and the points fit on them; else ``scale`` (a grid the points lie on, from 0:
+    the offset a multiple of it) or ``default_step``, coarser where the extent needs it, from
+    the grid line at or below ``lo``."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    if scale is not None and offset is not None:
+        s, o = np.asarray(scale, np.float64), np.asarray(offset, np.float64)
+        if np.all(s > 0) and np.all((lo - o) / s > _INT32[0] + 1) and np.all((hi - o) / s < _INT32[1] - 1):
+            return s, o
+    s = np.broadcast_to(np.asarray(scale, np.float64), (3,)) if scale is not None else np.full(3, default_step(lo, hi))
+    s = np.maximum(s, (hi - lo) / 2**30)
+    o = np.floor(lo / s) * s
+    return s, o
