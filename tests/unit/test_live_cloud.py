@@ -356,7 +356,7 @@ def test_save_as_ply_writes_64_bit_integers_that_fit_in_32_and_refuses_others(tm
     live = LiveCloud()
     live.push(xyz, big=np.full(n, -(2**63)))
     live.snapshot(normals=False)
-    problem = "holds int64 values PLY cannot hold (it has no 64-bit integers), e.g. -9223372036854775808; save as .las, .laz or an octree folder"
+    problem = "holds int64 values PLY cannot hold (it has no 64-bit integers), e.g. -9223372036854775808; save as .las or .laz"
     with pytest.raises(InputError, match=f"b.ply: attribute 'big' {re.escape(problem)}$"):
         live.save(tmp_path / "b.ply")
     assert not (tmp_path / "b.ply").exists()

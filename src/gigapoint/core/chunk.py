@@ -18,13 +18,16 @@ class PointChunk:
 
     Attributes are 1-D (or (N, k)) numpy arrays of length N, e.g. ``intensity``,
     ``classification``, ``return_number``. ``scale``: the resolution the source stored the
-    coordinates at, per axis (a LAS file's scale), where it has one.
+    coordinates at, per axis (a LAS file's scale), where it has one. ``color_bits``: 8 or 16, how
+    the source's integer colours were stored (a LAS file's: 8-bit values in its 16-bit fields, or
+    16-bit ones, shifted to 8), where it says; a save writes them back so.
     """
 
     xyz: np.ndarray
     rgba: np.ndarray | None = None
     attributes: dict[str, np.ndarray] = field(default_factory=dict)
     scale: tuple[float, float, float] | None = None
+    color_bits: int | None = None
 
     def __post_init__(self) -> None:
         self.xyz = np.ascontiguousarray(self.xyz, dtype=np.float64).reshape(-1, 3)

@@ -43,7 +43,7 @@ from ..atomic import append_file, write_failure
 from ..errors import InputError, MemoryLimitError
 from .attributes import Attributes
 from .chunk import PointChunk, attributes_in_common, warn_dropped_attributes
-from .cloud import PointCloud, _valid_mask, check_valid_count, finest_scale, gather, scan_points, storage_format
+from .cloud import PointCloud, _valid_mask, check_valid_count, finest_scale, gather, scan_points, source_color_bits, storage_format
 from .compact import compact_positions, ext_bits_per_point, pack_rgb565, stream_words
 from .layout import BATCH_SIZE, PACK_DTYPE
 from .morton import MORTON_BITS_PER_AXIS, counting_order, cube_of, morton_codes, morton_order
@@ -154,7 +154,9 @@ def build_cloud_chunked(
         attr_dtypes = survey["attributes"]
         with _spilling(name, folder, n):
             _spill(passes.last if passes else source, clean, folder, origin, edge, shift, part_of_cell, n_parts, short, attr_dtypes)
-        return _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, color_format, attr_dtypes, batch_size, name, skipped, source_scale)
+        cloud = _finalize(folder, n_parts, n, lo, hi, origin, edge, compact, color_format, attr_dtypes, batch_size, name, skipped, source_scale)
+        cloud.source_color_bits = source_color_bits(survey["color_bits"])
+        return cloud
 
 
 @contextmanager
@@ -222,6 +224,7 @@ def _survey(source: ChunkSource, keep_attributes: bool, name: str) -> dict:
     dropped: set[str] = set()
     dtypes: dict[str, tuple] = {}  # name -> (dtype, shape of one point's value)
     scales: list = []
+    color_bits: list = []
     opaque = True
     for chunk in source():
         n_bad, chunk_lo, chunk_hi = scan_points(chunk.xyz)
@@ -232,13 +235,14 @@ def _survey(source: ChunkSource, keep_attributes: bool, name: str) -> dict:
         for a, v in chunk.attributes.items():
             dtypes.setdefault(a, (np.asarray(v).dtype, np.asarray(v).shape[1:]))
         scales.append(chunk.scale)
+        color_bits.append(chunk.color_bits)
         if opaque and len(chunk.rgba):
             keep = _kept(chunk, n_bad == 0)
             opaque = bool((chunk.rgba[keep, 3] == 255).all())
     if keep_attributes:
         warn_dropped_attributes(name, dropped)
     attrs = {a: dtypes[a] for a in (names or [])} if keep_attributes else {}
-    return {"n": n, "skipped": skipped, "lo": lo, "hi": hi, "attributes": attrs, "scales": scales, "opaque": opaque}
+    return {"n": n, "skipped": skipped, "lo": lo, "hi": hi, "attributes": attrs, "scales": scales, "color_bits": color_bits, "opaque": opaque}
 
 
 def _histogram(source: ChunkSource, clean: bool, origin, edge, shift: int, level: int) -> np.ndarray:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit, prange, types
 from numba.typed import List
 
-from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError, check_whole, warn
+from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError, check_switch, check_whole, warn
 from . import pages
 from .attributes import Attributes
 from .chunk import PointChunk, attributes_in_common, colors_for, warn_dropped_attributes
@@ -31,6 +31,15 @@ from .selection import View, select_view, select_views, subsample_step
 
 #: Coordinates beyond this magnitude are not of this planet in any CRS: skipped as invalid.
 MAX_ABS_COORDINATE = 1e12
+
+#: what ``PointCloud.save`` writes with: io/write.py's ``save_cloud``, set when gigapoint.io is
+#: imported (as every ``import gigapoint`` does): core cannot import io
+_CLOUD_WRITER: list[Callable] = []
+
+
+def set_cloud_writer(write: Callable) -> None:
+    """io/write.py's writer of a cloud's points to a file (``PointCloud.save``)."""
+    _CLOUD_WRITER[:] = [write]
 
 
 @dataclass
@@ -65,6 +74,9 @@ class PointCloud:
     # PointSource: the files it was read from (io.open_cloud), whose headers give a conversion
     # of the cloud its CRS and LAS grid; empty where it was built from points
     source_files: tuple = ()
+    # 8 where every source file stored its colours as 8-bit values in 16-bit fields (some LAS
+    # files do), 16 where one held 16-bit colours, None where unknown (source_color_bits)
+    source_color_bits: int | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.attributes, Attributes):  # a dict of arrays: held as given
@@ -128,6 +140,14 @@ class PointCloud:
         else:
             self.color[idx] = pack_rgb565(new)
         self.changed(indices)
+
+    def save(self, path, overwrite: bool = False) -> int:
+        """Write every point, in the cloud's order, to ``path``: .las, .laz or .ply (its suffix
+        says). A cloud read from LAS/LAZ files keeps their CRS and their X, Y, Z integers (on their
+        grid); colours are written as held (8 bits a channel). An existing file is replaced only
+        with ``overwrite=True``. Returns the points written."""
+        check_switch("overwrite", overwrite, f"{self.name}: save")  # ("no" was taken as true)
+        return _CLOUD_WRITER[0](self, path, overwrite)
 
     def changed(self, indices=None) -> None:
         """Say that the arrays of points ``indices`` (all if None) were changed in place (``rgba``'s
@@ -450,6 +470,7 @@ def build_cloud(
     32-bit colors otherwise (three-word clouds, translucent colors)."""
     xyz_parts, rgba_parts, attr_parts = [], [], {}
     scales: list[tuple | None] = []
+    color_bits: list[int | None] = []
     skipped = 0
     total = 0
     attr_names: list[str] | None = None
@@ -462,6 +483,7 @@ def build_cloud(
         keep = slice(None) if n_bad == 0 else _valid_mask(chunk.xyz)
         attr_names = attributes_in_common(attr_names, chunk.attributes, dropped)  # files of one scene: the common ones
         scales.append(chunk.scale)
+        color_bits.append(chunk.color_bits)
         xyz_parts.append(chunk.xyz[keep])
         rgba_parts.append(chunk.rgba[keep])
         for a, values in chunk.attributes.items():
@@ -485,6 +507,7 @@ def build_cloud(
         xyz, rgba, attributes, name=name, skipped=skipped, batch_size=batch_size, bounds=(lo, hi), scale=compact, colors=color_format
     )
     cloud.source_scale = source_scale
+    cloud.source_color_bits = source_color_bits(color_bits)
     return cloud
 
 
@@ -522,6 +545,15 @@ def finest_scale(scales) -> tuple[float, float, float] | None:
     if scales and all(s is not None for s in scales):
         return tuple(float(v) for v in np.min(np.abs(np.array(scales, np.float64)), axis=0))
     return None
+
+
+def source_color_bits(bits) -> int | None:
+    """The chunks' ``color_bits`` as one cloud's: 16 where any chunk's colours were 16-bit (a file
+    that turned out 16-bit after a dark start among them), 8 where every chunk's were 8-bit, None
+    where a chunk did not say."""
+    if 16 in bits:
+        return 16
+    return 8 if bits and all(b == 8 for b in bits) else None
 
 
 def storage_format(name: str, layout: str, colors: str, source_scale, opaque: bool):

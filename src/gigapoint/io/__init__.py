@@ -26,6 +26,7 @@ import numpy as np
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud, value_decimals
 from ..errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, check_switch, warn
+from . import write as _write  # noqa: F401  (PointCloud.save's writer: core cannot import io)
 from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail, headers_once, read_once
 from .demo import demo_arrays, demo_chunks
 from .filters import PointFilter, filtered

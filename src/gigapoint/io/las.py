@@ -885,7 +885,8 @@ class LasReader(Reader):
                     # copies (a field of the records is a strided view of the reused buffer, a bit field a new array)
                     attributes = {a: _field_values(pts, f) for a, f in attrs.items()}
                 done += n
-                yield PointChunk(xyz, rgba, attributes, scale=stored_scale)
+                color_bits = (16 if scaler.mode == "16" else 8) if has_rgb else None  # (a save writes them back so)
+                yield PointChunk(xyz, rgba, attributes, scale=stored_scale, color_bits=color_bits)
                 if damage is not None:
                     break
         if damage is not None:  # (the child stopped with the reader: it decodes no garbage for nothing)

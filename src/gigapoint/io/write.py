@@ -1,0 +1,225 @@
+"""Writing points to a LAS, LAZ or PLY file, chunk by chunk: a cloud's ``save`` (core/cloud.py,
+through ``save_cloud``) and a live cloud's (live/save.py) share these writers.
+
+The points come as a function giving their ``PointChunk``s (called once a pass: the PLY writer
+looks at 64-bit integer attributes first), so no writer holds more than a chunk beyond what the
+cloud holds. Files appear under their name only once whole (atomic.atomic_write); an existing
+file is replaced only with ``overwrite``; every failure is a one-line InputError naming the file."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+import numpy as np
+
+from ..atomic import atomic_write, write_failure
+from ..core.chunk import PointChunk
+from ..core.cloud import PointCloud, set_cloud_writer
+from ..errors import InputError, first_line
+from .las import GEOKEYS_RECORD, PROJECTION_USER_ID, WKT_RECORD, LasReader, read_las_header, wkt_of
+from .las_fields import LAS_FIELD_OF, choose_point_format, extra_attributes, field_attributes, las_field_values, las_grid
+from .registry import reader_for
+
+#: the point files ``write_points`` writes, by suffix
+POINT_FILE_SUFFIXES = (".las", ".laz", ".ply")
+#: a GeoTIFF CRS's records: the keys and their double and ASCII parameters
+_GEOTIFF_RECORDS = (GEOKEYS_RECORD, 34736, 34737)
+
+Chunks = Callable[[], Iterable[PointChunk]]
+
+
+def check_output(path: Path, overwrite: bool) -> None:
+    """Refuse, in one line naming ``path``, a point file that cannot be written there: a folder
+    (overwrite=True was os.replace's IsADirectoryError: a folder is never replaced by a file), an
+    existing file without ``overwrite``, a missing folder."""
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory, not a {path.suffix[1:].upper()} file; not replaced")
+    if path.exists() and not overwrite:
+        raise InputError(f"{path}: exists; pass overwrite=True to replace it")
+    if not path.parent.is_dir():
+        raise InputError(f"{path}: the folder {path.parent} does not exist")
+
+
+def write_points(path: Path, chunks: Chunks, n_points: int, *, grid=None, crs_records=(), color_bits: int = 16) -> int:
+    """Write the ``n_points`` points of ``chunks()`` to ``path`` (checked by ``check_output``), as its suffix
+    says: .las/.laz (LAS 1.4 point format 7, 8 with ``nir``; ``grid``: the (scale, offset) to store
+    positions on, else one fine enough for their bounds; ``crs_records``: (user id, record id,
+    data) VLRs naming their CRS; ``color_bits``: 16 stores 8-bit colours x 257, 8 as they are, as a
+    file of 8-bit values in 16-bit fields had them) or .ply. Returns the points written."""
+    from lazrs import LazrsError
+
+    suffix = path.suffix.lower()
+    written = 0
+
+    def write(tmp: Path) -> None:
+        nonlocal written
+        if suffix == ".ply":
+            written = _write_ply(tmp, path, chunks, n_points)
+        else:
+            written = _write_las(tmp, path, chunks, grid, crs_records, color_bits)
+
+    try:
+        atomic_write(path, write)
+    except (OSError, LazrsError) as exc:  # a full disk: lazrs said "IoError: Failed to call write", naming no file, not an OSError
+        reason = write_failure(exc) if isinstance(exc, OSError) else first_line(exc)
+        raise InputError(f"{path}: not written ({reason}); nothing was left there") from None
+    return written
+
+
+def _first(chunks: Chunks) -> PointChunk:
+    """The first chunk (its attributes' names and dtypes stand for all of them), or an empty one."""
+    return next(iter(chunks()), None) or PointChunk(np.empty((0, 3)))
+
+
+def _write_las(tmp: Path, path: Path, chunks: Chunks, grid, crs_records, color_bits: int) -> int:
+    """Point format 7 (8 with ``nir``), LAS 1.4: attributes the format has a field for go to
+    it, clipped to its range as the COPC writer does (they were added as extra bytes under the
+    field's own name, which laspy refused: "field 'intensity' occurs more than once"); others
+    as extra bytes (las_fields.extra_attributes: booleans as u8, half floats as f4)."""
+    import laspy
+
+    attrs = {a: v.dtype for a, v in _first(chunks).attributes.items()}
+    fmt = choose_point_format(attrs)
+    header = laspy.LasHeader(point_format=fmt, version="1.4")
+    scale, offset = grid if grid is not None else _grid_of(chunks)
+    header.scales, header.offsets = np.asarray(scale, np.float64), np.asarray(offset, np.float64)
+    extra = extra_attributes(attrs, where=str(path), point_format=fmt)
+    for a, dt in extra.items():
+        header.add_extra_dim(laspy.ExtraBytesParams(name=a, type=dt))
+    for user, record, data in crs_records:
+        header.vlrs.append(laspy.VLR(user.decode(), record, "CRS", data))
+    header.global_encoding.wkt = any(record == WKT_RECORD for _, record, _ in crs_records)
+    fields = {a: LAS_FIELD_OF.get(a, a) for a in attrs if a in field_attributes(fmt)}
+    color_factor = np.uint16(257 if color_bits == 16 else 1)
+    written = 0
+    with laspy.open(str(tmp), mode="w", header=header, do_compress=path.suffix.lower() == ".laz") as writer:
+        for chunk in chunks():
+            rec = laspy.ScaleAwarePointRecord.zeros(len(chunk), header=header)
+            for k, axis in enumerate("XYZ"):  # the grid's integers, rounded: not laspy's truncation of x
+                rec[axis] = np.rint((chunk.xyz[:, k] - header.offsets[k]) / header.scales[k]).astype(np.int32)
+            for k, channel in enumerate(("red", "green", "blue")):
+                rec[channel] = chunk.rgba[:, k].astype(np.uint16) * color_factor
+            for a, field in fields.items():
+                rec[field] = las_field_values(a, chunk.attributes[a]).astype(rec[field].dtype)
+            for a, dt in extra.items():
+                rec[a] = chunk.attributes[a].astype(dt)
+            writer.write_points(rec)
+            written += len(chunk)
+    return written
+
+
+def _grid_of(chunks: Chunks) -> tuple[np.ndarray, np.ndarray]:
+    """``las_grid`` of the points' bounds (one pass over them): points that came without a grid."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for chunk in chunks():
+        if len(chunk):
+            lo, hi = np.minimum(lo, chunk.xyz.min(axis=0)), np.maximum(hi, chunk.xyz.max(axis=0))
+    return las_grid(np.minimum(lo, hi), np.maximum(lo, hi)) if np.all(lo <= hi) else las_grid(np.zeros(3), np.zeros(3))
+
+
+#: PLY's name of each numpy type it holds
+_PLY_NAMES = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": "int", "u4": "uint", "f4": "float", "f8": "double"}
+
+
+def _write_ply(tmp: Path, path: Path, chunks: Chunks, n: int) -> int:
+    """Binary little-endian PLY: x, y, z (double), red, green, blue (uchar), then the attributes;
+    the header first, then the records chunk by chunk."""
+    first = _first(chunks)
+    wide = [a for a, v in first.attributes.items() if v.dtype.kind in "iu" and v.dtype.itemsize == 8]
+    lo, hi = dict.fromkeys(wide, 0), dict.fromkeys(wide, 0)
+    for chunk in chunks() if wide else ():  # the range of 64-bit integers, which PLY has no type for: a pass first
+        for a in wide:
+            if len(chunk):
+                lo[a], hi[a] = min(lo[a], int(chunk.attributes[a].min())), max(hi[a], int(chunk.attributes[a].max()))
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    fields += [(a, _ply_type(path, a, v.dtype, lo.get(a, 0), hi.get(a, 0))) for a, v in first.attributes.items()]
+    properties = "".join(f"property {_PLY_NAMES[np.dtype(t).str[1:]]} {a}\n" for a, t in fields)
+    with open(tmp, "wb") as f:
+        f.write(f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\n{properties}end_header\n".encode())
+        written = 0
+        for chunk in chunks():
+            data = np.empty(len(chunk), fields)
+            for k, a in enumerate("xyz"):
+                data[a] = chunk.xyz[:, k]
+            for k, a in enumerate(("red", "green", "blue")):
+                data[a] = chunk.rgba[:, k]
+            for a, v in chunk.attributes.items():
+                data[a] = v
+            f.write(data.tobytes())
+            written += len(chunk)
+    if written != n:  # (a file whose header says otherwise would read as damaged)
+        raise InputError(f"{path}: {written:,} points came to be written, not the {n:,} expected; nothing was written")
+    return n
+
+
+def _ply_type(path: Path, name: str, dt: np.dtype, lo: int, hi: int) -> str:
+    """The PLY type that holds an attribute exactly: PLY has no 64-bit integers, half floats or
+    booleans (plyfile refused them with a ValueError traceback, numpy's default int64 among
+    them), so 64-bit integers (``lo``..``hi``) go to 32 bits when every value fits, and are refused otherwise."""
+    if dt == np.bool_:
+        return "u1"
+    if dt.kind == "f":
+        return "<f8" if dt.itemsize == 8 else "<f4"
+    if dt.itemsize < 8:
+        return dt.newbyteorder("<").str
+    for narrow in ("<i4", "<u4"):
+        info = np.iinfo(narrow)
+        if lo >= info.min and hi <= info.max:
+            return narrow
+    far = lo if abs(lo) > abs(hi) else hi
+    raise InputError(f"{path}: attribute {name!r} holds {dt} values PLY cannot hold (it has no 64-bit integers), e.g. {far}; save as .las or .laz")
+
+
+def source_crs_records(files) -> list[tuple[bytes, int, bytes]]:
+    """The CRS records of the first LAS/LAZ file of ``files`` that names one, to write into a LAS
+    file: its WKT (a VLR's, or an EVLR's), else its GeoTIFF key records as they are (LAS 1.4 wants
+    WKT with point format 7; GeoTIFF keys are read by laspy, PDAL and gigapoint all the same, and
+    making WKT of them needs pyproj). Empty where none names one."""
+    for p in files:
+        if not isinstance(reader_for(p), LasReader):
+            continue
+        hdr = read_las_header(Path(p))
+        wkt = wkt_of(hdr.vlrs + hdr.evlrs)
+        if wkt:
+            return [(PROJECTION_USER_ID, WKT_RECORD, wkt.encode() + b"\0")]
+        geotiff = [(u, r, d) for u, r, d in hdr.vlrs if u == PROJECTION_USER_ID and r in _GEOTIFF_RECORDS]
+        if geotiff:
+            return geotiff
+    return []
+
+
+def _source_grid(cloud: PointCloud):
+    """(scale, offset) of the grid the cloud's source stored positions on (its finest scale, its
+    first LAS file's offset), where its points fit 32-bit integers on it; None where it had none."""
+    if cloud.source_scale is None:
+        return None
+    offset = next((read_las_header(Path(p)).offset for p in cloud.source_files if isinstance(reader_for(p), LasReader)), None)
+    return las_grid(*cloud.bounds, cloud.source_scale, offset)  # (no offset: one from 0, a multiple of the scale)
+
+
+#: points a chunk of ``save_cloud`` holds
+SAVE_CHUNK_POINTS = 1_000_000
+
+
+def save_cloud(cloud: PointCloud, path, overwrite: bool = False, points_per_chunk: int = SAVE_CHUNK_POINTS) -> int:
+    """``PointCloud.save``: every point of ``cloud``, in its order, to ``path`` (.las, .laz, .ply),
+    a chunk at a time. A cloud read from LAS/LAZ files keeps their CRS (the first file's naming
+    one) and their grid (the X, Y, Z integers as the files had them, where every point lies on
+    it); colours as held (8 bits a channel), in LAS's 16-bit fields x 257, or as they are where
+    the source's were 8-bit values there (``source_color_bits``)."""
+    if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):
+        raise InputError(f"{cloud.name}: save: the output must be a path of a .las, .laz or .ply file, got {path!r}")
+    path = Path(path)
+    if path.suffix.lower() not in POINT_FILE_SUFFIXES:
+        raise InputError(f"{path}: save writes .las, .laz or .ply files, not {path.suffix or 'a name without a suffix'}")
+    check_output(path, overwrite)
+    crs = source_crs_records(cloud.source_files) if path.suffix.lower() != ".ply" else []
+    color_bits = 8 if cloud.source_color_bits == 8 else 16  # (LAS's own: 16; 8 where the source stored 8-bit values)
+    return write_points(path, lambda: cloud.chunks(points_per_chunk), cloud.n_points, grid=_source_grid(cloud), crs_records=crs, color_bits=color_bits)
+
+
+set_cloud_writer(save_cloud)
+
+__all__ = ["POINT_FILE_SUFFIXES", "check_output", "save_cloud", "source_crs_records", "write_points"]

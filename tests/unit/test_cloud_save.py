@@ -1,0 +1,193 @@
+"""PointCloud.save: a cloud read, built or recoloured written to LAS, LAZ or PLY (io/write.py),
+faithful to its LAS source (integers, grid, CRS, 8-bit colours as stored), chunk by chunk."""
+
+from __future__ import annotations
+
+import re
+import struct
+import subprocess
+import sys
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.errors import InputError
+from gigapoint.io.las import read_las_header, wkt_of
+from gigapoint.io.write import save_cloud
+
+LAS_FIELDS = ("X", "Y", "Z", "classification", "intensity", "return_number", "number_of_returns", "gps_time", "point_source_id",
+              "user_data", "red", "green", "blue")  # fmt: skip
+
+
+def by_position(las) -> dict[str, np.ndarray]:
+    """The fields of a laspy file in one order (X, Y, Z, then gps_time: unique in autzen_trim)."""
+    order = np.lexsort((np.asarray(las.gps_time), np.asarray(las.Z), np.asarray(las.Y), np.asarray(las.X)))
+    return {f: np.asarray(las[f])[order] for f in LAS_FIELDS}
+
+
+@pytest.mark.parametrize("chunked", [False, True])
+def test_autzen_round_trip_gives_back_the_files_integers_attributes_colours_and_crs(tmp_path, autzen_path, chunked):
+    """Every field gigapoint keeps comes back as the file had it: X, Y, Z on its grid (scale
+    0.01, offset 0), colours as its 8-bit values in 16-bit fields (not x 257), its WKT CRS;
+    built in memory or in bounded memory (core/chunked.py) alike."""
+    out = tmp_path / "x.laz"
+    assert gp.open(autzen_path, colors="rgba", chunked=chunked).save(out) == 110_000
+    src, got = laspy.read(autzen_path), laspy.read(out)
+    assert list(got.header.scales) == [0.01] * 3 and list(got.header.offsets) == [0.0] * 3
+    want, have = by_position(src), by_position(got)
+    for field in LAS_FIELDS:
+        np.testing.assert_array_equal(have[field], want[field], err_msg=field)
+    assert int(have["red"].max()) == 236  # (8-bit values: written back as they were)
+    source = read_las_header(autzen_path)
+    written = read_las_header(out)
+    assert wkt_of(written.vlrs) == wkt_of(source.vlrs) and "NAD83" in wkt_of(written.vlrs)
+    assert got.header.global_encoding.wkt
+
+
+def _las_with_offset_and_geotiff_crs(path: Path) -> laspy.LasData:
+    """A LAS 1.2 file of 5 000 points on a grid off zero (offset 100.005, scale 0.01) with 16-bit
+    colours and a GeoTIFF-only CRS (EPSG:32610), as many older files are."""
+    rng = np.random.default_rng(5)
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = np.full(3, 0.01), np.array([100.005, 200.005, 0.005])
+    keys = struct.pack("<8H", 1, 1, 0, 1, 3072, 0, 1, 32610)  # one key: ProjectedCSTypeGeoKey = 32610
+    header.vlrs.append(laspy.VLR("LASF_Projection", 34735, "GeoTIFF keys", keys))
+    las = laspy.LasData(header)
+    n = 5000
+    las.X, las.Y, las.Z = (rng.integers(-50_000, 50_000, n, dtype=np.int32) for _ in range(3))
+    las.red, las.green, las.blue = (rng.integers(0, 65536, n).astype(np.uint16) for _ in range(3))
+    las.intensity = rng.integers(0, 65536, n).astype(np.uint16)
+    las.gps_time = np.arange(n, dtype=np.float64)
+    las.write(str(path))
+    return las
+
+
+def test_a_files_offset_grid_and_geotiff_crs_are_kept_and_16_bit_colours_keep_their_high_byte(tmp_path):
+    """The source's grid is kept (its integers, its offset off zero), its GeoTIFF keys copied
+    (LAS 1.4 wants WKT; making it needs pyproj), and 16-bit colours lose their low byte only:
+    gigapoint holds 8 bits a channel (written back x 257)."""
+    src_path = tmp_path / "old.las"
+    src = _las_with_offset_and_geotiff_crs(src_path)
+    out = tmp_path / "new.las"
+    cloud = gp.open(src_path, colors="rgba")
+    assert cloud.source_color_bits == 16
+    assert cloud.save(out) == 5000
+    got = laspy.read(out)
+    np.testing.assert_array_equal(got.header.offsets, [100.005, 200.005, 0.005])
+    order_src, order_got = np.argsort(np.asarray(src.gps_time)), np.argsort(np.asarray(got.gps_time))
+    for field in ("X", "Y", "Z", "intensity"):
+        np.testing.assert_array_equal(np.asarray(got[field])[order_got], np.asarray(src[field])[order_src], err_msg=field)
+    np.testing.assert_array_equal(np.asarray(got.red)[order_got], (np.asarray(src.red)[order_src] >> 8) * 257)
+    assert read_las_header(out).crs() == "EPSG:32610"
+
+
+def test_from_arrays_with_attributes_saves_to_las_laz_and_ply_and_reads_back_equal(tmp_path):
+    rng = np.random.default_rng(3)
+    n = 4000
+    xyz = np.round(rng.random((n, 3)) * [500, 300, 40] + [4.5e5, 5.2e6, 10], 3)  # on a millimetre grid
+    rgb = rng.integers(0, 256, (n, 3), dtype=np.uint8)
+    attrs = {"intensity": rng.integers(0, 65536, n).astype(np.uint16), "classification": rng.integers(0, 20, n).astype(np.uint8),
+             "label": np.arange(n, dtype=np.int32), "height": rng.random(n).astype(np.float32)}  # fmt: skip
+    cloud = gp.from_arrays(xyz, rgb, scale=0.001, colors="rgba", **attrs)
+    for suffix in (".las", ".laz", ".ply"):
+        out = tmp_path / f"a{suffix}"
+        assert cloud.save(out) == n
+        back = gp.open(out, colors="rgba")
+        order = np.argsort(back.attributes["label"])
+        assert back.n_points == n, suffix
+        np.testing.assert_allclose(back.positions()[order], xyz, atol=1e-6, rtol=0, err_msg=suffix)
+        np.testing.assert_array_equal(back.rgba[order, :3], rgb, err_msg=suffix)
+        for name, values in attrs.items():
+            np.testing.assert_array_equal(back.attributes[name][order], values, err_msg=f"{suffix} {name}")
+    assert laspy.read(tmp_path / "a.las").header.scales.tolist() == [0.001] * 3  # from_arrays' scale is the file's
+
+
+def test_set_colors_then_save_writes_the_new_colours(tmp_path):
+    xyz = np.random.default_rng(1).random((3000, 3)) * 10
+    cloud = gp.from_arrays(xyz, np.full((3000, 3), 200, np.uint8), colors="rgba")
+    cloud.set_colors([10, 20, 30], np.arange(0, 3000, 2))
+    cloud.save(tmp_path / "a.ply")
+    cloud.save(tmp_path / "a.las")
+    ply = gp.open(tmp_path / "a.ply", colors="rgba")
+    assert sorted(map(tuple, np.unique(ply.rgba[:, :3], axis=0).tolist())) == [(10, 20, 30), (200, 200, 200)]
+    assert np.count_nonzero(ply.rgba[:, 0] == 10) == 1500
+    las = laspy.read(tmp_path / "a.las")  # built from points: LAS's 16-bit colours, x 257
+    assert sorted(set(np.asarray(las.red).tolist())) == [10 * 257, 200 * 257] and np.count_nonzero(np.asarray(las.green) == 20 * 257) == 1500
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz", ".ply"])
+def test_writing_in_small_chunks_gives_the_same_file_as_one_chunk(tmp_path, suffix, autzen_path):
+    """points_per_chunk=1: each of autzen_trim's 11 batches a chunk of its own, written one by one."""
+    cloud = gp.open(autzen_path)
+    assert len(cloud.batches) > 1
+    one, many = tmp_path / f"one{suffix}", tmp_path / f"many{suffix}"
+    assert save_cloud(cloud, one, points_per_chunk=10**9) == save_cloud(cloud, many, points_per_chunk=1) == 110_000
+    if suffix == ".laz":  # (LAZ chunks follow the writes: the points compared)
+        a, b = laspy.read(one), laspy.read(many)
+        for field in LAS_FIELDS:
+            np.testing.assert_array_equal(np.asarray(a[field]), np.asarray(b[field]), err_msg=field)
+    else:
+        assert one.read_bytes() == many.read_bytes()
+
+
+def test_save_refuses_in_one_line_naming_the_file_and_leaves_nothing(tmp_path, monkeypatch):
+    cloud = gp.from_arrays(np.random.default_rng(2).random((100, 3)), big=np.full(100, -(2**63)))
+    (tmp_path / "taken.las").write_bytes(b"mine")
+    (tmp_path / "dir.laz").mkdir()
+    monkeypatch.chdir(tmp_path)
+    for path, problem in (
+        ("taken.las", "taken.las: exists; pass overwrite=True to replace it"),
+        ("dir.laz", "dir.laz: is a directory, not a LAZ file; not replaced"),
+        ("nowhere/a.ply", "nowhere/a.ply: the folder nowhere does not exist"),
+        ("a.xyz", "a.xyz: save writes .las, .laz or .ply files, not .xyz"),
+        ("a", "a: save writes .las, .laz or .ply files, not a name without a suffix"),
+        (5, "arrays: save: the output must be a path of a .las, .laz or .ply file, got 5"),
+        ("b.ply", "b.ply: attribute 'big' holds int64 values PLY cannot hold (it has no 64-bit integers), e.g. -9223372036854775808; save as .las or .laz"),
+    ):  # fmt: skip
+        with pytest.raises(InputError, match=f"^{re.escape(problem)}$"):
+            cloud.save(path, overwrite=path == "dir.laz")
+    with pytest.raises(InputError, match="overwrite"):
+        cloud.save("taken.las", overwrite="no")
+    assert (tmp_path / "taken.las").read_bytes() == b"mine"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dir.laz", "taken.las"]  # nothing else, no temporary file
+    assert cloud.save("taken.las", overwrite=True) == 100 and laspy.read("taken.las").header.point_count == 100
+
+
+def test_save_where_nothing_can_be_created_names_the_file(tmp_path):
+    cloud = gp.from_arrays(np.random.default_rng(2).random((100, 3)))
+    with pytest.raises(InputError, match=r"^/proc/gigapoint_save\.las: not written \(.+\); nothing was left there$"):
+        cloud.save("/proc/gigapoint_save.las")
+
+
+_SAVE_ON_A_FULL_DISK = """
+import resource, signal, sys
+from pathlib import Path
+import numpy as np
+import gigapoint as gp
+from gigapoint.errors import InputError
+
+out = Path(sys.argv[1])
+cloud = gp.from_arrays(np.random.default_rng(3).random((20000, 3)) * 100, np.full((20000, 3), 9, np.uint8))
+for suffix in (".las", ".laz", ".ply"):
+    cloud.save(out / f"warm{suffix}")  # every kernel compiled (and cached) before the limit
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit: EFBIG, as a full disk's ENOSPC
+resource.setrlimit(resource.RLIMIT_FSIZE, (4000, resource.RLIM_INFINITY))
+for suffix in (".las", ".laz", ".ply"):
+    try:
+        cloud.save(out / f"scan{suffix}")
+    except InputError as exc:
+        print(exc)
+"""
+
+
+def test_save_on_a_full_disk_is_one_line_naming_the_file_and_leaves_nothing(tmp_path):
+    pytest.importorskip("resource")
+    run = subprocess.run([sys.executable, "-c", _SAVE_ON_A_FULL_DISK, str(tmp_path)], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    lines = run.stdout.splitlines()
+    assert [line.split(" (")[0] for line in lines] == [f"{tmp_path / f'scan{s}'}: not written" for s in (".las", ".laz", ".ply")]
+    assert all(line.endswith("); nothing was left there") for line in lines)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["warm.las", "warm.laz", "warm.ply"]
