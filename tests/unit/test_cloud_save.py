@@ -82,6 +82,8 @@ def test_a_files_offset_grid_and_geotiff_crs_are_kept_and_16_bit_colours_keep_th
         np.testing.assert_array_equal(np.asarray(got[field])[order_got], np.asarray(src[field])[order_src], err_msg=field)
     np.testing.assert_array_equal(np.asarray(got.red)[order_got], (np.asarray(src.red)[order_src] >> 8) * 257)
     assert read_las_header(out).crs() == "EPSG:32610"
+    src_path.unlink()  # a source gone since: its CRS and grid are lost, not the save
+    assert cloud.save(tmp_path / "later.las") == 5000 and read_las_header(tmp_path / "later.las").crs() is None
 
 
 def test_from_arrays_with_attributes_saves_to_las_laz_and_ply_and_reads_back_equal(tmp_path):

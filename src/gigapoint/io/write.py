@@ -177,10 +177,8 @@ def source_crs_records(files) -> list[tuple[bytes, int, bytes]]:
     file: its WKT (a VLR's, or an EVLR's), else its GeoTIFF key records as they are (LAS 1.4 wants
     WKT with point format 7; GeoTIFF keys are read by laspy, PDAL and gigapoint all the same, and
     making WKT of them needs pyproj). Empty where none names one."""
-    for p in files:
-        if not isinstance(reader_for(p), LasReader):
-            continue
-        hdr = read_las_header(Path(p))
+    for p in _las_files(files):
+        hdr = read_las_header(p)
         wkt = wkt_of(hdr.vlrs + hdr.evlrs)
         if wkt:
             return [(PROJECTION_USER_ID, WKT_RECORD, wkt.encode() + b"\0")]
@@ -190,12 +188,18 @@ def source_crs_records(files) -> list[tuple[bytes, int, bytes]]:
     return []
 
 
+def _las_files(files) -> list[Path]:
+    """The LAS/LAZ files among a cloud's source files that are still there (one removed since it
+    was read gives nothing: its CRS and grid are lost, not the save)."""
+    return [Path(p) for p in files if Path(p).is_file() and isinstance(reader_for(p), LasReader)]
+
+
 def _source_grid(cloud: PointCloud):
     """(scale, offset) of the grid the cloud's source stored positions on (its finest scale, its
     first LAS file's offset), where its points fit 32-bit integers on it; None where it had none."""
     if cloud.source_scale is None:
         return None
-    offset = next((read_las_header(Path(p)).offset for p in cloud.source_files if isinstance(reader_for(p), LasReader)), None)
+    offset = next((read_las_header(p).offset for p in _las_files(cloud.source_files)), None)
     return las_grid(*cloud.bounds, cloud.source_scale, offset)  # (no offset: one from 0, a multiple of the scale)
 
 
