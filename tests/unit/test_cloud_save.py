@@ -123,7 +123,7 @@ def test_set_colors_then_save_writes_the_new_colours(tmp_path):
 @pytest.mark.parametrize("suffix", [".las", ".laz", ".ply"])
 def test_writing_in_small_chunks_gives_the_same_file_as_one_chunk(tmp_path, suffix, autzen_path):
     """points_per_chunk=1: each of autzen_trim's 11 batches a chunk of its own, written one by one."""
-    cloud = gp.open(autzen_path)
+    cloud = gp.open(autzen_path, colors="rgba")  # (exact colours: no warning)
     assert len(cloud.batches) > 1
     one, many = tmp_path / f"one{suffix}", tmp_path / f"many{suffix}"
     assert save_cloud(cloud, one, points_per_chunk=10**9) == save_cloud(cloud, many, points_per_chunk=1) == 110_000
@@ -193,3 +193,20 @@ def test_save_on_a_full_disk_is_one_line_naming_the_file_and_leaves_nothing(tmp_
     assert [line.split(" (")[0] for line in lines] == [f"{tmp_path / f'scan{s}'}: not written" for s in (".las", ".laz", ".ply")]
     assert all(line.endswith("); nothing was left there") for line in lines)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["warm.las", "warm.laz", "warm.ply"]
+
+
+def test_saving_approximated_colours_says_so(tmp_path, autzen_path):
+    """gp.open's default colors="auto" holds RGB565 or palettes: save writes those, off the
+    file's by up to 12/255, which it said nowhere (convert says it); exact colours say nothing."""
+    import warnings
+
+    from gigapoint.errors import GigapointWarning
+
+    out = tmp_path / "approx.laz"
+    with pytest.warns(GigapointWarning) as caught:
+        gp.open(autzen_path).save(out)
+    said = f"{out}: the cloud holds its colours approximated (RGB565 or a palette), so the file gets those; "
+    assert [str(w.message) for w in caught] == [said + f"open its files ({autzen_path}) with colors='rgba' for exact colours"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gp.open(autzen_path, colors="rgba").save(tmp_path / "exact.laz")

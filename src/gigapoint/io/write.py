@@ -17,7 +17,7 @@ import numpy as np
 from ..atomic import atomic_write, write_failure
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, set_cloud_writer
-from ..errors import InputError, first_line
+from ..errors import GigapointWarning, InputError, first_line, warn
 from .las import GEOKEYS_RECORD, PROJECTION_USER_ID, WKT_RECORD, LasReader, read_las_header, wkt_of
 from .las_fields import LAS_FIELD_OF, choose_point_format, extra_attributes, field_attributes, las_field_values, las_grid
 from .registry import reader_for
@@ -219,6 +219,10 @@ def save_cloud(cloud: PointCloud, path, overwrite: bool = False, points_per_chun
     if path.suffix.lower() not in POINT_FILE_SUFFIXES:
         raise InputError(f"{path}: save writes .las, .laz or .ply files, not {path.suffix or 'a name without a suffix'}")
     check_output(path, overwrite)
+    if not cloud.colors_exact:  # gp.open's colors="auto": written as held, up to 12/255 off the file's (as convert says)
+        files = ", ".join(str(f) for f in cloud.source_files)
+        exact = f"open its files ({files}) with colors='rgba'" if files else "make the cloud with colors='rgba'"
+        warn(f"{path}: the cloud holds its colours approximated (RGB565 or a palette), so the file gets those; {exact} for exact colours", GigapointWarning)
     crs = source_crs_records(cloud.source_files) if path.suffix.lower() != ".ply" else []
     color_bits = 8 if cloud.source_color_bits == 8 else 16  # (LAS's own: 16; 8 where the source stored 8-bit values)
     return write_points(path, lambda: cloud.chunks(points_per_chunk), cloud.n_points, grid=_source_grid(cloud), crs_records=crs, color_bits=color_bits)
