@@ -80,3 +80,12 @@ def save_image(image: np.ndarray, path: Path) -> None:
 def save_array(array: np.ndarray, path: Path) -> None:
     """Write an array as .npy (depth, point index). Atomic."""
     atomic_npy(path, array)
+
+
+def save_heights(heights: np.ndarray, path: Path) -> None:
+    """Write (H, W) heights (NaN: no point) as a float32 TIFF (Pillow's mode 'F'): a surface
+    model a GIS opens with its world file. Atomic."""
+    from PIL import Image
+
+    img = Image.fromarray(np.ascontiguousarray(heights, np.float32))  # float32: mode F
+    atomic_write(path, lambda tmp: img.save(tmp, format="TIFF"))

@@ -13,6 +13,7 @@ import typer
 
 from ..core.cloud import PointCloud
 from ..errors import CameraError, GigapointError
+from ..io import crs_wkt
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from . import compiling
@@ -30,8 +31,9 @@ from .cloud_opts import (
     open_files,
     subfolders_read,
 )
+from .georef import cloud_crs, georef_paths, no_prj_reason, world_file_path, write_prj, write_world_file
 from .info_cmd import memory_line
-from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_image
+from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_heights, save_image
 from .progress import err_console, progress_bar, status
 from .quality_opts import check_color_attribute, check_color_options, prepare_cloud
 from .settings_opts import named_option, options_named, settings_from_options, with_settings_options
@@ -135,6 +137,32 @@ def _described_camera(bounds, c: dict, width, height, projection, fov) -> Camera
     return Camera.orbit(target, c["yaw"], c["pitch"], distance, fov=fov, width=width, height=height, **extra)
 
 
+def check_gsd(gsd, view, camera_text, width, height, projection, settings) -> None:
+    """One-line errors, before anything is read, for a --gsd that is no size or for options that
+    contradict it: it draws straight down, orthographic, one image whose size it sets."""
+    if not (math.isfinite(gsd) and gsd > 0):
+        raise GigapointError(f"--gsd must be a number > 0 (cloud units per pixel), got {gsd:g}")
+    contradicting = [name for name, given in (
+        ("--view", view not in ("auto", "top")), ("--camera", camera_text is not None), ("--width", width is not None),
+        ("--height", height is not None), ("--projection", projection == "perspective"), ("--stereo", settings.stereo != "none"),
+    ) if given]  # fmt: skip
+    if contradicting:
+        raise GigapointError(
+            f"{', '.join(contradicting)} and --gsd: give one (--gsd draws one image straight down, orthographic, north up, sized to cover the cloud)"
+        )
+
+
+def top_down_camera(cloud, gsd: float, output: Path) -> Camera:
+    """The --gsd camera over ``cloud``'s bounds (Camera.top_down), its image checked against
+    ``output``'s format; a gsd too fine for the largest image a one-line error naming --gsd."""
+    try:
+        cam = Camera.top_down(cloud.bounds, gsd)
+    except CameraError as exc:
+        raise CameraError(f"--gsd: {exc}") from None
+    check_image_fits(output, cam.width, cam.height)
+    return cam
+
+
 def open_inputs(inputs, point_budget: int, progressive: bool | None = None, options: dict | None = None, point_filter=None):
     """The command's inputs (lod/progressive.open_sized: inputs above the point budget build an
     LOD octree as they load, and the render waits for it; ``options``: ``--colors``/``--chunked``,
@@ -183,10 +211,16 @@ def render(
     camera: Annotated[
         str | None, typer.Option(help=r"'eye=x,y,z target=x,y,z \[up=x,y,z]' or 'yaw=deg pitch=deg \[distance=m] \[target=x,y,z]' (distance from the target, by default the cloud's centre; without it the cloud fills the frame).")
     ] = None,
-    projection: Annotated[str, typer.Option(help="perspective or orthographic.")] = "perspective",
+    projection: Annotated[str | None, typer.Option(help=r"perspective or orthographic. \[default: perspective]")] = None,
     fov: Annotated[float, typer.Option(help="Vertical field of view in degrees.")] = 60.0,
-    depth_out: Annotated[Path | None, typer.Option(readable=False, help="Also write the depth buffer (.npy, float32, inf = empty).")] = None,
+    depth_out: Annotated[
+        Path | None, typer.Option(readable=False, help="Also write the depth buffer (.npy, float32, inf = empty); with --gsd the surface heights instead (a DSM: .tif, float32, NaN = empty, with its world file and .prj).")
+    ] = None,
     index_out: Annotated[Path | None, typer.Option(readable=False, help="Also write the point index buffer (.npy, int64, -1 = empty): each pixel's point as gigapoint holds the cloud (a file read into memory: gp.open(FILE).point_info(i)), not the file's row.")] = None,
+    gsd: Annotated[
+        float | None,
+        typer.Option(help="Ground sample distance (cloud units per pixel): an orthophoto straight down, north up, covering the cloud, with a world file (.pgw, .jgw, .tfw, .wld) and a .prj of the cloud's CRS beside it."),
+    ] = None,
     stats: Annotated[bool, typer.Option("--stats", help="Print render statistics.")] = False,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace existing output files.")] = False,
     turntable: Annotated[
@@ -215,8 +249,8 @@ def render(
     if turntable is not None:
         check_output(output, overwrite, suffixes=VIDEO_SUFFIXES)
         ignored = [name for name, given in (("--depth-out", depth_out is not None), ("--index-out", index_out is not None),
-                   ("--camera", camera is not None), ("--view", view != "auto"), ("--projection", projection != "perspective"),
-                   ("--stats", stats)) if given]  # fmt: skip
+                   ("--camera", camera is not None), ("--view", view != "auto"), ("--projection", projection not in (None, "perspective")),
+                   ("--gsd", gsd is not None), ("--stats", stats)) if given]  # fmt: skip
         if ignored:  # each was dropped without a word: no depth file, the turntable's own orbit
             raise GigapointError(f"{', '.join(ignored)}: options of a still image, not of --turntable (it orbits the cloud at its own distance)")
     else:
@@ -225,13 +259,19 @@ def render(
         if output.suffix.lower() in VIDEO_SUFFIXES:  # 'unsupported output type' left the video option to be found
             raise GigapointError(f"{output}: a video needs --turntable N (its number of frames); a still image is .png, .jpg, .webp or .tif")
         check_output(output, overwrite)
-    for extra in (depth_out, index_out):
+    for extra, suffixes in ((depth_out, {".tif", ".tiff"} if gsd is not None else {".npy"}), (index_out, {".npy"})):
         if extra is not None:
-            check_output(extra, overwrite, suffixes={".npy"})
-    check_outputs_apart([output, depth_out, index_out], inputs)
-    if projection not in ("perspective", "orthographic"):
+            check_output(extra, overwrite, suffixes=suffixes)
+    georef = georef_paths([output, depth_out]) if gsd is not None else []
+    for side in georef:  # refused like the image: a user's world file or .prj is not replaced without asking
+        check_output(side, overwrite, suffixes=None)
+    check_outputs_apart([output, depth_out, index_out, *georef], inputs)
+    if projection not in (None, "perspective", "orthographic"):
         raise GigapointError(f"--projection must be perspective or orthographic, got {projection!r}")
     check_view(view)
+    if gsd is not None:
+        check_gsd(gsd, view, camera, width, height, projection, settings)
+    projection = projection or "perspective"
     width, height = check_image_size(width, height, fov)  # before reading anything
     check_color_options(settings)
     point_filter = filter_options(classes, drop_classes, clip, "render")
@@ -252,7 +292,7 @@ def render(
             check_turntable(output, turntable, width, height, fps, overwrite)
         except GigapointError as exc:  # the library's words ('video fps must be ...') named no option
             raise named_option(exc, {"turntable": "--turntable", "video fps": "--fps"}) from None
-    else:  # (side-by-side stereo writes both eyes: twice the width)
+    elif gsd is None:  # (side-by-side stereo writes both eyes: twice the width; --gsd's size is known once the cloud is read)
         check_image_fits(output, width * (2 if settings.stereo == "side-by-side" else 1), height)
     cloud = open_inputs(inputs, settings.point_budget, progressive, cloud_options(colors, chunked), point_filter)
     with options_named():  # drawing's errors name the option (--color-attribute NAME that the file lacks)
@@ -272,18 +312,35 @@ def render(
             )  # fmt: skip
         typer.echo(f"wrote {output} ({turntable} frames, {width}x{height}, {cloud.n_points:,} points)")
         return
-    cam = make_camera(cloud, width, height, view, camera, projection, fov)
+    if gsd is not None:
+        cam = top_down_camera(cloud, gsd, output)
+        settings = settings.replace(adaptive_precision=False)  # 30-bit positions: exact pixels and heights, whatever a batch's size
+    else:
+        cam = make_camera(cloud, width, height, view, camera, projection, fov)
     compiled = compiling.compiled_seconds()
     with options_named():
         frame = gp.render_frame(cloud, cam, settings)
     compiled = compiling.compiled_seconds() - compiled
+    writes = [(output, lambda p: save_image(frame.image, p))]
+    if depth_out is not None:  # with --gsd a surface model: the heights, not the camera's depths
+        writes.append((depth_out, (lambda p: save_heights(cam.heights(frame.depth), p)) if gsd is not None else (lambda p: save_array(frame.depth, p))))
+    if index_out is not None:
+        writes.append((index_out, lambda p: save_array(frame.index, p)))
+    notes = []
+    if gsd is not None:
+        crs = cloud_crs(cloud)
+        wkt = crs_wkt(crs)
+        writes += [(world_file_path(image), lambda p: write_world_file(cam, p)) for image in filter(None, (output, depth_out))]
+        if wkt:
+            writes += [(p, lambda p: write_prj(wkt, p)) for p in georef if p.suffix == ".prj"]
+        else:
+            notes.append(no_prj_reason(crs))
     written = []
     try:
-        for save, data, path in ((save_image, frame.image, output), (save_array, frame.depth, depth_out), (save_array, frame.index, index_out)):
-            if path is not None:
-                save(data, path)
-                written.append(path)
-    except BaseException:  # (a full disk, Ctrl+C) the image stayed without the depth asked for beside it
+        for path, save in writes:
+            save(path)
+            written.append(path)
+    except BaseException:  # (a full disk, Ctrl+C) the image stayed without the depth or georeference asked for beside it
         for path in written:
             path.unlink(missing_ok=True)
         raise
@@ -293,6 +350,10 @@ def render(
     drawn = frame.stats.points_processed  # (a budget, --max-points, culling: fewer than the cloud's; '110,000 points' said the cloud's)
     points = f"{cloud.n_points:,} points" if drawn >= cloud.n_points else f"{drawn:,} of {cloud.n_points:,} points drawn"
     typer.echo(f"wrote {output} ({frame.image.shape[1]}x{frame.image.shape[0]}, {points})")  # (side-by-side stereo: both eyes)
+    if len(written) > 1:
+        typer.echo(f"wrote {', '.join(str(p) for p in written[1:])}")
+    for note in notes:
+        typer.echo(note)
 
 
 @app.command()

@@ -388,18 +388,45 @@ def crs_units(crs: str | None, geokeys: dict[int, int] | None = None) -> dict:
     return {"horizontal": horizontal, "vertical": horizontal if assumed else vertical, "vertical_assumed": assumed}
 
 
-def files_units(files) -> dict:
-    """``crs_units`` of the first LAS/LAZ file of ``files`` that names a CRS (its WKT, else its
-    GeoTIFF keys; warn_mixed_crs warns where files differ); all unknown without one."""
+def _crs_header(files):
+    """The header of the first LAS/LAZ file of ``files`` that names a CRS (warn_mixed_crs warns
+    where files differ), None without one."""
     for f in files:
         try:
             if isinstance(reader_for(f), LasReader):
                 hdr = read_las_header(f, salvage=True)
                 if hdr.crs():
-                    return crs_units(hdr.crs(), geokeys(hdr.vlrs))
+                    return hdr
         except (GigapointError, OSError):  # a file gone or damaged since it was read: no word from it
             continue
-    return crs_units(None)
+    return None
+
+
+def files_units(files) -> dict:
+    """``crs_units`` of the first LAS/LAZ file of ``files`` that names a CRS (its WKT, else its
+    GeoTIFF keys); all unknown without one."""
+    hdr = _crs_header(files)
+    return crs_units(hdr.crs(), geokeys(hdr.vlrs)) if hdr else crs_units(None)
+
+
+def files_crs(files) -> str | None:
+    """The CRS of the first LAS/LAZ file of ``files`` that names one: its WKT, else 'EPSG:n' of
+    its GeoTIFF keys (LasHeader.crs); None without one."""
+    hdr = _crs_header(files)
+    return hdr.crs() if hdr else None
+
+
+def crs_wkt(crs: str | None) -> str | None:
+    """WKT of a CRS as the readers give it: an 'EPSG:n' through pyproj when it is installed (else
+    None); any other is WKT already."""
+    if not crs or not crs.upper().startswith("EPSG:"):
+        return crs or None
+    try:
+        import pyproj
+
+        return pyproj.CRS.from_user_input(crs).to_wkt()
+    except Exception:  # noqa: BLE001 - pyproj missing or the code unknown: no WKT
+        return None
 
 
 def warn_mixed_crs(files, then: str = "") -> None:

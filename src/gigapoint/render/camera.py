@@ -119,6 +119,21 @@ def _yaw_pitch(view) -> tuple[float, float]:
     return float(yaw), float(pitch)
 
 
+def _box(bounds) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) float64 corners of ``bounds``, else a one-line CameraError."""
+    try:
+        lo, hi = bounds  # ((0, 0, 0),) was an IndexError
+    except (TypeError, ValueError):
+        raise CameraError(f"camera bounds must be (min, max), two points of three numbers, got {bounds!r}") from None
+    return np.asarray(_vec3(lo, "bounds min")), np.asarray(_vec3(hi, "bounds max"))
+
+
+def _round_up(v: float) -> float:
+    """``v`` rounded up to three significant digits (a suggested gsd that still fits)."""
+    step = 10.0 ** (math.floor(math.log10(v)) - 2)
+    return math.ceil(v / step - 1e-9) * step
+
+
 def image_side(name: str, v) -> int:
     """An image's width or height (``name``) as an int in 1..MAX_IMAGE_SIDE (960.0 taken as 960),
     else a one-line CameraError."""
@@ -227,12 +242,7 @@ class Camera:
         ``trim`` (default ``TRIM``) of them at each side may fall outside): the data, not its box, fills the frame.
         ``view='auto'``: the (yaw, pitch) ``auto_view`` gives (of ``points``, else the box)."""
         width, height = image_side("width", width), image_side("height", height)  # before width / height divides
-        try:
-            lo_in, hi_in = bounds  # ((0, 0, 0),) was an IndexError
-        except (TypeError, ValueError):
-            raise CameraError(f"camera bounds must be (min, max), two points of three numbers, got {bounds!r}") from None
-        lo = np.asarray(_vec3(lo_in, "bounds min"))
-        hi = np.asarray(_vec3(hi_in, "bounds max"))
+        lo, hi = _box(bounds)
         box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         if points is not None:
             points = np.asarray(points, np.float64).reshape(-1, 3)
@@ -301,6 +311,58 @@ class Camera:
             cx, cy = cx - shift_x, cy - shift_y
             distance = fitting_distance()
         return cls.orbit(center, yaw, pitch, distance, fov=fov, width=width, height=height, projection=projection, **kw)
+
+    @classmethod
+    def top_down(cls, bounds, gsd) -> Camera:
+        """An orthographic camera looking straight down on the box ``bounds = (min, max)``, north
+        up (+y up the image, +x to the right), each pixel ``gsd`` (ground sample distance: the
+        cloud's units) a side: an orthophoto or a surface model that a GIS places on its map
+        (``world_file``, ``heights``). Pixel edges lie on whole multiples of ``gsd`` (tiles drawn
+        alike line up), and the image holds every point of the box, those on its max edges too:
+        width = floor(max_x / gsd) - floor(min_x / gsd) + 1 pixels, height likewise from y.
+        An image over MAX_IMAGE_SIDE a side is a one-line CameraError naming the finest gsd that fits."""
+        lo, hi = _box(bounds)
+        if not (is_real(gsd) and gsd > 0):
+            raise CameraError(f"gsd (ground sample distance) must be a number > 0, got {gsd!r}")
+        gsd = float(gsd)
+        # the rasterizer puts a point into column floor(px) and row floor(py) (px = (x - left) / gsd,
+        # py = (top - y) / gsd): column 0 holds x in [left, left + gsd), row 0 y in (top - gsd, top]
+        first_col, top_row = math.floor(lo[0] / gsd), math.ceil(hi[1] / gsd)
+        width = math.floor(hi[0] / gsd) - first_col + 1
+        height = top_row - math.ceil(lo[1] / gsd) + 1
+        if max(width, height) > MAX_IMAGE_SIDE:
+            fits = _round_up(float(np.max(hi[:2] - lo[:2])) / (MAX_IMAGE_SIDE - 1))
+            raise CameraError(f"gsd {gsd:g} makes a {width:,}x{height:,} image, over {MAX_IMAGE_SIDE:,} pixels a side: a gsd of {fits:g} or more fits")
+        left, top = first_col * gsd, top_row * gsd
+        # the eye just above the highest point: depths then span little more than the cloud's
+        # heights, so float32 depths give heights (``heights``) as finely as they can
+        eye_z = hi[2] + max(hi[2] - lo[2], gsd)
+        centre = (left + width * gsd / 2, top - height * gsd / 2)
+        return cls(
+            eye=(*centre, eye_z), target=(*centre, lo[2]), up=(0.0, 1.0, 0.0), width=width, height=height,
+            projection="orthographic", ortho_height=height * gsd,
+        )  # fmt: skip
+
+    def _check_top_down(self, what: str) -> None:
+        right, up, _ = self.basis()
+        if self.projection != "orthographic" or not (np.allclose(right, (1, 0, 0), rtol=0, atol=1e-12) and np.allclose(up, (0, 1, 0), rtol=0, atol=1e-12)):
+            raise CameraError(f"{what} needs an orthographic camera looking straight down, north up (Camera.top_down)")
+
+    def world_file(self) -> tuple[float, float, float, float, float, float]:
+        """The six numbers of an ESRI world file for this camera's image (``top_down``): pixel
+        width, 0, 0, minus pixel height, then x and y of the centre of the upper-left pixel (the
+        rasterizer's pixel (0, 0) holds x in [left, left + size), y in (top - size, top])."""
+        self._check_top_down("a world file")
+        size = self.ortho_height / self.height
+        left, top = self.eye[0] - self.width * size / 2, self.eye[1] + self.height * size / 2
+        return (size, 0.0, 0.0, -size, left + size / 2, top - size / 2)
+
+    def heights(self, depth: np.ndarray) -> np.ndarray:
+        """float32 heights (z) of the points a ``top_down`` camera drew at each pixel from their
+        depths (``Frame.depth``): the eye's height less the depth; NaN where no point is (inf depth)."""
+        self._check_top_down("heights from depths")
+        depth = np.asarray(depth, np.float64)
+        return np.where(np.isfinite(depth), self.eye[2] - depth, np.nan).astype(np.float32)
 
     @classmethod
     def fit_cloud(cls, cloud, view="auto", **kw) -> Camera:

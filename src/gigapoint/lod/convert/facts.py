@@ -10,22 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import GigapointWarning, warn
-from ...io import file_names, warn_mixed_crs
+from ...io import crs_wkt, file_names, warn_mixed_crs
 from ...io.las import LasReader, read_las_header, wkt_of
 from ...io.registry import reader_for
-
-
-def _as_wkt(text: str | None) -> str | None:
-    """WKT of the LAS reader's CRS: an 'EPSG:n' through pyproj when it is installed (else None);
-    any other is WKT already (one found in an EVLR, where copc-lib writes it)."""
-    if not text or not text.upper().startswith("EPSG:"):
-        return text or None
-    try:
-        import pyproj
-
-        return pyproj.CRS.from_user_input(text).to_wkt()
-    except Exception:  # noqa: BLE001 - pyproj missing or the code unknown: no WKT
-        return None
 
 
 def _warn_off_grid(grids, scale, offset) -> None:
@@ -76,7 +63,7 @@ def input_facts(paths, one_grid: bool = False) -> dict:
         if text and crs is None:
             crs = text
             hdr = read_las_header(p)  # (its (E)VLRs: the first CRS's file only)
-            wkt = wkt_of(hdr.vlrs + hdr.evlrs) or _as_wkt(text)
+            wkt = wkt_of(hdr.vlrs + hdr.evlrs) or crs_wkt(text)
     warn_mixed_crs(paths or [], then="; the output takes the first CRS named")
     if one_grid and grids:
         _warn_off_grid(grids, scale, offset)
