@@ -255,6 +255,14 @@ class LasHeader:
     evlrs_cut: str | None = None
     #: points in each LAZ chunk (its chunk table), where a damaged point's chunk is named
     laz_chunks: list[int] | None = None
+    #: its global encoding bits (bit 0: gps_time is adjusted GPS standard time, not seconds of a GPS week)
+    global_encoding: int = 0
+
+    @property
+    def adjusted_gps_time(self) -> bool:
+        """Whether its points' gps_time is adjusted standard GPS time (seconds since the GPS epoch
+        less 1e9: a date), not seconds into an unnamed GPS week (global encoding bit 0)."""
+        return bool(self.global_encoding & 1)
 
     def crs(self) -> str | None:
         """The CRS its VLRs or EVLRs name (vlrs_crs'), None without one."""
@@ -291,6 +299,7 @@ def _read_las_header(path: Path, salvage: bool = False) -> LasHeader:
         major, minor = head[24], head[25]
         if major != 1 or minor > 4:
             raise fail(path, f"unsupported LAS version {major}.{minor} (gigapoint reads 1.0-1.4)")
+        (global_encoding,) = _u("H", head, 6)  # (LAS 1.0: reserved, 0)
         (header_size,) = _u("H", head, 94)
         offset_to_data, n_vlrs = _u("II", head, 96)
         fmt_id, record_length, legacy_count = _u("BHI", head, 104)
@@ -360,6 +369,7 @@ def _read_las_header(path: Path, salvage: bool = False) -> LasHeader:
             number_of_evlrs=n_evlrs,
             generating_software=head[58:90].split(b"\0")[0].decode("ascii", "replace").strip(),
             vlrs=vlrs,
+            global_encoding=global_encoding,
         )
         data_end = size
         if n_evlrs and start_evlr >= size:  # cut before its EVLRs: its points checked below, as any cut file's
