@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.chunk import PointChunk
-from ..core.cloud import PointCloud, build_cloud, value_decimals
+from ..core.cloud import MAX_ABS_COORDINATE, PointCloud, build_cloud, value_decimals
 from ..errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, check_switch, warn
 from . import write as _write  # noqa: F401  (PointCloud.save's writer: core cannot import io)
 from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fail, headers_once, read_once
@@ -33,6 +33,7 @@ from .filters import PointFilter, filtered
 from .http import shown_url
 from .las import LasReader, geokeys, read_las_header, with_scan_angle
 from .registry import in_folder, is_dataset_folder, is_supported_name, reader_for, readers, register, supported_suffixes
+from .stats import PointStats, file_stats
 
 
 def read_chunks(path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:
@@ -687,6 +688,67 @@ def format_info(info: dict) -> str:
     return "\n".join(lines)
 
 
+@headers_once()  # (a folder listed once)
+def point_stats(*paths, recursive: bool = False, chunk_size: int = DEFAULT_CHUNK_SIZE) -> dict:
+    """What the points of files, folders or glob patterns (``expand_paths``) hold, summed up:
+    their true bounds (and the headers'), each attribute's min, max and mean, the
+    classification histogram, returns, flight lines, gps_time, colour ranges, invalid points
+    (io/stats.py: ``PointStats.result``). Every point is read once, a chunk at a time."""
+    files = expand_paths(paths, recursive=recursive)
+    total = PointStats()
+    for f in files:
+        total.merge(file_stats(f, chunk_size))
+    return {"path": cloud_name(files) if len(files) > 1 else str(files[0]), **total.result()}
+
+
+def _number(v) -> str:
+    """A statistic: a whole number with thousands separators, else 10 significant digits."""
+    return f"{int(v):,}" if float(v).is_integer() and abs(v) < 1e15 else f"{v:.10g}"
+
+
+def format_stats(stats: dict) -> str:
+    """Human-readable text of a ``point_stats`` dict (what ``gigapoint info --stats`` prints)."""
+    n = stats["point_count"]
+    lines = [f"{stats.get('path', '?')}" + (f" ({stats['files']:,} files)" if stats.get("files", 1) > 1 else "")]
+    lines.append(f"  points:      {n:,}, {stats['invalid_points']:,} of them invalid (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g}): skipped")
+    b, h, stale, scale = stats.get("bounds"), stats.get("header_bounds"), stats.get("header_bounds_differ"), stats.get("scale")
+    if b is not None:
+        whose = " (the points'; the header's the same)" if h is not None and not stale else " (the points')"
+        lines.append(f"  bounds min:  {_coords(b['min'], scale)}{whose}")
+        lines.append(f"  bounds max:  {_coords(b['max'], scale)}")
+    if h is not None and stale:  # a stale header: tools that trust it crop or misplace the points
+        lines.append(f"  header min:  {_coords(h['min'], scale)}")
+        lines.append(f"  header max:  {_coords(h['max'], scale)}")
+        lines.append(f"  stale:       the header's bounds are not its points' ({file_names(stale)})")
+    if stats["attributes"]:
+        lines.append(f"  {'attribute':<22}{'min':>16}{'max':>16}{'mean':>18}")
+        for name, a in stats["attributes"].items():
+            lines.append(f"    {name:<20}{_number(a['min']):>16}{_number(a['max']):>16}{_number(a['mean']):>18}")
+    for c in stats.get("classification") or []:
+        label = "classes:" if c is stats["classification"][0] else ""
+        lines.append(f"  {label:<13}{c['class']:>3} {c['name']:<26}{c['count']:>14,} {c['percent']:6.2f}%")
+    r = stats.get("returns")
+    if r is not None:
+        odd = f", invalid {r['invalid']:,} (return 0 or above the number of returns)" if r["invalid"] else ""
+        lines.append(f"  returns:     single {r['single']:,}, first {r['first']:,}, last {r['last']:,}, intermediate {r['intermediate']:,}{odd}")
+        lines += [f"    return {k['return_number']} of {k['number_of_returns']}:{k['count']:>14,}" for k in r["by_number"]]
+    s = stats.get("point_source_ids")
+    if s is not None:
+        each = ", ".join(f"{k}: {v:,}" for k, v in s["points"].items()) if s["points"] else ""
+        lines.append(f"  sources:     {s['count']:,} flight line{'s' * (s['count'] > 1)} (point_source_id{f' {each}' if each else ''})")
+    t = stats.get("gps_time")
+    if t is not None:
+        when = f": {t['first']} .. {t['last']} GPS" if "first" in t else ": no date" if t["kind"] == "seconds of a GPS week" else ""
+        lines.append(f"  gps_time:    {t['min']:.6f} .. {t['max']:.6f} ({t['kind']}{when})")
+    c = stats.get("color")
+    if c is not None:
+        depth = {8: " (8-bit values in 16-bit LAS fields)", 16: " (16-bit, shown as 8-bit: >> 8)"}.get(c["bits"], "")
+        lines.append("  color:       " + ", ".join(f"{k} {lo}..{hi}" for k, lo, hi in zip(("red", "green", "blue"), c["min"], c["max"])) + depth)
+    else:
+        lines.append("  color:       none")
+    return "\n".join(lines)
+
+
 def human_bytes(n: int) -> str:
     for unit in ("bytes", "KiB", "MiB", "GiB", "TiB"):
         if n < 1024 or unit == "TiB":
@@ -697,6 +759,7 @@ def human_bytes(n: int) -> str:
 
 __all__ = [
     "DEFAULT_CHUNK_SIZE",
+    "PointStats",
     "Reader",
     "cloud_name",
     "crs_units",
@@ -704,12 +767,15 @@ __all__ = [
     "demo_chunks",
     "expand_paths",
     "file_info",
+    "file_stats",
     "files_label",
     "files_units",
     "folder_info",
     "format_info",
+    "format_stats",
     "lone_match",
     "open_cloud",
+    "point_stats",
     "read_chunks",
     "reader_for",
     "readers",

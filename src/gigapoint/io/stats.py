@@ -1,0 +1,231 @@
+"""What files' points hold, read once in bounded chunks (``gigapoint info --stats``,
+``gigapoint.io.point_stats``): the QA a surveyor runs on a delivery, as ``lasinfo -histo`` and
+``pdal info --stats`` give it.
+
+``PointStats`` is a running accumulator: ``add(chunk)`` a chunk at a time (memory stays one
+chunk's whatever the file's size), ``merge`` another's (a folder's files summed), ``result()``
+the numbers as a JSON-able dict. ``file_stats`` reads one file into one and compares the
+points' true bounds with its header's (a stale header is a finding).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import numpy as np
+
+from ..core.chunk import DEFAULT_COLOR, ColorScaler, PointChunk
+from ..core.cloud import _valid_mask
+from ._base import DEFAULT_CHUNK_SIZE, check_chunk_size, headers_once
+from .las import LasReader, read_las_header
+from .registry import reader_for
+
+#: ASPRS standard classes (LAS 1.4 R15, table 17; 8 and 12 as LAS 1.2 named them before 1.4 reserved them)
+ASPRS_CLASSES = {
+    0: "never classified", 1: "unassigned", 2: "ground", 3: "low vegetation", 4: "medium vegetation",
+    5: "high vegetation", 6: "building", 7: "low point (noise)", 8: "model key-point/reserved", 9: "water",
+    10: "rail", 11: "road surface", 12: "reserved/overlap", 13: "wire guard", 14: "wire conductor",
+    15: "transmission tower", 16: "wire connector", 17: "bridge deck", 18: "high noise",
+}  # fmt: skip
+
+#: flight lines (point_source_id) listed one by one up to this many; above, only how many
+SOURCES_LISTED = 20
+
+#: adjusted standard GPS time is GPS time (seconds since this epoch) less 1e9 (LAS 1.4 R15, global encoding bit 0)
+GPS_EPOCH = datetime(1980, 1, 6, tzinfo=UTC)
+ADJUSTED_GPS_OFFSET = 1e9
+
+#: how a file's gps_time counts (``time_kind``)
+ADJUSTED, WEEK, UNKNOWN = "adjusted standard GPS time", "seconds of a GPS week", "unknown"
+
+
+def class_name(code: int) -> str:
+    """The ASPRS name of a classification code; above 18 'reserved' up to 63, 'user defined' above."""
+    return ASPRS_CLASSES.get(code) or ("reserved" if code < 64 else "user defined")
+
+
+def gps_date(t: float) -> str:
+    """An adjusted standard GPS time as a date, 'YYYY-MM-DD HH:MM:SS' on the GPS time scale (no
+    leap seconds: 18 s ahead of UTC since 2017)."""
+    return (GPS_EPOCH + timedelta(seconds=t + ADJUSTED_GPS_OFFSET)).strftime("%Y-%m-%d %H:%M:%S")
+
+
+def _codes(values: np.ndarray, most: int) -> np.ndarray | None:
+    """``values`` as int64 codes 0..``most`` (a text file's float column of whole numbers too),
+    None where any is not one (a histogram of them would be no histogram)."""
+    if values.size == 0:
+        return np.zeros(0, np.int64)
+    if values.dtype.kind == "f" and not np.all(np.isfinite(values) & (values == np.round(values))):
+        return None
+    codes = values.astype(np.int64, copy=False).ravel()
+    return codes if 0 <= codes.min() and codes.max() <= most else None
+
+
+class PointStats:
+    """Running statistics of points, added a chunk at a time; invalid points (NaN, inf, beyond
+    ``MAX_ABS_COORDINATE``: those every build skips) are counted and left out of the rest."""
+
+    def __init__(self) -> None:
+        self.files = 0
+        self.scale: np.ndarray | None = None  # the finest resolution the files store coordinates at, where they say
+        self.points = 0
+        self.invalid = 0
+        self.lo, self.hi = np.full(3, np.inf), np.full(3, -np.inf)
+        self.header_lo, self.header_hi = np.full(3, np.inf), np.full(3, -np.inf)
+        self.stale: list[str] = []  # files whose header bounds are not their points'
+        self.attributes: dict[str, list] = {}  # name -> [count, min, max, sum]
+        self.classes = np.zeros(256, np.int64)
+        self.returns = np.zeros((16, 16), np.int64)  # [return_number, number_of_returns]
+        self.sources = np.zeros(65536, np.int64)  # points per point_source_id
+        self.time_kinds: set[str] = set()
+        self.colored = False
+        self.color_lo, self.color_hi = np.full(3, 255, np.int64), np.zeros(3, np.int64)
+        self.color_bits: set[int | None] = set()
+
+    def add(self, chunk: PointChunk) -> None:
+        """Count one chunk's points."""
+        valid = _valid_mask(chunk.xyz)
+        every = bool(valid.all())
+        self.points += len(chunk)
+        self.invalid += len(chunk) - int(valid.sum())
+        xyz = chunk.xyz if every else chunk.xyz[valid]
+        if len(xyz) == 0:
+            return
+        self.lo, self.hi = np.minimum(self.lo, xyz.min(axis=0)), np.maximum(self.hi, xyz.max(axis=0))
+        attrs = chunk.attributes if every else {name: values[valid] for name, values in chunk.attributes.items()}
+        for name, values in attrs.items():
+            self._add_attribute(name, values)
+        if "return_number" in attrs and "number_of_returns" in attrs:
+            self._add_returns(attrs["return_number"], attrs["number_of_returns"])
+        rgb = chunk.rgba[:, :3] if every else chunk.rgba[valid, :3]
+        self.colored = self.colored or bool(np.any(rgb != np.array(DEFAULT_COLOR[:3], np.uint8)))
+        self.color_lo = np.minimum(self.color_lo, rgb.min(axis=0))
+        self.color_hi = np.maximum(self.color_hi, rgb.max(axis=0))
+
+    def _add_attribute(self, name: str, values: np.ndarray) -> None:
+        v = values.astype(np.uint8) if values.dtype.kind == "b" else values
+        if v.dtype.kind == "f":
+            v = v[np.isfinite(v)]  # (an extra bytes field's "no data" NaN)
+        if v.size:
+            count, lo, hi, total = self.attributes.get(name, [0, np.inf, -np.inf, 0.0])
+            self.attributes[name] = [count + v.size, min(lo, v.min().item()), max(hi, v.max().item()), total + float(np.sum(v, dtype=np.float64))]
+        codes = _codes(values, 255) if name == "classification" else None
+        if codes is not None:
+            self.classes += np.bincount(codes, minlength=256)
+        codes = _codes(values, 65535) if name == "point_source_id" else None
+        if codes is not None:
+            self.sources += np.bincount(codes, minlength=65536)
+
+    def _add_returns(self, return_number: np.ndarray, number_of_returns: np.ndarray) -> None:
+        """Count a chunk's (return_number, number_of_returns) pairs (LAS: 0..15 each)."""
+        r, n = _codes(return_number, 15), _codes(number_of_returns, 15)
+        if r is not None and n is not None:
+            self.returns += np.bincount(r * 16 + n, minlength=256).reshape(16, 16)
+
+    def merge(self, other: PointStats) -> None:
+        """Add another's points (a folder's next file)."""
+        self.files += other.files
+        self.points += other.points
+        self.invalid += other.invalid
+        self.lo, self.hi = np.minimum(self.lo, other.lo), np.maximum(self.hi, other.hi)
+        self.header_lo, self.header_hi = np.minimum(self.header_lo, other.header_lo), np.maximum(self.header_hi, other.header_hi)
+        self.stale += other.stale
+        if other.scale is not None:
+            self.scale = other.scale if self.scale is None else np.minimum(self.scale, other.scale)
+        for name, (count, lo, hi, total) in other.attributes.items():
+            mine = self.attributes.get(name, [0, np.inf, -np.inf, 0.0])
+            self.attributes[name] = [mine[0] + count, min(mine[1], lo), max(mine[2], hi), mine[3] + total]
+        self.classes += other.classes
+        self.returns += other.returns
+        self.sources += other.sources
+        self.time_kinds |= other.time_kinds
+        if other.colored:
+            self.colored = True
+            self.color_lo, self.color_hi = np.minimum(self.color_lo, other.color_lo), np.maximum(self.color_hi, other.color_hi)
+            self.color_bits |= other.color_bits
+
+    def result(self) -> dict:
+        """The statistics as plain numbers (JSON-able)."""
+        out: dict = {"files": self.files, "point_count": self.points, "invalid_points": self.invalid}
+        seen = bool(np.all(np.isfinite(self.lo)))
+        out["bounds"] = {"min": self.lo.tolist(), "max": self.hi.tolist()} if seen else None
+        headed = bool(np.all(np.isfinite(self.header_lo)))
+        out["header_bounds"] = {"min": self.header_lo.tolist(), "max": self.header_hi.tolist()} if headed else None
+        out["header_bounds_differ"] = list(self.stale)
+        out["scale"] = None if self.scale is None else self.scale.tolist()
+        out["attributes"] = {name: {"min": lo, "max": hi, "mean": total / count} for name, (count, lo, hi, total) in self.attributes.items()}
+        classified = self.classes.sum()
+        if classified:
+            out["classification"] = [
+                {"class": c, "name": class_name(c), "count": int(self.classes[c]), "percent": 100 * float(self.classes[c]) / classified}
+                for c in np.flatnonzero(self.classes).tolist()
+            ]  # fmt: skip
+        if self.returns.any():
+            out["returns"] = self._returns()
+        sources = np.flatnonzero(self.sources)
+        if len(sources):
+            listed = {str(s): int(self.sources[s]) for s in sources} if len(sources) <= SOURCES_LISTED else None
+            out["point_source_ids"] = {"count": len(sources), "points": listed}
+        if "gps_time" in self.attributes:
+            out["gps_time"] = self._gps_time()
+        if self.colored:
+            bits = self.color_bits.pop() if len(self.color_bits) == 1 else None  # (files of both: not one)
+            out["color"] = {"bits": bits, "min": self.color_lo.tolist(), "max": self.color_hi.tolist()}
+        return out
+
+    def _returns(self) -> dict:
+        """Points by return: single (1 of 1), first (1 of any), last (n of n), intermediate, and
+        those whose numbers cannot be (return 0, a return number above the number of returns)."""
+        m = self.returns
+        r, n = np.indices(m.shape)
+        by = [{"return_number": int(i), "number_of_returns": int(j), "count": int(m[i, j])} for i, j in zip(*np.nonzero(m))]
+        return {
+            "single": int(m[1, 1]),
+            "first": int(m[1, 1:].sum()),
+            "last": int(m[(r == n) & (n > 0)].sum()),
+            "intermediate": int(m[(r > 1) & (r < n)].sum()),
+            "invalid": int(m[(r == 0) | (n == 0) | (r > n)].sum()),
+            "by_number": by,
+        }
+
+    def _gps_time(self) -> dict:
+        lo, hi = self.attributes["gps_time"][1:3]
+        kind = self.time_kinds.pop() if len(self.time_kinds) == 1 else "mixed" if self.time_kinds else UNKNOWN
+        out = {"min": lo, "max": hi, "kind": kind}
+        if kind == ADJUSTED:
+            out.update(first=gps_date(lo), last=gps_date(hi))
+        return out
+
+
+@headers_once()  # (its header: read for its reader, its chunks, its bounds, its time encoding)
+def file_stats(path, chunk_size: int = DEFAULT_CHUNK_SIZE, on_chunk: Callable[[int], None] | None = None) -> PointStats:
+    """One file's ``PointStats``, its points read once in chunks of at most ``chunk_size``
+    (``on_chunk(points)`` after each: a progress bar); its header's bounds, where it has them,
+    kept beside its points' and the file named in ``stale`` where they differ by more than half
+    a step of its stored resolution. A damaged file raises its reader's one-line InputError."""
+    path, chunk_size = Path(path), check_chunk_size(chunk_size)
+    reader = reader_for(path)
+    stats, scaler = PointStats(), ColorScaler()
+    stats.files = 1
+    # a LAS file's colour depth is the scaler's decision (8-bit values in its 16-bit fields, or 16-bit)
+    chunks = reader.read_chunks(path, chunk_size, scaler=scaler) if isinstance(reader, LasReader) else reader.read_chunks(path, chunk_size)
+    for chunk in chunks:
+        stats.add(chunk)
+        stats.scale = np.array(chunk.scale) if chunk.scale is not None else stats.scale
+        if on_chunk is not None:
+            on_chunk(len(chunk))
+    if isinstance(reader, LasReader):
+        stats.color_bits = {{"8": 8, "16": 16}.get(scaler.mode or "")}
+        if "gps_time" in stats.attributes:
+            stats.time_kinds = {ADJUSTED if read_las_header(path).adjusted_gps_time else WEEK}
+    elif "gps_time" in stats.attributes:
+        stats.time_kinds = {UNKNOWN}
+    bounds = reader.header(path).get("bounds")
+    if bounds is not None and None not in bounds[0] + bounds[1]:
+        stats.header_lo, stats.header_hi = np.array(bounds[0], np.float64), np.array(bounds[1], np.float64)
+        tolerance = (stats.scale if stats.scale is not None else np.zeros(3)) / 2 + 1e-9 * np.maximum(1, np.abs(stats.header_hi))
+        if np.all(np.isfinite(stats.lo)) and (np.any(np.abs(stats.lo - stats.header_lo) > tolerance) or np.any(np.abs(stats.hi - stats.header_hi) > tolerance)):
+            stats.stale.append(str(path))
+    return stats
