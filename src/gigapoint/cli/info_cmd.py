@@ -1,7 +1,9 @@
-"""`gigapoint info FILE...`: what point cloud files hold (format, points, bounds, attributes, CRS)."""
+"""`gigapoint info FILE...`: what point cloud files hold (format, points, bounds, attributes, CRS);
+``--stats``: what their points hold, every point read (io/stats.py)."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
 
@@ -10,6 +12,7 @@ import typer
 from ..errors import GigapointError, InputError
 from .app import app
 from .cloud_opts import ChunkedOption, ColorsOption, RecursiveOption, cloud_options, option_names
+from .progress import progress_bar
 
 #: a folder of more files than this is shown as one block (a city's 1 500 tiles were 21 000 lines)
 FOLDER_LISTED = 10
@@ -21,17 +24,23 @@ def info(
         ..., readable=False, help="Point cloud files (LAS/LAZ/PLY/E57/XYZ/XYZRGB/TXT/CSV/PTS/ASC/NPY/NPZ), directories, octrees, COPC/EPT files or URLs. A quoted glob pattern ('tiles/*.laz', 'city/**/*.laz') stands for what it matches."
     ),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of text: an object per file, or per folder summed up."),
-    each: bool = typer.Option(False, "--each", help=f"Show each file of a folder of more than {FOLDER_LISTED} files (by default summed up in one block)."),
+    each: bool = typer.Option(False, "--each", help=f"Show each file of a folder of more than {FOLDER_LISTED} files, or of any folder with --stats (by default summed up in one block)."),
+    stats: bool = typer.Option(
+        False, "--stats", help="Read every point and show what they hold: true bounds (against the header's), each attribute's min/max/mean, classes, returns, flight lines, gps_time, colour ranges, invalid points."
+    ),
     recursive: RecursiveOption = False,
     memory: bool = typer.Option(False, "--memory", help="Also load the points and print the bytes a point each component holds in memory."),
     colors: ColorsOption = "auto",
     chunked: ChunkedOption = None,
 ) -> None:
-    """Show format, point count, bounds, attributes, LAS version/scale/offset and CRS of files."""
+    """Show format, point count, bounds, attributes, LAS version/scale/offset and CRS of files;
+    with --stats, statistics of their points (read once, in bounded memory)."""
     options = cloud_options(colors, chunked)
+    if stats and memory:
+        raise GigapointError("--stats and --memory: one at a time (--stats reads the points a chunk at a time, holding none)")
     if options and not memory:  # without --memory nothing is loaded: the option would do nothing
         raise GigapointError(f"{option_names(options)}: only with --memory (how the loaded points are held)")
-    from ..io import expand_paths, file_info, folder_info, format_info, shown_url
+    from ..io import PointStats, expand_paths, file_info, file_stats, folder_info, format_info, format_stats, shown_url
     from ..lod import is_lod_source, octree_info
     from ..lod.copc_write import work_dir
     from ..lod.octree_dir import RESUME_HINT, OctreeDir
@@ -47,55 +56,91 @@ def info(
                 raise InputError(f"{f}: no such file yet: a conversion to it is unfinished (its work folder {work_dir(f)} is there); {again}")
             lod = is_lod_source(f)
             found = [] if lod else expand_paths([f], recursive=recursive)
-            summed = f if len(found) > FOLDER_LISTED and f.is_dir() and not (each or memory) else None
+            summed = f if (stats or len(found) > FOLDER_LISTED) and f.is_dir() and not (each or memory) else None
             paths.extend([(f, True, None, None)] if lod else [(p, False, None, summed) for p in found])
         except GigapointError as exc:  # a missing file among several stopped the others from being shown
             paths.append((f, False, exc, None))
     failed = shown = 0
-    infos: list[dict] = []  # those of the folder being summed up, so far
-    for i, (path, octree, missing, folder) in enumerate(paths):
-        data = None
-        try:
-            if missing is not None:
-                raise missing
-            data = octree_info(path) if octree else file_info(path)
-        except GigapointError as exc:
-            if len(paths) == 1:
-                raise
-            failed += 1  # one damaged tile of a folder: said, and the others still shown
-            typer.echo(json.dumps({"path": shown_url(path), "error": str(exc)}) if as_json else f"error: {exc}", err=not as_json)
-        if folder is not None:  # shown once its last file is read
-            infos += [data] if data is not None else []
-            if (i + 1 < len(paths) and paths[i + 1][3] is folder) or not infos:
-                continue
-            data, infos = folder_info(folder, infos), []
-        if data is None:
-            continue
-        if as_json:
-            typer.echo(json.dumps(data))
-        else:
-            if shown:
-                typer.echo("")
-            typer.echo(format_info(data))
-        shown += 1
-        if memory and octree:  # it printed nothing of memory, without a word
-            why = "an octree is read node by node as views need them; --memory measures point files"
-            typer.echo(json.dumps({"path": shown_url(path), "memory": None, "why": why}) if as_json else f"memory: {why}")
-        elif memory:
-            import gigapoint as gp
+    infos: list = []  # those of the folder being summed up, so far (--stats: PointStats)
+    # --stats reads every point: a bar on a terminal, as render's reading shows one
+    reading = progress_bar("reading points", points_to_read(paths)) if stats else contextlib.nullcontext()
+    with reading as advance:
+        done = 0
 
-            cloud = gp.open(path, **options)
-            held = attributes_held(cloud)
+        def read_points(n: int) -> None:
+            nonlocal done
+            done += n
+            advance(done)
+
+        for i, (path, octree, missing, folder) in enumerate(paths):
+            data = None
+            try:
+                if missing is not None:
+                    raise missing
+                if stats and octree:
+                    raise GigapointError(f"{shown_url(path)}: an octree; --stats reads point files (those it was converted from)")
+                data = file_stats(path, on_chunk=read_points) if stats else octree_info(path) if octree else file_info(path)
+            except GigapointError as exc:
+                if len(paths) == 1:
+                    raise
+                failed += 1  # one damaged tile of a folder: said, and the others still shown
+                typer.echo(json.dumps({"path": shown_url(path), "error": str(exc)}) if as_json else f"error: {exc}", err=not as_json)
+            if folder is not None:  # shown once its last file is read
+                infos += [data] if data is not None else []
+                if (i + 1 < len(paths) and paths[i + 1][3] is folder) or not infos:
+                    continue
+                data, infos = summed_stats(folder, infos) if stats else folder_info(folder, infos), []
+            if data is None:
+                continue
+            if isinstance(data, PointStats):
+                data = {"path": shown_url(path), **data.result()}
             if as_json:
-                row = {"path": shown_url(path), "layout": cloud.layout, "n_points": cloud.n_points, "memory": cloud.memory(), "attributes": held}
-                typer.echo(json.dumps(row))
+                typer.echo(json.dumps(data))
             else:
-                typer.echo(memory_line(cloud))
-                if held:
-                    n = max(cloud.n_points, 1)
-                    typer.echo("attributes held: " + ", ".join(f"{k} {v['bytes'] / n:.2f} ({v['held']})" for k, v in held.items()))
+                if shown:
+                    typer.echo("")
+                typer.echo(format_stats(data) if stats else format_info(data))
+            shown += 1
+            if memory and octree:  # it printed nothing of memory, without a word
+                why = "an octree is read node by node as views need them; --memory measures point files"
+                typer.echo(json.dumps({"path": shown_url(path), "memory": None, "why": why}) if as_json else f"memory: {why}")
+            elif memory:
+                import gigapoint as gp
+
+                cloud = gp.open(path, **options)
+                held = attributes_held(cloud)
+                if as_json:
+                    row = {"path": shown_url(path), "layout": cloud.layout, "n_points": cloud.n_points, "memory": cloud.memory(), "attributes": held}
+                    typer.echo(json.dumps(row))
+                else:
+                    typer.echo(memory_line(cloud))
+                    if held:
+                        n = max(cloud.n_points, 1)
+                        typer.echo("attributes held: " + ", ".join(f"{k} {v['bytes'] / n:.2f} ({v['held']})" for k, v in held.items()))
     if failed:
         raise GigapointError(f"info: {failed} of {len(paths)} files could not be read (said above)")
+
+
+def points_to_read(paths) -> int | None:
+    """The points ``info --stats`` reads (its progress bar's total): the point files' header
+    counts; None where one does not say (a text file) or cannot be read (its error comes later)."""
+    from ..io import reader_for
+
+    try:
+        counts = [reader_for(p).point_count(p) for p, octree, missing, _ in paths if not (octree or missing)]
+    except GigapointError:
+        return None
+    return None if None in counts else sum(counts)
+
+
+def summed_stats(folder: Path, files: list) -> dict:
+    """The ``PointStats`` of a folder's files, summed up, as ``--stats`` prints them."""
+    from ..io import PointStats
+
+    total = PointStats()
+    for one in files:
+        total.merge(one)
+    return {"path": str(folder), **total.result()}
 
 
 def memory_line(cloud) -> str:
