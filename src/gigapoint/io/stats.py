@@ -170,8 +170,9 @@ class PointStats:
             out["point_source_ids"] = {"count": len(sources), "points": listed}
         if "gps_time" in self.attributes:
             out["gps_time"] = self._gps_time()
+        out["color"] = None  # (files without colours: every point the default one)
         if self.colored:
-            bits = self.color_bits.pop() if len(self.color_bits) == 1 else None  # (files of both: not one)
+            bits = next(iter(self.color_bits)) if len(self.color_bits) == 1 else None  # (files of both: not one)
             out["color"] = {"bits": bits, "min": self.color_lo.tolist(), "max": self.color_hi.tolist()}
         return out
 
@@ -192,7 +193,7 @@ class PointStats:
 
     def _gps_time(self) -> dict:
         lo, hi = self.attributes["gps_time"][1:3]
-        kind = self.time_kinds.pop() if len(self.time_kinds) == 1 else "mixed" if self.time_kinds else UNKNOWN
+        kind = next(iter(self.time_kinds)) if len(self.time_kinds) == 1 else "mixed" if self.time_kinds else UNKNOWN
         out = {"min": lo, "max": hi, "kind": kind}
         if kind == ADJUSTED:
             out.update(first=gps_date(lo), last=gps_date(hi))

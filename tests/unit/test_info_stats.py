@@ -1,0 +1,188 @@
+"""``gigapoint info --stats`` and ``gigapoint.io.point_stats``: what the points hold, every point
+read once in chunks, numbers checked against laspy's and numpy's."""
+
+from __future__ import annotations
+
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gigapoint.errors import InputError
+from gigapoint.io import point_stats
+from gigapoint.io.stats import class_name
+
+laspy = pytest.importorskip("laspy")
+
+#: byte offset of the header's max X in LAS 1.0-1.4 (max X, min X, max Y, min Y, max Z, min Z)
+HEADER_MAX_X = 179
+
+
+def write_tile(path: Path, n: int, seed: int, classes: list[int], adjusted_time: bool = False) -> Path:
+    """A LAS 1.2 point format 3 tile of ``n`` points: classes drawn from ``classes``, returns
+    1..3 of 1..3, two flight lines, 16-bit colours."""
+    rng = np.random.default_rng(seed)
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = [0.01] * 3, [500000.0, 4000000.0, 0.0]
+    if adjusted_time:
+        header.global_encoding.gps_time_type = laspy.header.GpsTimeType.STANDARD
+    las = laspy.LasData(header)
+    las.x = 500000 + rng.random(n) * 100
+    las.y = 4000000 + rng.random(n) * 100
+    las.z = 100 + rng.random(n) * 10
+    las.classification = rng.choice(classes, n)
+    las.number_of_returns = rng.integers(1, 4, n)
+    las.return_number = [rng.integers(1, k + 1) for k in las.number_of_returns]
+    las.point_source_id = rng.choice([11, 12], n)
+    las.intensity = rng.integers(0, 4000, n)
+    las.gps_time = rng.random(n) * 100 + (0.0 if adjusted_time else 300_000)
+    las.red, las.green, las.blue = (rng.integers(0, 65536, n) for _ in range(3))
+    las.write(path)
+    return path
+
+
+def expected_returns(las) -> dict:
+    r, n = np.asarray(las.return_number), np.asarray(las.number_of_returns)
+    return {"single": int(np.sum((r == 1) & (n == 1))), "first": int(np.sum(r == 1)), "last": int(np.sum(r == n)),
+            "intermediate": int(np.sum((r > 1) & (r < n)))}  # fmt: skip
+
+
+def test_autzen_stats_are_laspys_numbers(autzen_path):
+    """True bounds, each attribute's min/max/mean, the class histogram, returns, flight lines,
+    gps_time and colours of autzen, as laspy reads them."""
+    las = laspy.read(autzen_path)
+    s = point_stats(autzen_path, chunk_size=7_000)  # (16 chunks: the running sums add up)
+    xyz = np.column_stack([las.x, las.y, las.z])
+    assert s["point_count"] == len(xyz) and s["invalid_points"] == 0
+    assert s["bounds"] == {"min": xyz.min(axis=0).tolist(), "max": xyz.max(axis=0).tolist()}
+    assert s["header_bounds_differ"] == []
+    for name in ("intensity", "classification", "return_number", "number_of_returns", "point_source_id", "gps_time", "scan_angle_rank", "user_data"):
+        v = np.asarray(las[name])
+        assert s["attributes"][name]["min"] == v.min() and s["attributes"][name]["max"] == v.max(), name
+        assert s["attributes"][name]["mean"] == pytest.approx(v.astype(np.float64).mean(), rel=1e-12), name
+    codes, counts = np.unique(np.asarray(las.classification), return_counts=True)
+    assert [(c["class"], c["name"], c["count"]) for c in s["classification"]] == [(int(c), class_name(int(c)), int(k)) for c, k in zip(codes, counts)]
+    assert [c["name"] for c in s["classification"]] == ["unassigned", "ground"]
+    assert [c["percent"] for c in s["classification"]] == pytest.approx((100 * counts / len(xyz)).tolist())
+    assert {k: s["returns"][k] for k in ("single", "first", "last", "intermediate")} == expected_returns(las)
+    pairs, n_pairs = np.unique(np.column_stack([las.return_number, las.number_of_returns]), axis=0, return_counts=True)
+    assert [(p["return_number"], p["number_of_returns"], p["count"]) for p in s["returns"]["by_number"]] == [(*map(int, p), int(k)) for p, k in zip(pairs, n_pairs)]
+    ids, per_id = np.unique(np.asarray(las.point_source_id), return_counts=True)
+    assert s["point_source_ids"] == {"count": len(ids), "points": {str(i): int(k) for i, k in zip(ids, per_id)}}
+    assert s["gps_time"] == {"min": las.gps_time.min(), "max": las.gps_time.max(), "kind": "seconds of a GPS week"}  # (global encoding 0)
+    rgb = np.column_stack([las.red, las.green, las.blue])
+    assert rgb.max() <= 255 and s["color"] == {"bits": 8, "min": rgb.min(axis=0).tolist(), "max": rgb.max(axis=0).tolist()}
+
+
+def test_info_stats_prints_autzens_classes_returns_and_colours(cli, autzen_path):
+    las = laspy.read(autzen_path)
+    rc, out, err = cli("info", "--stats", autzen_path)
+    assert rc == 0, err
+    lines = out.splitlines()
+    assert lines[0] == str(autzen_path)
+    assert "  points:      110,000, 0 of them invalid (NaN, inf or beyond ±1e+12): skipped" in lines
+    assert "  bounds min:  636001.76, 848935.20, 406.26 (the points'; the header's the same)" in lines
+    n1, n2 = (int(np.sum(las.classification == c)) for c in (1, 2))
+    words = [line.split() for line in lines]  # (the columns' widths aside)
+    classes = words.index(["classes:", "1", "unassigned", f"{n1:,}", f"{100 * n1 / len(las):.2f}%"])
+    assert words[classes + 1] == ["2", "ground", f"{n2:,}", f"{100 * n2 / len(las):.2f}%"]
+    r = expected_returns(las)
+    assert f"  returns:     single {r['single']:,}, first {r['first']:,}, last {r['last']:,}, intermediate {r['intermediate']:,}" in lines
+    assert "  sources:     1 flight line (point_source_id 7326: 110,000)" in lines
+    assert ["intensity", "0", f"{las.intensity.max()}", f"{las.intensity.mean():.10g}"] in words
+    assert ["gps_time", f"{las.gps_time.min():.10g}", f"{las.gps_time.max():.10g}", f"{las.gps_time.mean():.10g}"] in words
+    assert "  color:       red 40..236, green 55..228, blue 52..219 (8-bit values in 16-bit LAS fields)" in lines
+
+
+def test_a_folder_of_two_tiles_is_summed_and_each_gives_one_object_a_file(cli, tmp_path):
+    a = write_tile(tmp_path / "a.las", 300, 1, [2, 6])
+    b = write_tile(tmp_path / "b.las", 200, 2, [2, 9, 19])
+    both = [laspy.read(a), laspy.read(b)]
+    rc, out, err = cli("info", "--stats", "--json", tmp_path)
+    assert rc == 0, err
+    [s] = map(json.loads, out.splitlines())  # one object: the folder summed
+    classes = np.concatenate([np.asarray(t.classification) for t in both])
+    assert s["path"] == str(tmp_path) and s["files"] == 2 and s["point_count"] == 500
+    assert [(c["class"], c["name"], c["count"]) for c in s["classification"]] == [
+        (2, "ground", int(np.sum(classes == 2))), (6, "building", int(np.sum(classes == 6))),
+        (9, "water", int(np.sum(classes == 9))), (19, "reserved", int(np.sum(classes == 19)))]  # fmt: skip
+    intensity = np.concatenate([np.asarray(t.intensity) for t in both])
+    assert s["attributes"]["intensity"] == {"min": intensity.min(), "max": intensity.max(), "mean": pytest.approx(intensity.mean(), rel=1e-12)}
+    xyz = np.concatenate([np.column_stack([t.x, t.y, t.z]) for t in both])
+    assert s["bounds"] == {"min": xyz.min(axis=0).tolist(), "max": xyz.max(axis=0).tolist()}
+    returns = [expected_returns(t) for t in both]
+    assert {k: s["returns"][k] for k in returns[0]} == {k: returns[0][k] + returns[1][k] for k in returns[0]}
+    ids = np.concatenate([np.asarray(t.point_source_id) for t in both])
+    assert s["point_source_ids"] == {"count": 2, "points": {"11": int(np.sum(ids == 11)), "12": int(np.sum(ids == 12))}}
+    assert s["color"]["bits"] == 16  # (values above 255: 16-bit colours, read >> 8)
+    red8 = np.concatenate([np.asarray(t.red) >> 8 for t in both])
+    assert (s["color"]["min"][0], s["color"]["max"][0]) == (red8.min(), red8.max())
+    rc, out, err = cli("info", "--stats", "--json", "--each", tmp_path)
+    each = [json.loads(line) for line in out.splitlines()]
+    assert rc == 0 and [(e["path"], e["point_count"]) for e in each] == [(str(a), 300), (str(b), 200)]
+
+
+def test_a_stale_header_is_reported_beside_the_points_true_bounds(cli, tmp_path):
+    path = write_tile(tmp_path / "stale.las", 100, 3, [2])
+    las = laspy.read(path)
+    data = bytearray(path.read_bytes())
+    true_max_x = float(las.x.max())
+    struct.pack_into("<d", data, HEADER_MAX_X, true_max_x - 20)  # a writer that did not update it
+    path.write_bytes(bytes(data))
+    s = point_stats(path)
+    assert s["header_bounds_differ"] == [str(path)]
+    assert s["bounds"]["max"][0] == true_max_x and s["header_bounds"]["max"][0] == true_max_x - 20
+    rc, out, err = cli("info", "--stats", path)
+    assert rc == 0, err
+    lines = out.splitlines()
+    assert f"  bounds max:  {true_max_x:.2f}, {las.y.max():.2f}, {las.z.max():.2f}" in lines
+    assert f"  header max:  {true_max_x - 20:.2f}, {las.y.max():.2f}, {las.z.max():.2f}" in lines
+    assert "  stale:       the header's bounds are not its points' (stale.las)" in lines
+
+
+def test_adjusted_standard_gps_time_is_shown_as_dates(tmp_path):
+    """Global encoding bit 0: gps_time counts from the GPS epoch less 1e9 s (GPS second 1e9 was
+    2011-09-14 01:46:40 GPS)."""
+    path = write_tile(tmp_path / "adjusted.las", 50, 4, [2], adjusted_time=True)
+    t = laspy.read(path).gps_time
+    s = point_stats(path)["gps_time"]
+    assert s["kind"] == "adjusted standard GPS time" and (s["min"], s["max"]) == (t.min(), t.max())
+    assert s["first"] == f"2011-09-14 01:{46 + int(40 + t.min()) // 60:02d}:{int(40 + t.min()) % 60:02d}"
+
+
+def test_invalid_points_are_counted_and_left_out(tmp_path):
+    path = tmp_path / "points.xyz"
+    path.write_text("1 2 3 10\nnan 5 6 20\n4 5 6 30\n")
+    s = point_stats(path)
+    assert (s["point_count"], s["invalid_points"]) == (3, 1)
+    assert s["bounds"] == {"min": [1.0, 2.0, 3.0], "max": [4.0, 5.0, 6.0]} and s["color"] is None
+
+
+def test_a_truncated_file_is_a_one_line_error(cli, tmp_path):
+    path = write_tile(tmp_path / "cut.las", 200, 5, [2])
+    path.write_bytes(path.read_bytes()[:-1000])
+    with pytest.raises(InputError, match=f"^{path}: truncated LAS file"):
+        point_stats(path)
+    rc, out, err = cli("info", "--stats", path)
+    assert rc != 0 and out == "" and len(err.strip().splitlines()) == 1 and err.startswith(f"error: {path}: truncated LAS file")
+
+
+def test_the_progress_bar_counts_every_point_read(cli, autzen_path, monkeypatch):
+    from gigapoint.cli import info_cmd
+
+    seen = []
+
+    def bar(description, total):
+        seen.append(total)
+        return info_cmd.contextlib.nullcontext(seen.append)
+
+    monkeypatch.setattr(info_cmd, "progress_bar", bar)
+    rc, out, err = cli("info", "--stats", autzen_path)
+    assert rc == 0 and seen[0] == 110_000 and seen[-1] == 110_000
+
+
+def test_class_names_above_the_standard_ones():
+    assert [class_name(c) for c in (0, 7, 18, 19, 63, 64, 255)] == [
+        "never classified", "low point (noise)", "high noise", "reserved", "reserved", "user defined", "user defined"]  # fmt: skip
