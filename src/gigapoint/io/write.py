@@ -8,6 +8,7 @@ file is replaced only with ``overwrite``; every failure is a one-line InputError
 
 from __future__ import annotations
 
+import contextlib
 import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -42,12 +43,15 @@ def check_output(path: Path, overwrite: bool) -> None:
         raise InputError(f"{path}: the folder {path.parent} does not exist")
 
 
-def write_points(path: Path, chunks: Chunks, n_points: int, *, grid=None, crs_records=(), color_bits: int = 16) -> int:
+def write_points(path: Path, chunks: Chunks, n_points: int | None, *, grid=None, crs_records=(), color_bits: int | None = 16) -> int:
     """Write the ``n_points`` points of ``chunks()`` to ``path`` (checked by ``check_output``), as its suffix
     says: .las/.laz (LAS 1.4 point format 7, 8 with ``nir``; ``grid``: the (scale, offset) to store
     positions on, else one fine enough for their bounds; ``crs_records``: (user id, record id,
     data) VLRs naming their CRS; ``color_bits``: 16 stores 8-bit colours x 257, 8 as they are, as a
-    file of 8-bit values in 16-bit fields had them) or .ply. Returns the points written."""
+    file of 8-bit values in 16-bit fields had them; None: as each chunk says, its ``color_bits``,
+    16 where it does not) or .ply. ``n_points`` None: not known before the points are read (a
+    filter's, files': a PLY header's count is written once they are). The first chunk's attributes
+    (names and dtypes) stand for every chunk's. Returns the points written."""
     from lazrs import LazrsError
 
     suffix = path.suffix.lower()
@@ -68,23 +72,20 @@ def write_points(path: Path, chunks: Chunks, n_points: int, *, grid=None, crs_re
     return written
 
 
-def _first(chunks: Chunks) -> PointChunk:
-    """The first chunk (its attributes' names and dtypes stand for all of them), or an empty one."""
-    return next(iter(chunks()), None) or PointChunk(np.empty((0, 3)))
+#: no point: what a writer given no chunk at all writes (a header, no record)
+_NO_POINTS = PointChunk(np.empty((0, 3)))
 
 
-def _write_las(tmp: Path, path: Path, chunks: Chunks, grid, crs_records, color_bits: int) -> int:
-    """Point format 7 (8 with ``nir``), LAS 1.4: attributes the format has a field for go to
-    it, clipped to its range as the COPC writer does (they were added as extra bytes under the
-    field's own name, which laspy refused: "field 'intensity' occurs more than once"); others
-    as extra bytes (las_fields.extra_attributes: booleans as u8, half floats as f4)."""
+def _las_layout(path: Path, attributes: dict, grid, crs_records) -> tuple:
+    """(laspy header, {attribute: its point format field}, {attribute: extra bytes dtype}) of a
+    file of points with ``attributes`` ({name: values}, the first chunk's): point format 7 (8 with
+    ``nir``), LAS 1.4, the (scale, offset) ``grid`` and the CRS records."""
     import laspy
 
-    attrs = {a: v.dtype for a, v in _first(chunks).attributes.items()}
+    attrs = {a: v.dtype for a, v in attributes.items()}
     fmt = choose_point_format(attrs)
     header = laspy.LasHeader(point_format=fmt, version="1.4")
-    scale, offset = grid if grid is not None else _grid_of(chunks)
-    header.scales, header.offsets = np.asarray(scale, np.float64), np.asarray(offset, np.float64)
+    header.scales, header.offsets = (np.asarray(v, np.float64) for v in grid)
     extra = extra_attributes(attrs, where=str(path), point_format=fmt)
     for a, dt in extra.items():
         header.add_extra_dim(laspy.ExtraBytesParams(name=a, type=dt))
@@ -92,22 +93,51 @@ def _write_las(tmp: Path, path: Path, chunks: Chunks, grid, crs_records, color_b
         header.vlrs.append(laspy.VLR(user.decode(), record, "CRS", data))
     header.global_encoding.wkt = any(record == WKT_RECORD for _, record, _ in crs_records)
     fields = {a: LAS_FIELD_OF.get(a, a) for a in attrs if a in field_attributes(fmt)}
-    color_factor = np.uint16(257 if color_bits == 16 else 1)
+    return header, fields, extra
+
+
+def _write_las(tmp: Path, path: Path, chunks: Chunks, grid, crs_records, color_bits: int | None) -> int:
+    """Point format 7 (8 with ``nir``), LAS 1.4: attributes the format has a field for go to
+    it, clipped to its range as the COPC writer does (they were added as extra bytes under the
+    field's own name, which laspy refused: "field 'intensity' occurs more than once"); others
+    as extra bytes (las_fields.extra_attributes: booleans as u8, half floats as f4). The header
+    is made from the first chunk, as it comes: one pass over the points (files are read once)."""
+    import laspy
+
+    grid = grid if grid is not None else _grid_of(chunks)
     written = 0
-    with laspy.open(str(tmp), mode="w", header=header, do_compress=path.suffix.lower() == ".laz") as writer:
+    with contextlib.ExitStack() as open_file:
+        writer = None
         for chunk in chunks():
+            if writer is None:
+                header, fields, extra = _las_layout(path, chunk.attributes, grid, crs_records)
+                writer = open_file.enter_context(laspy.open(str(tmp), mode="w", header=header, do_compress=path.suffix.lower() == ".laz"))
             rec = laspy.ScaleAwarePointRecord.zeros(len(chunk), header=header)
             for k, axis in enumerate("XYZ"):  # the grid's integers, rounded: not laspy's truncation of x
-                rec[axis] = np.rint((chunk.xyz[:, k] - header.offsets[k]) / header.scales[k]).astype(np.int32)
+                rec[axis] = _grid_integers(path, chunk.xyz[:, k], header.offsets[k], header.scales[k], axis)
+            bits = color_bits if color_bits is not None else chunk.color_bits or 16
             for k, channel in enumerate(("red", "green", "blue")):
-                rec[channel] = chunk.rgba[:, k].astype(np.uint16) * color_factor
+                rec[channel] = chunk.rgba[:, k].astype(np.uint16) * np.uint16(257 if bits == 16 else 1)
             for a, field in fields.items():
                 rec[field] = las_field_values(a, chunk.attributes[a]).astype(rec[field].dtype)
             for a, dt in extra.items():
                 rec[a] = chunk.attributes[a].astype(dt)
             writer.write_points(rec)
             written += len(chunk)
+        if writer is None:  # no chunk: a header alone
+            header = _las_layout(path, _NO_POINTS.attributes, grid, crs_records)[0]
+            open_file.enter_context(laspy.open(str(tmp), mode="w", header=header, do_compress=path.suffix.lower() == ".laz"))
     return written
+
+
+def _grid_integers(path: Path, values: np.ndarray, offset: float, scale: float, axis: str) -> np.ndarray:
+    """``values`` as the grid's 32-bit integers; one beyond them (a grid made from headers' bounds
+    that the points overstep) a one-line InputError, not a position wrapped around."""
+    ints = np.rint((values - offset) / scale)
+    if len(ints) and not (-(2**31) <= ints.min() and ints.max() < 2**31):
+        far = values[np.argmax(np.abs(ints))]
+        raise InputError(f"{path}: {axis.lower()} {far:.15g} lies beyond the LAS grid (scale {scale:g}, offset {offset:.15g}): not written")
+    return ints.astype(np.int32)
 
 
 def _grid_of(chunks: Chunks) -> tuple[np.ndarray, np.ndarray]:
@@ -123,23 +153,22 @@ def _grid_of(chunks: Chunks) -> tuple[np.ndarray, np.ndarray]:
 _PLY_NAMES = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": "int", "u4": "uint", "f4": "float", "f8": "double"}
 
 
-def _write_ply(tmp: Path, path: Path, chunks: Chunks, n: int) -> int:
+#: digits of a PLY header's count written before the points are counted (``_write_ply``): any 64-bit count
+_PLY_COUNT_DIGITS = 20
+
+
+def _write_ply(tmp: Path, path: Path, chunks: Chunks, n: int | None) -> int:
     """Binary little-endian PLY: x, y, z (double), red, green, blue (uchar), then the attributes;
-    the header first, then the records chunk by chunk."""
-    first = _first(chunks)
-    wide = [a for a, v in first.attributes.items() if v.dtype.kind in "iu" and v.dtype.itemsize == 8]
-    lo, hi = dict.fromkeys(wide, 0), dict.fromkeys(wide, 0)
-    for chunk in chunks() if wide else ():  # the range of 64-bit integers, which PLY has no type for: a pass first
-        for a in wide:
-            if len(chunk):
-                lo[a], hi[a] = min(lo[a], int(chunk.attributes[a].min())), max(hi[a], int(chunk.attributes[a].max()))
-    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("red", "u1"), ("green", "u1"), ("blue", "u1")]
-    fields += [(a, _ply_type(path, a, v.dtype, lo.get(a, 0), hi.get(a, 0))) for a, v in first.attributes.items()]
-    properties = "".join(f"property {_PLY_NAMES[np.dtype(t).str[1:]]} {a}\n" for a, t in fields)
+    the header (made from the first chunk) first, then the records chunk by chunk. ``n`` None: the
+    header's count is written as zeros of a fixed width and patched once the points are counted,
+    not counted in a pass of their own (files' points, decoded again)."""
     with open(tmp, "wb") as f:
-        f.write(f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\n{properties}end_header\n".encode())
+        fields = count_at = None
         written = 0
         for chunk in chunks():
+            if fields is None:
+                fields = _ply_fields(path, chunk, chunks)
+                count_at = _write_ply_header(f, fields, n)
             data = np.empty(len(chunk), fields)
             for k, a in enumerate("xyz"):
                 data[a] = chunk.xyz[:, k]
@@ -149,9 +178,36 @@ def _write_ply(tmp: Path, path: Path, chunks: Chunks, n: int) -> int:
                 data[a] = v
             f.write(data.tobytes())
             written += len(chunk)
-    if written != n:  # (a file whose header says otherwise would read as damaged)
+        if fields is None:  # no chunk: a header alone
+            count_at = _write_ply_header(f, _ply_fields(path, _NO_POINTS, chunks), n)
+        if n is None:
+            f.seek(count_at)
+            f.write(f"{written:0{_PLY_COUNT_DIGITS}d}".encode())
+    if n is not None and written != n:  # (a file whose header says otherwise would read as damaged)
         raise InputError(f"{path}: {written:,} points came to be written, not the {n:,} expected; nothing was written")
-    return n
+    return written
+
+
+def _ply_fields(path: Path, first: PointChunk, chunks: Chunks) -> list[tuple[str, str]]:
+    """The PLY records' (name, dtype) of points with ``first``'s attributes: 64-bit integers,
+    which PLY has no type for, narrowed to their range (a pass over ``chunks()`` for it)."""
+    wide = [a for a, v in first.attributes.items() if v.dtype.kind in "iu" and v.dtype.itemsize == 8]
+    lo, hi = dict.fromkeys(wide, 0), dict.fromkeys(wide, 0)
+    for chunk in chunks() if wide else ():
+        for a in wide:
+            if len(chunk):
+                lo[a], hi[a] = min(lo[a], int(chunk.attributes[a].min())), max(hi[a], int(chunk.attributes[a].max()))
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    return fields + [(a, _ply_type(path, a, v.dtype, lo.get(a, 0), hi.get(a, 0))) for a, v in first.attributes.items()]
+
+
+def _write_ply_header(f, fields: list, n: int | None) -> int:
+    """Write the PLY header of ``n`` points (None: zeros to patch); returns where its count starts."""
+    count = f"{0:0{_PLY_COUNT_DIGITS}d}" if n is None else str(n)
+    properties = "".join(f"property {_PLY_NAMES[np.dtype(t).str[1:]]} {a}\n" for a, t in fields)
+    head = "ply\nformat binary_little_endian 1.0\nelement vertex "
+    f.write(f"{head}{count}\n{properties}end_header\n".encode())
+    return len(head)
 
 
 def _ply_type(path: Path, name: str, dt: np.dtype, lo: int, hi: int) -> str:
