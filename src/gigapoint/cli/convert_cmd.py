@@ -1,4 +1,5 @@
-"""`gigapoint convert`: point cloud files -> an LOD octree directory (gigapoint or Potree 2.0)."""
+"""`gigapoint convert`: point cloud files -> an LOD octree (a gigapoint or Potree 2.0 directory, a COPC file),
+or one plain point file (.las, .laz, .ply) of their points merged and filtered."""
 
 from __future__ import annotations
 
@@ -18,9 +19,10 @@ from .settings_opts import named_option
 def convert(
     inputs: list[Path] = typer.Argument(..., readable=False, help="Input files or directories (every supported point cloud file inside, as for render). A quoted glob pattern ('tiles/*.laz', 'city/**/*.laz') stands for what it matches."),
     output: Path = typer.Option(
-        ..., "-o", "--output", readable=False, help="Output directory (created; resumed when a conversion was interrupted), or the .copc.laz file of --format copc."
+        ..., "-o", "--output", readable=False, help="Output directory (created; resumed when a conversion was interrupted), or the .copc.laz file of --format copc, "
+        "or one plain .las, .laz or .ply file of every point read (merged, filtered: no octree)."
     ),
-    sampler: str = typer.Option("grid", help="grid (first point per cell of a 128³ grid per node) or poisson (minimum distance)."),
+    sampler: str | None = typer.Option(None, help="grid (first point per cell of a 128³ grid per node; the default) or poisson (minimum distance)."),
     memory_limit: str | None = typer.Option(None, "--memory-limit", help="Peak memory, e.g. 4G or 512M (default: a quarter of the RAM). An input that fits is converted in memory; a larger one is spilled to OUTPUT/.partial in partitions."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing converted cloud in OUTPUT."),
     format: str | None = typer.Option(
@@ -29,7 +31,7 @@ def convert(
         help="gigapoint (rendered directly), potree (Potree 2.0, for Potree's web viewers) or copc (one .copc.laz file, LAS 1.4); "
         "default: copc for an OUTPUT ending in .copc.laz, else gigapoint.",
     ),
-    max_leaf: int = typer.Option(20_000, "--max-leaf", help="Most points a leaf node holds."),
+    max_leaf: int | None = typer.Option(None, "--max-leaf", help="Most points a leaf node holds (default 20000)."),
     layout: str | None = typer.Option(
         None, "--layout", help="gigapoint format: compact (version 2, ~half the bytes, exact at the source's scale; the default) or words (version 1)."
     ),
@@ -50,9 +52,10 @@ def convert(
     drop_classes: DropClassesOption = None,
     clip: ClipOption = None,
 ) -> None:
-    """Convert point clouds into a level-of-detail octree, out of core, resumable."""
+    """Convert point clouds into a level-of-detail octree, out of core, resumable; or merge and filter them into one .las, .laz or .ply file (-o ground.laz)."""
     from ..lod import ConvertError
     from ..lod import convert as run
+    from ..lod.convert.to_file import is_point_file_name
     from ..lod.copc_write import is_copc_name, work_dir
     from ..lod.octree_dir import OctreeDir
 
@@ -60,11 +63,12 @@ def convert(
         raise ConvertError("--dask and --workers: give one of them (a running cluster's scheduler, or a local cluster's size)")
     point_filter = filter_options(classes, drop_classes, clip, "convert")  # its errors name the options, before a cluster starts
     copc = format == "copc" or (format is None and is_copc_name(output))  # (convert's own default)
+    to_file = format is None and is_point_file_name(output)  # one plain point file: nothing to watch, no cluster (convert refuses one)
     watch = work_dir(output) if copc else output  # a COPC output appears only once complete
     # quoted as a shell needs it: `gigapoint view my scans` named two paths
-    hint = None if quiet else lambda: print(f"while this runs, `gigapoint view {shlex.quote(str(watch))}` shows what has been read so far", file=sys.stderr)
-    cluster = nullcontext(None)
-    if dask is not None or workers is not None:
+    hint = None if quiet or to_file else lambda: print(f"while this runs, `gigapoint view {shlex.quote(str(watch))}` shows what has been read so far", file=sys.stderr)
+    cluster = nullcontext(dask if dask is not None else workers)
+    if not to_file and (dask is not None or workers is not None):
         from ..lod.convert.distributed import open_client
 
         cluster = open_client(dask if dask is not None else workers, announce=not quiet)  # prints the dashboard's address
@@ -89,11 +93,14 @@ def convert(
     except ConvertError as exc:  # 'max_leaf must be ...' named no option
         raise named_option(exc, {"max_leaf": "--max-leaf"}) from None
     except (KeyboardInterrupt, SystemExit):  # (Ctrl+C, SIGTERM) a bare "interrupted" left the user to guess whether OUT was lost
-        if OctreeDir(watch).read_state() is not None:
+        if not to_file and OctreeDir(watch).read_state() is not None:
             print(f"{watch}: kept unfinished; run the same convert command again to resume it", file=sys.stderr)
         raise
     resumed = (" (resumed)" if result.resumed else "") + (", in memory" if result.in_memory else "")
     skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
+    if to_file:
+        print(f"{output}: {result.points:,} points ({result.format}){skipped}, {result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s")
+        return
     print(  # OUTPUT as given: a Dask run's result holds it absolute (its workers need that)
         f"{output}: {result.points:,} points in {result.nodes:,} nodes ({result.format}, {result.sampler}){skipped}, "
         f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s{resumed}"

@@ -33,6 +33,7 @@ from .phases import BuildPhases
 from .read import ReadPhase
 from .seeded import GrownTree, SeededPhases
 from .state import damaged_work_file, local_path
+from .to_file import is_point_file_name, write_point_file
 
 PHASES = ("read", "count", "distribute", "build", "group", "upper", "write")
 
@@ -41,7 +42,7 @@ PHASES = ("read", "count", "distribute", "build", "group", "upper", "write")
 class ConvertResult:
     out: Path
     format: str
-    sampler: str
+    sampler: str | None  # None: a plain point file (to_file.py), no octree
     points: int
     nodes: int
     skipped: int
@@ -201,11 +202,11 @@ def convert(
     inputs,
     out,
     *,
-    sampler: str = "grid",
+    sampler: str | None = None,
     memory_limit=None,
     overwrite: bool = False,
     format: str | None = None,
-    max_leaf: int = DEFAULT_MAX_LEAF,
+    max_leaf: int | None = None,
     partition_points: int | None = None,
     chunk_size: int | None = None,
     progress: bool = False,
@@ -224,7 +225,12 @@ def convert(
 ) -> ConvertResult:
     """Convert point cloud files (or a cloud, or an iterable of PointChunks) into an LOD octree directory ``out``.
 
-    ``sampler``: grid | poisson. ``format``: gigapoint (rendered directly) | potree (Potree 2.0,
+    An ``out`` named as a plain point file (.las, .laz or .ply, not .copc.laz), without ``format``
+    and with files or folders as ``inputs`` (a cloud is written by its ``save``), is written as one: every point of the input files that passes the filter, merged a chunk at
+    a time (to_file.py); the octree's options (sampler, memory_limit, max_leaf, layout, colors,
+    encoding, client, ...) are refused with it. Its result counts the points written, in 0 nodes.
+
+    ``sampler``: grid (the default) | poisson. ``format``: gigapoint (rendered directly) | potree (Potree 2.0,
     ``encoding`` DEFAULT (the default) or BROTLI) | copc; None: copc for an ``out`` ending in .copc.laz, else
     gigapoint (a folder, so not named like a point file). ``memory_limit``: bytes or '4G'; bounds partition sizes
     (the limit less a fixed allowance for the runtime, not less what this process holds: the plan is
@@ -278,9 +284,25 @@ def convert(
     if source_files is not None:  # a path given alone was read letter by letter, a missing file skipped: no CRS, no word
         source_files = [source_files] if isinstance(source_files, (str, os.PathLike)) else list(source_files)
         source_files = [check_file(p) if isinstance(p, (str, os.PathLike)) else _not_a_path(p) for p in source_files]
+    out = local_path(out, "the output", ConvertError)  # a file:// URL names a path
+    if format is None and out is not None and str(out) != "" and is_point_file_name(out) and _are_paths(inputs):  # -o ground.laz: one plain point file
+        octree_options = {"--sampler": sampler, "--memory-limit": memory_limit, "--max-leaf": max_leaf, "--layout": layout, "--colors": colors,
+                          "encoding": encoding, "--dask/--workers (client)": client, "name": name, "partition_points": partition_points,
+                          "upper_points": upper_points, "source_files": source_files, "on_ready": on_ready}  # fmt: skip
+        given = [option for option, value in octree_options.items() if value is not None]
+        if given:  # (each meant something of an octree only: none was ignored without a word)
+            raise ConvertError(f"{out}: {', '.join(given)}: {'options' if len(given) > 1 else 'an option'} of an octree, not of a plain {out.suffix[1:].upper()} file")
+        t0 = time.perf_counter()
+        shown = RichProgress() if progress else NullProgress()
+        try:
+            points, skipped = write_point_file(inputs, out, keep, overwrite, chunk_size, shown)
+        finally:
+            shown.close()
+        return ConvertResult(out, out.suffix[1:].lower(), None, points, 0, skipped, time.perf_counter() - t0, False)
+    sampler = "grid" if sampler is None else sampler
     if sampler not in SAMPLERS:
         raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
-    out = local_path(out, "the output", ConvertError)  # a file:// URL names a path
+    max_leaf = DEFAULT_MAX_LEAF if max_leaf is None else max_leaf
     if format is None:  # -o scan.copc.laz without --format was a gigapoint folder of that name
         format = "copc" if is_copc_name(out) else "gigapoint"
     if format not in FORMATS:
