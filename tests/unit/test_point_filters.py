@@ -134,7 +134,7 @@ def test_render_drop_classes_draws_only_the_points_kept(cli, tmp_path, autzen_pa
     rc, out, err = cli("render", autzen_path, "-o", tmp_path / "ground.png", "--index-out", tmp_path / "ground.npy", "--drop-classes", "1", *size)
     assert rc == 0, err
     ground = np.count_nonzero(classification != 1)
-    assert out.strip() == f"wrote {tmp_path / 'ground.png'} (240x160, {ground:,} points)" and ground == 26_107
+    assert out == f"wrote {tmp_path / 'ground.png'} (240x160, {ground:,} points)\nwrote {tmp_path / 'ground.npy'}\n" and ground == 26_107
     everything, kept = np.load(tmp_path / "all.npy") >= 0, np.load(tmp_path / "ground.npy") >= 0  # pixels a point covers
     # the ground's pixels are the whole cloud's (but a few: adaptive point sizes follow the density), and far fewer
     assert np.count_nonzero(kept & ~everything) <= kept.sum() // 1000
