@@ -800,8 +800,10 @@ def test_the_second_chunk_is_decoded_once_the_first_is_in(scene, monkeypatch):
     chunk only once the first is inserted, so the first insertion, and the first image, do not
     wait for it; after that it decodes ahead of the insertions as before."""
     from gigapoint.core.chunk import PointChunk
+    from gigapoint.lod.progressive import loader
     from gigapoint.lod.progressive.loader import open_progressive
 
+    monkeypatch.setattr(loader, "SLICE_POINTS", 10_000)  # (chunks of 10 000 each inserted: none joined)
     xyz, rgba, _ = scene
     events = []
 
@@ -2454,9 +2456,11 @@ def test_a_small_batch_is_inserted_on_the_calling_thread_alone(scene, monkeypatc
 def test_many_small_files_load_in_joined_batches(tmp_path, monkeypatch):
     """A progressive load of many small files inserted each file's points on its own (2 000 files
     of 50 points: 6 s, the plain cloud 1.2 s): runs of small chunks are joined into batches of
-    SMALL_BATCH points or more, after the first chunk (the first image). Every point is in once."""
-    from gigapoint.core.threads import SMALL_BATCH
+    SLICE_POINTS points or more (here 10 000), after the first chunk (the first image). Every point is in once."""
+    from gigapoint.lod.progressive import loader
 
+    SMALL_BATCH = 10_000
+    monkeypatch.setattr(loader, "SLICE_POINTS", SMALL_BATCH)
     xyz = demo_arrays(15_000, seed=2)[0]
     for k in range(300):
         np.save(tmp_path / f"t{k:04d}.npy", xyz[k * 50 : (k + 1) * 50])

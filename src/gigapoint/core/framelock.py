@@ -71,7 +71,15 @@ class FrameLock:
         with self._turn:
             while (self._drawing or self._readers_waiting) and self._frames_drawn == seen:
                 self._turn.wait(0.05)
-            return self._frames_drawn, time.perf_counter() - self._frame_end < FRAMES_RECENT_S
+            return self._frames_drawn, self._frames_recent()
+
+    def _frames_recent(self) -> bool:
+        return time.perf_counter() - self._frame_end < FRAMES_RECENT_S
+
+    def frames_recent(self) -> bool:
+        """Whether frames are being drawn (one ended within FRAMES_RECENT_S), without waiting."""
+        with self._turn:
+            return self._frames_recent()
 
     def frame_waiting(self) -> bool:
         """Whether a frame waits for the lock: a writer holding it for a run of writes lets go

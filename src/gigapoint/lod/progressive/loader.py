@@ -49,7 +49,12 @@ from ...io.filters import PointFilter, filtered
 from ...io.las import header_slack
 from ..convert.prefetch import prefetch
 
-SLICE_POINTS = 250_000  # points inserted under one hold of the octree (~20-40 ms) while no frames are drawn
+# points inserted under one hold of the octree while no frames are drawn (~70-140 ms; a frame asked for
+# meanwhile waits for it once, then slices are SLICE_WHILE_DRAWING): decoded chunks are joined up to it
+# while no frames are drawn, as an insertion of 1 M points costs less a point than four of 250 k (a 20 M
+# LAS load 3.2 -> 2.5 s, Zen 4); while frames are drawn, up to JOIN_WHILE_DRAWING (points show as they come)
+SLICE_POINTS = 1_000_000
+JOIN_WHILE_DRAWING = SMALL_BATCH
 SLICE_WHILE_DRAWING = 50_000  # ... and while frames are drawn: a waiting frame waits ~5-10 ms at most
 ORDER_POINTS = 2_000_000  # points of leaves ordered (octree.order_leaves: ~10 ns a point) under one hold while no frames are drawn
 ORDER_WHILE_DRAWING = 400_000  # ... and while frames are drawn (~4 ms)
@@ -164,7 +169,7 @@ class Loader:
         keep_warnings(self.warnings)  # this thread's context, which the decoder's copies (prefetch)
         chunks = prefetch(self._chunks(), name="gigapoint-decode")  # held here: closed below, after the decoder is let go
         try:
-            for name, chunk in _joined(chunks, SMALL_BATCH):
+            for name, chunk in _joined(chunks, self._join_points):
                 s = 0
                 # the attributes every source has so far: a file without one drops it, one with more brings none
                 self.octree.keep_attributes(chunk.attributes)
@@ -211,6 +216,10 @@ class Loader:
             self.finished_at = time.perf_counter()
             self._done.set()
 
+    def _join_points(self) -> int:
+        """The points decoded chunks are joined up to before they go in (``_joined``)."""
+        return JOIN_WHILE_DRAWING if self.octree.lock.frames_recent() else SLICE_POINTS
+
     def _stop_for_memory(self, name: str) -> None:
         of = f" of {self.total:,}" if self.total else ""
         self.error = MemoryLimitError(  # sizes in a unit that fits them: in GiB, a 40M limit read "0.0 GiB"
@@ -248,11 +257,12 @@ def _of_source(exc: InputError, label: str, source: str) -> InputError:
     return type(exc)(f"{source}: {str(exc).removeprefix(f'{label}: ')}")
 
 
-def _joined(chunks: Iterator[tuple[str, PointChunk]], least: int) -> Iterator[tuple[str, PointChunk]]:
-    """``chunks`` with runs of small ones (fewer than ``least`` points: many small files) joined
-    into chunks of ``least`` points or more, where their attributes are the same: an insertion
-    costs ~0.1 ms whatever its size (2 000 files of 50 points loaded in 1.7 s, one by one). The
-    first chunk goes in as it is (the first image; the decoder waits for it), and a source's
+def _joined(chunks: Iterator[tuple[str, PointChunk]], least: int | Callable[[], int]) -> Iterator[tuple[str, PointChunk]]:
+    """``chunks`` with runs of small ones (fewer than ``least`` points, or ``least()``, asked as each chunk comes:
+    many small files, decoded chunks) joined into chunks of that many points or more, where their
+    attributes are the same: an insertion costs ~0.1 ms whatever its size (2 000 files of 50 points
+    loaded in 1.7 s, one by one), and a large one less a point than several small ones
+    (SLICE_POINTS). The first chunk goes in as it is (the first image; the decoder waits for it), and a source's
     error comes after the points read before it are given (they stay drawable)."""
     held: list[PointChunk] = []
     held_points, name, first = 0, "", True
@@ -271,18 +281,19 @@ def _joined(chunks: Iterator[tuple[str, PointChunk]], least: int) -> Iterator[tu
             first = False
             yield item
             continue
-        if held and (item is None or kind(item[1]) != kind(held[0]) or len(item[1]) >= least):
+        target = least() if callable(least) else least
+        if held and (item is None or kind(item[1]) != kind(held[0]) or len(item[1]) >= target):
             yield name, join_chunks(held)
             held, held_points = [], 0
         if item is None:
             return
-        if len(item[1]) >= least:
+        if len(item[1]) >= target:
             yield item
             continue
         name = item[0]  # (the last file of a join: an error inserting it names one of them)
         held.append(item[1])
         held_points += len(item[1])
-        if held_points >= least:
+        if held_points >= target:
             yield name, join_chunks(held)
             held, held_points = [], 0
 
