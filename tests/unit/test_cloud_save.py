@@ -210,3 +210,35 @@ def test_saving_approximated_colours_says_so(tmp_path, autzen_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         gp.open(autzen_path, colors="rgba").save(tmp_path / "exact.laz")
+
+
+def test_a_progressive_octree_saves_its_points_into_one_point_file(tmp_path, autzen_path):
+    """save("merged.laz") of a progressive octree was "a gigapoint octree is a folder": its leaves'
+    points (not its voxels) into one file, on the source's grid (the same X, Y, Z integers, as
+    sets: the leaves' order is not the file's) with its CRS; the octree's options refused."""
+    from gigapoint.errors import InputError
+
+    cloud = gp.open(autzen_path, progressive=True)
+    result = cloud.save(tmp_path / "merged.laz")
+    assert result.points == 110_000 and result.out == tmp_path / "merged.laz" and result.nodes == 0
+    src, out = laspy.read(autzen_path), laspy.read(tmp_path / "merged.laz")
+    fields = ("X", "Y", "Z", "classification", "intensity", "return_number", "gps_time")
+
+    def rows(las):
+        return np.sort(np.rec.fromarrays([np.asarray(las[f]) for f in fields], names=fields))
+
+    src_rows, out_rows = rows(src), rows(out)
+    np.testing.assert_array_equal(out.header.scales, src.header.scales)
+    np.testing.assert_array_equal(out.header.offsets, src.header.offsets)
+    assert (src_rows == out_rows).all()
+    from gigapoint.io.las import read_las_header
+
+    assert read_las_header(tmp_path / "merged.laz").crs() == read_las_header(autzen_path).crs() and "Lambert" in read_las_header(autzen_path).crs()
+    ply = cloud.save(tmp_path / "merged.ply")
+    assert ply.points == 110_000 and gp.open(tmp_path / "merged.ply").n_points == 110_000
+    with pytest.raises(InputError, match=r"^.*again\.laz: max_leaf: options of an octree, not of a plain LAZ file$"):
+        cloud.save(tmp_path / "again.laz", max_leaf=1000)
+    with pytest.raises(InputError, match=r"merged\.laz: exists"):
+        cloud.save(tmp_path / "merged.laz")
+    cloud.close()
+

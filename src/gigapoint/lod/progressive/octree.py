@@ -1373,7 +1373,10 @@ class ProgressiveOctree:
         import inspect
 
         from ..convert import convert
+        from ..convert.to_file import is_point_file_name
 
+        if format is None and out is not None and str(out) != "" and is_point_file_name(out):  # save("merged.laz"): the points, no octree
+            return self._save_points(Path(out), overwrite, options)
         # (not the point filter's classes, drop_classes, clip: they filter points read from files, not an octree's)
         taken = set(inspect.signature(convert).parameters) - {"inputs", "out", "format", "overwrite", "classes", "drop_classes", "clip"}
         unknown = sorted(set(options) - taken)
@@ -1386,6 +1389,27 @@ class ProgressiveOctree:
         grown = options["max_leaf"] == self.max_leaf and options.get("client") is None and self.points > 0
         inputs = self.grown() if grown else self.chunks()
         return convert(inputs, out, format=format, overwrite=overwrite, **options)
+
+    def _save_points(self, out: Path, overwrite: bool, options: dict):
+        """``save`` into one plain point file (.las, .laz, .ply): the leaves' points (not the
+        voxels), on the source files' grid where the octree kept one (``grid``), with the first
+        LAS file's CRS (io/write.py). Options of an octree are refused."""
+        import time
+
+        from ...io.las_fields import las_grid
+        from ...io.write import check_output, source_crs_records, write_points
+        from ..convert.converter import ConvertResult
+
+        if options:  # (sampler=, max_leaf=, ...: each meant something of an octree only)
+            raise InputError(f"{out}: {', '.join(sorted(options))}: options of an octree, not of a plain {out.suffix[1:].upper()} file")
+        check_output(out, overwrite)
+        self._check_loaded("save it")
+        t0 = time.perf_counter()
+        ply = out.suffix.lower() == ".ply"
+        grid = None if ply or self.grid is None else las_grid(self.lo, self.hi, np.full(3, self.grid[1]), self.grid[0])
+        crs = [] if ply else source_crs_records(self.source_files)
+        n = write_points(out, self.chunks, self.points, grid=grid, crs_records=crs, color_bits=None)
+        return ConvertResult(out, out.suffix[1:].lower(), None, n, 0, self.skipped, time.perf_counter() - t0, False)
 
     def _check_loaded(self, to: str) -> None:
         """Wait for loading to finish; a one-line InputError where the octree is closed, or a
