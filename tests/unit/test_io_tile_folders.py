@@ -332,3 +332,27 @@ def test_a_glob_pattern_matching_one_octree_opens_it(tmp_path, cli):
     assert type(cloud).__name__ != "PointCloud" and cloud.n_points == result.points == 40
     rc, out, err = cli("render", str(tmp_path / "out" / "city*"), "-o", tmp_path / "x.png", "-W", 64, "-H", 48)
     assert rc == 0 and out.startswith(f"wrote {tmp_path / 'x.png'} (64x48, ") and err == ""
+
+
+def test_info_of_a_glob_pattern_of_many_tiles_sums_them_up_as_a_folders(cli, tmp_path):
+    """``gigapoint info "tiles/*.laz"`` printed a block a tile where ``gigapoint info tiles/`` sums
+    them up in one: a pattern names a folder's files (--each: a block a file; --json: one object)."""
+    write_tiles(tmp_path / "tiles", 12)
+    (tmp_path / "tiles" / "notes.csv").write_text("x,y,z\n1,2,3\n")  # not matched
+    pattern = str(tmp_path / "tiles" / "*.laz")
+    rc, out, err = cli("info", pattern)
+    lines = out.splitlines()
+    assert (rc, err, out.count("points:")) == (0, "", 1)
+    assert lines[0] == f"{pattern} (12 files)" and "  points:      600" in lines
+    rc, out, _ = cli("info", "--json", pattern)
+    [summed] = map(json.loads, out.splitlines())
+    assert {k: summed[k] for k in ("path", "files", "point_count", "format")} == {"path": pattern, "files": 12, "point_count": 600, "format": "LAZ"}
+    rc, out, _ = cli("info", "--each", pattern)
+    assert rc == 0 and out.count("points:") == 12
+    rc, out, _ = cli("info", "--json", "--each", pattern)
+    assert [json.loads(line)["point_count"] for line in out.splitlines()] == [50] * 12
+    rc, out, _ = cli("info", "--json", str(tmp_path / "tiles" / "tile_00_0[12].laz"))  # a few: a block a file, as a folder's few
+    assert [json.loads(line)["path"] for line in out.splitlines()] == [str(tmp_path / "tiles" / f"tile_00_0{i}.laz") for i in (1, 2)]
+    rc, out, _ = cli("info", "--stats", "--json", str(tmp_path / "tiles" / "tile_00_0[12].laz"))  # --stats: summed, as any folder's
+    [summed] = map(json.loads, out.splitlines())
+    assert (rc, summed["path"], summed["files"], summed["point_count"]) == (0, str(tmp_path / "tiles" / "tile_00_0[12].laz"), 2, 100)

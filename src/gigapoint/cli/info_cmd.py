@@ -23,8 +23,8 @@ def info(
     files: list[Path] = typer.Argument(
         ..., readable=False, help="Point cloud files (LAS/LAZ/PLY/E57/XYZ/XYZRGB/TXT/CSV/PTS/ASC/NPY/NPZ), directories, octrees, COPC/EPT files or URLs. A quoted glob pattern ('tiles/*.laz', 'city/**/*.laz') stands for what it matches."
     ),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of text: an object per file, or per folder summed up."),
-    each: bool = typer.Option(False, "--each", help=f"Show each file of a folder of more than {FOLDER_LISTED} files, or of any folder with --stats (by default summed up in one block)."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of text: an object per file, or per folder or pattern summed up."),
+    each: bool = typer.Option(False, "--each", help=f"Show each file of a folder or pattern of more than {FOLDER_LISTED} files, or of any with --stats (by default summed up in one block)."),
     stats: bool = typer.Option(
         False, "--stats", help="Read every point and show what they hold: true bounds (against the header's), each attribute's min/max/mean, classes, returns, flight lines, gps_time, colour ranges, invalid points."
     ),
@@ -40,7 +40,7 @@ def info(
         raise GigapointError("--stats and --memory: one at a time (--stats reads the points a chunk at a time, holding none)")
     if options and not memory:  # without --memory nothing is loaded: the option would do nothing
         raise GigapointError(f"{option_names(options)}: only with --memory (how the loaded points are held)")
-    from ..io import PointStats, expand_paths, file_info, file_stats, folder_info, format_info, format_stats, shown_url
+    from ..io import PointStats, expand_paths, file_info, file_stats, folder_info, format_info, format_stats, pattern_matches, shown_url
     from ..lod import is_lod_source, octree_info
     from ..lod.copc_write import work_dir
     from ..lod.octree_dir import RESUME_HINT, OctreeDir
@@ -56,7 +56,9 @@ def info(
                 raise InputError(f"{f}: no such file yet: a conversion to it is unfinished (its work folder {work_dir(f)} is there); {again}")
             lod = is_lod_source(f)
             found = [] if lod else expand_paths([f], recursive=recursive)
-            summed = f if (stats or len(found) > FOLDER_LISTED) and f.is_dir() and not (each or memory) else None
+            # a pattern names a folder's files: summed as a folder is ("tiles/*.laz" was a block a tile); one it matches alone is that file
+            named = f.is_dir() or (len(found) > 1 and pattern_matches(f) is not None)
+            summed = f if (stats or len(found) > FOLDER_LISTED) and named and not (each or memory) else None
             paths.extend([(f, True, None, None)] if lod else [(p, False, None, summed) for p in found])
         except GigapointError as exc:  # a missing file among several stopped the others from being shown
             paths.append((f, False, exc, None))
