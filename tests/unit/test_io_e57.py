@@ -268,3 +268,40 @@ def test_without_pye57_the_error_says_what_to_install(autzen, tmp_path, monkeypa
     monkeypatch.setitem(sys.modules, "pye57", None)  # (an import of it raises ImportError)
     with pytest.raises(InputError, match=r"a\.e57: reading E57 needs pye57 \(pip install 'gigapoint\[e57\]'\)$"):
         gp.open(path)
+
+
+def test_time_stamps_flagged_invalid_are_nan(tmp_path):
+    """A point whose isTimeStampInvalid is not 0 kept the meaningless timeStamp written for it as its
+    timestamp; it is NaN now (the point and the other time stamps kept). pye57's write_scan_raw
+    writes no time stamps: the scan is made of libE57's nodes, as the spherical one above."""
+    from pye57 import libe57
+
+    xyz = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
+    stamps, flags = np.array([10.5, 99.0, 12.25]), np.array([0.0, 1.0, 0.0])
+    path = tmp_path / "stamps.e57"
+    e = pye57.E57(str(path), mode="w")
+    image = e.image_file
+    scan = libe57.StructureNode(image)
+    scan.set("guid", libe57.StringNode(image, "{stamps}"))
+    proto = libe57.StructureNode(image)
+    for name in ("cartesianX", "cartesianY", "cartesianZ", "timeStamp"):
+        proto.set(name, libe57.FloatNode(image, 0.0, libe57.E57_DOUBLE))
+    proto.set("isTimeStampInvalid", libe57.IntegerNode(image, 0, 0, 1))
+    points = libe57.CompressedVectorNode(image, proto, libe57.VectorNode(image, True))
+    scan.set("points", points)
+    e.data3d.append(scan)
+    fields = ["cartesianX", "cartesianY", "cartesianZ", "timeStamp", "isTimeStampInvalid"]
+    arrays = {f: np.ascontiguousarray(v, np.float64) for f, v in zip(fields, [*xyz.T, stamps, flags])}
+    buffers = libe57.VectorSourceDestBuffer()
+    for f in fields:
+        buffers.append(libe57.SourceDestBuffer(image, f, arrays[f], 3, True, True))
+    writer = points.writer(buffers)
+    writer.write(3)
+    writer.close()
+    e.close()
+    (chunk,) = read_chunks(path)
+    np.testing.assert_array_equal(chunk.attributes["timestamp"], [10.5, np.nan, 12.25])
+    np.testing.assert_array_equal(chunk.xyz, xyz)
+    cloud = gp.open(path)  # (NaN is no invalid point: all 3 kept)
+    assert cloud.n_points == 3
+    np.testing.assert_array_equal(np.asarray(cloud.attributes["timestamp"]), [10.5, np.nan, 12.25])

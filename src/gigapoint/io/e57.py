@@ -9,8 +9,9 @@ builders skip such points and say how many, as of any file's invalid points.
 
 Colours are scaled from the scan's ``colorLimits`` to 8 bits, intensity from ``intensityLimits``
 to 0..65535 (LAS's range, uint16); ``rowIndex``, ``columnIndex`` and ``timeStamp`` become the
-attributes row_index, column_index and timestamp. Scans that differ in their fields keep the
-attributes all of them have (the others are said, once). The header (point count, bounds: each
+attributes row_index, column_index and timestamp (float64; NaN where the point's
+``isTimeStampInvalid`` is not 0: its time stamp means nothing; the point is kept). Scans that
+differ in their fields keep the attributes all of them have (the others are said, once). The header (point count, bounds: each
 scan's ``cartesianBounds``, local to the scan, its 8 corners moved by its pose) comes from the
 file's XML section, without reading points. pye57 is an optional dependency
 (``pip install 'gigapoint[e57]'``).
@@ -255,6 +256,7 @@ class E57Reader(Reader):
         invalid = "sphericalInvalidState" if scan.spherical else "cartesianInvalidState"
         colors = list(COLORS) if scan.has_color else []
         flags = [f for f in ("isColorInvalid", "isIntensityInvalid") if f in scan.fields]
+        flags += ["isTimeStampInvalid"] if "timeStamp" in kept and "isTimeStampInvalid" in scan.fields else []
         fields = [*coords, *colors, *kept, *(f for f in (invalid, *flags) if f in scan.fields)]
         # every field read as float64 (whole up to 2^53): pye57 takes numpy's int64 ('l') as a narrower
         # type, and the reader left most of such a buffer unwritten (random invalid states)
@@ -292,6 +294,8 @@ class E57Reader(Reader):
                             values[b["isIntensityInvalid"] != 0] = 0
                     else:  # (a copy: the buffers are filled again)
                         values = b[f].astype(np.int32) if f in ("rowIndex", "columnIndex") else b[f].copy()
+                        if f == "timeStamp" and "isTimeStampInvalid" in b:  # (it kept the meaningless value written)
+                            values[b["isTimeStampInvalid"] != 0] = np.nan
                     attributes[ATTRIBUTES[f]] = values
                 yield PointChunk(xyz, rgba, attributes)
         finally:
