@@ -5,8 +5,11 @@ from __future__ import annotations
 
 import json
 import math
+import sys
+import types
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import gigapoint as gp
@@ -96,7 +99,8 @@ def test_metres_of_real_ept_and_geographic_crss_in_degrees():
 
 
 @pytest.mark.parametrize("crs", [None, "", "EPSG:2992", "+proj=geocent +R=1000 +units=m +no_defs", 'PROJCS["cut off', "LOCAL_CS[]"])
-def test_units_unknown(crs):
+def test_units_unknown(crs, monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyproj", None)  # (an import of it raises ImportError: an EPSG code alone says nothing)
     assert crs_units(crs) == UNKNOWN
     assert crs_units(crs, {1024: 1, 3072: 32767, 3076: 9036}) == UNKNOWN  # a unit code not known here
 
@@ -109,3 +113,86 @@ def test_measured_lengths_in_the_crs_units():
     assert math.isclose(s["total"]["vertical"], 32.80833333, rel_tol=1e-9)  # heights stay in their own unit
     s = M.summary([[-123.0, 45.0, 10.0], [-123.001, 45.0, 12.0]], crs_units(WGS84_3D))
     assert s["segments"] == [{"length": None, "horizontal": None, "vertical": 2.0}]  # degrees are no length
+
+
+def write_geokeys_only(path: Path, code: int) -> Path:
+    """A LAS 1.2 file naming its CRS by GeoTIFF keys alone: GTModelTypeGeoKey 1 (projected),
+    ProjectedCSTypeGeoKey ``code``, no ProjLinearUnitsGeoKey (as many LAS 1.2 files do)."""
+    laspy = pytest.importorskip("laspy")
+    from laspy.vlrs.known import GeoKeyDirectoryVlr, GeoKeyEntryStruct
+
+    header = laspy.LasHeader(point_format=0, version="1.2")
+    vlr = GeoKeyDirectoryVlr()
+    vlr.geo_keys_header.number_of_keys = 2
+    vlr.geo_keys = []
+    for key_id, value in ((1024, 1), (3072, code)):
+        key = GeoKeyEntryStruct()
+        key.id, key.tiff_tag_location, key.count, key.value_offset = key_id, 0, 1, value
+        vlr.geo_keys.append(key)
+    header.vlrs.append(vlr)
+    las = laspy.LasData(header)
+    las.x = las.y = las.z = np.arange(5.0)
+    las.write(str(path))
+    return path
+
+
+class FakeAxis:
+    def __init__(self, direction: str, unit_name: str, factor: float):
+        self.direction, self.unit_name, self.unit_conversion_factor = direction, unit_name, factor
+
+
+#: what pyproj.CRS.from_epsg(code).axis_info says of these codes (pyproj 3.7.2)
+FAKE_EPSG = {
+    2994: (False, [FakeAxis("east", "foot", 0.3048), FakeAxis("north", "foot", 0.3048)]),  # NAD83(HARN) / Oregon GIC Lambert (ft)
+    26910: (False, [FakeAxis("east", "metre", 1.0), FakeAxis("north", "metre", 1.0)]),  # NAD83 / UTM zone 10N
+    4979: (True, [FakeAxis("north", "degree", 0.017453292519943295), FakeAxis("east", "degree", 0.017453292519943295), FakeAxis("up", "metre", 1.0)]),
+    4978: (False, [FakeAxis("geocentricX", "metre", 1.0), FakeAxis("geocentricY", "metre", 1.0), FakeAxis("geocentricZ", "metre", 1.0)]),
+}
+
+
+@pytest.fixture
+def fake_pyproj(monkeypatch):
+    """A pyproj module of the few codes above (another code: its CRSError); the codes looked up."""
+    asked = []
+
+    def from_epsg(code):
+        asked.append(code)
+        if code not in FAKE_EPSG:
+            raise RuntimeError(f"crs not found: EPSG:{code}")
+        geographic, axes = FAKE_EPSG[code]
+        return types.SimpleNamespace(is_geographic=geographic, axis_info=axes)
+
+    module = types.ModuleType("pyproj")
+    module.CRS = types.SimpleNamespace(from_epsg=from_epsg)
+    monkeypatch.setitem(sys.modules, "pyproj", module)
+    return asked
+
+
+def test_an_epsg_code_without_unit_keys_has_its_units_from_pyproj(tmp_path, fake_pyproj):
+    """A LAS 1.2 file naming its CRS by an EPSG code's GeoTIFF keys alone (no ProjLinearUnitsGeoKey)
+    was measured in "unknown" units: pyproj, where installed, says the code's axes' units."""
+    feet = write_geokeys_only(tmp_path / "oregon.las", 2994)
+    assert files_units([feet]) == {"horizontal": FOOT, "vertical": FOOT, "vertical_assumed": True}
+    metres = write_geokeys_only(tmp_path / "utm.las", 26910)
+    assert files_units([metres]) == {"horizontal": METRE, "vertical": METRE, "vertical_assumed": True}
+    assert crs_units(None, {1024: 1, 3072: 26910}) == crs_units("epsg:26910") == files_units([metres])
+    degree = {"name": "degree", "symbol": "°", "metres": None}
+    assert crs_units("EPSG:4979") == {"horizontal": degree, "vertical": METRE, "vertical_assumed": False}
+    assert crs_units("EPSG:4978") == crs_units("EPSG:1234") == UNKNOWN  # geocentric: no east/north axes; a code pyproj knows not
+    assert crs_units(None, {1024: 1, 3072: 26910, 3076: 9002})["horizontal"] == FOOT  # a unit key said is taken as said
+    assert fake_pyproj == [2994, 26910, 26910, 26910, 26910, 4979, 4978, 1234]  # (none where a unit key says it)
+
+
+def test_an_epsg_code_without_pyproj_is_in_unknown_units(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyproj", None)  # (an import of it raises ImportError)
+    assert files_units([write_geokeys_only(tmp_path / "oregon.las", 2994)]) == UNKNOWN
+    assert crs_units("EPSG:26910") == UNKNOWN
+
+
+def test_real_pyprojs_units_of_epsg_codes():
+    pytest.importorskip("pyproj")
+    assert crs_units(None, {1024: 1, 3072: 2994}) == {"horizontal": FOOT, "vertical": FOOT, "vertical_assumed": True}
+    assert crs_units("EPSG:26910") == {"horizontal": METRE, "vertical": METRE, "vertical_assumed": True}
+    us_foot = {"name": "US survey foot", "symbol": "US ft", "metres": pytest.approx(US_FOOT, rel=1e-12)}
+    assert crs_units("EPSG:2927")["horizontal"] == us_foot
+    assert crs_units("EPSG:4979")["vertical"] == METRE and crs_units("EPSG:4978") == UNKNOWN

@@ -371,9 +371,11 @@ def crs_units(crs: str | None, geokeys: dict[int, int] | None = None) -> dict:
     "vertical": U, "vertical_assumed": bool}, each U {name, symbol, metres} or None (unknown).
 
     From a WKT (``crs``: the projected CRS's axes' UNIT, a compound CRS's vertical part's), else
-    from LAS GeoTIFF keys (``geokeys``: ProjLinearUnitsGeoKey 3076, VerticalUnitsGeoKey 4099); an
-    'EPSG:n' alone says none (no pyproj to look it up). A geographic CRS's horizontal unit is an
-    angle (metres None: its x and y are no lengths). Where a CRS names no vertical unit, heights
+    from LAS GeoTIFF keys (``geokeys``: ProjLinearUnitsGeoKey 3076, VerticalUnitsGeoKey 4099), else
+    from an EPSG code ('EPSG:n', or the keys' ProjectedCSTypeGeoKey 3072 / GeographicTypeGeoKey 2048
+    without a unit key, as LAS 1.2 files often name theirs) through pyproj's axes where pyproj is
+    installed (``_epsg_units``; without it such a code says none). A geographic CRS's horizontal
+    unit is an angle (metres None: its x and y are no lengths). Where a CRS names no vertical unit, heights
     are taken to be in the horizontal length unit (LAS files are; ``vertical_assumed`` says so).
     """
     tree = _wkt_tree(crs or "")
@@ -385,8 +387,38 @@ def crs_units(crs: str | None, geokeys: dict[int, int] | None = None) -> dict:
         horizontal = _wkt_unit(["UNIT", *EPSG_LENGTH_UNITS[keys[3076]]], angle=False)
     if vertical is None and keys.get(4099) in EPSG_LENGTH_UNITS:
         vertical = _wkt_unit(["UNIT", *EPSG_LENGTH_UNITS[keys[4099]]], angle=False)
+    code = _epsg_code(crs, keys) if horizontal is None else None
+    if code is not None:  # ("unknown" units in the viewer for EPSG:2994's feet, EPSG:26910's metres)
+        horizontal, up = _epsg_units(code)
+        vertical = vertical or up
     assumed = vertical is None and horizontal is not None and horizontal["metres"] is not None
     return {"horizontal": horizontal, "vertical": horizontal if assumed else vertical, "vertical_assumed": assumed}
+
+
+def _epsg_code(crs: str | None, keys: dict[int, int]) -> int | None:
+    """The EPSG code of an 'EPSG:n' ``crs`` (LasHeader.crs of GeoTIFF keys), else of the keys'
+    projected or geographic CRS (not 32767: user-defined); None without one."""
+    named = re.fullmatch(r"\s*EPSG:(\d+)\s*", crs or "", re.IGNORECASE)
+    if named:
+        return int(named.group(1))
+    return next((keys[k] for k in (3072, 2048) if 0 < keys.get(k, 0) < 32767), None)
+
+
+def _epsg_units(code: int) -> tuple[dict | None, dict | None]:
+    """(horizontal, vertical) units of EPSG:``code`` by pyproj's axes (``axis_info``: east/north
+    and up ones; a geographic CRS's across in angles; a geocentric one's none), (None, None) where
+    pyproj is not installed (an optional dependency) or knows no such code."""
+    try:
+        import pyproj
+
+        crs = pyproj.CRS.from_epsg(code)
+        axes, geographic = list(crs.axis_info), bool(crs.is_geographic)
+    except Exception:  # noqa: BLE001 - pyproj missing or the code unknown to it: units unknown
+        return None, None
+    across = [a for a in axes if str(a.direction).lower() in ("east", "north", "west", "south")]
+    up = [a for a in axes if str(a.direction).lower() == "up"]
+    horizontal = _wkt_unit(["UNIT", across[0].unit_name, across[0].unit_conversion_factor], angle=geographic) if across else None
+    return horizontal, (_wkt_unit(["UNIT", up[0].unit_name, up[0].unit_conversion_factor], angle=False) if up else None)
 
 
 def _crs_header(files):
