@@ -186,3 +186,9 @@ def test_the_progress_bar_counts_every_point_read(cli, autzen_path, monkeypatch)
 def test_class_names_above_the_standard_ones():
     assert [class_name(c) for c in (0, 7, 18, 19, 63, 64, 255)] == [
         "never classified", "low point (noise)", "high noise", "reserved", "reserved", "user defined", "user defined"]  # fmt: skip
+
+
+def test_point_stats_takes_a_list_of_paths_as_gp_open_does(autzen_path):
+    """point_stats([a]) was pathlib's TypeError ("expected str, bytes or os.PathLike object, not list")."""
+    assert point_stats([autzen_path]) == point_stats(autzen_path)
+    assert point_stats((autzen_path,))["point_count"] == 110_000

@@ -725,7 +725,10 @@ def point_stats(*paths, recursive: bool = False, chunk_size: int = DEFAULT_CHUNK
     """What the points of files, folders or glob patterns (``expand_paths``) hold, summed up:
     their true bounds (and the headers'), each attribute's min, max and mean, the
     classification histogram, returns, flight lines, gps_time, colour ranges, invalid points
-    (io/stats.py: ``PointStats.result``). Every point is read once, a chunk at a time."""
+    (io/stats.py: ``PointStats.result``). Every point is read once, a chunk at a time. Paths may
+    also come as one list or tuple, as gp.open takes them."""
+    if len(paths) == 1 and isinstance(paths[0], (list, tuple)):  # (a list was pathlib's TypeError)
+        paths = tuple(paths[0])
     files = expand_paths(paths, recursive=recursive)
     total = PointStats()
     for f in files:
