@@ -10,6 +10,7 @@ from . import backends as _backends  # noqa: F401  (registers the cpu and wgpu b
 from .core import PointChunk, PointCloud, from_arrays
 from .errors import GigapointError, GigapointWarning
 from .io import registry as _registry
+from .io._base import headers_once as _headers_once
 from .io.demo import demo_arrays
 from .render import Camera, Frame, RenderSettings, RenderStats, render, render_frame
 
@@ -103,6 +104,7 @@ def _flat_paths(paths) -> tuple:
     return flat
 
 
+@_headers_once()  # one operation: its steps (patterns, folders, headers) each read once, the loader's thread too
 def open(*paths, progressive: bool = False, **options):
     """Read one or more files or directories (LAS/LAZ/PLY/E57/XYZ/XYZRGB/TXT/CSV/PTS/ASC/NPY/NPZ) into one PointCloud.
 

@@ -356,3 +356,24 @@ def test_info_of_a_glob_pattern_of_many_tiles_sums_them_up_as_a_folders(cli, tmp
     rc, out, _ = cli("info", "--stats", "--json", str(tmp_path / "tiles" / "tile_00_0[12].laz"))  # --stats: summed, as any folder's
     [summed] = map(json.loads, out.splitlines())
     assert (rc, summed["path"], summed["files"], summed["point_count"]) == (0, str(tmp_path / "tiles" / "tile_00_0[12].laz"), 2, 100)
+
+
+def test_a_glob_pattern_is_matched_once_an_operation(tmp_path, monkeypatch):
+    """gp.open's steps and convert's expand the paths again each; a pattern was globbed by each
+    (a "**" walks a whole tree): once an operation now, as a folder's listing is."""
+    import glob as glob_module
+
+    write_tiles(tmp_path / "tiles", 12, points=20, suffix=".las")
+    calls, real = [], glob_module.glob
+
+    def counting(pattern, **kwargs):
+        calls.append(pattern)
+        return real(pattern, **kwargs)
+
+    monkeypatch.setattr(glob_module, "glob", counting)
+    pattern = str(tmp_path / "tiles" / "*.las")
+    assert gp.open(pattern, progressive=True).wait(timeout=60)
+    assert calls == [pattern]
+    calls.clear()
+    assert gp.convert(pattern, tmp_path / "oct").points == 240
+    assert calls == [pattern]

@@ -45,21 +45,6 @@ def write_prj(wkt: str, path: Path) -> None:
     atomic_bytes(path, wkt.encode())
 
 
-def cloud_crs(cloud) -> str | None:
-    """The CRS a cloud's points are in, as its readers give it (WKT, or 'EPSG:n' of LAS GeoTIFF
-    keys): an octree's metadata names it (COPC, EPT, converted), a cloud read from LAS/LAZ files
-    their headers; None for any other (arrays, other formats, files that name none)."""
-    from ..core.renderable import PointSource
-    from ..io import files_crs
-    from ..lod.store import OctreeCloud
-
-    if isinstance(cloud, OctreeCloud):
-        return cloud.meta.get("crs") or None
-    if isinstance(cloud, PointSource):  # a plain cloud, a progressive octree: the files it was read from
-        return files_crs(cloud.source_files)
-    return None
-
-
 def no_prj_reason(crs: str | None) -> str:
     """Why no .prj is written: the inputs name no CRS, or only an EPSG code whose WKT needs pyproj."""
     if crs is None:

@@ -31,7 +31,7 @@ from .cloud_opts import (
     open_files,
     subfolders_read,
 )
-from .georef import cloud_crs, georef_paths, no_prj_reason, world_file_path, write_prj, write_world_file
+from .georef import georef_paths, no_prj_reason, world_file_path, write_prj, write_world_file
 from .info_cmd import memory_line
 from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_heights, save_image
 from .progress import err_console, progress_bar, status
@@ -328,6 +328,8 @@ def render(
         writes.append((index_out, lambda p: save_array(frame.index, p)))
     notes = []
     if gsd is not None:
+        from ..lod.reader import cloud_crs
+
         crs = cloud_crs(cloud)
         wkt = crs_wkt(crs)
         writes += [(world_file_path(image), lambda p: write_world_file(cam, p)) for image in filter(None, (output, depth_out))]

@@ -31,7 +31,7 @@ from ._base import DEFAULT_CHUNK_SIZE, Reader, check_chunk_size, check_file, fai
 from .demo import demo_arrays, demo_chunks
 from .filters import PointFilter, filtered
 from .http import shown_url
-from .las import LasReader, geokeys, read_las_header, with_scan_angle
+from .las import LasReader, first_crs_header, geokeys, read_las_header, with_scan_angle
 from .registry import in_folder, is_dataset_folder, is_supported_name, reader_for, readers, register, supported_suffixes
 from .stats import PointStats, file_stats
 
@@ -84,7 +84,8 @@ def pattern_matches(p) -> list[Path] | None:
     text = os.fspath(p) if isinstance(p, (str, os.PathLike)) else None
     if text is None or not GLOB_CHARS.search(text) or URL_LIKE.match(text) or Path(os.path.expanduser(text)).exists():
         return None
-    found = glob.glob(os.path.expanduser(text), recursive=True)
+    # once an operation (headers_once), as a folder's listing: its steps expand the paths again, and "**" walks a tree
+    found = read_once("pattern", text, lambda: glob.glob(os.path.expanduser(text), recursive=True))
     if not found:
         raise InputError(f"{text}: matches no file")
     return sorted((Path(f) for f in found), key=lambda f: f.parts)
@@ -421,31 +422,17 @@ def _epsg_units(code: int) -> tuple[dict | None, dict | None]:
     return horizontal, (_wkt_unit(["UNIT", up[0].unit_name, up[0].unit_conversion_factor], angle=False) if up else None)
 
 
-def _crs_header(files):
-    """The header of the first LAS/LAZ file of ``files`` that names a CRS (warn_mixed_crs warns
-    where files differ), None without one."""
-    for f in files:
-        try:
-            if isinstance(reader_for(f), LasReader):
-                hdr = read_las_header(f, salvage=True)
-                if hdr.crs():
-                    return hdr
-        except (GigapointError, OSError):  # a file gone or damaged since it was read: no word from it
-            continue
-    return None
-
-
 def files_units(files) -> dict:
     """``crs_units`` of the first LAS/LAZ file of ``files`` that names a CRS (its WKT, else its
     GeoTIFF keys); all unknown without one."""
-    hdr = _crs_header(files)
+    hdr = first_crs_header(files)
     return crs_units(hdr.crs(), geokeys(hdr.vlrs)) if hdr else crs_units(None)
 
 
 def files_crs(files) -> str | None:
     """The CRS of the first LAS/LAZ file of ``files`` that names one: its WKT, else 'EPSG:n' of
     its GeoTIFF keys (LasHeader.crs); None without one."""
-    hdr = _crs_header(files)
+    hdr = first_crs_header(files)
     return hdr.crs() if hdr else None
 
 

@@ -23,7 +23,7 @@ from ..core import pages
 from ..core.chunk import ColorScaler, PointChunk, safe_attribute_name
 from ..core.cloud import MAX_ABS_COORDINATE, NUMPY_MAX
 from ..core.threads import prepare_kernel_calls
-from ..errors import EmptyCloudError, GigapointWarning, InputError, warn
+from ..errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, warn
 from . import laz_process
 from ._base import DEFAULT_CHUNK_SIZE, SALVAGE_HINT, Reader, check_chunk_size, check_file, fail, one_line, read_once
 
@@ -637,6 +637,20 @@ def vlrs_crs(vlrs) -> str | None:
     for key_id in (3072, 2048):  # ProjectedCSTypeGeoKey, GeographicTypeGeoKey
         if 0 < keys.get(key_id, 0) < 32767:  # (32767: user-defined)
             return f"EPSG:{keys[key_id]}"
+    return None
+
+
+def first_crs_header(files) -> LasHeader | None:
+    """The header of the first LAS/LAZ file of ``files`` that names a CRS (warn_mixed_crs warns
+    where files differ), None without one; a file of another format, or gone or damaged since it
+    was read, says nothing (its header is not a LAS header)."""
+    for f in files:
+        try:
+            hdr = read_las_header(f, salvage=True)
+        except (GigapointError, OSError):
+            continue
+        if hdr.crs():
+            return hdr
     return None
 
 

@@ -19,7 +19,7 @@ from ..atomic import atomic_write, write_failure
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, set_cloud_writer
 from ..errors import GigapointWarning, InputError, first_line, warn
-from .las import GEOKEYS_RECORD, PROJECTION_USER_ID, WKT_RECORD, LasReader, read_las_header, wkt_of
+from .las import GEOKEYS_RECORD, PROJECTION_USER_ID, WKT_RECORD, LasReader, first_crs_header, read_las_header, wkt_of
 from .las_fields import LAS_FIELD_OF, choose_point_format, extra_attributes, field_attributes, las_field_values, las_grid
 from .registry import reader_for
 
@@ -233,15 +233,13 @@ def source_crs_records(files) -> list[tuple[bytes, int, bytes]]:
     file: its WKT (a VLR's, or an EVLR's), else its GeoTIFF key records as they are (LAS 1.4 wants
     WKT with point format 7; GeoTIFF keys are read by laspy, PDAL and gigapoint all the same, and
     making WKT of them needs pyproj). Empty where none names one."""
-    for p in _las_files(files):
-        hdr = read_las_header(p)
-        wkt = wkt_of(hdr.vlrs + hdr.evlrs)
-        if wkt:
-            return [(PROJECTION_USER_ID, WKT_RECORD, wkt.encode() + b"\0")]
-        geotiff = [(u, r, d) for u, r, d in hdr.vlrs if u == PROJECTION_USER_ID and r in _GEOTIFF_RECORDS]
-        if geotiff:
-            return geotiff
-    return []
+    hdr = first_crs_header(files)
+    if hdr is None:
+        return []
+    wkt = wkt_of(hdr.vlrs + hdr.evlrs)
+    if wkt:
+        return [(PROJECTION_USER_ID, WKT_RECORD, wkt.encode() + b"\0")]
+    return [(u, r, d) for u, r, d in hdr.vlrs if u == PROJECTION_USER_ID and r in _GEOTIFF_RECORDS]
 
 
 def _las_files(files) -> list[Path]:

@@ -237,3 +237,33 @@ def _conversion_details(s: dict, hint: str) -> dict:
     if s.get("running") is not None:
         lines["state"] = "a conversion is writing into it" if s["running"] else f"stopped: {hint}"
     return lines
+
+
+def _crs_source(cloud) -> tuple[str | None, tuple]:
+    """(an octree's CRS, from its metadata: COPC, EPT, converted; the files a plain cloud or a
+    progressive octree was read from, whose headers name theirs): where a cloud's CRS is told."""
+    from ..core.renderable import PointSource
+
+    if isinstance(cloud, OctreeCloud):
+        return cloud.meta.get("crs") or None, ()
+    if isinstance(cloud, PointSource):
+        return None, tuple(cloud.source_files)
+    return None, ()
+
+
+def cloud_crs(cloud) -> str | None:
+    """The CRS a cloud's points are in, as its readers give it (WKT, or 'EPSG:n' of LAS GeoTIFF
+    keys); None for any other (arrays, a live stream, other formats, files that name none)."""
+    from ..io import files_crs
+
+    crs, files = _crs_source(cloud)
+    return files_crs(files) if files else crs
+
+
+def cloud_units(cloud) -> dict:
+    """io.crs_units of the cloud's CRS (a file's GeoTIFF unit keys too): what lengths measured in
+    its coordinates are in; unknown for any other."""
+    from ..io import crs_units, files_units
+
+    crs, files = _crs_source(cloud)
+    return files_units(files) if files else crs_units(crs)

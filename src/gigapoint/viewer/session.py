@@ -21,7 +21,7 @@ import numpy as np
 
 from ..core.layout import EMPTY_PIXEL
 from ..errors import GigapointError, warn, warnings_kept
-from ..io import crs_units, files_units
+from ..lod.reader import cloud_units
 from ..render.camera import sample_points
 from ..render.frame import Frame, encode_image
 from ..render.renderer import render_frame
@@ -59,19 +59,6 @@ def cloud_bytes(cloud) -> int:
     from ..core import PointCloud
 
     return cloud.nbytes if isinstance(cloud, PointCloud) else 0
-
-
-def cloud_units(cloud) -> dict:
-    """io.crs_units of the cloud's CRS: an octree's metadata names it (COPC, EPT, converted), a
-    cloud read from LAS/LAZ files their headers; unknown for any other (arrays, a live stream)."""
-    from ..core.renderable import PointSource
-    from ..lod.store import OctreeCloud
-
-    if isinstance(cloud, OctreeCloud):
-        return crs_units(cloud.meta.get("crs"))
-    if isinstance(cloud, PointSource):  # a plain cloud, a progressive octree: the files it was read from
-        return files_units(cloud.source_files)
-    return crs_units(None)
 
 
 def view_frame(cloud, camera, settings) -> Frame:
