@@ -1,0 +1,112 @@
+"""Gap filling of top-down rasters (``Camera.top_down``): a surface model's NaN pixels and an
+orthophoto's empty ones, as a post-pass on the finished image (the raster kernels never see it).
+
+Heights are interpolated linearly (a TIN, as surveyors fill a DTM): scipy's Delaunay
+triangulation of the drawn pixels that border an empty one (the interior of a drawn area adds
+nothing to a hole but triangles), then each empty pixel takes the plane of the triangle it lies
+in. A plane is kept exactly, a value never leaves the range of its triangle's corners, and
+nothing outside the drawn pixels' convex hull (the data's footprint) is filled: linear
+interpolation does not extrapolate. ``max_distance`` bounds it further to pixels within that
+many pixels of a drawn one (gdal_fillnodata's -md): speckle closes, a building's hole in a
+ground model keeps its middle. (Nearest value + smoothing was the other choice: it steps at
+the Voronoi edges in the middle of a hole and does not keep a slope.)
+
+Colours are not interpolated across a hole (that would invent imagery): ``fill_colors`` gives an
+empty pixel within ``max_distance`` of a drawn one, inside the footprint, the nearest drawn colour.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import GigapointError, check_whole
+
+
+def require_scipy(what: str = "filling empty pixels") -> None:
+    """A one-line error naming the extra to install where scipy is missing."""
+    try:
+        import scipy.ndimage
+        import scipy.spatial  # noqa: F401
+    except ImportError:
+        raise GigapointError(f"{what} needs scipy (pip install 'gigapoint[quality]')") from None
+
+
+def check_max_distance(where: str, max_distance) -> int | None:
+    """``max_distance`` (whole pixels, >= 1) or None (every hole inside the footprint); anything
+    else a one-line error."""
+    return None if max_distance is None else check_whole(where, "max_distance", max_distance, 1, unit=" pixels")
+
+
+def _pixels(mask: np.ndarray) -> np.ndarray:
+    """(row, column) of ``mask``'s true pixels as float64 points."""
+    return np.argwhere(mask).astype(np.float64)
+
+
+def _to_fill(valid: np.ndarray, max_distance: int | None):
+    """(empty pixels to fill (K, 2) rows/columns, the Delaunay triangulation of the drawn pixels
+    bordering empty ones, those pixels' mask): empty pixels inside the drawn pixels' convex hull,
+    within ``max_distance`` of a drawn one if given. None where nothing can be filled."""
+    from scipy import ndimage
+    from scipy.spatial import Delaunay, QhullError
+
+    empty = ~valid
+    if not empty.any() or valid.sum() < 3:
+        return None
+    # a drawn pixel with an empty neighbour, or on the image's edge: the hull's corners are among them
+    border = valid & ndimage.binary_dilation(np.pad(empty, 1, constant_values=True), np.ones((3, 3), bool))[1:-1, 1:-1]
+    candidates = empty
+    if max_distance is not None:
+        candidates = empty & (ndimage.distance_transform_edt(empty) <= max_distance)
+    targets = _pixels(candidates)
+    try:
+        tri = Delaunay(_pixels(border))
+    except QhullError:  # the drawn pixels on one line: a footprint of no area
+        return None
+    inside = tri.find_simplex(targets) >= 0
+    return targets[inside].astype(np.intp), tri, border
+
+
+def fill_heights(heights: np.ndarray, max_distance: int | None = None) -> np.ndarray:
+    """A copy of the (H, W) ``heights`` (a DSM/DTM: ``Camera.heights``, NaN where no point) whose
+    NaN pixels inside the data's footprint (the convex hull of the non-NaN pixels) are linearly
+    interpolated from the surrounding ones; ``max_distance``: only those within that many pixels
+    of a non-NaN pixel. Pixels outside the footprint stay NaN. Needs scipy."""
+    require_scipy("fill_heights")
+    from scipy.interpolate import LinearNDInterpolator
+
+    max_distance = check_max_distance("fill_heights", max_distance)
+    heights = np.asarray(heights)
+    if heights.ndim != 2:
+        raise GigapointError(f"fill_heights takes an (H, W) array of heights, got shape {heights.shape}")
+    filled = heights.copy()
+    found = _to_fill(~np.isnan(heights), max_distance)
+    if found is None:
+        return filled
+    targets, tri, border = found
+    values = LinearNDInterpolator(tri, heights[border].astype(np.float64))(targets.astype(np.float64))
+    filled[targets[:, 0], targets[:, 1]] = values
+    return filled
+
+
+def fill_colors(image: np.ndarray, empty: np.ndarray, max_distance: int) -> np.ndarray:
+    """A copy of the (H, W, C) ``image`` whose ``empty`` pixels (``Frame.index < 0``) within
+    ``max_distance`` pixels of a drawn one, inside the drawn pixels' convex hull, take the nearest
+    drawn pixel's colour. Needs scipy."""
+    require_scipy("fill_colors")
+    from scipy import ndimage
+
+    max_distance = check_max_distance("fill_colors", max_distance)
+    if max_distance is None:  # a colour smeared across a whole building would be invented imagery
+        raise GigapointError("fill_colors needs a max_distance in pixels: colours are filled only near drawn pixels")
+    image, empty = np.asarray(image), np.asarray(empty, bool)
+    if empty.shape != image.shape[:2]:
+        raise GigapointError(f"fill_colors: empty's shape {empty.shape} is not the image's {image.shape[:2]}")
+    filled = image.copy()
+    found = _to_fill(~empty, max_distance)
+    if found is None:
+        return filled
+    targets = found[0]
+    _, (near_rows, near_cols) = ndimage.distance_transform_edt(empty, return_indices=True)
+    rows, cols = targets[:, 0], targets[:, 1]
+    filled[rows, cols] = image[near_rows[rows, cols], near_cols[rows, cols]]
+    return filled
