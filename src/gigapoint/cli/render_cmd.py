@@ -16,6 +16,7 @@ from ..errors import CameraError, GigapointError
 from ..io import crs_wkt
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
+from ..render.raster_fill import fill_colors, fill_heights, require_scipy
 from . import compiling
 from .app import app
 from .cloud_opts import (
@@ -199,6 +200,33 @@ def print_stats(stats, console=None, compiled_s: float = 0.0) -> None:
     )
 
 
+def check_fill_nodata(text: str | None, gsd, depth_out) -> int | None:
+    """--fill-nodata's pixels (None: 'all', every hole inside the footprint), checked before
+    anything is read: a one-line error for a value that is neither, for a use without --gsd, and
+    for 'all' without --depth-out (the orthophoto's colours are filled only within N pixels)."""
+    if text is None:
+        return None
+    if gsd is None:
+        raise GigapointError("--fill-nodata: an option of --gsd (it fills the orthophoto and the surface model of a top-down render)")
+    distance = None if text.strip().lower() == "all" else int(text) if text.strip().isdigit() else 0
+    if distance == 0:
+        raise GigapointError(f"--fill-nodata must be 'all' or a whole number of pixels >= 1, got {text!r}")
+    if distance is None and depth_out is None:
+        raise GigapointError("--fill-nodata all fills the surface model: give --depth-out too (the orthophoto is filled only within N pixels: --fill-nodata N)")
+    require_scipy("--fill-nodata")
+    return distance
+
+
+def fill_map(frame, image, heights, distance: int | None):
+    """--fill-nodata: the orthophoto (only within ``distance``: colours are not invented across a
+    hole) and the heights (None: no --depth-out) with their empty pixels filled (render/raster_fill)."""
+    if distance is not None:
+        image = fill_colors(image, frame.index < 0, distance)
+    if heights is not None:
+        heights = fill_heights(heights, distance)
+    return image, heights
+
+
 @app.command()
 @with_settings_options(RenderSettings)
 def render(
@@ -220,6 +248,10 @@ def render(
     gsd: Annotated[
         float | None,
         typer.Option(help="Ground sample distance (cloud units per pixel): an orthophoto straight down, north up, covering the cloud, with a world file (.pgw, .jgw, .tfw, .wld) and a .prj of the cloud's CRS beside it."),
+    ] = None,
+    fill_nodata: Annotated[
+        str | None,
+        typer.Option(help="With --gsd: fill the surface model's NaN pixels by linear interpolation (a TIN), never outside the data's footprint: 'all' every hole inside it, N only pixels within N of data (speckle), which also gives the orthophoto's empty pixels there the nearest colour. Needs scipy."),
     ] = None,
     stats: Annotated[bool, typer.Option("--stats", help="Print render statistics.")] = False,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace existing output files.")] = False,
@@ -271,6 +303,7 @@ def render(
     check_view(view)
     if gsd is not None:
         check_gsd(gsd, view, camera, width, height, projection, settings)
+    fill_distance = check_fill_nodata(fill_nodata, gsd, depth_out)
     projection = projection or "perspective"
     width, height = check_image_size(width, height, fov)  # before reading anything
     check_color_options(settings)
@@ -321,9 +354,12 @@ def render(
     with options_named():
         frame = gp.render_frame(cloud, cam, settings)
     compiled = compiling.compiled_seconds() - compiled
-    writes = [(output, lambda p: save_image(frame.image, p))]
+    image, heights = frame.image, (cam.heights(frame.depth) if gsd is not None and depth_out is not None else None)
+    if fill_nodata is not None:
+        image, heights = fill_map(frame, image, heights, fill_distance)
+    writes = [(output, lambda p: save_image(image, p))]
     if depth_out is not None:  # with --gsd a surface model: the heights, not the camera's depths
-        writes.append((depth_out, (lambda p: save_heights(cam.heights(frame.depth), p)) if gsd is not None else (lambda p: save_array(frame.depth, p))))
+        writes.append((depth_out, (lambda p: save_heights(heights, p)) if gsd is not None else (lambda p: save_array(frame.depth, p))))
     if index_out is not None:
         writes.append((index_out, lambda p: save_array(frame.index, p)))
     notes = []
