@@ -233,3 +233,119 @@ def test_a_failed_side_write_takes_the_image_back(cli, tmp_path, grid_npy, monke
     rc, _, err = cli("render", grid_npy[0], "-o", tmp_path / "o.png", "--gsd", GSD)
     assert rc == 1 and f"{tmp_path / 'o.pgw'}" in err and "No space left on device" in err, err
     assert not list(tmp_path.glob("o.*"))
+
+
+# --- GeoTIFF: a .tif output carries its grid and CRS in its own tags --------------------------
+
+
+@pytest.fixture
+def gdal():
+    """rasterio (GDAL) reading only what a file holds itself: GDAL reads a .tfw beside a plain
+    TIFF too, and that must not stand in for the GeoTIFF's own tags."""
+    rasterio = pytest.importorskip("rasterio")
+    with rasterio.Env(GDAL_GEOREF_SOURCES="INTERNAL"):
+        yield rasterio
+
+
+def world_grid(world_file_path):
+    """The affine transform (GDAL's a, b, c, d, e, f) of a world file's grid: the world file names
+    the centre of pixel (0, 0), the transform its upper-left corner, half a pixel left and up."""
+    a, d, b, e, c, f = read_world_file(world_file_path)
+    return (a, b, c - a / 2 - b / 2, d, e, f - d / 2 - e / 2)
+
+
+def gdal_crs_of(gdal, wkt, tmp_path):
+    """The CRS GDAL reads back from a GeoTIFF it writes itself in ``wkt`` (GDAL renames a datum by
+    its EPSG code: autzen's 'Regional' network is EPSG's 'Reference' one, in any GeoTIFF)."""
+    crs = gdal.crs.CRS.from_wkt(wkt)
+    with gdal.open(tmp_path / "gdal_own.tif", "w", driver="GTiff", width=1, height=1, count=1, dtype="uint8", crs=crs, transform=gdal.transform.from_origin(0, 1, 1, 1)) as ds:
+        ds.write(np.zeros((1, 1, 1), np.uint8))
+    with gdal.open(tmp_path / "gdal_own.tif") as ds:
+        return ds.crs
+
+
+def test_cli_tif_outputs_are_geotiffs_in_the_files_crs(cli, tmp_path, gdal):
+    """autzen (a WKT in US feet that names no EPSG code for its map grid): GDAL places the image
+    and the DSM by their own tags where the world files put them, in the .prj's CRS; the DSM's
+    empty pixels are its nodata, its heights those Pillow reads."""
+    out, dsm = tmp_path / "autzen.tif", tmp_path / "dsm.tiff"
+    rc, stdout, err = cli("render", AUTZEN, "-o", out, "--gsd", 8, "--depth-out", dsm, "--size-mode", "fixed")
+    assert rc == 0, err
+    prj = (tmp_path / "autzen.prj").read_text()
+    assert prj == read_las_header(AUTZEN).crs() == (tmp_path / "dsm.prj").read_text()  # the .prj and world files as before
+    expected_crs = gdal_crs_of(gdal, prj, tmp_path)
+    for path, world in ((out, "autzen.tfw"), (dsm, "dsm.tfw")):
+        with gdal.open(path) as ds:
+            assert ds.transform[:6] == pytest.approx(world_grid(tmp_path / world), rel=0, abs=1e-6)
+            assert ds.transform[:6] == pytest.approx((8, 0, 636_000, 0, -8, 849_504), rel=0, abs=1e-6)  # corners on multiples of 8 ft
+            assert ds.crs == expected_crs
+            assert ds.crs.linear_units == "foot" and ds.crs.to_proj4() == gdal.crs.CRS.from_wkt(prj).to_proj4()
+            pixels = ds.read()
+    with gdal.open(out) as ds:
+        assert ds.count == 4 and ds.dtypes == ("uint8",) * 4
+        np.testing.assert_array_equal(np.moveaxis(ds.read(), 0, -1), np.asarray(Image.open(out)))  # RGBA as Pillow reads it
+    heights = np.asarray(Image.open(dsm))
+    assert np.isnan(heights).mean() > 0.1  # (autzen_trim is no rectangle)
+    with gdal.open(dsm) as ds:
+        assert ds.count == 1 and ds.dtypes == ("float32",) and np.isnan(ds.nodata)
+        np.testing.assert_array_equal(pixels[0], heights)  # NaN where Pillow's are, the same heights elsewhere
+        assert ds.read_masks(1).astype(bool).tolist() == (~np.isnan(heights)).tolist()  # empty pixels are nodata
+    assert "no .prj" not in stdout and "GeoTIFF keys" not in stdout
+
+
+def test_cli_geotiff_of_an_epsg_only_crs_names_the_code(cli, tmp_path, gdal):
+    """LAS 1.2 GeoTIFF keys naming EPSG:32610 alone (no WKT: no .prj without pyproj): the GeoTIFF
+    names the code and GDAL knows its metres; a PNG is placed by its world file alone, as before."""
+    keys = [(1024, 0, 1, 1), (3072, 0, 1, 32610)]
+    data = struct.pack("<4H", 1, 1, 0, len(keys)) + b"".join(struct.pack("<4H", *k) for k in keys)
+    write_las(tmp_path / "utm.las", laspy.VLR("LASF_Projection", 34735, "GeoKeyDirectoryTag", data))
+    rc, stdout, err = cli("render", tmp_path / "utm.las", "-o", tmp_path / "o.tif", "--gsd", GSD, "--depth-out", tmp_path / "d.tif")
+    assert rc == 0, err
+    for name in ("o", "d"):
+        with gdal.open(tmp_path / f"{name}.tif") as ds:
+            assert ds.crs.to_epsg() == 32610 and ds.crs.linear_units == "metre"
+            assert ds.transform[:6] == pytest.approx(world_grid(tmp_path / f"{name}.tfw"), rel=0, abs=1e-9)
+            assert ds.transform[:6] == pytest.approx((0.5, 0, 637_000, 0, -0.5, 851_012.5), rel=0, abs=1e-9)  # grid_cloud's corner
+    rc, _, err = cli("render", tmp_path / "utm.las", "-o", tmp_path / "o.png", "--gsd", GSD)
+    assert rc == 0, err
+    with gdal.open(tmp_path / "o.png") as ds:
+        assert ds.driver == "PNG" and ds.crs is None  # as before: its world file places it (GDAL's PNG driver reads it)
+        assert ds.transform[:6] == pytest.approx(world_grid(tmp_path / "o.pgw"), rel=0, abs=1e-9)
+
+
+def test_cli_geotiff_of_a_compound_wkt_names_its_horizontal_code(cli, tmp_path, gdal):
+    """A WKT of UTM 10N (EPSG:26910) with NAVD88 heights: the GeoKeys name the map grid's code."""
+    horizontal = gdal.crs.CRS.from_epsg(26910).to_wkt()
+    wkt = f'COMPD_CS["NAD83 / UTM zone 10N + NAVD88 height",{horizontal},VERT_CS["NAVD88 height",VERT_DATUM["North American Vertical Datum 1988",2005],UNIT["metre",1],AUTHORITY["EPSG","5703"]]]'
+    write_las(tmp_path / "c.las", laspy.VLR("LASF_Projection", 2112, "OGC WKT", wkt.encode() + b"\0"))
+    rc, _, err = cli("render", tmp_path / "c.las", "-o", tmp_path / "o.tif", "--gsd", GSD)
+    assert rc == 0, err
+    assert (tmp_path / "o.prj").read_text() == wkt
+    with gdal.open(tmp_path / "o.tif") as ds:
+        assert ds.crs.to_epsg() == 26910 and ds.crs.linear_units == "metre"
+
+
+def test_cli_geotiff_without_a_crs_holds_its_grid(cli, tmp_path, grid_npy, gdal):
+    """No CRS (a .npy): the GeoTIFF DSM has its grid and nodata, no CRS (as no .prj is written)."""
+    rc, out, err = cli("render", grid_npy[0], "-o", tmp_path / "o.png", "--gsd", GSD, "--depth-out", tmp_path / "d.tif")
+    assert rc == 0, err
+    with gdal.open(tmp_path / "d.tif") as ds:
+        assert ds.crs is None and np.isnan(ds.nodata)
+        assert ds.transform[:6] == pytest.approx((0.5, 0, 637_000, 0, -0.5, 851_012.5), rel=0, abs=1e-9)
+    assert "no .prj written: the inputs name no CRS" in out and "GeoTIFF keys" not in out
+
+
+def test_a_wkt_too_long_for_gdals_citation_is_left_to_the_prj(tmp_path):
+    """GDAL reads a user-defined CRS's WKT from its GeoKeys into 2 400 characters: a longer one is
+    not written there (it would be cut), and the command says the .prj has it."""
+    from gigapoint.cli.georef import PCS_CITATION, geo_keys, geotiff_notes
+
+    wkt = read_las_header(AUTZEN).crs()
+    units = {"horizontal": {"name": "foot", "symbol": "ft", "metres": 0.3048}}
+    assert geo_keys(wkt, wkt, units) == {1024: 32767, 1025: 1, PCS_CITATION: f"ESRI PE String = {wkt}", 3076: 9002}
+    long = wkt[:-1] + ',EXTENSION["note","' + "x" * 2400 + '"]]'
+    assert geo_keys(long, long, units) == {}
+    assert geotiff_notes([tmp_path / "o.png", tmp_path / "d.tif", None], long, long, units) == [
+        f"{tmp_path / 'd.tif'}: its GeoTIFF keys name no CRS (its WKT is longer than GDAL reads from them); the .prj beside it has it"
+    ]
+    assert geotiff_notes([tmp_path / "d.tif"], wkt, wkt, units) == []

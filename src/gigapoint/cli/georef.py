@@ -1,11 +1,14 @@
 """What `gigapoint render --gsd` writes beside its image and its surface model so that a GIS
-places them on its map: an ESRI world file (the pixel grid) and a .prj (the cloud's CRS as WKT)."""
+places them on its map: an ESRI world file (the pixel grid) and a .prj (the cloud's CRS as WKT);
+a .tif or .tiff is a GeoTIFF besides, the same grid and CRS in its own tags (``geotiff_tags``)."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from ..atomic import atomic_bytes
+from ..io import EPSG_LENGTH_UNITS, horizontal_epsg
 from ..render import Camera
 
 # ESRI's names: the image suffix's first and last letters and a 'w'; .wld, which GDAL and QGIS
@@ -50,3 +53,85 @@ def no_prj_reason(crs: str | None) -> str:
     if crs is None:
         return "no .prj written: the inputs name no CRS"
     return f"no .prj written: the inputs name their CRS only as {crs}, and its WKT needs pyproj (pip install pyproj)"
+
+
+GEOTIFF_SUFFIXES = {".tif", ".tiff"}
+#: GeoTIFF's TIFF tags and their TIFF types (3 SHORT, 12 DOUBLE, 2 ASCII); GDAL_NODATA is GDAL's
+MODEL_PIXEL_SCALE, MODEL_TIEPOINT, GEO_KEY_DIRECTORY, GEO_DOUBLE_PARAMS, GEO_ASCII_PARAMS, GDAL_NODATA = 33550, 33922, 34735, 34736, 34737, 42113
+TAG_TYPES = {MODEL_PIXEL_SCALE: 12, MODEL_TIEPOINT: 12, GEO_KEY_DIRECTORY: 3, GEO_DOUBLE_PARAMS: 12, GEO_ASCII_PARAMS: 2, GDAL_NODATA: 2}
+#: GeoKeys written (GeoTIFF 1.0 names), and their values
+MODEL_TYPE, RASTER_TYPE, GEOGRAPHIC_TYPE, PROJECTED_CS_TYPE, PCS_CITATION, LINEAR_UNITS, LINEAR_UNIT_SIZE = 1024, 1025, 2048, 3072, 3073, 3076, 3077
+PROJECTED, GEOGRAPHIC, USER_DEFINED, PIXEL_IS_AREA = 1, 2, 32767, 1
+#: GDAL reads a user-defined CRS's WKT from PCSCitationGeoKey after this prefix (ArcGIS's), into a
+#: buffer of 2 400 characters: a longer one would be cut, so it is not written there
+ESRI_PE_PREFIX, GDAL_CITATION_MAX = "ESRI PE String = ", 2399
+
+
+def geotiff_tags(camera: Camera, crs: str | None, wkt: str | None, units: dict, nodata: bool = False):
+    """The GeoTIFF tags (a Pillow ImageFileDirectory_v2, for ``save(tiffinfo=)``) of ``camera``'s
+    image (``Camera.top_down``): its grid, and where ``crs`` is known (lod.reader.cloud_crs,
+    ``units`` its cloud_units) its GeoKeys (``geo_keys``); ``nodata``: NaN marks empty pixels (a DSM)."""
+    from PIL.TiffImagePlugin import ImageFileDirectory_v2
+
+    size, _, _, minus_size, x, y = camera.world_file()
+    # the world file names the centre of pixel (0, 0); the tiepoint, with RasterPixelIsArea, its
+    # upper-left corner: half a pixel left and up
+    values = {MODEL_PIXEL_SCALE: (size, -minus_size, 0.0), MODEL_TIEPOINT: (0.0, 0.0, 0.0, x - size / 2, y - minus_size / 2, 0.0)}
+    keys, doubles, text = geo_keys(crs, wkt, units), [], ""
+    if keys:
+        directory = [1, 1, 0, len(keys)]  # KeyDirectoryVersion, KeyRevision 1.0, then the keys by id
+        for key, value in sorted(keys.items()):
+            if isinstance(value, float):
+                directory += [key, GEO_DOUBLE_PARAMS, 1, len(doubles)]
+                doubles.append(value)
+            elif isinstance(value, str):  # ASCII params end with '|'
+                directory += [key, GEO_ASCII_PARAMS, len(value) + 1, len(text)]
+                text += value + "|"
+            else:
+                directory += [key, 0, 1, value]
+        values[GEO_KEY_DIRECTORY] = tuple(directory)
+    if doubles:
+        values[GEO_DOUBLE_PARAMS] = tuple(doubles)
+    if text:
+        values[GEO_ASCII_PARAMS] = text
+    if nodata:
+        values[GDAL_NODATA] = "nan"
+    tags = ImageFileDirectory_v2()
+    for tag, value in values.items():
+        tags[tag] = value
+        tags.tagtype[tag] = TAG_TYPES[tag]
+    return tags
+
+
+def geo_keys(crs: str | None, wkt: str | None, units: dict) -> dict:
+    """The GeoKeys ({key: value}) naming ``crs``: its horizontal part's EPSG code (io.horizontal_epsg)
+    and linear unit, else its ``wkt`` as an ESRI PE string, which GDAL reads; {} without a CRS, or
+    with a WKT that GDAL would cut."""
+    horizontal = units.get("horizontal")
+    code = horizontal_epsg(crs)
+    if code is not None and horizontal is not None and horizontal["metres"] is None:  # an angle: geographic
+        return {MODEL_TYPE: GEOGRAPHIC, RASTER_TYPE: PIXEL_IS_AREA, GEOGRAPHIC_TYPE: code}
+    if code is not None:  # (an 'EPSG:n' whose units are unknown, pyproj missing, is taken to be projected)
+        return {MODEL_TYPE: PROJECTED, RASTER_TYPE: PIXEL_IS_AREA, PROJECTED_CS_TYPE: code, **linear_unit_keys(horizontal)}
+    if wkt and len(ESRI_PE_PREFIX + wkt) <= GDAL_CITATION_MAX:
+        # GDAL reads the citation only where the model type is user-defined (neither projected nor geographic)
+        return {MODEL_TYPE: USER_DEFINED, RASTER_TYPE: PIXEL_IS_AREA, PCS_CITATION: ESRI_PE_PREFIX + wkt, **linear_unit_keys(horizontal)}
+    return {}
+
+
+def linear_unit_keys(unit: dict | None) -> dict:
+    """ProjLinearUnitsGeoKey of a length unit (io.crs_units'): its EPSG code, else user-defined
+    with its size in metres; {} where it is unknown or an angle."""
+    if unit is None or unit["metres"] is None:
+        return {}
+    code = next((c for c, (_, metres) in EPSG_LENGTH_UNITS.items() if math.isclose(metres, unit["metres"], rel_tol=1e-9)), None)
+    return {LINEAR_UNITS: code} if code else {LINEAR_UNITS: USER_DEFINED, LINEAR_UNIT_SIZE: float(unit["metres"])}
+
+
+def geotiff_notes(images, crs: str | None, wkt: str | None, units: dict) -> list[str]:
+    """Which of ``images`` (None: not written) are GeoTIFFs whose keys name no CRS although the
+    cloud has one (a WKT too long for them; their .prj has it): a line each."""
+    if not crs or geo_keys(crs, wkt, units):
+        return []
+    tiffs = [image for image in filter(None, images) if Path(image).suffix.lower() in GEOTIFF_SUFFIXES]
+    return [f"{image}: its GeoTIFF keys name no CRS (its WKT is longer than GDAL reads from them); the .prj beside it has it" for image in tiffs]

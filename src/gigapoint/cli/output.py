@@ -62,8 +62,9 @@ def check_outputs_apart(outputs, inputs) -> None:
                 raise GigapointError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
 
 
-def save_image(image: np.ndarray, path: Path) -> None:
-    """Write an (H, W, 4) uint8 image; formats without alpha get RGB. Atomic."""
+def save_image(image: np.ndarray, path: Path, tiff_tags=None) -> None:
+    """Write an (H, W, 4) uint8 image; formats without alpha get RGB. Atomic. ``tiff_tags``
+    (a Pillow ImageFileDirectory_v2: georef.geotiff_tags) are added to a .tif's, not to others."""
     from PIL import Image
 
     path = Path(path)
@@ -74,6 +75,8 @@ def save_image(image: np.ndarray, path: Path) -> None:
     # PNG at zlib level 1: the default (6) took 0.3 s of a 1.8 s first render of 1 M points and its
     # files of renders (flat background) were larger, not smaller (docs/benchmarks.md, CLI first render)
     options = {"compress_level": 1} if path.suffix.lower() == ".png" else {}
+    if fmt == "TIFF" and tiff_tags is not None:
+        options["tiffinfo"] = tiff_tags
     atomic_write(path, lambda tmp: img.save(tmp, format=fmt or path.suffix[1:].upper(), **options))
 
 
@@ -82,10 +85,10 @@ def save_array(array: np.ndarray, path: Path) -> None:
     atomic_npy(path, array)
 
 
-def save_heights(heights: np.ndarray, path: Path) -> None:
-    """Write (H, W) heights (NaN: no point) as a float32 TIFF (Pillow's mode 'F'): a surface
-    model a GIS opens with its world file. Atomic."""
+def save_heights(heights: np.ndarray, path: Path, tiff_tags=None) -> None:
+    """Write (H, W) heights (NaN: no point) as a float32 TIFF (Pillow's mode 'F'), with
+    ``tiff_tags`` (a GeoTIFF's: georef.geotiff_tags): a surface model a GIS places. Atomic."""
     from PIL import Image
 
     img = Image.fromarray(np.ascontiguousarray(heights, np.float32))  # float32: mode F
-    atomic_write(path, lambda tmp: img.save(tmp, format="TIFF"))
+    atomic_write(path, lambda tmp: img.save(tmp, format="TIFF", **({"tiffinfo": tiff_tags} if tiff_tags is not None else {})))

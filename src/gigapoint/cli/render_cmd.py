@@ -32,7 +32,7 @@ from .cloud_opts import (
     open_files,
     subfolders_read,
 )
-from .georef import georef_paths, no_prj_reason, world_file_path, write_prj, write_world_file
+from .georef import georef_paths, geotiff_notes, geotiff_tags, no_prj_reason, world_file_path, write_prj, write_world_file
 from .info_cmd import memory_line
 from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_heights, save_image
 from .progress import err_console, progress_bar, status
@@ -242,12 +242,12 @@ def render(
     projection: Annotated[str | None, typer.Option(help=r"perspective or orthographic. \[default: perspective]")] = None,
     fov: Annotated[float, typer.Option(help="Vertical field of view in degrees.")] = 60.0,
     depth_out: Annotated[
-        Path | None, typer.Option(readable=False, help="Also write the depth buffer (.npy, float32, inf = empty); with --gsd the surface heights instead (a DSM: .tif, float32, NaN = empty, with its world file and .prj).")
+        Path | None, typer.Option(readable=False, help="Also write the depth buffer (.npy, float32, inf = empty); with --gsd the surface heights instead (a DSM: a float32 GeoTIFF, NaN = empty, with its world file and .prj).")
     ] = None,
     index_out: Annotated[Path | None, typer.Option(readable=False, help="Also write the point index buffer (.npy, int64, -1 = empty): each pixel's point as gigapoint holds the cloud (a file read into memory: gp.open(FILE).point_info(i)), not the file's row.")] = None,
     gsd: Annotated[
         float | None,
-        typer.Option(help="Ground sample distance (cloud units per pixel): an orthophoto straight down, north up, covering the cloud, with a world file (.pgw, .jgw, .tfw, .wld) and a .prj of the cloud's CRS beside it."),
+        typer.Option(help="Ground sample distance (cloud units per pixel): an orthophoto straight down, north up, covering the cloud, with a world file (.pgw, .jgw, .tfw, .wld) and a .prj of the cloud's CRS beside it; a .tif is a GeoTIFF (its grid and CRS in its tags)."),
     ] = None,
     fill_nodata: Annotated[
         str | None,
@@ -348,6 +348,10 @@ def render(
     if gsd is not None:
         cam = top_down_camera(cloud, gsd, output)
         settings = settings.replace(adaptive_precision=False)  # 30-bit positions: exact pixels and heights, whatever a batch's size
+        from ..lod.reader import cloud_crs, cloud_units
+
+        crs, units = cloud_crs(cloud), cloud_units(cloud)
+        wkt = crs_wkt(crs)
     else:
         cam = make_camera(cloud, width, height, view, camera, projection, fov)
     compiled = compiling.compiled_seconds()
@@ -357,22 +361,20 @@ def render(
     image, heights = frame.image, (cam.heights(frame.depth) if gsd is not None and depth_out is not None else None)
     if fill_nodata is not None:
         image, heights = fill_map(frame, image, heights, fill_distance)
-    writes = [(output, lambda p: save_image(image, p))]
+    geotiff = geotiff_tags(cam, crs, wkt, units) if gsd is not None else None  # a .tif is a GeoTIFF (others ignore it)
+    writes = [(output, lambda p: save_image(image, p, geotiff))]
     if depth_out is not None:  # with --gsd a surface model: the heights, not the camera's depths
-        writes.append((depth_out, (lambda p: save_heights(heights, p)) if gsd is not None else (lambda p: save_array(frame.depth, p))))
+        writes.append((depth_out, (lambda p: save_heights(heights, p, geotiff_tags(cam, crs, wkt, units, nodata=True))) if gsd is not None else (lambda p: save_array(frame.depth, p))))
     if index_out is not None:
         writes.append((index_out, lambda p: save_array(frame.index, p)))
     notes = []
     if gsd is not None:
-        from ..lod.reader import cloud_crs
-
-        crs = cloud_crs(cloud)
-        wkt = crs_wkt(crs)
         writes += [(world_file_path(image), lambda p: write_world_file(cam, p)) for image in filter(None, (output, depth_out))]
         if wkt:
             writes += [(p, lambda p: write_prj(wkt, p)) for p in georef if p.suffix == ".prj"]
         else:
             notes.append(no_prj_reason(crs))
+        notes += geotiff_notes((output, depth_out), crs, wkt, units)
     written = []
     try:
         for path, save in writes:

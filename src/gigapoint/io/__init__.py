@@ -396,6 +396,22 @@ def crs_units(crs: str | None, geokeys: dict[int, int] | None = None) -> dict:
     return {"horizontal": horizontal, "vertical": horizontal if assumed else vertical, "vertical_assumed": assumed}
 
 
+def horizontal_epsg(crs: str | None) -> int | None:
+    """The EPSG code of a CRS's horizontal part: an 'EPSG:n''s n; a WKT projected or geographic
+    CRS's own AUTHORITY / ID (a compound CRS's horizontal part's: its whole one names no map
+    grid GeoTIFF keys can hold); None where none is named (autzen's WKT names only its datum's
+    and unit's codes, inside it)."""
+    tree = _wkt_tree(crs or "")
+    if tree is None:
+        return _epsg_code(crs, {})
+    if tree[0] in ("COMPD_CS", "COMPOUNDCRS"):
+        tree = next((p for p in tree[1:] if isinstance(p, list) and _WKT_KINDS.get(p[0]) in ("projected", "geographic")), None)
+    if tree is None or _WKT_KINDS.get(tree[0]) not in ("projected", "geographic"):
+        return None
+    codes = [n[2] for n in tree[1:] if isinstance(n, list) and n[0] in ("AUTHORITY", "ID") and len(n) > 2 and str(n[1]).upper() == "EPSG"]
+    return int(codes[-1]) if codes and str(codes[-1]).isdigit() else None
+
+
 def _epsg_code(crs: str | None, keys: dict[int, int]) -> int | None:
     """The EPSG code of an 'EPSG:n' ``crs`` (LasHeader.crs of GeoTIFF keys), else of the keys'
     projected or geographic CRS (not 32767: user-defined); None without one."""
@@ -795,6 +811,7 @@ __all__ = [
     "folder_info",
     "format_info",
     "format_stats",
+    "horizontal_epsg",
     "lone_match",
     "open_cloud",
     "point_stats",
