@@ -436,6 +436,33 @@ def test_ply_with_a_vertex_list_cut_off_is_truncated(tmp_path):
     raises(InputError, p, fn=open_cloud, match="truncated PLY file: 30 of 40 vertices present")
 
 
+@pytest.mark.parametrize("byte_order", ["<", ">"])
+def test_a_binary_mesh_ply_that_overstates_its_vertex_count_is_refused(tmp_path, byte_order):
+    """A mesh (vertices, then faces) whose header declares more vertices than it holds read the
+    faces' bytes as vertices (nonsense points, no error) while the faces had room for them; a correct
+    mesh, triangles and quads mixed, reads its vertices only."""
+    from plyfile import PlyData, PlyElement
+
+    rng = np.random.default_rng(1)
+    v = np.zeros(300, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4")])
+    v["x"] = np.arange(300)
+    faces = np.empty(40, dtype=[("vertex_indices", "O"), ("flags", "u1")])
+    for i in range(40):
+        faces[i] = (rng.integers(0, 300, 3 + i % 2).astype(np.int32), 7)
+    p = tmp_path / "mesh.ply"
+    PlyData([PlyElement.describe(v, "vertex"), PlyElement.describe(faces, "face")], byte_order=byte_order).write(str(p))
+    assert open_cloud(p).n_points == 300 and file_info(p)["bounds"]["max"][0] == 299
+    data = p.read_bytes()
+    faces_bytes = len(data) - data.index(b"end_header\n") - len(b"end_header\n") - 300 * 12
+    for declared in (301, 302, 307, 313):
+        p.write_bytes(data.replace(b"element vertex 300", b"element vertex %d" % declared))
+        raises(InputError, p, match=f"corrupt PLY file: the elements after its {declared} vertices (40 'face') do not fit the "
+                                    f"{faces_bytes - 12 * (declared - 300)} bytes after them")
+        raises(InputError, p, fn=file_info, match="the header's vertex count is not the number of vertices the file holds")
+    p.write_bytes(data[:-30])  # the faces cut off
+    raises(InputError, p, match="or the file is cut off")
+
+
 def test_ply_ascii_count_beyond_its_bytes(tmp_path):
     """An ASCII header's count that the file's bytes cannot hold (6 bytes a vertex at least) is
     refused before the points are read; a file whose last line ends without a newline is not."""

@@ -7,6 +7,9 @@ list properties before or inside the vertex element fall back to plyfile reading
 Vertex properties: x y z, red green blue [alpha] (also r g b, diffuse_*), the rest
 (nx ny nz, intensity, scalar_*...) become attributes. Without those, colours come from PCL's
 packed 4-byte ``rgb``/``rgba`` (consumed) or a 3D Gaussian splat's ``f_dc_0..2`` (kept).
+A binary mesh's elements after the vertices (faces) are walked, not read, to check that they
+end where the file does: a header that overstates the vertex count is refused, not read as
+vertices made of the faces' bytes.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from ..core.chunk import ColorScaler, PointChunk
 from ..errors import EmptyCloudError
@@ -57,6 +61,32 @@ def _without_lists(line: str, props, lists: set) -> str:
     return " ".join(kept) + "\n" if i == len(tokens) else line
 
 
+@njit(cache=True)
+def _records_end(data, pos, count, len_bytes, len_signed, sizes, least, big_endian):
+    """Where ``count`` binary records that start at ``pos`` end, or -1 where they run past the end of
+    ``data`` (uint8) or a list is shorter than ``least[j]``. Property j is ``sizes[j]`` bytes, or with
+    ``len_bytes[j]`` > 0 a list: a length field of that many bytes, then that many items of ``sizes[j]``
+    bytes (lists make records' sizes vary)."""
+    end = len(data)
+    for _ in range(count):
+        for j in range(len(sizes)):
+            n = len_bytes[j]
+            if n == 0:
+                pos += sizes[j]
+                continue
+            if pos + n > end:
+                return -1
+            length = 0
+            for b in range(n):
+                length = (length << 8) | data[pos + (b if big_endian else n - 1 - b)]
+            if (len_signed[j] and length >= 1 << (8 * n - 1)) or length < least[j]:
+                return -1  # a negative length; a face of fewer than 3 corners
+            pos += n + length * sizes[j]
+        if pos > end:
+            return -1
+    return pos
+
+
 class _Header:
     def __init__(self, path: Path):
         import plyfile
@@ -93,6 +123,7 @@ class _Header:
                 self.vertex = el
                 break
             self.before.append(el)
+        self.after = ply.elements[len(self.before) + 1 :]  # (a mesh's faces)
         if self.vertex is None:
             raise fail(path, f"PLY file has no 'vertex' element (elements: {', '.join(e.name for e in ply.elements) or 'none'})")
         self.names = [p.name for p in self.vertex.properties]
@@ -124,6 +155,9 @@ class _Header:
             names, cols = [*col, "red", "green", "blue"], [*col.values(), *rgb.T]
         return rows_to_chunk(self.path, names, cols, scaler)
 
+
+#: a face's list of vertex indices (as the PLY format names it; some writers drop the s): 3 at least
+_FACE_CORNERS = ("vertex_indices", "vertex_index")
 
 #: bytes an ASCII vertex takes at least: three one-digit numbers, two spaces and a newline
 _LEAST_ASCII_VERTEX = 6
@@ -192,7 +226,46 @@ class PlyReader(Reader):
         if need > have:
             short = (f"truncated PLY file: the header declares {h.count:,} vertices ({need:,} bytes) "
                      f"but only {max(have, 0):,} bytes follow (room for {max(have, 0) // dtype.itemsize:,})")  # fmt: skip
+        if short is None and h.after:
+            PlyReader._check_after_vertices(path, h, offset + need)
         return offset, dtype, short
+
+    @staticmethod
+    def _check_after_vertices(path, h: _Header, vertex_end: int) -> None:
+        """The elements after the vertices (a mesh's faces) end where the file ends. A header that
+        declares more vertices than the file holds read the faces' bytes as vertices when the
+        faces had room for them (their list lengths walked, as their records' sizes vary; a walk
+        begun off a record's start can fall back into step, where a face of fewer than 3 corners,
+        often a high byte of an index, gives it away)."""
+        import plyfile
+
+        end = vertex_end
+        if h.file_size > vertex_end:
+            data = np.memmap(h.path, dtype=np.uint8, mode="r")
+            try:
+                for el in h.after:
+                    props = el.properties
+                    lists = [isinstance(p, plyfile.PlyListProperty) for p in props]
+                    len_types = [np.dtype(p.len_dtype) if is_list else None for p, is_list in zip(props, lists)]
+                    end = _records_end(
+                        data, end, el.count,
+                        np.array([t.itemsize if t else 0 for t in len_types], np.int64),
+                        np.array([bool(t and t.kind == "i") for t in len_types]),
+                        np.array([np.dtype(p.val_dtype).itemsize for p in props], np.int64),
+                        np.array([3 if el.name == "face" and p.name in _FACE_CORNERS else 0 for p in props], np.int64),
+                        h.byte_order == ">",
+                    )  # fmt: skip
+                    if end < 0:
+                        break
+            finally:
+                del data
+        elif any(el.count for el in h.after):
+            end = -1
+        if end != h.file_size:
+            after = ", ".join(f"{el.count:,} {el.name!r}" for el in h.after)
+            raise fail(path, f"corrupt PLY file: the elements after its {h.count:,} vertices ({after}) do not fit the "
+                             f"{h.file_size - vertex_end:,} bytes after them: the header's vertex count is not the number "
+                             "of vertices the file holds, or the file is cut off")  # fmt: skip
 
     def _read_binary(self, path, h: _Header, chunk_size, scaler, salvage: bool = False) -> Iterator[PointChunk]:
         offset, dtype, short = self._binary_span(path, h)
