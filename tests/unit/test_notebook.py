@@ -171,7 +171,35 @@ def test_a_render_is_the_array_it_was_to_numpy_pil_and_imageio(tmp_path):
     iio.imwrite(tmp_path / "a.png", image)
     iio.imwrite(tmp_path / "b.png", plain)
     assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
-    assert repr(image.astype(np.float32)).startswith("Image([[[")  # cast by a method: numpy's repr, not a picture's
+
+
+def test_an_images_methods_give_a_plain_array_where_the_result_is_no_longer_a_picture():
+    """astype, reshape, .T, view, ravel... kept the Image class whatever they made: a float or
+    flattened image printed as "Image([[[0.5, ...", a (4, 6, 5) transpose as an Image; as slicing a
+    pixel already was, what is no longer an (H, W, 3|4) uint8 picture is a plain ndarray."""
+    import numpy as np
+
+    image = gp.render(gp.demo(5000), width=6, height=5)
+    plain = np.asarray(image)
+    for result, expected in (
+        (image.astype(np.float32), plain.astype(np.float32)),
+        (image.astype(bool), plain.astype(bool)),
+        (image.reshape(-1, 4), plain.reshape(-1, 4)),
+        (image.T, plain.T),
+        (image.swapaxes(0, 2), plain.swapaxes(0, 2)),
+        (image.view(np.uint32), plain.view(np.uint32)),
+        (image.view(np.int8), plain.view(np.int8)),
+        (image.view(np.ndarray), plain),
+        (image.ravel(), plain.ravel()),
+        (image.flatten(), plain.flatten()),
+        (image.argsort(axis=2), plain.argsort(axis=2)),
+    ):
+        assert type(result) is np.ndarray, result.shape
+        np.testing.assert_array_equal(result, expected)
+    assert repr(image.astype(np.float32)).startswith("array([[[")
+    for kept in (image.astype(np.uint8), image.reshape(6, 5, 4), image.transpose(1, 0, 2), image.view(np.uint8), image.view(), image.repeat(2, axis=0)):
+        assert type(kept) is type(image) and repr(kept).startswith("Image(")
+    assert repr(image.transpose(1, 0, 2)) == "Image(5x6 RGBA, uint8)"
 
 
 def test_the_command_line_writes_the_same_bytes_for_an_image_as_for_its_array(tmp_path):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import io
 from dataclasses import dataclass, field
 
@@ -69,9 +70,10 @@ def encode_image(image: np.ndarray, fmt: str = "JPEG", quality: int = 85) -> byt
 
 class Image(np.ndarray):
     """An (H, W, 4) uint8 RGBA picture (3 channels: RGB) that a notebook shows as a PNG and a
-    terminal as one line; otherwise the plain array it views. What indexing, arithmetic and
-    numpy's functions make of it stays an Image while still a uint8 picture of that shape, and
-    is a plain ndarray (or a number) else: a pixel, a channel, a float array, a mean."""
+    terminal as one line; otherwise the plain array it views. What indexing, arithmetic, numpy's
+    functions and its own methods (astype, reshape, .T, view...) make of it stays an Image while
+    still a uint8 picture of that shape, and is a plain ndarray (or a number) else: a pixel, a
+    channel, a float array, a mean."""
 
     def __getitem__(self, key):  # (a view keeps its class: image[0, 0] was an Image)
         return _as_image_if_one(super().__getitem__(key))
@@ -83,14 +85,40 @@ class Image(np.ndarray):
     def __array_function__(self, func, types, args, kwargs):  # np.mean, np.concatenate, ...
         return _as_image_if_one(super().__array_function__(func, types, args, kwargs))
 
+    def view(self, *args, **kwargs):  # (a type asked for, as image.view(np.ndarray), is what it gets)
+        out = super().view(*args, **kwargs)
+        asks_type = any(isinstance(a, type) and issubclass(a, np.ndarray) for a in (*args, kwargs.get("type")))
+        return out if asks_type else _as_image_if_one(out)
+
+    @property
+    def T(self):
+        return self.transpose()
+
     def __repr__(self) -> str:  # a 1920x1080 image printed 8 million numbers
-        if not _is_picture(self):  # (reshaped or cast by a method: numpy's repr)
+        if not _is_picture(self):  # (a subclass's, or one made by a method not wrapped below: numpy's repr)
             return super().__repr__()
         h, w, c = self.shape
         return f"Image({w}x{h} {'RGBA' if c == 4 else 'RGB'}, uint8)"
 
     def _repr_png_(self) -> bytes | None:
         return encode_image(self, "PNG") if _is_picture(self) else None
+
+
+def _keeps_image_if_one(method):
+    """``method`` of ndarray, whose result is an Image while it is a picture (as __getitem__'s)."""
+
+    @functools.wraps(method)
+    def image_if_one(self, *args, **kwargs):
+        return _as_image_if_one(method(self, *args, **kwargs))
+
+    return image_if_one
+
+
+# ndarray's methods that make an array of another shape or dtype without a ufunc or numpy function
+# (image.astype(float), image.reshape(-1, 4), image.ravel() stayed Images: numpy's repr, no picture)
+for _name in ("astype", "reshape", "transpose", "swapaxes", "ravel", "flatten", "squeeze", "repeat", "take",
+              "compress", "diagonal", "cumsum", "cumprod", "argsort", "argmax", "argmin"):  # fmt: skip
+    setattr(Image, _name, _keeps_image_if_one(getattr(np.ndarray, _name)))
 
 
 def _is_picture(a: np.ndarray) -> bool:
