@@ -150,6 +150,21 @@ def test_the_default_ipd_gives_any_scene_the_same_depth(scale):
     np.testing.assert_array_equal(gp.render(cloud, cam, conv), gp.render(cloud, cam, conv.replace(ipd=1.5 * scale / 30.0)))
 
 
+@pytest.mark.parametrize("fov", [60.0, 20.0, 5.0, 0.5, 0.05])
+def test_the_default_ipd_of_a_narrow_fov_keeps_the_eyes_images_in_the_picture(fov):
+    """The auto ipd, convergence / 30, moved each eye's image fx / 60 px: a 5 degree pair's 21 %
+    of the width apart, a 0.5 degree pair's out of the picture (blank, both eyes). Made smaller by
+    tan(fov / 2) / tan(30°) under 60 degrees, it moves them H / (120 tan 30°) px, 2 px here, at any fov."""
+    from gigapoint.render.passes.compose import stereo_ipd
+
+    cloud = gp.from_arrays(np.random.default_rng(0).random((20_000, 3)) * 100.0, name="box")
+    cam = gp.Camera.fit_cloud(cloud, width=160, height=120, fov=fov)
+    s = gp.RenderSettings(backend="cpu", stereo="side-by-side")
+    assert convergence_shift(cam, stereo_ipd(cam, s), None) == round(120 / (120 * np.tan(np.radians(30.0)))) == 2
+    plain = gp.render_frame(cloud, cam, s.replace(stereo="none")).stats.visible_pixels
+    assert gp.render_frame(cloud, cam, s).stats.visible_pixels > 0.9 * 2 * plain > 1000
+
+
 def test_the_default_ipd_of_an_orthographic_camera_is_0():
     """Parallel rays see no parallax: eyes moved apart only doubled a small object's image (red
     and cyan copies 0.065 world units apart). The automatic ipd of an orthographic camera is 0."""

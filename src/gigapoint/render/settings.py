@@ -197,7 +197,8 @@ class RenderSettings:
     ipd: float | None = setting(
         None,
         "Stereo eye distance in world units (default: auto, the zero-parallax distance / 30, the stereographers' 1/30 rule, "
-        "so a 30 cm object and a city both show depth; 0 for an orthographic camera; 0 = both eyes alike).",
+        "so a 30 cm object and a city both show depth; smaller by tan(fov/2) / tan(30°) for a fov under 60 degrees; "
+        "0 for an orthographic camera; 0 = both eyes alike).",
         min=0.0,
     )
     convergence: float | None = setting(

@@ -10,7 +10,9 @@ target distance): each eye's image moves by fx * ipd / (2 * convergence) pixels,
 uncovered columns show the background. The default ``ipd`` follows the stereographers'
 1/30 rule, convergence / 30: a fixed 6.5 cm put the eyes of a 30 cm scan wider apart than
 the object and gave a city no depth; scaled with the scene, a point at the convergence
-distance is fx / 30 pixels apart in the two eyes whatever the units. ``side-by-side``
+distance is fx / 30 pixels apart in the two eyes whatever the units. A fov narrower than the
+default 60 degrees shrinks it by tan(fov / 2) / tan(30°), keeping that disparity at what a
+60 degree view has (``stereo_ipd``). ``side-by-side``
 puts the eyes next to each other (2W x H); ``anaglyph`` takes red from the left eye and green and blue from the right.
 
 Each whole render is ``render_one(cloud, camera, settings)`` (the renderer's render_frame,
@@ -28,7 +30,7 @@ import numpy as np
 from ...core.layout import EMPTY_PIXEL
 from ...errors import GigapointWarning, SettingsError, warn
 from ..backend import get_backend
-from ..camera import MAX_IMAGE_SIDE
+from ..camera import MAX_IMAGE_SIDE, Camera
 from ..frame import Frame, RenderStats, check_indexable
 from . import finish_frame, splat_for
 
@@ -90,12 +92,24 @@ def convergence_distance(camera, convergence: float | None) -> float:
     return convergence if convergence is not None else float(np.linalg.norm(np.subtract(camera.target, camera.eye)))
 
 
+#: the camera's default fov (60 degrees): the normal lens the stereographers' 1/30 rule is for
+NORMAL_FOV = Camera.fov
+
+
 def stereo_ipd(camera, settings) -> float:
     """The eye distance drawn: ``settings.ipd``; when None (auto) the 1/30 rule, or 0 for an
-    orthographic camera (its parallel rays see no parallax: moved eyes only double the image)."""
+    orthographic camera (its parallel rays see no parallax: moved eyes only double the image).
+    A fov narrower than 60 degrees magnifies parallax by tan(30°) / tan(fov / 2): the auto ipd is
+    that much smaller (as stereographers shorten the eye distance for a long lens), so each eye's
+    image moves H / (120 tan 30°) px, 1.4 % of the height, at any fov up to 60. Without it the
+    eyes' images moved fx / 60 px: a 5 degree pair's were 21 % of the width apart, and below
+    half a degree both moved out of the picture (a blank pair)."""
     if settings.ipd is not None:
         return settings.ipd
-    return convergence_distance(camera, settings.convergence) / 30.0 if camera.projection == "perspective" else 0.0
+    if camera.projection != "perspective":
+        return 0.0
+    narrowing = min(1.0, math.tan(math.radians(camera.fov) / 2) / math.tan(math.radians(NORMAL_FOV) / 2))
+    return convergence_distance(camera, settings.convergence) / 30.0 * narrowing
 
 
 def convergence_shift(camera, ipd: float, convergence: float | None) -> int:
@@ -185,8 +199,8 @@ def stereo_frame(cloud, camera, settings, render_one) -> Frame:
         vis = np.minimum(shift_columns(frames[0].visibility, -h, EMPTY_PIXEL), shift_columns(frames[1].visibility, h, EMPTY_PIXEL))
     stats.visible_pixels = int((vis != EMPTY_PIXEL).sum())
     # an empty pair was a background image without the plain frame's warning (one eye drawn by
-    # render_one and empty has said it already); the auto ipd moves each image fx / 60 px (a
-    # fraction of the width at any usual fov), so only an explicit ipd is named as too wide
+    # render_one and empty has said it already); the auto ipd moves each image 1.4 % of the
+    # height at most (stereo_ipd), so only an explicit ipd is named as too wide
     if stats.visible_pixels == 0 and (multi is not None or all(f.stats.visible_pixels for f in frames)):
         wide = settings.ipd is not None and abs(h) >= w
         why = f" (each eye's image moves {abs(h)} px of {w}: ipd {ipd:g} world units is wide for this scene)" if wide else ""
