@@ -1,0 +1,232 @@
+"""What the files say of their coordinate reference system: its name and identity, its units
+(WKT1, WKT2, compound CRSs, LAS GeoTIFF keys; pyproj for a bare EPSG code where installed), its
+WKT and EPSG code, and a warning where files disagree."""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+from ..errors import GigapointError, GigapointWarning, warn
+from ._base import read_once
+from .las import LasReader, first_crs_header, geokeys, read_las_header
+from .paths import file_names
+from .registry import reader_for
+
+WKT_EPSG = re.compile(r'(?:AUTHORITY|ID)\[\s*"EPSG"\s*,\s*"?(\d+)"?\s*\]\s*\]\s*$', re.IGNORECASE)
+
+#: The name a WKT CRS starts with (PROJCS["WGS 84 / UTM zone 10N",...)
+WKT_NAME = re.compile(r'\s*[A-Z_]+\[\s*"([^"]+)"')
+
+
+def crs_name(crs: str | None) -> str:
+    """A CRS as ``gigapoint info`` says it: a WKT by its name and EPSG code (the code ends it,
+    past where 100 characters cut it), 'unknown' where none is named."""
+    name, code = WKT_NAME.match(crs or ""), WKT_EPSG.search(crs or "")
+    if name:
+        return f"{name.group(1)} ({f'EPSG:{code.group(1)}' if code else 'WKT'})"
+    return crs or "unknown"
+
+
+def crs_identity(crs: str) -> str:
+    """What tells two CRSs apart: 'EPSG:n' where a WKT ends with its code (the same CRS as WKT in
+    one tile, as GeoTIFF keys in another), else the text. warn_mixed_crs and folder_info compare by it."""
+    code = WKT_EPSG.search(crs)
+    return f"EPSG:{code.group(1)}" if code else crs
+
+
+#: Symbols of the length units coordinates come in, by their size in metres (WKT names one unit
+#: many ways: "US survey foot", "Foot_US"); another unit is shown by its name
+LENGTH_SYMBOLS = ((1.0, "m"), (0.3048, "ft"), (1200 / 3937, "US ft"))
+#: The length units of GeoTIFF keys (ProjLinearUnitsGeoKey, VerticalUnitsGeoKey) by EPSG code
+EPSG_LENGTH_UNITS = {9001: ("metre", 1.0), 9002: ("foot", 0.3048), 9003: ("US survey foot", 1200 / 3937)}
+_WKT_TOKEN = re.compile(r'\s*(?:"((?:[^"]|"")*)"|([\[\](),])|([^\[\](),"\s]+))')
+_WKT_KINDS = {  # the CRS keywords of WKT1 and WKT2 whose axes' units are read
+    "PROJCS": "projected", "PROJCRS": "projected", "PROJECTEDCRS": "projected",
+    "GEOGCS": "geographic", "GEOGCRS": "geographic", "GEOGRAPHICCRS": "geographic",
+    "VERT_CS": "vertical", "VERTCRS": "vertical", "VERTICALCRS": "vertical",
+}  # fmt: skip
+
+
+def _wkt_tree(text: str) -> list | None:
+    """A WKT as nested lists, KEYWORD[a, b, ...] -> [KEYWORD, a, b, ...] (numbers and enum words
+    as text); None where the text is not WKT ('EPSG:2992')."""
+    stack = [[]]
+    for quoted, bracket, word in _WKT_TOKEN.findall(text):
+        if bracket in ("[", "("):
+            if not stack[-1] or not isinstance(stack[-1][-1], str):
+                return None
+            node = [stack[-1].pop().upper()]
+            stack[-1].append(node)
+            stack.append(node)
+        elif bracket in ("]", ")"):
+            if len(stack) < 2:
+                return None
+            stack.pop()
+        elif bracket != ",":
+            stack[-1].append(word or quoted)
+    root = stack[0][0] if len(stack) == 1 and len(stack[0]) == 1 else None
+    return root if isinstance(root, list) else None
+
+
+def _wkt_unit(node: list, angle: bool) -> dict | None:
+    """{name, symbol, metres} of a UNIT / LENGTHUNIT / ANGLEUNIT node; an angle's metres are None."""
+    try:
+        name, size = str(node[1]), float(node[2])
+    except (IndexError, ValueError):
+        return None
+    if angle or node[0] == "ANGLEUNIT":
+        return {"name": name, "symbol": "°" if name.lower().startswith("deg") else name, "metres": None}
+    return {"name": name, "symbol": next((s for m, s in LENGTH_SYMBOLS if math.isclose(size, m, rel_tol=1e-9)), name), "metres": size}
+
+
+def _wkt_units(crs: list) -> tuple[dict | None, dict | None]:
+    """(horizontal, vertical) units of one WKT CRS (a compound CRS's parts' in turn): those of its
+    own axes (WKT2 may give each AXIS its unit; else the one UNIT for all), not its base CRS's."""
+    kind = _WKT_KINDS.get(crs[0])
+    if kind is None:  # a compound CRS: its parts; any other (geocentric, engineering): unknown
+        parts = [_wkt_units(p) for p in crs[1:] if isinstance(p, list)] if crs[0] in ("COMPD_CS", "COMPOUNDCRS") else []
+        return next((h for h, _ in parts if h), None), next((v for _, v in parts if v), None)
+    nodes = [c for c in crs[1:] if isinstance(c, list)]
+    units = [u for a in nodes if a[0] == "AXIS" for u in a if isinstance(u, list) and u[0].endswith("UNIT")]
+    units = [_wkt_unit(u, kind == "geographic" and u[0] != "LENGTHUNIT") for u in units or [c for c in nodes if c[0].endswith("UNIT")]]
+    if kind == "vertical":
+        return None, units[0] if units else None
+    if kind == "geographic":  # a 3D one's ellipsoidal height has a length unit
+        return (units[0] if units else None), next((u for u in units if u and u["metres"] is not None), None)
+    return (units[0] if units else None), (units[2] if len(units) == 3 else None)
+
+
+def crs_units(crs: str | None, geokeys: dict[int, int] | None = None) -> dict:
+    """The units of a CRS's coordinates, for lengths measured in them: {"horizontal": U,
+    "vertical": U, "vertical_assumed": bool}, each U {name, symbol, metres} or None (unknown).
+
+    From a WKT (``crs``: the projected CRS's axes' UNIT, a compound CRS's vertical part's), else
+    from LAS GeoTIFF keys (``geokeys``: ProjLinearUnitsGeoKey 3076, VerticalUnitsGeoKey 4099), else
+    from an EPSG code ('EPSG:n', or the keys' ProjectedCSTypeGeoKey 3072 / GeographicTypeGeoKey 2048
+    without a unit key, as LAS 1.2 files often name theirs) through pyproj's axes where pyproj is
+    installed (``_epsg_units``; without it such a code says none). A geographic CRS's horizontal
+    unit is an angle (metres None: its x and y are no lengths). Where a CRS names no vertical unit, heights
+    are taken to be in the horizontal length unit (LAS files are; ``vertical_assumed`` says so).
+    """
+    tree = _wkt_tree(crs or "")
+    horizontal, vertical = _wkt_units(tree) if tree else (None, None)
+    keys = geokeys or {}
+    if horizontal is None and keys.get(1024) == 2:  # GTModelTypeGeoKey: geographic
+        horizontal = {"name": "degree", "symbol": "°", "metres": None}
+    elif horizontal is None and keys.get(3076) in EPSG_LENGTH_UNITS:
+        horizontal = _wkt_unit(["UNIT", *EPSG_LENGTH_UNITS[keys[3076]]], angle=False)
+    if vertical is None and keys.get(4099) in EPSG_LENGTH_UNITS:
+        vertical = _wkt_unit(["UNIT", *EPSG_LENGTH_UNITS[keys[4099]]], angle=False)
+    code = _epsg_code(crs, keys) if horizontal is None else None
+    if code is not None:  # ("unknown" units in the viewer for EPSG:2994's feet, EPSG:26910's metres)
+        horizontal, up = _epsg_units(code)
+        vertical = vertical or up
+    assumed = vertical is None and horizontal is not None and horizontal["metres"] is not None
+    return {"horizontal": horizontal, "vertical": horizontal if assumed else vertical, "vertical_assumed": assumed}
+
+
+def horizontal_epsg(crs: str | None) -> int | None:
+    """The EPSG code of a CRS's horizontal part: an 'EPSG:n''s n; a WKT projected or geographic
+    CRS's own AUTHORITY / ID (a compound CRS's horizontal part's: its whole one names no map
+    grid GeoTIFF keys can hold); None where none is named (autzen's WKT names only its datum's
+    and unit's codes, inside it)."""
+    tree = _wkt_tree(crs or "")
+    if tree is None:
+        return _epsg_code(crs, {})
+    if tree[0] in ("COMPD_CS", "COMPOUNDCRS"):
+        tree = next((p for p in tree[1:] if isinstance(p, list) and _WKT_KINDS.get(p[0]) in ("projected", "geographic")), None)
+    if tree is None or _WKT_KINDS.get(tree[0]) not in ("projected", "geographic"):
+        return None
+    codes = [n[2] for n in tree[1:] if isinstance(n, list) and n[0] in ("AUTHORITY", "ID") and len(n) > 2 and str(n[1]).upper() == "EPSG"]
+    return int(codes[-1]) if codes and str(codes[-1]).isdigit() else None
+
+
+def _epsg_code(crs: str | None, keys: dict[int, int]) -> int | None:
+    """The EPSG code of an 'EPSG:n' ``crs`` (LasHeader.crs of GeoTIFF keys), else of the keys'
+    projected or geographic CRS (not 32767: user-defined); None without one."""
+    named = re.fullmatch(r"\s*EPSG:(\d+)\s*", crs or "", re.IGNORECASE)
+    if named:
+        return int(named.group(1))
+    return next((keys[k] for k in (3072, 2048) if 0 < keys.get(k, 0) < 32767), None)
+
+
+def _epsg_units(code: int) -> tuple[dict | None, dict | None]:
+    """(horizontal, vertical) units of EPSG:``code`` by pyproj's axes (``axis_info``: east/north
+    and up ones; a geographic CRS's across in angles; a geocentric one's none), (None, None) where
+    pyproj is not installed (an optional dependency) or knows no such code."""
+    try:
+        import pyproj
+
+        crs = pyproj.CRS.from_epsg(code)
+        axes, geographic = list(crs.axis_info), bool(crs.is_geographic)
+    except Exception:  # noqa: BLE001 - pyproj missing or the code unknown to it: units unknown
+        return None, None
+    across = [a for a in axes if str(a.direction).lower() in ("east", "north", "west", "south")]
+    up = [a for a in axes if str(a.direction).lower() == "up"]
+    horizontal = _wkt_unit(["UNIT", across[0].unit_name, across[0].unit_conversion_factor], angle=geographic) if across else None
+    return horizontal, (_wkt_unit(["UNIT", up[0].unit_name, up[0].unit_conversion_factor], angle=False) if up else None)
+
+
+def files_units(files) -> dict:
+    """``crs_units`` of the first LAS/LAZ file of ``files`` that names a CRS (its WKT, else its
+    GeoTIFF keys); all unknown without one."""
+    hdr = first_crs_header(files)
+    return crs_units(hdr.crs(), geokeys(hdr.vlrs)) if hdr else crs_units(None)
+
+
+def files_crs(files) -> str | None:
+    """The CRS of the first LAS/LAZ file of ``files`` that names one: its WKT, else 'EPSG:n' of
+    its GeoTIFF keys (LasHeader.crs); None without one."""
+    hdr = first_crs_header(files)
+    return hdr.crs() if hdr else None
+
+
+def crs_wkt(crs: str | None) -> str | None:
+    """WKT of a CRS as the readers give it: an 'EPSG:n' through pyproj when it is installed (else
+    None); any other is WKT already."""
+    if not crs or not crs.upper().startswith("EPSG:"):
+        return crs or None
+    try:
+        import pyproj
+
+        return pyproj.CRS.from_user_input(crs).to_wkt()
+    except Exception:  # noqa: BLE001 - pyproj missing or the code unknown: no WKT
+        return None
+
+
+def warn_mixed_crs(files, then: str = "") -> None:
+    """Warn where LAS/LAZ files read as one cloud name different CRSs, or some name one and
+    others none (lost with their VLRs, or another CRS unsaid): their coordinates are used as
+    they are, nothing is reprojected, so such tiles may not line up (``then``: what follows,
+    added to the message). Once an operation (``headers_once``: open_sized reads the files twice)."""
+    if len(files) < 2:
+        return
+    first: dict = {}  # CRS (its EPSG code where a WKT ends with one): the first file naming it
+    have, none = 0, []  # how many LAS files name a CRS; those naming none
+    for f in files:
+        try:  # (the header the read uses: no second open; salvage: as scan_angles_differ)
+            if not isinstance(reader_for(f), LasReader):  # (no CRS to name: not said to lack one)
+                continue
+            crs = read_las_header(f, salvage=True).crs()
+        except GigapointError:  # a bad file: reading its points says so, in its own words
+            continue
+        if crs:
+            first.setdefault(crs_identity(crs), f)
+            have += 1
+        else:
+            none.append(f)
+    lacking = f"{file_names(none)} {'names' if len(none) == 1 else 'name'} no CRS"
+    if len(first) > 1:
+        named = "; ".join(f"{Path(f).name}: {crs[:60]}" for crs, f in list(first.items())[:3])
+        said = f"the files name {len(first)} different CRSs ({named}{'; ...' if len(first) > 3 else ''}){'; ' + lacking if none else ''}"
+        line_up = "so they do not line up"
+    elif first and none:  # (the others' points probably in another CRS, or their VLRs lost)
+        crs, f = next(iter(first.items()))
+        others = f"{Path(f).name} names" if have == 1 else f"{Path(f).name} and {have - 1} more name"
+        said, line_up = f"{lacking}, where {others} {crs[:60]}", "so they may not line up"
+    else:
+        return
+    message = f"{said}: their coordinates are used as they are, not reprojected, {line_up}{then}"
+    read_once("mixed CRSs", "\n".join(map(str, files)), lambda: warn(message, GigapointWarning))
