@@ -31,7 +31,7 @@ _GEOTIFF_RECORDS = (GEOKEYS_RECORD, 34736, 34737)
 Chunks = Callable[[], Iterable[PointChunk]]
 
 
-def check_output(path: Path, overwrite: bool) -> None:
+def check_point_file_output(path: Path, overwrite: bool) -> None:
     """Refuse, in one line naming ``path``, a point file that cannot be written there: a folder
     (overwrite=True was os.replace's IsADirectoryError: a folder is never replaced by a file), an
     existing file without ``overwrite``, a missing folder."""
@@ -44,7 +44,7 @@ def check_output(path: Path, overwrite: bool) -> None:
 
 
 def write_points(path: Path, chunks: Chunks, n_points: int | None, *, grid=None, crs_records=(), color_bits: int | None = 16) -> int:
-    """Write the ``n_points`` points of ``chunks()`` to ``path`` (checked by ``check_output``), as its suffix
+    """Write the ``n_points`` points of ``chunks()`` to ``path`` (checked by ``check_point_file_output``), as its suffix
     says: .las/.laz (LAS 1.4 point format 7, 8 with ``nir``; ``grid``: the (scale, offset) to store
     positions on, else one fine enough for their bounds; ``crs_records``: (user id, record id,
     data) VLRs naming their CRS; ``color_bits``: 16 stores 8-bit colours x 257, 8 as they are, as a
@@ -272,7 +272,7 @@ def save_cloud(cloud: PointCloud, path, overwrite: bool = False, points_per_chun
     path = Path(path)
     if path.suffix.lower() not in POINT_FILE_SUFFIXES:
         raise InputError(f"{path}: save writes .las, .laz or .ply files, not {path.suffix or 'a name without a suffix'}")
-    check_output(path, overwrite)
+    check_point_file_output(path, overwrite)
     if not cloud.colors_exact:  # gp.open's colors="auto": written as held, up to 12/255 off the file's (as convert says)
         files = ", ".join(str(f) for f in cloud.source_files)
         exact = f"open its files ({files}) with colors='rgba'" if files else "make the cloud with colors='rgba'"
@@ -284,4 +284,4 @@ def save_cloud(cloud: PointCloud, path, overwrite: bool = False, points_per_chun
 
 set_cloud_writer(save_cloud)
 
-__all__ = ["POINT_FILE_SUFFIXES", "check_output", "save_cloud", "source_crs_records", "write_points"]
+__all__ = ["POINT_FILE_SUFFIXES", "check_point_file_output", "save_cloud", "source_crs_records", "write_points"]

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..io.registry import is_supported_name
-from ..io.write import POINT_FILE_SUFFIXES, check_output, write_points
+from ..io.write import POINT_FILE_SUFFIXES, check_point_file_output, write_points
 from ..lod.copc_write import is_copc_name
 
 
@@ -25,5 +25,5 @@ def save_snapshots(octree, path, overwrite: bool = False) -> int:
         raise InputError(f"{path}: save writes .las, .laz or .ply files, or an octree folder (a name without a point file's suffix)")
     if suffix not in POINT_FILE_SUFFIXES:
         return int(octree.save(path, overwrite=overwrite).points)
-    check_output(path, overwrite)
+    check_point_file_output(path, overwrite)
     return write_points(path, octree.chunks, octree.n_points)  # (chunk by chunk: no joined copy of every snapshot)

@@ -353,7 +353,7 @@ def write_copc(
     grid; ``cube_min``/``cube_edge``: the octree's cube (keys are relative to it); ``wkt``: the
     CRS; ``extra``: {name: dtype} of attributes stored in extra bytes (``extra_attributes``).
     Returns {points, nodes, pages}."""
-    check_output(path, overwrite)
+    check_copc_output(path, overwrite)
     with atomic_open(path, durable=durable) as f:
         w = CopcWriter(
             f, scale=scale, offset=offset, cube_min=cube_min, cube_edge=cube_edge, point_format=point_format, wkt=wkt, spacing=spacing,
@@ -415,7 +415,7 @@ def work_dir(out) -> Path:
     return out.with_name(out.name + ".work")
 
 
-def check_output(out, overwrite: bool) -> None:
+def check_copc_output(out, overwrite: bool) -> None:
     """A COPC output ``out`` may be written: not a folder, and not an existing file without ``overwrite``."""
     out = Path(out)
     if out.is_dir():

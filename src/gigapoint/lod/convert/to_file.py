@@ -26,7 +26,7 @@ from ...io.filters import PointFilter, filtered
 from ...io.las import LasReader, with_scan_angle
 from ...io.las_fields import las_grid
 from ...io.registry import reader_for
-from ...io.write import POINT_FILE_SUFFIXES, check_output, source_crs_records, write_points
+from ...io.write import POINT_FILE_SUFFIXES, check_point_file_output, source_crs_records, write_points
 from ..build import valid_bounds
 from ..copc_write import is_copc_name
 from .facts import input_facts
@@ -43,7 +43,7 @@ def write_point_file(inputs, out: Path, keep: PointFilter | None, overwrite: boo
     chunk at a time (``progress``: lod/progress.py's, told of the points read). An existing
     ``out`` without ``overwrite`` is refused before anything is read, as is an ``out`` that is
     one of the inputs. Returns (points written, invalid points skipped)."""
-    check_output(out, overwrite)
+    check_point_file_output(out, overwrite)
     files = expand_paths([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
     if any(same_file(out, f) for f in files):
         raise InputError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")

@@ -1397,12 +1397,12 @@ class ProgressiveOctree:
         import time
 
         from ...io.las_fields import las_grid
-        from ...io.write import check_output, source_crs_records, write_points
+        from ...io.write import check_point_file_output, source_crs_records, write_points
         from ..convert.converter import ConvertResult
 
         if options:  # (sampler=, max_leaf=, ...: each meant something of an octree only)
             raise InputError(f"{out}: {', '.join(sorted(options))}: options of an octree, not of a plain {out.suffix[1:].upper()} file")
-        check_output(out, overwrite)
+        check_point_file_output(out, overwrite)
         self._check_loaded("save it")
         t0 = time.perf_counter()
         ply = out.suffix.lower() == ".ply"
