@@ -126,7 +126,9 @@ def open(*paths, progressive: bool = False, **options):
 
     Only some points are read with ``classes=[2, 6]`` (those LAS classes), ``drop_classes=[7, 18]``
     (all but those: noise) and ``clip=(xmin, ymin, xmax, ymax)`` (any z) or ``(xmin, ymin, zmin,
-    xmax, ymax, zmax)``, in the files' coordinates, bounds included; a point must pass all those given.
+    xmax, ymax, zmax)``, in the files' coordinates, bounds included, and ``corridor=(x1, y1, x2, y2,
+    width)``: within width / 2 of the line (x1, y1)-(x2, y2) and between its ends, any z (what
+    ``gigapoint.section`` draws); a point must pass all those given.
 
     Paths may also come as one list or tuple: ``gp.open([a, b])`` is ``gp.open(a, b)``."""
     from .errors import InputError, check_switch
@@ -138,7 +140,7 @@ def open(*paths, progressive: bool = False, **options):
     check_switch("progressive", progressive, "open")  # (chunked= is open_cloud's to check)
     recursive = options.pop("recursive", False)
     check_switch("recursive", recursive, "open")
-    keep = point_filter(options.pop("classes", None), options.pop("drop_classes", None), options.pop("clip", None), "open")
+    keep = point_filter(options.pop("classes", None), options.pop("drop_classes", None), options.pop("clip", None), "open", corridor=options.pop("corridor", None))
     if keep is not None:  # (an octree was drawn whole, without a word)
         refuse_octrees(paths, f"the filter ({keep.describe()}) applies to point files")
     if recursive:
@@ -172,7 +174,7 @@ def open(*paths, progressive: bool = False, **options):
     if unknown:  # a TypeError naming the internal open_cloud() before
         raise InputError(
             f"open: unknown option(s) {', '.join(unknown)}; it takes {', '.join(known)}, recursive=True, "
-            "progressive=True (with memory_limit=), classes=, drop_classes=, clip="
+            "progressive=True (with memory_limit=), classes=, drop_classes=, clip=, corridor="
         )
 
     return open_cloud(*paths, point_filter=keep, **options)
@@ -186,6 +188,8 @@ _LAZY = {
     "estimate_normals": ("gigapoint.render.normals", "estimate_normals"),
     "convert": ("gigapoint.lod.convert", "convert"),
     "LiveCloud": ("gigapoint.live", "LiveCloud"),
+    "section": ("gigapoint.cross_section", "section"),
+    "Section": ("gigapoint.cross_section", "Section"),
 }
 
 
@@ -216,6 +220,7 @@ __all__ = [
     "PointCloud",
     "RenderSettings",
     "RenderStats",
+    "Section",
     "Viewer",
     "__version__",
     "convert",
@@ -228,4 +233,5 @@ __all__ = [
     "render_flythrough",
     "render_frame",
     "render_turntable",
+    "section",
 ]

@@ -6,5 +6,6 @@ from . import (
     convert_cmd,  # noqa: F401
     info_cmd,  # noqa: F401
     render_cmd,  # noqa: F401
+    section_cmd,  # noqa: F401
     view_cmd,  # noqa: F401
 )

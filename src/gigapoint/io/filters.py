@@ -1,5 +1,6 @@
-"""Read-time point filters: keep or drop LAS classes, keep a clip box (PDAL's filters.range,
-LAStools' -keep_class, -drop_class, -keep_xy).
+"""Read-time point filters: keep or drop LAS classes, keep a clip box or a corridor along a line
+(PDAL's filters.range and filters.crop, LAStools' -keep_class, -drop_class, -keep_xy; the corridor
+is what a cross-section draws, ``gigapoint section``).
 
 One ``PointFilter`` is made from the options (``point_filter``: every bad value a one-line
 error before anything is read) and applied to each chunk right after its reader gives it, by
@@ -20,10 +21,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.chunk import PointChunk
-from ..errors import EmptyCloudError, InputError, is_whole_number
+from ..errors import EmptyCloudError, InputError, is_real, is_whole_number
 
 #: The option names as Python's keywords and the CLI's options say them
-PYTHON_NAMES = {"classes": "classes=", "drop_classes": "drop_classes=", "clip": "clip="}
+PYTHON_NAMES = {"classes": "classes=", "drop_classes": "drop_classes=", "clip": "clip=", "corridor": "corridor="}
 CLI_NAMES = {"classes": "--classes ", "drop_classes": "--drop-classes ", "clip": "--clip "}
 
 
@@ -31,36 +32,46 @@ CLI_NAMES = {"classes": "--classes ", "drop_classes": "--drop-classes ", "clip":
 class PointFilter:
     """Which points of a chunk are kept: those of ``classes`` (empty: any), not of
     ``drop_classes``, inside ``clip`` ((xmin, ymin, xmax, ymax): any z, or (xmin, ymin, zmin,
-    xmax, ymax, zmax); bounds included; empty: anywhere). ``read``/``passed``: points seen and
-    kept so far (one operation's: ``fresh`` gives a copy at zero)."""
+    xmax, ymax, zmax); bounds included; empty: anywhere), inside ``corridor`` ((x1, y1, x2, y2,
+    width): at most width / 2 from the segment (x1, y1)-(x2, y2), measured square to it in x and
+    y, and between its ends; any z; empty: anywhere). ``read``/``passed``: points seen and kept
+    so far (one operation's: ``fresh`` gives a copy at zero)."""
 
     classes: tuple[int, ...] = ()
     drop_classes: tuple[int, ...] = ()
     clip: tuple[float, ...] = ()
+    corridor: tuple[float, ...] = ()
     read: int = field(default=0, compare=False)
     passed: int = field(default=0, compare=False)
 
     def fresh(self) -> PointFilter:
         """This filter with its counts at zero (a pass of a read that reads the files again)."""
-        return PointFilter(self.classes, self.drop_classes, self.clip)
+        return PointFilter(self.classes, self.drop_classes, self.clip, self.corridor)
 
     def describe(self) -> str:
-        """'classes 2, 6; clip 1, 2, 3, 4': what the messages say of it."""
+        """'classes 2, 6; clip 1, 2, 3, 4; corridor 0, 0 to 10, 0, width 2': what the messages say of it."""
         parts = [
             f"{label} {', '.join(f'{v:.15g}' for v in values)}"
             for label, values in (("classes", self.classes), ("drop classes", self.drop_classes), ("clip", self.clip))
             if values
         ]
+        if self.corridor:
+            x1, y1, x2, y2, width = self.corridor
+            parts.append(f"corridor {x1:.15g}, {y1:.15g} to {x2:.15g}, {y2:.15g}, width {width:.15g}")
         return "; ".join(parts)
 
     def as_spec(self) -> dict:
         """JSON-able, as the keywords of ``point_filter`` (and gp.open's, gp.convert's; None: not
-        given): for a conversion's fingerprint, its Dask tasks (``from_spec``), the CLI's calls."""
-        return {name: list(values) or None for name, values in (("classes", self.classes), ("drop_classes", self.drop_classes), ("clip", self.clip))}
+        given): for a conversion's fingerprint, its Dask tasks (``from_spec``), the CLI's calls. A
+        corridor is there only where given (a conversion's fingerprint without one is as before)."""
+        spec = {name: list(values) or None for name, values in (("classes", self.classes), ("drop_classes", self.drop_classes), ("clip", self.clip))}
+        if self.corridor:
+            spec["corridor"] = list(self.corridor)
+        return spec
 
     @classmethod
     def from_spec(cls, spec: dict | None) -> PointFilter | None:
-        return None if spec is None else cls(*(tuple(spec[name] or ()) for name in ("classes", "drop_classes", "clip")))
+        return None if spec is None else cls(*(tuple(spec.get(name) or ()) for name in ("classes", "drop_classes", "clip", "corridor")))
 
     def kept(self, chunk: PointChunk, path) -> PointChunk:
         """The points of ``chunk`` (read from ``path``) the filter keeps, counted."""
@@ -78,6 +89,10 @@ class PointFilter:
             lo, hi = np.array(self.clip[:axes]), np.array(self.clip[axes:])
             xyz = chunk.xyz[:, :axes]
             keep &= np.all((xyz >= lo) & (xyz <= hi), axis=1)  # (NaN positions fail both: left out)
+        if self.corridor:
+            distance, offset = along_and_across(chunk.xyz, self.corridor[:4])
+            length, half = math.dist(self.corridor[:2], self.corridor[2:4]), self.corridor[4] / 2
+            keep &= (distance >= 0) & (distance <= length) & (np.abs(offset) <= half)  # (NaN: left out)
         n = int(np.count_nonzero(keep))
         self.read += len(chunk)
         self.passed += n
@@ -99,13 +114,16 @@ class PointFilter:
             raise EmptyCloudError(f"{label}: no point passes the filter ({self.describe()}): {self.read:,} points read")
 
     def clipped_bounds(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds ``lo``..``hi`` (a header's) cut to the clip box: where the kept points can be."""
-        if not self.clip:
-            return lo, hi
-        axes = len(self.clip) // 2
+        """Bounds ``lo``..``hi`` (a header's) cut to the clip box and the corridor's box: where the kept points can be."""
         lo, hi = np.array(lo, np.float64), np.array(hi, np.float64)
-        lo[:axes] = np.maximum(lo[:axes], self.clip[:axes])
-        hi[:axes] = np.minimum(hi[:axes], self.clip[axes:])
+        if self.clip:
+            axes = len(self.clip) // 2
+            lo[:axes] = np.maximum(lo[:axes], self.clip[:axes])
+            hi[:axes] = np.minimum(hi[:axes], self.clip[axes:])
+        if self.corridor:
+            ends, half = np.reshape(self.corridor[:4], (2, 2)), self.corridor[4] / 2
+            lo[:2] = np.maximum(lo[:2], ends.min(axis=0) - half)
+            hi[:2] = np.minimum(hi[:2], ends.max(axis=0) + half)
         return lo, hi
 
 
@@ -114,12 +132,25 @@ def filtered(chunks: Iterable[PointChunk], path, point_filter: PointFilter | Non
     return chunks if point_filter is None else point_filter.apply(chunks, path)
 
 
-def point_filter(classes=None, drop_classes=None, clip=None, where: str = "open", names: dict = PYTHON_NAMES, shown: dict | None = None) -> PointFilter | None:
+def along_and_across(xyz: np.ndarray, line) -> tuple[np.ndarray, np.ndarray]:
+    """(distance, offset) of points ``xyz`` from ``line`` = (x1, y1, x2, y2), in x and y: how far
+    along the line from its start (negative before it), and how far square to it, positive to
+    the left of the line looking from its start to its end."""
+    x1, y1, x2, y2 = line
+    length = math.dist((x1, y1), (x2, y2))
+    ux, uy = (x2 - x1) / length, (y2 - y1) / length
+    dx, dy = xyz[:, 0] - x1, xyz[:, 1] - y1
+    return dx * ux + dy * uy, dy * ux - dx * uy
+
+
+def point_filter(classes=None, drop_classes=None, clip=None, where: str = "open", names: dict = PYTHON_NAMES, shown: dict | None = None,
+                 corridor=None) -> PointFilter | None:  # fmt: skip
     """The PointFilter of the options given (None for none), or a one-line InputError naming the
     bad one (``where``: the operation, ``names``: how the options are spelt, ``PYTHON_NAMES`` or
     ``CLI_NAMES``; ``shown``: the values as given, where not their repr): a class outside 0..255
     or not an integer, a class both kept and dropped, a clip box of other than 4 or 6 numbers,
-    NaN or infinite, or with a min above its max."""
+    NaN or infinite, or with a min above its max, a corridor that is not 5 finite numbers, whose
+    line has no length or whose width is not above 0 (``corridor_of``'s checks)."""
     given = {"classes": classes, "drop_classes": drop_classes, "clip": clip}
     label = {name: f"{where}: {names[name]}{(shown or {}).get(name) or repr(value)}" for name, value in given.items()}
     keep = _classes(classes, label["classes"])
@@ -128,9 +159,10 @@ def point_filter(classes=None, drop_classes=None, clip=None, where: str = "open"
     if both:
         raise InputError(f"{where}: {names['classes'].strip()} and {names['drop_classes'].strip()} both name class {', '.join(map(str, both))}; keep it or drop it")
     box = _clip(clip, label["clip"])
-    if not (keep or drop or box):
+    lane = () if corridor is None else _corridor(corridor, f"{where}: {names['corridor']}{corridor!r}")
+    if not (keep or drop or box or lane):
         return None
-    return PointFilter(keep, drop, box)
+    return PointFilter(keep, drop, box, lane)
 
 
 def _classes(value, label: str) -> tuple[int, ...]:
@@ -168,6 +200,29 @@ def _clip(value, label: str) -> tuple[float, ...]:
     return tuple(float(v) for v in values)
 
 
+def _corridor(value, label: str) -> tuple[float, ...]:
+    """``corridor`` (x1, y1, x2, y2, width) checked as ``corridor_of`` does, with ``label`` naming it."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, Iterable) or len(values := list(value)) != 5:
+        raise InputError(f"{label}: a corridor is x1, y1, x2, y2, width (a line's two ends and the corridor's width)")
+    return corridor_of(values[:4], values[4], label, label)
+
+
+def corridor_of(line, width, line_label: str, width_label: str) -> tuple[float, float, float, float, float]:
+    """(x1, y1, x2, y2, width) of a corridor along ``line`` (its two ends, x and y) ``width`` wide,
+    or a one-line InputError starting with the label of the bad value: a line of other than 4
+    finite numbers or whose ends are one point, a width that is not a finite number above 0."""
+    ends = None if isinstance(line, (str, bytes)) or not isinstance(line, Iterable) else list(line)
+    if ends is None or len(ends) != 4:
+        raise InputError(f"{line_label}: a line is x1, y1, x2, y2 (its two ends)")
+    if not all(is_real(v) for v in ends):
+        raise InputError(f"{line_label}: a line's ends are finite numbers")
+    if ends[:2] == ends[2:]:
+        raise InputError(f"{line_label}: the line's two ends are one point; it has no direction")
+    if not (is_real(width) and width > 0):
+        raise InputError(f"{width_label}: the corridor's width must be a finite number above 0")
+    return (*(float(v) for v in ends), float(width))
+
+
 def cli_point_filter(classes: str | None, drop_classes: str | None, clip: str | None, where: str = "filter") -> PointFilter | None:
     """``point_filter`` of the CLI's ``--classes 2,6``, ``--drop-classes 7,18`` and ``--clip
     x0,y0,x1,y1``: comma-separated numbers (one that is not a number: a one-line error)."""
@@ -186,4 +241,4 @@ def cli_point_filter(classes: str | None, drop_classes: str | None, clip: str | 
     return point_filter(keep, drop, box, where, CLI_NAMES, shown)
 
 
-__all__ = ["PointFilter", "cli_point_filter", "filtered", "point_filter"]
+__all__ = ["PointFilter", "along_and_across", "cli_point_filter", "corridor_of", "filtered", "point_filter"]

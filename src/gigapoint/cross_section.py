@@ -1,0 +1,187 @@
+"""Cross-sections (Potree's profile tool, CloudCompare's cross-section): the points of a thin
+corridor along a line, seen from the side, to read the heights of a road, a wall, a ditch.
+
+``section`` reads only the corridor's points (the read-time filter's ``corridor``,
+io/filters.py: chunk by chunk, on every read path) and gives them as distances along the line,
+offsets square to it and heights (``Section``: the CSV ``gigapoint section --csv`` writes), and
+draws them with the renderer through an orthographic camera looking across the line
+(``Camera.section``), on one scale on both axes unless a vertical exaggeration is asked for.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from .core.chunk import PointChunk
+from .core.cloud import PointCloud, build_cloud
+from .errors import CameraError, InputError, is_real
+from .io.filters import along_and_across, corridor_of, point_filter
+from .render import Camera, Frame, RenderSettings, render_frame
+from .render.camera import MAX_IMAGE_SIDE, image_side
+
+BORDER = 1  # pixels around the corridor's points: a point on the frame's edge is not lost to rounding
+DEFAULT_WIDTH = 1920  # an image's width where neither a scale nor a size is given
+
+
+@dataclass(frozen=True)
+class Section:
+    """The corridor's points (``cloud``, in the files' coordinates) along ``line`` (x1, y1, x2, y2),
+    ``width`` wide. ``distance`` (from the line's start, along it), ``offset`` (square to it,
+    positive to the left looking from the start to the end), ``z`` and ``classification`` (None
+    where the points have none) are rows sorted by distance; ``index``: each row's point in ``cloud``."""
+
+    cloud: PointCloud
+    line: tuple[float, float, float, float]
+    width: float
+
+    @property
+    def length(self) -> float:
+        return math.dist(self.line[:2], self.line[2:])
+
+    @cached_property
+    def _rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        xyz = self.cloud.positions()
+        distance, offset = along_and_across(xyz, self.line)
+        order = np.argsort(distance, kind="stable")
+        return order, distance[order], offset[order], xyz[order, 2]
+
+    @property
+    def index(self) -> np.ndarray:
+        return self._rows[0]
+
+    @property
+    def distance(self) -> np.ndarray:
+        return self._rows[1]
+
+    @property
+    def offset(self) -> np.ndarray:
+        return self._rows[2]
+
+    @property
+    def z(self) -> np.ndarray:
+        return self._rows[3]
+
+    @property
+    def classification(self) -> np.ndarray | None:
+        if "classification" not in self.cloud.attributes:
+            return None
+        return self.cloud.attributes.at("classification", self.index)
+
+    def write_csv(self, path) -> None:
+        """The rows as ``distance_along,offset,z[,classification]`` (a header line, then a point a
+        line, by distance), written atomically."""
+        from .atomic import atomic_write
+
+        columns = [self.distance, self.offset, self.z]
+        header, formats = "distance_along,offset,z", ["%.6f"] * 3
+        if self.classification is not None:
+            columns.append(self.classification)
+            header, formats = header + ",classification", [*formats, "%d"]
+        table = np.column_stack(columns)
+        atomic_write(path, lambda tmp: np.savetxt(tmp, table, fmt=formats, delimiter=",", header=header, comments=""))
+
+    def camera(self, scale=None, size=None, vertical_exaggeration=1.0) -> Camera:
+        """The camera of the section's image (``Camera.section``): the line's whole length across,
+        the points' heights (times ``vertical_exaggeration``) up, with a ``BORDER`` pixel border.
+        ``scale``: pixels per unit of the cloud (the image sized to fit); ``size`` (width, height):
+        that image, the section as large as fits, centred; neither: ``DEFAULT_WIDTH`` pixels
+        wide, as tall as the section is at that scale."""
+        exaggeration = _exaggeration(vertical_exaggeration)
+        z_lo, z_hi = float(self.z.min()) * exaggeration, float(self.z.max()) * exaggeration
+        span = (self.length, z_hi - z_lo)  # across and up, in the image's units
+        room = 2 * BORDER + 1  # (the last pixel holds the points on the right and bottom edges)
+        if scale is not None and size is not None:
+            raise InputError("section: give scale= or size=, not both (a size sets the scale)")
+        if scale is not None:
+            if not (is_real(scale) and scale > 0):
+                raise CameraError(f"section: scale (pixels per unit) must be a number > 0, got {scale!r}")
+            pixel = 1.0 / scale
+            sides = [math.floor(s / pixel + 1e-9) + room for s in span]  # (1e-9: L / (L / n) is n, not n - 1, as floor takes it)
+            if max(sides) > MAX_IMAGE_SIDE:
+                fits = (MAX_IMAGE_SIDE - room) / max(span)
+                raise CameraError(f"section: scale {scale:g} makes a {sides[0]:,}x{sides[1]:,} image, over {MAX_IMAGE_SIDE:,} pixels a side: a scale of {fits:.3g} or less fits")
+        else:  # the largest pixels that fit the section into the size (a default one: as tall as it needs, within the largest image)
+            fit = (DEFAULT_WIDTH, MAX_IMAGE_SIDE) if size is None else _size(size)
+            pixel = max(s / (f - room) for s, f in zip(span, fit))
+            sides = [math.floor(s / pixel + 1e-9) + room for s in span]  # (1e-9: L / (L / n) is n, not n - 1, as floor takes it)
+        image = sides if size is None else _size(size)
+        # the points' columns and rows centred in the image (whole pixels: columns stay floor(distance / pixel) + a margin)
+        margin = [BORDER + (i - s) // 2 for i, s in zip(image, sides)]
+        return Camera.section(self.line, self.width, (z_lo, z_hi), pixel, left=-margin[0] * pixel, top=z_hi + margin[1] * pixel,
+                              width=image[0], height=image[1])  # fmt: skip
+
+    def render_frame(self, scale=None, size=None, vertical_exaggeration=1.0, settings=None, **setting_overrides) -> Frame:
+        """The section drawn (``render_frame`` through ``camera``'s camera): settings as ``render``
+        takes them (``color_mode="classification"``, ``point_size=2``), with 30-bit positions
+        (points in their exact pixels, as ``render --gsd``'s)."""
+        camera = self.camera(scale, size, vertical_exaggeration)
+        settings = RenderSettings.of(settings)
+        if setting_overrides:
+            settings = settings.given(**setting_overrides)
+        return render_frame(self._drawn(_exaggeration(vertical_exaggeration)), camera, settings.replace(adaptive_precision=False))
+
+    def render(self, scale=None, size=None, vertical_exaggeration=1.0, settings=None, **setting_overrides):
+        """(H, W, 4) uint8 image of the section (``render_frame``'s)."""
+        return self.render_frame(scale, size, vertical_exaggeration, settings, **setting_overrides).image
+
+    def _drawn(self, exaggeration: float) -> PointCloud:
+        """The cloud drawn: the corridor's, its heights times ``exaggeration`` (an orthographic
+        camera has one scale: the points are stretched instead)."""
+        if exaggeration == 1.0:
+            return self.cloud
+
+        def stretched(chunk: PointChunk) -> PointChunk:
+            scale = None if chunk.scale is None else (chunk.scale[0], chunk.scale[1], chunk.scale[2] * exaggeration)
+            return PointChunk(chunk.xyz * (1.0, 1.0, exaggeration), chunk.rgba, chunk.attributes, scale=scale)
+
+        return build_cloud(map(stretched, self.cloud.chunks()), name=self.cloud.name, colors="rgba")  # (its colours as the cloud holds them)
+
+
+def _exaggeration(value) -> float:
+    if not (is_real(value) and value > 0):
+        raise CameraError(f"section: vertical_exaggeration must be a number > 0 (1: heights at the scale of distances), got {value!r}")
+    return float(value)
+
+
+def _size(size) -> tuple[int, int]:
+    """(width, height) of an image size given as a pair, each side at least 2 * BORDER + 2 pixels."""
+    try:
+        width, height = size
+    except (TypeError, ValueError):
+        raise CameraError(f"section: size must be (width, height) in pixels, got {size!r}") from None
+    width, height = image_side("width", width), image_side("height", height)
+    if min(width, height) < 2 * BORDER + 2:
+        raise CameraError(f"section: an image of {width}x{height} pixels has no room for a section; give at least {2 * BORDER + 2} a side")
+    return width, height
+
+
+def section(source, line, width, classes=None, drop_classes=None) -> Section:
+    """The cross-section of ``source`` (a path, a list of paths, as ``gigapoint.open`` takes them,
+    or a PointCloud) along ``line`` = (x1, y1, x2, y2), in the cloud's coordinates: the points
+    within ``width`` / 2 of the line, square to it in x and y, between its ends, any z (only those
+    are read from files: ``gigapoint.open(..., corridor=)``); ``classes``/``drop_classes``: only
+    those LAS classes, or all but those. Bad values are one-line InputErrors before anything is
+    read; a corridor that holds no point an EmptyCloudError naming the files.
+
+    ``Section.distance``, ``.offset``, ``.z``, ``.classification``: the points along the line;
+    ``.render(scale=pixels per unit or size=(w, h), vertical_exaggeration=1, **settings)``: the image."""
+    lane = corridor_of(line, width, f"section: line={line!r}", f"section: width={width!r}")
+    if isinstance(source, PointCloud):
+        keep = point_filter(classes, drop_classes, where="section", corridor=lane)
+        kept = list(keep.apply(source.chunks(), source.name))  # (the corridor's points only)
+        keep.check_passed(source.name)
+        cloud = build_cloud(kept, name=source.name, colors="rgba")  # (its colours as the cloud holds them)
+    else:  # only the corridor's points are read (an octree is refused: a filter applies to point files)
+        from . import open as open_points
+
+        paths = [source] if isinstance(source, (str, os.PathLike)) else source
+        cloud = open_points(paths, classes=classes, drop_classes=drop_classes, corridor=lane)
+    return Section(cloud, lane[:4], lane[4])
+
+
+__all__ = ["Section", "section"]
