@@ -87,32 +87,35 @@ class Section:
 
     def camera(self, scale=None, size=None, vertical_exaggeration=1.0) -> Camera:
         """The camera of the section's image (``Camera.section``): the line's whole length across,
-        the points' heights (times ``vertical_exaggeration``) up, with a ``BORDER`` pixel border.
+        the points' heights (times ``vertical_exaggeration``) up, with a ``BORDER`` pixel border;
+        pixel edges on whole multiples of the pixel's size from the line's start and from z 0.
         ``scale``: pixels per unit of the cloud (the image sized to fit); ``size`` (width, height):
         that image, the section as large as fits, centred; neither: ``DEFAULT_WIDTH`` pixels
         wide, as tall as the section is at that scale."""
         exaggeration = _exaggeration(vertical_exaggeration)
         z_lo, z_hi = float(self.z.min()) * exaggeration, float(self.z.max()) * exaggeration
-        span = (self.length, z_hi - z_lo)  # across and up, in the image's units
-        room = 2 * BORDER + 1  # (the last pixel holds the points on the right and bottom edges)
         if scale is not None and size is not None:
             raise InputError("section: give scale= or size=, not both (a size sets the scale)")
+
+        def needed(pixel: float) -> tuple[int, int]:
+            """Pixels across and up that hold every point at ``pixel`` units a pixel, borders included."""
+            return (math.floor(self.length / pixel) + 1 + 2 * BORDER, math.ceil(z_hi / pixel) - math.floor(z_lo / pixel) + 1 + 2 * BORDER)
+
         if scale is not None:
             if not (is_real(scale) and scale > 0):
                 raise CameraError(f"section: scale (pixels per unit) must be a number > 0, got {scale!r}")
             pixel = 1.0 / scale
-            sides = [math.floor(s / pixel + 1e-9) + room for s in span]  # (1e-9: L / (L / n) is n, not n - 1, as floor takes it)
-            if max(sides) > MAX_IMAGE_SIDE:
-                fits = (MAX_IMAGE_SIDE - room) / max(span)
-                raise CameraError(f"section: scale {scale:g} makes a {sides[0]:,}x{sides[1]:,} image, over {MAX_IMAGE_SIDE:,} pixels a side: a scale of {fits:.3g} or less fits")
-        else:  # the largest pixels that fit the section into the size (a default one: as tall as it needs, within the largest image)
-            fit = (DEFAULT_WIDTH, MAX_IMAGE_SIDE) if size is None else _size(size)
-            pixel = max(s / (f - room) for s, f in zip(span, fit))
-            sides = [math.floor(s / pixel + 1e-9) + room for s in span]  # (1e-9: L / (L / n) is n, not n - 1, as floor takes it)
-        image = sides if size is None else _size(size)
-        # the points' columns and rows centred in the image (whole pixels: columns stay floor(distance / pixel) + a margin)
-        margin = [BORDER + (i - s) // 2 for i, s in zip(image, sides)]
-        return Camera.section(self.line, self.width, (z_lo, z_hi), pixel, left=-margin[0] * pixel, top=z_hi + margin[1] * pixel,
+            image = needed(pixel)
+            if max(image) > MAX_IMAGE_SIDE:
+                fits = (MAX_IMAGE_SIDE - 2 * BORDER - 2) / max(self.length, z_hi - z_lo)
+                raise CameraError(f"section: scale {scale:g} makes a {image[0]:,}x{image[1]:,} image, over {MAX_IMAGE_SIDE:,} pixels a side: a scale of {fits:.3g} or less fits")
+        else:  # the largest pixel that fits the section into the size (1e-9: division's rounding never needs one more)
+            fit = (DEFAULT_WIDTH, MAX_IMAGE_SIDE) if size is None else check_size(size)
+            pixel = max(self.length / (fit[0] - 2 * BORDER - 1), (z_hi - z_lo) / (fit[1] - 2 * BORDER - 2)) * (1 + 1e-9)
+            image = (fit[0], needed(pixel)[1]) if size is None else fit
+        # the points centred in the image by whole pixels (so the pixel edges stay on the grid)
+        margin = [BORDER + (i - n) // 2 for i, n in zip(image, needed(pixel))]
+        return Camera.section(self.line, self.width, pixel, left=-margin[0] * pixel, top=(math.ceil(z_hi / pixel) + margin[1]) * pixel,
                               width=image[0], height=image[1])  # fmt: skip
 
     def render_frame(self, scale=None, size=None, vertical_exaggeration=1.0, settings=None, **setting_overrides) -> Frame:
@@ -148,15 +151,15 @@ def _exaggeration(value) -> float:
     return float(value)
 
 
-def _size(size) -> tuple[int, int]:
-    """(width, height) of an image size given as a pair, each side at least 2 * BORDER + 2 pixels."""
+def check_size(size) -> tuple[int, int]:
+    """(width, height) of an image size given as a pair, each side at least 2 * BORDER + 3 pixels."""
     try:
         width, height = size
     except (TypeError, ValueError):
         raise CameraError(f"section: size must be (width, height) in pixels, got {size!r}") from None
     width, height = image_side("width", width), image_side("height", height)
-    if min(width, height) < 2 * BORDER + 2:
-        raise CameraError(f"section: an image of {width}x{height} pixels has no room for a section; give at least {2 * BORDER + 2} a side")
+    if min(width, height) < 2 * BORDER + 3:
+        raise CameraError(f"section: an image of {width}x{height} pixels has no room for a section; give at least {2 * BORDER + 3} a side")
     return width, height
 
 
@@ -184,4 +187,4 @@ def section(source, line, width, classes=None, drop_classes=None) -> Section:
     return Section(cloud, lane[:4], lane[4])
 
 
-__all__ = ["Section", "section"]
+__all__ = ["Section", "check_size", "section"]

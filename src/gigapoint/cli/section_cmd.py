@@ -49,6 +49,7 @@ def section(
     """Draw a cross-section: the points of a corridor along a line, seen from the side."""
     import gigapoint as gp
 
+    from ..cross_section import check_size
     from ..io.filters import corridor_of
 
     check_output(output, overwrite)
@@ -60,7 +61,7 @@ def section(
         raise GigapointError("section: --scale and --size: give one (a size sets the scale)")
     if scale is not None and not (math.isfinite(scale) and scale > 0):
         raise GigapointError(f"section: --scale must be a number > 0 (pixels per unit), got {scale:g}")
-    image_size = None if size is None else tuple(numbers("--size", size.lower(), 2, int, "x"))
+    image_size = None if size is None else check_size(numbers("--size", size.lower(), 2, int, "x"))
     if not (math.isfinite(vertical_exaggeration) and vertical_exaggeration > 0):
         raise GigapointError(f"section: --vertical-exaggeration must be a number > 0, got {vertical_exaggeration:g}")
     if settings.stereo != "none":  # (two eyes of an orthographic side view see the same)

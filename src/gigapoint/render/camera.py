@@ -344,33 +344,26 @@ class Camera:
         )  # fmt: skip
 
     @classmethod
-    def section(cls, line, corridor_width, z_range, pixel_size, left: float = 0.0, top: float | None = None, width=None, height=None) -> Camera:
+    def section(cls, line, corridor_width, pixel_size, left: float, top: float, width: int, height: int) -> Camera:
         """An orthographic camera looking horizontally across the corridor ``corridor_width`` wide
         along ``line`` = (x1, y1, x2, y2): a cross-section, the line's start on the left, +z up,
         each pixel ``pixel_size`` a side on both axes (a section must not distort heights). It
         looks from the line's right (looking from its start to its end) towards its left.
 
-        Image column ``floor((distance - left) / pixel_size)`` holds the points ``distance`` along
-        the line from its start, row ``floor((top - z) / pixel_size)`` those at height ``z``:
-        ``left`` is the distance at the image's left edge, ``top`` the height at its top edge
-        (default: ``z_range``'s max). ``width`` x ``height``: by default just enough pixels for the
-        line's length and ``z_range`` (the points on the right and bottom edges in the last ones)."""
+        Image column ``floor((distance - left) / pixel_size)`` of its ``width`` holds the points
+        ``distance`` along the line from its start, row ``floor((top - z) / pixel_size)`` of its
+        ``height`` those at height ``z`` (``gigapoint.Section.camera`` chooses them to frame a
+        section's points)."""
         x1, y1, x2, y2 = (float(v) for v in line)
         length = math.dist((x1, y1), (x2, y2))
-        for name, v in (("pixel size", pixel_size), ("corridor width", corridor_width), ("line length", length)):
+        for name, v in (("pixel size", pixel_size), ("corridor width", corridor_width), ("line's length", length)):
             if not (is_real(v) and v > 0):
                 raise CameraError(f"section: the {name} must be a number > 0, got {v!r}")
-        z_lo, z_hi = (float(v) for v in z_range)
-        top = z_hi if top is None else float(top)
-        width = math.floor((length - left) / pixel_size) + 1 if width is None else width
-        height = math.floor((top - z_lo) / pixel_size) + 1 if height is None else height
-        if max(width, height) > MAX_IMAGE_SIDE:
-            raise CameraError(f"section: {width:,}x{height:,} pixels, over {MAX_IMAGE_SIDE:,} a side: take larger pixels")
         along = np.array([x2 - x1, y2 - y1, 0.0]) / length
         right_of_line = np.array([along[1], -along[0], 0.0])
         centre = np.array([x1, y1, top - height * pixel_size / 2]) + along * (left + width * pixel_size / 2)
-        # the eye half a corridor outside the corridor's right edge: every point between depths
-        # width / 2 and 3 width / 2, inside near and far whatever the cloud's (axis-aligned) box is
+        # the eye half a corridor outside the corridor's right edge: every point lies between
+        # depths width / 2 and 3 width / 2, inside near and far whatever the cloud's (axis-aligned) box
         eye = centre + right_of_line * corridor_width
         return cls(
             eye=tuple(eye), target=tuple(centre), up=(0.0, 0.0, 1.0), width=width, height=height, projection="orthographic",
