@@ -47,6 +47,11 @@ class PointChunk:
     def __len__(self) -> int:
         return len(self.xyz)
 
+    def subset(self, rows: np.ndarray) -> PointChunk:
+        """The points ``rows`` (a mask or indices) selects, with every attribute, the scale and colour bits."""
+        attributes = {a: v[rows] for a, v in self.attributes.items()}
+        return PointChunk(self.xyz[rows], self.rgba[rows], attributes, scale=self.scale, color_bits=self.color_bits)
+
 
 def join_chunks(chunks: list[PointChunk]) -> PointChunk:
     """One chunk of ``chunks``' points, in order, with the first's attributes (every chunk has them)."""

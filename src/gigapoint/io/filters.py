@@ -98,8 +98,7 @@ class PointFilter:
         self.passed += n
         if n == len(chunk):
             return chunk
-        attributes = {a: v[keep] for a, v in chunk.attributes.items()}
-        return PointChunk(chunk.xyz[keep], chunk.rgba[keep], attributes, scale=chunk.scale, color_bits=chunk.color_bits)  # (a save writes the colours back so)
+        return chunk.subset(keep)  # (its colour bits: a save writes the colours back so)
 
     def apply(self, chunks: Iterable[PointChunk], path) -> Iterator[PointChunk]:
         """``chunks`` of ``path`` with only the points kept; a chunk left without any is not given."""
