@@ -153,3 +153,102 @@ def test_invalid_points_are_skipped_with_a_warning(tmp_path):
     assert (res.points, res.skipped) == (2, 1)
     off = np.abs(np.column_stack([written.x, written.y, written.z]) - xyz[[0, 2]])
     assert np.all(off <= written.header.scales / 2)  # (on the grid made from their bounds)
+
+
+def _cells_tiles(tmp_path):
+    """Two LAS tiles (millimetre grid, offset -4 so cells -4..3 on x and y) of 6 points in each of
+    8 x 8 x 3 one-unit cells, in shuffled order, with colours, classes, intensities and times all
+    distinct enough to tell the points apart; returns their paths and the points' cells in file order."""
+    rng = np.random.default_rng(7)
+    cells = np.stack(np.meshgrid(np.arange(-4, 4), np.arange(-4, 4), np.arange(3), indexing="ij"), axis=-1).reshape(-1, 3)
+    cells = np.repeat(cells, 6, axis=0)
+    inside = rng.integers(0, 1000, cells.shape)  # millimetres inside the cell, its lower faces included
+    ints = (cells + [4, 4, 0]) * 1000 + inside  # (the offsets: x = X * 0.001 - 4, z = Z * 0.001)
+    order = rng.permutation(len(ints))
+    ints, cells = ints[order], cells[order]
+    paths = []
+    for k, rows in enumerate((slice(0, 700), slice(700, None))):
+        header = laspy.LasHeader(point_format=3, version="1.2")
+        header.scales, header.offsets = [0.001] * 3, [-4.0, -4.0, 0.0]
+        las = laspy.LasData(header)
+        las.X, las.Y, las.Z = (ints[rows, a].astype(np.int32) for a in range(3))
+        n = len(las.X)
+        las.red, las.green, las.blue = (rng.integers(0, 256, n).astype(np.uint16) * 257 for _ in range(3))  # (8-bit colours, as held)
+        las.classification = rng.integers(0, 32, n).astype(np.uint8)
+        las.intensity = rng.integers(0, 65536, n).astype(np.uint16)
+        las.gps_time = rng.uniform(0, 1e6, n)
+        paths.append(tmp_path / f"tile{k}.las")
+        las.write(str(paths[-1]))
+    return paths, cells
+
+
+def test_thin_keeps_the_first_point_of_each_occupied_cell_over_both_files_and_every_chunk(tmp_path):
+    paths, cells = _cells_tiles(tmp_path)
+    res = convert(paths, tmp_path / "thin.laz", thin=1.0, chunk_size=100)  # 12 chunks: a cell's points in several
+    first = np.sort(np.unique(cells, axis=0, return_index=True)[1])  # the first point of each cell, in file order
+    assert (res.points, res.thinned_from) == (8 * 8 * 3, 1152)
+    thin, sources = laspy.read(str(tmp_path / "thin.laz")), [laspy.read(str(p)) for p in paths]
+    for field in ("X", "Y", "Z", "red", "green", "blue", "classification", "intensity", "gps_time"):
+        assert np.array_equal(np.asarray(thin[field]), np.concatenate([np.asarray(s[field]) for s in sources])[first]), field
+    assert list(thin.header.scales) == [0.001] * 3 and list(thin.header.offsets) == [-4.0, -4.0, 0.0]
+    # one point a cell: its position's cell (the grid anchored at 0, not at the offset)
+    kept_cells = np.floor(np.column_stack([thin.x, thin.y, thin.z])).astype(np.int64)
+    assert np.array_equal(kept_cells, cells[first])
+
+
+def test_autzen_thinned_at_10_ft_keeps_one_point_of_each_occupied_cell_with_its_crs(cli, autzen_path, tmp_path):
+    src = laspy.read(str(autzen_path))
+    cells = np.floor(np.column_stack([src.x, src.y, src.z]) / 10)
+    first = np.sort(np.unique(cells, axis=0, return_index=True)[1])
+    out = tmp_path / "thin.laz"
+    rc, stdout, err = cli("convert", autzen_path, "-o", out, "--thin", "10", "-q")
+    assert rc == 0, err
+    assert stdout.startswith(f"{out}: {len(first):,} points (laz), thinned from 110,000, ")
+    written = laspy.read(str(out))
+    assert len(first) == 7_788
+    assert np.array_equal(written.X, src.X[first]) and np.array_equal(written.red, src.red[first])
+    assert _wkt(out) == _wkt(autzen_path) is not None
+
+
+@pytest.mark.parametrize("value", [0, -1.5, float("nan"), float("inf"), True, "10"])
+def test_a_bad_thin_spacing_is_refused_in_one_line(autzen_path, tmp_path, value):
+    with pytest.raises(InputError) as info:
+        convert(autzen_path, tmp_path / "thin.laz", thin=value)
+    assert str(info.value) == f"convert: thin={value!r}: the cells' edge is a number above 0, in the cloud's units"
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("typed", "message"),
+    [
+        ("0", "convert: --thin 0: the cells' edge is a number above 0, in the cloud's units"),
+        ("ten", "convert: --thin ten: the cells' edge is a number above 0, in the cloud's units"),
+        ("1e-9", "convert: --thin 1e-9: cells too small for the data's extent ({}: 1.18e+12 x 5.63e+11 x 1.14e+11 cells, over 2^63)"),
+    ],
+)
+def test_the_cli_refuses_a_bad_thin_spacing_before_reading_a_point(cli, autzen_path, tmp_path, monkeypatch, typed, message):
+    def no_read(*args):
+        raise AssertionError("read")
+
+    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.to_file"), "read_chunks", no_read)
+    rc, _, err = cli("convert", autzen_path, "-o", tmp_path / "thin.laz", "--thin", typed)
+    assert (rc, err.strip()) == (1, "error: " + message.format(autzen_path))
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_thin_of_points_beyond_the_keys_reach_names_their_file(tmp_path):
+    src = tmp_path / "pts.npy"  # (no header bounds: the keys sized around the first point)
+    np.save(src, np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [1e4, 0.0, 0.0]]))
+    assert convert(src, tmp_path / "ok.ply", thin=1.0).points == 2
+    with pytest.raises(InputError, match=r"^convert: thin=1e-06: cells too small for the data's extent \(.*pts\.npy: a point at 10000, 0, 0 is beyond the reach of 63-bit cell keys\)$"):
+        convert(src, tmp_path / "far.ply", thin=1e-6)
+    assert not (tmp_path / "far.ply").exists()
+
+
+@pytest.mark.parametrize("name", ["octree", "thin.copc.laz"])
+def test_thin_with_an_octree_output_is_refused(cli, autzen_path, tmp_path, name):
+    out = tmp_path / name
+    rc, _, err = cli("convert", autzen_path, "-o", out, "--thin", "10")
+    fmt = "copc" if name.endswith(".copc.laz") else "gigapoint"
+    assert (rc, err.strip()) == (1, f"error: {out}: --thin: an option of a plain .las, .laz or .ply file of the files' points, not of a {fmt} octree")
+    assert not out.exists()

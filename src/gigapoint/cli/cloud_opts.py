@@ -73,6 +73,20 @@ def filter_options(classes: str | None, drop_classes: str | None, clip: str | No
     return cli_point_filter(classes, drop_classes, clip, where)
 
 
+def thin_option(text: str | None, where: str) -> float | None:
+    """``--thin SPACING`` as a number (None without it); a bad one a one-line error naming the
+    option as typed, before anything is read."""
+    from ..io.thin import thin_spacing
+
+    if text is None:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = text  # (not a number: thin_spacing says what it takes)
+    return thin_spacing(value, f"{where}: --thin {text}")
+
+
 def subfolders_read(paths, recursive: bool) -> list:
     """The inputs as ``--recursive`` has them read: each folder by every point file below it."""
     from ..io import with_subfolders

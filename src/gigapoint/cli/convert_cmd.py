@@ -1,5 +1,5 @@
 """`gigapoint convert`: point cloud files -> an LOD octree (a gigapoint or Potree 2.0 directory, a COPC file),
-or one plain point file (.las, .laz, .ply) of their points merged and filtered."""
+or one plain point file (.las, .laz, .ply) of their points merged, filtered and thinned."""
 
 from __future__ import annotations
 
@@ -10,8 +10,9 @@ from pathlib import Path
 
 import typer
 
+from ..errors import InputError
 from .app import app
-from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, RecursiveOption, filter_options
+from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, RecursiveOption, filter_options, thin_option
 from .settings_opts import named_option
 
 
@@ -20,7 +21,7 @@ def convert(
     inputs: list[Path] = typer.Argument(..., readable=False, help="Input files or directories (every supported point cloud file inside, as for render). A quoted glob pattern ('tiles/*.laz', 'city/**/*.laz') stands for what it matches."),
     output: Path = typer.Option(
         ..., "-o", "--output", readable=False, help="Output directory (created; resumed when a conversion was interrupted), or the .copc.laz file of --format copc, "
-        "or one plain .las, .laz or .ply file of every point read (merged, filtered: no octree)."
+        "or one plain .las, .laz or .ply file of every point read (merged, filtered, thinned: no octree)."
     ),
     sampler: str | None = typer.Option(None, help="grid (first point per cell of a 128³ grid per node; the default) or poisson (minimum distance)."),
     memory_limit: str | None = typer.Option(None, "--memory-limit", help="Peak memory, e.g. 4G or 512M (default: a quarter of the RAM). An input that fits is converted in memory; a larger one is spilled to OUTPUT/.partial in partitions."),
@@ -51,8 +52,15 @@ def convert(
     classes: ClassesOption = None,
     drop_classes: DropClassesOption = None,
     clip: ClipOption = None,
+    thin: str | None = typer.Option(
+        None,
+        "--thin",
+        metavar="SPACING",
+        help="Plain point file only: keep one point per occupied cube cell of this edge, in the files' units "
+        "(cells from coordinate 0, so tiles thinned apart line up), the first point in the files' order, over all the files.",
+    ),
 ) -> None:
-    """Convert point clouds into a level-of-detail octree, out of core, resumable; or merge and filter them into one .las, .laz or .ply file (-o ground.laz)."""
+    """Convert point clouds into a level-of-detail octree, out of core, resumable; or merge, filter and thin them into one .las, .laz or .ply file (-o ground.laz)."""
     from ..lod import ConvertError
     from ..lod import convert as run
     from ..lod.convert.to_file import is_point_file_name
@@ -62,6 +70,7 @@ def convert(
     if dask is not None and workers is not None:
         raise ConvertError("--dask and --workers: give one of them (a running cluster's scheduler, or a local cluster's size)")
     point_filter = filter_options(classes, drop_classes, clip, "convert")  # its errors name the options, before a cluster starts
+    spacing = thin_option(thin, "convert")
     copc = format == "copc" or (format is None and is_copc_name(output))  # (convert's own default)
     to_file = format is None and is_point_file_name(output)  # one plain point file: nothing to watch, no cluster (convert refuses one)
     watch = work_dir(output) if copc else output  # a COPC output appears only once complete
@@ -88,10 +97,11 @@ def convert(
                 client=client,
                 recursive=recursive,
                 **(point_filter.as_spec() if point_filter is not None else {}),
+                thin=spacing,
                 on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
             )
-    except ConvertError as exc:  # 'max_leaf must be ...' named no option
-        raise named_option(exc, {"max_leaf": "--max-leaf"}) from None
+    except (ConvertError, InputError) as exc:  # 'max_leaf must be ...' named no option; thin=1e-09 said as typed
+        raise named_option(exc, {"max_leaf": "--max-leaf", f"convert: thin={spacing!r}": f"convert: --thin {thin}"}) from None
     except (KeyboardInterrupt, SystemExit):  # (Ctrl+C, SIGTERM) a bare "interrupted" left the user to guess whether OUT was lost
         if not to_file and OctreeDir(watch).read_state() is not None:
             print(f"{watch}: kept unfinished; run the same convert command again to resume it", file=sys.stderr)
@@ -99,7 +109,8 @@ def convert(
     resumed = (" (resumed)" if result.resumed else "") + (", in memory" if result.in_memory else "")
     skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
     if to_file:
-        print(f"{output}: {result.points:,} points ({result.format}){skipped}, {result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s")
+        thinned = f", thinned from {result.thinned_from:,}" if result.thinned_from is not None else ""
+        print(f"{output}: {result.points:,} points ({result.format}){thinned}{skipped}, {result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s")
         return
     print(  # OUTPUT as given: a Dask run's result holds it absolute (its workers need that)
         f"{output}: {result.points:,} points in {result.nodes:,} nodes ({result.format}, {result.sampler}){skipped}, "

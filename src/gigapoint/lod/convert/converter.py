@@ -19,6 +19,7 @@ from ...io import with_subfolders
 from ...io._base import check_file, headers_once
 from ...io.filters import point_filter
 from ...io.registry import is_supported_name
+from ...io.thin import thin_spacing
 from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
 from ..copc_write import check_copc_output, is_copc_name
@@ -50,6 +51,7 @@ class ConvertResult:
     phase_seconds: dict | None = None
     first_view_seconds: float | None = None  # until OUT first opened (its preview); 0: a resumed run's was there; None: none
     in_memory: bool = False  # the points waited between phases in memory (in_memory.py), not in spill files
+    thinned_from: int | None = None  # thin=: the points thinned (valid, passing the filter) to ``points``; None: not thinned
 
     @property
     def points_per_second(self) -> float:
@@ -221,6 +223,7 @@ def convert(
     classes=None,
     drop_classes=None,
     clip=None,
+    thin=None,
 ) -> ConvertResult:
     """Convert point cloud files (or a cloud, or an iterable of PointChunks) into an LOD octree directory ``out``.
 
@@ -265,6 +268,10 @@ def convert(
 
     ``classes``, ``drop_classes``, ``clip``: only the points of the input files that pass them are
     read, as ``gp.open``'s (io/filters.py); a conversion resumes only under the same filter.
+
+    ``thin`` (a plain point file only): the edge of cube cells on a grid anchored at coordinate
+    0, in the inputs' units; one point is kept per occupied cell, the first in the inputs' order,
+    over all of them (io/thin.py). The result's ``thinned_from`` counts the points before it.
     """
     check_switch("overwrite", overwrite, "convert")
     check_switch("recursive", recursive, "convert")
@@ -275,6 +282,8 @@ def convert(
     if recursive:
         inputs = with_subfolders(inputs)
     keep = point_filter(classes, drop_classes, clip, "convert")  # before anything is read
+    thin_label = f"convert: thin={thin!r}"
+    spacing = thin_spacing(thin, thin_label)
     if keep is not None and not _are_paths(inputs):  # (a cloud's or chunks' points are not read here)
         raise InputError(f"convert: the filter ({keep.describe()}) applies to the points read from files; the inputs are a cloud or PointChunks")
     check_switch("progress", progress, "convert")  # "yes"/"no" were both true
@@ -294,10 +303,11 @@ def convert(
         t0 = time.perf_counter()
         shown = RichProgress() if progress else NullProgress()
         try:
-            points, skipped = write_point_file(inputs, out, keep, overwrite, chunk_size, shown)
+            points, skipped, passed = write_point_file(inputs, out, keep, overwrite, chunk_size, shown, None if spacing is None else (spacing, thin_label))
         finally:
             shown.close()
-        return ConvertResult(out, out.suffix[1:].lower(), None, points, 0, skipped, time.perf_counter() - t0, False)
+        thinned_from = None if spacing is None else passed
+        return ConvertResult(out, out.suffix[1:].lower(), None, points, 0, skipped, time.perf_counter() - t0, False, thinned_from=thinned_from)
     sampler = "grid" if sampler is None else sampler
     if sampler not in SAMPLERS:
         raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
@@ -308,6 +318,8 @@ def convert(
         raise ConvertError(f"--format: unknown format {format!r}; choose {' or '.join(FORMATS)}")
     if format != "copc" and out is not None and str(out) != "" and is_supported_name(out):  # -o scan.laz: a folder named so
         raise ConvertError(f"{out}: a {format} octree is a folder; name it without a point file's suffix, or write --format copc into a .copc.laz file")
+    if spacing is not None:  # (an octree's inner nodes are its thinned levels; its leaves hold every point)
+        raise ConvertError(f"{out}: --thin: an option of a plain .las, .laz or .ply file of the files' points, not of a {format} octree")
     if format == "copc" and out is not None and str(out) != "":
         check_copc_output(out, overwrite)
     given = [f"--{n}" for n, v in (("layout", layout), ("colors", colors)) if v is not None]

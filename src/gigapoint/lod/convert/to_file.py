@@ -7,7 +7,8 @@ The file is faithful to the inputs: the first LAS file's CRS, a LAS grid that ho
 input's points exactly (their finest scale, the first file's offset: facts.input_facts, which
 warns of files off it), colours as each file stored them (8-bit values or 16-bit ones), the
 attributes every file has (as gp.open keeps them). Invalid points (NaN, inf) are skipped with
-the usual warning."""
+the usual warning. ``thin``: one point kept per occupied cell of that edge over the whole file
+set, the first in the inputs' order (io/thin.py), after the filter."""
 
 from __future__ import annotations
 
@@ -26,6 +27,7 @@ from ...io.filters import PointFilter, filtered
 from ...io.las import LasReader, with_scan_angle
 from ...io.las_fields import las_grid
 from ...io.registry import reader_for
+from ...io.thin import Thinning
 from ...io.write import POINT_FILE_SUFFIXES, check_point_file_output, source_crs_records, write_points
 from ..build import valid_bounds
 from ..copc_write import is_copc_name
@@ -38,11 +40,13 @@ def is_point_file_name(out) -> bool:
     return not is_copc_name(out) and Path(out).suffix.lower() in POINT_FILE_SUFFIXES
 
 
-def write_point_file(inputs, out: Path, keep: PointFilter | None, overwrite: bool, chunk_size: int | None, progress) -> tuple[int, int]:
+def write_point_file(inputs, out: Path, keep: PointFilter | None, overwrite: bool, chunk_size: int | None, progress, thin: tuple[float, str] | None = None) -> tuple[int, int, int]:
     """Write the points of the files and folders ``inputs`` that pass ``keep`` into ``out``, a
-    chunk at a time (``progress``: lod/progress.py's, told of the points read). An existing
-    ``out`` without ``overwrite`` is refused before anything is read, as is an ``out`` that is
-    one of the inputs. Returns (points written, invalid points skipped)."""
+    chunk at a time (``progress``: lod/progress.py's, told of the points read); ``thin``:
+    (spacing, the option as its errors name it), one point of each occupied cell kept. An
+    existing ``out`` without ``overwrite`` is refused before anything is read, as is an ``out``
+    that is one of the inputs, or cells too small for the headers' bounds. Returns (points
+    written, invalid points skipped, valid points that passed the filter: those thinned)."""
     check_point_file_output(out, overwrite)
     files = expand_paths([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
     if any(same_file(out, f) for f in files):
@@ -53,10 +57,15 @@ def write_point_file(inputs, out: Path, keep: PointFilter | None, overwrite: boo
     one_angle = scan_angles_differ(files)
     names = _attributes_in_common(files, one_angle, chunk_size, out)
     counts = [reader_for(f).point_count(f) for f in files]
+    bounds = None
+    if thin is not None:  # cells too small for the headers' bounds: refused here, before a point is read
+        bounds = _headers_bounds(files, counts)
+        Thinning(*thin, bounds, label)
     tally = {"points": 0, "skipped": 0}
 
     def chunks():  # called once a pass (a PLY file's 64-bit integers, points without a grid: a pass first)
         passing = keep.fresh() if keep is not None else None
+        thinning = Thinning(*thin, bounds, label) if thin is not None else None  # (each pass meets every cell anew)
         tally.update(points=0, skipped=0)
         progress.phase("write", None if None in counts else sum(counts))  # (with a filter: an upper bound)
         for f in files:
@@ -69,7 +78,8 @@ def write_point_file(inputs, out: Path, keep: PointFilter | None, overwrite: boo
                 tally["skipped"] += len(chunk) - n
                 if n:
                     attributes = {a: chunk.attributes[a][rows] for a in names}
-                    yield PointChunk(chunk.xyz[rows], chunk.rgba[rows], attributes, scale=chunk.scale, color_bits=chunk.color_bits)
+                    chunk = PointChunk(chunk.xyz[rows], chunk.rgba[rows], attributes, scale=chunk.scale, color_bits=chunk.color_bits)
+                    yield chunk if thinning is None else thinning.kept(chunk, f)
         if passing is not None:  # "no point passes the filter", not "no valid points"
             passing.check_passed(label)
         if not tally["points"]:  # (raised in the write: no file is left)
@@ -79,7 +89,22 @@ def write_point_file(inputs, out: Path, keep: PointFilter | None, overwrite: boo
     crs = [] if ply else source_crs_records(files)
     written = write_points(out, chunks, None, grid=None if ply else _las_inputs_grid(files, facts), crs_records=crs, color_bits=None)
     check_valid_count(label, written, tally["skipped"])  # the skipped points' warning
-    return written, tally["skipped"]
+    return written, tally["skipped"], tally["points"]
+
+
+def _headers_bounds(files, counts):
+    """(lo, hi) of the files' points as their headers tell (those with points); None where one
+    tells none (or an unfilled or impossible box: all 0, min above max, not finite)."""
+    boxes = []
+    for f, count in zip(files, counts):
+        if count == 0:
+            continue
+        box = reader_for(f).header(f).get("bounds")
+        lo, hi = (np.asarray(b, np.float64) for b in box) if box is not None else (np.zeros(3), np.zeros(3))
+        if not (np.all(np.isfinite(lo) & np.isfinite(hi) & (lo <= hi)) and (lo.any() or hi.any())):
+            return None
+        boxes.append((lo, hi))
+    return (np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)) if boxes else None
 
 
 def _told(chunks, progress):
