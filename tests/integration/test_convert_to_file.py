@@ -72,6 +72,14 @@ def test_a_clip_box_keeps_the_points_inside_it(autzen_path, tmp_path):
     assert np.array_equal(written.X, src.X[inside]) and np.array_equal(written.gps_time, src.gps_time[inside])
 
 
+def test_paths_given_as_strings_write_the_file(autzen_path, tmp_path):
+    out = str(tmp_path / "strings.laz")  # a str output was "'str' object has no attribute 'is_dir'"
+    res = gp.convert(str(autzen_path), out, classes=[2])
+    written = laspy.read(out)
+    assert res.points == len(written.points) == int(np.count_nonzero(laspy.read(str(autzen_path)).classification == 2)) > 0
+    assert res.out == tmp_path / "strings.laz"
+
+
 def _rows(chunks) -> np.ndarray:
     """Points as sorted rows of position, colour and classification."""
     chunks = list(chunks)

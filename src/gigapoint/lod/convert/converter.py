@@ -297,6 +297,7 @@ def convert(
         octree_options = {"--sampler": sampler, "--memory-limit": memory_limit, "--max-leaf": max_leaf, "--layout": layout, "--colors": colors,
                           "encoding": encoding, "--dask/--workers (client)": client, "name": name, "partition_points": partition_points,
                           "upper_points": upper_points, "source_files": source_files, "on_ready": on_ready}  # fmt: skip
+        out = Path(out)  # (a str was "'str' object has no attribute 'is_dir'")
         given = [option for option, value in octree_options.items() if value is not None]
         if given:  # (each meant something of an octree only: none was ignored without a word)
             raise ConvertError(f"{out}: {', '.join(given)}: {'options' if len(given) > 1 else 'an option'} of an octree, not of a plain {out.suffix[1:].upper()} file")
