@@ -195,6 +195,7 @@ def test_thin_keeps_the_first_point_of_each_occupied_cell_over_both_files_and_ev
     res = convert(paths, tmp_path / "thin.laz", thin=1.0, chunk_size=100)  # 12 chunks: a cell's points in several
     first = np.sort(np.unique(cells, axis=0, return_index=True)[1])  # the first point of each cell, in file order
     assert (res.points, res.thinned_from) == (8 * 8 * 3, 1152)
+    assert res.points_per_second == pytest.approx(1152 / res.seconds)  # points thinned a second, not the few kept
     thin, sources = laspy.read(str(tmp_path / "thin.laz")), [laspy.read(str(p)) for p in paths]
     for field in ("X", "Y", "Z", "red", "green", "blue", "classification", "intensity", "gps_time"):
         assert np.array_equal(np.asarray(thin[field]), np.concatenate([np.asarray(s[field]) for s in sources])[first]), field

@@ -55,7 +55,9 @@ class ConvertResult:
 
     @property
     def points_per_second(self) -> float:
-        return self.points / self.seconds if self.seconds > 0 else 0.0
+        """Points converted a second: those thinned (``thinned_from``) where thinned, not the few kept."""
+        done = self.points if self.thinned_from is None else self.thinned_from
+        return done / self.seconds if self.seconds > 0 else 0.0
 
 
 class _Converter(ReadPhase, PartitionPhases, BuildPhases):
