@@ -40,6 +40,55 @@ def is_point_file_name(out) -> bool:
     return not is_copc_name(out) and Path(out).suffix.lower() in POINT_FILE_SUFFIXES
 
 
+class PointFiles:
+    """The input files of a plain point file output (``write_point_file``) or of tiles (tiles.py),
+    and what every output file takes from them, known from their headers before a point is read:
+    ``files`` (folders and patterns expanded), ``label`` (their name in messages), ``names``
+    (the attributes in common), ``counts`` (the headers' point counts; None: not told),
+    ``las_grid`` (the grid holding every LAS input's points, else None) and ``crs_records``
+    (the first CRS named; ``ply``: none). ``valid_chunks`` reads them, a chunk at a time."""
+
+    def __init__(self, inputs, out: Path, chunk_size: int | None, ply: bool = False):
+        self.files = expand_paths([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
+        if any(same_file(out, f) for f in self.files):
+            raise InputError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
+        self.label = files_label(self.files)
+        self.chunk_size = chunk_size or DEFAULT_CHUNK_SIZE
+        facts = input_facts(self.files, one_grid=True)  # the LAS grid; CRSs that differ, files off the grid: warned
+        self.one_angle = scan_angles_differ(self.files)
+        self.names = _attributes_in_common(self.files, self.one_angle, self.chunk_size, out)
+        self.counts = [reader_for(f).point_count(f) for f in self.files]
+        self.las_grid = None if ply else _las_inputs_grid(self.files, facts)
+        self.crs_records = [] if ply else source_crs_records(self.files)
+
+    def headers_bounds(self):
+        """(lo, hi) of the files' points as their headers tell; None where one tells none."""
+        return _headers_bounds(self.files, self.counts)
+
+    def valid_chunks(self, keep: PointFilter | None, progress, tally: dict):
+        """(file, chunk) of every valid point (finite, within gigapoint's reach) that passes
+        ``keep`` (counted afresh: a pass of its own), with the attributes in common; ``progress``
+        told of the points read; ``tally``: {points: valid points that passed, skipped: invalid
+        ones}. Once read, a filter that let nothing pass, or no valid point, is its error."""
+        passing = keep.fresh() if keep is not None else None
+        tally.update(points=0, skipped=0)
+        for f in self.files:
+            read = with_scan_angle(read_chunks(f, self.chunk_size)) if self.one_angle else read_chunks(f, self.chunk_size)
+            for chunk in _skipped_if_empty(f, filtered(_told(read, progress), f, passing), len(self.files) > 1):
+                valid = valid_bounds(chunk.xyz, MAX_ABS_COORDINATE)[0]
+                n = int(np.count_nonzero(valid))
+                rows = slice(None) if n == len(chunk) else valid
+                tally["points"] += n
+                tally["skipped"] += len(chunk) - n
+                if n:
+                    attributes = {a: chunk.attributes[a][rows] for a in self.names}
+                    yield f, PointChunk(chunk.xyz[rows], chunk.rgba[rows], attributes, scale=chunk.scale, color_bits=chunk.color_bits)
+        if passing is not None:  # "no point passes the filter", not "no valid points"
+            passing.check_passed(self.label)
+        if not tally["points"]:  # (raised in the write: no file is left)
+            check_valid_count(self.label, 0, tally["skipped"])
+
+
 def write_point_file(inputs, out: Path, keep: PointFilter | None, overwrite: bool, chunk_size: int | None, progress, thin: tuple[float, str] | None = None) -> tuple[int, int, int]:
     """Write the points of the files and folders ``inputs`` that pass ``keep`` into ``out``, a
     chunk at a time (``progress``: lod/progress.py's, told of the points read); ``thin``:
@@ -48,47 +97,22 @@ def write_point_file(inputs, out: Path, keep: PointFilter | None, overwrite: boo
     that is one of the inputs, or cells too small for the headers' bounds. Returns (points
     written, invalid points skipped, valid points that passed the filter: those thinned)."""
     check_point_file_output(out, overwrite)
-    files = expand_paths([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
-    if any(same_file(out, f) for f in files):
-        raise InputError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
-    label = files_label(files)
-    chunk_size = chunk_size or DEFAULT_CHUNK_SIZE
-    facts = input_facts(files, one_grid=True)  # the LAS grid; CRSs that differ, files off the grid: warned
-    one_angle = scan_angles_differ(files)
-    names = _attributes_in_common(files, one_angle, chunk_size, out)
-    counts = [reader_for(f).point_count(f) for f in files]
+    ply = out.suffix.lower() == ".ply"
+    inputs = PointFiles(inputs, out, chunk_size, ply)
     bounds = None
     if thin is not None:  # cells too small for the headers' bounds: refused here, before a point is read
-        bounds = _headers_bounds(files, counts)
-        Thinning(*thin, bounds, label)
+        bounds = inputs.headers_bounds()
+        Thinning(*thin, bounds, inputs.label)
     tally = {"points": 0, "skipped": 0}
 
     def chunks():  # called once a pass (a PLY file's 64-bit integers, points without a grid: a pass first)
-        passing = keep.fresh() if keep is not None else None
-        thinning = Thinning(*thin, bounds, label) if thin is not None else None  # (each pass meets every cell anew)
-        tally.update(points=0, skipped=0)
-        progress.phase("write", None if None in counts else sum(counts))  # (with a filter: an upper bound)
-        for f in files:
-            read = with_scan_angle(read_chunks(f, chunk_size)) if one_angle else read_chunks(f, chunk_size)
-            for chunk in _skipped_if_empty(f, filtered(_told(read, progress), f, passing), len(files) > 1):
-                valid = valid_bounds(chunk.xyz, MAX_ABS_COORDINATE)[0]
-                n = int(np.count_nonzero(valid))
-                rows = slice(None) if n == len(chunk) else valid
-                tally["points"] += n
-                tally["skipped"] += len(chunk) - n
-                if n:
-                    attributes = {a: chunk.attributes[a][rows] for a in names}
-                    chunk = PointChunk(chunk.xyz[rows], chunk.rgba[rows], attributes, scale=chunk.scale, color_bits=chunk.color_bits)
-                    yield chunk if thinning is None else thinning.kept(chunk, f)
-        if passing is not None:  # "no point passes the filter", not "no valid points"
-            passing.check_passed(label)
-        if not tally["points"]:  # (raised in the write: no file is left)
-            check_valid_count(label, 0, tally["skipped"])
+        thinning = Thinning(*thin, bounds, inputs.label) if thin is not None else None  # (each pass meets every cell anew)
+        progress.phase("write", None if None in inputs.counts else sum(inputs.counts))  # (with a filter: an upper bound)
+        for f, chunk in inputs.valid_chunks(keep, progress, tally):
+            yield chunk if thinning is None else thinning.kept(chunk, f)
 
-    ply = out.suffix.lower() == ".ply"
-    crs = [] if ply else source_crs_records(files)
-    written = write_points(out, chunks, None, grid=None if ply else _las_inputs_grid(files, facts), crs_records=crs, color_bits=None)
-    check_valid_count(label, written, tally["skipped"])  # the skipped points' warning
+    written = write_points(out, chunks, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None)
+    check_valid_count(inputs.label, written, tally["skipped"])  # the skipped points' warning
     return written, tally["skipped"], tally["points"]
 
 
