@@ -189,6 +189,7 @@ _LAZY = {
     "convert": ("gigapoint.lod.convert", "convert"),
     "LiveCloud": ("gigapoint.live", "LiveCloud"),
     "section": ("gigapoint.cross_section", "section"),
+    "tile": ("gigapoint.lod.convert.tiles", "tile"),
     "Section": ("gigapoint.cross_section", "Section"),
 }
 
@@ -234,4 +235,5 @@ __all__ = [
     "render_frame",
     "render_turntable",
     "section",
+    "tile",
 ]

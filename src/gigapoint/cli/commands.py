@@ -7,5 +7,6 @@ from . import (
     info_cmd,  # noqa: F401
     render_cmd,  # noqa: F401
     section_cmd,  # noqa: F401
+    tile_cmd,  # noqa: F401
     view_cmd,  # noqa: F401
 )

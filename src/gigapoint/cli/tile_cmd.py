@@ -1,0 +1,60 @@
+"""`gigapoint tile`: point files split into square LAS/LAZ tiles (gigapoint.tile, lod/convert/tiles.py)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from ..errors import GigapointError
+from .app import app
+from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, RecursiveOption, filter_options
+from .settings_opts import named_option
+
+
+@app.command()
+def tile(
+    inputs: Annotated[list[Path], typer.Argument(readable=False, help="Point cloud files or directories (read as one, e.g. overlapping flight strips). A quoted glob pattern ('strips/*.laz') stands for what it matches.")],
+    size: Annotated[float, typer.Option("--size", metavar="S", help="The tiles' edge, in the files' units: tile (i, j) holds x in [i S, (i+1) S), y in [j S, (j+1) S), any z.")],
+    output: Annotated[Path, typer.Option("-o", "--output", readable=False, help="Folder of the tiles (made if missing), named NAME_XMIN_YMIN.laz after their lower-left corners.")],
+    format: Annotated[str, typer.Option("--format", help="laz (the default) or las.")] = "laz",
+    buffer: Annotated[float, typer.Option("--buffer", metavar="B", help="Each tile also holds the points within B of its square (0 to S), flagged in the LAS 1.4 overlap bit.")] = 0.0,
+    name: Annotated[str | None, typer.Option("--name", help="The tiles' names' start (default: the input file's stem; for several inputs, the output folder's name).")] = None,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="Write into a folder holding LAS/LAZ files: the tiles of this run's names are replaced, other files left.")] = False,
+    recursive: RecursiveOption = False,
+    classes: ClassesOption = None,
+    drop_classes: DropClassesOption = None,
+    clip: ClipOption = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """Split point clouds into square LAS/LAZ tiles (lastile), read once, a chunk at a time; only tiles holding points are written."""
+    from ..lod.convert.tiles import tile as run
+
+    point_filter = filter_options(classes, drop_classes, clip, "tile")  # its errors name the options
+    try:
+        result = run(
+            [str(p) for p in inputs],
+            output,
+            size,
+            buffer=buffer,
+            format=format,
+            name=name,
+            overwrite=overwrite,
+            recursive=recursive,
+            progress=not quiet and sys.stderr.isatty(),
+            **(point_filter.as_spec() if point_filter is not None else {}),
+        )
+    except GigapointError as exc:  # tile: size=0.0 said as the option
+        raise named_option(exc, {f"tile: size={size!r}": f"tile: --size {size:g}", f"tile: buffer={buffer!r}": f"tile: --buffer {buffer:g}",
+                                 f"tile: format={format!r}": f"tile: --format {format}", f"tile: name={name!r}": f"tile: --name {name}"}) from None  # fmt: skip
+    counts = np.array(result.points_per_tile)
+    median = float(np.median(counts))
+    buffered = f" (+{result.buffer_points:,} buffer points)" if result.buffer_points else ""
+    skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
+    print(
+        f"{output}: {len(counts):,} tiles of {size:g} x {size:g} ({format}), {result.points:,} points{buffered}{skipped}; "
+        f"points per tile: min {counts.min():,}, median {median:,.{0 if median.is_integer() else 1}f}, max {counts.max():,}; {result.seconds:.1f} s"
+    )

@@ -1,0 +1,286 @@
+"""``tile``: the points of point files split into square LAS/LAZ tiles (LAStools' lastile,
+PDAL's filters.splitter), for processing pipelines and delivery.
+
+Tiles are squares of edge ``size`` in x and y on a grid anchored at coordinate 0: tile (i, j)
+holds the points of [i·size, (i+1)·size) x [j·size, (j+1)·size), any z, and is named
+``<name>_<xmin>_<ymin>.laz`` after its lower-left corner (lastile's convention). Only tiles
+holding points of their own are written. ``buffer``: a tile also holds the points within that
+distance of its square (in x and y: its square grown by ``buffer`` on every side, edges
+included), each flagged in the LAS 1.4 "overlap" bit of its classification flags, as lastile
+flags its buffers in LAS 1.4 ("withheld" would make readers drop them as if they were bad
+points); the tile's own points keep the overlap flag the inputs gave them (formats 6-10) and
+are 0 otherwise.
+
+Every tile is written as ``convert -o x.laz`` writes its one file (to_file.PointFiles): the
+first CRS named, a LAS grid holding every input's points exactly, the attributes all inputs
+have, colours as each file stored them.
+
+The inputs are read once, a chunk at a time; each chunk's points are bucketed by tile and
+appended to that tile's raw spill file (records of position, colour and attributes) in a
+hidden work folder inside the output folder; once every point is read, the tiles are written
+one at a time from their spill files, then moved into place together. So no more than a chunk
+and one writer are held, and no file stays open between chunks, however many tiles there are.
+Keeping a LAZ writer open per tile holds a compressor and its buffered chunk each (unbounded
+with the tile count); closing and reopening them in append mode (laspy's LasAppender) rewrites
+each LAZ chunk table and cuts the compressed chunks short at every chunk read. The spill costs
+disk: the points' raw records (~50 bytes a point) until their tile is written. A run that
+fails or is interrupted removes its work folder: no tile of it appears.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ...atomic import append_file
+from ...core.chunk import PointChunk
+from ...core.cloud import check_valid_count
+from ...errors import GigapointWarning, InputError, check_switch, is_real, warn
+from ...io import with_subfolders
+from ...io.filters import point_filter
+from ...io.write import write_points
+from ..progress import NullProgress, RichProgress
+from .to_file import PointFiles
+
+#: what ``tile`` writes
+TILE_FORMATS = ("laz", "las")
+#: most tiles a run may make: more, over the data's extent, is surely a size in the wrong unit
+MAX_TILES = 1_000_000
+#: the attribute a buffer point is flagged in (LAS 1.4 classification flags' bit 3)
+BUFFER_FLAG = "overlap"
+
+
+@dataclass
+class TileResult:
+    out: Path
+    tiles: list[Path]  # in name order of their (xmin, ymin): by x, then y
+    points_per_tile: list[int]  # each tile's points, its buffer's included
+    points: int  # points tiled (valid, passing the filter), each once
+    buffer_points: int  # points written into tiles as buffers (copies of their neighbours')
+    skipped: int  # invalid points (NaN, inf) left out
+    seconds: float
+
+
+def tile(
+    inputs,
+    out,
+    size,
+    *,
+    buffer=0.0,
+    format: str = "laz",
+    name: str | None = None,
+    classes=None,
+    drop_classes=None,
+    clip=None,
+    overwrite: bool = False,
+    recursive: bool = False,
+    chunk_size: int | None = None,
+    progress: bool = False,
+) -> TileResult:
+    """Split the points of the files and folders ``inputs`` into square tiles of edge ``size`` (in
+    the files' units, on a grid anchored at 0) written into the folder ``out`` as
+    ``<name>_<xmin>_<ymin>.laz`` (``format`` "las": .las). ``name``: by default the input file's
+    stem, or ``out``'s name for several inputs. ``buffer``: each tile also holds the points within
+    that distance of its square, flagged "overlap". ``classes``, ``drop_classes``, ``clip``: only
+    the points passing them are tiled (as ``gp.open``'s); ``recursive=True``: folders' subfolders too.
+
+    ``out`` is made if missing; one holding LAS/LAZ files already is refused without
+    ``overwrite``, which replaces the tiles of this run's names and leaves every other file.
+    Tiles appear only once every one is written. Bad values (a size not above 0, a buffer below
+    0 or above the size, more than a million tiles over the headers' extent) are one-line
+    InputErrors before a point is read."""
+    t0 = time.perf_counter()
+    for switch, value in (("overwrite", overwrite), ("recursive", recursive), ("progress", progress)):
+        check_switch(switch, value, "tile")
+    if not (is_real(size) and size > 0):
+        raise InputError(f"tile: size={size!r}: a tile's edge is a number above 0, in the files' units")
+    if not (is_real(buffer) and 0 <= buffer <= size):
+        raise InputError(f"tile: buffer={buffer!r}: a buffer is a number from 0 to the tile's edge ({size:g}), in the files' units")
+    if format not in TILE_FORMATS:
+        raise InputError(f"tile: format={format!r}: tiles are written as {' or '.join(TILE_FORMATS)}")
+    if name is not None and not (isinstance(name, str) and name and Path(name).name == name):
+        raise InputError(f"tile: name={name!r}: the tiles' name is a file name's start, without folders")
+    if not isinstance(out, (str, os.PathLike)) or not os.fspath(out):
+        raise InputError(f"tile: the output must be a folder's path, got {out!r}")
+    keep = point_filter(classes, drop_classes, clip, "tile")
+    out = Path(out)
+    _check_output_folder(out, overwrite)
+    if recursive:
+        inputs = with_subfolders([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
+    files = PointFiles(inputs, out, chunk_size)
+    name = name or (Path(files.files[0]).stem if len(files.files) == 1 else out.resolve().name)
+    bounds = files.headers_bounds()
+    if bounds is not None:  # a size in the wrong unit: refused before a point is read
+        _check_tile_count(*(bounds if keep is None else keep.clipped_bounds(*bounds)), size, files.label)
+    shown = RichProgress() if progress else NullProgress()
+    created = not out.exists()
+    out.mkdir(exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".tiling", dir=out))  # (hidden: folder walks pass it over)
+    try:
+        spill = _TileSpill(work, float(size), float(buffer), files.label)
+        tally = {"points": 0, "skipped": 0}
+        shown.phase("read", None if None in files.counts else sum(files.counts))
+        for _, chunk in files.valid_chunks(keep, shown, tally):
+            spill.add(chunk)
+        check_valid_count(files.label, tally["points"], tally["skipped"])  # (the skipped points' warning)
+        written = spill.write_tiles(name, format, files, shown)
+        for tile_path in written:  # every tile whole: now they appear
+            os.replace(tile_path, out / tile_path.name)
+    except BaseException:
+        if created:  # (a folder this run made: only its work folder is in it)
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+        shown.close()
+    tiles = [out / p.name for p in written]
+    _warn_stale_tiles(out, name, tiles)
+    counts = [spill.held[key] for key in spill.written_keys]
+    return TileResult(out, tiles, counts, tally["points"], sum(counts) - tally["points"], tally["skipped"], time.perf_counter() - t0)
+
+
+def _check_output_folder(out: Path, overwrite: bool) -> None:
+    """Refuse, in one line naming ``out``, a tiles' folder that is a file, lies in a missing
+    folder, or holds LAS/LAZ files already without ``overwrite``."""
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: is a file, not a folder for tiles")
+    if not out.exists() and not out.parent.is_dir():
+        raise InputError(f"{out}: the folder {out.parent} does not exist")
+    held = sorted(p.name for p in out.iterdir() if p.suffix.lower() in (".las", ".laz") and not p.name.startswith(".")) if out.is_dir() else []
+    if held and not overwrite:
+        shown = ", ".join(held[:3]) + (", ..." if len(held) > 3 else "")
+        raise InputError(f"{out}: holds {len(held):,} LAS/LAZ files already ({shown}); pass overwrite=True to replace the tiles of the same names (other files are left as they are)")
+
+
+def _check_tile_count(lo, hi, size: float, where: str) -> None:
+    """More than MAX_TILES tiles over x and y of ``lo``..``hi``: a one-line InputError."""
+    across = [max(0, math.floor(hi[a] / size) - math.floor(lo[a] / size) + 1) for a in (0, 1)]  # (a clip beside the data: 0)
+    if across[0] * across[1] > MAX_TILES:
+        raise InputError(f"tile: size={size!r}: {across[0]:,} x {across[1]:,} tiles over the extent of {where}, above {MAX_TILES:,}; take larger tiles")
+
+
+def tile_index(values: np.ndarray, size: float) -> np.ndarray:
+    """The tile (on one axis) of each of ``values``: i with i·size <= v < (i+1)·size, those
+    products as floats compute them (the names' corners): a division rounded across an edge is mended."""
+    i = np.floor(values / size)
+    i -= values < i * size
+    i += values >= (i + 1) * size
+    return i.astype(np.int64)
+
+
+def _corner(value: float) -> str:
+    """A tile corner's coordinate as its name says it: an integer where it is one."""
+    return str(int(value)) if value.is_integer() else f"{value:.15g}"
+
+
+def tile_name(name: str, i: int, j: int, size: float, suffix: str) -> str:
+    return f"{name}_{_corner(i * size)}_{_corner(j * size)}.{suffix}"
+
+
+class _TileSpill:
+    """Each tile's points as they come, appended to its raw file in ``folder`` (one record a point:
+    position, colour, the colour bits of its file, its attributes; the layout of the first chunk)."""
+
+    def __init__(self, folder: Path, size: float, buffer: float, where: str):
+        self.folder, self.size, self.buffer, self.where = folder, size, buffer, where
+        self.dtype = None
+        self.held: dict[tuple[int, int], int] = {}  # points spilled for each tile
+        self.own: dict[tuple[int, int], int] = {}  # of them, the tile's own (not its buffer's)
+        self.written_keys: list[tuple[int, int]] = []
+
+    def path(self, key: tuple[int, int]) -> Path:
+        return self.folder / f"{key[0]}_{key[1]}.points"
+
+    def add(self, chunk: PointChunk) -> None:
+        """Append the points of ``chunk`` to their tiles' files (and, with a buffer, to their neighbours')."""
+        records = self._records(chunk)
+        i, j = (tile_index(chunk.xyz[:, axis], self.size) for axis in (0, 1))
+        rows, ti, tj = [np.arange(len(chunk))], [i], [j]
+        if self.buffer:
+            reach = math.ceil(self.buffer / self.size)  # (a buffer up to the edge: the next tile on each side)
+            near_x = {d: self._near(chunk.xyz[:, 0], i + d) for d in range(-reach, reach + 1)}
+            near_y = {d: self._near(chunk.xyz[:, 1], j + d) for d in range(-reach, reach + 1)}
+            for dx, in_x in near_x.items():
+                for dy, in_y in near_y.items():
+                    if dx or dy:
+                        sel = np.flatnonzero(in_x & in_y)
+                        rows.append(sel)
+                        ti.append(i[sel] + dx)
+                        tj.append(j[sel] + dy)
+        records = records[np.concatenate(rows)]
+        if self.buffer:
+            records[f"attribute {BUFFER_FLAG}"][len(chunk) :] = 1
+        keys, where, counts = np.unique(np.column_stack([np.concatenate(ti), np.concatenate(tj)]), axis=0, return_inverse=True, return_counts=True)
+        order = np.argsort(where.ravel(), kind="stable")  # each tile's points in the files' order
+        own = np.bincount(where.ravel()[: len(chunk)], minlength=len(keys))
+        ends = np.cumsum(counts)
+        for k, key in enumerate(map(tuple, keys.tolist())):
+            if key not in self.held and len(self.held) >= MAX_TILES:
+                raise InputError(f"tile: size={self.size!r}: more than {MAX_TILES:,} tiles over the points of {self.where}; take larger tiles")
+            append_file(self.path(key), [records[order[ends[k] - counts[k] : ends[k]]]])
+            self.held[key] = self.held.get(key, 0) + int(counts[k])
+            self.own[key] = self.own.get(key, 0) + int(own[k])
+
+    def _near(self, values: np.ndarray, tile: np.ndarray) -> np.ndarray:
+        """Whether each of ``values`` is within the buffer of its ``tile`` (on one axis, edges included)."""
+        return (values >= tile * self.size - self.buffer) & (values <= (tile + 1) * self.size + self.buffer)
+
+    def _records(self, chunk: PointChunk) -> np.ndarray:
+        """The chunk's points as spill records (the first chunk sets their layout)."""
+        attributes = dict(chunk.attributes)
+        if self.buffer:  # buffer points get the flag; the tile's own keep theirs (0 where the files have none)
+            attributes.setdefault(BUFFER_FLAG, np.zeros(len(chunk), np.uint8))
+        if self.dtype is None:
+            own = [(f"attribute {a}", v.dtype, v.shape[1:]) for a, v in attributes.items()]
+            self.dtype = np.dtype([("xyz", np.float64, (3,)), ("rgba", np.uint8, (4,)), ("color_bits", np.uint8), *own])
+        records = np.empty(len(chunk), self.dtype)
+        records["xyz"], records["rgba"], records["color_bits"] = chunk.xyz, chunk.rgba, chunk.color_bits or 0
+        for a, v in attributes.items():
+            records[f"attribute {a}"] = v
+        return records
+
+    def chunks(self, key: tuple[int, int], chunk_size: int):
+        """The points of tile ``key`` as PointChunks, in the order they came; each of one file's colour bits."""
+        held = np.memmap(self.path(key), self.dtype, mode="r")
+        names = [f[len("attribute ") :] for f in self.dtype.names if f.startswith("attribute ")]
+        for start in range(0, len(held), chunk_size):
+            part = held[start : start + chunk_size]
+            for run in np.split(part, np.flatnonzero(np.diff(part["color_bits"])) + 1):
+                attributes = {a: np.array(run[f"attribute {a}"]) for a in names}
+                yield PointChunk(run["xyz"], run["rgba"], attributes, color_bits=int(run["color_bits"][0]) or None)
+
+    def write_tiles(self, name: str, suffix: str, files: PointFiles, progress) -> list[Path]:
+        """Write each tile holding points of its own into the work folder, one at a time, its spill
+        file removed once written; returns their paths, by x then y (tiles of buffer points only: none)."""
+        self.written_keys = sorted(key for key, n in self.own.items() if n)
+        progress.phase("write", sum(self.held[key] for key in self.written_keys))
+        written = []
+        for key in self.written_keys:
+            path = self.folder / tile_name(name, *key, self.size, suffix)
+            write_points(path, lambda key=key: self.chunks(key, files.chunk_size), None, grid=files.las_grid, crs_records=files.crs_records, color_bits=None)
+            self.path(key).unlink()
+            progress.advance(self.held[key])
+            written.append(path)
+        return written
+
+
+def _warn_stale_tiles(out: Path, name: str, tiles: list[Path]) -> None:
+    """Warn of files in ``out`` named as this run names tiles that it did not write (an earlier
+    run's, of another size or extent): left as they were, they would pass for this run's."""
+    pattern = re.compile(rf"{re.escape(name)}_-?[0-9.e+-]+_-?[0-9.e+-]+\.(las|laz)", re.IGNORECASE)
+    ours = {p.name for p in tiles}
+    stale = sorted(p.name for p in out.iterdir() if pattern.fullmatch(p.name) and p.name not in ours)
+    if stale:
+        shown = ", ".join(stale[:3]) + (", ..." if len(stale) > 3 else "")
+        warn(f"{out}: {len(stale):,} tiles named as this run's were not written by it and are left as they were ({shown}); remove them if they are an earlier run's", GigapointWarning)
+
+
+__all__ = ["MAX_TILES", "TILE_FORMATS", "TileResult", "tile", "tile_index", "tile_name"]
