@@ -20,11 +20,13 @@ appended to that tile's raw spill file (records of position, colour and attribut
 hidden work folder inside the output folder; once every point is read, the tiles are written
 one at a time from their spill files, then moved into place together. So no more than a chunk
 and one writer are held, and no file stays open between chunks, however many tiles there are.
-Keeping a LAZ writer open per tile holds a compressor and its buffered chunk each (unbounded
-with the tile count); closing and reopening them in append mode (laspy's LasAppender) rewrites
-each LAZ chunk table and cuts the compressed chunks short at every chunk read. The spill costs
-disk: the points' raw records (~50 bytes a point) until their tile is written. A run that
-fails or is interrupted removes its work folder: no tile of it appears.
+Keeping a LAZ writer open per tile holds a compressor and its buffered points each (unbounded
+with the tile count); closing and reopening them in append mode (laspy's LasAppender) reads
+and rewrites each LAZ file's chunk table at every (chunk, tile) append. Measured (2 M demo
+points in 103 tiles, 100 000-point chunks, a shared 2-core host): the spill 3.4 s, laspy's
+reopen-and-append 19.3 s for the same tiles, ``convert -o one.laz`` of the same points 2.0 s.
+The spill costs disk: the points' raw records (~50 bytes a point) until their tile is written.
+A run that fails or is interrupted removes its work folder: no tile of it appears.
 """
 
 from __future__ import annotations
@@ -215,12 +217,14 @@ class _TileSpill:
                         rows.append(sel)
                         ti.append(i[sel] + dx)
                         tj.append(j[sel] + dy)
-        records = records[np.concatenate(rows)]
+        rows = np.concatenate(rows)
+        records = records[rows]
         if self.buffer:
             records[f"attribute {BUFFER_FLAG}"][len(chunk) :] = 1
         keys, where, counts = np.unique(np.column_stack([np.concatenate(ti), np.concatenate(tj)]), axis=0, return_inverse=True, return_counts=True)
-        order = np.argsort(where.ravel(), kind="stable")  # each tile's points in the files' order
-        own = np.bincount(where.ravel()[: len(chunk)], minlength=len(keys))
+        where = where.ravel()
+        order = np.lexsort((rows, where))  # by tile, each tile's points in the files' order (its buffer's among its own)
+        own = np.bincount(where[: len(chunk)], minlength=len(keys))
         ends = np.cumsum(counts)
         for k, key in enumerate(map(tuple, keys.tolist())):
             if key not in self.held and len(self.held) >= MAX_TILES:

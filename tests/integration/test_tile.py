@@ -1,0 +1,213 @@
+"""``gigapoint tile`` / ``gp.tile`` (lod/convert/tiles.py): point files split into square LAS/LAZ
+tiles on a grid anchored at 0, each holding exactly its points (and its buffer's, flagged), as
+``convert -o x.laz`` writes them; nothing left behind by a run that fails."""
+
+from __future__ import annotations
+
+import importlib
+
+import laspy
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.errors import GigapointWarning, InputError
+from gigapoint.io.las import read_las_header, wkt_of
+from gigapoint.lod.convert.tiles import tile_index, tile_name
+
+FIELDS = ("X", "Y", "Z", "intensity", "classification", "gps_time", "red", "green", "blue")
+
+
+def _strips(tmp_path):
+    """Two LAS files (centimetre grid, offset -10, 0, 0) of points over x -10..20, y 0..20, none
+    in [10, 20) x [10, 20); every point's Z (its number) tells it apart; a's colours 16-bit, b's
+    8-bit values. Returns their paths and their points joined (a's first)."""
+    rng = np.random.default_rng(3)
+    X = rng.integers(0, 3000, 4000)  # x = X / 100 - 10
+    Y = rng.integers(0, 2000, 4000)
+    X[:8] = [0, 999, 1000, 1999, 2000, 2999, 1000, 999]  # on the tiles' edges: x -10, -0.01, 0, 9.99, 10, 19.99
+    Y[:8] = [0, 999, 1000, 1999, 0, 999, 0, 1999]
+    keep = ~((X >= 2000) & (Y >= 1000))
+    X, Y = X[keep], Y[keep]
+    n = len(X)
+    points = {"X": X, "Y": Y, "Z": np.arange(n), "intensity": rng.integers(0, 65536, n), "classification": rng.integers(0, 32, n), "gps_time": rng.uniform(0, 1e6, n)}
+    points.update(zip(("red", "green", "blue"), rng.integers(0, 256, (3, n))))
+    paths = []
+    for name, rows, factor in (("a.las", slice(0, 2500), 257), ("b.las", slice(2500, None), 1)):
+        header = laspy.LasHeader(point_format=3, version="1.2")
+        header.scales, header.offsets = [0.01] * 3, [-10.0, 0.0, 0.0]
+        las = laspy.LasData(header)
+        for field, values in points.items():
+            las[field] = values[rows] * (factor if field in ("red", "green", "blue") else 1)
+        las.write(str(tmp_path / name))
+        paths.append(tmp_path / name)
+    points.update({c: np.concatenate([points[c][:2500] * 257, points[c][2500:]]) for c in ("red", "green", "blue")})  # as stored
+    points["x"], points["y"] = X / 100 - 10, Y / 100
+    return paths, points
+
+
+def _expected(points, xmin, ymin, size, buffer=0.0):
+    """The rows of ``points`` in the tile of corner (xmin, ymin), in file order, and which of them are its buffer's."""
+    x, y = points["x"], points["y"]
+    own = (x >= xmin) & (x < xmin + size) & (y >= ymin) & (y < ymin + size)
+    near = (x >= xmin - buffer) & (x <= xmin + size + buffer) & (y >= ymin - buffer) & (y <= ymin + size + buffer)
+    rows = np.flatnonzero(own | near) if buffer else np.flatnonzero(own)
+    return rows, ~own[rows]
+
+
+def test_two_files_split_into_exactly_their_tiles_with_every_points_attributes(tmp_path):
+    paths, points = _strips(tmp_path)
+    out = tmp_path / "tiles"
+    res = gp.tile(paths, out, 10, chunk_size=700)  # chunks of 700: a tile's points in several
+    corners = [(-10, 0), (-10, 10), (0, 0), (0, 10), (10, 0)]  # (10, 10) holds no point: not written
+    assert [p.name for p in res.tiles] == [f"tiles_{x}_{y}.laz" for x, y in corners]
+    assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in res.tiles)  # nothing else (no work folder)
+    for path, (xmin, ymin), count in zip(res.tiles, corners, res.points_per_tile):
+        written, (rows, _) = laspy.read(str(path)), _expected(points, xmin, ymin, 10)
+        assert len(written.points) == count == len(rows) > 0
+        for field in FIELDS:  # every point of the tile, in the files' order, its attributes and colours as stored
+            assert np.array_equal(np.asarray(written[field]), points[field][rows]), (path.name, field)
+        assert "overlap" not in written.point_format.dimension_names or not np.any(written.overlap)
+        assert list(written.header.scales) == [0.01] * 3 and list(written.header.offsets) == [-10.0, 0.0, 0.0]
+    assert (res.points, res.buffer_points, res.skipped) == (len(points["X"]), 0, 0) == (sum(res.points_per_tile), 0, 0)
+
+
+def test_a_buffer_adds_the_points_near_each_tile_flagged_in_the_overlap_bit(tmp_path):
+    paths, points = _strips(tmp_path)
+    res = gp.tile(paths, tmp_path / "tiles", 10, buffer=1.0, format="las", name="strip")
+    corners = [(-10, 0), (-10, 10), (0, 0), (0, 10), (10, 0)]  # (10, 10): buffer points alone, not written
+    assert [p.name for p in res.tiles] == [f"strip_{x}_{y}.las" for x, y in corners]
+    buffered = 0
+    for path, (xmin, ymin) in zip(res.tiles, corners):
+        written = laspy.read(str(path))
+        rows, flagged = _expected(points, xmin, ymin, 10, buffer=1.0)
+        assert np.array_equal(np.asarray(written.Z), points["Z"][rows]), path.name
+        assert np.array_equal(np.asarray(written.overlap, bool), flagged) and 0 < flagged.sum() < len(rows), path.name
+        assert written.header.point_format.id == 7 and not np.any(written.withheld)  # (withheld: readers would drop them)
+        buffered += int(flagged.sum())
+    assert res.buffer_points == buffered == sum(res.points_per_tile) - len(points["X"])
+
+
+def test_autzen_in_500_ft_tiles_through_the_cli(cli, autzen_path, tmp_path):
+    src = laspy.read(str(autzen_path))
+    keys, counts = np.unique(np.column_stack([np.floor(src.x / 500), np.floor(src.y / 500)]).astype(int), axis=0, return_counts=True)
+    out = tmp_path / "tiles"
+    rc, stdout, err = cli("tile", autzen_path, "--size", "500", "-o", out, "-q")
+    assert rc == 0, err
+    assert counts.sum() == 110_000 and len(counts) == 6
+    assert (counts.min(), np.median(counts), counts.max()) == (2_998, 7_433, 49_550)
+    assert stdout.startswith(f"{out}: 6 tiles of 500 x 500 (laz), 110,000 points; points per tile: min 2,998, median 7,433, max 49,550; ")
+    names = [f"autzen_trim_{x * 500}_{y * 500}.laz" for x, y in keys]
+    assert sorted(p.name for p in out.iterdir()) == names
+    total, ints = 0, []
+    for name, (i, j), count in zip(names, keys, counts):
+        written = laspy.read(str(out / name))
+        total += len(written.points)
+        assert len(written.points) == count
+        assert i * 500 <= written.x.min() and written.x.max() < (i + 1) * 500 and j * 500 <= written.y.min() and written.y.max() < (j + 1) * 500
+        assert i * 500 <= written.header.mins[0] and written.header.maxs[0] < (i + 1) * 500, name
+        assert j * 500 <= written.header.mins[1] and written.header.maxs[1] < (j + 1) * 500, name
+        hdr = read_las_header(out / name)
+        assert wkt_of(hdr.vlrs + hdr.evlrs) == wkt_of(read_las_header(autzen_path).vlrs + read_las_header(autzen_path).evlrs) is not None
+        ints.append(np.column_stack([written.X, written.Y, written.Z, written.gps_time.view(np.int64)]))
+    assert total == 110_000
+    tiled, source = np.concatenate(ints), np.column_stack([src.X, src.Y, src.Z, src.gps_time.view(np.int64)])
+    assert np.array_equal(tiled[np.lexsort(tiled.T)], source[np.lexsort(source.T)])  # every point once, its integers as stored
+
+
+def test_tiles_are_indexed_and_named_by_their_lower_left_corner():
+    assert tile_index(np.array([-10.0, -0.01, 0.0, 9.99, 10.0]), 10.0).tolist() == [-1, -1, 0, 0, 1]
+    # 0.7 / 0.1 is 6.999999999999999, floored to 6; 7 * 0.1 is 0.7000000000000001, above 0.7: tile 6 holds it, as the products say
+    values = np.array([0.3, 0.7, 1e6 + 0.1, -0.3])
+    assert tile_index(values, 0.1).tolist() == [2, 6, 10_000_000, -3]
+    assert all(i * 0.1 <= v < (i + 1) * 0.1 for i, v in zip(tile_index(values, 0.1).tolist(), values))
+    assert tile_name("s", 1, -1, 2.5, "laz") == "s_2.5_-2.5.laz"
+    assert tile_name("s", 636, 849, 1000.0, "las") == "s_636000_849000.las"
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"size": 0}, "tile: size=0: a tile's edge is a number above 0, in the files' units"),
+        ({"size": float("nan")}, "tile: size=nan: a tile's edge is a number above 0, in the files' units"),
+        ({"size": -5.0}, "tile: size=-5.0: a tile's edge is a number above 0, in the files' units"),
+        ({"size": "500"}, "tile: size='500': a tile's edge is a number above 0, in the files' units"),
+        ({"size": 500, "buffer": -1}, "tile: buffer=-1: a buffer is a number from 0 to the tile's edge (500), in the files' units"),
+        ({"size": 500, "buffer": float("nan")}, "tile: buffer=nan: a buffer is a number from 0 to the tile's edge (500), in the files' units"),
+        ({"size": 500, "buffer": 501}, "tile: buffer=501: a buffer is a number from 0 to the tile's edge (500), in the files' units"),
+        ({"size": 500, "format": "ply"}, "tile: format='ply': tiles are written as laz or las"),
+        ({"size": 0.01}, "tile: size=0.01: 117,747 x 56,271 tiles over the extent of {}, above 1,000,000; take larger tiles"),
+    ],
+)
+def test_bad_values_are_refused_in_one_line_before_a_point_is_read(autzen_path, tmp_path, monkeypatch, options, message):
+    def no_read(*args):
+        raise AssertionError("read")
+
+    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.to_file"), "read_chunks", no_read)
+    with pytest.raises(InputError) as info:
+        gp.tile(autzen_path, tmp_path / "tiles", **options)
+    assert str(info.value) == message.format(autzen_path)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_cli_names_the_option_of_a_bad_value(cli, autzen_path, tmp_path):
+    rc, _, err = cli("tile", autzen_path, "--size", "nan", "-o", tmp_path / "tiles")
+    assert (rc, err.strip()) == (1, "error: tile: --size nan: a tile's edge is a number above 0, in the files' units")
+    rc, _, err = cli("tile", autzen_path, "--size", "500", "--buffer", "-2", "-o", tmp_path / "tiles")
+    assert (rc, err.strip()) == (1, "error: tile: --buffer -2: a buffer is a number from 0 to the tile's edge (500), in the files' units")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_folder_holding_las_files_is_refused_and_overwrite_leaves_the_users_files(autzen_path, tmp_path):
+    out = tmp_path / "tiles"
+    out.mkdir()
+    (out / "mine.laz").write_bytes(b"the user's file")
+    (out / "autzen_trim_0_0.laz").write_bytes(b"an earlier run's tile")
+    (out / "autzen_trim_636000_849000.laz").write_bytes(b"a tile of this run's name")
+    with pytest.raises(InputError, match=r"tiles: holds 3 LAS/LAZ files already \(autzen_trim_0_0\.laz, autzen_trim_636000_849000\.laz, mine\.laz\); pass overwrite=True"):
+        gp.tile(autzen_path, out, 500)
+    assert len(list(out.iterdir())) == 3 and (out / "autzen_trim_636000_849000.laz").read_bytes() == b"a tile of this run's name"
+    with pytest.warns(GigapointWarning, match=r"tiles: 1 tiles named as this run's were not written by it and are left as they were \(autzen_trim_0_0\.laz\)"):
+        res = gp.tile(autzen_path, out, 500, overwrite=True)
+    assert len(res.tiles) == 6 and len(laspy.read(str(out / "autzen_trim_636000_849000.laz")).points) == res.points_per_tile[1]
+    assert (out / "mine.laz").read_bytes() == b"the user's file" and (out / "autzen_trim_0_0.laz").read_bytes() == b"an earlier run's tile"
+    assert len(list(out.iterdir())) == 8  # the 6 tiles (one replaced) and the two others, no work folder
+
+
+def test_a_read_failing_midway_leaves_no_tile(autzen_path, tmp_path, monkeypatch):
+    to_file = importlib.import_module("gigapoint.lod.convert.to_file")
+    read_chunks = to_file.read_chunks
+
+    def failing(path, chunk_size):  # the disk gives out after 5 chunks
+        for k, chunk in enumerate(read_chunks(path, chunk_size)):
+            if k == 5:
+                raise InputError(f"{path}: truncated")
+            yield chunk
+
+    monkeypatch.setattr(to_file, "read_chunks", failing)
+    out = tmp_path / "tiles"
+    with pytest.raises(InputError, match=r"autzen_trim\.laz: truncated$"):
+        gp.tile(autzen_path, out, 500, chunk_size=10_000)
+    assert list(tmp_path.iterdir()) == []  # the folder it made, gone with its work
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(InputError, match=r"truncated$"):
+        gp.tile(autzen_path, out, 500, chunk_size=10_000)
+    assert [p.name for p in out.iterdir()] == ["notes.txt"]
+
+
+def test_a_write_failing_at_the_third_tile_leaves_none_of_them(autzen_path, tmp_path, monkeypatch):
+    tiles = importlib.import_module("gigapoint.lod.convert.tiles")
+    write_points, written = tiles.write_points, []
+
+    def failing(path, *args, **kwargs):
+        if len(written) == 2:
+            raise InputError(f"{path.name}: not written (No space left on device)")
+        written.append(path.name)
+        return write_points(path, *args, **kwargs)
+
+    monkeypatch.setattr(tiles, "write_points", failing)
+    with pytest.raises(InputError, match=r"^autzen_trim_636500_848500\.laz: not written"):
+        gp.tile(autzen_path, tmp_path / "tiles", 500)
+    assert written == ["autzen_trim_636000_848500.laz", "autzen_trim_636000_849000.laz"]
+    assert list(tmp_path.iterdir()) == []  # the two whole tiles never appeared without the rest
