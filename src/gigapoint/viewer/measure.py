@@ -83,14 +83,15 @@ def _stamp(out: np.ndarray, xs: np.ndarray, ys: np.ndarray, radius: int, color) 
     out[Y[keep], X[keep]] = np.array(color, out.dtype)[: out.shape[2]]
 
 
-def draw(image: np.ndarray, camera, points) -> np.ndarray:
+def draw(image: np.ndarray, camera, points, line_color=COLOR) -> np.ndarray:
     """A copy of ``image`` (drawn with ``camera``) with the polyline through the world
-    ``points`` drawn over it; what lies behind the camera is cut off."""
+    ``points`` drawn over it in ``line_color`` (the section tool's line has its own); what lies
+    behind the camera is cut off."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     if len(p) == 0:
         return image
     out = image.copy()
-    color = (*COLOR, 255)
+    color = (*line_color, 255)
     q = np.column_stack([p, np.ones(len(p))]) @ camera.screen_rows().T  # (x', y', w, depth) per point
     h, w = out.shape[:2]
     pad = POINT_RADIUS + 2
