@@ -1,7 +1,8 @@
 """The viewer's wire protocol: message validation, the settings schema, frame packing.
 
 Client -> server: JSON text messages ``{"type": ..., ...}`` (at most MAX_MESSAGE bytes).
-Server -> client: JSON text messages (hello, settings, pick, measure, error, pong) and binary frames:
+Server -> client: JSON text messages (hello, settings, pick, measure, section, section_result, error,
+pong) and binary frames:
 ``b"GPF1" + u32 little-endian header length + JSON header + JPEG bytes``; a frame's header
 has ``cloud`` (hello's cloud line) again when that changed since the tab last got it.
 Hello's ``cloud`` (ViewerCore.cloud_info): name, points, batches, bounds, attributes,
@@ -109,6 +110,19 @@ MESSAGE_TYPES = {
     # counts heights in the horizontal unit (viewer/measure.py). A click on no point adds nothing:
     # added false and a "message". Frames draw the polyline.
     "measure",
+    # the section tool (viewer/section_tool.py): action: add (x, y: the point picked there, as
+    # measure's, is the line's next end; a third starts a new line) | set (any of points: two world
+    # [x, y, z] with different x, y; width: the corridor's, > 0, in the cloud's units; size: [w, h]
+    # pixels of the panel's image, 8..2048) | clear; id echoed. Reply {"type": "section", "id",
+    # "points", "width", "computing"} ("message" where a click found no point); with two points
+    # the section is computed off the render loop and sent as {"type": "section_result", "id": a
+    # number that grows with each change, "count", "length", "width", "line": [x1, y1, x2, y2],
+    # "distance": [min, max], "z": [min, max], "units" (as measure's), "image": a PNG data URL
+    # (Section.render at size: equal scale, +z up), "message": "" or what was left out (over
+    # section_tool.MAX_POINTS points: every k-th)} or {"type": "section_result", "id", "error": one
+    # line (an octree without source files, an empty corridor)}. GET section.csv?session=ID: its
+    # rows (Section.write_csv). Frames draw the line.
+    "section",
     "settings",  # values: {field: value}
     "quality",  # adaptive (bool), jpeg_quality (int)
     "ping",  # t (echoed)

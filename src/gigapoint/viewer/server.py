@@ -2,12 +2,12 @@
 
 Routes: ``/`` the page, ``/static/<name>`` a fixed whitelist of assets held in memory (no
 client path ever reaches the file system), ``/ws`` the tab's WebSocket, ``/screenshot`` a
-PNG rendered server-side, ``/api/info`` the cloud and settings schema. With a token (always
+PNG rendered server-side, ``/section.csv`` a tab's last cross-section's rows, ``/api/info`` the cloud and settings schema. With a token (always
 on a non-loopback bind) every route needs ``?token=...``; on a loopback bind the Host header
 must name the loopback (no DNS rebinding) and a WebSocket's Origin must match its Host, port included
 (a token, which another site's page cannot know, lets a reverse proxy in: gp.Viewer behind a JupyterHub's).
 Every address the page uses is relative to the page, so it works under any prefix a proxy strips.
-``/screenshot`` and ``/api/info`` refuse what another site's page asks for (Sec-Fetch-Site).
+``/screenshot``, ``/section.csv`` and ``/api/info`` refuse what another site's page asks for (Sec-Fetch-Site).
 Each request head must arrive within HEAD_TIMEOUT_S, and at most MAX_WAITING connections wait
 for one (clients that trickle their headers); uvicorn's log lines show queries without their values.
 """
@@ -191,6 +191,18 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
         w, h = struct.unpack(">II", png[16:24])
         return Response(png, media_type="image/png", headers={**headers, "Content-Disposition": f'attachment; filename="gigapoint_{w}x{h}.png"'})
 
+    async def section_csv(request):
+        if not authorized(request):
+            return denied(request)
+        if cross_site(request):
+            return PlainTextResponse("forbidden: a request from another site's page", status_code=403)
+        sid = request.query_params.get("session", "")[:64]
+        try:
+            csv = await run_in_threadpool(core.section_csv, sid)
+        except GigapointError as exc:
+            return PlainTextResponse(str(exc), status_code=400)
+        return Response(csv, media_type="text/csv", headers={**headers, "Content-Disposition": 'attachment; filename="section.csv"'})
+
     async def ws_endpoint(websocket):
         origin = websocket.headers.get("origin")
         # without a token, only the page's own origin (another site's page cannot set it); with one,
@@ -327,6 +339,7 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
         Route("/static/{name}", asset),
         Route("/api/info", info),
         Route("/screenshot", screenshot),
+        Route("/section.csv", section_csv),
         WebSocketRoute("/ws", ws_endpoint),
         WebSocketRoute("/push", push_endpoint),
     ]

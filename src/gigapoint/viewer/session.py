@@ -11,6 +11,7 @@ renders would only fight (and share those buffers).
 
 from __future__ import annotations
 
+import logging
 import os
 import secrets
 import threading
@@ -28,7 +29,10 @@ from ..render.renderer import render_frame
 from ..render.settings import RenderSettings
 from . import measure as M
 from . import protocol as P
+from . import section_tool as ST
 from .state import OrbitState
+
+log = logging.getLogger("gigapoint.viewer")
 
 RENDER_LOCK = threading.Lock()
 REST_S = 0.15  # no camera input for this long = at rest: refine to full resolution
@@ -194,6 +198,7 @@ class ViewerCore:
         self.bounds = (np.asarray(lo, np.float64), np.asarray(hi, np.float64))
         self.framing = sample_points(cloud)  # what the 'auto' view frames: the data, not its box
         self.units = cloud_units(cloud)  # its CRS's: what measured lengths are in (read once: a file's header)
+        self.section_width = ST.default_width(self.bounds)  # the section tool's first width
         self.watcher = None
         self.note = ""  # a line for the HUD (what a conversion preview shows)
         self.push_token: str | None = None  # a live cloud's: the key of the /push WebSocket
@@ -281,7 +286,7 @@ class ViewerCore:
         else:
             vw, vh = 1280, 720
             state, settings = self.default_state(vw, vh), self.settings
-        points = list(s.measure) if s is not None else []  # a tab's measurement is in its screenshot too
+        lines = s.lines() if s is not None else ([], [])  # a tab's measurement and section line are in its screenshot too
         if width is not None and height is None:  # one side given: keep the view's aspect
             height = max(1, round(int(width) * vh / vw))
         elif height is not None and width is None:
@@ -292,7 +297,21 @@ class ViewerCore:
             raise P.ProtocolError(f"screenshot: {w}x{h} is outside 1..{P.MAX_SHOT_SIDE} per side / {P.MAX_SHOT_PIXELS:,} pixels")
         cam = state.camera(w, h)
         frame = render_locked(self.cloud, cam, settings)
-        return encode_image(M.draw(frame.image, cam, points), "PNG")
+        return encode_image(overlaid(frame.image, cam, lines), "PNG")
+
+    def section_csv(self, session_id: str) -> bytes:
+        """The CSV of the last section a tab was sent (``Section.write_csv``'s rows)."""
+        s = self.sessions.get(session_id)
+        cut = None if s is None else s.section_cut
+        if cut is None:
+            raise P.ProtocolError("section: no section drawn in this tab yet")
+        return ST.csv_bytes(cut)
+
+
+def overlaid(image, camera, lines) -> np.ndarray:
+    """``image`` with a tab's measurement (``lines[0]``) and section line (``lines[1]``) drawn over it."""
+    measure, section = lines
+    return M.draw(M.draw(image, camera, measure), camera, section, ST.COLOR)
 
 
 class Session:
@@ -316,6 +335,12 @@ class Session:
         self.closed = False
         self.last: LastFrame | None = None
         self.measure: list[list[float]] = []  # the measuring tool's points (world), drawn over each frame
+        self.section: list[list[float]] = []  # the section tool's line: 0 to 2 picked points (world), drawn too
+        self.section_width = core.section_width
+        self.section_size = [600, 240]  # pixels of the panel's image
+        self.section_job = 0  # bumped by every change of the line: a section computed for an older one is not sent
+        self.section_cut = None  # the last section sent (its CSV)
+        self.section_lock = threading.Lock()  # one section computed at a time per tab
         self.scales = ScaleControl()
         self.budget = MovingBudget()
         self.frames = 0
@@ -394,6 +419,9 @@ class Session:
                 motion = pivot
                 if not pivot:
                     return reply
+            elif kind == "section":
+                reply = self._section(msg)
+                motion = False
             elif kind == "measure":
                 reply = self._measure(msg)
                 if reply is None:
@@ -460,6 +488,72 @@ class Session:
             self.state.set_pivot(info["position"])
         return {"type": "pick", "id": pick_id, "found": True, "pivot": pivot, "info": P.json_safe(info)}
 
+    def _picked(self, msg) -> list[float] | None:
+        """The world point of the visible point nearest to a message's (x, y) in the last frame
+        (as ``pick`` finds it), or None: a click on nothing. The measuring and section tools' picks."""
+        hit = self._hit(P.number(msg, "x", 0, 1), P.number(msg, "y", 0, 1))
+        if hit is None:
+            return None
+        index, depth, _, px, py = hit
+        return [float(v) for v in point_info(self.last, index, px, py, depth)["position"]]
+
+    def lines(self) -> tuple[list, list]:
+        """(measurement points, section line points) as frames draw them."""
+        return list(self.measure), list(self.section)
+
+    # --- the section tool ----------------------------------------------------------------
+    def _section(self, msg) -> dict:
+        """Apply a section message (add a picked point, set points/width/size, clear); with two
+        points the section is computed on a thread of its own and sent as "section_result"."""
+        action, message = msg.get("action"), None
+        if action == "add":
+            picked = self._picked(msg)
+            if picked is None:
+                message = "no point here: nothing added"
+            else:  # a third click starts a new line
+                self.section = [*self.section[-1:], picked] if len(self.section) == 1 else [picked]
+        elif action == "set":
+            values = ST.parse(msg)
+            self.section = values.get("points", self.section)
+            self.section_width = values.get("width", self.section_width)
+            self.section_size = values.get("size", self.section_size)
+        elif action == "clear":
+            self.section = []
+        else:
+            raise P.ProtocolError(f"section: action must be add, set or clear, got {str(action)[:20]!r}")
+        self.section_job += 1  # what is on its way for the old line is not sent
+        computing = len(self.section) == 2
+        if computing:
+            job = (self.section_job, [p[:2] for p in self.section], self.section_width, tuple(self.section_size))
+            threading.Thread(target=self._compute_section, args=job, name=f"gigapoint-section-{self.id}", daemon=True).start()
+        reply = {"type": "section", "id": msg.get("id"), "points": self.section, "width": self.section_width, "computing": computing}
+        return reply if message is None else {**reply, "message": message}
+
+    def _compute_section(self, job: int, ends, width: float, size) -> None:
+        """The section of the viewer's cloud along ``ends`` sent to the tab (off the render loop:
+        only its image is drawn under the render lock, and the corridor's points are few)."""
+        with self.section_lock:
+            if job != self.section_job or self.closed:
+                return  # the line changed again while an older one was computed
+            line = (*ends[0], *ends[1])
+            cut = None
+            try:
+                cut, note = ST.capped(ST.section_of(self.core.cloud, line, width), ST.MAX_POINTS)
+                result = ST.summary(cut, self.core.units, note)
+                with RENDER_LOCK:
+                    image = cut.render(size=size)
+                result["image"] = ST.image_url(image)
+            except GigapointError as exc:  # an octree without source files, an empty corridor: said in the panel
+                result, cut = {"error": str(exc)[:500]}, None
+            except Exception as exc:  # a bug: this section fails (logged), the tab goes on
+                log.exception("viewer: a section failed")
+                result, cut = {"error": f"internal error: {exc}"[:300]}, None
+            with self.cond:
+                if job != self.section_job:
+                    return
+                self.section_cut = cut
+        self.send("json", {"type": "section_result", "id": job, **result})
+
     def _measure(self, msg) -> dict | None:
         """Apply a measure message (add a picked point, restore points, undo the last, clear); None: a click on nothing."""
         action = msg.get("action")
@@ -471,11 +565,10 @@ class Session:
         elif action == "add":
             if len(self.measure) >= M.MAX_POINTS:
                 raise P.ProtocolError(f"measure: at most {M.MAX_POINTS} points; clear the measurement first")
-            hit = self._hit(P.number(msg, "x", 0, 1), P.number(msg, "y", 0, 1))
-            if hit is None:
+            picked = self._picked(msg)
+            if picked is None:
                 return None
-            index, depth, _, px, py = hit
-            self.measure.append([float(v) for v in point_info(self.last, index, px, py, depth)["position"]])
+            self.measure.append(picked)
         elif action == "undo":
             self.measure = self.measure[:-1]
         elif action == "clear":
@@ -486,7 +579,7 @@ class Session:
 
     # --- the worker ----------------------------------------------------------------------
     def _next_job(self):
-        """Wait for work; returns (version, seq, state, settings, size, scale_level, quality, moving, measure points) or None when closed."""
+        """Wait for work; returns (version, seq, state, settings, size, scale_level, quality, moving, lines drawn over it) or None when closed."""
         with self.cond:
             while True:
                 if self.closed:
@@ -505,14 +598,14 @@ class Session:
                 self.cond.wait()
             st = self.state
             job_state = OrbitState(st.target.copy(), st.yaw, st.pitch, st.distance, st.fov, st.scene_radius)
-            return self.version, self.seq, job_state, self.settings, (self.width, self.height), level, self.jpeg_quality, moving, list(self.measure)
+            return self.version, self.seq, job_state, self.settings, (self.width, self.height), level, self.jpeg_quality, moving, self.lines()
 
     def _run(self) -> None:
         while True:
             job = self._next_job()
             if job is None:
                 return
-            version, seq, state, settings, (w, h), level, quality, moving, measure = job
+            version, seq, state, settings, (w, h), level, quality, moving, lines = job
             scale = SCALES[level]
             t0 = time.perf_counter()
             cloud = self.core.cloud
@@ -533,7 +626,7 @@ class Session:
                 continue
             t1 = time.perf_counter()
             self.budget.record(frame.stats.points_processed, frame.stats.time_ms / 1000.0)
-            jpeg = encode_image(M.draw(frame.image, cam, measure), "JPEG", quality if level == 0 else min(quality, 75))
+            jpeg = encode_image(overlaid(frame.image, cam, lines), "JPEG", quality if level == 0 else min(quality, 75))
             t2 = time.perf_counter()
             if cloud is self.core.live:  # a live cloud measures push-to-pixels latency
                 cloud.drawn(frame)

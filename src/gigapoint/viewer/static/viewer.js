@@ -16,7 +16,7 @@
   const S = {
     ws: null, session: null, cloud: null, schema: [], settings: {}, camera: null,
     seq: 0, sentAt: new Map(), lastFrame: 0, frameTimes: [], fps: null, latency: null, renderTimes: [],
-    header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0, measuring: false, measure: [],
+    header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0, measuring: false, measure: [], sectioning: false,
     pending: { orbit: null, look: null, pan: null, zoom: null }, retry: 0,
   };
   window.gigapoint = S; // for tests and the curious
@@ -95,6 +95,7 @@
       S.sceneRadius = Math.hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]) / 2 || 1;
       showCloud(m.cloud);
       showMeasure({ points: [], segments: [] });  // a new session measures nothing yet (a reconnect's points are sent back below)
+      if (S.sectioning) startSection();  // the new session has no line: the panel asks for one again
       buildSettings();
       updateSpeedLabel();
       setFov(m.camera.fov, false);
@@ -117,6 +118,10 @@
       showPick(m);
     } else if (m.type === "measure") {
       showMeasure(m);
+    } else if (m.type === "section") {
+      showSection(m);
+    } else if (m.type === "section_result") {
+      showSectionResult(m);
     } else if (m.type === "error") {
       showError(m.message, m.in_reply_to);
       if (m.in_reply_to === "settings") syncSettings(); // the panel shows what the server kept
@@ -282,6 +287,7 @@
 
   // ---------------------------------------------------------------- measuring (the server draws the polyline into the frames)
   function setMeasuring(on) {
+    if (on && S.sectioning) setSectioning(false);  // one tool's clicks at a time
     if (S.measuring && !on) { send({ type: "measure", action: "clear" }, true); S.measure = []; }  // (its reply is not shown)
     S.measuring = on;
     $("btn-measure").classList.toggle("active", on);
@@ -322,6 +328,62 @@
     lines.push("Backspace removes the last point · Esc or M ends");
     $("measureinfo").textContent = lines.join("\n");
     $("measureinfo").dataset.points = String(m.points.length);
+  }
+
+  // ---------------------------------------------------------------- the section tool (the server computes the section, draws the line)
+  function setSectioning(on) {
+    if (on && S.measuring) setMeasuring(false);
+    if (S.sectioning && !on) send({ type: "section", action: "clear" }, true);
+    S.sectioning = on;
+    $("btn-section").classList.toggle("active", on);
+    canvas.classList.toggle("sectioning", on);
+    $("section-panel").classList.toggle("hidden", !on);
+    if (on) startSection();
+  }
+
+  // the image's size: the panel's <img> in device pixels; the width as typed, or the server's first (1/50 of the cloud)
+  function startSection() {
+    const img = $("section-image"), dpr = Math.min(window.devicePixelRatio || 1, 2);
+    const size = [Math.max(8, Math.min(2048, Math.round((img.parentElement.clientWidth || 270) * dpr))), Math.round(160 * dpr)];
+    const width = Number($("section-width").value);
+    send({ type: "section", action: "set", size, ...($("section-width").value !== "" && width > 0 ? { width } : {}) }, true);
+    $("section-image").classList.add("hidden");
+    $("btn-section-csv").disabled = true;
+    $("section-info").textContent = "click the line's first end";
+  }
+
+  function lengthUnit() {  // the symbol lengths are in ("" where the cloud names none, or its x, y are degrees)
+    const h = S.cloud && S.cloud.units && S.cloud.units.horizontal;
+    return h && h.metres != null ? " " + h.symbol : "";
+  }
+
+  function showSection(m) {
+    if (!S.sectioning) return;  // the reply to the clear that ended it
+    $("section-width").value = String(m.width);
+    $("section-unit").textContent = lengthUnit().trim();
+    const info = $("section-info");
+    info.dataset.points = String(m.points.length);
+    if (m.computing) info.textContent = "computing the section…";
+    else info.textContent = m.points.length ? "click the line's other end" : "click the line's first end";
+    if (m.message) info.textContent += ` (${m.message})`;
+  }
+
+  function showSectionResult(m) {
+    if (!S.sectioning) return;
+    const info = $("section-info"), img = $("section-image");
+    if (m.error) { info.textContent = m.error; img.classList.add("hidden"); $("btn-section-csv").disabled = true; return; }
+    const u = lengthUnit(), n = (x) => x.toFixed(2);
+    img.src = m.image;
+    img.classList.remove("hidden");
+    info.textContent = [
+      `${m.count.toLocaleString()} points · length ${n(m.length)}${u} · width ${n(m.width)}${u}`,
+      `heights ${n(m.z[0])} to ${n(m.z[1])}${u} (${n(m.z[1] - m.z[0])}${u})`,
+      unitsLine(m.units || {}),
+      ...(m.message ? [m.message] : []),
+      "click two points for another line · Esc ends",
+    ].join("\n");
+    info.dataset.count = String(m.count);
+    $("btn-section-csv").disabled = false;
   }
 
   function relPos(ev) {
@@ -379,7 +441,8 @@
     canvas.classList.remove("dragging");
     if (drag && drag.moved < 4 && e.type === "pointerup" && (drag.button === 0 || e.pointerType === "touch")) {
       const [x, y] = relPos(e);
-      if (S.measuring) send({ type: "measure", action: "add", x, y, id: ++S.pickId }, true);
+      if (S.sectioning) send({ type: "section", action: "add", x, y, id: ++S.pickId }, true);
+      else if (S.measuring) send({ type: "measure", action: "add", x, y, id: ++S.pickId }, true);
       else send({ type: "pick", x, y, id: ++S.pickId });
     }
     if (pointers.size < 2) pinch = null;
@@ -393,7 +456,7 @@
     return { dist: Math.hypot(a[0] - b[0], a[1] - b[1]), cx: (a[0] + b[0]) / 2, cy: (a[1] + b[1]) / 2 };
   }
   canvas.addEventListener("dblclick", (e) => {
-    if (S.measuring) return;  // its clicks measure: no pivot
+    if (S.measuring || S.sectioning) return;  // their clicks pick points: no pivot
     const [x, y] = relPos(e);
     send({ type: "pick", x, y, pivot: true, id: ++S.pickId }, true);
   });
@@ -412,6 +475,7 @@
     if ("wasdqe".includes(k) && k.length === 1) { S.keys.add(k); e.preventDefault(); }
     else if (k === "f") setFly(!S.fly);
     else if (k === "m") setMeasuring(!S.measuring);
+    else if (k === "escape" && S.sectioning) setSectioning(false);
     else if (k === "escape" && S.measuring) setMeasuring(false);
     else if (k === "backspace" && S.measuring) { e.preventDefault(); send({ type: "measure", action: "undo" }, true); }
     else if (k === "r") send({ type: "reset" }, true);
@@ -465,6 +529,21 @@
   $("fov").addEventListener("input", (e) => setFov(e.target.value, true));
   $("fly").addEventListener("change", (e) => setFly(e.target.checked));
   $("btn-measure").addEventListener("click", () => setMeasuring(!S.measuring));
+  $("btn-section").addEventListener("click", () => setSectioning(!S.sectioning));
+  $("section-width").addEventListener("change", (e) => {
+    const w = Number(e.target.value);
+    const ok = e.target.value !== "" && Number.isFinite(w) && w > 0;
+    e.target.classList.toggle("invalid", !ok);  // (nothing sent: the server keeps the last width)
+    if (ok) send({ type: "section", action: "set", width: w }, true);
+  });
+  $("btn-section-csv").addEventListener("click", () => {
+    const a = document.createElement("a");
+    a.href = withToken("section.csv", { session: S.session || "" }).toString();
+    a.download = "section.csv";
+    document.body.append(a);
+    a.click();
+    a.remove();
+  });
   $("speed").addEventListener("input", (e) => { S.speedExp = Number(e.target.value); updateSpeedLabel(); });
   const sendQuality = () => {
     // an emptied field was Number("") = 0: quality 10 while it showed nothing; the field shows the quality used

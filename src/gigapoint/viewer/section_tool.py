@@ -1,0 +1,113 @@
+"""The viewer's section tool (Potree's profile tool): a cross-section along two picked points.
+
+The session picks the two points as the measuring tool does (world points through the last
+frame's visibility buffer) and draws the line into each frame (measure.draw, in its own
+colour); the section itself (``gigapoint.section``, cross_section.py) is computed off the
+render loop (``Session._compute_section``'s thread) and sent as a PNG of the panel's size with
+its numbers. Which points: a cloud held in memory (a PointCloud) gives its own; a local COPC
+file is read again through the corridor filter (it is a LAZ file too); any other octree has no
+source files to read, and the reply says so in one line.
+"""
+
+from __future__ import annotations
+
+import base64
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..core.cloud import PointCloud, build_cloud
+from ..cross_section import Section, section
+from ..errors import GigapointError
+from ..io.http import LocalFile
+from ..lod.copc import CopcCloud
+from ..render.frame import encode_image
+from . import protocol as P
+
+COLOR = (0, 229, 255)  # cyan: the section's line, apart from the measuring tool's yellow
+MAX_POINTS = 5_000_000  # a corridor holding more is thinned to every k-th point (drawn and written)
+MAX_IMAGE_SIDE = 2048  # pixels of the panel's image
+
+
+def parse(msg: dict) -> dict:
+    """The checked values of a section message: ``points`` (two [x, y, z]), ``width`` (> 0), ``size`` ([w, h]); those given."""
+    out = {}
+    if "points" in msg:
+        points = msg["points"]
+        if not isinstance(points, list) or len(points) != 2:
+            raise P.ProtocolError("section: points must be a list of two points [x, y, z]")
+        out["points"] = [P.vec3({"type": "section", "point": p}, "point") for p in points]
+        if out["points"][0][:2] == out["points"][1][:2]:
+            raise P.ProtocolError("section: the two points are at the same x, y: the line has no length")
+    if "width" in msg:
+        width = P.number(msg, "width", 0, P.MAX_ABS_COORD)
+        if width <= 0:
+            raise P.ProtocolError("section: width must be above 0")
+        out["width"] = width
+    if "size" in msg:
+        size = msg["size"]
+        if not isinstance(size, list) or len(size) != 2:
+            raise P.ProtocolError("section: size must be [width, height] in pixels")
+        out["size"] = [P.integer({"type": "section", "size": v}, "size", 8, MAX_IMAGE_SIDE) for v in size]
+    return out
+
+
+def section_of(cloud, line, width) -> Section:
+    """``gigapoint.section`` of what the viewer shows: the cloud's points in memory, a local COPC
+    file's points read again; a one-line GigapointError for an octree without either."""
+    if isinstance(cloud, PointCloud):
+        return section(cloud, line, width)
+    if isinstance(cloud, CopcCloud) and isinstance(cloud.source, LocalFile):
+        return section(cloud.source.path, line, width)
+    raise GigapointError(f"{cloud.name}: sections need the points in memory or their source files; this octree names none (view the point files instead)")
+
+
+def capped(cut: Section, limit: int) -> tuple[Section, str]:
+    """``cut`` with at most ``limit`` points (every k-th row of the corridor: the image and the CSV
+    stay quick to make), and the line that says so ("" when nothing was left out)."""
+    n = cut.cloud.n_points
+    if n <= limit:
+        return cut, ""
+    step = -(-n // limit)
+    kept, start = [], 0
+    for chunk in cut.cloud.chunks():
+        rows = np.arange(start, start + len(chunk))
+        kept.append(chunk.subset(rows % step == 0))
+        start += len(chunk)
+    thinned = build_cloud(kept, name=cut.cloud.name, colors="rgba")
+    return Section(thinned, cut.line, cut.width), f"{n:,} points in the corridor: 1 point in {step} shown (at most {limit:,}); narrow or shorten it for all"
+
+
+def default_width(bounds) -> float:
+    """The width offered first: 1/50 of the cloud's larger horizontal side, to 2 significant digits."""
+    lo, hi = (np.asarray(b, np.float64) for b in bounds)
+    side = float(max(hi[0] - lo[0], hi[1] - lo[1]))
+    return float(f"{side / 50:.2g}") if side > 0 else 1.0
+
+
+def summary(cut: Section, units, note: str) -> dict:
+    """The section's numbers, as the panel shows them (in the cloud's ``units``)."""
+    return {
+        "count": int(cut.cloud.n_points),
+        "length": cut.length,
+        "width": cut.width,
+        "line": list(cut.line),
+        "distance": [float(cut.distance.min()), float(cut.distance.max())],
+        "z": [float(cut.z.min()), float(cut.z.max())],
+        "units": units,
+        "message": note,
+    }
+
+
+def image_url(image: np.ndarray) -> str:
+    """A PNG data URL of ``image`` (what the panel's <img> shows)."""
+    return "data:image/png;base64," + base64.b64encode(encode_image(image, "PNG")).decode("ascii")
+
+
+def csv_bytes(cut: Section) -> bytes:
+    """The rows as ``Section.write_csv`` writes them."""
+    with tempfile.TemporaryDirectory(prefix="gigapoint-section-") as tmp:
+        path = Path(tmp) / "section.csv"
+        cut.write_csv(path)
+        return path.read_bytes()
