@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import io
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -391,3 +392,43 @@ def test_the_viewer_draws_in_an_iframe_of_a_page_of_any_scheme(browser, server, 
         assert (canvas_pixels(viewer).sum(axis=2) > 60).mean() > 0.05  # the ground is drawn
     finally:
         ctx.close()
+
+
+def test_section_tool_shows_the_cross_section_of_two_clicked_points(page, server):
+    n = frame_no(page)
+    page.get_by_role("button", name="top").click()
+    page.wait_for_function("() => window.gigapoint.camera.pitch > 89", timeout=30_000)
+    wait_full_frame(page, n)
+    b = canvas_box(page)
+    page.get_by_role("button", name="section").click()
+    info = page.locator("#section-info")
+    info.get_by_text("click the line's first end").wait_for(timeout=30_000)
+    assert page.locator("#section-width").input_value() == "2"  # 1/50 of the ground's 100 units
+    page.locator("#section-width").fill("3")
+    page.locator("#section-width").press("Enter")
+    for k, fx in enumerate((0.3, 0.7), start=1):  # two points of the ground, seen from above
+        page.mouse.click(b["x"] + b["width"] * fx, b["y"] + b["height"] * 0.5)
+        page.wait_for_function("(k) => document.getElementById('section-info').dataset.points === String(k)", arg=k, timeout=30_000)
+    page.wait_for_function("() => document.getElementById('section-info').dataset.count", timeout=30_000)
+    (session,) = server.core.sessions.values()
+    (x1, y1, _), (x2, y2, _) = session.section
+    expected = gigapoint.section(server.core.cloud, (x1, y1, x2, y2), 3.0)
+    text = info.inner_text()
+    assert f"{len(expected.z):,} points · length {expected.length:.2f} · width 3.00" in text, text
+    assert f"heights {expected.z.min():.2f} to {expected.z.max():.2f}" in text and "units unknown" in text, text
+    image = page.locator("#section-image")
+    assert image.is_visible()
+    src = image.get_attribute("src")
+    shown = np.asarray(Image.open(io.BytesIO(base64.b64decode(src.split(",", 1)[1]))).convert("RGB"))
+    width = int(page.evaluate("() => document.getElementById('section-image').parentElement.clientWidth"))
+    assert shown.shape == (160, width, 3) and (shown.max(axis=2) > 0).sum() > 50  # the panel's size, points drawn
+    with page.expect_download() as download:
+        page.get_by_role("button", name="CSV").click()
+    rows = Path(download.value.path()).read_text().splitlines()
+    assert rows[0] == "distance_along,offset,z" and len(rows) == 1 + len(expected.z)
+    page.keyboard.press("Escape")
+    page.locator("#section-panel").wait_for(state="hidden")
+    t_end = time.monotonic() + 10
+    while session.section and time.monotonic() < t_end:
+        time.sleep(0.05)
+    assert session.section == []
