@@ -182,7 +182,8 @@ def test_every_field_is_a_render_option_with_its_help_default_choices_and_range(
             )
         if spec.max is not None:
             assert f"x<={spec.max}]" in p.help
-        assert p.default == (format_color(spec.default) if spec.kind == "color" else spec.default), spec.name
+        shown = {"color": lambda v: format_color(v), "classes": lambda v: ",".join(map(str, v)) or None}.get(spec.kind, lambda v: v)
+        assert p.default == shown(spec.default), spec.name
     assert params["point_budget"].default == RenderSettings().point_budget
     assert params["adaptive_precision"].secondary_opts == ["--no-adaptive-precision"]
     assert params["fill_holes_foveated"].opts == ["--foveated"]
@@ -226,6 +227,8 @@ def _bad_value(spec):
         return "3,1"
     if spec.kind == "color":
         return "no-such-color"
+    if spec.kind == "classes":
+        return "7,256"
     return None
 
 

@@ -245,7 +245,7 @@ def render(
     depth_out: Annotated[
         Path | None, typer.Option(readable=False, help="Also write the depth buffer (.npy, float32, inf = empty); with --gsd the surface heights instead (a DSM: a float32 GeoTIFF, NaN = empty, with its world file and .prj).")
     ] = None,
-    index_out: Annotated[Path | None, typer.Option(readable=False, help="Also write the point index buffer (.npy, int64, -1 = empty): each pixel's point as gigapoint holds the cloud (a file read into memory: gp.open(FILE).point_info(i)), not the file's row.")] = None,
+    index_out: Annotated[Path | None, typer.Option(readable=False, help="Also write the point index buffer (.npy, int64, -1 = empty): each pixel's point as gigapoint holds the cloud (a file read into memory: gp.open(FILE).point_info(i); with --hidden-classes, of the points drawn: gp.open(FILE).without_classes(CLASSES)), not the file's row.")] = None,
     gsd: Annotated[
         float | None,
         typer.Option(help="Ground sample distance (cloud units per pixel): an orthophoto straight down, north up, covering the cloud, with a world file (.pgw, .jgw, .tfw, .wld) and a .prj of the cloud's CRS beside it; a .tif is a GeoTIFF (its grid and CRS in its tags)."),

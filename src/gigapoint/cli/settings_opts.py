@@ -86,6 +86,8 @@ def setting_option(spec: SettingSpec, cls: type = RenderSettings) -> SettingOpti
         annotation, default = str, (None if default is None else format_color(default))
     elif kind == "range":
         annotation, default = str, _range_text(default)
+    elif kind == "classes":  # '7,18'; none hidden shows no default
+        annotation, default = str, ",".join(map(str, default)) or None
     else:
         annotation = str
     if nullable or default is None:
@@ -171,7 +173,10 @@ def settings_from_options(cls: type, values: dict, given: frozenset | set = froz
     for name, value in values.items():
         if name not in opts:
             raise SettingsError(f"unknown render setting(s): {name}")
-        kwargs[name] = _pair(blame[name], value) if opts[name].spec.kind == "range" else value
+        kind = opts[name].spec.kind
+        if kind == "classes" and value is None:
+            continue  # not given: the field's default (none hidden)
+        kwargs[name] = _pair(blame[name], value) if kind == "range" else value
     for target, (value, source) in implied_fields(cls, given).items():  # e.g. --point-world-size: attenuated points, 16 px at most
         if target in opts:
             kwargs[target] = value

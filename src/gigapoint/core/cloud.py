@@ -21,12 +21,12 @@ from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexEr
 from . import pages
 from .attributes import Attributes
 from .chunk import PointChunk, attributes_in_common, colors_for, warn_dropped_attributes
-from .compact import colors_at, compact_positions, full_words, pack_rgb565, point_words, rgba32
+from .compact import colors_at, compact_positions, full_words, pack_rgb565, point_words, rgba32, subset_streams
 from .layout import BATCH_DTYPE, BATCH_SIZE
 from .morton import cube_of, morton_codes, morton_order
 from .palette import PaletteColors, block_errors, choose_palette, quantize_palettes
 from .quantize import dequantize, make_batches, quantize
-from .renderable import DrawList, MultiViewDrawList, SelectionSettings, check_point_index
+from .renderable import DrawList, MultiViewDrawList, SelectionSettings, check_classified, check_point_index
 from .selection import View, select_view, select_views, subsample_step
 
 #: Coordinates beyond this magnitude are not of this planet in any CRS: skipped as invalid.
@@ -94,6 +94,9 @@ class PointCloud:
     version: int | None = field(default=None, init=False, repr=False, compare=False)
     batch_version: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
     load_progress: ClassVar[float] = 1.0  # Renderable: built whole
+    # what frames with hidden classes draw: {hidden classes: (this cloud's version, its points of the
+    # other classes)}, made once a set while the cloud is unchanged (``drawn``)
+    _without: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def n_points(self) -> int:
@@ -282,20 +285,69 @@ class PointCloud:
             info[name] = v.tolist() if hasattr(v, "tolist") else v
         return info
 
+    def without_classes(self, hidden) -> PointCloud:
+        """A cloud of the points whose ``classification`` is not in ``hidden``, in the same order:
+        each batch's kept points a batch of their own in its box (their position words as held,
+        so they draw where they drew), colours and attributes its own arrays. What frames with
+        ``hidden_classes`` draw (``drawn``); a cloud without classification is a SettingsError."""
+        hidden = tuple(hidden)
+        check_classified(self.name, self.attributes, hidden)
+        kept = ~np.isin(self.attributes["classification"], hidden)
+        idx = np.flatnonzero(kept)
+        count = self.batches["count"].astype(np.int64)
+        kept_counts = np.bincount(np.repeat(np.arange(len(count)), count)[idx], minlength=len(count))
+        nonempty = np.flatnonzero(kept_counts)
+        batches = self.batches[nonempty].copy()
+        batches["count"] = kept_counts[nonempty]
+        batches["first"] = np.cumsum(kept_counts[nonempty]) - kept_counts[nonempty]
+        ext = pack = None
+        if self.packing is None:
+            med, high = self.med[idx], self.high[idx]
+        else:  # the kept points' extension fields moved into streams of their own
+            med = high = None
+            positions = idx - np.repeat(self.batches["first"][nonempty].astype(np.int64), kept_counts[nonempty])
+            ext, pack = subset_streams(self, nonempty, kept_counts[nonempty], positions)
+        # palettes are per block of the whole cloud: the kept points' colours decoded (what they draw)
+        color = self.color[idx] if isinstance(self.color, np.ndarray) else colors_at(self.color, idx)
+        attrs = Attributes({a: self.attributes.at(a, idx) for a in self.attributes}, packed=True)
+        cloud = PointCloud(batches, self.low[idx], med, high, color, attrs, name=self.name, source_scale=self.source_scale, ext=ext,
+                           packing=pack, data_bounds=self.data_bounds, source_files=self.source_files,
+                           source_color_bits=self.source_color_bits)  # fmt: skip
+        return cloud
+
+    def drawn(self, settings: SelectionSettings) -> PointCloud:
+        """The cloud a frame with these settings draws: itself, or with ``hidden_classes`` its
+        points of the other classes, filtered once a set and kept until the cloud ``changed()``
+        (toggling classes back and forth filters nothing again)."""
+        hidden = settings.hidden_classes
+        if not hidden:
+            return self
+        made = self._without.get(hidden)
+        if made is None or made[0] != self.version:
+            self._without = {h: m for h, m in self._without.items() if m[0] == self.version}  # those of older points dropped
+            if len(self._without) >= 4:  # a few sets held (each a copy of the points kept), not every set ever shown
+                self._without.pop(next(iter(self._without)))
+            made = self._without[hidden] = (self.version, self.without_classes(hidden))
+        return made[1]
+
     # -- Renderable (renderable.py)
     def prepare(self, view: View, settings: SelectionSettings) -> DrawList:
-        """The batches in view; with ``settings.max_points``, every k-th point of each."""
-        sel = select_view(self.batches, view, settings)
-        step = subsample_step(self.batches["count"][sel.ids].astype(np.int64), settings.max_points)
-        return DrawList(self, sel, len(self.batches), step)
+        """The batches in view; with ``settings.max_points``, every k-th point of each; with
+        ``settings.hidden_classes``, those of the cloud of the other classes (``drawn``): the
+        frame's indices are its points'."""
+        cloud = self.drawn(settings)
+        sel = select_view(cloud.batches, view, settings)
+        step = subsample_step(cloud.batches["count"][sel.ids].astype(np.int64), settings.max_points)
+        return DrawList(cloud, sel, len(self.batches), step)
 
     def reading(self) -> contextlib.nullcontext:
         """Nothing to hold: the buffers change only where the program changes them, between frames."""
         return contextlib.nullcontext()
 
     def prepare_views(self, views: list[View], settings: SelectionSettings) -> MultiViewDrawList:
-        ids, bits, matrices, sels = select_views(self.batches, views, settings)
-        return MultiViewDrawList(self, ids, bits, matrices, [DrawList(self, sel, len(self.batches)) for sel in sels])
+        cloud = self.drawn(settings)
+        ids, bits, matrices, sels = select_views(cloud.batches, views, settings)
+        return MultiViewDrawList(cloud, ids, bits, matrices, [DrawList(cloud, sel, len(self.batches)) for sel in sels])
 
     def __repr__(self) -> str:
         lo, hi = (at_scale(b, self.source_scale) for b in self.bounds)  # as the file wrote them: 848935.2, not 848935.2000000001

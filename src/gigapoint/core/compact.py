@@ -452,6 +452,40 @@ def expand_cloud_words(points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return points.low.copy(), np.asarray(med), np.asarray(high)
 
 
+@njit(cache=True)
+def _gather_fields(ext, old_word0s, codes, new_word0s, starts, positions, out):
+    for b in range(new_word0s.shape[0]):
+        t = code_bits(codes[b])
+        if t == 0:
+            continue
+        for m in range(starts[b], starts[b + 1]):
+            write_ext(out, new_word0s[b], t, m - starts[b], read_ext(ext, old_word0s[b], t, positions[m]))
+
+
+def stream_subset(ext: np.ndarray, code: int, positions: np.ndarray) -> np.ndarray:
+    """The stream of one batch (layout ``code``) holding only its points ``positions``, their fields as stored."""
+    pack = np.zeros(1, PACK_DTYPE)
+    pack["code"] = code
+    out = np.zeros(int(stream_words(ext_bits_per_point(pack, None), np.int64(len(positions)))[0]), np.uint64)
+    starts = np.array([0, len(positions)], np.int64)
+    _gather_fields(ext, np.zeros(1, np.int64), pack["code"], np.zeros(1, np.int64), starts, positions.astype(np.int64), out)
+    return out
+
+
+def subset_streams(points, batches: np.ndarray, counts: np.ndarray, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(ext, packing) of new batches that hold some points of compact ``points``' ``batches``
+    (``counts`` each: points ``positions``, batch-relative, batch after batch), in the same boxes:
+    their fields are moved as stored, so the positions stay exact."""
+    pack = points.packing[batches].copy()
+    words = stream_words(ext_bits_per_point(pack, counts), counts)
+    pack["ext_first"] = np.cumsum(words) - words
+    ext = np.zeros(int(words.sum()), np.uint64)
+    starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    old = points.packing["ext_first"][batches].astype(np.int64)
+    _gather_fields(points.ext, old, pack["code"], pack["ext_first"].astype(np.int64), starts, positions.astype(np.int64), ext)
+    return ext, pack
+
+
 def wide_batches(pack: np.ndarray) -> np.ndarray:
     """Bool per batch: stored wide (off the source grid or beyond 29 bits an axis)."""
     return (pack["code"] & 0xFF) == EXT_FULL_BITS
@@ -479,7 +513,9 @@ __all__ = [
     "pack_code",
     "point_words",
     "read_ext",
+    "stream_subset",
     "stream_words",
+    "subset_streams",
     "tail_words",
     "wide_batches",
     "wide_bits",

@@ -20,6 +20,25 @@ import numpy as np
 from .selection import Selection, View
 
 
+def check_classified(name: str, attribute_names, hidden: tuple[int, ...]) -> None:
+    """A one-line SettingsError where ``hidden`` classes are to be left out of the cloud ``name``
+    and its points have no ``classification`` attribute to tell them by."""
+    from ..errors import SettingsError
+
+    if hidden and "classification" not in attribute_names:
+        classes = ",".join(map(str, hidden))
+        raise SettingsError(f"hidden_classes: {name} has no classification attribute, so no class {classes} to hide")
+
+
+def refuse_hidden_classes(name: str, kind: str, settings: SelectionSettings) -> None:
+    """A one-line SettingsError where ``settings`` hide classes of a cloud kind that cannot
+    leave them out while drawing (they would be drawn without a word)."""
+    from ..errors import SettingsError
+
+    if settings.hidden_classes:
+        raise SettingsError(f"hidden_classes: {name} is {kind}, which draws every class; leave them out as it reads instead (--drop-classes, drop_classes=)")
+
+
 def check_point_index(index, n_points: int | None = None, name: str = "") -> None:
     """A one-line PointIndexError unless ``index`` (given to ``point_info``) is a whole number
     (a float such as 3.5 was read as point 3) and, with ``n_points``, -1 (no point) or one of
@@ -42,6 +61,7 @@ class SelectionSettings(Protocol):
     point_budget: int  # octrees: most points a frame draws
     lod_threshold_px: float
     lod_foveation: float
+    hidden_classes: tuple[int, ...]  # LAS classes not drawn (the points drawn are a filtered cloud: DrawList.points)
 
 
 @runtime_checkable
@@ -81,7 +101,9 @@ class PointBuffers(Protocol):
 class DrawList:
     """What one view draws: batches ``selection`` of ``points``."""
 
-    points: PointBuffers  # the arrays the visibility buffer's indices point into
+    # the arrays the visibility buffer's indices point into: with ``hidden_classes`` those of the
+    # points drawn (a plain cloud's filtered copy, an octree's arena of filtered nodes)
+    points: PointBuffers
     selection: Selection
     n_batches: int  # batches (octree: nodes) of the whole renderable, for the stats
     step: int = 1  # draw every step-th point of each batch (a point cap on a plain cloud)

@@ -45,7 +45,7 @@ from ..core.cloud import MAX_ABS_COORDINATE, PointCloud, take
 from ..core.layout import BATCH_SIZE
 from ..core.morton import argsort_codes, cube_of, morton_codes
 from ..core.quantize import make_batches, quantize
-from ..core.renderable import DrawList
+from ..core.renderable import DrawList, refuse_hidden_classes
 from ..core.selection import Selection, View, select_view, subsample_step
 from ..core.threads import threads_for
 from ..errors import GigapointError, GigapointWarning, InputError, KeptWarnings, check_switch, check_timeout, check_whole, is_real, warn
@@ -645,6 +645,7 @@ class LiveCloud:
     def prepare(self, view: View, settings) -> DrawList:
         """Every ring chunk in view (``max_points``: every k-th point of each), then the snapshot
         octree's selection (its LOD within ``point_budget``), as one selection over the buffers."""
+        refuse_hidden_classes(self.name, "a live cloud", settings)  # (frames come and go: nothing to filter once)
         if self.decay is not None and self.frames:
             self._expire()  # the lock is held (reading): frames past their decay leave before this frame
         self._sync_mirror()

@@ -21,10 +21,10 @@ from numba import njit
 
 from ..core.attributes import Attributes, Packed, packed_range
 from ..core.cloud import MAX_ABS_COORDINATE, at_scale
-from ..core.compact import point_words, rgba32, stream_words
+from ..core.compact import point_words, rgba32, stream_subset, stream_words
 from ..core.layout import BATCH_DTYPE, PACK_DTYPE
 from ..core.quantize import dequantize
-from ..core.renderable import DrawList, MultiViewDrawList, check_point_index
+from ..core.renderable import DrawList, MultiViewDrawList, check_classified, check_point_index
 from ..core.selection import Selection, View, batch_matrices, box_in_view, precision_for, visible_and_size
 from ..errors import InputError, is_whole_number
 from ..render.splats import finest_spacing, union_gain
@@ -280,6 +280,7 @@ class Arena:
         self.bounds = bounds
         self.source_scale = None  # the octree's source grid (a LAS file's scale), which point_info rounds to
         self.loads = 0  # nodes copied in since creation (cache misses)
+        self.hidden: tuple[int, ...] = ()  # LAS classes the resident nodes were loaded without (``show``)
         # Bumped on every write; per slot, the version that last filled it (GPU backends re-upload those slots)
         self.version = 0
         self.batch_version = np.zeros(n_slots, np.int64)
@@ -315,21 +316,44 @@ class Arena:
             info[a] = self.attributes.at(a, [index])[0].item()
         return info
 
-    def _load(self, nd: int, cloud: OctreeCloud, slots: np.ndarray, count: int) -> None:
-        """Node ``nd``'s points into ``slots``, in the arena's layout."""
+    def show(self, hidden: tuple[int, ...]) -> None:
+        """Nodes loaded from now on leave out the points of LAS classes ``hidden`` (the settings'
+        ``hidden_classes``); a change drops every resident node, so frames load them again, filtered."""
+        if hidden == self.hidden:
+            return
+        for slots in self.resident.values():
+            self.free.extend(slots.tolist())
+        self.resident.clear()
+        self.hidden = hidden
+
+    def _load(self, nd: int, cloud: OctreeCloud, slots: np.ndarray, count: int) -> int:
+        """Node ``nd``'s points into ``slots``, in the arena's layout, but those of ``hidden``
+        classes; returns how many it loaded."""
         if self.med is None:  # the compact layout: the node's words as stored (a format-2 octree)
             arrays, attrs = cloud.node_payload(nd)
+            first, words = 0, ["low"]
+        else:
+            arrays, attrs, first = cloud.node_arrays(nd)  # a Potree node is read and decoded here
+            words = ["low", "med", "high"]
+        colors = "color" if cloud.filtered_colors else "rgba"
+        if self.hidden:  # the node's points of the other classes (inner nodes' too: real points, with their class)
+            node = slice(first, first + count)
+            kept = np.flatnonzero(~np.isin(attrs["classification"][node], self.hidden))
+            filtered = {k: np.asarray(arrays[k][node])[kept] for k in [*words, colors]}
+            if self.med is None:
+                filtered.update(ext=stream_subset(arrays["ext"], int(arrays["code"]), kept), code=arrays["code"], bits=arrays["bits"])
+            arrays, attrs = filtered, {a: np.asarray(attrs[a][node])[kept] for a in self.attributes}
+            first, count = 0, len(kept)
+        if self.med is None:
             t = arrays["bits"]
             for j, s in enumerate(slots.tolist()):
                 w = -(-min(ARENA_CHUNK, count - j * ARENA_CHUNK) * t // 64)  # the room's spare word left: only masked bits are read there
-                self.ext[s * self.room : s * self.room + w] = arrays["ext"][64 * t * j : 64 * t * j + w]
+                if w > 0:
+                    self.ext[s * self.room : s * self.room + w] = arrays["ext"][64 * t * j : 64 * t * j + w]
             self.packing["code"][slots] = arrays["code"]
-            pairs = [(arrays["low"], self.low)]
-            first = 0
-        else:
-            arrays, attrs, first = cloud.node_arrays(nd)  # a Potree node is read and decoded here
-            pairs = [(arrays["low"], self.low), (arrays["med"], self.med), (arrays["high"], self.high)]
-        pairs.append((arrays["color"] if cloud.filtered_colors else arrays["rgba"], self.color))
+        held_words = [self.low] if self.med is None else [self.low, self.med, self.high]
+        pairs = [(arrays[w], into) for w, into in zip(words, held_words)]
+        pairs.append((arrays[colors], self.color))
         for a in self.attributes:
             held = self.attributes.held(a)
             if not isinstance(held, Packed):
@@ -338,6 +362,7 @@ class Arena:
                 pairs.append((held.encode(attrs[a][:count]), held.stored))
         for a, b in pairs:
             _copy_slots(a, first, count, slots, ARENA_CHUNK, b)
+        return count
 
     def ensure(self, nodes: np.ndarray, cloud: OctreeCloud) -> bool:
         """Make every node in ``nodes`` resident; False when they cannot all fit."""
@@ -363,8 +388,12 @@ class Arena:
             count = int(rec["count"])
             k = -(-count // ARENA_CHUNK)
             slots = np.array([self.free.pop() for _ in range(k)], np.int64)
-            self._load(nd, cloud, slots, count)
-            count = int(cloud.nodes["count"][nd])  # 0: found damaged as it was read (voxel_octree.py), its slots left empty
+            loaded = self._load(nd, cloud, slots, count)
+            # 0: found damaged as it was read (voxel_octree.py), its slots left empty
+            count = min(loaded, int(cloud.nodes["count"][nd]))
+            used = max(1, -(-count // ARENA_CHUNK))  # slots left over by hidden classes freed again
+            self.free.extend(slots[used:].tolist())
+            slots, k = slots[:used], used
             b = self.batches[slots]
             b["count"] = np.clip(count - np.arange(k) * ARENA_CHUNK, 0, ARENA_CHUNK)
             b["level"] = rec["level"]
@@ -495,15 +524,18 @@ class OctreeCloud:
 
     def prepare(self, view: View, settings) -> DrawList:
         """The frame's nodes made resident in the arena, one batch per arena slot."""
-        ids, _, total = self.select_nodes(view, settings)
+        check_classified(self.name, self.attribute_names, settings.hidden_classes)
+        ids, _, total = self.select_nodes(view, settings)  # (by the nodes' whole counts: hidden classes draw fewer)
         ids = ids[self.nodes["count"][ids] > 0]
         if self.arena is None or self.arena.n_points < total:
             cap = max(total, min(int(settings.point_budget), self.n_points)) * 5 // 4 + 64 * ARENA_CHUNK
             self.arena = self.new_arena(min(cap, self.n_points + (len(self.keys) + 1) * ARENA_CHUNK))
         arena = self.arena
+        arena.show(settings.hidden_classes)  # (another set: every node loaded again)
         if not arena.ensure(ids, self):
             # a selection of many small nodes that wastes slots: grow and retry once
             self.arena = arena = self.new_arena(arena.n_points * 2 + (len(ids) + 1) * ARENA_CHUNK)
+            arena.show(settings.hidden_classes)
             arena.ensure(ids, self)
         recs = self.nodes[ids]
         _, size = visible_and_size(view.rows, recs["bbox_min"], recs["bbox_max"], view.width, view.height, view.near, view.far)

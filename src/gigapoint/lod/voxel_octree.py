@@ -255,6 +255,8 @@ class VoxelOctree(OctreeCloud):
             if not waiting:
                 break
             self._load_pages(waiting)
+        if self.arena is not None:
+            self.arena.show(settings.hidden_classes)  # (another set empties it: the nodes below are fetched again)
         resident = self.arena.resident if self.arena is not None else {}
         need = [i for i in ids.tolist() if self.counts[i] > 0 and i not in resident]
         if len(need) > 1:

@@ -174,7 +174,9 @@ class Frame:
 
     @property
     def index(self) -> np.ndarray:
-        """(H, W) int64 index of the visible point (into the cloud's buffers); -1 where none."""
+        """(H, W) int64 index of the visible point into ``points``, the buffers drawn (a plain
+        cloud's own; with ``hidden_classes`` its points of the other classes, in the same order:
+        ``cloud.without_classes(hidden)``; an octree's arena); -1 where none. ``point_info`` reads it."""
         idx = (self.visibility & np.uint64(0xFFFFFFFF)).astype(np.int64)
         idx[self.empty] = -1
         return idx

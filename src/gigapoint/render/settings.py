@@ -35,6 +35,7 @@ SupersampleFilter = Literal["box", "lanczos"]
 Stereo = Literal["none", "side-by-side", "anaglyph"]
 Color = tuple[int, int, int, int]  # r, g, b, a in 0..255
 Range = tuple[float, float]  # low, high
+Classes = tuple[int, ...]  # LAS classification codes, 0..255
 
 COLOR_MODES: tuple[str, ...] = get_args(ColorMode)
 COLORMAPS: tuple[str, ...] = get_args(Colormap)
@@ -130,6 +131,11 @@ class RenderSettings:
     )
     adaptive_precision: bool = setting(True, "Choose 10, 20 or 30-bit coordinates per batch (off: always 30 bits).", group="lod")
     frustum_culling: bool = setting(True, "Skip the batches outside the view.", group="lod")
+    # what a frame draws, not what is read (io/filters.py's --drop-classes re-reads the files): a
+    # changed set costs a plain cloud one filtering pass, an octree reloading its nodes
+    hidden_classes: Classes = setting(
+        (), "LAS classes not drawn, e.g. '7,18' (noise); changing them re-reads nothing.", kind="classes", viewer=False
+    )
     point_budget: int = setting(
         10_000_000, "Converted octrees: most points a frame draws (largest projected nodes first).", min=1, group="lod"
     )
@@ -267,7 +273,8 @@ class RenderSettings:
 class SettingSpec:
     """One field of a settings dataclass as CLI, viewer and validation see it.
 
-    kind: bool | int | float | enum (``choices``) | color | range (low, high) | text | other
+    kind: bool | int | float | enum (``choices``) | color | range (low, high) | classes (LAS
+    classes: ``parse_classes``) | text | other
     (a type none of them can edit; it is not validated either).
     """
 
@@ -317,6 +324,8 @@ class SettingSpec:
             return rgba if self.size == 4 else rgba[: self.size]
         if kind == "range":
             return _range(name, value)
+        if kind == "classes":
+            return parse_classes(value, name)
         if kind == "text" and not isinstance(value, str):
             raise SettingsError(f"{name} must be a string, got {value!r}")
         return value
@@ -347,6 +356,21 @@ def _range(name, v) -> tuple[float, float]:
     if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
         raise SettingsError(f"{name} must be finite with high > low, got {v!r}")
     return (lo, hi)
+
+
+def parse_classes(value, name: str = "hidden_classes") -> tuple[int, ...]:
+    """'7,18', one class or several (ints) -> the sorted distinct LAS classes, each a whole number in 0..255."""
+    parts = [p for p in value.replace(" ", "").split(",") if p] if isinstance(value, str) else value
+    if isinstance(parts, numbers.Real):  # one class: 7
+        parts = [parts]
+    try:
+        classes = [float(c) for c in parts]
+    except (TypeError, ValueError):
+        raise SettingsError(f"{name} must be LAS classes (whole numbers in 0..255, e.g. 7,18), got {value!r}") from None
+    bad = [c for c in classes if not (0 <= c <= 255 and c == int(c))]  # (NaN fails both)
+    if bad:
+        raise SettingsError(f"{name}: {bad[0]:g} is not a LAS class (whole numbers in 0..255), got {value!r}")
+    return tuple(sorted({int(c) for c in classes}))
 
 
 def field_types(cls) -> dict[str, object]:

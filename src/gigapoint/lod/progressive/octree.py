@@ -61,7 +61,7 @@ from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE, WORD_BITS
 from ...core.morton import fastest
 from ...core.quantize import dequantize
-from ...core.renderable import DrawList, MultiViewDrawList, check_point_index
+from ...core.renderable import DrawList, MultiViewDrawList, check_point_index, refuse_hidden_classes
 from ...core.selection import Selection, View, batch_matrices, precision_for, visible_and_size
 from ...core.threads import threads_for
 from ...errors import GigapointError, InputError, check_timeout, check_whole
@@ -1484,6 +1484,7 @@ class ProgressiveOctree:
     def prepare(self, view: View, settings) -> DrawList:
         """What a view draws (store.select_octants: largest projected child first within the point
         budget, each drawn child replacing its parent's voxels of its octant), one batch per chunk."""
+        refuse_hidden_classes(self.name, "a progressive octree", settings)  # (its pool is filled while drawn: no filtered copy)
         n = self.n_nodes
         pool = self.pool
         if pool is None or self.points == 0:

@@ -1,0 +1,173 @@
+"""hidden_classes: LAS classes left out while drawing (not while reading: io/filters.py), for
+plain clouds (a filtered copy made once a set), octrees (nodes filtered as they load) and the
+CLI; refused where a cloud cannot leave them out."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.core.cloud import PointCloud
+from gigapoint.errors import GigapointWarning, SettingsError
+
+RED, BLUE = (255, 0, 0), (0, 0, 255)
+FIXED = {"point_size": 1, "size_mode": "fixed"}
+TOP = gp.Camera.top_down(((0, 0, 0), (100, 50, 1)), 0.5)  # 201x101 pixels, one per half unit
+
+
+def two_classes(spacing: float = 2.5):
+    """A grid over 100 x 50: class 2 (red) on the left half, class 6 (blue) on the right; each
+    point in the middle of its own pixel of TOP."""
+    grid = np.mgrid[0 : int(100 / spacing), 0 : int(50 / spacing)].reshape(2, -1).T * spacing + spacing / 2
+    z = np.random.default_rng(0).uniform(0, 1, len(grid))
+    xyz = np.c_[grid, z]
+    classes = np.where(xyz[:, 0] < 50, 2, 6).astype(np.uint8)
+    rgb = np.where(classes[:, None] == 2, RED, BLUE).astype(np.uint8)
+    return xyz, rgb, classes
+
+
+def pixels_of(image, rgb) -> int:
+    return int(np.all(image[..., :3] == rgb, axis=-1).sum())
+
+
+@pytest.mark.parametrize("scale", [None, 0.01], ids=["words", "compact"])
+def test_hiding_a_class_draws_exactly_the_other_class_alone(scale):
+    xyz, rgb, classes = two_classes()
+    cloud = gp.from_arrays(xyz, rgb, classification=classes, scale=scale, colors="rgba")
+    ground = classes == 2
+    alone = gp.from_arrays(xyz[ground], rgb[ground], classification=classes[ground], scale=scale, colors="rgba")
+    everything = gp.render(cloud, TOP, **FIXED)
+    assert (pixels_of(everything, RED), pixels_of(everything, BLUE)) == (400, 400)
+    hidden = gp.render(cloud, TOP, hidden_classes=(6,), **FIXED)
+    assert (pixels_of(hidden, RED), pixels_of(hidden, BLUE)) == (400, 0)
+    np.testing.assert_array_equal(hidden, gp.render(alone, TOP, **FIXED))
+    # colour modes read the points drawn: classification's colour of class 2 alone, as the cloud of class 2 draws it
+    np.testing.assert_array_equal(
+        gp.render(cloud, TOP, hidden_classes=(6,), color_mode="classification", **FIXED),
+        gp.render(alone, TOP, color_mode="classification", **FIXED),
+    )
+    # a pixel's point is the one drawn: frame.index into the filtered cloud, point_info its class
+    frame = gp.render_frame(cloud, TOP, hidden_classes=(6,), **FIXED)
+    picked = frame.index[frame.index >= 0]
+    assert len(picked) == 400 and frame.points.n_points == 400
+    assert {frame.point_info(int(i))["classification"] for i in picked} == {2}
+    kept = cloud.attributes["classification"] == 2  # the drawn cloud's points: those of class 2, in the cloud's order
+    np.testing.assert_array_equal(frame.points.positions(), cloud.positions()[kept])
+
+
+def test_a_hidden_point_in_front_does_not_hide_the_point_behind():
+    xyz = np.array([[10.25, 10.25, 0.0], [10.25, 10.25, 1.0]])  # one pixel of TOP; class 6 above (nearer the eye)
+    cloud = gp.from_arrays(xyz, np.array([RED, BLUE], np.uint8), classification=np.array([2, 6], np.uint8), colors="rgba")
+    row, col = int((50 - 10.25) // 0.5), int(10.25 // 0.5)  # TOP's pixel of (10.25, 10.25): rows down from y = 50
+    assert tuple(gp.render(cloud, TOP, **FIXED)[row, col, :3]) == BLUE
+    assert tuple(gp.render(cloud, TOP, hidden_classes=(6,), **FIXED)[row, col, :3]) == RED
+
+
+def test_toggling_classes_filters_once_a_set_until_the_cloud_changes(monkeypatch):
+    xyz, rgb, classes = two_classes()
+    cloud = gp.from_arrays(xyz, rgb, classification=classes, colors="rgba")
+    filtered = []
+    without = PointCloud.without_classes
+
+    def counted(self, hidden):
+        filtered.append(tuple(hidden))
+        return without(self, hidden)
+
+    monkeypatch.setattr(PointCloud, "without_classes", counted)
+    images = [gp.render(cloud, TOP, hidden_classes=h, **FIXED) for h in [(6,), (), (6,), (6,)]]
+    assert [(pixels_of(i, RED), pixels_of(i, BLUE)) for i in images] == [(400, 0), (400, 400), (400, 0), (400, 0)]
+    assert filtered == [(6,)]
+    cloud.set_colors((0, 255, 0), np.flatnonzero(cloud.attributes["classification"] == 2))  # changed: filtered again, in its new colours
+    again = gp.render(cloud, TOP, hidden_classes=(6,), **FIXED)
+    assert filtered == [(6,), (6,)] and (pixels_of(again, (0, 255, 0)), pixels_of(again, RED)) == (400, 0)
+    with pytest.warns(GigapointWarning, match="no point is in view"):  # every class hidden: the background
+        assert not gp.render(cloud, TOP, hidden_classes=(2, 6), **FIXED)[..., :3].any()
+
+
+@pytest.mark.parametrize(("fmt", "options"), [("gigapoint", {"layout": "words"}), ("gigapoint", {}), ("potree", {})], ids=["words", "compact", "potree"])
+def test_an_octree_leaves_hidden_classes_out_of_the_nodes_it_loads(tmp_path, fmt, options):
+    xyz, rgb, classes = two_classes(spacing=0.5)  # 20 000 points: inner nodes (samples of real points) and leaves
+    cloud = gp.from_arrays(xyz, rgb, classification=classes, scale=0.01, colors="rgba")
+    gp.convert(cloud, tmp_path / "tree", format=fmt, max_leaf=2_000, **options)
+    tree = gp.open(tmp_path / "tree")
+    assert len(tree.keys) > 4
+    everything = gp.render(tree, TOP, **FIXED)
+    red, blue = pixels_of(everything, RED), pixels_of(everything, BLUE)
+    assert red > 5_000 and blue > 5_000
+    hidden = gp.render(tree, TOP, hidden_classes=(6,), **FIXED)
+    assert (pixels_of(hidden, RED), pixels_of(hidden, BLUE)) == (red, 0)  # the nodes drawn are the same, their class 6 left out
+    loads = tree.arena.loads
+    assert pixels_of(gp.render(tree, TOP, **FIXED), BLUE) == blue and tree.arena.loads > loads  # shown again: reloaded
+    with pytest.warns(GigapointWarning, match="no point is in view"):
+        assert not gp.render(tree, TOP, hidden_classes=(2, 6), **FIXED)[..., :3].any()
+
+
+CAMERA = "eye=636590,849216,1100 target=636590,849216,460 up=0,1,0"  # straight down over the survey
+
+
+def test_render_hidden_classes_draws_what_reading_without_them_draws(cli, tmp_path, autzen_path):
+    # classification colours and 30-bit positions: the winner of a pixel is the same point whichever cloud holds it
+    same = ("-W", 240, "-H", 160, "--camera", CAMERA, "--color-mode", "classification", "--no-adaptive-precision")
+    rc, out, err = cli("render", autzen_path, "-o", tmp_path / "hidden.png", "--index-out", tmp_path / "hidden.npy", "--hidden-classes", "2", *same)
+    assert rc == 0, err
+    rc, _, err = cli("render", autzen_path, "-o", tmp_path / "dropped.png", "--drop-classes", "2", *same)
+    assert rc == 0, err
+    from PIL import Image
+
+    hidden, dropped = (np.asarray(Image.open(tmp_path / f"{n}.png")) for n in ("hidden", "dropped"))
+    np.testing.assert_array_equal(hidden, dropped)
+    assert (hidden[..., :3] != 0).any(axis=-1).sum() > 10_000
+    cloud = gp.open(autzen_path)
+    index = np.load(tmp_path / "hidden.npy")
+    drawn = cloud.without_classes((2,)).attributes["classification"][index[index >= 0]]
+    assert len(drawn) > 10_000 and 2 not in set(drawn.tolist()) and 2 in set(cloud.attributes["classification"].tolist())
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ((7, 256), "hidden_classes: 256 is not a LAS class (whole numbers in 0..255), got (7, 256)"),
+        ("7,-1", "hidden_classes: -1 is not a LAS class (whole numbers in 0..255), got '7,-1'"),
+        ("7,x", "hidden_classes must be LAS classes (whole numbers in 0..255, e.g. 7,18), got '7,x'"),
+        ((2.5,), "hidden_classes: 2.5 is not a LAS class (whole numbers in 0..255), got (2.5,)"),
+    ],
+)
+def test_hidden_classes_are_whole_numbers_from_0_to_255(value, message):
+    with pytest.raises(SettingsError) as err:
+        gp.RenderSettings(hidden_classes=value)
+    assert str(err.value) == message
+    assert gp.RenderSettings(hidden_classes="18, 7,7").hidden_classes == (7, 18)
+    assert gp.RenderSettings(hidden_classes=7).hidden_classes == (7,)
+
+
+def test_render_hidden_classes_option_names_itself_when_bad(cli, tmp_path, autzen_path):
+    rc, _, err = cli("render", autzen_path, "-o", tmp_path / "x.png", "--hidden-classes", "300")
+    assert rc == 1 and err == "error: --hidden-classes: 300 is not a LAS class (whole numbers in 0..255), got '300'\n"
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_a_cloud_without_classification_cannot_hide_classes(tmp_path):
+    xyz, rgb, _ = two_classes()
+    cloud = gp.from_arrays(xyz, rgb, name="plain")
+    with pytest.raises(SettingsError) as err:
+        gp.render(cloud, TOP, hidden_classes=(7, 18))
+    assert str(err.value) == "hidden_classes: plain has no classification attribute, so no class 7,18 to hide"
+    gp.convert(cloud, tmp_path / "tree")
+    tree = gp.open(tmp_path / "tree")
+    with pytest.raises(SettingsError, match=r"^hidden_classes: .* has no classification attribute, so no class 7,18 to hide$"):
+        gp.render(tree, TOP, hidden_classes=(7, 18))
+    assert gp.render(cloud, TOP, hidden_classes=(), **FIXED).any()  # none hidden: drawn as ever
+
+
+def test_a_progressive_octree_refuses_hidden_classes():
+    from gigapoint.lod.progressive import ProgressiveOctree
+
+    xyz, _, classes = two_classes()
+    grown = ProgressiveOctree("grown")
+    grown.add(xyz, classification=classes)
+    with pytest.raises(SettingsError) as err:
+        gp.render(grown, TOP, hidden_classes=(6,))
+    assert str(err.value) == (
+        "hidden_classes: grown is a progressive octree, which draws every class; leave them out as it reads instead (--drop-classes, drop_classes=)"
+    )
