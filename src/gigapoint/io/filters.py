@@ -112,6 +112,28 @@ class PointFilter:
         if self.passed == 0 and self.read:  # (no point read at all: the readers' own errors say so)
             raise EmptyCloudError(f"{label}: no point passes the filter ({self.describe()}): {self.read:,} points read")
 
+    def meets(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Which of the boxes ``lo``..``hi`` ((k, 3) arrays, bounds included) may hold points the
+        filter keeps: those meeting the clip box and the corridor's rectangle in x and y (tested
+        on the four axes that can separate two rectangles: x, y, along and across the line);
+        classes are not known from a box."""
+        lo, hi = np.atleast_2d(np.asarray(lo, np.float64)), np.atleast_2d(np.asarray(hi, np.float64))
+        meets = np.ones(len(lo), bool)
+        if self.clip:
+            axes = len(self.clip) // 2
+            meets &= np.all((hi[:, :axes] >= self.clip[:axes]) & (lo[:, :axes] <= self.clip[axes:]), axis=1)
+        if self.corridor:
+            ends, half = np.reshape(self.corridor[:4], (2, 2)), self.corridor[4] / 2
+            length = math.dist(self.corridor[:2], self.corridor[2:4])
+            ux, uy = (ends[1] - ends[0]) / length
+            reach = half * np.array([abs(uy), abs(ux)])  # how far the rectangle's corners lie beyond its ends in x and y
+            meets &= np.all((hi[:, :2] >= ends.min(axis=0) - reach) & (lo[:, :2] <= ends.max(axis=0) + reach), axis=1)
+            centre, extent = (lo[:, :2] + hi[:, :2]) / 2, (hi[:, :2] - lo[:, :2]) / 2
+            distance, offset = along_and_across(centre, self.corridor[:4])
+            along, across = extent @ [abs(ux), abs(uy)], extent @ [abs(uy), abs(ux)]  # the boxes' half spans on those axes
+            meets &= (distance + along >= 0) & (distance - along <= length) & (np.abs(offset) - across <= half)
+        return meets
+
     def clipped_bounds(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bounds ``lo``..``hi`` (a header's) cut to the clip box and the corridor's box: where the kept points can be."""
         lo, hi = np.array(lo, np.float64), np.array(hi, np.float64)

@@ -1,0 +1,130 @@
+"""The points of the part of an LOD octree that meets a region, read node by node: what a tool
+that needs every point of a small part of an octree reads (a cross-section's corridor, Potree's
+profile tool), not the whole octree.
+
+In a layered octree every input point lives in exactly one node: inner nodes hold a sample of
+the real points, the leaves the rest (a converted gigapoint folder of either sampler, COPC, EPT,
+a Potree 2.0 folder that gigapoint wrote). The points of a region are then those of the nodes
+whose boxes meet it, at every level. Two kinds are otherwise:
+
+- a ProgressiveOctree's inner nodes hold voxels (representatives at cell centres, not points):
+  its points are those of its leaves, which hold every point added;
+- PotreeConverter's ``poisson_average`` stores copies of points in inner nodes (its metadata
+  counts fewer points than its nodes hold): refused, as no node says which are copies.
+
+Nodes are read through what each reader offers (``node_points``; a COPC/EPT octree's hierarchy
+pages and nodes fetched together, by ranged reads over HTTP), so only the meeting nodes are read.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+
+import numpy as np
+
+from ..core.chunk import PointChunk
+from ..errors import InputError
+from .keys import MAX_LEVEL
+from .potree import PotreeCloud
+from .progressive import ProgressiveOctree
+from .store import OctreeCloud
+from .voxel_octree import DECODE_GROUP_POINTS, VoxelOctree
+
+#: Node boxes are widened by this share of the octree's cube before they are tested: writers
+#: choose cubes before rounding positions to their grid, so a point may lie a step outside its box
+BOX_SLACK = 1e-3
+
+#: ``meets(lo, hi)``: which of the boxes lo..hi ((k, 3) arrays) meet the region
+Meets = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def is_octree(cloud) -> bool:
+    """An LOD octree ``points_meeting`` reads: an OctreeCloud of any kind or a ProgressiveOctree."""
+    return isinstance(cloud, (OctreeCloud, ProgressiveOctree))
+
+
+def points_meeting(cloud, meets: Meets) -> Iterator[tuple[int, PointChunk]]:
+    """(node index, its points with every attribute) of each node of the octree ``cloud`` whose box
+    meets the region (``meets``), at every level; leaves only for a ProgressiveOctree (its inner
+    nodes hold voxels). Every point of the region is in one of them, once. A one-line InputError
+    for an octree whose nodes hold copies of points."""
+    if isinstance(cloud, ProgressiveOctree):
+        yield from _progressive_leaves(cloud, meets)
+        return
+    if isinstance(cloud, PotreeCloud):
+        source = cloud.meta.get("source_points")
+        if isinstance(source, int) and 0 < source < cloud.n_points:
+            raise InputError(
+                f"{cloud.path}: its nodes hold {cloud.n_points - source:,} copies of its {source:,} points (PotreeConverter's poisson_average), "
+                "which no node tells apart: read the point files instead"
+            )
+    if isinstance(cloud, VoxelOctree):
+        yield from _voxel_nodes(cloud, meets)
+        return
+    for index in _meeting(cloud, meets, cloud.box_min, cloud.box_min + cloud.box_size).tolist():
+        yield index, _chunk(cloud.node_points(index))
+
+
+def _slack(cloud) -> float:
+    return BOX_SLACK * float(cloud.meta["cube_edge"])
+
+
+def _meeting(cloud: OctreeCloud, meets: Meets, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Indices of the nodes holding points whose boxes lo..hi (widened by ``BOX_SLACK``) meet the region."""
+    pad = _slack(cloud)
+    return np.flatnonzero((cloud.counts > 0) & meets(lo - pad, hi + pad))
+
+
+def _chunk(points: dict) -> PointChunk:
+    """A node's ``node_points`` as a PointChunk: its positions, own colours (not the filtered ones drawn) and attributes."""
+    rgba = np.asarray(points["rgba"], np.uint32).view(np.uint8).reshape(-1, 4)
+    attributes = {a: v for a, v in points.items() if a not in ("xyz", "color", "rgba")}
+    return PointChunk(points["xyz"], rgba, attributes)
+
+
+def _voxel_nodes(cloud: VoxelOctree, meets: Meets) -> Iterator[tuple[int, PointChunk]]:
+    """A COPC/EPT octree's meeting nodes: the hierarchy pages of pending nodes that meet the region
+    read first (a pending node's box is its cube), then the nodes' blobs fetched a group at a time
+    (several ranged reads in flight), as a frame's are (``VoxelOctree.prepare``)."""
+    for _ in range(MAX_LEVEL + 2):  # (each round reads a level of pages at least)
+        cube_min, cube_max = cloud.nodes["bbox_min"], cloud.nodes["bbox_max"]
+        pad = _slack(cloud)
+        near = np.flatnonzero(meets(cube_min - pad, cube_max + pad))
+        waiting = [k for k in cloud.keys[near].tolist() if k in cloud._pending]
+        if not waiting:
+            break
+        cloud._load_pages(waiting)
+    need = _meeting(cloud, meets, cloud.nodes["bbox_min"], cloud.nodes["bbox_max"]).tolist()
+    start = 0
+    while start < len(need):
+        group, held = [], 0
+        while start < len(need) and (not group or held < DECODE_GROUP_POINTS):
+            group.append(need[start])
+            held += int(cloud.counts[need[start]])
+            start += 1
+        cloud._blobs = dict(zip(group, cloud._fetch_nodes([cloud.locators[i] for i in group])))
+        try:
+            points = [(i, _chunk(cloud.node_points(i))) for i in group]
+        finally:
+            cloud._blobs = {}
+        yield from points
+
+
+def _progressive_leaves(cloud: ProgressiveOctree, meets: Meets) -> Iterator[tuple[int, PointChunk]]:
+    """A ProgressiveOctree's leaves that meet the region (once loading has finished: its error,
+    a memory limit reached, is raised), their points read under its lock."""
+    cloud._check_loaded("section it")
+    with cloud.lock:
+        leaves = cloud.leaves()
+        pad = BOX_SLACK * float(cloud.edge)
+        lo = cloud.cmin[leaves]
+        hi = lo + cloud.cedge[leaves][:, None]
+        found = []
+        for leaf in leaves[meets(lo - pad, hi + pad)].tolist():
+            slots = cloud.node_entries(leaf)
+            rgba = np.ascontiguousarray(cloud.pool.color[slots], np.uint32).view(np.uint8).reshape(-1, 4)
+            found.append((leaf, PointChunk(cloud.positions(slots), rgba, cloud.pool.attribute_rows(slots))))
+    yield from found
+
+
+__all__ = ["BOX_SLACK", "is_octree", "points_meeting"]
