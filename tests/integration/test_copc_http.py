@@ -251,6 +251,28 @@ def test_url_through_a_path_and_the_cli(data, server, tmp_path):
     assert out.stat().st_size > 500
 
 
+def test_a_section_over_http_reads_only_the_nodes_meeting_the_corridor(data, server):
+    """gp.section of a COPC URL and an EPT one: the local file's section, through ranged reads of the meeting nodes (lod/query.py)."""
+    local = gp.open(data / "autzen.copc.laz")
+    lo, hi = local.bounds
+    line = (float(lo[0]), float(lo[1]) + 100, float(lo[0]) + 400, float(lo[1]) + 300)  # a short corridor, 6 feet wide
+    want = gp.section(data / "autzen.copc.laz", line, 6)
+    c = gp.open(server.url("autzen.copc.laz"))
+    cut = gp.section(c, line, 6)
+    assert cut.cloud.n_points == want.cloud.n_points > 100
+    np.testing.assert_allclose(np.sort(cut.z), np.sort(want.z), rtol=0, atol=1e-6)
+    assert all(r.startswith("bytes=") for r in server.ranges)  # no whole-file download
+    c.load_hierarchy()
+    assert 0 < c.node_reads < np.count_nonzero(c.counts) / 3
+    c.close()
+    scene = gp.open(data / "ept_laz")
+    lo, hi = scene.bounds
+    line = (float(lo[0]), float(lo[1]) + 40, float(hi[0]), float(lo[1]) + 60)
+    e = gp.open(server.url("ept_laz/ept.json"))
+    assert np.array_equal(np.sort(gp.section(e, line, 4).z), np.sort(gp.section(scene, line, 4).z))
+    e.close()
+
+
 @pytest.mark.parametrize("folder", ["ept_laz", "ept_bin"])
 def test_ept_over_http_renders_like_the_local_dataset(data, server, folder):
     local = gp.open(data / folder)
