@@ -174,11 +174,13 @@ def test_an_empty_corridor_is_said_in_the_result(client):
     assert "image" not in result and "no point" in result["error"], result
 
 
-def test_an_octree_without_source_files_says_sections_need_the_points(tmp_path, cloud):
+def test_a_converted_octree_gives_the_section_of_its_points(tmp_path, cloud):
+    """Its nodes meeting the corridor, at every level, hold the corridor's points (lod/query.py)."""
     from starlette.testclient import TestClient
 
-    gigapoint.convert(cloud, tmp_path / "oct")
+    gigapoint.convert(cloud, tmp_path / "oct", max_leaf=2_000)
     octree = gigapoint.open(tmp_path / "oct")
+    assert len(octree.keys) > 8
     core = ViewerCore(octree)
     try:
         with TestClient(create_app(core)) as c, c.websocket_connect("/ws?w=120&h=90") as ws:
@@ -186,13 +188,14 @@ def test_an_octree_without_source_files_says_sections_need_the_points(tmp_path, 
             ws.send_json({"type": "section", "action": "set", "points": list(LINE), "width": WIDTH})
             assert receive(ws, reply("section"))["computing"] is True
             result = receive(ws, reply("section_result"))
-            assert result["error"] == f"{octree.name}: sections need the points in memory or their source files; this octree names none (view the point files instead)"
-            assert c.get(f"/section.csv?session={hello['session']}").text == "section: no section drawn in this tab yet"
+            csv = c.get(f"/section.csv?session={hello['session']}").text.splitlines()
     finally:
         core.close_all()
+    assert result["count"] == len(gigapoint.section(cloud, (10.25, 25, 89.75, 25), WIDTH).z) == 597 and len(csv) == 1 + 597
+    assert result["z"] == pytest.approx([1.05, 0.1 * WALL_X + WALL_TOP])
 
 
-def test_a_local_copc_file_is_read_again_through_the_corridor(tmp_path, cloud):
+def test_a_local_copc_file_gives_the_section_of_its_nodes(tmp_path, cloud):
     from starlette.testclient import TestClient
 
     gigapoint.convert(cloud, tmp_path / "scan.copc.laz")

@@ -4,9 +4,10 @@ The session picks the two points as the measuring tool does (world points throug
 frame's visibility buffer) and draws the line into each frame (measure.draw, in its own
 colour); the section itself (``gigapoint.section``, cross_section.py) is computed off the
 render loop (``Session._compute_section``'s thread) and sent as a PNG of the panel's size with
-its numbers. Which points: a cloud held in memory (a PointCloud) gives its own; a local COPC
-file is read again through the corridor filter (it is a LAZ file too); any other octree has no
-source files to read, and the reply says so in one line.
+its numbers. Which points: a cloud held in memory (a PointCloud) gives its own; an LOD octree
+(converted, COPC, EPT, Potree, local or over HTTP; a progressive one) those of the nodes that
+meet the corridor, at every level (lod/query.py): they hold every point once (a COPC file or
+EPT dataset through a reader of its own, apart from the frames').
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from ..core.cloud import PointCloud, build_cloud
 from ..cross_section import Section, section
 from ..errors import GigapointError
 from ..io.http import LocalFile
-from ..lod.copc import CopcCloud
+from ..lod.query import is_octree
+from ..lod.voxel_octree import VoxelOctree
 from ..render.frame import encode_image
 from . import protocol as P
 
@@ -54,13 +56,13 @@ def parse(msg: dict) -> dict:
 
 
 def section_of(cloud, line, width) -> Section:
-    """``gigapoint.section`` of what the viewer shows: the cloud's points in memory, a local COPC
-    file's points read again; a one-line GigapointError for an octree without either."""
-    if isinstance(cloud, PointCloud):
+    """``gigapoint.section`` of what the viewer shows: the cloud's points in memory, an octree's
+    from the nodes meeting the corridor; a one-line GigapointError for any other cloud."""
+    if isinstance(cloud, VoxelOctree):  # a reader of its own: the frames' reads change the octree's pages and nodes as they go
+        return section(cloud.source.path if isinstance(cloud.source, LocalFile) else cloud.source.url, line, width)
+    if isinstance(cloud, PointCloud) or is_octree(cloud):
         return section(cloud, line, width)
-    if isinstance(cloud, CopcCloud) and isinstance(cloud.source, LocalFile):
-        return section(cloud.source.path, line, width)
-    raise GigapointError(f"{cloud.name}: sections need the points in memory or their source files; this octree names none (view the point files instead)")
+    raise GigapointError(f"{cloud.name}: sections need the points in memory or an LOD octree; this cloud is neither (view the point files instead)")
 
 
 def capped(cut: Section, limit: int) -> tuple[Section, str]:
