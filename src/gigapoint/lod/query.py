@@ -24,11 +24,10 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..errors import InputError
-from .keys import MAX_LEVEL
 from .potree import PotreeCloud
 from .progressive import ProgressiveOctree
 from .store import OctreeCloud
-from .voxel_octree import DECODE_GROUP_POINTS, VoxelOctree
+from .voxel_octree import VoxelOctree
 
 #: Node boxes are widened by this share of the octree's cube before they are tested: writers
 #: choose cubes before rounding positions to their grid, so a point may lie a step outside its box
@@ -84,36 +83,19 @@ def _chunk(points: dict) -> PointChunk:
 
 def _voxel_nodes(cloud: VoxelOctree, meets: Meets) -> Iterator[tuple[int, PointChunk]]:
     """A COPC/EPT octree's meeting nodes: the hierarchy pages of pending nodes that meet the region
-    read first (a pending node's box is its cube), then the nodes' blobs fetched a group at a time
-    (several ranged reads in flight), as a frame's are (``VoxelOctree.prepare``)."""
-    for _ in range(MAX_LEVEL + 2):  # (each round reads a level of pages at least)
-        cube_min, cube_max = cloud.nodes["bbox_min"], cloud.nodes["bbox_max"]
-        pad = _slack(cloud)
-        near = np.flatnonzero(meets(cube_min - pad, cube_max + pad))
-        waiting = [k for k in cloud.keys[near].tolist() if k in cloud._pending]
-        if not waiting:
-            break
-        cloud._load_pages(waiting)
+    read first (a pending node's box is its cube), then the nodes fetched a group at a time, as a
+    frame's are."""
+    pad = _slack(cloud)
+    cloud.read_pages_meeting(lambda lo, hi: meets(lo - pad, hi + pad))
     need = _meeting(cloud, meets, cloud.nodes["bbox_min"], cloud.nodes["bbox_max"]).tolist()
-    start = 0
-    while start < len(need):
-        group, held = [], 0
-        while start < len(need) and (not group or held < DECODE_GROUP_POINTS):
-            group.append(need[start])
-            held += int(cloud.counts[need[start]])
-            start += 1
-        cloud._blobs = dict(zip(group, cloud._fetch_nodes([cloud.locators[i] for i in group])))
-        try:
-            points = [(i, _chunk(cloud.node_points(i))) for i in group]
-        finally:
-            cloud._blobs = {}
-        yield from points
+    for index, points in cloud.points_of_nodes(need):
+        yield index, _chunk(points)
 
 
 def _progressive_leaves(cloud: ProgressiveOctree, meets: Meets) -> Iterator[tuple[int, PointChunk]]:
     """A ProgressiveOctree's leaves that meet the region (once loading has finished: its error,
     a memory limit reached, is raised), their points read under its lock."""
-    cloud._check_loaded("section it")
+    cloud.check_loaded("section it")
     with cloud.lock:
         leaves = cloud.leaves()
         pad = BOX_SLACK * float(cloud.edge)

@@ -176,6 +176,35 @@ class VoxelOctree(OctreeCloud):
         while self._pending:
             self._load_pages(sorted(self._pending))
 
+    def read_pages_meeting(self, meets) -> None:
+        """Read the hierarchy pages of the pending nodes whose cubes meet a region (``meets(lo, hi)``
+        of (k, 3) boxes: which meet it), level after level, until no pending node meets it (a tool
+        reading a part of the octree: lod/query.py)."""
+        for _ in range(MAX_LEVEL + 2):  # (each round reads a level of pages at least)
+            near = np.flatnonzero(meets(self.nodes["bbox_min"], self.nodes["bbox_max"]))
+            waiting = [k for k in self.keys[near].tolist() if k in self._pending]
+            if not waiting:
+                return
+            self._load_pages(waiting)
+
+    def points_of_nodes(self, indices: list[int]):
+        """(index, ``node_points``) of each node of ``indices``, their blobs fetched a group of
+        about DECODE_GROUP_POINTS points at a time, together (ranged reads in flight at once, as a
+        frame's are), so that no more than a group is held."""
+        start = 0
+        while start < len(indices):
+            group, held = [], 0
+            while start < len(indices) and (not group or held < DECODE_GROUP_POINTS):
+                group.append(indices[start])
+                held += int(self.counts[indices[start]])
+                start += 1
+            self._blobs = dict(zip(group, self._fetch_nodes([self.locators[i] for i in group])))
+            try:
+                points = [(i, self.node_points(i)) for i in group]
+            finally:
+                self._blobs = {}
+            yield from points
+
     def _load_pages(self, keys: list[int]) -> None:
         locators = [self._pending[k] for k in keys]
         for k, loc in zip(keys, locators):

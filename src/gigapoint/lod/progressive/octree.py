@@ -1343,7 +1343,7 @@ class ProgressiveOctree:
     def chunks(self, points_per_chunk: int = 1_000_000):
         """The points of the leaves as PointChunks (positions, colours, attributes), leaf by leaf,
         once loading has finished; one line of error if the octree changes meanwhile (``_check_unchanged``)."""
-        self._check_loaded("read its points")
+        self.check_loaded("read its points")
         with self.lock:
             leaves = self.leaves().tolist()
             stamp = self._stamp()
@@ -1382,7 +1382,7 @@ class ProgressiveOctree:
         unknown = sorted(set(options) - taken)
         if unknown:  # banana=1 was a TypeError inside
             raise InputError(f"{self.name}: save: unknown option(s) {', '.join(unknown)}; it takes {', '.join(sorted(taken))}")
-        self._check_loaded("save it")
+        self.check_loaded("save it")
         options.setdefault("source_files", [p for p in self.source_files if p.is_file()])  # the files' CRS and LAS grid (those still there)
         options.setdefault("max_leaf", self.max_leaf)
         options.setdefault("name", self.name)  # name= another was "multiple values for keyword argument"
@@ -1403,7 +1403,7 @@ class ProgressiveOctree:
         if options:  # (sampler=, max_leaf=, ...: each meant something of an octree only)
             raise InputError(f"{out}: {', '.join(sorted(options))}: options of an octree, not of a plain {out.suffix[1:].upper()} file")
         check_point_file_output(out, overwrite)
-        self._check_loaded("save it")
+        self.check_loaded("save it")
         t0 = time.perf_counter()
         ply = out.suffix.lower() == ".ply"
         grid = None if ply or self.grid is None else las_grid(self.lo, self.hi, np.full(3, self.grid[1]), self.grid[0])
@@ -1411,7 +1411,7 @@ class ProgressiveOctree:
         n = write_points(out, self.chunks, self.points, grid=grid, crs_records=crs, color_bits=None)
         return ConvertResult(out, out.suffix[1:].lower(), None, n, 0, self.skipped, time.perf_counter() - t0, False)
 
-    def _check_loaded(self, to: str) -> None:
+    def check_loaded(self, to: str) -> None:
         """Wait for loading to finish; a one-line InputError where the octree is closed, or a
         close stopped its load part-way (its points were then saved as though the whole input)."""
         if not self.wait() or self.closed:
