@@ -64,27 +64,62 @@ def colormap_table(name: str) -> np.ndarray:
     return out
 
 
-# --- ASPRS LAS 1.4 classification colors (Potree's scheme where it has one) --------------------
+# --- ASPRS LAS 1.4 classes: names (R15, table 17) and colors (Potree's scheme where it has one) --------
+CLASS_NAMES = {
+    0: "created, never classified",
+    1: "unclassified",
+    2: "ground",
+    3: "low vegetation",
+    4: "medium vegetation",
+    5: "high vegetation",
+    6: "building",
+    7: "low point (noise)",
+    8: "model key-point",  # reserved in LAS 1.4; LAS 1.2's name
+    9: "water",
+    10: "rail",
+    11: "road surface",
+    12: "overlap",  # reserved in LAS 1.4; LAS 1.2's name
+    13: "wire guard (shield)",
+    14: "wire conductor (phase)",
+    15: "transmission tower",
+    16: "wire-structure connector",
+    17: "bridge deck",
+    18: "high noise",
+    19: "overhead structure",
+    20: "ignored ground",
+    21: "snow",
+    22: "temporal exclusion",
+}
+STANDARD_CLASSES = tuple(range(19))  # the classes a viewer offers where a cloud's are unknown (Potree's list)
+
+
+def class_name(code: int) -> str:
+    """The ASPRS name of LAS class ``code`` (23..63 reserved, 64..255 user defined)."""
+    if code in CLASS_NAMES:
+        return CLASS_NAMES[code]
+    return f"reserved {code}" if code < 64 else f"user defined {code}"
+
+
 _CLASS_COLORS = {
-    0: (128, 128, 128),  # created, never classified
-    1: (160, 160, 160),  # unclassified
-    2: (160, 82, 45),  # ground
-    3: (0, 255, 0),  # low vegetation
-    4: (0, 204, 0),  # medium vegetation
-    5: (0, 153, 0),  # high vegetation
-    6: (255, 168, 0),  # building
-    7: (255, 0, 255),  # low point (noise)
-    8: (255, 0, 0),  # reserved / model key point
-    9: (0, 0, 255),  # water
-    10: (200, 200, 50),  # rail
-    11: (90, 90, 90),  # road surface
-    12: (255, 255, 0),  # overlap / reserved
-    13: (255, 220, 160),  # wire guard
-    14: (255, 240, 90),  # wire conductor
-    15: (220, 100, 255),  # transmission tower
-    16: (180, 120, 40),  # wire connector
-    17: (120, 120, 200),  # bridge deck
-    18: (255, 80, 80),  # high noise
+    0: (128, 128, 128),
+    1: (160, 160, 160),
+    2: (160, 82, 45),
+    3: (0, 255, 0),
+    4: (0, 204, 0),
+    5: (0, 153, 0),
+    6: (255, 168, 0),
+    7: (255, 0, 255),
+    8: (255, 0, 0),
+    9: (0, 0, 255),
+    10: (200, 200, 50),
+    11: (90, 90, 90),
+    12: (255, 255, 0),
+    13: (255, 220, 160),
+    14: (255, 240, 90),
+    15: (220, 100, 255),
+    16: (180, 120, 40),
+    17: (120, 120, 200),
+    18: (255, 80, 80),
 }
 _CLASS_DEFAULT = (77, 153, 153)
 
