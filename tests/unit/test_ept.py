@@ -345,3 +345,22 @@ def test_an_ept_dataset_given_to_convert_is_named_as_one(datasets, tmp_path):
             gp.convert(given, tmp_path / "out")
         assert str(e.value) == f"{given}: is an EPT dataset (an octree: open or render it as it is), not an input point cloud"
     assert not (tmp_path / "out").exists()
+
+
+def test_the_classes_an_ept_schema_counts_or_bounds(broken, datasets):
+    """What ept.json's Classification dimension says of the classes (the viewer's Classes panel
+    lists them): Entwine's counts name them, a minimum and maximum bound them; nothing, or what
+    is not a class, says nothing."""
+    assert gp.open(datasets["binary"]).class_facts() == {}  # (SCHEMA states neither)
+    d = broken()
+    meta = json.loads((d / "ept.json").read_text())
+    dim = next(s for s in meta["schema"] if s["name"] == "Classification")
+    for stated, facts in [
+        ({"counts": [{"value": 6, "count": 10}, {"value": 2, "count": 5}, {"value": 9, "count": 0}]}, {"classes": [2, 6]}),
+        ({"minimum": 1, "maximum": 9}, {"class_range": (1, 9)}),
+        ({"counts": [{"value": 2.5, "count": 1}], "minimum": 0, "maximum": 300}, {}),
+    ]:
+        dim.clear()
+        dim.update({"name": "Classification", "type": "unsigned", "size": 1, **stated})
+        (d / "ept.json").write_text(json.dumps(meta))
+        assert gp.open(d).class_facts() == facts, stated

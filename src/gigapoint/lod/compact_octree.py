@@ -46,7 +46,7 @@ from ..core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE
 from ..errors import InputError
 from .keys import key_name
 from .octree_dir import OctreeDir
-from .store import OctreeCloud
+from .store import OctreeCloud, known_classes
 
 FIELD_DTYPE = np.dtype([("base", "<u8"), ("word0", "<u8"), ("bits", "<u4"), ("_pad", "<u4")])
 LAYOUTS = ("compact", "words")
@@ -292,6 +292,11 @@ class CompactOctree(OctreeCloud):
         attributes in their range over the octree (``attribute_ranges``)."""
         ext_bits = int(self.ext_bits.max()) if len(self.ext_bits) else 0
         return {"ext_bits": ext_bits, "color_dtype": self._dtypes["rgba"], "attribute_ranges": self.attribute_ranges()}
+
+    def class_facts(self) -> dict:
+        """Its classification's range over the octree (``attribute_ranges``: the lowest class
+        held, and a bound of the highest)."""
+        return known_classes(None, *self.attribute_ranges().get("classification", (None, None)))
 
     def attribute_ranges(self) -> dict[str, tuple[int, int]]:
         """(min, max) bounds of each integer attribute over all nodes, from the fields' records

@@ -25,7 +25,7 @@ from ..errors import InputError
 from ..io import laz_process
 from ..io.http import ByteSource, as_url, open_source, shown_url
 from ..io.las import _scaled_xyz, scan_angle_units
-from .store import check_grid, tight_bounds
+from .store import check_grid, known_classes, tight_bounds
 from .voxel_octree import VoxelOctree, parse_voxel_name, voxel_name
 
 EPT_FILE = "ept.json"
@@ -80,6 +80,19 @@ def _srs_text(srs) -> str | None:
 
 
 MAX_NODE_POINTS = 2**40  # a node's point count beyond this is a damaged hierarchy, not a node
+
+
+def _class_meta(schema: list[dict]) -> dict:
+    """What ept.json's schema says of the classes held (store.known_classes as ``classes`` or
+    ``class_range``): the values its Classification counts (Entwine writes them with its
+    statistics), else its minimum and maximum."""
+    for d in schema:
+        if d.get("name") == "Classification":
+            counts = d.get("counts")
+            listed = isinstance(counts, list) and all(isinstance(c, dict) for c in counts)
+            codes = [c.get("value") for c in counts if c.get("count") != 0] if listed else None
+            return known_classes(codes, d.get("minimum"), d.get("maximum"))
+    return {}
 
 
 class EptCloud(VoxelOctree):
@@ -137,6 +150,7 @@ class EptCloud(VoxelOctree):
             "data_type": self.data_type,
             "schema": [d["name"] for d in meta["schema"]],
             "version": meta.get("version"),
+            **_class_meta(meta["schema"]),
         }
         stem = Path(name.rstrip("/")).parent.name or "ept"
         self._open(stem, cloud_meta, "0-0-0-0", path=None)

@@ -26,7 +26,7 @@ from ..errors import InputError
 from .grid import output_grid
 from .keys import MAX_LEVEL, key_cube, level_of
 from .octree_dir import OctreeDir
-from .store import OctreeCloud, check_grid, check_placement, tight_bounds
+from .store import OctreeCloud, check_grid, check_placement, known_classes, tight_bounds
 
 HIERARCHY_DTYPE = np.dtype([("type", "u1"), ("mask", "u1"), ("points", "<u4"), ("offset", "<i8"), ("size", "<i8")])
 _TYPES = {
@@ -592,6 +592,7 @@ class PotreeCloud(OctreeCloud):
             "spacing": meta.get("spacing"),
             "crs": meta.get("projection") or None,
             "source_points": meta.get("points"),  # (PotreeConverter's poisson_average stores more: copies in inner nodes)
+            **_class_meta(self.potree_attributes),
         }
         super().__init__(meta.get("name") or p.name, cloud_meta, nodes, keys, {}, {}, p)
         self.node_reads = 0
@@ -674,6 +675,20 @@ def _gigapoint_name(name: str) -> str | None:
     gps_time), any other (extra bytes) kept, as the LAS reader keeps it ('height above ground'
     was 'height_above_ground' from PotreeConverter's output, and from our own); None: unusable."""
     return _FROM_POTREE.get(name) or safe_attribute_name(name)
+
+
+def _class_meta(attributes: list[dict]) -> dict:
+    """What metadata.json says of the classes held (store.known_classes as ``classes`` or
+    ``class_range``): the codes its classification histogram counts (PotreeConverter 2 writes
+    one for 1-byte attributes), else its min and max."""
+    for a in attributes:
+        if a.get("name") == "classification":
+            hist, lo, hi = a.get("histogram"), a.get("min"), a.get("max")
+            counted = isinstance(hist, list) and len(hist) == 256 and all(isinstance(n, int) for n in hist)
+            codes = [c for c, n in enumerate(hist) if n > 0] if counted else None
+            one = [v[0] if isinstance(v, list) and len(v) == 1 else None for v in (lo, hi)]
+            return known_classes(codes, *one)
+    return {}
 
 
 def _position_range(name: str, attributes: list[dict], bmin: np.ndarray, bmax: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:

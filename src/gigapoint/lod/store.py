@@ -316,6 +316,17 @@ class Arena:
             info[a] = self.attributes.at(a, [index])[0].item()
         return info
 
+    def resident_classification(self) -> np.ndarray | None:
+        """The ``classification`` of the points its resident nodes hold (the viewer lists the
+        classes seen so far where an octree's metadata names none); None without the attribute."""
+        if "classification" not in self.attributes:
+            return None
+        slots = np.concatenate([np.zeros(0, np.int64), *self.resident.values()])
+        b = self.batches[slots]
+        counts = b["count"].astype(np.int64)
+        index = np.repeat(b["first"].astype(np.int64) - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
+        return self.attributes.at("classification", index)
+
     def show(self, hidden: tuple[int, ...]) -> None:
         """Nodes loaded from now on leave out the points of LAS classes ``hidden`` (the settings'
         ``hidden_classes``); a change drops every resident node, so frames load them again, filtered."""
@@ -516,6 +527,11 @@ class OctreeCloud:
         format-2 octree's: compact_octree.CompactOctree)."""
         return {}
 
+    def class_facts(self) -> dict:
+        """What its metadata tells of the LAS classes its points hold (``known_classes``: the
+        readers keep it in ``meta``): the viewer's class toggles list them before any node is read."""
+        return {k: self.meta[k] for k in ("classes", "class_range") if k in self.meta}
+
     def new_arena(self, points: int) -> Arena:
         """An empty arena of at least ``points`` points for this octree's nodes."""
         arena = Arena(points, self.name, self.bounds, self._attribute_dtypes(), **self.arena_layout())
@@ -565,6 +581,21 @@ class OctreeCloud:
     def reading(self) -> contextlib.nullcontext:
         """Nothing to hold beyond the frame: ``prepare`` fills the arena, which no one else writes."""
         return contextlib.nullcontext()
+
+
+def known_classes(codes=None, low=None, high=None) -> dict:
+    """{"classes": the LAS classes a cloud holds} where its metadata lists them (an EPT schema's
+    counts, a Potree attribute's histogram), else {"class_range": (low, high)} where it bounds
+    them, else {}. What is not a class (a float, 300) is left unsaid: metadata that cannot tell
+    costs the viewer's list its precision, not the cloud its opening."""
+    def is_class(c) -> bool:  # (JSON's 2.0 too: Potree's min and max are floats)
+        return isinstance(c, (int, float)) and not isinstance(c, bool) and float(c).is_integer() and 0 <= c <= 255
+
+    if codes is not None and all(is_class(c) for c in codes):
+        return {"classes": sorted({int(c) for c in codes})}
+    if is_class(low) and is_class(high) and low <= high:
+        return {"class_range": (int(low), int(high))}
+    return {}
 
 
 def read_meta(d: OctreeDir) -> dict:
