@@ -30,13 +30,19 @@ def check_classified(name: str, attribute_names, hidden: tuple[int, ...]) -> Non
         raise SettingsError(f"hidden_classes: {name} has no classification attribute, so no class {classes} to hide")
 
 
+def hidden_classes_refusal(name: str, kind: str) -> str:
+    """Why the cloud ``name`` of ``kind`` (a live cloud) hides no class, in one line (the viewer's
+    Classes panel says it too)."""
+    return f"hidden_classes: {name} is {kind}, which draws every class; leave them out as it reads instead (--drop-classes, drop_classes=)"
+
+
 def refuse_hidden_classes(name: str, kind: str, settings: SelectionSettings) -> None:
     """A one-line SettingsError where ``settings`` hide classes of a cloud kind that cannot
     leave them out while drawing (they would be drawn without a word)."""
     from ..errors import SettingsError
 
     if settings.hidden_classes:
-        raise SettingsError(f"hidden_classes: {name} is {kind}, which draws every class; leave them out as it reads instead (--drop-classes, drop_classes=)")
+        raise SettingsError(hidden_classes_refusal(name, kind))
 
 
 def check_point_index(index, n_points: int | None = None, name: str = "") -> None:

@@ -195,6 +195,8 @@ def _misfits(values: np.ndarray, dtype: np.dtype) -> np.ndarray:
 class LiveCloud:
     """A cloud fed frame by frame (``push``, ``push_depth``), drawn at any moment (a Renderable)."""
 
+    KIND = "a live cloud"  # what refusals call it (hidden_classes)
+
     def __init__(self, keep: int = 100, decay: float | None = None, name: str = "live", chunk: int = BATCH_SIZE, clock: Callable[[], float] | None = None,
                  bounds=None, fade: bool = True):  # fmt: skip
         """``keep``: frames drawn (a ring: the oldest leaves when a new one arrives); ``decay``:
@@ -645,7 +647,7 @@ class LiveCloud:
     def prepare(self, view: View, settings) -> DrawList:
         """Every ring chunk in view (``max_points``: every k-th point of each), then the snapshot
         octree's selection (its LOD within ``point_budget``), as one selection over the buffers."""
-        refuse_hidden_classes(self.name, "a live cloud", settings)  # (frames come and go: nothing to filter once)
+        refuse_hidden_classes(self.name, self.KIND, settings)  # (frames come and go: nothing to filter once)
         if self.decay is not None and self.frames:
             self._expire()  # the lock is held (reading): frames past their decay leave before this frame
         self._sync_mirror()

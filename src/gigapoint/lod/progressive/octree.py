@@ -405,6 +405,7 @@ class ProgressiveOctree:
     """An LOD octree filled by ``add`` (or a background loader: gigapoint.open(..., progressive=True))
     and drawable at any moment (a Renderable: core/renderable.py)."""
 
+    KIND = "a progressive octree"  # what refusals call it (hidden_classes)
     #: bytes of work arrays kept from one insertion to the next (_Work)
     keep_work_bytes = _KEEP_WORK_BYTES
     #: frames select and cull nodes by the box of the points below them (kept at insertion),
@@ -1484,7 +1485,7 @@ class ProgressiveOctree:
     def prepare(self, view: View, settings) -> DrawList:
         """What a view draws (store.select_octants: largest projected child first within the point
         budget, each drawn child replacing its parent's voxels of its octant), one batch per chunk."""
-        refuse_hidden_classes(self.name, "a progressive octree", settings)  # (its pool is filled while drawn: no filtered copy)
+        refuse_hidden_classes(self.name, self.KIND, settings)  # (its pool is filled while drawn: no filtered copy)
         n = self.n_nodes
         pool = self.pool
         if pool is None or self.points == 0:
