@@ -432,3 +432,60 @@ def test_section_tool_shows_the_cross_section_of_two_clicked_points(page, server
     while session.section and time.monotonic() < t_end:
         time.sleep(0.05)
     assert session.section == []
+
+
+def test_unticking_a_class_hides_it_and_ticking_it_shows_it_again(browser, autzen_path):
+    """autzen_trim.laz holds classes 1 (unclassified) and 2 (ground): the Classes panel lists
+    them with their colours; unticking ground redraws without it, through a lost connection
+    too, and ticking it again draws the first frame again."""
+    srv = ViewerServer(gigapoint.open(autzen_path), settings=gigapoint.RenderSettings(color_mode="classification")).start()
+    ctx = browser.new_context(viewport=VIEWPORT)
+    pg = ctx.new_page()
+    ground = np.array([160, 82, 45])  # the classification colour mode's class 2
+
+    def ground_pixels(img) -> int:  # (a JPEG's colours: near it)
+        return int((np.abs(img - ground).max(axis=2) < 40).sum())
+
+    def drawn_pixels(img) -> int:
+        return int((img.max(axis=2) > 40).sum())
+
+    def shown(want, what):  # the frame asked for can come after one asked before it: up to 30 s
+        t_end = time.monotonic() + 30
+        while not want(canvas_pixels(pg)) and time.monotonic() < t_end:
+            time.sleep(0.2)
+        assert want(canvas_pixels(pg)), what
+
+    try:
+        pg.goto(srv.url)
+        wait_full_frame(pg, 0)
+        rows = pg.locator("#classes label")
+        assert rows.all_text_contents() == ["1 unclassified", "2 ground"]
+        assert pg.evaluate("() => getComputedStyle(document.querySelector('#classes label:nth-child(2) .swatch')).backgroundColor") == "rgb(160, 82, 45)"
+        time.sleep(0.5)  # (the full frame at rest)
+        before = canvas_pixels(pg)
+        assert ground_pixels(before) > 2_000
+        n = frame_no(pg)
+        pg.locator('#classes input[data-code="2"]').uncheck()
+        pg.wait_for_function("() => window.gigapoint.settings.hidden_classes.join() === '2'", timeout=30_000)
+        wait_full_frame(pg, n)
+        shown(lambda img: ground_pixels(img) == 0, "ground still drawn")
+        hidden = canvas_pixels(pg)
+        assert 1_000 < drawn_pixels(hidden) < drawn_pixels(before) - ground_pixels(before) // 2, (drawn_pixels(hidden), drawn_pixels(before))
+        (session,) = srv.core.sessions.values()
+        pg.evaluate("() => window.gigapoint.ws.close()")  # the connection drops: the page's new session hides ground too
+        pg.wait_for_function("(old) => window.gigapoint.session && window.gigapoint.session !== old", arg=session.id, timeout=30_000)
+        pg.wait_for_function("() => window.gigapoint.settings.hidden_classes.join() === '2'", timeout=30_000)
+        (again,) = srv.core.sessions.values()
+        assert again.settings.hidden_classes == (2,) and not pg.locator('#classes input[data-code="2"]').is_checked()
+        n = frame_no(pg)
+        pg.locator('#classes input[data-code="2"]').check()
+        pg.wait_for_function("() => window.gigapoint.settings.hidden_classes.length === 0", timeout=30_000)
+        wait_full_frame(pg, n)
+        shown(lambda img: np.array_equal(img, before), "the first frame not drawn again")
+        pg.locator("#btn-classes-none").click()  # every class listed hidden: nothing drawn
+        shown(lambda img: drawn_pixels(img) == 0, "points drawn with every class hidden")
+        pg.locator("#btn-classes-all").click()
+        shown(lambda img: np.array_equal(img, before), "the first frame not drawn again")
+    finally:
+        ctx.close()
+        srv.close()

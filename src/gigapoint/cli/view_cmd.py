@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from ..errors import GigapointError
+from ..errors import GigapointError, SettingsError
 from .app import app, prefer_passive_wait
 from .cloud_opts import (
     ChunkedOption,
@@ -25,6 +25,7 @@ from .cloud_opts import (
     option_names,
     subfolders_read,
 )
+from .settings_opts import options_named
 
 
 def _open_browser(url: str) -> None:
@@ -78,6 +79,9 @@ def view(
     classes: ClassesOption = None,
     drop_classes: DropClassesOption = None,
     clip: ClipOption = None,
+    hidden_classes: str | None = typer.Option(
+        None, "--hidden-classes", help="LAS classes hidden from the start, e.g. '7,18' (unticked in the Classes panel); changing them re-reads nothing."
+    ),
 ) -> None:
     """Serve an interactive viewer of PATH... in the browser (Ctrl+C stops it)."""
     prefer_passive_wait()
@@ -87,13 +91,18 @@ def view(
     point_filter = filter_options(classes, drop_classes, clip, "view")
     if point_filter is not None and not paths:  # (as --recursive: --demo, --live and --replay read no file)
         raise GigapointError("--classes, --drop-classes and --clip: filter the points of the files given as PATH...; none is given")
+    from ..render.settings import RenderSettings
+
+    with options_named():  # a bad class said as --hidden-classes's, before anything is read
+        settings = RenderSettings(hidden_classes=hidden_classes or ())
     if live is not None or replay is not None:
         from .live_cmd import check_live_options, view_live
 
         if paths or demo is not None or (live is not None and replay is not None):
             raise GigapointError("view: give one of PATH..., --demo N, --live SOURCE or --replay DIR")
-        if options:
-            raise GigapointError(f"{option_names(options)}: options of a point cloud held in memory, not of a live stream")
+        if options or settings.hidden_classes:
+            said = option_names(options) if options else "--hidden-classes"
+            raise GigapointError(f"{said}: options of a point cloud held in memory, not of a live stream")
         if window:
             raise GigapointError("view: --window does not show live streams yet; use the browser viewer (without --window)")
         if progressive is not None:
@@ -108,7 +117,7 @@ def view(
     import gigapoint
 
     from ..lod.progressive import ProgressiveOctree
-    from ..render.settings import RenderSettings
+    from ..viewer.classes import refusal
     from ..viewer.server import ViewerServer
 
     if demo is not None and paths:
@@ -140,10 +149,14 @@ def view(
         cloud = open_files(subfolders_read(paths, recursive), budget, progressive, options, progress=False, point_filter=point_filter)  # big: shown while it loads
     else:
         raise GigapointError("view: name at least one file or directory (or --demo N)")
+    refused = refusal(cloud) if settings.hidden_classes else ""
+    if refused:  # (a progressive load, a cloud without classification): said once, not by every frame
+        with options_named():
+            raise SettingsError(refused)
     if window:  # native window (rendercanvas + glfw), no server
         from ..viewer.window import open_window, run_loop
 
-        open_window(cloud)  # first: a window that cannot open is said alone, not after the title line
+        open_window(cloud, settings=settings)  # first: a window that cannot open is said alone, not after the title line
         print(f"gigapoint window: {cloud.name}, {cloud.n_points:,} points (drag: orbit, right drag: pan, wheel: zoom)", file=sys.stderr)
         _report_load(cloud)
         run_loop()
@@ -152,7 +165,7 @@ def view(
         deadline = time.monotonic() + 5.0
         while cloud.n_points == 0 and cloud.loading and time.monotonic() < deadline:
             time.sleep(0.02)
-    server = ViewerServer(cloud, host=host, port=port)
+    server = ViewerServer(cloud, host=host, port=port, settings=settings)
     print(f"gigapoint viewer: {cloud.name}, {cloud.n_points:,} points", file=sys.stderr)
     _report_load(cloud)
     if not server.loopback:

@@ -134,8 +134,8 @@ class RenderSettings:
     # what a frame draws, not what is read (io/filters.py's --drop-classes re-reads the files): a
     # changed set costs a plain cloud one filtering pass, an octree reloading its nodes
     hidden_classes: Classes = setting(
-        (), "LAS classes not drawn, e.g. '7,18' (noise); changing them re-reads nothing.", kind="classes", viewer=False
-    )
+        (), "LAS classes not drawn, e.g. '7,18' (noise); changing them re-reads nothing.", kind="classes"
+    )  # (the viewer edits it in its Classes panel, not among the settings: viewer/classes.py)
     point_budget: int = setting(
         10_000_000, "Converted octrees: most points a frame draws (largest projected nodes first).", min=1, group="lod"
     )

@@ -1,8 +1,8 @@
 """The viewer's wire protocol: message validation, the settings schema, frame packing.
 
 Client -> server: JSON text messages ``{"type": ..., ...}`` (at most MAX_MESSAGE bytes).
-Server -> client: JSON text messages (hello, settings, pick, measure, section, section_result, error,
-pong) and binary frames:
+Server -> client: JSON text messages (hello, settings, classes, pick, measure, section, section_result,
+error, pong) and binary frames:
 ``b"GPF1" + u32 little-endian header length + JSON header + JPEG bytes``; a frame's header
 has ``cloud`` (hello's cloud line) again when that changed since the tab last got it.
 Hello's ``cloud`` (ViewerCore.cloud_info): name, points, batches, bounds, attributes,
@@ -123,7 +123,16 @@ MESSAGE_TYPES = {
     # line (an octree without source files, an empty corridor)}. GET section.csv?session=ID: its
     # rows (Section.write_csv). Frames draw the line.
     "section",
-    "settings",  # values: {field: value}
+    # values: {field: value}; hidden_classes: a list of LAS classes (whole numbers 0..255), what
+    # the Classes panel leaves unticked, refused in one line where the panel is disabled
+    "settings",
+    # the Classes panel's list (viewer/classes.py): reply {"type": "classes", "enabled", "reason":
+    # "" or why not (no classification; a progressive or live cloud's refusal), "source": cloud (the
+    # classes a cloud in memory holds) | metadata (those an octree's metadata lists) | standard
+    # (ASPRS 0..18, within a range its metadata gives, and the classes seen and hidden), "complete"
+    # (false: the list may grow as nodes load; ask again), "classes": [{code, name, color: "#rrggbb"}]};
+    # hello carries the first
+    "classes",
     "quality",  # adaptive (bool), jpeg_quality (int)
     "ping",  # t (echoed)
     "refresh",  # render again
@@ -152,7 +161,8 @@ def _describe(cls: type, spec: SettingSpec) -> dict | None:
 
 def settings_schema(cls: type = RenderSettings) -> list[dict]:
     """One entry per editable field of the settings dataclass: name, label, help, nullable,
-    kind (bool|int|float|enum|color|range|text), choices, min, max, step, default.
+    kind (bool|int|float|enum|color|range|classes|text), choices, min, max, step, default
+    (classes: the Classes panel edits it, not the settings panel).
 
     Generated from ``render.settings.settings_fields`` (the fields' types and metadata), so a
     field added to RenderSettings, or to a class extending it, shows up in the viewer's panel
@@ -204,6 +214,10 @@ def _coerce(d: dict, value):
         if not isinstance(value, list) or len(value) != 2:
             raise ProtocolError(f"settings: {name} must be two numbers [low, high] or null")
         return tuple(number({"type": "settings", name: v}, name, -MAX_ABS_COORD, MAX_ABS_COORD) for v in value)
+    if kind == "classes":  # the Classes panel's unticked classes; RenderSettings sorts them
+        if not isinstance(value, list) or len(value) > 256:
+            raise ProtocolError(f"settings: {name} must be a list of LAS classes (whole numbers in 0..255)")
+        return tuple(integer({"type": "settings", name: c}, name, 0, 255) for c in value)
     if kind == "text":
         if not isinstance(value, str) or len(value) > 200:
             raise ProtocolError(f"settings: {name} must be a short string")

@@ -263,6 +263,7 @@ def create_app(core: ViewerCore, token: str | None = None, allowed_hosts=None):
                     "cloud": session.cloud_shown,
                     "schema": P.settings_schema(type(core.settings)),
                     "settings": P.settings_values(settings),
+                    "classes": core.class_panel(settings.hidden_classes),  # the Classes panel's list
                     "camera": state.as_dict(),
                     "views": list(P.VIEW_NAMES),
                     "limits": {"max_view_side": P.MAX_VIEW_SIDE, "max_shot_side": P.MAX_SHOT_SIDE, "max_message": P.MAX_MESSAGE},

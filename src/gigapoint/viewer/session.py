@@ -27,6 +27,7 @@ from ..render.camera import sample_points
 from ..render.frame import Frame, encode_image
 from ..render.renderer import render_frame
 from ..render.settings import RenderSettings
+from . import classes as C
 from . import measure as M
 from . import protocol as P
 from . import section_tool as ST
@@ -250,6 +251,16 @@ class ViewerCore:
             "units": self.units,
         }
 
+    def class_panel(self, hidden=()) -> dict:
+        """The Classes panel's list for the cloud drawn now (classes.py); an octree's resident
+        nodes join it when the render lock is free at once (a frame may be loading them)."""
+        seen = RENDER_LOCK.acquire(timeout=0.2)  # called from the event loop: never wait out a long screenshot
+        try:
+            return C.class_panel(self.cloud, hidden, seen)
+        finally:
+            if seen:
+                RENDER_LOCK.release()
+
     def open_session(self, send, width: int = 1280, height: int = 720) -> Session:
         with self.lock:
             if len(self.sessions) >= self.max_sessions:
@@ -428,9 +439,15 @@ class Session:
                     return {"type": "measure", "id": msg.get("id"), "added": False, "message": "no point here: nothing added", **M.summary(self.measure, self.core.units)}
                 motion = False
             elif kind == "settings":
-                self.settings = P.apply_settings(self.settings, msg.get("values"))
+                settings = P.apply_settings(self.settings, msg.get("values"))
+                refused = C.refusal(self.core.cloud) if settings.hidden_classes else ""
+                if refused:  # (not a frame that fails: the panel is disabled for it)
+                    raise P.ProtocolError(f"settings: {refused}")
+                self.settings = settings
                 motion = False
                 reply = {"type": "settings", "values": P.settings_values(self.settings)}
+            elif kind == "classes":
+                return {"type": "classes", **self.core.class_panel(self.settings.hidden_classes)}
             elif kind == "quality":
                 self.adaptive = P.flag(msg, "adaptive", self.adaptive)
                 self.jpeg_quality = P.integer(msg, "jpeg_quality", 10, 100, self.jpeg_quality)

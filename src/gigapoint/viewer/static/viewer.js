@@ -17,7 +17,7 @@
     ws: null, session: null, cloud: null, schema: [], settings: {}, camera: null,
     seq: 0, sentAt: new Map(), lastFrame: 0, frameTimes: [], fps: null, latency: null, renderTimes: [],
     header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0, measuring: false, measure: [], sectioning: false,
-    pending: { orbit: null, look: null, pan: null, zoom: null }, retry: 0,
+    pending: { orbit: null, look: null, pan: null, zoom: null }, retry: 0, classes: null, classesAsked: -1e9,
   };
   window.gigapoint = S; // for tests and the curious
 
@@ -94,6 +94,7 @@
       const b = m.cloud.bounds;
       S.sceneRadius = Math.hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]) / 2 || 1;
       showCloud(m.cloud);
+      showClasses(m.classes);
       showMeasure({ points: [], segments: [] });  // a new session measures nothing yet (a reconnect's points are sent back below)
       if (S.sectioning) startSection();  // the new session has no line: the panel asks for one again
       buildSettings();
@@ -110,9 +111,12 @@
         // the measurement too, in world coordinates; 100 points a message stays under the message limit
         for (let i = 0; i < kept.measure.length; i += 100) send({ type: "measure", action: "restore", points: kept.measure.slice(i, i + 100) }, true);
       }
+    } else if (m.type === "classes") {
+      showClasses(m);
     } else if (m.type === "settings") {
       S.settings = m.values;
       syncSettings();
+      syncClasses();
       if (errorFrom === "settings") $("error").classList.add("hidden");  // the last change was taken
     } else if (m.type === "pick") {
       showPick(m);
@@ -124,7 +128,7 @@
       showSectionResult(m);
     } else if (m.type === "error") {
       showError(m.message, m.in_reply_to);
-      if (m.in_reply_to === "settings") syncSettings(); // the panel shows what the server kept
+      if (m.in_reply_to === "settings") { syncSettings(); syncClasses(); } // the panels show what the server kept
     }
   }
 
@@ -135,6 +139,11 @@
     const n = dv.getUint32(4, true);
     const header = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 8, n)));
     if (header.cloud) showCloud(header.cloud);  // sent again when it changed (a live or loading cloud), whether or not this image is drawn
+    // an octree's list grows with the classes of the nodes loaded, a swapped cloud has its own: asked again, at most every 2 s
+    if ((header.cloud || (header.full && S.classes && !S.classes.complete)) && performance.now() - S.classesAsked > 2000) {
+      S.classesAsked = performance.now();
+      send({ type: "classes" });
+    }
     const blob = new Blob([new Uint8Array(buf, 8 + n)], { type: "image/jpeg" });
     const now = performance.now();
     if (header.seq != null && S.sentAt.has(header.seq)) {
@@ -192,6 +201,7 @@
     const form = $("settings");
     form.textContent = "";
     for (const f of S.schema) {
+      if (f.kind === "classes") continue;  // hidden_classes: the Classes panel's
       const row = document.createElement("label");
       row.className = "row";
       row.title = f.help || "";
@@ -268,6 +278,48 @@
     } else v = input.value;
     send({ type: "settings", values: { [f.name]: v } }, true);
   }
+
+  // ---------------------------------------------------------------- the Classes panel (hidden_classes: the classes unticked)
+  function showClasses(c) {
+    S.classes = c;
+    const list = $("classes"), panel = $("classes-panel");
+    list.textContent = "";
+    for (const k of c.classes) {
+      const row = document.createElement("label");
+      row.className = "row";
+      row.title = `class ${k.code}: ${k.name}`;
+      const box = document.createElement("input");
+      box.type = "checkbox"; box.dataset.code = String(k.code); box.disabled = !c.enabled;
+      box.addEventListener("change", () => sendHidden(listedCodes().filter((code) => !list.querySelector(`input[data-code="${code}"]`).checked)));
+      const swatch = document.createElement("span");
+      swatch.className = "swatch"; swatch.style.background = k.color;  // (the classification colour mode's colour)
+      const code = document.createElement("span");
+      code.className = "code"; code.textContent = String(k.code);
+      row.append(box, swatch, code, " " + k.name);
+      list.append(row);
+    }
+    panel.classList.toggle("disabled", !c.enabled);
+    panel.title = c.reason || "";
+    for (const b of ["btn-classes-all", "btn-classes-none"]) $(b).disabled = !c.enabled;
+    $("classes-note").textContent = c.enabled ? (c.classes.length ? "" : "no class in this cloud") : c.reason;
+    syncClasses();
+  }
+
+  function listedCodes() { return S.classes ? S.classes.classes.map((k) => k.code) : []; }
+  // the set sent: the listed classes as ticked, and hidden classes the list does not show, kept hidden
+  function sendHidden(unticked) {
+    const listed = new Set(listedCodes());
+    const kept = (S.settings.hidden_classes || []).filter((code) => !listed.has(code));
+    send({ type: "settings", values: { hidden_classes: [...kept, ...unticked].sort((a, b) => a - b) } }, true);
+  }
+
+  function syncClasses() {
+    const hidden = new Set(S.settings.hidden_classes || []);
+    for (const box of $("classes").querySelectorAll("input[data-code]")) box.checked = !hidden.has(Number(box.dataset.code));
+  }
+
+  $("btn-classes-all").addEventListener("click", () => send({ type: "settings", values: { hidden_classes: [] } }, true));
+  $("btn-classes-none").addEventListener("click", () => sendHidden(listedCodes()));
 
   // ---------------------------------------------------------------- picking
   function showPick(m) {

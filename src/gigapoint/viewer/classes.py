@@ -1,0 +1,76 @@
+"""The viewer's class toggles (Potree's classification filter): which LAS classes its Classes
+panel lists, with their ASPRS names and the classification colour mode's colours.
+
+A cloud in memory lists the classes it holds (counted once per version of its points); an
+octree those its metadata lists (an EPT schema's counts, a Potree histogram), else the ASPRS
+standard classes 0..18 (within the classification range its metadata gives: a gigapoint
+octree's), with those of the nodes loaded so far and those hidden. A cloud without
+classification, a progressive octree and a live cloud have the panel disabled, saying why.
+Unticking a class sets the ``hidden_classes`` render setting (the settings message).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.renderable import hidden_classes_refusal
+from ..render.cache import render_cache
+from ..render.colors import STANDARD_CLASSES, class_name, classification_table
+
+
+def held_classes(values) -> list[int]:
+    """The distinct LAS classes (0..255) among ``values`` (a classification array)."""
+    values = np.asarray(values)
+    if values.dtype == np.uint8:  # a LAS file's: one counting pass, no sort
+        return np.flatnonzero(np.bincount(values, minlength=256)).tolist()
+    return [int(c) for c in np.unique(values) if 0 <= c <= 255]  # (others cannot be hidden: parse_classes)
+
+
+def entries(codes) -> list[dict]:
+    """{code, name, color ('#rrggbb', as the classification colour mode draws it)} of each class."""
+    table = classification_table()
+    return [{"code": c, "name": class_name(c), "color": "#" + bytes(table[c, :3].tolist()).hex()} for c in sorted(codes)]
+
+
+def refusal(cloud) -> str:
+    """Why ``cloud`` hides no class, in one line ("" where it can): a progressive or live cloud's
+    refusal, or a cloud without classification. The panel is disabled with it; settings that hide
+    classes are refused with it."""
+    from ..live import LiveCloud
+    from ..lod.progressive import ProgressiveOctree
+
+    if isinstance(cloud, (LiveCloud, ProgressiveOctree)):
+        return hidden_classes_refusal(cloud.name, cloud.KIND)
+    if "classification" not in cloud.attribute_names:
+        return f"hidden_classes: {cloud.name} has no classification attribute, so no class to hide"
+    return ""
+
+
+def class_panel(cloud, hidden=(), seen: bool = True) -> dict:
+    """The Classes panel of ``cloud`` (protocol.py's "classes" reply): enabled, reason, source,
+    complete, classes. ``hidden``: the classes hidden now (an octree's list keeps them, so they
+    can be ticked again); ``seen``: an octree's list takes in the classes of its resident nodes
+    (False while a frame may be loading them)."""
+    from ..core import PointCloud
+    from ..lod.store import OctreeCloud
+
+    reason = refusal(cloud)
+    if reason:
+        return {"enabled": False, "reason": reason, "source": "none", "complete": True, "classes": []}
+    if isinstance(cloud, PointCloud):
+        cache = render_cache.arrays(cloud)  # (per version of its points: an edit counts again)
+        if "__classes__" not in cache:
+            cache["__classes__"] = held_classes(cloud.attributes["classification"])
+        return {"enabled": True, "reason": "", "source": "cloud", "complete": True, "classes": entries(cache["__classes__"])}
+    facts = cloud.class_facts() if isinstance(cloud, OctreeCloud) else {}
+    if "classes" in facts:
+        return {"enabled": True, "reason": "", "source": "metadata", "complete": True, "classes": entries(facts["classes"])}
+    lo, hi = facts.get("class_range", (0, 255))
+    codes = {c for c in STANDARD_CLASSES if lo <= c <= hi} | set(hidden)
+    if "class_range" in facts:
+        codes.add(lo)  # (the lowest class is held; the highest only bounds them)
+    arena = cloud.arena if isinstance(cloud, OctreeCloud) else None
+    if seen and arena is not None:
+        values = arena.resident_classification()
+        codes |= set(held_classes(values if values is not None else []))
+    return {"enabled": True, "reason": "", "source": "standard", "complete": False, "classes": entries(codes)}

@@ -1,0 +1,189 @@
+"""The viewer's class toggles (viewer/classes.py): the Classes panel's list for each kind of
+cloud, hidden_classes set through the settings message and the frames drawn without them, bad
+values answered with an error, the panel disabled where a cloud cannot hide classes."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("starlette")
+pytest.importorskip("httpx")
+
+from test_hidden_classes import two_classes  # class 2 on the left half, class 6 on the right
+from test_viewer_server import full_frame, receive, reply  # the websocket helpers of the server's tests
+
+import gigapoint as gp
+from gigapoint.viewer.classes import class_panel
+from gigapoint.viewer.server import create_app
+from gigapoint.viewer.session import ViewerCore
+
+pytestmark = [pytest.mark.timeout(120), pytest.mark.filterwarnings("ignore::DeprecationWarning")]
+
+GROUND, BUILDING = (160, 82, 45), (255, 168, 0)  # the classification colour mode's classes 2 and 6
+# 30-bit positions: a pixel draws the same point whichever cloud holds it (batch boxes differ)
+DRAWN = gp.RenderSettings(color_mode="classification", size_mode="fixed", point_size=1, adaptive_precision=False)
+TWO = [{"code": 2, "name": "ground", "color": "#a0522d"}, {"code": 6, "name": "building", "color": "#ffa800"}]
+
+
+def pixels_of(image, rgb) -> int:
+    return int(np.all(image[..., :3] == rgb, axis=-1).sum())
+
+
+@pytest.fixture()
+def two_class_cloud():
+    xyz, rgb, classes = two_classes()
+    return gp.from_arrays(xyz, rgb, classification=classes, name="two classes")
+
+
+def connect(cloud, settings=DRAWN):
+    from starlette.testclient import TestClient
+
+    core = ViewerCore(cloud, settings)
+    return core, TestClient(create_app(core))
+
+
+def test_the_classes_message_lists_exactly_the_classes_a_cloud_holds(two_class_cloud):
+    core, client = connect(two_class_cloud)
+    with client, client.websocket_connect("/ws?w=160&h=120") as ws:
+        hello = receive(ws, reply("hello"))
+        assert hello["classes"] == {"enabled": True, "reason": "", "source": "cloud", "complete": True, "classes": TWO}
+        assert hello["settings"]["hidden_classes"] == []
+        assert {d["name"]: d["kind"] for d in hello["schema"]}["hidden_classes"] == "classes"  # editable through settings
+        ws.send_json({"type": "classes"})
+        assert receive(ws, reply("classes"))["classes"] == TWO
+    core.close_all()
+
+
+def test_hiding_a_class_redraws_without_it_and_showing_it_redraws_as_before(two_class_cloud):
+    xyz, rgb, classes = two_classes()
+    ground = classes == 2
+    alone = gp.from_arrays(xyz[ground], rgb[ground], classification=classes[ground])
+    core, client = connect(two_class_cloud)
+    with client, client.websocket_connect("/ws?w=240&h=160") as ws:
+        session_id = receive(ws, reply("hello"))["session"]
+        session = core.sessions[session_id]
+        receive(ws, full_frame())
+        before = session.last.frame.image.copy()
+        assert pixels_of(before, GROUND) > 100 and pixels_of(before, BUILDING) > 100
+        ws.send_json({"type": "settings", "values": {"hidden_classes": [6]}, "seq": 1})
+        assert receive(ws, reply("settings"))["values"]["hidden_classes"] == [6]
+        receive(ws, full_frame(1))
+        last = session.last
+        hidden = last.frame.image
+        assert pixels_of(hidden, BUILDING) == 0
+        # exactly what the class-2 points alone draw from that camera
+        np.testing.assert_array_equal(hidden, gp.render(alone, last.camera, DRAWN))
+        ws.send_json({"type": "settings", "values": {"hidden_classes": []}, "seq": 2})
+        receive(ws, full_frame(2))
+        np.testing.assert_array_equal(session.last.frame.image, before)
+    core.close_all()
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ([300], "settings: hidden_classes must be in [0, 255], got 300"),
+        ([2.5], "settings: hidden_classes must be an integer, got 2.5"),
+        ([True], "settings: hidden_classes must be a finite number, got True"),
+        ("6", "settings: hidden_classes must be a list of LAS classes (whole numbers in 0..255)"),
+        (list(range(257)), "settings: hidden_classes must be a list of LAS classes (whole numbers in 0..255)"),
+    ],
+)
+def test_bad_hidden_classes_are_answered_with_an_error_line(two_class_cloud, value, message):
+    core, client = connect(two_class_cloud)
+    with client, client.websocket_connect("/ws?w=96&h=64") as ws:
+        receive(ws, reply("hello"))
+        ws.send_json({"type": "settings", "values": {"hidden_classes": value}})
+        error = receive(ws, reply("error"))
+        assert (error["message"], error["in_reply_to"]) == (message, "settings")
+        ws.send_json({"type": "ping", "t": 5})  # the connection goes on, the settings as they were
+        assert receive(ws, reply("pong"))["t"] == 5
+        assert core.sessions[next(iter(core.sessions))].settings.hidden_classes == ()
+    core.close_all()
+
+
+def test_a_cloud_without_classification_disables_the_panel_and_refuses_hidden_classes():
+    xyz, rgb, _ = two_classes()
+    core, client = connect(gp.from_arrays(xyz, rgb, name="plain"), gp.RenderSettings())
+    reason = "hidden_classes: plain has no classification attribute, so no class to hide"
+    with client, client.websocket_connect("/ws?w=96&h=64") as ws:
+        hello = receive(ws, reply("hello"))
+        assert hello["classes"] == {"enabled": False, "reason": reason, "source": "none", "complete": True, "classes": []}
+        ws.send_json({"type": "settings", "values": {"hidden_classes": [7]}})
+        assert receive(ws, reply("error"))["message"] == f"settings: {reason}"
+        ws.send_json({"type": "settings", "values": {"hidden_classes": []}})  # none hidden: nothing to refuse
+        assert receive(ws, reply("settings"))["values"]["hidden_classes"] == []
+    core.close_all()
+
+
+def test_a_progressive_octree_disables_the_panel_with_its_refusal():
+    from gigapoint.lod.progressive import ProgressiveOctree
+
+    xyz, _, classes = two_classes()
+    grown = ProgressiveOctree("grown")
+    grown.add(xyz, classification=classes)
+    panel = class_panel(grown)
+    assert not panel["enabled"] and panel["classes"] == []
+    assert panel["reason"] == (
+        "hidden_classes: grown is a progressive octree, which draws every class; leave them out as it reads instead (--drop-classes, drop_classes=)"
+    )
+
+
+def codes(panel) -> list[int]:
+    return [c["code"] for c in panel["classes"]]
+
+
+def test_an_octree_lists_the_classes_its_metadata_names(tmp_path, two_class_cloud):
+    gp.convert(two_class_cloud, tmp_path / "potree", format="potree")
+    meta_path = tmp_path / "potree" / "metadata.json"
+    meta = json.loads(meta_path.read_text())
+    entry = next(a for a in meta["attributes"] if a["name"] == "classification")
+    assert (entry["min"], entry["max"]) == ([2.0], [6.0])
+    # min and max bound them: the standard classes between, none above 6 or below 2, more to come as nodes load
+    bounded = class_panel(gp.open(tmp_path / "potree"))
+    assert (bounded["source"], bounded["complete"], codes(bounded)) == ("standard", False, [2, 3, 4, 5, 6])
+    entry["histogram"] = [0] * 256  # PotreeConverter 2's counts of a 1-byte attribute: exactly the classes held
+    entry["histogram"][2], entry["histogram"][6] = 400, 400
+    meta_path.write_text(json.dumps(meta))
+    listed = class_panel(gp.open(tmp_path / "potree"))
+    assert (listed["source"], listed["complete"], listed["classes"]) == ("metadata", True, TWO)
+
+
+def test_an_octree_without_a_list_offers_the_standard_classes_and_those_seen(tmp_path, two_class_cloud):
+    gp.convert(two_class_cloud, tmp_path / "tree")
+    tree = gp.open(tmp_path / "tree")
+    assert tree.class_facts()["class_range"][0] == 2  # the lowest class held; the highest only bounded
+    lo, hi = tree.class_facts()["class_range"]
+    assert codes(class_panel(tree)) == list(range(2, min(hi, 18) + 1))
+    assert codes(class_panel(tree, hidden=(30,))) == [*range(2, min(hi, 18) + 1), 30]  # hidden ones stay, to be ticked again
+    # a COPC file's header names no class: the standard 0..18, and once nodes are loaded the classes they hold
+    xyz, rgb, classes = two_classes()
+    gp.convert(gp.from_arrays(xyz, rgb, classification=np.where(classes == 6, 40, 2).astype(np.uint8)), tmp_path / "c.copc.laz")
+    copc = gp.open(tmp_path / "c.copc.laz")
+    assert codes(class_panel(copc)) == list(range(19))
+    gp.render(copc, gp.Camera.top_down(((0, 0, 0), (100, 50, 1)), 0.5))
+    assert codes(class_panel(copc)) == [*range(19), 40]
+    assert codes(class_panel(copc, seen=False)) == list(range(19))  # (the render lock was busy: what the nodes hold left out)
+
+
+def test_view_starts_with_the_hidden_classes_given(cli, autzen_path, monkeypatch):
+    from gigapoint.viewer.server import ViewerServer
+
+    served = []
+
+    def serve(self):  # (not for ever: the settings each tab starts with, then closed)
+        served.append(self.core.settings.hidden_classes)
+        self.sock.close()
+
+    monkeypatch.setattr(ViewerServer, "serve_forever", serve)
+    rc, _, err = cli("view", autzen_path, "--hidden-classes", "7,2", "--no-browser")
+    assert rc == 0, err
+    assert served == [(2, 7)]  # each tab's first settings: its Classes panel starts with 2 and 7 unticked
+    rc, _, err = cli("view", autzen_path, "--hidden-classes", "300", "--no-browser")
+    assert rc == 1 and err == "error: --hidden-classes: 300 is not a LAS class (whole numbers in 0..255), got '300'\n"
+    rc, _, err = cli("view", "--demo", "1000", "--progressive", "--hidden-classes", "7", "--no-browser")
+    assert rc == 1 and err.startswith("error: --hidden-classes: ") and "is a progressive octree, which draws every class" in err
+    assert len(err.splitlines()) == 1 and len(served) == 1
