@@ -160,14 +160,132 @@ def test_a_cloud_without_classification_cannot_hide_classes(tmp_path):
     assert gp.render(cloud, TOP, hidden_classes=(), **FIXED).any()  # none hidden: drawn as ever
 
 
-def test_a_progressive_octree_refuses_hidden_classes():
+def test_a_live_cloud_refuses_hidden_classes():
+    from gigapoint.live import LiveCloud
+
+    live = LiveCloud(name="scanner")
+    xyz, rgb, classes = two_classes()
+    live.push(xyz, rgb, classification=classes)
+    with pytest.raises(SettingsError) as err:
+        gp.render(live, TOP, hidden_classes=(6,))
+    assert str(err.value) == (
+        "hidden_classes: scanner is a live cloud, which draws every class; leave them out as it reads instead (--drop-classes, drop_classes=)"
+    )
+
+
+# ---------------------------------------------------------------- progressive octrees (KeptChunks)
+EVERY = {"point_budget": 10**9, "lod_threshold_px": 0, **FIXED}  # every leaf drawn
+VOXELS = {"point_budget": 3_000, "lod_threshold_px": 0, **FIXED}  # the root's voxels alone
+
+
+def grown(spacing: float = 0.5, **kw):
+    """A progressive octree of ``two_classes`` (20 000 points at 0.5: leaves of 2 000 at most
+    under inner nodes of voxels)."""
     from gigapoint.lod.progressive import ProgressiveOctree
 
-    xyz, _, classes = two_classes()
-    grown = ProgressiveOctree("grown")
-    grown.add(xyz, classification=classes)
-    with pytest.raises(SettingsError) as err:
-        gp.render(grown, TOP, hidden_classes=(6,))
-    assert str(err.value) == (
-        "hidden_classes: grown is a progressive octree, which draws every class; leave them out as it reads instead (--drop-classes, drop_classes=)"
-    )
+    xyz, rgb, classes = two_classes(spacing)
+    tree = ProgressiveOctree("grown", max_leaf=2_000, **kw)
+    tree.add(xyz, rgb, classification=classes)
+    assert len(tree.inner_nodes()) > 4
+    return tree
+
+
+def drawn(tree, hidden=(), options=EVERY):
+    """The DrawList of a frame of ``tree`` through TOP."""
+    with tree.reading():
+        return tree.prepare(TOP.view(tree.bounds), gp.RenderSettings(hidden_classes=hidden, **options))
+
+
+def counting_filters(monkeypatch) -> list:
+    """The octree chunks each frame filters (KeptChunks._filter's ``stale``), frame by frame."""
+    from gigapoint.lod.progressive.octree import KeptChunks
+
+    filtered, original = [], KeptChunks._filter
+
+    def counted(self, source, stale, drawn):
+        filtered.append(sorted(stale.tolist()))
+        return original(self, source, stale, drawn)
+
+    monkeypatch.setattr(KeptChunks, "_filter", counted)
+    return filtered
+
+
+@pytest.mark.parametrize("entries", ["leaves", "voxels"])
+def test_a_progressive_octree_leaves_hidden_classes_out_of_its_leaves_and_voxels(entries):
+    tree = grown()
+    options = EVERY if entries == "leaves" else VOXELS
+    everything = gp.render_frame(tree, TOP, **options)
+    red, blue = pixels_of(everything.image, RED), pixels_of(everything.image, BLUE)
+    assert red > 3_000 and blue > 3_000
+    frame = gp.render_frame(tree, TOP, hidden_classes=(6,), **options)
+    # the nodes drawn are the same, their class 6 left out (a voxel by its first point's class)
+    assert (pixels_of(frame.image, RED), pixels_of(frame.image, BLUE)) == (red, 0)
+    np.testing.assert_array_equal(drawn(tree, (6,), options).nodes, drawn(tree, (), options).nodes)
+    picked = [frame.point_info(int(i)) for i in np.unique(frame.index[frame.index >= 0])]
+    assert {p["classification"] for p in picked} == {2}
+    assert {p["voxel"] for p in picked} == {entries == "voxels"}
+    if entries == "leaves":  # every point of class 2, where the plain cloud of class 2 draws it
+        xyz, rgb, classes = two_classes(0.5)
+        alone = gp.from_arrays(xyz[classes == 2], rgb[classes == 2], colors="rgba")
+        np.testing.assert_array_equal(frame.image, gp.render(alone, TOP, **FIXED))
+    with pytest.warns(GigapointWarning, match="no point is in view"):  # every class hidden: the background
+        assert not gp.render(tree, TOP, hidden_classes=(2, 6), **options)[..., :3].any()
+
+
+def test_a_hidden_point_in_front_of_a_progressive_octree_does_not_hide_the_point_behind():
+    from gigapoint.lod.progressive import ProgressiveOctree
+
+    tree = ProgressiveOctree("two")
+    tree.add(np.array([[10.25, 10.25, 0.0], [10.25, 10.25, 1.0]]), np.array([RED, BLUE], np.uint8), classification=np.array([2, 6], np.uint8))
+    row, col = int((50 - 10.25) // 0.5), int(10.25 // 0.5)
+    assert tuple(gp.render(tree, TOP, **EVERY)[row, col, :3]) == BLUE
+    assert tuple(gp.render(tree, TOP, hidden_classes=(6,), **EVERY)[row, col, :3]) == RED
+
+
+def test_toggling_classes_of_a_progressive_octree_filters_each_chunk_once_a_set(monkeypatch):
+    tree = grown()
+    filtered = counting_filters(monkeypatch)
+    images = [gp.render(tree, TOP, hidden_classes=h, **EVERY) for h in [(6,), (), (6,), (6,)]]
+    assert [(pixels_of(i, RED), pixels_of(i, BLUE)) for i in images] == [(10_000, 0), (10_000, 10_000), (10_000, 0), (10_000, 0)]
+    chunks = sorted(drawn(tree).selection.ids.tolist())  # the chunks a frame draws: each filtered once
+    assert filtered == [chunks]
+    assert pixels_of(gp.render(tree, TOP, hidden_classes=(2,), **EVERY), BLUE) == 10_000  # another set: every chunk again
+    assert filtered[1:] == [chunks]
+
+
+def test_chunks_a_later_add_rewrites_are_filtered_again(monkeypatch):
+    tree = grown()
+    filtered = counting_filters(monkeypatch)
+    assert pixels_of(gp.render(tree, TOP, hidden_classes=(6,), **EVERY), BLUE) == 0
+    before = tree.pool.batch_version.copy()
+    # above two pixels of the red half: one point of class 2 (green), one of class 6 (yellow)
+    green, yellow = (0, 255, 0), (255, 255, 0)
+    tree.add(np.array([[10.25, 10.25, 1.0], [20.25, 20.25, 1.0]]), np.array([green, yellow], np.uint8), classification=np.array([2, 6], np.uint8))
+    image = gp.render(tree, TOP, hidden_classes=(6,), **EVERY)
+    assert (pixels_of(image, green), pixels_of(image, yellow), pixels_of(image, RED), pixels_of(image, BLUE)) == (1, 0, 9_999, 0)
+    chunks = drawn(tree).selection.ids.tolist()
+    rewritten = [c for c in chunks if c >= len(before) or tree.pool.batch_version[c] > before[c]]
+    assert len(filtered) == 2 and filtered[1] == sorted(rewritten) and 0 < len(rewritten) < len(chunks)  # those alone
+
+
+@pytest.mark.filterwarnings("ignore:.*no point is in view")  # (a frame before the first points are in)
+def test_a_progressive_load_never_draws_a_hidden_class(tmp_path, monkeypatch):
+    from gigapoint.lod.progressive import loader
+
+    xyz, rgb, classes = two_classes(0.25)  # 80 000 points, four a pixel
+    gp.from_arrays(xyz, rgb, classification=classes, scale=0.01, colors="rgba").save(tmp_path / "two.las")
+    for small in ("SLICE_POINTS", "SLICE_WHILE_DRAWING", "JOIN_WHILE_DRAWING"):  # a load of many insertions, frames between them
+        monkeypatch.setattr(loader, small, 2_000)
+    tree = gp.open(tmp_path / "two.las", progressive=True)
+    partial = 0
+    while True:
+        loaded = not tree.loading
+        held = tree.n_points
+        image = gp.render(tree, TOP, hidden_classes=(6,), **EVERY)
+        assert pixels_of(image, BLUE) == 0
+        partial += 0 < held < len(xyz)
+        if loaded:
+            break
+    assert tree.wait(timeout=60) and tree.n_points == len(xyz)
+    assert partial >= 2 and pixels_of(image, RED) == 10_000  # frames drawn while it loaded, the last one every red pixel
+    tree.close()

@@ -480,10 +480,18 @@ def subset_streams(points, batches: np.ndarray, counts: np.ndarray, positions: n
     words = stream_words(ext_bits_per_point(pack, counts), counts)
     pack["ext_first"] = np.cumsum(words) - words
     ext = np.zeros(int(words.sum()), np.uint64)
+    streams_into(points, batches, counts, positions, ext, pack["ext_first"])
+    return ext, pack
+
+
+def streams_into(points, batches: np.ndarray, counts: np.ndarray, positions: np.ndarray, out: np.ndarray, firsts: np.ndarray) -> None:
+    """``subset_streams``' fields written into ``out`` at u64 words ``firsts`` (one stream a batch,
+    in each batch's own layout): rooms of buffers refilled in place (a progressive octree's kept
+    chunks), whose stale bits need no zeroing (each field is rewritten whole)."""
     starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     old = points.packing["ext_first"][batches].astype(np.int64)
-    _gather_fields(points.ext, old, pack["code"], pack["ext_first"].astype(np.int64), starts, positions.astype(np.int64), ext)
-    return ext, pack
+    codes = points.packing["code"][batches]
+    _gather_fields(points.ext, old, codes, np.asarray(firsts).astype(np.int64), starts, positions.astype(np.int64), out)
 
 
 def wide_batches(pack: np.ndarray) -> np.ndarray:
@@ -515,6 +523,7 @@ __all__ = [
     "read_ext",
     "stream_subset",
     "stream_words",
+    "streams_into",
     "subset_streams",
     "tail_words",
     "wide_batches",

@@ -56,12 +56,12 @@ from ...core.attributes import Attributes, encode, fits, holder_for, repacked, r
 from ...core.attributes import stored as stored_array
 from ...core.chunk import PointChunk, attribute_dtype_problem, attribute_name_problem, colors_for, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, at_scale, byte_views, take
-from ...core.compact import GRID_TOLERANCE, ext_bits_per_point, point_words, stream_words
+from ...core.compact import GRID_TOLERANCE, ext_bits_per_point, point_words, stream_words, streams_into
 from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE, WORD_BITS
 from ...core.morton import fastest
 from ...core.quantize import dequantize
-from ...core.renderable import DrawList, MultiViewDrawList, check_point_index, refuse_hidden_classes
+from ...core.renderable import DrawList, MultiViewDrawList, check_classified, check_point_index
 from ...core.selection import Selection, View, batch_matrices, precision_for, visible_and_size
 from ...core.threads import threads_for
 from ...errors import GigapointError, InputError, check_timeout, check_whole
@@ -225,6 +225,113 @@ class Pool:
         for a, v in self.attribute_rows(np.array([index])).items():
             info[a] = v[0].item()
         return info
+
+
+def _extended(values: np.ndarray, n: int, fill: int) -> np.ndarray:
+    """``values`` with ``fill`` up to ``n`` entries (itself where it has as many)."""
+    return values if len(values) >= n else np.concatenate([values, np.full(n - len(values), fill, values.dtype)])
+
+
+class KeptChunks:
+    """What a progressive octree draws while classes are hidden (the settings' ``hidden_classes``):
+    the entries of the frame's chunks whose ``classification`` is not hidden, each chunk's a
+    batch of its own in the chunk's box, in a Pool of their own (``pool``, whose slots keep
+    their streams in fixed rooms, as store.Arena's do), entries as the octree's pool stores
+    them (low word, stream bits, colour, attributes: they draw where they drew). A voxel stands
+    for the points of its cell and has its first point's attributes, so it is hidden by that
+    point's class (as Potree hides its sampled points). A chunk is filtered when a frame first
+    draws it, again once it was rewritten (its ``batch_version``: entries written into it, its
+    leaf reordered, a voxel's colour), and every chunk once the hidden set or the attributes'
+    forms change; chunks no longer drawn give their slots back, least recently drawn first.
+    Slots filtered are stamped (``version``/``batch_version``): the GPU re-uploads those alone.
+    Written by ``prepare`` alone, under the octree's frame lock (no insertion meanwhile)."""
+
+    def __init__(self, name: str, chunk: int) -> None:
+        self.name, self.chunk = name, chunk
+        self.pool: Pool | None = None
+        self.hidden: tuple[int, ...] = ()
+        self.forms: tuple = ()  # the octree's attribute forms (held_dtype) the kept entries are held in
+        self.slot_of = np.empty(0, np.int64)  # per octree chunk: the slot of its kept entries (-1: none, or none kept)
+        self.filtered_at = np.empty(0, np.int64)  # per octree chunk: its batch_version when filtered (-1: not filtered)
+        self.chunk_in = np.empty(0, np.int64)  # per slot: the octree chunk whose entries it holds (-1: free)
+        self.drawn_at = np.empty(0, np.int64)  # per slot: the frame that last drew it
+        self.frames = 0
+        self.filtered = 0  # chunks filtered, in all
+
+    def slots(self, source: Pool, chunks: np.ndarray, hidden: tuple[int, ...]) -> np.ndarray:
+        """The slot holding each of the octree's ``chunks`` (of its pool ``source``) without its
+        entries of ``hidden`` classes, filtered where it is not yet; -1 where none is kept."""
+        forms = tuple((a, source.attributes.held_dtype(a)) for a in source.attributes)
+        if hidden != self.hidden or forms != self.forms:  # everything filtered again
+            self.slot_of[:], self.filtered_at[:], self.chunk_in[:] = -1, -1, -1
+            self.hidden = hidden
+            if forms != self.forms:  # held otherwise (widened, packed once loaded): a pool in the new forms
+                self.pool, self.forms = None, forms
+                self.chunk_in = self.drawn_at = np.empty(0, np.int64)
+        self.slot_of = _extended(self.slot_of, source.n_chunks, -1)
+        self.filtered_at = _extended(self.filtered_at, source.n_chunks, -1)
+        stale = chunks[self.filtered_at[chunks] != source.batch_version[chunks]]
+        if len(stale) or self.pool is None:
+            self._filter(source, stale, chunks)
+        out = self.slot_of[chunks]
+        self.drawn_at[out[out >= 0]] = self.frames
+        self.frames += 1
+        return out
+
+    def _filter(self, source: Pool, stale: np.ndarray, drawn: np.ndarray) -> None:
+        """The kept entries of octree chunks ``stale`` into slots (``drawn``: the frame's chunks,
+        whose slots stay)."""
+        held = self.slot_of[stale]
+        self.chunk_in[held[held >= 0]] = -1
+        self.slot_of[stale] = -1
+        counts = source.batches["count"][stale].astype(np.int64)
+        position = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)  # an entry's in its chunk
+        entries = np.repeat(stale * self.chunk, counts) + position
+        keep = ~np.isin(source.attributes.at("classification", entries), self.hidden)
+        kept = np.bincount(np.repeat(np.arange(len(stale)), counts)[keep], minlength=len(stale))
+        filled, n_kept = stale[kept > 0], kept[kept > 0]
+        slots = self._room(len(filled), drawn, source)
+        self.filtered_at[stale] = source.batch_version[stale]
+        self.filtered += len(stale)
+        if not len(filled):
+            return
+        pool, src = self.pool, entries[keep]
+        dst = np.repeat(slots * self.chunk, n_kept) + np.arange(int(n_kept.sum())) - np.repeat(np.cumsum(n_kept) - n_kept, n_kept)
+        pool.low[dst], pool.color[dst] = source.low[src], source.color[src]
+        for a, values in _stored_attributes(source).items():
+            stored_array(pool.attributes.held(a))[dst] = values[src]
+        streams_into(source, filled, n_kept, position[keep], pool.ext, pool.packing["ext_first"][slots])
+        pool.packing["code"][slots] = source.packing["code"][filled]
+        records = source.batches[filled]
+        records["first"], records["count"] = pool.batches["first"][slots], n_kept
+        pool.batches[slots] = records
+        pool.chunk_node[slots] = source.chunk_node[filled]  # (point_info: a voxel's or a point's)
+        pool.version += 1
+        pool.batch_version[slots] = pool.version
+        self.slot_of[filled], self.chunk_in[slots] = slots, filled
+
+    def _room(self, n: int, drawn: np.ndarray, source: Pool) -> np.ndarray:
+        """``n`` free slots: those of chunks the frame does not draw taken back where too few are
+        free (least recently drawn first), the pool grown where that is still too few."""
+        free = np.flatnonzero(self.chunk_in < 0)
+        if len(free) < n:
+            held = np.flatnonzero(self.chunk_in >= 0)
+            idle = held[~np.isin(self.chunk_in[held], drawn)]
+            idle = idle[np.argsort(self.drawn_at[idle], kind="stable")[: n - len(free)]]
+            self.slot_of[self.chunk_in[idle]] = self.filtered_at[self.chunk_in[idle]] = -1
+            self.chunk_in[idle] = -1
+            free = np.flatnonzero(self.chunk_in < 0)
+        if self.pool is None or len(free) < n:
+            size = (len(self.chunk_in) - len(free) + n) * 5 // 4 + 16  # room for the frame's chunks and a few more
+            if self.pool is None:
+                self.pool = Pool(self.name, size, self.chunk, {a: source.attributes.held(a) for a in source.attributes}, size)
+            else:
+                self.pool = self.pool.grown(size, size)
+            self.pool.packing["ext_first"] = np.arange(size, dtype=np.uint64) * np.uint64(self.pool.stream)  # a slot's room
+            self.chunk_in = _extended(self.chunk_in, size, -1)
+            self.drawn_at = _extended(self.drawn_at, size, 0)
+            free = np.flatnonzero(self.chunk_in < 0)
+        return free[:n]
 
 
 def _checked_grid(name: str, grid) -> tuple[np.ndarray, float] | None:
@@ -405,7 +512,6 @@ class ProgressiveOctree:
     """An LOD octree filled by ``add`` (or a background loader: gigapoint.open(..., progressive=True))
     and drawable at any moment (a Renderable: core/renderable.py)."""
 
-    KIND = "a progressive octree"  # what refusals call it (hidden_classes)
     #: bytes of work arrays kept from one insertion to the next (_Work)
     keep_work_bytes = _KEEP_WORK_BYTES
     #: frames select and cull nodes by the box of the points below them (kept at insertion),
@@ -452,6 +558,7 @@ class ProgressiveOctree:
         self.lo = np.full(3, np.inf)
         self.hi = np.full(3, -np.inf)
         self.loader = None  # the background Loader filling it (gigapoint.open(..., progressive=True))
+        self._kept = KeptChunks(name, chunk)  # what frames with hidden classes draw
         self._nodes(_INITIAL_NODES)
         self._vox(1 << 16)
         self._hkeys, self._hvals = _voxel_table(1 << 17)
@@ -831,6 +938,7 @@ class ProgressiveOctree:
         with self.lock:
             self.closed = True
             self.pool, self._packed = None, False
+            self._kept = KeptChunks(self.name, self.chunk)
             self._n_chunks = self._n_free = self._n_words = 0
             self._narrow = self.grid is not None
             self.origin = None
@@ -1484,8 +1592,9 @@ class ProgressiveOctree:
     # ------------------------------------------------------------------ drawing (Renderable)
     def prepare(self, view: View, settings) -> DrawList:
         """What a view draws (store.select_octants: largest projected child first within the point
-        budget, each drawn child replacing its parent's voxels of its octant), one batch per chunk."""
-        refuse_hidden_classes(self.name, self.KIND, settings)  # (its pool is filled while drawn: no filtered copy)
+        budget, each drawn child replacing its parent's voxels of its octant), one batch per chunk;
+        with ``hidden_classes``, each chunk's entries of the other classes (KeptChunks: the nodes
+        selected are the same, their hidden entries left out)."""
         n = self.n_nodes
         pool = self.pool
         if pool is None or self.points == 0:
@@ -1536,8 +1645,15 @@ class ProgressiveOctree:
         owner = np.empty(len(chunks), np.int64)
         k = list_chunks(self.first_chunk, pool.chunk_next, lists, chunks, owner, max_chunks)
         chunks, owner = chunks[:k], list_node[owner[:k]]
+        drawn_from = pool
+        if settings.hidden_classes:
+            check_classified(self.name, self.attribute_names, settings.hidden_classes)
+            slots = self._kept.slots(pool, chunks, settings.hidden_classes)
+            chunks, owner = slots[slots >= 0], owner[slots >= 0]  # (a chunk of hidden entries alone: nothing to draw)
+            drawn_from = self._kept.pool
+            drawn_from.source_scale, drawn_from.node_is_leaf, drawn_from.bounds = pool.source_scale, pool.node_is_leaf, pool.bounds
         sel = Selection(chunks, bits[owner].astype(np.int32), mats[owner], size[owner], int(n - len(ids)))
-        return DrawList(pool, sel, n, nodes=ids, spacing=self._drawn_spacing(lists, box_size, entries, sampled[node]))
+        return DrawList(drawn_from, sel, n, nodes=ids, spacing=self._drawn_spacing(lists, box_size, entries, sampled[node]))
 
     def _drawn_spacing(self, lists: np.ndarray, box_size: np.ndarray, entries: np.ndarray, sampled: np.ndarray) -> float:
         """Spacing of the drawn entries (adaptive point sizes), from the voxel grids rather than
