@@ -9,6 +9,7 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.core.cloud import PointCloud
+from gigapoint.core.layout import EMPTY_PIXEL
 from gigapoint.errors import GigapointWarning, SettingsError
 
 RED, BLUE = (255, 0, 0), (0, 0, 255)
@@ -289,3 +290,48 @@ def test_a_progressive_load_never_draws_a_hidden_class(tmp_path, monkeypatch):
     assert tree.wait(timeout=60) and tree.n_points == len(xyz)
     assert partial >= 2 and pixels_of(image, RED) == 10_000  # frames drawn while it loaded, the last one every red pixel
     tree.close()
+
+
+def test_wgpu_draws_a_growing_octree_without_hidden_classes_uploading_only_the_chunks_filtered_again():
+    from wgpu_support import wgpu_or_skip
+
+    from gigapoint.backends.numba_cpu import NumbaCpuBackend
+
+    gpu, cpu = wgpu_or_skip(), NumbaCpuBackend()
+    tree = grown()
+    settings = gp.RenderSettings(hidden_classes=(6,), adaptive_precision=False, **EVERY)
+    kept = None
+    for x in (10.25, 30.25, 40.25):
+        view = TOP.view(tree.bounds)
+        with tree.reading():
+            draw = tree.prepare(view, settings)
+            args = (draw.points, draw.selection, TOP.width, TOP.height, view.near, view.far)
+            before = gpu.memory["uploaded"]
+            got = np.asarray(gpu.rasterize(*args))
+            sent = gpu.memory["uploaded"] - before
+            want = cpu.rasterize(*args)
+        assert np.count_nonzero(got != want) <= 0.001 * want.size and np.count_nonzero(got != EMPTY_PIXEL) == 10_000  # class 2 alone
+        entries = int(draw.points.batches["count"][draw.selection.ids].astype(np.int64).sum())
+        if kept is not None:  # a chunk of points and its ancestors' voxel chunks filtered again: those alone sent (~7 kB)
+            assert draw.points is kept and 0 < sent < 4 * entries  # (not even every entry's low word: 40 kB)
+        kept = draw.points
+        tree.add(np.array([[x, 10.25, 1.0]]), np.array([RED], np.uint8), classification=np.array([2], np.uint8))
+
+
+def test_chunks_a_frame_no_longer_draws_give_their_slots_to_those_it_draws(monkeypatch):
+    """Class 7 hidden (no point has it): every chunk kept whole. Small chunks, so the left half's
+    chunks fill the slots made for them and the right half's take them back."""
+    tree = grown(chunk=64)
+    filtered = counting_filters(monkeypatch)
+    halves = [gp.Camera.top_down(((x, 0, 0), (x + 49.5, 50, 1)), 0.5) for x in (0, 50, 0)]
+    pools = []
+    for cam in halves:
+        frame = gp.render_frame(tree, cam, hidden_classes=(7,), **EVERY)
+        np.testing.assert_array_equal(frame.image, gp.render(tree, cam, **EVERY))  # as drawn without hiding
+        assert pixels_of(frame.image, RED) + pixels_of(frame.image, BLUE) == 100 * 100
+        pools.append(frame.points)
+    left, right, again = filtered
+    assert len(left) > 200 and len(right) > 200 and not set(left) & set(right)
+    assert pools[0] is pools[1] is pools[2]  # not grown: the right half took back the slots it lacked, from the left half
+    free = pools[0].n_chunks - len(left)
+    assert set(again) < set(left) and len(again) == len(right) - free  # those filtered again, the rest kept

@@ -132,7 +132,8 @@ class RenderSettings:
     adaptive_precision: bool = setting(True, "Choose 10, 20 or 30-bit coordinates per batch (off: always 30 bits).", group="lod")
     frustum_culling: bool = setting(True, "Skip the batches outside the view.", group="lod")
     # what a frame draws, not what is read (io/filters.py's --drop-classes re-reads the files): a
-    # changed set costs a plain cloud one filtering pass, an octree reloading its nodes
+    # changed set costs a plain cloud one filtering pass, an octree reloading its nodes, a
+    # progressive octree filtering the chunks it draws again
     hidden_classes: Classes = setting(
         (), "LAS classes not drawn, e.g. '7,18' (noise); changing them re-reads nothing.", kind="classes"
     )  # (the viewer edits it in its Classes panel, not among the settings: viewer/classes.py)

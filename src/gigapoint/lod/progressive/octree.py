@@ -28,7 +28,8 @@ The structure of SimLOD (Schütz, Herzberger, Wimmer 2024, sections 3-5; Wand et
   leaf's chunks go back to a free list. Each chunk is a batch: the renderer draws the pool
   directly (one batch per chunk), with the octree's node selection (largest projected
   first, within the point budget) and per-node precision, and the GPU re-uploads only the
-  chunks written since it last drew them (``version`` / ``batch_version``).
+  chunks written since it last drew them (``version`` / ``batch_version``). With hidden classes
+  it draws each chunk's entries of the other classes, kept apart (``KeptChunks``).
 - **the root** is the bounding cube of the points seen so far (or of bounds given up front,
   e.g. from LAS headers); a point outside it makes the tree grow upwards: a new root twice
   the size takes the old one as a child, and samples every point into its own voxels.
