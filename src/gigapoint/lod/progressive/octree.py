@@ -228,6 +228,11 @@ class Pool:
         return info
 
 
+def _within_runs(counts: np.ndarray) -> np.ndarray:
+    """0, 1, .. counts[0] - 1, 0, 1, .. counts[1] - 1, ...: each entry's place in its run."""
+    return np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+
+
 def _extended(values: np.ndarray, n: int, fill: int) -> np.ndarray:
     """``values`` with ``fill`` up to ``n`` entries (itself where it has as many)."""
     return values if len(values) >= n else np.concatenate([values, np.full(n - len(values), fill, values.dtype)])
@@ -257,7 +262,6 @@ class KeptChunks:
         self.chunk_in = np.empty(0, np.int64)  # per slot: the octree chunk whose entries it holds (-1: free)
         self.drawn_at = np.empty(0, np.int64)  # per slot: the frame that last drew it
         self.frames = 0
-        self.filtered = 0  # chunks filtered, in all
 
     def slots(self, source: Pool, chunks: np.ndarray, hidden: tuple[int, ...]) -> np.ndarray:
         """The slot holding each of the octree's ``chunks`` (of its pool ``source``) without its
@@ -286,18 +290,17 @@ class KeptChunks:
         self.chunk_in[held[held >= 0]] = -1
         self.slot_of[stale] = -1
         counts = source.batches["count"][stale].astype(np.int64)
-        position = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)  # an entry's in its chunk
+        position = _within_runs(counts)  # an entry's in its chunk
         entries = np.repeat(stale * self.chunk, counts) + position
         keep = ~np.isin(source.attributes.at("classification", entries), self.hidden)
         kept = np.bincount(np.repeat(np.arange(len(stale)), counts)[keep], minlength=len(stale))
         filled, n_kept = stale[kept > 0], kept[kept > 0]
         slots = self._room(len(filled), drawn, source)
         self.filtered_at[stale] = source.batch_version[stale]
-        self.filtered += len(stale)
         if not len(filled):
             return
         pool, src = self.pool, entries[keep]
-        dst = np.repeat(slots * self.chunk, n_kept) + np.arange(int(n_kept.sum())) - np.repeat(np.cumsum(n_kept) - n_kept, n_kept)
+        dst = np.repeat(slots * self.chunk, n_kept) + _within_runs(n_kept)
         pool.low[dst], pool.color[dst] = source.low[src], source.color[src]
         for a, values in _stored_attributes(source).items():
             stored_array(pool.attributes.held(a))[dst] = values[src]
