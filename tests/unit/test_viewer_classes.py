@@ -119,17 +119,16 @@ def test_a_cloud_without_classification_disables_the_panel_and_refuses_hidden_cl
     core.close_all()
 
 
-def test_a_progressive_octree_disables_the_panel_with_its_refusal():
+def test_a_progressive_octree_offers_the_standard_classes():
     from gigapoint.lod.progressive import ProgressiveOctree
 
     xyz, _, classes = two_classes()
     grown = ProgressiveOctree("grown")
     grown.add(xyz, classification=classes)
-    panel = class_panel(grown)
-    assert not panel["enabled"] and panel["classes"] == []
-    assert panel["reason"] == (
-        "hidden_classes: grown is a progressive octree, which draws every class; leave them out as it reads instead (--drop-classes, drop_classes=)"
-    )
+    panel = class_panel(grown, hidden=(40,))  # (it hides classes as it draws: the panel is on, its list the standard one and those hidden)
+    assert panel["enabled"] and panel["reason"] == ""
+    assert (panel["source"], panel["complete"]) == ("standard", False)
+    assert [c["code"] for c in panel["classes"]] == [*range(19), 40]
 
 
 def codes(panel) -> list[int]:
@@ -185,5 +184,6 @@ def test_view_starts_with_the_hidden_classes_given(cli, autzen_path, monkeypatch
     rc, _, err = cli("view", autzen_path, "--hidden-classes", "300", "--no-browser")
     assert rc == 1 and err == "error: --hidden-classes: 300 is not a LAS class (whole numbers in 0..255), got '300'\n"
     rc, _, err = cli("view", "--demo", "1000", "--progressive", "--hidden-classes", "7", "--no-browser")
-    assert rc == 1 and err.startswith("error: --hidden-classes: ") and "is a progressive octree, which draws every class" in err
+    # a progressive octree hides classes as it draws; the demo town has none to hide
+    assert rc == 1 and err == "error: --hidden-classes: demo(1,000) has no classification attribute, so no class to hide\n"
     assert len(err.splitlines()) == 1 and len(served) == 1

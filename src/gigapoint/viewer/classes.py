@@ -4,8 +4,9 @@ panel lists, with their ASPRS names and the classification colour mode's colours
 A cloud in memory lists the classes it holds (counted once per version of its points); an
 octree those its metadata lists (an EPT schema's counts, a Potree histogram), else the ASPRS
 standard classes 0..18 (within the classification range its metadata gives: a gigapoint
-octree's), with those of the nodes loaded so far and those hidden. A cloud without
-classification, a progressive octree and a live cloud have the panel disabled, saying why.
+octree's), with those of the nodes loaded so far and those hidden (a progressive octree: the
+standard classes and those hidden). A cloud without classification and a live cloud have the
+panel disabled, saying why.
 Unticking a class sets the ``hidden_classes`` render setting (the settings message).
 """
 
@@ -33,13 +34,12 @@ def entries(codes) -> list[dict]:
 
 
 def refusal(cloud) -> str:
-    """Why ``cloud`` hides no class, in one line ("" where it can): a progressive or live cloud's
-    refusal, or a cloud without classification. The panel is disabled with it; settings that hide
+    """Why ``cloud`` hides no class, in one line ("" where it can): a live cloud's refusal, or a
+    cloud without classification. The panel is disabled with it; settings that hide
     classes are refused with it."""
     from ..live import LiveCloud
-    from ..lod.progressive import ProgressiveOctree
 
-    if isinstance(cloud, (LiveCloud, ProgressiveOctree)):
+    if isinstance(cloud, LiveCloud):
         return hidden_classes_refusal(cloud.name, cloud.KIND)
     if "classification" not in cloud.attribute_names:
         return f"hidden_classes: {cloud.name} has no classification attribute, so no class to hide"
