@@ -13,7 +13,7 @@ import pytest
 import gigapoint as gp
 from gigapoint.errors import GigapointWarning, InputError
 from gigapoint.io.las import read_las_header, wkt_of
-from gigapoint.lod.convert.tiles import tile_index, tile_name
+from gigapoint.lod.convert.tiles import tile_groups, tile_index, tile_name
 
 FIELDS = ("X", "Y", "Z", "intensity", "classification", "gps_time", "red", "green", "blue")
 
@@ -123,6 +123,22 @@ def test_tiles_are_indexed_and_named_by_their_lower_left_corner():
     assert all(i * 0.1 <= v < (i + 1) * 0.1 for i, v in zip(tile_index(values, 0.1).tolist(), values))
     assert tile_name("s", 1, -1, 2.5, "laz") == "s_2.5_-2.5.laz"
     assert tile_name("s", 636, 849, 1000.0, "las") == "s_636000_849000.las"
+
+
+@pytest.mark.parametrize(
+    ("low", "high", "n"),
+    [(0, 3, 1000), (-2, 2, 5000), (-3_000, 3_000, 2000), (-(2**40), 2**40, 500), (-(2**62), 2**62, 300), (5, 6, 0)],
+    ids=["few-tiles", "negative", "sparse", "wide", "beyond-one-key", "empty"],
+)
+def test_a_chunks_tiles_are_grouped_as_numpys_unique_over_rows_groups_them(low, high, n):
+    # the table (few keys), the sort of one key a point (sparse) and rows (beyond 2^62 keys) give one answer
+    rng = np.random.default_rng(7)
+    i, j = rng.integers(low, high, n, dtype=np.int64), rng.integers(low, high, n, dtype=np.int64)
+    keys, where, counts = tile_groups(i, j)
+    want_keys, want_where, want_counts = np.unique(np.column_stack([i, j]), axis=0, return_inverse=True, return_counts=True)
+    assert np.array_equal(keys, want_keys.reshape(-1, 2)) and keys.dtype == np.int64
+    assert np.array_equal(where, want_where.ravel()) and where.shape == (n,)
+    assert np.array_equal(counts, want_counts)
 
 
 @pytest.mark.parametrize(

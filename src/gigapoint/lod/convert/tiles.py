@@ -178,6 +178,33 @@ def tile_index(values: np.ndarray, size: float) -> np.ndarray:
     return i.astype(np.int64)
 
 
+def tile_groups(i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the distinct tiles (i, j) in order as rows, each point's row among them, the points in
+    each): ``np.unique(np.column_stack([i, j]), axis=0, return_inverse=True, return_counts=True)``
+    (``where`` flat), by one int64 key a point, counted in a table where the chunk's tiles span
+    few keys. np.unique over rows sorts them as structured values (a generic comparison a step):
+    16 of a 5 M-point file's 35 s of ``gigapoint tile``."""
+    if not len(i):
+        return np.empty((0, 2), np.int64), np.empty(0, np.intp), np.empty(0, np.intp)
+    i0, j0 = int(i.min()), int(j.min())
+    span_i, span_j = int(i.max()) - i0 + 1, int(j.max()) - j0 + 1
+    span = span_i * span_j  # (Python ints: no overflow)
+    if span >= 2**62:
+        keys, where, counts = np.unique(np.column_stack([i, j]), axis=0, return_inverse=True, return_counts=True)
+        return keys, where.ravel(), counts
+    key = (i - i0) * span_j + (j - j0)
+    if span <= max(1 << 20, 4 * len(key)):
+        counts_all = np.bincount(key, minlength=span)
+        uniq = np.flatnonzero(counts_all)
+        index = np.zeros(span, np.intp)
+        index[uniq] = np.arange(len(uniq))
+        where, counts = index[key], counts_all[uniq]
+    else:
+        uniq, where, counts = np.unique(key, return_inverse=True, return_counts=True)
+        where = where.ravel()
+    return np.column_stack([uniq // span_j + i0, uniq % span_j + j0]), where, counts
+
+
 def _corner(value: float) -> str:
     """A tile corner's coordinate as its name says it: an integer where it is one."""
     return str(int(value)) if value.is_integer() else f"{value:.15g}"
@@ -221,8 +248,7 @@ class _TileSpill:
         records = records[rows]
         if self.buffer:
             records[f"attribute {BUFFER_FLAG}"][len(chunk) :] = 1
-        keys, where, counts = np.unique(np.column_stack([np.concatenate(ti), np.concatenate(tj)]), axis=0, return_inverse=True, return_counts=True)
-        where = where.ravel()
+        keys, where, counts = tile_groups(np.concatenate(ti), np.concatenate(tj))
         order = np.lexsort((rows, where))  # by tile, each tile's points in the files' order (its buffer's among its own)
         own = np.bincount(where[: len(chunk)], minlength=len(keys))
         ends = np.cumsum(counts)
