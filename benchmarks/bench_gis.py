@@ -1,0 +1,340 @@
+"""gigapoint's GIS commands against PDAL's on the same file, in the same run: whole-process wall
+time of the commands a user types, alternating gigapoint and PDAL round by round, medians of R
+rounds, peak RSS of both, and a check that each pair's outputs agree.
+
+    .venv/bin/python benchmarks/bench_gis.py [--points 20M] [--rounds 3] [--formats las,laz] [--jobs filter,thin,tile,stats,dtm] [--input FILE.las] [--workdir DIR] [--pdal pdal]
+
+Smoke check (under a minute with PDAL installed): ``--points 200000 --rounds 1``.
+
+The input is the demo town's first N points as a LAS 1.2 file (point format 3, 0.001 scale:
+bench_convert.write_las) and a LAZ copy of it (``--formats``), or ``--input`` an existing LAS
+file (its LAZ copy written beside it in the work folder). The pairs (``{in}`` the LAS or LAZ file):
+
+    filter  gigapoint convert {in} -o ground.laz --classes 2
+            pdal translate {in} ground.laz -f filters.range --filters.range.limits="Classification[2:2]"
+    thin    gigapoint convert {in} -o thin.laz --thin 1
+            pdal translate {in} thin.laz -f filters.voxeldownsize --filters.voxeldownsize.cell=1
+                 --filters.voxeldownsize.mode=first
+            (both keep the first point of each 1-unit cube; gigapoint's cubes are anchored at 0,
+            PDAL's at the first point less half a cell: the counts differ a little, both shown)
+    tile    gigapoint tile {in} --size 500 -o tiles/
+            pdal tile {in} "tiles/out_#.laz" --length 500 --origin_x 0 --origin_y 0
+            (PDAL's tile grid starts at the first point unless told; at 0 the grids are the same)
+    stats   gigapoint info --stats {in} --json
+            pdal info --stats {in}
+    dtm     gigapoint render {in} -o o.png --classes 2 --gsd 1 --depth-out dtm.tif --size-mode fixed --point-size 1
+            pdal pipeline dtm.json: the file, filters.range Classification[2:2], writers.gdal
+            (output_type max, resolution 1, binmode: a cell's points only, float32) on
+            gigapoint's grid (edges on whole multiples of the gsd: origin_x/origin_y/width/height)
+
+Each command runs once on a 20 000-point file first (numba's cache filled: JIT compile time
+excluded; PDAL's libraries loaded once), then R rounds of the pairs in turn, gigapoint first in
+odd rounds and PDAL first in even ones. Times include start-up (the Python interpreter and its
+imports; PDAL's plugin scan): they are what a user waits for. The machine may be shared:
+compare the ratios, measured side by side, rather than absolute times.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from bench_convert import write_las, write_laz  # a sibling script: its folder is sys.path[0]
+
+from gigapoint.bench import run_measured
+from gigapoint.bench.report import cpu_model, parse_count
+
+JOBS = ("filter", "thin", "tile", "stats", "dtm")
+GSD = 1.0
+TILE = 500.0
+SPACING = 1.0
+#: each point in its own pixel (the exact one-pixel render), as PDAL's binmode puts it in its own
+#: cell; render's default (adaptive) draws points as large as their spacing: a surface with no gaps
+DTM_POINTS = ("--size-mode", "fixed", "--point-size", "1")
+
+
+def gp_cmd(*args) -> list[str]:
+    return [sys.executable, "-m", "gigapoint.cli", *map(str, args)]
+
+
+def dtm_grid(las: Path, gsd: float) -> tuple[float, float, int, int]:
+    """(origin_x, origin_y, width, height) of gigapoint's top-down grid of the ground points
+    (camera.Camera.top_down over the bounds of the class 2 points it renders: pixel edges on
+    whole multiples of the gsd)."""
+    import math
+
+    import laspy
+
+    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
+    with laspy.open(str(las)) as f:
+        for pts in f.chunk_iterator(2_000_000):
+            ground = np.asarray(pts.classification) == 2
+            if ground.any():
+                x, y = np.asarray(pts.x)[ground], np.asarray(pts.y)[ground]
+                lo = np.minimum(lo, [x.min(), y.min()])
+                hi = np.maximum(hi, [x.max(), y.max()])
+    first_col, top_row = math.floor(lo[0] / gsd), math.ceil(hi[1] / gsd)
+    width = math.floor(hi[0] / gsd) - first_col + 1
+    height = top_row - math.ceil(lo[1] / gsd) + 1
+    return first_col * gsd, (top_row - height) * gsd, width, height
+
+
+def commands(job: str, inp: Path, out: Path, pdal: str, grid) -> tuple[list[str], list[str]]:
+    """(gigapoint's command, PDAL's) for ``job`` on ``inp``, writing under ``out``."""
+    if job == "filter":
+        return (
+            gp_cmd("convert", inp, "-o", out / "gp_ground.laz", "--classes", "2", "--quiet"),
+            [pdal, "translate", str(inp), str(out / "pdal_ground.laz"), "-f", "filters.range", "--filters.range.limits=Classification[2:2]"],
+        )
+    if job == "thin":
+        return (
+            gp_cmd("convert", inp, "-o", out / "gp_thin.laz", "--thin", SPACING, "--quiet"),
+            [pdal, "translate", str(inp), str(out / "pdal_thin.laz"), "-f", "filters.voxeldownsize",
+             f"--filters.voxeldownsize.cell={SPACING}", "--filters.voxeldownsize.mode=first"],
+        )
+    if job == "tile":
+        (out / "pdal_tiles").mkdir(exist_ok=True)
+        return (
+            gp_cmd("tile", inp, "--size", TILE, "-o", out / "gp_tiles", "--quiet"),
+            [pdal, "tile", str(inp), str(out / "pdal_tiles" / "out_#.laz"), "--length", str(TILE), "--origin_x", "0", "--origin_y", "0"],
+        )
+    if job == "stats":
+        return gp_cmd("info", "--stats", inp, "--json"), [pdal, "info", "--stats", str(inp)]
+    if job == "dtm":
+        ox, oy, w, h = grid
+        pipeline = [
+            str(inp),
+            {"type": "filters.range", "limits": "Classification[2:2]"},
+            {"type": "writers.gdal", "filename": str(out / "pdal_dtm.tif"), "output_type": "max", "resolution": GSD,
+             "binmode": True, "data_type": "float32", "origin_x": ox, "origin_y": oy, "width": w, "height": h},
+        ]
+        spec = out / "dtm.json"
+        spec.write_text(json.dumps(pipeline))
+        return (
+            gp_cmd("render", inp, "-o", out / "gp_ortho.png", "--classes", "2", "--gsd", GSD, "--depth-out", out / "gp_dtm.tif", *DTM_POINTS),
+            [pdal, "pipeline", str(spec)],
+        )
+    raise ValueError(job)
+
+
+def clean(out: Path) -> None:
+    """The last run's outputs removed (neither tool overwrites by default)."""
+    for p in out.iterdir():
+        if p.name == "dtm.json":
+            continue
+        shutil.rmtree(p) if p.is_dir() else p.unlink()
+
+
+def run(cmd: list[str]) -> tuple[float, int, bytes]:
+    code, stdout, err, wall, peak = run_measured(cmd)
+    if code != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed ({code}): {err.decode(errors='replace')[-2000:]}")
+    return wall, peak, stdout
+
+
+def las_count(path: Path) -> int:
+    import laspy
+
+    with laspy.open(str(path)) as f:
+        return int(f.header.point_count)
+
+
+def tiles_count(folder: Path) -> tuple[int, int]:
+    files = sorted(p for p in folder.iterdir() if p.suffix in (".las", ".laz"))
+    return len(files), sum(las_count(p) for p in files)
+
+
+def compare_dtm(gp_tif: Path, pdal_tif: Path) -> dict:
+    """Both DTMs' heights on the same cells: cells with a height in both, in one only, and how
+    far apart the shared ones are (max heights of the same points: 0 but for points on a cell
+    edge, which gigapoint puts in the row above, PDAL below)."""
+    import rasterio
+
+    with rasterio.open(gp_tif) as a, rasterio.open(pdal_tif) as b:
+        ga, gb = a.transform, b.transform
+        za, zb = a.read(1).astype(np.float64), b.read(1).astype(np.float64)
+        nb = b.nodata
+    if za.shape != zb.shape or not np.allclose(tuple(ga)[:6], tuple(gb)[:6]):
+        return {"same_grid": False, "gigapoint": f"{za.shape} {tuple(ga)[:6]}", "pdal": f"{zb.shape} {tuple(gb)[:6]}"}
+    va = np.isfinite(za)
+    vb = np.isfinite(zb) & ((zb != nb) if nb is not None else True)
+    both = va & vb
+    d = np.abs(za[both] - zb[both])
+    return {
+        "same_grid": True,
+        "cells": int(za.size),
+        "both": int(both.sum()),
+        "gigapoint_only": int((va & ~vb).sum()),
+        "pdal_only": int((vb & ~va).sum()),
+        "equal_within_1mm": round(float((d <= 0.0015).mean()) if d.size else 1.0, 5),
+        "max_abs_diff": round(float(d.max()) if d.size else 0.0, 3),
+    }
+
+
+def check(job: str, out: Path, gp_stdout: bytes, pdal_stdout: bytes, n: int) -> dict:
+    """What the pair's outputs say (counts), and whether they agree where they should."""
+    if job == "filter":
+        a, b = las_count(out / "gp_ground.laz"), las_count(out / "pdal_ground.laz")
+        return {"gigapoint_points": a, "pdal_points": b, "agree": a == b}
+    if job == "thin":
+        a, b = las_count(out / "gp_thin.laz"), las_count(out / "pdal_thin.laz")
+        return {"gigapoint_points": a, "pdal_points": b, "ratio": round(a / b, 4), "agree": "by rule (grid origins differ)"}
+    if job == "tile":
+        (ta, a), (tb, b) = tiles_count(out / "gp_tiles"), tiles_count(out / "pdal_tiles")
+        return {"gigapoint_tiles": ta, "pdal_tiles": tb, "gigapoint_points": a, "pdal_points": b, "agree": a == b == n and ta == tb}
+    if job == "stats":
+        g = json.loads(gp_stdout)
+        p = json.loads(pdal_stdout)
+        pst = {s["name"]: s for s in p["stats"]["statistic"]}
+        pb = [[pst[d]["minimum"] for d in "XYZ"], [pst[d]["maximum"] for d in "XYZ"]]
+        gb = [g["bounds"]["min"], g["bounds"]["max"]]
+        same_bounds = bool(np.allclose(gb, pb, atol=1e-6))
+        return {"gigapoint_points": g["point_count"], "pdal_points": pst["X"]["count"], "same_bounds": same_bounds,
+                "agree": g["point_count"] == pst["X"]["count"] == n and same_bounds}
+    if job == "dtm":
+        r = compare_dtm(out / "gp_dtm.tif", out / "pdal_dtm.tif")
+        # (a point on a row's edge: gigapoint's cell above it, PDAL's below; a few in 10^4 cells)
+        r["agree"] = bool(r.get("same_grid") and r["gigapoint_only"] + r["pdal_only"] <= 0.002 * r["both"] and r["equal_within_1mm"] > 0.99)
+        return r
+    raise ValueError(job)
+
+
+WARM = """
+import json, sys
+from gigapoint.cli import main
+for argv in json.loads(sys.argv[1]):
+    if main(argv):
+        raise SystemExit(f"warm-up failed: {argv}")
+"""
+
+
+def warm_up(jobs, inputs, out, pdal, grid) -> None:
+    """Every gigapoint command once on the 20 000-point files, in one process (numba's cache
+    filled: JIT compile time excluded; one interpreter start instead of one a command), and
+    PDAL's once on the LAS one (its libraries and plugins read from disk)."""
+    argvs = []
+    for fmt, (_, warm) in inputs.items():
+        for job in jobs:
+            sub = out / f"warm_{fmt}_{job}"
+            sub.mkdir()
+            gcmd, pcmd = commands(job, warm, sub, pdal, grid)
+            argvs.append(gcmd[3:])  # less python -m gigapoint.cli
+            if fmt == next(iter(inputs)):
+                run(pcmd)
+    code, _, err, _, _ = run_measured([sys.executable, "-c", WARM, json.dumps(argvs)])
+    if code != 0:
+        raise SystemExit(f"warm-up failed ({code}): {err.decode(errors='replace')[-2000:]}")
+    clean(out)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--points", default="20M", help="points of the generated demo file (20M, 5M, 200000)")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--formats", default="las,laz", help="input formats to measure: las, laz or both")
+    ap.add_argument("--jobs", default=",".join(JOBS))
+    ap.add_argument("--input", default=None, help="an existing LAS file instead of the demo town")
+    ap.add_argument("--workdir", default=None, help="keep the input files here (reused by later runs)")
+    ap.add_argument("--pdal", default=shutil.which("pdal") or "pdal")
+    ap.add_argument("--json", default=None, help="also write the rows to this JSON file")
+    a = ap.parse_args(argv)
+    jobs = [j for j in a.jobs.split(",") if j]
+    if bad := set(jobs) - set(JOBS):
+        raise SystemExit(f"unknown jobs {sorted(bad)}; choose from {JOBS}")
+    if shutil.which(a.pdal) is None:
+        raise SystemExit(f"no PDAL at {a.pdal!r} (--pdal PATH)")
+    work = Path(a.workdir) if a.workdir else Path(tempfile.mkdtemp(prefix="bench_gis_"))
+    work.mkdir(parents=True, exist_ok=True)
+    try:
+        if a.input:
+            las = Path(a.input)
+        else:
+            las = work / f"demo_{parse_count(a.points)}.las"
+            if not las.exists():
+                t = time.perf_counter()
+                write_las(las, parse_count(a.points))
+                print(f"wrote {las} in {time.perf_counter() - t:.1f} s", file=sys.stderr)
+        n = las_count(las)
+        warm = work / "warm.las"
+        if not warm.exists():
+            write_las(warm, 20_000)
+        inputs = {}
+        for fmt in a.formats.split(","):
+            if fmt == "las":
+                inputs["las"] = (las, warm)
+            elif fmt == "laz":
+                laz, warm_laz = work / (las.stem + ".laz"), work / "warm.laz"
+                for src, dst in ((las, laz), (warm, warm_laz)):
+                    if not dst.exists():
+                        write_laz(src, dst)
+                inputs["laz"] = (laz, warm_laz)
+            else:
+                raise SystemExit(f"--formats: las or laz, got {fmt!r}")
+        pdal_version = os.popen(f"{a.pdal} --version 2>/dev/null").read().split("(")[0].split()
+        print(f"{n:,} points, {a.rounds} rounds, {cpu_model()}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}, "
+              f"PDAL {' '.join(pdal_version[1:2]) or '?'}", file=sys.stderr)
+        out = work / "out"
+        out.mkdir(exist_ok=True)
+        warm_up(jobs, inputs, out, a.pdal, dtm_grid(warm, GSD))
+        grid = dtm_grid(las, GSD) if "dtm" in jobs else None
+        rows = []
+        for fmt, (inp, _) in inputs.items():
+            for job in jobs:
+                times: dict[str, list[float]] = {"gigapoint": [], "pdal": []}
+                peaks: dict[str, list[int]] = {"gigapoint": [], "pdal": []}
+                verdict = None
+                for r in range(a.rounds):
+                    clean(out)
+                    gcmd, pcmd = commands(job, inp, out, a.pdal, grid)
+                    order = [("gigapoint", gcmd), ("pdal", pcmd)]
+                    if r % 2:
+                        order.reverse()
+                    stdout = {}
+                    for tool, cmd in order:
+                        wall, peak, stdout[tool] = run(cmd)
+                        times[tool].append(wall)
+                        peaks[tool].append(peak)
+                    if verdict is None:
+                        verdict = check(job, out, stdout["gigapoint"], stdout["pdal"], n)
+                g, p = statistics.median(times["gigapoint"]), statistics.median(times["pdal"])
+                row = {
+                    "input": fmt, "job": job, "points": n,
+                    "gigapoint_s": round(g, 3), "pdal_s": round(p, 3),
+                    "gigapoint_mpts_s": round(n / g / 1e6, 2), "pdal_mpts_s": round(n / p / 1e6, 2),
+                    "pdal_over_gigapoint": round(p / g, 2),  # > 1: gigapoint faster
+                    "gigapoint_rss_mib": round(max(peaks["gigapoint"]) / 2**20), "pdal_rss_mib": round(max(peaks["pdal"]) / 2**20),
+                    "gigapoint_runs_s": [round(t, 2) for t in times["gigapoint"]], "pdal_runs_s": [round(t, 2) for t in times["pdal"]],
+                    "check": verdict,
+                }
+                rows.append(row)
+                print(json.dumps(row), flush=True)
+        print(f"load average at the end {os.getloadavg()[0]:.2f}", file=sys.stderr)
+        print_table(rows)
+        if a.json:
+            Path(a.json).write_text(json.dumps(rows, indent=1))
+    finally:
+        if not a.workdir:
+            shutil.rmtree(work, ignore_errors=True)
+    return 0
+
+
+def print_table(rows: list[dict]) -> None:
+    print()
+    print("| input | job | gigapoint s (M pts/s) | PDAL s (M pts/s) | PDAL / gigapoint | peak RSS MiB gigapoint / PDAL | check |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        c = {k: v for k, v in r["check"].items() if k != "agree"}
+        print(f"| {r['input']} | {r['job']} | {r['gigapoint_s']:.2f} ({r['gigapoint_mpts_s']}) | {r['pdal_s']:.2f} ({r['pdal_mpts_s']}) | "
+              f"{r['pdal_over_gigapoint']:.2f}x | {r['gigapoint_rss_mib']} / {r['pdal_rss_mib']} | {r['check']['agree']}: {json.dumps(c)} |")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
