@@ -39,6 +39,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shutil
 import statistics
 import sys
@@ -278,9 +279,9 @@ def main(argv=None) -> int:
                 inputs["laz"] = (laz, warm_laz)
             else:
                 raise SystemExit(f"--formats: las or laz, got {fmt!r}")
-        pdal_version = os.popen(f"{a.pdal} --version 2>/dev/null").read().split("(")[0].split()
+        found = re.search(r"pdal (\S+)", os.popen(f"{a.pdal} --version 2>/dev/null").read())
         print(f"{n:,} points, {a.rounds} rounds, {cpu_model()}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}, "
-              f"PDAL {' '.join(pdal_version[1:2]) or '?'}", file=sys.stderr)
+              f"PDAL {found.group(1) if found else '?'}", file=sys.stderr)
         out = work / "out"
         out.mkdir(exist_ok=True)
         warm_up(jobs, inputs, out, a.pdal, dtm_grid(warm, GSD))
