@@ -732,6 +732,25 @@ def test_drawing_while_another_thread_inserts(scene, grid):
     assert o._narrow == (grid == "on the grid") and (grid != "on the grid" or np.all(_chunk_widths(o)[1] < 20))
 
 
+def test_n_points_read_during_an_insertion_never_goes_back(scene, monkeypatch):
+    """An insertion that splits leaves takes their points out and puts them back: n_points, read
+    by other threads without the lock (a HUD, a test), says the count of the last finished one."""
+    xyz, rgba, _ = scene
+    o = ProgressiveOctree("split", max_leaf=2_000)
+    o.add(xyz[:1_900], rgba[:1_900])
+    seen = []
+    write_sets = ProgressiveOctree._write_sets
+
+    def watched(self, sets, routes):  # (the split leaves' points are out now, back in once written)
+        seen.append(self.n_points)
+        write_sets(self, sets, routes)
+
+    monkeypatch.setattr(ProgressiveOctree, "_write_sets", watched)
+    o.add(xyz[1_900:6_000], rgba[1_900:6_000])  # (the root leaf overflows: split, its 1 900 points spilled)
+    assert o.spilled >= 1_900 and seen == [1_900]
+    assert o.n_points == len(o) == 6_000
+
+
 def _draw_while(write, draw) -> int:
     """``write`` in another thread while ``draw`` draws frames, until it ends (three frames at
     least); an exception of ``write`` is raised here. Returns the frames drawn."""

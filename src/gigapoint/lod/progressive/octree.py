@@ -556,6 +556,7 @@ class ProgressiveOctree:
         self.n_nodes = 0
         self.n_voxels = 0
         self.points = 0  # points added (valid ones)
+        self.shown_points = 0  # ``points`` as of the last finished insertion: what n_points says (its insertion takes a split leaf's points out, then back in)
         self.skipped = 0  # invalid points left out (NaN, inf, beyond ±1e12)
         self.closed = False  # close() frees everything; add() then refuses (it would start a new tree)
         self.spilled = 0  # points taken out of split leaves to be inserted again, in all
@@ -946,7 +947,7 @@ class ProgressiveOctree:
             self._n_chunks = self._n_free = self._n_words = 0
             self._narrow = self.grid is not None
             self.origin = None
-            self.points = self.n_nodes = self.n_voxels = 0
+            self.points = self.shown_points = self.n_nodes = self.n_voxels = 0
             self._nodes(1)
             self._drop_voxel_state()
 
@@ -987,7 +988,8 @@ class ProgressiveOctree:
     # ------------------------------------------------------------------ facts (Renderable)
     @property
     def n_points(self) -> int:
-        return self.points
+        """Points added so far (read without the lock: never the count of an insertion under way)."""
+        return self.shown_points
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -1016,7 +1018,7 @@ class ProgressiveOctree:
         return self.key[: self.n_nodes]
 
     def __len__(self) -> int:
-        return self.points
+        return self.shown_points
 
     def __repr__(self) -> str:
         state = ""
@@ -1259,6 +1261,7 @@ class ProgressiveOctree:
             self._sample(st, leaf_runs, inner_runs)
             self._write_points(st, leaf_runs)
             self.points += len(st.codes)  # a batch, or the points spilled from split leaves
+        self.shown_points = self.points
 
     def _distribute(self, st: _Set) -> tuple[np.ndarray, np.ndarray]:
         """(leaf runs, inner runs) of a set's sorted codes routed from its start nodes, growing
