@@ -95,7 +95,7 @@ def test_gigapoint_view_prints_the_load_s_warning_once(nan_file, capsys, monkeyp
 
     monkeypatch.setattr(ViewerServer, "serve_forever", until_reported)
     monkeypatch.setattr(native, "check_display", lambda: None)
-    monkeypatch.setattr(native, "open_window", lambda cloud: None)
+    monkeypatch.setattr(native, "open_window", lambda cloud, settings=None: None)
     monkeypatch.setattr(native, "run_loop", until_reported)
     assert main(["view", str(nan_file), "--progressive", "--no-browser", *(["--window"] if window else [])]) == 0
     err = capsys.readouterr().err
