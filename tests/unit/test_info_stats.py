@@ -64,7 +64,7 @@ def test_autzen_stats_are_laspys_numbers(autzen_path):
         assert s["attributes"][name]["mean"] == pytest.approx(v.astype(np.float64).mean(), rel=1e-12), name
     codes, counts = np.unique(np.asarray(las.classification), return_counts=True)
     assert [(c["class"], c["name"], c["count"]) for c in s["classification"]] == [(int(c), class_name(int(c)), int(k)) for c, k in zip(codes, counts)]
-    assert [c["name"] for c in s["classification"]] == ["unassigned", "ground"]
+    assert [c["name"] for c in s["classification"]] == ["unclassified", "ground"]
     assert [c["percent"] for c in s["classification"]] == pytest.approx((100 * counts / len(xyz)).tolist())
     assert {k: s["returns"][k] for k in ("single", "first", "last", "intermediate")} == expected_returns(las)
     pairs, n_pairs = np.unique(np.column_stack([las.return_number, las.number_of_returns]), axis=0, return_counts=True)
@@ -86,7 +86,7 @@ def test_info_stats_prints_autzens_classes_returns_and_colours(cli, autzen_path)
     assert "  bounds min:  636001.76, 848935.20, 406.26 (the points'; the header's the same)" in lines
     n1, n2 = (int(np.sum(las.classification == c)) for c in (1, 2))
     words = [line.split() for line in lines]  # (the columns' widths aside)
-    classes = words.index(["classes:", "1", "unassigned", f"{n1:,}", f"{100 * n1 / len(las):.2f}%"])
+    classes = words.index(["classes:", "1", "unclassified", f"{n1:,}", f"{100 * n1 / len(las):.2f}%"])
     assert words[classes + 1] == ["2", "ground", f"{n2:,}", f"{100 * n2 / len(las):.2f}%"]
     r = expected_returns(las)
     assert f"  returns:     single {r['single']:,}, first {r['first']:,}, last {r['last']:,}, intermediate {r['intermediate']:,}" in lines
@@ -107,7 +107,7 @@ def test_a_folder_of_two_tiles_is_summed_and_each_gives_one_object_a_file(cli, t
     assert s["path"] == str(tmp_path) and s["files"] == 2 and s["point_count"] == 500
     assert [(c["class"], c["name"], c["count"]) for c in s["classification"]] == [
         (2, "ground", int(np.sum(classes == 2))), (6, "building", int(np.sum(classes == 6))),
-        (9, "water", int(np.sum(classes == 9))), (19, "reserved", int(np.sum(classes == 19)))]  # fmt: skip
+        (9, "water", int(np.sum(classes == 9))), (19, "overhead structure", int(np.sum(classes == 19)))]  # fmt: skip
     intensity = np.concatenate([np.asarray(t.intensity) for t in both])
     assert s["attributes"]["intensity"] == {"min": intensity.min(), "max": intensity.max(), "mean": pytest.approx(intensity.mean(), rel=1e-12)}
     xyz = np.concatenate([np.column_stack([t.x, t.y, t.z]) for t in both])
@@ -184,8 +184,9 @@ def test_the_progress_bar_counts_every_point_read(cli, autzen_path, monkeypatch)
 
 
 def test_class_names_above_the_standard_ones():
-    assert [class_name(c) for c in (0, 7, 18, 19, 63, 64, 255)] == [
-        "never classified", "low point (noise)", "high noise", "reserved", "reserved", "user defined", "user defined"]  # fmt: skip
+    assert [class_name(c) for c in (0, 7, 18, 19, 22, 23, 63, 64, 255)] == [
+        "created, never classified", "low point (noise)", "high noise", "overhead structure", "temporal exclusion", "reserved", "reserved",
+        "user defined", "user defined"]  # fmt: skip
 
 
 def test_point_stats_takes_a_list_of_paths_as_gp_open_does(autzen_path):

@@ -10,6 +10,42 @@ import numpy as np
 from ..errors import GigapointWarning, warn
 from .las import scan_angle_units
 
+#: ASPRS LAS 1.4 classes (R15, table 17; 8 and 12 as LAS 1.2 named them before 1.4 reserved them):
+#: one table for ``info --stats`` and the viewer's Classes panel
+CLASS_NAMES = {
+    0: "created, never classified",
+    1: "unclassified",
+    2: "ground",
+    3: "low vegetation",
+    4: "medium vegetation",
+    5: "high vegetation",
+    6: "building",
+    7: "low point (noise)",
+    8: "model key-point",  # reserved in LAS 1.4; LAS 1.2's name
+    9: "water",
+    10: "rail",
+    11: "road surface",
+    12: "overlap",  # reserved in LAS 1.4; LAS 1.2's name
+    13: "wire guard (shield)",
+    14: "wire conductor (phase)",
+    15: "transmission tower",
+    16: "wire-structure connector",
+    17: "bridge deck",
+    18: "high noise",
+    19: "overhead structure",
+    20: "ignored ground",
+    21: "snow",
+    22: "temporal exclusion",
+}
+STANDARD_CLASSES = tuple(range(19))  # the classes a viewer offers where a cloud's are unknown (Potree's list)
+
+
+def class_name(code: int) -> str:
+    """The ASPRS name of LAS class ``code``: 23..63 'reserved', 64..255 'user defined' (said beside
+    their code: ``info --stats``' histogram, the viewer's Classes panel)."""
+    return CLASS_NAMES.get(code) or ("reserved" if code < 64 else "user defined")
+
+
 #: Point attributes gigapoint reads from (and writes to) these formats, as the LAS reader names them.
 ATTRIBUTE_DTYPES = {
     "intensity": np.dtype(np.uint16),

@@ -20,15 +20,8 @@ from ..core.chunk import DEFAULT_COLOR, ColorScaler, PointChunk
 from ..core.cloud import _valid_mask
 from ._base import DEFAULT_CHUNK_SIZE, check_chunk_size, headers_once
 from .las import LasReader, read_las_header
+from .las_fields import class_name
 from .registry import reader_for
-
-#: ASPRS standard classes (LAS 1.4 R15, table 17; 8 and 12 as LAS 1.2 named them before 1.4 reserved them)
-ASPRS_CLASSES = {
-    0: "never classified", 1: "unassigned", 2: "ground", 3: "low vegetation", 4: "medium vegetation",
-    5: "high vegetation", 6: "building", 7: "low point (noise)", 8: "model key-point/reserved", 9: "water",
-    10: "rail", 11: "road surface", 12: "reserved/overlap", 13: "wire guard", 14: "wire conductor",
-    15: "transmission tower", 16: "wire connector", 17: "bridge deck", 18: "high noise",
-}  # fmt: skip
 
 #: flight lines (point_source_id) listed one by one up to this many; above, only how many
 SOURCES_LISTED = 20
@@ -39,11 +32,6 @@ ADJUSTED_GPS_OFFSET = 1e9
 
 #: how a file's gps_time counts (``time_kind``)
 ADJUSTED, WEEK, UNKNOWN = "adjusted standard GPS time", "seconds of a GPS week", "unknown"
-
-
-def class_name(code: int) -> str:
-    """The ASPRS name of a classification code; above 18 'reserved' up to 63, 'user defined' above."""
-    return ASPRS_CLASSES.get(code) or ("reserved" if code < 64 else "user defined")
 
 
 def gps_date(t: float) -> str:

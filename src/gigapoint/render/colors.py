@@ -64,40 +64,7 @@ def colormap_table(name: str) -> np.ndarray:
     return out
 
 
-# --- ASPRS LAS 1.4 classes: names (R15, table 17) and colors (Potree's scheme where it has one) --------
-CLASS_NAMES = {
-    0: "created, never classified",
-    1: "unclassified",
-    2: "ground",
-    3: "low vegetation",
-    4: "medium vegetation",
-    5: "high vegetation",
-    6: "building",
-    7: "low point (noise)",
-    8: "model key-point",  # reserved in LAS 1.4; LAS 1.2's name
-    9: "water",
-    10: "rail",
-    11: "road surface",
-    12: "overlap",  # reserved in LAS 1.4; LAS 1.2's name
-    13: "wire guard (shield)",
-    14: "wire conductor (phase)",
-    15: "transmission tower",
-    16: "wire-structure connector",
-    17: "bridge deck",
-    18: "high noise",
-    19: "overhead structure",
-    20: "ignored ground",
-    21: "snow",
-    22: "temporal exclusion",
-}
-STANDARD_CLASSES = tuple(range(19))  # the classes a viewer offers where a cloud's are unknown (Potree's list)
-
-
-def class_name(code: int) -> str:
-    """The ASPRS name of LAS class ``code`` (23..63 reserved, 64..255 user defined)."""
-    if code in CLASS_NAMES:
-        return CLASS_NAMES[code]
-    return f"reserved {code}" if code < 64 else f"user defined {code}"
+# --- ASPRS LAS 1.4 classes: colors (Potree's scheme where it has one; their names: io/las_fields.py) --------
 
 
 _CLASS_COLORS = {

@@ -15,8 +15,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.renderable import hidden_classes_refusal
+from ..io.las_fields import STANDARD_CLASSES, class_name
 from ..render.cache import render_cache
-from ..render.colors import STANDARD_CLASSES, class_name, classification_table
+from ..render.colors import classification_table
 
 
 def held_classes(values) -> list[int]:
