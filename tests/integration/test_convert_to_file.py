@@ -261,3 +261,27 @@ def test_thin_with_an_octree_output_is_refused(cli, autzen_path, tmp_path, name)
     fmt = "copc" if name.endswith(".copc.laz") else "gigapoint"
     assert (rc, err.strip()) == (1, f"error: {out}: --thin: an option of a plain .las, .laz or .ply file of the files' points, not of a {fmt} octree")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("given", [None, 10_000])
+def test_the_streaming_commands_read_chunks_of_the_stream_size_unless_told(autzen_path, tmp_path, monkeypatch, given):
+    """``convert -o x.laz`` and ``tile`` read their inputs in chunks of STREAM_CHUNK_SIZE (their peak
+    memory is a chunk or two: not the 2 M points of DEFAULT_CHUNK_SIZE), or of the ``chunk_size`` given."""
+    from gigapoint.io._base import DEFAULT_CHUNK_SIZE, STREAM_CHUNK_SIZE
+
+    to_file = importlib.import_module("gigapoint.lod.convert.to_file")
+    read_chunks_of, asked, sizes = to_file.read_chunks, [], []
+
+    def recorded(path, chunk_size):
+        asked.append(chunk_size)
+        for chunk in read_chunks_of(path, chunk_size):
+            sizes.append(len(chunk))
+            yield chunk
+
+    monkeypatch.setattr(to_file, "read_chunks", recorded)
+    expected = given or STREAM_CHUNK_SIZE
+    assert STREAM_CHUNK_SIZE < DEFAULT_CHUNK_SIZE
+    convert(autzen_path, tmp_path / "copy.laz", chunk_size=given)
+    gp.tile(autzen_path, tmp_path / "tiles", 500, chunk_size=given)
+    assert asked == [expected, expected]
+    assert max(sizes) == min(expected, 110_000) and sum(sizes) == 2 * 110_000

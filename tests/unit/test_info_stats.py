@@ -193,3 +193,25 @@ def test_point_stats_takes_a_list_of_paths_as_gp_open_does(autzen_path):
     """point_stats([a]) was pathlib's TypeError ("expected str, bytes or os.PathLike object, not list")."""
     assert point_stats([autzen_path]) == point_stats(autzen_path)
     assert point_stats((autzen_path,))["point_count"] == 110_000
+
+
+@pytest.mark.parametrize("given", [None, 30_000])
+def test_stats_read_chunks_of_the_stream_size_unless_told(autzen_path, monkeypatch, given):
+    """``info --stats`` (file_stats) reads in chunks of STREAM_CHUNK_SIZE (its peak memory is a chunk
+    or two: not DEFAULT_CHUNK_SIZE's 2 M points), or of the ``chunk_size`` given; each told to ``on_chunk``."""
+    from gigapoint.io import file_stats
+    from gigapoint.io._base import DEFAULT_CHUNK_SIZE, STREAM_CHUNK_SIZE
+    from gigapoint.io.las import LasReader
+
+    read, asked = LasReader.read_chunks, []
+
+    def recorded(self, path, chunk_size, **kw):
+        asked.append(chunk_size)
+        return read(self, path, chunk_size, **kw)
+
+    monkeypatch.setattr(LasReader, "read_chunks", recorded)
+    sizes = []
+    stats = file_stats(autzen_path, on_chunk=sizes.append) if given is None else file_stats(autzen_path, given, on_chunk=sizes.append)
+    assert STREAM_CHUNK_SIZE < DEFAULT_CHUNK_SIZE
+    assert asked == [given or STREAM_CHUNK_SIZE]
+    assert sizes == ([110_000] if given is None else [30_000] * 3 + [20_000]) and stats.result()["point_count"] == 110_000

@@ -16,6 +16,12 @@ from ..errors import EmptyCloudError, InputError, check_whole
 
 #: Points per chunk a reader yields unless told otherwise (about 100 MB of xyz + rgba + attributes).
 DEFAULT_CHUNK_SIZE = 2_000_000
+#: Points per chunk of the commands that only stream points through (``convert -o x.laz``,
+#: ``tile``, ``info --stats``): they hold a chunk or two of every attribute at a time and nothing
+#: else, so their peak memory is that (a 2 M-point chunk ~130 bytes a point, ~2 held at once:
+#: 270 of ``info --stats``'s 437 MiB), and smaller chunks cost no speed (docs/benchmarks.md, "Streaming
+#: commands' memory"). The octree builders keep their own, tuned chunk sizes.
+STREAM_CHUNK_SIZE = 250_000
 
 #: What a reader's refusal of a file cut off adds: where the points before the cut can be seen
 #: (``Reader.read_salvaged``).

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.cloud import MAX_ABS_COORDINATE, value_decimals
-from ._base import DEFAULT_CHUNK_SIZE, check_file, headers_once
+from ._base import STREAM_CHUNK_SIZE, check_file, headers_once
 from .crs import crs_identity, crs_name
 from .paths import cloud_name, expand_paths, file_names
 from .registry import reader_for
@@ -133,7 +133,7 @@ def format_info(info: dict) -> str:
 
 
 @headers_once()  # (a folder listed once)
-def point_stats(*paths, recursive: bool = False, chunk_size: int = DEFAULT_CHUNK_SIZE) -> dict:
+def point_stats(*paths, recursive: bool = False, chunk_size: int = STREAM_CHUNK_SIZE) -> dict:
     """What the points of files, folders or glob patterns (``expand_paths``) hold, summed up:
     their true bounds (and the headers'), each attribute's min, max and mean, the
     classification histogram, returns, flight lines, gps_time, colour ranges, invalid points

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..core.chunk import DEFAULT_COLOR, ColorScaler, PointChunk
 from ..core.cloud import _valid_mask
-from ._base import DEFAULT_CHUNK_SIZE, check_chunk_size, headers_once
+from ._base import STREAM_CHUNK_SIZE, check_chunk_size, headers_once
 from .las import LasReader, read_las_header
 from .las_fields import class_name
 from .registry import reader_for
@@ -189,7 +189,7 @@ class PointStats:
 
 
 @headers_once()  # (its header: read for its reader, its chunks, its bounds, its time encoding)
-def file_stats(path, chunk_size: int = DEFAULT_CHUNK_SIZE, on_chunk: Callable[[int], None] | None = None) -> PointStats:
+def file_stats(path, chunk_size: int = STREAM_CHUNK_SIZE, on_chunk: Callable[[int], None] | None = None) -> PointStats:
     """One file's ``PointStats``, its points read once in chunks of at most ``chunk_size``
     (``on_chunk(points)`` after each: a progress bar); its header's bounds, where it has them,
     kept beside its points' and the file named in ``stale`` where they differ by more than half

@@ -22,7 +22,7 @@ from ...core.chunk import PointChunk, attributes_in_common, warn_dropped_attribu
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
 from ...errors import EmptyCloudError, InputError
 from ...io import expand_paths, files_label, read_chunks, scan_angles_differ
-from ...io._base import DEFAULT_CHUNK_SIZE
+from ...io._base import STREAM_CHUNK_SIZE
 from ...io.filters import PointFilter, filtered
 from ...io.las import LasReader, with_scan_angle
 from ...io.las_fields import las_grid
@@ -53,7 +53,7 @@ class PointFiles:
         if any(same_file(out, f) for f in self.files):
             raise InputError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
         self.label = files_label(self.files)
-        self.chunk_size = chunk_size or DEFAULT_CHUNK_SIZE
+        self.chunk_size = chunk_size or STREAM_CHUNK_SIZE
         facts = input_facts(self.files, one_grid=True)  # the LAS grid; CRSs that differ, files off the grid: warned
         self.one_angle = scan_angles_differ(self.files)
         self.names = _attributes_in_common(self.files, self.one_angle, self.chunk_size, out)
