@@ -283,14 +283,16 @@ class _TileSpill:
         return records
 
     def chunks(self, key: tuple[int, int], chunk_size: int):
-        """The points of tile ``key`` as PointChunks, in the order they came; each of one file's colour bits."""
-        held = np.memmap(self.path(key), self.dtype, mode="r")
+        """The points of tile ``key`` as PointChunks, in the order they came; each of one file's colour bits.
+        Read a chunk at a time, not through a memory map: a map's pages, once read, count in the
+        process's memory until it is unmapped, the whole tile's (a 1.35 M-point tile of 5 M points:
+        130 MiB of ``tile``'s 300 MiB peak)."""
         names = [f[len("attribute ") :] for f in self.dtype.names if f.startswith("attribute ")]
-        for start in range(0, len(held), chunk_size):
-            part = held[start : start + chunk_size]
-            for run in np.split(part, np.flatnonzero(np.diff(part["color_bits"])) + 1):
-                attributes = {a: np.array(run[f"attribute {a}"]) for a in names}
-                yield PointChunk(run["xyz"], run["rgba"], attributes, color_bits=int(run["color_bits"][0]) or None)
+        with open(self.path(key), "rb") as held:
+            while len(part := np.fromfile(held, self.dtype, count=chunk_size)):
+                for run in np.split(part, np.flatnonzero(np.diff(part["color_bits"])) + 1):
+                    attributes = {a: np.array(run[f"attribute {a}"]) for a in names}
+                    yield PointChunk(run["xyz"], run["rgba"], attributes, color_bits=int(run["color_bits"][0]) or None)
 
     def write_tiles(self, name: str, suffix: str, files: PointFiles, progress) -> list[Path]:
         """Write each tile holding points of its own into the work folder, one at a time, its spill
