@@ -2,17 +2,35 @@
 
 from __future__ import annotations
 
-from .core.threads import choose_threading_layer
-
-choose_threading_layer()  # before any kernel runs: TBB from its wheel, else OpenMP (core/threads.py)
-
-from . import backends as _backends  # noqa: F401  (registers the cpu and wgpu backends with render)
-from .core import PointChunk, PointCloud, from_arrays
+from .core import hooks as _hooks
 from .errors import GigapointError, GigapointWarning
 from .io import registry as _registry
 from .io._base import headers_once as _headers_once
-from .io.demo import demo_arrays
-from .render import Camera, Frame, RenderSettings, RenderStats, render, render_frame
+
+
+def _set_up_numba() -> None:
+    """numba set up for gigapoint's kernels, once numba is imported (before any kernel is defined
+    or runs): kernels numba cannot cache compile in memory (core/kernel_cache.py); TBB from its
+    wheel, else OpenMP (core/threads.py). ``import gigapoint`` imported numba to do it at once
+    (~0.3 s): ``gigapoint --help`` and ``info`` of a LAS file need no kernel."""
+    from .core.kernel_cache import compile_where_uncachable
+    from .core.threads import choose_threading_layer
+
+    choose_threading_layer()
+    compile_where_uncachable()
+
+
+_hooks.on_numba_import(_set_up_numba)  # now where numba is imported already (its layer not yet loaded: it is kept)
+
+
+def _wire() -> None:
+    """What the lower layers look up but cannot import (core/hooks.py ``wire``, on first use):
+    the cpu and wgpu backends (render.backend), PointCloud.save's writer (io/write.py)."""
+    from . import backends  # noqa: F401
+    from .io import write  # noqa: F401
+
+
+_hooks.register_wiring(_wire)
 
 
 def _is_octree(path) -> bool:
@@ -26,6 +44,12 @@ def _is_octree(path) -> bool:
 
 
 _registry.register_dataset_folder(_is_octree)
+
+# the subpackage loaded now (cheap: its names are lazy), so that no later import of it makes
+# ``gigapoint.render`` the package: it is the function (``_LAZY``), as it was
+from . import render as _render_package  # noqa: F401
+
+del globals()["render"]  # (the import bound the package to the name)
 
 __version__ = "0.1.0"
 
@@ -86,6 +110,8 @@ def demo(
     check_room(name, n_points, IN_MEMORY_BYTES_MIN, instead=instead)
     chunks = demo_chunks(n_points, seed, scale=scale)
     if not attributes:
+        from .core.chunk import PointChunk
+
         chunks = (PointChunk(c.xyz, c.rgba, scale=c.scale) for c in chunks)
     return build_cloud(chunks, name=name, colors=colors)
 
@@ -180,8 +206,20 @@ def open(*paths, progressive: bool = False, **options):
     return open_cloud(*paths, point_filter=keep, **options)
 
 
-# Imported on first use: they pull in heavier packages (Starlette/uvicorn, imageio, scipy).
+# Imported on first use (PEP 562): numba and the kernels for most (``import gigapoint`` took
+# ~0.4-1 s, and every CLI command paid it), heavier packages for some (Starlette/uvicorn,
+# imageio, scipy).
 _LAZY = {
+    "PointChunk": ("gigapoint.core.chunk", "PointChunk"),
+    "PointCloud": ("gigapoint.core.cloud", "PointCloud"),
+    "from_arrays": ("gigapoint.core.cloud", "from_arrays"),
+    "demo_arrays": ("gigapoint.io.demo", "demo_arrays"),
+    "Camera": ("gigapoint.render.camera", "Camera"),
+    "Frame": ("gigapoint.render.frame", "Frame"),
+    "RenderSettings": ("gigapoint.render.settings", "RenderSettings"),
+    "RenderStats": ("gigapoint.render.frame", "RenderStats"),
+    "render": ("gigapoint.render.renderer", "render"),
+    "render_frame": ("gigapoint.render.renderer", "render_frame"),
     "Viewer": ("gigapoint.viewer.jupyter", "Viewer"),
     "render_turntable": ("gigapoint.render.video", "render_turntable"),
     "render_flythrough": ("gigapoint.render.video", "render_flythrough"),
@@ -199,7 +237,9 @@ def __getattr__(name):
         import importlib
 
         module, attr = _LAZY[name]
-        return getattr(importlib.import_module(module), attr)
+        value = getattr(importlib.import_module(module), attr)
+        globals()[name] = value  # (looked up once)
+        return value
     raise AttributeError(f"module 'gigapoint' has no attribute {name!r}")
 
 

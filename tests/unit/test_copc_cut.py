@@ -256,7 +256,7 @@ def test_telling_a_local_copc_file_from_a_cut_one_reads_its_head_once(files, tmp
     in its hierarchy (read as LAZ) apart (is_copc_file, then is_cut_copc_laz read it twice)."""
     import builtins
 
-    from gigapoint.lod import copc
+    from gigapoint.lod import kinds
     from gigapoint.lod.reader import lod_source_kind
 
     flat = files[0]
@@ -268,6 +268,6 @@ def test_telling_a_local_copc_file_from_a_cut_one_reads_its_head_once(files, tmp
         opened.append(Path(file).name)
         return builtins.open(file, *args, **kwargs)
 
-    monkeypatch.setattr(copc, "open", counting, raising=False)
+    monkeypatch.setattr(kinds, "open", counting, raising=False)
     assert [lod_source_kind(p) for p in (flat, cut)] == ["copc", None]
     assert opened == ["flat.copc.laz", "cut.copc.laz"]

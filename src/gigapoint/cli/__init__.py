@@ -42,10 +42,13 @@ def _compile_watch():
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``gigapoint`` script."""
+    from ..core import hooks
     from ..core.threads import skip_blas_check
     from . import commands  # noqa: F401  (registers the commands)
 
-    skip_blas_check()  # no command's kernel uses a BLAS: scipy.linalg stays unimported (0.26 s)
+    # no command's kernel uses a BLAS: scipy.linalg stays unimported (0.26 s); once numba is
+    # imported (a command that runs no kernel, --help or info, imports none)
+    hooks.on_numba_import(skip_blas_check)
 
     warnings.showwarning = _show_warning
     warnings.simplefilter("default", GigapointWarning)

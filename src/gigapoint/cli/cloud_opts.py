@@ -12,7 +12,7 @@ from typing import Annotated
 
 import typer
 
-from ..core.cloud import COLOR_FORMATS
+from ..core.layout import COLOR_FORMATS
 from ..errors import GigapointError
 
 ColorsOption = Annotated[

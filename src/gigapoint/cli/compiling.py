@@ -4,7 +4,8 @@ The kernels are ``@njit(cache=True)``: the first run after an install compiles t
 to a minute) and later runs load them from numba's cache. numba announces every compilation
 that its cache could not serve as a ``numba:compile`` event (numba.core.event; loading a
 cached kernel raises none), so listening to those events says exactly when a run compiles,
-before the compilation starts, and never on a warm run.
+before the compilation starts, and never on a warm run. The watch listens from numba's import
+on (core/hooks.py): a command that runs no kernel (``--help``, ``info``) imports no numba.
 """
 
 from __future__ import annotations
@@ -13,8 +14,7 @@ import contextlib
 import threading
 import time
 
-from numba.core import event
-
+from ..core import hooks
 from ..core.kernel_cache import is_ours as _is_ours
 from ..core.kernel_cache import later_runs
 
@@ -22,7 +22,7 @@ MESSAGE = "compiling render kernels, once per install…"
 _GRACE_S = 0.6  # the spinner stays this long after a compilation ends (the next one often follows)
 
 
-class CompileWatch(event.Listener):
+class CompileWatch:
     """Counts gigapoint's kernel compilations and their seconds; on a terminal console, shows
     ``MESSAGE`` with a spinner, the kernel being compiled and the seconds so far."""
 
@@ -101,6 +101,19 @@ class CompileWatch(event.Listener):
                 self._status = None
 
 
+def _forward(listener: type, watch: CompileWatch):
+    """numba's ``event.Listener`` (a subclass made where numba is imported) passing its events to ``watch``."""
+
+    class Forward(listener):
+        def on_start(self, ev) -> None:
+            watch.on_start(ev)
+
+        def on_end(self, ev) -> None:
+            watch.on_end(ev)
+
+    return Forward()
+
+
 _current: CompileWatch | None = None
 
 
@@ -121,11 +134,25 @@ def watching(console=None):
     global _current
     watch = CompileWatch(console)
     previous, _current = _current, watch
-    event.register("numba:compile", watch)
+    listening = []  # numba's listener, once numba is imported (core/hooks.py)
+
+    def listen() -> None:
+        if listening:  # (the command ended before numba was imported)
+            return
+        from numba.core import event
+
+        listening.append(_forward(event.Listener, watch))
+        event.register("numba:compile", listening[0])
+
+    hooks.on_numba_import(listen)
     try:
         yield watch
     finally:
-        event.unregister("numba:compile", watch)
+        if listening:
+            from numba.core import event
+
+            event.unregister("numba:compile", listening[0])
+        listening.append(None)  # a later import of numba registers nothing
         watch.hide()
         _current = previous
         if watch.console is not None and watch.enabled and watch.seconds >= 1.0:

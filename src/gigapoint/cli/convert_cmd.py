@@ -64,7 +64,7 @@ def convert(
     from ..lod import ConvertError
     from ..lod import convert as run
     from ..lod.convert.to_file import is_point_file_name
-    from ..lod.copc_write import is_copc_name, work_dir
+    from ..lod.kinds import is_copc_name, work_dir
     from ..lod.octree_dir import OctreeDir
 
     if dask is not None and workers is not None:

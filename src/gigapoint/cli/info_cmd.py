@@ -42,7 +42,7 @@ def info(
         raise GigapointError(f"{option_names(options)}: only with --memory (how the loaded points are held)")
     from ..io import PointStats, expand_paths, file_info, file_stats, folder_info, format_info, format_stats, pattern_matches, shown_url
     from ..lod import is_lod_source, octree_info
-    from ..lod.copc_write import work_dir
+    from ..lod.kinds import work_dir
     from ..lod.octree_dir import RESUME_HINT, OctreeDir
 
     # an octree (folder, COPC file, EPT dataset, URL) is one dataset, not a folder of files;

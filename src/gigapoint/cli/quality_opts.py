@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..core.cloud import PointCloud
 from ..errors import SettingsError, warnings_kept
 from ..render.settings import RenderSettings
 from .settings_opts import option_of
@@ -66,6 +65,8 @@ def check_color_attribute(inputs, settings) -> None:
 def prepare_cloud(cloud, settings) -> None:
     """Estimate normals when lighting or the normal color mode needs them and the cloud has none
     (a plain cloud: an octree's points are not all in memory)."""
+    from ..core.cloud import PointCloud  # (not at import: numba's kernels, which --help needs none of)
+
     if not (settings.lighting or settings.color_mode == "normal") or not isinstance(cloud, PointCloud):
         return
     from ..render.colors import normals_of

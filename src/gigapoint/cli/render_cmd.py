@@ -11,7 +11,6 @@ from typing import Annotated
 
 import typer
 
-from ..core.cloud import PointCloud
 from ..errors import CameraError, GigapointError
 from ..io import crs_wkt
 from ..render import VIEWS, Camera, RenderSettings
@@ -334,6 +333,8 @@ def render(
     cloud = open_inputs(inputs, settings.point_budget, progressive, cloud_options(colors, chunked), point_filter)
     with options_named():  # drawing's errors name the option (--color-attribute NAME that the file lacks)
         prepare_cloud(cloud, settings)
+    from ..core.cloud import PointCloud  # (not at import: numba's kernels, which --help needs none of)
+
     if settings.max_points and not isinstance(cloud, PointCloud):
         # an octree (a converted folder, or inputs above the point budget read progressively, as
         # `render huge.laz --max-points N` is) draws at most that many too, as the viewer's cap

@@ -1,14 +1,35 @@
 """Point data in gigapoint's own layout: chunks, Morton order, batches, quantization, selection,
-and the Renderable contract every kind of cloud implements."""
+and the Renderable contract every kind of cloud implements.
 
-from .kernel_cache import compile_where_uncachable
+The names below are imported on first use (PEP 562): most of core's modules define numba
+kernels, and ``gigapoint info`` or ``--help`` need none (core/hooks.py). numba's set-up (its
+cache fallback, core/kernel_cache.py; its threading layer, core/threads.py) runs when numba is
+imported, before any kernel is defined (gigapoint/__init__.py, ``hooks.on_numba_import``)."""
 
-compile_where_uncachable()  # before any kernel is defined (core's own modules have some): kernels numba cannot cache compile in memory
+from __future__ import annotations
 
-from .chunk import DEFAULT_COLOR, PointChunk, to_rgba8
-from .chunked import build_cloud_chunked
-from .cloud import PointCloud, build_cloud, cloud_from_points, from_arrays
-from .layout import BATCH_DTYPE, BATCH_SIZE, EMPTY_PIXEL
+_LAZY = {
+    "BATCH_DTYPE": "layout",
+    "BATCH_SIZE": "layout",
+    "EMPTY_PIXEL": "layout",
+    "DEFAULT_COLOR": "chunk",
+    "PointChunk": "chunk",
+    "to_rgba8": "chunk",
+    "build_cloud_chunked": "chunked",
+    "PointCloud": "cloud",
+    "build_cloud": "cloud",
+    "cloud_from_points": "cloud",
+    "from_arrays": "cloud",
+}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "BATCH_DTYPE",

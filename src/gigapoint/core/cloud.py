@@ -8,7 +8,6 @@ inside float64 batch boxes.
 from __future__ import annotations
 
 import contextlib
-import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -22,18 +21,18 @@ from . import pages
 from .attributes import Attributes
 from .chunk import PointChunk, attributes_in_common, colors_for, warn_dropped_attributes
 from .compact import colors_at, compact_positions, full_words, pack_rgb565, point_words, rgba32, subset_streams
-from .layout import BATCH_DTYPE, BATCH_SIZE
+from .coords import MAX_ABS_COORDINATE, NUMPY_MAX, value_decimals
+from .coords import valid_mask as _valid_mask
+from .hooks import wire
+from .layout import BATCH_DTYPE, BATCH_SIZE, COLOR_FORMATS
 from .morton import cube_of, morton_codes, morton_order
 from .palette import PaletteColors, block_errors, choose_palette, quantize_palettes
 from .quantize import dequantize, make_batches, quantize
 from .renderable import DrawList, MultiViewDrawList, SelectionSettings, check_classified, check_point_index
 from .selection import View, select_view, select_views, subsample_step
 
-#: Coordinates beyond this magnitude are not of this planet in any CRS: skipped as invalid.
-MAX_ABS_COORDINATE = 1e12
-
-#: what ``PointCloud.save`` writes with: io/write.py's ``save_cloud``, set when gigapoint.io is
-#: imported (as every ``import gigapoint`` does): core cannot import io
+#: what ``PointCloud.save`` writes with: io/write.py's ``save_cloud``, set when gigapoint.io.write
+#: is imported (gigapoint/__init__.py's wiring does it at the first save: core cannot import io)
 _CLOUD_WRITER: list[Callable] = []
 
 
@@ -150,6 +149,7 @@ class PointCloud:
         grid); colours are written as held (8 bits a channel). An existing file is replaced only
         with ``overwrite=True``. Returns the points written."""
         check_switch("overwrite", overwrite, f"{self.name}: save")  # ("no" was taken as true)
+        wire()  # io's writer registers itself on first use (core/hooks.py)
         return _CLOUD_WRITER[0](self, path, overwrite)
 
     def changed(self, indices=None) -> None:
@@ -363,30 +363,6 @@ def at_scale(position, scale) -> list[float]:
     return [round(float(v), value_decimals(float(v), s)) for v, s in zip(position, scale)]
 
 
-def value_decimals(value: float, scale: float) -> int:
-    """Decimals that show ``value``, a coordinate stored at resolution ``scale``: the scale's
-    (scale_decimals), more where the value lies off that decimal grid by over 1e-4 of a
-    step: its file's offset does (PDAL's offset 'auto', 637000.123456 at scale 0.001 was shown
-    rounded to 3 decimals, up to half a step from the file's value)."""
-    scale = abs(scale)
-    d = scale_decimals(scale)
-    while d < 12 and abs(round(value, d) - value) > 1e-4 * scale:  # (positions held compact are within 2e-5 steps)
-        d += 1
-    return d
-
-
-def scale_decimals(scale: float) -> int:
-    """Decimals that show a coordinate stored at resolution ``scale`` (0.01 -> 2, 0.001 -> 3, 0.5 -> 1)."""
-    if not (math.isfinite(scale) and scale > 0):
-        return 6
-    return max(0, min(12, math.ceil(-math.log10(scale) - 1e-9)))
-
-
-def _valid_mask(xyz: np.ndarray) -> np.ndarray:
-    """The rule of ``_scan_blocks``: |x| <= the limit on every axis (False for NaN and inf)."""
-    return np.all(np.abs(xyz) <= MAX_ABS_COORDINATE, axis=1)
-
-
 _SCAN_BLOCKS = 64
 
 
@@ -415,11 +391,6 @@ def _scan_blocks(xyz, limit, bad, lo, hi):
             else:
                 count += 1
         bad[b] = count
-
-
-#: arrays up to this many points are scanned and gathered by numpy (milliseconds): a small
-#: cloud's first run does not wait for the parallel kernels to compile
-NUMPY_MAX = 1 << 20
 
 
 def scan_points(xyz: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
@@ -586,9 +557,8 @@ def check_valid_count(name: str, valid: int, skipped: int) -> None:
         warn(f"{name}: skipped {skipped:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})", GigapointWarning)
 
 
-#: ``build_cloud``'s layouts and color formats
+#: ``build_cloud``'s layouts (its color formats: layout.py's COLOR_FORMATS)
 LAYOUTS = ("auto", "words", "compact")
-COLOR_FORMATS = ("auto", "rgba", "rgb565", "palette")
 
 
 def finest_scale(scales) -> tuple[float, float, float] | None:

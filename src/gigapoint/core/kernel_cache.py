@@ -5,8 +5,8 @@ The kernels are ``@njit(cache=True)``: numba keeps them in ``NUMBA_CACHE_DIR`` w
 none is writable (a read-only install run with a read-only or unset HOME: a container image),
 numba refused at each kernel's definition ("cannot cache function ...: no locator available"),
 so ``import gigapoint`` failed with a traceback; and a cache write that failed (a full disk) failed
-the kernel call that had just compiled. ``compile_where_uncachable`` (at import, before any
-kernel module) makes both compile in memory, as they do uncached, and says so once. The save's
+the kernel call that had just compiled. ``compile_where_uncachable`` (as numba is imported, before
+any kernel is defined: gigapoint/__init__.py's hook, core/hooks.py) makes both compile in memory, as they do uncached, and says so once. The save's
 fallback holds for every numba function of the process (a failed cache write only loses the
 next run's head start); the first, for gigapoint's kernels only.
 """
@@ -15,8 +15,6 @@ from __future__ import annotations
 
 import inspect
 import os
-
-from numba.core import caching, config, dispatcher, event
 
 from ..errors import GigapointWarning, warn
 
@@ -42,19 +40,24 @@ def _warn_once(key: str, message: str) -> None:
         warn(message, GigapointWarning)
 
 
-class _SayUncached(event.Listener):
-    """Warns at the first compilation of an uncached gigapoint kernel: inside a command, where the
-    CLI prints warnings as one line (at import it has not set that up yet)."""
+def _say_uncached(listener: type) -> type:
+    """The listener class (numba's ``event.Listener`` subclassed where numba is imported)."""
 
-    def __init__(self, where: str) -> None:
-        self.where = where
+    class _SayUncached(listener):
+        """Warns at the first compilation of an uncached gigapoint kernel: inside a command, where the
+        CLI prints warnings as one line (at import it has not set that up yet)."""
 
-    def on_start(self, ev) -> None:
-        if is_ours(ev.data["dispatcher"]):
-            _warn_once("uncached", f"numba can write its cache nowhere ({self.where}): gigapoint's kernels compile in memory on every run, which takes a while; {FIX}")
+        def __init__(self, where: str) -> None:
+            self.where = where
 
-    def on_end(self, ev) -> None:
-        pass
+        def on_start(self, ev) -> None:
+            if is_ours(ev.data["dispatcher"]):
+                _warn_once("uncached", f"numba can write its cache nowhere ({self.where}): gigapoint's kernels compile in memory on every run, which takes a while; {FIX}")
+
+        def on_end(self, ev) -> None:
+            pass
+
+    return _SayUncached
 
 
 def compile_where_uncachable() -> None:
@@ -63,6 +66,8 @@ def compile_where_uncachable() -> None:
     if "installed" in _done:
         return
     _done.add("installed")
+    from numba.core import caching, config, dispatcher, event  # (numba is imported when this runs: core/hooks.py)
+
     try:
         enable, save = dispatcher.Dispatcher.enable_caching, caching.Cache.save_overload
     except AttributeError:  # a numba that names them otherwise: its own behaviour, not an import that fails
@@ -78,7 +83,7 @@ def compile_where_uncachable() -> None:
                 _done.add("listening")
                 chosen = f"NUMBA_CACHE_DIR={config.CACHE_DIR}, " if config.CACHE_DIR else ""
                 source = os.path.join(os.path.dirname(inspect.getfile(self.py_func)), "__pycache__")
-                event.register("numba:compile", _SayUncached(f"{chosen}{source}, the user's cache folder"))
+                event.register("numba:compile", _say_uncached(event.Listener)(f"{chosen}{source}, the user's cache folder"))
 
     def save_overload(self, sig, data):
         # numba saves a kernel after compiling it and adding it to the dispatcher: without the

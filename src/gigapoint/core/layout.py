@@ -46,3 +46,6 @@ COMPACT_MIN_BITS = 10
 
 #: Extension bits an axis of a wide batch holds (medium and high words: 2 x 10).
 EXT_FULL_BITS = 20
+
+#: how a PointCloud holds its colours (``build_cloud``'s ``colors``; here, numba-free: the CLI's options check them)
+COLOR_FORMATS = ("auto", "rgba", "rgb565", "palette")

@@ -2,13 +2,14 @@
 
 numba's layers are TBB, OpenMP and its own workqueue; it takes the first that loads, TBB first.
 gigapoint depends on PyPI's ``tbb`` wheel where PyPI has one (Linux x86-64 with glibc 2.28 on,
-Windows x86-64) and loads its library by path at import (``load_wheel_tbb``: numba opens
+Windows x86-64) and loads its library by path as numba is imported (``load_wheel_tbb``, from gigapoint/__init__.py's
+hook, core/hooks.py: numba opens
 ``libtbb.so.12`` by name, and the wheel puts it off the loader's path). On that TBB (2023.2)
 a forked process draws (GNU OpenMP terminates a child forked after drawing: "fork() called
 from a process already using GNU OpenMP"), and small kernels cost what they do on spinning
 OpenMP (a 50-point kernel 2.9 us a call against 3.1; passive OpenMP 50-56). Insertion, loading
 and drawing ran level with OpenMP, conversion 4-11 % slower (docs/benchmarks.md). Without the
-wheel, or where numba loaded a layer before gigapoint's import, no TBB is loaded; OpenMP goes first
+wheel, or where numba loaded a layer before gigapoint's set-up, no TBB is loaded; OpenMP goes first
 (``choose_threading_layer``): an older system TBB (Debian's 2021.8, numba 0.68) slowed
 repeated small kernels down as a process went on (a 50-point kernel 23 -> 257 us a call over
 18 000 calls; OpenMP 2 us throughout). A layer the user names (``NUMBA_THREADING_LAYER`` /
@@ -34,8 +35,6 @@ import os
 import sys
 from contextlib import contextmanager
 
-import numba
-
 #: points below which a batch is worked on the calling thread alone (two threads gain from here
 #: on: bench_small_batches.py on 2 vCPUs)
 SMALL_BATCH = 10_000
@@ -45,6 +44,8 @@ SMALL_BATCH = 10_000
 def numba_threads(n_threads: int):
     """numba's parallel kernels run on ``n_threads`` threads (of this thread's calls: numba's
     setting is per thread) until the block ends."""
+    import numba  # (not at import: core/hooks.py sets numba up as numba is imported, with this module's functions)
+
     previous = numba.get_num_threads()
     numba.set_num_threads(n_threads)
     try:
@@ -91,6 +92,8 @@ def skip_blas_check() -> None:
 
 def _loaded_layer() -> str | None:
     """The threading layer numba has loaded, None before its first parallel kernel."""
+    import numba
+
     try:
         return numba.threading_layer()
     except ValueError:
@@ -110,6 +113,8 @@ def threads_for(n_points: int, when_awake: bool = True):
     """The block's kernels on one thread for a batch below SMALL_BATCH points, else on as many as
     numba has now; ``when_awake`` False: on as many whatever the batch where idle threads take
     up work at once (``threads_awake``)."""
+    import numba
+
     small = n_points < SMALL_BATCH and (when_awake or not threads_awake())
     return numba_threads(1 if small else numba.get_num_threads())
 
@@ -149,13 +154,15 @@ def load_wheel_tbb() -> bool:
 
 def choose_threading_layer() -> str:
     """numba's threading layers in the order gigapoint runs best on, unless the user set one in
-    the environment; before any parallel kernel runs (at import: numba loads its layer once, at
-    the first). With the ``tbb`` wheel: TBB first (numba's own order); else OpenMP first (an
+    the environment; before any parallel kernel runs (as numba is imported, core/hooks.py, or at
+    ``import gigapoint`` where it was already: numba loads its layer once, at the first). With the ``tbb`` wheel: TBB first (numba's own order); else OpenMP first (an
     older system TBB would come first otherwise). Returns the layer put first ("" where the
     user chose)."""
     wheel = load_wheel_tbb()  # whatever the user chose: a choice of TBB means the wheel's too
     if any(os.environ.get(v) for v in ("NUMBA_THREADING_LAYER", "NUMBA_THREADING_LAYER_PRIORITY")):
         return ""
     first = "tbb" if wheel else "omp"
+    import numba
+
     numba.config.THREADING_LAYER_PRIORITY = [first] + [layer for layer in ("omp", "tbb", "workqueue") if layer != first]
     return first

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.cloud import MAX_ABS_COORDINATE, value_decimals
+from ..core.coords import MAX_ABS_COORDINATE, value_decimals
 from ._base import STREAM_CHUNK_SIZE, check_file, headers_once
 from .crs import crs_identity, crs_name
 from .paths import cloud_name, expand_paths, file_names

@@ -17,12 +17,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from numba import njit, prange
 
 from ..core import pages
 from ..core.chunk import ColorScaler, PointChunk, safe_attribute_name
-from ..core.cloud import MAX_ABS_COORDINATE, NUMPY_MAX
-from ..core.threads import prepare_kernel_calls
+from ..core.coords import MAX_ABS_COORDINATE, NUMPY_MAX
 from ..errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, warn
 from . import laz_process
 from ._base import DEFAULT_CHUNK_SIZE, SALVAGE_HINT, Reader, check_chunk_size, check_file, fail, one_line, read_once
@@ -160,48 +158,11 @@ class _RecordPlan:
         xyz = np.empty((n, 3), np.float64)
         outs = {size: np.empty((len(spec), n), f"<u{size}") for size, spec in self.specs.items()}
         rgb = np.empty((len(self.rgb), n), np.uint16)
+        from .las_kernels import _decode_records
+
         first = _decode_records(rec, scale, offset, limits, xyz, self.rgb, rgb, self.specs[1], outs[1], self.specs[2], outs[2], self.specs[4], outs[4], self.specs[8], outs[8])
         attributes = {a: outs[size][row].view(dtype) for a, (size, row, dtype) in self.rows.items()}
         return xyz, list(rgb), attributes, first if first < n else -1
-
-
-@njit(inline="always")
-def _le_bytes(r, o, size):
-    """The little-endian unsigned integer of ``size`` bytes at ``r[o]``."""
-    w = np.uint64(0)
-    for j in range(size):
-        w |= np.uint64(r[o + j]) << np.uint64(8 * j)
-    return w
-
-
-@njit(parallel=True, cache=True)
-def _decode_records(rec, scale, offset, limits, xyz, rgb_at, rgb, spec1, out1, spec2, out2, spec4, out4, spec8, out8):
-    """One pass over point records (rows of bytes): positions ``X * scale + offset`` (int32 X, Y,
-    Z at bytes 0, 4, 8; as ``_scaled_xyz``), the 16-bit colour channels at ``rgb_at`` into the
-    rows of ``rgb``, and the fields of ``spec<k>`` (byte offsets; for one byte also a shift and a
-    mask) into the rows of ``out<k>``. Each field read from its own strided view was one pass
-    over all the records' bytes a field (20 M LAS points, 6 attributes: 0.45 s). Returns the
-    first record whose X, Y or Z lies outside ``limits`` (``_first_outside``), else ``len(rec)``:
-    found here at no cost (a pass of its own took 8 ms of 2 M LAS points' 100 ms)."""
-    first = rec.shape[0]
-    for i in prange(rec.shape[0]):
-        r = rec[i]
-        for a in range(3):
-            v = np.int32(np.uint32(_le_bytes(r, 4 * a, 4)))
-            xyz[i, a] = v * scale[a] + offset[a]
-            if v < limits[a, 0] or v > limits[a, 1]:
-                first = min(first, i)
-        for k in range(rgb_at.shape[0]):
-            rgb[k, i] = _le_bytes(r, rgb_at[k], 2)
-        for k in range(spec1.shape[0]):
-            out1[k, i] = (r[spec1[k, 0]] >> spec1[k, 1]) & spec1[k, 2]
-        for k in range(spec2.shape[0]):
-            out2[k, i] = _le_bytes(r, spec2[k], 2)
-        for k in range(spec4.shape[0]):
-            out4[k, i] = _le_bytes(r, spec4[k], 4)
-        for k in range(spec8.shape[0]):
-            out8[k, i] = _le_bytes(r, spec8[k], 8)
-    return first
 
 
 def _first_outside(raw, limits: np.ndarray) -> int:
@@ -682,24 +643,11 @@ def _parse_crs(header, hdr: LasHeader) -> str | None:
     return hdr.crs()
 
 
-@njit(parallel=True, cache=True)
-def _scaled_xyz(X, Y, Z, scale, offset, out):
-    """Integer record coordinates to float64 positions (numpy took 3 temporaries an axis)."""
-    for i in prange(X.shape[0]):
-        out[i, 0] = X[i] * scale[0] + offset[0]
-        out[i, 1] = Y[i] * scale[1] + offset[1]
-        out[i, 2] = Z[i] * scale[2] + offset[2]
+def prepare_kernel_calls() -> None:
+    """core/threads.py's ``prepare_kernel_calls`` (numba imported only where a kernel is to run)."""
+    from ..core.threads import prepare_kernel_calls as prepare
 
-
-@njit(parallel=True, cache=True)
-def _rgb8(r, g, b, shift, out):
-    """16-bit record colors to opaque 8-bit RGBA (ColorScaler.int_shift chose the shift)."""
-    s = np.uint16(shift)
-    for i in prange(r.shape[0]):
-        out[i, 0] = min(r[i] >> s, 255)
-        out[i, 1] = min(g[i] >> s, 255)
-        out[i, 2] = min(b[i] >> s, 255)
-        out[i, 3] = 255
+    prepare()
 
 
 def _positions(raw, scale, offset) -> np.ndarray:
@@ -723,6 +671,8 @@ def _colors(r, g, b, scaler) -> np.ndarray:
             rgba[:, a] = np.minimum(v >> np.uint16(shift), 255)
         rgba[:, 3] = 255
     else:
+        from .las_kernels import _rgb8
+
         _rgb8(r, g, b, shift, rgba)
     return rgba
 

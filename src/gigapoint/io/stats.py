@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.chunk import DEFAULT_COLOR, ColorScaler, PointChunk
-from ..core.cloud import _valid_mask
+from ..core.coords import valid_mask as _valid_mask
 from ._base import STREAM_CHUNK_SIZE, check_chunk_size, headers_once
 from .las import LasReader, read_las_header
 from .las_fields import class_name

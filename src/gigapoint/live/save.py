@@ -8,7 +8,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..io.registry import is_supported_name
 from ..io.write import POINT_FILE_SUFFIXES, check_point_file_output, write_points
-from ..lod.copc_write import is_copc_name
+from ..lod.kinds import is_copc_name
 
 
 def save_snapshots(octree, path, overwrite: bool = False) -> int:

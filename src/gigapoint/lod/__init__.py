@@ -6,13 +6,45 @@ copc.py and ept.py read COPC files and EPT datasets (local or over HTTP) as octr
 (voxel_octree.py), copc_write.py writes COPC.
 """
 
-from .convert import ConvertError, ConvertResult, OutputExistsError, convert, parse_memory
-from .copc import CopcCloud, open_copc
-from .copc_write import write_copc
-from .ept import EptCloud, open_ept
-from .octree_dir import OctreeDir
-from .reader import is_lod_source, is_octree_dir, octree_info, open_octree
-from .store import Arena, OctreeCloud
+from __future__ import annotations
+
+# Imported on first use (PEP 562): most of lod's modules define numba kernels; ``gigapoint
+# info`` of a point file asks only whether it is an octree (reader.py's ``is_lod_source``).
+_LAZY = {
+    "ConvertError": "convert",
+    "ConvertResult": "convert",
+    "OutputExistsError": "convert",
+    "convert": "convert",
+    "parse_memory": "convert",
+    "CopcCloud": "copc",
+    "open_copc": "copc",
+    "write_copc": "copc_write",
+    "EptCloud": "ept",
+    "open_ept": "ept",
+    "OctreeDir": "octree_dir",
+    "is_lod_source": "reader",
+    "is_octree_dir": "reader",
+    "octree_info": "reader",
+    "open_octree": "reader",
+    "Arena": "store",
+    "OctreeCloud": "store",
+}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+# the subpackage loaded now (cheap: its names are lazy), so that no later import of it makes
+# ``gigapoint.lod.convert`` the package: it is the function (``_LAZY``), as it was
+from . import convert as _convert_package  # noqa: F401
+
+del globals()["convert"]  # (the import bound the package to the name)
+
 
 __all__ = [
     "Arena",

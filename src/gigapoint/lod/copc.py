@@ -18,8 +18,6 @@ one whose points are whole is read as plain LAZ instead: ``copc_file_kind``).
 from __future__ import annotations
 
 import io
-import os
-from pathlib import Path
 
 import numpy as np
 
@@ -27,66 +25,24 @@ from ..core.chunk import safe_attribute_name
 from ..errors import GigapointWarning, InputError, warn
 from ..io import laz_process
 from ..io.http import ByteSource, HttpFile, LocalFile, open_source
-from ..io.las import EVLR_HEADER, PROJECTION_USER_ID, WKT_RECORD, _scaled_xyz, evlr_headers, read_las_header, wkt_of
+from ..io.las import EVLR_HEADER, PROJECTION_USER_ID, WKT_RECORD, evlr_headers, read_las_header, wkt_of
 from ..io.las_fields import ATTRIBUTE_DTYPES, EXTRA_BYTES_TYPES, FLAG_BITS, field_attributes
+from ..io.las_kernels import _scaled_xyz
+from .kinds import (
+    COPC_INFO_DTYPE,
+    INFO_OFFSET,
+    LAS14_HEADER_DTYPE,
+    VLR_HEADER_DTYPE,
+    copc_file_kind,
+    is_copc_head,
+)
 from .store import check_grid, tight_bounds
 from .voxel_octree import VOXEL_KEY_DTYPE, VoxelOctree, valid_voxels, voxel_name, voxel_to_key
 
 # --------------------------------------------------------------------------- layouts
 
-#: The LAS 1.4 public header block.
-LAS14_HEADER_DTYPE = np.dtype(
-    [
-        ("file_signature", "S4"),
-        ("file_source_id", "<u2"),
-        ("global_encoding", "<u2"),
-        ("project_id", "V16"),
-        ("version_major", "u1"),
-        ("version_minor", "u1"),
-        ("system_identifier", "S32"),
-        ("generating_software", "S32"),
-        ("creation_day", "<u2"),
-        ("creation_year", "<u2"),
-        ("header_size", "<u2"),
-        ("offset_to_point_data", "<u4"),
-        ("number_of_vlrs", "<u4"),
-        ("point_format", "u1"),
-        ("point_record_length", "<u2"),
-        ("legacy_point_count", "<u4"),
-        ("legacy_points_by_return", "<u4", (5,)),
-        ("scale", "<f8", (3,)),
-        ("offset", "<f8", (3,)),
-        ("max_x", "<f8"),
-        ("min_x", "<f8"),
-        ("max_y", "<f8"),
-        ("min_y", "<f8"),
-        ("max_z", "<f8"),
-        ("min_z", "<f8"),
-        ("start_of_waveform", "<u8"),
-        ("start_of_first_evlr", "<u8"),
-        ("number_of_evlrs", "<u4"),
-        ("point_count", "<u8"),
-        ("points_by_return", "<u8", (15,)),
-    ]
-)
-VLR_HEADER_DTYPE = np.dtype(
-    [("reserved", "<u2"), ("user_id", "S16"), ("record_id", "<u2"), ("record_length", "<u2"), ("description", "S32")]
-)
 EVLR_HEADER_DTYPE = np.dtype(
     [("reserved", "<u2"), ("user_id", "S16"), ("record_id", "<u2"), ("record_length", "<u8"), ("description", "S32")]
-)
-#: The COPC info VLR's 160 bytes.
-COPC_INFO_DTYPE = np.dtype(
-    [
-        ("center", "<f8", (3,)),
-        ("halfsize", "<f8"),
-        ("spacing", "<f8"),
-        ("root_hier_offset", "<u8"),
-        ("root_hier_size", "<u8"),
-        ("gpstime_minimum", "<f8"),
-        ("gpstime_maximum", "<f8"),
-        ("reserved", "<u8", (11,)),
-    ]
 )
 #: One hierarchy entry (32 bytes).
 HIERARCHY_ENTRY_DTYPE = np.dtype([("key", VOXEL_KEY_DTYPE), ("offset", "<u8"), ("byte_size", "<i4"), ("point_count", "<i4")])
@@ -110,8 +66,6 @@ POINT_DTYPES = {
     8: np.dtype([*_PDRF6, ("red", "<u2"), ("green", "<u2"), ("blue", "<u2"), ("nir", "<u2")]),
 }
 
-COPC_USER_ID = b"copc"
-COPC_INFO_RECORD = 1
 COPC_HIERARCHY_RECORD = 1000
 LASZIP_USER_ID = b"laszip encoded"
 LASZIP_RECORD = 22204
@@ -135,9 +89,6 @@ EXTRA_BYTES_DTYPE = np.dtype(
         ("description", "S32"),
     ]
 )
-HEADER_SIZE = LAS14_HEADER_DTYPE.itemsize  # 375
-INFO_OFFSET = HEADER_SIZE + VLR_HEADER_DTYPE.itemsize  # the info VLR's data: byte 429
-MAGIC_END = INFO_OFFSET  # bytes needed to tell a COPC file
 HEAD_READ = 64 << 10  # the first request reads this much (the header and VLRs, usually)
 EVLR_READ = 1 << 20  # the most EVLR bytes read at open over HTTP for a CRS in them, in one request (CopcCloud._evlr_wkt)
 EVLR_WALK = 4  # past it, the most EVLR headers read over HTTP (a request each) to find the CRS's
@@ -204,42 +155,6 @@ def extra_fields(vlrs, point_format: int = 8) -> list[ExtraField]:
             out.append(ExtraField(name, EXTRA_BYTES_TYPES[kind], scale, offset))
         return out
     return []
-
-
-def is_copc_head(head: bytes) -> bool:
-    """The first bytes of a COPC file: 'LASF', LAS 1.4, the COPC info VLR first (copc.io's
-    reader notes: 'copc' at byte 377, record id 1 at 393)."""
-    if len(head) < MAGIC_END or head[:4] != b"LASF" or head[24:26] != b"\x01\x04":
-        return False
-    vlr = np.frombuffer(head, VLR_HEADER_DTYPE, count=1, offset=HEADER_SIZE)[0]
-    return vlr["user_id"].rstrip(b"\0") == COPC_USER_ID and int(vlr["record_id"]) == COPC_INFO_RECORD
-
-
-def copc_file_kind(path) -> str | None:
-    """A local file's kind, from one read of its head: "copc" (it starts as a COPC file does,
-    ``is_copc_head``), "laz" (a COPC file cut in its EVLRs, after the points: its root hierarchy
-    page is gone, so no node can be found, but its LAZ chunk table is whole: it reads as the
-    plain LAZ file it still is, every point; ``lod_source_kind`` sends it to the LAS reader,
-    which warns) or None (not a COPC file)."""
-    if not os.path.isfile(path):  # a FIFO named x.las: reading it waited for a writer for good
-        return None
-    end = INFO_OFFSET + COPC_INFO_DTYPE.itemsize
-    try:
-        with open(path, "rb") as f:
-            head, size = f.read(end), os.fstat(f.fileno()).st_size
-    except OSError:
-        return None
-    if not is_copc_head(head):
-        return None
-    if len(head) < end:  # its info VLR cut: COPC's error says so
-        return "copc"
-    info = np.frombuffer(head, COPC_INFO_DTYPE, count=1, offset=INFO_OFFSET)[0]
-    if int(info["root_hier_offset"]) + int(info["root_hier_size"]) <= size:
-        return "copc"
-    try:  # (a whole file whose info VLR points past its end stays COPC's error)
-        return "laz" if read_las_header(Path(path)).evlrs_cut is not None else "copc"
-    except InputError:  # its points cut too: COPC's error says what is left
-        return "copc"
 
 
 def read_vlrs(data: bytes, start: int, count: int, end: int, header=VLR_HEADER_DTYPE) -> list[tuple[bytes, int, bytes]]:

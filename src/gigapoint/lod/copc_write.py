@@ -36,8 +36,6 @@ from ..io.las_fields import (
 from .copc import (
     COPC_HIERARCHY_RECORD,
     COPC_INFO_DTYPE,
-    COPC_INFO_RECORD,
-    COPC_USER_ID,
     EVLR_HEADER_DTYPE,
     EXTRA_BYTES_DTYPE,
     EXTRA_BYTES_RECORD,
@@ -51,6 +49,7 @@ from .copc import (
 )
 from .grid import output_grid
 from .keys import ROOT_KEY, level_of
+from .kinds import COPC_INFO_RECORD, COPC_USER_ID
 from .octree_dir import OutputExistsError
 from .voxel_octree import key_to_voxel
 
@@ -400,19 +399,6 @@ def write_copc_sets(path: Path, sources: list[Path], st: dict, progress, page_le
         extra=extra_attributes(attrs, str(path), fmt),
     )  # fmt: skip
     return int(summary["nodes"])
-
-
-def is_copc_name(out) -> bool:
-    """Whether ``out`` is named as a COPC file (``*.copc.laz``): what a conversion (or a live
-    cloud's save) without a format writes as COPC."""
-    return out is not None and Path(out).name.lower().endswith(".copc.laz")
-
-
-def work_dir(out) -> Path:
-    """The folder a conversion into the COPC file ``out`` works in (an OctreeDir: its state,
-    preview and node sets; removed once ``out`` is written): ``<out>.work`` beside it."""
-    out = Path(out)
-    return out.with_name(out.name + ".work")
 
 
 def check_copc_output(out, overwrite: bool) -> None:

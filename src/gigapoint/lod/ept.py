@@ -17,18 +17,18 @@ from __future__ import annotations
 import io
 import json
 from pathlib import Path
-from urllib.parse import urlsplit, urlunsplit
 
 import numpy as np
 
 from ..errors import InputError
 from ..io import laz_process
-from ..io.http import ByteSource, as_url, open_source, shown_url
-from ..io.las import _scaled_xyz, scan_angle_units
+from ..io.http import ByteSource, open_source, shown_url
+from ..io.las import scan_angle_units
+from ..io.las_kernels import _scaled_xyz
+from .kinds import ept_location
 from .store import check_grid, known_classes, tight_bounds
 from .voxel_octree import VoxelOctree, parse_voxel_name, voxel_name
 
-EPT_FILE = "ept.json"
 DATA_TYPES = {"laszip": ".laz", "binary": ".bin", "zstandard": ".zst"}
 _TYPES = {("signed", 1): "i1", ("signed", 2): "<i2", ("signed", 4): "<i4", ("signed", 8): "<i8"}
 _TYPES.update({("unsigned", 1): "u1", ("unsigned", 2): "<u2", ("unsigned", 4): "<u4", ("unsigned", 8): "<u8"})
@@ -47,27 +47,6 @@ ATTRIBUTES = {
     "EdgeOfFlightLine": ("edge_of_flight_line", np.uint8),
     "ScanAngleRank": ("scan_angle", np.int16),  # PDAL's degrees (any format's) in LAS 1.4 units, as COPC's
 }
-
-
-def ept_location(path) -> str | Path | None:
-    """The ``ept.json`` that ``path`` names (the file, its folder, or a URL ending in
-    ``ept.json`` or ``/``), else None."""
-    url = as_url(path)
-    if url is not None:
-        # the URL's path, not its query: '.../ept.json?sig=...' was taken for a COPC file
-        try:
-            parts = urlsplit(url)
-        except ValueError:  # 'http://[::1': the HTTP client says so, naming the URL
-            return None
-        if parts.path.endswith("/"):
-            return urlunsplit(parts._replace(path=parts.path + EPT_FILE))
-        return url if parts.path.rsplit("/", 1)[-1].endswith(".json") else None
-    p = Path(path)
-    if p.is_dir() and (p / EPT_FILE).is_file():
-        return p / EPT_FILE
-    if p.is_file() and p.name == EPT_FILE:
-        return p
-    return None
 
 
 def _srs_text(srs) -> str | None:

@@ -6,20 +6,22 @@ info`` says about one."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import urlsplit, urlunsplit
 
 import numpy as np
 
-from ..core.cloud import PointCloud
 from ..errors import InputError
 from ..io.http import HttpNotFound, as_url, shown_url
-from .compact_octree import read_compact
-from .copc import copc_file_kind, open_copc
-from .ept import ept_location, open_ept
+from .kinds import copc_file_kind, ept_location
 from .octree_dir import FORMAT_VERSION, OctreeDir
-from .potree import read_potree
-from .preview import open_preview
-from .store import OctreeCloud, read_gigapoint, read_meta
+
+if TYPE_CHECKING:
+    from ..core.cloud import PointCloud
+    from .store import OctreeCloud
+
+# The readers of each kind are imported where one is opened (numba's kernels: ``gigapoint info``
+# of a point file asks ``is_lod_source`` alone).
 
 
 def is_octree_dir(path) -> bool:
@@ -67,6 +69,13 @@ def open_octree(path) -> OctreeCloud | PointCloud:
     """Open an octree for rendering: an OctreeCloud (gigapoint or Potree 2.0 folder; a COPC file
     or EPT dataset, local or an http(s) URL), or for an unfinished conversion its preview (a
     ConversionPreview, with a warning)."""
+    from .compact_octree import read_compact
+    from .copc import open_copc
+    from .ept import open_ept
+    from .potree import read_potree
+    from .preview import open_preview
+    from .store import read_gigapoint, read_meta
+
     kind = lod_source_kind(path)
     if kind == "copc":
         url = as_url(path)
@@ -243,6 +252,7 @@ def _crs_source(cloud) -> tuple[str | None, tuple]:
     """(an octree's CRS, from its metadata: COPC, EPT, converted; the files a plain cloud or a
     progressive octree was read from, whose headers name theirs): where a cloud's CRS is told."""
     from ..core.renderable import PointSource
+    from .store import OctreeCloud
 
     if isinstance(cloud, OctreeCloud):
         return cloud.meta.get("crs") or None, ()

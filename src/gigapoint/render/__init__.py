@@ -1,8 +1,29 @@
-"""The renderer: cameras, settings, the Backend contract, passes and their references, the facade."""
+"""The renderer: cameras, settings, the Backend contract, passes and their references, the facade.
 
-from .camera import VIEWS, Camera
-from .frame import Frame, Image, RenderStats
-from .renderer import render, render_frame
-from .settings import RenderSettings, parse_color
+The names below are imported on first use (PEP 562): the renderer's modules define numba
+kernels, which ``import gigapoint`` and the CLI's ``--help`` and ``info`` need none of."""
+
+from __future__ import annotations
+
+_LAZY = {
+    "VIEWS": "camera",
+    "Camera": "camera",
+    "Frame": "frame",
+    "Image": "frame",
+    "RenderStats": "frame",
+    "render": "renderer",
+    "render_frame": "renderer",
+    "RenderSettings": "settings",
+    "parse_color": "settings",
+}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = ["VIEWS", "Camera", "Frame", "Image", "RenderSettings", "RenderStats", "parse_color", "render", "render_frame"]

@@ -19,6 +19,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from ..core.hooks import wire
 from ..core.renderable import PointBuffers
 from ..core.selection import Selection
 from ..errors import BackendUnavailableError, GigapointWarning, warn
@@ -125,12 +126,14 @@ def register_backend(entry: BackendEntry) -> None:
 
 
 def backend_names() -> list[str]:
+    wire()  # the backends register on first use (core/hooks.py: gigapoint/__init__.py's wiring)
     return ["auto", *sorted(_REGISTRY, key=lambda n: _REGISTRY[n].auto_rank)]
 
 
 def get_backend(name: str = "auto") -> Backend:
     """The backend called ``name``; ``auto``: the first available by rank (a real GPU if any,
     else the CPU). One instance per name and process."""
+    wire()  # the backends register on first use (core/hooks.py: gigapoint/__init__.py's wiring)
     with _registry_lock:
         if name in _instances:
             return _instances[name]

@@ -10,11 +10,14 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..core.selection import View
 from ..errors import CameraError, is_real
+
+if TYPE_CHECKING:
+    from ..core.selection import View
 
 MAX_IMAGE_SIDE = 16_384
 DEFAULT_SIZE = (1920, 1080)  # a fitted camera's image (16:9)
@@ -481,6 +484,8 @@ class Camera:
     def view(self, bounds) -> View:
         """What selecting batches needs of this camera looking at ``bounds``: its screen rows,
         image size and the clip range that encloses them."""
+        from ..core.selection import View  # (numba's kernels beside it: not for the CLI's --view check)
+
         near, far = self.clip_range(bounds)
         return View(self.screen_rows(), self.width, self.height, near, far)
 

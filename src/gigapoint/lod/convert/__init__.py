@@ -29,11 +29,32 @@ the output folder itself (kind, lock, clearing, state file) is ../octree_dir.py'
 client (``convert(..., client=...)``) distributed.py runs the same phases as tasks on workers.
 """
 
-from ..octree_dir import ConvertError, OutputExistsError
-from .converter import ConvertResult, _Converter, convert
-from .options import DEFAULT_MAX_LEAF, FORMATS, parse_memory
-from .partition import plan_groups as _plan_groups  # the names tests use
-from .partition import plan_partitions as _plan_partitions
+from __future__ import annotations
+
+# Imported on first use (PEP 562): the phases' modules define numba kernels (gigapoint/lod/__init__.py
+# loads this package at once, so that ``gigapoint.lod.convert`` stays the function).
+_LAZY = {
+    "ConvertError": ("octree_dir", "ConvertError"),
+    "OutputExistsError": ("octree_dir", "OutputExistsError"),
+    "ConvertResult": ("convert.converter", "ConvertResult"),
+    "_Converter": ("convert.converter", "_Converter"),
+    "convert": ("convert.converter", "convert"),
+    "DEFAULT_MAX_LEAF": ("convert.options", "DEFAULT_MAX_LEAF"),
+    "FORMATS": ("convert.options", "FORMATS"),
+    "parse_memory": ("convert.options", "parse_memory"),
+    "_plan_groups": ("convert.partition", "plan_groups"),  # the names tests use
+    "_plan_partitions": ("convert.partition", "plan_partitions"),
+}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        module, attr = _LAZY[name]
+        return getattr(importlib.import_module(f"gigapoint.lod.{module}"), attr)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "DEFAULT_MAX_LEAF",

@@ -22,7 +22,8 @@ from ...io.registry import is_supported_name
 from ...io.thin import thin_spacing
 from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
-from ..copc_write import check_copc_output, is_copc_name
+from ..copc_write import check_copc_output
+from ..kinds import is_copc_name
 from ..octree_dir import STOPPED_BY_INPUT, STOPPED_RESUMES, ConvertError
 from ..progress import NullProgress, RichProgress
 from .in_memory import InMemoryPhases

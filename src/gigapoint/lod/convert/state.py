@@ -21,8 +21,8 @@ import numpy as np
 from ...atomic import same_file
 from ...errors import InputError
 from ...io import URL_LIKE, expand_paths, file_url_path, shown_url
-from ..copc_write import work_dir as copc_work_dir
 from ..ept import ept_location
+from ..kinds import work_dir as copc_work_dir
 from ..octree_dir import OctreeDir, OutputExistsError
 from .options import BYTES_PER_POINT_BUILD, MAX_PARTITION_POINTS, RUNTIME_BYTES
 

@@ -30,7 +30,7 @@ from ...io.registry import reader_for
 from ...io.thin import Thinning
 from ...io.write import POINT_FILE_SUFFIXES, check_point_file_output, source_crs_records, write_points
 from ..build import valid_bounds
-from ..copc_write import is_copc_name
+from ..kinds import is_copc_name
 from .facts import input_facts
 from .read import _skipped_if_empty
 
