@@ -47,8 +47,9 @@ _registry.register_dataset_folder(_is_octree)
 
 # the subpackage loaded now (cheap: its names are lazy), so that no later import of it makes
 # ``gigapoint.render`` the package: it is the function (``_LAZY``), as it was
-from . import render as _render_package  # noqa: F401
+import importlib as _importlib
 
+_importlib.import_module(f"{__name__}.render")  # (``from . import render`` would ask __getattr__ for the function)
 del globals()["render"]  # (the import bound the package to the name)
 
 __version__ = "0.1.0"

@@ -132,5 +132,3 @@ def open_cloud(
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
     with Progress(*columns, console=Console(stderr=True), transient=True) as bar:
         return build((lambda: chunks(bar)) if chunked else chunks(bar))
-
-

@@ -41,8 +41,9 @@ def __getattr__(name):
 
 # the subpackage loaded now (cheap: its names are lazy), so that no later import of it makes
 # ``gigapoint.lod.convert`` the package: it is the function (``_LAZY``), as it was
-from . import convert as _convert_package  # noqa: F401
+import importlib as _importlib
 
+_importlib.import_module(f"{__name__}.convert")  # (``from . import convert`` would ask __getattr__ for the function)
 del globals()["convert"]  # (the import bound the package to the name)
 
 
