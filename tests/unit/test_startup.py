@@ -109,3 +109,21 @@ def test_the_compile_watch_listens_from_numbas_import_on():
         "assert event._registered['numba:compile'] == []\n"
     )
     _imports("-c", code)
+
+
+def test_a_command_line_imports_its_command_module_alone():
+    """``gigapoint info`` registers info's module alone (render's, view's, bench's... took
+    ~0.1-0.2 s); ``--help`` every one, as app.py's COMMAND_MODULES says where each is."""
+    got, _ = _imports("info", "--help")
+    assert {m for m in got["gigapoint"] if m.endswith("_cmd")} == {"gigapoint.cli.info_cmd"}
+    got, out = _imports("--help")
+    assert {m for m in got["gigapoint"] if m.endswith("_cmd")} == {"gigapoint.cli." + m for m in ("bench_cmd", "compile_cmd", "convert_cmd", "info_cmd", "render_cmd", "section_cmd", "tile_cmd", "view_cmd")}
+    code = (
+        "import typer\n"
+        "from gigapoint.cli import app, commands\n"
+        "from gigapoint.cli.app import COMMAND_MODULES\n"
+        "registered = {c.name or c.callback.__name__: c.callback.__module__.rsplit('.', 1)[-1] for c in app.registered_commands}\n"
+        "assert registered == COMMAND_MODULES, registered\n"
+        "assert list(typer.main.get_command(app).commands) == list(COMMAND_MODULES)\n"
+    )
+    _imports("-c", code)

@@ -2,7 +2,8 @@
 
 Each implements the Backend and Passes contracts of gigapoint.render.backend and is
 registered there by name; importing this package imports neither backend module (``auto``
-loads a class only when it tries it). ``gigapoint`` imports this package on start.
+loads a class only when it tries it). ``gigapoint`` imports this package at the first
+lookup of a backend (gigapoint/__init__.py's wiring, core/hooks.py).
 """
 
 from __future__ import annotations

@@ -40,15 +40,21 @@ def _compile_watch():
     return watching(err_console())
 
 
+def _skip_blas_check() -> None:
+    from ..core.threads import skip_blas_check
+
+    skip_blas_check()
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``gigapoint`` script."""
     from ..core import hooks
-    from ..core.threads import skip_blas_check
-    from . import commands  # noqa: F401  (registers the commands)
+    from .app import register_commands
 
+    register_commands(sys.argv[1:] if argv is None else argv)  # the command's module alone (every one's for --help)
     # no command's kernel uses a BLAS: scipy.linalg stays unimported (0.26 s); once numba is
     # imported (a command that runs no kernel, --help or info, imports none)
-    hooks.on_numba_import(skip_blas_check)
+    hooks.on_numba_import(_skip_blas_check)
 
     warnings.showwarning = _show_warning
     warnings.simplefilter("default", GigapointWarning)

@@ -89,3 +89,29 @@ def prefer_passive_wait() -> None:
     71/103 ms spinning (docs/benchmarks.md). Renders and benchmarks keep numba's default (a quiet
     host draws ~5 % faster spinning)."""
     os.environ.setdefault("OMP_WAIT_POLICY", "passive")
+
+
+#: each command's module (cli/<module>.py registers it on ``app``), in the order ``--help`` lists them
+COMMAND_MODULES = {
+    "bench": "bench_cmd",
+    "compile": "compile_cmd",
+    "convert": "convert_cmd",
+    "info": "info_cmd",
+    "render": "render_cmd",
+    "demo": "render_cmd",
+    "section": "section_cmd",
+    "tile": "tile_cmd",
+    "view": "view_cmd",
+}
+
+
+def register_commands(argv: list[str] | None = None) -> None:
+    """Import the module of the command ``argv`` names (its first word not an option), so that
+    it registers on ``app``; every command's where it names none (``--help``, a mistyped one:
+    typer lists them, or suggests one). ``gigapoint info`` imported render's, view's, bench's...
+    modules too, ~0.1-0.2 s of its start-up. ``argv`` None: every command's (cli/commands.py)."""
+    import importlib
+
+    name = next((a for a in argv if not a.startswith("-")), None) if argv is not None else None
+    for module in [COMMAND_MODULES[name]] if name in COMMAND_MODULES else dict.fromkeys(COMMAND_MODULES.values()):
+        importlib.import_module(f"{__package__}.{module}")

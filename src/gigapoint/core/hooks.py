@@ -19,7 +19,6 @@ This module imports nothing of numba's.
 
 from __future__ import annotations
 
-import importlib.abc
 import importlib.util
 import sys
 import threading
@@ -31,8 +30,9 @@ _lock = threading.RLock()
 _wired = False
 
 
-class _Loader(importlib.abc.Loader):
-    """numba's own loader, then the set-ups (as soon as numba's package has executed)."""
+class _Loader:
+    """numba's own loader, then the set-ups (as soon as numba's package has executed). (Not
+    importlib.abc's classes: their import takes ~15 ms; the import system asks for these methods.)"""
 
     def __init__(self, loader) -> None:
         self._loader = loader
@@ -48,7 +48,7 @@ class _Loader(importlib.abc.Loader):
         return getattr(self._loader, name)
 
 
-class _NumbaFinder(importlib.abc.MetaPathFinder):
+class _NumbaFinder:
     """Finds numba as the other finders do, with a loader that runs the set-ups after it."""
 
     def find_spec(self, fullname, path, target=None):
