@@ -5,7 +5,6 @@ from __future__ import annotations
 from .core import hooks as _hooks
 from .errors import GigapointError, GigapointWarning
 from .io import registry as _registry
-from .io._base import headers_once as _headers_once
 
 
 def _set_up_numba() -> None:
@@ -131,7 +130,6 @@ def _flat_paths(paths) -> tuple:
     return flat
 
 
-@_headers_once()  # one operation: its steps (patterns, folders, headers) each read once, the loader's thread too
 def open(*paths, progressive: bool = False, **options):
     """Read one or more files or directories (LAS/LAZ/PLY/E57/XYZ/XYZRGB/TXT/CSV/PTS/ASC/NPY/NPZ) into one PointCloud.
 
@@ -158,6 +156,13 @@ def open(*paths, progressive: bool = False, **options):
     ``gigapoint.section`` draws); a point must pass all those given.
 
     Paths may also come as one list or tuple: ``gp.open([a, b])`` is ``gp.open(a, b)``."""
+    from .io._base import headers_once
+
+    with headers_once():  # one operation: its steps (patterns, folders, headers) each read once, the loader's thread too
+        return _open(paths, progressive, options)
+
+
+def _open(paths: tuple, progressive: bool, options: dict):
     from .errors import InputError, check_switch
     from .io import lone_match
     from .io.filters import point_filter

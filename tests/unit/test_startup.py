@@ -20,7 +20,7 @@ else:
     from gigapoint.cli import main
     rc = main(argv)
 mods = sorted(sys.modules)
-print(json.dumps({"rc": rc, "numba": [m for m in mods if m.split(".")[0] in ("numba", "llvmlite")], "gigapoint": [m for m in mods if m.startswith("gigapoint")]}))
+print(json.dumps({"rc": rc, "numba": [m for m in mods if m.split(".")[0] in ("numba", "llvmlite")], "gigapoint": [m for m in mods if m.startswith("gigapoint")], "numpy": "numpy" in mods}))
 """
 
 
@@ -38,8 +38,9 @@ def test_help_version_and_info_of_a_las_file_import_no_numba(autzen_path):
         assert got["rc"] == 0, (argv, out)
         assert got["numba"] == [], argv
         assert not {"gigapoint.core.cloud", "gigapoint.io.las_kernels", "gigapoint.lod.store", "gigapoint.render.renderer"} & set(got["gigapoint"]), argv
-    _, out = _imports("--version")
+    got, out = _imports("--version")
     assert out == "gigapoint 0.1.0"
+    assert not got["numpy"] and not [m for m in got["gigapoint"] if m.endswith("_cmd")]  # no command's module
     got, out = _imports("info", str(autzen_path))
     assert "points:      110,000" in out and "LAZ 1.2, point format 3" in out  # the header, read by laspy alone
     assert "bounds min:  636001.76, 848935.20, 406.26 (header)" in out
@@ -49,7 +50,7 @@ def test_import_gigapoint_imports_no_numba_and_its_api_loads_on_use():
     """``import gigapoint`` imports no kernel; the public names are there when used (PEP 562),
     ``gp.render`` stays the function and ``gp.convert`` too, whatever imported their packages."""
     got, _ = _imports("-c", "import gigapoint")
-    assert got["numba"] == []
+    assert got["numba"] == [] and not got["numpy"]
     code = (
         "import sys, gigapoint as gp, gigapoint.render.renderer, gigapoint.lod.convert.tiles\n"
         "from gigapoint.lod import convert\n"

@@ -108,10 +108,12 @@ COMMAND_MODULES = {
 def register_commands(argv: list[str] | None = None) -> None:
     """Import the module of the command ``argv`` names (its first word not an option), so that
     it registers on ``app``; every command's where it names none (``--help``, a mistyped one:
-    typer lists them, or suggests one). ``gigapoint info`` imported render's, view's, bench's...
+    typer lists them, or suggests one), none for ``--version``. ``gigapoint info`` imported render's, view's, bench's...
     modules too, ~0.1-0.2 s of its start-up. ``argv`` None: every command's (cli/commands.py)."""
     import importlib
 
     name = next((a for a in argv if not a.startswith("-")), None) if argv is not None else None
+    if name is None and argv is not None and "--version" in argv and "--help" not in argv:
+        return  # (an eager option: the version printed, no command looked at)
     for module in [COMMAND_MODULES[name]] if name in COMMAND_MODULES else dict.fromkeys(COMMAND_MODULES.values()):
         importlib.import_module(f"{__package__}.{module}")

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import InputError, UnsupportedFormatError
-from ._base import Reader, check_file, fail, read_head, read_once
+
+if TYPE_CHECKING:  # (_base imports numpy: ``import gigapoint`` registers its octree test here without it)
+    from ._base import Reader
 
 _READERS: list[Reader] = []
 
@@ -55,6 +58,8 @@ def in_folder(path: Path) -> bool:
     shared = [r for r in readers() if any(name.endswith(s) for s in r.shared_suffixes)]
     if not shared:
         return True
+    from ._base import read_head, read_once
+
     try:
         head = read_once("head", path, lambda: read_head(path))
     except InputError:
@@ -71,6 +76,8 @@ def reader_by_name(name: str) -> Reader:
 
 def reader_for(path: Path | str) -> Reader:
     """The reader for a file: a magic number in its first bytes wins, then its suffix, then a content guess."""
+    from ._base import check_file, fail, read_head, read_once
+
     p = check_file(path)
     head = read_once("head", p, lambda: read_head(p))  # (an operation asks several times a file: headers_once)
     all_readers = readers()
