@@ -19,6 +19,7 @@ This module imports nothing of numba's.
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
 import sys
 import threading
@@ -104,3 +105,20 @@ def wire() -> None:
         todo = list(_WIRINGS)
     for wire_up in todo:
         wire_up()
+
+
+def lazy_names(package: str, names: dict, base: str | None = None):
+    """The module ``__getattr__`` (PEP 562) of ``package`` (its ``__name__``) that imports its
+    public names on first use: ``names`` maps each to the module defining it, relative to
+    ``base`` (default: the package), or to (that module, the name there). core, io, render and
+    lod load so: their modules define numba kernels, which ``import gigapoint`` and the CLI's
+    ``--help`` and ``info`` need none of."""
+
+    def __getattr__(name: str):
+        where = names.get(name)
+        if where is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        module, attr = (where, name) if isinstance(where, str) else where
+        return getattr(importlib.import_module(f"{base or package}.{module}"), attr)
+
+    return __getattr__

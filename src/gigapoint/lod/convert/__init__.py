@@ -47,13 +47,9 @@ _LAZY = {
 }
 
 
-def __getattr__(name):
-    if name in _LAZY:
-        import importlib
+from ...core.hooks import lazy_names
 
-        module, attr = _LAZY[name]
-        return getattr(importlib.import_module(f"gigapoint.lod.{module}"), attr)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_names(__name__, _LAZY, base="gigapoint.lod")  # (its names are in its modules and lod's)
 
 
 __all__ = [
