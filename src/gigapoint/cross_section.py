@@ -209,7 +209,7 @@ def _octree_section(octree, label: str, lane, classes, drop_classes) -> PointClo
     """The corridor's points of an LOD octree (named ``label`` in messages): those of the nodes
     whose boxes meet the corridor (lod/query.py), through the corridor's filter."""
     keep = point_filter(classes, drop_classes, where="section", corridor=lane)
-    kept = [chunk for _, points in points_meeting(octree, keep.meets) if len(chunk := keep.kept(points, label))]
+    kept = [chunk for points in points_meeting(octree, keep.meets) if len(chunk := keep.kept(points, label))]
     keep.check_passed(label)
     if not kept:  # (no node meets it: none read)
         raise EmptyCloudError(f"{label}: no point passes the filter ({keep.describe()}): no node of the octree meets the corridor")

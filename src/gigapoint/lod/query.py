@@ -27,7 +27,7 @@ from ..errors import InputError
 from .potree import PotreeCloud
 from .progressive import ProgressiveOctree
 from .store import OctreeCloud
-from .voxel_octree import VoxelOctree
+from .voxel_octree import DECODE_GROUP_POINTS, VoxelOctree
 
 #: Node boxes are widened by this share of the octree's cube before they are tested: writers
 #: choose cubes before rounding positions to their grid, so a point may lie a step outside its box
@@ -42,11 +42,12 @@ def is_octree(cloud) -> bool:
     return isinstance(cloud, (OctreeCloud, ProgressiveOctree))
 
 
-def points_meeting(cloud, meets: Meets) -> Iterator[tuple[int, PointChunk]]:
-    """(node index, its points with every attribute) of each node of the octree ``cloud`` whose box
-    meets the region (``meets``), at every level; leaves only for a ProgressiveOctree (its inner
-    nodes hold voxels). Every point of the region is in one of them, once. A one-line InputError
-    for an octree whose nodes hold copies of points."""
+def points_meeting(cloud, meets: Meets) -> Iterator[PointChunk]:
+    """The points (every attribute) of the nodes of the octree ``cloud`` whose boxes meet the
+    region (``meets``), at every level, a node a chunk (leaves only for a ProgressiveOctree, its
+    inner nodes holding voxels: its leaves' points a few leaves a chunk). Every point of the
+    region is in one of them, once. A one-line InputError for an octree whose nodes hold copies
+    of points."""
     if isinstance(cloud, ProgressiveOctree):
         yield from _progressive_leaves(cloud, meets)
         return
@@ -61,7 +62,7 @@ def points_meeting(cloud, meets: Meets) -> Iterator[tuple[int, PointChunk]]:
         yield from _voxel_nodes(cloud, meets)
         return
     for index in _meeting(cloud, meets, cloud.box_min, cloud.box_min + cloud.box_size).tolist():
-        yield index, _chunk(cloud.node_points(index))
+        yield _chunk(cloud.node_points(index))
 
 
 def _slack(cloud) -> float:
@@ -81,32 +82,22 @@ def _chunk(points: dict) -> PointChunk:
     return PointChunk(points["xyz"], rgba, attributes)
 
 
-def _voxel_nodes(cloud: VoxelOctree, meets: Meets) -> Iterator[tuple[int, PointChunk]]:
+def _voxel_nodes(cloud: VoxelOctree, meets: Meets) -> Iterator[PointChunk]:
     """A COPC/EPT octree's meeting nodes: the hierarchy pages of pending nodes that meet the region
     read first (a pending node's box is its cube), then the nodes fetched a group at a time, as a
     frame's are."""
     pad = _slack(cloud)
     cloud.read_pages_meeting(lambda lo, hi: meets(lo - pad, hi + pad))
     need = _meeting(cloud, meets, cloud.nodes["bbox_min"], cloud.nodes["bbox_max"]).tolist()
-    for index, points in cloud.points_of_nodes(need):
-        yield index, _chunk(points)
+    for _, points in cloud.points_of_nodes(need):
+        yield _chunk(points)
 
 
-def _progressive_leaves(cloud: ProgressiveOctree, meets: Meets) -> Iterator[tuple[int, PointChunk]]:
-    """A ProgressiveOctree's leaves that meet the region (once loading has finished: its error,
-    a memory limit reached, is raised), their points read under its lock."""
-    cloud.check_loaded("section it")
-    with cloud.lock:
-        leaves = cloud.leaves()
-        pad = BOX_SLACK * float(cloud.edge)
-        lo = cloud.cmin[leaves]
-        hi = lo + cloud.cedge[leaves][:, None]
-        found = []
-        for leaf in leaves[meets(lo - pad, hi + pad)].tolist():
-            slots = cloud.node_entries(leaf)
-            rgba = np.ascontiguousarray(cloud.pool.color[slots], np.uint32).view(np.uint8).reshape(-1, 4)
-            found.append((leaf, PointChunk(cloud.positions(slots), rgba, cloud.pool.attribute_rows(slots))))
-    yield from found
+def _progressive_leaves(cloud: ProgressiveOctree, meets: Meets) -> Iterator[PointChunk]:
+    """The points of a ProgressiveOctree's leaves that meet the region (``chunks``: once loading
+    has finished, its error raised), a chunk of up to DECODE_GROUP_POINTS points at a time."""
+    pad = BOX_SLACK * float(cloud.edge)
+    yield from cloud.chunks(DECODE_GROUP_POINTS, leaves_of=lambda leaves, lo, edge: meets(lo - pad, lo + edge[:, None] + pad))
 
 
 __all__ = ["BOX_SLACK", "is_octree", "points_meeting"]

@@ -1456,12 +1456,17 @@ class ProgressiveOctree:
         return self._decode(slots), take(pool.color, slots), {a: take(v, slots) for a, v in _stored_attributes(pool).items()}
 
     # ------------------------------------------------------------------ saving
-    def chunks(self, points_per_chunk: int = 1_000_000):
+    def chunks(self, points_per_chunk: int = 1_000_000, leaves_of=None):
         """The points of the leaves as PointChunks (positions, colours, attributes), leaf by leaf,
-        once loading has finished; one line of error if the octree changes meanwhile (``_check_unchanged``)."""
+        once loading has finished; one line of error if the octree changes meanwhile (``_check_unchanged``).
+        ``leaves_of``: those of the leaves it picks (given the leaves and their cubes' corners and
+        edges, it returns which: a tool reading a region, lod/query.py), not all."""
         self.check_loaded("read its points")
         with self.lock:
-            leaves = self.leaves().tolist()
+            leaves = self.leaves()
+            if leaves_of is not None:
+                leaves = leaves[leaves_of(leaves, self.cmin[leaves], self.cedge[leaves])]
+            leaves = leaves.tolist()
             stamp = self._stamp()
         parts, held = [], 0
         for node in leaves:
