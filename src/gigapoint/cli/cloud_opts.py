@@ -65,6 +65,23 @@ ClipOption = Annotated[
 ]
 
 
+ToCrsOption = Annotated[
+    str | None,
+    typer.Option(
+        "--to-crs",
+        metavar="CRS",
+        help="Reproject the points into this CRS (EPSG:32610, a WKT, a PROJ string) as they are read, from each file's own "
+        "(its header's, or --from-crs); --clip, --thin and tile sizes are then in its units. z is transformed only between CRSs "
+        "with a vertical part (compound ones, e.g. EPSG:2994+6360 to EPSG:32610+5703), else kept as it is (PROJ's rule). "
+        "Needs pyproj: pip install 'gigapoint\\[gis]'.",  # \[: rich would take [gis] for markup and drop it
+    ),
+]
+FromCrsOption = Annotated[
+    str | None,
+    typer.Option("--from-crs", metavar="CRS", help="With --to-crs: the CRS every input's coordinates are in, in place of what their headers name (for files naming none)."),
+]
+
+
 def filter_options(classes: str | None, drop_classes: str | None, clip: str | None, where: str):
     """The PointFilter (io/filters.py) of ``--classes``, ``--drop-classes`` and ``--clip``, None
     without them; a bad value a one-line error naming the option, before anything is read."""

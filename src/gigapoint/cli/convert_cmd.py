@@ -12,7 +12,16 @@ import typer
 
 from ..errors import InputError
 from .app import app
-from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, RecursiveOption, filter_options, thin_option
+from .cloud_opts import (
+    ClassesOption,
+    ClipOption,
+    DropClassesOption,
+    FromCrsOption,
+    RecursiveOption,
+    ToCrsOption,
+    filter_options,
+    thin_option,
+)
 from .settings_opts import named_option
 
 
@@ -59,6 +68,8 @@ def convert(
         help="Plain point file only: keep one point per occupied cube cell of this edge, in the files' units "
         "(cells from coordinate 0, so tiles thinned apart line up), the first point in the files' order, over all the files.",
     ),
+    to_crs: ToCrsOption = None,
+    from_crs: FromCrsOption = None,
 ) -> None:
     """Convert point clouds into a level-of-detail octree, out of core, resumable; or merge, filter and thin them into one .las, .laz or .ply file (-o ground.laz)."""
     from ..lod import ConvertError
@@ -98,10 +109,13 @@ def convert(
                 recursive=recursive,
                 **(point_filter.as_spec() if point_filter is not None else {}),
                 thin=spacing,
+                to_crs=to_crs,
+                from_crs=from_crs,
                 on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
             )
     except (ConvertError, InputError) as exc:  # 'max_leaf must be ...' named no option; thin=1e-09 said as typed
-        raise named_option(exc, {"max_leaf": "--max-leaf", f"convert: thin={spacing!r}": f"convert: --thin {thin}"}) from None
+        raise named_option(exc, {"max_leaf": "--max-leaf", f"convert: thin={spacing!r}": f"convert: --thin {thin}",
+                                 f"convert: to_crs={to_crs!r}": f"convert: --to-crs {to_crs}", f"convert: from_crs={from_crs!r}": f"convert: --from-crs {from_crs}"}) from None
     except (KeyboardInterrupt, SystemExit):  # (Ctrl+C, SIGTERM) a bare "interrupted" left the user to guess whether OUT was lost
         if not to_file and OctreeDir(watch).read_state() is not None:
             print(f"{watch}: kept unfinished; run the same convert command again to resume it", file=sys.stderr)

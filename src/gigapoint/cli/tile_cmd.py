@@ -11,7 +11,7 @@ import typer
 
 from ..errors import GigapointError
 from .app import app
-from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, RecursiveOption, filter_options
+from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, FromCrsOption, RecursiveOption, ToCrsOption, filter_options
 from .settings_opts import named_option
 
 
@@ -29,6 +29,8 @@ def tile(
     drop_classes: DropClassesOption = None,
     clip: ClipOption = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    to_crs: ToCrsOption = None,
+    from_crs: FromCrsOption = None,
 ) -> None:
     """Split point clouds into square LAS/LAZ tiles (lastile), read once, a chunk at a time; only tiles holding points are written."""
     from ..lod.convert.tiles import tile as run
@@ -45,11 +47,14 @@ def tile(
             overwrite=overwrite,
             recursive=recursive,
             progress=not quiet and sys.stderr.isatty(),
+            to_crs=to_crs,
+            from_crs=from_crs,
             **(point_filter.as_spec() if point_filter is not None else {}),
         )
     except GigapointError as exc:  # tile: size=0.0 said as the option
         raise named_option(exc, {f"tile: size={size!r}": f"tile: --size {size:g}", f"tile: buffer={buffer!r}": f"tile: --buffer {buffer:g}",
-                                 f"tile: format={format!r}": f"tile: --format {format}", f"tile: name={name!r}": f"tile: --name {name}"}) from None  # fmt: skip
+                                 f"tile: format={format!r}": f"tile: --format {format}", f"tile: name={name!r}": f"tile: --name {name}",
+                                 f"tile: to_crs={to_crs!r}": f"tile: --to-crs {to_crs}", f"tile: from_crs={from_crs!r}": f"tile: --from-crs {from_crs}"}) from None  # fmt: skip
     counts = np.array(result.points_per_tile)
     median = float(np.median(counts))
     buffered = f" (+{result.buffer_points:,} buffer points)" if result.buffer_points else ""

@@ -228,6 +228,11 @@ def _ply_type(path: Path, name: str, dt: np.dtype, lo: int, hi: int) -> str:
     raise InputError(f"{path}: attribute {name!r} holds {dt} values PLY cannot hold (it has no 64-bit integers), e.g. {far}; save as .las or .laz")
 
 
+def wkt_crs_records(wkt: str) -> list[tuple[bytes, int, bytes]]:
+    """The LAS 1.4 OGC WKT VLR of a CRS, to write into a LAS file (``write_points``' crs_records)."""
+    return [(PROJECTION_USER_ID, WKT_RECORD, wkt.encode() + b"\0")]
+
+
 def source_crs_records(files) -> list[tuple[bytes, int, bytes]]:
     """The CRS records of the first LAS/LAZ file of ``files`` that names one, to write into a LAS
     file: its WKT (a VLR's, or an EVLR's), else its GeoTIFF key records as they are (LAS 1.4 wants
@@ -238,7 +243,7 @@ def source_crs_records(files) -> list[tuple[bytes, int, bytes]]:
         return []
     wkt = wkt_of(hdr.vlrs + hdr.evlrs)
     if wkt:
-        return [(PROJECTION_USER_ID, WKT_RECORD, wkt.encode() + b"\0")]
+        return wkt_crs_records(wkt)
     return [(u, r, d) for u, r, d in hdr.vlrs if u == PROJECTION_USER_ID and r in _GEOTIFF_RECORDS]
 
 
@@ -284,4 +289,4 @@ def save_cloud(cloud: PointCloud, path, overwrite: bool = False, points_per_chun
 
 set_cloud_writer(save_cloud)
 
-__all__ = ["POINT_FILE_SUFFIXES", "check_point_file_output", "save_cloud", "source_crs_records", "write_points"]
+__all__ = ["POINT_FILE_SUFFIXES", "check_point_file_output", "save_cloud", "source_crs_records", "wkt_crs_records", "write_points"]

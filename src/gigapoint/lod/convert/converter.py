@@ -19,6 +19,7 @@ from ...io import with_subfolders
 from ...io._base import check_file, headers_once
 from ...io.filters import point_filter
 from ...io.registry import is_supported_name
+from ...io.reproject import Reprojection
 from ...io.thin import thin_spacing
 from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
@@ -227,6 +228,8 @@ def convert(
     drop_classes=None,
     clip=None,
     thin=None,
+    to_crs=None,
+    from_crs=None,
 ) -> ConvertResult:
     """Convert point cloud files (or a cloud, or an iterable of PointChunks) into an LOD octree directory ``out``.
 
@@ -275,6 +278,13 @@ def convert(
     ``thin`` (a plain point file only): the edge of cube cells on a grid anchored at coordinate
     0, in the inputs' units; one point is kept per occupied cell, the first in the inputs' order,
     over all of them (io/thin.py). The result's ``thinned_from`` counts the points before it.
+
+    ``to_crs`` (a plain point file only; needs pyproj: ``pip install 'gigapoint[gis]'``): the CRS
+    the points are moved into ('EPSG:32610', a WKT, a PROJ string), from each file's own (its
+    header's; ``from_crs`` for every file where given, and for files naming none), as they are read
+    (io/reproject.py): the filter's clip box and ``thin``'s cells are then in its coordinates. z is
+    transformed only between CRSs with a vertical part (compound ones), else kept (PROJ's rule).
+    The file names ``to_crs`` (a WKT VLR) and keeps the inputs' precision in its units.
     """
     check_switch("overwrite", overwrite, "convert")
     check_switch("recursive", recursive, "convert")
@@ -287,6 +297,9 @@ def convert(
     keep = point_filter(classes, drop_classes, clip, "convert")  # before anything is read
     thin_label = f"convert: thin={thin!r}"
     spacing = thin_spacing(thin, thin_label)
+    reprojection = None if to_crs is None else Reprojection(to_crs, from_crs, "convert")  # an unknown CRS: said before a point is read
+    if from_crs is not None and to_crs is None:
+        raise InputError(f"convert: from_crs={from_crs!r}: the CRS the inputs are in, for to_crs; give to_crs too")
     if keep is not None and not _are_paths(inputs):  # (a cloud's or chunks' points are not read here)
         raise InputError(f"convert: the filter ({keep.describe()}) applies to the points read from files; the inputs are a cloud or PointChunks")
     check_switch("progress", progress, "convert")  # "yes"/"no" were both true
@@ -302,12 +315,16 @@ def convert(
                           "upper_points": upper_points, "source_files": source_files, "on_ready": on_ready}  # fmt: skip
         out = Path(out)  # (a str was "'str' object has no attribute 'is_dir'")
         given = [option for option, value in octree_options.items() if value is not None]
+        if to_crs is not None and not _are_paths(inputs):
+            raise InputError("convert: to_crs reprojects the points read from files; the inputs are a cloud or PointChunks")
         if given:  # (each meant something of an octree only: none was ignored without a word)
             raise ConvertError(f"{out}: {', '.join(given)}: {'options' if len(given) > 1 else 'an option'} of an octree, not of a plain {out.suffix[1:].upper()} file")
         t0 = time.perf_counter()
         shown = RichProgress() if progress else NullProgress()
         try:
-            points, skipped, passed = write_point_file(inputs, out, keep, overwrite, chunk_size, shown, None if spacing is None else (spacing, thin_label))
+            points, skipped, passed = write_point_file(
+                inputs, out, keep, overwrite, chunk_size, shown, None if spacing is None else (spacing, thin_label), reprojection
+            )
         finally:
             shown.close()
         thinned_from = None if spacing is None else passed
@@ -322,6 +339,8 @@ def convert(
         raise ConvertError(f"--format: unknown format {format!r}; choose {' or '.join(FORMATS)}")
     if format != "copc" and out is not None and str(out) != "" and is_supported_name(out):  # -o scan.laz: a folder named so
         raise ConvertError(f"{out}: a {format} octree is a folder; name it without a point file's suffix, or write --format copc into a .copc.laz file")
+    if to_crs is not None:
+        raise ConvertError(f"{out}: --to-crs: an option of a plain .las, .laz or .ply file, or of tiles, not of a {format} octree")
     if spacing is not None:  # (an octree's inner nodes are its thinned levels; its leaves hold every point)
         raise ConvertError(f"{out}: --thin: an option of a plain .las, .laz or .ply file of the files' points, not of a {format} octree")
     if format == "copc" and out is not None and str(out) != "":

@@ -13,7 +13,8 @@ are 0 otherwise.
 
 Every tile is written as ``convert -o x.laz`` writes its one file (to_file.PointFiles): the
 first CRS named, a LAS grid holding every input's points exactly, the attributes all inputs
-have, colours as each file stored them.
+have, colours as each file stored them; ``to_crs``: their points moved into that CRS as they
+are read (io/reproject.py), so tiles, their size, buffer and clip box are in its coordinates.
 
 The inputs are read once, a chunk at a time; each chunk's points are bucketed by tile and
 appended to that tile's raw spill file (records of position, colour and attributes) in a
@@ -48,6 +49,7 @@ from ...core.cloud import check_valid_count
 from ...errors import GigapointWarning, InputError, check_switch, is_real, warn
 from ...io import with_subfolders
 from ...io.filters import point_filter
+from ...io.reproject import Reprojection
 from ...io.write import write_points
 from ..progress import NullProgress, RichProgress
 from .to_file import PointFiles
@@ -86,6 +88,8 @@ def tile(
     recursive: bool = False,
     chunk_size: int | None = None,
     progress: bool = False,
+    to_crs=None,
+    from_crs=None,
 ) -> TileResult:
     """Split the points of the files and folders ``inputs`` into square tiles of edge ``size`` (in
     the files' units, on a grid anchored at 0) written into the folder ``out`` as
@@ -93,6 +97,8 @@ def tile(
     stem, or ``out``'s name for several inputs. ``buffer``: each tile also holds the points within
     that distance of its square, flagged "overlap". ``classes``, ``drop_classes``, ``clip``: only
     the points passing them are tiled (as ``gp.open``'s); ``recursive=True``: folders' subfolders too.
+    ``to_crs`` (needs pyproj): the points are moved into that CRS first (from each file's own, or
+    ``from_crs``), as ``convert``'s: ``size``, ``buffer`` and ``clip`` are then in its units.
 
     ``out`` is made if missing; one holding LAS/LAZ files already is refused without
     ``overwrite``, which replaces the tiles of this run's names and leaves every other file.
@@ -113,11 +119,14 @@ def tile(
     if not isinstance(out, (str, os.PathLike)) or not os.fspath(out):
         raise InputError(f"tile: the output must be a folder's path, got {out!r}")
     keep = point_filter(classes, drop_classes, clip, "tile")
+    if from_crs is not None and to_crs is None:
+        raise InputError(f"tile: from_crs={from_crs!r}: the CRS the inputs are in, for to_crs; give to_crs too")
+    reprojection = None if to_crs is None else Reprojection(to_crs, from_crs, "tile")
     out = Path(out)
     _check_output_folder(out, overwrite)
     if recursive:
         inputs = with_subfolders([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
-    files = PointFiles(inputs, out, chunk_size)
+    files = PointFiles(inputs, out, chunk_size, reprojection=reprojection)
     name = name or (Path(files.files[0]).stem if len(files.files) == 1 else out.resolve().name)
     bounds = files.headers_bounds()
     if bounds is not None:  # a size in the wrong unit: refused before a point is read

@@ -7,7 +7,9 @@ The file is faithful to the inputs: the first LAS file's CRS, a LAS grid that ho
 input's points exactly (their finest scale, the first file's offset: facts.input_facts, which
 warns of files off it), colours as each file stored them (8-bit values or 16-bit ones), the
 attributes every file has (as gp.open keeps them). Invalid points (NaN, inf) are skipped with
-the usual warning. ``thin``: one point kept per occupied cell of that edge over the whole file
+the usual warning. ``reprojection`` (io/reproject.py: ``to_crs``): the points move into that CRS
+as they are read, before the filter and the thinning (a clip box and cells in the output's
+coordinates); the file then names that CRS and takes a grid of the inputs' precision in its units. ``thin``: one point kept per occupied cell of that edge over the whole file
 set, the first in the inputs' order (io/thin.py), after the filter."""
 
 from __future__ import annotations
@@ -27,8 +29,9 @@ from ...io.filters import PointFilter, filtered
 from ...io.las import LasReader, with_scan_angle
 from ...io.las_fields import las_grid
 from ...io.registry import reader_for
+from ...io.reproject import Reprojection, output_grid
 from ...io.thin import Thinning
-from ...io.write import POINT_FILE_SUFFIXES, check_point_file_output, source_crs_records, write_points
+from ...io.write import POINT_FILE_SUFFIXES, check_point_file_output, source_crs_records, wkt_crs_records, write_points
 from ..build import valid_bounds
 from ..kinds import is_copc_name
 from .facts import input_facts
@@ -46,24 +49,34 @@ class PointFiles:
     ``files`` (folders and patterns expanded), ``label`` (their name in messages), ``names``
     (the attributes in common), ``counts`` (the headers' point counts; None: not told),
     ``las_grid`` (the grid holding every LAS input's points, else None) and ``crs_records``
-    (the first CRS named; ``ply``: none). ``valid_chunks`` reads them, a chunk at a time."""
+    (the first CRS named; ``ply``: none). ``valid_chunks`` reads them, a chunk at a time.
+    ``reprojection``: their points moved into its CRS as they are read; the grid, the CRS records and
+    the headers' bounds are then the target CRS's (each file's CRS checked before a point is read)."""
 
-    def __init__(self, inputs, out: Path, chunk_size: int | None, ply: bool = False):
+    def __init__(self, inputs, out: Path, chunk_size: int | None, ply: bool = False, reprojection: Reprojection | None = None):
         self.files = expand_paths([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
         if any(same_file(out, f) for f in self.files):
             raise InputError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
         self.label = files_label(self.files)
         self.chunk_size = chunk_size or STREAM_CHUNK_SIZE
-        facts = input_facts(self.files, one_grid=True)  # the LAS grid; CRSs that differ, files off the grid: warned
+        self.reprojection = reprojection
+        if reprojection is not None:  # (CRSs that differ are what it is for; every point leaves its grid)
+            reprojection.check_files(self.files)
+        else:
+            facts = input_facts(self.files, one_grid=True)  # the LAS grid; CRSs that differ, files off the grid: warned
         self.one_angle = scan_angles_differ(self.files)
         self.names = _attributes_in_common(self.files, self.one_angle, self.chunk_size, out)
         self.counts = [reader_for(f).point_count(f) for f in self.files]
-        self.las_grid = None if ply else _las_inputs_grid(self.files, facts)
-        self.crs_records = [] if ply else source_crs_records(self.files)
+        if ply:
+            self.las_grid, self.crs_records = None, []
+        elif reprojection is not None:
+            self.las_grid, self.crs_records = output_grid(self.files, reprojection), wkt_crs_records(reprojection.target_wkt())
+        else:
+            self.las_grid, self.crs_records = _las_inputs_grid(self.files, facts), source_crs_records(self.files)
 
     def headers_bounds(self):
-        """(lo, hi) of the files' points as their headers tell; None where one tells none."""
-        return _headers_bounds(self.files, self.counts)
+        """(lo, hi) of the files' points as their headers tell (in the target CRS where reprojected); None where one tells none."""
+        return _headers_bounds(self.files, self.counts, self.reprojection)
 
     def valid_chunks(self, keep: PointFilter | None, progress, tally: dict):
         """(file, chunk) of every valid point (finite, within gigapoint's reach) that passes
@@ -73,8 +86,10 @@ class PointFiles:
         passing = keep.fresh() if keep is not None else None
         tally.update(points=0, skipped=0)
         for f in self.files:
-            read = with_scan_angle(read_chunks(f, self.chunk_size)) if self.one_angle else read_chunks(f, self.chunk_size)
-            for chunk in _skipped_if_empty(f, filtered(_told(read, progress), f, passing), len(self.files) > 1):
+            read = _told(with_scan_angle(read_chunks(f, self.chunk_size)) if self.one_angle else read_chunks(f, self.chunk_size), progress)
+            if self.reprojection is not None:  # (before the filter: a clip box is in the output's coordinates)
+                read = (self.reprojection.chunk(chunk, f) for chunk in read)
+            for chunk in _skipped_if_empty(f, filtered(read, f, passing), len(self.files) > 1):
                 valid = valid_bounds(chunk.xyz, MAX_ABS_COORDINATE)[0]
                 n = int(np.count_nonzero(valid))
                 rows = slice(None) if n == len(chunk) else valid
@@ -89,16 +104,20 @@ class PointFiles:
             check_valid_count(self.label, 0, tally["skipped"])
 
 
-def write_point_file(inputs, out: Path, keep: PointFilter | None, overwrite: bool, chunk_size: int | None, progress, thin: tuple[float, str] | None = None) -> tuple[int, int, int]:
+def write_point_file(
+    inputs, out: Path, keep: PointFilter | None, overwrite: bool, chunk_size: int | None, progress, thin: tuple[float, str] | None = None,
+    reprojection: Reprojection | None = None,
+) -> tuple[int, int, int]:
     """Write the points of the files and folders ``inputs`` that pass ``keep`` into ``out``, a
     chunk at a time (``progress``: lod/progress.py's, told of the points read); ``thin``:
     (spacing, the option as its errors name it), one point of each occupied cell kept. An
     existing ``out`` without ``overwrite`` is refused before anything is read, as is an ``out``
-    that is one of the inputs, or cells too small for the headers' bounds. Returns (points
+    that is one of the inputs, or cells too small for the headers' bounds; ``reprojection``: the
+    points moved into its CRS (PointFiles). Returns (points
     written, invalid points skipped, valid points that passed the filter: those thinned)."""
     check_point_file_output(out, overwrite)
     ply = out.suffix.lower() == ".ply"
-    inputs = PointFiles(inputs, out, chunk_size, ply)
+    inputs = PointFiles(inputs, out, chunk_size, ply, reprojection)
     bounds = None
     if thin is not None:  # cells too small for the headers' bounds: refused here, before a point is read
         bounds = inputs.headers_bounds()
@@ -116,9 +135,10 @@ def write_point_file(inputs, out: Path, keep: PointFilter | None, overwrite: boo
     return written, tally["skipped"], tally["points"]
 
 
-def _headers_bounds(files, counts):
-    """(lo, hi) of the files' points as their headers tell (those with points); None where one
-    tells none (or an unfilled or impossible box: all 0, min above max, not finite)."""
+def _headers_bounds(files, counts, reprojection: Reprojection | None = None):
+    """(lo, hi) of the files' points as their headers tell (those with points), each file's box
+    in ``reprojection``'s CRS where given; None where one tells none (or an unfilled or impossible
+    box: all 0, min above max, not finite)."""
     boxes = []
     for f, count in zip(files, counts):
         if count == 0:
@@ -127,7 +147,7 @@ def _headers_bounds(files, counts):
         lo, hi = (np.asarray(b, np.float64) for b in box) if box is not None else (np.zeros(3), np.zeros(3))
         if not (np.all(np.isfinite(lo) & np.isfinite(hi) & (lo <= hi)) and (lo.any() or hi.any())):
             return None
-        boxes.append((lo, hi))
+        boxes.append((lo, hi) if reprojection is None else reprojection.box(f, lo, hi))
     return (np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)) if boxes else None
 
 

@@ -1,0 +1,209 @@
+"""Points read from files moved into another coordinate reference system, a chunk at a time
+(PDAL's filters.reprojection, LAStools' las2las -target_epsg): ``convert -o out.laz --to-crs``
+and ``tile --to-crs`` (lod/convert/to_file.py's PointFiles), through pyproj (PROJ), an optional
+dependency (``pip install 'gigapoint[gis]'``).
+
+Each file's CRS is the one its header names (its WKT, else its GeoTIFF keys: LasHeader.crs), or
+``from_crs`` for every file where given (PDAL's in_srs). x and y are transformed with
+``always_xy`` (east, north; longitude, latitude). z follows PROJ's rule: it is transformed only
+where both CRSs have a vertical part (compound CRSs such as 'EPSG:2994+6360'); between 2D CRSs
+PROJ passes it through as it is, so a feet -> metres transform of x and y leaves z in feet unless
+the vertical CRSs say otherwise (warned of: the output header's 2D CRS says nothing of z).
+
+The output's LAS grid keeps the inputs' precision in the new units (one step of the source's grid,
+as far as it moves the points, rounded down to a power of ten: 0.01 ft -> 0.001 m) on an offset
+that is a round number below the points (``output_grid``); the output's bounds are those of the
+headers' boxes transformed (a grid of samples over each box: projections bend straight edges)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..core.chunk import PointChunk
+from ..core.coords import MAX_ABS_COORDINATE
+from ..errors import GigapointWarning, InputError, first_line, warn
+from .las import LasReader, read_las_header
+from .registry import reader_for
+
+#: samples along each horizontal edge of a header's box (a grid of them over it, at both heights)
+#: whose transforms bound the box's: a projection turns straight edges into curves
+BOX_SAMPLES = 21
+#: steps of the output grid between its offset and the points' minimum, at most: the offset a
+#: round number (a power of ten times the step) that is near the points
+OFFSET_STEPS = 10**6
+
+
+def pyproj_module(option: str):
+    """pyproj, or a one-line InputError naming ``option`` where it is not installed."""
+    try:
+        import pyproj
+    except ImportError:
+        raise InputError(f"{option}: reprojecting needs pyproj (pip install 'gigapoint[gis]')") from None
+    return pyproj
+
+
+def parse_crs(value, option: str):
+    """``value`` ('EPSG:32610', a WKT, a PROJ string) as a pyproj CRS, or a one-line InputError
+    starting with ``option`` (e.g. "convert: to_crs='EPSG:0'"): checked before a point is read."""
+    pyproj = pyproj_module(option)
+    if not isinstance(value, str) or not value.strip():
+        raise InputError(f"{option}: a CRS is a string such as 'EPSG:32610', a WKT or a PROJ string")
+    try:
+        return pyproj.CRS.from_user_input(value)
+    except pyproj.exceptions.CRSError as exc:
+        raise InputError(f"{option}: not a CRS PROJ knows ({first_line(exc)})") from None
+
+
+def round_offset(lo: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """A round offset at or below ``lo`` for a grid of ``step``: a multiple of step x 10^6, a power
+    of ten (1000 m for a millimetre grid), rounded to the step's decimals (no 0.30000000000000004)."""
+    unit = step * OFFSET_STEPS
+    decimals = np.maximum(0, -np.floor(np.log10(step))).astype(int)
+    return np.array([round(math.floor(v / u) * u, d) for v, u, d in zip(lo, unit, decimals)])
+
+
+def _metres_across(crs) -> float | None:
+    """Metres in the unit of a projected CRS's x (a compound one's horizontal part's); None for a
+    geographic one (degrees: no length)."""
+    axis = crs.axis_info[0] if crs.axis_info else None
+    return None if axis is None or crs.is_geographic or axis.unit_name.startswith("deg") else axis.unit_conversion_factor
+
+
+def power_of_ten_below(value: float) -> float:
+    """The power of ten at or below ``value`` (0.003048 -> 0.001; 0.01 -> 0.01)."""
+    exponent = math.floor(math.log10(value) + 1e-9)  # (log10(0.001) is -2.9999999999999996)
+    return 10.0**exponent if exponent >= 0 else 1 / 10.0**-exponent
+
+
+class Reprojection:
+    """The move of every input file's points into ``to_crs`` (``from_crs``: the CRS of every file,
+    in place of what their headers name). ``where``: the operation ('convert', 'tile') its errors
+    start with, and how they name the options (``to_crs=``, ``from_crs=``). Bad CRSs, a file naming
+    none without ``from_crs``: one-line InputErrors, before a point is read (``check_files``)."""
+
+    def __init__(self, to_crs, from_crs=None, where: str = "convert"):
+        self.where = where
+        self.target = parse_crs(to_crs, f"{where}: to_crs={to_crs!r}")
+        self.given_source = None if from_crs is None else parse_crs(from_crs, f"{where}: from_crs={from_crs!r}")
+        self._by_crs: dict[str, object] = {}  # transformers, by their source CRS's text
+        self._by_file: dict[str, object] = {}
+        self._z_warned = False
+
+    def check_files(self, files) -> None:
+        """Each file's transformer made: a file without a CRS, or one PROJ cannot read, is an error now."""
+        for f in files:
+            self.transformer(f)
+
+    def transformer(self, path):
+        """The pyproj Transformer from ``path``'s CRS to the target (one per distinct CRS)."""
+        key = str(path)
+        if key not in self._by_file:
+            self._by_file[key] = self._transformer_of(path)
+        return self._by_file[key]
+
+    def _transformer_of(self, path):
+        import pyproj
+
+        text = "" if self.given_source is not None else self._file_crs(path)  # ("": every file's, given)
+        if text not in self._by_crs:
+            source = self.given_source if self.given_source is not None else parse_crs(text, f"{path}: its CRS {text[:60]!r}")
+            self._by_crs[text] = pyproj.Transformer.from_crs(source, self.target, always_xy=True)
+        return self._by_crs[text]
+
+    def _file_crs(self, path) -> str:
+        """The CRS ``path``'s header names (WKT or 'EPSG:n'); a one-line InputError where it names none."""
+        text = read_las_header(path).crs() if isinstance(reader_for(path), LasReader) else None
+        if not text:
+            raise InputError(f"{path}: names no CRS to reproject from; give the CRS its coordinates are in ({self.where}: from_crs=, --from-crs)")
+        return text
+
+    def transformed(self, xyz: np.ndarray, path) -> np.ndarray:
+        """``xyz`` (n x 3, float64) in the target CRS: a new array. A valid point that is not
+        finite once moved (outside the projection's domain) is a one-line InputError naming
+        ``path``; invalid points (NaN, inf, beyond gigapoint's reach) come out as NaN, for the
+        readers' rule to skip them (1e30 would come out finite, as if it were a point)."""
+        out, lost = self._moved(xyz, path)
+        if lost.any():
+            at = xyz[np.argmax(lost)]
+            raise InputError(
+                f"{path}: {int(lost.sum()):,} points lie outside the domain of the transform to {self.target.name} "
+                f"(e.g. {at[0]:.15g}, {at[1]:.15g}, {at[2]:.15g}): nothing was written; are its coordinates in the CRS it is read in?"
+            )
+        return out
+
+    def _moved(self, xyz: np.ndarray, path) -> tuple[np.ndarray, np.ndarray]:
+        """(``xyz`` in the target CRS, invalid ones NaN; whether each valid point came out not finite)."""
+        x, y, z = (np.array(xyz[:, k], np.float64) for k in range(3))
+        self.transformer(path).transform(x, y, z, inplace=True)
+        out = np.column_stack([x, y, z])
+        valid = (np.isfinite(xyz) & (np.abs(xyz) <= MAX_ABS_COORDINATE)).all(axis=1)
+        out[~valid] = np.nan
+        return out, valid & ~np.isfinite(out).all(axis=1)
+
+    def chunk(self, chunk: PointChunk, path) -> PointChunk:
+        """``chunk`` with its positions in the target CRS (its colours and attributes as they are)."""
+        return PointChunk(self.transformed(chunk.xyz, path), chunk.rgba, chunk.attributes, color_bits=chunk.color_bits)
+
+    def box(self, path, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+        """The bounds in the target CRS of ``path``'s box ``lo``..``hi``: those of a grid of samples
+        over it at its lowest and highest z (its corners and edges among them); samples outside the
+        transform's domain are left out (the points there, if any, are refused as they are read)."""
+        xs, ys = (np.linspace(lo[k], hi[k], BOX_SAMPLES) for k in (0, 1))
+        gx, gy, gz = np.meshgrid(xs, ys, [lo[2], hi[2]])
+        moved, _ = self._moved(np.column_stack([gx.ravel(), gy.ravel(), gz.ravel()]), path)
+        moved = moved[np.isfinite(moved).all(axis=1)]
+        return (moved.min(axis=0), moved.max(axis=0)) if len(moved) else (np.zeros(3), np.zeros(3))
+
+    def step(self, path, lo, hi, scale) -> np.ndarray:
+        """The output grid's step of ``path``'s points (its grid's ``scale``) per axis: how far one
+        step of its grid moves them in the target CRS, at its box's middle, rounded down to a power
+        of ten; x and y alike (the finer of the two). Warns once where z is kept as it is while x and
+        y change length unit (between 2D CRSs: PROJ keeps z)."""
+        mid = (np.asarray(lo, np.float64) + np.asarray(hi, np.float64)) / 2
+        scale = np.asarray(scale, np.float64)
+        moved = self.transformed(np.array([mid, mid + [scale[0], 0, 0], mid + [0, scale[1], 0], mid + [0, 0, scale[2]]]), path)
+        across = min(float(np.hypot(*(moved[k, :2] - moved[0, :2]))) for k in (1, 2))
+        up = abs(moved[3, 2] - moved[0, 2])
+        units = [_metres_across(c) for c in (self.transformer(path).source_crs, self.target)]
+        if math.isclose(up, scale[2], rel_tol=1e-9) and None not in units and not math.isclose(*units, rel_tol=1e-9):
+            self._warn_z_kept(path)
+        return np.array([power_of_ten_below(across)] * 2 + [power_of_ten_below(up)])
+
+    def _warn_z_kept(self, path) -> None:
+        if self._z_warned:
+            return
+        self._z_warned = True
+        warn(
+            f"{path}: z is kept as it is, in its own unit, while x and y change unit: neither CRS has a vertical part, and PROJ "
+            f"transforms heights only between vertical CRSs; give compound CRSs (e.g. from 'EPSG:2994+6360' to 'EPSG:32610+5703') to convert z",
+            GigapointWarning,
+        )
+
+    def target_wkt(self) -> str:
+        """The target CRS as the output's WKT VLR holds it (OGC WKT1, as LAS 1.4 says)."""
+        return self.target.to_wkt("WKT1_GDAL")
+
+
+def output_grid(files, reprojection: Reprojection):
+    """(scale, offset) of the LAS grid of the reprojected points of LAS ``files``: the finest step
+    of theirs in the target CRS (``Reprojection.step``), a round offset below their headers' boxes
+    transformed; None where a file is no LAS file (a grid is then made from the points' bounds, a
+    pass over them)."""
+    from .las_fields import las_grid
+
+    if not all(isinstance(reader_for(f), LasReader) for f in files):
+        return None
+    boxes, steps = [], []
+    for f in files:
+        header = reader_for(f).header(f)
+        lo, hi = (np.asarray(b, np.float64) for b in header["bounds"])
+        boxes.append(reprojection.box(f, lo, hi))
+        steps.append(reprojection.step(f, lo, hi, np.abs(np.asarray(header["scale"], np.float64))))
+    lo, hi = np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
+    step = np.min(steps, axis=0)
+    return las_grid(lo, hi, step, round_offset(lo, step))
+
+
+__all__ = ["Reprojection", "output_grid", "parse_crs", "power_of_ten_below", "round_offset"]

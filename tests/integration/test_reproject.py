@@ -1,0 +1,160 @@
+"""``convert -o out.laz --to-crs`` / ``tile --to-crs`` (io/reproject.py): every point moved as
+pyproj moves it, onto a grid of the source's precision in the new units, the output naming the
+target CRS; bad CRSs and files naming none refused in one line before a point is read."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+import laspy
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.errors import GigapointWarning, InputError
+from gigapoint.io import files_crs
+from gigapoint.io.crs import crs_identity
+from gigapoint.io.las import read_las_header
+from gigapoint.lod import ConvertError
+
+pyproj = pytest.importorskip("pyproj")
+
+UTM = "EPSG:32610"
+ATTRIBUTES = ("intensity", "classification", "return_number", "gps_time", "point_source_id", "red", "green", "blue")
+
+
+def _pyproj_moved(path, to_crs, from_crs=None):
+    """The points of ``path`` as pyproj moves them (always_xy), x, y, z as three arrays."""
+    las = laspy.read(str(path))
+    source = pyproj.CRS.from_user_input(from_crs or read_las_header(path).crs())
+    move = pyproj.Transformer.from_crs(source, to_crs, always_xy=True)
+    return move.transform(np.asarray(las.x), np.asarray(las.y), np.asarray(las.z))
+
+
+def _plain_tile(path, xyz, scale=0.01):
+    """A LAS 1.2 file of ``xyz`` naming no CRS."""
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = [scale] * 3, [0.0] * 3
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = np.asarray(xyz, np.float64).T
+    las.write(str(path))
+    return path
+
+
+def test_autzen_to_utm_moves_every_point_as_pyproj_does_and_names_utm(cli, autzen_path, tmp_path):
+    out = tmp_path / "utm.laz"
+    rc, stdout, err = cli("convert", autzen_path, "-o", out, "--to-crs", UTM, "-q")
+    assert rc == 0, err
+    assert err.startswith(f"warning: {autzen_path}: z is kept as it is, in its own unit, while x and y change unit: neither CRS has a vertical part")
+    assert stdout.startswith(f"{out}: 110,000 points (laz), ")
+    written, source = laspy.read(str(out)), laspy.read(str(autzen_path))
+    # 0.01 ft -> 0.001 m across; z kept as it is (2D CRSs: PROJ's rule), on its own grid
+    assert list(written.header.scales) == [0.001, 0.001, 0.01]
+    assert list(written.header.offsets) == [494_000.0, 4_877_000.0, 0.0]
+    x, y, z = _pyproj_moved(autzen_path, UTM)
+    assert np.abs(np.asarray(written.x) - x).max() <= 0.0005 + 1e-9
+    assert np.abs(np.asarray(written.y) - y).max() <= 0.0005 + 1e-9
+    assert np.array_equal(np.asarray(written.z), np.asarray(source.z))
+    assert 494_000 < x.min() < x.max() < 495_000 and 4_877_000 < y.min() < y.max() < 4_878_000  # (metres of UTM 10N: Eugene, Oregon)
+    for field in ATTRIBUTES:
+        assert np.array_equal(np.asarray(written[field]), np.asarray(source[field])), field
+    assert crs_identity(files_crs([out])) == UTM  # gigapoint's own reading of its WKT VLR
+    assert written.header.parse_crs() == pyproj.CRS.from_epsg(32610)
+    rc, stdout, _ = cli("info", out)
+    assert "  crs:         EPSG:32610" in stdout.splitlines()
+
+
+def test_a_round_trip_back_to_the_source_crs_lands_within_two_of_its_steps(autzen_path, tmp_path):
+    utm, back = tmp_path / "utm.las", tmp_path / "back.las"
+    with pytest.warns(GigapointWarning, match="z is kept"):
+        gp.convert(autzen_path, utm, to_crs=UTM)
+    with pytest.warns(GigapointWarning, match="z is kept"):
+        gp.convert(utm, back, to_crs=read_las_header(autzen_path).crs())
+    source, returned = laspy.read(str(autzen_path)), laspy.read(str(back))
+    assert list(returned.header.scales) == [0.001, 0.001, 0.01]  # (0.001 m is 0.0033 ft: its power of ten below)
+    for axis in "xyz":
+        assert np.abs(np.asarray(returned[axis]) - np.asarray(source[axis])).max() <= 2 * 0.01, axis
+    assert read_las_header(back).crs().startswith('PROJCS["NAD_1983_HARN_Lambert_Conformal_Conic"')
+
+
+def test_compound_crss_move_z_too_feet_to_metres(autzen_path, tmp_path, recwarn):
+    out = tmp_path / "utm_navd88_m.las"
+    source_crs, target_crs = "EPSG:2994+6360", "EPSG:32610+5703"  # Oregon GIC Lambert (ft) + NAVD88 (US ft) -> UTM 10N + NAVD88 (m)
+    gp.convert(autzen_path, out, to_crs=target_crs, from_crs=source_crs)
+    assert not [w for w in recwarn if issubclass(w.category, GigapointWarning)]  # (z changes unit with x and y: nothing to warn of)
+    written, source = laspy.read(str(out)), laspy.read(str(autzen_path))
+    x, y, z = _pyproj_moved(autzen_path, target_crs, source_crs)
+    assert list(written.header.scales) == [0.001, 0.001, 0.001]  # 0.01 US ft of z: 0.003 m
+    assert np.abs(np.asarray(written.z) - z).max() <= 0.0005 + 1e-9
+    assert np.allclose(np.asarray(written.z), np.asarray(source.z) * 1200 / 3937, atol=0.0006)  # (the same vertical datum: the unit alone)
+    assert np.abs(np.asarray(written.x) - x).max() <= 0.0005 + 1e-9
+    assert pyproj.CRS.from_wkt(read_las_header(out).crs()) == pyproj.CRS.from_user_input(target_crs)
+
+
+def test_a_file_naming_no_crs_is_refused_unless_from_crs_says_it(tmp_path, recwarn):
+    plain = _plain_tile(tmp_path / "plain.las", [[-123.0, 44.0, 100.0], [-122.9, 44.1, 110.0]], scale=1e-7)
+    with pytest.raises(InputError, match=r"^.*plain\.las: names no CRS to reproject from; give the CRS its coordinates are in \(convert: from_crs=, --from-crs\)$"):
+        gp.convert(plain, tmp_path / "utm.laz", to_crs=UTM)
+    assert not (tmp_path / "utm.laz").exists()
+    gp.convert(plain, tmp_path / "utm.laz", to_crs=UTM, from_crs="EPSG:4326")
+    x, y, _ = _pyproj_moved(plain, UTM, "EPSG:4326")
+    written = laspy.read(str(tmp_path / "utm.laz"))
+    assert np.abs(np.asarray(written.x) - x).max() <= 0.0005 + 1e-9 and np.abs(np.asarray(written.y) - y).max() <= 0.0005 + 1e-9
+    assert not [w for w in recwarn if issubclass(w.category, GigapointWarning)]  # (degrees to metres: z, in metres, is no unit off)
+    assert list(written.header.scales)[:2] == [0.001, 0.001]  # 1e-7 degree (~1 cm east-west here): its power of ten below in metres
+
+
+def test_the_cli_names_the_file_without_a_crs(cli, tmp_path):
+    plain = _plain_tile(tmp_path / "plain.las", [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    rc, _, err = cli("convert", plain, "-o", tmp_path / "out.laz", "--to-crs", UTM, "-q")
+    assert (rc, err.strip()) == (1, f"error: {plain}: names no CRS to reproject from; give the CRS its coordinates are in (convert: from_crs=, --from-crs)")
+
+
+def test_an_unknown_crs_is_refused_before_a_point_is_read(cli, autzen_path, tmp_path, monkeypatch):
+    def no_read(*args):
+        raise AssertionError("read")
+
+    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.to_file"), "read_chunks", no_read)
+    rc, _, err = cli("convert", autzen_path, "-o", tmp_path / "out.laz", "--to-crs", "EPSG:999999", "-q")
+    assert rc == 1 and err.startswith("error: convert: --to-crs EPSG:999999: not a CRS PROJ knows (") and len(err.strip().splitlines()) == 1
+    with pytest.raises(InputError, match=r"^tile: from_crs='nowhere': not a CRS PROJ knows \("):
+        gp.tile(autzen_path, tmp_path / "tiles", 100, to_crs=UTM, from_crs="nowhere")
+    assert not (tmp_path / "out.laz").exists() and not (tmp_path / "tiles").exists()
+
+
+def test_points_outside_the_projections_domain_are_refused_naming_the_file(tmp_path):
+    beyond = _plain_tile(tmp_path / "beyond.las", [[10.0, 45.0, 0.0], [10.0, 95.0, 0.0], [10.0, 46.0, 0.0]])  # latitude 95: no Mercator y
+    with pytest.raises(InputError, match=r"beyond\.las: 1 points lie outside the domain of the transform to WGS 84 / Pseudo-Mercator \(e\.g\. 10, 95, 0\): nothing was written"):
+        gp.convert(beyond, tmp_path / "out.laz", to_crs="EPSG:3857", from_crs="EPSG:4326")
+    assert not (tmp_path / "out.laz").exists()
+
+
+def test_without_pyproj_the_option_says_how_to_install_it(autzen_path, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyproj", None)  # (import pyproj raises ImportError)
+    with pytest.raises(InputError, match=r"^convert: to_crs='EPSG:32610': reprojecting needs pyproj \(pip install 'gigapoint\[gis\]'\)$"):
+        gp.convert(autzen_path, tmp_path / "out.laz", to_crs=UTM)
+
+
+def test_to_crs_is_refused_with_an_octree_and_from_crs_without_to_crs(autzen_path, tmp_path):
+    with pytest.raises(ConvertError, match=r"--to-crs: an option of a plain \.las, \.laz or \.ply file, or of tiles, not of a gigapoint octree$"):
+        gp.convert(autzen_path, tmp_path / "octree", to_crs=UTM)
+    with pytest.raises(InputError, match=r"^convert: from_crs='EPSG:2994': the CRS the inputs are in, for to_crs; give to_crs too$"):
+        gp.convert(autzen_path, tmp_path / "out.laz", from_crs="EPSG:2994")
+
+
+def test_tiles_in_utm_hold_their_squares_points_in_metres(cli, autzen_path, tmp_path):
+    rc, stdout, err = cli("tile", autzen_path, "--size", 100, "-o", tmp_path / "tiles", "--to-crs", UTM, "-q")
+    assert rc == 0 and "z is kept" in err, err
+    tiles = sorted((tmp_path / "tiles").glob("*.laz"))
+    x, y, _ = _pyproj_moved(autzen_path, UTM)
+    expected = {(int(i), int(j)) for i, j in zip(np.floor(x / 100), np.floor(y / 100))}
+    assert {tuple(int(v) // 100 for v in p.stem.split("_")[-2:]) for p in tiles} == expected  # (named after UTM corners)
+    total = 0
+    for p in tiles:
+        las = laspy.read(str(p))
+        xmin, ymin = (float(v) for v in p.stem.split("_")[-2:])
+        assert xmin - 0.0005 <= las.x.min() and las.x.max() < xmin + 100 + 0.0005 and ymin - 0.0005 <= las.y.min() and las.y.max() < ymin + 100 + 0.0005
+        assert crs_identity(files_crs([p])) == UTM
+        total += len(las.points)
+    assert total == 110_000
