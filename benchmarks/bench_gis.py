@@ -2,7 +2,7 @@
 time of the commands a user types, alternating gigapoint and PDAL round by round, medians of R
 rounds, peak RSS of both, and a check that each pair's outputs agree.
 
-    .venv/bin/python benchmarks/bench_gis.py [--points 20M] [--rounds 3] [--formats las,laz] [--jobs filter,thin,tile,stats,dtm] [--input FILE.las] [--workdir DIR] [--pdal pdal]
+    .venv/bin/python benchmarks/bench_gis.py [--points 20M] [--rounds 3] [--formats las,laz] [--jobs filter,thin,tile,stats,dtm,copy,reproject] [--input FILE.las] [--workdir DIR] [--pdal pdal]
 
 Smoke check (under a minute with PDAL installed): ``--points 200000 --rounds 1``.
 
@@ -26,6 +26,14 @@ file (its LAZ copy written beside it in the work folder). The pairs (``{in}`` th
             pdal pipeline dtm.json: the file, filters.range Classification[2:2], writers.gdal
             (output_type max, resolution 1, binmode: a cell's points only, float32) on
             gigapoint's grid (edges on whole multiples of the gsd: origin_x/origin_y/width/height)
+    copy    gigapoint convert {in} -o copy.las
+            pdal translate {in} copy.las
+            (the baseline of reproject: the same read and write without the transform)
+    reproject  gigapoint convert {in} -o utm.las --from-crs EPSG:2992 --to-crs EPSG:32610
+            pdal translate {in} utm.las reprojection --filters.reprojection.in_srs=EPSG:2992
+                 --filters.reprojection.out_srs=EPSG:32610
+            (the demo town, which names no CRS, taken as Oregon Lambert in feet, as autzen is,
+            into UTM 10N metres; the check: the largest distance between the two files' points)
 
 Each command runs once on a 20 000-point file first (numba's cache filled: JIT compile time
 excluded; PDAL's libraries loaded once), then R rounds of the pairs in turn, gigapoint first in
@@ -53,7 +61,9 @@ from bench_convert import write_las, write_laz  # a sibling script: its folder i
 from gigapoint.bench import run_measured
 from gigapoint.bench.report import cpu_model, parse_count
 
-JOBS = ("filter", "thin", "tile", "stats", "dtm")
+JOBS = ("filter", "thin", "tile", "stats", "dtm", "copy", "reproject")
+#: reproject's CRSs: Oregon Lambert (NAD83, international feet; autzen's) -> WGS 84 / UTM 10N (metres)
+FROM_CRS, TO_CRS = "EPSG:2992", "EPSG:32610"
 GSD = 1.0
 TILE = 500.0
 SPACING = 1.0
@@ -122,6 +132,14 @@ def commands(job: str, inp: Path, out: Path, pdal: str, grid) -> tuple[list[str]
         return (
             gp_cmd("render", inp, "-o", out / "gp_ortho.png", "--classes", "2", "--gsd", GSD, "--depth-out", out / "gp_dtm.tif", *DTM_POINTS),
             [pdal, "pipeline", str(spec)],
+        )
+    if job == "copy":
+        return gp_cmd("convert", inp, "-o", out / "gp_copy.las", "--quiet"), [pdal, "translate", str(inp), str(out / "pdal_copy.las")]
+    if job == "reproject":
+        return (
+            gp_cmd("convert", inp, "-o", out / "gp_utm.las", "--from-crs", FROM_CRS, "--to-crs", TO_CRS, "--quiet"),
+            [pdal, "translate", str(inp), str(out / "pdal_utm.las"), "reprojection",
+             f"--filters.reprojection.in_srs={FROM_CRS}", f"--filters.reprojection.out_srs={TO_CRS}"],
         )
     raise ValueError(job)
 
@@ -205,7 +223,27 @@ def check(job: str, out: Path, gp_stdout: bytes, pdal_stdout: bytes, n: int) -> 
         # (a point on a row's edge: gigapoint's cell above it, PDAL's below; a few in 10^4 cells)
         r["agree"] = bool(r.get("same_grid") and r["gigapoint_only"] + r["pdal_only"] <= 0.002 * r["both"] and r["equal_within_1mm"] > 0.99)
         return r
+    if job == "copy":
+        a, b = las_count(out / "gp_copy.las"), las_count(out / "pdal_copy.las")
+        return {"gigapoint_points": a, "pdal_points": b, "agree": a == b == n}
+    if job == "reproject":
+        return compare_points(out / "gp_utm.las", out / "pdal_utm.las", n)
     raise ValueError(job)
+
+
+def compare_points(a: Path, b: Path, n: int) -> dict:
+    """Both files' points in order: the largest distance between the same point in each (PDAL
+    writes a 0.01 grid by default: up to 0.005 per axis of it), and the grids they chose."""
+    import laspy
+
+    with laspy.open(str(a)) as fa, laspy.open(str(b)) as fb:
+        far = 0.0
+        for pa, pb in zip(fa.chunk_iterator(1_000_000), fb.chunk_iterator(1_000_000)):
+            d = np.stack([np.asarray(pa[k]) - np.asarray(pb[k]) for k in "xyz"], axis=1)
+            far = max(far, float(np.abs(d).max()))
+        scales = [list(fa.header.scales), list(fb.header.scales)]
+        counts = [int(fa.header.point_count), int(fb.header.point_count)]
+    return {"points": counts, "max_abs_diff": round(far, 4), "scales": scales, "agree": counts == [n, n] and far <= 0.01}
 
 
 WARM = """
@@ -252,6 +290,8 @@ def main(argv=None) -> int:
         raise SystemExit(f"unknown jobs {sorted(bad)}; choose from {JOBS}")
     if shutil.which(a.pdal) is None:
         raise SystemExit(f"no PDAL at {a.pdal!r} (--pdal PATH)")
+    if "reproject" in jobs and "filters.reprojection" not in os.popen(f"{a.pdal} --drivers 2>/dev/null").read():
+        raise SystemExit(f"{a.pdal} has no filters.reprojection (a build without PROJ); leave out the reproject job (--jobs)")
     work = Path(a.workdir) if a.workdir else Path(tempfile.mkdtemp(prefix="bench_gis_"))
     work.mkdir(parents=True, exist_ok=True)
     try:

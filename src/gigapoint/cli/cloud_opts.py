@@ -59,7 +59,7 @@ ClipOption = Annotated[
     typer.Option(
         "--clip",
         metavar="XMIN,YMIN,XMAX,YMAX",
-        help="Read only the points inside this box, in the files' coordinates, bounds included: "
+        help="Read only the points inside this box, in the files' coordinates (with --to-crs: the output's), bounds included: "
         "xmin,ymin,xmax,ymax (any z) or xmin,ymin,zmin,xmax,ymax,zmax.",
     ),
 ]

@@ -65,7 +65,7 @@ def convert(
         None,
         "--thin",
         metavar="SPACING",
-        help="Plain point file only: keep one point per occupied cube cell of this edge, in the files' units "
+        help="Plain point file only: keep one point per occupied cube cell of this edge, in the files' units (with --to-crs: the output's) "
         "(cells from coordinate 0, so tiles thinned apart line up), the first point in the files' order, over all the files.",
     ),
     to_crs: ToCrsOption = None,
