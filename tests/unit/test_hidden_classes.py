@@ -104,6 +104,21 @@ def test_an_octree_leaves_hidden_classes_out_of_the_nodes_it_loads(tmp_path, fmt
         assert not gp.render(tree, TOP, hidden_classes=(2, 6), **FIXED)[..., :3].any()
 
 
+def test_an_octree_spends_the_budget_hidden_classes_leave_on_deeper_nodes(tmp_path):
+    xyz, rgb, _ = two_classes(spacing=0.25)  # 80 000 points: a root of 15 601, two nodes of ~20 800, leaves of ~2 850
+    classes = np.where(np.random.default_rng(1).permutation(len(xyz)) % 2 == 0, 2, 7).astype(np.uint8)  # half class 7, everywhere
+    gp.convert(gp.from_arrays(xyz, rgb, classification=classes, scale=0.01, colors="rgba"), tmp_path / "tree", max_leaf=2_000)
+    tree = gp.open(tmp_path / "tree")
+    budget = {"point_budget": 40_000, "lod_threshold_px": 0, **FIXED}
+    shown = gp.render_frame(tree, TOP, **budget).stats
+    assert (shown.batches_rendered, shown.points_processed) == (2, 36_353)  # the root and one node below
+    hidden = gp.render_frame(tree, TOP, hidden_classes=(7,), **budget)
+    # by their whole counts the same two nodes, half their points drawn (18 125); by their kept
+    # points nine nodes, within the budget of points drawn
+    assert (hidden.stats.batches_rendered, hidden.stats.points_processed) == (9, 37_156)
+    assert {hidden.point_info(int(i))["classification"] for i in np.unique(hidden.index[hidden.index >= 0])} == {2}
+
+
 CAMERA = "eye=636590,849216,1100 target=636590,849216,460 up=0,1,0"  # straight down over the survey
 
 

@@ -32,6 +32,9 @@ from .keys import key_cube, morton_position
 from .octree_dir import FORMAT_NAME, FORMAT_VERSION_WORDS, FORMAT_VERSIONS, POINT_ARRAYS, OctreeDir
 
 ARENA_CHUNK = 4096  # points per arena slot (a node spans ceil(count / ARENA_CHUNK) slots)
+# selections a frame with hidden classes makes at most: each weighs the nodes the last one
+# loaded by their kept points (half the points hidden: the budget's unknown part halves a round)
+KEPT_ROUNDS = 8
 
 
 # --------------------------------------------------------------------------- selection kernels
@@ -77,9 +80,13 @@ def _heap_place(hp, hi, n, j, p, item):
 
 
 @njit(cache=True)
-def select_nodes(rows, box_min, box_size, counts, children, width, height, near, far, threshold, budget, out_ids, out_size, foveation=0.0):
+def select_nodes(rows, box_min, box_size, counts, costs, children, width, height, near, far, threshold, budget, out_ids, out_size, foveation=0.0):
     """Largest-projected-first traversal: visible nodes of ≥ threshold px (the root always, and
     the children of a node without points), within budget.
+
+    ``costs``: what each node takes of the budget (its points drawn: ``counts``, or fewer where
+    hidden classes leave some out); ``counts`` tells the nodes without points (a node whose
+    points are all hidden is no reason to descend below the threshold).
 
     ``foveation`` f > 0 raises the threshold away from the image centre: threshold · (1 + f·d),
     d = 0 at the centre .. 1 in the corners (the 2022 paper's 100/200/300 px is f = 2).
@@ -87,7 +94,7 @@ def select_nodes(rows, box_min, box_size, counts, children, width, height, near,
     ``box_min``/``box_size`` (k, 3): each node's cube clipped to the cloud's bounds (it holds
     every point of the node's subtree, without the cube's empty space).
 
-    Returns (number of selected nodes written to out_ids/out_size, their point total).
+    Returns (number of selected nodes written to out_ids/out_size, their total cost).
     """
     n = counts.shape[0]
     hp = np.empty(n, np.float64)
@@ -107,12 +114,12 @@ def select_nodes(rows, box_min, box_size, counts, children, width, height, near,
         hn -= 1
         _heap_place(hp, hi, hn, 0, hp[hn], hi[hn])  # pop: the last entry fills the top's hole
         cnt = counts[node]
-        if total + cnt > budget and k > 0:
+        if total + costs[node] > budget and k > 0:
             break
         out_ids[k] = node
         out_size[k] = size
         k += 1
-        total += cnt
+        total += costs[node]
         for d in range(8):
             ch = children[node, d]
             if ch < 0:
@@ -337,6 +344,20 @@ class Arena:
         self.resident.clear()
         self.hidden = hidden
 
+    def kept_counts(self, counts: np.ndarray, hidden: tuple[int, ...]) -> np.ndarray:
+        """The nodes' ``counts`` as a selection hiding classes ``hidden`` should weigh them: a
+        node resident without them counts the points it kept, the others their whole counts
+        (what they keep is known once loaded)."""
+        if not hidden or hidden != self.hidden or not self.resident:
+            return counts
+        nodes = np.fromiter(self.resident, np.int64, len(self.resident))
+        slot_lists = list(self.resident.values())
+        owner = np.repeat(np.arange(len(nodes)), [len(s) for s in slot_lists])
+        kept = np.bincount(owner, self.batches["count"][np.concatenate(slot_lists)], minlength=len(nodes))
+        out = counts.copy()
+        out[nodes] = kept.astype(np.int64)
+        return out
+
     def _load(self, nd: int, cloud: OctreeCloud, slots: np.ndarray, count: int) -> int:
         """Node ``nd``'s points into ``slots``, in the arena's layout, but those of ``hidden``
         classes; returns how many it loaded."""
@@ -509,11 +530,13 @@ class OctreeCloud:
 
     # -- Renderable (core/renderable.py)
     def select_nodes(self, view: View, settings) -> tuple[np.ndarray, np.ndarray, int]:
-        """(node indices, projected cube sizes, point total) chosen for a view."""
+        """(node indices, projected cube sizes, point total) chosen for a view; with
+        ``hidden_classes``, the nodes resident without them count the points they kept."""
         out_ids = np.empty(len(self.keys), np.int64)
         out_size = np.empty(len(self.keys), np.float64)
+        costs = self.counts if self.arena is None else self.arena.kept_counts(self.counts, settings.hidden_classes)
         k, total = select_nodes(
-            view.rows, self.box_min, self.box_size, self.counts, self.children, float(view.width), float(view.height),
+            view.rows, self.box_min, self.box_size, self.counts, costs, self.children, float(view.width), float(view.height),
             float(view.near), float(view.far), float(settings.lod_threshold_px), int(settings.point_budget), out_ids, out_size,
             float(settings.lod_foveation),
         )  # fmt: skip
@@ -541,18 +564,15 @@ class OctreeCloud:
     def prepare(self, view: View, settings) -> DrawList:
         """The frame's nodes made resident in the arena, one batch per arena slot."""
         check_classified(self.name, self.attribute_names, settings.hidden_classes)
-        ids, _, total = self.select_nodes(view, settings)  # (by the nodes' whole counts: hidden classes draw fewer)
-        ids = ids[self.nodes["count"][ids] > 0]
-        if self.arena is None or self.arena.n_points < total:
-            cap = max(total, min(int(settings.point_budget), self.n_points)) * 5 // 4 + 64 * ARENA_CHUNK
-            self.arena = self.new_arena(min(cap, self.n_points + (len(self.keys) + 1) * ARENA_CHUNK))
+        ids = self._resident_selection(view, settings)
+        for _ in range(KEPT_ROUNDS if settings.hidden_classes else 0):
+            # the nodes just loaded count their kept points from now on, not their whole counts:
+            # the budget they leave takes deeper nodes, until a selection loads none
+            loads = self.arena.loads
+            ids = self._resident_selection(view, settings)
+            if self.arena.loads == loads:
+                break
         arena = self.arena
-        arena.show(settings.hidden_classes)  # (another set: every node loaded again)
-        if not arena.ensure(ids, self):
-            # a selection of many small nodes that wastes slots: grow and retry once
-            self.arena = arena = self.new_arena(arena.n_points * 2 + (len(ids) + 1) * ARENA_CHUNK)
-            arena.show(settings.hidden_classes)
-            arena.ensure(ids, self)
         recs = self.nodes[ids]
         _, size = visible_and_size(view.rows, recs["bbox_min"], recs["bbox_max"], view.width, view.height, view.near, view.far)
         bits = precision_for(size, settings.precision_threshold_px) if settings.adaptive_precision else np.full(len(ids), 30, np.int32)
@@ -573,6 +593,25 @@ class OctreeCloud:
                 self._node_spacing = np.full(len(self.counts), np.nan)  # each node's own, measured when first drawn finest
             spacing = finest_spacing(arena, sel.ids, owner, ids, self.children, self.counts, self._union_gain, self._node_spacing)
         return DrawList(arena, sel, len(self.nodes), nodes=ids, spacing=spacing)
+
+    def _resident_selection(self, view: View, settings) -> np.ndarray:
+        """The nodes a view selects (those with points), made resident in the arena (one made or
+        grown where they do not fit)."""
+        if self.arena is not None:
+            self.arena.show(settings.hidden_classes)  # (another set: every node loaded again)
+        ids, _, total = self.select_nodes(view, settings)
+        ids = ids[self.nodes["count"][ids] > 0]
+        if self.arena is None or self.arena.n_points < total:
+            cap = max(total, min(int(settings.point_budget), self.n_points)) * 5 // 4 + 64 * ARENA_CHUNK
+            self.arena = self.new_arena(min(cap, self.n_points + (len(self.keys) + 1) * ARENA_CHUNK))
+        arena = self.arena
+        arena.show(settings.hidden_classes)
+        if not arena.ensure(ids, self):
+            # a selection of many small nodes that wastes slots: grow and retry once
+            self.arena = arena = self.new_arena(arena.n_points * 2 + (len(ids) + 1) * ARENA_CHUNK)
+            arena.show(settings.hidden_classes)
+            arena.ensure(ids, self)
+        return ids
 
     def prepare_views(self, views, settings) -> MultiViewDrawList | None:
         """None: each view selects its own nodes, so stereo draws the eyes one by one."""
