@@ -350,3 +350,18 @@ def test_chunks_a_frame_no_longer_draws_give_their_slots_to_those_it_draws(monke
     assert pools[0] is pools[1] is pools[2]  # not grown: the right half took back the slots it lacked, from the left half
     free = pools[0].n_chunks - len(left)
     assert set(again) < set(left) and len(again) == len(right) - free  # those filtered again, the rest kept
+
+
+def test_a_progressive_octrees_memory_counts_the_chunks_it_keeps_without_hidden_classes():
+    tree = grown()
+    before = tree.memory()
+    assert before["kept"] == 0
+    frame = gp.render_frame(tree, TOP, hidden_classes=(6,), **EVERY)
+    kept = frame.points  # KeptChunks' pool: the 10 000 entries of class 2, a low word and a colour each at least
+    mem = tree.memory()
+    assert mem["kept"] >= sum(kept.memory().values()) >= 8 * 10_000
+    assert tree.nbytes - sum(before.values()) == mem["kept"]
+    gp.render(tree, TOP, **EVERY)  # shown again: kept, so hiding them again filters nothing
+    assert tree.memory() == mem
+    tree.close()
+    assert tree.memory()["kept"] == 0

@@ -156,6 +156,16 @@ class Pool:
     def n_streams(self) -> int:
         return len(self.ext) // self.stream
 
+    def memory(self) -> dict[str, int]:
+        """Bytes per component: positions (low words and streams), colours, attributes and batch records."""
+        def size(*arrays) -> int:
+            return int(sum(a.nbytes for a in arrays))
+
+        return {
+            "positions": size(self.low, self.ext), "color": size(self.color), "attributes": self.attributes.nbytes,
+            "batches": size(self.batches, self.packing, self.chunk_next, self.chunk_node, self.batch_version),
+        }  # fmt: skip
+
     def grown(self, n_chunks: int, n_streams: int) -> Pool:
         """A pool of ``n_chunks`` chunks and ``n_streams`` streams holding this one's contents, or
         its first ones when smaller (new arrays: caches of the old ones are dropped by identity)."""
@@ -262,6 +272,13 @@ class KeptChunks:
         self.chunk_in = np.empty(0, np.int64)  # per slot: the octree chunk whose entries it holds (-1: free)
         self.drawn_at = np.empty(0, np.int64)  # per slot: the frame that last drew it
         self.frames = 0
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes it holds: its pool and its records of chunks and slots (kept while nothing is
+        hidden, so that hiding the same classes again filters nothing)."""
+        records = self.slot_of, self.filtered_at, self.chunk_in, self.drawn_at
+        return sum(a.nbytes for a in records) + (sum(self.pool.memory().values()) if self.pool is not None else 0)
 
     def slots(self, source: Pool, chunks: np.ndarray, hidden: tuple[int, ...]) -> np.ndarray:
         """The slot holding each of the octree's ``chunks`` (of its pool ``source``) without its
@@ -961,22 +978,18 @@ class ProgressiveOctree:
     def memory(self) -> dict[str, int]:
         """Bytes per component: the pool's positions (low words and streams), colours, attributes
         and batch records (points and voxels, with the room kept for growth), the voxels' colour
-        sums and lookup table (build state, none once trimmed), and the nodes."""
+        sums and lookup table (build state, none once trimmed), the nodes, and the copies of
+        chunks without hidden classes that frames drew (``kept``: KeptChunks, until closed)."""
         def size(*arrays) -> int:
             return int(sum(a.nbytes for a in arrays))
 
         pool = self.pool
-        m = {"positions": 0, "color": 0, "attributes": 0, "batches": 0}
-        if pool is not None:
-            m = {
-                "positions": size(pool.low, pool.ext), "color": size(pool.color),
-                "attributes": pool.attributes.nbytes,
-                "batches": size(pool.batches, pool.packing, pool.chunk_next, pool.chunk_node, pool.batch_version),
-            }  # fmt: skip
+        m = pool.memory() if pool is not None else {"positions": 0, "color": 0, "attributes": 0, "batches": 0}
         m["voxels"] = size(self.vox_slot, self.vox_sum, self._hkeys, self._hvals)
         m["work"] = self._work.nbytes  # insertions' work arrays kept (address space: the rows touched are the largest batch's)
         m["nodes"] = size(self.key, self.level, self.parent, self.children, self.leaf, self.count, self.first_chunk, self.last_chunk,
                           self.list_count, self.cmin, self.cedge, self.grid_sample, self._free)  # fmt: skip
+        m["kept"] = self._kept.nbytes
         return m
 
     def __enter__(self) -> Self:
