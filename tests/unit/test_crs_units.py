@@ -196,3 +196,18 @@ def test_real_pyprojs_units_of_epsg_codes():
     us_foot = {"name": "US survey foot", "symbol": "US ft", "metres": pytest.approx(US_FOOT, rel=1e-12)}
     assert crs_units("EPSG:2927")["horizontal"] == us_foot
     assert crs_units("EPSG:4979")["vertical"] == METRE and crs_units("EPSG:4978") == UNKNOWN
+
+
+def test_render_gsd_reads_the_header_naming_the_crs_once(cli, tmp_path, autzen_path, monkeypatch):
+    from PIL import Image
+
+    from gigapoint.io import crs
+
+    read, first = [], crs.first_crs_header
+    monkeypatch.setattr(crs, "first_crs_header", lambda files: read.append(list(files)) or first(files))
+    rc, _, err = cli("render", autzen_path, "-o", tmp_path / "ortho.tif", "--gsd", 20)
+    assert rc == 0, err
+    assert read == [[autzen_path]]  # its CRS and its units from one read (there were two)
+    keys = Image.open(tmp_path / "ortho.tif").tag_v2[34735]  # GeoKeyDirectory: 4 shorts of header, then (key, where, count, value)
+    entries = {keys[i]: keys[i + 3] for i in range(4, len(keys), 4)}
+    assert entries[3076] == 9002  # ProjLinearUnitsGeoKey: foot, the units that read told

@@ -353,9 +353,9 @@ def render(
     if gsd is not None:
         cam = top_down_camera(cloud, gsd, output)
         settings = settings.replace(adaptive_precision=False)  # 30-bit positions: exact pixels and heights, whatever a batch's size
-        from ..lod.reader import cloud_crs, cloud_units
+        from ..lod.reader import cloud_crs_units
 
-        crs, units = cloud_crs(cloud), cloud_units(cloud)
+        crs, units = cloud_crs_units(cloud)
         wkt = crs_wkt(crs)
     else:
         cam = make_camera(cloud, width, height, view, camera, projection, fov)

@@ -172,8 +172,13 @@ def _epsg_units(code: int) -> tuple[dict | None, dict | None]:
 def files_units(files) -> dict:
     """``crs_units`` of the first LAS/LAZ file of ``files`` that names a CRS (its WKT, else its
     GeoTIFF keys); all unknown without one."""
+    return files_crs_units(files)[1]
+
+
+def files_crs_units(files) -> tuple[str | None, dict]:
+    """(``files_crs``, ``files_units``) of ``files`` from one read of the header naming the CRS."""
     hdr = first_crs_header(files)
-    return crs_units(hdr.crs(), geokeys(hdr.vlrs)) if hdr else crs_units(None)
+    return (hdr.crs(), crs_units(hdr.crs(), geokeys(hdr.vlrs))) if hdr else (None, crs_units(None))
 
 
 def files_crs(files) -> str | None:

@@ -273,7 +273,12 @@ def cloud_crs(cloud) -> str | None:
 def cloud_units(cloud) -> dict:
     """io.crs_units of the cloud's CRS (a file's GeoTIFF unit keys too): what lengths measured in
     its coordinates are in; unknown for any other."""
-    from ..io import crs_units, files_units
+    return cloud_crs_units(cloud)[1]
+
+
+def cloud_crs_units(cloud) -> tuple[str | None, dict]:
+    """(``cloud_crs``, ``cloud_units``) of a cloud, from one read of a file's header naming the CRS."""
+    from ..io import crs_units, files_crs_units
 
     crs, files = _crs_source(cloud)
-    return files_units(files) if files else crs_units(crs)
+    return files_crs_units(files) if files else (crs, crs_units(crs))
