@@ -1,6 +1,7 @@
 """Contour lines of a heights raster (render/contours.py) and `render --gsd --contours INTERVAL
---contours-out lines.geojson`: polylines in world coordinates at every level, none across a
-hole, every 5th an index contour, written as GeoJSON in the cloud's CRS."""
+[--contours-base B] [--contours-out lines.geojson] [--contours-on-image]`: polylines in world
+coordinates at every level, none across a hole, every 5th an index contour, written as GeoJSON in
+the cloud's CRS and/or drawn onto the orthophoto where the GeoJSON's lines run."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import pytest
 from PIL import Image
 
 from gigapoint.errors import GigapointError
-from gigapoint.render.contours import contour_lines, contours_geojson, write_contours
+from gigapoint.render.contours import LINE_RGB, contour_lines, contours_geojson, draw_contours, write_contours
 
 AUTZEN = "/work/shared/data/autzen_trim.laz"
 SIZE = 2.0  # the grid's pixel size
@@ -100,6 +101,25 @@ def test_too_many_levels_is_a_one_line_error():
     assert len(contour_lines(PLANE, WORLD_FILE, 0.1)) == 710  # 34.5 .. 105.4: under the limit
 
 
+def test_drawn_lines_cover_the_pixels_they_run_through_and_index_lines_are_twice_as_wide():
+    heights = 99.0 - 2.0 * ROWS[:40, :30]  # level L runs along row (99 - L) / 2: 90 between rows 4 and 5, 50 between 24 and 25
+    lines = contour_lines(heights, WORLD_FILE, 10)
+    assert [(line.elevation, line.index) for line in lines if line.elevation in (50, 90)] == [(50.0, True), (90.0, False)]
+    grey = np.full((40, 30, 4), 200, np.uint8)
+    drawn = draw_contours(grey, lines, WORLD_FILE)
+    assert (grey == 200).all()  # a copy
+    half_line = np.rint(200 + (np.array(LINE_RGB) - 200) * 0.5)
+    column = drawn[:, 10]  # inside the grid's columns (a line ends at the pixel centres of the edge columns)
+    np.testing.assert_array_equal(column[[4, 5], :3], [half_line, half_line])  # a 1-pixel line half over each row
+    np.testing.assert_array_equal(column[[24, 25], :3], [LINE_RGB, LINE_RGB])  # the index line, 2 pixels over both
+    lined_rows = {4, 5, 14, 15, 24, 25, 34, 35}  # levels 90, 70, 50, 30 (80, 60, 40 between rows 9|10, 19|20, 29|30)
+    lined_rows |= {9, 10, 19, 20, 29, 30}
+    untouched = [r for r in range(40) if r not in lined_rows]
+    assert (drawn[untouched, 1:-1] == 200).all() and (drawn[sorted(lined_rows), 1:-1, :3] < 200).all()
+    empty = draw_contours(np.zeros((40, 30, 4), np.uint8), lines, WORLD_FILE)
+    assert empty[25, 10].tolist() == [*LINE_RGB, 255] and empty[4, 10, 3] == 128  # empty pixels become opaque by the share covered
+
+
 def dtm_args(tmp_path, *extra):
     return ["render", AUTZEN, "--classes", "2", "--gsd", "10", "-o", tmp_path / "o.png", "--fill-nodata", "all", *extra]
 
@@ -142,13 +162,51 @@ def test_cli_contours_without_depth_out_are_those_of_the_same_heights(cli, tmp_p
     assert (tmp_path / "a.geojson").read_text() == (tmp_path / "b.geojson").read_text()
 
 
+def test_cli_draws_the_lines_onto_the_orthophoto_where_the_geojson_runs(cli, tmp_path):
+    from scipy.spatial import cKDTree
+
+    rc, _, err = cli(*dtm_args(tmp_path, "--depth-out", tmp_path / "dtm.tif", "--contours", 5, "--contours-out", tmp_path / "c.geojson"))
+    assert rc == 0, err
+    plain = np.asarray(Image.open(tmp_path / "o.png"))  # with --contours-out alone the image is left as rendered
+    rc, _, err = cli(*dtm_args(tmp_path, "--depth-out", tmp_path / "dtm.tif", "--contours", 5, "-o", tmp_path / "d.png", "--overwrite"))
+    assert rc == 0, err
+    drawn = np.asarray(Image.open(tmp_path / "d.png"))  # without --contours-out: drawn onto the image
+    rc, _, err = cli(*dtm_args(tmp_path, "--contours", 5, "-o", tmp_path / "both.png", "--contours-out", tmp_path / "c.geojson", "--contours-on-image", "--overwrite"))
+    assert rc == 0, err
+    np.testing.assert_array_equal(np.asarray(Image.open(tmp_path / "both.png")), drawn)
+    size, _, _, minus_size, x0, y0 = (float(v) for v in (tmp_path / "d.pgw").read_text().split())
+    features = json.loads((tmp_path / "c.geojson").read_text())["features"]
+    vertices = np.concatenate([f["geometry"]["coordinates"] for f in features])
+    pixels = np.column_stack(((vertices[:, 0] - x0) / size, (vertices[:, 1] - y0) / minus_size))  # (col, row), pixel centres whole
+    changed = (drawn != plain).any(axis=2)
+    cols, rows = np.rint(pixels).astype(int).T
+    assert changed[rows, cols].all()  # every pixel a line runs through is drawn on
+    # and nothing else: a drawn pixel's centre lies within the widest line's half width (1 pixel) and
+    # half a pixel's diagonal of a line, so within 1 + 0.71 + 0.71 (vertices on a line are at most a diagonal apart)
+    distance, _ = cKDTree(pixels).query(np.argwhere(changed)[:, ::-1])
+    assert distance.max() <= 2.5
+    assert 0.02 < changed.mean() < 0.5  # lines, not the whole image
+
+
+def test_cli_contours_base_shifts_the_levels_and_the_index_contours(cli, tmp_path):
+    rc, _, err = cli(*dtm_args(tmp_path, "--contours", 5, "--contours-base", 2.5, "--contours-out", tmp_path / "c.geojson"))
+    assert rc == 0, err
+    properties = [f["properties"] for f in json.loads((tmp_path / "c.geojson").read_text())["features"]]
+    elevations = np.array([p["elevation"] for p in properties])
+    assert len(set(elevations)) >= 4
+    np.testing.assert_array_equal(elevations % 5, 2.5)  # 2.5 + 5k
+    assert [p["index"] for p in properties] == list((elevations - 2.5) % 25 == 0)  # 2.5 + 25k: every 5th counted from the base
+
+
 @pytest.mark.parametrize(
     "args, message",
     [
         (["--gsd", "10", "--contours", "0", "--contours-out", "c.geojson"], "error: --contours: the contour interval must be a number > 0, got 0.0"),
         (["--gsd", "10", "--contours", "nan", "--contours-out", "c.geojson"], "error: --contours: the contour interval must be a number > 0, got nan"),
-        (["--gsd", "10", "--contours", "5"], "error: --contours INTERVAL and --contours-out FILE.geojson go together: give both"),
-        (["--gsd", "10", "--contours-out", "c.geojson"], "error: --contours INTERVAL and --contours-out FILE.geojson go together: give both"),
+        (["--gsd", "10", "--contours", "5", "--contours-base", "nan"], "error: --contours-base: the contour base must be a finite number, got nan"),
+        (["--gsd", "10", "--contours", "5", "--contours-base", "-inf"], "error: --contours-base: the contour base must be a finite number, got -inf"),
+        (["--gsd", "10", "--contours-out", "c.geojson"], "error: --contours-out: an option of --contours INTERVAL"),
+        (["--gsd", "10", "--contours-base", "2", "--contours-on-image"], "error: --contours-base and --contours-on-image: options of --contours INTERVAL"),
         (["--contours", "5", "--contours-out", "c.geojson"], "error: --contours: an option of --gsd (contour lines of a top-down render's surface model)"),
         (["--gsd", "10", "--contours", "5", "--contours-out", "c.shp"], "unsupported output type '.shp'; use one of .geojson, .json"),
         (["--gsd", "10", "--contours", "0.001", "--contours-out", "c.geojson"], "error: --contours: interval 0.001 ft gives 113,780 levels over 113.78 ft; give a larger one (at most 1,000 levels)"),

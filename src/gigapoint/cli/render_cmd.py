@@ -15,6 +15,7 @@ from ..errors import CameraError, GigapointError
 from ..io import crs_wkt
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
+from ..render.contours import draw_contours
 from ..render.raster_fill import fill_colors, fill_heights, require_scipy
 from . import compiling
 from .app import app
@@ -31,7 +32,15 @@ from .cloud_opts import (
     open_files,
     subfolders_read,
 )
-from .contour_opts import ContoursOption, ContoursOutOption, check_contour_options, contour_write
+from .contour_opts import (
+    ContoursBaseOption,
+    ContoursOnImageOption,
+    ContoursOption,
+    ContoursOutOption,
+    check_contour_options,
+    contour_write,
+    traced_contours,
+)
 from .georef import georef_paths, geotiff_notes, geotiff_tags, no_prj_reason, world_file_path, write_prj, write_world_file
 from .info_cmd import memory_line
 from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_heights, save_image
@@ -273,7 +282,9 @@ def render(
     drop_classes: DropClassesOption = None,
     clip: ClipOption = None,
     contours: ContoursOption = None,
+    contours_base: ContoursBaseOption = None,
     contours_out: ContoursOutOption = None,
+    contours_on_image: ContoursOnImageOption = False,
 ) -> None:
     """Render point clouds to an image (or a turntable video)."""
     import gigapoint as gp
@@ -299,14 +310,14 @@ def render(
     georef = georef_paths([output, depth_out]) if gsd is not None else []
     for side in georef:  # refused like the image: a user's world file or .prj is not replaced without asking
         check_output(side, overwrite, suffixes=None)
-    check_contour_options(contours, contours_out, gsd, overwrite)
+    contours_drawn = check_contour_options(contours, contours_base, contours_out, contours_on_image, gsd, overwrite)
     check_outputs_apart([output, depth_out, index_out, *georef, contours_out], inputs)
     if projection not in (None, "perspective", "orthographic"):
         raise GigapointError(f"--projection must be perspective or orthographic, got {projection!r}")
     check_view(view)
     if gsd is not None:
         check_gsd(gsd, view, camera, width, height, projection, settings)
-    fill_distance = check_fill_nodata(fill_nodata, gsd, depth_out or contours_out)  # (contours are drawn from the filled heights too)
+    fill_distance = check_fill_nodata(fill_nodata, gsd, depth_out or contours)  # (contours are traced on the filled heights too)
     projection = projection or "perspective"
     width, height = check_image_size(width, height, fov)  # before reading anything
     check_color_options(settings)
@@ -367,14 +378,17 @@ def render(
     image, heights = frame.image, (cam.heights(frame.depth) if surface else None)
     if fill_nodata is not None:
         image, heights = fill_map(frame, image, heights, fill_distance)
+    lines = traced_contours(heights, cam, contours, contours_base, units) if contours is not None else []
+    if contours_drawn:
+        image = draw_contours(image, lines, cam.world_file())
     geotiff = geotiff_tags(cam, crs, wkt, units) if gsd is not None else None  # a .tif is a GeoTIFF (others ignore it)
     writes = [(output, lambda p: save_image(image, p, geotiff))]
     if depth_out is not None:  # with --gsd a surface model: the heights, not the camera's depths
         writes.append((depth_out, (lambda p: save_heights(heights, p, geotiff_tags(cam, crs, wkt, units, nodata=True))) if gsd is not None else (lambda p: save_array(frame.depth, p))))
     if index_out is not None:
         writes.append((index_out, lambda p: save_array(frame.index, p)))
-    if contours is not None:
-        writes.append(contour_write(heights, cam, contours, contours_out, crs, wkt, units))
+    if contours_out is not None:
+        writes.append(contour_write(lines, cam, contours_out, crs, wkt))
     notes = []
     if gsd is not None:
         writes += [(world_file_path(image), lambda p: write_world_file(cam, p)) for image in filter(None, (output, depth_out))]

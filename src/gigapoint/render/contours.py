@@ -11,6 +11,10 @@ Lines are traced through the pixel centres (pixel (row, col) at the world file's
 within the heights' range; every ``INDEX_EVERY``-th (k a multiple of it) is an index contour,
 which surveyors draw heavier.
 
+``draw_contours`` draws them onto the orthophoto of the same grid: thin dark lines, index
+contours twice as wide, anti-aliased by drawing at ``SUPERSAMPLE`` times the size with Pillow's
+ImageDraw and averaging back, so each pixel is darkened by the share of it a line covers.
+
 GeoJSON: a FeatureCollection of LineString features, properties ``elevation`` and ``index``,
 coordinates in the cloud's CRS. RFC 7946 GeoJSON allows WGS 84 only, so the CRS goes in the
 GeoJSON 2008 ``crs`` member, which GDAL (and so QGIS) read: its name is
@@ -34,6 +38,10 @@ from ..io import horizontal_epsg
 
 INDEX_EVERY = 5  # every 5th line an index contour
 MAX_LEVELS = 1000  # more lines than anyone can read on a map; a typo in the interval, most often
+LINE_RGB = (48, 32, 16)  # a dark brown, as topographic maps draw contours: it reads on grass, roofs and roads
+LINE_PIXELS, INDEX_LINE_PIXELS = 1, 2  # widths on the image
+SUPERSAMPLE = 4  # quarter-pixel anti-aliasing (even: the lines' widths in the mask are even, see draw_contours)
+STRIP_PIXELS = 1 << 20  # image pixels drawn at a time: the supersampled strip's mask is 16 MB, whatever the image's size
 
 
 @dataclass(frozen=True)
@@ -66,6 +74,13 @@ def check_interval(where: str, interval) -> float:
     return float(interval)
 
 
+def check_base(where: str, base) -> float:
+    """``base`` as a float, or a one-line InputError unless it is a finite number."""
+    if not is_real(base):
+        raise InputError(f"{where}: the contour base must be a finite number, got {base!r}")
+    return float(base)
+
+
 def contour_levels(z_min: float, z_max: float, interval: float, base: float = 0.0, where: str = "contour_lines", unit: str = "") -> np.ndarray:
     """The whole steps k (int64) whose levels ``base + k * interval`` lie in ``z_min..z_max``;
     more than MAX_LEVELS a one-line InputError (``unit``: the heights' unit symbol, for it)."""
@@ -84,8 +99,7 @@ def contour_lines(heights, world_file, interval, base=0.0, where: str = "contour
     ``Camera.world_file``: pixel centres), lowest level first. ``where`` and ``unit`` name the
     caller and the heights' unit in the errors. Needs contourpy."""
     interval = check_interval(where, interval)
-    if not is_real(base):
-        raise InputError(f"{where}: the contour base must be a finite number, got {base!r}")
+    base = check_base(where, base)
     heights = np.asarray(heights, np.float64)
     if heights.ndim != 2:
         raise InputError(f"{where}: takes an (H, W) array of heights, got shape {heights.shape}")
@@ -95,7 +109,7 @@ def contour_lines(heights, world_file, interval, base=0.0, where: str = "contour
     valid = ~np.isnan(heights)
     if valid.sum() < 2 or min(heights.shape) < 2:  # no square of data to trace
         return []
-    steps = contour_levels(float(heights[valid].min()), float(heights[valid].max()), interval, float(base), where, unit)
+    steps = contour_levels(float(heights[valid].min()), float(heights[valid].max()), interval, base, where, unit)
     import contourpy
 
     # (x, y omitted: contourpy's x is the column, y the row; NaN heights are masked)
@@ -146,3 +160,39 @@ def write_contours(path, lines: list[ContourLine], crs: str | None = None, wkt: 
     """``lines`` as the GeoJSON file ``path`` (``contours_geojson``), atomically."""
     collection = contours_geojson(lines, crs, wkt, coordinate_digits(pixel_size))
     return atomic_bytes(path, json.dumps(collection, separators=(",", ":")).encode())
+
+
+def draw_contours(image, lines: list[ContourLine], world_file) -> np.ndarray:
+    """A copy of the (H, W, 4) uint8 ``image`` (the orthophoto whose pixel centres ``world_file``,
+    ``Camera.world_file``'s six numbers, places) with ``lines`` drawn on it (``LINE_RGB``, index
+    contours ``INDEX_LINE_PIXELS`` wide, others ``LINE_PIXELS``), anti-aliased; an empty pixel a
+    line covers becomes opaque by its share."""
+    from PIL import Image, ImageDraw
+
+    image = np.array(image, np.uint8)
+    height, width = image.shape[:2]
+    a, d, b, e, c, f = (float(v) for v in world_file)
+    to_pixel = np.linalg.inv([[a, b], [d, e]])  # world x, y less the first pixel centre -> col, row
+    # vertices in the supersampled mask, where Pillow's line of an even width w at the whole
+    # number y fills rows y - w/2 .. y + w/2 - 1, centred on y when row i spans [i, i + 1): the
+    # pixel centre (col, row) is there at ((col + 0.5) S, (row + 0.5) S), to a sample (Pillow draws
+    # from whole numbers: rounded here, half to even, rather than as Pillow would)
+    paths = [np.rint(((line.xy - (c, f)) @ to_pixel.T + 0.5) * SUPERSAMPLE) for line in lines]
+    widths = [(INDEX_LINE_PIXELS if line.index else LINE_PIXELS) * SUPERSAMPLE for line in lines]
+    strip_rows = max(1, STRIP_PIXELS // width)
+    for top in range(0, height, strip_rows):
+        rows = min(strip_rows, height - top)
+        y0 = top * SUPERSAMPLE
+        mask = Image.new("L", (width * SUPERSAMPLE, rows * SUPERSAMPLE))
+        draw = ImageDraw.Draw(mask)
+        for path, line_width in zip(paths, widths):
+            reach = line_width  # a line's edge or round joint lies within its width of its vertices
+            if path[:, 1].max() + reach < y0 or path[:, 1].min() - reach > y0 + rows * SUPERSAMPLE:
+                continue  # none of it in this strip
+            draw.line([(x, y - y0) for x, y in path.tolist()], fill=255, width=line_width, joint="curve")
+        cover = np.asarray(mask.resize((width, rows), Image.Resampling.BOX), np.float32)[..., None] / 255  # each pixel's share under a line
+        strip = image[top : top + rows].astype(np.float32)
+        strip[..., :3] += (np.array(LINE_RGB, np.float32) - strip[..., :3]) * cover
+        strip[..., 3:] += (255 - strip[..., 3:]) * cover
+        image[top : top + rows] = np.rint(strip).astype(np.uint8)
+    return image
