@@ -394,22 +394,34 @@ def test_the_viewer_draws_in_an_iframe_of_a_page_of_any_scheme(browser, server, 
         ctx.close()
 
 
+def draw_section(pg, width: str) -> str:
+    """The section tool across the marker scene's ground seen from above, the corridor ``width``
+    wide, once its numbers are shown; the width the panel offered first."""
+    n = frame_no(pg)
+    pg.get_by_role("button", name="top").click()
+    pg.wait_for_function("() => window.gigapoint.camera.pitch > 89", timeout=30_000)
+    wait_full_frame(pg, n)
+    b = canvas_box(pg)
+    pg.get_by_role("button", name="section").click()
+    pg.locator("#section-info").get_by_text("click the line's first end").wait_for(timeout=30_000)
+    offered = pg.locator("#section-width").input_value()
+    pg.locator("#section-width").fill(width)
+    pg.locator("#section-width").press("Enter")
+    for k, fx in enumerate((0.3, 0.7), start=1):  # two points of the ground
+        pg.mouse.click(b["x"] + b["width"] * fx, b["y"] + b["height"] * 0.5)
+        pg.wait_for_function("(k) => document.getElementById('section-info').dataset.points === String(k)", arg=k, timeout=30_000)
+    pg.wait_for_function("() => document.getElementById('section-info').dataset.count", timeout=30_000)
+    return offered
+
+
+def image_size(pg, element_id: str) -> list[int]:
+    """The pixels of the image an <img> shows (its PNG's, not its box's)."""
+    return pg.evaluate("(id) => { const i = document.getElementById(id); return [i.naturalWidth, i.naturalHeight]; }", element_id)
+
+
 def test_section_tool_shows_the_cross_section_of_two_clicked_points(page, server):
-    n = frame_no(page)
-    page.get_by_role("button", name="top").click()
-    page.wait_for_function("() => window.gigapoint.camera.pitch > 89", timeout=30_000)
-    wait_full_frame(page, n)
-    b = canvas_box(page)
-    page.get_by_role("button", name="section").click()
+    assert draw_section(page, "3") == "2"  # 1/50 of the ground's 100 units first
     info = page.locator("#section-info")
-    info.get_by_text("click the line's first end").wait_for(timeout=30_000)
-    assert page.locator("#section-width").input_value() == "2"  # 1/50 of the ground's 100 units
-    page.locator("#section-width").fill("3")
-    page.locator("#section-width").press("Enter")
-    for k, fx in enumerate((0.3, 0.7), start=1):  # two points of the ground, seen from above
-        page.mouse.click(b["x"] + b["width"] * fx, b["y"] + b["height"] * 0.5)
-        page.wait_for_function("(k) => document.getElementById('section-info').dataset.points === String(k)", arg=k, timeout=30_000)
-    page.wait_for_function("() => document.getElementById('section-info').dataset.count", timeout=30_000)
     (session,) = server.core.sessions.values()
     (x1, y1, _), (x2, y2, _) = session.section
     expected = gigapoint.section(server.core.cloud, (x1, y1, x2, y2), 3.0)
@@ -432,6 +444,63 @@ def test_section_tool_shows_the_cross_section_of_two_clicked_points(page, server
     while session.section and time.monotonic() < t_end:
         time.sleep(0.05)
     assert session.section == []
+
+
+def test_the_enlarged_section_is_drawn_at_its_size_over_the_view_and_esc_closes_it(page):
+    draw_section(page, "3")
+    assert image_size(page, "section-image")[1] == 160
+    page.get_by_role("button", name="enlarge").click()
+    overlay = page.locator("#section-overlay")
+    assert overlay.is_visible() and overlay.bounding_box() == canvas_box(page)  # over the whole 3D view
+    # drawn again for the overlay's box (not the panel's image stretched): its PNG is the box's size
+    page.wait_for_function(
+        "() => { const i = document.getElementById('section-large'), b = document.getElementById('section-large-box');"
+        " return i.naturalWidth === b.clientWidth && i.naturalHeight === b.clientHeight; }",
+        timeout=30_000,
+    )
+    assert image_size(page, "section-large")[1] > 400 and image_size(page, "section-large")[0] > 600
+    assert "points · length" in page.locator("#section-overlay").inner_text()
+    page.keyboard.press("Escape")  # closes the overlay, not the tool
+    overlay.wait_for(state="hidden")
+    assert page.locator("#section-panel").is_visible()
+    page.wait_for_function("() => document.getElementById('section-image').naturalHeight === 160", timeout=30_000)  # the panel's again
+    page.locator("#section-image").click()  # the image itself enlarges too
+    overlay.wait_for(state="visible")
+    page.get_by_role("button", name="close").click()
+    overlay.wait_for(state="hidden")
+    page.keyboard.press("Escape")  # the next Esc ends the tool
+    page.locator("#section-panel").wait_for(state="hidden")
+
+
+def test_a_reconnect_draws_the_section_again(browser):
+    scene = marker_scene()
+    srv = ViewerServer(scene).start()
+    ctx = browser.new_context(viewport=VIEWPORT)
+    errors = []
+    try:
+        pg = ctx.new_page()
+        pg.on("pageerror", lambda e: errors.append(str(e)))
+        pg.goto(srv.url)
+        wait_full_frame(pg, 0)
+        draw_section(pg, "3")
+        (before,) = srv.core.sessions.values()
+        line, count = before.section, pg.locator("#section-info").get_attribute("data-count")
+        pg.evaluate("() => delete document.getElementById('section-info').dataset.count")  # set again by the new session's section
+        srv.close()
+        pg.wait_for_function("() => document.getElementById('status').textContent.startsWith('no answer from the viewer server')", timeout=30_000)
+        again = ViewerServer(scene, port=srv.port).start()  # the same address: the page reconnects by itself
+        try:
+            pg.wait_for_function("() => document.getElementById('section-info').dataset.count", timeout=30_000)
+            (after,) = again.core.sessions.values()
+            assert after.section == line and after.section_width == 3.0  # the same line, the same corridor
+            assert pg.locator("#section-info").get_attribute("data-count") == count
+            assert "width 3.00" in pg.locator("#section-info").inner_text()
+            assert pg.locator("#section-image").is_visible() and image_size(pg, "section-image")[1] == 160
+        finally:
+            again.close()
+    finally:
+        ctx.close()
+    assert not errors, errors
 
 
 def test_unticking_a_class_hides_it_and_ticking_it_shows_it_again(browser, autzen_path):

@@ -16,7 +16,7 @@
   const S = {
     ws: null, session: null, cloud: null, schema: [], settings: {}, camera: null,
     seq: 0, sentAt: new Map(), lastFrame: 0, frameTimes: [], fps: null, latency: null, renderTimes: [],
-    header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0, measuring: false, measure: [], sectioning: false,
+    header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0, measuring: false, measure: [], sectioning: false, section: [],
     pending: { orbit: null, look: null, pan: null, zoom: null }, retry: 0, classes: null, classesAsked: -1e9,
   };
   window.gigapoint = S; // for tests and the curious
@@ -88,7 +88,7 @@
     if (m.type === "hello") {
       // a reconnect to the same cloud (the server restarted, the network dropped) keeps this tab's view and settings
       const same = S.cloud && S.cloud.name === m.cloud.name && JSON.stringify(S.cloud.bounds) === JSON.stringify(m.cloud.bounds);
-      const kept = same && S.camera ? { camera: S.camera, settings: S.settings, measure: S.measure } : null;
+      const kept = same && S.camera ? { camera: S.camera, settings: S.settings, measure: S.measure, section: S.section } : null;
       drawing = 0;  // the new session numbers its frames from 1: the old count dropped them all
       S.session = m.session; S.schema = m.schema; S.settings = m.settings; S.camera = m.camera;
       const b = m.cloud.bounds;
@@ -96,7 +96,8 @@
       showCloud(m.cloud);
       showClasses(m.classes);
       showMeasure({ points: [], segments: [] });  // a new session measures nothing yet (a reconnect's points are sent back below)
-      if (S.sectioning) startSection();  // the new session has no line: the panel asks for one again
+      // the new session has no section line: a reconnect's is sent back (with the width the panel kept) and drawn again
+      if (S.sectioning) startSection(kept ? kept.section : []);
       buildSettings();
       updateSpeedLabel();
       setFov(m.camera.fov, false);
@@ -386,6 +387,7 @@
   function setSectioning(on) {
     if (on && S.measuring) setMeasuring(false);
     if (S.sectioning && !on) send({ type: "section", action: "clear" }, true);
+    if (!on) $("section-overlay").classList.add("hidden");
     S.sectioning = on;
     $("btn-section").classList.toggle("active", on);
     canvas.classList.toggle("sectioning", on);
@@ -393,15 +395,33 @@
     if (on) startSection();
   }
 
-  // the image's size: the panel's <img> in device pixels; the width as typed, or the server's first (1/50 of the cloud)
-  function startSection() {
-    const img = $("section-image"), dpr = Math.min(window.devicePixelRatio || 1, 2);
-    const size = [Math.max(8, Math.min(2048, Math.round((img.parentElement.clientWidth || 270) * dpr))), Math.round(160 * dpr)];
+  const sectionEnlarged = () => !$("section-overlay").classList.contains("hidden");
+
+  // the size the server draws the section at: the box it is shown in (the panel's, or the enlarged one over the view), in device pixels
+  function sectionImageSize() {
+    const dpr = Math.min(window.devicePixelRatio || 1, 2), box = $("section-large-box");
+    const [w, h] = sectionEnlarged() ? [box.clientWidth, box.clientHeight] : [$("section-image").parentElement.clientWidth || 270, 160];
+    return [w, h].map((v) => Math.max(8, Math.min(2048, Math.round(v * dpr))));
+  }
+
+  // the width as typed, or the server's first (1/50 of the cloud); ``line``: a lost connection's two points, drawn again
+  function startSection(line = []) {
     const width = Number($("section-width").value);
-    send({ type: "section", action: "set", size, ...($("section-width").value !== "" && width > 0 ? { width } : {}) }, true);
+    const points = line.length === 2 ? { points: line } : {};
+    send({ type: "section", action: "set", size: sectionImageSize(), ...($("section-width").value !== "" && width > 0 ? { width } : {}), ...points }, true);
+    if (points.points) return;  // the last image stays until the new session's arrives
     $("section-image").classList.add("hidden");
     $("btn-section-csv").disabled = true;
+    $("btn-section-enlarge").disabled = true;
+    $("section-overlay").classList.add("hidden");
     $("section-info").textContent = "click the line's first end";
+  }
+
+  // enlarged: drawn again at the overlay's size (a small image stretched is a blur); closed: at the panel's again
+  function enlargeSection(on) {
+    if (on === sectionEnlarged()) return;
+    $("section-overlay").classList.toggle("hidden", !on);
+    send({ type: "section", action: "set", size: sectionImageSize() }, true);
   }
 
   function lengthUnit() {  // the symbol lengths are in ("" where the cloud names none, or its x, y are degrees)
@@ -411,6 +431,7 @@
 
   function showSection(m) {
     if (!S.sectioning) return;  // the reply to the clear that ended it
+    S.section = m.points;  // kept for a reconnect: its new session draws the line again
     $("section-width").value = String(m.width);
     $("section-unit").textContent = lengthUnit().trim();
     const info = $("section-info");
@@ -423,10 +444,17 @@
   function showSectionResult(m) {
     if (!S.sectioning) return;
     const info = $("section-info"), img = $("section-image");
-    if (m.error) { info.textContent = m.error; img.classList.add("hidden"); $("btn-section-csv").disabled = true; return; }
+    if (m.error) {
+      info.textContent = m.error; img.classList.add("hidden"); $("btn-section-csv").disabled = true; $("btn-section-enlarge").disabled = true;
+      $("section-overlay").classList.add("hidden");
+      return;
+    }
     const u = lengthUnit(), n = (x) => x.toFixed(2);
     img.src = m.image;
     img.classList.remove("hidden");
+    $("section-large").src = m.image;
+    $("section-large-info").textContent = `${m.count.toLocaleString()} points · length ${n(m.length)}${u} · width ${n(m.width)}${u} · heights ${n(m.z[0])} to ${n(m.z[1])}${u}`;
+    $("btn-section-enlarge").disabled = false;
     info.textContent = [
       `${m.count.toLocaleString()} points · length ${n(m.length)}${u} · width ${n(m.width)}${u}`,
       `heights ${n(m.z[0])} to ${n(m.z[1])}${u} (${n(m.z[1] - m.z[0])}${u})`,
@@ -527,6 +555,7 @@
     if ("wasdqe".includes(k) && k.length === 1) { S.keys.add(k); e.preventDefault(); }
     else if (k === "f") setFly(!S.fly);
     else if (k === "m") setMeasuring(!S.measuring);
+    else if (k === "escape" && sectionEnlarged()) enlargeSection(false);  // the first Esc closes the enlarged section, the next ends the tool
     else if (k === "escape" && S.sectioning) setSectioning(false);
     else if (k === "escape" && S.measuring) setMeasuring(false);
     else if (k === "backspace" && S.measuring) { e.preventDefault(); send({ type: "measure", action: "undo" }, true); }
@@ -588,6 +617,9 @@
     e.target.classList.toggle("invalid", !ok);  // (nothing sent: the server keeps the last width)
     if (ok) send({ type: "section", action: "set", width: w }, true);
   });
+  $("btn-section-enlarge").addEventListener("click", () => enlargeSection(true));
+  $("section-image").addEventListener("click", () => enlargeSection(true));
+  $("btn-section-close").addEventListener("click", () => enlargeSection(false));
   $("btn-section-csv").addEventListener("click", () => {
     const a = document.createElement("a");
     a.href = withToken("section.csv", { session: S.session || "" }).toString();
