@@ -224,12 +224,12 @@ def test_cli_side_files_are_never_replaced_without_overwrite(cli, tmp_path):
 def test_a_failed_side_write_takes_the_image_back(cli, tmp_path, grid_npy, monkeypatch):
     """The world file's write failing (a full disk) removes the image written before it: no
     orthophoto is left without its georeference."""
-    from gigapoint.cli import render_cmd
+    from gigapoint.cli import georef
 
     def full_disk(camera, path):
         raise OSError(28, "No space left on device", str(path))
 
-    monkeypatch.setattr(render_cmd, "write_world_file", full_disk)
+    monkeypatch.setattr(georef, "write_world_file", full_disk)
     rc, _, err = cli("render", grid_npy[0], "-o", tmp_path / "o.png", "--gsd", GSD)
     assert rc == 1 and f"{tmp_path / 'o.pgw'}" in err and "No space left on device" in err, err
     assert not list(tmp_path.glob("o.*"))

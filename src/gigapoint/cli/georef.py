@@ -55,6 +55,18 @@ def no_prj_reason(crs: str | None) -> str:
     return f"no .prj written: the inputs name their CRS only as {crs}, and its WKT needs pyproj (pip install pyproj)"
 
 
+def georef_writes(camera: Camera, images, crs: str | None, wkt: str | None, units: dict) -> tuple[list, list[str]]:
+    """What georeferences ``images`` (None: not written) drawn through ``camera``: the (path,
+    save) writes of their world files and .prj files (``georef_paths``; no .prj without a WKT),
+    and the notes to print (why no .prj, a GeoTIFF whose keys name no CRS)."""
+    images = [Path(image) for image in images if image is not None]
+    writes = [(world_file_path(image), lambda p: write_world_file(camera, p)) for image in images]
+    notes = [] if wkt else [no_prj_reason(crs)]
+    if wkt:
+        writes += [(p, lambda p: write_prj(wkt, p)) for p in georef_paths(images) if p.suffix == ".prj"]
+    return writes, notes + geotiff_notes(images, crs, wkt, units)
+
+
 GEOTIFF_SUFFIXES = {".tif", ".tiff"}
 #: GeoTIFF's TIFF tags and their TIFF types (3 SHORT, 12 DOUBLE, 2 ASCII); GDAL_NODATA is GDAL's
 MODEL_PIXEL_SCALE, MODEL_TIEPOINT, GEO_KEY_DIRECTORY, GEO_DOUBLE_PARAMS, GEO_ASCII_PARAMS, GDAL_NODATA = 33550, 33922, 34735, 34736, 34737, 42113

@@ -92,3 +92,19 @@ def save_heights(heights: np.ndarray, path: Path, tiff_tags=None) -> None:
 
     img = Image.fromarray(np.ascontiguousarray(heights, np.float32))  # float32: mode F
     atomic_write(path, lambda tmp: img.save(tmp, format="TIFF", **({"tiffinfo": tiff_tags} if tiff_tags is not None else {})))
+
+
+def write_together(writes) -> list[Path]:
+    """Each ``(path, save)`` of ``writes`` by ``save(path)`` (each atomic), in order: all of them
+    or none. A failure (a full disk, Ctrl+C) removes those written before it: an image was left
+    without the surface model or the georeference asked for beside it. Returns the paths."""
+    written: list[Path] = []
+    try:
+        for path, save in writes:
+            save(path)
+            written.append(path)
+    except BaseException:
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
+    return written

@@ -16,7 +16,7 @@ from ..io import crs_wkt
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from ..render.contours import draw_contours
-from ..render.raster_fill import fill_colors, fill_heights, require_scipy
+from ..render.raster_fill import fill_colors, fill_heights
 from . import compiling
 from .app import app
 from .cloud_opts import (
@@ -41,9 +41,10 @@ from .contour_opts import (
     contour_write,
     traced_contours,
 )
-from .georef import georef_paths, geotiff_notes, geotiff_tags, no_prj_reason, world_file_path, write_prj, write_world_file
+from .georef import georef_paths, georef_writes, geotiff_tags
+from .gsd_opts import check_fill_nodata, check_gsd_value
 from .info_cmd import memory_line
-from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_heights, save_image
+from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_heights, save_image, write_together
 from .progress import err_console, progress_bar, status
 from .quality_opts import check_color_attribute, check_color_options, prepare_cloud
 from .settings_opts import named_option, options_named, settings_from_options, with_settings_options
@@ -150,8 +151,7 @@ def _described_camera(bounds, c: dict, width, height, projection, fov) -> Camera
 def check_gsd(gsd, view, camera_text, width, height, projection, settings) -> None:
     """One-line errors, before anything is read, for a --gsd that is no size or for options that
     contradict it: it draws straight down, orthographic, one image whose size it sets."""
-    if not (math.isfinite(gsd) and gsd > 0):
-        raise GigapointError(f"--gsd must be a number > 0 (cloud units per pixel), got {gsd:g}")
+    check_gsd_value(gsd)
     contradicting = [name for name, given in (
         ("--view", view not in ("auto", "top")), ("--camera", camera_text is not None), ("--width", width is not None),
         ("--height", height is not None), ("--projection", projection == "perspective"), ("--stereo", settings.stereo != "none"),
@@ -207,23 +207,6 @@ def print_stats(stats, console=None, compiled_s: float = 0.0) -> None:
         f"{stats.visible_pixels:,} pixels covered, {stats.time_ms:.1f} ms ({rate}) on {stats.backend}",
         highlight=False,
     )
-
-
-def check_fill_nodata(text: str | None, gsd, depth_out) -> int | None:
-    """--fill-nodata's pixels (None: 'all', every hole inside the footprint), checked before
-    anything is read: a one-line error for a value that is neither, for a use without --gsd, and
-    for 'all' without --depth-out (the orthophoto's colours are filled only within N pixels)."""
-    if text is None:
-        return None
-    if gsd is None:
-        raise GigapointError("--fill-nodata: an option of --gsd (it fills the orthophoto and the surface model of a top-down render)")
-    distance = None if text.strip().lower() == "all" else int(text) if text.strip().isdigit() else 0
-    if distance == 0:
-        raise GigapointError(f"--fill-nodata must be 'all' or a whole number of pixels >= 1, got {text!r}")
-    if distance is None and depth_out is None:
-        raise GigapointError("--fill-nodata all fills the surface model: give --depth-out too (the orthophoto is filled only within N pixels: --fill-nodata N)")
-    require_scipy("--fill-nodata")
-    return distance
 
 
 def fill_map(frame, image, heights, distance: int | None):
@@ -391,21 +374,9 @@ def render(
         writes.append(contour_write(lines, cam, contours_out, crs, wkt))
     notes = []
     if gsd is not None:
-        writes += [(world_file_path(image), lambda p: write_world_file(cam, p)) for image in filter(None, (output, depth_out))]
-        if wkt:
-            writes += [(p, lambda p: write_prj(wkt, p)) for p in georef if p.suffix == ".prj"]
-        else:
-            notes.append(no_prj_reason(crs))
-        notes += geotiff_notes((output, depth_out), crs, wkt, units)
-    written = []
-    try:
-        for path, save in writes:
-            save(path)
-            written.append(path)
-    except BaseException:  # (a full disk, Ctrl+C) the image stayed without the depth or georeference asked for beside it
-        for path in written:
-            path.unlink(missing_ok=True)
-        raise
+        side_writes, notes = georef_writes(cam, (output, depth_out), crs, wkt, units)
+        writes += side_writes
+    written = write_together(writes)
     if stats:
         print_stats(frame.stats, compiled_s=compiled)
         err_console().print(memory_line(cloud), highlight=False)

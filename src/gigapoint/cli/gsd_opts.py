@@ -1,0 +1,32 @@
+"""Checks of the options of the commands that draw on a ground grid (`render --gsd`, `change`):
+the gsd and --fill-nodata, told in one line before anything is read."""
+
+from __future__ import annotations
+
+import math
+
+from ..errors import GigapointError
+from ..render.raster_fill import require_scipy
+
+
+def check_gsd_value(gsd: float) -> None:
+    """A one-line error for a --gsd that is no size."""
+    if not (math.isfinite(gsd) and gsd > 0):
+        raise GigapointError(f"--gsd must be a number > 0 (cloud units per pixel), got {gsd:g}")
+
+
+def check_fill_nodata(text: str | None, gsd, depth_out) -> int | None:
+    """--fill-nodata's pixels (None: 'all', every hole inside the footprint), checked before
+    anything is read: a one-line error for a value that is neither, for a use without --gsd, and
+    for 'all' without --depth-out (the orthophoto's colours are filled only within N pixels)."""
+    if text is None:
+        return None
+    if gsd is None:
+        raise GigapointError("--fill-nodata: an option of --gsd (it fills the orthophoto and the surface model of a top-down render)")
+    distance = None if text.strip().lower() == "all" else int(text) if text.strip().isdigit() else 0
+    if distance == 0:
+        raise GigapointError(f"--fill-nodata must be 'all' or a whole number of pixels >= 1, got {text!r}")
+    if distance is None and depth_out is None:
+        raise GigapointError("--fill-nodata all fills the surface model: give --depth-out too (the orthophoto is filled only within N pixels: --fill-nodata N)")
+    require_scipy("--fill-nodata")
+    return distance
