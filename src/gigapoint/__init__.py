@@ -235,6 +235,8 @@ _LAZY = {
     "section": ("gigapoint.cross_section", "section"),
     "tile": ("gigapoint.lod.convert.tiles", "tile"),
     "Section": ("gigapoint.cross_section", "Section"),
+    "change": ("gigapoint.surface_change", "change"),
+    "Change": ("gigapoint.surface_change", "Change"),
 }
 
 
@@ -259,6 +261,7 @@ def __dir__():
 
 __all__ = [
     "Camera",
+    "Change",
     "Frame",
     "GigapointError",
     "GigapointWarning",
@@ -270,6 +273,7 @@ __all__ = [
     "Section",
     "Viewer",
     "__version__",
+    "change",
     "convert",
     "demo",
     "demo_arrays",

@@ -94,6 +94,7 @@ def prefer_passive_wait() -> None:
 #: each command's module (cli/<module>.py registers it on ``app``), in the order ``--help`` lists them
 COMMAND_MODULES = {
     "bench": "bench_cmd",
+    "change": "change_cmd",
     "compile": "compile_cmd",
     "convert": "convert_cmd",
     "info": "info_cmd",

@@ -23,6 +23,9 @@ _CONTROL = {
     "viridis": ["440154", "482878", "3e4989", "31688e", "26828e", "1f9e89", "35b779", "6ece58", "b5de2b", "fde725"],
     "gray": ["000000", "ffffff"],
     "inferno": ["000004", "1b0c41", "4a0c6b", "781c6d", "a52c60", "cf4446", "ed6925", "fb9b06", "f7d13d", "fcffa4"],
+    # ColorBrewer's diverging RdBu, white in the middle: the change preview's (surface_change.py), not a
+    # points' colormap (RenderSettings.colormap's choices are settings.Colormap)
+    "rdbu": ["67001f", "b2182b", "d6604d", "f4a582", "fddbc7", "f7f7f7", "d1e5f0", "92c5de", "4393c3", "2166ac", "053061"],
 }
 # matplotlib's "terrain": (position, rgb 0..1) segments
 _TERRAIN = [
@@ -179,7 +182,7 @@ def _hsv_to_rgba(h, s, v) -> np.ndarray:
 NO_VALUE = (128, 128, 128, 255)  # a point whose attribute is NaN (no value): grey, not the colormap's low end
 
 
-def _ramp(values: np.ndarray, lo: float, hi: float, table: np.ndarray) -> np.ndarray:
+def ramp(values: np.ndarray, lo: float, hi: float, table: np.ndarray) -> np.ndarray:
     """u32 colors of values mapped linearly from [lo, hi] onto a (256, 4) table (clamped);
     NaN values get ``NO_VALUE`` (their cast to an index was an IndexError)."""
     scale = 255.0 / (hi - lo) if hi > lo else 0.0
@@ -239,18 +242,18 @@ def _compute(cloud, mode: str, settings) -> np.ndarray:
     if mode == "intensity":
         v = _attribute(cloud, mode)
         lo, hi = settings.intensity_range or _auto_range(v)
-        return _ramp(v, lo, hi, colormap_table("gray"))
+        return ramp(v, lo, hi, colormap_table("gray"))
     if mode == "attribute":
         v = _named_attribute(cloud, settings.color_attribute)
         lo, hi = settings.attribute_range or _auto_range(v)
-        return _ramp(v, lo, hi, colormap_table(settings.colormap))
+        return ramp(v, lo, hi, colormap_table(settings.colormap))
     if mode == "classification":
         v = _attribute(cloud, mode).astype(np.int64) & 0xFF
         return classification_table().view(np.uint32).reshape(-1)[v]
     if mode == "elevation":
         z = elevations(cloud)
         lo, hi = settings.elevation_range or (float(cloud.bounds[0][2]), float(cloud.bounds[1][2]))
-        return _ramp(z, lo, hi, colormap_table(settings.colormap))
+        return ramp(z, lo, hi, colormap_table(settings.colormap))
     if mode == "return_number":
         v = _attribute(cloud, mode).astype(np.int64)
         table = np.array([(*c, 255) for c in _RETURN_COLORS], np.uint8)

@@ -1,0 +1,240 @@
+"""Change between two surveys (`gigapoint change`, gp.change: surface_change.py): both surfaces on
+one grid, AFTER - BEFORE as a GeoTIFF, cut and fill volumes, a diverging preview."""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import laspy
+import numpy as np
+import pytest
+from PIL import Image
+
+import gigapoint as gp
+from gigapoint.errors import InputError
+
+AUTZEN = "/work/shared/data/autzen_trim.laz"
+ORIGIN = (500_000.0, 4_000_000.0)  # a UTM-sized corner, on every grid below
+SPACING = 0.2  # of the synthetic surveys' points, at cell centres: 0.1, 0.3, ...
+BOX = (10.0, 5.0, 10.0, 20.0, 3.0)  # x, y (from ORIGIN), width, length, height: 600 units³ of fill
+PIT = (28.0, 28.0, 5.0, 5.0, -2.0)  # 50 units³ of cut
+
+
+def plane(size_x=40.0, size_y=40.0):
+    """Points every SPACING over a size_x x size_y square at z 0, coordinates from (0, 0)."""
+    x, y = np.meshgrid(np.arange(SPACING / 2, size_x, SPACING), np.arange(SPACING / 2, size_y, SPACING))
+    return np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+
+
+def with_blocks(xyz, offset=0.0):
+    """``xyz`` with BOX's top raised and PIT's floor sunk, both moved ``offset`` in x and y."""
+    xyz = xyz.copy()
+    for x0, y0, w, length, h in (BOX, PIT):
+        inside = (xyz[:, 0] >= x0 + offset) & (xyz[:, 0] < x0 + offset + w) & (xyz[:, 1] >= y0 + offset) & (xyz[:, 1] < y0 + offset + length)
+        xyz[inside, 2] = h
+    return xyz
+
+
+def volume_error_bound(width, length, height, gsd):
+    """How far a width x length block drawn on a gsd grid can be from its volume: the pixels its
+    outline crosses count whole or not at all, so the footprint drawn lies between the outline
+    grown and shrunk by one pixel on every side."""
+    grown = (width + 2 * gsd) * (length + 2 * gsd) - width * length
+    shrunk = width * length - max(width - 2 * gsd, 0) * max(length - 2 * gsd, 0)
+    return abs(height) * max(grown, shrunk)
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.3])
+def test_a_box_is_fill_and_a_pit_is_cut(offset):
+    """On pixel edges (offset 0) the volumes are exact; moved off them (0.3) they are within the
+    grid's discretisation error, which is not zero there."""
+    gsd = 0.5
+    before = gp.from_arrays(plane())
+    after = gp.from_arrays(with_blocks(plane(), offset))
+    c = gp.change(before, after, gsd)
+    fill_error = volume_error_bound(*BOX[2:], gsd)
+    cut_error = volume_error_bound(*PIT[2:], gsd)
+    assert (fill_error, cut_error) == (93.0, 22.0)
+    if offset == 0:
+        assert (c.fill, c.cut, c.net) == (600.0, 50.0, 550.0)
+    else:
+        assert 0 < abs(c.fill - 600) <= fill_error and 0 < abs(c.cut - 50) <= cut_error
+        assert (c.fill, c.cut) == (3 * 10.5 * 20.5, 2 * 4.5 * 4.5)  # the box's 21 x 41 pixels touched, the pit's 9 x 9 wholly inside
+    assert c.area_compared == 40 * 40 and c.dz.shape == (80, 80)
+    assert set(np.unique(c.dz)) == {-2.0, 0.0, 3.0}
+    assert c.area_changed == (c.fill / 3 + c.cut / 2)
+    assert c.summary()["units"] == {"length": "units", "area": "square units", "volume": "cubic units"}  # arrays name no CRS
+
+
+def test_min_change_leaves_small_changes_out():
+    c = gp.change(gp.from_arrays(plane()), gp.from_arrays(with_blocks(plane())), 0.5, min_change=2.5)
+    assert (c.fill, c.cut, c.area_changed, c.area_compared) == (600.0, 0.0, 200.0, 1600.0)  # the pit's 2 is no change beyond 2.5
+    c = gp.change(gp.from_arrays(plane()), gp.from_arrays(with_blocks(plane())), 0.5, min_change=3.0)
+    assert (c.fill, c.cut, c.area_changed) == (0.0, 0.0, 0.0)  # 'by more than'
+
+
+def test_the_preview_is_symmetric_around_zero():
+    """Red where cut, white where unchanged, blue where filled, transparent where not compared;
+    by default spanning the 98th percentile of |dz| (the box's 3 here: it covers 12.5 % of the pixels)."""
+    before = gp.from_arrays(plane())
+    after = gp.from_arrays(with_blocks(plane(40.0, 44.0)))  # 4 more units north: not compared
+    c = gp.change(before, after, 0.5)
+    assert c.preview_range() == 3.0 and c.dz.shape == (88, 80)
+    image = c.preview()
+    box, pit, flat, north = image[88 - 20, 25], image[88 - 60, 60], image[88 - 2, 2], image[2, 2]  # (row 0 is the top)
+    assert tuple(box) == (0x05, 0x30, 0x61, 255)  # +3: RdBu's end
+    assert tuple(flat) == (0xF7, 0xF7, 0xF7, 255) or abs(int(flat[0]) - 0xF7) <= 2  # 0: its white middle
+    assert pit[0] > 200 and pit[2] < pit[0] and pit[3] == 255  # -2 of 3: on the red side
+    assert tuple(north) == (0, 0, 0, 0)
+    assert tuple(c.preview(2.0)[88 - 60, 60]) == (0x67, 0x00, 0x1F, 255)  # a range of 2: the pit at RdBu's red end
+    with pytest.raises(InputError, match="the preview's range must be a number > 0"):
+        c.preview(0)
+
+
+def test_surveys_that_share_no_pixel_are_refused():
+    far = plane() + (100.0, 0.0, 0.0)
+    with pytest.raises(InputError, match="arrays and arrays: no 0.5-unit pixel holds points of both: the surveys do not overlap"):
+        gp.change(gp.from_arrays(plane()), gp.from_arrays(far), 0.5)
+    for bad, message in (({"gsd": 0}, "gsd must be a number > 0"), ({"min_change": -1}, "min_change must be a number >= 0"), ({"fill_nodata": 0}, "fill_nodata")):
+        with pytest.raises(InputError, match=message):
+            gp.change(gp.from_arrays(plane()), gp.from_arrays(plane()), **{"gsd": 0.5, **bad})
+
+
+# --- the command: LAS files in a CRS ---------------------------------------------------------------
+
+EPSG_32610_KEYS = [(1024, 0, 1, 1), (3072, 0, 1, 32610)]  # LAS 1.2 GeoTIFF keys: projected, UTM 10N
+
+
+def write_las(path, xyz, keys=EPSG_32610_KEYS):
+    header = laspy.LasHeader(point_format=0, version="1.2")
+    header.scales, header.offsets = np.array([0.01] * 3), np.array([*ORIGIN, 0.0])
+    data = struct.pack("<4H", 1, 1, 0, len(keys)) + b"".join(struct.pack("<4H", *k) for k in keys)
+    header.vlrs.append(laspy.VLR("LASF_Projection", 34735, "GeoKeyDirectoryTag", data))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = (xyz + (*ORIGIN, 0.0)).T
+    las.write(str(path))
+    return path
+
+
+@pytest.fixture
+def surveys(tmp_path):
+    """before.las (the plane) and after.las (the box and the pit, its plane 4 units longer north), EPSG:32610."""
+    return write_las(tmp_path / "before.las", plane()), write_las(tmp_path / "after.las", with_blocks(plane(40.0, 44.0)))
+
+
+def test_cli_writes_the_differences_as_a_geotiff_in_the_inputs_crs(cli, tmp_path, surveys):
+    rasterio = pytest.importorskip("rasterio")
+    out = tmp_path / "change.tif"
+    rc, stdout, err = cli("change", *surveys, "--gsd", 0.5, "-o", out, "--preview", tmp_path / "change.png")
+    assert rc == 0, err
+    assert stdout.splitlines()[:2] == [f"wrote {out} (80x88, after - before, NaN where either survey has no point)", f"wrote {tmp_path / 'change.png'}, {tmp_path / 'change.tfw'}, {tmp_path / 'change.pgw'}, {tmp_path / 'change.prj'}"]
+    assert "compared 1,600.00 m² (6,400 pixels of 0.5 m)" in stdout and "changed by more than 0 m: 225.00 m²" in stdout
+    assert "cut  50.000 m³\nfill 600.000 m³\nnet  +550.000 m³\n" in stdout
+    with rasterio.Env(GDAL_GEOREF_SOURCES="INTERNAL"), rasterio.open(out) as ds:  # its own tags, not the .tfw beside it
+        assert ds.crs.to_epsg() == 32610 and ds.dtypes == ("float32",) and np.isnan(ds.nodata)
+        assert ds.transform[:6] == pytest.approx((0.5, 0, ORIGIN[0], 0, -0.5, ORIGIN[1] + 44), rel=0, abs=1e-9)
+        dz = ds.read(1)
+        # the box's cell centre (x 15, y 15) and the pit's (30.5, 30.5), through GDAL's own transform
+        assert dz[ds.index(ORIGIN[0] + 15, ORIGIN[1] + 15)] == 3.0 and dz[ds.index(ORIGIN[0] + 30.5, ORIGIN[1] + 30.5)] == -2.0
+        assert np.isnan(dz[ds.index(ORIGIN[0] + 15, ORIGIN[1] + 42)])  # only the after survey reaches there
+    assert np.isnan(dz[:8]).all() and not np.isnan(dz[8:]).any() and (dz[8:] == 0).sum() == 6400 - 225 * 4
+    preview = np.asarray(Image.open(tmp_path / "change.png"))
+    assert preview.shape == (88, 80, 4) and (preview[:8, :, 3] == 0).all() and (preview[8:, :, 3] == 255).all()
+
+
+def test_cli_json_of_autzen_against_itself_is_no_change(cli, tmp_path, autzen_path):
+    rc, stdout, err = cli("change", autzen_path, autzen_path, "--gsd", 4, "-o", tmp_path / "c.tif", "--json")
+    assert rc == 0, err
+    summary = json.loads(stdout)
+    assert (summary["cut"], summary["fill"], summary["net"], summary["area_changed"]) == (0.0, 0.0, 0.0, 0.0)
+    assert summary["area_compared"] == summary["pixels_compared"] * 16 > 300_000
+    assert summary["units"] == {"length": "ft", "area": "ft²", "volume": "ft³"}  # autzen is in (international) feet
+    assert summary["outputs"] == [str(tmp_path / p) for p in ("c.tif", "c.tfw", "c.prj")]
+    dz = np.asarray(Image.open(tmp_path / "c.tif"))
+    assert (dz[~np.isnan(dz)] == 0).all() and (~np.isnan(dz)).sum() == summary["pixels_compared"]
+
+
+def test_autzen_raised_one_foot_is_its_area_in_cubic_feet(tmp_path, autzen_path):
+    las = laspy.read(autzen_path)
+    las.z = las.z + 1.0
+    las.write(str(tmp_path / "raised.laz"))
+    c = gp.change(autzen_path, tmp_path / "raised.laz", 4)
+    moved = c.dz[c.compared]
+    # float32 heights (eye - depth) near autzen's 406..521 ft: each a few ulps of the highest off
+    ulps = 4 * float(np.spacing(np.float32(521.0)))
+    assert np.abs(moved - 1.0).max() <= ulps
+    assert c.cut == 0.0 and abs(c.net - c.area_compared) <= c.area_compared * ulps and c.area_compared > 300_000
+    assert c.area_changed == c.area_compared
+
+
+def test_cli_refuses_surveys_in_different_crss(cli, tmp_path, surveys, autzen_path):
+    rc, _, err = cli("change", autzen_path, surveys[1], "--gsd", 4, "-o", tmp_path / "c.tif")
+    assert rc == 1 and err.count("\n") == 1, err
+    assert err.startswith(f"error: {autzen_path} is in NAD_1983_HARN_Lambert_Conformal_Conic (WKT), {surveys[1]} in EPSG:32610: change compares two surveys in one CRS")
+    assert not list(tmp_path.glob("c.*"))
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--gsd", "0"], "--gsd must be a number > 0 (cloud units per pixel), got 0"),
+        (["--gsd", "1", "--min-change", "-1"], "--min-change must be a number >= 0"),
+        (["--gsd", "1", "--range", "2"], "--range: an option of --preview"),
+        (["--gsd", "1", "--fill-nodata", "x"], "--fill-nodata must be 'all' or a whole number of pixels >= 1, got 'x'"),
+        (["--gsd", "1", "--classes", "300"], "change: --classes 300"),
+    ],
+)
+def test_cli_option_errors_are_one_line(cli, tmp_path, surveys, args, message):
+    rc, _, err = cli("change", *surveys, "-o", tmp_path / "c.tif", *args)
+    assert rc == 1 and err.count("\n") == 1 and message in err, err
+    assert not list(tmp_path.glob("c.*"))
+
+
+def test_cli_outputs_are_never_replaced_without_overwrite(cli, tmp_path, surveys):
+    rc, _, err = cli("change", *surveys, "--gsd", 0.5, "-o", tmp_path / "c.png")
+    assert rc == 1 and "c.png: unsupported output type '.png'; use one of .tif, .tiff" in err
+    for existing in ("c.tif", "c.tfw", "p.png", "p.pgw"):
+        (tmp_path / existing).write_text("precious")
+        rc, _, err = cli("change", *surveys, "--gsd", 0.5, "-o", tmp_path / "c.tif", "--preview", tmp_path / "p.png")
+        assert rc == 1 and err.strip() == f"error: {tmp_path / existing}: already exists; pass --overwrite to replace it", err
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["after.las", "before.las", existing]
+        (tmp_path / existing).unlink()
+    (tmp_path / "c.tif").write_text("precious")
+    rc, _, err = cli("change", *surveys, "--gsd", 0.5, "-o", tmp_path / "c.tif", "--overwrite")
+    assert rc == 0, err
+    assert np.asarray(Image.open(tmp_path / "c.tif")).shape == (88, 80)
+
+
+def test_cli_leaves_nothing_half_written(cli, tmp_path, surveys, monkeypatch):
+    """A failed write (a full disk at the world file) takes back the GeoTIFF and preview written
+    before it; a failure before any write (no overlap) writes nothing."""
+    from gigapoint.cli import georef
+
+    def full_disk(camera, path):
+        raise OSError(28, "No space left on device", str(path))
+
+    monkeypatch.setattr(georef, "write_world_file", full_disk)
+    rc, _, err = cli("change", *surveys, "--gsd", 0.5, "-o", tmp_path / "c.tif", "--preview", tmp_path / "p.png")
+    assert rc == 1 and f"{tmp_path / 'c.tfw'}: No space left on device" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["after.las", "before.las"]  # no temporary file either
+    monkeypatch.undo()
+    far = write_las(tmp_path / "far.las", plane() + (100.0, 0.0, 0.0))
+    rc, _, err = cli("change", surveys[0], far, "--gsd", 0.5, "-o", tmp_path / "c.tif")
+    assert rc == 1 and "the surveys do not overlap" in err
+    assert not list(tmp_path.glob("c.*"))
+
+
+def test_cli_filters_read_the_same_classes_of_both(cli, tmp_path, autzen_path):
+    """--classes 2: ground against ground (autzen's classes 1 and 2): the pixels compared are
+    those `render --classes 2 --gsd 4 --depth-out` draws, fewer than of every point."""
+    rc, stdout, err = cli("change", autzen_path, autzen_path, "--gsd", 4, "-o", tmp_path / "all.tif", "--json")
+    every = json.loads(stdout)["pixels_compared"]
+    rc, stdout, err = cli("change", autzen_path, autzen_path, "--gsd", 4, "-o", tmp_path / "ground.tif", "--json", "--classes", "2")
+    assert rc == 0, err
+    rc, _, err = cli("render", autzen_path, "--classes", "2", "--gsd", 4, "-o", tmp_path / "o.png", "--depth-out", tmp_path / "dtm.tif", "--size-mode", "fixed")
+    assert rc == 0, err
+    dtm = np.asarray(Image.open(tmp_path / "dtm.tif"))
+    assert json.loads(stdout)["pixels_compared"] == (~np.isnan(dtm)).sum() < every
+    dz = np.asarray(Image.open(tmp_path / "ground.tif"))
+    assert (np.isnan(dz) == np.isnan(dtm)).all()  # the same grid, pixel for pixel
