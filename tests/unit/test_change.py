@@ -76,7 +76,7 @@ def test_min_change_leaves_small_changes_out():
 
 def test_the_preview_is_symmetric_around_zero():
     """Red where cut, white where unchanged, blue where filled, transparent where not compared;
-    by default spanning the 98th percentile of |dz| (the box's 3 here: it covers 12.5 % of the pixels)."""
+    by default spanning the 98th percentile of the changed pixels' |dz| (the box's 3 here: 800 of their 900)."""
     before = gp.from_arrays(plane())
     after = gp.from_arrays(with_blocks(plane(40.0, 44.0)))  # 4 more units north: not compared
     c = gp.change(before, after, 0.5)
@@ -166,6 +166,32 @@ def test_autzen_raised_one_foot_is_its_area_in_cubic_feet(tmp_path, autzen_path)
     assert np.abs(moved - 1.0).max() <= ulps
     assert c.cut == 0.0 and abs(c.net - c.area_compared) <= c.area_compared * ulps and c.area_compared > 300_000
     assert c.area_changed == c.area_compared
+
+
+def test_float32_rounding_is_no_change(tmp_path, autzen_path):
+    """A stockpile raised 8 ft and a pit dug 5 ft below autzen's lowest point: the after cloud's
+    box, so its batches, differ, and points that did not move come out an ulp (3e-5 ft) apart in
+    ~1 % of the pixels. They are neither changed area nor volume nor the preview's range."""
+    las = laspy.read(autzen_path)
+    x, y = np.asarray(las.x), np.asarray(las.y)
+    blocks = {(636_500, 849_100, 636_600, 849_160): 8.0, (636_900, 849_300, 636_940, 849_340): -5.0}
+    z = np.asarray(las.z).copy()
+    for (x0, y0, x1, y1), dz in blocks.items():
+        z[(x > x0) & (x < x1) & (y > y0) & (y < y1)] += dz
+    las.z = z
+    las.write(str(tmp_path / "dug.laz"))
+    c = gp.change(autzen_path, tmp_path / "dug.laz", 2)
+    a, _, _, e, left, top = c.camera.world_file()
+    px, py = np.meshgrid(left + a * np.arange(c.dz.shape[1]), top + e * np.arange(c.dz.shape[0]))  # pixel centres
+    near = {dz: (px > x0 - 2) & (px < x1 + 2) & (py > y0 - 2) & (py < y1 + 2) for (x0, y0, x1, y1), dz in blocks.items()}  # within a pixel
+    elsewhere = c.compared & ~near[8.0] & ~near[-5.0]
+    assert c.resolution == 2 * float(np.spacing(np.float32(520.51)))  # (autzen's highest point: 1.2e-4 ft)
+    assert (c.dz[elsewhere] != 0).sum() > 500 and np.abs(c.dz[elsewhere]).max() <= c.resolution
+    assert not (c.changed & elsewhere).any()
+    for dz, there in near.items():
+        assert np.abs(c.dz[c.changed & there] - dz).max() <= c.resolution
+    assert c.area_changed == 4 * int((c.changed & (near[8.0] | near[-5.0])).sum())
+    assert c.preview_range() == pytest.approx(8.0, abs=c.resolution)
 
 
 def test_cli_refuses_surveys_in_different_crss(cli, tmp_path, surveys, autzen_path):

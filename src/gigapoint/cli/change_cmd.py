@@ -29,7 +29,7 @@ def change(
     output: Annotated[Path, typer.Option("-o", "--output", readable=False, help="The height differences AFTER - BEFORE: a float32 GeoTIFF (.tif), NaN where either survey has no point, with its world file and .prj.")],
     preview: Annotated[Path | None, typer.Option(readable=False, help="Also a colour image of the differences (.png, ...): red lower (cut), white unchanged, blue higher (fill); transparent where not compared.")] = None,
     value_range: Annotated[float | None, typer.Option("--range", metavar="DZ", help="The preview's colours span -DZ..+DZ (default: the 98th percentile of |dz|).")] = None,
-    min_change: Annotated[float, typer.Option(metavar="DZ", help="Pixels that moved by DZ or less count in neither the volumes nor the changed area (a level of detection; default 0: every change).")] = 0.0,
+    min_change: Annotated[float, typer.Option(metavar="DZ", help="Pixels that moved by DZ or less count in neither the volumes nor the changed area (a level of detection; default 0: every change the float32 heights tell from their rounding).")] = 0.0,
     fill_nodata: Annotated[
         str | None,
         typer.Option(help="Fill each survey's empty pixels by linear interpolation (a TIN) inside its footprint before comparing: 'all' every hole, N only those within N pixels of a point. Needs scipy."),
