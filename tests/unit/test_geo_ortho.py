@@ -4,6 +4,7 @@ on the gsd grid with a world file and a .prj beside it, and --depth-out a float3
 from __future__ import annotations
 
 import struct
+import sys
 
 import laspy
 import numpy as np
@@ -164,7 +165,8 @@ def test_cli_prj_holds_the_files_wkt(cli, tmp_path):
     np.testing.assert_allclose(heights[drawn & ~unsure], highest[drawn & ~unsure], rtol=0, atol=1e-3)
 
 
-def test_cli_an_epsg_only_crs_writes_no_prj_and_says_so(cli, tmp_path):
+def test_cli_an_epsg_only_crs_writes_no_prj_and_says_so(cli, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyproj", None)  # (import pyproj raises ImportError: an optional dependency)
     keys = [(1024, 0, 1, 1), (3072, 0, 1, 32610)]  # model type projected; ProjectedCSTypeGeoKey (LAS 1.2's GeoTIFF keys)
     data = struct.pack("<4H", 1, 1, 0, len(keys)) + b"".join(struct.pack("<4H", *k) for k in keys)
     write_las(tmp_path / "utm.las", laspy.VLR("LASF_Projection", 34735, "GeoKeyDirectoryTag", data))
@@ -293,9 +295,22 @@ def test_cli_tif_outputs_are_geotiffs_in_the_files_crs(cli, tmp_path, gdal):
     assert "no .prj" not in stdout and "GeoTIFF keys" not in stdout
 
 
-def test_cli_geotiff_of_an_epsg_only_crs_names_the_code(cli, tmp_path, gdal):
+def test_cli_an_epsg_only_crs_writes_pyprojs_wkt_as_prj(cli, tmp_path):
+    """With pyproj (the gis extra), the .prj of a CRS named only as EPSG:32610 holds its WKT."""
+    pyproj = pytest.importorskip("pyproj")
+    keys = [(1024, 0, 1, 1), (3072, 0, 1, 32610)]
+    data = struct.pack("<4H", 1, 1, 0, len(keys)) + b"".join(struct.pack("<4H", *k) for k in keys)
+    write_las(tmp_path / "utm.las", laspy.VLR("LASF_Projection", 34735, "GeoKeyDirectoryTag", data))
+    rc, stdout, err = cli("render", tmp_path / "utm.las", "-o", tmp_path / "o.png", "--gsd", GSD)
+    assert rc == 0, err
+    assert "no .prj written" not in stdout
+    assert pyproj.CRS.from_wkt((tmp_path / "o.prj").read_text()).to_epsg() == 32610
+
+
+def test_cli_geotiff_of_an_epsg_only_crs_names_the_code(cli, tmp_path, gdal, monkeypatch):
     """LAS 1.2 GeoTIFF keys naming EPSG:32610 alone (no WKT: no .prj without pyproj): the GeoTIFF
     names the code and GDAL knows its metres; a PNG is placed by its world file alone, as before."""
+    monkeypatch.setitem(sys.modules, "pyproj", None)
     keys = [(1024, 0, 1, 1), (3072, 0, 1, 32610)]
     data = struct.pack("<4H", 1, 1, 0, len(keys)) + b"".join(struct.pack("<4H", *k) for k in keys)
     write_las(tmp_path / "utm.las", laspy.VLR("LASF_Projection", 34735, "GeoKeyDirectoryTag", data))

@@ -626,8 +626,14 @@ def geokeys(vlrs) -> dict[int, int]:
 
 
 def _parse_crs(header, hdr: LasHeader) -> str | None:
-    """CRS of a laspy header as 'EPSG:n' or WKT through pyproj when installed, else ``hdr.crs()``
-    (gigapoint's header parse, as warn_mixed_crs and convert see it)."""
+    """CRS of a file as ``hdr.crs()`` says it (gigapoint's header parse, as warn_mixed_crs and
+    convert see it: the file's own WKT, else 'EPSG:n' of its GeoTIFF keys); where that finds none,
+    pyproj's reading of laspy's header ('EPSG:n' or WKT) when pyproj is installed. The file's own
+    words come first so that info, .prj files and GeoTIFF keys are the same with pyproj or without
+    (pyproj's 'EPSG:32610' for a WKT dropped its name and its exact text)."""
+    own = hdr.crs()
+    if own:
+        return own
     try:
         import pyproj
     except ImportError:
@@ -640,7 +646,7 @@ def _parse_crs(header, hdr: LasHeader) -> str | None:
         if crs is not None:
             epsg = crs.to_epsg()
             return f"EPSG:{epsg}" if epsg else crs.to_wkt()
-    return hdr.crs()
+    return None
 
 
 def prepare_kernel_calls() -> None:
