@@ -153,7 +153,9 @@ def open(*paths, progressive: bool = False, **options):
     (all but those: noise) and ``clip=(xmin, ymin, xmax, ymax)`` (any z) or ``(xmin, ymin, zmin,
     xmax, ymax, zmax)``, in the files' coordinates, bounds included, and ``corridor=(x1, y1, x2, y2,
     width)``: within width / 2 of the line (x1, y1)-(x2, y2) and between its ends, any z (what
-    ``gigapoint.section`` draws); a point must pass all those given.
+    ``gigapoint.section`` draws), and ``clip_polygon=`` a GeoJSON or WKT file, WKT text or a
+    GeoJSON geometry dict: inside its polygons, holes left out, edges included, any z
+    (io/polygon.py); a point must pass all those given.
 
     Paths may also come as one list or tuple: ``gp.open([a, b])`` is ``gp.open(a, b)``."""
     from .io._base import headers_once
@@ -172,7 +174,8 @@ def _open(paths: tuple, progressive: bool, options: dict):
     check_switch("progressive", progressive, "open")  # (chunked= is open_cloud's to check)
     recursive = options.pop("recursive", False)
     check_switch("recursive", recursive, "open")
-    keep = point_filter(options.pop("classes", None), options.pop("drop_classes", None), options.pop("clip", None), "open", corridor=options.pop("corridor", None))
+    keep = point_filter(options.pop("classes", None), options.pop("drop_classes", None), options.pop("clip", None), "open", corridor=options.pop("corridor", None),
+                        clip_polygon=options.pop("clip_polygon", None))  # fmt: skip
     if keep is not None:  # (an octree was drawn whole, without a word)
         refuse_octrees(paths, f"the filter ({keep.describe()}) applies to point files")
     if recursive:
@@ -206,7 +209,7 @@ def _open(paths: tuple, progressive: bool, options: dict):
     if unknown:  # a TypeError naming the internal open_cloud() before
         raise InputError(
             f"open: unknown option(s) {', '.join(unknown)}; it takes {', '.join(known)}, recursive=True, "
-            "progressive=True (with memory_limit=), classes=, drop_classes=, clip=, corridor="
+            "progressive=True (with memory_limit=), classes=, drop_classes=, clip=, corridor=, clip_polygon="
         )
 
     return open_cloud(*paths, point_filter=keep, **options)

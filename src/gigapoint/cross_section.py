@@ -19,12 +19,10 @@ import numpy as np
 
 from .core.chunk import PointChunk
 from .core.cloud import PointCloud, build_cloud
-from .errors import CameraError, EmptyCloudError, InputError, is_real
-from .io.filters import along_and_across, corridor_of, point_filter
-from .io.http import shown_url
-from .lod import is_lod_source, open_octree
-from .lod.query import is_octree, points_meeting
-from .lod.voxel_octree import VoxelOctree
+from .errors import CameraError, InputError, is_real
+from .io.filters import PointFilter, along_and_across, corridor_of, point_filter
+from .lod import is_lod_source
+from .lod.query import is_octree, kept_points, octree_path_kept
 from .render import Camera, Frame, RenderSettings, render_frame
 from .render.camera import MAX_IMAGE_SIDE, image_side
 
@@ -167,53 +165,41 @@ def check_size(size) -> tuple[int, int]:
     return width, height
 
 
-def section(source, line, width, classes=None, drop_classes=None) -> Section:
+def section(source, line, width, classes=None, drop_classes=None, clip_polygon=None) -> Section:
     """The cross-section of ``source`` (a path, a list of paths, as ``gigapoint.open`` takes them,
     a PointCloud, or an LOD octree: opened, or its path or URL) along ``line`` = (x1, y1, x2, y2),
     in the cloud's coordinates: the points within ``width`` / 2 of the line, square to it in x and
     y, between its ends, any z (only those are read from files: ``gigapoint.open(...,
     corridor=)``; of an octree, only the nodes whose boxes meet the corridor, at every level:
-    lod/query.py); ``classes``/``drop_classes``: only those LAS classes, or all but those. Bad
+    lod/query.py); ``classes``/``drop_classes``: only those LAS classes, or all but those;
+    ``clip_polygon``: only the points inside it (as ``gigapoint.open``'s). Bad
     values are one-line InputErrors before anything is read; a corridor that holds no point an
     EmptyCloudError naming the files.
 
     ``Section.distance``, ``.offset``, ``.z``, ``.classification``: the points along the line;
     ``.render(scale=pixels per unit or size=(w, h), vertical_exaggeration=1, **settings)``: the image."""
     lane = corridor_of(line, width, f"section: line={line!r}", f"section: width={width!r}")
+    keep = point_filter(classes, drop_classes, where="section", corridor=lane, clip_polygon=clip_polygon)  # (its bad values before anything is read)
     paths = [source] if isinstance(source, (str, os.PathLike)) else source
     if isinstance(source, PointCloud):
-        keep = point_filter(classes, drop_classes, where="section", corridor=lane)
         kept = list(keep.apply(source.chunks(), source.name))  # (the corridor's points only)
         keep.check_passed(source.name)
         cloud = build_cloud(kept, name=source.name, colors="rgba")  # (its colours as the cloud holds them)
     elif is_octree(source):
-        cloud = _octree_section(source, source.name, lane, classes, drop_classes)
+        cloud = build_cloud(kept_points(source, keep, source.name, _region(keep)), name=source.name, colors="rgba")
     elif isinstance(paths, (list, tuple)) and len(paths) == 1 and is_lod_source(paths[0]):
-        keep = point_filter(classes, drop_classes, where="section", corridor=lane)  # (its bad values before the octree opens)
-        octree = open_octree(paths[0])
-        try:
-            if not is_octree(octree):  # an unfinished conversion's preview: a sample of the points read so far
-                raise InputError(f"{shown_url(paths[0])}: an unfinished conversion; its preview holds a sample of the points: section the point files, or wait for the octree")
-            cloud = _octree_section(octree, shown_url(paths[0]), lane, classes, drop_classes)
-        finally:
-            if isinstance(octree, VoxelOctree):  # (a URL's connections)
-                octree.close()
+        kept, name = octree_path_kept(paths[0], keep, _region(keep), "section the point files, or wait for the octree")
+        cloud = build_cloud(kept, name=name, colors="rgba")
     else:  # only the corridor's points are read
         from . import open as open_points
 
-        cloud = open_points(paths, classes=classes, drop_classes=drop_classes, corridor=lane)
+        cloud = open_points(paths, classes=classes, drop_classes=drop_classes, corridor=lane, clip_polygon=keep.polygon)
     return Section(cloud, lane[:4], lane[4])
 
 
-def _octree_section(octree, label: str, lane, classes, drop_classes) -> PointCloud:
-    """The corridor's points of an LOD octree (named ``label`` in messages): those of the nodes
-    whose boxes meet the corridor (lod/query.py), through the corridor's filter."""
-    keep = point_filter(classes, drop_classes, where="section", corridor=lane)
-    kept = [chunk for points in points_meeting(octree, keep.meets) if len(chunk := keep.kept(points, label))]
-    keep.check_passed(label)
-    if not kept:  # (no node meets it: none read)
-        raise EmptyCloudError(f"{label}: no point passes the filter ({keep.describe()}): no node of the octree meets the corridor")
-    return build_cloud(kept, name=octree.name, colors="rgba")
+def _region(keep: PointFilter) -> str:
+    """What a section's filter keeps, as the error says no octree node meets it."""
+    return "the corridor" if keep.polygon is None else "the corridor in the clip polygon"
 
 
 __all__ = ["Section", "check_size", "section"]

@@ -63,6 +63,15 @@ ClipOption = Annotated[
         "xmin,ymin,xmax,ymax (any z) or xmin,ymin,zmin,xmax,ymax,zmax.",
     ),
 ]
+ClipPolygonOption = Annotated[
+    str | None,
+    typer.Option(
+        "--clip-polygon",
+        metavar="AREA",
+        help="Read only the points inside this polygon, in the files' coordinates (any z; holes left out, edges included): "
+        "a GeoJSON file (Polygon, MultiPolygon, a Feature or FeatureCollection of them) or a WKT file or text ('POLYGON ((x y, ...))').",
+    ),
+]
 
 
 ToCrsOption = Annotated[
@@ -82,12 +91,13 @@ FromCrsOption = Annotated[
 ]
 
 
-def filter_options(classes: str | None, drop_classes: str | None, clip: str | None, where: str):
-    """The PointFilter (io/filters.py) of ``--classes``, ``--drop-classes`` and ``--clip``, None
-    without them; a bad value a one-line error naming the option, before anything is read."""
+def filter_options(classes: str | None, drop_classes: str | None, clip: str | None, where: str, clip_polygon: str | None = None):
+    """The PointFilter (io/filters.py) of ``--classes``, ``--drop-classes``, ``--clip`` and
+    ``--clip-polygon``, None without them; a bad value a one-line error naming the option (a bad
+    polygon file: the file), before anything is read."""
     from ..io.filters import cli_point_filter
 
-    return cli_point_filter(classes, drop_classes, clip, where)
+    return cli_point_filter(classes, drop_classes, clip, where, clip_polygon)
 
 
 def thin_option(text: str | None, where: str) -> float | None:
@@ -138,7 +148,7 @@ def open_files(inputs, point_budget: int, progressive: bool | None, options: dic
     """What ``render`` and ``view`` open: ``open_sized``'s choice (an octree as itself, big inputs
     progressively, else one PointCloud); with ``options`` (``cloud_options``) always one
     PointCloud built with them. ``point_filter`` (``filter_options``): only the points it keeps
-    are read, whichever way (an octree is refused: it is drawn as stored)."""
+    are read, whichever way (of an octree, those of the nodes meeting it, as one PointCloud)."""
     from ..io import open_cloud, shown_url
     from ..lod import is_lod_source
     from ..lod.progressive import open_sized
@@ -157,6 +167,7 @@ __all__ = [
     "ChunkedOption",
     "ClassesOption",
     "ClipOption",
+    "ClipPolygonOption",
     "ColorsOption",
     "DropClassesOption",
     "RecursiveOption",

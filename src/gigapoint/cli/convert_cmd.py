@@ -15,6 +15,7 @@ from .app import app
 from .cloud_opts import (
     ClassesOption,
     ClipOption,
+    ClipPolygonOption,
     DropClassesOption,
     FromCrsOption,
     RecursiveOption,
@@ -61,6 +62,7 @@ def convert(
     classes: ClassesOption = None,
     drop_classes: DropClassesOption = None,
     clip: ClipOption = None,
+    clip_polygon: ClipPolygonOption = None,
     thin: str | None = typer.Option(
         None,
         "--thin",
@@ -80,7 +82,7 @@ def convert(
 
     if dask is not None and workers is not None:
         raise ConvertError("--dask and --workers: give one of them (a running cluster's scheduler, or a local cluster's size)")
-    point_filter = filter_options(classes, drop_classes, clip, "convert")  # its errors name the options, before a cluster starts
+    point_filter = filter_options(classes, drop_classes, clip, "convert", clip_polygon)  # its errors name the options, before a cluster starts
     spacing = thin_option(thin, "convert")
     copc = format == "copc" or (format is None and is_copc_name(output))  # (convert's own default)
     to_file = format is None and is_point_file_name(output)  # one plain point file: nothing to watch, no cluster (convert refuses one)

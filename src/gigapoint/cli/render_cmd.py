@@ -23,6 +23,7 @@ from .cloud_opts import (
     ChunkedOption,
     ClassesOption,
     ClipOption,
+    ClipPolygonOption,
     ColorsOption,
     DropClassesOption,
     RecursiveOption,
@@ -264,6 +265,7 @@ def render(
     classes: ClassesOption = None,
     drop_classes: DropClassesOption = None,
     clip: ClipOption = None,
+    clip_polygon: ClipPolygonOption = None,
     contours: ContoursOption = None,
     contours_base: ContoursBaseOption = None,
     contours_out: ContoursOutOption = None,
@@ -304,7 +306,7 @@ def render(
     projection = projection or "perspective"
     width, height = check_image_size(width, height, fov)  # before reading anything
     check_color_options(settings)
-    point_filter = filter_options(classes, drop_classes, clip, "render")
+    point_filter = filter_options(classes, drop_classes, clip, "render", clip_polygon)
     inputs = subfolders_read(inputs, recursive)
     with options_named():  # (--color-attribute: the files' headers lack it)
         check_color_attribute(inputs, settings)

@@ -11,7 +11,7 @@ import typer
 from ..errors import GigapointError
 from ..render import RenderSettings
 from .app import app
-from .cloud_opts import ClassesOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
+from .cloud_opts import ClassesOption, ClipPolygonOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
 from .output import check_image_fits, check_output, check_outputs_apart, save_image
 from .quality_opts import check_color_options
 from .settings_opts import options_named, with_settings_options
@@ -45,6 +45,7 @@ def section(
     recursive: RecursiveOption = False,
     classes: ClassesOption = None,
     drop_classes: DropClassesOption = None,
+    clip_polygon: ClipPolygonOption = None,
 ) -> None:
     """Draw a cross-section: the points of a corridor along a line, seen from the side."""
     import gigapoint as gp
@@ -67,8 +68,8 @@ def section(
     if settings.stereo != "none":  # (two eyes of an orthographic side view see the same)
         raise GigapointError("section: --stereo: a section is one orthographic view")
     check_color_options(settings)
-    keep = filter_options(classes, drop_classes, None, "section")  # (checked here: its errors name the options)
-    chosen = {} if keep is None else {"classes": keep.classes or None, "drop_classes": keep.drop_classes or None}
+    keep = filter_options(classes, drop_classes, None, "section", clip_polygon)  # (checked here: its errors name the options)
+    chosen = {} if keep is None else {"classes": keep.classes or None, "drop_classes": keep.drop_classes or None, "clip_polygon": keep.polygon}
     cut = gp.section(subfolders_read(inputs, recursive), lane[:4], lane[4], **chosen)
     camera = cut.camera(scale, image_size, vertical_exaggeration)
     check_image_fits(output, camera.width, camera.height)

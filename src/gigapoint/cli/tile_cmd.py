@@ -11,7 +11,7 @@ import typer
 
 from ..errors import GigapointError
 from .app import app
-from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, FromCrsOption, RecursiveOption, ToCrsOption, filter_options
+from .cloud_opts import ClassesOption, ClipOption, ClipPolygonOption, DropClassesOption, FromCrsOption, RecursiveOption, ToCrsOption, filter_options
 from .settings_opts import named_option
 
 
@@ -28,6 +28,7 @@ def tile(
     classes: ClassesOption = None,
     drop_classes: DropClassesOption = None,
     clip: ClipOption = None,
+    clip_polygon: ClipPolygonOption = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
     to_crs: ToCrsOption = None,
     from_crs: FromCrsOption = None,
@@ -35,7 +36,7 @@ def tile(
     """Split point clouds into square LAS/LAZ tiles (lastile), read once, a chunk at a time; only tiles holding points are written."""
     from ..lod.convert.tiles import tile as run
 
-    point_filter = filter_options(classes, drop_classes, clip, "tile")  # its errors name the options
+    point_filter = filter_options(classes, drop_classes, clip, "tile", clip_polygon)  # its errors name the options
     try:
         result = run(
             [str(p) for p in inputs],

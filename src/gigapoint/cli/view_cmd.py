@@ -16,6 +16,7 @@ from .cloud_opts import (
     ChunkedOption,
     ClassesOption,
     ClipOption,
+    ClipPolygonOption,
     ColorsOption,
     DropClassesOption,
     RecursiveOption,
@@ -79,6 +80,7 @@ def view(
     classes: ClassesOption = None,
     drop_classes: DropClassesOption = None,
     clip: ClipOption = None,
+    clip_polygon: ClipPolygonOption = None,
     hidden_classes: str | None = typer.Option(
         None, "--hidden-classes", help="LAS classes hidden from the start, e.g. '7,18' (unticked in the Classes panel); changing them re-reads nothing."
     ),
@@ -88,9 +90,9 @@ def view(
     options = cloud_options(colors, chunked)
     if recursive and not paths:  # (dropped without a word by --demo, --live and --replay)
         raise GigapointError("--recursive: reads the subfolders of the folders given as PATH...; none is given")
-    point_filter = filter_options(classes, drop_classes, clip, "view")
+    point_filter = filter_options(classes, drop_classes, clip, "view", clip_polygon)
     if point_filter is not None and not paths:  # (as --recursive: --demo, --live and --replay read no file)
-        raise GigapointError("--classes, --drop-classes and --clip: filter the points of the files given as PATH...; none is given")
+        raise GigapointError("--classes, --drop-classes, --clip and --clip-polygon: filter the points of the files given as PATH...; none is given")
     from ..render.settings import RenderSettings
 
     with options_named():  # a bad class said as --hidden-classes's, before anything is read

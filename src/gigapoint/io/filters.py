@@ -1,6 +1,7 @@
-"""Read-time point filters: keep or drop LAS classes, keep a clip box or a corridor along a line
-(PDAL's filters.range and filters.crop, LAStools' -keep_class, -drop_class, -keep_xy; the corridor
-is what a cross-section draws, ``gigapoint section``).
+"""Read-time point filters: keep or drop LAS classes, keep a clip box, a clip polygon or a corridor
+along a line (PDAL's filters.range and filters.crop, LAStools' -keep_class, -drop_class, -keep_xy,
+lasclip -poly; the corridor is what a cross-section draws, ``gigapoint section``; the polygon's
+parsing and kernels are polygon.py's).
 
 One ``PointFilter`` is made from the options (``point_filter``: every bad value a one-line
 error before anything is read) and applied to each chunk right after its reader gives it, by
@@ -16,16 +17,17 @@ from __future__ import annotations
 import math
 import numbers
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..core.chunk import PointChunk
 from ..errors import EmptyCloudError, InputError, is_real, is_whole_number
+from .polygon import ClipPolygon, clip_polygon_of, far_apart
 
 #: The option names as Python's keywords and the CLI's options say them
-PYTHON_NAMES = {"classes": "classes=", "drop_classes": "drop_classes=", "clip": "clip=", "corridor": "corridor="}
-CLI_NAMES = {"classes": "--classes ", "drop_classes": "--drop-classes ", "clip": "--clip "}
+PYTHON_NAMES = {"classes": "classes=", "drop_classes": "drop_classes=", "clip": "clip=", "corridor": "corridor=", "clip_polygon": "clip_polygon="}
+CLI_NAMES = {"classes": "--classes ", "drop_classes": "--drop-classes ", "clip": "--clip ", "clip_polygon": "--clip-polygon "}
 
 
 @dataclass
@@ -34,19 +36,23 @@ class PointFilter:
     ``drop_classes``, inside ``clip`` ((xmin, ymin, xmax, ymax): any z, or (xmin, ymin, zmin,
     xmax, ymax, zmax); bounds included; empty: anywhere), inside ``corridor`` ((x1, y1, x2, y2,
     width): at most width / 2 from the segment (x1, y1)-(x2, y2), measured square to it in x and
-    y, and between its ends; any z; empty: anywhere). ``read``/``passed``: points seen and kept
-    so far (one operation's: ``fresh`` gives a copy at zero)."""
+    y, and between its ends; any z; empty: anywhere), inside ``polygon`` (polygon.py: even-odd
+    over its rings, edges included, any z; None: anywhere). ``read``/``passed``: points seen and
+    kept so far (one operation's: ``fresh`` gives a copy at zero); ``seen``: the x and y box
+    of the points read where a polygon is given (a hint when none of them passes)."""
 
     classes: tuple[int, ...] = ()
     drop_classes: tuple[int, ...] = ()
     clip: tuple[float, ...] = ()
     corridor: tuple[float, ...] = ()
+    polygon: ClipPolygon | None = None
     read: int = field(default=0, compare=False)
     passed: int = field(default=0, compare=False)
+    seen: tuple[np.ndarray, np.ndarray] | None = field(default=None, compare=False)
 
     def fresh(self) -> PointFilter:
         """This filter with its counts at zero (a pass of a read that reads the files again)."""
-        return PointFilter(self.classes, self.drop_classes, self.clip, self.corridor)
+        return replace(self, read=0, passed=0, seen=None)
 
     def describe(self) -> str:
         """'classes 2, 6; clip 1, 2, 3, 4; corridor 0, 0 to 10, 0, width 2': what the messages say of it."""
@@ -58,20 +64,28 @@ class PointFilter:
         if self.corridor:
             x1, y1, x2, y2, width = self.corridor
             parts.append(f"corridor {x1:.15g}, {y1:.15g} to {x2:.15g}, {y2:.15g}, width {width:.15g}")
+        if self.polygon is not None:
+            parts.append(self.polygon.describe())
         return "; ".join(parts)
 
     def as_spec(self) -> dict:
         """JSON-able, as the keywords of ``point_filter`` (and gp.open's, gp.convert's; None: not
         given): for a conversion's fingerprint, its Dask tasks (``from_spec``), the CLI's calls. A
-        corridor is there only where given (a conversion's fingerprint without one is as before)."""
+        corridor and a polygon (its vertices: ``ClipPolygon.as_spec``) are there only where given
+        (a conversion's fingerprint without one is as before)."""
         spec = {name: list(values) or None for name, values in (("classes", self.classes), ("drop_classes", self.drop_classes), ("clip", self.clip))}
         if self.corridor:
             spec["corridor"] = list(self.corridor)
+        if self.polygon is not None:
+            spec["clip_polygon"] = self.polygon.as_spec()
         return spec
 
     @classmethod
     def from_spec(cls, spec: dict | None) -> PointFilter | None:
-        return None if spec is None else cls(*(tuple(spec.get(name) or ()) for name in ("classes", "drop_classes", "clip", "corridor")))
+        if spec is None:
+            return None
+        polygon = None if spec.get("clip_polygon") is None else clip_polygon_of(spec["clip_polygon"], "clip_polygon=")
+        return cls(*(tuple(spec.get(name) or ()) for name in ("classes", "drop_classes", "clip", "corridor")), polygon)
 
     def kept(self, chunk: PointChunk, path) -> PointChunk:
         """The points of ``chunk`` (read from ``path``) the filter keeps, counted."""
@@ -93,6 +107,9 @@ class PointFilter:
             distance, offset = along_and_across(chunk.xyz, self.corridor[:4])
             length, half = math.dist(self.corridor[:2], self.corridor[2:4]), self.corridor[4] / 2
             keep &= (distance >= 0) & (distance <= length) & (np.abs(offset) <= half)  # (NaN: left out)
+        if self.polygon is not None:
+            keep &= self.polygon.inside(chunk.xyz)
+            self._see(chunk.xyz)
         n = int(np.count_nonzero(keep))
         self.read += len(chunk)
         self.passed += n
@@ -110,12 +127,38 @@ class PointFilter:
     def check_passed(self, label: str) -> None:
         """An EmptyCloudError naming ``label`` (the files) where points were read and none passed."""
         if self.passed == 0 and self.read:  # (no point read at all: the readers' own errors say so)
-            raise EmptyCloudError(f"{label}: no point passes the filter ({self.describe()}): {self.read:,} points read")
+            raise EmptyCloudError(f"{label}: no point passes the filter ({self.describe()}): {self.read:,} points read{self.polygon_hint()}")
+
+    def _see(self, xyz: np.ndarray) -> None:
+        """Widen ``seen`` by the x and y of ``xyz`` (NaN positions left out)."""
+        finite = xyz[np.isfinite(xyz[:, :2]).all(axis=1), :2]
+        if len(finite):
+            lo, hi = finite.min(axis=0), finite.max(axis=0)
+            self.seen = (lo, hi) if self.seen is None else (np.minimum(self.seen[0], lo), np.maximum(self.seen[1], hi))
+
+    def polygon_hint(self) -> str:
+        """Where no point passes a polygon: '; site.geojson lies far from the points (...)' where
+        it does (taken in another CRS), and the CRS its GeoJSON names; else ''."""
+        polygon = self.polygon
+        if polygon is None:
+            return ""
+        hint = ""
+        if self.seen is not None and far_apart(polygon, *self.seen):
+            (x0, y0), (x1, y1) = polygon.lo, polygon.hi
+            (px0, py0), (px1, py1) = self.seen
+            hint = (
+                f"; {polygon.source} spans x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}, far from the points' x {px0:.6g}..{px1:.6g}, "
+                f"y {py0:.6g}..{py1:.6g}: give it in the files' coordinates"
+            )
+        if polygon.epsg is not None:
+            hint += f"; {polygon.source} names EPSG:{polygon.epsg} (it is taken in the files' coordinates, not reprojected)"
+        return hint
 
     def meets(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Which of the boxes ``lo``..``hi`` ((k, 3) arrays, bounds included) may hold points the
         filter keeps: those meeting the clip box and the corridor's rectangle in x and y (tested
-        on the four axes that can separate two rectangles: x, y, along and across the line);
+        on the four axes that can separate two rectangles: x, y, along and across the line), and
+        the polygon (``ClipPolygon.meets``: an edge passes through the box, or it lies inside);
         classes are not known from a box."""
         lo, hi = np.atleast_2d(np.asarray(lo, np.float64)), np.atleast_2d(np.asarray(hi, np.float64))
         meets = np.ones(len(lo), bool)
@@ -132,10 +175,13 @@ class PointFilter:
             distance, offset = along_and_across(centre, self.corridor[:4])
             along, across = extent @ [abs(ux), abs(uy)], extent @ [abs(uy), abs(ux)]  # the boxes' half spans on those axes
             meets &= (distance + along >= 0) & (distance - along <= length) & (np.abs(offset) - across <= half)
+        if self.polygon is not None and meets.any():
+            meets[meets] = self.polygon.meets(lo[meets], hi[meets])
         return meets
 
     def clipped_bounds(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds ``lo``..``hi`` (a header's) cut to the clip box and the corridor's box: where the kept points can be."""
+        """Bounds ``lo``..``hi`` (a header's) cut to the clip box, the corridor's and the polygon's
+        boxes: where the kept points can be."""
         lo, hi = np.array(lo, np.float64), np.array(hi, np.float64)
         if self.clip:
             axes = len(self.clip) // 2
@@ -145,6 +191,9 @@ class PointFilter:
             ends, half = np.reshape(self.corridor[:4], (2, 2)), self.corridor[4] / 2
             lo[:2] = np.maximum(lo[:2], ends.min(axis=0) - half)
             hi[:2] = np.minimum(hi[:2], ends.max(axis=0) + half)
+        if self.polygon is not None:
+            lo[:2] = np.maximum(lo[:2], self.polygon.lo)
+            hi[:2] = np.minimum(hi[:2], self.polygon.hi)
         return lo, hi
 
 
@@ -165,13 +214,14 @@ def along_and_across(xyz: np.ndarray, line) -> tuple[np.ndarray, np.ndarray]:
 
 
 def point_filter(classes=None, drop_classes=None, clip=None, where: str = "open", names: dict = PYTHON_NAMES, shown: dict | None = None,
-                 corridor=None) -> PointFilter | None:  # fmt: skip
+                 corridor=None, clip_polygon=None) -> PointFilter | None:  # fmt: skip
     """The PointFilter of the options given (None for none), or a one-line InputError naming the
     bad one (``where``: the operation, ``names``: how the options are spelt, ``PYTHON_NAMES`` or
     ``CLI_NAMES``; ``shown``: the values as given, where not their repr): a class outside 0..255
     or not an integer, a class both kept and dropped, a clip box of other than 4 or 6 numbers,
     NaN or infinite, or with a min above its max, a corridor that is not 5 finite numbers, whose
-    line has no length or whose width is not above 0 (``corridor_of``'s checks)."""
+    line has no length or whose width is not above 0 (``corridor_of``'s checks), a clip polygon
+    that cannot be read or is no area (``polygon.clip_polygon_of``'s checks)."""
     given = {"classes": classes, "drop_classes": drop_classes, "clip": clip}
     label = {name: f"{where}: {names[name]}{(shown or {}).get(name) or repr(value)}" for name, value in given.items()}
     keep = _classes(classes, label["classes"])
@@ -181,9 +231,10 @@ def point_filter(classes=None, drop_classes=None, clip=None, where: str = "open"
         raise InputError(f"{where}: {names['classes'].strip()} and {names['drop_classes'].strip()} both name class {', '.join(map(str, both))}; keep it or drop it")
     box = _clip(clip, label["clip"])
     lane = () if corridor is None else _corridor(corridor, f"{where}: {names['corridor']}{corridor!r}")
-    if not (keep or drop or box or lane):
+    area = None if clip_polygon is None else clip_polygon_of(clip_polygon, f"{where}: {names['clip_polygon']}{(shown or {}).get('clip_polygon') or repr(clip_polygon)}")
+    if not (keep or drop or box or lane or area):
         return None
-    return PointFilter(keep, drop, box, lane)
+    return PointFilter(keep, drop, box, lane, area)
 
 
 def _classes(value, label: str) -> tuple[int, ...]:
@@ -244,9 +295,10 @@ def corridor_of(line, width, line_label: str, width_label: str) -> tuple[float, 
     return (*(float(v) for v in ends), float(width))
 
 
-def cli_point_filter(classes: str | None, drop_classes: str | None, clip: str | None, where: str = "filter") -> PointFilter | None:
+def cli_point_filter(classes: str | None, drop_classes: str | None, clip: str | None, where: str = "filter", clip_polygon: str | None = None) -> PointFilter | None:
     """``point_filter`` of the CLI's ``--classes 2,6``, ``--drop-classes 7,18`` and ``--clip
-    x0,y0,x1,y1``: comma-separated numbers (one that is not a number: a one-line error)."""
+    x0,y0,x1,y1``: comma-separated numbers (one that is not a number: a one-line error), and
+    ``--clip-polygon AREA`` (a file, or WKT text)."""
 
     def numbers_of(text: str | None, name: str, kind):
         if text is None:
@@ -257,9 +309,9 @@ def cli_point_filter(classes: str | None, drop_classes: str | None, clip: str | 
             what = "integers from 0 to 255" if kind is int else "numbers"
             raise InputError(f"{where}: {CLI_NAMES[name]}{text}: give {what}, separated by commas") from None
 
-    shown = {"classes": classes, "drop_classes": drop_classes, "clip": clip}
+    shown = {"classes": classes, "drop_classes": drop_classes, "clip": clip, "clip_polygon": clip_polygon}
     keep, drop, box = numbers_of(classes, "classes", int), numbers_of(drop_classes, "drop_classes", int), numbers_of(clip, "clip", float)
-    return point_filter(keep, drop, box, where, CLI_NAMES, shown)
+    return point_filter(keep, drop, box, where, CLI_NAMES, shown, clip_polygon=clip_polygon)
 
 
 __all__ = ["PointFilter", "along_and_across", "cli_point_filter", "corridor_of", "filtered", "point_filter"]

@@ -23,7 +23,8 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from ..core.chunk import PointChunk
-from ..errors import InputError
+from ..errors import EmptyCloudError, InputError
+from ..io.filters import PointFilter
 from .potree import PotreeCloud
 from .progressive import ProgressiveOctree
 from .store import OctreeCloud
@@ -67,6 +68,33 @@ def points_meeting(cloud, meets: Meets) -> Iterator[PointChunk]:
 
 def _slack(cloud) -> float:
     return BOX_SLACK * float(cloud.meta["cube_edge"])
+
+
+def kept_points(cloud, keep: PointFilter, label: str, region: str) -> list[PointChunk]:
+    """The points of the octree ``cloud`` (named ``label`` in messages) that ``keep`` keeps, read
+    from the nodes meeting it only (``points_meeting`` of ``keep.meets``); an EmptyCloudError
+    where none passes, or where no node meets ``region`` (what the filter keeps, in words)."""
+    kept = [chunk for points in points_meeting(cloud, keep.meets) if len(chunk := keep.kept(points, label))]
+    keep.check_passed(label)
+    if not kept:  # (no node meets it: none read)
+        raise EmptyCloudError(f"{label}: no point passes the filter ({keep.describe()}): no node of the octree meets {region}{keep.polygon_hint()}")
+    return kept
+
+
+def octree_path_kept(path, keep: PointFilter, region: str, instead: str) -> tuple[list[PointChunk], str]:
+    """(``kept_points``, the octree's name) of the octree at ``path`` (opened and closed here); an
+    unfinished conversion's preview (a sample of the points) a one-line InputError: ``instead``,
+    what to do instead, ends it."""
+    from .reader import open_octree, shown_url
+
+    octree = open_octree(path)
+    try:
+        if not is_octree(octree):
+            raise InputError(f"{shown_url(path)}: an unfinished conversion; its preview holds a sample of the points: {instead}")
+        return kept_points(octree, keep, shown_url(path), region), octree.name
+    finally:
+        if isinstance(octree, VoxelOctree):  # (a URL's connections)
+            octree.close()
 
 
 def _meeting(cloud: OctreeCloud, meets: Meets, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

@@ -227,6 +227,7 @@ def convert(
     classes=None,
     drop_classes=None,
     clip=None,
+    clip_polygon=None,
     thin=None,
     to_crs=None,
     from_crs=None,
@@ -272,7 +273,7 @@ def convert(
     ``recursive=True``: a folder stands for every point file below it, not only its own
     (``io.with_subfolders``, as ``gp.open``'s).
 
-    ``classes``, ``drop_classes``, ``clip``: only the points of the input files that pass them are
+    ``classes``, ``drop_classes``, ``clip``, ``clip_polygon``: only the points of the input files that pass them are
     read, as ``gp.open``'s (io/filters.py); a conversion resumes only under the same filter.
 
     ``thin`` (a plain point file only): the edge of cube cells on a grid anchored at coordinate
@@ -294,7 +295,7 @@ def convert(
         raise InputError("convert: recursive=True reads the subfolders of folders; the inputs are a cloud or PointChunks")  # (dropped without a word)
     if recursive:
         inputs = with_subfolders(inputs)
-    keep = point_filter(classes, drop_classes, clip, "convert")  # before anything is read
+    keep = point_filter(classes, drop_classes, clip, "convert", clip_polygon=clip_polygon)  # before anything is read
     thin_label = f"convert: thin={thin!r}"
     spacing = thin_spacing(thin, thin_label)
     reprojection = None if to_crs is None else Reprojection(to_crs, from_crs, "convert")  # an unknown CRS: said before a point is read

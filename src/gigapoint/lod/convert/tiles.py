@@ -84,6 +84,7 @@ def tile(
     classes=None,
     drop_classes=None,
     clip=None,
+    clip_polygon=None,
     overwrite: bool = False,
     recursive: bool = False,
     chunk_size: int | None = None,
@@ -95,8 +96,8 @@ def tile(
     the files' units, on a grid anchored at 0) written into the folder ``out`` as
     ``<name>_<xmin>_<ymin>.laz`` (``format`` "las": .las). ``name``: by default the input file's
     stem, or ``out``'s name for several inputs. ``buffer``: each tile also holds the points within
-    that distance of its square, flagged "overlap". ``classes``, ``drop_classes``, ``clip``: only
-    the points passing them are tiled (as ``gp.open``'s); ``recursive=True``: folders' subfolders too.
+    that distance of its square, flagged "overlap". ``classes``, ``drop_classes``, ``clip``,
+    ``clip_polygon``: only the points passing them are tiled (as ``gp.open``'s); ``recursive=True``: folders' subfolders too.
     ``to_crs`` (needs pyproj): the points are moved into that CRS first (from each file's own, or
     ``from_crs``), as ``convert``'s: ``size``, ``buffer`` and ``clip`` are then in its units.
 
@@ -118,7 +119,7 @@ def tile(
         raise InputError(f"tile: name={name!r}: the tiles' name is a file name's start, without folders")
     if not isinstance(out, (str, os.PathLike)) or not os.fspath(out):
         raise InputError(f"tile: the output must be a folder's path, got {out!r}")
-    keep = point_filter(classes, drop_classes, clip, "tile")
+    keep = point_filter(classes, drop_classes, clip, "tile", clip_polygon=clip_polygon)
     if from_crs is not None and to_crs is None:
         raise InputError(f"tile: from_crs={from_crs!r}: the CRS the inputs are in, for to_crs; give to_crs too")
     reprojection = None if to_crs is None else Reprojection(to_crs, from_crs, "tile")

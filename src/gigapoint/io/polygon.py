@@ -1,0 +1,260 @@
+"""A clip polygon (``--clip-polygon AREA``, ``gp.open(clip_polygon=)``): a site cut out by its
+boundary, as PDAL's filters.crop polygon= and LAStools' lasclip -poly do.
+
+AREA is a GeoJSON file (a Polygon, a MultiPolygon, a Feature or FeatureCollection of them), a
+WKT file or string (POLYGON, MULTIPOLYGON), or (Python) a GeoJSON geometry as a dict. Its
+coordinates are taken in the cloud's own, x and y (any z). A point is kept when it lies inside
+by the even-odd rule over all rings: holes are left out, the parts of a multipolygon each kept;
+a point exactly on an edge (outer or a hole's) is kept, as a clip box's bounds are.
+
+Parsed with json and a small WKT reader (no shapely or GDAL); every bad input is a one-line
+InputError naming the file before anything is read. The kernels are in polygon_kernels.py.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+#: GeoJSON geometry types that are not areas, named in the error
+_NOT_AREAS = {"Point", "MultiPoint", "LineString", "MultiLineString"}
+
+
+class ClipPolygon:
+    """The rings of one or more polygons (``polygons``: per polygon a list of rings, each a (k, 2)
+    array without the closing vertex; the first ring the outline, the rest its holes), read from
+    ``source`` (the file, or the WKT text's start: what messages name). ``epsg``: the CRS a
+    GeoJSON's ``crs`` member names, None without one (a hint when nothing passes)."""
+
+    def __init__(self, polygons: list[list[np.ndarray]], source: str, epsg: int | None = None):
+        self.polygons = polygons
+        self.source = source
+        self.epsg = epsg
+        rings = [ring for polygon in polygons for ring in polygon]
+        self.edges = np.concatenate([np.hstack([ring, np.roll(ring, -1, axis=0)]) for ring in rings])  # rows x1, y1, x2, y2
+        xy = np.concatenate(rings)
+        self.lo, self.hi = xy.min(axis=0), xy.max(axis=0)
+        self.n_vertices = len(xy)
+        self._buckets = None  # (starts, members) of the edges by y: made on first use
+
+    def __eq__(self, other) -> bool:
+        return (
+            isinstance(other, ClipPolygon)
+            and self.source == other.source
+            and len(self.edges) == len(other.edges)
+            and bool(np.array_equal(self.edges, other.edges))
+        )
+
+    __hash__ = None
+
+    def describe(self) -> str:
+        """'clip polygon site.geojson (2 polygons, 1 hole, 12 vertices)'."""
+        holes = sum(len(p) - 1 for p in self.polygons)
+        parts = [f"{len(self.polygons)} polygon{'s' * (len(self.polygons) > 1)}"] if len(self.polygons) > 1 else []
+        parts += [f"{holes} hole{'s' * (holes > 1)}"] if holes else []
+        parts.append(f"{self.n_vertices:,} vertices")
+        return f"clip polygon {self.source} ({', '.join(parts)})"
+
+    def as_spec(self) -> dict:
+        """A GeoJSON MultiPolygon (with ``source`` and ``epsg``): JSON-able, read back by ``clip_polygon_of``."""
+        closed = [[[*map(list, ring.tolist()), list(ring[0].tolist())] for ring in polygon] for polygon in self.polygons]
+        return {"type": "MultiPolygon", "coordinates": closed, "source": self.source, "epsg": self.epsg}
+
+    def buckets(self) -> tuple[np.ndarray, np.ndarray]:
+        """(starts, members): the edges by bands of y (``polygon_kernels.edge_buckets``), made once."""
+        from .polygon_kernels import edge_buckets
+
+        if self._buckets is None:
+            self._buckets = edge_buckets(self.edges, self.lo[1], self.hi[1])
+        return self._buckets
+
+    def inside(self, xyz: np.ndarray) -> np.ndarray:
+        """Whether each point (x and y of ``xyz``) is in the polygon (NaN positions: not)."""
+        from .polygon_kernels import points_inside
+
+        starts, members = self.buckets()
+        height = (self.hi[1] - self.lo[1]) / (len(starts) - 1) if self.hi[1] > self.lo[1] else 1.0
+        inside = np.empty(len(xyz), bool)
+        box = np.array([*self.lo, *self.hi])
+        points_inside(np.ascontiguousarray(xyz[:, :2], np.float64), self.edges, box, float(self.lo[1]), float(height), starts, members, inside)
+        return inside
+
+    def meets(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Which boxes ``lo``..``hi`` ((k, >=2) arrays, x and y) hold some of the area: one an
+        edge passes through, or else one wholly inside (then its centre is inside)."""
+        from .polygon_kernels import boxes_crossed
+
+        near = np.all((hi[:, :2] >= self.lo) & (lo[:, :2] <= self.hi), axis=1)
+        meets = np.zeros(len(lo), bool)
+        if near.any():
+            lo_near, hi_near = np.ascontiguousarray(lo[near, :2], np.float64), np.ascontiguousarray(hi[near, :2], np.float64)
+            meets[near] = boxes_crossed(lo_near, hi_near, self.edges) | self.inside((lo_near + hi_near) / 2)
+        return meets
+
+
+def clip_polygon_of(value, label: str) -> ClipPolygon:
+    """The ClipPolygon of ``value``: a path to a GeoJSON or WKT file, a WKT string, a GeoJSON
+    geometry (a dict: ``as_spec``'s too) or a ClipPolygon; a one-line InputError starting with
+    ``label`` (the option as given) for anything else."""
+    if isinstance(value, ClipPolygon):
+        return value
+    if isinstance(value, dict):
+        source = value.get("source") if isinstance(value.get("source"), str) else "the GeoJSON geometry"
+        return _geojson_polygon(value, source, label)
+    if not isinstance(value, (str, os.PathLike)):
+        raise InputError(f"{label}: a clip polygon is a GeoJSON or WKT file, or WKT text (POLYGON ((x y, ...)))")
+    text = str(value)
+    if isinstance(value, str) and re.match(r"\s*(MULTI)?POLYGON\b", text, re.IGNORECASE):
+        return _wkt_polygon(text, f"WKT {text.strip()[:30]}{'...' * (len(text.strip()) > 30)}")
+    path = Path(value)
+    if not path.is_file():
+        raise InputError(f"{label}: no such file{' (nor WKT text: POLYGON ((x y, ...)))' * isinstance(value, str)}")
+    try:
+        content = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot be read as a clip polygon ({type(exc).__name__})") from None
+    if content.lstrip().startswith("{"):
+        try:
+            document = json.loads(content)
+        except ValueError as exc:
+            raise InputError(f"{path}: not valid GeoJSON ({exc})") from None
+        return _geojson_polygon(document, str(path), str(path))
+    if re.match(r"\s*(MULTI)?POLYGON\b", content, re.IGNORECASE):
+        return _wkt_polygon(content, str(path))
+    raise InputError(f"{path}: neither GeoJSON nor WKT (POLYGON, MULTIPOLYGON): not a clip polygon")
+
+
+def _geojson_polygon(document, source: str, label: str) -> ClipPolygon:
+    """The polygons of a GeoJSON Polygon, MultiPolygon, Feature or FeatureCollection."""
+    if not isinstance(document, dict):
+        raise InputError(f"{label}: not a GeoJSON object")
+    polygons: list = []
+    _collect(document, polygons, label)
+    if not polygons:
+        raise InputError(f"{label}: holds no polygon")
+    return ClipPolygon([[_ring(r, label) for r in rings] for rings in polygons], source, _epsg(document))
+
+
+def _collect(node, polygons: list, label: str) -> None:
+    """Append the coordinate lists of the polygons of GeoJSON ``node`` to ``polygons``."""
+    kind = node.get("type") if isinstance(node, dict) else None
+    if kind == "FeatureCollection":
+        for feature in node.get("features") or []:
+            _collect(feature, polygons, label)
+    elif kind == "Feature":
+        _collect(node.get("geometry"), polygons, label)
+    elif kind == "Polygon":
+        polygons.append(_list(node.get("coordinates"), label))
+    elif kind == "MultiPolygon":
+        polygons.extend(_list(p, label) for p in _list(node.get("coordinates"), label))
+    elif kind in _NOT_AREAS:
+        raise InputError(f"{label}: a {kind}, not a polygon: a clip polygon is a Polygon or MultiPolygon")
+    else:
+        raise InputError(f"{label}: GeoJSON of type {kind!r}; a clip polygon is a Polygon, MultiPolygon, Feature or FeatureCollection of them")
+
+
+def _list(value, label: str) -> list:
+    if not isinstance(value, list) or not value:
+        raise InputError(f"{label}: a polygon's coordinates are lists of rings of [x, y] positions")
+    return value
+
+
+def _ring(positions, label: str) -> np.ndarray:
+    """One ring as a (k, 2) array, without a closing vertex; a one-line error for positions that
+    are not numbers, NaN or infinite, or fewer than 3 distinct vertices."""
+    try:
+        xy = np.array([p[:2] for p in _list(positions, label)], np.float64)
+    except (TypeError, ValueError, IndexError):
+        raise InputError(f"{label}: a polygon's positions are [x, y] numbers") from None
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise InputError(f"{label}: a polygon's positions are [x, y] numbers")
+    if not np.isfinite(xy).all():
+        raise InputError(f"{label}: a polygon vertex is NaN or infinite ({xy[~np.isfinite(xy).all(axis=1)][0].tolist()})")
+    if len(xy) > 1 and np.array_equal(xy[0], xy[-1]):
+        xy = xy[:-1]
+    if len(np.unique(xy, axis=0)) < 3:
+        raise InputError(f"{label}: a ring has fewer than 3 distinct vertices; it encloses no area")
+    return xy
+
+
+def _epsg(document: dict) -> int | None:
+    """The EPSG code of a GeoJSON's (2008 draft) ``crs`` member ('EPSG:2992',
+    'urn:ogc:def:crs:EPSG::2992'), or an ``epsg`` (``as_spec``'s); None without one."""
+    if isinstance(document.get("epsg"), int):
+        return document["epsg"]
+    name = ((document.get("crs") or {}).get("properties") or {}).get("name") if isinstance(document.get("crs"), dict) else None
+    found = re.search(r"EPSG:+(\d+)", name or "", re.IGNORECASE)
+    if found:
+        return int(found.group(1))
+    return 4326 if re.search(r"CRS84$", name or "") else None
+
+
+def _wkt_polygon(text: str, source: str) -> ClipPolygon:
+    """The polygons of WKT ``POLYGON ((x y, ...), (...))`` or ``MULTIPOLYGON (((...)), ((...)))``
+    (a Z, M or ZM tag allowed; only x and y are read)."""
+    tokens = re.findall(r"[()]|,|[^\s(),]+", text)
+    kind = tokens[0].upper() if tokens else ""
+    at = 1
+    if at < len(tokens) and tokens[at].upper() in ("Z", "M", "ZM"):
+        at += 1
+
+    def problem(what: str) -> InputError:
+        return InputError(f"{source}: not WKT POLYGON or MULTIPOLYGON ({what})")
+
+    def nested(at: int) -> tuple[list, int]:
+        """The parenthesised list at ``tokens[at]``: its items, each a nested list or a vertex."""
+        if at >= len(tokens) or tokens[at] != "(":
+            raise problem("a '(' was expected")
+        items, at = [], at + 1
+        while True:
+            if at < len(tokens) and tokens[at] == "(":
+                item, at = nested(at)
+            else:
+                item = []
+                while at < len(tokens) and tokens[at] not in "(),":
+                    item.append(tokens[at])
+                    at += 1
+                try:
+                    item = [float(v) for v in item]
+                except ValueError:
+                    raise problem(f"{' '.join(item)!r} is not a vertex") from None
+            items.append(item)
+            if at >= len(tokens):
+                raise problem("a ')' is missing")
+            if tokens[at] == ")":
+                return items, at + 1
+            if tokens[at] != ",":
+                raise problem(f"{tokens[at]!r} where ',' or ')' was expected")
+            at += 1
+
+    if kind not in ("POLYGON", "MULTIPOLYGON"):
+        raise problem(f"it starts {kind or 'empty'}")
+    if at < len(tokens) and tokens[at].upper() == "EMPTY":
+        raise InputError(f"{source}: an empty polygon; it encloses no area")
+    body, end = nested(at)
+    if end != len(tokens):
+        raise problem(f"{' '.join(tokens[end:end + 3])!r} after its end")
+    polygons = [body] if kind == "POLYGON" else body
+    if not all(isinstance(rings, list) and rings and all(isinstance(r, list) and r and isinstance(r[0], list) for r in rings) for rings in polygons):
+        raise problem("its rings are lists of 'x y' vertices in parentheses")
+    if any(len(v) < 2 for rings in polygons for r in rings for v in r):
+        raise problem("a vertex has fewer than 2 numbers")
+    return ClipPolygon([[_ring(r, source) for r in rings] for rings in polygons], source)
+
+
+def far_apart(polygon: ClipPolygon, lo, hi) -> bool:
+    """Whether the polygon's box and the points' x and y box ``lo``..``hi`` are apart by more than
+    both their sizes: a polygon in another CRS (degrees against metres or feet)."""
+    size = max(float(np.max(polygon.hi - polygon.lo)), float(np.max(np.asarray(hi[:2]) - np.asarray(lo[:2]))), 1.0)
+    gap = np.maximum(np.asarray(lo[:2]) - polygon.hi, polygon.lo - np.asarray(hi[:2]))
+    return bool(np.max(gap) > size) and math.isfinite(float(np.max(gap)))
+
+
+__all__ = ["ClipPolygon", "clip_polygon_of", "far_apart"]

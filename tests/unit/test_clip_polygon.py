@@ -1,0 +1,244 @@
+"""Clip polygons (io/polygon.py, the filter's ``clip_polygon``): the kernel against a plain Python
+ray-casting reference (a polygon with a hole, a multipolygon, a 2 000-vertex boundary, points on
+edges), GeoJSON and WKT read alike, autzen cut through ``gp.open``, ``convert -o x.laz`` and
+``render``, an octree read only where its nodes meet the polygon, the filter's spec through JSON
+(a Dask task's), and every bad input a one-line error naming the file before anything is read."""
+
+from __future__ import annotations
+
+import json
+
+import laspy
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.errors import EmptyCloudError, InputError
+from gigapoint.io import read_chunks
+from gigapoint.io.filters import PointFilter, point_filter
+from gigapoint.io.polygon import clip_polygon_of
+from gigapoint.lod.store import OctreeCloud
+
+SQUARE_WITH_HOLE = [[[0, 0], [10, 0], [10, 10], [0, 10], [0, 0]], [[2, 2], [6, 2], [6, 6], [2, 6], [2, 2]]]
+CONCAVE = [[[12, 0], [20, 0], [20, 10], [16, 4], [12, 10], [12, 0]]]  # a V cut out of its top
+#: autzen's middle (feet), a quadrilateral with a square hole
+SITE = {
+    "type": "Feature",
+    "properties": {},
+    "geometry": {
+        "type": "Polygon",
+        "coordinates": [
+            [[636400, 848900], [637200, 849000], [637000, 849600], [636300, 849400], [636400, 848900]],
+            [[636600, 849100], [636800, 849100], [636800, 849300], [636600, 849300], [636600, 849100]],
+        ],
+    },
+}
+SITE_WKT = "POLYGON ((636400 848900, 637200 849000, 637000 849600, 636300 849400, 636400 848900), (636600 849100, 636800 849100, 636800 849300, 636600 849300, 636600 849100))"
+
+
+def ray_casting(x: float, y: float, rings) -> bool:
+    """Even-odd over all rings, edges included: the reference, one point at a time."""
+    inside = False
+    for ring in rings:
+        for (x1, y1), (x2, y2) in zip(ring, ring[1:] + ring[:1]):
+            if min(x1, x2) <= x <= max(x1, x2) and min(y1, y2) <= y <= max(y1, y2) and (x2 - x1) * (y - y1) == (y2 - y1) * (x - x1):
+                return True  # on an edge
+            if (y1 > y) != (y2 > y) and x < x1 + (y - y1) * (x2 - x1) / (y2 - y1):
+                inside = not inside
+    return inside
+
+
+def reference(xy: np.ndarray, polygons) -> np.ndarray:
+    rings = [[tuple(map(float, v)) for v in ring] for polygon in polygons for ring in polygon]
+    return np.array([ray_casting(float(x), float(y), rings) for x, y in xy])
+
+
+def star(n: int, centre=(30.0, 30.0)) -> list:
+    """A wiggly star of ``n`` vertices (concave everywhere), radius 5 to 15."""
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    r = 10 + 5 * np.sin(37 * t)
+    return [np.column_stack([centre[0] + r * np.cos(t), centre[1] + r * np.sin(t)]).tolist()]
+
+
+@pytest.mark.parametrize(
+    "geometry",
+    [
+        {"type": "Polygon", "coordinates": SQUARE_WITH_HOLE},
+        {"type": "MultiPolygon", "coordinates": [SQUARE_WITH_HOLE, CONCAVE]},
+        {"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": {"type": "Polygon", "coordinates": star(2_000)}}]},
+    ],
+    ids=["hole", "multipolygon", "2000-vertex"],
+)
+def test_points_inside_match_a_ray_casting_reference(geometry):
+    polygon = clip_polygon_of(geometry, "test")
+    polygons = [p for p in (geometry["coordinates"] if "coordinates" in geometry else [star(2_000)])]
+    polygons = [polygons] if geometry.get("type") == "Polygon" else polygons
+    lo, hi = polygon.lo - 3, polygon.hi + 3
+    xy = np.random.default_rng(7).uniform(lo, hi, (4_000, 2))
+    want = reference(xy, polygons)
+    got = polygon.inside(np.column_stack([xy, np.zeros(len(xy))]))
+    assert np.array_equal(got, want)
+    assert 500 < np.count_nonzero(want) < 3_500  # (both sides well sampled)
+
+
+def test_points_on_edges_and_vertices_are_kept_those_in_holes_not():
+    polygon = clip_polygon_of({"type": "MultiPolygon", "coordinates": [SQUARE_WITH_HOLE, CONCAVE]}, "test")
+    x, y = np.meshgrid(np.arange(-1.0, 22.0, 0.5), np.arange(-1.0, 12.0, 0.5))  # the vertices and edges among them
+    xy = np.column_stack([x.ravel(), y.ravel()])
+    got = polygon.inside(np.column_stack([xy, np.zeros(len(xy))]))
+    assert np.array_equal(got, reference(xy, [SQUARE_WITH_HOLE, CONCAVE]))
+    points = {(0, 0): True, (10, 5): True, (2, 4): True, (4, 4): False, (6, 6): True, (16, 4): True, (16, 8): False, (10.5, 5): False, (11, 5): False}
+    inside = polygon.inside(np.array([[px, py, 0.0] for px, py in points], np.float64))
+    assert dict(zip(points, inside.tolist())) == points
+    assert not polygon.inside(np.array([[np.nan, 5.0, 0.0], [5.0, np.nan, 0.0]])).any()
+
+
+def test_geojson_and_wkt_files_and_text_give_one_polygon(tmp_path):
+    geojson, wkt = tmp_path / "site.geojson", tmp_path / "site.wkt"
+    geojson.write_text(json.dumps(SITE))
+    wkt.write_text(SITE_WKT + "\n")
+    polygons = [clip_polygon_of(value, "test") for value in (geojson, str(wkt), SITE_WKT, SITE["geometry"])]
+    assert all(np.array_equal(p.edges, polygons[0].edges) for p in polygons)
+    assert len(polygons[0].edges) == 8
+    assert polygons[0].describe() == f"clip polygon {geojson} (1 hole, 8 vertices)"
+    multi = clip_polygon_of("MULTIPOLYGON (((0 0, 1 0, 1 1, 0 0)), ((5 5, 6 5, 6 6, 5 5)))", "test")
+    assert multi.describe() == "clip polygon WKT MULTIPOLYGON (((0 0, 1 0, 1 1,... (2 polygons, 6 vertices)"
+
+
+@pytest.fixture(scope="module")
+def autzen(autzen_path):
+    chunks = list(read_chunks(autzen_path))
+    xyz = np.concatenate([c.xyz for c in chunks])
+    return xyz, reference(xyz[:, :2], [SITE["geometry"]["coordinates"]])
+
+
+def test_open_keeps_autzen_inside_the_site(autzen_path, autzen, tmp_path):
+    xyz, inside = autzen
+    site = tmp_path / "site.geojson"
+    site.write_text(json.dumps(SITE))
+    cloud = gp.open(autzen_path, clip_polygon=site)
+    assert cloud.n_points == np.count_nonzero(inside) == 59_071
+    kept = np.sort(np.concatenate([c.xyz for c in cloud.chunks()])[:, 0])
+    assert np.allclose(kept, np.sort(xyz[inside, 0]), atol=0.01)  # (the cloud's grid)
+    assert gp.open(autzen_path, clip_polygon=SITE_WKT, classes=[2]).n_points < 59_071  # with the other filters
+
+
+def test_convert_to_laz_and_render_keep_the_site(cli, autzen_path, autzen, tmp_path):
+    xyz, inside = autzen
+    site = tmp_path / "site.geojson"
+    site.write_text(json.dumps(SITE))
+    out = tmp_path / "site.laz"
+    rc, _, err = cli("convert", autzen_path, "-o", out, "--clip-polygon", site, "--quiet")
+    assert rc == 0, err
+    las = laspy.read(str(out))
+    assert len(las.points) == 59_071
+    assert reference(np.column_stack([las.x, las.y])[::50], [SITE["geometry"]["coordinates"]]).all()
+    rc, out_text, err = cli("render", autzen_path, "-o", tmp_path / "site.png", "-W", 120, "-H", 80, "--clip-polygon", SITE_WKT)
+    assert rc == 0, err
+    assert "59,071 points" in out_text
+
+
+def _grid_las(path):
+    """A 300 x 300 grid of points a unit apart (z 0), as a LAS file."""
+    x, y = np.meshgrid(np.arange(0.0, 300.0), np.arange(0.0, 300.0))
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.scales, header.offsets = [0.001] * 3, [0.0, 0.0, 0.0]
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = x.ravel() + 0.25, y.ravel() + 0.25, np.zeros(x.size)
+    las.classification = np.full(x.size, 2, np.uint8)
+    las.write(str(path))
+    return path
+
+
+def test_an_octree_reads_only_the_nodes_meeting_the_polygon(cli, tmp_path, monkeypatch):
+    las = _grid_las(tmp_path / "grid.las")
+    octree_dir = tmp_path / "grid"
+    gp.convert([las], octree_dir, max_leaf=100)
+    area = {"type": "Polygon", "coordinates": [[[20, 20], [60, 25], [40, 70]], [[35, 35], [45, 35], [40, 45]]]}  # a triangle with a hole
+    want = np.count_nonzero(reference(np.column_stack([np.arange(90_000) % 300 + 0.25, np.arange(90_000) // 300 + 0.25]), [area["coordinates"]]))
+    reads = []
+    real = OctreeCloud.node_points
+    monkeypatch.setattr(OctreeCloud, "node_points", lambda self, index: reads.append(index) or real(self, index))
+    site = tmp_path / "area.geojson"
+    site.write_text(json.dumps(area))
+    rc, out, err = cli("render", octree_dir, "-o", tmp_path / "a.png", "-W", 100, "-H", 100, "--clip-polygon", site)
+    assert rc == 0, err
+    assert f"{want:,} points" in out
+    octree = gp.open(octree_dir)
+    full = int(np.count_nonzero(octree.counts))
+    assert len(reads) == len(set(reads)) and 0 < len(reads) < full / 3, (len(reads), full)
+    # every node left unread holds no point inside
+    keep = point_filter(clip_polygon=area)
+    for index in sorted(set(np.flatnonzero(octree.counts).tolist()) - set(reads)):
+        assert not keep.polygon.inside(real(octree, index)["xyz"]).any()
+    reads.clear()
+    cut = gp.section(octree_dir, (0, 40.25, 300, 40.25), 1, clip_polygon=area)  # along a row of the grid, through the hole
+    assert cut.cloud.n_points == gp.section(las, (0, 40.25, 300, 40.25), 1, clip_polygon=area).cloud.n_points == 20
+    assert 0 < len(reads) < full / 3
+
+
+def test_the_spec_carries_the_polygon_through_json():
+    keep = point_filter(classes=[2], clip_polygon={"type": "MultiPolygon", "coordinates": [SQUARE_WITH_HOLE, CONCAVE]})
+    again = PointFilter.from_spec(json.loads(json.dumps(keep.as_spec())))
+    assert again == keep and again.describe() == keep.describe()
+    xyz = np.random.default_rng(3).uniform(-1, 21, (2_000, 3))
+    assert np.array_equal(again.polygon.inside(xyz), keep.polygon.inside(xyz))
+    assert PointFilter.from_spec(point_filter(classes=[2]).as_spec()).polygon is None
+    assert "clip_polygon" not in point_filter(classes=[2]).as_spec()  # (a conversion's fingerprint without one is as before)
+
+
+def test_boxes_meet_the_polygon_where_sampled_points_say():
+    """Boxes on a grid: those an edge crosses or lying inside meet it; those wholly outside, or
+    wholly in its hole, not (what 20 x 20 points sampled in each box say)."""
+    keep = PointFilter(polygon=clip_polygon_of({"type": "Polygon", "coordinates": SQUARE_WITH_HOLE}, "test"))
+    corners = np.array([(x, y) for x in np.arange(-2.0, 12.0, 1.5) for y in np.arange(-2.0, 12.0, 1.5)])
+    lo, hi = np.column_stack([corners + 0.1, np.zeros(len(corners))]), np.column_stack([corners + 1.2, np.ones(len(corners))])
+    meets = keep.meets(lo, hi)
+    s = np.linspace(0, 1, 20)
+    sampled = []
+    for box_lo, box_hi in zip(lo, hi):
+        gx, gy = np.meshgrid(box_lo[0] + s * (box_hi[0] - box_lo[0]), box_lo[1] + s * (box_hi[1] - box_lo[1]))
+        sampled.append(keep.polygon.inside(np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])).any())
+    assert np.array_equal(meets, sampled)
+    assert 0 < np.count_nonzero(meets) < len(meets) and not keep.meets(np.array([[3.0, 3.0, 0]]), np.array([[5.0, 5.0, 1]]))[0]  # (in the hole)
+    lo, hi = keep.clipped_bounds([-50.0, 1.0, -5.0], [50.0, 60.0, 5.0])
+    assert lo.tolist() == [0.0, 1.0, -5.0] and hi.tolist() == [10.0, 10.0, 5.0]
+
+
+def test_a_polygon_far_from_the_points_says_so(autzen_path, tmp_path):
+    degrees = tmp_path / "lonlat.geojson"
+    crs = {"type": "name", "properties": {"name": "urn:ogc:def:crs:EPSG::4326"}}
+    degrees.write_text(json.dumps({"type": "Polygon", "crs": crs, "coordinates": [[[-123.1, 44.0], [-123.0, 44.0], [-123.0, 44.1]]]}))
+    with pytest.raises(EmptyCloudError) as err:
+        gp.open(autzen_path, clip_polygon=degrees)
+    assert str(err.value) == (
+        f"{autzen_path}: no point passes the filter (clip polygon {degrees} (3 vertices)): 110,000 points read; "
+        f"{degrees} spans x -123.1..-123, y 44..44.1, far from the points' x 636002..637179, y 848935..849498: give it in the files' coordinates; "
+        f"{degrees} names EPSG:4326 (it is taken in the files' coordinates, not reprojected)"
+    )
+
+
+BAD = {
+    "missing": (None, "no such file (nor WKT text: POLYGON ((x y, ...)))"),
+    "not-polygon-text": ("x,y,z\n1,2,3\n", "neither GeoJSON nor WKT (POLYGON, MULTIPOLYGON): not a clip polygon"),
+    "broken-json": ("{\"type\": ", "not valid GeoJSON (Expecting value: line 1 column 10 (char 9))"),
+    "two-vertices": (json.dumps({"type": "Polygon", "coordinates": [[[0, 0], [1, 1], [0, 0], [1, 1]]]}), "a ring has fewer than 3 distinct vertices; it encloses no area"),
+    "nan": ("POLYGON ((0 0, 1 0, nan 1, 0 0))", "a polygon vertex is NaN or infinite ([nan, 1.0])"),
+    "linestring": (json.dumps({"type": "LineString", "coordinates": [[0, 0], [1, 1]]}), "a LineString, not a polygon: a clip polygon is a Polygon or MultiPolygon"),
+    "point": (json.dumps({"type": "Feature", "geometry": {"type": "Point", "coordinates": [0, 0]}}), "a Point, not a polygon: a clip polygon is a Polygon or MultiPolygon"),
+    "wkt-unclosed": ("POLYGON ((0 0, 1 0, 1 1)", "not WKT POLYGON or MULTIPOLYGON (a ')' is missing)"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD))
+def test_bad_polygons_are_one_line_errors_naming_the_file_before_reading(cli, tmp_path, case):
+    content, message = BAD[case]
+    area = tmp_path / f"{case}.txt"
+    if content is not None:
+        area.write_text(content)
+    with pytest.raises(InputError) as err:
+        gp.open(tmp_path / "missing.laz", clip_polygon=str(area))  # (read first, it would be "no such file")
+    want = f"open: clip_polygon={str(area)!r}: {message}" if content is None else f"{area}: {message}"
+    assert str(err.value) == want
+    rc, _, cli_err = cli("render", tmp_path / "missing.laz", "-o", tmp_path / "x.png", "--clip-polygon", area)
+    assert rc != 0 and cli_err.strip() == "error: " + (f"render: --clip-polygon {area}: {message}" if content is None else f"{area}: {message}")
