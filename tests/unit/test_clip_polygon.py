@@ -123,7 +123,7 @@ def test_open_keeps_autzen_inside_the_site(autzen_path, autzen, tmp_path):
     assert gp.open(autzen_path, clip_polygon=SITE_WKT, classes=[2]).n_points < 59_071  # with the other filters
 
 
-def test_convert_to_laz_and_render_keep_the_site(cli, autzen_path, autzen, tmp_path):
+def test_convert_to_laz_render_and_tile_keep_the_site(cli, autzen_path, autzen, tmp_path):
     xyz, inside = autzen
     site = tmp_path / "site.geojson"
     site.write_text(json.dumps(SITE))
@@ -136,6 +136,9 @@ def test_convert_to_laz_and_render_keep_the_site(cli, autzen_path, autzen, tmp_p
     rc, out_text, err = cli("render", autzen_path, "-o", tmp_path / "site.png", "-W", 120, "-H", 80, "--clip-polygon", SITE_WKT)
     assert rc == 0, err
     assert "59,071 points" in out_text
+    rc, out_text, err = cli("tile", autzen_path, "--size", 500, "-o", tmp_path / "tiles", "--clip-polygon", site, "-q")
+    assert rc == 0, err
+    assert "6 tiles of 500 x 500 (laz), 59,071 points" in out_text
 
 
 def _grid_las(path):

@@ -170,4 +170,4 @@ def test_render_says_when_the_filter_keeps_nothing(cli, tmp_path, autzen_path):
 def test_view_filter_options_need_files(cli):
     rc, _, err = cli("view", "--demo", 100, "--classes", "2")
     assert rc != 0
-    assert err.strip() == "error: --classes, --drop-classes and --clip: filter the points of the files given as PATH...; none is given"
+    assert err.strip() == "error: --classes, --drop-classes, --clip and --clip-polygon: filter the points of the files given as PATH...; none is given"

@@ -394,19 +394,13 @@ def open_sized(paths, point_budget: int, progressive: bool | None = None, progre
     itself; other inputs as a ProgressiveOctree (drawable while it loads) when asked, or when
     their headers count more points than ``point_budget``, or when one is cut off (what it
     holds drawn, its error said); else as one PointCloud. ``point_filter`` (io/filters.py):
-    only the points it keeps are read; of an octree, those of the nodes meeting it, at every
-    level (lod/query.py), as one PointCloud."""
-    from ...core.cloud import build_cloud
+    only the points it keeps are read; an octree is then refused (it is drawn as stored)."""
     from ...io import expand_paths, lone_match, open_cloud
-    from ..query import octree_path_kept
     from ..reader import is_lod_source, open_octree, refuse_octrees
 
     paths = lone_match(paths)  # (a pattern matching one octree opens it)
-    if len(paths) == 1 and is_lod_source(paths[0]) and not progressive:
-        if point_filter is None:
-            return open_octree(paths[0])
-        kept, name = octree_path_kept(paths[0], point_filter, "the filter's region", "filter the point files, or wait for the octree")
-        return build_cloud(kept, name=name, colors="rgba")
+    if len(paths) == 1 and is_lod_source(paths[0]) and not progressive and point_filter is None:
+        return open_octree(paths[0])
     if point_filter is not None:
         refuse_octrees(paths, f"the filter ({point_filter.describe()}) applies to point files")
     # (--progressive of a converted folder drew it as stored, without a word; a local COPC file is read as LAZ)
