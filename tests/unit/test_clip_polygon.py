@@ -7,13 +7,14 @@ edges), GeoJSON and WKT read alike, autzen cut through ``gp.open``, ``convert -o
 from __future__ import annotations
 
 import json
+import struct
 
 import laspy
 import numpy as np
 import pytest
 
 import gigapoint as gp
-from gigapoint.errors import EmptyCloudError, InputError
+from gigapoint.errors import EmptyCloudError, InputError, warnings_kept
 from gigapoint.io import read_chunks
 from gigapoint.io.filters import PointFilter, point_filter
 from gigapoint.io.polygon import clip_polygon_of
@@ -219,6 +220,24 @@ def test_a_polygon_far_from_the_points_says_so(autzen_path, tmp_path):
         f"{degrees} spans x -123.1..-123, y 44..44.1, far from the points' x 636002..637179, y 848935..849498: give it in the files' coordinates; "
         f"{degrees} names EPSG:4326 (it is taken in the files' coordinates, not reprojected)"
     )
+
+
+def test_a_geojson_naming_another_crs_than_the_files_is_warned_of(tmp_path):
+    las_path = _grid_las(tmp_path / "utm.las")
+    las = laspy.read(str(las_path))
+    keys = struct.pack("<8H", 1, 1, 0, 1, 3072, 0, 1, 32610)  # GeoTIFF keys: ProjectedCSTypeGeoKey = EPSG:32610
+    las.header.vlrs.append(laspy.VLR("LASF_Projection", 34735, "GeoTIFF keys", keys))
+    las.write(str(las_path))
+    area = {"type": "Polygon", "coordinates": [[[0, 0], [100, 0], [100, 100], [0, 100]]]}
+    for epsg, warned in ((4326, True), (32610, False)):
+        site = tmp_path / f"site{epsg}.geojson"
+        site.write_text(json.dumps({**area, "crs": {"type": "name", "properties": {"name": f"EPSG:{epsg}"}}}))
+        with warnings_kept() as kept:
+            cloud = gp.open(las_path, clip_polygon=site)
+        assert cloud.n_points == 100 * 100  # (taken in the file's coordinates all the same)
+        said = [message for message, _ in kept]
+        want = f"{site} names EPSG:4326, {las_path} EPSG:32610: the polygon is taken in the files' coordinates, not reprojected"
+        assert said == ([want] if warned else [])
 
 
 BAD = {

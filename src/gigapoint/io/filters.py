@@ -22,7 +22,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..core.chunk import PointChunk
-from ..errors import EmptyCloudError, InputError, is_real, is_whole_number
+from ..errors import EmptyCloudError, GigapointWarning, InputError, is_real, is_whole_number, warn
+from ._base import read_once
 from .polygon import ClipPolygon, clip_polygon_of, far_apart
 
 #: The option names as Python's keywords and the CLI's options say them
@@ -119,10 +120,22 @@ class PointFilter:
 
     def apply(self, chunks: Iterable[PointChunk], path) -> Iterator[PointChunk]:
         """``chunks`` of ``path`` with only the points kept; a chunk left without any is not given."""
+        if self.polygon is not None and self.polygon.epsg is not None:
+            self._check_crs(path)
         for chunk in chunks:
             chunk = self.kept(chunk, path)
             if len(chunk):
                 yield chunk
+
+    def _check_crs(self, path) -> None:
+        """Warn where the polygon's GeoJSON names an EPSG code other than the file's (LAS/LAZ):
+        it is taken in the files' coordinates, not reprojected. Once an operation a CRS."""
+        from .crs import files_crs, horizontal_epsg
+
+        epsg = horizontal_epsg(files_crs([path]))
+        if epsg is not None and epsg != self.polygon.epsg:
+            message = f"{self.polygon.source} names EPSG:{self.polygon.epsg}, {path} EPSG:{epsg}: the polygon is taken in the files' coordinates, not reprojected"
+            read_once("clip polygon CRS", f"{self.polygon.source} EPSG:{epsg}", lambda: warn(message, GigapointWarning))
 
     def check_passed(self, label: str) -> None:
         """An EmptyCloudError naming ``label`` (the files) where points were read and none passed."""
