@@ -95,7 +95,7 @@ def test_points_on_edges_and_vertices_are_kept_those_in_holes_not():
 
 
 def test_geojson_and_wkt_files_and_text_give_one_polygon(tmp_path):
-    geojson, wkt = tmp_path / "site.geojson", tmp_path / "site.wkt"
+    geojson, wkt = tmp_path / "site.geojson", tmp_path / "POLYGON.wkt"  # (a file, not WKT text, by that name)
     geojson.write_text(json.dumps(SITE))
     wkt.write_text(SITE_WKT + "\n")
     polygons = [clip_polygon_of(value, "test") for value in (geojson, str(wkt), SITE_WKT, SITE["geometry"])]

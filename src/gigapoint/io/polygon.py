@@ -23,6 +23,9 @@ import numpy as np
 
 from ..errors import InputError
 
+#: How WKT of a polygon starts (a file named POLYGON.wkt does not)
+_WKT_START = re.compile(r"\s*(MULTI)?POLYGON\s*(Z|M|ZM)?\s*(\(|EMPTY)", re.IGNORECASE)
+
 #: GeoJSON geometry types that are not areas, named in the error
 _NOT_AREAS = {"Point", "MultiPoint", "LineString", "MultiLineString"}
 
@@ -111,7 +114,7 @@ def clip_polygon_of(value, label: str) -> ClipPolygon:
     if not isinstance(value, (str, os.PathLike)):
         raise InputError(f"{label}: a clip polygon is a GeoJSON or WKT file, or WKT text (POLYGON ((x y, ...)))")
     text = str(value)
-    if isinstance(value, str) and re.match(r"\s*(MULTI)?POLYGON\b", text, re.IGNORECASE):
+    if isinstance(value, str) and _WKT_START.match(text):
         return _wkt_polygon(text, f"WKT {text.strip()[:30]}{'...' * (len(text.strip()) > 30)}")
     path = Path(value)
     if not path.is_file():
@@ -126,7 +129,7 @@ def clip_polygon_of(value, label: str) -> ClipPolygon:
         except ValueError as exc:
             raise InputError(f"{path}: not valid GeoJSON ({exc})") from None
         return _geojson_polygon(document, str(path), str(path))
-    if re.match(r"\s*(MULTI)?POLYGON\b", content, re.IGNORECASE):
+    if _WKT_START.match(content):
         return _wkt_polygon(content, str(path))
     raise InputError(f"{path}: neither GeoJSON nor WKT (POLYGON, MULTIPOLYGON): not a clip polygon")
 
