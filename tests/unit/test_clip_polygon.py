@@ -94,11 +94,12 @@ def test_points_on_edges_and_vertices_are_kept_those_in_holes_not():
     assert not polygon.inside(np.array([[np.nan, 5.0, 0.0], [5.0, np.nan, 0.0]])).any()
 
 
-def test_geojson_and_wkt_files_and_text_give_one_polygon(tmp_path):
+def test_geojson_and_wkt_files_and_text_give_one_polygon(tmp_path, monkeypatch):
     geojson, wkt = tmp_path / "site.geojson", tmp_path / "POLYGON.wkt"  # (a file, not WKT text, by that name)
     geojson.write_text(json.dumps(SITE))
     wkt.write_text(SITE_WKT + "\n")
-    polygons = [clip_polygon_of(value, "test") for value in (geojson, str(wkt), SITE_WKT, SITE["geometry"])]
+    monkeypatch.chdir(tmp_path)  # ("POLYGON.wkt": a file name, not WKT text)
+    polygons = [clip_polygon_of(value, "test") for value in (geojson, "POLYGON.wkt", SITE_WKT, SITE["geometry"])]
     assert all(np.array_equal(p.edges, polygons[0].edges) for p in polygons)
     assert len(polygons[0].edges) == 8
     assert polygons[0].describe() == f"clip polygon {geojson} (1 hole, 8 vertices)"
