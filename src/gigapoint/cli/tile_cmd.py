@@ -11,7 +11,16 @@ import typer
 
 from ..errors import GigapointError
 from .app import app
-from .cloud_opts import ClassesOption, ClipOption, ClipPolygonOption, DropClassesOption, FromCrsOption, RecursiveOption, ToCrsOption, filter_options
+from .cloud_opts import (
+    ClassesOption,
+    ClipOption,
+    ClipPolygonOption,
+    DropClassesOption,
+    FromCrsOption,
+    RecursiveOption,
+    ToCrsOption,
+    filter_options,
+)
 from .settings_opts import named_option
 
 
