@@ -240,6 +240,7 @@ _LAZY = {
     "Section": ("gigapoint.cross_section", "Section"),
     "change": ("gigapoint.surface_change", "change"),
     "Change": ("gigapoint.surface_change", "Change"),
+    "classify_ground": ("gigapoint.classify", "classify_ground"),
 }
 
 
@@ -277,6 +278,7 @@ __all__ = [
     "Viewer",
     "__version__",
     "change",
+    "classify_ground",
     "convert",
     "demo",
     "demo_arrays",

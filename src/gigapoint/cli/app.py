@@ -95,6 +95,7 @@ def prefer_passive_wait() -> None:
 COMMAND_MODULES = {
     "bench": "bench_cmd",
     "change": "change_cmd",
+    "classify": "classify_cmd",
     "compile": "compile_cmd",
     "convert": "convert_cmd",
     "info": "info_cmd",

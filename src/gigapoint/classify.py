@@ -1,0 +1,293 @@
+"""Ground classification (``gigapoint classify --ground``, ``gp.classify_ground``): the Simple
+Morphological Filter (SMRF, Pingel, Clarke & McBride 2013), as PDAL's filters.smrf and LAStools'
+lasground classify unclassified deliveries so that a DTM (``render --gsd --classes 2``) and
+sections can be made of them.
+
+It runs in bounded memory however many points there are: what it holds is a raster of the
+files' extent (a float64 a cell), never the points.
+
+1. Pass 1 streams the points (``PointFiles.valid_chunks``, as ``convert -o x.laz`` reads them)
+   into the lowest z of each ``cell``-sized cell. Noise (classes 7 and 18) is left out, and so
+   are the first and intermediate returns of a pulse that has several: only a pulse's last
+   return can reach the ground (PDAL's ``returns="last,only"``).
+2. On the raster: empty cells filled (linear, render/raster_fill.py's TIN; nearest outside the
+   data's hull); low outliers (a cell more than 5 x cell below an opening of the inverted
+   surface, SMRF's first step) removed; then openings by diamonds of radius 1, 2, ... window /
+   cell cells, each of the last: a cell that the opening lowers by more than slope x radius x
+   cell is an object (a building, a tree). The cells neither empty, low nor object make the
+   provisional DEM, interpolated again over the others.
+3. Pass 2 streams the points again and writes them (io/write.py's ``write_points``, as
+   ``convert -o`` does): class 2 where |z - DEM(x, y)| <= threshold + scalar x the DEM's slope
+   (bilinear DEM, the slope of the point's cell), else 1. Noise keeps its class (7, 18: a
+   user who cleaned a cloud expects it kept), first and intermediate returns become 1; every
+   other attribute is written as read.
+
+Lengths are in the cloud's units (io/crs.py): the defaults (cell 1 m, window 18 m, threshold
+0.5 m, scalar 1.25 m per unit of slope) are converted for a cloud in feet; ``slope`` is rise over run.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+from .errors import InputError, is_real
+
+#: PDAL's and the paper's defaults, in metres (``slope``: rise over run, no unit)
+DEFAULTS_METRES = {"cell": 1.0, "window": 18.0, "threshold": 0.5, "scalar": 1.25}
+DEFAULT_SLOPE = 0.15
+#: the classes a ground classification keeps as they are: low and high noise
+NOISE_CLASSES = (7, 18)
+GROUND, NON_GROUND = 2, 1
+#: the most cells the raster may have (several float64 arrays of it are held at once: ~1 GB each at this size)
+MAX_CELLS = 120_000_000
+#: SMRF's low-outlier step: an opening of the inverted surface with this slope, radius 1 cell
+LOW_OUTLIER_SLOPE = 5.0
+
+
+@dataclass(frozen=True)
+class GroundResult:
+    """What ``classify_ground`` wrote: ``points`` in ``out``, of which ``ground`` class 2,
+    ``non_ground`` class 1 and ``noise`` kept as 7 or 18; ``skipped`` invalid points (NaN, inf)
+    not written; ``params`` the parameters used, in the cloud's units; ``seconds`` taken."""
+
+    out: Path
+    points: int
+    ground: int
+    non_ground: int
+    noise: int
+    skipped: int
+    params: dict
+    seconds: float
+
+    @property
+    def points_per_second(self) -> float:
+        return self.points / self.seconds if self.seconds > 0 else 0.0
+
+
+def ground_parameters(files, cell=None, slope=None, window=None, threshold=None, scalar=None) -> dict:
+    """The SMRF parameters in the units of ``files``' CRS: those given as they are, the others
+    the defaults converted from metres (a cloud in feet: cell 3.28 ft...; units unknown: taken
+    as metres). A value that is no number > 0 (threshold, scalar: >= 0), or coordinates in
+    degrees without every length given, is a one-line InputError."""
+    from .io.crs import files_units
+
+    given = {"cell": cell, "slope": slope, "window": window, "threshold": threshold, "scalar": scalar}
+    for name, value in given.items():
+        least = "> 0" if name in ("cell", "slope", "window") else ">= 0"
+        if value is not None and not (is_real(value) and (value > 0 if least == "> 0" else value >= 0)):
+            raise InputError(f"classify_ground: {name} must be a number {least}, got {value!r}")
+    units = files_units(files)
+    across, up = units["horizontal"], units["vertical"]
+    if across is not None and across["metres"] is None and any(given[n] is None for n in ("cell", "window")):
+        raise InputError(f"classify_ground: the coordinates are in {across['name']}s, not lengths: give cell and window in them, or reproject the cloud")
+    per_metre_across = 1.0 / across["metres"] if across is not None and across["metres"] else 1.0
+    per_metre_up = 1.0 / up["metres"] if up is not None and up["metres"] else 1.0
+    params = {
+        "cell": DEFAULTS_METRES["cell"] * per_metre_across if cell is None else float(cell),
+        "slope": DEFAULT_SLOPE if slope is None else float(slope),
+        "window": DEFAULTS_METRES["window"] * per_metre_across if window is None else float(window),
+        "threshold": DEFAULTS_METRES["threshold"] * per_metre_up if threshold is None else float(threshold),
+        "scalar": DEFAULTS_METRES["scalar"] * per_metre_up if scalar is None else float(scalar),
+    }
+    params["units"] = across["symbol"] if across is not None else "m (assumed)"
+    return params
+
+
+@njit(cache=True)
+def _lowest_into(raster, rows, cols, z):  # pragma: no cover - compiled
+    for i in range(z.size):
+        raster[rows[i], cols[i]] = min(raster[rows[i], cols[i]], z[i])
+
+
+class _Grid:
+    """The raster's cells: ``cell`` units a side from ``lo`` (x, y), ``shape`` (rows, columns)."""
+
+    def __init__(self, lo, hi, cell: float, label: str):
+        self.lo, self.cell = np.asarray(lo[:2], np.float64), cell
+        self.shape = tuple(math.floor((h - low) / cell) + 1 for low, h in zip(lo[1::-1], hi[1::-1]))  # (rows: y, columns: x)
+        if self.shape[0] * self.shape[1] > MAX_CELLS:
+            raise InputError(
+                f"{label}: cells of {cell:g} make a {self.shape[1]:,} x {self.shape[0]:,} raster over the files' extent, more than "
+                f"{MAX_CELLS:,} cells: give a larger cell, or classify tiles of it (gigapoint tile)"
+            )
+
+    def cells_of(self, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(row, column) of each point's cell; points beyond the extent (a stale header's) in the edge cells."""
+        cols = np.clip(np.floor((xyz[:, 0] - self.lo[0]) / self.cell), 0, self.shape[1] - 1).astype(np.intp)
+        rows = np.clip(np.floor((xyz[:, 1] - self.lo[1]) / self.cell), 0, self.shape[0] - 1).astype(np.intp)
+        return rows, cols
+
+    def bilinear(self, raster: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+        """``raster`` (values at the cells' centres) at the points' (x, y), bilinearly; the edge
+        cells' values carried half a cell beyond them."""
+        padded = np.pad(raster, 1, mode="edge")  # (a 1-cell-wide raster has a neighbour to blend with)
+        fx = np.clip((xyz[:, 0] - self.lo[0]) / self.cell + 0.5, 0, padded.shape[1] - 1.000001)  # + 0.5: -0.5 for the centre, +1 for the pad
+        fy = np.clip((xyz[:, 1] - self.lo[1]) / self.cell + 0.5, 0, padded.shape[0] - 1.000001)
+        c, r = fx.astype(np.intp), fy.astype(np.intp)
+        tx, ty = fx - c, fy - r
+        top = padded[r, c] * (1 - tx) + padded[r, c + 1] * tx
+        bottom = padded[r + 1, c] * (1 - tx) + padded[r + 1, c + 1] * tx
+        return top * (1 - ty) + bottom * ty
+
+
+def _ground_candidates(chunk) -> np.ndarray:
+    """Which points may be ground: not noise, and a pulse's last (or only) return where the
+    points tell their returns (a return number 0 or above the count: taken as a last one)."""
+    attrs = chunk.attributes
+    keep = np.ones(len(chunk), bool)
+    if "classification" in attrs:
+        keep &= ~np.isin(attrs["classification"], NOISE_CLASSES)
+    if "return_number" in attrs and "number_of_returns" in attrs:
+        keep &= attrs["return_number"] >= attrs["number_of_returns"]
+    return keep
+
+
+def _filled(raster: np.ndarray) -> np.ndarray:
+    """``raster`` with its NaN cells filled: linearly inside the hull of the others (the TIN of
+    render/raster_fill.py), from the nearest one outside it."""
+    from scipy import ndimage
+
+    from .render.raster_fill import fill_heights
+
+    filled = fill_heights(raster)
+    empty = np.isnan(filled)
+    if empty.any():
+        nearest = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
+        filled = filled[tuple(nearest)]
+    return filled
+
+
+_CROSS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)
+
+
+def _opened(surface: np.ndarray, radius: int) -> np.ndarray:
+    """The morphological opening of ``surface`` by a diamond of ``radius`` cells (``radius``
+    erosions by a cross, then as many dilations: PDAL's structuring element)."""
+    from scipy import ndimage
+
+    out = surface
+    for _ in range(radius):
+        out = ndimage.grey_erosion(out, footprint=_CROSS, mode="nearest")
+    for _ in range(radius):
+        out = ndimage.grey_dilation(out, footprint=_CROSS, mode="nearest")
+    return out
+
+
+def _objects(surface: np.ndarray, cell: float, slope: float, window: float) -> np.ndarray:
+    """SMRF's progressive filter: the cells that an opening by a growing diamond (radius 1 to
+    window / cell cells) lowers by more than slope x radius x cell below the previous opening."""
+    objects = np.zeros(surface.shape, bool)
+    last = surface
+    for radius in range(1, max(1, math.ceil(window / cell)) + 1):
+        opened = _opened(last, radius)
+        objects |= last - opened > slope * radius * cell
+        last = opened
+    return objects
+
+
+def ground_model(lowest: np.ndarray, cell: float, slope: float, window: float) -> np.ndarray:
+    """The provisional DEM of a raster of lowest z (NaN: no point): low outliers and objects
+    left out, then every cell interpolated from the rest (``_filled``)."""
+    surface = _filled(lowest)
+    low = _objects(-surface, cell, LOW_OUTLIER_SLOPE, 1.0)  # (a cell pitted below its neighbours: a multipath return)
+    surface = _filled(np.where(low | np.isnan(lowest), np.nan, lowest))
+    objects = _objects(surface, cell, slope, window)
+    dem = np.where(objects | low | np.isnan(lowest), np.nan, lowest)
+    if np.isnan(dem).all():  # (every cell an object: nothing to interpolate from; the lowest surface stands)
+        return surface
+    return _filled(dem)
+
+
+def classify_ground(source, out, *, cell=None, slope=None, window=None, threshold=None, scalar=None, overwrite: bool = False,
+                    chunk_size: int | None = None, progress: bool = False) -> GroundResult:  # fmt: skip
+    """Classify the points of ``source`` (files, folders or patterns, as ``gp.open`` takes them)
+    as ground (2) or not (1) by SMRF, and write them all to ``out`` (.las, .laz or .ply), every
+    other attribute as read; noise (7, 18) keeps its class. Two passes over the files, memory
+    bounded by the raster (see the module's notes). Parameters in the cloud's units, None: the
+    defaults converted from metres (``ground_parameters``). ``out`` appears only once whole; an
+    existing one is replaced only with ``overwrite``. Needs scipy (gigapoint[quality])."""
+    from .lod.convert.to_file import PointFiles
+    from .lod.progress import NullProgress, RichProgress
+    from .render.raster_fill import require_scipy
+
+    require_scipy("classify_ground")
+    t0 = time.perf_counter()
+    out = Path(out)
+    if out.suffix.lower() not in (".las", ".laz", ".ply"):
+        raise InputError(f"{out}: classify_ground writes a .las, .laz or .ply file")
+    from .io.write import check_point_file_output, write_points
+
+    check_point_file_output(out, overwrite)
+    inputs = PointFiles(source, out, chunk_size, ply=out.suffix.lower() == ".ply")
+    params = ground_parameters(inputs.files, cell, slope, window, threshold, scalar)
+    shown = RichProgress() if progress else NullProgress()
+    try:
+        grid, lowest = _lowest_raster(inputs, params["cell"], shown)
+        dem = ground_model(lowest, params["cell"], params["slope"], params["window"])
+        rise_y, rise_x = np.gradient(np.pad(dem, 1, mode="edge"), params["cell"])
+        tolerance = params["threshold"] + params["scalar"] * np.hypot(rise_x, rise_y)[1:-1, 1:-1]
+        counts = {GROUND: 0, NON_GROUND: 0, "noise": 0}
+        tally: dict = {}
+
+        def classified():
+            shown.phase("classify", None if None in inputs.counts else sum(inputs.counts))
+            for _, chunk in inputs.valid_chunks(None, shown, tally):
+                yield _classified(chunk, grid, dem, tolerance, counts)
+
+        written = write_points(out, classified, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None)
+    finally:
+        shown.close()
+    return GroundResult(out, written, counts[GROUND], counts[NON_GROUND], counts["noise"], tally["skipped"], params, time.perf_counter() - t0)
+
+
+def _lowest_raster(inputs, cell: float, progress) -> tuple[_Grid, np.ndarray]:
+    """Pass 1: the grid over the files' extent (their headers' bounds; a pass of its own where
+    one tells none) and the lowest z of the ground candidates in each of its cells (NaN: none).
+    Fewer than 3 cells with points is a one-line InputError: no surface to make."""
+    bounds = inputs.headers_bounds()
+    tally: dict = {}
+    if bounds is None:
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for _, chunk in inputs.valid_chunks(None, progress, tally):
+            lo, hi = np.minimum(lo, chunk.xyz.min(axis=0)), np.maximum(hi, chunk.xyz.max(axis=0))
+        bounds = (lo, hi)
+    grid = _Grid(bounds[0], bounds[1], cell, inputs.label)
+    lowest = np.full(grid.shape, np.inf)
+    progress.phase("raster", None if None in inputs.counts else sum(inputs.counts))
+    for _, chunk in inputs.valid_chunks(None, progress, tally):
+        keep = _ground_candidates(chunk)
+        xyz = chunk.xyz[keep]
+        rows, cols = grid.cells_of(xyz)
+        _lowest_into(lowest, rows, cols, np.ascontiguousarray(xyz[:, 2]))
+    occupied = int(np.isfinite(lowest).sum())
+    if occupied < 3:
+        raise InputError(
+            f"{inputs.label}: {tally['points']:,} point{'s' if tally['points'] != 1 else ''} in {occupied} cell{'s' if occupied != 1 else ''} of {cell:g}: "
+            "a ground surface needs points (last returns, not noise) in 3 cells at least"
+        )
+    return grid, np.where(np.isfinite(lowest), lowest, np.nan)
+
+
+def _classified(chunk, grid: _Grid, dem: np.ndarray, tolerance: np.ndarray, counts: dict):
+    """``chunk`` with its classification set: 2 where a ground candidate lies within its cell's
+    ``tolerance`` of the ``dem``, 1 for every other point but noise, which keeps its class."""
+    from .core.chunk import PointChunk
+
+    old = chunk.attributes.get("classification")
+    noise = np.isin(old, NOISE_CLASSES) if old is not None else np.zeros(len(chunk), bool)
+    rows, cols = grid.cells_of(chunk.xyz)
+    near = np.abs(chunk.xyz[:, 2] - grid.bilinear(dem, chunk.xyz)) <= tolerance[rows, cols]
+    ground = near & _ground_candidates(chunk)
+    classes = np.where(noise, old if old is not None else 0, np.where(ground, GROUND, NON_GROUND))
+    counts[GROUND] += int(ground.sum())
+    counts["noise"] += int(noise.sum())
+    counts[NON_GROUND] += len(chunk) - int(ground.sum()) - int(noise.sum())
+    attributes = dict(chunk.attributes)
+    attributes["classification"] = classes.astype(old.dtype if old is not None else np.uint8)
+    return PointChunk(chunk.xyz, chunk.rgba, attributes, scale=chunk.scale, color_bits=chunk.color_bits)
