@@ -62,7 +62,10 @@ def _to_fill(valid: np.ndarray, max_distance: int | None):
         tri = Delaunay(_pixels(border))
     except QhullError:  # the drawn pixels on one line: a footprint of no area
         return None
-    inside = tri.find_simplex(targets) >= 0
+    # no brute-force fallback: pixels on a lattice lie on the triangles' edges, and scipy's
+    # fallback searched every triangle for each (20 s against 2 ms for a 100 x 150 raster half
+    # empty, the same pixels found: a scattered DTM's, a ground classification's min-z raster)
+    inside = tri.find_simplex(targets, bruteforce=False) >= 0
     return targets[inside].astype(np.intp), tri, border
 
 
