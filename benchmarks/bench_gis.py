@@ -34,6 +34,11 @@ file (its LAZ copy written beside it in the work folder). The pairs (``{in}`` th
                  --filters.reprojection.out_srs=EPSG:32610
             (the demo town, which names no CRS, taken as Oregon Lambert in feet, as autzen is,
             into UTM 10N metres; the check: the largest distance between the two files' points)
+    ground  gigapoint classify {in} -o smrf.laz --ground
+            pdal translate {in} smrf.laz smrf
+            (SMRF with both tools' defaults, in the file's units: PDAL takes them as they are, metres
+            or not; the check: agreement of their class 2, point by point, and Cohen's kappa. Needs a
+            PDAL with filters.smrf: --jobs without ground for one that lacks it)
 
 Each command runs once on a 20 000-point file first (numba's cache filled: JIT compile time
 excluded; PDAL's libraries loaded once), then R rounds of the pairs in turn, gigapoint first in
@@ -61,7 +66,7 @@ from bench_convert import write_las, write_laz  # a sibling script: its folder i
 from gigapoint.bench import run_measured
 from gigapoint.bench.report import cpu_model, parse_count
 
-JOBS = ("filter", "thin", "tile", "stats", "dtm", "copy", "reproject")
+JOBS = ("filter", "thin", "tile", "stats", "dtm", "copy", "reproject", "ground")
 #: reproject's CRSs: Oregon Lambert (NAD83, international feet; autzen's) -> WGS 84 / UTM 10N (metres)
 FROM_CRS, TO_CRS = "EPSG:2992", "EPSG:32610"
 GSD = 1.0
@@ -140,6 +145,11 @@ def commands(job: str, inp: Path, out: Path, pdal: str, grid) -> tuple[list[str]
             gp_cmd("convert", inp, "-o", out / "gp_utm.las", "--from-crs", FROM_CRS, "--to-crs", TO_CRS, "--quiet"),
             [pdal, "translate", str(inp), str(out / "pdal_utm.las"), "reprojection",
              f"--filters.reprojection.in_srs={FROM_CRS}", f"--filters.reprojection.out_srs={TO_CRS}"],
+        )
+    if job == "ground":
+        return (
+            gp_cmd("classify", inp, "-o", out / "gp_smrf.laz", "--ground", "--quiet"),
+            [pdal, "translate", str(inp), str(out / "pdal_smrf.laz"), "smrf"],
         )
     raise ValueError(job)
 
@@ -228,6 +238,8 @@ def check(job: str, out: Path, gp_stdout: bytes, pdal_stdout: bytes, n: int) -> 
         return {"gigapoint_points": a, "pdal_points": b, "agree": a == b == n}
     if job == "reproject":
         return compare_points(out / "gp_utm.las", out / "pdal_utm.las", n)
+    if job == "ground":
+        return compare_ground(out / "gp_smrf.laz", out / "pdal_smrf.laz")
     raise ValueError(job)
 
 
@@ -244,6 +256,20 @@ def compare_points(a: Path, b: Path, n: int) -> dict:
         scales = [list(fa.header.scales), list(fb.header.scales)]
         counts = [int(fa.header.point_count), int(fb.header.point_count)]
     return {"points": counts, "max_abs_diff": round(far, 4), "scales": scales, "agree": counts == [n, n] and far <= 0.01}
+
+
+def compare_ground(gp_laz: Path, pdal_laz: Path) -> dict:
+    """Both classifications' ground (class 2), point by point (both tools write the points in
+    the input's order): how many each finds, the share of points they agree on, Cohen's kappa."""
+    import laspy
+
+    a, b = (np.asarray(laspy.read(str(p)).classification) == 2 for p in (gp_laz, pdal_laz))
+    if len(a) != len(b):
+        return {"gigapoint_points": len(a), "pdal_points": len(b), "agree": False}
+    agree = float((a == b).mean())
+    chance = a.mean() * b.mean() + (1 - a.mean()) * (1 - b.mean())
+    kappa = (agree - chance) / (1 - chance) if chance < 1 else 1.0
+    return {"gigapoint_ground": int(a.sum()), "pdal_ground": int(b.sum()), "agreement": round(agree, 4), "kappa": round(float(kappa), 4), "agree": "by measure"}
 
 
 WARM = """
