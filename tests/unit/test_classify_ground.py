@@ -105,8 +105,8 @@ def test_autzen_ground_agrees_with_its_own_class_2(autzen_path, tmp_path):
     result = gp.classify_ground(autzen_path, tmp_path / "out.laz")
     truth = np.asarray(laspy.read(str(autzen_path)).classification) == 2
     ground = np.asarray(laspy.read(str(tmp_path / "out.laz")).classification) == 2
-    assert ground[truth].mean() >= 0.999  # measured 0.99992
-    assert (~truth[~ground]).mean() >= 0.999  # measured 0.99990
+    assert ground[truth].mean() >= 0.999  # measured 0.99996
+    assert (~truth[~ground]).mean() >= 0.999  # measured 0.99995
     assert (ground == truth).mean() >= 0.42 and _kappa(ground, truth) >= 0.13
     assert result.params["units"] == "ft" and result.params["cell"] == pytest.approx(1 / 0.3048)
     assert result.params["threshold"] == pytest.approx(0.5 / 0.3048) and result.params["window"] == pytest.approx(18 / 0.3048)
