@@ -34,7 +34,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-__all__ = ["append_file", "atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "fsync_file", "mapped_npy", "reserve", "start_writeback", "temp_files", "write_at", "write_failure"]
+__all__ = ["append_file", "atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "fsync_file", "mapped_npy", "reserve", "start_writeback", "temp_files", "write_at", "write_failure", "write_together"]
 
 _IOV_MAX = min(1024, os.sysconf("SC_IOV_MAX")) if hasattr(os, "sysconf") else 16  # buffers per writev
 _SHORT_WRITE = re.compile(r"(\d+) requested and (\d+) written")
@@ -280,3 +280,19 @@ def atomic_npy(path, array: np.ndarray, *, durable: bool = False) -> Path:
 def temp_files(folder) -> Iterator[Path]:
     """The temporary files ``atomic_write`` left in ``folder`` when its process was killed."""
     return (p for p in Path(folder).glob(".*.tmp*") if _TEMP_NAME.fullmatch(p.name) and p.is_file())
+
+
+def write_together(writes) -> list[Path]:
+    """Each ``(path, save)`` of ``writes`` by ``save(path)`` (each atomic), in order: all of them
+    or none. A failure (a full disk, Ctrl+C) removes those written before it: an image was left
+    without the surface model or the georeference asked for beside it. Returns the paths."""
+    written: list[Path] = []
+    try:
+        for path, save in writes:
+            save(path)
+            written.append(Path(path))
+    except BaseException:
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
+    return written

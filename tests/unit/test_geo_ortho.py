@@ -226,7 +226,7 @@ def test_cli_side_files_are_never_replaced_without_overwrite(cli, tmp_path):
 def test_a_failed_side_write_takes_the_image_back(cli, tmp_path, grid_npy, monkeypatch):
     """The world file's write failing (a full disk) removes the image written before it: no
     orthophoto is left without its georeference."""
-    from gigapoint.cli import georef
+    from gigapoint.render import georef
 
     def full_disk(camera, path):
         raise OSError(28, "No space left on device", str(path))
@@ -353,7 +353,7 @@ def test_cli_geotiff_without_a_crs_holds_its_grid(cli, tmp_path, grid_npy, gdal)
 def test_a_wkt_too_long_for_gdals_citation_is_left_to_the_prj(tmp_path):
     """GDAL reads a user-defined CRS's WKT from its GeoKeys into 2 400 characters: a longer one is
     not written there (it would be cut), and the command says the .prj has it."""
-    from gigapoint.cli.georef import PCS_CITATION, geo_keys, geotiff_notes
+    from gigapoint.render.georef import PCS_CITATION, geo_keys, geotiff_notes
 
     wkt = read_las_header(AUTZEN).crs()
     units = {"horizontal": {"name": "foot", "symbol": "ft", "metres": 0.3048}}

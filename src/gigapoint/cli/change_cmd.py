@@ -12,11 +12,11 @@ from typing import Annotated
 import typer
 
 from ..errors import GigapointError
+from ..render.georef import GEOTIFF_SUFFIXES, georef_paths, georef_writes, raster_writes
 from .app import app
 from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
-from .georef import GEOTIFF_SUFFIXES, georef_paths, georef_writes, geotiff_tags
 from .gsd_opts import check_fill_nodata, check_gsd_value
-from .output import check_image_fits, check_output, check_outputs_apart, save_heights, save_image, write_together
+from .output import check_image_fits, check_output, check_outputs_apart, write_together
 
 SURVEY_HELP = "The {} survey: a point cloud file, a folder of tiles or a quoted glob pattern ('{}/*.laz'), its files merged."
 
@@ -69,9 +69,7 @@ def change(
     if preview is not None:
         check_image_fits(preview, cam.width, cam.height)
     wkt = crs_wkt(crs)
-    writes = [(output, lambda p: save_heights(result.dz, p, geotiff_tags(cam, crs, wkt, result.units, nodata=True)))]
-    if preview is not None:
-        writes.append((preview, lambda p: save_image(result.preview(value_range), p, geotiff_tags(cam, crs, wkt, result.units))))
+    writes = raster_writes(cam, crs, wkt, result.units, [(output, result.dz), (preview, None if preview is None else result.preview(value_range))])
     side_writes, notes = georef_writes(cam, (output, preview), crs, wkt, result.units)
     written = write_together(writes + side_writes)
     summary = result.summary()

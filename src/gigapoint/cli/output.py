@@ -1,45 +1,22 @@
-"""Writing outputs safely: never over a user's file without --overwrite, never half-written."""
+"""Writing outputs safely: never over a user's file without --overwrite, never half-written.
+The writers are the library's (render/image_files.py, atomic.write_together): the CLI adds its
+option's name to the refusal and the check of outputs against the inputs."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
-import numpy as np
-
-from ..atomic import atomic_npy, atomic_write, same_file
+from ..atomic import same_file, write_together
 from ..errors import GigapointError
+from ..render import image_files
+from ..render.image_files import IMAGE_SUFFIXES, check_image_fits, save_array, save_heights, save_image
 
-IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff", ".bmp"}
+__all__ = ["IMAGE_SUFFIXES", "check_image_fits", "check_output", "check_outputs_apart", "save_array", "save_heights", "save_image", "write_together"]
 
 
 def check_output(path: Path, overwrite: bool, suffixes=IMAGE_SUFFIXES) -> Path:
-    """Validate an output path before any work is done."""
-    path = Path(path)
-    if path.is_dir():  # (before the suffix: 'unsupported output type (none)' hid what was wrong)
-        raise GigapointError(f"{path}: is a directory, not an output file")
-    if suffixes is not None and path.suffix.lower() not in suffixes:
-        raise GigapointError(f"{path}: unsupported output type {path.suffix or '(none)'!r}; use one of {', '.join(sorted(suffixes))}")
-    if path.exists() and not overwrite:
-        raise GigapointError(f"{path}: already exists; pass --overwrite to replace it")
-    if not path.parent.exists():
-        raise GigapointError(f"{path}: directory {path.parent} does not exist")
-    if not path.parent.is_dir():  # a file there: "Not a directory" only once the work was done
-        raise GigapointError(f"{path}: {path.parent} is a file, not a directory")
-    if not os.access(path.parent, os.W_OK):  # "Permission denied" came once the render was done
-        raise GigapointError(f"{path}: cannot write into {path.parent} (permission denied)")
-    return path
-
-
-WEBP_MAX_SIDE = 16_383  # libwebp's limit (an image may be 16 384 wide): its "encoding error" came once the render was done
-
-
-def check_image_fits(path: Path, width: int, height: int) -> None:
-    """A one-line error, before anything is drawn, where ``path``'s format cannot hold a
-    ``width`` x ``height`` image."""
-    path = Path(path)
-    if path.suffix.lower() == ".webp" and max(width, height) > WEBP_MAX_SIDE:
-        raise GigapointError(f"{path}: a WebP image is at most {WEBP_MAX_SIDE:,} pixels a side, this one would be {width}x{height}; write .png or .tif")
+    """Validate an output path before any work is done (image_files.check_output, naming --overwrite)."""
+    return image_files.check_output(path, overwrite, suffixes, overwrite_hint="--overwrite")
 
 
 def check_outputs_apart(outputs, inputs) -> None:
@@ -60,51 +37,3 @@ def check_outputs_apart(outputs, inputs) -> None:
             p = Path(p)
             if same_file(out, p) or (p.is_dir() and is_supported_name(out) and same_file(out.parent, p)):
                 raise GigapointError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
-
-
-def save_image(image: np.ndarray, path: Path, tiff_tags=None) -> None:
-    """Write an (H, W, 4) uint8 image; formats without alpha get RGB. Atomic. ``tiff_tags``
-    (a Pillow ImageFileDirectory_v2: georef.geotiff_tags) are added to a .tif's, not to others."""
-    from PIL import Image
-
-    path = Path(path)
-    fmt = {".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF", ".tiff": "TIFF"}.get(path.suffix.lower())
-    img = Image.fromarray(image)
-    if path.suffix.lower() in (".jpg", ".jpeg", ".bmp"):
-        img = img.convert("RGB")
-    # PNG at zlib level 1: the default (6) took 0.3 s of a 1.8 s first render of 1 M points and its
-    # files of renders (flat background) were larger, not smaller (docs/benchmarks.md, CLI first render)
-    options = {"compress_level": 1} if path.suffix.lower() == ".png" else {}
-    if fmt == "TIFF" and tiff_tags is not None:
-        options["tiffinfo"] = tiff_tags
-    atomic_write(path, lambda tmp: img.save(tmp, format=fmt or path.suffix[1:].upper(), **options))
-
-
-def save_array(array: np.ndarray, path: Path) -> None:
-    """Write an array as .npy (depth, point index). Atomic."""
-    atomic_npy(path, array)
-
-
-def save_heights(heights: np.ndarray, path: Path, tiff_tags=None) -> None:
-    """Write (H, W) heights (NaN: no point) as a float32 TIFF (Pillow's mode 'F'), with
-    ``tiff_tags`` (a GeoTIFF's: georef.geotiff_tags): a surface model a GIS places. Atomic."""
-    from PIL import Image
-
-    img = Image.fromarray(np.ascontiguousarray(heights, np.float32))  # float32: mode F
-    atomic_write(path, lambda tmp: img.save(tmp, format="TIFF", **({"tiffinfo": tiff_tags} if tiff_tags is not None else {})))
-
-
-def write_together(writes) -> list[Path]:
-    """Each ``(path, save)`` of ``writes`` by ``save(path)`` (each atomic), in order: all of them
-    or none. A failure (a full disk, Ctrl+C) removes those written before it: an image was left
-    without the surface model or the georeference asked for beside it. Returns the paths."""
-    written: list[Path] = []
-    try:
-        for path, save in writes:
-            save(path)
-            written.append(path)
-    except BaseException:
-        for path in written:
-            path.unlink(missing_ok=True)
-        raise
-    return written

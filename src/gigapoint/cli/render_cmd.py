@@ -16,7 +16,8 @@ from ..io import crs_wkt
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from ..render.contours import draw_contours
-from ..render.raster_fill import fill_colors, fill_heights
+from ..render.georef import georef_paths, georef_writes, raster_writes
+from ..render.raster_fill import fill_map
 from . import compiling
 from .app import app
 from .cloud_opts import (
@@ -42,10 +43,9 @@ from .contour_opts import (
     contour_write,
     traced_contours,
 )
-from .georef import georef_paths, georef_writes, geotiff_tags
 from .gsd_opts import check_fill_nodata, check_gsd_value
 from .info_cmd import memory_line
-from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_heights, save_image, write_together
+from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_image, write_together
 from .progress import err_console, progress_bar, status
 from .quality_opts import check_color_attribute, check_color_options, prepare_cloud
 from .settings_opts import named_option, options_named, settings_from_options, with_settings_options
@@ -210,16 +210,6 @@ def print_stats(stats, console=None, compiled_s: float = 0.0) -> None:
     )
 
 
-def fill_map(frame, image, heights, distance: int | None):
-    """--fill-nodata: the orthophoto (only within ``distance``: colours are not invented across a
-    hole) and the heights (None: no --depth-out) with their empty pixels filled (render/raster_fill)."""
-    if distance is not None:
-        image = fill_colors(image, frame.index < 0, distance)
-    if heights is not None:
-        heights = fill_heights(heights, distance)
-    return image, heights
-
-
 @app.command()
 @with_settings_options(RenderSettings)
 def render(
@@ -362,14 +352,16 @@ def render(
     surface = gsd is not None and (depth_out is not None or contours is not None)
     image, heights = frame.image, (cam.heights(frame.depth) if surface else None)
     if fill_nodata is not None:
-        image, heights = fill_map(frame, image, heights, fill_distance)
+        image, heights = fill_map(image, frame.index < 0, heights, fill_distance)
     lines = traced_contours(heights, cam, contours, contours_base, units) if contours is not None else []
     if contours_drawn:
         image = draw_contours(image, lines, cam.world_file())
-    geotiff = geotiff_tags(cam, crs, wkt, units) if gsd is not None else None  # a .tif is a GeoTIFF (others ignore it)
-    writes = [(output, lambda p: save_image(image, p, geotiff))]
-    if depth_out is not None:  # with --gsd a surface model: the heights, not the camera's depths
-        writes.append((depth_out, (lambda p: save_heights(heights, p, geotiff_tags(cam, crs, wkt, units, nodata=True))) if gsd is not None else (lambda p: save_array(frame.depth, p))))
+    if gsd is not None:  # a map: a .tif is a GeoTIFF, --depth-out the heights (a surface model), as gigapoint.orthophoto writes them
+        writes = raster_writes(cam, crs, wkt, units, [(output, image), (depth_out, heights)])
+    else:
+        writes = [(output, lambda p: save_image(image, p))]
+        if depth_out is not None:
+            writes.append((depth_out, lambda p: save_array(frame.depth, p)))
     if index_out is not None:
         writes.append((index_out, lambda p: save_array(frame.index, p)))
     if contours_out is not None:

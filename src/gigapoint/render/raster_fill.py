@@ -113,3 +113,15 @@ def fill_colors(image: np.ndarray, empty: np.ndarray, max_distance: int) -> np.n
     rows, cols = targets[:, 0], targets[:, 1]
     filled[rows, cols] = image[near_rows[rows, cols], near_cols[rows, cols]]
     return filled
+
+
+def fill_map(image: np.ndarray, empty: np.ndarray, heights: np.ndarray | None, max_distance: int | None):
+    """A top-down render's orthophoto and surface model (None: none) with their empty pixels
+    filled (``render --gsd --fill-nodata``, gigapoint.orthophoto): the heights within
+    ``max_distance`` (None: every hole inside the footprint), the colours of ``empty`` pixels
+    only within ``max_distance`` (None: not at all; colours are not invented across a hole)."""
+    if max_distance is not None:
+        image = fill_colors(image, empty, max_distance)
+    if heights is not None:
+        heights = fill_heights(heights, max_distance)
+    return image, heights

@@ -1,15 +1,21 @@
-"""What `gigapoint render --gsd` writes beside its image and its surface model so that a GIS
-places them on its map: an ESRI world file (the pixel grid) and a .prj (the cloud's CRS as WKT);
-a .tif or .tiff is a GeoTIFF besides, the same grid and CRS in its own tags (``geotiff_tags``)."""
+"""What a map product (`gigapoint render --gsd`, `gigapoint change`, gigapoint.orthophoto,
+Change.write_geotiff) writes beside its image and its surface model so that a GIS places them on
+its map: an ESRI world file (the pixel grid) and a .prj (the cloud's CRS as WKT); a .tif or .tiff
+is a GeoTIFF besides, the same grid and CRS in its own tags (``geotiff_tags``). ``map_writes``
+gives all of a product's files; ``write_map`` writes them, all or none, for the Python API."""
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
 
-from ..atomic import atomic_bytes
-from ..io import EPSG_LENGTH_UNITS, horizontal_epsg
-from ..render import Camera
+import numpy as np
+
+from ..atomic import atomic_bytes, write_together
+from ..errors import GigapointError, GigapointWarning, warn
+from ..io import EPSG_LENGTH_UNITS, crs_wkt, horizontal_epsg
+from .camera import Camera
+from .image_files import IMAGE_SUFFIXES, check_image_fits, check_output, save_heights, save_image
 
 # ESRI's names: the image suffix's first and last letters and a 'w'; .wld, which GDAL and QGIS
 # read beside any image, for the others
@@ -147,3 +153,49 @@ def geotiff_notes(images, crs: str | None, wkt: str | None, units: dict) -> list
         return []
     tiffs = [image for image in filter(None, images) if Path(image).suffix.lower() in GEOTIFF_SUFFIXES]
     return [f"{image}: its GeoTIFF keys name no CRS (its WKT is longer than GDAL reads from them); the .prj beside it has it" for image in tiffs]
+
+
+def raster_writes(camera: Camera, crs: str | None, wkt: str | None, units: dict, rasters) -> list:
+    """The (path, save) writes of ``rasters``, (path, array) pairs drawn through ``camera`` (path
+    None: not written): an (H, W) array is a surface model (float32 heights, NaN where empty),
+    an (H, W, 4) one an image; a .tif of either a GeoTIFF (``geotiff_tags``)."""
+    writes = []
+    for path, array in rasters:
+        if path is None:
+            continue
+        if np.ndim(array) == 2:
+            writes.append((Path(path), lambda p, a=array: save_heights(a, p, geotiff_tags(camera, crs, wkt, units, nodata=True))))
+        else:
+            writes.append((Path(path), lambda p, a=array: save_image(a, p, geotiff_tags(camera, crs, wkt, units))))
+    return writes
+
+
+def write_map(camera: Camera, crs: str | None, units: dict, rasters, overwrite: bool = False) -> list[Path]:
+    """``rasters`` ((path, array) pairs: ``raster_writes``) written with their world files and
+    .prj files, all or none (atomic.write_together), as the CLI writes them; returns the paths
+    written. Each is checked first: its type (a surface model is a .tif), an existing file
+    refused without ``overwrite``. A .prj that holds this very CRS already (an earlier product of
+    the same map beside it: change.tif, then change.png) is kept. Why no .prj is written, or a
+    GeoTIFF names no CRS, is a GigapointWarning."""
+    rasters = [(Path(path), array) for path, array in rasters if path is not None]
+    wkt = crs_wkt(crs)
+    for path, array in rasters:
+        check_output(path, overwrite, GEOTIFF_SUFFIXES if np.ndim(array) == 2 else IMAGE_SUFFIXES)
+        check_image_fits(path, camera.width, camera.height)
+    side_writes, notes = georef_writes(camera, [path for path, _ in rasters], crs, wkt, units)
+    side_writes = [(path, save) for path, save in side_writes if not _holds(path, wkt)]
+    named = [path for path, _ in rasters] + [path for path, _ in side_writes]
+    for i, path in enumerate(named):
+        if any(path.resolve() == other.resolve() for other in named[:i]):  # (ortho.tif and ortho.tiff: one .tfw)
+            raise GigapointError(f"{path}: named for two outputs")
+    for path, _ in side_writes:  # a user's world file or .prj is not replaced without asking
+        check_output(path, overwrite, suffixes=None)
+    written = write_together(raster_writes(camera, crs, wkt, units, rasters) + side_writes)
+    for note in notes:
+        warn(note, GigapointWarning)
+    return written
+
+
+def _holds(path: Path, wkt: str | None) -> bool:
+    """Whether ``path`` is a .prj holding ``wkt`` already."""
+    return bool(wkt) and path.suffix == ".prj" and path.is_file() and path.read_bytes() == wkt.encode()
