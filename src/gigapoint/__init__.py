@@ -241,6 +241,8 @@ _LAZY = {
     "change": ("gigapoint.surface_change", "change"),
     "Change": ("gigapoint.surface_change", "Change"),
     "classify_ground": ("gigapoint.classify", "classify_ground"),
+    "orthophoto": ("gigapoint.orthophoto", "orthophoto"),
+    "Orthophoto": ("gigapoint.orthophoto", "Orthophoto"),
 }
 
 
@@ -270,6 +272,7 @@ __all__ = [
     "GigapointError",
     "GigapointWarning",
     "LiveCloud",
+    "Orthophoto",
     "PointChunk",
     "PointCloud",
     "RenderSettings",
@@ -285,6 +288,7 @@ __all__ = [
     "estimate_normals",
     "from_arrays",
     "open",
+    "orthophoto",
     "render",
     "render_flythrough",
     "render_frame",

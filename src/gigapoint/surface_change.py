@@ -21,16 +21,18 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 
 from .core.cloud import PointCloud, build_cloud
-from .errors import InputError, is_real
+from .errors import InputError, check_switch, is_real
 from .io.crs import crs_identity, crs_name
 from .io.filters import point_filter
 from .lod.reader import cloud_crs, cloud_units
 from .render import Camera, RenderSettings, render_frame
 from .render.colors import colormap_table, ramp
+from .render.georef import write_map
 from .render.raster_fill import check_max_distance, fill_heights
 
 #: a surface model's drawing: each point in its exact pixel (no splat reaches a neighbour), 30-bit positions
@@ -135,6 +137,20 @@ class Change:
         image = ramp(self.dz, -limit, limit, colormap_table(PREVIEW_COLORMAP)).view(np.uint8).reshape(*self.dz.shape, 4)
         image[~self.compared] = 0
         return image
+
+    def write_geotiff(self, path, overwrite: bool = False) -> list[Path]:
+        """``dz`` as ``path``, a float32 GeoTIFF (.tif, NaN nodata) in the surveys' CRS, with its
+        world file and .prj: the files ``gigapoint change -o PATH`` writes, byte for byte, all or
+        none; an existing file is replaced only with ``overwrite=True``. Returns the paths."""
+        check_switch("overwrite", overwrite, "change")
+        return write_map(self.camera, self.crs, self.units, [(path, self.dz)], overwrite)
+
+    def write_preview(self, path, limit: float | None = None, overwrite: bool = False) -> list[Path]:
+        """``preview(limit)`` as the image ``path`` (.png, ...; a .tif is a GeoTIFF), with its world
+        file and .prj (one already beside it holding this CRS is kept: change.tif's for change.png),
+        as ``gigapoint change --preview PATH`` writes them. Returns the paths."""
+        check_switch("overwrite", overwrite, "change")
+        return write_map(self.camera, self.crs, self.units, [(path, self.preview(limit))], overwrite)
 
 
 def unit_names(units: dict) -> dict:

@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 
 import gigapoint as gp
-from gigapoint.errors import InputError
+from gigapoint.errors import GigapointError, InputError
 
 AUTZEN = "/work/shared/data/autzen_trim.laz"
 ORIGIN = (500_000.0, 4_000_000.0)  # a UTM-sized corner, on every grid below
@@ -143,6 +143,35 @@ def test_cli_writes_the_differences_as_a_geotiff_in_the_inputs_crs(cli, tmp_path
     assert preview.shape == (88, 80, 4) and (preview[:8, :, 3] == 0).all() and (preview[8:, :, 3] == 255).all()
 
 
+def test_write_geotiff_and_write_preview_write_the_bytes_the_cli_writes(cli, tmp_path, surveys):
+    """Change.write_geotiff / write_preview: the CLI's files from Python; the preview keeps the
+    .prj the GeoTIFF wrote beside it (the same CRS), as the CLI writes one for both."""
+    rasterio = pytest.importorskip("rasterio")
+    (tmp_path / "cli").mkdir()
+    rc, _, err = cli("change", *surveys, "--gsd", 0.5, "-o", tmp_path / "cli/change.tif", "--preview", tmp_path / "cli/change.png", "--range", 2)
+    assert rc == 0, err
+    result = gp.change(*surveys, 0.5)
+    assert [p.name for p in result.write_geotiff(tmp_path / "change.tif")] == ["change.tif", "change.tfw", "change.prj"]
+    assert [p.name for p in result.write_preview(tmp_path / "change.png", limit=2)] == ["change.png", "change.pgw"]
+    for name in ("change.tif", "change.tfw", "change.png", "change.pgw", "change.prj"):
+        assert (tmp_path / name).read_bytes() == (tmp_path / "cli" / name).read_bytes(), name
+    with rasterio.Env(GDAL_GEOREF_SOURCES="INTERNAL"), rasterio.open(tmp_path / "change.tif") as ds:
+        assert ds.crs.to_epsg() == 32610 and np.isnan(ds.nodata)
+        assert ds.transform[:6] == pytest.approx((0.5, 0, ORIGIN[0], 0, -0.5, ORIGIN[1] + 44), rel=0, abs=1e-9)
+        np.testing.assert_array_equal(ds.read(1), result.dz)
+
+
+def test_write_geotiff_refuses_an_existing_file_and_other_types(tmp_path, surveys):
+    result = gp.change(*surveys, 0.5)
+    with pytest.raises(GigapointError, match=r"c\.png: unsupported output type '\.png'; use one of \.tif, \.tiff$"):
+        result.write_geotiff(tmp_path / "c.png")
+    (tmp_path / "c.tfw").write_text("precious")
+    with pytest.raises(GigapointError, match=r"c\.tfw: already exists; pass overwrite=True to replace it$"):
+        result.write_geotiff(tmp_path / "c.tif")
+    assert not (tmp_path / "c.tif").exists() and (tmp_path / "c.tfw").read_text() == "precious"
+    assert [p.name for p in result.write_geotiff(tmp_path / "c.tif", overwrite=True)] == ["c.tif", "c.tfw", "c.prj"]
+
+
 def test_cli_json_of_autzen_against_itself_is_no_change(cli, tmp_path, autzen_path):
     rc, stdout, err = cli("change", autzen_path, autzen_path, "--gsd", 4, "-o", tmp_path / "c.tif", "--json")
     assert rc == 0, err
@@ -235,7 +264,7 @@ def test_cli_outputs_are_never_replaced_without_overwrite(cli, tmp_path, surveys
 def test_cli_leaves_nothing_half_written(cli, tmp_path, surveys, monkeypatch):
     """A failed write (a full disk at the world file) takes back the GeoTIFF and preview written
     before it; a failure before any write (no overlap) writes nothing."""
-    from gigapoint.cli import georef
+    from gigapoint.render import georef
 
     def full_disk(camera, path):
         raise OSError(28, "No space left on device", str(path))

@@ -1,0 +1,91 @@
+"""gigapoint.orthophoto: the orthophoto and surface model of `render --gsd` from Python, the same
+files byte for byte (orthophoto.py, render/georef.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import gigapoint as gp
+from gigapoint.errors import GigapointError, GigapointWarning, InputError
+
+GSD = 4.0  # autzen in feet: 295x142 pixels
+
+
+def test_orthophoto_writes_the_bytes_the_cli_writes(cli, tmp_path, autzen_path):
+    (tmp_path / "cli").mkdir()
+    rc, _, err = cli("render", autzen_path, "--gsd", GSD, "-o", tmp_path / "cli/ortho.tif", "--depth-out", tmp_path / "cli/dsm.tif", "--fill-nodata", 2)
+    assert rc == 0, err
+    result = gp.orthophoto(autzen_path, GSD, out=tmp_path / "ortho.tif", dsm=tmp_path / "dsm.tif", fill_nodata=2)
+    for name in ("ortho.tif", "ortho.tfw", "ortho.prj", "dsm.tif", "dsm.tfw", "dsm.prj"):
+        assert (tmp_path / name).read_bytes() == (tmp_path / "cli" / name).read_bytes(), name
+    assert result.image.shape == (142, 295, 4) and result.heights.shape == (142, 295)
+    np.testing.assert_array_equal(np.asarray(Image.open(tmp_path / "dsm.tif")), result.heights)
+
+
+def test_orthophoto_geotiffs_are_placed_in_the_files_crs(tmp_path, autzen_path):
+    rasterio = pytest.importorskip("rasterio")
+    result = gp.orthophoto(autzen_path, GSD, out=tmp_path / "ortho.tif", dsm=tmp_path / "dsm.tif")
+    size, _, _, _, x, y = result.camera.world_file()
+    for name in ("ortho.tif", "dsm.tif"):
+        with rasterio.open(tmp_path / name) as ds:
+            assert tuple(ds.transform)[:6] == (GSD, 0.0, x - size / 2, 0.0, -GSD, y + size / 2)  # the upper-left corner: half a pixel out
+            assert ds.crs.linear_units == "foot" and "Lambert_Conformal_Conic" in ds.crs.to_wkt()
+            assert (ds.width, ds.height) == (295, 142)
+    with rasterio.open(tmp_path / "dsm.tif") as ds:
+        assert np.isnan(ds.nodata)
+        np.testing.assert_array_equal(ds.read(1), result.heights)
+
+
+def test_write_is_refused_over_an_existing_file_and_writes_nothing(tmp_path, autzen_path):
+    result = gp.orthophoto(autzen_path, GSD)
+    (tmp_path / "ortho.prj").write_text("mine")
+    with pytest.raises(GigapointError, match=r"^\S*ortho\.prj: already exists; pass overwrite=True to replace it$"):
+        result.write(tmp_path / "ortho.png", tmp_path / "dsm.tif")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ortho.prj"] and (tmp_path / "ortho.prj").read_text() == "mine"
+    written = result.write(tmp_path / "ortho.png", tmp_path / "dsm.tif", overwrite=True)
+    assert [p.name for p in written] == ["ortho.png", "dsm.tif", "ortho.pgw", "dsm.tfw", "ortho.prj", "dsm.prj"]
+    assert (tmp_path / "ortho.prj").read_text().startswith("PROJCS[")
+
+
+def test_an_existing_output_is_refused_before_anything_is_read(tmp_path):
+    (tmp_path / "ortho.png").write_bytes(b"mine")
+    with pytest.raises(GigapointError, match=r"ortho\.png: already exists; pass overwrite=True"):
+        gp.orthophoto(tmp_path / "missing.laz", 1.0, out=tmp_path / "ortho.png")  # (not: missing.laz does not exist)
+
+
+def test_a_failed_side_write_takes_the_image_back(tmp_path, autzen_path, monkeypatch):
+    from gigapoint.render import georef
+
+    def full_disk(*args):
+        raise OSError(28, "No space left on device")
+
+    result = gp.orthophoto(autzen_path, GSD)
+    monkeypatch.setattr(georef, "write_world_file", full_disk)
+    with pytest.raises(OSError, match="No space left"):
+        result.write(tmp_path / "ortho.tif", tmp_path / "dsm.tif")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_cloud_without_a_crs_is_placed_by_its_world_file_and_warned_of(tmp_path):
+    xyz = np.array([[0.5, 0.5, 1.0], [3.5, 1.5, 2.0], [1.5, 2.5, 3.0]])
+    with pytest.warns(GigapointWarning, match="no .prj written: the inputs name no CRS"):
+        result = gp.orthophoto(gp.from_arrays(xyz), 1.0, dsm=tmp_path / "dsm.tif", size_mode="fixed", point_size=1)
+    assert (tmp_path / "dsm.tfw").read_text() == "1\n0\n0\n-1\n0.5\n2.5\n" and not list(tmp_path.glob("*.prj"))
+    assert result.heights[0, 1] == 3.0 and result.heights[2, 0] == 1.0 and np.isnan(result.heights[0, 0])
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        ({"gsd": 0}, r"^orthophoto: gsd must be a number > 0 \(cloud units per pixel\), got 0$"),
+        ({"gsd": 1, "fill_nodata": 0}, r"^orthophoto: fill_nodata: max_distance must be an integer >= 1 pixels, got 0$"),
+        ({"gsd": 1, "classes": [2]}, r"^orthophoto: classes filter the files read; a cloud is drawn as it is"),
+        ({"gsd": 1, "dsm": "dsm.png"}, r"^dsm\.png: unsupported output type '\.png'; use one of \.tif, \.tiff$"),
+        ({"gsd": 1, "overwrite": "no"}, r"^orthophoto: overwrite must be True or False, got 'no'$"),
+    ],
+)
+def test_errors_are_one_line(args, message):
+    with pytest.raises(InputError if "dsm" not in args else GigapointError, match=message):
+        gp.orthophoto(gp.from_arrays(np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])), **args)
