@@ -81,7 +81,7 @@ def orthophoto(source, gsd, out=None, dsm=None, fill_nodata=None, classes=None, 
     if fill_nodata is not None:
         image, heights = fill_map(image, frame.index < 0, heights, distance)
     crs, units = cloud_crs_units(cloud)
-    result = Orthophoto(np.asarray(image), heights, camera, float(gsd), crs, units)
+    result = Orthophoto(image, heights, camera, float(gsd), crs, units)
     if out is not None or dsm is not None:
         result.write(out, dsm, overwrite)
     return result
