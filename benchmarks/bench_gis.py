@@ -2,7 +2,7 @@
 time of the commands a user types, alternating gigapoint and PDAL round by round, medians of R
 rounds, peak RSS of both, and a check that each pair's outputs agree.
 
-    .venv/bin/python benchmarks/bench_gis.py [--points 20M] [--rounds 3] [--formats las,laz] [--jobs filter,thin,tile,stats,dtm,copy,reproject] [--input FILE.las] [--workdir DIR] [--pdal pdal]
+    .venv/bin/python benchmarks/bench_gis.py [--points 20M] [--rounds 3] [--formats las,laz] [--jobs filter,thin,tile,stats,dtm,copy,reproject,colorize] [--input FILE.las] [--workdir DIR] [--pdal pdal]
 
 Smoke check (under a minute with PDAL installed): ``--points 200000 --rounds 1``.
 
@@ -39,6 +39,13 @@ file (its LAZ copy written beside it in the work folder). The pairs (``{in}`` th
             (SMRF with both tools' defaults, in the file's units: PDAL takes them as they are, metres
             or not; the check: agreement of their class 2, point by point, and Cohen's kappa. Needs a
             PDAL with filters.smrf: --jobs without ground for one that lacks it)
+    colorize  gigapoint convert {in} -o colored.las --colorize ortho.tif
+            pdal translate {in} colored.las colorization --filters.colorization.raster=ortho.tif
+                 --filters.colorization.dimensions=Red:1:257,Green:2:257,Blue:3:257
+            (ortho.tif: an 8-bit RGB GeoTIFF over the file's extent, ORTHO_PIXELS on its long
+            side, in 512-pixel tiles, written once into the work folder; like the points, it
+            names no CRS; PDAL's scale 257 is gigapoint's 8 -> 16 bits; compare with copy; the
+            check: the share of points whose colours are the same in both files)
 
 Each command runs once on a 20 000-point file first (numba's cache filled: JIT compile time
 excluded; PDAL's libraries loaded once), then R rounds of the pairs in turn, gigapoint first in
@@ -66,12 +73,14 @@ from bench_convert import write_las, write_laz  # a sibling script: its folder i
 from gigapoint.bench import run_measured
 from gigapoint.bench.report import cpu_model, parse_count
 
-JOBS = ("filter", "thin", "tile", "stats", "dtm", "copy", "reproject", "ground")
+JOBS = ("filter", "thin", "tile", "stats", "dtm", "copy", "reproject", "ground", "colorize")
 #: reproject's CRSs: Oregon Lambert (NAD83, international feet; autzen's) -> WGS 84 / UTM 10N (metres)
 FROM_CRS, TO_CRS = "EPSG:2992", "EPSG:32610"
 GSD = 1.0
 TILE = 500.0
 SPACING = 1.0
+#: pixels along the long side of colorize's orthophoto
+ORTHO_PIXELS = 8192
 #: each point in its own pixel (the exact one-pixel render), as PDAL's binmode puts it in its own
 #: cell; render's default (adaptive) draws points as large as their spacing: a surface with no gaps
 DTM_POINTS = ("--size-mode", "fixed", "--point-size", "1")
@@ -103,8 +112,29 @@ def dtm_grid(las: Path, gsd: float) -> tuple[float, float, int, int]:
     return first_col * gsd, (top_row - height) * gsd, width, height
 
 
-def commands(job: str, inp: Path, out: Path, pdal: str, grid) -> tuple[list[str], list[str]]:
-    """(gigapoint's command, PDAL's) for ``job`` on ``inp``, writing under ``out``."""
+def write_ortho(las: Path, path: Path) -> Path:
+    """An 8-bit RGB GeoTIFF over ``las``'s header extent (``ORTHO_PIXELS`` along its long side,
+    tiled), of a pattern whose neighbouring pixels differ, naming no CRS (as the demo town)."""
+    import laspy
+    import rasterio
+    from rasterio.transform import from_origin
+
+    with laspy.open(str(las)) as f:
+        lo, hi = f.header.mins, f.header.maxs
+    pixel = max(hi[0] - lo[0], hi[1] - lo[1]) / (ORTHO_PIXELS - 1)
+    width, height = (int((hi[k] - lo[k]) / pixel) + 2 for k in (0, 1))
+    profile = {"driver": "GTiff", "width": width, "height": height, "count": 3, "dtype": "uint8", "tiled": True, "blockxsize": 512,
+               "blockysize": 512, "transform": from_origin(lo[0] - pixel / 2, hi[1] + pixel / 2, pixel, pixel)}  # fmt: skip
+    with rasterio.open(path, "w", **profile) as ds:
+        for top in range(0, height, 512):
+            rows, cols = np.mgrid[top : min(top + 512, height), 0:width]
+            window = rasterio.windows.Window(0, top, width, rows.shape[0])
+            ds.write(np.stack([(cols * 3) % 256, (rows * 5) % 256, (cols + 2 * rows) % 256]).astype(np.uint8), window=window)
+    return path
+
+
+def commands(job: str, inp: Path, out: Path, pdal: str, grid, ortho: Path | None = None) -> tuple[list[str], list[str]]:
+    """(gigapoint's command, PDAL's) for ``job`` on ``inp``, writing under ``out`` (``ortho``: colorize's raster)."""
     if job == "filter":
         return (
             gp_cmd("convert", inp, "-o", out / "gp_ground.laz", "--classes", "2", "--quiet"),
@@ -150,6 +180,12 @@ def commands(job: str, inp: Path, out: Path, pdal: str, grid) -> tuple[list[str]
         return (
             gp_cmd("classify", inp, "-o", out / "gp_smrf.laz", "--ground", "--quiet"),
             [pdal, "translate", str(inp), str(out / "pdal_smrf.laz"), "smrf"],
+        )
+    if job == "colorize":
+        return (
+            gp_cmd("convert", inp, "-o", out / "gp_colored.las", "--colorize", ortho, "--quiet"),
+            [pdal, "translate", str(inp), str(out / "pdal_colored.las"), "colorization", f"--filters.colorization.raster={ortho}",
+             "--filters.colorization.dimensions=Red:1:257,Green:2:257,Blue:3:257"],
         )
     raise ValueError(job)
 
@@ -240,6 +276,8 @@ def check(job: str, out: Path, gp_stdout: bytes, pdal_stdout: bytes, n: int) -> 
         return compare_points(out / "gp_utm.las", out / "pdal_utm.las", n)
     if job == "ground":
         return compare_ground(out / "gp_smrf.laz", out / "pdal_smrf.laz")
+    if job == "colorize":
+        return compare_colors(out / "gp_colored.las", out / "pdal_colored.las", n)
     raise ValueError(job)
 
 
@@ -272,6 +310,18 @@ def compare_ground(gp_laz: Path, pdal_laz: Path) -> dict:
     return {"gigapoint_ground": int(a.sum()), "pdal_ground": int(b.sum()), "agreement": round(agree, 4), "kappa": round(float(kappa), 4), "agree": "by measure"}
 
 
+def compare_colors(a: Path, b: Path, n: int) -> dict:
+    """The share of points (in order) whose red, green and blue are the same in both files."""
+    import laspy
+
+    with laspy.open(str(a)) as fa, laspy.open(str(b)) as fb:
+        same = 0
+        for pa, pb in zip(fa.chunk_iterator(1_000_000), fb.chunk_iterator(1_000_000)):
+            same += int(np.all([np.asarray(pa[c]) == np.asarray(pb[c]) for c in ("red", "green", "blue")], axis=0).sum())
+        counts = [int(fa.header.point_count), int(fb.header.point_count)]
+    return {"points": counts, "same_colour": round(same / max(n, 1), 5), "agree": counts == [n, n] and same == n}
+
+
 WARM = """
 import json, sys
 from gigapoint.cli import main
@@ -281,7 +331,7 @@ for argv in json.loads(sys.argv[1]):
 """
 
 
-def warm_up(jobs, inputs, out, pdal, grid) -> None:
+def warm_up(jobs, inputs, out, pdal, grid, ortho) -> None:
     """Every gigapoint command once on the 20 000-point files, in one process (numba's cache
     filled: JIT compile time excluded; one interpreter start instead of one a command), and
     PDAL's once on the LAS one (its libraries and plugins read from disk)."""
@@ -290,7 +340,7 @@ def warm_up(jobs, inputs, out, pdal, grid) -> None:
         for job in jobs:
             sub = out / f"warm_{fmt}_{job}"
             sub.mkdir()
-            gcmd, pcmd = commands(job, warm, sub, pdal, grid)
+            gcmd, pcmd = commands(job, warm, sub, pdal, grid, ortho)
             argvs.append(gcmd[3:])  # less python -m gigapoint.cli
             if fmt == next(iter(inputs)):
                 run(pcmd)
@@ -350,7 +400,10 @@ def main(argv=None) -> int:
               f"PDAL {found.group(1) if found else '?'}", file=sys.stderr)
         out = work / "out"
         out.mkdir(exist_ok=True)
-        warm_up(jobs, inputs, out, a.pdal, dtm_grid(warm, GSD))
+        ortho = work / "ortho.tif"
+        if "colorize" in jobs and not ortho.exists():
+            write_ortho(las, ortho)
+        warm_up(jobs, inputs, out, a.pdal, dtm_grid(warm, GSD), ortho)
         grid = dtm_grid(las, GSD) if "dtm" in jobs else None
         rows = []
         for fmt, (inp, _) in inputs.items():
@@ -360,7 +413,7 @@ def main(argv=None) -> int:
                 verdict = None
                 for r in range(a.rounds):
                     clean(out)
-                    gcmd, pcmd = commands(job, inp, out, a.pdal, grid)
+                    gcmd, pcmd = commands(job, inp, out, a.pdal, grid, ortho)
                     order = [("gigapoint", gcmd), ("pdal", pcmd)]
                     if r % 2:
                         order.reverse()

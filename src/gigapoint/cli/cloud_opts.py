@@ -8,6 +8,7 @@ so they are refused with a line naming the option instead of being ignored silen
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -89,6 +90,24 @@ FromCrsOption = Annotated[
     str | None,
     typer.Option("--from-crs", metavar="CRS", help="With --to-crs: the CRS every input's coordinates are in, in place of what their headers name (for files naming none)."),
 ]
+ColorizeOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--colorize",
+        metavar="RASTER",
+        readable=False,
+        help="Colour the points from an orthophoto (a GeoTIFF, any raster GDAL reads) in the output's CRS (after --to-crs): each point "
+        "takes its pixel's bands 1-3 as red, green, blue; points outside it, or under its alpha 0 or nodata, keep their colour (0 "
+        "where their file had none) and are counted. Needs rasterio: pip install 'gigapoint\\[gis]'.",
+    ),
+]
+
+
+def uncolored_note(uncolored: int | None, raster) -> str:
+    """What a summary line says of the points --colorize left uncoloured: nothing without it."""
+    if uncolored is None:
+        return ""
+    return f", {uncolored:,} outside {raster} or under its mask (colour kept, 0 where none)" if uncolored else f", every point coloured from {raster}"
 
 
 def filter_options(classes: str | None, drop_classes: str | None, clip: str | None, where: str, clip_polygon: str | None = None):

@@ -16,12 +16,14 @@ from .cloud_opts import (
     ClassesOption,
     ClipOption,
     ClipPolygonOption,
+    ColorizeOption,
     DropClassesOption,
     FromCrsOption,
     RecursiveOption,
     ToCrsOption,
     filter_options,
     thin_option,
+    uncolored_note,
 )
 from .settings_opts import named_option
 
@@ -72,6 +74,7 @@ def convert(
     ),
     to_crs: ToCrsOption = None,
     from_crs: FromCrsOption = None,
+    colorize: ColorizeOption = None,
 ) -> None:
     """Convert point clouds into a level-of-detail octree, out of core, resumable; or merge, filter and thin them into one .las, .laz or .ply file (-o ground.laz)."""
     from ..lod import ConvertError
@@ -113,6 +116,7 @@ def convert(
                 thin=spacing,
                 to_crs=to_crs,
                 from_crs=from_crs,
+                colorize=colorize,
                 on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
             )
     except (ConvertError, InputError) as exc:  # 'max_leaf must be ...' named no option; thin=1e-09 said as typed
@@ -126,7 +130,8 @@ def convert(
     skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
     if to_file:
         thinned = f", thinned from {result.thinned_from:,}" if result.thinned_from is not None else ""
-        print(f"{output}: {result.points:,} points ({result.format}){thinned}{skipped}, {result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s")
+        colored = uncolored_note(result.uncolored, colorize)
+        print(f"{output}: {result.points:,} points ({result.format}){thinned}{colored}{skipped}, {result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s")
         return
     print(  # OUTPUT as given: a Dask run's result holds it absolute (its workers need that)
         f"{output}: {result.points:,} points in {result.nodes:,} nodes ({result.format}, {result.sampler}){skipped}, "

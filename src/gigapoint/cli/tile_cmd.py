@@ -15,11 +15,13 @@ from .cloud_opts import (
     ClassesOption,
     ClipOption,
     ClipPolygonOption,
+    ColorizeOption,
     DropClassesOption,
     FromCrsOption,
     RecursiveOption,
     ToCrsOption,
     filter_options,
+    uncolored_note,
 )
 from .settings_opts import named_option
 
@@ -41,6 +43,7 @@ def tile(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
     to_crs: ToCrsOption = None,
     from_crs: FromCrsOption = None,
+    colorize: ColorizeOption = None,
 ) -> None:
     """Split point clouds into square LAS/LAZ tiles (lastile), read once, a chunk at a time; only tiles holding points are written."""
     from ..lod.convert.tiles import tile as run
@@ -59,6 +62,7 @@ def tile(
             progress=not quiet and sys.stderr.isatty(),
             to_crs=to_crs,
             from_crs=from_crs,
+            colorize=colorize,
             **(point_filter.as_spec() if point_filter is not None else {}),
         )
     except GigapointError as exc:  # tile: size=0.0 said as the option
@@ -70,6 +74,6 @@ def tile(
     buffered = f" (+{result.buffer_points:,} buffer points)" if result.buffer_points else ""
     skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
     print(
-        f"{output}: {len(counts):,} tiles of {size:g} x {size:g} ({format}), {result.points:,} points{buffered}{skipped}; "
+        f"{output}: {len(counts):,} tiles of {size:g} x {size:g} ({format}), {result.points:,} points{buffered}{uncolored_note(result.uncolored, colorize)}{skipped}; "
         f"points per tile: min {counts.min():,}, median {median:,.{0 if median.is_integer() else 1}f}, max {counts.max():,}; {result.seconds:.1f} s"
     )

@@ -17,6 +17,7 @@ from ...core.renderable import PointSource
 from ...errors import GigapointError, GigapointWarning, InputError, check_switch, warn
 from ...io import with_subfolders
 from ...io._base import check_file, headers_once
+from ...io.colorize import Colorization
 from ...io.filters import point_filter
 from ...io.registry import is_supported_name
 from ...io.reproject import Reprojection
@@ -54,6 +55,7 @@ class ConvertResult:
     first_view_seconds: float | None = None  # until OUT first opened (its preview); 0: a resumed run's was there; None: none
     in_memory: bool = False  # the points waited between phases in memory (in_memory.py), not in spill files
     thinned_from: int | None = None  # thin=: the points thinned (valid, passing the filter) to ``points``; None: not thinned
+    uncolored: int | None = None  # colorize=: the points written that took no colour from the raster (outside it, under its mask); None: not coloured
 
     @property
     def points_per_second(self) -> float:
@@ -231,6 +233,7 @@ def convert(
     thin=None,
     to_crs=None,
     from_crs=None,
+    colorize=None,
 ) -> ConvertResult:
     """Convert point cloud files (or a cloud, or an iterable of PointChunks) into an LOD octree directory ``out``.
 
@@ -286,6 +289,13 @@ def convert(
     (io/reproject.py): the filter's clip box and ``thin``'s cells are then in its coordinates. z is
     transformed only between CRSs with a vertical part (compound ones), else kept (PROJ's rule).
     The file names ``to_crs`` (a WKT VLR) and keeps the inputs' precision in its units.
+
+    ``colorize`` (a plain point file only; needs rasterio: ``pip install 'gigapoint[gis]'``): an
+    orthophoto (a GeoTIFF, any raster GDAL reads) whose pixels colour the points written, each the
+    pixel it lies in, after ``to_crs`` (in the output's coordinates; io/colorize.py): bands 1-3 as
+    red, green, blue. Points outside it or under its mask (alpha 0, nodata) keep their colour (0
+    where their file had none), counted in the result's ``uncolored``. A raster in another CRS than
+    the output's is refused (move the points into its CRS with ``to_crs``).
     """
     check_switch("overwrite", overwrite, "convert")
     check_switch("recursive", recursive, "convert")
@@ -301,6 +311,8 @@ def convert(
     reprojection = None if to_crs is None else Reprojection(to_crs, from_crs, "convert")  # an unknown CRS: said before a point is read
     if from_crs is not None and to_crs is None:
         raise InputError(f"convert: from_crs={from_crs!r}: the CRS the inputs are in, for to_crs; give to_crs too")
+    if colorize is not None and not isinstance(colorize, (str, os.PathLike)):
+        raise InputError(f"convert: colorize={colorize!r}: the path of an orthophoto (a GeoTIFF)")
     if keep is not None and not _are_paths(inputs):  # (a cloud's or chunks' points are not read here)
         raise InputError(f"convert: the filter ({keep.describe()}) applies to the points read from files; the inputs are a cloud or PointChunks")
     check_switch("progress", progress, "convert")  # "yes"/"no" were both true
@@ -321,15 +333,21 @@ def convert(
         if given:  # (each meant something of an octree only: none was ignored without a word)
             raise ConvertError(f"{out}: {', '.join(given)}: {'options' if len(given) > 1 else 'an option'} of an octree, not of a plain {out.suffix[1:].upper()} file")
         t0 = time.perf_counter()
+        colorization = None if colorize is None else Colorization(colorize, "convert")  # a raster that cannot be read: said before a point is
         shown = RichProgress() if progress else NullProgress()
         try:
-            points, skipped, passed = write_point_file(
-                inputs, out, keep, overwrite, chunk_size, shown, None if spacing is None else (spacing, thin_label), reprojection
+            points, skipped, passed, uncolored = write_point_file(
+                inputs, out, keep, overwrite, chunk_size, shown, None if spacing is None else (spacing, thin_label), reprojection, colorization
             )
         finally:
             shown.close()
+            if colorization is not None:
+                colorization.close()
         thinned_from = None if spacing is None else passed
-        return ConvertResult(out, out.suffix[1:].lower(), None, points, 0, skipped, time.perf_counter() - t0, False, thinned_from=thinned_from)
+        return ConvertResult(
+            out, out.suffix[1:].lower(), None, points, 0, skipped, time.perf_counter() - t0, False, thinned_from=thinned_from,
+            uncolored=None if colorize is None else uncolored,
+        )
     sampler = "grid" if sampler is None else sampler
     if sampler not in SAMPLERS:
         raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
@@ -340,6 +358,8 @@ def convert(
         raise ConvertError(f"--format: unknown format {format!r}; choose {' or '.join(FORMATS)}")
     if format != "copc" and out is not None and str(out) != "" and is_supported_name(out):  # -o scan.laz: a folder named so
         raise ConvertError(f"{out}: a {format} octree is a folder; name it without a point file's suffix, or write --format copc into a .copc.laz file")
+    if colorize is not None:
+        raise ConvertError(f"{out}: --colorize: an option of a plain .las, .laz or .ply file, or of tiles, not of a {format} octree")
     if to_crs is not None:
         raise ConvertError(f"{out}: --to-crs: an option of a plain .las, .laz or .ply file, or of tiles, not of a {format} octree")
     if spacing is not None:  # (an octree's inner nodes are its thinned levels; its leaves hold every point)

@@ -33,6 +33,15 @@ def _warn_off_grid(grids, scale, offset) -> None:
         )
 
 
+def file_has_color(path) -> bool:
+    """Whether the points of ``path`` have colours, as its header says: a LAS file's point format
+    has RGB; other files where their header tells (PLY, NPY), else assumed."""
+    reader = reader_for(path)
+    if isinstance(reader, LasReader):
+        return bool(reader.info(path).get("has_color"))
+    return bool(reader.header(path).get("has_color", True))
+
+
 def input_facts(paths, one_grid: bool = False) -> dict:
     """{crs: 'EPSG:n' or WKT or None, wkt: WKT or None, scale, offset: the LAS inputs' grid (the
     finest scale; the first file's offset) or None, has_color}. Read from headers only.
@@ -48,7 +57,7 @@ def input_facts(paths, one_grid: bool = False) -> dict:
             reader = None
         if not isinstance(reader, LasReader):  # colors where its header says so (PLY, NPY), else assumed
             try:
-                colored = True if reader is None else reader.header(p).get("has_color", True)
+                colored = True if reader is None else file_has_color(p)
             except Exception:  # noqa: BLE001 - as above
                 colored = True
             has_color = bool(has_color) or colored

@@ -14,7 +14,8 @@ are 0 otherwise.
 Every tile is written as ``convert -o x.laz`` writes its one file (to_file.PointFiles): the
 first CRS named, a LAS grid holding every input's points exactly, the attributes all inputs
 have, colours as each file stored them; ``to_crs``: their points moved into that CRS as they
-are read (io/reproject.py), so tiles, their size, buffer and clip box are in its coordinates.
+are read (io/reproject.py), so tiles, their size, buffer and clip box are in its coordinates;
+``colorize``: their colours from an orthophoto's pixels, after that (io/colorize.py).
 
 The inputs are read once, a chunk at a time; each chunk's points are bucketed by tile and
 appended to that tile's raw spill file (records of position, colour and attributes) in a
@@ -48,6 +49,7 @@ from ...core.chunk import PointChunk
 from ...core.cloud import check_valid_count
 from ...errors import GigapointWarning, InputError, check_switch, is_real, warn
 from ...io import with_subfolders
+from ...io.colorize import Colorization
 from ...io.filters import point_filter
 from ...io.reproject import Reprojection
 from ...io.write import write_points
@@ -71,6 +73,7 @@ class TileResult:
     buffer_points: int  # points written into tiles as buffers (copies of their neighbours')
     skipped: int  # invalid points (NaN, inf) left out
     seconds: float
+    uncolored: int | None = None  # colorize=: points that took no colour from the raster (outside it, under its mask); None: not coloured
 
 
 def tile(
@@ -91,6 +94,7 @@ def tile(
     progress: bool = False,
     to_crs=None,
     from_crs=None,
+    colorize=None,
 ) -> TileResult:
     """Split the points of the files and folders ``inputs`` into square tiles of edge ``size`` (in
     the files' units, on a grid anchored at 0) written into the folder ``out`` as
@@ -100,6 +104,8 @@ def tile(
     ``clip_polygon``: only the points passing them are tiled (as ``gp.open``'s); ``recursive=True``: folders' subfolders too.
     ``to_crs`` (needs pyproj): the points are moved into that CRS first (from each file's own, or
     ``from_crs``), as ``convert``'s: ``size``, ``buffer`` and ``clip`` are then in its units.
+    ``colorize`` (needs rasterio): an orthophoto whose pixels colour the points, as ``convert``'s
+    (after ``to_crs``); the result's ``uncolored`` counts those outside it or under its mask.
 
     ``out`` is made if missing; one holding LAS/LAZ files already is refused without
     ``overwrite``, which replaces the tiles of this run's names and leaves every other file.
@@ -123,11 +129,14 @@ def tile(
     if from_crs is not None and to_crs is None:
         raise InputError(f"tile: from_crs={from_crs!r}: the CRS the inputs are in, for to_crs; give to_crs too")
     reprojection = None if to_crs is None else Reprojection(to_crs, from_crs, "tile")
+    if colorize is not None and not isinstance(colorize, (str, os.PathLike)):
+        raise InputError(f"tile: colorize={colorize!r}: the path of an orthophoto (a GeoTIFF)")
     out = Path(out)
     _check_output_folder(out, overwrite)
     if recursive:
         inputs = with_subfolders([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
-    files = PointFiles(inputs, out, chunk_size, reprojection=reprojection)
+    colorization = None if colorize is None else Colorization(colorize, "tile")  # a raster that cannot be read: said before a point is
+    files = PointFiles(inputs, out, chunk_size, reprojection=reprojection, colorization=colorization)
     name = name or (Path(files.files[0]).stem if len(files.files) == 1 else out.resolve().name)
     bounds = files.headers_bounds()
     if bounds is not None:  # a size in the wrong unit: refused before a point is read
@@ -140,8 +149,8 @@ def tile(
         spill = _TileSpill(work, float(size), float(buffer), files.label)
         tally = {"points": 0, "skipped": 0}
         shown.phase("read", None if None in files.counts else sum(files.counts))
-        for _, chunk in files.valid_chunks(keep, shown, tally):
-            spill.add(chunk)
+        for f, chunk in files.valid_chunks(keep, shown, tally):
+            spill.add(files.colored(f, chunk, tally))
         check_valid_count(files.label, tally["points"], tally["skipped"])  # (the skipped points' warning)
         written = spill.write_tiles(name, format, files, shown)
         for tile_path in written:  # every tile whole: now they appear
@@ -153,10 +162,13 @@ def tile(
     finally:
         shutil.rmtree(work, ignore_errors=True)
         shown.close()
+        if colorization is not None:
+            colorization.close()
     tiles = [out / p.name for p in written]
     _warn_stale_tiles(out, name, tiles)
     counts = [spill.held[key] for key in spill.written_keys]
-    return TileResult(out, tiles, counts, tally["points"], sum(counts) - tally["points"], tally["skipped"], time.perf_counter() - t0)
+    uncolored = None if colorization is None else tally["uncolored"]
+    return TileResult(out, tiles, counts, tally["points"], sum(counts) - tally["points"], tally["skipped"], time.perf_counter() - t0, uncolored)
 
 
 def _check_output_folder(out: Path, overwrite: bool) -> None:

@@ -10,7 +10,10 @@ attributes every file has (as gp.open keeps them). Invalid points (NaN, inf) are
 the usual warning. ``reprojection`` (io/reproject.py: ``to_crs``): the points move into that CRS
 as they are read, before the filter and the thinning (a clip box and cells in the output's
 coordinates); the file then names that CRS and takes a grid of the inputs' precision in its units. ``thin``: one point kept per occupied cell of that edge over the whole file
-set, the first in the inputs' order (io/thin.py), after the filter."""
+set, the first in the inputs' order (io/thin.py), after the filter. ``colorization``
+(io/colorize.py: ``colorize``): the points kept take their colours from an orthophoto, last (after
+the reprojection, in the output's coordinates; after the filter and the thinning: no pixel is read
+for a point left out)."""
 
 from __future__ import annotations
 
@@ -25,6 +28,8 @@ from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
 from ...errors import EmptyCloudError, InputError
 from ...io import expand_paths, files_label, read_chunks, scan_angles_differ
 from ...io._base import STREAM_CHUNK_SIZE
+from ...io.colorize import Colorization
+from ...io.crs import files_crs
 from ...io.filters import PointFilter, filtered
 from ...io.las import LasReader, with_scan_angle
 from ...io.las_fields import las_grid
@@ -34,7 +39,7 @@ from ...io.thin import Thinning
 from ...io.write import POINT_FILE_SUFFIXES, check_point_file_output, source_crs_records, wkt_crs_records, write_points
 from ..build import valid_bounds
 from ..kinds import is_copc_name
-from .facts import input_facts
+from .facts import file_has_color, input_facts
 from .read import _skipped_if_empty
 
 
@@ -51,9 +56,14 @@ class PointFiles:
     ``las_grid`` (the grid holding every LAS input's points, else None) and ``crs_records``
     (the first CRS named; ``ply``: none). ``valid_chunks`` reads them, a chunk at a time.
     ``reprojection``: their points moved into its CRS as they are read; the grid, the CRS records and
-    the headers' bounds are then the target CRS's (each file's CRS checked before a point is read)."""
+    the headers' bounds are then the target CRS's (each file's CRS checked before a point is read).
+    ``colorization``: the points coloured from its raster (``colored``), whose CRS is checked
+    against theirs (the output's) here."""
 
-    def __init__(self, inputs, out: Path, chunk_size: int | None, ply: bool = False, reprojection: Reprojection | None = None):
+    def __init__(
+        self, inputs, out: Path, chunk_size: int | None, ply: bool = False, reprojection: Reprojection | None = None,
+        colorization: Colorization | None = None,
+    ):
         self.files = expand_paths([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
         if any(same_file(out, f) for f in self.files):
             raise InputError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
@@ -73,6 +83,19 @@ class PointFiles:
             self.las_grid, self.crs_records = output_grid(self.files, reprojection), wkt_crs_records(reprojection.target_wkt())
         else:
             self.las_grid, self.crs_records = _las_inputs_grid(self.files, facts), source_crs_records(self.files)
+        self.colorization = colorization
+        if colorization is not None:  # (the points' CRS is the output's: the target's where reprojected)
+            colorization.check_crs(reprojection.target_wkt() if reprojection is not None else files_crs(self.files), self.label)
+            self.had_color = {f: file_has_color(f) for f in self.files}
+
+    def colored(self, f, chunk: PointChunk, tally: dict) -> PointChunk:
+        """``chunk`` (of file ``f``) coloured from the orthophoto, as it is without one; ``tally``'s
+        "uncolored" counts the points that took no colour from it (outside it, under its mask)."""
+        if self.colorization is None:
+            return chunk
+        chunk, uncolored = self.colorization.colored(chunk, self.had_color[f])
+        tally["uncolored"] += uncolored
+        return chunk
 
     def headers_bounds(self):
         """(lo, hi) of the files' points as their headers tell (in the target CRS where reprojected); None where one tells none."""
@@ -84,7 +107,7 @@ class PointFiles:
         told of the points read; ``tally``: {points: valid points that passed, skipped: invalid
         ones}. Once read, a filter that let nothing pass, or no valid point, is its error."""
         passing = keep.fresh() if keep is not None else None
-        tally.update(points=0, skipped=0)
+        tally.update(points=0, skipped=0, uncolored=0)  # (uncolored: counted by ``colored``)
         for f in self.files:
             read = _told(with_scan_angle(read_chunks(f, self.chunk_size)) if self.one_angle else read_chunks(f, self.chunk_size), progress)
             if self.reprojection is not None:  # (before the filter: a clip box is in the output's coordinates)
@@ -106,18 +129,19 @@ class PointFiles:
 
 def write_point_file(
     inputs, out: Path, keep: PointFilter | None, overwrite: bool, chunk_size: int | None, progress, thin: tuple[float, str] | None = None,
-    reprojection: Reprojection | None = None,
-) -> tuple[int, int, int]:
+    reprojection: Reprojection | None = None, colorization: Colorization | None = None,
+) -> tuple[int, int, int, int]:
     """Write the points of the files and folders ``inputs`` that pass ``keep`` into ``out``, a
     chunk at a time (``progress``: lod/progress.py's, told of the points read); ``thin``:
     (spacing, the option as its errors name it), one point of each occupied cell kept. An
     existing ``out`` without ``overwrite`` is refused before anything is read, as is an ``out``
     that is one of the inputs, or cells too small for the headers' bounds; ``reprojection``: the
-    points moved into its CRS (PointFiles). Returns (points
-    written, invalid points skipped, valid points that passed the filter: those thinned)."""
+    points moved into its CRS (PointFiles); ``colorization``: the points written coloured from its
+    raster. Returns (points written, invalid points skipped, valid points that passed the filter:
+    those thinned, points written that took no colour from the raster)."""
     check_point_file_output(out, overwrite)
     ply = out.suffix.lower() == ".ply"
-    inputs = PointFiles(inputs, out, chunk_size, ply, reprojection)
+    inputs = PointFiles(inputs, out, chunk_size, ply, reprojection, colorization)
     bounds = None
     if thin is not None:  # cells too small for the headers' bounds: refused here, before a point is read
         bounds = inputs.headers_bounds()
@@ -128,11 +152,11 @@ def write_point_file(
         thinning = Thinning(*thin, bounds, inputs.label) if thin is not None else None  # (each pass meets every cell anew)
         progress.phase("write", None if None in inputs.counts else sum(inputs.counts))  # (with a filter: an upper bound)
         for f, chunk in inputs.valid_chunks(keep, progress, tally):
-            yield chunk if thinning is None else thinning.kept(chunk, f)
+            yield inputs.colored(f, chunk if thinning is None else thinning.kept(chunk, f), tally)
 
     written = write_points(out, chunks, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None)
     check_valid_count(inputs.label, written, tally["skipped"])  # the skipped points' warning
-    return written, tally["skipped"], tally["points"]
+    return written, tally["skipped"], tally["points"], tally["uncolored"]
 
 
 def _headers_bounds(files, counts, reprojection: Reprojection | None = None):

@@ -1,0 +1,208 @@
+"""``convert -o out.laz --colorize ortho.tif`` / ``tile --colorize`` (io/colorize.py): each point
+takes the colour of the orthophoto's pixel it lies in (GeoTIFFs written here with rasterio, over
+autzen's extent in its CRS, the expected pixel found with rasterio's own rowcol), after --to-crs;
+points outside it or under alpha 0 keep their colour (0 where none) and are counted; rasters that
+cannot be read or lie in another CRS are refused in one line before a point is read."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+import laspy
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.errors import GigapointWarning, InputError
+from gigapoint.io.las import read_las_header
+from gigapoint.lod import ConvertError
+
+rasterio = pytest.importorskip("rasterio")
+pyproj = pytest.importorskip("pyproj")
+from rasterio.transform import from_origin, rowcol
+
+#: the test rasters' pixel edge (feet, in autzen's CRS) and their top-left corner: half a grid step
+#: off autzen's 0.01 ft grid, so no point lies on a pixel edge
+PIXEL = 5.0
+LEFT, TOP = 636_000.005, 849_500.005
+WIDTH, HEIGHT = 237, 114  # (to x 637 185, y 848 930: past autzen's 637 179.22, 848 935.20)
+
+
+def _pattern(height=HEIGHT, width=WIDTH) -> np.ndarray:
+    """Bands 1-3 (3 x height x width, uint8) of a pattern whose neighbours all differ."""
+    row, col = np.mgrid[0:height, 0:width]
+    return np.stack([(col * 3) % 256, (row * 5) % 256, (col + 2 * row) % 256]).astype(np.uint8)
+
+
+def _geotiff(path, bands, crs, transform=None, alpha: bool = False):
+    """A GeoTIFF of ``bands`` (k x h x w); ``alpha``: its last band marked as alpha."""
+    count, height, width = bands.shape
+    transform = transform or from_origin(LEFT, TOP, PIXEL, PIXEL)
+    with rasterio.open(path, "w", driver="GTiff", width=width, height=height, count=count, dtype=bands.dtype, crs=crs, transform=transform) as ds:
+        ds.write(bands)
+        if alpha:
+            ds.colorinterp = [rasterio.enums.ColorInterp.red, rasterio.enums.ColorInterp.green, rasterio.enums.ColorInterp.blue, rasterio.enums.ColorInterp.alpha]
+    return path
+
+
+@pytest.fixture(scope="module")
+def no_rgb(autzen_path, tmp_path_factory):
+    """autzen without colours: point format 1 (LAS 1.2), its CRS and grid kept."""
+    path = tmp_path_factory.mktemp("colorize") / "autzen_no_rgb.las"
+    laspy.convert(laspy.read(str(autzen_path)), point_format_id=1).write(str(path))
+    assert not {"red", "green", "blue"} & set(laspy.read(str(path)).point_format.dimension_names)
+    return path
+
+
+def _pixels_of(path, transform=None):
+    """(row, column) of the pixel under each point of ``path`` (rasterio's rowcol: floor), and its points."""
+    las = laspy.read(str(path))
+    rows, cols = rowcol(transform or from_origin(LEFT, TOP, PIXEL, PIXEL), np.asarray(las.x), np.asarray(las.y))
+    return np.asarray(rows), np.asarray(cols), las
+
+
+def _rgb(las) -> np.ndarray:
+    return np.column_stack([np.asarray(las[c]) for c in ("red", "green", "blue")])
+
+
+def test_every_point_takes_its_pixels_colour_x_257_and_gains_rgb(cli, no_rgb, tmp_path):
+    wkt = read_las_header(no_rgb).crs()
+    ortho = _geotiff(tmp_path / "ortho.tif", _pattern(), wkt)
+    out = tmp_path / "colored.laz"
+    rc, stdout, err = cli("convert", no_rgb, "-o", out, "--colorize", ortho, "-q")
+    assert (rc, err) == (0, "")
+    assert stdout.startswith(f"{out}: 110,000 points (laz), every point coloured from {ortho}, ")
+    rows, cols, source = _pixels_of(no_rgb)
+    assert rows.min() >= 0 and rows.max() < HEIGHT and cols.min() >= 0 and cols.max() < WIDTH  # (the raster covers every point)
+    written = laspy.read(str(out))
+    assert written.header.point_format.id == 7  # (format 1 had no RGB)
+    assert np.array_equal(np.asarray(written.X), np.asarray(source.X)) and np.array_equal(np.asarray(written.Y), np.asarray(source.Y))
+    expected = _pattern()[:, rows, cols].T.astype(np.uint16) * 257
+    assert np.array_equal(_rgb(written), expected)
+    assert len(np.unique(expected, axis=0)) > 1000  # (a pattern, not one colour)
+
+
+def test_a_16_bit_raster_keeps_its_values_high_byte(no_rgb, tmp_path):
+    wkt = read_las_header(no_rgb).crs()
+    bands = _pattern().astype(np.uint16) * 256 + 77  # (low bytes 77: gigapoint holds 8 bits a channel)
+    result = gp.convert(no_rgb, tmp_path / "out.las", colorize=_geotiff(tmp_path / "ortho16.tif", bands, wkt))
+    assert result.uncolored == 0
+    rows, cols, _ = _pixels_of(no_rgb)
+    assert np.array_equal(_rgb(laspy.read(str(tmp_path / "out.las"))), (bands[:, rows, cols] >> 8).T * 257)
+
+
+def test_points_outside_a_half_raster_keep_their_colour_or_zero_and_are_counted(cli, autzen_path, no_rgb, tmp_path):
+    wkt = read_las_header(no_rgb).crs()
+    half = _geotiff(tmp_path / "west.tif", _pattern()[:, :, : WIDTH // 2], wkt)  # columns 0-117: the west half
+    rows, cols, _ = _pixels_of(no_rgb)
+    inside = cols < WIDTH // 2
+    outside = int((~inside).sum())
+    assert 30_000 < outside < 80_000
+
+    out = tmp_path / "no_rgb.laz"
+    rc, stdout, _ = cli("convert", no_rgb, "-o", out, "--colorize", half, "-q")
+    assert rc == 0 and f", {outside:,} outside {half} or under its mask (colour kept, 0 where none), " in stdout
+    rgb = _rgb(laspy.read(str(out)))
+    assert np.array_equal(rgb[inside], _pattern()[:, rows[inside], cols[inside]].T.astype(np.uint16) * 257)
+    assert not rgb[~inside].any()  # (no colour in the file: 0)
+
+    colored = tmp_path / "colored.laz"
+    result = gp.convert(autzen_path, colored, colorize=half)
+    assert result.uncolored == outside
+    own, rgb = _rgb(laspy.read(str(autzen_path))), _rgb(laspy.read(str(colored)))
+    assert own.max() <= 255 and own[~inside].any()  # (autzen stores 8-bit values in LAS's 16-bit fields)
+    assert np.array_equal(rgb[~inside], own[~inside] * 257)  # its own colours, on the 16-bit scale of the raster's
+    assert np.array_equal(rgb[inside], _pattern()[:, rows[inside], cols[inside]].T.astype(np.uint16) * 257)
+
+
+def test_points_under_alpha_0_keep_no_colour_and_are_counted(no_rgb, tmp_path):
+    wkt = read_las_header(no_rgb).crs()
+    alpha = np.where(np.arange(HEIGHT)[:, None] % 3 == 0, 0, 255) * np.ones((1, WIDTH))  # every third row transparent
+    ortho = _geotiff(tmp_path / "rgba.tif", np.concatenate([_pattern(), alpha[None].astype(np.uint8)]), wkt, alpha=True)
+    result = gp.convert(no_rgb, tmp_path / "out.laz", colorize=ortho)
+    rows, cols, _ = _pixels_of(no_rgb)
+    hidden = rows % 3 == 0
+    assert result.uncolored == int(hidden.sum()) > 10_000
+    rgb = _rgb(laspy.read(str(tmp_path / "out.laz")))
+    assert not rgb[hidden].any()
+    assert np.array_equal(rgb[~hidden], _pattern()[:, rows[~hidden], cols[~hidden]].T.astype(np.uint16) * 257)
+
+
+def test_a_raster_in_another_crs_is_refused_naming_both(cli, no_rgb, tmp_path):
+    utm = _geotiff(tmp_path / "utm.tif", _pattern(), "EPSG:32610", from_origin(494_000, 4_878_000, 2, 2))
+    out = tmp_path / "out.laz"
+    rc, _, err = cli("convert", no_rgb, "-o", out, "--colorize", utm, "-q")
+    expected = (
+        f"error: {utm}: is in EPSG:32610 (WGS 84 / UTM zone 10N), the points ({no_rgb}) in NAD_1983_HARN_Lambert_Conformal_Conic; "
+        "move them into its CRS with --to-crs EPSG:32610"
+    )
+    assert (rc, err.strip()) == (1, expected)
+    assert not out.exists()
+
+
+def test_colours_are_taken_after_to_crs_in_the_output_crs(no_rgb, tmp_path):
+    transform = from_origin(494_000.0005, 4_878_000.0005, 2, 2)  # UTM metres, over autzen moved there (x 494 2xx-494 6xx)
+    utm = _geotiff(tmp_path / "utm.tif", _pattern(1000, 1000), "EPSG:32610", transform)
+    out = tmp_path / "utm.laz"
+    with pytest.warns(GigapointWarning, match="z is kept"):
+        result = gp.convert(no_rgb, out, to_crs="EPSG:32610", colorize=utm)
+    assert result.uncolored == 0
+    las = laspy.read(str(no_rgb))
+    move = pyproj.Transformer.from_crs(pyproj.CRS(read_las_header(no_rgb).crs()), "EPSG:32610", always_xy=True)
+    x, y, _ = move.transform(np.asarray(las.x), np.asarray(las.y), np.asarray(las.z))  # (as convert moves them: x, y and z)
+    rows, cols = (np.asarray(v) for v in rowcol(transform, x, y))
+    assert np.array_equal(_rgb(laspy.read(str(out))), _pattern(1000, 1000)[:, rows, cols].T.astype(np.uint16) * 257)
+
+
+def test_tiles_are_coloured_too(no_rgb, tmp_path):
+    wkt = read_las_header(no_rgb).crs()
+    result = gp.tile(no_rgb, tmp_path / "tiles", 500, colorize=_geotiff(tmp_path / "ortho.tif", _pattern(), wkt))
+    assert result.uncolored == 0 and len(result.tiles) > 1
+    for tile in result.tiles:
+        rows, cols, las = _pixels_of(tile)
+        assert np.array_equal(_rgb(las), _pattern()[:, rows, cols].T.astype(np.uint16) * 257), tile
+
+
+def test_a_missing_or_damaged_raster_is_refused_before_a_point_is_read(cli, no_rgb, tmp_path, monkeypatch):
+    def no_read(*args):
+        raise AssertionError("read")
+
+    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.to_file"), "read_chunks", no_read)
+    out = tmp_path / "out.laz"
+    rc, _, err = cli("convert", no_rgb, "-o", out, "--colorize", tmp_path / "missing.tif", "-q")
+    assert (rc, err.strip()) == (1, f"error: {tmp_path / 'missing.tif'}: no such raster file (convert: colorize)")
+    damaged = tmp_path / "damaged.tif"
+    damaged.write_bytes(b"II*\0" + bytes(range(256)) * 4)
+    rc, _, err = cli("convert", no_rgb, "-o", out, "--colorize", damaged, "-q")
+    assert rc == 1 and err.startswith(f"error: {damaged}: not a raster GDAL can read (") and len(err.strip().splitlines()) == 1
+    with pytest.raises(InputError, match=r"float32 values; colorize reads orthophotos of 8- or 16-bit integers$"):
+        gp.tile(no_rgb, tmp_path / "tiles", 500, colorize=_geotiff(tmp_path / "f.tif", _pattern().astype(np.float32), read_las_header(no_rgb).crs()))
+    assert not out.exists() and not (tmp_path / "tiles").exists()
+
+
+def test_a_raster_whose_pixels_cannot_be_read_leaves_no_output(no_rgb, tmp_path):
+    wkt = read_las_header(no_rgb).crs()
+    ortho = tmp_path / "cut.tif"
+    with rasterio.open(
+        ortho, "w", driver="GTiff", width=WIDTH, height=HEIGHT, count=3, dtype="uint8", crs=wkt, transform=from_origin(LEFT, TOP, PIXEL, PIXEL),
+        compress="deflate", tiled=True, blockxsize=16, blockysize=16,
+    ) as ds:
+        ds.write(_pattern())
+    data = ortho.read_bytes()
+    ortho.write_bytes(data[:4096] + bytes(len(data) - 4096))  # its header whole, its compressed pixels zeros
+    out = tmp_path / "out.laz"
+    with pytest.raises(InputError, match=r"cut\.tif: its pixels at rows \d+-\d+, columns \d+-\d+ cannot be read \(.*\); nothing was written$"):
+        gp.convert(no_rgb, out, colorize=ortho)
+    assert not out.exists() and [p.name for p in tmp_path.iterdir()] == ["cut.tif"]
+
+
+def test_without_rasterio_the_option_says_how_to_install_it(no_rgb, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "rasterio", None)  # (import rasterio raises ImportError)
+    with pytest.raises(InputError, match=r"^convert: colorize: colouring from a raster needs rasterio \(pip install 'gigapoint\[gis\]'\)$"):
+        gp.convert(no_rgb, tmp_path / "out.laz", colorize=tmp_path / "ortho.tif")
+
+
+def test_colorize_is_refused_with_an_octree(no_rgb, tmp_path):
+    with pytest.raises(ConvertError, match=r"--colorize: an option of a plain \.las, \.laz or \.ply file, or of tiles, not of a gigapoint octree$"):
+        gp.convert(no_rgb, tmp_path / "octree", colorize=tmp_path / "ortho.tif")
