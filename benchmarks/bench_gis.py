@@ -368,6 +368,8 @@ def main(argv=None) -> int:
         raise SystemExit(f"no PDAL at {a.pdal!r} (--pdal PATH)")
     if "reproject" in jobs and "filters.reprojection" not in os.popen(f"{a.pdal} --drivers 2>/dev/null").read():
         raise SystemExit(f"{a.pdal} has no filters.reprojection (a build without PROJ); leave out the reproject job (--jobs)")
+    if "colorize" in jobs and "filters.colorization" not in os.popen(f"{a.pdal} --drivers 2>/dev/null").read():
+        raise SystemExit(f"{a.pdal} has no filters.colorization (a build without GDAL); leave out the colorize job (--jobs)")
     work = Path(a.workdir) if a.workdir else Path(tempfile.mkdtemp(prefix="bench_gis_"))
     work.mkdir(parents=True, exist_ok=True)
     try:

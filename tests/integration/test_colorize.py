@@ -129,6 +129,22 @@ def test_points_under_alpha_0_keep_no_colour_and_are_counted(no_rgb, tmp_path):
     assert np.array_equal(rgb[~hidden], _pattern()[:, rows[~hidden], cols[~hidden]].T.astype(np.uint16) * 257)
 
 
+def test_small_blocks_evicted_from_a_small_cache_give_the_same_colours(no_rgb, tmp_path, monkeypatch):
+    colorize = importlib.import_module("gigapoint.io.colorize")
+    monkeypatch.setattr(colorize, "BLOCK", 50)  # 237 x 114 pixels: 5 x 3 blocks, the last column's and row's narrower
+    monkeypatch.setattr(colorize, "CACHE_BYTES", 3 * 50 * 50 * 5)  # three blocks with their masks: most are read again
+    wkt = read_las_header(no_rgb).crs()
+    alpha = np.where((np.arange(WIDTH)[None, :] + np.arange(HEIGHT)[:, None]) % 7 == 0, 0, 255) * np.ones((HEIGHT, 1))
+    ortho = _geotiff(tmp_path / "rgba.tif", np.concatenate([_pattern(), alpha[None].astype(np.uint8)]), wkt, alpha=True)
+    result = gp.convert(no_rgb, tmp_path / "out.laz", colorize=ortho, chunk_size=7_000)
+    rows, cols, _ = _pixels_of(no_rgb)
+    hidden = (rows + cols) % 7 == 0
+    assert result.uncolored == int(hidden.sum()) > 5_000
+    rgb = _rgb(laspy.read(str(tmp_path / "out.laz")))
+    assert not rgb[hidden].any()
+    assert np.array_equal(rgb[~hidden], _pattern()[:, rows[~hidden], cols[~hidden]].T.astype(np.uint16) * 257)
+
+
 def test_a_raster_in_another_crs_is_refused_naming_both(cli, no_rgb, tmp_path):
     utm = _geotiff(tmp_path / "utm.tif", _pattern(), "EPSG:32610", from_origin(494_000, 4_878_000, 2, 2))
     out = tmp_path / "out.laz"

@@ -10,10 +10,10 @@ as 16-bit LAS colours do through ``convert``. A point outside the raster, or on 
 mask says holds nothing (an alpha band's 0, the bands' nodata value), takes no colour from it: it
 keeps the colour its file gave it, or 0 (black) where its file had none; those points are counted.
 
-The raster is read in blocks of ``BLOCK`` x ``BLOCK`` pixels, those under a chunk's points, a few
-of them kept (``CACHED_BLOCKS``): orthophotos are often tens of GB, and a chunk of points covers a
-small part of one. A raster that cannot be opened, holds no 8- or 16-bit integers, or is in
-another CRS than the points, is a one-line InputError before a point is read."""
+The raster is read in blocks of ``BLOCK`` x ``BLOCK`` pixels, those under a chunk's points, never
+whole: orthophotos are often tens of GB, and a chunk of points covers a small part of one (the
+blocks last used are kept, ``CACHE_BYTES`` of them). A raster that cannot be opened, holds no 8- or
+16-bit integers, or is in another CRS than the points, is a one-line InputError before a point is read."""
 
 from __future__ import annotations
 
@@ -26,9 +26,12 @@ from ..core.chunk import PointChunk
 from ..errors import GigapointWarning, InputError, first_line, warn
 
 #: pixels along each edge of the blocks the raster is read in
-BLOCK = 512
-#: blocks kept between chunks (at most 32 x 512² pixels x 3 bytes: 24 MiB, their masks 8 MiB more)
-CACHED_BLOCKS = 32
+BLOCK = 1024
+#: bytes of blocks kept, the last used, so that a chunk's blocks, and those of the next chunks over
+#: the same ground, are read once: 256 MiB, 64 blocks (4 bytes a pixel), 8192 x 8192 pixels (410 m
+#: square of a 5 cm orthophoto). 32 blocks of 512² with 5 M demo points in 20 chunks, each chunk
+#: over all 272 blocks of an 8192² raster: every block read again in every chunk, 6.8 s against 2.0 s
+CACHE_BYTES = 256 * 2**20
 
 
 def rasterio_module(option: str):
@@ -64,6 +67,7 @@ class Colorization:
         self.masked = any(flag.name != "all_valid" for flags in ds.mask_flag_enums for flag in flags)
         self.transform = ds.transform
         self._blocks: OrderedDict[tuple[int, int], tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
+        self._cached_bytes = 0
 
     def close(self) -> None:
         self._dataset.close()
@@ -93,25 +97,27 @@ class Colorization:
         rgba = chunk.rgba.copy() if had_color else np.zeros_like(chunk.rgba)
         rgba[:, 3] = 255
         rows, cols = self._pixels(chunk.xyz)
-        inside = np.flatnonzero((rows >= 0) & (rows < self._dataset.height) & (cols >= 0) & (cols < self._dataset.width))
-        colored = 0
-        if len(inside):
-            keys = (rows[inside] // BLOCK) * (self._dataset.width // BLOCK + 1) + cols[inside] // BLOCK
-            order = np.argsort(keys, kind="stable")
-            inside, keys = inside[order], keys[order]
-            starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
-            for start, end in zip(starts, np.r_[starts[1:], len(keys)]):
-                points = inside[start:end]
-                r, c = rows[points], cols[points]
-                block_row, block_col = int(r[0]) // BLOCK, int(c[0]) // BLOCK
-                values, valid = self._block(block_row, block_col)
-                r, c = r - block_row * BLOCK, c - block_col * BLOCK
-                if valid is not None:
-                    keep = valid[r, c]
-                    points, r, c = points[keep], r[keep], c[keep]
-                rgba[points, :3] = values[:, r, c].T
-                colored += len(points)
-        return PointChunk(chunk.xyz, rgba, chunk.attributes, scale=chunk.scale, color_bits=16), len(chunk) - colored
+        height, width = self._dataset.height, self._dataset.width
+        inside = np.flatnonzero((rows >= 0) & (rows < height) & (cols >= 0) & (cols < width))
+        rows, cols = rows[inside], cols[inside]
+        block_rows, block_cols = rows // BLOCK, cols // BLOCK
+        keys = block_rows * (width // BLOCK + 1) + block_cols
+        few = len(keys) and keys.max() < 2**16  # (numpy sorts 16-bit integers by radix, "stable": 5x quicker)
+        order = np.argsort(keys.astype(np.uint16), kind="stable") if few else np.argsort(keys)  # (each block's points together: one read, one take)
+        inside, keys = inside[order], keys[order]
+        block_widths = np.minimum(BLOCK, width - block_cols * BLOCK)
+        in_block = ((rows % BLOCK) * block_widths + cols % BLOCK)[order]  # each point's pixel in its block's flat arrays
+        values = np.empty(len(inside), np.uint32)  # red, green, blue, 0: bytes of one u32 (a 1-D take, ~3x a (n, 3) one's speed)
+        valid = np.ones(len(inside), np.bool_)
+        starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]]) if len(keys) else np.empty(0, np.intp)
+        for start, end in zip(starts, np.r_[starts[1:], len(keys)]):
+            first = order[start]
+            block_values, block_valid = self._block(int(block_rows[first]), int(block_cols[first]))
+            np.take(block_values, in_block[start:end], out=values[start:end])
+            if block_valid is not None:
+                np.take(block_valid, in_block[start:end], out=valid[start:end])
+        rgba[inside[valid], :3] = values.view(np.uint8).reshape(-1, 4)[valid, :3]
+        return PointChunk(chunk.xyz, rgba, chunk.attributes, scale=chunk.scale, color_bits=16), len(chunk) - int(valid.sum())
 
     def _pixels(self, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(row, column) of the pixel each point lies in (-1 for a point whose x or y is not finite)."""
@@ -126,8 +132,9 @@ class Colorization:
         return (np.where(ok, np.floor(row), -1).astype(np.int64), np.where(ok, np.floor(col), -1).astype(np.int64))
 
     def _block(self, block_row: int, block_col: int) -> tuple[np.ndarray, np.ndarray | None]:
-        """(8-bit red, green, blue (3 x h x w), where GDAL's mask says a pixel holds something or None
-        where every one does) of one block, read once while it stays among the ``CACHED_BLOCKS`` last used."""
+        """(8-bit red, green, blue, 0 of one block's pixels as the bytes of u32s, row by row (h·w); whether GDAL's mask says
+        each holds something (h·w), None where every one does), read once while it stays among the
+        blocks last used (``CACHE_BYTES``)."""
         key = (block_row, block_col)
         if key in self._blocks:
             self._blocks.move_to_end(key)
@@ -139,16 +146,19 @@ class Colorization:
         top, left = block_row * BLOCK, block_col * BLOCK
         window = Window(left, top, min(BLOCK, ds.width - left), min(BLOCK, ds.height - top))
         try:
-            values = (ds.read(sorted(set(self.bands)), window=window) >> self.shift).astype(np.uint8)
-            valid = ds.dataset_mask(window=window) != 0 if self.masked else None
+            bands = ds.read(sorted(set(self.bands)), window=window)
+            valid = ds.dataset_mask(window=window).ravel() != 0 if self.masked else None
         except RasterioError as exc:  # (a damaged file whose header reads: its pixels do not)
             raise InputError(f"{self.path}: its pixels at rows {top}-{top + window.height - 1}, columns {left}-{left + window.width - 1} "
                              f"cannot be read ({first_line(exc)}); nothing was written") from None  # fmt: skip
-        if len(values) == 1:
-            values = np.repeat(values, 3, axis=0)
+        rgb0 = np.zeros((bands.shape[1] * bands.shape[2], 4), np.uint8)
+        rgb0[:, :3] = (bands[[0, 0, 0] if len(bands) == 1 else [0, 1, 2]] >> self.shift).reshape(3, -1).T
+        values = rgb0.view(np.uint32).ravel()
         self._blocks[key] = (values, valid)
-        if len(self._blocks) > CACHED_BLOCKS:
-            self._blocks.popitem(last=False)
+        self._cached_bytes += values.nbytes + (valid.nbytes if valid is not None else 0)
+        while self._cached_bytes > CACHE_BYTES:
+            old_values, old_valid = self._blocks.popitem(last=False)[1]
+            self._cached_bytes -= old_values.nbytes + (old_valid.nbytes if old_valid is not None else 0)
         return values, valid
 
 
@@ -158,4 +168,4 @@ def _crs_label(crs) -> str:
     return f"EPSG:{code} ({crs.name})" if code else crs.name
 
 
-__all__ = ["BLOCK", "CACHED_BLOCKS", "Colorization", "rasterio_module"]
+__all__ = ["BLOCK", "CACHE_BYTES", "Colorization", "rasterio_module"]
