@@ -243,6 +243,7 @@ _LAZY = {
     "classify_ground": ("gigapoint.classify", "classify_ground"),
     "orthophoto": ("gigapoint.orthophoto", "orthophoto"),
     "Orthophoto": ("gigapoint.orthophoto", "Orthophoto"),
+    "classify_noise": ("gigapoint.classify", "classify_noise"),
 }
 
 
@@ -282,6 +283,7 @@ __all__ = [
     "__version__",
     "change",
     "classify_ground",
+    "classify_noise",
     "convert",
     "demo",
     "demo_arrays",

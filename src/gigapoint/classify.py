@@ -64,6 +64,8 @@ class GroundResult:
     skipped: int
     params: dict
     seconds: float
+    #: of ``noise``, the points found isolated and classified 7 (``noise=...``)
+    isolated: int = 0
 
     @property
     def points_per_second(self) -> float:
@@ -208,13 +210,15 @@ def ground_model(lowest: np.ndarray, cell: float, slope: float, window: float) -
 
 
 def classify_ground(source, out, *, cell=None, slope=None, window=None, threshold=None, scalar=None, overwrite: bool = False,
-                    chunk_size: int | None = None, progress: bool = False) -> GroundResult:  # fmt: skip
+                    chunk_size: int | None = None, progress: bool = False, noise: dict | bool | None = None) -> GroundResult:  # fmt: skip
     """Classify the points of ``source`` (files, folders or patterns, as ``gp.open`` takes them)
     as ground (2) or not (1) by SMRF, and write them all to ``out`` (.las, .laz or .ply), every
     other attribute as read; noise (7, 18) keeps its class. Two passes over the files, memory
     bounded by the raster (see the module's notes). Parameters in the cloud's units, None: the
     defaults converted from metres (``ground_parameters``). ``out`` appears only once whole; an
-    existing one is replaced only with ``overwrite``. Needs scipy (gigapoint[quality])."""
+    existing one is replaced only with ``overwrite``. ``noise``: classify_noise's parameters
+    (a dict; True: its defaults) to classify isolated points 7 first, in a pass of its own, and
+    keep them out of the ground. Needs scipy (gigapoint[quality])."""
     from .lod.convert.to_file import PointFiles
     from .lod.progress import NullProgress, RichProgress
     from .render.raster_fill import require_scipy
@@ -229,8 +233,11 @@ def classify_ground(source, out, *, cell=None, slope=None, window=None, threshol
     check_point_file_output(out, overwrite)
     inputs = PointFiles(source, out, chunk_size, ply=out.suffix.lower() == ".ply")
     params = ground_parameters(inputs.files, cell, slope, window, threshold, scalar)
+    noise_params = noise_parameters(inputs.files, **({} if noise is True else noise)) if noise else None
     shown = RichProgress() if progress else NullProgress()
     try:
+        if noise_params is not None:
+            inputs = _NoiseFound(inputs, _sparse_cells(inputs, noise_params, shown))
         grid, lowest = _lowest_raster(inputs, params["cell"], shown)
         dem = ground_model(lowest, params["cell"], params["slope"], params["window"])
         rise_y, rise_x = np.gradient(np.pad(dem, 1, mode="edge"), params["cell"])
@@ -246,7 +253,10 @@ def classify_ground(source, out, *, cell=None, slope=None, window=None, threshol
         written = write_points(out, classified, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None)
     finally:
         shown.close()
-    return GroundResult(out, written, counts[GROUND], counts[NON_GROUND], counts["noise"], tally["skipped"], params, time.perf_counter() - t0)
+    if noise_params is not None:
+        params = {**params, **{k: v for k, v in noise_params.items() if k != "units"}}
+    isolated = inputs.counts_found["noise"] if noise_params is not None else 0
+    return GroundResult(out, written, counts[GROUND], counts[NON_GROUND], counts["noise"], tally["skipped"], params, time.perf_counter() - t0, isolated)
 
 
 def _lowest_raster(inputs, cell: float, progress) -> tuple[_Grid, np.ndarray]:
@@ -294,3 +304,159 @@ def _classified(chunk, grid: _Grid, dem: np.ndarray, tolerance: np.ndarray, coun
     attributes = dict(chunk.attributes)
     attributes["classification"] = classes.astype(old.dtype if old is not None else np.uint8)
     return PointChunk(chunk.xyz, chunk.rgba, attributes, scale=chunk.scale, color_bits=chunk.color_bits)
+
+
+# Noise classification (``gigapoint classify --noise``, ``gp.classify_noise``): isolated points
+# (birds, multipath returns, sensor spikes far above or below the surface) classified 7, low
+# noise, as LAStools' lasnoise does (PDAL's filters.outlier, radius method, by cells instead of a
+# radius). Pass 1 counts the points of each occupied cell of step x step x step_z (io/cells.py's
+# hash table: 16-32 bytes an occupied cell, never the points); a cell whose 3 x 3 x 3 block of
+# cells (itself in the middle) holds at most isolated + 1 points is sparse. Pass 2 writes every
+# point, class 7 where it lies in a sparse cell (at most `isolated` other points in its 27
+# cells). The cells are anchored at 0, as thinning's are, so tiles classified separately line up
+# (a point near a tile's edge has neighbours in the next tile: classify buffered tiles).
+# With classify_ground(noise=...), the noise is found first (a pass of its own) and kept out of
+# the ground raster as the noise classes always are.
+
+#: lasnoise's defaults: cells of 4 m each way; a point with at most 5 others in its 27 cells is noise
+NOISE_STEP_METRES = 4.0
+DEFAULT_ISOLATED = 5
+LOW_NOISE = 7
+
+
+@dataclass(frozen=True)
+class NoiseResult:
+    """What ``classify_noise`` wrote: ``points`` in ``out``, of which ``noise`` found isolated
+    and classified 7, ``kept_noise`` classified 7 or 18 already (kept); every other point's class
+    as read. ``skipped`` invalid points not written; ``cells`` the occupied cells counted, in a
+    table of ``table_bytes``; ``params`` the parameters used, in the cloud's units; ``seconds`` taken."""
+
+    out: Path
+    points: int
+    noise: int
+    kept_noise: int
+    skipped: int
+    cells: int
+    table_bytes: int
+    params: dict
+    seconds: float
+
+    @property
+    def points_per_second(self) -> float:
+        return self.points / self.seconds if self.seconds > 0 else 0.0
+
+
+def noise_parameters(files, step=None, step_z=None, isolated=None) -> dict:
+    """The noise parameters in the units of ``files``' CRS: ``step`` (the cells' horizontal
+    edge) as given, else 4 m converted; ``step_z`` (their height) as given, else as long as
+    ``step`` in the vertical units; ``isolated`` (the most other points an isolated point has in
+    its 27 cells) as given, else 5. A step that is no number > 0, an isolated that is no whole
+    number >= 0, or coordinates in degrees without both steps given, is a one-line InputError."""
+    import numbers
+
+    from .io.crs import files_units
+
+    for name, value in (("step", step), ("step_z", step_z)):
+        if value is not None and not (is_real(value) and value > 0):
+            raise InputError(f"classify_noise: {name} must be a number > 0, got {value!r}")
+    if isolated is not None and not (isinstance(isolated, numbers.Integral) and not isinstance(isolated, bool) and isolated >= 0):
+        raise InputError(f"classify_noise: isolated must be a whole number >= 0, got {isolated!r}")
+    units = files_units(files)
+    across, up = units["horizontal"], units["vertical"]
+    if across is not None and across["metres"] is None and (step is None or step_z is None):
+        raise InputError(f"classify_noise: the coordinates are in {across['name']}s, not lengths: give step and step_z, or reproject the cloud")
+    metres_across = across["metres"] if across is not None and across["metres"] else 1.0
+    metres_up = up["metres"] if up is not None and up["metres"] else 1.0
+    step = NOISE_STEP_METRES / metres_across if step is None else float(step)
+    return {
+        "step": step,
+        "step_z": step * metres_across / metres_up if step_z is None else float(step_z),
+        "isolated": DEFAULT_ISOLATED if isolated is None else int(isolated),
+        "units": across["symbol"] if across is not None else "m (assumed)",
+    }
+
+
+def classify_noise(source, out, *, step=None, step_z=None, isolated=None, overwrite: bool = False,
+                   chunk_size: int | None = None, progress: bool = False) -> NoiseResult:  # fmt: skip
+    """Classify the isolated points of ``source`` (files, folders or patterns, as ``gp.open``
+    takes them) as noise (7), as lasnoise does, and write them all to ``out`` (.las, .laz or
+    .ply), every other point's class and every attribute as read. Two passes over the files,
+    memory bounded by the occupied cells (see the notes above). Parameters in the cloud's units,
+    None: the defaults (``noise_parameters``). ``out`` appears only once whole; an existing one
+    is replaced only with ``overwrite``."""
+    from .io.write import check_point_file_output, write_points
+    from .lod.convert.to_file import PointFiles
+    from .lod.progress import NullProgress, RichProgress
+
+    t0 = time.perf_counter()
+    out = Path(out)
+    if out.suffix.lower() not in (".las", ".laz", ".ply"):
+        raise InputError(f"{out}: classify_noise writes a .las, .laz or .ply file")
+    check_point_file_output(out, overwrite)
+    inputs = PointFiles(source, out, chunk_size, ply=out.suffix.lower() == ".ply")
+    params = noise_parameters(inputs.files, step, step_z, isolated)
+    shown = RichProgress() if progress else NullProgress()
+    try:
+        cells = _sparse_cells(inputs, params, shown)
+        counts = {"noise": 0, "kept": 0}
+        tally: dict = {}
+
+        def classified():
+            shown.phase("classify", None if None in inputs.counts else sum(inputs.counts))
+            for _, chunk in inputs.valid_chunks(None, shown, tally):
+                yield _noise_classified(chunk, cells, counts)
+
+        written = write_points(out, classified, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None)
+    finally:
+        shown.close()
+    return NoiseResult(out, written, counts["noise"], counts["kept"], tally["skipped"], cells.cells, cells.nbytes, params, time.perf_counter() - t0)
+
+
+def _sparse_cells(inputs, params: dict, progress):
+    """Pass 1: every valid point counted in its cell, the cells with at most ``isolated`` + 1
+    points in their 3 x 3 x 3 block marked (io/cells.py's CellCounts)."""
+    from .io.cells import CellCounts
+
+    edges = (params["step"], params["step"], params["step_z"])
+    cells = CellCounts(edges, f"classify_noise: step {params['step']:g}", inputs.headers_bounds(), inputs.label)
+    progress.phase("count", None if None in inputs.counts else sum(inputs.counts))
+    for f, chunk in inputs.valid_chunks(None, progress, {}):
+        cells.add(chunk.xyz, f)
+    cells.mark_sparse(params["isolated"] + 1)
+    return cells
+
+
+def _noise_classified(chunk, cells, counts: dict):
+    """``chunk`` with its points in sparse cells classified 7, but those classified noise (7,
+    18) already, which keep their class, as every other point does."""
+    from .core.chunk import PointChunk
+
+    old = chunk.attributes.get("classification")
+    was_noise = np.isin(old, NOISE_CLASSES) if old is not None else np.zeros(len(chunk), bool)
+    found = cells.in_sparse_cells(chunk.xyz) & ~was_noise
+    counts["noise"] += int(found.sum())
+    counts["kept"] += int(was_noise.sum())
+    attributes = dict(chunk.attributes)
+    attributes["classification"] = np.where(found, LOW_NOISE, old if old is not None else 0).astype(old.dtype if old is not None else np.uint8)
+    return PointChunk(chunk.xyz, chunk.rgba, attributes, scale=chunk.scale, color_bits=chunk.color_bits)
+
+
+class _NoiseFound:
+    """``inputs`` (a PointFiles) read with the points of the sparse ``cells`` classified 7
+    (``_noise_classified``): what classify_ground's passes read when it finds noise first, so
+    that the ground raster leaves them out and the output keeps them 7. ``counts_found``: of
+    the last pass read."""
+
+    def __init__(self, inputs, cells):
+        self.inputs, self.cells = inputs, cells
+        self.files, self.label, self.counts = inputs.files, inputs.label, inputs.counts
+        self.las_grid, self.crs_records = inputs.las_grid, inputs.crs_records
+        self.counts_found = {"noise": 0, "kept": 0}
+
+    def headers_bounds(self):
+        return self.inputs.headers_bounds()
+
+    def valid_chunks(self, keep, progress, tally: dict):
+        self.counts_found = {"noise": 0, "kept": 0}
+        for f, chunk in self.inputs.valid_chunks(keep, progress, tally):
+            yield f, _noise_classified(chunk, self.cells, self.counts_found)

@@ -26,20 +26,29 @@ def classify(
     window: Annotated[float | None, typer.Option("--window", help=f"The largest object (building) removed: the opening's largest radius, {_UNITS}. Default 18 m.")] = None,
     threshold: Annotated[float | None, typer.Option("--threshold", help=f"How far a ground point may lie off the ground model, {_UNITS}. Default 0.5 m.")] = None,
     scalar: Annotated[float | None, typer.Option("--scalar", help=f"What the threshold grows by per unit of the model's slope, {_UNITS}. Default 1.25 m.")] = None,
+    noise: Annotated[bool, typer.Option("--noise", help="Classify isolated points (birds, multipath returns, spikes) as noise (7), as lasnoise does; with --ground, found first and kept out of the ground.")] = False,
+    step: Annotated[float | None, typer.Option("--step", help=f"--noise's cells' width (x and y), {_UNITS}. Default 4 m.")] = None,
+    step_z: Annotated[float | None, typer.Option("--step-z", help=f"--noise's cells' height, {_UNITS}. Default as long as --step.")] = None,
+    isolated: Annotated[int | None, typer.Option("--isolated", help="--noise: a point with at most this many others in the 3 x 3 x 3 cells around it is noise. Default 5.")] = None,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing OUTPUT.")] = False,
     recursive: RecursiveOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
-    """Classify point clouds (--ground: ground by the Simple Morphological Filter, as PDAL's smrf and lasground), read twice a chunk at a time, into one point file."""
+    """Classify point clouds (--ground: ground by the Simple Morphological Filter, as PDAL's smrf and lasground; --noise: isolated points, as lasnoise), read a chunk at a time, into one point file."""
     from ..classify import classify_ground
 
+    if not ground and not noise:
+        raise GigapointError("classify: say what to classify: --ground, --noise or both")
+    noise_params = {"step": step, "step_z": step_z, "isolated": isolated}
     if not ground:
-        raise GigapointError("classify: say what to classify: --ground")
+        _classify_noise(inputs, output, noise_params, overwrite, recursive, quiet)
+        return
     params = {"cell": cell, "slope": slope, "window": window, "threshold": threshold, "scalar": scalar}
     try:
-        result = classify_ground(subfolders_read(inputs, recursive), output, **params, overwrite=overwrite, progress=not quiet and sys.stderr.isatty())
+        result = classify_ground(subfolders_read(inputs, recursive), output, **params, overwrite=overwrite, progress=not quiet and sys.stderr.isatty(),
+                                 noise=noise_params if noise else None)  # fmt: skip
     except InputError as exc:  # classify_ground: cell must be ... said as the option
-        message = str(exc)
+        message = _noise_options_named(str(exc))
         for name in params:
             message = message.replace(f"classify_ground: {name} ", f"classify: --{name} ")
         raise type(exc)(message.replace("overwrite=True", "--overwrite").replace("classify_ground: ", "classify: ")) from None
@@ -47,8 +56,37 @@ def classify(
     units = p["units"]
     skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
     noise = f", {result.noise:,} noise kept" if result.noise else ""
+    if "isolated" in p:  # (--noise: the points found, and the noise the files held already)
+        kept = f", {result.noise - result.isolated:,} noise kept" if result.noise > result.isolated else ""
+        noise = f", {result.isolated:,} isolated found noise (7; step {p['step']:.4g} x {p['step_z']:.4g}, isolated {p['isolated']}){kept}"
     print(
         f"{output}: {result.points:,} points, {result.ground:,} ground (2), {result.non_ground:,} not (1){noise}{skipped}; "
         f"cell {p['cell']:.4g} {units}, slope {p['slope']:g}, window {p['window']:.4g}, threshold {p['threshold']:.4g}, scalar {p['scalar']:.4g}; "
+        f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s"
+    )
+
+
+def _noise_options_named(message: str) -> str:
+    """classify_noise's message with its parameters said as the options ("classify: --step-z must be ...")."""
+    for name in ("step_z", "step", "isolated"):
+        message = message.replace(f"classify_noise: {name} ", f"classify: --{name.replace('_', '-')} ")
+    message = message.replace("give step and step_z", "give --step and --step-z")
+    return message.replace("overwrite=True", "--overwrite").replace("classify_noise: ", "classify: ")
+
+
+def _classify_noise(inputs, output: Path, params: dict, overwrite: bool, recursive: bool, quiet: bool) -> None:
+    """``classify --noise`` alone: classify_noise, and its counts in one line."""
+    from ..classify import classify_noise
+
+    try:
+        result = classify_noise(subfolders_read(inputs, recursive), output, **params, overwrite=overwrite, progress=not quiet and sys.stderr.isatty())
+    except InputError as exc:
+        raise type(exc)(_noise_options_named(str(exc))) from None
+    p = result.params
+    skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
+    kept = f", {result.kept_noise:,} noise kept" if result.kept_noise else ""
+    print(
+        f"{output}: {result.points:,} points, {result.noise:,} isolated found noise (7){kept}{skipped}; "
+        f"step {p['step']:.4g} x {p['step_z']:.4g} {p['units']}, isolated {p['isolated']}; {result.cells:,} cells in {result.table_bytes / 2**20:.1f} MiB; "
         f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s"
     )

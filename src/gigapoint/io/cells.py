@@ -121,52 +121,61 @@ def grown(table: np.ndarray, counts: np.ndarray, slots_needed: int, counted: boo
 
 
 @njit(cache=True)
-def _count_into(xyz, edges, corner, bits, table, counts, shift):  # pragma: no cover - compiled
-    """Add each point of ``xyz`` to its cell's count (saturating). Returns the number of cells
-    entered, or -1 - i where point i lies beyond the keys' reach (the table then holds the points before it)."""
+def _count_into(xyz, start, edges, corner, bits, table, counts, shift, room):  # pragma: no cover - compiled
+    """Add the points of ``xyz`` from ``start`` on to their cells' counts (saturating), entering
+    at most ``room`` new cells. Returns (the next point to count: xyz's length when all are,
+    cells entered), or (-1 - i, 0) where point i lies beyond the keys' reach."""
     entered = 0
     last_key, last_slot = EMPTY, np.uint64(0)
-    for i in range(xyz.shape[0]):
+    for i in range(start, xyz.shape[0]):
         key = cell_key(xyz, i, edges, corner, bits)
         if key == EMPTY:
-            return -1 - i
+            return -1 - i, 0
         if key != last_key:  # (a scan's points come a cell at a time: no probe for the next point of the same cell)
-            last_key, last_slot = key, slot_of(table, key, shift)
-            if table[last_slot] == EMPTY:
-                table[last_slot] = key
+            slot = slot_of(table, key, shift)
+            if table[slot] == EMPTY:
+                if entered == room:  # (full enough: the table grows, then counting goes on from here)
+                    return i, entered
+                table[slot] = key
                 entered += 1
+            last_key, last_slot = key, slot
         if counts[last_slot] < _COUNT_MAX:
             counts[last_slot] += np.uint32(1)
-    return entered
+    return xyz.shape[0], entered
 
 
 @njit(cache=True)
-def _mark_sparse(table, counts, bits, most):  # pragma: no cover - compiled
+def _block_total(table, counts, shift, cx, cy, cz, bits, most):  # pragma: no cover - compiled
+    """The points in the 3 x 3 x 3 cells around cell (cx, cy, cz), counted up to ``most`` + 1."""
+    total = 0
+    for x in range(cx - 1, cx + 2):
+        for y in range(cy - 1, cy + 2):
+            for z in range(cz - 1, cz + 2):
+                if x < 0 or y < 0 or z < 0 or x >= (1 << bits[0]) or y >= (1 << bits[1]) or z >= (1 << bits[2]):
+                    continue  # (beyond the keys' reach: no point there)
+                near = (np.uint64(x) << np.uint64(bits[1] + bits[2])) | (np.uint64(y) << np.uint64(bits[2])) | np.uint64(z)
+                h = slot_of(table, near, shift)
+                if table[h] == near:
+                    total += counts[h] & _COUNT_MAX
+                    if total > most:
+                        return total
+    return total
+
+
+@njit(cache=True)
+def _mark_sparse(table, counts, shift, bits, most):  # pragma: no cover - compiled
     """Set the mark bit of every cell whose 3 x 3 x 3 block of cells (itself in the middle) holds
     at most ``most`` points. Returns the number of points in the marked cells."""
-    shift = np.uint64(65 - np.int64(table.shape[0]).bit_length())
     bz, by = np.uint64(bits[2]), np.uint64(bits[1])
     marked = 0
     for s in range(table.shape[0]):
         key = table[s]
         if key == EMPTY:
             continue
-        c = np.array([np.int64(key >> (by + bz)), np.int64((key >> bz) & ((np.uint64(1) << by) - np.uint64(1))),
-                      np.int64(key & ((np.uint64(1) << bz) - np.uint64(1)))])
-        total = 0
-        for dx in range(-1, 2):
-            for dy in range(-1, 2):
-                for dz in range(-1, 2):
-                    x, y, z = c[0] + dx, c[1] + dy, c[2] + dz
-                    if x < 0 or y < 0 or z < 0 or x >= (1 << bits[0]) or y >= (1 << bits[1]) or z >= (1 << bits[2]):
-                        continue  # (beyond the keys' reach: no point there)
-                    near = (np.uint64(x) << (by + bz)) | (np.uint64(y) << bz) | np.uint64(z)
-                    h = slot_of(table, near, shift)
-                    if table[h] == near:
-                        total += counts[h] & _COUNT_MAX
-                    if total > most:
-                        break
-        if total <= most:
+        cx = np.int64(key >> (by + bz))
+        cy = np.int64((key >> bz) & ((np.uint64(1) << by) - np.uint64(1)))
+        cz = np.int64(key & ((np.uint64(1) << bz) - np.uint64(1)))
+        if _block_total(table, counts, shift, cx, cy, cz, bits, most) <= most:
             counts[s] |= _MARK
             marked += counts[s] & _COUNT_MAX
     return marked
@@ -190,10 +199,11 @@ class CellCounts:
     chunks (``add``), then which cells are sparse (``mark_sparse``) and which points lie in them
     (``in_sparse_cells``). ``bounds``: (lo, hi) of every point to come, from headers (None:
     unknown, the first point's cell stands for them). A uint64 key and a uint32 count a slot,
-    the table kept at most 3/4 full (should a whole chunk be new cells): 16 to 32 bytes an
-    occupied cell, 1.5 times that while it grows."""
+    the table between 3/8 and 3/4 full (doubled when a point's new cell would fill it more): 16 to
+    32 bytes an occupied cell (past the first MIN_SLOTS), 1.5 times that while it grows."""
 
     MAX_LOAD = 0.75
+    MIN_SLOTS = 1024
 
     def __init__(self, edges, label: str, bounds, where: str):
         self.keys = CellKeys(edges, label)
@@ -211,16 +221,21 @@ class CellCounts:
         if not len(xyz):
             return
         self.keys.sized_for(xyz, path)
-        self.table, self.counts = grown(self.table, self.counts, math.ceil((self.cells + len(xyz)) / self.MAX_LOAD), counted=True)
         xyz = np.ascontiguousarray(xyz, np.float64)
-        n = _count_into(xyz, self.keys.edges, self.keys.corner, self.keys.bits, self.table, self.counts, table_shift(self.table))
-        if n < 0:
-            self.keys.beyond_reach(xyz, n, path)
-        self.cells += n
+        i = 0
+        while i < len(xyz):
+            room = int(self.table.size * self.MAX_LOAD) - self.cells
+            if room <= 0:  # (doubled: 3/8 full after, 3/4 at most before)
+                self.table, self.counts = grown(self.table, self.counts, max(2 * self.table.size, self.MIN_SLOTS), counted=True)
+                continue
+            i, entered = _count_into(xyz, i, self.keys.edges, self.keys.corner, self.keys.bits, self.table, self.counts, table_shift(self.table), room)
+            if i < 0:
+                self.keys.beyond_reach(xyz, i, path)
+            self.cells += entered
 
     def mark_sparse(self, most: int) -> int:
         """Mark the cells whose 3 x 3 x 3 block holds at most ``most`` points; returns how many points they hold."""
-        return int(_mark_sparse(self.table, self.counts, self.keys.bits, most)) if self.table.size else 0
+        return int(_mark_sparse(self.table, self.counts, table_shift(self.table), self.keys.bits, most)) if self.table.size else 0
 
     def in_sparse_cells(self, xyz: np.ndarray) -> np.ndarray:
         """Whether each point of ``xyz`` lies in a marked cell."""
