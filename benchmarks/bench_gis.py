@@ -2,7 +2,7 @@
 time of the commands a user types, alternating gigapoint and PDAL round by round, medians of R
 rounds, peak RSS of both, and a check that each pair's outputs agree.
 
-    .venv/bin/python benchmarks/bench_gis.py [--points 20M] [--rounds 3] [--formats las,laz] [--jobs filter,thin,tile,stats,dtm,copy,reproject,colorize] [--input FILE.las] [--workdir DIR] [--pdal pdal]
+    .venv/bin/python benchmarks/bench_gis.py [--points 20M] [--rounds 3] [--formats las,laz] [--jobs filter,thin,tile,stats,dtm,copy,reproject,ground,colorize,noise] [--input FILE.las] [--workdir DIR] [--pdal pdal]
 
 Smoke check (under a minute with PDAL installed): ``--points 200000 --rounds 1``.
 
@@ -46,6 +46,14 @@ file (its LAZ copy written beside it in the work folder). The pairs (``{in}`` th
             side, in 512-pixel tiles, written once into the work folder; like the points, it
             names no CRS; PDAL's scale 257 is gigapoint's 8 -> 16 bits; compare with copy; the
             check: the share of points whose colours are the same in both files)
+    noise   gigapoint classify {in} -o noise.laz --noise --step 4 --isolated 5
+            pdal translate {in} noise.laz outlier --filters.outlier.method=radius
+                 --filters.outlier.radius=4 --filters.outlier.min_k=6
+            (lasnoise's rule against PDAL's radius outlier filter: at most 5 other points in the
+            27 cells of 4 units around a point's, against at most 5 others within 4 units of it
+            (PDAL: noise where the radius search, the point included, finds min_k or fewer):
+            neighbourhoods alike, not the same; the check: both tools' class 7, point by point.
+            Needs a PDAL with filters.outlier)
 
 Each command runs once on a 20 000-point file first (numba's cache filled: JIT compile time
 excluded; PDAL's libraries loaded once), then R rounds of the pairs in turn, gigapoint first in
@@ -73,7 +81,7 @@ from bench_convert import write_las, write_laz  # a sibling script: its folder i
 from gigapoint.bench import run_measured
 from gigapoint.bench.report import cpu_model, parse_count
 
-JOBS = ("filter", "thin", "tile", "stats", "dtm", "copy", "reproject", "ground", "colorize")
+JOBS = ("filter", "thin", "tile", "stats", "dtm", "copy", "reproject", "ground", "colorize", "noise")
 #: reproject's CRSs: Oregon Lambert (NAD83, international feet; autzen's) -> WGS 84 / UTM 10N (metres)
 FROM_CRS, TO_CRS = "EPSG:2992", "EPSG:32610"
 GSD = 1.0
@@ -187,6 +195,12 @@ def commands(job: str, inp: Path, out: Path, pdal: str, grid, ortho: Path | None
             [pdal, "translate", str(inp), str(out / "pdal_colored.las"), "colorization", f"--filters.colorization.raster={ortho}",
              "--filters.colorization.dimensions=Red:1:257,Green:2:257,Blue:3:257"],
         )
+    if job == "noise":
+        return (
+            gp_cmd("classify", inp, "-o", out / "gp_noise.laz", "--noise", "--step", "4", "--isolated", "5", "--quiet"),
+            [pdal, "translate", str(inp), str(out / "pdal_noise.laz"), "outlier", "--filters.outlier.method=radius",
+             "--filters.outlier.radius=4", "--filters.outlier.min_k=6"],
+        )
     raise ValueError(job)
 
 
@@ -278,6 +292,8 @@ def check(job: str, out: Path, gp_stdout: bytes, pdal_stdout: bytes, n: int) -> 
         return compare_ground(out / "gp_smrf.laz", out / "pdal_smrf.laz")
     if job == "colorize":
         return compare_colors(out / "gp_colored.las", out / "pdal_colored.las", n)
+    if job == "noise":
+        return compare_noise(out / "gp_noise.laz", out / "pdal_noise.laz")
     raise ValueError(job)
 
 
@@ -320,6 +336,16 @@ def compare_colors(a: Path, b: Path, n: int) -> dict:
             same += int(np.all([np.asarray(pa[c]) == np.asarray(pb[c]) for c in ("red", "green", "blue")], axis=0).sum())
         counts = [int(fa.header.point_count), int(fb.header.point_count)]
     return {"points": counts, "same_colour": round(same / max(n, 1), 5), "agree": counts == [n, n] and same == n}
+
+
+def compare_noise(gp_laz: Path, pdal_laz: Path) -> dict:
+    """Both tools' noise (class 7), point by point (in the input's order): how many each flags, how many both do."""
+    import laspy
+
+    a, b = (np.asarray(laspy.read(str(p)).classification) == 7 for p in (gp_laz, pdal_laz))
+    if len(a) != len(b):
+        return {"gigapoint_points": len(a), "pdal_points": len(b), "agree": False}
+    return {"gigapoint_noise": int(a.sum()), "pdal_noise": int(b.sum()), "both": int((a & b).sum()), "agree": "by measure"}
 
 
 WARM = """
@@ -370,6 +396,8 @@ def main(argv=None) -> int:
         raise SystemExit(f"{a.pdal} has no filters.reprojection (a build without PROJ); leave out the reproject job (--jobs)")
     if "colorize" in jobs and "filters.colorization" not in os.popen(f"{a.pdal} --drivers 2>/dev/null").read():
         raise SystemExit(f"{a.pdal} has no filters.colorization (a build without GDAL); leave out the colorize job (--jobs)")
+    if "noise" in jobs and "filters.outlier" not in os.popen(f"{a.pdal} --drivers 2>/dev/null").read():
+        raise SystemExit(f"{a.pdal} has no filters.outlier; leave out the noise job (--jobs)")
     work = Path(a.workdir) if a.workdir else Path(tempfile.mkdtemp(prefix="bench_gis_"))
     work.mkdir(parents=True, exist_ok=True)
     try:
