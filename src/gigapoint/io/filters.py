@@ -55,6 +55,11 @@ class PointFilter:
         """This filter with its counts at zero (a pass of a read that reads the files again)."""
         return replace(self, read=0, passed=0, seen=None)
 
+    def dropping(self, classes: tuple[int, ...]) -> PointFilter:
+        """This filter (fresh) also leaving out LAS ``classes``: an LOD octree's hidden classes
+        join its read filter as its nodes load (lod/store.py)."""
+        return replace(self.fresh(), drop_classes=tuple(sorted({*self.drop_classes, *classes})))
+
     def describe(self) -> str:
         """'classes 2, 6; clip 1, 2, 3, 4; corridor 0, 0 to 10, 0, width 2': what the messages say of it."""
         parts = [
@@ -88,11 +93,30 @@ class PointFilter:
         polygon = None if spec.get("clip_polygon") is None else clip_polygon_of(spec["clip_polygon"], "clip_polygon=")
         return cls(*(tuple(spec.get(name) or ()) for name in ("classes", "drop_classes", "clip", "corridor")), polygon)
 
+    @property
+    def needs_positions(self) -> bool:
+        """Whether it tests positions (a clip box, corridor or polygon), not classes alone."""
+        return bool(self.clip or self.corridor or self.polygon is not None)
+
     def kept(self, chunk: PointChunk, path) -> PointChunk:
         """The points of ``chunk`` (read from ``path``) the filter keeps, counted."""
-        keep = np.ones(len(chunk), bool)
+        keep = self.keeps(chunk.xyz, chunk.attributes.get("classification"), path)
+        if self.polygon is not None:
+            self._see(chunk.xyz)
+        n = int(np.count_nonzero(keep))
+        self.read += len(chunk)
+        self.passed += n
+        if n == len(chunk):
+            return chunk
+        return chunk.subset(keep)  # (its colour bits: a save writes the colours back so)
+
+    def keeps(self, xyz: np.ndarray | None, classification: np.ndarray | None, path) -> np.ndarray:
+        """Which points (positions ``xyz``, None where it ``needs_positions`` not; their
+        ``classification``, None where they hold none) of ``path`` the filter keeps, not counted:
+        what ``kept`` keeps, and an LOD octree's arena as it loads a node (lod/store.py)."""
+        n = len(xyz) if xyz is not None else len(classification)
+        keep = np.ones(n, bool)
         if self.classes or self.drop_classes:
-            classification = chunk.attributes.get("classification")
             if classification is None:
                 raise InputError(f"{path}: holds no classification, which the filter ({self.describe()}) needs")
             if self.classes:
@@ -102,21 +126,14 @@ class PointFilter:
         if self.clip:
             axes = len(self.clip) // 2  # 2: x and y (any z), 3: x, y and z
             lo, hi = np.array(self.clip[:axes]), np.array(self.clip[axes:])
-            xyz = chunk.xyz[:, :axes]
-            keep &= np.all((xyz >= lo) & (xyz <= hi), axis=1)  # (NaN positions fail both: left out)
+            keep &= np.all((xyz[:, :axes] >= lo) & (xyz[:, :axes] <= hi), axis=1)  # (NaN positions fail both: left out)
         if self.corridor:
-            distance, offset = along_and_across(chunk.xyz, self.corridor[:4])
+            distance, offset = along_and_across(xyz, self.corridor[:4])
             length, half = math.dist(self.corridor[:2], self.corridor[2:4]), self.corridor[4] / 2
             keep &= (distance >= 0) & (distance <= length) & (np.abs(offset) <= half)  # (NaN: left out)
         if self.polygon is not None:
-            keep &= self.polygon.inside(chunk.xyz)
-            self._see(chunk.xyz)
-        n = int(np.count_nonzero(keep))
-        self.read += len(chunk)
-        self.passed += n
-        if n == len(chunk):
-            return chunk
-        return chunk.subset(keep)  # (its colour bits: a save writes the colours back so)
+            keep &= self.polygon.inside(xyz)
+        return keep
 
     def apply(self, chunks: Iterable[PointChunk], path) -> Iterator[PointChunk]:
         """``chunks`` of ``path`` with only the points kept; a chunk left without any is not given."""

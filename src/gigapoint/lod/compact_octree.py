@@ -354,12 +354,17 @@ class CompactOctree(OctreeCloud):
         """Node ``index`` decoded: (low, med, high, color, rgba in the three-word layout; its
         attributes; 0, where its points start in them)."""
         payload, attrs = self.node_payload(index)
+        med, high = self.payload_tails(payload)
+        arrays = {"low": payload["low"], "med": med, "high": high, "color": rgba32(payload["color"]), "rgba": rgba32(payload["rgba"])}
+        return arrays, attrs, 0
+
+    def payload_tails(self, payload: dict) -> tuple[np.ndarray, np.ndarray]:
+        """(med, high): the three-word layout's other words of a ``node_payload``'s points."""
         count = len(payload["low"])
         med = np.empty(count, np.uint32)
         high = np.empty(count, np.uint32)
         _node_tails(payload["ext"], np.int64(0), payload["code"], med, high)
-        arrays = {"low": payload["low"], "med": med, "high": high, "color": rgba32(payload["color"]), "rgba": rgba32(payload["rgba"])}
-        return arrays, attrs, 0
+        return med, high
 
     def decode_all(self, name: str) -> np.ndarray:
         """Array ``name`` (low, med, high, color, rgba or an attribute) of every point."""

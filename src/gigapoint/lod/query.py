@@ -27,12 +27,8 @@ from ..errors import EmptyCloudError, InputError
 from ..io.filters import PointFilter
 from .potree import PotreeCloud
 from .progressive import ProgressiveOctree
-from .store import OctreeCloud
+from .store import BOX_SLACK, OctreeCloud
 from .voxel_octree import DECODE_GROUP_POINTS, VoxelOctree
-
-#: Node boxes are widened by this share of the octree's cube before they are tested: writers
-#: choose cubes before rounding positions to their grid, so a point may lie a step outside its box
-BOX_SLACK = 1e-3
 
 #: ``meets(lo, hi)``: which of the boxes lo..hi ((k, 3) arrays) meet the region
 Meets = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -66,10 +62,6 @@ def points_meeting(cloud, meets: Meets) -> Iterator[PointChunk]:
         yield _chunk(cloud.node_points(index))
 
 
-def _slack(cloud) -> float:
-    return BOX_SLACK * float(cloud.meta["cube_edge"])
-
-
 def kept_points(cloud, keep: PointFilter, label: str, region: str) -> list[PointChunk]:
     """The points of the octree ``cloud`` (named ``label`` in messages) that ``keep`` keeps, read
     from the nodes meeting it only (``points_meeting`` of ``keep.meets``); an EmptyCloudError
@@ -99,8 +91,7 @@ def octree_path_kept(path, keep: PointFilter, region: str, instead: str) -> tupl
 
 def _meeting(cloud: OctreeCloud, meets: Meets, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Indices of the nodes holding points whose boxes lo..hi (widened by ``BOX_SLACK``) meet the region."""
-    pad = _slack(cloud)
-    return np.flatnonzero((cloud.counts > 0) & meets(lo - pad, hi + pad))
+    return np.flatnonzero((cloud.counts > 0) & cloud.boxes_meeting(meets, lo, hi))
 
 
 def _chunk(points: dict) -> PointChunk:
@@ -114,8 +105,7 @@ def _voxel_nodes(cloud: VoxelOctree, meets: Meets) -> Iterator[PointChunk]:
     """A COPC/EPT octree's meeting nodes: the hierarchy pages of pending nodes that meet the region
     read first (a pending node's box is its cube), then the nodes fetched a group at a time, as a
     frame's are."""
-    pad = _slack(cloud)
-    cloud.read_pages_meeting(lambda lo, hi: meets(lo - pad, hi + pad))
+    cloud.read_pages_meeting(lambda lo, hi: cloud.boxes_meeting(meets, lo, hi))
     need = _meeting(cloud, meets, cloud.nodes["bbox_min"], cloud.nodes["bbox_max"]).tolist()
     for _, points in cloud.points_of_nodes(need):
         yield _chunk(points)

@@ -27,14 +27,20 @@ from ..core.quantize import dequantize
 from ..core.renderable import DrawList, MultiViewDrawList, check_classified, check_point_index
 from ..core.selection import Selection, View, batch_matrices, box_in_view, precision_for, visible_and_size
 from ..errors import InputError, is_whole_number
+from ..io.filters import PointFilter
 from ..render.splats import finest_spacing, union_gain
 from .keys import key_cube, morton_position
 from .octree_dir import FORMAT_NAME, FORMAT_VERSION_WORDS, FORMAT_VERSIONS, POINT_ARRAYS, OctreeDir
 
 ARENA_CHUNK = 4096  # points per arena slot (a node spans ceil(count / ARENA_CHUNK) slots)
-# selections a frame with hidden classes makes at most: each weighs the nodes the last one
-# loaded by their kept points (half the points hidden: the budget's unknown part halves a round)
+# selections a frame with a load filter (hidden classes, a read filter) makes at most: each weighs
+# the nodes the last one loaded by their kept points (half the points left out: the budget's
+# unknown part halves a round)
 KEPT_ROUNDS = 8
+#: Node boxes are widened by this share of the octree's cube before they are tested against a
+#: region: writers choose cubes before rounding positions to their grid, so a point may lie a
+#: step outside its box
+BOX_SLACK = 1e-3
 
 
 # --------------------------------------------------------------------------- selection kernels
@@ -80,13 +86,14 @@ def _heap_place(hp, hi, n, j, p, item):
 
 
 @njit(cache=True)
-def select_nodes(rows, box_min, box_size, counts, costs, children, width, height, near, far, threshold, budget, out_ids, out_size, foveation=0.0):
+def select_nodes(rows, box_min, box_size, counts, costs, meets, children, width, height, near, far, threshold, budget, out_ids, out_size, foveation=0.0):
     """Largest-projected-first traversal: visible nodes of ≥ threshold px (the root always, and
     the children of a node without points), within budget.
 
     ``costs``: what each node takes of the budget (its points drawn: ``counts``, or fewer where
-    hidden classes leave some out); ``counts`` tells the nodes without points (a node whose
-    points are all hidden is no reason to descend below the threshold).
+    a load filter leaves some out); ``counts`` tells the nodes without points (a node whose
+    points are all left out is no reason to descend below the threshold). ``meets``: whether a
+    node's box meets the read filter's region; a node that does not is skipped with its subtree.
 
     ``foveation`` f > 0 raises the threshold away from the image centre: threshold · (1 + f·d),
     d = 0 at the centre .. 1 in the corners (the 2022 paper's 100/200/300 px is f = 2).
@@ -101,7 +108,7 @@ def select_nodes(rows, box_min, box_size, counts, costs, children, width, height
     hi = np.empty(n, np.int64)
     hn = 0
     vis, s, _ = _box_test(rows, box_min[0], box_size[0], width, height, near, far)
-    if not vis:
+    if not vis or not meets[0]:
         return 0, 0
     hp[0] = s
     hi[0] = 0
@@ -122,7 +129,7 @@ def select_nodes(rows, box_min, box_size, counts, costs, children, width, height
         total += costs[node]
         for d in range(8):
             ch = children[node, d]
-            if ch < 0:
+            if ch < 0 or not meets[ch]:
                 continue
             vis, s, dist = _box_test(rows, box_min[ch], box_size[ch], width, height, near, far)
             # the children of a node without points, whatever their size (a COPC root may hold none)
@@ -287,7 +294,7 @@ class Arena:
         self.bounds = bounds
         self.source_scale = None  # the octree's source grid (a LAS file's scale), which point_info rounds to
         self.loads = 0  # nodes copied in since creation (cache misses)
-        self.hidden: tuple[int, ...] = ()  # LAS classes the resident nodes were loaded without (``show``)
+        self.keep: PointFilter | None = None  # what the resident nodes were loaded through (``show``)
         # Bumped on every write; per slot, the version that last filled it (GPU backends re-upload those slots)
         self.version = 0
         self.batch_version = np.zeros(n_slots, np.int64)
@@ -334,21 +341,22 @@ class Arena:
         index = np.repeat(b["first"].astype(np.int64) - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
         return self.attributes.at("classification", index)
 
-    def show(self, hidden: tuple[int, ...]) -> None:
-        """Nodes loaded from now on leave out the points of LAS classes ``hidden`` (the settings'
-        ``hidden_classes``); a change drops every resident node, so frames load them again, filtered."""
-        if hidden == self.hidden:
+    def show(self, keep: PointFilter | None) -> None:
+        """Nodes loaded from now on keep only the points ``keep`` keeps (``OctreeCloud.load_filter``:
+        its read filter, hidden classes; None: all); a change drops every resident node, so
+        frames load them again, filtered."""
+        if keep == self.keep:
             return
         for slots in self.resident.values():
             self.free.extend(slots.tolist())
         self.resident.clear()
-        self.hidden = hidden
+        self.keep = keep
 
-    def kept_counts(self, counts: np.ndarray, hidden: tuple[int, ...]) -> np.ndarray:
-        """The nodes' ``counts`` as a selection hiding classes ``hidden`` should weigh them: a
-        node resident without them counts the points it kept, the others their whole counts
-        (what they keep is known once loaded)."""
-        if not hidden or hidden != self.hidden or not self.resident:
+    def kept_counts(self, counts: np.ndarray, keep: PointFilter | None) -> np.ndarray:
+        """The nodes' ``counts`` as a selection through the load filter ``keep`` should weigh
+        them: a node resident through it counts the points it kept, the others their whole
+        counts (what they keep is known once loaded)."""
+        if keep is None or keep != self.keep or not self.resident:
             return counts
         nodes = np.fromiter(self.resident, np.int64, len(self.resident))
         slot_lists = list(self.resident.values())
@@ -359,8 +367,8 @@ class Arena:
         return out
 
     def _load(self, nd: int, cloud: OctreeCloud, slots: np.ndarray, count: int) -> int:
-        """Node ``nd``'s points into ``slots``, in the arena's layout, but those of ``hidden``
-        classes; returns how many it loaded."""
+        """Node ``nd``'s points into ``slots``, in the arena's layout, those ``keep`` keeps;
+        returns how many it loaded."""
         if self.med is None:  # the compact layout: the node's words as stored (a format-2 octree)
             arrays, attrs = cloud.node_payload(nd)
             first, words = 0, ["low"]
@@ -368,9 +376,11 @@ class Arena:
             arrays, attrs, first = cloud.node_arrays(nd)  # a Potree node is read and decoded here
             words = ["low", "med", "high"]
         colors = "color" if cloud.filtered_colors else "rgba"
-        if self.hidden:  # the node's points of the other classes (inner nodes' too: real points, with their class)
+        if self.keep is not None:  # the node's points the filter keeps (inner nodes' too: real points, with their class)
             node = slice(first, first + count)
-            kept = np.flatnonzero(~np.isin(attrs["classification"][node], self.hidden))
+            xyz = self._positions(cloud, nd, arrays, node) if self.keep.needs_positions else None
+            classification = attrs["classification"][node] if "classification" in attrs else None
+            kept = np.flatnonzero(self.keep.keeps(xyz, classification, cloud.name))
             filtered = {k: np.asarray(arrays[k][node])[kept] for k in [*words, colors]}
             if self.med is None:
                 filtered.update(ext=stream_subset(arrays["ext"], int(arrays["code"]), kept), code=arrays["code"], bits=arrays["bits"])
@@ -395,6 +405,17 @@ class Arena:
         for a, b in pairs:
             _copy_slots(a, first, count, slots, ARENA_CHUNK, b)
         return count
+
+    def _positions(self, cloud: OctreeCloud, nd: int, arrays: dict, node: slice) -> np.ndarray:
+        """The positions of node ``nd``'s points ``node`` of ``arrays`` (as ``_load`` read them:
+        a compact payload's tails decoded first), against its box (the tight one a Potree, COPC
+        or EPT node's record holds once read)."""
+        if self.med is None:
+            med, high = cloud.payload_tails(arrays)
+        else:
+            med, high = arrays["med"][node], arrays["high"][node]
+        rec = cloud.nodes[nd]
+        return dequantize(np.asarray(arrays["low"][node]), np.asarray(med), np.asarray(high), rec["bbox_min"], rec["bbox_max"], 30)
 
     def ensure(self, nodes: np.ndarray, cloud: OctreeCloud) -> bool:
         """Make every node in ``nodes`` resident; False when they cannot all fit."""
@@ -447,6 +468,7 @@ class OctreeCloud:
     (largest projected first, within the point budget) and draws them from its arena."""
 
     load_progress = 1.0  # converted whole
+    read_filter: PointFilter | None = None  # only the points it keeps are drawn (``read_only``)
 
     def __init__(
         self, name: str, meta: dict, nodes: np.ndarray, keys: np.ndarray, arrays: dict, attributes: dict, path: Path | None = None
@@ -463,9 +485,10 @@ class OctreeCloud:
         self._union_gain: np.ndarray | None = None  # adaptive sizes' per-node facts (prepare), made on first use
         self._node_spacing: np.ndarray | None = None
         self.counts = nodes["count"].astype(np.int64)  # node counts never change: widened once, not per frame
+        self._meets: np.ndarray | None = None  # which nodes' boxes meet the read filter (``meeting_read_filter``), made on first use
         self.morton_position = morton_position(self.keys)  # frames draw node after node in this order
         self.cube_min, self.cube_edge = key_cube(self.keys, meta["cube_min"], float(meta["cube_edge"]))
-        lo, hi = self.bounds
+        lo, hi = self.stored_bounds()
         self.box_min = np.clip(self.cube_min, lo, hi)
         self.box_size = np.clip(self.cube_min + self.cube_edge[:, None], lo, hi) - self.box_min
         self.children = np.full((len(self.keys), 8), -1, np.int64)
@@ -494,6 +517,13 @@ class OctreeCloud:
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Its points' bounds; with a read filter, cut to where the points it keeps can be
+        (``PointFilter.clipped_bounds``: what a view frames, as a filtered cloud's bounds do)."""
+        lo, hi = self.stored_bounds()
+        return (lo, hi) if self.read_filter is None else self.read_filter.clipped_bounds(lo, hi)
+
+    def stored_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The bounds of all its points (its metadata's), which its nodes' boxes are cut to."""
         b = self.meta["bounds"]
         return np.array(b["min"], np.float64), np.array(b["max"], np.float64)
 
@@ -528,15 +558,52 @@ class OctreeCloud:
             out[a] = np.asarray(v[s])
         return out
 
+    # -- read filter
+    def read_only(self, keep: PointFilter, label: str) -> None:
+        """Draw only the points ``keep`` keeps (gp.open's ``classes=``, ``clip=``, ...), level of
+        detail: frames skip the nodes whose boxes do not meet it and load the others' points
+        through it (``load_filter``), their kept points weighing on the budget. Nothing is read
+        here; a filter naming classes of an octree (``label`` in messages) without
+        classification is a one-line InputError."""
+        if (keep.classes or keep.drop_classes) and "classification" not in self.attribute_names:
+            raise InputError(f"{label}: holds no classification, which the filter ({keep.describe()}) needs")
+        self.read_filter = keep
+        self._meets = None
+        if self.arena is not None:
+            self.arena.show(None)  # (its nodes were loaded unfiltered: dropped)
+
+    def load_filter(self, hidden: tuple[int, ...]) -> PointFilter | None:
+        """What its nodes are loaded through: its read filter, less the LAS classes ``hidden``
+        (the settings' ``hidden_classes``); None: every point."""
+        if not hidden:
+            return self.read_filter
+        return (self.read_filter or PointFilter()).dropping(hidden)
+
+    def boxes_meeting(self, meets, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Which of the node boxes lo..hi ((k, 3)), widened by ``BOX_SLACK`` of its cube, meet a
+        region (``meets(lo, hi)``: a PointFilter's ``meets``)."""
+        pad = BOX_SLACK * float(self.meta["cube_edge"])
+        return meets(lo - pad, hi + pad)
+
+    def meeting_read_filter(self) -> np.ndarray:
+        """Which nodes' boxes (their subtrees') meet the read filter; all without one. Made once
+        a hierarchy (a COPC/EPT octree's grows as pages are read: ``__init__`` again)."""
+        if self._meets is None:
+            keep = self.read_filter
+            self._meets = np.ones(len(self.keys), bool) if keep is None else self.boxes_meeting(keep.meets, self.box_min, self.box_min + self.box_size)
+        return self._meets
+
     # -- Renderable (core/renderable.py)
     def select_nodes(self, view: View, settings) -> tuple[np.ndarray, np.ndarray, int]:
-        """(node indices, projected cube sizes, point total) chosen for a view; with
-        ``hidden_classes``, the nodes resident without them count the points they kept."""
+        """(node indices, projected cube sizes, point total) chosen for a view, of the nodes
+        meeting the read filter; through a load filter (``load_filter``), the nodes resident
+        through it count the points they kept."""
         out_ids = np.empty(len(self.keys), np.int64)
         out_size = np.empty(len(self.keys), np.float64)
-        costs = self.counts if self.arena is None else self.arena.kept_counts(self.counts, settings.hidden_classes)
+        keep = self.load_filter(settings.hidden_classes)
+        costs = self.counts if self.arena is None else self.arena.kept_counts(self.counts, keep)
         k, total = select_nodes(
-            view.rows, self.box_min, self.box_size, self.counts, costs, self.children, float(view.width), float(view.height),
+            view.rows, self.box_min, self.box_size, self.counts, costs, self.meeting_read_filter(), self.children, float(view.width), float(view.height),
             float(view.near), float(view.far), float(settings.lod_threshold_px), int(settings.point_budget), out_ids, out_size,
             float(settings.lod_foveation),
         )  # fmt: skip
@@ -565,7 +632,7 @@ class OctreeCloud:
         """The frame's nodes made resident in the arena, one batch per arena slot."""
         check_classified(self.name, self.attribute_names, settings.hidden_classes)
         ids = self._resident_selection(view, settings)
-        for _ in range(KEPT_ROUNDS if settings.hidden_classes else 0):
+        for _ in range(KEPT_ROUNDS if self.load_filter(settings.hidden_classes) is not None else 0):
             # the nodes just loaded count their kept points from now on, not their whole counts:
             # the budget they leave takes deeper nodes, until a selection loads none
             loads = self.arena.loads
@@ -597,19 +664,20 @@ class OctreeCloud:
     def _resident_selection(self, view: View, settings) -> np.ndarray:
         """The nodes a view selects (those with points), made resident in the arena (one made or
         grown where they do not fit)."""
+        keep = self.load_filter(settings.hidden_classes)
         if self.arena is not None:
-            self.arena.show(settings.hidden_classes)  # (another set: every node loaded again)
+            self.arena.show(keep)  # (another filter: every node loaded again)
         ids, _, total = self.select_nodes(view, settings)
         ids = ids[self.nodes["count"][ids] > 0]
         if self.arena is None or self.arena.n_points < total:
             cap = max(total, min(int(settings.point_budget), self.n_points)) * 5 // 4 + 64 * ARENA_CHUNK
             self.arena = self.new_arena(min(cap, self.n_points + (len(self.keys) + 1) * ARENA_CHUNK))
         arena = self.arena
-        arena.show(settings.hidden_classes)
+        arena.show(keep)
         if not arena.ensure(ids, self):
             # a selection of many small nodes that wastes slots: grow and retry once
             self.arena = arena = self.new_arena(arena.n_points * 2 + (len(ids) + 1) * ARENA_CHUNK)
-            arena.show(settings.hidden_classes)
+            arena.show(keep)
             arena.ensure(ids, self)
         return ids
 

@@ -285,7 +285,7 @@ class VoxelOctree(OctreeCloud):
                 break
             self._load_pages(waiting)
         if self.arena is not None:
-            self.arena.show(settings.hidden_classes)  # (another set empties it: the nodes below are fetched again)
+            self.arena.show(self.load_filter(settings.hidden_classes))  # (another filter empties it: the nodes below are fetched again)
         resident = self.arena.resident if self.arena is not None else {}
         need = [i for i in ids.tolist() if self.counts[i] > 0 and i not in resident]
         if len(need) > 1:
