@@ -155,7 +155,9 @@ def open(*paths, progressive: bool = False, **options):
     width)``: within width / 2 of the line (x1, y1)-(x2, y2) and between its ends, any z (what
     ``gigapoint.section`` draws), and ``clip_polygon=`` a GeoJSON or WKT file, WKT text or a
     GeoJSON geometry dict: inside its polygons, holes left out, edges included, any z
-    (io/polygon.py); a point must pass all those given.
+    (io/polygon.py); a point must pass all those given. One octree given them opens as the
+    OctreeCloud drawing only the points they keep, level of detail: frames skip the nodes that
+    do not meet them and filter the others' points as they load (no point is read whole).
 
     Paths may also come as one list or tuple: ``gp.open([a, b])`` is ``gp.open(a, b)``."""
     from .io._base import headers_once
@@ -176,8 +178,6 @@ def _open(paths: tuple, progressive: bool, options: dict):
     check_switch("recursive", recursive, "open")
     keep = point_filter(options.pop("classes", None), options.pop("drop_classes", None), options.pop("clip", None), "open", corridor=options.pop("corridor", None),
                         clip_polygon=options.pop("clip_polygon", None))  # fmt: skip
-    if keep is not None:  # (an octree was drawn whole, without a word)
-        refuse_octrees(paths, f"the filter ({keep.describe()}) applies to point files")
     if recursive:
         from .io import with_subfolders
 
@@ -194,11 +194,12 @@ def _open(paths: tuple, progressive: bool, options: dict):
         memory_limit = memory_limit_bytes(memory_limit)  # checked before any file is read
         with headers_once():  # each file's header read once: by file_sources, then by the loader thread (it takes them along)
             return open_progressive(*file_sources(paths, point_filter=keep), memory_limit=memory_limit, point_filter=keep)
-    if len(paths) == 1 and not options and keep is None:
+    if len(paths) == 1 and not options:
         from .lod import is_lod_source, open_octree
+        from .lod.reader import open_filtered
 
-        if is_lod_source(paths[0]):
-            return open_octree(paths[0])
+        if is_lod_source(paths[0]):  # (with a filter: its nodes filtered as frames load them)
+            return open_octree(paths[0]) if keep is None else open_filtered(paths[0], keep, "open the point files, or wait for the octree")
     refuse_octrees(paths, f"it takes no options ({', '.join(sorted(options))})" if len(paths) == 1 else "it cannot join other files")
     import inspect
 

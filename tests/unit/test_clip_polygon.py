@@ -18,7 +18,7 @@ from gigapoint.errors import EmptyCloudError, InputError, warnings_kept
 from gigapoint.io import read_chunks
 from gigapoint.io.filters import PointFilter, point_filter
 from gigapoint.io.polygon import clip_polygon_of
-from gigapoint.lod.store import OctreeCloud
+from gigapoint.lod.store import Arena, OctreeCloud
 
 SQUARE_WITH_HOLE = [[[0, 0], [10, 0], [10, 10], [0, 10], [0, 0]], [[2, 2], [6, 2], [6, 6], [2, 6], [2, 2]]]
 CONCAVE = [[[12, 0], [20, 0], [20, 10], [16, 4], [12, 10], [12, 0]]]  # a V cut out of its top
@@ -161,22 +161,24 @@ def test_an_octree_reads_only_the_nodes_meeting_the_polygon(cli, tmp_path, monke
     gp.convert([las], octree_dir, max_leaf=100)
     area = {"type": "Polygon", "coordinates": [[[20, 20], [60, 25], [40, 70]], [[35, 35], [45, 35], [40, 45]]]}  # a triangle with a hole
     want = np.count_nonzero(reference(np.column_stack([np.arange(90_000) % 300 + 0.25, np.arange(90_000) // 300 + 0.25]), [area["coordinates"]]))
-    reads = []
-    real = OctreeCloud.node_points
-    monkeypatch.setattr(OctreeCloud, "node_points", lambda self, index: reads.append(index) or real(self, index))
+    loads = []  # render: the nodes its frame loads (level of detail, every node meeting the polygon with no threshold)
+    real_load = Arena._load
+    monkeypatch.setattr(Arena, "_load", lambda self, nd, *rest: loads.append(nd) or real_load(self, nd, *rest))
     site = tmp_path / "area.geojson"
     site.write_text(json.dumps(area))
-    rc, out, err = cli("render", octree_dir, "-o", tmp_path / "a.png", "-W", 100, "-H", 100, "--clip-polygon", site)
+    rc, out, err = cli("render", octree_dir, "-o", tmp_path / "a.png", "-W", 100, "-H", 100, "--clip-polygon", site, "--lod-threshold-px", 0)
     assert rc == 0, err
-    assert f"{want:,} points" in out
+    assert f", {want:,} of 90,000 points drawn)" in out
     octree = gp.open(octree_dir)
     full = int(np.count_nonzero(octree.counts))
-    assert len(reads) == len(set(reads)) and 0 < len(reads) < full / 3, (len(reads), full)
+    assert len(loads) == len(set(loads)) and 0 < len(loads) < full / 3, (len(loads), full)
     # every node left unread holds no point inside
     keep = point_filter(clip_polygon=area)
-    for index in sorted(set(np.flatnonzero(octree.counts).tolist()) - set(reads)):
-        assert not keep.polygon.inside(real(octree, index)["xyz"]).any()
-    reads.clear()
+    for index in sorted(set(np.flatnonzero(octree.counts).tolist()) - set(loads)):
+        assert not keep.polygon.inside(octree.node_points(index)["xyz"]).any()
+    reads = []  # section: the nodes whose every point it reads
+    real = OctreeCloud.node_points
+    monkeypatch.setattr(OctreeCloud, "node_points", lambda self, index: reads.append(index) or real(self, index))
     cut = gp.section(octree_dir, (0, 40.25, 300, 40.25), 1, clip_polygon=area)  # along a row of the grid, through the hole
     assert cut.cloud.n_points == gp.section(las, (0, 40.25, 300, 40.25), 1, clip_polygon=area).cloud.n_points == 20
     assert 0 < len(reads) < full / 3

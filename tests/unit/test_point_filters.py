@@ -113,14 +113,6 @@ def test_a_file_without_classification_given_classes_is_an_error_naming_it(tmp_p
     assert gp.open(f, clip=(0, 0, 0.5, 0.5)).n_points > 0  # (a clip box needs none)
 
 
-def test_an_octree_given_a_filter_is_refused(demo_small, tmp_path):
-    out = tmp_path / "oct"
-    gp.convert(demo_small, out)
-    with pytest.raises(InputError) as err:
-        gp.open(out, classes=[2])
-    assert str(err.value) == f"{out}: a converted octree folder opens alone, drawn level of detail as stored; the filter (classes 2) applies to point files"
-
-
 # ---------------------------------------------------------------------------------------- CLI
 
 CAMERA = "eye=636590,849216,1100 target=636590,849216,460 up=0,1,0"  # straight down over the survey

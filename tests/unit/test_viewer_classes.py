@@ -187,3 +187,29 @@ def test_view_starts_with_the_hidden_classes_given(cli, autzen_path, monkeypatch
     # a progressive octree hides classes as it draws; the demo town has none to hide
     assert rc == 1 and err == "error: --hidden-classes: demo(1,000) has no classification attribute, so no class to hide\n"
     assert len(err.splitlines()) == 1 and len(served) == 1
+
+
+def test_view_of_an_octree_with_a_class_filter_draws_it_level_of_detail_without_the_others(cli, tmp_path, two_class_cloud, monkeypatch):
+    from gigapoint.io.filters import point_filter
+    from gigapoint.lod.store import OctreeCloud
+    from gigapoint.viewer.server import ViewerServer
+
+    gp.convert(two_class_cloud, tmp_path / "tree")
+    served = []
+
+    def serve(self):  # (not for ever: the cloud each tab draws, then closed)
+        served.append(self.core.cloud)
+        self.sock.close()
+
+    monkeypatch.setattr(ViewerServer, "serve_forever", serve)
+    rc, _, err = cli("view", tmp_path / "tree", "--classes", "2", "--no-browser")
+    assert rc == 0, err
+    (tree,) = served
+    assert isinstance(tree, OctreeCloud) and tree.read_filter == point_filter(classes=[2])  # the octree itself, drawn level of detail
+    core, client = connect(tree)
+    with client, client.websocket_connect("/ws?w=240&h=160") as ws:
+        session = core.sessions[receive(ws, reply("hello"))["session"]]
+        receive(ws, full_frame())
+        image = session.last.frame.image
+        assert pixels_of(image, GROUND) > 300 and pixels_of(image, BUILDING) == 0  # (400 points of class 2, 400 of class 6)
+    core.close_all()

@@ -167,19 +167,12 @@ def open_files(inputs, point_budget: int, progressive: bool | None, options: dic
     """What ``render`` and ``view`` open: ``open_sized``'s choice (an octree as itself, big inputs
     progressively, else one PointCloud); with ``options`` (``cloud_options``) always one
     PointCloud built with them. ``point_filter`` (``filter_options``): only the points it keeps
-    are read, whichever way (of one octree, those of the nodes meeting it, at every level, as one
-    PointCloud: lod/query.py)."""
-    from ..io import lone_match, open_cloud, shown_url
+    are read, whichever way (of one octree, drawn level of detail: its nodes filtered as frames
+    load them, lod/reader.open_filtered)."""
+    from ..io import open_cloud, shown_url
     from ..lod import is_lod_source
     from ..lod.progressive import open_sized
 
-    octree = lone_match(inputs) if point_filter is not None and not options and not progressive else []  # (a pattern matching one octree: it)
-    if len(octree) == 1 and is_lod_source(octree[0]):
-        from ..core.cloud import build_cloud
-        from ..lod.query import octree_path_kept
-
-        kept, name = octree_path_kept(octree[0], point_filter, "the filter's region", "filter the point files, or wait for the octree")
-        return build_cloud(kept, name=name, colors="rgba")
     if not options:
         return open_sized(inputs, point_budget, progressive, progress=progress, point_filter=point_filter)
     if progressive:

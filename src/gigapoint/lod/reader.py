@@ -11,13 +11,14 @@ from urllib.parse import urlsplit, urlunsplit
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import EmptyCloudError, InputError
 from ..io.http import HttpNotFound, as_url, shown_url
 from .kinds import copc_file_kind, ept_location
 from .octree_dir import FORMAT_VERSION, OctreeDir
 
 if TYPE_CHECKING:
     from ..core.cloud import PointCloud
+    from ..io.filters import PointFilter
     from .store import OctreeCloud
 
 # The readers of each kind are imported where one is opened (numba's kernels: ``gigapoint info``
@@ -120,6 +121,26 @@ def open_octree(path) -> OctreeCloud | PointCloud:
     if kind == "unfinished":
         return open_preview(d)
     raise InputError(f"{d.path}: no {d.meta.name} or {d.potree_meta.name}: not a converted octree")
+
+
+def open_filtered(path, keep: PointFilter, instead: str) -> OctreeCloud:
+    """The octree at ``path`` (``open_octree``) drawing only the points ``keep`` keeps, level of
+    detail (``OctreeCloud.read_only``: no point is read here); an EmptyCloudError where no node
+    meets the filter's region, an unfinished conversion's preview (a sample of the points) a
+    one-line InputError: ``instead``, what to do instead, ends it."""
+    from .store import OctreeCloud
+    from .voxel_octree import VoxelOctree
+
+    octree = open_octree(path)
+    if not isinstance(octree, OctreeCloud):
+        raise InputError(f"{shown_url(path)}: an unfinished conversion; its preview holds a sample of the points: {instead}")
+    octree.read_only(keep, shown_url(path))
+    if not octree.meeting_read_filter()[0]:  # (the root's box holds every point)
+        if isinstance(octree, VoxelOctree):  # (a URL's connections)
+            octree.close()
+        region = "no node of the octree meets the filter's region"
+        raise EmptyCloudError(f"{shown_url(path)}: no point passes the filter ({keep.describe()}): {region}{keep.polygon_hint()}")
+    return octree
 
 
 def octree_info(path) -> dict:

@@ -394,15 +394,14 @@ def open_sized(paths, point_budget: int, progressive: bool | None = None, progre
     itself; other inputs as a ProgressiveOctree (drawable while it loads) when asked, or when
     their headers count more points than ``point_budget``, or when one is cut off (what it
     holds drawn, its error said); else as one PointCloud. ``point_filter`` (io/filters.py):
-    only the points it keeps are read; an octree is then refused (it is drawn as stored)."""
+    only the points it keeps are read, or of an octree drawn (``reader.open_filtered``: level
+    of detail, the nodes meeting it read as frames need them)."""
     from ...io import expand_paths, lone_match, open_cloud
-    from ..reader import is_lod_source, open_octree, refuse_octrees
+    from ..reader import is_lod_source, open_filtered, open_octree, refuse_octrees
 
     paths = lone_match(paths)  # (a pattern matching one octree opens it)
-    if len(paths) == 1 and is_lod_source(paths[0]) and not progressive and point_filter is None:
-        return open_octree(paths[0])
-    if point_filter is not None:
-        refuse_octrees(paths, f"the filter ({point_filter.describe()}) applies to point files")
+    if len(paths) == 1 and is_lod_source(paths[0]) and not progressive:
+        return open_octree(paths[0]) if point_filter is None else open_filtered(paths[0], point_filter, "filter the point files, or wait for the octree")
     # (--progressive of a converted folder drew it as stored, without a word; a local COPC file is read as LAZ)
     refuse_octrees(paths, "it cannot join other files" if len(paths) > 1 else "--progressive builds an octree from point files")
     paths = expand_paths(paths)  # once: a file named twice was warned about twice (headers, then the points)
