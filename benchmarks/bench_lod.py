@@ -103,8 +103,7 @@ def run_render(args) -> list[dict]:
             times.append(time.perf_counter() - t)
             raster.append(f.stats.raster_ms)
         med = statistics.median(times)
-        near, far = cam.clip_range(oc.bounds)
-        ids, _, total = oc.select_nodes(cam, s, near, far)
+        ids, _, total = oc.select_nodes(cam.view(oc.bounds), s)
         rows.append(
             {
                 "view": name,
