@@ -37,6 +37,7 @@ import numpy as np
 from numba import njit
 
 from .errors import InputError, is_real
+from .render.raster_fill import fill_everywhere
 
 #: PDAL's and the paper's defaults, in metres (``slope``: rise over run, no unit)
 DEFAULTS_METRES = {"cell": 1.0, "window": 18.0, "threshold": 0.5, "scalar": 1.25}
@@ -128,14 +129,25 @@ class _Grid:
     def bilinear(self, raster: np.ndarray, xyz: np.ndarray) -> np.ndarray:
         """``raster`` (values at the cells' centres) at the points' (x, y), bilinearly; the edge
         cells' values carried half a cell beyond them."""
-        padded = np.pad(raster, 1, mode="edge")  # (a 1-cell-wide raster has a neighbour to blend with)
-        fx = np.clip((xyz[:, 0] - self.lo[0]) / self.cell + 0.5, 0, padded.shape[1] - 1.000001)  # + 0.5: -0.5 for the centre, +1 for the pad
-        fy = np.clip((xyz[:, 1] - self.lo[1]) / self.cell + 0.5, 0, padded.shape[0] - 1.000001)
-        c, r = fx.astype(np.intp), fy.astype(np.intp)
-        tx, ty = fx - c, fy - r
-        top = padded[r, c] * (1 - tx) + padded[r, c + 1] * tx
-        bottom = padded[r + 1, c] * (1 - tx) + padded[r + 1, c + 1] * tx
-        return top * (1 - ty) + bottom * ty
+        return _bilinear(raster, np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1]), self.lo[0], self.lo[1], self.cell)
+
+
+@njit(cache=True)
+def _bilinear(raster, x, y, x0, y0, cell):  # pragma: no cover - compiled
+    """``Grid.bilinear`` a point at a time (numpy's version padded the raster and gathered four
+    arrays of corners per chunk: 3 s of 10 M points)."""
+    rows, cols = raster.shape
+    out = np.empty(x.size)
+    for i in range(x.size):
+        fx = min(max((x[i] - x0) / cell - 0.5, 0.0), cols - 1.0)  # in cells from the first centre, clamped: the edges carried on
+        fy = min(max((y[i] - y0) / cell - 0.5, 0.0), rows - 1.0)
+        c0, r0 = min(int(fx), cols - 1), min(int(fy), rows - 1)
+        c1, r1 = min(c0 + 1, cols - 1), min(r0 + 1, rows - 1)
+        tx, ty = fx - c0, fy - r0
+        top = raster[r0, c0] * (1 - tx) + raster[r0, c1] * tx
+        bottom = raster[r1, c0] * (1 - tx) + raster[r1, c1] * tx
+        out[i] = top * (1 - ty) + bottom * ty
+    return out
 
 
 def _ground_candidates(chunk) -> np.ndarray:
@@ -150,34 +162,34 @@ def _ground_candidates(chunk) -> np.ndarray:
     return keep
 
 
-def _filled(raster: np.ndarray, linear: bool = True) -> np.ndarray:
-    """``raster`` with its NaN cells filled: linearly inside the hull of the others (the TIN of
-    render/raster_fill.py; ``linear`` False: not), from the nearest one elsewhere."""
-    from scipy import ndimage
-
-    from .render.raster_fill import fill_heights
-
-    filled = fill_heights(raster) if linear else raster
-    empty = np.isnan(filled)
-    if empty.any():
-        nearest = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
-        filled = filled[tuple(nearest)]
-    return filled
-
-
-_CROSS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)
+@njit(cache=True)
+def _cross_extreme(surface: np.ndarray, lowest: bool) -> np.ndarray:  # pragma: no cover - compiled
+    """One erosion (``lowest``: each cell the least of itself and its 4 neighbours) or dilation
+    (the most) by a 3 x 3 cross, the raster's edge cells seeing only the neighbours they have
+    (scipy.ndimage's mode="nearest"): 4 x faster than scipy's general footprint filter, which
+    the 342 passes of a default opening on a million cells spent 4 s in."""
+    rows, cols = surface.shape
+    out = np.empty_like(surface)
+    for r in range(rows):
+        up, down = surface[max(r - 1, 0)], surface[min(r + 1, rows - 1)]  # (an edge's missing neighbour: the cell itself)
+        row = surface[r]
+        for c in range(cols):
+            left, right = row[max(c - 1, 0)], row[min(c + 1, cols - 1)]
+            if lowest:
+                out[r, c] = min(row[c], up[c], down[c], left, right)
+            else:
+                out[r, c] = max(row[c], up[c], down[c], left, right)
+    return out
 
 
 def _opened(surface: np.ndarray, radius: int) -> np.ndarray:
     """The morphological opening of ``surface`` by a diamond of ``radius`` cells (``radius``
     erosions by a cross, then as many dilations: PDAL's structuring element)."""
-    from scipy import ndimage
-
     out = surface
     for _ in range(radius):
-        out = ndimage.grey_erosion(out, footprint=_CROSS, mode="nearest")
+        out = _cross_extreme(out, True)
     for _ in range(radius):
-        out = ndimage.grey_dilation(out, footprint=_CROSS, mode="nearest")
+        out = _cross_extreme(out, False)
     return out
 
 
@@ -199,14 +211,14 @@ def ground_model(lowest: np.ndarray, cell: float, slope: float, window: float) -
     openings run on are filled from the nearest cell, as PDAL fills them from its nearest ones
     (the TIN took 12 s a time on a million cells, 40 % of them empty; an opening only needs a
     value in each)."""
-    surface = _filled(lowest, linear=False)
+    surface = fill_everywhere(lowest)
     low = _objects(-surface, cell, LOW_OUTLIER_SLOPE, 1.0)  # (a cell pitted below its neighbours: a multipath return)
-    surface = _filled(np.where(low | np.isnan(lowest), np.nan, lowest), linear=False)
+    surface = fill_everywhere(np.where(low | np.isnan(lowest), np.nan, lowest))
     objects = _objects(surface, cell, slope, window)
     dem = np.where(objects | low | np.isnan(lowest), np.nan, lowest)
     if np.isnan(dem).all():  # (every cell an object: nothing to interpolate from; the lowest surface stands)
         return surface
-    return _filled(dem)
+    return fill_everywhere(dem)
 
 
 def classify_ground(source, out, *, cell=None, slope=None, window=None, threshold=None, scalar=None, overwrite: bool = False,

@@ -13,11 +13,20 @@ the Voronoi edges in the middle of a hole and does not keep a slope.)
 
 Colours are not interpolated across a hole (that would invent imagery): ``fill_colors`` gives an
 empty pixel within ``max_distance`` of a drawn one, inside the footprint, the nearest drawn colour.
+
+``fill_everywhere`` is the fast fill for rasters that are models, not pictures (ground
+classification's DEMs, classify.py): every NaN cell, inside the hull or not, by pull-push (a
+mip-map interpolation: the known cells averaged down a pyramid of halved rasters with their
+weights, then each level's empty cells blended from the bilinearly read coarser one on the way
+back up). It is O(cells) and in numba: a million-cell raster 40 % empty in ~0.05 s where the TIN
+takes ~50 s, smooth over a large gap and exact on the known cells, but not linear: a plane's
+hole comes back slightly sagged (``fill_heights`` keeps the plane, so render keeps the TIN).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from ..errors import GigapointError, check_whole
 
@@ -125,3 +134,63 @@ def fill_map(image: np.ndarray, empty: np.ndarray, heights: np.ndarray | None, m
     if heights is not None:
         heights = fill_heights(heights, max_distance)
     return image, heights
+
+
+@njit(cache=True)
+def _pulled(values: np.ndarray, weights: np.ndarray):  # pragma: no cover - compiled
+    """The next level up the pyramid: each coarse cell the weighted mean of its (up to) 2 x 2
+    cells, its weight their weights' sum capped at 1 (a cell with one known child is known)."""
+    rows, cols = values.shape
+    coarse = np.zeros(((rows + 1) // 2, (cols + 1) // 2))
+    weight = np.zeros(coarse.shape)
+    for r in range(rows):
+        for c in range(cols):
+            if weights[r, c] > 0:
+                coarse[r // 2, c // 2] += weights[r, c] * values[r, c]
+                weight[r // 2, c // 2] += weights[r, c]
+    for r in range(coarse.shape[0]):
+        for c in range(coarse.shape[1]):
+            if weight[r, c] > 0:
+                coarse[r, c] /= weight[r, c]
+                weight[r, c] = min(weight[r, c], 1.0)
+    return coarse, weight
+
+
+@njit(cache=True)
+def _pushed(values: np.ndarray, weights: np.ndarray, coarse: np.ndarray) -> None:  # pragma: no cover - compiled
+    """A level back down the pyramid, in place: each cell blended with the (filled) ``coarse``
+    level read bilinearly at its centre, by its weight (a known cell, weight 1, kept as it is)."""
+    rows, cols = values.shape
+    top_r, top_c = coarse.shape[0] - 1, coarse.shape[1] - 1
+    for r in range(rows):
+        fy = min(max(r / 2.0 - 0.25, 0.0), float(top_r))  # the centre of fine cell r is at r / 2 - 0.25 in coarse cells
+        r0 = min(int(fy), max(top_r - 1, 0))
+        r1, ty = min(r0 + 1, top_r), fy - r0
+        for c in range(cols):
+            w = weights[r, c]
+            if w >= 1.0:
+                continue
+            fx = min(max(c / 2.0 - 0.25, 0.0), float(top_c))
+            c0 = min(int(fx), max(top_c - 1, 0))
+            c1, tx = min(c0 + 1, top_c), fx - c0
+            up = coarse[r0, c0] * (1 - tx) + coarse[r0, c1] * tx
+            down = coarse[r1, c0] * (1 - tx) + coarse[r1, c1] * tx
+            values[r, c] = w * values[r, c] + (1 - w) * (up * (1 - ty) + down * ty)
+
+
+def fill_everywhere(raster: np.ndarray) -> np.ndarray:
+    """A float64 copy of the (H, W) ``raster`` with every NaN cell filled by pull-push (see the
+    module's notes): known cells as they were, a gap smoothly from the cells around it. All NaN
+    stays all NaN."""
+    raster = np.asarray(raster, np.float64)
+    if raster.ndim != 2:
+        raise GigapointError(f"fill_everywhere takes an (H, W) raster, got shape {raster.shape}")
+    known = ~np.isnan(raster)
+    if known.all() or not known.any():
+        return raster.copy()
+    levels = [(np.where(known, raster, 0.0), known.astype(np.float64))]
+    while levels[-1][0].size > 1:
+        levels.append(_pulled(*levels[-1]))
+    for (values, weights), (coarse, _) in zip(levels[-2::-1], levels[:0:-1]):
+        _pushed(values, weights, coarse)
+    return levels[0][0]
