@@ -178,19 +178,53 @@ def _pushed(values: np.ndarray, weights: np.ndarray, coarse: np.ndarray) -> None
             values[r, c] = w * values[r, c] + (1 - w) * (up * (1 - ty) + down * ty)
 
 
-def fill_everywhere(raster: np.ndarray) -> np.ndarray:
-    """A float64 copy of the (H, W) ``raster`` with every NaN cell filled by pull-push (see the
-    module's notes): known cells as they were, a gap smoothly from the cells around it. All NaN
-    stays all NaN."""
-    raster = np.asarray(raster, np.float64)
-    if raster.ndim != 2:
-        raise GigapointError(f"fill_everywhere takes an (H, W) raster, got shape {raster.shape}")
-    known = ~np.isnan(raster)
-    if known.all() or not known.any():
-        return raster.copy()
+def _pull_push(raster: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """``raster`` (float64) with its cells not ``known`` filled by pull-push; some cell known."""
     levels = [(np.where(known, raster, 0.0), known.astype(np.float64))]
     while levels[-1][0].size > 1:
         levels.append(_pulled(*levels[-1]))
     for (values, weights), (coarse, _) in zip(levels[-2::-1], levels[:0:-1]):
         _pushed(values, weights, coarse)
     return levels[0][0]
+
+
+def _known_slopes(raster: np.ndarray, known: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
+    """(the rise per cell along ``axis``, where it is known): between the two known neighbours of
+    a cell (a central difference), or one known neighbour and the cell itself."""
+    ahead, behind = np.roll(raster, -1, axis), np.roll(raster, 1, axis)
+    has_ahead, has_behind = np.roll(known, -1, axis), np.roll(known, 1, axis)
+    edge = [slice(None)] * 2
+    edge[axis] = -1
+    has_ahead[tuple(edge)] = False  # (np.roll wraps around: the far edge is no neighbour)
+    edge[axis] = 0
+    has_behind[tuple(edge)] = False
+    ahead = np.where(has_ahead, ahead, raster)
+    behind = np.where(has_behind, behind, raster)
+    steps = has_ahead.astype(np.float64) + has_behind
+    slopes = np.where(known & (steps > 0), (ahead - behind) / np.maximum(steps, 1), 0.0)
+    return slopes, known & (steps > 0)
+
+
+def fill_everywhere(raster: np.ndarray) -> np.ndarray:
+    """A float64 copy of the (H, W) ``raster`` with every NaN cell filled by pull-push (see the
+    module's notes): known cells as they were, a gap smoothly from the cells around it. All NaN
+    stays all NaN.
+
+    First order: pull-push alone averages a gap's value from the cells around it as if they lay
+    at the gap's centre, and a hole in a slope comes back sagged (2 units in a 15 x 20 hole of a
+    slope 0.76 a cell). So the cells' positions and the known slopes are filled alongside, and
+    each filled value is moved from where its data lay to the cell along the filled slope: a
+    plane is kept exactly."""
+    raster = np.asarray(raster, np.float64)
+    if raster.ndim != 2:
+        raise GigapointError(f"fill_everywhere takes an (H, W) raster, got shape {raster.shape}")
+    known = ~np.isnan(raster)
+    if known.all() or not known.any():
+        return raster.copy()
+    rows, cols = np.indices(raster.shape, dtype=np.float64)
+    filled = _pull_push(raster, known)
+    for axis, at in ((0, rows), (1, cols)):
+        slopes, slope_known = _known_slopes(raster, known, axis)
+        if slope_known.any():
+            filled += _pull_push(slopes, slope_known) * (at - _pull_push(at, known))
+    return filled
