@@ -245,6 +245,7 @@ _LAZY = {
     "orthophoto": ("gigapoint.orthophoto", "orthophoto"),
     "Orthophoto": ("gigapoint.orthophoto", "Orthophoto"),
     "classify_noise": ("gigapoint.classify", "classify_noise"),
+    "height_above_ground": ("gigapoint.classify", "height_above_ground"),
 }
 
 
@@ -290,6 +291,7 @@ __all__ = [
     "demo_arrays",
     "estimate_normals",
     "from_arrays",
+    "height_above_ground",
     "open",
     "orthophoto",
     "render",

@@ -10,12 +10,12 @@ files' extent (a float64 a cell), never the points.
    into the lowest z of each ``cell``-sized cell. Noise (classes 7 and 18) is left out, and so
    are the first and intermediate returns of a pulse that has several: only a pulse's last
    return can reach the ground (PDAL's ``returns="last,only"``).
-2. On the raster: empty cells filled from the nearest cell; low outliers (a cell more than 5 x cell below an opening of the inverted
+2. On the raster: empty cells filled (render/raster_fill.py's ``fill_everywhere``); low outliers (a cell more than 5 x cell below an opening of the inverted
    surface, SMRF's first step) removed; then openings by diamonds of radius 1, 2, ... window /
    cell cells, each of the last: a cell that the opening lowers by more than slope x radius x
    cell is an object (a building, a tree). The cells neither empty, low nor object make the
-   provisional DEM, interpolated linearly over the others (render/raster_fill.py's TIN;
-   nearest outside the data's hull).
+   provisional DEM, filled over the others (``fill_everywhere``: a first-order pull-push, linear
+   over a hole in a slope; the TIN of render's ``--fill-nodata`` took 50 s of a million cells).
 3. Pass 2 streams the points again and writes them (io/write.py's ``write_points``, as
    ``convert -o`` does): class 2 where |z - DEM(x, y)| <= threshold + scalar x the DEM's slope
    (bilinear DEM, the slope of the point's cell), else 1. Noise keeps its class (7, 18: a
@@ -67,6 +67,8 @@ class GroundResult:
     seconds: float
     #: of ``noise``, the points found isolated and classified 7 (``noise=...``)
     isolated: int = 0
+    #: (lowest, highest) height above ground written (``heights``), else None
+    heights: tuple[float, float] | None = None
 
     @property
     def points_per_second(self) -> float:
@@ -207,10 +209,9 @@ def _objects(surface: np.ndarray, cell: float, slope: float, window: float) -> n
 
 def ground_model(lowest: np.ndarray, cell: float, slope: float, window: float) -> np.ndarray:
     """The provisional DEM of a raster of lowest z (NaN: no point): low outliers and objects
-    left out, then every cell interpolated from the rest (``_filled``). The surfaces the
-    openings run on are filled from the nearest cell, as PDAL fills them from its nearest ones
-    (the TIN took 12 s a time on a million cells, 40 % of them empty; an opening only needs a
-    value in each)."""
+    left out, then every cell filled from the rest (render/raster_fill.py's ``fill_everywhere``,
+    as are the surfaces the openings run on: 0.4 s a fill of a million cells, where the TIN
+    took 12-50 s)."""
     surface = fill_everywhere(lowest)
     low = _objects(-surface, cell, LOW_OUTLIER_SLOPE, 1.0)  # (a cell pitted below its neighbours: a multipath return)
     surface = fill_everywhere(np.where(low | np.isnan(lowest), np.nan, lowest))
@@ -222,7 +223,7 @@ def ground_model(lowest: np.ndarray, cell: float, slope: float, window: float) -
 
 
 def classify_ground(source, out, *, cell=None, slope=None, window=None, threshold=None, scalar=None, overwrite: bool = False,
-                    chunk_size: int | None = None, progress: bool = False, noise: dict | bool | None = None) -> GroundResult:  # fmt: skip
+                    chunk_size: int | None = None, progress: bool = False, noise: dict | bool | None = None, heights: bool = False, normalize: bool = False) -> GroundResult:  # fmt: skip
     """Classify the points of ``source`` (files, folders or patterns, as ``gp.open`` takes them)
     as ground (2) or not (1) by SMRF, and write them all to ``out`` (.las, .laz or .ply), every
     other attribute as read; noise (7, 18) keeps its class. Two passes over the files, memory
@@ -230,12 +231,12 @@ def classify_ground(source, out, *, cell=None, slope=None, window=None, threshol
     defaults converted from metres (``ground_parameters``). ``out`` appears only once whole; an
     existing one is replaced only with ``overwrite``. ``noise``: classify_noise's parameters
     (a dict; True: its defaults) to classify isolated points 7 first, in a pass of its own, and
-    keep them out of the ground. Needs scipy (gigapoint[quality])."""
+    keep them out of the ground. ``heights``: each point's height above
+    the ground model just made written too (``height_above_ground``'s attribute; ``normalize``:
+    as its z as well)."""
     from .lod.convert.to_file import PointFiles
     from .lod.progress import NullProgress, RichProgress
-    from .render.raster_fill import require_scipy
 
-    require_scipy("classify_ground")
     t0 = time.perf_counter()
     out = Path(out)
     if out.suffix.lower() not in (".las", ".laz", ".ply"):
@@ -256,11 +257,13 @@ def classify_ground(source, out, *, cell=None, slope=None, window=None, threshol
         tolerance = params["threshold"] + params["scalar"] * np.hypot(rise_x, rise_y)[1:-1, 1:-1]
         counts = {GROUND: 0, NON_GROUND: 0, "noise": 0}
         tally: dict = {}
+        span = _HeightSpan()
 
         def classified():
             shown.phase("classify", None if None in inputs.counts else sum(inputs.counts))
             for _, chunk in inputs.valid_chunks(None, shown, tally):
-                yield _classified(chunk, grid, dem, tolerance, counts)
+                chunk = _classified(chunk, grid, dem, tolerance, counts)
+                yield _with_heights(chunk, grid, dem, normalize, span) if heights or normalize else chunk
 
         written = write_points(out, classified, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None)
     finally:
@@ -268,21 +271,26 @@ def classify_ground(source, out, *, cell=None, slope=None, window=None, threshol
     if noise_params is not None:
         params = {**params, **{k: v for k, v in noise_params.items() if k != "units"}}
     isolated = inputs.counts_found["noise"] if noise_params is not None else 0
-    return GroundResult(out, written, counts[GROUND], counts[NON_GROUND], counts["noise"], tally["skipped"], params, time.perf_counter() - t0, isolated)
+    return GroundResult(out, written, counts[GROUND], counts[NON_GROUND], counts["noise"], tally["skipped"], params, time.perf_counter() - t0, isolated, span.range())
+
+
+def _files_grid(inputs, cell: float, progress) -> _Grid:
+    """The grid over the files' extent: their headers' bounds, or a pass of its own where one tells none."""
+    bounds = inputs.headers_bounds()
+    if bounds is None:
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for _, chunk in inputs.valid_chunks(None, progress, {}):
+            lo, hi = np.minimum(lo, chunk.xyz.min(axis=0)), np.maximum(hi, chunk.xyz.max(axis=0))
+        bounds = (lo, hi)
+    return _Grid(bounds[0], bounds[1], cell, inputs.label)
 
 
 def _lowest_raster(inputs, cell: float, progress) -> tuple[_Grid, np.ndarray]:
     """Pass 1: the grid over the files' extent (their headers' bounds; a pass of its own where
     one tells none) and the lowest z of the ground candidates in each of its cells (NaN: none).
     Fewer than 3 cells with points is a one-line InputError: no surface to make."""
-    bounds = inputs.headers_bounds()
+    grid = _files_grid(inputs, cell, progress)
     tally: dict = {}
-    if bounds is None:
-        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-        for _, chunk in inputs.valid_chunks(None, progress, tally):
-            lo, hi = np.minimum(lo, chunk.xyz.min(axis=0)), np.maximum(hi, chunk.xyz.max(axis=0))
-        bounds = (lo, hi)
-    grid = _Grid(bounds[0], bounds[1], cell, inputs.label)
     lowest = np.full(grid.shape, np.inf)
     progress.phase("raster", None if None in inputs.counts else sum(inputs.counts))
     for _, chunk in inputs.valid_chunks(None, progress, tally):
@@ -472,3 +480,124 @@ class _NoiseFound:
         self.counts_found = {"noise": 0, "kept": 0}
         for f, chunk in self.inputs.valid_chunks(keep, progress, tally):
             yield f, _noise_classified(chunk, self.cells, self.counts_found)
+
+
+# --- Height above ground (``gigapoint classify --height-above-ground``, ``gp.height_above_ground``):
+# PDAL's filters.hag_dem, LAStools' lasheight. The ground model is a raster of the files' extent,
+# as SMRF's: the mean z of the class-2 points in each cell (pass 1), its empty cells (buildings,
+# water) filled by ``fill_everywhere``; pass 2 writes each point's z minus the model read
+# bilinearly at its (x, y). With ``classify_ground(heights=True)`` the model is SMRF's, just made.
+
+#: the extra-bytes dimension the heights are written to (PDAL's name for them)
+HEIGHT_ATTRIBUTE = "HeightAboveGround"
+
+
+@dataclass(frozen=True)
+class HeightResult:
+    """What ``height_above_ground`` wrote: ``points`` in ``out`` with their heights above the
+    ground model, the ``heights`` (lowest, highest) among them; ``ground`` the class-2 points the
+    model was made of; ``skipped`` invalid points not written; ``params`` the cell and units;
+    ``seconds`` taken."""
+
+    out: Path
+    points: int
+    ground: int
+    heights: tuple[float, float]
+    skipped: int
+    params: dict
+    seconds: float
+
+    @property
+    def points_per_second(self) -> float:
+        return self.points / self.seconds if self.seconds > 0 else 0.0
+
+
+class _HeightSpan:
+    """The lowest and highest height above ground written so far."""
+
+    def __init__(self):
+        self.lowest, self.highest = math.inf, -math.inf
+
+    def add(self, heights: np.ndarray) -> None:
+        if heights.size:
+            self.lowest, self.highest = min(self.lowest, float(heights.min())), max(self.highest, float(heights.max()))
+
+    def range(self) -> tuple[float, float] | None:
+        return (self.lowest, self.highest) if self.lowest <= self.highest else None
+
+
+def _with_heights(chunk, grid: _Grid, dem: np.ndarray, normalize: bool, span: _HeightSpan):
+    """``chunk`` with its heights above ``dem`` as the float32 ``HeightAboveGround`` attribute
+    (``normalize``: as its z too, the z it had dropped)."""
+    from .core.chunk import PointChunk
+
+    heights = chunk.xyz[:, 2] - grid.bilinear(dem, chunk.xyz)
+    span.add(heights)
+    attributes = dict(chunk.attributes)
+    attributes[HEIGHT_ATTRIBUTE] = heights.astype(np.float32)
+    xyz = np.column_stack([chunk.xyz[:, :2], heights]) if normalize else chunk.xyz
+    return PointChunk(xyz, chunk.rgba, attributes, scale=chunk.scale, color_bits=chunk.color_bits)
+
+
+@njit(cache=True)
+def _sum_into(sums, counts, rows, cols, z):  # pragma: no cover - compiled
+    for i in range(z.size):
+        sums[rows[i], cols[i]] += z[i]
+        counts[rows[i], cols[i]] += 1
+
+
+def _mean_ground_raster(inputs, grid: _Grid, progress) -> tuple[np.ndarray, int]:
+    """Pass 1 of ``height_above_ground``: (the mean z of the class-2 points in each cell, NaN
+    where none; how many there were). None at all is a one-line InputError."""
+    sums, counts = np.zeros(grid.shape), np.zeros(grid.shape, np.int64)
+    progress.phase("ground", None if None in inputs.counts else sum(inputs.counts))
+    for _, chunk in inputs.valid_chunks(None, progress, {}):
+        classes = chunk.attributes.get("classification")
+        if classes is None:
+            continue
+        xyz = chunk.xyz[classes == GROUND]
+        rows, cols = grid.cells_of(xyz)
+        _sum_into(sums, counts, rows, cols, np.ascontiguousarray(xyz[:, 2]))
+    ground = int(counts.sum())
+    if not ground:
+        raise InputError(f"{inputs.label}: no ground point (class 2) to measure heights from: classify the ground in the same run (--ground, heights=True)")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return sums / counts, ground
+
+
+def height_above_ground(source, out, *, cell=None, normalize: bool = False, overwrite: bool = False, chunk_size: int | None = None,
+                        progress: bool = False) -> HeightResult:  # fmt: skip
+    """Write the points of ``source`` (files, folders or patterns) to ``out`` (.las, .laz or
+    .ply) with each one's height above the ground as the float32 attribute ``HeightAboveGround``
+    (``normalize``: as its z too, for a canopy height model), every other attribute as read. The
+    ground model is made of the files' class-2 points, ``cell`` a side (None: 1 m in the
+    cloud's units, as ``classify_ground``'s); a cloud with no class 2 is a one-line InputError
+    (``classify_ground(..., heights=True)`` classifies and measures in one run). Two passes,
+    memory bounded by the raster."""
+    from .io.write import check_point_file_output, write_points
+    from .lod.convert.to_file import PointFiles
+    from .lod.progress import NullProgress, RichProgress
+
+    t0 = time.perf_counter()
+    out = Path(out)
+    if out.suffix.lower() not in (".las", ".laz", ".ply"):
+        raise InputError(f"{out}: height_above_ground writes a .las, .laz or .ply file")
+    check_point_file_output(out, overwrite)
+    inputs = PointFiles(source, out, chunk_size, ply=out.suffix.lower() == ".ply")
+    params = {k: v for k, v in ground_parameters(inputs.files, cell=cell).items() if k in ("cell", "units")}
+    shown = RichProgress() if progress else NullProgress()
+    span, tally = _HeightSpan(), {}
+    try:
+        grid = _files_grid(inputs, params["cell"], shown)
+        mean, ground = _mean_ground_raster(inputs, grid, shown)
+        dem = fill_everywhere(mean)
+
+        def measured():
+            shown.phase("heights", None if None in inputs.counts else sum(inputs.counts))
+            for _, chunk in inputs.valid_chunks(None, shown, tally):
+                yield _with_heights(chunk, grid, dem, normalize, span)
+
+        written = write_points(out, measured, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None)
+    finally:
+        shown.close()
+    return HeightResult(out, written, ground, span.range(), tally["skipped"], params, time.perf_counter() - t0)

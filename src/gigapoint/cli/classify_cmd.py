@@ -30,23 +30,32 @@ def classify(
     step: Annotated[float | None, typer.Option("--step", help=f"--noise's cells' width (x and y), {_UNITS}. Default 4 m.")] = None,
     step_z: Annotated[float | None, typer.Option("--step-z", help=f"--noise's cells' height, {_UNITS}. Default as long as --step.")] = None,
     isolated: Annotated[int | None, typer.Option("--isolated", help="--noise: a point with at most this many others in the 3 x 3 x 3 cells around it is noise. Default 5.")] = None,
+    height_above_ground: Annotated[bool, typer.Option("--height-above-ground", help="Write each point's height above the ground as the float attribute HeightAboveGround (PDAL's hag_dem, lasheight): the ground model of the file's class 2 points, or with --ground of the ground just found.")] = False,
+    normalize: Annotated[bool, typer.Option("--normalize", help="With --height-above-ground (implied): z replaced by the height above ground, for a canopy height model (render --gsd of the output).")] = False,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing OUTPUT.")] = False,
     recursive: RecursiveOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
-    """Classify point clouds (--ground: ground by the Simple Morphological Filter, as PDAL's smrf and lasground; --noise: isolated points, as lasnoise), read a chunk at a time, into one point file."""
+    """Classify point clouds (--ground: ground by the Simple Morphological Filter, as PDAL's smrf and lasground; --noise: isolated points, as lasnoise; --height-above-ground: each point's height above the ground), read a chunk at a time, into one point file."""
     from ..classify import classify_ground
 
-    if not ground and not noise:
-        raise GigapointError("classify: say what to classify: --ground, --noise or both")
+    heights = height_above_ground or normalize
+    if not (ground or noise or heights):
+        raise GigapointError("classify: say what to classify: --ground, --noise, --height-above-ground, or several")
+    if noise and heights and not ground:  # (heights alone are measured from the file's own class 2, which --noise does not make)
+        raise GigapointError("classify: --noise and --height-above-ground go together only with --ground; or run them one after the other")
     noise_params = {"step": step, "step_z": step_z, "isolated": isolated}
-    if not ground:
+    if noise and not ground:
         _classify_noise(inputs, output, noise_params, overwrite, recursive, quiet)
         return
     params = {"cell": cell, "slope": slope, "window": window, "threshold": threshold, "scalar": scalar}
+    shown = not quiet and sys.stderr.isatty()
+    if not ground:
+        _heights_only(subfolders_read(inputs, recursive), output, params, normalize, overwrite, shown)
+        return
     try:
-        result = classify_ground(subfolders_read(inputs, recursive), output, **params, overwrite=overwrite, progress=not quiet and sys.stderr.isatty(),
-                                 noise=noise_params if noise else None)  # fmt: skip
+        result = classify_ground(subfolders_read(inputs, recursive), output, **params, overwrite=overwrite, progress=shown,
+                                 noise=noise_params if noise else None, heights=heights, normalize=normalize)  # fmt: skip
     except InputError as exc:  # classify_ground: cell must be ... said as the option
         message = _noise_options_named(str(exc))
         for name in params:
@@ -60,7 +69,7 @@ def classify(
         kept = f", {result.noise - result.isolated:,} noise kept" if result.noise > result.isolated else ""
         noise = f", {result.isolated:,} isolated found noise (7; step {p['step']:.4g} x {p['step_z']:.4g}, isolated {p['isolated']}){kept}"
     print(
-        f"{output}: {result.points:,} points, {result.ground:,} ground (2), {result.non_ground:,} not (1){noise}{skipped}; "
+        f"{output}: {result.points:,} points, {result.ground:,} ground (2), {result.non_ground:,} not (1){noise}{_heights_told(result.heights, units, normalize)}{skipped}; "
         f"cell {p['cell']:.4g} {units}, slope {p['slope']:g}, window {p['window']:.4g}, threshold {p['threshold']:.4g}, scalar {p['scalar']:.4g}; "
         f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s"
     )
@@ -88,5 +97,33 @@ def _classify_noise(inputs, output: Path, params: dict, overwrite: bool, recursi
     print(
         f"{output}: {result.points:,} points, {result.noise:,} isolated found noise (7){kept}{skipped}; "
         f"step {p['step']:.4g} x {p['step_z']:.4g} {p['units']}, isolated {p['isolated']}; {result.cells:,} cells in {result.table_bytes / 2**20:.1f} MiB; "
+        f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s"
+    )
+
+
+def _heights_told(heights, units: str, normalize: bool) -> str:
+    """The output line's words for the heights above ground written (None: none)."""
+    if heights is None:
+        return ""
+    return f", heights above ground {heights[0]:.4g} to {heights[1]:.4g} {units} in HeightAboveGround{' and z' if normalize else ''}"
+
+
+def _heights_only(sources, output: Path, params: dict, normalize: bool, overwrite: bool, progress: bool) -> None:
+    """--height-above-ground without --ground: from the class-2 points the files have."""
+    from ..classify import height_above_ground
+
+    smrf_only = [f"--{name}" for name, value in params.items() if value is not None and name != "cell"]
+    if smrf_only:
+        raise GigapointError(f"classify: {', '.join(smrf_only)} {'is' if len(smrf_only) == 1 else 'are'} for the ground classification: give --ground too")
+    try:
+        result = height_above_ground(sources, output, cell=params["cell"], normalize=normalize, overwrite=overwrite, progress=progress)
+    except InputError as exc:
+        message = str(exc).replace("classify_ground: cell ", "classify: --cell ").replace("(--ground, heights=True)", "(--ground)")
+        raise type(exc)(message.replace("overwrite=True", "--overwrite").replace("height_above_ground: ", "classify: ")) from None
+    p = result.params
+    skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
+    print(
+        f"{output}: {result.points:,} points{_heights_told(result.heights, p['units'], normalize)}; "
+        f"ground model of {result.ground:,} class-2 points, cell {p['cell']:.4g} {p['units']}{skipped}; "
         f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s"
     )
