@@ -18,15 +18,16 @@ empty pixel within ``max_distance`` of a drawn one, inside the footprint, the ne
 classification's DEMs, classify.py): every NaN cell, inside the hull or not, by pull-push (a
 mip-map interpolation: the known cells averaged down a pyramid of halved rasters with their
 weights, then each level's empty cells blended from the bilinearly read coarser one on the way
-back up). It is O(cells) and in numba: a million-cell raster 40 % empty in ~0.05 s where the TIN
-takes ~50 s, smooth over a large gap and exact on the known cells, but not linear: a plane's
-hole comes back slightly sagged (``fill_heights`` keeps the plane, so render keeps the TIN).
+back up; first order: a plane kept). It is O(cells) and in numba (raster_fill_kernels.py): a
+million-cell raster 40 % empty in ~0.4 s where the TIN took 12-50 s of classify's, smooth over a
+large gap and exact on the known cells. It is not linear interpolation: over a curved hole it
+bends near the TIN's values, not on them, and it fills outside the data's hull too, so render's
+``--fill-nodata`` keeps ``fill_heights``, whose tests pin the TIN's values.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from ..errors import GigapointError, check_whole
 
@@ -136,55 +137,15 @@ def fill_map(image: np.ndarray, empty: np.ndarray, heights: np.ndarray | None, m
     return image, heights
 
 
-@njit(cache=True)
-def _pulled(values: np.ndarray, weights: np.ndarray):  # pragma: no cover - compiled
-    """The next level up the pyramid: each coarse cell the weighted mean of its (up to) 2 x 2
-    cells, its weight their weights' sum capped at 1 (a cell with one known child is known)."""
-    rows, cols = values.shape
-    coarse = np.zeros(((rows + 1) // 2, (cols + 1) // 2))
-    weight = np.zeros(coarse.shape)
-    for r in range(rows):
-        for c in range(cols):
-            if weights[r, c] > 0:
-                coarse[r // 2, c // 2] += weights[r, c] * values[r, c]
-                weight[r // 2, c // 2] += weights[r, c]
-    for r in range(coarse.shape[0]):
-        for c in range(coarse.shape[1]):
-            if weight[r, c] > 0:
-                coarse[r, c] /= weight[r, c]
-                weight[r, c] = min(weight[r, c], 1.0)
-    return coarse, weight
-
-
-@njit(cache=True)
-def _pushed(values: np.ndarray, weights: np.ndarray, coarse: np.ndarray) -> None:  # pragma: no cover - compiled
-    """A level back down the pyramid, in place: each cell blended with the (filled) ``coarse``
-    level read bilinearly at its centre, by its weight (a known cell, weight 1, kept as it is)."""
-    rows, cols = values.shape
-    top_r, top_c = coarse.shape[0] - 1, coarse.shape[1] - 1
-    for r in range(rows):
-        fy = min(max(r / 2.0 - 0.25, 0.0), float(top_r))  # the centre of fine cell r is at r / 2 - 0.25 in coarse cells
-        r0 = min(int(fy), max(top_r - 1, 0))
-        r1, ty = min(r0 + 1, top_r), fy - r0
-        for c in range(cols):
-            w = weights[r, c]
-            if w >= 1.0:
-                continue
-            fx = min(max(c / 2.0 - 0.25, 0.0), float(top_c))
-            c0 = min(int(fx), max(top_c - 1, 0))
-            c1, tx = min(c0 + 1, top_c), fx - c0
-            up = coarse[r0, c0] * (1 - tx) + coarse[r0, c1] * tx
-            down = coarse[r1, c0] * (1 - tx) + coarse[r1, c1] * tx
-            values[r, c] = w * values[r, c] + (1 - w) * (up * (1 - ty) + down * ty)
-
-
 def _pull_push(raster: np.ndarray, known: np.ndarray) -> np.ndarray:
     """``raster`` (float64) with its cells not ``known`` filled by pull-push; some cell known."""
+    from .raster_fill_kernels import pulled, pushed  # (numba: not at import, as the CLI's --help needs none)
+
     levels = [(np.where(known, raster, 0.0), known.astype(np.float64))]
     while levels[-1][0].size > 1:
-        levels.append(_pulled(*levels[-1]))
+        levels.append(pulled(*levels[-1]))
     for (values, weights), (coarse, _) in zip(levels[-2::-1], levels[:0:-1]):
-        _pushed(values, weights, coarse)
+        pushed(values, weights, coarse)
     return levels[0][0]
 
 
