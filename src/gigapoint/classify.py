@@ -10,8 +10,9 @@ files' extent (a float64 a cell), never the points.
    into the lowest z of each ``cell``-sized cell. Noise (classes 7 and 18) is left out, and so
    are the first and intermediate returns of a pulse that has several: only a pulse's last
    return can reach the ground (PDAL's ``returns="last,only"``).
-2. On the raster: empty cells filled (render/raster_fill.py's ``fill_everywhere``); low outliers (a cell more than 5 x cell below an opening of the inverted
-   surface, SMRF's first step) removed; then openings by diamonds of radius 1, 2, ... window /
+2. On the raster: empty cells filled (render/raster_fill.py's ``fill_everywhere``); low
+   outliers (a cell more than 5 x cell below an opening of the inverted surface, SMRF's first
+   step) removed; then openings by diamonds of radius 1, 2, ... window /
    cell cells, each of the last: a cell that the opening lowers by more than slope x radius x
    cell is an object (a building, a tree). The cells neither empty, low nor object make the
    provisional DEM, filled over the others (``fill_everywhere``: a first-order pull-push, linear
@@ -21,6 +22,8 @@ files' extent (a float64 a cell), never the points.
    (bilinear DEM, the slope of the point's cell), else 1. Noise keeps its class (7, 18: a
    user who cleaned a cloud expects it kept), first and intermediate returns become 1; every
    other attribute is written as read.
+
+``height_above_ground`` (at the end) measures each point against such a model: see its notes.
 
 Lengths are in the cloud's units (io/crs.py): the defaults (cell 1 m, window 18 m, threshold
 0.5 m, scalar 1.25 m per unit of slope) are converted for a cloud in feet; ``slope`` is rise over run.
