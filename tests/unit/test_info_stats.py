@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gigapoint.errors import InputError
+from gigapoint.errors import EmptyCloudError, InputError
 from gigapoint.io import point_stats
 from gigapoint.io.stats import class_name
 
@@ -169,7 +169,9 @@ def test_a_truncated_file_is_a_one_line_error(cli, tmp_path):
     assert rc != 0 and out == "" and len(err.strip().splitlines()) == 1 and err.startswith(f"error: {path}: truncated LAS file")
 
 
-def test_the_progress_bar_counts_every_point_read(cli, autzen_path, monkeypatch):
+@pytest.mark.parametrize("filtered", [[], ["--classes", "2"]])
+def test_the_progress_bar_counts_every_point_read(cli, autzen_path, monkeypatch, filtered):
+    """Those a filter keeps too: the bar's total is the header's count, of every point read."""
     from gigapoint.cli import info_cmd
 
     seen = []
@@ -179,7 +181,7 @@ def test_the_progress_bar_counts_every_point_read(cli, autzen_path, monkeypatch)
         return info_cmd.contextlib.nullcontext(seen.append)
 
     monkeypatch.setattr(info_cmd, "progress_bar", bar)
-    rc, out, err = cli("info", "--stats", autzen_path)
+    rc, out, err = cli("info", "--stats", *filtered, autzen_path)
     assert rc == 0 and seen[0] == 110_000 and seen[-1] == 110_000
 
 
@@ -215,3 +217,118 @@ def test_stats_read_chunks_of_the_stream_size_unless_told(autzen_path, monkeypat
     assert STREAM_CHUNK_SIZE < DEFAULT_CHUNK_SIZE
     assert asked == [given or STREAM_CHUNK_SIZE]
     assert sizes == ([110_000] if given is None else [30_000] * 3 + [20_000]) and stats.result()["point_count"] == 110_000
+
+
+def in_polygon(xy: np.ndarray, ring: list) -> np.ndarray:
+    """Brute force, point by point against every edge: even-odd crossings of a ray towards +x."""
+    x, y = xy[:, 0], xy[:, 1]
+    inside = np.zeros(len(xy), bool)
+    for (x0, y0), (x1, y1) in zip(ring, ring[1:] + ring[:1]):
+        crosses = (y0 > y) != (y1 > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            at = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+        inside ^= crosses & (x < at)
+    return inside
+
+
+#: a concave site boundary across autzen (feet), its corners off the points' 0.01 grid: no point on an edge
+SITE = [(636150.005, 849000.003), (636900.007, 848980.001), (636700.003, 849250.009), (636450.001, 849150.007), (636300.009, 849420.005)]
+
+
+def test_info_stats_of_class_2_are_laspys_ground_points(cli, autzen_path):
+    """``--classes 2``: the ground's count and its true bounds (its height range), the filter and
+    the points read and kept said in the text and in the JSON."""
+    las = laspy.read(autzen_path)
+    ground = np.asarray(las.classification) == 2
+    xyz = np.column_stack([las.x, las.y, las.z])[ground]
+    rc, out, err = cli("info", "--stats", "--json", "--classes", "2", autzen_path)
+    assert rc == 0, err
+    s = json.loads(out)
+    assert s["point_count"] == int(ground.sum()) == 26_107
+    assert s["filter"] == {"applied": "classes 2", "points_read": 110_000, "points_kept": 26_107}
+    assert s["bounds"] == {"min": xyz.min(axis=0).tolist(), "max": xyz.max(axis=0).tolist()}
+    assert s["header_bounds"] is None and s["header_bounds_differ"] == []  # (the header's are of every point: not compared)
+    assert [(c["class"], c["count"]) for c in s["classification"]] == [(2, 26_107)]
+    rc, out, err = cli("info", "--stats", "--classes", "2", autzen_path)
+    assert rc == 0, err
+    lines = out.splitlines()
+    assert lines[1:4] == [
+        "  filter:      classes 2: 26,107 of 110,000 points read kept",
+        "  points:      26,107, 0 of them invalid (NaN, inf or beyond ±1e+12): skipped",
+        f"  bounds min:  {xyz[:, 0].min():.2f}, {xyz[:, 1].min():.2f}, {xyz[:, 2].min():.2f} (the points')",
+    ]
+    assert point_stats(autzen_path, classes=2) == {**s, "path": str(autzen_path)}  # (Python's the same)
+    rc, out, err = cli("info", "--stats", "--json", autzen_path)
+    assert rc == 0 and json.loads(out)["filter"] is None
+
+
+def test_info_stats_inside_a_site_boundary_count_the_points_in_it(cli, autzen_path, tmp_path):
+    """``--clip-polygon site.geojson`` (and ``--classes 2``: the site's ground): the counts and
+    bounds of a brute-force point-in-polygon test."""
+    site = tmp_path / "site.geojson"
+    ring = [list(p) for p in SITE]
+    site.write_text(json.dumps({"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": [[*ring, ring[0]]]}}))
+    las = laspy.read(autzen_path)
+    xyz = np.column_stack([las.x, las.y, las.z])
+    inside = in_polygon(xyz, SITE)
+    ground = inside & (np.asarray(las.classification) == 2)
+    assert 0 < ground.sum() < inside.sum() < len(xyz)
+    for extra, kept in (([], inside), (["--classes", "2"], ground)):
+        rc, out, err = cli("info", "--stats", "--json", "--clip-polygon", site, *extra, autzen_path)
+        assert rc == 0, err
+        s = json.loads(out)
+        assert s["point_count"] == s["filter"]["points_kept"] == int(kept.sum()) and s["filter"]["points_read"] == 110_000
+        assert s["bounds"] == {"min": xyz[kept].min(axis=0).tolist(), "max": xyz[kept].max(axis=0).tolist()}
+        described = f"clip polygon {site} (5 vertices)"
+        assert s["filter"]["applied"] == ("classes 2; " + described if extra else described)
+
+
+def test_a_filter_without_stats_is_a_one_line_error(cli, autzen_path):
+    """Without --stats info reads headers only: a filter would be ignored, without a word."""
+    rc, out, err = cli("info", "--classes", "2", "--clip", "0,0,1,1", autzen_path)
+    assert rc == 1 and out == ""
+    assert err.strip().splitlines() == ["error: --classes and --clip: only with --stats (info reads the headers only; --stats reads the points, those the filter keeps)"]
+
+
+def test_a_filter_that_keeps_nothing_is_its_own_error(cli, autzen_path, tmp_path):
+    """No stats of no point: the filter's one-line error (a file, a folder summed; python's too)."""
+    rc, out, err = cli("info", "--stats", "--classes", "9", autzen_path)
+    assert rc == 1 and out == ""
+    assert err.strip().splitlines() == [f"error: {autzen_path}: no point passes the filter (classes 9): 110,000 points read"]
+    with pytest.raises(EmptyCloudError, match=r"no point passes the filter \(clip 0, 0, 1, 1\): 110,000 points read$"):
+        point_stats(autzen_path, clip=(0, 0, 1, 1))
+    write_tile(tmp_path / "a.las", 300, 1, [2, 6])
+    write_tile(tmp_path / "b.las", 200, 2, [2, 9, 19])
+    rc, out, err = cli("info", "--stats", "--classes", "7", tmp_path)
+    assert rc == 1 and out == ""
+    assert err.strip().splitlines() == [f"error: {tmp_path}: no point passes the filter (classes 7): 500 points read"]
+
+
+def test_a_folders_tiles_are_filtered_each_and_summed(cli, tmp_path):
+    """Summed: the tiles' kept points and points read; ``--each``: a tile none of whose points
+    is kept shows its 0, the others theirs (no error: the filter kept points)."""
+    a = write_tile(tmp_path / "a.las", 300, 1, [2, 6])
+    b = write_tile(tmp_path / "b.las", 200, 2, [2, 9, 19])
+    nine = int(np.sum(np.asarray(laspy.read(b).classification) == 9))
+    rc, out, err = cli("info", "--stats", "--json", "--classes", "9", tmp_path)
+    assert rc == 0, err
+    s = json.loads(out)
+    assert (s["files"], s["point_count"], s["filter"]) == (2, nine, {"applied": "classes 9", "points_read": 500, "points_kept": nine})
+    rc, out, err = cli("info", "--stats", "--json", "--each", "--classes", "9", tmp_path)
+    assert rc == 0, err
+    each = [json.loads(line) for line in out.splitlines()]
+    assert [(e["path"], e["point_count"], e["filter"]["points_read"], e["bounds"]) for e in each] == [(str(a), 0, 300, None), (str(b), nine, 200, each[1]["bounds"])]
+    rc, out, err = cli("info", "--stats", "--each", "--classes", "7", tmp_path)  # (none kept anywhere: each shown, then the error)
+    assert rc == 1 and out.count("  filter:      classes 7: 0 of ") == 2
+    assert err.strip().splitlines() == [f"error: {tmp_path}: no point passes the filter (classes 7): 500 points read"]  # (the files as given)
+
+
+def test_info_stats_of_an_octree_is_refused_with_a_filter_too(cli, tmp_path):
+    """An octree: --stats (filtered or not) reads point files, in one line (its nodes are read for
+    drawing; the files it was converted from hold every point)."""
+    import gigapoint as gp
+
+    gp.convert([write_tile(tmp_path / "a.las", 300, 1, [2, 6])], tmp_path / "octree")
+    rc, out, err = cli("info", "--stats", "--classes", "2", tmp_path / "octree")
+    assert rc == 1 and out == ""
+    assert err.strip().splitlines() == [f"error: {tmp_path / 'octree'}: an octree; --stats reads point files (those it was converted from)"]

@@ -1,5 +1,6 @@
 """`gigapoint info FILE...`: what point cloud files hold (format, points, bounds, attributes, CRS);
-``--stats``: what their points hold, every point read (io/stats.py)."""
+``--stats``: what their points hold, every point read (io/stats.py), or those the read filters keep
+(``--classes``, ``--clip-polygon``, ...: what is inside a site boundary, the ground's heights)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,18 @@ import typer
 
 from ..errors import GigapointError, InputError
 from .app import app
-from .cloud_opts import ChunkedOption, ColorsOption, RecursiveOption, cloud_options, option_names
+from .cloud_opts import (
+    ChunkedOption,
+    ClassesOption,
+    ClipOption,
+    ClipPolygonOption,
+    ColorsOption,
+    DropClassesOption,
+    RecursiveOption,
+    cloud_options,
+    filter_options,
+    option_names,
+)
 from .progress import progress_bar
 
 #: a folder of more files than this is shown as one block (a city's 1 500 tiles were 21 000 lines)
@@ -32,15 +44,36 @@ def info(
     memory: bool = typer.Option(False, "--memory", help="Also load the points and print the bytes a point each component holds in memory."),
     colors: ColorsOption = "auto",
     chunked: ChunkedOption = None,
+    classes: ClassesOption = None,
+    drop_classes: DropClassesOption = None,
+    clip: ClipOption = None,
+    clip_polygon: ClipPolygonOption = None,
 ) -> None:
     """Show format, point count, bounds, attributes, LAS version/scale/offset and CRS of files;
-    with --stats, statistics of their points (read once, in bounded memory)."""
+    with --stats, statistics of their points (read once, in bounded memory), or of those the
+    filters (--classes, --drop-classes, --clip, --clip-polygon) keep."""
     options = cloud_options(colors, chunked)
+    given = {"--classes": classes, "--drop-classes": drop_classes, "--clip": clip, "--clip-polygon": clip_polygon}
+    filters = [name for name, value in given.items() if value is not None]
+    if filters and not stats:  # without --stats no point is read: a filter would do nothing
+        raise GigapointError(f"{' and '.join(filters)}: only with --stats (info reads the headers only; --stats reads the points, those the filter keeps)")
+    point_filter = filter_options(classes, drop_classes, clip, "info", clip_polygon)  # its errors name the options, before anything is read
     if stats and memory:
         raise GigapointError("--stats and --memory: one at a time (--stats reads the points a chunk at a time, holding none)")
     if options and not memory:  # without --memory nothing is loaded: the option would do nothing
         raise GigapointError(f"{option_names(options)}: only with --memory (how the loaded points are held)")
-    from ..io import PointStats, expand_paths, file_info, file_stats, folder_info, format_info, format_stats, pattern_matches, shown_url
+    from ..io import (
+        PointStats,
+        expand_paths,
+        file_info,
+        file_stats,
+        files_label,
+        folder_info,
+        format_info,
+        format_stats,
+        pattern_matches,
+        shown_url,
+    )
     from ..lod import is_lod_source, octree_info
     from ..lod.kinds import work_dir
     from ..lod.octree_dir import RESUME_HINT, OctreeDir
@@ -81,7 +114,7 @@ def info(
                     raise missing
                 if stats and octree:
                     raise GigapointError(f"{shown_url(path)}: an octree; --stats reads point files (those it was converted from)")
-                data = file_stats(path, on_chunk=read_points) if stats else octree_info(path) if octree else file_info(path)
+                data = file_stats(path, on_chunk=read_points, point_filter=point_filter) if stats else octree_info(path) if octree else file_info(path)
             except GigapointError as exc:
                 if len(paths) == 1:
                     raise
@@ -96,6 +129,8 @@ def info(
                 continue
             if isinstance(data, PointStats):
                 data = {"path": shown_url(path), **data.result()}
+            if point_filter is not None and shown == 0 and i + 1 == len(paths):  # the one block: the filter's error, not its stats of no point
+                point_filter.check_passed(data["path"])
             if as_json:
                 typer.echo(json.dumps(data))
             else:
@@ -121,6 +156,8 @@ def info(
                         typer.echo("attributes held: " + ", ".join(f"{k} {v['bytes'] / n:.2f} ({v['held']})" for k, v in held.items()))
     if failed:
         raise GigapointError(f"info: {failed} of {len(paths)} files could not be read (said above)")
+    if point_filter is not None:  # several blocks shown, of none it kept a point
+        point_filter.check_passed(files_label(files))
 
 
 def points_to_read(paths) -> int | None:

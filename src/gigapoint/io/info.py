@@ -9,7 +9,8 @@ import numpy as np
 from ..core.coords import MAX_ABS_COORDINATE, value_decimals
 from ._base import STREAM_CHUNK_SIZE, check_file, headers_once
 from .crs import crs_identity, crs_name
-from .paths import cloud_name, expand_paths, file_names
+from .filters import point_filter
+from .paths import cloud_name, expand_paths, file_names, files_label
 from .registry import reader_for
 from .stats import PointStats, file_stats
 
@@ -133,18 +134,23 @@ def format_info(info: dict) -> str:
 
 
 @headers_once()  # (a folder listed once)
-def point_stats(*paths, recursive: bool = False, chunk_size: int = STREAM_CHUNK_SIZE) -> dict:
+def point_stats(*paths, recursive: bool = False, chunk_size: int = STREAM_CHUNK_SIZE, classes=None, drop_classes=None, clip=None, clip_polygon=None) -> dict:
     """What the points of files, folders or glob patterns (``expand_paths``) hold, summed up:
     their true bounds (and the headers'), each attribute's min, max and mean, the
     classification histogram, returns, flight lines, gps_time, colour ranges, invalid points
     (io/stats.py: ``PointStats.result``). Every point is read once, a chunk at a time. Paths may
-    also come as one list or tuple, as gp.open takes them."""
+    also come as one list or tuple, as gp.open takes them. ``classes``, ``drop_classes``,
+    ``clip``, ``clip_polygon``: of the points gp.open's filter of them keeps (``s["filter"]``:
+    what it is, the points read and kept); one that keeps none is an EmptyCloudError."""
     if len(paths) == 1 and isinstance(paths[0], (list, tuple)):  # (a list was pathlib's TypeError)
         paths = tuple(paths[0])
+    keep = point_filter(classes, drop_classes, clip, "point_stats", clip_polygon=clip_polygon)  # (bad values: said before reading)
     files = expand_paths(paths, recursive=recursive)
     total = PointStats()
     for f in files:
-        total.merge(file_stats(f, chunk_size))
+        total.merge(file_stats(f, chunk_size, point_filter=keep))
+    if keep is not None:
+        keep.check_passed(files_label(files))
     return {"path": cloud_name(files) if len(files) > 1 else str(files[0]), **total.result()}
 
 
@@ -157,6 +163,9 @@ def format_stats(stats: dict) -> str:
     """Human-readable text of a ``point_stats`` dict (what ``gigapoint info --stats`` prints)."""
     n = stats["point_count"]
     lines = [f"{stats.get('path', '?')}" + (f" ({stats['files']:,} files)" if stats.get("files", 1) > 1 else "")]
+    f = stats.get("filter")
+    if f is not None:  # the figures below are of the points it kept
+        lines.append(f"  filter:      {f['applied']}: {f['points_kept']:,} of {f['points_read']:,} points read kept")
     lines.append(f"  points:      {n:,}, {stats['invalid_points']:,} of them invalid (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g}): skipped")
     b, h, stale, scale = stats.get("bounds"), stats.get("header_bounds"), stats.get("header_bounds_differ"), stats.get("scale")
     if b is not None:

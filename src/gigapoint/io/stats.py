@@ -5,7 +5,8 @@
 ``PointStats`` is a running accumulator: ``add(chunk)`` a chunk at a time (memory stays one
 chunk's whatever the file's size), ``merge`` another's (a folder's files summed), ``result()``
 the numbers as a JSON-able dict. ``file_stats`` reads one file into one and compares the
-points' true bounds with its header's (a stale header is a finding).
+points' true bounds with its header's (a stale header is a finding); given a ``PointFilter``
+(io/filters.py: what is inside a site boundary, the ground points), of the points it keeps.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 from ..core.chunk import DEFAULT_COLOR, ColorScaler, PointChunk
 from ..core.coords import valid_mask as _valid_mask
 from ._base import STREAM_CHUNK_SIZE, check_chunk_size, headers_once
+from .filters import PointFilter, filtered
 from .las import LasReader, read_las_header
 from .las_fields import class_name
 from .registry import reader_for
@@ -57,6 +59,8 @@ class PointStats:
 
     def __init__(self) -> None:
         self.files = 0
+        self.filter: str | None = None  # what the filter applied keeps (``PointFilter.describe``), None without one
+        self.read = 0  # points read, before the filter: ``points`` are those it kept
         self.scale: np.ndarray | None = None  # the finest resolution the files store coordinates at, where they say
         self.points = 0
         self.invalid = 0
@@ -115,6 +119,8 @@ class PointStats:
     def merge(self, other: PointStats) -> None:
         """Add another's points (a folder's next file)."""
         self.files += other.files
+        self.filter = self.filter or other.filter  # (one filter an operation)
+        self.read += other.read
         self.points += other.points
         self.invalid += other.invalid
         self.lo, self.hi = np.minimum(self.lo, other.lo), np.maximum(self.hi, other.hi)
@@ -137,6 +143,7 @@ class PointStats:
     def result(self) -> dict:
         """The statistics as plain numbers (JSON-able)."""
         out: dict = {"files": self.files, "point_count": self.points, "invalid_points": self.invalid}
+        out["filter"] = None if self.filter is None else {"applied": self.filter, "points_read": self.read, "points_kept": self.points}
         seen = bool(np.all(np.isfinite(self.lo)))
         out["bounds"] = {"min": self.lo.tolist(), "max": self.hi.tolist()} if seen else None
         headed = bool(np.all(np.isfinite(self.header_lo)))
@@ -189,29 +196,40 @@ class PointStats:
 
 
 @headers_once()  # (its header: read for its reader, its chunks, its bounds, its time encoding)
-def file_stats(path, chunk_size: int = STREAM_CHUNK_SIZE, on_chunk: Callable[[int], None] | None = None) -> PointStats:
+def file_stats(path, chunk_size: int = STREAM_CHUNK_SIZE, on_chunk: Callable[[int], None] | None = None, point_filter: PointFilter | None = None) -> PointStats:
     """One file's ``PointStats``, its points read once in chunks of at most ``chunk_size``
     (``on_chunk(points)`` after each: a progress bar); its header's bounds, where it has them,
     kept beside its points' and the file named in ``stale`` where they differ by more than half
-    a step of its stored resolution. A damaged file raises its reader's one-line InputError."""
+    a step of its stored resolution. A damaged file raises its reader's one-line InputError.
+    ``point_filter``: the statistics of the points it keeps (it counts them too, over all the
+    files it is given for: one filter an operation); the header's bounds, of every point, are
+    then neither kept nor compared. A file none of whose points it keeps is no error here: the
+    caller checks the operation's (``PointFilter.check_passed``)."""
     path, chunk_size = Path(path), check_chunk_size(chunk_size)
     reader = reader_for(path)
     stats, scaler = PointStats(), ColorScaler()
     stats.files = 1
+    stats.filter = None if point_filter is None else point_filter.describe()
     # a LAS file's colour depth is the scaler's decision (8-bit values in its 16-bit fields, or 16-bit)
     chunks = reader.read_chunks(path, chunk_size, scaler=scaler) if isinstance(reader, LasReader) else reader.read_chunks(path, chunk_size)
-    for chunk in chunks:
+
+    def counted(chunks):  # every point read is counted, before the filter keeps some (the progress bar counts the header's)
+        for chunk in chunks:
+            stats.read += len(chunk)
+            stats.scale = np.array(chunk.scale) if chunk.scale is not None else stats.scale
+            if on_chunk is not None:
+                on_chunk(len(chunk))
+            yield chunk
+
+    for chunk in filtered(counted(chunks), path, point_filter):
         stats.add(chunk)
-        stats.scale = np.array(chunk.scale) if chunk.scale is not None else stats.scale
-        if on_chunk is not None:
-            on_chunk(len(chunk))
     if isinstance(reader, LasReader):
         stats.color_bits = {{"8": 8, "16": 16}.get(scaler.mode or "")}
         if "gps_time" in stats.attributes:
             stats.time_kinds = {ADJUSTED if read_las_header(path).adjusted_gps_time else WEEK}
     elif "gps_time" in stats.attributes:
         stats.time_kinds = {UNKNOWN}
-    bounds = reader.header(path).get("bounds")
+    bounds = reader.header(path).get("bounds") if point_filter is None else None
     if bounds is not None and None not in bounds[0] + bounds[1]:
         stats.header_lo, stats.header_hi = np.array(bounds[0], np.float64), np.array(bounds[1], np.float64)
         tolerance = (stats.scale if stats.scale is not None else np.zeros(3)) / 2 + 1e-9 * np.maximum(1, np.abs(stats.header_hi))
