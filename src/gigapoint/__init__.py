@@ -246,6 +246,8 @@ _LAZY = {
     "Orthophoto": ("gigapoint.orthophoto", "Orthophoto"),
     "classify_noise": ("gigapoint.classify", "classify_noise"),
     "height_above_ground": ("gigapoint.classify", "height_above_ground"),
+    "volume": ("gigapoint.volume", "volume"),
+    "Volume": ("gigapoint.volume", "Volume"),
 }
 
 
@@ -282,6 +284,7 @@ __all__ = [
     "RenderStats",
     "Section",
     "Viewer",
+    "Volume",
     "__version__",
     "change",
     "classify_ground",
@@ -300,4 +303,5 @@ __all__ = [
     "render_turntable",
     "section",
     "tile",
+    "volume",
 ]

@@ -165,7 +165,7 @@ def unit_names(units: dict) -> dict:
     return {"length": length, "area": f"{length}²", "volume": f"{length}³" if height == length else f"{length}²·{height}"}
 
 
-def _label(source) -> str:
+def survey_label(source) -> str:
     """How messages name a survey: its path(s) as given, or its cloud's name."""
     if isinstance(source, PointCloud):
         return source.name
@@ -173,11 +173,11 @@ def _label(source) -> str:
     return ", ".join(map(str, paths[:3])) + (f" and {len(paths) - 3} more" if len(paths) > 3 else "")
 
 
-def _survey(source, filters: dict) -> PointCloud:
+def read_survey(source, filters: dict, where: str = "change") -> PointCloud:
     """``source`` (paths as ``gigapoint.open`` takes them, or a PointCloud) as one PointCloud of
-    the points the filters keep (only those read from files)."""
+    the points the filters keep (only those read from files); ``where``: the operation messages name."""
     if isinstance(source, PointCloud):
-        keep = point_filter(**filters, where="change")
+        keep = point_filter(**filters, where=where)
         if keep is None:
             return source
         kept = list(keep.apply(source.chunks(), source.name))
@@ -187,7 +187,7 @@ def _survey(source, filters: dict) -> PointCloud:
 
     cloud = open_points(source, **filters)
     if not isinstance(cloud, PointCloud):  # an octree draws a level of detail, not every point
-        raise InputError(f"{_label(source)}: an LOD octree; change compares surfaces of every point: give the point files")
+        raise InputError(f"{survey_label(source)}: an LOD octree; {where} draws a surface of every point: give the point files")
     return cloud
 
 
@@ -229,8 +229,8 @@ def change(before, after, gsd, classes=None, drop_classes=None, clip=None, fill_
         check_max_distance("change: fill_nodata", fill_nodata)
     filters = {"classes": classes, "drop_classes": drop_classes, "clip": clip}
     point_filter(**filters, where="change")  # bad values told before anything is read
-    labels = (_label(before), _label(after))
-    clouds = [_survey(before, filters), _survey(after, filters)]
+    labels = (survey_label(before), survey_label(after))
+    clouds = [read_survey(before, filters), read_survey(after, filters)]
     crs = check_crs(*clouds, labels)
     lows, highs = zip(*(c.bounds for c in clouds))
     camera = Camera.top_down((np.minimum(*lows), np.maximum(*highs)), gsd)  # one grid, one eye: pixel to pixel

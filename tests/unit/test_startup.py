@@ -118,7 +118,7 @@ def test_a_command_line_imports_its_command_module_alone():
     got, _ = _imports("info", "--help")
     assert {m for m in got["gigapoint"] if m.endswith("_cmd")} == {"gigapoint.cli.info_cmd"}
     got, out = _imports("--help")
-    assert {m for m in got["gigapoint"] if m.endswith("_cmd")} == {"gigapoint.cli." + m for m in ("bench_cmd", "change_cmd", "classify_cmd", "compile_cmd", "convert_cmd", "info_cmd", "render_cmd", "section_cmd", "tile_cmd", "view_cmd")}
+    assert {m for m in got["gigapoint"] if m.endswith("_cmd")} == {"gigapoint.cli." + m for m in ("bench_cmd", "change_cmd", "classify_cmd", "compile_cmd", "convert_cmd", "info_cmd", "render_cmd", "section_cmd", "tile_cmd", "view_cmd", "volume_cmd")}
     code = (
         "import typer\n"
         "from gigapoint.cli import app, commands\n"

@@ -104,6 +104,7 @@ COMMAND_MODULES = {
     "section": "section_cmd",
     "tile": "tile_cmd",
     "view": "view_cmd",
+    "volume": "volume_cmd",
 }
 
 

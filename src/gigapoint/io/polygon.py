@@ -34,12 +34,15 @@ class ClipPolygon:
     """The rings of one or more polygons (``polygons``: per polygon a list of rings, each a (k, 2)
     array without the closing vertex; the first ring the outline, the rest its holes), read from
     ``source`` (the file, or the WKT text's start: what messages name). ``epsg``: the CRS a
-    GeoJSON's ``crs`` member names, None without one (a hint when nothing passes)."""
+    GeoJSON's ``crs`` member names, None without one (a hint when nothing passes). ``names``: per
+    polygon the ``name`` property of the GeoJSON Feature it came from (None: none; a stockpile's
+    label in ``gigapoint volume``)."""
 
-    def __init__(self, polygons: list[list[np.ndarray]], source: str, epsg: int | None = None):
+    def __init__(self, polygons: list[list[np.ndarray]], source: str, epsg: int | None = None, names: list[str | None] | None = None):
         self.polygons = polygons
         self.source = source
         self.epsg = epsg
+        self.names = names or [None] * len(polygons)
         rings = [ring for polygon in polygons for ring in polygon]
         self.edges = np.concatenate([np.hstack([ring, np.roll(ring, -1, axis=0)]) for ring in rings])  # rows x1, y1, x2, y2
         xy = np.concatenate(rings)
@@ -139,24 +142,31 @@ def _geojson_polygon(document, source: str, label: str) -> ClipPolygon:
     if not isinstance(document, dict):
         raise InputError(f"{label}: not a GeoJSON object")
     polygons: list = []
-    _collect(document, polygons, label)
+    names: list = []
+    _collect(document, polygons, names, label)
     if not polygons:
         raise InputError(f"{label}: holds no polygon")
-    return ClipPolygon([[_ring(r, label) for r in rings] for rings in polygons], source, _epsg(document))
+    return ClipPolygon([[_ring(r, label) for r in rings] for rings in polygons], source, _epsg(document), names)
 
 
-def _collect(node, polygons: list, label: str) -> None:
-    """Append the coordinate lists of the polygons of GeoJSON ``node`` to ``polygons``."""
+def _collect(node, polygons: list, names: list, label: str, name: str | None = None) -> None:
+    """Append the coordinate lists of the polygons of GeoJSON ``node`` to ``polygons``, and to
+    ``names`` the ``name`` of the Feature each is in (``name``; None outside a Feature)."""
     kind = node.get("type") if isinstance(node, dict) else None
     if kind == "FeatureCollection":
         for feature in node.get("features") or []:
-            _collect(feature, polygons, label)
+            _collect(feature, polygons, names, label)
     elif kind == "Feature":
-        _collect(node.get("geometry"), polygons, label)
+        properties = node.get("properties")
+        named = properties.get("name") if isinstance(properties, dict) else None
+        _collect(node.get("geometry"), polygons, names, label, None if named is None else str(named))
     elif kind == "Polygon":
         polygons.append(_list(node.get("coordinates"), label))
+        names.append(name)
     elif kind == "MultiPolygon":
-        polygons.extend(_list(p, label) for p in _list(node.get("coordinates"), label))
+        parts = [_list(p, label) for p in _list(node.get("coordinates"), label)]
+        polygons.extend(parts)
+        names.extend([name] * len(parts))
     elif kind in _NOT_AREAS:
         raise InputError(f"{label}: a {kind}, not a polygon: a clip polygon is a Polygon or MultiPolygon")
     else:

@@ -1,0 +1,82 @@
+"""`gigapoint volume FILES --clip-polygon toe.geojson --gsd G`: the volume of each stockpile a
+polygon outlines, above and below a base (gigapoint.volume, volume.py), with its footprint and
+highest point; --dsm-out writes the surface model measured."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..errors import GigapointError
+from ..render.georef import GEOTIFF_SUFFIXES, georef_paths
+from .app import app
+from .cloud_opts import ClassesOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
+from .gsd_opts import check_fill_nodata, check_gsd_value
+from .output import check_output, check_outputs_apart
+
+
+def _base_of(text: str) -> str | float:
+    if text in ("plane", "lowest"):
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise GigapointError(f"--base must be 'plane', 'lowest' or an elevation (a number), got {text!r}") from None
+
+
+@app.command()
+def volume(
+    inputs: Annotated[list[Path], typer.Argument(readable=False, help="Point cloud files or directories of one survey (merged). A quoted glob pattern ('tiles/*.laz') stands for what it matches.")],
+    gsd: Annotated[float, typer.Option(help="Ground sample distance (cloud units per pixel) of the surface model the volumes are summed on.")],
+    clip_polygon: Annotated[
+        str | None,
+        typer.Option("--clip-polygon", metavar="AREA", help="The piles' boundaries (toes), in the files' coordinates: a GeoJSON file (Polygon, MultiPolygon, a Feature or FeatureCollection of them: one pile each polygon, named by its Feature's 'name') or a WKT file or text."),
+    ] = None,
+    base: Annotated[str, typer.Option(metavar="plane|lowest|Z", help="What the volume stands on: 'plane' the least-squares plane through the surface along the toe, 'lowest' flat at the toe's lowest height, or an elevation Z.")] = "plane",
+    fill_nodata: Annotated[str, typer.Option(help="Fill empty pixels inside the piles by linear interpolation (a TIN) first: 'all' every hole (default), N only those within N pixels of a point, 'none' leave them out of the volume. Needs scipy.")] = "all",
+    dsm_out: Annotated[Path | None, typer.Option(readable=False, help="Also write the surface model inside the piles (holes filled) as a float32 GeoTIFF (.tif), NaN outside, with its world file and .prj.")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print each pile's figures and the total as one JSON object (and nothing else).")] = False,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing --dsm-out file.")] = False,
+    recursive: RecursiveOption = False,
+    classes: ClassesOption = None,
+    drop_classes: DropClassesOption = None,
+) -> None:
+    """Stockpile volumes of one survey: above (fill) and below (cut) a base inside each polygon."""
+    import gigapoint as gp
+
+    if clip_polygon is None:
+        raise GigapointError("--clip-polygon is needed: the piles' boundaries (a GeoJSON or WKT polygon)")
+    if dsm_out is not None:
+        check_output(dsm_out, overwrite, suffixes=GEOTIFF_SUFFIXES)
+        for side in georef_paths([dsm_out]):  # a user's world file or .prj is not replaced without asking
+            check_output(side, overwrite, suffixes=None)
+        check_outputs_apart([dsm_out, *georef_paths([dsm_out])], inputs)
+    check_gsd_value(gsd)
+    chosen_base = _base_of(base.strip().lower())
+    # the heights are filled for the volumes whether or not the surface model is written
+    distance = None if fill_nodata.strip().lower() == "none" else check_fill_nodata(fill_nodata, gsd, "the volume")
+    keep = filter_options(classes, drop_classes, None, "volume", clip_polygon)
+    filled = None if fill_nodata.strip().lower() == "none" else distance or "all"
+    result = gp.volume(
+        subfolders_read(inputs, recursive), keep.polygon, gsd, base=chosen_base, classes=keep.classes or None, drop_classes=keep.drop_classes or None, fill_nodata=filled
+    )
+    written = [] if dsm_out is None else result.write_dsm(dsm_out, overwrite)
+    summary = result.summary()
+    if as_json:
+        typer.echo(json.dumps({**summary, "outputs": [str(p) for p in written]}, indent=1))
+        return
+    unit = summary["units"]
+    for pile in result.piles:
+        x, y, z = pile.highest
+        typer.echo(f"{pile.name}: fill {pile.fill:,.3f} {unit['volume']}, cut {pile.cut:,.3f}, net {pile.net:+,.3f}")
+        typer.echo(f"  footprint {pile.area:,.2f} {unit['area']} ({pile.pixels:,} pixels of {gsd:g} {unit['length']}; polygon {pile.polygon_area:,.2f})")
+        typer.echo(f"  highest {z:.3f} at {x:.3f}, {y:.3f}: {pile.height:.3f} {unit['length']} above a {pile.base['type']} base (mean z {pile.base['z']:.3f})")
+        if pile.filled or pile.empty:
+            typer.echo(f"  {pile.filled:.1%} of its pixels filled by interpolation, {pile.empty:.1%} left empty")
+    if len(result.piles) > 1:
+        typer.echo(f"total: fill {result.fill:,.3f} {unit['volume']}, cut {result.cut:,.3f}, net {result.net:+,.3f}, footprint {result.area:,.2f} {unit['area']}")
+    if written:
+        typer.echo(f"wrote {', '.join(map(str, written))}")

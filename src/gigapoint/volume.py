@@ -1,0 +1,288 @@
+"""Stockpile volume from one survey (a quarry's, an aggregate yard's, a landfill's): CloudCompare's
+2.5D volume against a base, Propeller's and Pix4D's volume tool.
+
+Each pile is a polygon, its boundary (the toe) drawn on the ground. The survey is drawn as a
+surface model (``surface_change.surface``: the highest point in each pixel) on a grid of ``gsd``
+over the polygons' box, a little beyond it, so that the pixels along the toe hold the ground on
+both sides. A pixel is the pile's when its centre lies inside the polygon (polygon.py's
+even-odd rule: holes left out). Holes in the surface (pixels with no point) are filled by a TIN
+by default (render/raster_fill.py): a pile's volume must not drop where points are missing; the
+share filled is reported, as is the share left empty (beyond the data's footprint, or
+``fill_nodata=None``), which then counts no volume.
+
+The base is the surface the pile stands on:
+
+* ``"plane"`` (the default): the least-squares plane through the surface's heights sampled every
+  half pixel along the polygon's rings (Pix4D's "triangulated"/"best fit" base); it follows a
+  pile standing on a slope;
+* ``"lowest"``: flat, at the lowest of those heights (a pile on a slope then counts the wedge
+  of ground between the slope and that level too);
+* a number: flat, at that elevation (a pad's design height).
+
+Volumes are (surface - base) summed over the pile's pixels, times a pixel's area: ``fill`` where
+the surface is above the base (the stockpile; Pix4D calls it "cut", the material to take away),
+``cut`` where it is below (a pit, or a toe drawn outside the pile), ``net`` = fill - cut."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import EmptyCloudError, InputError, check_switch, is_real
+from .io.filters import point_filter
+from .io.polygon import ClipPolygon, clip_polygon_of
+from .lod.reader import cloud_crs, cloud_units
+from .render import Camera
+from .render.georef import write_map
+from .render.raster_fill import check_max_distance, fill_heights
+from .surface_change import read_survey, surface, survey_label, unit_names
+
+#: how far (in pixels) the grid reaches beyond the polygons: the toe's pixels are then whole
+MARGIN_PIXELS = 2
+#: how often (in pixels) the toe is sampled along the polygon's rings for the base
+TOE_STEP_PIXELS = 0.5
+BASES = ("plane", "lowest")
+
+
+@dataclass(frozen=True)
+class Pile:
+    """One pile's figures, in the survey's units: ``fill`` (above the base), ``cut`` (below it),
+    ``area`` (its pixels' area: the footprint drawn), ``polygon_area`` (the polygon's own, holes
+    left out), ``highest`` (x, y, z of its highest pixel), ``height`` (the most the surface rises
+    above the base), ``base`` (what it was: type, z: the base's mean height under the pile, and
+    for a plane its slope (dz/dx, dz/dy) and the toe's rms distance from it), ``filled`` and
+    ``empty``: shares of its pixels filled by interpolation and left without a height."""
+
+    name: str
+    fill: float
+    cut: float
+    area: float
+    polygon_area: float
+    highest: tuple[float, float, float]
+    height: float
+    base: dict
+    filled: float
+    empty: float
+    pixels: int
+
+    @property
+    def net(self) -> float:
+        return self.fill - self.cut
+
+    def summary(self) -> dict:
+        return {
+            "name": self.name, "fill": self.fill, "cut": self.cut, "net": self.net, "area": self.area,
+            "polygon_area": self.polygon_area, "highest": list(self.highest), "height": self.height, "base": self.base,
+            "filled": self.filled, "empty": self.empty, "pixels": self.pixels,
+        }  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Volume:
+    """The piles of one survey (``piles``, in the polygons' order) measured on one grid:
+    ``heights`` (H, W) float32 the surface model inside the piles (holes filled), NaN outside,
+    drawn through ``camera`` (``Camera.top_down``), pixels ``gsd`` a side; ``base`` as asked;
+    ``crs`` and ``units`` (io.crs_units) the survey's."""
+
+    piles: tuple[Pile, ...]
+    heights: np.ndarray
+    camera: Camera
+    gsd: float
+    base: str | float
+    crs: str | None
+    units: dict
+
+    @property
+    def fill(self) -> float:
+        return math.fsum(p.fill for p in self.piles)
+
+    @property
+    def cut(self) -> float:
+        return math.fsum(p.cut for p in self.piles)
+
+    @property
+    def net(self) -> float:
+        return self.fill - self.cut
+
+    @property
+    def area(self) -> float:
+        return math.fsum(p.area for p in self.piles)
+
+    def summary(self) -> dict:
+        """The figures as ``gigapoint volume --json`` gives them: each pile's and the total."""
+        return {
+            "piles": [p.summary() for p in self.piles],
+            "total": {"fill": self.fill, "cut": self.cut, "net": self.net, "area": self.area},
+            "base": self.base, "gsd": self.gsd, "units": unit_names(self.units), "crs": self.crs,
+        }  # fmt: skip
+
+    def write_dsm(self, path, overwrite: bool = False) -> list[Path]:
+        """``heights`` as ``path``, a float32 GeoTIFF (.tif, NaN nodata) with its world file and
+        .prj, as ``gigapoint volume --dsm-out PATH`` writes it. Returns the paths."""
+        check_switch("overwrite", overwrite, "volume")
+        return write_map(self.camera, self.crs, self.units, [(path, self.heights)], overwrite)
+
+
+class _Grid:
+    """A top-down camera's pixels as ground positions: centres, and the pixel holding a position."""
+
+    def __init__(self, camera: Camera):
+        self.size, _, _, _, self.x0, self.y0 = camera.world_file()  # x0, y0: the upper-left pixel's centre
+        self.shape = (camera.height, camera.width)
+
+    def centres(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        return np.column_stack([self.x0 + cols * self.size, self.y0 - rows * self.size])
+
+    def pixels(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) of the pixels holding ``xy`` (the rasterizer's rule: x in [left, right), y in (bottom, top])."""
+        cols = np.floor((xy[:, 0] - self.x0) / self.size + 0.5).astype(np.intp)
+        rows = np.floor((self.y0 - xy[:, 1]) / self.size + 0.5).astype(np.intp)
+        return np.clip(rows, 0, self.shape[0] - 1), np.clip(cols, 0, self.shape[1] - 1)
+
+    def inside(self, polygon: ClipPolygon) -> np.ndarray:
+        """(H, W) bool: the pixels whose centre lies inside ``polygon`` (tested in its box only)."""
+        (top, bottom), (left, right) = self.pixels(np.array([[polygon.lo[0], polygon.hi[1]], [polygon.hi[0], polygon.lo[1]]]))
+        rows, cols = np.mgrid[top : bottom + 1, left : right + 1]
+        mask = np.zeros(self.shape, bool)
+        mask[rows, cols] = polygon.inside(self.centres(rows.ravel(), cols.ravel())).reshape(rows.shape)
+        return mask
+
+
+def _check_base(base) -> str | float:
+    if isinstance(base, str) and base in BASES:
+        return base
+    if is_real(base):
+        return float(base)
+    raise InputError(f"volume: base must be 'plane', 'lowest' or an elevation (a number), got {base!r}")
+
+
+def _toe(rings: list[np.ndarray], step: float) -> np.ndarray:
+    """(k, 2) positions every ``step`` at most along ``rings`` (each closed back to its first vertex)."""
+    points = []
+    for ring in rings:
+        for start, end in zip(ring, np.roll(ring, -1, axis=0)):
+            n = max(1, math.ceil(math.dist(start, end) / step))
+            points.append(start + np.arange(n)[:, None] / n * (end - start))
+    return np.concatenate(points)
+
+
+def _ring_area(ring: np.ndarray) -> float:
+    x, y = ring[:, 0] - ring[0, 0], ring[:, 1] - ring[0, 1]  # (from a vertex: no cancellation at UTM sizes)
+    return abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))) / 2
+
+
+def _base_heights(base, toe_xy: np.ndarray, toe_z: np.ndarray, xy: np.ndarray, where: str) -> tuple[np.ndarray, dict]:
+    """The base's heights at ``xy`` and what it is (``Pile.base``), from the toe's heights ``toe_z`` at ``toe_xy``."""
+    if not isinstance(base, str):
+        return np.full(len(xy), base), {"type": "elevation", "z": base}
+    if base == "lowest":
+        lowest = float(toe_z.min())
+        return np.full(len(xy), lowest), {"type": "lowest", "z": lowest}
+    centre = toe_xy.mean(axis=0)  # (fitted about the toe's centre: UTM-sized x and y lose no digits)
+    design = np.column_stack([toe_xy - centre, np.ones(len(toe_xy))])
+    (slope_x, slope_y, z0), _, rank, _ = np.linalg.lstsq(design, toe_z, rcond=None)
+    if rank < 3:
+        raise InputError(f"{where}: the heights along its boundary lie on one line; no plane fits them (try --base lowest)")
+    rms = float(np.sqrt(np.mean((design @ (slope_x, slope_y, z0) - toe_z) ** 2)))
+    heights = (xy - centre) @ (slope_x, slope_y) + z0
+    return heights, {"type": "plane", "slope": [float(slope_x), float(slope_y)], "boundary_rms": rms}
+
+
+def _pile(rings, inside: np.ndarray, name: str, drawn: np.ndarray, heights: np.ndarray, grid: _Grid, base, where: str, label: str) -> Pile:
+    """The figures of the pile inside ``rings`` (its pixels: ``inside``) from the surface ``drawn``
+    and ``heights`` (its holes filled); ``where``: how messages name it."""
+    pixels = int(inside.sum())
+    if not pixels:
+        raise InputError(f"{where}: no pixel centre of the {grid.size:g} grid lies inside it: give a finer gsd")
+    if np.isnan(drawn[inside]).all():
+        raise InputError(f"{where}: no point of {label} lies inside it")
+    toe_xy = _toe(rings, TOE_STEP_PIXELS * grid.size)
+    toe_z = heights[grid.pixels(toe_xy)]
+    known_toe = ~np.isnan(toe_z)
+    if known_toe.sum() < 3 and not is_real(base):
+        raise InputError(f"{where}: the surface has no height along its boundary (no point near the toe) to lay a base on; give --base Z")
+    rows, cols = np.nonzero(inside)
+    z = heights[rows, cols].astype(np.float64)
+    known = ~np.isnan(z)
+    base_z, description = _base_heights(base, toe_xy[known_toe], toe_z[known_toe].astype(np.float64), grid.centres(rows, cols), where)
+    above = z[known] - base_z[known]
+    cell = grid.size * grid.size
+    top = int(np.nanargmax(np.where(np.isnan(drawn[rows, cols]), -np.inf, drawn[rows, cols])))
+    outline, *holes = rings
+    return Pile(
+        name=name,
+        fill=float(above[above > 0].sum(dtype=np.float64)) * cell,
+        cut=abs(float(above[above < 0].sum(dtype=np.float64))) * cell,  # (abs: no -0.0)
+        area=pixels * cell,
+        polygon_area=_ring_area(outline) - sum(map(_ring_area, holes)),
+        highest=(*map(float, grid.centres(rows[top : top + 1], cols[top : top + 1])[0]), float(drawn[rows[top], cols[top]])),
+        height=float(above.max()),
+        base={**description, "z": float(base_z.mean())},
+        filled=float((np.isnan(drawn[rows, cols]) & known).sum()) / pixels,
+        empty=float((~known).sum()) / pixels,
+        pixels=pixels,
+    )
+
+
+def _pile_names(polygon: ClipPolygon) -> list[str]:
+    """Each polygon's name: its Feature's ``name`` ('pile N' without one); a name several polygons
+    share (a Feature's MultiPolygon) numbered 'A (1)', 'A (2)'."""
+    names = [name if name else f"pile {i + 1}" for i, name in enumerate(polygon.names)]
+    shared = {name for name, n in Counter(names).items() if n > 1}
+    seen: Counter = Counter()
+    numbered = []
+    for name in names:
+        seen[name] += 1
+        numbered.append(f"{name} ({seen[name]})" if name in shared else name)
+    return numbered
+
+
+def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=None, fill_nodata="all") -> Volume:
+    """The volume of each pile ``clip_polygon`` outlines (a GeoJSON or WKT file, WKT text, a GeoJSON
+    geometry as a dict: polygon.py; several polygons, several piles, named by their Feature's
+    ``name``) in survey ``source`` (paths as ``gigapoint.open`` takes them, or a PointCloud), on a
+    grid of ``gsd`` units a pixel, above and below ``base`` ("plane", "lowest" or an elevation).
+
+    ``classes``/``drop_classes``: only those points read (``drop_classes=[7, 18]``: no noise);
+    ``fill_nodata``: "all" (the default) every hole inside the data's footprint filled linearly
+    (needs scipy), N only those within N pixels of a point, None none. Returns a ``Volume``
+    (``piles``, ``fill``, ``cut``, ``net``, ``area``, ``summary()``, ``write_dsm()``). No polygon, a
+    polygon outside the data or with no point inside are one-line InputErrors."""
+    if clip_polygon is None:
+        raise InputError("volume: clip_polygon is needed: the piles' boundaries (a GeoJSON or WKT polygon file, or WKT text)")
+    if not (is_real(gsd) and gsd > 0):
+        raise InputError(f"volume: gsd must be a number > 0 (cloud units per pixel), got {gsd!r}")
+    base = _check_base(base)
+    if fill_nodata is not None and fill_nodata != "all":
+        check_max_distance("volume: fill_nodata", fill_nodata)
+    toe = clip_polygon_of(clip_polygon, f"volume: clip_polygon={clip_polygon!r}")
+    margin = MARGIN_PIXELS * gsd
+    box = [*(toe.lo - margin), *(toe.hi + margin)]  # read-time: only the points near the piles
+    filters = {"classes": classes, "drop_classes": drop_classes, "clip": box}
+    point_filter(**filters, where="volume")  # bad values told before anything is read
+    label = survey_label(source)
+    try:
+        cloud = read_survey(source, filters, "volume")
+    except EmptyCloudError:
+        (x0, y0), (x1, y1) = toe.lo, toe.hi
+        raise InputError(f"{toe.source}: no point of {label} lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}: the polygon is outside the data") from None
+    lo, hi = cloud.bounds
+    camera = Camera.top_down(((box[0], box[1], lo[2]), (box[2], box[3], hi[2])), gsd)
+    drawn = surface(cloud, camera)
+    heights = drawn if fill_nodata is None else fill_heights(drawn, None if fill_nodata == "all" else fill_nodata)
+    grid = _Grid(camera)
+    names = _pile_names(toe)
+    insides = [grid.inside(ClipPolygon([rings], toe.source)) for rings in toe.polygons]
+    piles = tuple(
+        _pile(rings, inside, name, drawn, heights, grid, base, f"{toe.source}: {name}" if len(names) > 1 else toe.source, label)
+        for rings, inside, name in zip(toe.polygons, insides, names)
+    )
+    dsm = np.where(np.logical_or.reduce(insides), heights, np.nan).astype(np.float32)
+    return Volume(piles, dsm, camera, float(gsd), base, cloud_crs(cloud), cloud_units(cloud))
+
+
+__all__ = ["Pile", "Volume", "volume"]
