@@ -169,5 +169,5 @@ def test_the_cli_classifies_noise_and_names_its_options(cli, surface, tmp_path):
     rc, _, err = cli("classify", path, "-o", tmp_path / "b.laz", "--ground", "--noise", "--isolated", "-1")
     assert rc != 0 and "classify: --isolated must be a whole number >= 0, got -1" in err
     rc, _, err = cli("classify", path, "-o", tmp_path / "b.laz")
-    assert rc != 0 and "classify: say what to classify: --ground, --noise or both" in err
+    assert rc != 0 and "classify: say what to classify: --ground, --noise, --height-above-ground, or several" in err
     assert not (tmp_path / "b.laz").exists()
