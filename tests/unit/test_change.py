@@ -1,4 +1,4 @@
-"""Change between two surveys (`gigapoint change`, gp.change: surface_change.py): both surfaces on
+"""Change between two surveys (`gigapoint change`, gp.change: survey/change.py): both surfaces on
 one grid, AFTER - BEFORE as a GeoTIFF, cut and fill volumes, a diverging preview."""
 
 from __future__ import annotations

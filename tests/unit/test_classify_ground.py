@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import gigapoint as gp
-from gigapoint import classify
 from gigapoint.errors import EmptyCloudError, InputError
+from gigapoint.survey import classify
 
 
 def _write_las(path, xyz, classification, returns=None):

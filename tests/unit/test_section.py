@@ -1,4 +1,4 @@
-"""Cross-sections (cross_section.py, `gigapoint section`): the corridor's points as distances along
+"""Cross-sections (survey/section.py, `gigapoint section`): the corridor's points as distances along
 the line, offsets and heights, checked against a hand-built scene (a sloped plane and a wall), on
 a line along x and the same scene turned 30 degrees; the image's pixels where the profile is;
 autzen_trim.laz across; bad values one line before reading."""
@@ -13,9 +13,9 @@ import pytest
 from PIL import Image
 
 import gigapoint as gp
-from gigapoint.cross_section import BORDER
 from gigapoint.errors import EmptyCloudError, InputError
 from gigapoint.io.filters import PointFilter
+from gigapoint.survey.section import BORDER
 
 # the line (-0.25, 0) -> (70.25, 0), a corridor 5 wide: |y| <= 2.5, x in -0.25..70.25. Distances
 # (x + 0.25) and heights lie a quarter unit from every half unit: at 2 pixels a unit, mid-pixel

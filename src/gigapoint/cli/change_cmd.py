@@ -1,5 +1,5 @@
 """`gigapoint change BEFORE AFTER --gsd G -o change.tif`: what moved between two surveys and how
-much (gigapoint.change, surface_change.py), as a GeoTIFF of height differences, a colour
+much (gigapoint.change, survey/change.py), as a GeoTIFF of height differences, a colour
 preview and cut/fill volumes."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""`gigapoint section`: a cross-section along a line (gigapoint.section, cross_section.py)."""
+"""`gigapoint section`: a cross-section along a line (gigapoint.section, survey/section.py)."""
 
 from __future__ import annotations
 
@@ -50,8 +50,8 @@ def section(
     """Draw a cross-section: the points of a corridor along a line, seen from the side."""
     import gigapoint as gp
 
-    from ..cross_section import check_size
     from ..io.filters import corridor_of
+    from ..survey.section import check_size
 
     check_output(output, overwrite)
     if csv is not None:

@@ -1,5 +1,5 @@
 """`gigapoint volume FILES --clip-polygon toe.geojson --gsd G`: the volume of each stockpile a
-polygon outlines, above and below a base (gigapoint.volume, volume.py), with its footprint and
+polygon outlines, above and below a base (gigapoint.volume, survey/volume.py), with its footprint and
 highest point; --dsm-out writes the surface model measured."""
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ _CONTROL = {
     "viridis": ["440154", "482878", "3e4989", "31688e", "26828e", "1f9e89", "35b779", "6ece58", "b5de2b", "fde725"],
     "gray": ["000000", "ffffff"],
     "inferno": ["000004", "1b0c41", "4a0c6b", "781c6d", "a52c60", "cf4446", "ed6925", "fb9b06", "f7d13d", "fcffa4"],
-    # ColorBrewer's diverging RdBu, white in the middle: the change preview's (surface_change.py), not a
+    # ColorBrewer's diverging RdBu, white in the middle: the change preview's (survey/change.py), not a
     # points' colormap (RenderSettings.colormap's choices are settings.Colormap)
     "rdbu": ["67001f", "b2182b", "d6604d", "f4a582", "fddbc7", "f7f7f7", "d1e5f0", "92c5de", "4393c3", "2166ac", "053061"],
 }

@@ -2,7 +2,7 @@
 
 The session picks the two points as the measuring tool does (world points through the last
 frame's visibility buffer) and draws the line into each frame (measure.draw, in its own
-colour); the section itself (``gigapoint.section``, cross_section.py) is computed off the
+colour); the section itself (``gigapoint.section``, survey/section.py) is computed off the
 render loop (``Session._compute_section``'s thread) and sent as a PNG of the panel's size with
 its numbers. Which points: a cloud held in memory (a PointCloud) gives its own; an LOD octree
 (converted, COPC, EPT, Potree, local or over HTTP; a progressive one) those of the nodes that
@@ -19,12 +19,12 @@ from pathlib import Path
 import numpy as np
 
 from ..core.cloud import PointCloud, build_cloud
-from ..cross_section import Section, section
 from ..errors import GigapointError
 from ..io.http import LocalFile
 from ..lod.query import is_octree
 from ..lod.voxel_octree import VoxelOctree
 from ..render.frame import encode_image
+from ..survey.section import Section, section
 from . import protocol as P
 
 COLOR = (0, 229, 255)  # cyan: the section's line, apart from the measuring tool's yellow

@@ -2,7 +2,7 @@
 2.5D volume against a base, Propeller's and Pix4D's volume tool.
 
 Each pile is a polygon, its boundary (the toe) drawn on the ground. The survey is drawn as a
-surface model (``surface_change.surface``: the highest point in each pixel) on a grid of ``gsd``
+surface model (``change.surface``: the highest point in each pixel) on a grid of ``gsd``
 over the polygons' box, a little beyond it, so that the pixels along the toe hold the ground on
 both sides. A pixel is the pile's when its centre lies inside the polygon (polygon.py's
 even-odd rule: holes left out). Holes in the surface (pixels with no point) are filled by a TIN
@@ -32,14 +32,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import EmptyCloudError, InputError, check_switch, is_real
-from .io.filters import point_filter
-from .io.polygon import ClipPolygon, clip_polygon_of
-from .lod.reader import cloud_crs, cloud_units
-from .render import Camera
-from .render.georef import write_map
-from .render.raster_fill import check_max_distance, fill_heights
-from .surface_change import read_survey, surface, survey_label, unit_names
+from ..errors import EmptyCloudError, InputError, check_switch, is_real
+from ..io.filters import point_filter
+from ..io.polygon import ClipPolygon, clip_polygon_of
+from ..lod.reader import cloud_crs, cloud_units
+from ..render import Camera
+from ..render.georef import write_map
+from ..render.raster_fill import check_max_distance, fill_heights
+from .change import read_survey, surface, survey_label, unit_names
 
 #: how far (in pixels) the grid reaches beyond the polygons: the toe's pixels are then whole
 MARGIN_PIXELS = 2

@@ -17,14 +17,14 @@ from functools import cached_property
 
 import numpy as np
 
-from .core.chunk import PointChunk
-from .core.cloud import PointCloud, build_cloud
-from .errors import CameraError, InputError, is_real
-from .io.filters import PointFilter, along_and_across, corridor_of, point_filter
-from .lod import is_lod_source
-from .lod.query import is_octree, kept_points, octree_path_kept
-from .render import Camera, Frame, RenderSettings, render_frame
-from .render.camera import MAX_IMAGE_SIDE, image_side
+from ..core.chunk import PointChunk
+from ..core.cloud import PointCloud, build_cloud
+from ..errors import CameraError, InputError, is_real
+from ..io.filters import PointFilter, along_and_across, corridor_of, point_filter
+from ..lod import is_lod_source
+from ..lod.query import is_octree, kept_points, octree_path_kept
+from ..render import Camera, Frame, RenderSettings, render_frame
+from ..render.camera import MAX_IMAGE_SIDE, image_side
 
 BORDER = 1  # pixels around the corridor's points: a point on the frame's edge is not lost to rounding
 DEFAULT_WIDTH = 1920  # an image's width where neither a scale nor a size is given
@@ -77,7 +77,7 @@ class Section:
     def write_csv(self, path) -> None:
         """The rows as ``distance_along,offset,z[,classification]`` (a header line, then a point a
         line, by distance), written atomically."""
-        from .atomic import atomic_write
+        from ..atomic import atomic_write
 
         columns = [self.distance, self.offset, self.z]
         header, formats = "distance_along,offset,z", ["%.6f"] * 3
@@ -191,7 +191,7 @@ def section(source, line, width, classes=None, drop_classes=None, clip_polygon=N
         kept, name = octree_path_kept(paths[0], keep, _region(keep), "section the point files, or wait for the octree")
         cloud = build_cloud(kept, name=name, colors="rgba")
     else:  # only the corridor's points are read
-        from . import open as open_points
+        from .. import open as open_points
 
         cloud = open_points(paths, classes=classes, drop_classes=drop_classes, corridor=lane, clip_polygon=keep.polygon)
     return Section(cloud, lane[:4], lane[4])

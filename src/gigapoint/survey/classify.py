@@ -39,8 +39,8 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from .errors import InputError, is_real
-from .render.raster_fill import fill_everywhere
+from ..errors import InputError, is_real
+from ..render.raster_fill import fill_everywhere
 
 #: PDAL's and the paper's defaults, in metres (``slope``: rise over run, no unit)
 DEFAULTS_METRES = {"cell": 1.0, "window": 18.0, "threshold": 0.5, "scalar": 1.25}
@@ -83,7 +83,7 @@ def ground_parameters(files, cell=None, slope=None, window=None, threshold=None,
     the defaults converted from metres (a cloud in feet: cell 3.28 ft...; units unknown: taken
     as metres). A value that is no number > 0 (threshold, scalar: >= 0), or coordinates in
     degrees without every length given, is a one-line InputError."""
-    from .io.crs import files_units
+    from ..io.crs import files_units
 
     given = {"cell": cell, "slope": slope, "window": window, "threshold": threshold, "scalar": scalar}
     for name, value in given.items():
@@ -237,14 +237,14 @@ def classify_ground(source, out, *, cell=None, slope=None, window=None, threshol
     keep them out of the ground. ``heights``: each point's height above
     the ground model just made written too (``height_above_ground``'s attribute; ``normalize``:
     as its z as well)."""
-    from .lod.convert.to_file import PointFiles
-    from .lod.progress import NullProgress, RichProgress
+    from ..lod.convert.to_file import PointFiles
+    from ..lod.progress import NullProgress, RichProgress
 
     t0 = time.perf_counter()
     out = Path(out)
     if out.suffix.lower() not in (".las", ".laz", ".ply"):
         raise InputError(f"{out}: classify_ground writes a .las, .laz or .ply file")
-    from .io.write import check_point_file_output, write_points
+    from ..io.write import check_point_file_output, write_points
 
     check_point_file_output(out, overwrite)
     inputs = PointFiles(source, out, chunk_size, ply=out.suffix.lower() == ".ply")
@@ -313,7 +313,7 @@ def _lowest_raster(inputs, cell: float, progress) -> tuple[_Grid, np.ndarray]:
 def _classified(chunk, grid: _Grid, dem: np.ndarray, tolerance: np.ndarray, counts: dict):
     """``chunk`` with its classification set: 2 where a ground candidate lies within its cell's
     ``tolerance`` of the ``dem``, 1 for every other point but noise, which keeps its class."""
-    from .core.chunk import PointChunk
+    from ..core.chunk import PointChunk
 
     old = chunk.attributes.get("classification")
     noise = np.isin(old, NOISE_CLASSES) if old is not None else np.zeros(len(chunk), bool)
@@ -377,7 +377,7 @@ def noise_parameters(files, step=None, step_z=None, isolated=None) -> dict:
     number >= 0, or coordinates in degrees without both steps given, is a one-line InputError."""
     import numbers
 
-    from .io.crs import files_units
+    from ..io.crs import files_units
 
     for name, value in (("step", step), ("step_z", step_z)):
         if value is not None and not (is_real(value) and value > 0):
@@ -407,9 +407,9 @@ def classify_noise(source, out, *, step=None, step_z=None, isolated=None, overwr
     memory bounded by the occupied cells (see the notes above). Parameters in the cloud's units,
     None: the defaults (``noise_parameters``). ``out`` appears only once whole; an existing one
     is replaced only with ``overwrite``."""
-    from .io.write import check_point_file_output, write_points
-    from .lod.convert.to_file import PointFiles
-    from .lod.progress import NullProgress, RichProgress
+    from ..io.write import check_point_file_output, write_points
+    from ..lod.convert.to_file import PointFiles
+    from ..lod.progress import NullProgress, RichProgress
 
     t0 = time.perf_counter()
     out = Path(out)
@@ -438,7 +438,7 @@ def classify_noise(source, out, *, step=None, step_z=None, isolated=None, overwr
 def _sparse_cells(inputs, params: dict, progress):
     """Pass 1: every valid point counted in its cell, the cells with at most ``isolated`` + 1
     points in their 3 x 3 x 3 block marked (io/cells.py's CellCounts)."""
-    from .io.cells import CellCounts
+    from ..io.cells import CellCounts
 
     edges = (params["step"], params["step"], params["step_z"])
     cells = CellCounts(edges, f"classify_noise: step {params['step']:g}", inputs.headers_bounds(), inputs.label)
@@ -452,7 +452,7 @@ def _sparse_cells(inputs, params: dict, progress):
 def _noise_classified(chunk, cells, counts: dict):
     """``chunk`` with its points in sparse cells classified 7, but those classified noise (7,
     18) already, which keep their class, as every other point does."""
-    from .core.chunk import PointChunk
+    from ..core.chunk import PointChunk
 
     old = chunk.attributes.get("classification")
     was_noise = np.isin(old, NOISE_CLASSES) if old is not None else np.zeros(len(chunk), bool)
@@ -532,7 +532,7 @@ class _HeightSpan:
 def _with_heights(chunk, grid: _Grid, dem: np.ndarray, normalize: bool, span: _HeightSpan):
     """``chunk`` with its heights above ``dem`` as the float32 ``HeightAboveGround`` attribute
     (``normalize``: as its z too, the z it had dropped)."""
-    from .core.chunk import PointChunk
+    from ..core.chunk import PointChunk
 
     heights = chunk.xyz[:, 2] - grid.bilinear(dem, chunk.xyz)
     span.add(heights)
@@ -577,9 +577,9 @@ def height_above_ground(source, out, *, cell=None, normalize: bool = False, over
     cloud's units, as ``classify_ground``'s); a cloud with no class 2 is a one-line InputError
     (``classify_ground(..., heights=True)`` classifies and measures in one run). Two passes,
     memory bounded by the raster."""
-    from .io.write import check_point_file_output, write_points
-    from .lod.convert.to_file import PointFiles
-    from .lod.progress import NullProgress, RichProgress
+    from ..io.write import check_point_file_output, write_points
+    from ..lod.convert.to_file import PointFiles
+    from ..lod.progress import NullProgress, RichProgress
 
     t0 = time.perf_counter()
     out = Path(out)

@@ -25,15 +25,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .core.cloud import PointCloud, build_cloud
-from .errors import InputError, check_switch, is_real
-from .io.crs import crs_identity, crs_name
-from .io.filters import point_filter
-from .lod.reader import cloud_crs, cloud_units
-from .render import Camera, RenderSettings, render_frame
-from .render.colors import colormap_table, ramp
-from .render.georef import write_map
-from .render.raster_fill import check_max_distance, fill_heights
+from ..core.cloud import PointCloud, build_cloud
+from ..errors import InputError, check_switch, is_real
+from ..io.crs import crs_identity, crs_name
+from ..io.filters import point_filter
+from ..lod.reader import cloud_crs, cloud_units
+from ..render import Camera, RenderSettings, render_frame
+from ..render.colors import colormap_table, ramp
+from ..render.georef import write_map
+from ..render.raster_fill import check_max_distance, fill_heights
 
 #: a surface model's drawing: each point in its exact pixel (no splat reaches a neighbour), 30-bit positions
 SURFACE_SETTINGS = {"size_mode": "fixed", "point_size": 1, "adaptive_precision": False}
@@ -183,7 +183,7 @@ def read_survey(source, filters: dict, where: str = "change") -> PointCloud:
         kept = list(keep.apply(source.chunks(), source.name))
         keep.check_passed(source.name)
         return build_cloud(kept, name=source.name, colors="rgba")
-    from . import open as open_points
+    from .. import open as open_points
 
     cloud = open_points(source, **filters)
     if not isinstance(cloud, PointCloud):  # an octree draws a level of detail, not every point

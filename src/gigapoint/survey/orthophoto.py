@@ -12,13 +12,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .core.renderable import Renderable
-from .errors import CameraError, InputError, check_switch, is_real
-from .lod.reader import cloud_crs_units
-from .render import Camera, RenderSettings, render_frame
-from .render.georef import GEOTIFF_SUFFIXES, write_map
-from .render.image_files import IMAGE_SUFFIXES, check_output
-from .render.raster_fill import check_max_distance, fill_map
+from ..core.renderable import Renderable
+from ..errors import CameraError, InputError, check_switch, is_real
+from ..lod.reader import cloud_crs_units
+from ..render import Camera, RenderSettings, render_frame
+from ..render.georef import GEOTIFF_SUFFIXES, write_map
+from ..render.image_files import IMAGE_SUFFIXES, check_output
+from ..render.raster_fill import check_max_distance, fill_map
 
 
 @dataclass(frozen=True)
@@ -94,7 +94,7 @@ def _cloud(source, filters: dict):
         if given:  # (they would be dropped without a word)
             raise InputError(f"orthophoto: {', '.join(given)} filter the files read; a cloud is drawn as it is (filter it with gigapoint.open)")
         return source
-    from . import open as open_points
+    from .. import open as open_points
 
     return open_points(source, **given)
 

@@ -1,0 +1,10 @@
+"""What surveyors make of a point cloud, beyond a picture: cross-sections (section.py), change
+between two surveys (change.py), stockpile volumes (volume.py), ground and noise classes and
+heights above ground (classify.py), orthophotos and surface models as GeoTIFFs (orthophoto.py).
+
+Each reads its clouds through io/lod (files, folders, octrees; the read filters), draws through
+render where it needs a picture, and writes through io/render's writers; the CLI's commands
+(section, change, volume, classify, render --gsd) and gigapoint's top-level calls (gp.section,
+gp.change, gp.volume, gp.classify_ground, gp.orthophoto, ...) are thin layers over them. The
+package imports nothing at start-up: each module is loaded by the call that needs it.
+"""
