@@ -285,3 +285,57 @@ def test_the_streaming_commands_read_chunks_of_the_stream_size_unless_told(autze
     gp.tile(autzen_path, tmp_path / "tiles", 500, chunk_size=given)
     assert asked == [expected, expected]
     assert max(sizes) == min(expected, 110_000) and sum(sizes) == 2 * 110_000
+
+
+def _colourless_tile(path, n: int, seed: int):
+    """A LAS tile of point format 1 (no RGB): positions, intensities, classes, returns and GPS times."""
+    rng = np.random.default_rng(seed)
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.scales, header.offsets = [0.01] * 3, [1000.0, 2000.0, 0.0]
+    las = laspy.LasData(header)
+    las.X, las.Y, las.Z = (rng.integers(0, 100_000, n, dtype=np.int32) for _ in range(3))
+    las.intensity = rng.integers(0, 65536, n).astype(np.uint16)
+    las.classification = rng.integers(0, 8, n).astype(np.uint8)
+    las.return_number, las.number_of_returns = np.ones(n, np.uint8), np.full(n, 2, np.uint8)
+    las.gps_time = rng.uniform(0, 1e6, n)
+    las.write(str(path))
+    return path
+
+
+def test_a_colourless_las_is_written_in_point_format_6_with_its_points_and_attributes(cli, tmp_path):
+    src = _colourless_tile(tmp_path / "norgb.las", 2_000, 11)
+    out = tmp_path / "out.las"
+    rc, _, err = cli("convert", src, "-o", out, "-q")
+    assert rc == 0, err
+    written, source = laspy.read(str(out)), laspy.read(str(src))
+    assert written.header.point_format.id == 6  # (was 7, every point red = green = blue = 51400: the viewer's grey)
+    assert "red" not in written.point_format.dimension_names
+    for field in ("X", "Y", "Z", "intensity", "classification", "return_number", "number_of_returns", "gps_time"):
+        assert np.array_equal(written[field], source[field]), field
+    assert list(written.header.scales) == [0.01] * 3 and list(written.header.offsets) == [1000.0, 2000.0, 0.0]
+
+
+def test_a_colourless_ply_round_trip_writes_no_colour_properties(tmp_path):
+    src = _colourless_tile(tmp_path / "norgb.las", 500, 12)
+    convert(src, tmp_path / "a.ply")
+    convert(tmp_path / "a.ply", tmp_path / "b.ply")  # a PLY without colours read, then written
+    for name in ("a.ply", "b.ply"):
+        head = (tmp_path / name).read_bytes().split(b"end_header")[0].decode()
+        assert "property uchar red" not in head and "property double x" in head, name
+    source = laspy.read(str(src))
+    back = np.concatenate([c.xyz for c in read_chunks(tmp_path / "b.ply")])
+    assert np.array_equal(back, np.column_stack([source.x, source.y, source.z]))
+    assert np.array_equal(np.concatenate([c.attributes["intensity"] for c in read_chunks(tmp_path / "b.ply")]), source.intensity)
+
+
+def test_colourless_tiles_among_coloured_ones_are_written_black_with_a_warning(tmp_path):
+    coloured = _tile(tmp_path / "rgb.las", 1_000, 13, 257)
+    plain = _colourless_tile(tmp_path / "norgb.las", 600, 14)
+    with pytest.warns(GigapointWarning, match=r"^norgb\.las: no colours; their points are written black \(0, 0, 0\) beside the other files' colours"):
+        res = convert([coloured, plain], tmp_path / "mixed.laz")
+    written = laspy.read(str(tmp_path / "mixed.laz"))
+    assert res.points == 1_600 and written.header.point_format.id == 7
+    rgb = np.column_stack([written.red, written.green, written.blue])
+    source = laspy.read(str(coloured))
+    assert np.array_equal(rgb[:1_000], np.column_stack([source.red, source.green, source.blue]))
+    assert not rgb[1_000:].any()  # (not the grey 51400 made up for them)

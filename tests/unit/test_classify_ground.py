@@ -96,6 +96,15 @@ def test_only_a_pulses_last_return_can_be_ground(tmp_path):
     assert (result.ground, result.non_ground) == (390, 10)
 
 
+def test_a_colourless_input_is_classified_into_a_file_without_colours(town, tmp_path):
+    path, _ = town  # (point format 1: no RGB)
+    gp.classify_ground(path, tmp_path / "out.las")
+    written, source = laspy.read(str(tmp_path / "out.las")), laspy.read(str(path))
+    assert written.header.point_format.id == 6  # (was 7, every point grey 51400)
+    for name in ("X", "Y", "Z", "intensity"):
+        np.testing.assert_array_equal(np.asarray(written[name]), np.asarray(source[name]), err_msg=name)
+
+
 def test_autzen_ground_agrees_with_its_own_class_2(autzen_path, tmp_path):
     """autzen_trim's class 2 is a conservative subset of its ground: half its class-1 points lie
     within 0.2 ft of the ground model (roads, lawns). So SMRF must find (nearly) all of its

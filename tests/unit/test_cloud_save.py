@@ -242,3 +242,23 @@ def test_a_progressive_octree_saves_its_points_into_one_point_file(tmp_path, aut
         cloud.save(tmp_path / "merged.laz")
     cloud.close()
 
+
+
+def test_a_cloud_of_a_colourless_file_saves_without_colours_until_it_is_given_some(tmp_path):
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.scales, header.offsets = np.full(3, 0.01), np.zeros(3)
+    las = laspy.LasData(header)
+    las.X, las.Y, las.Z = (np.arange(3000, dtype=np.int32) * k for k in (1, 2, 3))
+    las.intensity = np.arange(3000, dtype=np.uint16)
+    las.write(str(tmp_path / "norgb.las"))
+    cloud = gp.open(tmp_path / "norgb.las", colors="rgba")
+    cloud.save(tmp_path / "plain.las")
+    cloud.save(tmp_path / "plain.ply")
+    plain = laspy.read(str(tmp_path / "plain.las"))
+    assert plain.header.point_format.id == 6 and "red" not in plain.point_format.dimension_names  # (was 7: grey 51400 made up)
+    assert sorted(np.asarray(plain.intensity).tolist()) == list(range(3000))
+    assert b"property uchar red" not in (tmp_path / "plain.ply").read_bytes().split(b"end_header")[0]
+    cloud.set_colors([10, 20, 30])  # colours given: they are the cloud's, and written
+    cloud.save(tmp_path / "coloured.las")
+    coloured = laspy.read(str(tmp_path / "coloured.las"))
+    assert coloured.header.point_format.id == 7 and set(np.asarray(coloured.green).tolist()) == {20 * 257}

@@ -43,13 +43,16 @@ def check_point_file_output(path: Path, overwrite: bool) -> None:
         raise InputError(f"{path}: the folder {path.parent} does not exist")
 
 
-def write_points(path: Path, chunks: Chunks, n_points: int | None, *, grid=None, crs_records=(), color_bits: int | None = 16) -> int:
+def write_points(
+    path: Path, chunks: Chunks, n_points: int | None, *, grid=None, crs_records=(), color_bits: int | None = 16, has_color: bool = True
+) -> int:
     """Write the ``n_points`` points of ``chunks()`` to ``path`` (checked by ``check_point_file_output``), as its suffix
-    says: .las/.laz (LAS 1.4 point format 7, 8 with ``nir``; ``grid``: the (scale, offset) to store
+    says: .las/.laz (LAS 1.4 point format 7, 8 with ``nir``; 6 where not ``has_color``: points whose
+    source had no colours get none, not the grey they are drawn in; ``grid``: the (scale, offset) to store
     positions on, else one fine enough for their bounds; ``crs_records``: (user id, record id,
     data) VLRs naming their CRS; ``color_bits``: 16 stores 8-bit colours x 257, 8 as they are, as a
     file of 8-bit values in 16-bit fields had them; None: as each chunk says, its ``color_bits``,
-    16 where it does not) or .ply. ``n_points`` None: not known before the points are read (a
+    16 where it does not) or .ply (red, green, blue only ``has_color``). ``n_points`` None: not known before the points are read (a
     filter's, files': a PLY header's count is written once they are). The first chunk's attributes
     (names and dtypes) stand for every chunk's. Returns the points written."""
     from lazrs import LazrsError
@@ -60,9 +63,9 @@ def write_points(path: Path, chunks: Chunks, n_points: int | None, *, grid=None,
     def write(tmp: Path) -> None:
         nonlocal written
         if suffix == ".ply":
-            written = _write_ply(tmp, path, chunks, n_points)
+            written = _write_ply(tmp, path, chunks, n_points, has_color)
         else:
-            written = _write_las(tmp, path, chunks, grid, crs_records, color_bits)
+            written = _write_las(tmp, path, chunks, grid, crs_records, color_bits, has_color)
 
     try:
         atomic_write(path, write)
@@ -76,14 +79,14 @@ def write_points(path: Path, chunks: Chunks, n_points: int | None, *, grid=None,
 _NO_POINTS = PointChunk(np.empty((0, 3)))
 
 
-def _las_layout(path: Path, attributes: dict, grid, crs_records) -> tuple:
+def _las_layout(path: Path, attributes: dict, grid, crs_records, has_color: bool) -> tuple:
     """(laspy header, {attribute: its point format field}, {attribute: extra bytes dtype}) of a
     file of points with ``attributes`` ({name: values}, the first chunk's): point format 7 (8 with
-    ``nir``), LAS 1.4, the (scale, offset) ``grid`` and the CRS records."""
+    ``nir``; 6 without ``has_color``, nir then in extra bytes), LAS 1.4, the (scale, offset) ``grid`` and the CRS records."""
     import laspy
 
     attrs = {a: v.dtype for a, v in attributes.items()}
-    fmt = choose_point_format(attrs)
+    fmt = choose_point_format(attrs, has_color)
     header = laspy.LasHeader(point_format=fmt, version="1.4")
     header.scales, header.offsets = (np.asarray(v, np.float64) for v in grid)
     extra = extra_attributes(attrs, where=str(path), point_format=fmt)
@@ -96,8 +99,8 @@ def _las_layout(path: Path, attributes: dict, grid, crs_records) -> tuple:
     return header, fields, extra
 
 
-def _write_las(tmp: Path, path: Path, chunks: Chunks, grid, crs_records, color_bits: int | None) -> int:
-    """Point format 7 (8 with ``nir``), LAS 1.4: attributes the format has a field for go to
+def _write_las(tmp: Path, path: Path, chunks: Chunks, grid, crs_records, color_bits: int | None, has_color: bool) -> int:
+    """Point format 7 (8 with ``nir``; 6 without ``has_color``), LAS 1.4: attributes the format has a field for go to
     it, clipped to its range as the COPC writer does (they were added as extra bytes under the
     field's own name, which laspy refused: "field 'intensity' occurs more than once"); others
     as extra bytes (las_fields.extra_attributes: booleans as u8, half floats as f4). The header
@@ -110,13 +113,13 @@ def _write_las(tmp: Path, path: Path, chunks: Chunks, grid, crs_records, color_b
         writer = None
         for chunk in chunks():
             if writer is None:
-                header, fields, extra = _las_layout(path, chunk.attributes, grid, crs_records)
+                header, fields, extra = _las_layout(path, chunk.attributes, grid, crs_records, has_color)
                 writer = open_file.enter_context(laspy.open(str(tmp), mode="w", header=header, do_compress=path.suffix.lower() == ".laz"))
             rec = laspy.ScaleAwarePointRecord.zeros(len(chunk), header=header)
             for k, axis in enumerate("XYZ"):  # the grid's integers, rounded: not laspy's truncation of x
                 rec[axis] = _grid_integers(path, chunk.xyz[:, k], header.offsets[k], header.scales[k], axis)
             bits = color_bits if color_bits is not None else chunk.color_bits or 16
-            for k, channel in enumerate(("red", "green", "blue")):
+            for k, channel in enumerate(("red", "green", "blue") if has_color else ()):
                 rec[channel] = chunk.rgba[:, k].astype(np.uint16) * np.uint16(257 if bits == 16 else 1)
             for a, field in fields.items():
                 rec[field] = las_field_values(a, chunk.attributes[a]).astype(rec[field].dtype)
@@ -125,7 +128,7 @@ def _write_las(tmp: Path, path: Path, chunks: Chunks, grid, crs_records, color_b
             writer.write_points(rec)
             written += len(chunk)
         if writer is None:  # no chunk: a header alone
-            header = _las_layout(path, _NO_POINTS.attributes, grid, crs_records)[0]
+            header = _las_layout(path, _NO_POINTS.attributes, grid, crs_records, has_color)[0]
             open_file.enter_context(laspy.open(str(tmp), mode="w", header=header, do_compress=path.suffix.lower() == ".laz"))
     return written
 
@@ -157,8 +160,8 @@ _PLY_NAMES = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": 
 _PLY_COUNT_DIGITS = 20
 
 
-def _write_ply(tmp: Path, path: Path, chunks: Chunks, n: int | None) -> int:
-    """Binary little-endian PLY: x, y, z (double), red, green, blue (uchar), then the attributes;
+def _write_ply(tmp: Path, path: Path, chunks: Chunks, n: int | None, has_color: bool) -> int:
+    """Binary little-endian PLY: x, y, z (double), red, green, blue (uchar; ``has_color`` only), then the attributes;
     the header (made from the first chunk) first, then the records chunk by chunk. ``n`` None: the
     header's count is written as zeros of a fixed width and patched once the points are counted,
     not counted in a pass of their own (files' points, decoded again)."""
@@ -167,19 +170,19 @@ def _write_ply(tmp: Path, path: Path, chunks: Chunks, n: int | None) -> int:
         written = 0
         for chunk in chunks():
             if fields is None:
-                fields = _ply_fields(path, chunk, chunks)
+                fields = _ply_fields(path, chunk, chunks, has_color)
                 count_at = _write_ply_header(f, fields, n)
             data = np.empty(len(chunk), fields)
             for k, a in enumerate("xyz"):
                 data[a] = chunk.xyz[:, k]
-            for k, a in enumerate(("red", "green", "blue")):
+            for k, a in enumerate(("red", "green", "blue") if has_color else ()):
                 data[a] = chunk.rgba[:, k]
             for a, v in chunk.attributes.items():
                 data[a] = v
             f.write(data.tobytes())
             written += len(chunk)
         if fields is None:  # no chunk: a header alone
-            count_at = _write_ply_header(f, _ply_fields(path, _NO_POINTS, chunks), n)
+            count_at = _write_ply_header(f, _ply_fields(path, _NO_POINTS, chunks, has_color), n)
         if n is None:
             f.seek(count_at)
             f.write(f"{written:0{_PLY_COUNT_DIGITS}d}".encode())
@@ -188,7 +191,7 @@ def _write_ply(tmp: Path, path: Path, chunks: Chunks, n: int | None) -> int:
     return written
 
 
-def _ply_fields(path: Path, first: PointChunk, chunks: Chunks) -> list[tuple[str, str]]:
+def _ply_fields(path: Path, first: PointChunk, chunks: Chunks, has_color: bool) -> list[tuple[str, str]]:
     """The PLY records' (name, dtype) of points with ``first``'s attributes: 64-bit integers,
     which PLY has no type for, narrowed to their range (a pass over ``chunks()`` for it)."""
     wide = [a for a, v in first.attributes.items() if v.dtype.kind in "iu" and v.dtype.itemsize == 8]
@@ -197,7 +200,7 @@ def _ply_fields(path: Path, first: PointChunk, chunks: Chunks) -> list[tuple[str
         for a in wide:
             if len(chunk):
                 lo[a], hi[a] = min(lo[a], int(chunk.attributes[a].min())), max(hi[a], int(chunk.attributes[a].max()))
-    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")] + ([("red", "u1"), ("green", "u1"), ("blue", "u1")] if has_color else [])
     return fields + [(a, _ply_type(path, a, v.dtype, lo.get(a, 0), hi.get(a, 0))) for a, v in first.attributes.items()]
 
 
@@ -247,6 +250,23 @@ def source_crs_records(files) -> list[tuple[bytes, int, bytes]]:
     return [(u, r, d) for u, r, d in hdr.vlrs if u == PROJECTION_USER_ID and r in _GEOTIFF_RECORDS]
 
 
+def file_has_color(path) -> bool:
+    """Whether the points of ``path`` have colours, as its header says: a LAS file's point format
+    has RGB; other files where their header tells (PLY, NPY), else assumed."""
+    reader = reader_for(path)
+    if isinstance(reader, LasReader):
+        return bool(reader.info(path).get("has_color"))
+    return bool(reader.header(path).get("has_color", True))
+
+
+def sources_have_color(files) -> bool:
+    """Whether points read from ``files`` (a cloud's or an octree's sources) are written with
+    colours: unless every one is still there and has none (the grey they are drawn in is no
+    colour of theirs). No files (points built from arrays): they have colours."""
+    there = [Path(p) for p in files if Path(p).is_file()]
+    return not files or len(there) < len(files) or any(file_has_color(p) for p in there)
+
+
 def _las_files(files) -> list[Path]:
     """The LAS/LAZ files among a cloud's source files that are still there (one removed since it
     was read gives nothing: its CRS and grid are lost, not the save)."""
@@ -271,22 +291,27 @@ def save_cloud(cloud: PointCloud, path, overwrite: bool = False, points_per_chun
     a chunk at a time. A cloud read from LAS/LAZ files keeps their CRS (the first file's naming
     one) and their grid (the X, Y, Z integers as the files had them, where every point lies on
     it); colours as held (8 bits a channel), in LAS's 16-bit fields x 257, or as they are where
-    the source's were 8-bit values there (``source_color_bits``)."""
+    the source's were 8-bit values there (``source_color_bits``); none (LAS point format 6, a PLY
+    without red, green, blue) where its files have none and its colours were never changed."""
     if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):
         raise InputError(f"{cloud.name}: save: the output must be a path of a .las, .laz or .ply file, got {path!r}")
     path = Path(path)
     if path.suffix.lower() not in POINT_FILE_SUFFIXES:
         raise InputError(f"{path}: save writes .las, .laz or .ply files, not {path.suffix or 'a name without a suffix'}")
     check_point_file_output(path, overwrite)
-    if not cloud.colors_exact:  # gp.open's colors="auto": written as held, up to 12/255 off the file's (as convert says)
+    has_color = cloud.version is not None or sources_have_color(cloud.source_files)  # (changed: set_colors may have given it colours)
+    if has_color and not cloud.colors_exact:  # gp.open's colors="auto": written as held, up to 12/255 off the file's (as convert says)
         files = ", ".join(str(f) for f in cloud.source_files)
         exact = f"open its files ({files}) with colors='rgba'" if files else "make the cloud with colors='rgba'"
         warn(f"{path}: the cloud holds its colours approximated (RGB565 or a palette), so the file gets those; {exact} for exact colours", GigapointWarning)
     crs = source_crs_records(cloud.source_files) if path.suffix.lower() != ".ply" else []
     color_bits = 8 if cloud.source_color_bits == 8 else 16  # (LAS's own: 16; 8 where the source stored 8-bit values)
-    return write_points(path, lambda: cloud.chunks(points_per_chunk), cloud.n_points, grid=_source_grid(cloud), crs_records=crs, color_bits=color_bits)
+    return write_points(
+        path, lambda: cloud.chunks(points_per_chunk), cloud.n_points, grid=_source_grid(cloud), crs_records=crs, color_bits=color_bits,
+        has_color=has_color,
+    )
 
 
 set_cloud_writer(save_cloud)
 
-__all__ = ["POINT_FILE_SUFFIXES", "check_point_file_output", "save_cloud", "source_crs_records", "wkt_crs_records", "write_points"]
+__all__ = ["POINT_FILE_SUFFIXES", "check_point_file_output", "file_has_color", "save_cloud", "source_crs_records", "sources_have_color", "wkt_crs_records", "write_points"]

@@ -268,7 +268,7 @@ def classify_ground(source, out, *, cell=None, slope=None, window=None, threshol
                 chunk = _classified(chunk, grid, dem, tolerance, counts)
                 yield _with_heights(chunk, grid, dem, normalize, span) if heights or normalize else chunk
 
-        written = write_points(out, classified, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None)
+        written = write_points(out, classified, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None, has_color=inputs.has_color)
     finally:
         shown.close()
     if noise_params is not None:
@@ -429,7 +429,7 @@ def classify_noise(source, out, *, step=None, step_z=None, isolated=None, overwr
             for _, chunk in inputs.valid_chunks(None, shown, tally):
                 yield _noise_classified(chunk, cells, counts)
 
-        written = write_points(out, classified, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None)
+        written = write_points(out, classified, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None, has_color=inputs.has_color)
     finally:
         shown.close()
     return NoiseResult(out, written, counts["noise"], counts["kept"], tally["skipped"], cells.cells, cells.nbytes, params, time.perf_counter() - t0)
@@ -473,7 +473,7 @@ class _NoiseFound:
     def __init__(self, inputs, cells):
         self.inputs, self.cells = inputs, cells
         self.files, self.label, self.counts = inputs.files, inputs.label, inputs.counts
-        self.las_grid, self.crs_records = inputs.las_grid, inputs.crs_records
+        self.las_grid, self.crs_records, self.has_color = inputs.las_grid, inputs.crs_records, inputs.has_color
         self.counts_found = {"noise": 0, "kept": 0}
 
     def headers_bounds(self):
@@ -600,7 +600,7 @@ def height_above_ground(source, out, *, cell=None, normalize: bool = False, over
             for _, chunk in inputs.valid_chunks(None, shown, tally):
                 yield _with_heights(chunk, grid, dem, normalize, span)
 
-        written = write_points(out, measured, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None)
+        written = write_points(out, measured, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None, has_color=inputs.has_color)
     finally:
         shown.close()
     return HeightResult(out, written, ground, span.range(), tally["skipped"], params, time.perf_counter() - t0)

@@ -13,6 +13,7 @@ from ...errors import GigapointWarning, warn
 from ...io import crs_wkt, file_names, warn_mixed_crs
 from ...io.las import LasReader, read_las_header, wkt_of
 from ...io.registry import reader_for
+from ...io.write import file_has_color
 
 
 def _warn_off_grid(grids, scale, offset) -> None:
@@ -31,15 +32,6 @@ def _warn_off_grid(grids, scale, offset) -> None:
             f"({float(np.max(scale)) / 2:g})",
             GigapointWarning,
         )
-
-
-def file_has_color(path) -> bool:
-    """Whether the points of ``path`` have colours, as its header says: a LAS file's point format
-    has RGB; other files where their header tells (PLY, NPY), else assumed."""
-    reader = reader_for(path)
-    if isinstance(reader, LasReader):
-        return bool(reader.info(path).get("has_color"))
-    return bool(reader.header(path).get("has_color", True))
 
 
 def input_facts(paths, one_grid: bool = False) -> dict:

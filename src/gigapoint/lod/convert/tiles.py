@@ -324,7 +324,10 @@ class _TileSpill:
         written = []
         for key in self.written_keys:
             path = self.folder / tile_name(name, *key, self.size, suffix)
-            write_points(path, lambda key=key: self.chunks(key, files.chunk_size), None, grid=files.las_grid, crs_records=files.crs_records, color_bits=None)
+            write_points(
+                path, lambda key=key: self.chunks(key, files.chunk_size), None, grid=files.las_grid, crs_records=files.crs_records, color_bits=None,
+                has_color=files.has_color,
+            )
             self.path(key).unlink()
             progress.advance(self.held[key])
             written.append(path)

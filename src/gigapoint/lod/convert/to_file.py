@@ -6,7 +6,9 @@ io/write.py's writer as they are read, so no more than a chunk is held, however 
 The file is faithful to the inputs: the first LAS file's CRS, a LAS grid that holds every LAS
 input's points exactly (their finest scale, the first file's offset: facts.input_facts, which
 warns of files off it), colours as each file stored them (8-bit values or 16-bit ones), the
-attributes every file has (as gp.open keeps them). Invalid points (NaN, inf) are skipped with
+attributes every file has (as gp.open keeps them), colours only where an input has them (LAS point
+format 6, a PLY without red, green, blue where none has: not the grey the viewer draws them in;
+black for the points of a colourless file among coloured ones, warned of). Invalid points (NaN, inf) are skipped with
 the usual warning. ``reprojection`` (io/reproject.py: ``to_crs``): the points move into that CRS
 as they are read, before the filter and the thinning (a clip box and cells in the output's
 coordinates); the file then names that CRS and takes a grid of the inputs' precision in its units. ``thin``: one point kept per occupied cell of that edge over the whole file
@@ -25,8 +27,8 @@ import numpy as np
 from ...atomic import same_file
 from ...core.chunk import PointChunk, attributes_in_common, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
-from ...errors import EmptyCloudError, InputError
-from ...io import expand_paths, files_label, read_chunks, scan_angles_differ
+from ...errors import EmptyCloudError, GigapointWarning, InputError, warn
+from ...io import expand_paths, file_names, files_label, read_chunks, scan_angles_differ
 from ...io._base import STREAM_CHUNK_SIZE
 from ...io.colorize import Colorization
 from ...io.crs import files_crs
@@ -36,10 +38,10 @@ from ...io.las_fields import las_grid
 from ...io.registry import reader_for
 from ...io.reproject import Reprojection, output_grid
 from ...io.thin import Thinning
-from ...io.write import POINT_FILE_SUFFIXES, check_point_file_output, source_crs_records, wkt_crs_records, write_points
+from ...io.write import POINT_FILE_SUFFIXES, check_point_file_output, file_has_color, source_crs_records, wkt_crs_records, write_points
 from ..build import valid_bounds
 from ..kinds import is_copc_name
-from .facts import file_has_color, input_facts
+from .facts import input_facts
 from .read import _skipped_if_empty
 
 
@@ -54,7 +56,8 @@ class PointFiles:
     ``files`` (folders and patterns expanded), ``label`` (their name in messages), ``names``
     (the attributes in common), ``counts`` (the headers' point counts; None: not told),
     ``las_grid`` (the grid holding every LAS input's points, else None) and ``crs_records``
-    (the first CRS named; ``ply``: none). ``valid_chunks`` reads them, a chunk at a time.
+    (the first CRS named; ``ply``: none), ``has_color`` (whether the output has colours: an input
+    with points has them, or ``colorization``) and ``colorless`` (the files with points and none). ``valid_chunks`` reads them, a chunk at a time.
     ``reprojection``: their points moved into its CRS as they are read; the grid, the CRS records and
     the headers' bounds are then the target CRS's (each file's CRS checked before a point is read).
     ``colorization``: the points coloured from its raster (``colored``), whose CRS is checked
@@ -86,14 +89,18 @@ class PointFiles:
         self.colorization = colorization
         if colorization is not None:  # (the points' CRS is the output's: the target's where reprojected)
             colorization.check_crs(reprojection.target_wkt() if reprojection is not None else files_crs(self.files), self.label)
-            self.had_color = {f: file_has_color(f) for f in self.files}
+        self.colorless = {f for f, count in zip(self.files, self.counts) if count != 0 and not file_has_color(f)}
+        self.has_color = colorization is not None or len(self.colorless) < sum(count != 0 for count in self.counts)
+        if self.colorless and self.has_color and colorization is None:
+            warn(f"{file_names(sorted(self.colorless))}: no colours; their points are written black (0, 0, 0) beside the other files' colours ({out})",
+                 GigapointWarning)  # fmt: skip
 
     def colored(self, f, chunk: PointChunk, tally: dict) -> PointChunk:
         """``chunk`` (of file ``f``) coloured from the orthophoto, as it is without one; ``tally``'s
         "uncolored" counts the points that took no colour from it (outside it, under its mask)."""
         if self.colorization is None:
             return chunk
-        chunk, uncolored = self.colorization.colored(chunk, self.had_color[f])
+        chunk, uncolored = self.colorization.colored(chunk, f not in self.colorless)
         tally["uncolored"] += uncolored
         return chunk
 
@@ -120,7 +127,8 @@ class PointFiles:
                 tally["skipped"] += len(chunk) - n
                 if n:
                     attributes = {a: chunk.attributes[a][rows] for a in self.names}
-                    yield f, PointChunk(chunk.xyz[rows], chunk.rgba[rows], attributes, scale=chunk.scale, color_bits=chunk.color_bits)
+                    rgba = chunk.rgba[rows] if f not in self.colorless else _BLACK[np.zeros(n, np.intp)]  # (not the grey they are drawn in)
+                    yield f, PointChunk(chunk.xyz[rows], rgba, attributes, scale=chunk.scale, color_bits=chunk.color_bits)
         if passing is not None:  # "no point passes the filter", not "no valid points"
             passing.check_passed(self.label)
         if not tally["points"]:  # (raised in the write: no file is left)
@@ -154,9 +162,13 @@ def write_point_file(
         for f, chunk in inputs.valid_chunks(keep, progress, tally):
             yield inputs.colored(f, chunk if thinning is None else thinning.kept(chunk, f), tally)
 
-    written = write_points(out, chunks, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None)
+    written = write_points(out, chunks, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None, has_color=inputs.has_color)
     check_valid_count(inputs.label, written, tally["skipped"])  # the skipped points' warning
     return written, tally["skipped"], tally["points"], tally["uncolored"]
+
+
+#: the colour written for points of a file without colours among files with them
+_BLACK = np.array([[0, 0, 0, 255]], np.uint8)
 
 
 def _headers_bounds(files, counts, reprojection: Reprojection | None = None):

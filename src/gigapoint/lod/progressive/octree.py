@@ -1531,7 +1531,7 @@ class ProgressiveOctree:
         import time
 
         from ...io.las_fields import las_grid
-        from ...io.write import check_point_file_output, source_crs_records, write_points
+        from ...io.write import check_point_file_output, source_crs_records, sources_have_color, write_points
         from ..convert.converter import ConvertResult
 
         if options:  # (sampler=, max_leaf=, ...: each meant something of an octree only)
@@ -1542,7 +1542,7 @@ class ProgressiveOctree:
         ply = out.suffix.lower() == ".ply"
         grid = None if ply or self.grid is None else las_grid(self.lo, self.hi, np.full(3, self.grid[1]), self.grid[0])
         crs = [] if ply else source_crs_records(self.source_files)
-        n = write_points(out, self.chunks, self.points, grid=grid, crs_records=crs, color_bits=None)
+        n = write_points(out, self.chunks, self.points, grid=grid, crs_records=crs, color_bits=None, has_color=sources_have_color(self.source_files))
         return ConvertResult(out, out.suffix[1:].lower(), None, n, 0, self.skipped, time.perf_counter() - t0, False)
 
     def check_loaded(self, to: str) -> None:
