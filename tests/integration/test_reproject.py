@@ -130,6 +130,25 @@ def test_points_outside_the_projections_domain_are_refused_naming_the_file(tmp_p
     assert not (tmp_path / "out.laz").exists()
 
 
+def test_a_file_beyond_gigapoints_reach_is_no_valid_point_not_an_internal_error(cli, tmp_path):
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = [1.0] * 3, [1e12, 1e12, 0.0]  # (the farthest offset a header may have: its points just beyond)
+    las = laspy.LasData(header)
+    las.X, las.Y, las.Z = np.array([1, 5], np.int32), np.array([1, 5], np.int32), np.array([0, 1], np.int32)
+    far = tmp_path / "far.las"
+    las.write(str(far))
+    rc, _, err = cli("convert", far, "-o", tmp_path / "out.laz", "--to-crs", "EPSG:4326", "--from-crs", UTM)
+    assert rc == 1 and err.strip() == f"error: {far}: no valid points (2 invalid points: NaN, inf or beyond ±1e+12)"  # (was "internal error: ValueError")
+    assert not (tmp_path / "out.laz").exists()
+
+
+def test_a_box_outside_the_domain_names_its_middle_not_a_count_of_made_up_points(tmp_path):
+    one = _plain_tile(tmp_path / "one.las", [[473.18, 511.82, 755.16]])  # metres taken for degrees: latitude 511
+    with pytest.raises(InputError, match=r"^.*one\.las: the middle of its points' box \(473\.18, 511\.82, 755\.16, as its header says\) lies outside the domain of the transform to WGS 84 / UTM zone 10N: nothing was written"):
+        gp.convert(one, tmp_path / "out.laz", to_crs=UTM, from_crs="EPSG:4326")  # (was "4 points lie outside": the file has 1)
+    assert not (tmp_path / "out.laz").exists()
+
+
 def test_without_pyproj_the_option_says_how_to_install_it(autzen_path, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "pyproj", None)  # (import pyproj raises ImportError)
     with pytest.raises(InputError, match=r"^convert: to_crs='EPSG:32610': reprojecting needs pyproj \(pip install 'gigapoint\[gis\]'\)$"):

@@ -163,7 +163,12 @@ class Reprojection:
         y change length unit (between 2D CRSs: PROJ keeps z)."""
         mid = (np.asarray(lo, np.float64) + np.asarray(hi, np.float64)) / 2
         scale = np.asarray(scale, np.float64)
-        moved = self.transformed(np.array([mid, mid + [scale[0], 0, 0], mid + [0, scale[1], 0], mid + [0, 0, scale[2]]]), path)
+        moved, lost = self._moved(np.array([mid, mid + [scale[0], 0, 0], mid + [0, scale[1], 0], mid + [0, 0, scale[2]]]), path)
+        if lost.any():  # (transformed's "4 points lie outside" counted these probes, not the file's points: one file had 1)
+            raise InputError(
+                f"{path}: the middle of its points' box ({mid[0]:.15g}, {mid[1]:.15g}, {mid[2]:.15g}, as its header says) lies outside the "
+                f"domain of the transform to {self.target.name}: nothing was written; are its coordinates in the CRS it is read in?"
+            )
         across = min(float(np.hypot(*(moved[k, :2] - moved[0, :2]))) for k in (1, 2))
         up = abs(moved[3, 2] - moved[0, 2])
         units = [_metres_across(c) for c in (self.transformer(path).source_crs, self.target)]
@@ -189,7 +194,7 @@ class Reprojection:
 def output_grid(files, reprojection: Reprojection):
     """(scale, offset) of the LAS grid of the reprojected points of LAS ``files``: the finest step
     of theirs in the target CRS (``Reprojection.step``), a round offset below their headers' boxes
-    transformed; None where a file is no LAS file (a grid is then made from the points' bounds, a
+    transformed (of the files within gigapoint's reach); None where a file is no LAS file, or none is within it (a grid is then made from the points' bounds, a
     pass over them)."""
     from .las_fields import las_grid
 
@@ -199,8 +204,12 @@ def output_grid(files, reprojection: Reprojection):
     for f in files:
         header = reader_for(f).header(f)
         lo, hi = (np.asarray(b, np.float64) for b in header["bounds"])
+        if not (np.all(np.isfinite(lo) & np.isfinite(hi)) and max(np.abs(lo).max(), np.abs(hi).max()) <= MAX_ABS_COORDINATE):
+            continue  # beyond gigapoint's reach: no grid of its (a NaN step was "cannot convert float NaN to integer"); its points are skipped as read
         boxes.append(reprojection.box(f, lo, hi))
         steps.append(reprojection.step(f, lo, hi, np.abs(np.asarray(header["scale"], np.float64))))
+    if not boxes:
+        return None
     lo, hi = np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
     step = np.min(steps, axis=0)
     return las_grid(lo, hi, step, round_offset(lo, step))
