@@ -188,6 +188,9 @@ def test_a_missing_or_damaged_raster_is_refused_before_a_point_is_read(cli, no_r
     out = tmp_path / "out.laz"
     rc, _, err = cli("convert", no_rgb, "-o", out, "--colorize", tmp_path / "missing.tif", "-q")
     assert (rc, err.strip()) == (1, f"error: {tmp_path / 'missing.tif'}: no such raster file (convert: colorize)")
+    (tmp_path / "rasters").mkdir()
+    rc, _, err = cli("convert", no_rgb, "-o", out, "--colorize", tmp_path / "rasters", "-q")
+    assert (rc, err.strip()) == (1, f"error: {tmp_path / 'rasters'}: is a folder, not a raster file (convert: colorize)")  # (was "no such raster file")
     damaged = tmp_path / "damaged.tif"
     damaged.write_bytes(b"II*\0" + bytes(range(256)) * 4)
     rc, _, err = cli("convert", no_rgb, "-o", out, "--colorize", damaged, "-q")

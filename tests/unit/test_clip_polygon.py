@@ -267,3 +267,10 @@ def test_bad_polygons_are_one_line_errors_naming_the_file_before_reading(cli, tm
     assert str(err.value) == want
     rc, _, cli_err = cli("render", tmp_path / "missing.laz", "-o", tmp_path / "x.png", "--clip-polygon", area)
     assert rc != 0 and cli_err.strip() == "error: " + (f"render: --clip-polygon {area}: {message}" if content is None else f"{area}: {message}")
+
+
+def test_a_folder_given_as_the_clip_polygon_is_said_to_be_one(cli, autzen_path, tmp_path):
+    (tmp_path / "areas").mkdir()
+    rc, _, err = cli("convert", autzen_path, "-o", tmp_path / "x.laz", "--clip-polygon", tmp_path / "areas")
+    assert rc != 0 and err.strip() == f"error: convert: --clip-polygon {tmp_path / 'areas'}: is a folder, not a clip polygon file (GeoJSON or WKT)"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["areas"]  # (was "no such file (nor WKT text ...)" of a folder that is there)

@@ -52,6 +52,8 @@ class Colorization:
         rasterio = rasterio_module(f"{where}: colorize")
         self.path = Path(raster)
         self.where = where
+        if self.path.is_dir():  # (was "no such raster file" of a folder that is there)
+            raise InputError(f"{self.path}: is a folder, not a raster file ({where}: colorize)")
         if not self.path.is_file():
             raise InputError(f"{self.path}: no such raster file ({where}: colorize)")
         try:

@@ -120,6 +120,8 @@ def clip_polygon_of(value, label: str) -> ClipPolygon:
     if isinstance(value, str) and _WKT_START.match(text):
         return _wkt_polygon(text, f"WKT {text.strip()[:30]}{'...' * (len(text.strip()) > 30)}")
     path = Path(value)
+    if path.is_dir():  # (was "no such file" of a folder that is there)
+        raise InputError(f"{label}: is a folder, not a clip polygon file (GeoJSON or WKT)")
     if not path.is_file():
         raise InputError(f"{label}: no such file{' (nor WKT text: POLYGON ((x y, ...)))' * isinstance(value, str)}")
     try:
