@@ -63,8 +63,9 @@ def test_a_failed_side_write_takes_the_image_back(tmp_path, autzen_path, monkeyp
 
     result = gp.orthophoto(autzen_path, GSD)
     monkeypatch.setattr(georef, "write_world_file", full_disk)
-    with pytest.raises(OSError, match="No space left"):
+    with pytest.raises(GigapointError) as err:  # (was the OSError raw: "[Errno 28] No space left on device", naming no file)
         result.write(tmp_path / "ortho.tif", tmp_path / "dsm.tif")
+    assert str(err.value) == f"{tmp_path / 'ortho.tfw'}: not written (No space left on device); none of the map's files was left"
     assert list(tmp_path.iterdir()) == []
 
 

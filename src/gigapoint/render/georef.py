@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_bytes, write_together
+from ..atomic import atomic_bytes, write_failure, write_together
 from ..errors import GigapointError, GigapointWarning, warn
 from ..io import EPSG_LENGTH_UNITS, crs_wkt, horizontal_epsg
 from .camera import Camera
@@ -190,10 +190,23 @@ def write_map(camera: Camera, crs: str | None, units: dict, rasters, overwrite: 
             raise GigapointError(f"{path}: named for two outputs")
     for path, _ in side_writes:  # a user's world file or .prj is not replaced without asking
         check_output(path, overwrite, suffixes=None)
-    written = write_together(raster_writes(camera, crs, wkt, units, rasters) + side_writes)
+    written = write_together([(path, _said(path, save)) for path, save in raster_writes(camera, crs, wkt, units, rasters) + side_writes])
     for note in notes:
         warn(note, GigapointWarning)
     return written
+
+
+def _said(path: Path, save):
+    """``save``, its OSError (a full disk, a folder not writable after all: PIL's and rasterio's
+    "[Errno 13] Permission denied" came raw through gp.orthophoto) a one-line GigapointError naming ``path``."""
+
+    def save_or_say(target):
+        try:
+            save(target)
+        except OSError as exc:
+            raise GigapointError(f"{path}: not written ({write_failure(exc)}); none of the map's files was left") from None
+
+    return save_or_say
 
 
 def _holds(path: Path, wkt: str | None) -> bool:
