@@ -151,6 +151,21 @@ def test_bad_inputs_are_one_line_errors(tmp_path, town):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.las", "one.las", "there.laz"]  # no output left by a refused run
 
 
+def test_a_folder_it_cannot_write_into_is_refused_before_a_point_is_read(town, tmp_path, monkeypatch):
+    import os
+
+    path, _ = town
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode, **kw: False if str(p) == str(locked) else real_access(p, mode, **kw))  # (root writes anywhere)
+    monkeypatch.setattr(classify, "_classified", lambda *args: pytest.fail("points classified"))
+    with pytest.raises(InputError) as err:
+        gp.classify_ground(path, locked / "out.laz")
+    assert str(err.value) == f"{locked / 'out.laz'}: cannot write into {locked} (permission denied)"  # (was "not written" once every point was classified)
+    assert list(locked.iterdir()) == []
+
+
 def test_a_run_that_fails_while_writing_leaves_no_output(town, tmp_path, monkeypatch):
     path, _ = town
     calls = []

@@ -34,13 +34,15 @@ Chunks = Callable[[], Iterable[PointChunk]]
 def check_point_file_output(path: Path, overwrite: bool) -> None:
     """Refuse, in one line naming ``path``, a point file that cannot be written there: a folder
     (overwrite=True was os.replace's IsADirectoryError: a folder is never replaced by a file), an
-    existing file without ``overwrite``, a missing folder."""
+    existing file without ``overwrite``, a missing folder, one not writable."""
     if path.is_dir():
         raise InputError(f"{path}: is a directory, not a {path.suffix[1:].upper()} file; not replaced")
     if path.exists() and not overwrite:
         raise InputError(f"{path}: exists; pass overwrite=True to replace it")
     if not path.parent.is_dir():
         raise InputError(f"{path}: the folder {path.parent} does not exist")
+    if not os.access(path.parent, os.W_OK):  # ("Permission denied" came once every point was read, classified, reprojected)
+        raise InputError(f"{path}: cannot write into {path.parent} (permission denied)")
 
 
 def write_points(
