@@ -225,6 +225,41 @@ def ground_model(lowest: np.ndarray, cell: float, slope: float, window: float) -
     return fill_everywhere(dem)
 
 
+def _point_files(source, out, overwrite: bool, chunk_size: int | None, where: str):
+    """(``out`` as a Path, the PointFiles of ``source`` it is written from) for a classification
+    that writes every point of its inputs again: ``out`` a .las, .laz or .ply file not there
+    yet (or ``overwrite``), checked before a point is read (one-line errors starting ``where``)."""
+    from ..io.write import check_point_file_output
+    from ..lod.convert.to_file import PointFiles
+
+    out = Path(out)
+    if out.suffix.lower() not in (".las", ".laz", ".ply"):
+        raise InputError(f"{out}: {where} writes a .las, .laz or .ply file")
+    check_point_file_output(out, overwrite)
+    return out, PointFiles(source, out, chunk_size, ply=out.suffix.lower() == ".ply")
+
+
+def _progress(shown: bool):
+    """The progress bar of a classification's passes (rich), or none."""
+    from ..lod.progress import NullProgress, RichProgress
+
+    return RichProgress() if shown else NullProgress()
+
+
+def _write_through(inputs, out: Path, phase: str, each, progress, tally: dict) -> int:
+    """The last pass of a classification: every valid chunk of ``inputs`` as ``each`` gives it
+    back, written to ``out`` on the inputs' LAS grid, with their CRS and colours (none where
+    none of them has any); the points written."""
+    from ..io.write import write_points
+
+    def chunks():
+        progress.phase(phase, None if None in inputs.counts else sum(inputs.counts))
+        for _, chunk in inputs.valid_chunks(None, progress, tally):
+            yield each(chunk)
+
+    return write_points(out, chunks, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None, has_color=inputs.has_color)
+
+
 def classify_ground(source, out, *, cell=None, slope=None, window=None, threshold=None, scalar=None, overwrite: bool = False,
                     chunk_size: int | None = None, progress: bool = False, noise: dict | bool | None = None, heights: bool = False, normalize: bool = False) -> GroundResult:  # fmt: skip
     """Classify the points of ``source`` (files, folders or patterns, as ``gp.open`` takes them)
@@ -237,20 +272,11 @@ def classify_ground(source, out, *, cell=None, slope=None, window=None, threshol
     keep them out of the ground. ``heights``: each point's height above
     the ground model just made written too (``height_above_ground``'s attribute; ``normalize``:
     as its z as well)."""
-    from ..lod.convert.to_file import PointFiles
-    from ..lod.progress import NullProgress, RichProgress
-
     t0 = time.perf_counter()
-    out = Path(out)
-    if out.suffix.lower() not in (".las", ".laz", ".ply"):
-        raise InputError(f"{out}: classify_ground writes a .las, .laz or .ply file")
-    from ..io.write import check_point_file_output, write_points
-
-    check_point_file_output(out, overwrite)
-    inputs = PointFiles(source, out, chunk_size, ply=out.suffix.lower() == ".ply")
+    out, inputs = _point_files(source, out, overwrite, chunk_size, "classify_ground")
     params = ground_parameters(inputs.files, cell, slope, window, threshold, scalar)
     noise_params = noise_parameters(inputs.files, **({} if noise is True else noise)) if noise else None
-    shown = RichProgress() if progress else NullProgress()
+    shown = _progress(progress)
     try:
         if noise_params is not None:
             inputs = _NoiseFound(inputs, _sparse_cells(inputs, noise_params, shown))
@@ -262,13 +288,11 @@ def classify_ground(source, out, *, cell=None, slope=None, window=None, threshol
         tally: dict = {}
         span = _HeightSpan()
 
-        def classified():
-            shown.phase("classify", None if None in inputs.counts else sum(inputs.counts))
-            for _, chunk in inputs.valid_chunks(None, shown, tally):
-                chunk = _classified(chunk, grid, dem, tolerance, counts)
-                yield _with_heights(chunk, grid, dem, normalize, span) if heights or normalize else chunk
+        def classified(chunk):
+            chunk = _classified(chunk, grid, dem, tolerance, counts)
+            return _with_heights(chunk, grid, dem, normalize, span) if heights or normalize else chunk
 
-        written = write_points(out, classified, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None, has_color=inputs.has_color)
+        written = _write_through(inputs, out, "classify", classified, shown, tally)
     finally:
         shown.close()
     if noise_params is not None:
@@ -407,29 +431,15 @@ def classify_noise(source, out, *, step=None, step_z=None, isolated=None, overwr
     memory bounded by the occupied cells (see the notes above). Parameters in the cloud's units,
     None: the defaults (``noise_parameters``). ``out`` appears only once whole; an existing one
     is replaced only with ``overwrite``."""
-    from ..io.write import check_point_file_output, write_points
-    from ..lod.convert.to_file import PointFiles
-    from ..lod.progress import NullProgress, RichProgress
-
     t0 = time.perf_counter()
-    out = Path(out)
-    if out.suffix.lower() not in (".las", ".laz", ".ply"):
-        raise InputError(f"{out}: classify_noise writes a .las, .laz or .ply file")
-    check_point_file_output(out, overwrite)
-    inputs = PointFiles(source, out, chunk_size, ply=out.suffix.lower() == ".ply")
+    out, inputs = _point_files(source, out, overwrite, chunk_size, "classify_noise")
     params = noise_parameters(inputs.files, step, step_z, isolated)
-    shown = RichProgress() if progress else NullProgress()
+    shown = _progress(progress)
     try:
         cells = _sparse_cells(inputs, params, shown)
         counts = {"noise": 0, "kept": 0}
         tally: dict = {}
-
-        def classified():
-            shown.phase("classify", None if None in inputs.counts else sum(inputs.counts))
-            for _, chunk in inputs.valid_chunks(None, shown, tally):
-                yield _noise_classified(chunk, cells, counts)
-
-        written = write_points(out, classified, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None, has_color=inputs.has_color)
+        written = _write_through(inputs, out, "classify", lambda chunk: _noise_classified(chunk, cells, counts), shown, tally)
     finally:
         shown.close()
     return NoiseResult(out, written, counts["noise"], counts["kept"], tally["skipped"], cells.cells, cells.nbytes, params, time.perf_counter() - t0)
@@ -577,30 +587,16 @@ def height_above_ground(source, out, *, cell=None, normalize: bool = False, over
     cloud's units, as ``classify_ground``'s); a cloud with no class 2 is a one-line InputError
     (``classify_ground(..., heights=True)`` classifies and measures in one run). Two passes,
     memory bounded by the raster."""
-    from ..io.write import check_point_file_output, write_points
-    from ..lod.convert.to_file import PointFiles
-    from ..lod.progress import NullProgress, RichProgress
-
     t0 = time.perf_counter()
-    out = Path(out)
-    if out.suffix.lower() not in (".las", ".laz", ".ply"):
-        raise InputError(f"{out}: height_above_ground writes a .las, .laz or .ply file")
-    check_point_file_output(out, overwrite)
-    inputs = PointFiles(source, out, chunk_size, ply=out.suffix.lower() == ".ply")
+    out, inputs = _point_files(source, out, overwrite, chunk_size, "height_above_ground")
     params = {k: v for k, v in ground_parameters(inputs.files, cell=cell).items() if k in ("cell", "units")}
-    shown = RichProgress() if progress else NullProgress()
+    shown = _progress(progress)
     span, tally = _HeightSpan(), {}
     try:
         grid = _files_grid(inputs, params["cell"], shown)
         mean, ground = _mean_ground_raster(inputs, grid, shown)
         dem = fill_everywhere(mean)
-
-        def measured():
-            shown.phase("heights", None if None in inputs.counts else sum(inputs.counts))
-            for _, chunk in inputs.valid_chunks(None, shown, tally):
-                yield _with_heights(chunk, grid, dem, normalize, span)
-
-        written = write_points(out, measured, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None, has_color=inputs.has_color)
+        written = _write_through(inputs, out, "heights", lambda chunk: _with_heights(chunk, grid, dem, normalize, span), shown, tally)
     finally:
         shown.close()
     return HeightResult(out, written, ground, span.range(), tally["skipped"], params, time.perf_counter() - t0)
