@@ -248,6 +248,31 @@ def test_a_progressive_octree_leaves_hidden_classes_out_of_its_leaves_and_voxels
         assert not gp.render(tree, TOP, hidden_classes=(2, 6), **options)[..., :3].any()
 
 
+def test_a_progressive_octree_spends_the_budget_hidden_classes_leave_on_deeper_octants():
+    from gigapoint.lod.progressive import ProgressiveOctree
+
+    xyz, rgb, _ = two_classes(spacing=0.25)  # 80 000 points: leaves of 550-650 (level 4) under a root of 15 833 voxels
+    classes = np.where(np.random.default_rng(1).permutation(len(xyz)) % 2 == 0, 2, 7).astype(np.uint8)  # half class 7, everywhere
+    tree = ProgressiveOctree("half", max_leaf=2_000)
+    tree.add(xyz, rgb, classification=classes)
+    budget = {"point_budget": 40_000, "lod_threshold_px": 0, **FIXED}
+
+    def levels(hidden) -> list:  # how many nodes of each level a frame draws
+        return np.bincount(tree.level[drawn(tree, hidden, budget).nodes]).tolist()
+
+    shown = gp.render_frame(tree, TOP, **budget).stats
+    assert (shown.batches_rendered, shown.points_processed) == (18, 39_359)  # nothing hidden: the selection of whole counts
+    assert levels(()) == [1, 1, 0, 0, 16]
+    hidden = gp.render_frame(tree, TOP, hidden_classes=(7,), **budget)
+    # by whole counts the same 18 nodes, half their entries drawn (19 574); by the entries kept
+    # in the chunks filtered, 48 leaves: more entries, within the budget of entries drawn (the
+    # other level-1 node, never filtered, counts whole: its 28 231 voxels do not fit)
+    assert (hidden.stats.batches_rendered, hidden.stats.points_processed) == (50, 22_512)
+    assert levels((7,)) == [1, 1, 0, 0, 48]
+    assert {hidden.point_info(int(i))["classification"] for i in np.unique(hidden.index[hidden.index >= 0])} == {2}
+    assert levels(()) == [1, 1, 0, 0, 16]  # shown again: as before anything was hidden
+
+
 def test_a_hidden_point_in_front_of_a_progressive_octree_does_not_hide_the_point_behind():
     from gigapoint.lod.progressive import ProgressiveOctree
 

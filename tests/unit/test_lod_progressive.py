@@ -570,6 +570,21 @@ def test_a_leaf_small_on_screen_draws_its_grid_sample_with_the_footprint_of_its_
         assert (a & b).sum() / (a | b).sum() >= 0.95
 
 
+def test_a_leaf_drawn_as_its_grid_sample_weighs_the_entries_it_keeps_while_classes_are_hidden(scene):
+    """With hidden classes, the budget counts what a filtered sample keeps, not its whole size:
+    the budget the hidden entries leave draws one more leaf."""
+    o = _filled(scene, max_leaf=MAX_LEAF_DEFAULT)
+    o.trim()
+    cam = gp.Camera.fit(o.bounds, view="iso", width=320, height=200)
+    s = EXACT.replace(point_budget=60_000, lod_threshold_px=100.0)  # leaves of 160-230 px: drawn as their samples
+    shown = gp.render_frame(o, cam, s).stats
+    assert (shown.batches_rendered, shown.points_processed) == (3, 58_519)
+    hidden = gp.render_frame(o, cam, s.replace(hidden_classes=(2,)))
+    # by the samples' whole sizes the same 3 nodes (39 125 entries of other classes drawn)
+    assert (hidden.stats.batches_rendered, hidden.stats.points_processed) == (4, 49_784)
+    assert 2 not in {hidden.point_info(int(i))["classification"] for i in np.unique(hidden.index[hidden.index >= 0])}
+
+
 def test_voxels_draw_where_the_three_word_layout_drew_them(octree):
     """A voxel is stored as its low word alone, its chunk's box moved half a 1024-cell: drawn at
     30 bits it lands on the pixels of the three-word layout's voxel (its cell's centre in the

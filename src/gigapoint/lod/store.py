@@ -34,8 +34,8 @@ from .octree_dir import FORMAT_NAME, FORMAT_VERSION_WORDS, FORMAT_VERSIONS, POIN
 
 ARENA_CHUNK = 4096  # points per arena slot (a node spans ceil(count / ARENA_CHUNK) slots)
 # selections a frame with a load filter (hidden classes, a read filter) makes at most: each weighs
-# the nodes the last one loaded by their kept points (half the points left out: the budget's
-# unknown part halves a round)
+# the nodes the last one loaded (a progressive octree: the chunks it filtered) by their kept
+# points (half the points left out: the budget's unknown part halves a round)
 KEPT_ROUNDS = 8
 #: Node boxes are widened by this share of the octree's cube before they are tested against a
 #: region: writers choose cubes before rounding positions to their grid, so a point may lie a
@@ -149,8 +149,8 @@ def _as_sample(sampled, node, s, dist, threshold, foveation):
 
 @njit(cache=True)
 def select_octants(
-    rows, box_min, box_size, counts, list_counts, parent, children, width, height, near, far, threshold, budget, drawn, size_of,
-    foveation, root, sampled, sampled_drawn,
+    rows, box_min, box_size, costs, list_counts, list_costs, parent, children, width, height, near, far, threshold, budget, drawn,
+    size_of, foveation, root, sampled, sample_costs, sampled_drawn,
 ):  # fmt: skip
     """Node selection for octrees whose inner nodes hold representatives (voxels) of the points
     below them, in one list per child octant, and whose leaves hold every point (SimLOD):
@@ -162,8 +162,12 @@ def select_octants(
     first that many points are a sample of it on the grid its children would have as inner
     nodes; where such children would be too small on screen to be drawn (half its size under
     the threshold), the leaf draws the sample alone (``sampled_drawn[n]``), as a converted
-    octree draws an inner node and not its children. Returns the entries drawn."""
-    n = counts.shape[0]
+    octree draws an inner node and not its children.
+
+    What each takes of the budget (as ``select_nodes``'s ``costs``): ``costs[n]`` (node n drawn
+    whole), ``list_costs[8 n + o]`` (its list o), ``sample_costs[n]`` (its sample), the entries
+    they hold or fewer where hidden classes leave some out. Returns the budget the selection takes."""
+    n = costs.shape[0]
     hp = np.empty(n, np.float64)
     hi = np.empty(n, np.int64)
     vis, s, dist = _box_test(rows, box_min[root], box_size[root], width, height, near, far)
@@ -172,10 +176,10 @@ def select_octants(
     for o in range(8):
         drawn[root, o] = list_counts[root * 8 + o] > 0
     size_of[root] = s
-    total = counts[root]
+    total = costs[root]
     if _as_sample(sampled, root, s, dist, threshold, foveation):
         sampled_drawn[root] = True
-        total = sampled[root]
+        total = sample_costs[root]
     hn = 0
     node = root
     while True:
@@ -202,7 +206,7 @@ def select_octants(
             if sampled[node] > 0:  # its distance from the image centre, again (the heap holds sizes only)
                 _, _, dist = _box_test(rows, box_min[node], box_size[node], width, height, near, far)
                 as_sample = _as_sample(sampled, node, s, dist, threshold, foveation)
-            cost = (sampled[node] if as_sample else counts[node]) - list_counts[p * 8 + d]
+            cost = (sample_costs[node] if as_sample else costs[node]) - list_costs[p * 8 + d]
             if total + cost <= budget:
                 break
         drawn[p, d] = False

@@ -69,7 +69,7 @@ from ...errors import GigapointError, InputError, check_timeout, check_whole
 from ...render.splats import weighted_median
 from ..build import valid_bounds
 from ..keys import CODE_BITS, morton_position, point_codes
-from ..store import list_chunks, select_octants
+from ..store import KEPT_ROUNDS, list_chunks, select_octants
 from . import kernels as K
 
 CHUNK = 2048  # entries a chunk holds (the paper: 1 000)
@@ -272,6 +272,7 @@ class KeptChunks:
         self.chunk_in = np.empty(0, np.int64)  # per slot: the octree chunk whose entries it holds (-1: free)
         self.drawn_at = np.empty(0, np.int64)  # per slot: the frame that last drew it
         self.frames = 0
+        self.filtered = 0  # octree chunks filtered since creation (a frame's selection knows more once it grows)
 
     @property
     def nbytes(self) -> int:
@@ -283,7 +284,7 @@ class KeptChunks:
     def slots(self, source: Pool, chunks: np.ndarray, hidden: tuple[int, ...]) -> np.ndarray:
         """The slot holding each of the octree's ``chunks`` (of its pool ``source``) without its
         entries of ``hidden`` classes, filtered where it is not yet; -1 where none is kept."""
-        forms = tuple((a, source.attributes.held_dtype(a)) for a in source.attributes)
+        forms = self._forms_of(source)
         if hidden != self.hidden or forms != self.forms:  # everything filtered again
             self.slot_of[:], self.filtered_at[:], self.chunk_in[:] = -1, -1, -1
             self.hidden = hidden
@@ -300,6 +301,25 @@ class KeptChunks:
         self.frames += 1
         return out
 
+    def kept_counts(self, source: Pool, hidden: tuple[int, ...]) -> np.ndarray:
+        """The entries of each of the octree's chunks (of its pool ``source``) as a selection
+        hiding ``hidden`` should weigh them: a chunk filtered since it was last written counts
+        the entries it kept, the others all theirs (what they keep is known once filtered)."""
+        counts = source.batches["count"].astype(np.int64)
+        if hidden != self.hidden or self._forms_of(source) != self.forms:  # (the next ``slots`` filters every chunk again)
+            return counts
+        n = min(len(self.filtered_at), source.n_chunks)
+        known = np.flatnonzero(self.filtered_at[:n] == source.batch_version[:n])
+        if len(known):
+            slot = self.slot_of[known]
+            counts[known] = np.where(slot >= 0, self.pool.batches["count"][np.maximum(slot, 0)], 0)
+        return counts
+
+    @staticmethod
+    def _forms_of(source: Pool) -> tuple:
+        """The forms (held_dtype) the octree's attributes are held in."""
+        return tuple((a, source.attributes.held_dtype(a)) for a in source.attributes)
+
     def _filter(self, source: Pool, stale: np.ndarray, drawn: np.ndarray) -> None:
         """The kept entries of octree chunks ``stale`` into slots (``drawn``: the frame's chunks,
         whose slots stay)."""
@@ -311,6 +331,7 @@ class KeptChunks:
         entries = np.repeat(stale * self.chunk, counts) + position
         keep = ~np.isin(source.attributes.at("classification", entries), self.hidden)
         kept = np.bincount(np.repeat(np.arange(len(stale)), counts)[keep], minlength=len(stale))
+        self.filtered += len(stale)
         filled, n_kept = stale[kept > 0], kept[kept > 0]
         slots = self._room(len(filled), drawn, source)
         self.filtered_at[stale] = source.batch_version[stale]
@@ -1618,13 +1639,16 @@ class ProgressiveOctree:
     def prepare(self, view: View, settings) -> DrawList:
         """What a view draws (store.select_octants: largest projected child first within the point
         budget, each drawn child replacing its parent's voxels of its octant), one batch per chunk;
-        with ``hidden_classes``, each chunk's entries of the other classes (KeptChunks: the nodes
-        selected are the same, their hidden entries left out)."""
+        with ``hidden_classes``, each chunk's entries of the other classes (KeptChunks), the
+        budget spent on those: a chunk filtered counts the entries it kept (``_kept_costs``)."""
         n = self.n_nodes
         pool = self.pool
         if pool is None or self.points == 0:
             empty = Selection(np.empty(0, np.int64), np.empty(0, np.int32), np.empty((0, 4, 4), np.float32), np.empty(0), 0)
             return DrawList(pool or Pool(self.name, 1, self.chunk, {}, 0), empty, max(n, 1), nodes=np.empty(0, np.int64))
+        hidden = settings.hidden_classes
+        if hidden:
+            check_classified(self.name, self.attribute_names, hidden)
         pool.source_scale = (self.grid[1],) * 3 if self.grid is not None and self._narrow else None  # point_info's rounding
         pool.node_is_leaf = self.leaf  # ... and its voxels
         lo, hi = self.bounds
@@ -1639,23 +1663,22 @@ class ProgressiveOctree:
             has = (self.point_min[:n, 0] <= self.point_max[:n, 0])[:, None]
             box_min = np.where(has, np.maximum(self.point_min[:n] - pad, cube_min), cube_min)
             box_size = np.where(has, np.minimum(self.point_max[:n] + pad, cube_max), cube_max) - box_min
-        drawn = np.zeros((n, K.LISTS), np.bool_)
-        size_of = np.zeros(n)
         sample = self.grid_sample[:n]
         sample = np.where(sample > 0, np.minimum(self.count[:n], -(-sample // pool.chunk) * pool.chunk), 0)  # whole chunks are drawn
-        sampled = np.zeros(n, np.bool_)
-        select_octants(
-            view.rows, box_min, box_size, self.count[:n], self.list_count, self.parent, self.children[:n], float(view.width),
-            float(view.height), float(view.near), float(view.far), float(settings.lod_threshold_px), int(settings.point_budget), drawn,
-            size_of, float(settings.lod_foveation), self.root, sample, sampled,
-        )  # fmt: skip
-        lists = np.flatnonzero(drawn.reshape(-1))
-        # drawn node by node in Morton order of their cubes, not in the pool's order: the pool
-        # interleaves chunks of nodes all over the cloud (as batches arrived), and frames drawn in
-        # that order scatter their writes over the whole image
-        node = lists // K.LISTS
-        by_curve = np.argsort(morton_position(self.key[node], self.level[node]), kind="stable")
-        lists, node = lists[by_curve], node[by_curve]
+        for _ in range(1 + (KEPT_ROUNDS if hidden else 0)):
+            costs = self._kept_costs(hidden, sample) if hidden else (self.count[:n], self.list_count, sample)
+            lists, sampled = self._drawn_lists(view, settings, box_min, box_size, sample, costs)
+            node = lists // K.LISTS
+            entries = np.where(sampled[node], sample[node], self.list_count[lists])  # a leaf drawn as its sample: its first chunks
+            chunks, chunk_list = self._list_chunks(lists, entries)
+            if not hidden:
+                break
+            # the chunks filtered now count their kept entries from now on, not all theirs: the
+            # budget they leave takes deeper octants, until a selection filters no chunk
+            filtered = self._kept.filtered
+            slots = self._kept.slots(pool, chunks, hidden)
+            if self._kept.filtered == filtered:
+                break
         ids, list_node = np.unique(node, return_inverse=True)
         corner = self._box_min(ids)  # the chunks' boxes (the voxels' moved: kernels.VOXEL_SHIFT)
         # the precision a batch needs follows the projection of its quantization box: its whole
@@ -1664,21 +1687,65 @@ class ProgressiveOctree:
         _, size = visible_and_size(view.rows, cmin[ids], cmin[ids] + cedge[ids, None], view.width, view.height, view.near, view.far)
         bits = precision_for(size, settings.precision_threshold_px) if settings.adaptive_precision else np.full(len(ids), 30, np.int32)
         mats = batch_matrices(view.rows, corner, corner + cedge[ids, None])
-        entries = np.where(sampled[node], sample[node], self.list_count[lists])  # a leaf drawn as its sample: its first chunks
-        max_chunks = -(-entries // pool.chunk)
-        chunks = np.empty(int(max_chunks.sum()), np.int64)
-        owner = np.empty(len(chunks), np.int64)
-        k = list_chunks(self.first_chunk, pool.chunk_next, lists, chunks, owner, max_chunks)
-        chunks, owner = chunks[:k], list_node[owner[:k]]
+        owner = list_node[chunk_list]
         drawn_from = pool
-        if settings.hidden_classes:
-            check_classified(self.name, self.attribute_names, settings.hidden_classes)
-            slots = self._kept.slots(pool, chunks, settings.hidden_classes)
+        if hidden:
             chunks, owner = slots[slots >= 0], owner[slots >= 0]  # (a chunk of hidden entries alone: nothing to draw)
             drawn_from = self._kept.pool
             drawn_from.source_scale, drawn_from.node_is_leaf, drawn_from.bounds = pool.source_scale, pool.node_is_leaf, pool.bounds
         sel = Selection(chunks, bits[owner].astype(np.int32), mats[owner], size[owner], int(n - len(ids)))
         return DrawList(drawn_from, sel, n, nodes=ids, spacing=self._drawn_spacing(lists, box_size, entries, sampled[node]))
+
+    def _drawn_lists(self, view: View, settings, box_min: np.ndarray, box_size: np.ndarray, sample: np.ndarray, costs: tuple):
+        """(the lists a view draws, in Morton order of their nodes' cubes; which leaves draw their
+        grid ``sample`` alone) as store.select_octants selects them within the point budget,
+        ``costs`` its (costs, list_costs, sample_costs)."""
+        n = self.n_nodes
+        drawn = np.zeros((n, K.LISTS), np.bool_)
+        size_of = np.zeros(n)
+        sampled = np.zeros(n, np.bool_)
+        node_costs, list_costs, sample_costs = costs
+        select_octants(
+            view.rows, box_min, box_size, node_costs, self.list_count, list_costs, self.parent, self.children[:n], float(view.width),
+            float(view.height), float(view.near), float(view.far), float(settings.lod_threshold_px), int(settings.point_budget), drawn,
+            size_of, float(settings.lod_foveation), self.root, sample, sample_costs, sampled,
+        )  # fmt: skip
+        lists = np.flatnonzero(drawn.reshape(-1))
+        # drawn node by node in Morton order of their cubes, not in the pool's order: the pool
+        # interleaves chunks of nodes all over the cloud (as batches arrived), and frames drawn in
+        # that order scatter their writes over the whole image
+        node = lists // K.LISTS
+        return lists[np.argsort(morton_position(self.key[node], self.level[node]), kind="stable")], sampled
+
+    def _list_chunks(self, lists: np.ndarray, entries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(the chunks holding the first ``entries`` of each of ``lists``, list by list; the index
+        in ``lists`` of each one's list)."""
+        max_chunks = -(-entries // self.pool.chunk)
+        chunks = np.empty(int(max_chunks.sum()), np.int64)
+        owner = np.empty(len(chunks), np.int64)
+        k = list_chunks(self.first_chunk, self.pool.chunk_next, lists, chunks, owner, max_chunks)
+        return chunks[:k], owner[:k]
+
+    def _kept_costs(self, hidden: tuple[int, ...], sample: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(costs, list_costs, sample_costs) of store.select_octants while ``hidden`` classes are
+        left out: the entries of each node, list and grid ``sample`` (its first chunks), less
+        those hidden in the chunks KeptChunks has filtered (KeptChunks.kept_counts: the others
+        count whole)."""
+        n, pool = self.n_nodes, self.pool
+        left_out = pool.batches["count"] - self._kept.kept_counts(pool, hidden)
+        costs, list_costs, sample_costs = self.count[:n].copy(), self.list_count.copy(), sample.copy()
+        nodes = np.unique(pool.chunk_node[left_out > 0])
+        nodes = nodes[(nodes >= 0) & (nodes < n)]  # (a chunk given back keeps its last node: its lists are walked for nothing)
+        lists = (nodes[:, None] * K.LISTS + np.arange(K.LISTS)).ravel()
+        lists = lists[self.list_count[lists] > 0]
+        chunks, chunk_list = self._list_chunks(lists, self.list_count[lists])
+        per_list = np.bincount(chunk_list, left_out[chunks], minlength=len(lists)).astype(np.int64)
+        list_costs[lists] -= per_list
+        np.subtract.at(costs, lists // K.LISTS, per_list)
+        node = lists[chunk_list] // K.LISTS
+        in_sample = _within_runs(np.bincount(chunk_list, minlength=len(lists))) < -(-sample[node] // pool.chunk)
+        np.subtract.at(sample_costs, node[in_sample], left_out[chunks[in_sample]])
+        return costs, list_costs, sample_costs
 
     def _drawn_spacing(self, lists: np.ndarray, box_size: np.ndarray, entries: np.ndarray, sampled: np.ndarray) -> float:
         """Spacing of the drawn entries (adaptive point sizes), from the voxel grids rather than
