@@ -16,6 +16,7 @@ from gigapoint.errors import GigapointWarning, InputError
 from gigapoint.io import files_crs
 from gigapoint.io.crs import crs_identity
 from gigapoint.io.las import read_las_header
+from gigapoint.io.reproject import Reprojection, output_grid
 from gigapoint.lod import ConvertError
 
 pyproj = pytest.importorskip("pyproj")
@@ -177,3 +178,76 @@ def test_tiles_in_utm_hold_their_squares_points_in_metres(cli, autzen_path, tmp_
         assert crs_identity(files_crs([p])) == UTM
         total += len(las.points)
     assert total == 110_000
+
+
+def _read_xyz(path):
+    las = laspy.read(str(path))
+    return np.column_stack([las.x, las.y, las.z]).astype(np.float64)
+
+
+def _fast_and_exact(reprojection, xyz, path):
+    """(the fast path's points, PROJ's exact ones) of ``xyz``, and the fast path's counts."""
+    fast = reprojection.transformed(xyz, path)
+    exact = np.column_stack(reprojection.transformer(path).transform(*(xyz[:, k].copy() for k in range(3))))
+    return fast, exact
+
+
+def test_the_fast_path_is_within_a_tenth_of_the_grid_step_of_proj_and_writes_the_same_file(autzen_path, tmp_path):
+    reprojection = Reprojection(UTM)
+    reprojection.check_files([autzen_path])
+    with pytest.warns(GigapointWarning, match="z is kept"):
+        output_grid([autzen_path], reprojection)
+    assert reprojection.tolerance == (pytest.approx(0.0001), pytest.approx(0.001))  # (0.001 m grid: 0.1 mm)
+    xyz = _read_xyz(autzen_path)
+    fast, exact = _fast_and_exact(reprojection, xyz, autzen_path)
+    assert reprojection.interpolated_points == 110_000
+    off = np.abs(fast[:, :2] - exact[:, :2]).max()
+    assert off <= 1e-6  # (measured 7.5e-9 m: far inside the 1e-4 m bound)
+    assert np.array_equal(fast[:, 2], xyz[:, 2])  # (z passed through as it is, untouched)
+    with pytest.warns(GigapointWarning, match="z is kept"):
+        gp.convert(autzen_path, tmp_path / "fast.las", to_crs=UTM)
+    with pytest.warns(GigapointWarning, match="z is kept"):
+        gp.convert(autzen_path, tmp_path / "exact.las", to_crs=UTM, exact_transform=True)
+    written_fast, written_exact = laspy.read(str(tmp_path / "fast.las")), laspy.read(str(tmp_path / "exact.las"))
+    # the same grid integers, but where PROJ's point lies within the fast path's distance of a rounding boundary
+    near = np.zeros(110_000, bool)
+    for k, axis in enumerate("XY"):
+        steps = (exact[:, k] - written_exact.header.offsets[k]) / written_exact.header.scales[k]
+        near |= np.abs(steps - np.floor(steps) - 0.5) <= off / 0.001 + 1e-9
+        same = np.asarray(written_fast[axis]) == np.asarray(written_exact[axis])
+        assert same[~near].all(), axis
+    assert near.sum() <= 10  # (2 x 7.5e-6 of a step: ~2 by chance)
+    assert np.array_equal(np.asarray(written_fast.Z), np.asarray(written_exact.Z))
+
+
+def test_a_200_km_box_across_a_utm_zone_edge_takes_a_finer_grid_and_stays_within_the_bound(tmp_path):
+    rng = np.random.default_rng(7)
+    lonlat = np.column_stack([rng.uniform(-121.3, -118.7, 200_000), rng.uniform(44.0, 45.8, 200_000), rng.uniform(0, 500, 200_000)])
+    path = _plain_tile(tmp_path / "wide.las", lonlat, scale=1e-6)  # (across 120 W, zone 10's east edge, into zone 11)
+    reprojection = Reprojection(UTM, "EPSG:4326")
+    reprojection.tolerance = (0.0001, 0.0001)
+    from gigapoint.io import reproject_grid
+
+    fitted = reproject_grid.fit(reprojection.transformer(path).transform, lonlat.min(axis=0), lonlat.max(axis=0), reprojection.tolerance, len(lonlat))
+    assert fitted is not None and fitted[0].n > reproject_grid.FIRST_CELLS  # (a finer grid than the first)
+    fast, exact = _fast_and_exact(reprojection, lonlat, path)
+    assert reprojection.interpolated_points == 200_000
+    assert np.abs(fast - exact).max() <= 0.0001
+
+
+def test_polar_stereographic_to_lon_lat_across_the_pole_falls_back_to_proj(tmp_path):
+    rng = np.random.default_rng(3)
+    xyz = np.column_stack([rng.uniform(-50_000, 50_000, 20_000), rng.uniform(-50_000, 50_000, 20_000), np.zeros(20_000)])
+    path = _plain_tile(tmp_path / "pole.las", xyz)
+    reprojection = Reprojection("EPSG:4326", "EPSG:3413")  # (longitude turns all the way round the pole: no smooth grid)
+    reprojection.tolerance = (1e-8, 0.001)  # (a 1e-7 degree grid)
+    fast, exact = _fast_and_exact(reprojection, xyz, path)
+    assert (reprojection.interpolated_points, reprojection.exact_points) == (0, 20_000)
+    assert np.array_equal(fast, exact)
+
+
+def test_exact_transform_sends_every_point_through_proj(autzen_path):
+    reprojection = Reprojection(UTM, exact=True)
+    reprojection.tolerance = (0.0001, 0.001)
+    fast, exact = _fast_and_exact(reprojection, _read_xyz(autzen_path), autzen_path)
+    assert (reprojection.interpolated_points, reprojection.exact_points) == (0, 110_000) and np.array_equal(fast, exact)

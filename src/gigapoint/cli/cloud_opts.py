@@ -90,6 +90,14 @@ FromCrsOption = Annotated[
     str | None,
     typer.Option("--from-crs", metavar="CRS", help="With --to-crs: the CRS every input's coordinates are in, in place of what their headers name (for files naming none)."),
 ]
+ExactTransformOption = Annotated[
+    bool,
+    typer.Option(
+        "--exact-transform",
+        help="With --to-crs: every point through PROJ's exact transform (slower), not the default interpolation from PROJ's "
+        "transform of a grid of control points, checked to within a tenth of the output grid's step of it.",
+    ),
+]
 ColorizeOption = Annotated[
     Path | None,
     typer.Option(

@@ -18,6 +18,7 @@ from .cloud_opts import (
     ClipPolygonOption,
     ColorizeOption,
     DropClassesOption,
+    ExactTransformOption,
     FromCrsOption,
     RecursiveOption,
     ToCrsOption,
@@ -74,6 +75,7 @@ def convert(
     ),
     to_crs: ToCrsOption = None,
     from_crs: FromCrsOption = None,
+    exact_transform: ExactTransformOption = False,
     colorize: ColorizeOption = None,
 ) -> None:
     """Convert point clouds into a level-of-detail octree, out of core, resumable; or merge, filter and thin them into one .las, .laz or .ply file (-o ground.laz)."""
@@ -116,6 +118,7 @@ def convert(
                 thin=spacing,
                 to_crs=to_crs,
                 from_crs=from_crs,
+                exact_transform=exact_transform,
                 colorize=colorize,
                 on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
             )

@@ -17,6 +17,7 @@ from .cloud_opts import (
     ClipPolygonOption,
     ColorizeOption,
     DropClassesOption,
+    ExactTransformOption,
     FromCrsOption,
     RecursiveOption,
     ToCrsOption,
@@ -43,6 +44,7 @@ def tile(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
     to_crs: ToCrsOption = None,
     from_crs: FromCrsOption = None,
+    exact_transform: ExactTransformOption = False,
     colorize: ColorizeOption = None,
 ) -> None:
     """Split point clouds into square LAS/LAZ tiles (lastile), read once, a chunk at a time; only tiles holding points are written."""
@@ -62,6 +64,7 @@ def tile(
             progress=not quiet and sys.stderr.isatty(),
             to_crs=to_crs,
             from_crs=from_crs,
+            exact_transform=exact_transform,
             colorize=colorize,
             **(point_filter.as_spec() if point_filter is not None else {}),
         )

@@ -13,7 +13,18 @@ the vertical CRSs say otherwise (warned of: the output header's 2D CRS says noth
 The output's LAS grid keeps the inputs' precision in the new units (one step of the source's grid,
 as far as it moves the points, rounded down to a power of ten: 0.01 ft -> 0.001 m) on an offset
 that is a round number below the points (``output_grid``); the output's bounds are those of the
-headers' boxes transformed (a grid of samples over each box: projections bend straight edges)."""
+headers' boxes transformed (a grid of samples over each box: projections bend straight edges).
+
+Fast path (reproject_grid.py): a chunk's points are interpolated from PROJ's exact transform of a
+grid of control points over their box, the grid refined until the interpolation is within
+``tolerance`` (set by ``output_grid``: a tenth of the output grid's step, 0.0001 m for 0.001 m)
+at every cell's and edge's middle, checked against PROJ. The exact path (every point through
+PROJ) where no grid gets there (near a projection's singularity), for small chunks, where
+``exact=True`` (``--exact-transform``), where no tolerance is set (outputs with no grid: PLY),
+where an operation PROJ may use applies a grid file (datum and geoid grids are interpolated
+bilinearly by PROJ: kinks a smooth interpolation would miss between check points), and for a
+chunk whose box crosses the edge of the area of use of one of several operations PROJ picks
+among point by point (a jump there)."""
 
 from __future__ import annotations
 
@@ -33,6 +44,13 @@ BOX_SAMPLES = 21
 #: steps of the output grid between its offset and the points' minimum, at most: the offset a
 #: round number (a power of ten times the step) that is near the points
 OFFSET_STEPS = 10**6
+#: the interpolation's tolerance (the fast path's bound), in output grid steps
+TOLERANCE_STEPS = 0.1
+#: chunks of fewer points are transformed exactly (a grid's own exact transforms cost as much)
+MIN_INTERPOLATED = 4096
+#: degrees kept between a chunk's box and the edge of an operation's area of use (the fast path's
+#: test of which operation PROJ picks; PROJ tests the area's box in the source CRS)
+AREA_MARGIN = 0.01
 
 
 def pyproj_module(option: str):
@@ -77,14 +95,32 @@ def power_of_ten_below(value: float) -> float:
     return 10.0**exponent if exponent >= 0 else 1 / 10.0**-exponent
 
 
+def _operation_areas(transformer) -> list | None:
+    """The areas of use (lon/lat boxes: west, south, east, north) of the operations a new
+    ``transformer`` (not used yet) has PROJ pick among point by point ([] where it has one); None
+    where one applies a grid file (the exact path: module notes)."""
+    from pyproj.transformer import TransformerGroup
+
+    candidates = [transformer]
+    if not transformer.operations:  # (several candidates: PROJ picks one per point, by their areas of use)
+        candidates = TransformerGroup(transformer.source_crs, transformer.target_crs, always_xy=True).transformers
+    if any(op.grids for t in candidates for op in (t.operations or [])):
+        return None
+    return [t.area_of_use.bounds if t.area_of_use else (-180.0, -90.0, 180.0, 90.0) for t in candidates] if len(candidates) > 1 else []
+
+
 class Reprojection:
     """The move of every input file's points into ``to_crs`` (``from_crs``: the CRS of every file,
     in place of what their headers name). ``where``: the operation ('convert', 'tile') its errors
     start with, and how they name the options (``to_crs=``, ``from_crs=``). Bad CRSs, a file naming
     none without ``from_crs``: one-line InputErrors, before a point is read (``check_files``)."""
 
-    def __init__(self, to_crs, from_crs=None, where: str = "convert"):
+    def __init__(self, to_crs, from_crs=None, where: str = "convert", exact: bool = False):
         self.where = where
+        self.exact = exact
+        self.tolerance = None  # (xy, z) of the fast path's bound (``output_grid``); None: exact
+        self.interpolated_points = self.exact_points = 0  # (how each point was moved)
+        self._areas: dict[int, list | None] = {}  # per transformer (by id): its ``_operation_areas``
         self.target = parse_crs(to_crs, f"{where}: to_crs={to_crs!r}")
         self.given_source = None if from_crs is None else parse_crs(from_crs, f"{where}: from_crs={from_crs!r}")
         self._by_crs: dict[str, object] = {}  # transformers, by their source CRS's text
@@ -110,6 +146,7 @@ class Reprojection:
         if text not in self._by_crs:
             source = self.given_source if self.given_source is not None else parse_crs(text, f"{path}: its CRS {text[:60]!r}")
             self._by_crs[text] = pyproj.Transformer.from_crs(source, self.target, always_xy=True)
+            self._areas[id(self._by_crs[text])] = _operation_areas(self._by_crs[text])  # (before its first use: then it names that one)
         return self._by_crs[text]
 
     def _file_crs(self, path) -> str:
@@ -134,13 +171,67 @@ class Reprojection:
         return out
 
     def _moved(self, xyz: np.ndarray, path) -> tuple[np.ndarray, np.ndarray]:
-        """(``xyz`` in the target CRS, invalid ones NaN; whether each valid point came out not finite)."""
-        x, y, z = (np.array(xyz[:, k], np.float64) for k in range(3))
-        self.transformer(path).transform(x, y, z, inplace=True)
-        out = np.column_stack([x, y, z])
+        """(``xyz`` in the target CRS, invalid ones NaN; whether each valid point came out not
+        finite): interpolated from a control grid where one is within the tolerance, else exact."""
         valid = (np.isfinite(xyz) & (np.abs(xyz) <= MAX_ABS_COORDINATE)).all(axis=1)
+        out = self._interpolated(xyz, valid, path)
+        if out is None:
+            out = self._exact(xyz, path)
+            self.exact_points += len(xyz)
+        else:
+            self.interpolated_points += len(xyz)
         out[~valid] = np.nan
         return out, valid & ~np.isfinite(out).all(axis=1)
+
+    def _exact(self, xyz: np.ndarray, path) -> np.ndarray:
+        """``xyz`` moved by PROJ, every point."""
+        x, y, z = (np.array(xyz[:, k], np.float64) for k in range(3))
+        self.transformer(path).transform(x, y, z, inplace=True)
+        return np.column_stack([x, y, z])
+
+    def _interpolated(self, xyz: np.ndarray, valid: np.ndarray, path) -> np.ndarray | None:
+        """``xyz`` (its ``valid`` points) moved by a control grid within the tolerance; None where
+        the fast path is off, or no grid gets there (the module's notes)."""
+        count = int(np.count_nonzero(valid))
+        if self.exact or self.tolerance is None or count < MIN_INTERPOLATED:
+            return None
+        transformer = self.transformer(path)
+        areas = self._areas[id(transformer)]
+        points = xyz[valid]
+        lo, hi = points.min(axis=0), points.max(axis=0)
+        if areas is None or (areas and not self._one_operation(transformer, areas, lo, hi)):
+            return None
+        from .reproject_grid import fit
+
+        fitted = fit(lambda x, y, z: transformer.transform(x, y, z), lo, hi, self.tolerance, count)
+        if fitted is None:
+            return None
+        grid, keep_z = fitted
+        x, y, z = (np.where(valid, xyz[:, k], np.nan) for k in range(3))  # (invalid points: NaN, no node of theirs)
+        return grid.at(x, y, z, keep_z)
+
+    def _one_operation(self, transformer, areas, lo, hi) -> bool:
+        """Whether the box ``lo``..``hi`` (source coordinates) lies inside or outside each of the
+        operations' ``areas`` (by ``AREA_MARGIN`` at least): PROJ then picks one operation for all
+        its points."""
+        import pyproj
+
+        geodetic = pyproj.Transformer.from_crs(transformer.source_crs, transformer.source_crs.geodetic_crs, always_xy=True)
+        xs, ys = (np.linspace(lo[k], hi[k], BOX_SAMPLES) for k in (0, 1))
+        gx, gy = np.meshgrid(xs, ys)
+        lon, lat = geodetic.transform(gx.ravel(), gy.ravel())
+        if not (np.isfinite(lon).all() and np.isfinite(lat).all()):
+            return False
+        m = AREA_MARGIN
+        for west, south, east, north in areas:
+            wraps = west > east  # (an area across the antimeridian)
+            inside_lon = ((lon >= west + m) | (lon <= east - m)) if wraps else ((lon >= west + m) & (lon <= east - m))
+            outside_lon = ((lon < west - m) & (lon > east + m)) if wraps else ((lon < west - m) | (lon > east + m))
+            inside = inside_lon & (lat >= south + m) & (lat <= north - m)
+            outside = outside_lon | (lat < south - m) | (lat > north + m)
+            if not (inside.all() or outside.all()):
+                return False
+        return True
 
     def chunk(self, chunk: PointChunk, path) -> PointChunk:
         """``chunk`` with its positions in the target CRS (its colours and attributes as they are)."""
@@ -152,7 +243,7 @@ class Reprojection:
         transform's domain are left out (the points there, if any, are refused as they are read)."""
         xs, ys = (np.linspace(lo[k], hi[k], BOX_SAMPLES) for k in (0, 1))
         gx, gy, gz = np.meshgrid(xs, ys, [lo[2], hi[2]])
-        moved, _ = self._moved(np.column_stack([gx.ravel(), gy.ravel(), gz.ravel()]), path)
+        moved = self._exact(np.column_stack([gx.ravel(), gy.ravel(), gz.ravel()]), path)
         moved = moved[np.isfinite(moved).all(axis=1)]
         return (moved.min(axis=0), moved.max(axis=0)) if len(moved) else (np.zeros(3), np.zeros(3))
 
@@ -212,6 +303,7 @@ def output_grid(files, reprojection: Reprojection):
         return None
     lo, hi = np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
     step = np.min(steps, axis=0)
+    reprojection.tolerance = (step[0] * TOLERANCE_STEPS, step[2] * TOLERANCE_STEPS)
     return las_grid(lo, hi, step, round_offset(lo, step))
 
 

@@ -233,6 +233,7 @@ def convert(
     thin=None,
     to_crs=None,
     from_crs=None,
+    exact_transform=False,
     colorize=None,
 ) -> ConvertResult:
     """Convert point cloud files (or a cloud, or an iterable of PointChunks) into an LOD octree directory ``out``.
@@ -288,7 +289,10 @@ def convert(
     header's; ``from_crs`` for every file where given, and for files naming none), as they are read
     (io/reproject.py): the filter's clip box and ``thin``'s cells are then in its coordinates. z is
     transformed only between CRSs with a vertical part (compound ones), else kept (PROJ's rule).
-    The file names ``to_crs`` (a WKT VLR) and keeps the inputs' precision in its units.
+    The file names ``to_crs`` (a WKT VLR) and keeps the inputs' precision in its units. The points
+    are interpolated from PROJ's transform of a grid of control points, within a tenth of the
+    output grid's step of PROJ's own (checked; else exactly); ``exact_transform=True``: every point
+    through PROJ.
 
     ``colorize`` (a plain point file only; needs rasterio: ``pip install 'gigapoint[gis]'``): an
     orthophoto (a GeoTIFF, any raster GDAL reads) whose pixels colour the points written, each the
@@ -308,7 +312,7 @@ def convert(
     keep = point_filter(classes, drop_classes, clip, "convert", clip_polygon=clip_polygon)  # before anything is read
     thin_label = f"convert: thin={thin!r}"
     spacing = thin_spacing(thin, thin_label)
-    reprojection = None if to_crs is None else Reprojection(to_crs, from_crs, "convert")  # an unknown CRS: said before a point is read
+    reprojection = None if to_crs is None else Reprojection(to_crs, from_crs, "convert", exact_transform)  # an unknown CRS: said before a point is read
     if from_crs is not None and to_crs is None:
         raise InputError(f"convert: from_crs={from_crs!r}: the CRS the inputs are in, for to_crs; give to_crs too")
     if colorize is not None and not isinstance(colorize, (str, os.PathLike)):

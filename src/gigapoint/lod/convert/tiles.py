@@ -94,6 +94,7 @@ def tile(
     progress: bool = False,
     to_crs=None,
     from_crs=None,
+    exact_transform=False,
     colorize=None,
 ) -> TileResult:
     """Split the points of the files and folders ``inputs`` into square tiles of edge ``size`` (in
@@ -103,7 +104,8 @@ def tile(
     that distance of its square, flagged "overlap". ``classes``, ``drop_classes``, ``clip``,
     ``clip_polygon``: only the points passing them are tiled (as ``gp.open``'s); ``recursive=True``: folders' subfolders too.
     ``to_crs`` (needs pyproj): the points are moved into that CRS first (from each file's own, or
-    ``from_crs``), as ``convert``'s: ``size``, ``buffer`` and ``clip`` are then in its units.
+    ``from_crs``), as ``convert``'s: ``size``, ``buffer`` and ``clip`` are then in its units
+    (``exact_transform``: as ``convert``'s).
     ``colorize`` (needs rasterio): an orthophoto whose pixels colour the points, as ``convert``'s
     (after ``to_crs``); the result's ``uncolored`` counts those outside it or under its mask.
 
@@ -128,7 +130,7 @@ def tile(
     keep = point_filter(classes, drop_classes, clip, "tile", clip_polygon=clip_polygon)
     if from_crs is not None and to_crs is None:
         raise InputError(f"tile: from_crs={from_crs!r}: the CRS the inputs are in, for to_crs; give to_crs too")
-    reprojection = None if to_crs is None else Reprojection(to_crs, from_crs, "tile")
+    reprojection = None if to_crs is None else Reprojection(to_crs, from_crs, "tile", exact_transform)
     if colorize is not None and not isinstance(colorize, (str, os.PathLike)):
         raise InputError(f"tile: colorize={colorize!r}: the path of an orthophoto (a GeoTIFF)")
     out = Path(out)
