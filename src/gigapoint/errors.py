@@ -21,6 +21,12 @@ def first_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text.strip() else type(exc).__name__
 
 
+def counted(n: int, noun: str, plural: str | None = None) -> str:
+    """``n`` things as a message says them: '1 point', '2,000 points' (``plural``: where adding
+    's' is wrong, 'batches')."""
+    return f"{n:,} {noun if n == 1 else plural or noun + 's'}"
+
+
 def is_whole_number(value) -> bool:
     """Whether ``value`` is an integer (Python's or numpy's, not a bool): the test behind the
     one-line errors about counts, sizes and indices (3.5 was read as 3, True as 1)."""

@@ -339,3 +339,15 @@ def test_colourless_tiles_among_coloured_ones_are_written_black_with_a_warning(t
     source = laspy.read(str(coloured))
     assert np.array_equal(rgb[:1_000], np.column_stack([source.red, source.green, source.blue]))
     assert not rgb[1_000:].any()  # (not the grey 51400 made up for them)
+
+
+def test_one_point_is_said_as_1_point_in_the_summary_and_the_filters_error(cli, tmp_path):
+    """A one-point file: '1 point', not '1 points' (the summary line and the empty filter's error)."""
+    src = _tile(tmp_path / "one.las", 1, 5, 257)
+    out = tmp_path / "out.laz"
+    rc, stdout, err = cli("convert", src, "-o", out, "-q")
+    assert rc == 0, err
+    assert stdout.startswith(f"{out}: 1 point (laz), ")
+    rc, _, err = cli("convert", src, "-o", tmp_path / "none.laz", "--classes", "31", "-q")
+    assert rc == 1
+    assert err.strip() == f"error: {src}: no point passes the filter (classes 31): 1 point read"

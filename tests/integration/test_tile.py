@@ -227,3 +227,15 @@ def test_a_write_failing_at_the_third_tile_leaves_none_of_them(autzen_path, tmp_
         gp.tile(autzen_path, tmp_path / "tiles", 500)
     assert written == ["autzen_trim_636000_848500.laz", "autzen_trim_636000_849000.laz"]
     assert list(tmp_path.iterdir()) == []  # the two whole tiles never appeared without the rest
+
+
+def test_one_point_in_one_tile_is_said_in_the_singular(cli, tmp_path):
+    """The summary line of a one-point file: '1 tile ..., 1 point', not '1 tiles ..., 1 points'."""
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = [1.0], [2.0], [3.0]
+    las.write(str(tmp_path / "one.las"))
+    out = tmp_path / "tiles"
+    rc, stdout, err = cli("tile", tmp_path / "one.las", "--size", "500", "-o", out, "-q")
+    assert rc == 0, err
+    assert stdout.startswith(f"{out}: 1 tile of 500 x 500 (laz), 1 point; points per tile: min 1, median 1, max 1; ")

@@ -283,6 +283,14 @@ def test_info_stats_inside_a_site_boundary_count_the_points_in_it(cli, autzen_pa
         assert s["filter"]["applied"] == ("classes 2; " + described if extra else described)
 
 
+def test_the_filter_line_of_one_point_read_says_1_point(cli, tmp_path):
+    """'1 of 1 point read kept', not '1 of 1 points read kept'."""
+    one = write_tile(tmp_path / "one.las", 1, 1, [2])
+    rc, out, err = cli("info", "--stats", "--classes", "2", one)
+    assert rc == 0, err
+    assert out.splitlines()[1] == "  filter:      classes 2: 1 of 1 point read kept"
+
+
 def test_a_filter_without_stats_is_a_one_line_error(cli, autzen_path):
     """Without --stats info reads headers only: a filter would be ignored, without a word."""
     rc, out, err = cli("info", "--classes", "2", "--clip", "0,0,1,1", autzen_path)

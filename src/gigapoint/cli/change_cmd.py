@@ -11,7 +11,7 @@ from typing import Annotated
 
 import typer
 
-from ..errors import GigapointError
+from ..errors import GigapointError, counted
 from ..render.georef import GEOTIFF_SUFFIXES, georef_paths, georef_writes, raster_writes
 from .app import app
 from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
@@ -81,7 +81,7 @@ def change(
     typer.echo(f"wrote {', '.join(str(p) for p in written[1:])}")
     for note in notes:
         typer.echo(note)
-    typer.echo(f"compared {result.area_compared:,.2f} {unit['area']} ({summary['pixels_compared']:,} pixels of {gsd:g} {unit['length']})")
+    typer.echo(f"compared {result.area_compared:,.2f} {unit['area']} ({counted(summary['pixels_compared'], 'pixel')} of {gsd:g} {unit['length']})")
     typer.echo(f"changed by more than {min_change:g} {unit['length']}: {result.area_changed:,.2f} {unit['area']}")
     for name in ("cut", "fill", "net"):
         typer.echo(f"{name:<4} {summary[name]:{'+' if name == 'net' else ''},.3f} {unit['volume']}")

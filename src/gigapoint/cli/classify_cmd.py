@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from ..errors import GigapointError, InputError
+from ..errors import GigapointError, InputError, counted
 from .app import app
 from .cloud_opts import RecursiveOption, subfolders_read
 
@@ -63,13 +63,13 @@ def classify(
         raise type(exc)(message.replace("overwrite=True", "--overwrite").replace("classify_ground: ", "classify: ")) from None
     p = result.params
     units = p["units"]
-    skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
+    skipped = f", {counted(result.skipped, 'invalid point')} skipped" if result.skipped else ""
     noise = f", {result.noise:,} noise kept" if result.noise else ""
     if "isolated" in p:  # (--noise: the points found, and the noise the files held already)
         kept = f", {result.noise - result.isolated:,} noise kept" if result.noise > result.isolated else ""
         noise = f", {result.isolated:,} isolated found noise (7; step {p['step']:.4g} x {p['step_z']:.4g}, isolated {p['isolated']}){kept}"
     print(
-        f"{output}: {result.points:,} points, {result.ground:,} ground (2), {result.non_ground:,} not (1){noise}{_heights_told(result.heights, units, normalize)}{skipped}; "
+        f"{output}: {counted(result.points, 'point')}, {result.ground:,} ground (2), {result.non_ground:,} not (1){noise}{_heights_told(result.heights, units, normalize)}{skipped}; "
         f"cell {p['cell']:.4g} {units}, slope {p['slope']:g}, window {p['window']:.4g}, threshold {p['threshold']:.4g}, scalar {p['scalar']:.4g}; "
         f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s"
     )
@@ -92,10 +92,10 @@ def _classify_noise(inputs, output: Path, params: dict, overwrite: bool, recursi
     except InputError as exc:
         raise type(exc)(_noise_options_named(str(exc))) from None
     p = result.params
-    skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
+    skipped = f", {counted(result.skipped, 'invalid point')} skipped" if result.skipped else ""
     kept = f", {result.kept_noise:,} noise kept" if result.kept_noise else ""
     print(
-        f"{output}: {result.points:,} points, {result.noise:,} isolated found noise (7){kept}{skipped}; "
+        f"{output}: {counted(result.points, 'point')}, {result.noise:,} isolated found noise (7){kept}{skipped}; "
         f"step {p['step']:.4g} x {p['step_z']:.4g} {p['units']}, isolated {p['isolated']}; {result.cells:,} cells in {result.table_bytes / 2**20:.1f} MiB; "
         f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s"
     )
@@ -121,9 +121,9 @@ def _heights_only(sources, output: Path, params: dict, normalize: bool, overwrit
         message = str(exc).replace("classify_ground: cell ", "classify: --cell ").replace("(--ground, heights=True)", "(--ground)")
         raise type(exc)(message.replace("overwrite=True", "--overwrite").replace("height_above_ground: ", "classify: ")) from None
     p = result.params
-    skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
+    skipped = f", {counted(result.skipped, 'invalid point')} skipped" if result.skipped else ""
     print(
-        f"{output}: {result.points:,} points{_heights_told(result.heights, p['units'], normalize)}; "
-        f"ground model of {result.ground:,} class-2 points, cell {p['cell']:.4g} {p['units']}{skipped}; "
+        f"{output}: {counted(result.points, 'point')}{_heights_told(result.heights, p['units'], normalize)}; "
+        f"ground model of {counted(result.ground, 'class-2 point')}, cell {p['cell']:.4g} {p['units']}{skipped}; "
         f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s"
     )

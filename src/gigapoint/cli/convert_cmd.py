@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from ..errors import InputError
+from ..errors import InputError, counted
 from .app import app
 from .cloud_opts import (
     ClassesOption,
@@ -130,14 +130,14 @@ def convert(
             print(f"{watch}: kept unfinished; run the same convert command again to resume it", file=sys.stderr)
         raise
     resumed = (" (resumed)" if result.resumed else "") + (", in memory" if result.in_memory else "")
-    skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
+    skipped = f", {counted(result.skipped, 'invalid point')} skipped" if result.skipped else ""
     if to_file:
         thinned = f", thinned from {result.thinned_from:,}" if result.thinned_from is not None else ""
         colored = uncolored_note(result.uncolored, colorize)
-        print(f"{output}: {result.points:,} points ({result.format}){thinned}{colored}{skipped}, {result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s")
+        print(f"{output}: {counted(result.points, 'point')} ({result.format}){thinned}{colored}{skipped}, {result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s")
         return
     print(  # OUTPUT as given: a Dask run's result holds it absolute (its workers need that)
-        f"{output}: {result.points:,} points in {result.nodes:,} nodes ({result.format}, {result.sampler}){skipped}, "
+        f"{output}: {counted(result.points, 'point')} in {counted(result.nodes, 'node')} ({result.format}, {result.sampler}){skipped}, "
         f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s{resumed}"
         + (f"; viewable after {result.first_view_seconds:.1f} s" if result.first_view_seconds is not None else "")
     )

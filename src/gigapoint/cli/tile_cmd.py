@@ -9,7 +9,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from ..errors import GigapointError
+from ..errors import GigapointError, counted
 from .app import app
 from .cloud_opts import (
     ClassesOption,
@@ -74,9 +74,9 @@ def tile(
                                  f"tile: to_crs={to_crs!r}": f"tile: --to-crs {to_crs}", f"tile: from_crs={from_crs!r}": f"tile: --from-crs {from_crs}"}) from None  # fmt: skip
     counts = np.array(result.points_per_tile)
     median = float(np.median(counts))
-    buffered = f" (+{result.buffer_points:,} buffer points)" if result.buffer_points else ""
-    skipped = f", {result.skipped:,} invalid points skipped" if result.skipped else ""
+    buffered = f" (+{counted(result.buffer_points, 'buffer point')})" if result.buffer_points else ""
+    skipped = f", {counted(result.skipped, 'invalid point')} skipped" if result.skipped else ""
     print(
-        f"{output}: {len(counts):,} tiles of {size:g} x {size:g} ({format}), {result.points:,} points{buffered}{uncolored_note(result.uncolored, colorize)}{skipped}; "
+        f"{output}: {counted(len(counts), 'tile')} of {size:g} x {size:g} ({format}), {counted(result.points, 'point')}{buffered}{uncolored_note(result.uncolored, colorize)}{skipped}; "
         f"points per tile: min {counts.min():,}, median {median:,.{0 if median.is_integer() else 1}f}, max {counts.max():,}; {result.seconds:.1f} s"
     )

@@ -10,7 +10,7 @@ from typing import Annotated
 
 import typer
 
-from ..errors import GigapointError
+from ..errors import GigapointError, counted
 from ..render.georef import GEOTIFF_SUFFIXES, georef_paths
 from .app import app
 from .cloud_opts import ClassesOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
@@ -72,7 +72,7 @@ def volume(
     for pile in result.piles:
         x, y, z = pile.highest
         typer.echo(f"{pile.name}: fill {pile.fill:,.3f} {unit['volume']}, cut {pile.cut:,.3f}, net {pile.net:+,.3f}")
-        typer.echo(f"  footprint {pile.area:,.2f} {unit['area']} ({pile.pixels:,} pixels of {gsd:g} {unit['length']}; polygon {pile.polygon_area:,.2f})")
+        typer.echo(f"  footprint {pile.area:,.2f} {unit['area']} ({counted(pile.pixels, 'pixel')} of {gsd:g} {unit['length']}; polygon {pile.polygon_area:,.2f})")
         typer.echo(f"  highest {z:.3f} at {x:.3f}, {y:.3f}: {pile.height:.3f} {unit['length']} above a {pile.base['type']} base (mean z {pile.base['z']:.3f})")
         if pile.filled or pile.empty:
             typer.echo(f"  {pile.filled:.1%} of its pixels filled by interpolation, {pile.empty:.1%} left empty")

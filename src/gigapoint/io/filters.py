@@ -22,7 +22,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..core.chunk import PointChunk
-from ..errors import EmptyCloudError, GigapointWarning, InputError, is_real, is_whole_number, warn
+from ..errors import EmptyCloudError, GigapointWarning, InputError, counted, is_real, is_whole_number, warn
 from ._base import read_once
 from .polygon import ClipPolygon, clip_polygon_of, far_apart
 
@@ -157,7 +157,7 @@ class PointFilter:
     def check_passed(self, label: str) -> None:
         """An EmptyCloudError naming ``label`` (the files) where points were read and none passed."""
         if self.passed == 0 and self.read:  # (no point read at all: the readers' own errors say so)
-            raise EmptyCloudError(f"{label}: no point passes the filter ({self.describe()}): {self.read:,} points read{self.polygon_hint()}")
+            raise EmptyCloudError(f"{label}: no point passes the filter ({self.describe()}): {counted(self.read, 'point')} read{self.polygon_hint()}")
 
     def _see(self, xyz: np.ndarray) -> None:
         """Widen ``seen`` by the x and y of ``xyz`` (NaN positions left out)."""

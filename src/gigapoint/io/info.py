@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.coords import MAX_ABS_COORDINATE, value_decimals
+from ..errors import counted
 from ._base import STREAM_CHUNK_SIZE, check_file, headers_once
 from .crs import crs_identity, crs_name
 from .filters import point_filter
@@ -165,7 +166,7 @@ def format_stats(stats: dict) -> str:
     lines = [f"{stats.get('path', '?')}" + (f" ({stats['files']:,} files)" if stats.get("files", 1) > 1 else "")]
     f = stats.get("filter")
     if f is not None:  # the figures below are of the points it kept
-        lines.append(f"  filter:      {f['applied']}: {f['points_kept']:,} of {f['points_read']:,} points read kept")
+        lines.append(f"  filter:      {f['applied']}: {f['points_kept']:,} of {counted(f['points_read'], 'point')} read kept")
     lines.append(f"  points:      {n:,}, {stats['invalid_points']:,} of them invalid (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g}): skipped")
     b, h, stale, scale = stats.get("bounds"), stats.get("header_bounds"), stats.get("header_bounds_differ"), stats.get("scale")
     if b is not None:
