@@ -293,3 +293,13 @@ def test_cli_filters_read_the_same_classes_of_both(cli, tmp_path, autzen_path):
     assert json.loads(stdout)["pixels_compared"] == (~np.isnan(dtm)).sum() < every
     dz = np.asarray(Image.open(tmp_path / "ground.tif"))
     assert (np.isnan(dz) == np.isnan(dtm)).all()  # the same grid, pixel for pixel
+
+
+def test_a_gsd_too_fine_for_the_surveys_grid_names_both_surveys(cli, tmp_path, surveys):
+    """The grid spans both surveys: its size error names them (it named no file), in one line."""
+    far = write_las(tmp_path / "far.las", np.vstack([plane(), [20_000.0, 0.0, 0.0]]))  # one point 20 km east
+    rc, _, err = cli("change", surveys[0], far, "--gsd", 1, "-o", tmp_path / "c.tif")
+    assert rc == 1 and not list(tmp_path.glob("c.*"))
+    assert err.strip().splitlines() == [
+        f"error: {surveys[0]} and {far}: gsd 1 makes a 20,001x41 image, over 16,384 pixels a side: a gsd of 1.23 or more fits"
+    ]

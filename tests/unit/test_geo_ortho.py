@@ -190,7 +190,7 @@ def test_cli_an_epsg_only_crs_writes_no_prj_and_says_so(cli, tmp_path, monkeypat
         (["--gsd", "1", "--stereo", "anaglyph"], "--stereo and --gsd: give one"),
         (["--gsd", "1", "--depth-out", "d.npy"], "d.npy: unsupported output type '.npy'; use one of .tif, .tiff"),
         (["--gsd", "1", "--turntable", "3"], "--gsd: options of a still image, not of --turntable"),
-        (["--gsd", "0.001"], "--gsd: gsd 0.001 makes a 19,501x11,501 image, over 16,384 pixels a side: a gsd of 0.0012 or more fits"),
+        (["--gsd", "0.001"], "grid.npy: --gsd 0.001 makes a 19,501x11,501 image, over 16,384 pixels a side: a gsd of 0.0012 or more fits"),
     ],
 )
 def test_cli_gsd_errors_are_one_line(cli, tmp_path, grid_npy, args, message):

@@ -12,7 +12,7 @@ from typing import Annotated
 import typer
 
 from ..errors import CameraError, GigapointError
-from ..io import crs_wkt
+from ..io import crs_wkt, files_label
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from ..render.contours import draw_contours
@@ -163,13 +163,14 @@ def check_gsd(gsd, view, camera_text, width, height, projection, settings) -> No
         )
 
 
-def top_down_camera(cloud, gsd: float, output: Path) -> Camera:
+def top_down_camera(cloud, gsd: float, output: Path, inputs) -> Camera:
     """The --gsd camera over ``cloud``'s bounds (Camera.top_down), its image checked against
-    ``output``'s format; a gsd too fine for the largest image a one-line error naming --gsd."""
+    ``output``'s format; a gsd too fine for the largest image a one-line error naming the
+    ``inputs`` (whose extent it is) and --gsd."""
     try:
         cam = Camera.top_down(cloud.bounds, gsd)
-    except CameraError as exc:
-        raise CameraError(f"--gsd: {exc}") from None
+    except CameraError as exc:  # (its message begins 'gsd N makes ...': said as the option)
+        raise CameraError(f"{files_label(inputs)}: --{exc}") from None
     check_image_fits(output, cam.width, cam.height)
     return cam
 
@@ -337,7 +338,7 @@ def render(
         typer.echo(f"wrote {output} ({turntable} frames, {width}x{height}, {cloud.n_points:,} points)")
         return
     if gsd is not None:
-        cam = top_down_camera(cloud, gsd, output)
+        cam = top_down_camera(cloud, gsd, output, inputs)
         settings = settings.replace(adaptive_precision=False)  # 30-bit positions: exact pixels and heights, whatever a batch's size
         from ..lod.reader import cloud_crs_units
 

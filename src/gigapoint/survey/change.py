@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.cloud import PointCloud, build_cloud
-from ..errors import InputError, check_switch, is_real
+from ..errors import CameraError, InputError, check_switch, is_real
 from ..io.crs import crs_identity, crs_name
 from ..io.filters import point_filter
 from ..lod.reader import cloud_crs, cloud_units
@@ -233,7 +233,10 @@ def change(before, after, gsd, classes=None, drop_classes=None, clip=None, fill_
     clouds = [read_survey(before, filters), read_survey(after, filters)]
     crs = check_crs(*clouds, labels)
     lows, highs = zip(*(c.bounds for c in clouds))
-    camera = Camera.top_down((np.minimum(*lows), np.maximum(*highs)), gsd)  # one grid, one eye: pixel to pixel
+    try:
+        camera = Camera.top_down((np.minimum(*lows), np.maximum(*highs)), gsd)  # one grid, one eye: pixel to pixel
+    except CameraError as exc:  # the grid spans both: name them (a huge survey beside a tiny one said neither)
+        raise CameraError(f"{labels[0]} and {labels[1]}: {exc}") from None
     heights = [surface(c, camera, fill_nodata) for c in clouds]
     units = cloud_units(clouds[0]) if cloud_crs(clouds[0]) else cloud_units(clouds[1])
     result = Change(*heights, camera=camera, gsd=float(gsd), crs=crs, units=units, min_change=float(min_change))
