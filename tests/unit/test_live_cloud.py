@@ -336,6 +336,35 @@ def test_save_puts_las_attributes_in_their_fields_and_others_in_extra_bytes(tmp_
     assert set(np.asarray(las.classification).tolist()) == {255} and set(np.asarray(las.return_number).tolist()) == {15}
 
 
+def test_save_writes_rgb_only_when_a_snapshotted_frame_had_colours(tmp_path):
+    """Frames pushed without rgb are drawn grey (200, 200, 200): their snapshots were saved as LAS
+    point format 7 with that made-up grey; now point format 6 (PLY: no red, green, blue), the
+    points and attributes as they were. A frame with colours among them keeps RGB."""
+    import laspy
+    from plyfile import PlyData
+
+    xyz, rgb = frame(3, n=2000)
+    label = np.arange(len(xyz), dtype=np.int32)
+    live = LiveCloud()
+    live.push(xyz, label=label)
+    live.snapshot(normals=False)
+    assert live.save(tmp_path / "grey.las") == 2000 and live.save(tmp_path / "grey.ply") == 2000
+    las = laspy.read(tmp_path / "grey.las")
+    assert las.header.point_format.id == 6 and "red" not in las.point_format.dimension_names
+    assert_same_points(las.xyz, xyz, 2e-3)
+    order = np.argsort(np.asarray(las.label))
+    np.testing.assert_array_equal(np.asarray(las.label)[order], label)
+    assert {"red", "green", "blue"}.isdisjoint(PlyData.read(tmp_path / "grey.ply")["vertex"].data.dtype.names)
+    live.clear()
+    live.push(xyz + [0, 0, 10], rgb, label=label)  # the second snapshot's frame has colours: the file has RGB
+    live.snapshot(normals=False)
+    assert live.save(tmp_path / "mixed.las") == 4000
+    las = laspy.read(tmp_path / "mixed.las")
+    assert las.header.point_format.id == 7
+    red = np.asarray(las.red)[np.asarray(las.z) > 5] // 257
+    assert set(red.tolist()) == {int(rgb[0, 0])}
+
+
 def test_save_as_ply_writes_64_bit_integers_that_fit_in_32_and_refuses_others(tmp_path):
     """PLY has no 64-bit integers, half floats or booleans: numpy's default int64 attribute (a
     label pushed as np.arange) was plyfile's ValueError traceback "field type 'u8' not in [...]"."""

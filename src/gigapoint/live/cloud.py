@@ -81,6 +81,7 @@ class FrameInfo:
     pushed_at: float = 0.0  # perf_counter when push was called (latency)
     firsts: list[int] = field(default_factory=list)  # per chunk, the buffer entry of its first point there
     counts: list[int] = field(default_factory=list)  # per chunk, its points there
+    colored: bool = True  # pushed with colours (False: drawn in the grey it was filled with, saved without RGB)
 
 
 @dataclass
@@ -236,6 +237,7 @@ class LiveCloud:
         self.points = 0  # points in the ring
         self.stats = LiveStats()
         self.snapshots = None  # the ProgressiveOctree of snapshots (created by the first snapshot)
+        self.snapshots_colored = False  # a frame snapshotted had colours: save writes RGB (else the grey is made up)
         self.closed = False  # close(): frames and snapshots freed, pushes refused
         self._mirror_pool = None
         self._mirror_version = -1
@@ -439,6 +441,7 @@ class LiveCloud:
             world_normals = world_normals[valid] if world_normals is not None else None
             attrs = {a: v[valid] for a, v in attrs.items()}
         m = len(pts)
+        colored = rgba is not None  # (before the grey fill: saved without RGB, not as grey)
         if rgba is None:
             rgba = np.empty((m, 4), np.uint8)
             rgba[:] = (200, 200, 200, 255)
@@ -459,7 +462,7 @@ class LiveCloud:
             self._attribute_set(attrs)  # in push order: the first frame's set, which later ones keep to
             seq = self._seq
             self._seq += 1
-            self._pending.append((frame, FrameInfo(seq, [], m, t, arrived, p, lo, hi, pushed_at)))
+            self._pending.append((frame, FrameInfo(seq, [], m, t, arrived, p, lo, hi, pushed_at, colored=colored)))
             self._last_time = t
             # the queue's bound: behind ``keep`` newer frames, a waiting frame would leave the ring
             # as soon as it was copied in (a renderer holding the lock, a producer outpacing the
@@ -804,6 +807,7 @@ class LiveCloud:
             if runs is None or not runs.n_points:
                 return 0
             self._pins.update(slots)
+            self.snapshots_colored |= any(f.colored for f in self.frames)
         skip = ("frame_time",) if normals else ("frame_time", "normal")
         try:
             n = runs.n_points
@@ -842,8 +846,8 @@ class LiveCloud:
         self._pins = +self._pins  # drop the zero counts
 
     def save(self, path, overwrite: bool = False) -> int:
-        """Write the accumulated snapshots: ``.las``/``.laz``/``.ply`` (points with colors and
-        normals), ``.copc.laz`` (the snapshot octree as COPC), else (a name without a point
+        """Write the accumulated snapshots: ``.las``/``.laz``/``.ply`` (points with normals, and
+        colors unless no frame snapshotted had any), ``.copc.laz`` (the snapshot octree as COPC), else (a name without a point
         file's suffix) a gigapoint octree folder. Returns the points written."""
         from .save import save_snapshots
 
@@ -852,7 +856,7 @@ class LiveCloud:
         check_switch("overwrite", overwrite, f"{self.name}: save")
         if self.snapshots is None or self.snapshots.n_points == 0:
             raise InputError(f"{self.name}: nothing to save: no snapshot taken yet (call snapshot())")
-        return save_snapshots(self.snapshots, path, overwrite)
+        return save_snapshots(self.snapshots, path, overwrite, has_color=self.snapshots_colored)
 
     # ------------------------------------------------------------------ recording
     def record(self, directory, overwrite: bool = False):

@@ -11,10 +11,11 @@ from ..io.write import POINT_FILE_SUFFIXES, check_point_file_output, write_point
 from ..lod.kinds import is_copc_name
 
 
-def save_snapshots(octree, path, overwrite: bool = False) -> int:
+def save_snapshots(octree, path, overwrite: bool = False, has_color: bool = True) -> int:
     """Write every point of the snapshot octree to ``path`` (its suffix picks the format:
     .las, .laz, .ply, .copc.laz (the octree as COPC); a name without a point file's suffix a
-    gigapoint octree folder). Returns the points written."""
+    gigapoint octree folder). ``has_color``: a point file gets RGB (False: frames pushed without
+    colours, whose grey is no colour of theirs). Returns the points written."""
     if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):  # 5: a TypeError; "": an octree in the current folder
         raise InputError(f"save: the output must be a path (.las, .laz, .ply or an octree folder), got {path!r}")
     path = Path(path)
@@ -26,4 +27,4 @@ def save_snapshots(octree, path, overwrite: bool = False) -> int:
     if suffix not in POINT_FILE_SUFFIXES:
         return int(octree.save(path, overwrite=overwrite).points)
     check_point_file_output(path, overwrite)
-    return write_points(path, octree.chunks, octree.n_points)  # (chunk by chunk: no joined copy of every snapshot)
+    return write_points(path, octree.chunks, octree.n_points, has_color=has_color)  # (chunk by chunk: no joined copy of every snapshot)
