@@ -340,3 +340,23 @@ def test_info_stats_of_an_octree_is_refused_with_a_filter_too(cli, tmp_path):
     rc, out, err = cli("info", "--stats", "--classes", "2", tmp_path / "octree")
     assert rc == 1 and out == ""
     assert err.strip().splitlines() == [f"error: {tmp_path / 'octree'}: an octree; --stats reads point files (those it was converted from)"]
+
+
+def test_info_stats_of_a_local_copc_file_reads_it_as_the_laz_file_it_is(cli, autzen_path, tmp_path):
+    """A COPC file is a LAZ 1.4 file whose points are each stored once: --stats refused it as an
+    octree ("--stats reads point files"); now its points are read as laspy reads them (the
+    classes filter too). Without --stats it is still shown as the octree it is."""
+    copc = tmp_path / "x.copc.laz"
+    assert cli("convert", autzen_path, "-o", copc)[0] == 0
+    las = laspy.read(copc)
+    xyz = np.column_stack([las.x, las.y, las.z])
+    rc, out, err = cli("info", "--stats", "--json", copc)
+    assert rc == 0, err
+    [s] = map(json.loads, out.splitlines())
+    assert s["path"] == str(copc) and s["point_count"] == len(xyz) == 110_000 and s["invalid_points"] == 0
+    assert s["bounds"] == {"min": xyz.min(axis=0).tolist(), "max": xyz.max(axis=0).tolist()}
+    rc, out, err = cli("info", "--stats", "--json", "--classes", "2", copc)
+    assert rc == 0, err
+    assert json.loads(out)["point_count"] == int(np.sum(np.asarray(las.classification) == 2))
+    rc, out, err = cli("info", copc)
+    assert rc == 0 and "  format:      COPC 1.4, point format 7" in out.splitlines(), err

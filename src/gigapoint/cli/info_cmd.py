@@ -74,7 +74,7 @@ def info(
         pattern_matches,
         shown_url,
     )
-    from ..lod import is_lod_source, octree_info
+    from ..lod import is_local_copc, is_lod_source, octree_info
     from ..lod.kinds import work_dir
     from ..lod.octree_dir import RESUME_HINT, OctreeDir
 
@@ -87,7 +87,8 @@ def info(
                 hint = OctreeDir(work_dir(f)).resume_hint  # (a bad input that stopped it: its error, and what to do)
                 again = "run the same convert command again to resume it" if hint == RESUME_HINT else hint
                 raise InputError(f"{f}: no such file yet: a conversion to it is unfinished (its work folder {work_dir(f)} is there); {again}")
-            lod = is_lod_source(f)
+            # a local COPC file is a LAZ file too, each point stored once: --stats reads its points as one
+            lod = is_lod_source(f) and not (stats and is_local_copc(f))
             found = [] if lod else expand_paths([f], recursive=recursive)
             # a pattern names a folder's files: summed as a folder is ("tiles/*.laz" was a block a tile); one it matches alone is that file
             named = f.is_dir() or (len(found) > 1 and pattern_matches(f) is not None)

@@ -55,6 +55,12 @@ def is_lod_source(path) -> bool:
     return lod_source_kind(path) is not None
 
 
+def is_local_copc(path) -> bool:
+    """A COPC file on disk: a LAZ 1.4 file too, whose points are each stored once (its nodes are
+    chunks of it), so what reads point files one point at a time reads it as that LAZ file."""
+    return as_url(path) is None and lod_source_kind(path) == "copc"
+
+
 def refuse_octrees(paths, why: str) -> None:
     """A one-line InputError for the first of ``paths`` that is an octree a point file reader
     cannot read (a converted folder, an EPT dataset, a URL: each opens alone, as itself),
