@@ -168,6 +168,31 @@ def test_an_octree_without_a_list_offers_the_standard_classes_and_those_seen(tmp
     assert codes(class_panel(copc, seen=False)) == list(range(19))  # (the render lock was busy: what the nodes hold left out)
 
 
+def test_an_octree_opened_with_a_class_filter_lists_only_the_classes_it_keeps(tmp_path, two_class_cloud):
+    """``view OCTREE --classes 2``: its Classes panel listed the standard classes, 6 among them,
+    whose toggles did nothing (the filter drops them as nodes load); now those the filter keeps,
+    before and after nodes are loaded, from its metadata's list too."""
+    gp.convert(two_class_cloud, tmp_path / "tree")
+    core, client = connect(gp.open(tmp_path / "tree", classes=[2]))
+    with client, client.websocket_connect("/ws?w=240&h=160") as ws:
+        hello = receive(ws, reply("hello"))
+        assert (hello["classes"]["source"], codes(hello["classes"])) == ("standard", [2])
+        receive(ws, full_frame())  # (its nodes loaded: class 2 alone seen)
+        ws.send_json({"type": "classes"})
+        assert receive(ws, reply("classes"))["classes"] == TWO[:1]
+    core.close_all()
+    lo, hi = gp.open(tmp_path / "tree").class_facts()["class_range"]
+    assert codes(class_panel(gp.open(tmp_path / "tree", drop_classes=[6, 9]))) == [c for c in range(lo, min(hi, 18) + 1) if c not in (6, 9)]
+    gp.convert(two_class_cloud, tmp_path / "potree", format="potree")
+    meta_path = tmp_path / "potree" / "metadata.json"
+    meta = json.loads(meta_path.read_text())
+    entry = next(a for a in meta["attributes"] if a["name"] == "classification")
+    entry["histogram"] = [400 if c in (2, 6) else 0 for c in range(256)]  # its metadata lists 2 and 6
+    meta_path.write_text(json.dumps(meta))
+    listed = class_panel(gp.open(tmp_path / "potree", drop_classes=[2]))
+    assert (listed["source"], listed["complete"], listed["classes"]) == ("metadata", True, TWO[1:])
+
+
 def test_view_starts_with_the_hidden_classes_given(cli, autzen_path, monkeypatch):
     from gigapoint.viewer.server import ViewerServer
 

@@ -60,6 +60,11 @@ class PointFilter:
         join its read filter as its nodes load (lod/store.py)."""
         return replace(self.fresh(), drop_classes=tuple(sorted({*self.drop_classes, *classes})))
 
+    def keeps_class(self, code: int) -> bool:
+        """Whether points of LAS class ``code`` may pass: one of its ``classes`` (or any), none of
+        its ``drop_classes`` (their positions aside)."""
+        return (not self.classes or code in self.classes) and code not in self.drop_classes
+
     def describe(self) -> str:
         """'classes 2, 6; clip 1, 2, 3, 4; corridor 0, 0 to 10, 0, width 2': what the messages say of it."""
         parts = [

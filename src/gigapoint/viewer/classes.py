@@ -5,7 +5,8 @@ A cloud in memory lists the classes it holds (counted once per version of its po
 octree those its metadata lists (an EPT schema's counts, a Potree histogram), else the ASPRS
 standard classes 0..18 (within the classification range its metadata gives: a gigapoint
 octree's), with those of the nodes loaded so far and those hidden (a progressive octree: the
-standard classes and those hidden). A cloud without classification and a live cloud have the
+standard classes and those hidden); an octree opened with a class filter lists only the
+classes it keeps. A cloud without classification and a live cloud have the
 panel disabled, saying why.
 Unticking a class sets the ``hidden_classes`` render setting (the settings message).
 """
@@ -65,7 +66,7 @@ def class_panel(cloud, hidden=(), seen: bool = True) -> dict:
         return {"enabled": True, "reason": "", "source": "cloud", "complete": True, "classes": entries(cache["__classes__"])}
     facts = cloud.class_facts() if isinstance(cloud, OctreeCloud) else {}
     if "classes" in facts:
-        return {"enabled": True, "reason": "", "source": "metadata", "complete": True, "classes": entries(facts["classes"])}
+        return {"enabled": True, "reason": "", "source": "metadata", "complete": True, "classes": entries(filter_kept(cloud, facts["classes"]))}
     lo, hi = facts.get("class_range", (0, 255))
     codes = {c for c in STANDARD_CLASSES if lo <= c <= hi} | set(hidden)
     if "class_range" in facts:
@@ -74,4 +75,13 @@ def class_panel(cloud, hidden=(), seen: bool = True) -> dict:
     if seen and arena is not None:
         values = arena.resident_classification()
         codes |= set(held_classes(values if values is not None else []))
-    return {"enabled": True, "reason": "", "source": "standard", "complete": False, "classes": entries(codes)}
+    return {"enabled": True, "reason": "", "source": "standard", "complete": False, "classes": entries(filter_kept(cloud, codes))}
+
+
+def filter_kept(cloud, codes) -> list[int]:
+    """Those of ``codes`` an octree's read filter keeps (opened with ``classes=`` or
+    ``drop_classes=``): the others are never loaded, so their toggles would do nothing."""
+    from ..lod.store import OctreeCloud
+
+    keep = cloud.read_filter if isinstance(cloud, OctreeCloud) else None
+    return [c for c in codes if keep is None or keep.keeps_class(c)]
