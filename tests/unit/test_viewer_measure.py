@@ -86,7 +86,7 @@ def test_measuring_two_picked_points_gives_their_lengths(client):
         ws.send_json({"type": "measure", "action": "clear"})
         assert receive(ws, reply("measure"))["points"] == []
         ws.send_json({"type": "measure", "action": "erase"})
-        assert receive(ws, reply("error"))["message"] == "measure: action must be add, restore, undo or clear, got 'erase'"
+        assert receive(ws, reply("error"))["message"] == "measure: action must be add, restore, undo, clear, close or open, got 'erase'"
         ws.send_json({"type": "measure", "action": "add", "x": 2})
         assert receive(ws, reply("error"))["message"] == "measure: x must be in [0, 1], got 2"
 

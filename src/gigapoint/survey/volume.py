@@ -170,7 +170,8 @@ def _toe(rings: list[np.ndarray], step: float) -> np.ndarray:
     return np.concatenate(points)
 
 
-def _ring_area(ring: np.ndarray) -> float:
+def ring_area(ring: np.ndarray) -> float:
+    """The area of the ring of (k, 2) vertices ``ring`` (the shoelace formula; without its closing vertex)."""
     x, y = ring[:, 0] - ring[0, 0], ring[:, 1] - ring[0, 1]  # (from a vertex: no cancellation at UTM sizes)
     return abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))) / 2
 
@@ -218,7 +219,7 @@ def _pile(rings, inside: np.ndarray, name: str, drawn: np.ndarray, heights: np.n
         fill=float(above[above > 0].sum(dtype=np.float64)) * cell,
         cut=abs(float(above[above < 0].sum(dtype=np.float64))) * cell,  # (abs: no -0.0)
         area=pixels * cell,
-        polygon_area=_ring_area(outline) - sum(map(_ring_area, holes)),
+        polygon_area=ring_area(outline) - sum(map(ring_area, holes)),
         highest=(*map(float, grid.centres(rows[top : top + 1], cols[top : top + 1])[0]), float(drawn[rows[top], cols[top]])),
         height=float(above.max()),
         base={**description, "z": float(base_z.mean())},

@@ -1,4 +1,5 @@
-"""The viewer's measuring tool: a polyline through picked points, its lengths, and its drawing.
+"""The viewer's measuring tool: a polyline through picked points, its lengths (closed: a
+polygon's area and perimeter; volume_tool.py its stockpile volume), and its drawing.
 
 The session keeps the points in world coordinates (as the pick gives them: a file's points at
 its scale) and draws the polyline into each frame's image before it is encoded, projected with
@@ -13,6 +14,7 @@ import math
 import numpy as np
 
 from ..io import crs_units
+from ..survey.volume import ring_area
 
 MAX_POINTS = 1000
 COLOR = (255, 214, 0)  # yellow, with a black edge so it reads on any ground
@@ -20,19 +22,24 @@ LINE_RADIUS = 1  # pixels either side of a segment's centre: 3 px wide
 POINT_RADIUS = 3  # a point is a 7 x 7 square
 
 
-def summary(points, units: dict | None = None) -> dict:
+def summary(points, units: dict | None = None, closed: bool = False) -> dict:
     """The lengths of the polyline through ``points``: per segment its 3D length, its
     horizontal (xy) length and its height difference (z, signed: up is positive); the total
     of each (the total height difference is the last point's z minus the first's).
 
+    ``closed`` (3 points or more): the polyline closed into a polygon, its last segment back to
+    the first point; ``area`` is then its horizontal area (shoelace, in the horizontal unit
+    squared) and ``perimeter`` its horizontal length (None both where open).
+
     ``units`` (crs_units of the cloud's CRS, carried in the reply): heights in another length
     unit than x and y (a compound CRS: metres, heights in US feet) count in the 3D length in
     the horizontal unit; where x and y are angles (a geographic CRS) the 3D and horizontal
-    lengths are None: degrees are no length."""
+    lengths and the area are None: degrees are no length."""
     units = units or crs_units(None)
     h, v = units["horizontal"], units["vertical"]
     p = np.asarray(points, np.float64).reshape(-1, 3)
-    d = np.diff(p, axis=0)
+    closed = bool(closed) and len(p) >= 3
+    d = np.diff(np.vstack([p, p[:1]]) if closed else p, axis=0)
     z_in_xy_unit = v["metres"] / h["metres"] if h and v and h["metres"] and v["metres"] else 1.0
     horizontal, vertical = np.hypot(d[:, 0], d[:, 1]), d[:, 2]
     length = np.hypot(horizontal, vertical * z_in_xy_unit)
@@ -42,7 +49,17 @@ def summary(points, units: dict | None = None) -> dict:
         return {"length": None if angular else float(a), "horizontal": None if angular else float(b), "vertical": float(c)}
 
     segments = [lengths(a, b, c) for a, b, c in zip(length, horizontal, vertical)]
-    return {"points": p.tolist(), "segments": segments, "total": lengths(length.sum(), horizontal.sum(), vertical.sum()), "units": units}
+    total = lengths(length.sum(), horizontal.sum(), vertical.sum())
+    polygon = closed and not angular
+    return {
+        "points": p.tolist(), "segments": segments, "total": total, "units": units, "closed": closed,
+        "area": ring_area(p[:, :2]) if polygon else None, "perimeter": total["horizontal"] if polygon else None,
+    }  # fmt: skip
+
+
+def drawn(points, closed: bool) -> list:
+    """The points of the line frames draw: a closed polygon's back to its first."""
+    return [*points, *points[:1]] if closed and len(points) >= 3 else list(points)
 
 
 def _clip_depth(a: np.ndarray, b: np.ndarray):

@@ -1,8 +1,8 @@
 """The viewer's wire protocol: message validation, the settings schema, frame packing.
 
 Client -> server: JSON text messages ``{"type": ..., ...}`` (at most MAX_MESSAGE bytes).
-Server -> client: JSON text messages (hello, settings, classes, pick, measure, section, section_result,
-error, pong) and binary frames:
+Server -> client: JSON text messages (hello, settings, classes, pick, measure, volume, volume_result,
+section, section_result, error, pong) and binary frames:
 ``b"GPF1" + u32 little-endian header length + JSON header + JPEG bytes``; a frame's header
 has ``cloud`` (hello's cloud line) again when that changed since the tab last got it.
 Hello's ``cloud`` (ViewerCore.cloud_info): name, points, batches, bounds, attributes,
@@ -108,8 +108,22 @@ MESSAGE_TYPES = {
     # "vertical_assumed"}, U {name, symbol, metres} or null: unknown; a geographic CRS's horizontal
     # U has metres null and length and horizontal are null: degrees are no length); the 3D length
     # counts heights in the horizontal unit (viewer/measure.py). A click on no point adds nothing:
-    # added false and a "message". Frames draw the polyline.
+    # added false and a "message". Frames draw the polyline. close (3 points or more) | open: the
+    # polyline closed into a polygon (its last segment back to the first point; restore's
+    # "closed": true closes what it restores), or open again (an undo below 3 points opens it);
+    # every reply has "closed", "area" (the polygon's horizontal area, in the horizontal unit
+    # squared) and "perimeter" (its horizontal length), both null where open or in degrees.
     "measure",
+    # the stockpile volume inside the closed measurement (viewer/volume_tool.py, gp.volume of the
+    # cloud shown, but the classes hidden): base ("plane", the default | "lowest" | an elevation),
+    # gsd (> 0; by default the polygon's larger side / 500, to 2 digits; at most 4096 pixels
+    # across); id echoed. Reply {"type": "volume", "id", "job", "computing": true, "gsd", "base"},
+    # then, computed off the render loop, {"type": "volume_result", "id": job, gp.volume's pile
+    # figures (fill, cut, net, area, polygon_area, highest, height, base: {type, z, slope,
+    # boundary_rms}, filled, empty, pixels), "gsd", "gsd_note", "units": {length, area, volume}
+    # symbols} or {"type": "volume_result", "id", "error": one line}. A change of the measurement
+    # drops what is on its way.
+    "volume",
     # the section tool (viewer/section_tool.py): action: add (x, y: the point picked there, as
     # measure's, is the line's next end; a third starts a new line) | set (any of points: two world
     # [x, y, z] with different x, y; width: the corridor's, > 0, in the cloud's units; size: [w, h]

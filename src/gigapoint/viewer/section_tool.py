@@ -55,11 +55,17 @@ def parse(msg: dict) -> dict:
     return out
 
 
+def own_reader_source(cloud: VoxelOctree) -> str:
+    """The path or URL of a COPC file or EPT dataset, for a reader of its own: the frames' reads
+    change the viewer's octree's pages and nodes as they go."""
+    return cloud.source.path if isinstance(cloud.source, LocalFile) else cloud.source.url
+
+
 def section_of(cloud, line, width) -> Section:
     """``gigapoint.section`` of what the viewer shows: the cloud's points in memory, an octree's
     from the nodes meeting the corridor; a one-line GigapointError for any other cloud."""
-    if isinstance(cloud, VoxelOctree):  # a reader of its own: the frames' reads change the octree's pages and nodes as they go
-        return section(cloud.source.path if isinstance(cloud.source, LocalFile) else cloud.source.url, line, width)
+    if isinstance(cloud, VoxelOctree):
+        return section(own_reader_source(cloud), line, width)
     if isinstance(cloud, PointCloud) or is_octree(cloud):
         return section(cloud, line, width)
     raise GigapointError(f"{cloud.name}: sections need the points in memory or an LOD octree; this cloud is neither (view the point files instead)")

@@ -27,10 +27,12 @@ from ..render.camera import sample_points
 from ..render.frame import Frame, encode_image
 from ..render.renderer import render_frame
 from ..render.settings import RenderSettings
+from ..survey.volume import volume
 from . import classes as C
 from . import measure as M
 from . import protocol as P
 from . import section_tool as ST
+from . import volume_tool as VT
 from .state import OrbitState
 
 log = logging.getLogger("gigapoint.viewer")
@@ -346,6 +348,9 @@ class Session:
         self.closed = False
         self.last: LastFrame | None = None
         self.measure: list[list[float]] = []  # the measuring tool's points (world), drawn over each frame
+        self.measure_closed = False  # closed into a polygon (3 points or more): its area, and its volume on request
+        self.volume_job = 0  # bumped by every change of the measurement: a volume computed for an older one is not sent
+        self.volume_lock = threading.Lock()  # one volume computed at a time per tab
         self.section: list[list[float]] = []  # the section tool's line: 0 to 2 picked points (world), drawn too
         self.section_width = core.section_width
         self.section_size = [600, 240]  # pixels of the panel's image
@@ -436,8 +441,10 @@ class Session:
             elif kind == "measure":
                 reply = self._measure(msg)
                 if reply is None:
-                    return {"type": "measure", "id": msg.get("id"), "added": False, "message": "no point here: nothing added", **M.summary(self.measure, self.core.units)}
+                    return {"type": "measure", "id": msg.get("id"), "added": False, "message": "no point here: nothing added", **self._measured()}
                 motion = False
+            elif kind == "volume":
+                return self._volume(msg)  # (nothing drawn changes)
             elif kind == "settings":
                 settings = P.apply_settings(self.settings, msg.get("values"))
                 refused = C.refusal(self.core.cloud) if settings.hidden_classes else ""
@@ -515,8 +522,8 @@ class Session:
         return [float(v) for v in point_info(self.last, index, px, py, depth)["position"]]
 
     def lines(self) -> tuple[list, list]:
-        """(measurement points, section line points) as frames draw them."""
-        return list(self.measure), list(self.section)
+        """(measurement points, section line points) as frames draw them (a closed measurement back to its first point)."""
+        return M.drawn(self.measure, self.measure_closed), list(self.section)
 
     # --- the section tool ----------------------------------------------------------------
     def _section(self, msg) -> dict:
@@ -571,14 +578,21 @@ class Session:
                 self.section_cut = cut
         self.send("json", {"type": "section_result", "id": job, **result})
 
+    def _measured(self) -> dict:
+        """The measurement's reply fields: its points, lengths, and closed: its area (measure.summary)."""
+        return M.summary(self.measure, self.core.units, self.measure_closed)
+
     def _measure(self, msg) -> dict | None:
-        """Apply a measure message (add a picked point, restore points, undo the last, clear); None: a click on nothing."""
+        """Apply a measure message (add a picked point, restore points, undo the last, clear, close
+        into a polygon, open it again); None: a click on nothing."""
         action = msg.get("action")
         if action == "restore":  # a reconnected page's measurement (world points): the new session had none
             points = msg.get("points")
             if not isinstance(points, list) or len(self.measure) + len(points) > M.MAX_POINTS:
                 raise P.ProtocolError(f"measure: points must be a list of at most {M.MAX_POINTS} points in all")
+            closed = P.flag(msg, "closed", self.measure_closed)  # (sent with the last batch of a closed one)
             self.measure = self.measure + [P.vec3({"type": "measure", "point": p}, "point") for p in points]
+            self.measure_closed = closed
         elif action == "add":
             if len(self.measure) >= M.MAX_POINTS:
                 raise P.ProtocolError(f"measure: at most {M.MAX_POINTS} points; clear the measurement first")
@@ -590,9 +604,56 @@ class Session:
             self.measure = self.measure[:-1]
         elif action == "clear":
             self.measure = []
+        elif action == "close":
+            if len(self.measure) < 3:
+                raise P.ProtocolError(f"measure: a polygon needs 3 points or more; {len(self.measure)} measured")
+            self.measure_closed = True
+        elif action == "open":
+            self.measure_closed = False
         else:
-            raise P.ProtocolError(f"measure: action must be add, restore, undo or clear, got {str(action)[:20]!r}")
-        return {"type": "measure", "id": msg.get("id"), "added": action == "add", **M.summary(self.measure, self.core.units)}
+            raise P.ProtocolError(f"measure: action must be add, restore, undo, clear, close or open, got {str(action)[:20]!r}")
+        self.measure_closed = self.measure_closed and len(self.measure) >= 3  # (undone below 3 points: a polyline again)
+        self.volume_job += 1  # what is on its way for the old polygon is not sent
+        return {"type": "measure", "id": msg.get("id"), "added": action == "add", **self._measured()}
+
+    # --- the stockpile volume inside the closed measurement ------------------------------
+    def _volume(self, msg) -> dict:
+        """Start the volume inside the closed measurement (``base``, ``gsd``: volume_tool.parse; the
+        gsd offered first: volume_tool.default_gsd) on a thread of its own, sent as "volume_result"."""
+        values = VT.parse(msg)
+        if not self.measure_closed:
+            raise P.ProtocolError("volume: close the measurement into a polygon first (3 points or more, C)")
+        points = [list(p) for p in self.measure]
+        if "gsd" in values:
+            gsd, note = values["gsd"], f"a grid of {values['gsd']:g}"
+        else:
+            gsd, note = VT.default_gsd(points, VT.point_spacing(self.core.bounds, self.core.cloud.n_points))
+        VT.check_gsd(points, gsd)
+        self.volume_job += 1
+        job = (self.volume_job, points, gsd, values.get("base", "plane"), note, self.settings.hidden_classes)
+        threading.Thread(target=self._compute_volume, args=job, name=f"gigapoint-volume-{self.id}", daemon=True).start()
+        return {"type": "volume", "id": msg.get("id"), "job": self.volume_job, "computing": True, "gsd": gsd, "base": job[3]}
+
+    def _compute_volume(self, job: int, points, gsd: float, base, note: str, hidden_classes) -> None:
+        """``gp.volume`` inside ``points`` sent to the tab (off the render loop: the box's points
+        read first, only the surface model drawn under the render lock)."""
+        with self.volume_lock:
+            if job != self.volume_job or self.closed:
+                return  # the measurement changed again while an older one was computed
+            try:
+                cloud = VT.points_in_box(self.core.cloud, points, gsd, hidden_classes)
+                with RENDER_LOCK:
+                    measured = volume(cloud, VT.toe(points), gsd, base)
+                result = VT.summary(measured, self.core.units, note)
+            except GigapointError as exc:  # no point inside, an octree without source files: said in the panel
+                result = {"error": str(exc)[:500]}
+            except Exception as exc:  # a bug: this volume fails (logged), the tab goes on
+                log.exception("viewer: a volume failed")
+                result = {"error": f"internal error: {exc}"[:300]}
+            with self.cond:
+                if job != self.volume_job:
+                    return
+        self.send("json", P.json_safe({"type": "volume_result", "id": job, **result}))
 
     # --- the worker ----------------------------------------------------------------------
     def _next_job(self):

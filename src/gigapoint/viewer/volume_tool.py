@@ -1,0 +1,117 @@
+"""The viewer's stockpile volume: ``gigapoint.volume`` (survey/volume.py) inside the measuring
+tool's closed polygon, its toe, of the cloud the viewer shows.
+
+The session computes it off the render loop, as the section tool computes its section
+(``Session._compute_volume``'s thread): the points of the polygon's box are read first without
+the render lock (a cloud in memory filtered; an LOD octree's nodes that meet the box, at every
+level, lod/query.py: they hold every point once, which ``gp.volume`` itself refuses to take from
+an octree), then ``gp.volume`` draws its surface model of them under the lock (the renderer's
+scratch buffers are shared with the frames'). Classes hidden in the Classes panel are left out:
+the volume is of what the view shows.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.cloud import PointCloud, build_cloud
+from ..errors import EmptyCloudError, GigapointError, InputError
+from ..io.filters import point_filter
+from ..lod.query import is_octree, kept_points, octree_path_kept
+from ..lod.voxel_octree import VoxelOctree
+from ..survey.change import read_survey, unit_names
+from ..survey.volume import BASES, MARGIN_PIXELS, Volume
+from . import protocol as P
+from .section_tool import own_reader_source
+
+GRID_PIXELS = 500  # the grid offered first: the polygon's larger side this many pixels across
+MAX_GRID_PIXELS = 4096  # a finer gsd asked for is refused (the grid's memory, the TIN's time)
+POLYGON = "the measured polygon"  # how gp.volume's messages name it
+
+
+def parse(msg: dict) -> dict:
+    """The checked values of a volume message: ``base`` ("plane", "lowest" or an elevation) and ``gsd`` (> 0); those given."""
+    out = {}
+    if "base" in msg:
+        base = msg["base"]
+        if isinstance(base, str) and base not in BASES:
+            raise P.ProtocolError(f"volume: base must be 'plane', 'lowest' or an elevation (a number), got {base[:20]!r}")
+        out["base"] = base if isinstance(base, str) else P.number(msg, "base", -P.MAX_ABS_COORD, P.MAX_ABS_COORD)
+    if "gsd" in msg:
+        gsd = P.number(msg, "gsd", 0, P.MAX_ABS_COORD)
+        if gsd <= 0:
+            raise P.ProtocolError("volume: gsd must be above 0")
+        out["gsd"] = gsd
+    return out
+
+
+def side(points) -> float:
+    """The polygon's larger horizontal side."""
+    xy = np.asarray(points, np.float64)[:, :2]
+    return float((xy.max(axis=0) - xy.min(axis=0)).max())
+
+
+def point_spacing(bounds, n_points: int) -> float:
+    """The cloud's mean horizontal point spacing, from its box's area and its point count (its
+    gaps make it larger: a coarser grid, the safe side)."""
+    lo, hi = (np.asarray(b, np.float64) for b in bounds)
+    area = float((hi[0] - lo[0]) * (hi[1] - lo[1]))
+    return float(np.sqrt(area / n_points)) if area > 0 and n_points > 0 else 0.0
+
+
+def default_gsd(points, spacing: float) -> tuple[float, str]:
+    """(the grid offered first, the line that says why): the polygon's larger side GRID_PIXELS
+    pixels across, but no finer than the points' ``spacing`` (gp.volume reads two pixels beyond
+    the toe: a finer grid finds no point there, and the toe no height to lay the base on); to 2
+    significant digits."""
+    across = side(points) / GRID_PIXELS
+    if across >= spacing:
+        gsd = float(f"{across:.2g}")
+        return gsd, f"a grid of {gsd:g}: the polygon about {GRID_PIXELS} pixels across"
+    gsd = float(f"{spacing:.2g}")
+    return gsd, f"a grid of {gsd:g}, the points' mean spacing: the polygon {side(points) / gsd:,.0f} pixels across"
+
+
+def check_gsd(points, gsd: float) -> None:
+    """A ProtocolError where ``gsd`` makes the polygon more than MAX_GRID_PIXELS pixels across."""
+    if side(points) == 0:
+        raise P.ProtocolError("volume: the polygon's points are at one x, y: it has no area")
+    across = side(points) / gsd
+    if across > MAX_GRID_PIXELS:
+        raise P.ProtocolError(f"volume: a gsd of {gsd:g} makes the polygon {across:,.0f} pixels across, over {MAX_GRID_PIXELS:,}: give {side(points) / MAX_GRID_PIXELS:.2g} or more")
+
+
+def toe(points) -> dict:
+    """The closed polygon as a GeoJSON geometry (``gp.volume``'s clip_polygon), named POLYGON in messages."""
+    return {"type": "Polygon", "coordinates": [[p[:2] for p in [*points, points[0]]]], "source": POLYGON}
+
+
+def points_in_box(cloud, points, gsd: float, drop_classes) -> PointCloud:
+    """The points of ``cloud`` (what the viewer shows) in the box ``gp.volume`` reads around the
+    polygon, but those of ``drop_classes``: a cloud in memory's, an octree's nodes meeting it (a
+    COPC file or EPT dataset through a reader of its own); a one-line GigapointError for any other cloud."""
+    xy = np.asarray(points, np.float64)[:, :2]
+    margin = MARGIN_PIXELS * gsd
+    box = [*(xy.min(axis=0) - margin), *(xy.max(axis=0) + margin)]
+    filters = {"drop_classes": list(drop_classes) or None, "clip": box}
+    keep = point_filter(**filters, where="volume")
+    try:
+        if isinstance(cloud, PointCloud):
+            return read_survey(cloud, filters, "volume")
+        if isinstance(cloud, VoxelOctree):  # (the frames' reads change its pages and nodes as they go)
+            kept, _ = octree_path_kept(own_reader_source(cloud), keep, "the polygon's box", "measure the point files, or wait for the octree")
+        elif is_octree(cloud):
+            kept = kept_points(cloud, keep, cloud.name, "the polygon's box")
+        else:
+            raise GigapointError(f"{cloud.name}: volumes need the points in memory or an LOD octree; this cloud is neither (view the point files instead)")
+    except EmptyCloudError:
+        (x0, y0, x1, y1) = box
+        raise InputError(f"{POLYGON}: no point of {cloud.name} lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}") from None
+    return build_cloud(kept, name=cloud.name, colors="rgba")
+
+
+def summary(measured: Volume, units: dict, gsd_note: str) -> dict:
+    """The pile's figures as the panel shows them (``Pile.summary``), in the cloud's ``units``
+    (its CRS's: the points read from an octree's nodes name none)."""
+    (pile,) = measured.piles
+    return {**pile.summary(), "gsd": measured.gsd, "gsd_note": gsd_note, "units": unit_names(units)}

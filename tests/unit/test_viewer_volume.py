@@ -1,0 +1,214 @@
+"""The measuring tool closed into a polygon: its area and perimeter in the reply, the closing
+segment drawn over the frames, and the stockpile volume inside it (gp.volume of the viewer's
+cloud, off the render loop), bad messages refused."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("starlette")
+pytest.importorskip("httpx")
+pytest.importorskip("scipy")  # (gp.volume fills the surface's holes by a TIN)
+
+from test_viewer_measure import screen, yellow
+from test_viewer_server import full_frame, jpeg_pixels, receive, reply  # the websocket helpers of the server's tests
+
+import gigapoint
+from gigapoint.viewer import measure as M
+from gigapoint.viewer import volume_tool as VT
+from gigapoint.viewer.server import create_app
+from gigapoint.viewer.session import ViewerCore
+
+pytestmark = [pytest.mark.timeout(120), pytest.mark.filterwarnings("ignore::DeprecationWarning")]
+
+FEET = {"horizontal": {"name": "foot", "symbol": "ft", "metres": 0.3048}, "vertical": {"name": "foot", "symbol": "ft", "metres": 0.3048}, "vertical_assumed": False}
+
+
+def shoelace(xy) -> float:
+    """The area of the polygon through ``xy`` (written out here, vertex by vertex)."""
+    twice = sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(xy, [*xy[1:], xy[0]]))
+    return abs(twice) / 2
+
+
+def test_a_closed_measurement_gives_the_polygons_area_and_perimeter():
+    # a concave pentagon on UTM-sized coordinates, its heights all different (the area is horizontal)
+    xy = [(637010.0, 4850020.0), (637050.0, 4850020.0), (637050.0, 4850050.0), (637030.0, 4850035.0), (637010.0, 4850050.0)]
+    points = [[x, y, 10.0 + k] for k, (x, y) in enumerate(xy)]
+    local = [(x - 637000.0, y - 4850000.0) for x, y in xy]  # (exact in floats: the shoelace in the test loses no digits)
+    perimeter = sum(math.dist(a, b) for a, b in zip(local, [*local[1:], local[0]]))
+    s = M.summary(points, FEET, closed=True)
+    assert s["closed"] is True and len(s["segments"]) == 5
+    assert s["area"] == pytest.approx(shoelace(local), rel=1e-12) and shoelace(local) == 40 * 30 - 40 * 15 / 2  # the box less the notch
+    assert s["perimeter"] == pytest.approx(perimeter, rel=1e-12) == s["total"]["horizontal"]
+    assert s["segments"][-1] == {"length": pytest.approx(math.hypot(30, 4)), "horizontal": 30.0, "vertical": -4.0}  # back to the first
+    assert s["total"]["vertical"] == 0.0  # round the ring: back to where it began
+    opened = M.summary(points, FEET)
+    assert opened["closed"] is False and opened["area"] is None and opened["perimeter"] is None and len(opened["segments"]) == 4
+    two = M.summary(points[:2], FEET, closed=True)  # no polygon below 3 points
+    assert two["closed"] is False and two["area"] is None and len(two["segments"]) == 1
+    degrees = {"horizontal": {"name": "degree", "symbol": "°", "metres": None}, "vertical": FEET["vertical"], "vertical_assumed": False}
+    assert M.summary(points, degrees, closed=True)["area"] is None  # degrees squared are no area
+    assert M.drawn(points, True) == [*points, points[0]] and M.drawn(points[:2], True) == points[:2]
+
+
+def test_the_grid_offered_spans_the_polygon_500_pixels_but_no_finer_than_the_points():
+    assert VT.point_spacing(([0, 0, 5], [60, 50, 9]), 48_000) == pytest.approx(0.25)
+    assert VT.default_gsd(TOE, 0.01) == (0.06, "a grid of 0.06: the polygon about 500 pixels across")  # 30 / 500
+    assert VT.default_gsd(TOE, 0.2489) == (0.25, "a grid of 0.25, the points' mean spacing: the polygon 120 pixels across")
+    assert VT.toe(TOE) == {"type": "Polygon", "coordinates": [[[15.0, 15.0], [45.0, 15.0], [45.0, 35.0], [15.0, 35.0], [15.0, 15.0]]], "source": "the measured polygon"}
+
+
+# a flat plane at z 10 over 60 x 50 with a box pile 20 x 10 x 3 standing on it (600 cubic units),
+# sampled every 0.25 off the box's edges, so a TIN between the points puts each wall where it is
+GROUND_Z, BOX, BOX_HEIGHT = 10.0, (20.0, 40.0, 20.0, 30.0), 3.0
+TOE = [[15.0, 15.0, GROUND_Z], [45.0, 15.0, GROUND_Z], [45.0, 35.0, GROUND_Z], [15.0, 35.0, GROUND_Z]]  # 30 x 20 around it
+
+
+def pile(classification: bool = False) -> gigapoint.PointCloud:
+    gx, gy = np.meshgrid(np.arange(0.125, 60, 0.25), np.arange(0.125, 50, 0.25), indexing="ij")
+    x, y = gx.ravel(), gy.ravel()
+    on_box = (x > BOX[0]) & (x < BOX[1]) & (y > BOX[2]) & (y < BOX[3])
+    z = GROUND_Z + BOX_HEIGHT * on_box
+    rgb = np.where(on_box[:, None], [200, 120, 40], [0, 160, 0]).astype(np.uint8)
+    extra = {"classification": np.where(on_box, 6, 2).astype(np.uint8)} if classification else {}
+    return gigapoint.from_arrays(np.column_stack([x, y, z]), rgb, name="pile", **extra)
+
+
+@pytest.fixture(scope="module")
+def cloud():
+    return pile()
+
+
+@pytest.fixture()
+def client(cloud):
+    from starlette.testclient import TestClient
+
+    core = ViewerCore(cloud, gigapoint.RenderSettings(point_size=3))
+    with TestClient(create_app(core)) as c:
+        yield c, core
+    core.close_all()
+
+
+def close_toe(ws) -> dict:
+    ws.send_json({"type": "measure", "action": "restore", "points": TOE})
+    receive(ws, reply("measure"))
+    ws.send_json({"type": "measure", "action": "close", "seq": 5})
+    return receive(ws, reply("measure"))
+
+
+def grid_error(gsd: float) -> float:
+    """How far the volume of a box of whole pixels may be off (docs/guide.md, section 8): the toe's pixels count whole or not at all."""
+    width, length = BOX[1] - BOX[0], BOX[3] - BOX[2]
+    return BOX_HEIGHT * ((width + 2 * gsd) * (length + 2 * gsd) - width * length)
+
+
+def test_closing_the_measurement_around_a_pile_gives_its_area_and_volume(client):
+    c, core = client
+    with c.websocket_connect("/ws?w=240&h=180") as ws:
+        hello = receive(ws, reply("hello"))
+        ws.send_json({"type": "volume"})
+        assert receive(ws, reply("error"))["message"] == "volume: close the measurement into a polygon first (3 points or more, C)"
+        ws.send_json({"type": "view", "name": "top", "seq": 1})
+        receive(ws, full_frame(1))
+        session = core.sessions[hello["session"]]
+        cam = session.last.camera
+        closing = (screen(cam, np.array(TOE[-1])) + screen(cam, np.array(TOE[0]))) / 2  # the middle of the side from the last point to the first
+        m = close_toe(ws)
+        assert m["closed"] is True and m["area"] == 600.0 and m["perimeter"] == 100.0 and len(m["segments"]) == 4
+        _, jpeg = receive(ws, full_frame(5))
+        assert yellow(jpeg_pixels(jpeg), closing)  # the closing side is drawn
+        ws.send_json({"type": "volume", "base": "plane", "id": 4})
+        started = receive(ws, reply("volume"))
+        assert started == {"type": "volume", "id": 4, "job": started["job"], "computing": True, "gsd": 0.25, "base": "plane"}  # the points' spacing
+        result = receive(ws, reply("volume_result"))
+        ws.send_json({"type": "measure", "action": "open", "seq": 6})
+        assert receive(ws, reply("measure"))["closed"] is False
+        _, jpeg = receive(ws, full_frame(6))
+        assert not yellow(jpeg_pixels(jpeg), closing)  # open again: a polyline
+    assert result["id"] == started["job"] and "error" not in result, result
+    assert result["gsd"] == 0.25 and result["gsd_note"] == "a grid of 0.25, the points' mean spacing: the polygon 120 pixels across"
+    assert abs(result["fill"] - 600.0) < grid_error(0.25) and result["fill"] == pytest.approx(600.0, rel=0.01)
+    assert result["cut"] == pytest.approx(0.0, abs=0.5) and result["net"] == pytest.approx(result["fill"] - result["cut"])
+    assert result["base"]["type"] == "plane" and result["base"]["z"] == pytest.approx(GROUND_Z, abs=1e-3)
+    assert result["base"]["slope"] == pytest.approx([0.0, 0.0], abs=1e-5)  # the plane is flat
+    assert result["polygon_area"] == 600.0 and result["area"] == pytest.approx(600.0, rel=0.01)
+    assert result["height"] == pytest.approx(BOX_HEIGHT, abs=1e-3) and result["highest"][2] == pytest.approx(GROUND_Z + BOX_HEIGHT, abs=1e-3)
+    assert result["filled"] < 0.01 and result["empty"] == 0.0  # a point in (nearly) every pixel
+    assert result["units"] == {"length": "units", "area": "square units", "volume": "cubic units"}  # arrays: no CRS
+
+
+def test_a_flat_base_and_a_gsd_asked_for(client):
+    c, _ = client
+    with c.websocket_connect("/ws?w=120&h=90") as ws:
+        receive(ws, reply("hello"))
+        close_toe(ws)
+        ws.send_json({"type": "volume", "base": GROUND_Z - 1, "gsd": 0.5})
+        assert receive(ws, reply("volume"))["gsd"] == 0.5
+        result = receive(ws, reply("volume_result"))
+    # a base 1 below the ground: the whole 30 x 20 polygon 1 high besides the pile, within the 0.5 grid's error
+    assert abs(result["fill"] - (600.0 + 600.0)) < grid_error(0.5) + 1.0 * 0.5 * 100
+    assert result["base"] == {"type": "elevation", "z": GROUND_Z - 1} and result["gsd_note"] == "a grid of 0.5"
+
+
+@pytest.mark.parametrize(
+    ("message", "error"),
+    [
+        ({"base": "flat"}, "volume: base must be 'plane', 'lowest' or an elevation (a number), got 'flat'"),
+        ({"base": [1]}, "volume: base must be a finite number, got [1]"),
+        ({"gsd": 0}, "volume: gsd must be above 0"),
+        ({"gsd": 0.001}, "volume: a gsd of 0.001 makes the polygon 30,000 pixels across, over 4,096: give 0.0073 or more"),
+    ],
+)
+def test_bad_volume_messages_are_answered_with_an_error(client, message, error):
+    c, _ = client
+    with c.websocket_connect("/ws?w=120&h=90") as ws:
+        receive(ws, reply("hello"))
+        close_toe(ws)
+        ws.send_json({"type": "volume", **message})
+        assert receive(ws, reply("error"))["message"] == error
+        ws.send_json({"type": "measure", "action": "undo"})
+        assert receive(ws, reply("measure"))["closed"] is True  # a triangle
+        ws.send_json({"type": "measure", "action": "undo"})
+        assert receive(ws, reply("measure"))["closed"] is False  # 2 points: a polyline again
+        ws.send_json({"type": "measure", "action": "close"})
+        assert receive(ws, reply("error"))["message"] == "measure: a polygon needs 3 points or more; 2 measured"
+
+
+def test_a_polygon_off_the_data_says_so_in_the_result(client):
+    c, _ = client
+    with c.websocket_connect("/ws?w=120&h=90") as ws:
+        receive(ws, reply("hello"))
+        ws.send_json({"type": "measure", "action": "restore", "points": [[500, 500, 0], [600, 500, 0], [600, 600, 0]], "closed": True})
+        assert receive(ws, reply("measure"))["closed"] is True  # (a reconnected page's closed polygon)
+        ws.send_json({"type": "volume"})
+        result = receive(ws, reply("volume_result"))
+    assert result["error"] == "the measured polygon: no point of pile lies in its box x 499.5..600.5, y 499.5..600.5"  # (two pixels of 0.25 beyond it)
+
+
+def test_an_octree_gives_the_volume_of_its_nodes_points_and_hidden_classes_are_left_out(tmp_path):
+    """A converted octree's nodes meeting the polygon's box, at every level, hold its points
+    (lod/query.py): the volume of the cloud's; the pile's class hidden in the Classes panel: no pile."""
+    from starlette.testclient import TestClient
+
+    gigapoint.convert(pile(classification=True), tmp_path / "oct", max_leaf=2_000)
+    octree = gigapoint.open(tmp_path / "oct")
+    assert len(octree.keys) > 8
+    core = ViewerCore(octree)
+    try:
+        with TestClient(create_app(core)) as c, c.websocket_connect("/ws?w=120&h=90") as ws:
+            receive(ws, reply("hello"))
+            close_toe(ws)
+            ws.send_json({"type": "volume", "gsd": 0.25})
+            whole = receive(ws, reply("volume_result"))
+            ws.send_json({"type": "settings", "values": {"hidden_classes": [6]}})
+            receive(ws, reply("settings"))
+            ws.send_json({"type": "volume", "gsd": 0.25})
+            hidden = receive(ws, reply("volume_result"))
+    finally:
+        core.close_all()
+    expected = gigapoint.volume(pile(), VT.toe(TOE), 0.25)
+    assert whole["fill"] == pytest.approx(expected.fill, rel=1e-9) and abs(whole["fill"] - 600.0) < grid_error(0.25)
+    assert hidden["fill"] == pytest.approx(0.0, abs=1e-6) and hidden["height"] == pytest.approx(0.0, abs=1e-3)  # the ground only
