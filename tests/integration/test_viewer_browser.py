@@ -266,6 +266,34 @@ def test_measure_lists_the_lengths_between_clicked_points(page, server):
     assert session.measure == []
 
 
+def test_c_closes_the_measurement_into_a_polygon_and_volume_computes_the_volume_inside(page, server):
+    from gigapoint.viewer import volume_tool as VT
+
+    n = frame_no(page)
+    page.get_by_role("button", name="top").click()
+    page.wait_for_function("() => window.gigapoint.camera.pitch > 89", timeout=30_000)
+    wait_full_frame(page, n)
+    b = canvas_box(page)
+    page.locator("#canvas").focus()
+    page.keyboard.press("m")
+    for k, (fx, fy) in enumerate(((0.3, 0.3), (0.7, 0.3), (0.5, 0.7)), start=1):  # a triangle of ground around the marker
+        page.mouse.click(b["x"] + b["width"] * fx, b["y"] + b["height"] * fy)
+        page.wait_for_function("(k) => document.getElementById('measureinfo').dataset.points === String(k)", arg=k, timeout=30_000)
+    page.keyboard.press("c")
+    page.wait_for_function("() => document.getElementById('measureinfo').dataset.closed === 'true'", timeout=30_000)
+    (session,) = server.core.sessions.values()
+    (x0, y0), (x1, y1), (x2, y2) = np.array(session.measure)[:, :2]
+    area = abs((x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)) / 2
+    assert f"polygon: area {area:.3f}" in page.locator("#measureinfo").inner_text()
+    page.get_by_role("button", name="volume", exact=True).click()
+    page.wait_for_function("() => document.getElementById('volume-info').dataset.fill !== undefined", timeout=30_000)
+    gsd, note = VT.default_gsd(session.measure, VT.point_spacing(server.core.bounds, server.core.cloud.n_points))
+    expected = gigapoint.volume(server.core.cloud, VT.toe(session.measure), gsd)
+    assert float(page.locator("#volume-info").get_attribute("data-fill")) == pytest.approx(expected.fill)
+    text = page.locator("#volume-info").inner_text()
+    assert f"fill {expected.fill:,.2f} cubic units" in text and "base plane through the toe" in text and note in text, text
+
+
 def test_measure_in_feet_says_so_and_survives_a_lost_connection(browser, autzen_path):
     """autzen_trim.laz is in feet: the HUD writes "ft" by each number and the totals in metres
     too; after the connection drops, the page's new session has the measurement again."""

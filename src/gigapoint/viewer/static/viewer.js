@@ -16,7 +16,7 @@
   const S = {
     ws: null, session: null, cloud: null, schema: [], settings: {}, camera: null,
     seq: 0, sentAt: new Map(), lastFrame: 0, frameTimes: [], fps: null, latency: null, renderTimes: [],
-    header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0, measuring: false, measure: [], sectioning: false, section: [],
+    header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0, measuring: false, measure: [], measureClosed: false, sectioning: false, section: [],
     pending: { orbit: null, look: null, pan: null, zoom: null }, retry: 0, classes: null, classesAsked: -1e9,
   };
   window.gigapoint = S; // for tests and the curious
@@ -88,7 +88,7 @@
     if (m.type === "hello") {
       // a reconnect to the same cloud (the server restarted, the network dropped) keeps this tab's view and settings
       const same = S.cloud && S.cloud.name === m.cloud.name && JSON.stringify(S.cloud.bounds) === JSON.stringify(m.cloud.bounds);
-      const kept = same && S.camera ? { camera: S.camera, settings: S.settings, measure: S.measure, section: S.section } : null;
+      const kept = same && S.camera ? { camera: S.camera, settings: S.settings, measure: S.measure, closed: S.measureClosed, section: S.section } : null;
       drawing = 0;  // the new session numbers its frames from 1: the old count dropped them all
       S.session = m.session; S.schema = m.schema; S.settings = m.settings; S.camera = m.camera;
       const b = m.cloud.bounds;
@@ -110,7 +110,11 @@
         const changed = Object.fromEntries(Object.entries(kept.settings).filter(([k, v]) => JSON.stringify(v) !== JSON.stringify(m.settings[k])));
         if (Object.keys(changed).length) send({ type: "settings", values: changed }, true);
         // the measurement too, in world coordinates; 100 points a message stays under the message limit
-        for (let i = 0; i < kept.measure.length; i += 100) send({ type: "measure", action: "restore", points: kept.measure.slice(i, i + 100) }, true);
+        // (the last batch closes a closed one again)
+        for (let i = 0; i < kept.measure.length; i += 100) {
+          const last = i + 100 >= kept.measure.length;
+          send({ type: "measure", action: "restore", points: kept.measure.slice(i, i + 100), ...(last && kept.closed ? { closed: true } : {}) }, true);
+        }
       }
     } else if (m.type === "classes") {
       showClasses(m);
@@ -123,6 +127,10 @@
       showPick(m);
     } else if (m.type === "measure") {
       showMeasure(m);
+    } else if (m.type === "volume") {
+      showVolume(m);
+    } else if (m.type === "volume_result") {
+      showVolumeResult(m);
     } else if (m.type === "section") {
       showSection(m);
     } else if (m.type === "section_result") {
@@ -346,6 +354,7 @@
     $("btn-measure").classList.toggle("active", on);
     canvas.classList.toggle("measuring", on);
     $("measureinfo").classList.toggle("hidden", !on);
+    $("volume-panel").classList.toggle("hidden", !on);
     if (on) showMeasure({ points: [], segments: [] });
   }
 
@@ -376,11 +385,75 @@
     const lines = ["measure: 3D, horizontal, height", unitsLine(u)];
     m.segments.forEach((s, i) => lines.push(`${i + 1}: ${f(s.length, h)}   horizontal ${f(s.horizontal, h)}   height ${dz(s.vertical)}`));
     if (m.segments.length) lines.push(`total ${f(m.total.length, h, true)}   horizontal ${f(m.total.horizontal, h, true)}   height ${dz(m.total.vertical, true)}`);
+    if (m.closed) {  // (area null: degrees, no area)
+      const area = m.area == null ? "—" : `${m.area.toFixed(dec)}${h ? ` ${h.symbol}²` : ""}${h && h.metres !== 1 ? ` (${(m.area * h.metres * h.metres).toFixed(dec)} m²)` : ""}`;
+      lines.push(`polygon: area ${area}   perimeter ${f(m.perimeter, h, true)}`);
+    }
     if (m.points.length < 2) lines.push(m.points.length ? "1 point: click the next" : "click a point to start");
     if (m.message) lines.push(m.message);  // a click on empty sky
-    lines.push("Backspace removes the last point · Esc or M ends");
+    lines.push(`Backspace removes the last point${m.points.length >= 3 ? ` · C ${m.closed ? "opens the polygon" : "closes the polygon: its area, its volume"}` : ""} · Esc or M ends`);
     $("measureinfo").textContent = lines.join("\n");
     $("measureinfo").dataset.points = String(m.points.length);
+    $("measureinfo").dataset.closed = String(!!m.closed);
+    S.measureClosed = !!m.closed;
+    $("btn-measure-close").disabled = m.points.length < 3;
+    $("btn-measure-close").textContent = m.closed ? "open polygon" : "close polygon";
+    $("btn-measure-close").classList.toggle("active", !!m.closed);
+    $("btn-volume").disabled = !m.closed;
+    $("volume-unit").textContent = lengthUnit().trim();
+    if (!m.message) showVolumeInfo(m.closed ? "volume: the stockpile volume inside the polygon" : "close the polygon (C) for its area and volume", false);
+  }
+
+  function closePolygon() {
+    if (S.measure.length >= 3) send({ type: "measure", action: S.measureClosed ? "open" : "close" }, true);
+  }
+
+  // ---------------------------------------------------------------- the volume inside the closed measurement (the server computes it: gp.volume)
+  function showVolumeInfo(text, copyable) {
+    $("volume-info").textContent = text;
+    $("btn-volume-copy").disabled = !copyable;
+  }
+
+  function requestVolume() {
+    const choice = $("volume-base").value, gsd = Number($("volume-gsd").value), z = Number($("volume-elevation").value);
+    if (choice === "elevation" && ($("volume-elevation").value === "" || !Number.isFinite(z))) { $("volume-elevation").classList.add("invalid"); return; }
+    $("volume-elevation").classList.remove("invalid");
+    const base = choice === "elevation" ? z : choice;
+    send({ type: "volume", base, ...($("volume-gsd").value !== "" && gsd > 0 ? { gsd } : {}), id: ++S.pickId });
+  }
+
+  function showVolume(m) {
+    if (!S.measuring) return;
+    showVolumeInfo(`computing the volume on a grid of ${m.gsd}…`, false);
+  }
+
+  function showVolumeResult(m) {
+    if (!S.measuring) return;  // (the server sends none for a polygon changed since)
+    const info = $("volume-info");
+    if (m.error) { showVolumeInfo(m.error, false); return; }
+    const u = m.units, n = (x) => x.toLocaleString(undefined, { minimumFractionDigits: 2, maximumFractionDigits: 2 });
+    const b = m.base, length = u.length === "units" ? "" : ` ${u.length}`;
+    const base = b.type === "plane"
+      ? `plane through the toe, mean z ${n(b.z)}${length}, slope ${(Math.hypot(...b.slope) * 100).toFixed(2)} % (dz/dx ${b.slope[0].toFixed(4)}, dz/dy ${b.slope[1].toFixed(4)}), toe rms ${n(b.boundary_rms)}${length}`
+      : b.type === "lowest" ? `flat at the toe's lowest, z ${n(b.z)}${length}` : `flat at z ${n(b.z)}${length}`;
+    const pct = (x) => `${(x * 100).toFixed(1)} %`;
+    showVolumeInfo([
+      `fill ${n(m.fill)} ${u.volume}`,
+      `cut  ${n(m.cut)} ${u.volume}`,
+      `net  ${n(m.net)} ${u.volume}`,
+      `base ${base}`,
+      `footprint ${n(m.area)} ${u.area} (the polygon ${n(m.polygon_area)} ${u.area})`,
+      `highest z ${n(m.highest[2])}${length}, ${n(m.height)}${length} above the base`,
+      `filled ${pct(m.filled)} of the pixels by interpolation${m.empty ? `, ${pct(m.empty)} left empty (no volume)` : ""}`,
+      m.gsd_note,
+    ].join("\n"), true);
+    info.dataset.fill = String(m.fill);
+  }
+
+  function copyVolume() {
+    const text = $("volume-info").textContent;
+    if (navigator.clipboard) navigator.clipboard.writeText(text).catch(() => {});
+    else { const r = document.createRange(); r.selectNodeContents($("volume-info")); getSelection().removeAllRanges(); getSelection().addRange(r); }
   }
 
   // ---------------------------------------------------------------- the section tool (the server computes the section, draws the line)
@@ -558,6 +631,7 @@
     else if (k === "escape" && sectionEnlarged()) enlargeSection(false);  // the first Esc closes the enlarged section, the next ends the tool
     else if (k === "escape" && S.sectioning) setSectioning(false);
     else if (k === "escape" && S.measuring) setMeasuring(false);
+    else if (k === "c" && S.measuring) closePolygon();
     else if (k === "backspace" && S.measuring) { e.preventDefault(); send({ type: "measure", action: "undo" }, true); }
     else if (k === "r") send({ type: "reset" }, true);
     else if (k >= "1" && k <= "5") send({ type: "view", name: ["top", "front", "side", "iso", "auto"][Number(k) - 1] }, true);
@@ -611,6 +685,10 @@
   $("fly").addEventListener("change", (e) => setFly(e.target.checked));
   $("btn-measure").addEventListener("click", () => setMeasuring(!S.measuring));
   $("btn-section").addEventListener("click", () => setSectioning(!S.sectioning));
+  $("btn-measure-close").addEventListener("click", closePolygon);
+  $("btn-volume").addEventListener("click", requestVolume);
+  $("btn-volume-copy").addEventListener("click", copyVolume);
+  $("volume-base").addEventListener("change", (e) => $("volume-elevation-row").classList.toggle("hidden", e.target.value !== "elevation"));
   $("section-width").addEventListener("change", (e) => {
     const w = Number(e.target.value);
     const ok = e.target.value !== "" && Number.isFinite(w) && w > 0;
