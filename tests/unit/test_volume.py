@@ -164,6 +164,17 @@ def test_bad_inputs_are_one_line_errors(polygon, kwargs, message):
     assert "\n" not in str(error.value)
 
 
+def test_a_toe_without_heights_says_why_and_how_to_mend_it():
+    """Points 2 units apart and a 0.25 grid: the toe's pixels hold none, so no plane can be laid
+    (the message named neither the grid nor a coarser one); a 3-unit grid finds the toe."""
+    x, y = np.meshgrid(np.arange(0.0, 40.0, 2.0), np.arange(0.0, 40.0, 2.0))
+    cloud = gp.from_arrays(np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 100.0)]))
+    toe = square(10.3, 10.3, 29.7, 29.7)
+    with pytest.raises(InputError, match=r"no point near the toe \(it runs off the data, or the points lie further apart than the 0\.25 grid: a coarser gsd\)"):
+        gp.volume(cloud, toe, 0.25, fill_nodata=None)
+    assert gp.volume(cloud, toe, 3.0).piles[0].fill == pytest.approx(0.0, abs=1e-6)
+
+
 def test_a_polygon_over_a_gap_in_the_data_holds_no_point():
     x, y = lattice(40.0)
     gap = (x >= 14.5) & (x < 25.5) & (y >= 14.5) & (y < 25.5)  # points in the box read (a pixel beyond), none inside

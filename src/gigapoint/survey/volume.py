@@ -205,7 +205,10 @@ def _pile(rings, inside: np.ndarray, name: str, drawn: np.ndarray, heights: np.n
     toe_z = heights[grid.pixels(toe_xy)]
     known_toe = ~np.isnan(toe_z)
     if known_toe.sum() < 3 and not is_real(base):
-        raise InputError(f"{where}: the surface has no height along its boundary (no point near the toe) to lay a base on; give --base Z")
+        raise InputError(
+            f"{where}: the surface has no height along its boundary to lay a base on: no point near the toe (it runs off the data, or the "
+            f"points lie further apart than the {grid.size:g} grid: a coarser gsd); or give a base elevation (--base Z)"
+        )
     rows, cols = np.nonzero(inside)
     z = heights[rows, cols].astype(np.float64)
     known = ~np.isnan(z)
