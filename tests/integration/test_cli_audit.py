@@ -282,4 +282,4 @@ def test_convert_prints_the_output_as_given(cloud_file, tmp_path, cli, monkeypat
     monkeypatch.setattr(gigapoint.lod, "convert", as_a_dask_run)
     rc, out, err = cli("convert", cloud_file, "-o", "oct", "--quiet")
     assert rc == 0, err
-    assert out.startswith("oct: 3,000 points in 1 nodes (gigapoint, grid), ")
+    assert out.startswith("oct: 3,000 points in 1 node (gigapoint, grid), ")

@@ -126,7 +126,7 @@ def test_an_unknown_crs_is_refused_before_a_point_is_read(cli, autzen_path, tmp_
 
 def test_points_outside_the_projections_domain_are_refused_naming_the_file(tmp_path):
     beyond = _plain_tile(tmp_path / "beyond.las", [[10.0, 45.0, 0.0], [10.0, 95.0, 0.0], [10.0, 46.0, 0.0]])  # latitude 95: no Mercator y
-    with pytest.raises(InputError, match=r"beyond\.las: 1 points lie outside the domain of the transform to WGS 84 / Pseudo-Mercator \(e\.g\. 10, 95, 0\): nothing was written"):
+    with pytest.raises(InputError, match=r"beyond\.las: 1 point lies outside the domain of the transform to WGS 84 / Pseudo-Mercator \(e\.g\. 10, 95, 0\): nothing was written"):
         gp.convert(beyond, tmp_path / "out.laz", to_crs="EPSG:3857", from_crs="EPSG:4326")
     assert not (tmp_path / "out.laz").exists()
 

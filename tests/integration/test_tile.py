@@ -183,7 +183,7 @@ def test_a_folder_holding_las_files_is_refused_and_overwrite_leaves_the_users_fi
     with pytest.raises(InputError, match=r"tiles: holds 3 LAS/LAZ files already \(autzen_trim_0_0\.laz, autzen_trim_636000_849000\.laz, mine\.laz\); pass overwrite=True"):
         gp.tile(autzen_path, out, 500)
     assert len(list(out.iterdir())) == 3 and (out / "autzen_trim_636000_849000.laz").read_bytes() == b"a tile of this run's name"
-    with pytest.warns(GigapointWarning, match=r"tiles: 1 tiles named as this run's were not written by it and are left as they were \(autzen_trim_0_0\.laz\)"):
+    with pytest.warns(GigapointWarning, match=r"tiles: tiles named as this run's but not written by it are left as they were \(1 tile: autzen_trim_0_0\.laz\)"):
         res = gp.tile(autzen_path, out, 500, overwrite=True)
     assert len(res.tiles) == 6 and len(laspy.read(str(out / "autzen_trim_636000_849000.laz")).points) == res.points_per_tile[1]
     assert (out / "mine.laz").read_bytes() == b"the user's file" and (out / "autzen_trim_0_0.laz").read_bytes() == b"an earlier run's tile"

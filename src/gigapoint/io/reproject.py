@@ -34,7 +34,7 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..core.coords import MAX_ABS_COORDINATE
-from ..errors import GigapointWarning, InputError, first_line, warn
+from ..errors import GigapointWarning, InputError, counted, first_line, warn
 from .las import LasReader, read_las_header
 from .registry import reader_for
 
@@ -165,7 +165,7 @@ class Reprojection:
         if lost.any():
             at = xyz[np.argmax(lost)]
             raise InputError(
-                f"{path}: {int(lost.sum()):,} points lie outside the domain of the transform to {self.target.name} "
+                f"{path}: {counted(int(lost.sum()), 'point lies', 'points lie')} outside the domain of the transform to {self.target.name} "
                 f"(e.g. {at[0]:.15g}, {at[1]:.15g}, {at[2]:.15g}): nothing was written; are its coordinates in the CRS it is read in?"
             )
         return out

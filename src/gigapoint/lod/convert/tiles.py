@@ -47,7 +47,7 @@ import numpy as np
 from ...atomic import append_file
 from ...core.chunk import PointChunk
 from ...core.cloud import check_valid_count
-from ...errors import GigapointWarning, InputError, check_switch, is_real, warn
+from ...errors import GigapointWarning, InputError, check_switch, counted, is_real, warn
 from ...io import with_subfolders
 from ...io.colorize import Colorization
 from ...io.filters import point_filter
@@ -344,7 +344,7 @@ def _warn_stale_tiles(out: Path, name: str, tiles: list[Path]) -> None:
     stale = sorted(p.name for p in out.iterdir() if pattern.fullmatch(p.name) and p.name not in ours)
     if stale:
         shown = ", ".join(stale[:3]) + (", ..." if len(stale) > 3 else "")
-        warn(f"{out}: {len(stale):,} tiles named as this run's were not written by it and are left as they were ({shown}); remove them if they are an earlier run's", GigapointWarning)
+        warn(f"{out}: tiles named as this run's but not written by it are left as they were ({counted(len(stale), 'tile')}: {shown}); remove them if they are an earlier run's", GigapointWarning)
 
 
 __all__ = ["MAX_TILES", "TILE_FORMATS", "TileResult", "tile", "tile_index", "tile_name"]
