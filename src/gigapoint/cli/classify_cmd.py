@@ -10,7 +10,7 @@ import typer
 
 from ..errors import GigapointError, InputError, counted
 from .app import app
-from .cloud_opts import RecursiveOption, subfolders_read
+from .cloud_opts import RecursiveOption, skipped_note, subfolders_read
 
 #: the lengths' help: in the cloud's units, the default converted from metres
 _UNITS = "in the cloud's units (its CRS's: a cloud in feet takes the default in feet)"
@@ -63,7 +63,7 @@ def classify(
         raise type(exc)(message.replace("overwrite=True", "--overwrite").replace("classify_ground: ", "classify: ")) from None
     p = result.params
     units = p["units"]
-    skipped = f", {counted(result.skipped, 'invalid point')} skipped" if result.skipped else ""
+    skipped = skipped_note(result.skipped)
     noise = f", {result.noise:,} noise kept" if result.noise else ""
     if "isolated" in p:  # (--noise: the points found, and the noise the files held already)
         kept = f", {result.noise - result.isolated:,} noise kept" if result.noise > result.isolated else ""
@@ -92,7 +92,7 @@ def _classify_noise(inputs, output: Path, params: dict, overwrite: bool, recursi
     except InputError as exc:
         raise type(exc)(_noise_options_named(str(exc))) from None
     p = result.params
-    skipped = f", {counted(result.skipped, 'invalid point')} skipped" if result.skipped else ""
+    skipped = skipped_note(result.skipped)
     kept = f", {result.kept_noise:,} noise kept" if result.kept_noise else ""
     print(
         f"{output}: {counted(result.points, 'point')}, {result.noise:,} isolated found noise (7){kept}{skipped}; "
@@ -121,7 +121,7 @@ def _heights_only(sources, output: Path, params: dict, normalize: bool, overwrit
         message = str(exc).replace("classify_ground: cell ", "classify: --cell ").replace("(--ground, heights=True)", "(--ground)")
         raise type(exc)(message.replace("overwrite=True", "--overwrite").replace("height_above_ground: ", "classify: ")) from None
     p = result.params
-    skipped = f", {counted(result.skipped, 'invalid point')} skipped" if result.skipped else ""
+    skipped = skipped_note(result.skipped)
     print(
         f"{output}: {counted(result.points, 'point')}{_heights_told(result.heights, p['units'], normalize)}; "
         f"ground model of {counted(result.ground, 'class-2 point')}, cell {p['cell']:.4g} {p['units']}{skipped}; "

@@ -14,7 +14,7 @@ from typing import Annotated
 import typer
 
 from ..core.layout import COLOR_FORMATS
-from ..errors import GigapointError
+from ..errors import GigapointError, counted
 
 ColorsOption = Annotated[
     str,
@@ -109,6 +109,11 @@ ColorizeOption = Annotated[
         "where their file had none) and are counted. Needs rasterio: pip install 'gigapoint\\[gis]'.",
     ),
 ]
+
+
+def skipped_note(skipped: int) -> str:
+    """What a summary line says of the invalid points a command skipped (NaN, inf, beyond reach): nothing where none."""
+    return f", {counted(skipped, 'invalid point')} skipped" if skipped else ""
 
 
 def uncolored_note(uncolored: int | None, raster) -> str:

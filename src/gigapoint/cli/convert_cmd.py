@@ -23,6 +23,7 @@ from .cloud_opts import (
     RecursiveOption,
     ToCrsOption,
     filter_options,
+    skipped_note,
     thin_option,
     uncolored_note,
 )
@@ -130,7 +131,7 @@ def convert(
             print(f"{watch}: kept unfinished; run the same convert command again to resume it", file=sys.stderr)
         raise
     resumed = (" (resumed)" if result.resumed else "") + (", in memory" if result.in_memory else "")
-    skipped = f", {counted(result.skipped, 'invalid point')} skipped" if result.skipped else ""
+    skipped = skipped_note(result.skipped)
     if to_file:
         thinned = f", thinned from {result.thinned_from:,}" if result.thinned_from is not None else ""
         colored = uncolored_note(result.uncolored, colorize)

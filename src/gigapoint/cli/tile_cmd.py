@@ -22,6 +22,7 @@ from .cloud_opts import (
     RecursiveOption,
     ToCrsOption,
     filter_options,
+    skipped_note,
     uncolored_note,
 )
 from .settings_opts import named_option
@@ -75,7 +76,7 @@ def tile(
     counts = np.array(result.points_per_tile)
     median = float(np.median(counts))
     buffered = f" (+{counted(result.buffer_points, 'buffer point')})" if result.buffer_points else ""
-    skipped = f", {counted(result.skipped, 'invalid point')} skipped" if result.skipped else ""
+    skipped = skipped_note(result.skipped)
     print(
         f"{output}: {counted(len(counts), 'tile')} of {size:g} x {size:g} ({format}), {counted(result.points, 'point')}{buffered}{uncolored_note(result.uncolored, colorize)}{skipped}; "
         f"points per tile: min {counts.min():,}, median {median:,.{0 if median.is_integer() else 1}f}, max {counts.max():,}; {result.seconds:.1f} s"
