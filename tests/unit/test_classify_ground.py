@@ -1,4 +1,4 @@
-"""Ground classification by SMRF (classify.py, ``gigapoint classify --ground``): a synthetic
+"""Ground classification by SMRF (ground.py, ``gigapoint classify --ground``): a synthetic
 town of known truth, autzen against its own class 2, every point and attribute kept, and
 one-line errors for what cannot be classified."""
 
@@ -10,7 +10,7 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.errors import EmptyCloudError, InputError
-from gigapoint.survey import classify
+from gigapoint.survey import ground as smrf  # (not "ground": the tests name their ground points so)
 
 
 def _write_las(path, xyz, classification, returns=None):
@@ -159,7 +159,7 @@ def test_a_folder_it_cannot_write_into_is_refused_before_a_point_is_read(town, t
     locked.mkdir()
     real_access = os.access
     monkeypatch.setattr(os, "access", lambda p, mode, **kw: False if str(p) == str(locked) else real_access(p, mode, **kw))  # (root writes anywhere)
-    monkeypatch.setattr(classify, "_classified", lambda *args: pytest.fail("points classified"))
+    monkeypatch.setattr(smrf, "_classified", lambda *args: pytest.fail("points classified"))
     with pytest.raises(InputError) as err:
         gp.classify_ground(path, locked / "out.laz")
     assert str(err.value) == f"{locked / 'out.laz'}: cannot write into {locked} (permission denied)"  # (was "not written" once every point was classified)
@@ -176,8 +176,8 @@ def test_a_run_that_fails_while_writing_leaves_no_output(town, tmp_path, monkeyp
             raise InputError("disk on fire")
         return real(chunk, *args)
 
-    real = classify._classified
-    monkeypatch.setattr(classify, "_classified", failing)
+    real = smrf._classified
+    monkeypatch.setattr(smrf, "_classified", failing)
     with pytest.raises(InputError, match="disk on fire"):
         gp.classify_ground(path, tmp_path / "out.laz", chunk_size=10_000)
     assert len(calls) == 2 and list(tmp_path.iterdir()) == []
@@ -216,12 +216,12 @@ def test_the_ground_model_is_filled_without_the_tin_or_scipy(town, tmp_path, mon
 
 
 def test_the_openings_cross_passes_are_scipys_grey_erosion_and_dilation():
-    """The numba cross (classify._cross_extreme) gives scipy.ndimage's results to the bit,
+    """The numba cross (ground.py's _cross_extreme) gives scipy.ndimage's results to the bit,
     edges included (mode="nearest"), on rasters of every thinness."""
     from scipy import ndimage
 
     cross = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)
     surface = np.random.default_rng(1).normal(size=(40, 37))
     for raster in (surface, surface[:1, :6], surface[:6, :1], surface[:1, :1], surface[:2, :3]):
-        np.testing.assert_array_equal(classify._cross_extreme(raster, True), ndimage.grey_erosion(raster, footprint=cross, mode="nearest"))
-        np.testing.assert_array_equal(classify._cross_extreme(raster, False), ndimage.grey_dilation(raster, footprint=cross, mode="nearest"))
+        np.testing.assert_array_equal(smrf._cross_extreme(raster, True), ndimage.grey_erosion(raster, footprint=cross, mode="nearest"))
+        np.testing.assert_array_equal(smrf._cross_extreme(raster, False), ndimage.grey_dilation(raster, footprint=cross, mode="nearest"))

@@ -1,4 +1,4 @@
-"""Noise classification as lasnoise does it (classify.py, ``gigapoint classify --noise``):
+"""Noise classification as lasnoise does it (noise.py, ``gigapoint classify --noise``):
 isolated points planted around a synthetic surface found and nothing else, autzen's flagged
 points checked against a brute-force neighbour count, every point and attribute kept, one-line
 errors."""

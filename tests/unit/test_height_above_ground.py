@@ -1,4 +1,4 @@
-"""Height above ground (classify.py's ``height_above_ground``, ``classify_ground(heights=True)``,
+"""Height above ground (heights.py's ``height_above_ground``, ``classify_ground(heights=True)``,
 ``gigapoint classify --height-above-ground``): a sloped, curved terrain with buildings and poles
 of known heights measured within the ground model's interpolation error, autzen's ground at 0
 and its other points above it, the attribute read back by gigapoint and laspy."""

@@ -1,4 +1,4 @@
-"""`gigapoint classify`: points classified and written to one point file (gigapoint.classify_ground, classify.py)."""
+"""`gigapoint classify`: points classified and written to one point file (gigapoint.classify_ground, survey/ground.py, noise.py, heights.py)."""
 
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ def classify(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
     """Classify point clouds (--ground: ground by the Simple Morphological Filter, as PDAL's smrf and lasground; --noise: isolated points, as lasnoise; --height-above-ground: each point's height above the ground), read a chunk at a time, into one point file."""
-    from ..survey.classify import classify_ground
+    from ..survey.ground import classify_ground
 
     heights = height_above_ground or normalize
     if not (ground or noise or heights):
@@ -85,7 +85,7 @@ def _noise_options_named(message: str) -> str:
 
 def _classify_noise(inputs, output: Path, params: dict, overwrite: bool, recursive: bool, quiet: bool) -> None:
     """``classify --noise`` alone: classify_noise, and its counts in one line."""
-    from ..survey.classify import classify_noise
+    from ..survey.noise import classify_noise
 
     try:
         result = classify_noise(subfolders_read(inputs, recursive), output, **params, overwrite=overwrite, progress=not quiet and sys.stderr.isatty())
@@ -110,7 +110,7 @@ def _heights_told(heights, units: str, normalize: bool) -> str:
 
 def _heights_only(sources, output: Path, params: dict, normalize: bool, overwrite: bool, progress: bool) -> None:
     """--height-above-ground without --ground: from the class-2 points the files have."""
-    from ..survey.classify import height_above_ground
+    from ..survey.heights import height_above_ground
 
     smrf_only = [f"--{name}" for name, value in params.items() if value is not None and name != "cell"]
     if smrf_only:

@@ -1,6 +1,6 @@
 """Occupied cells of a grid of boxes over a stream of points, held as 64-bit keys in an
 open-addressing hash table (numba): the set of cells met by thinning (io/thin.py) and the
-points counted in each cell by noise classification (classify.py).
+points counted in each cell by noise classification (survey/noise.py).
 
 The cells are [i·edge, (i+1)·edge) on each axis (an edge an axis: x, y, z): a grid anchored at
 coordinate 0, not at a file's bounds or offset, so tiles processed separately line up. A key

@@ -15,7 +15,7 @@ Colours are not interpolated across a hole (that would invent imagery): ``fill_c
 empty pixel within ``max_distance`` of a drawn one, inside the footprint, the nearest drawn colour.
 
 ``fill_everywhere`` is the fast fill for rasters that are models, not pictures (ground
-classification's DEMs, classify.py): every NaN cell, inside the hull or not, by pull-push (a
+classification's DEMs, survey/ground.py): every NaN cell, inside the hull or not, by pull-push (a
 mip-map interpolation: the known cells averaged down a pyramid of halved rasters with their
 weights, then each level's empty cells blended from the bilinearly read coarser one on the way
 back up; first order: a plane kept). It is O(cells) and in numba (raster_fill_kernels.py): a

@@ -1,6 +1,7 @@
 """What surveyors make of a point cloud, beyond a picture: cross-sections (section.py), change
-between two surveys (change.py), stockpile volumes (volume.py), ground and noise classes and
-heights above ground (classify.py), orthophotos and surface models as GeoTIFFs (orthophoto.py).
+between two surveys (change.py), stockpile volumes (volume.py), ground classes by SMRF
+(ground.py), noise classes (noise.py) and heights above ground (heights.py) over a shared raster
+and point passes (ground_raster.py), orthophotos and surface models as GeoTIFFs (orthophoto.py).
 
 Each reads its clouds through io/lod (files, folders, octrees; the read filters), draws through
 render where it needs a picture, and writes through io/render's writers; the CLI's commands

@@ -1,0 +1,149 @@
+"""The raster and the point passes that ground classification (ground.py), noise classification
+(noise.py) and heights above ground (heights.py) share: ``point_files`` checks the output and
+opens the inputs (io's PointFiles), ``files_grid`` lays a ``Grid`` of ``cell``-sized cells over
+the files' extent (its cells, its bilinear reads), ``write_through`` is every job's last pass
+(each valid chunk, changed, written as ``convert -o`` writes it). ``ground_parameters`` holds
+the ground raster's lengths in the cloud's units: SMRF's, whose cell heights above ground take
+too.
+
+Lengths are in the cloud's units (io/crs.py): the defaults (cell 1 m, window 18 m, threshold
+0.5 m, scalar 1.25 m per unit of slope) are converted for a cloud in feet; ``slope`` is rise over run.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+from ..errors import InputError, is_real
+
+#: PDAL's and the paper's defaults, in metres (``slope``: rise over run, no unit)
+DEFAULTS_METRES = {"cell": 1.0, "window": 18.0, "threshold": 0.5, "scalar": 1.25}
+DEFAULT_SLOPE = 0.15
+#: the classes a ground classification keeps as they are: low and high noise
+NOISE_CLASSES = (7, 18)
+GROUND, NON_GROUND = 2, 1
+#: the most cells the raster may have (several float64 arrays of it are held at once: ~1 GB each at this size)
+MAX_CELLS = 120_000_000
+
+
+def ground_parameters(files, cell=None, slope=None, window=None, threshold=None, scalar=None) -> dict:
+    """The SMRF parameters in the units of ``files``' CRS: those given as they are, the others
+    the defaults converted from metres (a cloud in feet: cell 3.28 ft...; units unknown: taken
+    as metres). A value that is no number > 0 (threshold, scalar: >= 0), or coordinates in
+    degrees without every length given, is a one-line InputError."""
+    from ..io.crs import files_units
+
+    given = {"cell": cell, "slope": slope, "window": window, "threshold": threshold, "scalar": scalar}
+    for name, value in given.items():
+        least = "> 0" if name in ("cell", "slope", "window") else ">= 0"
+        if value is not None and not (is_real(value) and (value > 0 if least == "> 0" else value >= 0)):
+            raise InputError(f"classify_ground: {name} must be a number {least}, got {value!r}")
+    units = files_units(files)
+    across, up = units["horizontal"], units["vertical"]
+    if across is not None and across["metres"] is None and any(given[n] is None for n in ("cell", "window")):
+        raise InputError(f"classify_ground: the coordinates are in {across['name']}s, not lengths: give cell and window in them, or reproject the cloud")
+    per_metre_across = 1.0 / across["metres"] if across is not None and across["metres"] else 1.0
+    per_metre_up = 1.0 / up["metres"] if up is not None and up["metres"] else 1.0
+    params = {
+        "cell": DEFAULTS_METRES["cell"] * per_metre_across if cell is None else float(cell),
+        "slope": DEFAULT_SLOPE if slope is None else float(slope),
+        "window": DEFAULTS_METRES["window"] * per_metre_across if window is None else float(window),
+        "threshold": DEFAULTS_METRES["threshold"] * per_metre_up if threshold is None else float(threshold),
+        "scalar": DEFAULTS_METRES["scalar"] * per_metre_up if scalar is None else float(scalar),
+    }
+    params["units"] = across["symbol"] if across is not None else "m (assumed)"
+    return params
+
+
+class Grid:
+    """The raster's cells: ``cell`` units a side from ``lo`` (x, y), ``shape`` (rows, columns)."""
+
+    def __init__(self, lo, hi, cell: float, label: str):
+        self.lo, self.cell = np.asarray(lo[:2], np.float64), cell
+        self.shape = tuple(math.floor((h - low) / cell) + 1 for low, h in zip(lo[1::-1], hi[1::-1]))  # (rows: y, columns: x)
+        if self.shape[0] * self.shape[1] > MAX_CELLS:
+            raise InputError(
+                f"{label}: cells of {cell:g} make a {self.shape[1]:,} x {self.shape[0]:,} raster over the files' extent, more than "
+                f"{MAX_CELLS:,} cells: give a larger cell, or classify tiles of it (gigapoint tile)"
+            )
+
+    def cells_of(self, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(row, column) of each point's cell; points beyond the extent (a stale header's) in the edge cells."""
+        cols = np.clip(np.floor((xyz[:, 0] - self.lo[0]) / self.cell), 0, self.shape[1] - 1).astype(np.intp)
+        rows = np.clip(np.floor((xyz[:, 1] - self.lo[1]) / self.cell), 0, self.shape[0] - 1).astype(np.intp)
+        return rows, cols
+
+    def bilinear(self, raster: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+        """``raster`` (values at the cells' centres) at the points' (x, y), bilinearly; the edge
+        cells' values carried half a cell beyond them."""
+        return _bilinear(raster, np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1]), self.lo[0], self.lo[1], self.cell)
+
+
+@njit(cache=True)
+def _bilinear(raster, x, y, x0, y0, cell):  # pragma: no cover - compiled
+    """``Grid.bilinear`` a point at a time (numpy's version padded the raster and gathered four
+    arrays of corners per chunk: 3 s of 10 M points)."""
+    rows, cols = raster.shape
+    out = np.empty(x.size)
+    for i in range(x.size):
+        fx = min(max((x[i] - x0) / cell - 0.5, 0.0), cols - 1.0)  # in cells from the first centre, clamped: the edges carried on
+        fy = min(max((y[i] - y0) / cell - 0.5, 0.0), rows - 1.0)
+        c0, r0 = min(int(fx), cols - 1), min(int(fy), rows - 1)
+        c1, r1 = min(c0 + 1, cols - 1), min(r0 + 1, rows - 1)
+        tx, ty = fx - c0, fy - r0
+        top = raster[r0, c0] * (1 - tx) + raster[r0, c1] * tx
+        bottom = raster[r1, c0] * (1 - tx) + raster[r1, c1] * tx
+        out[i] = top * (1 - ty) + bottom * ty
+    return out
+
+
+def point_files(source, out, overwrite: bool, chunk_size: int | None, where: str):
+    """(``out`` as a Path, the PointFiles of ``source`` it is written from) for a classification
+    that writes every point of its inputs again: ``out`` a .las, .laz or .ply file not there
+    yet (or ``overwrite``), checked before a point is read (one-line errors starting ``where``)."""
+    from ..io.write import check_point_file_output
+    from ..lod.convert.to_file import PointFiles
+
+    out = Path(out)
+    if out.suffix.lower() not in (".las", ".laz", ".ply"):
+        raise InputError(f"{out}: {where} writes a .las, .laz or .ply file")
+    check_point_file_output(out, overwrite)
+    return out, PointFiles(source, out, chunk_size, ply=out.suffix.lower() == ".ply")
+
+
+def progress_bar(shown: bool):
+    """The progress bar of a classification's passes (rich), or none."""
+    from ..lod.progress import NullProgress, RichProgress
+
+    return RichProgress() if shown else NullProgress()
+
+
+def write_through(inputs, out: Path, phase: str, each, progress, tally: dict) -> int:
+    """The last pass of a classification: every valid chunk of ``inputs`` as ``each`` gives it
+    back, written to ``out`` on the inputs' LAS grid, with their CRS and colours (none where
+    none of them has any); the points written."""
+    from ..io.write import write_points
+
+    def chunks():
+        progress.phase(phase, None if None in inputs.counts else sum(inputs.counts))
+        for _, chunk in inputs.valid_chunks(None, progress, tally):
+            yield each(chunk)
+
+    return write_points(out, chunks, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None, has_color=inputs.has_color)
+
+
+def files_grid(inputs, cell: float, progress) -> Grid:
+    """The grid over the files' extent: their headers' bounds, or a pass of its own where one tells none."""
+    bounds = inputs.headers_bounds()
+    if bounds is None:
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for _, chunk in inputs.valid_chunks(None, progress, {}):
+            lo, hi = np.minimum(lo, chunk.xyz.min(axis=0)), np.maximum(hi, chunk.xyz.max(axis=0))
+        bounds = (lo, hi)
+    return Grid(bounds[0], bounds[1], cell, inputs.label)
+
+
