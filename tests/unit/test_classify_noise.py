@@ -102,6 +102,34 @@ def test_with_ground_the_noise_is_found_first(surface, tmp_path):
     assert result.params["step"] == 4.0 and result.params["isolated"] == 5
 
 
+def test_with_ground_the_noise_is_marked_in_the_input_files_own_passes(surface, tmp_path, monkeypatch):
+    """classify_ground(noise=...) marks the noise in the chunks its passes read from the input
+    files themselves, not through a stand-in that copied their fields by hand (one did, and a
+    field PointFiles gained would have been missing from it): a field added is seen by the
+    written pass."""
+    from gigapoint.lod.convert import to_file
+    from gigapoint.survey import ground
+
+    class WithFlight(to_file.PointFiles):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            self.flight = "flight 12"
+
+    seen = []
+    real = ground.write_through
+
+    def spying(inputs, *args):
+        seen.append(inputs.flight)
+        return real(inputs, *args)
+
+    monkeypatch.setattr(to_file, "PointFiles", WithFlight)
+    monkeypatch.setattr(ground, "write_through", spying)
+    path, planted, _ = surface
+    result = gp.classify_ground(path, tmp_path / "out.laz", noise=True)
+    assert seen == ["flight 12"] and result.isolated == 50
+    assert (np.asarray(laspy.read(str(tmp_path / "out.laz")).classification)[planted] == 7).all()
+
+
 def test_autzen_flags_few_points_each_in_a_sparse_neighbourhood(autzen_path, tmp_path):
     """autzen_trim (feet: the 4 m cells are 13.12 ft) has 67 points flagged with the defaults.
     Brute force (cKDTree, Chebyshev distance): a flagged point has at most 5 others nearer than
