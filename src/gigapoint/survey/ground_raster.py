@@ -2,9 +2,8 @@
 (noise.py) and heights above ground (heights.py) share: ``point_files`` checks the output and
 opens the inputs (io's PointFiles), ``files_grid`` lays a ``Grid`` of ``cell``-sized cells over
 the files' extent (its cells, its bilinear reads), ``write_through`` is every job's last pass
-(each valid chunk, changed, written as ``convert -o`` writes it). ``ground_parameters`` holds
-the ground raster's lengths in the cloud's units: SMRF's, whose cell heights above ground take
-too.
+(each valid chunk, changed, written as ``convert -o`` writes it). ``ground_parameters``: SMRF's
+lengths in the cloud's units, here because heights above ground take its cell (and its messages).
 
 Lengths are in the cloud's units (io/crs.py): the defaults (cell 1 m, window 18 m, threshold
 0.5 m, scalar 1.25 m per unit of slope) are converted for a cloud in feet; ``slope`` is rise over run.
