@@ -4,14 +4,15 @@
 
 ``PointStats`` is a running accumulator: ``add(chunk)`` a chunk at a time (memory stays one
 chunk's whatever the file's size), ``merge`` another's (a folder's files summed), ``result()``
-the numbers as a JSON-able dict. ``file_stats`` reads one file into one and compares the
+the numbers as a JSON-able dict. ``stream_stats`` counts any one dataset's chunks (an octree's
+nodes: lod/query.py's ``octree_stats``); ``file_stats`` reads one file so and compares the
 points' true bounds with its header's (a stale header is a finding); given a ``PointFilter``
 (io/filters.py: what is inside a site boundary, the ground points), of the points it keeps.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
@@ -195,6 +196,30 @@ class PointStats:
         return out
 
 
+def stream_stats(chunks: Iterable[PointChunk], path, point_filter: PointFilter | None = None, on_chunk: Callable[[int], None] | None = None) -> PointStats:
+    """The ``PointStats`` of one dataset's ``chunks`` (read from ``path``: a file, an octree's
+    nodes), a chunk at a time: every point read counted (``on_chunk(points)`` after each chunk:
+    a progress bar), those ``point_filter`` keeps added (it counts them too: one filter an
+    operation). gps_time is of an ``UNKNOWN`` kind here (a LAS file's header says which)."""
+    stats = PointStats()
+    stats.files = 1
+    stats.filter = None if point_filter is None else point_filter.describe()
+
+    def counted(chunks):  # every point read is counted, before the filter keeps some (the progress bar counts the header's)
+        for chunk in chunks:
+            stats.read += len(chunk)
+            stats.scale = np.array(chunk.scale) if chunk.scale is not None else stats.scale
+            if on_chunk is not None:
+                on_chunk(len(chunk))
+            yield chunk
+
+    for chunk in filtered(counted(chunks), path, point_filter):
+        stats.add(chunk)
+    if "gps_time" in stats.attributes:
+        stats.time_kinds = {UNKNOWN}
+    return stats
+
+
 @headers_once()  # (its header: read for its reader, its chunks, its bounds, its time encoding)
 def file_stats(path, chunk_size: int = STREAM_CHUNK_SIZE, on_chunk: Callable[[int], None] | None = None, point_filter: PointFilter | None = None) -> PointStats:
     """One file's ``PointStats``, its points read once in chunks of at most ``chunk_size``
@@ -207,28 +232,14 @@ def file_stats(path, chunk_size: int = STREAM_CHUNK_SIZE, on_chunk: Callable[[in
     caller checks the operation's (``PointFilter.check_passed``)."""
     path, chunk_size = Path(path), check_chunk_size(chunk_size)
     reader = reader_for(path)
-    stats, scaler = PointStats(), ColorScaler()
-    stats.files = 1
-    stats.filter = None if point_filter is None else point_filter.describe()
+    scaler = ColorScaler()
     # a LAS file's colour depth is the scaler's decision (8-bit values in its 16-bit fields, or 16-bit)
     chunks = reader.read_chunks(path, chunk_size, scaler=scaler) if isinstance(reader, LasReader) else reader.read_chunks(path, chunk_size)
-
-    def counted(chunks):  # every point read is counted, before the filter keeps some (the progress bar counts the header's)
-        for chunk in chunks:
-            stats.read += len(chunk)
-            stats.scale = np.array(chunk.scale) if chunk.scale is not None else stats.scale
-            if on_chunk is not None:
-                on_chunk(len(chunk))
-            yield chunk
-
-    for chunk in filtered(counted(chunks), path, point_filter):
-        stats.add(chunk)
+    stats = stream_stats(chunks, path, point_filter, on_chunk)
     if isinstance(reader, LasReader):
         stats.color_bits = {{"8": 8, "16": 16}.get(scaler.mode or "")}
         if "gps_time" in stats.attributes:
             stats.time_kinds = {ADJUSTED if read_las_header(path).adjusted_gps_time else WEEK}
-    elif "gps_time" in stats.attributes:
-        stats.time_kinds = {UNKNOWN}
     bounds = reader.header(path).get("bounds") if point_filter is None else None
     if bounds is not None and None not in bounds[0] + bounds[1]:
         stats.header_lo, stats.header_hi = np.array(bounds[0], np.float64), np.array(bounds[1], np.float64)
