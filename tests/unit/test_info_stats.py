@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import gigapoint as gp
 from gigapoint.errors import EmptyCloudError, InputError
 from gigapoint.io import point_stats
 from gigapoint.io.stats import class_name
@@ -331,21 +332,113 @@ def test_a_folders_tiles_are_filtered_each_and_summed(cli, tmp_path):
     assert err.strip().splitlines() == [f"error: {tmp_path}: no point passes the filter (classes 7): 500 points read"]  # (the files as given)
 
 
-def test_info_stats_of_an_octree_is_refused_with_a_filter_too(cli, tmp_path):
-    """An octree: --stats (filtered or not) reads point files, in one line (its nodes are read for
-    drawing; the files it was converted from hold every point)."""
-    import gigapoint as gp
+@pytest.fixture(scope="module")
+def autzen_octrees(autzen_path, tmp_path_factory):
+    """autzen_trim.laz converted to a gigapoint octree and a Potree 2.0 one, of many nodes each."""
+    folder = tmp_path_factory.mktemp("autzen_octrees")
+    out = {"gigapoint": folder / "gigapoint", "potree": folder / "potree"}
+    gp.convert([autzen_path], out["gigapoint"], max_leaf=4_000)
+    gp.convert([autzen_path], out["potree"], max_leaf=4_000, format="potree")
+    return out
 
-    gp.convert([write_tile(tmp_path / "a.las", 300, 1, [2, 6])], tmp_path / "octree")
-    rc, out, err = cli("info", "--stats", "--classes", "2", tmp_path / "octree")
+
+def octree_step(octree: Path) -> float:
+    """How far an octree's decoded positions may lie from its source's: a node's 30-bit grid, at
+    worst the root cube's edge / 2**30 (1.1e-6 ft for autzen)."""
+    return float(gp.open(octree).meta["cube_edge"]) / 2**30
+
+
+#: a clip box across autzen's middle (feet): it misses some nodes
+AUTZEN_CLIP = "636200,849000,636600,849300"
+
+
+@pytest.mark.parametrize("kind", ["gigapoint", "potree"])
+@pytest.mark.parametrize("filtered", [[], ["--classes", "2"], ["--clip", AUTZEN_CLIP]], ids=["all", "classes", "clip"])
+def test_info_stats_of_an_octree_are_those_of_its_source_file(cli, autzen_path, autzen_octrees, kind, filtered):
+    """Every point lives in one node: the octree's statistics, its nodes read one at a time, are
+    the LAZ file's (counts, classes, returns, flight lines, colours and attribute ranges exactly,
+    means to float sums' order); its positions to its 30-bit grid (bounds within a step). A clip
+    box's missed nodes are not read; the filter keeps the same points."""
+    octree = autzen_octrees[kind]
+    runs = [cli("info", "--stats", "--json", *filtered, path) for path in (autzen_path, octree)]
+    assert [rc for rc, _, _ in runs] == [0, 0], runs
+    want, got = (json.loads(out) for _, out, _ in runs)
+    assert got["path"] == str(octree) and got["point_count"] == want["point_count"] > 0 and got["invalid_points"] == 0
+    for key in ("classification", "returns", "point_source_ids"):
+        assert got[key] == want[key], key
+    assert got["color"]["min"] == want["color"]["min"] and got["color"]["max"] == want["color"]["max"]
+    assert got["attributes"].keys() == want["attributes"].keys()
+    for name, a in want["attributes"].items():
+        assert (got["attributes"][name]["min"], got["attributes"][name]["max"]) == (a["min"], a["max"]), name
+        assert got["attributes"][name]["mean"] == pytest.approx(a["mean"], rel=1e-12), name
+    for end in ("min", "max"):
+        np.testing.assert_allclose(got["bounds"][end], want["bounds"][end], rtol=0, atol=octree_step(octree))
+    assert got["header_bounds"] is None  # (an octree has no header: its metadata's bounds are not compared)
+    if filtered:
+        assert got["filter"]["applied"] == want["filter"]["applied"] and got["filter"]["points_kept"] == want["point_count"]
+        read = got["filter"]["points_read"]
+        assert read < 110_000 if filtered[0] == "--clip" else read == 110_000  # (the nodes the box misses: not read)
+
+
+def test_info_stats_of_an_octree_count_its_nodes_points_on_the_bar(cli, autzen_octrees, monkeypatch):
+    """The bar has no total (an octree's nodes are counted as they are read) and ends at every point."""
+    from gigapoint.cli import info_cmd
+
+    seen = []
+
+    def bar(description, total):
+        seen.append(total)
+        return info_cmd.contextlib.nullcontext(seen.append)
+
+    monkeypatch.setattr(info_cmd, "progress_bar", bar)
+    rc, out, err = cli("info", "--stats", autzen_octrees["gigapoint"])
+    assert rc == 0, err
+    assert seen[0] is None and len(seen) > 2 and seen[-1] == 110_000
+    assert out.splitlines()[1:3] == ["  points:      110,000, 0 of them invalid (NaN, inf or beyond ±1e+12): skipped", "  bounds min:  636001.76, 848935.20, 406.26 (the points')"]
+
+
+def test_info_stats_of_an_octree_no_node_of_which_meets_the_clip_box(cli, autzen_octrees):
+    """No node read: the filter's one-line error, not statistics of no point."""
+    octree = autzen_octrees["potree"]
+    rc, out, err = cli("info", "--stats", "--clip", "0,0,1,1", octree)
     assert rc == 1 and out == ""
-    assert err.strip().splitlines() == [f"error: {tmp_path / 'octree'}: an octree; --stats reads point files (those it was converted from)"]
+    assert err.strip().splitlines() == [f"error: {octree}: no point passes the filter (clip 0, 0, 1, 1): no node of the octree meets its region"]
+
+
+def test_info_stats_of_an_ept_dataset_are_its_points(cli, tmp_path):
+    """An EPT dataset's nodes (test_ept.py's), read one at a time: its points' counts, classes
+    and ranges, of every point and of class 2."""
+    from test_ept import make_scene, write_ept
+
+    scene = make_scene(n=3_000)
+    ept = write_ept(tmp_path / "ept", scene, "laszip")
+    classes, intensity = scene["attrs"]["classification"], scene["attrs"]["intensity"]
+    for filtered, kept in (([], np.ones(len(classes), bool)), (["--classes", "2"], classes == 2)):
+        rc, out, err = cli("info", "--stats", "--json", *filtered, ept)
+        assert rc == 0, err
+        s = json.loads(out)
+        assert s["point_count"] == int(kept.sum()) > 0
+        assert [(c["class"], c["count"]) for c in s["classification"]] == [(int(c), int(n)) for c, n in zip(*np.unique(classes[kept], return_counts=True))]
+        i = intensity[kept]
+        assert s["attributes"]["intensity"]["min"] == i.min() and s["attributes"]["intensity"]["max"] == i.max()
+        assert s["attributes"]["intensity"]["mean"] == pytest.approx(i.mean(), rel=1e-12)
+        xyz = scene["xyz"][kept]
+        np.testing.assert_allclose(s["bounds"]["min"], xyz.min(axis=0), rtol=0, atol=scene["edge"] / 2**30 + 1e-6)
+        np.testing.assert_allclose(s["bounds"]["max"], xyz.max(axis=0), rtol=0, atol=scene["edge"] / 2**30 + 1e-6)
+
+
+def test_info_stats_of_an_octree_over_http_is_refused(cli):
+    """Every node would be downloaded: one line, before any is (no server here)."""
+    url = "http://127.0.0.1:9/scan.copc.laz"
+    rc, out, err = cli("info", "--stats", url)
+    assert rc == 1 and out == ""
+    assert err.strip().splitlines() == [f"error: {url}: an octree over HTTP; --stats reads local octrees and point files"]
 
 
 def test_info_stats_of_a_local_copc_file_reads_it_as_the_laz_file_it_is(cli, autzen_path, tmp_path):
-    """A COPC file is a LAZ 1.4 file whose points are each stored once: --stats refused it as an
-    octree ("--stats reads point files"); now its points are read as laspy reads them (the
-    classes filter too). Without --stats it is still shown as the octree it is."""
+    """A COPC file is a LAZ 1.4 file whose points are each stored once: its points are read as
+    laspy reads them (the classes filter too), its header's bounds compared. Without --stats it is
+    still shown as the octree it is."""
     copc = tmp_path / "x.copc.laz"
     assert cli("convert", autzen_path, "-o", copc)[0] == 0
     las = laspy.read(copc)
@@ -360,3 +453,14 @@ def test_info_stats_of_a_local_copc_file_reads_it_as_the_laz_file_it_is(cli, aut
     assert json.loads(out)["point_count"] == int(np.sum(np.asarray(las.classification) == 2))
     rc, out, err = cli("info", copc)
     assert rc == 0 and "  format:      COPC 1.4, point format 7" in out.splitlines(), err
+
+
+def test_info_stats_of_an_unfinished_conversion_is_refused(cli, tmp_path, stop_conversion_after):
+    """Its preview holds a sample of the points, not each once: one line saying what to do."""
+    octree = tmp_path / "octree"
+    stop_conversion_after(1)
+    with pytest.raises(KeyboardInterrupt):
+        gp.convert([write_tile(tmp_path / "a.las", 3_000, 1, [2, 6])], octree, max_leaf=300, partition_points=1_000)
+    rc, out, err = cli("info", "--stats", octree)
+    assert rc == 1 and out == ""
+    assert err.strip().splitlines()[-1] == f"error: {octree}: an unfinished conversion; its preview holds a sample of the points: read the point files, or finish the conversion first"

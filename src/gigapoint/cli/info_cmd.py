@@ -1,6 +1,7 @@
 """`gigapoint info FILE...`: what point cloud files hold (format, points, bounds, attributes, CRS);
-``--stats``: what their points hold, every point read (io/stats.py), or those the read filters keep
-(``--classes``, ``--clip-polygon``, ...: what is inside a site boundary, the ground's heights)."""
+``--stats``: what their points hold, every point read (io/stats.py; an octree's node by node,
+lod/query.py), or those the read filters keep (``--classes``, ``--clip-polygon``, ...: what is
+inside a site boundary, the ground's heights)."""
 
 from __future__ import annotations
 
@@ -113,9 +114,14 @@ def info(
             try:
                 if missing is not None:
                     raise missing
-                if stats and octree:
-                    raise GigapointError(f"{shown_url(path)}: an octree; --stats reads point files (those it was converted from)")
-                data = file_stats(path, on_chunk=read_points, point_filter=point_filter) if stats else octree_info(path) if octree else file_info(path)
+                if stats and octree:  # its nodes read one at a time: each point is in one of them
+                    from ..lod.query import octree_stats  # (its readers' numba kernels: loaded for an octree only)
+
+                    data = octree_stats(path, on_chunk=read_points, point_filter=point_filter)
+                elif stats:
+                    data = file_stats(path, on_chunk=read_points, point_filter=point_filter)
+                else:
+                    data = octree_info(path) if octree else file_info(path)
             except GigapointError as exc:
                 if len(paths) == 1:
                     raise
@@ -163,11 +169,14 @@ def info(
 
 def points_to_read(paths) -> int | None:
     """The points ``info --stats`` reads (its progress bar's total): the point files' header
-    counts; None where one does not say (a text file) or cannot be read (its error comes later)."""
+    counts; None where one does not say (a text file) or cannot be read (its error comes later),
+    or where an octree is read (its nodes are counted as they are read)."""
     from ..io import reader_for
 
+    if any(octree for _, octree, _, _ in paths):
+        return None
     try:
-        counts = [reader_for(p).point_count(p) for p, octree, missing, _ in paths if not (octree or missing)]
+        counts = [reader_for(p).point_count(p) for p, octree, missing, _ in paths if not missing]
     except GigapointError:
         return None
     return None if None in counts else sum(counts)

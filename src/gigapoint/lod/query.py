@@ -1,6 +1,7 @@
 """The points of the part of an LOD octree that meets a region, read node by node: what a tool
 that needs every point of a small part of an octree reads (a cross-section's corridor, Potree's
-profile tool), not the whole octree.
+profile tool), not the whole octree; or every node, one at a time, for the statistics of all
+its points (``octree_stats``: ``gigapoint info --stats``).
 
 In a layered octree every input point lives in exactly one node: inner nodes hold a sample of
 the real points, the leaves the rest (a converted gigapoint folder of either sampler, COPC, EPT,
@@ -19,12 +20,15 @@ pages and nodes fetched together, by ranged reads over HTTP), so only the meetin
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 import numpy as np
 
 from ..core.chunk import PointChunk
 from ..errors import EmptyCloudError, InputError
 from ..io.filters import PointFilter
+from ..io.http import as_url, shown_url
+from ..io.stats import PointStats, stream_stats
 from .potree import PotreeCloud
 from .progressive import ProgressiveOctree
 from .store import BOX_SLACK, OctreeCloud
@@ -77,16 +81,46 @@ def octree_path_kept(path, keep: PointFilter, region: str, instead: str) -> tupl
     """(``kept_points``, the octree's name) of the octree at ``path`` (opened and closed here); an
     unfinished conversion's preview (a sample of the points) a one-line InputError: ``instead``,
     what to do instead, ends it."""
-    from .reader import open_octree, shown_url
+    with opened_octree(path, instead) as octree:
+        return kept_points(octree, keep, shown_url(path), region), octree.name
+
+
+@contextmanager
+def opened_octree(path, instead: str) -> Iterator[OctreeCloud]:
+    """The octree at ``path`` (``open_octree``), closed after (a URL's connections); an unfinished
+    conversion's preview (a sample of the points) a one-line InputError: ``instead``, what to do
+    instead, ends it."""
+    from .reader import open_octree
 
     octree = open_octree(path)
     try:
         if not is_octree(octree):
             raise InputError(f"{shown_url(path)}: an unfinished conversion; its preview holds a sample of the points: {instead}")
-        return kept_points(octree, keep, shown_url(path), region), octree.name
+        yield octree
     finally:
         if isinstance(octree, VoxelOctree):  # (a URL's connections)
             octree.close()
+
+
+def octree_stats(path, point_filter: PointFilter | None = None, on_chunk: Callable[[int], None] | None = None) -> PointStats:
+    """The ``PointStats`` of a local octree (gigapoint or Potree 2.0 folder, EPT dataset, COPC
+    file), its nodes read one at a time (``points_meeting``: each point once); with
+    ``point_filter``, of the points it keeps, the nodes whose boxes miss its region not read (an
+    EmptyCloudError where none meets it). ``on_chunk(points)`` after each node (a progress bar).
+    No header bounds are compared (an octree's are its metadata's). Over HTTP: a one-line
+    InputError (every node would be downloaded)."""
+    url = as_url(path)
+    if url is not None:
+        raise InputError(f"{shown_url(url)}: an octree over HTTP; --stats reads local octrees and point files")
+    label = shown_url(path)
+    with opened_octree(path, "read the point files, or finish the conversion first") as octree:
+        meets = (point_filter or PointFilter()).meets  # (no filter: every box meets it)
+        stats = stream_stats(points_meeting(octree, meets), label, point_filter, on_chunk)
+        scale = octree.meta.get("scale")  # the grid its source stored positions at, where it says
+        stats.scale = None if scale is None else np.array(scale, np.float64)
+    if point_filter is not None and stats.read == 0:  # no node meets its region: none read
+        raise EmptyCloudError(f"{label}: no point passes the filter ({point_filter.describe()}): no node of the octree meets its region{point_filter.polygon_hint()}")
+    return stats
 
 
 def _meeting(cloud: OctreeCloud, meets: Meets, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -118,4 +152,4 @@ def _progressive_leaves(cloud: ProgressiveOctree, meets: Meets) -> Iterator[Poin
     yield from cloud.chunks(DECODE_GROUP_POINTS, leaves_of=lambda leaves, lo, edge: meets(lo - pad, lo + edge[:, None] + pad))
 
 
-__all__ = ["BOX_SLACK", "is_octree", "points_meeting"]
+__all__ = ["BOX_SLACK", "is_octree", "octree_stats", "opened_octree", "points_meeting"]
