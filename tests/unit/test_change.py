@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import json
 import struct
+from pathlib import Path
 
 import laspy
 import numpy as np
 import pytest
+from laspy.vlrs.known import WktCoordinateSystemVlr
 from PIL import Image
 
 import gigapoint as gp
@@ -226,7 +228,7 @@ def test_float32_rounding_is_no_change(tmp_path, autzen_path):
 def test_cli_refuses_surveys_in_different_crss(cli, tmp_path, surveys, autzen_path):
     rc, _, err = cli("change", autzen_path, surveys[1], "--gsd", 4, "-o", tmp_path / "c.tif")
     assert rc == 1 and err.count("\n") == 1, err
-    assert err.startswith(f"error: {autzen_path} is in NAD_1983_HARN_Lambert_Conformal_Conic (WKT), {surveys[1]} in EPSG:32610: change compares two surveys in one CRS")
+    assert err.startswith(f"error: {autzen_path} is in NAD_1983_HARN_Lambert_Conformal_Conic (WKT), lengths in ft; {surveys[1]} in EPSG:32610, lengths in m: change compares two surveys in one CRS")
     assert not list(tmp_path.glob("c.*"))
 
 
@@ -303,3 +305,109 @@ def test_a_gsd_too_fine_for_the_surveys_grid_names_both_surveys(cli, tmp_path, s
     assert err.strip().splitlines() == [
         f"error: {surveys[0]} and {far}: gsd 1 makes a 20,001x41 image, over 16,384 pixels a side: a gsd of 1.23 or more fits"
     ]
+
+
+# --- octree inputs: a converted folder, a COPC file -------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def autzen_octrees(tmp_path_factory):
+    """autzen_trim converted to a gigapoint octree folder and a COPC file (each point in one node)."""
+    if not Path(AUTZEN).exists():
+        pytest.skip(f"shared sample {AUTZEN} not present")
+    out = tmp_path_factory.mktemp("octrees")
+    gp.convert([AUTZEN], out / "autzen_octree")
+    gp.convert([AUTZEN], out / "autzen.copc.laz", format="copc")
+    return {"gigapoint": out / "autzen_octree", "copc": out / "autzen.copc.laz"}
+
+
+@pytest.mark.parametrize("kind", ["gigapoint", "copc"])
+@pytest.mark.parametrize("octree_first", [True, False])
+def test_an_octree_against_its_point_file_is_no_change(autzen_octrees, kind, octree_first):
+    """Every point of the octree's nodes, at its LAS coordinates (the nodes' 30-bit positions put
+    back on the 0.01 ft grid: off it, points on a pixel edge fell into the next pixel, 9.2 ft of
+    change in 20 pixels), gives the LAZ file's surface exactly."""
+    pair = (autzen_octrees[kind], AUTZEN) if octree_first else (AUTZEN, autzen_octrees[kind])
+    c = gp.change(*pair, 4)
+    itself = gp.change(AUTZEN, AUTZEN, 4)
+    assert (c.dz[c.compared] == 0).all() and (c.cut, c.fill, c.area_changed) == (0.0, 0.0, 0.0)
+    assert (c.compared == itself.compared).all() and c.compared.sum() == 23_613
+    assert c.summary()["units"] == {"length": "ft", "area": "ft²", "volume": "ft³"} and c.crs == itself.crs  # the octree's CRS, from its metadata
+    ground = gp.change(*pair, 4, classes=[2])  # the filter read through the nodes meeting it
+    assert (ground.compared == gp.change(AUTZEN, AUTZEN, 4, classes=[2]).compared).all() and ground.area_changed == 0.0
+
+
+def test_an_octree_drawn_a_few_nodes_at_a_time_is_the_same_surface(autzen_octrees, monkeypatch):
+    """At most 20,000 points a draw (6+ draws of autzen's 110,000), each pixel the highest of
+    the draws': the surface of one draw, but where a point lies exactly on a pixel edge (autzen's
+    0.01 ft grid meets the 4 ft one): each draw's batches have their own float32 transforms, which
+    put it on either side (~0.1 % of the pixels)."""
+    from gigapoint.survey import change as change_module
+
+    whole = gp.change(autzen_octrees["copc"], AUTZEN, 4)
+    monkeypatch.setattr(change_module, "STREAM_POINTS", 20_000)
+    drawn = gp.change(autzen_octrees["copc"], AUTZEN, 4)
+    both = whole.compared & drawn.compared
+    apart = np.abs(drawn.before - whole.before)[both] > drawn.resolution
+    assert both.sum() >= 23_613 - 30 and 0 < apart.sum() <= 30
+    assert drawn.area_changed == 16 * apart.sum()  # (the same pixels: the after survey is the LAZ file, drawn whole)
+
+
+def test_an_octree_against_a_copy_raised_one_foot_is_one_foot_of_fill(tmp_path, autzen_octrees):
+    las = laspy.read(AUTZEN)
+    las.z = las.z + 1.0
+    las.write(str(tmp_path / "raised.las"))
+    c = gp.change(autzen_octrees["copc"], tmp_path / "raised.las", 4)
+    assert c.compared.sum() == 23_613 and np.abs(c.dz[c.compared] - 1.0).max() <= c.resolution  # (each height rounded to float32 once)
+    assert c.cut == 0.0 and abs(c.fill - c.area_compared) <= c.area_compared * c.resolution and c.area_changed == c.area_compared
+
+
+def test_cli_compares_an_octree_folder_with_a_point_file(cli, tmp_path, autzen_octrees):
+    rc, stdout, err = cli("change", autzen_octrees["gigapoint"], AUTZEN, "--gsd", 4, "-o", tmp_path / "c.tif", "--json")
+    assert rc == 0, err
+    summary = json.loads(stdout)
+    assert (summary["cut"], summary["fill"], summary["area_changed"], summary["units"]["volume"]) == (0.0, 0.0, 0.0, "ft³")
+    assert summary["pixels_compared"] == 23_613  # autzen against itself's
+
+
+def test_an_opened_octree_takes_no_other_filter(autzen_octrees):
+    octree = gp.open(autzen_octrees["gigapoint"])
+    c = gp.change(octree, AUTZEN, 4)
+    assert c.compared.sum() == 23_613 and (c.dz[c.compared] == 0).all()
+    with pytest.raises(InputError, match=r"^autzen_trim: an opened LOD octree reads no other filter; give its path"):
+        gp.change(octree, AUTZEN, 4, classes=[2])
+
+
+# --- surveys in different units ----------------------------------------------------------------------
+
+FOOT, METRE = 'UNIT["foot",0.3048,AUTHORITY["EPSG","9002"]]', 'UNIT["metre",1,AUTHORITY["EPSG","9001"]]'
+
+
+def test_a_survey_in_metres_against_one_in_feet_names_both_units(tmp_path, autzen_path):
+    """autzen (its WKT in international feet) and a copy in metres: the same projection (its
+    false easting 1,312,335.958 ft = 400,000 m), the same CRS name; the message tells them apart."""
+    las = laspy.read(autzen_path)
+    wkt = las.header.vlrs.get("WktCoordinateSystemVlr")[0].string.strip("\0")
+    assert FOOT in wkt
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = np.array([0.001] * 3), np.zeros(3)
+    header.vlrs.append(WktCoordinateSystemVlr(wkt.replace(FOOT, METRE).replace("1312335.958005249", "400000")))
+    metres = laspy.LasData(header)
+    metres.x, metres.y, metres.z = (np.asarray(las.x) * 0.3048, np.asarray(las.y) * 0.3048, np.asarray(las.z) * 0.3048)
+    metres.write(str(tmp_path / "metres.las"))
+    name = "NAD_1983_HARN_Lambert_Conformal_Conic (WKT)"
+    with pytest.raises(InputError) as caught:
+        gp.change(autzen_path, tmp_path / "metres.las", 4)
+    assert str(caught.value) == (
+        f"{autzen_path} is in {name}, lengths in ft; {tmp_path / 'metres.las'} in {name}, lengths in m: "
+        "change compares two surveys in one CRS and unit; reproject one first (gigapoint convert --to-crs)"
+    )
+
+
+def test_one_crs_with_heights_in_another_unit_is_refused(tmp_path):
+    """Both EPSG:32610 (metres), one with VerticalUnitsGeoKey foot: one CRS by its code, but its
+    heights in feet would have been subtracted from heights in metres."""
+    before = write_las(tmp_path / "before.las", plane())
+    after = write_las(tmp_path / "after.las", plane(), keys=[*EPSG_32610_KEYS, (4099, 0, 1, 9002)])
+    with pytest.raises(InputError, match=rf"^{before} is in EPSG:32610, lengths in m; {after} in EPSG:32610, lengths in m, heights in ft: change compares"):
+        gp.change(before, after, 0.5)

@@ -18,7 +18,10 @@ from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, RecursiveO
 from .gsd_opts import check_fill_nodata, check_gsd_value
 from .output import check_image_fits, check_output, check_outputs_apart, write_together
 
-SURVEY_HELP = "The {} survey: a point cloud file, a folder of tiles or a quoted glob pattern ('{}/*.laz'), its files merged."
+SURVEY_HELP = (
+    "The {} survey: a point cloud file, a folder of tiles or a quoted glob pattern ('{}/*.laz'), its files merged; "
+    "or an LOD octree (a converted folder, a COPC file, an EPT dataset), every point read node by node."
+)
 
 
 @app.command()
@@ -41,7 +44,9 @@ def change(
     drop_classes: DropClassesOption = None,
     clip: ClipOption = None,
 ) -> None:
-    """Compare two surveys: height differences, cut and fill volumes (in the clouds' units)."""
+    """Compare two surveys: height differences, cut and fill volumes (in the clouds' units). Both
+    must be in one CRS and unit: surveys in feet and in metres are refused (reproject one first,
+    gigapoint convert --to-crs)."""
     import gigapoint as gp
 
     from ..io import crs_wkt

@@ -11,6 +11,17 @@ much both cover. Each point lands in its exact pixel (one-pixel points, 30-bit p
 splat reaches a neighbour, so a pixel without a point is NaN, not a guess; ``fill_nodata`` fills
 those holes of each surface (render/raster_fill.py: a TIN inside its footprint) before they are compared.
 
+A survey kept as an LOD octree (a converted folder, a COPC file, an EPT dataset) is read node by
+node: every point lives in exactly one node of these layered octrees (lod/query.py), so its
+surface is the highest of the surfaces of its nodes meeting the area, drawn STREAM_POINTS points
+at a time (memory bounded by those, not by the survey), its positions put back on its source's
+LAS grid. A survey of fewer points is drawn whole, as its point files would be; in several draws
+a point lying exactly on a pixel edge may fall on either side (each draw's batches have float32
+transforms of their own): ~0.1 % of autzen's 4 ft pixels drawn 20,000 points at a time.
+
+Both surveys must be in one CRS and one unit: nothing is reprojected (``gigapoint convert
+--to-crs`` does that), and a height difference between feet and metres would be no length.
+
 Volumes are the difference summed over the pixels compared, times a pixel's area: fill where the
 after surface is higher, cut where it is lower, net = fill - cut. ``min_change`` is a level of
 detection: only pixels that moved by more count in the volumes and the changed area (0: all
@@ -18,6 +29,7 @@ that moved by more than the float32 heights can tell from their rounding, ``Chan
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from functools import cached_property
@@ -25,11 +37,16 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
 from ..errors import CameraError, InputError, check_switch, is_real
 from ..io.crs import crs_identity, crs_name
-from ..io.filters import point_filter
-from ..lod.reader import cloud_crs, cloud_units
+from ..io.filters import PointFilter, point_filter
+from ..lod.potree import PotreeCloud
+from ..lod.query import is_octree, points_meeting
+from ..lod.reader import cloud_crs_units
+from ..lod.store import OctreeCloud
+from ..lod.voxel_octree import VoxelOctree
 from ..render import Camera, RenderSettings, render_frame
 from ..render.colors import colormap_table, ramp
 from ..render.georef import write_map
@@ -39,6 +56,8 @@ from ..render.raster_fill import check_max_distance, fill_heights
 SURFACE_SETTINGS = {"size_mode": "fixed", "point_size": 1, "adaptive_precision": False}
 PREVIEW_COLORMAP = "rdbu"  # diverging, white at 0: red where ground was cut, blue where it was filled
 PREVIEW_PERCENTILE = 98.0  # of |dz|: the preview's default range (a few outliers do not wash it out)
+#: points of an octree's nodes drawn at a time into its surface: its memory, whatever the survey's size
+STREAM_POINTS = 4_000_000
 
 
 @dataclass(frozen=True)
@@ -166,16 +185,18 @@ def unit_names(units: dict) -> dict:
 
 
 def survey_label(source) -> str:
-    """How messages name a survey: its path(s) as given, or its cloud's name."""
-    if isinstance(source, PointCloud):
+    """How messages name a survey: its path(s) as given, or its cloud's (or opened octree's) name."""
+    if isinstance(source, PointCloud) or is_octree(source):
         return source.name
     paths = [source] if isinstance(source, (str, os.PathLike)) else list(source)
     return ", ".join(map(str, paths[:3])) + (f" and {len(paths) - 3} more" if len(paths) > 3 else "")
 
 
-def read_survey(source, filters: dict, where: str = "change") -> PointCloud:
-    """``source`` (paths as ``gigapoint.open`` takes them, or a PointCloud) as one PointCloud of
-    the points the filters keep (only those read from files); ``where``: the operation messages name."""
+def open_survey(source, filters: dict, where: str = "change"):
+    """``source`` (paths as ``gigapoint.open`` takes them, a PointCloud, or an LOD octree) as one
+    PointCloud of the points the filters keep (only those read from files), or as the LOD octree
+    it is or opens as (unread: ``surface`` reads its nodes; one opened from a path filtered as
+    frames load it); ``where``: the operation messages name."""
     if isinstance(source, PointCloud):
         keep = point_filter(**filters, where=where)
         if keep is None:
@@ -183,44 +204,122 @@ def read_survey(source, filters: dict, where: str = "change") -> PointCloud:
         kept = list(keep.apply(source.chunks(), source.name))
         keep.check_passed(source.name)
         return build_cloud(kept, name=source.name, colors="rgba")
+    if is_octree(source):
+        if any(v is not None for v in filters.values()):  # (its own filter is the one it was opened with)
+            raise InputError(f"{source.name}: an opened LOD octree reads no other filter; give its path, or open it with them (gigapoint.open(path, classes=...))")
+        return source
     from .. import open as open_points
 
     cloud = open_points(source, **filters)
+    if not (isinstance(cloud, PointCloud) or is_octree(cloud)):
+        raise InputError(f"{survey_label(source)}: an unfinished conversion; its preview holds a sample of the points: give the point files, or wait for the octree")
+    return cloud
+
+
+def read_survey(source, filters: dict, where: str = "change") -> PointCloud:
+    """``open_survey``'s PointCloud; an LOD octree a one-line InputError."""
+    cloud = open_survey(source, filters, where)
     if not isinstance(cloud, PointCloud):  # an octree draws a level of detail, not every point
         raise InputError(f"{survey_label(source)}: an LOD octree; {where} draws a surface of every point: give the point files")
     return cloud
 
 
-def check_crs(before: PointCloud, after: PointCloud, labels: tuple[str, str]) -> str | None:
-    """The CRS both surveys are in (one naming none takes the other's); a one-line InputError
-    naming both where they name different ones: nothing is reprojected, their pixels would not
-    be the same ground."""
-    crs = [cloud_crs(before), cloud_crs(after)]
-    if all(crs) and crs_identity(crs[0]) != crs_identity(crs[1]):
+def _lengths(units: dict) -> tuple:
+    """(horizontal, vertical) metres of a unit of ``units`` (io.crs_units); None where unknown or an angle."""
+    return tuple(u["metres"] if u else None for u in (units["horizontal"], units["vertical"]))
+
+
+def units_named(units: dict) -> str:
+    """How messages name a survey's units: 'lengths in ft', 'lengths in m, heights in ft', 'units unknown'."""
+    across, up = (u["symbol"] if u and u["metres"] is not None else None for u in (units["horizontal"], units["vertical"]))
+    if across is None:
+        return "units unknown" if up is None else f"heights in {up}"
+    return f"lengths in {across}" + (f", heights in {up}" if up not in (None, across) else "")
+
+
+def check_crs(before, after, labels: tuple[str, str]) -> tuple[str | None, dict]:
+    """(The CRS both surveys are in, its units: io.crs_units); one naming none takes the
+    other's. A one-line InputError naming both where they name different CRSs, or different
+    units (autzen's WKT in feet and its copy in metres: one projection, other numbers): nothing
+    is reprojected, their pixels would not be the same ground, nor their heights one unit."""
+    (crs_a, units_a), (crs_b, units_b) = cloud_crs_units(before), cloud_crs_units(after)
+    other_crs = crs_a and crs_b and crs_identity(crs_a) != crs_identity(crs_b)
+    known = [(a, b) for a, b in zip(_lengths(units_a), _lengths(units_b)) if a is not None and b is not None]
+    if other_crs or not all(math.isclose(a, b, rel_tol=1e-9) for a, b in known):  # (ft and US ft: 2 ppm, 2 ft a million ft out)
         raise InputError(
-            f"{labels[0]} is in {crs_name(crs[0])}, {labels[1]} in {crs_name(crs[1])}: change compares two surveys in one CRS; reproject one first"
+            f"{labels[0]} is in {crs_name(crs_a)}, {units_named(units_a)}; {labels[1]} in {crs_name(crs_b)}, {units_named(units_b)}: "
+            "change compares two surveys in one CRS and unit; reproject one first (gigapoint convert --to-crs)"
         )
-    return crs[0] or crs[1]
+    return (crs_a, units_a) if crs_a else (crs_b, units_b)
 
 
 def surface(cloud, camera: Camera, fill_nodata=None) -> np.ndarray:
     """(H, W) float32 heights of ``cloud``'s highest point in each of ``camera``'s pixels (NaN:
-    none); ``fill_nodata`` "all" or N: holes filled (raster_fill.fill_heights)."""
-    heights = camera.heights(render_frame(cloud, camera, RenderSettings().replace(**SURFACE_SETTINGS)).depth)
+    none); ``fill_nodata`` "all" or N: holes filled (raster_fill.fill_heights). An LOD octree's
+    points are read node by node (``_octree_heights``)."""
+    if is_octree(cloud):
+        heights = _octree_heights(cloud, camera)
+    else:
+        heights = camera.heights(render_frame(cloud, camera, RenderSettings().replace(**SURFACE_SETTINGS)).depth)
     return heights if fill_nodata is None else fill_heights(heights, None if fill_nodata == "all" else fill_nodata)
+
+
+def _octree_heights(octree, camera: Camera) -> np.ndarray:
+    """``surface`` of every point of the LOD octree ``octree`` (those its read filter keeps): the
+    points of its nodes meeting the filter, at every level (each point in one node), drawn
+    STREAM_POINTS at a time, each pixel the highest of the heights drawn there."""
+    keep = octree.read_filter if isinstance(octree, OctreeCloud) and octree.read_filter is not None else PointFilter()
+    heights = np.full((camera.height, camera.width), np.nan, np.float32)
+    group: list = []
+
+    def draw_group():
+        np.fmax(heights, surface(build_cloud(group, name=octree.name, colors="rgba"), camera), out=heights)
+        group.clear()
+
+    grid = _source_grid(octree)
+    for points in points_meeting(octree, keep.meets):
+        kept = keep.kept(points, octree.name)
+        if len(kept):
+            group.append(kept if grid is None else _on_grid(kept, *grid))
+        if sum(map(len, group)) >= STREAM_POINTS:
+            draw_group()
+    if group:
+        draw_group()
+    keep.check_passed(octree.name)
+    return heights
+
+
+def _source_grid(octree) -> tuple[np.ndarray, np.ndarray] | None:
+    """(scale, offset) of the grid an octree's source stored its points on (a LAS file's, a
+    Potree folder's own); None where it names none."""
+    if isinstance(octree, PotreeCloud):
+        return octree.scale, octree.offset
+    if isinstance(octree, OctreeCloud) and octree.meta.get("scale") is not None:
+        return np.asarray(octree.meta["scale"], np.float64), np.asarray(octree.meta.get("offset") or (0.0, 0.0, 0.0), np.float64)
+    return None
+
+
+def _on_grid(chunk: PointChunk, scale: np.ndarray, offset: np.ndarray) -> PointChunk:
+    """``chunk``'s points moved back onto their source's grid, as a LAS reader gives them (integer
+    * scale + offset), and said to be on it: a node's 30-bit positions lie up to 6e-5 ft off it,
+    which moved autzen's points on a pixel edge into the next pixel (a 9 ft change in 20 of its
+    4 ft pixels against the LAZ file), and the cloud drawn keeps them exact (core/compact.py)."""
+    xyz = np.round((chunk.xyz - offset) / scale) * scale + offset
+    return PointChunk(xyz, chunk.rgba, chunk.attributes, scale=tuple(map(float, scale)), color_bits=chunk.color_bits)
 
 
 def change(before, after, gsd, classes=None, drop_classes=None, clip=None, fill_nodata=None, min_change=0.0) -> Change:
     """The change from survey ``before`` to survey ``after`` (each paths as ``gigapoint.open``
-    takes them: a file, a folder, a glob pattern, a list; or a PointCloud), as two surface models
+    takes them: a file, a folder, a glob pattern, a list; an LOD octree, its every point read node
+    by node: a converted folder, a COPC file, an EPT dataset, or one opened; or a PointCloud), as two surface models
     on one grid of ``gsd`` units a pixel over the union of their bounds (``Change``: ``dz``,
     ``cut``, ``fill``, ``net``, ``area_compared``, ``area_changed``, ``preview()``).
 
     ``classes``/``drop_classes``/``clip``: only those points read of both (``classes=[2]``:
     ground against ground); ``fill_nodata``: "all" or N pixels, each surface's holes filled
     linearly inside its footprint first (needs scipy); ``min_change``: pixels that moved by no
-    more are left out of the volumes and the changed area. Surveys that name different CRSs, or
-    that share no pixel, are one-line InputErrors."""
+    more are left out of the volumes and the changed area. Surveys that name different CRSs or
+    units (feet and metres), or that share no pixel, are one-line InputErrors."""
     if not (is_real(gsd) and gsd > 0):
         raise InputError(f"change: gsd must be a number > 0 (cloud units per pixel), got {gsd!r}")
     if not (is_real(min_change) and min_change >= 0):
@@ -230,15 +329,21 @@ def change(before, after, gsd, classes=None, drop_classes=None, clip=None, fill_
     filters = {"classes": classes, "drop_classes": drop_classes, "clip": clip}
     point_filter(**filters, where="change")  # bad values told before anything is read
     labels = (survey_label(before), survey_label(after))
-    clouds = [read_survey(before, filters), read_survey(after, filters)]
-    crs = check_crs(*clouds, labels)
-    lows, highs = zip(*(c.bounds for c in clouds))
+    surveys: list = []
     try:
-        camera = Camera.top_down((np.minimum(*lows), np.maximum(*highs)), gsd)  # one grid, one eye: pixel to pixel
-    except CameraError as exc:  # the grid spans both: name them (a huge survey beside a tiny one said neither)
-        raise CameraError(f"{labels[0]} and {labels[1]}: {exc}") from None
-    heights = [surface(c, camera, fill_nodata) for c in clouds]
-    units = cloud_units(clouds[0]) if cloud_crs(clouds[0]) else cloud_units(clouds[1])
+        for source in (before, after):
+            surveys.append(open_survey(source, filters))
+        crs, units = check_crs(*surveys, labels)
+        lows, highs = zip(*(s.bounds for s in surveys))  # (an octree's: its metadata's, cut to its read filter's region)
+        try:
+            camera = Camera.top_down((np.minimum(*lows), np.maximum(*highs)), gsd)  # one grid, one eye: pixel to pixel
+        except CameraError as exc:  # the grid spans both: name them (a huge survey beside a tiny one said neither)
+            raise CameraError(f"{labels[0]} and {labels[1]}: {exc}") from None
+        heights = [surface(s, camera, fill_nodata) for s in surveys]
+    finally:
+        for survey, source in zip(surveys, (before, after)):
+            if isinstance(survey, VoxelOctree) and survey is not source:  # a COPC/EPT octree opened here (a URL's connections)
+                survey.close()
     result = Change(*heights, camera=camera, gsd=float(gsd), crs=crs, units=units, min_change=float(min_change))
     if not result.compared.any():
         raise InputError(f"{labels[0]} and {labels[1]}: no {gsd:g}-unit pixel holds points of both: the surveys do not overlap")
