@@ -195,6 +195,15 @@ def ramp(values: np.ndarray, lo: float, hi: float, table: np.ndarray) -> np.ndar
     return colors
 
 
+def ramp_image(values: np.ndarray, lo: float, hi: float, colormap: str) -> np.ndarray:
+    """(H, W, 4) uint8 image of the (H, W) raster ``values`` (a height difference, a height above
+    a base) on ``colormap`` from ``lo`` to ``hi`` (clamped); transparent where a value is NaN
+    (no data): a map product's preview (survey/change.py, survey/volume.py)."""
+    image = ramp(values, lo, hi, colormap_table(colormap)).view(np.uint8).reshape(*np.shape(values), 4)
+    image[np.isnan(values)] = 0
+    return image
+
+
 @njit(parallel=True, cache=True)
 def _decode_z(firsts, counts, zmin, zsize, low, med, high, out):
     """float64 world z (30-bit cell centres) of every point, batch by batch."""

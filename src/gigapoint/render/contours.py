@@ -165,8 +165,16 @@ def write_contours(path, lines: list[ContourLine], crs: str | None = None, wkt: 
 def draw_contours(image, lines: list[ContourLine], world_file) -> np.ndarray:
     """A copy of the (H, W, 4) uint8 ``image`` (the orthophoto whose pixel centres ``world_file``,
     ``Camera.world_file``'s six numbers, places) with ``lines`` drawn on it (``LINE_RGB``, index
-    contours ``INDEX_LINE_PIXELS`` wide, others ``LINE_PIXELS``), anti-aliased; an empty pixel a
-    line covers becomes opaque by its share."""
+    contours ``INDEX_LINE_PIXELS`` wide, others ``LINE_PIXELS``), anti-aliased (``draw_lines``)."""
+    widths = [INDEX_LINE_PIXELS if line.index else LINE_PIXELS for line in lines]
+    return draw_lines(image, [line.xy for line in lines], widths, world_file)
+
+
+def draw_lines(image, polylines: list[np.ndarray], pixel_widths: list[int], world_file, rgb=LINE_RGB) -> np.ndarray:
+    """A copy of the (H, W, 4) uint8 ``image`` (whose pixel centres ``world_file`` places) with
+    ``polylines`` ((N, 2) world x, y each; a ring closed by repeating its first vertex) drawn on it
+    in ``rgb``, each ``pixel_widths`` wide, anti-aliased; an empty pixel a line covers becomes
+    opaque by its share. Contour lines, a stockpile's toe (survey/volume.py)."""
     from PIL import Image, ImageDraw
 
     image = np.array(image, np.uint8)
@@ -177,8 +185,8 @@ def draw_contours(image, lines: list[ContourLine], world_file) -> np.ndarray:
     # number y fills rows y - w/2 .. y + w/2 - 1, centred on y when row i spans [i, i + 1): the
     # pixel centre (col, row) is there at ((col + 0.5) S, (row + 0.5) S), to a sample (Pillow draws
     # from whole numbers: rounded here, half to even, rather than as Pillow would)
-    paths = [np.rint(((line.xy - (c, f)) @ to_pixel.T + 0.5) * SUPERSAMPLE) for line in lines]
-    widths = [(INDEX_LINE_PIXELS if line.index else LINE_PIXELS) * SUPERSAMPLE for line in lines]
+    paths = [np.rint(((np.asarray(xy, np.float64) - (c, f)) @ to_pixel.T + 0.5) * SUPERSAMPLE) for xy in polylines]
+    widths = [pixels * SUPERSAMPLE for pixels in pixel_widths]
     strip_rows = max(1, STRIP_PIXELS // width)
     for top in range(0, height, strip_rows):
         rows = min(strip_rows, height - top)
@@ -192,7 +200,7 @@ def draw_contours(image, lines: list[ContourLine], world_file) -> np.ndarray:
             draw.line([(x, y - y0) for x, y in path.tolist()], fill=255, width=line_width, joint="curve")
         cover = np.asarray(mask.resize((width, rows), Image.Resampling.BOX), np.float32)[..., None] / 255  # each pixel's share under a line
         strip = image[top : top + rows].astype(np.float32)
-        strip[..., :3] += (np.array(LINE_RGB, np.float32) - strip[..., :3]) * cover
+        strip[..., :3] += (np.array(rgb, np.float32) - strip[..., :3]) * cover
         strip[..., 3:] += (255 - strip[..., 3:]) * cover
         image[top : top + rows] = np.rint(strip).astype(np.uint8)
     return image

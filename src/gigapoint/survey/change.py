@@ -48,7 +48,7 @@ from ..lod.reader import cloud_crs_units
 from ..lod.store import OctreeCloud
 from ..lod.voxel_octree import VoxelOctree
 from ..render import Camera, RenderSettings, render_frame
-from ..render.colors import colormap_table, ramp
+from ..render.colors import ramp_image
 from ..render.georef import write_map
 from ..render.raster_fill import check_max_distance, fill_heights
 
@@ -153,9 +153,7 @@ class Change:
             limit = self.preview_range()
         elif not (is_real(limit) and limit > 0):
             raise InputError(f"change: the preview's range must be a number > 0 (a height difference), got {limit!r}")
-        image = ramp(self.dz, -limit, limit, colormap_table(PREVIEW_COLORMAP)).view(np.uint8).reshape(*self.dz.shape, 4)
-        image[~self.compared] = 0
-        return image
+        return ramp_image(self.dz, -limit, limit, PREVIEW_COLORMAP)  # (not compared: dz NaN, transparent)
 
     def write_geotiff(self, path, overwrite: bool = False) -> list[Path]:
         """``dz`` as ``path``, a float32 GeoTIFF (.tif, NaN nodata) in the surveys' CRS, with its
