@@ -36,13 +36,17 @@ class ClipPolygon:
     ``source`` (the file, or the WKT text's start: what messages name). ``epsg``: the CRS a
     GeoJSON's ``crs`` member names, None without one (a hint when nothing passes). ``names``: per
     polygon the ``name`` property of the GeoJSON Feature it came from (None: none; a stockpile's
-    label in ``gigapoint volume``)."""
+    label in ``gigapoint volume``). ``features``: per polygon the number of that Feature (0, 1, ...
+    in the file's order; None outside one): a Feature's MultiPolygon is one stockpile in parts."""
 
-    def __init__(self, polygons: list[list[np.ndarray]], source: str, epsg: int | None = None, names: list[str | None] | None = None):
+    def __init__(
+        self, polygons: list[list[np.ndarray]], source: str, epsg: int | None = None, names: list[str | None] | None = None, features: list[int | None] | None = None
+    ):
         self.polygons = polygons
         self.source = source
         self.epsg = epsg
         self.names = names or [None] * len(polygons)
+        self.features = features or [None] * len(polygons)
         rings = [ring for polygon in polygons for ring in polygon]
         self.edges = np.concatenate([np.hstack([ring, np.roll(ring, -1, axis=0)]) for ring in rings])  # rows x1, y1, x2, y2
         xy = np.concatenate(rings)
@@ -145,30 +149,35 @@ def _geojson_polygon(document, source: str, label: str) -> ClipPolygon:
         raise InputError(f"{label}: not a GeoJSON object")
     polygons: list = []
     names: list = []
-    _collect(document, polygons, names, label)
+    features: list = []
+    _collect(document, polygons, names, features, label)
     if not polygons:
         raise InputError(f"{label}: holds no polygon")
-    return ClipPolygon([[_ring(r, label) for r in rings] for rings in polygons], source, _epsg(document), names)
+    return ClipPolygon([[_ring(r, label) for r in rings] for rings in polygons], source, _epsg(document), names, features)
 
 
-def _collect(node, polygons: list, names: list, label: str, name: str | None = None) -> None:
-    """Append the coordinate lists of the polygons of GeoJSON ``node`` to ``polygons``, and to
-    ``names`` the ``name`` of the Feature each is in (``name``; None outside a Feature)."""
+def _collect(node, polygons: list, names: list, features: list, label: str, name: str | None = None, feature: int | None = None) -> None:
+    """Append the coordinate lists of the polygons of GeoJSON ``node`` to ``polygons``, to
+    ``names`` the ``name`` of the Feature each is in (``name``; None outside a Feature) and to
+    ``features`` that Feature's number (``feature``)."""
     kind = node.get("type") if isinstance(node, dict) else None
     if kind == "FeatureCollection":
-        for feature in node.get("features") or []:
-            _collect(feature, polygons, names, label)
+        for item in node.get("features") or []:
+            _collect(item, polygons, names, features, label)
     elif kind == "Feature":
         properties = node.get("properties")
         named = properties.get("name") if isinstance(properties, dict) else None
-        _collect(node.get("geometry"), polygons, names, label, None if named is None else str(named))
+        number = next((f + 1 for f in reversed(features) if f is not None), 0)  # (the last one's the highest so far)
+        _collect(node.get("geometry"), polygons, names, features, label, None if named is None else str(named), number)
     elif kind == "Polygon":
         polygons.append(_list(node.get("coordinates"), label))
         names.append(name)
+        features.append(feature)
     elif kind == "MultiPolygon":
         parts = [_list(p, label) for p in _list(node.get("coordinates"), label)]
         polygons.extend(parts)
         names.extend([name] * len(parts))
+        features.extend([feature] * len(parts))
     elif kind in _NOT_AREAS:
         raise InputError(f"{label}: a {kind}, not a polygon: a clip polygon is a Polygon or MultiPolygon")
     else:
