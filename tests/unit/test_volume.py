@@ -8,9 +8,12 @@ import math
 
 import numpy as np
 import pytest
+from PIL import Image
 
 import gigapoint as gp
-from gigapoint.errors import InputError
+from gigapoint.errors import GigapointWarning, InputError
+from gigapoint.render.colors import colormap_table
+from gigapoint.survey.volume import PREVIEW_COLORMAP, TOE_RGB
 
 STEP = 0.1  # the synthetic surveys' point spacing, at 0.05, 0.15, ...: the same lattice in every pixel
 CONE = (50.0, 50.0, 20.0, 10.0)  # centre x, y, radius r, height h
@@ -127,6 +130,77 @@ def test_two_piles_in_a_feature_collection_are_named_and_summed():
     assert [p.name for p in unnamed.piles] == ["pile 1", "pile 2"]
 
 
+def cone_on_flat_ground():
+    x, y = lattice()
+    cx, cy, r, h = CONE
+    return gp.from_arrays(np.column_stack([x, y, 100 + np.maximum(0.0, h * (1 - np.hypot(x - cx, y - cy) / r))]))
+
+
+def pixel_of(camera, x, y) -> tuple[int, int]:
+    """(row, col) of the pixel of top-down ``camera`` whose centre is nearest ``x``, ``y``."""
+    size, _, _, _, x0, y0 = camera.world_file()
+    return round((y0 - y) / size), round((x - x0) / size)
+
+
+def test_the_preview_colours_the_height_above_the_base_and_draws_the_toe(tmp_path):
+    cx, cy, r, h = CONE
+    v = gp.volume(cone_on_flat_ground(), circle(cx, cy, r), 0.5, base=100)  # (the four pixels round the apex alike)
+    (pile,) = v.piles
+    image, colours = v.preview(), colormap_table(PREVIEW_COLORMAP)
+    apex = pixel_of(v.camera, *pile.highest[:2])
+    assert math.dist(pile.highest[:2], (cx, cy)) < 0.5 and v.above_base[apex] == np.float32(pile.height)
+    assert tuple(image[apex]) == tuple(colours[255])  # the cone's top: the colormap's top colour
+    halfway = pixel_of(v.camera, cx + r / 2, cy)
+    assert abs(v.above_base[halfway] - h / 2) < 0.5 and tuple(image[halfway]) == tuple(colours[round(255 * v.above_base[halfway] / pile.height)])
+    assert tuple(image[pixel_of(v.camera, cx + r, cy)]) == (*TOE_RGB, 255)  # the toe drawn over it
+    for outside in (pixel_of(v.camera, cx + r + 1, cy), (0, 0)):  # beyond the toe: transparent, no height
+        assert image[outside][3] == 0 and np.isnan(v.above_base[outside])
+    with pytest.warns(GigapointWarning, match="no .prj written: the inputs name no CRS"):
+        written = v.write_preview(tmp_path / "cone.png")
+    assert written == [tmp_path / "cone.png", tmp_path / "cone.pgw"]
+    np.testing.assert_array_equal(np.asarray(Image.open(tmp_path / "cone.png")), image)
+    assert (tmp_path / "cone.pgw").read_text().split() == [f"{v:.15g}" for v in v.camera.world_file()]
+
+
+def test_the_geotiff_is_the_height_above_the_base_the_volume_sums(tmp_path):
+    """On a slope the base is a tilted plane: each pixel's height above it, not above a level."""
+    v = gp.volume(cone_on_a_slope(), circle(*CONE[:3]), 0.5)
+    (pile,) = v.piles
+    with pytest.warns(GigapointWarning, match="no .prj written"):
+        assert v.write_geotiff(tmp_path / "above.tif") == [tmp_path / "above.tif", tmp_path / "above.tfw"]
+    above = np.asarray(Image.open(tmp_path / "above.tif"))
+    np.testing.assert_array_equal(above, v.above_base)
+    assert (~np.isnan(above)).sum() == pile.pixels and np.nanmax(above) == np.float32(pile.height)
+    assert above[above > 0].sum(dtype=np.float64) * 0.25 == pytest.approx(pile.fill, rel=1e-6)  # float32 heights: 1e-7 each
+    assert -above[above < 0].sum(dtype=np.float64) * 0.25 == pytest.approx(pile.cut, rel=1e-6, abs=1e-9)
+    assert abs(float(np.nanmax(above)) - CONE[3]) < 0.5  # the apex: the cone's height, the slope under it taken away
+    box = gp.volume(box_pile(), square(10, 10, 30, 30), 0.5, base=102)  # 3 above the block's 100, 2 below over the rest's 300
+    assert sorted(np.unique(box.above_base[~np.isnan(box.above_base)]).tolist()) == [-2.0, 3.0]
+    assert (np.nansum(np.where(box.above_base > 0, box.above_base, 0)) * 0.25, box.piles[0].fill) == (300.0, 300.0)
+
+
+def test_a_multipolygon_feature_is_one_pile_each_part_on_its_own_base():
+    """A pile split by a step in the ground (100 left of x 30, 110 right of it): one pile named
+    by its Feature, its volume the two parts', each part's plane laid through its own toe (one
+    plane through both toes would tilt across the step and count the ground as volume)."""
+    x, y = lattice(60.0)
+    ground = np.where(x < 30, 100.0, 110.0)
+    z = ground + np.where((x >= 10) & (x < 20) & (y >= 10) & (y < 20), 2.0, 0.0) + np.where((x >= 40) & (x < 45) & (y >= 40) & (y < 50), 3.0, 0.0)
+    cloud = gp.from_arrays(np.column_stack([x, y, z]))
+    parts = [square(5, 5, 25, 25)["coordinates"], square(35, 35, 55, 55)["coordinates"]]
+    split = {"type": "Feature", "properties": {"name": "gravel"}, "geometry": {"type": "MultiPolygon", "coordinates": parts}}
+    v = gp.volume(cloud, {"type": "FeatureCollection", "features": [split, square(5, 35, 25, 55, "sand")]}, 0.5)
+    gravel, sand = v.piles
+    assert (gravel.name, sand.name) == ("gravel", "sand")
+    assert gravel.fill == pytest.approx(200.0 + 150.0, abs=1e-6) and gravel.cut < 1e-6
+    assert (gravel.area, gravel.polygon_area, gravel.pixels, gravel.height) == (800.0, 800.0, 3200, pytest.approx(3.0, abs=1e-6))
+    assert gravel.highest[2] == 113.0 and gravel.base["type"] == "plane"
+    assert [part["z"] for part in gravel.base["parts"]] == pytest.approx([100.0, 110.0]) and gravel.base["z"] == pytest.approx(105.0)
+    assert np.nansum(np.where(v.above_base > 0, v.above_base, 0), dtype=np.float64) * 0.25 == pytest.approx(v.fill, rel=1e-6)
+    unnamed = gp.volume(cloud, {**split, "properties": {}}, 0.5, base="lowest")
+    assert [(p.name, p.pixels) for p in unnamed.piles] == [("pile 1", 3200)] and unnamed.fill == 350.0  # each part level at its own toe's lowest
+
+
 # a raised flat area in autzen_trim (which has no building class): its roof at ~422-425 ft, the ground ~410
 AUTZEN_BLOCK = (636455.0, 849225.0, 636535.0, 849260.0)
 
@@ -147,6 +221,55 @@ def test_autzen_a_raised_area_has_a_positive_volume_and_the_polygons_footprint(c
     rc, text, err = cli("volume", autzen_path, "--clip-polygon", toe, "--gsd", gsd, "--base", "lowest")
     assert rc == 0, err
     assert text.startswith("block: fill ") and "ft³" in text and "above a lowest base" in text
+
+
+def test_cli_writes_the_heights_above_the_base_and_a_preview_as_python_does(cli, tmp_path, autzen_path):
+    toe = tmp_path / "toe.geojson"
+    toe.write_text(json.dumps(square(*AUTZEN_BLOCK, "block")))
+    (tmp_path / "cli").mkdir()
+    rc, out, err = cli("volume", autzen_path, "--clip-polygon", toe, "--gsd", 2, "-o", tmp_path / "cli/above.tif", "--preview", tmp_path / "cli/above.png", "--json")
+    assert rc == 0, err
+    names = ["above.tif", "above.png", "above.tfw", "above.pgw", "above.prj"]
+    assert json.loads(out)["outputs"] == [str(tmp_path / "cli" / n) for n in names]  # one .prj for both
+    result = gp.volume(autzen_path, toe, 2.0)
+    result.write_geotiff(tmp_path / "above.tif")
+    result.write_preview(tmp_path / "above.png")  # (keeps the .prj the GeoTIFF wrote: the same CRS)
+    for name in names:
+        assert (tmp_path / name).read_bytes() == (tmp_path / "cli" / name).read_bytes(), name
+    preview = np.asarray(Image.open(tmp_path / "above.png"))
+    assert preview.shape == (*result.above_base.shape, 4) and (preview[..., 3] == 0).sum() > 0  # the margin beyond the toe
+
+
+def test_cli_reports_a_multipolygon_feature_as_one_pile_in_parts(cli, tmp_path, autzen_path):
+    x0, y0, x1, y1 = AUTZEN_BLOCK
+    middle = (x0 + x1) / 2
+    halves = [square(x0, y0, middle - 4, y1)["coordinates"], square(middle + 4, y0, x1, y1)["coordinates"]]  # a road between
+    toe = tmp_path / "toe.geojson"
+    toe.write_text(json.dumps({"type": "Feature", "properties": {"name": "block"}, "geometry": {"type": "MultiPolygon", "coordinates": halves}}))
+    rc, out, err = cli("volume", autzen_path, "--clip-polygon", toe, "--gsd", 2)
+    assert rc == 0, err
+    assert out.startswith("block: fill ") and out.count("fill ") == 1 and "total" not in out
+    assert "  in 2 parts, each on a base of its own toe\n" in out
+
+
+def test_cli_outputs_are_refused_before_anything_is_read(cli, tmp_path, monkeypatch, autzen_path):
+    import os
+
+    toe = tmp_path / "toe.geojson"
+    toe.write_text(json.dumps(square(*AUTZEN_BLOCK)))
+    monkeypatch.setattr(gp, "volume", lambda *args, **kwargs: pytest.fail("volumes measured"))
+    (tmp_path / "p.pgw").write_text("precious")
+    rc, _, err = cli("volume", autzen_path, "--clip-polygon", toe, "--gsd", 2, "-o", tmp_path / "h.tif", "--preview", tmp_path / "p.png")
+    assert rc == 1 and err.strip() == f"error: {tmp_path / 'p.pgw'}: already exists; pass --overwrite to replace it", err
+    rc, _, err = cli("volume", autzen_path, "--clip-polygon", toe, "--gsd", 2, "-o", tmp_path / "h.png")
+    assert rc == 1 and err.strip() == f"error: {tmp_path / 'h.png'}: unsupported output type '.png'; use one of .tif, .tiff", err
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode, **kw: False if str(p) == str(locked) else real_access(p, mode, **kw))  # (root writes anywhere)
+    rc, _, err = cli("volume", autzen_path, "--clip-polygon", toe, "--gsd", 2, "--preview", locked / "p.png")
+    assert rc == 1 and err.strip() == f"error: {locked / 'p.png'}: cannot write into {locked} (permission denied)", err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["locked", "p.pgw", "toe.geojson"] and (tmp_path / "p.pgw").read_text() == "precious"
 
 
 @pytest.mark.parametrize(

@@ -1,6 +1,7 @@
 """`gigapoint volume FILES --clip-polygon toe.geojson --gsd G`: the volume of each stockpile a
 polygon outlines, above and below a base (gigapoint.volume, survey/volume.py), with its footprint and
-highest point; --dsm-out writes the surface model measured."""
+highest point; -o writes the height above the base the volumes sum (a GeoTIFF), --preview a colour
+image of it with the toes drawn, --dsm-out the surface model measured."""
 
 from __future__ import annotations
 
@@ -11,11 +12,11 @@ from typing import Annotated
 import typer
 
 from ..errors import GigapointError, counted
-from ..render.georef import GEOTIFF_SUFFIXES, georef_paths
+from ..render.georef import GEOTIFF_SUFFIXES, georef_paths, write_map
 from .app import app
 from .cloud_opts import ClassesOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
 from .gsd_opts import check_fill_nodata, check_gsd_value
-from .output import check_output, check_outputs_apart
+from .output import IMAGE_SUFFIXES, check_output, check_outputs_apart
 
 
 def _base_of(text: str) -> str | float:
@@ -33,13 +34,25 @@ def volume(
     gsd: Annotated[float, typer.Option(help="Ground sample distance (cloud units per pixel) of the surface model the volumes are summed on.")],
     clip_polygon: Annotated[
         str | None,
-        typer.Option("--clip-polygon", metavar="AREA", help="The piles' boundaries (toes), in the files' coordinates: a GeoJSON file (Polygon, MultiPolygon, a Feature or FeatureCollection of them: one pile each polygon, named by its Feature's 'name') or a WKT file or text."),
+        typer.Option(
+            "--clip-polygon",
+            metavar="AREA",
+            help="The piles' boundaries (toes), in the files' coordinates: a GeoJSON file (Polygon, MultiPolygon, a Feature or FeatureCollection of them: one pile each Feature, named by its 'name', a MultiPolygon Feature one pile in parts; one each polygon outside a Feature) or a WKT file or text (one pile each polygon).",
+        ),
     ] = None,
     base: Annotated[str, typer.Option(metavar="plane|lowest|Z", help="What the volume stands on: 'plane' the least-squares plane through the surface along the toe, 'lowest' flat at the toe's lowest height, or an elevation Z.")] = "plane",
     fill_nodata: Annotated[str, typer.Option(help="Fill empty pixels inside the piles by linear interpolation (a TIN) first: 'all' every hole (default), N only those within N pixels of a point, 'none' leave them out of the volume. Needs scipy.")] = "all",
+    output: Annotated[
+        Path | None,
+        typer.Option("-o", "--output", readable=False, help="Write the height above the base inside the piles (what the volumes sum) as a float32 GeoTIFF (.tif), NaN outside, with its world file and .prj."),
+    ] = None,
+    preview: Annotated[
+        Path | None,
+        typer.Option(readable=False, help="Write a colour image (.png, ...) of the height above the base: dark purple at the base to yellow at the highest pile's top, the toes drawn in red, transparent outside; with its world file."),
+    ] = None,
     dsm_out: Annotated[Path | None, typer.Option(readable=False, help="Also write the surface model inside the piles (holes filled) as a float32 GeoTIFF (.tif), NaN outside, with its world file and .prj.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print each pile's figures and the total as one JSON object (and nothing else).")] = False,
-    overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing --dsm-out file.")] = False,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace existing output files.")] = False,
     recursive: RecursiveOption = False,
     classes: ClassesOption = None,
     drop_classes: DropClassesOption = None,
@@ -49,11 +62,13 @@ def volume(
 
     if clip_polygon is None:
         raise GigapointError("--clip-polygon is needed: the piles' boundaries (a GeoJSON or WKT polygon)")
-    if dsm_out is not None:
-        check_output(dsm_out, overwrite, suffixes=GEOTIFF_SUFFIXES)
-        for side in georef_paths([dsm_out]):  # a user's world file or .prj is not replaced without asking
-            check_output(side, overwrite, suffixes=None)
-        check_outputs_apart([dsm_out, *georef_paths([dsm_out])], inputs)
+    for path, suffixes in ((output, GEOTIFF_SUFFIXES), (preview, IMAGE_SUFFIXES), (dsm_out, GEOTIFF_SUFFIXES)):
+        if path is not None:
+            check_output(path, overwrite, suffixes=suffixes)
+    georef = georef_paths([output, preview, dsm_out])
+    for side in georef:  # a user's world file or .prj is not replaced without asking
+        check_output(side, overwrite, suffixes=None)
+    check_outputs_apart([output, preview, dsm_out, *georef], inputs)
     check_gsd_value(gsd)
     chosen_base = _base_of(base.strip().lower())
     # the heights are filled for the volumes whether or not the surface model is written
@@ -63,7 +78,9 @@ def volume(
     result = gp.volume(
         subfolders_read(inputs, recursive), keep.polygon, gsd, base=chosen_base, classes=keep.classes or None, drop_classes=keep.drop_classes or None, fill_nodata=filled
     )
-    written = [] if dsm_out is None else result.write_dsm(dsm_out, overwrite)
+    rasters = [(output, result.above_base), (preview, None if preview is None else result.preview()), (dsm_out, result.heights)]
+    # all or none; nothing asked, nothing written (nor a word on the .prj none would have)
+    written = write_map(result.camera, result.crs, result.units, rasters, overwrite) if any(path for path, _ in rasters) else []
     summary = result.summary()
     if as_json:
         typer.echo(json.dumps({**summary, "outputs": [str(p) for p in written]}, indent=1))
@@ -74,6 +91,8 @@ def volume(
         typer.echo(f"{pile.name}: fill {pile.fill:,.3f} {unit['volume']}, cut {pile.cut:,.3f}, net {pile.net:+,.3f}")
         typer.echo(f"  footprint {pile.area:,.2f} {unit['area']} ({counted(pile.pixels, 'pixel')} of {gsd:g} {unit['length']}; polygon {pile.polygon_area:,.2f})")
         typer.echo(f"  highest {z:.3f} at {x:.3f}, {y:.3f}: {pile.height:.3f} {unit['length']} above a {pile.base['type']} base (mean z {pile.base['z']:.3f})")
+        if "parts" in pile.base:  # a Feature's MultiPolygon
+            typer.echo(f"  in {len(pile.base['parts'])} parts, each on a base of its own toe")
         if pile.filled or pile.empty:
             typer.echo(f"  {pile.filled:.1%} of its pixels filled by interpolation, {pile.empty:.1%} left empty")
     if len(result.piles) > 1:

@@ -1,8 +1,10 @@
 """Stockpile volume from one survey (a quarry's, an aggregate yard's, a landfill's): CloudCompare's
 2.5D volume against a base, Propeller's and Pix4D's volume tool.
 
-Each pile is a polygon, its boundary (the toe) drawn on the ground. The survey is drawn as a
-surface model (``change.surface``: the highest point in each pixel) on a grid of ``gsd``
+Each pile is a polygon, its boundary (the toe) drawn on the ground; a GeoJSON Feature's
+MultiPolygon is one pile in parts (a stockpile a road runs through is one stock item): its
+volume the sum of its parts', each part measured against its own base (below). The survey is
+drawn as a surface model (``change.surface``: the highest point in each pixel) on a grid of ``gsd``
 over the polygons' box, a little beyond it, so that the pixels along the toe hold the ground on
 both sides. A pixel is the pile's when its centre lies inside the polygon (polygon.py's
 even-odd rule: holes left out). Holes in the surface (pixels with no point) are filled by a TIN
@@ -21,7 +23,15 @@ The base is the surface the pile stands on:
 
 Volumes are (surface - base) summed over the pile's pixels, times a pixel's area: ``fill`` where
 the surface is above the base (the stockpile; Pix4D calls it "cut", the material to take away),
-``cut`` where it is below (a pit, or a toe drawn outside the pile), ``net`` = fill - cut."""
+``cut`` where it is below (a pit, or a toe drawn outside the pile), ``net`` = fill - cut.
+
+A pile in parts lays a base under each part from that part's own toe, not one through the
+toes of all: the parts may stand on ground at different heights (either side of a road, on two
+benches), and a plane through all of them would tilt across the gap between; so a pile's volume
+is what its parts measured one by one add up to, and grouping them changes only how it is reported.
+
+``Volume.above_base`` is what the volumes sum: each pixel's height above its pile's base;
+``write_geotiff`` writes it, ``write_preview`` a colour image of it with the toes drawn."""
 
 from __future__ import annotations
 
@@ -29,6 +39,7 @@ import math
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -37,6 +48,8 @@ from ..io.filters import point_filter
 from ..io.polygon import ClipPolygon, clip_polygon_of
 from ..lod.reader import cloud_crs, cloud_units
 from ..render import Camera
+from ..render.colors import ramp_image
+from ..render.contours import draw_lines
 from ..render.georef import write_map
 from ..render.raster_fill import check_max_distance, fill_heights
 from .change import read_survey, surface, survey_label, unit_names
@@ -46,6 +59,8 @@ MARGIN_PIXELS = 2
 #: how often (in pixels) the toe is sampled along the polygon's rings for the base
 TOE_STEP_PIXELS = 0.5
 BASES = ("plane", "lowest")
+PREVIEW_COLORMAP = "viridis"  # sequential: dark purple at the base, yellow at the highest pile's top
+TOE_RGB, TOE_PIXELS = (220, 20, 60), 2  # the toes in the preview: crimson reads against viridis' purple to yellow and on white
 
 
 @dataclass(frozen=True)
@@ -55,7 +70,8 @@ class Pile:
     left out), ``highest`` (x, y, z of its highest pixel), ``height`` (the most the surface rises
     above the base), ``base`` (what it was: type, z: the base's mean height under the pile, and
     for a plane its slope (dz/dx, dz/dy) and the toe's rms distance from it), ``filled`` and
-    ``empty``: shares of its pixels filled by interpolation and left without a height."""
+    ``empty``: shares of its pixels filled by interpolation and left without a height. A pile in
+    parts (a Feature's MultiPolygon) sums its parts; its ``base`` lists each part's in ``parts``."""
 
     name: str
     fill: float
@@ -85,11 +101,16 @@ class Pile:
 class Volume:
     """The piles of one survey (``piles``, in the polygons' order) measured on one grid:
     ``heights`` (H, W) float32 the surface model inside the piles (holes filled), NaN outside,
-    drawn through ``camera`` (``Camera.top_down``), pixels ``gsd`` a side; ``base`` as asked;
-    ``crs`` and ``units`` (io.crs_units) the survey's."""
+    drawn through ``camera`` (``Camera.top_down``), pixels ``gsd`` a side; ``above_base`` (H, W)
+    float32 the surface's height above its pile's base there (negative below it), NaN outside the
+    piles and where the surface is empty: the volumes are its sums times a pixel's area; ``toes``
+    the piles' polygons (ClipPolygon.polygons); ``base`` as asked; ``crs`` and ``units``
+    (io.crs_units) the survey's."""
 
     piles: tuple[Pile, ...]
     heights: np.ndarray
+    above_base: np.ndarray
+    toes: list
     camera: Camera
     gsd: float
     base: str | float
@@ -125,6 +146,30 @@ class Volume:
         .prj, as ``gigapoint volume --dsm-out PATH`` writes it. Returns the paths."""
         check_switch("overwrite", overwrite, "volume")
         return write_map(self.camera, self.crs, self.units, [(path, self.heights)], overwrite)
+
+    def write_geotiff(self, path, overwrite: bool = False) -> list[Path]:
+        """``above_base`` as ``path``, a float32 GeoTIFF (.tif, NaN nodata) with its world file and
+        .prj, as ``gigapoint volume -o PATH`` writes it, all or none; an existing file is replaced
+        only with ``overwrite=True``. Returns the paths."""
+        check_switch("overwrite", overwrite, "volume")
+        return write_map(self.camera, self.crs, self.units, [(path, self.above_base)], overwrite)
+
+    def preview(self) -> np.ndarray:
+        """(H, W, 4) uint8 image of ``above_base`` on a sequential colormap (``PREVIEW_COLORMAP``)
+        from 0 (the base) to the highest pile's ``height`` (below the base: the colour of 0),
+        transparent outside the piles and where the surface is empty, each toe's rings drawn over
+        it (``TOE_RGB``)."""
+        top = max(pile.height for pile in self.piles)
+        image = ramp_image(self.above_base, 0.0, top, PREVIEW_COLORMAP)
+        rings = [np.vstack([ring, ring[:1]]) for polygon in self.toes for ring in polygon]  # (closed)
+        return draw_lines(image, rings, [TOE_PIXELS] * len(rings), self.camera.world_file(), TOE_RGB)
+
+    def write_preview(self, path, overwrite: bool = False) -> list[Path]:
+        """``preview()`` as the image ``path`` (.png, ...; a .tif is a GeoTIFF), with its world file
+        and .prj (one already beside it holding this CRS is kept), as ``gigapoint volume --preview
+        PATH`` writes them. Returns the paths."""
+        check_switch("overwrite", overwrite, "volume")
+        return write_map(self.camera, self.crs, self.units, [(path, self.preview())], overwrite)
 
 
 class _Grid:
@@ -193,11 +238,20 @@ def _base_heights(base, toe_xy: np.ndarray, toe_z: np.ndarray, xy: np.ndarray, w
     return heights, {"type": "plane", "slope": [float(slope_x), float(slope_y)], "boundary_rms": rms}
 
 
-def _pile(rings, inside: np.ndarray, name: str, drawn: np.ndarray, heights: np.ndarray, grid: _Grid, base, where: str, label: str) -> Pile:
-    """The figures of the pile inside ``rings`` (its pixels: ``inside``) from the surface ``drawn``
-    and ``heights`` (its holes filled); ``where``: how messages name it."""
-    pixels = int(inside.sum())
-    if not pixels:
+class _Part(NamedTuple):
+    """One polygon of a pile measured: its pixels (``rows``, ``cols``), the surface's height
+    ``above`` its base there (float64, NaN: empty) and the ``base`` described (``Pile.base``)."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    above: np.ndarray
+    base: dict
+
+
+def _part(rings, inside: np.ndarray, drawn: np.ndarray, heights: np.ndarray, grid: _Grid, base, where: str, label: str) -> _Part:
+    """The polygon ``rings`` of a pile (its pixels ``inside``) against its own base, from the
+    surface ``drawn`` and ``heights`` (its holes filled); ``where``: how messages name it."""
+    if not inside.any():
         raise InputError(f"{where}: no pixel centre of the {grid.size:g} grid lies inside it: give a finer gsd")
     if np.isnan(drawn[inside]).all():
         raise InputError(f"{where}: no point of {label} lies inside it")
@@ -210,51 +264,71 @@ def _pile(rings, inside: np.ndarray, name: str, drawn: np.ndarray, heights: np.n
             f"points lie further apart than the {grid.size:g} grid: a coarser gsd); or give a base elevation (--base Z)"
         )
     rows, cols = np.nonzero(inside)
-    z = heights[rows, cols].astype(np.float64)
-    known = ~np.isnan(z)
     base_z, description = _base_heights(base, toe_xy[known_toe], toe_z[known_toe].astype(np.float64), grid.centres(rows, cols), where)
-    above = z[known] - base_z[known]
+    return _Part(rows, cols, heights[rows, cols].astype(np.float64) - base_z, {**description, "z": float(base_z.mean())})
+
+
+def _pile(parts: list, insides: list, name: str, drawn: np.ndarray, heights: np.ndarray, grid: _Grid, base, where: str, label: str):
+    """The pile ``name`` made of the polygons ``parts`` (each a list of rings; their pixels
+    ``insides``), each part against its own base; ``where``: how messages name it. Returns the
+    Pile, and its pixels (rows, cols) with their heights above the base (``Volume.above_base``)."""
+    measured = [
+        _part(rings, inside, drawn, heights, grid, base, f"{where}, part {k + 1}" if len(parts) > 1 else where, label)
+        for k, (rings, inside) in enumerate(zip(parts, insides))
+    ]
+    rows, cols, above = (np.concatenate(arrays) for arrays in zip(*((part.rows, part.cols, part.above) for part in measured)))
+    pixels = len(rows)
+    known = ~np.isnan(above)
     cell = grid.size * grid.size
-    top = int(np.nanargmax(np.where(np.isnan(drawn[rows, cols]), -np.inf, drawn[rows, cols])))
-    outline, *holes = rings
-    return Pile(
+    highest = drawn[rows, cols]
+    top = int(np.nanargmax(np.where(np.isnan(highest), -np.inf, highest)))
+    base_z = math.fsum(part.base["z"] * len(part.rows) for part in measured) / pixels  # the mean under all its pixels
+    pile = Pile(
         name=name,
         fill=float(above[above > 0].sum(dtype=np.float64)) * cell,
         cut=abs(float(above[above < 0].sum(dtype=np.float64))) * cell,  # (abs: no -0.0)
         area=pixels * cell,
-        polygon_area=ring_area(outline) - sum(map(ring_area, holes)),
-        highest=(*map(float, grid.centres(rows[top : top + 1], cols[top : top + 1])[0]), float(drawn[rows[top], cols[top]])),
-        height=float(above.max()),
-        base={**description, "z": float(base_z.mean())},
-        filled=float((np.isnan(drawn[rows, cols]) & known).sum()) / pixels,
+        polygon_area=sum(ring_area(outline) - sum(map(ring_area, holes)) for outline, *holes in parts),
+        highest=(*map(float, grid.centres(rows[top : top + 1], cols[top : top + 1])[0]), float(highest[top])),
+        height=float(above[known].max()),
+        base=measured[0].base if len(parts) == 1 else {"type": measured[0].base["type"], "z": base_z, "parts": [part.base for part in measured]},
+        filled=float((np.isnan(highest) & known).sum()) / pixels,
         empty=float((~known).sum()) / pixels,
         pixels=pixels,
     )
+    return pile, rows, cols, above
 
 
-def _pile_names(polygon: ClipPolygon) -> list[str]:
-    """Each polygon's name: its Feature's ``name`` ('pile N' without one); a name several polygons
-    share (a Feature's MultiPolygon) numbered 'A (1)', 'A (2)'."""
-    names = [name if name else f"pile {i + 1}" for i, name in enumerate(polygon.names)]
-    shared = {name for name, n in Counter(names).items() if n > 1}
+def _pile_parts(polygon: ClipPolygon) -> list[tuple[str, list[int]]]:
+    """Each pile's name and its polygons (indices into ``polygon.polygons``), in their order: the
+    polygons of one GeoJSON Feature (its MultiPolygon's parts) one pile, each other polygon one.
+    A pile is named by its Feature's ``name`` ('pile N' without one); a name several piles share
+    is numbered 'A (1)', 'A (2)'."""
+    members: dict = {}
+    for i, feature in enumerate(polygon.features):
+        members.setdefault(("feature", feature) if feature is not None else ("polygon", i), []).append(i)
+    groups = list(members.values())
+    names = [polygon.names[group[0]] or f"pile {n + 1}" for n, group in enumerate(groups)]
+    shared = {name for name, count in Counter(names).items() if count > 1}
     seen: Counter = Counter()
     numbered = []
     for name in names:
         seen[name] += 1
         numbered.append(f"{name} ({seen[name]})" if name in shared else name)
-    return numbered
+    return list(zip(numbered, groups))
 
 
 def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=None, fill_nodata="all") -> Volume:
     """The volume of each pile ``clip_polygon`` outlines (a GeoJSON or WKT file, WKT text, a GeoJSON
     geometry as a dict: polygon.py; several polygons, several piles, named by their Feature's
-    ``name``) in survey ``source`` (paths as ``gigapoint.open`` takes them, or a PointCloud), on a
+    ``name``; a Feature's MultiPolygon one pile in parts) in survey ``source`` (paths as ``gigapoint.open`` takes them, or a PointCloud), on a
     grid of ``gsd`` units a pixel, above and below ``base`` ("plane", "lowest" or an elevation).
 
     ``classes``/``drop_classes``: only those points read (``drop_classes=[7, 18]``: no noise);
     ``fill_nodata``: "all" (the default) every hole inside the data's footprint filled linearly
     (needs scipy), N only those within N pixels of a point, None none. Returns a ``Volume``
-    (``piles``, ``fill``, ``cut``, ``net``, ``area``, ``summary()``, ``write_dsm()``). No polygon, a
+    (``piles``, ``fill``, ``cut``, ``net``, ``area``, ``summary()``, ``write_dsm()``,
+    ``write_geotiff()``, ``write_preview()``). No polygon, a
     polygon outside the data or with no point inside are one-line InputErrors."""
     if clip_polygon is None:
         raise InputError("volume: clip_polygon is needed: the piles' boundaries (a GeoJSON or WKT polygon file, or WKT text)")
@@ -279,14 +353,17 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
     drawn = surface(cloud, camera)
     heights = drawn if fill_nodata is None else fill_heights(drawn, None if fill_nodata == "all" else fill_nodata)
     grid = _Grid(camera)
-    names = _pile_names(toe)
+    groups = _pile_parts(toe)
     insides = [grid.inside(ClipPolygon([rings], toe.source)) for rings in toe.polygons]
-    piles = tuple(
-        _pile(rings, inside, name, drawn, heights, grid, base, f"{toe.source}: {name}" if len(names) > 1 else toe.source, label)
-        for rings, inside, name in zip(toe.polygons, insides, names)
-    )
+    above_base = np.full(grid.shape, np.nan, np.float32)
+    piles = []
+    for name, members in groups:
+        where = f"{toe.source}: {name}" if len(groups) > 1 else toe.source
+        pile, rows, cols, above = _pile([toe.polygons[i] for i in members], [insides[i] for i in members], name, drawn, heights, grid, base, where, label)
+        piles.append(pile)
+        above_base[rows, cols] = above  # (piles that overlap: the later one's height where they do)
     dsm = np.where(np.logical_or.reduce(insides), heights, np.nan).astype(np.float32)
-    return Volume(piles, dsm, camera, float(gsd), base, cloud_crs(cloud), cloud_units(cloud))
+    return Volume(tuple(piles), dsm, above_base, toe.polygons, camera, float(gsd), base, cloud_crs(cloud), cloud_units(cloud))
 
 
 __all__ = ["Pile", "Volume", "volume"]
