@@ -846,9 +846,9 @@ class LiveCloud:
         self._pins = +self._pins  # drop the zero counts
 
     def save(self, path, overwrite: bool = False) -> int:
-        """Write the accumulated snapshots: ``.las``/``.laz``/``.ply`` (points with normals, and
-        colors unless no frame snapshotted had any), ``.copc.laz`` (the snapshot octree as COPC), else (a name without a point
-        file's suffix) a gigapoint octree folder. Returns the points written."""
+        """Write the accumulated snapshots: ``.las``/``.laz``/``.ply`` (points with normals),
+        ``.copc.laz`` (the snapshot octree as COPC), else (a name without a point file's suffix) a
+        gigapoint octree folder; each with colors unless no frame snapshotted had any. Returns the points written."""
         from .save import save_snapshots
 
         self.warnings.issue()

@@ -178,7 +178,7 @@ def octree_info(path) -> dict:
     sampler, spacing = cloud.meta.get("sampler"), cloud.meta.get("spacing")
     text = f"{len(cloud.keys):,} nodes in {levels} levels"
     text += (f", {sampler} sampler" if sampler else "") + (f", spacing {spacing:.6g}" if spacing else "")
-    has_color = True
+    has_color = bool(cloud.meta.get("has_color", True))  # false: converted from points without colours (a folder older than the key: assumed)
     if potree:  # its nodes are decoded on demand: the metadata names what they hold (as gigapoint names them)
         attributes = list(cloud.extra)
         has_color = any(a["name"] == "rgb" for a in cloud.potree_attributes)  # (PotreeConverter --attributes intensity: none)

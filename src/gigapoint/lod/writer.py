@@ -131,6 +131,7 @@ def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sa
         "attributes": attrs,
         "skipped": int(st.get("skipped", 0)),
         "crs": (st.get("source") or {}).get("crs"),  # 'EPSG:n' or WKT from the LAS/COPC inputs (info shows it)
+        "has_color": bool((st.get("source") or {}).get("has_color", True)),  # false: the colours stored are the grey of points without
     }
     meta.update(extra)
     atomic_json(out.meta, meta, durable=True)  # last: the folder is complete from here on

@@ -235,6 +235,7 @@ def convert(
     from_crs=None,
     exact_transform=False,
     colorize=None,
+    has_color=None,
 ) -> ConvertResult:
     """Convert point cloud files (or a cloud, or an iterable of PointChunks) into an LOD octree directory ``out``.
 
@@ -260,6 +261,11 @@ def convert(
 
     ``source_files``: where ``inputs`` are chunks, the LAS/LAZ/COPC files they came from; their
     headers give the output its CRS and LAS grid (a progressive octree's ``save``).
+
+    ``has_color`` (a cloud or chunks as ``inputs``; files say it themselves): False where their
+    points have no colours of their own (a live cloud's frames pushed without: drawn grey), so a
+    COPC output gets a point format without RGB (6) and a gigapoint octree records it
+    (``octree.json``'s ``has_color``), as for colourless files; None: as ``source_files`` say.
 
     ``inputs`` may also be a ``GrownTree`` (seeded.py): a builder's tree whose leaves are the
     partitions as they stand (``ProgressiveOctree.save``); it is converted in this process.
@@ -320,6 +326,9 @@ def convert(
     if keep is not None and not _are_paths(inputs):  # (a cloud's or chunks' points are not read here)
         raise InputError(f"convert: the filter ({keep.describe()}) applies to the points read from files; the inputs are a cloud or PointChunks")
     check_switch("progress", progress, "convert")  # "yes"/"no" were both true
+    check_switch("has_color", has_color, "convert", allow_none=True)
+    if has_color is not None and _are_paths(inputs):
+        raise InputError(f"convert: has_color={has_color!r} is for a cloud's or chunks' points; files say themselves whether they have colours")
     if name is not None and not isinstance(name, str):  # 5 went into octree.json as a number
         raise InputError(f"convert: name must be a string, got {name!r}")
     if source_files is not None:  # a path given alone was read letter by letter, a missing file skipped: no CRS, no word
@@ -424,6 +433,7 @@ def convert(
         source_files,
         layout,
         colors,
+        has_color,
     )
     conv.on_ready = on_ready
     conv.point_filter = keep

@@ -19,7 +19,6 @@ from ...io.las import with_scan_angle
 from ...io.registry import reader_for
 from ..build import valid_bounds
 from ..preview import PreviewSampler, preview_points
-from .facts import input_facts
 from .prefetch import prefetch
 from .spill import encode_xyz, las_xyz_code, load_raw_chunk, one_value, save_raw_chunk
 from .state import Job
@@ -318,7 +317,7 @@ class ReadPhase(Job):
                 GigapointWarning,
             )
         edge = float(np.max(hi - lo))
-        st.setdefault("source", input_facts(self.paths or self.source_files, one_grid=self.format != "gigapoint"))  # CRS, LAS grid, colors: for outputs that hold them
+        st.setdefault("source", self.source_facts(self.paths or self.source_files))  # CRS, LAS grid, colors: for outputs that hold them
         st["compact"] = self.compact_plan()
         st.update(origin=lo.tolist(), edge=edge if edge > 0 else 1.0, phase="count")
         self.save_state()

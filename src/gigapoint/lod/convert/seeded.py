@@ -18,7 +18,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..keys import level_of
-from .facts import input_facts
 from .partition import COUNT_LEVEL, partition_lut, plan_partitions
 from .state import Job
 
@@ -73,7 +72,7 @@ class SeededPhases(Job):
         counts = np.bincount(pid, tree.leaf_counts, len(parts)).astype(np.int64).tolist()
         assert sum(counts) == total, (sum(counts), total)
         self.progress.advance(total)
-        st.setdefault("source", input_facts(self.source_files, one_grid=self.format != "gigapoint"))  # CRS, LAS grid: for outputs that hold them
+        st.setdefault("source", self.source_facts(self.source_files))  # CRS, LAS grid, colours: for outputs that hold them
         st["compact"] = self.compact_plan()
         st.update(origin=np.asarray(tree.origin, np.float64).tolist(), edge=float(tree.edge), partitions=parts, part_counts=counts,
                   distributed=0, phase="build")  # fmt: skip

@@ -24,6 +24,7 @@ from ...io import URL_LIKE, expand_paths, file_url_path, shown_url
 from ..ept import ept_location
 from ..kinds import work_dir as copc_work_dir
 from ..octree_dir import OctreeDir, OutputExistsError
+from .facts import input_facts
 from .options import BYTES_PER_POINT_BUILD, MAX_PARTITION_POINTS, RUNTIME_BYTES
 
 STATE_VERSION = 1
@@ -123,8 +124,10 @@ class Job:
         source_files=None,
         layout="compact",
         colors="rgba",
+        has_color=None,
     ):
         self.encoding = encoding
+        self.has_color = has_color  # chunk inputs: whether their points have colours (None: as the source files say)
         self.layout = layout  # gigapoint format: "compact" (version 2, compact_octree.py) or "words" (version 1)
         self.colors = colors  # version 2's colours: "rgba" (exact) or "rgb565"
         self.out = Path(out)
@@ -200,6 +203,15 @@ class Job:
         if scale is None and self.paths is None:
             scale = st.get("chunk_scale")
         return {"scale": scale if isinstance(scale, list) else None, "colors": self.colors}
+
+    def source_facts(self, paths) -> dict:
+        """``input_facts`` of ``paths`` (CRS, LAS grid, colours: ``state["source"]``), their
+        ``has_color`` the chunks' own where convert was told (a live cloud's frames pushed without
+        colours: its grey is no colour of theirs, so a COPC output gets no RGB)."""
+        facts = input_facts(paths, one_grid=self.format != "gigapoint")
+        if self.has_color is not None:
+            facts["has_color"] = bool(self.has_color)
+        return facts
 
     _saved_at = float("-inf")  # time.monotonic() of the last save_state
 
