@@ -536,6 +536,29 @@ def test_the_output_grid_keeps_the_inputs_and_fits_potrees_unsigned_integers():
     assert output_grid({"lo": [0, 0, 0], "hi": [1, 1, 1], "chunk_scale": [0.01] * 3})[0].tolist() == [0.01] * 3  # gp.demo's grid
 
 
+def test_has_color_false_writes_chunks_without_rgb_and_is_refused_for_files(tmp_path):
+    """Chunks (a cloud) whose points have no colours of their own: ``has_color=False`` gives the
+    COPC file point format 6 (the chunks' grey was written as format 7 colours). Files say it
+    themselves: there, and with a value not a switch, it is a one-line error."""
+    import re
+
+    import laspy
+
+    xyz = np.random.default_rng(4).uniform(0, 50, (5_000, 3))
+    convert(gp.from_arrays(xyz), tmp_path / "plain.copc.laz", has_color=False, **OPTS)
+    with laspy.CopcReader.open(tmp_path / "plain.copc.laz") as r:
+        assert r.header.point_format.id == 6 and len(r.query()) == 5_000
+    convert(gp.from_arrays(xyz), tmp_path / "grey.copc.laz", **OPTS)  # (None: as the cloud's files say; it has none: colours)
+    with laspy.CopcReader.open(tmp_path / "grey.copc.laz") as r:
+        assert r.header.point_format.id == 7
+    refused = "convert: has_color=False is for a cloud's or chunks' points; files say themselves whether they have colours"
+    with pytest.raises(InputError, match=f"^{re.escape(refused)}$"):
+        convert([tmp_path / "plain.copc.laz"], tmp_path / "again", has_color=False)
+    with pytest.raises(InputError, match=r"^convert: has_color must be True or False or None, got 'no'$"):
+        convert(gp.from_arrays(xyz), tmp_path / "again", has_color="no")
+    assert not (tmp_path / "again").exists()
+
+
 def test_nir_without_colors_is_format_6_with_nir_in_extra_bytes(tmp_path):
     """Points with NIR but no colors were written as format 8, every point grey (info: 'color:
     yes'): now format 6, NIR an extra bytes field read back under its name."""

@@ -365,6 +365,58 @@ def test_save_writes_rgb_only_when_a_snapshotted_frame_had_colours(tmp_path):
     assert set(red.tolist()) == {int(rgb[0, 0])}
 
 
+def _colours_read_back(path) -> set:
+    """The (r, g, b, a) colours gp.open draws the points of an octree ``path`` (COPC or folder) in."""
+    back = gp.open(path)
+    parts = [back.node_points(i)["rgba"] for i in np.flatnonzero(back.counts > 0).tolist()]
+    return set(map(tuple, np.concatenate(parts).view(np.uint8).reshape(-1, 4).tolist()))
+
+
+def test_save_as_copc_or_octree_writes_no_colour_where_no_frame_had_any(tmp_path):
+    """The COPC file and octree folder of frames pushed without rgb held their made-up grey as
+    colours (COPC point format 7, an octree that says it has colours); now point format 6 and an
+    octree.json saying ``has_color: false``, as ``convert`` writes a colourless LAS file. Read
+    back, both are drawn in the default grey, as that file is. A coloured cloud keeps RGB."""
+    import json
+
+    import laspy
+
+    from gigapoint.core.chunk import DEFAULT_COLOR
+    from gigapoint.lod import octree_info
+
+    xyz, rgb = frame(4, n=3000)
+    live = LiveCloud()
+    live.push(xyz, intensity=np.arange(len(xyz), dtype=np.uint16))
+    live.snapshot(normals=False)
+    assert live.save(tmp_path / "grey.copc.laz") == 3000 and live.save(tmp_path / "grey") == 3000
+    with laspy.CopcReader.open(tmp_path / "grey.copc.laz") as r:
+        assert r.header.point_format.id == 6 and "red" not in r.header.point_format.dimension_names  # (was 7, every point 51400)
+        np.testing.assert_array_equal(np.sort(np.asarray(r.query().intensity)), np.arange(len(xyz)))
+    assert json.loads((tmp_path / "grey" / "octree.json").read_text())["has_color"] is False
+    assert octree_info(tmp_path / "grey.copc.laz")["has_color"] is False and octree_info(tmp_path / "grey")["has_color"] is False
+
+    las = laspy.LasData(laspy.LasHeader(point_format=6, version="1.4"))  # the same points in a colourless LAS file, converted
+    las.header.scales, las.header.offsets = [1e-3] * 3, [0.0] * 3
+    las.x, las.y, las.z = xyz.T
+    las.write(tmp_path / "grey.las")
+    gp.convert(tmp_path / "grey.las", tmp_path / "converted")
+    assert json.loads((tmp_path / "converted" / "octree.json").read_text())["has_color"] is False
+    drawn = {tuple(DEFAULT_COLOR)}
+    assert _colours_read_back(tmp_path / "converted") == _colours_read_back(tmp_path / "grey.copc.laz") == _colours_read_back(tmp_path / "grey") == drawn
+
+    coloured = LiveCloud()
+    coloured.push(xyz, rgb)
+    coloured.snapshot(normals=False)
+    assert coloured.save(tmp_path / "rgb.copc.laz") == 3000 and coloured.save(tmp_path / "rgb") == 3000
+    with laspy.CopcReader.open(tmp_path / "rgb.copc.laz") as r:
+        assert r.header.point_format.id == 7
+        assert set((np.asarray(r.query().red) // 257).tolist()) == {int(rgb[0, 0])}
+    assert json.loads((tmp_path / "rgb" / "octree.json").read_text())["has_color"] is True
+    assert octree_info(tmp_path / "rgb.copc.laz")["has_color"] is True and octree_info(tmp_path / "rgb")["has_color"] is True
+    pushed = (*rgb[0].tolist(), 255)
+    assert _colours_read_back(tmp_path / "rgb.copc.laz") == _colours_read_back(tmp_path / "rgb") == {pushed}
+
+
 def test_save_as_ply_writes_64_bit_integers_that_fit_in_32_and_refuses_others(tmp_path):
     """PLY has no 64-bit integers, half floats or booleans: numpy's default int64 attribute (a
     label pushed as np.arange) was plyfile's ValueError traceback "field type 'u8' not in [...]"."""
