@@ -20,7 +20,7 @@ from gigapoint.lod import ConvertError
 
 rasterio = pytest.importorskip("rasterio")
 pyproj = pytest.importorskip("pyproj")
-from rasterio.transform import from_origin, rowcol
+from rasterio.transform import Affine, from_origin, rowcol
 
 #: the test rasters' pixel edge (feet, in autzen's CRS) and their top-left corner: half a grid step
 #: off autzen's 0.01 ft grid, so no point lies on a pixel edge
@@ -35,11 +35,11 @@ def _pattern(height=HEIGHT, width=WIDTH) -> np.ndarray:
     return np.stack([(col * 3) % 256, (row * 5) % 256, (col + 2 * row) % 256]).astype(np.uint8)
 
 
-def _geotiff(path, bands, crs, transform=None, alpha: bool = False):
-    """A GeoTIFF of ``bands`` (k x h x w); ``alpha``: its last band marked as alpha."""
+def _geotiff(path, bands, crs, transform=None, alpha: bool = False, **creation):
+    """A GeoTIFF of ``bands`` (k x h x w); ``alpha``: its last band marked as alpha; ``creation``: GDAL's creation options (nbits=12)."""
     count, height, width = bands.shape
     transform = transform or from_origin(LEFT, TOP, PIXEL, PIXEL)
-    with rasterio.open(path, "w", driver="GTiff", width=width, height=height, count=count, dtype=bands.dtype, crs=crs, transform=transform) as ds:
+    with rasterio.open(path, "w", driver="GTiff", width=width, height=height, count=count, dtype=bands.dtype, crs=crs, transform=transform, **creation) as ds:
         ds.write(bands)
         if alpha:
             ds.colorinterp = [rasterio.enums.ColorInterp.red, rasterio.enums.ColorInterp.green, rasterio.enums.ColorInterp.blue, rasterio.enums.ColorInterp.alpha]
@@ -90,6 +90,96 @@ def test_a_16_bit_raster_keeps_its_values_high_byte(no_rgb, tmp_path):
     assert result.uncolored == 0
     rows, cols, _ = _pixels_of(no_rgb)
     assert np.array_equal(_rgb(laspy.read(str(tmp_path / "out.las"))), (bands[:, rows, cols] >> 8).T * 257)
+
+
+@pytest.mark.parametrize(("dtype", "nbits"), [("uint16", 12), ("uint16", 11), ("uint8", 4)])
+def test_a_raster_of_fewer_bits_than_its_type_is_scaled_by_its_nbits(no_rgb, tmp_path, dtype, nbits):
+    wkt = read_las_header(no_rgb).crs()
+    if nbits > 8:  # the pattern in the top 8 of 12 or 11 bits, the bits below all 1: 0-4095 (was v >> 8: 0-15, near black)
+        bands = (_pattern().astype(np.uint16) << (nbits - 8)) | (2 ** (nbits - 8) - 1)
+        expected_8_bits = _pattern()
+    else:  # 4-bit levels 0-15, stretched to 0-255 (was 0-15)
+        bands = _pattern() >> 4
+        expected_8_bits = bands * 17
+    ortho = _geotiff(tmp_path / f"ortho{nbits}.tif", bands.astype(dtype), wkt, nbits=nbits)
+    with rasterio.open(ortho) as ds:
+        assert (ds.dtypes[0], ds.tags(1, ns="IMAGE_STRUCTURE")["NBITS"]) == (dtype, str(nbits))
+    result = gp.convert(no_rgb, tmp_path / "out.las", colorize=ortho)
+    assert result.uncolored == 0
+    rows, cols, _ = _pixels_of(no_rgb)
+    rgb = _rgb(laspy.read(str(tmp_path / "out.las")))
+    assert np.array_equal(rgb, expected_8_bits[:, rows, cols].T.astype(np.uint16) * 257)
+    assert rgb.max() == 255 * 257  # (the brightest level comes out white)
+
+
+def test_a_float_raster_of_reflectance_is_refused_naming_it_and_its_dtype(cli, no_rgb, tmp_path):
+    reflectance = _geotiff(tmp_path / "reflectance.tif", _pattern().astype(np.float32) / 255, read_las_header(no_rgb).crs())
+    out = tmp_path / "out.laz"
+    rc, _, err = cli("convert", no_rgb, "-o", out, "--colorize", reflectance, "-q")
+    expected = (
+        f"error: {reflectance}: its bands hold float32 values; colorize reads orthophotos of 8- or 16-bit integers "
+        "(gdal_translate -ot Byte -scale MIN MAX 0 255 makes one of its range)"
+    )
+    assert (rc, err.strip()) == (1, expected)
+    assert not out.exists()
+
+
+def test_a_rotated_raster_gives_each_point_its_pixels_colour(no_rgb, tmp_path):
+    # rotated 90 degrees from north up: rows run east from LEFT, columns north from the bottom edge
+    bottom = TOP - HEIGHT * PIXEL
+    transform = Affine.translation(LEFT, bottom) @ Affine.rotation(90) @ Affine.scale(PIXEL, -PIXEL)
+    assert (transform.a, transform.b, transform.d, transform.e) == (0, PIXEL, PIXEL, 0)
+    bands = _pattern(WIDTH, HEIGHT)  # (237 rows east, 114 columns north)
+    ortho = _geotiff(tmp_path / "rotated.tif", bands, read_las_header(no_rgb).crs(), transform)
+    with rasterio.open(ortho) as ds:
+        assert ds.transform == transform  # (GDAL wrote and read the rotation back)
+    result = gp.convert(no_rgb, tmp_path / "out.las", colorize=ortho)
+    assert result.uncolored == 0
+    las = laspy.read(str(tmp_path / "out.las"))
+    rows = np.floor((np.asarray(las.x) - LEFT) / PIXEL).astype(int)
+    cols = np.floor((np.asarray(las.y) - bottom) / PIXEL).astype(int)
+    assert rows.min() >= 0 and rows.max() < WIDTH and cols.min() >= 0 and cols.max() < HEIGHT
+    assert np.array_equal(_rgb(las), bands[:, rows, cols].T.astype(np.uint16) * 257)
+    first = np.asarray([las.x[0], las.y[0]])  # one point by hand: its pixel's colour
+    row, col = int((first[0] - LEFT) // PIXEL), int((first[1] - bottom) // PIXEL)
+    assert list(_rgb(las)[0]) == [int(v) * 257 for v in bands[:, row, col]]
+
+
+def _gdal_cache_during_reads(monkeypatch) -> list:
+    """GDAL_CACHEMAX as rasterio's environment gives it during each read of a raster's pixels (None: not set)."""
+    seen = []
+    read = rasterio.io.DatasetReader.read
+
+    def read_noting_the_cache(self, *args, **kwargs):
+        seen.append(rasterio.env.getenv().get("GDAL_CACHEMAX") if rasterio.env.hasenv() else None)
+        return read(self, *args, **kwargs)
+
+    monkeypatch.setattr(rasterio.io.DatasetReader, "read", read_noting_the_cache)
+    return seen
+
+
+def test_gdals_block_cache_is_held_small_while_blocks_are_read(no_rgb, tmp_path, monkeypatch):
+    colorize = importlib.import_module("gigapoint.io.colorize")
+    wkt = read_las_header(no_rgb).crs()
+    ortho = _geotiff(tmp_path / "tiled.tif", _pattern(), wkt, tiled=True, blockxsize=64, blockysize=64)
+    seen = _gdal_cache_during_reads(monkeypatch)
+    gp.convert(no_rgb, tmp_path / "out.las", colorize=ortho)
+    assert seen == [16 * 2**20] == [colorize.GDAL_CACHE_BYTES]  # (one block of 1024²: the whole raster)
+    assert not rasterio.env.hasenv() or "GDAL_CACHEMAX" not in rasterio.env.getenv()  # (set only around the reads)
+
+
+def test_a_wide_strip_raster_gets_gdal_cache_for_a_row_of_blocks(no_rgb, tmp_path, monkeypatch):
+    pixel, width, height = 0.4, 3000, 1420  # (3 blocks of 1024 across autzen's 1 179 ft, 2 down)
+    transform = from_origin(LEFT, TOP, pixel, pixel)
+    ortho = _geotiff(tmp_path / "strips.tif", _pattern(height, width), read_las_header(no_rgb).crs(), transform, compress="deflate", blockysize=1)
+    with rasterio.open(ortho) as ds:
+        assert ds.block_shapes[0] == (1, width)  # strips of one row: each block decodes all 1024 under it, whole
+    seen = _gdal_cache_during_reads(monkeypatch)
+    result = gp.convert(no_rgb, tmp_path / "out.las", colorize=ortho)
+    assert result.uncolored == 0
+    assert seen == [2 * 1025 * width * 3] * 6  # twice the strips under a row of blocks (16 MiB: a 16 384-wide one read 5.7x slower)
+    rows, cols, las = _pixels_of(tmp_path / "out.las", transform)
+    assert np.array_equal(_rgb(las), _pattern(height, width)[:, rows, cols].T.astype(np.uint16) * 257)
 
 
 def test_points_outside_a_half_raster_keep_their_colour_or_zero_and_are_counted(cli, autzen_path, no_rgb, tmp_path):
@@ -195,7 +285,7 @@ def test_a_missing_or_damaged_raster_is_refused_before_a_point_is_read(cli, no_r
     damaged.write_bytes(b"II*\0" + bytes(range(256)) * 4)
     rc, _, err = cli("convert", no_rgb, "-o", out, "--colorize", damaged, "-q")
     assert rc == 1 and err.startswith(f"error: {damaged}: not a raster GDAL can read (") and len(err.strip().splitlines()) == 1
-    with pytest.raises(InputError, match=r"float32 values; colorize reads orthophotos of 8- or 16-bit integers$"):
+    with pytest.raises(InputError, match=r"float32 values; colorize reads orthophotos of 8- or 16-bit integers \(gdal_translate -ot Byte"):
         gp.tile(no_rgb, tmp_path / "tiles", 500, colorize=_geotiff(tmp_path / "f.tif", _pattern().astype(np.float32), read_las_header(no_rgb).crs()))
     assert not out.exists() and not (tmp_path / "tiles").exists()
 

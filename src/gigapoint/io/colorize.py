@@ -3,17 +3,24 @@
 PointFiles), through rasterio (GDAL), an optional dependency (``pip install 'gigapoint[gis]'``).
 
 Each point takes the colour of the pixel it lies in (nearest: no blending), in the output's
-coordinates: after ``--to-crs`` has moved it. Bands 1, 2, 3 are red, green, blue (a raster of one
-or two bands: band 1 as grey). 8-bit values are written x 257 into LAS's 16-bit fields; gigapoint
-holds 8 bits a channel, so a 16-bit raster's values keep their high byte (v >> 8, written x 257),
-as 16-bit LAS colours do through ``convert``. A point outside the raster, or on a pixel GDAL's
-mask says holds nothing (an alpha band's 0, the bands' nodata value), takes no colour from it: it
-keeps the colour its file gave it, or 0 (black) where its file had none; those points are counted.
+coordinates: after ``--to-crs`` has moved it; a rotated or sheared raster (an affine with b, d
+terms) too, through its inverse affine. Bands 1, 2, 3 are red, green, blue (a raster of one or two
+bands: band 1 as grey). 8-bit values are written x 257 into LAS's 16-bit fields. gigapoint's
+chunks hold 8 bits a channel (PointChunk.rgba), so a raster's values are scaled to 8 bits by its
+real bit depth, n: GDAL's NBITS where the file gives one (a 16-bit orthophoto of 12- or 11-bit
+data, 0-4095 or 0-2047), else its type's (8, 16). n > 8 keeps each value's top 8 bits
+(v >> (n - 8), as 16-bit LAS colours do through ``convert``), n < 8 is stretched to 0-255; then
+written x 257. Keeping 16 bits would need 16-bit colours in PointChunk. A float raster is refused:
+its values do not say their range (0-1 reflectance, 0-255, 0-10000, or a DSM's heights given by
+mistake). A point outside the raster, or on a pixel GDAL's mask says holds nothing (an alpha
+band's 0, the bands' nodata value), takes no colour from it: it keeps the colour its file gave it,
+or 0 (black) where its file had none; those points are counted.
 
 The raster is read in blocks of ``BLOCK`` x ``BLOCK`` pixels, those under a chunk's points, never
 whole: orthophotos are often tens of GB, and a chunk of points covers a small part of one (the
-blocks last used are kept, ``CACHE_BYTES`` of them). A raster that cannot be opened, holds no 8- or
-16-bit integers, or is in another CRS than the points, is a one-line InputError before a point is read."""
+blocks last used are kept, ``CACHE_BYTES`` of them; GDAL's own cache held to ``GDAL_CACHE_BYTES``).
+A raster that cannot be opened, holds no 8- or 16-bit unsigned integers, or is in another CRS than
+the points, is a one-line InputError before a point is read."""
 
 from __future__ import annotations
 
@@ -32,6 +39,10 @@ BLOCK = 1024
 #: square of a 5 cm orthophoto). 32 blocks of 512² with 5 M demo points in 20 chunks, each chunk
 #: over all 272 blocks of an 8192² raster: every block read again in every chunk, 6.8 s against 2.0 s
 CACHE_BYTES = 256 * 2**20
+#: bytes of GDAL's own block cache while blocks are read (its default, 5% of the RAM, would keep a
+#: second copy of what ``CACHE_BYTES`` keeps); more where the raster's blocks are wider than a
+#: ``BLOCK`` (strips), which each block along a row decodes again: ``_gdal_cache_bytes``
+GDAL_CACHE_BYTES = 16 * 2**20
 
 
 def rasterio_module(option: str):
@@ -63,9 +74,13 @@ class Colorization:
         ds = self._dataset
         if ds.dtypes[0] not in ("uint8", "uint16"):
             ds.close()
-            raise InputError(f"{self.path}: its bands hold {ds.dtypes[0]} values; colorize reads orthophotos of 8- or 16-bit integers")
+            scale = " (gdal_translate -ot Byte -scale MIN MAX 0 255 makes one of its range)" if ds.dtypes[0].startswith("float") else ""
+            raise InputError(f"{self.path}: its bands hold {ds.dtypes[0]} values; colorize reads orthophotos of 8- or 16-bit integers{scale}")
         self.bands = (1, 2, 3) if ds.count >= 3 else (1, 1, 1)  # (one or two bands: grey, and maybe its alpha)
-        self.shift = 8 if ds.dtypes[0] == "uint16" else 0  # (gigapoint holds 8 bits a channel)
+        type_bits = np.dtype(ds.dtypes[0]).itemsize * 8
+        nbits = max(_nbits(ds.tags(band, ns="IMAGE_STRUCTURE"), type_bits) for band in set(self.bands))
+        self.to_8_bits = _levels_8_bits(nbits, type_bits)  # (gigapoint holds 8 bits a channel)
+        self.gdal_cache_bytes = _gdal_cache_bytes(ds)
         self.masked = any(flag.name != "all_valid" for flags in ds.mask_flag_enums for flag in flags)
         self.transform = ds.transform
         self._blocks: OrderedDict[tuple[int, int], tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
@@ -141,6 +156,7 @@ class Colorization:
         if key in self._blocks:
             self._blocks.move_to_end(key)
             return self._blocks[key]
+        import rasterio
         from rasterio.errors import RasterioError
         from rasterio.windows import Window
 
@@ -148,13 +164,14 @@ class Colorization:
         top, left = block_row * BLOCK, block_col * BLOCK
         window = Window(left, top, min(BLOCK, ds.width - left), min(BLOCK, ds.height - top))
         try:
-            bands = ds.read(sorted(set(self.bands)), window=window)
-            valid = ds.dataset_mask(window=window).ravel() != 0 if self.masked else None
+            with rasterio.Env(GDAL_CACHEMAX=self.gdal_cache_bytes):  # (rasterio sets bytes: GDALSetCacheMax64)
+                bands = ds.read(sorted(set(self.bands)), window=window)
+                valid = ds.dataset_mask(window=window).ravel() != 0 if self.masked else None
         except RasterioError as exc:  # (a damaged file whose header reads: its pixels do not)
             raise InputError(f"{self.path}: its pixels at rows {top}-{top + window.height - 1}, columns {left}-{left + window.width - 1} "
                              f"cannot be read ({first_line(exc)}); nothing was written") from None  # fmt: skip
         rgb0 = np.zeros((bands.shape[1] * bands.shape[2], 4), np.uint8)
-        rgb0[:, :3] = (bands[[0, 0, 0] if len(bands) == 1 else [0, 1, 2]] >> self.shift).reshape(3, -1).T
+        rgb0[:, :3] = self.to_8_bits[bands[[0, 0, 0] if len(bands) == 1 else [0, 1, 2]]].reshape(3, -1).T
         values = rgb0.view(np.uint32).ravel()
         self._blocks[key] = (values, valid)
         self._cached_bytes += values.nbytes + (valid.nbytes if valid is not None else 0)
@@ -164,10 +181,35 @@ class Colorization:
         return values, valid
 
 
+def _nbits(image_structure: dict, type_bits: int) -> int:
+    """A band's real bit depth: GDAL's NBITS (IMAGE_STRUCTURE metadata) where it gives a sane one, else ``type_bits``."""
+    nbits = image_structure.get("NBITS", "")
+    return int(nbits) if nbits.isdigit() and 1 <= int(nbits) <= type_bits else type_bits
+
+
+def _levels_8_bits(nbits: int, type_bits: int) -> np.ndarray:
+    """The 8-bit level of each value 0 .. 2**type_bits - 1 of ``nbits``-bit data, a look-up table: its
+    top 8 bits, or under 8 bits stretched to 0-255; values past the n-bit range are 255."""
+    values = np.minimum(np.arange(2**type_bits), 2**nbits - 1)
+    return (values >> (nbits - 8) if nbits >= 8 else values * 255 // (2**nbits - 1)).astype(np.uint8)
+
+
+def _gdal_cache_bytes(ds) -> int:
+    """``GDAL_CACHE_BYTES``, or more where the raster's own blocks are wider than a ``BLOCK`` (strips,
+    often of one row): twice the bytes of those under one row of ``BLOCK``s, which every block along
+    the row decodes whole else (16384 x 2048 pixels of deflate strips, 32 blocks: 1.3 s in 16 MiB or
+    in exactly those bytes, 0.2 s in 1.5 times them or in GDAL's default 5% of the RAM)."""
+    block_height, block_width = ds.block_shapes[0]
+    if block_width <= BLOCK:
+        return GDAL_CACHE_BYTES
+    rows = (-(-BLOCK // block_height) + 1) * block_height  # (a BLOCK's rows may start inside a strip)
+    return max(GDAL_CACHE_BYTES, 2 * rows * ds.width * ds.count * np.dtype(ds.dtypes[0]).itemsize)
+
+
 def _crs_label(crs) -> str:
     """A pyproj CRS as errors name it: 'EPSG:n (its name)' where pyproj finds its code, else its name."""
     code = crs.to_epsg()
     return f"EPSG:{code} ({crs.name})" if code else crs.name
 
 
-__all__ = ["BLOCK", "CACHE_BYTES", "Colorization", "rasterio_module"]
+__all__ = ["BLOCK", "CACHE_BYTES", "GDAL_CACHE_BYTES", "Colorization", "rasterio_module"]
