@@ -35,8 +35,13 @@ from .octree_dir import FORMAT_NAME, FORMAT_VERSION_WORDS, FORMAT_VERSIONS, POIN
 ARENA_CHUNK = 4096  # points per arena slot (a node spans ceil(count / ARENA_CHUNK) slots)
 # selections a frame with a load filter (hidden classes, a read filter) makes at most: each weighs
 # the nodes the last one loaded (a progressive octree: the chunks it filtered) by their kept
-# points (half the points left out: the budget's unknown part halves a round)
+# points, the others by the share their nearest loaded ancestor kept (``kept_shares``); the last
+# weighs those whole, so what it loads keeps within the budget whatever they keep
 KEPT_ROUNDS = 8
+#: The least share of its points a node not yet loaded is taken to keep (``kept_shares``): a
+#: round loads at most 1 / MIN_KEPT_SHARE times the budget it has left, however little the
+#: nodes above kept (a subtree of hidden points is not read whole for a guess of nothing kept)
+MIN_KEPT_SHARE = 0.25
 #: Node boxes are widened by this share of the octree's cube before they are tested against a
 #: region: writers choose cubes before rounding positions to their grid, so a point may lie a
 #: step outside its box
@@ -138,6 +143,26 @@ def select_nodes(rows, box_min, box_size, counts, costs, meets, children, width,
             hn += 1
             _heap_place(hp, hi, hn, hn - 1, s, ch)  # push: into the new hole at the end
     return k, total
+
+
+@njit(cache=True)
+def kept_shares(kept, whole, parent):
+    """Per node, the share of its points a load filter is taken to keep: ``kept[n] / whole[n]``
+    (of its points filtered so far) where ``whole[n]`` > 0, else that of its nearest ancestor
+    with one (classes mix much alike in a node and its children, which cover the same ground),
+    else 1; at least MIN_KEPT_SHARE. ``parent``: each node's, -1 for the root (in any order)."""
+    share = np.full(parent.shape[0], -1.0)
+    for i in range(parent.shape[0]):
+        top = i  # the nearest node from i up whose share is set or known
+        while share[top] < 0 and whole[top] == 0 and parent[top] >= 0:
+            top = parent[top]
+        if share[top] < 0:
+            share[top] = max(kept[top] / whole[top], MIN_KEPT_SHARE) if whole[top] > 0 else 1.0
+        j = i
+        while share[j] < 0:  # the nodes between take its share
+            share[j] = share[top]
+            j = parent[j]
+    return share
 
 
 @njit(inline="always")
@@ -356,18 +381,24 @@ class Arena:
         self.resident.clear()
         self.keep = keep
 
-    def kept_counts(self, counts: np.ndarray, keep: PointFilter | None) -> np.ndarray:
+    def kept_counts(self, counts: np.ndarray, keep: PointFilter | None, parent: np.ndarray | None) -> np.ndarray:
         """The nodes' ``counts`` as a selection through the load filter ``keep`` should weigh
-        them: a node resident through it counts the points it kept, the others their whole
-        counts (what they keep is known once loaded)."""
+        them: a node resident through it counts the points it kept; the others, given
+        ``parent`` (each node's, -1 for the root), their counts times the share their nearest
+        resident ancestor kept (``kept_shares``), else their whole counts (what they keep is
+        known once loaded: no more than that)."""
         if keep is None or keep != self.keep or not self.resident:
             return counts
         nodes = np.fromiter(self.resident, np.int64, len(self.resident))
         slot_lists = list(self.resident.values())
         owner = np.repeat(np.arange(len(nodes)), [len(s) for s in slot_lists])
-        kept = np.bincount(owner, self.batches["count"][np.concatenate(slot_lists)], minlength=len(nodes))
+        kept = np.bincount(owner, self.batches["count"][np.concatenate(slot_lists)], minlength=len(nodes)).astype(np.int64)
         out = counts.copy()
-        out[nodes] = kept.astype(np.int64)
+        if parent is not None:
+            kept_of, whole = np.zeros_like(counts), np.zeros_like(counts)
+            kept_of[nodes], whole[nodes] = kept, counts[nodes]
+            out = np.ceil(counts * kept_shares(kept_of, whole, parent)).astype(np.int64)
+        out[nodes] = kept
         return out
 
     def _load(self, nd: int, cloud: OctreeCloud, slots: np.ndarray, count: int) -> int:
@@ -496,6 +527,7 @@ class OctreeCloud:
         self.box_min = np.clip(self.cube_min, lo, hi)
         self.box_size = np.clip(self.cube_min + self.cube_edge[:, None], lo, hi) - self.box_min
         self.children = np.full((len(self.keys), 8), -1, np.int64)
+        self.parent = np.full(len(self.keys), -1, np.int64)  # (-1: the root)
         if len(self.keys) > 1:
             kid = np.arange(1, len(self.keys))
             parents = np.searchsorted(self.keys, self.keys[1:] >> np.uint64(3))
@@ -504,6 +536,7 @@ class OctreeCloud:
             ):
                 raise InputError(f"{path or name}: octree hierarchy is broken (a node without its parent)")
             self.children[parents, (self.keys[1:] & np.uint64(7)).astype(np.int64)] = kid
+            self.parent[kid] = parents
         if len(self.keys) == 0 or self.keys[0] != 1:
             raise InputError(f"{path or name}: octree has no root node")
 
@@ -598,14 +631,15 @@ class OctreeCloud:
         return self._meets
 
     # -- Renderable (core/renderable.py)
-    def select_nodes(self, view: View, settings) -> tuple[np.ndarray, np.ndarray, int]:
+    def select_nodes(self, view: View, settings, estimated: bool = True) -> tuple[np.ndarray, np.ndarray, int]:
         """(node indices, projected cube sizes, point total) chosen for a view, of the nodes
         meeting the read filter; through a load filter (``load_filter``), the nodes resident
-        through it count the points they kept."""
+        through it count the points they kept, the others (``estimated``) the share their
+        nearest resident ancestor kept or (not ``estimated``) all theirs (``Arena.kept_counts``)."""
         out_ids = np.empty(len(self.keys), np.int64)
         out_size = np.empty(len(self.keys), np.float64)
         keep = self.load_filter(settings.hidden_classes)
-        costs = self.counts if self.arena is None else self.arena.kept_counts(self.counts, keep)
+        costs = self.counts if self.arena is None else self.arena.kept_counts(self.counts, keep, self.parent if estimated else None)
         k, total = select_nodes(
             view.rows, self.box_min, self.box_size, self.counts, costs, self.meeting_read_filter(), self.children, float(view.width), float(view.height),
             float(view.near), float(view.far), float(settings.lod_threshold_px), int(settings.point_budget), out_ids, out_size,
@@ -636,11 +670,15 @@ class OctreeCloud:
         """The frame's nodes made resident in the arena, one batch per arena slot."""
         check_classified(self.name, self.attribute_names, settings.hidden_classes)
         ids = self._resident_selection(view, settings)
-        for _ in range(KEPT_ROUNDS if self.load_filter(settings.hidden_classes) is not None else 0):
-            # the nodes just loaded count their kept points from now on, not their whole counts:
-            # the budget they leave takes deeper nodes, until a selection loads none
+        rounds = KEPT_ROUNDS if self.load_filter(settings.hidden_classes) is not None else 0
+        for r in range(rounds):
+            # the nodes just loaded count their kept points from now on, not their estimates:
+            # an estimate too low drops the nodes past the budget, one too high leaves budget to
+            # deeper nodes, until a selection loads none (every node it draws weighed by its
+            # kept points: within the budget). The last round weighs the nodes not loaded whole,
+            # so what it loads fits whatever they keep.
             loads = self.arena.loads
-            ids = self._resident_selection(view, settings)
+            ids = self._resident_selection(view, settings, estimated=r < rounds - 1)
             if self.arena.loads == loads:
                 break
         arena = self.arena
@@ -665,13 +703,13 @@ class OctreeCloud:
             spacing = finest_spacing(arena, sel.ids, owner, ids, self.children, self.counts, self._union_gain, self._node_spacing)
         return DrawList(arena, sel, len(self.nodes), nodes=ids, spacing=spacing)
 
-    def _resident_selection(self, view: View, settings) -> np.ndarray:
-        """The nodes a view selects (those with points), made resident in the arena (one made or
-        grown where they do not fit)."""
+    def _resident_selection(self, view: View, settings, estimated: bool = True) -> np.ndarray:
+        """The nodes a view selects (those with points; ``estimated`` as ``select_nodes``), made
+        resident in the arena (one made or grown where they do not fit)."""
         keep = self.load_filter(settings.hidden_classes)
         if self.arena is not None:
             self.arena.show(keep)  # (another filter: every node loaded again)
-        ids, _, total = self.select_nodes(view, settings)
+        ids, _, total = self.select_nodes(view, settings, estimated)
         ids = ids[self.nodes["count"][ids] > 0]
         if self.arena is None or self.arena.n_points < total:
             cap = max(total, min(int(settings.point_budget), self.n_points)) * 5 // 4 + 64 * ARENA_CHUNK

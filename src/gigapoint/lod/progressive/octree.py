@@ -69,7 +69,7 @@ from ...errors import GigapointError, InputError, check_timeout, check_whole
 from ...render.splats import weighted_median
 from ..build import valid_bounds
 from ..keys import CODE_BITS, morton_position, point_codes
-from ..store import KEPT_ROUNDS, list_chunks, select_octants
+from ..store import KEPT_ROUNDS, kept_shares, list_chunks, select_octants
 from . import kernels as K
 
 CHUNK = 2048  # entries a chunk holds (the paper: 1 000)
@@ -269,6 +269,10 @@ class KeptChunks:
         self.forms: tuple = ()  # the octree's attribute forms (held_dtype) the kept entries are held in
         self.slot_of = np.empty(0, np.int64)  # per octree chunk: the slot of its kept entries (-1: none, or none kept)
         self.filtered_at = np.empty(0, np.int64)  # per octree chunk: its batch_version when filtered (-1: not filtered)
+        # per octree chunk: the entries it kept and its batch_version then (-1: never filtered), known
+        # after its slot is taken back (``kept_counts``: what the selection weighs it by)
+        self.kept_entries = np.empty(0, np.int64)
+        self.counted_at = np.empty(0, np.int64)
         self.chunk_in = np.empty(0, np.int64)  # per slot: the octree chunk whose entries it holds (-1: free)
         self.drawn_at = np.empty(0, np.int64)  # per slot: the frame that last drew it
         self.frames = 0
@@ -278,7 +282,7 @@ class KeptChunks:
     def nbytes(self) -> int:
         """Bytes it holds: its pool and its records of chunks and slots (kept while nothing is
         hidden, so that hiding the same classes again filters nothing)."""
-        records = self.slot_of, self.filtered_at, self.chunk_in, self.drawn_at
+        records = self.slot_of, self.filtered_at, self.kept_entries, self.counted_at, self.chunk_in, self.drawn_at
         return sum(a.nbytes for a in records) + (sum(self.pool.memory().values()) if self.pool is not None else 0)
 
     def slots(self, source: Pool, chunks: np.ndarray, hidden: tuple[int, ...]) -> np.ndarray:
@@ -286,13 +290,15 @@ class KeptChunks:
         entries of ``hidden`` classes, filtered where it is not yet; -1 where none is kept."""
         forms = self._forms_of(source)
         if hidden != self.hidden or forms != self.forms:  # everything filtered again
-            self.slot_of[:], self.filtered_at[:], self.chunk_in[:] = -1, -1, -1
+            self.slot_of[:], self.filtered_at[:], self.counted_at[:], self.chunk_in[:] = -1, -1, -1, -1
             self.hidden = hidden
             if forms != self.forms:  # held otherwise (widened, packed once loaded): a pool in the new forms
                 self.pool, self.forms = None, forms
                 self.chunk_in = self.drawn_at = np.empty(0, np.int64)
         self.slot_of = _extended(self.slot_of, source.n_chunks, -1)
         self.filtered_at = _extended(self.filtered_at, source.n_chunks, -1)
+        self.kept_entries = _extended(self.kept_entries, source.n_chunks, 0)
+        self.counted_at = _extended(self.counted_at, source.n_chunks, -1)
         stale = chunks[self.filtered_at[chunks] != source.batch_version[chunks]]
         if len(stale) or self.pool is None:
             self._filter(source, stale, chunks)
@@ -301,19 +307,19 @@ class KeptChunks:
         self.frames += 1
         return out
 
-    def kept_counts(self, source: Pool, hidden: tuple[int, ...]) -> np.ndarray:
-        """The entries of each of the octree's chunks (of its pool ``source``) as a selection
-        hiding ``hidden`` should weigh them: a chunk filtered since it was last written counts
-        the entries it kept, the others all theirs (what they keep is known once filtered)."""
+    def kept_counts(self, source: Pool, hidden: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """(the entries of each of the octree's chunks (of its pool ``source``) as a selection
+        hiding ``hidden`` knows them, which chunks it knows): a chunk filtered since it was last
+        written counts the entries it kept (its slot taken back since or not), the others all
+        theirs (what they keep is known once filtered)."""
         counts = source.batches["count"].astype(np.int64)
+        known = np.zeros(len(counts), bool)
         if hidden != self.hidden or self._forms_of(source) != self.forms:  # (the next ``slots`` filters every chunk again)
-            return counts
-        n = min(len(self.filtered_at), source.n_chunks)
-        known = np.flatnonzero(self.filtered_at[:n] == source.batch_version[:n])
-        if len(known):
-            slot = self.slot_of[known]
-            counts[known] = np.where(slot >= 0, self.pool.batches["count"][np.maximum(slot, 0)], 0)
-        return counts
+            return counts, known
+        n = min(len(self.counted_at), source.n_chunks)
+        known[:n] = self.counted_at[:n] == source.batch_version[:n]
+        counts[:n][known[:n]] = self.kept_entries[:n][known[:n]]
+        return counts, known
 
     @staticmethod
     def _forms_of(source: Pool) -> tuple:
@@ -332,6 +338,7 @@ class KeptChunks:
         keep = ~np.isin(source.attributes.at("classification", entries), self.hidden)
         kept = np.bincount(np.repeat(np.arange(len(stale)), counts)[keep], minlength=len(stale))
         self.filtered += len(stale)
+        self.kept_entries[stale], self.counted_at[stale] = kept, source.batch_version[stale]
         filled, n_kept = stale[kept > 0], kept[kept > 0]
         slots = self._room(len(filled), drawn, source)
         self.filtered_at[stale] = source.batch_version[stale]
@@ -1665,16 +1672,20 @@ class ProgressiveOctree:
             box_size = np.where(has, np.minimum(self.point_max[:n] + pad, cube_max), cube_max) - box_min
         sample = self.grid_sample[:n]
         sample = np.where(sample > 0, np.minimum(self.count[:n], -(-sample // pool.chunk) * pool.chunk), 0)  # whole chunks are drawn
-        for _ in range(1 + (KEPT_ROUNDS if hidden else 0)):
-            costs = self._kept_costs(hidden, sample) if hidden else (self.count[:n], self.list_count, sample)
+        rounds = 1 + (KEPT_ROUNDS if hidden else 0)
+        for r in range(rounds):
+            # the last round weighs the chunks not filtered whole: what it filters fits whatever they keep
+            costs = self._kept_costs(hidden, sample, estimated=r < rounds - 1) if hidden else (self.count[:n], self.list_count, sample)
             lists, sampled = self._drawn_lists(view, settings, box_min, box_size, sample, costs)
             node = lists // K.LISTS
             entries = np.where(sampled[node], sample[node], self.list_count[lists])  # a leaf drawn as its sample: its first chunks
             chunks, chunk_list = self._list_chunks(lists, entries)
             if not hidden:
                 break
-            # the chunks filtered now count their kept entries from now on, not all theirs: the
-            # budget they leave takes deeper octants, until a selection filters no chunk
+            # the chunks filtered now count their kept entries from now on, not their estimates:
+            # an estimate too low drops the octants past the budget, one too high leaves budget
+            # to deeper octants, until a selection filters no chunk (every entry it draws weighed
+            # as kept: within the budget)
             filtered = self._kept.filtered
             slots = self._kept.slots(pool, chunks, hidden)
             if self._kept.filtered == filtered:
@@ -1726,13 +1737,23 @@ class ProgressiveOctree:
         k = list_chunks(self.first_chunk, self.pool.chunk_next, lists, chunks, owner, max_chunks)
         return chunks[:k], owner[:k]
 
-    def _kept_costs(self, hidden: tuple[int, ...], sample: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _kept_costs(self, hidden: tuple[int, ...], sample: np.ndarray, estimated: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(costs, list_costs, sample_costs) of store.select_octants while ``hidden`` classes are
         left out: the entries of each node, list and grid ``sample`` (its first chunks), less
-        those hidden in the chunks KeptChunks has filtered (KeptChunks.kept_counts: the others
-        count whole)."""
+        those hidden in the chunks KeptChunks has filtered (KeptChunks.kept_counts); the others
+        (``estimated``) less the share of theirs their node's filtered chunks, or its nearest
+        ancestor's, left out (store.kept_shares), or (not ``estimated``) none."""
         n, pool = self.n_nodes, self.pool
-        left_out = pool.batches["count"] - self._kept.kept_counts(pool, hidden)
+        counts = pool.batches["count"].astype(np.int64)
+        kept, known = self._kept.kept_counts(pool, hidden)
+        if estimated:
+            chunk_node = pool.chunk_node
+            ours = (chunk_node >= 0) & (chunk_node < n)  # (a chunk never written has none)
+            filtered = known & ours
+            shares = kept_shares(np.bincount(chunk_node[filtered], kept[filtered], n), np.bincount(chunk_node[filtered], counts[filtered], n), self.parent[:n])
+            guess = ours & ~known
+            kept[guess] = np.ceil(counts[guess] * shares[chunk_node[guess]])
+        left_out = counts - kept
         costs, list_costs, sample_costs = self.count[:n].copy(), self.list_count.copy(), sample.copy()
         nodes = np.unique(pool.chunk_node[left_out > 0])
         nodes = nodes[(nodes >= 0) & (nodes < n)]  # (a chunk given back keeps its last node: its lists are walked for nothing)

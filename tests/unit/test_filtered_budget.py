@@ -1,0 +1,114 @@
+"""The point budget through a load filter (hidden classes, a read filter): a node not yet loaded
+(a progressive octree's chunk not yet filtered) is weighed by the share of its points its
+nearest loaded ancestor kept (store.kept_shares), so a frame spends the budget close to full;
+the selections that follow, on the kept counts of what loaded, drop what passes the budget."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_hidden_classes import FIXED, TOP, counting_filters, two_classes
+
+import gigapoint as gp
+from gigapoint.lod import store
+from gigapoint.lod.progressive import ProgressiveOctree
+from gigapoint.lod.progressive import octree as progressive
+from gigapoint.lod.store import OctreeCloud
+
+LEFT = (0.0, 0.0, 50.0, 50.0)  # a clip box of the left half: the root keeps half its points, the node below it on the left all
+
+
+def half_hidden():
+    """two_classes(0.25) (80 000 points) with half of them class 7, everywhere."""
+    xyz, rgb, _ = two_classes(spacing=0.25)
+    classes = np.where(np.random.default_rng(1).permutation(len(xyz)) % 2 == 0, 2, 7).astype(np.uint8)
+    return xyz, rgb, classes
+
+
+@pytest.fixture(scope="module")
+def half(tmp_path_factory):
+    """half_hidden converted: a root of 15 601 points, two nodes of ~20 800 below it, leaves of ~2 850."""
+    path = tmp_path_factory.mktemp("half") / "tree"
+    xyz, rgb, classes = half_hidden()
+    gp.convert(gp.from_arrays(xyz, rgb, classification=classes, scale=0.01, colors="rgba"), path, max_leaf=2_000)
+    return path
+
+
+def grown_half() -> ProgressiveOctree:
+    tree = ProgressiveOctree("half", max_leaf=2_000)
+    tree.add(*half_hidden()[:2], classification=half_hidden()[2])
+    return tree
+
+
+def selections(monkeypatch) -> list[int]:
+    """The points each selection of a converted octree draws (the kept points of the nodes
+    ``_resident_selection`` makes resident), selection by selection."""
+    drawn, original = [], OctreeCloud._resident_selection
+
+    def recorded(self, view, settings, **kw):
+        ids = original(self, view, settings, **kw)
+        drawn.append(sum(int(self.arena.batches["count"][self.arena.resident[i]].sum()) for i in ids.tolist()))
+        return ids
+
+    monkeypatch.setattr(OctreeCloud, "_resident_selection", recorded)
+    return drawn
+
+
+def test_the_second_selection_already_spends_the_budget_in_full(half, monkeypatch):
+    drawn = selections(monkeypatch)
+    frame = gp.render_frame(gp.open(half), TOP, hidden_classes=(7,), point_budget=40_000, lod_threshold_px=0, **FIXED)
+    # the first knows nothing kept (the root and a node by their whole counts: 18 125 of theirs
+    # drawn); the second weighs the nodes below by the half the root kept: 40 000, all the
+    # budget, the third the same. (Weighed whole: 28 536, 34 285, 35 710 ... 37 156 in 9 selections)
+    assert drawn == [18_125, 40_000, 40_000]
+    assert frame.stats.points_processed == 40_000
+
+
+@pytest.mark.parametrize("budget", [20_000, 30_000, 40_000])
+@pytest.mark.parametrize("kind", ["converted", "progressive"])
+def test_the_budget_hidden_classes_leave_is_spent_close_to_full_and_never_passed(half, kind, budget):
+    tree = gp.open(half) if kind == "converted" else grown_half()
+    drawn = gp.render_frame(tree, TOP, hidden_classes=(7,), point_budget=budget, lod_threshold_px=0, **FIXED).stats.points_processed
+    # weighed whole, the nodes not yet loaded left most of it: 7 795, 18 125, 37 156 drawn
+    # (converted), 7 925, 7 925, 22 512 (progressive)
+    assert 0.9 * budget <= drawn <= budget
+
+
+def test_a_kept_share_guessed_too_low_drops_the_nodes_past_the_budget(half, monkeypatch):
+    drawn = selections(monkeypatch)
+    frame = gp.render_frame(gp.open(half, clip=LEFT), TOP, point_budget=25_000, lod_threshold_px=0, **FIXED)
+    # the root keeps half its points, so the node on the left is guessed to keep half its 20 752:
+    # loaded, it keeps all of them, root and node 28 562 past the budget: the next selection
+    # drops it again, the root alone within the budget
+    assert drawn == [7_810, 28_562, 7_810]
+    assert frame.stats.points_processed == 7_810
+
+
+@pytest.mark.parametrize("kind", ["converted", "progressive"])
+def test_the_last_selection_weighs_what_is_not_loaded_whole(half, monkeypatch, kind):
+    """Selections run out (one after the first here) while guesses still load nodes: the last
+    weighs those not loaded by all their points, so what it draws fits whatever they keep."""
+    monkeypatch.setattr(store, "KEPT_ROUNDS", 1)
+    monkeypatch.setattr(progressive, "KEPT_ROUNDS", 1)
+    if kind == "converted":
+        tree, options = gp.open(half, clip=LEFT), {}  # (guessed by the share the root kept, the left node would pass it: as above)
+    else:
+        xyz, rgb, classes = two_classes(0.25)  # class 2 on the left, 6 on the right: the root keeps half, its octants one or none
+        tree, options = ProgressiveOctree("sides", max_leaf=2_000), {"hidden_classes": (6,)}
+        tree.add(xyz, rgb, classification=classes)
+    frame = gp.render_frame(tree, TOP, point_budget=25_000, lod_threshold_px=0, **options, **FIXED)
+    assert frame.stats.points_processed <= 25_000
+
+
+def test_a_progressive_octree_knows_what_a_chunk_kept_once_its_slot_is_taken_back(monkeypatch):
+    tree = grown_half()
+    filtered = counting_filters(monkeypatch)
+    gp.render_frame(tree, TOP, hidden_classes=(7,), point_budget=40_000, lod_threshold_px=0, **FIXED)
+    kept, pool = tree._kept, tree.pool
+    chunks = np.intersect1d(np.flatnonzero(pool.chunk_node[: pool.n_chunks] == tree.root), np.concatenate(filtered))
+    # the root's voxels filtered by the first selection, their slots given to the leaves drawn since
+    assert len(chunks) == 4 and np.all(kept.slot_of[chunks] == -1)
+    counts, known = kept.kept_counts(pool, (7,))
+    entries = [np.arange(c * pool.chunk, c * pool.chunk + pool.batches["count"][c]) for c in chunks]
+    not_hidden = [int(np.count_nonzero(pool.attributes.at("classification", e) != 7)) for e in entries]
+    assert known[chunks].all() and counts[chunks].tolist() == not_hidden
