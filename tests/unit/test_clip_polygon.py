@@ -274,3 +274,67 @@ def test_a_folder_given_as_the_clip_polygon_is_said_to_be_one(cli, autzen_path, 
     rc, _, err = cli("convert", autzen_path, "-o", tmp_path / "x.laz", "--clip-polygon", tmp_path / "areas")
     assert rc != 0 and err.strip() == f"error: convert: --clip-polygon {tmp_path / 'areas'}: is a folder, not a clip polygon file (GeoJSON or WKT)"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["areas"]  # (was "no such file (nor WKT text ...)" of a folder that is there)
+
+
+def meet_reference(p, q, r, s) -> bool:
+    """Whether segments p..q and r..s share a point (written out: orientations, then the collinear cases)."""
+
+    def side(a, b, c):
+        cross = float((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+        return (cross > 0) - (cross < 0)
+
+    def on(a, b, c):
+        return min(a[0], b[0]) <= c[0] <= max(a[0], b[0]) and min(a[1], b[1]) <= c[1] <= max(a[1], b[1])
+
+    d1, d2, d3, d4 = side(r, s, p), side(r, s, q), side(p, q, r), side(p, q, s)
+    if d1 * d2 < 0 and d3 * d4 < 0:
+        return True
+    return (d1 == 0 and on(r, s, p)) or (d2 == 0 and on(r, s, q)) or (d3 == 0 and on(p, q, r)) or (d4 == 0 and on(p, q, s))
+
+
+@pytest.mark.parametrize(
+    ("ring", "edges"),
+    [
+        ([[0, 0], [10, 0], [0, 10], [10, 10]], (2, 4)),  # a bow tie: its two diagonals cross
+        ([[0, 0], [10, 0], [10, 10], [0, 10]], None),
+        (CONCAVE[0][:-1], None),
+        ([[0, 0], [10, 0], [10, 0], [10, 10], [0, 10], [0, 10]], None),  # points picked twice: no edge between them
+        ([[0, 0], [2, 0], [1, 1], [2, 2], [0, 2], [1, 1]], (2, 5)),  # a figure eight pinched at a vertex: it touches itself
+        ([[0, 0], [4, 0], [4, 4], [2, 0.0], [0, 4]], (1, 3)),  # a vertex on another edge
+        ([[637000.0, 4850000.0], [637000.5, 4850000.0], [637000.0, 4850000.5], [637000.5, 4850000.5]], (2, 4)),  # UTM-sized
+    ],
+)
+def test_crossing_edges_names_the_first_two_edges_that_meet(ring, edges):
+    from gigapoint.io.polygon import crossing_edges
+
+    assert crossing_edges(ring) == edges
+
+
+def test_crossing_edges_match_every_pair_compared():
+    from gigapoint.io.polygon import crossing_edges
+
+    rng = np.random.default_rng(3)
+    crossed = 0
+    for _ in range(300):
+        ring = rng.integers(0, 6, (int(rng.integers(4, 10)), 2)).astype(float)  # (a small lattice: many touching and collinear edges)
+        if (ring == np.roll(ring, -1, axis=0)).all(axis=1).any():
+            continue
+        n = len(ring)
+        pairs = [
+            (i + 1, j + 1) for i in range(n) for j in range(i + 2, n)
+            if not (i == 0 and j == n - 1) and meet_reference(ring[i], ring[(i + 1) % n], ring[j], ring[(j + 1) % n])
+        ]  # fmt: skip
+        assert crossing_edges(ring) == (min(pairs) if pairs else None), ring.tolist()
+        crossed += bool(pairs)
+    assert 50 < crossed < 250  # (both kinds met)
+    circle = [[637000 + 50 * np.cos(t), 4850000 + 50 * np.sin(t)] for t in np.linspace(0, 2 * np.pi, 20_000, endpoint=False)]
+    assert crossing_edges(circle) is None
+    circle[10_000], circle[10_001] = circle[10_001], circle[10_000]  # two neighbours swapped: a tiny bow tie
+    assert crossing_edges(circle) == (10_000, 10_002)
+
+
+def test_a_self_crossing_polygon_still_clips_by_the_even_odd_rule():
+    """Clipping (--clip-polygon on render, convert, ...) is well defined for a bow tie: both its triangles kept. Only what measures an area refuses it."""
+    bow_tie = clip_polygon_of("POLYGON ((0 0, 10 0, 0 10, 10 10, 0 0))", "test")
+    inside = bow_tie.inside(np.array([[5.0, 2.0, 0.0], [5.0, 8.0, 0.0], [2.0, 5.0, 0.0], [8.0, 5.0, 0.0]]))
+    assert inside.tolist() == [True, True, False, False]  # the lower and upper triangles, not the sides

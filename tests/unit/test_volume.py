@@ -287,6 +287,22 @@ def test_bad_inputs_are_one_line_errors(polygon, kwargs, message):
     assert "\n" not in str(error.value)
 
 
+def test_a_toe_crossing_itself_is_refused_naming_its_edges():
+    """A bow tie's shoelace area (its two triangles subtracted) and its pixels inside (the even-odd
+    rule: both triangles) disagree: refused before anything is read, in every polygon of several."""
+    bow_tie = {"type": "Polygon", "coordinates": [[[10, 10], [30, 10], [10, 30], [30, 30], [10, 10]]]}
+    why = "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it"
+    with pytest.raises(InputError) as error:
+        gp.volume(box_pile(), bow_tie, 0.5)
+    assert str(error.value) == f"the GeoJSON geometry: the polygon crosses itself (edges 2 and 4): {why}"
+    piles = {"type": "MultiPolygon", "coordinates": [square(0, 0, 5, 5)["coordinates"], bow_tie["coordinates"]]}
+    with pytest.raises(InputError, match=r"^the GeoJSON geometry: polygon 2 crosses itself \(edges 2 and 4\): "):
+        gp.volume(box_pile(), piles, 0.5)
+    holed = {"type": "Polygon", "coordinates": [*square(0, 0, 40, 40)["coordinates"], *bow_tie["coordinates"]]}
+    with pytest.raises(InputError, match=r"^the GeoJSON geometry: the polygon's hole 1 crosses itself \(edges 2 and 4\): "):
+        gp.volume(box_pile(), holed, 0.5)
+
+
 def test_a_toe_without_heights_says_why_and_how_to_mend_it():
     """Points 2 units apart and a 0.25 grid: the toe's pixels hold none, so no plane can be laid
     (the message named neither the grid nor a coarser one); a 3-unit grid finds the toe."""
@@ -313,6 +329,7 @@ def test_a_polygon_over_a_gap_in_the_data_holds_no_point():
         (("--clip-polygon", "toe.geojson", "--gsd", "0"), "--gsd must be a number > 0"),
         (("--clip-polygon", "toe.geojson", "--base", "top"), "--base must be 'plane', 'lowest' or an elevation"),
         (("--clip-polygon", "missing.geojson"), "no such file"),
+        (("--clip-polygon", "POLYGON ((636455 849225, 636535 849225, 636455 849260, 636535 849260, 636455 849225))"), "the polygon crosses itself (edges 2 and 4)"),
     ],
 )
 def test_cli_errors_are_one_line(cli, tmp_path, monkeypatch, autzen_path, args, message):
@@ -320,3 +337,14 @@ def test_cli_errors_are_one_line(cli, tmp_path, monkeypatch, autzen_path, args, 
     (tmp_path / "toe.geojson").write_text(json.dumps(square(*AUTZEN_BLOCK)))
     rc, out, err = cli("volume", autzen_path, *(args if "--gsd" in args else (*args, "--gsd", "2")))
     assert rc != 0 and message in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_render_and_open_still_clip_by_a_self_crossing_polygon(cli, autzen_path, tmp_path):
+    """Only volume refuses a bow tie: clipping by one is well defined (the even-odd rule), as before."""
+    x0, y0, x1, y1 = AUTZEN_BLOCK
+    bow_tie = f"POLYGON (({x0} {y0}, {x1} {y0}, {x0} {y1}, {x1} {y1}, {x0} {y0}))"
+    xyz = gp.open(autzen_path, clip_polygon=bow_tie).positions()
+    u, v = (xyz[:, 0] - x0) / (x1 - x0), (xyz[:, 1] - y0) / (y1 - y0)
+    assert len(xyz) > 100 and ((v - u) * (v - (1 - u)) >= -1e-9).all()  # in the lower or the upper triangle, none beside them
+    rc, _, err = cli("render", autzen_path, "--clip-polygon", bow_tie, "-o", tmp_path / "bow.png", "-W", 64, "-H", 48)
+    assert rc == 0 and (tmp_path / "bow.png").is_file(), err

@@ -45,7 +45,7 @@ import numpy as np
 
 from ..errors import EmptyCloudError, InputError, check_switch, is_real
 from ..io.filters import point_filter
-from ..io.polygon import ClipPolygon, clip_polygon_of
+from ..io.polygon import ClipPolygon, check_simple, clip_polygon_of
 from ..lod.reader import cloud_crs, cloud_units
 from ..render import Camera
 from ..render.colors import ramp_image
@@ -329,7 +329,7 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
     (needs scipy), N only those within N pixels of a point, None none. Returns a ``Volume``
     (``piles``, ``fill``, ``cut``, ``net``, ``area``, ``summary()``, ``write_dsm()``,
     ``write_geotiff()``, ``write_preview()``). No polygon, a
-    polygon outside the data or with no point inside are one-line InputErrors."""
+    polygon crossing itself, outside the data or with no point inside are one-line InputErrors."""
     if clip_polygon is None:
         raise InputError("volume: clip_polygon is needed: the piles' boundaries (a GeoJSON or WKT polygon file, or WKT text)")
     if not (is_real(gsd) and gsd > 0):
@@ -338,6 +338,7 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
     if fill_nodata is not None and fill_nodata != "all":
         check_max_distance("volume: fill_nodata", fill_nodata)
     toe = clip_polygon_of(clip_polygon, f"volume: clip_polygon={clip_polygon!r}")
+    check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it")
     margin = MARGIN_PIXELS * gsd
     box = [*(toe.lo - margin), *(toe.hi + margin)]  # read-time: only the points near the piles
     filters = {"classes": classes, "drop_classes": drop_classes, "clip": box}
