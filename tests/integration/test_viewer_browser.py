@@ -294,6 +294,25 @@ def test_c_closes_the_measurement_into_a_polygon_and_volume_computes_the_volume_
     assert f"fill {expected.fill:,.2f} cubic units" in text and "base plane through the toe" in text and note in text, text
 
 
+def test_a_polygon_crossing_itself_shows_why_instead_of_an_area_and_offers_no_volume(page, server):
+    n = frame_no(page)
+    page.get_by_role("button", name="top").click()
+    page.wait_for_function("() => window.gigapoint.camera.pitch > 89", timeout=30_000)
+    wait_full_frame(page, n)
+    b = canvas_box(page)
+    page.locator("#canvas").focus()
+    page.keyboard.press("m")
+    for k, (fx, fy) in enumerate(((0.3, 0.3), (0.7, 0.3), (0.3, 0.7), (0.7, 0.7)), start=1):  # a bow tie: its 2nd and 4th sides cross
+        page.mouse.click(b["x"] + b["width"] * fx, b["y"] + b["height"] * fy)
+        page.wait_for_function("(k) => document.getElementById('measureinfo').dataset.points === String(k)", arg=k, timeout=30_000)
+    page.keyboard.press("c")
+    page.wait_for_function("() => document.getElementById('measureinfo').dataset.closed === 'true'", timeout=30_000)
+    crossing = "the polygon crosses itself (edges 2 and 4): no area or volume; move a point so that no two edges cross"
+    text = page.locator("#measureinfo").inner_text()
+    assert crossing in text and "area" not in text.replace(crossing, ""), text  # the message, not a wrong area
+    assert page.locator("#btn-volume").is_disabled() and page.locator("#volume-info").inner_text() == crossing
+
+
 def test_measure_in_feet_says_so_and_survives_a_lost_connection(browser, autzen_path):
     """autzen_trim.laz is in feet: the HUD writes "ft" by each number and the totals in metres
     too; after the connection drops, the page's new session has the measurement again."""

@@ -130,6 +130,7 @@ def test_closing_the_measurement_around_a_pile_gives_its_area_and_volume(client)
         assert not yellow(jpeg_pixels(jpeg), closing)  # open again: a polyline
     assert result["id"] == started["job"] and "error" not in result, result
     assert result["gsd"] == 0.25 and result["gsd_note"] == "a grid of 0.25, the points' mean spacing: the polygon 120 pixels across"
+    assert result["note"] == ""  # all the box's points read
     assert abs(result["fill"] - 600.0) < grid_error(0.25) and result["fill"] == pytest.approx(600.0, rel=0.01)
     assert result["cut"] == pytest.approx(0.0, abs=0.5) and result["net"] == pytest.approx(result["fill"] - result["cut"])
     assert result["base"]["type"] == "plane" and result["base"]["z"] == pytest.approx(GROUND_Z, abs=1e-3)
@@ -212,3 +213,53 @@ def test_an_octree_gives_the_volume_of_its_nodes_points_and_hidden_classes_are_l
     expected = gigapoint.volume(pile(), VT.toe(TOE), 0.25)
     assert whole["fill"] == pytest.approx(expected.fill, rel=1e-9) and abs(whole["fill"] - 600.0) < grid_error(0.25)
     assert hidden["fill"] == pytest.approx(0.0, abs=1e-6) and hidden["height"] == pytest.approx(0.0, abs=1e-3)  # the ground only
+
+
+BOW_TIE = [[15.0, 15.0, GROUND_Z], [45.0, 15.0, GROUND_Z], [15.0, 35.0, GROUND_Z], [45.0, 35.0, GROUND_Z]]  # its 2nd and 4th edges cross
+CROSSING = "the polygon crosses itself (edges 2 and 4): no area or volume; move a point so that no two edges cross"
+
+
+def test_a_polygon_crossing_itself_has_no_area_and_its_volume_is_refused(client):
+    """A bow tie's shoelace area (600 - 600 = 0 here) is no area, and gp.volume's pixels inside
+    it (the even-odd rule) are both triangles: the reply says so instead, the volume is refused."""
+    s = M.summary(BOW_TIE, FEET, closed=True)
+    assert s["crossing"] == CROSSING and s["area"] is None and s["perimeter"] == pytest.approx(60 + 2 * math.hypot(30, 20))
+    assert M.summary(TOE, FEET, closed=True)["crossing"] is None and M.summary(BOW_TIE, FEET)["crossing"] is None  # (open: a polyline may cross)
+    c, _ = client
+    with c.websocket_connect("/ws?w=120&h=90") as ws:
+        receive(ws, reply("hello"))
+        ws.send_json({"type": "measure", "action": "restore", "points": BOW_TIE, "closed": True})
+        m = receive(ws, reply("measure"))
+        assert m["closed"] is True and m["area"] is None and m["crossing"] == CROSSING
+        ws.send_json({"type": "volume", "base": "plane"})
+        assert receive(ws, reply("error"))["message"] == f"volume: {CROSSING}"
+        ws.send_json({"type": "measure", "action": "undo"})  # a triangle: an area again
+        m = receive(ws, reply("measure"))
+        assert m["crossing"] is None and m["area"] == 300.0
+
+
+def test_a_box_over_the_cap_is_read_thinned_and_its_volume_stays_near_the_whole_ones(client, cloud, monkeypatch):
+    """The polygon's box holds 124 x 84 = 10,416 points: above a cap of 3,000 every 4th is read
+    (never more than the cap held), the grid no finer than their spacing, and the result says so;
+    the volume within the coarser grid's error of the whole box's."""
+    box_points, seen, step = VT.points_in_box(cloud, TOE, 0.25, (), 3_000)
+    assert (seen, step, box_points.n_points) == (10_416, 4, 2_604)
+    whole, seen, step = VT.points_in_box(cloud, TOE, 0.25, (), 20_000)
+    assert (seen, step, whole.n_points) == (10_416, 1, 10_416)
+    every_4th = np.concatenate([c.xyz for c in cloud.chunks()])
+    every_4th = every_4th[np.all((every_4th[:, :2] >= [14.5, 14.5]) & (every_4th[:, :2] <= [45.5, 35.5]), axis=1)][::4]  # of the box's, in the cloud's order
+    assert sorted(map(tuple, box_points.positions().round(3))) == sorted(map(tuple, every_4th.round(3)))
+    monkeypatch.setattr(VT, "MAX_POINTS", 3_000)
+    c, _ = client
+    with c.websocket_connect("/ws?w=120&h=90") as ws:
+        receive(ws, reply("hello"))
+        close_toe(ws)
+        ws.send_json({"type": "volume", "gsd": 0.25})
+        assert receive(ws, reply("volume"))["gsd"] == 0.25  # (asked for; coarsened once the points are read)
+        result = receive(ws, reply("volume_result"))
+    assert "error" not in result, result
+    spacing = VT.point_spacing(box_points.bounds, box_points.n_points)  # 4 times fewer points: about twice as far apart
+    assert result["gsd"] == float(f"{spacing:.2g}") == 0.49 and result["gsd_note"] == "a grid of 0.49, the points' mean spacing: the polygon 61 pixels across"
+    assert result["note"] == "on thinned points: 1 in 4 of the 10,416 in the polygon's box (at most 3,000 kept); draw a smaller polygon for all"
+    uncapped = gigapoint.volume(cloud, VT.toe(TOE), 0.25).fill
+    assert abs(result["fill"] - uncapped) < grid_error(0.49) and abs(result["fill"] - 600.0) < grid_error(0.49), (result["fill"], uncapped)

@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from ..io import crs_units
+from ..io.polygon import crossing_problem
 from ..survey.volume import ring_area
 
 MAX_POINTS = 1000
@@ -29,7 +30,10 @@ def summary(points, units: dict | None = None, closed: bool = False) -> dict:
 
     ``closed`` (3 points or more): the polyline closed into a polygon, its last segment back to
     the first point; ``area`` is then its horizontal area (shoelace, in the horizontal unit
-    squared) and ``perimeter`` its horizontal length (None both where open).
+    squared) and ``perimeter`` its horizontal length (None both where open). A closed polygon
+    whose edges cross (a bow tie) has no area: the shoelace's would be wrong, and gp.volume's
+    pixels inside (the even-odd rule) another shape; ``crossing`` then says so (None otherwise),
+    the area None, and volume_tool refuses it.
 
     ``units`` (crs_units of the cloud's CRS, carried in the reply): heights in another length
     unit than x and y (a compound CRS: metres, heights in US feet) count in the 3D length in
@@ -50,10 +54,12 @@ def summary(points, units: dict | None = None, closed: bool = False) -> dict:
 
     segments = [lengths(a, b, c) for a, b, c in zip(length, horizontal, vertical)]
     total = lengths(length.sum(), horizontal.sum(), vertical.sum())
+    crossing = crossing_problem(p[:, :2]) if closed else None
     polygon = closed and not angular
     return {
         "points": p.tolist(), "segments": segments, "total": total, "units": units, "closed": closed,
-        "area": ring_area(p[:, :2]) if polygon else None, "perimeter": total["horizontal"] if polygon else None,
+        "area": ring_area(p[:, :2]) if polygon and not crossing else None, "perimeter": total["horizontal"] if polygon else None,
+        "crossing": crossing and f"{crossing}: no area or volume; move a point so that no two edges cross",
     }  # fmt: skip
 
 

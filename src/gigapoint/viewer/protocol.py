@@ -112,7 +112,8 @@ MESSAGE_TYPES = {
     # polyline closed into a polygon (its last segment back to the first point; restore's
     # "closed": true closes what it restores), or open again (an undo below 3 points opens it);
     # every reply has "closed", "area" (the polygon's horizontal area, in the horizontal unit
-    # squared) and "perimeter" (its horizontal length), both null where open or in degrees.
+    # squared) and "perimeter" (its horizontal length), both null where open or in degrees, and
+    # "crossing": null, or for a polygon crossing itself the line saying which edges (area null).
     "measure",
     # the stockpile volume inside the closed measurement (viewer/volume_tool.py, gp.volume of the
     # cloud shown, but the classes hidden): base ("plane", the default | "lowest" | an elevation),
@@ -120,8 +121,10 @@ MESSAGE_TYPES = {
     # across); id echoed. Reply {"type": "volume", "id", "job", "computing": true, "gsd", "base"},
     # then, computed off the render loop, {"type": "volume_result", "id": job, gp.volume's pile
     # figures (fill, cut, net, area, polygon_area, highest, height, base: {type, z, slope,
-    # boundary_rms}, filled, empty, pixels), "gsd", "gsd_note", "units": {length, area, volume}
-    # symbols} or {"type": "volume_result", "id", "error": one line}. A change of the measurement
+    # boundary_rms}, filled, empty, pixels), "gsd", "gsd_note", "note" (thinned points: a box of
+    # over volume_tool.MAX_POINTS read every k-th, the gsd then no finer than their spacing; ""
+    # none), "units": {length, area, volume} symbols} or {"type": "volume_result", "id", "error":
+    # one line}. A polygon crossing itself is refused (an error). A change of the measurement
     # drops what is on its way.
     "volume",
     # the section tool (viewer/section_tool.py): action: add (x, y: the point picked there, as

@@ -14,10 +14,12 @@ from __future__ import annotations
 
 import base64
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 
+from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
 from ..errors import GigapointError
 from ..io.http import LocalFile
@@ -71,18 +73,42 @@ def section_of(cloud, line, width) -> Section:
     raise GigapointError(f"{cloud.name}: sections need the points in memory or an LOD octree; this cloud is neither (view the point files instead)")
 
 
+def every_kth(chunks: Iterable[PointChunk], limit: int, total: int | None = None) -> tuple[list[PointChunk], int, int]:
+    """(the rows of ``chunks`` thinned to every k-th, the first included: at most ``limit``; the
+    rows seen; k). ``total``, the rows there are where known: k = total / limit (rounded up) from
+    the start. Without it k starts at 1 and doubles whenever more than ``limit`` rows are held
+    (every other row held is dropped): a stream of any length is read holding at most ``limit``
+    rows and a chunk."""
+    step = 1 if total is None else max(1, -(-total // limit))
+    held: list[tuple[int, PointChunk]] = []  # (its first row's number in the stream, a chunk's rows numbered a multiple of step)
+    n_held = seen = 0
+
+    def halved(first: int, part: PointChunk) -> tuple[int, PointChunk]:
+        """Of ``part``'s rows (every step/2-th from row ``first``) those numbered a multiple of step."""
+        odd = first % step != 0
+        return first + odd * step // 2, part.subset(np.arange(int(odd), len(part), 2))
+
+    for chunk in chunks:
+        first = -(-seen // step) * step  # the chunk's first row numbered a multiple of step
+        part = chunk if step == 1 else chunk.subset(np.arange(first - seen, len(chunk), step))
+        seen += len(chunk)
+        if len(part):
+            held.append((first, part))
+            n_held += len(part)
+        while n_held > limit:
+            step *= 2
+            held = [(first, part) for first, part in (halved(*kept) for kept in held) if len(part)]
+            n_held = sum(len(part) for _, part in held)
+    return [part for _, part in held], seen, step
+
+
 def capped(cut: Section, limit: int) -> tuple[Section, str]:
     """``cut`` with at most ``limit`` points (every k-th row of the corridor: the image and the CSV
     stay quick to make), and the line that says so ("" when nothing was left out)."""
     n = cut.cloud.n_points
     if n <= limit:
         return cut, ""
-    step = -(-n // limit)
-    kept, start = [], 0
-    for chunk in cut.cloud.chunks():
-        rows = np.arange(start, start + len(chunk))
-        kept.append(chunk.subset(rows % step == 0))
-        start += len(chunk)
+    kept, _, step = every_kth(cut.cloud.chunks(), limit, total=n)
     thinned = build_cloud(kept, name=cut.cloud.name, colors="rgba")
     return Section(thinned, cut.line, cut.width), f"{n:,} points in the corridor: 1 point in {step} shown (at most {limit:,}); narrow or shorten it for all"
 

@@ -623,6 +623,9 @@ class Session:
         values = VT.parse(msg)
         if not self.measure_closed:
             raise P.ProtocolError("volume: close the measurement into a polygon first (3 points or more, C)")
+        crossing = self._measured()["crossing"]
+        if crossing:  # (the panel shows it in place of the area, its volume button off)
+            raise P.ProtocolError(f"volume: {crossing}")
         points = [list(p) for p in self.measure]
         if "gsd" in values:
             gsd, note = values["gsd"], f"a grid of {values['gsd']:g}"
@@ -641,10 +644,11 @@ class Session:
             if job != self.volume_job or self.closed:
                 return  # the measurement changed again while an older one was computed
             try:
-                cloud = VT.points_in_box(self.core.cloud, points, gsd, hidden_classes)
+                cloud, seen, step = VT.points_in_box(self.core.cloud, points, gsd, hidden_classes, VT.MAX_POINTS)
+                gsd, note, thinned = VT.thinned_grid(points, cloud, seen, step, gsd, note)
                 with RENDER_LOCK:
                     measured = volume(cloud, VT.toe(points), gsd, base)
-                result = VT.summary(measured, self.core.units, note)
+                result = VT.summary(measured, self.core.units, note, thinned)
             except GigapointError as exc:  # no point inside, an octree without source files: said in the panel
                 result = {"error": str(exc)[:500]}
             except Exception as exc:  # a bug: this volume fails (logged), the tab goes on

@@ -8,22 +8,33 @@ level, lod/query.py: they hold every point once, which ``gp.volume`` itself refu
 an octree), then ``gp.volume`` draws its surface model of them under the lock (the renderer's
 scratch buffers are shared with the frames'). Classes hidden in the Classes panel are left out:
 the volume is of what the view shows.
+
+A box holding more than MAX_POINTS points (a polygon drawn round much of a large cloud) is
+thinned to every k-th point as it is read (``section_tool.every_kth``, the section tool's cap: at
+most MAX_POINTS held at once), the grid then no finer than the thinned points' spacing, and the result's
+``note`` says so. A polygon crossing itself is refused (measure.summary's ``crossing``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 
+from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
-from ..errors import EmptyCloudError, GigapointError, InputError
-from ..io.filters import point_filter
-from ..lod.query import is_octree, kept_points, octree_path_kept
+from ..errors import GigapointError, InputError
+from ..io.filters import PointFilter, point_filter
+from ..lod.query import is_octree, points_meeting
+from ..lod.reader import open_octree
 from ..lod.voxel_octree import VoxelOctree
-from ..survey.change import read_survey, unit_names
+from ..survey.change import unit_names
 from ..survey.volume import BASES, MARGIN_PIXELS, Volume
 from . import protocol as P
-from .section_tool import own_reader_source
+from .section_tool import MAX_POINTS as SECTION_MAX_POINTS
+from .section_tool import every_kth, own_reader_source
 
+MAX_POINTS = SECTION_MAX_POINTS  # a polygon's box holding more is read thinned to every k-th point
 GRID_PIXELS = 500  # the grid offered first: the polygon's larger side this many pixels across
 MAX_GRID_PIXELS = 4096  # a finer gsd asked for is refused (the grid's memory, the TIN's time)
 POLYGON = "the measured polygon"  # how gp.volume's messages name it
@@ -86,32 +97,54 @@ def toe(points) -> dict:
     return {"type": "Polygon", "coordinates": [[p[:2] for p in [*points, points[0]]]], "source": POLYGON}
 
 
-def points_in_box(cloud, points, gsd: float, drop_classes) -> PointCloud:
-    """The points of ``cloud`` (what the viewer shows) in the box ``gp.volume`` reads around the
-    polygon, but those of ``drop_classes``: a cloud in memory's, an octree's nodes meeting it (a
-    COPC file or EPT dataset through a reader of its own); a one-line GigapointError for any other cloud."""
+def points_in_box(cloud, points, gsd: float, drop_classes, limit: int) -> tuple[PointCloud, int, int]:
+    """(the points of ``cloud``, what the viewer shows, in the box ``gp.volume`` reads around the
+    polygon, but those of ``drop_classes``: at most ``limit``, every k-th where there are more;
+    the points in the box; k). A cloud in memory's, an octree's nodes meeting the box (a COPC file
+    or EPT dataset through a reader of its own); a one-line GigapointError for any other cloud."""
     xy = np.asarray(points, np.float64)[:, :2]
     margin = MARGIN_PIXELS * gsd
     box = [*(xy.min(axis=0) - margin), *(xy.max(axis=0) + margin)]
-    filters = {"drop_classes": list(drop_classes) or None, "clip": box}
-    keep = point_filter(**filters, where="volume")
-    try:
-        if isinstance(cloud, PointCloud):
-            return read_survey(cloud, filters, "volume")
-        if isinstance(cloud, VoxelOctree):  # (the frames' reads change its pages and nodes as they go)
-            kept, _ = octree_path_kept(own_reader_source(cloud), keep, "the polygon's box", "measure the point files, or wait for the octree")
-        elif is_octree(cloud):
-            kept = kept_points(cloud, keep, cloud.name, "the polygon's box")
-        else:
-            raise GigapointError(f"{cloud.name}: volumes need the points in memory or an LOD octree; this cloud is neither (view the point files instead)")
-    except EmptyCloudError:
+    keep = point_filter(drop_classes=list(drop_classes) or None, clip=box, where="volume")
+    kept, seen, step = every_kth(_kept_chunks(cloud, keep), limit)  # (never the whole box at once)
+    if not kept:
         (x0, y0, x1, y1) = box
-        raise InputError(f"{POLYGON}: no point of {cloud.name} lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}") from None
-    return build_cloud(kept, name=cloud.name, colors="rgba")
+        raise InputError(f"{POLYGON}: no point of {cloud.name} lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}")
+    return build_cloud(kept, name=cloud.name, colors="rgba"), seen, step
 
 
-def summary(measured: Volume, units: dict, gsd_note: str) -> dict:
+def _kept_chunks(cloud, keep: PointFilter) -> Iterator[PointChunk]:
+    """The points of ``cloud`` that ``keep`` keeps, a chunk (an octree's: a node) at a time."""
+    if isinstance(cloud, PointCloud):
+        yield from keep.apply(cloud.chunks(), cloud.name)
+    elif isinstance(cloud, VoxelOctree):  # a reader of its own: the frames' reads change its pages and nodes as they go
+        own = open_octree(own_reader_source(cloud))
+        try:
+            yield from keep.apply(points_meeting(own, keep.meets), cloud.name)
+        finally:
+            own.close()
+    elif is_octree(cloud):
+        yield from keep.apply(points_meeting(cloud, keep.meets), cloud.name)
+    else:
+        raise GigapointError(f"{cloud.name}: volumes need the points in memory or an LOD octree; this cloud is neither (view the point files instead)")
+
+
+def thinned_grid(points, box: PointCloud, seen: int, step: int, gsd: float, gsd_note: str) -> tuple[float, str, str]:
+    """(the grid, the line that says why, the note) for the volume of ``box``, 1 point in
+    ``step`` of the ``seen`` in the polygon's box (``points_in_box``): where points were left out,
+    a grid finer than those read coarsened to their spacing (``default_gsd``), and a note that
+    says so ("" where none was left out)."""
+    if step == 1:
+        return gsd, gsd_note, ""
+    spacing = point_spacing(box.bounds, box.n_points)
+    if gsd < spacing:
+        gsd, gsd_note = default_gsd(points, spacing)
+    return gsd, gsd_note, f"on thinned points: 1 in {step} of the {seen:,} in the polygon's box (at most {MAX_POINTS:,} kept); draw a smaller polygon for all"
+
+
+def summary(measured: Volume, units: dict, gsd_note: str, note: str) -> dict:
     """The pile's figures as the panel shows them (``Pile.summary``), in the cloud's ``units``
-    (its CRS's: the points read from an octree's nodes name none)."""
+    (its CRS's: the points read from an octree's nodes name none); ``note``: thinned points
+    (``thinned_grid``'s; "" none)."""
     (pile,) = measured.piles
-    return {**pile.summary(), "gsd": measured.gsd, "gsd_note": gsd_note, "units": unit_names(units)}
+    return {**pile.summary(), "gsd": measured.gsd, "gsd_note": gsd_note, "note": note, "units": unit_names(units)}

@@ -385,7 +385,8 @@
     const lines = ["measure: 3D, horizontal, height", unitsLine(u)];
     m.segments.forEach((s, i) => lines.push(`${i + 1}: ${f(s.length, h)}   horizontal ${f(s.horizontal, h)}   height ${dz(s.vertical)}`));
     if (m.segments.length) lines.push(`total ${f(m.total.length, h, true)}   horizontal ${f(m.total.horizontal, h, true)}   height ${dz(m.total.vertical, true)}`);
-    if (m.closed) {  // (area null: degrees, no area)
+    if (m.crossing) lines.push(m.crossing);  // (a bow tie: no area, no volume)
+    else if (m.closed) {  // (area null: degrees, no area)
       const area = m.area == null ? "—" : `${m.area.toFixed(dec)}${h ? ` ${h.symbol}²` : ""}${h && h.metres !== 1 ? ` (${(m.area * h.metres * h.metres).toFixed(dec)} m²)` : ""}`;
       lines.push(`polygon: area ${area}   perimeter ${f(m.perimeter, h, true)}`);
     }
@@ -399,9 +400,9 @@
     $("btn-measure-close").disabled = m.points.length < 3;
     $("btn-measure-close").textContent = m.closed ? "open polygon" : "close polygon";
     $("btn-measure-close").classList.toggle("active", !!m.closed);
-    $("btn-volume").disabled = !m.closed;
+    $("btn-volume").disabled = !m.closed || !!m.crossing;
     $("volume-unit").textContent = lengthUnit().trim();
-    if (!m.message) showVolumeInfo(m.closed ? "volume: the stockpile volume inside the polygon" : "close the polygon (C) for its area and volume", false);
+    if (!m.message) showVolumeInfo(m.crossing || (m.closed ? "volume: the stockpile volume inside the polygon" : "close the polygon (C) for its area and volume"), false);
   }
 
   function closePolygon() {
@@ -446,6 +447,7 @@
       `highest z ${n(m.highest[2])}${length}, ${n(m.height)}${length} above the base`,
       `filled ${pct(m.filled)} of the pixels by interpolation${m.empty ? `, ${pct(m.empty)} left empty (no volume)` : ""}`,
       m.gsd_note,
+      ...(m.note ? [m.note] : []),  // (thinned points: a polygon round much of a large cloud)
     ].join("\n"), true);
     info.dataset.fill = String(m.fill);
   }
