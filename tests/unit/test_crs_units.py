@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import gigapoint as gp
-from gigapoint.io import crs_units, files_units
+from gigapoint.io import crs_units, files_units, vertical_crs
 from gigapoint.io.las import geokeys, read_las_header
 from gigapoint.viewer import measure as M
 
@@ -211,3 +211,38 @@ def test_render_gsd_reads_the_header_naming_the_crs_once(cli, tmp_path, autzen_p
     keys = Image.open(tmp_path / "ortho.tif").tag_v2[34735]  # GeoKeyDirectory: 4 shorts of header, then (key, where, count, value)
     entries = {keys[i]: keys[i + 3] for i in range(4, len(keys), 4)}
     assert entries[3076] == 9002  # ProjLinearUnitsGeoKey: foot, the units that read told
+
+
+US_FOOT_UNIT = {"name": "US survey foot", "symbol": "US ft", "metres": pytest.approx(US_FOOT, rel=1e-12)}
+NAVD88_FTUS = {"epsg": 6360, "name": "NAVD88 height (ftUS)", "unit": US_FOOT_UNIT}
+
+
+@pytest.mark.parametrize("pyproj_installed", [True, False])
+def test_vertical_crs_of_a_compound_wkt_with_pyproj_or_without(pyproj_installed, autzen_path, monkeypatch):
+    """What a DSM's heights are measured from and in (GeoTIFF's vertical keys): a compound WKT's
+    vertical part, read alike by pyproj and by the WKT parse; none in a 2D or 3D geographic CRS."""
+    if not pyproj_installed:
+        monkeypatch.setitem(sys.modules, "pyproj", None)  # (an import of it raises ImportError)
+    else:
+        pytest.importorskip("pyproj")
+    copc = gp.open(DATA / "autzen_clip_native.copc.laz")  # PDAL's WKT1 COMPD_CS: EPSG:2991 + 6360
+    assert vertical_crs(copc.meta["crs"]) == vertical_crs(UTM10_NAVD88_FTUS) == NAVD88_FTUS  # WKT1, WKT2
+    local = UTM10_NAVD88_FTUS.replace(',ID["EPSG",6360]]', "]").replace("NAVD88 height (ftUS)", "site height")
+    assert vertical_crs(local) == {"epsg": None, "name": "site height", "unit": US_FOOT_UNIT}  # no code: by its name
+    for crs in (read_las_header(autzen_path).crs(), WASHINGTON_SOUTH_FTUS, WGS84_3D, WGS84_WKT1, None, "", 'COMPD_CS["cut off'):
+        assert vertical_crs(crs) is None
+
+
+def test_vertical_crs_of_epsg_codes_needs_pyproj(monkeypatch):
+    """An 'EPSG:...' compound code, and a WKT2 whose parts carry no ID of their own (PROJ writes
+    the registered compound EPSG:5498's so), name their vertical code through pyproj alone."""
+    pyproj = pytest.importorskip("pyproj")
+    navd88 = {"epsg": 5703, "name": "NAVD88 height", "unit": METRE}
+    nad83_navd88 = pyproj.CRS.from_epsg(5498).to_wkt()
+    assert 'ID["EPSG",5703]' not in nad83_navd88
+    assert vertical_crs("EPSG:26910+5703") == vertical_crs("EPSG:5498") == vertical_crs(nad83_navd88) == navd88
+    assert vertical_crs("EPSG:2994+6360") == NAVD88_FTUS
+    assert vertical_crs("EPSG:26910") is None and vertical_crs("EPSG:4979") is None
+    monkeypatch.setitem(sys.modules, "pyproj", None)
+    assert vertical_crs("EPSG:26910+5703") is None  # unknown without pyproj
+    assert vertical_crs(nad83_navd88) == {**navd88, "epsg": None}  # its name and unit still

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import struct
 import sys
+from pathlib import Path
 
 import laspy
 import numpy as np
@@ -17,6 +18,7 @@ from gigapoint.io.las import read_las_header
 from gigapoint.render.camera import MAX_IMAGE_SIDE
 
 AUTZEN = "/work/shared/data/autzen_trim.laz"
+AUTZEN_COPC = Path(__file__).parent / "data" / "pdal_ept" / "autzen_clip_native.copc.laz"  # PDAL's, in a compound CRS
 GSD = 0.5
 ORIGIN = np.array([637_000.0, 851_000.5, 100.0])  # a projected CRS's size of numbers, on the 0.5 grid
 
@@ -329,7 +331,8 @@ def test_cli_geotiff_of_an_epsg_only_crs_names_the_code(cli, tmp_path, gdal, mon
 
 
 def test_cli_geotiff_of_a_compound_wkt_names_its_horizontal_code(cli, tmp_path, gdal):
-    """A WKT of UTM 10N (EPSG:26910) with NAVD88 heights: the GeoKeys name the map grid's code."""
+    """A WKT of UTM 10N (EPSG:26910) with NAVD88 heights: the GeoKeys name the map grid's code (and
+    the heights' vertical CRS: GDAL reads the compound CRS back)."""
     horizontal = gdal.crs.CRS.from_epsg(26910).to_wkt()
     wkt = f'COMPD_CS["NAD83 / UTM zone 10N + NAVD88 height",{horizontal},VERT_CS["NAVD88 height",VERT_DATUM["North American Vertical Datum 1988",2005],UNIT["metre",1],AUTHORITY["EPSG","5703"]]]'
     write_las(tmp_path / "c.las", laspy.VLR("LASF_Projection", 2112, "OGC WKT", wkt.encode() + b"\0"))
@@ -337,7 +340,74 @@ def test_cli_geotiff_of_a_compound_wkt_names_its_horizontal_code(cli, tmp_path, 
     assert rc == 0, err
     assert (tmp_path / "o.prj").read_text() == wkt
     with gdal.open(tmp_path / "o.tif") as ds:
-        assert ds.crs.to_epsg() == 26910 and ds.crs.linear_units == "metre"
+        assert 'AUTHORITY["EPSG","26910"]],VERT_CS["NAVD88 height"' in ds.crs.to_wkt() and ds.crs.linear_units == "metre"
+
+
+def geo_key_directory(path):
+    """A GeoTIFF's key directory as Pillow reads it: (its revision (KeyRevision, MinorRevision),
+    {key: value}), a value held in place as its number, one in GeoAsciiParams as its text."""
+    tags = Image.open(path).tag_v2
+    directory, text = tags[34735], tags.get(34737, "")
+    keys = {}
+    for at in range(4, 4 + 4 * directory[3], 4):
+        key, location, count, offset = directory[at : at + 4]
+        keys[key] = offset if location == 0 else text[offset : offset + count - 1]  # (ASCII: without its '|')
+    return tuple(directory[1:3]), keys
+
+
+@pytest.mark.parametrize("pyproj_installed", [True, False])
+@pytest.mark.parametrize(
+    ("code", "wkt_version", "keys", "height_unit"),
+    [
+        ("EPSG:26910+5703", "WKT1_GDAL", {3072: 26910, 3076: 9001, 4096: 5703, 4099: 9001}, "metre"),  # NAD83 / UTM 10N + NAVD88 height
+        ("EPSG:2994+6360", "WKT2_2019", {3072: 2994, 3076: 9002, 4096: 6360, 4099: 9003}, "US survey foot"),  # Oregon GIC (ft) + NAVD88 (ftUS)
+    ],
+)
+def test_cli_dsm_of_a_compound_crs_names_its_vertical_crs(cli, tmp_path, gdal, monkeypatch, code, wkt_version, keys, height_unit, pyproj_installed):
+    """A LAS file's compound WKT: the DSM's GeoTIFF 1.1 keys name the heights' vertical CRS and unit
+    as well as the map grid (with pyproj or without: the WKT's own codes), and GDAL reads them
+    back as the CRS it reads from a GeoTIFF it writes itself in that WKT."""
+    wkt = gdal.crs.CRS.from_user_input(code).to_wkt(version=wkt_version)
+    if not pyproj_installed:
+        monkeypatch.setitem(sys.modules, "pyproj", None)
+    write_las(tmp_path / "c.las", laspy.VLR("LASF_Projection", 2112, "OGC WKT", wkt.encode() + b"\0"))
+    rc, _, err = cli("render", tmp_path / "c.las", "-o", tmp_path / "o.png", "--gsd", GSD, "--depth-out", tmp_path / "d.tif")
+    assert rc == 0, err
+    assert geo_key_directory(tmp_path / "d.tif") == ((1, 1), {1024: 1, 1025: 1, **keys})
+    with gdal.open(tmp_path / "d.tif") as ds:
+        assert ds.crs == gdal_crs_of(gdal, wkt, tmp_path)
+        assert ds.crs.to_wkt().endswith(f'AUTHORITY["EPSG","{keys[4096]}"]]]')  # (the compound's last part: its vertical one)
+        assert ds.units == (height_unit,)  # the heights' unit, GDAL's band unit
+
+
+def test_cli_dsm_of_autzens_copc_names_its_heights_navd88_in_us_feet(cli, tmp_path, gdal):
+    """PDAL's COPC of autzen: Oregon Lambert in metres (EPSG:2991), heights NAVD88 in US survey feet."""
+    rc, _, err = cli("render", AUTZEN_COPC, "-o", tmp_path / "o.png", "--gsd", 4, "--depth-out", tmp_path / "d.tif")
+    assert rc == 0, err
+    assert geo_key_directory(tmp_path / "d.tif") == ((1, 1), {1024: 1, 1025: 1, 3072: 2991, 3076: 9001, 4096: 6360, 4099: 9003})
+    with gdal.open(tmp_path / "d.tif") as ds:
+        assert ds.crs.linear_units == "metre" and ds.units == ("US survey foot",)
+        assert 'VERT_CS["NAVD88 height (ftUS)"' in ds.crs.to_wkt()
+
+
+def test_cli_dsm_of_a_vertical_crs_without_a_code_names_it_by_citation(cli, tmp_path, gdal):
+    """A vertical CRS no EPSG code names: user-defined, its name the VerticalCitationGeoKey."""
+    wkt = gdal.crs.CRS.from_user_input("EPSG:26910+6360").to_wkt()
+    wkt = wkt.replace('AUTHORITY["EPSG","6360"]]]', "]]").replace("NAVD88 height (ftUS)", "site height")
+    write_las(tmp_path / "c.las", laspy.VLR("LASF_Projection", 2112, "OGC WKT", wkt.encode() + b"\0"))
+    rc, _, err = cli("render", tmp_path / "c.las", "-o", tmp_path / "o.png", "--gsd", GSD, "--depth-out", tmp_path / "d.tif")
+    assert rc == 0, err
+    assert geo_key_directory(tmp_path / "d.tif") == ((1, 1), {1024: 1, 1025: 1, 3072: 26910, 3076: 9001, 4096: 32767, 4097: "site height", 4099: 9003})
+    with gdal.open(tmp_path / "d.tif") as ds:
+        assert 'VERT_CS["site height"' in ds.crs.to_wkt() and ds.units == ("US survey foot",)
+
+
+def test_cli_geotiff_of_a_2d_crs_has_no_vertical_keys(cli, tmp_path, gdal):
+    """A CRS without a vertical part (UTM 10N alone): GeoTIFF 1.0's key directory, as before."""
+    write_las(tmp_path / "c.las", laspy.VLR("LASF_Projection", 2112, "OGC WKT", gdal.crs.CRS.from_epsg(26910).to_wkt().encode() + b"\0"))
+    rc, _, err = cli("render", tmp_path / "c.las", "-o", tmp_path / "o.png", "--gsd", GSD, "--depth-out", tmp_path / "d.tif")
+    assert rc == 0, err
+    assert Image.open(tmp_path / "d.tif").tag_v2[34735] == (1, 1, 0, 4, 1024, 0, 1, 1, 1025, 0, 1, 1, 3072, 0, 1, 26910, 3076, 0, 1, 9001)
 
 
 def test_cli_geotiff_without_a_crs_holds_its_grid(cli, tmp_path, grid_npy, gdal):

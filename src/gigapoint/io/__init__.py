@@ -26,6 +26,7 @@ _LAZY = {
     "files_crs_units": "crs",
     "files_units": "crs",
     "horizontal_epsg": "crs",
+    "vertical_crs": "crs",
     "warn_mixed_crs": "crs",
     "demo_arrays": "demo",
     "demo_chunks": "demo",
@@ -102,6 +103,7 @@ __all__ = [
     "register",
     "shown_url",
     "supported_suffixes",
+    "vertical_crs",
     "warn_mixed_crs",
     "with_subfolders",
 ]

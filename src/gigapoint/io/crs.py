@@ -139,8 +139,53 @@ def horizontal_epsg(crs: str | None) -> int | None:
         tree = next((p for p in tree[1:] if isinstance(p, list) and _WKT_KINDS.get(p[0]) in ("projected", "geographic")), None)
     if tree is None or _WKT_KINDS.get(tree[0]) not in ("projected", "geographic"):
         return None
-    codes = [n[2] for n in tree[1:] if isinstance(n, list) and n[0] in ("AUTHORITY", "ID") and len(n) > 2 and str(n[1]).upper() == "EPSG"]
+    return _wkt_epsg(tree)
+
+
+def _wkt_epsg(crs: list) -> int | None:
+    """The EPSG code a WKT CRS node names as its own (its last AUTHORITY / ID: not its datum's or
+    unit's, which lie inside those nodes); None without one."""
+    codes = [n[2] for n in crs[1:] if isinstance(n, list) and n[0] in ("AUTHORITY", "ID") and len(n) > 2 and str(n[1]).upper() == "EPSG"]
     return int(codes[-1]) if codes and str(codes[-1]).isdigit() else None
+
+
+def vertical_crs(crs: str | None) -> dict | None:
+    """The vertical part of a CRS, what its heights are measured from and in (a compound CRS's:
+    NAVD88 height of EPSG:26910+5703): {"epsg": its code or None, "name": its name, "unit": U as
+    crs_units' or None}; None where the CRS has none (a 2D one, autzen's). Read by pyproj where
+    installed (``_pyproj_vertical``: a registered compound code, 'EPSG:26910+5703', a WKT2 whose
+    parts carry no ID of their own); else from a WKT's VERT_CS / VERTCRS part (``_wkt_vertical``)."""
+    if not crs:
+        return None
+    try:
+        return _pyproj_vertical(crs)
+    except Exception:  # noqa: BLE001 - pyproj missing, or the CRS unknown to it: the WKT's own words
+        return _wkt_vertical(crs)
+
+
+def _pyproj_vertical(crs: str) -> dict | None:
+    """``vertical_crs`` by pyproj: the vertical CRS that ``crs`` is or holds (a compound one's part,
+    its code as pyproj identifies it); raises where pyproj is not installed or cannot read ``crs``."""
+    import pyproj
+
+    whole = pyproj.CRS.from_user_input(crs.strip())
+    whole = whole.source_crs if whole.is_bound else whole  # (a WKT1 with TOWGS84)
+    part = next((c for c in (whole.sub_crs_list if whole.is_compound else [whole]) if c.is_vertical), None)
+    if part is None:
+        return None
+    axes = list(part.axis_info)
+    return {"epsg": part.to_epsg(), "name": part.name, "unit": _axis_unit(axes[0]) if axes else None}
+
+
+def _wkt_vertical(crs: str) -> dict | None:
+    """``vertical_crs`` of a WKT (a vertical CRS, or a compound one's vertical part): the code it
+    names as its own; None for any other text ('EPSG:n' without pyproj: unknown)."""
+    tree = _wkt_tree(crs)
+    if tree is not None and tree[0] in ("COMPD_CS", "COMPOUNDCRS"):
+        tree = next((p for p in tree[1:] if isinstance(p, list) and _WKT_KINDS.get(p[0]) == "vertical"), None)
+    if tree is None or _WKT_KINDS.get(tree[0]) != "vertical" or len(tree) < 2 or not isinstance(tree[1], str):
+        return None
+    return {"epsg": _wkt_epsg(tree), "name": tree[1], "unit": _wkt_units(tree)[1]}
 
 
 def _epsg_code(crs: str | None, keys: dict[int, int]) -> int | None:
@@ -165,8 +210,12 @@ def _epsg_units(code: int) -> tuple[dict | None, dict | None]:
         return None, None
     across = [a for a in axes if str(a.direction).lower() in ("east", "north", "west", "south")]
     up = [a for a in axes if str(a.direction).lower() == "up"]
-    horizontal = _wkt_unit(["UNIT", across[0].unit_name, across[0].unit_conversion_factor], angle=geographic) if across else None
-    return horizontal, (_wkt_unit(["UNIT", up[0].unit_name, up[0].unit_conversion_factor], angle=False) if up else None)
+    return (_axis_unit(across[0], angle=geographic) if across else None), (_axis_unit(up[0]) if up else None)
+
+
+def _axis_unit(axis, angle: bool = False) -> dict | None:
+    """{name, symbol, metres} of a pyproj axis's unit (an angle's metres None)."""
+    return _wkt_unit(["UNIT", axis.unit_name, axis.unit_conversion_factor], angle=angle)
 
 
 def files_units(files) -> dict:

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..atomic import atomic_bytes, write_failure, write_together
 from ..errors import GigapointError, GigapointWarning, warn
-from ..io import EPSG_LENGTH_UNITS, crs_wkt, horizontal_epsg
+from ..io import EPSG_LENGTH_UNITS, crs_wkt, horizontal_epsg, vertical_crs
 from .camera import Camera
 from .image_files import IMAGE_SUFFIXES, check_image_fits, check_output, save_heights, save_image
 
@@ -80,6 +80,9 @@ TAG_TYPES = {MODEL_PIXEL_SCALE: 12, MODEL_TIEPOINT: 12, GEO_KEY_DIRECTORY: 3, GE
 #: GeoKeys written (GeoTIFF 1.0 names), and their values
 MODEL_TYPE, RASTER_TYPE, GEOGRAPHIC_TYPE, PROJECTED_CS_TYPE, PCS_CITATION, LINEAR_UNITS, LINEAR_UNIT_SIZE = 1024, 1025, 2048, 3072, 3073, 3076, 3077
 PROJECTED, GEOGRAPHIC, USER_DEFINED, PIXEL_IS_AREA = 1, 2, 32767, 1
+#: GeoTIFF 1.1's keys of a vertical CRS (VerticalGeoKey: its EPSG code), which a file holding them
+#: says it follows by its key directory's minor revision 1 (as GDAL writes it)
+VERTICAL, VERTICAL_CITATION, VERTICAL_UNITS = 4096, 4097, 4099
 #: GDAL reads a user-defined CRS's WKT from PCSCitationGeoKey after this prefix (ArcGIS's), into a
 #: buffer of 2 400 characters: a longer one would be cut, so it is not written there
 ESRI_PE_PREFIX, GDAL_CITATION_MAX = "ESRI PE String = ", 2399
@@ -97,7 +100,8 @@ def geotiff_tags(camera: Camera, crs: str | None, wkt: str | None, units: dict, 
     values = {MODEL_PIXEL_SCALE: (size, -minus_size, 0.0), MODEL_TIEPOINT: (0.0, 0.0, 0.0, x - size / 2, y - minus_size / 2, 0.0)}
     keys, doubles, text = geo_keys(crs, wkt, units), [], ""
     if keys:
-        directory = [1, 1, 0, len(keys)]  # KeyDirectoryVersion, KeyRevision 1.0, then the keys by id
+        revision = 1 if VERTICAL in keys else 0
+        directory = [1, 1, revision, len(keys)]  # KeyDirectoryVersion, KeyRevision 1.0 or 1.1, then the keys by id
         for key, value in sorted(keys.items()):
             if isinstance(value, float):
                 directory += [key, GEO_DOUBLE_PARAMS, 1, len(doubles)]
@@ -122,8 +126,16 @@ def geotiff_tags(camera: Camera, crs: str | None, wkt: str | None, units: dict, 
 
 
 def geo_keys(crs: str | None, wkt: str | None, units: dict) -> dict:
-    """The GeoKeys ({key: value}) naming ``crs``: its horizontal part's EPSG code (io.horizontal_epsg)
-    and linear unit, else its ``wkt`` as an ESRI PE string, which GDAL reads; {} without a CRS, or
+    """The GeoKeys ({key: value}) naming ``crs``: its horizontal part's (``horizontal_keys``) and,
+    where it has one, its vertical part's (``vertical_keys``: a DSM's heights' datum and unit); {}
+    where the horizontal part cannot be named (no CRS, a WKT that GDAL would cut)."""
+    keys = horizontal_keys(crs, wkt, units)
+    return {**keys, **vertical_keys(crs)} if keys else {}
+
+
+def horizontal_keys(crs: str | None, wkt: str | None, units: dict) -> dict:
+    """The GeoKeys of ``crs``'s map grid: its horizontal part's EPSG code (io.horizontal_epsg) and
+    linear unit, else its ``wkt`` as an ESRI PE string, which GDAL reads; {} without a CRS, or
     with a WKT that GDAL would cut."""
     horizontal = units.get("horizontal")
     code = horizontal_epsg(crs)
@@ -137,19 +149,40 @@ def geo_keys(crs: str | None, wkt: str | None, units: dict) -> dict:
     return {}
 
 
+def vertical_keys(crs: str | None) -> dict:
+    """GeoTIFF 1.1's keys of ``crs``'s vertical part (io.vertical_crs: NAVD88 height of
+    EPSG:26910+5703), so that a GIS knows what a DSM's heights are measured from and in: its EPSG
+    code, else user-defined with its name as citation; its unit's EPSG code (GeoTIFF has no key
+    for another's size); {} where the CRS has no vertical part."""
+    vertical = vertical_crs(crs)
+    if vertical is None:
+        return {}
+    keys = {VERTICAL: vertical["epsg"]} if vertical["epsg"] else {VERTICAL: USER_DEFINED, VERTICAL_CITATION: vertical["name"]}
+    unit = length_unit_code(vertical["unit"])
+    return {**keys, VERTICAL_UNITS: unit} if unit else keys
+
+
 def linear_unit_keys(unit: dict | None) -> dict:
     """ProjLinearUnitsGeoKey of a length unit (io.crs_units'): its EPSG code, else user-defined
     with its size in metres; {} where it is unknown or an angle."""
     if unit is None or unit["metres"] is None:
         return {}
-    code = next((c for c, (_, metres) in EPSG_LENGTH_UNITS.items() if math.isclose(metres, unit["metres"], rel_tol=1e-9)), None)
+    code = length_unit_code(unit)
     return {LINEAR_UNITS: code} if code else {LINEAR_UNITS: USER_DEFINED, LINEAR_UNIT_SIZE: float(unit["metres"])}
+
+
+def length_unit_code(unit: dict | None) -> int | None:
+    """The EPSG code of a length unit (io.crs_units'; io.EPSG_LENGTH_UNITS: metre, foot, US survey
+    foot) by its size; None for another, an unknown one or an angle."""
+    if unit is None or unit["metres"] is None:
+        return None
+    return next((c for c, (_, metres) in EPSG_LENGTH_UNITS.items() if math.isclose(metres, unit["metres"], rel_tol=1e-9)), None)
 
 
 def geotiff_notes(images, crs: str | None, wkt: str | None, units: dict) -> list[str]:
     """Which of ``images`` (None: not written) are GeoTIFFs whose keys name no CRS although the
     cloud has one (a WKT too long for them; their .prj has it): a line each."""
-    if not crs or geo_keys(crs, wkt, units):
+    if not crs or horizontal_keys(crs, wkt, units):
         return []
     tiffs = [image for image in filter(None, images) if Path(image).suffix.lower() in GEOTIFF_SUFFIXES]
     return [f"{image}: its GeoTIFF keys name no CRS (its WKT is longer than GDAL reads from them); the .prj beside it has it" for image in tiffs]
