@@ -266,9 +266,9 @@ def test_measure_lists_the_lengths_between_clicked_points(page, server):
     assert session.measure == []
 
 
-def test_c_closes_the_measurement_into_a_polygon_and_volume_computes_the_volume_inside(page, server):
-    from gigapoint.viewer import volume_tool as VT
-
+def close_polygon_from_the_top(page, corners) -> None:
+    """Seen from the top, the measuring tool's points clicked at ``corners`` (fractions of the
+    canvas), then closed into a polygon (C)."""
     n = frame_no(page)
     page.get_by_role("button", name="top").click()
     page.wait_for_function("() => window.gigapoint.camera.pitch > 89", timeout=30_000)
@@ -276,11 +276,17 @@ def test_c_closes_the_measurement_into_a_polygon_and_volume_computes_the_volume_
     b = canvas_box(page)
     page.locator("#canvas").focus()
     page.keyboard.press("m")
-    for k, (fx, fy) in enumerate(((0.3, 0.3), (0.7, 0.3), (0.5, 0.7)), start=1):  # a triangle of ground around the marker
+    for k, (fx, fy) in enumerate(corners, start=1):
         page.mouse.click(b["x"] + b["width"] * fx, b["y"] + b["height"] * fy)
         page.wait_for_function("(k) => document.getElementById('measureinfo').dataset.points === String(k)", arg=k, timeout=30_000)
     page.keyboard.press("c")
     page.wait_for_function("() => document.getElementById('measureinfo').dataset.closed === 'true'", timeout=30_000)
+
+
+def test_c_closes_the_measurement_into_a_polygon_and_volume_computes_the_volume_inside(page, server):
+    from gigapoint.viewer import volume_tool as VT
+
+    close_polygon_from_the_top(page, ((0.3, 0.3), (0.7, 0.3), (0.5, 0.7)))  # a triangle of ground around the marker
     (session,) = server.core.sessions.values()
     (x0, y0), (x1, y1), (x2, y2) = np.array(session.measure)[:, :2]
     area = abs((x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)) / 2
@@ -295,18 +301,7 @@ def test_c_closes_the_measurement_into_a_polygon_and_volume_computes_the_volume_
 
 
 def test_a_polygon_crossing_itself_shows_why_instead_of_an_area_and_offers_no_volume(page, server):
-    n = frame_no(page)
-    page.get_by_role("button", name="top").click()
-    page.wait_for_function("() => window.gigapoint.camera.pitch > 89", timeout=30_000)
-    wait_full_frame(page, n)
-    b = canvas_box(page)
-    page.locator("#canvas").focus()
-    page.keyboard.press("m")
-    for k, (fx, fy) in enumerate(((0.3, 0.3), (0.7, 0.3), (0.3, 0.7), (0.7, 0.7)), start=1):  # a bow tie: its 2nd and 4th sides cross
-        page.mouse.click(b["x"] + b["width"] * fx, b["y"] + b["height"] * fy)
-        page.wait_for_function("(k) => document.getElementById('measureinfo').dataset.points === String(k)", arg=k, timeout=30_000)
-    page.keyboard.press("c")
-    page.wait_for_function("() => document.getElementById('measureinfo').dataset.closed === 'true'", timeout=30_000)
+    close_polygon_from_the_top(page, ((0.3, 0.3), (0.7, 0.3), (0.3, 0.7), (0.7, 0.7)))  # a bow tie: its 2nd and 4th sides cross
     crossing = "the polygon crosses itself (edges 2 and 4): no area or volume; move a point so that no two edges cross"
     text = page.locator("#measureinfo").inner_text()
     assert crossing in text and "area" not in text.replace(crossing, ""), text  # the message, not a wrong area
