@@ -251,3 +251,53 @@ def test_exact_transform_sends_every_point_through_proj(autzen_path):
     reprojection.tolerance = (0.0001, 0.001)
     fast, exact = _fast_and_exact(reprojection, _read_xyz(autzen_path), autzen_path)
     assert (reprojection.interpolated_points, reprojection.exact_points) == (0, 110_000) and np.array_equal(fast, exact)
+
+
+#: a site of autzen (its Lambert feet): four corners, a few hundred feet apart
+SITE_FEET = [(636_200.0, 849_000.0), (637_000.0, 848_990.0), (636_900.0, 849_400.0), (636_300.0, 849_350.0)]
+
+
+def _site_geojson(path, corners, epsg=None):
+    """A GeoJSON Polygon of ``corners``, naming EPSG:``epsg`` in its crs member where given."""
+    import json
+
+    document = {"type": "Polygon", "coordinates": [[*map(list, corners), list(corners[0])]]}
+    if epsg is not None:
+        document["crs"] = {"type": "name", "properties": {"name": f"urn:ogc:def:crs:EPSG::{epsg}"}}
+    path.write_text(json.dumps(document))
+    return path
+
+
+def test_a_clip_polygon_in_the_source_crs_or_named_in_the_target_or_lon_lat_clips_the_same_points(cli, autzen_path, tmp_path):
+    from gigapoint.io.polygon import clip_polygon_of
+
+    source = laspy.read(str(autzen_path))
+    inside = clip_polygon_of(_site_geojson(tmp_path / "feet.geojson", SITE_FEET), "test").inside(np.column_stack([source.x, source.y, source.z]))
+    assert 10_000 < inside.sum() < 100_000  # (a cut, not all or nothing)
+    feet = pyproj.CRS.from_wkt(read_las_header(autzen_path).crs())
+    areas = {"feet": SITE_FEET}  # (the inputs' CRS: the polygon names none)
+    for name, crs in (("utm", UTM), ("lonlat", "EPSG:4326")):  # the same corners, named in the target's CRS and in another
+        x, y = pyproj.Transformer.from_crs(feet, crs, always_xy=True).transform(*np.array(SITE_FEET).T)
+        areas[name] = list(zip(x, y))
+    for name, corners in areas.items():
+        polygon = _site_geojson(tmp_path / f"{name}.geojson", corners, None if name == "feet" else int(pyproj.CRS(UTM if name == "utm" else "EPSG:4326").to_epsg()))
+        out = tmp_path / f"{name}.laz"
+        rc, stdout, err = cli("convert", autzen_path, "-o", out, "--to-crs", UTM, "--clip-polygon", polygon, "-q")
+        assert rc == 0, err
+        assert "names EPSG" not in err  # (a polygon in the target's CRS was said to be "taken in the files' coordinates")
+        assert stdout.startswith(f"{out}: {inside.sum():,} points (laz)"), name
+        written = laspy.read(str(out))
+        assert np.array_equal(np.asarray(written.gps_time), np.asarray(source.gps_time)[inside]), name  # (the same points, in order)
+    rc, stdout, err = cli("tile", autzen_path, "--size", 1000, "-o", tmp_path / "tiles", "--to-crs", UTM, "--clip-polygon", tmp_path / "feet.geojson", "-q")
+    assert rc == 0, err
+    assert sum(len(laspy.read(str(p)).points) for p in (tmp_path / "tiles").glob("*.laz")) == inside.sum()
+
+
+def test_a_clip_polygon_naming_no_crs_over_inputs_in_two_crss_is_refused_before_a_point_is_read(autzen_path, tmp_path, recwarn):
+    utm = tmp_path / "utm.las"
+    with pytest.warns(GigapointWarning, match="z is kept"):
+        gp.convert(autzen_path, utm, to_crs=UTM)
+    polygon = _site_geojson(tmp_path / "site.geojson", SITE_FEET)
+    with pytest.raises(InputError, match=r"^.*site\.geojson: names no CRS while the inputs are in 2 CRSs: give it as GeoJSON naming its CRS \(a crs member\), or the CRS of every input \(convert: from_crs=, --from-crs\)$"):
+        gp.convert([autzen_path, utm], tmp_path / "both.laz", to_crs="EPSG:32611", clip_polygon=str(polygon))
+    assert not (tmp_path / "both.laz").exists()

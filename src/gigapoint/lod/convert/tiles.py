@@ -139,6 +139,7 @@ def tile(
         inputs = with_subfolders([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
     colorization = None if colorize is None else Colorization(colorize, "tile")  # a raster that cannot be read: said before a point is
     files = PointFiles(inputs, out, chunk_size, reprojection=reprojection, colorization=colorization)
+    keep = files.points_filter(keep)  # (a clip polygon moved into the CRS the points are tiled in)
     name = name or (Path(files.files[0]).stem if len(files.files) == 1 else out.resolve().name)
     bounds = files.headers_bounds()
     if bounds is not None:  # a size in the wrong unit: refused before a point is read

@@ -11,7 +11,8 @@ format 6, a PLY without red, green, blue where none has: not the grey the viewer
 black for the points of a colourless file among coloured ones, warned of). Invalid points (NaN, inf) are skipped with
 the usual warning. ``reprojection`` (io/reproject.py: ``to_crs``): the points move into that CRS
 as they are read, before the filter and the thinning (a clip box and cells in the output's
-coordinates); the file then names that CRS and takes a grid of the inputs' precision in its units. ``thin``: one point kept per occupied cell of that edge over the whole file
+coordinates; a clip polygon moved there from its own CRS, the inputs' unless its GeoJSON names
+another); the file then names that CRS and takes a grid of the inputs' precision in its units. ``thin``: one point kept per occupied cell of that edge over the whole file
 set, the first in the inputs' order (io/thin.py), after the filter. ``colorization``
 (io/colorize.py: ``colorize``): the points kept take their colours from an orthophoto, last (after
 the reprojection, in the output's coordinates; after the filter and the thinning: no pixel is read
@@ -20,6 +21,7 @@ for a point left out)."""
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -104,6 +106,14 @@ class PointFiles:
         tally["uncolored"] += uncolored
         return chunk
 
+    def points_filter(self, keep: PointFilter | None) -> PointFilter | None:
+        """``keep`` as the points are filtered: where they are reprojected (the filter then sees
+        them in the target CRS), its clip polygon moved there from its own CRS (the inputs', unless
+        its GeoJSON names another: ``Reprojection.clip_polygon``)."""
+        if keep is None or keep.polygon is None or self.reprojection is None:
+            return keep
+        return replace(keep, polygon=self.reprojection.clip_polygon(keep.polygon, self.files))
+
     def headers_bounds(self):
         """(lo, hi) of the files' points as their headers tell (in the target CRS where reprojected); None where one tells none."""
         return _headers_bounds(self.files, self.counts, self.reprojection)
@@ -117,7 +127,7 @@ class PointFiles:
         tally.update(points=0, skipped=0, uncolored=0)  # (uncolored: counted by ``colored``)
         for f in self.files:
             read = _told(with_scan_angle(read_chunks(f, self.chunk_size)) if self.one_angle else read_chunks(f, self.chunk_size), progress)
-            if self.reprojection is not None:  # (before the filter: a clip box is in the output's coordinates)
+            if self.reprojection is not None:  # (before the filter: a clip box is in the output's coordinates; see points_filter)
                 read = (self.reprojection.chunk(chunk, f) for chunk in read)
             for chunk in _skipped_if_empty(f, filtered(read, f, passing), len(self.files) > 1):
                 valid = valid_bounds(chunk.xyz, MAX_ABS_COORDINATE)[0]
@@ -150,6 +160,7 @@ def write_point_file(
     check_point_file_output(out, overwrite)
     ply = out.suffix.lower() == ".ply"
     inputs = PointFiles(inputs, out, chunk_size, ply, reprojection, colorization)
+    keep = inputs.points_filter(keep)
     bounds = None
     if thin is not None:  # cells too small for the headers' bounds: refused here, before a point is read
         bounds = inputs.headers_bounds()
