@@ -156,9 +156,10 @@ def test_without_pyproj_the_option_says_how_to_install_it(autzen_path, tmp_path,
         gp.convert(autzen_path, tmp_path / "out.laz", to_crs=UTM)
 
 
-def test_to_crs_is_refused_with_an_octree_and_from_crs_without_to_crs(autzen_path, tmp_path):
-    with pytest.raises(ConvertError, match=r"--to-crs: an option of a plain \.las, \.laz or \.ply file, or of tiles, not of a gigapoint octree$"):
-        gp.convert(autzen_path, tmp_path / "octree", to_crs=UTM)
+def test_to_crs_is_refused_on_a_dask_cluster_and_from_crs_without_to_crs(autzen_path, tmp_path):
+    with pytest.raises(ConvertError, match=r"octree: --to-crs: reprojects in this process, not on a Dask cluster \(--dask, --workers\); convert without one$"):
+        gp.convert(autzen_path, tmp_path / "octree", to_crs=UTM, client="tcp://127.0.0.1:1")
+    assert not (tmp_path / "octree").exists()
     with pytest.raises(InputError, match=r"^convert: from_crs='EPSG:2994': the CRS the inputs are in, for to_crs; give to_crs too$"):
         gp.convert(autzen_path, tmp_path / "out.laz", from_crs="EPSG:2994")
 
@@ -291,6 +292,9 @@ def test_a_clip_polygon_in_the_source_crs_or_named_in_the_target_or_lon_lat_clip
     rc, stdout, err = cli("tile", autzen_path, "--size", 1000, "-o", tmp_path / "tiles", "--to-crs", UTM, "--clip-polygon", tmp_path / "feet.geojson", "-q")
     assert rc == 0, err
     assert sum(len(laspy.read(str(p)).points) for p in (tmp_path / "tiles").glob("*.laz")) == inside.sum()
+    copc = tmp_path / "site.copc.laz"  # (an octree's read stage moves the polygon too)
+    rc, _, err = cli("convert", autzen_path, "-o", copc, "--to-crs", UTM, "--clip-polygon", tmp_path / "feet.geojson", "-q")
+    assert rc == 0 and len(laspy.read(str(copc)).points) == inside.sum(), err
 
 
 def test_a_clip_polygon_naming_no_crs_over_inputs_in_two_crss_is_refused_before_a_point_is_read(autzen_path, tmp_path, recwarn):
@@ -301,3 +305,62 @@ def test_a_clip_polygon_naming_no_crs_over_inputs_in_two_crss_is_refused_before_
     with pytest.raises(InputError, match=r"^.*site\.geojson: names no CRS while the inputs are in 2 CRSs: give it as GeoJSON naming its CRS \(a crs member\), or the CRS of every input \(convert: from_crs=, --from-crs\)$"):
         gp.convert([autzen_path, utm], tmp_path / "both.laz", to_crs="EPSG:32611", clip_polygon=str(polygon))
     assert not (tmp_path / "both.laz").exists()
+
+
+#: the attributes that, with z, tell autzen's points apart (their order in an octree is its own)
+KEYS = ("gps_time", "intensity", "return_number", "point_source_id")
+
+
+def _sorted_by_keys(xy, z, attributes):
+    """``xy`` (n x 2) in the order of (``KEYS``' ``attributes``, z)."""
+    return xy[np.lexsort([np.asarray(z), *(np.asarray(attributes[k]) for k in KEYS)])]
+
+
+def test_octrees_and_copc_take_to_crs_their_points_where_pyproj_moves_them_and_name_the_target(cli, autzen_path, tmp_path):
+    from gigapoint.lod import open_octree
+
+    source = laspy.read(str(autzen_path))
+    x, y, _ = _pyproj_moved(autzen_path, UTM)
+    expected = _sorted_by_keys(np.column_stack([x, y]), source.z, source)
+    copc = tmp_path / "utm.copc.laz"
+    rc, stdout, err = cli("convert", autzen_path, "-o", copc, "--to-crs", UTM, "-q")
+    assert rc == 0 and "z is kept" in err, err
+    assert stdout.startswith(f"{copc}: 110,000 points in ")
+    written = laspy.read(str(copc))
+    assert written.header.parse_crs() == pyproj.CRS.from_epsg(32610)  # (its WKT VLR)
+    assert list(written.header.scales) == [0.001, 0.001, 0.01] and list(written.header.offsets) == [494_000.0, 4_877_000.0, 0.0]
+    moved = _sorted_by_keys(np.column_stack([written.x, written.y]), written.z, written)
+    assert np.abs(moved - expected).max() <= 0.0005 + 1e-6  # (half the output grid's step: its rounding; the fast path's 7.5e-9 m)
+    octree = tmp_path / "utm"
+    with pytest.warns(GigapointWarning, match="z is kept"):
+        gp.convert(autzen_path, octree, to_crs=UTM)
+    tree = open_octree(octree)
+    parts = [tree.node_points(i) for i in range(len(tree.nodes))]
+    xyz = np.concatenate([p["xyz"] for p in parts])
+    moved = _sorted_by_keys(xyz[:, :2], xyz[:, 2], {k: np.concatenate([p[k] for p in parts]) for k in KEYS})
+    assert np.abs(moved - expected).max() <= 0.0005 + 1e-6
+    assert pyproj.CRS.from_wkt(tree.meta["crs"]) == pyproj.CRS.from_epsg(32610)  # (octree.json's, as gigapoint info shows it)
+
+
+def test_an_octree_conversion_resumes_only_under_the_same_to_crs_and_spills_the_moved_points(autzen_path, tmp_path, monkeypatch, recwarn):
+    read = importlib.import_module("gigapoint.lod.convert.read")
+    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.in_memory"), "fits_in_memory", lambda job: False)  # (out of core)
+    real = read._read_chunks
+
+    def stops(path, size):  # Ctrl+C once two chunks are read
+        chunks = real(path, size)
+        yield next(chunks)
+        yield next(chunks)
+        raise KeyboardInterrupt("test")
+
+    out = tmp_path / "utm"
+    monkeypatch.setattr(read, "_read_chunks", stops)
+    with pytest.raises(KeyboardInterrupt):
+        gp.convert(autzen_path, out, to_crs=UTM, chunk_size=20_000)
+    monkeypatch.setattr(read, "_read_chunks", real)
+    zone_11 = gp.convert(autzen_path, out, to_crs="EPSG:32611", chunk_size=20_000)  # another CRS: starts over, not a mix of both
+    assert (zone_11.resumed, zone_11.points) == (False, 110_000)
+    x, y, _ = _pyproj_moved(autzen_path, "EPSG:32611")
+    tree = importlib.import_module("gigapoint.lod").open_octree(out)
+    bounds = tree.meta["bounds"]
+    assert np.allclose(bounds["min"][:2], [x.min(), y.min()], atol=0.001) and np.allclose(bounds["max"][:2], [x.max(), y.max()], atol=0.001)

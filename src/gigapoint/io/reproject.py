@@ -1,7 +1,9 @@
 """Points read from files moved into another coordinate reference system, a chunk at a time
 (PDAL's filters.reprojection, LAStools' las2las -target_epsg): ``convert -o out.laz --to-crs``
-and ``tile --to-crs`` (lod/convert/to_file.py's PointFiles), through pyproj (PROJ), an optional
-dependency (``pip install 'gigapoint[gis]'``).
+and ``tile --to-crs`` (lod/convert/to_file.py's PointFiles), ``convert -o octree/`` or ``-o
+out.copc.laz`` (lod/convert/read.py's read phase), through pyproj (PROJ), an optional
+dependency (``pip install 'gigapoint[gis]'``). A clip polygon is moved into the target, where the
+points are filtered, from the inputs' CRS or the one its GeoJSON names (``clip_polygon``).
 
 Each file's CRS is the one its header names (its WKT, else its GeoTIFF keys: LasHeader.crs), or
 ``from_crs`` for every file where given (PDAL's in_srs). x and y are transformed with
@@ -29,12 +31,14 @@ among point by point (a jump there)."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from ..core.chunk import PointChunk
 from ..core.coords import MAX_ABS_COORDINATE
 from ..errors import GigapointWarning, InputError, counted, first_line, warn
+from .filters import PointFilter
 from .las import LasReader, read_las_header
 from .polygon import ClipPolygon
 from .registry import reader_for
@@ -283,6 +287,13 @@ class Reprojection:
             GigapointWarning,
         )
 
+    def moved_filter(self, keep: PointFilter | None, files) -> PointFilter | None:
+        """``keep`` as it filters the moved points (in the target CRS): its clip polygon moved there
+        from its own CRS (``clip_polygon``); its clip box is the target's already."""
+        if keep is None or keep.polygon is None:
+            return keep
+        return replace(keep, polygon=self.clip_polygon(keep.polygon, files))
+
     def clip_polygon(self, polygon: ClipPolygon, files) -> ClipPolygon:
         """``polygon`` in the target CRS, in which the moved points are filtered: from the CRS its
         GeoJSON names (a ``crs`` member), else the inputs' (``from_crs``, else the one their headers
@@ -333,6 +344,12 @@ class Reprojection:
             if off <= (size * POLYGON_SHARE if tolerance is None else tolerance) or pieces >= MAX_EDGE_PIECES:
                 return starts.reshape(-1, 2)
             pieces *= 2
+
+    def as_spec(self) -> dict:
+        """What tells two reprojections apart (a conversion's fingerprint: one resumed under another
+        mixed points moved two ways): the CRSs, as WKT, and whether every point goes through PROJ."""
+        source = None if self.given_source is None else self.given_source.to_wkt()
+        return {"to_crs": self.target.to_wkt(), "from_crs": source, "exact": self.exact}
 
     def target_wkt(self) -> str:
         """The target CRS as the output's WKT VLR holds it (OGC WKT1, as LAS 1.4 says)."""

@@ -20,7 +20,7 @@ from ...io._base import check_file, headers_once
 from ...io.colorize import Colorization
 from ...io.filters import point_filter
 from ...io.registry import is_supported_name
-from ...io.reproject import Reprojection
+from ...io.reproject import Reprojection, output_grid
 from ...io.thin import thin_spacing
 from ..build import SAMPLERS
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
@@ -290,12 +290,13 @@ def convert(
     0, in the inputs' units; one point is kept per occupied cell, the first in the inputs' order,
     over all of them (io/thin.py). The result's ``thinned_from`` counts the points before it.
 
-    ``to_crs`` (a plain point file only; needs pyproj: ``pip install 'gigapoint[gis]'``): the CRS
+    ``to_crs`` (input files only, not on a ``client``; needs pyproj: ``pip install 'gigapoint[gis]'``): the CRS
     the points are moved into ('EPSG:32610', a WKT, a PROJ string), from each file's own (its
     header's; ``from_crs`` for every file where given, and for files naming none), as they are read
-    (io/reproject.py): the filter's clip box and ``thin``'s cells are then in its coordinates. z is
-    transformed only between CRSs with a vertical part (compound ones), else kept (PROJ's rule).
-    The file names ``to_crs`` (a WKT VLR) and keeps the inputs' precision in its units. The points
+    (io/reproject.py): the filter's clip box and ``thin``'s cells are then in its coordinates (a
+    clip polygon moved there from its own CRS). z is transformed only between CRSs with a vertical
+    part (compound ones), else kept (PROJ's rule). The output (a plain file, an octree, a COPC
+    file) names ``to_crs`` (a WKT VLR, octree.json's crs) and keeps the inputs' precision in its units. The points
     are interpolated from PROJ's transform of a grid of control points, within a tenth of the
     output grid's step of PROJ's own (checked; else exactly); ``exact_transform=True``: every point
     through PROJ.
@@ -323,6 +324,8 @@ def convert(
         raise InputError(f"convert: from_crs={from_crs!r}: the CRS the inputs are in, for to_crs; give to_crs too")
     if colorize is not None and not isinstance(colorize, (str, os.PathLike)):
         raise InputError(f"convert: colorize={colorize!r}: the path of an orthophoto (a GeoTIFF)")
+    if to_crs is not None and not _are_paths(inputs):
+        raise InputError("convert: to_crs reprojects the points read from files; the inputs are a cloud or PointChunks")
     if keep is not None and not _are_paths(inputs):  # (a cloud's or chunks' points are not read here)
         raise InputError(f"convert: the filter ({keep.describe()}) applies to the points read from files; the inputs are a cloud or PointChunks")
     check_switch("progress", progress, "convert")  # "yes"/"no" were both true
@@ -341,8 +344,6 @@ def convert(
                           "upper_points": upper_points, "source_files": source_files, "on_ready": on_ready}  # fmt: skip
         out = Path(out)  # (a str was "'str' object has no attribute 'is_dir'")
         given = [option for option, value in octree_options.items() if value is not None]
-        if to_crs is not None and not _are_paths(inputs):
-            raise InputError("convert: to_crs reprojects the points read from files; the inputs are a cloud or PointChunks")
         if given:  # (each meant something of an octree only: none was ignored without a word)
             raise ConvertError(f"{out}: {', '.join(given)}: {'options' if len(given) > 1 else 'an option'} of an octree, not of a plain {out.suffix[1:].upper()} file")
         t0 = time.perf_counter()
@@ -373,8 +374,8 @@ def convert(
         raise ConvertError(f"{out}: a {format} octree is a folder; name it without a point file's suffix, or write --format copc into a .copc.laz file")
     if colorize is not None:
         raise ConvertError(f"{out}: --colorize: an option of a plain .las, .laz or .ply file, or of tiles, not of a {format} octree")
-    if to_crs is not None:
-        raise ConvertError(f"{out}: --to-crs: an option of a plain .las, .laz or .ply file, or of tiles, not of a {format} octree")
+    if to_crs is not None and client is not None:  # (its read tasks read the files as they are)
+        raise ConvertError(f"{out}: --to-crs: reprojects in this process, not on a Dask cluster (--dask, --workers); convert without one")
     if spacing is not None:  # (an octree's inner nodes are its thinned levels; its leaves hold every point)
         raise ConvertError(f"{out}: --thin: an option of a plain .las, .laz or .ply file of the files' points, not of a {format} octree")
     if format == "copc" and out is not None and str(out) != "":
@@ -437,6 +438,10 @@ def convert(
     )
     conv.on_ready = on_ready
     conv.point_filter = keep
+    if reprojection is not None:  # every file's CRS checked, the grid of the moved points made: before a point is read
+        reprojection.check_files(conv.paths)
+        conv.reprojection, conv.reprojected_grid = reprojection, output_grid(conv.paths, reprojection)
+        conv.point_filter = reprojection.moved_filter(keep, conv.paths)  # (its clip polygon in the target CRS, where the points are filtered)
     if client is not None:
         with open_client(client, announce=progress) as conv.client:
             return conv.run(overwrite)

@@ -34,11 +34,14 @@ def _warn_off_grid(grids, scale, offset) -> None:
         )
 
 
-def input_facts(paths, one_grid: bool = False) -> dict:
+def input_facts(paths, one_grid: bool = False, moved_to: tuple | None = None) -> dict:
     """{crs: 'EPSG:n' or WKT or None, wkt: WKT or None, scale, offset: the LAS inputs' grid (the
     finest scale; the first file's offset) or None, has_color}. Read from headers only.
     ``one_grid``: the output holds every point as integers on that grid (Potree, COPC): a file
-    on another one (an offset off it by a fraction of a step) is warned about."""
+    on another one (an offset off it by a fraction of a step) is warned about. ``moved_to``:
+    (the target CRS's WKT, the moved points' LAS grid (scale, offset) or None) where the points
+    are reprojected as they are read (convert's to_crs): the CRS and grid are those, and the
+    inputs' own (mixed CRSs, grids apart) nothing to warn of."""
     crs = wkt = scale = offset = None
     has_color = None
     grids = []  # (file, scale, offset) of the LAS inputs
@@ -65,9 +68,13 @@ def input_facts(paths, one_grid: bool = False) -> dict:
             crs = text
             hdr = read_las_header(p)  # (its (E)VLRs: the first CRS's file only)
             wkt = wkt_of(hdr.vlrs + hdr.evlrs) or crs_wkt(text)
-    warn_mixed_crs(paths or [], then="; the output takes the first CRS named")
-    if one_grid and grids:
-        _warn_off_grid(grids, scale, offset)
+    if moved_to is not None:
+        crs = wkt = moved_to[0]
+        scale, offset = (None, None) if moved_to[1] is None else (np.asarray(v, np.float64) for v in moved_to[1])
+    else:
+        warn_mixed_crs(paths or [], then="; the output takes the first CRS named")
+        if one_grid and grids:
+            _warn_off_grid(grids, scale, offset)
     return {
         "crs": crs,
         "wkt": wkt,

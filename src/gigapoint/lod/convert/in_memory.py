@@ -84,7 +84,7 @@ class InMemoryPhases(ReadPhase, PartitionPhases):
         if not self.spilled:  # a fresh run (a spilled one resumes spilled): held while it fits
             self.spilled = self.state["spilled"] = not fits_in_memory(self)
         self._held, self._held_points = [], 0
-        self._xyz_code = None if self.spilled else _shared_las_code(self.paths)
+        self._xyz_code = None if self.spilled or self.reprojection is not None else _shared_las_code(self.paths)  # (moved points: off the files' grid)
         super().read()
 
     def _take_chunk(self, i: int, chunk) -> tuple:

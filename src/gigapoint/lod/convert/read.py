@@ -216,10 +216,15 @@ class ReadPhase(Job):
     _passing = None
 
     def _file_chunks(self):
-        """The input files' chunks, each with its file's LAS grid (``_grid_of``), through the filter."""
+        """The input files' chunks, each with its file's LAS grid (``_grid_of``), through the
+        filter; moved into the target CRS first where reprojected (as a plain point file's: the
+        filter in the target's coordinates), off any file's grid then (spilled as float64)."""
         for p in self.paths:
-            code = _grid_of(p)
-            chunks = _skipped_if_empty(p, filtered(_read_chunks(p, self.chunk_size), p, self._passing), len(self.paths) > 1)
+            code = _grid_of(p) if self.reprojection is None else None
+            read = _read_chunks(p, self.chunk_size)
+            if self.reprojection is not None:
+                read = (self.reprojection.chunk(chunk, p) for chunk in read)
+            chunks = _skipped_if_empty(p, filtered(read, p, self._passing), len(self.paths) > 1)
             chunks = with_scan_angle(chunks) if self.one_angle else chunks
             for chunk in prefetch(chunks) if self.read_ahead else chunks:
                 yield code, chunk

@@ -157,6 +157,10 @@ class Job:
 
     #: only the points it keeps are read (io/filters.py; convert's classes, drop_classes, clip); None: every point
     point_filter = None
+    #: the points moved into another CRS as they are read (io/reproject.py's Reprojection: convert's to_crs); None: kept
+    reprojection = None
+    #: the LAS grid (scale, offset) of the moved points (reproject.output_grid; None: not LAS inputs), what the output stores them on
+    reprojected_grid = None
 
     def fingerprint(self) -> dict | None:
         """The inputs and options a saved state must match to be resumed (None: chunk inputs)."""
@@ -179,7 +183,7 @@ class Job:
             "chunks": "joined",  # small files' chunks joined (read._joined): a state of one chunk a file reads otherwise
             # a run resumed under another filter mixed points kept by one and by the other
             "filter": None if self.point_filter is None else self.point_filter.as_spec(),
-        }
+        } | ({} if self.reprojection is None else {"reprojection": self.reprojection.as_spec()})  # (a run without one: its fingerprint as before)
 
     def fingerprint_key(self) -> str | None:
         """``fingerprint`` as the state holds it: a digest. Held whole, 2 000 tiles' paths, sizes and
@@ -207,8 +211,10 @@ class Job:
     def source_facts(self, paths) -> dict:
         """``input_facts`` of ``paths`` (CRS, LAS grid, colours: ``state["source"]``), their
         ``has_color`` the chunks' own where convert was told (a live cloud's frames pushed without
-        colours: its grey is no colour of theirs, so a COPC output gets no RGB)."""
-        facts = input_facts(paths, one_grid=self.format != "gigapoint")
+        colours: its grey is no colour of theirs, so a COPC output gets no RGB); with ``--to-crs``
+        the target's CRS and grid."""
+        moved_to = None if self.reprojection is None else (self.reprojection.target_wkt(), self.reprojected_grid)
+        facts = input_facts(paths, one_grid=self.format != "gigapoint", moved_to=moved_to)
         if self.has_color is not None:
             facts["has_color"] = bool(self.has_color)
         return facts

@@ -21,7 +21,6 @@ for a point left out)."""
 from __future__ import annotations
 
 import os
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -107,12 +106,9 @@ class PointFiles:
         return chunk
 
     def points_filter(self, keep: PointFilter | None) -> PointFilter | None:
-        """``keep`` as the points are filtered: where they are reprojected (the filter then sees
-        them in the target CRS), its clip polygon moved there from its own CRS (the inputs', unless
-        its GeoJSON names another: ``Reprojection.clip_polygon``)."""
-        if keep is None or keep.polygon is None or self.reprojection is None:
-            return keep
-        return replace(keep, polygon=self.reprojection.clip_polygon(keep.polygon, self.files))
+        """``keep`` as the points are filtered: in the target CRS where they are reprojected (its
+        clip polygon moved there: ``Reprojection.moved_filter``)."""
+        return keep if self.reprojection is None else self.reprojection.moved_filter(keep, self.files)
 
     def headers_bounds(self):
         """(lo, hi) of the files' points as their headers tell (in the target CRS where reprojected); None where one tells none."""
