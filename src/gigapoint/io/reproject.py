@@ -183,8 +183,10 @@ class Reprojection:
     def _moved(self, xyz: np.ndarray, path) -> tuple[np.ndarray, np.ndarray]:
         """(``xyz`` in the target CRS, invalid ones NaN; whether each valid point came out not
         finite): interpolated from a control grid where one is within the tolerance, else exact."""
-        valid = (np.isfinite(xyz) & (np.abs(xyz) <= MAX_ABS_COORDINATE)).all(axis=1)
-        out = self._interpolated(xyz, valid, path)
+        from ..core.bounds import valid_bounds  # (numba: only once points are moved)
+
+        valid, lo, hi = valid_bounds(xyz, MAX_ABS_COORDINATE)  # (one pass: numpy's mask and box took ~0.1 s a 1 M chunk)
+        out = self._interpolated(xyz, valid, lo, hi, path)
         if out is None:
             out = self._exact(xyz, path)
             self.exact_points += len(xyz)
@@ -199,16 +201,14 @@ class Reprojection:
         self.transformer(path).transform(x, y, z, inplace=True)
         return np.column_stack([x, y, z])
 
-    def _interpolated(self, xyz: np.ndarray, valid: np.ndarray, path) -> np.ndarray | None:
-        """``xyz`` (its ``valid`` points) moved by a control grid within the tolerance; None where
-        the fast path is off, or no grid gets there (the module's notes)."""
+    def _interpolated(self, xyz: np.ndarray, valid: np.ndarray, lo: np.ndarray, hi: np.ndarray, path) -> np.ndarray | None:
+        """``xyz`` (its ``valid`` points, within ``lo``..``hi``) moved by a control grid within
+        the tolerance; None where the fast path is off, or no grid gets there (the module's notes)."""
         count = int(np.count_nonzero(valid))
         if self.exact or self.tolerance is None or count < MIN_INTERPOLATED:
             return None
         transformer = self.transformer(path)
         areas = self._areas[id(transformer)]
-        points = xyz[valid]
-        lo, hi = points.min(axis=0), points.max(axis=0)
         if areas is None or (areas and not self._one_operation(transformer, areas, lo, hi)):
             return None
         from .reproject_grid import fit

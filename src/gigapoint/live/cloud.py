@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.bounds import valid_bounds
 from ..core.chunk import colors_for
 from ..core.cloud import MAX_ABS_COORDINATE, PointCloud, take
 from ..core.layout import BATCH_SIZE
@@ -49,7 +50,6 @@ from ..core.renderable import DrawList, refuse_hidden_classes
 from ..core.selection import Selection, View, select_view, subsample_step
 from ..core.threads import threads_for
 from ..errors import GigapointError, GigapointWarning, InputError, KeptWarnings, check_switch, check_timeout, check_whole, is_real, warn
-from ..lod.build import valid_bounds
 from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
 from ..render.splats import point_spacing
 from .depth import depth_to_points, parse_pose

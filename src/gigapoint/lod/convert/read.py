@@ -10,6 +10,7 @@ from functools import cached_property
 
 import numpy as np
 
+from ...core.bounds import valid_bounds
 from ...core.chunk import PointChunk, join_chunks, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
 from ...errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, warn
@@ -17,7 +18,6 @@ from ...io import files_label, read_chunks, scan_angles_differ
 from ...io.filters import filtered
 from ...io.las import with_scan_angle
 from ...io.registry import reader_for
-from ..build import valid_bounds
 from ..preview import PreviewSampler, preview_points
 from .prefetch import prefetch
 from .spill import encode_xyz, las_xyz_code, load_raw_chunk, one_value, save_raw_chunk

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ...atomic import same_file
+from ...core.bounds import valid_bounds
 from ...core.chunk import PointChunk, attributes_in_common, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
 from ...errors import EmptyCloudError, GigapointWarning, InputError, warn
@@ -40,7 +41,6 @@ from ...io.registry import reader_for
 from ...io.reproject import Reprojection, output_grid
 from ...io.thin import Thinning
 from ...io.write import POINT_FILE_SUFFIXES, check_point_file_output, file_has_color, source_crs_records, wkt_crs_records, write_points
-from ..build import valid_bounds
 from ..kinds import is_copc_name
 from .facts import input_facts
 from .read import _skipped_if_empty

@@ -55,6 +55,7 @@ from numba.typed import List
 from ...core import pages
 from ...core.attributes import Attributes, encode, fits, holder_for, repacked, resized, widened, zeroed_like
 from ...core.attributes import stored as stored_array
+from ...core.bounds import valid_bounds
 from ...core.chunk import PointChunk, attribute_dtype_problem, attribute_name_problem, colors_for, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, at_scale, byte_views, take
 from ...core.compact import GRID_TOLERANCE, ext_bits_per_point, point_words, stream_words, streams_into
@@ -67,7 +68,6 @@ from ...core.selection import Selection, View, batch_matrices, precision_for, vi
 from ...core.threads import threads_for
 from ...errors import GigapointError, InputError, check_timeout, check_whole
 from ...render.splats import weighted_median
-from ..build import valid_bounds
 from ..keys import CODE_BITS, morton_position, point_codes
 from ..store import KEPT_ROUNDS, kept_shares, list_chunks, select_octants
 from . import kernels as K
