@@ -511,3 +511,53 @@ def test_an_attribute_of_several_numbers_is_one_attribute_a_number(tmp_path, enc
         assert got[f"normal_{k}"].dtype == np.float32
         np.testing.assert_array_equal(got[f"normal_{k}"][order], normal[want, k])
     np.testing.assert_array_equal(got["quality"][order], np.array([7, 8, 9])[want])
+
+
+def _points_of(cloud) -> dict:
+    """Every point of an octree's nodes ({field: values}), in node order."""
+    got = [cloud.node_points(i) for i in range(len(cloud.keys)) if cloud.nodes["count"][i]]
+    return {k: np.concatenate([g[k] for g in got]) for k in got[0]}
+
+
+@pytest.mark.parametrize("encoding", ["DEFAULT", "BROTLI"])
+def test_points_without_colours_make_a_potree_folder_without_rgb(tmp_path, encoding):
+    """As PotreeConverter 2: a LAS file without RGB (point format 1), or a cloud converted with
+    has_color=False, gets no rgb attribute in metadata.json and no rgb bytes in its records (it
+    got the grey of points without colours, 6 bytes a point); the folder reads back: the same
+    points and intensities, the grey of a colourless LAS file, no colour says info."""
+    import laspy
+
+    from gigapoint.core.chunk import DEFAULT_COLOR
+    from gigapoint.lod import octree_info
+
+    rng = np.random.default_rng(5)
+    n = 6_000
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.scales, header.offsets = [0.01] * 3, [1000.0, 2000.0, 0.0]
+    las = laspy.LasData(header)
+    las.X, las.Y, las.Z = (rng.integers(0, 50_000, n, dtype=np.int32) for _ in range(3))
+    las.intensity = rng.integers(0, 65536, n).astype(np.uint16)
+    las.classification = rng.integers(0, 8, n).astype(np.uint8)
+    las.write(str(tmp_path / "norgb.las"))
+    convert([tmp_path / "norgb.las"], tmp_path / "las", format="potree", encoding=encoding, max_leaf=1_000)
+    xyz = np.stack([las.x, las.y, las.z], axis=1)
+    convert(gp.from_arrays(xyz), tmp_path / "cloud", format="potree", encoding=encoding, max_leaf=1_000, has_color=False)
+
+    for out in (tmp_path / "las", tmp_path / "cloud"):
+        meta = json.loads((out / "metadata.json").read_text())
+        names = [a["name"] for a in meta["attributes"]]
+        assert "rgb" not in names and names[:3] == ["position", "intensity", "classification"], out
+        assert octree_info(out)["has_color"] is False
+        if encoding == "DEFAULT":  # a node's bytes: its points' records, of the attributes stated, nothing more
+            record_size = sum(a["size"] for a in meta["attributes"])
+            if out.name == "cloud":  # (the LAS file's have its fields too: returns, GPS time, ...)
+                assert names == ["position", "intensity", "classification"] and record_size == 12 + 2 + 1
+            assert (out / "octree.bin").stat().st_size == n * record_size
+        back = _points_of(open_octree(out))
+        assert len(back["xyz"]) == n
+        have, want = np.round((back["xyz"] - [1000.0, 2000.0, 0.0]) / 0.01).astype(np.int64), np.stack([las.X, las.Y, las.Z], 1)
+        i, j = np.lexsort(want.T), np.lexsort(have.T)
+        np.testing.assert_array_equal(have[j], want[i])
+        assert (back["rgba"] == np.array(DEFAULT_COLOR, np.uint8).view(np.uint32)[0]).all()
+        if out.name == "las":
+            np.testing.assert_array_equal(back["intensity"][j], np.asarray(las.intensity)[i])

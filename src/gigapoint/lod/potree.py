@@ -42,7 +42,8 @@ _TYPES = {
     "double": "<f8",
 }
 #: what the writer stores first (LAS order): position, intensity, classification (zeros where
-#: the points have none: viewers expect them), then every other attribute, then rgb
+#: the points have none: viewers expect them), then every other attribute, then rgb (left out
+#: for points without colours, as PotreeConverter 2 leaves it out)
 WRITE_ATTRIBUTES = (("position", "int32", 3), ("intensity", "uint16", 1), ("classification", "uint8", 1), ("rgb", "uint16", 3))
 #: gigapoint's attribute names as PotreeConverter writes them (the reader maps them back)
 POTREE_NAMES = {"return_number": "return number", "number_of_returns": "number of returns", "point_source_id": "point source id",
@@ -116,13 +117,14 @@ def _attribute_entries(layout: list[tuple[str, str, int]], scale, offset, stats)
     return out
 
 
-def write_layout(attributes: dict) -> list[tuple[str, str, int]]:
+def write_layout(attributes: dict, has_color: bool = True) -> list[tuple[str, str, int]]:
     """(name, Potree type, elements) of every field a node's record holds, in order, for points
     with ``attributes`` ({name: dtype}): ``WRITE_ATTRIBUTES``' position, intensity and
-    classification, the other attributes, rgb."""
+    classification, the other attributes, rgb (not for points without colours: ``has_color``
+    False; their grey is no colour of theirs)."""
     first, rgb = list(WRITE_ATTRIBUTES[:3]), WRITE_ATTRIBUTES[3]
     taken = {name for name, _, _ in first}
-    return first + [(a, _potree_type(dt), 1) for a, dt in attributes.items() if a not in taken] + [rgb]
+    return first + [(a, _potree_type(dt), 1) for a, dt in attributes.items() if a not in taken] + ([rgb] if has_color else [])
 
 
 def record_dtype(layout) -> np.dtype:
@@ -138,7 +140,8 @@ def _pack_records(xyz, rgba, idx, offset, scale, pos_at, rgb_at, attr_src, attr_
     """Record j of ``out`` (u8, ``rec_size`` bytes a point, little-endian) from point idx[j], with
     no gathered copy of the inputs (a task's values only): its position on the grid (int32, clipped at 0 and 2^31 - 1),
     its attributes (``attr_src[a]``'s bytes from idx[j] * attr_stride[a]: a stride 0 reads a
-    value of zeros, for a field the points lack), its colour (8 to 16 bits a channel: x 257).
+    value of zeros, for a field the points lack), its colour (8 to 16 bits a channel: x 257;
+    none where ``rgb_at`` is negative: a layout without rgb).
     Task t's minimum and maximum of each field as written go to lo[t], hi[t]: the position
     (3, as float grid steps), the attributes (attr_kind 0 unsigned, 1 signed, 2 float; a NaN
     wins, as numpy's min), the colour (3). A task goes field by field, each field's values
@@ -161,6 +164,8 @@ def _pack_records(xyz, rgba, idx, offset, scale, pos_at, rgb_at, attr_src, attr_
         for a in range(n_attr):
             _gather_values(attr_src[a], attr_stride[a], attr_width[a], idx, j0, j1, vals)
             _pack_field(vals, attr_width[a], attr_at[a], attr_kind[a], j0, j1, rec_size, out, tlo, thi, 3 + a)
+        if rgb_at < 0:
+            continue
         for j in range(j0, j1):
             vals[j - j0] = rgba[idx[j]]
         for ch in range(3):
@@ -257,11 +262,12 @@ def pack_records(xyz, rgba, attributes: dict, idx, layout, scale, offset, out: n
         at.append(rec.fields[a][1])
         kind.append({"u": 0, "i": 1, "f": 2}[dt.kind])
     n_tasks = (n + _RECORDS_A_TASK - 1) // _RECORDS_A_TASK
-    n_fields = 3 + len(fields) + 3
+    has_rgb = "rgb" in rec.names
+    n_fields = 3 + len(fields) + 3 * has_rgb
     lo, hi = np.full((n_tasks, n_fields), np.inf), np.full((n_tasks, n_fields), -np.inf)
     if n:
         _pack_records(np.ascontiguousarray(xyz, np.float64), np.ascontiguousarray(rgba, np.uint32), np.ascontiguousarray(idx, np.int64),
-                      np.asarray(offset, np.float64), np.asarray(scale, np.float64), rec.fields["position"][1], rec.fields["rgb"][1],
+                      np.asarray(offset, np.float64), np.asarray(scale, np.float64), rec.fields["position"][1], rec.fields["rgb"][1] if has_rgb else -1,
                       byte_views(src), np.array(stride, np.int64), np.array(width, np.int64), np.array(at, np.int64),
                       np.array(kind, np.int64), rec.itemsize, out, lo, hi)  # fmt: skip
     lo, hi = lo.min(axis=0, initial=np.inf), hi.max(axis=0, initial=-np.inf)
@@ -306,9 +312,11 @@ PLACED_STATS = "potree_stats.json"  # ... and its fields' minimum and maximum, a
 
 
 def potree_plan(st: dict) -> tuple[list, np.ndarray, np.ndarray]:
-    """(write_layout, scale, offset) of the Potree octree a conversion's state makes."""
+    """(write_layout, scale, offset) of the Potree octree a conversion's state makes: rgb only
+    for sources with colours (``source_facts``' has_color, as the gigapoint and COPC writers)."""
     scale, offset = output_grid(st, unsigned=True)
-    return write_layout({a: np.dtype(d) for a, d in (st.get("attributes") or {}).items()}), scale, offset
+    has_color = bool((st.get("source") or {}).get("has_color", True))
+    return write_layout({a: np.dtype(d) for a, d in (st.get("attributes") or {}).items()}, has_color), scale, offset
 
 
 def place_node_set(out: OctreeDir, at: int, dest: Path, xyz, rgba, attributes: dict, counts, plan, encoding: str, idx=None) -> int:
