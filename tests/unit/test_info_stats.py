@@ -397,6 +397,23 @@ def test_info_stats_of_an_octree_count_its_nodes_points_on_the_bar(cli, autzen_o
     assert out.splitlines()[1:3] == ["  points:      110,000, 0 of them invalid (NaN, inf or beyond ±1e+12): skipped", "  bounds min:  636001.76, 848935.20, 406.26 (the points')"]
 
 
+@pytest.mark.parametrize("kind", ["gigapoint", "potree"])
+def test_point_stats_of_an_octree_folder_names_what_gives_its_statistics(autzen_path, autzen_octrees, kind):
+    """io reads point files; an octree's nodes are lod's to read (io cannot import lod). An
+    octree folder was read as a folder of files ("crc.npy: NPY array: expected an (N, 3) ...
+    array", "directory holds no supported point cloud file"): one line naming what reads it,
+    alone or beside a file, and what it names gives its statistics."""
+    from gigapoint.lod.query import octree_stats
+
+    octree = autzen_octrees[kind]
+    said = f"{octree}: an LOD octree; its statistics: gigapoint info --stats {octree} or gigapoint.lod.query.octree_stats"
+    for paths in ([octree], [[autzen_path, str(octree)]]):
+        with pytest.raises(InputError) as refused:
+            point_stats(*paths)
+        assert str(refused.value) == said
+    assert octree_stats(octree).result()["point_count"] == 110_000
+
+
 def test_info_stats_of_an_octree_no_node_of_which_meets_the_clip_box(cli, autzen_octrees):
     """No node read: the filter's one-line error, not statistics of no point."""
     octree = autzen_octrees["potree"]

@@ -4,15 +4,18 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 
 from ..core.coords import MAX_ABS_COORDINATE, value_decimals
-from ..errors import counted
+from ..errors import InputError, counted
 from ._base import STREAM_CHUNK_SIZE, check_file, headers_once
 from .crs import crs_identity, crs_name
 from .filters import point_filter
 from .paths import cloud_name, expand_paths, file_names, files_label
-from .registry import reader_for
+from .registry import is_dataset_folder, reader_for
 from .stats import PointStats, file_stats
 
 
@@ -145,6 +148,8 @@ def point_stats(*paths, recursive: bool = False, chunk_size: int = STREAM_CHUNK_
     what it is, the points read and kept); one that keeps none is an EmptyCloudError."""
     if len(paths) == 1 and isinstance(paths[0], (list, tuple)):  # (a list was pathlib's TypeError)
         paths = tuple(paths[0])
+    for path in paths:
+        _refuse_octree_folder(path)
     keep = point_filter(classes, drop_classes, clip, "point_stats", clip_polygon=clip_polygon)  # (bad values: said before reading)
     files = expand_paths(paths, recursive=recursive)
     total = PointStats()
@@ -153,6 +158,14 @@ def point_stats(*paths, recursive: bool = False, chunk_size: int = STREAM_CHUNK_
     if keep is not None:
         keep.check_passed(files_label(files))
     return {"path": cloud_name(files) if len(files) > 1 else str(files[0]), **total.result()}
+
+
+def _refuse_octree_folder(path) -> None:
+    """A one-line InputError for an octree folder (converted, Potree, EPT): its nodes are read by
+    lod, which io cannot import; read as a folder of files it failed on one of its arrays
+    ("crc.npy: NPY array: expected an (N, 3) ... array") or on holding no point file."""
+    if isinstance(path, (str, os.PathLike)) and Path(path).expanduser().is_dir() and is_dataset_folder(Path(path).expanduser()):
+        raise InputError(f"{path}: an LOD octree; its statistics: gigapoint info --stats {path} or gigapoint.lod.query.octree_stats")
 
 
 def _number(v) -> str:
