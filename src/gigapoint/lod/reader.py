@@ -67,7 +67,7 @@ def refuse_octrees(paths, why: str) -> None:
     ending in ``why``. A local COPC file passes: it is a LAZ file too."""
     for path in paths:
         kind = lod_source_kind(path)
-        if kind in ("folder", "ept") or (kind is not None and as_url(path) is not None):
+        if kind is not None and not is_local_copc(path):
             what = {"folder": "a converted octree folder", "ept": "an EPT dataset"}.get(kind, "a URL")
             raise InputError(f"{shown_url(path)}: {what} opens alone, drawn level of detail as stored; {why}")
 
