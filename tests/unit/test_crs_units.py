@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import gigapoint as gp
-from gigapoint.io import crs_units, files_units, vertical_crs
+from gigapoint.io import crs_units, files_units, horizontal_epsg, vertical_crs
 from gigapoint.io.las import geokeys, read_las_header
 from gigapoint.viewer import measure as M
 
@@ -115,25 +115,31 @@ def test_measured_lengths_in_the_crs_units():
     assert s["segments"] == [{"length": None, "horizontal": None, "vertical": 2.0}]  # degrees are no length
 
 
-def write_geokeys_only(path: Path, code: int) -> Path:
+def write_geokeys_only(path: Path, code: int, more_keys: dict | None = None) -> Path:
     """A LAS 1.2 file naming its CRS by GeoTIFF keys alone: GTModelTypeGeoKey 1 (projected),
-    ProjectedCSTypeGeoKey ``code``, no ProjLinearUnitsGeoKey (as many LAS 1.2 files do)."""
+    ProjectedCSTypeGeoKey ``code``, no ProjLinearUnitsGeoKey (as many LAS 1.2 files do); and
+    ``more_keys`` ({key: value})."""
     laspy = pytest.importorskip("laspy")
-    from laspy.vlrs.known import GeoKeyDirectoryVlr, GeoKeyEntryStruct
-
     header = laspy.LasHeader(point_format=0, version="1.2")
-    vlr = GeoKeyDirectoryVlr()
-    vlr.geo_keys_header.number_of_keys = 2
-    vlr.geo_keys = []
-    for key_id, value in ((1024, 1), (3072, code)):
-        key = GeoKeyEntryStruct()
-        key.id, key.tiff_tag_location, key.count, key.value_offset = key_id, 0, 1, value
-        vlr.geo_keys.append(key)
-    header.vlrs.append(vlr)
+    header.vlrs.append(geokeys_vlr({1024: 1, 3072: code, **(more_keys or {})}))
     las = laspy.LasData(header)
     las.x = las.y = las.z = np.arange(5.0)
     las.write(str(path))
     return path
+
+
+def geokeys_vlr(keys: dict):
+    """laspy's GeoKeyDirectory VLR of ``keys`` ({key: value}, each held in place: LAS 1.2-1.3 files' CRS)."""
+    from laspy.vlrs.known import GeoKeyDirectoryVlr, GeoKeyEntryStruct
+
+    vlr = GeoKeyDirectoryVlr()
+    vlr.geo_keys_header.number_of_keys = len(keys)
+    vlr.geo_keys = []
+    for key_id, value in keys.items():
+        key = GeoKeyEntryStruct()
+        key.id, key.tiff_tag_location, key.count, key.value_offset = key_id, 0, 1, value
+        vlr.geo_keys.append(key)
+    return vlr
 
 
 class FakeAxis:
@@ -244,5 +250,44 @@ def test_vertical_crs_of_epsg_codes_needs_pyproj(monkeypatch):
     assert vertical_crs("EPSG:2994+6360") == NAVD88_FTUS
     assert vertical_crs("EPSG:26910") is None and vertical_crs("EPSG:4979") is None
     monkeypatch.setitem(sys.modules, "pyproj", None)
-    assert vertical_crs("EPSG:26910+5703") is None  # unknown without pyproj
+    assert vertical_crs("EPSG:26910+5703") == {"epsg": 5703, "name": "EPSG:5703", "unit": None}  # its code is text; its unit unknown
+    assert vertical_crs("EPSG:5498") is None  # a registered compound code: unknown without pyproj
     assert vertical_crs(nad83_navd88) == {**navd88, "epsg": None}  # its name and unit still
+
+
+@pytest.mark.parametrize("pyproj_installed", [True, False])
+def test_horizontal_epsg_of_compound_codes(pyproj_installed, monkeypatch):
+    """The map grid's code of 'EPSG:h+v' is h, text with pyproj or without; a registered compound
+    code's (EPSG:5498 NAD83 + NAVD88 height, EPSG:7407 NAD27 / Texas North + NGVD29 height (ftUS))
+    is its horizontal part's, which pyproj alone knows (without it the code is taken as it is)."""
+    if pyproj_installed:
+        pytest.importorskip("pyproj")
+    else:
+        monkeypatch.setitem(sys.modules, "pyproj", None)
+    assert horizontal_epsg("EPSG:26910+5703") == horizontal_epsg(" epsg:26910+5703 ") == horizontal_epsg("EPSG:26910") == 26910
+    assert horizontal_epsg("EPSG:4269+5703") == 4269
+    registered = {5498: 4269, 7407: 32037} if pyproj_installed else {5498: 5498, 7407: 7407}
+    assert {code: horizontal_epsg(f"EPSG:{code}") for code in registered} == registered
+    assert horizontal_epsg("EPSG:26910+") is None and horizontal_epsg("EPSG:+5703") is None
+
+
+def test_units_of_a_compound_code_name_its_heights_unit():
+    """'EPSG:h+v' (a LAS file's GeoTIFF keys naming a vertical CRS): lengths in h's unit, heights in v's."""
+    pytest.importorskip("pyproj")
+    assert crs_units("EPSG:26910+6360") == {"horizontal": METRE, "vertical": US_FOOT_UNIT, "vertical_assumed": False}
+    assert crs_units("EPSG:2994+5703") == {"horizontal": FOOT, "vertical": METRE, "vertical_assumed": False}
+    keys = {1024: 1, 3072: 26910, 4096: 5703, 4099: 9003}  # NAVD88 in US feet by the file's own unit key
+    assert crs_units("EPSG:26910+5703", keys)["vertical"] == US_FOOT_UNIT
+
+
+def test_geokeys_name_a_compound_crs_where_a_vertical_code_is_given(tmp_path):
+    """VerticalCSTypeGeoKey's EPSG code joins the map grid's; a user-defined one, or a code of
+    GeoTIFF 1.0's own list EPSG has no vertical CRS for (5001-5033, 5101-5106), leaves the grid's alone
+    and the heights' unit to VerticalUnitsGeoKey."""
+    said = {}
+    for vertical, units in ((5703, None), (6360, 9003), (32767, 9003), (5030, None), (5103, 9002), (0, 9002)):
+        keys = {4096: vertical} if vertical else {}
+        path = write_geokeys_only(tmp_path / f"v{vertical}.las", 26910, {**keys, **({4099: units} if units else {})})
+        said[vertical] = read_las_header(path).crs()
+    assert said == {5703: "EPSG:26910+5703", 6360: "EPSG:26910+6360", 32767: "EPSG:26910", 5030: "EPSG:26910", 5103: "EPSG:26910", 0: "EPSG:26910"}
+    assert crs_units(None, {1024: 1, 3072: 26910, 4096: 32767, 4099: 9003})["vertical"] == US_FOOT_UNIT

@@ -11,6 +11,7 @@ import laspy
 import numpy as np
 import pytest
 from PIL import Image
+from test_crs_units import geokeys_vlr  # tests/unit is on sys.path
 
 import gigapoint as gp
 from gigapoint.errors import CameraError
@@ -434,3 +435,59 @@ def test_a_wkt_too_long_for_gdals_citation_is_left_to_the_prj(tmp_path):
         f"{tmp_path / 'd.tif'}: its GeoTIFF keys name no CRS (its WKT is longer than GDAL reads from them); the .prj beside it has it"
     ]
     assert geotiff_notes([tmp_path / "d.tif"], wkt, wkt, units) == []
+
+
+@pytest.mark.parametrize("pyproj_installed", [True, False])
+def test_cli_geokeys_naming_a_vertical_crs_reach_info_and_the_dsm(cli, tmp_path, gdal, monkeypatch, pyproj_installed):
+    """A LAS 1.2 file naming Oregon GIC Lambert (ft) and NAVD88 height (ftUS) by GeoTIFF keys alone
+    (VerticalCSTypeGeoKey 6360): info names the compound CRS, and the DSM's keys the heights'
+    vertical CRS and unit as the file's own (with pyproj or without: the codes are text)."""
+    pyproj = pytest.importorskip("pyproj") if pyproj_installed else monkeypatch.setitem(sys.modules, "pyproj", None)
+    keys = {1024: 1, 3072: 2994, 3076: 9002, 4096: 6360, 4099: 9003}  # projected, ft; heights NAVD88 in US ft
+    write_las(tmp_path / "c.las", geokeys_vlr(keys))
+    rc, stdout, err = cli("info", tmp_path / "c.las")
+    assert rc == 0, err
+    assert "  crs:         EPSG:2994+6360\n" in stdout
+    rc, stdout, err = cli("render", tmp_path / "c.las", "-o", tmp_path / "o.png", "--gsd", GSD, "--depth-out", tmp_path / "d.tif")
+    assert rc == 0, err
+    assert geo_key_directory(tmp_path / "d.tif") == ((1, 1), {1025: 1, **keys})
+    with gdal.open(tmp_path / "d.tif") as ds:
+        assert ds.crs.linear_units == "foot" and ds.units == ("US survey foot",)
+        assert 'PROJCS["NAD83(HARN) / Oregon GIC Lambert (ft)"' in ds.crs.to_wkt()
+        assert 'VERT_CS["NAVD88 height (ftUS)"' in ds.crs.to_wkt() and ds.crs.to_wkt().endswith('AUTHORITY["EPSG","6360"]]]')
+    if pyproj_installed:  # the .prj: pyproj's WKT of the compound CRS
+        prj = pyproj.CRS.from_wkt((tmp_path / "o.prj").read_text())
+        assert [part.to_epsg() for part in prj.sub_crs_list] == [2994, 6360]
+    else:
+        assert "no .prj written: the inputs name their CRS only as EPSG:2994+6360, and its WKT needs pyproj" in stdout
+
+
+@pytest.mark.parametrize(
+    "vertical_code",
+    [32767, 5103],  # user-defined; GeoTIFF 1.0's own code of NAVD88 (EPSG's code of its datum, no CRS)
+)
+def test_cli_geokeys_naming_the_heights_unit_alone_reach_the_dsm(cli, tmp_path, gdal, vertical_code):
+    """VerticalUnitsGeoKey beside a vertical CRS no EPSG code names: the CRS is the map grid's code
+    alone, and the DSM's keys keep the heights' unit (a user-defined vertical CRS, as GDAL reads it)."""
+    write_las(tmp_path / "c.las", geokeys_vlr({1024: 1, 3072: 26910, 3076: 9001, 4096: vertical_code, 4099: 9003}))
+    rc, stdout, err = cli("info", tmp_path / "c.las")
+    assert rc == 0, err
+    assert "  crs:         EPSG:26910\n" in stdout
+    rc, _, err = cli("render", tmp_path / "c.las", "-o", tmp_path / "o.png", "--gsd", GSD, "--depth-out", tmp_path / "d.tif")
+    assert rc == 0, err
+    assert geo_key_directory(tmp_path / "d.tif") == ((1, 1), {1024: 1, 1025: 1, 3072: 26910, 3076: 9001, 4096: 32767, 4099: 9003})
+    with gdal.open(tmp_path / "d.tif") as ds:
+        assert ds.crs.linear_units == "metre" and ds.units == ("US survey foot",)
+
+
+def test_dsm_heights_unit_is_the_files_own_unit_key():
+    """NAVD88 height (EPSG:5703, in metres) with VerticalUnitsGeoKey US survey foot, as many US
+    LAS files name their heights: the DSM's keys keep the file's unit, the one its heights are in."""
+    pytest.importorskip("pyproj")
+    from gigapoint.io import crs_units
+    from gigapoint.render.georef import geo_keys
+
+    keys = {1024: 1, 3072: 26910, 3076: 9001, 4096: 5703, 4099: 9003}
+    units = crs_units("EPSG:26910+5703", keys)
+    assert geo_keys("EPSG:26910+5703", None, units) == {1024: 1, 1025: 1, 3072: 26910, 3076: 9001, 4096: 5703, 4099: 9003}
+    assert geo_keys("EPSG:26910+5703", None, crs_units("EPSG:26910+5703"))[4099] == 9001  # no unit key: NAVD88's metres

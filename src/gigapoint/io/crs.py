@@ -105,8 +105,8 @@ def crs_units(crs: str | None, geokeys: dict[int, int] | None = None) -> dict:
     From a WKT (``crs``: the projected CRS's axes' UNIT, a compound CRS's vertical part's), else
     from LAS GeoTIFF keys (``geokeys``: ProjLinearUnitsGeoKey 3076, VerticalUnitsGeoKey 4099), else
     from an EPSG code ('EPSG:n', or the keys' ProjectedCSTypeGeoKey 3072 / GeographicTypeGeoKey 2048
-    without a unit key, as LAS 1.2 files often name theirs) through pyproj's axes where pyproj is
-    installed (``_epsg_units``; without it such a code says none). A geographic CRS's horizontal
+    without a unit key, as LAS 1.2 files often name theirs; 'EPSG:n+v''s n, and v for the heights)
+    through pyproj's axes where pyproj is installed (``_epsg_units``; without it such a code says none). A geographic CRS's horizontal
     unit is an angle (metres None: its x and y are no lengths). Where a CRS names no vertical unit, heights
     are taken to be in the horizontal length unit (LAS files are; ``vertical_assumed`` says so).
     """
@@ -123,23 +123,43 @@ def crs_units(crs: str | None, geokeys: dict[int, int] | None = None) -> dict:
     if code is not None:  # ("unknown" units in the viewer for EPSG:2994's feet, EPSG:26910's metres)
         horizontal, up = _epsg_units(code)
         vertical = vertical or up
+    vertical_code = _epsg_codes(crs)[1]
+    if vertical is None and vertical_code is not None:  # 'EPSG:26910+5703': its vertical CRS's axis
+        vertical = _epsg_units(vertical_code)[1]
     assumed = vertical is None and horizontal is not None and horizontal["metres"] is not None
     return {"horizontal": horizontal, "vertical": horizontal if assumed else vertical, "vertical_assumed": assumed}
 
 
 def horizontal_epsg(crs: str | None) -> int | None:
-    """The EPSG code of a CRS's horizontal part: an 'EPSG:n''s n; a WKT projected or geographic
-    CRS's own AUTHORITY / ID (a compound CRS's horizontal part's: its whole one names no map
-    grid GeoTIFF keys can hold); None where none is named (autzen's WKT names only its datum's
-    and unit's codes, inside it)."""
+    """The EPSG code of a CRS's horizontal part: an 'EPSG:n''s n (a registered compound code's
+    horizontal part's where pyproj is installed: ``_compound_horizontal``), 'EPSG:n+v''s n; a WKT
+    projected or geographic CRS's own AUTHORITY / ID (a compound CRS's horizontal part's: its
+    whole one names no map grid GeoTIFF keys can hold); None where none is named (autzen's WKT
+    names only its datum's and unit's codes, inside it)."""
     tree = _wkt_tree(crs or "")
     if tree is None:
-        return _epsg_code(crs, {})
+        horizontal, vertical = _epsg_codes(crs)
+        return _compound_horizontal(horizontal) if horizontal is not None and vertical is None else horizontal
     if tree[0] in ("COMPD_CS", "COMPOUNDCRS"):
         tree = next((p for p in tree[1:] if isinstance(p, list) and _WKT_KINDS.get(p[0]) in ("projected", "geographic")), None)
     if tree is None or _WKT_KINDS.get(tree[0]) not in ("projected", "geographic"):
         return None
     return _wkt_epsg(tree)
+
+
+def _compound_horizontal(code: int) -> int | None:
+    """The code of EPSG:``code``'s horizontal part where it is a registered compound CRS (EPSG:5498,
+    NAD83 + NAVD88 height: 4269; None where that part has no code), by pyproj; ``code`` itself for
+    any other, and where pyproj is not installed or knows no such code (the text cannot tell)."""
+    try:
+        import pyproj
+
+        whole = pyproj.CRS.from_epsg(code)
+        if not whole.is_compound:
+            return code
+        return next((c.to_epsg() for c in whole.sub_crs_list if not c.is_vertical), None)
+    except Exception:  # noqa: BLE001 - pyproj missing or the code unknown to it: taken as it is
+        return code
 
 
 def _wkt_epsg(crs: list) -> int | None:
@@ -154,13 +174,15 @@ def vertical_crs(crs: str | None) -> dict | None:
     NAVD88 height of EPSG:26910+5703): {"epsg": its code or None, "name": its name, "unit": U as
     crs_units' or None}; None where the CRS has none (a 2D one, autzen's). Read by pyproj where
     installed (``_pyproj_vertical``: a registered compound code, 'EPSG:26910+5703', a WKT2 whose
-    parts carry no ID of their own); else from a WKT's VERT_CS / VERTCRS part (``_wkt_vertical``)."""
+    parts carry no ID of their own); else from a WKT's VERT_CS / VERTCRS part (``_wkt_vertical``),
+    or the code of 'EPSG:n+v' (named by it, its unit unknown)."""
     if not crs:
         return None
     try:
         return _pyproj_vertical(crs)
-    except Exception:  # noqa: BLE001 - pyproj missing, or the CRS unknown to it: the WKT's own words
-        return _wkt_vertical(crs)
+    except Exception:  # noqa: BLE001 - pyproj missing, or the CRS unknown to it: the text's own words
+        vertical_code = _epsg_codes(crs)[1]
+        return {"epsg": vertical_code, "name": f"EPSG:{vertical_code}", "unit": None} if vertical_code else _wkt_vertical(crs)
 
 
 def _pyproj_vertical(crs: str) -> dict | None:
@@ -188,12 +210,22 @@ def _wkt_vertical(crs: str) -> dict | None:
     return {"epsg": _wkt_epsg(tree), "name": tree[1], "unit": _wkt_units(tree)[1]}
 
 
+#: A CRS named by EPSG codes alone: 'EPSG:n', or a compound one 'EPSG:n+v' (LasHeader.crs of GeoTIFF keys)
+EPSG_TEXT = re.compile(r"\s*EPSG:(\d+)(?:\+(\d+))?\s*", re.IGNORECASE)
+
+
+def _epsg_codes(crs: str | None) -> tuple[int | None, int | None]:
+    """(n, v) of an 'EPSG:n+v' ``crs``, (n, None) of an 'EPSG:n'; (None, None) of other text."""
+    named = EPSG_TEXT.fullmatch(crs or "")
+    return (int(named.group(1)), int(named.group(2)) if named.group(2) else None) if named else (None, None)
+
+
 def _epsg_code(crs: str | None, keys: dict[int, int]) -> int | None:
-    """The EPSG code of an 'EPSG:n' ``crs`` (LasHeader.crs of GeoTIFF keys), else of the keys'
-    projected or geographic CRS (not 32767: user-defined); None without one."""
-    named = re.fullmatch(r"\s*EPSG:(\d+)\s*", crs or "", re.IGNORECASE)
-    if named:
-        return int(named.group(1))
+    """The first EPSG code of an 'EPSG:n' or 'EPSG:n+v' ``crs`` (LasHeader.crs of GeoTIFF keys),
+    else of the keys' projected or geographic CRS (not 32767: user-defined); None without one."""
+    code = _epsg_codes(crs)[0]
+    if code is not None:
+        return code
     return next((keys[k] for k in (3072, 2048) if 0 < keys.get(k, 0) < 32767), None)
 
 
@@ -231,15 +263,15 @@ def files_crs_units(files) -> tuple[str | None, dict]:
 
 
 def files_crs(files) -> str | None:
-    """The CRS of the first LAS/LAZ file of ``files`` that names one: its WKT, else 'EPSG:n' of
-    its GeoTIFF keys (LasHeader.crs); None without one."""
+    """The CRS of the first LAS/LAZ file of ``files`` that names one: its WKT, else 'EPSG:n' (or
+    'EPSG:n+v') of its GeoTIFF keys (LasHeader.crs); None without one."""
     hdr = first_crs_header(files)
     return hdr.crs() if hdr else None
 
 
 def crs_wkt(crs: str | None) -> str | None:
-    """WKT of a CRS as the readers give it: an 'EPSG:n' through pyproj when it is installed (else
-    None); any other is WKT already."""
+    """WKT of a CRS as the readers give it: an 'EPSG:n' or 'EPSG:n+v' through pyproj when it
+    is installed (else None); any other is WKT already."""
     if not crs or not crs.upper().startswith("EPSG:"):
         return crs or None
     try:

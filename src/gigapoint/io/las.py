@@ -588,17 +588,28 @@ def wkt_of(vlrs) -> str | None:
     return None
 
 
+#: VerticalCSTypeGeoKey values of GeoTIFF 1.0's own list that are no EPSG vertical CRS (5001-5033:
+#: heights above an ellipsoid; 5101-5106: EPSG's codes of datums, or of other CRSs, since): GDAL
+#: leaves them out of the CRS too
+GEOTIFF10_VERTICAL_CODES = (range(5001, 5034), range(5101, 5107))
+
+
 def vlrs_crs(vlrs) -> str | None:
     """The CRS VLRs name (as wkt_of's): their WKT, else 'EPSG:n' of their GeoTIFF keys' projected
-    or geographic CRS code; None without either."""
+    or geographic CRS code, 'EPSG:n+v' where VerticalCSTypeGeoKey names the heights' vertical
+    CRS v as well (pyproj reads that compound CRS; a user-defined one leaves its unit to
+    VerticalUnitsGeoKey: io.crs_units); None without either."""
     wkt = wkt_of(vlrs)
     if wkt:
         return wkt
     keys = geokeys(vlrs)
-    for key_id in (3072, 2048):  # ProjectedCSTypeGeoKey, GeographicTypeGeoKey
-        if 0 < keys.get(key_id, 0) < 32767:  # (32767: user-defined)
-            return f"EPSG:{keys[key_id]}"
-    return None
+    horizontal = next((keys[k] for k in (3072, 2048) if 0 < keys.get(k, 0) < 32767), None)  # Projected-, GeographicTypeGeoKey (32767: user-defined)
+    if horizontal is None:
+        return None
+    vertical = keys.get(4096, 0)
+    if 0 < vertical < 32767 and not any(vertical in codes for codes in GEOTIFF10_VERTICAL_CODES):
+        return f"EPSG:{horizontal}+{vertical}"
+    return f"EPSG:{horizontal}"
 
 
 def first_crs_header(files) -> LasHeader | None:
@@ -627,7 +638,7 @@ def geokeys(vlrs) -> dict[int, int]:
 
 def _parse_crs(header, hdr: LasHeader) -> str | None:
     """CRS of a file as ``hdr.crs()`` says it (gigapoint's header parse, as warn_mixed_crs and
-    convert see it: the file's own WKT, else 'EPSG:n' of its GeoTIFF keys); where that finds none,
+    convert see it: the file's own WKT, else 'EPSG:n' or 'EPSG:n+v' of its GeoTIFF keys); where that finds none,
     pyproj's reading of laspy's header ('EPSG:n' or WKT) when pyproj is installed. The file's own
     words come first so that info, .prj files and GeoTIFF keys are the same with pyproj or without
     (pyproj's 'EPSG:32610' for a WKT dropped its name and its exact text)."""

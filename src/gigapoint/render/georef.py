@@ -130,7 +130,7 @@ def geo_keys(crs: str | None, wkt: str | None, units: dict) -> dict:
     where it has one, its vertical part's (``vertical_keys``: a DSM's heights' datum and unit); {}
     where the horizontal part cannot be named (no CRS, a WKT that GDAL would cut)."""
     keys = horizontal_keys(crs, wkt, units)
-    return {**keys, **vertical_keys(crs)} if keys else {}
+    return {**keys, **vertical_keys(crs, units)} if keys else {}
 
 
 def horizontal_keys(crs: str | None, wkt: str | None, units: dict) -> dict:
@@ -149,16 +149,22 @@ def horizontal_keys(crs: str | None, wkt: str | None, units: dict) -> dict:
     return {}
 
 
-def vertical_keys(crs: str | None) -> dict:
+def vertical_keys(crs: str | None, units: dict) -> dict:
     """GeoTIFF 1.1's keys of ``crs``'s vertical part (io.vertical_crs: NAVD88 height of
     EPSG:26910+5703), so that a GIS knows what a DSM's heights are measured from and in: its EPSG
     code, else user-defined with its name as citation; its unit's EPSG code (GeoTIFF has no key
-    for another's size); {} where the CRS has no vertical part."""
+    for another's size), the one ``units`` (io.crs_units) name where they name one (a LAS file's
+    VerticalUnitsGeoKey: its own word), else the vertical CRS's. A projected CRS without a vertical
+    part whose heights' unit is named all the same (VerticalUnitsGeoKey beside a user-defined
+    VerticalCSTypeGeoKey) has a user-defined one in that unit; {} where neither is named."""
     vertical = vertical_crs(crs)
-    if vertical is None:
-        return {}
+    named_unit = None if units.get("vertical_assumed", True) else units.get("vertical")
+    if vertical is None:  # (a 3D geographic CRS's ellipsoidal heights are its own: no vertical CRS)
+        horizontal = units.get("horizontal")
+        code = length_unit_code(named_unit) if horizontal is not None and horizontal["metres"] is not None else None
+        return {VERTICAL: USER_DEFINED, VERTICAL_UNITS: code} if code else {}
     keys = {VERTICAL: vertical["epsg"]} if vertical["epsg"] else {VERTICAL: USER_DEFINED, VERTICAL_CITATION: vertical["name"]}
-    unit = length_unit_code(vertical["unit"])
+    unit = length_unit_code(named_unit or vertical["unit"])
     return {**keys, VERTICAL_UNITS: unit} if unit else keys
 
 
