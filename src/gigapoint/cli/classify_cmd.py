@@ -60,7 +60,7 @@ def classify(
         message = _noise_options_named(str(exc))
         for name in params:
             message = message.replace(f"classify_ground: {name} ", f"classify: --{name} ")
-        raise type(exc)(message.replace("overwrite=True", "--overwrite").replace("classify_ground: ", "classify: ")) from None
+        raise type(exc)(_as_command(message.replace("classify_ground: ", "classify: "))) from None
     p = result.params
     units = p["units"]
     skipped = skipped_note(result.skipped)
@@ -80,7 +80,15 @@ def _noise_options_named(message: str) -> str:
     for name in ("step_z", "step", "isolated"):
         message = message.replace(f"classify_noise: {name} ", f"classify: --{name.replace('_', '-')} ")
     message = message.replace("give step and step_z", "give --step and --step-z")
-    return message.replace("overwrite=True", "--overwrite").replace("classify_noise: ", "classify: ")
+    return _as_command(message.replace("classify_noise: ", "classify: "))
+
+
+def _as_command(message: str) -> str:
+    """A classification's message said of the command: its keyword as the option, the command
+    for its function ("out.txt: classify writes a .las, ..." was "classify_noise writes")."""
+    for function in ("classify_ground", "classify_noise", "height_above_ground"):
+        message = message.replace(f": {function} writes ", ": classify writes ")
+    return message.replace("overwrite=True", "--overwrite")
 
 
 def _classify_noise(inputs, output: Path, params: dict, overwrite: bool, recursive: bool, quiet: bool) -> None:
@@ -119,7 +127,7 @@ def _heights_only(sources, output: Path, params: dict, normalize: bool, overwrit
         result = height_above_ground(sources, output, cell=params["cell"], normalize=normalize, overwrite=overwrite, progress=progress)
     except InputError as exc:
         message = str(exc).replace("classify_ground: cell ", "classify: --cell ").replace("(--ground, heights=True)", "(--ground)")
-        raise type(exc)(message.replace("overwrite=True", "--overwrite").replace("height_above_ground: ", "classify: ")) from None
+        raise type(exc)(_as_command(message.replace("height_above_ground: ", "classify: "))) from None
     p = result.params
     skipped = skipped_note(result.skipped)
     print(

@@ -111,6 +111,13 @@ ColorizeOption = Annotated[
 ]
 
 
+def check_from_crs(from_crs: str | None, to_crs: str | None, where: str) -> None:
+    """A one-line error for --from-crs without --to-crs, in the options' words (the library's
+    said "give to_crs too")."""
+    if from_crs is not None and to_crs is None:
+        raise GigapointError(f"{where}: --from-crs {from_crs}: the CRS the inputs are in, for --to-crs; give --to-crs too")
+
+
 def skipped_note(skipped: int) -> str:
     """What a summary line says of the invalid points a command skipped (NaN, inf, beyond reach): nothing where none."""
     return f", {counted(skipped, 'invalid point')} skipped" if skipped else ""

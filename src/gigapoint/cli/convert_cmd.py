@@ -22,6 +22,7 @@ from .cloud_opts import (
     FromCrsOption,
     RecursiveOption,
     ToCrsOption,
+    check_from_crs,
     filter_options,
     skipped_note,
     thin_option,
@@ -88,6 +89,7 @@ def convert(
 
     if dask is not None and workers is not None:
         raise ConvertError("--dask and --workers: give one of them (a running cluster's scheduler, or a local cluster's size)")
+    check_from_crs(from_crs, to_crs, "convert")
     point_filter = filter_options(classes, drop_classes, clip, "convert", clip_polygon)  # its errors name the options, before a cluster starts
     spacing = thin_option(thin, "convert")
     copc = format == "copc" or (format is None and is_copc_name(output))  # (convert's own default)

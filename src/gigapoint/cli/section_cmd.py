@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from ..errors import GigapointError
+from ..errors import GigapointError, counted
 from ..render import RenderSettings
 from .app import app
 from .cloud_opts import ClassesOption, ClipPolygonOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
@@ -78,7 +78,7 @@ def section(
     save_image(frame.image, output)
     pixel = camera.ortho_height / camera.height
     up = "" if vertical_exaggeration == 1 else f" across, {pixel / vertical_exaggeration:.6g} up"
-    typer.echo(f"wrote {output} ({camera.width}x{camera.height}, {cut.cloud.n_points:,} points in the corridor, a pixel {pixel:.6g} units{up or ' a side'})")
+    typer.echo(f"wrote {output} ({camera.width}x{camera.height}, {counted(cut.cloud.n_points, 'point')} in the corridor, a pixel {pixel:.6g} units{up or ' a side'})")
     if csv is not None:
         cut.write_csv(csv)
-        typer.echo(f"wrote {csv} ({cut.cloud.n_points:,} rows)")
+        typer.echo(f"wrote {csv} ({counted(cut.cloud.n_points, 'row')})")

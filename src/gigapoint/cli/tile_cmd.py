@@ -21,6 +21,7 @@ from .cloud_opts import (
     FromCrsOption,
     RecursiveOption,
     ToCrsOption,
+    check_from_crs,
     filter_options,
     skipped_note,
     uncolored_note,
@@ -51,6 +52,7 @@ def tile(
     """Split point clouds into square LAS/LAZ tiles (lastile), read once, a chunk at a time; only tiles holding points are written."""
     from ..lod.convert.tiles import tile as run
 
+    check_from_crs(from_crs, to_crs, "tile")
     point_filter = filter_options(classes, drop_classes, clip, "tile", clip_polygon)  # its errors name the options
     try:
         result = run(

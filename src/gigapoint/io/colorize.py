@@ -72,6 +72,9 @@ class Colorization:
         except rasterio.errors.RasterioError as exc:
             raise InputError(f"{self.path}: not a raster GDAL can read ({first_line(exc)})") from None
         ds = self._dataset
+        if ds.transform.is_identity:  # (GDAL's stand-in where a raster has none: points coloured by pixel index)
+            ds.close()
+            raise InputError(f"{self.path}: not georeferenced (no geotransform, nor a world file beside it): colorize needs to know where its pixels lie")
         if ds.dtypes[0] not in ("uint8", "uint16"):
             ds.close()
             scale = " (gdal_translate -ot Byte -scale MIN MAX 0 255 makes one of its range)" if ds.dtypes[0].startswith("float") else ""

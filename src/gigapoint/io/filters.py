@@ -22,6 +22,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..core.chunk import PointChunk
+from ..core.coords import MAX_ABS_COORDINATE
 from ..errors import EmptyCloudError, GigapointWarning, InputError, counted, is_real, is_whole_number, warn
 from ._base import read_once
 from .polygon import ClipPolygon, clip_polygon_of, far_apart
@@ -323,10 +324,14 @@ def corridor_of(line, width, line_label: str, width_label: str) -> tuple[float, 
         raise InputError(f"{line_label}: a line is x1, y1, x2, y2 (its two ends)")
     if not all(is_real(v) for v in ends):
         raise InputError(f"{line_label}: a line's ends are finite numbers")
+    if max(map(abs, ends)) > MAX_ABS_COORDINATE:  # (as points beyond it are: 1e300 said 'camera eye and target are the same point')
+        raise InputError(f"{line_label}: a line's end lies beyond ±{MAX_ABS_COORDINATE:g}: no point can be there")
     if ends[:2] == ends[2:]:
         raise InputError(f"{line_label}: the line's two ends are one point; it has no direction")
     if not (is_real(width) and width > 0):
         raise InputError(f"{width_label}: the corridor's width must be a finite number above 0")
+    if width > 2 * MAX_ABS_COORDINATE:  # (1e300 overflowed the camera's sums: a blank image and numpy's warnings)
+        raise InputError(f"{width_label}: the corridor's width must be at most {2 * MAX_ABS_COORDINATE:g}, the span points can have")
     return (*(float(v) for v in ends), float(width))
 
 

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.coords import MAX_ABS_COORDINATE
 from ..errors import InputError
 
 #: How WKT of a polygon starts (a file named POLYGON.wkt does not)
@@ -201,6 +202,8 @@ def _ring(positions, label: str) -> np.ndarray:
         raise InputError(f"{label}: a polygon's positions are [x, y] numbers")
     if not np.isfinite(xy).all():
         raise InputError(f"{label}: a polygon vertex is NaN or infinite ({xy[~np.isfinite(xy).all(axis=1)][0].tolist()})")
+    if np.abs(xy).max() > MAX_ABS_COORDINATE:  # (as points beyond it are: a volume's grid over it was a 300-digit size)
+        raise InputError(f"{label}: a polygon vertex lies beyond ±{MAX_ABS_COORDINATE:g} ({xy[(np.abs(xy) > MAX_ABS_COORDINATE).any(axis=1)][0].tolist()}): no point can be there")
     if len(xy) > 1 and np.array_equal(xy[0], xy[-1]):
         xy = xy[:-1]
     if len(np.unique(xy, axis=0)) < 3:

@@ -131,7 +131,10 @@ def _objects(surface: np.ndarray, cell: float, slope: float, window: float) -> n
     window / cell cells) lowers by more than slope x radius x cell below the previous opening."""
     objects = np.zeros(surface.shape, bool)
     last = surface
-    for radius in range(1, max(1, math.ceil(window / cell)) + 1):
+    # a diamond of rows + cols cells covers the raster from any cell: larger ones open it alike
+    # (a window of 1e12 ran 3e11 openings: a hang)
+    radii = min(max(1, math.ceil(window / cell)), sum(surface.shape))
+    for radius in range(1, radii + 1):
         opened = _opened(last, radius)
         objects |= last - opened > slope * radius * cell
         last = opened

@@ -113,7 +113,7 @@ def sparse_cells(inputs, params: dict, progress):
     progress.phase("count", None if None in inputs.counts else sum(inputs.counts))
     for f, chunk in inputs.valid_chunks(None, progress, {}):
         cells.add(chunk.xyz, f)
-    cells.mark_sparse(params["isolated"] + 1)
+    cells.mark_sparse(min(params["isolated"], 2**62) + 1)  # (no block holds 2**62 points; 1e20 overflowed the kernel's int64: a numba traceback)
     return cells
 
 
