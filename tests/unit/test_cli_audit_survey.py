@@ -53,6 +53,9 @@ def files_in(folder) -> list[str]:
          "{in}/huge.geojson: a polygon vertex lies beyond ±1e+12 ([-1e+300, -1e+300]): no point can be there"),
         (["convert", "{in}/small.las", "-o", "{out}/c.las", "--clip-polygon", "{in}/huge.geojson"],
          "{in}/huge.geojson: a polygon vertex lies beyond ±1e+12 ([-1e+300, -1e+300]): no point can be there"),
+        # the grid spans the polygon's box (not the data's): said only "gsd 0.001 makes a ... image"
+        (["volume", "{in}/small.las", "--gsd", "0.001", "--clip-polygon", "{in}/good.geojson", "-o", "{out}/v.tif"],
+         "{in}/good.geojson: --gsd over its box: gsd 0.001 makes a 50,005x50,005 image, over 16,384 pixels a side: a gsd of 0.00306 or more fits"),
         # a line's end at 1e300 said "camera eye and target are the same point", naming nothing
         (["section", "{in}/small.las", "--line", "0,0,1e300,1e300", "--width", "10", "-o", "{out}/s.png"],
          "section: --line 0,0,1e300,1e300: a line's end lies beyond ±1e+12: no point can be there"),

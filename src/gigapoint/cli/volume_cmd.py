@@ -11,7 +11,7 @@ from typing import Annotated
 
 import typer
 
-from ..errors import GigapointError, counted
+from ..errors import CameraError, GigapointError, counted
 from ..render.georef import GEOTIFF_SUFFIXES, georef_paths, write_map
 from .app import app
 from .cloud_opts import ClassesOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
@@ -75,9 +75,12 @@ def volume(
     distance = None if fill_nodata.strip().lower() == "none" else check_fill_nodata(fill_nodata, gsd, "the volume")
     keep = filter_options(classes, drop_classes, None, "volume", clip_polygon)
     filled = None if fill_nodata.strip().lower() == "none" else distance or "all"
-    result = gp.volume(
-        subfolders_read(inputs, recursive), keep.polygon, gsd, base=chosen_base, classes=keep.classes or None, drop_classes=keep.drop_classes or None, fill_nodata=filled
-    )
+    try:
+        result = gp.volume(
+            subfolders_read(inputs, recursive), keep.polygon, gsd, base=chosen_base, classes=keep.classes or None, drop_classes=keep.drop_classes or None, fill_nodata=filled
+        )
+    except CameraError as exc:  # the grid spans the polygons' box, not the data's: say whose (it named neither)
+        raise CameraError(f"{keep.polygon.source}: --gsd over its box: {exc}") from None
     rasters = [(output, result.above_base), (preview, None if preview is None else result.preview()), (dsm_out, result.heights)]
     # all or none; nothing asked, nothing written (nor a word on the .prj none would have)
     written = write_map(result.camera, result.crs, result.units, rasters, overwrite) if any(path for path, _ in rasters) else []
