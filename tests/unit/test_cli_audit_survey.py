@@ -26,8 +26,11 @@ def write_las(path, xyz, classification=None):
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory):
     """small.las (2,000 points over 100 x 100, z 0..5, classes 1 and 2), a polygon inside it, one
-    with a vertex far beyond any point's reach, and a PNG that no world file places."""
+    with a vertex far beyond any point's reach, a PNG that no world file places, and the octree
+    oct/ converted from small.las."""
     from PIL import Image
+
+    from gigapoint.lod import convert
 
     folder = tmp_path_factory.mktemp("in")
     rng = np.random.default_rng(0)
@@ -38,6 +41,7 @@ def inputs(tmp_path_factory):
     far = [[-1e300, -1e300], [1e300, -1e300], [1e300, 1e300], [-1e300, 1e300], [-1e300, -1e300]]
     (folder / "huge.geojson").write_text(json.dumps({"type": "Polygon", "coordinates": [far]}))
     Image.fromarray(np.full((10, 10, 3), 200, np.uint8)).save(folder / "plain.png")
+    convert([str(folder / "small.las")], folder / "oct")
     return folder
 
 
@@ -67,6 +71,11 @@ def files_in(folder) -> list[str]:
          "convert: --from-crs EPSG:32610: the CRS the inputs are in, for --to-crs; give --to-crs too"),
         (["tile", "{in}/small.las", "-o", "{out}/tiles", "--size", "10", "--from-crs", "EPSG:32610"],
          "tile: --from-crs EPSG:32610: the CRS the inputs are in, for --to-crs; give --to-crs too"),
+        # an octree folder's arrays were read as point files: "oct/crc.npy: NPY array: expected an (N, 3) ... array"
+        (["classify", "{in}/oct", "-o", "{out}/c.las", "--ground"], "{in}/oct: is a converted octree (or a conversion in progress), not an input point cloud"),
+        (["classify", "{in}/oct", "-o", "{out}/c.las", "--noise"], "{in}/oct: is a converted octree (or a conversion in progress), not an input point cloud"),
+        (["tile", "{in}/oct", "-o", "{out}/tiles", "--size", "10"], "{in}/oct: is a converted octree (or a conversion in progress), not an input point cloud"),
+        (["convert", "{in}/oct", "-o", "{out}/c.las"], "{in}/oct: is a converted octree (or a conversion in progress), not an input point cloud"),
         # named the library's function ("classify_noise writes ...") for the command's output
         (["classify", "{in}/small.las", "-o", "{out}/c.txt", "--noise"], "{out}/c.txt: classify writes a .las, .laz or .ply file"),
         (["classify", "{in}/small.las", "-o", "{out}/c.txt", "--ground"], "{out}/c.txt: classify writes a .las, .laz or .ply file"),

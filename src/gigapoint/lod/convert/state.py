@@ -79,12 +79,18 @@ def input_paths(inputs) -> list[Path] | None:
     if not inputs:
         raise InputError("convert: no input given")
     inputs = [local_path(p, "an input") for p in inputs]
+    refuse_octrees(inputs)
+    return expand_paths(inputs)
+
+
+def refuse_octrees(inputs) -> None:
+    """A one-line InputError for an input path that is an octree folder or an EPT dataset: an
+    output of conversions, not point files to read."""
     for p in inputs:
         if OctreeDir(p).kind is not None:
             raise InputError(f"{p}: is a converted octree (or a conversion in progress), not an input point cloud")
         if ept_location(p) is not None:  # (was "holds no supported point cloud file", or an unknown .json)
             raise InputError(f"{p}: is an EPT dataset (an octree: open or render it as it is), not an input point cloud")
-    return expand_paths(inputs)
 
 
 def damaged_work_file(d: OctreeDir) -> str | None:

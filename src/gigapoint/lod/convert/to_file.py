@@ -44,6 +44,7 @@ from ...io.write import POINT_FILE_SUFFIXES, check_point_file_output, file_has_c
 from ..kinds import is_copc_name
 from .facts import input_facts
 from .read import _skipped_if_empty
+from .state import refuse_octrees
 
 
 def is_point_file_name(out) -> bool:
@@ -68,7 +69,9 @@ class PointFiles:
         self, inputs, out: Path, chunk_size: int | None, ply: bool = False, reprojection: Reprojection | None = None,
         colorization: Colorization | None = None,
     ):
-        self.files = expand_paths([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
+        inputs = [inputs] if isinstance(inputs, (str, os.PathLike)) else inputs
+        refuse_octrees(p for p in inputs if isinstance(p, (str, os.PathLike)))  # (an octree folder's .npy arrays were read as points)
+        self.files = expand_paths(inputs)
         if any(same_file(out, f) for f in self.files):
             raise InputError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
         self.label = files_label(self.files)
