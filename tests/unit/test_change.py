@@ -96,8 +96,11 @@ def test_the_preview_is_symmetric_around_zero():
 
 def test_surveys_that_share_no_pixel_are_refused():
     far = plane() + (100.0, 0.0, 0.0)
-    with pytest.raises(InputError, match="arrays and arrays: no 0.5-unit pixel holds points of both: the surveys do not overlap"):
+    with pytest.raises(InputError, match=r"^arrays and arrays: the surveys do not overlap \(arrays x 0.1..39.9, y 0.1..39.9; arrays x 100.1..139.9, y 0.1..39.9\): nothing to compare$"):
         gp.change(gp.from_arrays(plane()), gp.from_arrays(far), 0.5)
+    corners = np.concatenate([plane(10, 10), plane(10, 10) + (30.0, 30.0, 0.0)])  # boxes that meet, points that do not
+    with pytest.raises(InputError, match="arrays and arrays: no 0.5-unit pixel holds points of both: the surveys do not overlap"):
+        gp.change(gp.from_arrays(corners), gp.from_arrays(plane(10, 10) + (15.0, 15.0, 0.0)), 0.5)
     for bad, message in (({"gsd": 0}, "gsd must be a number > 0"), ({"min_change": -1}, "min_change must be a number >= 0"), ({"fill_nodata": 0}, "fill_nodata")):
         with pytest.raises(InputError, match=message):
             gp.change(gp.from_arrays(plane()), gp.from_arrays(plane()), **{"gsd": 0.5, **bad})

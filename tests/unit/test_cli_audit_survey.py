@@ -25,7 +25,8 @@ def write_las(path, xyz, classification=None):
 
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory):
-    """small.las (2,000 points over 100 x 100, z 0..5, classes 1 and 2), a polygon inside it, one
+    """small.las (2,000 points over 100 x 100, z 0..5, classes 1 and 2), beside.las (its points
+    1,000 further east), a polygon inside small.las, one
     with a vertex far beyond any point's reach, a PNG that no world file places, and the octree
     oct/ converted from small.las."""
     from PIL import Image
@@ -36,6 +37,7 @@ def inputs(tmp_path_factory):
     rng = np.random.default_rng(0)
     xyz = np.column_stack([rng.random((2000, 2)) * 100, rng.random(2000) * 5])
     write_las(folder / "small.las", xyz, np.where(rng.random(2000) < 0.5, 2, 1).astype(np.uint8))
+    write_las(folder / "beside.las", xyz + (1000, 0, 0))
     square = [[10, 10], [60, 10], [60, 60], [10, 60], [10, 10]]
     (folder / "good.geojson").write_text(json.dumps({"type": "Polygon", "coordinates": [square]}))
     far = [[-1e300, -1e300], [1e300, -1e300], [1e300, 1e300], [-1e300, 1e300], [-1e300, -1e300]]
@@ -60,6 +62,10 @@ def files_in(folder) -> list[str]:
         # the grid spans the polygon's box (not the data's): said only "gsd 0.001 makes a ... image"
         (["volume", "{in}/small.las", "--gsd", "0.001", "--clip-polygon", "{in}/good.geojson", "-o", "{out}/v.tif"],
          "{in}/good.geojson: --gsd over its box: gsd 0.001 makes a 50,005x50,005 image, over 16,384 pixels a side: a gsd of 0.00306 or more fits"),
+        # surveys side by side were drawn on the grid of their union: said "gsd 0.01 makes a 109,993x9,995 image"
+        (["change", "{in}/small.las", "{in}/beside.las", "--gsd", "0.01", "-o", "{out}/c.tif"],
+         ("{in}/small.las and {in}/beside.las: the surveys do not overlap ({in}/small.las x 0.04..99.96, y 0.02..99.96; "
+          "{in}/beside.las x 1000.04..1099.96, y 0.02..99.96): nothing to compare")),
         # a line's end at 1e300 said "camera eye and target are the same point", naming nothing
         (["section", "{in}/small.las", "--line", "0,0,1e300,1e300", "--width", "10", "-o", "{out}/s.png"],
          "section: --line 0,0,1e300,1e300: a line's end lies beyond ±1e+12: no point can be there"),
@@ -81,6 +87,9 @@ def files_in(folder) -> list[str]:
         (["classify", "{in}/small.las", "-o", "{out}/c.txt", "--ground"], "{out}/c.txt: classify writes a .las, .laz or .ply file"),
         (["classify", "{in}/small.las", "-o", "{out}/c.txt", "--height-above-ground"], "{out}/c.txt: classify writes a .las, .laz or .ply file"),
     ],
+    ids=["volume-polygon-1e300", "convert-polygon-1e300", "volume-gsd-over-polygon-box", "change-apart", "section-line-1e300", "section-width-1e300",
+         "convert-from-crs-alone", "tile-from-crs-alone", "classify-ground-octree", "classify-noise-octree", "tile-octree", "convert-octree",
+         "classify-noise-txt", "classify-ground-txt", "classify-heights-txt"],
 )  # fmt: skip
 def test_bad_input_is_one_line_and_leaves_no_output(cli, inputs, tmp_path, args, problem):
     out = tmp_path / "out"

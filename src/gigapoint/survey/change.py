@@ -333,6 +333,9 @@ def change(before, after, gsd, classes=None, drop_classes=None, clip=None, fill_
             surveys.append(open_survey(source, filters))
         crs, units = check_crs(*surveys, labels)
         lows, highs = zip(*(s.bounds for s in surveys))  # (an octree's: its metadata's, cut to its read filter's region)
+        if (np.maximum(*lows)[:2] > np.minimum(*highs)[:2]).any():  # (their union's grid was refused as too fine, or drawn for nothing)
+            spans = "; ".join(f"{label} x {lo[0]:.6g}..{hi[0]:.6g}, y {lo[1]:.6g}..{hi[1]:.6g}" for label, lo, hi in zip(labels, lows, highs))
+            raise InputError(f"{labels[0]} and {labels[1]}: the surveys do not overlap ({spans}): nothing to compare")
         try:
             camera = Camera.top_down((np.minimum(*lows), np.maximum(*highs)), gsd)  # one grid, one eye: pixel to pixel
         except CameraError as exc:  # the grid spans both: name them (a huge survey beside a tiny one said neither)
