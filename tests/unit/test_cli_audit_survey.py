@@ -148,3 +148,10 @@ def test_a_section_of_one_point_says_one_point(cli, tmp_path):
     rc, stdout, err = cli("section", path, "--line", "0,0,10,0", "--width", "2", "-o", tmp_path / "s.png", "--csv", tmp_path / "s.csv")
     assert (rc, err) == (0, ""), err
     assert " 1 point in the corridor, " in stdout and f"wrote {tmp_path / 's.csv'} (1 row)\n" in stdout
+
+
+def test_a_pile_on_an_elevation_says_an(cli, inputs):
+    """'2.990 units above a elevation base'."""
+    rc, stdout, err = cli("volume", inputs / "small.las", "--gsd", "1", "--clip-polygon", inputs / "good.geojson", "--base", "0")
+    assert (rc, err) == (0, ""), err
+    assert " units above an elevation base (mean z 0.000)\n" in stdout

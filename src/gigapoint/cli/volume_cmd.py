@@ -93,7 +93,7 @@ def volume(
         x, y, z = pile.highest
         typer.echo(f"{pile.name}: fill {pile.fill:,.3f} {unit['volume']}, cut {pile.cut:,.3f}, net {pile.net:+,.3f}")
         typer.echo(f"  footprint {pile.area:,.2f} {unit['area']} ({counted(pile.pixels, 'pixel')} of {gsd:g} {unit['length']}; polygon {pile.polygon_area:,.2f})")
-        typer.echo(f"  highest {z:.3f} at {x:.3f}, {y:.3f}: {pile.height:.3f} {unit['length']} above a {pile.base['type']} base (mean z {pile.base['z']:.3f})")
+        typer.echo(f"  highest {z:.3f} at {x:.3f}, {y:.3f}: {pile.height:.3f} {unit['length']} above {'an' if pile.base['type'] == 'elevation' else 'a'} {pile.base['type']} base (mean z {pile.base['z']:.3f})")
         if "parts" in pile.base:  # a Feature's MultiPolygon
             typer.echo(f"  in {len(pile.base['parts'])} parts, each on a base of its own toe")
         if pile.filled or pile.empty:
