@@ -15,12 +15,12 @@ from ..errors import GigapointError, counted
 from ..render.georef import GEOTIFF_SUFFIXES, georef_paths, georef_writes, raster_writes
 from .app import app
 from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
-from .gsd_opts import check_fill_nodata, check_gsd_value
+from .gsd_opts import ALL_POINTS_HELP, check_fill_nodata, check_gsd_value
 from .output import check_image_fits, check_output, check_outputs_apart, write_together
 
 SURVEY_HELP = (
     "The {} survey: a point cloud file, a folder of tiles or a quoted glob pattern ('{}/*.laz'), its files merged; "
-    "or an LOD octree (a converted folder, a COPC file, an EPT dataset), every point read node by node."
+    "or an LOD octree (a converted folder, a COPC file, an EPT dataset), read node by node down to the levels the gsd needs (--all-points: every node)."
 )
 
 
@@ -39,6 +39,7 @@ def change(
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the volumes and areas as one JSON object (and nothing else).")] = False,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace existing output files.")] = False,
+    all_points: Annotated[bool, typer.Option("--all-points", help=ALL_POINTS_HELP)] = False,
     recursive: RecursiveOption = False,
     classes: ClassesOption = None,
     drop_classes: DropClassesOption = None,
@@ -69,7 +70,7 @@ def change(
     keep = filter_options(classes, drop_classes, clip, "change")
     chosen = {} if keep is None else {"classes": keep.classes or None, "drop_classes": keep.drop_classes or None, "clip": keep.clip or None}
     surveys = [subfolders_read([path], recursive) for path in (before, after)]
-    result = gp.change(*surveys, gsd, fill_nodata=None if fill_nodata is None else distance or "all", min_change=min_change, **chosen)
+    result = gp.change(*surveys, gsd, fill_nodata=None if fill_nodata is None else distance or "all", min_change=min_change, full=all_points, **chosen)
     cam, crs = result.camera, result.crs
     if preview is not None:
         check_image_fits(preview, cam.width, cam.height)

@@ -8,6 +8,12 @@ import math
 from ..errors import GigapointError
 from ..render.raster_fill import require_scipy
 
+#: --all-points (`change`, `volume`): an LOD octree read whole, not down to the levels the gsd needs
+ALL_POINTS_HELP = (
+    "An LOD octree's every node read, not only its levels whose points lie at most half a pixel apart "
+    "(those give each pixel the highest of a sample of its points: on a roof's edge or a tree's crown a little lower)."
+)
+
 
 def check_gsd_value(gsd: float) -> None:
     """A one-line error for a --gsd that is no size."""

@@ -15,7 +15,7 @@ from ..errors import CameraError, GigapointError, counted
 from ..render.georef import GEOTIFF_SUFFIXES, georef_paths, write_map
 from .app import app
 from .cloud_opts import ClassesOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
-from .gsd_opts import check_fill_nodata, check_gsd_value
+from .gsd_opts import ALL_POINTS_HELP, check_fill_nodata, check_gsd_value
 from .output import IMAGE_SUFFIXES, check_output, check_outputs_apart
 
 
@@ -30,7 +30,7 @@ def _base_of(text: str) -> str | float:
 
 @app.command()
 def volume(
-    inputs: Annotated[list[Path], typer.Argument(readable=False, help="Point cloud files or directories of one survey (merged). A quoted glob pattern ('tiles/*.laz') stands for what it matches.")],
+    inputs: Annotated[list[Path], typer.Argument(readable=False, help="Point cloud files or directories of one survey (merged), or an LOD octree (a converted folder, a COPC file, an EPT dataset: its nodes near the piles read down to the levels the gsd needs). A quoted glob pattern ('tiles/*.laz') stands for what it matches.")],
     gsd: Annotated[float, typer.Option(help="Ground sample distance (cloud units per pixel) of the surface model the volumes are summed on.")],
     clip_polygon: Annotated[
         str | None,
@@ -53,6 +53,7 @@ def volume(
     dsm_out: Annotated[Path | None, typer.Option(readable=False, help="Also write the surface model inside the piles (holes filled) as a float32 GeoTIFF (.tif), NaN outside, with its world file and .prj.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print each pile's figures and the total as one JSON object (and nothing else).")] = False,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace existing output files.")] = False,
+    all_points: Annotated[bool, typer.Option("--all-points", help=ALL_POINTS_HELP)] = False,
     recursive: RecursiveOption = False,
     classes: ClassesOption = None,
     drop_classes: DropClassesOption = None,
@@ -77,7 +78,7 @@ def volume(
     filled = None if fill_nodata.strip().lower() == "none" else distance or "all"
     try:
         result = gp.volume(
-            subfolders_read(inputs, recursive), keep.polygon, gsd, base=chosen_base, classes=keep.classes or None, drop_classes=keep.drop_classes or None, fill_nodata=filled
+            subfolders_read(inputs, recursive), keep.polygon, gsd, base=chosen_base, classes=keep.classes or None, drop_classes=keep.drop_classes or None, fill_nodata=filled, full=all_points
         )
     except CameraError as exc:  # the grid spans the polygons' box, not the data's: say whose (it named neither)
         raise CameraError(f"{keep.polygon.source}: --gsd over its box: {exc}") from None

@@ -13,12 +13,20 @@ whose boxes meet it, at every level. Two kinds are otherwise:
 - PotreeConverter's ``poisson_average`` stores copies of points in inner nodes (its metadata
   counts fewer points than its nodes hold): refused, as no node says which are copies.
 
+A coarser product needs fewer of them: a node at level d holds a sample of its cube's points
+about ``spacing / 2^d`` apart (``spacing``: the root's, from the octree's metadata; the grid and
+Poisson samplers, COPC, EPT and Potree 2.0 alike), so with ``max_spacing`` only the levels down to
+the first whose spacing is at most that are read (``deepest_level``): a sample of the region's
+points at least that dense, not every point. A ProgressiveOctree's leaves are read whole then too
+(its inner voxels are cell centres, not points).
+
 Nodes are read through what each reader offers (``node_points``; a COPC/EPT octree's hierarchy
 pages and nodes fetched together, by ranged reads over HTTP), so only the meeting nodes are read.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
@@ -43,12 +51,14 @@ def is_octree(cloud) -> bool:
     return isinstance(cloud, (OctreeCloud, ProgressiveOctree))
 
 
-def points_meeting(cloud, meets: Meets) -> Iterator[PointChunk]:
+def points_meeting(cloud, meets: Meets, max_spacing: float | None = None) -> Iterator[PointChunk]:
     """The points (every attribute) of the nodes of the octree ``cloud`` whose boxes meet the
     region (``meets``), at every level, a node a chunk (leaves only for a ProgressiveOctree, its
     inner nodes holding voxels: its leaves' points a few leaves a chunk). Every point of the
-    region is in one of them, once. A one-line InputError for an octree whose nodes hold copies
-    of points."""
+    region is in one of them, once. With ``max_spacing``, only the levels down to
+    ``deepest_level(cloud, max_spacing)``: a sample of the region's points about that far apart
+    or closer (every point where the octree names no spacing, and for a ProgressiveOctree). A
+    one-line InputError for an octree whose nodes hold copies of points."""
     if isinstance(cloud, ProgressiveOctree):
         yield from _progressive_leaves(cloud, meets)
         return
@@ -59,11 +69,31 @@ def points_meeting(cloud, meets: Meets) -> Iterator[PointChunk]:
                 f"{cloud.path}: its nodes hold {cloud.n_points - source:,} copies of its {source:,} points (PotreeConverter's poisson_average), "
                 "which no node tells apart: read the point files instead"
             )
+    deepest = deepest_level(cloud, max_spacing)
     if isinstance(cloud, VoxelOctree):
-        yield from _voxel_nodes(cloud, meets)
+        yield from _voxel_nodes(cloud, meets, deepest)
         return
-    for index in _meeting(cloud, meets, cloud.box_min, cloud.box_min + cloud.box_size).tolist():
+    for index in _meeting(cloud, meets, cloud.box_min, cloud.box_min + cloud.box_size, deepest).tolist():
         yield _chunk(cloud.node_points(index))
+
+
+def root_spacing(cloud: OctreeCloud) -> float | None:
+    """The spacing of the points of the octree's root node (its level d nodes': that / 2^d), from
+    its metadata (an EPT dataset's: its cube's edge / its ``span``); None where it names none."""
+    spacing = cloud.meta.get("spacing")
+    if spacing is None and cloud.meta.get("span"):  # (EPT: a node is a grid of span³ cells)
+        spacing = float(cloud.meta["cube_edge"]) / float(cloud.meta["span"])
+    return float(spacing) if spacing else None
+
+
+def deepest_level(cloud, max_spacing: float | None) -> int | None:
+    """The first level of the octree ``cloud`` whose points are at most ``max_spacing`` apart (its
+    nodes and those above hold a sample of every place at least that dense); None (every level)
+    without ``max_spacing``, for a ProgressiveOctree, or where the octree names no spacing."""
+    spacing = None if max_spacing is None or isinstance(cloud, ProgressiveOctree) else root_spacing(cloud)
+    if spacing is None:
+        return None
+    return max(0, math.ceil(math.log2(spacing / max_spacing)))
 
 
 def kept_points(cloud, keep: PointFilter, label: str, region: str) -> list[PointChunk]:
@@ -123,9 +153,15 @@ def octree_stats(path, point_filter: PointFilter | None = None, on_chunk: Callab
     return stats
 
 
-def _meeting(cloud: OctreeCloud, meets: Meets, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Indices of the nodes holding points whose boxes lo..hi (widened by ``BOX_SLACK``) meet the region."""
-    return np.flatnonzero((cloud.counts > 0) & cloud.boxes_meeting(meets, lo, hi))
+def _meeting(cloud: OctreeCloud, meets: Meets, lo: np.ndarray, hi: np.ndarray, deepest: int | None = None) -> np.ndarray:
+    """Indices of the nodes holding points whose boxes lo..hi (widened by ``BOX_SLACK``) meet the
+    region, at levels down to ``deepest`` (None: all)."""
+    return np.flatnonzero((cloud.counts > 0) & cloud.boxes_meeting(meets, lo, hi) & _down_to(cloud, deepest))
+
+
+def _down_to(cloud: OctreeCloud, deepest: int | None) -> np.ndarray | bool:
+    """Which of the octree's nodes lie at levels down to ``deepest`` (None: all)."""
+    return True if deepest is None else cloud.levels <= deepest
 
 
 def _chunk(points: dict) -> PointChunk:
@@ -135,12 +171,12 @@ def _chunk(points: dict) -> PointChunk:
     return PointChunk(points["xyz"], rgba, attributes)
 
 
-def _voxel_nodes(cloud: VoxelOctree, meets: Meets) -> Iterator[PointChunk]:
-    """A COPC/EPT octree's meeting nodes: the hierarchy pages of pending nodes that meet the region
-    read first (a pending node's box is its cube), then the nodes fetched a group at a time, as a
-    frame's are."""
-    cloud.read_pages_meeting(lambda lo, hi: cloud.boxes_meeting(meets, lo, hi))
-    need = _meeting(cloud, meets, cloud.nodes["bbox_min"], cloud.nodes["bbox_max"]).tolist()
+def _voxel_nodes(cloud: VoxelOctree, meets: Meets, deepest: int | None) -> Iterator[PointChunk]:
+    """A COPC/EPT octree's meeting nodes down to level ``deepest`` (None: all): the hierarchy pages
+    of pending nodes that meet the region read first (a pending node's box is its cube; pages of
+    nodes deeper than ``deepest`` not read), then the nodes fetched a group at a time, as a frame's are."""
+    cloud.read_pages_meeting(lambda lo, hi: cloud.boxes_meeting(meets, lo, hi) & _down_to(cloud, deepest))  # (levels of the hierarchy read so far)
+    need = _meeting(cloud, meets, cloud.nodes["bbox_min"], cloud.nodes["bbox_max"], deepest).tolist()
     for _, points in cloud.points_of_nodes(need):
         yield _chunk(points)
 
@@ -152,4 +188,4 @@ def _progressive_leaves(cloud: ProgressiveOctree, meets: Meets) -> Iterator[Poin
     yield from cloud.chunks(DECODE_GROUP_POINTS, leaves_of=lambda leaves, lo, edge: meets(lo - pad, lo + edge[:, None] + pad))
 
 
-__all__ = ["BOX_SLACK", "is_octree", "octree_stats", "opened_octree", "points_meeting"]
+__all__ = ["BOX_SLACK", "deepest_level", "is_octree", "octree_stats", "opened_octree", "points_meeting"]

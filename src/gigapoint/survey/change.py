@@ -15,7 +15,13 @@ A survey kept as an LOD octree (a converted folder, a COPC file, an EPT dataset)
 node: every point lives in exactly one node of these layered octrees (lod/query.py), so its
 surface is the highest of the surfaces of its nodes meeting the area, drawn STREAM_POINTS points
 at a time (memory bounded by those, not by the survey), its positions put back on its source's
-LAS grid. A survey of fewer points is drawn whole, as its point files would be; in several draws
+LAS grid. Only the levels whose points are needed at the gsd are read: down to the first whose
+spacing is at most SURFACE_SPACING of a pixel (half: every pixel the data covers still holds a
+few points): a sample of the survey, of which a coarse gsd reads a small part (not the deep
+levels that hold most points). A pixel's height is then that of the highest point sampled
+there, which may lie a little below its highest point: where the ground within a spacing rises
+(a roof's edge, a tree's crown), not on open ground; ``full=True`` reads every node (every
+point: the surface of the point files exactly). A survey of fewer points is drawn whole, as its point files would be; in several draws
 a point lying exactly on a pixel edge may fall on either side (each draw's batches have float32
 transforms of their own): ~0.1 % of autzen's 4 ft pixels drawn 20,000 points at a time.
 
@@ -56,6 +62,8 @@ from ..render.raster_fill import check_max_distance, fill_heights
 SURFACE_SETTINGS = {"size_mode": "fixed", "point_size": 1, "adaptive_precision": False}
 PREVIEW_COLORMAP = "rdbu"  # diverging, white at 0: red where ground was cut, blue where it was filled
 PREVIEW_PERCENTILE = 98.0  # of |dz|: the preview's default range (a few outliers do not wash it out)
+#: an octree's levels read for a surface: down to the first whose point spacing is at most this share of a pixel
+SURFACE_SPACING = 0.5
 #: points of an octree's nodes drawn at a time into its surface: its memory, whatever the survey's size
 STREAM_POINTS = 4_000_000
 
@@ -214,14 +222,6 @@ def open_survey(source, filters: dict, where: str = "change"):
     return cloud
 
 
-def read_survey(source, filters: dict, where: str = "change") -> PointCloud:
-    """``open_survey``'s PointCloud; an LOD octree a one-line InputError."""
-    cloud = open_survey(source, filters, where)
-    if not isinstance(cloud, PointCloud):  # an octree draws a level of detail, not every point
-        raise InputError(f"{survey_label(source)}: an LOD octree; {where} draws a surface of every point: give the point files")
-    return cloud
-
-
 def _lengths(units: dict) -> tuple:
     """(horizontal, vertical) metres of a unit of ``units`` (io.crs_units); None where unknown or an angle."""
     return tuple(u["metres"] if u else None for u in (units["horizontal"], units["vertical"]))
@@ -251,22 +251,28 @@ def check_crs(before, after, labels: tuple[str, str]) -> tuple[str | None, dict]
     return (crs_a, units_a) if crs_a else (crs_b, units_b)
 
 
-def surface(cloud, camera: Camera, fill_nodata=None) -> np.ndarray:
+def surface(cloud, camera: Camera, fill_nodata=None, full: bool = False) -> np.ndarray:
     """(H, W) float32 heights of ``cloud``'s highest point in each of ``camera``'s pixels (NaN:
     none); ``fill_nodata`` "all" or N: holes filled (raster_fill.fill_heights). An LOD octree's
-    points are read node by node (``_octree_heights``)."""
+    points are read node by node (``_octree_heights``): the levels the camera's gsd needs, every
+    node with ``full``."""
     if is_octree(cloud):
-        heights = _octree_heights(cloud, camera)
+        heights = _octree_heights(cloud, camera, full)
     else:
         heights = camera.heights(render_frame(cloud, camera, RenderSettings().replace(**SURFACE_SETTINGS)).depth)
     return heights if fill_nodata is None else fill_heights(heights, None if fill_nodata == "all" else fill_nodata)
 
 
-def _octree_heights(octree, camera: Camera) -> np.ndarray:
-    """``surface`` of every point of the LOD octree ``octree`` (those its read filter keeps): the
-    points of its nodes meeting the filter, at every level (each point in one node), drawn
-    STREAM_POINTS at a time, each pixel the highest of the heights drawn there."""
+def _octree_heights(octree, camera: Camera, full: bool) -> np.ndarray:
+    """``surface`` of the LOD octree ``octree`` (of the points its read filter keeps): the points of
+    its nodes meeting the filter, at the levels down to a spacing of SURFACE_SPACING of a pixel
+    (``full``: at every level, each point in one node), drawn STREAM_POINTS at a time, each pixel
+    the highest of the heights drawn there; nodes outside the camera's footprint are not read."""
+    gsd, _, _, _, x0, y0 = camera.world_file()  # (x0, y0: the upper-left pixel's centre)
+    max_spacing = None if full else SURFACE_SPACING * gsd
     keep = octree.read_filter if isinstance(octree, OctreeCloud) and octree.read_filter is not None else PointFilter()
+    left, top = x0 - gsd / 2, y0 + gsd / 2
+    footprint = PointFilter(clip=(left, top - camera.height * gsd, left + camera.width * gsd, top))
     heights = np.full((camera.height, camera.width), np.nan, np.float32)
     group: list = []
 
@@ -275,7 +281,7 @@ def _octree_heights(octree, camera: Camera) -> np.ndarray:
         group.clear()
 
     grid = _source_grid(octree)
-    for points in points_meeting(octree, keep.meets):
+    for points in points_meeting(octree, lambda lo, hi: keep.meets(lo, hi) & footprint.meets(lo, hi), max_spacing):
         kept = keep.kept(points, octree.name)
         if len(kept):
             group.append(kept if grid is None else _on_grid(kept, *grid))
@@ -306,17 +312,18 @@ def _on_grid(chunk: PointChunk, scale: np.ndarray, offset: np.ndarray) -> PointC
     return PointChunk(xyz, chunk.rgba, chunk.attributes, scale=tuple(map(float, scale)), color_bits=chunk.color_bits)
 
 
-def change(before, after, gsd, classes=None, drop_classes=None, clip=None, fill_nodata=None, min_change=0.0) -> Change:
+def change(before, after, gsd, classes=None, drop_classes=None, clip=None, fill_nodata=None, min_change=0.0, full=False) -> Change:
     """The change from survey ``before`` to survey ``after`` (each paths as ``gigapoint.open``
-    takes them: a file, a folder, a glob pattern, a list; an LOD octree, its every point read node
-    by node: a converted folder, a COPC file, an EPT dataset, or one opened; or a PointCloud), as two surface models
+    takes them: a file, a folder, a glob pattern, a list; an LOD octree, read node by node down to
+    the levels the gsd needs: a converted folder, a COPC file, an EPT dataset, or one opened; or a PointCloud), as two surface models
     on one grid of ``gsd`` units a pixel over the union of their bounds (``Change``: ``dz``,
     ``cut``, ``fill``, ``net``, ``area_compared``, ``area_changed``, ``preview()``).
 
     ``classes``/``drop_classes``/``clip``: only those points read of both (``classes=[2]``:
     ground against ground); ``fill_nodata``: "all" or N pixels, each surface's holes filled
     linearly inside its footprint first (needs scipy); ``min_change``: pixels that moved by no
-    more are left out of the volumes and the changed area. Surveys that name different CRSs or
+    more are left out of the volumes and the changed area; ``full``: an octree's every node read,
+    not only the levels the gsd needs (its surface then that of its point files exactly). Surveys that name different CRSs or
     units (feet and metres), or that share no pixel, are one-line InputErrors."""
     if not (is_real(gsd) and gsd > 0):
         raise InputError(f"change: gsd must be a number > 0 (cloud units per pixel), got {gsd!r}")
@@ -324,6 +331,7 @@ def change(before, after, gsd, classes=None, drop_classes=None, clip=None, fill_
         raise InputError(f"change: min_change must be a number >= 0 (a height difference), got {min_change!r}")
     if fill_nodata is not None and fill_nodata != "all":
         check_max_distance("change: fill_nodata", fill_nodata)
+    check_switch("full", full, "change")
     filters = {"classes": classes, "drop_classes": drop_classes, "clip": clip}
     point_filter(**filters, where="change")  # bad values told before anything is read
     labels = (survey_label(before), survey_label(after))
@@ -340,7 +348,7 @@ def change(before, after, gsd, classes=None, drop_classes=None, clip=None, fill_
             camera = Camera.top_down((np.minimum(*lows), np.maximum(*highs)), gsd)  # one grid, one eye: pixel to pixel
         except CameraError as exc:  # the grid spans both: name them (a huge survey beside a tiny one said neither)
             raise CameraError(f"{labels[0]} and {labels[1]}: {exc}") from None
-        heights = [surface(s, camera, fill_nodata) for s in surveys]
+        heights = [surface(s, camera, fill_nodata, full) for s in surveys]
     finally:
         for survey, source in zip(surveys, (before, after)):
             if isinstance(survey, VoxelOctree) and survey is not source:  # a COPC/EPT octree opened here (a URL's connections)

@@ -46,13 +46,14 @@ import numpy as np
 from ..errors import EmptyCloudError, InputError, check_switch, is_real
 from ..io.filters import point_filter
 from ..io.polygon import ClipPolygon, check_simple, clip_polygon_of
+from ..lod.query import is_octree
 from ..lod.reader import cloud_crs, cloud_units
 from ..render import Camera
 from ..render.colors import ramp_image
 from ..render.contours import draw_lines
 from ..render.georef import write_map
 from ..render.raster_fill import check_max_distance, fill_heights
-from .change import read_survey, surface, survey_label, unit_names
+from .change import open_survey, surface, survey_label, unit_names
 
 #: how far (in pixels) the grid reaches beyond the polygons: the toe's pixels are then whole
 MARGIN_PIXELS = 2
@@ -318,11 +319,13 @@ def _pile_parts(polygon: ClipPolygon) -> list[tuple[str, list[int]]]:
     return list(zip(numbered, groups))
 
 
-def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=None, fill_nodata="all") -> Volume:
+def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=None, fill_nodata="all", full=False) -> Volume:
     """The volume of each pile ``clip_polygon`` outlines (a GeoJSON or WKT file, WKT text, a GeoJSON
     geometry as a dict: polygon.py; several polygons, several piles, named by their Feature's
-    ``name``; a Feature's MultiPolygon one pile in parts) in survey ``source`` (paths as ``gigapoint.open`` takes them, or a PointCloud), on a
-    grid of ``gsd`` units a pixel, above and below ``base`` ("plane", "lowest" or an elevation).
+    ``name``; a Feature's MultiPolygon one pile in parts) in survey ``source`` (paths as ``gigapoint.open`` takes them, or a PointCloud;
+    an LOD octree's path: its nodes near the piles read down to the levels the gsd needs, as
+    ``change.surface`` reads them, every node with ``full``), on a grid of ``gsd`` units a pixel,
+    above and below ``base`` ("plane", "lowest" or an elevation).
 
     ``classes``/``drop_classes``: only those points read (``drop_classes=[7, 18]``: no noise);
     ``fill_nodata``: "all" (the default) every hole inside the data's footprint filled linearly
@@ -335,6 +338,7 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
     if not (is_real(gsd) and gsd > 0):
         raise InputError(f"volume: gsd must be a number > 0 (cloud units per pixel), got {gsd!r}")
     base = _check_base(base)
+    check_switch("full", full, "volume")
     if fill_nodata is not None and fill_nodata != "all":
         check_max_distance("volume: fill_nodata", fill_nodata)
     toe = clip_polygon_of(clip_polygon, f"volume: clip_polygon={clip_polygon!r}")
@@ -344,14 +348,15 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
     filters = {"classes": classes, "drop_classes": drop_classes, "clip": box}
     point_filter(**filters, where="volume")  # bad values told before anything is read
     label = survey_label(source)
-    try:
-        cloud = read_survey(source, filters, "volume")
+    try:  # (an octree's points are read, and found missing, as its surface is drawn)
+        # (an opened octree takes no filter of its own: the grid's footprint bounds what is read of it)
+        cloud = open_survey(source, {**filters, "clip": None} if is_octree(source) else filters, "volume")
+        lo, hi = cloud.bounds
+        camera = Camera.top_down(((box[0], box[1], lo[2]), (box[2], box[3], hi[2])), gsd)
+        drawn = surface(cloud, camera, full=full)
     except EmptyCloudError:
         (x0, y0), (x1, y1) = toe.lo, toe.hi
         raise InputError(f"{toe.source}: no point of {label} lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}: the polygon is outside the data") from None
-    lo, hi = cloud.bounds
-    camera = Camera.top_down(((box[0], box[1], lo[2]), (box[2], box[3], hi[2])), gsd)
-    drawn = surface(cloud, camera)
     heights = drawn if fill_nodata is None else fill_heights(drawn, None if fill_nodata == "all" else fill_nodata)
     grid = _Grid(camera)
     groups = _pile_parts(toe)

@@ -3,14 +3,14 @@ tool's closed polygon, its toe, of the cloud the viewer shows.
 
 The session computes it off the render loop, as the section tool computes its section
 (``Session._compute_volume``'s thread): the points of the polygon's box are read first without
-the render lock (a cloud in memory filtered; an LOD octree's nodes that meet the box, at every
-level, lod/query.py: they hold every point once, which ``gp.volume`` itself refuses to take from
-an octree), then ``gp.volume`` draws its surface model of them under the lock (the renderer's
+the render lock (a cloud in memory filtered; an LOD octree's nodes that meet the box, down to the
+levels the grid needs, as ``gp.volume`` reads an octree: lod/query.py, survey/change.py's
+SURFACE_SPACING), then ``gp.volume`` draws its surface model of them under the lock (the renderer's
 scratch buffers are shared with the frames'). Classes hidden in the Classes panel are left out:
 the volume is of what the view shows.
 
-A box holding more than MAX_POINTS points (a polygon drawn round much of a large cloud) is
-thinned to every k-th point as it is read (``section_tool.every_kth``, the section tool's cap: at
+A box holding more than MAX_POINTS points (a polygon drawn round much of a large cloud in memory;
+an octree's levels the grid needs rarely hold as many) is thinned to every k-th point as it is read (``section_tool.every_kth``, the section tool's cap: at
 most MAX_POINTS held at once), the grid then no finer than the thinned points' spacing, and the result's
 ``note`` says so. A polygon crossing itself is refused (measure.summary's ``crossing``).
 """
@@ -28,7 +28,7 @@ from ..io.filters import PointFilter, point_filter
 from ..lod.query import is_octree, points_meeting
 from ..lod.reader import open_octree
 from ..lod.voxel_octree import VoxelOctree
-from ..survey.change import unit_names
+from ..survey.change import SURFACE_SPACING, unit_names
 from ..survey.volume import BASES, MARGIN_PIXELS, Volume
 from . import protocol as P
 from .section_tool import MAX_POINTS as SECTION_MAX_POINTS
@@ -100,31 +100,33 @@ def toe(points) -> dict:
 def points_in_box(cloud, points, gsd: float, drop_classes, limit: int) -> tuple[PointCloud, int, int]:
     """(the points of ``cloud``, what the viewer shows, in the box ``gp.volume`` reads around the
     polygon, but those of ``drop_classes``: at most ``limit``, every k-th where there are more;
-    the points in the box; k). A cloud in memory's, an octree's nodes meeting the box (a COPC file
-    or EPT dataset through a reader of its own); a one-line GigapointError for any other cloud."""
+    the points in the box; k). A cloud in memory's, an octree's nodes meeting the box down to the
+    levels a ``gsd`` grid needs (a COPC file or EPT dataset through a reader of its own); a
+    one-line GigapointError for any other cloud."""
     xy = np.asarray(points, np.float64)[:, :2]
     margin = MARGIN_PIXELS * gsd
     box = [*(xy.min(axis=0) - margin), *(xy.max(axis=0) + margin)]
     keep = point_filter(drop_classes=list(drop_classes) or None, clip=box, where="volume")
-    kept, seen, step = every_kth(_kept_chunks(cloud, keep), limit)  # (never the whole box at once)
+    kept, seen, step = every_kth(_kept_chunks(cloud, keep, SURFACE_SPACING * gsd), limit)  # (never the whole box at once)
     if not kept:
         (x0, y0, x1, y1) = box
         raise InputError(f"{POLYGON}: no point of {cloud.name} lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}")
     return build_cloud(kept, name=cloud.name, colors="rgba"), seen, step
 
 
-def _kept_chunks(cloud, keep: PointFilter) -> Iterator[PointChunk]:
-    """The points of ``cloud`` that ``keep`` keeps, a chunk (an octree's: a node) at a time."""
+def _kept_chunks(cloud, keep: PointFilter, max_spacing: float) -> Iterator[PointChunk]:
+    """The points of ``cloud`` that ``keep`` keeps, a chunk (an octree's: a node, down to the level
+    whose points are at most ``max_spacing`` apart) at a time."""
     if isinstance(cloud, PointCloud):
         yield from keep.apply(cloud.chunks(), cloud.name)
     elif isinstance(cloud, VoxelOctree):  # a reader of its own: the frames' reads change its pages and nodes as they go
         own = open_octree(own_reader_source(cloud))
         try:
-            yield from keep.apply(points_meeting(own, keep.meets), cloud.name)
+            yield from keep.apply(points_meeting(own, keep.meets, max_spacing), cloud.name)
         finally:
             own.close()
     elif is_octree(cloud):
-        yield from keep.apply(points_meeting(cloud, keep.meets), cloud.name)
+        yield from keep.apply(points_meeting(cloud, keep.meets, max_spacing), cloud.name)
     else:
         raise GigapointError(f"{cloud.name}: volumes need the points in memory or an LOD octree; this cloud is neither (view the point files instead)")
 
