@@ -10,8 +10,8 @@ from ..render.raster_fill import require_scipy
 
 #: --all-points (`change`, `volume`): an LOD octree read whole, not down to the levels the gsd needs
 ALL_POINTS_HELP = (
-    "An LOD octree's every node read, not only its levels whose points lie at most half a pixel apart "
-    "(those give each pixel the highest of a sample of its points: on a roof's edge or a tree's crown a little lower)."
+    "An LOD octree's every node read, not only its levels down to points a quarter of a pixel apart "
+    "(those give each pixel the highest of a sample of its points: on a roof's edge or a tree's crown up to that spacing lower)."
 )
 
 

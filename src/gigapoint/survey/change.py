@@ -16,12 +16,19 @@ node: every point lives in exactly one node of these layered octrees (lod/query.
 surface is the highest of the surfaces of its nodes meeting the area, drawn STREAM_POINTS points
 at a time (memory bounded by those, not by the survey), its positions put back on its source's
 LAS grid. Only the levels whose points are needed at the gsd are read: down to the first whose
-spacing is at most SURFACE_SPACING of a pixel (half: every pixel the data covers still holds a
-few points): a sample of the survey, of which a coarse gsd reads a small part (not the deep
-levels that hold most points). A pixel's height is then that of the highest point sampled
-there, which may lie a little below its highest point: where the ground within a spacing rises
-(a roof's edge, a tree's crown), not on open ground; ``full=True`` reads every node (every
-point: the surface of the point files exactly). A survey of fewer points is drawn whole, as its point files would be; in several draws
+spacing is at most SURFACE_SPACING of a pixel, a sample of the survey of which a coarse gsd
+reads a small part (not the deep levels that hold most points). A pixel's height is then that of
+the highest point sampled there, never above its highest point (but for a point on a pixel edge,
+which other draws may put on either side) and below it by up to about the
+spacing read (a sampler keeps one point of each cell of that side, not the highest): where the
+ground rises within a cell (a roof's edge, a tree's crown), not on open ground. That bound is in
+z, whatever the pixel's size, hence a quarter of a pixel and not half: autzen (110,000 points,
+max_leaf 2,000) at 16 ft reads 79,000 points (levels down to 2.3 ft), 98 % of its pixels within
+0.5 ft of every point's surface, 99.5 % within 2.3 ft; at half a pixel (4.6 ft) 30,000 points,
+88 % within 0.5 ft. Volumes then come out a little low where the surface is rough.
+``full=True`` reads every node (every point: the surface of the point files exactly).
+
+A survey of fewer than STREAM_POINTS points is drawn whole, as its point files would be; in several draws
 a point lying exactly on a pixel edge may fall on either side (each draw's batches have float32
 transforms of their own): ~0.1 % of autzen's 4 ft pixels drawn 20,000 points at a time.
 
@@ -63,7 +70,8 @@ SURFACE_SETTINGS = {"size_mode": "fixed", "point_size": 1, "adaptive_precision":
 PREVIEW_COLORMAP = "rdbu"  # diverging, white at 0: red where ground was cut, blue where it was filled
 PREVIEW_PERCENTILE = 98.0  # of |dz|: the preview's default range (a few outliers do not wash it out)
 #: an octree's levels read for a surface: down to the first whose point spacing is at most this share of a pixel
-SURFACE_SPACING = 0.5
+#: (a pixel's height then at most about that spacing below its highest point's: see above)
+SURFACE_SPACING = 0.25
 #: points of an octree's nodes drawn at a time into its surface: its memory, whatever the survey's size
 STREAM_POINTS = 4_000_000
 
