@@ -28,6 +28,16 @@ def autzen_path():
     return AUTZEN
 
 
+@pytest.fixture(scope="session")
+def autzen_layered(autzen_path, tmp_path_factory):
+    """autzen_trim converted with leaves of at most 2,000 points (levels 0-4, spacing 9.2 ft at
+    the root: 2.3 ft at level 2) to a gigapoint octree folder and a COPC file: {kind: path}."""
+    out = tmp_path_factory.mktemp("layered")
+    gp.convert([autzen_path], out / "autzen_octree", max_leaf=2_000)
+    gp.convert([autzen_path], out / "autzen.copc.laz", format="copc", max_leaf=2_000)
+    return {"gigapoint": out / "autzen_octree", "copc": out / "autzen.copc.laz"}
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)

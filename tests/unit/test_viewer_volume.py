@@ -263,3 +263,23 @@ def test_a_box_over_the_cap_is_read_thinned_and_its_volume_stays_near_the_whole_
     assert result["note"] == "on thinned points: 1 in 4 of the 10,416 in the polygon's box (at most 3,000 kept); draw a smaller polygon for all"
     uncapped = gigapoint.volume(cloud, VT.toe(TOE), 0.25).fill
     assert abs(result["fill"] - uncapped) < grid_error(0.49) and abs(result["fill"] - 600.0) < grid_error(0.49), (result["fill"], uncapped)
+
+
+def test_an_octree_box_is_read_down_to_the_levels_the_grid_needs(autzen_layered, autzen_path):
+    """Most of autzen at a 16 ft grid: its octree's levels down to 2.3 ft (a quarter pixel) are
+    read, not every point of the box, under the cap that would have thinned them all; the panel's
+    volume is then gp.volume's of the octree (the same levels; its points at their 30-bit positions,
+    not put back on the LAS grid: a few on a pixel edge fall into the next pixel, 3e-5 of the fill),
+    and a fine grid reads every point."""
+    octree = gigapoint.open(autzen_layered["gigapoint"])
+    toe = [[636200.0, 849000.0, 0.0], [636900.0, 849000.0, 0.0], [636900.0, 849400.0, 0.0], [636200.0, 849400.0, 0.0]]
+
+    def in_box(gsd):  # autzen's points in the box read: two pixels beyond the polygon
+        return gigapoint.open(autzen_path, clip=[636200.0 - 2 * gsd, 849000.0 - 2 * gsd, 636900.0 + 2 * gsd, 849400.0 + 2 * gsd]).n_points
+
+    sampled, seen, step = VT.points_in_box(octree, toe, 16.0, (), 60_000)
+    assert step == 1 and sampled.n_points == seen < 0.75 * in_box(16.0) and in_box(16.0) > 60_000
+    every, seen, step = VT.points_in_box(octree, toe, 2.0, (), 200_000)  # 0.5 ft of 2: the deepest level, 0.57 ft
+    assert seen == every.n_points == in_box(2.0) and step == 1
+    panel = gigapoint.volume(sampled, VT.toe(toe), 16.0, base="lowest")
+    assert panel.fill == pytest.approx(gigapoint.volume(autzen_layered["gigapoint"], VT.toe(toe), 16.0, base="lowest").fill, rel=1e-4)

@@ -348,3 +348,44 @@ def test_render_and_open_still_clip_by_a_self_crossing_polygon(cli, autzen_path,
     assert len(xyz) > 100 and ((v - u) * (v - (1 - u)) >= -1e-9).all()  # in the lower or the upper triangle, none beside them
     rc, _, err = cli("render", autzen_path, "--clip-polygon", bow_tie, "-o", tmp_path / "bow.png", "-W", 64, "-H", 48)
     assert rc == 0 and (tmp_path / "bow.png").is_file(), err
+
+
+# --- an LOD octree: its levels the gsd needs (survey/change.py's surface) --------------------------------
+
+AUTZEN_MIDDLE = (636200.0, 849000.0, 636900.0, 849400.0)  # most of autzen_trim: roofs, trees, roads
+
+
+@pytest.mark.parametrize("base", ["plane", "lowest"])
+def test_an_octree_gives_its_point_files_volume_from_its_upper_levels(autzen_layered, autzen_path, base):
+    """At 16 ft the octree's levels down to 2.3 ft are read (a quarter pixel: 79,000 of its
+    110,000 points): the highest of a sample in each pixel, a little low on roofs and trees, so
+    the net volume lies below the LAZ file's by at most 0.15 ft over the footprint (measured: 0.118
+    on a plane base, 0.112 on the lowest) and the fill by at most 2 % (1.5 %, 0.5 %). Every node
+    read (full=True): the LAZ file's volumes, but for the float32 heights' rounding (the camera's eye
+    at the octree's top, not the box's points'). An opened octree takes no clip box: the grid's
+    edge pixels then hold the points beyond the box too, which the holes' TIN reaches (measured:
+    4e-5 of the fill on a plane base)."""
+    toe = square(*AUTZEN_MIDDLE)
+    las = gp.volume(autzen_path, toe, 16, base=base)
+    sampled = gp.volume(autzen_layered["gigapoint"], toe, 16, base=base)
+    assert sampled.area == las.area == 292_864.0 and las.fill > 2e6
+    assert -0.15 * las.area <= sampled.net - las.net < 0 and abs(sampled.fill - las.fill) <= 0.02 * las.fill
+    every = gp.volume(autzen_layered["copc"], toe, 16, base=base, full=True)
+    assert every.fill == pytest.approx(las.fill, rel=1e-7) and every.cut == pytest.approx(las.cut, rel=1e-7, abs=1e-3)
+    assert np.nanmax(np.abs(every.heights - las.heights)) <= 2 * np.spacing(np.float32(600))  # 2 ulps of the heights
+    opened = gp.volume(gp.open(autzen_layered["gigapoint"]), toe, 16, base=base)
+    assert opened.fill == pytest.approx(sampled.fill, rel=1e-4)
+
+
+def test_cli_volume_of_an_octree_folder_with_all_points_is_the_point_files(cli, autzen_layered, autzen_path, tmp_path):
+    toe = tmp_path / "toe.geojson"
+    toe.write_text(json.dumps(square(*AUTZEN_MIDDLE, "middle")))
+    figures = {}
+    for name, source, *more in (("las", autzen_path), ("octree", autzen_layered["gigapoint"]), ("every", autzen_layered["gigapoint"], "--all-points")):
+        rc, out, err = cli("volume", source, "--clip-polygon", toe, "--gsd", 16, "--base", "lowest", "--json", *more)
+        assert rc == 0, err
+        figures[name] = json.loads(out)["total"]["fill"]
+    assert figures["every"] == pytest.approx(figures["las"], rel=1e-7) and figures["octree"] < figures["las"]
+    outside = {"type": "Polygon", "coordinates": [[[0, 0], [10, 0], [10, 10], [0, 0]]]}
+    with pytest.raises(InputError, match=r"^the GeoJSON geometry: no point of .*autzen_octree lies in its box x 0\.\.10, y 0\.\.10: the polygon is outside the data$"):
+        gp.volume(autzen_layered["gigapoint"], outside, 16)
