@@ -14,6 +14,12 @@ ALL_POINTS_HELP = (
     "(those give each pixel the highest of a sample of its points: on a roof's edge or a tree's crown up to that spacing lower)."
 )
 
+#: --all-points/--levels-only (`volume`): every node by default (volumes are paid by the cubic metre)
+VOLUME_POINTS_HELP = (
+    "An LOD octree's every node near the piles read (the default), or with --levels-only its levels down to points a quarter "
+    "of a pixel apart: faster, and each pixel the highest of a sample, so a pile's volume comes out a little low."
+)
+
 
 def check_gsd_value(gsd: float) -> None:
     """A one-line error for a --gsd that is no size."""

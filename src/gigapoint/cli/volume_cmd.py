@@ -15,7 +15,7 @@ from ..errors import CameraError, GigapointError, counted
 from ..render.georef import GEOTIFF_SUFFIXES, georef_paths, write_map
 from .app import app
 from .cloud_opts import ClassesOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
-from .gsd_opts import ALL_POINTS_HELP, check_fill_nodata, check_gsd_value
+from .gsd_opts import VOLUME_POINTS_HELP, check_fill_nodata, check_gsd_value
 from .output import IMAGE_SUFFIXES, check_output, check_outputs_apart
 
 
@@ -53,7 +53,7 @@ def volume(
     dsm_out: Annotated[Path | None, typer.Option(readable=False, help="Also write the surface model inside the piles (holes filled) as a float32 GeoTIFF (.tif), NaN outside, with its world file and .prj.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print each pile's figures and the total as one JSON object (and nothing else).")] = False,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace existing output files.")] = False,
-    all_points: Annotated[bool, typer.Option("--all-points", help=ALL_POINTS_HELP)] = False,
+    all_points: Annotated[bool, typer.Option("--all-points/--levels-only", help=VOLUME_POINTS_HELP)] = True,
     recursive: RecursiveOption = False,
     classes: ClassesOption = None,
     drop_classes: DropClassesOption = None,

@@ -319,12 +319,14 @@ def _pile_parts(polygon: ClipPolygon) -> list[tuple[str, list[int]]]:
     return list(zip(numbered, groups))
 
 
-def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=None, fill_nodata="all", full=False) -> Volume:
+def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=None, fill_nodata="all", full=True) -> Volume:
     """The volume of each pile ``clip_polygon`` outlines (a GeoJSON or WKT file, WKT text, a GeoJSON
     geometry as a dict: polygon.py; several polygons, several piles, named by their Feature's
     ``name``; a Feature's MultiPolygon one pile in parts) in survey ``source`` (paths as ``gigapoint.open`` takes them, or a PointCloud;
-    an LOD octree's path: its nodes near the piles read down to the levels the gsd needs, as
-    ``change.surface`` reads them, every node with ``full``), on a grid of ``gsd`` units a pixel,
+    an LOD octree's path: every node near the piles read; ``full=False`` only its levels down to
+    the spacing the gsd needs, as ``change.surface`` reads them: faster, and a pile's volume
+    then a little low, each pixel the highest of a sample; volumes are paid by the cubic metre, so
+    every point is the default), on a grid of ``gsd`` units a pixel,
     above and below ``base`` ("plane", "lowest" or an elevation).
 
     ``classes``/``drop_classes``: only those points read (``drop_classes=[7, 18]``: no noise);
