@@ -55,11 +55,16 @@ def no_rgb(autzen_path, tmp_path_factory):
     return path
 
 
+def _pixels_under(x, y, transform=None):
+    """(row, column) of the pixel under each point ``x``, ``y`` (rasterio's rowcol: floor)."""
+    rows, cols = rowcol(transform or from_origin(LEFT, TOP, PIXEL, PIXEL), np.asarray(x), np.asarray(y))
+    return np.asarray(rows), np.asarray(cols)
+
+
 def _pixels_of(path, transform=None):
-    """(row, column) of the pixel under each point of ``path`` (rasterio's rowcol: floor), and its points."""
+    """(row, column) of the pixel under each point of ``path``, and its points."""
     las = laspy.read(str(path))
-    rows, cols = rowcol(transform or from_origin(LEFT, TOP, PIXEL, PIXEL), np.asarray(las.x), np.asarray(las.y))
-    return np.asarray(rows), np.asarray(cols), las
+    return *_pixels_under(las.x, las.y, transform), las
 
 
 def _rgb(las) -> np.ndarray:
@@ -312,6 +317,119 @@ def test_without_rasterio_the_option_says_how_to_install_it(no_rgb, tmp_path, mo
         gp.convert(no_rgb, tmp_path / "out.laz", colorize=tmp_path / "ortho.tif")
 
 
-def test_colorize_is_refused_with_an_octree(no_rgb, tmp_path):
-    with pytest.raises(ConvertError, match=r"--colorize: an option of a plain \.las, \.laz or \.ply file, or of tiles, not of a gigapoint octree$"):
-        gp.convert(no_rgb, tmp_path / "octree", colorize=tmp_path / "ortho.tif")
+def _octree_points(path):
+    """Every point of the octree folder ``path`` (gp.open): positions (n x 3), 8-bit RGB (n x 3), gps_time; and octree.json's has_color."""
+    tree = gp.open(path)
+    parts = [tree.node_points(i) for i in range(len(tree.nodes))]
+    rgb = np.concatenate([p["rgba"] for p in parts]).view(np.uint8).reshape(-1, 4)[:, :3]
+    return np.concatenate([p["xyz"] for p in parts]), rgb, np.concatenate([p["gps_time"] for p in parts]), tree.meta["has_color"]
+
+
+def _in_order(rgb, xyz, gps_time, step=0.01):
+    """``rgb`` in the order of (gps_time, x, y, z on the grid of ``step``): the same points of two outputs in one order (an octree's is its own)."""
+    cells = np.round(np.asarray(xyz, np.float64) / step).astype(np.int64)
+    return np.asarray(rgb)[np.lexsort([cells[:, 2], cells[:, 1], cells[:, 0], np.asarray(gps_time)])]
+
+
+def _las_in_order(las, step=0.01):
+    """A LAS file's RGB in ``_in_order``'s order."""
+    return _in_order(_rgb(las), np.column_stack([las.x, las.y, las.z]), las.gps_time, step)
+
+
+def test_a_copc_file_takes_each_points_pixel_colour_as_a_plain_file_does(cli, no_rgb, tmp_path):
+    ortho = _geotiff(tmp_path / "ortho.tif", _pattern(), read_las_header(no_rgb).crs())
+    plain = laspy.read(str(gp.convert(no_rgb, tmp_path / "plain.las", colorize=ortho).out))
+    copc = tmp_path / "rgb.copc.laz"
+    rc, stdout, err = cli("convert", no_rgb, "-o", copc, "--colorize", ortho, "-q")
+    assert (rc, err) == (0, "")
+    assert stdout.startswith(f"{copc}: 110,000 points in ") and f" (copc, grid), every point coloured from {ortho}, " in stdout
+    written = laspy.read(str(copc))
+    assert written.header.point_format.id == 7  # (format 1 had no RGB)
+    rows, cols = _pixels_under(written.x, written.y)
+    expected = _pattern()[:, rows, cols].T.astype(np.uint16) * 257
+    assert np.array_equal(_rgb(written), expected) and len(np.unique(expected, axis=0)) > 1000
+    assert np.array_equal(_las_in_order(written), _las_in_order(plain))
+
+
+def test_an_octree_folder_takes_its_pixels_colours_black_outside_and_counts_those(cli, no_rgb, tmp_path):
+    half = _geotiff(tmp_path / "west.tif", _pattern()[:, :, : WIDTH // 2], read_las_header(no_rgb).crs())  # columns 0-117: the west half
+    plain = laspy.read(str(gp.convert(no_rgb, tmp_path / "plain.las", colorize=half).out))
+    outside = int((_pixels_of(no_rgb)[1] >= WIDTH // 2).sum())
+    assert 30_000 < outside < 80_000
+    out = tmp_path / "octree"
+    rc, stdout, err = cli("convert", no_rgb, "-o", out, "--colorize", half, "-q")
+    assert (rc, err) == (0, "")
+    assert f" (gigapoint, grid), {outside:,} outside {half} or under its mask (colour kept, 0 where none), " in stdout
+    xyz, rgb, gps_time, has_color = _octree_points(out)
+    assert has_color is True and len(xyz) == 110_000  # (the file had no colours: octree.json said false)
+    rows, cols = _pixels_under(xyz[:, 0], xyz[:, 1])
+    inside = cols < WIDTH // 2
+    assert int((~inside).sum()) == outside and not rgb[~inside].any()  # (no colour in the file: 0, not the grey it is drawn in)
+    assert np.array_equal(rgb[inside], _pattern()[:, rows[inside], cols[inside]].T)
+    assert np.array_equal(_in_order(rgb.astype(np.uint16) * 257, xyz, gps_time), _las_in_order(plain))
+
+
+def test_octrees_and_copc_are_coloured_after_to_crs_as_a_plain_file(autzen_path, tmp_path):
+    transform = from_origin(494_000.0005, 4_878_000.0005, 2, 2)  # UTM metres, over autzen moved there; pixel edges half a step off the 0.001 m grid
+    utm = _geotiff(tmp_path / "utm.tif", _pattern(1000, 1000), "EPSG:32610", transform)
+    with pytest.warns(GigapointWarning, match="z is kept"):
+        plain = laspy.read(str(gp.convert(autzen_path, tmp_path / "plain.las", to_crs="EPSG:32610", colorize=utm).out))
+    with pytest.warns(GigapointWarning, match="z is kept"):
+        result = gp.convert(autzen_path, tmp_path / "utm.copc.laz", to_crs="EPSG:32610", colorize=utm)
+    assert result.uncolored == 0
+    written = laspy.read(str(result.out))
+    assert written.header.parse_crs() == pyproj.CRS.from_epsg(32610)
+    rows, cols = _pixels_under(written.x, written.y, transform)  # (the moved points' pixels: in feet, autzen's lie off this raster)
+    assert np.array_equal(_rgb(written), _pattern(1000, 1000)[:, rows, cols].T.astype(np.uint16) * 257)
+    assert np.array_equal(_las_in_order(written, 0.001), _las_in_order(plain, 0.001))
+    with pytest.warns(GigapointWarning, match="z is kept"):
+        assert gp.convert(autzen_path, tmp_path / "utm", to_crs="EPSG:32610", colorize=utm).uncolored == 0
+    xyz, rgb, gps_time, _ = _octree_points(tmp_path / "utm")
+    rows, cols = _pixels_under(xyz[:, 0], xyz[:, 1], transform)
+    assert np.array_equal(rgb, _pattern(1000, 1000)[:, rows, cols].T)
+    assert np.array_equal(_in_order(rgb.astype(np.uint16) * 257, xyz, gps_time, 0.001), _las_in_order(plain, 0.001))
+
+
+def test_an_octree_conversion_resumes_only_with_the_same_raster_and_counts_across_runs(no_rgb, tmp_path, monkeypatch):
+    read = importlib.import_module("gigapoint.lod.convert.read")
+    colorize = importlib.import_module("gigapoint.io.colorize")
+    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.in_memory"), "fits_in_memory", lambda job: False)  # (out of core: resumable mid-read)
+    closed = []
+    monkeypatch.setattr(colorize.Colorization, "close", lambda self, close=colorize.Colorization.close: (closed.append(self.path.name), close(self)))
+    real = read._read_chunks
+
+    def stops(path, size):  # Ctrl+C once two chunks are read
+        chunks = real(path, size)
+        yield next(chunks)
+        yield next(chunks)
+        raise KeyboardInterrupt("test")
+
+    def stopped(out, raster):
+        monkeypatch.setattr(read, "_read_chunks", stops)
+        with pytest.raises(KeyboardInterrupt):
+            gp.convert(no_rgb, out, colorize=raster, chunk_size=20_000)
+        monkeypatch.setattr(read, "_read_chunks", real)
+
+    wkt = read_las_header(no_rgb).crs()
+    half = _geotiff(tmp_path / "west.tif", _pattern()[:, :, : WIDTH // 2], wkt)
+    whole = _geotiff(tmp_path / "ortho.tif", _pattern(), wkt)
+    rows, cols, _ = _pixels_of(no_rgb)
+    stopped(tmp_path / "same", half)
+    assert closed == ["west.tif"]  # (closed on the way out of a stopped run too)
+    same = gp.convert(no_rgb, tmp_path / "same", colorize=half, chunk_size=20_000)
+    assert (same.resumed, same.points, same.uncolored) == (True, 110_000, int((cols >= WIDTH // 2).sum()))  # (the chunks of both runs counted)
+    stopped(tmp_path / "other", half)
+    other = gp.convert(no_rgb, tmp_path / "other", colorize=whole, chunk_size=20_000)  # another raster: starts over, not a mix of both
+    assert (other.resumed, other.points, other.uncolored) == (False, 110_000, 0)
+    xyz, rgb, _, _ = _octree_points(tmp_path / "other")
+    rows, cols = _pixels_under(xyz[:, 0], xyz[:, 1])
+    assert np.array_equal(rgb, _pattern()[:, rows, cols].T)
+    assert closed == ["west.tif", "west.tif", "west.tif", "ortho.tif"]
+
+
+def test_colorize_is_refused_on_a_dask_cluster_and_for_a_clouds_points(no_rgb, tmp_path):
+    with pytest.raises(ConvertError, match=r"octree: --colorize: colours in this process, not on a Dask cluster \(--dask, --workers\); convert without one$"):
+        gp.convert(no_rgb, tmp_path / "octree", colorize=tmp_path / "ortho.tif", client="tcp://127.0.0.1:1")
+    with pytest.raises(InputError, match=r"^convert: colorize colours the points read from files; the inputs are a cloud or PointChunks$"):
+        gp.convert(gp.open(no_rgb), tmp_path / "octree", colorize=tmp_path / "ortho.tif")
+    assert not (tmp_path / "octree").exists()

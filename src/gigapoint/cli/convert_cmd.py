@@ -134,13 +134,13 @@ def convert(
         raise
     resumed = (" (resumed)" if result.resumed else "") + (", in memory" if result.in_memory else "")
     skipped = skipped_note(result.skipped)
+    colored = uncolored_note(result.uncolored, colorize)
     if to_file:
         thinned = f", thinned from {result.thinned_from:,}" if result.thinned_from is not None else ""
-        colored = uncolored_note(result.uncolored, colorize)
         print(f"{output}: {counted(result.points, 'point')} ({result.format}){thinned}{colored}{skipped}, {result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s")
         return
     print(  # OUTPUT as given: a Dask run's result holds it absolute (its workers need that)
-        f"{output}: {counted(result.points, 'point')} in {counted(result.nodes, 'node')} ({result.format}, {result.sampler}){skipped}, "
+        f"{output}: {counted(result.points, 'point')} in {counted(result.nodes, 'node')} ({result.format}, {result.sampler}){colored}{skipped}, "
         f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s{resumed}"
         + (f"; viewable after {result.first_view_seconds:.1f} s" if result.first_view_seconds is not None else "")
     )

@@ -15,9 +15,10 @@ from pathlib import Path
 from ...core import pages
 from ...core.renderable import PointSource
 from ...errors import GigapointError, GigapointWarning, InputError, check_switch, warn
-from ...io import with_subfolders
+from ...io import files_label, with_subfolders
 from ...io._base import check_file, headers_once
 from ...io.colorize import Colorization
+from ...io.crs import files_crs
 from ...io.filters import point_filter
 from ...io.registry import is_supported_name
 from ...io.reproject import Reprojection, output_grid
@@ -301,12 +302,14 @@ def convert(
     output grid's step of PROJ's own (checked; else exactly); ``exact_transform=True``: every point
     through PROJ.
 
-    ``colorize`` (a plain point file only; needs rasterio: ``pip install 'gigapoint[gis]'``): an
+    ``colorize`` (input files only, not on a ``client``; needs rasterio: ``pip install 'gigapoint[gis]'``): an
     orthophoto (a GeoTIFF, any raster GDAL reads) whose pixels colour the points written, each the
     pixel it lies in, after ``to_crs`` (in the output's coordinates; io/colorize.py): bands 1-3 as
     red, green, blue. Points outside it or under its mask (alpha 0, nodata) keep their colour (0
     where their file had none), counted in the result's ``uncolored``. A raster in another CRS than
-    the output's is refused (move the points into its CRS with ``to_crs``).
+    the output's is refused (move the points into its CRS with ``to_crs``). The output (a plain
+    file, an octree, a COPC file) has colours; an octree's points are coloured as they are read,
+    and a conversion resumes only with the same raster, unchanged (its path, size, time).
     """
     check_switch("overwrite", overwrite, "convert")
     check_switch("recursive", recursive, "convert")
@@ -326,6 +329,8 @@ def convert(
         raise InputError(f"convert: colorize={colorize!r}: the path of an orthophoto (a GeoTIFF)")
     if to_crs is not None and not _are_paths(inputs):
         raise InputError("convert: to_crs reprojects the points read from files; the inputs are a cloud or PointChunks")
+    if colorize is not None and not _are_paths(inputs):
+        raise InputError("convert: colorize colours the points read from files; the inputs are a cloud or PointChunks")
     if keep is not None and not _are_paths(inputs):  # (a cloud's or chunks' points are not read here)
         raise InputError(f"convert: the filter ({keep.describe()}) applies to the points read from files; the inputs are a cloud or PointChunks")
     check_switch("progress", progress, "convert")  # "yes"/"no" were both true
@@ -372,10 +377,10 @@ def convert(
         raise ConvertError(f"--format: unknown format {format!r}; choose {' or '.join(FORMATS)}")
     if format != "copc" and out is not None and str(out) != "" and is_supported_name(out):  # -o scan.laz: a folder named so
         raise ConvertError(f"{out}: a {format} octree is a folder; name it without a point file's suffix, or write --format copc into a .copc.laz file")
-    if colorize is not None:
-        raise ConvertError(f"{out}: --colorize: an option of a plain .las, .laz or .ply file, or of tiles, not of a {format} octree")
     if to_crs is not None and client is not None:  # (its read tasks read the files as they are)
         raise ConvertError(f"{out}: --to-crs: reprojects in this process, not on a Dask cluster (--dask, --workers); convert without one")
+    if colorize is not None and client is not None:  # (as --to-crs: its read tasks spill the files' points as they are)
+        raise ConvertError(f"{out}: --colorize: colours in this process, not on a Dask cluster (--dask, --workers); convert without one")
     if spacing is not None:  # (an octree's inner nodes are its thinned levels; its leaves hold every point)
         raise ConvertError(f"{out}: --thin: an option of a plain .las, .laz or .ply file of the files' points, not of a {format} octree")
     if format == "copc" and out is not None and str(out) != "":
@@ -442,8 +447,19 @@ def convert(
         reprojection.check_files(conv.paths)
         conv.reprojection, conv.reprojected_grid = reprojection, output_grid(conv.paths, reprojection)
         conv.point_filter = reprojection.moved_filter(keep, conv.paths)  # (its clip polygon in the target CRS, where the points are filtered)
-    if client is not None:
-        with open_client(client, announce=progress) as conv.client:
-            return conv.run(overwrite)
-    with KeepFreedMemory(), pages.numpy_small_pages():  # both: new pages are the slow part of a conversion here
-        return conv.run(overwrite)
+    conv.colorization = None if colorize is None else Colorization(colorize, "convert")  # a raster that cannot be read: said before a point is
+    try:
+        if conv.colorization is not None:  # (the points' CRS is the output's: the target's where reprojected)
+            conv.colorization.check_crs(reprojection.target_wkt() if reprojection is not None else files_crs(conv.paths), files_label(conv.paths))
+        if client is not None:
+            with open_client(client, announce=progress) as conv.client:
+                result = conv.run(overwrite)
+        else:
+            with KeepFreedMemory(), pages.numpy_small_pages():  # both: new pages are the slow part of a conversion here
+                result = conv.run(overwrite)
+    finally:
+        if conv.colorization is not None:
+            conv.colorization.close()
+    if conv.colorization is not None:  # (a resumed run's count: the chunks read before it too, from the state)
+        result.uncolored = int(conv.state.get("uncolored", 0))
+    return result

@@ -1,5 +1,6 @@
-"""Phase 1, read: input chunks validated, bounded and spilled to raw chunk files, with the
-conversion's preview sampled on the way (../preview.py)."""
+"""Phase 1, read: input chunks (moved by ``--to-crs``, filtered, coloured by ``--colorize``)
+validated, bounded and spilled to raw chunk files, with the conversion's preview sampled on the
+way (../preview.py)."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from ...io import files_label, read_chunks, scan_angles_differ
 from ...io.filters import filtered
 from ...io.las import with_scan_angle
 from ...io.registry import reader_for
+from ...io.write import file_has_color
 from ..preview import PreviewSampler, preview_points
 from .prefetch import prefetch
 from .spill import encode_xyz, las_xyz_code, load_raw_chunk, one_value, save_raw_chunk
@@ -110,6 +112,13 @@ def spill_chunk(raw, i: int, chunk, xyz_code=None) -> tuple:
     else:
         save_raw_chunk(raw, i, ints, rgba, values, xyz_code)
     return taken, found
+
+
+def _black(n: int) -> np.ndarray:
+    """RGBA of ``n`` black points (opaque)."""
+    rgba = np.zeros((n, 4), np.uint8)
+    rgba[:, 3] = 255
+    return rgba
 
 
 def _same(a, b) -> bool:
@@ -218,12 +227,16 @@ class ReadPhase(Job):
     def _file_chunks(self):
         """The input files' chunks, each with its file's LAS grid (``_grid_of``), through the
         filter; moved into the target CRS first where reprojected (as a plain point file's: the
-        filter in the target's coordinates), off any file's grid then (spilled as float64)."""
+        filter in the target's coordinates), off any file's grid then (spilled as float64).
+        Where coloured from a raster, a file without colours gives black points (``read`` colours
+        them: those the raster gives no colour stay black, as in a plain point file, not grey)."""
         for p in self.paths:
             code = _grid_of(p) if self.reprojection is None else None
             read = _read_chunks(p, self.chunk_size)
             if self.reprojection is not None:
                 read = (self.reprojection.chunk(chunk, p) for chunk in read)
+            if self.colorization is not None and not file_has_color(p):
+                read = (replace(chunk, rgba=_black(len(chunk))) for chunk in read)
             chunks = _skipped_if_empty(p, filtered(read, p, self._passing), len(self.paths) > 1)
             chunks = with_scan_angle(chunks) if self.one_angle else chunks
             for chunk in prefetch(chunks) if self.read_ahead else chunks:
@@ -270,7 +283,12 @@ class ReadPhase(Job):
                 if i < done:  # (read again, from the start: the filter counts those too)
                     self.progress.advance(n_in)
                     continue
+                uncolored = 0
+                if self.colorization is not None:  # here, not as files are read: a resumed run's chunks read before are not coloured, nor counted, again
+                    chunk, uncolored = self.colorization.colored(chunk, had_color=True)  # (a colourless file's points: black, _file_chunks)
                 xyz, rgba, kept, names, invalid, c_lo, c_hi = self._take_chunk(i, chunk)
+                if self.colorization is not None:  # the invalid points, skipped, lie on no pixel (NaN, inf; beyond ±1e12: no raster's)
+                    st["uncolored"] = st.get("uncolored", 0) + uncolored - int(invalid)
                 merged = merge_attributes(attrs, names)
                 if attrs is not None:  # left out: one chunk lacks it, brings it alone, or in another dtype
                     dropped |= (set(attrs) | set(names)) - set(merged)

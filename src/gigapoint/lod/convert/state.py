@@ -2,8 +2,8 @@
 the fingerprint of its inputs and options, and its saved state (``OctreeDir.write_state``).
 
 A re-run resumes only when its fingerprint equals the saved one: the same input files (path,
-size, modification time), the same options and the same gigapoint code (``code_version``);
-anything else starts clean.
+size, modification time; ``--colorize``'s raster's too), the same options and the same
+gigapoint code (``code_version``); anything else starts clean.
 """
 
 from __future__ import annotations
@@ -93,6 +93,12 @@ def refuse_octrees(inputs) -> None:
             raise InputError(f"{p}: is an EPT dataset (an octree: open or render it as it is), not an input point cloud")
 
 
+def file_identity(path: Path) -> list:
+    """[resolved path, size, modification time (ns)] of a file: what a resumed run must find unchanged."""
+    stat = path.stat()
+    return [str(path.resolve()), stat.st_size, stat.st_mtime_ns]
+
+
 def damaged_work_file(d: OctreeDir) -> str | None:
     """Before a resume: what is wrong with the first array of an unfinished conversion's work
     folder that does not read whole (its header, and as many bytes as it says), or None. A
@@ -167,12 +173,14 @@ class Job:
     reprojection = None
     #: the LAS grid (scale, offset) of the moved points (reproject.output_grid; None: not LAS inputs), what the output stores them on
     reprojected_grid = None
+    #: the orthophoto the points are coloured from as they are read (io/colorize.py's Colorization: convert's colorize); None: their own colours
+    colorization = None
 
     def fingerprint(self) -> dict | None:
         """The inputs and options a saved state must match to be resumed (None: chunk inputs)."""
         if self.paths is None:
             return None
-        files = [[str(p.resolve()), p.stat().st_size, p.stat().st_mtime_ns] for p in self.paths]
+        files = [file_identity(p) for p in self.paths]
         return {
             "version": STATE_VERSION,
             "code": code_version(),  # a run resumed after an upgrade mixed two versions' work files
@@ -189,7 +197,9 @@ class Job:
             "chunks": "joined",  # small files' chunks joined (read._joined): a state of one chunk a file reads otherwise
             # a run resumed under another filter mixed points kept by one and by the other
             "filter": None if self.point_filter is None else self.point_filter.as_spec(),
-        } | ({} if self.reprojection is None else {"reprojection": self.reprojection.as_spec()})  # (a run without one: its fingerprint as before)
+        } | ({} if self.reprojection is None else {"reprojection": self.reprojection.as_spec()}) | (  # (a run without either: its fingerprint as before)
+            {} if self.colorization is None else {"colorize": file_identity(self.colorization.path)}  # (another raster, or this one changed: other colours)
+        )
 
     def fingerprint_key(self) -> str | None:
         """``fingerprint`` as the state holds it: a digest. Held whole, 2 000 tiles' paths, sizes and
@@ -218,11 +228,13 @@ class Job:
         """``input_facts`` of ``paths`` (CRS, LAS grid, colours: ``state["source"]``), their
         ``has_color`` the chunks' own where convert was told (a live cloud's frames pushed without
         colours: its grey is no colour of theirs, so a COPC output gets no RGB); with ``--to-crs``
-        the target's CRS and grid."""
+        the target's CRS and grid; with ``--colorize`` colours (``has_color``) whatever the files hold."""
         moved_to = None if self.reprojection is None else (self.reprojection.target_wkt(), self.reprojected_grid)
         facts = input_facts(paths, one_grid=self.format != "gigapoint", moved_to=moved_to)
         if self.has_color is not None:
             facts["has_color"] = bool(self.has_color)
+        if self.colorization is not None:  # every point has a colour now (black where the raster gave none and its file had none)
+            facts["has_color"] = True
         return facts
 
     _saved_at = float("-inf")  # time.monotonic() of the last save_state
