@@ -307,6 +307,64 @@ def test_a_clip_polygon_naming_no_crs_over_inputs_in_two_crss_is_refused_before_
     assert not (tmp_path / "both.laz").exists()
 
 
+def _densified(corners, pieces=64):
+    """The ring ``corners`` with each edge cut into ``pieces``: moved into another CRS, its edges
+    still follow the straight ones in the first (a projection bends them: millimetres over autzen's
+    hundreds of feet, where a few points lie)."""
+    ring = np.array(corners, np.float64)
+    along = np.arange(pieces)[None, :, None] / pieces
+    return (ring[:, None, :] + along * (np.roll(ring, -1, axis=0) - ring)[:, None, :]).reshape(-1, 2)
+
+
+def test_a_clip_polygon_naming_another_crs_than_the_files_is_moved_into_theirs_without_to_crs(cli, autzen_path, tmp_path):
+    """autzen's Lambert feet cut by one site given in those feet, in lon/lat and in UTM (a crs
+    member naming each): the same points kept by open, convert, render and info --stats."""
+    import json
+
+    from gigapoint.io.polygon import clip_polygon_of
+
+    source = laspy.read(str(autzen_path))
+    ring = _densified(SITE_FEET)
+    feet = _site_geojson(tmp_path / "feet.geojson", ring)
+    inside = clip_polygon_of(feet, "test").inside(np.column_stack([source.x, source.y, source.z]))
+    assert 10_000 < inside.sum() < 100_000  # (a cut, not all or nothing)
+    lambert = pyproj.CRS.from_wkt(read_las_header(autzen_path).crs())
+    for epsg in (4326, 32610):
+        x, y = pyproj.Transformer.from_crs(lambert, f"EPSG:{epsg}", always_xy=True).transform(*ring.T)
+        polygon = _site_geojson(tmp_path / f"site{epsg}.geojson", list(zip(x, y)), epsg)
+        cloud = gp.open(autzen_path, clip_polygon=polygon)
+        assert cloud.n_points == inside.sum(), epsg
+        kept_time = np.concatenate([c.attributes["gps_time"] for c in cloud.chunks()])
+        assert np.array_equal(np.sort(kept_time), np.sort(np.asarray(source.gps_time)[inside])), epsg  # (the same points)
+        out = tmp_path / f"site{epsg}.laz"
+        rc, stdout, err = cli("convert", autzen_path, "-o", out, "--clip-polygon", polygon, "-q")
+        assert rc == 0 and "names EPSG" not in err, err
+        assert np.array_equal(np.asarray(laspy.read(str(out)).gps_time), np.asarray(source.gps_time)[inside]), epsg  # (in order)
+        rc, stdout, err = cli("render", autzen_path, "-o", tmp_path / f"site{epsg}.png", "-W", 60, "-H", 40, "--clip-polygon", polygon)
+        assert rc == 0 and f"{inside.sum():,} points" in stdout, err
+        rc, stdout, err = cli("info", "--stats", "--json", "--clip-polygon", polygon, autzen_path)
+        assert rc == 0, err
+        assert json.loads(stdout)["filter"]["points_kept"] == inside.sum(), epsg
+
+
+def test_a_clip_polygon_in_lon_lat_far_from_its_points_says_which_crs_it_was_given_in(autzen_path, tmp_path):
+    """Named EPSG:4326 and moved into autzen's feet, a site in Florida keeps nothing: the hint says
+    which CRS it was given in, and where it landed."""
+    import json
+
+    from gigapoint.errors import EmptyCloudError
+
+    florida = tmp_path / "florida.geojson"
+    crs = {"type": "name", "properties": {"name": "EPSG:4326"}}
+    florida.write_text(json.dumps({"type": "Polygon", "crs": crs, "coordinates": [[[-81.1, 28.0], [-81.0, 28.0], [-81.0, 28.1]]]}))
+    with pytest.raises(EmptyCloudError) as err:
+        gp.open(autzen_path, clip_polygon=florida)
+    assert str(err.value).startswith(f"{autzen_path}: no point passes the filter (clip polygon {florida} (3 vertices)): 110,000 points read; {florida} (given in EPSG:4326) spans x ")
+    assert str(err.value).endswith("far from the points' x 636002..637179, y 848935..849498: is it in EPSG:4326?")
+    x0 = float(str(err.value).split(" spans x ")[1].split("..")[0])
+    assert 1.3e7 < x0 < 1.5e7  # (Florida in Oregon's Lambert feet: 14 million feet east)
+
+
 #: the attributes that, with z, tell autzen's points apart (their order in an octree is its own)
 KEYS = ("gps_time", "intensity", "return_number", "point_source_id")
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import struct
+import sys
 
 import laspy
 import numpy as np
@@ -212,35 +213,93 @@ def test_boxes_meet_the_polygon_where_sampled_points_say():
     assert lo.tolist() == [0.0, 1.0, -5.0] and hi.tolist() == [10.0, 10.0, 5.0]
 
 
+#: autzen's corner in longitude/latitude (it lies near -123.07, 44.06): a triangle of a few miles
+LON_LAT_TRIANGLE = [[-123.1, 44.0], [-123.0, 44.0], [-123.0, 44.1]]
+AUTZEN_CRS = "NAD_1983_HARN_Lambert_Conformal_Conic (WKT)"
+
+
 def test_a_polygon_far_from_the_points_says_so(autzen_path, tmp_path):
-    degrees = tmp_path / "lonlat.geojson"
-    crs = {"type": "name", "properties": {"name": "urn:ogc:def:crs:EPSG::4326"}}
-    degrees.write_text(json.dumps({"type": "Polygon", "crs": crs, "coordinates": [[[-123.1, 44.0], [-123.0, 44.0], [-123.0, 44.1]]]}))
+    far = tmp_path / "far.geojson"  # (autzen's site 100,000 feet east: in its CRS, in the wrong place)
+    far.write_text(json.dumps({"type": "Polygon", "coordinates": [[[x + 100_000, y] for x, y in SITE["geometry"]["coordinates"][0]]]}))
     with pytest.raises(EmptyCloudError) as err:
-        gp.open(autzen_path, clip_polygon=degrees)
+        gp.open(autzen_path, clip_polygon=far)
     assert str(err.value) == (
-        f"{autzen_path}: no point passes the filter (clip polygon {degrees} (3 vertices)): 110,000 points read; "
-        f"{degrees} spans x -123.1..-123, y 44..44.1, far from the points' x 636002..637179, y 848935..849498: give it in the files' coordinates; "
-        f"{degrees} names EPSG:4326 (it is taken in the files' coordinates, not reprojected)"
+        f"{autzen_path}: no point passes the filter (clip polygon {far} (4 vertices)): 110,000 points read; "
+        f"{far} spans x 736300..737200, y 848900..849600, far from the points' x 636002..637179, y 848935..849498: give it in the files' coordinates"
     )
 
 
-def test_a_geojson_naming_another_crs_than_the_files_is_warned_of(tmp_path):
+def test_a_polygon_naming_a_crs_over_a_file_naming_none_is_taken_as_it_is_and_said_so(tmp_path):
+    grid = _grid_las(tmp_path / "grid.las")  # (names no CRS: nothing to move the polygon into)
+    named = tmp_path / "named.geojson"
+    crs = {"type": "name", "properties": {"name": "EPSG:32610"}}
+    named.write_text(json.dumps({"type": "Polygon", "crs": crs, "coordinates": [[[1000, 1000], [1100, 1000], [1100, 1100]]]}))
+    with warnings_kept() as kept, pytest.raises(EmptyCloudError) as err:
+        gp.open(grid, clip_polygon=named)
+    assert kept == []
+    assert str(err.value).endswith(
+        f"{named} spans x 1000..1100, y 1000..1100, far from the points' x 0.25..299.25, y 0.25..299.25: give it in the files' coordinates; "
+        f"{named} names EPSG:32610 (it is taken in the files' coordinates, not reprojected)"
+    )
+    assert gp.open(grid, clip_polygon={"type": "Polygon", "crs": crs, "coordinates": [[[0, 0], [100, 0], [100, 100], [0, 100]]]}).n_points == 100 * 100
+
+
+def test_a_lon_lat_polygon_without_a_crs_over_projected_files_is_refused_naming_both(cli, autzen_path, tmp_path, monkeypatch):
+    """RFC 7946 GeoJSON (no crs member) is longitude/latitude: over autzen's feet it would clip
+    nothing; refused before a point is read, with or without pyproj (never guessed)."""
+    lonlat = tmp_path / "lonlat.geojson"
+    lonlat.write_text(json.dumps({"type": "Polygon", "coordinates": [LON_LAT_TRIANGLE]}))
+    want = (
+        f"{lonlat}: x -123.1..-123, y 44..44.1 looks like longitude/latitude (RFC 7946 GeoJSON) while {autzen_path} is in {AUTZEN_CRS}: "
+        f"add a crs member naming its CRS, or reproject it into the files' coordinates"
+    )
+    with pytest.raises(InputError) as err:
+        gp.open(autzen_path, clip_polygon=lonlat)
+    assert str(err.value) == want
+    for command in (["convert", autzen_path, "-o", tmp_path / "out.laz"], ["render", autzen_path, "-o", tmp_path / "out.png"], ["info", "--stats", autzen_path]):
+        rc, _, err_text = cli(*command, "--clip-polygon", lonlat)
+        assert rc != 0 and err_text.strip() == f"error: {want}", command
+    assert not (tmp_path / "out.laz").exists()
+    monkeypatch.setitem(sys.modules, "pyproj", None)  # (without pyproj alike: autzen's WKT says its feet)
+    with pytest.raises(InputError, match="looks like longitude/latitude"):
+        gp.open(autzen_path, clip_polygon=lonlat)
+    grid = _grid_las(tmp_path / "grid.las")  # a file naming no CRS: small numbers may be its own coordinates, not refused
+    with pytest.raises(EmptyCloudError, match=r"\(3 vertices\)\): 90,000 points read$"):
+        gp.open(grid, clip_polygon=lonlat)
+
+
+def test_without_pyproj_a_polygon_naming_lon_lat_over_projected_files_is_refused(autzen_path, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyproj", None)  # (import pyproj raises ImportError)
+    degrees = tmp_path / "lonlat.geojson"
+    crs = {"type": "name", "properties": {"name": "urn:ogc:def:crs:EPSG::4326"}}
+    degrees.write_text(json.dumps({"type": "Polygon", "crs": crs, "coordinates": [LON_LAT_TRIANGLE]}))
+    with pytest.raises(InputError) as err:
+        gp.open(autzen_path, clip_polygon=degrees)
+    assert str(err.value) == (
+        f"{degrees}: names EPSG:4326 while {autzen_path} is in {AUTZEN_CRS}: moving it there needs pyproj (pip install 'gigapoint[gis]'), "
+        f"or reproject it into the files' coordinates"
+    )
+
+
+def test_a_geojson_naming_another_crs_than_the_files_is_warned_of_without_pyproj(tmp_path, monkeypatch):
     las_path = _grid_las(tmp_path / "utm.las")
     las = laspy.read(str(las_path))
     keys = struct.pack("<8H", 1, 1, 0, 1, 3072, 0, 1, 32610)  # GeoTIFF keys: ProjectedCSTypeGeoKey = EPSG:32610
     las.header.vlrs.append(laspy.VLR("LASF_Projection", 34735, "GeoTIFF keys", keys))
     las.write(str(las_path))
     area = {"type": "Polygon", "coordinates": [[[0, 0], [100, 0], [100, 100], [0, 100]]]}
-    for epsg, warned in ((4326, True), (32610, False)):
-        site = tmp_path / f"site{epsg}.geojson"
-        site.write_text(json.dumps({**area, "crs": {"type": "name", "properties": {"name": f"EPSG:{epsg}"}}}))
-        with warnings_kept() as kept:
-            cloud = gp.open(las_path, clip_polygon=site)
-        assert cloud.n_points == 100 * 100  # (taken in the file's coordinates all the same)
-        said = [message for message, _ in kept]
-        want = f"{site} names EPSG:4326, {las_path} EPSG:32610: the polygon is taken in the files' coordinates, not reprojected"
-        assert said == ([want] if warned else [])
+    sites = {}
+    for epsg in (32611, 32610):
+        sites[epsg] = tmp_path / f"site{epsg}.geojson"
+        sites[epsg].write_text(json.dumps({**area, "crs": {"type": "name", "properties": {"name": f"EPSG:{epsg}"}}}))
+    with warnings_kept() as kept:
+        assert gp.open(las_path, clip_polygon=sites[32610]).n_points == 100 * 100  # (its own CRS: as it is, with pyproj or not)
+    assert kept == []
+    monkeypatch.setitem(sys.modules, "pyproj", None)  # (import pyproj raises ImportError: nothing to move it with)
+    with warnings_kept() as kept:
+        cloud = gp.open(las_path, clip_polygon=sites[32611])
+    assert cloud.n_points == 100 * 100  # (taken in the file's coordinates)
+    assert [message for message, _ in kept] == [f"{sites[32611]} names EPSG:32611, {las_path} EPSG:32610: the polygon is taken in the files' coordinates, not reprojected"]
 
 
 BAD = {

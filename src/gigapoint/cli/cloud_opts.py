@@ -70,7 +70,8 @@ ClipPolygonOption = Annotated[
         "--clip-polygon",
         metavar="AREA",
         help="Read only the points inside this polygon, in the files' coordinates (any z; holes left out, edges included): "
-        "a GeoJSON file (Polygon, MultiPolygon, a Feature or FeatureCollection of them) or a WKT file or text ('POLYGON ((x y, ...))').",
+        "a GeoJSON file (Polygon, MultiPolygon, a Feature or FeatureCollection of them) or a WKT file or text ('POLYGON ((x y, ...))'). "
+        "A GeoJSON naming another CRS (a crs member) is moved into the files' CRS first (pyproj); one in longitude/latitude naming none is refused.",
     ),
 ]
 

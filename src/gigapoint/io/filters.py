@@ -10,6 +10,13 @@ and its Dask tasks, which get it as ``as_spec``). A filter counts the points it 
 pass, so that a filter that lets nothing pass says so (``check_passed``) rather than the
 generic "no valid points". Header point counts are then upper bounds: progress bars and
 presizing may use them, nothing may expect that many points.
+
+A clip polygon whose GeoJSON names a CRS (a ``crs`` member) other than a LAS/LAZ file's is moved
+into the file's CRS before its points are tested (``placed_polygon``: pyproj, the ``gis`` extra);
+without pyproj, or over a file naming no CRS, it is taken in the files' coordinates (warned of
+where both name EPSG codes that differ). One in longitude/latitude's range over a file in a
+projected CRS far from it (a GeoJSON without a ``crs`` member is lon/lat by RFC 7946, or one
+naming lon/lat without pyproj to move it) is refused in one line: it would clip nothing.
 """
 
 from __future__ import annotations
@@ -25,7 +32,7 @@ from ..core.chunk import PointChunk
 from ..core.coords import MAX_ABS_COORDINATE
 from ..errors import EmptyCloudError, GigapointWarning, InputError, counted, is_real, is_whole_number, warn
 from ._base import read_once
-from .polygon import ClipPolygon, clip_polygon_of, far_apart
+from .polygon import ClipPolygon, clip_polygon_of, far_apart, looks_like_lon_lat, moved_polygon
 
 #: The option names as Python's keywords and the CLI's options say them
 PYTHON_NAMES = {"classes": "classes=", "drop_classes": "drop_classes=", "clip": "clip=", "corridor": "corridor=", "clip_polygon": "clip_polygon="}
@@ -138,27 +145,34 @@ class PointFilter:
             length, half = math.dist(self.corridor[:2], self.corridor[2:4]), self.corridor[4] / 2
             keep &= (distance >= 0) & (distance <= length) & (np.abs(offset) <= half)  # (NaN: left out)
         if self.polygon is not None:
-            keep &= self.polygon.inside(xyz)
+            keep &= self.placed_polygon(path).inside(xyz)
         return keep
 
     def apply(self, chunks: Iterable[PointChunk], path) -> Iterator[PointChunk]:
         """``chunks`` of ``path`` with only the points kept; a chunk left without any is not given."""
-        if self.polygon is not None and self.polygon.epsg is not None:
-            self._check_crs(path)
+        if self.polygon is not None:
+            self.placed_polygon(path)  # (moved, warned of or refused before a chunk is read)
         for chunk in chunks:
             chunk = self.kept(chunk, path)
             if len(chunk):
                 yield chunk
 
-    def _check_crs(self, path) -> None:
-        """Warn where the polygon's GeoJSON names an EPSG code other than the file's (LAS/LAZ):
-        it is taken in the files' coordinates, not reprojected. Once an operation a CRS."""
-        from .crs import files_crs, horizontal_epsg
+    def placed_polygon(self, path) -> ClipPolygon:
+        """The polygon in the coordinates of ``path``'s points (module notes; ``_placed``), placed
+        once a file: kept with the polygon, which a filter's fresh copies share."""
+        key = str(path)
+        if key not in self.polygon.placed:
+            self.polygon.placed[key] = _placed(self.polygon, path)
+        return self.polygon.placed[key]
 
-        epsg = horizontal_epsg(files_crs([path]))
-        if epsg is not None and epsg != self.polygon.epsg:
-            message = f"{self.polygon.source} names EPSG:{self.polygon.epsg}, {path} EPSG:{epsg}: the polygon is taken in the files' coordinates, not reprojected"
-            read_once("clip polygon CRS", f"{self.polygon.source} EPSG:{epsg}", lambda: warn(message, GigapointWarning))
+    def _box_polygon(self) -> ClipPolygon | None:
+        """The polygon boxes are tested against (no file named): as it is where it names no CRS;
+        else as placed over the files filtered so far where that is one polygon; None before
+        (where it may yet move: no test)."""
+        if self.polygon.epsg is None:
+            return self.polygon
+        placed = {id(p): p for p in self.polygon.placed.values() if p is not None}
+        return next(iter(placed.values())) if len(placed) == 1 else None
 
     def check_passed(self, label: str) -> None:
         """An EmptyCloudError naming ``label`` (the files) where points were read and none passed."""
@@ -175,18 +189,20 @@ class PointFilter:
     def polygon_hint(self) -> str:
         """Where no point passes a polygon: '; site.geojson lies far from the points (...)' where
         it does (taken in another CRS), and the CRS its GeoJSON names; else ''."""
-        polygon = self.polygon
-        if polygon is None:
+        if self.polygon is None:
             return ""
+        polygon = self._box_polygon() or self.polygon  # (as the points were tested)
         hint = ""
         if self.seen is not None and far_apart(polygon, *self.seen):
             (x0, y0), (x1, y1) = polygon.lo, polygon.hi
             (px0, py0), (px1, py1) = self.seen
+            moved = f" (given in {polygon.moved_from})" if polygon.moved_from else ""
+            advice = f"is it in {polygon.moved_from}?" if moved else "give it in the files' coordinates"
             hint = (
-                f"; {polygon.source} spans x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}, far from the points' x {px0:.6g}..{px1:.6g}, "
-                f"y {py0:.6g}..{py1:.6g}: give it in the files' coordinates"
+                f"; {polygon.source}{moved} spans x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}, far from the points' x {px0:.6g}..{px1:.6g}, "
+                f"y {py0:.6g}..{py1:.6g}: {advice}"
             )
-        if polygon.epsg is not None:
+        if polygon.epsg is not None:  # (named, and taken as it is: no pyproj, or a file naming no CRS)
             hint += f"; {polygon.source} names EPSG:{polygon.epsg} (it is taken in the files' coordinates, not reprojected)"
         return hint
 
@@ -211,8 +227,9 @@ class PointFilter:
             distance, offset = along_and_across(centre, self.corridor[:4])
             along, across = extent @ [abs(ux), abs(uy)], extent @ [abs(uy), abs(ux)]  # the boxes' half spans on those axes
             meets &= (distance + along >= 0) & (distance - along <= length) & (np.abs(offset) - across <= half)
-        if self.polygon is not None and meets.any():
-            meets[meets] = self.polygon.meets(lo[meets], hi[meets])
+        polygon = None if self.polygon is None else self._box_polygon() or self.polygon  # (an octree's: its files' CRS unknown here, as it is)
+        if polygon is not None and meets.any():
+            meets[meets] = polygon.meets(lo[meets], hi[meets])
         return meets
 
     def clipped_bounds(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -227,10 +244,70 @@ class PointFilter:
             ends, half = np.reshape(self.corridor[:4], (2, 2)), self.corridor[4] / 2
             lo[:2] = np.maximum(lo[:2], ends.min(axis=0) - half)
             hi[:2] = np.minimum(hi[:2], ends.max(axis=0) + half)
-        if self.polygon is not None:
-            lo[:2] = np.maximum(lo[:2], self.polygon.lo)
-            hi[:2] = np.minimum(hi[:2], self.polygon.hi)
+        polygon = None if self.polygon is None else self._box_polygon()  # (None: it may yet move; bounds not cut)
+        if polygon is not None:
+            lo[:2] = np.maximum(lo[:2], polygon.lo)
+            hi[:2] = np.minimum(hi[:2], polygon.hi)
         return lo, hi
+
+
+def _placed(polygon: ClipPolygon, path) -> ClipPolygon:
+    """``polygon`` in the coordinates of ``path``'s points (the module's notes): moved from the CRS
+    its GeoJSON names into the one ``path``'s LAS header names where pyproj is installed; else as
+    it is (a warning where both name EPSG codes that differ), or a one-line InputError where it
+    lies in longitude/latitude's range far from a file in a projected CRS (it would clip nothing)."""
+    from .crs import crs_name, crs_units, horizontal_epsg
+    from .las import first_crs_header, geokeys
+
+    if polygon.moved_from is not None or (polygon.epsg is None and not looks_like_lon_lat(polygon)):
+        return polygon  # in the points' coordinates (the usual case: no header read)
+    header = first_crs_header([path])  # (None: names no CRS, or is no LAS/LAZ file: an octree, a PLY)
+    if header is None:
+        return polygon
+    crs = header.crs()
+    if polygon.epsg is not None:
+        if crs not in polygon.placed:  # (once a CRS, not once a file: a survey's thousands of tiles share one)
+            polygon.placed[crs] = _moved_into(polygon, crs, path)
+        if polygon.placed[crs] is not None:
+            return polygon.placed[crs]
+    horizontal = crs_units(crs, geokeys(header.vlrs))["horizontal"]
+    projected = horizontal is not None and horizontal["metres"] is not None
+    if projected and looks_like_lon_lat(polygon) and far_apart(polygon, header.mins, header.maxs):
+        (x0, y0), (x1, y1) = polygon.lo, polygon.hi
+        if polygon.epsg is None:
+            raise InputError(
+                f"{polygon.source}: x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g} looks like longitude/latitude (RFC 7946 GeoJSON) while {path} "
+                f"is in {crs_name(crs)}: add a crs member naming its CRS, or reproject it into the files' coordinates"
+            )
+        raise InputError(
+            f"{polygon.source}: names EPSG:{polygon.epsg} while {path} is in {crs_name(crs)}: moving it there needs pyproj "
+            f"(pip install 'gigapoint[gis]'), or reproject it into the files' coordinates"
+        )
+    epsg = horizontal_epsg(crs)
+    if polygon.epsg is not None and epsg is not None and epsg != polygon.epsg:
+        message = f"{polygon.source} names EPSG:{polygon.epsg}, {path} EPSG:{epsg}: the polygon is taken in the files' coordinates, not reprojected"
+        read_once("clip polygon CRS", f"{polygon.source} EPSG:{epsg}", lambda: warn(message, GigapointWarning))
+    return polygon
+
+
+def _moved_into(polygon: ClipPolygon, crs: str, path) -> ClipPolygon | None:
+    """``polygon`` moved from the EPSG code it names into ``crs`` (``path``'s); None without
+    pyproj. A code or CRS PROJ does not know: a one-line InputError naming its file."""
+    from .crs import crs_name
+
+    try:
+        import pyproj
+    except ImportError:
+        return None
+    try:
+        source = pyproj.CRS.from_epsg(polygon.epsg)
+    except pyproj.exceptions.CRSError:
+        raise InputError(f"{polygon.source}: names EPSG:{polygon.epsg}, a CRS PROJ does not know: cannot move it into {path}'s CRS") from None
+    try:
+        target = pyproj.CRS.from_user_input(crs)
+    except pyproj.exceptions.CRSError:
+        raise InputError(f"{path}: its CRS ({crs_name(crs)}) is not one PROJ knows: cannot move {polygon.source} (EPSG:{polygon.epsg}) into it") from None
+    return moved_polygon(polygon, source, target)
 
 
 def filtered(chunks: Iterable[PointChunk], path, point_filter: PointFilter | None) -> Iterable[PointChunk]:

@@ -8,7 +8,9 @@ by the even-odd rule over all rings: holes are left out, the parts of a multipol
 a point exactly on an edge (outer or a hole's) is kept, as a clip box's bounds are.
 
 Parsed with json and a small WKT reader (no shapely or GDAL); every bad input is a one-line
-InputError naming the file before anything is read. The kernels are in polygon_kernels.py.
+InputError naming the file before anything is read. The kernels are in polygon_kernels.py. A
+polygon is moved from one CRS into another by pyproj (``moved_polygon``: a GeoJSON naming a CRS
+other than the files', filters.py; ``--to-crs``, reproject.py).
 """
 
 from __future__ import annotations
@@ -30,24 +32,38 @@ _WKT_START = re.compile(r"\s*(MULTI)?POLYGON\s*(Z|M|ZM)?\s*(\(|EMPTY)", re.IGNOR
 #: GeoJSON geometry types that are not areas, named in the error
 _NOT_AREAS = {"Point", "MultiPoint", "LineString", "MultiLineString"}
 
+#: how far a moved clip polygon's edges may stray from the curves a projection makes of them,
+#: as a share of its size, where no output grid sets the tolerance (no --to-crs, or a PLY output)
+POLYGON_SHARE = 1e-8
+#: pieces an edge of a clip polygon is cut into, at most, to follow its curve once moved
+MAX_EDGE_PIECES = 1024
+
 
 class ClipPolygon:
     """The rings of one or more polygons (``polygons``: per polygon a list of rings, each a (k, 2)
     array without the closing vertex; the first ring the outline, the rest its holes), read from
     ``source`` (the file, or the WKT text's start: what messages name). ``epsg``: the CRS a
-    GeoJSON's ``crs`` member names, None without one (a hint when nothing passes). ``names``: per
+    GeoJSON's ``crs`` member names, None without one (filters.py moves it from there into the
+    files' CRS). ``names``: per
     polygon the ``name`` property of the GeoJSON Feature it came from (None: none; a stockpile's
     label in ``gigapoint volume``). ``features``: per polygon the number of that Feature (0, 1, ...
-    in the file's order; None outside one): a Feature's MultiPolygon is one stockpile in parts."""
+    in the file's order; None outside one): a Feature's MultiPolygon is one stockpile in parts.
+    ``moved_from``: the CRS it was moved from into the points' (``moved_polygon``; None: as read):
+    it is in their coordinates, never moved again. ``placed``: filters.py's, this polygon in the
+    coordinates of each file filtered (by its path) and of each CRS it was moved into (by the
+    CRS's text; None: no pyproj to move it)."""
 
     def __init__(
-        self, polygons: list[list[np.ndarray]], source: str, epsg: int | None = None, names: list[str | None] | None = None, features: list[int | None] | None = None
-    ):
+        self, polygons: list[list[np.ndarray]], source: str, epsg: int | None = None, names: list[str | None] | None = None, features: list[int | None] | None = None,
+        moved_from: str | None = None,
+    ):  # fmt: skip
         self.polygons = polygons
         self.source = source
         self.epsg = epsg
         self.names = names or [None] * len(polygons)
         self.features = features or [None] * len(polygons)
+        self.moved_from = moved_from
+        self.placed: dict[str, ClipPolygon | None] = {}
         rings = [ring for polygon in polygons for ring in polygon]
         self.edges = np.concatenate([np.hstack([ring, np.roll(ring, -1, axis=0)]) for ring in rings])  # rows x1, y1, x2, y2
         xy = np.concatenate(rings)
@@ -74,9 +90,12 @@ class ClipPolygon:
         return f"clip polygon {self.source} ({', '.join(parts)})"
 
     def as_spec(self) -> dict:
-        """A GeoJSON MultiPolygon (with ``source`` and ``epsg``): JSON-able, read back by ``clip_polygon_of``."""
+        """A GeoJSON MultiPolygon (with ``source``, ``epsg`` and any ``moved_from``): JSON-able, read back by ``clip_polygon_of``."""
         closed = [[[*map(list, ring.tolist()), list(ring[0].tolist())] for ring in polygon] for polygon in self.polygons]
-        return {"type": "MultiPolygon", "coordinates": closed, "source": self.source, "epsg": self.epsg}
+        spec = {"type": "MultiPolygon", "coordinates": closed, "source": self.source, "epsg": self.epsg}
+        if self.moved_from is not None:  # (only where moved: a conversion's fingerprint without is as before)
+            spec["moved_from"] = self.moved_from
+        return spec
 
     def buckets(self) -> tuple[np.ndarray, np.ndarray]:
         """(starts, members): the edges by bands of y (``polygon_kernels.edge_buckets``), made once."""
@@ -154,7 +173,8 @@ def _geojson_polygon(document, source: str, label: str) -> ClipPolygon:
     _collect(document, polygons, names, features, label)
     if not polygons:
         raise InputError(f"{label}: holds no polygon")
-    return ClipPolygon([[_ring(r, label) for r in rings] for rings in polygons], source, _epsg(document), names, features)
+    moved_from = document.get("moved_from") if isinstance(document.get("moved_from"), str) else None  # (as_spec's)
+    return ClipPolygon([[_ring(r, label) for r in rings] for rings in polygons], source, _epsg(document), names, features, moved_from)
 
 
 def _collect(node, polygons: list, names: list, features: list, label: str, name: str | None = None, feature: int | None = None) -> None:
@@ -284,6 +304,56 @@ def far_apart(polygon: ClipPolygon, lo, hi) -> bool:
     return bool(np.max(gap) > size) and math.isfinite(float(np.max(gap)))
 
 
+def looks_like_lon_lat(polygon: ClipPolygon) -> bool:
+    """Whether every vertex is within longitude/latitude's range (|x| <= 180, |y| <= 90)."""
+    return bool(np.all(np.abs(polygon.lo) <= (180, 90)) and np.all(np.abs(polygon.hi) <= (180, 90)))
+
+
+def horizontal_crs(crs):
+    """The horizontal part of a pyproj CRS (a compound one's first part; the CRS itself else): a clip polygon's x and y."""
+    return crs.sub_crs_list[0] if crs.is_compound else crs
+
+
+def moved_polygon(polygon: ClipPolygon, source, target, tolerance: float | None = None) -> ClipPolygon:
+    """``polygon`` moved from pyproj CRS ``source`` into ``target`` (their horizontal parts), its
+    edges cut into pieces whose moved ends follow the curves a projection makes of straight edges
+    (``_moved_ring``: within ``tolerance``, in target units, else a share ``POLYGON_SHARE`` of its
+    size); as it is where the two are one CRS. It names no CRS then (``moved_from`` says which it
+    came from): it is in the target's coordinates."""
+    import pyproj
+
+    source, target = horizontal_crs(source), horizontal_crs(target)
+    came_from = f"EPSG:{polygon.epsg}" if polygon.epsg is not None else source.name
+    if source.equals(target, ignore_axis_order=True):  # (named the target: already in the points' coordinates)
+        return ClipPolygon(polygon.polygons, polygon.source, None, polygon.names, polygon.features, came_from)
+    move = pyproj.Transformer.from_crs(source, target, always_xy=True)
+    moved = [[_moved_ring(ring, move, tolerance, polygon.source, target.name) for ring in rings] for rings in polygon.polygons]
+    return ClipPolygon(moved, polygon.source, None, polygon.names, polygon.features, came_from)
+
+
+def _moved_ring(ring: np.ndarray, move, tolerance: float | None, source: str, target_name: str) -> np.ndarray:
+    """``ring`` moved by ``move``, each edge cut into as many equal pieces (a power of two, at
+    most ``MAX_EDGE_PIECES``) as keep the moved pieces' middles within ``tolerance`` (a share
+    ``POLYGON_SHARE`` of the ring's size where None) of their moved chords: the curve a
+    projection makes of a straight edge, followed. Vertices outside the transform's domain:
+    a one-line InputError naming ``source``."""
+    step = np.roll(ring, -1, axis=0) - ring
+    pieces = 1
+    while True:
+        at = np.arange(2 * pieces + 1) / (2 * pieces)  # each piece's start, middle (odd) and the edge's end
+        points = ring[:, None, :] + at[None, :, None] * step[:, None, :]
+        x, y = move.transform(points[..., 0].ravel(), points[..., 1].ravel())
+        moved = np.stack([x, y], axis=-1).reshape(points.shape)
+        if not np.isfinite(moved).all():
+            raise InputError(f"{source}: the clip polygon lies outside the domain of the transform to {target_name}: is it in the CRS it is read in?")
+        starts, middles, ends = moved[:, 0:-1:2], moved[:, 1::2], moved[:, 2::2]
+        size = float(np.max(moved.max(axis=(0, 1)) - moved.min(axis=(0, 1))))
+        off = float(np.max(np.hypot(*np.moveaxis(middles - (starts + ends) / 2, -1, 0))))
+        if off <= (size * POLYGON_SHARE if tolerance is None else tolerance) or pieces >= MAX_EDGE_PIECES:
+            return starts.reshape(-1, 2)
+        pieces *= 2
+
+
 def crossing_edges(ring) -> tuple[int, int] | None:
     """The first two edges of the ring of (k, 2) vertices ``ring`` (without its closing vertex;
     edges numbered from 1: edge 1 from the first vertex to the second, the last back to the
@@ -355,4 +425,6 @@ def check_simple(polygon: ClipPolygon, why: str) -> None:
                 raise InputError(f"{polygon.source}: {problem}: {why}")
 
 
-__all__ = ["ClipPolygon", "check_simple", "clip_polygon_of", "crossing_edges", "crossing_problem", "far_apart"]
+__all__ = [
+    "ClipPolygon", "check_simple", "clip_polygon_of", "crossing_edges", "crossing_problem", "far_apart", "horizontal_crs", "looks_like_lon_lat", "moved_polygon",
+]  # fmt: skip

@@ -40,7 +40,7 @@ from ..core.coords import MAX_ABS_COORDINATE
 from ..errors import GigapointWarning, InputError, counted, first_line, warn
 from .filters import PointFilter
 from .las import LasReader, read_las_header
-from .polygon import ClipPolygon
+from .polygon import ClipPolygon, moved_polygon
 from .registry import reader_for
 
 #: samples along each horizontal edge of a header's box (a grid of them over it, at both heights)
@@ -53,11 +53,6 @@ OFFSET_STEPS = 10**6
 TOLERANCE_STEPS = 0.1
 #: chunks of fewer points are transformed exactly (a grid's own exact transforms cost as much)
 MIN_INTERPOLATED = 4096
-#: how far a moved clip polygon's edges may stray from the curves a projection makes of them,
-#: as a share of its size, where no output grid sets the tolerance (a PLY output)
-POLYGON_SHARE = 1e-8
-#: pieces an edge of a clip polygon is cut into, at most, to follow its curve once moved
-MAX_EDGE_PIECES = 1024
 #: degrees kept between a chunk's box and the edge of an operation's area of use (the fast path's
 #: test of which operation PROJ picks; PROJ tests the area's box in the source CRS)
 AREA_MARGIN = 0.01
@@ -298,10 +293,9 @@ class Reprojection:
         """``polygon`` in the target CRS, in which the moved points are filtered: from the CRS its
         GeoJSON names (a ``crs`` member), else the inputs' (``from_crs``, else the one their headers
         name; inputs in several CRSs are refused: which would it be in?), its edges cut into pieces
-        whose moved ends follow the curves a projection makes of straight edges (``_moved_ring``).
-        It names no CRS any more: it is in the points' coordinates (no "names EPSG:n" warning)."""
-        import pyproj
-
+        whose moved ends follow the curves a projection makes of straight edges (polygon.py's
+        ``moved_polygon``, within the fast path's tolerance where set). It names no CRS any more:
+        it is in the points' coordinates (no "names EPSG:n" warning)."""
         if polygon.epsg is not None:
             source = parse_crs(f"EPSG:{polygon.epsg}", f"{polygon.source}: its CRS EPSG:{polygon.epsg}")
         elif self.given_source is not None:
@@ -315,35 +309,7 @@ class Reprojection:
                 )
             text = named.pop()
             source = parse_crs(text, f"{files[0]}: its CRS {text[:60]!r}")
-        target = _horizontal(self.target)
-        if _horizontal(source).equals(target, ignore_axis_order=True):  # (named the target: already in the points' coordinates)
-            return ClipPolygon(polygon.polygons, polygon.source, None, polygon.names)
-        move = pyproj.Transformer.from_crs(_horizontal(source), target, always_xy=True)
-        tolerance = None if self.tolerance is None else self.tolerance[0]
-        moved = [[self._moved_ring(ring, move, tolerance, polygon.source) for ring in rings] for rings in polygon.polygons]
-        return ClipPolygon(moved, polygon.source, None, polygon.names)
-
-    def _moved_ring(self, ring: np.ndarray, move, tolerance: float | None, source: str) -> np.ndarray:
-        """``ring`` moved by ``move``, each edge cut into as many equal pieces (a power of two, at
-        most ``MAX_EDGE_PIECES``) as keep the moved pieces' middles within ``tolerance`` (a share
-        ``POLYGON_SHARE`` of the ring's size where None) of their moved chords: the curve a
-        projection makes of a straight edge, followed. Vertices outside the transform's domain:
-        a one-line InputError naming ``source``."""
-        step = np.roll(ring, -1, axis=0) - ring
-        pieces = 1
-        while True:
-            at = np.arange(2 * pieces + 1) / (2 * pieces)  # each piece's start, middle (odd) and the edge's end
-            points = ring[:, None, :] + at[None, :, None] * step[:, None, :]
-            x, y = move.transform(points[..., 0].ravel(), points[..., 1].ravel())
-            moved = np.stack([x, y], axis=-1).reshape(points.shape)
-            if not np.isfinite(moved).all():
-                raise InputError(f"{source}: the clip polygon lies outside the domain of the transform to {self.target.name}: is it in the CRS it is read in?")
-            starts, middles, ends = moved[:, 0:-1:2], moved[:, 1::2], moved[:, 2::2]
-            size = float(np.max(moved.max(axis=(0, 1)) - moved.min(axis=(0, 1))))
-            off = float(np.max(np.hypot(*np.moveaxis(middles - (starts + ends) / 2, -1, 0))))
-            if off <= (size * POLYGON_SHARE if tolerance is None else tolerance) or pieces >= MAX_EDGE_PIECES:
-                return starts.reshape(-1, 2)
-            pieces *= 2
+        return moved_polygon(polygon, source, self.target, None if self.tolerance is None else self.tolerance[0])
 
     def as_spec(self) -> dict:
         """What tells two reprojections apart (a conversion's fingerprint: one resumed under another
@@ -354,11 +320,6 @@ class Reprojection:
     def target_wkt(self) -> str:
         """The target CRS as the output's WKT VLR holds it (OGC WKT1, as LAS 1.4 says)."""
         return self.target.to_wkt("WKT1_GDAL")
-
-
-def _horizontal(crs):
-    """The horizontal part of a compound CRS (the CRS itself where it is not one): a clip polygon's x and y."""
-    return crs.sub_crs_list[0] if crs.is_compound else crs
 
 
 def output_grid(files, reprojection: Reprojection):
