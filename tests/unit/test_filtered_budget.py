@@ -112,3 +112,39 @@ def test_a_progressive_octree_knows_what_a_chunk_kept_once_its_slot_is_taken_bac
     entries = [np.arange(c * pool.chunk, c * pool.chunk + pool.batches["count"][c]) for c in chunks]
     not_hidden = [int(np.count_nonzero(pool.attributes.at("classification", e) != 7)) for e in entries]
     assert known[chunks].all() and counts[chunks].tolist() == not_hidden
+
+
+def test_frames_that_load_nothing_weigh_the_nodes_again_only_once_a_node_comes_or_goes(half, monkeypatch):
+    """The shares are a pass over every node (10^5 and more in a big octree) each selection makes,
+    two or more a frame: the arena reuses its kept counts until its resident nodes change."""
+    tree = gp.open(half)
+    options = {"hidden_classes": (7,), "lod_threshold_px": 0, **FIXED}
+    gp.render_frame(tree, TOP, point_budget=20_000, **options)
+    passes, shares = [], store.kept_shares
+    monkeypatch.setattr(store, "kept_shares", lambda *a: passes.append(1) or shares(*a))
+    frame = gp.render_frame(tree, TOP, point_budget=20_000, **options)
+    assert len(passes) == 0 and frame.stats.points_processed == 18_125  # (as the frame before it)
+    frame = gp.render_frame(tree, TOP, point_budget=40_000, **options)  # the leaves loaded: weighed again
+    assert len(passes) > 0 and frame.stats.points_processed == 40_000
+    arena, keep = tree.arena, tree.load_filter((7,))
+    nodes = np.array(list(arena.resident))
+    kept = [int(arena.batches["count"][arena.resident[i]].sum()) for i in nodes.tolist()]
+    assert arena.kept_counts(tree.counts, keep, tree.parent)[nodes].tolist() == kept
+
+
+def test_a_progressive_octree_weighs_its_chunks_again_only_once_one_is_written_or_filtered(monkeypatch):
+    """As above, a progressive octree's costs walk every chunk the estimates leave entries out
+    of: frames reuse them until a chunk is written or filtered."""
+    tree = grown_half()
+    options = {"hidden_classes": (7,), "lod_threshold_px": 0, **FIXED}
+    first = gp.render_frame(tree, TOP, point_budget=20_000, **options).stats.points_processed
+    passes, shares = [], progressive.kept_shares
+    monkeypatch.setattr(progressive, "kept_shares", lambda *a: passes.append(1) or shares(*a))
+    again = gp.render_frame(tree, TOP, point_budget=20_000, **options).stats.points_processed
+    assert len(passes) == 0 and again == first == 19_574
+    deeper = gp.render_frame(tree, TOP, point_budget=40_000, **options).stats.points_processed  # more chunks filtered
+    assert len(passes) > 0 and deeper == 38_596
+    tree.add(*half_hidden()[:2], classification=half_hidden()[2])  # every chunk written again: twice the points
+    passes.clear()
+    grown = gp.render_frame(tree, TOP, point_budget=40_000, **options).stats.points_processed
+    assert len(passes) > 0 and grown == 39_861  # (as without reusing the costs)

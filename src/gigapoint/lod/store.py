@@ -324,6 +324,8 @@ class Arena:
         self.source_scale = None  # the octree's source grid (a LAS file's scale), which point_info rounds to
         self.loads = 0  # nodes copied in since creation (cache misses)
         self.keep: PointFilter | None = None  # what the resident nodes were loaded through (``show``)
+        self.resident_changes = 0  # bumped whenever a node is made resident or dropped (``kept_counts`` reuses its answer until then)
+        self._kept_counts: tuple = (None, None)  # (what ``kept_counts`` last answered for, its answer)
         # Bumped on every write; per slot, the version that last filled it (GPU backends re-upload those slots)
         self.version = 0
         self.batch_version = np.zeros(n_slots, np.int64)
@@ -379,6 +381,7 @@ class Arena:
         for slots in self.resident.values():
             self.free.extend(slots.tolist())
         self.resident.clear()
+        self.resident_changes += 1
         self.keep = keep
 
     def kept_counts(self, counts: np.ndarray, keep: PointFilter | None, parent: np.ndarray | None) -> np.ndarray:
@@ -386,9 +389,14 @@ class Arena:
         them: a node resident through it counts the points it kept; the others, given
         ``parent`` (each node's, -1 for the root), their counts times the share their nearest
         resident ancestor kept (``kept_shares``), else their whole counts (what they keep is
-        known once loaded: no more than that)."""
+        known once loaded: no more than that). The same array while no node was made resident
+        or dropped since (a frame selects two times or more, each a pass over every node)."""
         if keep is None or keep != self.keep or not self.resident:
             return counts
+        asked = (self.resident_changes, counts, parent)  # (an octree whose hierarchy grew asks with new counts and parents)
+        last, answer = self._kept_counts
+        if last is not None and last[0] == asked[0] and last[1] is counts and last[2] is parent:
+            return answer
         nodes = np.fromiter(self.resident, np.int64, len(self.resident))
         slot_lists = list(self.resident.values())
         owner = np.repeat(np.arange(len(nodes)), [len(s) for s in slot_lists])
@@ -399,6 +407,7 @@ class Arena:
             kept_of[nodes], whole[nodes] = kept, counts[nodes]
             out = np.ceil(counts * kept_shares(kept_of, whole, parent)).astype(np.int64)
         out[nodes] = kept
+        self._kept_counts = (asked, out)
         return out
 
     def _load(self, nd: int, cloud: OctreeCloud, slots: np.ndarray, count: int) -> int:
@@ -467,6 +476,7 @@ class Arena:
                     break
                 if nd not in wanted:
                     self.free.extend(self.resident.pop(nd).tolist())
+                    self.resident_changes += 1
         if need > len(self.free):
             return False
         for nd in nodes.tolist():
@@ -489,6 +499,7 @@ class Arena:
             b["bbox_max"] = rec["bbox_max"]
             self.batches[slots] = b
             self.resident[nd] = slots
+            self.resident_changes += 1
             self.loads += 1
             self.version += 1
             self.batch_version[slots] = self.version

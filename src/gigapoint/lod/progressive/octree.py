@@ -609,6 +609,7 @@ class ProgressiveOctree:
         self.hi = np.full(3, -np.inf)
         self.loader = None  # the background Loader filling it (gigapoint.open(..., progressive=True))
         self._kept = KeptChunks(name, chunk)  # what frames with hidden classes draw
+        self._last_kept_costs: tuple = (None, None, None)  # (what ``_kept_costs`` last answered for, its sample, its answer)
         self._nodes(_INITIAL_NODES)
         self._vox(1 << 16)
         self._hkeys, self._hvals = _voxel_table(1 << 17)
@@ -1742,10 +1743,16 @@ class ProgressiveOctree:
         left out: the entries of each node, list and grid ``sample`` (its first chunks), less
         those hidden in the chunks KeptChunks has filtered (KeptChunks.kept_counts); the others
         (``estimated``) less the share of theirs their node's filtered chunks, or its nearest
-        ancestor's, left out (store.kept_shares), or (not ``estimated``) none."""
-        n, pool = self.n_nodes, self.pool
+        ancestor's, left out (store.kept_shares), or (not ``estimated``) none. The same arrays
+        while no chunk was written or filtered since: each selection asks (two or more a frame)
+        and the answer walks every chunk the estimates leave entries out of, all of them."""
+        n, pool, kept_chunks = self.n_nodes, self.pool, self._kept
+        asked = (pool, pool.version, n, hidden, estimated, kept_chunks, kept_chunks.filtered, kept_chunks.hidden, kept_chunks.forms)
+        last, last_sample, answer = self._last_kept_costs
+        if last == asked and np.array_equal(last_sample, sample):
+            return answer
         counts = pool.batches["count"].astype(np.int64)
-        kept, known = self._kept.kept_counts(pool, hidden)
+        kept, known = kept_chunks.kept_counts(pool, hidden)
         if estimated:
             chunk_node = pool.chunk_node
             ours = (chunk_node >= 0) & (chunk_node < n)  # (a chunk never written has none)
@@ -1766,6 +1773,7 @@ class ProgressiveOctree:
         node = lists[chunk_list] // K.LISTS
         in_sample = _within_runs(np.bincount(chunk_list, minlength=len(lists))) < -(-sample[node] // pool.chunk)
         np.subtract.at(sample_costs, node[in_sample], left_out[chunks[in_sample]])
+        self._last_kept_costs = (asked, sample.copy(), (costs, list_costs, sample_costs))
         return costs, list_costs, sample_costs
 
     def _drawn_spacing(self, lists: np.ndarray, box_size: np.ndarray, entries: np.ndarray, sampled: np.ndarray) -> float:
