@@ -48,6 +48,10 @@
   their cubes (``ProgressiveOctree.select_by_points``), interleaved.
 - ``sample``: frames of the loaded demo with its leaves' grid samples and with every leaf's
   points (the samples switched off), and of its converted octree, alternating (views as ``frames``).
+- ``hidden``: the selection of a frame (``prepare``: its selections, through the load filter
+  their costs) and the whole frame (``--backend``, one-pixel points, 10 M budget), with class 5
+  (vegetation) hidden and without, alternating, of the loaded demo and of its points converted
+  with 150-point leaves (10^5 nodes and more at 20 M points); views as ``frames``.
 - ``sort``: a set's keys sorted by numpy's sort and by ``kernels.radix_sort`` (10^6 keys of the
   town, best of 5), then the insertion (as ``insert``, both orders) with each, alternately;
   which one this CPU's insertions use (timed once a process).
@@ -553,6 +557,37 @@ def bench_select(n: int) -> None:
         ProgressiveOctree.select_by_points = True
 
 
+def bench_hidden(n: int, backend: str = "auto") -> None:
+    """What hidden classes cost a frame's selection (its costs through the load filter, two or
+    more selections a frame) and the frame, progressive and converted (docstring: ``hidden``)."""
+    cloud = gp.demo(n, progressive=True)
+    cloud.wait()
+    with tempfile.TemporaryDirectory() as tmp:
+        gp.convert(cloud.chunks(), Path(tmp) / "octree", max_leaf=150)  # small leaves: many nodes, as a big octree has
+        converted = gp.open(Path(tmp) / "octree")
+        for name, target, size in (("progressive", cloud, f"{cloud.n_nodes:,} nodes, {cloud.pool.n_chunks:,} chunks"),
+                                   ("converted", converted, f"{len(converted.keys):,} nodes")):  # fmt: skip
+            print(f"{name} octree of demo({n:,}): {size}")
+            for view, cam in _views(cloud.bounds).items():
+                times = {hidden: ([], []) for hidden in ((), (5,))}  # (prepare, frame) seconds
+                points = {}
+                for _ in range(7):
+                    for hidden, (prepared, framed) in times.items():
+                        s = gp.RenderSettings(point_budget=10_000_000, size_mode="fixed", backend=backend, hidden_classes=hidden)
+                        gp.render_frame(target, cam, s)  # once before timing: what the view needs loaded (filtered)
+                        for _ in range(3):
+                            t = time.perf_counter()
+                            target.prepare(cam.view(target.bounds), s)
+                            prepared.append(time.perf_counter() - t)
+                        t = time.perf_counter()
+                        points[hidden] = gp.render_frame(target, cam, s).stats.points_processed
+                        framed.append(time.perf_counter() - t)
+                for hidden, (prepared, framed) in times.items():
+                    p, f = (np.array(x) * 1e3 for x in (prepared, framed))
+                    print(f"  {view}, hidden {list(hidden)}: selection {np.median(p):.2f} ms ({p.min():.2f}-{p.max():.2f}), frame "
+                          f"{np.median(f):.1f} ms ({f.min():.1f}-{f.max():.1f}), {points[hidden]:,} points")  # fmt: skip
+
+
 def bench_sample(n: int) -> None:
     """Frames of the loaded demo with its leaves' grid samples (ProgressiveOctree.order_leaves)
     and with every leaf's points (the samples switched off), and of its converted octree,
@@ -675,7 +710,7 @@ def main(argv=None) -> int:
     ap.add_argument("--parts", nargs="+", default=["insert", "load", "first", "viewer", "frames"])
     ap.add_argument("--first-source", default=None, help="a file for --parts first (default: the demo of 10^9 points)")
     ap.add_argument("--potree-converter", default=None, help="a PotreeConverter 2 binary for --parts convert (its --method random)")
-    ap.add_argument("--backend", default="auto", choices=["auto", "cpu", "wgpu"], help="the rasterizer of --parts frames")
+    ap.add_argument("--backend", default="auto", choices=["auto", "cpu", "wgpu"], help="the rasterizer of --parts frames and hidden")
     ap.add_argument("--base", default="HEAD~1", help="the revision --parts insert-ab compares this one with")
     args = ap.parse_args(argv)
     n = parse_count(args.points)
@@ -708,6 +743,8 @@ def main(argv=None) -> int:
         bench_sort(n, parse_count(args.batch))
     if "sample" in args.parts:
         bench_sample(n)
+    if "hidden" in args.parts:
+        bench_hidden(n, args.backend)
     return 0
 
 
