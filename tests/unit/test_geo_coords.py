@@ -4,6 +4,7 @@ about (nothing is reprojected), tiles on different LAS grids merge at the files'
 from __future__ import annotations
 
 import struct
+import sys
 import warnings
 
 import laspy
@@ -14,6 +15,7 @@ from laspy.vlrs.vlrlist import VLRList
 
 import gigapoint as gp
 from gigapoint.errors import GigapointWarning
+from gigapoint.io.las import read_las_header
 
 UTM10_WKT = (
     'PROJCS["WGS 84 / UTM zone 10N",GEOGCS["WGS 84",DATUM["WGS_1984",SPHEROID["WGS 84",6378137,298.257223563]],'
@@ -23,9 +25,46 @@ UTM10_WKT = (
 )
 
 
-def geokeys(epsg: int) -> laspy.VLR:
-    """A LAS 1.2 GeoTIFF key directory naming a projected CRS by its EPSG code."""
+# GDAL's WKT1 of EPSG:26910+5703 (NAD83 / UTM zone 10N + NAVD88 height): a COMPD_CS of the two
+# parts, each with its AUTHORITY code, the whole with none (its text ends in ']]]')
+UTM10_NAVD88_WKT1 = (
+    'COMPD_CS["NAD83 / UTM zone 10N + NAVD88 height",PROJCS["NAD83 / UTM zone 10N",GEOGCS["NAD83",DATUM["North_American_Datum_1983",'
+    'SPHEROID["GRS 1980",6378137,298.257222101,AUTHORITY["EPSG","7019"]],AUTHORITY["EPSG","6269"]],PRIMEM["Greenwich",0,AUTHORITY["EPSG","8901"]],'
+    'UNIT["degree",0.0174532925199433,AUTHORITY["EPSG","9122"]],AUTHORITY["EPSG","4269"]],PROJECTION["Transverse_Mercator"],'
+    'PARAMETER["latitude_of_origin",0],PARAMETER["central_meridian",-123],PARAMETER["scale_factor",0.9996],PARAMETER["false_easting",500000],'
+    'PARAMETER["false_northing",0],UNIT["metre",1,AUTHORITY["EPSG","9001"]],AXIS["Easting",EAST],AXIS["Northing",NORTH],AUTHORITY["EPSG","26910"]],'
+    'VERT_CS["NAVD88 height",VERT_DATUM["North American Vertical Datum 1988",2005,AUTHORITY["EPSG","5103"]],UNIT["metre",1,AUTHORITY["EPSG","9001"]],'
+    'AXIS["Gravity-related height",UP],AUTHORITY["EPSG","5703"]]]'
+)
+# PROJ's WKT2:2019 of the same (its USAGE left out): the parts' codes as ID["EPSG",n]
+UTM10_NAVD88_WKT2 = (
+    'COMPOUNDCRS["NAD83 / UTM zone 10N + NAVD88 height",PROJCRS["NAD83 / UTM zone 10N",BASEGEOGCRS["NAD83",DATUM["North American Datum 1983",'
+    'ELLIPSOID["GRS 1980",6378137,298.257222101,LENGTHUNIT["metre",1]]],PRIMEM["Greenwich",0,ANGLEUNIT["degree",0.0174532925199433]],ID["EPSG",4269]],'
+    'CONVERSION["UTM zone 10N",METHOD["Transverse Mercator",ID["EPSG",9807]],PARAMETER["Latitude of natural origin",0,ANGLEUNIT["degree",0.0174532925199433],'
+    'ID["EPSG",8801]],PARAMETER["Longitude of natural origin",-123,ANGLEUNIT["degree",0.0174532925199433],ID["EPSG",8802]],'
+    'PARAMETER["Scale factor at natural origin",0.9996,SCALEUNIT["unity",1],ID["EPSG",8805]],PARAMETER["False easting",500000,LENGTHUNIT["metre",1],'
+    'ID["EPSG",8806]],PARAMETER["False northing",0,LENGTHUNIT["metre",1],ID["EPSG",8807]]],CS[Cartesian,2],AXIS["(E)",east,ORDER[1],'
+    'LENGTHUNIT["metre",1]],AXIS["(N)",north,ORDER[2],LENGTHUNIT["metre",1]],ID["EPSG",26910]],VERTCRS["NAVD88 height",'
+    'VDATUM["North American Vertical Datum 1988"],CS[vertical,1],AXIS["gravity-related height (H)",up,LENGTHUNIT["metre",1]],ID["EPSG",5703]]]'
+)
+# GDAL's WKT1 of EPSG:2994, NAD83(HARN) / Oregon GIC Lambert (ft): autzen's projection, by OGC's names
+OREGON_LAMBERT_FT_WKT1 = (
+    'PROJCS["NAD83(HARN) / Oregon GIC Lambert (ft)",GEOGCS["NAD83(HARN)",DATUM["NAD83_High_Accuracy_Reference_Network",SPHEROID["GRS 1980",'
+    '6378137,298.257222101,AUTHORITY["EPSG","7019"]],AUTHORITY["EPSG","6152"]],PRIMEM["Greenwich",0,AUTHORITY["EPSG","8901"]],'
+    'UNIT["degree",0.0174532925199433,AUTHORITY["EPSG","9122"]],AUTHORITY["EPSG","4152"]],PROJECTION["Lambert_Conformal_Conic_2SP"],'
+    'PARAMETER["latitude_of_origin",41.75],PARAMETER["central_meridian",-120.5],PARAMETER["standard_parallel_1",43],PARAMETER["standard_parallel_2",45.5],'
+    'PARAMETER["false_easting",1312335.958],PARAMETER["false_northing",0],UNIT["foot",0.3048,AUTHORITY["EPSG","9002"]],'
+    'AXIS["Easting",EAST],AXIS["Northing",NORTH],AUTHORITY["EPSG","2994"]]'
+)
+# the next zone east (EPSG:26911+5703), written as UTM10_NAVD88_WKT1 is: another CRS
+UTM11_NAVD88_WKT1 = UTM10_NAVD88_WKT1.replace("zone 10N", "zone 11N").replace("-123", "-117").replace("26910", "26911")
+
+
+def geokeys(epsg: int, vertical: int | None = None) -> laspy.VLR:
+    """A LAS 1.2 GeoTIFF key directory naming a projected CRS by its EPSG code (and ``vertical``:
+    VerticalCSTypeGeoKey's code, heights' CRS; LasHeader.crs reads both as 'EPSG:h+v')."""
     keys = [(1024, 0, 1, 1), (3072, 0, 1, epsg)]  # model type projected; ProjectedCSTypeGeoKey
+    keys += [(4096, 0, 1, vertical)] if vertical else []
     data = struct.pack("<4H", 1, 1, 0, len(keys)) + b"".join(struct.pack("<4H", *k) for k in keys)
     return laspy.VLR("LASF_Projection", 34735, "GeoKeyDirectoryTag", data)
 
@@ -167,6 +206,76 @@ def test_info_of_a_folder_counts_one_crs_as_wkt_and_as_geotiff_keys_once(tmp_pat
     summed = gp.io.folder_info(tmp_path, [gp.io.file_info(tmp_path / f) for f in ("a.las", "b.las")])
     assert "crs differs" not in summed["details"] and summed["crs"] == gp.io.file_info(tmp_path / "a.las")["crs"]
     assert "  crs:         WGS 84 / UTM zone 10N (EPSG:32610)" in gp.io.format_info(summed).splitlines()
+
+
+def wkt_vlr(wkt: str) -> laspy.VLR:
+    """A LAS 1.4 OGC WKT VLR of ``wkt``."""
+    return laspy.VLR("LASF_Projection", 2112, "OGC WKT", wkt.encode() + b"\0")
+
+
+def without_pyproj(pyproj_installed: bool, monkeypatch) -> None:
+    """pyproj's import made to fail where ``pyproj_installed`` is False (it needs it where True)."""
+    if pyproj_installed:
+        pytest.importorskip("pyproj")
+    else:
+        monkeypatch.setitem(sys.modules, "pyproj", None)  # (an import of it raises ImportError)
+
+
+@pytest.mark.parametrize("pyproj_installed", [True, False])
+def test_one_compound_crs_as_geotiff_keys_wkt1_and_wkt2_is_one_crs(tmp_path, pyproj_installed, monkeypatch):
+    """EPSG:26910+5703 as GeoTIFF keys with a vertical code ('EPSG:26910+5703'), as GDAL's
+    COMPD_CS and as PROJ's COMPOUNDCRS: they were three CRSs (the whole WKT their identity: no
+    code at its end), so opening, converting or summing up such tiles said they were mixed. The
+    next zone's COMPD_CS is another CRS, said by its two codes; pyproj or not."""
+    without_pyproj(pyproj_installed, monkeypatch)
+    write_tile(tmp_path / "a.las", tile_points(0, 500_000.0), 0.001, (500_000, 4_800_000, 0), geokeys(26910, 5703))
+    write_tile(tmp_path / "b.las", tile_points(1, 500_050.0), 0.001, (500_000, 4_800_000, 0), wkt_vlr(UTM10_NAVD88_WKT1), version="1.4")
+    write_tile(tmp_path / "c.las", tile_points(2, 500_100.0), 0.001, (500_000, 4_800_000, 0), wkt_vlr(UTM10_NAVD88_WKT2), version="1.4")
+    files = [tmp_path / f"{name}.las" for name in "abc"]
+    assert [gp.io.file_info(f)["crs"][:9] for f in files] == ["EPSG:2691", "COMPD_CS[", "COMPOUNDC"]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert gp.open(tmp_path).n_points == 6000
+        gp.convert(files, tmp_path / "out")
+    assert crs_warnings(caught) == []
+    summed = gp.io.folder_info(tmp_path, [gp.io.file_info(f) for f in files])
+    assert "crs differs" not in summed["details"] and summed["crs"] == "EPSG:26910+5703"
+    write_tile(tmp_path / "d.las", tile_points(3, 500_150.0), 0.001, (500_000, 4_800_000, 0), wkt_vlr(UTM11_NAVD88_WKT1), version="1.4")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gp.open(tmp_path)
+    said = crs_warnings(caught)
+    assert len(said) == 1 and "the files name 2 different CRSs (a.las: EPSG:26910+5703; d.las: EPSG:26911+5703)" in said[0], said
+
+
+@pytest.mark.parametrize("pyproj_installed", [True, False])
+def test_autzens_esri_wkt_and_its_epsg_code_are_one_crs_where_pyproj_tells(tmp_path, autzen_path, pyproj_installed, monkeypatch):
+    """autzen's ESRI-flavoured WKT names no code; EPSG:2994 (NAD83(HARN) / Oregon GIC Lambert
+    (ft)) is the same projection, as GeoTIFF keys and as GDAL's OGC WKT: pyproj tells them one
+    (``CRS.equals``), the text alone cannot (still warned without pyproj, the two forms of 2994
+    one). The same WKT in metres (false easting 400,000 m) is another CRS either way."""
+    without_pyproj(pyproj_installed, monkeypatch)
+    wkt = read_las_header(autzen_path).crs()  # ESRI's names (NAD_1983_HARN_Lambert_Conformal_Conic), no EPSG code of its own
+    write_tile(tmp_path / "a.las", tile_points(0, 500_000.0), 0.01, (0, 0, 0), wkt_vlr(wkt), version="1.4")
+    write_tile(tmp_path / "b.las", tile_points(1, 500_050.0), 0.01, (0, 0, 0), geokeys(2994))
+    write_tile(tmp_path / "c.las", tile_points(2, 500_100.0), 0.01, (0, 0, 0), wkt_vlr(OREGON_LAMBERT_FT_WKT1), version="1.4")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gp.open(tmp_path)
+    said = crs_warnings(caught)
+    if pyproj_installed:
+        assert said == []
+    else:
+        assert len(said) == 1 and '2 different CRSs (a.las: PROJCS["NAD_1983_HARN_Lambert_Conformal_Conic",GEOGCS["GCS_N; b.las: EPSG:2994)' in said[0], said
+    (tmp_path / "c.las").unlink()
+    metres = wkt.replace('UNIT["foot",0.3048,AUTHORITY["EPSG","9002"]]', 'UNIT["metre",1,AUTHORITY["EPSG","9001"]]').replace("1312335.958005249", "400000")
+    assert metres != wkt
+    write_tile(tmp_path / "b.las", tile_points(1, 500_050.0), 0.01, (0, 0, 0), wkt_vlr(metres), version="1.4")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gp.open(tmp_path)
+    said = crs_warnings(caught)
+    assert len(said) == 1 and '2 different CRSs (a.las: ' in said[0] and '; b.las: PROJCS["NAD_1983_HARN_Lambert_Conformal_Conic"' in said[0], said
 
 
 def test_tiles_on_different_las_grids_merge_at_the_files_values(tmp_path):

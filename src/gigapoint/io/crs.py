@@ -4,8 +4,10 @@ WKT and EPSG code, and a warning where files disagree."""
 
 from __future__ import annotations
 
+import functools
 import math
 import re
+import threading
 from pathlib import Path
 
 from ..errors import GigapointError, GigapointWarning, warn
@@ -30,10 +32,65 @@ def crs_name(crs: str | None) -> str:
 
 
 def crs_identity(crs: str) -> str:
-    """What tells two CRSs apart: 'EPSG:n' where a WKT ends with its code (the same CRS as WKT in
-    one tile, as GeoTIFF keys in another), else the text. warn_mixed_crs and folder_info compare by it."""
-    code = WKT_EPSG.search(crs)
-    return f"EPSG:{code.group(1)}" if code else crs
+    """What tells two CRSs apart, the same for one CRS however a file writes it: 'EPSG:n', or
+    'EPSG:h+v' for a compound CRS by its parts' codes (a WKT1 AUTHORITY or WKT2 ID, GeoTIFF keys'
+    'EPSG:26910+5703' and a COMPD_CS of those two parts alike), else the first text of it read.
+    With pyproj (``_pyproj_identity``) an ESRI WKT and PROJ's WKT of one projection are one CRS
+    too (autzen's NAD_1983_HARN_Lambert_Conformal_Conic and EPSG:2994); without it, the codes its
+    text names (``_text_identity``). Another zone, datum or unit stays another CRS.
+    warn_mixed_crs, folder_info, change and the reprojection's clip polygon compare by it."""
+    try:
+        return _pyproj_identity(crs)
+    except Exception:  # noqa: BLE001 - pyproj missing, or the text unknown to it: the codes the text names
+        return _text_identity(crs)
+
+
+_identity_lock = threading.Lock()
+#: crs_identity of each CRS text pyproj has read: tiles by the thousand share a few texts
+_identities: dict[str, str] = {}
+#: (pyproj CRS, its parts' EPSG codes, identity) of each identity given, which a new text is compared with
+_distinct_crss: list[tuple[object, tuple, str]] = []
+
+
+def _pyproj_identity(crs: str) -> str:
+    """``crs_identity`` by pyproj: the identity of a CRS read before that is the same one (its
+    parts' EPSG codes the same, or ``CRS.equals`` ignoring axis order), else its own: its codes'
+    'EPSG:h+v', or its text where a part has no code. Raises where pyproj is not installed or
+    cannot read ``crs``."""
+    import pyproj  # (first: where it is not installed, no identity it gave is taken)
+
+    with _identity_lock:
+        if crs in _identities:
+            return _identities[crs]
+    parsed = pyproj.CRS.from_user_input(crs.strip())
+    parsed = parsed.source_crs if parsed.is_bound else parsed  # (a WKT1 with TOWGS84: the CRS it binds)
+    codes = tuple(part.to_epsg() for part in (parsed.sub_crs_list if parsed.is_compound else [parsed]))
+    coded = None not in codes
+    with _identity_lock:
+        same = (key for seen, seen_codes, key in _distinct_crss if (coded and codes == seen_codes) or parsed.equals(seen, ignore_axis_order=True))
+        identity = next(same, None)
+        if identity is None:
+            identity = "EPSG:" + "+".join(map(str, codes)) if coded else crs
+            _distinct_crss.append((parsed, codes, identity))
+        _identities[crs] = identity
+    return identity
+
+
+@functools.lru_cache(maxsize=64)
+def _text_identity(crs: str) -> str:
+    """``crs_identity`` without pyproj: 'EPSG:h+v' or 'EPSG:n' of the codes the text names as its
+    own ('EPSG:n+v' itself; a WKT's AUTHORITY / ID; a compound WKT's two parts' ones, else its
+    own), else the text ('EPSG:5498', a registered compound code, is not told from its parts')."""
+    horizontal, vertical = _epsg_codes(crs)
+    tree = _wkt_tree(crs) if horizontal is None else None
+    if tree is not None and tree[0] in ("COMPD_CS", "COMPOUNDCRS"):
+        parts = [_wkt_epsg(p) for p in tree[1:] if isinstance(p, list) and p[0] in _WKT_KINDS]
+        horizontal, vertical = parts if len(parts) == 2 and None not in parts else (_wkt_epsg(tree), None)
+    elif tree is not None:
+        horizontal = _wkt_epsg(tree)
+    if horizontal is None:
+        return crs
+    return f"EPSG:{horizontal}" + (f"+{vertical}" if vertical is not None else "")
 
 
 #: Symbols of the length units coordinates come in, by their size in metres (WKT names one unit
@@ -289,7 +346,7 @@ def warn_mixed_crs(files, then: str = "") -> None:
     added to the message). Once an operation (``headers_once``: open_sized reads the files twice)."""
     if len(files) < 2:
         return
-    first: dict = {}  # CRS (its EPSG code where a WKT ends with one): the first file naming it
+    first: dict = {}  # CRS (crs_identity: one however each file writes it): the first file naming it
     have, none = 0, []  # how many LAS files name a CRS; those naming none
     for f in files:
         try:  # (the header the read uses: no second open; salvage: as scan_angles_differ)

@@ -38,6 +38,7 @@ import numpy as np
 from ..core.chunk import PointChunk
 from ..core.coords import MAX_ABS_COORDINATE
 from ..errors import GigapointWarning, InputError, counted, first_line, warn
+from .crs import crs_identity
 from .filters import PointFilter
 from .las import LasReader, read_las_header
 from .polygon import ClipPolygon, moved_polygon
@@ -301,13 +302,13 @@ class Reprojection:
         elif self.given_source is not None:
             source = self.given_source
         else:
-            named = {self._file_crs(f) for f in files}
+            named = {crs_identity(text): text for text in map(self._file_crs, files)}  # (one CRS as WKT and as GeoTIFF keys: one)
             if len(named) > 1:
                 raise InputError(
                     f"{polygon.source}: names no CRS while the inputs are in {len(named)} CRSs: give it as GeoJSON naming "
                     f"its CRS (a crs member), or the CRS of every input ({self.where}: from_crs=, --from-crs)"
                 )
-            text = named.pop()
+            text = named.popitem()[1]
             source = parse_crs(text, f"{files[0]}: its CRS {text[:60]!r}")
         return moved_polygon(polygon, source, self.target, None if self.tolerance is None else self.tolerance[0])
 
