@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from laspy.vlrs.known import WktCoordinateSystemVlr
 from PIL import Image
+from test_geo_coords import UTM10_NAVD88_WKT1, UTM11_NAVD88_WKT1, without_pyproj  # (tests/unit is on sys.path)
 
 import gigapoint as gp
 from gigapoint.errors import GigapointError, InputError
@@ -111,11 +112,12 @@ def test_surveys_that_share_no_pixel_are_refused():
 EPSG_32610_KEYS = [(1024, 0, 1, 1), (3072, 0, 1, 32610)]  # LAS 1.2 GeoTIFF keys: projected, UTM 10N
 
 
-def write_las(path, xyz, keys=EPSG_32610_KEYS):
+def write_las(path, xyz, keys=EPSG_32610_KEYS, wkt=None):
+    """A LAS 1.2 file of ``xyz`` (from ORIGIN) naming its CRS by GeoTIFF ``keys``, or by ``wkt`` (a WKT VLR) where given."""
     header = laspy.LasHeader(point_format=0, version="1.2")
     header.scales, header.offsets = np.array([0.01] * 3), np.array([*ORIGIN, 0.0])
     data = struct.pack("<4H", 1, 1, 0, len(keys)) + b"".join(struct.pack("<4H", *k) for k in keys)
-    header.vlrs.append(laspy.VLR("LASF_Projection", 34735, "GeoKeyDirectoryTag", data))
+    header.vlrs.append(WktCoordinateSystemVlr(wkt) if wkt else laspy.VLR("LASF_Projection", 34735, "GeoKeyDirectoryTag", data))
     las = laspy.LasData(header)
     las.x, las.y, las.z = (xyz + (*ORIGIN, 0.0)).T
     las.write(str(path))
@@ -233,6 +235,22 @@ def test_cli_refuses_surveys_in_different_crss(cli, tmp_path, surveys, autzen_pa
     assert rc == 1 and err.count("\n") == 1, err
     assert err.startswith(f"error: {autzen_path} is in NAD_1983_HARN_Lambert_Conformal_Conic (WKT), lengths in ft; {surveys[1]} in EPSG:32610, lengths in m: change compares two surveys in one CRS")
     assert not list(tmp_path.glob("c.*"))
+
+
+@pytest.mark.parametrize("pyproj_installed", [True, False])
+def test_one_compound_crs_as_geotiff_keys_and_as_wkt_is_compared_another_zone_refused(tmp_path, pyproj_installed, monkeypatch):
+    """EPSG:26910+5703 as GeoTIFF keys with a vertical code in one survey, as GDAL's COMPD_CS in
+    the other: one CRS (it was refused as two, "change compares two surveys in one CRS"), with
+    pyproj or without; the next zone's COMPD_CS is still refused."""
+    without_pyproj(pyproj_installed, monkeypatch)
+    keys = [(1024, 0, 1, 1), (3072, 0, 1, 26910), (4096, 0, 1, 5703)]  # projected, UTM 10N (NAD83), NAVD88 heights
+    before = write_las(tmp_path / "before.las", plane(), keys)
+    after = write_las(tmp_path / "after.las", with_blocks(plane()), wkt=UTM10_NAVD88_WKT1)
+    c = gp.change(before, after, 0.5)
+    assert c.crs == "EPSG:26910+5703" and c.summary()["fill"] == pytest.approx(600, abs=volume_error_bound(*BOX[2:], 0.5))
+    other = write_las(tmp_path / "other.las", with_blocks(plane()), wkt=UTM11_NAVD88_WKT1)
+    with pytest.raises(InputError, match=rf"^{before} is in EPSG:26910\+5703, .*; {other} in NAD83 / UTM zone 11N \+ NAVD88 height \(WKT\), .*: change compares two surveys in one CRS"):
+        gp.change(before, other, 0.5)
 
 
 @pytest.mark.parametrize(
