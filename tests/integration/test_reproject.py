@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import importlib
 import sys
+from pathlib import Path
 
 import laspy
 import numpy as np
@@ -363,6 +364,30 @@ def test_a_clip_polygon_in_lon_lat_far_from_its_points_says_which_crs_it_was_giv
     assert str(err.value).endswith("far from the points' x 636002..637179, y 848935..849498: is it in EPSG:4326?")
     x0 = float(str(err.value).split(" spans x ")[1].split("..")[0])
     assert 1.3e7 < x0 < 1.5e7  # (Florida in Oregon's Lambert feet: 14 million feet east)
+
+
+def test_a_clip_polygon_naming_no_crs_over_one_crs_written_two_ways_is_taken_in_it(autzen_path, tmp_path):
+    """autzen's ESRI WKT and a tile of its points naming EPSG:2994 by GeoTIFF keys (the same
+    projection, another text) were "inputs in 2 CRSs" and the polygon refused: it is taken in
+    theirs, and cuts both tiles' points alike."""
+    from gigapoint.io.polygon import clip_polygon_of
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "unit"))
+    from test_crs_units import geokeys_vlr
+
+    source = laspy.read(str(autzen_path))
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = source.header.scales, source.header.offsets
+    header.vlrs.append(geokeys_vlr({1024: 1, 3072: 2994}))
+    keyed = laspy.LasData(header)
+    keyed.x, keyed.y, keyed.z = source.x[::10], source.y[::10], source.z[::10]
+    keyed.write(str(tmp_path / "keyed.las"))
+    polygon = _site_geojson(tmp_path / "site.geojson", SITE_FEET)
+    inside = clip_polygon_of(polygon, "test").inside(np.column_stack([source.x, source.y, source.z]))
+    with pytest.warns(GigapointWarning, match="z is kept"):
+        gp.convert([autzen_path, tmp_path / "keyed.las"], tmp_path / "both.laz", to_crs=UTM, clip_polygon=str(polygon))
+    assert len(laspy.read(str(tmp_path / "both.laz")).points) == inside.sum() + inside[::10].sum() > 10_000
+    assert crs_identity(files_crs([tmp_path / "keyed.las"])) == crs_identity(files_crs([autzen_path]))
 
 
 #: the attributes that, with z, tell autzen's points apart (their order in an octree is its own)
