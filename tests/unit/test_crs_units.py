@@ -11,9 +11,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_geo_coords import UTM10_NAVD88_WKT1, UTM10_NAVD88_WKT2, UTM11_NAVD88_WKT1, without_pyproj  # (tests/unit is on sys.path)
 
 import gigapoint as gp
 from gigapoint.io import crs_units, files_units, horizontal_epsg, vertical_crs
+from gigapoint.io.crs import crs_identity
 from gigapoint.io.las import geokeys, read_las_header
 from gigapoint.viewer import measure as M
 
@@ -291,3 +293,41 @@ def test_geokeys_name_a_compound_crs_where_a_vertical_code_is_given(tmp_path):
         said[vertical] = read_las_header(path).crs()
     assert said == {5703: "EPSG:26910+5703", 6360: "EPSG:26910+6360", 32767: "EPSG:26910", 5030: "EPSG:26910", 5103: "EPSG:26910", 0: "EPSG:26910"}
     assert crs_units(None, {1024: 1, 3072: 26910, 4096: 32767, 4099: 9003})["vertical"] == US_FOOT_UNIT
+
+
+@pytest.mark.parametrize("pyproj_installed", [True, False])
+def test_crs_identity_of_one_crs_written_several_ways(pyproj_installed, monkeypatch):
+    """One CRS as 'EPSG:h+v', as GDAL's COMPD_CS (its text ends ']]]': no code of its own) and as
+    PROJ's COMPOUNDCRS is one identity, its parts' codes, with pyproj or without; a WKT1 AUTHORITY
+    and a WKT2 ID alike. Another zone, datum or vertical CRS stays another; a registered compound
+    code is its parts only where pyproj says what they are."""
+    without_pyproj(pyproj_installed, monkeypatch)
+    compound = {crs_identity(t) for t in ("EPSG:26910+5703", " epsg:26910+5703 ", UTM10_NAVD88_WKT1, UTM10_NAVD88_WKT2)}
+    assert compound == {"EPSG:26910+5703"}
+    assert crs_identity(UTM11_NAVD88_WKT1) == "EPSG:26911+5703"
+    assert {crs_identity(t) for t in ("EPSG:4326", WGS84_WKT1)} == {"EPSG:4326"}
+    differ = ["EPSG:26910", "EPSG:26911", "EPSG:32610", "EPSG:26910+6360", "EPSG:4269+5703", "EPSG:2994"]
+    assert len({crs_identity(t) for t in differ}) == len(differ)
+    assert (crs_identity("EPSG:5498") == "EPSG:4269+5703") is pyproj_installed  # NAD83 + NAVD88 height, registered
+
+
+def test_crs_identity_reads_each_text_once_with_pyproj(monkeypatch):
+    """Thousands of tiles share a few CRS texts: pyproj reads each once (a text it has not seen
+    here: the identities are kept for the process)."""
+    pyproj = pytest.importorskip("pyproj")
+    read, original = [], pyproj.CRS.from_user_input
+    monkeypatch.setattr(pyproj.CRS, "from_user_input", lambda text, *args: read.append(text) or original(text, *args))
+    tiles = [UTM10_NAVD88_WKT1.replace("NAD83 / UTM zone 10N + NAVD88 height", f"survey {i % 3}") for i in range(1000)]
+    assert {crs_identity(t) for t in tiles} == {"EPSG:26910+5703"}
+    assert len(read) == 3
+
+
+def test_crs_identity_by_pyproj_tells_an_esri_wkt_from_another_unit(autzen_path):
+    """autzen's ESRI WKT (no code of its own) is EPSG:2994 and PROJ's WKT2 of it, by CRS.equals;
+    the same in metres is not."""
+    pyproj = pytest.importorskip("pyproj")
+    autzen = read_las_header(autzen_path).crs()
+    same = {crs_identity(t) for t in (autzen, "EPSG:2994", pyproj.CRS.from_user_input(autzen).to_wkt(), pyproj.CRS(2994).to_wkt("WKT1_ESRI"))}
+    assert len(same) == 1
+    metres = autzen.replace('UNIT["foot",0.3048,AUTHORITY["EPSG","9002"]]', 'UNIT["metre",1,AUTHORITY["EPSG","9001"]]').replace("1312335.958005249", "400000")
+    assert crs_identity(metres) not in same | {"EPSG:2994"}
