@@ -128,6 +128,19 @@ def test_cli_writes_the_orthophoto_its_world_file_and_the_dsm(cli, tmp_path, gri
     assert "no .prj written: the inputs name no CRS" in out and not list(tmp_path.glob("*.prj"))
 
 
+def test_pixels_no_point_reached_are_transparent_and_filled_ones_opaque(cli, tmp_path, grid_npy):
+    """A map's empty pixels are no colour (alpha 0: GIS software and --colorize read an opaque
+    background as black imagery); --fill-nodata's filled pixels take their neighbour's, opaque."""
+    path, _ = grid_npy
+    rc, _, err = cli("render", path, "-o", tmp_path / "ortho.png", "--gsd", GSD, "--depth-out", tmp_path / "dsm.tif", "--size-mode", "fixed")
+    assert rc == 0, err
+    alpha, dsm = np.asarray(Image.open(tmp_path / "ortho.png"))[..., 3], np.asarray(Image.open(tmp_path / "dsm.tif"))
+    assert np.array_equal(alpha == 255, ~np.isnan(dsm)) and np.array_equal(alpha == 0, np.isnan(dsm)) and (alpha == 0).any()
+    filled = gp.orthophoto(path, GSD, fill_nodata=1, size_mode="fixed")
+    assert np.array_equal(filled.image[..., 3] == 255, ~np.isnan(filled.heights))  # (filled colours within 1 pixel, opaque)
+    assert (filled.image[..., 3] == 255).sum() > (alpha == 255).sum()
+
+
 def write_las(path, crs_vlr):
     header = laspy.LasHeader(point_format=0, version="1.2")
     header.scales, header.offsets = np.array([0.01] * 3), ORIGIN

@@ -16,7 +16,7 @@ from ..io import crs_wkt, files_label
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from ..render.contours import draw_contours
-from ..render.georef import georef_paths, georef_writes, raster_writes
+from ..render.georef import georef_paths, georef_writes, map_image, raster_writes
 from ..render.raster_fill import fill_map
 from . import compiling
 from .app import app
@@ -352,6 +352,8 @@ def render(
     compiled = compiling.compiled_seconds() - compiled
     surface = gsd is not None and (depth_out is not None or contours is not None)
     image, heights = frame.image, (cam.heights(frame.depth) if surface else None)
+    if gsd is not None:  # a map: no data is no colour (--fill-nodata's filled pixels take their neighbour's alpha)
+        image = map_image(image, frame.index < 0)
     if fill_nodata is not None:
         image, heights = fill_map(image, frame.index < 0, heights, fill_distance)
     lines = traced_contours(heights, cam, contours, contours_base, units) if contours is not None else []

@@ -22,6 +22,15 @@ from .image_files import IMAGE_SUFFIXES, check_image_fits, check_output, save_he
 WORLD_FILE_SUFFIXES = {".png": ".pgw", ".jpg": ".jgw", ".jpeg": ".jgw", ".tif": ".tfw", ".tiff": ".tfw"}
 
 
+def map_image(image: np.ndarray, empty: np.ndarray) -> np.ndarray:
+    """A top-down render's (H, W, 4) image as a map holds it: pixels no point reached (``empty``,
+    ``Frame.index < 0``) transparent, alpha 0, their colour the background's. An opaque
+    background read as imagery (GIS software, ``--colorize`` from it) coloured points black."""
+    image = image.copy()
+    image[np.asarray(empty, bool), 3] = 0
+    return image
+
+
 def world_file_path(image: Path) -> Path:
     """The world file beside ``image`` (ortho.png -> ortho.pgw)."""
     return image.with_suffix(WORLD_FILE_SUFFIXES.get(image.suffix.lower(), ".wld"))

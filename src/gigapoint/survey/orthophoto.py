@@ -16,7 +16,7 @@ from ..core.renderable import Renderable
 from ..errors import CameraError, InputError, check_switch, is_real
 from ..lod.reader import cloud_crs_units
 from ..render import Camera, RenderSettings, render_frame
-from ..render.georef import GEOTIFF_SUFFIXES, write_map
+from ..render.georef import GEOTIFF_SUFFIXES, map_image, write_map
 from ..render.image_files import IMAGE_SUFFIXES, check_output
 from ..render.raster_fill import check_max_distance, fill_map
 
@@ -77,7 +77,7 @@ def orthophoto(source, gsd, out=None, dsm=None, fill_nodata=None, classes=None, 
         raise CameraError(f"orthophoto: gsd: {exc}") from None
     frame = render_frame(cloud, camera, settings.replace(adaptive_precision=False))  # 30-bit positions: exact pixels and heights
     distance = None if fill_nodata in (None, "all") else fill_nodata
-    image, heights = frame.image, camera.heights(frame.depth)
+    image, heights = map_image(frame.image, frame.index < 0), camera.heights(frame.depth)  # (--fill-nodata's colours opaque again)
     if fill_nodata is not None:
         image, heights = fill_map(image, frame.index < 0, heights, distance)
     crs, units = cloud_crs_units(cloud)
