@@ -61,7 +61,7 @@ def files_in(folder) -> list[str]:
          "{in}/huge.geojson: a polygon vertex lies beyond ±1e+12 ([-1e+300, -1e+300]): no point can be there"),
         # the grid spans the polygon's box (not the data's): said only "gsd 0.001 makes a ... image"
         (["volume", "{in}/small.las", "--gsd", "0.001", "--clip-polygon", "{in}/good.geojson", "-o", "{out}/v.tif"],
-         "{in}/good.geojson: --gsd over its box: gsd 0.001 makes a 50,005x50,005 image, over 16,384 pixels a side: a gsd of 0.00306 or more fits"),
+         "{in}/good.geojson: --gsd over its box: gsd 0.001 makes a 50,006x50,006 image, over 16,384 pixels a side: a gsd of 0.00306 or more fits"),
         # surveys side by side were drawn on the grid of their union: said "gsd 0.01 makes a 109,993x9,995 image"
         (["change", "{in}/small.las", "{in}/beside.las", "--gsd", "0.01", "-o", "{out}/c.tif"],
          ("{in}/small.las and {in}/beside.las: the surveys do not overlap ({in}/small.las x 0.04..99.96, y 0.02..99.96; "

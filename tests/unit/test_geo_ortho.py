@@ -96,11 +96,58 @@ def test_world_files_and_heights_need_a_top_down_camera():
 def test_a_gsd_too_fine_names_the_finest_that_fits():
     with pytest.raises(CameraError) as err:
         gp.Camera.top_down(((0, 0, 0), (10_000.0, 5.0, 1.0)), 0.5)
-    assert str(err.value) == "gsd 0.5 makes a 20,001x11 image, over 16,384 pixels a side: a gsd of 0.611 or more fits"
+    assert str(err.value) == "gsd 0.5 makes a 20,002x12 image, over 16,384 pixels a side: a gsd of 0.611 or more fits"  # (a margin column and row: 0 and 5 lie on the grid)
     assert gp.Camera.top_down(((0, 0, 0), (10_000.0, 5.0, 1.0)), 0.611).width <= MAX_IMAGE_SIDE
     for bad in (0, -1, float("nan"), "1"):
         with pytest.raises(CameraError, match="gsd .ground sample distance. must be a number > 0"):
             gp.Camera.top_down(((0, 0, 0), (1, 1, 1)), bad)
+
+
+def test_each_edge_of_the_box_lies_inside_the_image_by_a_margin():
+    """A box whose corners lie on the gsd grid gets a column to the left and a row above (a point
+    on the image's top or left edge was pushed out by the decoding's and float32's rounding); the
+    pixel centres stay on the grid's half multiples."""
+    cam = gp.Camera.top_down(((10.0, 20.0, 0.0), (13.0, 23.0, 1.0)), 1)
+    # columns floor(10 - m) = 9 .. floor(13 + m) = 13; rows from ceil(23 + m) = 24 (top) down to ceil(20 - m) = 20
+    assert (cam.width, cam.height) == (5, 5)
+    assert cam.world_file() == (1.0, 0.0, 0.0, -1.0, 9.5, 23.5)
+    # off the grid by more than the margin: the box's own columns and rows, as ever
+    cam = gp.Camera.top_down(((10.1, 20.1, 0.0), (12.9, 22.9, 1.0)), 1)
+    assert (cam.width, cam.height, cam.world_file()[4:]) == (3, 3, (10.5, 22.5))
+
+
+def write_points_las(path, xyz):
+    header = laspy.LasHeader(point_format=0, version="1.2")
+    header.scales, header.offsets = np.array([0.01] * 3), np.zeros(3)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = np.asarray(xyz, float).T
+    las.write(str(path))
+    return path
+
+
+@pytest.mark.parametrize("gsd", [1, 0.5])
+@pytest.mark.parametrize(
+    "xyz",
+    [
+        [[10, 20, 5]],  # a LAS point decodes ~5e-9 above its y: on the image's top edge it was dropped (a blank image)
+        [[10, 20, 1], [13, 20, 2], [10, 23, 3], [13, 23, 4], [11, 22, 6]],  # the corners of the box and a point inside
+    ],
+)
+def test_cli_draws_every_point_of_a_las_file_on_the_grid(cli, tmp_path, xyz, gsd):
+    path = write_points_las(tmp_path / "grid.las", xyz)
+    rc, out, err = cli("render", path, "-o", tmp_path / "o.png", "--gsd", gsd, "--depth-out", tmp_path / "dsm.tif", "--size-mode", "fixed")
+    assert rc == 0 and "warning" not in err, err
+    dsm = np.asarray(Image.open(tmp_path / "dsm.tif"))
+    assert sorted(dsm[np.isfinite(dsm)].tolist()) == sorted(z for _, _, z in xyz)  # each point in a pixel of its own
+
+
+def test_autzens_lowest_point_is_drawn():
+    """autzen's lowest y (848,935.2) is a multiple of 0.3 that float64 puts a hair (5e-10) above the
+    grid line: the image ended at that line, and float32 put the point on it, below the image
+    (109,630 pixels were drawn)."""
+    heights = gp.orthophoto(AUTZEN, 0.3, size_mode="fixed").heights
+    assert heights.shape == (1877, 3926)
+    assert np.isfinite(heights[-1]).any() and np.isfinite(heights).sum() == 109_631
 
 
 @pytest.fixture
@@ -206,7 +253,7 @@ def test_cli_an_epsg_only_crs_writes_no_prj_and_says_so(cli, tmp_path, monkeypat
         (["--gsd", "1", "--stereo", "anaglyph"], "--stereo and --gsd: give one"),
         (["--gsd", "1", "--depth-out", "d.npy"], "d.npy: unsupported output type '.npy'; use one of .tif, .tiff"),
         (["--gsd", "1", "--turntable", "3"], "--gsd: options of a still image, not of --turntable"),
-        (["--gsd", "0.001"], "grid.npy: --gsd 0.001 makes a 19,501x11,501 image, over 16,384 pixels a side: a gsd of 0.0012 or more fits"),
+        (["--gsd", "0.001"], "grid.npy: --gsd 0.001 makes a 19,502x11,502 image, over 16,384 pixels a side: a gsd of 0.0012 or more fits"),
     ],
 )
 def test_cli_gsd_errors_are_one_line(cli, tmp_path, grid_npy, args, message):

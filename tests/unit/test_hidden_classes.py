@@ -14,7 +14,7 @@ from gigapoint.errors import GigapointWarning, SettingsError
 
 RED, BLUE = (255, 0, 0), (0, 0, 255)
 FIXED = {"point_size": 1, "size_mode": "fixed"}
-TOP = gp.Camera.top_down(((0, 0, 0), (100, 50, 1)), 0.5)  # 201x101 pixels, one per half unit
+TOP = gp.Camera.top_down(((0, 0, 0), (100, 50, 1)), 0.5)  # 202x102 pixels, one per half unit, from x -0.5 and y 50.5
 
 
 def two_classes(spacing: float = 2.5):
@@ -60,7 +60,7 @@ def test_hiding_a_class_draws_exactly_the_other_class_alone(scale):
 def test_a_hidden_point_in_front_does_not_hide_the_point_behind():
     xyz = np.array([[10.25, 10.25, 0.0], [10.25, 10.25, 1.0]])  # one pixel of TOP; class 6 above (nearer the eye)
     cloud = gp.from_arrays(xyz, np.array([RED, BLUE], np.uint8), classification=np.array([2, 6], np.uint8), colors="rgba")
-    row, col = int((50 - 10.25) // 0.5), int(10.25 // 0.5)  # TOP's pixel of (10.25, 10.25): rows down from y = 50
+    row, col = int((50.5 - 10.25) // 0.5), int((10.25 + 0.5) // 0.5)  # TOP's pixel of (10.25, 10.25): rows down from y = 50.5
     assert tuple(gp.render(cloud, TOP, **FIXED)[row, col, :3]) == BLUE
     assert tuple(gp.render(cloud, TOP, hidden_classes=(6,), **FIXED)[row, col, :3]) == RED
 
@@ -279,7 +279,7 @@ def test_a_hidden_point_in_front_of_a_progressive_octree_does_not_hide_the_point
 
     tree = ProgressiveOctree("two")
     tree.add(np.array([[10.25, 10.25, 0.0], [10.25, 10.25, 1.0]]), np.array([RED, BLUE], np.uint8), classification=np.array([2, 6], np.uint8))
-    row, col = int((50 - 10.25) // 0.5), int(10.25 // 0.5)
+    row, col = int((50.5 - 10.25) // 0.5), int((10.25 + 0.5) // 0.5)  # (TOP's rows down from y = 50.5, columns from x = -0.5)
     assert tuple(gp.render(tree, TOP, **EVERY)[row, col, :3]) == BLUE
     assert tuple(gp.render(tree, TOP, hidden_classes=(6,), **EVERY)[row, col, :3]) == RED
 
@@ -364,7 +364,7 @@ def test_chunks_a_frame_no_longer_draws_give_their_slots_to_those_it_draws(monke
     chunks fill the slots made for them and the right half's take them back."""
     tree = grown(chunk=64)
     filtered = counting_filters(monkeypatch)
-    halves = [gp.Camera.top_down(((x, 0, 0), (x + 49.5, 50, 1)), 0.5) for x in (0, 50, 0)]
+    halves = [gp.Camera.top_down(((x + 0.25, 0.25, 0), (x + 49.75, 49.75, 1)), 0.5) for x in (0, 50, 0)]  # each half's points
     pools = []
     for cam in halves:
         frame = gp.render_frame(tree, cam, hidden_classes=(7,), **EVERY)

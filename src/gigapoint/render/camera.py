@@ -32,6 +32,9 @@ VIEWS = {
     "iso": (-135.0, 35.264),
     "auto": (None, None),  # iso, or turned so a long cloud runs across the image (``auto_view``)
 }
+#: how far (pixels) inside a ``top_down`` image every edge of its box lies: more than the
+#: rasterizer's error in px and py (float32 rounding, ~1e-3 px in a 16,384 px image)
+EDGE_MARGIN_PX = 1 / 64
 TRIM = 1e-4  # framing sample points: this share at each side may fall outside the frame (a few stray points)
 
 
@@ -321,20 +324,27 @@ class Camera:
         up (+y up the image, +x to the right), each pixel ``gsd`` (ground sample distance: the
         cloud's units) a side: an orthophoto or a surface model that a GIS places on its map
         (``world_file``, ``heights``). Pixel edges lie on whole multiples of ``gsd`` (tiles drawn
-        alike line up), and the image holds every point of the box, those on its max edges too:
-        width = floor(max_x / gsd) - floor(min_x / gsd) + 1 pixels, height likewise from y.
+        alike line up), and the image holds every point of the box, those on its edges too, with
+        EDGE_MARGIN_PX to spare: columns floor(min_x / gsd - m) .. floor(max_x / gsd + m) (m the
+        margin), rows likewise from y (a box whose max y lies on the grid gets a row above it).
         An image over MAX_IMAGE_SIDE a side is a one-line CameraError naming the finest gsd that fits."""
         lo, hi = _box(bounds)
         if not (is_real(gsd) and gsd > 0):
             raise CameraError(f"gsd (ground sample distance) must be a number > 0, got {gsd!r}")
         gsd = float(gsd)
         # the rasterizer puts a point into column floor(px) and row floor(py) (px = (x - left) / gsd,
-        # py = (top - y) / gsd): column 0 holds x in [left, left + gsd), row 0 y in (top - gsd, top]
-        first_col, top_row = math.floor(lo[0] / gsd), math.ceil(hi[1] / gsd)
-        width = math.floor(hi[0] / gsd) - first_col + 1
-        height = top_row - math.ceil(lo[1] / gsd) + 1
+        # py = (top - y) / gsd): column 0 holds x in [left, left + gsd), row 0 y in (top - gsd, top].
+        # Its px and py are not exact: decoded positions lie off the true ones (a LAS cloud's ~5e-9
+        # above them, an octree's up to half a 30-bit cell either way) and float32 rounds them. A
+        # point of the box on an image edge (a max y on the grid: py = -5e-9) fell outside, so each
+        # edge of the box lies at least EDGE_MARGIN_PX inside the image (a row or column more there).
+        margin = EDGE_MARGIN_PX
+        first_col, top_row = math.floor(lo[0] / gsd - margin), math.ceil(hi[1] / gsd + margin)
+        width = math.floor(hi[0] / gsd + margin) - first_col + 1
+        height = top_row - math.ceil(lo[1] / gsd - margin) + 1
         if max(width, height) > MAX_IMAGE_SIDE:
-            fits = _round_up(float(np.max(hi[:2] - lo[:2])) / (MAX_IMAGE_SIDE - 1))
+            # (a side of extent / gsd pixels takes at most that + 2: the margins' rows may add one)
+            fits = _round_up(float(np.max(hi[:2] - lo[:2])) / (MAX_IMAGE_SIDE - 2))
             raise CameraError(f"gsd {gsd:g} makes a {width:,}x{height:,} image, over {MAX_IMAGE_SIDE:,} pixels a side: a gsd of {fits:g} or more fits")
         left, top = first_col * gsd, top_row * gsd
         # the eye just above the highest point: depths then span little more than the cloud's
