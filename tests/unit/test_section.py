@@ -234,6 +234,26 @@ def test_the_command_refuses_bad_values_in_one_line(cli, tmp_path, args, message
     assert not (tmp_path / "s.png").exists()
 
 
+def test_a_corridor_thinner_than_float32_depths_draws_its_points(cli, tmp_path):
+    """A corridor 1e-9 wide holds the three points on the line (a file at 0.01: batches 10.24
+    units across): the eye stood 1e-9 from them, and float32 depths (~1e-7 of a batch's size
+    off) put every one outside near and far (a blank image and a warning)."""
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.scales, header.offsets = [0.01] * 3, [0.0] * 3
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = np.array([10.0, 12.0, 14.0, 16.0]), np.array([20.0, 20.0, 20.0, 21.0]), np.array([5.0, 6.0, 7.0, 8.0])
+    las.classification = np.full(4, 2, np.uint8)
+    las.write(str(tmp_path / "line.las"))
+    png = tmp_path / "thin.png"
+    rc, out, err = cli("section", tmp_path / "line.las", "--line", "9,20,17,20", "--width", 1e-9, "-o", png, "--scale", 2,
+                       "--color-mode", "classification", "--size-mode", "fixed")  # fmt: skip
+    assert rc == 0 and err == "", err
+    assert out == f"wrote {png} (19x8, 3 points in the corridor, a pixel 0.5 units a side)\n"
+    drawn = np.argwhere(np.asarray(Image.open(png))[..., :3].any(axis=2))
+    # column floor(2 * distance) + BORDER; rows 2 a unit down from z 8 (the border over z 7.5: z 7 decodes a hair above 7)
+    assert sorted(map(tuple, drawn.tolist())) == [(2, 11), (4, 7), (6, 3)]
+
+
 def test_the_command_names_the_files_of_an_empty_corridor(cli, files, tmp_path):
     rc, out, err = cli("section", files["straight"], "--line", "0,0,10,0", "--width", 2, "-o", tmp_path / "s.png")
     assert rc == 1 and err.startswith(f"error: {files['straight']}: no point passes the filter (corridor 0, 0 to 10, 0, width 2)")

@@ -375,12 +375,15 @@ class Camera:
         along = np.array([x2 - x1, y2 - y1, 0.0]) / length
         right_of_line = np.array([along[1], -along[0], 0.0])
         centre = np.array([x1, y1, top - height * pixel_size / 2]) + along * (left + width * pixel_size / 2)
-        # the eye half a corridor outside the corridor's right edge: every point lies between
-        # depths width / 2 and 3 width / 2, inside near and far whatever the cloud's (axis-aligned) box
-        eye = centre + right_of_line * corridor_width
+        # the eye ``distance`` from the line, at least half a corridor outside its right edge: every
+        # point lies between depths distance -+ width / 2, inside near and far whatever the cloud's
+        # (axis-aligned) box. The rasterizer's float32 depths are ~1e-7 of the section's size off:
+        # a corridor far thinner than that (1e-9 wide) had every point outside near or far.
+        distance = max(corridor_width, 1e-4 * max(width, height) * pixel_size)
+        eye = centre + right_of_line * distance
         return cls(
             eye=tuple(eye), target=tuple(centre), up=(0.0, 0.0, 1.0), width=width, height=height, projection="orthographic",
-            ortho_height=height * pixel_size, near=corridor_width / 4, far=2 * corridor_width,
+            ortho_height=height * pixel_size, near=distance / 4, far=2 * distance,
         )  # fmt: skip
 
     def _check_top_down(self, what: str) -> None:
