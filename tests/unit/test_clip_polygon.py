@@ -311,6 +311,7 @@ BAD = {
     "linestring": (json.dumps({"type": "LineString", "coordinates": [[0, 0], [1, 1]]}), "a LineString, not a polygon: a clip polygon is a Polygon or MultiPolygon"),
     "point": (json.dumps({"type": "Feature", "geometry": {"type": "Point", "coordinates": [0, 0]}}), "a Point, not a polygon: a clip polygon is a Polygon or MultiPolygon"),
     "wkt-unclosed": ("POLYGON ((0 0, 1 0, 1 1)", "not WKT POLYGON or MULTIPOLYGON (a ')' is missing)"),
+    "wkt-linestring": ("LINESTRING (0 0, 1 1)", "a LINESTRING, not a polygon: a clip polygon is a POLYGON or MULTIPOLYGON"),
 }
 
 
@@ -326,6 +327,21 @@ def test_bad_polygons_are_one_line_errors_naming_the_file_before_reading(cli, tm
     assert str(err.value) == want
     rc, _, cli_err = cli("render", tmp_path / "missing.laz", "-o", tmp_path / "x.png", "--clip-polygon", area)
     assert rc != 0 and cli_err.strip() == "error: " + (f"render: --clip-polygon {area}: {message}" if content is None else f"{area}: {message}")
+
+
+@pytest.mark.parametrize(
+    ("text", "kind"),
+    [("POINT (1 2)", "POINT"), ("LineString Z (0 0 0, 1 1 1)", "LINESTRING"), ("MULTIPOINT ((0 0), (1 1))", "MULTIPOINT"),
+     ("GEOMETRYCOLLECTION (POINT (1 2))", "GEOMETRYCOLLECTION")],
+)
+def test_wkt_text_of_another_geometry_is_named(cli, tmp_path, text, kind):
+    """(was "no such file (nor WKT text: POLYGON ((x y, ...)))")"""
+    reason = f"a {kind}, not a polygon: a clip polygon is a POLYGON or MULTIPOLYGON"
+    with pytest.raises(InputError) as err:
+        gp.open(tmp_path / "missing.laz", clip_polygon=text)
+    assert str(err.value) == f"open: clip_polygon={text!r}: {reason}"
+    rc, _, cli_err = cli("render", tmp_path / "missing.laz", "-o", tmp_path / "x.png", "--clip-polygon", text)
+    assert (rc, cli_err) == (1, f"error: render: --clip-polygon {text}: {reason}\n")
 
 
 def test_a_folder_given_as_the_clip_polygon_is_said_to_be_one(cli, autzen_path, tmp_path):

@@ -29,6 +29,9 @@ from ..errors import InputError
 #: How WKT of a polygon starts (a file named POLYGON.wkt does not)
 _WKT_START = re.compile(r"\s*(MULTI)?POLYGON\s*(Z|M|ZM)?\s*(\(|EMPTY)", re.IGNORECASE)
 
+#: How WKT of another geometry starts: named in the error (was "no such file" of WKT text)
+_WKT_NOT_AREA = re.compile(r"\s*(POINT|MULTIPOINT|LINESTRING|MULTILINESTRING|GEOMETRYCOLLECTION)\s*(Z|M|ZM)?\s*(\(|EMPTY)", re.IGNORECASE)
+
 #: GeoJSON geometry types that are not areas, named in the error
 _NOT_AREAS = {"Point", "MultiPoint", "LineString", "MultiLineString"}
 
@@ -147,6 +150,8 @@ def clip_polygon_of(value, label: str) -> ClipPolygon:
     if path.is_dir():  # (was "no such file" of a folder that is there)
         raise InputError(f"{label}: is a folder, not a clip polygon file (GeoJSON or WKT)")
     if not path.is_file():
+        if isinstance(value, str):  # (a file named "POINT (1).geojson" is read as one)
+            _refuse_other_wkt(text, label)
         raise InputError(f"{label}: no such file{' (nor WKT text: POLYGON ((x y, ...)))' * isinstance(value, str)}")
     try:
         content = path.read_text(encoding="utf-8-sig")
@@ -160,7 +165,15 @@ def clip_polygon_of(value, label: str) -> ClipPolygon:
         return _geojson_polygon(document, str(path), str(path))
     if _WKT_START.match(content):
         return _wkt_polygon(content, str(path))
+    _refuse_other_wkt(content, str(path))
     raise InputError(f"{path}: neither GeoJSON nor WKT (POLYGON, MULTIPOLYGON): not a clip polygon")
+
+
+def _refuse_other_wkt(text: str, label: str) -> None:
+    """A one-line InputError naming the geometry of WKT ``text`` that is not an area (POINT (1 2))."""
+    other = _WKT_NOT_AREA.match(text)
+    if other:
+        raise InputError(f"{label}: a {other[1].upper()}, not a polygon: a clip polygon is a POLYGON or MULTIPOLYGON")
 
 
 def _geojson_polygon(document, source: str, label: str) -> ClipPolygon:
