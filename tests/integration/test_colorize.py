@@ -252,6 +252,19 @@ def test_a_raster_in_another_crs_is_refused_naming_both(cli, no_rgb, tmp_path):
     assert not out.exists()
 
 
+def test_points_naming_no_crs_are_said_to_in_one_warning(cli, tmp_path):
+    """(was "plain.las name no CRS")"""
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.scales, header.offsets = [0.01] * 3, [0.0] * 3
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = np.array([5.0, 55.0]), np.array([5.0, 55.0]), np.array([1.0, 2.0])
+    plain = tmp_path / "plain.las"
+    las.write(str(plain))
+    raster = _geotiff(tmp_path / "utm.tif", _pattern(10, 10), "EPSG:32610", from_origin(0, 100, 10, 10))
+    rc, _, err = cli("convert", plain, "-o", tmp_path / "out.las", "--colorize", raster, "-q")
+    assert (rc, err) == (0, f"warning: the points ({plain}) name no CRS: the raster's pixels are taken to be in the points' coordinates (convert: colorize)\n")
+
+
 def test_colours_are_taken_after_to_crs_in_the_output_crs(no_rgb, tmp_path):
     transform = from_origin(494_000.0005, 4_878_000.0005, 2, 2)  # UTM metres, over autzen moved there (x 494 2xx-494 6xx)
     utm = _geotiff(tmp_path / "utm.tif", _pattern(1000, 1000), "EPSG:32610", transform)

@@ -107,6 +107,20 @@ def test_a_file_naming_no_crs_is_refused_unless_from_crs_says_it(tmp_path, recwa
     assert list(written.header.scales)[:2] == [0.001, 0.001]  # 1e-7 degree (~1 cm east-west here): its power of ten below in metres
 
 
+@pytest.mark.parametrize(("source", "xy", "warned"), [("EPSG:2994", (636_000.0, 849_000.0), True), (UTM, (494_000.0, 4_877_000.0), False)])
+def test_to_degrees_z_is_said_kept_where_it_is_not_in_metres(tmp_path, recwarn, source, xy, warned):
+    """A geographic CRS's heights are in metres: Oregon's feet to EPSG:4326 keep z in feet (that was
+    said nothing of, where feet to UTM's metres warned); UTM's metres to degrees keep it right."""
+    plain = _plain_tile(tmp_path / "plain.las", [[xy[0], xy[1], 100.0], [xy[0] + 10, xy[1] + 10, 110.0]])
+    gp.convert(plain, tmp_path / "lonlat.laz", to_crs="EPSG:4326", from_crs=source)
+    said = [str(w.message) for w in recwarn if issubclass(w.category, GigapointWarning)]
+    kept = (
+        f"{plain}: z is kept as it is, in its own unit, while x and y change unit: neither CRS has a vertical part, and PROJ "
+        "transforms heights only between vertical CRSs; give compound CRSs (e.g. from 'EPSG:2994+6360' to 'EPSG:32610+5703') to convert z"
+    )
+    assert said == ([kept] if warned else [])
+
+
 def test_the_cli_names_the_file_without_a_crs(cli, tmp_path):
     plain = _plain_tile(tmp_path / "plain.las", [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
     rc, _, err = cli("convert", plain, "-o", tmp_path / "out.laz", "--to-crs", UTM, "-q")

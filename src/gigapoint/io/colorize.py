@@ -97,8 +97,8 @@ class Colorization:
         their WKT or 'EPSG:n', the output's); warn where either names none (taken to be the same)."""
         raster_crs = self._dataset.crs
         if raster_crs is None or not points_crs:
-            which = f"{self.path} names no CRS" if raster_crs is None else f"{label} name no CRS"
-            warn(f"{which}: its pixels are taken to be in the points' coordinates ({self.where}: colorize)", GigapointWarning)
+            which = f"{self.path} names no CRS" if raster_crs is None else f"the points ({label}) name no CRS"  # (one file or several)
+            warn(f"{which}: the raster's pixels are taken to be in the points' coordinates ({self.where}: colorize)", GigapointWarning)
             return
         from .reproject import parse_crs
 

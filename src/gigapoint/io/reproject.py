@@ -95,6 +95,13 @@ def _metres_across(crs) -> float | None:
     return None if axis is None or crs.is_geographic or axis.unit_name.startswith("deg") else axis.unit_conversion_factor
 
 
+def _z_metres(crs) -> float | None:
+    """Metres in the unit z is in where ``crs`` has no vertical part: its x's (``_metres_across``),
+    metres for a geographic one (its heights are ellipsoidal, in metres: feet to degrees keeps z
+    in feet, which was said nothing of)."""
+    return 1.0 if crs.is_geographic else _metres_across(crs)
+
+
 def power_of_ten_below(value: float) -> float:
     """The power of ten at or below ``value`` (0.003048 -> 0.001; 0.01 -> 0.01)."""
     exponent = math.floor(math.log10(value) + 1e-9)  # (log10(0.001) is -2.9999999999999996)
@@ -256,8 +263,8 @@ class Reprojection:
     def step(self, path, lo, hi, scale) -> np.ndarray:
         """The output grid's step of ``path``'s points (its grid's ``scale``) per axis: how far one
         step of its grid moves them in the target CRS, at its box's middle, rounded down to a power
-        of ten; x and y alike (the finer of the two). Warns once where z is kept as it is while x and
-        y change length unit (between 2D CRSs: PROJ keeps z)."""
+        of ten; x and y alike (the finer of the two). Warns once where z is kept as it is while its unit
+        changes (between 2D CRSs: PROJ keeps z; a geographic CRS's heights are in metres)."""
         mid = (np.asarray(lo, np.float64) + np.asarray(hi, np.float64)) / 2
         scale = np.asarray(scale, np.float64)
         moved, lost = self._moved(np.array([mid, mid + [scale[0], 0, 0], mid + [0, scale[1], 0], mid + [0, 0, scale[2]]]), path)
@@ -268,7 +275,7 @@ class Reprojection:
             )
         across = min(float(np.hypot(*(moved[k, :2] - moved[0, :2]))) for k in (1, 2))
         up = abs(moved[3, 2] - moved[0, 2])
-        units = [_metres_across(c) for c in (self.transformer(path).source_crs, self.target)]
+        units = [_z_metres(c) for c in (self.transformer(path).source_crs, self.target)]
         if math.isclose(up, scale[2], rel_tol=1e-9) and None not in units and not math.isclose(*units, rel_tol=1e-9):
             self._warn_z_kept(path)
         return np.array([power_of_ten_below(across)] * 2 + [power_of_ten_below(up)])
