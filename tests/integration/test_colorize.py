@@ -16,7 +16,6 @@ import pytest
 import gigapoint as gp
 from gigapoint.errors import GigapointWarning, InputError
 from gigapoint.io.las import read_las_header
-from gigapoint.lod import ConvertError
 
 rasterio = pytest.importorskip("rasterio")
 pyproj = pytest.importorskip("pyproj")
@@ -440,9 +439,7 @@ def test_an_octree_conversion_resumes_only_with_the_same_raster_and_counts_acros
     assert closed == ["west.tif", "west.tif", "west.tif", "ortho.tif"]
 
 
-def test_colorize_is_refused_on_a_dask_cluster_and_for_a_clouds_points(no_rgb, tmp_path):
-    with pytest.raises(ConvertError, match=r"octree: --colorize: colours in this process, not on a Dask cluster \(--dask, --workers\); convert without one$"):
-        gp.convert(no_rgb, tmp_path / "octree", colorize=tmp_path / "ortho.tif", client="tcp://127.0.0.1:1")
+def test_colorize_is_refused_for_a_clouds_points(no_rgb, tmp_path):
     with pytest.raises(InputError, match=r"^convert: colorize colours the points read from files; the inputs are a cloud or PointChunks$"):
         gp.convert(gp.open(no_rgb), tmp_path / "octree", colorize=tmp_path / "ortho.tif")
     assert not (tmp_path / "octree").exists()

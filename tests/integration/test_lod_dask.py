@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from gigapoint.cli import main
-from gigapoint.errors import InputError
+from gigapoint.errors import GigapointWarning, InputError
 from gigapoint.lod import ConvertError, OctreeDir, convert
 
 distributed = pytest.importorskip("distributed")
@@ -716,3 +716,70 @@ def test_a_bad_input_read_after_others_keeps_out_as_one_process_does(thread_clie
     monkeypatch.setattr(hooks, "task_started", lambda kind, name: None)
     res = convert(good, out, client=thread_client, **OPTS)
     assert res.points == 40_000 and not res.resumed
+
+
+UTM = "EPSG:32610"
+#: a quadrilateral over part of autzen, in its own CRS (feet): moved into the target before a point is read
+SITE_FEET = [[636_200.0, 849_000.0], [637_000.0, 848_990.0], [636_900.0, 849_400.0], [636_300.0, 849_350.0], [636_200.0, 849_000.0]]
+
+
+def test_to_crs_on_dask_is_the_single_process_octree(autzen_path, client, tmp_path):
+    """The read tasks move each chunk as one process does (Reprojection.from_spec: the same CRSs
+    and fast-path tolerance), the clip polygon moved into the target before the filter, the points
+    spilled off the file's grid (float64): the same octree, byte for byte, in UTM metres."""
+    pyproj = pytest.importorskip("pyproj")
+    polygon = tmp_path / "site.geojson"
+    polygon.write_text(json.dumps({"type": "Polygon", "coordinates": [SITE_FEET]}))  # (names no CRS: autzen's feet)
+    results = {}
+    for run, dask in (("one", None), ("dask", client)):
+        with pytest.warns(GigapointWarning, match="z is kept as it is"):
+            results[run] = convert(autzen_path, tmp_path / run, to_crs=UTM, clip_polygon=polygon, client=dask, **OPTS)
+    assert 10_000 < results["dask"].points == results["one"].points < 100_000  # (a cut, not all or nothing)
+    _assert_identical(tmp_path / "one", tmp_path / "dask")
+    meta = json.loads((tmp_path / "dask" / "octree.json").read_text())
+    assert pyproj.CRS.from_wkt(meta["crs"]) == pyproj.CRS.from_epsg(32610)
+    lo, hi = meta["bounds"]["min"], meta["bounds"]["max"]
+    assert 494_000 < lo[0] and hi[0] < 495_000 and 4_877_000 < lo[1] and hi[1] < 4_878_000  # (metres of UTM 10N, not autzen's feet)
+
+
+def _colorize_helpers():
+    """test_colorize.py's raster width, GeoTIFF writer, pattern and pixels under a file's points."""
+    pytest.importorskip("rasterio")
+    pytest.importorskip("pyproj")
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from test_colorize import WIDTH, _geotiff, _pattern, _pixels_of
+
+    return WIDTH, _geotiff, _pattern, _pixels_of
+
+
+def test_colorize_on_dask_is_the_single_process_octree_and_counts_the_uncoloured(autzen_path, client, tmp_path):
+    """Each read task opens the raster itself, blackens a colourless file's points, colours its
+    chunks after the filter and counts those the raster leaves uncoloured: the same octree, byte
+    for byte, and the same count, the points east of a raster over autzen's west half."""
+    WIDTH, _geotiff, _pattern, _pixels_of = _colorize_helpers()
+    no_rgb = tmp_path / "autzen_no_rgb.las"
+    laspy.convert(laspy.read(str(autzen_path)), point_format_id=1).write(str(no_rgb))
+    half = _geotiff(tmp_path / "west.tif", _pattern()[:, :, : WIDTH // 2], laspy.read(str(no_rgb)).header.parse_crs().to_wkt())
+    east = int((_pixels_of(no_rgb)[1] >= WIDTH // 2).sum())
+    assert 30_000 < east < 80_000
+    results = {run: convert(no_rgb, tmp_path / run, colorize=half, client=dask, **OPTS) for run, dask in (("one", None), ("dask", client))}
+    assert results["dask"].uncolored == results["one"].uncolored == east
+    _assert_identical(tmp_path / "one", tmp_path / "dask")
+    assert json.loads((tmp_path / "dask" / "octree.json").read_text())["has_color"] is True
+
+
+def test_a_raster_a_worker_does_not_see_is_named_as_such(thread_client, tmp_path, las_writer, monkeypatch):
+    """The read tasks open the --colorize raster themselves: one only the driver sees (gone here
+    once a read task starts) is named with what to do, as an input is."""
+    from gigapoint.lod.convert import hooks
+
+    _, _geotiff, _pattern, _ = _colorize_helpers()
+    src = las_writer(tmp_path / "a.las", 20_000)
+    raster = _geotiff(tmp_path / "ortho.tif", _pattern(), None)
+    monkeypatch.setattr(hooks, "task_started", lambda kind, name: kind == "read" and raster.unlink(missing_ok=True))
+    with pytest.raises(ConvertError) as err, pytest.warns(GigapointWarning, match="names no CRS"):
+        convert([src], tmp_path / "oct", colorize=raster, client=thread_client)
+    msg = str(err.value)
+    assert msg.startswith(f"{raster}: Dask worker inproc://") and "\n" not in msg, msg
+    assert "does not see this raster (--colorize), which the driver does (it must be at the same path on a file system every worker shares)" in msg
+    assert msg.endswith("it resumes)")

@@ -18,7 +18,6 @@ from gigapoint.io import files_crs
 from gigapoint.io.crs import crs_identity
 from gigapoint.io.las import read_las_header
 from gigapoint.io.reproject import Reprojection, output_grid
-from gigapoint.lod import ConvertError
 
 pyproj = pytest.importorskip("pyproj")
 
@@ -171,10 +170,7 @@ def test_without_pyproj_the_option_says_how_to_install_it(autzen_path, tmp_path,
         gp.convert(autzen_path, tmp_path / "out.laz", to_crs=UTM)
 
 
-def test_to_crs_is_refused_on_a_dask_cluster_and_from_crs_without_to_crs(autzen_path, tmp_path):
-    with pytest.raises(ConvertError, match=r"octree: --to-crs: reprojects in this process, not on a Dask cluster \(--dask, --workers\); convert without one$"):
-        gp.convert(autzen_path, tmp_path / "octree", to_crs=UTM, client="tcp://127.0.0.1:1")
-    assert not (tmp_path / "octree").exists()
+def test_from_crs_without_to_crs_is_refused(autzen_path, tmp_path):
     with pytest.raises(InputError, match=r"^convert: from_crs='EPSG:2994': the CRS the inputs are in, for to_crs; give to_crs too$"):
         gp.convert(autzen_path, tmp_path / "out.laz", from_crs="EPSG:2994")
 
@@ -234,6 +230,22 @@ def test_the_fast_path_is_within_a_tenth_of_the_grid_step_of_proj_and_writes_the
         assert same[~near].all(), axis
     assert near.sum() <= 10  # (2 x 7.5e-6 of a step: ~2 by chance)
     assert np.array_equal(np.asarray(written_fast.Z), np.asarray(written_exact.Z))
+
+
+def test_a_reprojection_made_again_from_its_spec_moves_points_bit_for_bit_as_it_does(autzen_path):
+    """What a Dask read task gets (lod/convert/distributed.py): the CRSs, the exact switch and the
+    fast path's tolerance, so its chunks are interpolated as the driver's would be, not moved exactly."""
+    reprojection = Reprojection(UTM, "EPSG:2994")
+    with pytest.warns(GigapointWarning, match="z is kept"):
+        output_grid([autzen_path], reprojection)
+    again = Reprojection.from_spec(reprojection.as_spec())
+    assert again.as_spec() == reprojection.as_spec() and again.tolerance == reprojection.tolerance
+    xyz = _read_xyz(autzen_path)
+    assert np.array_equal(again.transformed(xyz, autzen_path), reprojection.transformed(xyz, autzen_path))
+    assert again.interpolated_points == reprojection.interpolated_points == 110_000
+    exact = Reprojection.from_spec({**reprojection.as_spec(), "exact": True})
+    exact.transformed(xyz, autzen_path)
+    assert (exact.interpolated_points, exact.exact_points) == (0, 110_000)
 
 
 def test_a_200_km_box_across_a_utm_zone_edge_takes_a_finer_grid_and_stays_within_the_bound(tmp_path):

@@ -321,9 +321,20 @@ class Reprojection:
 
     def as_spec(self) -> dict:
         """What tells two reprojections apart (a conversion's fingerprint: one resumed under another
-        mixed points moved two ways): the CRSs, as WKT, and whether every point goes through PROJ."""
+        mixed points moved two ways), and all a Dask read task needs to move points the same
+        (``from_spec``): the CRSs, as WKT, whether every point goes through PROJ, and the fast
+        path's tolerance (``output_grid``'s: it decides which chunks are interpolated)."""
         source = None if self.given_source is None else self.given_source.to_wkt()
-        return {"to_crs": self.target.to_wkt(), "from_crs": source, "exact": self.exact}
+        tolerance = None if self.tolerance is None else [float(t) for t in self.tolerance]
+        return {"to_crs": self.target.to_wkt(), "from_crs": source, "exact": self.exact, "tolerance": tolerance}
+
+    @classmethod
+    def from_spec(cls, spec: dict, where: str = "convert") -> Reprojection:
+        """The reprojection ``as_spec`` describes, made again (in a Dask worker): it moves points
+        as the one described does, bit for bit."""
+        made = cls(spec["to_crs"], spec["from_crs"], where, spec["exact"])
+        made.tolerance = None if spec["tolerance"] is None else tuple(spec["tolerance"])
+        return made
 
     def target_wkt(self) -> str:
         """The target CRS as the output's WKT VLR holds it (OGC WKT1, as LAS 1.4 says)."""

@@ -291,7 +291,7 @@ def convert(
     0, in the inputs' units; one point is kept per occupied cell, the first in the inputs' order,
     over all of them (io/thin.py). The result's ``thinned_from`` counts the points before it.
 
-    ``to_crs`` (input files only, not on a ``client``; needs pyproj: ``pip install 'gigapoint[gis]'``): the CRS
+    ``to_crs`` (input files only; needs pyproj: ``pip install 'gigapoint[gis]'``): the CRS
     the points are moved into ('EPSG:32610', a WKT, a PROJ string), from each file's own (its
     header's; ``from_crs`` for every file where given, and for files naming none), as they are read
     (io/reproject.py): the filter's clip box and ``thin``'s cells are then in its coordinates (a
@@ -302,14 +302,16 @@ def convert(
     output grid's step of PROJ's own (checked; else exactly); ``exact_transform=True``: every point
     through PROJ.
 
-    ``colorize`` (input files only, not on a ``client``; needs rasterio: ``pip install 'gigapoint[gis]'``): an
+    ``colorize`` (input files only; needs rasterio: ``pip install 'gigapoint[gis]'``): an
     orthophoto (a GeoTIFF, any raster GDAL reads) whose pixels colour the points written, each the
     pixel it lies in, after ``to_crs`` (in the output's coordinates; io/colorize.py): bands 1-3 as
     red, green, blue. Points outside it or under its mask (alpha 0, nodata) keep their colour (0
     where their file had none), counted in the result's ``uncolored``. A raster in another CRS than
     the output's is refused (move the points into its CRS with ``to_crs``). The output (a plain
     file, an octree, a COPC file) has colours; an octree's points are coloured as they are read,
-    and a conversion resumes only with the same raster, unchanged (its path, size, time).
+    and a conversion resumes only with the same raster, unchanged (its path, size, time). On a
+    ``client``, the workers move and colour the points they read, and open the raster themselves:
+    it must be at the same path on a file system they all share, as the inputs are.
     """
     check_switch("overwrite", overwrite, "convert")
     check_switch("recursive", recursive, "convert")
@@ -377,10 +379,6 @@ def convert(
         raise ConvertError(f"--format: unknown format {format!r}; choose {' or '.join(FORMATS)}")
     if format != "copc" and out is not None and str(out) != "" and is_supported_name(out):  # -o scan.laz: a folder named so
         raise ConvertError(f"{out}: a {format} octree is a folder; name it without a point file's suffix, or write --format copc into a .copc.laz file")
-    if to_crs is not None and client is not None:  # (its read tasks read the files as they are)
-        raise ConvertError(f"{out}: --to-crs: reprojects in this process, not on a Dask cluster (--dask, --workers); convert without one")
-    if colorize is not None and client is not None:  # (as --to-crs: its read tasks spill the files' points as they are)
-        raise ConvertError(f"{out}: --colorize: colours in this process, not on a Dask cluster (--dask, --workers); convert without one")
     if spacing is not None:  # (an octree's inner nodes are its thinned levels; its leaves hold every point)
         raise ConvertError(f"{out}: --thin: an option of a plain .las, .laz or .ply file of the files' points, not of a {format} octree")
     if format == "copc" and out is not None and str(out) != "":

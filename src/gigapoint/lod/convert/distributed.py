@@ -61,9 +61,11 @@ from ...core import pages
 from ...core.chunk import ColorScaler, warn_dropped_attributes
 from ...errors import GigapointError, GigapointWarning, warn
 from ...io._base import one_line
+from ...io.colorize import Colorization
 from ...io.filters import PointFilter, filtered
 from ...io.las import with_scan_angle
 from ...io.registry import reader_for
+from ...io.reproject import Reprojection
 from ..keys import CODE_BITS
 from ..octree_dir import STOPPED_RESUMES, ConvertError, OctreeDir
 from ..preview import PreviewSampler, preview_points
@@ -78,6 +80,7 @@ from .read import (
     _skipped_if_empty,
     merge_attributes,
     merge_constants,
+    moved_and_blackened,
     skipped_message,
     spill_chunk,
 )
@@ -394,15 +397,45 @@ def _run_task(kind: str, name: str, spec: dict, fn, *args):
         ) from None
 
 
-def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | None, color_mode: str | None, stride: int) -> dict:
+def _unseen(path: str, what: str, rule: str, spec: dict) -> ConvertError:
+    """The error of a file the driver saw when it planned the task that this worker does not see
+    (it runs elsewhere): not an InputError, the file is fine, and the run resumes once the workers see it."""
+    return ConvertError(
+        f"{path}: Dask worker {_worker_name()} does not see this {what}, which the driver does ({rule} at the "
+        f"same path on a file system every worker shares); the conversion to {spec['out']} stopped unfinished ({STOPPED_RESUMES})"
+    )
+
+
+@contextmanager
+def _moving_and_coloring(spec: dict):
+    """(Reprojection, Colorization) of the conversion's ``--to-crs`` and ``--colorize`` (None where
+    not given) for read tasks, made again from the driver's spec: the raster opened here (on a
+    file system every worker shares, as the inputs are), closed at the end."""
+    reprojection = None if spec["reprojection"] is None else Reprojection.from_spec(spec["reprojection"])
+    raster = spec["colorize"]
+    if raster is None:
+        yield reprojection, None
+        return
+    if not os.path.exists(raster):
+        raise _unseen(raster, "raster (--colorize)", "it must be", spec)
+    colorization = Colorization(raster, "convert")
+    try:
+        yield reprojection, colorization
+    finally:
+        colorization.close()
+
+
+def _read_task(
+    spec: dict, t: int, path: str, start: int | None, stop: int | None, color_mode: str | None, stride: int, reprojection=None, colorization=None
+) -> dict:
     """Read task ``t``: points start..stop of ``path`` (None: the whole file) spilled to raw chunks
     t·CHUNK_STRIDE + j. ``color_mode``: the file's color decision before ``start``. Its result
-    has every ``stride``-th valid point for the preview ("preview"; the driver's, not the state's)."""
+    has every ``stride``-th valid point for the preview ("preview"; the driver's, not the state's).
+    ``reprojection``, ``colorization``: ``_moving_and_coloring``'s, which move each chunk before the
+    filter and colour it after, as one process does (read.py); the points that took no colour
+    are counted ("uncolored")."""
     if not os.path.exists(path):  # the driver saw it when it planned this task: this worker is elsewhere
-        raise ConvertError(  # (not an InputError: the file is fine, and the run resumes once the workers see it)
-            f"{path}: Dask worker {_worker_name()} does not see this input, which the driver does (inputs must be at the "
-            f"same path on a file system every worker shares); the conversion to {spec['out']} stopped unfinished ({STOPPED_RESUMES})"
-        )
+        raise _unseen(path, "input", "inputs must be", spec)
     raw = OctreeDir(spec["dir"]).raw
     scaler, xyz_code, empty = None, None, []
     if start is None:  # an empty file among several (one whose header has no count: text) skipped, said by the driver
@@ -411,18 +444,24 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
         scaler = ColorScaler()
         scaler.mode = color_mode
         chunks = reader_for(path).read_chunks(Path(path), spec["chunk_size"], start=start, stop=stop, scaler=scaler)
-        xyz_code = las_xyz_code(path)  # a range of a LAS/LAZ file: its positions spilled as the file's int32 (spill.encode_xyz)
+        if reprojection is None:  # a range of a LAS/LAZ file: its positions spilled as the file's int32 (spill.encode_xyz); moved ones are off its grid
+            xyz_code = las_xyz_code(path)
+    chunks = moved_and_blackened(chunks, path, reprojection, colorization)
     if spec["one_angle"]:
         chunks = with_scan_angle(chunks)
     passing = PointFilter.from_spec(spec["filter"])  # the driver's filter, as the task's own count
     chunks = filtered(chunks, path, passing)
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-    attrs, constant, n_chunks, n_in, points, skipped, eight = None, {}, 0, 0, 0, 0, False
+    attrs, constant, n_chunks, n_in, points, skipped, eight, uncolored = None, {}, 0, 0, 0, 0, False, 0
     sample: list[dict] = []
     for j, chunk in enumerate(chunks):
         if j >= CHUNK_STRIDE:
             raise ConvertError(f"{path}: more than {CHUNK_STRIDE:,} chunks in one read task")
+        if colorization is not None:
+            chunk, missed = colorization.colored(chunk, had_color=True)  # (a colourless file's points: black, moved_and_blackened)
         (xyz, rgba, _, names, invalid, c_lo, c_hi), found = spill_chunk(raw, t * CHUNK_STRIDE + j, chunk, xyz_code)
+        if colorization is not None:  # the invalid points, skipped, lie on no pixel (as ReadPhase.read counts them)
+            uncolored += missed - int(invalid)
         merge_constants(constant, found)
         pick = slice((-points) % stride, None, stride)
         sample.append({"xyz": np.array(xyz[pick]), "rgba": np.array(rgba[pick])})
@@ -437,6 +476,7 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
         "passed": None if passing is None else passing.passed,
         "points": points,
         "skipped": skipped,
+        "uncolored": uncolored,  # (0 without --colorize)
         "empty": bool(empty),
         "lo": lo.tolist(),
         "hi": hi.tolist(),
@@ -453,7 +493,8 @@ def _read_task(spec: dict, t: int, path: str, start: int | None, stop: int | Non
 
 def _read_batch(spec: dict, reads: list, stride: int) -> list[dict]:
     """Read tasks ``reads`` [(t, path, start, stop, color mode), ...] in one Dask task (``DaskPhases._batches``): their results."""
-    return [_read_task(spec, *r, stride) for r in reads]
+    with _moving_and_coloring(spec) as (reprojection, colorization):
+        return [_read_task(spec, *r, stride, reprojection, colorization) for r in reads]
 
 
 def _count_task(spec: dict, ids: list[int]) -> tuple[np.ndarray, np.ndarray]:
@@ -654,11 +695,19 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             "chunk_size": self.chunk_size,
             "several": len(self.paths) > 1,
             "one_angle": self.one_angle,
-            "filter": None if self.point_filter is None else self.point_filter.as_spec(),
+            "filter": None if self.point_filter is None else self.point_filter.as_spec(),  # (with --to-crs: its polygon moved already)
+            "reprojection": None if self.reprojection is None else self.reprojection.as_spec(),
+            "colorize": None if self.colorization is None else str(self._raster()),
             "memory_limit": self.mem,
             "own_workers": self.client in _OWN_WORKERS,
             "state": {k: st[k] for k in keep if k in st},
         }
+
+    def _raster(self) -> Path:
+        """The ``--colorize`` raster's absolute path, for the workers; errors name it as given (_as_given)."""
+        full = self.colorization.path.resolve()
+        self._given.setdefault(str(full), str(self.colorization.path))
+        return full
 
     def _run(self, kind: str, calls: list, on_done, also: tuple | None = None, meanwhile=None) -> None:
         """Run ``calls`` [(name, function, args, priority), ...] as ``kind`` tasks; ``on_done(i,
@@ -905,6 +954,8 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             attributes=attrs or {},
             constant=constant,
         )
+        if self.colorization is not None:  # (every task's, those of a resumed run's earlier runs too: convert() reports it)
+            st["uncolored"] = sum(r["uncolored"] for r in results.values())
         if self.point_filter is not None:  # (ReadPhase._end_read: "no point passes the filter" where it left none)
             st.update(filter_read=sum(r["input"] for r in results.values()), filter_passed=sum(r["passed"] for r in results.values()))
         warn_dropped_attributes(self._as_given(str(self.out)), dropped)

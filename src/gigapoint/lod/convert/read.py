@@ -121,6 +121,17 @@ def _black(n: int) -> np.ndarray:
     return rgba
 
 
+def moved_and_blackened(chunks, path, reprojection, colorization):
+    """The chunks of file ``path`` as the read phase filters them (here and in a Dask read task):
+    moved into the target CRS where ``reprojection`` is given; where ``colorization`` is given and
+    the file has no colours, black (those the raster gives none stay black, as a plain file's)."""
+    if reprojection is not None:
+        chunks = (reprojection.chunk(chunk, path) for chunk in chunks)
+    if colorization is not None and not file_has_color(path):
+        chunks = (replace(chunk, rgba=_black(len(chunk))) for chunk in chunks)
+    return chunks
+
+
 def _same(a, b) -> bool:
     """Whether ``a`` and ``b`` (arrays, tuples or None) hold the same values."""
     return (a is None) == (b is None) and (a is None or np.array_equal(a, b))
@@ -232,11 +243,7 @@ class ReadPhase(Job):
         them: those the raster gives no colour stay black, as in a plain point file, not grey)."""
         for p in self.paths:
             code = _grid_of(p) if self.reprojection is None else None
-            read = _read_chunks(p, self.chunk_size)
-            if self.reprojection is not None:
-                read = (self.reprojection.chunk(chunk, p) for chunk in read)
-            if self.colorization is not None and not file_has_color(p):
-                read = (replace(chunk, rgba=_black(len(chunk))) for chunk in read)
+            read = moved_and_blackened(_read_chunks(p, self.chunk_size), p, self.reprojection, self.colorization)
             chunks = _skipped_if_empty(p, filtered(read, p, self._passing), len(self.paths) > 1)
             chunks = with_scan_angle(chunks) if self.one_angle else chunks
             for chunk in prefetch(chunks) if self.read_ahead else chunks:
