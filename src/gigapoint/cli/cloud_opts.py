@@ -107,7 +107,8 @@ ColorizeOption = Annotated[
         readable=False,
         help="Colour the points from an orthophoto (a GeoTIFF, any raster GDAL reads) in the output's CRS (after --to-crs): each point "
         "takes its pixel's bands 1-3 as red, green, blue; points outside it, or under its alpha 0 or nodata, keep their colour (0 "
-        "where their file had none) and are counted. Needs rasterio: pip install 'gigapoint\\[gis]'.",
+        "where their file had none) and are counted. On a Dask cluster (convert --dask/--workers) its workers open it: put it on the file system "
+        "they share, as the inputs. Needs rasterio: pip install 'gigapoint\\[gis]'.",
     ),
 ]
 
