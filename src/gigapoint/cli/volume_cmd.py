@@ -37,7 +37,7 @@ def volume(
         typer.Option(
             "--clip-polygon",
             metavar="AREA",
-            help="The piles' boundaries (toes), in the files' coordinates: a GeoJSON file (Polygon, MultiPolygon, a Feature or FeatureCollection of them: one pile each Feature, named by its 'name', a MultiPolygon Feature one pile in parts; one each polygon outside a Feature) or a WKT file or text (one pile each polygon). A polygon crossing itself is refused.",
+            help="The piles' boundaries (toes), in the files' coordinates: a GeoJSON file (Polygon, MultiPolygon, a Feature or FeatureCollection of them: one pile each Feature, named by its 'name', a MultiPolygon Feature one pile in parts; one each polygon outside a Feature) or a WKT file or text (one pile each polygon). A GeoJSON naming another CRS (a crs member) is moved into the survey's first (pyproj). A polygon crossing itself is refused.",
         ),
     ] = None,
     base: Annotated[str, typer.Option(metavar="plane|lowest|Z", help="What the volume stands on: 'plane' the least-squares plane through the surface along the toe, 'lowest' flat at the toe's lowest height, or an elevation Z.")] = "plane",

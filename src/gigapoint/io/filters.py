@@ -252,42 +252,77 @@ class PointFilter:
 
 
 def _placed(polygon: ClipPolygon, path) -> ClipPolygon:
-    """``polygon`` in the coordinates of ``path``'s points (the module's notes): moved from the CRS
-    its GeoJSON names into the one ``path``'s LAS header names where pyproj is installed; else as
-    it is (a warning where both name EPSG codes that differ), or a one-line InputError where it
-    lies in longitude/latitude's range far from a file in a projected CRS (it would clip nothing)."""
-    from .crs import crs_name, crs_units, horizontal_epsg
+    """``polygon`` in the coordinates of ``path``'s points (``placed_over``)."""
+    return placed_over(polygon, [path], path)
+
+
+def placed_over(polygon: ClipPolygon, files, where) -> ClipPolygon:
+    """``polygon`` in the coordinates of the points of ``files`` (named ``where`` in messages):
+    ``placed_in`` the CRS the first of their LAS headers naming one names, over its box (as it
+    is where none names one, or they are no LAS/LAZ files: an octree, a PLY)."""
+    from .crs import crs_units
     from .las import first_crs_header, geokeys
 
-    if polygon.moved_from is not None or (polygon.epsg is None and not looks_like_lon_lat(polygon)):
+    if not may_move(polygon):
         return polygon  # in the points' coordinates (the usual case: no header read)
-    header = first_crs_header([path])  # (None: names no CRS, or is no LAS/LAZ file: an octree, a PLY)
+    header = first_crs_header(files)
     if header is None:
         return polygon
     crs = header.crs()
+    return placed_in(polygon, crs, crs_units(crs, geokeys(header.vlrs)), (header.mins, header.maxs), where)
+
+
+def may_move(polygon: ClipPolygon) -> bool:
+    """Whether ``polygon`` may be moved into its points' CRS, or refused there (``placed_in``): it
+    names a CRS, or looks like longitude/latitude; any other is in the points' coordinates."""
+    return polygon.moved_from is None and (polygon.epsg is not None or looks_like_lon_lat(polygon))
+
+
+def placed_in(polygon: ClipPolygon, crs: str | None, units: dict, bounds, where) -> ClipPolygon:
+    """``polygon`` in the coordinates of points in ``crs`` (the module's notes; ``units``: its
+    io.crs_units, ``bounds``: the points' (lo, hi) box, ``where``: how messages name them, a file
+    or a survey): moved from the CRS its GeoJSON names into ``crs`` where pyproj is installed;
+    else as it is (a warning where both name EPSG codes that differ), or a one-line InputError
+    where it lies in longitude/latitude's range far from points in a projected CRS
+    (``refuse_lon_lat``: it would clip nothing). As it is where ``crs`` is None."""
+    from .crs import horizontal_epsg
+
+    if not may_move(polygon) or crs is None:
+        return polygon
     if polygon.epsg is not None:
         if crs not in polygon.placed:  # (once a CRS, not once a file: a survey's thousands of tiles share one)
-            polygon.placed[crs] = _moved_into(polygon, crs, path)
+            polygon.placed[crs] = _moved_into(polygon, crs, where)
         if polygon.placed[crs] is not None:
             return polygon.placed[crs]
-    horizontal = crs_units(crs, geokeys(header.vlrs))["horizontal"]
-    projected = horizontal is not None and horizontal["metres"] is not None
-    if projected and looks_like_lon_lat(polygon) and far_apart(polygon, header.mins, header.maxs):
-        (x0, y0), (x1, y1) = polygon.lo, polygon.hi
-        if polygon.epsg is None:
-            raise InputError(
-                f"{polygon.source}: x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g} looks like longitude/latitude (RFC 7946 GeoJSON) while {path} "
-                f"is in {crs_name(crs)}: add a crs member naming its CRS, or reproject it into the files' coordinates"
-            )
-        raise InputError(
-            f"{polygon.source}: names EPSG:{polygon.epsg} while {path} is in {crs_name(crs)}: moving it there needs pyproj "
-            f"(pip install 'gigapoint[gis]'), or reproject it into the files' coordinates"
-        )
+    refuse_lon_lat(polygon, crs, units, bounds, where)
     epsg = horizontal_epsg(crs)
     if polygon.epsg is not None and epsg is not None and epsg != polygon.epsg:
-        message = f"{polygon.source} names EPSG:{polygon.epsg}, {path} EPSG:{epsg}: the polygon is taken in the files' coordinates, not reprojected"
+        message = f"{polygon.source} names EPSG:{polygon.epsg}, {where} EPSG:{epsg}: the polygon is taken in the files' coordinates, not reprojected"
         read_once("clip polygon CRS", f"{polygon.source} EPSG:{epsg}", lambda: warn(message, GigapointWarning))
     return polygon
+
+
+def refuse_lon_lat(polygon: ClipPolygon, crs: str, units: dict, bounds, where) -> None:
+    """A one-line InputError where ``polygon``, taken as it is, lies within longitude/latitude's
+    range far from the ``bounds`` (lo, hi) of points (named ``where``) in ``crs``, a projected CRS
+    (``units``: its io.crs_units): it would clip nothing. One naming no CRS is lon/lat by RFC 7946;
+    one naming a CRS is here only without pyproj to move it."""
+    from .crs import crs_name
+
+    horizontal = units["horizontal"]
+    projected = horizontal is not None and horizontal["metres"] is not None
+    if not (projected and looks_like_lon_lat(polygon) and far_apart(polygon, *bounds)):
+        return
+    (x0, y0), (x1, y1) = polygon.lo, polygon.hi
+    if polygon.epsg is None:
+        raise InputError(
+            f"{polygon.source}: x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g} looks like longitude/latitude (RFC 7946 GeoJSON) while {where} "
+            f"is in {crs_name(crs)}: add a crs member naming its CRS, or reproject it into the files' coordinates"
+        )
+    raise InputError(
+        f"{polygon.source}: names EPSG:{polygon.epsg} while {where} is in {crs_name(crs)}: moving it there needs pyproj "
+        f"(pip install 'gigapoint[gis]'), or reproject it into the files' coordinates"
+    )
 
 
 def _moved_into(polygon: ClipPolygon, crs: str, path) -> ClipPolygon | None:

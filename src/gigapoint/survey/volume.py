@@ -3,7 +3,9 @@
 
 Each pile is a polygon, its boundary (the toe) drawn on the ground; a GeoJSON Feature's
 MultiPolygon is one pile in parts (a stockpile a road runs through is one stock item): its
-volume the sum of its parts', each part measured against its own base (below). The survey is
+volume the sum of its parts', each part measured against its own base (below). A toe whose
+GeoJSON names a CRS is moved into the survey's first, as a read filter moves its polygon
+(``_in_survey_crs``); one in longitude/latitude naming none over a projected survey is refused. The survey is
 drawn as a surface model (``change.surface``: the highest point in each pixel) on a grid of ``gsd``
 over the polygons' box, a little beyond it, so that the pixels along the toe hold the ground on
 both sides. A pixel is the pile's when its centre lies inside the polygon (polygon.py's
@@ -36,6 +38,7 @@ is what its parts measured one by one add up to, and grouping them changes only 
 from __future__ import annotations
 
 import math
+import os
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,11 +46,14 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..core.cloud import PointCloud
 from ..errors import EmptyCloudError, InputError, check_switch, is_real
-from ..io.filters import point_filter
+from ..io._base import headers_once
+from ..io.filters import may_move, placed_in, placed_over, point_filter
 from ..io.polygon import ClipPolygon, check_simple, clip_polygon_of
 from ..lod.query import is_octree
-from ..lod.reader import cloud_crs, cloud_units
+from ..lod.reader import cloud_crs, cloud_crs_units, cloud_units
+from ..lod.voxel_octree import VoxelOctree
 from ..render import Camera
 from ..render.colors import ramp_image
 from ..render.contours import draw_lines
@@ -319,6 +325,34 @@ def _pile_parts(polygon: ClipPolygon) -> list[tuple[str, list[int]]]:
     return list(zip(numbered, groups))
 
 
+def _in_survey_crs(toe: ClipPolygon, source) -> ClipPolygon:
+    """``toe`` in the survey's coordinates, as a read filter places its polygon (io/filters.py's
+    ``placed_in``): moved from the CRS its GeoJSON names into the survey's (``cloud_crs``'s: that
+    of its first point file naming one, or an octree's), refused in one line where it looks like
+    longitude/latitude naming none over a projected survey. Only headers (or an octree's
+    metadata) are read, before a point is: the toe's box bounds what is read."""
+    if not may_move(toe):
+        return toe
+    from .. import open as open_points
+    from ..io import expand_paths, lone_match
+    from ..lod import is_lod_source
+
+    label = survey_label(source)
+    survey = source
+    if not (isinstance(source, PointCloud) or is_octree(source)):
+        paths = lone_match([source] if isinstance(source, (str, os.PathLike)) else source)
+        if not (len(paths) == 1 and is_lod_source(paths[0])):
+            return placed_over(toe, expand_paths(paths), label)
+        survey = open_points(paths[0])  # (an octree opens unread: its metadata)
+    try:
+        crs, units = cloud_crs_units(survey)
+        return placed_in(toe, crs, units, survey.bounds, label)
+    finally:
+        if isinstance(survey, VoxelOctree) and survey is not source:  # (a COPC/EPT octree opened here: its connections)
+            survey.close()
+
+
+@headers_once()  # (one operation: the toe placed over the survey's headers, then its points read, each header read and each warning said once)
 def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=None, fill_nodata="all", full=True) -> Volume:
     """The volume of each pile ``clip_polygon`` outlines (a GeoJSON or WKT file, WKT text, a GeoJSON
     geometry as a dict: polygon.py; several polygons, several piles, named by their Feature's
@@ -333,8 +367,9 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
     ``fill_nodata``: "all" (the default) every hole inside the data's footprint filled linearly
     (needs scipy), N only those within N pixels of a point, None none. Returns a ``Volume``
     (``piles``, ``fill``, ``cut``, ``net``, ``area``, ``summary()``, ``write_dsm()``,
-    ``write_geotiff()``, ``write_preview()``). No polygon, a
-    polygon crossing itself, outside the data or with no point inside are one-line InputErrors."""
+    ``write_geotiff()``, ``write_preview()``). A GeoJSON naming another CRS than the survey's
+    (a ``crs`` member) is moved into it first (pyproj). No polygon, a polygon crossing itself,
+    outside the data or with no point inside are one-line InputErrors."""
     if clip_polygon is None:
         raise InputError("volume: clip_polygon is needed: the piles' boundaries (a GeoJSON or WKT polygon file, or WKT text)")
     if not (is_real(gsd) and gsd > 0):
@@ -345,6 +380,7 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
         check_max_distance("volume: fill_nodata", fill_nodata)
     toe = clip_polygon_of(clip_polygon, f"volume: clip_polygon={clip_polygon!r}")
     check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it")
+    toe = _in_survey_crs(toe, source)  # (before its box bounds what is read)
     margin = MARGIN_PIXELS * gsd
     box = [*(toe.lo - margin), *(toe.hi + margin)]  # read-time: only the points near the piles
     filters = {"classes": classes, "drop_classes": drop_classes, "clip": box}
