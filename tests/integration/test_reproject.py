@@ -334,6 +334,22 @@ def test_a_clip_polygon_naming_no_crs_over_inputs_in_two_crss_is_refused_before_
     assert not (tmp_path / "both.laz").exists()
 
 
+def test_a_lon_lat_clip_polygon_naming_no_crs_with_to_crs_is_refused_before_a_point_is_read(cli, autzen_path, tmp_path):
+    """RFC 7946 GeoJSON (no crs member) is longitude/latitude: --to-crs took it in the inputs'
+    feet and said "no point passes" once every point was read; now the one line a read filter
+    gives without --to-crs, for a file, an octree and tiles alike."""
+    lonlat = _site_geojson(tmp_path / "lonlat.geojson", [(-123.1, 44.0), (-123.0, 44.0), (-123.0, 44.1)])
+    want = (
+        f"error: {lonlat}: x -123.1..-123, y 44..44.1 looks like longitude/latitude (RFC 7946 GeoJSON) while {autzen_path} is in "
+        "NAD_1983_HARN_Lambert_Conformal_Conic (WKT): add a crs member naming its CRS, or reproject it into the files' coordinates"
+    )
+    for out in ("out.laz", "out.copc.laz", "tiles"):
+        command = ("tile", autzen_path, "--size", 1000) if out == "tiles" else ("convert", autzen_path)
+        rc, _, err = cli(*command, "-o", tmp_path / out, "--to-crs", UTM, "--clip-polygon", lonlat, "-q")
+        assert rc != 0 and err.strip().splitlines()[-1] == want, out  # (after the warning that z keeps its feet)
+        assert not (tmp_path / out).exists() or not any((tmp_path / out).iterdir()), out
+
+
 def _densified(corners, pieces=64):
     """The ring ``corners`` with each edge cut into ``pieces``: moved into another CRS, its edges
     still follow the straight ones in the first (a projection bends them: millimetres over autzen's

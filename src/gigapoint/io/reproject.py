@@ -39,7 +39,7 @@ from ..core.chunk import PointChunk
 from ..core.coords import MAX_ABS_COORDINATE
 from ..errors import GigapointWarning, InputError, counted, first_line, warn
 from .crs import crs_identity
-from .filters import PointFilter
+from .filters import PointFilter, placed_over
 from .las import LasReader, read_las_header
 from .polygon import ClipPolygon, moved_polygon
 from .registry import reader_for
@@ -303,7 +303,9 @@ class Reprojection:
         name; inputs in several CRSs are refused: which would it be in?), its edges cut into pieces
         whose moved ends follow the curves a projection makes of straight edges (polygon.py's
         ``moved_polygon``, within the fast path's tolerance where set). It names no CRS any more:
-        it is in the points' coordinates (no "names EPSG:n" warning)."""
+        it is in the points' coordinates (no "names EPSG:n" warning). Naming none, in
+        longitude/latitude's range far from inputs whose headers name a projected CRS: refused in
+        one line, as a read filter refuses it (RFC 7946 GeoJSON is lon/lat: it would keep nothing)."""
         if polygon.epsg is not None:
             source = parse_crs(f"EPSG:{polygon.epsg}", f"{polygon.source}: its CRS EPSG:{polygon.epsg}")
         elif self.given_source is not None:
@@ -317,6 +319,7 @@ class Reprojection:
                 )
             text = named.popitem()[1]
             source = parse_crs(text, f"{files[0]}: its CRS {text[:60]!r}")
+            placed_over(polygon, files[:1], files[0])  # (lon/lat far from projected inputs: refused in one line, as without --to-crs)
         return moved_polygon(polygon, source, self.target, None if self.tolerance is None else self.tolerance[0])
 
     def as_spec(self) -> dict:
