@@ -59,6 +59,34 @@ def stop_conversion_after(monkeypatch):
     return arm
 
 
+@pytest.fixture
+def interrupted_read(monkeypatch):
+    """``interrupted_read(run)``: ``run()``, a conversion, stopped by Ctrl+C once its read phase has
+    taken two chunks (this test's conversions held out of core: resumable mid-read); the
+    conversions after it read through."""
+    import importlib
+
+    read = importlib.import_module("gigapoint.lod.convert.read")
+    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.in_memory"), "fits_in_memory", lambda job: False)
+    real = read._read_chunks
+
+    def stops(path, size):
+        chunks = real(path, size)
+        yield next(chunks)
+        yield next(chunks)
+        raise KeyboardInterrupt("test")
+
+    def interrupt(run) -> None:
+        monkeypatch.setattr(read, "_read_chunks", stops)
+        try:
+            with pytest.raises(KeyboardInterrupt):
+                run()
+        finally:
+            monkeypatch.setattr(read, "_read_chunks", real)
+
+    return interrupt
+
+
 def write_demo_las(path: Path, n: int, seed: int = 0) -> Path:
     """The demo scene's first n points as a LAS 1.2 file (point format 3, millimetre scale)."""
     import laspy

@@ -402,25 +402,13 @@ def test_octrees_and_copc_are_coloured_after_to_crs_as_a_plain_file(autzen_path,
     assert np.array_equal(_in_order(rgb.astype(np.uint16) * 257, xyz, gps_time, 0.001), _las_in_order(plain, 0.001))
 
 
-def test_an_octree_conversion_resumes_only_with_the_same_raster_and_counts_across_runs(no_rgb, tmp_path, monkeypatch):
-    read = importlib.import_module("gigapoint.lod.convert.read")
+def test_an_octree_conversion_resumes_only_with_the_same_raster_and_counts_across_runs(no_rgb, tmp_path, monkeypatch, interrupted_read):
     colorize = importlib.import_module("gigapoint.io.colorize")
-    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.in_memory"), "fits_in_memory", lambda job: False)  # (out of core: resumable mid-read)
     closed = []
     monkeypatch.setattr(colorize.Colorization, "close", lambda self, close=colorize.Colorization.close: (closed.append(self.path.name), close(self)))
-    real = read._read_chunks
-
-    def stops(path, size):  # Ctrl+C once two chunks are read
-        chunks = real(path, size)
-        yield next(chunks)
-        yield next(chunks)
-        raise KeyboardInterrupt("test")
 
     def stopped(out, raster):
-        monkeypatch.setattr(read, "_read_chunks", stops)
-        with pytest.raises(KeyboardInterrupt):
-            gp.convert(no_rgb, out, colorize=raster, chunk_size=20_000)
-        monkeypatch.setattr(read, "_read_chunks", real)
+        interrupted_read(lambda: gp.convert(no_rgb, out, colorize=raster, chunk_size=20_000))
 
     wkt = read_las_header(no_rgb).crs()
     half = _geotiff(tmp_path / "west.tif", _pattern()[:, :, : WIDTH // 2], wkt)

@@ -467,22 +467,9 @@ def test_octrees_and_copc_take_to_crs_their_points_where_pyproj_moves_them_and_n
     assert pyproj.CRS.from_wkt(tree.meta["crs"]) == pyproj.CRS.from_epsg(32610)  # (octree.json's, as gigapoint info shows it)
 
 
-def test_an_octree_conversion_resumes_only_under_the_same_to_crs_and_spills_the_moved_points(autzen_path, tmp_path, monkeypatch, recwarn):
-    read = importlib.import_module("gigapoint.lod.convert.read")
-    monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.in_memory"), "fits_in_memory", lambda job: False)  # (out of core)
-    real = read._read_chunks
-
-    def stops(path, size):  # Ctrl+C once two chunks are read
-        chunks = real(path, size)
-        yield next(chunks)
-        yield next(chunks)
-        raise KeyboardInterrupt("test")
-
+def test_an_octree_conversion_resumes_only_under_the_same_to_crs_and_spills_the_moved_points(autzen_path, tmp_path, recwarn, interrupted_read):
     out = tmp_path / "utm"
-    monkeypatch.setattr(read, "_read_chunks", stops)
-    with pytest.raises(KeyboardInterrupt):
-        gp.convert(autzen_path, out, to_crs=UTM, chunk_size=20_000)
-    monkeypatch.setattr(read, "_read_chunks", real)
+    interrupted_read(lambda: gp.convert(autzen_path, out, to_crs=UTM, chunk_size=20_000))
     zone_11 = gp.convert(autzen_path, out, to_crs="EPSG:32611", chunk_size=20_000)  # another CRS: starts over, not a mix of both
     assert (zone_11.resumed, zone_11.points) == (False, 110_000)
     x, y, _ = _pyproj_moved(autzen_path, "EPSG:32611")
