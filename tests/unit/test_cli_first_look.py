@@ -173,6 +173,20 @@ def test_info_of_a_converted_octree_prints_bounds_at_the_source_scale(cli, autze
     assert "scale:       0.01, 0.01, 0.01" in text and "offset:" not in text
 
 
+def test_info_of_a_reprojected_octree_prints_bounds_at_its_scale_not_float_digits(cli, autzen_path, tmp_path):
+    """An octree converted --to-crs holds the moved points as floats on no grid: info printed
+    them with as many decimals as reach them (494115.3218665); now the scale's, as a LAS file
+    converted the same way prints them (docs/survey.md section 11)."""
+    out = tmp_path / "utm"
+    rc, _, err = cli("convert", autzen_path, "-o", out, "--to-crs", "EPSG:32610")
+    assert rc == 0, err
+    rc, text, err = cli("info", out)
+    assert rc == 0, err
+    assert "scale:       0.001, 0.001, 0.01" in text, text
+    assert "bounds min:  494115.322, 4877429.190, 406.26\n" in text, text
+    assert "bounds max:  494475.305, 4877589.854, 520.51\n" in text and "extent:      359.983, 160.664, 114.25\n" in text, text
+
+
 # --- picking -------------------------------------------------------------------------------------------
 def test_point_info_of_an_empty_pixel_is_none_and_a_bad_index_a_clear_error():
     cloud = gp.from_arrays(np.random.default_rng(1).random((500, 3)) * 10)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.coords import MAX_ABS_COORDINATE, value_decimals
+from ..core.coords import MAX_ABS_COORDINATE, scale_decimals, value_decimals
 from ..errors import InputError, counted
 from ._base import STREAM_CHUNK_SIZE, check_file, headers_once
 from .crs import crs_identity, crs_name
@@ -84,14 +84,17 @@ def folder_info(folder, infos: list[dict]) -> dict:
     return out
 
 
-def _coords(values, scale=None) -> str:
+def _coords(values, scale=None, on_grid: bool = True) -> str:
     """'636001.76, 848935.20, 406.26': each axis with the decimals of its stored resolution (a
-    LAS scale), else 3 (6 significant digits below 1); no thousands separators in the list."""
+    LAS scale), else 3 (6 significant digits below 1); no thousands separators in the list.
+    ``on_grid`` False: values on no grid of the scale's (an octree's float positions, moved ones
+    by --to-crs): the scale's decimals, not as many as reach them (494115.3218665)."""
     out = []
     for axis, v in enumerate(values):
         v = float(v)
         if scale is not None:
-            out.append(f"{v:.{value_decimals(v, float(scale[axis]))}f}")
+            decimals = value_decimals(v, float(scale[axis])) if on_grid else scale_decimals(float(scale[axis]))
+            out.append(f"{v:.{decimals}f}")
         else:
             out.append(f"{v:.3f}" if abs(v) >= 1 or v == 0 else f"{v:.6g}")
     return ", ".join(out)
@@ -112,10 +115,10 @@ def format_info(info: dict) -> str:
     if b.get("min") is not None:
         lo, hi = b["min"], b["max"]
         src = " (header)" if info.get("bounds_source") == "header" else ""
-        scale = info.get("scale")
-        lines.append(f"  bounds min:  {_coords(lo, scale)}{src}")
-        lines.append(f"  bounds max:  {_coords(hi, scale)}")
-        lines.append(f"  extent:      {_coords([h - lo_ for lo_, h in zip(lo, hi)], scale)}")
+        scale, on_grid = info.get("scale"), info.get("on_grid", True)
+        lines.append(f"  bounds min:  {_coords(lo, scale, on_grid)}{src}")
+        lines.append(f"  bounds max:  {_coords(hi, scale, on_grid)}")
+        lines.append(f"  extent:      {_coords([h - lo_ for lo_, h in zip(lo, hi)], scale, on_grid)}")
     lines.append(f"  color:       {'yes' if info.get('has_color') else 'no (default color)'}")
     attrs = info.get("attributes") or []
     lines.append(f"  attributes:  {', '.join(attrs) if attrs else 'none'}")

@@ -152,7 +152,9 @@ def open_filtered(path, keep: PointFilter, instead: str) -> OctreeCloud:
 def octree_info(path) -> dict:
     """What ``gigapoint info`` says about an octree folder (gigapoint or Potree 2.0) or an
     unfinished conversion: ``file_info``'s keys plus nodes, levels, sampler, spacing or
-    conversion (OctreeDir.status), and ``details``: {label: text} lines ready to print."""
+    conversion (OctreeDir.status), ``on_grid`` (False: its bounds are not values on the scale's
+    grid, io.format_info prints them at the scale's decimals) and ``details``: {label: text}
+    lines ready to print."""
     if lod_source_kind(path) in ("copc", "ept"):
         return _voxel_info(path)
     d = OctreeDir(path)
@@ -195,6 +197,7 @@ def octree_info(path) -> dict:
         "attributes": attributes,
         "crs": crs,
         "scale": None if potree else cloud.meta.get("scale"),  # the source's grid (LAS inputs): bounds print at its decimals
+        "on_grid": False,  # its positions are floats (reprojected ones on no grid): no more decimals than the scale's
         "nodes": len(cloud.keys),
         "levels": levels,
         "sampler": sampler,
