@@ -186,6 +186,23 @@ def test_autzen_across_gives_heights_within_the_files(autzen_path, cli, tmp_path
     assert image.shape[1] == 1920 and (image[..., :3] != 0).any(axis=2).sum() > 1000
 
 
+def test_the_command_names_the_pixel_in_the_crs_unit_of_a_file_and_of_an_octree(autzen_path, cli, tmp_path):
+    """autzen's CRS is in feet: a pixel was '0.561833 units' where change and volume say 'ft'; an
+    octree's section (its nodes read, its CRS in octree.json) names them as the file's does."""
+    octree = tmp_path / "oct"
+    gp.convert([autzen_path], octree)
+    line = ("--line", "636100,849000,637100,849400", "--width", 10)
+    for source in (autzen_path, octree):
+        png = tmp_path / "side.png"
+        rc, out, err = cli("section", source, *line, "-o", png, "--overwrite")
+        assert rc == 0, err
+        assert out == f"wrote {png} (1920x109, 1,972 points in the corridor, a pixel 0.561833 ft a side)\n"
+        rc, out, err = cli("section", source, *line, "-o", png, "--overwrite", "--scale", 2, "--vertical-exaggeration", 5)
+        assert rc == 0, err
+        assert out == f"wrote {png} (2157x597, 1,972 points in the corridor, a pixel 0.5 ft across, 0.1 ft up)\n"
+    assert gp.section(octree, (636100, 849000, 637100, 849400), 10).units["horizontal"]["symbol"] == "ft"
+
+
 @pytest.mark.parametrize(
     ("line", "width", "message"),
     [

@@ -51,6 +51,7 @@ def section(
     import gigapoint as gp
 
     from ..io.filters import corridor_of
+    from ..survey.change import unit_symbols
     from ..survey.section import check_size
 
     check_output(output, overwrite)
@@ -77,8 +78,11 @@ def section(
         frame = cut.render_frame(scale, image_size, vertical_exaggeration, settings)
     save_image(frame.image, output)
     pixel = camera.ortho_height / camera.height
-    up = "" if vertical_exaggeration == 1 else f" across, {pixel / vertical_exaggeration:.6g} up"
-    typer.echo(f"wrote {output} ({camera.width}x{camera.height}, {counted(cut.cloud.n_points, 'point')} in the corridor, a pixel {pixel:.6g} units{up or ' a side'})")
+    across, up = unit_symbols(cut.units)  # the CRS's units, as change and volume name them ('units' where it names none)
+    across = across or "units"
+    up = up or across
+    side = f"{across} a side" if vertical_exaggeration == 1 and up == across else f"{across} across, {pixel / vertical_exaggeration:.6g} {up} up"
+    typer.echo(f"wrote {output} ({camera.width}x{camera.height}, {counted(cut.cloud.n_points, 'point')} in the corridor, a pixel {pixel:.6g} {side})")
     if csv is not None:
         cut.write_csv(csv)
         typer.echo(f"wrote {csv} ({counted(cut.cloud.n_points, 'row')})")

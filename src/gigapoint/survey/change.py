@@ -190,12 +190,17 @@ def unit_names(units: dict) -> dict:
     """{"length", "area", "volume"}: the symbols the surveys' coordinates give lengths, areas and
     volumes in ("ft", "ft²", "ft³"); a volume is an area times a height, whose unit may differ
     ("m²·ft"); "units" where the CRS names none."""
-    across, up = units.get("horizontal"), units.get("vertical")
-    length = across["symbol"] if across and across["metres"] is not None else None
-    height = up["symbol"] if up and up["metres"] is not None else length
+    length, height = unit_symbols(units)
+    height = height or length
     if length is None:
         return {"length": "units", "area": "square units", "volume": "cubic units"}
     return {"length": length, "area": f"{length}²", "volume": f"{length}³" if height == length else f"{length}²·{height}"}
+
+
+def unit_symbols(units: dict) -> tuple[str | None, str | None]:
+    """(horizontal, vertical) symbols of ``units`` (io.crs_units): 'ft', 'm'; None where unknown or an angle."""
+    across, up = (u["symbol"] if u and u["metres"] is not None else None for u in (units.get("horizontal"), units.get("vertical")))
+    return across, up
 
 
 def survey_label(source) -> str:
@@ -237,7 +242,7 @@ def _lengths(units: dict) -> tuple:
 
 def units_named(units: dict) -> str:
     """How messages name a survey's units: 'lengths in ft', 'lengths in m, heights in ft', 'units unknown'."""
-    across, up = (u["symbol"] if u and u["metres"] is not None else None for u in (units["horizontal"], units["vertical"]))
+    across, up = unit_symbols(units)
     if across is None:
         return "units unknown" if up is None else f"heights in {up}"
     return f"lengths in {across}" + (f", heights in {up}" if up not in (None, across) else "")
@@ -367,4 +372,4 @@ def change(before, after, gsd, classes=None, drop_classes=None, clip=None, fill_
     return result
 
 
-__all__ = ["Change", "change", "unit_names"]
+__all__ = ["Change", "change", "unit_names", "unit_symbols"]

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -20,9 +20,11 @@ import numpy as np
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
 from ..errors import CameraError, InputError, is_real
+from ..io.crs import crs_units
 from ..io.filters import PointFilter, along_and_across, corridor_of, point_filter
 from ..lod import is_lod_source
 from ..lod.query import is_octree, kept_points, octree_path_kept
+from ..lod.reader import cloud_units
 from ..render import Camera, Frame, RenderSettings, render_frame
 from ..render.camera import MAX_IMAGE_SIDE, image_side
 
@@ -35,11 +37,13 @@ class Section:
     """The corridor's points (``cloud``, in the files' coordinates) along ``line`` (x1, y1, x2, y2),
     ``width`` wide. ``distance`` (from the line's start, along it), ``offset`` (square to it,
     positive to the left looking from the start to the end), ``z`` and ``classification`` (None
-    where the points have none) are rows sorted by distance; ``index``: each row's point in ``cloud``."""
+    where the points have none) are rows sorted by distance; ``index``: each row's point in ``cloud``;
+    ``units``: io.crs_units of the source's CRS (what its distances and heights are in)."""
 
     cloud: PointCloud
     line: tuple[float, float, float, float]
     width: float
+    units: dict = field(default_factory=lambda: crs_units(None))
 
     @property
     def length(self) -> float:
@@ -184,17 +188,18 @@ def section(source, line, width, classes=None, drop_classes=None, clip_polygon=N
     if isinstance(source, PointCloud):
         kept = list(keep.apply(source.chunks(), source.name))  # (the corridor's points only)
         keep.check_passed(source.name)
-        cloud = build_cloud(kept, name=source.name, colors="rgba")  # (its colours as the cloud holds them)
+        cloud, units = build_cloud(kept, name=source.name, colors="rgba"), cloud_units(source)  # (its colours as the cloud holds them)
     elif is_octree(source):
-        cloud = build_cloud(kept_points(source, keep, source.name, _region(keep)), name=source.name, colors="rgba")
+        cloud, units = build_cloud(kept_points(source, keep, source.name, _region(keep)), name=source.name, colors="rgba"), cloud_units(source)
     elif isinstance(paths, (list, tuple)) and len(paths) == 1 and is_lod_source(paths[0]):
-        kept, name = octree_path_kept(paths[0], keep, _region(keep), "section the point files, or wait for the octree")
+        kept, name, units = octree_path_kept(paths[0], keep, _region(keep), "section the point files, or wait for the octree")
         cloud = build_cloud(kept, name=name, colors="rgba")
     else:  # only the corridor's points are read
         from .. import open as open_points
 
         cloud = open_points(paths, classes=classes, drop_classes=drop_classes, corridor=lane, clip_polygon=keep.polygon)
-    return Section(cloud, lane[:4], lane[4])
+        units = cloud_units(cloud)
+    return Section(cloud, lane[:4], lane[4], units)
 
 
 def _region(keep: PointFilter) -> str:

@@ -110,7 +110,7 @@ def capped(cut: Section, limit: int) -> tuple[Section, str]:
         return cut, ""
     kept, _, step = every_kth(cut.cloud.chunks(), limit, total=n)
     thinned = build_cloud(kept, name=cut.cloud.name, colors="rgba")
-    return Section(thinned, cut.line, cut.width), f"{n:,} points in the corridor: 1 point in {step} shown (at most {limit:,}); narrow or shorten it for all"
+    return Section(thinned, cut.line, cut.width, cut.units), f"{n:,} points in the corridor: 1 point in {step} shown (at most {limit:,}); narrow or shorten it for all"
 
 
 def default_width(bounds) -> float:
