@@ -30,7 +30,7 @@ def _base_of(text: str) -> str | float:
 
 @app.command()
 def volume(
-    inputs: Annotated[list[Path], typer.Argument(readable=False, help="Point cloud files or directories of one survey (merged), or an LOD octree (a converted folder, a COPC file, an EPT dataset: its nodes near the piles read down to the levels the gsd needs). A quoted glob pattern ('tiles/*.laz') stands for what it matches.")],
+    inputs: Annotated[list[Path], typer.Argument(readable=False, help="Point cloud files or directories of one survey (merged), or an LOD octree (a converted folder, a COPC file, an EPT dataset: every node near the piles read; --levels-only: only the levels the gsd needs). A quoted glob pattern ('tiles/*.laz') stands for what it matches.")],
     gsd: Annotated[float, typer.Option(help="Ground sample distance (cloud units per pixel) of the surface model the volumes are summed on.")],
     clip_polygon: Annotated[
         str | None,
