@@ -42,13 +42,23 @@ def grid_cloud(rng, n, scale, extent, origin=UTM, batch_size=1024, layout="compa
 
 
 def assert_exact(cloud, xyz, scale):
-    """Every point decodes to a source point at the source's scale (same multiset of grid points)."""
+    """Every point decodes to a source point at the source's scale (same multiset of grid points),
+    its very value to float64 rounding (``assert_source_values``)."""
     scale = np.asarray(scale, np.float64)
-    got = np.round((cloud.positions() - UTM) / scale).astype(np.int64)
+    pos = cloud.positions()
+    got = np.round((pos - UTM) / scale).astype(np.int64)
     want = np.round((xyz - UTM) / scale).astype(np.int64)
     np.testing.assert_array_equal(got[np.lexsort(got.T)], want[np.lexsort(want.T)])
-    dev = np.abs((cloud.positions() - UTM) / scale - got)
-    assert dev.max() < 1e-3, dev.max()  # the cell centre is the source point
+    assert_source_values(pos[np.lexsort(got.T)], xyz[np.lexsort(want.T)])
+
+
+def assert_source_values(got, want):
+    """Decoded positions equal the source's (rows matched) to float64 rounding: 4 units in the last
+    place of each value (of 1 below 1). Decoding a grid-aligned batch's words with 0.5 added as for floor-quantized
+    ones put every point scale * 2^(B - 31) past it (3e-7 ft on autzen, 2.5e-3 at 2^29 steps)."""
+    err = np.abs(got - want)
+    ulps = err / np.spacing(np.maximum(np.abs(want), 1.0))  # (a unit's at 0)
+    assert ulps.max() <= 4, (err.max(axis=0), ulps.max())
 
 
 @pytest.mark.parametrize("scale", [(0.01, 0.01, 0.01), (0.001, 0.001, 0.001), (0.25, 0.25, 0.1), (0.01, 0.02, 0.005)])
@@ -140,10 +150,12 @@ def test_off_grid_and_huge_batches_are_stored_wide(rng):
     cloud = build_cloud([PointChunk(pts, None, {}, scale=(1e-4,) * 3)], batch_size=1000, layout="compact")
     wide = wide_batches(cloud.packing)
     assert wide.any() and not wide.all()
-    got = cloud.positions()
-    order = np.lexsort(pts.T)
-    back = got[np.lexsort(got.T)]
-    np.testing.assert_allclose(back, pts[order], rtol=0, atol=1e-3)  # 30 bits of 100 km: 0.1 mm
+    from scipy.spatial import cKDTree
+
+    # matched by distance, not by sorting: a z exact in a compact batch and 0.1 mm off in the wide
+    # one sort two points of one z (the source's) in either order
+    dist, idx = cKDTree(cloud.positions()).query(pts, k=1)
+    assert dist.max() <= 1e-3 and len(np.unique(idx)) == len(pts)  # 30 bits of 100 km: 0.1 mm
 
 
 @pytest.mark.parametrize("step", [1e4, 1e9])
@@ -169,13 +181,41 @@ def test_autzen_is_compact_and_exact():
     las = laspy.read(str(AUTZEN))
     scale, offset = np.asarray(las.header.scales), np.asarray(las.header.offsets)
     src = np.stack([las.X, las.Y, las.Z], axis=1).astype(np.int64)
-    got = np.round((cloud.positions() - offset) / scale).astype(np.int64)
+    pos = cloud.positions()
+    got = np.round((pos - offset) / scale).astype(np.int64)
     np.testing.assert_array_equal(got[np.lexsort(got.T)], src[np.lexsort(src.T)])
+    # laspy's scaled values themselves (not only on their grid): 3.05e-7 ft off before (B = 16 batches)
+    assert_source_values(pos[np.lexsort(got.T)], np.stack([las.x, las.y, las.z], axis=1)[np.lexsort(src.T)])
     mem = cloud.memory()
     assert mem["positions"] < 6.5 * cloud.n_points  # 12 bytes a point in three words
     assert cloud.nbytes == sum(mem.values())
     info = cloud.point_info(0)
     assert all(round(v, 2) == v for v in info["position"])
+
+
+@pytest.mark.parametrize("steps", [10**7, 2**29 + 12_345])
+def test_wide_grid_batches_decode_to_the_las_values(tmp_path, steps):
+    """A LAS file whose batches span 2^24 and 2^29 steps (B = 24, 29: the widest compact batch):
+    ``positions`` and ``point_info`` give laspy's x, y, z. Decoded with the 30-bit words' 0.5 they
+    were scale * 2^(B - 31) above them: 7.8e-5 and 2.5e-3 (a quarter of a step)."""
+    laspy = pytest.importorskip("laspy")
+    r = np.random.default_rng(steps)
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = [0.01] * 3, [500_000.0, 4_000_000.0, 0.0]
+    las = laspy.LasData(header)
+    las.X, las.Y, las.Z = r.integers(0, steps, 3000), r.integers(0, steps, 3000), r.integers(0, 2**20, 3000)
+    path = tmp_path / "wide.las"
+    las.write(str(path))
+    las = laspy.read(str(path))
+    cloud = gp.open(path)
+    assert cloud.layout == "compact" and not wide_batches(cloud.packing).any()
+    assert (cloud.packing["code"] & 0xFF).max() == {10**7: 14, 2**29 + 12_345: 19}[steps]
+    src = np.stack([las.X, las.Y, las.Z], axis=1).astype(np.int64)
+    pos = cloud.positions()
+    got = np.round((pos - header.offsets) / 0.01).astype(np.int64)
+    assert_source_values(pos[np.lexsort(got.T)], np.stack([las.x, las.y, las.z], axis=1)[np.lexsort(src.T)])
+    i = int(np.argmax(pos[:, 0]))
+    assert cloud.point_info(i)["position"] == pos[i].round(2).tolist()
 
 
 def test_layout_choice_and_errors(rng):
@@ -252,7 +292,11 @@ def test_expanded_twin_has_the_same_boxes(scene):
     twin = scene.expanded()
     assert twin.layout == "words"
     np.testing.assert_array_equal(twin.batches, scene.batches)
-    np.testing.assert_array_equal(twin.positions(), scene.positions())
+    # the same words: the twin's positions (floor-quantized words: + half a 30-bit cell) lie half
+    # a 30-bit cell of each batch past the compact cloud's source values, no further
+    size = np.repeat(scene.batches["bbox_max"] - scene.batches["bbox_min"], scene.batches["count"].astype(np.int64), axis=0)
+    diff = twin.positions() - scene.positions()
+    np.testing.assert_allclose(diff, size / 2**31, rtol=0, atol=1e-9)
     assert twin.memory()["positions"] == 12 * scene.n_points > 2 * scene.memory()["positions"]
 
 

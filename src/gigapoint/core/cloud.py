@@ -20,7 +20,7 @@ from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexEr
 from . import pages
 from .attributes import Attributes
 from .chunk import PointChunk, attributes_in_common, colors_for, warn_dropped_attributes
-from .compact import colors_at, compact_positions, full_words, pack_rgb565, point_words, rgba32, subset_streams
+from .compact import centre_half, colors_at, compact_positions, full_words, pack_rgb565, point_words, rgba32, subset_streams
 from .coords import MAX_ABS_COORDINATE, NUMPY_MAX, value_decimals
 from .coords import valid_mask as _valid_mask
 from .hooks import wire
@@ -195,7 +195,7 @@ class PointCloud:
             rec = self.batches[batch]
             lo, hi = int(i.min()), int(i.max()) + 1
             low, med, high = self._words(int(batch), lo, hi)
-            out[sel] = dequantize(low[i - lo], med[i - lo], high[i - lo], rec["bbox_min"], rec["bbox_max"], 30)
+            out[sel] = dequantize(low[i - lo], med[i - lo], high[i - lo], rec["bbox_min"], rec["bbox_max"], 30, self._half(int(batch)))
         return out
 
     def chunks(self, points_per_chunk: int = 1_000_000):
@@ -219,7 +219,12 @@ class PointCloud:
         """float64 positions of one batch's points (30-bit precision)."""
         rec = self.batches[batch]
         lo = int(rec["first"])
-        return dequantize(*self._words(batch, lo, lo + int(rec["count"])), rec["bbox_min"], rec["bbox_max"], 30)
+        return dequantize(*self._words(batch, lo, lo + int(rec["count"])), rec["bbox_min"], rec["bbox_max"], 30, self._half(batch))
+
+    def _half(self, batch: int) -> np.ndarray:
+        """``dequantize``'s half for ``batch``: 0 on a grid-aligned compact batch's axes (its words are the
+        source's values), so positions equal them to float64 rounding, not scale * 2^(B - 31) past."""
+        return centre_half(None if self.packing is None else self.packing["code"][batch])
 
     def _words(self, batch: int, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The three 10-bit-per-axis words of points lo..hi of ``batch`` (decoded in the compact layout)."""
@@ -254,7 +259,9 @@ class PointCloud:
 
     def expanded(self) -> PointCloud:
         """The same points in the three-word layout, with the same boxes: renders of the two are
-        identical bit for bit (the compact layout's contract; tests and benchmarks compare them)."""
+        identical bit for bit (the compact layout's contract; tests and benchmarks compare them).
+        Its ``positions`` decode the words as floor-quantized ones (+ half a 30-bit cell): up to
+        2^-31 of a batch's size past the compact cloud's, which are the source's values."""
         if self.packing is None:
             return self
         med, high = full_words(self)

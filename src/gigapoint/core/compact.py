@@ -16,7 +16,12 @@ The medium and high words decode from them by integer shifts (``tail_words``), s
 batch and the same batch expanded to three words give the same float32 grid coordinates in
 the same operation order (layout.py contract): images are identical bit for bit. Positions
 are exact at the source's scale: the decoded cell centre is the source coordinate (to
-float64 rounding, far below the scale).
+float64 rounding, far below the scale). The half-cell bit makes X30 that centre already, so
+the float64 decoder (``quantize.dequantize``) adds no half of a 30-bit cell here
+(``centre_half``: 0, where floor-quantized words take 0.5); with 0.5 every point sat
+scale * 2^(B - 31) past its source value (3e-7 ft on autzen's 2^16-step batches, a quarter
+of a step 2^29 steps wide). The renderers' float32 decoding keeps the 0.5 of both layouts:
+2^-31 of a batch's size is below float32's resolution of it.
 
 A batch whose points are not on the cloud's grid (files of one scene with other offsets)
 or whose extent needs more than 29 bits an axis is stored *wide*: today's tight box and
@@ -66,6 +71,17 @@ def on_the_grid(x, r, q, step, tolerance) -> bool:
     rounding could have put it there (``GRID_SNAP``)."""
     d = abs(r - q)
     return d <= tolerance and d * step <= GRID_SNAP * max(abs(x), 1.0)
+
+
+def centre_half(code=None) -> np.ndarray:
+    """Per axis, what ``quantize.dequantize`` adds to 30-bit words of a batch with layout
+    ``code`` (None: the three-word layout) to reach its points: 0.5, the centre of the 30-bit
+    cell floor quantization put a point in, on a wide axis (e = 20) or without a layout; 0 on
+    a grid-aligned one, whose words hold the source cell's centre already (the half-cell bit)."""
+    if code is None:
+        return np.full(3, 0.5)
+    c = int(code)
+    return np.array([0.5 if (c >> (8 * a)) & 0xFF == EXT_FULL_BITS else 0.0 for a in range(3)])
 
 
 def pack_code(ex: int, ey: int, ez: int) -> int:
@@ -513,6 +529,7 @@ def stream_words(t: np.ndarray, counts: np.ndarray) -> np.ndarray:
 
 __all__ = [
     "GRID_TOLERANCE",
+    "centre_half",
     "compact_positions",
     "expand_cloud_words",
     "expand_tails",

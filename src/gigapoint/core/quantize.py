@@ -2,7 +2,9 @@
 
 X30 = min(floor(2^30 (x - min) / size), 2^30 - 1); low = bits 20-29 of x, y, z packed
 into one u32 (x | y << 10 | z << 20), medium = bits 10-19, high = bits 0-9.
-Decoding takes the centre of the cell: min + (X + 0.5) * size / 2^bits.
+Decoding takes the centre of the cell: min + (X + 0.5) * size / 2^bits; a grid-aligned
+batch of the compact layout holds its points' cell centres in X already (core/compact.py's
+half-cell bit), and decodes with ``half`` 0 (``compact.centre_half``).
 """
 
 from __future__ import annotations
@@ -120,8 +122,12 @@ def fixed_point(low, med, high, bits: int) -> np.ndarray:
     return q
 
 
-def dequantize(low, med, high, bbox_min, bbox_max, bits: int = 30) -> np.ndarray:
-    """float64 world positions of points of one batch at a given precision (cell centres)."""
+def dequantize(low, med, high, bbox_min, bbox_max, bits: int = 30, half=0.5) -> np.ndarray:
+    """float64 world positions of points of one batch at a given precision (cell centres):
+    min + (X + ``half``) cells. ``half`` (per axis or one for all) is 0.5 for floor-quantized
+    words; at 30 bits a grid-aligned compact batch's words are the centres already and take 0
+    (``compact.centre_half``: 0.5 there put each point scale * 2^(B - 31) past its source value,
+    a quarter of a step in a batch 2^29 steps wide)."""
     q = fixed_point(low, med, high, bits).astype(np.float64)
     size = np.asarray(bbox_max, np.float64) - np.asarray(bbox_min, np.float64)
-    return np.asarray(bbox_min, np.float64) + (q + 0.5) * (size / float(1 << bits))
+    return np.asarray(bbox_min, np.float64) + (q + np.asarray(half, np.float64)) * (size / float(1 << bits))

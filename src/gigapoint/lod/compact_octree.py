@@ -41,7 +41,17 @@ from collections.abc import Mapping
 import numpy as np
 from numba import njit, prange
 
-from ..core.compact import _expand_all, compact_positions, expand_tails, ext_bits_per_point, pack_rgb565, read_ext, rgba32, stream_words
+from ..core.compact import (
+    _expand_all,
+    centre_half,
+    compact_positions,
+    expand_tails,
+    ext_bits_per_point,
+    pack_rgb565,
+    read_ext,
+    rgba32,
+    stream_words,
+)
 from ..core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE
 from ..errors import InputError
 from .keys import key_name
@@ -349,6 +359,10 @@ class CompactOctree(OctreeCloud):
             "rgba": rgba,
         }
         return payload, {a: self._field(f"attr.{a}", index, count) for a in self.meta.get("attributes", {})}
+
+    def node_half(self, index: int) -> np.ndarray:
+        """0 on a grid-aligned node's axes (its words hold its points' grid values, core/compact.py), 0.5 on a wide one's."""
+        return centre_half(self.pack["code"][index])
 
     def node_arrays(self, index: int) -> tuple[dict, dict, int]:
         """Node ``index`` decoded: (low, med, high, color, rgba in the three-word layout; its

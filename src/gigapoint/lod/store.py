@@ -21,7 +21,7 @@ from numba import njit
 
 from ..core.attributes import Attributes, Packed, packed_range
 from ..core.cloud import MAX_ABS_COORDINATE, at_scale
-from ..core.compact import point_words, rgba32, stream_subset, stream_words
+from ..core.compact import centre_half, point_words, rgba32, stream_subset, stream_words
 from ..core.layout import BATCH_DTYPE, PACK_DTYPE
 from ..core.quantize import dequantize
 from ..core.renderable import DrawList, MultiViewDrawList, check_classified, check_point_index
@@ -354,7 +354,8 @@ class Arena:
         slot = int(np.searchsorted(self.batches["first"], np.uint64(index), side="right") - 1)
         rec = self.batches[slot]
         low, med, high = point_words(self, slot, index, index + 1)
-        pos = dequantize(low, med, high, rec["bbox_min"], rec["bbox_max"], 30)[0]
+        half = centre_half(None if self.med is not None else self.packing["code"][slot])  # (a grid-aligned node's words: its grid values)
+        pos = dequantize(low, med, high, rec["bbox_min"], rec["bbox_max"], 30, half)[0]
         rgba = rgba32(self.color[index : index + 1]).view(np.uint8).tolist()
         info = {"position": at_scale(pos, self.source_scale), "rgba": rgba, "level": int(rec["level"]), "source": "octree"}
         for a in self.attributes:
@@ -459,7 +460,8 @@ class Arena:
         else:
             med, high = arrays["med"][node], arrays["high"][node]
         rec = cloud.nodes[nd]
-        return dequantize(np.asarray(arrays["low"][node]), np.asarray(med), np.asarray(high), rec["bbox_min"], rec["bbox_max"], 30)
+        low = np.asarray(arrays["low"][node])
+        return dequantize(low, np.asarray(med), np.asarray(high), rec["bbox_min"], rec["bbox_max"], 30, cloud.node_half(nd))
 
     def ensure(self, nodes: np.ndarray, cloud: OctreeCloud) -> bool:
         """Make every node in ``nodes`` resident; False when they cannot all fit."""
@@ -595,12 +597,17 @@ class OctreeCloud:
         slice touches are read); a Potree cloud reads and decodes the node instead."""
         return self.arrays, self.attributes, int(self.nodes["first"][index])
 
+    def node_half(self, index: int) -> np.ndarray:
+        """``dequantize``'s half for node ``index``'s 30-bit words: 0.5, floor-quantized words (a
+        format-2 octree's grid-aligned nodes take 0: compact_octree.CompactOctree)."""
+        return centre_half(None)
+
     def node_points(self, index: int) -> dict:
         """Decoded float64 positions (30-bit) and colors of one node (for tests and tools)."""
         arrays, attrs, first = self.node_arrays(index)
         rec = self.nodes[index]
         s = slice(first, first + int(rec["count"]))
-        xyz = dequantize(arrays["low"][s], arrays["med"][s], arrays["high"][s], rec["bbox_min"], rec["bbox_max"], 30)
+        xyz = dequantize(arrays["low"][s], arrays["med"][s], arrays["high"][s], rec["bbox_min"], rec["bbox_max"], 30, self.node_half(index))
         out = {"xyz": xyz, "color": np.asarray(arrays["color"][s]), "rgba": np.asarray(arrays["rgba"][s])}
         for a, v in attrs.items():
             out[a] = np.asarray(v[s])

@@ -1024,7 +1024,9 @@ def write_voxels(vid, is_new, node, cell, sums, level, slots_of_new, first_new, 
 def dequantize_slots(low, ext, ext_first, code, chunk_size, slots, chunk_node, box_min, edge, out):
     """float64 positions (30-bit cell centres) of the entries at pool ``slots``, through the
     compact layout's decoder (core/compact.py): an entry's chunk belongs to a node, whose chunks'
-    box starts at ``box_min[node]`` with edge ``edge[node]``."""
+    box starts at ``box_min[node]`` with edge ``edge[node]``. A wide axis's words are floor-quantized
+    (+ half a 30-bit cell); a grid chunk's and a voxel's (code 0) hold their cell's centre already
+    (``compact.centre_half``)."""
     for k in prange(slots.shape[0]):
         s = slots[k]
         c = s // chunk_size
@@ -1033,10 +1035,11 @@ def dequantize_slots(low, ext, ext_first, code, chunk_size, slots, chunk_node, b
         cd = code[c]
         med, high = tail_words(read_ext(ext, ext_first[c], code_bits(cd), s - c * chunk_size), cd)
         for a in range(3):
+            half = 0.5 if (cd >> np.uint32(8 * a)) & np.uint32(0xFF) == EXT_FULL_BITS else 0.0
             sh = np.uint32(WORD_BITS * a)
             q = (np.int64((low[s] >> sh) & np.uint32(WORD_MASK)) << 20) | (np.int64((med >> sh) & np.uint32(WORD_MASK)) << 10)
             q |= np.int64((high >> sh) & np.uint32(WORD_MASK))
-            out[k, a] = box_min[node, a] + (q + 0.5) * inv
+            out[k, a] = box_min[node, a] + (q + half) * inv
 
 
 # --- streams on the source's grid (ProgressiveOctree.trim) -----------------------------------

@@ -58,7 +58,7 @@ from ...core.attributes import stored as stored_array
 from ...core.bounds import valid_bounds
 from ...core.chunk import PointChunk, attribute_dtype_problem, attribute_name_problem, colors_for, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, at_scale, byte_views, take
-from ...core.compact import GRID_TOLERANCE, ext_bits_per_point, point_words, stream_words, streams_into
+from ...core.compact import GRID_TOLERANCE, centre_half, ext_bits_per_point, point_words, stream_words, streams_into
 from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE, WORD_BITS
 from ...core.morton import fastest
@@ -224,7 +224,8 @@ class Pool:
         if index == -1:
             return None
         rec = self.batches[index // self.chunk]
-        pos = dequantize(*point_words(self, index // self.chunk, index, index + 1), rec["bbox_min"], rec["bbox_max"], 30)[0]
+        c = index // self.chunk
+        pos = dequantize(*point_words(self, c, index, index + 1), rec["bbox_min"], rec["bbox_max"], 30, centre_half(self.packing["code"][c]))[0]
         info = {
             "position": at_scale(pos, self.source_scale),
             "rgba": self.color[index : index + 1].view(np.uint8).tolist(),
