@@ -22,7 +22,7 @@ def value_decimals(value: float, scale: float) -> int:
     rounded to 3 decimals, up to half a step from the file's value)."""
     scale = abs(scale)
     d = scale_decimals(scale)
-    while d < 12 and abs(round(value, d) - value) > 1e-4 * scale:  # (positions held compact are within 2e-5 steps)
+    while d < 12 and abs(round(value, d) - value) > 1e-4 * scale:  # (positions held compact are the source's, to float64 rounding)
         d += 1
     return d
 
