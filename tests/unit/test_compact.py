@@ -218,6 +218,26 @@ def test_wide_grid_batches_decode_to_the_las_values(tmp_path, steps):
     assert cloud.point_info(i)["position"] == pos[i].round(2).tolist()
 
 
+@pytest.mark.parametrize("steps", [2**30 - 100, 2**31 - 10])
+def test_batches_over_2_to_29_steps_are_within_half_a_30_bit_cell(rng, steps):
+    """Wide batches (B > 29) hold 30 bits of their tight box: half a cell is under half a step up
+    to 2^30 steps (rounding gives the grid back: 0.4999 steps measured), a step at 2^31 (0.998)."""
+    q = np.concatenate([[[0, 0, 0], [steps, steps, 5]], rng.integers(0, steps, (2000, 3))])
+    xyz = np.array([500_000.0, 4_000_000.0, 0.0]) + q * 0.01
+    cloud = build_cloud([PointChunk(xyz, None, {}, scale=(0.01,) * 3)], batch_size=10_240, layout="compact")
+    assert wide_batches(cloud.packing).all()
+    from scipy.spatial import cKDTree
+
+    got = cloud.positions()
+    half_cell = (xyz.max(axis=0) - xyz.min(axis=0)) / 2**31
+    dist, idx = cKDTree(got / half_cell).query(xyz / half_cell, k=1, p=np.inf)  # in half cells, per axis
+    assert dist.max() <= 1 + 1e-6 and len(np.unique(idx)) == len(xyz)
+    assert (dist.max() * half_cell[0] < 0.005) == (steps < 2**30)  # under half a step: rounding gives the grid back
+    if steps < 2**30:
+        k = np.round((got - [500_000.0, 4_000_000.0, 0.0]) / 0.01).astype(np.int64)
+        np.testing.assert_array_equal(k[np.lexsort(k.T)], q[np.lexsort(q.T)])
+
+
 def test_layout_choice_and_errors(rng):
     xyz = UTM + rng.uniform(0, 10, (100, 3))
     assert build_cloud([PointChunk(xyz, None, {})]).layout == "words"  # no scale: today's layout

@@ -26,7 +26,9 @@ of a step 2^29 steps wide). The renderers' float32 decoding keeps the 0.5 of bot
 A batch whose points are not on the cloud's grid (files of one scene with other offsets)
 or whose extent needs more than 29 bits an axis is stored *wide*: today's tight box and
 30-bit quantization, its medium and high words as e = 20 bits an axis (no half bit) in the
-same stream, 60 bits a point. Nothing is ever coarser than the source.
+same stream, 60 bits a point, within half a 30-bit cell of the source: under half a step
+while the batch spans under 2^30 steps (rounding to the grid gives the source back); a wider
+one (a LAS file's int32 grid spans up to 2^32 steps: far outliers) is up to 4 steps a cell, 2 off.
 
 Per batch a ``PACK_DTYPE`` record (core/layout.py) holds the stream's first u64 word and the
 three widths. Decoding is one function per side: ``tail_words`` here (the numba kernels and
