@@ -265,10 +265,10 @@ def test_a_corridor_thinner_than_float32_depths_draws_its_points(cli, tmp_path):
     rc, out, err = cli("section", tmp_path / "line.las", "--line", "9,20,17,20", "--width", 1e-9, "-o", png, "--scale", 2,
                        "--color-mode", "classification", "--size-mode", "fixed")  # fmt: skip
     assert rc == 0 and err == "", err
-    assert out == f"wrote {png} (19x8, 3 points in the corridor, a pixel 0.5 units a side)\n"
+    assert out == f"wrote {png} (19x7, 3 points in the corridor, a pixel 0.5 units a side)\n"
     drawn = np.argwhere(np.asarray(Image.open(png))[..., :3].any(axis=2))
-    # column floor(2 * distance) + BORDER; rows 2 a unit down from z 8 (the border over z 7.5: z 7 decodes a hair above 7)
-    assert sorted(map(tuple, drawn.tolist())) == [(2, 11), (4, 7), (6, 3)]
+    # column floor(2 * distance) + BORDER; rows 2 a unit down from the border over z 7 (as a corridor 1 wide draws them)
+    assert sorted(map(tuple, drawn.tolist())) == [(1, 11), (3, 7), (5, 3)]
 
 
 def test_the_command_names_the_files_of_an_empty_corridor(cli, files, tmp_path):
