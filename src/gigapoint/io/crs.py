@@ -67,7 +67,13 @@ def _pyproj_identity(crs: str) -> str:
     codes = tuple(part.to_epsg() for part in (parsed.sub_crs_list if parsed.is_compound else [parsed]))
     coded = None not in codes
     with _identity_lock:
-        same = (key for seen, seen_codes, key in _distinct_crss if (coded and codes == seen_codes) or parsed.equals(seen, ignore_axis_order=True))
+        # two CRSs with codes are the same where their codes are; CRS.equals (which reads its
+        # other CRS again) only where one has none (an ESRI WKT)
+        same = (
+            key
+            for seen, seen_codes, key in _distinct_crss
+            if (codes == seen_codes if coded and None not in seen_codes else parsed.equals(seen, ignore_axis_order=True))
+        )
         identity = next(same, None)
         if identity is None:
             identity = "EPSG:" + "+".join(map(str, codes)) if coded else crs
