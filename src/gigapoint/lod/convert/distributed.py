@@ -356,6 +356,20 @@ def _numba_threads_from_environment() -> None:
         ) from None
 
 
+
+def _first_failed_read(dd, failed, name: str, index: int, futures: dict):
+    """(future, name) of the read task that fails first in the inputs' order: ``failed`` (the
+    ``index``-th read), or one before it still running, waited for. Read tasks end in any order,
+    and each task over a damaged LAZ chunk names another of its points: the run said whichever
+    ended first (a message that changed from run to run)."""
+    earlier = sorted(((j, g, n) for g, (k, n, _, j) in futures.items() if k == "read" and j < index), key=lambda t: t[0])
+    dd.wait([g for _, g, _ in earlier])
+    for _, g, n in earlier:
+        if g.status != "finished":
+            return g, n
+    return failed, name
+
+
 def _task(kind: str, name: str, spec: dict, fn, *args):
     """Run one task on a worker: numba's kernels on this thread only, freed memory kept while it
     runs (keep_freed_memory.py; for the life of the process in the workers of a LocalCluster
@@ -757,6 +771,8 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
                 if lost:
                     raise ConvertError(f"{self.out}: the Dask cluster has had no worker for {NO_WORKER_S:.0f} s; {self._resume_hint()}")
                 if f.status != "finished":
+                    if kind == "read":  # a damaged file fails every read of it: named, as one process does, by the first
+                        f, name = _first_failed_read(dd, f, name, i, futures)
                     raise self._task_error(kind, name, f)
                 more = callback(i, f.result())
                 f.release()
