@@ -29,11 +29,6 @@ def _spill_always(monkeypatch) -> None:
     monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.in_memory"), "fits_in_memory", lambda job: False)
 
 
-@pytest.fixture
-def out_of_core(monkeypatch):
-    _spill_always(monkeypatch)
-
-
 def _in_clip(xyz: np.ndarray) -> np.ndarray:
     return np.all((xyz[:, :2] >= CLIP[:2]) & (xyz[:, :2] <= CLIP[2:]), axis=1)
 
@@ -73,33 +68,16 @@ def test_a_filter_is_refused_for_chunk_inputs(autzen_path, tmp_path):
     assert str(err.value) == "convert: the filter (drop classes 7) applies to the points read from files; the inputs are a cloud or PointChunks"
 
 
-def _stopped_after_two_chunks(monkeypatch, **options):
-    """A conversion with ``options`` stopped (Ctrl+C) once two chunks of its input are read."""
-    read = importlib.import_module("gigapoint.lod.convert.read")
-    real = read._read_chunks
-
-    def stops(path, size):
-        chunks = real(path, size)
-        yield next(chunks)
-        yield next(chunks)
-        raise KeyboardInterrupt("test")
-
-    monkeypatch.setattr(read, "_read_chunks", stops)
-    with pytest.raises(KeyboardInterrupt):
-        convert(*options.pop("args"), **options)
-    monkeypatch.setattr(read, "_read_chunks", real)
-
-
-def test_a_conversion_resumes_only_under_the_same_filter(autzen_path, autzen, tmp_path, monkeypatch, out_of_core):
+def test_a_conversion_resumes_only_under_the_same_filter(autzen_path, autzen, tmp_path, interrupted_read):
     _, classification = autzen
     out = tmp_path / "oct"
     opts = {"chunk_size": 20_000}  # (out of core: a resume takes the chunks spilled)
-    _stopped_after_two_chunks(monkeypatch, args=(autzen_path, out), classes=[1], **opts)
+    interrupted_read(lambda: convert(autzen_path, out, classes=[1], **opts))
     assert OctreeDir(out).read_state()["chunks"] == 1  # (the two chunks' class 1 points, joined)
     res = convert(autzen_path, out, classes=[2], **opts)  # another filter: starts over, not a mix of both
     assert (res.resumed, res.points) == (False, np.count_nonzero(classification == 2))
     out = tmp_path / "again"
-    _stopped_after_two_chunks(monkeypatch, args=(autzen_path, out), classes=[1], **opts)
+    interrupted_read(lambda: convert(autzen_path, out, classes=[1], **opts))
     res = convert(autzen_path, out, classes=[1], **opts)  # the same one: resumed
     assert (res.resumed, res.points) == (True, np.count_nonzero(classification == 1))
     assert gp.open(out).n_points == 83_893
