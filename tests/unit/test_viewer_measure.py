@@ -12,7 +12,7 @@ pytest.importorskip("starlette")
 pytest.importorskip("httpx")
 
 from PIL import Image
-from test_viewer_server import full_frame, jpeg_pixels, receive, reply  # the websocket helpers of the server's tests
+from test_viewer_server import full_frame, jpeg_pixels, receive, reply, served  # the websocket helpers of the server's tests
 
 import gigapoint
 from gigapoint.render.camera import Camera
@@ -37,12 +37,8 @@ def cloud():
 
 @pytest.fixture()
 def client(cloud):
-    from starlette.testclient import TestClient
-
-    core = ViewerCore(cloud, gigapoint.RenderSettings(point_size=5))
-    with TestClient(create_app(core)) as c:
-        yield c, core
-    core.close_all()
+    with served(cloud, 5) as pair:
+        yield pair
 
 
 def screen(cam, p) -> np.ndarray:

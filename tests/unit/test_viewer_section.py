@@ -14,7 +14,7 @@ pytest.importorskip("httpx")
 
 from PIL import Image
 from test_viewer_measure import screen, yellow
-from test_viewer_server import full_frame, jpeg_pixels, receive, reply  # the websocket helpers of the server's tests
+from test_viewer_server import full_frame, jpeg_pixels, receive, reply, served  # the websocket helpers of the server's tests
 
 import gigapoint
 from gigapoint.viewer import section_tool as ST
@@ -46,12 +46,8 @@ def cloud():
 
 @pytest.fixture()
 def client(cloud):
-    from starlette.testclient import TestClient
-
-    core = ViewerCore(cloud, gigapoint.RenderSettings(point_size=3))
-    with TestClient(create_app(core)) as c:
-        yield c, core
-    core.close_all()
+    with served(cloud, 3) as pair:
+        yield pair
 
 
 def png_of(url: str) -> np.ndarray:

@@ -12,6 +12,7 @@ import sys
 import threading
 import time
 import warnings
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
@@ -36,6 +37,20 @@ from gigapoint.viewer.session import ViewerCore
 pytestmark = [pytest.mark.timeout(120), pytest.mark.filterwarnings("ignore::DeprecationWarning")]
 
 MARKER = np.array([637050.123456789, 4850040.987654321, 30.0])
+
+
+@contextmanager
+def served(cloud, point_size: int):
+    """(a TestClient of the viewer's app, its ViewerCore) over ``cloud``: the tools' tests' client."""
+    from starlette.testclient import TestClient
+
+    from gigapoint.viewer.server import create_app
+    from gigapoint.viewer.session import ViewerCore
+
+    core = ViewerCore(cloud, gigapoint.RenderSettings(point_size=point_size))
+    with TestClient(create_app(core)) as c:
+        yield c, core
+    core.close_all()
 
 
 def marker_scene() -> gigapoint.PointCloud:
