@@ -5,6 +5,8 @@ tiles on a grid anchored at 0, each holding exactly its points (and its buffer's
 from __future__ import annotations
 
 import importlib
+import os
+import shutil
 
 import laspy
 import numpy as np
@@ -13,7 +15,8 @@ import pytest
 import gigapoint as gp
 from gigapoint.errors import GigapointWarning, InputError
 from gigapoint.io.las import read_las_header, wkt_of
-from gigapoint.lod.convert.tiles import tile_groups, tile_index, tile_name
+from gigapoint.io.las_fields import las_grid
+from gigapoint.lod.convert.tiles import TileAxis, tile_groups, tile_index, tile_name
 
 FIELDS = ("X", "Y", "Z", "intensity", "classification", "gps_time", "red", "green", "blue")
 
@@ -239,3 +242,99 @@ def test_one_point_in_one_tile_is_said_in_the_singular(cli, tmp_path):
     rc, stdout, err = cli("tile", tmp_path / "one.las", "--size", "500", "-o", out, "-q")
     assert rc == 0, err
     assert stdout.startswith(f"{out}: 1 tile of 500 x 500 (laz), 1 point; points per tile: min 1, median 1, max 1; ")
+
+
+def _line_of_points(path, scale, offset, X):
+    """A LAS file of points at x = X * scale + offset (integers ``X`` on its grid), y = 0, z = their number."""
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = [scale] * 3, [offset, 0.0, 0.0]
+    las = laspy.LasData(header)
+    las.X, las.Y, las.Z = X, np.zeros_like(X), np.arange(len(X))
+    las.write(str(path))
+    return path
+
+
+@pytest.mark.parametrize(("scale", "offset"), [(0.01, 0.0), (0.001, 0.0), (0.01, -10.0), (0.001, 635000.0)])
+def test_a_point_on_a_decimal_edge_is_placed_in_integers_on_its_las_grid(scale, offset):
+    # x = 0.7 as a LAS grid stores it (70 * 0.01): floats put it in tile 0.6 (0.7 / 0.1 = 6.999999999999999)
+    X = np.arange(-3000, 3000)
+    axis = TileAxis(0.1, 0.0, scale, offset)
+    steps, start = round(0.1 / scale), round(offset / scale)
+    assert np.array_equal(axis.index(X * scale + offset), (X + start) // steps)  # each tile from the grid line on its edge
+    buffered = TileAxis(0.1, 0.03, scale, offset)  # tile 4 (0.4..0.5) and its buffer: 0.37..0.53, both edges in
+    at = np.array([0.37, 0.37 - scale, 0.53, 0.53 + scale])
+    assert buffered.near(at + offset, np.full(4, 4 + start // steps)).tolist() == [True, False, True, False]
+
+
+def test_edges_between_grid_lines_are_taken_at_the_nearest_line():
+    """A size of no whole number of grid steps: an edge counts as on the grid line nearest it
+    (within half a step), a halfway one as on the line above."""
+    X = np.array([11, 12, 13, 24, 25])
+    assert TileAxis(0.123, 0.0, 0.01, 0.0).index(X * 0.01).tolist() == [0, 1, 1, 1, 2]  # 0.12 is 0.003 below 0.123
+    assert TileAxis(0.125, 0.0, 0.01, 0.0).index(X * 0.01).tolist() == [0, 0, 1, 1, 2]  # 0.125: halfway, 0.13 starts tile 1
+    assert TileAxis(0.125, 0.0, 0.01, 0.005).index(X * 0.01 + 0.005).tolist() == [0, 1, 1, 1, 2]  # offset off the grid from 0: 0.125 on the edge
+    assert TileAxis(0.1, 0.0).index(np.array([0.7])).tolist() == [6]  # without a grid: as floats place it (tile_index)
+
+
+def test_tiles_of_a_decimal_size_hold_the_points_on_their_edges_and_buffers(tmp_path):
+    X = np.arange(0, 100)  # x = 0.00 .. 0.99, centimetres: tile i (0.1 i .. 0.1 (i + 1)) holds X 10 i .. 10 i + 9
+    src = _line_of_points(tmp_path / "line.las", 0.01, 0.0, X)
+    res = gp.tile(src, tmp_path / "tiles", 0.1, buffer=0.03, format="las")
+    assert [p.name for p in res.tiles] == ["line_0_0.las"] + [f"line_0.{i}_0.las" for i in range(1, 10)]
+    for i, path in enumerate(res.tiles):
+        written = laspy.read(str(path))
+        want = X[(X >= 10 * i - 3) & (X <= 10 * i + 13)]  # its own and those within 0.03, edges included
+        assert np.array_equal(np.asarray(written.X), want), path.name
+        assert np.array_equal(np.asarray(written.overlap, bool), (want < 10 * i) | (want >= 10 * i + 10)), path.name
+    assert res.points == 100 and res.buffer_points == 9 * (3 + 4)  # each inner edge: the 3 points below it, the 4 from it to 0.03 above
+
+
+def test_tiles_of_points_without_a_las_grid_share_one_grid(tmp_path):
+    """Float positions (a .npy file) are stored on one grid for the run, made from all of them:
+    tiles with a grid each (from their own bounds) could not be merged back without moving points."""
+    rng = np.random.default_rng(5)
+    xyz = np.concatenate([rng.uniform(0, 3, (500, 3)), rng.uniform([10, 0, 0], [10.5, 0.5, 0.5], (500, 3))])
+    np.save(tmp_path / "pts.npy", xyz)
+    res = gp.tile(tmp_path / "pts.npy", tmp_path / "tiles", 10)
+    headers = [laspy.read(str(p)).header for p in res.tiles]
+    scale, offset = las_grid(xyz.min(axis=0), xyz.max(axis=0))
+    assert [p.name for p in res.tiles] == ["pts_0_0.laz", "pts_10_0.laz"]
+    for header in headers:
+        assert np.array_equal(header.scales, scale) and np.array_equal(header.offsets, offset)
+    tiled = np.concatenate([np.column_stack([w.x, w.y, w.z]) for w in (laspy.read(str(p)) for p in res.tiles)])
+    assert np.all(np.abs(tiled - xyz) <= scale / 2)  # (the points in file order: tile 0's, then tile 10's)
+
+
+@pytest.mark.parametrize("killed_at", [1, 3])
+def test_a_run_killed_as_its_tiles_move_into_place_leaves_no_folder_that_looks_whole(autzen_path, tmp_path, monkeypatch, killed_at):
+    """A kill runs no clean-up: the folder a run makes is there with every tile or not at all (was:
+    the tiles moved before the kill, under the output's name, as if they were all)."""
+    moves = []
+    real_replace, real_rename = os.replace, os.rename
+
+    class Killed(BaseException):
+        pass
+
+    def moved(real):
+        def move(src, dst):
+            if ".tiling" in str(src) and ".tiling" not in str(dst):  # out of the work folder
+                moves.append(dst)
+                if len(moves) == killed_at:
+                    raise Killed
+            return real(src, dst)
+
+        return move
+
+    monkeypatch.setattr(os, "replace", moved(real_replace))
+    monkeypatch.setattr(os, "rename", moved(real_rename))
+    monkeypatch.setattr(shutil, "rmtree", lambda *args, **kwargs: None)  # (a kill removes nothing)
+    out = tmp_path / "tiles"
+    try:
+        gp.tile(autzen_path, out, 500)
+    except Killed:
+        pass
+    monkeypatch.undo()
+    shown = sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) if out.exists() else None
+    whole = gp.tile(autzen_path, tmp_path / "whole", 500)
+    assert shown is None or shown == sorted(p.name for p in whole.tiles)
+    assert shown == (None if killed_at == 1 else sorted(p.name for p in whole.tiles))  # one move: the folder itself

@@ -32,7 +32,7 @@ from .settings_opts import named_option
 @app.command()
 def tile(
     inputs: Annotated[list[Path], typer.Argument(readable=False, help="Point cloud files or directories (read as one, e.g. overlapping flight strips). A quoted glob pattern ('strips/*.laz') stands for what it matches.")],
-    size: Annotated[float, typer.Option("--size", metavar="S", help="The tiles' edge, in the files' units (with --to-crs: the output's): tile (i, j) holds x in [i S, (i+1) S), y in [j S, (j+1) S), any z.")],
+    size: Annotated[float, typer.Option("--size", metavar="S", help="The tiles' edge, in the files' units (with --to-crs: the output's): tile (i, j) holds x in [i S, (i+1) S), y in [j S, (j+1) S), any z; a point on an edge is in the tile starting there, decided on the files' LAS grid.")],
     output: Annotated[Path, typer.Option("-o", "--output", readable=False, help="Folder of the tiles (made if missing), named NAME_XMIN_YMIN.laz after their lower-left corners.")],
     format: Annotated[str, typer.Option("--format", help="laz (the default) or las.")] = "laz",
     buffer: Annotated[float, typer.Option("--buffer", metavar="B", help="Each tile also holds the points within B of its square (0 to S), flagged in the LAS 1.4 overlap bit.")] = 0.0,

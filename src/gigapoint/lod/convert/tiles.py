@@ -3,7 +3,10 @@ PDAL's filters.splitter), for processing pipelines and delivery.
 
 Tiles are squares of edge ``size`` in x and y on a grid anchored at coordinate 0: tile (i, j)
 holds the points of [i·size, (i+1)·size) x [j·size, (j+1)·size), any z, and is named
-``<name>_<xmin>_<ymin>.laz`` after its lower-left corner (lastile's convention). Only tiles
+``<name>_<xmin>_<ymin>.laz`` after its lower-left corner (lastile's convention). A point is
+placed by the position its tile stores, on the LAS grid, in integers (``TileAxis``): one on an
+edge always goes to the tile that starts there (x = 0.7 with a size of 0.1: tile 0.7, where
+floats said 0.7 / 0.1 = 6.999999999999999), as lastile places it. Only tiles
 holding points of their own are written. ``buffer``: a tile also holds the points within that
 distance of its square (in x and y: its square grown by ``buffer`` on every side, edges
 included), each flagged in the LAS 1.4 "overlap" bit of its classification flags, as lastile
@@ -12,15 +15,19 @@ points); the tile's own points keep the overlap flag the inputs gave them (forma
 are 0 otherwise.
 
 Every tile is written as ``convert -o x.laz`` writes its one file (to_file.PointFiles): the
-first CRS named, a LAS grid holding every input's points exactly, the attributes all inputs
-have, colours as each file stored them; ``to_crs``: their points moved into that CRS as they
-are read (io/reproject.py), so tiles, their size, buffer and clip box are in its coordinates;
-``colorize``: their colours from an orthophoto's pixels, after that (io/colorize.py).
+first CRS named, a LAS grid holding every input's points exactly (one for all the tiles of a
+run: points without a grid, of float files, get one made once from all of them, so that
+merging tiles back moves no point), the attributes all inputs have, colours as each file
+stored them; ``to_crs``: their points moved into that CRS as they are read (io/reproject.py),
+so tiles, their size, buffer and clip box are in its coordinates; ``colorize``: their colours
+from an orthophoto's pixels, after that (io/colorize.py).
 
 The inputs are read once, a chunk at a time; each chunk's points are bucketed by tile and
 appended to that tile's raw spill file (records of position, colour and attributes) in a
-hidden work folder inside the output folder; once every point is read, the tiles are written
-one at a time from their spill files, then moved into place together. So no more than a chunk
+hidden work folder (beside the output folder where the run makes it, else inside it); once
+every point is read, the tiles are written one at a time from their spill files, then moved
+into place together: a folder the run makes is the work folder's tiles renamed, so it appears
+with every tile or not at all, even where the run is killed. So no more than a chunk
 and one writer are held, and no file stays open between chunks, however many tiles there are.
 Keeping a LAZ writer open per tile holds a compressor and its buffered points each (unbounded
 with the tile count); closing and reopening them in append mode (laspy's LasAppender) reads
@@ -28,7 +35,9 @@ and rewrites each LAZ file's chunk table at every (chunk, tile) append. Measured
 points in 103 tiles, 100 000-point chunks, a shared 2-core host): the spill 3.4 s, laspy's
 reopen-and-append 19.3 s for the same tiles, ``convert -o one.laz`` of the same points 2.0 s.
 The spill costs disk: the points' raw records (~50 bytes a point) until their tile is written.
-A run that fails or is interrupted removes its work folder: no tile of it appears.
+A run that fails or is interrupted removes its work folder: no tile of it appears (a run
+killed outright leaves its hidden work folder). Into a folder that was there, the tiles are
+moved one at a time (a moment, once all are written): a run killed in that moment leaves some.
 """
 
 from __future__ import annotations
@@ -51,6 +60,7 @@ from ...errors import GigapointWarning, InputError, check_switch, counted, is_re
 from ...io import with_subfolders
 from ...io.colorize import Colorization
 from ...io.filters import point_filter
+from ...io.las_fields import las_grid
 from ...io.reproject import Reprojection
 from ...io.write import write_points
 from ..progress import NullProgress, RichProgress
@@ -111,7 +121,9 @@ def tile(
 
     ``out`` is made if missing; one holding LAS/LAZ files already is refused without
     ``overwrite``, which replaces the tiles of this run's names and leaves every other file.
-    Tiles appear only once every one is written. Bad values (a size not above 0, a buffer below
+    Tiles appear only once every one is written (a folder ``out`` that was missing appears with all
+    of them at once). A point on an edge goes to the tile that starts there, decided on the
+    inputs' LAS grid (``TileAxis``). Bad values (a size not above 0, a buffer below
     0 or above the size, more than a million tiles over the headers' extent) are one-line
     InputErrors before a point is read."""
     t0 = time.perf_counter()
@@ -145,23 +157,26 @@ def tile(
     if bounds is not None:  # a size in the wrong unit: refused before a point is read
         _check_tile_count(*(bounds if keep is None else keep.clipped_bounds(*bounds)), size, files.label)
     shown = RichProgress() if progress else NullProgress()
-    created = not out.exists()
-    out.mkdir(exist_ok=True)
-    work = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".tiling", dir=out))  # (hidden: folder walks pass it over)
+    created = not out.exists()  # then the tiles are written into a folder renamed ``out`` at the end
+    # (hidden: folder walks pass it over; beside ``out`` where this run makes it, so it appears whole or not at all)
+    work = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".tiling", dir=out.parent if created else out))
+    tiles_folder = work / "tiles"
     try:
-        spill = _TileSpill(work, float(size), float(buffer), files.label)
+        tiles_folder.mkdir()  # (not mkdtemp's: its mode 0700 would become ``out``'s)
+        spill = _TileSpill(work, float(size), float(buffer), files.label, files.las_grid)
         tally = {"points": 0, "skipped": 0}
         shown.phase("read", None if None in files.counts else sum(files.counts))
         for f, chunk in files.valid_chunks(keep, shown, tally):
             spill.add(files.colored(f, chunk, tally))
         check_valid_count(files.label, tally["points"], tally["skipped"])  # (the skipped points' warning)
-        written = spill.write_tiles(name, format, files, shown)
-        for tile_path in written:  # every tile whole: now they appear
-            os.replace(tile_path, out / tile_path.name)
-    except BaseException:
-        if created:  # (a folder this run made: only its work folder is in it)
-            shutil.rmtree(out, ignore_errors=True)
-        raise
+        # points without a LAS grid: one for the run, from all of them (not one a tile: tiles of one survey share their grid)
+        grid = files.las_grid if files.las_grid is not None else las_grid(spill.lo, spill.hi)
+        written = spill.write_tiles(name, format, files, grid, tiles_folder, shown)
+        if created:  # every tile whole: now they appear, all at once
+            tiles_folder.rename(out)
+        else:  # (into a folder that was there: one at a time, a moment's work)
+            for tile_path in written:
+                os.replace(tile_path, out / tile_path.name)
     finally:
         shutil.rmtree(work, ignore_errors=True)
         shown.close()
@@ -196,11 +211,63 @@ def _check_tile_count(lo, hi, size: float, where: str) -> None:
 
 def tile_index(values: np.ndarray, size: float) -> np.ndarray:
     """The tile (on one axis) of each of ``values``: i with i·size <= v < (i+1)·size, those
-    products as floats compute them (the names' corners): a division rounded across an edge is mended."""
+    products as floats compute them (the names' corners): a division rounded across an edge is mended.
+    For positions without a LAS grid; ``TileAxis`` places those on one."""
     i = np.floor(values / size)
     i -= values < i * size
     i += values >= (i + 1) * size
     return i.astype(np.int64)
+
+
+def _in_steps(value: float, scale: float) -> float:
+    """``value`` in steps of ``scale``: a whole number where it is one but for float rounding
+    (0.1 / 0.01 is 10.000000000000002), else as divided."""
+    steps = value / scale
+    whole = round(steps)
+    return float(whole) if abs(steps - whole) <= 1e-9 * max(1.0, abs(steps)) and abs(whole) < 2**53 else steps
+
+
+class TileAxis:
+    """The tiles' edges on one axis (x or y): every ``size`` from 0, a tile's buffer ``buffer``
+    beyond its edges. ``scale``, ``offset``: the LAS grid the tiles store positions on; each point
+    is then placed by the grid integer its tile stores (as io/write.py rounds it), in grid steps:
+    where the size and the offset are whole numbers of steps (the usual case: a size of 0.1 on a
+    grid of 0.01 or 0.001), in integers, exactly, so a point on an edge always goes
+    to the tile that starts there (x = 0.7 into tile 0.7..0.8, where floats said 0.7 / 0.1 =
+    6.999999999999999: tile 0.6); otherwise each edge falls between grid lines and counts as on
+    the one nearest it (a point less than half a grid step below an edge is in the tile above).
+    Without a grid (points of float files), by their float positions (``tile_index``)."""
+
+    def __init__(self, size: float, buffer: float, scale: float | None = None, offset: float | None = None):
+        self.size, self.buffer, self.scale, self.offset = size, buffer, scale, offset
+        if scale is not None:  # edges, buffer and the grid's start in grid steps
+            self.steps, self.start, self.reach = (_in_steps(v, scale) for v in (size, offset, buffer))
+            self.exact = self.steps.is_integer() and self.start.is_integer()
+
+    def _position(self, values: np.ndarray) -> np.ndarray:
+        """Each of ``values`` in grid steps from 0, as its grid integer (int64 where exact)."""
+        stored = np.rint((values - self.offset) / self.scale)
+        return stored.astype(np.int64) + int(self.start) if self.exact else stored + self.start
+
+    def index(self, values: np.ndarray) -> np.ndarray:
+        """The tile of each of ``values``."""
+        if self.scale is None:
+            return tile_index(values, self.size)
+        at = self._position(values)
+        if self.exact:
+            return at // int(self.steps)
+        # tile i starts at the grid line nearest i·steps (a halfway edge: the line above it)
+        return (np.ceil((at + 0.5) / self.steps) - 1).astype(np.int64)
+
+    def near(self, values: np.ndarray, tile: np.ndarray) -> np.ndarray:
+        """Whether each of ``values`` lies within the buffer of its ``tile`` (edges included)."""
+        if self.scale is None:
+            return (values >= tile * self.size - self.buffer) & (values <= (tile + 1) * self.size + self.buffer)
+        at = self._position(values)
+        if self.exact:  # whole steps from the edges, against the buffer in steps (off the grid or not: no float rounding)
+            return (at - tile * int(self.steps) >= -self.reach) & (at - (tile + 1) * int(self.steps) <= self.reach)
+        reach = self.reach + 0.5  # (edges between grid lines, as ``index``: within half a step)
+        return (at >= tile * self.steps - reach) & (at <= (tile + 1) * self.steps + reach)
 
 
 def tile_groups(i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -243,8 +310,11 @@ class _TileSpill:
     """Each tile's points as they come, appended to its raw file in ``folder`` (one record a point:
     position, colour, the colour bits of its file, its attributes; the layout of the first chunk)."""
 
-    def __init__(self, folder: Path, size: float, buffer: float, where: str):
+    def __init__(self, folder: Path, size: float, buffer: float, where: str, grid=None):
         self.folder, self.size, self.buffer, self.where = folder, size, buffer, where
+        on_grid = [(float(grid[0][a]), float(grid[1][a])) if grid is not None else () for a in (0, 1)]  # (scale, offset) of x, of y
+        self.axes = [TileAxis(size, buffer, *on_grid[a]) for a in (0, 1)]
+        self.lo, self.hi = np.full(3, np.inf), np.full(3, -np.inf)  # the points' bounds: a grid for points without one
         self.dtype = None
         self.held: dict[tuple[int, int], int] = {}  # points spilled for each tile
         self.own: dict[tuple[int, int], int] = {}  # of them, the tile's own (not its buffer's)
@@ -256,12 +326,13 @@ class _TileSpill:
     def add(self, chunk: PointChunk) -> None:
         """Append the points of ``chunk`` to their tiles' files (and, with a buffer, to their neighbours')."""
         records = self._records(chunk)
-        i, j = (tile_index(chunk.xyz[:, axis], self.size) for axis in (0, 1))
+        self.lo, self.hi = np.minimum(self.lo, chunk.xyz.min(axis=0)), np.maximum(self.hi, chunk.xyz.max(axis=0))
+        i, j = (self.axes[a].index(chunk.xyz[:, a]) for a in (0, 1))
         rows, ti, tj = [np.arange(len(chunk))], [i], [j]
         if self.buffer:
             reach = math.ceil(self.buffer / self.size)  # (a buffer up to the edge: the next tile on each side)
-            near_x = {d: self._near(chunk.xyz[:, 0], i + d) for d in range(-reach, reach + 1)}
-            near_y = {d: self._near(chunk.xyz[:, 1], j + d) for d in range(-reach, reach + 1)}
+            near_x = {d: self.axes[0].near(chunk.xyz[:, 0], i + d) for d in range(-reach, reach + 1)}
+            near_y = {d: self.axes[1].near(chunk.xyz[:, 1], j + d) for d in range(-reach, reach + 1)}
             for dx, in_x in near_x.items():
                 for dy, in_y in near_y.items():
                     if dx or dy:
@@ -289,10 +360,6 @@ class _TileSpill:
             self.held[key] = self.held.get(key, 0) + int(counts[k])
             self.own[key] = self.own.get(key, 0) + int(own[k])
 
-    def _near(self, values: np.ndarray, tile: np.ndarray) -> np.ndarray:
-        """Whether each of ``values`` is within the buffer of its ``tile`` (on one axis, edges included)."""
-        return (values >= tile * self.size - self.buffer) & (values <= (tile + 1) * self.size + self.buffer)
-
     def _records(self, chunk: PointChunk) -> np.ndarray:
         """The chunk's points as spill records (the first chunk sets their layout)."""
         attributes = dict(chunk.attributes)
@@ -319,16 +386,17 @@ class _TileSpill:
                     attributes = {a: np.array(run[f"attribute {a}"]) for a in names}
                     yield PointChunk(run["xyz"], run["rgba"], attributes, color_bits=int(run["color_bits"][0]) or None)
 
-    def write_tiles(self, name: str, suffix: str, files: PointFiles, progress) -> list[Path]:
-        """Write each tile holding points of its own into the work folder, one at a time, its spill
-        file removed once written; returns their paths, by x then y (tiles of buffer points only: none)."""
+    def write_tiles(self, name: str, suffix: str, files: PointFiles, grid, folder: Path, progress) -> list[Path]:
+        """Write each tile holding points of its own into ``folder``, one at a time, on the LAS
+        ``grid`` (scale, offset), its spill file removed once written; returns their paths, by x
+        then y (tiles of buffer points only: none)."""
         self.written_keys = sorted(key for key, n in self.own.items() if n)
         progress.phase("write", sum(self.held[key] for key in self.written_keys))
         written = []
         for key in self.written_keys:
-            path = self.folder / tile_name(name, *key, self.size, suffix)
+            path = folder / tile_name(name, *key, self.size, suffix)
             write_points(
-                path, lambda key=key: self.chunks(key, files.chunk_size), None, grid=files.las_grid, crs_records=files.crs_records, color_bits=None,
+                path, lambda key=key: self.chunks(key, files.chunk_size), None, grid=grid, crs_records=files.crs_records, color_bits=None,
                 has_color=files.has_color,
             )
             self.path(key).unlink()
