@@ -20,6 +20,7 @@ import numpy as np
 from numba import njit
 
 from ..core.attributes import Attributes, Packed, packed_range
+from ..core.chunk import attribute_name_problem
 from ..core.cloud import MAX_ABS_COORDINATE, at_scale
 from ..core.compact import centre_half, point_words, rgba32, stream_subset, stream_words
 from ..core.layout import BATCH_DTYPE, PACK_DTYPE
@@ -784,6 +785,9 @@ def read_meta(d: OctreeDir) -> dict:
         attributes = meta.get("attributes", {})
         if not isinstance(attributes, dict) or not all(isinstance(a, str) for a in attributes):  # 5 was a TypeError
             raise TypeError(f"attributes is not {{name: dtype}}: {str(attributes)[:60]}")
+        for a in attributes:  # each names a file: '/../../x' read x.npy from outside the folder (one named 'attr.' inside let it through)
+            if attribute_name_problem(a):
+                raise ValueError(attribute_name_problem(a)[:200])
         bounds = meta["bounds"]
         if not isinstance(bounds, dict):
             raise TypeError(f"bounds is not {{\"min\": [x, y, z], \"max\": [x, y, z]}}: {bounds!r}")
