@@ -2,8 +2,9 @@
 
 A message is binary: ``b"GPL1"``, a u32 little-endian header length, a JSON header, then the
 arrays' raw bytes one after the other. The header says the frame's kind (``points`` or
-``depth``), each array's dtype and shape (in order), and the pose (16 numbers, row-major),
-time, intrinsics and depth scale. ``decode_frame`` checks every part against the bytes it
+``depth``), each array's dtype and shape (whole numbers; in order, each array once), and the
+pose (16 numbers, row-major), time, intrinsics ((fx, fy, cx, cy), or a 3x3 matrix: 9 numbers
+row-major or nested) and depth scale. ``decode_frame`` checks every part against the bytes it
 got and raises a one-line InputError on anything else (the server answers it and keeps the
 stream going). ``PushClient`` (websockets' sync client) sends frames and reads each answer.
 """
@@ -72,13 +73,19 @@ def decode_frame(data: bytes) -> RecordedFrame:
         raise InputError("push: 'arrays' must be a list of {name, dtype, shape}")
     for spec in specs:
         try:
-            name, dtype, shape = spec["name"], spec["dtype"], tuple(int(s) for s in spec["shape"])
-        except (TypeError, KeyError, ValueError, OverflowError):  # (1e400 in JSON is inf: int() overflows)
+            name, dtype, shape = spec["name"], spec["dtype"], spec["shape"]
+        except (TypeError, KeyError):
             raise InputError("push: each array needs a name, a dtype and a shape") from None
         if not isinstance(name, str) or not isinstance(dtype, str):  # (lists: unhashable)
             raise InputError("push: each array's name and dtype must be strings")
         if name not in _ARRAYS[kind]:
             raise InputError(f"push: a {kind} frame has no array {str(name)[:30]!r} (only {', '.join(_ARRAYS[kind])})")
+        if name in arrays:  # a second xyz replaced the first, without a word
+            raise InputError(f"push: array {name} is given twice")
+        if not isinstance(shape, list) or not all(isinstance(s, int) and not isinstance(s, bool) for s in shape):
+            # (int() read a shape of [2.5, 3] as [2, 3] and true as 1: the bytes were split otherwise than the producer meant)
+            raise InputError(f"push: array {name}: shape must be a list of whole numbers, got {str(shape)[:60]}")
+        shape = tuple(shape)
         if dtype not in _DTYPES or len(shape) > 3 or any(not 0 <= s <= MAX_PUSH_BYTES for s in shape):
             raise InputError(f"push: array {name}: unsupported dtype {str(dtype)[:10]!r} or shape {str(shape)[:60]}")
         count = math.prod(shape)  # Python's integers: numpy's int64 product of [2**62, 4] wrapped to 0 (a ValueError, the connection lost)
@@ -102,6 +109,8 @@ def decode_frame(data: bytes) -> RecordedFrame:
         intrinsics = header.get("intrinsics")
         if intrinsics is not None:
             intrinsics = np.asarray(intrinsics, np.float64)
+            if intrinsics.size == 9:  # a 3x3 camera matrix, row-major (encode_frame sends it flat): push_depth refused its 9 numbers
+                intrinsics = intrinsics.reshape(3, 3)
     except (TypeError, ValueError, OverflowError):
         raise InputError("push: time, depth_scale, max_depth and intrinsics must be numbers") from None
     if kind == "depth":
