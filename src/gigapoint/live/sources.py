@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import io
 import math
+import os
 import threading
 import time
 from collections.abc import Iterator
@@ -31,6 +32,7 @@ from numba import njit
 
 from ..errors import GigapointError, InputError, check_switch, first_line, is_real, keep_warnings
 from ..io._base import unpack_rgb
+from ..io.http import as_url, shown_url
 from .record import RecordedFrame, is_recording, read_frame, recording_files, stopped_early
 
 KINECT_V2 = (365.5, 365.5, 256.0, 212.0)  # fx, fy, cx, cy of a Kinect v2's 512x424 depth camera
@@ -484,6 +486,10 @@ def open_source(spec, **options) -> Source:
     folder, or a folder of frame files."""
     if str(spec) in ("demo", "synthetic"):
         return SyntheticSensor(**options)
+    if not isinstance(spec, str | os.PathLike) or not os.fspath(spec).strip():  # "" played the current folder's files; 5 was a TypeError
+        raise InputError(f"live: a source is demo, a recording, a bag, a TUM sequence or a folder of frames, got {spec!r}")
+    if as_url(spec) is not None:  # (said as 'http:/host/x.bag: no such file')
+        raise InputError(f"{shown_url(spec)}: live sources are read from this machine's files, not from URLs")
     path = Path(spec)
     if not path.exists():
         raise InputError(f"{path}: no such file or folder (a live source: demo, a recording, a bag, a TUM sequence or a folder of frames)")
