@@ -702,7 +702,8 @@ class Session:
                 if not ok:
                     return
                 continue
-            except Exception as exc:  # noqa: BLE001 - a bug must not kill the tab silently
+            except Exception as exc:  # a bug must not kill the tab silently
+                log.exception("viewer: a frame failed")  # (its traceback was lost: the tab got one line, the terminal nothing)
                 if not self._render_failed(version, exc, settings):
                     return
                 continue
