@@ -350,6 +350,27 @@ def test_a_lon_lat_clip_polygon_naming_no_crs_with_to_crs_is_refused_before_a_po
         assert not (tmp_path / out).exists() or not any((tmp_path / out).iterdir()), out
 
 
+
+def test_a_lon_lat_clip_polygon_naming_no_crs_is_refused_over_inputs_in_a_projected_from_crs_too(cli, tmp_path):
+    """--from-crs (its inputs' headers naming no CRS: no header said which) took a lon/lat polygon
+    in autzen's feet, and "no point passes" came once every point was read: the one line it gets
+    where the headers name that CRS, for a file, an octree and tiles alike. Over inputs in lon/lat
+    (--from-crs EPSG:4326) the same polygon is theirs: kept as it is."""
+    feet = _plain_tile(tmp_path / "feet.las", [[636_000.0, 849_000.0, 100.0], [637_000.0, 849_500.0, 110.0]])
+    lonlat = _site_geojson(tmp_path / "lonlat.geojson", [(-123.1, 44.0), (-123.0, 44.0), (-123.0, 44.1)])
+    want = (
+        f"error: {lonlat}: x -123.1..-123, y 44..44.1 looks like longitude/latitude (RFC 7946 GeoJSON) while {feet} is in "
+        "NAD83(HARN) / Oregon GIC Lambert (ft) (EPSG:2994): add a crs member naming its CRS, or reproject it into the files' coordinates"
+    )
+    for out in ("out.laz", "out.copc.laz", "tiles"):
+        command = ("tile", feet, "--size", 1000) if out == "tiles" else ("convert", feet)
+        rc, _, err = cli(*command, "-o", tmp_path / out, "--to-crs", UTM, "--from-crs", "EPSG:2994", "--clip-polygon", lonlat, "-q")
+        assert rc != 0 and err.strip().splitlines()[-1] == want, out  # (after the warning that z keeps its feet)
+        assert not (tmp_path / out).exists() or not any((tmp_path / out).iterdir()), out
+    degrees = _plain_tile(tmp_path / "degrees.las", [[-123.05, 44.01, 100.0], [-122.9, 44.2, 110.0]], scale=1e-7)
+    rc, stdout, err = cli("convert", degrees, "-o", tmp_path / "kept.laz", "--to-crs", UTM, "--from-crs", "EPSG:4326", "--clip-polygon", lonlat, "-q")
+    assert rc == 0 and stdout.startswith(f"{tmp_path / 'kept.laz'}: 1 point (laz)"), err
+
 def _densified(corners, pieces=64):
     """The ring ``corners`` with each edge cut into ``pieces``: moved into another CRS, its edges
     still follow the straight ones in the first (a projection bends them: millimetres over autzen's

@@ -38,8 +38,8 @@ import numpy as np
 from ..core.chunk import PointChunk
 from ..core.coords import MAX_ABS_COORDINATE
 from ..errors import GigapointWarning, InputError, counted, first_line, warn
-from .crs import crs_identity
-from .filters import PointFilter, placed_over
+from .crs import crs_identity, crs_units
+from .filters import PointFilter, may_move, placed_in, placed_over
 from .las import LasReader, read_las_header
 from .polygon import ClipPolygon, moved_polygon
 from .registry import reader_for
@@ -304,12 +304,14 @@ class Reprojection:
         whose moved ends follow the curves a projection makes of straight edges (polygon.py's
         ``moved_polygon``, within the fast path's tolerance where set). It names no CRS any more:
         it is in the points' coordinates (no "names EPSG:n" warning). Naming none, in
-        longitude/latitude's range far from inputs whose headers name a projected CRS: refused in
-        one line, as a read filter refuses it (RFC 7946 GeoJSON is lon/lat: it would keep nothing)."""
+        longitude/latitude's range far from inputs in a projected CRS (``from_crs``, else the one
+        their headers name): refused in one line, as a read filter refuses it (RFC 7946 GeoJSON is
+        lon/lat: it would keep nothing)."""
         if polygon.epsg is not None:
             source = parse_crs(f"EPSG:{polygon.epsg}", f"{polygon.source}: its CRS EPSG:{polygon.epsg}")
         elif self.given_source is not None:
             source = self.given_source
+            self._refuse_lon_lat_polygon(polygon, files)
         else:
             named = {crs_identity(text): text for text in map(self._file_crs, files)}  # (one CRS as WKT and as GeoTIFF keys: one)
             if len(named) > 1:
@@ -321,6 +323,18 @@ class Reprojection:
             source = parse_crs(text, f"{files[0]}: its CRS {text[:60]!r}")
             placed_over(polygon, files[:1], files[0])  # (lon/lat far from projected inputs: refused in one line, as without --to-crs)
         return moved_polygon(polygon, source, self.target, None if self.tolerance is None else self.tolerance[0])
+
+    def _refuse_lon_lat_polygon(self, polygon: ClipPolygon, files) -> None:
+        """A one-line InputError where ``polygon`` (naming no CRS) looks like longitude/latitude far
+        from the first of ``files`` whose header gives its box, in ``from_crs`` if that is projected:
+        as ``placed_over`` refuses it over inputs whose headers name that CRS (``from_crs`` is
+        theirs here: their headers may name none). Files whose headers give no box: not refused."""
+        if not may_move(polygon):
+            return  # (in the points' coordinates: no header read)
+        boxed = next(((f, box) for f in files if (box := reader_for(f).header(f, salvage=True).get("bounds")) is not None), None)
+        if boxed is not None:
+            crs = self.given_source.to_wkt()
+            placed_in(polygon, crs, crs_units(crs), boxed[1], boxed[0])
 
     def as_spec(self) -> dict:
         """What tells two reprojections apart (a conversion's fingerprint: one resumed under another
