@@ -302,6 +302,31 @@ def test_a_geojson_naming_another_crs_than_the_files_is_warned_of_without_pyproj
     assert [message for message, _ in kept] == [f"{sites[32611]} names EPSG:32611, {las_path} EPSG:32610: the polygon is taken in the files' coordinates, not reprojected"]
 
 
+
+def test_a_polygon_naming_another_crs_is_moved_once_a_crs_not_once_a_file(tmp_path, monkeypatch):
+    """Two tiles in UTM zone 10 (GeoTIFF keys), a square over their first 100 units given in
+    lon/lat: moved into their CRS once, and each tile's placement is that one polygon."""
+    pyproj = pytest.importorskip("pyproj")
+    from gigapoint.io import filters
+
+    keys = struct.pack("<8H", 1, 1, 0, 1, 3072, 0, 1, 32610)  # GeoTIFF keys: ProjectedCSTypeGeoKey = EPSG:32610
+    tiles = []
+    for name in ("a.las", "b.las"):
+        las = laspy.read(str(_grid_las(tmp_path / name)))
+        las.header.vlrs.append(laspy.VLR("LASF_Projection", 34735, "GeoTIFF keys", keys))
+        las.write(str(tmp_path / name))
+        tiles.append(tmp_path / name)
+    lon, lat = pyproj.Transformer.from_crs("EPSG:32610", "EPSG:4326", always_xy=True).transform([0, 100, 100, 0], [0, 0, 100, 100])
+    crs = {"type": "name", "properties": {"name": "EPSG:4326"}}
+    polygon = clip_polygon_of({"type": "Polygon", "crs": crs, "coordinates": [[*zip(lon, lat)]]}, "test")
+    moves = []
+    real = filters.moved_polygon
+    monkeypatch.setattr(filters, "moved_polygon", lambda *args, **kwargs: moves.append(args[2]) or real(*args, **kwargs))
+    assert gp.open(*tiles, clip_polygon=polygon).n_points == 2 * 100 * 100  # (x and y 0.25 .. 99.25 of each tile)
+    assert len(moves) == 1 and list(polygon.moved_by_crs) == ["EPSG:32610"]
+    assert set(polygon.placed_by_file) == set(map(str, tiles))
+    assert polygon.placed_by_file[str(tiles[0])] is polygon.placed_by_file[str(tiles[1])] is polygon.moved_by_crs["EPSG:32610"]
+
 BAD = {
     "missing": (None, "no such file (nor WKT text: POLYGON ((x y, ...)))"),
     "not-polygon-text": ("x,y,z\n1,2,3\n", "neither GeoJSON nor WKT (POLYGON, MULTIPOLYGON): not a clip polygon"),

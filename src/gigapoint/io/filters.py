@@ -160,10 +160,10 @@ class PointFilter:
     def placed_polygon(self, path) -> ClipPolygon:
         """The polygon in the coordinates of ``path``'s points (module notes; ``_placed``), placed
         once a file: kept with the polygon, which a filter's fresh copies share."""
-        key = str(path)
-        if key not in self.polygon.placed:
-            self.polygon.placed[key] = _placed(self.polygon, path)
-        return self.polygon.placed[key]
+        placed = self.polygon.placed_by_file
+        if str(path) not in placed:
+            placed[str(path)] = _placed(self.polygon, path)
+        return placed[str(path)]
 
     def _box_polygon(self) -> ClipPolygon | None:
         """The polygon boxes are tested against (no file named): as it is where it names no CRS;
@@ -171,7 +171,7 @@ class PointFilter:
         (where it may yet move: no test)."""
         if self.polygon.epsg is None:
             return self.polygon
-        placed = {id(p): p for p in self.polygon.placed.values() if p is not None}
+        placed = {id(p): p for p in self.polygon.placed_by_file.values()}
         return next(iter(placed.values())) if len(placed) == 1 else None
 
     def check_passed(self, label: str) -> None:
@@ -290,10 +290,11 @@ def placed_in(polygon: ClipPolygon, crs: str | None, units: dict, bounds, where)
     if not may_move(polygon) or crs is None:
         return polygon
     if polygon.epsg is not None:
-        if crs not in polygon.placed:  # (once a CRS, not once a file: a survey's thousands of tiles share one)
-            polygon.placed[crs] = _moved_into(polygon, crs, where)
-        if polygon.placed[crs] is not None:
-            return polygon.placed[crs]
+        moved = polygon.moved_by_crs
+        if crs not in moved:  # (once a CRS, not once a file: a survey's thousands of tiles share one)
+            moved[crs] = _moved_into(polygon, crs, where)
+        if moved[crs] is not None:
+            return moved[crs]
     refuse_lon_lat(polygon, crs, units, bounds, where)
     epsg = horizontal_epsg(crs)
     if polygon.epsg is not None and epsg is not None and epsg != polygon.epsg:

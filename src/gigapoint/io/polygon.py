@@ -52,9 +52,10 @@ class ClipPolygon:
     label in ``gigapoint volume``). ``features``: per polygon the number of that Feature (0, 1, ...
     in the file's order; None outside one): a Feature's MultiPolygon is one stockpile in parts.
     ``moved_from``: the CRS it was moved from into the points' (``moved_polygon``; None: as read):
-    it is in their coordinates, never moved again. ``placed``: filters.py's, this polygon in the
-    coordinates of each file filtered (by its path) and of each CRS it was moved into (by the
-    CRS's text; None: no pyproj to move it)."""
+    it is in their coordinates, never moved again. filters.py's caches: ``placed_by_file``, this
+    polygon in the coordinates of each file filtered (by its path); ``moved_by_crs``, it moved
+    into each CRS (by the CRS's text; None: no pyproj to move it), once a CRS however many files
+    are in it."""
 
     def __init__(
         self, polygons: list[list[np.ndarray]], source: str, epsg: int | None = None, names: list[str | None] | None = None, features: list[int | None] | None = None,
@@ -66,7 +67,8 @@ class ClipPolygon:
         self.names = names or [None] * len(polygons)
         self.features = features or [None] * len(polygons)
         self.moved_from = moved_from
-        self.placed: dict[str, ClipPolygon | None] = {}
+        self.placed_by_file: dict[str, ClipPolygon] = {}
+        self.moved_by_crs: dict[str, ClipPolygon | None] = {}
         rings = [ring for polygon in polygons for ring in polygon]
         self.edges = np.concatenate([np.hstack([ring, np.roll(ring, -1, axis=0)]) for ring in rings])  # rows x1, y1, x2, y2
         xy = np.concatenate(rings)
