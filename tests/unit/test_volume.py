@@ -391,6 +391,24 @@ def test_cli_volume_of_an_octree_folder_with_all_points_is_the_point_files(cli, 
         gp.volume(autzen_layered["gigapoint"], outside, 16)
 
 
+BLOCK_OFF_CENTRES = (636455.9375, 849225.875, 636535.9375, 849260.875)  # AUTZEN_BLOCK, its edges off the 2 ft pixels' centres (the test below says how far)
+
+
+def block_in_degrees(autzen_path):
+    """(ring, toe): autzen's raised block (``BLOCK_OFF_CENTRES``, Lambert feet), each edge cut into 64 pieces,
+    and that ring moved into lon/lat as a GeoJSON Polygon whose crs member names EPSG:4326."""
+    pyproj = pytest.importorskip("pyproj")
+    from gigapoint.io.las import read_las_header
+
+    x0, y0, x1, y1 = BLOCK_OFF_CENTRES
+    corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+    along = np.arange(64)[None, :, None] / 64
+    ring = (corners[:, None, :] + along * (np.roll(corners, -1, axis=0) - corners)[:, None, :]).reshape(-1, 2)
+    feet = pyproj.CRS.from_wkt(read_las_header(autzen_path).crs())
+    lon, lat = pyproj.Transformer.from_crs(feet, "EPSG:4326", always_xy=True).transform(*ring.T)
+    crs = {"type": "name", "properties": {"name": "EPSG:4326"}}
+    return ring, {"type": "Polygon", "crs": crs, "coordinates": [[*zip(lon, lat), (lon[0], lat[0])]]}
+
 def test_a_toe_naming_another_crs_is_moved_into_the_surveys_before_its_box_is_read(cli, tmp_path, autzen_path):
     """autzen's raised block (Lambert feet) drawn in lon/lat, a crs member naming EPSG:4326: moved
     into the survey's feet before the read box and the grid are made from it (it was refused as
@@ -400,18 +418,10 @@ def test_a_toe_naming_another_crs_is_moved_into_the_surveys_before_its_box_is_re
     toe's samples for the base (every foot at most) 0.047 ft from the pixels' edges: the same
     pixels and the same samples' pixels; the plane through those is fitted at the samples'
     positions, which move by up to 3e-7 ft: the volumes agree within 1e-7 (measured: 7e-9)."""
-    pyproj = pytest.importorskip("pyproj")
-    from gigapoint.io.las import read_las_header
-
-    x0, y0, x1, y1 = (636455.9375, 849225.875, 636535.9375, 849260.875)  # (AUTZEN_BLOCK; see above)
-    corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
-    along = np.arange(64)[None, :, None] / 64
-    ring = (corners[:, None, :] + along * (np.roll(corners, -1, axis=0) - corners)[:, None, :]).reshape(-1, 2)
-    feet = pyproj.CRS.from_wkt(read_las_header(autzen_path).crs())
-    lon, lat = pyproj.Transformer.from_crs(feet, "EPSG:4326", always_xy=True).transform(*ring.T)
-    crs = {"type": "name", "properties": {"name": "EPSG:4326"}}
+    ring, in_degrees = block_in_degrees(autzen_path)
+    x0, y0, x1, y1 = BLOCK_OFF_CENTRES
     degrees = tmp_path / "toe4326.geojson"
-    degrees.write_text(json.dumps({"type": "Polygon", "crs": crs, "coordinates": [[*zip(lon, lat), (lon[0], lat[0])]]}))
+    degrees.write_text(json.dumps(in_degrees))
     given = gp.volume(autzen_path, {"type": "Polygon", "coordinates": [[*ring.tolist(), ring[0].tolist()]]}, 2.0)
     moved = gp.volume(autzen_path, degrees, 2.0)
     assert given.fill > 1000 and moved.piles[0].pixels == given.piles[0].pixels == 40 * 17
@@ -423,6 +433,21 @@ def test_a_toe_naming_another_crs_is_moved_into_the_surveys_before_its_box_is_re
     assert rc == 0, err
     assert json.loads(out)["total"]["fill"] == pytest.approx(given.fill, rel=1e-7)
 
+
+
+@pytest.mark.parametrize("kind", ["gigapoint", "copc"])
+def test_a_toe_naming_a_crs_over_an_octrees_path_opens_it_once(autzen_layered, autzen_path, monkeypatch, kind):
+    """The octree was opened for its CRS and bounds (to move the toe), then again to read it: now
+    once, and the toe moved from lon/lat measures what the same ring given in its feet does."""
+    ring, in_degrees = block_in_degrees(autzen_path)
+    given = gp.volume(autzen_layered[kind], {"type": "Polygon", "coordinates": [[*ring.tolist(), ring[0].tolist()]]}, 2.0)
+    opens = []
+    real_open = gp.open
+    monkeypatch.setattr(gp, "open", lambda *paths, **options: opens.append(paths) or real_open(*paths, **options))
+    moved = gp.volume(autzen_layered[kind], in_degrees, 2.0)
+    assert opens == [(autzen_layered[kind],)]
+    assert moved.piles[0].pixels == given.piles[0].pixels == 40 * 17 and given.fill > 1000
+    assert moved.fill == pytest.approx(given.fill, rel=1e-7) and moved.cut == pytest.approx(given.cut, rel=1e-7)
 
 def test_a_lon_lat_toe_naming_no_crs_over_a_projected_survey_is_refused_as_a_read_filter_refuses_it(autzen_path, tmp_path, autzen_layered):
     """RFC 7946 GeoJSON is longitude/latitude: over autzen's feet it was "outside the data"; now

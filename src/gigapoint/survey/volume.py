@@ -53,7 +53,7 @@ from ..io.filters import may_move, placed_in, placed_over, point_filter
 from ..io.polygon import ClipPolygon, check_simple, clip_polygon_of
 from ..lod.query import is_octree
 from ..lod.reader import cloud_crs, cloud_crs_units, cloud_units
-from ..lod.voxel_octree import VoxelOctree
+from ..lod.store import OctreeCloud
 from ..render import Camera
 from ..render.colors import ramp_image
 from ..render.contours import draw_lines
@@ -325,31 +325,43 @@ def _pile_parts(polygon: ClipPolygon) -> list[tuple[str, list[int]]]:
     return list(zip(numbered, groups))
 
 
-def _in_survey_crs(toe: ClipPolygon, source) -> ClipPolygon:
-    """``toe`` in the survey's coordinates, as a read filter places its polygon (io/filters.py's
-    ``placed_in``): moved from the CRS its GeoJSON names into the survey's (``cloud_crs``'s: that
-    of its first point file naming one, or an octree's), refused in one line where it looks like
-    longitude/latitude naming none over a projected survey. Only headers (or an octree's
-    metadata) are read, before a point is: the toe's box bounds what is read."""
-    if not may_move(toe):
-        return toe
+def _survey_paths(source) -> list:
+    """The paths of ``source`` (a path or several; a pattern matching one octree: its path)."""
+    from ..io import lone_match
+
+    return lone_match([source] if isinstance(source, (str, os.PathLike)) else source)
+
+
+def _opened_octree(source):
+    """The LOD octree ``source`` names (its path, or a pattern matching one) opened unread (its
+    metadata; an unfinished conversion's preview, which ``open_survey`` refuses); None for any
+    other source. Opened once: its CRS places the toe (``_in_survey_crs``), then its nodes are read."""
     from .. import open as open_points
-    from ..io import expand_paths, lone_match
     from ..lod import is_lod_source
 
+    if isinstance(source, PointCloud) or is_octree(source):
+        return None
+    paths = _survey_paths(source)
+    return open_points(paths[0]) if len(paths) == 1 and is_lod_source(paths[0]) else None
+
+
+def _in_survey_crs(toe: ClipPolygon, source, opened=None) -> ClipPolygon:
+    """``toe`` in the survey's coordinates, as a read filter places its polygon (io/filters.py's
+    ``placed_in``): moved from the CRS its GeoJSON names into the survey's (``cloud_crs``'s: that
+    of its first point file naming one, or an octree's: ``opened``, where ``source`` is its path),
+    refused in one line where it looks like longitude/latitude naming none over a projected
+    survey. Only headers (or an octree's metadata) are read, before a point is: the toe's box
+    bounds what is read."""
+    if not may_move(toe):
+        return toe
+    from ..io import expand_paths
+
     label = survey_label(source)
-    survey = source
-    if not (isinstance(source, PointCloud) or is_octree(source)):
-        paths = lone_match([source] if isinstance(source, (str, os.PathLike)) else source)
-        if not (len(paths) == 1 and is_lod_source(paths[0])):
-            return placed_over(toe, expand_paths(paths), label)
-        survey = open_points(paths[0])  # (an octree opens unread: its metadata)
-    try:
-        crs, units = cloud_crs_units(survey)
-        return placed_in(toe, crs, units, survey.bounds, label)
-    finally:
-        if isinstance(survey, VoxelOctree) and survey is not source:  # (a COPC/EPT octree opened here: its connections)
-            survey.close()
+    survey = source if opened is None else opened
+    if not (isinstance(survey, PointCloud) or is_octree(survey)):
+        return placed_over(toe, expand_paths(_survey_paths(source)), label)
+    crs, units = cloud_crs_units(survey)
+    return placed_in(toe, crs, units, survey.bounds, label)
 
 
 @headers_once()  # (one operation: the toe placed over the survey's headers, then its points read, each header read and each warning said once)
@@ -380,18 +392,24 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
         check_max_distance("volume: fill_nodata", fill_nodata)
     toe = clip_polygon_of(clip_polygon, f"volume: clip_polygon={clip_polygon!r}")
     check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it")
-    toe = _in_survey_crs(toe, source)  # (before its box bounds what is read)
+    octree = _opened_octree(source)
+    toe = _in_survey_crs(toe, source, octree)  # (before its box bounds what is read)
     margin = MARGIN_PIXELS * gsd
     box = [*(toe.lo - margin), *(toe.hi + margin)]  # read-time: only the points near the piles
     filters = {"classes": classes, "drop_classes": drop_classes, "clip": box}
-    point_filter(**filters, where="volume")  # bad values told before anything is read
+    keep = point_filter(**filters, where="volume")  # bad values told before anything is read
     label = survey_label(source)
     try:  # (an octree's points are read, and found missing, as its surface is drawn)
-        # (an opened octree takes no filter of its own: the grid's footprint bounds what is read of it)
-        cloud = open_survey(source, {**filters, "clip": None} if is_octree(source) else filters, "volume")
+        if isinstance(octree, OctreeCloud):  # (its path's: filtered as gp.open(path, **filters) filters it, not opened again)
+            octree.read_only(keep, label)
+            cloud = octree
+        else:  # (an opened octree takes no filter of its own: the grid's footprint bounds what is read of it)
+            cloud = open_survey(source, {**filters, "clip": None} if is_octree(source) else filters, "volume")
         lo, hi = cloud.bounds
         camera = Camera.top_down(((box[0], box[1], lo[2]), (box[2], box[3], hi[2])), gsd)
         drawn = surface(cloud, camera, full=full)
+        if np.isnan(drawn).all():  # (an octree's nodes not meeting the box are not read: none said so)
+            raise EmptyCloudError(label)
     except EmptyCloudError:
         (x0, y0), (x1, y1) = toe.lo, toe.hi
         raise InputError(f"{toe.source}: no point of {label} lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}: the polygon is outside the data") from None
