@@ -54,6 +54,7 @@ from ..io.polygon import ClipPolygon, check_simple, clip_polygon_of
 from ..lod.query import is_octree
 from ..lod.reader import cloud_crs, cloud_crs_units, cloud_units
 from ..lod.store import OctreeCloud
+from ..lod.voxel_octree import VoxelOctree
 from ..render import Camera
 from ..render.colors import ramp_image
 from ..render.contours import draw_lines
@@ -392,7 +393,17 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
         check_max_distance("volume: fill_nodata", fill_nodata)
     toe = clip_polygon_of(clip_polygon, f"volume: clip_polygon={clip_polygon!r}")
     check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it")
+    point_filter(classes, drop_classes, where="volume")  # bad classes told before an octree is opened
     octree = _opened_octree(source)
+    try:
+        return _measured(toe, source, octree, gsd, base, classes, drop_classes, fill_nodata, full)
+    finally:
+        if isinstance(octree, VoxelOctree):  # (a COPC/EPT URL opened here: its connections)
+            octree.close()
+
+
+def _measured(toe: ClipPolygon, source, octree, gsd, base, classes, drop_classes, fill_nodata, full: bool) -> Volume:
+    """``volume``'s figures, its arguments checked (``octree``: ``_opened_octree(source)``)."""
     toe = _in_survey_crs(toe, source, octree)  # (before its box bounds what is read)
     margin = MARGIN_PIXELS * gsd
     box = [*(toe.lo - margin), *(toe.hi + margin)]  # read-time: only the points near the piles
