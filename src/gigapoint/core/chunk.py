@@ -195,10 +195,28 @@ class ColorScaler:
         return to_rgba8(np.clip(ci, 0, 255).astype(np.uint8))
 
 
+def points_for(xyz, where: str) -> np.ndarray:
+    """Positions given as an array (from_arrays, a frame pushed, points added) as an (N, 3)
+    array of integers or floats, in their own dtype; a one-line InputError starting with
+    ``where`` otherwise: a ragged list was numpy's ValueError, complex positions lost their
+    imaginary part (a ComplexWarning), bools became 0 and 1, an object array's None a NaN point
+    dropped without a word and strings were parsed as numbers."""
+    try:
+        a = np.asarray(xyz)
+    except (TypeError, ValueError):  # a ragged list: numpy's "setting an array element with a sequence. The requested array ..."
+        raise InputError(f"{where}: xyz must be an (N, 3) array of numbers, got a ragged {type(xyz).__name__}") from None
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise InputError(f"{where}: xyz must have shape (N, 3), got {a.shape}")
+    if a.dtype.kind not in "uif":
+        raise InputError(f"{where}: xyz must hold numbers (integers or floats), got dtype {a.dtype}")
+    return a
+
+
 def colors_for(rgb, n: int, where: str) -> np.ndarray:
     """Colors given with ``n`` points (from_arrays, a frame pushed, points added) as uint8 RGBA
     (n, 4), their range judged as a file's (``ColorScaler``: floats of 0..255 were all white);
-    a one-line InputError starting with ``where`` when they are not (N, 3|4) colors or not ``n`` rows."""
+    a one-line InputError starting with ``where`` when they are not (N, 3|4) colors of 0..65535
+    or not ``n`` rows."""
     try:
         try:
             rgb = np.asarray(rgb)
@@ -208,6 +226,11 @@ def colors_for(rgb, n: int, where: str) -> np.ndarray:
             raise ValueError(f"colors must have shape (N, 3) or (N, 4), got {rgb.shape}")
         if rgb.dtype.kind not in "biuf":  # strings were a UFuncTypeError traceback of the range check
             raise ValueError(f"colors must be numbers, got dtype {rgb.dtype}")
+        if rgb.dtype.kind in "iuf" and rgb.dtype not in (np.uint8, np.uint16) and rgb.size:  # NaN, -5, 70000 were clipped: black or white points without a word
+            lo, hi = rgb.min(), rgb.max()
+            if not (0 <= lo and hi <= 65535):  # (NaN fails both)
+                bad = rgb.reshape(-1)[np.flatnonzero(~((rgb >= 0) & (rgb <= 65535)))[0]].item()
+                raise ValueError(f"colors must be 0..1, 0..255 or 0..65535 (16 bits), got {bad!r}")
         rgba = ColorScaler()(rgb)
     except ValueError as exc:
         raise InputError(f"{where}: {exc}") from None

@@ -19,7 +19,7 @@ from numba.typed import List
 from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError, check_switch, check_whole, warn
 from . import pages
 from .attributes import Attributes
-from .chunk import PointChunk, attributes_in_common, colors_for, warn_dropped_attributes
+from .chunk import PointChunk, attributes_in_common, colors_for, points_for, warn_dropped_attributes
 from .compact import centre_half, colors_at, compact_positions, full_words, pack_rgb565, point_words, rgba32, subset_streams
 from .coords import MAX_ABS_COORDINATE, NUMPY_MAX, value_decimals
 from .coords import valid_mask as _valid_mask
@@ -28,7 +28,7 @@ from .layout import BATCH_DTYPE, BATCH_SIZE, COLOR_FORMATS
 from .morton import cube_of, morton_codes, morton_order
 from .palette import PaletteColors, block_errors, choose_palette, quantize_palettes
 from .quantize import dequantize, make_batches, quantize
-from .renderable import DrawList, MultiViewDrawList, SelectionSettings, check_classified, check_point_index
+from .renderable import DrawList, MultiViewDrawList, SelectionSettings, check_classified, check_point_index, parse_classes
 from .selection import View, select_view, select_views, subsample_step
 
 #: what ``PointCloud.save`` writes with: io/write.py's ``save_cloud``, set when gigapoint.io.write
@@ -296,8 +296,9 @@ class PointCloud:
         """A cloud of the points whose ``classification`` is not in ``hidden``, in the same order:
         each batch's kept points a batch of their own in its box (their position words as held,
         so they draw where they drew), colours and attributes its own arrays. What frames with
-        ``hidden_classes`` draw (``drawn``); a cloud without classification is a SettingsError."""
-        hidden = tuple(hidden)
+        ``hidden_classes`` draw (``drawn``); a cloud without classification, or ``hidden`` not LAS
+        classes, is a SettingsError."""
+        hidden = parse_classes(hidden, f"{self.name}: without_classes: hidden")  # ("a", -1, 1.5 hid nothing without a word)
         check_classified(self.name, self.attributes, hidden)
         kept = ~np.isin(self.attributes["classification"], hidden)
         idx = np.flatnonzero(kept)
@@ -654,9 +655,7 @@ def from_arrays(xyz, rgb=None, name: str = "arrays", scale=None, colors: str = "
     (``build_cloud``: "auto", "rgba", "rgb565" or "palette")."""
     if not isinstance(name, str):
         raise InputError(f"from_arrays: name must be a string, got {name!r}")
-    xyz = np.asarray(xyz)
-    if xyz.ndim != 2 or xyz.shape[1] != 3:
-        raise InputError(f"{name}: xyz must have shape (N, 3), got {xyz.shape}")
+    xyz = points_for(xyz, name)
     if scale is not None:
         try:
             s = np.asarray(scale, np.float64).reshape(-1)

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.bounds import valid_bounds
-from ..core.chunk import colors_for
+from ..core.chunk import colors_for, points_for
 from ..core.cloud import MAX_ABS_COORDINATE, PointCloud, take
 from ..core.layout import BATCH_SIZE
 from ..core.morton import argsort_codes, cube_of, morton_codes
@@ -142,18 +142,6 @@ class LiveStats:
 
 
 MAX_CHUNK = 1 << 20  # the most points a ring chunk (a drawn batch) may hold
-
-
-def _as_points(xyz, name: str) -> np.ndarray:
-    try:
-        a = np.asarray(xyz)
-    except (TypeError, ValueError):
-        raise InputError(f"{name}: xyz must be an (N, 3) array of numbers, got {type(xyz).__name__}") from None
-    if a.ndim != 2 or a.shape[1] != 3:
-        raise InputError(f"{name}: xyz must have shape (N, 3), got {a.shape}")
-    if a.dtype.kind not in "uif":
-        raise InputError(f"{name}: xyz must hold numbers, got dtype {a.dtype}")
-    return a
 
 
 def _array(values, where: str) -> np.ndarray:
@@ -401,7 +389,7 @@ class LiveCloud:
         (batch_frame); other frames are sorted by Morton code."""
         name = self.name
         self._check_open("push")
-        xyz_in = _as_points(xyz, f"{name}: push")
+        xyz_in = points_for(xyz, f"{name}: push")
         n = len(xyz_in)
         if n == 0:
             raise InputError(f"{name}: push: the frame has no points")

@@ -22,6 +22,7 @@ from typing import Literal, get_args
 
 import numpy as np
 
+from ..core.renderable import parse_classes
 from ..errors import SettingsError
 
 # --- the choices (render/colors.py derives COLOR_MODES and COLORMAPS from these) ----------------------
@@ -357,21 +358,6 @@ def _range(name, v) -> tuple[float, float]:
     if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
         raise SettingsError(f"{name} must be finite with high > low, got {v!r}")
     return (lo, hi)
-
-
-def parse_classes(value, name: str = "hidden_classes") -> tuple[int, ...]:
-    """'7,18', one class or several (ints) -> the sorted distinct LAS classes, each a whole number in 0..255."""
-    parts = [p for p in value.replace(" ", "").split(",") if p] if isinstance(value, str) else value
-    if isinstance(parts, numbers.Real):  # one class: 7
-        parts = [parts]
-    try:
-        classes = [float(c) for c in parts]
-    except (TypeError, ValueError):
-        raise SettingsError(f"{name} must be LAS classes (whole numbers in 0..255, e.g. 7,18), got {value!r}") from None
-    bad = [c for c in classes if not (0 <= c <= 255 and c == int(c))]  # (NaN fails both)
-    if bad:
-        raise SettingsError(f"{name}: {bad[0]:g} is not a LAS class (whole numbers in 0..255), got {value!r}")
-    return tuple(sorted({int(c) for c in classes}))
 
 
 def field_types(cls) -> dict[str, object]:

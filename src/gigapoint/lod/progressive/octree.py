@@ -56,7 +56,7 @@ from ...core import pages
 from ...core.attributes import Attributes, encode, fits, holder_for, repacked, resized, widened, zeroed_like
 from ...core.attributes import stored as stored_array
 from ...core.bounds import valid_bounds
-from ...core.chunk import PointChunk, attribute_dtype_problem, attribute_name_problem, colors_for, warn_dropped_attributes
+from ...core.chunk import PointChunk, attribute_dtype_problem, attribute_name_problem, colors_for, points_for, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, at_scale, byte_views, take
 from ...core.compact import GRID_TOLERANCE, centre_half, ext_bits_per_point, point_words, stream_words, streams_into
 from ...core.framelock import FrameLock
@@ -1081,13 +1081,7 @@ class ProgressiveOctree:
         and may not bring others (InputError); an attribute whose dtype cannot hold a batch's
         widens to numpy's dtype for both (uint16 and float32: float32), as ``gp.open`` of
         several files does."""
-        xyz = np.asarray(xyz)  # (its shape first: ascontiguousarray makes None one NaN of shape (1,))
-        if xyz.ndim != 2 or xyz.shape[1] != 3:
-            raise InputError(f"{self.name}: xyz must have shape (N, 3), got {xyz.shape}")
-        try:
-            xyz = np.ascontiguousarray(xyz, np.float64)
-        except (TypeError, ValueError) as exc:  # strings, objects: from_arrays' one line, not a traceback
-            raise InputError(f"{self.name}: xyz: {exc}") from None
+        xyz = np.ascontiguousarray(points_for(xyz, self.name), np.float64)
         n = len(xyz)
         if n == 0:
             return 0

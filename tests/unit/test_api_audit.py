@@ -1,0 +1,169 @@
+"""A demanding Python user's bad input to the API (gp.from_arrays, a progressive octree's add, a
+live cloud's push, without_classes, point_info, save, Camera, gp.open, gp.convert, a progressive
+load that fails): each case is one line of gigapoint's own errors naming the input and the
+problem; never numpy's traceback, a hang, NaN points drawn or bounds gone NaN, or the user's
+files touched."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+import gigapoint as gp
+from gigapoint.errors import CameraError, InputError, PointIndexError, SettingsError
+from gigapoint.lod.progressive import ProgressiveOctree
+
+XYZ = np.arange(30, dtype=np.float64).reshape(10, 3)
+CLASSES = np.repeat(np.array([1, 2], np.uint8), 5)
+
+# positions that are no numbers: complex ones lost their imaginary part (a ComplexWarning), bools
+# were 0 and 1, an object array's None a NaN point dropped without a word (an octree's add then
+# returned 0), strings were parsed as numbers; a ragged list was numpy's ValueError
+NOT_POSITIONS = [
+    ("complex", np.ones((3, 3), complex), "xyz must hold numbers (integers or floats), got dtype complex128"),
+    ("bool", np.ones((3, 3), bool), "xyz must hold numbers (integers or floats), got dtype bool"),
+    ("object", np.array([[1.0, 2.0, None]] * 3, dtype=object), "xyz must hold numbers (integers or floats), got dtype object"),
+    ("strings", np.array([["1", "2", "3"]] * 3), "xyz must hold numbers (integers or floats), got dtype <U1"),
+    ("ragged", [[1.0, 2.0, 3.0], [4.0, 5.0]], "xyz must be an (N, 3) array of numbers, got a ragged list"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("values", "problem"), [case[1:] for case in NOT_POSITIONS], ids=[case[0] for case in NOT_POSITIONS])
+@pytest.mark.parametrize(
+    ("where", "call"),
+    [
+        ("arrays", lambda xyz: gp.from_arrays(xyz)),
+        ("oct", lambda xyz: ProgressiveOctree("oct").add(xyz)),
+        ("live: push", lambda xyz: gp.LiveCloud(name="live").push(xyz)),
+    ],
+    ids=["from_arrays", "progressive-add", "live-push"],
+)
+def test_positions_that_are_no_numbers_are_one_line(where, call, values, problem):
+    with pytest.raises(InputError, match=f"^{re.escape(f'{where}: {problem}')}$"):
+        call(values)
+
+
+# colours outside any range a colour has: clipped to black or white without a word
+BAD_COLORS = [
+    ("nan", np.full((10, 3), np.nan), "nan"),
+    ("negative-float", np.full((10, 3), -5.0), "-5.0"),
+    ("negative-int", np.full((10, 3), -1), "-1"),
+    ("over-16-bits", np.full((10, 3), 70_000, np.uint32), "70000"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("rgb", "value"), [case[1:] for case in BAD_COLORS], ids=[case[0] for case in BAD_COLORS])
+@pytest.mark.parametrize(
+    ("where", "call"),
+    [
+        ("arrays", lambda rgb: gp.from_arrays(XYZ, rgb)),
+        ("arrays: set_colors", lambda rgb: gp.from_arrays(XYZ).set_colors(rgb)),
+        ("oct", lambda rgb: ProgressiveOctree("oct").add(XYZ, rgb)),
+        ("live: push", lambda rgb: gp.LiveCloud(name="live").push(XYZ, rgb)),
+    ],
+    ids=["from_arrays", "set_colors", "progressive-add", "live-push"],
+)
+def test_colors_out_of_any_range_are_one_line(where, call, rgb, value):
+    with pytest.raises(InputError, match=f"^{re.escape(f'{where}: colors must be 0..1, 0..255 or 0..65535 (16 bits), got {value}')}$"):
+        call(rgb)
+
+
+def test_colors_of_each_range_are_taken():
+    """Floats of 0..1 and of 0..255 and 16-bit integers are the same grey."""
+    for rgb in (np.full((10, 3), 0.5), np.full((10, 3), 128.0), np.full((10, 3), 128 * 256, np.uint16)):
+        assert gp.from_arrays(XYZ, rgb).rgba[0].tolist() == [128, 128, 128, 255]
+
+
+def test_without_classes_refuses_what_is_no_las_class():
+    """'a', -1 and 1.5 hid nothing without a word (the cloud came back whole)."""
+    cloud = gp.from_arrays(XYZ, classification=CLASSES)
+    for hidden, problem in (
+        ("a", "hidden must be LAS classes (whole numbers in 0..255, e.g. 7,18), got 'a'"),
+        ([-1], "hidden: -1 is not a LAS class (whole numbers in 0..255), got [-1]"),
+        ([1.5], "hidden: 1.5 is not a LAS class (whole numbers in 0..255), got [1.5]"),
+        (None, "hidden must be LAS classes (whole numbers in 0..255, e.g. 7,18), got None"),
+    ):
+        with pytest.raises(SettingsError, match=f"^{re.escape(f'arrays: without_classes: {problem}')}$"):
+            cloud.without_classes(hidden)
+    assert cloud.without_classes([2]).n_points == 5 and cloud.without_classes("1,2").n_points == 0
+
+
+def _closed_octree():
+    octree = ProgressiveOctree("oct")
+    octree.close()
+    return octree
+
+
+# cases that were already one line: kept so (a table of what the API says)
+@pytest.mark.parametrize(
+    ("call", "error", "message"),
+    [
+        (lambda: ProgressiveOctree("oct").add(XYZ[:, :2]), InputError, "oct: xyz must have shape (N, 3), got (10, 2)"),
+        (lambda: ProgressiveOctree("oct").add(np.c_[XYZ, XYZ[:, 0]]), InputError, "oct: xyz must have shape (N, 3), got (10, 4)"),
+        (lambda: ProgressiveOctree("oct").add(XYZ[:, 0]), InputError, "oct: xyz must have shape (N, 3), got (10,)"),
+        (lambda: ProgressiveOctree("oct").add(XYZ, rgb=np.zeros((9, 3), np.uint8)), InputError, "oct: rgb has 9 rows, xyz has 10"),
+        (lambda: ProgressiveOctree("oct").add(XYZ, rgb=np.full((10, 3), "a")), InputError, "oct: colors must be numbers, got dtype <U1"),
+        (lambda: ProgressiveOctree("oct").add(XYZ, intensity=np.zeros(9)), InputError, "oct: attribute 'intensity' must be 1-D of length 10, got shape (9,)"),
+        (lambda: _closed_octree().add(XYZ), InputError, "oct: the octree is closed; open it again to add points"),
+        (lambda: gp.from_arrays(np.empty((0, 3))), InputError, "arrays: no valid points"),
+        (lambda: gp.from_arrays(XYZ).point_info(10), PointIndexError, "arrays: point index 10 out of range 0..9 (-1: no point)"),
+        (lambda: gp.from_arrays(XYZ).point_info(-2), PointIndexError, "arrays: point index -2 out of range 0..9 (-1: no point)"),
+        (lambda: gp.Camera.look_at((1, 1, 1), (1, 1, 1)), CameraError, "camera eye and target are the same point"),
+        (lambda: gp.Camera.look_at((20, 20, 20), (5, 5, 5), width=0), CameraError, "image width must be an integer in 1..16384, got 0"),
+        (lambda: gp.open([]), InputError, "open: no file given"),
+        (lambda: gp.open([], progressive=True), InputError, "open: no file given"),
+    ],
+    ids=["add-N2", "add-N4", "add-1d", "add-rgb-rows", "add-rgb-strings", "add-attribute-rows", "add-closed", "from-arrays-empty",
+         "point-info-past-end", "point-info-minus-2", "camera-eye-is-target", "camera-width-0", "open-empty-list", "open-progressive-empty-list"],
+)  # fmt: skip
+def test_bad_input_is_one_line(call, error, message):
+    with pytest.raises(error, match=f"^{re.escape(message)}$"):
+        call()
+
+
+def test_a_nan_row_is_skipped_not_drawn():
+    """NaN and inf rows added are left out and counted: the bounds stay those of the others."""
+    octree = ProgressiveOctree("oct")
+    assert octree.add(np.vstack([XYZ, [[np.nan, 0, 0], [np.inf, 1, 1]]])) == 10
+    assert octree.skipped == 2 and [b.tolist() for b in octree.bounds] == [[0, 1, 2], [27, 28, 29]]
+    with pytest.warns(gp.GigapointWarning, match=r"^arrays: skipped 1 invalid points \(NaN, inf or beyond ±1e\+12\)$"):
+        assert gp.from_arrays(np.vstack([XYZ, [[np.nan, 0, 0]]])).n_points == 10
+
+
+def test_a_pattern_matching_nothing_names_it(tmp_path):
+    pattern = str(tmp_path / "*.laz")
+    for progressive in (False, True):
+        with pytest.raises(InputError, match=f"^{re.escape(pattern)}: matches no file$"):
+            gp.open(pattern, progressive=progressive)
+
+
+def test_outputs_that_exist_are_left_alone(tmp_path, autzen_path):
+    """Saving or converting onto what the user has refuses in one line and leaves it as it was."""
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("mine")
+    (tmp_path / "o.laz").write_text("mine")
+    from gigapoint.lod.octree_dir import OutputExistsError
+
+    octree = ProgressiveOctree("oct")
+    octree.add(XYZ)
+    with pytest.raises(OutputExistsError, match=f"^{re.escape(str(mine))}: directory is not empty and is not a gigapoint/Potree output; refusing to write into it$"):
+        octree.save(mine)
+    with pytest.raises(InputError, match=f"^{re.escape(str(tmp_path / 'o.laz'))}: exists; pass overwrite=True to replace it$"):
+        gp.convert(autzen_path, tmp_path / "o.laz")
+    assert [p.name for p in mine.iterdir()] == ["notes.txt"] and (tmp_path / "o.laz").read_text() == "mine"
+
+
+def test_waiting_on_a_truncated_laz_raises_its_one_line_error(tmp_path, autzen_path):
+    """The loader's error, raised by wait (not a hang), again by a second wait; nothing drawn."""
+    cut = tmp_path / "cut.laz"
+    cut.write_bytes(autzen_path.read_bytes()[:20_000])
+    cloud = gp.open(cut, progressive=True)
+    problem = f"{cut}: truncated or corrupt LAZ file: chunk table offset 603,333 lies past the end of the file (20,000 bytes): 0 of its 110,000 points read"
+    for _ in range(2):
+        with pytest.raises(InputError, match=f"^{re.escape(problem)}$"):
+            cloud.wait(60)
+    assert cloud.n_points == 0 and str(cloud.error) == problem
+    cloud.close()
