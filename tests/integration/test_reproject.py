@@ -497,3 +497,16 @@ def test_an_octree_conversion_resumes_only_under_the_same_to_crs_and_spills_the_
     tree = importlib.import_module("gigapoint.lod").open_octree(out)
     bounds = tree.meta["bounds"]
     assert np.allclose(bounds["min"][:2], [x.min(), y.min()], atol=0.001) and np.allclose(bounds["max"][:2], [x.max(), y.max()], atol=0.001)
+
+
+def test_an_octree_conversion_resumes_only_under_the_same_proj(autzen_path, tmp_path, recwarn, interrupted_read, monkeypatch):
+    """Another PROJ (an upgrade, or PROJ_NETWORK turned on: other grids) may pick other operations and
+    move the points elsewhere: a resume under it mixed points moved two ways. It starts over; under
+    the same PROJ, the same command resumes."""
+    for out in (tmp_path / "same", tmp_path / "upgraded"):
+        interrupted_read(lambda out=out: gp.convert(autzen_path, out, to_crs=UTM, chunk_size=20_000))
+    same = gp.convert(autzen_path, tmp_path / "same", to_crs=UTM, chunk_size=20_000)
+    assert (same.resumed, same.points) == (True, 110_000)
+    monkeypatch.setattr(pyproj, "proj_version_str", "0.0.1")  # PROJ upgraded in between
+    upgraded = gp.convert(autzen_path, tmp_path / "upgraded", to_crs=UTM, chunk_size=20_000)
+    assert (upgraded.resumed, upgraded.points) == (False, 110_000)

@@ -353,6 +353,15 @@ class Reprojection:
         made.tolerance = None if spec["tolerance"] is None else tuple(spec["tolerance"])
         return made
 
+    def proj_setup(self) -> list:
+        """PROJ's version and whether it may fetch grid files (PROJ_NETWORK): besides ``as_spec``,
+        what decides the operations PROJ picks, so where the points land (a conversion's
+        fingerprint: one resumed under another PROJ mixed points moved two ways)."""
+        import pyproj
+        from pyproj.network import is_network_enabled
+
+        return [pyproj.proj_version_str, is_network_enabled()]
+
     def target_wkt(self) -> str:
         """The target CRS as the output's WKT VLR holds it (OGC WKT1, as LAS 1.4 says)."""
         return self.target.to_wkt("WKT1_GDAL")

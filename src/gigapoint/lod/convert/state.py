@@ -3,7 +3,8 @@ the fingerprint of its inputs and options, and its saved state (``OctreeDir.writ
 
 A re-run resumes only when its fingerprint equals the saved one: the same input files (path,
 size, modification time; ``--colorize``'s raster's too), the same options and the same
-gigapoint code (``code_version``); anything else starts clean.
+gigapoint code (``code_version``; with ``--to-crs``, the same PROJ: ``Reprojection.proj_setup``);
+anything else starts clean.
 """
 
 from __future__ import annotations
@@ -197,7 +198,7 @@ class Job:
             "chunks": "joined",  # small files' chunks joined (read._joined): a state of one chunk a file reads otherwise
             # a run resumed under another filter mixed points kept by one and by the other
             "filter": None if self.point_filter is None else self.point_filter.as_spec(),
-        } | ({} if self.reprojection is None else {"reprojection": self.reprojection.as_spec()}) | (  # (a run without either: its fingerprint as before)
+        } | ({} if self.reprojection is None else {"reprojection": self.reprojection.as_spec(), "proj": self.reprojection.proj_setup()}) | (  # (a run without either: its fingerprint as before)
             {} if self.colorization is None else {"colorize": file_identity(self.colorization.path)}  # (another raster, or this one changed: other colours)
         )
 
