@@ -12,6 +12,7 @@ from typing import TypeVar
 import numpy as np
 
 from ..core.chunk import ColorScaler, PointChunk, safe_attribute_name
+from ..core.coords import valid_mask
 from ..errors import EmptyCloudError, InputError, check_whole
 
 #: Points per chunk a reader yields unless told otherwise (about 100 MB of xyz + rgba + attributes).
@@ -229,13 +230,14 @@ def color_names(names: list[str]) -> list[str]:
 
 
 def scan_bounds(chunks: Iterator[PointChunk]) -> tuple[int, list[float] | None, list[float] | None]:
-    """(count, min, max) over finite points of a chunk stream (bounds None when no finite point)."""
+    """(count, min, max) over the valid points of a chunk stream (``valid_mask``: those a read
+    keeps; bounds None when none is): a row at 1e300 in a text file was ``info``'s 300-digit bounds."""
     n = 0
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     for chunk in chunks:
         n += len(chunk)
-        ok = np.all(np.isfinite(chunk.xyz), axis=1)
+        ok = valid_mask(chunk.xyz)
         if ok.any():
             v = chunk.xyz[ok]
             lo = np.minimum(lo, v.min(axis=0))

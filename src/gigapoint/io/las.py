@@ -296,6 +296,11 @@ def _read_las_header(path: Path, salvage: bool = False) -> LasHeader:
                 raise fail(path, f"corrupt LAS header: absurd {axis} scale {s!r} (expected a finite, non-zero value up to {MAX_SCALE:g})")
             if not math.isfinite(o) or abs(o) > MAX_ABS_COORDINATE:
                 raise fail(path, f"corrupt LAS header: absurd {axis} offset {o!r} (expected a finite value within ±{MAX_ABS_COORDINATE:g})")
+        # bounds at NaN or 1e300 were info's 300-digit extent, tile's count of 10^299 tiles, and
+        # the output grid of convert -o x.las (scale nan): "x 63.7 lies beyond the LAS grid"
+        for name, bound in zip(("max x", "min x", "max y", "min y", "max z", "min z"), mm):
+            if not math.isfinite(bound) or abs(bound) > MAX_ABS_COORDINATE:
+                raise fail(path, f"corrupt LAS header: absurd {name} {bound!r} (expected a finite value within ±{MAX_ABS_COORDINATE:g})")
         # VLRs: each record's length is a u16, so walking them is bounded by offset_to_data
         vlrs = []
         pos = header_size

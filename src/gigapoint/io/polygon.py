@@ -157,8 +157,10 @@ def clip_polygon_of(value, label: str) -> ClipPolygon:
         raise InputError(f"{label}: no such file{' (nor WKT text: POLYGON ((x y, ...)))' * isinstance(value, str)}")
     try:
         content = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot be read as a clip polygon ({type(exc).__name__})") from None
+    except UnicodeDecodeError:  # (a PNG given as the polygon was "cannot be read ... (UnicodeDecodeError)")
+        raise InputError(f"{path}: not a text file: neither GeoJSON nor WKT (POLYGON, MULTIPOLYGON): not a clip polygon") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot be read as a clip polygon ({exc.strerror or type(exc).__name__})") from None
     if content.lstrip().startswith("{"):
         try:
             document = json.loads(content)
