@@ -116,6 +116,72 @@ def test_a_raster_of_fewer_bits_than_its_type_is_scaled_by_its_nbits(no_rgb, tmp
     assert rgb.max() == 255 * 257  # (the brightest level comes out white)
 
 
+def _bits_warning(raster, highest: int, bits: int) -> str:
+    """The warning of a 16-bit ``raster`` naming no NBITS whose values reach only ``highest`` (``bits`` bits)."""
+    return (
+        f"warning: {raster}: its 16-bit values name no bit depth (NBITS) and reach only {highest} ({bits} bits) in GDAL's approximate statistics: "
+        f"read as 16-bit, its colours come out at most 1/{2 ** (16 - bits)} of full brightness; if it holds {bits}-bit values, say so "
+        f"with --colorize-bits {bits} (colorize_bits={bits}), or write NBITS into a copy: gdal_translate -co NBITS={bits} {raster} OUT.tif\n"
+    )
+
+
+def test_a_16_bit_raster_of_12_bit_values_naming_no_nbits_is_warned_of_and_colorize_bits_reads_it_as_nbits_does(cli, no_rgb, tmp_path):
+    wkt = read_las_header(no_rgb).crs()
+    (tmp_path / "nbits").mkdir()
+    bands = (_pattern().astype(np.uint16) << 4) | 15  # 12-bit values, 0-4095, in a 16-bit file naming no NBITS
+    ortho = _geotiff(tmp_path / "ortho12.tif", bands, wkt)
+    with rasterio.open(ortho) as ds:
+        assert (ds.dtypes[0], "NBITS" in ds.tags(1, ns="IMAGE_STRUCTURE")) == ("uint16", False)
+    with_nbits = _geotiff(tmp_path / "nbits" / "nbits12.tif", bands, wkt, nbits=12)  # the same values, NBITS=12
+    as_nbits = _rgb(laspy.read(str(gp.convert(no_rgb, tmp_path / "nbits" / "nbits.las", colorize=with_nbits).out)))
+    rows, cols, _ = _pixels_of(no_rgb)
+    rc, _, err = cli("convert", no_rgb, "-o", tmp_path / "dark.las", "--colorize", ortho, "-q")
+    assert (rc, err) == (0, _bits_warning(ortho, 4095, 12))  # (was no word)
+    dark = _rgb(laspy.read(str(tmp_path / "dark.las")))
+    assert np.array_equal(dark, (bands[:, rows, cols] >> 8).T * 257) and dark.max() == 15 * 257  # (read as 16-bit: near black)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dark.las", "nbits", "ortho12.tif"]  # (GDAL's statistics not written beside it: no .aux.xml)
+
+    rc, _, err = cli("convert", no_rgb, "-o", tmp_path / "bright.las", "--colorize", ortho, "--colorize-bits", "12", "-q")
+    assert (rc, err) == (0, "")
+    bright = _rgb(laspy.read(str(tmp_path / "bright.las")))
+    assert np.array_equal(bright, as_nbits) and np.array_equal(bright, _pattern()[:, rows, cols].T.astype(np.uint16) * 257)
+    assert bright.max() == 255 * 257
+    result = gp.tile(no_rgb, tmp_path / "tiles", 500, colorize=ortho, colorize_bits=12)  # tile's too
+    for tile in result.tiles:
+        rows, cols, las = _pixels_of(tile)
+        assert np.array_equal(_rgb(las), _pattern()[:, rows, cols].T.astype(np.uint16) * 257), tile
+
+
+def test_a_16_bit_raster_of_8_bit_values_is_warned_of_naming_8_bits(no_rgb, tmp_path):
+    eight = _geotiff(tmp_path / "ortho8in16.tif", _pattern().astype(np.uint16), read_las_header(no_rgb).crs())
+    with pytest.warns(GigapointWarning) as warned:
+        gp.convert(no_rgb, tmp_path / "out.las", colorize=eight)
+    assert [str(w.message) + "\n" for w in warned] == [_bits_warning(eight, 255, 8).removeprefix("warning: ")]
+
+
+def test_a_full_range_16_bit_raster_is_not_warned_of(cli, no_rgb, tmp_path):
+    bands = _pattern().astype(np.uint16) * 257  # 0-65535
+    ortho = _geotiff(tmp_path / "ortho16.tif", bands, read_las_header(no_rgb).crs())
+    rc, _, err = cli("convert", no_rgb, "-o", tmp_path / "out.las", "--colorize", ortho, "-q")
+    assert (rc, err) == (0, "")
+    rows, cols, _ = _pixels_of(no_rgb)
+    assert np.array_equal(_rgb(laspy.read(str(tmp_path / "out.las"))), _pattern()[:, rows, cols].T.astype(np.uint16) * 257)
+
+
+def test_colorize_bits_beyond_the_rasters_type_or_without_a_raster_is_refused_in_one_line(cli, no_rgb, tmp_path):
+    ortho = _geotiff(tmp_path / "ortho.tif", _pattern(), read_las_header(no_rgb).crs())
+    out = tmp_path / "out.laz"
+    rc, _, err = cli("convert", no_rgb, "-o", out, "--colorize", ortho, "--colorize-bits", "12", "-q")
+    assert (rc, err.strip()) == (1, f"error: {ortho}: --colorize-bits for its uint8 values must be an integer from 1 to 8, got 12")
+    rc, _, err = cli("tile", no_rgb, "--size", "500", "-o", tmp_path / "tiles", "--colorize-bits", "12", "-q")
+    assert (rc, err.strip()) == (1, "error: tile: --colorize-bits 12: the bit depth of a --colorize raster's values; give --colorize too")
+    with pytest.raises(InputError, match=r"^convert: --colorize-bits 12: the bit depth of a --colorize raster's values; give --colorize too$"):
+        gp.convert(no_rgb, out, colorize_bits=12)  # (was ignored)
+    with pytest.raises(InputError, match=r"--colorize-bits for its uint8 values must be an integer from 1 to 8, got '8'$"):
+        gp.convert(no_rgb, out, colorize=ortho, colorize_bits="8")
+    assert not out.exists() and not (tmp_path / "tiles").exists()
+
+
 def test_a_float_raster_of_reflectance_is_refused_naming_it_and_its_dtype(cli, no_rgb, tmp_path):
     reflectance = _geotiff(tmp_path / "reflectance.tif", _pattern().astype(np.float32) / 255, read_las_header(no_rgb).crs())
     out = tmp_path / "out.laz"
@@ -431,3 +497,16 @@ def test_colorize_is_refused_for_a_clouds_points(no_rgb, tmp_path):
     with pytest.raises(InputError, match=r"^convert: colorize colours the points read from files; the inputs are a cloud or PointChunks$"):
         gp.convert(gp.open(no_rgb), tmp_path / "octree", colorize=tmp_path / "ortho.tif")
     assert not (tmp_path / "octree").exists()
+
+
+def test_an_octree_conversion_resumes_only_with_the_same_colorize_bits(no_rgb, tmp_path, interrupted_read):
+    bands = (_pattern().astype(np.uint16) << 4) | 15  # 12-bit values naming no NBITS
+    ortho = _geotiff(tmp_path / "ortho12.tif", bands, read_las_header(no_rgb).crs())
+    for out in (tmp_path / "same", tmp_path / "other"):
+        interrupted_read(lambda out=out: gp.convert(no_rgb, out, colorize=ortho, colorize_bits=12, chunk_size=20_000))
+    assert gp.convert(no_rgb, tmp_path / "same", colorize=ortho, colorize_bits=12, chunk_size=20_000).resumed is True
+    other = gp.convert(no_rgb, out, colorize=ortho, colorize_bits=11, chunk_size=20_000)  # other colours: starts over, not a mix of both
+    assert (other.resumed, other.points) == (False, 110_000)
+    xyz, rgb, _, _ = _octree_points(out)
+    rows, cols = _pixels_under(xyz[:, 0], xyz[:, 1])
+    assert np.array_equal(rgb, (np.minimum(bands, 2047) >> 3)[:, rows, cols].T)  # (as 11-bit values: those past 2047 white)

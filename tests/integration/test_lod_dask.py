@@ -768,6 +768,16 @@ def test_colorize_on_dask_is_the_single_process_octree_and_counts_the_uncoloured
     assert json.loads((tmp_path / "dask" / "octree.json").read_text())["has_color"] is True
 
 
+def test_colorize_bits_on_dask_reach_the_workers(autzen_path, client, tmp_path):
+    """The read tasks open the raster themselves and read its values as of the driver's bit depth
+    (--colorize-bits 12 for a 16-bit raster of 0-4095 naming no NBITS; they took 16 bits: near black)."""
+    _, _geotiff, _pattern, _ = _colorize_helpers()
+    raster = _geotiff(tmp_path / "ortho12.tif", (_pattern().astype(np.uint16) << 4) | 15, laspy.read(str(autzen_path)).header.parse_crs().to_wkt())
+    results = {run: convert(autzen_path, tmp_path / run, colorize=raster, colorize_bits=12, client=dask, **OPTS) for run, dask in (("one", None), ("dask", client))}
+    assert results["dask"].uncolored == results["one"].uncolored == 0
+    _assert_identical(tmp_path / "one", tmp_path / "dask")
+
+
 def test_a_raster_a_worker_does_not_see_is_named_as_such(thread_client, tmp_path, las_writer, monkeypatch):
     """The read tasks open the --colorize raster themselves: one only the driver sees (gone here
     once a read task starts) is named with what to do, as an input is."""

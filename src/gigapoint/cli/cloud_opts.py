@@ -112,6 +112,16 @@ ColorizeOption = Annotated[
     ),
 ]
 
+ColorizeBitsOption = Annotated[
+    int | None,
+    typer.Option(
+        "--colorize-bits",
+        metavar="N",
+        help="With --colorize: how many bits its values hold (12 for a 16-bit raster of 0-4095 that names no NBITS: "
+        "else read as 0-65535, its colours come out near black, with a warning), in place of its NBITS or type's.",
+    ),
+]
+
 
 def check_from_crs(from_crs: str | None, to_crs: str | None, where: str) -> None:
     """A one-line error for --from-crs without --to-crs, in the options' words (the library's

@@ -16,6 +16,7 @@ from .cloud_opts import (
     ClassesOption,
     ClipOption,
     ClipPolygonOption,
+    ColorizeBitsOption,
     ColorizeOption,
     DropClassesOption,
     ExactTransformOption,
@@ -79,6 +80,7 @@ def convert(
     from_crs: FromCrsOption = None,
     exact_transform: ExactTransformOption = False,
     colorize: ColorizeOption = None,
+    colorize_bits: ColorizeBitsOption = None,
 ) -> None:
     """Convert point clouds into a level-of-detail octree, out of core, resumable; or merge, filter and thin them into one .las, .laz or .ply file (-o ground.laz)."""
     from ..lod import ConvertError
@@ -123,6 +125,7 @@ def convert(
                 from_crs=from_crs,
                 exact_transform=exact_transform,
                 colorize=colorize,
+                colorize_bits=colorize_bits,
                 on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
             )
     except (ConvertError, InputError) as exc:  # 'max_leaf must be ...' named no option; thin=1e-09 said as typed

@@ -15,6 +15,7 @@ from .cloud_opts import (
     ClassesOption,
     ClipOption,
     ClipPolygonOption,
+    ColorizeBitsOption,
     ColorizeOption,
     DropClassesOption,
     ExactTransformOption,
@@ -49,6 +50,7 @@ def tile(
     from_crs: FromCrsOption = None,
     exact_transform: ExactTransformOption = False,
     colorize: ColorizeOption = None,
+    colorize_bits: ColorizeBitsOption = None,
 ) -> None:
     """Split point clouds into square LAS/LAZ tiles (lastile), read once, a chunk at a time; only tiles holding points are written."""
     from ..lod.convert.tiles import tile as run
@@ -71,6 +73,7 @@ def tile(
             from_crs=from_crs,
             exact_transform=exact_transform,
             colorize=colorize,
+            colorize_bits=colorize_bits,
             **(point_filter.as_spec() if point_filter is not None else {}),
         )
     except GigapointError as exc:  # tile: size=0.0 said as the option

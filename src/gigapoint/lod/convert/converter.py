@@ -17,7 +17,7 @@ from ...core.renderable import PointSource
 from ...errors import GigapointError, GigapointWarning, InputError, check_switch, warn
 from ...io import files_label, with_subfolders
 from ...io._base import check_file, headers_once
-from ...io.colorize import Colorization
+from ...io.colorize import open_colorization
 from ...io.crs import files_crs
 from ...io.filters import point_filter
 from ...io.registry import is_supported_name
@@ -236,6 +236,7 @@ def convert(
     from_crs=None,
     exact_transform=False,
     colorize=None,
+    colorize_bits=None,
     has_color=None,
 ) -> ConvertResult:
     """Convert point cloud files (or a cloud, or an iterable of PointChunks) into an LOD octree directory ``out``.
@@ -312,6 +313,9 @@ def convert(
     and a conversion resumes only with the same raster, unchanged (its path, size, time). On a
     ``client``, the workers move and colour the points they read, and open the raster themselves:
     it must be at the same path on a file system they all share, as the inputs are.
+    ``colorize_bits``: how many bits the raster's values hold (12 for 12-bit data in a 16-bit
+    file naming no NBITS: scaled from 0-4095, not 0-65535, so not dark), in place of its NBITS or
+    type's; a 16-bit raster naming no NBITS whose values reach fewer bits is warned of without it.
     """
     check_switch("overwrite", overwrite, "convert")
     check_switch("recursive", recursive, "convert")
@@ -354,7 +358,7 @@ def convert(
         if given:  # (each meant something of an octree only: none was ignored without a word)
             raise ConvertError(f"{out}: {', '.join(given)}: {'options' if len(given) > 1 else 'an option'} of an octree, not of a plain {out.suffix[1:].upper()} file")
         t0 = time.perf_counter()
-        colorization = None if colorize is None else Colorization(colorize, "convert")  # a raster that cannot be read: said before a point is
+        colorization = open_colorization(colorize, colorize_bits, "convert")  # a raster that cannot be read: said before a point is
         shown = RichProgress() if progress else NullProgress()
         try:
             points, skipped, passed, uncolored = write_point_file(
@@ -445,7 +449,7 @@ def convert(
         reprojection.check_files(conv.paths)
         conv.reprojection, conv.reprojected_grid = reprojection, output_grid(conv.paths, reprojection)
         conv.point_filter = reprojection.moved_filter(keep, conv.paths)  # (its clip polygon in the target CRS, where the points are filtered)
-    conv.colorization = None if colorize is None else Colorization(colorize, "convert")  # a raster that cannot be read: said before a point is
+    conv.colorization = open_colorization(colorize, colorize_bits, "convert")  # a raster that cannot be read: said before a point is
     try:
         if conv.colorization is not None:  # (the points' CRS is the output's: the target's where reprojected)
             conv.colorization.check_crs(reprojection.target_wkt() if reprojection is not None else files_crs(conv.paths), files_label(conv.paths))

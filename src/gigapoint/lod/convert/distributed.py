@@ -432,7 +432,7 @@ def _moving_and_coloring(spec: dict):
         return
     if not os.path.exists(raster):
         raise _unseen(raster, "raster (--colorize)", "it must be", spec)
-    colorization = Colorization(raster, "convert")
+    colorization = Colorization(raster, "convert", spec["colorize_bits"])  # (the driver's bit depth: not sampled, nor warned of, again)
     try:
         yield reprojection, colorization
     finally:
@@ -712,6 +712,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             "filter": None if self.point_filter is None else self.point_filter.as_spec(),  # (with --to-crs: its polygon moved already)
             "reprojection": None if self.reprojection is None else self.reprojection.as_spec(),
             "colorize": None if self.colorization is None else str(self._raster()),
+            "colorize_bits": None if self.colorization is None else self.colorization.nbits,
             "memory_limit": self.mem,
             "own_workers": self.client in _OWN_WORKERS,
             "state": {k: st[k] for k in keep if k in st},

@@ -199,7 +199,8 @@ class Job:
             # a run resumed under another filter mixed points kept by one and by the other
             "filter": None if self.point_filter is None else self.point_filter.as_spec(),
         } | ({} if self.reprojection is None else {"reprojection": self.reprojection.as_spec(), "proj": self.reprojection.proj_setup()}) | (  # (a run without either: its fingerprint as before)
-            {} if self.colorization is None else {"colorize": file_identity(self.colorization.path)}  # (another raster, or this one changed: other colours)
+            {} if self.colorization is None  # (another raster, or this one changed, or read as of other bits: other colours)
+            else {"colorize": file_identity(self.colorization.path), "colorize_bits": self.colorization.nbits}
         )
 
     def fingerprint_key(self) -> str | None:

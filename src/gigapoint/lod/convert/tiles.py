@@ -58,7 +58,7 @@ from ...core.chunk import PointChunk
 from ...core.cloud import check_valid_count
 from ...errors import GigapointWarning, InputError, check_switch, counted, is_real, warn
 from ...io import with_subfolders
-from ...io.colorize import Colorization
+from ...io.colorize import open_colorization
 from ...io.filters import point_filter
 from ...io.las_fields import las_grid
 from ...io.reproject import Reprojection
@@ -106,6 +106,7 @@ def tile(
     from_crs=None,
     exact_transform=False,
     colorize=None,
+    colorize_bits=None,
 ) -> TileResult:
     """Split the points of the files and folders ``inputs`` into square tiles of edge ``size`` (in
     the files' units, on a grid anchored at 0) written into the folder ``out`` as
@@ -117,7 +118,8 @@ def tile(
     ``from_crs``), as ``convert``'s: ``size``, ``buffer`` and ``clip`` are then in its units
     (``exact_transform``: as ``convert``'s).
     ``colorize`` (needs rasterio): an orthophoto whose pixels colour the points, as ``convert``'s
-    (after ``to_crs``); the result's ``uncolored`` counts those outside it or under its mask.
+    (after ``to_crs``); the result's ``uncolored`` counts those outside it or under its mask;
+    ``colorize_bits``: how many bits its values hold, as ``convert``'s.
 
     ``out`` is made if missing; one holding LAS/LAZ files already is refused without
     ``overwrite``, which replaces the tiles of this run's names and leaves every other file.
@@ -149,7 +151,7 @@ def tile(
     _check_output_folder(out, overwrite)
     if recursive:
         inputs = with_subfolders([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
-    colorization = None if colorize is None else Colorization(colorize, "tile")  # a raster that cannot be read: said before a point is
+    colorization = open_colorization(colorize, colorize_bits, "tile")  # a raster that cannot be read: said before a point is
     files = PointFiles(inputs, out, chunk_size, reprojection=reprojection, colorization=colorization)
     keep = files.points_filter(keep)  # (a clip polygon moved into the CRS the points are tiled in)
     name = name or (Path(files.files[0]).stem if len(files.files) == 1 else out.resolve().name)
