@@ -256,7 +256,7 @@ def test_one_compound_crs_as_geotiff_keys_and_as_wkt_is_compared_another_zone_re
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--gsd", "0"], "--gsd must be a number > 0 (cloud units per pixel), got 0"),
+        (["--gsd", "0"], "--gsd must be a number > 0 and at most 2e+12 (cloud units per pixel), got 0"),
         (["--gsd", "1", "--min-change", "-1"], "--min-change must be a number >= 0"),
         (["--gsd", "1", "--range", "2"], "--range: an option of --preview"),
         (["--gsd", "1", "--fill-nodata", "x"], "--fill-nodata must be 'all' or a whole number of pixels >= 1, got 'x'"),

@@ -242,8 +242,8 @@ def test_cli_an_epsg_only_crs_writes_no_prj_and_says_so(cli, tmp_path, monkeypat
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--gsd", "0"], "--gsd must be a number > 0 (cloud units per pixel), got 0"),
-        (["--gsd", "nan"], "--gsd must be a number > 0 (cloud units per pixel), got nan"),
+        (["--gsd", "0"], "--gsd must be a number > 0 and at most 2e+12 (cloud units per pixel), got 0"),
+        (["--gsd", "nan"], "--gsd must be a number > 0 and at most 2e+12 (cloud units per pixel), got nan"),
         (["--gsd", "-2"], "--gsd must be a number > 0"),
         (["--gsd", "1", "--view", "iso"], "--view and --gsd: give one (--gsd draws one image straight down, orthographic, north up"),
         (["--gsd", "1", "--camera", "yaw=0 pitch=90"], "--camera and --gsd: give one"),

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from ..atomic import atomic_bytes
 from ..errors import GigapointError
+from ..io.demo import MAX_DEMO_POINTS
 from .scene import THROUGHPUT_DEFINITION
 
 _SUFFIXES = {"k": 10**3, "m": 10**6, "g": 10**9, "b": 10**9}
@@ -109,6 +110,8 @@ def parse_count(text) -> int:
         raise GigapointError(f"--points: cannot read {text!r} (use e.g. 20M, 200k, 1e6 or 5000000)") from None
     if not (math.isfinite(value) and value >= 1 and value == int(value)):
         raise GigapointError(f"--points: need a positive whole number of points, got {text!r}")
+    if value > MAX_DEMO_POINTS:  # (1e99 was said as a 100-digit count of points and of terabytes)
+        raise GigapointError(f"--points: the demo scene has at most {MAX_DEMO_POINTS:,} points, got {text!r}")
     return int(value)
 
 

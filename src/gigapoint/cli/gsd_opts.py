@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 from ..errors import GigapointError
+from ..render.camera import MAX_GSD
 from ..render.raster_fill import require_scipy
 
 #: --all-points (`change`, `volume`): an LOD octree read whole, not down to the levels the gsd needs
@@ -23,8 +24,8 @@ VOLUME_POINTS_HELP = (
 
 def check_gsd_value(gsd: float) -> None:
     """A one-line error for a --gsd that is no size."""
-    if not (math.isfinite(gsd) and gsd > 0):
-        raise GigapointError(f"--gsd must be a number > 0 (cloud units per pixel), got {gsd:g}")
+    if not (math.isfinite(gsd) and 0 < gsd <= MAX_GSD):
+        raise GigapointError(f"--gsd must be a number > 0 and at most {MAX_GSD:g} (cloud units per pixel), got {gsd:g}")
 
 
 def check_fill_nodata(text: str | None, gsd, depth_out) -> int | None:

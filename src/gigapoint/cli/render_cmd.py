@@ -11,7 +11,8 @@ from typing import Annotated
 
 import typer
 
-from ..errors import CameraError, GigapointError
+from ..core.coords import MAX_ABS_COORDINATE
+from ..errors import CameraError, GigapointError, counted
 from ..io import crs_wkt, files_label
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
@@ -67,6 +68,11 @@ def parse_camera(text: str) -> dict:
             raise GigapointError(f"--camera: {key} needs numbers, got {raw!r}") from None
         if len(nums) != _CAMERA_KEYS[key] or not all(math.isfinite(v) for v in nums):
             raise GigapointError(f"--camera: {key} needs {_CAMERA_KEYS[key]} finite number(s), got {raw!r}")
+        # (an eye at 1e300 overflowed the camera's sums: numpy's warnings and a blank image, exit 0)
+        if key in ("eye", "target") and max(map(abs, nums)) > MAX_ABS_COORDINATE:
+            raise GigapointError(f"--camera: {key} {raw} lies beyond ±{MAX_ABS_COORDINATE:g}, where no point can be")
+        if key == "distance" and nums[0] > 2 * MAX_ABS_COORDINATE:
+            raise GigapointError(f"--camera: distance must be at most {2 * MAX_ABS_COORDINATE:g}, the span points can have, got {raw}")
         if key in values:  # 'yaw=10 yaw=20' kept the last one without a word
             raise GigapointError(f"--camera: {key} is given twice")
         values[key] = nums if len(nums) > 1 else nums[0]
@@ -335,7 +341,7 @@ def render(
                 cloud, turntable, output, settings, width=width, height=height, fov=fov, fps=fps, overwrite=overwrite,
                 progress=lambda done, total: advance(done),
             )  # fmt: skip
-        typer.echo(f"wrote {output} ({turntable} frames, {width}x{height}, {cloud.n_points:,} points)")
+        typer.echo(f"wrote {output} ({counted(turntable, 'frame')}, {width}x{height}, {counted(cloud.n_points, 'point')})")
         return
     if gsd is not None:
         cam = top_down_camera(cloud, gsd, output, inputs)
@@ -378,7 +384,7 @@ def render(
         print_stats(frame.stats, compiled_s=compiled)
         err_console().print(memory_line(cloud), highlight=False)
     drawn = frame.stats.points_processed  # (a budget, --max-points, culling: fewer than the cloud's; '110,000 points' said the cloud's)
-    points = f"{cloud.n_points:,} points" if drawn >= cloud.n_points else f"{drawn:,} of {cloud.n_points:,} points drawn"
+    points = counted(cloud.n_points, "point") if drawn >= cloud.n_points else f"{drawn:,} of {cloud.n_points:,} points drawn"
     typer.echo(f"wrote {output} ({frame.image.shape[1]}x{frame.image.shape[0]}, {points})")  # (side-by-side stereo: both eyes)
     if len(written) > 1:
         typer.echo(f"wrote {', '.join(str(p) for p in written[1:])}")
@@ -419,12 +425,12 @@ def demo(
     from ..core import build_cloud
     from ..core.chunk import PointChunk
     from ..core.chunked import IN_MEMORY_BYTES_MIN, check_room
-    from ..io.demo import check_seed, demo_arrays, round_to_grid
+    from ..io.demo import MAX_DEMO_POINTS, check_seed, demo_arrays, round_to_grid
     from ..render import render_frame
 
     console = Console()
-    if not 1 <= points <= 4_000_000_000:
-        raise GigapointError(f"--points must be between 1 and 4e9, got {points}")
+    if not 1 <= points <= MAX_DEMO_POINTS:
+        raise GigapointError(f"--points must be between 1 and {MAX_DEMO_POINTS:,}, got {points}")
     check_seed("--seed", seed)  # 2**64 was an internal error in the generator
     check_room(f"demo({points:,})", points, IN_MEMORY_BYTES_MIN, instead=": take fewer --points")
     check_output(output, overwrite)

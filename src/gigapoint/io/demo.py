@@ -17,6 +17,7 @@ from numba import njit, prange
 from ..core import pages
 
 SCENE_SIZE = 1000.0  # metres
+MAX_DEMO_POINTS = 4_000_000_000  # the largest scene `gigapoint demo` and `bench` make
 _LOT = 100.0  # roads every 100 m
 _ROAD_HALF_WIDTH = 6.0
 _N_LOTS = int(SCENE_SIZE / _LOT)

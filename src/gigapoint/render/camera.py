@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..core.coords import MAX_ABS_COORDINATE
 from ..errors import CameraError, is_real
 
 if TYPE_CHECKING:
@@ -35,6 +36,9 @@ VIEWS = {
 #: how far (pixels) inside a ``top_down`` image every edge of its box lies: more than the
 #: rasterizer's error in px and py (float32 rounding, ~1e-3 px in a 16,384 px image)
 EDGE_MARGIN_PX = 1 / 64
+#: the largest gsd: a pixel as wide as the span points can have (1e100 drew a blank image, 1e200
+#: numpy's warnings and a refused world file)
+MAX_GSD = 2 * MAX_ABS_COORDINATE
 TRIM = 1e-4  # framing sample points: this share at each side may fall outside the frame (a few stray points)
 
 
@@ -329,8 +333,8 @@ class Camera:
         margin), rows likewise from y (a box whose max y lies on the grid gets a row above it).
         An image over MAX_IMAGE_SIDE a side is a one-line CameraError naming the finest gsd that fits."""
         lo, hi = _box(bounds)
-        if not (is_real(gsd) and gsd > 0):
-            raise CameraError(f"gsd (ground sample distance) must be a number > 0, got {gsd!r}")
+        if not (is_real(gsd) and 0 < gsd <= MAX_GSD):
+            raise CameraError(f"gsd (ground sample distance) must be a number > 0 and at most {MAX_GSD:g}, got {gsd!r}")
         gsd = float(gsd)
         # the rasterizer puts a point into column floor(px) and row floor(py) (px = (x - left) / gsd,
         # py = (top - y) / gsd): column 0 holds x in [left, left + gsd), row 0 y in (top - gsd, top].
@@ -345,7 +349,8 @@ class Camera:
         if max(width, height) > MAX_IMAGE_SIDE:
             # (a side of extent / gsd pixels takes at most that + 2: the margins' rows may add one)
             fits = _round_up(float(np.max(hi[:2] - lo[:2])) / (MAX_IMAGE_SIDE - 2))
-            raise CameraError(f"gsd {gsd:g} makes a {width:,}x{height:,} image, over {MAX_IMAGE_SIDE:,} pixels a side: a gsd of {fits:g} or more fits")
+            size = f"{width:,}x{height:,}" if max(width, height) < 1e15 else f"{width:.3g}x{height:.3g}"  # (not 300 digits)
+            raise CameraError(f"gsd {gsd:g} makes a {size} image, over {MAX_IMAGE_SIDE:,} pixels a side: a gsd of {fits:g} or more fits")
         left, top = first_col * gsd, top_row * gsd
         # the eye just above the highest point: depths then span little more than the cloud's
         # heights, so float32 depths give heights (``heights``) as finely as they can

@@ -58,6 +58,7 @@ ONE_PIXEL = (np.array([[0, 0, 1]], np.int32), np.float32(1.0), np.float32(0.0))
 #: 1.4 and 91 % at 1.5 (sizes are whole pixels, so coverage moves in steps)
 ADAPTIVE_FILL = 1.4
 ADAPTIVE_MAX_PX = 16  # the largest adaptive point, in pixels
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 #: ``point_spacing`` looks at up to this many batches (spread over the cloud) and this many
@@ -197,7 +198,9 @@ def splat_params(settings, camera, spacing: float | None = None):
         size = np.float32(largest)
     if mode != "fixed":  # (this float64 operation order is the attenuated mode's since #5)
         if camera.projection == "perspective":
-            atten = np.float32(world * (camera.height / 2.0) / math.tan(math.radians(camera.fov) / 2.0))
+            # (a world size of 1e300 overflowed float32: numpy's warning; any scale that large
+            # draws every point at the largest size alike)
+            atten = np.float32(min(world * (camera.height / 2.0) / math.tan(math.radians(camera.fov) / 2.0), FLOAT32_MAX))
             if mode == "adaptive" and atten == 0:  # no spacing (a single point, a line): one pixel
                 size = np.float32(1.0)
         else:

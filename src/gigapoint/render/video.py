@@ -36,6 +36,9 @@ PITCH_SEARCH_YAWS = 36
 #: the most frames a turntable or fly-through takes: 55 minutes at 30 fps, framed one by one (~5 ms a frame)
 MAX_TURNTABLE_FRAMES = 100_000
 MAX_FPS = 1000  # a GIF's frames last 10 ms at least; a video's frame rate is a few hundred at most
+#: a frame lasts 100 s at most: ffmpeg wrote no MP4 or MOV at 1e-6 fps (told once every frame was
+#: drawn, as a full disk), and a GIF's frame lasts 655 s at most
+MIN_FPS = 0.01
 
 
 def turntable_cameras(
@@ -187,8 +190,8 @@ def _check_path(path, overwrite: bool = False) -> Path:
 
 
 def _check_fps(fps) -> None:
-    if not (is_real(fps) and 0 < fps <= MAX_FPS):  # "a": a TypeError
-        raise GigapointError(f"video fps must be a number in (0, {MAX_FPS}], got {fps!r}")
+    if not (is_real(fps) and MIN_FPS <= fps <= MAX_FPS):  # "a": a TypeError
+        raise GigapointError(f"video fps must be a number in [{MIN_FPS:g}, {MAX_FPS}], got {fps!r}")
 
 
 def render_flythrough(

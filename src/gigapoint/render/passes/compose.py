@@ -92,6 +92,9 @@ def convergence_distance(camera, convergence: float | None) -> float:
     return convergence if convergence is not None else float(np.linalg.norm(np.subtract(camera.target, camera.eye)))
 
 
+#: the most pixels ``convergence_shift`` moves an eye's image (far beyond any image's width)
+MAX_SHIFT_PX = 1e15
+
 #: the camera's default fov (60 degrees): the normal lens the stereographers' 1/30 rule is for
 NORMAL_FOV = Camera.fov
 
@@ -118,7 +121,9 @@ def convergence_shift(camera, ipd: float, convergence: float | None) -> int:
         return 0
     c = convergence_distance(camera, convergence)
     fx = (camera.width / 2.0) / (math.tan(math.radians(camera.fov) / 2.0) * camera.aspect)
-    return round(fx * ipd / (2.0 * c))
+    # a shift beyond the image moves it out of view all the same: capped (ipd 1e300 at convergence
+    # 1e-300 was an internal OverflowError, and a 300-digit number of pixels in the warning)
+    return round(min(fx * ipd / (2.0 * c), MAX_SHIFT_PX))
 
 
 def shift_columns(a: np.ndarray, dx: int, fill, out: np.ndarray | None = None) -> np.ndarray:
@@ -203,7 +208,8 @@ def stereo_frame(cloud, camera, settings, render_one) -> Frame:
     # height at most (stereo_ipd), so only an explicit ipd is named as too wide
     if stats.visible_pixels == 0 and (multi is not None or all(f.stats.visible_pixels for f in frames)):
         wide = settings.ipd is not None and abs(h) >= w
-        why = f" (each eye's image moves {abs(h)} px of {w}: ipd {ipd:g} world units is wide for this scene)" if wide else ""
+        moved = f"{abs(h):,} px" if abs(h) < MAX_SHIFT_PX else f"over {MAX_SHIFT_PX:g} px"
+        why = f" (each eye's image moves {moved} of {w}: ipd {ipd:g} world units is wide for this scene)" if wide else ""
         warn(f"{cloud.name}: no point is in view of the stereo camera{why}; the image shows only the background", GigapointWarning)
     # the buffers both eyes' indices name (point_info was None for every pixel); none where an
     # octree's arena was refilled between the eyes (the first eye's indices name other points now)
