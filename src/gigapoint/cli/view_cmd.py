@@ -167,6 +167,8 @@ def view(
         deadline = time.monotonic() + 5.0
         while cloud.n_points == 0 and cloud.loading and time.monotonic() < deadline:
             time.sleep(0.02)
+        if cloud.n_points == 0 and not cloud.loading:  # a file cut off before its first point: its error, not a server showing nothing
+            cloud.wait()
     server = ViewerServer(cloud, host=host, port=port, settings=settings)
     print(f"gigapoint viewer: {cloud.name}, {cloud.n_points:,} points", file=sys.stderr)
     _report_load(cloud)
