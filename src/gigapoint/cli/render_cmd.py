@@ -248,7 +248,7 @@ def render(
     turntable: Annotated[
         int | None, typer.Option(help="Write a video of N frames orbiting the cloud instead of an image (-o out.mp4).")
     ] = None,
-    fps: Annotated[float | None, typer.Option(help=r"Frames per second of --turntable videos. \[default: 30]")] = None,
+    fps: Annotated[float | None, typer.Option(help=r"Frames per second of --turntable videos, 0.01 to 1000. \[default: 30]")] = None,
     progressive: Annotated[
         bool | None,
         typer.Option(
