@@ -271,6 +271,27 @@ def test_nodes_resident_before_a_page_is_read_stay_resident(paged):
     np.testing.assert_array_equal(again.image, gp.render_frame(gp.open(path), cam, s).image)
 
 
+
+def test_what_nodes_kept_follows_them_as_pages_are_read(paged):
+    """Through hidden classes, a node once loaded is weighed by the points it kept (resident
+    still or not: store.Arena.kept_counts); a page read numbers the nodes again, the counts
+    follow them."""
+    path, g = paged
+    c = gp.open(path)
+    c.arena = c.new_arena(800_000)  # (room for every node drawn here: never replaced)
+    lo, hi = g.bounds
+    corner = gp.Camera.fit((lo, lo + (hi - lo) * [0.3, 0.3, 1]), view="top", width=160, height=120)
+    s = gp.RenderSettings(backend="cpu", point_budget=30_000, lod_threshold_px=0.0, size_mode="fixed", hidden_classes=(1,))
+    gp.render_frame(c, corner, s)
+    loaded = {int(c.keys[i]): i for i in c.arena.resident}
+    gp.render_frame(c, gp.Camera.fit(g.bounds, view="iso", width=160, height=120), s.replace(point_budget=60_000))  # reads the other pages
+    assert sum(int(c.keys[i]) != k for k, i in loaded.items()) == 3  # (nodes numbered again)
+    loaded.update((int(c.keys[i]), i) for i in c.arena.resident)
+    index_in_g = {k: i for i, k in enumerate(g.keys.tolist())}
+    kept = [int(np.count_nonzero(g.node_points(index_in_g[k])["classification"] != 1)) if k in loaded else int(g.counts[index_in_g[k]]) for k in c.keys.tolist()]
+    assert c.arena.kept_counts(c.counts, c.load_filter((1,)), None).tolist() == kept
+
+
 # --------------------------------------------------------------------------- malformed files
 
 

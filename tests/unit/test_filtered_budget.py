@@ -148,3 +148,40 @@ def test_a_progressive_octree_weighs_its_chunks_again_only_once_one_is_written_o
     passes.clear()
     grown = gp.render_frame(tree, TOP, point_budget=40_000, **options).stats.points_processed
     assert len(passes) > 0 and grown == 39_861  # (as without reusing the costs)
+
+
+
+@pytest.fixture(scope="module")
+def sides(tmp_path_factory):
+    """two_classes(0.25) converted, a tenth of the right side's points class 2 too: a root of
+    15 601 points (8 612 of class 2), a node below it on each side: 20 752 on the left (all of
+    class 2), 20 782 on the right (2 011)."""
+    path = tmp_path_factory.mktemp("sides") / "tree"
+    xyz, rgb, classes = two_classes(0.25)
+    classes[(classes == 6) & (np.random.default_rng(2).random(len(xyz)) < 0.1)] = 2
+    gp.convert(gp.from_arrays(xyz, rgb, classification=classes, scale=0.01, colors="rgba"), path, max_leaf=2_000)
+    return path
+
+
+def test_a_node_the_arena_dropped_is_weighed_by_the_points_it_kept(sides, monkeypatch):
+    """An arena too small for both sides drops the nodes of one as the camera looks at the
+    other; back again, they are weighed by what they kept when loaded (not by the share the
+    root keeps): the same points drawn, and only the nodes drawn that were dropped loaded."""
+    tree = gp.open(sides)
+    tree.arena = tree.new_arena(60_000)  # 15 slots
+    left = gp.Camera.top_down(((0, 0, 0), (25, 25, 1)), 0.125)
+    right = gp.Camera.top_down(((75, 25, 0), (100, 50, 1)), 0.125)
+    prepared = []
+    monkeypatch.setattr(OctreeCloud, "prepare", lambda self, view, settings, prepare=OctreeCloud.prepare: prepared.append(prepare(self, view, settings)) or prepared[-1])
+    frames = []
+    for camera in [left, right, left, right, left]:
+        resident, loads = set(tree.arena.resident), tree.arena.loads
+        frame = gp.render_frame(tree, camera, hidden_classes=(6,), point_budget=30_000, lod_threshold_px=0, **FIXED)
+        frames.append((frame.stats.points_processed, tree.arena.loads - loads, len(set(prepared[-1].nodes.tolist()) - resident)))
+    # (points drawn, nodes loaded, nodes drawn that were not resident): the left draws the root
+    # and the left node (8 612 + 20 752), the right the root, the right node and its children
+    # (11 830); the left node is dropped meanwhile and loaded alone on the way back. (Weighed by
+    # the root's share, 11 455, it left room for its 4 children: loaded, then dropped again as
+    # it kept all its points: 5 loads; and 3 back on the right, 5 again on the left)
+    assert frames == [(29_364, 6, 2), (11_830, 5, 5), (29_364, 1, 1), (11_830, 0, 0), (29_364, 0, 0)]
+    assert tree.arena.n_slots == 15  # (the arena the test made: never replaced)

@@ -325,6 +325,9 @@ class Arena:
         self.source_scale = None  # the octree's source grid (a LAS file's scale), which point_info rounds to
         self.loads = 0  # nodes copied in since creation (cache misses)
         self.keep: PointFilter | None = None  # what the resident nodes were loaded through (``show``)
+        # per node: the points it kept when last loaded through ``keep`` (-1: not loaded since),
+        # known after the LRU drops it, so that a selection weighs it by them (``kept_counts``)
+        self.kept = np.empty(0, np.int64)
         self.resident_changes = 0  # bumped whenever a node is made resident or dropped (``kept_counts`` reuses its answer until then)
         self._kept_counts: tuple = (None, None)  # (what ``kept_counts`` last answered for, its answer)
         # Bumped on every write; per slot, the version that last filled it (GPU backends re-upload those slots)
@@ -376,33 +379,35 @@ class Arena:
 
     def show(self, keep: PointFilter | None) -> None:
         """Nodes loaded from now on keep only the points ``keep`` keeps (``OctreeCloud.load_filter``:
-        its read filter, hidden classes; None: all); a change drops every resident node, so
-        frames load them again, filtered."""
+        its read filter, hidden classes; None: all); a change drops every resident node and
+        what each node kept, so frames load them again, filtered."""
         if keep == self.keep:
             return
         for slots in self.resident.values():
             self.free.extend(slots.tolist())
         self.resident.clear()
+        self.kept[:] = -1
         self.resident_changes += 1
         self.keep = keep
 
     def kept_counts(self, counts: np.ndarray, keep: PointFilter | None, parent: np.ndarray | None) -> np.ndarray:
         """The nodes' ``counts`` as a selection through the load filter ``keep`` should weigh
-        them: a node resident through it counts the points it kept; the others, given
-        ``parent`` (each node's, -1 for the root), their counts times the share their nearest
-        resident ancestor kept (``kept_shares``), else their whole counts (what they keep is
-        known once loaded: no more than that). The same array while no node was made resident
-        or dropped since (a frame selects two times or more, each a pass over every node)."""
-        if keep is None or keep != self.keep or not self.resident:
+        them: a node loaded through it counts the points it kept (resident still or dropped
+        since: ``kept``); the others, given ``parent`` (each node's, -1 for the root), their
+        counts times the share their nearest loaded ancestor kept (``kept_shares``), else their
+        whole counts (what they keep is known once loaded: no more than that). The same array
+        while no node was made resident or dropped since (a frame selects two times or more,
+        each a pass over every node)."""
+        if keep is None or keep != self.keep:
             return counts
         asked = (self.resident_changes, counts, parent)  # (an octree whose hierarchy grew asks with new counts and parents)
         last, answer = self._kept_counts
         if last is not None and last[0] == asked[0] and last[1] is counts and last[2] is parent:
             return answer
-        nodes = np.fromiter(self.resident, np.int64, len(self.resident))
-        slot_lists = list(self.resident.values())
-        owner = np.repeat(np.arange(len(nodes)), [len(s) for s in slot_lists])
-        kept = np.bincount(owner, self.batches["count"][np.concatenate(slot_lists)], minlength=len(nodes)).astype(np.int64)
+        nodes = np.flatnonzero(self.kept[: len(counts)] >= 0)
+        if not len(nodes):
+            return counts
+        kept = self.kept[nodes]
         out = counts.copy()
         if parent is not None:
             kept_of, whole = np.zeros_like(counts), np.zeros_like(counts)
@@ -464,8 +469,20 @@ class Arena:
         low = np.asarray(arrays["low"][node])
         return dequantize(low, np.asarray(med), np.asarray(high), rec["bbox_min"], rec["bbox_max"], 30, cloud.node_half(nd))
 
+    def renumber(self, new_index: np.ndarray, n_nodes: int) -> None:
+        """Follow an octree whose nodes were numbered again (a hierarchy that grew: node i is
+        now node ``new_index[i]`` of ``n_nodes``): its resident nodes and what each kept."""
+        resident = list(self.resident.items())
+        self.resident.clear()
+        self.resident.update((int(new_index[i]), slots) for i, slots in resident)
+        kept = np.full(n_nodes, -1, np.int64)
+        kept[new_index[: len(self.kept)]] = self.kept
+        self.kept = kept
+
     def ensure(self, nodes: np.ndarray, cloud: OctreeCloud) -> bool:
         """Make every node in ``nodes`` resident; False when they cannot all fit."""
+        if len(self.kept) < len(cloud.counts):  # (its first nodes: a count for each of the octree's)
+            self.kept = np.full(len(cloud.counts), -1, np.int64)
         need = 0
         wanted = set(nodes.tolist())
         for nd in nodes.tolist():
@@ -502,6 +519,7 @@ class Arena:
             b["bbox_max"] = rec["bbox_max"]
             self.batches[slots] = b
             self.resident[nd] = slots
+            self.kept[nd] = count
             self.resident_changes += 1
             self.loads += 1
             self.version += 1
@@ -652,9 +670,9 @@ class OctreeCloud:
     # -- Renderable (core/renderable.py)
     def select_nodes(self, view: View, settings, estimated: bool = True) -> tuple[np.ndarray, np.ndarray, int]:
         """(node indices, projected cube sizes, point total) chosen for a view, of the nodes
-        meeting the read filter; through a load filter (``load_filter``), the nodes resident
+        meeting the read filter; through a load filter (``load_filter``), the nodes loaded
         through it count the points they kept, the others (``estimated``) the share their
-        nearest resident ancestor kept or (not ``estimated``) all theirs (``Arena.kept_counts``)."""
+        nearest loaded ancestor kept or (not ``estimated``) all theirs (``Arena.kept_counts``)."""
         out_ids = np.empty(len(self.keys), np.int64)
         out_size = np.empty(len(self.keys), np.float64)
         keep = self.load_filter(settings.hidden_classes)

@@ -268,10 +268,8 @@ class VoxelOctree(OctreeCloud):
         self.locators = [self._entries.get(k, (0, None))[1] for k in keys.tolist()]
         OctreeCloud.__init__(self, self._name, meta, nodes, keys, {}, {}, self._path)
         self.filtered_colors = filtered
-        if arena is not None:  # resident nodes keep their slots under their new indices
-            resident = list(arena.resident.items())
-            arena.resident.clear()
-            arena.resident.update((int(pos[i]), slots) for i, slots in resident)
+        if arena is not None:  # resident nodes keep their slots (and nodes what they kept) under their new indices
+            arena.renumber(pos, len(keys))
             self.arena = arena
 
     # -- per frame
