@@ -59,15 +59,17 @@ SCHEMA = [
 ]
 
 
-def write_ept(folder: Path, scene: dict, data_type: str, page_level: int | None = 2) -> Path:
+def write_ept(folder: Path, scene: dict, data_type: str, page_level: int | None = 2, extra: tuple = ()) -> Path:
     """An EPT dataset of ``scene`` in ``folder``; nodes at ``page_level`` that have children
-    head hierarchy files of their own."""
+    head hierarchy files of their own. ``extra``: (schema entry, stored values of every point)
+    of further dimensions (in a laszip node, LAS extra bytes of the same name)."""
     folder.mkdir(parents=True)
     (folder / "ept-data").mkdir()
     (folder / "ept-hierarchy").mkdir()
     xyz, nodes = scene["xyz"], scene["nodes"]
+    schema = SCHEMA + [d for d, _ in extra]
     offsets = np.array([d["offset"] for d in SCHEMA[:3]])
-    dt = np.dtype([(d["name"], {"signed": "<i", "unsigned": "<u"}[d["type"]] + str(d["size"])) for d in SCHEMA])
+    dt = np.dtype([(d["name"], {"signed": "<i", "unsigned": "<u"}[d["type"]] + str(d["size"])) for d in schema])
     for key, idx in nodes.items():
         name = voxel_name(key)
         if data_type == "binary":
@@ -76,14 +78,20 @@ def write_ept(folder: Path, scene: dict, data_type: str, page_level: int | None 
             rec["X"], rec["Y"], rec["Z"] = ints.T
             rec["Intensity"], rec["Classification"] = scene["attrs"]["intensity"][idx], scene["attrs"]["classification"][idx]
             rec["Red"], rec["Green"], rec["Blue"] = scene["rgb"][idx].T
+            for d, v in extra:
+                rec[d["name"]] = v[idx]
             (folder / "ept-data" / f"{name}.bin").write_bytes(rec.tobytes())
         else:
             header = laspy.LasHeader(point_format=7, version="1.4")
             header.scales, header.offsets = [SCALE] * 3, offsets
+            for d, _ in extra:
+                header.add_extra_dim(laspy.ExtraBytesParams(d["name"], dt[d["name"]]))
             las = laspy.LasData(header)
             las.X, las.Y, las.Z = np.rint((xyz[idx] - offsets) / SCALE).astype(np.int32).T
             las.red, las.green, las.blue = scene["rgb"][idx].T
             las.intensity, las.classification = scene["attrs"]["intensity"][idx], scene["attrs"]["classification"][idx]
+            for d, v in extra:
+                las[d["name"]] = v[idx]
             las.write(str(folder / "ept-data" / f"{name}.laz"))
     keys = set(nodes)
     level = {k: (k.bit_length() - 1) // 3 for k in keys}
@@ -109,7 +117,7 @@ def write_ept(folder: Path, scene: dict, data_type: str, page_level: int | None 
         "dataType": data_type,
         "hierarchyType": "json",
         "points": len(xyz),
-        "schema": SCHEMA,
+        "schema": schema,
         "span": 128,
         "srs": {"authority": "EPSG", "horizontal": "32610", "wkt": WKT},
         "version": "1.0.0",
@@ -364,3 +372,40 @@ def test_the_classes_an_ept_schema_counts_or_bounds(broken, datasets):
         dim.update({"name": "Classification", "type": "unsigned", "size": 1, **stated})
         (d / "ept.json").write_text(json.dumps(meta))
         assert gp.open(d).class_facts() == facts, stated
+
+
+@pytest.mark.parametrize("data_type", ["laszip", "binary"])
+def test_ept_dimensions_beyond_las_are_attributes(scene, tmp_path, data_type):
+    """Entwine's OriginId and a source's extra bytes (here a scaled Reflectance) were dropped
+    without a word: they are attributes under their own names (laszip: the node's LAS extra
+    bytes), as the LAS and COPC readers read extra bytes, and ``info`` lists them; binary's
+    ClassFlags is the LAS reader's four flags."""
+    from gigapoint.io import format_info
+    from gigapoint.lod import octree_info
+
+    n = len(scene["xyz"])
+    rng = np.random.default_rng(9)
+    origin, reflectance, flags = rng.integers(0, 4, n).astype(np.uint32), rng.integers(-2000, 2000, n).astype(np.int16), rng.integers(0, 16, n).astype(np.uint8)
+    extra = [
+        ({"name": "OriginId", "type": "unsigned", "size": 4}, origin),
+        ({"name": "Reflectance", "type": "signed", "size": 2, "scale": 0.01, "offset": -5.0}, reflectance),
+    ]
+    flag_names = ["key_point", "overlap", "synthetic", "withheld"] if data_type == "binary" else []
+    if data_type == "binary":
+        extra.append(({"name": "ClassFlags", "type": "unsigned", "size": 1}, flags))
+    d = write_ept(tmp_path / "e", scene, data_type, extra=extra)
+    c = gp.open(d)
+    assert c.attribute_names == sorted(["OriginId", "Reflectance", "classification", "intensity", *flag_names])
+    c.load_hierarchy()
+    for i in np.flatnonzero(c.counts > 0).tolist()[:6]:
+        idx = scene["nodes"][int(c.keys[i])]
+        p = c.node_points(i)
+        np.testing.assert_array_equal(p["OriginId"], origin[idx])
+        assert p["OriginId"].dtype == np.uint32 and p["Reflectance"].dtype == np.float64
+        np.testing.assert_allclose(p["Reflectance"], reflectance[idx] * 0.01 - 5.0)
+        for name in flag_names:
+            np.testing.assert_array_equal(p[name], (flags[idx] >> ["synthetic", "key_point", "withheld", "overlap"].index(name)) & 1)
+    info = octree_info(d)
+    assert "OriginId" in info["attributes"] and "Reflectance" in info["attributes"]
+    assert "OriginId, Reflectance, classification" in format_info(info)
+

@@ -114,6 +114,17 @@ def test_entwine_hierarchy_steps_are_read_when_drawn():
         np.testing.assert_array_equal(p["gps_time"], np.asarray(las.gps_time))
 
 
+def test_entwines_origin_ids_are_read():
+    """PDAL's lone-star (Entwine, laszip): OriginId, the source file of each point, 0..3 in node 3-5-4-3."""
+    c = gp.open(DATA / "lone-star-laszip")
+    c.load_hierarchy()
+    i = [voxel_name(int(k)) for k in c.keys].index("3-5-4-3")
+    las = laspy.read(DATA / "lone-star-laszip" / "ept-data" / "3-5-4-3.laz")
+    got = c.node_points(i)["OriginId"]
+    np.testing.assert_array_equal(got, np.asarray(las["OriginId"]))
+    assert np.bincount(got).tolist() == [7_788, 7_228, 2_223, 1_027]
+
+
 @pytest.mark.parametrize("name", ["ellipsoid-binary-2k", "ellipsoid-zstandard-2k"])
 def test_entwine_binary_and_zstandard_read_point_for_point(name):
     if name.startswith("ellipsoid-zstandard"):

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.chunk import safe_attribute_name
 from ..errors import InputError
 from ..io import laz_process
 from ..io.http import ByteSource, open_source, shown_url
@@ -46,7 +47,12 @@ ATTRIBUTES = {
     "ScanDirectionFlag": ("scan_direction_flag", np.uint8),
     "EdgeOfFlightLine": ("edge_of_flight_line", np.uint8),
     "ScanAngleRank": ("scan_angle", np.int16),  # PDAL's degrees (any format's) in LAS 1.4 units, as COPC's
+    "ScanChannel": ("scanner_channel", np.uint8),
 }
+#: PDAL's ClassFlags (LAS's classification flags in one byte): its bits as the LAS reader names them
+CLASS_FLAGS = {"synthetic": 0, "key_point": 1, "withheld": 2, "overlap": 3}
+#: the schema's dimensions that are not attributes of their own (positions, colours, the flags above)
+NOT_EXTRA = {"X", "Y", "Z", "Red", "Green", "Blue", "ClassFlags", *ATTRIBUTES}
 
 
 def _srs_text(srs) -> str | None:
@@ -153,6 +159,19 @@ class EptCloud(VoxelOctree):
         self.record = np.dtype(fields)
         self._has_rgb = all(c in names for c in ("Red", "Green", "Blue"))
         self._attr_dtypes = {a: np.dtype(dt) for n, (a, dt) in ATTRIBUTES.items() if n in names}
+        if "ClassFlags" in names:
+            self._attr_dtypes.update(dict.fromkeys(CLASS_FLAGS, np.dtype(np.uint8)))
+        # the other dimensions (Entwine's OriginId, a source's extra bytes) are attributes under
+        # their own names, as the LAS and COPC readers read extra bytes; a laszip node holds
+        # them as LAS extra bytes. Scaled where the schema gives a scale or offset.
+        self._extras: dict[str, tuple[str, bool]] = {}  # attribute -> (dimension, scaled)
+        for d in schema:
+            name = safe_attribute_name(d["name"])
+            if d["name"] in NOT_EXTRA or name is None or name in self._attr_dtypes:
+                continue
+            scaled = "scale" in d or "offset" in d
+            self._extras[name] = (d["name"], scaled)
+            self._attr_dtypes[name] = np.dtype(np.float64) if scaled else self.record.fields[d["name"]][0]
 
     # -- VoxelOctree
     def _fetch_pages(self, locators: list) -> list[bytes]:
@@ -215,6 +234,10 @@ class EptCloud(VoxelOctree):
             attrs = {a: rec[d] for d, (a, _) in ATTRIBUTES.items() if d in self.record.names}
             if "ScanAngleRank" in self.record.names:
                 attrs["scan_angle"] = scan_angle_units(rec["ScanAngleRank"])
+            if "ClassFlags" in self.record.names:
+                attrs.update({a: (rec["ClassFlags"] >> np.uint8(bit)) & np.uint8(1) for a, bit in CLASS_FLAGS.items()})
+            for a, (dim, scaled) in self._extras.items():
+                attrs[a] = self._extra_values(dim, scaled, rec[dim])
             return {"xyz": xyz, "rgb": rgb, "attributes": attrs}
         import laspy
 
@@ -240,7 +263,18 @@ class EptCloud(VoxelOctree):
         attrs = {a: np.asarray(pts[a]) for a, _ in ATTRIBUTES.values() if a in dims}  # laspy's names are gigapoint's
         if "scan_angle_rank" in dims:  # formats 0-5 (Entwine's): degrees
             attrs["scan_angle"] = scan_angle_units(pts["scan_angle_rank"])
+        attrs.update({a: np.asarray(pts[a]) for a in CLASS_FLAGS if a in self._attr_dtypes and a in dims})
+        # the extra dimensions: the node's LAS extra bytes of the same names (absent ones: zeros)
+        attrs.update({a: self._extra_values(dim, scaled, pts[dim]) for a, (dim, scaled) in self._extras.items() if dim in dims})
         return {"xyz": xyz, "rgb": rgb, "attributes": attrs}
+
+    def _extra_values(self, dim: str, scaled: bool, stored) -> np.ndarray:
+        """An extra dimension's values: as stored, or times the schema's scale plus its offset
+        where it gives them (``_schema``)."""
+        if not scaled:
+            return np.asarray(stored)
+        scale, offset = self._scales[dim]
+        return np.asarray(stored, np.float64) * scale + offset
 
 
 def open_ept(path_or_url) -> EptCloud:
