@@ -409,3 +409,22 @@ def test_ept_dimensions_beyond_las_are_attributes(scene, tmp_path, data_type):
     assert "OriginId" in info["attributes"] and "Reflectance" in info["attributes"]
     assert "OriginId, Reflectance, classification" in format_info(info)
 
+
+
+def test_an_ept_count_is_its_hierarchys_once_read(broken, scene):
+    """ept.json's ``points`` beside what its hierarchy holds (PDAL's bcbf: 10 and 5): a render
+    said "5 of 10 points drawn" of all there is. Once every page is read (``info``, a frame
+    that reaches them) the count is the nodes'; ``info`` says ept.json's beside it."""
+    from gigapoint.io import format_info
+    from gigapoint.lod import octree_info
+
+    d = broken()
+    meta = json.loads((d / "ept.json").read_text())
+    (d / "ept.json").write_text(json.dumps(dict(meta, points=meta["points"] + 777)))
+    n = len(scene["xyz"])
+    c = gp.open(d)
+    assert c.pending_pages > 0 and c.n_points == n + 777  # (all it knows before its pages are read)
+    f = gp.render_frame(c, gp.Camera.fit(c.bounds, width=64, height=48), gp.RenderSettings(backend="cpu", lod_threshold_px=0.0, point_budget=10**9))
+    assert c.pending_pages == 0 and f.stats.points_processed == c.n_points == len(c) == n
+    text = format_info(octree_info(d))
+    assert f"points:      {n:,}\n" in text and f"mismatch:    the hierarchy's nodes hold {n:,} points, ept.json says {n + 777:,}\n" in text

@@ -193,6 +193,9 @@ def test_bcbf_one_point_a_level_with_no_scale(tmp_path):
                        capture_output=True, text=True, timeout=120)  # fmt: skip
     assert r.returncode == 0 and r.stderr == "", r.stderr
     assert (np.asarray(Image.open(tmp_path / "b.png"))[..., :3] > 0).any(axis=2).sum() >= 1
+    # its count is its hierarchy's, 5 (ept.json says 10: "1 of 10 points drawn" where all were)
+    assert r.stdout == f"wrote {tmp_path / 'b.png'} (64x48, 1 of 5 points drawn)\n"
+    assert c.n_points == len(c) == 5 and c.meta["stated_points"] == 10
 
 
 @pytest.mark.parametrize(
@@ -244,7 +247,8 @@ def test_gigapoint_info_of_pdals_datasets():
     assert "per level:   0: 41,998, 1: 166,916, 2: 270,355, 3: 39,593" in runs["lone-star-laszip"]
     assert "EPT (binary)" in runs["ellipsoid-binary-2k"] and "crs:         EPSG:3857" in runs["ellipsoid-binary-2k"]
     assert "5 nodes in 5 levels" in runs["bcbf"]
-    # ept.json's count and its hierarchy's disagree: both said (a frame draws the hierarchy's)
-    assert "points:      10\n" in runs["bcbf"] and "mismatch:    the hierarchy's nodes hold 5 points, ept.json says 10\n" in runs["bcbf"]
+    # ept.json's count and its hierarchy's disagree: the hierarchy's is the count (a frame draws it), both said
+    assert "points:      5\n" in runs["bcbf"] and "mismatch:    the hierarchy's nodes hold 5 points, ept.json says 10\n" in runs["bcbf"]
+    assert "points:      1,000\n" in runs["bad-pointcount/laszip"]
     assert "mismatch:    the hierarchy's nodes hold 1,000 points, ept.json says 1,065\n" in runs["bad-pointcount/laszip"]
     assert all("mismatch" not in runs[k] for k in ("1.2-with-color", "lone-star-laszip", "ellipsoid-binary-2k"))

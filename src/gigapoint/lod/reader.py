@@ -240,10 +240,9 @@ def _voxel_info(path) -> dict:
             + (f", spacing {meta['spacing']:.6g}" if meta.get("spacing") else ""),
             "per level": ", ".join(f"{lv}: {n:,}" for lv, n in enumerate(per_level)),
         }
-        held = int(sum(per_level))
-        if held != cloud.n_points:  # what a frame draws (PDAL's bcbf EPT: ept.json says 10, its 5 nodes hold 1 each)
+        if "stated_points" in meta:  # the count is the nodes' (PDAL's bcbf EPT: ept.json says 10, its 5 nodes hold 1 each)
             said = "the LAS header" if copc else "ept.json"
-            details["mismatch"] = f"the hierarchy's nodes hold {held:,} points, {said} says {cloud.n_points:,}"
+            details["mismatch"] = f"the hierarchy's nodes hold {cloud.n_points:,} points, {said} says {meta['stated_points']:,}"
         return {
             "path": shown_url(url or path),  # (a URL's password and token not printed)
             "format": "COPC" if copc else f"EPT ({meta.get('data_type')})",

@@ -249,6 +249,11 @@ class VoxelOctree(OctreeCloud):
         keys = np.array(sorted(have), np.uint64)
         counts = np.array([self._entries.get(k, (0, None))[0] for k in keys.tolist()], np.int64)
         meta = self._meta
+        if not self._pending and int(counts.sum()) != meta["points"]:
+            # the hierarchy read whole: the cloud's count is what its nodes hold (PDAL's reader
+            # goes by them too), the header's or ept.json's kept for ``info`` to say beside it
+            meta.setdefault("stated_points", meta["points"])
+            meta["points"] = int(counts.sum())
         lo, hi = (np.array(meta["bounds"][b], np.float64) for b in ("min", "max"))
         nodes = np.zeros(len(keys), BATCH_DTYPE)
         nodes["level"] = level_of(keys)
