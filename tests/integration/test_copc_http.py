@@ -591,7 +591,13 @@ def test_shown_url_hides_passwords_and_query_values():
     assert s(Path("https://u:pw@h/a.laz?key=k")) == "https:/u:***@h/a.laz?key=***"  # (the CLI's Path of a URL)
     assert s("http://user:sec/ret@h:1/x") == "http://user:***@h:1/x"  # a raw '/' in the password
     assert s("http://u:1234@[::1]:80/x") == "http://u:***@[::1]:80/x"
-    for same in ("https://user@h/x", "http://h/x?", "http://[::1", "http://[::1]:80/a@b", "http://h:8080/a@b", "http://h/a:b@c", "/data/a?b=1.laz", "C:/x?y=1", "scan.laz"):
+    # a token as the user name (GitHub's, GitLab's) was shown whole; a password that is digits up
+    # to a raw '/' was read as a port and shown: 'h:8080/a@b' reads the same, hidden as one
+    assert s("https://ghp_T0KEN@raw.example/x.laz?a=1") == "https://***@raw.example/x.laz?a=***"
+    assert s("https://me@mail.example@h/x") == "https://***@h/x"
+    assert s("http://user:1234/x@h:1/y") == "http://user:***@h:1/y"
+    assert s("http://h:8080/a@b") == "http://h:***@b"
+    for same in ("http://h/x?", "http://[::1", "http://[::1]:80/a@b", "http://h/a:b@c", "http://h/a@b", "/data/a?b=1.laz", "C:/x?y=1", "scan.laz"):
         assert s(same) == same
     with pytest.raises(InputError) as e:  # httpx: "Invalid port: 'sec'", a piece of the password
         gp.open("http://user:sec/ret@127.0.0.1:1/x.copc.laz")
@@ -714,6 +720,39 @@ def test_a_redirect_to_signed_urls_is_followed_afresh_for_every_file(data, serve
     assert n > 2 and sorted(server.paths) == ["/autzen.copc.laz?sig=1766382414"] * n + ["/s/autzen.copc.laz"] * n
     c.close()
 
+
+def test_an_ept_json_redirected_alone_to_a_folder_token_has_its_files_beside_it(data, server):
+    """``/az/ept.json`` -> ``/ept_laz/ept.json?sv=…&sig=…`` (ept.json alone redirected to an
+    Azure SAS URL whose token reads the container): the hierarchy was asked beside the URL given
+    ("…/az/ept-hierarchy/0-0-0-0.json: HTTP 404"). A sibling not found there is asked beside the
+    signed URL, with its token; once found there, so are the later files, each asked once. The
+    token is never shown."""
+    token = "sv=2031-01-01&sig=S3CRET%2Fsig"
+
+    def azure(path):  # only ept.json redirects; the container refuses what lacks the token
+        if path == "/az/ept.json":
+            return 302, f"/ept_laz/ept.json?{token}"
+        return (403, None) if path.startswith("/ept_laz/") and not path.endswith(f"?{token}") else None
+
+    server.route = azure
+    c = gp.open(server.url("az/ept.json"))
+    assert isinstance(c, EptCloud) and c.n_points == 20_000
+    a = _frame(gp.open(data / "ept_laz"), point_budget=10**9, lod_threshold_px=0.0)
+    b = _frame(c, point_budget=10**9, lod_threshold_px=0.0)
+    np.testing.assert_array_equal(a.image, b.image)
+    assert server.paths[:4] == ["/az/ept.json", f"/ept_laz/ept.json?{token}", "/az/ept-hierarchy/0-0-0-0.json", f"/ept_laz/ept-hierarchy/0-0-0-0.json?{token}"]
+    later = server.paths[4:]
+    assert len(later) > 4 and len(set(later)) == len(later) and all(p.startswith("/ept_laz/") and p.endswith(f"?{token}") for p in later)
+    assert c.node_file(int(c.keys[0])) == server.url("ept_laz/ept-data/0-0-0-0.laz?sv=***&sig=***")
+    c.close()
+    root_page = data / "ept_laz" / "ept-hierarchy" / "0-0-0-0.json"
+    root_page.rename(data / "root-page.away")
+    try:  # missing beside both: the 404 of the URL given, as before
+        with pytest.raises(InputError) as e:
+            gp.open(server.url("az/ept.json"))
+        assert str(e.value) == f"{server.url('az/ept-hierarchy/0-0-0-0.json')}: HTTP 404 Not Found for the file"
+    finally:
+        (data / "root-page.away").rename(root_page)
 
 def test_a_moved_copc_file_is_read_where_it_went(data, server):
     """A COPC file's every range request went to the URL given and was redirected again: now the

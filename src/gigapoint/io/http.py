@@ -15,17 +15,18 @@ error status, a short read, a server that ignores ``Range`` (200 with the whole 
 answers another range than asked, a range past the end of the file, a timeout, a file that
 changed on the server since its first answer (size, ETag or Last-Modified), too many redirects,
 a redirect from https to http or to another scheme (not followed). Messages name a URL
-as ``shown_url`` gives it: its password and query values as *** (signed URLs are how COPC files
-are shared); requests use the URL itself.
+as ``shown_url`` gives it: its password (or a user name alone, a token) and query values as ***
+(signed URLs are how COPC files are shared); requests use the URL itself.
 
 Redirects: a redirect that keeps the URL's query (a moved file or dataset, ``/latest/`` ->
 ``/v3/``) is remembered: the file's later ranges are asked where it led, and its siblings are
 the files beside where it led (an EPT's ``ept.json`` alone redirected has its hierarchy and data
 there). A redirect to another query (a signed URL: ``/ept.json`` -> ``/bucket/ept.json?sig=...``)
 is followed afresh at every request (a signature is for one file and expires), and siblings
-are beside the URL as given, each redirected and signed by the server on its own (a dataset
-whose ept.json alone redirects to a signed URL opens from that URL itself where its token reads
-the whole folder, as ``sibling`` carries a URL's query on).
+are beside the URL as given, each redirected and signed by the server on its own; a sibling
+not found there (HTTP 404: ept.json alone redirected, to a URL whose token reads the whole
+folder, an Azure SAS) is asked beside where the redirect led, with its query, and once found
+there so are the later siblings.
 
 httpx is an optional dependency (``pip install 'gigapoint[http]'``).
 """
@@ -65,9 +66,6 @@ _URL = re.compile(r"^(https?):/+(.+)$", re.IGNORECASE)
 #: a URL's scheme (a Path of one has lost a '/') and the rest; a path or request target's ?query and #fragment
 _SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]+:/+)(.*)$", re.DOTALL)
 _QUERY = re.compile(r"^([^?#]*)(\?[^#]*|)(#.*|)$", re.DOTALL)
-#: 'user:password@' before the host: up to the last '@' before the query (a password may hold a raw '@' or '/');
-#: 'host:8080/a@b' is a port
-_USER_INFO = re.compile(r"^([^/:@\[\]?#]*):(?!\d*(?:[/?#]|$))([^?#]*)@(?=[^@?#]*(?:[?#]|$))", re.DOTALL)
 _CONTENT_RANGE = re.compile(r"^\s*bytes\s+(\d+)-(\d+)/(\d+|\*)\s*$", re.IGNORECASE)
 
 
@@ -89,15 +87,33 @@ def as_url(source) -> str | None:
 
 
 def shown_url(text) -> str:
-    """``text`` (a URL or a path) as messages, ``info`` and the viewer show it: a URL's password and
-    the values of its query as *** (``https://user:***@host/a.copc.laz?sig=***&se=***``). Signed
-    and credentialed URLs are how COPC files are shared, and what is shown ends up in logs and
-    issues; requests use the URL itself. Anything else is given back as it is."""
+    """``text`` (a URL or a path) as messages, ``info`` and the viewer show it: a URL's password, a
+    user name alone (a token: ``https://TOKEN@host/``) and the values of its query as ***
+    (``https://user:***@host/a.copc.laz?sig=***&se=***``). Signed and credentialed URLs are how
+    COPC files are shared, and what is shown ends up in logs and issues; requests use the URL
+    itself. Anything else is given back as it is."""
     text = os.fspath(text) if isinstance(text, os.PathLike) else str(text)
     m = _SCHEME.match(text)
     if m is None:
         return text
-    return m.group(1) + _USER_INFO.sub(r"\1:***@", hidden_query(m.group(2)), count=1)
+    return m.group(1) + _hidden_user_info(hidden_query(m.group(2)))
+
+
+def _hidden_user_info(rest: str) -> str:
+    """A URL's part after ``scheme://`` with its user info hidden: 'user:pw@host/x' ->
+    'user:***@host/x', 'token@host/x' -> '***@host/x'. The user info ends at the last '@' before
+    the query (a password may hold a raw '@' or '/'), and is none where a '/' comes before that
+    '@' and any ':' (an '@' in the path: 'host/a@b', 'host/a:b@c') or the host is an IPv6
+    '[...]'. 'host:8080/a@b' cannot be told from 'user:1234/x@host' (a password with a raw '/'):
+    it is hidden as one ('host:***@b'), never shown."""
+    main = _QUERY.match(rest).group(1)
+    at = main.rfind("@")
+    if at < 0 or main.startswith("["):
+        return rest
+    user, colon, _ = main[:at].partition(":")
+    if "/" in user:
+        return rest
+    return (f"{user}:***" if colon else "***") + rest[at:]
 
 
 def hidden_query(target: str) -> str:
@@ -269,6 +285,8 @@ class HttpClient:
         self.sizes: dict[str, int] = {}  # file sizes learnt from Content-Range
         self.versions: dict[str, str] = {}  # each file's first ETag (else Last-Modified): a change is noticed
         self.moved: dict[str, str] = {}  # URL -> where a redirect that kept its query led (see the module's docstring)
+        self.signed: dict[str, str] = {}  # URL -> where its latest redirect to another query led (a signed URL)
+        self.siblings_beside_signed: set[str] = set()  # URLs whose siblings were found beside their signed URL
         self.requests = 0  # requests sent (cache misses), for tests and benchmarks
         self.bytes_read = 0
         self.closed = False  # (httpx's own "Cannot send a request" was a RuntimeError traceback)
@@ -359,6 +377,8 @@ class HttpClient:
                     raise HttpNotFound(f"{shown_url(url)}: a folder, not a file (the server redirected to {shown_url(str(r.url))})")
                 if r.history and urlsplit(str(r.url)).query == urlsplit(url).query:  # moved, not signed
                     self.moved[url] = _led_to(r)  # (no redirect per range, and a /latest/ that moves on stays put)
+                elif r.history:  # signed: asked afresh next time; its siblings may be beside it (HttpFile.sibling)
+                    self.signed[url] = _led_to(r)
                 status = r.status_code
                 if status in _RETRY_STATUS:
                     raise _Transient(f"HTTP {status} {r.reason_phrase} for {what}")
@@ -494,24 +514,44 @@ class _Transient(Exception):
 
 
 class HttpFile(ByteSource):
-    """A file over HTTP(S), read by range requests through a shared ``HttpClient``."""
+    """A file over HTTP(S), read by range requests through a shared ``HttpClient``. ``fallback``
+    (a sibling's): (where else to ask it when the URL answers 404, the file it is a sibling of)."""
 
-    def __init__(self, url: str, client: HttpClient | None = None):
+    def __init__(self, url: str, client: HttpClient | None = None, fallback: tuple[str, str] | None = None):
         self.url = url
         self.name = shown_url(url)  # what messages say (the URL itself is what is requested)
         self.client = client or HttpClient()
+        self.fallback = fallback
 
     def size(self) -> int | None:
         return self.client.sizes.get(self.url)
 
+    def _get(self, *args, **kwargs) -> bytes:
+        """``client.get`` of this file; where its URL answers 404, of its ``fallback`` (the 404
+        said where that fails too), which it is from then on, as its siblings are."""
+        try:
+            return self.client.get(self.url, *args, **kwargs)
+        except HttpNotFound as exc:
+            if self.fallback is None:
+                raise
+            not_found = exc
+        url, of = self.fallback
+        try:
+            data = self.client.get(url, *args, **kwargs)
+        except InputError:
+            raise not_found from None
+        self.url, self.name, self.fallback = url, shown_url(url), None
+        self.client.siblings_beside_signed.add(of)
+        return data
+
     def read(self, offset: int, size: int) -> bytes:
-        return self.client.get(self.url, int(offset), int(size))
+        return self._get(int(offset), int(size))
 
     def read_head(self, size: int) -> bytes:
-        return self.client.get(self.url, 0, int(size), allow_short=True)
+        return self._get(0, int(size), allow_short=True)
 
     def read_all(self) -> bytes:
-        return self.client.get(self.url)
+        return self._get()
 
     def read_many(self, ranges) -> list[bytes]:
         """The ranges not in the cache fetched several at once, neighbours joined into one
@@ -550,14 +590,24 @@ class HttpFile(ByteSource):
         return self.client.map(lambda s: s.read_all(), list(sources))
 
     def sibling(self, relative: str) -> HttpFile:
-        url = urljoin(self.client.moved.get(self.url, self.url), relative)  # beside where a move led (it kept the query)
-        query = urlsplit(self.url).query
-        if query and not urlsplit(relative).query:  # a token in the query (a container's SAS) reads the files beside it too
-            url = f"{url}?{query}"
-        return HttpFile(url, self.client)
+        url = _beside(self.client.moved.get(self.url, self.url), relative)  # beside where a move led (it kept the query)
+        signed = self.client.signed.get(self.url)
+        if signed is None:
+            return HttpFile(url, self.client)
+        if self.url in self.client.siblings_beside_signed:
+            return HttpFile(_beside(signed, relative), self.client)
+        return HttpFile(url, self.client, fallback=(_beside(signed, relative), self.url))
 
     def close(self) -> None:
         self.client.close()
+
+
+def _beside(url: str, relative: str) -> str:
+    """The URL of ``relative`` beside ``url``, with ``url``'s query where ``relative`` has none: a
+    token in the query (a container's SAS) reads the files beside it too."""
+    query = urlsplit(url).query
+    beside = urljoin(url, relative)
+    return f"{beside}?{query}" if query and not urlsplit(relative).query else beside
 
 
 def open_source(source, client: HttpClient | None = None) -> ByteSource:
