@@ -379,7 +379,7 @@ def test_ept_dimensions_beyond_las_are_attributes(scene, tmp_path, data_type):
     """Entwine's OriginId and a source's extra bytes (here a scaled Reflectance) were dropped
     without a word: they are attributes under their own names (laszip: the node's LAS extra
     bytes), as the LAS and COPC readers read extra bytes, and ``info`` lists them; binary's
-    ClassFlags is the LAS reader's four flags."""
+    ClassFlags is the LAS reader's four flags, its ScanChannel its scanner_channel."""
     from gigapoint.io import format_info
     from gigapoint.lod import octree_info
 
@@ -390,12 +390,13 @@ def test_ept_dimensions_beyond_las_are_attributes(scene, tmp_path, data_type):
         ({"name": "OriginId", "type": "unsigned", "size": 4}, origin),
         ({"name": "Reflectance", "type": "signed", "size": 2, "scale": 0.01, "offset": -5.0}, reflectance),
     ]
-    flag_names = ["key_point", "overlap", "synthetic", "withheld"] if data_type == "binary" else []
+    channel = flags >> 2  # 0..3
+    binary_only = ["key_point", "overlap", "scanner_channel", "synthetic", "withheld"] if data_type == "binary" else []
     if data_type == "binary":
-        extra.append(({"name": "ClassFlags", "type": "unsigned", "size": 1}, flags))
+        extra += [({"name": "ClassFlags", "type": "unsigned", "size": 1}, flags), ({"name": "ScanChannel", "type": "unsigned", "size": 1}, channel)]
     d = write_ept(tmp_path / "e", scene, data_type, extra=extra)
     c = gp.open(d)
-    assert c.attribute_names == sorted(["OriginId", "Reflectance", "classification", "intensity", *flag_names])
+    assert c.attribute_names == sorted(["OriginId", "Reflectance", "classification", "intensity", *binary_only])
     c.load_hierarchy()
     for i in np.flatnonzero(c.counts > 0).tolist()[:6]:
         idx = scene["nodes"][int(c.keys[i])]
@@ -403,8 +404,10 @@ def test_ept_dimensions_beyond_las_are_attributes(scene, tmp_path, data_type):
         np.testing.assert_array_equal(p["OriginId"], origin[idx])
         assert p["OriginId"].dtype == np.uint32 and p["Reflectance"].dtype == np.float64
         np.testing.assert_allclose(p["Reflectance"], reflectance[idx] * 0.01 - 5.0)
-        for name in flag_names:
-            np.testing.assert_array_equal(p[name], (flags[idx] >> ["synthetic", "key_point", "withheld", "overlap"].index(name)) & 1)
+        if data_type == "binary":
+            for bit, name in enumerate(["synthetic", "key_point", "withheld", "overlap"]):
+                np.testing.assert_array_equal(p[name], (flags[idx] >> bit) & 1)
+            np.testing.assert_array_equal(p["scanner_channel"], channel[idx])
     info = octree_info(d)
     assert "OriginId" in info["attributes"] and "Reflectance" in info["attributes"]
     assert "OriginId, Reflectance, classification" in format_info(info)
