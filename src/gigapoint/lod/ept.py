@@ -6,7 +6,8 @@ beside it, local or over HTTP, opened as an octree (EptCloud).
 LAZ file ``ept-data/d-x-y-z.laz``; ``binary``: the schema's dimensions packed in order,
 little-endian, ``ept-data/d-x-y-z.bin``; ``zstandard``: binary compressed with Zstandard,
 ``ept-data/d-x-y-z.zst``, read with the zstandard package), ``hierarchyType`` (``json``), ``schema`` (name, type
-signed/unsigned/float, size, scale and offset per dimension) and ``srs`` (wkt, authority,
+signed/unsigned/float, size, scale and offset per dimension; those beyond the LAS fields,
+Entwine's OriginId, are attributes under their own names) and ``srs`` (wkt, authority,
 horizontal). The hierarchy: ``ept-hierarchy/0-0-0-0.json`` maps node names to point counts,
 -1 for a node whose subtree is in ``ept-hierarchy/<name>.json``, read when a frame draws it
 (voxel_octree.py).
