@@ -8,6 +8,7 @@ from __future__ import annotations
 import filecmp
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -594,6 +595,72 @@ def test_a_worker_running_other_gigapoint_code_is_a_one_line_error(inputs, clien
     msg = str(err.value)
     assert msg.startswith(f"{(tmp_path / 'oct').resolve()}: Dask worker tcp://") and "\n" not in msg, msg
     assert ", the driver 0.0.1+000000000000 (version+digest of the source): install the same gigapoint on every worker" in msg, msg
+
+
+def _other_code() -> None:
+    """On a worker: gigapoint seen as another release (as a worker of another install is)."""
+    from gigapoint.lod.convert import state
+
+    state._CODE_VERSION = "0.0.1+000000000000"
+
+
+def _no_writing() -> None:
+    """On a worker: every temporary file in OUT refused (the workers run as root here, for whom permissions do not count)."""
+    import tempfile
+
+    def mkstemp(*a, dir=None, **k):
+        raise PermissionError(13, "Permission denied", dir)
+
+    tempfile.mkstemp = mkstemp
+
+
+@pytest.mark.parametrize(
+    ("spoil", "problem"),
+    [
+        (_other_code, r"runs gigapoint 0\.0\.1\+000000000000, the driver \S+ \(version\+digest of the source\): install the same gigapoint"),
+        (_no_writing, r"cannot write into it \(Permission denied\)"),
+    ],
+    ids=["other code", "cannot write OUT"],
+)
+def test_a_worker_that_joins_after_the_check_is_checked_before_its_first_task(las_writer, tmp_path, monkeypatch, spoil, problem):
+    """The driver checks the workers there when the run starts (code, OUT seen and writable); one
+    that joins later (an autoscaling cluster) ran its tasks unchecked. Here worker A passes the
+    check, then B joins, spoilt, and A leaves: B's first task says why it cannot run, in one line."""
+    import cloudpickle
+
+    from gigapoint.lod.convert.distributed import DaskPhases
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])  # the spoilers travel to the worker by value
+    src = las_writer(tmp_path / "a.las", 20_000)
+    out = tmp_path / "oct"
+    cluster = distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0", env={"NUMBA_NUM_THREADS": "1"}, silence_logs=40
+    )
+    c = distributed.Client(cluster)
+    checked = DaskPhases.output_ready
+    late = []
+
+    def output_ready_then_a_worker_joins(conv):
+        checked(conv)
+        (first,) = c.scheduler_info()["workers"]
+        cluster.scale(2)
+        c.wait_for_workers(2, timeout=60)
+        late.extend(w for w in c.scheduler_info()["workers"] if w != first)
+        c.run(spoil, workers=late)
+        c.retire_workers([first], close_workers=True)
+
+    monkeypatch.setattr(DaskPhases, "output_ready", output_ready_then_a_worker_joins)
+    try:
+        with pytest.raises(ConvertError) as err:
+            convert([src], out, client=c, max_leaf=3_000)
+    finally:
+        c.close()
+        cluster.close()
+    msg = str(err.value)
+    assert re.fullmatch(f"{re.escape(str(out))}: Dask worker {re.escape(late[0])} {problem}.*", msg), msg
+    assert "\n" not in msg
+    raw = OctreeDir(out).raw
+    assert not OctreeDir(out).complete and not (raw.exists() and any(raw.iterdir()))  # nothing was read
 
 
 def test_ctrl_c_waits_for_the_tasks_running_on_the_workers(thread_client, tmp_path, las_writer, monkeypatch, stop_conversion_after, capsys):

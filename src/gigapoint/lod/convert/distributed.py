@@ -388,6 +388,8 @@ def _run_task(kind: str, name: str, spec: dict, fn, *args):
     import numba
 
     hooks.task_started(kind, name)
+    if "run" in spec:  # (the driver's tasks; tests run bare ones)
+        _worker_checked(spec)
     _numba_threads_from_environment()
     numba.set_num_threads(1)
     try:
@@ -635,9 +637,27 @@ def _call_task(spec: dict, fn, *args):
     return fn(*args)
 
 
+# In a worker: the runs (their state's token) whose check (_probe) this process passed
+_CHECKED: set[str] = set()
+_CHECKED_LOCK = threading.Lock()
+
+
+def _worker_checked(spec: dict) -> None:
+    """The driver's check of its workers (_probe), made on this worker once a run, before its
+    first task: the driver checks the workers there when the run starts, and one that joins
+    later (an autoscaling cluster) ran tasks unchecked, under other code or writing where the
+    driver never looks."""
+    with _CHECKED_LOCK:  # (a worker of several threads: one check)
+        if spec["run"] in _CHECKED:
+            return
+        problem = _probe(spec["dir"], spec["run"], spec["version"])
+    if problem:
+        raise ConvertError(f"{spec['out']}: Dask worker {_worker_name()} {problem}")
+
+
 def _probe(out: str, token: str, version: str) -> str | None:
-    """On each worker before the tasks: does it run the driver's code (``version``), does it see
-    the driver's output folder, and may it write there?"""
+    """On each worker before its first task: does it run the driver's code (``version``), does it
+    see the driver's output folder, and may it write there? (None: yes; noted in _CHECKED)"""
     if version != code_version():
         return (
             f"runs gigapoint {code_version()}, the driver {version} (version+digest of the source): "
@@ -653,6 +673,7 @@ def _probe(out: str, token: str, version: str) -> str | None:
         os.unlink(name)
     except OSError as exc:
         return f"cannot write into it ({exc.strerror or exc})"
+    _CHECKED.add(token)
     return None
 
 
@@ -714,6 +735,8 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             "colorize": None if self.colorization is None else str(self._raster()),
             "colorize_bits": None if self.colorization is None else self.colorization.nbits,
             "memory_limit": self.mem,
+            "run": st["run"],  # each worker checks itself with these before its first task (_worker_checked)
+            "version": code_version(),
             "own_workers": self.client in _OWN_WORKERS,
             "state": {k: st[k] for k in keep if k in st},
         }
