@@ -1,6 +1,7 @@
 """The workers of the LocalCluster that ``--workers N`` starts (distributed.open_client): one
 malloc arena, so that a task thread's freed memory is kept for the next task (keep_freed_memory.py),
-and Dask's profiler and fast event-loop ticks off (docs/scale.md)."""
+Dask's profiler and fast event-loop ticks off (docs/scale.md), no Dask memory limit, and half the
+RAM among them as the conversion's default limit (docs/lod.md)."""
 
 from __future__ import annotations
 
@@ -147,3 +148,48 @@ def test_a_folder_of_many_tiles_converts_on_workers_within_the_open_files_limit(
     proc = subprocess.run([sys.executable, "-c", _OPEN_FILES_LIMITED, str(tiles), str(out)], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert f"{out}: 4,000 points in " in proc.stdout, proc.stdout
+
+
+def _hold_1_1_gb(spec: dict) -> int:
+    """1.1 GB of arrays made, written and read on the task's thread: bytes summed."""
+    import numpy as np
+
+    a = np.ones(137_500_000)  # 1.1 GB
+    a[::512] = 2.0
+    return int(a.sum()) - len(a)
+
+
+def test_local_workers_share_the_ram_and_dask_stops_no_task_within_the_conversions_limit(monkeypatch, las_writer, tmp_path):
+    """On a machine of 3 GiB, ``--workers 3``: Dask's default limit for its workers (the RAM split
+    3 ways, 1 GiB) killed a worker whose task held 1.1 GB (at 95 %; paused it at 80 %, for good:
+    its freed memory is kept), while the conversion planned each worker's tasks by its own limit,
+    a quarter of the RAM (768 MiB: 4 such workers held all the RAM). Now Dask sets no limit of its
+    own, and 3 workers on this machine plan half the RAM among them: 512 MiB each."""
+    import dask
+
+    from gigapoint.core import chunked
+    from gigapoint.lod import ConvertError, convert
+    from gigapoint.lod.convert.distributed import DaskPhases, _task, default_memory_limit, open_client
+    from gigapoint.lod.convert.options import parse_memory
+
+    monkeypatch.setattr(chunked, "physical_memory", lambda: 3 << 30)
+    monkeypatch.setattr(distributed.system, "MEMORY_LIMIT", 3 << 30)  # (read here, where the LocalCluster sizes its workers)
+    assert default_memory_limit(1) == parse_memory(None) == 768 << 20  # one worker: one process's default (the same octree)
+    assert default_memory_limit("tcp://elsewhere:8786") == 768 << 20  # other machines' workers: the driver's quarter, as before
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}), open_client(3) as client:
+        assert default_memory_limit(client) == default_memory_limit(3) == 512 << 20
+        planned = []  # the limit a conversion on these workers plans by
+
+        def stop_at_start(conv):
+            planned.append(conv.mem)
+            raise ConvertError("stopped here")
+
+        monkeypatch.setattr(DaskPhases, "_cluster_ready", stop_at_start)
+        with pytest.raises(ConvertError, match="stopped here"):
+            convert([las_writer(tmp_path / "a.las", 1_000)], tmp_path / "oct", client=client)
+        assert planned == [512 << 20]
+        spec = {"own_workers": True, "out": ".", "tag": "probe"}
+        worker = [next(iter(client.scheduler_info()["workers"]))]
+        assert client.submit(_task, "build", "big", spec, _hold_1_1_gb, workers=worker, pure=False).result() == 137_500_000 // 512 + 1
+        # the same worker takes its next task (a paused one never would: it keeps the 1.1 GB)
+        assert client.submit(_task, "build", "next", spec, _hold_1_1_gb, workers=worker, pure=False).result() == 137_500_000 // 512 + 1

@@ -259,7 +259,8 @@ def convert(
     scheduler address (``"tcp://host:8786"``) or a number of local single-threaded worker
     processes (a ``LocalCluster``, closed at the end). Workers read the inputs and write into
     ``out``, which must be a path every worker sees (a shared file system); the octree is the
-    one this function makes without a client. ``memory_limit`` is then per worker.
+    one this function makes without a client. ``memory_limit`` is then per worker (default: a
+    quarter of the RAM; N local workers: half the RAM among them, at most a quarter each).
 
     ``source_files``: where ``inputs`` are chunks, the LAS/LAZ/COPC files they came from; their
     headers give the output its CRS and LAS grid (a progressive octree's ``save``).
@@ -422,8 +423,10 @@ def convert(
             raise ConvertError("convert: a grown tree is converted in this process, not on a Dask client")
         cls = _SeededConverter
     if client is not None:
-        from .distributed import DaskPhases, open_client  # dask is imported only when asked for
+        from .distributed import DaskPhases, default_memory_limit, open_client  # dask is imported only when asked for
 
+        if memory_limit is None:  # (workers on this machine share it)
+            mem = default_memory_limit(client)
         cls = type("_DaskConverter", (DaskPhases, _Converter), {})
     conv = cls(
         inputs,

@@ -57,7 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from ...atomic import atomic_json, atomic_open
-from ...core import pages
+from ...core import chunked, pages
 from ...core.chunk import ColorScaler, warn_dropped_attributes
 from ...errors import GigapointError, GigapointWarning, warn
 from ...io._base import one_line
@@ -72,6 +72,7 @@ from ..preview import PreviewSampler, preview_points
 from ..progress import NullProgress
 from . import hooks
 from .keep_freed_memory import KeepFreedMemory
+from .options import MIN_DEFAULT_MEMORY, parse_memory
 from .partition import COUNT_LEVEL, CellCounts, PartitionPhases, built_name, grid_cells, group_name, partition_lut
 from .phases import BuildPhases, place_set
 from .read import (
@@ -111,7 +112,8 @@ WORKER_MALLOC_ENV = {"MALLOC_ARENA_MAX": "1"}
 # every 500 ms instead of 20 ms. With both, Dask's own threads used 0.3 s of CPU instead of 0.8 s
 # over 5 s of two busy workers (docs/scale.md).
 OWN_CLUSTER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "500ms"}
-_OWN_WORKERS: weakref.WeakSet = weakref.WeakSet()  # clients of the LocalClusters open_client started
+# clients of the LocalClusters open_client started: their number of workers
+_OWN_WORKERS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _KEPT: list = []  # in a worker of such a cluster: the KeepFreedMemory entered for the process's life
 # In a worker: the tasks of each output (output_tag) running now. A task whose driver was
 # interrupted or died runs on to its end, but the scheduler forgets it at once (processing()
@@ -194,9 +196,14 @@ def open_client(client, announce: bool = False):
                 silence_logs=logging.CRITICAL,  # a task's failure comes back as the conversion's one line, not also as
                 # the worker's "Compute Failed" log of seven (a full disk, a damaged input)
                 env={"NUMBA_NUM_THREADS": "1"},  # one core a worker: numba's kernels run on the task's thread
+                # no memory limit of Dask's own: the conversion's (--memory-limit, default_memory_limit) sizes each
+                # task. Dask's default, the RAM split N ways, paused a worker at 80 % of it, for good (it keeps freed
+                # memory: the run hung), and killed it at 95 %, below what its tasks were allowed (the default a
+                # quarter of the RAM each, 1 GB with --workers 4 on a 4 GB machine; or --memory-limit's)
+                memory_limit=None,
             )
         c = dd.Client(cluster)
-        _OWN_WORKERS.add(c)
+        _OWN_WORKERS[c] = client
     elif isinstance(client, str) and client.strip():
         try:
             _handshake(dd, client)
@@ -215,6 +222,20 @@ def open_client(client, announce: bool = False):
         c.close()
         if cluster is not None:
             cluster.close()
+
+
+def default_memory_limit(client) -> int:
+    """The conversion's memory limit, a worker's, where none is given: a quarter of the RAM, as in
+    one process; the N workers of a LocalCluster here (``--workers N``, ``client=N``) share this
+    machine: half its RAM among them, at most a quarter each (4 workers planning a quarter each
+    held all of a small machine's RAM). A cluster elsewhere (``--dask``): the driver's quarter."""
+    if client in _OWN_WORKERS:  # the CLI's --workers N: open_client started them
+        workers = _OWN_WORKERS[client]
+    elif isinstance(client, int):  # convert(client=N): open_client starts them (and refuses N < 1)
+        workers = max(1, client)
+    else:  # a scheduler's address, a Client of one's own: workers elsewhere
+        workers = 1
+    return min(parse_memory(None), max(MIN_DEFAULT_MEMORY, chunked.physical_memory() // (2 * workers)))
 
 
 def _handshake(dd, address: str) -> None:

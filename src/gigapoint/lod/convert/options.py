@@ -17,6 +17,7 @@ MAX_PARTITION_POINTS = 4_000_000
 # the same wherever and whenever it is made, or the octree is not (one process against a Dask
 # driver, whose size says nothing of its workers').
 RUNTIME_BYTES = 192 << 20
+MIN_DEFAULT_MEMORY = 256 << 20  # the default memory limit on the smallest machines
 DEFAULT_MAX_LEAF = 20_000
 FORMATS = ("gigapoint", "potree", "copc")
 ENCODINGS = ("DEFAULT", "BROTLI")  # Potree's
@@ -28,7 +29,7 @@ def parse_memory(value, option: str = "--memory-limit", minimum: int = 64 << 20)
     if value is None:
         from ...core.chunked import physical_memory
 
-        return max(256 << 20, physical_memory() // 4)
+        return max(MIN_DEFAULT_MEMORY, physical_memory() // 4)
     if isinstance(value, (int, np.integer)):
         n = int(value)
     else:
