@@ -37,7 +37,9 @@ returns it, so a task that Dask runs again (its worker died: the scheduler gives
 one) writes the same files. The driver saves the state as tasks finish; a run killed as a
 whole resumes from it when the same command (any cluster) runs again. Errors come back as
 one-line ``gigapoint.errors`` exceptions; a task whose workers keep dying fails the run after
-Dask's ``allowed-failures``; a cluster without workers for ``NO_WORKER_S`` fails it too.
+Dask's ``allowed-failures``; a cluster without workers for ``NO_WORKER_S`` fails it too. Every
+worker runs the driver's code and sees and may write ``out``: the driver checks the workers there
+when the run starts (``_probe``), and a worker that joins later checks itself before its first task.
 """
 
 from __future__ import annotations
