@@ -64,6 +64,7 @@ from ..render import Camera, RenderSettings, render_frame
 from ..render.colors import ramp_image
 from ..render.georef import write_map
 from ..render.raster_fill import check_max_distance, fill_heights
+from .raster_grid import RasterGrid
 
 #: a surface model's drawing: each point in its exact pixel (no splat reaches a neighbour), 30-bit positions
 SURFACE_SETTINGS = {"size_mode": "fixed", "point_size": 1, "adaptive_precision": False}
@@ -281,11 +282,10 @@ def _octree_heights(octree, camera: Camera, full: bool) -> np.ndarray:
     its nodes meeting the filter, at the levels down to a spacing of SURFACE_SPACING of a pixel
     (``full``: at every level, each point in one node), drawn STREAM_POINTS at a time, each pixel
     the highest of the heights drawn there; nodes outside the camera's footprint are not read."""
-    gsd, _, _, _, x0, y0 = camera.world_file()  # (x0, y0: the upper-left pixel's centre)
-    max_spacing = None if full else SURFACE_SPACING * gsd
+    pixels = RasterGrid.of_camera(camera)
+    max_spacing = None if full else SURFACE_SPACING * pixels.cell
     keep = octree.read_filter if isinstance(octree, OctreeCloud) and octree.read_filter is not None else PointFilter()
-    left, top = x0 - gsd / 2, y0 + gsd / 2
-    footprint = PointFilter(clip=(left, top - camera.height * gsd, left + camera.width * gsd, top))
+    footprint = PointFilter(clip=pixels.bounds)
     heights = np.full((camera.height, camera.width), np.nan, np.float32)
     group: list = []
 

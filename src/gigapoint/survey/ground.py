@@ -43,9 +43,10 @@ from numba import njit
 
 from ..errors import InputError
 from ..render.raster_fill import fill_everywhere
-from .ground_raster import GROUND, NOISE_CLASSES, NON_GROUND, Grid, files_grid, ground_parameters, point_files, progress_bar, write_through
+from .ground_raster import GROUND, NOISE_CLASSES, NON_GROUND, files_grid, ground_parameters, point_files, progress_bar, write_through
 from .heights import HeightSpan, with_heights
 from .noise import noise_classified, noise_parameters, sparse_cells
+from .raster_grid import RasterGrid
 
 #: SMRF's low-outlier step: an opening of the inverted surface with this slope, radius 1 cell
 LOW_OUTLIER_SLOPE = 5.0
@@ -204,7 +205,7 @@ def classify_ground(source, out, *, cell=None, slope=None, window=None, threshol
                         found["noise"], span.range())
 
 
-def _lowest_raster(inputs, cell: float, progress, noise_marked) -> tuple[Grid, np.ndarray]:
+def _lowest_raster(inputs, cell: float, progress, noise_marked) -> tuple[RasterGrid, np.ndarray]:
     """Pass 1: the grid over the files' extent (their headers' bounds; a pass of its own where
     one tells none) and the lowest z of the ground candidates in each of its cells (NaN: none),
     each chunk read as ``noise_marked`` gives it back (the noise found first classified 7).
@@ -228,7 +229,7 @@ def _lowest_raster(inputs, cell: float, progress, noise_marked) -> tuple[Grid, n
     return grid, np.where(np.isfinite(lowest), lowest, np.nan)
 
 
-def _classified(chunk, grid: Grid, dem: np.ndarray, tolerance: np.ndarray, counts: dict):
+def _classified(chunk, grid: RasterGrid, dem: np.ndarray, tolerance: np.ndarray, counts: dict):
     """``chunk`` with its classification set: 2 where a ground candidate lies within its cell's
     ``tolerance`` of the ``dem``, 1 for every other point but noise, which keeps its class."""
     from ..core.chunk import PointChunk

@@ -1,7 +1,7 @@
 """The raster and the point passes that ground classification (ground.py), noise classification
 (noise.py) and heights above ground (heights.py) share: ``point_files`` checks the output and
-opens the inputs (io's PointFiles), ``files_grid`` lays a ``Grid`` of ``cell``-sized cells over
-the files' extent (its cells, its bilinear reads), ``write_through`` is every job's last pass
+opens the inputs (io's PointFiles), ``files_grid`` lays a raster grid of ``cell``-sized cells over
+the files' extent (raster_grid.py: its cells, its bilinear reads), ``write_through`` is every job's last pass
 (each valid chunk, changed, written as ``convert -o`` writes it). ``ground_parameters``: SMRF's
 lengths in the cloud's units, here because heights above ground take its cell (and its messages).
 
@@ -11,13 +11,12 @@ Lengths are in the cloud's units (io/crs.py): the defaults (cell 1 m, window 18 
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
-from numba import njit
 
 from ..errors import InputError, is_real
+from .raster_grid import RasterGrid
 
 #: PDAL's and the paper's defaults, in metres (``slope``: rise over run, no unit)
 DEFAULTS_METRES = {"cell": 1.0, "window": 18.0, "threshold": 0.5, "scalar": 1.25}
@@ -58,48 +57,6 @@ def ground_parameters(files, cell=None, slope=None, window=None, threshold=None,
     return params
 
 
-class Grid:
-    """The raster's cells: ``cell`` units a side from ``lo`` (x, y), ``shape`` (rows, columns)."""
-
-    def __init__(self, lo, hi, cell: float, label: str):
-        self.lo, self.cell = np.asarray(lo[:2], np.float64), cell
-        self.shape = tuple(math.floor((h - low) / cell) + 1 for low, h in zip(lo[1::-1], hi[1::-1]))  # (rows: y, columns: x)
-        if self.shape[0] * self.shape[1] > MAX_CELLS:
-            raise InputError(
-                f"{label}: cells of {cell:g} make a {self.shape[1]:,} x {self.shape[0]:,} raster over the files' extent, more than "
-                f"{MAX_CELLS:,} cells: give a larger cell, or classify tiles of it (gigapoint tile)"
-            )
-
-    def cells_of(self, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(row, column) of each point's cell; points beyond the extent (a stale header's) in the edge cells."""
-        cols = np.clip(np.floor((xyz[:, 0] - self.lo[0]) / self.cell), 0, self.shape[1] - 1).astype(np.intp)
-        rows = np.clip(np.floor((xyz[:, 1] - self.lo[1]) / self.cell), 0, self.shape[0] - 1).astype(np.intp)
-        return rows, cols
-
-    def bilinear(self, raster: np.ndarray, xyz: np.ndarray) -> np.ndarray:
-        """``raster`` (values at the cells' centres) at the points' (x, y), bilinearly; the edge
-        cells' values carried half a cell beyond them."""
-        return _bilinear(raster, np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1]), self.lo[0], self.lo[1], self.cell)
-
-
-@njit(cache=True)
-def _bilinear(raster, x, y, x0, y0, cell):  # pragma: no cover - compiled
-    """``Grid.bilinear`` a point at a time (numpy's version padded the raster and gathered four
-    arrays of corners per chunk: 3 s of 10 M points)."""
-    rows, cols = raster.shape
-    out = np.empty(x.size)
-    for i in range(x.size):
-        fx = min(max((x[i] - x0) / cell - 0.5, 0.0), cols - 1.0)  # in cells from the first centre, clamped: the edges carried on
-        fy = min(max((y[i] - y0) / cell - 0.5, 0.0), rows - 1.0)
-        c0, r0 = min(int(fx), cols - 1), min(int(fy), rows - 1)
-        c1, r1 = min(c0 + 1, cols - 1), min(r0 + 1, rows - 1)
-        tx, ty = fx - c0, fy - r0
-        top = raster[r0, c0] * (1 - tx) + raster[r0, c1] * tx
-        bottom = raster[r1, c0] * (1 - tx) + raster[r1, c1] * tx
-        out[i] = top * (1 - ty) + bottom * ty
-    return out
-
-
 def point_files(source, out, overwrite: bool, chunk_size: int | None, where: str):
     """(``out`` as a Path, the PointFiles of ``source`` it is written from) for a classification
     that writes every point of its inputs again: ``out`` a .las, .laz or .ply file not there
@@ -135,14 +92,22 @@ def write_through(inputs, out: Path, phase: str, each, progress, tally: dict) ->
     return write_points(out, chunks, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None, has_color=inputs.has_color)
 
 
-def files_grid(inputs, cell: float, progress) -> Grid:
-    """The grid over the files' extent: their headers' bounds, or a pass of its own where one tells none."""
+def files_grid(inputs, cell: float, progress) -> RasterGrid:
+    """The raster grid over the files' extent (``RasterGrid.over``: from its lowest corner, rows
+    northwards): their headers' bounds, or a pass of its own where one tells none. More than
+    MAX_CELLS cells is a one-line InputError."""
     bounds = inputs.headers_bounds()
     if bounds is None:
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
         for _, chunk in inputs.valid_chunks(None, progress, {}):
             lo, hi = np.minimum(lo, chunk.xyz.min(axis=0)), np.maximum(hi, chunk.xyz.max(axis=0))
         bounds = (lo, hi)
-    return Grid(bounds[0], bounds[1], cell, inputs.label)
+    grid = RasterGrid.over(bounds[0], bounds[1], cell)
+    if grid.cells > MAX_CELLS:
+        raise InputError(
+            f"{inputs.label}: cells of {cell:g} make a {grid.shape[1]:,} x {grid.shape[0]:,} raster over the files' extent, more than "
+            f"{MAX_CELLS:,} cells: give a larger cell, or classify tiles of it (gigapoint tile)"
+        )
+    return grid
 
 

@@ -1,6 +1,6 @@
 """Height above ground (``gigapoint classify --height-above-ground``, ``gp.height_above_ground``):
 PDAL's filters.hag_dem, LAStools' lasheight. The ground model is a raster of the files' extent,
-as SMRF's (ground_raster.py's ``Grid``): the mean z of the class-2 points in each cell (pass 1),
+as SMRF's (ground_raster.py's ``files_grid``): the mean z of the class-2 points in each cell (pass 1),
 its empty cells (buildings, water) filled by ``fill_everywhere``; pass 2 writes each point's z
 minus the model read bilinearly at its (x, y). With ``classify_ground(heights=True)`` (ground.py)
 the model is SMRF's, just made, and its points are measured by ``with_heights``.
@@ -18,7 +18,8 @@ from numba import njit
 
 from ..errors import InputError
 from ..render.raster_fill import fill_everywhere
-from .ground_raster import GROUND, Grid, files_grid, ground_parameters, point_files, progress_bar, write_through
+from .ground_raster import GROUND, files_grid, ground_parameters, point_files, progress_bar, write_through
+from .raster_grid import RasterGrid
 
 #: the extra-bytes dimension the heights are written to (PDAL's name for them)
 HEIGHT_ATTRIBUTE = "HeightAboveGround"
@@ -58,7 +59,7 @@ class HeightSpan:
         return (self.lowest, self.highest) if self.lowest <= self.highest else None
 
 
-def with_heights(chunk, grid: Grid, dem: np.ndarray, normalize: bool, span: HeightSpan):
+def with_heights(chunk, grid: RasterGrid, dem: np.ndarray, normalize: bool, span: HeightSpan):
     """``chunk`` with its heights above ``dem`` as the float32 ``HeightAboveGround`` attribute
     (``normalize``: as its z too, the z it had dropped)."""
     from ..core.chunk import PointChunk
@@ -78,7 +79,7 @@ def _sum_into(sums, counts, rows, cols, z):  # pragma: no cover - compiled
         counts[rows[i], cols[i]] += 1
 
 
-def _mean_ground_raster(inputs, grid: Grid, progress) -> tuple[np.ndarray, int]:
+def _mean_ground_raster(inputs, grid: RasterGrid, progress) -> tuple[np.ndarray, int]:
     """Pass 1 of ``height_above_ground``: (the mean z of the class-2 points in each cell, NaN
     where none; how many there were). None at all is a one-line InputError."""
     sums, counts = np.zeros(grid.shape), np.zeros(grid.shape, np.int64)

@@ -61,6 +61,7 @@ from ..render.contours import draw_lines
 from ..render.georef import write_map
 from ..render.raster_fill import check_max_distance, fill_heights
 from .change import open_survey, surface, survey_label, unit_names
+from .raster_grid import RasterGrid
 
 #: how far (in pixels) the grid reaches beyond the polygons: the toe's pixels are then whole
 MARGIN_PIXELS = 2
@@ -180,31 +181,6 @@ class Volume:
         return write_map(self.camera, self.crs, self.units, [(path, self.preview())], overwrite)
 
 
-class _Grid:
-    """A top-down camera's pixels as ground positions: centres, and the pixel holding a position."""
-
-    def __init__(self, camera: Camera):
-        self.size, _, _, _, self.x0, self.y0 = camera.world_file()  # x0, y0: the upper-left pixel's centre
-        self.shape = (camera.height, camera.width)
-
-    def centres(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-        return np.column_stack([self.x0 + cols * self.size, self.y0 - rows * self.size])
-
-    def pixels(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(rows, cols) of the pixels holding ``xy`` (the rasterizer's rule: x in [left, right), y in (bottom, top])."""
-        cols = np.floor((xy[:, 0] - self.x0) / self.size + 0.5).astype(np.intp)
-        rows = np.floor((self.y0 - xy[:, 1]) / self.size + 0.5).astype(np.intp)
-        return np.clip(rows, 0, self.shape[0] - 1), np.clip(cols, 0, self.shape[1] - 1)
-
-    def inside(self, polygon: ClipPolygon) -> np.ndarray:
-        """(H, W) bool: the pixels whose centre lies inside ``polygon`` (tested in its box only)."""
-        (top, bottom), (left, right) = self.pixels(np.array([[polygon.lo[0], polygon.hi[1]], [polygon.hi[0], polygon.lo[1]]]))
-        rows, cols = np.mgrid[top : bottom + 1, left : right + 1]
-        mask = np.zeros(self.shape, bool)
-        mask[rows, cols] = polygon.inside(self.centres(rows.ravel(), cols.ravel())).reshape(rows.shape)
-        return mask
-
-
 def _check_base(base) -> str | float:
     if isinstance(base, str) and base in BASES:
         return base
@@ -256,27 +232,27 @@ class _Part(NamedTuple):
     base: dict
 
 
-def _part(rings, inside: np.ndarray, drawn: np.ndarray, heights: np.ndarray, grid: _Grid, base, where: str, label: str) -> _Part:
+def _part(rings, inside: np.ndarray, drawn: np.ndarray, heights: np.ndarray, grid: RasterGrid, base, where: str, label: str) -> _Part:
     """The polygon ``rings`` of a pile (its pixels ``inside``) against its own base, from the
     surface ``drawn`` and ``heights`` (its holes filled); ``where``: how messages name it."""
     if not inside.any():
-        raise InputError(f"{where}: no pixel centre of the {grid.size:g} grid lies inside it: give a finer gsd")
+        raise InputError(f"{where}: no pixel centre of the {grid.cell:g} grid lies inside it: give a finer gsd")
     if np.isnan(drawn[inside]).all():
         raise InputError(f"{where}: no point of {label} lies inside it")
-    toe_xy = _toe(rings, TOE_STEP_PIXELS * grid.size)
-    toe_z = heights[grid.pixels(toe_xy)]
+    toe_xy = _toe(rings, TOE_STEP_PIXELS * grid.cell)
+    toe_z = heights[grid.cells_of(toe_xy)]
     known_toe = ~np.isnan(toe_z)
     if known_toe.sum() < 3 and not is_real(base):
         raise InputError(
             f"{where}: the surface has no height along its boundary to lay a base on: no point near the toe (it runs off the data, or the "
-            f"points lie further apart than the {grid.size:g} grid: a coarser gsd); or give a base elevation (--base Z)"
+            f"points lie further apart than the {grid.cell:g} grid: a coarser gsd); or give a base elevation (--base Z)"
         )
     rows, cols = np.nonzero(inside)
     base_z, description = _base_heights(base, toe_xy[known_toe], toe_z[known_toe].astype(np.float64), grid.centres(rows, cols), where)
     return _Part(rows, cols, heights[rows, cols].astype(np.float64) - base_z, {**description, "z": float(base_z.mean())})
 
 
-def _pile(parts: list, insides: list, name: str, drawn: np.ndarray, heights: np.ndarray, grid: _Grid, base, where: str, label: str):
+def _pile(parts: list, insides: list, name: str, drawn: np.ndarray, heights: np.ndarray, grid: RasterGrid, base, where: str, label: str):
     """The pile ``name`` made of the polygons ``parts`` (each a list of rings; their pixels
     ``insides``), each part against its own base; ``where``: how messages name it. Returns the
     Pile, and its pixels (rows, cols) with their heights above the base (``Volume.above_base``)."""
@@ -287,15 +263,15 @@ def _pile(parts: list, insides: list, name: str, drawn: np.ndarray, heights: np.
     rows, cols, above = (np.concatenate(arrays) for arrays in zip(*((part.rows, part.cols, part.above) for part in measured)))
     pixels = len(rows)
     known = ~np.isnan(above)
-    cell = grid.size * grid.size
+    cell_area = grid.cell * grid.cell
     highest = drawn[rows, cols]
     top = int(np.nanargmax(np.where(np.isnan(highest), -np.inf, highest)))
     base_z = math.fsum(part.base["z"] * len(part.rows) for part in measured) / pixels  # the mean under all its pixels
     pile = Pile(
         name=name,
-        fill=float(above[above > 0].sum(dtype=np.float64)) * cell,
-        cut=abs(float(above[above < 0].sum(dtype=np.float64))) * cell,  # (abs: no -0.0)
-        area=pixels * cell,
+        fill=float(above[above > 0].sum(dtype=np.float64)) * cell_area,
+        cut=abs(float(above[above < 0].sum(dtype=np.float64))) * cell_area,  # (abs: no -0.0)
+        area=pixels * cell_area,
         polygon_area=sum(ring_area(outline) - sum(map(ring_area, holes)) for outline, *holes in parts),
         highest=(*map(float, grid.centres(rows[top : top + 1], cols[top : top + 1])[0]), float(highest[top])),
         height=float(above[known].max()),
@@ -425,9 +401,9 @@ def _measured(toe: ClipPolygon, source, octree, gsd, base, classes, drop_classes
         (x0, y0), (x1, y1) = toe.lo, toe.hi
         raise InputError(f"{toe.source}: no point of {label} lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}: the polygon is outside the data") from None
     heights = drawn if fill_nodata is None else fill_heights(drawn, None if fill_nodata == "all" else fill_nodata)
-    grid = _Grid(camera)
+    grid = RasterGrid.of_camera(camera)
     groups = _pile_parts(toe)
-    insides = [grid.inside(ClipPolygon([rings], toe.source)) for rings in toe.polygons]
+    insides = [grid.centres_inside(ClipPolygon([rings], toe.source)) for rings in toe.polygons]
     above_base = np.full(grid.shape, np.nan, np.float32)
     piles = []
     for name, members in groups:
