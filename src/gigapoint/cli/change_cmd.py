@@ -45,9 +45,10 @@ def change(
     drop_classes: DropClassesOption = None,
     clip: ClipOption = None,
 ) -> None:
-    """Compare two surveys: height differences, cut and fill volumes (in the clouds' units). Both
-    must be in one CRS and unit: surveys in feet and in metres are refused (reproject one first,
-    gigapoint convert --to-crs)."""
+    """Compare two surveys: height differences, cut and fill volumes (in the clouds' units).
+
+    Both must be in one CRS and unit: surveys in feet and in metres are refused (reproject one
+    first, gigapoint convert --to-crs)."""
     import gigapoint as gp
 
     from ..io import crs_wkt

@@ -50,8 +50,9 @@ def info(
     clip: ClipOption = None,
     clip_polygon: ClipPolygonOption = None,
 ) -> None:
-    """Show format, point count, bounds, attributes, LAS version/scale/offset and CRS of files;
-    with --stats, statistics of their points (read once, in bounded memory), or of those the
+    """Show format, point count, bounds, attributes, LAS version/scale/offset and CRS of files.
+
+    With --stats, statistics of their points (read once, in bounded memory), or of those the
     filters (--classes, --drop-classes, --clip, --clip-polygon) keep."""
     options = cloud_options(colors, chunked)
     given = {"--classes": classes, "--drop-classes": drop_classes, "--clip": clip, "--clip-polygon": clip_polygon}
