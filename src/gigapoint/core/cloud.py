@@ -20,6 +20,7 @@ from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexEr
 from . import pages
 from .attributes import Attributes
 from .chunk import PointChunk, attributes_in_common, colors_for, points_for, warn_dropped_attributes
+from .classes import parse_classes
 from .compact import centre_half, colors_at, compact_positions, full_words, pack_rgb565, point_words, rgba32, subset_streams
 from .coords import MAX_ABS_COORDINATE, NUMPY_MAX, value_decimals
 from .coords import valid_mask as _valid_mask
@@ -28,7 +29,7 @@ from .layout import BATCH_DTYPE, BATCH_SIZE, COLOR_FORMATS
 from .morton import cube_of, morton_codes, morton_order
 from .palette import PaletteColors, block_errors, choose_palette, quantize_palettes
 from .quantize import dequantize, make_batches, quantize
-from .renderable import DrawList, MultiViewDrawList, SelectionSettings, check_classified, check_point_index, parse_classes
+from .renderable import DrawList, MultiViewDrawList, SelectionSettings, check_classified, check_point_index
 from .selection import View, select_view, select_views, subsample_step
 
 #: what ``PointCloud.save`` writes with: io/write.py's ``save_cloud``, set when gigapoint.io.write

@@ -22,7 +22,7 @@ from typing import Literal, get_args
 
 import numpy as np
 
-from ..core.renderable import parse_classes
+from ..core.classes import parse_classes
 from ..errors import SettingsError
 
 # --- the choices (render/colors.py derives COLOR_MODES and COLORMAPS from these) ----------------------
