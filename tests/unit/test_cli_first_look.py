@@ -144,6 +144,29 @@ def test_help_keeps_bracketed_words(cli, monkeypatch, command, option, text):
     assert text in line, line
 
 
+@pytest.mark.parametrize(("args", "line"), [
+    (["convert", "x.laz", "-o", "o", "--workers", "abc"], "gigapoint convert: --workers: 'abc' is not a valid integer"),
+    (["tile", "x.laz", "-o", "t", "--size", "abc"], "gigapoint tile: --size: 'abc' is not a valid number"),
+    (["tile", "x.laz", "-o", "t"], "gigapoint tile: missing option --size"),
+    (["render", "x.laz", "--bogus"], "gigapoint render: no such option: --bogus (Possible options: --gsd)"),
+    (["render"], "gigapoint render: missing argument INPUTS"),
+    (["tile", "x.laz", "-o", "t", "--size"], "gigapoint tile: option '--size' requires an argument"),
+    (["rendr", "x.laz"], "gigapoint: no such command 'rendr'. Did you mean 'render'?"),
+])  # fmt: skip
+def test_a_usage_error_is_one_line_naming_the_option(cli, tmp_path, monkeypatch, args, line):
+    """click printed the usage line, a 'Try ... --help' line and 'Error: Invalid value for
+    '--workers': Input should be a valid integer, unable to parse string as an integer'."""
+    monkeypatch.chdir(tmp_path)
+    rc, out, err = cli(*args)
+    command = line.split(":")[0]
+    assert (rc, out, err) == (2, "", f"error: {line} (see {command} --help)\n")
+
+
+def test_gigapoint_alone_still_shows_its_help(cli):
+    rc, out, err = cli()
+    assert rc == 2 and "Usage: gigapoint [OPTIONS] COMMAND" in out + err and "error:" not in out + err
+
+
 # --- info formatted from the file's scale -------------------------------------------------------------
 def test_info_prints_bounds_with_the_decimals_of_the_scale(cli, las_writer, tmp_path):
     path = las_writer(tmp_path / "mm.las", 5_000)  # scale 0.001

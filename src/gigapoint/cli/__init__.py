@@ -1,12 +1,14 @@
 """The gigapoint command line: thin wrappers that parse arguments and call the library.
 
 Every command module registers itself on ``app`` (app.py); ``main`` turns GigapointError (and
-the few OS errors a user can cause) into one line on stderr and a non-zero exit.
+the few OS errors a user can cause) into one line on stderr and a non-zero exit, and click's
+usage errors (exit 2) into one line too.
 """
 
 from __future__ import annotations
 
 import atexit
+import importlib
 import os
 import signal
 import sys
@@ -46,12 +48,62 @@ def _skip_blas_check() -> None:
     skip_blas_check()
 
 
+def _click_errors():
+    """The module of click's exceptions typer raises: click's own (older typer) or typer's copy
+    of it (typer 0.29); typer exports BadParameter alone of them."""
+    import typer
+
+    return importlib.import_module(typer.BadParameter.__module__)
+
+
+def _param_name(param) -> str:
+    """How the command line spells a parameter: an option's long name, an argument's in capitals (as --help shows them)."""
+    return max(param.opts, key=len) if param.param_type_name == "option" else (param.name or "").upper()
+
+
+def _bad_value(exc) -> str:
+    """Why a value was refused. typer converts values with pydantic and words its first error
+    ('Input should be a valid integer, unable to parse string as an integer'): that is said of
+    the value itself, as click did ("'abc' is not a valid integer")."""
+    from pydantic import ValidationError
+
+    if not isinstance(exc.__cause__, ValidationError):
+        return exc.message
+    error = exc.__cause__.errors()[0]
+    wanted = error["msg"].removeprefix("Input should be ")
+    if wanted == error["msg"]:  # "Value error, 'z' is not one of 'p', 'q'."
+        return error["msg"].removeprefix("Value error, ")
+    return f"{error['input']!r} is not {wanted.split(', unable to parse')[0]}"
+
+
+def usage_line(exc, argv: list[str]) -> str:
+    """A usage error (an unknown option, a value of the wrong type, a missing option or argument)
+    in one line naming the command and the option: click printed the usage, a hint and then the
+    error (four lines). ``argv`` names the command where click's error has no context
+    ("option '--size' requires an argument")."""
+    from .app import COMMAND_MODULES, command_name
+
+    errors = _click_errors()
+    name = command_name(argv)
+    command = exc.ctx.command_path if exc.ctx is not None else "gigapoint" + (f" {name}" if name in COMMAND_MODULES else "")
+    param = exc.param if isinstance(exc, errors.BadParameter) else None
+    if param is None:  # 'No such option: --bogus', 'Missing argument ...' without its parameter
+        problem = exc.format_message()
+        problem = problem[:1].lower() + problem[1:]
+    elif isinstance(exc, errors.MissingParameter):
+        problem = f"missing {param.param_type_name} {_param_name(param)}"
+    else:
+        problem = f"{_param_name(param)}: {_bad_value(exc)}"
+    return f"error: {command}: {problem.rstrip('.')} (see {command} --help)"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``gigapoint`` script."""
     from ..core import hooks
     from .app import register_commands
 
-    register_commands(sys.argv[1:] if argv is None else argv)  # the command's module alone (every one's for --help)
+    args = sys.argv[1:] if argv is None else argv
+    register_commands(args)  # the command's module alone (every one's for --help)
     # no command's kernel uses a BLAS: scipy.linalg stays unimported (0.26 s); once numba is
     # imported (a command that runs no kernel, --help or info, imports none)
     hooks.on_numba_import(_skip_blas_check)
@@ -62,7 +114,8 @@ def main(argv: list[str] | None = None) -> int:
     before = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     try:
         with _compile_watch():  # a spinner while numba compiles kernels (first run after an install)
-            rv = app(args=argv, standalone_mode=False)
+            # (prog_name: usage errors and --help say 'gigapoint', run as python -m gigapoint.cli too)
+            rv = app(args=argv, prog_name="gigapoint", standalone_mode=False)
         # typer turns Ctrl+C into Exit(130) and, outside standalone mode, *returns* that code
         # (commands themselves return None): before, an interrupted command exited 0 silently
         if isinstance(rv, int) and not isinstance(rv, bool) and rv != 0:
@@ -88,10 +141,14 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:
         return int(exc.code or 0) if isinstance(exc.code, int) else 1
     except Exception as exc:
-        # typer bundles click; its usage errors carry show() and exit_code
+        errors = _click_errors()
         if type(exc).__name__ == "Abort":
             return 130
-        if hasattr(exc, "show") and hasattr(exc, "exit_code"):
+        # a usage error stays exit 2, click's convention; NoArgsIsHelpError ('gigapoint' alone) shows the help
+        if isinstance(exc, errors.UsageError) and not isinstance(exc, vars(errors).get("NoArgsIsHelpError", ())):
+            print(usage_line(exc, args), file=sys.stderr)
+            return int(exc.exit_code)
+        if isinstance(exc, errors.ClickException):
             exc.show()
             return int(exc.exit_code)
         if os.environ.get("GIGAPOINT_DEBUG"):

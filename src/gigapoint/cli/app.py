@@ -108,6 +108,11 @@ COMMAND_MODULES = {
 }
 
 
+def command_name(argv: list[str]) -> str | None:
+    """The command ``argv`` names: its first word not an option (None: none, or a mistyped one)."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
 def register_commands(argv: list[str] | None = None) -> None:
     """Import the module of the command ``argv`` names (its first word not an option), so that
     it registers on ``app``; every command's where it names none (``--help``, a mistyped one:
@@ -115,7 +120,7 @@ def register_commands(argv: list[str] | None = None) -> None:
     modules too, ~0.1-0.2 s of its start-up. ``argv`` None: every command's (cli/commands.py)."""
     import importlib
 
-    name = next((a for a in argv if not a.startswith("-")), None) if argv is not None else None
+    name = command_name(argv) if argv is not None else None
     if name is None and argv is not None and "--version" in argv and "--help" not in argv:
         return  # (an eager option: the version printed, no command looked at)
     for module in [COMMAND_MODULES[name]] if name in COMMAND_MODULES else dict.fromkeys(COMMAND_MODULES.values()):
