@@ -177,6 +177,18 @@ def test_the_cli_names_the_option_of_a_bad_value(cli, autzen_path, tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_size_in_the_wrong_unit_on_points_without_header_bounds_is_refused_before_a_tile_is_written(cli, tmp_path):
+    """A .npy (or text) file has no header bounds to check the tiles' count against before reading:
+    --size 1e-9 wrote a tile a point (minutes on a large file) until a million tiles stopped it."""
+    points = tmp_path / "pts.npy"
+    xy = np.linspace(0.0, 0.5, 2000)
+    np.save(points, np.column_stack([xy, xy / 2, np.zeros(2000)]))
+    rc, out, err = cli("tile", points, "--size", "1e-9", "-o", tmp_path / "tiles")
+    assert (rc, out) == (1, "")
+    assert err == f"error: tile: --size 1e-09: 500,000,000 x 250,000,000 tiles over the extent of {points}, above 1,000,000; take larger tiles\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pts.npy"]  # no tiles' folder, nor its hidden work folder
+
+
 def test_a_folder_holding_las_files_is_refused_and_overwrite_leaves_the_users_files(autzen_path, tmp_path):
     out = tmp_path / "tiles"
     out.mkdir()

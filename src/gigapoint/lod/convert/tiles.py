@@ -127,7 +127,8 @@ def tile(
     of them at once). A point on an edge goes to the tile that starts there, decided on the
     inputs' LAS grid (``TileAxis``). Bad values (a size not above 0, a buffer below
     0 or above the size, more than a million tiles over the headers' extent) are one-line
-    InputErrors before a point is read."""
+    InputErrors before a point is read; inputs without header bounds (text, .npy) are refused as
+    their points pass a million tiles' extent, before a tile is written."""
     t0 = time.perf_counter()
     for switch, value in (("overwrite", overwrite), ("recursive", recursive), ("progress", progress)):
         check_switch(switch, value, "tile")
@@ -327,8 +328,11 @@ class _TileSpill:
 
     def add(self, chunk: PointChunk) -> None:
         """Append the points of ``chunk`` to their tiles' files (and, with a buffer, to their neighbours')."""
-        records = self._records(chunk)
         self.lo, self.hi = np.minimum(self.lo, chunk.xyz.min(axis=0)), np.maximum(self.hi, chunk.xyz.max(axis=0))
+        # files without header bounds (text, .npy) are checked here, on the points read so far: a
+        # size in the wrong unit wrote a tile a point until the cap below, minutes later
+        _check_tile_count(self.lo, self.hi, self.size, self.where)
+        records = self._records(chunk)
         i, j = (self.axes[a].index(chunk.xyz[:, a]) for a in (0, 1))
         rows, ti, tj = [np.arange(len(chunk))], [i], [j]
         if self.buffer:
