@@ -155,7 +155,7 @@ def test_invalid_points_are_skipped_with_a_warning(tmp_path):
     xyz = np.array([[0.0, 0.0, 0.0], [np.nan, 1.0, 1.0], [1.0, 2.0, 3.0]])
     src = tmp_path / "pts.npy"
     np.save(src, xyz)
-    with pytest.warns(GigapointWarning, match=r"pts\.npy: skipped 1 invalid points"):
+    with pytest.warns(GigapointWarning, match=r"pts\.npy: skipped 1 invalid point \("):
         res = convert(src, tmp_path / "pts.las")
     written = laspy.read(str(tmp_path / "pts.las"))
     assert (res.points, res.skipped) == (2, 1)

@@ -128,7 +128,7 @@ def test_a_nan_row_is_skipped_not_drawn():
     octree = ProgressiveOctree("oct")
     assert octree.add(np.vstack([XYZ, [[np.nan, 0, 0], [np.inf, 1, 1]]])) == 10
     assert octree.skipped == 2 and [b.tolist() for b in octree.bounds] == [[0, 1, 2], [27, 28, 29]]
-    with pytest.warns(gp.GigapointWarning, match=r"^arrays: skipped 1 invalid points \(NaN, inf or beyond ±1e\+12\)$"):
+    with pytest.warns(gp.GigapointWarning, match=r"^arrays: skipped 1 invalid point \(NaN, inf or beyond ±1e\+12\)$"):
         assert gp.from_arrays(np.vstack([XYZ, [[np.nan, 0, 0]]])).n_points == 10
 
 

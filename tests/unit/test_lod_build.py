@@ -230,6 +230,10 @@ def test_invalid_points_skipped_with_warning(tmp_path):
     np.save(bad, xyz)
     with pytest.warns(GigapointWarning, match=f"^{re.escape(str(bad))}: skipped 2 invalid points"):
         convert(bad, tmp_path / "o3")
+    one = tmp_path / "one.npy"  # (one skipped: said in the singular)
+    np.save(one, xyz[:3])
+    with pytest.warns(GigapointWarning, match=f"^{re.escape(str(one))}: skipped 1 invalid point \\("):
+        convert(one, tmp_path / "o4")
 
 
 def test_dense_spot_is_split_below_the_count_grid(tmp_path, monkeypatch):

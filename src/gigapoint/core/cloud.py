@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit, prange, types
 from numba.typed import List
 
-from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError, check_switch, check_whole, warn
+from ..errors import EmptyCloudError, GigapointWarning, InputError, PointIndexError, check_switch, check_whole, counted, warn
 from . import pages
 from .attributes import Attributes
 from .chunk import PointChunk, attributes_in_common, colors_for, points_for, warn_dropped_attributes
@@ -560,10 +560,10 @@ def check_valid_count(name: str, valid: int, skipped: int) -> None:
     """No valid point is an error; invalid points skipped, a warning (``build_cloud``'s rule, and
     the chunked build's)."""
     if valid == 0:
-        detail = f" ({skipped:,} invalid points: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
+        detail = f" ({counted(skipped, 'invalid point')}: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
         raise EmptyCloudError(f"{name}: no valid points{detail}")
     if skipped:
-        warn(f"{name}: skipped {skipped:,} invalid points (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})", GigapointWarning)
+        warn(f"{name}: skipped {counted(skipped, 'invalid point')} (NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})", GigapointWarning)
 
 
 #: ``build_cloud``'s layouts (its color formats: layout.py's COLOR_FORMATS)
