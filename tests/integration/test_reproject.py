@@ -95,7 +95,7 @@ def test_compound_crss_move_z_too_feet_to_metres(autzen_path, tmp_path, recwarn)
 
 def test_a_file_naming_no_crs_is_refused_unless_from_crs_says_it(tmp_path, recwarn):
     plain = _plain_tile(tmp_path / "plain.las", [[-123.0, 44.0, 100.0], [-122.9, 44.1, 110.0]], scale=1e-7)
-    with pytest.raises(InputError, match=r"^.*plain\.las: names no CRS to reproject from; give the CRS its coordinates are in \(convert: from_crs=, --from-crs\)$"):
+    with pytest.raises(InputError, match=r"^.*plain\.las: names no CRS to reproject from; give the CRS its coordinates are in with gp\.convert\(\.\.\., from_crs=\.\.\.\)$"):
         gp.convert(plain, tmp_path / "utm.laz", to_crs=UTM)
     assert not (tmp_path / "utm.laz").exists()
     gp.convert(plain, tmp_path / "utm.laz", to_crs=UTM, from_crs="EPSG:4326")
@@ -121,9 +121,15 @@ def test_to_degrees_z_is_said_kept_where_it_is_not_in_metres(tmp_path, recwarn, 
 
 
 def test_the_cli_names_the_file_without_a_crs(cli, tmp_path):
+    """It said '(convert: from_crs=, --from-crs)': the Python keyword and the option at once."""
     plain = _plain_tile(tmp_path / "plain.las", [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
     rc, _, err = cli("convert", plain, "-o", tmp_path / "out.laz", "--to-crs", UTM, "-q")
-    assert (rc, err.strip()) == (1, f"error: {plain}: names no CRS to reproject from; give the CRS its coordinates are in (convert: from_crs=, --from-crs)")
+    assert (rc, err) == (1, f"error: {plain}: names no CRS to reproject from; give the CRS its coordinates are in with --from-crs\n")
+    rc, _, err = cli("tile", plain, "-o", tmp_path / "tiles", "--size", "1", "--to-crs", UTM, "-q")
+    assert (rc, err) == (1, f"error: {plain}: names no CRS to reproject from; give the CRS its coordinates are in with --from-crs\n")
+    with pytest.raises(InputError, match=r"give the CRS its coordinates are in with gp\.tile\(\.\.\., from_crs=\.\.\.\)$"):
+        gp.tile(plain, tmp_path / "tiles", 1.0, to_crs=UTM)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plain.las"]
 
 
 def test_an_unknown_crs_is_refused_before_a_point_is_read(cli, autzen_path, tmp_path, monkeypatch):
@@ -329,7 +335,7 @@ def test_a_clip_polygon_naming_no_crs_over_inputs_in_two_crss_is_refused_before_
     with pytest.warns(GigapointWarning, match="z is kept"):
         gp.convert(autzen_path, utm, to_crs=UTM)
     polygon = _site_geojson(tmp_path / "site.geojson", SITE_FEET)
-    with pytest.raises(InputError, match=r"^.*site\.geojson: names no CRS while the inputs are in 2 CRSs: give it as GeoJSON naming its CRS \(a crs member\), or the CRS of every input \(convert: from_crs=, --from-crs\)$"):
+    with pytest.raises(InputError, match=r"^.*site\.geojson: names no CRS while the inputs are in 2 CRSs: give it as GeoJSON naming its CRS \(a crs member\), or the CRS of every input with gp\.convert\(\.\.\., from_crs=\.\.\.\)$"):
         gp.convert([autzen_path, utm], tmp_path / "both.laz", to_crs="EPSG:32611", clip_polygon=str(polygon))
     assert not (tmp_path / "both.laz").exists()
 

@@ -48,6 +48,21 @@ def _skip_blas_check() -> None:
     skip_blas_check()
 
 
+#: hints the library words for Python, and the option each is on the command line
+PYTHON_HINTS = {
+    "overwrite=True": "--overwrite",
+    "gp.convert(..., from_crs=...)": "--from-crs",  # (io/reproject.py: a file naming no CRS)
+    "gp.tile(..., from_crs=...)": "--from-crs",
+}
+
+
+def said_as_options(message: str) -> str:
+    """A library error's ``message`` with its hints for Python (PYTHON_HINTS) told as the options."""
+    for python, option in PYTHON_HINTS.items():
+        message = message.replace(python, option)
+    return message
+
+
 def _click_errors():
     """The module of click's exceptions typer raises: click's own (older typer) or typer's copy
     of it (typer 0.29); typer exports BadParameter alone of them."""
@@ -123,8 +138,7 @@ def main(argv: list[str] | None = None) -> int:
                 print("interrupted", file=sys.stderr)
             return rv
     except GigapointError as exc:
-        # the library words an overwrite hint for Python (overwrite=True): here it is the option
-        print(f"error: {exc}".replace("overwrite=True", "--overwrite"), file=sys.stderr)
+        print(f"error: {said_as_options(str(exc))}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

@@ -140,6 +140,12 @@ class Reprojection:
         self._by_file: dict[str, object] = {}
         self._z_warned = False
 
+    @property
+    def from_crs_hint(self) -> str:
+        """How an error tells a Python caller to give the inputs' CRS; the command line says its
+        option instead (cli/__init__.py's ``PYTHON_HINTS``)."""
+        return f"gp.{self.where}(..., from_crs=...)"
+
     def check_files(self, files) -> None:
         """Each file's transformer made: a file without a CRS, or one PROJ cannot read, is an error now."""
         for f in files:
@@ -166,7 +172,7 @@ class Reprojection:
         """The CRS ``path``'s header names (WKT or 'EPSG:n'); a one-line InputError where it names none."""
         text = read_las_header(path).crs() if isinstance(reader_for(path), LasReader) else None
         if not text:
-            raise InputError(f"{path}: names no CRS to reproject from; give the CRS its coordinates are in ({self.where}: from_crs=, --from-crs)")
+            raise InputError(f"{path}: names no CRS to reproject from; give the CRS its coordinates are in with {self.from_crs_hint}")
         return text
 
     def transformed(self, xyz: np.ndarray, path) -> np.ndarray:
@@ -317,7 +323,7 @@ class Reprojection:
             if len(named) > 1:
                 raise InputError(
                     f"{polygon.source}: names no CRS while the inputs are in {len(named)} CRSs: give it as GeoJSON naming "
-                    f"its CRS (a crs member), or the CRS of every input ({self.where}: from_crs=, --from-crs)"
+                    f"its CRS (a crs member), or the CRS of every input with {self.from_crs_hint}"
                 )
             text = named.popitem()[1]
             source = parse_crs(text, f"{files[0]}: its CRS {text[:60]!r}")
