@@ -13,7 +13,7 @@ import gigapoint as gp
 from gigapoint.lod import store
 from gigapoint.lod.progressive import ProgressiveOctree
 from gigapoint.lod.progressive import octree as progressive
-from gigapoint.lod.store import OctreeCloud
+from gigapoint.lod.store import Arena, OctreeCloud
 
 LEFT = (0.0, 0.0, 50.0, 50.0)  # a clip box of the left half: the root keeps half its points, the node below it on the left all
 
@@ -151,16 +151,25 @@ def test_a_progressive_octree_weighs_its_chunks_again_only_once_one_is_written_o
 
 
 
+def converted_sides(path, **options):
+    xyz, rgb, classes = two_classes(0.25)
+    classes[(classes == 6) & (np.random.default_rng(2).random(len(xyz)) < 0.1)] = 2
+    gp.convert(gp.from_arrays(xyz, rgb, classification=classes, scale=0.01, colors="rgba"), path, max_leaf=2_000, **options)
+    return path
+
+
 @pytest.fixture(scope="module")
 def sides(tmp_path_factory):
     """two_classes(0.25) converted, a tenth of the right side's points class 2 too: a root of
     15 601 points (8 612 of class 2), a node below it on each side: 20 752 on the left (all of
     class 2), 20 782 on the right (2 011)."""
-    path = tmp_path_factory.mktemp("sides") / "tree"
-    xyz, rgb, classes = two_classes(0.25)
-    classes[(classes == 6) & (np.random.default_rng(2).random(len(xyz)) < 0.1)] = 2
-    gp.convert(gp.from_arrays(xyz, rgb, classification=classes, scale=0.01, colors="rgba"), path, max_leaf=2_000)
-    return path
+    return converted_sides(tmp_path_factory.mktemp("sides") / "tree")
+
+
+@pytest.fixture(scope="module")
+def sides_in_words(tmp_path_factory):
+    """sides in the three-word layout (an arena of low, med and high words, no streams)."""
+    return converted_sides(tmp_path_factory.mktemp("sides_in_words") / "tree", layout="words")
 
 
 def test_a_node_the_arena_dropped_is_weighed_by_the_points_it_kept(sides, monkeypatch):
@@ -185,3 +194,32 @@ def test_a_node_the_arena_dropped_is_weighed_by_the_points_it_kept(sides, monkey
     # it kept all its points: 5 loads; and 3 back on the right, 5 again on the left)
     assert frames == [(29_364, 6, 2), (11_830, 5, 5), (29_364, 1, 1), (11_830, 0, 0), (29_364, 0, 0)]
     assert tree.arena.n_slots == 15  # (the arena the test made: never replaced)
+
+
+@pytest.mark.parametrize("layout", ["sides", "sides_in_words"])
+def test_an_arena_replaced_by_a_larger_one_hands_over_its_nodes_and_what_each_kept(layout, request, monkeypatch):
+    """A budget raised past what the arena holds replaces it: the new one holds the old one's
+    nodes, filter and kept counts, so its frames draw and load what they would have, had the
+    arena been large enough all along (not every node loaded again, weighed by estimates)."""
+    path = request.getfixturevalue(layout)
+    loaded = []
+    load = Arena._load
+    monkeypatch.setattr(Arena, "_load", lambda self, nd, *rest: loaded.append(nd) or load(self, nd, *rest))
+    options = {"hidden_classes": (6,), "lod_threshold_px": 0, **FIXED}
+    replaced, large = gp.open(path), gp.open(path)
+    replaced.arena, large.arena = replaced.new_arena(20_000), large.new_arena(200_000)  # 5 slots, 49
+    frames = {}
+    for tree in (replaced, large):
+        frames[tree] = []
+        for budget in [20_000, 35_000, 35_000]:
+            loaded.clear()
+            frame = gp.render_frame(tree, TOP, point_budget=budget, **options)
+            frames[tree].append((frame.stats.points_processed, len(loaded), frame.image))
+    assert replaced.arena.n_slots == 64  # (replaced by the second frame)
+    # (points drawn, nodes loaded): the root (8 612 kept); then the nodes below it, the root not
+    # loaded again (a new arena that held nothing: 5 loads); then nothing more to load
+    assert [f[:2] for f in frames[replaced]] == [f[:2] for f in frames[large]] == [(8_612, 1), (34_520, 4), (34_520, 0)]
+    for (*_, image), (*_, same) in zip(frames[replaced], frames[large]):
+        np.testing.assert_array_equal(image, same)  # the nodes handed over as they were loaded
+    np.testing.assert_array_equal(replaced.arena.kept, large.arena.kept)
+    assert replaced.arena.loads == large.arena.loads == 5

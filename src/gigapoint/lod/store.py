@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from ..core.attributes import Attributes, Packed, packed_range
+from ..core.attributes import Attributes, Packed, packed_range, stored
 from ..core.chunk import attribute_name_problem
 from ..core.cloud import MAX_ABS_COORDINATE, at_scale
 from ..core.compact import centre_half, point_words, rgba32, stream_subset, stream_words
@@ -323,7 +323,7 @@ class Arena:
         self.name = name
         self.bounds = bounds
         self.source_scale = None  # the octree's source grid (a LAS file's scale), which point_info rounds to
-        self.loads = 0  # nodes copied in since creation (cache misses)
+        self.loads = 0  # nodes copied in since creation, or in an arena it took over (cache misses)
         self.keep: PointFilter | None = None  # what the resident nodes were loaded through (``show``)
         # per node: the points it kept when last loaded through ``keep`` (-1: not loaded since),
         # known after the LRU drops it, so that a selection weighs it by them (``kept_counts``)
@@ -478,6 +478,30 @@ class Arena:
         kept = np.full(n_nodes, -1, np.int64)
         kept[new_index[: len(self.kept)]] = self.kept
         self.kept = kept
+
+    def take_over(self, old: Arena) -> None:
+        """Hold what ``old`` held, an arena of the same layout and no more slots that this one
+        replaces (too small for a frame): its slots as they are (a slot's place in the buffers
+        depends on its number alone), its resident nodes, the filter they were loaded through,
+        what each node kept and its count of loads. The next frame then neither loads its nodes
+        again nor weighs them by estimates (issue #18)."""
+        n = old.n_slots
+        held = [(old.low, self.low), (old.color, self.color)]
+        if old.med is not None:
+            held += [(old.med, self.med), (old.high, self.high)]
+        else:
+            held += [(old.ext, self.ext), (old.packing, self.packing)]
+        held += [(stored(old.attributes.held(a)), stored(self.attributes.held(a))) for a in old.attributes]
+        for had, has in held:
+            if had is not None:  # (None: a constant attribute, nothing stored)
+                has[: len(had)] = had
+        self.batches[:n] = old.batches
+        self.batch_version[:n] = old.batch_version
+        self.version = old.version
+        self.resident = OrderedDict(old.resident)
+        self.free = list(range(self.n_slots - 1, n - 1, -1)) + old.free
+        self.keep, self.kept, self.loads = old.keep, old.kept.copy(), old.loads
+        self.resident_changes = old.resident_changes + 1
 
     def ensure(self, nodes: np.ndarray, cloud: OctreeCloud) -> bool:
         """Make every node in ``nodes`` resident; False when they cannot all fit."""
@@ -750,15 +774,22 @@ class OctreeCloud:
         ids = ids[self.nodes["count"][ids] > 0]
         if self.arena is None or self.arena.n_points < total:
             cap = max(total, min(int(settings.point_budget), self.n_points)) * 5 // 4 + 64 * ARENA_CHUNK
-            self.arena = self.new_arena(min(cap, self.n_points + (len(self.keys) + 1) * ARENA_CHUNK))
+            self._grow_arena(min(cap, self.n_points + (len(self.keys) + 1) * ARENA_CHUNK))
         arena = self.arena
         arena.show(keep)
         if not arena.ensure(ids, self):
             # a selection of many small nodes that wastes slots: grow and retry once
-            self.arena = arena = self.new_arena(arena.n_points * 2 + (len(ids) + 1) * ARENA_CHUNK)
-            arena.show(keep)
-            arena.ensure(ids, self)
+            self._grow_arena(arena.n_points * 2 + (len(ids) + 1) * ARENA_CHUNK).ensure(ids, self)
         return ids
+
+    def _grow_arena(self, points: int) -> Arena:
+        """A new arena of ``points`` points in place of the octree's (more than it has), holding
+        what it held (``Arena.take_over``)."""
+        arena = self.new_arena(points)
+        if self.arena is not None:
+            arena.take_over(self.arena)
+        self.arena = arena
+        return arena
 
     def prepare_views(self, views, settings) -> MultiViewDrawList | None:
         """None: each view selects its own nodes, so stereo draws the eyes one by one."""
