@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from gigapoint.viewer.protocol import settings_schema
+
 
 def write_las(path, xyz):
     header = laspy.LasHeader(point_format=3, version="1.2")
@@ -72,7 +74,10 @@ def files_in(folder) -> list[str]:
         (["render", "{in}/small.las", "-o", "{out}/x.png", "--camera", "eye=1,2,3 target=1,2,3"], "--camera: camera eye and target are the same point"),
         (["render", "{in}/small.las", "-o", "{out}/x.png", "--camera", "eye=nan,0,10 target=0,0,0"], "--camera: eye needs 3 finite number(s), got 'nan,0,10'"),
         (["render", "{in}/small.las", "-o", "{out}/x.png", "--camera", "eye=0,0,10 target=0,0,0 up=0,0,0"], "--camera: camera up vector is zero"),
-        (["render", "{in}/small.las", "-o", "{out}/x.png", "--stereo", "anaglyph", "--ipd", "nan"], "--ipd: ipd must be a number >= 0.0, got nan"),
+        (["render", "{in}/small.las", "-o", "{out}/x.png", "--stereo", "anaglyph", "--ipd", "nan"], "--ipd: ipd must be a number in [0.0, 2000000000000.0], got nan"),
+        # the auto eye distance (convergence / 30) put the eyes 3e298 apart: a blank image and a warning without a reason
+        (["render", "{in}/small.las", "-o", "{out}/x.png", "--stereo", "anaglyph", "--convergence", "1e300"],
+         "--convergence: convergence must be a number in (0.0, 2000000000000.0], got 1e+300"),
         (["render", "{in}/small.las", "-o", "{out}/v.mp4", "--turntable", "0"], "--turntable: number of frames must be an integer from 1 to 100,000, got 0"),
         (["render", "{in}/small.las", "-o", "{out}/x.png", "--point-size", "0"], "--point-size: point_size must be an integer in [1, 64], got 0"),
         (["render", "{in}/small.las", "-o", "{out}/x.png", "--point-budget", "0"], "--point-budget: point_budget must be an integer >= 1, got 0"),
@@ -90,7 +95,7 @@ def files_in(folder) -> list[str]:
         (["view", "--demo", "0"], "--demo: point count must be in 1..2e9, got 0"),
     ],
     ids=["camera-eye-1e300", "camera-target-1e13", "camera-distance-1e300", "fps-1e-9", "gsd-1e200", "gsd-1e-300", "bench-points-1e99",
-         "fov-0", "fov-nan", "width-0", "height-1e9", "eye-is-target", "eye-nan", "up-zero", "ipd-nan", "turntable-0", "point-size-0",
+         "fov-0", "fov-nan", "width-0", "height-1e9", "eye-is-target", "eye-nan", "up-zero", "ipd-nan", "convergence-1e300", "turntable-0", "point-size-0",
          "point-budget-0", "gsd-nan", "missing", "zero-bytes", "png-as-laz", "all-nan", "no-rows", "unknown-suffix", "no-folder",
          "output-is-input", "demo-points-0", "view-demo-0"],
 )  # fmt: skip
@@ -128,14 +133,28 @@ def test_a_single_point_is_framed_and_drawn(cli, tmp_path):
 
 def test_an_absurd_stereo_shift_is_a_warning_not_an_overflow(cli, inputs, tmp_path):
     """--ipd 1e300 at --convergence 1e-300 moved each eye's image by an infinite number of pixels:
-    an internal OverflowError; --ipd 1e300 alone said the shift in 300 digits. Both eyes' images
-    move out of the picture: the pair's warning, with a number it can say."""
+    an internal OverflowError; --ipd 1e300 alone said the shift in 300 digits. (Eyes past the span
+    points can have are refused now: the widest, 2e12, at 1e-300 overflows the same.) Both eyes'
+    images move out of the picture: the pair's warning, with a number it can say."""
     out = tmp_path / "s.png"
-    rc, stdout, err = cli("render", inputs / "small.las", "-o", out, "--width", "64", "--stereo", "anaglyph", "--ipd", "1e300", "--convergence", "1e-300")
+    rc, stdout, err = cli("render", inputs / "small.las", "-o", out, "--width", "64", "--stereo", "anaglyph", "--ipd", "2e12", "--convergence", "1e-300")
     assert rc == 0, err
     assert err == ("warning: small.las: no point is in view of the stereo camera (each eye's image moves over 1e+15 px of 64: "
-                   "ipd 1e+300 world units is wide for this scene); the image shows only the background\n")  # fmt: skip
+                   "ipd 2e+12 world units is wide for this scene); the image shows only the background\n")  # fmt: skip
     assert lit_pixels(out).size == 0
+
+
+def test_stereo_distances_within_the_span_points_can_have_draw_the_pair(cli, inputs, tmp_path):
+    """--ipd and --convergence are bounded by the span points can have (2e12, as --camera's
+    distance): the settings schema carries it, so the viewer's panel bounds its inputs alike;
+    a convergence in reach of the scene still draws both eyes."""
+    schema = {d["name"]: d for d in settings_schema()}
+    assert (schema["ipd"]["max"], schema["convergence"]["max"]) == (2e12, 2e12)
+    out = tmp_path / "s.png"
+    rc, stdout, err = cli("render", inputs / "small.las", "-o", out, "--width", "64", "--stereo", "anaglyph", "--convergence", "150", "--color-mode", "elevation")
+    assert (rc, err) == (0, "")
+    drawn = np.asarray(Image.open(out))[..., :3]
+    assert drawn[..., 0].any() and drawn[..., 1:].any()  # the left eye in red, the right in green and blue
 
 
 def test_a_huge_world_size_draws_the_largest_points_without_numpy_warnings(cli, inputs, tmp_path):

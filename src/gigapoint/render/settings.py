@@ -23,6 +23,7 @@ from typing import Literal, get_args
 import numpy as np
 
 from ..core.classes import parse_classes
+from ..core.coords import MAX_ABS_COORDINATE
 from ..errors import SettingsError
 
 # --- the choices (render/colors.py derives COLOR_MODES and COLORMAPS from these) ----------------------
@@ -37,6 +38,10 @@ Stereo = Literal["none", "side-by-side", "anaglyph"]
 Color = tuple[int, int, int, int]  # r, g, b, a in 0..255
 Range = tuple[float, float]  # low, high
 Classes = tuple[int, ...]  # LAS classification codes, 0..255
+
+#: the most world units a distance (the stereo eyes', their convergence) can be: the span points
+#: can have (convergence 1e300 put the auto eyes 3e298 apart: a blank image)
+MAX_SPAN = 2 * MAX_ABS_COORDINATE
 
 COLOR_MODES: tuple[str, ...] = get_args(ColorMode)
 COLORMAPS: tuple[str, ...] = get_args(Colormap)
@@ -208,9 +213,14 @@ class RenderSettings:
         "so a 30 cm object and a city both show depth; smaller by tan(fov/2) / tan(30°) for a fov under 60 degrees; "
         "0 for an orthographic camera; 0 = both eyes alike).",
         min=0.0,
+        max=MAX_SPAN,
     )
     convergence: float | None = setting(
-        None, "Stereo zero-parallax distance in world units (default: the camera's target distance).", min=0.0, exclusive_min=True
+        None,
+        "Stereo zero-parallax distance in world units (default: the camera's target distance).",
+        min=0.0,
+        exclusive_min=True,
+        max=MAX_SPAN,
     )
     lighting: bool = setting(False, "Blinn-Phong headlight from the cloud's normals (the CLI estimates them when missing).")
     shininess: float = setting(32.0, "Lighting specular exponent.", min=0.0, max=10_000.0)
