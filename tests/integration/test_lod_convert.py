@@ -115,15 +115,15 @@ def test_interrupted_conversion_resumes_to_the_same_result(demo_las, reference, 
 def test_a_conversion_interrupted_under_one_gigapoint_starts_clean_under_another(demo_las, reference, tmp_path, monkeypatch):
     """The fingerprint held no code version: a run interrupted, gigapoint upgraded, then run again
     resumed the old version's work files under the new code. Now it starts clean, as with other inputs."""
-    from gigapoint.lod.convert import state
+    from gigapoint.lod import code
 
     out = tmp_path / "oct"
-    monkeypatch.setattr(state, "_CODE_VERSION", "0.0.1+000000000000")
+    monkeypatch.setattr(code, "_CODE_VERSION", "0.0.1+000000000000")
     _interrupt_after(monkeypatch, 2)
     with pytest.raises(KeyboardInterrupt):
         convert([demo_las], out, **OPTS)
     assert json.loads((out / ".partial" / "state.json").read_text())["phase"] == "build"
-    monkeypatch.setattr(state, "_CODE_VERSION", "0.0.2+000000000000")  # upgraded
+    monkeypatch.setattr(code, "_CODE_VERSION", "0.0.2+000000000000")  # upgraded
     _interrupt_after(monkeypatch, None)
     res = convert([demo_las], out, **OPTS)
     assert not res.resumed and res.points == 150_000

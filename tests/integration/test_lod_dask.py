@@ -587,9 +587,9 @@ def test_an_input_a_worker_does_not_see_is_named_as_such(thread_client, tmp_path
 def test_a_worker_running_other_gigapoint_code_is_a_one_line_error(inputs, client, tmp_path, monkeypatch):
     """Workers import their own gigapoint: another release or a stale checkout would write other
     bytes (or fail on a task it does not know). Here the driver's code is the odd one."""
-    from gigapoint.lod.convert import state
+    from gigapoint.lod import code
 
-    monkeypatch.setattr(state, "_CODE_VERSION", "0.0.1+000000000000")
+    monkeypatch.setattr(code, "_CODE_VERSION", "0.0.1+000000000000")
     with pytest.raises(ConvertError) as err:
         convert(inputs[:1], tmp_path / "oct", client=client, **OPTS)
     msg = str(err.value)

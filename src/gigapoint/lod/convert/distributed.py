@@ -68,6 +68,7 @@ from ...io.filters import PointFilter, filtered
 from ...io.las import with_scan_angle
 from ...io.registry import reader_for
 from ...io.reproject import Reprojection
+from ..code import code_version
 from ..keys import CODE_BITS
 from ..octree_dir import STOPPED_RESUMES, ConvertError, OctreeDir
 from ..preview import PreviewSampler, preview_points
@@ -88,7 +89,6 @@ from .read import (
     spill_chunk,
 )
 from .spill import copy_range, decode_xyz, las_xyz_code, load_raw_chunk, load_raw_chunks, raw_chunk_files, raw_xyz_code
-from .state import code_version
 
 READ_CHUNKS = 1  # chunks (``chunk_size`` points, 2 M by default) a read task decodes: one a task
 CHUNK_STRIDE = 1 << 20  # read task t spills chunks t·CHUNK_STRIDE + 0, 1, ...: sorted ids are the input order

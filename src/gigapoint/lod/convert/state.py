@@ -3,7 +3,7 @@ the fingerprint of its inputs and options, and its saved state (``OctreeDir.writ
 
 A re-run resumes only when its fingerprint equals the saved one: the same input files (path,
 size, modification time; ``--colorize``'s raster's too), the same options and the same
-gigapoint code (``code_version``; with ``--to-crs``, the same PROJ: ``Reprojection.proj_setup``);
+gigapoint code (``code_version``, lod/code.py; with ``--to-crs``, the same PROJ: ``Reprojection.proj_setup``);
 anything else starts clean.
 """
 
@@ -22,6 +22,7 @@ import numpy as np
 from ...atomic import same_file
 from ...errors import InputError
 from ...io import URL_LIKE, expand_paths, file_url_path, shown_url
+from ..code import code_version
 from ..ept import ept_location
 from ..kinds import work_dir as copc_work_dir
 from ..octree_dir import OctreeDir, OutputExistsError
@@ -30,29 +31,6 @@ from .options import BYTES_PER_POINT_BUILD, MAX_PARTITION_POINTS, RUNTIME_BYTES
 
 STATE_VERSION = 1
 SAVE_EVERY_S = 1.0  # the state is saved (fsynced) at most this often while chunks or tasks finish (save_state_soon)
-
-
-def code_version() -> str:
-    """gigapoint's version and a digest of its source files (12 ms): a worker that imports other
-    code than the driver (another release, a stale checkout) writes other bytes, or fails; a
-    resume under other code than the run it resumes mixes two versions' work files (fingerprint)."""
-    global _CODE_VERSION
-    if _CODE_VERSION is None:
-        from importlib import metadata
-
-        root = Path(__file__).parents[2]  # the gigapoint package (not imported: lod sits below it)
-        h = hashlib.sha1()
-        for f in sorted(root.rglob("*.py")):
-            h.update(f"{f.relative_to(root).as_posix()}\0".encode() + f.read_bytes())
-        try:
-            release = metadata.version("gigapoint")
-        except metadata.PackageNotFoundError:  # a source tree on the path
-            release = "(source)"
-        _CODE_VERSION = f"{release}+{h.hexdigest()[:12]}"
-    return _CODE_VERSION
-
-
-_CODE_VERSION: str | None = None
 
 
 def local_path(p, what: str, error=InputError):
