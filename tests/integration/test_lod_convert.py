@@ -112,9 +112,13 @@ def test_interrupted_conversion_resumes_to_the_same_result(demo_las, reference, 
     _assert_same(_snapshot(out), reference)
 
 
-def test_a_conversion_interrupted_under_one_gigapoint_starts_clean_under_another(demo_las, reference, tmp_path, monkeypatch):
+def test_a_conversion_interrupted_under_one_gigapoint_starts_clean_under_another(demo_las, reference, tmp_path, monkeypatch, capsys):
     """The fingerprint held no code version: a run interrupted, gigapoint upgraded, then run again
-    resumed the old version's work files under the new code. Now it starts clean, as with other inputs."""
+    resumed the old version's work files under the new code. Now it starts clean, as with other
+    inputs; and info, gp.open and the rerun say so (they said "run `gigapoint convert` again to
+    resume it", then the rerun discarded the work without a word)."""
+    import gigapoint as gp
+    from gigapoint.errors import GigapointWarning
     from gigapoint.lod import code
 
     out = tmp_path / "oct"
@@ -122,12 +126,41 @@ def test_a_conversion_interrupted_under_one_gigapoint_starts_clean_under_another
     _interrupt_after(monkeypatch, 2)
     with pytest.raises(KeyboardInterrupt):
         convert([demo_las], out, **OPTS)
-    assert json.loads((out / ".partial" / "state.json").read_text())["phase"] == "build"
+    state = json.loads((out / ".partial" / "state.json").read_text())
+    assert state["phase"] == "build" and state["code_version"] == "0.0.1+000000000000"
+    assert main(["info", str(out)]) == 0
+    assert "stopped: run `gigapoint convert` again to resume it" in capsys.readouterr().out  # under the same gigapoint
     monkeypatch.setattr(code, "_CODE_VERSION", "0.0.2+000000000000")  # upgraded
+    hint = "it was started by gigapoint 0.0.1+000000000000, not this gigapoint 0.0.2+000000000000: running `gigapoint convert` again starts it over"
+    assert main(["info", str(out)]) == 0
+    assert f"stopped: {hint}" in capsys.readouterr().out
+    with pytest.warns(GigapointWarning, match=re.escape(f"it has stopped: {hint}")):
+        gp.open(out)
     _interrupt_after(monkeypatch, None)
-    res = convert([demo_las], out, **OPTS)
+    said = re.escape(f"{out}: the unfinished conversion there was started by gigapoint 0.0.1+000000000000 (this is 0.0.2+000000000000): starting over")
+    with pytest.warns(GigapointWarning, match=said):
+        res = convert([demo_las], out, **OPTS)
     assert not res.resumed and res.points == 150_000
     _assert_same(_snapshot(out), reference)
+
+
+def test_a_rerun_with_other_options_says_it_starts_over_and_a_resume_says_nothing(demo_las, tmp_path, monkeypatch, capsys):
+    """A rerun with other inputs or options discarded the unfinished conversion's work without a
+    word (hours of it, for a mistyped option); the CLI now warns, and a resume does not."""
+    out = tmp_path / "oct"
+    _interrupt_after(monkeypatch, 2)
+    with pytest.raises(KeyboardInterrupt):
+        convert([demo_las], out, **OPTS)
+    _interrupt_after(monkeypatch, 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the same conversion resumes: no word of starting over
+        with pytest.raises(KeyboardInterrupt):
+            convert([demo_las], out, **OPTS)
+    _interrupt_after(monkeypatch, None)
+    assert main(["convert", str(demo_las), "-o", str(out), "--quiet", "--max-leaf", "5000"]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: {out}: the unfinished conversion there was started with other inputs or options: starting over" in " ".join(err.split()), err
+    assert open_octree(out).n_points == 150_000
 
 
 def test_a_set_written_part_way_into_the_streams_is_written_again_in_its_place(demo_las, reference, tmp_path, monkeypatch):

@@ -129,6 +129,28 @@ def test_prepare_output_resumes_clears_or_refuses(tmp_path):
     assert [p.name for p in foreign.path.iterdir()] == ["holiday.jpg"]
 
 
+def test_a_stopped_conversion_of_another_gigapoint_says_a_rerun_starts_over(tmp_path, monkeypatch):
+    """The fingerprint holds the code version, so after an upgrade a rerun starts over: the folder
+    said "run `gigapoint convert` again to resume it" all the same. A state saved before states
+    named their version was an older gigapoint's; chunks' work resumes under none."""
+    from gigapoint.lod import code
+    from gigapoint.lod.octree_dir import NO_RESUME_HINT, RESUME_HINT
+
+    monkeypatch.setattr(code, "_CODE_VERSION", "0.2.0+bbbbbbbbbbbb")
+    d = OctreeDir(tmp_path / "out")
+    d.partial.mkdir(parents=True)
+    d.write_state({"fingerprint": "sha256:1", "code_version": "0.2.0+bbbbbbbbbbbb", "phase": "build"})
+    assert d.resume_hint == RESUME_HINT and d.other_work("sha256:1") is None
+    assert d.other_work("sha256:2") == "with other inputs or options"
+    d.write_state({"fingerprint": "sha256:1", "code_version": "0.1.0+aaaaaaaaaaaa", "phase": "build"})
+    assert d.resume_hint == "it was started by gigapoint 0.1.0+aaaaaaaaaaaa, not this gigapoint 0.2.0+bbbbbbbbbbbb: running `gigapoint convert` again starts it over"
+    assert d.other_work("sha256:2") == "by gigapoint 0.1.0+aaaaaaaaaaaa (this is 0.2.0+bbbbbbbbbbbb)"
+    d.write_state({"fingerprint": "sha256:1", "phase": "build"})  # saved by a gigapoint that named no version
+    assert d.resume_hint.startswith("it was started by an older gigapoint, not this gigapoint 0.2.0+bbbbbbbbbbbb:")
+    d.write_state({"fingerprint": None, "code_version": "0.1.0+aaaaaaaaaaaa", "phase": "build"})  # chunks from Python
+    assert d.resume_hint == NO_RESUME_HINT and d.other_work("sha256:2") is None
+
+
 def test_clear_removes_what_a_conversion_writes_and_nothing_else(tmp_path):
     d = OctreeDir(tmp_path / "out")
     d.raw.mkdir(parents=True)

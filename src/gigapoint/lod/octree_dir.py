@@ -22,9 +22,9 @@ An octree folder ``OUT`` is made by ``gigapoint convert`` (or PotreeConverter) a
   ``octree.bin``;
 
 - an **unfinished conversion**: ``.partial/`` with ``state.json`` (the resumable state, written
-  atomically after every step), ``preview.npz`` (preview.py) and the converter's working
-  folders ``raw/`` (spilled input chunks), ``parts/`` (partition files) and ``built/`` (built
-  node sets). A gigapoint conversion also fills ``<array>.tmp.npy`` in ``OUT`` itself; the
+  atomically after every step; it names the gigapoint that began it, ``code_version``),
+  ``preview.npz`` (preview.py) and the converter's working folders ``raw/`` (spilled input
+  chunks), ``parts/`` (partition files) and ``built/`` (built node sets). A gigapoint conversion also fills ``<array>.tmp.npy`` in ``OUT`` itself; the
   write phase renames them.
 
 A conversion with overwrite leaves the complete octree it replaces in place, beside its
@@ -54,6 +54,7 @@ import numpy as np
 
 from ..atomic import atomic_json, temp_files
 from ..errors import GigapointError, InputError
+from .code import code_version
 
 GIGAPOINT_META = "octree.json"
 FORMAT_NAME = "gigapoint-octree"  # octree.json's "format"
@@ -82,6 +83,18 @@ Kind = Literal["gigapoint", "potree", "unfinished"]
 def _resumable(state: dict) -> bool:
     """A stopped conversion's state that a run resumes: not one of chunks given from Python (no fingerprint)."""
     return not ("fingerprint" in state and state["fingerprint"] is None)
+
+
+def _other_gigapoint(state: dict) -> str | None:
+    """The gigapoint that began the conversion of ``state``, where that is not this one (its
+    fingerprint holds the code version, so a rerun here starts over), else None. A state of
+    files that names none (``code_version``) was saved by an older gigapoint than this one."""
+    if state.get("fingerprint") is None:  # chunks given from Python: no rerun resumes them anyway
+        return None
+    saved = state.get("code_version")
+    if saved == code_version():
+        return None
+    return f"gigapoint {saved}" if isinstance(saved, str) else "an older gigapoint"
 
 
 class ConvertError(GigapointError):
@@ -295,7 +308,20 @@ class OctreeDir:
         st = self.read_state() or {}  # (once: resumable would read it again)
         if isinstance(st.get("stopped_by"), str):
             return f"{st['stopped_by']}; {STOPPED_BY_INPUT}"
+        other = _other_gigapoint(st)  # an upgrade since: "run again to resume it" was wrong, the rerun started over
+        if other is not None:
+            return f"it was started by {other}, not this gigapoint {code_version()}: running `gigapoint convert` again starts it over"
         return RESUME_HINT if _resumable(st) else NO_RESUME_HINT
+
+    def other_work(self, fingerprint) -> str | None:
+        """Where a conversion whose inputs and options are ``fingerprint`` would start over another
+        run's unfinished work here (another fingerprint): who started that one, to say so (another
+        gigapoint, named where known), else None. Chunks' work (no run resumes it) is no one's."""
+        st = self.read_state() or {}
+        if st.get("fingerprint") is None or st["fingerprint"] == fingerprint:
+            return None
+        other = _other_gigapoint(st)
+        return "with other inputs or options" if other is None else f"by {other} (this is {code_version()})"
 
     # ------------------------------------------------------------------ lock
 

@@ -24,6 +24,7 @@ from ...io.registry import is_supported_name
 from ...io.reproject import Reprojection, output_grid
 from ...io.thin import thin_spacing
 from ..build import SAMPLERS
+from ..code import code_version
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
 from ..copc_write import check_copc_output
 from ..kinds import is_copc_name
@@ -136,8 +137,11 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
             self.dir.start_over()
 
     def _run_locked(self, overwrite: bool, fp) -> ConvertResult:
+        other_work = self.dir.other_work(fp)  # (before prepare_output clears it)
         saved = self.dir.prepare_output(fp, overwrite)
         self.prepared = True
+        if other_work is not None:  # hours of work may go: said, not done silently
+            warn(f"{self.out}: the unfinished conversion there was started {other_work}: starting over", GigapointWarning)
         # what OUT holds stays until the new one is complete (prepare_output let it, or atomic_open's rename for COPC)
         self.replacing = self.dir.complete or (self.format == "copc" and self.out.is_file())
         damage = (saved.get("damaged") or damaged_work_file(self.dir)) if saved is not None else None
@@ -150,6 +154,7 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
         resumed = saved is not None
         self.state = self.resume_state(saved) if resumed else {"fingerprint": fp, "phase": "read"}
         self.state.pop("stopped_by", None)  # the last run's cause: this run says its own, if any
+        self.state["code_version"] = code_version()  # readable: info says when a rerun under other code starts over
         self.save_state()
         self.output_ready()
         if resumed and self.dir.preview.is_file():

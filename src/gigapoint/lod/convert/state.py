@@ -4,7 +4,7 @@ the fingerprint of its inputs and options, and its saved state (``OctreeDir.writ
 A re-run resumes only when its fingerprint equals the saved one: the same input files (path,
 size, modification time; ``--colorize``'s raster's too), the same options and the same
 gigapoint code (``code_version``, lod/code.py; with ``--to-crs``, the same PROJ: ``Reprojection.proj_setup``);
-anything else starts clean.
+anything else starts clean, with a warning where it discards another run's work (converter.py).
 """
 
 from __future__ import annotations
