@@ -599,9 +599,9 @@ def test_a_worker_running_other_gigapoint_code_is_a_one_line_error(inputs, clien
 
 def _other_code() -> None:
     """On a worker: gigapoint seen as another release (as a worker of another install is)."""
-    from gigapoint.lod.convert import state
+    from gigapoint.lod import code
 
-    state._CODE_VERSION = "0.0.1+000000000000"
+    code._CODE_VERSION = "0.0.1+000000000000"
 
 
 def _no_writing() -> None:
