@@ -1,9 +1,13 @@
 """The point budget through a load filter (hidden classes, a read filter): a node not yet loaded
 (a progressive octree's chunk not yet filtered) is weighed by the share of its points its
 nearest loaded ancestor kept (store.kept_shares), so a frame spends the budget close to full;
-the selections that follow, on the kept counts of what loaded, drop what passes the budget."""
+the selections that follow, on the kept counts of what loaded, drop what passes the budget.
+A converted octree's per-node class counts (classes.npy) tell a class filter's kept counts
+before anything loads: the first selection spends the budget, and is the only one."""
 
 from __future__ import annotations
+
+import shutil
 
 import numpy as np
 import pytest
@@ -34,6 +38,15 @@ def half(tmp_path_factory):
     return path
 
 
+@pytest.fixture(scope="module")
+def half_before_counts(half, tmp_path_factory):
+    """``half`` as octrees written before class counts are: without classes.npy."""
+    path = tmp_path_factory.mktemp("before") / "tree"
+    shutil.copytree(half, path)
+    (path / "classes.npy").unlink(missing_ok=True)  # (main before them wrote none)
+    return path
+
+
 def grown_half() -> ProgressiveOctree:
     tree = ProgressiveOctree("half", max_leaf=2_000)
     tree.add(*half_hidden()[:2], classification=half_hidden()[2])
@@ -54,9 +67,24 @@ def selections(monkeypatch) -> list[int]:
     return drawn
 
 
-def test_the_second_selection_already_spends_the_budget_in_full(half, monkeypatch):
+@pytest.mark.parametrize(("budget", "first"), [(20_000, 18_125), (30_000, 29_998), (40_000, 40_000)])
+@pytest.mark.parametrize("filtered", ["hidden class 7", "classes=[2]"])
+def test_class_counts_let_the_first_selection_spend_the_budget(half, monkeypatch, budget, first, filtered):
+    """Every node's kept points known before any loads: one selection, the budget spent (40 000:
+    18 125 without the counts, below; 20 000: 7 795; 30 000: 7 795), no share guessed."""
     drawn = selections(monkeypatch)
-    frame = gp.render_frame(gp.open(half), TOP, hidden_classes=(7,), point_budget=40_000, lod_threshold_px=0, **FIXED)
+    passes, shares = [], store.kept_shares
+    monkeypatch.setattr(store, "kept_shares", lambda *a: passes.append(1) or shares(*a))
+    tree, options = (gp.open(half), {"hidden_classes": (7,)}) if filtered == "hidden class 7" else (gp.open(half, classes=[2]), {})
+    frame = gp.render_frame(tree, TOP, point_budget=budget, lod_threshold_px=0, **options, **FIXED)
+    # (20 000: the root's 7 795 kept and one node's 10 330 below it; the other's would pass it)
+    assert drawn == [first] and frame.stats.points_processed == first and not passes
+    assert first >= 0.9 * budget
+
+
+def test_the_second_selection_already_spends_the_budget_in_full(half_before_counts, monkeypatch):
+    drawn = selections(monkeypatch)
+    frame = gp.render_frame(gp.open(half_before_counts), TOP, hidden_classes=(7,), point_budget=40_000, lod_threshold_px=0, **FIXED)
     # the first knows nothing kept (the root and a node by their whole counts: 18 125 of theirs
     # drawn); the second weighs the nodes below by the half the root kept: 40 000, all the
     # budget, the third the same. (Weighed whole: 28 536, 34 285, 35 710 ... 37 156 in 9 selections)
@@ -65,9 +93,9 @@ def test_the_second_selection_already_spends_the_budget_in_full(half, monkeypatc
 
 
 @pytest.mark.parametrize("budget", [20_000, 30_000, 40_000])
-@pytest.mark.parametrize("kind", ["converted", "progressive"])
-def test_the_budget_hidden_classes_leave_is_spent_close_to_full_and_never_passed(half, kind, budget):
-    tree = gp.open(half) if kind == "converted" else grown_half()
+@pytest.mark.parametrize("kind", ["converted", "converted before class counts", "progressive"])
+def test_the_budget_hidden_classes_leave_is_spent_close_to_full_and_never_passed(half, half_before_counts, kind, budget):
+    tree = {"converted": lambda: gp.open(half), "converted before class counts": lambda: gp.open(half_before_counts), "progressive": grown_half}[kind]()
     drawn = gp.render_frame(tree, TOP, hidden_classes=(7,), point_budget=budget, lod_threshold_px=0, **FIXED).stats.points_processed
     # weighed whole, the nodes not yet loaded left most of it: 7 795, 18 125, 37 156 drawn
     # (converted), 7 925, 7 925, 22 512 (progressive)
@@ -114,10 +142,10 @@ def test_a_progressive_octree_knows_what_a_chunk_kept_once_its_slot_is_taken_bac
     assert known[chunks].all() and counts[chunks].tolist() == not_hidden
 
 
-def test_frames_that_load_nothing_weigh_the_nodes_again_only_once_a_node_comes_or_goes(half, monkeypatch):
+def test_frames_that_load_nothing_weigh_the_nodes_again_only_once_a_node_comes_or_goes(half_before_counts, monkeypatch):
     """The shares are a pass over every node (10^5 and more in a big octree) each selection makes,
     two or more a frame: the arena reuses its kept counts until its resident nodes change."""
-    tree = gp.open(half)
+    tree = gp.open(half_before_counts)
     options = {"hidden_classes": (7,), "lod_threshold_px": 0, **FIXED}
     gp.render_frame(tree, TOP, point_budget=20_000, **options)
     passes, shares = [], store.kept_shares

@@ -54,6 +54,7 @@ from ..core.compact import (
 )
 from ..core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE
 from ..errors import InputError
+from .class_counts import read_class_counts
 from .keys import key_name
 from .octree_dir import OctreeDir
 from .store import OctreeCloud, known_classes
@@ -456,7 +457,9 @@ def read_compact(d: OctreeDir, meta: dict) -> CompactOctree:
         crc = d.load("crc", mmap=False)
         if crc.dtype != np.uint32 or crc.shape != (len(nodes), len(names) + 2):
             raise InputError(f"{d.array('crc')}: holds {crc.shape} checksums for {len(nodes):,} nodes and {len(names) + 2} arrays")
-    return CompactOctree(meta.get("name", p.name), meta, nodes, keys, low, np.asarray(ext), pack, fields, streams, p, crc)
+    cloud = CompactOctree(meta.get("name", p.name), meta, nodes, keys, low, np.asarray(ext), pack, fields, streams, p, crc)
+    cloud.class_counts = read_class_counts(d, nodes)
+    return cloud
 
 
 __all__ = [

@@ -12,6 +12,8 @@ An octree folder ``OUT`` is made by ``gigapoint convert`` (or PotreeConverter) a
   - ``color.npy``: u32 RGBA, inner nodes' colors averaged over the points they stand for
   - ``rgba.npy``: u32 RGBA as read (source colors)
   - ``attr.<name>.npy``: per-point attributes (intensity, classification, ...)
+  - ``classes.npy`` (optional, both versions): per node the count of each LAS class its points
+    hold (class_counts.py); written where the points have a classification
 
   That is version 1 (``convert(layout="words")``). Version 2, the default (compact_octree.py),
   keeps ``octree.json``, ``nodes.npy``, ``keys.npy`` and ``low.npy`` and holds the rest per node
@@ -63,6 +65,7 @@ FORMAT_VERSION_WORDS = 1  # three u32 words a point (store.read_gigapoint; `layo
 FORMAT_VERSIONS = (FORMAT_VERSION_WORDS, FORMAT_VERSION)
 POINT_ARRAYS = ("low", "med", "high", "color", "rgba")  # one entry per point each (version 1)
 COMPACT_ARRAYS = ("low", "pack", "ext", "fields", "crc")  # version 2, besides field.<name>.npy (crc: since #22, optional)
+CLASSES = "classes"  # both versions: per-node class counts (class_counts.py; optional, older octrees have none)
 POTREE_META = "metadata.json"
 POTREE_HIERARCHY = "hierarchy.bin"
 POTREE_OCTREE = "octree.bin"
@@ -75,7 +78,7 @@ STOPPED_BY_INPUT = "run it again once that file is whole, or without it: it star
 NO_RESUME_HINT = "its points were given from Python (a cloud's save), so it cannot resume: save the cloud again"  # what a stopped one of chunks needs
 
 # an octree's files besides attr.*.npy and field.*.npy, metadata first: what a conversion replaces (never anything else)
-_OWN_FILES = (GIGAPOINT_META, POTREE_META, POTREE_HIERARCHY, POTREE_OCTREE, "nodes.npy", "keys.npy", *(f"{a}.npy" for a in POINT_ARRAYS + COMPACT_ARRAYS[1:]))
+_OWN_FILES = (GIGAPOINT_META, POTREE_META, POTREE_HIERARCHY, POTREE_OCTREE, "nodes.npy", "keys.npy", *(f"{a}.npy" for a in (*POINT_ARRAYS, *COMPACT_ARRAYS[1:], CLASSES)))
 
 Kind = Literal["gigapoint", "potree", "unfinished"]
 

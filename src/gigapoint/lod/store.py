@@ -30,6 +30,7 @@ from ..core.selection import Selection, View, batch_matrices, box_in_view, preci
 from ..errors import InputError, is_whole_number
 from ..io.filters import PointFilter
 from ..render.splats import finest_spacing, union_gain
+from .class_counts import kept_by_class, read_class_counts
 from .keys import key_cube, morton_position
 from .octree_dir import FORMAT_NAME, FORMAT_VERSION_WORDS, FORMAT_VERSIONS, POINT_ARRAYS, OctreeDir
 
@@ -560,6 +561,7 @@ class OctreeCloud:
 
     load_progress = 1.0  # converted whole
     read_filter: PointFilter | None = None  # only the points it keeps are drawn (``read_only``)
+    class_counts: np.ndarray | None = None  # per-node class counts where its files hold them (class_counts.py)
 
     def __init__(
         self, name: str, meta: dict, nodes: np.ndarray, keys: np.ndarray, arrays: dict, attributes: dict, path: Path | None = None
@@ -577,6 +579,7 @@ class OctreeCloud:
         self._node_spacing: np.ndarray | None = None
         self.counts = nodes["count"].astype(np.int64)  # node counts never change: widened once, not per frame
         self._meets: np.ndarray | None = None  # which nodes' boxes meet the read filter (``meeting_read_filter``), made on first use
+        self._class_kept: tuple = (None, None)  # (a class filter, what ``kept_by_class`` answered for it)
         self.morton_position = morton_position(self.keys)  # frames draw node after node in this order
         self.cube_min, self.cube_edge = key_cube(self.keys, meta["cube_min"], float(meta["cube_edge"]))
         lo, hi = self.stored_bounds()
@@ -696,17 +699,31 @@ class OctreeCloud:
         """(node indices, projected cube sizes, point total) chosen for a view, of the nodes
         meeting the read filter; through a load filter (``load_filter``), the nodes loaded
         through it count the points they kept, the others (``estimated``) the share their
-        nearest loaded ancestor kept or (not ``estimated``) all theirs (``Arena.kept_counts``)."""
+        nearest loaded ancestor kept or (not ``estimated``) all theirs (``Arena.kept_counts``);
+        through classes alone, with the octree's class counts, every node what it keeps."""
         out_ids = np.empty(len(self.keys), np.int64)
         out_size = np.empty(len(self.keys), np.float64)
         keep = self.load_filter(settings.hidden_classes)
-        costs = self.counts if self.arena is None else self.arena.kept_counts(self.counts, keep, self.parent if estimated else None)
+        costs = self._kept_by_class(keep)
+        if costs is None:
+            costs = self.counts if self.arena is None else self.arena.kept_counts(self.counts, keep, self.parent if estimated else None)
         k, total = select_nodes(
             view.rows, self.box_min, self.box_size, self.counts, costs, self.meeting_read_filter(), self.children, float(view.width), float(view.height),
             float(view.near), float(view.far), float(settings.lod_threshold_px), int(settings.point_budget), out_ids, out_size,
             float(settings.lod_foveation),
         )  # fmt: skip
         return out_ids[:k], out_size[:k], int(total)
+
+    def _kept_by_class(self, keep: PointFilter | None) -> np.ndarray | None:
+        """Each node's points the load filter ``keep`` keeps, known before any is loaded from the
+        octree's class counts (the first selection of a frame spends the budget in full); None
+        without them, or where ``keep`` tests positions too (a clip box: ``Arena.kept_counts``
+        guesses from what is loaded). Made once a filter."""
+        if self.class_counts is None or keep is None or keep.needs_positions:
+            return None
+        if self._class_kept[0] != keep:
+            self._class_kept = (keep, kept_by_class(self.class_counts, len(self.keys), keep))
+        return self._class_kept[1]
 
     def _attribute_dtypes(self) -> dict:
         return {a: v.dtype for a, v in self.attributes.items() if v.ndim == 1}
@@ -731,7 +748,9 @@ class OctreeCloud:
         """The frame's nodes made resident in the arena, one batch per arena slot."""
         check_classified(self.name, self.attribute_names, settings.hidden_classes)
         ids = self._resident_selection(view, settings)
-        rounds = KEPT_ROUNDS if self.load_filter(settings.hidden_classes) is not None else 0
+        keep = self.load_filter(settings.hidden_classes)
+        # (no round where the class counts tell what every node keeps: the first selection weighed it all)
+        rounds = KEPT_ROUNDS if keep is not None and self._kept_by_class(keep) is None else 0
         for r in range(rounds):
             # the nodes just loaded count their kept points from now on, not their estimates:
             # an estimate too low drops the nodes past the budget, one too high leaves budget to
@@ -888,7 +907,9 @@ def read_gigapoint(octree_dir, meta: dict | None = None) -> OctreeCloud:
     n = int(meta["points"])
     if any(len(a) != n for a in arrays.values()) or int(nodes["count"].astype(np.int64).sum()) != n:
         raise InputError(f"{p}: point arrays hold a different number of points than {d.meta.name} says ({n:,})")
-    return OctreeCloud(meta.get("name", p.name), meta, nodes, keys, arrays, attributes, p)
+    cloud = OctreeCloud(meta.get("name", p.name), meta, nodes, keys, arrays, attributes, p)
+    cloud.class_counts = read_class_counts(d, nodes)
+    return cloud
 
 
 def check_grid(name: str, what: str, scale, offset) -> None:

@@ -15,9 +15,10 @@ from ..atomic import atomic_json, atomic_npy, fsync_file, mapped_npy, start_writ
 from ..core.compact import ext_bits_per_point
 from ..core.layout import BATCH_DTYPE
 from ..core.quantize import quantize
+from .class_counts import join_class_counts
 from .compact_octree import checksum_table, field_names
 from .keys import key_cube, level_of
-from .octree_dir import FORMAT_NAME, FORMAT_VERSION, FORMAT_VERSION_WORDS, POINT_ARRAYS, OctreeDir
+from .octree_dir import CLASSES, FORMAT_NAME, FORMAT_VERSION, FORMAT_VERSION_WORDS, POINT_ARRAYS, OctreeDir
 
 
 def point_dtypes(attributes: dict, compact: bool = False) -> dict[str, np.dtype]:
@@ -113,6 +114,9 @@ def write_gigapoint(out: OctreeDir, sources: list[Path], st: dict, name: str, sa
         extra = write_streams(out, sources, order, attrs, plan, run)
     atomic_npy(out.array("nodes"), nodes[order])
     atomic_npy(out.array("keys"), keys[order])
+    classes = join_class_counts(sources, [len(k) for k in all_keys], order)
+    if classes is not None:  # (no file: an octree without classification, read as before)
+        atomic_npy(out.array(CLASSES), classes)
     if plan is not None:
         atomic_npy(out.array("crc"), write_checksums(out, nodes[order], extra["fields"], run))
     lo, hi = np.array(st["lo"]), np.array(st["hi"])

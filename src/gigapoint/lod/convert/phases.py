@@ -20,9 +20,11 @@ from ...core.cloud import take
 from ...core.layout import BATCH_DTYPE
 from ...core.quantize import _quantize_batches
 from ..build import color_sums, filtered_colors, init_ownlevel, owned_order, sample_tree, sort_codes, split_tree, upper_tree
+from ..class_counts import node_class_counts
 from ..compact_octree import encode_nodes
 from ..copc_write import write_copc_sets
 from ..keys import level_of, point_codes
+from ..octree_dir import CLASSES
 from ..potree import place_node_set, placed_end, potree_plan, write_potree
 from ..writer import append_streams, point_dtypes, run_serially, streams_end, write_gigapoint
 from . import hooks
@@ -266,6 +268,7 @@ class BuildPhases(Job):
                 attrs, plan["colors"],
             )  # fmt: skip
             outs["low"][sl] = low
+            self._save_class_counts(dest, attrs.get("attr.classification"), counts)
             streams = {"ext": ext, **{f"field.{f}": v for f, v in streams.items()}}
             for k, v in {"pack": pack, "fields": fields, **(streams if self.local_sets else {})}.items():
                 atomic_npy(dest / f"{k}.npy", v)
@@ -284,10 +287,18 @@ class BuildPhases(Job):
         filtered_colors(*colors, out=outs["color"][sl])
         for k, v in data.items():
             take(v, idx, out=outs[k][sl])
+        self._save_class_counts(dest, outs["attr.classification"][sl] if "attr.classification" in outs else None, counts)
         del outs, low, med, high  # unmapped; a killed process's writes stay in the page cache
         if not self.local_sets:
             self._write_back(off, n)
         self._finish_set(dest, nodes, first, off, n)
+
+    def _save_class_counts(self, dest: Path, classification, counts) -> None:
+        """gigapoint format: the set's per-node class counts (class_counts.py), from its points'
+        ``classification`` in node order (None: it has none), while they are at hand."""
+        records = None if classification is None else node_class_counts(classification, counts)
+        if records is not None:
+            atomic_npy(dest / f"{CLASSES}.npy", records)
 
     def _write_back(self, off: int, n: int) -> None:
         """Points off..off+n of the output arrays, just written, on their way to the disk while
