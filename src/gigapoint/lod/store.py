@@ -699,12 +699,11 @@ class OctreeCloud:
         """(node indices, projected cube sizes, point total) chosen for a view, of the nodes
         meeting the read filter; through a load filter (``load_filter``), the nodes loaded
         through it count the points they kept, the others (``estimated``) the share their
-        nearest loaded ancestor kept or (not ``estimated``) all theirs (``Arena.kept_counts``);
-        through classes alone, with the octree's class counts, every node what it keeps."""
+        nearest loaded ancestor kept or (not ``estimated``) all theirs (``Arena.kept_counts``)."""
         out_ids = np.empty(len(self.keys), np.int64)
         out_size = np.empty(len(self.keys), np.float64)
         keep = self.load_filter(settings.hidden_classes)
-        costs = self._kept_by_class(keep)
+        costs = self._kept_by_class(keep)  # (through classes alone, with class counts: every node what it keeps)
         if costs is None:
             costs = self.counts if self.arena is None else self.arena.kept_counts(self.counts, keep, self.parent if estimated else None)
         k, total = select_nodes(
