@@ -785,6 +785,41 @@ def test_a_bad_input_read_after_others_keeps_out_as_one_process_does(thread_clie
     assert res.points == 40_000 and not res.resumed
 
 
+def test_a_damaged_read_that_fails_before_the_reads_before_it_end_keeps_out_as_one_process_does(autzen_path, thread_client, tmp_path, monkeypatch):
+    """The damaged LAZ's read of points 40 000.. failed while that of points 0.. still ran (a
+    busy machine): the driver waited for it, but raised without taking in its points, so none
+    were counted, OUT was removed and the line lacked what became of it (the flaky
+    test_a_damaged_laz_fails_the_run_naming_its_damaged_chunk_as_in_one_process). Forced here:
+    the first read ends only once the driver has seen a read fail."""
+    import threading
+
+    from gigapoint.lod.convert import distributed as gd
+    from gigapoint.lod.convert import hooks
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "unit"))
+    from test_io_las import DAMAGE, damaged_autzen
+
+    path = damaged_autzen(autzen_path, tmp_path)
+    failure_seen = threading.Event()
+    first_failed_read = gd._first_failed_read
+
+    def seen(*args):
+        failure_seen.set()
+        return first_failed_read(*args)
+
+    monkeypatch.setattr(gd, "_first_failed_read", seen)
+    monkeypatch.setattr(hooks, "task_done", lambda kind, name: name == "damaged.laz:0" and failure_seen.wait(60))
+    out = tmp_path / "oct"
+    with pytest.raises(InputError) as err:
+        convert(path, out, client=thread_client, **OPTS)
+    assert failure_seen.is_set()
+    assert str(err.value) == (
+        f"{path}: {DAMAGE}; the conversion to {out} stopped unfinished: run it again once that file is whole, or without it: it starts over"
+    )
+    state = OctreeDir(out).read_state()
+    assert state["points"] == 40_000 and state["stopped_by"] == f"{path}: {DAMAGE}", state
+
+
 UTM = "EPSG:32610"
 #: a quadrilateral over part of autzen, in its own CRS (feet): moved into the target before a point is read
 SITE_FEET = [[636_200.0, 849_000.0], [637_000.0, 848_990.0], [636_900.0, 849_400.0], [636_300.0, 849_350.0], [636_200.0, 849_000.0]]

@@ -382,15 +382,18 @@ def _numba_threads_from_environment() -> None:
 
 def _first_failed_read(dd, failed, name: str, index: int, futures: dict):
     """(future, name) of the read task that fails first in the inputs' order: ``failed`` (the
-    ``index``-th read), or one before it still running, waited for. Read tasks end in any order,
+    ``index``-th read), or one before it still running, waited for; and the reads before that
+    one, which ended well, as [(future, on_done, i), ...] in order. Read tasks end in any order,
     and each task over a damaged LAZ chunk names another of its points: the run said whichever
     ended first (a message that changed from run to run)."""
-    earlier = sorted(((j, g, n) for g, (k, n, _, j) in futures.items() if k == "read" and j < index), key=lambda t: t[0])
-    dd.wait([g for _, g, _ in earlier])
-    for _, g, n in earlier:
+    earlier = sorted(((j, g, n, on_done) for g, (k, n, on_done, j) in futures.items() if k == "read" and j < index), key=lambda t: t[0])
+    dd.wait([g for _, g, _, _ in earlier])
+    ended = []
+    for j, g, n, on_done in earlier:
         if g.status != "finished":
-            return g, n
-    return failed, name
+            return g, n, ended
+        ended.append((g, on_done, j))
+    return failed, name, ended
 
 
 def _task(kind: str, name: str, spec: dict, fn, *args):
@@ -819,7 +822,13 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
                     raise ConvertError(f"{self.out}: the Dask cluster has had no worker for {NO_WORKER_S:.0f} s; {self._resume_hint()}")
                 if f.status != "finished":
                     if kind == "read":  # a damaged file fails every read of it: named, as one process does, by the first
-                        f, name = _first_failed_read(dd, f, name, i, futures)
+                        f, name, ended = _first_failed_read(dd, f, name, i, futures)
+                        # the reads before it are taken in: their points counted, as one process counts those before
+                        # a bad input, so OUT stays and the error says so (converter.run); a read failing before they
+                        # were taken in left none counted: OUT was removed and the line lacked what became of it
+                        for g, take_in, j in ended:
+                            del futures[g]
+                            take_in(j, g.result())
                     raise self._task_error(kind, name, f)
                 more = callback(i, f.result())
                 f.release()
