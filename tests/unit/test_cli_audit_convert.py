@@ -8,7 +8,7 @@ import struct
 
 import numpy as np
 import pytest
-from test_cli_audit_survey import files_in, write_las  # tests/unit is on sys.path
+from test_cli_audit_survey import files_in, refused_in_one_line, write_las  # tests/unit is on sys.path
 
 
 @pytest.fixture(scope="module")
@@ -72,11 +72,7 @@ def home(tmp_path):
          "convert-png-as-laz", "convert-thin-nan", "convert-workers-0", "convert-clip-inverted", "convert-classes-999", "tile-size-nan", "tile-size-1e-12"],
 )  # fmt: skip
 def test_bad_input_is_one_line_and_leaves_no_output(cli, inputs, tmp_path, args, problem):
-    out = tmp_path / "out"
-    out.mkdir()
-    rc, stdout, err = cli(*(a.format(**{"in": inputs, "out": out}) for a in args))
-    assert (rc, stdout, err) == (1, "", f"error: {problem.format(**{'in': inputs, 'out': out})}\n")
-    assert files_in(out) == []
+    refused_in_one_line(cli, inputs, tmp_path, args, problem)
 
 
 @pytest.mark.parametrize("name", ["far.xyz", "far.npy"])

@@ -10,6 +10,7 @@ import laspy
 import numpy as np
 import pytest
 from PIL import Image
+from test_cli_audit_survey import refused_in_one_line  # tests/unit is on sys.path
 
 from gigapoint.viewer.protocol import settings_schema
 
@@ -41,10 +42,6 @@ def inputs(tmp_path_factory):
     laz = write_las(folder / "whole.laz", xyz)
     (folder / "cut.laz").write_bytes(laz.read_bytes()[: laspy.read(laz).header.offset_to_point_data + 100])
     return folder
-
-
-def files_in(folder) -> list[str]:
-    return sorted(p.name for p in folder.iterdir())
 
 
 @pytest.mark.parametrize(
@@ -100,11 +97,7 @@ def files_in(folder) -> list[str]:
          "output-is-input", "demo-points-0", "view-demo-0"],
 )  # fmt: skip
 def test_bad_input_is_one_line_and_leaves_no_output(cli, inputs, tmp_path, args, problem):
-    out = tmp_path / "out"
-    out.mkdir()
-    rc, stdout, err = cli(*(a.format(**{"in": inputs, "out": out}) for a in args))
-    assert (rc, stdout, err) == (1, "", f"error: {problem.format(**{'in': inputs, 'out': out})}\n")
-    assert files_in(out) == []
+    refused_in_one_line(cli, inputs, tmp_path, args, problem)
 
 
 def test_an_existing_image_is_kept_without_overwrite(cli, inputs, tmp_path):

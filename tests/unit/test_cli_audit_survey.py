@@ -51,6 +51,17 @@ def files_in(folder) -> list[str]:
     return sorted(p.name for p in folder.iterdir())
 
 
+def refused_in_one_line(cli, inputs, tmp_path, args, problem) -> None:
+    """The command ``args`` ({in}: the inputs' folder, {out}: an empty one) exits 1 saying
+    ``problem`` in one line on stderr, nothing on stdout, and leaves {out} empty (the audits'
+    tables: this file's, test_cli_audit_convert's, test_cli_audit_render's)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    rc, stdout, err = cli(*(a.format(**{"in": inputs, "out": out}) for a in args))
+    assert (rc, stdout, err) == (1, "", f"error: {problem.format(**{'in': inputs, 'out': out})}\n")
+    assert files_in(out) == []
+
+
 @pytest.mark.parametrize(
     ("args", "problem"),
     [
@@ -92,11 +103,7 @@ def files_in(folder) -> list[str]:
          "classify-noise-txt", "classify-ground-txt", "classify-heights-txt"],
 )  # fmt: skip
 def test_bad_input_is_one_line_and_leaves_no_output(cli, inputs, tmp_path, args, problem):
-    out = tmp_path / "out"
-    out.mkdir()
-    rc, stdout, err = cli(*(a.format(**{"in": inputs, "out": out}) for a in args))
-    assert (rc, stdout, err) == (1, "", f"error: {problem.format(**{'in': inputs, 'out': out})}\n")
-    assert files_in(out) == []
+    refused_in_one_line(cli, inputs, tmp_path, args, problem)
 
 
 def test_colorize_refuses_a_raster_no_world_file_places(cli, inputs, tmp_path):
