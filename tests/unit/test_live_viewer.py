@@ -285,6 +285,36 @@ def test_producers_past_the_limit_are_refused_with_a_message():
         srv.close()
 
 
+def test_only_push_takes_large_messages_on_a_live_viewer():
+    """uvicorn's one ws_max_size, raised to the 64 MB push limit on a live viewer, let a tab's /ws
+    send 64 MB before its message was refused. /ws now closes with 1009 (too big) past the tab's
+    limit, as on a plain viewer; /push (its path quoted too) still takes a frame that size."""
+    from websockets.exceptions import ConnectionClosed
+    from websockets.sync.client import connect
+
+    from gigapoint.viewer.server import ViewerServer
+
+    tab_limit = P.MAX_MESSAGE * 4  # bytes (the tab's limit counts characters)
+    live = LiveCloud(keep=2, bounds=((-12, -12, -2), (12, 12, 2)))
+    srv = ViewerServer(live).start()
+    try:
+        with connect(f"ws://127.0.0.1:{srv.port}/ws?w=64&h=48", open_timeout=10, max_size=2**24) as tab:
+            assert json.loads(tab.recv(timeout=10))["type"] == "hello"
+            tab.send("x" * (tab_limit + 1))
+            with pytest.raises(ConnectionClosed):
+                while True:  # (frames drawn before the message may come first)
+                    assert "exceeds the limit" not in str(tab.recv(timeout=10))  # read whole, then refused
+            assert tab.close_code == 1009
+        frame = encode_frame("points", xyz=patch(1, n=4000)[0])
+        assert len(frame) > tab_limit
+        for path in (srv.push_url, srv.push_url.replace("/push?", "/pus%68?")):
+            with connect(path, open_timeout=10) as producer:
+                producer.send(frame)
+                assert json.loads(producer.recv(timeout=10))["type"] == "ack"
+    finally:
+        srv.close()
+
+
 def test_a_warning_of_a_pushed_frame_reaches_the_user_at_the_cloud_s_next_call():
     """The cloud's "frames arrive faster" of a frame pushed over /push was warned on the server's
     thread: past the user's catch, at any moment. Now kept in ``live.warnings``, as a Player's,

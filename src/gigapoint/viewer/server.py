@@ -26,7 +26,7 @@ import struct
 import threading
 import time
 from importlib import resources
-from urllib.parse import quote, urlsplit
+from urllib.parse import quote, unquote, urlsplit
 
 from ..errors import GigapointError, warnings_kept
 from ..io.http import hidden_query
@@ -44,6 +44,7 @@ STATIC_TYPES = {
 HEAD_TIMEOUT_S = 10.0  # seconds a request's head may take, from connecting or from the previous answer
 MAX_WAITING = 256  # connections waiting for a request head at once; past it the one waiting longest is closed
 MAX_PUSHERS = 8  # /push connections at once: each may hold a frame of up to MAX_PUSH_BYTES (300 of them: 19 GB)
+TAB_WS_MAX_BYTES = P.MAX_MESSAGE * 4  # a tab's message, in bytes (its limit counts characters: up to 4 bytes each)
 LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
 CSP = (
     "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' blob: data:; "
@@ -368,12 +369,18 @@ def _head_deadline_protocol():
     connections waiting for one (one class a server: its own waiting list). uvicorn times only
     the idle wait between requests: a client sending a header byte a second held its connection
     for ever, and 1,100 of them used up the usual limit of 1,024 open files (the page no longer
-    loaded). A real client's head comes at once, so it is never the one waiting longest."""
+    loaded). A real client's head comes at once, so it is never the one waiting longest.
+
+    Its WebSockets other than ``/push`` take messages of TAB_WS_MAX_BYTES at most: uvicorn has one
+    ``ws_max_size`` for all, raised to MAX_PUSH_BYTES on a live viewer, so a tab's ``/ws`` read a
+    64 MB message whole before refusing it; now refused by its frame's header (close 1009)."""
+    import copy
     from collections import OrderedDict
 
     from uvicorn.protocols.http.h11_impl import H11Protocol
 
     waiting: OrderedDict = OrderedDict()  # protocol -> its deadline's timer, the longest waiting first
+    tab_config = []  # the server's config copied with the tab's message limit (made at the first upgrade: loaded)
 
     class HeadDeadline(H11Protocol):
         def connection_made(self, transport) -> None:
@@ -393,6 +400,16 @@ def _head_deadline_protocol():
         def connection_lost(self, exc) -> None:
             self._stop_waiting()
             super().connection_lost(exc)
+
+        def handle_websocket_upgrade(self, event) -> None:
+            # the path as the router matches it (unquoted: /pus%68 is /push); this protocol ends with the upgrade
+            path = unquote(event.target.decode("latin-1").partition("?")[0])
+            if path != "/push" and self.config.ws_max_size > TAB_WS_MAX_BYTES:
+                if not tab_config:
+                    tab_config.append(copy.copy(self.config))
+                    tab_config[0].ws_max_size = TAB_WS_MAX_BYTES
+                self.config = tab_config[0]
+            super().handle_websocket_upgrade(event)
 
         def _wait(self) -> None:
             self._stop_waiting()
@@ -451,7 +468,7 @@ class ViewerServer:
             self.app,
             log_level=log_level,
             lifespan="off",
-            ws_max_size=P.MAX_MESSAGE * 4 if self.core.push_token is None else MAX_PUSH_BYTES,  # a live cloud takes pushed frames
+            ws_max_size=TAB_WS_MAX_BYTES if self.core.push_token is None else MAX_PUSH_BYTES,  # a live cloud's /push takes frames (/ws: the tab's limit)
             ws_ping_interval=20.0,
             ws_ping_timeout=20.0,
             timeout_graceful_shutdown=2,
