@@ -157,6 +157,7 @@ def test_a_flat_base_and_a_gsd_asked_for(client):
         ({"base": [1]}, "volume: base must be a finite number, got [1]"),
         ({"gsd": 0}, "volume: gsd must be above 0"),
         ({"gsd": 0.001}, "volume: a gsd of 0.001 makes the polygon 30,000 pixels across, over 4,096: give 0.0073 or more"),
+        ({"gsd": 1e-300}, "volume: a gsd of 1e-300 makes the polygon 3e+301 pixels across, over 4,096: give 0.0073 or more"),  # (not 302 digits)
     ],
 )
 def test_bad_volume_messages_are_answered_with_an_error(client, message, error):

@@ -144,6 +144,12 @@ def _round_up(v: float) -> float:
     return math.ceil(v / step - 1e-9) * step
 
 
+def pixels_text(n: float) -> str:
+    """A count of pixels in a message: exact with thousands' commas, or past 1e15 (an absurd gsd's)
+    in three significant digits, not 300."""
+    return f"{n:,.0f}" if n < 1e15 else f"{n:.3g}"
+
+
 def image_side(name: str, v) -> int:
     """An image's width or height (``name``) as an int in 1..MAX_IMAGE_SIDE (960.0 taken as 960),
     else a one-line CameraError."""
@@ -349,8 +355,7 @@ class Camera:
         if max(width, height) > MAX_IMAGE_SIDE:
             # (a side of extent / gsd pixels takes at most that + 2: the margins' rows may add one)
             fits = _round_up(float(np.max(hi[:2] - lo[:2])) / (MAX_IMAGE_SIDE - 2))
-            size = f"{width:,}x{height:,}" if max(width, height) < 1e15 else f"{width:.3g}x{height:.3g}"  # (not 300 digits)
-            raise CameraError(f"gsd {gsd:g} makes a {size} image, over {MAX_IMAGE_SIDE:,} pixels a side: a gsd of {fits:g} or more fits")
+            raise CameraError(f"gsd {gsd:g} makes a {pixels_text(width)}x{pixels_text(height)} image, over {MAX_IMAGE_SIDE:,} pixels a side: a gsd of {fits:g} or more fits")
         left, top = first_col * gsd, top_row * gsd
         # the eye just above the highest point: depths then span little more than the cloud's
         # heights, so float32 depths give heights (``heights``) as finely as they can

@@ -28,6 +28,7 @@ from ..io.filters import PointFilter, point_filter
 from ..lod.query import is_octree, points_meeting
 from ..lod.reader import open_octree
 from ..lod.voxel_octree import VoxelOctree
+from ..render.camera import pixels_text
 from ..survey.change import SURFACE_SPACING, unit_names
 from ..survey.volume import BASES, MARGIN_PIXELS, Volume
 from . import protocol as P
@@ -89,7 +90,7 @@ def check_gsd(points, gsd: float) -> None:
         raise P.ProtocolError("volume: the polygon's points are at one x, y: it has no area")
     across = side(points) / gsd
     if across > MAX_GRID_PIXELS:
-        raise P.ProtocolError(f"volume: a gsd of {gsd:g} makes the polygon {across:,.0f} pixels across, over {MAX_GRID_PIXELS:,}: give {side(points) / MAX_GRID_PIXELS:.2g} or more")
+        raise P.ProtocolError(f"volume: a gsd of {gsd:g} makes the polygon {pixels_text(across)} pixels across, over {MAX_GRID_PIXELS:,}: give {side(points) / MAX_GRID_PIXELS:.2g} or more")
 
 
 def toe(points) -> dict:
