@@ -151,8 +151,21 @@ def test_an_octree_lists_the_classes_its_metadata_names(tmp_path, two_class_clou
     assert (listed["source"], listed["complete"], listed["classes"]) == ("metadata", True, TWO)
 
 
+def test_a_gigapoint_octree_lists_exactly_the_classes_its_class_counts_name(tmp_path, two_class_cloud):
+    """Its Classes panel listed the standard classes within its classification's range (2..6 and
+    up: 3, 4, 5 none of its points), more as nodes loaded; its per-node class counts name exactly
+    the classes held, before any node is read."""
+    gp.convert(two_class_cloud, tmp_path / "tree")
+    tree = gp.open(tmp_path / "tree")
+    assert tree.class_facts() == {"classes": [2, 6]}
+    panel = class_panel(tree)
+    assert (panel["source"], panel["complete"], panel["classes"]) == ("metadata", True, TWO)
+    assert codes(class_panel(gp.open(tmp_path / "tree", drop_classes=[6]))) == [2]
+
+
 def test_an_octree_without_a_list_offers_the_standard_classes_and_those_seen(tmp_path, two_class_cloud):
     gp.convert(two_class_cloud, tmp_path / "tree")
+    (tmp_path / "tree" / "classes.npy").unlink()  # an octree written before class counts
     tree = gp.open(tmp_path / "tree")
     assert tree.class_facts()["class_range"][0] == 2  # the lowest class held; the highest only bounded
     lo, hi = tree.class_facts()["class_range"]
@@ -176,11 +189,12 @@ def test_an_octree_opened_with_a_class_filter_lists_only_the_classes_it_keeps(tm
     core, client = connect(gp.open(tmp_path / "tree", classes=[2]))
     with client, client.websocket_connect("/ws?w=240&h=160") as ws:
         hello = receive(ws, reply("hello"))
-        assert (hello["classes"]["source"], codes(hello["classes"])) == ("standard", [2])
+        assert (hello["classes"]["source"], codes(hello["classes"])) == ("metadata", [2])  # (its class counts list 2 and 6)
         receive(ws, full_frame())  # (its nodes loaded: class 2 alone seen)
         ws.send_json({"type": "classes"})
         assert receive(ws, reply("classes"))["classes"] == TWO[:1]
     core.close_all()
+    (tmp_path / "tree" / "classes.npy").unlink()  # an octree written before class counts: its range's standard classes
     lo, hi = gp.open(tmp_path / "tree").class_facts()["class_range"]
     assert codes(class_panel(gp.open(tmp_path / "tree", drop_classes=[6, 9]))) == [c for c in range(lo, min(hi, 18) + 1) if c not in (6, 9)]
     gp.convert(two_class_cloud, tmp_path / "potree", format="potree")

@@ -304,7 +304,7 @@ class CompactOctree(OctreeCloud):
         ext_bits = int(self.ext_bits.max()) if len(self.ext_bits) else 0
         return {"ext_bits": ext_bits, "color_dtype": self._dtypes["rgba"], "attribute_ranges": self.attribute_ranges()}
 
-    def class_facts(self) -> dict:
+    def metadata_class_facts(self) -> dict:
         """Its classification's range over the octree (``attribute_ranges``: the lowest class
         held, and a bound of the highest)."""
         return known_classes(None, *self.attribute_ranges().get("classification", (None, None)))

@@ -743,8 +743,16 @@ class OctreeCloud:
         return {}
 
     def class_facts(self) -> dict:
+        """What its files tell of the LAS classes its points hold: the viewer's class toggles list
+        them before any node is read. A gigapoint octree's class counts (``classes.npy``) name
+        exactly those held; else its metadata's ``metadata_class_facts``."""
+        if self.class_counts is not None:
+            return {"classes": np.unique(self.class_counts["class"][self.class_counts["count"] > 0]).tolist()}
+        return self.metadata_class_facts()
+
+    def metadata_class_facts(self) -> dict:
         """What its metadata tells of the LAS classes its points hold (``known_classes``: the
-        readers keep it in ``meta``): the viewer's class toggles list them before any node is read."""
+        readers keep it in ``meta``)."""
         return {k: self.meta[k] for k in ("classes", "class_range") if k in self.meta}
 
     def new_arena(self, points: int) -> Arena:

@@ -2,12 +2,12 @@
 panel lists, with their ASPRS names and the classification colour mode's colours.
 
 A cloud in memory lists the classes it holds (counted once per version of its points); an
-octree those its metadata lists (an EPT schema's counts, a Potree histogram), else the ASPRS
-standard classes 0..18 (within the classification range its metadata gives: a gigapoint
-octree's), with those of the nodes loaded so far and those hidden (a progressive octree: the
-standard classes and those hidden); an octree opened with a class filter lists only the
-classes it keeps. A cloud without classification and a live cloud have the
-panel disabled, saying why.
+octree those its files list (a gigapoint octree's class counts, an EPT schema's counts, a
+Potree histogram), else the ASPRS standard classes 0..18 (within the classification range its
+metadata gives: a gigapoint octree's written before class counts), with those of the nodes
+loaded so far and those hidden (a progressive octree: the standard classes and those hidden);
+an octree opened with a class filter lists only the classes it keeps. A cloud without
+classification and a live cloud have the panel disabled, saying why.
 Unticking a class sets the ``hidden_classes`` render setting (the settings message).
 """
 

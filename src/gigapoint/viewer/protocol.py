@@ -145,7 +145,7 @@ MESSAGE_TYPES = {
     "settings",
     # the Classes panel's list (viewer/classes.py): reply {"type": "classes", "enabled", "reason":
     # "" or why not (no classification; a live cloud's refusal), "source": cloud (the
-    # classes a cloud in memory holds) | metadata (those an octree's metadata lists) | standard
+    # classes a cloud in memory holds) | metadata (those an octree's files list: class counts, metadata) | standard
     # (ASPRS 0..18, within a range its metadata gives, and the classes seen and hidden), "complete"
     # (false: the list may grow as nodes load; ask again), "classes": [{code, name, color: "#rrggbb"}]};
     # hello carries the first
