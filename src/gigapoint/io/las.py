@@ -298,12 +298,13 @@ def _read_las_header(path: Path, salvage: bool = False) -> LasHeader:
                 raise fail(path, f"corrupt LAS header: absurd {axis} offset {o!r} (expected a finite value within ±{MAX_ABS_COORDINATE:g})")
         # bounds at NaN or 1e300 were info's 300-digit extent, tile's count of 10^299 tiles, and
         # the output grid of convert -o x.las (scale nan): "x 63.7 lies beyond the LAS grid". Corrupt
-        # is what no record can reach (its int32 times the scale, plus the offset): stale bounds are
-        # read, and points honestly beyond gigapoint's reach are said as such when read.
+        # is what no record can reach (its int32 times the scale, plus the offset) beyond any
+        # coordinate gigapoint takes: stale and wrong bounds within it are read (they do not spoil
+        # an octree), and points honestly beyond ±1e12 are said as such when read.
         for k, (name, bound) in enumerate(zip(("max x", "min x", "max y", "min y", "max z", "min z"), mm)):
             s, o = scale[k // 2], offset[k // 2]
             reach = 2**31 * abs(s) * (1 + 1e-9)
-            if not math.isfinite(bound) or abs(bound - o) > reach:
+            if not math.isfinite(bound) or (abs(bound - o) > reach and abs(bound) > MAX_ABS_COORDINATE):
                 raise fail(path, f"corrupt LAS header: absurd {name} {bound!r} (its records reach {o - reach:.6g}..{o + reach:.6g})")
         # VLRs: each record's length is a u16, so walking them is bounded by offset_to_data
         vlrs = []
