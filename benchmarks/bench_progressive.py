@@ -13,7 +13,7 @@
   same points into the same tree (sort and ``split_tree``) for comparison.
 - ``insert-ab``: the insertion of this revision against ``--base``'s (its package exported as
   ``gigapoint_base``, as bench_ab.py does), alternating ``--rounds`` times in one process, both
-  orders: points/s and CPU seconds.
+  orders: points/s, CPU seconds and the memory faulted in (minor page faults).
 - ``load``: the same points written as LAZ and LAS (scan order); decoding them alone (laspy's
   records, the baseline; laspy's records with scaled xyz and colours, what a program needs of
   them; every chunk of ``gigapoint.io.read_chunks``) against ``gigapoint.open(...,
@@ -669,7 +669,7 @@ def bench_sort(n: int, batch: int) -> None:
 def bench_insert_ab(n: int, batch: int, rounds: int, base_rev: str) -> None:
     """The insertion of this revision against ``base_rev``'s (bench_ab.load_base: its package as
     ``gigapoint_base``), alternating in one process, generator and scan order: points/s and the
-    process's CPU seconds (less sensitive than wall time to a busy host)."""
+    process's CPU seconds (less sensitive than wall time to a busy host) and MB faulted in."""
     from bench_ab import load_base
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -684,21 +684,24 @@ def bench_insert_ab(n: int, batch: int, rounds: int, base_rev: str) -> None:
             x, c, at = xyz[idx], rgba[idx], {a: v[idx] for a, v in attrs.items()}
             for cls in codes.values():  # compiled (or loaded from the cache) first
                 cls("warm", cube=cube).add(x[:300_000], c[:300_000], **{a: v[:300_000] for a, v in at.items()})
-            rate, cpu = {k: [] for k in codes}, {k: [] for k in codes}
+            rate, cpu, faulted = {k: [] for k in codes}, {k: [] for k in codes}, {k: [] for k in codes}
             for r in range(rounds):
                 for k in codes if r % 2 == 0 else reversed(codes):
                     o = codes[k]("bench", cube=cube, capacity=n)
                     t, t_cpu = time.perf_counter(), time.process_time()
+                    faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
                     for s in range(0, n, batch):
                         o.add(x[s : s + batch], c[s : s + batch], **{a: v[s : s + batch] for a, v in at.items()})
                     rate[k].append(n / (time.perf_counter() - t) / 1e6)
                     cpu[k].append(time.process_time() - t_cpu)
+                    faulted[k].append((resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faults) * resource.getpagesize() / 1e6)
                     del o
             med = {k: statistics.median(v) for k, v in rate.items()}
             med_cpu = {k: statistics.median(v) for k, v in cpu.items()}
-            print(f"insert, {name}: {base_rev} {med['base']:.2f} M points/s (CPU {med_cpu['base']:.2f} s), this revision {med['new']:.2f} "
-                  f"(CPU {med_cpu['new']:.2f} s): {med['new'] / med['base']:.3f}x (CPU {med_cpu['base'] / med_cpu['new']:.3f}x), "
-                  f"medians of {rounds}, alternating")  # fmt: skip
+            med_mb = {k: statistics.median(v) for k, v in faulted.items()}
+            print(f"insert, {name}: {base_rev} {med['base']:.2f} M points/s (CPU {med_cpu['base']:.2f} s, {med_mb['base']:.0f} MB faulted), "
+                  f"this revision {med['new']:.2f} (CPU {med_cpu['new']:.2f} s, {med_mb['new']:.0f} MB): {med['new'] / med['base']:.3f}x "
+                  f"(CPU {med_cpu['base'] / med_cpu['new']:.3f}x), medians of {rounds}, alternating")  # fmt: skip
         del base
 
 
