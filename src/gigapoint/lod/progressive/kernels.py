@@ -936,7 +936,7 @@ def grow_bounds(leaf_runs, run_min, run_max, parent, point_min, point_max):
 
 @njit(inline="always")
 def _add_sums(vox_sum, v, sums, e):
-    """vox_sum[v] (u32) += sums[e] (u64: a batch's, any size), halved k times (rounded) where
+    """vox_sum[v] (u32) += sums[e] (a set's: u32 under 2^24 points, else u64), halved k times (rounded) where
     the count reaches 2^VOXEL_WEIGHT_BITS: the mean stays, the u32 sums cannot overflow."""
     n = np.uint64(vox_sum[v, 4]) + np.uint64(sums[e, 4])
     k = np.uint64(0)
@@ -949,7 +949,7 @@ def _add_sums(vox_sum, v, sums, e):
 
 @njit(cache=True)
 def set_voxel_sums(vox_sum, vid, sums):
-    """vox_sum[vid[e]] = sums[e] (u64, all the points a voxel stands for), fitted as ``_add_sums``
+    """vox_sum[vid[e]] = sums[e] (u32 or u64, all the points a voxel stands for), fitted as ``_add_sums``
     fits them (the voxels' build state rebuilt after a trim)."""
     for e in range(vid.shape[0]):
         for ch in range(5):

@@ -475,12 +475,17 @@ class _Work:
         self.keep_bytes = keep_bytes
         self.arrays: dict[str, np.ndarray] = {}
 
-    def get(self, name: str, n: int, dtype, width: int = 0) -> np.ndarray:
+    def get(self, name: str, n: int, dtype, width: int = 0, room: int = 0) -> np.ndarray:
+        """``room``: the rows later batches are expected to need, made at once where they fit
+        within ``keep_bytes`` (an array made again as it grows has its pages faulted in again)."""
         a = self.arrays.get(name)
         if a is None or len(a) < n or a.dtype != dtype:
             rows = max(n, len(a) * 3 // 2 if a is not None else 0)
+            others = self.nbytes - (a.nbytes if a is not None else 0)
+            if room > rows and self.keep_bytes is not None and others + room * max(width, 1) * np.dtype(dtype).itemsize <= self.keep_bytes:
+                rows = room
             new = pages.empty((rows, width) if width else rows, dtype)
-            kept = self.nbytes - (a.nbytes if a is not None else 0) + new.nbytes
+            kept = others + new.nbytes
             if self.keep_bytes is None or kept <= self.keep_bytes:
                 self.arrays[name] = new
             else:  # too large to keep: neither is the smaller one kept for it (no batch would use it)
@@ -491,6 +496,18 @@ class _Work:
     @property
     def nbytes(self) -> int:
         return sum(a.nbytes for a in self.arrays.values())
+
+
+_U32_SUMS_BELOW = 1 << 24  # points of a set whose voxel cells' colour sums fit u32 (255 x 2^24 < 2^32)
+_ENTRIES_PER_POINT = 1.5  # voxel cell entries a set's point makes, made room for at once (the town's: 0.2-1.3 at 8 M, 1.9 at 20 M)
+
+
+def _entry_room(st: _Set) -> int:
+    """Rows the voxel cell entries' work arrays are made with (``_Work.get``'s room): a batch in
+    no spatial order makes more entries a point as the tree deepens (8 M town points in 10^6
+    batches: 0.50, 0.54, 0.89, 1.23 M over the first four), and arrays grown to each made them
+    again, faulting their pages in again (docs/benchmarks.md, "Voxel cell entries made room for")."""
+    return int(_ENTRIES_PER_POINT * len(st.codes))
 
 
 _KEY_SORT: list = []  # "numpy" or "radix": the faster here, timed once a process on a real set's keys
@@ -1403,9 +1420,11 @@ class ProgressiveOctree:
         bins = max(1, numba.get_num_threads()) if len(st.codes) >= _PARALLEL_CELLS else 1
         tasks, group_start = np.empty(ni, np.int64), np.empty(ni * bins + 1, np.int64)
         groups = K.plan_levels(inner_runs, self.level, bins, tasks, group_start)
-        e_cell, e_local = w.get("e_cell", m, np.uint64), w.get("e_local", m, np.uint64)
-        e_first, e_node = w.get("e_first", m, np.int64), w.get("e_node", m, np.int64)
-        e_sum = w.get("e_sum", m, np.uint64, 5)  # a batch may put any number of points in one cell
+        room = _entry_room(st)
+        e_cell, e_local = w.get("e_cell", m, np.uint64, room=room), w.get("e_local", m, np.uint64, room=room)
+        e_first, e_node = w.get("e_first", m, np.int64, room=room), w.get("e_node", m, np.int64, room=room)
+        # colour sums: 255 times a set's points fits u32 under 2^24 points (20 bytes an entry, not 40); else u64
+        e_sum = w.get("e_sum", m, np.uint32 if len(st.codes) < _U32_SUMS_BELOW else np.uint64, 5, room=room)
         K.sample_runs(st.codes, st.rgba, st.order, inner_runs, leaf_runs, self._ent_start, self._ent_count, tasks, group_start, groups, bins,
                       self.level, self.leaf, self.children, self._run_lo, self._run_hi, e_cell, e_first, e_sum, e_node, e_local)  # fmt: skip
         if only is not None:
@@ -1424,7 +1443,8 @@ class ProgressiveOctree:
         m, node, cell, first, sums = self._voxel_cells(st, leaf_runs, inner_runs, only)
         if m == 0:
             return
-        vid, is_new = self._work.get("vid", m, np.int64), self._work.get("is_new", m, np.uint8)
+        room = _entry_room(st)
+        vid, is_new = self._work.get("vid", m, np.int64, room=room), self._work.get("is_new", m, np.uint8, room=room)
         n_new = K.voxel_lookup(self._hkeys, self._hvals, node, cell, vid, is_new)
         self._ensure_hash(n_new)  # room for the new voxels (a rebuilt table keeps every id found)
         next_vid = K.voxel_enter(self._hkeys, self._hvals, node, cell, self.n_voxels, vid, is_new, max(1, numba.get_num_threads()))
