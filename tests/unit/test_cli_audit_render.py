@@ -150,6 +150,19 @@ def test_stereo_distances_within_the_span_points_can_have_draw_the_pair(cli, inp
     assert drawn[..., 0].any() and drawn[..., 1:].any()  # the left eye in red, the right in green and blue
 
 
+def test_a_convergence_far_beyond_the_cloud_says_why_the_pair_is_blank(cli, inputs, tmp_path):
+    """--convergence 1e12 on a 100-unit cloud puts the automatic eyes (convergence / 30) 3.3e10
+    apart, both beside the cloud: a blank pair whose warning gave no reason (one was given
+    only for an explicit --ipd)."""
+    out = tmp_path / "s.png"
+    rc, stdout, err = cli("render", inputs / "small.las", "-o", out, "--width", "64", "--stereo", "anaglyph", "--convergence", "1e12")
+    assert rc == 0, err
+    assert err == ("warning: small.las: no point is in view of the stereo camera (the automatic ipd, 3.3e+10 world units from convergence 1e+12, "
+                   "puts each eye beside the cloud, 100 across: give a convergence near the cloud's distance, or an ipd); "
+                   "the image shows only the background\n")  # fmt: skip
+    assert lit_pixels(out).size == 0
+
+
 def test_a_huge_world_size_draws_the_largest_points_without_numpy_warnings(cli, inputs, tmp_path):
     """--point-world-size 1e300 overflowed float32: 'warning: overflow encountered in cast'."""
     out = tmp_path / "w.png"

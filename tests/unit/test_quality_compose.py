@@ -100,6 +100,12 @@ def test_an_empty_stereo_frame_warns_like_a_plain_one():
     with pytest.warns(gp.GigapointWarning, match=r"^pebble: no point is in view of the stereo camera; the image shows only the background$"):
         gp.render_frame(cloud, away, stereo="side-by-side")
     assert gp.render_frame(cloud, cam, stereo="anaglyph", ipd=0.0005).stats.visible_pixels > 100  # an ipd for its size
+    # eyes beside the pebble, their images hardly moved (a convergence far away): that said too
+    beside = r"^pebble: no point is in view of the stereo camera \(%s puts each eye beside the cloud, 0.00999 across: give %s\); the image"
+    with pytest.warns(gp.GigapointWarning, match=beside % ("ipd 1 world units", "a smaller ipd")):
+        gp.render_frame(cloud, cam, stereo="anaglyph", ipd=1.0, convergence=1e6)
+    with pytest.warns(gp.GigapointWarning, match=beside % (r"the automatic ipd, 3.3e\+04 world units from convergence 1e\+06,", "a convergence near the cloud's distance, or an ipd")):
+        gp.render_frame(cloud, cam, stereo="side-by-side", convergence=1e6)
 
 
 def test_the_default_stereo_pair_of_a_pebble_shows_it():

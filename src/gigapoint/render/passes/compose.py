@@ -28,6 +28,7 @@ from dataclasses import replace
 import numpy as np
 
 from ...core.layout import EMPTY_PIXEL
+from ...core.selection import visible_and_size
 from ...errors import GigapointWarning, SettingsError, warn
 from ..backend import get_backend
 from ..camera import MAX_IMAGE_SIDE, Camera
@@ -204,18 +205,45 @@ def stereo_frame(cloud, camera, settings, render_one) -> Frame:
         vis = np.minimum(shift_columns(frames[0].visibility, -h, EMPTY_PIXEL), shift_columns(frames[1].visibility, h, EMPTY_PIXEL))
     stats.visible_pixels = int((vis != EMPTY_PIXEL).sum())
     # an empty pair was a background image without the plain frame's warning (one eye drawn by
-    # render_one and empty has said it already); the auto ipd moves each image 1.4 % of the
-    # height at most (stereo_ipd), so only an explicit ipd is named as too wide
+    # render_one and empty has said it already)
     if stats.visible_pixels == 0 and (multi is not None or all(f.stats.visible_pixels for f in frames)):
-        wide = settings.ipd is not None and abs(h) >= w
-        moved = f"{abs(h):,} px" if abs(h) < MAX_SHIFT_PX else f"over {MAX_SHIFT_PX:g} px"
-        why = f" (each eye's image moves {moved} of {w}: ipd {ipd:g} world units is wide for this scene)" if wide else ""
+        why = _why_no_eye_sees(cloud, camera, cams, settings, ipd, h, w)
         warn(f"{cloud.name}: no point is in view of the stereo camera{why}; the image shows only the background", GigapointWarning)
     # the buffers both eyes' indices name (point_info was None for every pixel); none where an
     # octree's arena was refilled between the eyes (the first eye's indices name other points now)
     left, right = frames
     same = left.points is right.points and left.generation == right.generation
     return Frame(vis, image, stats, right.points if same else None, right.generation if same else None)
+
+
+def _why_no_eye_sees(cloud, camera, eyes, settings, ipd: float, shift: int, width: int) -> str:
+    """Why a stereo pair shows no point, in brackets, where the eye distance is why ("" where it
+    is not: a camera looking away). An explicit ipd can move each eye's image out of the picture
+    (the auto one moves it 1.4 % of the height at most, stereo_ipd). Any ipd can put both eyes
+    beside a cloud the camera itself sees: the auto one too, of a convergence far beyond the
+    cloud (convergence 1e12: eyes 3.3e10 apart; a blank pair without a reason before)."""
+    if settings.ipd is not None and abs(shift) >= width:
+        moved = f"{abs(shift):,} px" if abs(shift) < MAX_SHIFT_PX else f"over {MAX_SHIFT_PX:g} px"
+        return f" (each eye's image moves {moved} of {width}: ipd {ipd:g} world units is wide for this scene)"
+    if not _sees_box(camera, cloud.bounds) or any(_sees_box(eye, cloud.bounds) for eye in eyes):
+        return ""
+    lo, hi = cloud.bounds
+    span = float(np.max(hi - lo))
+    if settings.ipd is not None:
+        return f" (ipd {ipd:g} world units puts each eye beside the cloud, {span:.3g} across: give a smaller ipd)"
+    convergence = convergence_distance(camera, settings.convergence)
+    return (
+        f" (the automatic ipd, {ipd:.2g} world units from convergence {convergence:g}, puts each eye beside the cloud, "
+        f"{span:.3g} across: give a convergence near the cloud's distance, or an ipd)"
+    )
+
+
+def _sees_box(camera, bounds) -> bool:
+    """Whether the box ``bounds`` is in ``camera``'s view (conservatively: out only with all its corners beyond one side)."""
+    lo, hi = (np.asarray(b, np.float64).reshape(1, 3) for b in bounds)
+    view = camera.view(bounds)
+    visible, _ = visible_and_size(view.rows, lo, hi, view.width, view.height, view.near, view.far)
+    return bool(visible[0])
 
 
 def composite_frame(cloud, camera, settings, render_one) -> Frame:
