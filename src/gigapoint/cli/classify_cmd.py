@@ -84,11 +84,11 @@ def _noise_options_named(message: str) -> str:
 
 
 def _as_command(message: str) -> str:
-    """A classification's message said of the command: its keyword as the option, the command
-    for its function ("out.txt: classify writes a .las, ..." was "classify_noise writes")."""
+    """A classification's message said of the command: the command for its function ("out.txt:
+    classify writes a .las, ..." was "classify_noise writes"; main() says overwrite=True as the option)."""
     for function in ("classify_ground", "classify_noise", "height_above_ground"):
         message = message.replace(f": {function} writes ", ": classify writes ")
-    return message.replace("overwrite=True", "--overwrite")
+    return message
 
 
 def _classify_noise(inputs, output: Path, params: dict, overwrite: bool, recursive: bool, quiet: bool) -> None:
