@@ -228,17 +228,20 @@ def test_a_killed_run_resumes_its_finished_partitions(inputs, reference, client,
     _assert_identical(reference, out)
 
 
-def test_a_run_interrupted_here_starts_over_on_dask_to_the_same_bytes(inputs, reference, client, tmp_path, stop_conversion_after):
+def test_a_run_interrupted_here_starts_over_on_dask_to_the_same_bytes(inputs, reference, client, tmp_path, stop_conversion_after, monkeypatch):
     """Sets built here wrote their bit streams in place (writer.append_streams), those the Dask
     workers build keep their own: a Dask run does not take up a single-process run's state
-    (its layout differs), and nothing of it is left in the octree."""
-    out = tmp_path / "oct"
+    (its layout differs), and nothing of it is left in the octree. The warning that it starts
+    over names OUT as given, as one process does (it named the driver's absolute path)."""
+    monkeypatch.chdir(tmp_path)
+    out = Path("oct")
     stop_conversion_after(3)
     with pytest.raises(KeyboardInterrupt):
         convert(inputs, out, **OPTS)
     stop_conversion_after(None)
     assert list((out / ".partial").glob("*.stream.npy")), "the sets built here wrote their streams in place"
-    res = convert(inputs, out, client=client, **OPTS)
+    with pytest.warns(GigapointWarning, match=r"^oct: the unfinished conversion there was started with other inputs or options: starting over$"):
+        res = convert(inputs, out, client=client, **OPTS)
     assert not res.resumed
     _assert_identical(reference, out)
 

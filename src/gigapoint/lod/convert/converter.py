@@ -73,6 +73,11 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
     def output_ready(self) -> None:
         """The output folder is prepared and the state saved; the phases come next (distributed.py checks its workers here)."""
 
+    def _as_given(self, text: str) -> str:
+        """``text`` with its paths as the user gave them: as it is in one process (distributed.py's
+        driver resolves them for its workers, and says them as given again)."""
+        return text
+
     def run(self, overwrite: bool) -> ConvertResult:
         self.t0 = time.perf_counter()
         fp = self.fingerprint_key()
@@ -141,7 +146,7 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
         saved = self.dir.prepare_output(fp, overwrite)
         self.prepared = True
         if other_work is not None:  # hours of work may go: said, not done silently
-            warn(f"{self.out}: the unfinished conversion there was started {other_work}: starting over", GigapointWarning)
+            warn(self._as_given(f"{self.out}: the unfinished conversion there was started {other_work}: starting over"), GigapointWarning)
         # what OUT holds stays until the new one is complete (prepare_output let it, or atomic_open's rename for COPC)
         self.replacing = self.dir.complete or (self.format == "copc" and self.out.is_file())
         damage = (saved.get("damaged") or damaged_work_file(self.dir)) if saved is not None else None
