@@ -822,8 +822,10 @@ class OctreeCloud:
         """A new arena of ``points`` points in place of the octree's (more than it has), holding
         what it held (``Arena.take_over``)."""
         arena = self.new_arena(points)
-        if self.arena is not None and arena.holds_like(self.arena):  # (one set by hand in another layout starts empty)
+        if self.arena is not None and arena.holds_like(self.arena):
             arena.take_over(self.arena)
+        elif self.arena is not None:  # (one set by hand in another layout: empty, loading through its filter)
+            arena.show(self.arena.keep)
         self.arena = arena
         return arena
 
