@@ -349,10 +349,16 @@ def test_a_lon_lat_clip_polygon_naming_no_crs_with_to_crs_is_refused_before_a_po
         f"error: {lonlat}: x -123.1..-123, y 44..44.1 looks like longitude/latitude (RFC 7946 GeoJSON) while {autzen_path} is in "
         "NAD_1983_HARN_Lambert_Conformal_Conic (WKT): add a crs member naming its CRS, or reproject it into the files' coordinates"
     )
+    _refused_into_each_output(cli, autzen_path, ("--to-crs", UTM, "--clip-polygon", lonlat), want, tmp_path)
+
+
+def _refused_into_each_output(cli, source, options, want, tmp_path):
+    """convert into a LAZ file and a COPC file, and tile, of ``source`` with ``options``: each
+    refused with the one line ``want`` (after the warning that z keeps its feet), nothing written."""
     for out in ("out.laz", "out.copc.laz", "tiles"):
-        command = ("tile", autzen_path, "--size", 1000) if out == "tiles" else ("convert", autzen_path)
-        rc, _, err = cli(*command, "-o", tmp_path / out, "--to-crs", UTM, "--clip-polygon", lonlat, "-q")
-        assert rc != 0 and err.strip().splitlines()[-1] == want, out  # (after the warning that z keeps its feet)
+        command = ("tile", source, "--size", 1000) if out == "tiles" else ("convert", source)
+        rc, _, err = cli(*command, "-o", tmp_path / out, *options, "-q")
+        assert rc != 0 and err.strip().splitlines()[-1] == want, out
         assert not (tmp_path / out).exists() or not any((tmp_path / out).iterdir()), out
 
 
@@ -368,14 +374,11 @@ def test_a_lon_lat_clip_polygon_naming_no_crs_is_refused_over_inputs_in_a_projec
         f"error: {lonlat}: x -123.1..-123, y 44..44.1 looks like longitude/latitude (RFC 7946 GeoJSON) while {feet} is in "
         "NAD83(HARN) / Oregon GIC Lambert (ft) (EPSG:2994): add a crs member naming its CRS, or reproject it into the files' coordinates"
     )
-    for out in ("out.laz", "out.copc.laz", "tiles"):
-        command = ("tile", feet, "--size", 1000) if out == "tiles" else ("convert", feet)
-        rc, _, err = cli(*command, "-o", tmp_path / out, "--to-crs", UTM, "--from-crs", "EPSG:2994", "--clip-polygon", lonlat, "-q")
-        assert rc != 0 and err.strip().splitlines()[-1] == want, out  # (after the warning that z keeps its feet)
-        assert not (tmp_path / out).exists() or not any((tmp_path / out).iterdir()), out
+    _refused_into_each_output(cli, feet, ("--to-crs", UTM, "--from-crs", "EPSG:2994", "--clip-polygon", lonlat), want, tmp_path)
     degrees = _plain_tile(tmp_path / "degrees.las", [[-123.05, 44.01, 100.0], [-122.9, 44.2, 110.0]], scale=1e-7)
     rc, stdout, err = cli("convert", degrees, "-o", tmp_path / "kept.laz", "--to-crs", UTM, "--from-crs", "EPSG:4326", "--clip-polygon", lonlat, "-q")
     assert rc == 0 and stdout.startswith(f"{tmp_path / 'kept.laz'}: 1 point (laz)"), err
+
 
 def _densified(corners, pieces=64):
     """The ring ``corners`` with each edge cut into ``pieces``: moved into another CRS, its edges

@@ -107,3 +107,13 @@ def test_overwrite_never_clears_a_folder_that_is_no_octree(cli, inputs, home):
     rc, stdout, err = cli("convert", inputs / "small.las", "-o", home, "--overwrite")
     assert (rc, stdout, err) == (1, "", f"error: {home}: directory is not empty and is not a gigapoint/Potree output; refusing to write into it\n")
     assert files_in(home) == ["a.las", "notes.txt"]
+
+
+def test_gp_tile_refuses_an_input_folder_as_the_command_does(home):
+    """The check is the library's (gp.tile), said for Python there, for the command by its options."""
+    import gigapoint as gp
+    from gigapoint.errors import InputError
+
+    with pytest.raises(InputError, match=r"lies in .*, read with recursive=True; write the tiles elsewhere"):
+        gp.tile(home, home / "tiles", size=50, recursive=True)
+    assert files_in(home) == ["a.las", "notes.txt"]

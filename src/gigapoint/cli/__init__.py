@@ -53,6 +53,7 @@ PYTHON_HINTS = {
     "overwrite=True": "--overwrite",
     "gp.convert(..., from_crs=...)": "--from-crs",  # (io/reproject.py: a file naming no CRS)
     "gp.tile(..., from_crs=...)": "--from-crs",
+    "read with recursive=True": "read with --recursive",  # (lod/convert/tiles.py: tiles inside a folder read)
 }
 
 

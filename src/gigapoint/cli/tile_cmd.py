@@ -27,7 +27,6 @@ from .cloud_opts import (
     skipped_note,
     uncolored_note,
 )
-from .output import check_outputs_apart
 from .settings_opts import named_option
 
 
@@ -57,7 +56,6 @@ def tile(
 
     check_from_crs(from_crs, to_crs, "tile")
     point_filter = filter_options(classes, drop_classes, clip, "tile", clip_polygon)  # its errors name the options
-    check_tiles_apart(output, inputs, recursive)
     try:
         result = run(
             [str(p) for p in inputs],
@@ -89,14 +87,3 @@ def tile(
         f"points per tile: min {counts.min():,}, median {median:,.{0 if median.is_integer() else 1}f}, max {counts.max():,}; {result.seconds:.1f} s"
     )
 
-
-def check_tiles_apart(output: Path, inputs: list[Path], recursive: bool) -> None:
-    """One-line errors where the tiles' folder is an input folder, or lies in one read with
-    --recursive: the next run read its tiles as input points (`tile rec -o rec/tiles --recursive`
-    run twice: every point twice), and --overwrite replaced files it was reading."""
-    check_outputs_apart([output], inputs)
-    if recursive:
-        inside = output.resolve()
-        for folder in (p for p in inputs if p.is_dir()):
-            if inside.is_relative_to(folder.resolve()):
-                raise GigapointError(f"{output}: lies in {folder}, read with --recursive; write the tiles elsewhere (the next run would read them as input points)")

@@ -53,7 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import append_file
+from ...atomic import append_file, same_file
 from ...core.chunk import PointChunk
 from ...core.cloud import check_valid_count
 from ...errors import GigapointWarning, InputError, check_switch, counted, is_real, warn
@@ -149,6 +149,7 @@ def tile(
     if colorize is not None and not isinstance(colorize, (str, os.PathLike)):
         raise InputError(f"tile: colorize={colorize!r}: the path of an orthophoto (a GeoTIFF)")
     out = Path(out)
+    _check_apart(out, [inputs] if isinstance(inputs, (str, os.PathLike)) else inputs, recursive)
     _check_output_folder(out, overwrite)
     if recursive:
         inputs = with_subfolders([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
@@ -203,6 +204,20 @@ def _check_output_folder(out: Path, overwrite: bool) -> None:
     if held and not overwrite:
         shown = ", ".join(held[:3]) + (", ..." if len(held) > 3 else "")
         raise InputError(f"{out}: holds {len(held):,} LAS/LAZ files already ({shown}); pass overwrite=True to replace the tiles of the same names (other files are left as they are)")
+
+
+def _check_apart(out: Path, inputs, recursive: bool) -> None:
+    """One-line errors where the tiles' folder is an input folder, or lies in one read with
+    ``recursive``: the next run read its tiles as input points (`tile rec -o rec/tiles
+    --recursive` run twice: every point twice), and ``overwrite`` replaced files it was reading."""
+    folders = [Path(p) for p in inputs if isinstance(p, (str, os.PathLike)) and Path(p).is_dir()]
+    if out.exists() and any(same_file(out, folder) for folder in folders):
+        raise InputError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
+    if recursive:
+        inside = out.resolve()
+        for folder in folders:
+            if inside.is_relative_to(folder.resolve()):
+                raise InputError(f"{out}: lies in {folder}, read with recursive=True; write the tiles elsewhere (the next run would read them as input points)")
 
 
 def _check_tile_count(lo, hi, size: float, where: str) -> None:
