@@ -27,6 +27,20 @@ def counted(n: int, noun: str, plural: str | None = None) -> str:
     return f"{n:,} {noun if n == 1 else plural or noun + 's'}"
 
 
+def number_text(value) -> str:
+    """A number as a message says it: compact and exact ('2e+12', '0', '0.25': a bound such as
+    2e12 was spelled 2000000000000.0); '%g' where it reads back as the same number, else the
+    float's repr; an integer in full, anything else (a string, True, None) as its repr."""
+    import numbers
+
+    if is_whole_number(value):
+        return str(int(value))
+    if not isinstance(value, numbers.Real) or isinstance(value, bool):
+        return repr(value)
+    compact = f"{value:g}"
+    return compact if float(compact) == value else repr(float(value))
+
+
 def is_whole_number(value) -> bool:
     """Whether ``value`` is an integer (Python's or numpy's, not a bool): the test behind the
     one-line errors about counts, sizes and indices (3.5 was read as 3, True as 1)."""

@@ -71,10 +71,12 @@ def inputs(tmp_path_factory):
         (["render", "{in}/small.las", "-o", "{out}/x.png", "--camera", "eye=1,2,3 target=1,2,3"], "--camera: camera eye and target are the same point"),
         (["render", "{in}/small.las", "-o", "{out}/x.png", "--camera", "eye=nan,0,10 target=0,0,0"], "--camera: eye needs 3 finite number(s), got 'nan,0,10'"),
         (["render", "{in}/small.las", "-o", "{out}/x.png", "--camera", "eye=0,0,10 target=0,0,0 up=0,0,0"], "--camera: camera up vector is zero"),
-        (["render", "{in}/small.las", "-o", "{out}/x.png", "--stereo", "anaglyph", "--ipd", "nan"], "--ipd: ipd must be a number in [0.0, 2000000000000.0], got nan"),
+        (["render", "{in}/small.las", "-o", "{out}/x.png", "--stereo", "anaglyph", "--ipd", "nan"], "--ipd: ipd must be a number in [0, 2e+12], got nan"),
+        # the bound and the value were said in full ('[0.0, 2000000000000.0], got 10000000000000.0')
+        (["render", "{in}/small.las", "-o", "{out}/x.png", "--stereo", "anaglyph", "--ipd", "1e13"], "--ipd: ipd must be a number in [0, 2e+12], got 1e+13"),
         # the auto eye distance (convergence / 30) put the eyes 3e298 apart: a blank image and a warning without a reason
         (["render", "{in}/small.las", "-o", "{out}/x.png", "--stereo", "anaglyph", "--convergence", "1e300"],
-         "--convergence: convergence must be a number in (0.0, 2000000000000.0], got 1e+300"),
+         "--convergence: convergence must be a number in (0, 2e+12], got 1e+300"),
         (["render", "{in}/small.las", "-o", "{out}/v.mp4", "--turntable", "0"], "--turntable: number of frames must be an integer from 1 to 100,000, got 0"),
         (["render", "{in}/small.las", "-o", "{out}/x.png", "--point-size", "0"], "--point-size: point_size must be an integer in [1, 64], got 0"),
         (["render", "{in}/small.las", "-o", "{out}/x.png", "--point-budget", "0"], "--point-budget: point_budget must be an integer >= 1, got 0"),
@@ -92,7 +94,7 @@ def inputs(tmp_path_factory):
         (["view", "--demo", "0"], "--demo: point count must be in 1..2e9, got 0"),
     ],
     ids=["camera-eye-1e300", "camera-target-1e13", "camera-distance-1e300", "fps-1e-9", "gsd-1e200", "gsd-1e-300", "bench-points-1e99",
-         "fov-0", "fov-nan", "width-0", "height-1e9", "eye-is-target", "eye-nan", "up-zero", "ipd-nan", "convergence-1e300", "turntable-0", "point-size-0",
+         "fov-0", "fov-nan", "width-0", "height-1e9", "eye-is-target", "eye-nan", "up-zero", "ipd-nan", "ipd-1e13", "convergence-1e300", "turntable-0", "point-size-0",
          "point-budget-0", "gsd-nan", "missing", "zero-bytes", "png-as-laz", "all-nan", "no-rows", "unknown-suffix", "no-folder",
          "output-is-input", "demo-points-0", "view-demo-0"],
 )  # fmt: skip

@@ -114,8 +114,20 @@ def test_new_fields_appear_in_the_viewer_schema():
     assert "glint_passes" not in schema  # viewer=False
     s = P.apply_settings(Extended(), {"glint": "soft", "sparkle_gain": 1, "halo_range": [0, 3]})
     assert (s.glint, s.sparkle_gain, s.halo_range) == ("soft", 1, (0.0, 3.0))
-    with pytest.raises(P.ProtocolError, match=r"sparkle_gain must be a number in \[0.25, 7.5\], got 9.0$"):
+    with pytest.raises(P.ProtocolError, match=r"sparkle_gain must be a number in \[0.25, 7.5\], got 9$"):
         P.apply_settings(Extended(), {"sparkle_gain": 9})
+
+
+def test_range_messages_say_numbers_compactly_and_exactly():
+    """A bound of 2e12 was said '2000000000000.0' (and --ipd 1e13 '10000000000000.0'): numbers read
+    '%g' short where that is the same number, in full where '%g' would round them."""
+    for value, said in ((1e13, "1e+13"), (-0.5, "-0.5"), (-123456789.5, "-123456789.5"), (-1 / 3, "-0.3333333333333333"), ("far", "'far'")):
+        with pytest.raises(SettingsError, match=rf"^ipd must be a number in \[0, 2e\+12\], got {re.escape(said)}$"):
+            RenderSettings(ipd=value)
+    with pytest.raises(SettingsError, match=r"^convergence must be a number in \(0, 2e\+12\], got 0$"):
+        RenderSettings(convergence=0.0)
+    with pytest.raises(SettingsError, match=r"^point_size must be an integer in \[1, 64\], got 1000000000000$"):
+        RenderSettings(point_size=10**12)
 
 
 def test_new_fields_are_validated_from_type_and_metadata():
@@ -243,7 +255,7 @@ def test_a_bad_value_names_its_option(spec, tmp_path, capsys):
 
 def test_text_a_number_option_cannot_read_is_a_one_line_error_too(tmp_path, capsys):
     assert main(["render", str(tmp_path / "missing.npy"), "-o", str(tmp_path / "x.png"), "--edl-strength", "lots"]) == 1
-    assert capsys.readouterr().err == "error: --edl-strength: edl_strength must be a number in [0.0, 10000.0], got 'lots'\n"
+    assert capsys.readouterr().err == "error: --edl-strength: edl_strength must be a number in [0, 10000], got 'lots'\n"
 
 
 def test_image_size_errors_name_their_option(tmp_path, capsys):

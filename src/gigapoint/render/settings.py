@@ -24,7 +24,7 @@ import numpy as np
 
 from ..core.classes import parse_classes
 from ..core.coords import MAX_ABS_COORDINATE
-from ..errors import SettingsError
+from ..errors import SettingsError, number_text
 
 # --- the choices (render/colors.py derives COLOR_MODES and COLORMAPS from these) ----------------------
 Backend = Literal["auto", "cpu", "wgpu"]
@@ -353,11 +353,11 @@ def _number(name, value, lo=None, hi=None, integer=False, lo_open=False):
         ok = value <= hi
     if not ok:
         rng = (
-            f" in {'(' if lo_open else '['}{lo}, {hi}]"
+            f" in {'(' if lo_open else '['}{number_text(lo)}, {number_text(hi)}]"
             if hi is not None
-            else (f" {'>' if lo_open else '>='} {lo}" if lo is not None else "")
+            else (f" {'>' if lo_open else '>='} {number_text(lo)}" if lo is not None else "")
         )
-        raise SettingsError(f"{name} must be a{'n integer' if integer else ' number'}{rng}, got {value!r}")
+        raise SettingsError(f"{name} must be a{'n integer' if integer else ' number'}{rng}, got {number_text(value)}")
 
 
 def _range(name, v) -> tuple[float, float]:
