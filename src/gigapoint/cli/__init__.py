@@ -92,6 +92,29 @@ def _bad_value(exc) -> str:
     return f"{error['input']!r} is not {wanted.split(', unable to parse')[0]}"
 
 
+def _close_options(unknown: str, ctx) -> list[str]:
+    """The command's long options ``unknown`` (an option it lacks) is likely a typo of, best
+    first, at most three: click suggested any with difflib's ratio over 0.6 ('--bogus': 'Possible
+    options: --gsd'); here 0.75 ('--outptu': --output, '--ips': --ipd) or options it begins
+    ('--point': --point-size, --point-shape, --point-budget)."""
+    import difflib
+
+    shown = [param for param in ctx.command.get_params(ctx) if param.param_type_name == "option" and not param.hidden]
+    options = {opt for param in shown for opt in (*param.opts, *param.secondary_opts) if opt.startswith("--")}
+    ratio = {opt: difflib.SequenceMatcher(None, unknown, opt).ratio() for opt in options}
+    close = [opt for opt in options if ratio[opt] >= 0.75 or len(unknown) >= 5 and opt.startswith(unknown)]
+    # ties (--ips: --ipd and --fps) put the option sharing more of its start first
+    return sorted(close, key=lambda opt: (-ratio[opt], -len(os.path.commonprefix([unknown, opt])), opt))[:3]
+
+
+def _did_you_mean(exc) -> str:
+    """'; did you mean --output?' after an unknown long option where one is close (``_close_options``), else ''."""
+    close = _close_options(exc.option_name, exc.ctx) if exc.ctx is not None and exc.option_name.startswith("--") else []
+    if not close:
+        return ""
+    return f"; did you mean {close[0] if len(close) == 1 else ', '.join(close[:-1]) + ' or ' + close[-1]}?"
+
+
 def usage_line(exc, argv: list[str]) -> str:
     """A usage error (an unknown option, a value of the wrong type, a missing option or argument)
     in one line naming the command and the option: click printed the usage, a hint and then the
@@ -104,7 +127,8 @@ def usage_line(exc, argv: list[str]) -> str:
     command = exc.ctx.command_path if exc.ctx is not None else "gigapoint" + (f" {name}" if name in COMMAND_MODULES else "")
     param = exc.param if isinstance(exc, errors.BadParameter) else None
     if param is None:  # 'No such option: --bogus', 'Missing argument ...' without its parameter
-        problem = exc.format_message()
+        # (click's suggestions for an unknown option, 'Possible options: --gsd' for --bogus, replaced by close ones)
+        problem = exc.message + _did_you_mean(exc) if isinstance(exc, errors.NoSuchOption) else exc.format_message()
         problem = problem[:1].lower() + problem[1:]
     elif isinstance(exc, errors.MissingParameter):
         problem = f"missing {param.param_type_name} {_param_name(param)}"
