@@ -105,7 +105,7 @@ def test_bench_out_makes_its_folder(tmp_path, cli):
 def test_turntable_errors_name_their_options(cloud_file, tmp_path, cli):
     video = tmp_path / "turntable.mp4"
     rc, _, err = cli("render", cloud_file, "-o", video, "--turntable", 3, "--fps", 0)
-    assert (rc, err) == (1, "error: --fps: video fps must be a number in [0.01, 1000], got 0.0\n")
+    assert (rc, err) == (1, "error: --fps: video fps must be a number in [0.01, 1000], got 0\n")
     rc, _, err = cli("render", cloud_file, "-o", video, "--turntable", 0)
     assert (rc, err) == (1, "error: --turntable: number of frames must be an integer from 1 to 100,000, got 0\n")
     video.write_bytes(b"mine")  # a file named turntable.mp4 is not the --turntable option

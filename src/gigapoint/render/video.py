@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_write
-from ..errors import GigapointError, check_switch, check_whole, is_real
+from ..errors import GigapointError, check_switch, check_whole, is_real, number_text
 from .camera import Camera, auto_view, image_side, sample_points
 from .settings import RenderSettings
 
@@ -62,7 +62,7 @@ def turntable_cameras(
     width, height = image_side("width", width), image_side("height", height)  # before width / height divides
     for name, v, lo, hi in (("pitch", pitch, -90, 90), ("start_yaw", start_yaw, -1e6, 1e6)):  # 100: over the top, upside down
         if v is not None and not (is_real(v) and lo <= v <= hi):
-            raise GigapointError(f"turntable: {name} must be None or degrees in {lo}..{hi:g}, got {v!r}")
+            raise GigapointError(f"turntable: {name} must be None or degrees in {lo}..{hi:g}, got {number_text(v)}")
     points = sample_points(cloud)
     start_yaw = auto_view(points, width / height)[0] if start_yaw is None else start_yaw
     yaws = start_yaw + 360.0 * np.arange(n_frames) / n_frames
@@ -191,7 +191,7 @@ def _check_path(path, overwrite: bool = False) -> Path:
 
 def _check_fps(fps) -> None:
     if not (is_real(fps) and MIN_FPS <= fps <= MAX_FPS):  # "a": a TypeError
-        raise GigapointError(f"video fps must be a number in [{MIN_FPS:g}, {MAX_FPS}], got {fps!r}")
+        raise GigapointError(f"video fps must be a number in [{MIN_FPS:g}, {MAX_FPS:g}], got {number_text(fps)}")
 
 
 def render_flythrough(

@@ -20,7 +20,7 @@ import json
 import math
 import struct
 
-from ..errors import GigapointError
+from ..errors import GigapointError, number_text
 from ..render.camera import VIEWS
 from ..render.settings import RenderSettings, SettingSpec, help_text, parse_color, settings_fields
 
@@ -45,7 +45,7 @@ def number(msg: dict, key: str, lo: float, hi: float, default=None) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or (isinstance(v, float) and not math.isfinite(v)):
         raise ProtocolError(f"{msg.get('type')}: {key} must be a finite number, got {v!r}"[:200])
     if not lo <= v <= hi:  # ints compared exactly: math.isfinite(10**400), a JSON integer, raised OverflowError
-        raise ProtocolError(f"{msg.get('type')}: {key} must be in [{lo:g}, {hi:g}], got {v!r}"[:200])
+        raise ProtocolError(f"{msg.get('type')}: {key} must be in [{lo:g}, {hi:g}], got {number_text(v)}"[:200])
     return float(v)
 
 
