@@ -59,10 +59,12 @@ SCHEMA = [
 ]
 
 
-def write_ept(folder: Path, scene: dict, data_type: str, page_level: int | None = 2, extra: tuple = ()) -> Path:
+def write_ept(folder: Path, scene: dict, data_type: str, page_level: int | None = 2, extra: tuple = (), node_scales: dict | None = None) -> Path:
     """An EPT dataset of ``scene`` in ``folder``; nodes at ``page_level`` that have children
     head hierarchy files of their own. ``extra``: (schema entry, stored values of every point)
-    of further dimensions (in a laszip node, LAS extra bytes of the same name)."""
+    of further dimensions (in a laszip node, LAS extra bytes of the same name, given the
+    (scale, offset) of ``node_scales`` in the extra-bytes VLR where it names them)."""
+    node_scales = node_scales or {}
     folder.mkdir(parents=True)
     (folder / "ept-data").mkdir()
     (folder / "ept-hierarchy").mkdir()
@@ -85,13 +87,15 @@ def write_ept(folder: Path, scene: dict, data_type: str, page_level: int | None 
             header = laspy.LasHeader(point_format=7, version="1.4")
             header.scales, header.offsets = [SCALE] * 3, offsets
             for d, _ in extra:
-                header.add_extra_dim(laspy.ExtraBytesParams(d["name"], dt[d["name"]]))
+                scaled = d["name"] in node_scales
+                scale, offset = (np.array([v]) for v in node_scales[d["name"]]) if scaled else (None, None)
+                header.add_extra_dim(laspy.ExtraBytesParams(d["name"], dt[d["name"]], scales=scale, offsets=offset))
             las = laspy.LasData(header)
             las.X, las.Y, las.Z = np.rint((xyz[idx] - offsets) / SCALE).astype(np.int32).T
             las.red, las.green, las.blue = scene["rgb"][idx].T
             las.intensity, las.classification = scene["attrs"]["intensity"][idx], scene["attrs"]["classification"][idx]
             for d, v in extra:
-                las[d["name"]] = v[idx]
+                las.points.array[d["name"]] = v[idx]  # as stored (las[name] = ... unscales by the VLR's scale)
             las.write(str(folder / "ept-data" / f"{name}.laz"))
     keys = set(nodes)
     level = {k: (k.bit_length() - 1) // 3 for k in keys}
@@ -412,6 +416,32 @@ def test_ept_dimensions_beyond_las_are_attributes(scene, tmp_path, data_type):
     assert "OriginId" in info["attributes"] and "Reflectance" in info["attributes"]
     assert "OriginId, Reflectance, classification" in format_info(info)
 
+
+
+@pytest.mark.parametrize(
+    ("data_type", "in_schema", "in_node"),
+    [("laszip", False, True), ("laszip", True, True), ("laszip", True, False), ("binary", True, False)],
+    ids=["laszip-node-vlr-only", "laszip-schema-and-node-vlr", "laszip-schema-only", "binary-schema"],
+)
+def test_an_ept_extra_dimension_is_scaled_once(tmp_path, data_type, in_schema, in_node):
+    """A scaled extra dimension of a laszip node whose extra-bytes VLR gives the scale (as laspy
+    and PDAL read it) came back as whole numbers (-14 for -14.51: laspy's scaled values cast to
+    the schema's int16) when ept.json gave none, and scaled twice (-5.1451) when ept.json gave
+    the same: it is scaled once wherever the scale is given, a float64 attribute from the open."""
+    from gigapoint.io import format_info
+    from gigapoint.lod import octree_info
+
+    scene = make_scene(n=3000, seed=5)
+    stored = np.random.default_rng(4).integers(-2000, 2000, len(scene["xyz"])).astype(np.int16)
+    entry = {"name": "Reflectance", "type": "signed", "size": 2, **({"scale": 0.01, "offset": -5.0} if in_schema else {})}
+    d = write_ept(tmp_path / "e", scene, data_type, extra=[(entry, stored)], node_scales={"Reflectance": (0.01, -5.0)} if in_node else None)
+    c = gp.open(d)
+    c.load_hierarchy()
+    for i in np.flatnonzero(c.counts > 0).tolist():
+        p = c.node_points(i)
+        assert p["Reflectance"].dtype == np.float64  # (the dtype fixed at open: whole numbers were cast to it)
+        np.testing.assert_allclose(p["Reflectance"], stored[scene["nodes"][int(c.keys[i])]] * 0.01 - 5.0, rtol=0, atol=1e-9)
+    assert "Reflectance, classification, intensity" in format_info(octree_info(d))
 
 
 def test_an_ept_count_is_its_hierarchys_once_read(broken, scene):

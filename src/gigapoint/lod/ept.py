@@ -7,7 +7,8 @@ LAZ file ``ept-data/d-x-y-z.laz``; ``binary``: the schema's dimensions packed in
 little-endian, ``ept-data/d-x-y-z.bin``; ``zstandard``: binary compressed with Zstandard,
 ``ept-data/d-x-y-z.zst``, read with the zstandard package), ``hierarchyType`` (``json``), ``schema`` (name, type
 signed/unsigned/float, size, scale and offset per dimension; those beyond the LAS fields,
-Entwine's OriginId, are attributes under their own names) and ``srs`` (wkt, authority,
+Entwine's OriginId, are attributes under their own names, scaled once: by a laszip node's
+extra-bytes VLR where it scales them, else by the schema) and ``srs`` (wkt, authority,
 horizontal). The hierarchy: ``ept-hierarchy/0-0-0-0.json`` maps node names to point counts,
 -1 for a node whose subtree is in ``ept-hierarchy/<name>.json``, read when a frame draws it
 (voxel_octree.py).
@@ -66,6 +67,8 @@ def _srs_text(srs) -> str | None:
 
 
 MAX_NODE_POINTS = 2**40  # a node's point count beyond this is a damaged hierarchy, not a node
+ROOT_HEAD_READ = 64 * 1024  # the root node's LAS header and VLRs, read at open (_root_node_scales)
+MAX_ROOT_HEAD = 16 * 1024 * 1024  # VLRs longer than this: a damaged header, not read at open
 
 
 def _class_meta(schema: list[dict]) -> dict:
@@ -125,6 +128,9 @@ class EptCloud(VoxelOctree):
         check_grid(name, "ept.json schema", [self._scales[a][0] for a in "XYZ"], [self._scales[a][1] for a in "XYZ"])
         cube_min, edge = b[:3], float(np.max(b[3:] - b[:3]))
         lo, hi = tight_bounds(name, "ept.json (boundsConforming, bounds)", tight[:3], tight[3:], cube_min, edge, self.coordinate_step)
+        if self.data_type == "laszip" and any(not scaled for _, scaled in self._extras.values()):
+            node_scaled = self._root_node_scales()
+            self._attr_dtypes.update({a: np.dtype(np.float64) for a, (dim, _) in self._extras.items() if dim in node_scaled})
         cloud_meta = {
             "format": "ept",
             "points": n_points,
@@ -164,7 +170,8 @@ class EptCloud(VoxelOctree):
             self._attr_dtypes.update(dict.fromkeys(CLASS_FLAGS, np.dtype(np.uint8)))
         # the other dimensions (Entwine's OriginId, a source's extra bytes) are attributes under
         # their own names, as the LAS and COPC readers read extra bytes; a laszip node holds
-        # them as LAS extra bytes. Scaled where the schema gives a scale or offset.
+        # them as LAS extra bytes. Scaled where the schema gives a scale or offset (a laszip
+        # node's extra-bytes VLR may scale them too: _decode).
         self._extras: dict[str, tuple[str, bool]] = {}  # attribute -> (dimension, scaled)
         for d in schema:
             name = safe_attribute_name(d["name"])
@@ -173,6 +180,23 @@ class EptCloud(VoxelOctree):
             scaled = "scale" in d or "offset" in d
             self._extras[name] = (d["name"], scaled)
             self._attr_dtypes[name] = np.dtype(np.float64) if scaled else self.record.fields[d["name"]][0]
+
+    def _root_node_scales(self) -> dict[str, tuple[float, float]]:
+        """``_node_scales`` of the root node's LAZ, read from its head: the attribute dtypes are
+        fixed at open, and a laszip node's extra-bytes VLR may scale a dimension the schema does
+        not (floats then). {} where the root node's file is missing (a root of no points) or
+        has no readable LAS header (said when a frame decodes it)."""
+        import laspy
+
+        tile = self.source.sibling(self._node_path("0-0-0-0"))
+        try:
+            head = tile.read_head(ROOT_HEAD_READ)
+            data_start = int.from_bytes(head[96:100], "little") if len(head) >= 100 else 0
+            if len(head) < data_start <= MAX_ROOT_HEAD:  # (VLRs beyond the first read: a long WKT)
+                head = tile.read_head(data_start)
+            return _node_scales(laspy.LasHeader.read_from(io.BytesIO(head)))
+        except (InputError, laspy.errors.LaspyException, ValueError):
+            return {}
 
     # -- VoxelOctree
     def _fetch_pages(self, locators: list) -> list[bytes]:
@@ -265,17 +289,32 @@ class EptCloud(VoxelOctree):
         if "scan_angle_rank" in dims:  # formats 0-5 (Entwine's): degrees
             attrs["scan_angle"] = scan_angle_units(pts["scan_angle_rank"])
         attrs.update({a: np.asarray(pts[a]) for a in CLASS_FLAGS if a in self._attr_dtypes and a in dims})
-        # the extra dimensions: the node's LAS extra bytes of the same names (absent ones: zeros)
-        attrs.update({a: self._extra_values(dim, scaled, pts[dim]) for a, (dim, scaled) in self._extras.items() if dim in dims})
+        # the extra dimensions: the node's LAS extra bytes of the same names (absent ones: zeros),
+        # as stored (laspy's pts[dim] is already scaled where the VLR scales it: scaled twice)
+        node_scaled = _node_scales(header)
+        attrs.update(
+            {a: self._extra_values(dim, scaled, raw[dim], node_scaled.get(dim)) for a, (dim, scaled) in self._extras.items() if dim in dims}
+        )
         return {"xyz": xyz, "rgb": rgb, "attributes": attrs}
 
-    def _extra_values(self, dim: str, scaled: bool, stored) -> np.ndarray:
-        """An extra dimension's values: as stored, or times the schema's scale plus its offset
-        where it gives them (``_schema``)."""
-        if not scaled:
+    def _extra_values(self, dim: str, scaled: bool, stored, node_scale: tuple[float, float] | None = None) -> np.ndarray:
+        """An extra dimension's stored values scaled once: by ``node_scale`` (a laszip node's
+        extra-bytes VLR: how its bytes are stored, as laspy and PDAL read them), else by the
+        schema's scale and offset where it gives them (``_schema``), else as stored."""
+        if node_scale is None and not scaled:
             return np.asarray(stored)
-        scale, offset = self._scales[dim]
+        scale, offset = node_scale or self._scales[dim]
         return np.asarray(stored, np.float64) * scale + offset
+
+
+def _node_scales(header) -> dict[str, tuple[float, float]]:
+    """{dimension: (scale, offset)} of the extra bytes a LAS header's extra-bytes VLR gives a
+    scale or offset (one value a point; laspy's missing scale is 1, offset 0)."""
+    out = {}
+    for d in header.point_format.extra_dimensions:
+        if d.num_elements == 1 and (d.scales is not None or d.offsets is not None):
+            out[d.name] = (1.0 if d.scales is None else float(d.scales[0]), 0.0 if d.offsets is None else float(d.offsets[0]))
+    return out
 
 
 def open_ept(path_or_url) -> EptCloud:
