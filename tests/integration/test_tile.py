@@ -278,14 +278,16 @@ def test_a_point_on_a_decimal_edge_is_placed_in_integers_on_its_las_grid(scale, 
     assert buffered.near(at + offset, np.full(4, 4 + start // steps)).tolist() == [True, False, True, False]
 
 
-def test_edges_between_grid_lines_are_taken_at_the_nearest_line():
-    """A size of no whole number of grid steps: an edge counts as on the grid line nearest it
-    (within half a step), a halfway one as on the line above."""
+def test_edges_between_grid_lines_place_points_by_their_stored_positions():
+    """A size of no whole number of grid steps: a point is in the tile whose square holds its
+    position as stored (was: an edge counted as on the grid line nearest it, so x = 0.12 was in
+    tile 0.123..0.246, below its edge)."""
     X = np.array([11, 12, 13, 24, 25])
-    assert TileAxis(0.123, 0.0, 0.01, 0.0).index(X * 0.01).tolist() == [0, 1, 1, 1, 2]  # 0.12 is 0.003 below 0.123
-    assert TileAxis(0.125, 0.0, 0.01, 0.0).index(X * 0.01).tolist() == [0, 0, 1, 1, 2]  # 0.125: halfway, 0.13 starts tile 1
+    assert TileAxis(0.123, 0.0, 0.01, 0.0).index(X * 0.01).tolist() == [0, 0, 1, 1, 2]  # 0.12 is 0.003 below 0.123
+    assert TileAxis(0.125, 0.0, 0.01, 0.0).index(X * 0.01).tolist() == [0, 0, 1, 1, 2]  # 0.125: between 0.12 and 0.13
     assert TileAxis(0.125, 0.0, 0.01, 0.005).index(X * 0.01 + 0.005).tolist() == [0, 1, 1, 1, 2]  # offset off the grid from 0: 0.125 on the edge
-    assert TileAxis(0.1, 0.0).index(np.array([0.7])).tolist() == [6]  # without a grid: as floats place it (tile_index)
+    # positions off the grid (reprojected): 0.1249, above the edge 0.123, is stored as 0.12, below it
+    assert TileAxis(0.123, 0.0, 0.01, 0.0).index(np.array([0.1249, 0.1251])).tolist() == [0, 1]
 
 
 def test_tiles_of_a_decimal_size_hold_the_points_on_their_edges_and_buffers(tmp_path):
@@ -350,3 +352,55 @@ def test_a_run_killed_as_its_tiles_move_into_place_leaves_no_folder_that_looks_w
     whole = gp.tile(autzen_path, tmp_path / "whole", 500)
     assert shown is None or shown == sorted(p.name for p in whole.tiles)
     assert shown == (None if killed_at == 1 else sorted(p.name for p in whole.tiles))  # one move: the folder itself
+
+
+def _check_tiles_hold_their_stored_points(res, size, xyz):
+    """Each tile's own points (not its buffer's), as laspy reads them back, lie in its half-open
+    square (the corner its name gives), and the tiles together hold each of ``xyz`` once, as the
+    grid stores it."""
+    stored = []
+    for path in res.tiles:
+        written = laspy.read(str(path))
+        own = ~np.asarray(written.overlap, bool)
+        xmin, ymin = (float(c) for c in path.stem.split("_")[-2:])
+        x, y = np.asarray(written.x)[own], np.asarray(written.y)[own]
+        assert np.all((xmin <= x) & (x < xmin + size) & (ymin <= y) & (y < ymin + size)), (path.name, x.min(), x.max(), y.min(), y.max())
+        stored.append(np.column_stack([written.X, written.Y, written.Z])[own])
+        scale, offset = written.header.scales, written.header.offsets
+    stored, wanted = np.concatenate(stored), np.rint((xyz - offset) / scale).astype(np.int64)
+    assert np.array_equal(stored[np.lexsort(stored.T)], wanted[np.lexsort(wanted.T)])
+
+
+@pytest.mark.parametrize("suffix", [".npy", ".xyz"])
+def test_float_points_just_below_an_edge_are_stored_in_the_tile_that_holds_them(tmp_path, suffix):
+    """Points of float files are stored on a grid made for the run (a millimetre here): one less
+    than half a step below an edge is stored on it, and so belongs to the tile above (was: placed
+    by its float, it sat on the lower tile's upper edge, outside its square)."""
+    edges = np.array([10.0, 20.0])
+    near = np.concatenate([edges, edges - 1e-7, edges - 0.0004, edges - 0.0006, edges + 0.0004])  # at, just below, within half a step, beyond it
+    x = np.concatenate([near, np.full(len(near), 5.0), [0.0, 99.5]])  # (over 65.5 across: a millimetre grid)
+    y = np.concatenate([np.full(len(near), 5.0), near, [0.0, 99.5]])
+    xyz = np.column_stack([x, y, np.arange(len(x), dtype=np.float64)])
+    path = tmp_path / f"pts{suffix}"
+    if suffix == ".npy":
+        np.save(path, xyz)
+    else:
+        np.savetxt(path, xyz, fmt="%.10f")
+    res = gp.tile(path, tmp_path / "tiles", 10)
+    assert list(laspy.read(str(res.tiles[0])).header.scales) == [0.001] * 3
+    _check_tiles_hold_their_stored_points(res, 10.0, xyz)
+    assert res.points == len(xyz)
+
+
+def test_las_points_between_edges_off_their_grid_are_in_the_tile_holding_their_stored_position(tmp_path):
+    """A size of no whole number of grid steps (0.123 on a centimetre grid): x = 0.12 lies below
+    the edge 0.123 and is in tile 0 (was: the edge taken at the nearest grid line, 0.12, so tile
+    0.123 held x = 0.12, outside its square; and buffers reached half a step further)."""
+    X = np.arange(0, 100)
+    src = _line_of_points(tmp_path / "line.las", 0.01, 0.0, X)
+    res = gp.tile(src, tmp_path / "tiles", 0.123, buffer=0.01, format="las")
+    _check_tiles_hold_their_stored_points(res, 0.123, np.column_stack([X * 0.01, np.zeros(100), X * 0.01]))
+    for i, path in enumerate(res.tiles):  # the buffer: within 0.01 of the square, edges included, as stored
+        written = laspy.read(str(path))
+        want = np.flatnonzero((X * 0.01 >= i * 0.123 - 0.01) & (X * 0.01 <= (i + 1) * 0.123 + 0.01))
+        assert np.array_equal(np.asarray(written.X), want), path.name

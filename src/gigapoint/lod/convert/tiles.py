@@ -4,9 +4,10 @@ PDAL's filters.splitter), for processing pipelines and delivery.
 Tiles are squares of edge ``size`` in x and y on a grid anchored at coordinate 0: tile (i, j)
 holds the points of [i·size, (i+1)·size) x [j·size, (j+1)·size), any z, and is named
 ``<name>_<xmin>_<ymin>.laz`` after its lower-left corner (lastile's convention). A point is
-placed by the position its tile stores, on the LAS grid, in integers (``TileAxis``): one on an
-edge always goes to the tile that starts there (x = 0.7 with a size of 0.1: tile 0.7, where
-floats said 0.7 / 0.1 = 6.999999999999999), as lastile places it. Only tiles
+placed by the position its tile stores, on the LAS grid (``TileAxis``), so every tile's stored
+points lie in its square: one on an edge always goes to the tile that starts there (x = 0.7 with
+a size of 0.1: tile 0.7, where floats said 0.7 / 0.1 = 6.999999999999999), as lastile places
+it, and a float position less than half a grid step below an edge, stored on it, too. Only tiles
 holding points of their own are written. ``buffer``: a tile also holds the points within that
 distance of its square (in x and y: its square grown by ``buffer`` on every side, edges
 included), each flagged in the LAS 1.4 "overlap" bit of its classification flags, as lastile
@@ -16,8 +17,8 @@ are 0 otherwise.
 
 Every tile is written as ``convert -o x.laz`` writes its one file (to_file.PointFiles): the
 first CRS named, a LAS grid holding every input's points exactly (one for all the tiles of a
-run: points without a grid, of float files, get one made once from all of them, so that
-merging tiles back moves no point), the attributes all inputs have, colours as each file
+run: points without a grid, of float files, get one made once from all of them, in a pass
+over them before they are tiled, so that merging tiles back moves no point), the attributes all inputs have, colours as each file
 stored them; ``to_crs``: their points moved into that CRS as they are read (io/reproject.py),
 so tiles, their size, buffer and clip box are in its coordinates; ``colorize``: their colours
 from an orthophoto's pixels, after that (io/colorize.py).
@@ -56,7 +57,7 @@ import numpy as np
 from ...atomic import append_file, same_file
 from ...core.chunk import PointChunk
 from ...core.cloud import check_valid_count
-from ...errors import GigapointWarning, InputError, check_switch, counted, is_real, warn
+from ...errors import GigapointWarning, InputError, check_switch, counted, is_real, warn, warnings_kept
 from ...io import with_subfolders
 from ...io.colorize import open_colorization
 from ...io.filters import point_filter
@@ -124,8 +125,8 @@ def tile(
     ``out`` is made if missing; one holding LAS/LAZ files already is refused without
     ``overwrite``, which replaces the tiles of this run's names and leaves every other file.
     Tiles appear only once every one is written (a folder ``out`` that was missing appears with all
-    of them at once). A point on an edge goes to the tile that starts there, decided on the
-    inputs' LAS grid (``TileAxis``). Bad values (a size not above 0, a buffer below
+    of them at once). A point is in the tile whose square holds its position as stored, on the
+    tiles' LAS grid (``TileAxis``): one on an edge in the tile that starts there. Bad values (a size not above 0, a buffer below
     0 or above the size, more than a million tiles over the headers' extent) are one-line
     InputErrors before a point is read; inputs without header bounds (text, .npy) are refused as
     their points pass a million tiles' extent, before a tile is written."""
@@ -167,14 +168,13 @@ def tile(
     tiles_folder = work / "tiles"
     try:
         tiles_folder.mkdir()  # (not mkdtemp's: its mode 0700 would become ``out``'s)
-        spill = _TileSpill(work, float(size), float(buffer), files.label, files.las_grid)
+        grid = files.las_grid if files.las_grid is not None else _grid_of_points(files, keep, float(size), shown)
+        spill = _TileSpill(work, float(size), float(buffer), files.label, grid)
         tally = {"points": 0, "skipped": 0}
         shown.phase("read", None if None in files.counts else sum(files.counts))
         for f, chunk in files.valid_chunks(keep, shown, tally):
             spill.add(files.colored(f, chunk, tally))
         check_valid_count(files.label, tally["points"], tally["skipped"])  # (the skipped points' warning)
-        # points without a LAS grid: one for the run, from all of them (not one a tile: tiles of one survey share their grid)
-        grid = files.las_grid if files.las_grid is not None else las_grid(spill.lo, spill.hi)
         written = spill.write_tiles(name, format, files, grid, tiles_folder, shown)
         if created:  # every tile whole: now they appear, all at once
             tiles_folder.rename(out)
@@ -220,6 +220,22 @@ def _check_apart(out: Path, inputs, recursive: bool) -> None:
                 raise InputError(f"{out}: lies in {folder}, read with recursive=True; write the tiles elsewhere (the next run would read them as input points)")
 
 
+def _grid_of_points(files: PointFiles, keep, size: float, progress) -> tuple[np.ndarray, np.ndarray]:
+    """The LAS grid of points that came without one (float files: text, NPY, PLY): one for the
+    run, from all the points tiled (not one a tile: tiles of one survey share their grid), as
+    ``convert -o x.laz`` makes it, in a pass over them before they are tiled: a point is placed by
+    its position as the grid stores it (``TileAxis``), and one less than half a step below an edge
+    is stored on it. The tiles' count is checked on the points read so far (these files' headers
+    tell no bounds). The pass's warnings are dropped: the tiling pass says them."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    progress.phase("scan", None if None in files.counts else sum(files.counts))
+    with warnings_kept():
+        for _, chunk in files.valid_chunks(keep, progress, {}):
+            lo, hi = np.minimum(lo, chunk.xyz.min(axis=0)), np.maximum(hi, chunk.xyz.max(axis=0))
+            _check_tile_count(lo, hi, size, files.label)
+    return las_grid(lo, hi)
+
+
 def _check_tile_count(lo, hi, size: float, where: str) -> None:
     """More than MAX_TILES tiles over x and y of ``lo``..``hi``: a one-line InputError."""
     across = [max(0, math.floor(hi[a] / size) - math.floor(lo[a] / size) + 1) for a in (0, 1)]  # (a clip beside the data: 0)
@@ -230,7 +246,7 @@ def _check_tile_count(lo, hi, size: float, where: str) -> None:
 def tile_index(values: np.ndarray, size: float) -> np.ndarray:
     """The tile (on one axis) of each of ``values``: i with i·size <= v < (i+1)·size, those
     products as floats compute them (the names' corners): a division rounded across an edge is mended.
-    For positions without a LAS grid; ``TileAxis`` places those on one."""
+    For positions as stored (``TileAxis``)."""
     i = np.floor(values / size)
     i -= values < i * size
     i += values >= (i + 1) * size
@@ -248,44 +264,45 @@ def _in_steps(value: float, scale: float) -> float:
 class TileAxis:
     """The tiles' edges on one axis (x or y): every ``size`` from 0, a tile's buffer ``buffer``
     beyond its edges. ``scale``, ``offset``: the LAS grid the tiles store positions on; each point
-    is then placed by the grid integer its tile stores (as io/write.py rounds it), in grid steps:
-    where the size and the offset are whole numbers of steps (the usual case: a size of 0.1 on a
-    grid of 0.01 or 0.001), in integers, exactly, so a point on an edge always goes
-    to the tile that starts there (x = 0.7 into tile 0.7..0.8, where floats said 0.7 / 0.1 =
-    6.999999999999999: tile 0.6); otherwise each edge falls between grid lines and counts as on
-    the one nearest it (a point less than half a grid step below an edge is in the tile above).
-    Without a grid (points of float files), by their float positions (``tile_index``)."""
+    is placed by its position as its tile stores it (the grid integer io/write.py rounds it to), so
+    every tile's stored points lie in its square, [i·size, (i+1)·size) (a point less than half a
+    grid step below an edge is stored on it: it is in the tile above). Where the size and the
+    offset are whole numbers of steps (the usual case: a size of 0.1 on a grid of 0.01 or 0.001),
+    in integers, exactly, so a point on an edge always goes to the tile that starts there (x = 0.7
+    into tile 0.7..0.8, where floats said 0.7 / 0.1 = 6.999999999999999: tile 0.6); otherwise
+    (edges between grid lines) by the stored position as readers compute it (X·scale + offset)
+    against the edges, as floats compute them (``tile_index``)."""
 
-    def __init__(self, size: float, buffer: float, scale: float | None = None, offset: float | None = None):
+    def __init__(self, size: float, buffer: float, scale: float, offset: float):
         self.size, self.buffer, self.scale, self.offset = size, buffer, scale, offset
-        if scale is not None:  # edges, buffer and the grid's start in grid steps
-            self.steps, self.start, self.reach = (_in_steps(v, scale) for v in (size, offset, buffer))
-            self.exact = self.steps.is_integer() and self.start.is_integer()
+        self.steps, self.start, self.reach = (_in_steps(v, scale) for v in (size, offset, buffer))  # in grid steps
+        self.exact = self.steps.is_integer() and self.start.is_integer()
 
-    def _position(self, values: np.ndarray) -> np.ndarray:
-        """Each of ``values`` in grid steps from 0, as its grid integer (int64 where exact)."""
-        stored = np.rint((values - self.offset) / self.scale)
-        return stored.astype(np.int64) + int(self.start) if self.exact else stored + self.start
+    def _stored(self, values: np.ndarray) -> np.ndarray:
+        """Each of ``values`` as its grid integer (float)."""
+        return np.rint((values - self.offset) / self.scale)
+
+    def _steps_from_0(self, values: np.ndarray) -> np.ndarray:
+        """Each of ``values`` in whole grid steps from 0 (``exact`` grids)."""
+        return self._stored(values).astype(np.int64) + int(self.start)
+
+    def _read_back(self, values: np.ndarray) -> np.ndarray:
+        """Each of ``values`` as a reader of the tile reads it back."""
+        return self._stored(values) * self.scale + self.offset
 
     def index(self, values: np.ndarray) -> np.ndarray:
         """The tile of each of ``values``."""
-        if self.scale is None:
-            return tile_index(values, self.size)
-        at = self._position(values)
         if self.exact:
-            return at // int(self.steps)
-        # tile i starts at the grid line nearest i·steps (a halfway edge: the line above it)
-        return (np.ceil((at + 0.5) / self.steps) - 1).astype(np.int64)
+            return self._steps_from_0(values) // int(self.steps)
+        return tile_index(self._read_back(values), self.size)
 
     def near(self, values: np.ndarray, tile: np.ndarray) -> np.ndarray:
-        """Whether each of ``values`` lies within the buffer of its ``tile`` (edges included)."""
-        if self.scale is None:
-            return (values >= tile * self.size - self.buffer) & (values <= (tile + 1) * self.size + self.buffer)
-        at = self._position(values)
+        """Whether each of ``values`` lies within the buffer of its ``tile`` (edges included), as stored."""
         if self.exact:  # whole steps from the edges, against the buffer in steps (off the grid or not: no float rounding)
+            at = self._steps_from_0(values)
             return (at - tile * int(self.steps) >= -self.reach) & (at - (tile + 1) * int(self.steps) <= self.reach)
-        reach = self.reach + 0.5  # (edges between grid lines, as ``index``: within half a step)
-        return (at >= tile * self.steps - reach) & (at <= (tile + 1) * self.steps + reach)
+        at = self._read_back(values)
+        return (at >= tile * self.size - self.buffer) & (at <= (tile + 1) * self.size + self.buffer)
 
 
 def tile_groups(i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -326,13 +343,13 @@ def tile_name(name: str, i: int, j: int, size: float, suffix: str) -> str:
 
 class _TileSpill:
     """Each tile's points as they come, appended to its raw file in ``folder`` (one record a point:
-    position, colour, the colour bits of its file, its attributes; the layout of the first chunk)."""
+    position, colour, the colour bits of its file, its attributes; the layout of the first chunk);
+    ``grid``: the (scale, offset) the tiles store positions on, which places the points."""
 
-    def __init__(self, folder: Path, size: float, buffer: float, where: str, grid=None):
+    def __init__(self, folder: Path, size: float, buffer: float, where: str, grid):
         self.folder, self.size, self.buffer, self.where = folder, size, buffer, where
-        on_grid = [(float(grid[0][a]), float(grid[1][a])) if grid is not None else () for a in (0, 1)]  # (scale, offset) of x, of y
-        self.axes = [TileAxis(size, buffer, *on_grid[a]) for a in (0, 1)]
-        self.lo, self.hi = np.full(3, np.inf), np.full(3, -np.inf)  # the points' bounds: a grid for points without one
+        self.axes = [TileAxis(size, buffer, float(grid[0][a]), float(grid[1][a])) for a in (0, 1)]  # on the grid's (scale, offset) of x, of y
+        self.lo, self.hi = np.full(3, np.inf), np.full(3, -np.inf)  # the points' bounds (the tiles' count checked on them)
         self.dtype = None
         self.held: dict[tuple[int, int], int] = {}  # points spilled for each tile
         self.own: dict[tuple[int, int], int] = {}  # of them, the tile's own (not its buffer's)
