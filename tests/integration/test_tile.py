@@ -4,6 +4,7 @@ tiles on a grid anchored at 0, each holding exactly its points (and its buffer's
 
 from __future__ import annotations
 
+import errno
 import importlib
 import os
 import shutil
@@ -404,3 +405,84 @@ def test_las_points_between_edges_off_their_grid_are_in_the_tile_holding_their_s
         written = laspy.read(str(path))
         want = np.flatnonzero((X * 0.01 >= i * 0.123 - 0.01) & (X * 0.01 <= (i + 1) * 0.123 + 0.01))
         assert np.array_equal(np.asarray(written.X), want), path.name
+
+
+def _files_in(folder):
+    return {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+
+
+def _rerun_folders(autzen_path, tmp_path):
+    """A tiles folder of an earlier run (the ground points' tiles) holding a file of the user's,
+    its entries, and what the run of every point writes there (its tiles of the same names, the
+    user's file kept)."""
+    out = tmp_path / "tiles"
+    gp.tile(autzen_path, out, 500, classes=[2])
+    (out / "notes.txt").write_text("mine")
+    new = gp.tile(autzen_path, tmp_path / "new", 500).out
+    (new / "notes.txt").write_text("mine")
+    old, whole = _files_in(out), _files_in(new)
+    shutil.rmtree(new)
+    assert old.keys() == whole.keys() and old != whole and len(old) == 7
+    return out, old, whole
+
+
+def test_a_rerun_into_a_folder_replaces_its_tiles_all_at_once_and_a_failure_leaves_the_old_ones(autzen_path, tmp_path, monkeypatch):
+    """Tiles moved into a folder that was there one at a time: a failure part-way left a folder of
+    old and new tiles that looked whole. Now the folder is swapped for one of the new tiles and
+    its other files; a failure as it moves in puts the old one back."""
+    out, old, whole = _rerun_folders(autzen_path, tmp_path)
+    real = os.rename
+
+    def failing(src, dst):
+        if ".tiling" in os.fspath(src) and os.fspath(dst) == os.fspath(out.resolve()):  # the new folder moving in (not the old one back)
+            raise OSError(errno.EIO, "Input/output error")
+        return real(src, dst)
+
+    monkeypatch.setattr(os, "rename", failing)
+    with pytest.raises(InputError) as info:
+        gp.tile(autzen_path, out, 500, overwrite=True)
+    assert str(info.value) == f"{out}: the new tiles were not moved in (Input/output error); the folder is as it was"
+    assert _files_in(out) == old
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tiles"]  # nothing hidden left beside it
+    monkeypatch.undo()
+    gp.tile(autzen_path, out, 500, overwrite=True)
+    assert _files_in(out) == whole
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tiles"]
+
+
+@pytest.mark.parametrize("killed_at", [1, 2])
+def test_a_rerun_killed_as_its_tiles_move_in_leaves_all_old_tiles_or_all_new_ones(autzen_path, tmp_path, monkeypatch, killed_at):
+    """A kill runs no clean-up: killed as the old folder moves away, it is there as it was; killed
+    before the new one moves in, there is no folder, and the old one is whole beside it, hidden."""
+    out, old, whole = _rerun_folders(autzen_path, tmp_path)
+    moves, killed = [], []
+    real_replace, real_rename = os.replace, os.rename
+
+    class Killed(BaseException):
+        pass
+
+    def moved(real):
+        def move(src, dst):
+            if killed:  # (a killed run does nothing more)
+                raise Killed
+            if os.fspath(out.resolve()) in (os.fspath(src), os.fspath(dst)):
+                moves.append(dst)
+                if len(moves) == killed_at:
+                    killed.append(dst)
+                    raise Killed
+            return real(src, dst)
+
+        return move
+
+    monkeypatch.setattr(os, "replace", moved(real_replace))
+    monkeypatch.setattr(os, "rename", moved(real_rename))
+    monkeypatch.setattr(shutil, "rmtree", lambda *args, **kwargs: None)
+    with pytest.raises(Killed):
+        gp.tile(autzen_path, out, 500, overwrite=True)
+    monkeypatch.undo()
+    if killed_at == 1:
+        assert _files_in(out) == old
+    else:
+        assert not out.exists()
+        (hidden,) = (p for p in tmp_path.iterdir() if p.name.endswith(".replaced"))
+        assert _files_in(hidden) == old

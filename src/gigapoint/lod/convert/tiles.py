@@ -37,8 +37,10 @@ points in 103 tiles, 100 000-point chunks, a shared 2-core host): the spill 3.4 
 reopen-and-append 19.3 s for the same tiles, ``convert -o one.laz`` of the same points 2.0 s.
 The spill costs disk: the points' raw records (~50 bytes a point) until their tile is written.
 A run that fails or is interrupted removes its work folder: no tile of it appears (a run
-killed outright leaves its hidden work folder). Into a folder that was there, the tiles are
-moved one at a time (a moment, once all are written): a run killed in that moment leaves some.
+killed outright leaves its hidden work folder). A folder that was there is swapped for a new one
+of its other files (hard-linked) and the tiles, so it holds every old tile or every new one, never
+a mix (``_swap_in``; where it cannot be swapped, a mount point for one, the tiles are moved in
+one at a time).
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import append_file, same_file
+from ...atomic import append_file, same_file, write_failure
 from ...core.chunk import PointChunk
 from ...core.cloud import check_valid_count
 from ...errors import GigapointWarning, InputError, check_switch, counted, is_real, warn, warnings_kept
@@ -124,8 +126,8 @@ def tile(
 
     ``out`` is made if missing; one holding LAS/LAZ files already is refused without
     ``overwrite``, which replaces the tiles of this run's names and leaves every other file.
-    Tiles appear only once every one is written (a folder ``out`` that was missing appears with all
-    of them at once). A point is in the tile whose square holds its position as stored, on the
+    Tiles appear only once every one is written, all at once (a folder ``out`` that was missing
+    appears with all of them; one that was there is swapped for one of its other files and them). A point is in the tile whose square holds its position as stored, on the
     tiles' LAS grid (``TileAxis``): one on an edge in the tile that starts there. Bad values (a size not above 0, a buffer below
     0 or above the size, more than a million tiles over the headers' extent) are one-line
     InputErrors before a point is read; inputs without header bounds (text, .npy) are refused as
@@ -178,9 +180,8 @@ def tile(
         written = spill.write_tiles(name, format, files, grid, tiles_folder, shown)
         if created:  # every tile whole: now they appear, all at once
             tiles_folder.rename(out)
-        else:  # (into a folder that was there: one at a time, a moment's work)
-            for tile_path in written:
-                os.replace(tile_path, out / tile_path.name)
+        else:  # (into a folder that was there: it is swapped for one of its files and the tiles)
+            _swap_in(out, tiles_folder, work.name, written)
     finally:
         shutil.rmtree(work, ignore_errors=True)
         shown.close()
@@ -191,6 +192,54 @@ def tile(
     counts = [spill.held[key] for key in spill.written_keys]
     uncolored = None if colorization is None else tally["uncolored"]
     return TileResult(out, tiles, counts, tally["points"], sum(counts) - tally["points"], tally["skipped"], time.perf_counter() - t0, uncolored)
+
+
+def _swap_in(out: Path, tiles_folder: Path, work_name: str, written: list[Path]) -> None:
+    """Put the tiles of ``tiles_folder`` into ``out``, a folder that was there, all at once, as a
+    folder the run makes appears: ``tiles_folder`` (in the work folder ``work_name``, inside
+    ``out``) takes hard links of ``out``'s other entries (the user's files, tiles of other names:
+    only tiles of this run's names are replaced), ``out`` is renamed away beside itself, then
+    ``tiles_folder`` renamed ``out``, and the old folder removed. A failure between the renames
+    puts the old folder back (a one-line InputError); a run killed there leaves no ``out``, its
+    old folder whole beside it (hidden, ``.OUT.*.replaced``). Where ``out`` cannot be renamed or
+    its entries linked (a mount point, a parent folder not writable, a file system without hard
+    links, the working folder), the tiles are moved in one at a time (a run killed then leaves some)."""
+    folder = out.resolve()  # (an output given through a link: the folder it names)
+    old = None
+    try:
+        if Path.cwd().is_relative_to(folder):  # (renamed away, a shell's working folder would be gone)
+            raise OSError("the working folder")
+        for entry in folder.iterdir():
+            if entry.name != work_name and not (tiles_folder / entry.name).exists():
+                _link(entry, tiles_folder / entry.name)
+        shutil.copystat(folder, tiles_folder)  # (its permissions, not the work folder's)
+        old = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".replaced", dir=folder.parent))
+        os.rename(folder, old)
+    except OSError:
+        if old is not None and old.is_dir() and not any(old.iterdir()):
+            old.rmdir()
+        for tile_path in written:
+            os.replace(tile_path, out / tile_path.name)
+        return
+    try:
+        os.rename(old / work_name / tiles_folder.name, folder)
+    except OSError as exc:
+        os.rename(old, folder)  # as it was
+        raise InputError(f"{out}: the new tiles were not moved in ({write_failure(exc)}); the folder is as it was") from None
+    except BaseException:
+        os.rename(old, folder)
+        raise
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def _link(entry: Path, to: Path) -> None:
+    """``entry`` (a file, a link, a folder: its tree) hard-linked as ``to``, its data not copied."""
+    if entry.is_symlink():
+        os.symlink(os.readlink(entry), to)
+    elif entry.is_dir():
+        shutil.copytree(entry, to, symlinks=True, copy_function=os.link)
+    else:
+        os.link(entry, to, follow_symlinks=False)
 
 
 def _check_output_folder(out: Path, overwrite: bool) -> None:
