@@ -106,6 +106,20 @@ def test_bad_input_is_one_line_and_leaves_no_output(cli, inputs, tmp_path, args,
     refused_in_one_line(cli, inputs, tmp_path, args, problem)
 
 
+@pytest.mark.parametrize("command", [["convert", "-o", "{out}/c.las"], ["tile", "-o", "{out}/tiles", "--size", "10"]], ids=["convert", "tile"])
+@pytest.mark.parametrize("bad", [["--to-crs", "EPSG:999999"], ["--to-crs", "EPSG:32610", "--from-crs", "EPSG:999999"]], ids=["to-crs", "from-crs"])
+def test_a_crs_proj_does_not_know_is_said_as_its_option(cli, inputs, tmp_path, command, bad):
+    """The library says ``convert: to_crs='EPSG:999999': ...`` (its keyword); the command the option
+    typed, ``convert: --to-crs EPSG:999999: ...``, in one line, leaving nothing behind."""
+    pytest.importorskip("pyproj")
+    out = tmp_path / "out"
+    out.mkdir()
+    rc, stdout, err = cli(command[0], inputs / "small.las", *(a.format(out=out) for a in command[1:]), *bad)
+    assert (rc, stdout) == (1, "")
+    assert err.startswith(f"error: {command[0]}: {bad[-2]} EPSG:999999: not a CRS PROJ knows (") and len(err.splitlines()) == 1, err
+    assert files_in(out) == []
+
+
 def test_colorize_refuses_a_raster_no_world_file_places(cli, inputs, tmp_path):
     """A PNG without a world file was read with GDAL's stand-in transform: each point coloured by
     the pixel whose row and column were its coordinates, exit 0."""

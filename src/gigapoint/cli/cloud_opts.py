@@ -130,6 +130,19 @@ def check_from_crs(from_crs: str | None, to_crs: str | None, where: str) -> None
         raise GigapointError(f"{where}: --from-crs {from_crs}: the CRS the inputs are in, for --to-crs; give --to-crs too")
 
 
+def output_crs_keywords(where: str, to_crs: str | None, from_crs: str | None, exact_transform: bool, colorize, colorize_bits: int | None) -> dict:
+    """The library's keywords of --to-crs, --from-crs, --exact-transform, --colorize and
+    --colorize-bits (``convert``'s and ``tile``'s), --from-crs without --to-crs refused first."""
+    check_from_crs(from_crs, to_crs, where)
+    return {"to_crs": to_crs, "from_crs": from_crs, "exact_transform": exact_transform, "colorize": colorize, "colorize_bits": colorize_bits}
+
+
+def crs_options_named(where: str, to_crs: str | None, from_crs: str | None) -> dict[str, str]:
+    """``named_option``'s blame for a bad CRS: the library's ``where: to_crs='...'``
+    (io/reproject.py) said as the option typed, ``where: --to-crs ...``."""
+    return {f"{where}: to_crs={to_crs!r}": f"{where}: --to-crs {to_crs}", f"{where}: from_crs={from_crs!r}": f"{where}: --from-crs {from_crs}"}
+
+
 def skipped_note(skipped: int) -> str:
     """What a summary line says of the invalid points a command skipped (NaN, inf, beyond reach): nothing where none."""
     return f", {counted(skipped, 'invalid point')} skipped" if skipped else ""

@@ -23,8 +23,9 @@ from .cloud_opts import (
     FromCrsOption,
     RecursiveOption,
     ToCrsOption,
-    check_from_crs,
+    crs_options_named,
     filter_options,
+    output_crs_keywords,
     skipped_note,
     thin_option,
     uncolored_note,
@@ -91,7 +92,7 @@ def convert(
 
     if dask is not None and workers is not None:
         raise ConvertError("--dask and --workers: give one of them (a running cluster's scheduler, or a local cluster's size)")
-    check_from_crs(from_crs, to_crs, "convert")
+    output_crs = output_crs_keywords("convert", to_crs, from_crs, exact_transform, colorize, colorize_bits)
     point_filter = filter_options(classes, drop_classes, clip, "convert", clip_polygon)  # its errors name the options, before a cluster starts
     spacing = thin_option(thin, "convert")
     copc = format == "copc" or (format is None and is_copc_name(output))  # (convert's own default)
@@ -121,16 +122,11 @@ def convert(
                 recursive=recursive,
                 **(point_filter.as_spec() if point_filter is not None else {}),
                 thin=spacing,
-                to_crs=to_crs,
-                from_crs=from_crs,
-                exact_transform=exact_transform,
-                colorize=colorize,
-                colorize_bits=colorize_bits,
+                **output_crs,
                 on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
             )
     except (ConvertError, InputError) as exc:  # 'max_leaf must be ...' named no option; thin=1e-09 said as typed
-        raise named_option(exc, {"max_leaf": "--max-leaf", f"convert: thin={spacing!r}": f"convert: --thin {thin}",
-                                 f"convert: to_crs={to_crs!r}": f"convert: --to-crs {to_crs}", f"convert: from_crs={from_crs!r}": f"convert: --from-crs {from_crs}"}) from None
+        raise named_option(exc, {"max_leaf": "--max-leaf", f"convert: thin={spacing!r}": f"convert: --thin {thin}", **crs_options_named("convert", to_crs, from_crs)}) from None
     except (KeyboardInterrupt, SystemExit):  # (Ctrl+C, SIGTERM) a bare "interrupted" left the user to guess whether OUT was lost
         if not to_file and OctreeDir(watch).read_state() is not None:
             print(f"{watch}: kept unfinished; run the same convert command again to resume it", file=sys.stderr)

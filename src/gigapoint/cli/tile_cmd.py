@@ -22,8 +22,9 @@ from .cloud_opts import (
     FromCrsOption,
     RecursiveOption,
     ToCrsOption,
-    check_from_crs,
+    crs_options_named,
     filter_options,
+    output_crs_keywords,
     skipped_note,
     uncolored_note,
 )
@@ -54,7 +55,7 @@ def tile(
     """Split point clouds into square LAS/LAZ tiles (lastile), read once, a chunk at a time; only tiles holding points are written."""
     from ..lod.convert.tiles import tile as run
 
-    check_from_crs(from_crs, to_crs, "tile")
+    output_crs = output_crs_keywords("tile", to_crs, from_crs, exact_transform, colorize, colorize_bits)
     point_filter = filter_options(classes, drop_classes, clip, "tile", clip_polygon)  # its errors name the options
     try:
         result = run(
@@ -67,17 +68,13 @@ def tile(
             overwrite=overwrite,
             recursive=recursive,
             progress=not quiet and sys.stderr.isatty(),
-            to_crs=to_crs,
-            from_crs=from_crs,
-            exact_transform=exact_transform,
-            colorize=colorize,
-            colorize_bits=colorize_bits,
+            **output_crs,
             **(point_filter.as_spec() if point_filter is not None else {}),
         )
     except GigapointError as exc:  # tile: size=0.0 said as the option
         raise named_option(exc, {f"tile: size={size!r}": f"tile: --size {size:g}", f"tile: buffer={buffer!r}": f"tile: --buffer {buffer:g}",
                                  f"tile: format={format!r}": f"tile: --format {format}", f"tile: name={name!r}": f"tile: --name {name}",
-                                 f"tile: to_crs={to_crs!r}": f"tile: --to-crs {to_crs}", f"tile: from_crs={from_crs!r}": f"tile: --from-crs {from_crs}"}) from None  # fmt: skip
+                                 **crs_options_named("tile", to_crs, from_crs)}) from None  # fmt: skip
     counts = np.array(result.points_per_tile)
     median = float(np.median(counts))
     buffered = f" (+{counted(result.buffer_points, 'buffer point')})" if result.buffer_points else ""
