@@ -25,6 +25,17 @@ def test_demo_has_terrain_buildings_and_trees():
     assert (rgba[:, 3] == 255).all()
 
 
+def test_each_kind_stores_its_own_intensity_band():
+    """Terrain (ground, water, roads) 20000..40000, buildings 30000..45000, trees 8000..20000 (the
+    three kinds' stores share ``_store_point``: each passes its own class and intensity)."""
+    _, _, attrs = demo_arrays(100_000)
+    bands = {2: (20_000, 40_000), 9: (20_000, 40_000), 11: (20_000, 40_000), 6: (30_000, 45_000), 5: (8_000, 20_000)}
+    for cls, (lo, hi) in bands.items():
+        intensity = attrs["intensity"][attrs["classification"] == cls]
+        assert intensity.size > 1000 and lo <= intensity.min() and intensity.max() < hi, cls
+    assert set(np.unique(attrs["classification"]).tolist()) == set(bands)
+
+
 def test_seed_changes_the_scene():
     a, _, _ = demo_arrays(1000, seed=1)
     b, _, _ = demo_arrays(1000, seed=2)

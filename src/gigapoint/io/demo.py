@@ -145,6 +145,15 @@ def _terrain_xyn(seed, i):
 
 
 @njit(inline="always")
+def _store_point(out, rgba, cls, inten, j, x, y, z, r, g, b, c, intensity):
+    """Point j's position, opaque colour, class and intensity: terrain's, buildings' and trees' stores."""
+    out[j, 0], out[j, 1], out[j, 2] = x, y, z
+    rgba[j, 0], rgba[j, 1], rgba[j, 2], rgba[j, 3] = r, g, b, 255
+    cls[j] = c
+    inten[j] = intensity
+
+
+@njit(inline="always")
 def _store_terrain(x, y, z, n, out, rgba, cls, inten, j):
     """Water, road or ground at height z: the point's colour and class, then its stores."""
     if z < -5.0:  # water surface
@@ -156,10 +165,7 @@ def _store_terrain(x, y, z, n, out, rgba, cls, inten, j):
     else:
         t = min(max((z + 5.0) / 25.0, 0.0), 1.0)
         r, g, b, c = 70 + 90 * t + 30 * n, 120 + 40 * t + 30 * n, 50 + 20 * t + 20 * n, CLASS_GROUND
-    out[j, 0], out[j, 1], out[j, 2] = x, y, z
-    rgba[j, 0], rgba[j, 1], rgba[j, 2], rgba[j, 3] = r, g, b, 255
-    cls[j] = c
-    inten[j] = 20000 + 20000 * n
+    _store_point(out, rgba, cls, inten, j, x, y, z, r, g, b, c, 20000 + 20000 * n)
 
 
 @njit(inline="always")
@@ -221,10 +227,7 @@ def _building_point(seed, i, grid, lots, out, rgba, cls, inten, j):
             r, g, b = 150 + 40 * n, 50 + 20 * n, 40 + 15 * n
         else:
             r, g, b = 90 + 25 * n, 90 + 25 * n, 95 + 25 * n
-    out[j, 0], out[j, 1], out[j, 2] = x, y, z
-    rgba[j, 0], rgba[j, 1], rgba[j, 2], rgba[j, 3] = r, g, b, 255
-    cls[j] = CLASS_BUILDING
-    inten[j] = 30000 + 15000 * n
+    _store_point(out, rgba, cls, inten, j, x, y, z, r, g, b, CLASS_BUILDING, 30000 + 15000 * n)
 
 
 @njit(inline="always")
@@ -247,10 +250,7 @@ def _tree_point(seed, i, trees, out, rgba, cls, inten, j):
         z = base + height * 0.55 + cz * height * 0.45
         shade = 0.6 + 0.4 * (cz + 1.0) * 0.5
         r, g, b = (30 + 40 * n) * shade, (90 + 80 * n) * shade, (25 + 30 * n) * shade
-    out[j, 0], out[j, 1], out[j, 2] = x, y, z
-    rgba[j, 0], rgba[j, 1], rgba[j, 2], rgba[j, 3] = r, g, b, 255
-    cls[j] = CLASS_VEGETATION
-    inten[j] = 8000 + 12000 * n
+    _store_point(out, rgba, cls, inten, j, x, y, z, r, g, b, CLASS_VEGETATION, 8000 + 12000 * n)
 
 
 _BLOCK = 4096  # points a thread generates at a time, grouped by kind
