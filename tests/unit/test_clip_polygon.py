@@ -303,29 +303,66 @@ def test_a_geojson_naming_another_crs_than_the_files_is_warned_of_without_pyproj
 
 
 
+#: GeoTIFF keys naming ProjectedCSTypeGeoKey = EPSG:32610 (UTM zone 10N)
+UTM10_GEOKEYS = laspy.VLR("LASF_Projection", 34735, "GeoTIFF keys", struct.pack("<8H", 1, 1, 0, 1, 3072, 0, 1, 32610))
+
+
+def _utm10_tiles(tmp_path, crs_vlrs: dict) -> list:
+    """``_grid_las`` tiles named by ``crs_vlrs``' keys, each naming UTM zone 10N by its VLR."""
+    tiles = []
+    for name, vlr in crs_vlrs.items():
+        las = laspy.read(str(_grid_las(tmp_path / name)))
+        las.header.vlrs.append(vlr)
+        las.write(str(tmp_path / name))
+        tiles.append(tmp_path / name)
+    return tiles
+
+
+def _utm10_square_in_lon_lat(pyproj):
+    """A square over x and y 0..100 of UTM zone 10N, given in lon/lat (EPSG:4326)."""
+    lon, lat = pyproj.Transformer.from_crs("EPSG:32610", "EPSG:4326", always_xy=True).transform([0, 100, 100, 0], [0, 0, 100, 100])
+    crs = {"type": "name", "properties": {"name": "EPSG:4326"}}
+    return clip_polygon_of({"type": "Polygon", "crs": crs, "coordinates": [[*zip(lon, lat)]]}, "test")
+
+
+def _counted_moves(monkeypatch) -> list:
+    """The target CRSs filters.moved_polygon is called with from now on."""
+    from gigapoint.io import filters
+
+    moves = []
+    real = filters.moved_polygon
+    monkeypatch.setattr(filters, "moved_polygon", lambda *args, **kwargs: moves.append(args[2]) or real(*args, **kwargs))
+    return moves
+
+
 def test_a_polygon_naming_another_crs_is_moved_once_a_crs_not_once_a_file(tmp_path, monkeypatch):
     """Two tiles in UTM zone 10 (GeoTIFF keys), a square over their first 100 units given in
     lon/lat: moved into their CRS once, and each tile's placement is that one polygon."""
     pyproj = pytest.importorskip("pyproj")
-    from gigapoint.io import filters
-
-    keys = struct.pack("<8H", 1, 1, 0, 1, 3072, 0, 1, 32610)  # GeoTIFF keys: ProjectedCSTypeGeoKey = EPSG:32610
-    tiles = []
-    for name in ("a.las", "b.las"):
-        las = laspy.read(str(_grid_las(tmp_path / name)))
-        las.header.vlrs.append(laspy.VLR("LASF_Projection", 34735, "GeoTIFF keys", keys))
-        las.write(str(tmp_path / name))
-        tiles.append(tmp_path / name)
-    lon, lat = pyproj.Transformer.from_crs("EPSG:32610", "EPSG:4326", always_xy=True).transform([0, 100, 100, 0], [0, 0, 100, 100])
-    crs = {"type": "name", "properties": {"name": "EPSG:4326"}}
-    polygon = clip_polygon_of({"type": "Polygon", "crs": crs, "coordinates": [[*zip(lon, lat)]]}, "test")
-    moves = []
-    real = filters.moved_polygon
-    monkeypatch.setattr(filters, "moved_polygon", lambda *args, **kwargs: moves.append(args[2]) or real(*args, **kwargs))
+    tiles = _utm10_tiles(tmp_path, {"a.las": UTM10_GEOKEYS, "b.las": UTM10_GEOKEYS})
+    polygon = _utm10_square_in_lon_lat(pyproj)
+    moves = _counted_moves(monkeypatch)
     assert gp.open(*tiles, clip_polygon=polygon).n_points == 2 * 100 * 100  # (x and y 0.25 .. 99.25 of each tile)
     assert len(moves) == 1 and list(polygon.moved_by_crs) == ["EPSG:32610"]
     assert set(polygon.placed_by_file) == set(map(str, tiles))
     assert polygon.placed_by_file[str(tiles[0])] is polygon.placed_by_file[str(tiles[1])] is polygon.moved_by_crs["EPSG:32610"]
+
+
+def test_one_crs_written_two_ways_moves_the_polygon_once(tmp_path, monkeypatch):
+    """UTM zone 10 as GeoTIFF keys ('EPSG:32610') in one tile and as WKT in the other: the cache
+    was keyed by the CRS's text, so the polygon was moved twice and the tiles held two polygons.
+    It is moved once (keyed by io.crs_identity), and each tile keeps what it keeps alone."""
+    pyproj = pytest.importorskip("pyproj")
+    wkt = laspy.VLR("LASF_Projection", 2112, "OGC WKT", pyproj.CRS.from_epsg(32610).to_wkt("WKT1_GDAL").encode() + b"\0")
+    keyed, written = _utm10_tiles(tmp_path, {"keyed.las": UTM10_GEOKEYS, "written.las": wkt})
+    alone = [gp.open(tile, clip_polygon=_utm10_square_in_lon_lat(pyproj)).n_points for tile in (keyed, written)]
+    assert alone == [100 * 100, 100 * 100]  # (x and y 0.25 .. 99.25 of each tile)
+    polygon = _utm10_square_in_lon_lat(pyproj)
+    moves = _counted_moves(monkeypatch)
+    assert gp.open(keyed, written, clip_polygon=polygon).n_points == sum(alone)
+    assert len(moves) == 1 and list(polygon.moved_by_crs) == ["EPSG:32610"]
+    assert polygon.placed_by_file[str(keyed)] is polygon.placed_by_file[str(written)]
+
 
 BAD = {
     "missing": (None, "no such file (nor WKT text: POLYGON ((x y, ...)))"),

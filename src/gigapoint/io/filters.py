@@ -285,16 +285,19 @@ def placed_in(polygon: ClipPolygon, crs: str | None, units: dict, bounds, where)
     else as it is (a warning where both name EPSG codes that differ), or a one-line InputError
     where it lies in longitude/latitude's range far from points in a projected CRS
     (``refuse_lon_lat``: it would clip nothing). As it is where ``crs`` is None."""
-    from .crs import horizontal_epsg
+    from .crs import crs_identity, horizontal_epsg
 
     if not may_move(polygon) or crs is None:
         return polygon
     if polygon.epsg is not None:
         moved = polygon.moved_by_crs
-        if crs not in moved:  # (once a CRS, not once a file: a survey's thousands of tiles share one)
-            moved[crs] = _moved_into(polygon, crs, where)
-        if moved[crs] is not None:
-            return moved[crs]
+        # once a CRS, not once a file (a survey's thousands of tiles share one), however each
+        # file writes it (a WKT, GeoTIFF keys' EPSG:n): one polygon for all files in one CRS
+        identity = crs_identity(crs)
+        if identity not in moved:
+            moved[identity] = _moved_into(polygon, crs, where)
+        if moved[identity] is not None:
+            return moved[identity]
     refuse_lon_lat(polygon, crs, units, bounds, where)
     epsg = horizontal_epsg(crs)
     if polygon.epsg is not None and epsg is not None and epsg != polygon.epsg:

@@ -54,8 +54,8 @@ class ClipPolygon:
     ``moved_from``: the CRS it was moved from into the points' (``moved_polygon``; None: as read):
     it is in their coordinates, never moved again. filters.py's caches: ``placed_by_file``, this
     polygon in the coordinates of each file filtered (by its path); ``moved_by_crs``, it moved
-    into each CRS (by the CRS's text; None: no pyproj to move it), once a CRS however many files
-    are in it."""
+    into each CRS (by io.crs_identity: one CRS however its files write it; None: no pyproj to
+    move it), once a CRS however many files are in it."""
 
     def __init__(
         self, polygons: list[list[np.ndarray]], source: str, epsg: int | None = None, names: list[str | None] | None = None, features: list[int | None] | None = None,
