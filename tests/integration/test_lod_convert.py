@@ -163,6 +163,23 @@ def test_a_rerun_with_other_options_says_it_starts_over_and_a_resume_says_nothin
     assert open_octree(out).n_points == 150_000
 
 
+def test_a_conversion_reads_its_state_file_once_to_start_or_resume(demo_las, tmp_path, monkeypatch):
+    """Whose unfinished work is there (other_work) and whether it resumes (prepare_output) each
+    read the state file: twice at every start. It is read once, fresh or resumed."""
+    out = tmp_path / "oct"
+    reads = []
+    real = OctreeDir.read_state
+    monkeypatch.setattr(OctreeDir, "read_state", lambda d: reads.append(d.state_file) or real(d))
+    _interrupt_after(monkeypatch, 2)
+    with pytest.raises(KeyboardInterrupt):
+        convert([demo_las], out, **OPTS)
+    assert reads == [out / ".partial" / "state.json"]
+    reads.clear()
+    _interrupt_after(monkeypatch, None)
+    assert convert([demo_las], out, **OPTS).resumed
+    assert reads == [out / ".partial" / "state.json"]
+
+
 def test_a_set_written_part_way_into_the_streams_is_written_again_in_its_place(demo_las, reference, tmp_path, monkeypatch):
     """Node sets append their bit streams to one file each (writer.append_streams). A run killed
     while a set was writing leaves words past the finished sets' ends: the resumed run writes

@@ -108,24 +108,24 @@ def test_an_output_under_a_file_is_refused_without_promising_a_resume(tmp_path, 
 
 def test_prepare_output_resumes_clears_or_refuses(tmp_path):
     d = OctreeDir(tmp_path / "out")
-    assert d.prepare_output({"v": 1}, overwrite=False) is None and d.partial.is_dir()
+    assert d.prepare_output({"v": 1}, overwrite=False, state=None) is None and d.partial.is_dir()
     d.write_state({"fingerprint": {"v": 1}, "phase": "count"})
-    assert d.prepare_output({"v": 1}, overwrite=False) == {"fingerprint": {"v": 1}, "phase": "count"}
+    assert d.prepare_output({"v": 1}, overwrite=False, state=d.read_state()) == {"fingerprint": {"v": 1}, "phase": "count"}
     (d.raw).mkdir()
-    assert d.prepare_output({"v": 2}, overwrite=False) is None  # other inputs or options: a clean start
+    assert d.prepare_output({"v": 2}, overwrite=False, state=d.read_state()) is None  # other inputs or options: a clean start
     assert not d.raw.exists() and d.partial.is_dir()
     d.meta.write_text("{}")
     with pytest.raises(OutputExistsError, match=r"overwrite=True"):  # a Python caller's keyword (the CLI says --overwrite)
-        d.prepare_output({"v": 2}, overwrite=False)
+        d.prepare_output({"v": 2}, overwrite=False, state=d.read_state())
     d.write_state({"fingerprint": {"v": 2}, "phase": "count"})  # a replacement stopped part-way: resumed with overwrite only
-    assert d.prepare_output({"v": 2}, overwrite=True) == {"fingerprint": {"v": 2}, "phase": "count"}
-    assert d.prepare_output({"v": 3}, overwrite=True) is None and d.meta.read_text() == "{}"  # replaced once the new one is complete
+    assert d.prepare_output({"v": 2}, overwrite=True, state=d.read_state()) == {"fingerprint": {"v": 2}, "phase": "count"}
+    assert d.prepare_output({"v": 3}, overwrite=True, state=d.read_state()) is None and d.meta.read_text() == "{}"  # replaced once the new one is complete
     assert d.read_state() is None and d.partial.is_dir()
     foreign = OctreeDir(tmp_path / "photos")
     foreign.path.mkdir()
     (foreign.path / "holiday.jpg").write_bytes(b"x")
     with pytest.raises(OutputExistsError, match="not a gigapoint/Potree output"):
-        foreign.prepare_output(None, overwrite=True)
+        foreign.prepare_output(None, overwrite=True, state=None)
     assert [p.name for p in foreign.path.iterdir()] == ["holiday.jpg"]
 
 
@@ -140,15 +140,15 @@ def test_a_stopped_conversion_of_another_gigapoint_says_a_rerun_starts_over(tmp_
     d = OctreeDir(tmp_path / "out")
     d.partial.mkdir(parents=True)
     d.write_state({"fingerprint": "sha256:1", "code_version": "0.2.0+bbbbbbbbbbbb", "phase": "build"})
-    assert d.resume_hint == RESUME_HINT and d.other_work("sha256:1") is None
-    assert d.other_work("sha256:2") == "with other inputs or options"
+    assert d.resume_hint == RESUME_HINT and d.other_work("sha256:1", d.read_state()) is None
+    assert d.other_work("sha256:2", d.read_state()) == "with other inputs or options"
     d.write_state({"fingerprint": "sha256:1", "code_version": "0.1.0+aaaaaaaaaaaa", "phase": "build"})
     assert d.resume_hint == "it was started by gigapoint 0.1.0+aaaaaaaaaaaa, not this gigapoint 0.2.0+bbbbbbbbbbbb: running `gigapoint convert` again starts it over"
-    assert d.other_work("sha256:2") == "by gigapoint 0.1.0+aaaaaaaaaaaa (this is 0.2.0+bbbbbbbbbbbb)"
+    assert d.other_work("sha256:2", d.read_state()) == "by gigapoint 0.1.0+aaaaaaaaaaaa (this is 0.2.0+bbbbbbbbbbbb)"
     d.write_state({"fingerprint": "sha256:1", "phase": "build"})  # saved by a gigapoint that named no version
     assert d.resume_hint.startswith("it was started by an older gigapoint, not this gigapoint 0.2.0+bbbbbbbbbbbb:")
     d.write_state({"fingerprint": None, "code_version": "0.1.0+aaaaaaaaaaaa", "phase": "build"})  # chunks from Python
-    assert d.resume_hint == NO_RESUME_HINT and d.other_work("sha256:2") is None
+    assert d.resume_hint == NO_RESUME_HINT and d.other_work("sha256:2", d.read_state()) is None
 
 
 def test_clear_removes_what_a_conversion_writes_and_nothing_else(tmp_path):

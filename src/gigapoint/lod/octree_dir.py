@@ -316,11 +316,12 @@ class OctreeDir:
             return f"it was started by {other}, not this gigapoint {code_version()}: running `gigapoint convert` again starts it over"
         return RESUME_HINT if _resumable(st) else NO_RESUME_HINT
 
-    def other_work(self, fingerprint) -> str | None:
+    def other_work(self, fingerprint, state: dict | None) -> str | None:
         """Where a conversion whose inputs and options are ``fingerprint`` would start over another
-        run's unfinished work here (another fingerprint): who started that one, to say so (another
+        run's unfinished work here (another fingerprint; ``state``: ``read_state``'s, read once by
+        the conversion for this and ``prepare_output``): who started that one, to say so (another
         gigapoint, named where known), else None. Chunks' work (no run resumes it) is no one's."""
-        st = self.read_state() or {}
+        st = state or {}
         if st.get("fingerprint") is None or st["fingerprint"] == fingerprint:
             return None
         other = _other_gigapoint(st)
@@ -374,9 +375,10 @@ class OctreeDir:
 
     # ------------------------------------------------------------------ as an output
 
-    def prepare_output(self, fingerprint, overwrite: bool) -> dict | None:
+    def prepare_output(self, fingerprint, overwrite: bool, state: dict | None) -> dict | None:
         """Make the folder ready for a conversion whose inputs and options are ``fingerprint``:
-        the saved state when an unfinished conversion with the same fingerprint can resume,
+        the saved ``state`` (``read_state``'s, read once by the conversion for this and
+        ``other_work``) when an unfinished conversion with the same fingerprint can resume,
         else None, the conversion's work cleared and ``.partial`` created. A complete octree is
         replaced only with ``overwrite``, and stays until the new one is complete (``set_aside``);
         a folder that is not an octree is written into only when empty."""
@@ -384,7 +386,6 @@ class OctreeDir:
         if out.exists() and not out.is_dir():
             raise OutputExistsError(f"{out}: exists and is not a directory")
         if out.exists():
-            state = self.read_state()
             same = state and fingerprint is not None and state.get("fingerprint") == fingerprint  # (chunks never resume)
             if same and (overwrite or not self.complete):  # an unfinished conversion, or replacement, resumes
                 return state

@@ -142,8 +142,9 @@ class _Converter(ReadPhase, PartitionPhases, BuildPhases):
             self.dir.start_over()
 
     def _run_locked(self, overwrite: bool, fp) -> ConvertResult:
-        other_work = self.dir.other_work(fp)  # (before prepare_output clears it)
-        saved = self.dir.prepare_output(fp, overwrite)
+        found = self.dir.read_state()  # once: whose work is here, and whether this run resumes it
+        other_work = self.dir.other_work(fp, found)
+        saved = self.dir.prepare_output(fp, overwrite, found)
         self.prepared = True
         if other_work is not None:  # hours of work may go: said, not done silently
             warn(self._as_given(f"{self.out}: the unfinished conversion there was started {other_work}: starting over"), GigapointWarning)
