@@ -114,8 +114,24 @@ def test_the_real_compile_steps_cover_every_pass(tmp_path):
     from gigapoint.cli.compile_cmd import steps
 
     names = " ".join(name for name, _ in steps(tmp_path))
-    for word in ("LAS", "demo", "rendering", "point sizes", "eye-dome", "hole filling", "high-quality", "supersampling", "color modes", "octrees"):
+    for word in ("LAS", "demo", "rendering", "point sizes", "eye-dome", "hole filling", "high-quality", "supersampling", "color modes", "octrees", "progressive"):
         assert word in names
+
+
+def test_the_progressive_step_compiles_the_colour_sums_of_big_sets_too(tmp_path):
+    """A progressive octree's sets of 2^24 points and more sum colours in u64 (smaller ones in
+    u32): that variant of sample_runs compiled mid-load on the first big set. The compile step
+    leaves both: the same signature, the sums u32 in one and u64 in the other."""
+    import inspect
+
+    from gigapoint.cli.compile_cmd import steps
+    from gigapoint.lod.progressive import kernels
+
+    dict(steps(tmp_path))["progressive loading"]()
+    at = list(inspect.signature(kernels.sample_runs.py_func).parameters).index("e_sum")
+    by_sums = {str(signature[at].dtype): signature[:at] + signature[at + 1 :] for signature in kernels.sample_runs.signatures}
+    assert {"uint32", "uint64"} <= set(by_sums)
+    assert by_sums["uint32"] == by_sums["uint64"]
 
 
 # --- --help ----------------------------------------------------------------------------------------

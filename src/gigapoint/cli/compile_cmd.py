@@ -2,7 +2,8 @@
 
 The first run after an install compiles the kernels it needs as it goes (cli/compiling.py
 says so); this command does all of it up front, step by step with a progress bar: reading
-LAS files, building clouds, every render pass and color mode, octrees. Each step runs the
+LAS files, building clouds, every render pass and color mode, octrees, progressive loading
+(a viewer's; with its big sets' variant, ``compile_wide_colour_sums``). Each step runs the
 real code on a small scene, so exactly the kernels (and argument types) of real runs compile.
 """
 
@@ -39,6 +40,24 @@ def _las_file(folder: Path) -> Path:
     path = folder / "compile.las"
     las.write(path)
     return path
+
+
+def compile_wide_colour_sums() -> None:
+    """Compile ``kernels.sample_runs`` for sets of 2^24 points and more as well: the progressive
+    octree sums their voxels' colours in u64, smaller ones' in u32 (``octree._voxel_cells``),
+    and numba picks the variant by the sums' dtype, not their size, so a big set compiled it
+    mid-load (seconds). Each u32 signature a load used, with its sums' array a u64 one."""
+    import inspect
+
+    import numba
+
+    from ..lod.progressive import kernels
+
+    at = list(inspect.signature(kernels.sample_runs.py_func).parameters).index("e_sum")
+    for signature in list(kernels.sample_runs.signatures):
+        if signature[at].dtype == numba.types.uint32:
+            wide = signature[at].copy(dtype=numba.types.uint64)  # (its layout and dimensions as they are)
+            kernels.sample_runs.compile((*signature[:at], wide, *signature[at + 1 :]))
 
 
 def steps(folder: Path):
@@ -84,6 +103,10 @@ def steps(folder: Path):
             oc = gp.open(path)
             gp.render_frame(oc, gp.Camera.fit_cloud(oc, width=320, height=200), gp.RenderSettings(backend="cpu"))
 
+    def progressive():
+        gp.demo(120_000, progressive=True).wait()  # (more points than a leaf holds: inner nodes' voxels are sampled)
+        compile_wide_colour_sums()
+
     return [
         ("the demo scene", build),
         ("reading LAS/LAZ files", read_las),
@@ -95,6 +118,7 @@ def steps(folder: Path):
         ("supersampling", render(supersample=2)),
         ("color modes and lighting", colors),
         ("octrees", octree),
+        ("progressive loading", progressive),
     ]
 
 
