@@ -237,6 +237,13 @@ class Loader:
             raise self.error
         return finished and self.complete
 
+    def wait_first_points(self) -> None:
+        """Until the sources' first points are in, or the load has ended (for any thread but the
+        loader's own): those points fix the octree's attributes, where a program's ``add`` before
+        them fixed its own set (none), and every attribute of the files was dropped."""
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._first_in.wait()
+
     def close(self) -> None:
         """Stop loading (after the slice in hand) and wait for the thread."""
         self._stop.set()

@@ -1097,11 +1097,14 @@ class ProgressiveOctree:
         number inserted. Attributes are those of the first call with a valid point; later calls fill missing ones with 0
         and may not bring others (InputError); an attribute whose dtype cannot hold a batch's
         widens to numpy's dtype for both (uint16 and float32: float32), as ``gp.open`` of
-        several files does."""
+        several files does. While a loader fills the octree, an add waits for the files' first
+        points, whose attributes are the set."""
         xyz = np.ascontiguousarray(points_for(xyz, self.name), np.float64)
         n = len(xyz)
         if n == 0:
             return 0
+        if self.loader is not None:
+            self.loader.wait_first_points()
         with threads_for(n, when_awake=False):  # a small batch on this thread alone: waking the others costs more (core/threads.py)
             return self._add(xyz, rgb, attributes)
 
