@@ -57,7 +57,7 @@ from ...core.attributes import Attributes, encode, fits, holder_for, repacked, r
 from ...core.attributes import stored as stored_array
 from ...core.bounds import valid_bounds
 from ...core.chunk import PointChunk, attribute_dtype_problem, attribute_name_problem, colors_for, points_for, warn_dropped_attributes
-from ...core.cloud import MAX_ABS_COORDINATE, at_scale, byte_views, take
+from ...core.cloud import MAX_ABS_COORDINATE, at_scale, byte_views, check_valid_count, take
 from ...core.compact import GRID_TOLERANCE, centre_half, ext_bits_per_point, point_words, stream_words, streams_into
 from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE, WORD_BITS
@@ -1563,7 +1563,7 @@ class ProgressiveOctree:
         unknown = sorted(set(options) - taken)
         if unknown:  # banana=1 was a TypeError inside
             raise InputError(f"{self.name}: save: unknown option(s) {', '.join(unknown)}; it takes {', '.join(sorted(taken))}")
-        self.check_loaded("save it")
+        self._check_savable()
         options.setdefault("source_files", [p for p in self.source_files if p.is_file()])  # the files' CRS and LAS grid (those still there)
         options.setdefault("max_leaf", self.max_leaf)
         options.setdefault("name", self.name)  # name= another was "multiple values for keyword argument"
@@ -1584,7 +1584,7 @@ class ProgressiveOctree:
         if options:  # (sampler=, max_leaf=, ...: each meant something of an octree only)
             raise InputError(f"{out}: {', '.join(sorted(options))}: options of an octree, not of a plain {out.suffix[1:].upper()} file")
         check_point_file_output(out, overwrite)
-        self.check_loaded("save it")
+        self._check_savable()
         t0 = time.perf_counter()
         ply = out.suffix.lower() == ".ply"
         grid = None if ply or self.grid is None else las_grid(self.lo, self.hi, np.full(3, self.grid[1]), self.grid[0])
@@ -1597,6 +1597,14 @@ class ProgressiveOctree:
         close stopped its load part-way (its points were then saved as though the whole input)."""
         if not self.wait() or self.closed:
             raise InputError(f"{self.name}: the octree is closed (its points were freed); open it again to {to}")
+
+    def _check_savable(self) -> None:
+        """``check_loaded``; then, where it holds no point, the plain cloud's one-line EmptyCloudError
+        (with the invalid points skipped): saved into a point file, it was a file of no points,
+        as though a cloud were saved; into a folder, the converter's error without them."""
+        self.check_loaded("save it")
+        if self.points == 0:
+            check_valid_count(self.name, 0, self.skipped)
 
     def grown(self):
         """The octree as a conversion's input (convert.seeded.GrownTree): its cube, its leaves and
