@@ -343,6 +343,8 @@ def file_sources(paths, cut_off: list | None = None, point_filter: PointFilter |
         if n == 0 and len(files) > 1:  # as gp.open and convert: an empty tile among several is skipped, said
             warn(f"{f}: holds no points, skipped", GigapointWarning)
             continue
+        if n == 0:  # the reader's one-line error now, as gp.open's: not a cloud that loads nothing and says so at wait()
+            next(iter(reader.read_chunks(f)), None)
         if head.get("truncated") and cut_off is not None:
             cut_off.append(str(f))
         total = None if total is None or n is None else total + n
