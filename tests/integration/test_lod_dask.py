@@ -617,6 +617,43 @@ def _no_writing() -> None:
     tempfile.mkstemp = mkstemp
 
 
+def _no_gigapoint() -> None:
+    """On a worker: gigapoint cannot be imported, as where it is not installed."""
+
+    class NotInstalled:
+        def find_spec(self, name, path=None, target=None):
+            if name.partition(".")[0] == "gigapoint":
+                raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+
+    for name in [m for m in sys.modules if m.partition(".")[0] == "gigapoint"]:
+        del sys.modules[name]
+    sys.meta_path.insert(0, NotInstalled())
+
+
+def test_a_worker_without_gigapoint_is_named_in_one_line(las_writer, tmp_path):
+    """A worker that cannot import gigapoint failed the driver's check with Dask's failure to
+    unpickle the check ('failed the driver's check (ModuleNotFoundError("No module named ...'))."""
+    import cloudpickle
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])  # the spoiler travels to the worker by value
+    out = tmp_path / "oct"
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=50)
+    c = distributed.Client(cluster)
+    try:
+        c.run(_no_gigapoint)
+        (worker,) = c.scheduler_info()["workers"]
+        with pytest.raises(ConvertError) as err:
+            convert([las_writer(tmp_path / "a.las", 2_000)], out, client=c)
+    finally:
+        c.close()
+        cluster.close()
+    assert re.fullmatch(
+        rf"{re.escape(str(out))}: Dask worker {re.escape(worker)} cannot import gigapoint \(No module named 'gigapoint'\): "
+        r"install gigapoint \S+ there \(the driver's version\+digest of the source\)",
+        str(err.value),
+    ), err.value
+
+
 @pytest.mark.parametrize(
     ("spoil", "problem"),
     [

@@ -1,7 +1,8 @@
 """The workers of the LocalCluster that ``--workers N`` starts (distributed.open_client): one
 malloc arena, so that a task thread's freed memory is kept for the next task (keep_freed_memory.py),
 Dask's profiler and fast event-loop ticks off (docs/scale.md), no Dask memory limit, and half the
-RAM among them as the conversion's default limit (docs/lod.md)."""
+RAM among them as the conversion's default limit (docs/lod.md); another cluster's workers size
+that default by their own memory."""
 
 from __future__ import annotations
 
@@ -175,7 +176,6 @@ def test_local_workers_share_the_ram_and_dask_stops_no_task_within_the_conversio
     monkeypatch.setattr(chunked, "physical_memory", lambda: 3 << 30)
     monkeypatch.setattr(distributed.system, "MEMORY_LIMIT", 3 << 30)  # (read here, where the LocalCluster sizes its workers)
     assert default_memory_limit(1) == parse_memory(None) == 768 << 20  # one worker: one process's default (the same octree)
-    assert default_memory_limit("tcp://elsewhere:8786") == 768 << 20  # other machines' workers: the driver's quarter, as before
     with dask.config.set({"distributed.scheduler.allowed-failures": 0}), open_client(3) as client:
         assert default_memory_limit(client) == default_memory_limit(3) == 512 << 20
         planned = []  # the limit a conversion on these workers plans by
@@ -193,3 +193,41 @@ def test_local_workers_share_the_ram_and_dask_stops_no_task_within_the_conversio
         assert client.submit(_task, "build", "big", spec, _hold_1_1_gb, workers=worker, pure=False).result() == 137_500_000 // 512 + 1
         # the same worker takes its next task (a paused one never would: it keeps the 1.1 GB)
         assert client.submit(_task, "build", "next", spec, _hold_1_1_gb, workers=worker, pure=False).result() == 137_500_000 // 512 + 1
+
+
+def test_another_clusters_default_limit_follows_its_workers_memory_not_the_drivers(monkeypatch, las_writer, tmp_path, capsys):
+    """A Client of one's own (or ``--dask ADDRESS``) planned each task by the driver's RAM, a
+    quarter of it, which says nothing of the workers': a 64 GiB driver planned 16 GiB tasks for
+    workers of 300 MB. Now a task plans for the smallest worker's memory, shared as a local
+    cluster's (half among the tasks at once, at most a quarter each): its Dask memory limit, or
+    where it has none, its machine's memory shared by such workers' threads there."""
+    from gigapoint.core import chunked
+    from gigapoint.lod import ConvertError, convert
+    from gigapoint.lod.convert.distributed import DaskPhases, default_memory_limit
+
+    monkeypatch.setattr(chunked, "physical_memory", lambda: 64 << 30)  # the driver's
+    planned = []
+
+    def stop_at_start(conv):
+        planned.append((conv.mem, conv.partition_points))
+        raise ConvertError("stopped here")
+
+    monkeypatch.setattr(DaskPhases, "_cluster_ready", stop_at_start)
+    with (
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, memory_limit="300MB", processes=False, dashboard_address=":0") as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        with pytest.raises(ConvertError, match="stopped here"):
+            convert([las_writer(tmp_path / "a.las", 1_000)], tmp_path / "oct", client=client)
+        assert planned == [(75_000_000, 75_000_000 // 4 // 220)]  # a quarter of 300 MB; partitions by a quarter of that (state.py)
+        assert default_memory_limit(cluster.scheduler_address, say=True) == 75_000_000  # convert(client=ADDRESS) asks them too
+    said = capsys.readouterr().err
+    assert said.startswith("Dask: each task planned for 71 MiB, from worker inproc://") and said.endswith(
+        "'s 286 MiB (Dask memory limit) among 1 thread(s) (--memory-limit sets it)\n"
+    ), said
+    monkeypatch.setattr(distributed.system, "memory_limit", lambda: 8 << 30)  # the workers' machine (here, this one)
+    with (
+        distributed.LocalCluster(n_workers=2, threads_per_worker=2, memory_limit=None, processes=False, dashboard_address=":0") as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        assert default_memory_limit(client) == 1 << 30  # 8 GiB, half of it among 4 threads

@@ -271,7 +271,8 @@ def convert(
     processes (a ``LocalCluster``, closed at the end). Workers read the inputs and write into
     ``out``, which must be a path every worker sees (a shared file system); the octree is the
     one this function makes without a client. ``memory_limit`` is then per worker (default: a
-    quarter of the RAM; N local workers: half the RAM among them, at most a quarter each).
+    quarter of the RAM; N local workers: half the RAM among them, at most a quarter each; another
+    cluster's workers: the same rule for their memory, distributed.default_memory_limit).
 
     ``source_files``: where ``inputs`` are chunks, the LAS/LAZ/COPC files they came from; their
     headers give the output its CRS and LAS grid (a progressive octree's ``save``).
@@ -436,8 +437,8 @@ def convert(
     if client is not None:
         from .distributed import DaskPhases, default_memory_limit, open_client  # dask is imported only when asked for
 
-        if memory_limit is None:  # (workers on this machine share it)
-            mem = default_memory_limit(client)
+        if memory_limit is None:  # (workers on this machine share it; a cluster's say what they have)
+            mem = default_memory_limit(client, say=progress)
         cls = type("_DaskConverter", (DaskPhases, _Converter), {})
     conv = cls(
         inputs,

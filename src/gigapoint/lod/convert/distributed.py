@@ -75,7 +75,7 @@ from ..preview import PreviewSampler, preview_points
 from ..progress import NullProgress
 from . import hooks
 from .keep_freed_memory import KeepFreedMemory
-from .options import MIN_DEFAULT_MEMORY, parse_memory
+from .options import MIN_DEFAULT_MEMORY, MIN_MEMORY_LIMIT, parse_memory
 from .partition import COUNT_LEVEL, CellCounts, PartitionPhases, built_name, grid_cells, group_name, partition_lut
 from .phases import BuildPhases, place_set
 from .read import (
@@ -226,18 +226,64 @@ def open_client(client, announce: bool = False):
             cluster.close()
 
 
-def default_memory_limit(client) -> int:
-    """The conversion's memory limit, a worker's, where none is given: a quarter of the RAM, as in
-    one process; the N workers of a LocalCluster here (``--workers N``, ``client=N``) share this
-    machine: half its RAM among them, at most a quarter each (4 workers planning a quarter each
-    held all of a small machine's RAM). A cluster elsewhere (``--dask``): the driver's quarter."""
+def default_memory_limit(client, say: bool = False) -> int:
+    """The conversion's memory limit, a task's, where none is given: as in one process, a quarter
+    of the memory a task draws on. The N workers of a LocalCluster here (``--workers N``,
+    ``client=N``) share this machine: half its RAM among them, at most a quarter each (4 workers
+    planning a quarter each held all of a small machine's RAM). A cluster elsewhere (``--dask``, a
+    Client of one's own): the same rule for its workers' memory (``_cluster_memory_limit``), not the
+    driver's, which says nothing of theirs; the driver's quarter only where no worker has joined yet.
+    ``say``: where a cluster's limit came from, said on stderr."""
     if client in _OWN_WORKERS:  # the CLI's --workers N: open_client started them
-        workers = _OWN_WORKERS[client]
-    elif isinstance(client, int):  # convert(client=N): open_client starts them (and refuses N < 1)
-        workers = max(1, client)
-    else:  # a scheduler's address, a Client of one's own: workers elsewhere
-        workers = 1
-    return min(parse_memory(None), max(MIN_DEFAULT_MEMORY, chunked.physical_memory() // (2 * workers)))
+        return _task_share(chunked.physical_memory(), _OWN_WORKERS[client], MIN_DEFAULT_MEMORY)
+    if isinstance(client, int):  # convert(client=N): open_client starts them (and refuses N < 1)
+        return _task_share(chunked.physical_memory(), max(1, client), MIN_DEFAULT_MEMORY)
+    if isinstance(client, str):  # convert(client=ADDRESS): its workers asked over a connection of this call's
+        with open_client(client) as connected:
+            return default_memory_limit(connected, say)
+    found = _cluster_memory_limit(client) if isinstance(client, _distributed().Client) else None  # (open_client refuses others)
+    if found is None:
+        return parse_memory(None)
+    limit, source = found
+    if say:
+        print(f"Dask: each task planned for {limit >> 20} MiB, from {source} (--memory-limit sets it)", file=sys.stderr)
+    return limit
+
+
+def _task_share(memory: int, tasks: int, least: int) -> int:
+    """A task's memory limit where ``tasks`` tasks at once draw on ``memory``: half of it among
+    them, at most a quarter each (one task: a quarter, as one process plans); ``least`` at least."""
+    return max(least, min(memory // 4, memory // (2 * tasks)))
+
+
+def _cluster_memory_limit(client) -> tuple[int, str] | None:
+    """The smallest ``_task_share`` of the cluster's workers, and whose, in words: a worker's Dask
+    memory limit shared by its threads (each runs a task at once); a worker without one, its
+    machine's memory shared by the threads of every such worker there. None: no worker yet."""
+    dd = _distributed()
+    try:
+        workers = client.scheduler_info()["workers"]
+    except Exception:  # noqa: BLE001 - a scheduler gone: the run says so
+        return None
+    unlimited = [w for w, info in workers.items() if not info["memory_limit"]]  # (0 where none was given)
+    # (distributed's own function, which a worker that lacks gigapoint runs too: the run's check names that worker)
+    machine = client.run(dd.system.memory_limit, workers=unlimited, on_error="return") if unlimited else {}
+    threads_there: dict[str, int] = {}
+    for w in unlimited:
+        threads_there[workers[w]["host"]] = threads_there.get(workers[w]["host"], 0) + workers[w]["nthreads"]
+    shares = []
+    for w, info in workers.items():
+        if info["memory_limit"]:
+            memory, tasks, what = info["memory_limit"], info["nthreads"], "Dask memory limit"
+        elif isinstance(machine.get(w), int):
+            memory, tasks, what = machine[w], threads_there[info["host"]], "machine's memory, without a Dask limit"
+        else:  # (gone meanwhile)
+            continue
+        shares.append((_task_share(memory, tasks, MIN_MEMORY_LIMIT), w, f"{memory >> 20} MiB ({what}) among {tasks} thread(s)"))
+    if not shares:
+        return None
+    limit, worker, source = min(shares)
+    return limit, f"worker {worker}'s {source}"
 
 
 def _handshake(dd, address: str) -> None:
@@ -681,6 +727,22 @@ def _worker_checked(spec: dict) -> None:
         raise ConvertError(f"{spec['out']}: Dask worker {_worker_name()} {problem}")
 
 
+def _gigapoint_import_check():
+    """A function that says why ``module`` cannot be imported where it runs (None: it can). Defined
+    in here, so Dask's cloudpickle sends its code (by value), which runs where gigapoint is missing."""
+
+    def import_problem(module: str) -> str | None:
+        import importlib
+
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            return str(exc)
+        return None
+
+    return import_problem
+
+
 def _probe(out: str, token: str, version: str) -> str | None:
     """On each worker before its first task: does it run the driver's code (``version``), does it
     see the driver's output folder, and may it write there? (None: yes; noted in _CHECKED)"""
@@ -893,11 +955,27 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         self.state["run"] = token
         self.save_state()
         answers = self.client.run(_probe, str(self.dir.path), token, code_version(), on_error="return")
+        if any(isinstance(problem, BaseException) for problem in answers.values()) and (lacking := self._lacking_gigapoint()):
+            raise lacking  # (Dask's answer there: its failure to unpickle _probe, as a bare Exception)
         for worker, problem in sorted(answers.items()):
-            if isinstance(problem, BaseException):  # (gigapoint missing there, an older one's _probe)
+            if isinstance(problem, BaseException):  # (an older gigapoint's _probe)
                 problem = f"failed the driver's check ({one_line(problem)}): install the driver's gigapoint on every worker"
             if problem:
                 raise ConvertError(f"{self.out}: Dask worker {worker} {problem}")
+
+    def _lacking_gigapoint(self) -> ConvertError | None:
+        """The error naming a worker that cannot import gigapoint, if one is there: Dask cannot
+        unpickle _probe there, and says so as a bare Exception naming no package to install. (One
+        that joins later cannot unpickle its first task: Dask drops its connection, and the task
+        goes to another worker.)"""
+        answers = self.client.run(_gigapoint_import_check(), __name__, on_error="return")  # (the tasks' module)
+        for worker, problem in sorted(answers.items()):
+            if isinstance(problem, str):
+                return ConvertError(
+                    f"{self.out}: Dask worker {worker} cannot import gigapoint ({one_line(problem)}): "
+                    f"install gigapoint {code_version()} there (the driver's version+digest of the source)"
+                )
+        return None
 
     def _wait_for_earlier_run(self) -> None:
         """A killed driver's tasks that had started run to their end on the workers; its re-run

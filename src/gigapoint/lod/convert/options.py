@@ -18,12 +18,13 @@ MAX_PARTITION_POINTS = 4_000_000
 # driver, whose size says nothing of its workers').
 RUNTIME_BYTES = 192 << 20
 MIN_DEFAULT_MEMORY = 256 << 20  # the default memory limit on the smallest machines
+MIN_MEMORY_LIMIT = 64 << 20  # the least a conversion may be given
 DEFAULT_MAX_LEAF = 20_000
 FORMATS = ("gigapoint", "potree", "copc")
 ENCODINGS = ("DEFAULT", "BROTLI")  # Potree's
 
 
-def parse_memory(value, option: str = "--memory-limit", minimum: int = 64 << 20) -> int:
+def parse_memory(value, option: str = "--memory-limit", minimum: int = MIN_MEMORY_LIMIT) -> int:
     """'4G', '512M', '2GiB', '1.5g' or a byte count -> bytes; None -> a quarter of the RAM.
     ``option``: the setting errors name; ``minimum``: the fewest bytes it may be (a conversion's 64M)."""
     if value is None:
