@@ -148,3 +148,25 @@ def test_fit_refuses_bounds_that_are_not_a_min_max_pair(bounds):
     """``Camera.fit(((0, 0, 0),))`` was an IndexError ("tuple index out of range")."""
     with pytest.raises(CameraError, match=r"^camera bounds (must be \(min, max\), two points of three numbers|min must be three numbers), got "):
         Camera.fit(bounds)
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda: Camera.look_at((0, 0, 10), (0, 0, 0), fov=0.0), "camera fov must be between 0.01 and 179 degrees, got 0"),
+        (lambda: Camera.look_at((0, 0, 10), (0, 0, 0), near=10.0, far=1.0), "camera near (10) must be less than far (1)"),
+        (lambda: Camera.look_at((0, 0, 10), (0, 0, 0), far=np.float64(-2.5)), "camera far must be > 0, got -2.5"),
+        (lambda: Camera.look_at((0.0, 0.0, math.nan), (0, 0, 0)), "camera eye must be finite, got (0, 0, nan)"),
+        (lambda: Camera.look_at((0, 0, 10), (0, 0, 0), projection="orthographic", ortho_height=0.0), "orthographic camera needs ortho_height > 0, got 0"),
+        (lambda: Camera.orbit((0, 0, 0), 30, 10, -1e13), "orbit distance must be > 0, got -1e+13"),
+        (lambda: Camera.fit((np.zeros(3), np.ones(3)), margin=0.0), "camera margin must be a number in (0, 1000] (1: the data touches the frame), got 0"),
+        (lambda: Camera.top_down((np.zeros(3), np.ones(3)), 1e13), "gsd (ground sample distance) must be a number > 0 and at most 2e+12, got 1e+13"),
+        (lambda: Camera.look_at((0, 0, 10), (0, 0, 0)).ray(np.float64(np.inf), 2.0), "ray: pixel coordinates must be finite numbers, got (inf, 2)"),
+    ],
+)  # fmt: skip
+def test_camera_errors_spell_the_numbers_given_compactly(call, message):
+    """A camera's errors say a number as ``errors.number_text`` does: 'got 0', 'got 1e+13', not
+    'got 0.0', 'got 10000000000000.0' (nor numpy's 'np.float64(-2.5)')."""
+    with pytest.raises(CameraError) as err:
+        call()
+    assert str(err.value) == message

@@ -1,5 +1,6 @@
 """gigapoint.orthophoto: the orthophoto and surface model of `render --gsd` from Python, the same
-files byte for byte (orthophoto.py, render/georef.py)."""
+files byte for byte (orthophoto.py, render/georef.py); the survey functions' errors spelling the
+numbers given as errors.number_text does."""
 
 from __future__ import annotations
 
@@ -9,6 +10,8 @@ from PIL import Image
 
 import gigapoint as gp
 from gigapoint.errors import GigapointError, GigapointWarning, InputError
+from gigapoint.survey.ground_raster import ground_parameters
+from gigapoint.survey.noise import noise_parameters
 
 GSD = 4.0  # autzen in feet: 295x142 pixels
 
@@ -90,3 +93,30 @@ def test_a_cloud_without_a_crs_is_placed_by_its_world_file_and_warned_of(tmp_pat
 def test_errors_are_one_line(args, message):
     with pytest.raises(InputError if "dsm" not in args else GigapointError, match=message):
         gp.orthophoto(gp.from_arrays(np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])), **args)
+
+
+SECTION_CLOUD = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 1.0]])
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda: gp.orthophoto(gp.from_arrays(SECTION_CLOUD), -1e13), "orthophoto: gsd must be a number > 0 (cloud units per pixel), got -1e+13"),
+        (lambda: gp.change("m.laz", "m.laz", 0.0), "change: gsd must be a number > 0 (cloud units per pixel), got 0"),
+        (lambda: gp.change("m.laz", "m.laz", 1, min_change=-1e13), "change: min_change must be a number >= 0 (a height difference), got -1e+13"),
+        (lambda: gp.volume("m.laz", "toe.geojson", 0.0), "volume: gsd must be a number > 0 (cloud units per pixel), got 0"),
+        (lambda: gp.volume("m.laz", "toe.geojson", 1, base=np.float64("nan")), "volume: base must be 'plane', 'lowest' or an elevation (a number), got nan"),
+        (lambda: gp.section("m.laz", (0, 0, 1, 1), 0.0), "section: width=0: the corridor's width must be a finite number above 0"),
+        (lambda: gp.section(gp.from_arrays(SECTION_CLOUD), (0, 0, 10, 0), 2).camera(scale=0.0), "section: scale (pixels per unit) must be a number > 0, got 0"),
+        (lambda: gp.section(gp.from_arrays(SECTION_CLOUD), (0, 0, 10, 0), 2).camera(vertical_exaggeration=-1e13),
+         "section: vertical_exaggeration must be a number > 0 (1: heights at the scale of distances), got -1e+13"),
+        (lambda: noise_parameters([], step=0.0), "classify_noise: step must be a number > 0, got 0"),
+        (lambda: ground_parameters([], threshold=-1e13), "classify_ground: threshold must be a number >= 0, got -1e+13"),
+    ],
+)  # fmt: skip
+def test_survey_errors_spell_the_numbers_given_compactly(call, message):
+    """The survey functions' errors say a number as ``errors.number_text`` does: 'got 0' and
+    'got -1e+13', not 'got 0.0' and 'got -10000000000000.0' (nor numpy's 'np.float64(nan)')."""
+    with pytest.raises(GigapointError) as err:
+        call()
+    assert str(err.value) == message

@@ -163,3 +163,18 @@ def test_view_filter_options_need_files(cli):
     rc, _, err = cli("view", "--demo", 100, "--classes", "2")
     assert rc != 0
     assert err.strip() == "error: --classes, --drop-classes, --clip and --clip-polygon: filter the points of the files given as PATH...; none is given"
+
+
+@pytest.mark.parametrize(
+    ("clip", "message"),
+    [
+        ((1e13, 0.0, 5.0, 1.0), "open: clip=(10000000000000.0, 0.0, 5.0, 1.0): xmin 1e+13 is above xmax 5"),
+        ((0.0, 0.0, 0.1 + 0.2, 1.0, 1.0, 0.3), "open: clip=(0.0, 0.0, 0.30000000000000004, 1.0, 1.0, 0.3): zmin 0.30000000000000004 is above zmax 0.3"),
+    ],
+)
+def test_a_clip_box_error_spells_its_bounds_compactly_and_exactly(tmp_path, clip, message):
+    """A min above its max is said as ``errors.number_text`` spells numbers: 1e13 was
+    '10000000000000', and 0.1 + 0.2 above 0.3 read '0.3 is above zmax 0.3' ('%.15g')."""
+    with pytest.raises(InputError) as err:
+        gp.open(tmp_path / "missing.laz", clip=clip)
+    assert str(err.value) == message

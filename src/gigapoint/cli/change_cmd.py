@@ -11,7 +11,7 @@ from typing import Annotated
 
 import typer
 
-from ..errors import GigapointError, counted
+from ..errors import GigapointError, counted, number_text
 from ..render.georef import GEOTIFF_SUFFIXES, georef_paths, georef_writes, raster_writes
 from .app import app
 from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
@@ -62,9 +62,9 @@ def change(
     check_outputs_apart([output, preview, *georef], [before, after])
     check_gsd_value(gsd)
     if not (math.isfinite(min_change) and min_change >= 0):
-        raise GigapointError(f"--min-change must be a number >= 0 (a height difference), got {min_change:g}")
+        raise GigapointError(f"--min-change must be a number >= 0 (a height difference), got {number_text(min_change)}")
     if value_range is not None and not (math.isfinite(value_range) and value_range > 0):
-        raise GigapointError(f"--range must be a number > 0 (the preview spans -DZ..+DZ), got {value_range:g}")
+        raise GigapointError(f"--range must be a number > 0 (the preview spans -DZ..+DZ), got {number_text(value_range)}")
     if value_range is not None and preview is None:  # (it would be dropped without a word)
         raise GigapointError("--range: an option of --preview (the colours' span)")
     distance = check_fill_nodata(fill_nodata, gsd, output)

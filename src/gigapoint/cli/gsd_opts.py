@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from ..errors import GigapointError
+from ..errors import GigapointError, number_text
 from ..render.camera import MAX_GSD
 from ..render.raster_fill import require_scipy
 
@@ -25,7 +25,7 @@ VOLUME_POINTS_HELP = (
 def check_gsd_value(gsd: float) -> None:
     """A one-line error for a --gsd that is no size."""
     if not (math.isfinite(gsd) and 0 < gsd <= MAX_GSD):
-        raise GigapointError(f"--gsd must be a number > 0 and at most {MAX_GSD:g} (cloud units per pixel), got {gsd:g}")
+        raise GigapointError(f"--gsd must be a number > 0 and at most {MAX_GSD:g} (cloud units per pixel), got {number_text(gsd)}")
 
 
 def check_fill_nodata(text: str | None, gsd, depth_out) -> int | None:

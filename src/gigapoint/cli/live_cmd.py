@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..errors import GigapointError
+from ..errors import GigapointError, number_text
 
 
 def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: float | None = None, record: Path | None = None, overwrite: bool = False,
@@ -60,6 +60,6 @@ def check_live_options(keep: int, decay: float | None, rate: float | None) -> No
     if keep < 1:
         raise GigapointError(f"--keep must be >= 1, got {keep}")
     if decay is not None and not decay > 0:
-        raise GigapointError(f"--decay must be > 0 seconds, got {decay}")
+        raise GigapointError(f"--decay must be > 0 seconds, got {number_text(decay)}")
     if rate is not None and not rate > 0:
-        raise GigapointError(f"--rate must be > 0, got {rate}")
+        raise GigapointError(f"--rate must be > 0, got {number_text(rate)}")

@@ -12,7 +12,7 @@ from typing import Annotated
 import typer
 
 from ..core.coords import MAX_ABS_COORDINATE
-from ..errors import CameraError, GigapointError, counted
+from ..errors import CameraError, GigapointError, counted, number_text
 from ..io import crs_wkt, files_label
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
@@ -440,7 +440,7 @@ def demo(
     settings = settings_from_options(RenderSettings, {"threads": threads})  # a bad --threads is named
     check_colors(colors)
     if not (scale == 0 or 1e-6 <= scale <= 1000):  # NaN fails both
-        raise GigapointError(f"--scale must be 0 (float positions) or a grid step between 1e-6 and 1000 metres, got {scale}")
+        raise GigapointError(f"--scale must be 0 (float positions) or a grid step between 1e-6 and 1000 metres, got {number_text(scale)}")
     compiled_before = compiling.compiled_seconds()
     t0 = time.perf_counter()
     with status(f"generating the demo scene ({points:,} points)"):

@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from ..errors import GigapointError, counted
+from ..errors import GigapointError, counted, number_text
 from ..render import RenderSettings
 from .app import app
 from .cloud_opts import ClassesOption, ClipPolygonOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
@@ -58,14 +58,14 @@ def section(
     if csv is not None:
         check_output(csv, overwrite, suffixes={".csv"})
     check_outputs_apart([output, csv], inputs)
-    lane = corridor_of(numbers("--line", line, 4), width, f"section: --line {line}", f"section: --width {width:g}")
+    lane = corridor_of(numbers("--line", line, 4), width, f"section: --line {line}", f"section: --width {number_text(width)}")
     if scale is not None and size is not None:
         raise GigapointError("section: --scale and --size: give one (a size sets the scale)")
     if scale is not None and not (math.isfinite(scale) and scale > 0):
-        raise GigapointError(f"section: --scale must be a number > 0 (pixels per unit), got {scale:g}")
+        raise GigapointError(f"section: --scale must be a number > 0 (pixels per unit), got {number_text(scale)}")
     image_size = None if size is None else check_size(numbers("--size", size.lower(), 2, int, "x"))
     if not (math.isfinite(vertical_exaggeration) and vertical_exaggeration > 0):
-        raise GigapointError(f"section: --vertical-exaggeration must be a number > 0, got {vertical_exaggeration:g}")
+        raise GigapointError(f"section: --vertical-exaggeration must be a number > 0, got {number_text(vertical_exaggeration)}")
     if settings.stereo != "none":  # (two eyes of an orthographic side view see the same)
         raise GigapointError("section: --stereo: a section is one orthographic view")
     check_color_options(settings)

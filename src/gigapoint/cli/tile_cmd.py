@@ -9,7 +9,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from ..errors import GigapointError, counted
+from ..errors import GigapointError, counted, number_text
 from .app import app
 from .cloud_opts import (
     ClassesOption,
@@ -72,7 +72,7 @@ def tile(
             **(point_filter.as_spec() if point_filter is not None else {}),
         )
     except GigapointError as exc:  # tile: size=0.0 said as the option
-        raise named_option(exc, {f"tile: size={size!r}": f"tile: --size {size:g}", f"tile: buffer={buffer!r}": f"tile: --buffer {buffer:g}",
+        raise named_option(exc, {f"tile: size={size!r}": f"tile: --size {number_text(size)}", f"tile: buffer={buffer!r}": f"tile: --buffer {number_text(buffer)}",
                                  f"tile: format={format!r}": f"tile: --format {format}", f"tile: name={name!r}": f"tile: --name {name}",
                                  **crs_options_named("tile", to_crs, from_crs)}) from None  # fmt: skip
     counts = np.array(result.points_per_tile)

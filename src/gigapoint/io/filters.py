@@ -30,7 +30,7 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..core.coords import MAX_ABS_COORDINATE
-from ..errors import EmptyCloudError, GigapointWarning, InputError, counted, is_real, is_whole_number, warn
+from ..errors import EmptyCloudError, GigapointWarning, InputError, counted, is_real, is_whole_number, number_text, warn
 from ._base import read_once
 from .polygon import ClipPolygon, clip_polygon_of, far_apart, looks_like_lon_lat, moved_polygon
 
@@ -420,7 +420,7 @@ def _clip(value, label: str) -> tuple[float, ...]:
     axes = len(values) // 2
     for axis in range(axes):
         if values[axis] > values[axis + axes]:
-            raise InputError(f"{label}: {'xyz'[axis]}min {values[axis]:.15g} is above {'xyz'[axis]}max {values[axis + axes]:.15g}")
+            raise InputError(f"{label}: {'xyz'[axis]}min {number_text(values[axis])} is above {'xyz'[axis]}max {number_text(values[axis + axes])}")
     return tuple(float(v) for v in values)
 
 

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..core.coords import MAX_ABS_COORDINATE
-from ..errors import CameraError, is_real
+from ..errors import CameraError, is_real, number_text
 
 if TYPE_CHECKING:
     from ..core.selection import View
@@ -46,11 +46,11 @@ def _vec3(value, what: str) -> tuple[float, float, float]:
     try:
         v = tuple(float(c) for c in value)
     except (TypeError, ValueError):
-        raise CameraError(f"camera {what} must be three numbers, got {value!r}") from None
+        raise CameraError(f"camera {what} must be three numbers, got {number_text(value)}") from None
     if len(v) != 3:
         raise CameraError(f"camera {what} must be three numbers, got {len(v)}")
     if not all(math.isfinite(c) for c in v):
-        raise CameraError(f"camera {what} must be finite, got {v}")
+        raise CameraError(f"camera {what} must be finite, got ({', '.join(map(number_text, v))})")
     return v
 
 
@@ -207,22 +207,22 @@ class Camera:
         if self.projection not in ("perspective", "orthographic"):
             raise CameraError(f"camera projection must be 'perspective' or 'orthographic', got {self.projection!r}")
         if not (is_real(self.fov) and 0.01 <= self.fov <= 179.0):  # (True was a 1 degree view)
-            raise CameraError(f"camera fov must be between 0.01 and 179 degrees, got {self.fov!r}")
+            raise CameraError(f"camera fov must be between 0.01 and 179 degrees, got {number_text(self.fov)}")
         d = np.subtract(self.target, self.eye)
         if not np.linalg.norm(d) > 0:
             raise CameraError("camera eye and target are the same point")
         if self.projection == "orthographic":
             h = self.ortho_height
             if not (is_real(h) and h > 0):  # ("10" was math's TypeError)
-                raise CameraError(f"orthographic camera needs ortho_height > 0, got {h!r}")
+                raise CameraError(f"orthographic camera needs ortho_height > 0, got {number_text(h)}")
         if np.linalg.norm(self.up) == 0:
             raise CameraError("camera up vector is zero")
         for name in ("near", "far"):
             v = getattr(self, name)
             if v is not None and not (is_real(v) and v > 0):
-                raise CameraError(f"camera {name} must be > 0, got {v!r}")
+                raise CameraError(f"camera {name} must be > 0, got {number_text(v)}")
         if self.near is not None and self.far is not None and self.near >= self.far:
-            raise CameraError(f"camera near ({self.near}) must be less than far ({self.far})")
+            raise CameraError(f"camera near ({number_text(self.near)}) must be less than far ({number_text(self.far)})")
 
     # --- constructors -------------------------------------------------------------
     @classmethod
@@ -234,9 +234,9 @@ class Camera:
         """Camera at ``distance`` from ``target``, at (yaw, pitch) degrees (z-up world)."""
         for name, v in (("yaw", yaw), ("pitch", pitch), ("distance", distance)):
             if not is_real(v):  # 'a' was math's TypeError, a NaN yaw an eye that "must be finite"
-                raise CameraError(f"orbit {name} must be a finite number, got {v!r}")
+                raise CameraError(f"orbit {name} must be a finite number, got {number_text(v)}")
         if not distance > 0:
-            raise CameraError(f"orbit distance must be > 0, got {distance!r}")
+            raise CameraError(f"orbit distance must be > 0, got {number_text(distance)}")
         target = np.asarray(_vec3(target, "target"))
         yaw_r, pitch_r = math.radians(yaw), math.radians(pitch)
         direction = np.array([math.cos(pitch_r) * math.cos(yaw_r), math.cos(pitch_r) * math.sin(yaw_r), math.sin(pitch_r)])
@@ -276,9 +276,9 @@ class Camera:
         else:
             yaw, pitch = _yaw_pitch(view)
         if not (is_real(margin) and 0 < margin <= 1000):  # 0 or -1 were framed as if 1.05 (the nearest the eye could be)
-            raise CameraError(f"camera margin must be a number in (0, 1000] (1: the data touches the frame), got {margin!r}")
+            raise CameraError(f"camera margin must be a number in (0, 1000] (1: the data touches the frame), got {number_text(margin)}")
         if trim is not None and not (is_real(trim) and 0 <= trim < 0.5):  # 5: numpy's "Quantiles must be in the range [0, 1]"
-            raise CameraError(f"camera trim must be a share of the points in [0, 0.5), got {trim!r}")
+            raise CameraError(f"camera trim must be a share of the points in [0, 0.5), got {number_text(trim)}")
         trim = (TRIM if trim is None else float(trim)) if points is not None and len(points) > 8 else 0.0
         if points is not None:
             lo, hi = np.quantile(points, trim, axis=0), np.quantile(points, 1.0 - trim, axis=0)
@@ -340,7 +340,7 @@ class Camera:
         An image over MAX_IMAGE_SIDE a side is a one-line CameraError naming the finest gsd that fits."""
         lo, hi = _box(bounds)
         if not (is_real(gsd) and 0 < gsd <= MAX_GSD):
-            raise CameraError(f"gsd (ground sample distance) must be a number > 0 and at most {MAX_GSD:g}, got {gsd!r}")
+            raise CameraError(f"gsd (ground sample distance) must be a number > 0 and at most {MAX_GSD:g}, got {number_text(gsd)}")
         gsd = float(gsd)
         # the rasterizer puts a point into column floor(px) and row floor(py) (px = (x - left) / gsd,
         # py = (top - y) / gsd): column 0 holds x in [left, left + gsd), row 0 y in (top - gsd, top].
@@ -355,7 +355,7 @@ class Camera:
         if max(width, height) > MAX_IMAGE_SIDE:
             # (a side of extent / gsd pixels takes at most that + 2: the margins' rows may add one)
             fits = _round_up(float(np.max(hi[:2] - lo[:2])) / (MAX_IMAGE_SIDE - 2))
-            raise CameraError(f"gsd {gsd:g} makes a {pixels_text(width)}x{pixels_text(height)} image, over {MAX_IMAGE_SIDE:,} pixels a side: a gsd of {fits:g} or more fits")
+            raise CameraError(f"gsd {number_text(gsd)} makes a {pixels_text(width)}x{pixels_text(height)} image, over {MAX_IMAGE_SIDE:,} pixels a side: a gsd of {fits:g} or more fits")
         left, top = first_col * gsd, top_row * gsd
         # the eye just above the highest point: depths then span little more than the cloud's
         # heights, so float32 depths give heights (``heights``) as finely as they can
@@ -381,7 +381,7 @@ class Camera:
         length = math.dist((x1, y1), (x2, y2))
         for name, v in (("pixel size", pixel_size), ("corridor width", corridor_width), ("line's length", length)):
             if not (is_real(v) and v > 0):
-                raise CameraError(f"section: the {name} must be a number > 0, got {v!r}")
+                raise CameraError(f"section: the {name} must be a number > 0, got {number_text(v)}")
         along = np.array([x2 - x1, y2 - y1, 0.0]) / length
         right_of_line = np.array([along[1], -along[0], 0.0])
         centre = np.array([x1, y1, top - height * pixel_size / 2]) + along * (left + width * pixel_size / 2)
@@ -515,7 +515,7 @@ class Camera:
     def ray(self, px: float, py: float) -> tuple[np.ndarray, np.ndarray]:
         """World-space origin and unit direction through pixel coordinates (px, py)."""
         if not (is_real(px) and is_real(py)):  # (NaN gave a NaN ray, "a" a TypeError)
-            raise CameraError(f"ray: pixel coordinates must be finite numbers, got ({px!r}, {py!r})")
+            raise CameraError(f"ray: pixel coordinates must be finite numbers, got ({number_text(px)}, {number_text(py)})")
         right, up, back = self.basis()
         nx = (px / self.width) * 2 - 1
         ny = 1 - (py / self.height) * 2

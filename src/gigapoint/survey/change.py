@@ -52,7 +52,7 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
-from ..errors import CameraError, InputError, check_switch, is_real
+from ..errors import CameraError, InputError, check_switch, is_real, number_text
 from ..io.crs import crs_identity, crs_name
 from ..io.filters import PointFilter, point_filter
 from ..lod.potree import PotreeCloud
@@ -169,7 +169,7 @@ class Change:
         if limit is None:
             limit = self.preview_range()
         elif not (is_real(limit) and limit > 0):
-            raise InputError(f"change: the preview's range must be a number > 0 (a height difference), got {limit!r}")
+            raise InputError(f"change: the preview's range must be a number > 0 (a height difference), got {number_text(limit)}")
         return ramp_image(self.dz, -limit, limit, PREVIEW_COLORMAP)  # (not compared: dz NaN, transparent)
 
     def write_geotiff(self, path, overwrite: bool = False) -> list[Path]:
@@ -339,9 +339,9 @@ def change(before, after, gsd, classes=None, drop_classes=None, clip=None, fill_
     not only the levels the gsd needs (its surface then that of its point files exactly). Surveys that name different CRSs or
     units (feet and metres), or that share no pixel, are one-line InputErrors."""
     if not (is_real(gsd) and gsd > 0):
-        raise InputError(f"change: gsd must be a number > 0 (cloud units per pixel), got {gsd!r}")
+        raise InputError(f"change: gsd must be a number > 0 (cloud units per pixel), got {number_text(gsd)}")
     if not (is_real(min_change) and min_change >= 0):
-        raise InputError(f"change: min_change must be a number >= 0 (a height difference), got {min_change!r}")
+        raise InputError(f"change: min_change must be a number >= 0 (a height difference), got {number_text(min_change)}")
     if fill_nodata is not None and fill_nodata != "all":
         check_max_distance("change: fill_nodata", fill_nodata)
     check_switch("full", full, "change")
@@ -368,7 +368,7 @@ def change(before, after, gsd, classes=None, drop_classes=None, clip=None, fill_
                 survey.close()
     result = Change(*heights, camera=camera, gsd=float(gsd), crs=crs, units=units, min_change=float(min_change))
     if not result.compared.any():
-        raise InputError(f"{labels[0]} and {labels[1]}: no {gsd:g}-unit pixel holds points of both: the surveys do not overlap")
+        raise InputError(f"{labels[0]} and {labels[1]}: no {number_text(gsd)}-unit pixel holds points of both: the surveys do not overlap")
     return result
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, is_real
+from ..errors import InputError, is_real, number_text
 from .raster_grid import RasterGrid
 
 #: PDAL's and the paper's defaults, in metres (``slope``: rise over run, no unit)
@@ -39,7 +39,7 @@ def ground_parameters(files, cell=None, slope=None, window=None, threshold=None,
     for name, value in given.items():
         least = "> 0" if name in ("cell", "slope", "window") else ">= 0"
         if value is not None and not (is_real(value) and (value > 0 if least == "> 0" else value >= 0)):
-            raise InputError(f"classify_ground: {name} must be a number {least}, got {value!r}")
+            raise InputError(f"classify_ground: {name} must be a number {least}, got {number_text(value)}")
     units = files_units(files)
     across, up = units["horizontal"], units["vertical"]
     if across is not None and across["metres"] is None and any(given[n] is None for n in ("cell", "window")):

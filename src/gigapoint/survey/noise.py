@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, is_real
+from ..errors import InputError, is_real, number_text
 from .ground_raster import NOISE_CLASSES, point_files, progress_bar, write_through
 
 #: lasnoise's defaults: cells of 4 m each way; a point with at most 5 others in its 27 cells is noise
@@ -63,7 +63,7 @@ def noise_parameters(files, step=None, step_z=None, isolated=None) -> dict:
 
     for name, value in (("step", step), ("step_z", step_z)):
         if value is not None and not (is_real(value) and value > 0):
-            raise InputError(f"classify_noise: {name} must be a number > 0, got {value!r}")
+            raise InputError(f"classify_noise: {name} must be a number > 0, got {number_text(value)}")
     if isolated is not None and not (isinstance(isolated, numbers.Integral) and not isinstance(isolated, bool) and isolated >= 0):
         raise InputError(f"classify_noise: isolated must be a whole number >= 0, got {isolated!r}")
     units = files_units(files)

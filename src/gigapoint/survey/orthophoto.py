@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.renderable import Renderable
-from ..errors import CameraError, InputError, check_switch, is_real
+from ..errors import CameraError, InputError, check_switch, is_real, number_text
 from ..lod.reader import cloud_crs_units
 from ..render import Camera, RenderSettings, render_frame
 from ..render.georef import GEOTIFF_SUFFIXES, map_image, write_map
@@ -61,7 +61,7 @@ def orthophoto(source, gsd, out=None, dsm=None, fill_nodata=None, classes=None, 
     full precision whatever they say (exact pixels and heights)."""
     check_switch("overwrite", overwrite, "orthophoto")
     if not (is_real(gsd) and gsd > 0):
-        raise InputError(f"orthophoto: gsd must be a number > 0 (cloud units per pixel), got {gsd!r}")
+        raise InputError(f"orthophoto: gsd must be a number > 0 (cloud units per pixel), got {number_text(gsd)}")
     if fill_nodata is not None and fill_nodata != "all":
         check_max_distance("orthophoto: fill_nodata", fill_nodata)
     for path, suffixes in ((out, IMAGE_SUFFIXES), (dsm, GEOTIFF_SUFFIXES)):  # before anything is read (a long render lost to a name)

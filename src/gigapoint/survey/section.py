@@ -19,7 +19,7 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
-from ..errors import CameraError, InputError, is_real
+from ..errors import CameraError, InputError, is_real, number_text
 from ..io.crs import crs_units
 from ..io.filters import PointFilter, along_and_across, corridor_of, point_filter
 from ..lod import is_lod_source
@@ -109,12 +109,12 @@ class Section:
 
         if scale is not None:
             if not (is_real(scale) and scale > 0):
-                raise CameraError(f"section: scale (pixels per unit) must be a number > 0, got {scale!r}")
+                raise CameraError(f"section: scale (pixels per unit) must be a number > 0, got {number_text(scale)}")
             pixel = 1.0 / scale
             image = needed(pixel)
             if max(image) > MAX_IMAGE_SIDE:
                 fits = (MAX_IMAGE_SIDE - 2 * BORDER - 2) / max(self.length, z_hi - z_lo)
-                raise CameraError(f"section: scale {scale:g} makes a {image[0]:,}x{image[1]:,} image, over {MAX_IMAGE_SIDE:,} pixels a side: a scale of {fits:.3g} or less fits")
+                raise CameraError(f"section: scale {number_text(scale)} makes a {image[0]:,}x{image[1]:,} image, over {MAX_IMAGE_SIDE:,} pixels a side: a scale of {fits:.3g} or less fits")
         else:  # the largest pixel that fits the section into the size (1e-9: division's rounding never needs one more)
             fit = (DEFAULT_WIDTH, MAX_IMAGE_SIDE) if size is None else check_size(size)
             pixel = max(self.length / (fit[0] - 2 * BORDER - 1), (z_hi - z_lo) / (fit[1] - 2 * BORDER - 2)) * (1 + 1e-9)
@@ -153,7 +153,7 @@ class Section:
 
 def _exaggeration(value) -> float:
     if not (is_real(value) and value > 0):
-        raise CameraError(f"section: vertical_exaggeration must be a number > 0 (1: heights at the scale of distances), got {value!r}")
+        raise CameraError(f"section: vertical_exaggeration must be a number > 0 (1: heights at the scale of distances), got {number_text(value)}")
     return float(value)
 
 
@@ -182,7 +182,7 @@ def section(source, line, width, classes=None, drop_classes=None, clip_polygon=N
 
     ``Section.distance``, ``.offset``, ``.z``, ``.classification``: the points along the line;
     ``.render(scale=pixels per unit or size=(w, h), vertical_exaggeration=1, **settings)``: the image."""
-    lane = corridor_of(line, width, f"section: line={line!r}", f"section: width={width!r}")
+    lane = corridor_of(line, width, f"section: line={line!r}", f"section: width={number_text(width)}")
     keep = point_filter(classes, drop_classes, where="section", corridor=lane, clip_polygon=clip_polygon)  # (its bad values before anything is read)
     paths = [source] if isinstance(source, (str, os.PathLike)) else source
     if isinstance(source, PointCloud):

@@ -47,7 +47,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..core.cloud import PointCloud
-from ..errors import EmptyCloudError, InputError, check_switch, is_real
+from ..errors import EmptyCloudError, InputError, check_switch, is_real, number_text
 from ..io._base import headers_once
 from ..io.filters import may_move, placed_in, placed_over, point_filter
 from ..io.polygon import ClipPolygon, check_simple, clip_polygon_of
@@ -186,7 +186,7 @@ def _check_base(base) -> str | float:
         return base
     if is_real(base):
         return float(base)
-    raise InputError(f"volume: base must be 'plane', 'lowest' or an elevation (a number), got {base!r}")
+    raise InputError(f"volume: base must be 'plane', 'lowest' or an elevation (a number), got {number_text(base)}")
 
 
 def _toe(rings: list[np.ndarray], step: float) -> np.ndarray:
@@ -362,7 +362,7 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
     if clip_polygon is None:
         raise InputError("volume: clip_polygon is needed: the piles' boundaries (a GeoJSON or WKT polygon file, or WKT text)")
     if not (is_real(gsd) and gsd > 0):
-        raise InputError(f"volume: gsd must be a number > 0 (cloud units per pixel), got {gsd!r}")
+        raise InputError(f"volume: gsd must be a number > 0 (cloud units per pixel), got {number_text(gsd)}")
     base = _check_base(base)
     check_switch("full", full, "volume")
     if fill_nodata is not None and fill_nodata != "all":
