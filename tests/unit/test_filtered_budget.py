@@ -19,7 +19,7 @@ from gigapoint.lod.progressive import ProgressiveOctree
 from gigapoint.lod.progressive import octree as progressive
 from gigapoint.lod.store import Arena, OctreeCloud
 
-LEFT = (0.0, 0.0, 50.0, 50.0)  # a clip box of the left half: the root keeps half its points, the node below it on the left all
+MIDDLE = (10.0, 0.0, 60.0, 50.0)  # a clip box over half the octree (x 10-60), its sides through the nodes below the root
 
 
 def half_hidden():
@@ -102,24 +102,37 @@ def test_the_budget_hidden_classes_leave_is_spent_close_to_full_and_never_passed
     assert 0.9 * budget <= drawn <= budget
 
 
-def test_a_kept_share_guessed_too_low_drops_the_nodes_past_the_budget(half, monkeypatch):
+def test_a_kept_share_guessed_too_low_drops_the_nodes_past_the_budget(sides, monkeypatch):
     drawn = selections(monkeypatch)
-    frame = gp.render_frame(gp.open(half, clip=LEFT), TOP, point_budget=25_000, lod_threshold_px=0, **FIXED)
-    # the root keeps half its points, so the node on the left is guessed to keep half its 20 752:
-    # loaded, it keeps all of them, root and node 28 562 past the budget: the next selection
-    # drops it again, the root alone within the budget
-    assert drawn == [7_810, 28_562, 7_810]
-    assert frame.stats.points_processed == 7_810
+    frame = gp.render_frame(gp.open(sides, classes=[2]), TOP, point_budget=25_000, lod_threshold_px=0, **FIXED)
+    # the root keeps 55 % of its points, so the node on the left is guessed to keep 55 % of its
+    # 20 752: loaded, it keeps all of them, root and node 29 364 past the budget: the next
+    # selection drops it again, the root alone within the budget
+    assert drawn == [8_612, 29_364, 8_612]
+    assert frame.stats.points_processed == 8_612
+
+
+@pytest.mark.parametrize(("budget", "first", "before"), [(15_000, 14_228, 3_882), (18_000, 17_119, 3_882), (20_000, 19_092, 3_882)])
+def test_class_counts_and_a_clip_box_let_the_first_selection_spend_the_budget(half, monkeypatch, budget, first, before):
+    """Class 7 hidden and a clip box over half the octree: a node not loaded is weighed by the
+    points its classes keep (the class counts) times the share of its box inside the clip box,
+    so the first selection spends 95 % of the budget (class 7 hidden alone: 18 125 of 20 000
+    above), where it weighed every node whole and drew the root alone (``before``), leaving the
+    budget to the selections after it."""
+    drawn = selections(monkeypatch)
+    frame = gp.render_frame(gp.open(half, clip=MIDDLE), TOP, hidden_classes=(7,), point_budget=budget, lod_threshold_px=0, **FIXED)
+    assert drawn[0] == first >= 0.94 * budget > before
+    assert 0.94 * budget <= frame.stats.points_processed <= budget
 
 
 @pytest.mark.parametrize("kind", ["converted", "progressive"])
-def test_the_last_selection_weighs_what_is_not_loaded_whole(half, monkeypatch, kind):
+def test_the_last_selection_weighs_what_is_not_loaded_whole(sides, monkeypatch, kind):
     """Selections run out (one after the first here) while guesses still load nodes: the last
     weighs those not loaded by all their points, so what it draws fits whatever they keep."""
     monkeypatch.setattr(store, "KEPT_ROUNDS", 1)
     monkeypatch.setattr(progressive, "KEPT_ROUNDS", 1)
     if kind == "converted":
-        tree, options = gp.open(half, clip=LEFT), {}  # (guessed by the share the root kept, the left node would pass it: as above)
+        tree, options = gp.open(sides, classes=[2]), {}  # (guessed by the share the root kept, the left node would pass it: as above)
     else:
         xyz, rgb, classes = two_classes(0.25)  # class 2 on the left, 6 on the right: the root keeps half, its octants one or none
         tree, options = ProgressiveOctree("sides", max_leaf=2_000), {"hidden_classes": (6,)}

@@ -10,6 +10,7 @@ import pytest
 import gigapoint as gp
 from gigapoint.errors import EmptyCloudError, InputError
 from gigapoint.io import read_chunks
+from gigapoint.io.filters import PointFilter
 
 CLIP_2D = (636_500.0, 849_000.0, 637_000.0, 849_300.0)
 CLIP_3D = (636_500.0, 849_000.0, 420.0, 637_000.0, 849_300.0, 440.0)
@@ -178,3 +179,15 @@ def test_a_clip_box_error_spells_its_bounds_compactly_and_exactly(tmp_path, clip
     with pytest.raises(InputError) as err:
         gp.open(tmp_path / "missing.laz", clip=clip)
     assert str(err.value) == message
+
+
+def test_box_shares_are_the_share_of_each_box_inside_the_clip_box():
+    """What an LOD octree weighs a node not loaded by (lod/store.py): the share of its box's
+    area in x and y (volume with a clip box in z) inside the clip box; 1 where it cannot tell."""
+    lo = np.array([[0.0, 0, 0], [0, 0, 0], [20, 0, 0], [5, 5, 3], [0, 0, 0]])
+    hi = np.array([[10.0, 10, 10], [20, 10, 10], [30, 10, 10], [5, 5, 3], [10, 10, 10]])
+    shares = PointFilter(clip=(0.0, 0.0, 10.0, 5.0)).box_shares(lo, hi)
+    # inside half in y; a quarter; outside; a point-like box inside; as the first
+    assert shares.tolist() == [0.5, 0.25, 0.0, 1.0, 0.5]
+    assert PointFilter(clip=(0.0, 0.0, 0.0, 10.0, 10.0, 2.5)).box_shares(lo[:1], hi[:1]).tolist() == [0.25]
+    assert PointFilter(classes=(2,), corridor=(0.0, 0.0, 10.0, 0.0, 2.0)).box_shares(lo, hi).tolist() == [1.0] * 5

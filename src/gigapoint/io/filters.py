@@ -232,6 +232,20 @@ class PointFilter:
             meets[meets] = polygon.meets(lo[meets], hi[meets])
         return meets
 
+    def box_shares(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """The share of each box ``lo``..``hi`` ((k, 3) arrays) inside the clip box, in the axes it
+        tests (its volume's, or its area's in x and y): the share of a box's points it keeps where
+        they spread evenly (an LOD octree weighs a node not loaded by it, lod/store.py). 1 where it
+        cannot tell: no clip box (a corridor's or polygon's share is not measured), a box flat in
+        an axis it lies within."""
+        lo, hi = np.atleast_2d(np.asarray(lo, np.float64)), np.atleast_2d(np.asarray(hi, np.float64))
+        if not self.clip:
+            return np.ones(len(lo))
+        axes = len(self.clip) // 2
+        size = hi[:, :axes] - lo[:, :axes]
+        inside = np.clip(np.minimum(hi[:, :axes], self.clip[axes:]) - np.maximum(lo[:, :axes], self.clip[:axes]), 0.0, None)
+        return np.prod(np.where(size > 0, np.minimum(inside, size) / np.where(size > 0, size, 1.0), 1.0), axis=1)
+
     def clipped_bounds(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bounds ``lo``..``hi`` (a header's) cut to the clip box, the corridor's and the polygon's
         boxes: where the kept points can be."""

@@ -589,7 +589,7 @@ class OctreeCloud:
         self._node_spacing: np.ndarray | None = None
         self.counts = nodes["count"].astype(np.int64)  # node counts never change: widened once, not per frame
         self._meets: np.ndarray | None = None  # which nodes' boxes meet the read filter (``meeting_read_filter``), made on first use
-        self._class_kept: tuple = (None, None)  # (a class filter, what ``kept_by_class`` answered for it)
+        self._kept_bounds: tuple = (None, None)  # (a load filter, what ``kept_bounds`` answered for it)
         self.morton_position = morton_position(self.keys)  # frames draw node after node in this order
         self.cube_min, self.cube_edge = key_cube(self.keys, meta["cube_min"], float(meta["cube_edge"]))
         lo, hi = self.stored_bounds()
@@ -713,9 +713,15 @@ class OctreeCloud:
         out_ids = np.empty(len(self.keys), np.int64)
         out_size = np.empty(len(self.keys), np.float64)
         keep = self.load_filter(settings.hidden_classes)
-        costs = self._kept_by_class(keep)  # (through classes alone, with class counts: every node what it keeps)
-        if costs is None:
-            costs = self.counts if self.arena is None else self.arena.kept_counts(self.counts, keep, self.parent if estimated else None)
+        most, likely = self.kept_bounds(keep)
+        if self.arena is None or self.knows_kept(keep):
+            costs = likely  # (nothing loaded yet; or every node's kept points known from the class counts)
+        else:
+            # the nodes loaded count what they kept; the others' likely points times the share of
+            # them their nearest loaded ancestor kept, or (not ``estimated``) the most they keep
+            costs = self.arena.kept_counts(likely, keep, self.parent) if estimated else self.arena.kept_counts(most, keep, None)
+            if likely is not most:  # (a share above 1 where the box's share guessed low: never past the most)
+                costs = np.minimum(costs, most)
         k, total = select_nodes(
             view.rows, self.box_min, self.box_size, self.counts, costs, self.meeting_read_filter(), self.children, float(view.width), float(view.height),
             float(view.near), float(view.far), float(settings.lod_threshold_px), int(settings.point_budget), out_ids, out_size,
@@ -723,16 +729,29 @@ class OctreeCloud:
         )  # fmt: skip
         return out_ids[:k], out_size[:k], int(total)
 
-    def _kept_by_class(self, keep: PointFilter | None) -> np.ndarray | None:
-        """Each node's points the load filter ``keep`` keeps, known before any is loaded from the
-        octree's class counts (the first selection of a frame spends the budget in full); None
-        without them, or where ``keep`` tests positions too (a clip box: ``Arena.kept_counts``
-        guesses from what is loaded). Made once a filter."""
-        if self.class_counts is None or keep is None or keep.needs_positions:
-            return None
-        if self._class_kept[0] != keep:
-            self._class_kept = (keep, kept_by_class(self.class_counts, len(self.keys), keep))
-        return self._class_kept[1]
+    def kept_bounds(self, keep: PointFilter | None) -> tuple[np.ndarray, np.ndarray]:
+        """(most, likely): per node, the most points the load filter ``keep`` keeps of it (what its
+        classes let pass, known from the octree's class counts where it has them, else all its
+        points) and those it likely keeps, known before any is loaded: the most times the share
+        of the node's box inside the clip box (``PointFilter.box_shares``, at least
+        MIN_KEPT_SHARE: a node barely inside is not taken for free). The first selection of a
+        frame weighs nodes by the likely (through classes alone, with class counts: what each
+        keeps, so it spends the budget in full and is the only one). Made once a filter."""
+        if keep is None:
+            return self.counts, self.counts
+        asked = (keep, len(self.keys))  # (a COPC/EPT hierarchy grows as its pages are read)
+        if self._kept_bounds[0] != asked:
+            has_classes = self.class_counts is not None and bool(keep.classes or keep.drop_classes)
+            most = kept_by_class(self.class_counts, len(self.keys), keep) if has_classes else self.counts
+            shares = np.maximum(keep.box_shares(self.box_min, self.box_min + self.box_size), MIN_KEPT_SHARE)
+            likely = np.ceil(most * shares).astype(np.int64) if keep.clip else most
+            self._kept_bounds = (asked, (most, likely))
+        return self._kept_bounds[1]
+
+    def knows_kept(self, keep: PointFilter | None) -> bool:
+        """Whether every node's points the load filter ``keep`` keeps are known before any is
+        loaded: through classes alone, from the class counts (``kept_bounds``)."""
+        return keep is not None and not keep.needs_positions and self.class_counts is not None
 
     def _attribute_dtypes(self) -> dict:
         return {a: v.dtype for a, v in self.attributes.items() if v.ndim == 1}
@@ -767,7 +786,7 @@ class OctreeCloud:
         ids = self._resident_selection(view, settings)
         keep = self.load_filter(settings.hidden_classes)
         # (no round where the class counts tell what every node keeps: the first selection weighed it all)
-        rounds = KEPT_ROUNDS if keep is not None and self._kept_by_class(keep) is None else 0
+        rounds = KEPT_ROUNDS if keep is not None and not self.knows_kept(keep) else 0
         for r in range(rounds):
             # the nodes just loaded count their kept points from now on, not their estimates:
             # an estimate too low drops the nodes past the budget, one too high leaves budget to
