@@ -54,6 +54,9 @@ PYTHON_HINTS = {
     "gp.convert(..., from_crs=...)": "--from-crs",  # (io/reproject.py: a file naming no CRS)
     "gp.tile(..., from_crs=...)": "--from-crs",
     "read with recursive=True": "read with --recursive",  # (lod/convert/tiles.py: tiles inside a folder read)
+    "give client its scheduler's address": "give its scheduler's address with --dask",  # (lod/convert/distributed.py: too many workers)
+    "port must be in 0..65535": "--port must be in 0..65535",  # (viewer/server.py: gp.Viewer's port, view's --port)
+    "host must be an address or a host name": "--host must be an address or a host name",
 }
 
 

@@ -125,8 +125,9 @@ def convert(
                 **output_crs,
                 on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
             )
-    except (ConvertError, InputError) as exc:  # 'max_leaf must be ...' named no option; thin=1e-09 said as typed
-        raise named_option(exc, {"max_leaf": "--max-leaf", f"convert: thin={spacing!r}": f"convert: --thin {thin}", **crs_options_named("convert", to_crs, from_crs)}) from None
+    except (ConvertError, InputError) as exc:  # the library's keywords ('max_leaf must be ...', format='bogus') said as the options typed
+        raise named_option(exc, {"max_leaf": "--max-leaf", f"convert: thin={spacing!r}": f"convert: --thin {thin}", **crs_options_named("convert", to_crs, from_crs),
+                                 **keywords_as_options(output, colors, dask)}) from None  # fmt: skip
     except (KeyboardInterrupt, SystemExit):  # (Ctrl+C, SIGTERM) a bare "interrupted" left the user to guess whether OUT was lost
         if not to_file and OctreeDir(watch).read_state() is not None:
             print(f"{watch}: kept unfinished; run the same convert command again to resume it", file=sys.stderr)
@@ -143,3 +144,20 @@ def convert(
         f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s{resumed}"
         + (f"; viewable after {result.first_view_seconds:.1f} s" if result.first_view_seconds is not None else "")
     )
+
+
+def keywords_as_options(output: Path, colors: str | None, dask: str | None) -> dict[str, str]:
+    """``named_option``'s blame for the library's words of convert's keywords (lod/convert:
+    ``format: unknown format 'x'``, ``client='tcp://...': cannot reach ...``): the options typed."""
+    return {
+        "sampler": "--sampler",
+        "format": "--format",
+        "layout and colors": "--layout and --colors",  # (before "layout", which begins it)
+        "layout": "--layout",
+        "colors": "--colors",
+        f"colors={colors!r}": f"--colors {colors}",
+        f"{output}: thin": f"{output}: --thin",
+        "client: a distributed conversion needs Dask": "--dask/--workers: a distributed conversion needs Dask",
+        "client": "--workers",  # (a number of workers: an address is client='...')
+        f"client={dask!r}": f"--dask {dask}",
+    }

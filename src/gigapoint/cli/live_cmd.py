@@ -19,7 +19,7 @@ def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: floa
     prefer_passive_wait()  # `gigapoint demo --live` comes here without `view`
     from ..live import LiveCloud
     from ..live.sources import Player, ReplaySource, SyntheticSensor, open_source
-    from ..viewer.server import ViewerServer, check_address
+    from ..viewer.server import check_address
 
     check_address(host, port)  # before anything plays or records: a bad --port failed with a recording made
     src = ReplaySource(source) if replay else open_source(source)
@@ -37,7 +37,7 @@ def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: floa
     try:
         if player.error is not None:
             raise player.error
-        server = ViewerServer(live, host=host, port=port)  # (a port in use)
+        server = serve_at(live, host, port)  # (a port in use)
     except BaseException:
         live.close()  # the player stops and the recording is closed with its index
         raise
@@ -63,3 +63,15 @@ def check_live_options(keep: int, decay: float | None, rate: float | None) -> No
         raise GigapointError(f"--decay must be > 0 seconds, got {number_text(decay)}")
     if rate is not None and not rate > 0:
         raise GigapointError(f"--rate must be > 0, got {number_text(rate)}")
+
+
+def serve_at(cloud, host: str, port: int, **options):
+    """A ViewerServer of ``cloud``; an address it cannot listen on said as the options typed
+    (viewer/server.py says gp.Viewer's keywords: ``host='::1', port=80: cannot listen there``)."""
+    from ..viewer.server import ViewerServer
+    from .settings_opts import named_option
+
+    try:
+        return ViewerServer(cloud, host=host, port=port, **options)
+    except GigapointError as exc:
+        raise named_option(exc, {f"host={host!r}, port={port!r}": f"--host {host} --port {port}"}) from None

@@ -120,7 +120,7 @@ def view(
 
     from ..lod.progressive import ProgressiveOctree
     from ..viewer.classes import refusal
-    from ..viewer.server import ViewerServer
+    from .live_cmd import serve_at
 
     if demo is not None and paths:
         raise GigapointError("view: give either PATH... or --demo N, not both")
@@ -169,7 +169,7 @@ def view(
             time.sleep(0.02)
         if cloud.n_points == 0 and not cloud.loading:  # a file cut off before its first point: its error, not a server showing nothing
             cloud.wait()
-    server = ViewerServer(cloud, host=host, port=port, settings=settings)
+    server = serve_at(cloud, host, port, settings=settings)
     print(f"gigapoint viewer: {cloud.name}, {cloud.n_points:,} points", file=sys.stderr)
     _report_load(cloud)
     if not server.loopback:

@@ -434,9 +434,9 @@ def check_address(host, port) -> None:
     """The checks of ``ViewerServer``'s host and port that need no socket (the live CLI makes them
     before its stream starts playing and recording)."""
     if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:  # True was port 1
-        raise GigapointError(f"--port must be in 0..65535, got {port!r}")
+        raise GigapointError(f"port must be in 0..65535, got {port!r}")
     if not isinstance(host, str) or not host.strip():  # 5: an AttributeError; "": "Name or service not known"
-        raise GigapointError(f"--host must be an address or a host name (127.0.0.1: this machine only), got {host!r}")
+        raise GigapointError(f"host must be an address or a host name (127.0.0.1: this machine only), got {host!r}")
 
 
 class ViewerServer:
@@ -460,7 +460,7 @@ class ViewerServer:
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             self.sock.bind(addr)
         except OSError as exc:
-            raise GigapointError(f"--host {host} --port {port}: cannot listen there ({exc.strerror or exc})") from None
+            raise GigapointError(f"host={host!r}, port={port!r}: cannot listen there ({exc.strerror or exc})") from None
         self.sock.listen(128)  # (uvicorn listens again with its backlog)
         self.sock.setblocking(False)
         self.port = self.sock.getsockname()[1]

@@ -388,37 +388,37 @@ def convert(
         )
     sampler = "grid" if sampler is None else sampler
     if sampler not in SAMPLERS:
-        raise ConvertError(f"--sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
+        raise ConvertError(f"sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
     max_leaf = DEFAULT_MAX_LEAF if max_leaf is None else max_leaf
     if format is None:  # -o scan.copc.laz without --format was a gigapoint folder of that name
         format = "copc" if is_copc_name(out) else "gigapoint"
     if format not in FORMATS:
-        raise ConvertError(f"--format: unknown format {format!r}; choose {' or '.join(FORMATS)}")
+        raise ConvertError(f"format: unknown format {format!r}; choose {' or '.join(FORMATS)}")
     if format != "copc" and out is not None and str(out) != "" and is_supported_name(out):  # -o scan.laz: a folder named so
         raise ConvertError(f"{out}: a {format} octree is a folder; name it without a point file's suffix, or write --format copc into a .copc.laz file")
     if spacing is not None:  # (an octree's inner nodes are its thinned levels; its leaves hold every point)
-        raise ConvertError(f"{out}: --thin: an option of a plain .las, .laz or .ply file of the files' points, not of a {format} octree")
+        raise ConvertError(f"{out}: thin: an option of a plain .las, .laz or .ply file of the files' points, not of a {format} octree")
     if format == "copc" and out is not None and str(out) != "":
         check_copc_output(out, overwrite)
-    given = [f"--{n}" for n, v in (("layout", layout), ("colors", colors)) if v is not None]
+    given = [n for n, v in (("layout", layout), ("colors", colors)) if v is not None]
     if given and format != "gigapoint":  # --format potree --layout words wrote Potree's own layout, without a word
         raise ConvertError(f"{' and '.join(given)}: {'options' if len(given) > 1 else 'an option'} of the gigapoint format, not of {format}")
     if encoding is not None and format != "potree":
         raise ConvertError(f"encoding: an option of the potree format, not of {format}")
     if layout == "words" and colors == "rgb565":  # version 1 holds 32-bit colours
-        raise ConvertError("--colors rgb565: an option of the compact layout; words holds 32-bit colours")
+        raise ConvertError("colors='rgb565': an option of the compact layout; words holds 32-bit colours")
     layout, colors, encoding = layout or "compact", colors or "rgba", encoding or "DEFAULT"
     if not (isinstance(max_leaf, int) and max_leaf >= 100):
         raise ConvertError(f"max_leaf must be an integer >= 100, got {max_leaf!r}")
     if encoding not in ENCODINGS:
         raise ConvertError(f"encoding: unknown Potree encoding {encoding!r}; choose DEFAULT or BROTLI")
     if layout not in LAYOUTS:
-        raise ConvertError(f"--layout: unknown layout {layout!r}; choose {' or '.join(LAYOUTS)}")
+        raise ConvertError(f"layout: unknown layout {layout!r}; choose {' or '.join(LAYOUTS)}")
     if colors not in COLOR_FORMATS:
-        raise ConvertError(f"--colors: unknown colour format {colors!r}; choose {' or '.join(COLOR_FORMATS)}")
+        raise ConvertError(f"colors: unknown colour format {colors!r}; choose {' or '.join(COLOR_FORMATS)}")
     mem = parse_memory(memory_limit)
     if out is None or str(out) == "":
-        raise ConvertError("convert: no output directory given (-o OUT)")
+        raise ConvertError(f"convert: no output directory given (out={out!r})")
     if isinstance(inputs, PointSource):  # a cloud: gp.demo, from_arrays, open; a progressive octree (its save() keeps its tree)
         name, source_files = name or inputs.name, list(inputs.source_files) if source_files is None else source_files
         if not inputs.colors_exact:  # gp.open's colors="auto": its octree's colours were up to 12/255 off the file's, without a word

@@ -138,7 +138,7 @@ def _distributed():
     try:
         import distributed
     except ImportError:
-        raise ConvertError("--dask/--workers: a distributed conversion needs Dask: pip install 'gigapoint[dask]'") from None
+        raise ConvertError("client: a distributed conversion needs Dask: pip install 'gigapoint[dask]'") from None
     return distributed
 
 
@@ -178,12 +178,12 @@ def open_client(client, announce: bool = False):
     cluster = None
     if isinstance(client, int) and not isinstance(client, bool):
         if client < 1:
-            raise ConvertError(f"--workers: needs at least 1 worker, got {client}")
+            raise ConvertError(f"client: needs at least 1 worker, got {client}")
         cores = os.cpu_count() or 1
         if client > MAX_WORKERS_PER_CORE * cores:  # 1000 started 1000 processes on 2 cores: the run never came back
             raise ConvertError(
-                f"--workers: {client} local worker processes on a machine of {cores} cores (at most {MAX_WORKERS_PER_CORE * cores}: each "
-                "runs one thread); for more, start a Dask cluster and give its scheduler's address with --dask"
+                f"client: {client} local worker processes on a machine of {cores} cores (at most {MAX_WORKERS_PER_CORE * cores}: each "
+                "runs one thread); for more, start a Dask cluster and give client its scheduler's address"
             )
         import dask
 
@@ -213,7 +213,7 @@ def open_client(client, announce: bool = False):
         except ConvertError:
             raise
         except Exception as exc:  # noqa: BLE001 - OSError, TimeoutError, ValueError (a bad address) alike
-            raise ConvertError(f"--dask {client}: cannot reach a Dask scheduler there ({one_line(exc) or type(exc).__name__})") from None
+            raise ConvertError(f"client={client!r}: cannot reach a Dask scheduler there ({one_line(exc) or type(exc).__name__})") from None
     else:
         raise ConvertError(f"client: a distributed.Client, a scheduler address or a number of workers, got {client!r}")
     try:
@@ -303,20 +303,20 @@ def _handshake(dd, address: str) -> None:
             socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
         except (OSError, ValueError) as exc:
             why = "nothing listens on that port" if isinstance(exc, ConnectionRefusedError) else one_line(exc) or type(exc).__name__
-            raise ConvertError(f"--dask {address}: cannot reach a Dask scheduler there ({why})") from None
+            raise ConvertError(f"client={address!r}: cannot reach a Dask scheduler there ({why})") from None
 
     async def hello() -> None:
         try:
             comm = await asyncio.wait_for(dd.comm.connect(address, timeout=CONNECT_TIMEOUT_S), CONNECT_TIMEOUT_S)
         except TimeoutError:  # (asyncio.wait_for's; an OSError too, so first) connected, no answer
             raise ConvertError(
-                f"--dask {address}: something listens there but does not answer as a Dask scheduler within {CONNECT_TIMEOUT_S:.0f} s "
+                f"client={address!r}: something listens there but does not answer as a Dask scheduler within {CONNECT_TIMEOUT_S:.0f} s "
                 "(the dashboard's port? a scheduler listens on 8786 unless told otherwise)"
             ) from None
         except (OSError, ValueError):  # nothing listens there (Dask's message says so), a bad address
             raise
         except Exception as exc:  # noqa: BLE001 - another service's bytes decoded as Dask's
-            raise ConvertError(f"--dask {address}: something listens there but does not speak Dask's protocol ({one_line(exc)})") from None
+            raise ConvertError(f"client={address!r}: something listens there but does not speak Dask's protocol ({one_line(exc)})") from None
         await comm.close()
 
     with ThreadPoolExecutor(1) as pool:  # a loop of its own: the caller's thread may run one (Jupyter)
