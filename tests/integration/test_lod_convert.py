@@ -937,11 +937,15 @@ def test_refuses_to_overwrite(demo_las, tmp_path, capsys):
     [
         (["{missing}"], "no such file"),
         (["{garbage}"], "garbage.las"),
-        (["{las}", "--sampler", "random"], "--sampler"),
+        (["{las}", "--sampler", "random"], "error: --sampler: unknown sampler 'random'; choose grid or poisson"),
         (["{las}", "--memory-limit", "lots"], "--memory-limit"),
         (["{las}", "--memory-limit", "1M"], "--memory-limit"),
         (["{las}", "--memory-limit", "infG"], "--memory-limit: cannot read 'infG'"),  # an internal error (OverflowError) before
-        (["{las}", "--format", "ept"], "--format"),
+        (["{las}", "--format", "ept"], "error: --format: unknown format 'ept'; choose gigapoint or potree or copc"),
+        # the library says its keywords (layout: ..., colors='rgb565': ...): the options' words here
+        (["{las}", "--layout", "bits"], "error: --layout: unknown layout 'bits'; choose compact or words"),
+        (["{las}", "--colors", "rgb332"], "error: --colors: unknown colour format 'rgb332'; choose rgba or rgb565"),
+        (["{las}", "--format", "potree", "--colors", "rgb565"], "error: --colors: an option of the gigapoint format, not of potree"),
         (["{octree}"], "converted octree"),
         # each was dropped without a word: Potree's own layout, 32-bit colours
         (["{las}", "--format", "potree", "--layout", "words"], "error: --layout: an option of the gigapoint format, not of potree"),
@@ -969,7 +973,7 @@ def test_options_of_one_format_are_refused_for_another(tmp_path):
     cloud = __import__("gigapoint").from_arrays(xyz, rgba)
     with pytest.raises(ConvertError, match=r"^encoding: an option of the potree format, not of gigapoint$"):
         convert(cloud, tmp_path / "g", encoding="BROTLI")
-    with pytest.raises(ConvertError, match=r"^--colors: an option of the gigapoint format, not of potree$"):
+    with pytest.raises(ConvertError, match=r"^colors: an option of the gigapoint format, not of potree$"):
         convert(cloud, tmp_path / "p", format="potree", colors="rgb565")
     assert not list(tmp_path.iterdir())
     assert convert(cloud, tmp_path / "w", layout="words", colors="rgba").points == 2_000  # words holds rgba: consistent

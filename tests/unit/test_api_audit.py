@@ -167,3 +167,60 @@ def test_waiting_on_a_truncated_laz_raises_its_one_line_error(tmp_path, autzen_p
             cloud.wait(60)
     assert cloud.n_points == 0 and str(cloud.error) == problem
     cloud.close()
+
+
+def _octree_of_points():
+    octree = ProgressiveOctree("oct")
+    octree.add(XYZ)
+    return octree
+
+
+# the library said the CLI's options to a Python caller ("--format: unknown format 'bogus'",
+# "--dask tcp://...: cannot reach ...", "--port must be ..."): it says the keyword given
+# (cli/convert_cmd.py and cli/live_cmd.py say the options, test_lod_convert.py and test_live_cli.py)
+CALLER_WORDS = [
+    ("convert-format", lambda src, out: gp.convert(src, out, format="bogus"), "format: unknown format 'bogus'; choose gigapoint or potree or copc"),
+    ("save-format", lambda src, out: _octree_of_points().save(out, format="bogus"), "format: unknown format 'bogus'; choose gigapoint or potree or copc"),
+    ("convert-sampler", lambda src, out: gp.convert(src, out, sampler="random"), "sampler: unknown sampler 'random'; choose grid or poisson"),
+    ("convert-layout", lambda src, out: gp.convert(src, out, layout="bits"), "layout: unknown layout 'bits'; choose compact or words"),
+    ("convert-colors", lambda src, out: gp.convert(src, out, colors="rgb332"), "colors: unknown colour format 'rgb332'; choose rgba or rgb565"),
+    ("convert-words-rgb565", lambda src, out: gp.convert(src, out, layout="words", colors="rgb565"),
+     "colors='rgb565': an option of the compact layout; words holds 32-bit colours"),
+    ("convert-copc-layout", lambda src, out: gp.convert(src, out, format="copc", layout="compact", colors="rgba"),
+     "layout and colors: options of the gigapoint format, not of copc"),
+    ("convert-thin-octree", lambda src, out: gp.convert(src, out, thin=10),
+     "{out}: thin: an option of a plain .las, .laz or .ply file of the files' points, not of a gigapoint octree"),
+    ("convert-out-empty", lambda src, out: gp.convert(src, ""), "convert: no output directory given (out='')"),
+    ("save-out-none", lambda src, out: _octree_of_points().save(None), "convert: no output directory given (out=None)"),
+    ("convert-client-0", lambda src, out: gp.convert(src, out, client=0), "client: needs at least 1 worker, got 0"),
+    ("convert-client-unreachable", lambda src, out: gp.convert(src, out, client="tcp://127.0.0.1:9"),
+     "client='tcp://127.0.0.1:9': cannot reach a Dask scheduler there (nothing listens on that port)"),
+    ("viewer-port", lambda src, out: gp.Viewer(gp.from_arrays(XYZ), port=70000, display=False), "port must be in 0..65535, got 70000"),
+    ("viewer-host", lambda src, out: gp.Viewer(gp.from_arrays(XYZ), host="", display=False),
+     "host must be an address or a host name (127.0.0.1: this machine only), got ''"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("call", "message"), [case[1:] for case in CALLER_WORDS], ids=[case[0] for case in CALLER_WORDS])
+def test_errors_name_the_keyword_the_caller_gave(autzen_path, tmp_path, call, message):
+    out = tmp_path / "oct"
+    with pytest.raises(gp.GigapointError, match=f"^{re.escape(message.format(out=out))}$"):
+        call(autzen_path, out)
+    assert not out.exists()
+
+
+def test_too_many_workers_says_the_keyword(autzen_path, tmp_path):
+    import os
+
+    pytest.importorskip("distributed")
+    cores = os.cpu_count()
+    with pytest.raises(gp.GigapointError, match=f"^client: 100000 local worker processes on a machine of {cores} cores .*; for more, start a Dask cluster and give client its scheduler's address$"):
+        gp.convert(autzen_path, tmp_path / "oct", client=100_000)
+
+
+def test_a_conversion_on_dask_without_dask_says_the_keyword(autzen_path, tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "distributed", None)  # (import distributed: an ImportError)
+    with pytest.raises(gp.GigapointError, match=r"^client: a distributed conversion needs Dask: pip install 'gigapoint\[dask\]'$"):
+        gp.convert(autzen_path, tmp_path / "oct", client=2)

@@ -117,3 +117,13 @@ def test_gp_tile_refuses_an_input_folder_as_the_command_does(home):
     with pytest.raises(InputError, match=r"lies in .*, read with recursive=True; write the tiles elsewhere"):
         gp.tile(home, home / "tiles", size=50, recursive=True)
     assert files_in(home) == ["a.las", "notes.txt"]
+
+
+def test_dask_missing_is_said_as_the_options(cli, inputs, tmp_path, monkeypatch):
+    """The library says ``client: ...`` (convert's keyword): the CLI the options typed, as before."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "distributed", None)  # (import distributed: an ImportError)
+    rc, _, err = cli("convert", inputs / "small.las", "-o", tmp_path / "o", "--workers", "2", "-q")
+    assert (rc, err) == (1, "error: --dask/--workers: a distributed conversion needs Dask: pip install 'gigapoint[dask]'\n")
+    assert not (tmp_path / "o").exists()

@@ -319,9 +319,9 @@ def test_16_bit_colors_on_request(las_pair, tmp_path):
 
 def test_options_are_checked(tmp_path):
     chunks = [PointChunk(np.zeros((10, 3)))]
-    with pytest.raises(ConvertError, match="--layout"):
+    with pytest.raises(ConvertError, match="^layout: unknown layout 'bits'; choose compact or words$"):
         convert(chunks, tmp_path / "a", layout="bits")
-    with pytest.raises(ConvertError, match="--colors"):
+    with pytest.raises(ConvertError, match="^colors: unknown colour format 'rgb332'; choose rgba or rgb565$"):
         convert(chunks, tmp_path / "b", colors="rgb332")
 
 

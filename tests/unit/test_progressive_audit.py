@@ -75,7 +75,7 @@ MISUSE = [
     ("chunks-after-close", lambda c, f, out: list(_closed(c).chunks()), InputError, "a.las: the octree is closed (its points were freed); open it again to read its points"),
     ("wait-nan", lambda c, f, out: c.wait(timeout=math.nan), InputError, "a.las: wait: timeout must be a number of seconds or None, got nan"),
     ("wait-string", lambda c, f, out: c.wait(timeout="1"), InputError, "a.las: wait: timeout must be a number of seconds or None, got '1'"),
-    ("save-bogus-format", lambda c, f, out: c.save(out, format="bogus"), ConvertError, "--format: unknown format 'bogus'; choose gigapoint or potree or copc"),
+    ("save-bogus-format", lambda c, f, out: c.save(out, format="bogus"), ConvertError, "format: unknown format 'bogus'; choose gigapoint or potree or copc"),
     ("save-unknown-option", lambda c, f, out: c.save(out, banana=1), InputError, "a.las: save: unknown option(s) banana; it takes "),
     ("save-overwrite-not-a-switch", lambda c, f, out: c.save(out, overwrite="no"), InputError, "convert: overwrite must be True or False, got 'no'"),
     ("save-laz-octree-option", lambda c, f, out: c.save(out.with_suffix(".laz"), max_leaf=1000), InputError,

@@ -556,11 +556,11 @@ def test_viewer_for_jupyter(cloud):
     with pytest.raises(gigapoint.GigapointError):
         gigapoint.Viewer(12345, display=False)
     for bad, problem in (
-        ({"host": 5}, "--host must be an address or a host name (127.0.0.1: this machine only), got 5"),  # an AttributeError
-        ({"host": ""}, "--host must be an address or a host name (127.0.0.1: this machine only), got ''"),
-        ({"port": True}, "--port must be in 0..65535, got True"),  # port 1
-        ({"port": 70000}, "--port must be in 0..65535, got 70000"),
-        ({"port": "a"}, "--port must be in 0..65535, got 'a'"),
+        ({"host": 5}, "host must be an address or a host name (127.0.0.1: this machine only), got 5"),  # an AttributeError
+        ({"host": ""}, "host must be an address or a host name (127.0.0.1: this machine only), got ''"),
+        ({"port": True}, "port must be in 0..65535, got True"),  # port 1
+        ({"port": 70000}, "port must be in 0..65535, got 70000"),
+        ({"port": "a"}, "port must be in 0..65535, got 'a'"),
         ({"display": "no"}, "Viewer: display must be True or False, got 'no'"),
     ):
         with pytest.raises(gigapoint.GigapointError, match=f"^{re.escape(problem)}$"):
@@ -801,3 +801,17 @@ def test_the_page_token_is_not_logged(cloud):
     said = "\n".join(lines)
     assert '"WebSocket /ws?w=***&h=***&token=***" [accepted]' in said and '"WebSocket /ws?token=***" 403' in said, said
     assert "SECRET" not in said
+
+
+def test_a_port_in_use_names_the_keywords_and_the_options(cloud, cli):
+    """gp.Viewer's error says its keywords (host=, port=); `view` the options typed, as before."""
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        with pytest.raises(gigapoint.GigapointError, match=f"^host='127.0.0.1', port={port}: cannot listen there \\(Address already in use\\)$"):
+            gigapoint.Viewer(cloud, port=port, display=False)
+        rc, out, err = cli("view", "--demo", "1000", "--port", port, "--no-browser")
+        assert (rc, out, err) == (1, "", f"error: --host 127.0.0.1 --port {port}: cannot listen there (Address already in use)\n")
