@@ -12,6 +12,10 @@ from contextvars import ContextVar
 # warnings kept for another thread to issue (``warn``): set in gigapoint's threads (a
 # progressive load's, a live Player's, a prefetch worker's)
 _kept: ContextVar[list | None] = ContextVar("gigapoint_kept_warnings", default=None)
+# ... and there other libraries' warnings too (``keep_warnings``; not ``warnings_kept``, a caller's own thread)
+_keeps_library_warnings: ContextVar[bool] = ContextVar("gigapoint_keeps_library_warnings", default=False)
+_shown_by_python = None  # Python's ``warnings._showwarnmsg``, once ``_show_or_keep`` stands in for it
+_installing = threading.Lock()
 
 
 def first_line(exc: BaseException) -> str:
@@ -197,8 +201,38 @@ class KeptWarnings(list):
 
 
 def keep_warnings(kept: list) -> None:
-    """From now on, in this context (a thread started with its own), ``warn`` appends to ``kept``."""
+    """From now on, in this context (a thread started with its own), ``warn`` appends to ``kept``,
+    and so do the warnings other libraries issue through Python's ``warnings`` (``_show_or_keep``)."""
+    _route_library_warnings()
     _kept.set(kept)
+    _keeps_library_warnings.set(True)
+
+
+def _route_library_warnings() -> None:
+    """``_show_or_keep`` in place of ``warnings._showwarnmsg``, once for the process. Not the public
+    ``warnings.showwarning``: ``catch_warnings`` (pytest.warns) swaps that for its block, so a
+    caller's catch took a thread's warnings again; ``_showwarnmsg``, which calls it, it leaves."""
+    global _shown_by_python
+    with _installing:
+        if _shown_by_python is None:
+            _shown_by_python, warnings._showwarnmsg = warnings._showwarnmsg, _show_or_keep
+
+
+def _show_or_keep(msg: warnings.WarningMessage) -> None:
+    """Shows a warning that Python's filters let through (``warnings._showwarnmsg``), as Python
+    would; but on a thread of gigapoint's that keeps its warnings (``keep_warnings``) a library's
+    (numpy's "overflow encountered in cast" packing an attribute on a progressive load's thread)
+    is kept as gigapoint's own are, each distinct one once, for the caller's thread to issue: shown
+    from the thread it printed amid progress bars, as often as it came, and a ``pytest.warns`` or
+    ``catch_warnings`` around ``wait()`` missed it. Which thread keeps is this context's (a
+    thread's own), so threads do not race as with ``catch_warnings``, which swaps globals."""
+    kept = _kept.get()
+    if kept is None or not _keeps_library_warnings.get():
+        _shown_by_python(msg)
+        return
+    warning = (str(msg.message), msg.category)
+    if warning not in kept:
+        kept.append(warning)
 
 
 @contextmanager

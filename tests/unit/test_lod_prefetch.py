@@ -88,3 +88,32 @@ def test_a_warning_of_the_source_is_issued_in_the_caller_s_thread_with_its_item(
     assert got == [(0, 1), (1, 1), (2, 1)]
     assert [(str(w.message), w.filename, w.lineno) for w in seen] == [("invalid value encountered in cast", __file__, line)]
     assert not _workers()
+
+
+def test_a_library_s_warning_in_the_worker_is_issued_once_in_the_caller_s_thread():
+    """numpy's RuntimeWarning in the worker (decoding a chunk) went through Python's machinery
+    from that thread, once a chunk: a catch around the caller's loop missed it (or took it at
+    random), and it printed amid progress bars. Now kept like gigapoint's own, each distinct one
+    once, issued at the caller's line when it takes the item, with numpy's category."""
+    import inspect
+    import warnings
+
+    import numpy as np
+
+    def source():
+        for i in range(3):
+            np.array([1e300]).astype(np.float32)  # "overflow encountered in cast", each item
+            yield i
+
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        items = prefetch(source())
+        line = inspect.currentframe().f_lineno + 1
+        got = [(next(items), len(seen))]
+        got += [(i, len(seen)) for i in items]
+    assert got == [(0, 1), (1, 1), (2, 1)]
+    assert [(str(w.message), w.category, w.filename, w.lineno) for w in seen] == [
+        ("overflow encountered in cast", RuntimeWarning, __file__, line)]  # fmt: skip
+    assert not _workers()
+    with pytest.warns(RuntimeWarning, match="overflow encountered in cast"):  # the caller's own: shown as Python shows it
+        np.array([1e300]).astype(np.float32)

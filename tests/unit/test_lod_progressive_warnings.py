@@ -167,3 +167,28 @@ def test_the_viewer_s_line_on_a_finished_load_says_its_warnings(nan_file, tmp_pa
     with pytest.warns(GigapointWarning):
         two.close()
 
+
+
+def test_a_library_s_warning_on_the_loader_s_thread_is_kept_and_issued_once_by_wait(tmp_path):
+    """numpy's RuntimeWarning on the loader's thread (a float64 attribute of 1e300 packed into
+    float32 as the load ends) went through Python's machinery from that thread: it printed at any
+    moment, and a ``pytest.warns`` around ``wait()`` never saw it. Now kept with the load's own,
+    after them, each once with its category, and issued by ``wait`` at the caller's line."""
+    import numpy as np
+
+    nan = tmp_path / "nan.xyz"
+    nan.write_text("1 2 3 0\nnan 2 3 0\n")  # x y z intensity: one invalid point, gigapoint's warning
+    loud = tmp_path / "loud.npy"
+    np.save(loud, np.column_stack([np.arange(12.0).reshape(4, 3), [1.0, 1e300, 1e300, 2.0]]))
+    overflow = "overflow encountered in cast"  # numpy's, for each of the two
+    with warnings.catch_warnings(record=True) as meanwhile:
+        warnings.simplefilter("always")  # numpy's warning shown however often it came
+        cloud = _loaded(gp.open(nan, loud, progressive=True))
+    assert meanwhile == []  # none issued on the load's threads
+    skipped = f"{nan}, {loud}: skipped 1 invalid point (NaN, inf or beyond ±1e+12)"
+    assert cloud.warnings == (skipped, overflow)
+    with pytest.warns(Warning) as caught:
+        assert cloud.wait()
+    assert [(str(w.message), w.category, w.filename) for w in caught] == [
+        (skipped, GigapointWarning, __file__), (overflow, RuntimeWarning, __file__)]  # fmt: skip
+    cloud.close()
