@@ -12,7 +12,7 @@ import warnings
 import pytest
 
 import gigapoint as gp
-from gigapoint.errors import GigapointWarning
+from gigapoint.errors import GigapointWarning, InputError
 
 
 @pytest.fixture
@@ -191,4 +191,22 @@ def test_a_library_s_warning_on_the_loader_s_thread_is_kept_and_issued_once_by_w
         assert cloud.wait()
     assert [(str(w.message), w.category, w.filename) for w in caught] == [
         (skipped, GigapointWarning, __file__), (overflow, RuntimeWarning, __file__)]  # fmt: skip
+    cloud.close()
+
+
+def test_a_library_s_warning_made_an_error_by_the_caller_ends_the_load_with_it(tmp_path):
+    """With ``-W error`` (or pytest's filterwarnings=error) numpy's warning is raised on the
+    loader's thread as the load ends (``trim``), where nothing caught it: ``wait()`` waited for
+    good. Now the load ends, and ``wait`` raises it as the load's one-line error."""
+    import numpy as np
+
+    loud = tmp_path / "loud.npy"
+    np.save(loud, np.column_stack([np.arange(12.0).reshape(4, 3), [1.0, 1e300, 1e300, 2.0]]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        cloud = gp.open(loud, progressive=True)
+        with pytest.raises(InputError) as err:
+            cloud.wait(timeout=60)
+        assert str(err.value) == f"{loud}: loading stopped: overflow encountered in cast"
+        assert cloud.loading is False
     cloud.close()

@@ -210,11 +210,15 @@ class Loader:
             # the decoder may wait for the first slice: let it go before closing the prefetch, which
             # waits for it (an error inserting the first slice hung the load here for good)
             self._first_in.set()
-            chunks.close()
-            if not self._stop.is_set():
-                self.octree.trim()  # the room kept for growth, back
-            self.finished_at = time.perf_counter()
-            self._done.set()
+            try:
+                chunks.close()
+                if not self._stop.is_set():
+                    self.octree.trim()  # the room kept for growth, back
+            except Exception as exc:  # noqa: BLE001 - (a library's warning made an error by the caller's filter: wait() waited for good)
+                self.error = self.error or InputError(f"{name}: loading stopped: {' '.join(str(exc).split()) or type(exc).__name__}")
+            finally:
+                self.finished_at = time.perf_counter()
+                self._done.set()
 
     def _join_points(self) -> int:
         """The points decoded chunks are joined up to before they go in (``_joined``)."""
