@@ -7,7 +7,7 @@ only the finished arrays (4-6 bytes a point of positions in the compact layout, 
 the attributes) and one bounded partition at a time. It reads its source three times, so the
 source is a function returning a fresh iterable of PointChunks (a demo generator, a file
 reader); a source costly to read (a LAZ file's decoding, text) is read once instead
-(``read_once``: its chunks kept in the spill folder for the later passes, ``_ReadOnce``):
+(``read_once``: its chunks kept in the spill folder for the later passes, ``ReadOnce``):
 
 1. **survey**: point count, invalid points, bounds (hence the Morton cube), the attributes
    every chunk has, the finest scale, whether all colours are opaque;
@@ -33,7 +33,7 @@ import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterable
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -129,7 +129,7 @@ def build_cloud_chunked(
     ``partition_points``, ``cell_level``: the partitions' size (memory) and the cells they are
     cut from. ``tmpdir``: where the spill folder goes (default: the system's temp folder); it
     needs ~29-31 bytes a point of disk (float64 xyz, colour, attributes). ``read_once``: call
-    ``source`` once and keep its chunks in that folder for the later passes (``_ReadOnce``: for
+    ``source`` once and keep its chunks in that folder for the later passes (``ReadOnce``: for
     sources whose reading costs far more than a copy, a LAZ file's decoding); the same disk."""
     if batch_size < 1:
         raise InputError(f"{name}: batch size must be >= 1, got {batch_size}")
@@ -139,7 +139,7 @@ def build_cloud_chunked(
         raise InputError(f"{name}: cell_level must be 1..8, got {cell_level}")
     with tempfile.TemporaryDirectory(prefix="gigapoint_chunked_", dir=tmpdir) as tmp:
         folder = Path(tmp)
-        passes = _ReadOnce(source, folder, name) if read_once else None
+        passes = ReadOnce(source, folder, name) if read_once else None
         survey = _survey(passes.first if passes else source, attributes, name)
         n, skipped = survey["n"], survey["skipped"]
         check_valid_count(name, n, skipped)
@@ -173,17 +173,20 @@ def _spilling(name: str, folder: Path, n: int | None):
         ) from exc
 
 
-class _ReadOnce:
+class ReadOnce:
     """A source read once: the first pass (the survey) reads it and appends every chunk, as read,
     to files of the build's folder (a file a field, as the partitions' files: ``_read`` reads
     them back); the later passes read those files instead of the source (a LAZ file's
     decoding, ~0.3 us a point, is then paid once instead of three times), and the last removes
     each chunk's files once read, so the folder holds at most the points once (the spill grows
-    as the chunk files go)."""
+    as the chunk files go). The chunks read back are those read: points, colours (and their
+    bits), attributes, scale. ``writing``: the context each chunk's files are written in (by
+    default a failed write, a full disk most likely, is the chunked build's one-line error)."""
 
-    def __init__(self, source: ChunkSource, folder: Path, name: str):
+    def __init__(self, source: ChunkSource, folder: Path, name: str, writing: Callable[[], AbstractContextManager] | None = None):
         self.source, self.folder, self.name = source, folder, name
-        self.chunks: list[tuple] = []  # (points, scale, {field: (dtype, shape of a value)})
+        self.writing = writing or (lambda: _spilling(name, folder, None))
+        self.chunks: list[tuple] = []  # (points, scale, colour bits, {field: (dtype, shape of a value)})
 
     def _path(self, k: int, field: str) -> Path:
         return self.folder / f"source.{k}.{field}"
@@ -191,20 +194,20 @@ class _ReadOnce:
     def first(self):
         for k, chunk in enumerate(self.source()):
             fields = {"xyz": chunk.xyz, "rgba": chunk.rgba, **{f"a_{a}": v for a, v in chunk.attributes.items()}}
-            with _spilling(self.name, self.folder, None):  # (not the source's own errors)
+            with self.writing():  # (not the source's own errors)
                 for key, v in fields.items():
                     append_file(self._path(k, key), [np.ascontiguousarray(v)])
-            self.chunks.append((len(chunk), chunk.scale, {key: (v.dtype, v.shape[1:]) for key, v in fields.items()}))
+            self.chunks.append((len(chunk), chunk.scale, chunk.color_bits, {key: (v.dtype, v.shape[1:]) for key, v in fields.items()}))
             yield chunk
 
     def again(self, remove: bool = False):
-        for k, (n, scale, fields) in enumerate(self.chunks):
+        for k, (n, scale, color_bits, fields) in enumerate(self.chunks):
             arrays = {}
             for key, (dtype, shape) in fields.items():
                 arrays[key] = _read(self._path(k, key), (n, *shape), dtype, None)
                 if remove:
                     self._path(k, key).unlink()
-            yield PointChunk(arrays.pop("xyz"), arrays.pop("rgba"), {key[2:]: v for key, v in arrays.items()}, scale=scale)
+            yield PointChunk(arrays.pop("xyz"), arrays.pop("rgba"), {key[2:]: v for key, v in arrays.items()}, scale=scale, color_bits=color_bits)
 
     def last(self):
         return self.again(remove=True)
@@ -429,4 +432,4 @@ def _changed(name: str, n: int) -> InputError:
     )
 
 
-__all__ = ["CELL_LEVEL", "PARTITION_POINTS", "ChunkSource", "build_cloud_chunked"]
+__all__ = ["CELL_LEVEL", "PARTITION_POINTS", "ChunkSource", "ReadOnce", "build_cloud_chunked"]

@@ -51,6 +51,7 @@ import re
 import shutil
 import tempfile
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -58,12 +59,14 @@ import numpy as np
 
 from ...atomic import append_file, same_file, write_failure
 from ...core.chunk import PointChunk
+from ...core.chunked import ReadOnce
 from ...core.cloud import check_valid_count
 from ...errors import GigapointWarning, InputError, check_switch, counted, is_real, warn, warnings_kept
 from ...io import with_subfolders
 from ...io.colorize import open_colorization
 from ...io.filters import point_filter
 from ...io.las_fields import las_grid
+from ...io.registry import reader_for
 from ...io.reproject import Reprojection
 from ...io.write import write_points
 from ..progress import NullProgress, RichProgress
@@ -170,12 +173,17 @@ def tile(
     tiles_folder = work / "tiles"
     try:
         tiles_folder.mkdir()  # (not mkdtemp's: its mode 0700 would become ``out``'s)
-        grid = files.las_grid if files.las_grid is not None else _grid_of_points(files, keep, float(size), shown)
-        spill = _TileSpill(work, float(size), float(buffer), files.label, grid)
         tally = {"points": 0, "skipped": 0}
-        shown.phase("read", None if None in files.counts else sum(files.counts))
-        for f, chunk in files.valid_chunks(keep, shown, tally):
-            spill.add(files.colored(f, chunk, tally))
+
+        def read():  # the points to tile, coloured: a pass over the files a call
+            shown.phase("read", None if None in files.counts else sum(files.counts))
+            for f, chunk in files.valid_chunks(keep, shown, tally):
+                yield files.colored(f, chunk, tally)
+
+        grid, points = (files.las_grid, read) if files.las_grid is not None else _grid_of_points(files, keep, read, float(size), work, shown)
+        spill = _TileSpill(work, float(size), float(buffer), files.label, grid)
+        for chunk in points():
+            spill.add(chunk)
         check_valid_count(files.label, tally["points"], tally["skipped"])  # (the skipped points' warning)
         written = spill.write_tiles(name, format, files, grid, tiles_folder, shown)
         if created:  # every tile whole: now they appear, all at once
@@ -269,20 +277,35 @@ def _check_apart(out: Path, inputs, recursive: bool) -> None:
                 raise InputError(f"{out}: lies in {folder}, read with recursive=True; write the tiles elsewhere (the next run would read them as input points)")
 
 
-def _grid_of_points(files: PointFiles, keep, size: float, progress) -> tuple[np.ndarray, np.ndarray]:
-    """The LAS grid of points that came without one (float files: text, NPY, PLY): one for the
-    run, from all the points tiled (not one a tile: tiles of one survey share their grid), as
-    ``convert -o x.laz`` makes it, in a pass over them before they are tiled: a point is placed by
-    its position as the grid stores it (``TileAxis``), and one less than half a step below an edge
-    is stored on it. The tiles' count is checked on the points read so far (these files' headers
-    tell no bounds). The pass's warnings are dropped: the tiling pass says them."""
-    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-    progress.phase("scan", None if None in files.counts else sum(files.counts))
-    with warnings_kept():
-        for _, chunk in files.valid_chunks(keep, progress, {}):
-            lo, hi = np.minimum(lo, chunk.xyz.min(axis=0)), np.maximum(hi, chunk.xyz.max(axis=0))
+def _grid_of_points(files: PointFiles, keep, read, size: float, work: Path, progress):
+    """(the LAS grid of points that came without one (float files: text, NPY, PLY), the function
+    giving the points to tile): one grid for the run, from all the points tiled (not one a tile:
+    tiles of one survey share their grid), as ``convert -o x.laz`` makes it, in a pass over them
+    before they are tiled: a point is placed by its position as the grid stores it
+    (``TileAxis``), and one less than half a step below an edge is stored on it. The tiles' count
+    is checked on the points read so far (these files' headers tell no bounds).
+    Files that read slowly (text, ASCII PLY, LAZ beside them: parsing is most of a run's time)
+    are read once, by ``read``, their points kept in ``work`` (core/chunked.py's ReadOnce) for the
+    tiling pass, which reads those back; the others (NPY, binary PLY: a read costs a copy) are
+    read again by it, so this pass's warnings are dropped (the tiling pass says them)."""
+    lo, hi, n = np.full(3, np.inf), np.full(3, -np.inf), 0
+    once = ReadOnce(read, work, files.label, writing=nullcontext) if any(reader_for(f).reads_slowly(f) for f in files.files) else None
+    if once is None:
+        progress.phase("scan", None if None in files.counts else sum(files.counts))
+    with warnings_kept() if once is None else nullcontext():
+        for chunk in once.first() if once is not None else (chunk for _, chunk in files.valid_chunks(keep, progress, {})):
+            lo, hi, n = np.minimum(lo, chunk.xyz.min(axis=0)), np.maximum(hi, chunk.xyz.max(axis=0)), n + len(chunk)
             _check_tile_count(lo, hi, size, files.label)
-    return las_grid(lo, hi)
+    if once is None:
+        return las_grid(lo, hi), read
+
+    def kept():  # the points read, as read, each chunk's files removed once read back (the tiles' spill grows as they go)
+        progress.phase("tile", n)
+        for chunk in once.last():
+            yield chunk
+            progress.advance(len(chunk))
+
+    return las_grid(lo, hi), kept
 
 
 def _check_tile_count(lo, hi, size: float, where: str) -> None:
