@@ -12,7 +12,7 @@ import pytest
 import gigapoint as gp
 from gigapoint import Camera, RenderSettings
 from gigapoint.core import PointChunk, build_cloud
-from gigapoint.core.chunked import build_cloud_chunked
+from gigapoint.core.chunked import ReadOnce, build_cloud_chunked
 from gigapoint.core.palette import PaletteColors
 from gigapoint.errors import EmptyCloudError, GigapointWarning, InputError
 from gigapoint.io.demo import demo_chunks
@@ -130,6 +130,25 @@ def test_invalid_points_mixed_attributes_wide_batches(rng, tmp_path, read_once):
     assert got.color.dtype == np.uint32  # not opaque: 32-bit colours
     assert ((got.packing["code"] & 0xFF) == 20).any()  # some wide batches
     assert_same_cloud(got, want)
+
+
+def test_a_source_read_once_is_read_back_as_it_came_colour_bits_and_scale_included(rng, tmp_path):
+    """ReadOnce's later passes give each chunk as the source gave it (gigapoint tile writes its
+    tiles from them: a file's 16-bit colours read back without their bits were written as 8-bit)."""
+    chunks = [
+        PointChunk(rng.random((500, 3)), rng.integers(0, 256, (500, 4), dtype=np.uint8), {"intensity": rng.integers(0, 65535, 500).astype(np.uint16)},
+                   scale=(0.01, 0.01, 0.01), color_bits=16),
+        PointChunk(rng.random((300, 3)), rng.integers(0, 256, (300, 4), dtype=np.uint8), {"intensity": np.zeros(300, np.uint16)}, color_bits=8),
+    ]  # fmt: skip
+    once = ReadOnce(lambda: chunks, tmp_path, "src")
+    assert all(got is want for got, want in zip(once.first(), chunks, strict=True))  # (the first pass: the source's own)
+    again = list(once.last())
+    assert [(len(c), c.scale, c.color_bits) for c in again] == [(500, (0.01, 0.01, 0.01), 16), (300, None, 8)]
+    for got, want in zip(again, chunks):
+        np.testing.assert_array_equal(got.xyz, want.xyz)
+        np.testing.assert_array_equal(got.rgba, want.rgba)
+        np.testing.assert_array_equal(got.attributes["intensity"], want.attributes["intensity"])
+    assert list(tmp_path.iterdir()) == []  # the last pass removed what it read
 
 
 def test_a_source_read_once_is_called_once_and_its_copy_never_outgrows_the_points(rng, tmp_path, monkeypatch):
