@@ -174,14 +174,15 @@ def _spilling(name: str, folder: Path, n: int | None):
 
 
 class ReadOnce:
-    """A source read once: the first pass (the survey) reads it and appends every chunk, as read,
-    to files of the build's folder (a file a field, as the partitions' files: ``_read`` reads
-    them back); the later passes read those files instead of the source (a LAZ file's
-    decoding, ~0.3 us a point, is then paid once instead of three times), and the last removes
-    each chunk's files once read, so the folder holds at most the points once (the spill grows
-    as the chunk files go). The chunks read back are those read: points, colours (and their
-    bits), attributes, scale. ``writing``: the context each chunk's files are written in (by
-    default a failed write, a full disk most likely, is the chunked build's one-line error)."""
+    """A source read once: the first pass (the survey; gigapoint tile's pass for its grid) reads it
+    and appends every chunk, as read, to files of the build's folder (a file a field, as the
+    partitions' files: ``_read`` reads them back); the later passes read those files instead of
+    the source (a LAZ file's decoding, ~0.3 us a point, is then paid once instead of three
+    times), and the last removes each chunk's files once read, so the folder holds at most the
+    points once (the spill grows as the chunk files go). The chunks read back are those read:
+    points, colours (and their bits), attributes, scale. ``writing``: the context each chunk's
+    files are written in (by default a failed write, a full disk most likely, is the chunked
+    build's one-line error)."""
 
     def __init__(self, source: ChunkSource, folder: Path, name: str, writing: Callable[[], AbstractContextManager] | None = None):
         self.source, self.folder, self.name = source, folder, name

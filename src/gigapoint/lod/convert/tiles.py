@@ -23,8 +23,9 @@ stored them; ``to_crs``: their points moved into that CRS as they are read (io/r
 so tiles, their size, buffer and clip box are in its coordinates; ``colorize``: their colours
 from an orthophoto's pixels, after that (io/colorize.py).
 
-The inputs are read once, a chunk at a time; each chunk's points are bucketed by tile and
-appended to that tile's raw spill file (records of position, colour and attributes) in a
+The inputs are read once, a chunk at a time (float files, whose grid takes a pass of its own:
+twice, but text once, its points kept for the tiling: ``_grid_of_points``); each chunk's points
+are bucketed by tile and appended to that tile's raw spill file (records of position, colour and attributes) in a
 hidden work folder (beside the output folder where the run makes it, else inside it); once
 every point is read, the tiles are written one at a time from their spill files, then moved
 into place together: a folder the run makes is the work folder's tiles renamed, so it appears
@@ -288,16 +289,20 @@ def _grid_of_points(files: PointFiles, keep, read, size: float, work: Path, prog
     are read once, by ``read``, their points kept in ``work`` (core/chunked.py's ReadOnce) for the
     tiling pass, which reads those back; the others (NPY, binary PLY: a read costs a copy) are
     read again by it, so this pass's warnings are dropped (the tiling pass says them)."""
-    lo, hi, n = np.full(3, np.inf), np.full(3, -np.inf), 0
-    once = ReadOnce(read, work, files.label, writing=nullcontext) if any(reader_for(f).reads_slowly(f) for f in files.files) else None
-    if once is None:
+    if any(reader_for(f).reads_slowly(f) for f in files.files):
+        once = ReadOnce(read, work, files.label, writing=nullcontext)  # (a full disk: the spill's OSError, as the tiles')
+        chunks, warnings_said = once.first(), nullcontext()
+    else:
         progress.phase("scan", None if None in files.counts else sum(files.counts))
-    with warnings_kept() if once is None else nullcontext():
-        for chunk in once.first() if once is not None else (chunk for _, chunk in files.valid_chunks(keep, progress, {})):
+        once, chunks, warnings_said = None, (chunk for _, chunk in files.valid_chunks(keep, progress, {})), warnings_kept()
+    lo, hi, n = np.full(3, np.inf), np.full(3, -np.inf), 0
+    with warnings_said:
+        for chunk in chunks:
             lo, hi, n = np.minimum(lo, chunk.xyz.min(axis=0)), np.maximum(hi, chunk.xyz.max(axis=0)), n + len(chunk)
             _check_tile_count(lo, hi, size, files.label)
+    grid = las_grid(lo, hi)
     if once is None:
-        return las_grid(lo, hi), read
+        return grid, read
 
     def kept():  # the points read, as read, each chunk's files removed once read back (the tiles' spill grows as they go)
         progress.phase("tile", n)
@@ -305,7 +310,7 @@ def _grid_of_points(files: PointFiles, keep, read, size: float, work: Path, prog
             yield chunk
             progress.advance(len(chunk))
 
-    return las_grid(lo, hi), kept
+    return grid, kept
 
 
 def _check_tile_count(lo, hi, size: float, where: str) -> None:
