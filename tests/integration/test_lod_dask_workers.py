@@ -231,3 +231,30 @@ def test_another_clusters_default_limit_follows_its_workers_memory_not_the_drive
         distributed.Client(cluster) as client,
     ):
         assert default_memory_limit(client) == 1 << 30  # 8 GiB, half of it among 4 threads
+
+
+_SEVEN_WORKERS = {f"tcp://10.0.0.{i}:1": {"memory_limit": (i + 1) * 2**30, "nthreads": 1, "host": f"10.0.0.{i}"} for i in range(7)}
+
+
+class _ListsFive:
+    """A client of a Dask release whose scheduler_info lists 5 workers unless told -1."""
+
+    def scheduler_info(self, n_workers: int = 5) -> dict:
+        listed = list(_SEVEN_WORKERS.items())
+        return {"workers": dict(listed if n_workers == -1 else listed[:n_workers])}
+
+
+class _ListsAll(_ListsFive):
+    """A client of a release before the argument: every worker, always."""
+
+    def scheduler_info(self) -> dict:
+        return {"workers": dict(_SEVEN_WORKERS)}
+
+
+@pytest.mark.parametrize("client", [_ListsFive(), _ListsAll()], ids=["lists-5-by-default", "no-argument"])
+def test_every_worker_of_the_cluster_is_asked_whatever_dasks_release(client):
+    """Some Dask releases list 5 workers by default: the memory plan (and the watchdog, and the
+    write steps' choice) saw 5 of a cluster's workers."""
+    from gigapoint.lod.convert.distributed import _workers
+
+    assert sorted(_workers(client)) == sorted(_SEVEN_WORKERS)

@@ -256,13 +256,22 @@ def _task_share(memory: int, tasks: int, least: int) -> int:
     return max(least, min(memory // 4, memory // (2 * tasks)))
 
 
+def _workers(client) -> dict:
+    """The cluster's workers, every one: some Dask releases list 5 by default
+    (``scheduler_info(n_workers=5)``); those before the argument list them all."""
+    try:
+        return client.scheduler_info(n_workers=-1)["workers"]
+    except TypeError:  # (a release without the argument)
+        return client.scheduler_info()["workers"]
+
+
 def _cluster_memory_limit(client) -> tuple[int, str] | None:
     """The smallest ``_task_share`` of the cluster's workers, and whose, in words: a worker's Dask
     memory limit shared by its threads (each runs a task at once); a worker without one, its
     machine's memory shared by the threads of every such worker there. None: no worker yet."""
     dd = _distributed()
     try:
-        workers = client.scheduler_info()["workers"]
+        workers = _workers(client)
     except Exception:  # noqa: BLE001 - a scheduler gone: the run says so
         return None
     unlimited = [w for w, info in workers.items() if not info["memory_limit"]]  # (0 where none was given)
@@ -861,7 +870,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
             since = None
             while not stop.wait(POLL_S):
                 try:
-                    workers = self.client.scheduler_info()["workers"]
+                    workers = _workers(self.client)
                 except Exception:  # noqa: BLE001 - a scheduler gone: the futures fail on their own
                     return
                 since = None if workers else (since or time.monotonic())
@@ -1321,7 +1330,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         where the cluster has two workers or more: on two they took 0.45 s instead of 0.56 s,
         while both would otherwise wait for the driver (on one, 0.1 s longer than here)."""
         try:
-            workers = len(self.client.scheduler_info()["workers"])
+            workers = len(_workers(self.client))
         except Exception:  # noqa: BLE001 - a scheduler gone: the tasks fail with the usual error
             workers = 2
         if workers < 2:
