@@ -517,3 +517,8 @@ def test_a_rerun_killed_as_its_tiles_move_in_leaves_all_old_tiles_or_all_new_one
         assert not out.exists()
         (hidden,) = (p for p in tmp_path.iterdir() if p.name.endswith(".replaced"))
         assert _files_in(hidden) == old
+        with pytest.warns(GigapointWarning, match=r"tiles: put back as it was before a run that was stopped while replacing its tiles$"):
+            gp.tile(autzen_path, out, 500, overwrite=True)  # the next run finds the user's folder, and replaces its tiles
+        assert _files_in(out) == whole
+        assert not any(p.name.endswith(".replaced") for p in tmp_path.iterdir())
+        assert not any(p.name.startswith(".") for p in out.iterdir())

@@ -46,6 +46,7 @@ one at a time).
 
 from __future__ import annotations
 
+import glob
 import math
 import os
 import re
@@ -157,6 +158,7 @@ def tile(
         raise InputError(f"tile: colorize={colorize!r}: the path of an orthophoto (a GeoTIFF)")
     out = Path(out)
     _check_apart(out, [inputs] if isinstance(inputs, (str, os.PathLike)) else inputs, recursive)
+    _put_back_set_aside(out)
     _check_output_folder(out, overwrite)
     if recursive:
         inputs = with_subfolders([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
@@ -239,6 +241,22 @@ def _swap_in(out: Path, tiles_folder: Path, work_name: str, written: list[Path])
         os.rename(old, folder)
         raise
     shutil.rmtree(old, ignore_errors=True)
+
+
+def _put_back_set_aside(out: Path) -> None:
+    """The folder a rerun set aside (``_swap_in``) and was killed before its new one moved in, put
+    back where ``out`` is missing, with a warning: it held the user's files, which the next run
+    would otherwise leave hidden beside a folder of new tiles only."""
+    folder = Path(os.path.realpath(out))  # (as _swap_in named it: an output given through a link, the folder it named)
+    if folder.exists() or not folder.parent.is_dir():
+        return
+    aside = sorted(folder.parent.glob(f".{glob.escape(folder.name)}.*.replaced"), key=lambda p: p.stat().st_mtime)
+    if not aside or not aside[-1].is_dir():
+        return
+    os.rename(aside[-1], folder)
+    for work in folder.glob(".*.tiling"):  # (the killed run's own work, inside the folder it replaced)
+        shutil.rmtree(work, ignore_errors=True)
+    warn(f"{out}: put back as it was before a run that was stopped while replacing its tiles", GigapointWarning)
 
 
 def _link(entry: Path, to: Path) -> None:
