@@ -107,7 +107,7 @@ def test_an_existing_output_is_refused_before_anything_is_read(autzen_path, tmp_
         raise AssertionError("read")
 
     monkeypatch.setattr(importlib.import_module("gigapoint.lod.convert.to_file"), "read_chunks", no_read)
-    with pytest.raises(InputError, match=r"ground\.laz: exists; pass overwrite=True to replace it$"):
+    with pytest.raises(InputError, match=r"ground\.laz: already exists; pass overwrite=True to replace it$"):
         convert(autzen_path, out, classes=2)
     assert out.read_bytes() == b"the user's file"
 

@@ -151,7 +151,7 @@ def test_outputs_that_exist_are_left_alone(tmp_path, autzen_path):
     octree.add(XYZ)
     with pytest.raises(OutputExistsError, match=f"^{re.escape(str(mine))}: directory is not empty and is not a gigapoint/Potree output; refusing to write into it$"):
         octree.save(mine)
-    with pytest.raises(InputError, match=f"^{re.escape(str(tmp_path / 'o.laz'))}: exists; pass overwrite=True to replace it$"):
+    with pytest.raises(InputError, match=f"^{re.escape(str(tmp_path / 'o.laz'))}: already exists; pass overwrite=True to replace it$"):
         gp.convert(autzen_path, tmp_path / "o.laz")
     assert [p.name for p in mine.iterdir()] == ["notes.txt"] and (tmp_path / "o.laz").read_text() == "mine"
 

@@ -145,7 +145,7 @@ def test_bad_inputs_are_one_line_errors(tmp_path, town):
     with pytest.raises(InputError, match=r"town.las: cells of 0.001 make a 200,00\d x 200,00\d raster over the files' extent, more than 120,000,000 cells"):
         gp.classify_ground(path, tmp_path / "a.laz", cell=0.001)
     (tmp_path / "there.laz").write_bytes(b"mine")
-    with pytest.raises(InputError, match="there.laz: exists; pass overwrite=True"):
+    with pytest.raises(InputError, match="there.laz: already exists; pass overwrite=True"):
         gp.classify_ground(path, tmp_path / "there.laz")
     assert (tmp_path / "there.laz").read_bytes() == b"mine"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.las", "one.las", "there.laz"]  # no output left by a refused run
@@ -189,9 +189,9 @@ def test_the_cli_classifies_and_names_its_options(cli, town, tmp_path):
     assert rc == 0, err
     assert f"{tmp_path / 'out.laz'}: " in out and " ground (2), " in out and "cell 2 m (assumed)" in out and "20 noise kept" in out
     rc, _, err = cli("classify", path, "-o", tmp_path / "out.laz", "--ground")
-    assert rc != 0 and err.strip().endswith("out.laz: exists; pass --overwrite to replace it") and len(err.strip().splitlines()) == 1
+    assert rc != 0 and err.strip().endswith("out.laz: already exists; pass --overwrite to replace it") and len(err.strip().splitlines()) == 1
     rc, _, err = cli("classify", path, "-o", tmp_path / "b.laz", "--ground", "--cell", "0")
-    assert rc != 0 and "classify: --cell must be a number > 0, got 0.0" in err
+    assert rc != 0 and "classify: --cell must be a number > 0, got 0" in err
     rc, _, err = cli("classify", path, "-o", tmp_path / "b.laz")
     assert rc != 0 and "classify: say what to classify: --ground" in err
     assert not (tmp_path / "b.laz").exists()

@@ -173,7 +173,7 @@ def test_bad_parameters_are_one_line_errors(surface, tmp_path):
     with pytest.raises(InputError, match="a.txt: classify_noise writes a .las, .laz or .ply file"):
         gp.classify_noise(path, tmp_path / "a.txt")
     (tmp_path / "there.laz").write_bytes(b"mine")
-    with pytest.raises(InputError, match="there.laz: exists; pass overwrite=True"):
+    with pytest.raises(InputError, match="there.laz: already exists; pass overwrite=True"):
         gp.classify_noise(path, tmp_path / "there.laz")
     assert (tmp_path / "there.laz").read_bytes() == b"mine"
     assert [p.name for p in tmp_path.iterdir()] == ["there.laz"]  # no output left by a refused run
@@ -185,8 +185,8 @@ def test_the_cli_classifies_noise_and_names_its_options(cli, surface, tmp_path):
     assert rc == 0, err
     assert out.startswith(f"{tmp_path / 'out.laz'}: 14,470 points, 50 isolated found noise (7); step 4 x 4 m (assumed), isolated 5; ")
     rc, _, err = cli("classify", path, "-o", tmp_path / "out.laz", "--noise")
-    assert rc != 0 and err.strip().endswith("out.laz: exists; pass --overwrite to replace it") and len(err.strip().splitlines()) == 1
-    for option, value, message in (("--step-z", "-1", "classify: --step-z must be a number > 0, got -1.0"),
+    assert rc != 0 and err.strip().endswith("out.laz: already exists; pass --overwrite to replace it") and len(err.strip().splitlines()) == 1
+    for option, value, message in (("--step-z", "-1", "classify: --step-z must be a number > 0, got -1"),
                                    ("--isolated", "-2", "classify: --isolated must be a whole number >= 0, got -2"),
                                    ("--step", "1e-12", "classify: --step 1e-12: cells too small")):  # fmt: skip
         rc, _, err = cli("classify", path, "-o", tmp_path / "b.laz", "--noise", option, value)

@@ -141,7 +141,7 @@ def test_save_refuses_in_one_line_naming_the_file_and_leaves_nothing(tmp_path, m
     (tmp_path / "dir.laz").mkdir()
     monkeypatch.chdir(tmp_path)
     for path, problem in (
-        ("taken.las", "taken.las: exists; pass overwrite=True to replace it"),
+        ("taken.las", "taken.las: already exists; pass overwrite=True to replace it"),
         ("dir.laz", "dir.laz: is a directory, not a LAZ file; not replaced"),
         ("nowhere/a.ply", "nowhere/a.ply: the folder nowhere does not exist"),
         ("a.xyz", "a.xyz: save writes .las, .laz or .ply files, not .xyz"),
@@ -238,7 +238,7 @@ def test_a_progressive_octree_saves_its_points_into_one_point_file(tmp_path, aut
     assert ply.points == 110_000 and gp.open(tmp_path / "merged.ply").n_points == 110_000
     with pytest.raises(InputError, match=r"^.*again\.laz: max_leaf: options of an octree, not of a plain LAZ file$"):
         cloud.save(tmp_path / "again.laz", max_leaf=1000)
-    with pytest.raises(InputError, match=r"merged\.laz: exists"):
+    with pytest.raises(InputError, match=r"merged\.laz: already exists"):
         cloud.save(tmp_path / "merged.laz")
     cloud.close()
 

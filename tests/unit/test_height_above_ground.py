@@ -137,7 +137,7 @@ def test_the_cli_writes_heights_that_info_lists_and_render_colours_by(cli, slope
     assert rc == 0, err
     assert " in HeightAboveGround; ground model of " in out and " class-2 points, cell 1 m (assumed)" in out
     rc, _, err = cli("classify", path, "-o", tmp_path / "hag.laz", "--height-above-ground")
-    assert rc != 0 and err == f"error: {tmp_path / 'hag.laz'}: exists; pass --overwrite to replace it\n"  # (said as the option)
+    assert rc != 0 and err == f"error: {tmp_path / 'hag.laz'}: already exists; pass --overwrite to replace it\n"  # (said as the option)
     rc, out, err = cli("info", tmp_path / "hag.laz")
     assert rc == 0 and "HeightAboveGround" in out.split("attributes:")[1].splitlines()[0]
     rc, _, err = cli("render", tmp_path / "hag.laz", "-o", tmp_path / "hag.png", "--color-mode", "attribute", "--color-attribute", "HeightAboveGround", "--width", "64", "--height", "48")

@@ -146,7 +146,7 @@ THERE_ALREADY = [
     ("folder-of-the-users-overwrite", "out", lambda out: (out.mkdir(), (out / "keep.txt").write_text("mine")), True,
      OutputExistsError, "{out}: directory is not empty and is not a gigapoint/Potree output; refusing to write into it"),
     ("a-file", "out", lambda out: out.write_text("mine"), False, OutputExistsError, "{out}: exists and is not a directory"),
-    ("a-laz-file", "out.laz", lambda out: out.write_text("mine"), False, InputError, "{out}: exists; pass overwrite=True to replace it"),
+    ("a-laz-file", "out.laz", lambda out: out.write_text("mine"), False, InputError, "{out}: already exists; pass overwrite=True to replace it"),
 ]  # fmt: skip
 
 

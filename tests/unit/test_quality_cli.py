@@ -144,7 +144,7 @@ def test_a_bad_turntable_is_refused_before_the_inputs_are_read(tmp_path, capsys)
     read (minutes for a large file); here the input is missing, so it is told first only if read."""
     missing = tmp_path / "big.laz"
     for extra, problem in (
-        (["--turntable", "2", "--fps", "0"], "--fps: video fps must be a number in [0.01, 1000], got 0.0"),
+        (["--turntable", "2", "--fps", "0"], "--fps: video fps must be a number in [0.01, 1000], got 0"),
         (["--turntable", "2", "-W", "33"], f"{tmp_path / 'spin.mp4'}: width and height must be even for video encoding, got 33x24"),
         (["--turntable", "0"], "--turntable: number of frames must be an integer from 1 to 100,000, got 0"),
     ):

@@ -38,7 +38,7 @@ def check_point_file_output(path: Path, overwrite: bool) -> None:
     if path.is_dir():
         raise InputError(f"{path}: is a directory, not a {path.suffix[1:].upper()} file; not replaced")
     if path.exists() and not overwrite:
-        raise InputError(f"{path}: exists; pass overwrite=True to replace it")
+        raise InputError(f"{path}: already exists; pass overwrite=True to replace it")
     if not path.parent.is_dir():
         raise InputError(f"{path}: the folder {path.parent} does not exist")
     if not os.access(path.parent, os.W_OK):  # ("Permission denied" came once every point was read, classified, reprojected)
