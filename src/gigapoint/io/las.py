@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import contextlib
 import io
+import logging
 import math
 import os
 import struct
 from collections.abc import Iterator
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -565,11 +567,50 @@ class _Las10AsLas11(io.RawIOBase):
         super().close()
 
 
+#: the file laspy is reading in this context (``_laspy_reports``), None where gigapoint is not reading one
+_laspy_file: ContextVar[str | None] = ContextVar("gigapoint_laspy_file", default=None)
+
+
+class _LaspyRecordsAsWarnings(logging.Handler):
+    """laspy's log records about a file gigapoint reads (a VLR it cannot parse: "Failed to parse
+    ... GeoKeyDirectoryVlr ...", points it could not read) as gigapoint warnings naming the file,
+    ``FILE: laspy: MESSAGE``, each once an operation (``read_once``: convert opens a file twice),
+    issued where gigapoint's warnings are (a progressive load's wait: ``errors.warn``). They were
+    lost (laspy's NullHandler keeps Python's last-resort printing off), or where the user set up
+    logging, printed without the file's name, from the thread that read it, once per open. It
+    is added beside the handlers on laspy's logger and its parents and stops none of them: a
+    user's logging gets laspy's records as before."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        path = _laspy_file.get()
+        if path is None:  # laspy used by other code (the user's own, a write): left to logging
+            return
+        message = f"{path}: laspy: {record.getMessage()}"
+        read_once("laspy log", message, lambda: warn(message, GigapointWarning))
+
+
+_LASPY_RECORDS = _LaspyRecordsAsWarnings(logging.WARNING)
+
+
+@contextlib.contextmanager
+def _laspy_reports(path):
+    """laspy's log records in the block are warnings about ``path`` (``_LaspyRecordsAsWarnings``).
+    Only around laspy's own calls, none that yields: the file is this context's, a generator's
+    consumer does not see it."""
+    # (added again where a logging.config call removed it; addHandler adds it once)
+    logging.getLogger("laspy").addHandler(_LASPY_RECORDS)
+    token = _laspy_file.set(str(path))
+    try:
+        yield
+    finally:
+        _laspy_file.reset(token)
+
+
 def _laspy_header(path: Path):
     """laspy's header of the file (its point format, scales, offsets), its points left unopened."""
     import laspy
 
-    with open(path, "rb") as f:
+    with open(path, "rb") as f, _laspy_reports(path):
         return laspy.LasHeader.read_from(f)
 
 
@@ -578,9 +619,10 @@ def _laspy_open(path: Path, hdr: LasHeader):
     before them is read up to the cut: read_las_header(salvage=True))."""
     import laspy
 
-    if hdr.version == "1.0":
-        return laspy.open(io.BufferedReader(_Las10AsLas11(path)), closefd=True)
-    return laspy.open(str(path), read_evlrs=hdr.evlrs_cut is None)
+    with _laspy_reports(path):
+        if hdr.version == "1.0":
+            return laspy.open(io.BufferedReader(_Las10AsLas11(path)), closefd=True)
+        return laspy.open(str(path), read_evlrs=hdr.evlrs_cut is None)
 
 
 PROJECTION_USER_ID = b"LASF_Projection"
@@ -816,7 +858,7 @@ class LasReader(Reader):
                 offset = np.asarray(header.offsets, np.float64)
                 if start and not in_child:  # (a child seeks itself)
                     reader.seek(start)
-            except (InputError, MemoryError):
+            except (InputError, MemoryError, GigapointWarning):  # (a warning: laspy's record, made an error by -W error)
                 raise
             except BaseException as exc:  # laspy / lazrs / OS errors (and lazrs's panics) on corrupt data
                 if not laz_process.bad_data(exc):
@@ -850,8 +892,9 @@ class LasReader(Reader):
             limits, damage = _record_limits(hdr), None
             while done < stop:
                 try:
-                    pts = records.read(min(chunk_size, stop - done))
-                except (InputError, MemoryError):
+                    with _laspy_reports(path):  # (laspy's reader: "Could only read n of the requested m points")
+                        pts = records.read(min(chunk_size, stop - done))
+                except (InputError, MemoryError, GigapointWarning):
                     raise
                 except BaseException as exc:  # as above
                     if not laz_process.bad_data(exc):
@@ -910,7 +953,7 @@ class LasReader(Reader):
                 dims = list(header.point_format.dimension_names)
                 crs = _parse_crs(header, hdr)
                 creation = header.creation_date.isoformat() if header.creation_date else None
-        except InputError:
+        except (InputError, GigapointWarning):  # (as read_chunks)
             raise
         except BaseException as exc:  # laspy raises many types on corrupt headers (lazrs panics too)
             if not laz_process.bad_data(exc):
