@@ -122,13 +122,13 @@ def test_an_input_named_as_the_output_is_refused(tmp_path):
 @pytest.mark.parametrize(
     ("option", "named"),
     [
-        ({"sampler": "poisson"}, "--sampler"),
-        ({"memory_limit": "1G"}, "--memory-limit"),
-        ({"max_leaf": 1000}, "--max-leaf"),
-        ({"layout": "words"}, "--layout"),
-        ({"colors": "rgb565"}, "--colors"),
+        ({"sampler": "poisson"}, "sampler"),
+        ({"memory_limit": "1G"}, "memory_limit"),
+        ({"max_leaf": 1000}, "max_leaf"),
+        ({"layout": "words"}, "layout"),
+        ({"colors": "rgb565"}, "colors"),
         ({"encoding": "BROTLI"}, "encoding"),
-        ({"client": 2}, "--dask/--workers (client)"),
+        ({"client": 2}, "client"),
         ({"name": "scan"}, "name"),
     ],
 )
@@ -143,6 +143,14 @@ def test_the_cli_refuses_octree_options_with_a_point_file_output(cli, autzen_pat
     out = tmp_path / "out.las"
     rc, _, err = cli("convert", autzen_path, "-o", out, "--sampler", "poisson", "--workers", "2")
     assert (rc, err.strip()) == (1, f"error: {out}: --sampler, --dask/--workers (client): options of an octree, not of a plain LAS file")
+
+
+def test_the_cli_names_each_octree_option_it_refuses_with_a_point_file_output(cli, autzen_path, tmp_path):
+    """The library says the keywords (sampler, memory_limit, ...; above), the command line its options."""
+    out = tmp_path / "out.laz"
+    rc, _, err = cli("convert", autzen_path, "-o", out, "--memory-limit", "1G", "--max-leaf", "1000", "--layout", "words", "--colors", "rgba", "--dask", "tcp://127.0.0.1:9")
+    assert (rc, err.strip()) == (1, f"error: {out}: --memory-limit, --max-leaf, --layout, --colors, --dask/--workers (client): options of an octree, not of a plain LAZ file")
+    assert not out.exists()
 
 
 def test_a_filter_keeping_nothing_is_its_error_and_leaves_no_file(autzen_path, tmp_path):

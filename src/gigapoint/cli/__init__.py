@@ -57,6 +57,7 @@ PYTHON_HINTS = {
     "give client its scheduler's address": "give its scheduler's address with --dask",  # (lod/convert/distributed.py: too many workers)
     "port must be in 0..65535": "--port must be in 0..65535",  # (viewer/server.py: gp.Viewer's port, view's --port)
     "host must be an address or a host name": "--host must be an address or a host name",
+    "write format='copc' into": "write --format copc into",  # (lod/convert/converter.py: an octree folder named as a point file)
 }
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from ..errors import InputError, counted
+from ..errors import GigapointError, InputError, counted
 from .app import app
 from .cloud_opts import (
     ClassesOption,
@@ -126,7 +126,7 @@ def convert(
                 on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
             )
     except (ConvertError, InputError) as exc:  # the library's keywords ('max_leaf must be ...', format='bogus') said as the options typed
-        raise named_option(exc, {"max_leaf": "--max-leaf", f"convert: thin={spacing!r}": f"convert: --thin {thin}", **crs_options_named("convert", to_crs, from_crs),
+        raise named_option(octree_options_said(exc, output), {"max_leaf": "--max-leaf", f"convert: thin={spacing!r}": f"convert: --thin {thin}", **crs_options_named("convert", to_crs, from_crs),
                                  **keywords_as_options(output, colors, dask)}) from None  # fmt: skip
     except (KeyboardInterrupt, SystemExit):  # (Ctrl+C, SIGTERM) a bare "interrupted" left the user to guess whether OUT was lost
         if not to_file and OctreeDir(watch).read_state() is not None:
@@ -144,6 +144,23 @@ def convert(
         f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s{resumed}"
         + (f"; viewable after {result.first_view_seconds:.1f} s" if result.first_view_seconds is not None else "")
     )
+
+
+#: convert's keywords of an octree that options set, as the options (refused with a plain point file's output)
+OCTREE_OPTIONS = {"sampler": "--sampler", "memory_limit": "--memory-limit", "max_leaf": "--max-leaf", "layout": "--layout", "colors": "--colors",
+                  "client": "--dask/--workers (client)"}  # fmt: skip
+
+
+def octree_options_said(exc: GigapointError, output: Path) -> GigapointError:
+    """convert's refusal of octree keywords with a plain point file's output (``x.las: sampler,
+    client: options of an octree, not of a plain LAS file``) with the options typed; ``exc``
+    unchanged otherwise."""
+    message = str(exc)
+    keywords, _, why = message.removeprefix(f"{output}: ").partition(": ")
+    if not message.startswith(f"{output}: ") or "of an octree, not of a plain" not in why:
+        return exc
+    options = ", ".join(OCTREE_OPTIONS.get(keyword, keyword) for keyword in keywords.split(", "))
+    return type(exc)(f"{output}: {options}: {why}")
 
 
 def keywords_as_options(output: Path, colors: str | None, dask: str | None) -> dict[str, str]:

@@ -363,11 +363,11 @@ def convert(
         source_files = [check_file(p) if isinstance(p, (str, os.PathLike)) else _not_a_path(p) for p in source_files]
     out = local_path(out, "the output", ConvertError)  # a file:// URL names a path
     if format is None and out is not None and str(out) != "" and is_point_file_name(out) and _are_paths(inputs):  # -o ground.laz: one plain point file
-        octree_options = {"--sampler": sampler, "--memory-limit": memory_limit, "--max-leaf": max_leaf, "--layout": layout, "--colors": colors,
-                          "encoding": encoding, "--dask/--workers (client)": client, "name": name, "partition_points": partition_points,
+        octree_options = {"sampler": sampler, "memory_limit": memory_limit, "max_leaf": max_leaf, "layout": layout, "colors": colors,
+                          "encoding": encoding, "client": client, "name": name, "partition_points": partition_points,
                           "upper_points": upper_points, "source_files": source_files, "on_ready": on_ready}  # fmt: skip
         out = Path(out)  # (a str was "'str' object has no attribute 'is_dir'")
-        given = [option for option, value in octree_options.items() if value is not None]
+        given = [keyword for keyword, value in octree_options.items() if value is not None]  # (the CLI says its options: cli/convert_cmd.py)
         if given:  # (each meant something of an octree only: none was ignored without a word)
             raise ConvertError(f"{out}: {', '.join(given)}: {'options' if len(given) > 1 else 'an option'} of an octree, not of a plain {out.suffix[1:].upper()} file")
         t0 = time.perf_counter()
@@ -395,7 +395,7 @@ def convert(
     if format not in FORMATS:
         raise ConvertError(f"format: unknown format {format!r}; choose {' or '.join(FORMATS)}")
     if format != "copc" and out is not None and str(out) != "" and is_supported_name(out):  # -o scan.laz: a folder named so
-        raise ConvertError(f"{out}: a {format} octree is a folder; name it without a point file's suffix, or write --format copc into a .copc.laz file")
+        raise ConvertError(f"{out}: a {format} octree is a folder; name it without a point file's suffix, or write format='copc' into a .copc.laz file")
     if spacing is not None:  # (an octree's inner nodes are its thinned levels; its leaves hold every point)
         raise ConvertError(f"{out}: thin: an option of a plain .las, .laz or .ply file of the files' points, not of a {format} octree")
     if format == "copc" and out is not None and str(out) != "":
