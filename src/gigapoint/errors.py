@@ -45,6 +45,28 @@ def number_text(value) -> str:
     return compact if float(compact) == value else repr(float(value))
 
 
+def value_text(value) -> str:
+    """A value a count or class was given as, as a message quotes it: an integer (Python's or
+    numpy's) in digits (numpy's repr said np.int64(300)), anything else as its repr (2.0 stays
+    visibly a float: why an integer refuses it)."""
+    return str(int(value)) if is_whole_number(value) else repr(value)
+
+
+def numbers_text(values, spell=number_text) -> str:
+    """A value given as numbers (a clip box, a line), as the label of its errors quotes it: a
+    tuple or list (a 1-D numpy array as a list) with each item by ``spell`` ('clip=(1e+13, 0,
+    5, 1)': its repr said 10000000000000.0 where the message said 1e+13); anything else (a
+    number, a string, None) by ``spell`` alone."""
+    import numpy as np
+
+    if isinstance(values, np.ndarray) and values.ndim == 1:
+        values = values.tolist()
+    if not isinstance(values, (tuple, list)):
+        return spell(values)
+    items = ", ".join(map(spell, values))
+    return f"[{items}]" if isinstance(values, list) else f"({items}{',' if len(values) == 1 else ''})"
+
+
 def is_whole_number(value) -> bool:
     """Whether ``value`` is an integer (Python's or numpy's, not a bool): the test behind the
     one-line errors about counts, sizes and indices (3.5 was read as 3, True as 1)."""
@@ -75,7 +97,7 @@ def check_whole(where: str, name: str, value, lo: int | None = None, hi: int | N
         rng = f" >= {lo:,}"
     else:
         rng = "" if hi is None else f" <= {hi:,}"
-    raise InputError(f"{where}: {name} must be an integer{rng}{unit}, got {value!r}")
+    raise InputError(f"{where}: {name} must be an integer{rng}{unit}, got {value_text(value)}")
 
 
 def check_timeout(where: str, timeout) -> float | None:

@@ -114,9 +114,13 @@ def _closed_octree():
         (lambda: gp.Camera.look_at((20, 20, 20), (5, 5, 5), width=0), CameraError, "image width must be an integer in 1..16384, got 0"),
         (lambda: gp.open([]), InputError, "open: no file given"),
         (lambda: gp.open([], progressive=True), InputError, "open: no file given"),
+        # (errors.check_whole: numpy's integer in digits, not np.int64(0); a float as one, why it is refused)
+        (lambda: gp.demo(n_points=np.int64(0)), InputError, "demo: n_points must be an integer >= 1, got 0"),
+        (lambda: gp.demo(n_points=2.0), InputError, "demo: n_points must be an integer >= 1, got 2.0"),
     ],
     ids=["add-N2", "add-N4", "add-1d", "add-rgb-rows", "add-rgb-strings", "add-attribute-rows", "add-closed", "from-arrays-empty",
-         "point-info-past-end", "point-info-minus-2", "camera-eye-is-target", "camera-width-0", "open-empty-list", "open-progressive-empty-list"],
+         "point-info-past-end", "point-info-minus-2", "camera-eye-is-target", "camera-width-0", "open-empty-list", "open-progressive-empty-list",
+         "demo-numpy-integer", "demo-float"],
 )  # fmt: skip
 def test_bad_input_is_one_line(call, error, message):
     with pytest.raises(error, match=f"^{re.escape(message)}$"):

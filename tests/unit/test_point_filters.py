@@ -169,15 +169,35 @@ def test_view_filter_options_need_files(cli):
 @pytest.mark.parametrize(
     ("clip", "message"),
     [
-        ((1e13, 0.0, 5.0, 1.0), "open: clip=(10000000000000.0, 0.0, 5.0, 1.0): xmin 1e+13 is above xmax 5"),
-        ((0.0, 0.0, 0.1 + 0.2, 1.0, 1.0, 0.3), "open: clip=(0.0, 0.0, 0.30000000000000004, 1.0, 1.0, 0.3): zmin 0.30000000000000004 is above zmax 0.3"),
+        ((1e13, 0.0, 5.0, 1.0), "open: clip=(1e+13, 0, 5, 1): xmin 1e+13 is above xmax 5"),
+        ((0.0, 0.0, 0.1 + 0.2, 1.0, 1.0, 0.3), "open: clip=(0, 0, 0.30000000000000004, 1, 1, 0.3): zmin 0.30000000000000004 is above zmax 0.3"),
+        ([1e13, 0.0, 5.0, 1.0], "open: clip=[1e+13, 0, 5, 1]: xmin 1e+13 is above xmax 5"),
+        (np.array([1e13, 0.0, 5.0, 1.0]), "open: clip=[1e+13, 0, 5, 1]: xmin 1e+13 is above xmax 5"),
     ],
 )
 def test_a_clip_box_error_spells_its_bounds_compactly_and_exactly(tmp_path, clip, message):
     """A min above its max is said as ``errors.number_text`` spells numbers: 1e13 was
-    '10000000000000', and 0.1 + 0.2 above 0.3 read '0.3 is above zmax 0.3' ('%.15g')."""
+    '10000000000000', and 0.1 + 0.2 above 0.3 read '0.3 is above zmax 0.3' ('%.15g'); the
+    box given, at the message's start, too (its repr said 10000000000000.0, numpy's array([1.e+13, ...]))."""
     with pytest.raises(InputError) as err:
         gp.open(tmp_path / "missing.laz", clip=clip)
+    assert str(err.value) == message
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"classes": [np.int64(2), np.int64(300)]}, "open: classes=[2, 300]: class numbers are integers from 0 to 255 (LAS classes), got 300"),
+        ({"drop_classes": np.array([7, 300])}, "open: drop_classes=[7, 300]: class numbers are integers from 0 to 255 (LAS classes), got 300"),
+        ({"classes": [2.0]}, "open: classes=[2.0]: class numbers are integers from 0 to 255 (LAS classes), got 2.0"),
+        ({"corridor": (1e13, 0.0, 1e13, 0.0, 1.0)}, "open: corridor=(1e+13, 0, 1e+13, 0, 1): a line's end lies beyond ±1e+12: no point can be there"),
+    ],
+)
+def test_filter_labels_spell_numpy_integers_as_digits_and_floats_compactly(tmp_path, options, message):
+    """Classes given as numpy integers were said np.int64(300) (a float class stays 2.0: why it
+    is refused); a corridor's numbers as errors.number_text spells them, as the message does."""
+    with pytest.raises(InputError) as err:
+        gp.open(tmp_path / "missing.laz", **options)
     assert str(err.value) == message
 
 

@@ -212,6 +212,7 @@ def test_the_command_names_the_pixel_in_the_crs_unit_of_a_file_and_of_an_octree(
         ((0, 0, 1, math.nan), 1, "section: line=(0, 0, 1, nan): a line's ends are finite numbers"),
         ((0, 0, 1, 1), math.nan, "section: width=nan: the corridor's width must be a finite number above 0"),
         ((0, 0, 1), 1, "section: line=(0, 0, 1): a line is x1, y1, x2, y2 (its two ends)"),
+        ((1e13, 0.0, 1e13, 0.0), 1, "section: line=(1e+13, 0, 1e+13, 0): a line's end lies beyond ±1e+12: no point can be there"),
     ],
 )
 def test_bad_values_are_one_line_errors_before_reading(tmp_path, line, width, message):

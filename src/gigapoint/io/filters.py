@@ -30,7 +30,18 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..core.coords import MAX_ABS_COORDINATE
-from ..errors import EmptyCloudError, GigapointWarning, InputError, counted, is_real, is_whole_number, number_text, warn
+from ..errors import (
+    EmptyCloudError,
+    GigapointWarning,
+    InputError,
+    counted,
+    is_real,
+    is_whole_number,
+    number_text,
+    numbers_text,
+    value_text,
+    warn,
+)
 from ._base import read_once
 from .polygon import ClipPolygon, clip_polygon_of, far_apart, looks_like_lon_lat, moved_polygon
 
@@ -389,14 +400,16 @@ def point_filter(classes=None, drop_classes=None, clip=None, where: str = "open"
     line has no length or whose width is not above 0 (``corridor_of``'s checks), a clip polygon
     that cannot be read or is no area (``polygon.clip_polygon_of``'s checks)."""
     given = {"classes": classes, "drop_classes": drop_classes, "clip": clip}
-    label = {name: f"{where}: {names[name]}{(shown or {}).get(name) or repr(value)}" for name, value in given.items()}
+    # (a class given as 2.0 stays visibly a float: why it is refused)
+    spell = {"classes": value_text, "drop_classes": value_text, "clip": number_text}
+    label = {name: f"{where}: {names[name]}{(shown or {}).get(name) or numbers_text(value, spell[name])}" for name, value in given.items()}
     keep = _classes(classes, label["classes"])
     drop = _classes(drop_classes, label["drop_classes"])
     both = sorted(set(keep) & set(drop))
     if both:
         raise InputError(f"{where}: {names['classes'].strip()} and {names['drop_classes'].strip()} both name class {', '.join(map(str, both))}; keep it or drop it")
     box = _clip(clip, label["clip"])
-    lane = () if corridor is None else _corridor(corridor, f"{where}: {names['corridor']}{corridor!r}")
+    lane = () if corridor is None else _corridor(corridor, f"{where}: {names['corridor']}{numbers_text(corridor)}")
     area = None if clip_polygon is None else clip_polygon_of(clip_polygon, f"{where}: {names['clip_polygon']}{(shown or {}).get('clip_polygon') or repr(clip_polygon)}")
     if not (keep or drop or box or lane or area):
         return None
@@ -415,7 +428,7 @@ def _classes(value, label: str) -> tuple[int, ...]:
     values = list(values)
     bad = [v for v in values if not (is_whole_number(v) and 0 <= v <= 255)]
     if bad or not values:
-        raise InputError(problem + (f", got {bad[0]!r}" if bad else ", got none"))
+        raise InputError(problem + (f", got {value_text(bad[0])}" if bad else ", got none"))
     return tuple(sorted({int(v) for v in values}))
 
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
-from ..errors import CameraError, InputError, is_real, number_text
+from ..errors import CameraError, InputError, is_real, number_text, numbers_text
 from ..io.crs import crs_units
 from ..io.filters import PointFilter, along_and_across, corridor_of, point_filter
 from ..lod import is_lod_source
@@ -182,7 +182,7 @@ def section(source, line, width, classes=None, drop_classes=None, clip_polygon=N
 
     ``Section.distance``, ``.offset``, ``.z``, ``.classification``: the points along the line;
     ``.render(scale=pixels per unit or size=(w, h), vertical_exaggeration=1, **settings)``: the image."""
-    lane = corridor_of(line, width, f"section: line={line!r}", f"section: width={number_text(width)}")
+    lane = corridor_of(line, width, f"section: line={numbers_text(line)}", f"section: width={number_text(width)}")
     keep = point_filter(classes, drop_classes, where="section", corridor=lane, clip_polygon=clip_polygon)  # (its bad values before anything is read)
     paths = [source] if isinstance(source, (str, os.PathLike)) else source
     if isinstance(source, PointCloud):
