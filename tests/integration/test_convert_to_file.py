@@ -145,6 +145,14 @@ def test_the_cli_refuses_octree_options_with_a_point_file_output(cli, autzen_pat
     assert (rc, err.strip()) == (1, f"error: {out}: --sampler, --dask/--workers (client): options of an octree, not of a plain LAS file")
 
 
+def test_a_point_file_output_makes_the_folders_missing_on_its_way(cli, autzen_path, tmp_path):
+    """As an octree folder or a COPC file output does (-o out/scan.copc.laz made out/, -o out/scan.laz refused it)."""
+    assert convert(autzen_path, tmp_path / "lib" / "deeper" / "out.laz", progress=False).points == 110_000
+    rc, _, err = cli("convert", autzen_path, "-o", tmp_path / "cli" / "deeper" / "out.las", "--quiet")
+    assert rc == 0, err
+    assert [len(laspy.read(tmp_path / d / "deeper" / f).points) for d, f in (("lib", "out.laz"), ("cli", "out.las"))] == [110_000, 110_000]
+
+
 def test_the_cli_names_each_octree_option_it_refuses_with_a_point_file_output(cli, autzen_path, tmp_path):
     """The library says the keywords (sampler, memory_limit, ...; above), the command line its options."""
     out = tmp_path / "out.laz"

@@ -143,7 +143,7 @@ def test_save_refuses_in_one_line_naming_the_file_and_leaves_nothing(tmp_path, m
     for path, problem in (
         ("taken.las", "taken.las: already exists; pass overwrite=True to replace it"),
         ("dir.laz", "dir.laz: is a directory, not a LAZ file; not replaced"),
-        ("nowhere/a.ply", "nowhere/a.ply: the folder nowhere does not exist"),
+        ("taken.las/a.ply", "taken.las/a.ply: taken.las is a file, not a folder"),
         ("a.xyz", "a.xyz: save writes .las, .laz or .ply files, not .xyz"),
         ("a", "a: save writes .las, .laz or .ply files, not a name without a suffix"),
         (5, "arrays: save: the output must be a path of a .las, .laz or .ply file, got 5"),
@@ -156,6 +156,14 @@ def test_save_refuses_in_one_line_naming_the_file_and_leaves_nothing(tmp_path, m
     assert (tmp_path / "taken.las").read_bytes() == b"mine"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dir.laz", "taken.las"]  # nothing else, no temporary file
     assert cloud.save("taken.las", overwrite=True) == 100 and laspy.read("taken.las").header.point_count == 100
+
+
+def test_save_makes_the_folders_missing_on_its_way(tmp_path):
+    """As an octree folder and a COPC file are made (convert, a progressive cloud's save): "the
+    folder nowhere does not exist" was the one output refused for it."""
+    cloud = gp.from_arrays(np.random.default_rng(2).random((100, 3)))
+    assert cloud.save(tmp_path / "nowhere" / "deeper" / "a.ply") == 100
+    assert gp.open(tmp_path / "nowhere" / "deeper" / "a.ply").n_points == 100
 
 
 def test_save_where_nothing_can_be_created_names_the_file(tmp_path):

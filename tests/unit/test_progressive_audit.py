@@ -160,6 +160,22 @@ def test_save_over_what_the_user_has_is_refused(cloud, tmp_path, name, make, ove
     assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
 
 
+@pytest.mark.parametrize("name", ["t.laz", "t.ply", "tree", "t.copc.laz"])
+def test_save_makes_the_folders_missing_on_its_way_for_a_point_file_as_for_an_octree(cloud, tmp_path, name):
+    """save("missing/dir/t.laz") refused the folder while save("missing/dir/t.copc.laz") and an
+    octree folder made it: one rule, as convert -o and a plain cloud's save follow (io/write.py)."""
+    out = tmp_path / "missing" / "dir" / name
+    assert cloud.save(out).points == 20_000
+    assert gp.open(out).n_points == 20_000
+
+
+def test_save_through_a_file_is_refused_in_one_line(cloud, tmp_path):
+    (tmp_path / "afile").write_text("mine")
+    with pytest.raises(InputError, match=f"^{re.escape(str(tmp_path / 'afile' / 'dir' / 't.laz'))}: {re.escape(str(tmp_path / 'afile'))} is a file, not a folder$"):
+        cloud.save(tmp_path / "afile" / "dir" / "t.laz")
+    assert [p.name for p in tmp_path.iterdir()] == ["afile"] and (tmp_path / "afile").read_text() == "mine"
+
+
 def test_a_second_save_asks_for_overwrite(cloud, tmp_path):
     out = tmp_path / "tree"
     assert cloud.save(out).points == 20_000

@@ -34,15 +34,20 @@ Chunks = Callable[[], Iterable[PointChunk]]
 def check_point_file_output(path: Path, overwrite: bool) -> None:
     """Refuse, in one line naming ``path``, a point file that cannot be written there: a folder
     (overwrite=True was os.replace's IsADirectoryError: a folder is never replaced by a file), an
-    existing file without ``overwrite``, a missing folder, one not writable."""
+    existing file without ``overwrite``, a path through a file, a folder not writable. Folders
+    missing on the way are made as it is written (``write_points``), as they are for an octree's
+    folder or a COPC file: save("out/t.copc.laz") made out/, save("out/t.laz") refused it."""
     if path.is_dir():
         raise InputError(f"{path}: is a directory, not a {path.suffix[1:].upper()} file; not replaced")
     if path.exists() and not overwrite:
         raise InputError(f"{path}: already exists; pass overwrite=True to replace it")
-    if not path.parent.is_dir():
-        raise InputError(f"{path}: the folder {path.parent} does not exist")
-    if not os.access(path.parent, os.W_OK):  # ("Permission denied" came once every point was read, classified, reprojected)
-        raise InputError(f"{path}: cannot write into {path.parent} (permission denied)")
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:  # the folder the missing ones are made in
+        folder = folder.parent
+    if not folder.is_dir():
+        raise InputError(f"{path}: {folder} is a file, not a folder")
+    if not os.access(folder, os.W_OK):  # ("Permission denied" came once every point was read, classified, reprojected)
+        raise InputError(f"{path}: cannot write into {folder} (permission denied)")
 
 
 def write_points(
@@ -70,6 +75,7 @@ def write_points(
             written = _write_las(tmp, path, chunks, grid, crs_records, color_bits, has_color)
 
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)  # (those missing: check_point_file_output)
         atomic_write(path, write)
     except (OSError, LazrsError) as exc:  # a full disk: lazrs said "IoError: Failed to call write", naming no file, not an OSError
         reason = write_failure(exc) if isinstance(exc, OSError) else first_line(exc)
