@@ -282,6 +282,36 @@ def test_viewer_follows_the_conversion_to_the_octree(las_file, tmp_path, monkeyp
         core.close_all()
 
 
+def test_viewer_follows_a_copc_conversion_to_its_file(las_file, tmp_path, monkeypatch):
+    """`gigapoint view out.copc.laz.work` (the hint convert prints): once the COPC file is written
+    its work folder is removed, and the viewer kept the preview on screen for good."""
+    from gigapoint.lod.preview import ConversionPreview
+    from gigapoint.viewer.session import ViewerCore
+
+    path, _ = las_file
+    out = tmp_path / "out.copc.laz"
+    real = _stop_reading_after(monkeypatch, 2)
+    with pytest.raises(KeyboardInterrupt):
+        convert([path], out, format="copc", **OPTS)
+    preview = _open_preview(tmp_path / "out.copc.laz.work")
+    assert isinstance(preview, ConversionPreview) and 0 < preview.n_points < 100_000
+    core = ViewerCore(preview)
+    core.open_session(lambda kind, payload: True, 96, 64)
+    try:
+        core.watcher.interval_s = 0.05
+        monkeypatch.setattr(read_mod, "_read_chunks", real)
+        convert([path], out, format="copc", **OPTS)  # finishes while the viewer is open: the work folder goes
+        assert out.is_file() and not (tmp_path / "out.copc.laz.work").exists()
+        deadline = time.monotonic() + 20
+        while isinstance(core.cloud, ConversionPreview):
+            assert time.monotonic() < deadline, "the viewer did not switch to the finished COPC file"
+            time.sleep(0.05)
+        assert core.cloud.n_points == 100_000 and core.cloud.name == "out.copc.laz"
+        assert core.watcher.finished.is_set() and core.note == ""
+    finally:
+        core.close_all()
+
+
 def test_view_waits_for_the_first_preview(tmp_path):
     import threading
 

@@ -150,3 +150,10 @@ def work_dir(out) -> Path:
     preview and node sets; removed once ``out`` is written): ``<out>.work`` beside it."""
     out = Path(out)
     return out.with_name(out.name + ".work")
+
+
+def copc_of_work_dir(work) -> Path | None:
+    """The COPC file a conversion working in the folder ``work`` writes (``work_dir``'s
+    inverse), or None where ``work`` is not named as such a folder."""
+    work = Path(work)
+    return work.with_name(work.name.removesuffix(".work")) if work.name.endswith(".work") and work.name != ".work" else None

@@ -5,7 +5,8 @@ receiving frames (LiveWatcher).
 ``gigapoint view OUT`` on an unfinished conversion starts with its preview (a
 ConversionPreview, lod/preview.py). A thread polls the octree folder (lod/octree_dir.py)
 about once a second and swaps the viewer's cloud when the preview file is rewritten, and for
-good when the octree is complete; the tabs redraw with their camera unchanged.
+good when the octree is complete (a COPC conversion's: its file, once its ``<out>.work`` folder
+is gone); the tabs redraw with their camera unchanged.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import time
 from typing import Self
 
 from ..errors import GigapointError, warnings_kept
+from ..lod.kinds import copc_of_work_dir
 from ..lod.octree_dir import OctreeDir
 
 
@@ -66,14 +68,24 @@ class ConversionWatcher(_Watcher):
         self.interval_s = interval_s
         core.note = preview_note(folder)  # before the first frame is drawn
 
+    def _finished(self):
+        """The finished octree to draw, or None while the conversion is unfinished: the folder
+        itself once complete, or for a COPC conversion's work folder (``<out>.work``, removed
+        once ``<out>`` is written) the COPC file; the preview stayed on screen for good."""
+        if self.folder.complete:
+            return self.folder.path
+        copc = copc_of_work_dir(self.folder.path)
+        return copc if copc is not None and not self.folder.path.exists() and copc.is_file() else None
+
     def _run(self) -> None:
         from ..lod import open_octree
         from ..lod.preview import open_preview
 
         while not self.finished.wait(self.interval_s):
             try:
-                if self.folder.complete:
-                    self.core.replace_cloud(open_octree(self.folder.path))
+                finished = self._finished()
+                if finished is not None:
+                    self.core.replace_cloud(open_octree(finished))
                     self.core.note = ""
                     self.finished.set()
                     return
