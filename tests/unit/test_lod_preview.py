@@ -245,6 +245,29 @@ def test_info_describes_octrees_and_unfinished_conversions(las_file, tmp_path, m
     assert "intensity" in data["attributes"] and data["levels"] == int(oc.nodes["level"].max()) + 1
 
 
+def test_info_of_a_conversion_whose_work_files_go_while_it_is_read(tmp_path, monkeypatch, capsys):
+    """A running conversion renames and removes its work folders while `info` sums their sizes:
+    info failed with "OUT/.partial/built/g282.tmp: No such file or directory"."""
+    import os
+
+    out = tmp_path / "out.copc.laz.work"
+    (out / ".partial" / "built" / "g1.tmp").mkdir(parents=True)
+    (out / ".partial" / "built" / "g1.tmp" / "x.npy").write_bytes(b"x" * 1000)
+    (out / ".partial" / "state.json").write_text(json.dumps({"phase": "build", "points": 5, "total": 5}))
+    real = os.scandir
+
+    def removed_once_listed(path="."):  # g1.tmp goes between the listing of built/ and its own
+        if os.fspath(path).endswith("g1.tmp"):
+            raise FileNotFoundError(2, "No such file or directory", os.fspath(path))
+        return real(path)
+
+    monkeypatch.setattr(os, "scandir", removed_once_listed)
+    assert main(["info", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "phase build, 5 of 5 points read" in text
+    assert re.search(r"file size: +\d+ bytes", text), text  # state.json's, not g1.tmp's 1000
+
+
 def test_viewer_follows_the_conversion_to_the_octree(las_file, tmp_path, monkeypatch):
     from gigapoint.viewer.protocol import unpack_frame
     from gigapoint.viewer.session import ViewerCore

@@ -5,6 +5,7 @@ info`` says about one."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import urlsplit, urlunsplit
@@ -149,6 +150,20 @@ def open_filtered(path, keep: PointFilter, instead: str) -> OctreeCloud:
     return octree
 
 
+def bytes_under(folder: Path) -> int:
+    """The bytes of the files under ``folder``. A running conversion removes work files and folders
+    meanwhile (`info OUT.copc.laz.work` said "built/g282.tmp: No such file or directory"): those
+    count nothing (os.walk skips a folder gone before it is listed)."""
+    total = 0
+    for root, _, names in os.walk(folder):
+        for name in names:
+            try:
+                total += os.stat(os.path.join(root, name)).st_size
+            except FileNotFoundError:
+                continue
+    return total
+
+
 def octree_info(path) -> dict:
     """What ``gigapoint info`` says about an octree folder (gigapoint or Potree 2.0) or an
     unfinished conversion: ``file_info``'s keys plus nodes, levels, sampler, spacing or
@@ -159,7 +174,7 @@ def octree_info(path) -> dict:
         return _voxel_info(path)
     d = OctreeDir(path)
     p = d.path
-    size = sum(f.stat().st_size for f in p.rglob("*") if f.is_file())
+    size = bytes_under(p)
     if not d.complete:
         s = d.status()
         return {
@@ -234,7 +249,7 @@ def _voxel_info(path) -> dict:
         elif copc:
             size = Path(path).stat().st_size
         else:  # the whole dataset: ept.json's folder
-            size = sum(f.stat().st_size for f in Path(ept_location(path)).parent.rglob("*") if f.is_file())
+            size = bytes_under(Path(ept_location(path)).parent)
         details = {
             "octree": f"{len(cloud.keys):,} nodes in {len(per_level)} levels, {cloud.pages_read:,} hierarchy pages"
             + (f", spacing {meta['spacing']:.6g}" if meta.get("spacing") else ""),
