@@ -170,9 +170,11 @@ def _open(paths: tuple, progressive: bool, options: dict):
     from .errors import InputError, check_switch
     from .io import lone_match
     from .io.filters import point_filter
+    from .lod.preview import refuse_unwritten_copc
     from .lod.reader import refuse_octrees
 
     paths = tuple(lone_match(_flat_paths(paths)))  # (a pattern matching one octree opens it)
+    refuse_unwritten_copc(paths)
     check_switch("progressive", progressive, "open")  # (chunked= is open_cloud's to check)
     recursive = options.pop("recursive", False)
     check_switch("recursive", recursive, "open")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import json
 import re
+import shutil
 import time
 import warnings
 
@@ -266,6 +267,50 @@ def test_info_of_a_conversion_whose_work_files_go_while_it_is_read(tmp_path, mon
     text = capsys.readouterr().out
     assert "phase build, 5 of 5 points read" in text
     assert re.search(r"file size: +\d+ bytes", text), text  # state.json's, not g1.tmp's 1000
+
+
+def test_a_copc_file_not_written_yet_and_its_finished_work_folder_say_why(tmp_path, capsys):
+    """`render`/`view`/`gp.open` of a COPC file a conversion is still making said a bare "no such
+    file", and `info` said "run the same convert command again to resume it" of a conversion at
+    work; the work folder `convert` names, once the file is written and the folder removed, was
+    "no such file" too."""
+    out = tmp_path / "out.copc.laz"
+    work = tmp_path / "out.copc.laz.work"
+    (work / ".partial").mkdir(parents=True)
+    (work / ".partial" / "state.json").write_text(json.dumps({"phase": "read"}))
+
+    def said(args) -> str:
+        assert main(args) == 1
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and "Traceback" not in err
+        return err
+
+    running = f"{out}: no such file yet: a conversion is writing it; open its work folder {work} to see what it has read so far"
+    lock = OctreeDir(work).lock()  # a conversion at work
+    try:
+        with pytest.raises(InputError) as caught:
+            gp.open(out)
+        assert str(caught.value) == running
+        assert said(["info", str(out)]) == f"error: {running}"
+        assert said(["render", str(out), "-o", str(tmp_path / "x.png")]) == f"error: {running}"
+        assert said(["view", str(out), "--port", "0", "--no-browser"]) == f"error: {running}"
+    finally:
+        lock.release()
+    stopped = f"{out}: no such file yet: a conversion to it is unfinished (its work folder {work} is there); run the same convert command again to resume it"
+    with pytest.raises(InputError) as caught:
+        gp.open(out)
+    assert str(caught.value) == stopped
+    assert said(["render", str(out), "-o", str(tmp_path / "x.png")]) == f"error: {stopped}"
+
+    shutil.rmtree(work)  # finished: the file written, its work folder removed
+    out.write_bytes(b"a COPC file")
+    finished = f"{work}: no such folder: the conversion that worked in it has finished; open {out}"
+    with pytest.raises(InputError) as caught:
+        gp.open(work)
+    assert str(caught.value) == finished
+    for args in (["info", str(work)], ["render", str(work), "-o", str(tmp_path / "x.png")], ["view", str(work), "--port", "0", "--no-browser"]):
+        assert said(args) == f"error: {finished}"
+    assert not (tmp_path / "x.png").exists()
 
 
 def test_viewer_follows_the_conversion_to_the_octree(las_file, tmp_path, monkeypatch):

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import typer
 
-from ..errors import GigapointError, InputError
+from ..errors import GigapointError
 from .app import app
 from .cloud_opts import (
     ChunkedOption,
@@ -77,18 +77,14 @@ def info(
         shown_url,
     )
     from ..lod import is_local_copc, is_lod_source, octree_info
-    from ..lod.kinds import work_dir
-    from ..lod.octree_dir import RESUME_HINT, OctreeDir
+    from ..lod.preview import refuse_unwritten_copc
 
     # an octree (folder, COPC file, EPT dataset, URL) is one dataset, not a folder of files;
     # (path, octree?, its error, the folder argument it is summed up in or None)
     paths: list[tuple[Path, bool, GigapointError | None, Path | None]] = []
     for f in files:
         try:
-            if not f.exists() and work_dir(f).is_dir():  # "no such file" sent users looking for a file a conversion is still making
-                hint = OctreeDir(work_dir(f)).resume_hint  # (a bad input that stopped it: its error, and what to do)
-                again = "run the same convert command again to resume it" if hint == RESUME_HINT else hint
-                raise InputError(f"{f}: no such file yet: a conversion to it is unfinished (its work folder {work_dir(f)} is there); {again}")
+            refuse_unwritten_copc([f])  # "no such file" sent users looking for a file a conversion is still making
             # a local COPC file is a LAZ file too, each point stored once: --stats reads its points as one
             lod = is_lod_source(f) and not (stats and is_local_copc(f))
             found = [] if lod else expand_paths([f], recursive=recursive)
