@@ -170,7 +170,7 @@ def _open(paths: tuple, progressive: bool, options: dict):
     from .errors import InputError, check_switch
     from .io import lone_match
     from .io.filters import point_filter
-    from .lod.preview import refuse_unwritten_copc
+    from .lod.kinds import refuse_unwritten_copc
     from .lod.reader import refuse_octrees
 
     paths = tuple(lone_match(_flat_paths(paths)))  # (a pattern matching one octree opens it)

@@ -216,7 +216,7 @@ def open_files(inputs, point_budget: int, progressive: bool | None, options: dic
     load them, lod/reader.open_filtered)."""
     from ..io import open_cloud, shown_url
     from ..lod import is_lod_source
-    from ..lod.preview import refuse_unwritten_copc
+    from ..lod.kinds import refuse_unwritten_copc
     from ..lod.progressive import open_sized
 
     refuse_unwritten_copc(inputs)

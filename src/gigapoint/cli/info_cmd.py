@@ -77,7 +77,7 @@ def info(
         shown_url,
     )
     from ..lod import is_local_copc, is_lod_source, octree_info
-    from ..lod.preview import refuse_unwritten_copc
+    from ..lod.kinds import refuse_unwritten_copc
 
     # an octree (folder, COPC file, EPT dataset, URL) is one dataset, not a folder of files;
     # (path, octree?, its error, the folder argument it is summed up in or None)

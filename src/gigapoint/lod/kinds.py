@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import InputError
 from ..io.http import as_url
 from ..io.las import read_las_header
+from .octree_dir import RESUME_HINT, OctreeDir
 
 # --------------------------------------------------------------------------- COPC's head (copc.py)
 
@@ -157,3 +158,23 @@ def copc_of_work_dir(work) -> Path | None:
     inverse), or None where ``work`` is not named as such a folder."""
     work = Path(work)
     return work.with_name(work.name.removesuffix(".work")) if work.name.endswith(".work") and work.name != ".work" else None
+
+
+def refuse_unwritten_copc(paths) -> None:
+    """A one-line InputError for the first of ``paths`` that is not there because a conversion
+    into a COPC file is at work (the file appears once complete; ``<out>.work`` meanwhile): the
+    file before it is written (running: its work folder shows what is read so far; stopped: what
+    to do), or that work folder once it is gone. A bare "no such file" left users to guess."""
+    for path in paths:
+        if as_url(path) is not None or Path(path).exists():
+            continue
+        work, copc = work_dir(path), copc_of_work_dir(path)
+        if work.is_dir():
+            d = OctreeDir(work)
+            if d.running:
+                raise InputError(f"{path}: no such file yet: a conversion is writing it; open its work folder {work} to see what it has read so far")
+            hint = d.resume_hint  # (a bad input that stopped it: its error, and what to do)
+            again = "run the same convert command again to resume it" if hint == RESUME_HINT else hint
+            raise InputError(f"{path}: no such file yet: a conversion to it is unfinished (its work folder {work} is there); {again}")
+        if copc is not None and copc.is_file():
+            raise InputError(f"{path}: no such folder: the conversion that worked in it has finished; open {copc}")

@@ -21,9 +21,7 @@ from ..atomic import atomic_open
 from ..core.cloud import PointCloud
 from ..errors import GigapointWarning, InputError, warn
 from ..io import open_cloud
-from ..io.http import as_url
-from .kinds import copc_of_work_dir, work_dir
-from .octree_dir import RESUME_HINT, OctreeDir
+from .octree_dir import OctreeDir
 
 PREVIEW_BYTES_PER_POINT = 48  # xyz, rgba and a few attributes, held twice while a file is written
 MAX_PREVIEW_POINTS = 2_000_000  # renders brute force in a few ms: enough to look at, cheap to write
@@ -157,23 +155,3 @@ def wait_for_preview(out, timeout_s: float = 60.0, poll_s: float = 0.25) -> bool
 def awaiting_preview(path) -> bool:
     """``path`` is an unfinished conversion that has no preview yet."""
     return OctreeDir(path).awaiting_preview
-
-
-def refuse_unwritten_copc(paths) -> None:
-    """A one-line InputError for the first of ``paths`` that is not there because a conversion
-    into a COPC file is at work (the file appears once complete; ``<out>.work`` meanwhile): the
-    file before it is written (running: its work folder shows what is read so far; stopped: what
-    to do), or that work folder once it is gone. A bare "no such file" left users to guess."""
-    for path in paths:
-        if as_url(path) is not None or Path(path).exists():
-            continue
-        work, copc = work_dir(path), copc_of_work_dir(path)
-        if work.is_dir():
-            d = OctreeDir(work)
-            if d.running:
-                raise InputError(f"{path}: no such file yet: a conversion is writing it; open its work folder {work} to see what it has read so far")
-            hint = d.resume_hint  # (a bad input that stopped it: its error, and what to do)
-            again = "run the same convert command again to resume it" if hint == RESUME_HINT else hint
-            raise InputError(f"{path}: no such file yet: a conversion to it is unfinished (its work folder {work} is there); {again}")
-        if copc is not None and copc.is_file():
-            raise InputError(f"{path}: no such folder: the conversion that worked in it has finished; open {copc}")
