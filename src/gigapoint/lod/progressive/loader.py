@@ -52,7 +52,8 @@ from ..convert.prefetch import prefetch
 # points inserted under one hold of the octree while no frames are drawn (~70-140 ms; a frame asked for
 # meanwhile waits for it once, then slices are SLICE_WHILE_DRAWING): decoded chunks are joined up to it
 # while no frames are drawn, as an insertion of 1 M points costs less a point than four of 250 k (a 20 M
-# LAS load 3.2 -> 2.5 s, Zen 4); while frames are drawn, up to JOIN_WHILE_DRAWING (points show as they come)
+# LAS load 3.2 -> 2.5 s, Zen 4); while frames are drawn, up to JOIN_WHILE_DRAWING (points show as they come).
+# 2 M and 4 M were no faster and raised a 20 M load's peak by 137 / 483 MiB (docs/benchmarks.md, bench_slices.py)
 SLICE_POINTS = 1_000_000
 JOIN_WHILE_DRAWING = SMALL_BATCH
 SLICE_WHILE_DRAWING = 50_000  # ... and while frames are drawn: a waiting frame waits ~5-10 ms at most
