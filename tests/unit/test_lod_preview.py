@@ -313,6 +313,21 @@ def test_a_copc_file_not_written_yet_and_its_finished_work_folder_say_why(tmp_pa
     assert not (tmp_path / "x.png").exists()
 
 
+def test_folders_and_files_no_conversion_made_are_not_said_to_be_ones(tmp_path, capsys):
+    """A folder named `a.laz.work` that no conversion made (empty) beside a missing `a.laz` was said
+    to be an unfinished conversion to resume; a plain `b.las` made `b.las.work` "a conversion
+    that has finished". Both are the plain "no such file" again."""
+    (tmp_path / "a.laz.work").mkdir()
+    (tmp_path / "b.las").write_bytes(b"not a COPC file")
+    for missing in (tmp_path / "a.laz", tmp_path / "b.las.work"):
+        with pytest.raises(InputError) as caught:
+            gp.open(missing)
+        assert "conversion" not in str(caught.value) and str(missing) in str(caught.value)
+        assert main(["info", str(missing)]) == 1
+        err = capsys.readouterr().err
+        assert "conversion" not in err and str(missing) in err
+
+
 def test_viewer_follows_the_conversion_to_the_octree(las_file, tmp_path, monkeypatch):
     from gigapoint.viewer.protocol import unpack_frame
     from gigapoint.viewer.session import ViewerCore

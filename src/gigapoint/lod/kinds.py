@@ -169,12 +169,12 @@ def refuse_unwritten_copc(paths) -> None:
         if as_url(path) is not None or Path(path).exists():
             continue
         work, copc = work_dir(path), copc_of_work_dir(path)
-        if work.is_dir():
-            d = OctreeDir(work)
+        d = OctreeDir(work)
+        if work.is_dir() and (d.running or d.state_file.is_file()):  # (a folder of that name a conversion did not make: no word of one)
             if d.running:
                 raise InputError(f"{path}: no such file yet: a conversion is writing it; open its work folder {work} to see what it has read so far")
             hint = d.resume_hint  # (a bad input that stopped it: its error, and what to do)
             again = "run the same convert command again to resume it" if hint == RESUME_HINT else hint
             raise InputError(f"{path}: no such file yet: a conversion to it is unfinished (its work folder {work} is there); {again}")
-        if copc is not None and copc.is_file():
+        if copc is not None and is_copc_name(copc) and copc.is_file():  # (b.las beside a missing b.las.work: no conversion's)
             raise InputError(f"{path}: no such folder: the conversion that worked in it has finished; open {copc}")
