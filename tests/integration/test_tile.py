@@ -522,3 +522,35 @@ def test_a_rerun_killed_as_its_tiles_move_in_leaves_all_old_tiles_or_all_new_one
         assert _files_in(out) == whole
         assert not any(p.name.endswith(".replaced") for p in tmp_path.iterdir())
         assert not any(p.name.startswith(".") for p in out.iterdir())
+
+
+def test_a_file_written_into_the_folder_as_its_tiles_are_swapped_in_is_kept(autzen_path, tmp_path, monkeypatch):
+    """The folder's entries are linked into the new one, then the old one is removed: a file
+    written meanwhile (another run's tile of another name, a user's) was removed with it."""
+    out, old, whole = _rerun_folders(autzen_path, tmp_path)
+    real = shutil.copystat
+
+    def copystat_then_a_write(src, dst, **kwargs):  # (the step after the links)
+        (out / "late.txt").write_text("written meanwhile")
+        (out / "notes.txt").write_text("changed meanwhile")
+        return real(src, dst, **kwargs)
+
+    monkeypatch.setattr(shutil, "copystat", copystat_then_a_write)
+    gp.tile(autzen_path, out, 500, overwrite=True)
+    monkeypatch.undo()
+    files = _files_in(out)
+    assert files.pop("late.txt") == b"written meanwhile"
+    assert files.pop("notes.txt") == b"changed meanwhile"
+    whole.pop("notes.txt")
+    assert files == whole
+
+
+def test_a_set_aside_folder_of_another_output_is_not_put_back(autzen_path, tmp_path):
+    """`.tiles.*.replaced` matched `.tiles.v2.XXXXXXXX.replaced`, tiles.v2's folder set aside by a
+    killed run: a run into a missing `tiles` took it over as its own."""
+    aside = tmp_path / ".tiles.v2.abcd1234.replaced"
+    aside.mkdir()
+    (aside / "notes.txt").write_text("tiles.v2's")
+    gp.tile(autzen_path, tmp_path / "tiles", 500)
+    assert (aside / "notes.txt").read_text() == "tiles.v2's"
+    assert not (tmp_path / "tiles" / "notes.txt").exists()

@@ -240,7 +240,22 @@ def _swap_in(out: Path, tiles_folder: Path, work_name: str, written: list[Path])
     except BaseException:
         os.rename(old, folder)
         raise
+    _carry_over(old, folder, work_name, {p.name for p in written})
     shutil.rmtree(old, ignore_errors=True)
+
+
+def _carry_over(old: Path, folder: Path, work_name: str, ours: set[str]) -> None:
+    """Entries written into the old folder after its entries were linked (another run's tiles of
+    other names, a user's file), moved into the new ``folder`` rather than removed with ``old``:
+    those missing there, and files replaced since (another inode) unless they are this run's tiles."""
+    for entry in old.iterdir():
+        target = folder / entry.name
+        if entry.name == work_name:
+            continue
+        if not os.path.lexists(target):
+            os.rename(entry, target)
+        elif entry.name not in ours and not entry.is_dir() and os.lstat(entry).st_ino != os.lstat(target).st_ino:
+            os.replace(entry, target)
 
 
 def _put_back_set_aside(out: Path) -> None:
@@ -250,7 +265,8 @@ def _put_back_set_aside(out: Path) -> None:
     folder = Path(os.path.realpath(out))  # (as _swap_in named it: an output given through a link, the folder it named)
     if folder.exists() or not folder.parent.is_dir():
         return
-    aside = sorted(folder.parent.glob(f".{glob.escape(folder.name)}.*.replaced"), key=lambda p: p.stat().st_mtime)
+    # (mkdtemp's 8 random characters: '.tiles.*.replaced' took tiles.v2's, '.tiles.v2.XXXXXXXX.replaced')
+    aside = sorted(folder.parent.glob(f".{glob.escape(folder.name)}.{'[a-z0-9_]' * 8}.replaced"), key=lambda p: p.stat().st_mtime)
     if not aside or not aside[-1].is_dir():
         return
     os.rename(aside[-1], folder)
