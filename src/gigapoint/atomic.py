@@ -17,6 +17,10 @@ ffmpeg) the temporary file's name; such a writer truncates it when it opens it, 
 (``auto_da_alloc``) answers with a flush when the file is closed: ~0.1 ms a file, so the
 octree's many small files go through ``atomic_open``.
 
+Every output follows one rule for the folders on its way: ``folder_refusal`` says, before any
+work, what keeps them from being made and written into (a path through a file, a folder not
+writable); ``make_folders`` makes those missing just before the file is written.
+
 A bottom-layer module: it imports only the standard library and numpy.
 """
 
@@ -34,7 +38,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-__all__ = ["append_file", "atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "fsync_file", "mapped_npy", "reserve", "start_writeback", "temp_files", "write_at", "write_failure", "write_together"]
+__all__ = ["append_file", "atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "folder_refusal", "fsync_file", "make_folders", "mapped_npy", "nearest_folder", "reserve", "start_writeback", "temp_files", "write_at", "write_failure", "write_together"]
 
 _IOV_MAX = min(1024, os.sysconf("SC_IOV_MAX")) if hasattr(os, "sysconf") else 16  # buffers per writev
 _SHORT_WRITE = re.compile(r"(\d+) requested and (\d+) written")
@@ -110,6 +114,33 @@ def write_failure(exc: OSError) -> str:
         return exc.strerror
     short = _SHORT_WRITE.fullmatch(str(exc))  # numpy's tofile
     return f"only {short[2]} of {short[1]} bytes written (is the disk full?)" if short else str(exc)
+
+
+def nearest_folder(folder) -> Path:
+    """``folder``, or where it is missing, its nearest ancestor that exists (a file, maybe)."""
+    folder = Path(folder)
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    return folder
+
+
+def folder_refusal(folder) -> str | None:
+    """Why files cannot be written into ``folder`` once the folders missing on its way are made
+    (``make_folders``): a path through a file, or a nearest existing folder not writable; None
+    where they can. Every output checks this before any work ("Permission denied" came once
+    every point was read or the render was done) and its caller says it in one line."""
+    existing = nearest_folder(folder)
+    if not existing.is_dir():
+        return f"{existing} is a file, not a folder"
+    if not os.access(existing, os.W_OK):
+        return f"cannot write into {existing} (permission denied)"
+    return None
+
+
+def make_folders(path) -> None:
+    """The folders missing on the way to the file ``path`` made, just before it is written (never
+    earlier: an output refused or failed before that leaves none behind)."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
 
 
 def same_file(a, b) -> bool:
@@ -283,12 +314,13 @@ def temp_files(folder) -> Iterator[Path]:
 
 
 def write_together(writes) -> list[Path]:
-    """Each ``(path, save)`` of ``writes`` by ``save(path)`` (each atomic), in order: all of them
+    """Each ``(path, save)`` of ``writes`` by ``save(path)`` (each atomic, its missing folders made first), in order: all of them
     or none. A failure (a full disk, Ctrl+C) removes those written before it: an image was left
     without the surface model or the georeference asked for beside it. Returns the paths."""
     written: list[Path] = []
     try:
         for path, save in writes:
+            make_folders(path)
             save(path)
             written.append(Path(path))
     except BaseException:

@@ -212,18 +212,33 @@ def test_an_image_its_format_cannot_hold_is_refused_before_the_render(cli, tmp_p
     assert rc == 0 and Image.open(tmp_path / "s.webp").size == (80, 20) and "(80x20, 30,000 points)" in out_text, err
 
 
-def test_missing_input_and_missing_output_dir(cli, tmp_path, small_las):
-    rc, _, err = cli("render", tmp_path / "nope.laz", "-o", tmp_path / "o.png")
+def test_missing_input_and_output_folders_made_on_the_way(cli, tmp_path, small_las):
+    rc, _, err = cli("render", tmp_path / "nope.laz", "-o", tmp_path / "new" / "o.png")
     assert rc == 1 and "nope.laz" in err and len(err.strip().splitlines()) == 1
-    rc, _, err = cli("render", small_las, "-o", tmp_path / "no" / "such" / "o.png")
-    assert rc == 1 and "does not exist" in err
+    assert list(tmp_path.iterdir()) == []  # refused before any folder was made
+    # the folders missing on each output's way are made as it is written, as convert -o's are
+    # (an image, its depth and index, a map's surface model, a video were refused: 'directory X does not exist')
+    out, depth, index = tmp_path / "a" / "b" / "o.png", tmp_path / "d" / "d.npy", tmp_path / "i" / "j" / "i.npy"
+    rc, _, err = cli("render", small_las, "-o", out, "--depth-out", depth, "--index-out", index, "-W", 32, "-H", 24)
+    assert rc == 0, err
+    assert Image.open(out).size == (32, 24) and np.load(depth).shape == np.load(index).shape == (24, 32) and (np.load(index) >= 0).any()
+    ortho, dsm = tmp_path / "m" / "map.tif", tmp_path / "dsm" / "sub" / "dsm.tif"
+    rc, _, err = cli("render", small_las, "-o", ortho, "--gsd", 20, "--depth-out", dsm)
+    assert rc == 0, err
+    heights = np.asarray(Image.open(dsm))
+    assert heights.dtype == np.float32 and heights.shape == np.asarray(Image.open(ortho)).shape[:2] and np.isfinite(heights).any()
+    assert sorted(p.name for p in dsm.parent.iterdir()) == ["dsm.tfw", "dsm.tif"]  # its world file beside it
+    video = tmp_path / "v" / "w" / "t.gif"
+    rc, _, err = cli("render", small_las, "-o", video, "--turntable", 2, "-W", 32, "-H", 24)
+    assert rc == 0 and Image.open(video).n_frames == 2, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a", "d", "dsm", "i", "m", "v"]
     afile = tmp_path / "afile"  # a file where the folder should be: was "Not a directory" once the render was done
     afile.write_bytes(b"x")
-    for bad, args in ((afile / "o.png", []), (afile / "o.mp4", ["--turntable", 2]), (afile / "d.npy", ["--depth-out", afile / "d.npy"])):
+    for bad, args in ((afile / "o.png", []), (afile / "o.mp4", ["--turntable", 2]), (afile / "sub" / "d.npy", ["--depth-out", afile / "sub" / "d.npy"])):
         out = bad if not args or args[0] == "--turntable" else tmp_path / "o.png"
         rc, _, err = cli("render", small_las, "-o", out, *args, "-W", 32, "-H", 24)
-        assert rc == 1 and err.strip().splitlines() == [f"error: {bad}: {afile} is a file, not a directory"], err
-        assert not out.exists()
+        assert rc == 1 and err.strip().splitlines() == [f"error: {bad}: {afile} is a file, not a folder"], err
+        assert not out.exists() and afile.read_bytes() == b"x"
 
 
 def test_camera_looking_away_warns_and_renders_background(cli, tmp_path, small_las):

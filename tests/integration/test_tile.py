@@ -229,6 +229,37 @@ def test_a_read_failing_midway_leaves_no_tile(autzen_path, tmp_path, monkeypatch
     assert [p.name for p in out.iterdir()] == ["notes.txt"]
 
 
+def test_the_folders_missing_on_the_tiles_way_are_made_once_every_tile_is_written(cli, autzen_path, tmp_path, monkeypatch):
+    """`tile -o new/sub/tiles` was refused ('the folder new/sub does not exist') where convert -o
+    made an octree's or a point file's folders: they are made now, as the tiles move in. A run
+    failing midway leaves none of them; a path through a file is one line and writes nothing."""
+    res = gp.tile(autzen_path, tmp_path / "new" / "sub" / "tiles", 500)
+    out = tmp_path / "new" / "sub" / "tiles"
+    assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in res.tiles) and len(res.tiles) == 6
+    assert sum(len(laspy.read(str(p)).points) for p in res.tiles) == res.points == 110_000
+    rc, stdout, err = cli("tile", autzen_path, "--size", "500", "-o", tmp_path / "cli" / "tiles", "-q")
+    assert rc == 0 and stdout.startswith(f"{tmp_path / 'cli' / 'tiles'}: 6 tiles of 500 x 500 (laz), 110,000 points;"), err
+    assert sorted(p.name for p in (tmp_path / "cli" / "tiles").iterdir()) == sorted(p.name for p in res.tiles)
+    afile = tmp_path / "afile"
+    afile.write_text("mine")
+    rc, stdout, err = cli("tile", autzen_path, "--size", "500", "-o", afile / "tiles", "-q")
+    assert (rc, stdout, err) == (1, "", f"error: {afile / 'tiles'}: {afile} is a file, not a folder\n")
+    assert afile.read_text() == "mine" and sorted(p.name for p in tmp_path.iterdir()) == ["afile", "cli", "new"]
+    to_file = importlib.import_module("gigapoint.lod.convert.to_file")
+    read_chunks = to_file.read_chunks
+
+    def failing(path, chunk_size):  # the disk gives out after 5 chunks
+        for k, chunk in enumerate(read_chunks(path, chunk_size)):
+            if k == 5:
+                raise InputError(f"{path}: truncated")
+            yield chunk
+
+    monkeypatch.setattr(to_file, "read_chunks", failing)
+    with pytest.raises(InputError, match=r"truncated$"):
+        gp.tile(autzen_path, tmp_path / "later" / "tiles", 500, chunk_size=10_000)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "cli", "new"]  # no folder made, no work folder left
+
+
 def test_a_write_failing_at_the_third_tile_leaves_none_of_them(autzen_path, tmp_path, monkeypatch):
     tiles = importlib.import_module("gigapoint.lod.convert.tiles")
     write_points, written = tiles.write_points, []

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 
 import numpy as np
 import pytest
@@ -149,6 +150,10 @@ def test_table_and_json(bench_run, tmp_path):
     assert "closeup" in text and "generate" in text and "Morton sort" in text
     path = write_results(results, tmp_path / "r.json")
     assert json.loads(path.read_text()) == json.loads(json.dumps(results))
+    made = write_results(results, tmp_path / "new" / "dir" / "r.json")  # its missing folders made
+    assert made == tmp_path / "new" / "dir" / "r.json" and json.loads(made.read_text()) == json.loads(path.read_text())
+    with pytest.raises(GigapointError, match=f"^{re.escape(str(path / 'r.json'))}: {re.escape(str(path))} is a file, not a folder$"):
+        write_results(results, path / "r.json")
 
 
 def test_demo_cloud_is_gigapoint_demo():
@@ -206,9 +211,11 @@ def test_parsers_and_bad_input(tmp_path, capsys):
     from gigapoint.cli import main
 
     capsys.readouterr()
-    assert main(["bench", "-n", "1000", "--json", str(tmp_path / "nowhere" / "r.json"), "--no-gl", "--no-naive"]) == 1
+    # a path through a file: refused before anything is measured
+    assert main(["bench", "-n", "1000", "--json", str(afile / "sub" / "r.json"), "--no-gl", "--no-naive"]) == 1
     out, err = capsys.readouterr()
-    assert err.strip().endswith("r.json: directory " + str(tmp_path / "nowhere") + " does not exist") and "points/s" not in out  # nothing measured
+    assert err == f"error: {afile / 'sub' / 'r.json'}: {afile} is a file, not a folder\n" and "points/s" not in out  # nothing measured
+    assert afile.read_text() == "x"
     scan = tmp_path / "scan.laz"  # --json scan.laz replaced the user's file with the results, without a word
     scan.write_bytes(b"precious")
     results = tmp_path / "r.json"
@@ -220,6 +227,9 @@ def test_parsers_and_bad_input(tmp_path, capsys):
     assert scan.read_bytes() == b"precious" and results.read_text() == "[]"
     assert main(["bench", "-n", "1000", "--json", str(results), "--no-gl", "--no-naive", "--repeats", "1", "--threads", "1", "--overwrite"]) == 0
     assert json.loads(results.read_text())[0]["kind"] == "environment"
+    made = tmp_path / "nowhere" / "yet" / "r.json"  # the folders missing on its way are made as it is written (were refused at the start)
+    assert main(["bench", "-n", "1000", "--json", str(made), "--no-gl", "--no-naive", "--repeats", "1", "--threads", "1"]) == 0
+    assert json.loads(made.read_text())[0]["kind"] == "environment"
 
 
 def test_no_gl_reports_skipped():

@@ -89,7 +89,9 @@ def inputs(tmp_path_factory):
         (["render", "{in}/nan.npy", "-o", "{out}/x.png"], "{in}/nan.npy: no valid points (100 invalid points: NaN, inf or beyond ±1e+12)"),
         (["render", "{in}/empty.npy", "-o", "{out}/x.png"], "{in}/empty.npy: NPY array holds no points (0 rows)"),
         (["render", "{in}/small.las", "-o", "{out}/x.foo"], "{out}/x.foo: unsupported output type '.foo'; use one of .bmp, .jpeg, .jpg, .png, .tif, .tiff, .webp"),
-        (["render", "{in}/small.las", "-o", "{out}/nodir/x.png"], "{out}/nodir/x.png: directory {out}/nodir does not exist"),
+        # folders missing on the output's way are made only as it is written: a refusal before leaves none
+        (["render", "{in}/missing.laz", "-o", "{out}/nodir/x.png"], "{in}/missing.laz: no such file"),
+        (["render", "{in}/small.las", "-o", "{out}/x.png", "--depth-out", "{in}/small.las/d.npy"], "{in}/small.las/d.npy: {in}/small.las is a file, not a folder"),
         (["render", "{in}/pts.npy", "-o", "{out}/x.png", "--index-out", "{in}/pts.npy", "--overwrite"],
          "{in}/pts.npy: is one of the inputs; write it elsewhere (it would replace the points being read)"),
         (["demo", "-n", "0", "-o", "{out}/d.png"], "--points must be between 1 and 4,000,000,000, got 0"),
@@ -97,7 +99,7 @@ def inputs(tmp_path_factory):
     ],
     ids=["camera-eye-1e300", "camera-target-1e13", "camera-distance-1e300", "fps-1e-9", "gsd-1e200", "gsd-1e-300", "bench-points-1e99", "demo-scale-5000",
          "fov-0", "fov-nan", "width-0", "height-1e9", "eye-is-target", "eye-nan", "up-zero", "ipd-nan", "ipd-1e13", "convergence-1e300", "turntable-0", "point-size-0",
-         "point-budget-0", "gsd-nan", "missing", "zero-bytes", "png-as-laz", "all-nan", "no-rows", "unknown-suffix", "no-folder",
+         "point-budget-0", "gsd-nan", "missing", "zero-bytes", "png-as-laz", "all-nan", "no-rows", "unknown-suffix", "missing-no-folder-made", "through-a-file",
          "output-is-input", "demo-points-0", "view-demo-0"],
 )  # fmt: skip
 def test_bad_input_is_one_line_and_leaves_no_output(cli, inputs, tmp_path, args, problem):

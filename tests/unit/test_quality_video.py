@@ -184,19 +184,21 @@ def test_flythrough_gif_and_errors(cloud, tmp_path):
     cams = interpolate_cameras(keys, 5)
     np.testing.assert_allclose(cams[0].eye, keys[0].eye)
     np.testing.assert_allclose(cams[-1].eye, keys[1].eye)
-    out = render_flythrough(cloud, cams, tmp_path / "fly.gif", fps=10)
+    # the folders missing on its way are made as it is written (were: 'directory ... does not exist')
+    out = render_flythrough(cloud, cams, tmp_path / "new" / "dir" / "fly.gif", fps=10)
     from PIL import Image
 
-    assert Image.open(out).n_frames == 5
+    assert out == tmp_path / "new" / "dir" / "fly.gif" and Image.open(out).n_frames == 5
     with pytest.raises(GigapointError, match="unsupported video type"):
         render_turntable(cloud, 3, tmp_path / "x.png")
     with pytest.raises(GigapointError, match="even"):
-        render_turntable(cloud, 3, tmp_path / "x.mp4", width=33)
+        render_turntable(cloud, 3, tmp_path / "odd" / "x.mp4", width=33)
     with pytest.raises(GigapointError, match="an integer from 1 to 100,000"):
         render_turntable(cloud, 0, tmp_path / "x.mp4")
     (tmp_path / "afile").write_bytes(b"x")  # a file as the folder: was "Not a directory" once every frame was drawn
-    with pytest.raises(GigapointError, match=f"^{tmp_path / 'afile' / 'x.mp4'}: {tmp_path / 'afile'} is a file, not a directory$"):
-        render_turntable(cloud, 3, tmp_path / "afile" / "x.mp4", progress=lambda done, total: pytest.fail("a frame was drawn"))
+    with pytest.raises(GigapointError, match=f"^{tmp_path / 'afile' / 'sub' / 'x.mp4'}: {tmp_path / 'afile'} is a file, not a folder$"):
+        render_turntable(cloud, 3, tmp_path / "afile" / "sub" / "x.mp4", progress=lambda done, total: pytest.fail("a frame was drawn"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "new"]  # a refusal made no folder
 
 
 def test_a_flythrough_that_cannot_be_one_video_is_refused_before_a_frame(cloud, tmp_path):

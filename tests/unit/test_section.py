@@ -95,7 +95,7 @@ def test_section_gives_the_corridors_points_as_distance_offset_and_height(files,
 
 
 def test_the_csv_holds_the_rows_and_the_command_says_what_it_wrote(cli, files, tmp_path):
-    png, csv = tmp_path / "wall.png", tmp_path / "wall.csv"
+    png, csv = tmp_path / "img" / "wall.png", tmp_path / "rows" / "sub" / "wall.csv"  # their folders made on the way
     line = ",".join(f"{v:.15g}" for v in line_of("diagonal"))
     rc, out, err = cli("section", files["diagonal"], "--line", line, "--width", WIDTH, "-o", png, "--csv", csv, "--scale", 2)
     assert rc == 0, err

@@ -10,7 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ..atomic import atomic_bytes
+from ..atomic import atomic_bytes, folder_refusal, make_folders
 from ..errors import GigapointError
 from ..io.demo import MAX_DEMO_POINTS
 from .scene import THROUGHPUT_DEFINITION
@@ -130,10 +130,12 @@ def parse_threads(text) -> int | None:
 
 
 def write_results(results: list[dict], path) -> Path:
-    """Write the results as JSON (atomically) and return the path."""
+    """Write the results as JSON (atomically), the folders missing on its way made, and return the path."""
     path = Path(path)
-    if not path.parent.is_dir():
-        raise GigapointError(f"{path}: directory {path.parent} does not exist")
+    refusal = folder_refusal(path.parent)
+    if refusal is not None:
+        raise GigapointError(f"{path}: {refusal}")
+    make_folders(path)
     return atomic_bytes(path, (json.dumps(results, indent=2) + "\n").encode())
 
 

@@ -32,8 +32,7 @@ def bench(
     counts = [parse_count(p) for p in points]
     thread_counts = [parse_threads(t) for t in threads]
     target = json_path or (out / "bench_render.json" if out is not None else None)
-    fresh = json_path is None and out is not None and not out.exists()  # --out NEW: the benchmark makes the folder
-    if target is not None and not fresh:  # before any measurement: its folder was said only at the end; --json a.laz replaced the scan
+    if target is not None:  # before any measurement: its folder was said only at the end; --json a.laz replaced the scan
         check_output(target, overwrite, suffixes={".json"})
     err = err_console()
     # the steps it reports: per point count the scene, the GL upload, and per view each thread count, the naive loop, GL

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write, write_failure
+from ..atomic import atomic_write, folder_refusal, make_folders, write_failure
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, set_cloud_writer
 from ..errors import GigapointWarning, InputError, first_line, warn
@@ -41,13 +41,9 @@ def check_point_file_output(path: Path, overwrite: bool) -> None:
         raise InputError(f"{path}: is a directory, not a {path.suffix[1:].upper()} file; not replaced")
     if path.exists() and not overwrite:
         raise InputError(f"{path}: already exists; pass overwrite=True to replace it")
-    folder = path.parent
-    while not folder.exists() and folder != folder.parent:  # the folder the missing ones are made in
-        folder = folder.parent
-    if not folder.is_dir():
-        raise InputError(f"{path}: {folder} is a file, not a folder")
-    if not os.access(folder, os.W_OK):  # ("Permission denied" came once every point was read, classified, reprojected)
-        raise InputError(f"{path}: cannot write into {folder} (permission denied)")
+    refusal = folder_refusal(path.parent)
+    if refusal is not None:
+        raise InputError(f"{path}: {refusal}")
 
 
 def write_points(
@@ -75,7 +71,7 @@ def write_points(
             written = _write_las(tmp, path, chunks, grid, crs_records, color_bits, has_color)
 
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)  # (those missing: check_point_file_output)
+        make_folders(path)  # (those missing: check_point_file_output)
         atomic_write(path, write)
     except (OSError, LazrsError) as exc:  # a full disk: lazrs said "IoError: Failed to call write", naming no file, not an OSError
         reason = write_failure(exc) if isinstance(exc, OSError) else first_line(exc)

@@ -4,12 +4,11 @@ map products (gigapoint.orthophoto, Change.write_geotiff) write through these, b
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_npy, atomic_write
+from ..atomic import atomic_npy, atomic_write, folder_refusal, make_folders
 from ..errors import GigapointError
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff", ".bmp"}
@@ -18,7 +17,8 @@ WEBP_MAX_SIDE = 16_383  # libwebp's limit (an image may be 16 384 wide): its "en
 
 def check_output(path, overwrite: bool, suffixes=IMAGE_SUFFIXES, overwrite_hint: str = "overwrite=True") -> Path:
     """``path`` validated as an output before any work is done; ``overwrite_hint``: how the caller
-    asks to replace a file (the CLI's --overwrite)."""
+    asks to replace a file (the CLI's --overwrite). Folders missing on its way are not refused:
+    the writers below and ``atomic.write_together`` make them just before writing."""
     path = Path(path)
     if path.is_dir():  # (before the suffix: 'unsupported output type (none)' hid what was wrong)
         raise GigapointError(f"{path}: is a directory, not an output file")
@@ -26,12 +26,9 @@ def check_output(path, overwrite: bool, suffixes=IMAGE_SUFFIXES, overwrite_hint:
         raise GigapointError(f"{path}: unsupported output type {path.suffix or '(none)'!r}; use one of {', '.join(sorted(suffixes))}")
     if path.exists() and not overwrite:
         raise GigapointError(f"{path}: already exists; pass {overwrite_hint} to replace it")
-    if not path.parent.exists():
-        raise GigapointError(f"{path}: directory {path.parent} does not exist")
-    if not path.parent.is_dir():  # a file there: "Not a directory" only once the work was done
-        raise GigapointError(f"{path}: {path.parent} is a file, not a directory")
-    if not os.access(path.parent, os.W_OK):  # "Permission denied" came once the render was done
-        raise GigapointError(f"{path}: cannot write into {path.parent} (permission denied)")
+    refusal = folder_refusal(path.parent)  # (folders missing on the way are made as it is written: atomic.make_folders)
+    if refusal is not None:
+        raise GigapointError(f"{path}: {refusal}")
     return path
 
 
@@ -44,8 +41,8 @@ def check_image_fits(path, width: int, height: int) -> None:
 
 
 def save_image(image: np.ndarray, path, tiff_tags=None) -> None:
-    """Write an (H, W, 4) uint8 image; formats without alpha get RGB. Atomic. ``tiff_tags``
-    (a Pillow ImageFileDirectory_v2: georef.geotiff_tags) are added to a .tif's, not to others."""
+    """Write an (H, W, 4) uint8 image; formats without alpha get RGB. Atomic, its missing folders
+    made. ``tiff_tags`` (a Pillow ImageFileDirectory_v2: georef.geotiff_tags) are added to a .tif's, not to others."""
     from PIL import Image
 
     path = Path(path)
@@ -58,11 +55,13 @@ def save_image(image: np.ndarray, path, tiff_tags=None) -> None:
     options = {"compress_level": 1} if path.suffix.lower() == ".png" else {}
     if fmt == "TIFF" and tiff_tags is not None:
         options["tiffinfo"] = tiff_tags
+    make_folders(path)
     atomic_write(path, lambda tmp: img.save(tmp, format=fmt or path.suffix[1:].upper(), **options))
 
 
 def save_array(array: np.ndarray, path) -> None:
-    """Write an array as .npy (depth, point index). Atomic."""
+    """Write an array as .npy (depth, point index). Atomic, its missing folders made."""
+    make_folders(path)
     atomic_npy(path, array)
 
 
@@ -72,4 +71,5 @@ def save_heights(heights: np.ndarray, path, tiff_tags=None) -> None:
     from PIL import Image
 
     img = Image.fromarray(np.ascontiguousarray(heights, np.float32))  # float32: mode F
+    make_folders(path)
     atomic_write(path, lambda tmp: img.save(tmp, format="TIFF", **({"tiffinfo": tiff_tags} if tiff_tags is not None else {})))

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write
+from ..atomic import atomic_write, folder_refusal, make_folders
 from ..errors import GigapointError, check_switch, check_whole, is_real, number_text
 from .camera import Camera, auto_view, image_side, sample_points
 from .settings import RenderSettings
@@ -178,10 +178,9 @@ def _check_path(path, overwrite: bool = False) -> Path:
     path = Path(path)
     if path.suffix.lower() not in VIDEO_SUFFIXES:
         raise GigapointError(f"{path}: unsupported video type {path.suffix or '(none)'!r}; use one of {', '.join(sorted(VIDEO_SUFFIXES))}")
-    if not path.parent.exists():
-        raise GigapointError(f"{path}: directory {path.parent} does not exist")
-    if not path.parent.is_dir():  # a file there: "Not a directory" only once every frame was drawn
-        raise GigapointError(f"{path}: {path.parent} is a file, not a directory")
+    refusal = folder_refusal(path.parent)  # a file there: "Not a directory" only once every frame was drawn
+    if refusal is not None:
+        raise GigapointError(f"{path}: {refusal}")
     if path.is_dir():
         raise GigapointError(f"{path}: is a directory, not a video file")
     if path.exists() and not overwrite:
@@ -241,6 +240,7 @@ def render_flythrough(
                 pass
             _check_video(tmp, path, len(cameras))
 
+    make_folders(path)  # (those missing: _check_path)
     atomic_write(path, write)
     return path
 

@@ -26,7 +26,8 @@ from an orthophoto's pixels, after that (io/colorize.py).
 The inputs are read once, a chunk at a time (float files, whose grid takes a pass of its own:
 twice, but text once, its points kept for the tiling: ``_grid_of_points``); each chunk's points
 are bucketed by tile and appended to that tile's raw spill file (records of position, colour and attributes) in a
-hidden work folder (beside the output folder where the run makes it, else inside it); once
+hidden work folder (beside the output folder where the run makes it, or in the nearest existing
+folder above it where the folders on its way are missing too, else inside it); once
 every point is read, the tiles are written one at a time from their spill files, then moved
 into place together: a folder the run makes is the work folder's tiles renamed, so it appears
 with every tile or not at all, even where the run is killed. So no more than a chunk
@@ -59,7 +60,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import append_file, same_file, write_failure
+from ...atomic import append_file, folder_refusal, make_folders, nearest_folder, same_file, write_failure
 from ...core.chunk import PointChunk
 from ...core.chunked import ReadOnce
 from ...core.cloud import check_valid_count
@@ -129,7 +130,7 @@ def tile(
     (after ``to_crs``); the result's ``uncolored`` counts those outside it or under its mask;
     ``colorize_bits``: how many bits its values hold, as ``convert``'s.
 
-    ``out`` is made if missing; one holding LAS/LAZ files already is refused without
+    ``out`` is made if missing, with the folders missing on its way (once every tile is written); one holding LAS/LAZ files already is refused without
     ``overwrite``, which replaces the tiles of this run's names and leaves every other file.
     Tiles appear only once every one is written, all at once (a folder ``out`` that was missing
     appears with all of them; one that was there is swapped for one of its other files and them). A point is in the tile whose square holds its position as stored, on the
@@ -171,8 +172,9 @@ def tile(
         _check_tile_count(*(bounds if keep is None else keep.clipped_bounds(*bounds)), size, files.label)
     shown = RichProgress() if progress else NullProgress()
     created = not out.exists()  # then the tiles are written into a folder renamed ``out`` at the end
-    # (hidden: folder walks pass it over; beside ``out`` where this run makes it, so it appears whole or not at all)
-    work = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".tiling", dir=out.parent if created else out))
+    # (hidden: folder walks pass it over; beside ``out`` where this run makes it, so it appears whole or not at all;
+    # where folders on its way are missing, in the nearest existing one: they are made only once every tile is written)
+    work = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".tiling", dir=nearest_folder(out.parent) if created else out))
     tiles_folder = work / "tiles"
     try:
         tiles_folder.mkdir()  # (not mkdtemp's: its mode 0700 would become ``out``'s)
@@ -190,6 +192,7 @@ def tile(
         check_valid_count(files.label, tally["points"], tally["skipped"])  # (the skipped points' warning)
         written = spill.write_tiles(name, format, files, grid, tiles_folder, shown)
         if created:  # every tile whole: now they appear, all at once
+            make_folders(out)
             tiles_folder.rename(out)
         else:  # (into a folder that was there: it is swapped for one of its files and the tiles)
             _swap_in(out, tiles_folder, work.name, written)
@@ -286,12 +289,13 @@ def _link(entry: Path, to: Path) -> None:
 
 
 def _check_output_folder(out: Path, overwrite: bool) -> None:
-    """Refuse, in one line naming ``out``, a tiles' folder that is a file, lies in a missing
-    folder, or holds LAS/LAZ files already without ``overwrite``."""
+    """Refuse, in one line naming ``out``, a tiles' folder that is a file, lies through a file or
+    in a folder not writable, or holds LAS/LAZ files already without ``overwrite``."""
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: is a file, not a folder for tiles")
-    if not out.exists() and not out.parent.is_dir():
-        raise InputError(f"{out}: the folder {out.parent} does not exist")
+    refusal = folder_refusal(out)  # (folders missing on its way are made as the tiles move in)
+    if refusal is not None:
+        raise InputError(f"{out}: {refusal}")
     held = sorted(p.name for p in out.iterdir() if p.suffix.lower() in (".las", ".laz") and not p.name.startswith(".")) if out.is_dir() else []
     if held and not overwrite:
         shown = ", ".join(held[:3]) + (", ..." if len(held) > 3 else "")
