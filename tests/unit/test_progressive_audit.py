@@ -51,7 +51,9 @@ def cloud(files):
 
 
 def _loader_threads() -> list[str]:
-    return sorted(t.name for t in threading.enumerate() if t.name.startswith("gigapoint-"))
+    """A progressive load's threads (its loader's and its decoder's; not the render pools' other
+    tests leave, 'gigapoint-bands_0')."""
+    return sorted(t.name for t in threading.enumerate() if t.name.startswith(("gigapoint-load-", "gigapoint-decode")))
 
 
 def _closed(c):

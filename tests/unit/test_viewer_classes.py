@@ -207,7 +207,7 @@ def test_an_octree_opened_with_a_class_filter_lists_only_the_classes_it_keeps(tm
     assert (listed["source"], listed["complete"], listed["classes"]) == ("metadata", True, TWO[1:])
 
 
-def test_view_starts_with_the_hidden_classes_given(cli, autzen_path, monkeypatch):
+def test_view_starts_with_the_hidden_classes_given(cli, autzen_path, monkeypatch, tmp_path):
     from gigapoint.viewer.server import ViewerServer
 
     served = []
@@ -223,9 +223,16 @@ def test_view_starts_with_the_hidden_classes_given(cli, autzen_path, monkeypatch
     rc, _, err = cli("view", autzen_path, "--hidden-classes", "300", "--no-browser")
     assert rc == 1 and err == "error: --hidden-classes: 300 is not a LAS class (whole numbers in 0..255), got '300'\n"
     rc, _, err = cli("view", "--demo", "1000", "--progressive", "--hidden-classes", "7", "--no-browser")
-    # a progressive octree hides classes as it draws; the demo town has none to hide
-    assert rc == 1 and err == "error: --hidden-classes: demo(1,000) has no classification attribute, so no class to hide\n"
-    assert len(err.splitlines()) == 1 and len(served) == 1
+    # a progressive octree hides classes as it draws: the demo town's (its classes 2, 5, 6, 9, 11),
+    # known once its first points are in (before them it has no attribute: it was refused, or not,
+    # as the load's first slice came before the check or after it)
+    assert rc == 0, err
+    assert served == [(2, 7), (7,)]
+    xyz = tmp_path / "plain.xyz"
+    xyz.write_text("".join(f"{i} {i % 7} {i % 3}\n" for i in range(2000)))
+    rc, _, err = cli("view", xyz, "--progressive", "--hidden-classes", "7", "--no-browser")
+    assert rc == 1 and err == "error: --hidden-classes: plain.xyz has no classification attribute, so no class to hide\n"
+    assert len(err.splitlines()) == 1 and len(served) == 2
 
 
 def test_view_of_an_octree_with_a_class_filter_draws_it_level_of_detail_without_the_others(cli, tmp_path, two_class_cloud, monkeypatch):

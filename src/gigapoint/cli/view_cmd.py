@@ -151,6 +151,14 @@ def view(
         cloud = open_files(subfolders_read(paths, recursive), budget, progressive, options, progress=False, point_filter=point_filter)  # big: shown while it loads
     else:
         raise GigapointError("view: name at least one file or directory (or --demo N)")
+    if isinstance(cloud, ProgressiveOctree):  # a first slice of points, so that the first view frames them
+        deadline = time.monotonic() + 5.0
+        while cloud.n_points == 0 and cloud.loading and time.monotonic() < deadline:
+            time.sleep(0.02)
+        if cloud.n_points == 0 and not cloud.loading:  # a file cut off before its first point: its error, not a server showing nothing
+            cloud.wait()
+    if isinstance(cloud, ProgressiveOctree) and settings.hidden_classes:  # (its attributes: none before its first points)
+        cloud.wait_first_points()
     refused = refusal(cloud) if settings.hidden_classes else ""
     if refused:  # (a progressive load, a cloud without classification): said once, not by every frame
         with options_named():
@@ -163,12 +171,6 @@ def view(
         _report_load(cloud)
         run_loop()
         return
-    if isinstance(cloud, ProgressiveOctree):  # a first slice of points, so that the first view frames them
-        deadline = time.monotonic() + 5.0
-        while cloud.n_points == 0 and cloud.loading and time.monotonic() < deadline:
-            time.sleep(0.02)
-        if cloud.n_points == 0 and not cloud.loading:  # a file cut off before its first point: its error, not a server showing nothing
-            cloud.wait()
     server = serve_at(cloud, host, port, settings=settings)
     print(f"gigapoint viewer: {cloud.name}, {cloud.n_points:,} points", file=sys.stderr)
     _report_load(cloud)

@@ -1091,6 +1091,12 @@ class ProgressiveOctree:
         return f"ProgressiveOctree({self.name!r}, {self.points:,} points, {self.n_nodes:,} node{'' if self.n_nodes == 1 else 's'}, {self.n_voxels:,} voxels{state})"
 
     # ------------------------------------------------------------------ adding points
+    def wait_first_points(self) -> None:
+        """Until the loading sources' first points are in, or their load has ended: those points fix
+        the attributes (``attribute_names``: none before them)."""
+        if self.loader is not None:
+            self.loader.wait_first_points()
+
     def add(self, xyz, rgb=None, **attributes) -> int:
         """Insert points (float64 (N, 3); colors (N, 3|4) uint8/uint16/float; 1-D attributes of
         length N). Invalid points (NaN, inf, beyond ±1e12) are skipped and counted. Returns the
@@ -1103,8 +1109,7 @@ class ProgressiveOctree:
         n = len(xyz)
         if n == 0:
             return 0
-        if self.loader is not None:
-            self.loader.wait_first_points()
+        self.wait_first_points()
         with threads_for(n, when_awake=False):  # a small batch on this thread alone: waking the others costs more (core/threads.py)
             return self._add(xyz, rgb, attributes)
 
