@@ -137,10 +137,40 @@ def folder_refusal(folder) -> str | None:
     return None
 
 
-def make_folders(path) -> None:
+def make_folders(path) -> list[Path]:
     """The folders missing on the way to the file ``path`` made, just before it is written (never
-    earlier: an output refused or failed before that leaves none behind)."""
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    earlier: an output refused or failed before that leaves none behind). Returns those made,
+    deepest first (``remove_folders``)."""
+    parent = Path(path).parent
+    made = []
+    folder = parent
+    while not folder.exists() and folder != folder.parent:
+        made.append(folder)
+        folder = folder.parent
+    parent.mkdir(parents=True, exist_ok=True)
+    return made
+
+
+def remove_folders(made) -> None:
+    """The folders ``make_folders`` made, deepest first, removed where still empty: a write that
+    failed part-way (a bad input line read as it streams, a full disk) leaves none behind."""
+    for folder in made:
+        try:
+            folder.rmdir()
+        except OSError:  # (something else was written there meanwhile: kept)
+            return
+
+
+@contextmanager
+def folders_for(path):
+    """The folders missing on the way to ``path`` made for the block, which writes it; removed
+    again (``remove_folders``) where the block fails."""
+    made = make_folders(path)
+    try:
+        yield
+    except BaseException:
+        remove_folders(made)
+        raise
 
 
 def same_file(a, b) -> bool:
@@ -318,13 +348,15 @@ def write_together(writes) -> list[Path]:
     or none. A failure (a full disk, Ctrl+C) removes those written before it: an image was left
     without the surface model or the georeference asked for beside it. Returns the paths."""
     written: list[Path] = []
+    made: list[Path] = []
     try:
         for path, save in writes:
-            make_folders(path)
+            made = make_folders(path) + made  # (the later ones' deeper: removed first)
             save(path)
             written.append(Path(path))
     except BaseException:
         for path in written:
             path.unlink(missing_ok=True)
+        remove_folders(made)
         raise
     return written

@@ -367,3 +367,17 @@ def test_one_point_is_said_as_1_point_in_the_summary_and_the_filters_error(cli, 
     rc, _, err = cli("convert", src, "-o", tmp_path / "none.laz", "--classes", "31", "-q")
     assert rc == 1
     assert err.strip() == f"error: {src}: no point passes the filter (classes 31): 1 point read"
+
+
+def test_a_point_file_whose_input_fails_part_way_leaves_no_folder_it_made(tmp_path, cli):
+    """The folders missing on the way are made as the file is written, and its points are read as
+    it is: a bad line read part-way left them behind, empty (the file itself is never left)."""
+    bad = tmp_path / "bad.xyz"
+    bad.write_text("".join(f"{i} {i} {i}\n" for i in range(1500)) + "abc 1 2\n")
+    with pytest.raises(InputError, match="'abc' is not a number"):
+        gp.convert(bad, tmp_path / "nd" / "sub" / "x.laz")
+    assert not (tmp_path / "nd").exists()
+    (tmp_path / "kept").mkdir()
+    rc, _, err = cli("convert", bad, "-o", tmp_path / "kept" / "a" / "b" / "x.laz")
+    assert rc == 1 and "'abc' is not a number" in err
+    assert list((tmp_path / "kept").iterdir()) == []  # its own folder stays; those made go

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write, folder_refusal, make_folders, write_failure
+from ..atomic import atomic_write, folder_refusal, folders_for, write_failure
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, set_cloud_writer
 from ..errors import GigapointWarning, InputError, first_line, warn
@@ -71,8 +71,8 @@ def write_points(
             written = _write_las(tmp, path, chunks, grid, crs_records, color_bits, has_color)
 
     try:
-        make_folders(path)  # (those missing: check_point_file_output)
-        atomic_write(path, write)
+        with folders_for(path):  # (those missing: check_point_file_output; removed if the write fails)
+            atomic_write(path, write)
     except (OSError, LazrsError) as exc:  # a full disk: lazrs said "IoError: Failed to call write", naming no file, not an OSError
         reason = write_failure(exc) if isinstance(exc, OSError) else first_line(exc)
         raise InputError(f"{path}: not written ({reason}); nothing was left there") from None

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write, folder_refusal, make_folders
+from ..atomic import atomic_write, folder_refusal, folders_for
 from ..errors import GigapointError, check_switch, check_whole, is_real, number_text
 from .camera import Camera, auto_view, image_side, sample_points
 from .settings import RenderSettings
@@ -240,8 +240,8 @@ def render_flythrough(
                 pass
             _check_video(tmp, path, len(cameras))
 
-    make_folders(path)  # (those missing: _check_path)
-    atomic_write(path, write)
+    with folders_for(path):  # (those missing: _check_path; removed if the video fails)
+        atomic_write(path, write)
     return path
 
 
