@@ -207,17 +207,22 @@ def test_a_folder_holding_las_files_is_refused_and_overwrite_leaves_the_users_fi
     assert len(list(out.iterdir())) == 8  # the 6 tiles (one replaced) and the two others, no work folder
 
 
-def test_a_read_failing_midway_leaves_no_tile(autzen_path, tmp_path, monkeypatch):
+def _reads_fail_after_5_chunks(monkeypatch) -> None:
+    """Every input's read fails after 5 chunks ('PATH: truncated'), as a disk giving out."""
     to_file = importlib.import_module("gigapoint.lod.convert.to_file")
     read_chunks = to_file.read_chunks
 
-    def failing(path, chunk_size):  # the disk gives out after 5 chunks
+    def failing(path, chunk_size):
         for k, chunk in enumerate(read_chunks(path, chunk_size)):
             if k == 5:
                 raise InputError(f"{path}: truncated")
             yield chunk
 
     monkeypatch.setattr(to_file, "read_chunks", failing)
+
+
+def test_a_read_failing_midway_leaves_no_tile(autzen_path, tmp_path, monkeypatch):
+    _reads_fail_after_5_chunks(monkeypatch)
     out = tmp_path / "tiles"
     with pytest.raises(InputError, match=r"autzen_trim\.laz: truncated$"):
         gp.tile(autzen_path, out, 500, chunk_size=10_000)
@@ -245,16 +250,7 @@ def test_the_folders_missing_on_the_tiles_way_are_made_once_every_tile_is_writte
     rc, stdout, err = cli("tile", autzen_path, "--size", "500", "-o", afile / "tiles", "-q")
     assert (rc, stdout, err) == (1, "", f"error: {afile / 'tiles'}: {afile} is a file, not a folder\n")
     assert afile.read_text() == "mine" and sorted(p.name for p in tmp_path.iterdir()) == ["afile", "cli", "new"]
-    to_file = importlib.import_module("gigapoint.lod.convert.to_file")
-    read_chunks = to_file.read_chunks
-
-    def failing(path, chunk_size):  # the disk gives out after 5 chunks
-        for k, chunk in enumerate(read_chunks(path, chunk_size)):
-            if k == 5:
-                raise InputError(f"{path}: truncated")
-            yield chunk
-
-    monkeypatch.setattr(to_file, "read_chunks", failing)
+    _reads_fail_after_5_chunks(monkeypatch)
     with pytest.raises(InputError, match=r"truncated$"):
         gp.tile(autzen_path, tmp_path / "later" / "tiles", 500, chunk_size=10_000)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "cli", "new"]  # no folder made, no work folder left

@@ -64,12 +64,25 @@ def test_stopping_early_waits_for_the_worker_and_closes_the_source():
     assert not _workers()
 
 
+def _taken_recording_warnings(source):
+    """Each item of ``prefetch(source)`` with the warnings issued by then, the warnings (every one
+    recorded), and the line that took the first item (where they are issued)."""
+    import inspect
+    import warnings
+
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        items = prefetch(source)
+        line = inspect.currentframe().f_lineno + 1
+        got = [(next(items), len(seen))]
+        got += [(i, len(seen)) for i in items]
+    return got, seen, line
+
+
 def test_a_warning_of_the_source_is_issued_in_the_caller_s_thread_with_its_item():
     """gigapoint's warning in the worker (a reader's, decoding a chunk) went through Python's
     machinery from that thread, at any moment; now kept and issued at the caller's line when it
     takes the item."""
-    import inspect
-    import warnings
 
     from gigapoint.errors import GigapointWarning, warn
 
@@ -79,12 +92,7 @@ def test_a_warning_of_the_source_is_issued_in_the_caller_s_thread_with_its_item(
                 warn("invalid value encountered in cast", GigapointWarning)
             yield i
 
-    with warnings.catch_warnings(record=True) as seen:
-        warnings.simplefilter("always")
-        items = prefetch(source())
-        line = inspect.currentframe().f_lineno + 1
-        got = [(next(items), len(seen))]
-        got += [(i, len(seen)) for i in items]
+    got, seen, line = _taken_recording_warnings(source())
     assert got == [(0, 1), (1, 1), (2, 1)]
     assert [(str(w.message), w.filename, w.lineno) for w in seen] == [("invalid value encountered in cast", __file__, line)]
     assert not _workers()
@@ -95,8 +103,6 @@ def test_a_library_s_warning_in_the_worker_is_issued_once_in_the_caller_s_thread
     from that thread, once a chunk: a catch around the caller's loop missed it (or took it at
     random), and it printed amid progress bars. Now kept like gigapoint's own, each distinct one
     once, issued at the caller's line when it takes the item, with numpy's category."""
-    import inspect
-    import warnings
 
     import numpy as np
 
@@ -105,12 +111,7 @@ def test_a_library_s_warning_in_the_worker_is_issued_once_in_the_caller_s_thread
             np.array([1e300]).astype(np.float32)  # "overflow encountered in cast", each item
             yield i
 
-    with warnings.catch_warnings(record=True) as seen:
-        warnings.simplefilter("always")
-        items = prefetch(source())
-        line = inspect.currentframe().f_lineno + 1
-        got = [(next(items), len(seen))]
-        got += [(i, len(seen)) for i in items]
+    got, seen, line = _taken_recording_warnings(source())
     assert got == [(0, 1), (1, 1), (2, 1)]
     assert [(str(w.message), w.category, w.filename, w.lineno) for w in seen] == [
         ("overflow encountered in cast", RuntimeWarning, __file__, line)]  # fmt: skip
