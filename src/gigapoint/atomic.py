@@ -119,7 +119,7 @@ def write_failure(exc: OSError) -> str:
 def nearest_folder(folder) -> Path:
     """``folder``, or where it is missing, its nearest ancestor that exists (a file, maybe)."""
     folder = Path(folder)
-    while not folder.exists() and folder != folder.parent:
+    while not os.path.lexists(folder) and folder != folder.parent:  # (a link to a missing folder is there: refused)
         folder = folder.parent
     return folder
 
@@ -130,6 +130,10 @@ def folder_refusal(folder) -> str | None:
     where they can. Every output checks this before any work ("Permission denied" came once
     every point was read or the render was done) and its caller says it in one line."""
     existing = nearest_folder(folder)
+    if ".." in Path(folder).parts[len(existing.parts):]:  # ('new/../x': mkdir made new/, and the file went beside it)
+        return "'..' after a folder that does not exist"
+    if existing.is_symlink() and not existing.exists():  # (mkdir's "File exists" came once the work was done)
+        return f"{existing} is a link to a missing folder ({os.readlink(existing)})"
     if not existing.is_dir():
         return f"{existing} is a file, not a folder"
     if not os.access(existing, os.W_OK):
@@ -144,7 +148,7 @@ def make_folders(path) -> list[Path]:
     parent = Path(path).parent
     made = []
     folder = parent
-    while not folder.exists() and folder != folder.parent:
+    while not os.path.lexists(folder) and folder != folder.parent:
         made.append(folder)
         folder = folder.parent
     parent.mkdir(parents=True, exist_ok=True)

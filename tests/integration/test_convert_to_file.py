@@ -159,6 +159,8 @@ def test_the_cli_names_each_octree_option_it_refuses_with_a_point_file_output(cl
     rc, _, err = cli("convert", autzen_path, "-o", out, "--memory-limit", "1G", "--max-leaf", "1000", "--layout", "words", "--colors", "rgba", "--dask", "tcp://127.0.0.1:9")
     assert (rc, err.strip()) == (1, f"error: {out}: --memory-limit, --max-leaf, --layout, --colors, --dask/--workers (client): options of an octree, not of a plain LAZ file")
     assert not out.exists()
+    rc, _, err = cli("convert", autzen_path, "-o", f"file://{out}", "--sampler", "random")  # (the library names the URL's path)
+    assert (rc, err.strip()) == (1, f"error: {out}: --sampler: an option of an octree, not of a plain LAZ file")
 
 
 def test_a_filter_keeping_nothing_is_its_error_and_leaves_no_file(autzen_path, tmp_path):

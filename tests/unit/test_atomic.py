@@ -216,3 +216,26 @@ def test_start_writeback_changes_no_byte_and_needs_no_libc(tmp_path, monkeypatch
     start_writeback(path, 0, 0)
     atomic.fsync_file(path)
     assert np.array_equal(np.fromfile(path, np.uint8), data)
+
+
+def test_outputs_through_a_link_to_nothing_or_a_missing_folders_dotdot_are_refused_before_any_work(tmp_path, cli, autzen_path):
+    """A link to a missing folder was stepped over as missing: every output checked fine, then
+    mkdir said "dang: File exists" once the render, the conversion or the tiling was done.
+    'new/../x.png' (new missing) made new/ and wrote x.png beside it, new/ left empty."""
+    from gigapoint.atomic import folder_refusal
+
+    (tmp_path / "dang").symlink_to(tmp_path / "nowhere" / "dir")
+    assert folder_refusal(tmp_path / "dang") == f"{tmp_path / 'dang'} is a link to a missing folder ({tmp_path / 'nowhere' / 'dir'})"
+    assert folder_refusal(tmp_path / "dang" / "sub") == folder_refusal(tmp_path / "dang")
+    assert folder_refusal(tmp_path / "new" / "..") == "'..' after a folder that does not exist"
+    (tmp_path / "real").mkdir()
+    (tmp_path / "good").symlink_to(tmp_path / "real")
+    assert folder_refusal(tmp_path / "sub" / "new") is None and folder_refusal(tmp_path / "good" / ".." / "new") is None  # (.. of a folder there: the OS's)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    for out in (tmp_path / "dang" / "x.png", tmp_path / "new" / ".." / "x.png"):
+        rc, _, err = cli("render", autzen_path, "-o", out, "--width", "64", "--height", "48")
+        assert rc == 1 and err == f"error: {out}: {folder_refusal(out.parent)}\n"
+    for out in (tmp_path / "dang" / "x.laz", tmp_path / "new" / ".." / "x.laz"):
+        rc, _, err = cli("convert", autzen_path, "-o", out)
+        assert rc == 1 and err == f"error: {out}: {folder_refusal(out.parent)}\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == before

@@ -3,6 +3,7 @@ or one plain point file (.las, .laz, .ply) of their points merged, filtered and 
 
 from __future__ import annotations
 
+import re
 import shlex
 import sys
 from contextlib import nullcontext
@@ -126,7 +127,7 @@ def convert(
                 on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
             )
     except (ConvertError, InputError) as exc:  # the library's keywords ('max_leaf must be ...', format='bogus') said as the options typed
-        raise named_option(octree_options_said(exc, output), {"max_leaf": "--max-leaf", f"convert: thin={spacing!r}": f"convert: --thin {thin}", **crs_options_named("convert", to_crs, from_crs),
+        raise named_option(octree_options_said(exc), {"max_leaf": "--max-leaf", f"convert: thin={spacing!r}": f"convert: --thin {thin}", **crs_options_named("convert", to_crs, from_crs),
                                  **keywords_as_options(output, colors, dask)}) from None  # fmt: skip
     except (KeyboardInterrupt, SystemExit):  # (Ctrl+C, SIGTERM) a bare "interrupted" left the user to guess whether OUT was lost
         if not to_file and OctreeDir(watch).read_state() is not None:
@@ -151,16 +152,20 @@ OCTREE_OPTIONS = {"sampler": "--sampler", "memory_limit": "--memory-limit", "max
                   "client": "--dask/--workers (client)"}  # fmt: skip
 
 
-def octree_options_said(exc: GigapointError, output: Path) -> GigapointError:
+# the library's refusal: PATH: KEYWORDS: an option(s) of an octree, not of a plain ... file (the path as it names it: a
+# file:// URL's local path, not the option as typed)
+_OCTREE_REFUSAL = re.compile(r"(.*): ([a-z_]+(?:, [a-z_]+)*): ((?:an option|options) of an octree, not of a plain .*)")
+
+
+def octree_options_said(exc: GigapointError) -> GigapointError:
     """convert's refusal of octree keywords with a plain point file's output (``x.las: sampler,
     client: options of an octree, not of a plain LAS file``) with the options typed; ``exc``
     unchanged otherwise."""
-    message = str(exc)
-    keywords, _, why = message.removeprefix(f"{output}: ").partition(": ")
-    if not message.startswith(f"{output}: ") or "of an octree, not of a plain" not in why:
+    m = _OCTREE_REFUSAL.fullmatch(str(exc))
+    if m is None:
         return exc
-    options = ", ".join(OCTREE_OPTIONS.get(keyword, keyword) for keyword in keywords.split(", "))
-    return type(exc)(f"{output}: {options}: {why}")
+    options = ", ".join(OCTREE_OPTIONS.get(keyword, keyword) for keyword in m.group(2).split(", "))
+    return type(exc)(f"{m.group(1)}: {options}: {m.group(3)}")
 
 
 def keywords_as_options(output: Path, colors: str | None, dask: str | None) -> dict[str, str]:

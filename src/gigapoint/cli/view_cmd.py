@@ -159,6 +159,8 @@ def view(
             cloud.wait()
     if isinstance(cloud, ProgressiveOctree) and settings.hidden_classes:  # (its attributes: none before its first points)
         cloud.wait_first_points()
+        if cloud.n_points == 0 and not cloud.loading:  # (a load that ended with none: its error, not "no classification")
+            cloud.wait()
     refused = refusal(cloud) if settings.hidden_classes else ""
     if refused:  # (a progressive load, a cloud without classification): said once, not by every frame
         with options_named():
