@@ -394,7 +394,8 @@ def test_info_of_a_copc_output_still_being_converted_names_its_work_folder(cli, 
     """A COPC file appears only once its conversion completes; until then ``<out>.work`` holds
     the partial work. info named only a missing file, as if the conversion had never run."""
     out = tmp_path / "out.copc.laz"
-    (tmp_path / "out.copc.laz.work").mkdir()
+    (tmp_path / "out.copc.laz.work" / ".partial").mkdir(parents=True)
+    (tmp_path / "out.copc.laz.work" / ".partial" / "state.json").write_text('{"phase": "read"}')  # (a conversion's: an empty folder is none)
     rc, _, err = cli("info", out)
     assert rc == 1
     assert err.count("\n") == 1 and f"{out}: no such file yet: a conversion to it is unfinished" in err, err
