@@ -284,8 +284,7 @@ def test_without_pyproj_a_polygon_naming_lon_lat_over_projected_files_is_refused
 def test_a_geojson_naming_another_crs_than_the_files_is_warned_of_without_pyproj(tmp_path, monkeypatch):
     las_path = _grid_las(tmp_path / "utm.las")
     las = laspy.read(str(las_path))
-    keys = struct.pack("<8H", 1, 1, 0, 1, 3072, 0, 1, 32610)  # GeoTIFF keys: ProjectedCSTypeGeoKey = EPSG:32610
-    las.header.vlrs.append(laspy.VLR("LASF_Projection", 34735, "GeoTIFF keys", keys))
+    las.header.vlrs.append(UTM10_GEOKEYS)
     las.write(str(las_path))
     area = {"type": "Polygon", "coordinates": [[[0, 0], [100, 0], [100, 100], [0, 100]]]}
     sites = {}

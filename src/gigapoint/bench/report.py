@@ -10,7 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ..atomic import atomic_bytes, folder_refusal, make_folders
+from ..atomic import atomic_bytes, folder_refusal, folders_for
 from ..errors import GigapointError
 from ..io.demo import MAX_DEMO_POINTS
 from .scene import THROUGHPUT_DEFINITION
@@ -135,8 +135,8 @@ def write_results(results: list[dict], path) -> Path:
     refusal = folder_refusal(path.parent)
     if refusal is not None:
         raise GigapointError(f"{path}: {refusal}")
-    make_folders(path)
-    return atomic_bytes(path, (json.dumps(results, indent=2) + "\n").encode())
+    with folders_for(path):
+        return atomic_bytes(path, (json.dumps(results, indent=2) + "\n").encode())
 
 
 def _mps(v: float) -> str:

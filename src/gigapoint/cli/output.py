@@ -8,15 +8,9 @@ from pathlib import Path
 
 from ..atomic import same_file, write_together
 from ..errors import GigapointError
-from ..render import image_files
-from ..render.image_files import IMAGE_SUFFIXES, check_image_fits, save_array, save_heights, save_image
+from ..render.image_files import IMAGE_SUFFIXES, check_image_fits, check_output, save_array, save_heights, save_image
 
 __all__ = ["IMAGE_SUFFIXES", "check_image_fits", "check_output", "check_outputs_apart", "save_array", "save_heights", "save_image", "write_together"]
-
-
-def check_output(path: Path, overwrite: bool, suffixes=IMAGE_SUFFIXES) -> Path:
-    """Validate an output path before any work is done (image_files.check_output, naming --overwrite)."""
-    return image_files.check_output(path, overwrite, suffixes, overwrite_hint="--overwrite")
 
 
 def check_outputs_apart(outputs, inputs) -> None:

@@ -11,7 +11,7 @@ from typing import Annotated
 
 import typer
 
-from ..core.coords import MAX_ABS_COORDINATE
+from ..core.coords import MAX_ABS_COORDINATE, MAX_SPAN
 from ..errors import CameraError, GigapointError, counted, number_text
 from ..io import crs_wkt, files_label
 from ..render import VIEWS, Camera, RenderSettings
@@ -71,8 +71,8 @@ def parse_camera(text: str) -> dict:
         # (an eye at 1e300 overflowed the camera's sums: numpy's warnings and a blank image, exit 0)
         if key in ("eye", "target") and max(map(abs, nums)) > MAX_ABS_COORDINATE:
             raise GigapointError(f"--camera: {key} {raw} lies beyond ±{MAX_ABS_COORDINATE:g}, where no point can be")
-        if key == "distance" and nums[0] > 2 * MAX_ABS_COORDINATE:
-            raise GigapointError(f"--camera: distance must be at most {2 * MAX_ABS_COORDINATE:g}, the span points can have, got {raw}")
+        if key == "distance" and nums[0] > MAX_SPAN:
+            raise GigapointError(f"--camera: distance must be at most {MAX_SPAN:g}, the span points can have, got {raw}")
         if key in values:  # 'yaw=10 yaw=20' kept the last one without a word
             raise GigapointError(f"--camera: {key} is given twice")
         values[key] = nums if len(nums) > 1 else nums[0]

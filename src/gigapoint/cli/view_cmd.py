@@ -152,14 +152,12 @@ def view(
     else:
         raise GigapointError("view: name at least one file or directory (or --demo N)")
     if isinstance(cloud, ProgressiveOctree):  # a first slice of points, so that the first view frames them
+        if settings.hidden_classes:  # (and its attributes, none before its first points, say whether classes can hide)
+            cloud.wait_first_points()
         deadline = time.monotonic() + 5.0
         while cloud.n_points == 0 and cloud.loading and time.monotonic() < deadline:
             time.sleep(0.02)
         if cloud.n_points == 0 and not cloud.loading:  # a file cut off before its first point: its error, not a server showing nothing
-            cloud.wait()
-    if isinstance(cloud, ProgressiveOctree) and settings.hidden_classes:  # (its attributes: none before its first points)
-        cloud.wait_first_points()
-        if cloud.n_points == 0 and not cloud.loading:  # (a load that ended with none: its error, not "no classification")
             cloud.wait()
     refused = refusal(cloud) if settings.hidden_classes else ""
     if refused:  # (a progressive load, a cloud without classification): said once, not by every frame

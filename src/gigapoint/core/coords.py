@@ -9,6 +9,8 @@ import numpy as np
 
 #: Coordinates beyond this magnitude are not of this planet in any CRS: skipped as invalid.
 MAX_ABS_COORDINATE = 1e12
+#: the span points can have, the bound of distances and sizes said in world units
+MAX_SPAN = 2 * MAX_ABS_COORDINATE
 
 #: arrays up to this many points are scanned and gathered by numpy (milliseconds): a small
 #: cloud's first run does not wait for the parallel kernels to compile

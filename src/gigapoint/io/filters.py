@@ -29,7 +29,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..core.chunk import PointChunk
-from ..core.coords import MAX_ABS_COORDINATE
+from ..core.coords import MAX_ABS_COORDINATE, MAX_SPAN
 from ..errors import (
     EmptyCloudError,
     GigapointWarning,
@@ -473,8 +473,8 @@ def corridor_of(line, width, line_label: str, width_label: str) -> tuple[float, 
         raise InputError(f"{line_label}: the line's two ends are one point; it has no direction")
     if not (is_real(width) and width > 0):
         raise InputError(f"{width_label}: the corridor's width must be a finite number above 0")
-    if width > 2 * MAX_ABS_COORDINATE:  # (1e300 overflowed the camera's sums: a blank image and numpy's warnings)
-        raise InputError(f"{width_label}: the corridor's width must be at most {2 * MAX_ABS_COORDINATE:g}, the span points can have")
+    if width > MAX_SPAN:  # (1e300 overflowed the camera's sums: a blank image and numpy's warnings)
+        raise InputError(f"{width_label}: the corridor's width must be at most {MAX_SPAN:g}, the span points can have")
     return (*(float(v) for v in ends), float(width))
 
 

@@ -193,7 +193,7 @@ class EptCloud(VoxelOctree):
             head = tile.read_head(ROOT_HEAD_READ)
             data_start = int.from_bytes(head[96:100], "little") if len(head) >= 100 else 0
             if len(head) < data_start <= MAX_ROOT_HEAD:  # (VLRs beyond the first read: a long WKT)
-                head = tile.read_head(data_start)
+                head += tile.read(len(head), data_start - len(head))  # (the rest only, not its first bytes again)
             return _node_scales(laspy.LasHeader.read_from(io.BytesIO(head)))
         except (InputError, laspy.errors.LaspyException, ValueError):
             return {}

@@ -720,7 +720,7 @@ class OctreeCloud:
             # the nodes loaded count what they kept; the others' likely points times the share of
             # them their nearest loaded ancestor kept, or (not ``estimated``) the most they keep
             costs = self.arena.kept_counts(likely, keep, self.parent) if estimated else self.arena.kept_counts(most, keep, None)
-            if likely is not most:  # (a share above 1 where the box's share guessed low: never past the most)
+            if estimated and likely is not most:  # (a share above 1 where the box's share guessed low: never past the most)
                 costs = np.minimum(costs, most)
         k, total = select_nodes(
             view.rows, self.box_min, self.box_size, self.counts, costs, self.meeting_read_filter(), self.children, float(view.width), float(view.height),

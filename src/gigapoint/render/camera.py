@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..core.coords import MAX_ABS_COORDINATE
-from ..errors import CameraError, is_real, number_text
+from ..core.coords import MAX_SPAN
+from ..errors import CameraError, is_real, number_text, numbers_text
 
 if TYPE_CHECKING:
     from ..core.selection import View
@@ -38,7 +38,7 @@ VIEWS = {
 EDGE_MARGIN_PX = 1 / 64
 #: the largest gsd: a pixel as wide as the span points can have (1e100 drew a blank image, 1e200
 #: numpy's warnings and a refused world file)
-MAX_GSD = 2 * MAX_ABS_COORDINATE
+MAX_GSD = MAX_SPAN
 TRIM = 1e-4  # framing sample points: this share at each side may fall outside the frame (a few stray points)
 
 
@@ -50,7 +50,7 @@ def _vec3(value, what: str) -> tuple[float, float, float]:
     if len(v) != 3:
         raise CameraError(f"camera {what} must be three numbers, got {len(v)}")
     if not all(math.isfinite(c) for c in v):
-        raise CameraError(f"camera {what} must be finite, got ({', '.join(map(number_text, v))})")
+        raise CameraError(f"camera {what} must be finite, got {numbers_text(v)}")
     return v
 
 
@@ -515,7 +515,7 @@ class Camera:
     def ray(self, px: float, py: float) -> tuple[np.ndarray, np.ndarray]:
         """World-space origin and unit direction through pixel coordinates (px, py)."""
         if not (is_real(px) and is_real(py)):  # (NaN gave a NaN ray, "a" a TypeError)
-            raise CameraError(f"ray: pixel coordinates must be finite numbers, got ({number_text(px)}, {number_text(py)})")
+            raise CameraError(f"ray: pixel coordinates must be finite numbers, got {numbers_text((px, py))}")
         right, up, back = self.basis()
         nx = (px / self.width) * 2 - 1
         ny = 1 - (py / self.height) * 2

@@ -8,16 +8,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_npy, atomic_write, folder_refusal, make_folders
+from ..atomic import atomic_npy, atomic_write, folder_refusal, folders_for
 from ..errors import GigapointError
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff", ".bmp"}
 WEBP_MAX_SIDE = 16_383  # libwebp's limit (an image may be 16 384 wide): its "encoding error" came once the render was done
 
 
-def check_output(path, overwrite: bool, suffixes=IMAGE_SUFFIXES, overwrite_hint: str = "overwrite=True") -> Path:
-    """``path`` validated as an output before any work is done; ``overwrite_hint``: how the caller
-    asks to replace a file (the CLI's --overwrite). Folders missing on its way are not refused:
+def check_output(path, overwrite: bool, suffixes=IMAGE_SUFFIXES) -> Path:
+    """``path`` validated as an output before any work is done (the CLI says ``overwrite=True`` as
+    --overwrite: cli.PYTHON_HINTS). Folders missing on its way are not refused:
     the writers below and ``atomic.write_together`` make them just before writing."""
     path = Path(path)
     if path.is_dir():  # (before the suffix: 'unsupported output type (none)' hid what was wrong)
@@ -25,7 +25,7 @@ def check_output(path, overwrite: bool, suffixes=IMAGE_SUFFIXES, overwrite_hint:
     if suffixes is not None and path.suffix.lower() not in suffixes:
         raise GigapointError(f"{path}: unsupported output type {path.suffix or '(none)'!r}; use one of {', '.join(sorted(suffixes))}")
     if path.exists() and not overwrite:
-        raise GigapointError(f"{path}: already exists; pass {overwrite_hint} to replace it")
+        raise GigapointError(f"{path}: already exists; pass overwrite=True to replace it")
     refusal = folder_refusal(path.parent)  # (folders missing on the way are made as it is written: atomic.make_folders)
     if refusal is not None:
         raise GigapointError(f"{path}: {refusal}")
@@ -55,14 +55,14 @@ def save_image(image: np.ndarray, path, tiff_tags=None) -> None:
     options = {"compress_level": 1} if path.suffix.lower() == ".png" else {}
     if fmt == "TIFF" and tiff_tags is not None:
         options["tiffinfo"] = tiff_tags
-    make_folders(path)
-    atomic_write(path, lambda tmp: img.save(tmp, format=fmt or path.suffix[1:].upper(), **options))
+    with folders_for(path):
+        atomic_write(path, lambda tmp: img.save(tmp, format=fmt or path.suffix[1:].upper(), **options))
 
 
 def save_array(array: np.ndarray, path) -> None:
     """Write an array as .npy (depth, point index). Atomic, its missing folders made."""
-    make_folders(path)
-    atomic_npy(path, array)
+    with folders_for(path):
+        atomic_npy(path, array)
 
 
 def save_heights(heights: np.ndarray, path, tiff_tags=None) -> None:
@@ -71,5 +71,5 @@ def save_heights(heights: np.ndarray, path, tiff_tags=None) -> None:
     from PIL import Image
 
     img = Image.fromarray(np.ascontiguousarray(heights, np.float32))  # float32: mode F
-    make_folders(path)
-    atomic_write(path, lambda tmp: img.save(tmp, format="TIFF", **({"tiffinfo": tiff_tags} if tiff_tags is not None else {})))
+    with folders_for(path):
+        atomic_write(path, lambda tmp: img.save(tmp, format="TIFF", **({"tiffinfo": tiff_tags} if tiff_tags is not None else {})))

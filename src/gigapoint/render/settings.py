@@ -23,7 +23,7 @@ from typing import Literal, get_args
 import numpy as np
 
 from ..core.classes import parse_classes
-from ..core.coords import MAX_ABS_COORDINATE
+from ..core.coords import MAX_SPAN
 from ..errors import SettingsError, number_text
 
 # --- the choices (render/colors.py derives COLOR_MODES and COLORMAPS from these) ----------------------
@@ -41,7 +41,6 @@ Classes = tuple[int, ...]  # LAS classification codes, 0..255
 
 #: the most world units a distance (the stereo eyes', their convergence) can be: the span points
 #: can have (convergence 1e300 put the auto eyes 3e298 apart: a blank image)
-MAX_SPAN = 2 * MAX_ABS_COORDINATE
 
 COLOR_MODES: tuple[str, ...] = get_args(ColorMode)
 COLORMAPS: tuple[str, ...] = get_args(Colormap)

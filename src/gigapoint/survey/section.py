@@ -81,7 +81,7 @@ class Section:
     def write_csv(self, path) -> None:
         """The rows as ``distance_along,offset,z[,classification]`` (a header line, then a point a
         line, by distance), written atomically, the folders missing on its way made."""
-        from ..atomic import atomic_write, make_folders
+        from ..atomic import atomic_write, folders_for
 
         columns = [self.distance, self.offset, self.z]
         header, formats = "distance_along,offset,z", ["%.6f"] * 3
@@ -89,8 +89,8 @@ class Section:
             columns.append(self.classification)
             header, formats = header + ",classification", [*formats, "%d"]
         table = np.column_stack(columns)
-        make_folders(path)
-        atomic_write(path, lambda tmp: np.savetxt(tmp, table, fmt=formats, delimiter=",", header=header, comments=""))
+        with folders_for(path):
+            atomic_write(path, lambda tmp: np.savetxt(tmp, table, fmt=formats, delimiter=",", header=header, comments=""))
 
     def camera(self, scale=None, size=None, vertical_exaggeration=1.0) -> Camera:
         """The camera of the section's image (``Camera.section``): the line's whole length across,

@@ -75,7 +75,7 @@ from ..preview import PreviewSampler, preview_points
 from ..progress import NullProgress
 from . import hooks
 from .keep_freed_memory import KeepFreedMemory
-from .options import MIN_DEFAULT_MEMORY, MIN_MEMORY_LIMIT, parse_memory
+from .options import MIN_DEFAULT_MEMORY, MIN_MEMORY_LIMIT, parse_memory, task_share
 from .partition import COUNT_LEVEL, CellCounts, PartitionPhases, built_name, grid_cells, group_name, partition_lut
 from .phases import BuildPhases, place_set
 from .read import (
@@ -235,9 +235,9 @@ def default_memory_limit(client, say: bool = False) -> int:
     driver's, which says nothing of theirs; the driver's quarter only where no worker has joined yet.
     ``say``: where a cluster's limit came from, said on stderr."""
     if client in _OWN_WORKERS:  # the CLI's --workers N: open_client started them
-        return _task_share(chunked.physical_memory(), _OWN_WORKERS[client], MIN_DEFAULT_MEMORY)
+        return task_share(chunked.physical_memory(), _OWN_WORKERS[client], MIN_DEFAULT_MEMORY)
     if isinstance(client, int):  # convert(client=N): open_client starts them (and refuses N < 1)
-        return _task_share(chunked.physical_memory(), max(1, client), MIN_DEFAULT_MEMORY)
+        return task_share(chunked.physical_memory(), max(1, client), MIN_DEFAULT_MEMORY)
     if isinstance(client, str):  # convert(client=ADDRESS): its workers asked over a connection of this call's
         with open_client(client) as connected:
             return default_memory_limit(connected, say)
@@ -250,12 +250,6 @@ def default_memory_limit(client, say: bool = False) -> int:
     return limit
 
 
-def _task_share(memory: int, tasks: int, least: int) -> int:
-    """A task's memory limit where ``tasks`` tasks at once draw on ``memory``: half of it among
-    them, at most a quarter each (one task: a quarter, as one process plans); ``least`` at least."""
-    return max(least, min(memory // 4, memory // (2 * tasks)))
-
-
 def _workers(client) -> dict:
     """The cluster's workers, every one: some Dask releases list 5 by default
     (``scheduler_info(n_workers=5)``); those before the argument list them all."""
@@ -266,7 +260,7 @@ def _workers(client) -> dict:
 
 
 def _cluster_memory_limit(client) -> tuple[int, str] | None:
-    """The smallest ``_task_share`` of the cluster's workers, and whose, in words: a worker's Dask
+    """The smallest ``task_share`` of the cluster's workers, and whose, in words: a worker's Dask
     memory limit shared by its threads (each runs a task at once); a worker without one, its
     machine's memory shared by the threads of every such worker there. None: no worker yet."""
     dd = _distributed()
@@ -288,7 +282,7 @@ def _cluster_memory_limit(client) -> tuple[int, str] | None:
             memory, tasks, what = machine[w], threads_there[info["host"]], "machine's memory, without a Dask limit"
         else:  # (gone meanwhile)
             continue
-        shares.append((_task_share(memory, tasks, MIN_MEMORY_LIMIT), w, f"{memory >> 20} MiB ({what}) among {tasks} thread(s)"))
+        shares.append((task_share(memory, tasks, MIN_MEMORY_LIMIT), w, f"{memory >> 20} MiB ({what}) among {tasks} thread(s)"))
     if not shares:
         return None
     limit, worker, source = min(shares)

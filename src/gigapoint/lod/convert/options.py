@@ -24,13 +24,19 @@ FORMATS = ("gigapoint", "potree", "copc")
 ENCODINGS = ("DEFAULT", "BROTLI")  # Potree's
 
 
+def task_share(memory: int, tasks: int, least: int) -> int:
+    """A task's memory limit where ``tasks`` tasks at once draw on ``memory``: half of it among
+    them, at most a quarter each (one task: a quarter, as one process plans); ``least`` at least."""
+    return max(least, min(memory // 4, memory // (2 * tasks)))
+
+
 def parse_memory(value, option: str = "--memory-limit", minimum: int = MIN_MEMORY_LIMIT) -> int:
     """'4G', '512M', '2GiB', '1.5g' or a byte count -> bytes; None -> a quarter of the RAM.
     ``option``: the setting errors name; ``minimum``: the fewest bytes it may be (a conversion's 64M)."""
     if value is None:
         from ...core.chunked import physical_memory
 
-        return max(MIN_DEFAULT_MEMORY, physical_memory() // 4)
+        return task_share(physical_memory(), 1, MIN_DEFAULT_MEMORY)
     if isinstance(value, (int, np.integer)):
         n = int(value)
     else:

@@ -60,7 +60,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import append_file, folder_refusal, make_folders, nearest_folder, same_file, write_failure
+from ...atomic import append_file, folder_refusal, folders_for, nearest_folder, same_file, write_failure
 from ...core.chunk import PointChunk
 from ...core.chunked import ReadOnce
 from ...core.cloud import check_valid_count
@@ -192,8 +192,8 @@ def tile(
         check_valid_count(files.label, tally["points"], tally["skipped"])  # (the skipped points' warning)
         written = spill.write_tiles(name, format, files, grid, tiles_folder, shown)
         if created:  # every tile whole: now they appear, all at once
-            make_folders(out)
-            tiles_folder.rename(out)
+            with folders_for(out):
+                tiles_folder.rename(out)
         else:  # (into a folder that was there: it is swapped for one of its files and the tiles)
             _swap_in(out, tiles_folder, work.name, written)
     finally:
