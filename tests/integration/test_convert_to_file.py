@@ -145,6 +145,16 @@ def test_the_cli_refuses_octree_options_with_a_point_file_output(cli, autzen_pat
     assert (rc, err.strip()) == (1, f"error: {out}: --sampler, --dask/--workers (client): options of an octree, not of a plain LAS file")
 
 
+def test_the_cli_refuses_octree_options_itself_before_the_library_runs(cli, autzen_path, tmp_path, monkeypatch):
+    """The command knows its output and options: it refused them by rewriting the library's
+    refusal (a parse of its words, which a change there broke without a word), after the call."""
+    called = []
+    monkeypatch.setattr(gp.lod, "convert", lambda *args, **kwargs: called.append(args))
+    out = tmp_path / "out.ply"
+    rc, _, err = cli("convert", autzen_path, "-o", out, "--max-leaf", "1000", "--workers", "2")
+    assert (rc, err.strip(), called) == (1, f"error: {out}: --max-leaf, --dask/--workers (client): options of an octree, not of a plain PLY file", [])
+
+
 def test_a_point_file_output_makes_the_folders_missing_on_its_way(cli, autzen_path, tmp_path):
     """As an octree folder or a COPC file output does (-o out/scan.copc.laz made out/, -o out/scan.laz refused it)."""
     assert convert(autzen_path, tmp_path / "lib" / "deeper" / "out.laz", progress=False).points == 110_000

@@ -3,7 +3,6 @@ or one plain point file (.las, .laz, .ply) of their points merged, filtered and 
 
 from __future__ import annotations
 
-import re
 import shlex
 import sys
 from contextlib import nullcontext
@@ -11,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from ..errors import GigapointError, InputError, counted
+from ..errors import InputError, counted
 from .app import app
 from .cloud_opts import (
     ClassesOption,
@@ -87,7 +86,8 @@ def convert(
     """Convert point clouds into a level-of-detail octree, out of core, resumable; or merge, filter and thin them into one .las, .laz or .ply file (-o ground.laz)."""
     from ..lod import ConvertError
     from ..lod import convert as run
-    from ..lod.convert.to_file import is_point_file_name
+    from ..lod.convert.state import local_path
+    from ..lod.convert.to_file import is_point_file_name, refuse_octree_options
     from ..lod.kinds import is_copc_name, work_dir
     from ..lod.octree_dir import OctreeDir
 
@@ -98,6 +98,10 @@ def convert(
     spacing = thin_option(thin, "convert")
     copc = format == "copc" or (format is None and is_copc_name(output))  # (convert's own default)
     to_file = format is None and is_point_file_name(output)  # one plain point file: nothing to watch, no cluster (convert refuses one)
+    if to_file:  # said as the options typed (the library names its keywords); the path as it does, a file:// URL's local one
+        given = {"sampler": sampler, "memory_limit": memory_limit, "max_leaf": max_leaf, "layout": layout, "colors": colors,
+                 "client": dask if dask is not None else workers}  # fmt: skip
+        refuse_octree_options(Path(local_path(output, "the output", ConvertError)), [OCTREE_OPTIONS[k] for k, value in given.items() if value is not None])
     watch = work_dir(output) if copc else output  # a COPC output appears only once complete
     # quoted as a shell needs it: `gigapoint view my scans` named two paths
     hint = None if quiet or to_file else lambda: print(f"while this runs, `gigapoint view {shlex.quote(str(watch))}` shows what has been read so far", file=sys.stderr)
@@ -127,7 +131,7 @@ def convert(
                 on_ready=hint,  # once OUT shows points: a refused run, or a first file that cannot be read, says only why
             )
     except (ConvertError, InputError) as exc:  # the library's keywords ('max_leaf must be ...', format='bogus') said as the options typed
-        raise named_option(octree_options_said(exc), {"max_leaf": "--max-leaf", f"convert: thin={spacing!r}": f"convert: --thin {thin}", **crs_options_named("convert", to_crs, from_crs),
+        raise named_option(exc, {"max_leaf": "--max-leaf", f"convert: thin={spacing!r}": f"convert: --thin {thin}", **crs_options_named("convert", to_crs, from_crs),
                                  **keywords_as_options(output, colors, dask)}) from None  # fmt: skip
     except (KeyboardInterrupt, SystemExit):  # (Ctrl+C, SIGTERM) a bare "interrupted" left the user to guess whether OUT was lost
         if not to_file and OctreeDir(watch).read_state() is not None:
@@ -150,22 +154,6 @@ def convert(
 #: convert's keywords of an octree that options set, as the options (refused with a plain point file's output)
 OCTREE_OPTIONS = {"sampler": "--sampler", "memory_limit": "--memory-limit", "max_leaf": "--max-leaf", "layout": "--layout", "colors": "--colors",
                   "client": "--dask/--workers (client)"}  # fmt: skip
-
-
-# the library's refusal: PATH: KEYWORDS: an option(s) of an octree, not of a plain ... file (the path as it names it: a
-# file:// URL's local path, not the option as typed)
-_OCTREE_REFUSAL = re.compile(r"(.*): ([a-z_]+(?:, [a-z_]+)*): ((?:an option|options) of an octree, not of a plain .*)")
-
-
-def octree_options_said(exc: GigapointError) -> GigapointError:
-    """convert's refusal of octree keywords with a plain point file's output (``x.las: sampler,
-    client: options of an octree, not of a plain LAS file``) with the options typed; ``exc``
-    unchanged otherwise."""
-    m = _OCTREE_REFUSAL.fullmatch(str(exc))
-    if m is None:
-        return exc
-    options = ", ".join(OCTREE_OPTIONS.get(keyword, keyword) for keyword in m.group(2).split(", "))
-    return type(exc)(f"{m.group(1)}: {options}: {m.group(3)}")
 
 
 def keywords_as_options(output: Path, colors: str | None, dask: str | None) -> dict[str, str]:

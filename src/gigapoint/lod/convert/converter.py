@@ -38,7 +38,7 @@ from .phases import BuildPhases
 from .read import ReadPhase
 from .seeded import GrownTree, SeededPhases
 from .state import damaged_work_file, local_path
-from .to_file import is_point_file_name, write_point_file
+from .to_file import is_point_file_name, refuse_octree_options, write_point_file
 
 PHASES = ("read", "count", "distribute", "build", "group", "upper", "write")
 
@@ -367,9 +367,7 @@ def convert(
                           "encoding": encoding, "client": client, "name": name, "partition_points": partition_points,
                           "upper_points": upper_points, "source_files": source_files, "on_ready": on_ready}  # fmt: skip
         out = Path(out)  # (a str was "'str' object has no attribute 'is_dir'")
-        given = [keyword for keyword, value in octree_options.items() if value is not None]  # (the CLI says its options: cli/convert_cmd.py)
-        if given:  # (each meant something of an octree only: none was ignored without a word)
-            raise ConvertError(f"{out}: {', '.join(given)}: {'options' if len(given) > 1 else 'an option'} of an octree, not of a plain {out.suffix[1:].upper()} file")
+        refuse_octree_options(out, [keyword for keyword, value in octree_options.items() if value is not None])  # (the CLI refuses its options first)
         t0 = time.perf_counter()
         colorization = open_colorization(colorize, colorize_bits, "convert")  # a raster that cannot be read: said before a point is
         shown = RichProgress() if progress else NullProgress()

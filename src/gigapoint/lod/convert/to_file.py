@@ -42,6 +42,7 @@ from ...io.reproject import Reprojection, output_grid
 from ...io.thin import Thinning
 from ...io.write import POINT_FILE_SUFFIXES, check_point_file_output, file_has_color, source_crs_records, wkt_crs_records, write_points
 from ..kinds import is_copc_name
+from ..octree_dir import ConvertError
 from .facts import input_facts
 from .read import _skipped_if_empty
 from .state import refuse_octrees
@@ -50,6 +51,13 @@ from .state import refuse_octrees
 def is_point_file_name(out) -> bool:
     """Whether ``out`` names a plain point file (.las, .laz, .ply) that ``convert`` writes as one, not a COPC file."""
     return not is_copc_name(out) and Path(out).suffix.lower() in POINT_FILE_SUFFIXES
+
+
+def refuse_octree_options(out: Path, given: list[str]) -> None:
+    """A one-line ConvertError where options of an octree (``given``: convert's keywords, or the
+    CLI's options) come with the plain point file ``out``: each meant something of an octree only."""
+    if given:
+        raise ConvertError(f"{out}: {', '.join(given)}: {'options' if len(given) > 1 else 'an option'} of an octree, not of a plain {out.suffix[1:].upper()} file")
 
 
 class PointFiles:
