@@ -313,6 +313,30 @@ def test_a_copc_file_not_written_yet_and_its_finished_work_folder_say_why(tmp_pa
     assert not (tmp_path / "x.png").exists()
 
 
+def test_convert_tile_and_change_of_a_copc_file_not_written_yet_say_why(tmp_path, capsys):
+    """`convert`, `tile` (CLI and library) of a COPC file a conversion has not finished said a bare
+    "no such file", as `gp.open` once did; `change` (through `gp.open`) says why too."""
+    out = tmp_path / "out.copc.laz"
+    (tmp_path / "out.copc.laz.work" / ".partial").mkdir(parents=True)
+    (tmp_path / "out.copc.laz.work" / ".partial" / "state.json").write_text(json.dumps({"phase": "read"}))
+    stopped = f"{out}: no such file yet: a conversion to it is unfinished (its work folder {out}.work is there); run the same convert command again to resume it"
+    calls = {
+        "convert to a point file": lambda: gp.convert(out, tmp_path / "x.laz"),
+        "convert to an octree": lambda: gp.convert([out], tmp_path / "octree", recursive=True),
+        "tile": lambda: gp.tile(out, tmp_path / "tiles", 100.0),
+        "change": lambda: gp.change(out, out, 5.0),
+    }
+    for what, call in calls.items():
+        with pytest.raises(InputError) as caught:
+            call()
+        assert (what, str(caught.value)) == (what, stopped)
+    for args in (["convert", out, "-o", tmp_path / "x.laz"], ["convert", out, "-o", tmp_path / "x.copc.laz"], ["tile", out, "--size", "100", "-o", tmp_path / "tiles"],
+                 ["change", out, out, "--gsd", "5", "-o", tmp_path / "dz.tif"]):  # fmt: skip
+        assert main([str(a) for a in args]) == 1
+        assert (args[0], capsys.readouterr().err) == (args[0], f"error: {stopped}\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.copc.laz.work"]  # (nothing written, the work folder kept)
+
+
 def test_folders_and_files_no_conversion_made_are_not_said_to_be_ones(tmp_path, capsys):
     """A folder named `a.laz.work` that no conversion made (empty) beside a missing `a.laz` was said
     to be an unfinished conversion to resume; a plain `b.las` made `b.las.work` "a conversion

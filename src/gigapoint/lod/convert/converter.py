@@ -27,7 +27,7 @@ from ..build import SAMPLERS
 from ..code import code_version
 from ..compact_octree import COLOR_FORMATS, LAYOUTS
 from ..copc_write import check_copc_output
-from ..kinds import is_copc_name
+from ..kinds import is_copc_name, refuse_unwritten_copc
 from ..octree_dir import STOPPED_BY_INPUT, STOPPED_RESUMES, ConvertError
 from ..progress import NullProgress, RichProgress
 from .in_memory import InMemoryPhases
@@ -334,6 +334,8 @@ def convert(
     check_switch("recursive", recursive, "convert")
     if recursive and isinstance(inputs, (str, os.PathLike)):
         inputs = [inputs]
+    if _are_paths(inputs):  # a COPC file a conversion still writes: its work folder named, not a bare "no such file"
+        refuse_unwritten_copc([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
     if recursive and not _are_paths(inputs):
         raise InputError("convert: recursive=True reads the subfolders of folders; the inputs are a cloud or PointChunks")  # (dropped without a word)
     if recursive:

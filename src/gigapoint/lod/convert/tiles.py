@@ -72,6 +72,7 @@ from ...io.las_fields import las_grid
 from ...io.registry import reader_for
 from ...io.reproject import Reprojection
 from ...io.write import write_points
+from ..kinds import refuse_unwritten_copc
 from ..progress import NullProgress, RichProgress
 from .to_file import PointFiles
 
@@ -158,11 +159,13 @@ def tile(
     if colorize is not None and not isinstance(colorize, (str, os.PathLike)):
         raise InputError(f"tile: colorize={colorize!r}: the path of an orthophoto (a GeoTIFF)")
     out = Path(out)
-    _check_apart(out, [inputs] if isinstance(inputs, (str, os.PathLike)) else inputs, recursive)
+    given = [inputs] if isinstance(inputs, (str, os.PathLike)) else inputs
+    refuse_unwritten_copc(given)  # a COPC file a conversion still writes: its work folder named, not a bare "no such file"
+    _check_apart(out, given, recursive)
     _put_back_set_aside(out)
     _check_output_folder(out, overwrite)
     if recursive:
-        inputs = with_subfolders([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
+        inputs = with_subfolders(given)
     colorization = open_colorization(colorize, colorize_bits, "tile")  # a raster that cannot be read: said before a point is
     files = PointFiles(inputs, out, chunk_size, reprojection=reprojection, colorization=colorization)
     keep = files.points_filter(keep)  # (a clip polygon moved into the CRS the points are tiled in)
