@@ -191,6 +191,60 @@ def test_a_size_in_the_wrong_unit_on_points_without_header_bounds_is_refused_bef
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pts.npy"]  # no tiles' folder, nor its hidden work folder
 
 
+def test_points_without_header_bounds_have_the_tiles_count_checked_once_a_chunk_and_land_in_their_tiles(tmp_path, monkeypatch):
+    """A .npy's tile count is checked in the pass that makes its grid, a chunk at a time, and not
+    again as the same points are tiled (was: every chunk checked twice, its bounds taken twice);
+    the file is read twice, its points not kept (a read of a memory-mapped NPY costs less than
+    keeping them: tiles.py's _grid_of_points). Each tile holds the points numpy places in it."""
+    tiles = importlib.import_module("gigapoint.lod.convert.tiles")
+    to_file = importlib.import_module("gigapoint.lod.convert.to_file")
+    rng = np.random.default_rng(11)
+    n, chunk_size, size, buffer = 20_000, 3_000, 7.0, 1.5
+    # whole centimetres and 4 mm: no point within a grid step (a millimetre) of an edge or a buffer's, where floats and the stored grid could differ
+    x, y = rng.integers(-500, 7000, n) / 100 + 0.004, rng.integers(-300, 2100, n) / 100 + 0.004
+    np.save(tmp_path / "pts.npy", np.column_stack([x, y, rng.normal(0, 1, n)]))
+    checks, reads = [], []
+    check_tile_count, read_chunks = tiles._check_tile_count, to_file.read_chunks
+
+    def counted_check(*args):
+        checks.append(args)
+        return check_tile_count(*args)
+
+    def counted_read(path, chunk_size):
+        reads.append(path)
+        yield from read_chunks(path, chunk_size)
+
+    monkeypatch.setattr(tiles, "_check_tile_count", counted_check)
+    monkeypatch.setattr(to_file, "read_chunks", counted_read)
+    res = gp.tile(tmp_path / "pts.npy", tmp_path / "tiles", size, buffer=buffer, chunk_size=chunk_size)
+    assert len(checks) == 7  # the grid pass's 7 chunks (was 14: the tiling pass checked them again)
+    assert reads == [tmp_path / "pts.npy"] * 2
+    keys = np.unique(np.column_stack([np.floor(x / size), np.floor(y / size)]).astype(int), axis=0)
+    assert [p.name for p in res.tiles] == [tile_name("pts", i, j, size, "laz") for i, j in keys] and len(keys) == 44
+    wanted = [len(_expected({"x": x, "y": y}, i * size, j * size, size, buffer)[0]) for i, j in keys]
+    assert res.points_per_tile == wanted and res.points == n and res.buffer_points == sum(wanted) - n
+    assert [len(laspy.read(str(p)).points) for p in res.tiles] == wanted
+
+
+def test_las_points_beyond_their_headers_bounds_are_checked_as_they_are_tiled(tmp_path):
+    """A LAS file whose header tells no bounds (all 0) has the tiles' count checked on its points as
+    they are read: a size in the wrong unit is refused at the first chunk, before a tile is written."""
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = [0.01] * 3, [0.0] * 3
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = np.linspace(0, 0.5, 2000), np.linspace(0, 0.25, 2000), np.zeros(2000)
+    path = tmp_path / "pts.las"
+    las.write(str(path))
+    data = bytearray(path.read_bytes())
+    data[179 : 179 + 48] = bytes(48)  # (LAS 1.2's max x, min x, max y, min y, max z, min z)
+    path.write_bytes(bytes(data))
+    assert laspy.read(str(path)).header.maxs.tolist() == [0.0] * 3
+    with pytest.raises(InputError) as refusal:
+        gp.tile(path, tmp_path / "tiles", 1e-9, chunk_size=500)
+    assert str(refusal.value) == f"tile: size=1e-09: 120,000,000 x 60,000,000 tiles over the extent of {path}, above 1,000,000; take larger tiles"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pts.las"]  # no tiles' folder, nor its hidden work folder
+
+
 def test_a_folder_holding_las_files_is_refused_and_overwrite_leaves_the_users_files(autzen_path, tmp_path):
     out = tmp_path / "tiles"
     out.mkdir()

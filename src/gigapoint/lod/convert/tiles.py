@@ -188,7 +188,10 @@ def tile(
             for f, chunk in files.valid_chunks(keep, shown, tally):
                 yield files.colored(f, chunk, tally)
 
-        grid, points = (files.las_grid, read) if files.las_grid is not None else _grid_of_points(files, keep, read, float(size), work, shown)
+        if files.las_grid is not None:  # (headers that tell no bounds, or bounds the points pass: the tiles' count checked as they come)
+            grid, points = files.las_grid, _extent_checked(read, float(size), files.label)
+        else:  # (checked in the pass that makes the grid, over every point before one is tiled)
+            grid, points = _grid_of_points(files, keep, read, float(size), work, shown)
         spill = _TileSpill(work, float(size), float(buffer), files.label, grid)
         for chunk in points():
             spill.add(chunk)
@@ -325,33 +328,64 @@ def _grid_of_points(files: PointFiles, keep, read, size: float, work: Path, prog
     tiles of one survey share their grid), as ``convert -o x.laz`` makes it, in a pass over them
     before they are tiled: a point is placed by its position as the grid stores it
     (``TileAxis``), and one less than half a step below an edge is stored on it. The tiles' count
-    is checked on the points read so far (these files' headers tell no bounds).
+    is checked here, on the points read so far (these files' headers tell no bounds), and not
+    again as they are tiled: every point was checked before one is.
     Files that read slowly (text, ASCII PLY, LAZ beside them: parsing is most of a run's time)
     are read once, by ``read``, their points kept in ``work`` (core/chunked.py's ReadOnce) for the
     tiling pass, which reads those back; the others (NPY, binary PLY: a read costs a copy) are
-    read again by it, so this pass's warnings are dropped (the tiling pass says them)."""
+    read again by it, so this pass's warnings are dropped (the tiling pass says them). Kept too,
+    a 4 M-point NPY (x, y, z, colour, 2 attributes; 103 tiles) took more, not less: 3.10 s of
+    CPU a run against 2.95 s read twice (writing a chunk's points and reading them back costs
+    more than copying them from the memory-mapped file again; a shared 2-core host), and a copy
+    of its points on the work folder's disk (~124 MB) until they are tiled."""
     if any(reader_for(f).reads_slowly(f) for f in files.files):
         once = ReadOnce(read, work, files.label, writing=nullcontext)  # (a full disk: the spill's OSError, as the tiles')
         chunks, warnings_said = once.first(), nullcontext()
     else:
         progress.phase("scan", None if None in files.counts else sum(files.counts))
         once, chunks, warnings_said = None, (chunk for _, chunk in files.valid_chunks(keep, progress, {})), warnings_kept()
-    lo, hi, n = np.full(3, np.inf), np.full(3, -np.inf), 0
+    extent = _Extent(size, files.label)
     with warnings_said:
         for chunk in chunks:
-            lo, hi, n = np.minimum(lo, chunk.xyz.min(axis=0)), np.maximum(hi, chunk.xyz.max(axis=0)), n + len(chunk)
-            _check_tile_count(lo, hi, size, files.label)
-    grid = las_grid(lo, hi)
+            extent.add(chunk)
+    grid = las_grid(extent.lo, extent.hi)
     if once is None:
         return grid, read
 
     def kept():  # the points read, as read, each chunk's files removed once read back (the tiles' spill grows as they go)
-        progress.phase("tile", n)
+        progress.phase("tile", extent.n)
         for chunk in once.last():
             yield chunk
             progress.advance(len(chunk))
 
     return grid, kept
+
+
+class _Extent:
+    """The bounds of the points read so far, the tiles' count over them checked as each chunk
+    comes (``_check_tile_count``): points whose files' headers tell no bounds (text, NPY), or
+    bounds they pass, are refused for a size in the wrong unit before a tile is written (was: a
+    tile a point until MAX_TILES stopped them, minutes later)."""
+
+    def __init__(self, size: float, where: str):
+        self.size, self.where = size, where
+        self.lo, self.hi, self.n = np.full(3, np.inf), np.full(3, -np.inf), 0
+
+    def add(self, chunk: PointChunk) -> None:
+        self.lo, self.hi, self.n = np.minimum(self.lo, chunk.xyz.min(axis=0)), np.maximum(self.hi, chunk.xyz.max(axis=0)), self.n + len(chunk)
+        _check_tile_count(self.lo, self.hi, self.size, self.where)
+
+
+def _extent_checked(points, size: float, where: str):
+    """``points`` (a function giving the chunks to tile), each chunk's extent checked as it comes (``_Extent``)."""
+
+    def checked():
+        extent = _Extent(size, where)
+        for chunk in points():
+            extent.add(chunk)
+            yield chunk
+
+    return checked
 
 
 def _check_tile_count(lo, hi, size: float, where: str) -> None:
@@ -467,7 +501,6 @@ class _TileSpill:
     def __init__(self, folder: Path, size: float, buffer: float, where: str, grid):
         self.folder, self.size, self.buffer, self.where = folder, size, buffer, where
         self.axes = [TileAxis(size, buffer, float(grid[0][a]), float(grid[1][a])) for a in (0, 1)]  # on the grid's (scale, offset) of x, of y
-        self.lo, self.hi = np.full(3, np.inf), np.full(3, -np.inf)  # the points' bounds (the tiles' count checked on them)
         self.dtype = None
         self.held: dict[tuple[int, int], int] = {}  # points spilled for each tile
         self.own: dict[tuple[int, int], int] = {}  # of them, the tile's own (not its buffer's)
@@ -478,10 +511,6 @@ class _TileSpill:
 
     def add(self, chunk: PointChunk) -> None:
         """Append the points of ``chunk`` to their tiles' files (and, with a buffer, to their neighbours')."""
-        self.lo, self.hi = np.minimum(self.lo, chunk.xyz.min(axis=0)), np.maximum(self.hi, chunk.xyz.max(axis=0))
-        # files without header bounds (text, .npy) are checked here, on the points read so far: a
-        # size in the wrong unit wrote a tile a point until the cap below, minutes later
-        _check_tile_count(self.lo, self.hi, self.size, self.where)
         records = self._records(chunk)
         i, j = (self.axes[a].index(chunk.xyz[:, a]) for a in (0, 1))
         rows, ti, tj = [np.arange(len(chunk))], [i], [j]
