@@ -754,6 +754,22 @@ def test_an_ept_json_redirected_alone_to_a_folder_token_has_its_files_beside_it(
     finally:
         (data / "root-page.away").rename(root_page)
 
+def test_a_sibling_only_beside_the_signed_url_is_found_by_read_many(data, server):
+    """The fallback beside the signed URL (the test above) was ``read_all``'s alone: ``read_many``
+    asked the URL given and failed with its 404. Its ranges now fall back as well, and once found
+    there so are the later siblings."""
+    token = "sv=2031-01-01&sig=S3CRET%2Fsig"
+    server.route = lambda path: (302, f"/ept_laz/ept.json?{token}") if path == "/az/ept.json" else None
+    ept = gphttp.HttpFile(server.url("az/ept.json"))
+    ept.read_all()  # (learns the signed URL)
+    page = (data / "ept_laz" / "ept-hierarchy" / "0-0-0-0.json").read_bytes()
+    got = ept.sibling("ept-hierarchy/0-0-0-0.json").read_many([(0, 8), (len(page) - 5, 5)])
+    assert got == [page[:8], page[-5:]]
+    assert server.paths[-1] == f"/ept_laz/ept-hierarchy/0-0-0-0.json?{token}"
+    assert ept.sibling("ept.json").url == server.url(f"ept_laz/ept.json?{token}")
+    ept.close()
+
+
 def test_a_moved_copc_file_is_read_where_it_went(data, server):
     """A COPC file's every range request went to the URL given and was redirected again: now the
     first is, and the later ones go where it led."""

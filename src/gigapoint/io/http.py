@@ -528,14 +528,17 @@ class HttpFile(ByteSource):
 
     def _get(self, *args, **kwargs) -> bytes:
         """``client.get`` of this file; where its URL answers 404, of its ``fallback`` (the 404
-        said where that fails too), which it is from then on, as its siblings are."""
+        said where that fails too), which it is from then on, as its siblings are. Every read
+        goes through here (``read_many``'s requests too, several at once: hence the URL and
+        fallback taken once, so that a request that fell back does not undo another's)."""
+        url, fallback = self.url, self.fallback
         try:
-            return self.client.get(self.url, *args, **kwargs)
+            return self.client.get(url, *args, **kwargs)
         except HttpNotFound as exc:
-            if self.fallback is None:
+            if fallback is None:
                 raise
             not_found = exc
-        url, of = self.fallback
+        url, of = fallback
         try:
             data = self.client.get(url, *args, **kwargs)
         except InputError:
@@ -576,11 +579,11 @@ class HttpFile(ByteSource):
 
         def fetch(group: list) -> None:
             start, end, members = group
-            data = self.client.get(self.url, start, end - start, cache=len(members) == 1)
+            data = self._get(start, end - start, cache=len(members) == 1)
             for j in members:
                 o, s = ranges[j]
                 piece = data[o - start : o - start + s]
-                self.client.cache.put((self.url, o, s), piece)
+                self.client.cache.put((self.url, o, s), piece)  # (the URL that answered: a fallback's once taken)
                 out[j] = piece
 
         self.client.map(fetch, groups)
