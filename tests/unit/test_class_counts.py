@@ -15,8 +15,10 @@ import gigapoint as gp
 from gigapoint.errors import InputError
 from gigapoint.io.filters import PointFilter
 from gigapoint.lod.class_counts import CLASS_COUNT_DTYPE, kept_by_class
+from gigapoint.lod.compact_octree import CompactOctree
 from gigapoint.lod.convert import convert
 from gigapoint.lod.octree_dir import OctreeDir
+from gigapoint.lod.reader import open_octree
 
 
 @pytest.fixture(scope="module")
@@ -47,6 +49,18 @@ def test_each_nodes_counts_are_the_classes_of_its_points(converted):
     # what a filter keeps of each node: its points of the classes it lets pass
     kept = kept_by_class(records, len(tree.keys), PointFilter(classes=(2, 3, 5), drop_classes=(3,)))
     assert kept.tolist() == [int(np.isin(tree.node_points(i)["classification"], [2, 5]).sum()) for i in range(len(tree.keys))]
+
+
+def test_both_layouts_get_the_same_counts_where_a_folder_is_opened(converted):
+    """open_octree reads classes.npy once for whichever layout the folder has (each layout's
+    reader read it on its own before: another reader would have had none)."""
+    v1, v2 = converted
+    words, compact = open_octree(v1), open_octree(v2)
+    assert isinstance(compact, CompactOctree) and not isinstance(words, CompactOctree)
+    records = np.load(v2 / "classes.npy")
+    assert len(records) > 30 and int(records["count"].sum()) == 60_000
+    np.testing.assert_array_equal(words.class_counts, records)
+    np.testing.assert_array_equal(compact.class_counts, records)
 
 
 def test_a_cloud_without_classification_has_none(tmp_path):

@@ -54,7 +54,6 @@ from ..core.compact import (
 )
 from ..core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE
 from ..errors import InputError
-from .class_counts import read_class_counts
 from .keys import key_name
 from .octree_dir import OctreeDir
 from .store import OctreeCloud, known_classes
@@ -407,7 +406,7 @@ class CompactOctree(OctreeCloud):
 
 
 def read_compact(d: OctreeDir, meta: dict) -> CompactOctree:
-    """A version 2 octree folder opened (``reader.open_octree`` dispatches here): its arrays
+    """A version 2 octree folder opened (``reader.open_octree`` dispatches here and reads its class counts): its arrays
     memory-mapped and checked against each other, so a damaged file is an error naming it now,
     not a crash or garbage when its node is drawn."""
     p = d.path
@@ -457,9 +456,7 @@ def read_compact(d: OctreeDir, meta: dict) -> CompactOctree:
         crc = d.load("crc", mmap=False)
         if crc.dtype != np.uint32 or crc.shape != (len(nodes), len(names) + 2):
             raise InputError(f"{d.array('crc')}: holds {crc.shape} checksums for {len(nodes):,} nodes and {len(names) + 2} arrays")
-    cloud = CompactOctree(meta.get("name", p.name), meta, nodes, keys, low, np.asarray(ext), pack, fields, streams, p, crc)
-    cloud.class_counts = read_class_counts(d, nodes)
-    return cloud
+    return CompactOctree(meta.get("name", p.name), meta, nodes, keys, low, np.asarray(ext), pack, fields, streams, p, crc)
 
 
 __all__ = [

@@ -77,6 +77,7 @@ def open_octree(path) -> OctreeCloud | PointCloud:
     """Open an octree for rendering: an OctreeCloud (gigapoint or Potree 2.0 folder; a COPC file
     or EPT dataset, local or an http(s) URL), or for an unfinished conversion its preview (a
     ConversionPreview, with a warning)."""
+    from .class_counts import read_class_counts
     from .compact_octree import read_compact
     from .copc import open_copc
     from .ept import open_ept
@@ -122,7 +123,9 @@ def open_octree(path) -> OctreeCloud | PointCloud:
     kind = d.kind
     if kind == "gigapoint":
         meta = read_meta(d)
-        return read_compact(d, meta) if meta["version"] == FORMAT_VERSION else read_gigapoint(d, meta)
+        cloud = read_compact(d, meta) if meta["version"] == FORMAT_VERSION else read_gigapoint(d, meta)
+        cloud.class_counts = read_class_counts(d, cloud.nodes)  # (classes.npy: the same file whatever the layout)
+        return cloud
     if kind == "potree":
         return read_potree(d)
     if kind == "unfinished":

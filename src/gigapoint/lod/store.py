@@ -30,7 +30,7 @@ from ..core.selection import Selection, View, batch_matrices, box_in_view, preci
 from ..errors import InputError, is_whole_number
 from ..io.filters import PointFilter
 from ..render.splats import finest_spacing, union_gain
-from .class_counts import kept_by_class, read_class_counts
+from .class_counts import kept_by_class
 from .keys import key_cube, morton_position
 from .octree_dir import FORMAT_NAME, FORMAT_VERSION_WORDS, FORMAT_VERSIONS, POINT_ARRAYS, OctreeDir
 
@@ -930,7 +930,7 @@ def check_placement(triples: dict, positive: str = "", box: tuple[str, str] | No
 def read_gigapoint(octree_dir, meta: dict | None = None) -> OctreeCloud:
     """A gigapoint octree folder of format version 1 (an OctreeDir or a path) opened for
     rendering: its metadata checked, its arrays memory-mapped. ``reader.open_octree`` opens a
-    folder of any kind (version 2: compact_octree.read_compact)."""
+    folder of any kind (version 2: compact_octree.read_compact) and reads its class counts."""
     d = OctreeDir(octree_dir)
     p = d.path
     meta = read_meta(d) if meta is None else meta
@@ -945,9 +945,7 @@ def read_gigapoint(octree_dir, meta: dict | None = None) -> OctreeCloud:
     n = int(meta["points"])
     if any(len(a) != n for a in arrays.values()) or int(nodes["count"].astype(np.int64).sum()) != n:
         raise InputError(f"{p}: point arrays hold a different number of points than {d.meta.name} says ({n:,})")
-    cloud = OctreeCloud(meta.get("name", p.name), meta, nodes, keys, arrays, attributes, p)
-    cloud.class_counts = read_class_counts(d, nodes)
-    return cloud
+    return OctreeCloud(meta.get("name", p.name), meta, nodes, keys, arrays, attributes, p)
 
 
 def check_grid(name: str, what: str, scale, offset) -> None:
