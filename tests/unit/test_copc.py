@@ -499,6 +499,22 @@ def test_extra_bytes_descriptors_are_read_with_their_scale(tmp_path):
         point_dtype(7, 36 + 2, fields)
 
 
+def test_a_scaled_float32_extra_bytes_field_is_scaled_in_float64():
+    """A float32 extra bytes field with a scale came back float32 * scale, in float32 (NumPy 2
+    keeps float32 times a Python float float32): 3e6 * 0.001 + 10 was 3010.000000 only to
+    float32's 7 digits. It is scaled in float64, the attribute's dtype."""
+    from gigapoint.lod.copc import EXTRA_BYTES_DTYPE, extra_fields
+
+    d = np.zeros(1, EXTRA_BYTES_DTYPE)
+    d[0]["data_type"], d[0]["name"] = 9, b"amplitude"  # 9: float
+    d[0]["options"], d[0]["scale"][0], d[0]["offset"][0] = 8 | 16, 0.001, 10.0
+    (field,) = extra_fields([(b"LASF_Spec", 4, d.tobytes())])
+    rec = np.array([1234.567, -0.1, 3e6 + 1], [("amplitude", "<f4")])
+    got = field.values(rec)
+    assert field.value_dtype == got.dtype == np.float64
+    np.testing.assert_array_equal(got, rec["amplitude"].astype(np.float64) * 0.001 + 10.0)
+
+
 @pytest.mark.parametrize("where", [0.3, 0.4, 0.5])
 def test_damaged_chunks_that_crash_or_panic_lazrs_are_one_line_errors(autzen_octrees, tmp_path, monkeypatch, where):
     """20 kB of 0xFF in a node's compressed points: at 0.3 of the file lazrs's decoder crashes

@@ -59,19 +59,22 @@ SCHEMA = [
 ]
 
 
-def write_ept(folder: Path, scene: dict, data_type: str, page_level: int | None = 2, extra: tuple = (), node_scales: dict | None = None) -> Path:
+def write_ept(
+    folder: Path, scene: dict, data_type: str, page_level: int | None = 2, extra: tuple = (), node_scales: dict | None = None, node_dims: dict | None = None
+) -> Path:
     """An EPT dataset of ``scene`` in ``folder``; nodes at ``page_level`` that have children
     head hierarchy files of their own. ``extra``: (schema entry, stored values of every point)
     of further dimensions (in a laszip node, LAS extra bytes of the same name, given the
-    (scale, offset) of ``node_scales`` in the extra-bytes VLR where it names them)."""
-    node_scales = node_scales or {}
+    (scale, offset) of ``node_scales`` in the extra-bytes VLR where it names them; ``node_dims``
+    {node key: {name: (stored dtype, (scale, offset) or None)}}: that node's instead)."""
+    node_scales, node_dims = node_scales or {}, node_dims or {}
     folder.mkdir(parents=True)
     (folder / "ept-data").mkdir()
     (folder / "ept-hierarchy").mkdir()
     xyz, nodes = scene["xyz"], scene["nodes"]
     schema = SCHEMA + [d for d, _ in extra]
     offsets = np.array([d["offset"] for d in SCHEMA[:3]])
-    dt = np.dtype([(d["name"], {"signed": "<i", "unsigned": "<u"}[d["type"]] + str(d["size"])) for d in schema])
+    dt = np.dtype([(d["name"], {"signed": "<i", "unsigned": "<u", "float": "<f"}[d["type"]] + str(d["size"])) for d in schema])
     for key, idx in nodes.items():
         name = voxel_name(key)
         if data_type == "binary":
@@ -87,9 +90,9 @@ def write_ept(folder: Path, scene: dict, data_type: str, page_level: int | None 
             header = laspy.LasHeader(point_format=7, version="1.4")
             header.scales, header.offsets = [SCALE] * 3, offsets
             for d, _ in extra:
-                scaled = d["name"] in node_scales
-                scale, offset = (np.array([v]) for v in node_scales[d["name"]]) if scaled else (None, None)
-                header.add_extra_dim(laspy.ExtraBytesParams(d["name"], dt[d["name"]], scales=scale, offsets=offset))
+                stored, scaling = node_dims.get(key, {}).get(d["name"], (dt[d["name"]], node_scales.get(d["name"])))
+                scale, offset = (np.array([v]) for v in scaling) if scaling else (None, None)
+                header.add_extra_dim(laspy.ExtraBytesParams(d["name"], stored, scales=scale, offsets=offset))
             las = laspy.LasData(header)
             las.X, las.Y, las.Z = np.rint((xyz[idx] - offsets) / SCALE).astype(np.int32).T
             las.red, las.green, las.blue = scene["rgb"][idx].T
@@ -442,6 +445,100 @@ def test_an_ept_extra_dimension_is_scaled_once(tmp_path, data_type, in_schema, i
         assert p["Reflectance"].dtype == np.float64  # (the dtype fixed at open: whole numbers were cast to it)
         np.testing.assert_allclose(p["Reflectance"], stored[scene["nodes"][int(c.keys[i])]] * 0.01 - 5.0, rtol=0, atol=1e-9)
     assert "Reflectance, classification, intensity" in format_info(octree_info(d))
+
+
+def _child_node(scene) -> int:
+    """The key of a level-1 node (not the root) that holds points."""
+    return min(k for k in scene["nodes"] if k.bit_length() == 4)
+
+
+@pytest.mark.parametrize("data_type", ["laszip", "binary"])
+def test_ept_extra_dimensions_of_each_type(tmp_path, data_type):
+    """A scaled int32, a float32, a scaled float32 and a float64 dimension read back as the
+    numbers written, each in the dtype ept.json's schema gives (a scale: float64, the float32
+    scaled in float64); one laszip node that stores them
+    otherwise but to the same values (the scale in its extra-bytes VLR, the same as the
+    schema's; float32 where the schema says float64; uint16 where it says int32 unscaled) is
+    read as the others."""
+    scene = make_scene(n=3000, seed=6)
+    rng = np.random.default_rng(8)
+    n = len(scene["xyz"])
+    written = {
+        "Scaled": rng.integers(-(10**6), 10**6, n).astype(np.int32),
+        "Float32": rng.normal(0.0, 1000.0, n).astype(np.float32),
+        "Float64": rng.normal(0.0, 1e6, n),
+        "ScaledFloat32": rng.normal(0.0, 1e4, n).astype(np.float32),
+        "Count": rng.integers(0, 60_000, n).astype(np.int32),
+    }
+    child = _child_node(scene)
+    in_child = scene["nodes"][child]
+    written["Float64"][in_child] = written["Float64"][in_child].astype(np.float32)  # (exact in the node that stores float32)
+    extra = [
+        ({"name": "Scaled", "type": "signed", "size": 4, "scale": 0.001, "offset": 100.0}, written["Scaled"]),
+        ({"name": "Float32", "type": "float", "size": 4}, written["Float32"]),
+        ({"name": "Float64", "type": "float", "size": 8}, written["Float64"]),
+        ({"name": "ScaledFloat32", "type": "float", "size": 4, "scale": 0.001}, written["ScaledFloat32"]),
+        ({"name": "Count", "type": "signed", "size": 4}, written["Count"]),
+    ]
+    other = {child: {"Scaled": (np.int32, (0.001, 100.0)), "Float64": (np.float32, None), "Count": (np.uint16, None)}}
+    d = write_ept(tmp_path / "e", scene, data_type, extra=extra, node_dims=other if data_type == "laszip" else None)
+    dtypes = {"Scaled": np.float64, "Float32": np.float32, "Float64": np.float64, "ScaledFloat32": np.float64, "Count": np.int32}
+    c = gp.open(d)
+    c.load_hierarchy()
+    for i in np.flatnonzero(c.counts > 0).tolist():
+        idx = scene["nodes"][int(c.keys[i])]
+        p = c.node_points(i)
+        assert {a: p[a].dtype for a in written} == dtypes
+        np.testing.assert_allclose(p["Scaled"], written["Scaled"][idx] * 0.001 + 100.0, rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(p["ScaledFloat32"], written["ScaledFloat32"][idx].astype(np.float64) * 0.001)
+        for name in ("Float32", "Float64", "Count"):
+            np.testing.assert_array_equal(p[name], written[name][idx])
+
+
+@pytest.mark.parametrize(
+    ("entry", "child_stores", "match"),
+    [
+        (
+            {"type": "signed", "size": 2, "scale": 0.01, "offset": -5.0},
+            (np.int16, (0.1, 0.0)),
+            r"is stored \* 0\.1 \+ 0 \(its extra-bytes VLR\), ept\.json's schema says \* 0\.01 \+ -5",
+        ),
+        (
+            {"type": "signed", "size": 2, "scale": 0.01, "offset": -5.0},
+            (np.float64, None),
+            r"is stored as float64, unscaled, where ept\.json's schema scales stored int16",
+        ),
+        (
+            {"type": "signed", "size": 2},
+            (np.int16, (0.01, -5.0)),
+            r"gives float64 values \(scaled by its extra-bytes VLR\), where the dataset's 'Reflectance' is int16",
+        ),
+        ({"type": "unsigned", "size": 1}, (np.float32, None), r"gives float32 values \(stored as float32\), where the dataset's 'Reflectance' is uint8"),
+    ],
+    ids=["scaled-otherwise", "stored-scaled-already", "scaled-past-the-root", "float-for-int"],
+)
+def test_an_ept_node_that_disagrees_with_the_schema_is_refused(tmp_path, entry, child_stores, match):
+    """A laszip node whose extra-bytes VLR stores a dimension otherwise than ept.json's schema
+    (and the root node) says was read without a word, its values wrong: the node's own scale
+    applied over the schema's, the schema's applied to values stored already scaled, scaled
+    values cast to the whole numbers of the dtype fixed at open. Decoding that node is a
+    one-line error naming its file; the nodes that agree read as ever."""
+    scene = make_scene(n=3000, seed=5)
+    stored = np.random.default_rng(4).integers(0, 200, len(scene["xyz"]))
+    child = _child_node(scene)
+    d = write_ept(tmp_path / "e", scene, "laszip", extra=[({"name": "Reflectance", **entry}, stored)], node_dims={child: {"Reflectance": child_stores}})
+    c = gp.open(d)
+    c.load_hierarchy()
+    for i in np.flatnonzero(c.counts > 0).tolist():
+        key = int(c.keys[i])
+        if key != child:
+            c.node_points(i)
+            continue
+        with pytest.raises(InputError, match=match) as err:
+            c.node_points(i)
+        name = voxel_name(child)
+        assert str(err.value).startswith(f"{d / 'ept-data' / name}.laz: node {name}'s extra dimension 'Reflectance' ")
+        assert "\n" not in str(err.value) and str(err.value).endswith(": its values would be wrong")
 
 
 def test_an_ept_count_is_its_hierarchys_once_read(broken, scene):

@@ -117,15 +117,24 @@ class ExtraField:
         self.name, self.dtype, self.scale, self.offset = name, np.dtype(dtype), scale, offset
 
     @property
+    def scaling(self) -> tuple[float, float] | None:
+        """(scale, offset) its values are (a missing one 1 or 0), or None where stored as they are."""
+        if self.scale is None and self.offset is None:
+            return None
+        return (1.0 if self.scale is None else self.scale, 0.0 if self.offset is None else self.offset)
+
+    @property
     def value_dtype(self) -> np.dtype:
         """The attribute's dtype once decoded: float64 where a scale or offset applies."""
-        return np.dtype(np.float64) if self.scale is not None or self.offset is not None else self.dtype
+        return self.dtype if self.scaling is None else np.dtype(np.float64)
 
     def values(self, rec: np.ndarray) -> np.ndarray:
+        """The field of point records ``rec`` as values: stored * scale + offset where scaled."""
         v = rec[self.name]
-        if self.scale is None and self.offset is None:
+        if self.scaling is None:
             return v
-        return v * (1.0 if self.scale is None else self.scale) + (0.0 if self.offset is None else self.offset)
+        scale, offset = self.scaling
+        return v.astype(np.float64) * scale + offset  # (float32 * a Python float stays float32 in NumPy 2)
 
 
 def extra_fields(vlrs, point_format: int = 8) -> list[ExtraField]:

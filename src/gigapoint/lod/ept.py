@@ -8,7 +8,8 @@ little-endian, ``ept-data/d-x-y-z.bin``; ``zstandard``: binary compressed with Z
 ``ept-data/d-x-y-z.zst``, read with the zstandard package), ``hierarchyType`` (``json``), ``schema`` (name, type
 signed/unsigned/float, size, scale and offset per dimension; those beyond the LAS fields,
 Entwine's OriginId, are attributes under their own names, scaled once: by a laszip node's
-extra-bytes VLR where it scales them, else by the schema) and ``srs`` (wkt, authority,
+extra-bytes VLR where it scales them, else by the schema; a node that disagrees with the schema
+is refused) and ``srs`` (wkt, authority,
 horizontal). The hierarchy: ``ept-hierarchy/0-0-0-0.json`` maps node names to point counts,
 -1 for a node whose subtree is in ``ept-hierarchy/<name>.json``, read when a frame draws it
 (voxel_octree.py).
@@ -28,6 +29,7 @@ from ..io import laz_process
 from ..io.http import ByteSource, open_source, shown_url
 from ..io.las import scan_angle_units
 from ..io.las_kernels import _scaled_xyz
+from .copc import ExtraField
 from .kinds import ept_location
 from .store import check_grid, known_classes, tight_bounds
 from .voxel_octree import VoxelOctree, parse_voxel_name, voxel_name
@@ -67,7 +69,7 @@ def _srs_text(srs) -> str | None:
 
 
 MAX_NODE_POINTS = 2**40  # a node's point count beyond this is a damaged hierarchy, not a node
-ROOT_HEAD_READ = 64 * 1024  # the root node's LAS header and VLRs, read at open (_root_node_scales)
+ROOT_HEAD_READ = 64 * 1024  # the root node's LAS header and VLRs, read at open (_root_node_fields)
 MAX_ROOT_HEAD = 16 * 1024 * 1024  # VLRs longer than this: a damaged header, not read at open
 
 
@@ -128,9 +130,14 @@ class EptCloud(VoxelOctree):
         check_grid(name, "ept.json schema", [self._scales[a][0] for a in "XYZ"], [self._scales[a][1] for a in "XYZ"])
         cube_min, edge = b[:3], float(np.max(b[3:] - b[:3]))
         lo, hi = tight_bounds(name, "ept.json (boundsConforming, bounds)", tight[:3], tight[3:], cube_min, edge, self.coordinate_step)
-        if self.data_type == "laszip" and any(not scaled for _, scaled in self._extras.values()):
-            node_scaled = self._root_node_scales()
-            self._attr_dtypes.update({a: np.dtype(np.float64) for a, (dim, _) in self._extras.items() if dim in node_scaled})
+        if self.data_type == "laszip" and any(f.scaling is None for f in self._extras.values()):
+            # a dimension the schema does not scale may be scaled by a laszip node's extra-bytes
+            # VLR (floats then): the dtypes are fixed at open, so the root node's says, and every
+            # node is checked against them when decoded (_node_field)
+            root = self._root_node_fields()
+            self._attr_dtypes.update(
+                {a: np.dtype(np.float64) for a, f in self._extras.items() if f.scaling is None and f.name in root and root[f.name].scaling}
+            )
         cloud_meta = {
             "format": "ept",
             "points": n_points,
@@ -171,18 +178,18 @@ class EptCloud(VoxelOctree):
         # the other dimensions (Entwine's OriginId, a source's extra bytes) are attributes under
         # their own names, as the LAS and COPC readers read extra bytes; a laszip node holds
         # them as LAS extra bytes. Scaled where the schema gives a scale or offset (a laszip
-        # node's extra-bytes VLR may scale them too: _decode).
-        self._extras: dict[str, tuple[str, bool]] = {}  # attribute -> (dimension, scaled)
+        # node's extra-bytes VLR may scale them instead: _node_field).
+        self._extras: dict[str, ExtraField] = {}  # attribute -> its dimension as the schema stores and scales it
         for d in schema:
             name = safe_attribute_name(d["name"])
             if d["name"] in NOT_EXTRA or name is None or name in self._attr_dtypes:
                 continue
-            scaled = "scale" in d or "offset" in d
-            self._extras[name] = (d["name"], scaled)
-            self._attr_dtypes[name] = np.dtype(np.float64) if scaled else self.record.fields[d["name"]][0]
+            scale, offset = self._scales[d["name"]] if "scale" in d or "offset" in d else (None, None)
+            self._extras[name] = ExtraField(d["name"], self.record.fields[d["name"]][0], scale, offset)
+            self._attr_dtypes[name] = self._extras[name].value_dtype
 
-    def _root_node_scales(self) -> dict[str, tuple[float, float]]:
-        """``_node_scales`` of the root node's LAZ, read from its head: the attribute dtypes are
+    def _root_node_fields(self) -> dict[str, ExtraField]:
+        """``_node_fields`` of the root node's LAZ, read from its head: the attribute dtypes are
         fixed at open, and a laszip node's extra-bytes VLR may scale a dimension the schema does
         not (floats then). {} where the root node's file is missing (a root of no points) or
         has no readable LAS header (said when a frame decodes it)."""
@@ -194,7 +201,7 @@ class EptCloud(VoxelOctree):
             data_start = int.from_bytes(head[96:100], "little") if len(head) >= 100 else 0
             if len(head) < data_start <= MAX_ROOT_HEAD:  # (VLRs beyond the first read: a long WKT)
                 head += tile.read(len(head), data_start - len(head))  # (the rest only, not its first bytes again)
-            return _node_scales(laspy.LasHeader.read_from(io.BytesIO(head)))
+            return _node_fields(laspy.LasHeader.read_from(io.BytesIO(head)))
         except (InputError, laspy.errors.LaspyException, ValueError):
             return {}
 
@@ -261,8 +268,7 @@ class EptCloud(VoxelOctree):
                 attrs["scan_angle"] = scan_angle_units(rec["ScanAngleRank"])
             if "ClassFlags" in self.record.names:
                 attrs.update({a: (rec["ClassFlags"] >> np.uint8(bit)) & np.uint8(1) for a, bit in CLASS_FLAGS.items()})
-            for a, (dim, scaled) in self._extras.items():
-                attrs[a] = self._extra_values(dim, scaled, rec[dim])
+            attrs.update({a: f.values(rec) for a, f in self._extras.items()})
             return {"xyz": xyz, "rgb": rgb, "attributes": attrs}
         import laspy
 
@@ -290,30 +296,42 @@ class EptCloud(VoxelOctree):
             attrs["scan_angle"] = scan_angle_units(pts["scan_angle_rank"])
         attrs.update({a: np.asarray(pts[a]) for a in CLASS_FLAGS if a in self._attr_dtypes and a in dims})
         # the extra dimensions: the node's LAS extra bytes of the same names (absent ones: zeros),
-        # as stored (laspy's pts[dim] is already scaled where the VLR scales it: scaled twice)
-        node_scaled = _node_scales(header)
-        attrs.update(
-            {a: self._extra_values(dim, scaled, raw[dim], node_scaled.get(dim)) for a, (dim, scaled) in self._extras.items() if dim in dims}
-        )
+        # from the stored records (laspy's pts[dim] is already scaled where the VLR scales it)
+        node_fields, key = _node_fields(header), int(self.keys[index])
+        attrs.update({a: self._node_field(key, a, f, node_fields[f.name]).values(raw) for a, f in self._extras.items() if f.name in node_fields})
         return {"xyz": xyz, "rgb": rgb, "attributes": attrs}
 
-    def _extra_values(self, dim: str, scaled: bool, stored, node_scale: tuple[float, float] | None = None) -> np.ndarray:
-        """An extra dimension's stored values scaled once: by ``node_scale`` (a laszip node's
-        extra-bytes VLR: how its bytes are stored, as laspy and PDAL read them), else by the
-        schema's scale and offset where it gives them (``_schema``), else as stored."""
-        if node_scale is None and not scaled:
-            return np.asarray(stored)
-        scale, offset = node_scale or self._scales[dim]
-        return np.asarray(stored, np.float64) * scale + offset
+    def _node_field(self, key: int, attr: str, schema: ExtraField, node: ExtraField) -> ExtraField:
+        """How a laszip node's extra dimension becomes values: by its extra-bytes VLR's scale and
+        offset where it gives them (how its bytes are stored, as laspy and PDAL read them), else
+        by the schema's. Refused in one line where the node disagrees with the schema so that its
+        values would be wrong: both scale it, differently; the schema scales a type the node does
+        not store (already scaled values, scaled again); or its values do not fit the attribute's
+        dtype, fixed at open (scaled values cast to whole numbers, int32 to uint8, several values a
+        point to one)."""
+        dtype = self._attr_dtypes[attr]
+        field = node if node.scaling else ExtraField(node.name, node.dtype, schema.scale, schema.offset)
+        if node.scaling and schema.scaling and node.scaling != schema.scaling:
+            problem = "is stored * {:g} + {:g} (its extra-bytes VLR), ept.json's schema says * {:g} + {:g}".format(*node.scaling, *schema.scaling)
+        elif schema.scaling and not node.scaling and node.dtype != schema.dtype:
+            problem = f"is stored as {node.dtype}, unscaled, where ept.json's schema scales stored {schema.dtype}"
+        elif not (np.can_cast(field.value_dtype, dtype, "safe") or field.value_dtype.kind == dtype.kind == "f"):
+            scaled = " (scaled by its extra-bytes VLR)" if node.scaling else f" (stored as {node.dtype})"
+            problem = f"gives {field.value_dtype} values{scaled}, where the dataset's {attr!r} is {dtype} (ept.json's schema, its root node)"
+        else:
+            return field
+        raise InputError(f"{self.node_file(key)}: node {voxel_name(key)}'s extra dimension {node.name!r} {problem}: its values would be wrong")
 
 
-def _node_scales(header) -> dict[str, tuple[float, float]]:
-    """{dimension: (scale, offset)} of the extra bytes a LAS header's extra-bytes VLR gives a
-    scale or offset (one value a point; laspy's missing scale is 1, offset 0)."""
+def _node_fields(header) -> dict[str, ExtraField]:
+    """{dimension: ExtraField} of a LAS header's extra bytes, as its extra-bytes VLR stores them
+    (laspy's names, those of its point records; a scale or offset of one value a point only)."""
     out = {}
     for d in header.point_format.extra_dimensions:
-        if d.num_elements == 1 and (d.scales is not None or d.offsets is not None):
-            out[d.name] = (1.0 if d.scales is None else float(d.scales[0]), 0.0 if d.offsets is None else float(d.offsets[0]))
+        single = d.num_elements == 1
+        scale = float(d.scales[0]) if single and d.scales is not None else None
+        offset = float(d.offsets[0]) if single and d.offsets is not None else None
+        out[d.name] = ExtraField(d.name, d.dtype, scale, offset)
     return out
 
 
