@@ -20,6 +20,8 @@ octree's many small files go through ``atomic_open``.
 Every output follows one rule for the folders on its way: ``folder_refusal`` says, before any
 work, what keeps them from being made and written into (a path through a file, a folder not
 writable); ``make_folders`` makes those missing just before the file is written.
+``output_file_refusal`` adds a file's own checks (a folder there, its suffix, an existing file
+without overwrite) and ``refuse`` raises either in one line naming the output.
 
 A bottom-layer module: it imports only the standard library and numpy.
 """
@@ -38,7 +40,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-__all__ = ["append_file", "atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "folder_refusal", "fsync_file", "make_folders", "mapped_npy", "nearest_folder", "reserve", "start_writeback", "temp_files", "write_at", "write_failure", "write_together"]
+__all__ = ["append_file", "atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "folder_refusal", "fsync_file", "make_folders", "mapped_npy", "nearest_folder", "output_file_refusal", "refuse", "reserve", "start_writeback", "suffix_refusal", "temp_files", "write_at", "write_failure", "write_together"]
 
 _IOV_MAX = min(1024, os.sysconf("SC_IOV_MAX")) if hasattr(os, "sysconf") else 16  # buffers per writev
 _SHORT_WRITE = re.compile(r"(\d+) requested and (\d+) written")
@@ -139,6 +141,38 @@ def folder_refusal(folder) -> str | None:
     if not os.access(existing, os.W_OK):
         return f"cannot write into {existing} (permission denied)"
     return None
+
+
+def output_file_refusal(path, overwrite: bool, what: str, suffixes=None, kind: str = "output") -> str | None:
+    """Why the file ``path`` cannot be written as an output, before any work: a folder there
+    ("is a directory, not ``what``": a folder is never replaced by a file), a suffix not in
+    ``suffixes`` (where given; told as an unsupported ``kind`` type), an existing file without
+    ``overwrite``, or what keeps its folders from being made and written into (``folder_refusal``);
+    None where it can. Images, videos and point files check this (``refuse`` says it)."""
+    path = Path(path)
+    if path.is_dir():  # (before the suffix: 'unsupported output type (none)' hid what was wrong)
+        return f"is a directory, not {what}"
+    if suffixes is not None and path.suffix.lower() not in suffixes:
+        return suffix_refusal(path, suffixes, kind)
+    if path.exists() and not overwrite:
+        return "already exists; pass overwrite=True to replace it"
+    return folder_refusal(path.parent)  # (folders missing on the way are made as it is written: make_folders)
+
+
+def suffix_refusal(path, suffixes, kind: str) -> str | None:
+    """Why ``path``'s suffix is not one of ``suffixes`` (an unsupported ``kind`` type, the
+    supported ones listed); None where it is."""
+    suffix = Path(path).suffix
+    if suffix.lower() in suffixes:
+        return None
+    return f"unsupported {kind} type {suffix or '(none)'!r}; use one of {', '.join(sorted(suffixes))}"
+
+
+def refuse(path, refusal: str | None, error: type[Exception]) -> None:
+    """``error`` raised with ``refusal`` (``folder_refusal``'s, ``output_file_refusal``'s) in one
+    line naming ``path``, where there is one."""
+    if refusal is not None:
+        raise error(f"{path}: {refusal}")
 
 
 def make_folders(path) -> list[Path]:

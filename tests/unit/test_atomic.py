@@ -239,3 +239,48 @@ def test_outputs_through_a_link_to_nothing_or_a_missing_folders_dotdot_are_refus
         rc, _, err = cli("convert", autzen_path, "-o", out)
         assert rc == 1 and err == f"error: {out}: {folder_refusal(out.parent)}\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_images_videos_and_point_files_refuse_their_outputs_through_one_check_in_their_own_words(tmp_path):
+    """image_files.check_output, video's path check and io.write.check_point_file_output each
+    wrote out the same checks (a folder there, an existing file, the folders on its way);
+    ``atomic.output_file_refusal`` says them once, each caller naming its own kind of file."""
+    from gigapoint.errors import GigapointError, InputError
+    from gigapoint.io.write import check_point_file_output
+    from gigapoint.render.image_files import check_output
+    from gigapoint.render.video import check_turntable
+
+    (tmp_path / "old.png").write_bytes(b"x")
+    (tmp_path / "dir.mp4").mkdir()
+    (tmp_path / "clip").mkdir()
+    (tmp_path / "afile").write_bytes(b"x")
+    refusal = atomic.output_file_refusal
+    assert refusal(tmp_path / "old.png", False, "an output file") == "already exists; pass overwrite=True to replace it"
+    assert refusal(tmp_path / "old.png", True, "an output file") is None
+    assert refusal(tmp_path / "dir.mp4", True, "a video file") == "is a directory, not a video file"
+    assert refusal(tmp_path / "afile" / "x.png", False, "an output file") == f"{tmp_path / 'afile'} is a file, not a folder"
+    assert refusal(tmp_path / "new" / "x.png", False, "an output file", {".png"}) is None  # (missing folders are made as it is written)
+    assert refusal(tmp_path / "x.PNG", False, "an output file", {".png", ".jpg"}) is None
+    assert refusal(tmp_path / "x.gif", False, "an output file", {".png", ".jpg"}) == "unsupported output type '.gif'; use one of .jpg, .png"
+    assert refusal(tmp_path / "old.png", False, "an output file", {".jpg"}, "image") == "unsupported image type '.png'; use one of .jpg"
+    assert refusal(tmp_path / "clip", False, "an output file", {".jpg"}) == "is a directory, not an output file"  # (a folder first: the suffix hid it)
+    assert atomic.suffix_refusal(tmp_path / "x", {".mp4"}, "video") == "unsupported video type '(none)'; use one of .mp4"
+    atomic.refuse(tmp_path / "x.png", None, InputError)
+    with pytest.raises(InputError, match=r"^/.*x\.png: no room$"):
+        atomic.refuse(tmp_path / "x.png", "no room", InputError)
+
+    cases = [
+        (lambda p: check_output(p, False), GigapointError, "old.png", "already exists; pass overwrite=True to replace it"),
+        (lambda p: check_output(p, False), GigapointError, "dir.mp4", "is a directory, not an output file"),
+        (lambda p: check_output(p, False), GigapointError, "afile/x.png", f"{tmp_path / 'afile'} is a file, not a folder"),
+        (lambda p: check_turntable(p, 2, 64, 48, 30.0), GigapointError, "dir.mp4", "is a directory, not a video file"),
+        (lambda p: check_turntable(p, 2, 64, 48, 30.0), GigapointError, "clip", "unsupported video type '(none)'; use one of .avi, .gif, .mkv, .mov, .mp4, .webm"),
+        (lambda p: check_turntable(p, 2, 64, 48, 30.0), GigapointError, "afile/x.mp4", f"{tmp_path / 'afile'} is a file, not a folder"),
+        (lambda p: check_point_file_output(p, False), InputError, "dir.mp4", "is a directory, not a MP4 file; not replaced"),
+        (lambda p: check_point_file_output(p, False), InputError, "old.png", "already exists; pass overwrite=True to replace it"),
+        (lambda p: check_point_file_output(p, True), InputError, "afile/x.laz", f"{tmp_path / 'afile'} is a file, not a folder"),
+    ]
+    for check, error, name, message in cases:
+        with pytest.raises(error) as refused:
+            check(tmp_path / name)
+        assert str(refused.value) == f"{tmp_path / name}: {message}"

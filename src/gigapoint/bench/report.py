@@ -10,7 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ..atomic import atomic_bytes, folder_refusal, folders_for
+from ..atomic import atomic_bytes, folder_refusal, folders_for, refuse
 from ..errors import GigapointError
 from ..io.demo import MAX_DEMO_POINTS
 from .scene import THROUGHPUT_DEFINITION
@@ -132,9 +132,7 @@ def parse_threads(text) -> int | None:
 def write_results(results: list[dict], path) -> Path:
     """Write the results as JSON (atomically), the folders missing on its way made, and return the path."""
     path = Path(path)
-    refusal = folder_refusal(path.parent)
-    if refusal is not None:
-        raise GigapointError(f"{path}: {refusal}")
+    refuse(path, folder_refusal(path.parent), GigapointError)
     with folders_for(path):
         return atomic_bytes(path, (json.dumps(results, indent=2) + "\n").encode())
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write, folder_refusal, folders_for, write_failure
+from ..atomic import atomic_write, folders_for, output_file_refusal, refuse, write_failure
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, set_cloud_writer
 from ..errors import GigapointWarning, InputError, first_line, warn
@@ -37,13 +37,7 @@ def check_point_file_output(path: Path, overwrite: bool) -> None:
     existing file without ``overwrite``, a path through a file, a folder not writable. Folders
     missing on the way are made as it is written (``write_points``), as they are for an octree's
     folder or a COPC file: save("out/t.copc.laz") made out/, save("out/t.laz") refused it."""
-    if path.is_dir():
-        raise InputError(f"{path}: is a directory, not a {path.suffix[1:].upper()} file; not replaced")
-    if path.exists() and not overwrite:
-        raise InputError(f"{path}: already exists; pass overwrite=True to replace it")
-    refusal = folder_refusal(path.parent)
-    if refusal is not None:
-        raise InputError(f"{path}: {refusal}")
+    refuse(path, output_file_refusal(path, overwrite, f"a {path.suffix[1:].upper()} file; not replaced"), InputError)
 
 
 def write_points(

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_npy, atomic_write, folder_refusal, folders_for
+from ..atomic import atomic_npy, atomic_write, folders_for, output_file_refusal, refuse
 from ..errors import GigapointError
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff", ".bmp"}
@@ -20,15 +20,7 @@ def check_output(path, overwrite: bool, suffixes=IMAGE_SUFFIXES) -> Path:
     --overwrite: cli.PYTHON_HINTS). Folders missing on its way are not refused:
     the writers below and ``atomic.write_together`` make them just before writing."""
     path = Path(path)
-    if path.is_dir():  # (before the suffix: 'unsupported output type (none)' hid what was wrong)
-        raise GigapointError(f"{path}: is a directory, not an output file")
-    if suffixes is not None and path.suffix.lower() not in suffixes:
-        raise GigapointError(f"{path}: unsupported output type {path.suffix or '(none)'!r}; use one of {', '.join(sorted(suffixes))}")
-    if path.exists() and not overwrite:
-        raise GigapointError(f"{path}: already exists; pass overwrite=True to replace it")
-    refusal = folder_refusal(path.parent)  # (folders missing on the way are made as it is written: atomic.make_folders)
-    if refusal is not None:
-        raise GigapointError(f"{path}: {refusal}")
+    refuse(path, output_file_refusal(path, overwrite, "an output file", suffixes), GigapointError)
     return path
 
 

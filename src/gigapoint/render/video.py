@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write, folder_refusal, folders_for
+from ..atomic import atomic_write, folders_for, output_file_refusal, refuse, suffix_refusal
 from ..errors import GigapointError, check_switch, check_whole, is_real, number_text
 from .camera import Camera, auto_view, image_side, sample_points
 from .settings import RenderSettings
@@ -176,15 +176,9 @@ def interpolate_cameras(keys: list[Camera], n_frames: int) -> list[Camera]:
 def _check_path(path, overwrite: bool = False) -> Path:
     check_switch("overwrite", overwrite, "video")
     path = Path(path)
-    if path.suffix.lower() not in VIDEO_SUFFIXES:
-        raise GigapointError(f"{path}: unsupported video type {path.suffix or '(none)'!r}; use one of {', '.join(sorted(VIDEO_SUFFIXES))}")
-    refusal = folder_refusal(path.parent)  # a file there: "Not a directory" only once every frame was drawn
-    if refusal is not None:
-        raise GigapointError(f"{path}: {refusal}")
-    if path.is_dir():
-        raise GigapointError(f"{path}: is a directory, not a video file")
-    if path.exists() and not overwrite:
-        raise GigapointError(f"{path}: already exists; pass overwrite=True to replace it")
+    # before any frame (a path through a file: "Not a directory" came once every frame was drawn);
+    # the suffix first: a folder named without one is told as no video type
+    refuse(path, suffix_refusal(path, VIDEO_SUFFIXES, "video") or output_file_refusal(path, overwrite, "a video file"), GigapointError)
     return path
 
 
