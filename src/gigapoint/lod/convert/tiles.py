@@ -60,7 +60,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import append_file, folder_refusal, folders_for, nearest_folder, same_file, write_failure
+from ...atomic import append_file, folder_refusal, folders_for, nearest_folder, refuse, same_file, write_failure
 from ...core.chunk import PointChunk
 from ...core.chunked import ReadOnce
 from ...core.cloud import check_valid_count
@@ -299,9 +299,7 @@ def _check_output_folder(out: Path, overwrite: bool) -> None:
     in a folder not writable, or holds LAS/LAZ files already without ``overwrite``."""
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: is a file, not a folder for tiles")
-    refusal = folder_refusal(out)  # (folders missing on its way are made as the tiles move in)
-    if refusal is not None:
-        raise InputError(f"{out}: {refusal}")
+    refuse(out, folder_refusal(out), InputError)  # (folders missing on its way are made as the tiles move in)
     held = sorted(p.name for p in out.iterdir() if p.suffix.lower() in (".las", ".laz") and not p.name.startswith(".")) if out.is_dir() else []
     if held and not overwrite:
         shown = ", ".join(held[:3]) + (", ..." if len(held) > 3 else "")
