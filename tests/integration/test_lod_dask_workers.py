@@ -220,7 +220,7 @@ def test_another_clusters_default_limit_follows_its_workers_memory_not_the_drive
         with pytest.raises(ConvertError, match="stopped here"):
             convert([las_writer(tmp_path / "a.las", 1_000)], tmp_path / "oct", client=client)
         assert planned == [(75_000_000, 75_000_000 // 4 // 220)]  # a quarter of 300 MB; partitions by a quarter of that (state.py)
-        assert default_memory_limit(cluster.scheduler_address, say=True) == 75_000_000  # convert(client=ADDRESS) asks them too
+        assert default_memory_limit(client, say=True) == 75_000_000
     said = capsys.readouterr().err
     assert said.startswith("Dask: each task planned for 71 MiB, from worker inproc://") and said.endswith(
         "'s 286 MiB (Dask memory limit) among 1 thread(s) (--memory-limit sets it)\n"
@@ -231,6 +231,37 @@ def test_another_clusters_default_limit_follows_its_workers_memory_not_the_drive
         distributed.Client(cluster) as client,
     ):
         assert default_memory_limit(client) == 1 << 30  # 8 GiB, half of it among 4 threads
+
+
+def test_a_scheduler_address_is_connected_to_once_for_the_memory_plan_and_the_run(monkeypatch, las_writer, tmp_path):
+    """``convert(client=ADDRESS)`` connected to the scheduler twice: once to ask the workers'
+    memory (default_memory_limit), again for the run. Now one Client plans the memory and runs
+    the tasks, and is closed at the end; ``gigapoint convert --dask ADDRESS`` the same."""
+    from gigapoint.cli import main
+    from gigapoint.lod import convert
+    from gigapoint.lod.convert.distributed import DaskPhases
+
+    las = las_writer(tmp_path / "a.las", 1_000)
+    monkeypatch.setattr(distributed.system, "memory_limit", lambda: 8 << 30)  # the worker's machine (this one), without a Dask limit
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, memory_limit=None, processes=False, dashboard_address=":0") as cluster:
+
+        def connections() -> int:
+            return sum(event.get("action") == "add-client" for _, event in cluster.scheduler.get_events("all"))
+
+        at_start = []  # each run's memory limit, the scheduler's connections so far, the run's Client
+        cluster_ready = DaskPhases._cluster_ready
+
+        def seen_at_start(conv):
+            at_start.append((conv.mem, connections(), conv.client))
+            return cluster_ready(conv)
+
+        monkeypatch.setattr(DaskPhases, "_cluster_ready", seen_at_start)
+        assert convert([las], tmp_path / "oct", client=cluster.scheduler_address).points == 1_000
+        assert main(["convert", str(las), "-o", str(tmp_path / "cli"), "--dask", cluster.scheduler_address, "-q"]) == 0
+        after_both = connections()
+    assert [(mem, seen) for mem, seen, _ in at_start] == [(2 << 30, 1), (2 << 30, 2)]  # a quarter of the worker's 8 GiB
+    assert after_both == 2
+    assert [run_client.status for *_, run_client in at_start] == ["closed", "closed"]
 
 
 _SEVEN_WORKERS = {f"tcp://10.0.0.{i}:1": {"memory_limit": (i + 1) * 2**30, "nthreads": 1, "host": f"10.0.0.{i}"} for i in range(7)}

@@ -267,8 +267,9 @@ def convert(
     at once, default ``partition_points``) are tuning knobs, derived from the memory limit.
 
     ``client``: run the conversion as Dask tasks (distributed.py): a ``distributed.Client``, a
-    scheduler address (``"tcp://host:8786"``) or a number of local single-threaded worker
-    processes (a ``LocalCluster``, closed at the end). Workers read the inputs and write into
+    scheduler address (``"tcp://host:8786"``: one connection, for the memory plan and the run,
+    closed at the end) or a number of local single-threaded worker processes (a ``LocalCluster``,
+    closed at the end). Workers read the inputs and write into
     ``out``, which must be a path every worker sees (a shared file system); the octree is the
     one this function makes without a client. ``memory_limit`` is then per worker (default: a
     quarter of the RAM; N local workers: half the RAM among them, at most a quarter each; another
@@ -434,49 +435,52 @@ def convert(
         if client is not None:
             raise ConvertError("convert: a grown tree is converted in this process, not on a Dask client")
         cls = _SeededConverter
-    if client is not None:
-        from .distributed import DaskPhases, default_memory_limit, open_client  # dask is imported only when asked for
-
-        if memory_limit is None:  # (workers on this machine share it; a cluster's say what they have)
-            mem = default_memory_limit(client, say=progress)
-        cls = type("_DaskConverter", (DaskPhases, _Converter), {})
-    conv = cls(
-        inputs,
-        out,
-        sampler,
-        mem,
-        format,
-        max_leaf,
-        partition_points,
-        chunk_size,
-        RichProgress() if progress else NullProgress(),
-        name,
-        encoding,
-        upper_points,
-        source_files,
-        layout,
-        colors,
-        has_color,
-    )
-    conv.on_ready = on_ready
-    conv.point_filter = keep
-    if reprojection is not None:  # every file's CRS checked, the grid of the moved points made: before a point is read
-        reprojection.check_files(conv.paths)
-        conv.reprojection, conv.reprojected_grid = reprojection, output_grid(conv.paths, reprojection)
-        conv.point_filter = reprojection.moved_filter(keep, conv.paths)  # (its clip polygon in the target CRS, where the points are filtered)
-    conv.colorization = open_colorization(colorize, colorize_bits, "convert")  # a raster that cannot be read: said before a point is
-    try:
-        if conv.colorization is not None:  # (the points' CRS is the output's: the target's where reprojected)
-            conv.colorization.check_crs(reprojection.target_wkt() if reprojection is not None else files_crs(conv.paths), files_label(conv.paths))
+    with contextlib.ExitStack() as connection:
         if client is not None:
-            with open_client(client, announce=progress) as conv.client:
-                result = conv.run(overwrite)
-        else:
-            with KeepFreedMemory(), pages.numpy_small_pages():  # both: new pages are the slow part of a conversion here
-                result = conv.run(overwrite)
-    finally:
-        if conv.colorization is not None:
-            conv.colorization.close()
-    if conv.colorization is not None:  # (a resumed run's count: the chunks read before it too, from the state)
-        result.uncolored = int(conv.state.get("uncolored", 0))
-    return result
+            from .distributed import DaskPhases, default_memory_limit, open_client  # dask is imported only when asked for
+
+            if isinstance(client, str):  # a scheduler's address: one connection, for the memory plan and the run (closed at the end)
+                client = connection.enter_context(open_client(client, announce=progress))
+            if memory_limit is None:  # (workers on this machine share it; a cluster's say what they have)
+                mem = default_memory_limit(client, say=progress)
+            cls = type("_DaskConverter", (DaskPhases, _Converter), {})
+        conv = cls(
+            inputs,
+            out,
+            sampler,
+            mem,
+            format,
+            max_leaf,
+            partition_points,
+            chunk_size,
+            RichProgress() if progress else NullProgress(),
+            name,
+            encoding,
+            upper_points,
+            source_files,
+            layout,
+            colors,
+            has_color,
+        )
+        conv.on_ready = on_ready
+        conv.point_filter = keep
+        if reprojection is not None:  # every file's CRS checked, the grid of the moved points made: before a point is read
+            reprojection.check_files(conv.paths)
+            conv.reprojection, conv.reprojected_grid = reprojection, output_grid(conv.paths, reprojection)
+            conv.point_filter = reprojection.moved_filter(keep, conv.paths)  # (its clip polygon in the target CRS, where the points are filtered)
+        conv.colorization = open_colorization(colorize, colorize_bits, "convert")  # a raster that cannot be read: said before a point is
+        try:
+            if conv.colorization is not None:  # (the points' CRS is the output's: the target's where reprojected)
+                conv.colorization.check_crs(reprojection.target_wkt() if reprojection is not None else files_crs(conv.paths), files_label(conv.paths))
+            if client is not None:  # (a Client, the caller's or connected above, is used as it is: not closed here)
+                with open_client(client, announce=progress) as conv.client:
+                    result = conv.run(overwrite)
+            else:
+                with KeepFreedMemory(), pages.numpy_small_pages():  # both: new pages are the slow part of a conversion here
+                    result = conv.run(overwrite)
+        finally:
+            if conv.colorization is not None:
+                conv.colorization.close()
+        if conv.colorization is not None:  # (a resumed run's count: the chunks read before it too, from the state)
+            result.uncolored = int(conv.state.get("uncolored", 0))
+        return result

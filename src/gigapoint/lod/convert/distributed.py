@@ -233,14 +233,12 @@ def default_memory_limit(client, say: bool = False) -> int:
     planning a quarter each held all of a small machine's RAM). A cluster elsewhere (``--dask``, a
     Client of one's own): the same rule for its workers' memory (``_cluster_memory_limit``), not the
     driver's, which says nothing of theirs; the driver's quarter only where no worker has joined yet.
+    ``convert(client=ADDRESS)`` asks them over the Client it runs on (connected once: converter.py).
     ``say``: where a cluster's limit came from, said on stderr."""
     if client in _OWN_WORKERS:  # the CLI's --workers N: open_client started them
         return task_share(chunked.physical_memory(), _OWN_WORKERS[client], MIN_DEFAULT_MEMORY)
     if isinstance(client, int):  # convert(client=N): open_client starts them (and refuses N < 1)
         return task_share(chunked.physical_memory(), max(1, client), MIN_DEFAULT_MEMORY)
-    if isinstance(client, str):  # convert(client=ADDRESS): its workers asked over a connection of this call's
-        with open_client(client) as connected:
-            return default_memory_limit(connected, say)
     found = _cluster_memory_limit(client) if isinstance(client, _distributed().Client) else None  # (open_client refuses others)
     if found is None:
         return parse_memory(None)
