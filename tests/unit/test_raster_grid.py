@@ -5,10 +5,13 @@ for which cell a position is in, where cells' centres lie and how values are rea
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import gigapoint as gp
+from gigapoint.core.chunk import PointChunk
 from gigapoint.io.polygon import clip_polygon_of
 from gigapoint.render import Camera
+from gigapoint.survey import ground as smrf
 from gigapoint.survey.change import surface
 from gigapoint.survey.raster_grid import RasterGrid
 
@@ -72,3 +75,92 @@ def test_the_cells_whose_centre_lies_inside_a_polygon():
     assert sorted(set(rows.tolist())) == [2, 3] and sorted(set(cols.tolist())) == [2, 3, 4]
     image = RasterGrid((0.5, 9.5), 1.0, (10, 10), rows_north=False, measured_from="centre")
     assert (image.centres_inside(square) == over_data.centres_inside(square)[::-1]).all()
+
+
+# A numpy reference of the module's rules (cell coordinates, the cell holding a position, the
+# bilinear read), op for op as the grid computed them before its kernels took them over: the
+# kernels must agree with it bit for bit, on cell edges and beyond the grid too.
+
+
+def _reference_cell_coordinates(grid: RasterGrid, xy: np.ndarray):
+    x0, y0 = grid.origin
+    cols = (xy[:, 0] - x0) / grid.cell
+    rows = (xy[:, 1] - y0) / grid.cell if grid.rows_north else (y0 - xy[:, 1]) / grid.cell
+    return (cols + 0.5, rows + 0.5) if grid.measured_from == "centre" else (cols, rows)
+
+
+def _reference_cells(grid: RasterGrid, xy: np.ndarray):
+    cols, rows = _reference_cell_coordinates(grid, xy)
+    return np.clip(np.floor(rows), 0, grid.shape[0] - 1).astype(np.intp), np.clip(np.floor(cols), 0, grid.shape[1] - 1).astype(np.intp)
+
+
+def _reference_bilinear(grid: RasterGrid, raster: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    cols, rows = _reference_cell_coordinates(grid, xy)
+    x = np.clip(cols - 0.5, 0.0, grid.shape[1] - 1.0)  # from the first centre, the edges carried on
+    y = np.clip(rows - 0.5, 0.0, grid.shape[0] - 1.0)
+    c0, r0 = np.minimum(x.astype(np.intp), grid.shape[1] - 1), np.minimum(y.astype(np.intp), grid.shape[0] - 1)
+    c1, r1 = np.minimum(c0 + 1, grid.shape[1] - 1), np.minimum(r0 + 1, grid.shape[0] - 1)
+    tx, ty = x - c0, y - r0
+    top = raster[r0, c0] * (1 - tx) + raster[r0, c1] * tx
+    bottom = raster[r1, c0] * (1 - tx) + raster[r1, c1] * tx
+    return top * (1 - ty) + bottom * ty
+
+
+#: a 0.3 grid (its edges round: x0 + k x 0.3 falls either side of k) laid both ways
+_GRIDS = {
+    "over data": RasterGrid.over((619199.1, 5000000.2), (619199.1 + 0.3 * 23.5, 5000000.2 + 0.3 * 17.5), 0.3),
+    "camera": RasterGrid((619199.25, 5000100.15), 0.3, (18, 24), rows_north=False, measured_from="centre"),
+}
+
+
+def _positions_on_edges_centres_and_beyond(grid: RasterGrid, rng) -> np.ndarray:
+    """(n, 3) random positions over the grid and 3 cells beyond it, and positions whose x or y
+    lies on a cell's edge or centre (the grid's outer edges among them)."""
+    left, bottom, right, top = grid.bounds
+    margin = 3 * grid.cell
+    spread = rng.uniform((left - margin, bottom - margin), (right + margin, top + margin), (4000, 2))
+    # x and y on edges and centres: the corner of cell (0, 0) plus k half cells, k from 2 cells before the grid to 2 after
+    half_steps = np.arange(-4, 2 * max(grid.shape) + 5) * 0.5 * grid.cell
+    x_lines, y_lines = left + half_steps, bottom + half_steps
+    on_x = np.column_stack([rng.choice(x_lines, 2000), rng.uniform(bottom - margin, top + margin, 2000)])
+    on_y = np.column_stack([rng.uniform(left - margin, right + margin, 2000), rng.choice(y_lines, 2000)])
+    on_both = np.column_stack([rng.choice(x_lines, 2000), rng.choice(y_lines, 2000)])
+    xy = np.vstack([spread, on_x, on_y, on_both])
+    return np.column_stack([xy, rng.uniform(-1.0, 1.0, len(xy))])
+
+
+@pytest.mark.parametrize("kind", list(_GRIDS))
+def test_the_kernels_cells_and_bilinear_reads_are_the_numpy_rules_bit_for_bit(kind):
+    grid = _GRIDS[kind]
+    rng = np.random.default_rng(7)
+    xyz = _positions_on_edges_centres_and_beyond(grid, rng)
+    raster = rng.normal(100.0, 10.0, grid.shape)
+    rows, cols = grid.cells_of(xyz)
+    expected_rows, expected_cols = _reference_cells(grid, xyz)
+    assert np.array_equal(rows, expected_rows) and np.array_equal(cols, expected_cols)
+    assert {0, grid.shape[0] - 1} <= set(rows.tolist()) and {0, grid.shape[1] - 1} <= set(cols.tolist())
+    assert np.array_equal(grid.bilinear(raster, xyz), _reference_bilinear(grid, raster, xyz))
+    tolerance = rng.uniform(0.0, 2.0, grid.shape)
+    read, of_cell = grid.bilinear_and_cell_values(raster, tolerance, xyz)
+    assert np.array_equal(read, _reference_bilinear(grid, raster, xyz))
+    assert np.array_equal(of_cell, tolerance[expected_rows, expected_cols])
+
+
+def test_ground_classification_reads_the_model_and_the_tolerance_of_each_points_cell_as_the_numpy_rules():
+    """``_classified`` on points on cell edges and beyond the grid, each within a random
+    tolerance of a cell's: 2 exactly where |z - the bilinear model| is within its own cell's."""
+    grid = _GRIDS["over data"]
+    rng = np.random.default_rng(11)
+    xyz = _positions_on_edges_centres_and_beyond(grid, rng)
+    dem = rng.normal(100.0, 10.0, grid.shape)
+    tolerance = rng.uniform(0.0, 2.0, grid.shape)
+    xyz[:, 2] = _reference_bilinear(grid, dem, xyz) + rng.uniform(-2.0, 2.0, len(xyz))  # near some cells' tolerance, beyond others'
+    classification = np.where(rng.random(len(xyz)) < 0.05, 7, 0).astype(np.uint8)  # a little noise, kept as it is
+    counts = {smrf.GROUND: 0, smrf.NON_GROUND: 0, "noise": 0}
+    classes = smrf._classified(PointChunk(xyz, attributes={"classification": classification}), grid, dem, tolerance, counts).attributes["classification"]
+    rows, cols = _reference_cells(grid, xyz)
+    near = np.abs(xyz[:, 2] - _reference_bilinear(grid, dem, xyz)) <= tolerance[rows, cols]
+    expected = np.where(classification == 7, 7, np.where(near, 2, 1))
+    assert np.array_equal(classes, expected)
+    assert counts == {2: int((expected == 2).sum()), 1: int((expected == 1).sum()), "noise": int((expected == 7).sum())}
+    assert 0.3 < counts[2] / len(xyz) < 0.7  # both classes well represented: a wrong cell shows

@@ -236,8 +236,8 @@ def _classified(chunk, grid: RasterGrid, dem: np.ndarray, tolerance: np.ndarray,
 
     old = chunk.attributes.get("classification")
     noise = np.isin(old, NOISE_CLASSES) if old is not None else np.zeros(len(chunk), bool)
-    rows, cols = grid.cells_of(chunk.xyz)
-    near = np.abs(chunk.xyz[:, 2] - grid.bilinear(dem, chunk.xyz)) <= tolerance[rows, cols]
+    model, allowed = grid.bilinear_and_cell_values(dem, tolerance, chunk.xyz)
+    near = np.abs(chunk.xyz[:, 2] - model) <= allowed
     ground = near & _ground_candidates(chunk)
     classes = np.where(noise, old if old is not None else 0, np.where(ground, GROUND, NON_GROUND))
     counts[GROUND] += int(ground.sum())
