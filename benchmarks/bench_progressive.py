@@ -244,16 +244,39 @@ def bench_load(n: int, rounds: int) -> None:
             print(f"load {suffix.upper()} {n / 1e6:g} M (medians of {rounds}): {cols}")
 
 
-# its peak RSS through gigapoint.bench.run_measured (this process is large: a child's own
-# ru_maxrss would report this one's)
+# one progressive load in a process of its own (load_alone; bench_slices.py's too): its seconds,
+# the octree's bytes when the last point is in (before trim) and once loaded; argv[2], where
+# given, the loader's slice size
 _LOAD_ALONE = """
 import sys, time
 import gigapoint as gp
+from gigapoint.lod.progressive import ProgressiveOctree, loader
+if len(sys.argv) > 2:
+    loader.SLICE_POINTS = int(sys.argv[2])
+filled, trim = {}, ProgressiveOctree.trim
+def recorded(octree):
+    filled["bytes"] = octree.nbytes
+    trim(octree)
+ProgressiveOctree.trim = recorded
 t = time.perf_counter()
 with gp.open(sys.argv[1], progressive=True) as cloud:
     cloud.wait()
-    print(f"{time.perf_counter() - t:.2f}")
+    print(f"{time.perf_counter() - t:.2f} {filled['bytes']} {cloud.nbytes}")
 """
+
+
+def load_alone(path: Path, slice_points: int | None = None) -> tuple[float, int, int, int]:
+    """``path`` loaded progressively to completion in a process of its own, with the loader's
+    ``SLICE_POINTS`` = ``slice_points`` (None: its default): (seconds, the octree's bytes when
+    the last point is in, its bytes once loaded, the process's peak RSS). The peak is taken
+    through gigapoint.bench.run_measured: this process is large, and a child's own ru_maxrss
+    would report this one's."""
+    slices = [] if slice_points is None else [str(slice_points)]
+    code, out, err, _, peak = run_measured([sys.executable, "-c", _LOAD_ALONE, str(path), *slices])
+    if code != 0:
+        raise SystemExit(f"the lone load failed: {err.decode()[-2000:]}")
+    seconds, filled, held = out.decode().split()
+    return float(seconds), int(filled), int(held), peak
 
 
 def bench_memory(n: int) -> None:
@@ -282,10 +305,8 @@ def bench_memory(n: int) -> None:
             ProgressiveOctree.trim = trim
         plain = open_cloud(path, colors="rgba").nbytes / n
         default = open_cloud(path).nbytes / n
-        code, out, err, _, peak = run_measured([sys.executable, "-c", _LOAD_ALONE, str(path)])
-        if code != 0:
-            raise SystemExit(f"the lone load failed: {err.decode()[-2000:]}")
-        alone = f"{float(out.decode().split()[-1]):.2f} s, peak RSS {peak / 2**20:.0f} MiB (the process's first load)"
+        seconds, _, _, peak = load_alone(path)
+        alone = f"{seconds:.2f} s, peak RSS {peak / 2**20:.0f} MiB (the process's first load)"
     total = sum(mem.values()) / n
     parts = ", ".join(f"{k} {v / n:.1f}" for k, v in mem.items() if v)
     while_filling = ", ".join(f"{k} {v / n:.1f}" for k, v in filled.items() if v)

@@ -10,7 +10,7 @@ frame is drawn) against a progressive load of the town as LAS and LAZ (issue #18
   wall seconds, CPU seconds (this process and the LAZ decoding child of each file, once waited
   for; not the shared child that decodes files up to ``laz_process.SHARED_MAX`` whole: steadier
   than wall time on a shared host), insertions a load.
-- ``memory``: each slice size's load in a process of its own (``run_measured``), alternating:
+- ``memory``: each slice size's load in a process of its own (``bench_progressive.load_alone``), alternating:
   peak RSS, the octree's bytes when the last point is in (before ``trim``: what the memory limit
   counts) and once loaded.
 
@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import resource
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -31,25 +30,8 @@ from pathlib import Path
 import bench_progressive  # a sibling script: its folder is sys.path[0]
 
 import gigapoint as gp
-from gigapoint.bench import parse_count, run_measured
+from gigapoint.bench import parse_count
 from gigapoint.lod.progressive import ProgressiveOctree, loader
-
-# one load in a process of its own: its time, the octree's bytes when the last point is in and once loaded
-_LOAD_ALONE = """
-import sys, time
-import gigapoint as gp
-from gigapoint.lod.progressive import ProgressiveOctree, loader
-loader.SLICE_POINTS = int(sys.argv[2])
-filled, trim = {}, ProgressiveOctree.trim
-def recorded(octree):
-    filled["bytes"] = octree.nbytes
-    trim(octree)
-ProgressiveOctree.trim = recorded
-t = time.perf_counter()
-with gp.open(sys.argv[1], progressive=True) as cloud:
-    cloud.wait()
-    print(f"{time.perf_counter() - t:.2f} {filled['bytes']} {cloud.nbytes}")
-"""
 
 
 def town_files(folder: Path, n: int) -> tuple[Path, Path]:
@@ -115,12 +97,9 @@ def bench_memory(path: Path, n: int, sizes: list[int], rounds: int) -> None:
     got = {s: [] for s in sizes}
     for r in range(rounds):
         for size in sizes if r % 2 == 0 else reversed(sizes):
-            code, out, err, _, peak = run_measured([sys.executable, "-c", _LOAD_ALONE, str(path), str(size)])
-            if code != 0:
-                raise SystemExit(f"the lone load failed: {err.decode()[-2000:]}")
-            seconds, filled, held = out.decode().split()
-            got[size].append((int(filled), int(held), peak))
-            print(f"  round {r}, slices of {size / 1e6:g} M: {seconds} s, peak RSS {peak / 2**20:.0f} MiB", flush=True)
+            seconds, filled, held, peak = bench_progressive.load_alone(path, size)
+            got[size].append((filled, held, peak))
+            print(f"  round {r}, slices of {size / 1e6:g} M: {seconds:.2f} s, peak RSS {peak / 2**20:.0f} MiB", flush=True)
     for size, runs in got.items():
         filled, held, peak = (statistics.median(run[k] for run in runs) for k in range(3))
         print(f"memory, slices of {size / 1e6:g} M: peak RSS {peak / 2**20:.0f} MiB (of {', '.join(f'{run[2] / 2**20:.0f}' for run in runs)}), "
