@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 import re
 import threading
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,8 +18,6 @@ from gigapoint.errors import EmptyCloudError, GigapointWarning, InputError
 from gigapoint.lod.octree_dir import ConvertError, OutputExistsError
 from gigapoint.lod.progressive import ProgressiveOctree
 
-AUTZEN = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "autzen_trim.laz"
-needs_autzen = pytest.mark.skipif(not AUTZEN.exists(), reason="autzen_trim.laz not present")
 INVALID = "NaN, inf or beyond ±1e+12"
 
 
@@ -42,10 +39,9 @@ def files(tmp_path_factory, las_writer):
 
 
 @pytest.fixture
-def cloud(files):
+def cloud(files, loaded):
     """a.las loaded whole (20 000 points, a LAS file's attributes), closed after the test."""
-    c = gp.open(files["a"], progressive=True)
-    assert c.wait(timeout=120)
+    c = loaded(files["a"])
     yield c
     c.close()
 
@@ -289,11 +285,10 @@ def test_a_closed_cloud_renders_the_background_and_says_it_may_be_closed(cloud):
     assert (image == image[0, 0]).all()
 
 
-@needs_autzen
 @pytest.mark.timeout(120)
-def test_progress_only_grows_from_0_to_1(files):
+def test_progress_only_grows_from_0_to_1(autzen_path, files):
     with pytest.warns(GigapointWarning, match="names no CRS"):  # (a.las names none)
-        c = gp.open(AUTZEN, files["a"], progressive=True)
+        c = gp.open(autzen_path, files["a"], progressive=True)
     seen = [c.progress]
     while not c.wait(timeout=0.001):
         seen.append(c.progress)
@@ -329,27 +324,25 @@ def test_an_error_in_the_with_block_closes_the_cloud_and_propagates():
     assert c.closed and not c.loading and _loader_threads() == []
 
 
-@needs_autzen
 @pytest.mark.timeout(120)
-def test_save_while_loading_waits_for_every_point(tmp_path):
+def test_save_while_loading_waits_for_every_point(autzen_path, tmp_path):
     """save() right after the open waits for the load (its docstring says so), then writes all of it."""
-    c = gp.open(AUTZEN, progressive=True)
+    c = gp.open(autzen_path, progressive=True)
     assert c.save(tmp_path / "all.laz").points == 110_000 and not c.loading and c.progress == 1.0
     assert gp.open(tmp_path / "all.laz").n_points == 110_000
     c.close()
 
 
-@needs_autzen
 @pytest.mark.timeout(120)
-def test_points_added_while_files_load_keep_the_files_attributes():
+def test_points_added_while_files_load_keep_the_files_attributes(autzen_path):
     """An add() before the loader's first points fixed the attribute set as the add's (none): each
     of the file's 13 attributes was dropped, with a warning that they were not in every file. The
     add waits for the files' first points, which fix the set; its points get 0 for each."""
     mine = np.array([[637_000.0, 851_000.0, 400.0]])
-    c = gp.open(AUTZEN, progressive=True)
+    c = gp.open(autzen_path, progressive=True)
     assert c.add(mine) == 1
     assert c.wait(timeout=120) and c.n_points == 110_001 and c.warnings == ()
-    assert list(c.attribute_names) == gp.open(AUTZEN).attribute_names and "intensity" in c.attribute_names
+    assert list(c.attribute_names) == gp.open(autzen_path).attribute_names and "intensity" in c.attribute_names
     found = [chunk.attributes["intensity"][hit] for chunk in c.chunks() for hit in np.flatnonzero(np.all(np.abs(chunk.xyz - mine) < 1e-3, axis=1))]
     assert found == [0]
     c.close()
