@@ -255,14 +255,17 @@ def test_the_arena_holds_attributes_in_their_range(tmp_path):
     for a, (lo, hi) in ranges.items():
         values = oc.decode_all(a)
         assert lo <= int(values.min()) and int(values.max()) <= hi, a
-    compact = oc.new_arena(20_000)
+    # room for every node: neither arena is replaced, so each frame is drawn from the one set here
+    compact = oc.new_arena(oc.n_points + len(oc.nodes) * ARENA_CHUNK)
     words = Arena(compact.n_points, oc.name, oc.bounds, oc._attribute_dtypes())
     words.source_scale = compact.source_scale  # (new_arena's: point_info rounds to the octree's source grid)
     held = {a: compact.attributes.held_dtype(a) for a in compact.attributes}
     assert held["intensity"] == "uint16 in uint8 + 1000" and held["point_source_id"] == "uint16 constant 7326"
     assert held["depth"].startswith("int32 in uint16 - ") and held["gps_time"] == "float64"
     assert compact.attributes.nbytes < words.attributes.nbytes
-    s = RenderSettings(backend="cpu", size_mode="fixed", point_budget=12_000, lod_threshold_px=10.0)
+    # intensity's range given: the automatic one is taken over every slot of the arena, and the
+    # slots no node fills read 0 in the words arena, 1000 (its range's low end) in the compact one
+    s = RenderSettings(backend="cpu", size_mode="fixed", point_budget=12_000, lod_threshold_px=10.0, intensity_range=(1000, 1100))
     for make in CAMS:
         cam = make(oc.bounds)
         for mode in ("intensity", "classification"):
@@ -270,6 +273,7 @@ def test_the_arena_holds_attributes_in_their_range(tmp_path):
             for arena in (compact, words):
                 oc.arena = arena
                 frames.append(render_frame(oc, cam, s.replace(color_mode=mode)))
+                assert oc.arena is arena
             np.testing.assert_array_equal(frames[0].image, frames[1].image)
         for nd, slots in compact.resident.items():
             count = int(oc.nodes["count"][nd])

@@ -480,16 +480,6 @@ class Arena:
         kept[new_index[: len(self.kept)]] = self.kept
         self.kept = kept
 
-    def holds_like(self, other: Arena) -> bool:
-        """Whether ``other`` holds nodes in this arena's layout (words or compact, colours,
-        each attribute's stored form): what ``take_over`` copies slot for slot."""
-        return (
-            (self.med is None) == (other.med is None)
-            and self.color.dtype == other.color.dtype
-            and (self.med is not None or self.room == other.room)
-            and {a: self.attributes.held_dtype(a) for a in self.attributes} == {a: other.attributes.held_dtype(a) for a in other.attributes}
-        )
-
     def take_over(self, old: Arena) -> None:
         """Hold what ``old`` held, an arena of the same layout and no more slots that this one
         replaces (too small for a frame): its slots as they are (a slot's place in the buffers
@@ -841,10 +831,8 @@ class OctreeCloud:
         """A new arena of ``points`` points in place of the octree's (more than it has), holding
         what it held (``Arena.take_over``)."""
         arena = self.new_arena(points)
-        if self.arena is not None and arena.holds_like(self.arena):
+        if self.arena is not None:
             arena.take_over(self.arena)
-        elif self.arena is not None:  # (one set by hand in another layout: empty, loading through its filter)
-            arena.show(self.arena.keep)
         self.arena = arena
         return arena
 
