@@ -128,6 +128,17 @@ def cli(capsys):
     return run
 
 
+@pytest.fixture(scope="module")
+def thread_client():
+    """A Dask Client of a LocalCluster of one two-thread worker in this process, a module's, for
+    conversions on Dask that need no worker processes (a test that kills, spoils or rescales its
+    workers starts a cluster of its own)."""
+    distributed = pytest.importorskip("distributed")
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=":0", silence_logs=40)
+    with cluster, distributed.Client(cluster) as client:
+        yield client
+
+
 @pytest.fixture(scope="session")
 def loaded():
     """``loaded(*paths)``: ``gp.open(*paths, progressive=True)`` once its loader is done (it

@@ -83,13 +83,10 @@ def test_a_conversion_resumes_only_under_the_same_filter(autzen_path, autzen, tm
     assert gp.open(out).n_points == 83_893
 
 
-def test_a_dask_conversion_filters_in_its_read_tasks(autzen_path, autzen, tmp_path):
-    distributed = pytest.importorskip("distributed")
+def test_a_dask_conversion_filters_in_its_read_tasks(autzen_path, autzen, thread_client, tmp_path):
     xyz, classification = autzen
-    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0", silence_logs=40)
-    with cluster, distributed.Client(cluster) as client:
-        res = convert(autzen_path, tmp_path / "oct", clip=CLIP, classes=[1], client=client, chunk_size=20_000)
-        assert res.points == gp.open(tmp_path / "oct").n_points == np.count_nonzero(_in_clip(xyz) & (classification == 1))
-        with pytest.raises(EmptyCloudError) as err:
-            convert(autzen_path, tmp_path / "none", classes=[6], client=client, chunk_size=20_000)
+    res = convert(autzen_path, tmp_path / "oct", clip=CLIP, classes=[1], client=thread_client, chunk_size=20_000)
+    assert res.points == gp.open(tmp_path / "oct").n_points == np.count_nonzero(_in_clip(xyz) & (classification == 1))
+    with pytest.raises(EmptyCloudError) as err:
+        convert(autzen_path, tmp_path / "none", classes=[6], client=thread_client, chunk_size=20_000)
     assert str(err.value) == f"{autzen_path}: no point passes the filter (classes 6): 110,000 points read"

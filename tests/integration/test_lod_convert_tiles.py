@@ -126,24 +126,20 @@ def test_a_damaged_tile_among_joined_ones_is_named(tiles, tmp_path, out_of_core)
     assert (st["chunks"], st["points"], st["stopped_by"].split(":")[0]) == (2, 10 * 150, str(cut))
 
 
-def test_dask_batches_small_tiles_into_few_tasks_with_the_same_output(tiles, tmp_path, monkeypatch):
+def test_dask_batches_small_tiles_into_few_tasks_with_the_same_output(tiles, thread_client, tmp_path, monkeypatch):
     """A Dask task a tile cost ~39 ms: read tasks are batched up to a chunk's points, and so the
     count and distribute tasks that follow them."""
-    distributed = pytest.importorskip("distributed")
     from gigapoint.lod.convert.distributed import DaskPhases
 
     runs = []
     real = DaskPhases._run
     monkeypatch.setattr(DaskPhases, "_run", lambda self, kind, calls, *a, **k: (runs.append((kind, len(calls))), real(self, kind, calls, *a, **k))[1])
-    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=":0", silence_logs=40)
     d = _copy(tiles, tmp_path / "in")
     cut = d / "t10.las"
     cut.write_bytes(cut.read_bytes()[:-1000])
-    with distributed.Client(cluster) as client:
-        res = convert(tiles, tmp_path / "dask", client=client, **OPTS)
-        with pytest.raises(InputError) as err:  # a damaged tile in a batch: named, in one line
-            convert(d, tmp_path / "bad", client=client, **OPTS)
-    cluster.close()
+    res = convert(tiles, tmp_path / "dask", client=thread_client, **OPTS)
+    with pytest.raises(InputError) as err:  # a damaged tile in a batch: named, in one line
+        convert(d, tmp_path / "bad", client=thread_client, **OPTS)
     assert str(err.value).startswith(f"{cut}: truncated LAS file: the header claims 150 points") and "\n" not in str(err.value)
     convert(tiles, tmp_path / "one", **OPTS)
     assert res.points == N_TILES * 150

@@ -67,6 +67,24 @@ def client():
     cluster.close()
 
 
+@pytest.fixture
+def own_cluster():
+    """``own_cluster(**options)``: a Client of a fresh LocalCluster (one single-threaded worker
+    process unless ``options`` say otherwise), closed after the test: for a test that kills,
+    spoils or rescales its workers, which the module's ``client`` must not see."""
+    started = []
+
+    def start(**options):
+        cluster = distributed.LocalCluster(**{"n_workers": 1, "threads_per_worker": 1, "processes": True, "dashboard_address": ":0", "silence_logs": 50, **options})
+        started.append((cluster, distributed.Client(cluster)))
+        return started[-1][1]
+
+    yield start
+    for cluster, c in started:
+        c.close()
+        cluster.close()
+
+
 @pytest.fixture(scope="module")
 def reference(inputs, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("dask_ref") / "oct"
@@ -178,22 +196,17 @@ def test_a_worker_killed_mid_task_is_retried_and_the_output_is_the_same(inputs, 
     _assert_identical(reference, out)
 
 
-def test_a_task_whose_worker_always_dies_fails_the_run_with_one_line(inputs, tmp_path):
+def test_a_task_whose_worker_always_dies_fails_the_run_with_one_line(inputs, own_cluster, tmp_path):
     """allowed-failures = 0: the first worker death of a task is its last (KilledWorker)."""
     import cloudpickle
     import dask
 
     cloudpickle.register_pickle_by_value(sys.modules[__name__])
     with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
-        cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=50)
-    c = distributed.Client(cluster)
-    try:
-        _install(c, "task_started", "count", tmp_path / "killed")
-        with pytest.raises(ConvertError, match=r"oct: the count task t\d+ failed because its worker died every time it ran") as err:
-            convert(inputs[2:], tmp_path / "oct", client=c, **OPTS)
-    finally:
-        c.close()
-        cluster.close()
+        c = own_cluster()
+    _install(c, "task_started", "count", tmp_path / "killed")
+    with pytest.raises(ConvertError, match=r"oct: the count task t\d+ failed because its worker died every time it ran") as err:
+        convert(inputs[2:], tmp_path / "oct", client=c, **OPTS)
     assert "\n" not in str(err.value) and (tmp_path / "killed").exists()
     assert not OctreeDir(tmp_path / "oct").complete and OctreeDir(tmp_path / "oct").read_state()["phase"] == "count"
 
@@ -414,18 +427,15 @@ def test_a_port_where_no_scheduler_answers_is_a_one_line_error_in_time(inputs, t
     assert "does not answer as a Dask scheduler within 1 s (the dashboard's port?" in err and err.count("\n") == 1, err
 
 
-def test_a_scheduler_without_workers_is_a_one_line_error(inputs, tmp_path, monkeypatch):
+def test_a_scheduler_without_workers_is_a_one_line_error(inputs, own_cluster, tmp_path, monkeypatch):
     from gigapoint.lod.convert import distributed as gd
 
     monkeypatch.setattr(gd, "WORKER_WAIT_S", 1.0)
-    cluster = distributed.LocalCluster(n_workers=0, processes=True, dashboard_address=":0", silence_logs=40)
-    try:
-        t = time.perf_counter()
-        with pytest.raises(ConvertError, match=r"tcp://\S+: no Dask worker joined the scheduler within 1 s"):
-            convert(inputs[:1], tmp_path / "oct", client=cluster.scheduler_address, **OPTS)
-        assert time.perf_counter() - t < 30
-    finally:
-        cluster.close()
+    address = own_cluster(n_workers=0, silence_logs=40).cluster.scheduler_address
+    t = time.perf_counter()
+    with pytest.raises(ConvertError, match=r"tcp://\S+: no Dask worker joined the scheduler within 1 s"):
+        convert(inputs[:1], tmp_path / "oct", client=address, **OPTS)
+    assert time.perf_counter() - t < 30
     assert not OctreeDir(tmp_path / "oct").complete
 
 
@@ -539,16 +549,6 @@ def test_las_point_formats_0_5_and_6_10_keep_one_scan_angle_as_in_one_process(cl
     assert "scan_angle" in gp.open(tmp_path / "dask").attribute_names
 
 
-@pytest.fixture(scope="module")
-def thread_client():
-    """A cluster of threads in this process, for what does not need worker processes."""
-    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=":0", silence_logs=40)
-    c = distributed.Client(cluster)
-    yield c
-    c.close()
-    cluster.close()
-
-
 def test_a_rerun_waits_for_a_task_its_interrupted_driver_left_running(thread_client, tmp_path, las_writer, monkeypatch):
     """A driver's Ctrl+C (or death) releases its tasks: the scheduler forgets a running one at once,
     but the worker runs it to its end, writing into OUT. A re-run must not start beside it."""
@@ -630,23 +630,18 @@ def _no_gigapoint() -> None:
     sys.meta_path.insert(0, NotInstalled())
 
 
-def test_a_worker_without_gigapoint_is_named_in_one_line(las_writer, tmp_path):
+def test_a_worker_without_gigapoint_is_named_in_one_line(las_writer, own_cluster, tmp_path):
     """A worker that cannot import gigapoint failed the driver's check with Dask's failure to
     unpickle the check ('failed the driver's check (ModuleNotFoundError("No module named ...'))."""
     import cloudpickle
 
     cloudpickle.register_pickle_by_value(sys.modules[__name__])  # the spoiler travels to the worker by value
     out = tmp_path / "oct"
-    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=50)
-    c = distributed.Client(cluster)
-    try:
-        c.run(_no_gigapoint)
-        (worker,) = c.scheduler_info()["workers"]
-        with pytest.raises(ConvertError) as err:
-            convert([las_writer(tmp_path / "a.las", 2_000)], out, client=c)
-    finally:
-        c.close()
-        cluster.close()
+    c = own_cluster()
+    c.run(_no_gigapoint)
+    (worker,) = c.scheduler_info()["workers"]
+    with pytest.raises(ConvertError) as err:
+        convert([las_writer(tmp_path / "a.las", 2_000)], out, client=c)
     assert re.fullmatch(
         rf"{re.escape(str(out))}: Dask worker {re.escape(worker)} cannot import gigapoint \(No module named 'gigapoint'\): "
         r"install gigapoint \S+ there \(the driver's version\+digest of the source\)",
@@ -662,7 +657,7 @@ def test_a_worker_without_gigapoint_is_named_in_one_line(las_writer, tmp_path):
     ],
     ids=["other code", "cannot write OUT"],
 )
-def test_a_worker_that_joins_after_the_check_is_checked_before_its_first_task(las_writer, tmp_path, monkeypatch, spoil, problem):
+def test_a_worker_that_joins_after_the_check_is_checked_before_its_first_task(las_writer, own_cluster, tmp_path, monkeypatch, spoil, problem):
     """The driver checks the workers there when the run starts (code, OUT seen and writable); one
     that joins later (an autoscaling cluster) ran its tasks unchecked. Here worker A passes the
     check, then B joins, spoilt, and A leaves: B's first task says why it cannot run, in one line."""
@@ -673,29 +668,22 @@ def test_a_worker_that_joins_after_the_check_is_checked_before_its_first_task(la
     cloudpickle.register_pickle_by_value(sys.modules[__name__])  # the spoilers travel to the worker by value
     src = las_writer(tmp_path / "a.las", 20_000)
     out = tmp_path / "oct"
-    cluster = distributed.LocalCluster(
-        n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0", env={"NUMBA_NUM_THREADS": "1"}, silence_logs=40
-    )
-    c = distributed.Client(cluster)
+    c = own_cluster(env={"NUMBA_NUM_THREADS": "1"}, silence_logs=40)
     checked = DaskPhases.output_ready
     late = []
 
     def output_ready_then_a_worker_joins(conv):
         checked(conv)
         (first,) = c.scheduler_info()["workers"]
-        cluster.scale(2)
+        c.cluster.scale(2)
         c.wait_for_workers(2, timeout=60)
         late.extend(w for w in c.scheduler_info()["workers"] if w != first)
         c.run(spoil, workers=late)
         c.retire_workers([first], close_workers=True)
 
     monkeypatch.setattr(DaskPhases, "output_ready", output_ready_then_a_worker_joins)
-    try:
-        with pytest.raises(ConvertError) as err:
-            convert([src], out, client=c, max_leaf=3_000)
-    finally:
-        c.close()
-        cluster.close()
+    with pytest.raises(ConvertError) as err:
+        convert([src], out, client=c, max_leaf=3_000)
     msg = str(err.value)
     assert re.fullmatch(f"{re.escape(str(out))}: Dask worker {re.escape(late[0])} {problem}.*", msg), msg
     assert "\n" not in msg
