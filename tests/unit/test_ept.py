@@ -98,7 +98,8 @@ def write_ept(
             las.red, las.green, las.blue = scene["rgb"][idx].T
             las.intensity, las.classification = scene["attrs"]["intensity"][idx], scene["attrs"]["classification"][idx]
             for d, v in extra:
-                las.points.array[d["name"]] = v[idx]  # as stored (las[name] = ... unscales by the VLR's scale)
+                field = las.points.array[d["name"]]  # as stored (las[name] = ... unscales by the VLR's scale)
+                field[...] = v[idx].reshape(-1, *(1,) * (field.ndim - 1))  # (several values a point: each of them the value)
             las.write(str(folder / "ept-data" / f"{name}.laz"))
     keys = set(nodes)
     level = {k: (k.bit_length() - 1) // 3 for k in keys}
@@ -514,8 +515,10 @@ def test_ept_extra_dimensions_of_each_type(tmp_path, data_type):
             r"gives float64 values \(scaled by its extra-bytes VLR\), where the dataset's 'Reflectance' is int16",
         ),
         ({"type": "unsigned", "size": 1}, (np.float32, None), r"gives float32 values \(stored as float32\), where the dataset's 'Reflectance' is uint8"),
+        # (an array type: its dtype was said as numpy's, "gives ('<i2', (3,)) values (stored as ('<i2', (3,)))")
+        ({"type": "signed", "size": 2}, ("3i2", None), r"holds 3 values a point \(3 x int16\), where ept\.json's schema gives it one \(int16\)"),
     ],
-    ids=["scaled-otherwise", "stored-scaled-already", "scaled-past-the-root", "float-for-int"],
+    ids=["scaled-otherwise", "stored-scaled-already", "scaled-past-the-root", "float-for-int", "several-values-a-point"],
 )
 def test_an_ept_node_that_disagrees_with_the_schema_is_refused(tmp_path, entry, child_stores, match):
     """A laszip node whose extra-bytes VLR stores a dimension otherwise than ept.json's schema

@@ -307,11 +307,13 @@ class EptCloud(VoxelOctree):
         by the schema's. Refused in one line where the node disagrees with the schema so that its
         values would be wrong: both scale it, differently; the schema scales a type the node does
         not store (already scaled values, scaled again); or its values do not fit the attribute's
-        dtype, fixed at open (scaled values cast to whole numbers, int32 to uint8, several values a
-        point to one)."""
+        dtype, fixed at open (scaled values cast to whole numbers, int32 to uint8); or it holds
+        several values a point (an array type), where the schema gives one."""
         dtype = self._attr_dtypes[attr]
         field = node if node.scaling else ExtraField(node.name, node.dtype, schema.scale, schema.offset)
-        if node.scaling and schema.scaling and node.scaling != schema.scaling:
+        if node.dtype.shape:  # (an array type, 3 x int16: its dtype was said as numpy's ('<i2', (3,)))
+            problem = f"holds {node.dtype.shape[0]} values a point ({node.dtype.shape[0]} x {node.dtype.base}), where ept.json's schema gives it one ({schema.dtype})"
+        elif node.scaling and schema.scaling and node.scaling != schema.scaling:
             problem = "is stored * {:g} + {:g} (its extra-bytes VLR), ept.json's schema says * {:g} + {:g}".format(*node.scaling, *schema.scaling)
         elif schema.scaling and not node.scaling and node.dtype != schema.dtype:
             problem = f"is stored as {node.dtype}, unscaled, where ept.json's schema scales stored {schema.dtype}"
