@@ -118,16 +118,11 @@ def demo(
 
 def _flat_paths(paths) -> tuple:
     """Paths with lists and tuples of them (at any depth) spread out, in order; anything else
-    that is not a path (None, a number, an array) a one-line InputError."""
-    import os
+    that is not a path (None, a number, an array) a one-line InputError naming it (``io.given_paths``)."""
+    from .io import given_paths
 
-    from .errors import InputError
-
-    flat = tuple(q for p in paths for q in (_flat_paths(p) if isinstance(p, (list, tuple)) else (p,)))
-    for p in flat:
-        if not isinstance(p, (str, os.PathLike)):
-            raise InputError(f"open: a path (str or pathlib.Path) or a URL is needed, got {type(p).__name__}")
-    return flat
+    one_list = len(paths) == 1 and isinstance(paths[0], (list, tuple))  # gp.open([a, 5]): "paths[1]: 5 is not a path"
+    return tuple(given_paths(paths[0] if one_list else paths, "open", "paths"))
 
 
 def open(*paths, progressive: bool = False, **options):

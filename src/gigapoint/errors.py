@@ -40,7 +40,7 @@ def number_text(value) -> str:
     if is_whole_number(value):
         return str(int(value))
     if not isinstance(value, numbers.Real) or isinstance(value, bool):
-        return repr(value)
+        return one_line_repr(value)
     compact = f"{value:g}"
     return compact if float(compact) == value else repr(float(value))
 
@@ -49,7 +49,27 @@ def value_text(value) -> str:
     """A value a count or class was given as, as a message quotes it: an integer (Python's or
     numpy's) in digits (numpy's repr said np.int64(300)), anything else as its repr (2.0 stays
     visibly a float: why an integer refuses it)."""
-    return str(int(value)) if is_whole_number(value) else repr(value)
+    return str(int(value)) if is_whole_number(value) else one_line_repr(value)
+
+
+def one_line_repr(value) -> str:
+    """``repr(value)`` where it is one line, as a one-line message quotes a value; else what
+    the value is: a numpy array by its shape ('a 2x3 array', 'an array of 1,000 values'),
+    anything else by its type ('a DataFrame'). A 2-D array given as clip= printed its rows over lines."""
+    import numpy as np
+
+    text = repr(value)
+    if "\n" not in text:
+        return text
+    if isinstance(value, np.ndarray):  # (a long 1-D one's repr spans lines too)
+        return f"an array of {counted(value.size, 'value')}" if value.ndim == 1 else f"a {'x'.join(map(str, value.shape))} array"
+    return type_text(value)
+
+
+def type_text(value) -> str:
+    """What ``value`` is, by its type, as a message names it: 'a list', 'an int' (not 'a int')."""
+    name = type(value).__name__
+    return f"{'an' if name[0] in 'AEIOUaeiou' else 'a'} {name}"
 
 
 def numbers_text(values, spell=number_text) -> str:

@@ -13,6 +13,7 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.errors import CameraError, InputError, PointIndexError, SettingsError
+from gigapoint.io import expand_paths
 from gigapoint.lod.progressive import ProgressiveOctree
 
 XYZ = np.arange(30, dtype=np.float64).reshape(10, 3)
@@ -177,6 +178,37 @@ def _octree_of_points():
     octree = ProgressiveOctree("oct")
     octree.add(XYZ)
     return octree
+
+
+# paths with something else among them (a number, None) were pathlib's TypeError from deep inside
+# ("expected str, bytes or os.PathLike object, not int", "'int' object is not iterable"): the entry is named
+NOT_A_PATH = "is not a path (a str or os.PathLike)"
+NOT_PATHS = [
+    ("tile", lambda src, out: gp.tile([5], out, 100), f"tile: inputs[0]: 5 {NOT_A_PATH}"),
+    ("tile-mixed", lambda src, out: gp.tile([src, None], out, 100), f"tile: inputs[1]: None {NOT_A_PATH}"),
+    ("tile-bare", lambda src, out: gp.tile(5, out, 100), f"tile: inputs: 5 {NOT_A_PATH}"),
+    ("convert-mixed", lambda src, out: gp.convert([src, None], out), f"convert: inputs[1]: None {NOT_A_PATH}"),  # (was "item 0 is a str")
+    ("convert", lambda src, out: gp.convert([5], out),
+     "convert: inputs[0]: 5 is neither a path nor a PointChunk (inputs are files and folders, a cloud, or PointChunks)"),
+    ("convert-bare", lambda src, out: gp.convert(5, out), "convert: inputs are files, folders, a cloud or PointChunks, got 5"),
+    ("open", lambda src, out: gp.open([5]), f"open: paths[0]: 5 {NOT_A_PATH}"),
+    ("open-mixed", lambda src, out: gp.open(src, [src, 2.5]), f"open: paths[1][1]: 2.5 {NOT_A_PATH}"),
+    ("change", lambda src, out: gp.change(src, [src, 5], 10), f"change: after[1]: 5 {NOT_A_PATH}"),
+    ("change-bare", lambda src, out: gp.change(5, src, 10), f"change: before: 5 {NOT_A_PATH}"),
+    ("volume-bare", lambda src, out: gp.volume(5, "POLYGON ((0 0, 1 0, 1 1, 0 0))", 1), f"volume: source: 5 {NOT_A_PATH}"),
+    ("volume", lambda src, out: gp.volume([None], "POLYGON ((0 0, 1 0, 1 1, 0 0))", 1), f"volume: source[0]: None {NOT_A_PATH}"),
+    ("expand-paths", lambda src, out: expand_paths([src, 5]), f"inputs[1]: 5 {NOT_A_PATH}"),  # (classify_ground's way in)
+    ("render", lambda src, out: gp.render(5), "render: cannot draw an int; give a cloud (gigapoint.open, from_arrays, demo)"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("call", "message"), [case[1:] for case in NOT_PATHS], ids=[case[0] for case in NOT_PATHS])
+def test_an_input_that_is_not_a_path_is_named_in_one_line(autzen_path, tmp_path, call, message):
+    out = tmp_path / "out"
+    with pytest.raises(gp.GigapointError) as err:
+        call(autzen_path, out)
+    assert str(err.value) == message
+    assert not out.exists()
 
 
 # the library said the CLI's options to a Python caller ("--format: unknown format 'bogus'",

@@ -382,12 +382,14 @@ def test_a_cloud_too_big_for_this_machine_is_refused_before_anything_is_read(mon
     assert gp.open(AUTZEN, chunked=True).n_points == 110_000  # room: built
 
 
-@pytest.mark.parametrize("bad", [None, 5, np.zeros(3)])
-def test_open_of_something_that_is_not_a_path_is_one_line(bad):
-    with pytest.raises(InputError, match=r"^open: a path \(str or pathlib.Path\) or a URL is needed, got (NoneType|int|ndarray)$"):
+@pytest.mark.parametrize(("bad", "shown"), [(None, "None"), (5, "5"), (np.zeros(3), "array([0., 0., 0.])")])
+def test_open_of_something_that_is_not_a_path_is_one_line(bad, shown):
+    with pytest.raises(InputError) as e:
         gp.open(bad)
-    with pytest.raises(InputError, match=r"got (NoneType|int|ndarray)$"):
+    assert str(e.value) == f"open: paths[0]: {shown} is not a path (a str or os.PathLike)"
+    with pytest.raises(InputError) as e:  # the entry named
         gp.open([AUTZEN, bad], progressive=True)
+    assert str(e.value) == f"open: paths[1]: {shown} is not a path (a str or os.PathLike)"
 
 
 def test_the_cli_demo_refuses_more_points_than_memory_holds(monkeypatch, tmp_path, capsys):

@@ -362,10 +362,10 @@ def test_an_iterable_of_what_is_not_a_point_chunk_is_a_one_line_error(tmp_path):
     from gigapoint.errors import InputError
 
     cloud = gp.from_arrays(np.random.default_rng(0).random((100, 3)))
-    for inputs, what in (([cloud], "item 0 is a PointCloud"), ([PointChunk(np.zeros((5, 3))), "a.laz", cloud], "item 1 is a str")):
+    for inputs, what in (([cloud], f"inputs[0]: {cloud!r}"), ([PointChunk(np.zeros((5, 3))), "a.laz", cloud], "inputs[1]: 'a.laz'"), ([5], "inputs[0]: 5")):
         with pytest.raises(InputError) as e:
             convert(inputs, tmp_path / "o")
-        assert str(e.value) == f"convert: inputs are files and folders, a cloud, or PointChunks; {what}"
+        assert str(e.value) == f"convert: {what} is neither a path nor a PointChunk (inputs are files and folders, a cloud, or PointChunks)"
 
 
 @pytest.mark.parametrize("memory_limit", [None, "64M"], ids=["in_memory", "spilled"])

@@ -201,6 +201,32 @@ def test_filter_labels_spell_numpy_integers_as_digits_and_floats_compactly(tmp_p
     assert str(err.value) == message
 
 
+BOX = "a clip box is xmin, ymin, xmax, ymax (any z) or xmin, ymin, zmin, xmax, ymax, zmax"
+CLASSES = "class numbers are integers from 0 to 255 (LAS classes)"
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"clip": np.zeros((2, 3))}, f"open: clip=a 2x3 array: {BOX}"),  # (its 2 rows were "got 2 numbers")
+        ({"clip": np.zeros((2, 2, 2))}, f"open: clip=a 2x2x2 array: {BOX}"),
+        ({"clip": np.array(5.0)}, f"open: clip=array(5.): {BOX}"),  # (0-d: a TypeError, "iteration over a 0-d array")
+        ({"classes": np.zeros((2, 3), int)}, f"open: classes=a 2x3 array: {CLASSES}"),
+        ({"drop_classes": np.array(7)}, f"open: drop_classes=array(7): {CLASSES}"),
+        ({"corridor": np.zeros((2, 3))}, "open: corridor=a 2x3 array: a corridor is x1, y1, x2, y2, width (a line's two ends and the corridor's width)"),
+        ({"clip_polygon": np.zeros((4, 2))}, "open: clip_polygon=a 4x2 array: a clip polygon is a GeoJSON or WKT file, or WKT text (POLYGON ((x y, ...)))"),
+        ({"clip_polygon": np.arange(100.0)}, "open: clip_polygon=an array of 100 values: a clip polygon is a GeoJSON or WKT file, or WKT text (POLYGON ((x y, ...)))"),
+    ],
+    ids=["clip-2d", "clip-3d", "clip-0d", "classes-2d", "drop-classes-0d", "corridor-2d", "polygon-2d", "polygon-long-1d"],
+)
+def test_an_array_of_other_than_one_dimension_is_said_in_one_line(tmp_path, options, message):
+    """A numpy array of several dimensions (or a long one, its repr wrapped) was quoted by its
+    repr, rows over several lines, in what must be one line; now by its shape (errors.one_line_repr)."""
+    with pytest.raises(InputError) as err:
+        gp.open(tmp_path / "missing.laz", **options)
+    assert str(err.value) == message
+
+
 def test_box_shares_are_the_share_of_each_box_inside_the_clip_box():
     """What an LOD octree weighs a node not loaded by (lod/store.py): the share of its box's
     area in x and y (volume with a clip box in z) inside the clip box; 1 where it cannot tell."""

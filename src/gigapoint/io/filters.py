@@ -410,10 +410,19 @@ def point_filter(classes=None, drop_classes=None, clip=None, where: str = "open"
         raise InputError(f"{where}: {names['classes'].strip()} and {names['drop_classes'].strip()} both name class {', '.join(map(str, both))}; keep it or drop it")
     box = _clip(clip, label["clip"])
     lane = () if corridor is None else _corridor(corridor, f"{where}: {names['corridor']}{numbers_text(corridor)}")
-    area = None if clip_polygon is None else clip_polygon_of(clip_polygon, f"{where}: {names['clip_polygon']}{(shown or {}).get('clip_polygon') or repr(clip_polygon)}")
+    area = None if clip_polygon is None else clip_polygon_of(clip_polygon, f"{where}: {names['clip_polygon']}{(shown or {}).get('clip_polygon') or value_text(clip_polygon)}")
     if not (keep or drop or box or lane or area):
         return None
     return PointFilter(keep, drop, box, lane, area)
+
+
+def _items(value) -> list | None:
+    """The values of ``value`` given as several (a list, a tuple, a 1-D array), None for one that
+    is not (a number, a string, an array of other than one dimension: a 2-D array's rows were
+    counted as numbers, a 0-d array's iteration a TypeError)."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, Iterable) or isinstance(value, np.ndarray) and value.ndim != 1:
+        return None
+    return list(value)
 
 
 def _classes(value, label: str) -> tuple[int, ...]:
@@ -421,11 +430,10 @@ def _classes(value, label: str) -> tuple[int, ...]:
     (``label``: the option and its value, as errors start)."""
     if value is None:
         return ()
-    values = [value] if is_whole_number(value) else value
+    values = [value] if is_whole_number(value) else _items(value)
     problem = f"{label}: class numbers are integers from 0 to 255 (LAS classes)"
-    if isinstance(values, (str, bytes)) or not isinstance(values, Iterable):
+    if values is None:
         raise InputError(problem)
-    values = list(values)
     bad = [v for v in values if not (is_whole_number(v) and 0 <= v <= 255)]
     if bad or not values:
         raise InputError(problem + (f", got {value_text(bad[0])}" if bad else ", got none"))
@@ -437,9 +445,9 @@ def _clip(value, label: str) -> tuple[float, ...]:
     if value is None:
         return ()
     shape = "xmin, ymin, xmax, ymax (any z) or xmin, ymin, zmin, xmax, ymax, zmax"
-    if isinstance(value, (str, bytes)) or not isinstance(value, Iterable):
+    values = _items(value)
+    if values is None:
         raise InputError(f"{label}: a clip box is {shape}")
-    values = list(value)
     if len(values) not in (4, 6):
         raise InputError(f"{label}: a clip box is {shape}; got {len(values)} numbers")
     if not all(isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) for v in values):
@@ -453,7 +461,7 @@ def _clip(value, label: str) -> tuple[float, ...]:
 
 def _corridor(value, label: str) -> tuple[float, ...]:
     """``corridor`` (x1, y1, x2, y2, width) checked as ``corridor_of`` does, with ``label`` naming it."""
-    if isinstance(value, (str, bytes)) or not isinstance(value, Iterable) or len(values := list(value)) != 5:
+    if (values := _items(value)) is None or len(values) != 5:
         raise InputError(f"{label}: a corridor is x1, y1, x2, y2, width (a line's two ends and the corridor's width)")
     return corridor_of(values[:4], values[4], label, label)
 
@@ -462,7 +470,7 @@ def corridor_of(line, width, line_label: str, width_label: str) -> tuple[float, 
     """(x1, y1, x2, y2, width) of a corridor along ``line`` (its two ends, x and y) ``width`` wide,
     or a one-line InputError starting with the label of the bad value: a line of other than 4
     finite numbers or whose ends are one point, a width that is not a finite number above 0."""
-    ends = None if isinstance(line, (str, bytes)) or not isinstance(line, Iterable) else list(line)
+    ends = _items(line)
     if ends is None or len(ends) != 4:
         raise InputError(f"{line_label}: a line is x1, y1, x2, y2 (its two ends)")
     if not all(is_real(v) for v in ends):

@@ -12,7 +12,7 @@ import urllib.request
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from ..errors import EmptyCloudError, GigapointWarning, InputError, warn
+from ..errors import EmptyCloudError, GigapointWarning, InputError, value_text, warn
 from ._base import check_file, fail, read_once
 from .http import shown_url
 from .las import LasReader, read_las_header
@@ -32,6 +32,31 @@ def file_url_path(text: str) -> Path | None:
     if u.netloc not in ("", "localhost"):
         raise InputError(f"{shown_url(text)}: a file:// URL of another machine ({u.netloc.rpartition('@')[2]}); give a path on this one")
     return Path(urllib.request.url2pathname(u.path))
+
+
+def given_paths(paths, where: str | None = None, name: str = "inputs") -> list:
+    """``paths`` as a list of paths: one path alone, or several (a list, a tuple, any iterable),
+    lists and tuples among them spread out in order; anything else a one-line InputError naming
+    the entry (``where``: the operation, ``name``: the argument), "tile: inputs[1]: None is not a
+    path (a str or os.PathLike)": pathlib's TypeError ("expected str, bytes or os.PathLike object,
+    not int") before, from deep inside."""
+    if isinstance(paths, (str, os.PathLike)):
+        return [paths]
+    if not isinstance(paths, Iterable) or isinstance(paths, bytes):
+        raise _not_a_path(paths, where, name)
+    out: list = []
+    for i, p in enumerate(paths):
+        if isinstance(p, (list, tuple)):
+            out.extend(given_paths(p, where, f"{name}[{i}]"))
+        elif isinstance(p, (str, os.PathLike)):
+            out.append(p)
+        else:
+            raise _not_a_path(p, where, f"{name}[{i}]")
+    return out
+
+
+def _not_a_path(value, where: str | None, name: str) -> InputError:
+    return InputError(f"{where + ': ' if where else ''}{name}: {value_text(value)} is not a path (a str or os.PathLike)")
 
 
 def _local(p) -> Path:
@@ -175,7 +200,7 @@ def expand_paths(paths: Iterable, recursive: bool = False) -> list[Path]:
     files are not read otherwise (a folder's raw/ and classified/ copies of its tiles would be
     read twice): said in the error of a folder with no file of its own, else in a warning."""
     out: list[Path] = []
-    for p, matched in _named(paths):
+    for p, matched in _named(given_paths(paths)):  # (5 among them: a TypeError from pathlib)
         p = _local(p)
         if matched and p.is_dir() and is_dataset_folder(p):  # ("tiles/*": a conversion's output beside the tiles)
             _octree_skipped(p)

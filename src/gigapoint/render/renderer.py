@@ -12,7 +12,7 @@ import numpy as np
 
 from ..core.layout import EMPTY_PIXEL
 from ..core.renderable import Renderable
-from ..errors import GigapointError, GigapointWarning, check_switch, warn
+from ..errors import GigapointError, GigapointWarning, check_switch, type_text, warn
 from .backend import get_backend
 from .camera import Camera, image_size
 from .frame import Frame, RenderStats, check_indexable
@@ -28,7 +28,7 @@ def check_renderable(cloud) -> None:
     if type(cloud) in _RENDERABLE_TYPES:
         return
     if not isinstance(cloud, Renderable):
-        raise GigapointError(f"render: cannot draw a {type(cloud).__name__}; give a cloud (gigapoint.open, from_arrays, demo)")
+        raise GigapointError(f"render: cannot draw {type_text(cloud)}; give a cloud (gigapoint.open, from_arrays, demo)")
     _RENDERABLE_TYPES.add(type(cloud))
 
 

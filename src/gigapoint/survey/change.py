@@ -43,7 +43,6 @@ that moved by more than the float32 heights can tell from their rounding, ``Chan
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -55,6 +54,7 @@ from ..core.cloud import PointCloud, build_cloud
 from ..errors import CameraError, InputError, check_switch, is_real, number_text
 from ..io.crs import crs_identity, crs_name
 from ..io.filters import PointFilter, point_filter
+from ..io.paths import given_paths
 from ..lod.potree import PotreeCloud
 from ..lod.query import is_octree, points_meeting
 from ..lod.reader import cloud_crs_units
@@ -204,11 +204,12 @@ def unit_symbols(units: dict) -> tuple[str | None, str | None]:
     return across, up
 
 
-def survey_label(source) -> str:
-    """How messages name a survey: its path(s) as given, or its cloud's (or opened octree's) name."""
+def survey_label(source, where: str | None = None, name: str = "source") -> str:
+    """How messages name a survey: its path(s) as given, or its cloud's (or opened octree's) name;
+    anything else a one-line InputError (``io.given_paths``: ``where``, the operation; ``name``, the argument)."""
     if isinstance(source, PointCloud) or is_octree(source):
         return source.name
-    paths = [source] if isinstance(source, (str, os.PathLike)) else list(source)
+    paths = given_paths(source, where, name)
     return ", ".join(map(str, paths[:3])) + (f" and {len(paths) - 3} more" if len(paths) > 3 else "")
 
 
@@ -347,7 +348,7 @@ def change(before, after, gsd, classes=None, drop_classes=None, clip=None, fill_
     check_switch("full", full, "change")
     filters = {"classes": classes, "drop_classes": drop_classes, "clip": clip}
     point_filter(**filters, where="change")  # bad values told before anything is read
-    labels = (survey_label(before), survey_label(after))
+    labels = (survey_label(before, "change", "before"), survey_label(after, "change", "after"))
     surveys: list = []
     try:
         for source in (before, after):

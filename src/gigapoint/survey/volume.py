@@ -38,7 +38,6 @@ is what its parts measured one by one add up to, and grouping them changes only 
 from __future__ import annotations
 
 import math
-import os
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -304,9 +303,9 @@ def _pile_parts(polygon: ClipPolygon) -> list[tuple[str, list[int]]]:
 
 def _survey_paths(source) -> list:
     """The paths of ``source`` (a path or several; a pattern matching one octree: its path)."""
-    from ..io import lone_match
+    from ..io import given_paths, lone_match
 
-    return lone_match([source] if isinstance(source, (str, os.PathLike)) else source)
+    return lone_match(given_paths(source, "volume", "source"))
 
 
 def _opened_octree(source):

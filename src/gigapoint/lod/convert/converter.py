@@ -14,8 +14,8 @@ from pathlib import Path
 
 from ...core import pages
 from ...core.renderable import PointSource
-from ...errors import GigapointError, GigapointWarning, InputError, check_switch, warn
-from ...io import files_label, with_subfolders
+from ...errors import GigapointError, GigapointWarning, InputError, check_switch, value_text, warn
+from ...io import files_label, given_paths, with_subfolders
 from ...io._base import check_file, headers_once
 from ...io.colorize import open_colorization
 from ...io.crs import files_crs
@@ -335,6 +335,8 @@ def convert(
     check_switch("recursive", recursive, "convert")
     if recursive and isinstance(inputs, (str, os.PathLike)):
         inputs = [inputs]
+    if isinstance(inputs, (list, tuple)) and inputs and isinstance(inputs[0], (str, os.PathLike)):  # files, then None: None named
+        inputs = given_paths(inputs, "convert")  # (taken as PointChunks: "item 0 is a str")
     if _are_paths(inputs):  # a COPC file a conversion still writes: its work folder named, not a bare "no such file"
         refuse_unwritten_copc([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
     if recursive and not _are_paths(inputs):
@@ -429,7 +431,7 @@ def convert(
                           f"{exact} for exact colours", GigapointWarning)  # fmt: skip
         inputs = inputs.chunks()
     elif not isinstance(inputs, (str, os.PathLike, GrownTree, Iterable)):
-        raise InputError(f"convert: inputs are files, folders, a cloud or PointChunks, got a {type(inputs).__name__}")
+        raise InputError(f"convert: inputs are files, folders, a cloud or PointChunks, got {value_text(inputs)}")
     cls = _InMemoryConverter  # held in memory where it fits, else out of core (in_memory.py)
     if isinstance(inputs, GrownTree):  # a progressive octree's save: its leaves are the partitions
         if client is not None:

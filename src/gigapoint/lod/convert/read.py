@@ -14,7 +14,7 @@ import numpy as np
 from ...core.bounds import valid_bounds
 from ...core.chunk import PointChunk, join_chunks, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
-from ...errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, warn
+from ...errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, value_text, warn
 from ...io import files_label, read_chunks, scan_angles_differ
 from ...io.filters import filtered
 from ...io.las import with_scan_angle
@@ -225,7 +225,7 @@ class ReadPhase(Job):
         if self.paths is None:
             for i, chunk in enumerate(self.inputs):
                 if not isinstance(chunk, PointChunk):  # [cloud] was an AttributeError ('no attribute xyz') further on
-                    raise InputError(f"convert: inputs are files and folders, a cloud, or PointChunks; item {i} is a {type(chunk).__name__}")
+                    raise InputError(f"convert: inputs[{i}]: {value_text(chunk)} is neither a path nor a PointChunk (inputs are files and folders, a cloud, or PointChunks)")
                 yield chunk
         else:
             for code, chunk in _joined(self._file_chunks(), self.chunk_size):

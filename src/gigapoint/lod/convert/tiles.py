@@ -65,7 +65,7 @@ from ...core.chunk import PointChunk
 from ...core.chunked import ReadOnce
 from ...core.cloud import check_valid_count
 from ...errors import GigapointWarning, InputError, check_switch, counted, is_real, warn, warnings_kept
-from ...io import with_subfolders
+from ...io import given_paths, with_subfolders
 from ...io.colorize import open_colorization
 from ...io.filters import point_filter
 from ...io.las_fields import las_grid
@@ -159,13 +159,12 @@ def tile(
     if colorize is not None and not isinstance(colorize, (str, os.PathLike)):
         raise InputError(f"tile: colorize={colorize!r}: the path of an orthophoto (a GeoTIFF)")
     out = Path(out)
-    given = [inputs] if isinstance(inputs, (str, os.PathLike)) else inputs
+    given = given_paths(inputs, "tile")  # (None among them: named, not a TypeError from pathlib)
     refuse_unwritten_copc(given)  # a COPC file a conversion still writes: its work folder named, not a bare "no such file"
     _check_apart(out, given, recursive)
     _put_back_set_aside(out)
     _check_output_folder(out, overwrite)
-    if recursive:
-        inputs = with_subfolders(given)
+    inputs = with_subfolders(given) if recursive else given
     colorization = open_colorization(colorize, colorize_bits, "tile")  # a raster that cannot be read: said before a point is
     files = PointFiles(inputs, out, chunk_size, reprojection=reprojection, colorization=colorization)
     keep = files.points_filter(keep)  # (a clip polygon moved into the CRS the points are tiled in)
