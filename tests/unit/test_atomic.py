@@ -252,6 +252,7 @@ def test_images_videos_and_point_files_refuse_their_outputs_through_one_check_in
 
     (tmp_path / "old.png").write_bytes(b"x")
     (tmp_path / "dir.mp4").mkdir()
+    (tmp_path / "dir.laz").mkdir()
     (tmp_path / "clip").mkdir()
     (tmp_path / "afile").write_bytes(b"x")
     refusal = atomic.output_file_refusal
@@ -276,7 +277,9 @@ def test_images_videos_and_point_files_refuse_their_outputs_through_one_check_in
         (lambda p: check_turntable(p, 2, 64, 48, 30.0), GigapointError, "dir.mp4", "is a directory, not a video file"),
         (lambda p: check_turntable(p, 2, 64, 48, 30.0), GigapointError, "clip", "unsupported video type '(none)'; use one of .avi, .gif, .mkv, .mov, .mp4, .webm"),
         (lambda p: check_turntable(p, 2, 64, 48, 30.0), GigapointError, "afile/x.mp4", f"{tmp_path / 'afile'} is a file, not a folder"),
-        (lambda p: check_point_file_output(p, False), InputError, "dir.mp4", "is a directory, not a MP4 file; not replaced"),
+        (lambda p: check_point_file_output(p, False), InputError, "dir.mp4", "is a directory, not a point file; not replaced"),
+        (lambda p: check_point_file_output(p, False), InputError, "clip", "is a directory, not a point file; not replaced"),  # (was "not a  file")
+        (lambda p: check_point_file_output(p, False), InputError, "dir.laz", "is a directory, not a LAZ file; not replaced"),
         (lambda p: check_point_file_output(p, False), InputError, "old.png", "already exists; pass overwrite=True to replace it"),
         (lambda p: check_point_file_output(p, True), InputError, "afile/x.laz", f"{tmp_path / 'afile'} is a file, not a folder"),
     ]

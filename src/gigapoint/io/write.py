@@ -37,7 +37,9 @@ def check_point_file_output(path: Path, overwrite: bool) -> None:
     existing file without ``overwrite``, a path through a file, a folder not writable. Folders
     missing on the way are made as it is written (``write_points``), as they are for an octree's
     folder or a COPC file: save("out/t.copc.laz") made out/, save("out/t.laz") refused it."""
-    refuse(path, output_file_refusal(path, overwrite, f"a {path.suffix[1:].upper()} file; not replaced"), InputError)
+    suffix = path.suffix.lower()  # (named where it is one written: a folder 'out' was "not a  file")
+    what = f"a {suffix[1:].upper()} file" if suffix in POINT_FILE_SUFFIXES else "a point file"
+    refuse(path, output_file_refusal(path, overwrite, f"{what}; not replaced"), InputError)
 
 
 def write_points(
