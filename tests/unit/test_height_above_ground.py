@@ -144,3 +144,33 @@ def test_the_cli_writes_heights_that_info_lists_and_render_colours_by(cli, slope
     assert rc == 0, err
     rc, _, err = cli("classify", path, "-o", tmp_path / "b.laz", "--height-above-ground", "--slope", "0.2")
     assert rc != 0 and "classify: --slope is for the ground classification: give --ground too" in err
+
+
+@pytest.mark.parametrize("normalize", [False, True])
+def test_classify_grounds_heights_are_its_models_bilinear_read_once_a_point(sloped, tmp_path, monkeypatch, normalize):
+    """``classify_ground(heights=True)`` measures each point against the DEM it classified it
+    by, read once: bit for bit z minus ``RasterGrid.bilinear`` of that DEM, with no second read."""
+    from gigapoint.survey import ground as smrf
+    from gigapoint.survey.raster_grid import RasterGrid
+
+    path, _, _ = sloped
+    made = {}
+    real_model, real_raster = smrf.ground_model, smrf._lowest_raster
+    monkeypatch.setattr(smrf, "ground_model", lambda *args: made.setdefault("dem", real_model(*args)))
+    monkeypatch.setattr(smrf, "_lowest_raster", lambda *args: made.setdefault("grid and lowest", real_raster(*args)))
+    read = {"bilinear": [], "with cell values": []}  # the points of each read of the DEM
+    bilinear, with_cell_values = RasterGrid.bilinear, RasterGrid.bilinear_and_cell_values
+    monkeypatch.setattr(RasterGrid, "bilinear", lambda self, raster, xy: read["bilinear"].append(len(xy)) or bilinear(self, raster, xy))
+    monkeypatch.setattr(RasterGrid, "bilinear_and_cell_values",
+                        lambda self, raster, values, xy: read["with cell values"].append(len(xy)) or with_cell_values(self, raster, values, xy))  # fmt: skip
+
+    result = gp.classify_ground(path, tmp_path / "out.las", heights=True, normalize=normalize, chunk_size=10_000)
+    chunks = read["with cell values"]
+    assert read["bilinear"] == [] and len(chunks) > 1 and sum(chunks) == result.points  # one read a point, in several chunks
+
+    a, b = laspy.read(str(path)), laspy.read(str(tmp_path / "out.las"))
+    xyz = np.column_stack([np.asarray(a.x), np.asarray(a.y), np.asarray(a.z)])
+    grid, _ = made["grid and lowest"]
+    expected = xyz[:, 2] - bilinear(grid, made["dem"], xyz)
+    np.testing.assert_array_equal(np.asarray(b.HeightAboveGround), expected.astype(np.float32))
+    assert result.heights == (expected.min(), expected.max())

@@ -44,7 +44,7 @@ from numba import njit
 from ..errors import InputError
 from ..render.raster_fill import fill_everywhere
 from .ground_raster import GROUND, NOISE_CLASSES, NON_GROUND, files_grid, ground_parameters, point_files, progress_bar, write_through
-from .heights import HeightSpan, with_heights
+from .heights import HeightSpan, heights_over
 from .noise import noise_classified, noise_parameters, sparse_cells
 from .raster_grid import RasterGrid
 
@@ -192,9 +192,11 @@ def classify_ground(source, out, *, cell=None, slope=None, window=None, threshol
         tally: dict = {}
         span = HeightSpan()
 
+        def measured(chunk, model):
+            return heights_over(chunk, model, normalize, span)
+
         def classified(chunk):
-            chunk = _classified(noise_marked(chunk, found), grid, dem, tolerance, counts)
-            return with_heights(chunk, grid, dem, normalize, span) if heights or normalize else chunk
+            return _classified(noise_marked(chunk, found), grid, dem, tolerance, counts, measured if heights or normalize else None)
 
         written = write_through(inputs, out, "classify", classified, shown, tally)
     finally:
@@ -229,9 +231,11 @@ def _lowest_raster(inputs, cell: float, progress, noise_marked) -> tuple[RasterG
     return grid, np.where(np.isfinite(lowest), lowest, np.nan)
 
 
-def _classified(chunk, grid: RasterGrid, dem: np.ndarray, tolerance: np.ndarray, counts: dict):
+def _classified(chunk, grid: RasterGrid, dem: np.ndarray, tolerance: np.ndarray, counts: dict, measured=None):
     """``chunk`` with its classification set: 2 where a ground candidate lies within its cell's
-    ``tolerance`` of the ``dem``, 1 for every other point but noise, which keeps its class."""
+    ``tolerance`` of the ``dem``, 1 for every other point but noise, which keeps its class.
+    ``measured``: called as ``measured(classified chunk, the dem read at its points)`` for the
+    chunk to return (its heights above ground: the dem read once a point)."""
     from ..core.chunk import PointChunk
 
     old = chunk.attributes.get("classification")
@@ -245,4 +249,5 @@ def _classified(chunk, grid: RasterGrid, dem: np.ndarray, tolerance: np.ndarray,
     counts[NON_GROUND] += len(chunk) - int(ground.sum()) - int(noise.sum())
     attributes = dict(chunk.attributes)
     attributes["classification"] = classes.astype(old.dtype if old is not None else np.uint8)
-    return PointChunk(chunk.xyz, chunk.rgba, attributes, scale=chunk.scale, color_bits=chunk.color_bits)
+    classified = PointChunk(chunk.xyz, chunk.rgba, attributes, scale=chunk.scale, color_bits=chunk.color_bits)
+    return classified if measured is None else measured(classified, model)

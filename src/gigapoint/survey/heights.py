@@ -3,7 +3,8 @@ PDAL's filters.hag_dem, LAStools' lasheight. The ground model is a raster of the
 as SMRF's (ground_raster.py's ``files_grid``): the mean z of the class-2 points in each cell (pass 1),
 its empty cells (buildings, water) filled by ``fill_everywhere``; pass 2 writes each point's z
 minus the model read bilinearly at its (x, y). With ``classify_ground(heights=True)`` (ground.py)
-the model is SMRF's, just made, and its points are measured by ``with_heights``.
+the model is SMRF's, just made, and its points are measured by ``heights_over`` against the
+model values that classifying them read.
 """
 
 from __future__ import annotations
@@ -62,9 +63,15 @@ class HeightSpan:
 def with_heights(chunk, grid: RasterGrid, dem: np.ndarray, normalize: bool, span: HeightSpan):
     """``chunk`` with its heights above ``dem`` as the float32 ``HeightAboveGround`` attribute
     (``normalize``: as its z too, the z it had dropped)."""
+    return heights_over(chunk, grid.bilinear(dem, chunk.xyz), normalize, span)
+
+
+def heights_over(chunk, model: np.ndarray, normalize: bool, span: HeightSpan):
+    """``with_heights`` for a ``model`` already read at the chunk's points (the ground model's
+    z at each: ``classify_ground`` has it from classifying them, and reads it only once)."""
     from ..core.chunk import PointChunk
 
-    heights = chunk.xyz[:, 2] - grid.bilinear(dem, chunk.xyz)
+    heights = chunk.xyz[:, 2] - model
     span.add(heights)
     attributes = dict(chunk.attributes)
     attributes[HEIGHT_ATTRIBUTE] = heights.astype(np.float32)
