@@ -87,24 +87,31 @@ def interrupted_read(monkeypatch):
     return interrupt
 
 
-def write_demo_las(path: Path, n: int, seed: int = 0) -> Path:
-    """The demo scene's first n points as a LAS 1.2 file (point format 3, millimetre scale)."""
+def write_las(path: Path, xyz: np.ndarray, rgb16: np.ndarray, intensity=None, classification=None) -> Path:
+    """The points ``xyz`` with their 16-bit colours ``rgb16`` as a LAS 1.2 file (point format 3,
+    millimetre scale, offsets 0); intensity each point's index (wrapping at 65 536) and
+    classification 0 where not given."""
     import laspy
 
-    from gigapoint.io import demo_arrays
-
-    xyz, rgba, attrs = demo_arrays(n, seed)
     header = laspy.LasHeader(point_format=3, version="1.2")
     header.scales = [0.001] * 3
     header.offsets = [0.0, 0.0, 0.0]
     las = laspy.LasData(header)
     las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-    rgb16 = rgba[:, :3].astype(np.uint16) * 257
     las.red, las.green, las.blue = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
-    las.intensity = attrs["intensity"]
-    las.classification = attrs["classification"]
+    las.intensity = np.arange(len(xyz), dtype=np.uint16) if intensity is None else intensity
+    if classification is not None:
+        las.classification = classification
     las.write(str(path))
     return path
+
+
+def write_demo_las(path: Path, n: int, seed: int = 0) -> Path:
+    """The demo scene's first n points as ``write_las`` writes them, with their classes."""
+    from gigapoint.io import demo_arrays
+
+    xyz, rgba, attrs = demo_arrays(n, seed)
+    return write_las(path, xyz, rgba[:, :3].astype(np.uint16) * 257, attrs["intensity"], attrs["classification"])
 
 
 @pytest.fixture(scope="session")
@@ -112,6 +119,14 @@ def las_writer():
     """``write_demo_las(path, n, seed=0)`` for tests that need LAS input files."""
     pytest.importorskip("laspy")
     return write_demo_las
+
+
+@pytest.fixture(scope="session")
+def points_las_writer():
+    """``write_las(path, xyz, rgb16, intensity=None, classification=None)``: a LAS input file of
+    the test's own points."""
+    pytest.importorskip("laspy")
+    return write_las
 
 
 @pytest.fixture

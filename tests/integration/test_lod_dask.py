@@ -33,26 +33,14 @@ pytestmark = pytest.mark.timeout(180)
 OPTS = {"max_leaf": 3_000, "partition_points": 25_000, "chunk_size": 40_000}
 
 
-def _write_las(path: Path, xyz: np.ndarray, rgb16: np.ndarray, intensity=None) -> Path:
-    header = laspy.LasHeader(point_format=3, version="1.2")
-    header.scales = [0.001] * 3
-    header.offsets = [0.0, 0.0, 0.0]
-    las = laspy.LasData(header)
-    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-    las.red, las.green, las.blue = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
-    las.intensity = np.arange(len(xyz), dtype=np.uint16) if intensity is None else intensity
-    las.write(str(path))
-    return path
-
-
 @pytest.fixture(scope="module")
-def inputs(tmp_path_factory, las_writer) -> list[Path]:
+def inputs(tmp_path_factory, las_writer, points_las_writer) -> list[Path]:
     d = tmp_path_factory.mktemp("dask_in")
     files = [las_writer(d / f"town{i}.las", n, seed=i) for i, n in enumerate([120_000, 50_000, 90_000])]
     rng = np.random.default_rng(5)
     lo = np.array([float(v) for v in laspy.read(str(files[0])).header.mins])
     spot = lo + 20.0 + rng.random((30_000, 3)) * 0.05  # 30 000 points in a 5 cm cube: one count-grid cell
-    files.insert(1, _write_las(d / "spot.las", spot, rng.integers(0, 65535, (30_000, 3)).astype(np.uint16)))
+    files.insert(1, points_las_writer(d / "spot.las", spot, rng.integers(0, 65535, (30_000, 3)).astype(np.uint16)))
     return files
 
 
@@ -303,7 +291,7 @@ def test_cli_workers_option_starts_a_local_cluster(inputs, tmp_path, capsys):
     assert not (tmp_path / "y").exists()
 
 
-def test_a_memory_limit_gives_one_process_and_workers_the_same_partitions_and_bytes(tmp_path):
+def test_a_memory_limit_gives_one_process_and_workers_the_same_partitions_and_bytes(tmp_path, points_las_writer):
     """`--memory-limit 300M` plans partitions of <= 514 747 points (the limit less a fixed
     allowance for the runtime) in one process as with `--workers 2`. The plan came from each
     process's own size: 622 000 points a partition in one process, 507 000 in a `--workers`
@@ -313,7 +301,7 @@ def test_a_memory_limit_gives_one_process_and_workers_the_same_partitions_and_by
     rng = np.random.default_rng(3)
     xyz = rng.random((1_100_000, 3)) * 100
     xyz[:500_000] /= 2  # 500 000 more points in the first octant
-    src = _write_las(tmp_path / "in.las", xyz, rng.integers(0, 65535, (len(xyz), 3)).astype(np.uint16))
+    src = points_las_writer(tmp_path / "in.las", xyz, rng.integers(0, 65535, (len(xyz), 3)).astype(np.uint16))
     code = (  # `gigapoint ARGS`, saying how many partitions it built
         "import sys; from gigapoint.cli import main; from gigapoint.lod.convert import hooks\n"
         "built = []; hooks.after_partition_built = built.append\n"
@@ -330,14 +318,14 @@ def test_a_memory_limit_gives_one_process_and_workers_the_same_partitions_and_by
     assert parts == {"one": "15", "dask": "15"}  # the dense octant in 8
 
 
-def test_16bit_colors_dark_after_bright_read_in_parts_are_the_single_process_colors(client, tmp_path):
+def test_16bit_colors_dark_after_bright_read_in_parts_are_the_single_process_colors(client, tmp_path, points_las_writer):
     """io's color decision never goes back from 16-bit: a dark part of a 16-bit file read by its
     own task decides 8-bit, is found out once the parts before it are read, and is read again."""
     rng = np.random.default_rng(3)
     xyz = rng.random((100_000, 3)) * 100
     rgb = rng.integers(0, 65535, (100_000, 3)).astype(np.uint16)
     rgb[40_000:] = rng.integers(1, 255, (60_000, 3))  # the 2nd and 3rd 40 000-point ranges: 8-bit values
-    src = _write_las(tmp_path / "mixed.las", xyz, rgb)
+    src = points_las_writer(tmp_path / "mixed.las", xyz, rgb)
     ref, out = tmp_path / "ref", tmp_path / "oct"
     convert([src], ref, **OPTS)
     with distributed.get_task_stream(client) as stream:
@@ -488,11 +476,11 @@ def test_chunk_inputs_cannot_go_to_workers(client, tmp_path):
     assert not (tmp_path / "oct").exists()
 
 
-def test_an_empty_las_tile_among_several_is_skipped_as_in_one_process(inputs, client, tmp_path):
+def test_an_empty_las_tile_among_several_is_skipped_as_in_one_process(inputs, client, tmp_path, points_las_writer):
     """Its whole-file read task failed on a worker: 'LAS file holds no points', the run stopped."""
     from gigapoint.errors import GigapointWarning
 
-    empty = _write_las(tmp_path / "empty.las", np.zeros((0, 3)), np.zeros((0, 3), np.uint16))
+    empty = points_las_writer(tmp_path / "empty.las", np.zeros((0, 3)), np.zeros((0, 3), np.uint16))
     with pytest.warns(GigapointWarning, match=f"{empty}: holds no points, skipped"):
         res = convert([inputs[1], empty], tmp_path / "oct", client=client, **OPTS)
     assert res.points == 30_000
