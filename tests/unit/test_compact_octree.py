@@ -263,9 +263,7 @@ def test_the_arena_holds_attributes_in_their_range(tmp_path):
     assert held["intensity"] == "uint16 in uint8 + 1000" and held["point_source_id"] == "uint16 constant 7326"
     assert held["depth"].startswith("int32 in uint16 - ") and held["gps_time"] == "float64"
     assert compact.attributes.nbytes < words.attributes.nbytes
-    # intensity's range given: the automatic one is taken over every slot of the arena, and the
-    # slots no node fills read 0 in the words arena, 1000 (its range's low end) in the compact one
-    s = RenderSettings(backend="cpu", size_mode="fixed", point_budget=12_000, lod_threshold_px=10.0, intensity_range=(1000, 1100))
+    s = RenderSettings(backend="cpu", size_mode="fixed", point_budget=12_000, lod_threshold_px=10.0)
     for make in CAMS:
         cam = make(oc.bounds)
         for mode in ("intensity", "classification"):
@@ -282,6 +280,40 @@ def test_the_arena_holds_attributes_in_their_range(tmp_path):
                 got = np.concatenate([compact.attributes[a][sl * ARENA_CHUNK : sl * ARENA_CHUNK + ARENA_CHUNK] for sl in slots])[:count]
                 assert got.dtype == attrs[a].dtype
                 np.testing.assert_array_equal(got, attrs[a], err_msg=a)
+
+
+def test_the_automatic_intensity_range_is_the_points_held(tmp_path):
+    """Colour by intensity without ``intensity_range``: the range is the 2nd..98th percentile of
+    the points the arena's nodes hold, not of its every slot (the slots no node fills read 0 in
+    the words arena, the range's low end in the compact one: 0..1098 washed the grey out, and
+    the layouts' frames differed), the same frames in either layout."""
+    rng = np.random.default_rng(4)
+    n = 40_000
+    xyz = np.array([500_000.0, 4_800_000.0, 100.0]) + rng.integers(0, 150_000, (n, 3)) * [0.01, 0.01, 0.001]
+    rgba = np.full((n, 4), 255, np.uint8)
+    intensity = rng.integers(1000, 1101, n).astype(np.uint16)
+    chunks = [PointChunk(xyz[s : s + 10_000], rgba[s : s + 10_000], {"intensity": intensity[s : s + 10_000]}, scale=(0.01, 0.01, 0.001))
+              for s in range(0, n, 10_000)]  # fmt: skip
+    convert(chunks, tmp_path / "oct", max_leaf=2_000, partition_points=15_000)
+    oc = open_octree(tmp_path / "oct")
+    assert isinstance(oc, CompactOctree)
+    compact = oc.new_arena(oc.n_points + len(oc.nodes) * ARENA_CHUNK)  # room for every node: each frame draws the arena set here
+    words = Arena(compact.n_points, oc.name, oc.bounds, oc._attribute_dtypes())
+    words.source_scale = compact.source_scale
+    s = RenderSettings(backend="cpu", size_mode="fixed", color_mode="intensity", point_budget=10**9, lod_threshold_px=0.0)
+    cam = Camera.fit(oc.bounds, view="top", width=300, height=300)
+    lo, hi = np.percentile(oc.decode_all("intensity").astype(np.float64), [2.0, 98.0])
+    assert 1000 <= lo <= 1004 and 1096 <= hi <= 1100
+    frames = []
+    for arena in (compact, words):
+        oc.arena = arena
+        f = render_frame(oc, cam, s)
+        assert oc.arena is arena and len(arena.resident) == int((oc.counts > 0).sum())  # every node held: the range is all points'
+        np.testing.assert_array_equal(f.image, render_frame(oc, cam, s.replace(intensity_range=(float(lo), float(hi)))).image)
+        grey = f.image[f.visibility != EMPTY_PIXEL][:, 0]
+        assert grey.min() == 0 and grey.max() == 255  # (the words arena's 0..1098 drew every grey 232 or more)
+        frames.append(f.image)
+    np.testing.assert_array_equal(frames[0], frames[1])
 
 
 def test_without_a_source_grid_the_words_are_the_previous_formats(tmp_path):

@@ -2653,3 +2653,18 @@ def test_points_on_a_las_grid_decode_to_the_file_values(tmp_path, las_writer):
         np.testing.assert_array_equal(q[np.lexsort(q.T)], src[np.lexsort(src.T)])
         err = np.abs(got[np.lexsort(q.T)] - want)
         assert (err / np.spacing(np.abs(want).max(axis=0))).max() <= 4, err.max(axis=0)
+
+
+def test_the_automatic_intensity_range_is_the_points_held():
+    """Colour by intensity without ``intensity_range``: the range is that of the pool's entries
+    the chunks hold (points and voxels), not of its every entry: those no chunk fills read 0
+    (intensities of 1000..1100 drew over 923..1096, no grey under 100)."""
+    rng = np.random.default_rng(3)
+    n = 30_000
+    o = ProgressiveOctree("p", max_leaf=2_000)
+    o.add(rng.random((n, 3)) * [300, 200, 20], intensity=rng.integers(1000, 1101, n).astype(np.uint16))
+    assert o.pool.n_points > 2 * int(o.pool.batches["count"].sum())  # most of the pool is empty room
+    cam = gp.Camera.fit(o.bounds, view="top", width=300, height=300)
+    f = gp.render_frame(o, cam, EXACT.replace(color_mode="intensity"))
+    grey = f.image[f.visibility != EMPTY_PIXEL][:, 0]
+    assert grey.min() == 0 and grey.max() == 255

@@ -246,15 +246,30 @@ def _auto_range(values: np.ndarray) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
+def held_values(cloud, values: np.ndarray) -> np.ndarray:
+    """``values`` of the points the cloud's batches hold (``first`` .. ``first + count``): all of a
+    PointCloud's; an LOD arena's or pool's slots beyond them (never filled, or a partial slot's
+    tail) read 0 in one layout and the attribute's low end in another, which an automatic range
+    taken over them started at 0 or differed by layout."""
+    b = cloud.batches
+    counts = b["count"].astype(np.int64)
+    if int(counts.sum()) == len(values):  # (a PointCloud: its batches hold every point)
+        return values
+    firsts = b["first"].astype(np.int64)[counts > 0]
+    counts = counts[counts > 0]
+    index = np.repeat(firsts - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
+    return values[index]
+
+
 def _compute(cloud, mode: str, settings) -> np.ndarray:
     n = cloud.n_points
     if mode == "intensity":
         v = _attribute(cloud, mode)
-        lo, hi = settings.intensity_range or _auto_range(v)
+        lo, hi = settings.intensity_range or _auto_range(held_values(cloud, v))
         return ramp(v, lo, hi, colormap_table("gray"))
     if mode == "attribute":
         v = _named_attribute(cloud, settings.color_attribute)
-        lo, hi = settings.attribute_range or _auto_range(v)
+        lo, hi = settings.attribute_range or _auto_range(held_values(cloud, v))
         return ramp(v, lo, hi, colormap_table(settings.colormap))
     if mode == "classification":
         v = _attribute(cloud, mode).astype(np.int64) & 0xFF
