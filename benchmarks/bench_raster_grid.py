@@ -18,21 +18,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
-from bench_ab import load_base  # a sibling script: its folder is sys.path[0]
+from bench_ab import interleaved, load_base  # a sibling script: its folder is sys.path[0]
 
 from gigapoint.core.chunk import PointChunk
 from gigapoint.survey import ground
 from gigapoint.survey.raster_grid import RasterGrid
-
-
-def seconds(call) -> float:
-    t = time.perf_counter()
-    call()
-    return time.perf_counter() - t
 
 
 def same(a, b) -> bool:
@@ -74,7 +67,7 @@ def run_cases(order: str, xyz, grids: dict, dem, tolerance, base_chunks, base_gr
         "bilinear": {side: (lambda g=g: g.bilinear(dem, xyz)) for side, g in grids.items()},
         "cells_of": {side: (lambda g=g: g.cells_of(xyz)) for side, g in grids.items()},
         "ground _classified": {
-            "new": lambda: ground._classified(chunk, grids["new"], dem, tolerance, {1: 0, 2: 0, "noise": 0}).attributes["classification"],
+            "new": lambda: ground._classified(chunk, grids["new"], dem, tolerance, {1: 0, 2: 0, "noise": 0})[0].attributes["classification"],
             "base": lambda: base_ground._classified(base_chunk, grids["base"], dem, tolerance, {1: 0, 2: 0, "noise": 0}).attributes["classification"],
         },
     }
@@ -82,10 +75,7 @@ def run_cases(order: str, xyz, grids: dict, dem, tolerance, base_chunks, base_gr
         results = {side: call() for side, call in sides.items()}  # warm-up: kernels compiled
         if not same(results["base"], results["new"]):
             raise SystemExit(f"{name}: the results differ from the base's")
-        times = {side: [] for side in sides}
-        for _ in range(rounds):
-            for side, call in sides.items():
-                times[side].append(seconds(call))
+        times = dict(zip(sides, interleaved([(call,) for call in sides.values()], rounds), strict=True))  # (ABBA: neither side always second)
         base_ms, new_ms = (1000 * float(np.median(times[side])) for side in ("base", "new"))
         print(f"  {order:10s} {name:20s} base {base_ms:7.1f} ms  new {new_ms:7.1f} ms  base / new {base_ms / new_ms:.2f}")
 

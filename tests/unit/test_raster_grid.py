@@ -157,7 +157,7 @@ def test_ground_classification_reads_the_model_and_the_tolerance_of_each_points_
     xyz[:, 2] = _reference_bilinear(grid, dem, xyz) + rng.uniform(-2.0, 2.0, len(xyz))  # near some cells' tolerance, beyond others'
     classification = np.where(rng.random(len(xyz)) < 0.05, 7, 0).astype(np.uint8)  # a little noise, kept as it is
     counts = {smrf.GROUND: 0, smrf.NON_GROUND: 0, "noise": 0}
-    classes = smrf._classified(PointChunk(xyz, attributes={"classification": classification}), grid, dem, tolerance, counts).attributes["classification"]
+    classes = smrf._classified(PointChunk(xyz, attributes={"classification": classification}), grid, dem, tolerance, counts)[0].attributes["classification"]
     rows, cols = _reference_cells(grid, xyz)
     near = np.abs(xyz[:, 2] - _reference_bilinear(grid, dem, xyz)) <= tolerance[rows, cols]
     expected = np.where(classification == 7, 7, np.where(near, 2, 1))

@@ -192,11 +192,9 @@ def classify_ground(source, out, *, cell=None, slope=None, window=None, threshol
         tally: dict = {}
         span = HeightSpan()
 
-        def measured(chunk, model):
-            return heights_over(chunk, model, normalize, span)
-
         def classified(chunk):
-            return _classified(noise_marked(chunk, found), grid, dem, tolerance, counts, measured if heights or normalize else None)
+            chunk, model = _classified(noise_marked(chunk, found), grid, dem, tolerance, counts)
+            return heights_over(chunk, model, normalize, span) if heights or normalize else chunk  # (the dem read once a point)
 
         written = write_through(inputs, out, "classify", classified, shown, tally)
     finally:
@@ -231,11 +229,10 @@ def _lowest_raster(inputs, cell: float, progress, noise_marked) -> tuple[RasterG
     return grid, np.where(np.isfinite(lowest), lowest, np.nan)
 
 
-def _classified(chunk, grid: RasterGrid, dem: np.ndarray, tolerance: np.ndarray, counts: dict, measured=None):
-    """``chunk`` with its classification set: 2 where a ground candidate lies within its cell's
-    ``tolerance`` of the ``dem``, 1 for every other point but noise, which keeps its class.
-    ``measured``: called as ``measured(classified chunk, the dem read at its points)`` for the
-    chunk to return (its heights above ground: the dem read once a point)."""
+def _classified(chunk, grid: RasterGrid, dem: np.ndarray, tolerance: np.ndarray, counts: dict):
+    """(``chunk`` with its classification set: 2 where a ground candidate lies within its cell's
+    ``tolerance`` of the ``dem``, 1 for every other point but noise, which keeps its class; the
+    ``dem`` read at its points, for their heights above ground)."""
     from ..core.chunk import PointChunk
 
     old = chunk.attributes.get("classification")
@@ -249,5 +246,4 @@ def _classified(chunk, grid: RasterGrid, dem: np.ndarray, tolerance: np.ndarray,
     counts[NON_GROUND] += len(chunk) - int(ground.sum()) - int(noise.sum())
     attributes = dict(chunk.attributes)
     attributes["classification"] = classes.astype(old.dtype if old is not None else np.uint8)
-    classified = PointChunk(chunk.xyz, chunk.rgba, attributes, scale=chunk.scale, color_bits=chunk.color_bits)
-    return classified if measured is None else measured(classified, model)
+    return PointChunk(chunk.xyz, chunk.rgba, attributes, scale=chunk.scale, color_bits=chunk.color_bits), model
