@@ -282,6 +282,23 @@ def test_the_arena_holds_attributes_in_their_range(tmp_path):
                 np.testing.assert_array_equal(got, attrs[a], err_msg=a)
 
 
+def test_the_points_an_arenas_batches_hold_all_or_an_even_sample():
+    """held_points: every point the batches hold (slots' empty tails and empty slots left out),
+    or an even sample of them without an index of every point (the automatic colour range's)."""
+    from gigapoint.core.layout import BATCH_DTYPE
+    from gigapoint.core.renderable import held_points
+
+    rng = np.random.default_rng(0)
+    batches = np.zeros(500, BATCH_DTYPE)
+    batches["first"] = rng.permutation(500) * 1000  # slots in any order, some empty, some partly filled
+    batches["count"] = rng.integers(0, 1000, 500) * (rng.random(500) < 0.8)
+    held = np.concatenate([np.arange(f, f + c) for f, c in zip(batches["first"], batches["count"], strict=True)])
+    assert np.array_equal(held_points(batches), held)
+    assert np.array_equal(held_points(batches, most=1000), held[:: len(held) // 1000])
+    assert np.array_equal(held_points(batches, most=len(held)), held)
+    assert held_points(batches[:0]).size == 0 and held_points(batches[:0], most=10).size == 0
+
+
 def test_the_automatic_intensity_range_is_the_points_held(tmp_path):
     """Colour by intensity without ``intensity_range``: the range is the 2nd..98th percentile of
     the points the arena's nodes hold, not of its every slot (the slots no node fills read 0 in
@@ -571,3 +588,21 @@ def test_checksums_are_each_nodes_crc32_of_its_record_and_slices(las_pair):
     np.testing.assert_array_equal(oc.crc, want)
     args = (oc.nodes, oc.low, oc.ext, oc.pack, oc.ext_bits, oc.fields, streams)
     np.testing.assert_array_equal(checksum_table(*args, 5, 17), want[5:17])
+
+
+def test_a_too_small_arena_of_the_other_layout_set_by_hand_is_replaced_and_its_nodes_loaded_again(autzen_path, tmp_path):
+    """A words arena set on a compact octree, too small for the frame's selection: the grown
+    arena (compact) cannot take its slots over (a TypeError before: its med words are None), so
+    it loads the nodes again, and the frame is the one of an octree left to its own arena."""
+    convert([autzen_path], tmp_path / "oct", max_leaf=2000, progress=False)
+    settings = RenderSettings(backend="cpu", size_mode="fixed", point_budget=50_000)
+    own = open_octree(tmp_path / "oct")
+    cam = Camera.fit(own.bounds, view="top", width=200, height=200)
+    expected = render_frame(own, cam, settings)
+    oc = open_octree(tmp_path / "oct")
+    oc.arena = Arena(5_000, oc.name, oc.bounds, oc._attribute_dtypes())  # words, a tenth of the selection
+    got = render_frame(oc, cam, settings)
+    assert oc.arena.med is None and oc.arena.n_points > 5_000  # grown, in the octree's own layout
+    assert np.array_equal(got.image, expected.image)
+    assert np.array_equal(got.visibility >> 32, expected.visibility >> 32)  # the depths (the indices are slots: they differ)
+    assert (got.visibility != EMPTY_PIXEL).sum() > 3_000 and got.stats.points_processed > 5_000  # (more than the hand-set arena held)

@@ -45,6 +45,21 @@ def refuse_hidden_classes(name: str, kind: str, settings: SelectionSettings) -> 
         raise SettingsError(hidden_classes_refusal(name, kind))
 
 
+def held_points(batches: np.ndarray, most: int | None = None) -> np.ndarray:
+    """Indices of the points ``batches`` hold (each its ``first`` .. ``first + count``), in batch
+    order; with ``most``, evenly spaced, at most ~2x ``most`` of them (an LOD arena's or pool's
+    slots beyond its batches are empty room, or a partial slot's tail)."""
+    counts = batches["count"].astype(np.int64)
+    firsts = batches["first"].astype(np.int64)
+    ends = np.cumsum(counts)
+    total = int(ends[-1]) if len(ends) else 0
+    if most is None or total <= most:
+        return np.repeat(firsts - (ends - counts), counts) + np.arange(total)
+    k = np.arange(0, total, total // most)  # a sample, without an index of every point first
+    held_by = np.searchsorted(ends, k, "right")
+    return firsts[held_by] + k - (ends - counts)[held_by]
+
+
 def check_point_index(index, n_points: int | None = None, name: str = "") -> None:
     """A one-line PointIndexError unless ``index`` (given to ``point_info``) is a whole number
     (a float such as 3.5 was read as point 3) and, with ``n_points``, -1 (no point) or one of

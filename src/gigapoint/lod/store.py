@@ -25,7 +25,7 @@ from ..core.cloud import MAX_ABS_COORDINATE, at_scale
 from ..core.compact import centre_half, point_words, rgba32, stream_subset, stream_words
 from ..core.layout import BATCH_DTYPE, PACK_DTYPE
 from ..core.quantize import dequantize
-from ..core.renderable import DrawList, MultiViewDrawList, check_classified, check_point_index
+from ..core.renderable import DrawList, MultiViewDrawList, check_classified, check_point_index, held_points
 from ..core.selection import Selection, View, batch_matrices, box_in_view, precision_for, visible_and_size
 from ..errors import InputError, is_whole_number
 from ..io.filters import PointFilter
@@ -373,10 +373,7 @@ class Arena:
         if "classification" not in self.attributes:
             return None
         slots = np.concatenate([np.zeros(0, np.int64), *self.resident.values()])
-        b = self.batches[slots]
-        counts = b["count"].astype(np.int64)
-        index = np.repeat(b["first"].astype(np.int64) - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
-        return self.attributes.at("classification", index)
+        return self.attributes.at("classification", held_points(self.batches[slots]))
 
     def show(self, keep: PointFilter | None) -> None:
         """Nodes loaded from now on keep only the points ``keep`` keeps (``OctreeCloud.load_filter``:
@@ -831,8 +828,10 @@ class OctreeCloud:
         """A new arena of ``points`` points in place of the octree's (more than it has), holding
         what it held (``Arena.take_over``)."""
         arena = self.new_arena(points)
-        if self.arena is not None:
+        if self.arena is not None and (self.arena.med is None) == (arena.med is None):
             arena.take_over(self.arena)
+        elif self.arena is not None:  # one set by hand in the other layout: its nodes loaded again, as it showed them
+            arena.show(self.arena.keep)
         self.arena = arena
         return arena
 

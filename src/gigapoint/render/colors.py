@@ -14,6 +14,7 @@ from numba import njit, prange
 
 from ..core.compact import full_words, rgba32
 from ..core.layout import COORD_BITS
+from ..core.renderable import held_points
 from ..errors import SettingsError
 from .cache import render_cache
 from .settings import COLOR_MODES, COLORMAPS  # the Literal choices of RenderSettings.color_mode and .colormap
@@ -232,10 +233,13 @@ def elevations(cloud) -> np.ndarray:
     return z
 
 
+_AUTO_RANGE_SAMPLE = 1_000_000  # values an automatic range is taken over, at most ~twice that
+
+
 def _auto_range(values: np.ndarray) -> tuple[float, float]:
     """2nd..98th percentile (robust to a few outliers), on a subsample for big clouds, of the
     finite values (a NaN or inf made the range NaN); (0, 1) where none is finite."""
-    v = values if len(values) <= 1_000_000 else values[:: len(values) // 1_000_000]
+    v = values if len(values) <= _AUTO_RANGE_SAMPLE else values[:: len(values) // _AUTO_RANGE_SAMPLE]
     v = v.astype(np.float64)
     v = v[np.isfinite(v)]
     if len(v) == 0:
@@ -247,18 +251,14 @@ def _auto_range(values: np.ndarray) -> tuple[float, float]:
 
 
 def held_values(cloud, values: np.ndarray) -> np.ndarray:
-    """``values`` of the points the cloud's batches hold (``first`` .. ``first + count``): all of a
-    PointCloud's; an LOD arena's or pool's slots beyond them (never filled, or a partial slot's
-    tail) read 0 in one layout and the attribute's low end in another, which an automatic range
-    taken over them started at 0 or differed by layout."""
-    b = cloud.batches
-    counts = b["count"].astype(np.int64)
-    if int(counts.sum()) == len(values):  # (a PointCloud: its batches hold every point)
+    """``values`` of the points the cloud's batches hold (``first`` .. ``first + count``), a
+    sample where they are many (``_auto_range`` reads ~1 M): all of a PointCloud's; an LOD
+    arena's or pool's slots beyond them (never filled, or a partial slot's tail) read 0 in one
+    layout and the attribute's low end in another, which an automatic range taken over them
+    started at 0 or differed by layout."""
+    if int(cloud.batches["count"].sum(dtype=np.int64)) == len(values):  # (a PointCloud: its batches hold every point)
         return values
-    firsts = b["first"].astype(np.int64)[counts > 0]
-    counts = counts[counts > 0]
-    index = np.repeat(firsts - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
-    return values[index]
+    return values[held_points(cloud.batches, most=_AUTO_RANGE_SAMPLE)]
 
 
 def _compute(cloud, mode: str, settings) -> np.ndarray:
