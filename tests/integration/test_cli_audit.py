@@ -194,6 +194,16 @@ def test_a_video_name_without_turntable_says_which_option_makes_one(cloud_file, 
     assert (rc, err) == (1, f"error: {tmp_path / 'spin.MP4'}: a video needs --turntable N (its number of frames); a still image is .png, .jpg, .webp or .tif\n")
 
 
+def test_a_turntables_output_is_refused_in_the_words_of_a_video(cloud_file, tmp_path, cli):
+    """render --turntable checked its output as a still image's ("is a directory, not an output
+    file", "unsupported output type"), where the library's turntable says a video's."""
+    (tmp_path / "spin.mp4").mkdir()
+    rc, _, err = cli("render", cloud_file, "-o", tmp_path / "spin.mp4", "--turntable", 2, *SIZE)
+    assert (rc, err) == (1, f"error: {tmp_path / 'spin.mp4'}: is a directory, not a video file\n")
+    rc, _, err = cli("render", cloud_file, "-o", tmp_path / "spin.txt", "--turntable", 2, *SIZE)
+    assert (rc, err) == (1, f"error: {tmp_path / 'spin.txt'}: unsupported video type '.txt'; use one of .avi, .gif, .mkv, .mov, .mp4, .webm\n")
+
+
 def test_version(cli):
     import gigapoint
 

@@ -1192,7 +1192,7 @@ def test_convert_checks_its_name_switches_and_source_files(autzen_path, tmp_path
     assert open_octree(tmp_path / "crs").meta["crs"] is not None  # one path, not its letters
     for kw, problem in (
         ({"source_files": "gone.laz"}, "gone.laz: no such file"),
-        ({"source_files": [5]}, "convert: source_files are paths of the files the points came from, got a int"),
+        ({"source_files": [5]}, "convert: source_files[0]: 5 is not a path (a str or os.PathLike)"),
         ({"name": 5}, "convert: name must be a string, got 5"),
         ({"progress": "no"}, "convert: progress must be True or False, got 'no'"),
     ):

@@ -190,7 +190,7 @@ NOT_PATHS = [
     ("convert-mixed", lambda src, out: gp.convert([src, None], out), f"convert: inputs[1]: None {NOT_A_PATH}"),  # (was "item 0 is a str")
     ("convert", lambda src, out: gp.convert([5], out),
      "convert: inputs[0]: 5 is neither a path nor a PointChunk (inputs are files and folders, a cloud, or PointChunks)"),
-    ("convert-bare", lambda src, out: gp.convert(5, out), "convert: inputs are files, folders, a cloud or PointChunks, got 5"),
+    ("convert-bare", lambda src, out: gp.convert(5, out), "convert: inputs are files, folders, a cloud or PointChunks, got an int"),
     ("open", lambda src, out: gp.open([5]), f"open: paths[0]: 5 {NOT_A_PATH}"),
     ("open-mixed", lambda src, out: gp.open(src, [src, 2.5]), f"open: paths[1][1]: 2.5 {NOT_A_PATH}"),
     ("change", lambda src, out: gp.change(src, [src, 5], 10), f"change: after[1]: 5 {NOT_A_PATH}"),

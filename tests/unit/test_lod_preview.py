@@ -325,6 +325,9 @@ def test_convert_tile_and_change_of_a_copc_file_not_written_yet_say_why(tmp_path
         "convert to an octree": lambda: gp.convert([out], tmp_path / "octree", recursive=True),
         "tile": lambda: gp.tile(out, tmp_path / "tiles", 100.0),
         "change": lambda: gp.change(out, out, 5.0),
+        "open a file:// URL": lambda: gp.open(out.as_uri()),  # (the URL's path looked for as given: a bare "no such file")
+        "convert a file:// URL": lambda: gp.convert(out.as_uri(), tmp_path / "x.laz"),
+        "tile a file:// URL": lambda: gp.tile(out.as_uri(), tmp_path / "tiles", 100.0),
     }
     for what, call in calls.items():
         with pytest.raises(InputError) as caught:

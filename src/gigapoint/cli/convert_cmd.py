@@ -99,9 +99,9 @@ def convert(
     copc = format == "copc" or (format is None and is_copc_name(output))  # (convert's own default)
     to_file = format is None and is_point_file_name(output)  # one plain point file: nothing to watch, no cluster (convert refuses one)
     if to_file:  # said as the options typed (the library names its keywords); the path as it does, a file:// URL's local one
-        given = {"sampler": sampler, "memory_limit": memory_limit, "max_leaf": max_leaf, "layout": layout, "colors": colors,
-                 "client": dask if dask is not None else workers}  # fmt: skip
-        refuse_octree_options(Path(local_path(output, "the output", ConvertError)), [OCTREE_OPTIONS[k] for k, value in given.items() if value is not None])
+        typed = {"--sampler": sampler, "--memory-limit": memory_limit, "--max-leaf": max_leaf, "--layout": layout, "--colors": colors,
+                 "--dask/--workers (client)": dask if dask is not None else workers}  # fmt: skip
+        refuse_octree_options(Path(local_path(output, "the output", ConvertError)), [option for option, value in typed.items() if value is not None])
     watch = work_dir(output) if copc else output  # a COPC output appears only once complete
     # quoted as a shell needs it: `gigapoint view my scans` named two paths
     hint = None if quiet or to_file else lambda: print(f"while this runs, `gigapoint view {shlex.quote(str(watch))}` shows what has been read so far", file=sys.stderr)
@@ -149,11 +149,6 @@ def convert(
         f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s{resumed}"
         + (f"; viewable after {result.first_view_seconds:.1f} s" if result.first_view_seconds is not None else "")
     )
-
-
-#: convert's keywords of an octree that options set, as the options (refused with a plain point file's output)
-OCTREE_OPTIONS = {"sampler": "--sampler", "memory_limit": "--memory-limit", "max_leaf": "--max-leaf", "layout": "--layout", "colors": "--colors",
-                  "client": "--dask/--workers (client)"}  # fmt: skip
 
 
 def keywords_as_options(output: Path, colors: str | None, dask: str | None) -> dict[str, str]:

@@ -271,10 +271,10 @@ def render(
     """Render point clouds to an image (or a turntable video)."""
     import gigapoint as gp
 
-    from ..render.video import VIDEO_SUFFIXES
+    from ..render.video import VIDEO_SUFFIXES, check_video_path
 
     if turntable is not None:
-        check_output(output, overwrite, suffixes=VIDEO_SUFFIXES)
+        check_video_path(output, overwrite)  # (in the library's words: 'not a video file', 'unsupported video type')
         ignored = [name for name, given in (("--depth-out", depth_out is not None), ("--index-out", index_out is not None),
                    ("--camera", camera is not None), ("--view", view != "auto"), ("--projection", projection not in (None, "perspective")),
                    ("--gsd", gsd is not None), ("--stats", stats)) if given]  # fmt: skip

@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import InputError
 from ..io.http import as_url
 from ..io.las import read_las_header
+from ..io.paths import file_url_path
 from .octree_dir import RESUME_HINT, OctreeDir
 
 # --------------------------------------------------------------------------- COPC's head (copc.py)
@@ -166,6 +167,7 @@ def refuse_unwritten_copc(paths) -> None:
     file before it is written (running: its work folder shows what is read so far; stopped: what
     to do), or that work folder once it is gone. A bare "no such file" left users to guess."""
     for path in paths:
+        path = file_url_path(os.fspath(path)) or path  # (file:///x.copc.laz: the path it names)
         if as_url(path) is not None or Path(path).exists():
             continue
         work, copc = work_dir(path), copc_of_work_dir(path)

@@ -173,7 +173,8 @@ def interpolate_cameras(keys: list[Camera], n_frames: int) -> list[Camera]:
     return out
 
 
-def _check_path(path, overwrite: bool = False) -> Path:
+def check_video_path(path, overwrite: bool = False) -> Path:
+    """``path`` as a video's output: refused in one line before any frame (render --turntable asks too)."""
     check_switch("overwrite", overwrite, "video")
     path = Path(path)
     # before any frame (a path through a file: "Not a directory" came once every frame was drawn);
@@ -198,7 +199,7 @@ def render_flythrough(
     keywords (``edl=True``)."""
     from .renderer import render
 
-    path = _check_path(path, overwrite)
+    path = check_video_path(path, overwrite)
     settings = RenderSettings.of(settings).given(**setting_overrides)  # (before any frame: a bad one is told at once)
     _check_fps(fps)
     cameras = list(cameras)
@@ -234,7 +235,7 @@ def render_flythrough(
                 pass
             _check_video(tmp, path, len(cameras))
 
-    with folders_for(path):  # (those missing: _check_path; removed if the video fails)
+    with folders_for(path):  # (those missing: check_video_path; removed if the video fails)
         atomic_write(path, write)
     return path
 
@@ -286,7 +287,7 @@ def check_turntable(path, n_frames, width, height, fps, overwrite: bool = False)
     """The one-line errors of a turntable that need no cloud: the path, the number of frames,
     the image size (even but for a GIF) and fps; `gigapoint render --turntable` asks before it
     reads its inputs (a bad --fps or an odd --width was told once a large file was read)."""
-    path = _check_path(path, overwrite)
+    path = check_video_path(path, overwrite)
     check_whole("turntable", "number of frames", n_frames, 1, MAX_TURNTABLE_FRAMES)
     width, height = image_side("width", width), image_side("height", height)
     _check_fps(fps)

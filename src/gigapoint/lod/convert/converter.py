@@ -14,7 +14,7 @@ from pathlib import Path
 
 from ...core import pages
 from ...core.renderable import PointSource
-from ...errors import GigapointError, GigapointWarning, InputError, check_switch, value_text, warn
+from ...errors import GigapointError, GigapointWarning, InputError, check_switch, type_text, warn
 from ...io import files_label, given_paths, with_subfolders
 from ...io._base import check_file, headers_once
 from ...io.colorize import open_colorization
@@ -212,10 +212,6 @@ def _are_paths(inputs) -> bool:
     return isinstance(inputs, (list, tuple)) and all(isinstance(p, (str, os.PathLike)) for p in inputs)
 
 
-def _not_a_path(p):
-    raise InputError(f"convert: source_files are paths of the files the points came from, got a {type(p).__name__}")
-
-
 @headers_once()  # each input's header read once, by the read phase's steps and facts alike
 def convert(
     inputs,
@@ -338,7 +334,7 @@ def convert(
     if isinstance(inputs, (list, tuple)) and inputs and isinstance(inputs[0], (str, os.PathLike)):  # files, then None: None named
         inputs = given_paths(inputs, "convert")  # (taken as PointChunks: "item 0 is a str")
     if _are_paths(inputs):  # a COPC file a conversion still writes: its work folder named, not a bare "no such file"
-        refuse_unwritten_copc([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)
+        refuse_unwritten_copc(given_paths(inputs, "convert"))
     if recursive and not _are_paths(inputs):
         raise InputError("convert: recursive=True reads the subfolders of folders; the inputs are a cloud or PointChunks")  # (dropped without a word)
     if recursive:
@@ -364,8 +360,7 @@ def convert(
     if name is not None and not isinstance(name, str):  # 5 went into octree.json as a number
         raise InputError(f"convert: name must be a string, got {name!r}")
     if source_files is not None:  # a path given alone was read letter by letter, a missing file skipped: no CRS, no word
-        source_files = [source_files] if isinstance(source_files, (str, os.PathLike)) else list(source_files)
-        source_files = [check_file(p) if isinstance(p, (str, os.PathLike)) else _not_a_path(p) for p in source_files]
+        source_files = [check_file(p) for p in given_paths(source_files, "convert", "source_files")]
     out = local_path(out, "the output", ConvertError)  # a file:// URL names a path
     if format is None and out is not None and str(out) != "" and is_point_file_name(out) and _are_paths(inputs):  # -o ground.laz: one plain point file
         octree_options = {"sampler": sampler, "memory_limit": memory_limit, "max_leaf": max_leaf, "layout": layout, "colors": colors,
@@ -431,7 +426,7 @@ def convert(
                           f"{exact} for exact colours", GigapointWarning)  # fmt: skip
         inputs = inputs.chunks()
     elif not isinstance(inputs, (str, os.PathLike, GrownTree, Iterable)):
-        raise InputError(f"convert: inputs are files, folders, a cloud or PointChunks, got {value_text(inputs)}")
+        raise InputError(f"convert: inputs are files, folders, a cloud or PointChunks, got {type_text(inputs)}")
     cls = _InMemoryConverter  # held in memory where it fits, else out of core (in_memory.py)
     if isinstance(inputs, GrownTree):  # a progressive octree's save: its leaves are the partitions
         if client is not None:

@@ -239,6 +239,8 @@ def default_memory_limit(client, say: bool = False) -> int:
         return task_share(chunked.physical_memory(), _OWN_WORKERS[client], MIN_DEFAULT_MEMORY)
     if isinstance(client, int):  # convert(client=N): open_client starts them (and refuses N < 1)
         return task_share(chunked.physical_memory(), max(1, client), MIN_DEFAULT_MEMORY)
+    if isinstance(client, str):  # (an address: convert connects first and passes its Client)
+        raise TypeError(f"default_memory_limit: a Client, a number of workers or None, got the address {client!r}")
     found = _cluster_memory_limit(client) if isinstance(client, _distributed().Client) else None  # (open_client refuses others)
     if found is None:
         return parse_memory(None)

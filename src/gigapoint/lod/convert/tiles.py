@@ -309,7 +309,7 @@ def _check_apart(out: Path, inputs, recursive: bool) -> None:
     """One-line errors where the tiles' folder is an input folder, or lies in one read with
     ``recursive``: the next run read its tiles as input points (`tile rec -o rec/tiles
     --recursive` run twice: every point twice), and ``overwrite`` replaced files it was reading."""
-    folders = [Path(p) for p in inputs if isinstance(p, (str, os.PathLike)) and Path(p).is_dir()]
+    folders = [Path(p) for p in inputs if Path(p).is_dir()]
     if out.exists() and any(same_file(out, folder) for folder in folders):
         raise InputError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
     if recursive:
