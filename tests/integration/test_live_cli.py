@@ -126,6 +126,22 @@ def test_record_into_a_recording_asks_for_an_option_view_has_and_a_bad_port_reco
     assert lone.returncode == 1 and "--overwrite: replaces a recording in --record DIR" in lone.stderr, lone.stderr
 
 
+def test_view_replay_refuses_to_record_over_the_recording_it_replays(tmp_path):
+    """`view --replay DIR --record DIR --overwrite` deleted DIR's frames before they were read:
+    it served an empty stream and said "recorded 0 frames", the recording lost."""
+    live = LiveCloud()
+    live.record(tmp_path / "rec")
+    live.push(np.random.default_rng(1).uniform(0, 5, (50, 3)))
+    live.stop_recording()
+    before = sorted((p.name, p.stat().st_size) for p in (tmp_path / "rec").rglob("*"))
+    for option in ("--replay", "--live"):
+        bad = subprocess.run([sys.executable, "-m", "gigapoint.cli", "view", option, str(tmp_path / "rec"), "--record", str(tmp_path / "rec"),
+                              "--overwrite", "--no-browser"], capture_output=True, text=True, timeout=60)  # fmt: skip
+        assert bad.returncode == 1 and len(bad.stderr.strip().splitlines()) == 1, bad.stderr
+        assert f"{tmp_path / 'rec'}: the recording being replayed (recording into it would delete its frames)" in bad.stderr
+    assert sorted((p.name, p.stat().st_size) for p in (tmp_path / "rec").rglob("*")) == before
+
+
 _VIEW_ON_A_FILLING_DISK = """
 import errno, sys
 import numpy as np

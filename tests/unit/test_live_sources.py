@@ -424,6 +424,26 @@ def test_a_replay_equals_the_recorded_frames(tmp_path):
         live.record(tmp_path / "rec")
 
 
+def test_recording_into_the_recording_being_replayed_is_refused_and_it_is_kept(tmp_path):
+    """Recording a replay into its own folder with overwrite=True deleted the recording's frames
+    before the player read them: nothing played, 0 frames recorded, the recording lost."""
+    live = LiveCloud()
+    live.record(tmp_path / "rec")
+    for k in range(3):
+        live.push(*patch(k), time=0.1 * k)
+    live.stop_recording()
+    before = sorted(p.name for p in (tmp_path / "rec" / "frames").iterdir())
+    again = LiveCloud()
+    player = Player(ReplaySource(tmp_path / "rec"), again, rate=None)
+    with pytest.raises(InputError, match=r"rec/?: the recording being replayed \(recording into it would delete its frames\); record into another folder"):
+        again.record(str(tmp_path / "rec") + "/", overwrite=True)
+    assert again.recorder is None
+    assert sorted(p.name for p in (tmp_path / "rec" / "frames").iterdir()) == before == ["000000.npz", "000001.npz", "000002.npz"]
+    player.run()
+    assert again.n_frames == 3 and player.errors == 0
+    again.record(tmp_path / "copy").stop()  # another folder: recorded as usual
+
+
 def test_replay_plays_at_the_recorded_rate_and_a_frame_written_after_the_index_is_found(tmp_path):
     import time
 

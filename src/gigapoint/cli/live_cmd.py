@@ -29,8 +29,9 @@ def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: floa
 
         bounds = ((0.0, 0.0, -30.0), (SCENE_SIZE, SCENE_SIZE, 60.0))  # frame the town from the start
     live = LiveCloud(keep=keep, decay=decay, name=f"live: {src.name}", bounds=bounds)
+    player = Player(src, live, rate=rate, loop=loop)  # (before the recording: it refuses to record over the recording replayed)
     recorder = live.record(record, overwrite=overwrite) if record is not None else None
-    player = Player(src, live, rate=rate, loop=loop).start()
+    player.start()
     deadline = time.monotonic() + 10.0
     while live.n_frames == 0 and not player.done.is_set() and time.monotonic() < deadline:  # the first view frames a first frame
         time.sleep(0.02)

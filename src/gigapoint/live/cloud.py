@@ -32,11 +32,13 @@ from __future__ import annotations
 
 import heapq
 import numbers
+import os
 import threading
 import time as _time
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -855,8 +857,18 @@ class LiveCloud:
         check_switch("overwrite", overwrite, f"{self.name}: record")
         if self.recorder is not None:
             raise InputError(f"{self.name}: already recording into {self.recorder.directory}")
+        self._check_not_replaying(directory)
         self.recorder = Recorder(directory, overwrite=overwrite)
         return self.recorder
+
+    def _check_not_replaying(self, directory) -> None:
+        """Refuse to record into the recording its player replays: overwrite=True deleted its
+        frames before they were read (nothing played, 0 frames recorded: the recording was lost)."""
+        from .sources import ReplaySource
+
+        source = self.player.source if self.player is not None else None
+        if isinstance(source, ReplaySource) and isinstance(directory, (str, os.PathLike)) and Path(directory).resolve() == source.path.resolve():
+            raise InputError(f"{directory}: the recording being replayed (recording into it would delete its frames); record into another folder")
 
     def stop_recording(self) -> None:
         rec, self.recorder = self.recorder, None
