@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from gigapoint.errors import InputError
+from gigapoint.live import LiveCloud
 from gigapoint.live.depth import TILE, depth_to_points, depth_to_points_reference, tile_order
 
 K = (365.5, 360.0, 31.5, 23.5)
@@ -69,6 +70,29 @@ def test_tilted_plane_normal_and_isolated_pixels_get_zero_normals():
     lone[2, 2] = 1.0
     _, nrm, _, _ = depth_to_points(lone, K)
     np.testing.assert_array_equal(nrm, [[0.0, 0.0, 0.0]])
+
+
+@pytest.mark.parametrize("scale", [(0.001, 0.001, 0.001), (2.0, 1.0, 0.5)], ids=["millimetres-to-metres", "non-uniform"])
+def test_a_scaled_pose_gives_unit_normals_perpendicular_to_the_world_surface(scale):
+    """Normals were moved by the pose's 3x3 part, as points are: a millimetre -> metre pose made
+    them 0.001 long (lighting and colour_mode='normal' all but black, files saying so), a
+    non-uniform scale tilted them off the surface."""
+    v, u = np.mgrid[0:30, 0:40].astype(np.float64)
+    z = 2.0 / (1.0 - 0.5 * (u - K[2]) / K[0])  # the sensor's plane z = 2 + 0.5 x: normal (0.5, 0, -1) towards it
+    p = pose_of()
+    p[:3, :3] = p[:3, :3] @ np.diag(scale)
+    xyz, nrm, _, _ = depth_to_points(z, K, p)
+    # the world plane: normal (0.5, 0, -1) (the sensor's) through the inverse transpose
+    expect = np.array([0.5, 0.0, -1.0]) @ np.linalg.inv(p[:3, :3])
+    expect /= np.linalg.norm(expect)
+    np.testing.assert_allclose(nrm, np.tile(expect, (len(nrm), 1)), atol=1e-5)
+    np.testing.assert_allclose((xyz - xyz[0]) @ expect, 0.0, atol=1e-9)  # (it is the world surface's normal)
+    _, rn, _ = depth_to_points_reference(z, K, p)
+    np.testing.assert_allclose(nrm, rn, rtol=0, atol=1e-6)
+    live = LiveCloud()
+    live.push(xyz, normals=np.tile([0.5, 0.0, -1.0], (len(xyz), 1)) / np.sqrt(1.25), pose=p)  # the sensor normals pushed with points (where does not matter)
+    a = live.frame_points()[2]
+    np.testing.assert_allclose(np.c_[a["nx"], a["ny"], a["nz"]], np.tile(expect, (len(xyz), 1)), atol=1e-5)
 
 
 def test_rgb_follows_the_pixels():

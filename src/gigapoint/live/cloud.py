@@ -54,7 +54,7 @@ from ..core.threads import threads_for
 from ..errors import GigapointError, GigapointWarning, InputError, KeptWarnings, check_switch, check_timeout, check_whole, is_real, warn
 from ..lod.progressive import CHUNK as SNAPSHOT_CHUNK  # the snapshot octree's chunk: the mirror's
 from ..render.splats import point_spacing
-from .depth import depth_to_points, parse_pose
+from .depth import depth_to_points, normal_matrix, parse_pose, unit_rows
 from .ring import BASE_ATTRIBUTES, NORMAL_PARTS, LiveBuffers, LiveLock, Runs, attribute_dtype
 
 _INITIAL_CHUNKS = 32
@@ -414,11 +414,14 @@ class LiveCloud:
             nrm = _array(normals, f"{name}: push: normals")
             if nrm.shape != (n, 3) or nrm.dtype.kind not in "if":
                 raise InputError(f"{name}: push: normals must be ({n}, 3) floats or signed integers, got shape {nrm.shape} dtype {nrm.dtype}")
+            to_world, renormalize = normal_matrix(p)  # (a scaled pose moves normals otherwise than points)
             with np.errstate(invalid="ignore"):  # (inf times 0)
-                world_normals = (nrm.astype(np.float64) @ p[:3, :3].T).astype(np.float32)
+                world_normals = (nrm.astype(np.float64) @ to_world.T).astype(np.float32)
             # a NaN or inf normal is an unknown one: 0 (as the module doc says); lighting and
             # color_mode="normal" drew a point with NaN in it black
             world_normals[~np.isfinite(world_normals).all(axis=1)] = 0.0
+            if renormalize:
+                unit_rows(world_normals)
         pts = np.asarray(xyz_in, np.float64)  # no copy of float64 points (nothing writes into them)
         if pose_tag is None and pose is not None:  # sensor -> world (push_depth's kernel applied it already)
             pts = pts @ p[:3, :3].T + p[:3, 3]

@@ -76,6 +76,27 @@ def parse_pose(pose, name: str = "push") -> np.ndarray:
     return np.ascontiguousarray(p)
 
 
+def normal_matrix(pose: np.ndarray) -> tuple[np.ndarray, bool]:
+    """(3x3 taking sensor normals to world normals under ``pose``, whether they must be made unit
+    again after it). Normals move by the inverse transpose of the pose's 3x3 part, not by it: a
+    pose in millimetres -> metres made every normal 0.001 long, and a non-uniform scale tilted
+    them off their surfaces. A rotation times a uniform scale keeps them unit once divided by
+    that scale; any other (a non-uniform scale, a shear) needs ``unit_rows`` after it."""
+    r = pose[:3, :3]
+    gram = r.T @ r
+    scale2 = float(np.trace(gram)) / 3.0
+    if np.allclose(gram, scale2 * np.eye(3), rtol=0.0, atol=1e-9 * scale2):  # a rotation times a uniform scale
+        return np.ascontiguousarray(r / np.sqrt(scale2)), False
+    return np.ascontiguousarray(np.linalg.inv(r).T), True
+
+
+def unit_rows(v: np.ndarray) -> None:
+    """Scale each non-zero row of ``v`` to length 1, in place (zero rows: unknown normals, kept)."""
+    length = np.linalg.norm(v, axis=1)
+    known = length > 0
+    v[known] /= length[known, None].astype(v.dtype)
+
+
 def check_depth(depth, depth_scale, name: str = "push_depth") -> tuple[np.ndarray, float]:
     """The depth image as a 2-D array and its scale to metres."""
     try:
@@ -114,11 +135,11 @@ def _metres(depth, v, u, scale, max_depth):
 
 
 @njit(parallel=True, cache=True)
-def depth_kernel(depth, scale, max_depth, fx, fy, cx, cy, pose, rgb, tiles, th, tw, z, xyz, nrm, rgba, pix, counts):
+def depth_kernel(depth, scale, max_depth, fx, fy, cx, cy, pose, normal_to_world, rgb, tiles, th, tw, z, xyz, nrm, rgba, pix, counts):
     """Points of the valid pixels of ``depth``, tile by tile in the order of ``tiles`` ((row,
     column) of each ``th`` x ``tw`` tile: whole rows in order, or ``tile_order``'s Z order),
-    row-major inside a tile: world xyz (pose applied), unit normal (world; 0 where no neighbour
-    pair exists), rgba (from ``rgb`` (H*W, 3|4) u8, alpha 255 for 3 channels, or left alone
+    row-major inside a tile: world xyz (pose applied), normal (world: ``normal_to_world``, from
+    normal_matrix, applied; 0 where no neighbour pair exists), rgba (from ``rgb`` (H*W, 3|4) u8, alpha 255 for 3 channels, or left alone
     when it has no rows) and pixel index. Scratch: ``z`` (H, W) float64 metres (0: invalid),
     ``counts`` (tiles + 1) the tiles' offsets. Returns the number of points."""
     h, w = depth.shape
@@ -185,7 +206,7 @@ def depth_kernel(depth, scale, max_depth, fx, fy, cx, cy, pose, rgb, tiles, th, 
                         nx = ny = nz = 0.0
                 for a in range(3):
                     xyz[k, a] = pose[a, 0] * x + pose[a, 1] * y + pose[a, 2] * zc + pose[a, 3]
-                    nrm[k, a] = np.float32(pose[a, 0] * nx + pose[a, 1] * ny + pose[a, 2] * nz)
+                    nrm[k, a] = np.float32(normal_to_world[a, 0] * nx + normal_to_world[a, 1] * ny + normal_to_world[a, 2] * nz)
                 if has_rgb:
                     for c in range(nc):
                         rgba[k, c] = rgb[v * w + u, c]
@@ -266,9 +287,12 @@ def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, ma
     pix = reused("pix", (n,), np.int64)
     tiles, th, tw = tile_order(h, w, bool(z_order))
     counts = np.empty(len(tiles) + 1, np.int64)
-    k = depth_kernel(d, scale, limit, fx, fy, cx, cy, p, rgb8, tiles, th, tw, reused("z", (h, w), np.float64), xyz, nrm, rgba, pix, counts)
+    to_world, renormalize = normal_matrix(p)
+    k = depth_kernel(d, scale, limit, fx, fy, cx, cy, p, to_world, rgb8, tiles, th, tw, reused("z", (h, w), np.float64), xyz, nrm, rgba, pix, counts)
     if k == 0:
         raise InputError(f"{name}: the {w}x{h} depth image has no valid pixel (all zero, NaN or beyond max_depth)")
+    if renormalize:
+        unit_rows(nrm[:k])
     return xyz[:k], nrm[:k], (rgba[:k] if rgb is not None else None), pix[:k]
 
 
@@ -316,4 +340,6 @@ def depth_to_points_reference(depth, intrinsics, pose=None, depth_scale=None, ma
     pts = cam.reshape(-1, 3)[idx]
     nrm = n.reshape(-1, 3)[idx]
     world = pts @ p[:3, :3].T + p[:3, 3]
-    return world, (nrm @ p[:3, :3].T).astype(np.float32), idx
+    world_normals = nrm @ np.linalg.inv(p[:3, :3])  # (the inverse transpose, applied to rows)
+    length = np.linalg.norm(world_normals, axis=1, keepdims=True)
+    return world, (world_normals / np.where(length > 0, length, 1.0)).astype(np.float32), idx
