@@ -213,6 +213,22 @@ def test_decay_drops_old_frames_and_fades_the_rest():
     np.testing.assert_allclose(live.fade_alpha(np.array([2.5, 0.5, np.nan], np.float32)), [1.0, 0.0, 1.0])
 
 
+def test_a_snapshot_leaves_out_frames_that_decayed_since_the_last_push_or_drawn_frame():
+    """Frames left the ring by decay only at a push or a drawn frame: a program that snapshotted
+    after its stream paused froze frames that had faded out (3 000 points, not 2 000 of the frame
+    still shown), and frame_points gave them."""
+    now = [0.0]
+    live = LiveCloud(decay=1.0, clock=lambda: now[0])
+    live.push(*frame(0, n=1000))
+    now[0] = 0.8
+    live.push(*frame(1, n=2000))
+    now[0] = 1.5  # the first frame has faded out; nothing pushed or drawn since
+    assert len(live.frame_points()[0]) == 2000
+    assert live.snapshot() == 2000 and live.snapshots.n_points == 2000 and live.n_frames == 1
+    now[0] = 2.0  # the second one too
+    assert live.snapshot() == 0 and live.n_points == 2000
+
+
 def test_without_decay_no_alpha_is_given():
     live = LiveCloud()
     live.push(*frame(0))

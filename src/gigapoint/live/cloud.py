@@ -644,8 +644,7 @@ class LiveCloud:
         """Every ring chunk in view (``max_points``: every k-th point of each), then the snapshot
         octree's selection (its LOD within ``point_budget``), as one selection over the buffers."""
         refuse_hidden_classes(self.name, self.KIND, settings)  # (frames come and go: nothing to filter once)
-        if self.decay is not None and self.frames:
-            self._expire()  # the lock is held (reading): frames past their decay leave before this frame
+        self._drop_decayed()
         self._sync_mirror()
         buf = self.buffers_
         if buf is None:
@@ -680,6 +679,12 @@ class LiveCloud:
             alpha = self.fade_alpha(t)
         sel = Selection(ids, bits.astype(np.int32), mats, size, culled)
         return DrawList(buf, sel, n_batches, step, alpha=alpha, spacing=self._kept_spacing(buf, step))
+
+    def _drop_decayed(self) -> None:
+        """Frames past their ``decay`` leave the ring now (the lock held, reading will do): no push
+        or frame drawn may have come since they aged out."""
+        if self.decay is not None and self.frames:
+            self._expire()
 
     def _kept_spacing(self, buf: LiveBuffers, step: int) -> float:
         """The buffers' point spacing (what adaptive point sizes read), measured again only when a
@@ -749,6 +754,7 @@ class LiveCloud:
         left the ring is a one-line InputError (its chunks hold newer frames' points: they were
         given as its own)."""
         with self.lock.reading():
+            self._drop_decayed()  # (as a snapshot: what a frame drawn now would show)
             frames = list(self.frames) if frames is None else self._frames_in_ring(frames)
             if not frames:
                 return np.empty((0, 3)), np.empty((0, 4), np.uint8), {}
@@ -794,6 +800,7 @@ class LiveCloud:
         self._check_open("snapshot")
         check_switch("normals", normals, f"{self.name}: snapshot")  # "no" kept the normals
         with self.lock.reading():
+            self._drop_decayed()  # frames that faded out since the last push or drawn frame were frozen
             buf = self.buffers_
             slots = [s for f in self.frames for s in f.chunks]
             runs = self._runs(self.frames) if slots else None
