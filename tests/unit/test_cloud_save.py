@@ -107,6 +107,34 @@ def test_from_arrays_with_attributes_saves_to_las_laz_and_ply_and_reads_back_equ
     assert laspy.read(tmp_path / "a.las").header.scales.tolist() == [0.001] * 3  # from_arrays' scale is the file's
 
 
+@pytest.mark.parametrize(
+    ("suffix", "left_out"),
+    [(".las", ["x", "red", "bit_fields", "café"]), (".laz", ["x", "red", "bit_fields", "café"]), (".ply", ["x", "red", "Red", "my attr", "café"])],
+)
+def test_attributes_a_file_cannot_hold_under_their_name_are_left_out_with_a_warning(tmp_path, suffix, left_out):
+    """A name the file's own fields use (x, red; LAS's packed bit_fields; 'Red' in PLY, read in
+    lower case) was a ValueError or IndexError traceback; one a PLY header cannot hold ('my
+    attr', 'café') a file no reader opened: now they are left out, said, and the rest written."""
+    n = 500
+    xyz = np.random.default_rng(5).random((n, 3)) * 100
+    rgb = np.full((n, 3), 90, np.uint8)
+    names = ["x", "red", "Red", "bit_fields", "my attr", "café", "label"]
+    cloud = gp.from_arrays(xyz, rgb, colors="rgba", **{a: np.arange(n, dtype=np.int32) + k for k, a in enumerate(names)})
+    out = tmp_path / f"odd{suffix}"
+    with pytest.warns(gp.GigapointWarning) as caught:
+        assert cloud.save(out) == n
+    said = [re.match(rf"^{re.escape(str(out))}: attribute '(.+)' is not written: ", str(w.message)) for w in caught]
+    assert [m[1] for m in said if m] == left_out
+    back = gp.open(out, colors="rgba")
+    order = np.argsort(back.attributes["label"])
+    np.testing.assert_allclose(back.positions()[order], xyz, atol=1e-3, rtol=0)
+    np.testing.assert_array_equal(back.rgba[order, :3], rgb)
+    for k, a in enumerate(names):
+        assert (a in back.attributes) == (a not in left_out), a
+        if a in back.attributes:
+            np.testing.assert_array_equal(back.attributes[a][order], np.arange(n) + k, err_msg=a)
+
+
 def test_set_colors_then_save_writes_the_new_colours(tmp_path):
     xyz = np.random.default_rng(1).random((3000, 3)) * 10
     cloud = gp.from_arrays(xyz, np.full((3000, 3), 200, np.uint8), colors="rgba")

@@ -168,6 +168,24 @@ def test_ply_header_with_blanks_or_crlf_on_some_lines(tmp_path, ending):
     assert file_info(p)["point_count"] == 2
 
 
+@pytest.mark.parametrize("line", [b"comment written before end_header\n", b"property float end_header\n"])
+def test_ply_header_ends_at_its_end_header_line_not_the_first_end_header_word(tmp_path, line):
+    """A comment or a property of that name held the word first: the header was cut there,
+    "corrupt PLY header: line 5: early end-of-file" (a saved attribute 'end_header' among them)."""
+    extra = b"property float end_header\n" in line
+    p = tmp_path / "e.ply"
+    rows = [(1, 2, 3, 7), (4, 5, 6, 8)] if extra else [(1, 2, 3), (4, 5, 6)]
+    v = np.array(rows, [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("end_header", "<f4")][: len(rows[0])])
+    props = b"property float x\nproperty float y\nproperty float z\n"
+    head = b"ply\nformat binary_little_endian 1.0\nelement vertex 2\n" + (props + line if extra else line + props) + b"end_header\n"
+    p.write_bytes(head + v.tobytes())
+    _, xyz, _, attrs = collect(p)
+    np.testing.assert_array_equal(xyz, [[1, 2, 3], [4, 5, 6]])
+    assert attrs.keys() == ({"end_header"} if extra else set())
+    if extra:
+        np.testing.assert_array_equal(attrs["end_header"], [7, 8])
+
+
 def test_ply_list_property_in_vertex_falls_back_to_plyfile(tmp_path):
     xyz, _ = ref_points(30)
     v = np.zeros(30, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("tags", "O")])

@@ -101,12 +101,23 @@ def las_field_values(name: str, values) -> np.ndarray:
     return np.clip(np.asarray(values), *LAS_FIELD_RANGE[name])
 
 
+def record_names(point_format: int) -> frozenset:
+    """The names point format ``point_format``'s record already uses (its fields, the bytes its
+    flags are packed in, laspy's scaled x, y, z): an extra bytes field of one of them made
+    laspy's "field 'red' occurs more than once" or an IndexError, not a file."""
+    import laspy
+
+    fmt = laspy.PointFormat(point_format)
+    return frozenset({*fmt.dtype().names, *fmt.dimension_names, "x", "y", "z"})
+
+
 def extra_attributes(attributes: dict, where: str = "COPC", point_format: int = 8) -> dict[str, np.dtype]:
     """The attributes ({name: dtype}) that ``point_format`` (6/7/8) has no field for, as they will be
     stored in extra bytes (LAS 1.4 types: booleans as u8, half floats as f4). An attribute that
-    cannot be stored (a name that is not ASCII or longer than 32 bytes, a non-scalar dtype) is
-    left out with a warning."""
+    cannot be stored (a name that is not ASCII or longer than 32 bytes, or that the record's own
+    fields use: ``x``, ``X``, ``red`` in format 7; a non-scalar dtype) is left out with a warning."""
     out = {}
+    taken = record_names(point_format)
     for name, dt in attributes.items():
         if name in field_attributes(point_format):
             continue
@@ -115,6 +126,8 @@ def extra_attributes(attributes: dict, where: str = "COPC", point_format: int = 
         problem = None
         if not name.isascii() or not 0 < len(name) <= 32:
             problem = "its name is not 1-32 ASCII characters"
+        elif name in taken:
+            problem = f"LAS point format {point_format} has a field of that name"
         elif stored not in EXTRA_BYTES_TYPES.values():
             problem = f"its dtype {dt} is not a LAS extra bytes type (8-64-bit integers and floats)"
         if problem:

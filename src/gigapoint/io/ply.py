@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import io
 import itertools
+import re
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -38,6 +39,8 @@ from ._base import (
 )
 
 _MAX_HEADER = 1 << 20
+#: the header's last line (blanks after the word taken, as other readers take them)
+_END_HEADER = re.compile(rb"[\r\n]end_header[ \t\r]*\n")
 
 #: 3D Gaussian splats' degree-0 spherical harmonic, 1 / (2 sqrt(pi)): colour = 0.5 + SH_C0 * f_dc
 SH_C0 = 0.28209479177387814
@@ -69,11 +72,10 @@ class _Header:
             head = f.read(_MAX_HEADER)
         if not head.startswith(b"ply"):
             raise fail(path, f"not a PLY file (starts with {head[:4]!r}, expected b'ply')")
-        end = head.find(b"end_header")
-        nl = head.find(b"\n", end) if end >= 0 else -1
-        if end < 0 or nl < 0:
+        end = _END_HEADER.search(head)  # the line, not the first "end_header": a property may be named so
+        if end is None:
             raise fail(path, "truncated or corrupt PLY header (no 'end_header' line)")
-        self.data_offset = nl + 1
+        self.data_offset = end.end()
         self.header_lines = head[: self.data_offset].count(b"\n")
         # plyfile takes the line end from the first line and no blank after a line's words:
         # "end_header \n", or "end_header\r\n" after "ply\n", was "early end-of-file" (other readers take them)

@@ -177,8 +177,8 @@ def _write_ply(tmp: Path, path: Path, chunks: Chunks, n: int | None, has_color: 
                 data[a] = chunk.xyz[:, k]
             for k, a in enumerate(("red", "green", "blue") if has_color else ()):
                 data[a] = chunk.rgba[:, k]
-            for a, v in chunk.attributes.items():
-                data[a] = v
+            for a in data.dtype.names[3 + 3 * has_color :]:  # (the attributes written)
+                data[a] = chunk.attributes[a]
             f.write(data.tobytes())
             written += len(chunk)
         if fields is None:  # no chunk: a header alone
@@ -193,15 +193,36 @@ def _write_ply(tmp: Path, path: Path, chunks: Chunks, n: int | None, has_color: 
 
 def _ply_fields(path: Path, first: PointChunk, chunks: Chunks, has_color: bool) -> list[tuple[str, str]]:
     """The PLY records' (name, dtype) of points with ``first``'s attributes: 64-bit integers,
-    which PLY has no type for, narrowed to their range (a pass over ``chunks()`` for it)."""
-    wide = [a for a, v in first.attributes.items() if v.dtype.kind in "iu" and v.dtype.itemsize == 8]
+    which PLY has no type for, narrowed to their range (a pass over ``chunks()`` for it); those
+    whose name a PLY file cannot hold left out (``_ply_name_problem``)."""
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")] + ([("red", "u1"), ("green", "u1"), ("blue", "u1")] if has_color else [])
+    taken = {a for a, _ in fields} | ({"alpha"} if has_color else set())  # (alpha would be read as the colours' own)
+    kept = {}
+    for a, v in first.attributes.items():
+        problem = _ply_name_problem(a, taken)
+        if problem:
+            warn(f"{path}: attribute {a!r} is not written: {problem}", GigapointWarning)
+            continue
+        taken.add(a.lower())
+        kept[a] = v.dtype
+    wide = [a for a, dt in kept.items() if dt.kind in "iu" and dt.itemsize == 8]
     lo, hi = dict.fromkeys(wide, 0), dict.fromkeys(wide, 0)
     for chunk in chunks() if wide else ():
         for a in wide:
             if len(chunk):
                 lo[a], hi[a] = min(lo[a], int(chunk.attributes[a].min())), max(hi[a], int(chunk.attributes[a].max()))
-    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")] + ([("red", "u1"), ("green", "u1"), ("blue", "u1")] if has_color else [])
-    return fields + [(a, _ply_type(path, a, v.dtype, lo.get(a, 0), hi.get(a, 0))) for a, v in first.attributes.items()]
+    return fields + [(a, _ply_type(path, a, dt, lo.get(a, 0), hi.get(a, 0))) for a, dt in kept.items()]
+
+
+def _ply_name_problem(name: str, taken: set[str]) -> str | None:
+    """Why a PLY file cannot hold an attribute under ``name``, or None: its header is ASCII words
+    ("property float my attr", "café": every reader refused the file written), and readers take
+    names in lower case (``taken``: those already in the file, lowered; 'X' was read as a second x)."""
+    if not (name.isascii() and name.isprintable()) or any(c.isspace() for c in name):
+        return "its name is not one word of ASCII characters"
+    if name.lower() in taken:
+        return f"the file has a field of that name read in lower case ({name.lower()!r})"
+    return None
 
 
 def _write_ply_header(f, fields: list, n: int | None) -> int:
