@@ -135,6 +135,27 @@ def test_attributes_a_file_cannot_hold_under_their_name_are_left_out_with_a_warn
             np.testing.assert_array_equal(back.attributes[a][order], np.arange(n) + k, err_msg=a)
 
 
+@pytest.mark.parametrize("suffix", [".las", ".laz", ".ply"])
+def test_attributes_of_several_values_a_point_are_written_a_column_each(tmp_path, suffix):
+    """An NPZ's (N, 3) normals (or a structured NPY's subarray field) made save and convert -o
+    numpy's "could not broadcast input array from shape (500,3) into shape (500,)" traceback:
+    normals are written as nx, ny, nz (read back as the renderer's normals), others as name_0 ..."""
+    n = 500
+    rng = np.random.default_rng(6)
+    xyz, normals, pair = rng.random((n, 3)) * 50, rng.normal(size=(n, 3)), rng.integers(0, 1000, (n, 2)).astype(np.uint16)
+    src = tmp_path / "n.npz"
+    np.savez(src, xyz=xyz, normals=normals, pair=pair, label=np.arange(n, dtype=np.int32))
+    saved, converted = tmp_path / f"saved{suffix}", tmp_path / f"converted{suffix}"
+    assert gp.open(src).save(saved) == n
+    assert gp.convert(src, converted).points == n
+    for out in (saved, converted):
+        back = gp.open(out)
+        order = np.argsort(back.attributes["label"])
+        for name, want in {"nx": normals[:, 0], "ny": normals[:, 1], "nz": normals[:, 2], "pair_0": pair[:, 0], "pair_1": pair[:, 1]}.items():
+            np.testing.assert_array_equal(back.attributes[name][order], want, err_msg=f"{out.name} {name}")
+        assert back.attributes["pair_0"].dtype == np.uint16 and "normals" not in back.attributes
+
+
 def test_set_colors_then_save_writes_the_new_colours(tmp_path):
     xyz = np.random.default_rng(1).random((3000, 3)) * 10
     cloud = gp.from_arrays(xyz, np.full((3000, 3), 200, np.uint8), colors="rgba")

@@ -9,6 +9,7 @@ file is replaced only with ``overwrite``; every failure is a one-line InputError
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -59,12 +60,15 @@ def write_points(
     suffix = path.suffix.lower()
     written = 0
 
+    def flat_chunks() -> Iterable[PointChunk]:
+        return (dataclasses.replace(chunk, attributes=_one_value_a_point(chunk.attributes)) for chunk in chunks())
+
     def write(tmp: Path) -> None:
         nonlocal written
         if suffix == ".ply":
-            written = _write_ply(tmp, path, chunks, n_points, has_color)
+            written = _write_ply(tmp, path, flat_chunks, n_points, has_color)
         else:
-            written = _write_las(tmp, path, chunks, grid, crs_records, color_bits, has_color)
+            written = _write_las(tmp, path, flat_chunks, grid, crs_records, color_bits, has_color)
 
     try:
         with folders_for(path):  # (those missing: check_point_file_output; removed if the write fails)
@@ -73,6 +77,23 @@ def write_points(
         reason = write_failure(exc) if isinstance(exc, OSError) else first_line(exc)
         raise InputError(f"{path}: not written ({reason}); nothing was left there") from None
     return written
+
+
+def _one_value_a_point(attributes: dict) -> dict:
+    """``attributes`` with one of k values a point (an NPZ's (N, 3) ``normals``) as k columns:
+    ``nx``, ``ny``, ``nz`` for normals (as PLY files and the renderer name them), else ``name_0``
+    .. (as the LAS reader names an extra bytes array's). A file's fields hold one value a point:
+    such an attribute was numpy's "could not broadcast input array" traceback. A column whose
+    name an attribute has already is left to that attribute."""
+    out = {a: v for a, v in attributes.items() if v.ndim == 1}
+    for a, v in attributes.items():
+        if v.ndim == 1:
+            continue
+        columns = v.reshape(len(v), -1).T
+        names = ("nx", "ny", "nz") if a in ("normal", "normals") and len(columns) == 3 else [f"{a}_{k}" for k in range(len(columns))]
+        for name, column in zip(names, columns):
+            out.setdefault(name, column)
+    return out
 
 
 #: no point: what a writer given no chunk at all writes (a header, no record)
