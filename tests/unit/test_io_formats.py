@@ -229,6 +229,27 @@ def test_text_round_trip(tmp_path, sep, suffix, header):
     assert file_info(p)["point_count"] == N
 
 
+@pytest.mark.filterwarnings("error")  # (nor a word of a column of text)
+@pytest.mark.parametrize("sep", [",", ";"])
+@pytest.mark.parametrize("header", [False, True])
+def test_text_lines_ending_with_a_separator_open_no_column(tmp_path, sep, header):
+    """'1,2,3,255,0,0,' (exports that end every line with the separator) was "line 1: not numeric
+    point data", with a header "column(s)  hold text, not numbers: left out", and a folder left the
+    file out (not taken for points)."""
+    xyz, rgb = ref_points(30)
+    folder = tmp_path / "f"
+    folder.mkdir()
+    p = folder / "pts.csv"
+    write_text(p, xyz, rgb, sep=sep, header=sep.join(["x", "y", "z", "r", "g", "b"]) if header else None)
+    p.write_text("".join(line + sep + "\n" for line in p.read_text().splitlines()))
+    _, got, rgba, attrs = collect(p)
+    np.testing.assert_allclose(got, xyz, atol=5e-7)
+    np.testing.assert_array_equal(rgba[:, :3], rgb)
+    assert attrs == {}
+    assert file_info(p)["columns"] == ["x", "y", "z", "r", "g", "b"]
+    assert open_cloud(folder).n_points == 30
+
+
 def test_text_layouts_by_column_count(tmp_path):
     xyz, rgb = ref_points(40)
     inten = np.arange(40.0)

@@ -1,6 +1,7 @@
 """XYZ / TXT / CSV / PTS: one point per line, streamed in chunks with numpy.loadtxt.
 
-Delimiter sniffed from the first data line (semicolon, comma, else whitespace: spaces or tabs).
+Delimiter sniffed from the first data line (semicolon, comma, else whitespace: spaces or tabs);
+a separator that ends a line ("1,2,3,", as some exports write every line) opens no column.
 An optional header line names the columns (x y z, red green blue [alpha] or r g b [a],
 anything else becomes an attribute, e.g. intensity, nx); CloudCompare's ``//X,Y,Z`` header
 works too. Without a header, columns are read by count:
@@ -70,6 +71,13 @@ def _sniff_delimiter(line: str) -> str | None:
 
 def _split(line: str, delimiter: str | None) -> list[str]:
     return [t.strip() for t in (line.split(delimiter) if delimiter else line.split())]
+
+
+def _values(line: str, delimiter: str | None) -> list[str]:
+    """A line's values: "1,2,3," ends with a separator (some exports end every line so), which
+    opens no column (the file was "not numeric point data", and not taken from a folder)."""
+    tokens = _split(line, delimiter)
+    return tokens[:-1] if delimiter is not None and len(tokens) > 1 and tokens[-1] == "" else tokens
 
 
 def _numeric(tokens: list[str]) -> bool:
@@ -146,7 +154,10 @@ def _layout(path: Path) -> _Layout:
         raise fail(path, "holds no points", EmptyCloudError)
     lineno, line = data[0]
     delimiter = _sniff_delimiter(line)
-    tokens = _split(line, delimiter)
+    tokens, n_columns = _values(line, delimiter), len(_split(line, delimiter))
+    if header_names and header_names[-1] == "":  # ("x,y,z,": its last separator names no column either)
+        header_names = header_names[:-1]
+    columns = list(range(len(tokens))) if len(tokens) < n_columns else None
     if header_names is None and not _numeric(tokens):
         raise fail(path, f"line {lineno}: not numeric point data: {line[:80]!r}")
     quoted = '"' in line
@@ -160,13 +171,13 @@ def _layout(path: Path) -> _Layout:
                 f"{path}: column(s) {', '.join(header_names[i] for i in text)} hold text, not numbers: left out", GigapointWarning
             )
             kept = [i for i in range(len(tokens)) if i not in text]
-            return _Layout(path, skip, delimiter, [header_names[i] for i in kept], True, quoted, kept, len(tokens))
+            return _Layout(path, skip, delimiter, [header_names[i] for i in kept], True, quoted, kept, n_columns)
         names = header_names
     else:
         if len(tokens) < 3:
             raise fail(path, f"line {lineno} has {len(tokens)} columns, expected at least 3 (x y z)")
         names = _names_by_count(len(tokens))
-    return _Layout(path, skip, delimiter, names, header_names is not None, quoted)
+    return _Layout(path, skip, delimiter, names, header_names is not None, quoted, columns, n_columns)
 
 
 def _first_bad_line(path: Path, lines: list[str], first_lineno: int, delimiter: str | None, ncols: int, columns=None) -> tuple[int, str]:
@@ -244,7 +255,7 @@ class TextReader(Reader):
             text = head[:-4].decode("utf-8", "ignore") if len(head) > 4 else ""
         lines = [ln for ln in text.splitlines()[:-1] if ln.strip() and not _is_comment(ln)] or [ln for ln in text.splitlines() if ln.strip()]
         for line in lines[:3]:
-            tokens = _split(line, _sniff_delimiter(line))
+            tokens = _values(line, _sniff_delimiter(line))
             if len(tokens) >= 3 and _numeric(tokens):
                 return True
         return False
