@@ -232,6 +232,12 @@ class ViewerCore:
         self.cloud = cloud
         self.redraw()
 
+    def reframe(self) -> None:
+        """Sample again what the 'auto' view frames, from the cloud drawn now (a loading cloud grew:
+        its first points may be a strip of the survey, or none); views stay."""
+        with RENDER_LOCK:  # sample_points prepares the cloud as a frame does (the octree's pool): not beside one
+            self.framing = sample_points(self.cloud)
+
     def redraw(self) -> None:
         """Every tab draws again (the cloud changed: swapped, or grown while it loads); views stay."""
         lo, hi = self.cloud.bounds

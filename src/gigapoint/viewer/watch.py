@@ -115,12 +115,15 @@ def load_note(cloud, rate: float) -> str:
 
 class LoadWatcher(_Watcher):
     """While a progressive octree fills: redraw every tab ``interval_s`` (what is loaded so far)
-    and keep the HUD's line on points loaded and points/s; one last redraw when it is done."""
+    and keep the HUD's line on points loaded and points/s; one last redraw when it is done. What
+    the 'auto' view frames (a new tab's first view) is sampled again as the points double, and
+    once all are loaded."""
 
     def __init__(self, core, cloud, interval_s: float = 0.25):
         super().__init__(core, "gigapoint-load-watch")
         self.cloud = cloud
         self.interval_s = interval_s
+        self.framed = cloud.n_points  # the points the core's framing was sampled from
         core.note = load_note(cloud, 0.0)
 
     def _run(self) -> None:
@@ -133,6 +136,10 @@ class LoadWatcher(_Watcher):
             last = now
             done = not self.cloud.loading
             self.core.note = load_note(self.cloud, rate)
+            n_points = self.cloud.n_points
+            if done or n_points >= max(2 * self.framed, 1):  # the 'auto' view framed the first points read for good
+                self.core.reframe()
+                self.framed = n_points
             self.core.redraw()
             if done:
                 self.finished.set()
