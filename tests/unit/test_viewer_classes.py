@@ -259,3 +259,28 @@ def test_view_of_an_octree_with_a_class_filter_draws_it_level_of_detail_without_
         image = session.last.frame.image
         assert pixels_of(image, GROUND) > 300 and pixels_of(image, BUILDING) == 0  # (400 points of class 2, 400 of class 6)
     core.close_all()
+
+
+def test_a_section_leaves_out_the_classes_hidden_and_is_drawn_again_when_they_change(two_class_cloud):
+    """The section tool drew (and its CSV listed) the points of classes unticked in the Classes
+    panel, where the volume tool leaves them out: a section across both halves counted class 6's
+    points hidden from the view. It is of what the view shows, and follows the panel."""
+    xyz, _, classes = two_classes()
+    line, width = (1.0, 25.0, 99.0, 25.0), 5.0  # across both halves, 2 rows of the 2.5 grid
+    in_corridor = (np.abs(xyz[:, 1] - 25.0) <= width / 2) & (xyz[:, 0] >= 1) & (xyz[:, 0] <= 99)
+    core, client = connect(two_class_cloud)
+    with client, client.websocket_connect("/ws?w=160&h=120") as ws:
+        session = receive(ws, reply("hello"))["session"]
+        ws.send_json({"type": "settings", "values": {"hidden_classes": [6]}})
+        receive(ws, reply("settings"))
+        ws.send_json({"type": "section", "action": "set", "points": [[*line[:2], 0], [*line[2:], 0]], "width": width})
+        shown = receive(ws, reply("section_result"))
+        assert shown["count"] == np.count_nonzero(in_corridor & (classes == 2)) == 40
+        assert shown["distance"][1] < 49  # the left half's points alone
+        rows = client.get(f"/section.csv?session={session}").text.splitlines()
+        assert rows[0].endswith(",classification") and len(rows) == 41 and {r.rsplit(",", 1)[1] for r in rows[1:]} == {"2"}
+        ws.send_json({"type": "settings", "values": {"hidden_classes": [2, 6]}})
+        said = "two classes: no point passes the filter (drop classes 2, 6; corridor 1, 25 to 99, 25, width 5): 800 points read"
+        assert receive(ws, reply("section_result"))["error"] == said  # nothing shown, nothing in the section
+        ws.send_json({"type": "settings", "values": {"hidden_classes": []}})
+        assert receive(ws, reply("section_result"))["count"] == np.count_nonzero(in_corridor) == 80

@@ -7,7 +7,9 @@ render loop (``Session._compute_section``'s thread) and sent as a PNG of the pan
 its numbers. Which points: a cloud held in memory (a PointCloud) gives its own; an LOD octree
 (converted, COPC, EPT, Potree, local or over HTTP; a progressive one) those of the nodes that
 meet the corridor, at every level (lod/query.py): they hold every point once (a COPC file or
-EPT dataset through a reader of its own, apart from the frames').
+EPT dataset through a reader of its own, apart from the frames'). Classes hidden in the Classes
+panel are left out (the section is of what the view shows, as the volume tool's volume), and
+the section is drawn again when they change.
 """
 
 from __future__ import annotations
@@ -63,13 +65,15 @@ def own_reader_source(cloud: VoxelOctree) -> str:
     return cloud.source.path if isinstance(cloud.source, LocalFile) else cloud.source.url
 
 
-def section_of(cloud, line, width) -> Section:
+def section_of(cloud, line, width, hidden_classes=()) -> Section:
     """``gigapoint.section`` of what the viewer shows: the cloud's points in memory, an octree's
-    from the nodes meeting the corridor; a one-line GigapointError for any other cloud."""
+    from the nodes meeting the corridor, but those of ``hidden_classes``; a one-line
+    GigapointError for any other cloud."""
+    dropped = list(hidden_classes) or None
     if isinstance(cloud, VoxelOctree):
-        return section(own_reader_source(cloud), line, width)
+        return section(own_reader_source(cloud), line, width, drop_classes=dropped)
     if isinstance(cloud, PointCloud) or is_octree(cloud):
-        return section(cloud, line, width)
+        return section(cloud, line, width, drop_classes=dropped)
     raise GigapointError(f"{cloud.name}: sections need the points in memory or an LOD octree; this cloud is neither (view the point files instead)")
 
 

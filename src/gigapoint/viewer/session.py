@@ -456,9 +456,12 @@ class Session:
                 refused = C.refusal(self.core.cloud) if settings.hidden_classes else ""
                 if refused:  # (not a frame that fails: the panel is disabled for it)
                     raise P.ProtocolError(f"settings: {refused}")
+                hidden_changed = settings.hidden_classes != self.settings.hidden_classes
                 self.settings = settings
                 motion = False
                 reply = {"type": "settings", "values": P.settings_values(self.settings)}
+                if hidden_changed and len(self.section) == 2:  # the section shows what the view shows: drawn again without them
+                    self._start_section()
             elif kind == "classes":
                 return {"type": "classes", **self.core.class_panel(self.settings.hidden_classes)}
             elif kind == "quality":
@@ -551,24 +554,31 @@ class Session:
             self.section = []
         else:
             raise P.ProtocolError(f"section: action must be add, set or clear, got {str(action)[:20]!r}")
-        self.section_job += 1  # what is on its way for the old line is not sent
-        computing = len(self.section) == 2
-        if computing:
-            job = (self.section_job, [p[:2] for p in self.section], self.section_width, tuple(self.section_size))
-            threading.Thread(target=self._compute_section, args=job, name=f"gigapoint-section-{self.id}", daemon=True).start()
+        computing = self._start_section()
         reply = {"type": "section", "id": msg.get("id"), "points": self.section, "width": self.section_width, "computing": computing}
         return reply if message is None else {**reply, "message": message}
 
-    def _compute_section(self, job: int, ends, width: float, size) -> None:
-        """The section of the viewer's cloud along ``ends`` sent to the tab (off the render loop:
-        only its image is drawn under the render lock, and the corridor's points are few)."""
+    def _start_section(self) -> bool:
+        """Compute the section of the line (when it has two points) on a thread of its own, without
+        the classes the view hides (as the volume leaves them out); whether it was started."""
+        self.section_job += 1  # what is on its way for the old line is not sent
+        if len(self.section) != 2:
+            return False
+        job = (self.section_job, [p[:2] for p in self.section], self.section_width, tuple(self.section_size), self.settings.hidden_classes)
+        threading.Thread(target=self._compute_section, args=job, name=f"gigapoint-section-{self.id}", daemon=True).start()
+        return True
+
+    def _compute_section(self, job: int, ends, width: float, size, hidden_classes) -> None:
+        """The section of the viewer's cloud along ``ends`` but the points of ``hidden_classes``,
+        sent to the tab (off the render loop: only its image is drawn under the render lock, and
+        the corridor's points are few)."""
         with self.section_lock:
             if job != self.section_job or self.closed:
                 return  # the line changed again while an older one was computed
             line = (*ends[0], *ends[1])
             cut = None
             try:
-                cut, note = ST.capped(ST.section_of(self.core.cloud, line, width), ST.MAX_POINTS)
+                cut, note = ST.capped(ST.section_of(self.core.cloud, line, width, hidden_classes), ST.MAX_POINTS)
                 result = ST.summary(cut, self.core.units, note)
                 with RENDER_LOCK:
                     image = cut.render(size=size)
