@@ -235,6 +235,28 @@ def test_a_polygon_crossing_itself_has_no_area_and_its_volume_is_refused(client)
         assert m["crossing"] is None and m["area"] == 300.0
 
 
+FLAT_POLYGONS = [  # closed measurements without area, on the pile's ground
+    [[15.0, 15.0, GROUND_Z], [30.0, 15.0, GROUND_Z], [45.0, 15.0, GROUND_Z]],  # along x
+    [[15.0, 15.0, GROUND_Z], [45.0, 35.0, GROUND_Z], [45.0, 35.0, GROUND_Z]],  # two points, one picked twice
+    [[15.1, 15.7, GROUND_Z], [15.3, 17.1, GROUND_Z], [15.7, 19.9, GROUND_Z]],  # slanted: its shoelace rounds to a hair above 0
+]
+
+
+@pytest.mark.parametrize("points", FLAT_POLYGONS, ids=["along_x", "two_points", "slanted"])
+def test_a_polygon_of_points_on_one_line_is_refused_for_having_no_area(client, points):
+    """Three points on a line closed into a polygon were computed, to "no pixel centre of the 0.25
+    grid lies inside it: give a finer gsd" (no gsd helps); two points' error was gp.volume's
+    dump of the GeoJSON made of them ("volume: clip_polygon={'type': 'Polygon', ...")."""
+    c, _ = client
+    with c.websocket_connect("/ws?w=120&h=90") as ws:
+        receive(ws, reply("hello"))
+        ws.send_json({"type": "measure", "action": "restore", "points": points, "closed": True})
+        assert receive(ws, reply("measure"))["area"] < 1e-12
+        ws.send_json({"type": "volume"})
+        said = receive(ws, lambda k, p: k == "json" and p["type"] in ("error", "volume_result"))
+    assert said == {"type": "error", "message": "volume: the polygon's points lie on one line: it has no area; move a point off the line", "in_reply_to": "volume"}
+
+
 def test_a_box_over_the_cap_is_read_thinned_and_its_volume_stays_near_the_whole_ones(client, cloud, monkeypatch):
     """The polygon's box holds 124 x 84 = 10,416 points: above a cap of 3,000 every 4th is read
     (never more than the cap held), the grid no finer than their spacing, and the result says so;
