@@ -305,3 +305,50 @@ def test_the_auto_view_of_a_loading_cloud_frames_every_point_loaded():
     finally:
         core.close_all()
         in_memory.close_all()
+
+
+def test_a_tab_opened_before_the_first_point_is_fit_to_the_points_once_they_come():
+    """A tab opened while a loading cloud held no point yet (`gigapoint view` serves after 5 s
+    without one; its page opens at once) was fit to an empty box: the origin at a distance of
+    5e-08, its zoom held under 0.01, and it showed nothing once the points came. It is fit to
+    them, as the 'auto' view; a tab moved meanwhile keeps its view."""
+    import threading
+    import time
+
+    from gigapoint.lod.progressive import Loader, ProgressiveOctree
+    from gigapoint.viewer.protocol import unpack_frame
+    from gigapoint.viewer.session import ViewerCore
+
+    xyz = np.random.default_rng(1).uniform((637000, 4850000, 0), (638000, 4851000, 5), (100_000, 3))
+    go_on = threading.Event()
+
+    def late():
+        go_on.wait(30)
+        for first in range(0, len(xyz), 20_000):
+            yield next(gp.from_arrays(xyz[first : first + 20_000]).chunks())
+
+    cloud = ProgressiveOctree("late")
+    cloud.attach(Loader(cloud, [("late", late)], len(xyz)).start())
+    core = ViewerCore(cloud)
+    frames = {"untouched": [], "moved": []}
+
+    def sent_to(tab):
+        return lambda kind, payload: kind != "bytes" or frames[tab].append(unpack_frame(payload)[0]) or True
+
+    try:
+        untouched, moved = (core.open_session(sent_to(tab), 96, 64) for tab in frames)
+        assert untouched.snapshot()[0].distance == pytest.approx(5e-08)  # (no point yet)
+        moved.handle({"type": "orbit", "dyaw": 30})
+        chosen = moved.snapshot()[0].as_dict()
+        go_on.set()
+        cloud.wait(timeout=60)
+        assert core.watcher.finished.wait(10)
+        time.sleep(0.5)  # the last frames
+        shown = untouched.snapshot()[0]
+        assert shown.as_dict() == core.default_state(96, 64).as_dict()  # the 'auto' view of the points loaded
+        assert frames["untouched"][-1]["camera"] == shown.as_dict() and frames["untouched"][-1]["visible_pixels"] > 1000
+        in_memory = ViewerCore(gp.from_arrays(xyz)).default_state(96, 64)  # the same points held in memory
+        assert np.linalg.norm(shown.target - in_memory.target) < 20 and shown.distance == pytest.approx(in_memory.distance, rel=0.05)
+        assert moved.snapshot()[0].as_dict() == chosen
+    finally:
+        core.close_all()

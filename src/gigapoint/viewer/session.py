@@ -234,14 +234,27 @@ class ViewerCore:
 
     def reframe(self) -> None:
         """Sample again what the 'auto' view frames, from the cloud drawn now (a loading cloud grew:
-        its first points may be a strip of the survey, or none); views stay."""
+        its first points may be a strip of the survey, or none); views stay, but those of tabs
+        opened before the first point and not moved since, which looked at nothing."""
+        if self.cloud.n_points == 0:  # (nothing to frame yet; once points are counted, the bounds hold them)
+            return
+        self._take_bounds()
         with RENDER_LOCK:  # sample_points prepares the cloud as a frame does (the octree's pool): not beside one
             self.framing = sample_points(self.cloud)
+        for s in list(self.sessions.values()):
+            with s.cond:
+                if s.framed_nothing:  # (fit to an empty box: the origin, at 5e-08, zoom held under 0.01)
+                    s.state = self.default_state(s.width, s.height, fov=s.state.fov)
+                    s.framed_nothing = False
+                    s._changed(False)
+
+    def _take_bounds(self) -> None:
+        lo, hi = self.cloud.bounds
+        self.bounds = (np.asarray(lo, np.float64), np.asarray(hi, np.float64))
 
     def redraw(self) -> None:
         """Every tab draws again (the cloud changed: swapped, or grown while it loads); views stay."""
-        lo, hi = self.cloud.bounds
-        self.bounds = (np.asarray(lo, np.float64), np.asarray(hi, np.float64))
+        self._take_bounds()
         for s in list(self.sessions.values()):
             with s.cond:
                 s._changed(False)
@@ -343,6 +356,7 @@ class Session:
         self.cond = threading.Condition()
         self.width, self.height = width, height
         self.state = core.default_state(width, height)
+        self.framed_nothing = core.cloud.n_points == 0  # its view fit to no point: fit again once points come (ViewerCore.reframe), unless moved
         self.settings = core.settings
         self.good_settings = self.settings
         self.cloud_shown = core.cloud_info()  # the panel's cloud line, as hello sent it; a frame carries it again once it changes
@@ -474,6 +488,7 @@ class Session:
                 motion = False
             if seq is not None:
                 self.seq = seq
+            self.framed_nothing = self.framed_nothing and not motion  # (moved: the view the user chose stays)
             self._changed(motion)
         return reply
 

@@ -117,7 +117,7 @@ class LoadWatcher(_Watcher):
     """While a progressive octree fills: redraw every tab ``interval_s`` (what is loaded so far)
     and keep the HUD's line on points loaded and points/s; one last redraw when it is done. What
     the 'auto' view frames (a new tab's first view) is sampled again as the points double, and
-    once all are loaded."""
+    once all are loaded; a tab opened before the first point is fit to them (ViewerCore.reframe)."""
 
     def __init__(self, core, cloud, interval_s: float = 0.25):
         super().__init__(core, "gigapoint-load-watch")
