@@ -600,3 +600,45 @@ def test_unticking_a_class_hides_it_and_ticking_it_shows_it_again(browser, autze
     finally:
         ctx.close()
         srv.close()
+
+
+def test_the_fly_speed_follows_a_loading_cloud_as_it_grows(browser):
+    """The fly speed (a quarter of the scene's radius a second) was set from the bounds the page's
+    hello held: a file read west to east flew at its first strip's pace (126/s over a 1000 x 1000
+    survey, not 177/s), one served before its first point at 0.25/s. The cloud's line each frame
+    carries again as it grows sets it."""
+    import threading
+
+    from gigapoint.lod.progressive import Loader, ProgressiveOctree
+
+    rng = np.random.default_rng(1)
+    xyz = rng.uniform((0, 0, 0), (1000, 1000, 5), (200_000, 3))
+    xyz = xyz[np.argsort(xyz[:, 0])]  # read west to east
+    go_on = threading.Event()
+
+    def strips():
+        for first in range(0, len(xyz), 20_000):
+            if first:
+                go_on.wait(30)
+            yield next(gigapoint.from_arrays(xyz[first : first + 20_000]).chunks())
+
+    cloud = ProgressiveOctree("strips")
+    cloud.attach(Loader(cloud, [("strips", strips)], len(xyz)).start())
+    while cloud.n_points == 0:
+        time.sleep(0.01)
+    srv = ViewerServer(cloud).start()
+    ctx = browser.new_context(viewport=VIEWPORT)
+    try:
+        pg = ctx.new_page()
+        pg.goto(srv.url)
+        wait_full_frame(pg, 0)
+        first_strip = np.linalg.norm(np.ptp(xyz[:20_000], axis=0)) / 2
+        assert pg.locator("#speed-value").text_content() == f"{first_strip * 0.25:.3g}/s" == "126/s"
+        go_on.set()
+        cloud.wait(timeout=60)
+        whole = np.linalg.norm(np.ptp(xyz, axis=0)) / 2
+        pg.wait_for_function("(s) => document.getElementById('speed-value').textContent === s", arg=f"{whole * 0.25:.3g}/s", timeout=10_000)
+        assert pg.locator("#speed-value").text_content() == "177/s"
+    finally:
+        ctx.close()
+        srv.close()

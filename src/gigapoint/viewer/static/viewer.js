@@ -74,6 +74,10 @@
 
   function showCloud(cloud) {
     S.cloud = cloud;
+    // the fly speed follows the cloud's size as it grows (a loading or live cloud's: its hello held a first slice, or nothing)
+    const b = cloud.bounds;
+    S.sceneRadius = Math.hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]) / 2 || 1;
+    updateSpeedLabel();
     const info = $("cloudinfo");  // "name · N points · M batches": a count and its unit never split over lines
     info.textContent = `${cloud.name} · `;
     for (const [i, part] of [`${cloud.points.toLocaleString()} points`, `${cloud.batches.toLocaleString()} batch${cloud.batches === 1 ? "" : "es"}`].entries()) {
@@ -91,8 +95,6 @@
       const kept = same && S.camera ? { camera: S.camera, settings: S.settings, measure: S.measure, closed: S.measureClosed, section: S.section } : null;
       drawing = 0;  // the new session numbers its frames from 1: the old count dropped them all
       S.session = m.session; S.schema = m.schema; S.settings = m.settings; S.camera = m.camera;
-      const b = m.cloud.bounds;
-      S.sceneRadius = Math.hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]) / 2 || 1;
       showCloud(m.cloud);
       showClasses(m.classes);
       showMeasure({ points: [], segments: [] });  // a new session measures nothing yet (a reconnect's points are sent back below)
