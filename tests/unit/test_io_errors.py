@@ -530,6 +530,22 @@ def test_a_named_text_column_is_left_out_with_a_warning(tmp_path):
             np.testing.assert_array_equal(open_cloud(p).bounds[1], [4, 5, 6])
 
 
+def test_text_problems_on_lines_that_end_with_a_comment(tmp_path):
+    """A line's trailing comment is no column: a named text column after one (whitespace between
+    the columns) was "line 2 has 6 columns, expected 4", a bad number "has 5 columns"."""
+    from gigapoint.errors import GigapointWarning
+
+    p = tmp_path / "labels.xyz"
+    p.write_text("x y z label\n1 2 3 tree # a note\n4 5 6 roof\n")
+    with pytest.warns(GigapointWarning, match="label hold text"):
+        cloud = open_cloud(p)
+    np.testing.assert_array_equal(cloud.bounds, [[1, 2, 3], [4, 5, 6]])
+    p.write_text("1 2 3 # a note\n4 5 x # another\n")
+    raises(InputError, p, match="line 2: 'x' is not a number")
+    p.write_text("1 2 3 # a note\n4 5 // another\n")
+    raises(InputError, p, match="line 2 has 2 columns, expected 3")
+
+
 def test_csv_wrong_column_count(tmp_path):
     p = tmp_path / "bad.xyz"
     p.write_text("1 2 3\n" * 5 + "1 2\n")

@@ -277,6 +277,29 @@ def test_text_cloudcompare_header_comments_and_unit_colors(tmp_path):
     np.testing.assert_array_equal(attrs["nz"], [1, 0])
 
 
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize("sep", [" ", ",", ";", "\t"])
+@pytest.mark.parametrize("mark", ["# note", "// note, with a comma"])
+@pytest.mark.parametrize("header", [False, True])
+def test_text_first_line_ending_with_a_comment(tmp_path, sep, mark, header):
+    """'1 2 3 # note' on the first line of points was "line 1: not numeric point data" (after a
+    header: "line 2 has 5 columns, the header names 3"), and a folder left the file out (a comment
+    on every line: not taken for points); the same comment on a later line was read (loadtxt drops it)."""
+    xyz, rgb = ref_points(30)
+    folder = tmp_path / "f"
+    folder.mkdir()
+    p = folder / "pts.txt"
+    write_text(p, xyz, rgb, sep=sep, header=sep.join(["x", "y", "z", "r", "g", "b"]) if header else None)
+    lines = p.read_text().splitlines()
+    p.write_text("".join(line + (f" {mark}" if i >= header else "") + "\n" for i, line in enumerate(lines)))
+    _, got, rgba, attrs = collect(p)
+    np.testing.assert_allclose(got, xyz, atol=5e-7)
+    np.testing.assert_array_equal(rgba[:, :3], rgb)
+    assert attrs == {}
+    assert file_info(p)["columns"] == ["x", "y", "z", "r", "g", "b"]
+    assert open_cloud(folder).n_points == 30
+
+
 def test_text_content_sniffed_without_known_suffix(tmp_path):
     p = tmp_path / "points.dat"
     p.write_text("1 2 3\n4 5 6\n")

@@ -17,7 +17,8 @@ works too. Without a header, columns are read by count:
 ====  ==============================================
 
 A PTS file's first line (the point count alone) is skipped. Lines starting with ``#`` or
-``//`` are comments; blank lines are skipped.
+``//`` are comments, and so is what follows either on a line of points ("1 2 3 # note");
+blank lines are skipped.
 """
 
 from __future__ import annotations
@@ -60,6 +61,15 @@ _MAX_LINE = 1 << 16
 def _is_comment(line: str) -> bool:
     s = line.lstrip()
     return s.startswith(("#", "//"))
+
+
+def _without_comment(line: str) -> str:
+    """A line of points before the ``#`` or ``//`` comment that may end it ("1 2 3 # note"), as
+    loadtxt reads the lines after the first: the first line's comment, split into columns, made
+    the file "not numeric point data" (or a column count the header did not name)."""
+    for mark in ("#", "//"):
+        line = line.split(mark, 1)[0]
+    return line
 
 
 def _sniff_delimiter(line: str) -> str | None:
@@ -153,14 +163,15 @@ def _layout(path: Path) -> _Layout:
             raise fail(path, "holds a header line but no points", EmptyCloudError)
         raise fail(path, "holds no points", EmptyCloudError)
     lineno, line = data[0]
-    delimiter = _sniff_delimiter(line)
-    tokens, n_columns = _values(line, delimiter), len(_split(line, delimiter))
+    values = _without_comment(line)  # (its separator a comma in the comment: "1 2 3 # a, b")
+    delimiter = _sniff_delimiter(values)
+    tokens, n_columns = _values(values, delimiter), len(_split(values, delimiter))
     if header_names and header_names[-1] == "":  # ("x,y,z,": its last separator names no column either)
         header_names = header_names[:-1]
     columns = list(range(len(tokens))) if len(tokens) < n_columns else None
     if header_names is None and not _numeric(tokens):
         raise fail(path, f"line {lineno}: not numeric point data: {line[:80]!r}")
-    quoted = '"' in line
+    quoted = '"' in values
     if header_names is not None:
         if len(header_names) != len(tokens):
             raise fail(path, f"line {lineno} has {len(tokens)} columns, the header names {len(header_names)}")
@@ -186,7 +197,7 @@ def _first_bad_line(path: Path, lines: list[str], first_lineno: int, delimiter: 
     for i, line in enumerate(lines):
         if not line.strip() or _is_comment(line):
             continue
-        tokens = _split(line.rstrip("\r\n"), delimiter)
+        tokens = _split(_without_comment(line.rstrip("\r\n")), delimiter)
         if len(tokens) != ncols:
             return i, f"line {first_lineno + i} has {len(tokens)} columns, expected {ncols}"
         for t in tokens if columns is None else [tokens[c] for c in columns]:
@@ -223,7 +234,7 @@ def _chunks(path: Path, chunk_size: int, layout: _Layout) -> Iterator[np.ndarray
                     arr = _parsed(lines, layout.delimiter, columns)
                     good = not arr.size or arr.shape[1] == used
                     if good and columns is not None:  # usecols reads short lines as long as they reach the columns used
-                        good = all(len(_split(ln.rstrip("\r\n"), layout.delimiter)) == ncols for ln in lines if ln.strip() and not _is_comment(ln))
+                        good = all(len(_split(_without_comment(ln.rstrip("\r\n")), layout.delimiter)) == ncols for ln in lines if ln.strip() and not _is_comment(ln))
                 except ValueError:
                     good = False
                 if not good:  # the lines before the bad one first: a progressive load keeps them
@@ -254,7 +265,7 @@ class TextReader(Reader):
         except UnicodeDecodeError:
             text = head[:-4].decode("utf-8", "ignore") if len(head) > 4 else ""
         lines = [ln for ln in text.splitlines()[:-1] if ln.strip() and not _is_comment(ln)] or [ln for ln in text.splitlines() if ln.strip()]
-        for line in lines[:3]:
+        for line in map(_without_comment, lines[:3]):
             tokens = _values(line, _sniff_delimiter(line))
             if len(tokens) >= 3 and _numeric(tokens):
                 return True
