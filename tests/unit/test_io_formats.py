@@ -342,6 +342,33 @@ def test_npy_layouts(tmp_path, layout):
     assert file_info(p)["point_count"] == N
 
 
+@pytest.mark.parametrize("name,kind", [("rgb", "<u4"), ("rgb", ">u4"), ("rgb", "<f4"), ("RGBA", "<u4")])
+@pytest.mark.parametrize("container", ["npy", "npz"])
+def test_npy_pcl_packed_rgb_is_the_colour(tmp_path, name, kind, container):
+    """A structured array's packed 'rgb' (0xRRGGBB in a uint32, or a float32's bits, as PCL and
+    Open3D exports write it; 'rgba' with its alpha in the top byte) stayed an attribute of
+    nonsense numbers, the points drawn grey, where the PLY reader takes it for the colour."""
+    xyz, rgb = ref_points(50)
+    order = kind[0]
+    arr = np.zeros(50, [("x", order + "f8"), ("y", order + "f8"), ("z", order + "f8"), (name, kind), ("intensity", order + "u2")])
+    arr["x"], arr["y"], arr["z"] = xyz.T
+    packed = (rgb[:, 0].astype(np.uint32) << 16) | (rgb[:, 1].astype(np.uint32) << 8) | rgb[:, 2] | (np.uint32(255) << 24 if name == "RGBA" else 0)
+    arr[name] = packed.view(np.dtype(kind).newbyteorder("="))
+    np.testing.assert_array_equal(arr[name].view(np.dtype("u4").newbyteorder(order)), packed)  # (written as meant)
+    p = tmp_path / f"pcl.{container}"
+    np.save(p, arr) if container == "npy" else np.savez(p, points=arr)
+    _, got, rgba, attrs = collect(p)
+    np.testing.assert_array_equal(got, xyz)
+    np.testing.assert_array_equal(rgba[:, :3], rgb)
+    assert (rgba[:, 3] == 255).all() and set(attrs) == {"intensity"}
+    np.testing.assert_array_equal(attrs["intensity"], 0)
+    check_chunking(p, 50)
+    assert file_info(p)["has_color"]
+    if container == "npy":
+        assert file_info(p)["attributes"] == ["intensity"]
+        assert reader_for(p).header(p) == {"point_count": 50, "has_color": True, "attributes": ["intensity"]}
+
+
 @pytest.mark.parametrize("compressed", [False, True])
 @pytest.mark.parametrize("keys", ["xyz_rgb", "positions_colors", "separate_xyz"])
 def test_npz_round_trip(tmp_path, compressed, keys):

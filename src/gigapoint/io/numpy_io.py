@@ -4,7 +4,8 @@ Layouts understood (NPY, or one array of an NPZ without named keys):
 
 - 2-D numeric (N, 3) x y z; (N, 4) x y z intensity; (N, 6) x y z r g b; (N, 7) x y z r g b a.
 - structured with fields x, y, z [red green blue [alpha] | r g b [a]]; other numeric fields
-  become attributes.
+  become attributes. Without red green blue, a 4-byte ``rgb``/``rgba`` field is PCL's packed
+  colour (0x..RRGGBB, as Open3D/PCL exports write it; read as the PLY reader reads it).
 
 NPZ keys: ``xyz`` / ``positions`` / ``points`` / ``pos`` (N, 3) or separate ``x``, ``y``, ``z``;
 ``rgb`` / ``rgba`` / ``colors`` / ``color``; every other array with N rows is an attribute.
@@ -34,6 +35,7 @@ from ._base import (
     fail,
     rows_to_chunk,
     scanned_info,
+    unpack_rgb,
 )
 
 NPY_MAGIC = b"\x93NUMPY"
@@ -70,13 +72,31 @@ def _layout_names(path: Path, what: str, dtype: np.dtype, shape: tuple) -> list[
     return _COLUMNS[shape[1]]
 
 
+def _packed_rgb(dtype: np.dtype) -> str | None:
+    """The field of a structured array without red green blue that holds PCL's packed colours (a
+    4-byte ``rgb``/``rgba``, as the PLY reader takes it), else None: it was an attribute of
+    nonsense numbers, the points drawn grey."""
+    if not dtype.names or color_names(list(dtype.names)):
+        return None
+    return next((n for n in dtype.names if n.lower() in ("rgb", "rgba") and dtype[n].shape == () and dtype[n].itemsize == 4), None)
+
+
+def _names_read(names: list[str], dtype: np.dtype) -> list[str]:
+    """A point table's column names as read: a packed colour field becomes red green blue."""
+    packed = _packed_rgb(dtype)
+    return names if packed is None else [*(n for n in names if n != packed), "red", "green", "blue"]
+
+
 def _table_chunk(path: Path, names: list[str], block: np.ndarray, scaler: ColorScaler) -> PointChunk:
     if block.dtype.names:
         block = block.astype(block.dtype.newbyteorder("="), copy=False) if not block.dtype.isnative else block
-        cols = [np.asarray(block[n]) for n in names]
+        packed = _packed_rgb(block.dtype)
+        cols = [np.asarray(block[n]) for n in names if n != packed]
+        if packed is not None:
+            cols += list(unpack_rgb(block[packed]).T)
     else:
         cols = [block[:, i] for i in range(block.shape[1])]
-    return rows_to_chunk(path, names, cols, scaler)
+    return rows_to_chunk(path, _names_read(names, block.dtype), cols, scaler)
 
 
 class NpyReader(Reader):
@@ -126,7 +146,7 @@ class NpyReader(Reader):
         """Also ``has_color``: whether its columns hold colors (a COPC output of points without
         them is written without colors)."""
         arr = self._open(check_file(path))  # (memory-mapped: only its header is read)
-        names = _layout_names(path, "NPY array", arr.dtype, arr.shape)
+        names = _names_read(_layout_names(path, "NPY array", arr.dtype, arr.shape), arr.dtype)
         cols = color_names(names)
         return {"point_count": len(arr) if arr.ndim else None, "has_color": bool(cols), "attributes": attribute_names(names, cols)}
 
@@ -144,7 +164,7 @@ class NpyReader(Reader):
     def info(self, path: Path) -> dict:
         path = check_file(path)
         arr = self._open(path)
-        names = _layout_names(path, "NPY array", arr.dtype, arr.shape)
+        names = _names_read(_layout_names(path, "NPY array", arr.dtype, arr.shape), arr.dtype)
         cols = color_names(names)
         attributes = attribute_names(names, cols)  # as read: in lower case
         chunks = self.read_chunks(path) if len(arr) else None
@@ -303,7 +323,7 @@ class NpzReader(Reader):
         with self._zip(path) as zf:
             members, table, use = _npz_plan(path, zf)
         lower = [k.lower() for k in use]
-        has_color = any(k in lower for k in COLOR_KEYS) or bool(table and {"r", "red"} & {t.lower() for t in table})
+        has_color = any(k in lower for k in COLOR_KEYS) or bool(table and color_names(_names_read(table, next(iter(use.values())).dtype)))
         attributes = [k for k in use if k.lower() not in XYZ_KEYS + COLOR_KEYS + ("x", "y", "z")]
         arrays = {k: {"shape": list(m.shape), "dtype": str(m.dtype)} for k, m in members.items()}
         return scanned_info(path, "NPZ", self.read_chunks(path), has_color, attributes, arrays=arrays)
