@@ -12,7 +12,8 @@ both sides. A pixel is the pile's when its centre lies inside the polygon (polyg
 even-odd rule: holes left out). Holes in the surface (pixels with no point) are filled by a TIN
 by default (render/raster_fill.py): a pile's volume must not drop where points are missing; the
 share filled is reported, as is the share left empty (beyond the data's footprint, or
-``fill_nodata=None``), which then counts no volume.
+``fill_nodata=None``), which then counts no volume: a pile more than EMPTY_WARNING_SHARE empty is
+warned of (its volume is short by those pixels; a TIN does not extrapolate beyond the data).
 
 The base is the surface the pile stands on:
 
@@ -46,7 +47,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..core.cloud import PointCloud
-from ..errors import EmptyCloudError, InputError, check_switch, is_real, number_text
+from ..errors import EmptyCloudError, InputError, check_switch, is_real, number_text, warn
 from ..io._base import headers_once
 from ..io.filters import may_move, placed_in, placed_over, point_filter
 from ..io.polygon import ClipPolygon, check_simple, clip_polygon_of
@@ -66,6 +67,9 @@ from .raster_grid import RasterGrid
 MARGIN_PIXELS = 2
 #: how often (in pixels) the toe is sampled along the polygon's rings for the base
 TOE_STEP_PIXELS = 0.5
+#: a pile whose pixels are empty (no height, no volume) more than this share of them is warned of:
+#: its volume is short by their share of it, which the figures report but a script may not read
+EMPTY_WARNING_SHARE = 0.01
 BASES = ("plane", "lowest")
 PREVIEW_COLORMAP = "viridis"  # sequential: dark purple at the base, yellow at the highest pile's top
 TOE_RGB, TOE_PIXELS = (220, 20, 60), 2  # the toes in the preview: crimson reads against viridis' purple to yellow and on white
@@ -282,6 +286,18 @@ def _pile(parts: list, insides: list, name: str, drawn: np.ndarray, heights: np.
     return pile, rows, cols, above
 
 
+def _warn_if_empty(pile: Pile, where: str, fill_nodata) -> None:
+    """A warning where more than EMPTY_WARNING_SHARE of ``pile``'s pixels are empty: they count
+    no volume (``Pile.empty``), so the fill is short; where from and how to mend it."""
+    if pile.empty <= EMPTY_WARNING_SHARE:
+        return
+    unfilled = "" if fill_nodata == "all" else f", or holes are left unfilled (fill_nodata={fill_nodata}; 'all' fills them)"
+    warn(
+        f"{where}: {pile.empty:.1%} of the pile's pixels hold no height and count no volume (its figures are short by them): "
+        f"the toe runs beyond the data's footprint (draw it inside the points){unfilled}"
+    )
+
+
 def _pile_parts(polygon: ClipPolygon) -> list[tuple[str, list[int]]]:
     """Each pile's name and its polygons (indices into ``polygon.polygons``), in their order: the
     polygons of one GeoJSON Feature (its MultiPolygon's parts) one pile, each other polygon one.
@@ -409,6 +425,7 @@ def _measured(toe: ClipPolygon, source, octree, gsd, base, classes, drop_classes
         where = f"{toe.source}: {name}" if len(groups) > 1 else toe.source
         pile, rows, cols, above = _pile([toe.polygons[i] for i in members], [insides[i] for i in members], name, drawn, heights, grid, base, where, label)
         piles.append(pile)
+        _warn_if_empty(pile, where, fill_nodata)
         above_base[rows, cols] = above  # (piles that overlap: the later one's height where they do)
     dsm = np.where(np.logical_or.reduce(insides), heights, np.nan).astype(np.float32)
     return Volume(tuple(piles), dsm, above_base, toe.polygons, camera, float(gsd), base, cloud_crs(cloud), cloud_units(cloud))
