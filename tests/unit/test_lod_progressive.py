@@ -570,6 +570,36 @@ def test_a_leaf_small_on_screen_draws_its_grid_sample_with_the_footprint_of_its_
         assert (a & b).sum() / (a | b).sum() >= 0.95
 
 
+def test_the_points_per_class_count_every_valid_point_added_by_class(scene):
+    """Counted as points go in (the viewer's Classes panel lists the classes held): batch after
+    batch, splits and root growth aside (points moved, not added); invalid points and values
+    that are no LAS class (a classification widened to int16: -1, 300) are not counted; none
+    once the attribute is dropped or the octree closed."""
+    xyz, rgba, attrs = scene
+    classes = attrs["classification"]
+    o = ProgressiveOctree("counted", max_leaf=5_000)  # (leaves split, the root grows: points moved, counted once)
+    assert o.class_facts() == {} and not o.points_per_class.any()
+    o.add(xyz[:60_000] * 0.5, rgba[:60_000], classification=classes[:60_000])
+    o.add(xyz[60_000:], rgba[60_000:], classification=classes[60_000:])
+    expected = np.bincount(classes, minlength=256)
+    assert np.array_equal(o.points_per_class, expected)
+    assert o.class_facts() == {"classes": np.unique(classes).tolist()}
+    odd = np.array([7, -1, 300, 7, 40], np.int16)  # (widens the octree's classification: -1 and 300 hide nothing)
+    bad = xyz[:5].copy()
+    bad[4] = np.nan  # (skipped: its 40 is not counted)
+    assert o.add(bad, classification=odd) == 4
+    expected[7] += 2
+    assert np.array_equal(o.points_per_class, expected) and o.n_points == len(xyz) + 4
+    with pytest.warns(GigapointWarning, match="classification not in every file"):
+        o.keep_attributes([])  # (a loader's file without classification)
+    assert o.class_facts() == {} and not o.points_per_class.any()
+    o.close()
+    p = ProgressiveOctree("closed")
+    p.add(xyz[:1000], classification=classes[:1000])
+    p.close()
+    assert not p.points_per_class.any()
+
+
 def test_a_leaf_drawn_as_its_grid_sample_weighs_the_entries_it_keeps_while_classes_are_hidden(scene):
     """With hidden classes, the budget counts what a filtered sample keeps, not its whole size:
     the budget the hidden entries leave draws one more leaf."""

@@ -22,6 +22,18 @@ from .octree_dir import CLASSES, OctreeDir
 CLASS_COUNT_DTYPE = np.dtype([("node", "<u4"), ("class", "u1"), ("count", "<u4")])
 
 
+def class_histogram(values) -> np.ndarray:
+    """Points per LAS class among ``values`` (a classification array): 256 int64 counts. Values
+    that are no LAS class (below 0, above 255, fractional) are left out: no class hides them."""
+    values = np.asarray(values)
+    if values.dtype != np.uint8:  # (a LAS file's uint8 is counted as it is: one pass, no sort)
+        whole = (values >= 0) & (values <= 255)
+        if values.dtype.kind == "f":
+            whole &= values == np.floor(values)
+        values = values[whole].astype(np.uint8)
+    return np.bincount(values, minlength=256).astype(np.int64, copy=False)
+
+
 def node_class_counts(classification: np.ndarray, counts: np.ndarray) -> np.ndarray | None:
     """The CLASS_COUNT_DTYPE records of nodes 0, 1, ... holding ``counts`` points each, whose
     ``classification`` is given in node order; None where it is not LAS classes (integers 0-255)."""

@@ -68,6 +68,7 @@ from ...core.selection import Selection, View, batch_matrices, precision_for, vi
 from ...core.threads import threads_for
 from ...errors import GigapointError, InputError, check_timeout, check_whole
 from ...render.splats import weighted_median
+from ..class_counts import class_histogram
 from ..keys import CODE_BITS, morton_position, point_codes
 from ..store import KEPT_ROUNDS, kept_shares, list_chunks, select_octants
 from . import kernels as K
@@ -621,6 +622,7 @@ class ProgressiveOctree:
         self.points = 0  # points added (valid ones)
         self.shown_points = 0  # ``points`` as of the last finished insertion: what n_points says (its insertion takes a split leaf's points out, then back in)
         self.skipped = 0  # invalid points left out (NaN, inf, beyond ±1e12)
+        self.points_per_class = np.zeros(256, np.int64)  # of the points added, by LAS class (``class_facts``)
         self.closed = False  # close() frees everything; add() then refuses (it would start a new tree)
         self.spilled = 0  # points taken out of split leaves to be inserted again, in all
         self.lo = np.full(3, np.inf)
@@ -1012,6 +1014,7 @@ class ProgressiveOctree:
             self._narrow = self.grid is not None
             self.origin = None
             self.points = self.shown_points = self.n_nodes = self.n_voxels = 0
+            self.points_per_class = np.zeros(256, np.int64)
             self._nodes(1)
             self._drop_voxel_state()
 
@@ -1071,6 +1074,14 @@ class ProgressiveOctree:
         ``add``): what a source whose batches may bring others passes to ``add``."""
         held = self._attribute_dtypes
         return dict(attributes) if held is None else {a: v for a, v in attributes.items() if a in held}
+
+    def class_facts(self) -> dict:
+        """The LAS classes its points hold, counted as they were added (``points_per_class``):
+        the viewer's Classes panel lists them, more as a loader brings points of others (as
+        ``OctreeCloud.class_facts``); {} without classification."""
+        if "classification" not in self.attribute_names:
+            return {}
+        return {"classes": np.flatnonzero(self.points_per_class).tolist()}
 
     @property
     def batches(self) -> np.ndarray:
@@ -1147,6 +1158,8 @@ class ProgressiveOctree:
                 xyz, rgba = xyz[valid], rgba[valid]
                 attrs = {a: v[valid] for a, v in attrs.items()}
             self._insert(xyz, rgba, attrs, lo, hi, table)
+            if "classification" in attrs:  # (a new array, not added in place: read without the lock)
+                self.points_per_class = self.points_per_class + class_histogram(attrs["classification"])
         return n_valid
 
     def expect(self, sample, weight: float) -> int:
@@ -1240,6 +1253,8 @@ class ProgressiveOctree:
                     del self.pool.attributes[a]
             if gone and self.pool is not None:
                 self.pool.version += 1  # a packing worked out meanwhile held them: it is dropped (_pack)
+            if "classification" in gone:
+                self.points_per_class = np.zeros(256, np.int64)
         self._dropped_said |= set(gone)
         warn_dropped_attributes(self.name, gone)
 
