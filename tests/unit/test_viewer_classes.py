@@ -119,20 +119,68 @@ def test_a_cloud_without_classification_disables_the_panel_and_refuses_hidden_cl
     core.close_all()
 
 
-def test_a_progressive_octree_offers_the_standard_classes():
-    from gigapoint.lod.progressive import ProgressiveOctree
-
-    xyz, _, classes = two_classes()
-    grown = ProgressiveOctree("grown")
-    grown.add(xyz, classification=classes)
-    panel = class_panel(grown, hidden=(40,))  # (it hides classes as it draws: the panel is on, its list the standard one and those hidden)
-    assert panel["enabled"] and panel["reason"] == ""
-    assert (panel["source"], panel["complete"]) == ("standard", False)
-    assert [c["code"] for c in panel["classes"]] == [*range(19), 40]
-
-
 def codes(panel) -> list[int]:
     return [c["code"] for c in panel["classes"]]
+
+
+def test_a_progressive_cloud_lists_exactly_the_classes_its_points_hold(autzen_path, tmp_path):
+    """A progressive cloud's Classes panel listed the 19 standard classes whatever it held
+    (autzen_trim: 1 and 2), and was never complete, so the page asked for it again every 2 s for
+    good. The octree counts its points' classes as they go in: the panel lists those, complete once
+    loaded, more with a file of another class or an ``add`` of one."""
+    laspy = pytest.importorskip("laspy")
+    las = laspy.read(autzen_path)
+    held = np.asarray(las.classification)
+    water = laspy.LasData(las.header, las.points[:500].copy())  # (autzen's header: its CRS, no mixed-CRS warning)
+    water.classification = np.full(500, 9, np.uint8)
+    water.write(tmp_path / "water.las")
+
+    cloud = gp.open(autzen_path, progressive=True)
+    assert cloud.wait(timeout=120)
+    panel = class_panel(cloud)
+    assert (panel["enabled"], panel["source"], panel["complete"]) == (True, "cloud", True)
+    assert codes(panel) == np.unique(held).tolist() == [1, 2]
+    assert np.array_equal(cloud.points_per_class, np.bincount(held, minlength=256))
+    cloud.add(las.xyz[:300], classification=np.full(300, 17, np.uint8))  # (bridge deck)
+    assert codes(class_panel(cloud)) == [1, 2, 17]
+    assert np.array_equal(cloud.points_per_class, np.bincount(held, minlength=256) + 300 * (np.arange(256) == 17))
+    cloud.close()
+
+    both = gp.open(autzen_path, tmp_path / "water.las", progressive=True)
+    assert both.wait(timeout=120)
+    assert codes(class_panel(both)) == [1, 2, 9]
+    assert np.array_equal(both.points_per_class, np.bincount(np.concatenate([held, water.classification]), minlength=256))
+    both.close()
+
+
+def test_a_loading_progressive_cloud_lists_the_classes_seen_so_far_until_it_is_loaded(autzen_path):
+    """While it loads the list is the classes of the points in so far, not complete (the page
+    asks again); a source that brings another class adds it; loaded, it is complete."""
+    import threading
+
+    from gigapoint.core.chunk import PointChunk
+    from gigapoint.lod.progressive import Loader, ProgressiveOctree
+
+    las = pytest.importorskip("laspy").read(autzen_path)
+    gate = threading.Event()
+
+    def autzen():
+        yield PointChunk(las.xyz, attributes={"classification": np.asarray(las.classification)})
+
+    def water():
+        gate.wait(60)
+        yield PointChunk(las.xyz[:500], attributes={"classification": np.full(500, 9, np.uint8)})
+
+    cloud = ProgressiveOctree("gated")
+    cloud.attach(Loader(cloud, [("autzen", autzen), ("water", water)], None).start())
+    cloud.wait_first_points()  # (autzen went in whole, as the first chunk does; water waits at the gate)
+    panel = class_panel(cloud, hidden=(40,))  # (a class hidden and never seen is not listed: as for a cloud in memory)
+    assert (panel["source"], panel["complete"], codes(panel)) == ("cloud", False, [1, 2])
+    gate.set()
+    assert cloud.wait(timeout=120)
+    panel = class_panel(cloud)
+    assert (panel["complete"], codes(panel)) == (True, [1, 2, 9])
+    cloud.close()
 
 
 def test_an_octree_lists_the_classes_its_metadata_names(tmp_path, two_class_cloud):

@@ -5,9 +5,10 @@ A cloud in memory lists the classes it holds (counted once per version of its po
 octree those its files list (a gigapoint octree's class counts, an EPT schema's counts, a
 Potree histogram), else the ASPRS standard classes 0..18 (within the classification range its
 metadata gives: a gigapoint octree's written before class counts), with those of the nodes
-loaded so far and those hidden (a progressive octree: the standard classes and those hidden);
-an octree opened with a class filter lists only the classes it keeps. A cloud without
-classification and a live cloud have the panel disabled, saying why.
+loaded so far and those hidden; an octree opened with a class filter lists only the classes it
+keeps. A progressive octree lists the classes of the points added so far (counted as they come:
+more as its loader brings others, complete once it is done). A cloud without classification
+and a live cloud have the panel disabled, saying why.
 Unticking a class sets the ``hidden_classes`` render setting (the settings message).
 """
 
@@ -17,16 +18,14 @@ import numpy as np
 
 from ..core.renderable import hidden_classes_refusal
 from ..io.las_fields import STANDARD_CLASSES, class_name
+from ..lod.class_counts import class_histogram
 from ..render.cache import render_cache
 from ..render.colors import classification_table
 
 
 def held_classes(values) -> list[int]:
     """The distinct LAS classes (0..255) among ``values`` (a classification array)."""
-    values = np.asarray(values)
-    if values.dtype == np.uint8:  # a LAS file's: one counting pass, no sort
-        return np.flatnonzero(np.bincount(values, minlength=256)).tolist()
-    return [int(c) for c in np.unique(values) if 0 <= c <= 255]  # (others cannot be hidden: parse_classes)
+    return np.flatnonzero(class_histogram(values)).tolist()  # (others cannot be hidden: parse_classes)
 
 
 def entries(codes) -> list[dict]:
@@ -54,6 +53,7 @@ def class_panel(cloud, hidden=(), seen: bool = True) -> dict:
     can be ticked again); ``seen``: an octree's list takes in the classes of its resident nodes
     (False while a frame may be loading them)."""
     from ..core import PointCloud
+    from ..lod.progressive import ProgressiveOctree
     from ..lod.store import OctreeCloud
 
     reason = refusal(cloud)
@@ -64,6 +64,8 @@ def class_panel(cloud, hidden=(), seen: bool = True) -> dict:
         if "__classes__" not in cache:
             cache["__classes__"] = held_classes(cloud.attributes["classification"])
         return {"enabled": True, "reason": "", "source": "cloud", "complete": True, "classes": entries(cache["__classes__"])}
+    if isinstance(cloud, ProgressiveOctree):  # counted as its points come: complete once they all have
+        return {"enabled": True, "reason": "", "source": "cloud", "complete": not cloud.loading, "classes": entries(cloud.class_facts()["classes"])}
     facts = cloud.class_facts() if isinstance(cloud, OctreeCloud) else {}
     if "classes" in facts:
         return {"enabled": True, "reason": "", "source": "metadata", "complete": True, "classes": entries(filter_kept(cloud, facts["classes"]))}
