@@ -17,7 +17,7 @@
     ws: null, session: null, cloud: null, schema: [], settings: {}, camera: null,
     seq: 0, sentAt: new Map(), lastFrame: 0, frameTimes: [], fps: null, latency: null, renderTimes: [],
     header: null, fly: false, speedExp: 0, keys: new Set(), pickId: 0, measuring: false, measure: [], measureClosed: false, sectioning: false, section: [],
-    pending: { orbit: null, look: null, pan: null, zoom: null }, retry: 0, classes: null, classesAsked: -1e9,
+    pending: { orbit: null, look: null, pan: null, zoom: null }, retry: 0, classes: null, classesAsked: -1e9, classesTimer: null,
   };
   window.gigapoint = S; // for tests and the curious
 
@@ -150,11 +150,9 @@
     const n = dv.getUint32(4, true);
     const header = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 8, n)));
     if (header.cloud) showCloud(header.cloud);  // sent again when it changed (a live or loading cloud), whether or not this image is drawn
-    // an octree's list grows with the classes of the nodes loaded, a swapped cloud has its own: asked again, at most every 2 s
-    if ((header.cloud || (header.full && S.classes && !S.classes.complete)) && performance.now() - S.classesAsked > 2000) {
-      S.classesAsked = performance.now();
-      send({ type: "classes" });
-    }
+    // an octree's list grows with the classes of the nodes loaded, a loading cloud's with those of its points, a
+    // swapped cloud has its own: asked again
+    if (header.cloud || (header.full && S.classes && !S.classes.complete)) askClasses();
     const blob = new Blob([new Uint8Array(buf, 8 + n)], { type: "image/jpeg" });
     const now = performance.now();
     if (header.seq != null && S.sentAt.has(header.seq)) {
@@ -314,6 +312,17 @@
     for (const b of ["btn-classes-all", "btn-classes-none"]) $(b).disabled = !c.enabled;
     $("classes-note").textContent = c.enabled ? (c.classes.length ? "" : "no class in this cloud") : c.reason;
     syncClasses();
+  }
+
+  // at most every 2 s; a change within them is asked for once they are past (the last points of a load
+  // brought a class the list then missed, for good: no frame came after them to ask again)
+  function askClasses() {
+    if (S.classesTimer) return;
+    S.classesTimer = setTimeout(() => {
+      S.classesTimer = null;
+      S.classesAsked = performance.now();
+      send({ type: "classes" });
+    }, Math.max(0, S.classesAsked + 2000 - performance.now()));
   }
 
   function listedCodes() { return S.classes ? S.classes.classes.map((k) => k.code) : []; }
