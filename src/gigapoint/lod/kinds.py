@@ -167,7 +167,10 @@ def refuse_unwritten_copc(paths) -> None:
     file before it is written (running: its work folder shows what is read so far; stopped: what
     to do), or that work folder once it is gone. A bare "no such file" left users to guess."""
     for path in paths:
-        path = file_url_path(os.fspath(path)) or path  # (file:///x.copc.laz: the path it names)
+        try:
+            path = file_url_path(os.fspath(path)) or path  # (file:///x.copc.laz: the path it names)
+        except InputError:  # (another machine's file: the input checks say so in their words)
+            continue
         if as_url(path) is not None or Path(path).exists():
             continue
         work, copc = work_dir(path), copc_of_work_dir(path)
