@@ -229,6 +229,17 @@ def test_text_round_trip(tmp_path, sep, suffix, header):
     assert file_info(p)["point_count"] == N
 
 
+def _reads_back_as_written(p, xyz, rgb) -> None:
+    """The x y z r g b text file ``p`` (in a folder of its own) read as written: alone, by its
+    info, and as the folder's one file of points."""
+    _, got, rgba, attrs = collect(p)
+    np.testing.assert_allclose(got, xyz, atol=5e-7)
+    np.testing.assert_array_equal(rgba[:, :3], rgb)
+    assert attrs == {}
+    assert file_info(p)["columns"] == ["x", "y", "z", "r", "g", "b"]
+    assert open_cloud(p.parent).n_points == len(xyz)
+
+
 @pytest.mark.filterwarnings("error")  # (nor a word of a column of text)
 @pytest.mark.parametrize("sep", [",", ";"])
 @pytest.mark.parametrize("header", [False, True])
@@ -242,12 +253,7 @@ def test_text_lines_ending_with_a_separator_open_no_column(tmp_path, sep, header
     p = folder / "pts.csv"
     write_text(p, xyz, rgb, sep=sep, header=sep.join(["x", "y", "z", "r", "g", "b"]) if header else None)
     p.write_text("".join(line + sep + "\n" for line in p.read_text().splitlines()))
-    _, got, rgba, attrs = collect(p)
-    np.testing.assert_allclose(got, xyz, atol=5e-7)
-    np.testing.assert_array_equal(rgba[:, :3], rgb)
-    assert attrs == {}
-    assert file_info(p)["columns"] == ["x", "y", "z", "r", "g", "b"]
-    assert open_cloud(folder).n_points == 30
+    _reads_back_as_written(p, xyz, rgb)
 
 
 def test_text_layouts_by_column_count(tmp_path):
@@ -292,12 +298,7 @@ def test_text_first_line_ending_with_a_comment(tmp_path, sep, mark, header):
     write_text(p, xyz, rgb, sep=sep, header=sep.join(["x", "y", "z", "r", "g", "b"]) if header else None)
     lines = p.read_text().splitlines()
     p.write_text("".join(line + (f" {mark}" if i >= header else "") + "\n" for i, line in enumerate(lines)))
-    _, got, rgba, attrs = collect(p)
-    np.testing.assert_allclose(got, xyz, atol=5e-7)
-    np.testing.assert_array_equal(rgba[:, :3], rgb)
-    assert attrs == {}
-    assert file_info(p)["columns"] == ["x", "y", "z", "r", "g", "b"]
-    assert open_cloud(folder).n_points == 30
+    _reads_back_as_written(p, xyz, rgb)
 
 
 def test_text_content_sniffed_without_known_suffix(tmp_path):
