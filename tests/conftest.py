@@ -168,6 +168,36 @@ def loaded():
     return load
 
 
+@pytest.fixture
+def strips_loading():
+    """(xyz, cloud, go_on): 200 000 points over a 1000 x 1000 survey loading progressively west to
+    east in strips of 20 000, held after the first strip until ``go_on`` is set (a viewer started
+    on a file's first points); the cloud holds that strip when given, and is closed after."""
+    import threading
+    import time
+
+    from gigapoint.lod.progressive import Loader, ProgressiveOctree
+
+    rng = np.random.default_rng(1)
+    xyz = rng.uniform((0, 0, 0), (1000, 1000, 5), (200_000, 3))
+    xyz = xyz[np.argsort(xyz[:, 0])]  # read in scan order: west to east
+    go_on = threading.Event()
+
+    def strips():
+        for first in range(0, len(xyz), 20_000):
+            if first:
+                go_on.wait(30)
+            yield next(gp.from_arrays(xyz[first : first + 20_000]).chunks())
+
+    cloud = ProgressiveOctree("strips")
+    cloud.attach(Loader(cloud, [("strips", strips)], len(xyz)).start())
+    while cloud.n_points == 0:
+        time.sleep(0.01)
+    yield xyz, cloud, go_on
+    go_on.set()
+    cloud.close()
+
+
 def pytest_report_header(config):
     import numba
 

@@ -602,30 +602,12 @@ def test_unticking_a_class_hides_it_and_ticking_it_shows_it_again(browser, autze
         srv.close()
 
 
-def test_the_fly_speed_follows_a_loading_cloud_as_it_grows(browser):
+def test_the_fly_speed_follows_a_loading_cloud_as_it_grows(browser, strips_loading):
     """The fly speed (a quarter of the scene's radius a second) was set from the bounds the page's
     hello held: a file read west to east flew at its first strip's pace (126/s over a 1000 x 1000
     survey, not 177/s), one served before its first point at 0.25/s. The cloud's line each frame
     carries again as it grows sets it."""
-    import threading
-
-    from gigapoint.lod.progressive import Loader, ProgressiveOctree
-
-    rng = np.random.default_rng(1)
-    xyz = rng.uniform((0, 0, 0), (1000, 1000, 5), (200_000, 3))
-    xyz = xyz[np.argsort(xyz[:, 0])]  # read west to east
-    go_on = threading.Event()
-
-    def strips():
-        for first in range(0, len(xyz), 20_000):
-            if first:
-                go_on.wait(30)
-            yield next(gigapoint.from_arrays(xyz[first : first + 20_000]).chunks())
-
-    cloud = ProgressiveOctree("strips")
-    cloud.attach(Loader(cloud, [("strips", strips)], len(xyz)).start())
-    while cloud.n_points == 0:
-        time.sleep(0.01)
+    xyz, cloud, go_on = strips_loading
     srv = ViewerServer(cloud).start()
     ctx = browser.new_context(viewport=VIEWPORT)
     try:

@@ -269,31 +269,13 @@ def test_an_octree_attribute_named_out_of_its_folder_is_refused(tmp_path):
 
 
 # --- a cloud that loads while it is shown ----------------------------------------------------------------------
-def test_the_auto_view_of_a_loading_cloud_frames_every_point_loaded():
+def test_the_auto_view_of_a_loading_cloud_frames_every_point_loaded(strips_loading):
     """The 'auto' view (a new tab's first view, key 5) framed the points the cloud held
     when the viewer started, for good: a file read west to east was framed on its first strip
     (target x 52 of 0..1000). It frames what is loaded, as the same points held in memory are framed."""
-    import threading
-    import time
-
-    from gigapoint.lod.progressive import Loader, ProgressiveOctree
     from gigapoint.viewer.session import ViewerCore
 
-    rng = np.random.default_rng(1)
-    xyz = rng.uniform((0, 0, 0), (1000, 1000, 5), (200_000, 3))
-    xyz = xyz[np.argsort(xyz[:, 0])]  # read in scan order: west to east
-    go_on = threading.Event()
-
-    def strips():
-        for first in range(0, len(xyz), 20_000):
-            if first:
-                go_on.wait(30)
-            yield next(gp.from_arrays(xyz[first : first + 20_000]).chunks())
-
-    cloud = ProgressiveOctree("strips")
-    cloud.attach(Loader(cloud, [("strips", strips)], len(xyz)).start())
-    while cloud.n_points == 0:  # the viewer starts on the first strip
-        time.sleep(0.01)
+    xyz, cloud, go_on = strips_loading
     core, in_memory = ViewerCore(cloud), ViewerCore(gp.from_arrays(xyz))
     try:
         go_on.set()
