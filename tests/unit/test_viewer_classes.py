@@ -123,7 +123,7 @@ def codes(panel) -> list[int]:
     return [c["code"] for c in panel["classes"]]
 
 
-def test_a_progressive_cloud_lists_exactly_the_classes_its_points_hold(autzen_path, tmp_path):
+def test_a_progressive_cloud_lists_exactly_the_classes_its_points_hold(autzen_path, tmp_path, loaded):
     """A progressive cloud's Classes panel listed the 19 standard classes whatever it held
     (autzen_trim: 1 and 2), and was never complete, so the page asked for it again every 2 s for
     good. The octree counts its points' classes as they go in: the panel lists those, complete once
@@ -135,8 +135,7 @@ def test_a_progressive_cloud_lists_exactly_the_classes_its_points_hold(autzen_pa
     water.classification = np.full(500, 9, np.uint8)
     water.write(tmp_path / "water.las")
 
-    cloud = gp.open(autzen_path, progressive=True)
-    assert cloud.wait(timeout=120)
+    cloud = loaded(autzen_path)
     panel = class_panel(cloud)
     assert (panel["enabled"], panel["source"], panel["complete"]) == (True, "cloud", True)
     assert codes(panel) == np.unique(held).tolist() == [1, 2]
@@ -146,8 +145,7 @@ def test_a_progressive_cloud_lists_exactly_the_classes_its_points_hold(autzen_pa
     assert np.array_equal(cloud.points_per_class, np.bincount(held, minlength=256) + 300 * (np.arange(256) == 17))
     cloud.close()
 
-    both = gp.open(autzen_path, tmp_path / "water.las", progressive=True)
-    assert both.wait(timeout=120)
+    both = loaded(autzen_path, tmp_path / "water.las")
     assert codes(class_panel(both)) == [1, 2, 9]
     assert np.array_equal(both.points_per_class, np.bincount(np.concatenate([held, water.classification]), minlength=256))
     both.close()

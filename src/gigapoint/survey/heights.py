@@ -60,15 +60,10 @@ class HeightSpan:
         return (self.lowest, self.highest) if self.lowest <= self.highest else None
 
 
-def with_heights(chunk, grid: RasterGrid, dem: np.ndarray, normalize: bool, span: HeightSpan):
-    """``chunk`` with its heights above ``dem`` as the float32 ``HeightAboveGround`` attribute
-    (``normalize``: as its z too, the z it had dropped)."""
-    return heights_over(chunk, grid.bilinear(dem, chunk.xyz), normalize, span)
-
-
 def heights_over(chunk, model: np.ndarray, normalize: bool, span: HeightSpan):
-    """``with_heights`` for a ``model`` already read at the chunk's points (the ground model's
-    z at each: ``classify_ground`` has it from classifying them, and reads it only once)."""
+    """``chunk`` with its heights above ``model`` (the ground model's z read at its points:
+    ``classify_ground`` has it from classifying them, and reads it only once) as the float32
+    ``HeightAboveGround`` attribute (``normalize``: as its z too, the z it had dropped)."""
     from ..core.chunk import PointChunk
 
     heights = chunk.xyz[:, 2] - model
@@ -123,7 +118,7 @@ def height_above_ground(source, out, *, cell=None, normalize: bool = False, over
         grid = files_grid(inputs, params["cell"], shown)
         mean, ground = _mean_ground_raster(inputs, grid, shown)
         dem = fill_everywhere(mean)
-        written = write_through(inputs, out, "heights", lambda chunk: with_heights(chunk, grid, dem, normalize, span), shown, tally)
+        written = write_through(inputs, out, "heights", lambda chunk: heights_over(chunk, grid.bilinear(dem, chunk.xyz), normalize, span), shown, tally)
     finally:
         shown.close()
     return HeightResult(out, written, ground, span.range(), tally["skipped"], params, time.perf_counter() - t0)
