@@ -235,6 +235,8 @@ CALLER_WORDS = [
     ("convert-client-0", lambda src, out: gp.convert(src, out, client=0), "client: needs at least 1 worker, got 0"),
     ("convert-client-unreachable", lambda src, out: gp.convert(src, out, client="tcp://127.0.0.1:9"),
      "client='tcp://127.0.0.1:9': cannot reach a Dask scheduler there (nothing listens on that port)"),
+    ("convert-client-address-with-a-limit", lambda src, out: gp.convert(src, out, client="tcp://127.0.0.1:9", memory_limit="1G", colorize=out.with_name("oct_nope.tif")),
+     "{out}_nope.tif: no such raster file (convert: colorize)"),  # the inputs checked before the scheduler is reached (no memory plan asks it)
     ("viewer-port", lambda src, out: gp.Viewer(gp.from_arrays(XYZ), port=70000, display=False), "port must be in 0..65535, got 70000"),
     ("viewer-host", lambda src, out: gp.Viewer(gp.from_arrays(XYZ), host="", display=False),
      "host must be an address or a host name (127.0.0.1: this machine only), got ''"),

@@ -505,6 +505,19 @@ def test_csv_non_numeric(tmp_path):
     raises(InputError, p, match="line 3: 'abc' is not a number")
 
 
+def test_a_named_text_column_of_hex_colours_is_left_out_not_taken_for_a_comment(tmp_path):
+    """'1,2,3,#ff0000' under 'x,y,z,color': the first line's '#' was taken for a comment (the
+    comment-ending fix of this session), and the file refused: "line 2 has 3 columns, the header names 4"."""
+    from gigapoint.errors import GigapointWarning
+
+    p = tmp_path / "hex.csv"
+    p.write_text("x,y,z,color\n1,2,3,#ff0000\n4,5,6,#00ff00\n")
+    with pytest.warns(GigapointWarning, match=r"hex.csv: column\(s\) color hold text, not numbers: left out"):
+        cloud = open_cloud(p)
+    assert cloud.n_points == 2 and list(cloud.attributes) == []
+    np.testing.assert_allclose(np.sort(cloud.positions()[:, 0]), [1, 4])
+
+
 def test_a_named_text_column_is_left_out_with_a_warning(tmp_path):
     """A CSV with a column of labels ("x,y,z,intensity,label") was refused whole ("'a' is not a
     number"): the named text column is left out, said once; the numbers in other columns are

@@ -131,6 +131,16 @@ def test_a_toe_beyond_the_data_warns_that_its_empty_pixels_count_no_volume():
     assert (pile.fill, pile.area, pile.empty) == (5 * 25.0, 900.0, 2000 / 3600)  # the block's 5 x 5 corner inside it, 5 high
 
 
+def test_a_toe_of_points_on_one_line_is_refused_for_having_no_area():
+    """A toe whose points lie on one line said "no pixel centre of the 0.25 grid lies inside it:
+    give a finer gsd", which no grid could help; the viewer's volume tool said why, the library not."""
+    line = {"type": "Polygon", "coordinates": [[[15, 15], [30, 15], [45, 15], [15, 15]]]}
+    slanted = {"type": "Polygon", "coordinates": [[[10.1, 10.3], [20.2, 20.6], [30.3, 30.9], [10.1, 10.3]]]}
+    for toe in (line, slanted):
+        with pytest.raises(InputError, match=r"^the GeoJSON geometry: the polygon's points lie on one line: it has no area; move a point off the line$"):
+            gp.volume(box_pile(), toe, 0.25, base=100)
+
+
 def test_two_piles_in_a_feature_collection_are_named_and_summed():
     x, y = lattice(60.0)
     z = 100.0 + np.where((x >= 10) & (x < 20) & (y >= 10) & (y < 20), 2.0, 0.0) + np.where((x >= 40) & (x < 45) & (y >= 40) & (y < 50), 3.0, 0.0)

@@ -229,6 +229,14 @@ def color_names(names: list[str]) -> list[str]:
     return []
 
 
+def packed_rgb_field(itemsizes: dict[str, int]) -> str | None:
+    """Of a table's scalar fields (name: bytes a value), the one holding PCL's packed colours (a
+    4-byte ``rgb``/``rgba``) where none is red green blue, else None (PLY and NPY tables alike)."""
+    if color_names(list(itemsizes)):
+        return None
+    return next((n for n, size in itemsizes.items() if n.lower() in ("rgb", "rgba") and size == 4), None)
+
+
 def scan_bounds(chunks: Iterator[PointChunk]) -> tuple[int, list[float] | None, list[float] | None]:
     """(count, min, max) over the valid points of a chunk stream (``valid_mask``: those a read
     keeps; bounds None when none is): a row at 1e300 in a text file was ``info``'s 300-digit bounds."""

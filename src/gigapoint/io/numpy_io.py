@@ -33,6 +33,7 @@ from ._base import (
     check_file,
     color_names,
     fail,
+    packed_rgb_field,
     rows_to_chunk,
     scanned_info,
     unpack_rgb,
@@ -76,14 +77,12 @@ def _packed_rgb(dtype: np.dtype) -> str | None:
     """The field of a structured array without red green blue that holds PCL's packed colours (a
     4-byte ``rgb``/``rgba``, as the PLY reader takes it), else None: it was an attribute of
     nonsense numbers, the points drawn grey."""
-    if not dtype.names or color_names(list(dtype.names)):
-        return None
-    return next((n for n in dtype.names if n.lower() in ("rgb", "rgba") and dtype[n].shape == () and dtype[n].itemsize == 4), None)
+    return packed_rgb_field({n: dtype[n].itemsize for n in dtype.names if dtype[n].shape == ()}) if dtype.names else None
 
 
-def _names_read(names: list[str], dtype: np.dtype) -> list[str]:
-    """A point table's column names as read: a packed colour field becomes red green blue."""
-    packed = _packed_rgb(dtype)
+def _names_read(names: list[str], dtype: np.dtype, packed: str | None = None) -> list[str]:
+    """A point table's column names as read: a packed colour field (``packed``, else found) becomes red green blue."""
+    packed = packed or _packed_rgb(dtype)
     return names if packed is None else [*(n for n in names if n != packed), "red", "green", "blue"]
 
 
@@ -94,9 +93,10 @@ def _table_chunk(path: Path, names: list[str], block: np.ndarray, scaler: ColorS
         cols = [np.asarray(block[n]) for n in names if n != packed]
         if packed is not None:
             cols += list(unpack_rgb(block[packed]).T)
+        names = _names_read(names, block.dtype, packed)
     else:
         cols = [block[:, i] for i in range(block.shape[1])]
-    return rows_to_chunk(path, _names_read(names, block.dtype), cols, scaler)
+    return rows_to_chunk(path, names, cols, scaler)
 
 
 class NpyReader(Reader):

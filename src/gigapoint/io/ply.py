@@ -33,6 +33,7 @@ from ._base import (
     check_file,
     color_names,
     fail,
+    packed_rgb_field,
     rows_to_chunk,
     scan_bounds,
     unpack_rgb,
@@ -110,8 +111,7 @@ class _Header:
         lower = [n.lower() for n in self.scalar_names]
         self.packed = self.splat = None  # where colours come from without red green blue (a field name; f_dc's names)
         if not self.colors:
-            self.packed = next((p.name for p in self.vertex.properties if p.name in self.scalar_names
-                                and p.name.lower() in ("rgb", "rgba") and np.dtype(p.val_dtype).itemsize == 4), None)  # fmt: skip
+            self.packed = packed_rgb_field({p.name: np.dtype(p.val_dtype).itemsize for p in self.vertex.properties if p.name in self.scalar_names})
             if self.packed is None and {"f_dc_0", "f_dc_1", "f_dc_2"} <= set(lower):
                 self.splat = [self.scalar_names[lower.index(f"f_dc_{k}")] for k in range(3)]
         self.has_color = bool(self.colors or self.packed or self.splat)

@@ -168,6 +168,9 @@ def _layout(path: Path) -> _Layout:
     tokens, n_columns = _values(values, delimiter), len(_split(values, delimiter))
     if header_names and header_names[-1] == "":  # ("x,y,z,": its last separator names no column either)
         header_names = header_names[:-1]
+    if header_names is not None and len(header_names) == len(_split(line, delimiter)) != len(tokens):
+        values = line  # a named column of text starting with '#' ("#ff0000"), not a comment: left out below, as before
+        tokens, n_columns = _split(line, delimiter), len(header_names)
     columns = list(range(len(tokens))) if len(tokens) < n_columns else None
     if header_names is None and not _numeric(tokens):
         raise fail(path, f"line {lineno}: not numeric point data: {line[:80]!r}")

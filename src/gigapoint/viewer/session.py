@@ -197,8 +197,7 @@ class ViewerCore:
         self.max_sessions = max_sessions
         self.lock = threading.Lock()
         self.last_active: Session | None = None
-        lo, hi = cloud.bounds
-        self.bounds = (np.asarray(lo, np.float64), np.asarray(hi, np.float64))
+        self._take_bounds()
         self.framing = sample_points(cloud)  # what the 'auto' view frames: the data, not its box
         self.units = cloud_units(cloud)  # its CRS's: what measured lengths are in (read once: a file's header)
         self.section_width = ST.default_width(self.bounds)  # the section tool's first width
@@ -474,7 +473,7 @@ class Session:
                 self.settings = settings
                 motion = False
                 reply = {"type": "settings", "values": P.settings_values(self.settings)}
-                if hidden_changed and len(self.section) == 2:  # the section shows what the view shows: drawn again without them
+                if hidden_changed:  # the section (where a line is drawn) shows what the view shows: drawn again without them
                     self._start_section()
             elif kind == "classes":
                 return {"type": "classes", **self.core.class_panel(self.settings.hidden_classes)}

@@ -31,7 +31,7 @@ from ..lod.reader import open_octree
 from ..lod.voxel_octree import VoxelOctree
 from ..render.camera import pixels_text
 from ..survey.change import SURFACE_SPACING, unit_names
-from ..survey.volume import BASES, MARGIN_PIXELS, Volume, ring_area
+from ..survey.volume import BASES, MARGIN_PIXELS, Volume, on_one_line
 from . import protocol as P
 from .section_tool import MAX_POINTS as SECTION_MAX_POINTS
 from .section_tool import every_kth, own_reader_source
@@ -97,8 +97,7 @@ def check_gsd(points, gsd: float) -> None:
     MAX_GRID_PIXELS pixels across."""
     if side(points) == 0:
         raise P.ProtocolError("volume: the polygon's points are at one x, y: it has no area")
-    if ring_area(np.asarray(points, np.float64)[:, :2]) <= 1e-9 * side(points) ** 2:  # (rounding leaves a line's shoelace a hair above 0)
-        # gp.volume said "no pixel centre ... lies inside it: give a finer gsd", or of two points its clip_polygon's repr
+    if on_one_line(points):  # (gp.volume says so too; of two points it said its clip_polygon's repr)
         raise P.ProtocolError("volume: the polygon's points lie on one line: it has no area; move a point off the line")
     across = side(points) / gsd
     if across > MAX_GRID_PIXELS:

@@ -334,7 +334,7 @@ def convert(
     if isinstance(inputs, (list, tuple)) and inputs and isinstance(inputs[0], (str, os.PathLike)):  # files, then None: None named
         inputs = given_paths(inputs, "convert")  # (taken as PointChunks: "item 0 is a str")
     if _are_paths(inputs):  # a COPC file a conversion still writes: its work folder named, not a bare "no such file"
-        refuse_unwritten_copc(given_paths(inputs, "convert"))
+        refuse_unwritten_copc(inputs if isinstance(inputs, list) else [inputs])
     if recursive and not _are_paths(inputs):
         raise InputError("convert: recursive=True reads the subfolders of folders; the inputs are a cloud or PointChunks")  # (dropped without a word)
     if recursive:
@@ -436,7 +436,7 @@ def convert(
         if client is not None:
             from .distributed import DaskPhases, default_memory_limit, open_client  # dask is imported only when asked for
 
-            if isinstance(client, str):  # a scheduler's address: one connection, for the memory plan and the run (closed at the end)
+            if isinstance(client, str) and memory_limit is None:  # an address: one connection, for the memory plan and the run (closed at the end; given a limit, the inputs are checked before it is reached)
                 client = connection.enter_context(open_client(client, announce=progress))
             if memory_limit is None:  # (workers on this machine share it; a cluster's say what they have)
                 mem = default_memory_limit(client, say=progress)

@@ -1142,6 +1142,7 @@ class ProgressiveOctree:
         valid, lo, hi = valid_bounds(xyz, MAX_ABS_COORDINATE)
         n_valid = int(np.count_nonzero(valid))
         table = self._presized_table()  # filled before the lock is taken: frames meanwhile draw
+        classes = class_histogram(np.asarray(attrs["classification"])[valid]) if "classification" in attrs else None  # (likewise)
         with self.lock.writing():
             if self.closed:
                 raise InputError(f"{self.name}: the octree is closed; open it again to add points")
@@ -1158,8 +1159,8 @@ class ProgressiveOctree:
                 xyz, rgba = xyz[valid], rgba[valid]
                 attrs = {a: v[valid] for a, v in attrs.items()}
             self._insert(xyz, rgba, attrs, lo, hi, table)
-            if "classification" in attrs:  # (a new array, not added in place: read without the lock)
-                self.points_per_class = self.points_per_class + class_histogram(attrs["classification"])
+            if classes is not None and "classification" in attrs:  # (kept by the attribute set; a new array, not added in place: read without the lock)
+                self.points_per_class = self.points_per_class + classes
         return n_valid
 
     def expect(self, sample, weight: float) -> int:
