@@ -180,11 +180,8 @@ def make_folders(path) -> list[Path]:
     earlier: an output refused or failed before that leaves none behind). Returns those made,
     deepest first (``remove_folders``)."""
     parent = Path(path).parent
-    made = []
-    folder = parent
-    while not os.path.lexists(folder) and folder != folder.parent:
-        made.append(folder)
-        folder = folder.parent
+    missing = len(parent.parts) - len(nearest_folder(parent).parts)  # (those between it and the nearest one there)
+    made = [parent, *parent.parents][:missing]
     parent.mkdir(parents=True, exist_ok=True)
     return made
 
