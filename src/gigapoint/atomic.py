@@ -40,7 +40,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-__all__ = ["append_file", "atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "folder_refusal", "fsync_file", "make_folders", "mapped_npy", "nearest_folder", "output_file_refusal", "refuse", "reserve", "start_writeback", "suffix_refusal", "temp_files", "write_at", "write_failure", "write_together"]
+__all__ = ["append_file", "atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "folder_refusal", "fsync_file", "make_folders", "mapped_npy", "nearest_folder", "output_file_refusal", "refuse", "reserve", "start_writeback", "temp_files", "write_at", "write_failure", "write_together"]
 
 _IOV_MAX = min(1024, os.sysconf("SC_IOV_MAX")) if hasattr(os, "sysconf") else 16  # buffers per writev
 _SHORT_WRITE = re.compile(r"(\d+) requested and (\d+) written")
@@ -144,28 +144,20 @@ def folder_refusal(folder) -> str | None:
 
 
 def output_file_refusal(path, overwrite: bool, what: str, suffixes=None, kind: str = "output") -> str | None:
-    """Why the file ``path`` cannot be written as an output, before any work: a folder there
-    ("is a directory, not ``what``": a folder is never replaced by a file), a suffix not in
-    ``suffixes`` (where given; told as an unsupported ``kind`` type), an existing file without
-    ``overwrite``, or what keeps its folders from being made and written into (``folder_refusal``);
-    None where it can. Images, videos and point files check this (``refuse`` says it)."""
+    """Why the file ``path`` cannot be written as an output, before any work, in this order for
+    every output: a folder there ("is a directory, not ``what``": a folder is never replaced by a
+    file), a suffix not in ``suffixes`` (where given; told as an unsupported ``kind`` type: a
+    video's "video"), an existing file without ``overwrite``, or what keeps its folders from being
+    made and written into (``folder_refusal``); None where it can. Images, videos and point files
+    check this (``refuse`` says it)."""
     path = Path(path)
-    if path.is_dir():  # (before the suffix: 'unsupported output type (none)' hid what was wrong)
+    if path.is_dir():  # (before the suffix: "unsupported ... type '(none)'" for -o FOLDER hid what was wrong)
         return f"is a directory, not {what}"
     if suffixes is not None and path.suffix.lower() not in suffixes:
-        return suffix_refusal(path, suffixes, kind)
+        return f"unsupported {kind} type {path.suffix or '(none)'!r}; use one of {', '.join(sorted(suffixes))}"
     if path.exists() and not overwrite:
         return "already exists; pass overwrite=True to replace it"
     return folder_refusal(path.parent)  # (folders missing on the way are made as it is written: make_folders)
-
-
-def suffix_refusal(path, suffixes, kind: str) -> str | None:
-    """Why ``path``'s suffix is not one of ``suffixes`` (an unsupported ``kind`` type, the
-    supported ones listed); None where it is."""
-    suffix = Path(path).suffix
-    if suffix.lower() in suffixes:
-        return None
-    return f"unsupported {kind} type {suffix or '(none)'!r}; use one of {', '.join(sorted(suffixes))}"
 
 
 def refuse(path, refusal: str | None, error: type[Exception]) -> None:

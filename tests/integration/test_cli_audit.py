@@ -202,6 +202,9 @@ def test_a_turntables_output_is_refused_in_the_words_of_a_video(cloud_file, tmp_
     assert (rc, err) == (1, f"error: {tmp_path / 'spin.mp4'}: is a directory, not a video file\n")
     rc, _, err = cli("render", cloud_file, "-o", tmp_path / "spin.txt", "--turntable", 2, *SIZE)
     assert (rc, err) == (1, f"error: {tmp_path / 'spin.txt'}: unsupported video type '.txt'; use one of .avi, .gif, .mkv, .mov, .mp4, .webm\n")
+    (tmp_path / "clips").mkdir()  # a folder first, as a still image's (was "unsupported video type '(none)'")
+    rc, _, err = cli("render", cloud_file, "-o", tmp_path / "clips", "--turntable", 2, *SIZE)
+    assert (rc, err) == (1, f"error: {tmp_path / 'clips'}: is a directory, not a video file\n")
 
 
 def test_version(cli):

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write, folders_for, output_file_refusal, refuse, suffix_refusal
+from ..atomic import atomic_write, folders_for, output_file_refusal, refuse
 from ..errors import GigapointError, check_switch, check_whole, is_real, number_text
 from .camera import Camera, auto_view, image_side, sample_points
 from .settings import RenderSettings
@@ -177,9 +177,8 @@ def check_video_path(path, overwrite: bool = False) -> Path:
     """``path`` as a video's output: refused in one line before any frame (render --turntable asks too)."""
     check_switch("overwrite", overwrite, "video")
     path = Path(path)
-    # before any frame (a path through a file: "Not a directory" came once every frame was drawn);
-    # the suffix first: a folder named without one is told as no video type
-    refuse(path, suffix_refusal(path, VIDEO_SUFFIXES, "video") or output_file_refusal(path, overwrite, "a video file"), GigapointError)
+    # before any frame (a path through a file: "Not a directory" came once every frame was drawn)
+    refuse(path, output_file_refusal(path, overwrite, "a video file", VIDEO_SUFFIXES, "video"), GigapointError)
     return path
 
 
