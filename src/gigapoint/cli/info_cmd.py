@@ -73,6 +73,7 @@ def info(
         folder_info,
         format_info,
         format_stats,
+        open_cloud,
         pattern_matches,
         shown_url,
     )
@@ -145,10 +146,8 @@ def info(
             if memory and octree:  # it printed nothing of memory, without a word
                 why = "an octree is read node by node as views need them; --memory measures point files"
                 typer.echo(json.dumps({"path": shown_url(path), "memory": None, "why": why}) if as_json else f"memory: {why}")
-            elif memory:
-                import gigapoint as gp
-
-                cloud = gp.open(path, **options)
+            elif memory:  # (a point file, checked above: gp.open would check it for a conversion's unwritten COPC again)
+                cloud = open_cloud(path, **options)
                 held = attributes_held(cloud)
                 if as_json:
                     row = {"path": shown_url(path), "layout": cloud.layout, "n_points": cloud.n_points, "memory": cloud.memory(), "attributes": held}
