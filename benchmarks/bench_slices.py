@@ -14,8 +14,8 @@ frame is drawn) against a progressive load of the town as LAS and LAZ (issue #18
   peak RSS, the octree's bytes when the last point is in (before ``trim``: what the memory limit
   counts) and once loaded.
 
-The town's files (``bench_progressive._town_files``, scan order) are written once into
-``--data`` and reused by later runs.
+The town's files (``bench_progressive._town_files``, scan order), those the run reads, are
+written once into ``--data`` and reused by later runs.
 """
 
 from __future__ import annotations
@@ -34,16 +34,18 @@ from gigapoint.bench import parse_count
 from gigapoint.lod.progressive import ProgressiveOctree, loader
 
 
-def town_files(folder: Path, n: int) -> tuple[Path, Path]:
-    """The town of ``n`` points as LAS and LAZ in ``folder``, written the first time only (20 M: ~2 min)."""
-    las, laz = folder / f"town_{n}.las", folder / f"town_{n}.laz"
-    if not (las.is_file() and laz.is_file()):
+def town_files(folder: Path, n: int, formats: list[str]) -> list[Path]:
+    """The town of ``n`` points in ``folder`` as each of ``formats`` ("las", "laz"), those missing
+    written (20 M: ~2 min a format), only those a run reads: the memory part reads LAS alone."""
+    paths = [folder / f"town_{n}.{suffix}" for suffix in formats]
+    missing = [path for path in paths if not path.is_file()]
+    if missing:
         folder.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory(dir=folder) as tmp:
-            made_laz, made_las = bench_progressive._town_files(Path(tmp), n, ("laz", "las"))
-            made_laz.rename(laz)
-            made_las.rename(las)
-    return las, laz
+            made = bench_progressive._town_files(Path(tmp), n, [path.suffix[1:] for path in missing])
+            for written, path in zip(made, missing):
+                written.rename(path)
+    return paths
 
 
 def _cpu_seconds() -> float:
@@ -112,16 +114,16 @@ def main(argv=None) -> int:
     ap.add_argument("slices", nargs="+", help="slice sizes (SLICE_POINTS) to compare: 1M 2M ...")
     ap.add_argument("--points", default="20M")
     ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--formats", nargs="+", default=["las", "laz"], choices=["las", "laz"], help="the files --parts load reads")
+    ap.add_argument("--formats", nargs="+", default=["las", "laz"], choices=["las", "laz"], help="the files the load part reads (memory reads LAS)")
     ap.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "gigapoint-bench-slices", help="where the town's files are kept")
     args = ap.parse_args(argv)
     n, sizes = parse_count(args.points), [parse_count(s) for s in args.slices]
-    las, laz = town_files(args.data, n)
+    paths = town_files(args.data, n, args.formats if args.part == "load" else ["las"])
     print(f"{bench_progressive._cpu()}; {n:,} points; the loader's slices of {', '.join(f'{s:,}' for s in sizes)} points")
     if args.part == "load":
-        bench_load([{"las": las, "laz": laz}[f] for f in args.formats], sizes, args.rounds)
+        bench_load(paths, sizes, args.rounds)
     else:
-        bench_memory(las, n, sizes, args.rounds)
+        bench_memory(paths[0], n, sizes, args.rounds)
     return 0
 
 
