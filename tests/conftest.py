@@ -87,14 +87,14 @@ def interrupted_read(monkeypatch):
     return interrupt
 
 
-def write_las(path: Path, xyz: np.ndarray, rgb16: np.ndarray, intensity=None, classification=None) -> Path:
+def write_las(path: Path, xyz: np.ndarray, rgb16: np.ndarray, intensity=None, classification=None, scale: float = 0.001) -> Path:
     """The points ``xyz`` with their 16-bit colours ``rgb16`` as a LAS 1.2 file (point format 3,
-    millimetre scale, offsets 0); intensity each point's index (wrapping at 65 536) and
-    classification 0 where not given."""
+    ``scale`` on each axis, millimetres by default, offsets 0); intensity each point's index
+    (wrapping at 65 536) and classification 0 where not given."""
     import laspy
 
     header = laspy.LasHeader(point_format=3, version="1.2")
-    header.scales = [0.001] * 3
+    header.scales = [scale] * 3
     header.offsets = [0.0, 0.0, 0.0]
     las = laspy.LasData(header)
     las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
@@ -123,8 +123,8 @@ def las_writer():
 
 @pytest.fixture(scope="session")
 def points_las_writer():
-    """``write_las(path, xyz, rgb16, intensity=None, classification=None)``: a LAS input file of
-    the test's own points."""
+    """``write_las(path, xyz, rgb16, intensity=None, classification=None, scale=0.001)``: a LAS
+    input file of the test's own points."""
     pytest.importorskip("laspy")
     return write_las
 

@@ -226,15 +226,11 @@ def test_points_without_header_bounds_have_the_tiles_count_checked_once_a_chunk_
     assert [len(laspy.read(str(p)).points) for p in res.tiles] == wanted
 
 
-def test_las_points_beyond_their_headers_bounds_are_checked_as_they_are_tiled(tmp_path):
+def test_las_points_beyond_their_headers_bounds_are_checked_as_they_are_tiled(tmp_path, points_las_writer):
     """A LAS file whose header tells no bounds (all 0) has the tiles' count checked on its points as
     they are read: a size in the wrong unit is refused at the first chunk, before a tile is written."""
-    header = laspy.LasHeader(point_format=3, version="1.2")
-    header.scales, header.offsets = [0.01] * 3, [0.0] * 3
-    las = laspy.LasData(header)
-    las.x, las.y, las.z = np.linspace(0, 0.5, 2000), np.linspace(0, 0.25, 2000), np.zeros(2000)
-    path = tmp_path / "pts.las"
-    las.write(str(path))
+    xyz = np.column_stack([np.linspace(0, 0.5, 2000), np.linspace(0, 0.25, 2000), np.zeros(2000)])
+    path = points_las_writer(tmp_path / "pts.las", xyz, np.zeros((2000, 3), np.uint16), scale=0.01)  # (centimetres: the first chunk's 0.12 x 0.06)
     data = bytearray(path.read_bytes())
     data[179 : 179 + 48] = bytes(48)  # (LAS 1.2's max x, min x, max y, min y, max z, min z)
     path.write_bytes(bytes(data))
