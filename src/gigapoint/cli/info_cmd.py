@@ -73,7 +73,6 @@ def info(
         folder_info,
         format_info,
         format_stats,
-        open_cloud,
         pattern_matches,
         shown_url,
     )
@@ -147,6 +146,8 @@ def info(
                 why = "an octree is read node by node as views need them; --memory measures point files"
                 typer.echo(json.dumps({"path": shown_url(path), "memory": None, "why": why}) if as_json else f"memory: {why}")
             elif memory:  # (a point file, checked above: gp.open would check it for a conversion's unwritten COPC again)
+                from ..io import open_cloud  # (here: the readers' kernels load numba, which info's other lines never need)
+
                 cloud = open_cloud(path, **options)
                 held = attributes_held(cloud)
                 if as_json:
