@@ -120,6 +120,23 @@ def test_to_degrees_z_is_said_kept_where_it_is_not_in_metres(tmp_path, recwarn, 
     assert said == ([kept] if warned else [])
 
 
+def test_a_3d_geographic_target_that_wkt1_cannot_say_is_written_as_wkt2(cli, tmp_path):
+    """EPSG:4979 (WGS 84 with ellipsoidal heights) has no WKT1: its output was pyproj's CRSError, a
+    traceback; it is written as WKT2, which laspy (pyproj) and gigapoint read back as EPSG:4979."""
+    plain = _plain_tile(tmp_path / "plain.las", [[494_000.0, 4_877_000.0, 100.0], [494_010.0, 4_877_010.0, 110.0]])
+    out = tmp_path / "lonlat3d.laz"
+    rc, _, err = cli("convert", plain, "-o", out, "--to-crs", "EPSG:4979", "--from-crs", UTM, "-q")
+    assert (rc, err) == (0, "")
+    written = laspy.read(str(out))
+    assert written.header.parse_crs() == pyproj.CRS.from_epsg(4979)
+    assert read_las_header(out).crs().startswith('GEOGCRS["WGS 84"')
+    x, y, z = _pyproj_moved(plain, "EPSG:4979", UTM)
+    assert np.abs(np.asarray(written.x) - x).max() <= 5e-9 and np.abs(np.asarray(written.y) - y).max() <= 5e-9  # (a 1e-8 degree grid)
+    assert np.allclose(np.asarray(written.z), [100.0, 110.0]) and np.allclose(z, [100.0, 110.0])  # (2D to 3D: PROJ keeps z)
+    rc, stdout, _ = cli("info", out)
+    assert "  crs:         WGS 84 (EPSG:4979)" in stdout.splitlines()
+
+
 def test_the_cli_names_the_file_without_a_crs(cli, tmp_path):
     """It said '(convert: from_crs=, --from-crs)': the Python keyword and the option at once."""
     plain = _plain_tile(tmp_path / "plain.las", [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])

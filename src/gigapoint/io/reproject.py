@@ -369,8 +369,15 @@ class Reprojection:
         return [pyproj.proj_version_str, is_network_enabled()]
 
     def target_wkt(self) -> str:
-        """The target CRS as the output's WKT VLR holds it (OGC WKT1, as LAS 1.4 says)."""
-        return self.target.to_wkt("WKT1_GDAL")
+        """The target CRS as the output's WKT VLR holds it: OGC WKT1, as LAS 1.4 says, or WKT2
+        where WKT1 cannot say it (a 3D geographic CRS, EPSG:4979: pyproj raised CRSError, a
+        traceback; laspy, PDAL and gigapoint read WKT2 too)."""
+        import pyproj
+
+        try:
+            return self.target.to_wkt("WKT1_GDAL")
+        except pyproj.exceptions.CRSError:
+            return self.target.to_wkt("WKT2_2019")
 
 
 def output_grid(files, reprojection: Reprojection):
