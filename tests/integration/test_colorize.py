@@ -317,6 +317,24 @@ def test_a_raster_in_another_crs_is_refused_naming_both(cli, no_rgb, tmp_path):
     assert not out.exists()
 
 
+def test_points_in_a_compound_crs_take_the_colours_of_a_raster_in_its_horizontal_part(cli, no_rgb, tmp_path):
+    """NAD83 / UTM 10N + NAVD88 heights over an orthophoto in NAD83 / UTM 10N: the heights are no
+    pixel's (was refused: "move them into its CRS with --to-crs EPSG:26910", which drops them)."""
+    compound = tmp_path / "utm_navd88.las"
+    gp.convert(no_rgb, compound, to_crs="EPSG:26910+5703", from_crs="EPSG:2994+6360")
+    transform = from_origin(494_000.0005, 4_878_000.0005, 2, 2)
+    raster = _geotiff(tmp_path / "utm.tif", _pattern(1000, 1000), "EPSG:26910", transform)
+    out = tmp_path / "out.las"
+    rc, _, err = cli("convert", compound, "-o", out, "--colorize", raster, "-q")
+    assert (rc, err) == (0, "")
+    rows, cols, las = _pixels_of(out, transform)
+    assert np.array_equal(_rgb(las), _pattern(1000, 1000)[:, rows, cols].T.astype(np.uint16) * 257)
+    assert las.header.parse_crs() == pyproj.CRS("EPSG:26910+5703")  # (the points' CRS kept, heights and all)
+    other = _geotiff(tmp_path / "wgs84.tif", _pattern(1000, 1000), "EPSG:32610", transform)  # (WGS 84's UTM: another datum)
+    rc, _, err = cli("convert", compound, "-o", tmp_path / "other.las", "--colorize", other, "-q")
+    assert (rc, err.split(";")[0]) == (1, f"error: {other}: is in EPSG:32610 (WGS 84 / UTM zone 10N), the points ({compound}) in NAD83 / UTM zone 10N + NAVD88 height")
+
+
 def test_points_naming_no_crs_are_said_to_in_one_warning(cli, tmp_path):
     """(was "plain.las name no CRS")"""
     header = laspy.LasHeader(point_format=1, version="1.2")

@@ -35,6 +35,7 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..errors import GigapointWarning, InputError, check_whole, first_line, warn
+from .crs import pyproj_horizontal
 
 #: pixels along each edge of the blocks the raster is read in
 BLOCK = 1024
@@ -139,8 +140,10 @@ class Colorization:
                  GigapointWarning)  # fmt: skip
 
     def check_crs(self, points_crs: str | None, label: str) -> None:
-        """Refuse, in one line naming both, a raster in another CRS than the points' (``points_crs``:
-        their WKT or 'EPSG:n', the output's); warn where either names none (taken to be the same)."""
+        """Refuse, in one line naming both, a raster in another horizontal CRS than the points'
+        (``points_crs``: their WKT or 'EPSG:n', the output's; a compound one's heights are no
+        pixel's: EPSG:26910+5703 points over an EPSG:26910 raster were refused); warn where either
+        names none (taken to be the same)."""
         raster_crs = self._dataset.crs
         if raster_crs is None or not points_crs:
             which = f"{self.path} names no CRS" if raster_crs is None else f"the points ({label}) name no CRS"  # (one file or several)
@@ -150,7 +153,7 @@ class Colorization:
 
         theirs = parse_crs(raster_crs.to_wkt(), f"{self.path}: its CRS")
         ours = parse_crs(points_crs, f"{label}: its CRS")
-        if not theirs.equals(ours, ignore_axis_order=True):  # (rasterio's == told autzen's WKT from its GeoTIFF copy apart)
+        if not _same_horizontal(theirs, ours):
             raise InputError(
                 f"{self.path}: is in {_crs_label(theirs)}, the points ({label}) in {_crs_label(ours)}; "
                 f"move them into its CRS with --to-crs {f'EPSG:{theirs.to_epsg()}' if theirs.to_epsg() else 'and its WKT'}"
@@ -253,6 +256,15 @@ def _gdal_cache_bytes(ds) -> int:
         return GDAL_CACHE_BYTES
     rows = (-(-BLOCK // block_height) + 1) * block_height  # (a BLOCK's rows may start inside a strip)
     return max(GDAL_CACHE_BYTES, 2 * rows * ds.width * ds.count * np.dtype(ds.dtypes[0]).itemsize)
+
+
+def _same_horizontal(raster_crs, points_crs) -> bool:
+    """Whether a raster's pixels and points lie in one horizontal CRS (the whole CRSs where one has
+    no horizontal part). By pyproj's ``equals``: rasterio's == told autzen's WKT from its GeoTIFF copy apart."""
+    theirs, ours = pyproj_horizontal(raster_crs), pyproj_horizontal(points_crs)
+    if theirs is None or ours is None:
+        theirs, ours = raster_crs, points_crs
+    return theirs.equals(ours, ignore_axis_order=True)
 
 
 def _crs_label(crs) -> str:

@@ -64,7 +64,7 @@ def _pyproj_identity(crs: str) -> str:
             return _identities[crs]
     parsed = pyproj.CRS.from_user_input(crs.strip())
     parsed = parsed.source_crs if parsed.is_bound else parsed  # (a WKT1 with TOWGS84: the CRS it binds)
-    codes = tuple(part.to_epsg() for part in (parsed.sub_crs_list if parsed.is_compound else [parsed]))
+    codes = tuple(part.to_epsg() for part in pyproj_parts(parsed))
     coded = None not in codes
     with _identity_lock:
         # two CRSs with codes are the same where their codes are; CRS.equals (which reads its
@@ -253,13 +253,25 @@ def _pyproj_vertical(crs: str) -> dict | None:
     its code as pyproj identifies it); raises where pyproj is not installed or cannot read ``crs``."""
     import pyproj
 
-    whole = pyproj.CRS.from_user_input(crs.strip())
-    whole = whole.source_crs if whole.is_bound else whole  # (a WKT1 with TOWGS84)
-    part = next((c for c in (whole.sub_crs_list if whole.is_compound else [whole]) if c.is_vertical), None)
+    part = next((c for c in pyproj_parts(pyproj.CRS.from_user_input(crs.strip())) if c.is_vertical), None)
     if part is None:
         return None
     axes = list(part.axis_info)
     return {"epsg": part.to_epsg(), "name": part.name, "unit": _axis_unit(axes[0]) if axes else None}
+
+
+def pyproj_parts(crs) -> list:
+    """The parts of a pyproj CRS: a compound one's (horizontal, vertical), else itself alone; of a
+    WKT1 with TOWGS84, those of the CRS it binds."""
+    whole = crs.source_crs if crs.is_bound else crs
+    return whole.sub_crs_list if whole.is_compound else [whole]
+
+
+def pyproj_horizontal(crs):
+    """The horizontal part of a pyproj CRS (a compound one's, unbound), None where it has none (a
+    vertical CRS): what an orthophoto's pixels and a point's x and y share."""
+    part = next((c for c in pyproj_parts(crs) if not c.is_vertical), None)
+    return part.source_crs if part is not None and part.is_bound else part
 
 
 def _wkt_vertical(crs: str) -> dict | None:
