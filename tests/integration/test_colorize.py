@@ -87,6 +87,21 @@ def test_every_point_takes_its_pixels_colour_x_257_and_gains_rgb(cli, no_rgb, tm
     assert len(np.unique(expected, axis=0)) > 1000  # (a pattern, not one colour)
 
 
+def test_a_paletted_raster_gives_each_point_its_pixels_colour_from_the_table(cli, no_rgb, tmp_path):
+    """A one-band raster of indices into a colour table (a classified map, GDAL's palette): was read
+    as grey, each point the grey of its index (index 1: 257, near black)."""
+    indices = (_pattern()[0] % 4).astype(np.uint8)[np.newaxis]
+    table = {0: (255, 0, 0, 255), 1: (0, 255, 0, 255), 2: (0, 0, 255, 255), 3: (250, 200, 10, 255)}
+    paletted = _geotiff(tmp_path / "classes.tif", indices, read_las_header(no_rgb).crs())
+    with rasterio.open(paletted, "r+") as ds:
+        ds.write_colormap(1, table)
+    rc, _, err = cli("convert", no_rgb, "-o", tmp_path / "out.las", "--colorize", paletted, "-q")
+    assert (rc, err) == (0, "")
+    rows, cols, las = _pixels_of(tmp_path / "out.las")
+    expected = np.array([table[i][:3] for i in range(4)], np.uint16)[indices[0, rows, cols]] * 257
+    assert np.array_equal(_rgb(las), expected) and len(np.unique(expected, axis=0)) == 4
+
+
 def test_a_16_bit_raster_keeps_its_values_high_byte(no_rgb, tmp_path):
     wkt = read_las_header(no_rgb).crs()
     bands = _pattern().astype(np.uint16) * 256 + 77  # (low bytes 77: gigapoint holds 8 bits a channel)

@@ -5,7 +5,7 @@ PointFiles), through rasterio (GDAL), an optional dependency (``pip install 'gig
 Each point takes the colour of the pixel it lies in (nearest: no blending), in the output's
 coordinates: after ``--to-crs`` has moved it; a rotated or sheared raster (an affine with b, d
 terms) too, through its inverse affine. Bands 1, 2, 3 are red, green, blue (a raster of one or two
-bands: band 1 as grey). 8-bit values are written x 257 into LAS's 16-bit fields. gigapoint's
+bands: band 1 as grey; a paletted one's band 1 indexes its colour table). 8-bit values are written x 257 into LAS's 16-bit fields. gigapoint's
 chunks hold 8 bits a channel (PointChunk.rgba), so a raster's values are scaled to 8 bits by its
 real bit depth, n: GDAL's NBITS where the file gives one (a 16-bit orthophoto of 12- or 11-bit
 data, 0-4095 or 0-2047), else its type's (8, 16); ``--colorize-bits n`` over both. A 16-bit
@@ -97,7 +97,10 @@ class Colorization:
             raise InputError(f"{self.path}: its bands hold {ds.dtypes[0]} values; colorize reads orthophotos of 8- or 16-bit integers{scale}")
         self.bands = (1, 2, 3) if ds.count >= 3 else (1, 1, 1)  # (one or two bands: grey, and maybe its alpha)
         type_bits = np.dtype(ds.dtypes[0]).itemsize * 8
-        if bits is not None:  # (--colorize-bits: the user's word over the file's)
+        self.palette = _palette(ds, type_bits)
+        if self.palette is not None:  # (its values are indices, of no bit depth: the colours are 8-bit)
+            self.bands, self.nbits = (1, 1, 1), 8
+        elif bits is not None:  # (--colorize-bits: the user's word over the file's)
             try:
                 self.nbits = check_whole(str(self.path), f"--colorize-bits for its {ds.dtypes[0]} values", bits, 1, type_bits)
             except InputError:
@@ -223,7 +226,10 @@ class Colorization:
             raise InputError(f"{self.path}: its pixels at rows {top}-{top + window.height - 1}, columns {left}-{left + window.width - 1} "
                              f"cannot be read ({first_line(exc)}); nothing was written") from None  # fmt: skip
         rgb0 = np.zeros((bands.shape[1] * bands.shape[2], 4), np.uint8)
-        rgb0[:, :3] = self.to_8_bits[bands[[0, 0, 0] if len(bands) == 1 else [0, 1, 2]]].reshape(3, -1).T
+        if self.palette is not None:
+            rgb0[:, :3] = self.palette[bands[0].ravel()]
+        else:
+            rgb0[:, :3] = self.to_8_bits[bands[[0, 0, 0] if len(bands) == 1 else [0, 1, 2]]].reshape(3, -1).T
         values = rgb0.view(np.uint32).ravel()
         self._blocks[key] = (values, valid)
         self._cached_bytes += values.nbytes + (valid.nbytes if valid is not None else 0)
@@ -231,6 +237,19 @@ class Colorization:
             old_values, old_valid = self._blocks.popitem(last=False)[1]
             self._cached_bytes -= old_values.nbytes + (old_valid.nbytes if old_valid is not None else 0)
         return values, valid
+
+
+def _palette(ds, type_bits: int) -> np.ndarray | None:
+    """The red, green, blue of each value of a paletted raster's band 1 (its colour table: a map's
+    classes; 2**type_bits x 3, black where the table has no entry), None for any other raster."""
+    from rasterio.enums import ColorInterp
+
+    if ds.colorinterp[0] != ColorInterp.palette:
+        return None
+    table = np.zeros((2**type_bits, 3), np.uint8)
+    for value, rgba in ds.colormap(1).items():
+        table[value] = rgba[:3]
+    return table
 
 
 def _nbits(image_structure: dict, type_bits: int) -> int:
