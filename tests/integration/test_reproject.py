@@ -137,6 +137,22 @@ def test_a_3d_geographic_target_that_wkt1_cannot_say_is_written_as_wkt2(cli, tmp
     assert "  crs:         WGS 84 (EPSG:4979)" in stdout.splitlines()
 
 
+def test_from_crs_over_a_file_naming_another_crs_is_warned_of(cli, autzen_path, tmp_path):
+    """from_crs reads every file in it (PDAL's in_srs): a file naming UTM read as Oregon feet came
+    out 1,000 km off without a word. autzen's ESRI WKT of EPSG:2994 is no other CRS."""
+    utm = tmp_path / "utm.laz"
+    with pytest.warns(GigapointWarning, match="z is kept"):
+        gp.convert(autzen_path, utm, to_crs=UTM)
+    rc, _, err = cli("convert", autzen_path, utm, "-o", tmp_path / "out.laz", "--to-crs", "EPSG:3857", "--from-crs", "EPSG:2994", "-q")
+    assert rc == 0
+    assert err.splitlines()[0] == (
+        f"warning: {utm}: names WGS 84 / UTM zone 10N (EPSG:32610), another CRS than the one given for every input "
+        "(NAD83(HARN) / Oregon GIC Lambert (ft)): its coordinates are taken to be in the one given; "
+        "leave it out to move each file from the CRS its header names"
+    )
+    assert sum("another CRS than the one given" in line for line in err.splitlines()) == 1
+
+
 def test_the_cli_names_the_file_without_a_crs(cli, tmp_path):
     """It said '(convert: from_crs=, --from-crs)': the Python keyword and the option at once."""
     plain = _plain_tile(tmp_path / "plain.las", [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..errors import GigapointWarning, InputError, check_whole, first_line, warn
-from .crs import pyproj_horizontal
+from .crs import same_horizontal
 
 #: pixels along each edge of the blocks the raster is read in
 BLOCK = 1024
@@ -156,7 +156,7 @@ class Colorization:
 
         theirs = parse_crs(raster_crs.to_wkt(), f"{self.path}: its CRS")
         ours = parse_crs(points_crs, f"{label}: its CRS")
-        if not _same_horizontal(theirs, ours):
+        if not same_horizontal(theirs, ours):  # (rasterio's == told autzen's WKT from its GeoTIFF copy apart)
             raise InputError(
                 f"{self.path}: is in {_crs_label(theirs)}, the points ({label}) in {_crs_label(ours)}; "
                 f"move them into its CRS with --to-crs {f'EPSG:{theirs.to_epsg()}' if theirs.to_epsg() else 'and its WKT'}"
@@ -275,15 +275,6 @@ def _gdal_cache_bytes(ds) -> int:
         return GDAL_CACHE_BYTES
     rows = (-(-BLOCK // block_height) + 1) * block_height  # (a BLOCK's rows may start inside a strip)
     return max(GDAL_CACHE_BYTES, 2 * rows * ds.width * ds.count * np.dtype(ds.dtypes[0]).itemsize)
-
-
-def _same_horizontal(raster_crs, points_crs) -> bool:
-    """Whether a raster's pixels and points lie in one horizontal CRS (the whole CRSs where one has
-    no horizontal part). By pyproj's ``equals``: rasterio's == told autzen's WKT from its GeoTIFF copy apart."""
-    theirs, ours = pyproj_horizontal(raster_crs), pyproj_horizontal(points_crs)
-    if theirs is None or ours is None:
-        theirs, ours = raster_crs, points_crs
-    return theirs.equals(ours, ignore_axis_order=True)
 
 
 def _crs_label(crs) -> str:

@@ -269,9 +269,18 @@ def pyproj_parts(crs) -> list:
 
 def pyproj_horizontal(crs):
     """The horizontal part of a pyproj CRS (a compound one's, unbound), None where it has none (a
-    vertical CRS): what an orthophoto's pixels and a point's x and y share."""
+    vertical CRS)."""
     part = next((c for c in pyproj_parts(crs) if not c.is_vertical), None)
     return part.source_crs if part is not None and part.is_bound else part
+
+
+def same_horizontal(one, other) -> bool:
+    """Whether two pyproj CRSs have one horizontal CRS (the whole CRSs where one has no horizontal
+    part), by pyproj's ``equals`` ignoring axis order."""
+    horizontal, other_horizontal = pyproj_horizontal(one), pyproj_horizontal(other)
+    if horizontal is None or other_horizontal is None:
+        horizontal, other_horizontal = one, other
+    return horizontal.equals(other_horizontal, ignore_axis_order=True)
 
 
 def _wkt_vertical(crs: str) -> dict | None:

@@ -38,7 +38,7 @@ import numpy as np
 from ..core.chunk import PointChunk
 from ..core.coords import MAX_ABS_COORDINATE
 from ..errors import GigapointWarning, InputError, counted, first_line, warn
-from .crs import crs_identity, crs_units
+from .crs import crs_identity, crs_name, crs_units, same_horizontal
 from .filters import PointFilter, may_move, placed_in, placed_over
 from .las import LasReader, read_las_header
 from .polygon import ClipPolygon, moved_polygon
@@ -147,9 +147,35 @@ class Reprojection:
         return f"gp.{self.where}(..., from_crs=...)"
 
     def check_files(self, files) -> None:
-        """Each file's transformer made: a file without a CRS, or one PROJ cannot read, is an error now."""
+        """Each file's transformer made: a file without a CRS, or one PROJ cannot read, is an error
+        now. With ``from_crs``, files whose headers name another horizontal CRS are warned of."""
         for f in files:
             self.transformer(f)
+        if self.given_source is not None:
+            self._warn_of_other_crss(files)
+
+    def _warn_of_other_crss(self, files) -> None:
+        """Warn where ``from_crs`` overrides another horizontal CRS the files' headers name (a
+        UTM file read as Oregon feet comes out far off, where its own CRS would have moved it right):
+        their coordinates are read in ``from_crs`` all the same, as PDAL's in_srs reads them."""
+        import pyproj
+
+        others = []
+        for f in files:
+            text = read_las_header(f).crs() if isinstance(reader_for(f), LasReader) else None
+            try:
+                if text and not same_horizontal(pyproj.CRS.from_user_input(text), self.given_source):
+                    others.append((f, text))
+            except pyproj.exceptions.CRSError:  # (a CRS PROJ cannot read: from_crs is given for such a file)
+                continue
+        if others:
+            f, text = others[0]
+            more = f" (and {counted(len(others) - 1, 'more file')})" if len(others) > 1 else ""
+            warn(
+                f"{f}: names {crs_name(text)[:60]}{more}, another CRS than the one given for every input ({self.given_source.name}): "
+                "its coordinates are taken to be in the one given; leave it out to move each file from the CRS its header names",
+                GigapointWarning,
+            )
 
     def transformer(self, path):
         """The pyproj Transformer from ``path``'s CRS to the target (one per distinct CRS)."""
