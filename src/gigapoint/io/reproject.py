@@ -162,7 +162,7 @@ class Reprojection:
 
         others = []
         for f in files:
-            text = read_las_header(f).crs() if isinstance(reader_for(f), LasReader) else None
+            text = _header_crs(f)
             try:
                 if text and not same_horizontal(pyproj.CRS.from_user_input(text), self.given_source):
                     others.append((f, text))
@@ -196,7 +196,7 @@ class Reprojection:
 
     def _file_crs(self, path) -> str:
         """The CRS ``path``'s header names (WKT or 'EPSG:n'); a one-line InputError where it names none."""
-        text = read_las_header(path).crs() if isinstance(reader_for(path), LasReader) else None
+        text = _header_crs(path)
         if not text:
             raise InputError(f"{path}: names no CRS to reproject from; give the CRS its coordinates are in with {self.from_crs_hint}")
         return text
@@ -404,6 +404,11 @@ class Reprojection:
             return self.target.to_wkt("WKT1_GDAL")
         except pyproj.exceptions.CRSError:
             return self.target.to_wkt("WKT2_2019")
+
+
+def _header_crs(path) -> str | None:
+    """The CRS a LAS/LAZ file's header names (WKT or 'EPSG:n'); None where it names none or the file is of another format."""
+    return read_las_header(path).crs() if isinstance(reader_for(path), LasReader) else None
 
 
 def output_grid(files, reprojection: Reprojection):
