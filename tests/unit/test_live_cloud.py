@@ -229,6 +229,26 @@ def test_a_snapshot_leaves_out_frames_that_decayed_since_the_last_push_or_drawn_
     assert live.snapshot() == 0 and live.n_points == 2000
 
 
+def test_a_paused_stream_counts_and_frames_only_what_has_not_decayed():
+    """n_points, len, bounds, repr and the HUD counted frames that had faded out until the next
+    push, drawn frame or snapshot: a paused stream with decay=1 s showed its old count forever."""
+    now = [0.0]
+    live = LiveCloud(decay=1.0, clock=lambda: now[0])
+    live.push(np.full((1000, 3), -50.0))
+    now[0] = 0.8
+    live.push(np.full((2000, 3), 7.0))
+    now[0] = 1.5  # the first frame has faded out; nothing pushed or drawn since
+    assert live.n_points == 2000 and len(live) == 2000 and live.n_frames == 1
+    lo, hi = live.bounds
+    assert lo.tolist() == [7.0, 7.0, 7.0] and hi.tolist() == [7.0, 7.0, 7.0]
+    assert repr(live) == "LiveCloud('live', 1 of 100 frames, 2,000 live points)"
+    assert ", 1 frames, 2,000 live points" in live.hud()
+    now[0] = 2.0  # the second one too: nothing left (a unit box to look at)
+    assert len(live) == 0 and repr(live) == "LiveCloud('live', 0 of 100 frames, 0 live points)"
+    assert [b.tolist() for b in live.bounds] == [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]
+    assert ", 0 frames, 0 live points" in live.hud()
+
+
 def test_without_decay_no_alpha_is_given():
     live = LiveCloud()
     live.push(*frame(0))

@@ -37,6 +37,7 @@ import threading
 import time as _time
 from collections import Counter, deque
 from collections.abc import Callable
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -257,18 +258,34 @@ class LiveCloud:
     # ------------------------------------------------------------------ facts (Renderable)
     load_progress = 1.0
 
+    @contextmanager
+    def _as_drawn_now(self):
+        """The lock held, frames past their ``decay`` gone: what a frame drawn now would show. (Decay
+        drops frames only at a push, a drawn frame or here: a paused stream's count, bounds and
+        HUD held a frame that had faded out until the next of them.)"""
+        with self.lock.reading():
+            self._drop_decayed()
+            yield
+
     @property
     def n_points(self) -> int:
-        return self.points + (self.snapshots.n_points if self.snapshots is not None else 0)
+        with self._as_drawn_now():
+            return self.points + (self.snapshots.n_points if self.snapshots is not None else 0)
 
     @property
     def n_frames(self) -> int:
-        return len(self.frames)
+        with self._as_drawn_now():
+            return len(self.frames)
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        with self._as_drawn_now():
+            return self._bounds()
+
+    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The box of the frames in the ring, the snapshots and the expected ``bounds`` (lock held)."""
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-        for f in list(self.frames):
+        for f in self.frames:
             lo, hi = np.minimum(lo, f.lo), np.maximum(hi, f.hi)
         if self.snapshots is not None and self.snapshots.n_points:
             slo, shi = self.snapshots.bounds
@@ -305,7 +322,8 @@ class LiveCloud:
     def __repr__(self) -> str:
         snap = f", {self.snapshots.n_points:,} snapshot points" if self.snapshots is not None else ""
         closed = ", closed" if self.closed else ""  # (as ProgressiveOctree's: the empty cloud said nothing of why)
-        return f"LiveCloud({self.name!r}, {len(self.frames)} of {self.keep} frames, {self.points:,} live points{snap}{closed})"
+        with self._as_drawn_now():
+            return f"LiveCloud({self.name!r}, {len(self.frames)} of {self.keep} frames, {self.points:,} live points{snap}{closed})"
 
     def now(self) -> float:
         """Seconds since the cloud started (the clock of ``frame_time``)."""
@@ -650,7 +668,7 @@ class LiveCloud:
         if buf is None:
             empty = Selection(np.empty(0, np.int64), np.empty(0, np.int32), np.empty((0, 4, 4), np.float32), np.empty(0), 0)
             return DrawList(LiveBuffers(self.name, 1, self.chunk, 0, SNAPSHOT_CHUNK, BASE_ATTRIBUTES), empty, 0)
-        buf.bounds = self.bounds
+        buf.bounds = self._bounds()  # (the renderer holds the lock; decayed frames dropped above)
         used = np.flatnonzero(buf.batches["count"][: buf.n_ring] > 0)
         sel = select_view(buf.batches[used], view, settings)
         ids, bits, mats, size = used[sel.ids], sel.bits, sel.matrices, sel.projected_px
@@ -719,7 +737,8 @@ class LiveCloud:
         snap = f", {self.snapshots.n_points:,} snapshot points" if self.snapshots is not None else ""
         err = f"; last bad frame: {s.last_error}" if s.last_error else ""
         dropped = f", {s.frames_dropped} dropped unseen" if s.frames_dropped else ""
-        return f"live: {s.frames_per_second():.1f} frames/s in{dropped}, {len(self.frames)} frames, {self.points:,} live points{snap}{latency}{err}"[:400]
+        with self._as_drawn_now():
+            return f"live: {s.frames_per_second():.1f} frames/s in{dropped}, {len(self.frames)} frames, {self.points:,} live points{snap}{latency}{err}"[:400]
 
     # ------------------------------------------------------------------ snapshots
     def _sync_mirror(self) -> None:
@@ -753,8 +772,7 @@ class LiveCloud:
         positions), or of ``frames``, FrameInfo of ``cloud.frames`` still in it: a frame that has
         left the ring is a one-line InputError (its chunks hold newer frames' points: they were
         given as its own)."""
-        with self.lock.reading():
-            self._drop_decayed()  # (as a snapshot: what a frame drawn now would show)
+        with self._as_drawn_now():
             frames = list(self.frames) if frames is None else self._frames_in_ring(frames)
             if not frames:
                 return np.empty((0, 3)), np.empty((0, 4), np.uint8), {}
@@ -799,8 +817,7 @@ class LiveCloud:
         self.warnings.issue()  # (its player's thread's, in the user's: as save and close)
         self._check_open("snapshot")
         check_switch("normals", normals, f"{self.name}: snapshot")  # "no" kept the normals
-        with self.lock.reading():
-            self._drop_decayed()  # frames that faded out since the last push or drawn frame were frozen
+        with self._as_drawn_now():  # frames that faded out since the last push or drawn frame were frozen
             buf = self.buffers_
             slots = [s for f in self.frames for s in f.chunks]
             runs = self._runs(self.frames) if slots else None
