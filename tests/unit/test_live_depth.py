@@ -104,6 +104,20 @@ def test_rgb_follows_the_pixels():
     assert (rgba[:, 3] == 255).all()
 
 
+def test_float_and_16_bit_rgb_are_judged_as_pushed_colours():
+    """A float image of 0..255 was taken as 0..1 (every point white), NaN and -3 clipped to black
+    without a word; push judged the same colours by their range."""
+    d = np.ones((4, 5), np.float32)
+    rgb = np.empty((4, 5, 3))
+    rgb[:] = (200.0, 100.0, 50.0)
+    assert depth_to_points(d, K, rgb=rgb)[2][0].tolist() == [200, 100, 50, 255]
+    assert depth_to_points(d, K, rgb=rgb / 255.0)[2][0].tolist() == [200, 100, 50, 255]
+    assert depth_to_points(d, K, rgb=(rgb * 256).astype(np.uint16))[2][0].tolist() == [200, 100, 50, 255]
+    rgb[2, 3] = (np.nan, 0.0, 0.0)
+    with pytest.raises(InputError, match=r"^push_depth: colors must be 0..1, 0..255 or 0..65535 \(16 bits\), got nan$"):
+        depth_to_points(d, K, rgb=rgb)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [

@@ -257,7 +257,7 @@ def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, ma
     h, w = d.shape
     rgb8 = np.empty((0, 4), np.uint8)
     if rgb is not None:
-        from ..core.chunk import to_rgba8
+        from ..core.chunk import colors_for
 
         try:
             c = np.asarray(rgb)
@@ -268,7 +268,9 @@ def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, ma
         if c.dtype.kind not in "biuf":  # strings were int()'s ValueError traceback, complex a ComplexWarning
             raise InputError(f"{name}: rgb must hold numbers (uint8, uint16 or float colors), got dtype {c.dtype}")
         rgb8 = c.reshape(h * w, c.shape[2])
-        rgb8 = np.ascontiguousarray(rgb8) if rgb8.dtype == np.uint8 else to_rgba8(rgb8)  # 8-bit RGB(A) read as it is
+        # 8-bit RGB(A) read as it is; others judged as push's colours (to_rgba8 took every float
+        # as 0..1: a float image of 0..255 was all white, NaN and -3 black without a word)
+        rgb8 = np.ascontiguousarray(rgb8) if rgb8.dtype == np.uint8 else colors_for(rgb8, h * w, name)
     if max_depth is not None and not (is_real(max_depth) and max_depth > 0 or max_depth == np.inf):  # -1: "no valid pixel"
         raise InputError(f"{name}: max_depth must be a positive number of metres or None, got {max_depth!r}")
     limit = np.inf if max_depth is None else float(max_depth)
