@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 import threading
 import time
+from functools import partial
 
 import numpy as np
 import pytest
@@ -177,6 +178,9 @@ def test_a_chunk_size_it_cannot_hold_is_refused_at_once(chunk):
         ({"bounds": "ab"}, "live: bounds must be (min, max): two (x, y, z) of finite numbers with min <= max, got 'ab'"),
         ({"bounds": ([0, 0, np.nan], [1, 1, 1])}, "live: bounds must be (min, max): two (x, y, z) of finite numbers with min <= max, got ([0, 0, nan], [1, 1, 1])"),
         ({"bounds": ([1, 1, 1], [0, 0, 0])}, "live: bounds must be (min, max): two (x, y, z) of finite numbers with min <= max, got ([1, 1, 1], [0, 0, 0])"),
+        ({"clock": 5}, "live: clock must be a function giving seconds (a finite number), got 5"),  # "'int' object is not callable"
+        ({"clock": str}, "live: clock must be a function giving seconds (a finite number), got <class 'str'>"),  # a TypeError at the first push
+        ({"clock": partial(float, "nan")}, "live: clock must be a function giving seconds (a finite number), got functools.partial(<class 'float'>, 'nan')"),  # never decayed
     ],
 )
 def test_odd_live_cloud_settings_are_refused_in_one_line(kw, problem):

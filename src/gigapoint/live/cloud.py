@@ -210,7 +210,9 @@ class LiveCloud:
         self.chunk = check_whole(name, "chunk", chunk, 1, MAX_CHUNK, " points")  # 0 divided by zero, 10**12 asked numpy for 116 TiB
         self.clock = clock or _time.monotonic
         self.expected_bounds = None if bounds is None else self._check_bounds(bounds)
-        self.started = self.clock()
+        self.started = self.clock() if callable(self.clock) else None
+        if not is_real(self.started):  # 5 was "'int' object is not callable"; NaN seconds never decayed a frame
+            raise InputError(f"{name}: clock must be a function giving seconds (a finite number), got {clock!r:.80}")
         self.lock = LiveLock(released=self._commit_pending)
         self._pending: deque = deque()  # (frame in core's layout, FrameInfo) batched, not yet in the ring
         self._pending_lock = threading.Lock()
