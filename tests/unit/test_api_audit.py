@@ -197,7 +197,13 @@ NOT_PATHS = [
     ("change-bare", lambda src, out: gp.change(5, src, 10), f"change: before: 5 {NOT_A_PATH}"),
     ("volume-bare", lambda src, out: gp.volume(5, "POLYGON ((0 0, 1 0, 1 1, 0 0))", 1), f"volume: source: 5 {NOT_A_PATH}"),
     ("volume", lambda src, out: gp.volume([None], "POLYGON ((0 0, 1 0, 1 1, 0 0))", 1), f"volume: source[0]: None {NOT_A_PATH}"),
-    ("expand-paths", lambda src, out: expand_paths([src, 5]), f"inputs[1]: 5 {NOT_A_PATH}"),  # (classify_ground's way in)
+    ("expand-paths", lambda src, out: expand_paths([src, 5]), f"inputs[1]: 5 {NOT_A_PATH}"),  # (a caller that named none)
+    # operations that read through gp.open or expand_paths name themselves (they said "open: paths[0]" and a nameless "inputs[0]")
+    ("section", lambda src, out: gp.section([5], (0, 0, 1, 1), 1), f"section: source[0]: 5 {NOT_A_PATH}"),
+    ("orthophoto", lambda src, out: gp.orthophoto([src, 5], 1.0), f"orthophoto: source[1]: 5 {NOT_A_PATH}"),
+    ("classify-ground", lambda src, out: gp.classify_ground([5], out.with_suffix(".las")), f"classify_ground: source[0]: 5 {NOT_A_PATH}"),
+    ("classify-noise-bare", lambda src, out: gp.classify_noise(5, out.with_suffix(".las")), f"classify_noise: source: 5 {NOT_A_PATH}"),  # (was "'int' object is not iterable")
+    ("height-above-ground", lambda src, out: gp.height_above_ground([src, None], out.with_suffix(".las")), f"height_above_ground: source[1]: None {NOT_A_PATH}"),
     ("render", lambda src, out: gp.render(5), "render: cannot draw an int; give a cloud (gigapoint.open, from_arrays, demo)"),
 ]  # fmt: skip
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..core.renderable import Renderable
 from ..errors import CameraError, InputError, check_switch, is_real, number_text
+from ..io.paths import given_paths
 from ..lod.reader import cloud_crs_units
 from ..render import Camera, RenderSettings, render_frame
 from ..render.georef import GEOTIFF_SUFFIXES, map_image, write_map
@@ -96,7 +97,7 @@ def _cloud(source, filters: dict):
         return source
     from .. import open as open_points
 
-    return open_points(source, **given)
+    return open_points(given_paths(source, "orthophoto", "source"), **given)  # (5 among them named by orthophoto, not gp.open)
 
 
 __all__ = ["Orthophoto", "orthophoto"]

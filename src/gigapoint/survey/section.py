@@ -11,7 +11,6 @@ draws them with the renderer through an orthographic camera looking across the l
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -22,6 +21,7 @@ from ..core.cloud import PointCloud, build_cloud
 from ..errors import CameraError, InputError, is_real, number_text, numbers_text
 from ..io.crs import crs_units
 from ..io.filters import PointFilter, along_and_across, corridor_of, point_filter
+from ..io.paths import given_paths
 from ..lod import is_lod_source
 from ..lod.query import is_octree, kept_points, octree_path_kept
 from ..lod.reader import cloud_units
@@ -185,21 +185,22 @@ def section(source, line, width, classes=None, drop_classes=None, clip_polygon=N
     ``.render(scale=pixels per unit or size=(w, h), vertical_exaggeration=1, **settings)``: the image."""
     lane = corridor_of(line, width, f"section: line={numbers_text(line)}", f"section: width={number_text(width)}")
     keep = point_filter(classes, drop_classes, where="section", corridor=lane, clip_polygon=clip_polygon)  # (its bad values before anything is read)
-    paths = [source] if isinstance(source, (str, os.PathLike)) else source
     if isinstance(source, PointCloud):
         kept = list(keep.apply(source.chunks(), source.name))  # (the corridor's points only)
         keep.check_passed(source.name)
         cloud, units = build_cloud(kept, name=source.name, colors="rgba"), cloud_units(source)  # (its colours as the cloud holds them)
     elif is_octree(source):
         cloud, units = build_cloud(kept_points(source, keep, source.name, _region(keep)), name=source.name, colors="rgba"), cloud_units(source)
-    elif isinstance(paths, (list, tuple)) and len(paths) == 1 and is_lod_source(paths[0]):
-        kept, name, units = octree_path_kept(paths[0], keep, _region(keep), "section the point files, or wait for the octree")
-        cloud = build_cloud(kept, name=name, colors="rgba")
-    else:  # only the corridor's points are read
-        from .. import open as open_points
+    else:
+        paths = given_paths(source, "section", "source")  # (5 among them: "section: source[0]: ...", not gp.open's "open: paths[0]")
+        if len(paths) == 1 and is_lod_source(paths[0]):
+            kept, name, units = octree_path_kept(paths[0], keep, _region(keep), "section the point files, or wait for the octree")
+            cloud = build_cloud(kept, name=name, colors="rgba")
+        else:  # only the corridor's points are read
+            from .. import open as open_points
 
-        cloud = open_points(paths, classes=classes, drop_classes=drop_classes, corridor=lane, clip_polygon=keep.polygon)
-        units = cloud_units(cloud)
+            cloud = open_points(paths, classes=classes, drop_classes=drop_classes, corridor=lane, clip_polygon=keep.polygon)
+            units = cloud_units(cloud)
     return Section(cloud, lane[:4], lane[4], units)
 
 
