@@ -518,6 +518,39 @@ def test_a_named_text_column_of_hex_colours_is_left_out_not_taken_for_a_comment(
     np.testing.assert_allclose(np.sort(cloud.positions()[:, 0]), [1, 4])
 
 
+@pytest.mark.parametrize(
+    ("name", "text", "attributes"),
+    [
+        ("spaces.xyz", "x y z intensity # exported by hand\n1 2 3 10\n4 5 6 20\n", {"intensity": [10, 20]}),  # "the header names 7"
+        ("commas.csv", "x,y,z # site A\n1,2,3\n4,5,6\n", {}),  # "line 1: not numeric point data" (no header: 'z # site A')
+        ("cc.txt", "//X,Y,Z,Intensity // CloudCompare\n1,2,3,10\n4,5,6,20\n", {"intensity": [10, 20]}),  # attribute 'intensity __ cloudcompare'
+    ],
+    ids=["spaces", "commas", "cloudcompare"],
+)
+def test_a_comment_ending_the_header_line_names_no_column(tmp_path, name, text, attributes):
+    """A comment ending the header line ("x y z intensity # note") was split into column names,
+    as one ending a line of points no longer is: dropped the same way."""
+    p = tmp_path / name
+    p.write_text(text)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (nothing left out, nothing said)
+        cloud = open_cloud(p)
+    order = np.argsort(cloud.positions()[:, 0])
+    np.testing.assert_allclose(cloud.positions()[order], [[1, 2, 3], [4, 5, 6]], atol=1e-6)
+    assert {a: cloud.attributes[a][order].tolist() for a in cloud.attributes} == attributes
+    assert file_info(p)["attributes"] == list(attributes)
+
+
+def test_a_hex_colour_column_under_a_header_ending_in_a_comment_is_named_as_the_header_names_it(tmp_path):
+    """The text column left out was said as "color # hex" (the header's comment made part of its name)."""
+    p = tmp_path / "hex.csv"
+    p.write_text("x,y,z,color # hex\n1,2,3,#ff0000\n4,5,6,#00ff00\n")
+    with pytest.warns(GigapointWarning) as said:
+        cloud = open_cloud(p)
+    assert [str(w.message) for w in said] == [f"{p}: column(s) color hold text, not numbers: left out"]
+    assert cloud.n_points == 2 and list(cloud.attributes) == []
+
+
 def test_a_named_text_column_is_left_out_with_a_warning(tmp_path):
     """A CSV with a column of labels ("x,y,z,intensity,label") was refused whole ("'a' is not a
     number"): the named text column is left out, said once; the numbers in other columns are

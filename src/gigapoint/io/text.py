@@ -17,8 +17,8 @@ works too. Without a header, columns are read by count:
 ====  ==============================================
 
 A PTS file's first line (the point count alone) is skipped. Lines starting with ``#`` or
-``//`` are comments, and so is what follows either on a line of points ("1 2 3 # note");
-blank lines are skipped.
+``//`` are comments, and so is what follows either on a line of points ("1 2 3 # note") or on
+the header line ("x y z intensity # note"); blank lines are skipped.
 """
 
 from __future__ import annotations
@@ -138,7 +138,7 @@ def _layout(path: Path) -> _Layout:
     candidates = list(first)
     # header: the first line that is not a comment, or a comment line naming x y z (CloudCompare's "//X,Y,Z")
     for i, (lineno, line) in enumerate(candidates):
-        body = line.lstrip().lstrip("#/").strip()
+        body = _without_comment(line.lstrip().lstrip("#/")).strip()  # ("x y z intensity # note": its comment named 3 more columns)
         tokens = _split(body, _sniff_delimiter(body))
         lowered = [_ALIASES.get(t.strip("'\"").lower(), t.strip("'\"").lower()) for t in tokens]
         if not _numeric(tokens) and {"x", "y", "z"} <= set(lowered):
