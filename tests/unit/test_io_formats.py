@@ -567,16 +567,16 @@ def test_a_file_named_twice_is_read_once(tmp_path):
 
 
 def test_field_names_are_listed_as_read_and_two_of_one_lower_case_name_are_an_error(tmp_path):
-    """PLY and NPY fields are read in lower case ('scalar_Intensity' -> 'scalar_intensity'), but
-    info listed the file's spelling, which --color-attribute then refused; and two fields of one
-    name in lower case ('Intensity' and 'intensity', 'X' and 'x') were one: the last kept, the
-    other lost without a word."""
+    """NPY fields are read in lower case, PLY's as the file spells them (but those gigapoint reads
+    by name: ply.attribute_spelling), and info lists them so (it listed the file's spelling,
+    which --color-attribute then refused); two fields of one name in lower case ('Intensity' and
+    'intensity', 'X' and 'x') were one: the last kept, the other lost without a word."""
     from gigapoint.errors import InputError
 
     PLY_XYZ = "property float x\nproperty float y\nproperty float z\n"
     p = tmp_path / "cc.ply"
     p.write_text("ply\nformat ascii 1.0\nelement vertex 2\n" + PLY_XYZ + "property float scalar_Intensity\nend_header\n1 2 3 7\n4 5 6 8\n")
-    assert file_info(p)["attributes"] == list(open_cloud(p).attributes) == ["scalar_intensity"]
+    assert file_info(p)["attributes"] == list(open_cloud(p).attributes) == ["scalar_Intensity"]
     n = tmp_path / "s.npy"
     rec = np.zeros(2, [("X", "f8"), ("Y", "f8"), ("Z", "f8"), ("Return_Number", "u1")])
     np.save(n, rec)
@@ -595,6 +595,31 @@ def test_field_names_are_listed_as_read_and_two_of_one_lower_case_name_are_an_er
             with pytest.raises(InputError) as e:
                 way(tmp_path / name)
             assert str(e.value).startswith(f"{tmp_path / name}: ") and f"fields {both} are one name" in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize("encoding", ["ascii", "binary_little_endian"])
+def test_ply_attributes_keep_the_files_spelling_but_those_read_by_name(tmp_path, encoding):
+    """A PLY file's attribute names came back in lower case: 'Amplitude' saved, 'amplitude' read
+    (and info listed). Now the file's spelling stays; x/y/z, colours and the names gigapoint reads
+    by name (LAS fields as PDAL spells them, 'Classification'; normals) are found in any case."""
+    n = 4
+    values = {"X": np.arange(n, dtype="f8"), "y": np.zeros(n), "Z": np.ones(n), "Red": np.full(n, 255, "u1"), "green": np.zeros(n, "u1"),
+              "blue": np.zeros(n, "u1"), "Amplitude": np.arange(n, dtype="f4") / 2, "Classification": np.full(n, 2, "u1"),
+              "NX": np.ones(n, "f4"), "scalar_Range_m": np.arange(n, dtype="f4")}  # fmt: skip
+    vertex = np.zeros(n, [(name, v.dtype) for name, v in values.items()])
+    for name, v in values.items():
+        vertex[name] = v
+    p = tmp_path / "named.ply"
+    PlyData([PlyElement.describe(vertex, "vertex")], text=encoding == "ascii").write(str(p))
+    cloud = open_cloud(p, colors="rgba")
+    want = ["Amplitude", "classification", "nx", "scalar_Range_m"]
+    assert list(cloud.attributes) == file_info(p)["attributes"] == want
+    np.testing.assert_array_equal(cloud.attributes["Amplitude"], values["Amplitude"])
+    np.testing.assert_array_equal(cloud.attributes["classification"], [2] * n)
+    np.testing.assert_array_equal(cloud.rgba[:, 0], [255] * n)
+    saved = tmp_path / "again.ply"  # gigapoint's writer keeps the names given: a round trip keeps them
+    cloud.save(saved)
+    assert list(open_cloud(saved).attributes) == want
 
 
 def test_a_vertex_list_property_is_left_out_quietly_and_not_listed(tmp_path):

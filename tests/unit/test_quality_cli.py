@@ -75,7 +75,7 @@ def test_a_missing_color_attribute_is_refused_before_the_inputs_are_read(tmp_pat
     las.x, las.y, las.z = xyz.T
     las.write(str(tmp_path / "a.laz"))
     (tmp_path / "b.ply").write_text("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
-                                    "property float Hag\nend_header\n1 2 3 7\n")  # fmt: skip
+                                    "property float hag\nend_header\n1 2 3 7\n")  # fmt: skip
     np.save(tmp_path / "c.npy", np.c_[xyz, np.ones(4)])  # (N, 4): x y z intensity
     (tmp_path / "d.csv").write_text("x,y,z,hag,a/b\n1,2,3,4,5\n")
     for name in ("a.laz", "b.ply", "c.npy", "d.csv"):

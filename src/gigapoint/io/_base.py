@@ -177,14 +177,17 @@ def check_distinct_names(path: Path, names: list[str], keys: list[str] | None = 
         seen[key] = name
 
 
-def attribute_names(names: list[str], colors: list[str]) -> list[str]:
+def attribute_names(names: list[str], colors: list[str], spelling: Callable[[str], str] = str.lower) -> list[str]:
     """The attributes ``rows_to_chunk`` makes of fields ``names`` (``colors``: color_names'), as it names them."""
-    out = (safe_attribute_name(n.lower()) for n in names if n.lower() not in ("x", "y", "z") and n.lower() not in colors)
+    out = (safe_attribute_name(spelling(n)) for n in names if n.lower() not in ("x", "y", "z") and n.lower() not in colors)
     return [n for n in out if n is not None]
 
 
-def rows_to_chunk(path: Path, names: list[str], columns: list[np.ndarray], scaler: ColorScaler) -> PointChunk:
-    """A PointChunk from named 1-D columns: x y z, red green blue [alpha] (or r g b [a]), the rest attributes."""
+def rows_to_chunk(path: Path, names: list[str], columns: list[np.ndarray], scaler: ColorScaler,
+                  spelling: Callable[[str], str] = str.lower) -> PointChunk:  # fmt: skip
+    """A PointChunk from named 1-D columns: x y z, red green blue [alpha] (or r g b [a]), found in
+    any case, the rest attributes, named ``spelling(field)`` (in lower case unless a reader keeps
+    the file's own spelling: PLY, ``ply.attribute_spelling``)."""
     check_distinct_names(path, names)
     lower = [n.lower() for n in names]
     col = dict(zip(lower, columns))
@@ -201,10 +204,10 @@ def rows_to_chunk(path: Path, names: list[str], columns: list[np.ndarray], scale
     else:
         used = []
     attributes = {}
-    for name, values in zip(lower, columns):
-        if name in ("x", "y", "z") or name in used:
+    for field, key, values in zip(names, lower, columns):
+        if key in ("x", "y", "z") or key in used:
             continue
-        name = safe_attribute_name(name)  # 'a/b' as 'a_b': a file's own names are kept, not refused
+        name = safe_attribute_name(spelling(field))  # 'a/b' as 'a_b': a file's own names are kept, not refused
         if name is not None:
             attributes[name] = np.ascontiguousarray(values)
     return PointChunk(xyz, rgba, attributes)

@@ -237,8 +237,9 @@ def _ply_fields(path: Path, first: PointChunk, chunks: Chunks, has_color: bool) 
 
 def _ply_name_problem(name: str, taken: set[str]) -> str | None:
     """Why a PLY file cannot hold an attribute under ``name``, or None: its header is ASCII words
-    ("property float my attr", "café": every reader refused the file written), and readers take
-    names in lower case (``taken``: those already in the file, lowered; 'X' was read as a second x)."""
+    ("property float my attr", "café": every reader refused the file written), and readers find
+    x, red... in any case ('X' was read as a second x) and refuse two fields of one name in lower
+    case ('Q' beside 'q'; ``taken``: those already in the file, lowered)."""
     if not (name.isascii() and name.isprintable()) or any(c.isspace() for c in name):
         return "its name is not one word of ASCII characters"
     if name.lower() in taken:
