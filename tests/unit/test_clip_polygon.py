@@ -39,7 +39,7 @@ SITE_WKT = "POLYGON ((636400 848900, 637200 849000, 637000 849600, 636300 849400
 
 
 def ray_casting(x: float, y: float, rings) -> bool:
-    """Even-odd over all rings, edges included: the reference, one point at a time."""
+    """Even-odd over one polygon's rings, edges included: the reference, one point at a time."""
     inside = False
     for ring in rings:
         for (x1, y1), (x2, y2) in zip(ring, ring[1:] + ring[:1]):
@@ -51,8 +51,9 @@ def ray_casting(x: float, y: float, rings) -> bool:
 
 
 def reference(xy: np.ndarray, polygons) -> np.ndarray:
-    rings = [[tuple(map(float, v)) for v in ring] for polygon in polygons for ring in polygon]
-    return np.array([ray_casting(float(x), float(y), rings) for x, y in xy])
+    """Inside any of ``polygons`` (each a list of rings)."""
+    rings = [[[tuple(map(float, v)) for v in ring] for ring in polygon] for polygon in polygons]
+    return np.array([any(ray_casting(float(x), float(y), polygon) for polygon in rings) for x, y in xy])
 
 
 def star(n: int, centre=(30.0, 30.0)) -> list:
@@ -81,6 +82,27 @@ def test_points_inside_match_a_ray_casting_reference(geometry):
     got = polygon.inside(np.column_stack([xy, np.zeros(len(xy))]))
     assert np.array_equal(got, want)
     assert 500 < np.count_nonzero(want) < 3_500  # (both sides well sampled)
+
+
+def test_overlapping_features_keep_their_overlap_and_a_hole_another_covers(autzen_path, autzen):
+    """Two Features of a collection that overlap keep the points of their union (even-odd over all
+    their rings left their overlap out: autzen kept 40,319 points of 58,034); a hole of one that
+    the other covers keeps its points too."""
+    west = [[[0, 0], [10, 0], [10, 10], [0, 10], [0, 0]], [[6, 2], [9, 2], [9, 8], [6, 8], [6, 2]]]  # a hole under east
+    east = [[[5, 0], [15, 0], [15, 10], [5, 10], [5, 0]]]
+    features = {"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": {"type": "Polygon", "coordinates": p}} for p in (west, east)]}
+    polygon = clip_polygon_of(features, "test")
+    points = {(2, 5): True, (7, 5): True, (12, 5): True, (5, 5): True, (7.5, 1): True, (16, 5): False, (-1, 5): False}
+    assert dict(zip(points, polygon.inside(np.array([[x, y, 0.0] for x, y in points])).tolist())) == points
+    xy = np.random.default_rng(3).uniform(-2, 17, (4_000, 2))
+    assert np.array_equal(polygon.inside(np.column_stack([xy, np.zeros(len(xy))])), reference(xy, [west, east]))
+
+    xyz = autzen[0]
+    (x0, y0), (x1, y1) = xyz[:, :2].mean(axis=0) - (300, 200), xyz[:, :2].mean(axis=0) + (300, 200)
+    halves = [[[[a, y0], [b, y0], [b, y1], [a, y1], [a, y0]]] for a, b in ((x0, x1 - 200), (x0 + 200, x1))]  # overlapping by 200 ft
+    collection = {"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": {"type": "Polygon", "coordinates": h}} for h in halves]}
+    in_box = (xyz[:, 0] >= x0) & (xyz[:, 0] <= x1) & (xyz[:, 1] >= y0) & (xyz[:, 1] <= y1)
+    assert gp.open(autzen_path, clip_polygon=collection).n_points == np.count_nonzero(in_box) == 58_034
 
 
 def test_points_on_edges_and_vertices_are_kept_those_in_holes_not():

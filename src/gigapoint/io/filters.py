@@ -56,8 +56,8 @@ class PointFilter:
     ``drop_classes``, inside ``clip`` ((xmin, ymin, xmax, ymax): any z, or (xmin, ymin, zmin,
     xmax, ymax, zmax); bounds included; empty: anywhere), inside ``corridor`` ((x1, y1, x2, y2,
     width): at most width / 2 from the segment (x1, y1)-(x2, y2), measured square to it in x and
-    y, and between its ends; any z; empty: anywhere), inside ``polygon`` (polygon.py: even-odd
-    over its rings, edges included, any z; None: anywhere). ``read``/``passed``: points seen and
+    y, and between its ends; any z; empty: anywhere), inside ``polygon`` (polygon.py: in one of
+    its polygons, even-odd over that one's rings, edges included, any z; None: anywhere). ``read``/``passed``: points seen and
     kept so far (one operation's: ``fresh`` gives a copy at zero); ``seen``: the x and y box
     of the points read where a polygon is given (a hint when none of them passes)."""
 

@@ -4,8 +4,9 @@ boundary, as PDAL's filters.crop polygon= and LAStools' lasclip -poly do.
 AREA is a GeoJSON file (a Polygon, a MultiPolygon, a Feature or FeatureCollection of them), a
 WKT file or string (POLYGON, MULTIPOLYGON), or (Python) a GeoJSON geometry as a dict. Its
 coordinates are taken in the cloud's own, x and y (any z). A point is kept when it lies inside
-by the even-odd rule over all rings: holes are left out, the parts of a multipolygon each kept;
-a point exactly on an edge (outer or a hole's) is kept, as a clip box's bounds are.
+one of the polygons, each by the even-odd rule over its rings: holes are left out, the polygons
+joined (where two overlap, as Features of one collection may, their overlap is kept); a point
+exactly on an edge (outer or a hole's) is kept, as a clip box's bounds are.
 
 Parsed with json and a small WKT reader (no shapely or GDAL); every bad input is a one-line
 InputError naming the file before anything is read. The kernels are in polygon_kernels.py. A
@@ -71,6 +72,8 @@ class ClipPolygon:
         self.moved_by_crs: dict[str, ClipPolygon | None] = {}
         rings = [ring for polygon in polygons for ring in polygon]
         self.edges = np.concatenate([np.hstack([ring, np.roll(ring, -1, axis=0)]) for ring in rings])  # rows x1, y1, x2, y2
+        # the polygon of each edge: a point is inside by even-odd over its polygon's rings, the polygons joined
+        self.owners = np.repeat(np.arange(len(polygons)), [sum(len(ring) for ring in polygon) for polygon in polygons])
         xy = np.concatenate(rings)
         self.lo, self.hi = xy.min(axis=0), xy.max(axis=0)
         self.n_vertices = len(xy)
@@ -118,7 +121,7 @@ class ClipPolygon:
         height = (self.hi[1] - self.lo[1]) / (len(starts) - 1) if self.hi[1] > self.lo[1] else 1.0
         inside = np.empty(len(xyz), bool)
         box = np.array([*self.lo, *self.hi])
-        points_inside(np.ascontiguousarray(xyz[:, :2], np.float64), self.edges, box, float(self.lo[1]), float(height), starts, members, inside)
+        points_inside(np.ascontiguousarray(xyz[:, :2], np.float64), self.edges, self.owners, box, float(self.lo[1]), float(height), starts, members, inside)
         return inside
 
     def meets(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

@@ -1,10 +1,12 @@
 """io/polygon.py's numba kernels: which points lie in a clip polygon, which boxes meet it. Apart
 from polygon.py so that checking ``--clip-polygon`` (before anything is read) imports no numba.
 
-The polygon is its edges, every ring's, with no grouping: a point is inside when a ray from it
-to +x crosses an odd number of them (even-odd), so holes and the parts of a multipolygon need no
-case of their own. Edges are bucketed by y (``edge_buckets``): a point tests only the edges of
-its bucket, not all of them (a 10 000-vertex site boundary: a few edges a point).
+A point is inside a polygon when a ray from it to +x crosses an odd number of the edges of its
+rings (even-odd: its holes need no case of their own), and inside the clip polygon when inside
+any of its polygons (their union: two overlapping Features of a FeatureCollection keep their
+overlap, which even-odd over all their rings left out). Edges are bucketed by y
+(``edge_buckets``): a point tests only the edges of its bucket, not all of them (a 10 000-vertex
+site boundary: a few edges a point).
 """
 
 from __future__ import annotations
@@ -70,9 +72,10 @@ def _on_edge(px, py, x1, y1, x2, y2):
 
 
 @njit(parallel=True, cache=True)
-def points_inside(xy, edges, box, y_lo, height, starts, members, inside):
-    """``inside[i]``: whether point ``xy[i]`` lies in the polygon of ``edges`` (even-odd; a point
-    exactly on an edge is inside; NaN positions outside). ``box``: the polygon's (xmin, ymin,
+def points_inside(xy, edges, owners, box, y_lo, height, starts, members, inside):
+    """``inside[i]``: whether point ``xy[i]`` lies in one of the polygons of ``edges`` (even-odd
+    over each polygon's rings, ``owners[e]`` the polygon of edge e, non-decreasing; a point
+    exactly on an edge is inside; NaN positions outside). ``box``: the polygons' (xmin, ymin,
     xmax, ymax), tested first; the y bands of ``edge_buckets`` (``y_lo`` and each band's
     ``height``) pick the edges a point tests."""
     n_bands = starts.shape[0] - 1
@@ -83,7 +86,14 @@ def points_inside(xy, edges, box, y_lo, height, starts, members, inside):
             continue
         band = min(max(int(np.floor((py - y_lo) / height)), 0), n_bands - 1)
         odd = False
+        owner = -1
         for j in range(starts[band], starts[band + 1]):
+            # a band lists its edges in ascending order (_fill_buckets), so each polygon's come
+            # together: the parity of one polygon is final where the next one's edges start
+            if owners[members[j]] != owner:
+                if odd:
+                    break
+                owner = owners[members[j]]
             x1, y1, x2, y2 = edges[members[j], 0], edges[members[j], 1], edges[members[j], 2], edges[members[j], 3]
             if _on_edge(px, py, x1, y1, x2, y2):
                 odd = True
