@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import gigapoint as gp
-from gigapoint.errors import EmptyCloudError, GigapointWarning, InputError
+from gigapoint.errors import EmptyCloudError, GigapointWarning, InputError, warnings_kept
 from gigapoint.io import file_info, read_chunks
 from gigapoint.io.e57 import rotation_matrix
 
@@ -174,6 +174,38 @@ def test_scans_of_different_fields_keep_the_attributes_all_have(autzen, tmp_path
     assert [sorted(c.attributes) for c in chunks] == [[], []]
     np.testing.assert_array_equal(chunks[0].rgba[:, :3], autzen.rgb[:100])
     assert (chunks[1].rgba == (200, 200, 200, 255)).all()
+
+
+def test_a_scan_without_points_takes_no_attribute_from_the_others(autzen, tmp_path):
+    """An empty scan (a station aborted) of coordinates and colours, before one of intensity and no
+    colours: the intensity is kept, unwarned (it was left out of the whole file, 'not in every
+    scan'), and the header says no colours (it said the empty scan's)."""
+    from pye57 import libe57
+
+    path = tmp_path / "aborted.e57"
+    e = pye57.E57(str(path), mode="w")
+    image = e.image_file
+    scan = libe57.StructureNode(image)
+    scan.set("guid", libe57.StringNode(image, "{aborted}"))
+    proto = libe57.StructureNode(image)
+    for name in ("cartesianX", "cartesianY", "cartesianZ", "colorRed", "colorGreen", "colorBlue"):
+        proto.set(name, libe57.FloatNode(image, 0.0, libe57.E57_DOUBLE))
+    scan.set("points", libe57.CompressedVectorNode(image, proto, libe57.VectorNode(image, True)))
+    e.data3d.append(scan)
+    n = 100
+    lo, hi = autzen.xyz[:n].min(axis=0), autzen.xyz[:n].max(axis=0)
+    header = SimpleNamespace(name="station 1", rotation=TURN, translation=SHIFT, xMinimum=lo[0], yMinimum=lo[1], zMinimum=lo[2],
+                             xMaximum=hi[0], yMaximum=hi[1], zMaximum=hi[2])  # fmt: skip
+    e.write_scan_raw(scan_data(autzen.xyz[:n], intensity=autzen.intensity[:n]), scan_header=header)
+    e.close()
+    head = gp.io.reader_for(path).header(path)
+    assert (head["point_count"], head["attributes"], head["has_color"]) == (n, ["intensity"], False)
+    with warnings_kept() as said:
+        cloud = gp.open(path)
+    assert said == []
+    lo, hi = autzen.intensity[:n].min(), autzen.intensity[:n].max()
+    want = np.round((autzen.intensity[:n] - lo) / (hi - lo) * 65535).astype(np.uint16)
+    np.testing.assert_array_equal(np.sort(cloud.attributes["intensity"]), np.sort(want))
 
 
 def test_spherical_scans_are_converted(tmp_path):

@@ -11,7 +11,8 @@ Colours are scaled from the scan's ``colorLimits`` to 8 bits, intensity from ``i
 to 0..65535 (LAS's range, uint16); ``rowIndex``, ``columnIndex`` and ``timeStamp`` become the
 attributes row_index, column_index and timestamp (float64; NaN where the point's
 ``isTimeStampInvalid`` is not 0: its time stamp means nothing; the point is kept). Scans that
-differ in their fields keep the attributes all of them have (the others are said, once). The header (point count, bounds: each
+differ in their fields keep the attributes all of them have (the others are said, once; a scan
+without points has no say). The header (point count, bounds: each
 scan's ``cartesianBounds``, local to the scan, its 8 corners moved by its pose) comes from the
 file's XML section, without reading points. pye57 is an optional dependency
 (``pip install 'gigapoint[e57]'``).
@@ -200,8 +201,10 @@ def _scans(path: Path, libe57, image) -> list[_Scan]:
 
 
 def _common(scans: list[_Scan]) -> tuple[list[str], set[str]]:
-    """(the E57 fields kept as attributes: those every scan has; the attributes some scans lack)."""
-    present = [{f for f in ATTRIBUTES if f in s.fields} for s in scans]
+    """(the E57 fields kept as attributes: those every scan with points has; the attributes some
+    of them lack). A scan without points (a station aborted) lacks nothing: it dropped the
+    intensity of every other scan."""
+    present = [{f for f in ATTRIBUTES if f in s.fields} for s in scans if s.count]
     common = set.intersection(*present) if present else set()
     return [f for f in ATTRIBUTES if f in common], {ATTRIBUTES[f] for f in set().union(*present) - common}
 
@@ -232,7 +235,7 @@ class E57Reader(Reader):
         return {
             "point_count": sum(s.count for s in scans),
             "bounds": bounds,
-            "has_color": any(s.has_color for s in scans),
+            "has_color": any(s.has_color for s in scans if s.count),
             "attributes": [ATTRIBUTES[f] for f in _common(scans)[0]],
             "scans": [{"name": s.name, "points": s.count, "scanner": s.scanner} for s in scans],
         }
