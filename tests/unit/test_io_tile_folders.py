@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import gigapoint as gp
-from gigapoint.errors import GigapointWarning
+from gigapoint.errors import EmptyCloudError, GigapointWarning
 from gigapoint.io import READ_SUBFOLDERS
 
 laspy = pytest.importorskip("laspy")
@@ -126,6 +126,19 @@ def test_an_empty_tile_is_skipped_by_a_progressive_load_as_by_open(tmp_path, loa
             cloud = loaded(tmp_path) if progressive else gp.open(tmp_path)
         assert cloud.n_points == 250
         assert f"{tmp_path / 'tile_00_05.laz'}: holds no points, skipped" in [str(w.message) for w in caught]
+
+
+@pytest.mark.parametrize("options", [{}, {"chunked": True}, {"progressive": True}], ids=["in_memory", "chunked", "progressive"])
+def test_a_folder_of_empty_tiles_says_no_file_holds_a_point(tmp_path, options):
+    """Every tile empty (each skipped with a warning): gp.open said 'no valid points', as of NaN
+    or absurd positions; it says what a progressive load says."""
+    for name in ("a.laz", "b.laz"):
+        laspy.LasData(laspy.LasHeader(point_format=3, version="1.2")).write(tmp_path / name)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GigapointWarning)  # (each tile's "holds no points, skipped")
+        with pytest.raises(EmptyCloudError) as caught:
+            gp.open(tmp_path, **options)
+    assert str(caught.value) == f"{tmp_path / 'a.laz'}, {tmp_path / 'b.laz'}: no file holds any point"
 
 
 def test_info_of_a_folder_tells_offsets_apart_as_one_files_info_prints_them(cli, tmp_path):

@@ -120,6 +120,8 @@ def open_cloud(
                 cloud = build_cloud(stream, name=name, layout=layout, colors=colors)
         except EmptyCloudError as exc:
             detail = str(exc).split(": ", 1)[-1]
+            if len(set(empty)) == len(files):  # each skipped as empty: not "no valid points" (NaN or absurd positions); progressive=True's words
+                detail = "no file holds any point"
             raise EmptyCloudError(f"{files_label(files)}: {detail}") from None
         cloud.source_files = tuple(files)  # gp.convert(cloud) takes their CRS
         return cloud
