@@ -105,6 +105,17 @@ def test_overlapping_features_keep_their_overlap_and_a_hole_another_covers(autze
     assert gp.open(autzen_path, clip_polygon=collection).n_points == np.count_nonzero(in_box) == 58_034
 
 
+def test_a_feature_without_geometry_is_passed_over():
+    """A Feature whose geometry is null (RFC 7946: unlocated; QGIS writes one for a row without a
+    geometry) holds no area: the collection's other Features clip (it was refused: 'GeoJSON of type
+    None'); a collection of none but those holds no polygon."""
+    unlocated = {"type": "Feature", "properties": {"name": "no survey yet"}, "geometry": None}
+    polygon = clip_polygon_of({"type": "FeatureCollection", "features": [unlocated, SITE]}, "site.geojson")
+    assert polygon == clip_polygon_of(SITE, "site.geojson") and polygon.features == [0]
+    with pytest.raises(InputError, match=r"^site\.geojson: holds no polygon$"):
+        clip_polygon_of({"type": "FeatureCollection", "features": [unlocated]}, "site.geojson")
+
+
 def test_points_on_edges_and_vertices_are_kept_those_in_holes_not():
     polygon = clip_polygon_of({"type": "MultiPolygon", "coordinates": [SQUARE_WITH_HOLE, CONCAVE]}, "test")
     x, y = np.meshgrid(np.arange(-1.0, 22.0, 0.5), np.arange(-1.0, 12.0, 0.5))  # the vertices and edges among them

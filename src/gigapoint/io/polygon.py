@@ -206,6 +206,8 @@ def _collect(node, polygons: list, names: list, features: list, label: str, name
         for item in node.get("features") or []:
             _collect(item, polygons, names, features, label)
     elif kind == "Feature":
+        if node.get("geometry") is None:  # (RFC 7946's unlocated Feature, QGIS's of a row without one: no area, was "GeoJSON of type None")
+            return
         properties = node.get("properties")
         named = properties.get("name") if isinstance(properties, dict) else None
         number = next((f + 1 for f in reversed(features) if f is not None), 0)  # (the last one's the highest so far)
