@@ -116,6 +116,20 @@ def test_a_feature_without_geometry_is_passed_over():
         clip_polygon_of({"type": "FeatureCollection", "features": [unlocated]}, "site.geojson")
 
 
+def test_ewkt_names_the_crs_its_polygon_is_moved_from(autzen_path, tmp_path):
+    """PostGIS's EWKT, 'SRID=4326;POLYGON ((...))', as text or in a file, is the polygon in the
+    CRS its SRID names, moved into the files' as a GeoJSON naming it is (it was 'no such file')."""
+    pytest.importorskip("pyproj")
+    ring = [[-123.0723, 44.0495], [-123.0703, 44.0495], [-123.0703, 44.0515], [-123.0723, 44.0515], [-123.0723, 44.0495]]
+    wkt = f"POLYGON (({', '.join(f'{x} {y}' for x, y in ring)}))"
+    (tmp_path / "site.wkt").write_text(f"SRID=4326; {wkt}\n")
+    for ewkt in (f"SRID=4326;{wkt}", tmp_path / "site.wkt"):
+        polygon = clip_polygon_of(ewkt, "test")
+        assert polygon.epsg == 4326 and np.array_equal(polygon.edges, clip_polygon_of(wkt, "test").edges)
+    named = {"type": "Polygon", "coordinates": [ring], "crs": {"type": "name", "properties": {"name": "EPSG:4326"}}}
+    assert gp.open(autzen_path, clip_polygon=f"SRID=4326;{wkt}").n_points == gp.open(autzen_path, clip_polygon=named).n_points == 51_774
+
+
 def test_points_on_edges_and_vertices_are_kept_those_in_holes_not():
     polygon = clip_polygon_of({"type": "MultiPolygon", "coordinates": [SQUARE_WITH_HOLE, CONCAVE]}, "test")
     x, y = np.meshgrid(np.arange(-1.0, 22.0, 0.5), np.arange(-1.0, 12.0, 0.5))  # the vertices and edges among them

@@ -11,7 +11,7 @@ pass, so that a filter that lets nothing pass says so (``check_passed``) rather 
 generic "no valid points". Header point counts are then upper bounds: progress bars and
 presizing may use them, nothing may expect that many points.
 
-A clip polygon whose GeoJSON names a CRS (a ``crs`` member) other than a LAS/LAZ file's is moved
+A clip polygon whose GeoJSON names a CRS (a ``crs`` member; an EWKT's SRID) other than a LAS/LAZ file's is moved
 into the file's CRS before its points are tested (``placed_polygon``: pyproj, the ``gis`` extra);
 without pyproj, or over a file naming no CRS, it is taken in the files' coordinates (warned of
 where both name EPSG codes that differ). One in longitude/latitude's range over a file in a

@@ -3,7 +3,8 @@ boundary, as PDAL's filters.crop polygon= and LAStools' lasclip -poly do.
 
 AREA is a GeoJSON file (a Polygon, a MultiPolygon, a Feature or FeatureCollection of them), a
 WKT file or string (POLYGON, MULTIPOLYGON), or (Python) a GeoJSON geometry as a dict. Its
-coordinates are taken in the cloud's own, x and y (any z). A point is kept when it lies inside
+coordinates are taken in the cloud's own, x and y (any z), unless it names a CRS: a GeoJSON's
+``crs`` member, an EWKT's ``SRID=code;`` (then filters.py moves it into the files'). A point is kept when it lies inside
 one of the polygons, each by the even-odd rule over its rings: holes are left out, the polygons
 joined (where two overlap, as Features of one collection may, their overlap is kept); a point
 exactly on an edge (outer or a hole's) is kept, as a clip box's bounds are.
@@ -28,10 +29,14 @@ from ..core.coords import MAX_ABS_COORDINATE
 from ..errors import InputError
 
 #: How WKT of a polygon starts (a file named POLYGON.wkt does not)
-_WKT_START = re.compile(r"\s*(MULTI)?POLYGON\s*(Z|M|ZM)?\s*(\(|EMPTY)", re.IGNORECASE)
+_WKT_START = re.compile(r"\s*(?:SRID=\d+\s*;)?\s*(MULTI)?POLYGON\s*(Z|M|ZM)?\s*(\(|EMPTY)", re.IGNORECASE)
+
+#: EWKT's SRID prefix (PostGIS's ST_AsEWKT: "SRID=2994;POLYGON ((...))"): the EPSG code of its
+#: coordinates, moved from as a GeoJSON's crs member (was "no such file" of such text)
+_EWKT_SRID = re.compile(r"\s*SRID=(\d+)\s*;", re.IGNORECASE)
 
 #: How WKT of another geometry starts: named in the error (was "no such file" of WKT text)
-_WKT_NOT_AREA = re.compile(r"\s*(POINT|MULTIPOINT|LINESTRING|MULTILINESTRING|GEOMETRYCOLLECTION)\s*(Z|M|ZM)?\s*(\(|EMPTY)", re.IGNORECASE)
+_WKT_NOT_AREA = re.compile(r"\s*(?:SRID=\d+\s*;)?\s*(POINT|MULTIPOINT|LINESTRING|MULTILINESTRING|GEOMETRYCOLLECTION)\s*(Z|M|ZM)?\s*(\(|EMPTY)", re.IGNORECASE)
 
 #: GeoJSON geometry types that are not areas, named in the error
 _NOT_AREAS = {"Point", "MultiPoint", "LineString", "MultiLineString"}
@@ -47,7 +52,7 @@ class ClipPolygon:
     """The rings of one or more polygons (``polygons``: per polygon a list of rings, each a (k, 2)
     array without the closing vertex; the first ring the outline, the rest its holes), read from
     ``source`` (the file, or the WKT text's start: what messages name). ``epsg``: the CRS a
-    GeoJSON's ``crs`` member names, None without one (filters.py moves it from there into the
+    GeoJSON's ``crs`` member (an EWKT's SRID) names, None without one (filters.py moves it from there into the
     files' CRS). ``names``: per
     polygon the ``name`` property of the GeoJSON Feature it came from (None: none; a stockpile's
     label in ``gigapoint volume``). ``features``: per polygon the number of that Feature (0, 1, ...
@@ -267,7 +272,9 @@ def _epsg(document: dict) -> int | None:
 
 def _wkt_polygon(text: str, source: str) -> ClipPolygon:
     """The polygons of WKT ``POLYGON ((x y, ...), (...))`` or ``MULTIPOLYGON (((...)), ((...)))``
-    (a Z, M or ZM tag allowed; only x and y are read)."""
+    (a Z, M or ZM tag allowed; only x and y are read; an EWKT ``SRID=code;`` before it names its CRS)."""
+    srid = _EWKT_SRID.match(text)
+    text = text[srid.end():] if srid else text
     tokens = re.findall(r"[()]|,|[^\s(),]+", text)
     kind = tokens[0].upper() if tokens else ""
     at = 1
@@ -315,7 +322,7 @@ def _wkt_polygon(text: str, source: str) -> ClipPolygon:
         raise problem("its rings are lists of 'x y' vertices in parentheses")
     if any(len(v) < 2 for rings in polygons for r in rings for v in r):
         raise problem("a vertex has fewer than 2 numbers")
-    return ClipPolygon([[_ring(r, source) for r in rings] for rings in polygons], source)
+    return ClipPolygon([[_ring(r, source) for r in rings] for rings in polygons], source, int(srid[1]) if srid else None)
 
 
 def far_apart(polygon: ClipPolygon, lo, hi) -> bool:
