@@ -203,6 +203,30 @@ def test_hqs_kernel_equals_reference_and_thread_count(demo):
     assert not np.array_equal(img, f.image)
 
 
+def test_hqs_under_a_point_cap_blends_only_the_points_drawn(demo):
+    """max_points draws every step-th point; HQS blended the skipped ones in too (and paid for them)."""
+    xyz, _ = plane()
+    two_layers = gp.from_arrays(np.r_[xyz, xyz + (0.0, 0.0, 0.001)], name="scene")  # two points a pixel, within HQS's tolerance
+    rgb = np.zeros((two_layers.n_points, 3), np.uint8)
+    rgb[0::2, 0] = 255  # even points (those a step of 2 draws) red, odd green
+    rgb[1::2, 1] = 255
+    two_layers.set_colors(rgb)
+    settings = gp.RenderSettings(backend="cpu", size_mode="fixed", max_points=two_layers.n_points // 2, hqs=True)
+    f = gp.render_frame(two_layers, top_camera(), settings)
+    assert f.stats.points_processed == W * H
+    assert np.all(f.index % 2 == 0)
+    assert np.unique(f.image.reshape(-1, 4), axis=0).tolist() == [[255, 0, 0, 255]]  # was (128, 128, 0): red and green blended
+    # the kernel and its reference agree on a step
+    cloud, cam, f = demo
+    near, far = cam.clip_range(cloud.bounds)
+    sel = select(cloud.batches, cam.screen_rows(), cam.width, cam.height, near, far)
+    vis = gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", size_mode="fixed", max_points=cloud.n_points // 3)).visibility.reshape(-1)
+    fallback = _u32(f.image)
+    ref = hqs_reference(cloud, sel, vis, cam.width, cam.height, near, far, cloud.color, fallback, 0.05, step=3)
+    np.testing.assert_array_equal(hqs_colors(cloud, sel, vis, cam.width, cam.height, near, far, cloud.color, fallback, 0.05, 2, step=3), ref)
+    assert not np.array_equal(ref, hqs_reference(cloud, sel, vis, cam.width, cam.height, near, far, cloud.color, fallback, 0.05))
+
+
 def test_hqs_mean_is_exact_past_the_packed_sums():
     """5000 points in one pixel, far more than the 32 a packed u64 sums: the spill sums keep the
     mean exact, hard and with soft-splat weights, whatever the threads and bands."""

@@ -188,6 +188,17 @@ def test_hqs_matches_cpu(any_gpu, scene, case):
     assert np.count_nonzero(want != fallback) > 0.05 * np.count_nonzero(vis != EMPTY_PIXEL)  # blending happened
 
 
+def test_hqs_under_a_point_cap_blends_only_the_points_drawn_like_the_cpu(any_gpu, scene):
+    """step=3 (max_points): the GPU's HQS blends every third point, as its depth pass drew them."""
+    cam = _cameras(scene)["closeup"]
+    sel, (w, h, near, far) = _frame(scene, cam)
+    vis = np.asarray(any_gpu.rasterize(scene, sel, w, h, near, far, step=3))
+    fallback = NumbaCpuBackend().resolve(vis, scene.color, BG)
+    want = hqs_colors(scene, sel, vis, w, h, near, far, scene.color, fallback, 0.05, step=3)
+    assert _n_differ(np.asarray(any_gpu.passes.hqs_colors(scene, sel, vis, w, h, near, far, scene.color, fallback, 0.05, step=3)), want) == 0
+    assert _n_differ(hqs_colors(scene, sel, vis, w, h, near, far, scene.color, fallback, 0.05), want) > 100  # all points blend otherwise
+
+
 def test_hqs_means_round_half_up_like_the_reference(any_gpu):
     """Stacks of points on one pixel: means of 0.5 and 0.75 round up; alpha too."""
     xyz = np.array([[1.5, 1.5, 0.0]] * 2 + [[5.5, 2.5, 0.0]] * 4 + [[2.5, 5.5, 0.0]])

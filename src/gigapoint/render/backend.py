@@ -48,9 +48,10 @@ class Passes(Protocol):
     def hqs_colors(
         self, points: PointBuffers, sel: Selection, vis, width: int, height: int, near: float, far: float,
         point_colors: np.ndarray, fallback, tolerance: float = 0.01, threads: int | None = None,
-        splat: Splat | None = None, softness: float = 0.0,
+        splat: Splat | None = None, softness: float = 0.0, step: int = 1,
     ):  # fmt: skip
-        """High-quality shading: the mean color of the points near each pixel's closest depth."""
+        """High-quality shading: the mean color of the points near each pixel's closest depth;
+        ``step`` > 1: of every step-th point of each batch, those the depth pass drew."""
 
     def transparent_colors(
         self, points: PointBuffers, sel: Selection, vis, width: int, height: int, near: float, far: float,

@@ -541,6 +541,7 @@ def hqs_shade(
     height,
     near,
     far,
+    step,
     bands,
     vis_f32,
     tol1,
@@ -561,7 +562,7 @@ def hqs_shade(
 
     Band t (rows bands[t]..bands[t+1]) belongs to one thread, which re-projects (raster.py's
     ``project_batch``) the batches whose rows row_lo[k]..row_hi[k] reach its band, adds every
-    point whose depth is <= tol1 x the closest depth at its pixel (``vis_f32`` = the depth pass's
+    step-th point (as the depth pass drew them) whose depth is <= tol1 x the closest depth at its pixel (``vis_f32`` = the depth pass's
     visibility buffer viewed as float32) at every pixel of its footprint inside the band (same
     footprint rule as raster.write_batch; with ``softness`` > 0 weights 0..15 from
     ``soft_weight``), then writes its rows' rounded means to ``out`` (``fallback`` where nothing
@@ -603,7 +604,7 @@ def hqs_shade(
                 token,
             )
             if n_fp == 1:
-                for j in range(c):
+                for j in range(0, c, step):
                     if j + _PREFETCH_AHEAD < c:
                         q = pix[j + _PREFETCH_AHEAD]
                         if p0 <= q < p1:
@@ -613,7 +614,7 @@ def hqs_shade(
                     if p0 <= p < p1:
                         _hqs_add(p, depth[j], color[first + j], np.uint64(1), vis_f32, t1, acc, spill_rg, spill_ba, spill_n)
                 continue
-            for j in range(c):
+            for j in range(0, c, step):
                 if j + _PREFETCH_AHEAD < c and pix[j + _PREFETCH_AHEAD] >= 0:
                     q = pix[j + _PREFETCH_AHEAD]
                     prefetch(acc, q)

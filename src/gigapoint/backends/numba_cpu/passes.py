@@ -231,8 +231,9 @@ def _banded_run(n_threads: int, scratch: dict):
 
 
 def hqs_colors(
-    points, sel, vis, width, height, near, far, point_colors, fallback, tolerance=0.01, threads=None, splat=None, softness=0.0, bands=None
-) -> np.ndarray:
+    points, sel, vis, width, height, near, far, point_colors, fallback, tolerance=0.01, threads=None, splat=None, softness=0.0, bands=None,
+    step=1,
+) -> np.ndarray:  # fmt: skip
     """(H*W,) u32 mean color of the points within ``tolerance`` of each pixel's closest depth.
 
     The screen is cut into one band of rows per thread; a thread re-projects only the batches
@@ -244,16 +245,18 @@ def hqs_colors(
     ``vis`` is the depth pass's (H*W,) visibility buffer; ``fallback`` the colors of pixels
     no point contributed to. ``splat``: (footprint, size, atten) of points larger than a
     pixel; each footprint pixel blends. ``bands``: how many bands of rows the screen is cut
-    into (default: one per thread)."""
+    into (default: one per thread). ``step``: every step-th point of each batch, as the depth
+    pass drew them (a point cap: the points it skipped must not blend in)."""
     footprint, size, atten = splat if splat is not None else ONE_PIXEL
     vis = np.ascontiguousarray(vis).reshape(-1)
-    n_threads, firsts, counts, matrices, row_lo, row_hi, bands = _banding(points, sel, width, height, threads, bands, 1)
+    step = max(1, int(step))
+    n_threads, firsts, counts, matrices, row_lo, row_hi, bands = _banding(points, sel, width, height, threads, bands, step)
     acc, spill_rg, spill_ba, spill_n = _accumulators(width * height)
     out = np.empty(width * height, np.uint32)
     with _banded_run(n_threads, _HQS_BUFFERS):
         kernels.hqs_shade(
             firsts, counts, np.ascontiguousarray(sel.bits, np.int32), matrices, row_lo, row_hi,
-            points.low, *full_words(points), width, height, near, far, bands, vis.view(np.float32), np.float32(1.0 + tolerance),
+            points.low, *full_words(points), width, height, near, far, step, bands, vis.view(np.float32), np.float32(1.0 + tolerance),
             point_colors, np.ascontiguousarray(footprint, np.int32), np.float32(size), np.float32(atten), float(softness),
             acc, spill_rg, spill_ba, spill_n, np.ascontiguousarray(fallback).reshape(-1), out, raster.shape_token(matrices),
         )  # fmt: skip

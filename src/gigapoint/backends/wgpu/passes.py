@@ -127,10 +127,12 @@ class GpuPasses:
             return DeviceArray(ctx, orole, np.uint64, n_pixels)
 
     def hqs_colors(
-        self, points, sel, vis, width, height, near, far, point_colors, fallback, tolerance=0.01, threads=None, splat=None, softness=0.0
-    ):
+        self, points, sel, vis, width, height, near, far, point_colors, fallback, tolerance=0.01, threads=None, splat=None, softness=0.0,
+        step=1,
+    ):  # fmt: skip
         """High-quality shading (render/passes/hqs.py): the rounded mean color of the points
-        within ``tolerance`` of each pixel's closest depth; ``fallback`` elsewhere.
+        within ``tolerance`` of each pixel's closest depth; ``fallback`` elsewhere. ``step``: every
+        step-th point of each batch, as the depth pass drew them.
 
         u32 atomic sums per channel: exact up to 2^24 points a pixel (2^24 / 15 with soft
         splats), the CPU pass's bound too. ``threads`` is unused."""
@@ -139,7 +141,7 @@ class GpuPasses:
         # a pixel) exceed one binding (lavapipe's 128 MiB: 6.7 M pixels, under 4K)
         if not ctx.hqs_on_gpu or int(width) * int(height) * 20 > ctx.max_binding:
             return self.fallback.hqs_colors(points, sel, np.asarray(vis), width, height, near, far, point_colors, np.asarray(fallback),
-                                            tolerance, threads, splat, softness)  # fmt: skip
+                                            tolerance, threads, splat, softness, step=step)  # fmt: skip
         with ctx.lock:
             n_pixels = int(width) * int(height)
             ctx.check_frame(n_pixels)
@@ -150,7 +152,7 @@ class GpuPasses:
             ctx.clear(accum, 0)
             ctx.cache.purge_dead()
             footprint, splat_uniforms = ctx.footprint(splat, float(softness))
-            params = {"width": width, "height": height, "tol1": np.float32(1.0 + tolerance), **splat_uniforms}
+            params = {"width": width, "height": height, "tol1": np.float32(1.0 + tolerance), "step": max(1, int(step)), **splat_uniforms}
 
             def own(start, stop, pinned):
                 colors = ctx.cache.get(point_colors, start, stop, pinned)

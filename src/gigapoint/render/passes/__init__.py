@@ -79,6 +79,7 @@ def finish_frame(backend, draw, camera, vis, settings, near, far) -> tuple[np.nd
             colors = passes.hqs_colors(
                 points, draw.selection, vis, width, height, near, far, rgba_point_colors(points, settings), colors,
                 settings.hqs_depth_tolerance, settings.threads, splat_for(settings, camera, draw, near), settings.splat_softness,
+                step=draw.step,
             )  # fmt: skip
         if settings.lighting:
             colors = passes.shade(vis, colors, point_normals(points), camera, settings.shininess)

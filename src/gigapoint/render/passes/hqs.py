@@ -19,9 +19,10 @@ from ..splats import ONE_PIXEL, point_sizes
 
 
 def hqs_reference(
-    cloud, sel, vis, width, height, near, far, point_colors, fallback, tolerance=0.01, splat=None, softness=0.0
+    cloud, sel, vis, width, height, near, far, point_colors, fallback, tolerance=0.01, splat=None, softness=0.0, step: int = 1
 ) -> np.ndarray:
-    """Plain numpy: the same projection as the reference renderer, exact integer means."""
+    """Plain numpy: the same projection as the reference renderer, exact integer means; ``step``:
+    every step-th point of each batch (a point cap's depth pass drew no other)."""
     vis = vis.reshape(-1)
     footprint, size, atten = splat if splat is not None else ONE_PIXEL
     n = width * height
@@ -30,6 +31,8 @@ def hqs_reference(
     depth0 = (vis >> np.uint64(32)).astype(np.uint32).view(np.float32)
     rgba = point_colors.view(np.uint8).reshape(-1, 4).astype(np.int64)
     for first, idx, x0, y0, d in projected_batches(cloud, sel, width, height, near, far):
+        drawn = idx % step == 0
+        idx, x0, y0, d = idx[drawn], x0[drawn], y0[drawn], d[drawn]
         sizes = point_sizes(d, size, atten)
         for dx, dy, m, pix in footprint_pixels(x0, y0, sizes, footprint, width, height):
             keep = (vis[pix] != EMPTY_PIXEL) & (d[m] <= depth0[pix] * np.float32(1.0 + tolerance))
