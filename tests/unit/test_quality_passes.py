@@ -250,7 +250,7 @@ def test_hqs_mean_is_exact_past_the_packed_sums():
         big = gp.render_frame(cloud, cam, s.replace(backend="cpu")).visibility.reshape(-1)
         ref = hqs_reference(cloud, sel, big, W, H, near, far, cloud.color, _u32(f.image), 0.01, splat, softness)
         for threads, bands in ((1, None), (2, None), (2, 9)):
-            got = hqs_colors(cloud, sel, big, W, H, near, far, cloud.color, _u32(f.image), 0.01, threads, splat, softness, bands)
+            got = hqs_colors(cloud, sel, big, W, H, near, far, cloud.color, _u32(f.image), 0.01, threads, splat, softness, bands=bands)
             np.testing.assert_array_equal(got, ref)
     assert not np.array_equal(got, hqs_colors(cloud, sel, vis, W, H, near, far, cloud.color, _u32(f.image), 0.01, 2))
 
@@ -271,7 +271,7 @@ def test_hqs_bands_and_cameras_inside_the_cloud(demo):
     ref = hqs_reference(cloud, sel, vis, cam.width, cam.height, near, far, cloud.color, _u32(f.image), 0.05, splat)
     assert not np.array_equal(ref, _u32(f.image))
     for bands in (1, 2, 7, 70):
-        got = hqs_colors(cloud, sel, vis, cam.width, cam.height, near, far, cloud.color, _u32(f.image), 0.05, 2, splat, 0.0, bands)
+        got = hqs_colors(cloud, sel, vis, cam.width, cam.height, near, far, cloud.color, _u32(f.image), 0.05, 2, splat, 0.0, bands=bands)
         np.testing.assert_array_equal(got, ref)
 
 

@@ -231,8 +231,8 @@ def _banded_run(n_threads: int, scratch: dict):
 
 
 def hqs_colors(
-    points, sel, vis, width, height, near, far, point_colors, fallback, tolerance=0.01, threads=None, splat=None, softness=0.0, bands=None,
-    step=1,
+    points, sel, vis, width, height, near, far, point_colors, fallback, tolerance=0.01, threads=None, splat=None, softness=0.0, step=1,
+    bands=None,
 ) -> np.ndarray:  # fmt: skip
     """(H*W,) u32 mean color of the points within ``tolerance`` of each pixel's closest depth.
 
