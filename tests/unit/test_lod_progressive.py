@@ -21,7 +21,7 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.core.layout import EMPTY_PIXEL
-from gigapoint.errors import GigapointError, GigapointWarning, InputError
+from gigapoint.errors import GigapointError, GigapointWarning, InputError, SettingsError
 from gigapoint.io import demo_arrays
 from gigapoint.lod.keys import CODE_BITS, point_codes
 from gigapoint.lod.progressive import ProgressiveOctree
@@ -207,6 +207,22 @@ def test_a_tree_shaped_from_all_the_points_is_the_same_and_spills_none(scene, oc
     _add_all(o, scene, 20_000)
     assert o.spilled == 0
     _assert_same_leaves(octree, o)
+
+
+@pytest.mark.parametrize("mode", ["classification", "intensity", "attribute"])
+def test_an_attribute_color_mode_before_the_first_points_draws_the_background(mode):
+    """Before its first points a progressive cloud knows no attributes: its first frame in
+    color_mode classification said "t has no classification attribute (attributes: none)"."""
+    o = ProgressiveOctree("t")
+    cam = gp.Camera.look_at((0, -10, 5), (0, 0, 0), width=8, height=6)
+    settings = EXACT.given(color_mode=mode, color_attribute="intensity" if mode == "attribute" else None)
+    with pytest.warns(GigapointWarning, match="holds none"):
+        f = gp.render_frame(o, cam, settings)
+    assert f.image.reshape(-1, 4).tolist() == [[0, 0, 0, 255]] * 48
+    xyz, rgba, attrs = demo_arrays(1_000, seed=4)
+    o.add(xyz, rgba, classification=attrs["classification"])  # its attributes now known: one it lacks is named
+    with pytest.raises(SettingsError, match="no (intensity attribute|attribute 'intensity')") if mode != "classification" else contextlib.nullcontext():
+        gp.render_frame(o, cam, settings)
 
 
 def test_a_tree_shaped_from_a_sample_holds_every_point_and_spills_few(scene, octree):

@@ -312,6 +312,8 @@ def point_colors(cloud, settings) -> np.ndarray:
     mode = settings.color_mode
     if mode == "rgb":
         return cloud.color
+    if cloud.n_points == 0:  # a progressive cloud before its first points: none to color, its attributes not known yet
+        return np.zeros(0, np.uint32)
     key = (
         mode,
         settings.colormap if mode == "elevation" else None,

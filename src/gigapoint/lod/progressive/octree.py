@@ -1700,7 +1700,8 @@ class ProgressiveOctree:
         pool = self.pool
         if pool is None or self.points == 0:
             empty = Selection(np.empty(0, np.int64), np.empty(0, np.int32), np.empty((0, 4, 4), np.float32), np.empty(0), 0)
-            return DrawList(pool or Pool(self.name, 1, self.chunk, {}, 0), empty, max(n, 1), nodes=np.empty(0, np.int64))
+            # before the first points no buffers: empty ones (no point, so no color mode asks for an attribute not known yet)
+            return DrawList(pool or Pool(self.name, 0, self.chunk, {}, 0), empty, max(n, 1), nodes=np.empty(0, np.int64))
         hidden = settings.hidden_classes
         if hidden:
             check_classified(self.name, self.attribute_names, hidden)
