@@ -300,6 +300,28 @@ def test_c_closes_the_measurement_into_a_polygon_and_volume_computes_the_volume_
     assert f"fill {expected.fill:,.2f} cubic units" in text and "base plane through the toe" in text and note in text, text
 
 
+def test_the_volume_panel_shows_gp_volumes_warning_of_a_toe_beyond_the_data(page, server):
+    """The panel said "49.5 % left empty" and the server's terminal the warning that says why (the
+    toe runs beyond the data) and how to mend it; the panel now says it."""
+    from gigapoint.errors import GigapointWarning
+    from gigapoint.viewer import volume_tool as VT
+
+    x0, y0 = 637000.0, 4850000.0  # the ground's corner: it spans 100 x 80
+    toe = [[x0 + 50, y0 + 20, 11.0], [x0 + 150, y0 + 20, 11.0], [x0 + 150, y0 + 60, 11.0], [x0 + 50, y0 + 60, 11.0]]  # half beyond x 100
+    page.locator("#canvas").focus()
+    page.keyboard.press("m")
+    page.evaluate("(toe) => window.gigapoint.ws.send(JSON.stringify({ type: 'measure', action: 'restore', points: toe, closed: true }))", toe)
+    page.wait_for_function("() => document.getElementById('measureinfo').dataset.closed === 'true'", timeout=30_000)
+    page.get_by_role("button", name="volume", exact=True).click()
+    page.wait_for_function("() => document.getElementById('volume-info').dataset.fill !== undefined", timeout=30_000)
+    gsd, _ = VT.default_gsd(toe, VT.point_spacing(server.core.bounds, server.core.cloud.n_points))
+    with pytest.warns(GigapointWarning) as said:
+        gigapoint.volume(server.core.cloud, VT.toe(toe), gsd)
+    (warning,) = [str(w.message) for w in said]
+    assert warning.startswith("the measured polygon: 49.5% of the pile's pixels hold no height") and warning.endswith("the toe runs beyond the data's footprint (draw it inside the points)")
+    assert page.locator("#volume-info").inner_text().splitlines()[-1] == f"warning: {warning}"
+
+
 def test_a_polygon_crossing_itself_shows_why_instead_of_an_area_and_offers_no_volume(page, server):
     close_polygon_from_the_top(page, ((0.3, 0.3), (0.7, 0.3), (0.3, 0.7), (0.7, 0.7)))  # a bow tie: its 2nd and 4th sides cross
     crossing = "the polygon crosses itself (edges 2 and 4): no area or volume; move a point so that no two edges cross"

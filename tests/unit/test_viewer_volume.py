@@ -169,7 +169,7 @@ def test_closing_the_measurement_around_a_pile_gives_its_area_and_volume(client)
         assert not yellow(jpeg_pixels(jpeg), closing)  # open again: a polyline
     assert result["id"] == started["job"] and "error" not in result, result
     assert result["gsd"] == 0.25 and result["gsd_note"] == "a grid of 0.25, the points' mean spacing: the polygon 120 pixels across"
-    assert result["note"] == ""  # all the box's points read
+    assert result["note"] == "" and result["warnings"] == []  # all the box's points read; none of its pixels empty
     assert abs(result["fill"] - 600.0) < grid_error(0.25) and result["fill"] == pytest.approx(600.0, rel=0.01)
     assert result["cut"] == pytest.approx(0.0, abs=0.5) and result["net"] == pytest.approx(result["fill"] - result["cut"])
     assert result["base"]["type"] == "plane" and result["base"]["z"] == pytest.approx(GROUND_Z, abs=1e-3)
@@ -227,6 +227,24 @@ def test_a_polygon_off_the_data_says_so_in_the_result(client):
         ws.send_json({"type": "volume"})
         result = receive(ws, reply("volume_result"))
     assert result["error"] == "the measured polygon: no point of pile lies in its box x 499.5..600.5, y 499.5..600.5"  # (two pixels of 0.25 beyond it)
+
+
+def test_a_toe_beyond_the_data_is_warned_of_in_the_result_not_on_the_servers_stderr(client, capfd, recwarn):
+    """gp.volume warns of a pile whose pixels are more than 1 % empty: issued on the volume's
+    thread, that warning went to the server's terminal, once per request, and the panel said only
+    "25.0 % left empty"; the warning, which says why and how to mend it, is the result's to show."""
+    beyond = [[30.0, 15.0, GROUND_Z], [70.0, 15.0, GROUND_Z], [70.0, 35.0, GROUND_Z], [30.0, 35.0, GROUND_Z]]  # x 60..70 beyond the data
+    c, _ = client
+    with c.websocket_connect("/ws?w=120&h=90") as ws:
+        receive(ws, reply("hello"))
+        ws.send_json({"type": "measure", "action": "restore", "points": beyond, "closed": True})
+        receive(ws, reply("measure"))
+        ws.send_json({"type": "volume", "gsd": 0.25})
+        result = receive(ws, reply("volume_result"))
+    assert result["empty"] == 0.25  # its east quarter
+    said = "the measured polygon: 25.0% of the pile's pixels hold no height and count no volume (its figures are short by them): "
+    assert result["warnings"] == [said + "the toe runs beyond the data's footprint (draw it inside the points)"]
+    assert [str(w.message) for w in recwarn] == [] and capfd.readouterr().err == ""  # not issued by the server too
 
 
 def test_an_octree_gives_the_volume_of_its_nodes_points_and_hidden_classes_are_left_out(tmp_path):

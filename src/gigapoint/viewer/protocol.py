@@ -123,7 +123,8 @@ MESSAGE_TYPES = {
     # figures (fill, cut, net, area, polygon_area, highest, height, base: {type, z, slope,
     # boundary_rms}, filled, empty, pixels), "gsd", "gsd_note", "note" (thinned points: a box of
     # over volume_tool.MAX_POINTS read every k-th, the gsd then no finer than their spacing; ""
-    # none), "units": {length, area, volume} symbols} or {"type": "volume_result", "id", "error":
+    # none), "warnings": [one line each] (gp.volume's: a toe beyond the data; shown in the panel,
+    # not printed by the server), "units": {length, area, volume} symbols} or {"type": "volume_result", "id", "error":
     # one line}. A polygon crossing itself is refused (an error). A change of the measurement
     # drops what is on its way.
     "volume",

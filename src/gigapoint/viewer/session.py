@@ -674,11 +674,14 @@ class Session:
             if job != self.volume_job or self.closed:
                 return  # the measurement changed again while an older one was computed
             try:
-                cloud, seen, step = VT.points_in_box(self.core.cloud, points, gsd, hidden_classes, VT.MAX_POINTS)
-                gsd, note, thinned = VT.thinned_grid(points, cloud, seen, step, gsd, note)
-                with RENDER_LOCK:
-                    measured = volume(cloud, VT.toe(points), gsd, base)
-                result = VT.summary(measured, self.core.units, note, thinned)
+                # its warnings (a toe beyond the data) are the panel's to show: issued here, on this
+                # thread, they went to the server's terminal, once per request
+                with warnings_kept() as said:
+                    cloud, seen, step = VT.points_in_box(self.core.cloud, points, gsd, hidden_classes, VT.MAX_POINTS)
+                    gsd, note, thinned = VT.thinned_grid(points, cloud, seen, step, gsd, note)
+                    with RENDER_LOCK:
+                        measured = volume(cloud, VT.toe(points), gsd, base)
+                result = VT.summary(measured, self.core.units, note, thinned, [message for message, _ in said])
             except GigapointError as exc:  # no point inside, an octree without source files: said in the panel
                 result = {"error": str(exc)[:500]}
             except Exception as exc:  # a bug: this volume fails (logged), the tab goes on

@@ -156,9 +156,10 @@ def thinned_grid(points, box: PointCloud, seen: int, step: int, gsd: float, gsd_
     return gsd, gsd_note, f"on thinned points: 1 in {step} of the {seen:,} in the polygon's box (at most {MAX_POINTS:,} kept); draw a smaller polygon for all"
 
 
-def summary(measured: Volume, units: dict, gsd_note: str, note: str) -> dict:
+def summary(measured: Volume, units: dict, gsd_note: str, note: str, warnings: list[str]) -> dict:
     """The pile's figures as the panel shows them (``Pile.summary``), in the cloud's ``units``
     (its CRS's: the points read from an octree's nodes name none); ``note``: thinned points
-    (``thinned_grid``'s; "" none)."""
+    (``thinned_grid``'s; "" none); ``warnings``: what reading and measuring them warned of (a
+    toe beyond the data: why its pixels are empty and how to mend it)."""
     (pile,) = measured.piles
-    return {**pile.summary(), "gsd": measured.gsd, "gsd_note": gsd_note, "note": note, "units": unit_names(units)}
+    return {**pile.summary(), "gsd": measured.gsd, "gsd_note": gsd_note, "note": note, "warnings": warnings, "units": unit_names(units)}

@@ -459,6 +459,7 @@
       `filled ${pct(m.filled)} of the pixels by interpolation${m.empty ? `, ${pct(m.empty)} left empty (no volume)` : ""}`,
       m.gsd_note,
       ...(m.note ? [m.note] : []),  // (thinned points: a polygon round much of a large cloud)
+      ...m.warnings.map((w) => `warning: ${w}`),  // (a toe beyond the data: why pixels are empty, how to mend it)
     ].join("\n"), true);
     info.dataset.fill = String(m.fill);
   }
