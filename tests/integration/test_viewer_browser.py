@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import io
+import threading
 import time
 from pathlib import Path
 
@@ -646,3 +647,64 @@ def test_the_fly_speed_follows_a_loading_cloud_as_it_grows(browser, strips_loadi
     finally:
         ctx.close()
         srv.close()
+
+
+@pytest.fixture
+def classes_loading():
+    """``load(*classes)``: (cloud, gates), a progressive cloud "survey" loading one strip of 20,000
+    points of each class of ``classes`` in turn, each held until its gate is set (a slow file); the
+    clouds are closed after."""
+    from gigapoint.core.chunk import PointChunk
+    from gigapoint.lod.progressive import Loader, ProgressiveOctree
+
+    made = []
+
+    def load(*classes):
+        gates = [threading.Event() for _ in classes]
+        xyz = np.random.default_rng(1).uniform((0, 0, 0), (1000, 1000, 5), (20_000 * len(classes), 3))
+
+        def strips():
+            for k, (code, gate) in enumerate(zip(classes, gates)):
+                gate.wait(60)
+                yield PointChunk(xyz[20_000 * k : 20_000 * (k + 1)], attributes={"classification": np.full(20_000, code, np.uint8)})
+
+        cloud = ProgressiveOctree("survey")
+        cloud.attach(Loader(cloud, [("survey", strips)], None).start())
+        made.append((cloud, gates))
+        return cloud, gates
+
+    yield load
+    for cloud, gates in made:
+        for gate in gates:
+            gate.set()
+        cloud.close()
+
+
+def class_rows(pg) -> list[str]:
+    return pg.locator("#classes label").all_text_contents()
+
+
+def test_a_cloud_served_before_its_first_points_enables_its_classes_panel_once_they_come(browser, classes_loading):
+    """A progressive cloud served before its first points (a slow file: view waits 5 s for them)
+    holds no attribute yet: its Classes panel was disabled saying it has no classification, and
+    complete, as if for good. It says its first points are not in yet, and lists their classes,
+    enabled, once they are."""
+    cloud, (first,) = classes_loading(6)
+    srv = ViewerServer(cloud).start()
+    ctx = browser.new_context(viewport=VIEWPORT)
+    try:
+        pg = ctx.new_page()
+        pg.goto(srv.url)
+        wait_full_frame(pg, 0)
+        assert pg.locator("#classes-note").text_content() == "hidden_classes: survey's first points are not in yet; its classes are listed once they are"
+        assert class_rows(pg) == [] and pg.locator("#btn-classes-none").is_disabled()
+        first.set()
+        pg.wait_for_function("() => document.querySelectorAll('#classes label').length > 0", timeout=30_000)
+        assert class_rows(pg) == ["6 building"] and pg.locator("#classes-note").text_content() == ""
+        assert pg.locator('#classes input[data-code="6"]').is_enabled() and pg.locator("#btn-classes-none").is_enabled()
+        pg.locator('#classes input[data-code="6"]').uncheck()  # and it hides the class
+        pg.wait_for_function("() => window.gigapoint.settings.hidden_classes.join() === '6'", timeout=30_000)
+    finally:
+        ctx.close()
+        srv.close()
+

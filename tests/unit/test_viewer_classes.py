@@ -181,6 +181,35 @@ def test_a_loading_progressive_cloud_lists_the_classes_seen_so_far_until_it_is_l
     cloud.close()
 
 
+def test_a_progressive_cloud_before_its_first_points_says_so_and_its_panel_is_not_complete():
+    """Before its first points a progressive octree holds no attribute: its panel said it had no
+    classification, complete (as if for good), and refused hidden classes for it. It says its
+    first points are not in yet, not complete (the page asks again); then lists their classes."""
+    import threading
+
+    from gigapoint.core.chunk import PointChunk
+    from gigapoint.lod.progressive import Loader, ProgressiveOctree
+
+    xyz, _, classes = two_classes()
+    gate = threading.Event()
+
+    def held():
+        gate.wait(60)
+        yield PointChunk(xyz, attributes={"classification": classes})
+
+    cloud = ProgressiveOctree("held")
+    cloud.attach(Loader(cloud, [("held", held)], None).start())
+    try:
+        reason = "hidden_classes: held's first points are not in yet; its classes are listed once they are"
+        assert class_panel(cloud) == {"enabled": False, "reason": reason, "source": "none", "complete": False, "classes": []}
+        gate.set()
+        assert cloud.wait(timeout=120)
+        assert class_panel(cloud) == {"enabled": True, "reason": "", "source": "cloud", "complete": True, "classes": TWO}
+    finally:
+        gate.set()
+        cloud.close()
+
+
 def test_an_octree_lists_the_classes_its_metadata_names(tmp_path, two_class_cloud):
     gp.convert(two_class_cloud, tmp_path / "potree", format="potree")
     meta_path = tmp_path / "potree" / "metadata.json"

@@ -8,7 +8,8 @@ metadata gives: a gigapoint octree's written before class counts), with those of
 loaded so far and those hidden; an octree opened with a class filter lists only the classes it
 keeps. A progressive octree lists the classes of the points added so far (counted as they come:
 more as its loader brings others, complete once it is done). A cloud without classification
-and a live cloud have the panel disabled, saying why.
+and a live cloud have the panel disabled, saying why; so has a progressive octree before its
+first points (they fix its attributes), its panel not complete: the page asks again.
 Unticking a class sets the ``hidden_classes`` render setting (the settings message).
 """
 
@@ -42,9 +43,20 @@ def refusal(cloud) -> str:
 
     if isinstance(cloud, LiveCloud):
         return hidden_classes_refusal(cloud.name, cloud.KIND)
+    if awaiting_first_points(cloud):  # (it was said to have no classification, as if for good)
+        return f"hidden_classes: {cloud.name}'s first points are not in yet; its classes are listed once they are"
     if "classification" not in cloud.attribute_names:
         return f"hidden_classes: {cloud.name} has no classification attribute, so no class to hide"
     return ""
+
+
+def awaiting_first_points(cloud) -> bool:
+    """Whether ``cloud`` is a progressive octree loading whose first points are not in: they fix
+    its attributes (none before them), so whether it can hide classes is not known yet. (By its
+    points: a file of x, y, z alone has no attribute once they are in either.)"""
+    from ..lod.progressive import ProgressiveOctree
+
+    return isinstance(cloud, ProgressiveOctree) and cloud.loading and cloud.n_points == 0
 
 
 def class_panel(cloud, hidden=(), seen: bool = True) -> dict:
@@ -56,9 +68,10 @@ def class_panel(cloud, hidden=(), seen: bool = True) -> dict:
     from ..lod.progressive import ProgressiveOctree
     from ..lod.store import OctreeCloud
 
+    awaiting = awaiting_first_points(cloud)  # (read before the refusal: its points may come in between)
     reason = refusal(cloud)
-    if reason:
-        return {"enabled": False, "reason": reason, "source": "none", "complete": True, "classes": []}
+    if reason:  # not complete while awaiting: the page asks again, and the panel enables itself once classes come
+        return {"enabled": False, "reason": reason, "source": "none", "complete": not awaiting, "classes": []}
     if isinstance(cloud, PointCloud):
         cache = render_cache.arrays(cloud)  # (per version of its points: an edit counts again)
         if "__classes__" not in cache:
