@@ -708,3 +708,34 @@ def test_a_cloud_served_before_its_first_points_enables_its_classes_panel_once_t
         ctx.close()
         srv.close()
 
+
+def test_a_class_that_comes_within_the_class_lists_throttle_is_listed_after_it(browser, classes_loading):
+    """The page asks for the class list at most every 2 s, and a change within them is asked for
+    once they are past, not dropped: the last points of a load brought a class the list missed for
+    good, no frame coming after them to ask again. The page's clock stands still here, so the
+    class comes within the 2 s however long the load takes."""
+    cloud, (ground, building) = classes_loading(2, 6)
+    ground.set()
+    cloud.wait_first_points()
+    srv = ViewerServer(cloud).start()
+    ctx = browser.new_context(viewport=VIEWPORT)
+    try:
+        pg = ctx.new_page()
+        pg.clock.install(time=0)
+        pg.clock.pause_at(1_000)  # (the page's timers run only as the test moves its clock)
+        pg.goto(srv.url)
+        wait_full_frame(pg, 0)  # loading: the list is not complete, and the frame asks for it again
+        pg.clock.run_for(200)  # (that ask, and the page's resize: its frame asks within the 2 s)
+        pg.wait_for_function("() => window.gigapoint.classesAsked > 0", polling=50, timeout=30_000)
+        assert class_rows(pg) == ["2 ground"]
+        building.set()
+        assert cloud.wait(timeout=60)
+        # the frame of the grown cloud asks for the list again, within the 2 s of the last ask
+        pg.wait_for_function("() => window.gigapoint.cloud.points === 40000 && window.gigapoint.cloud.load_progress === 1", polling=50, timeout=30_000)
+        assert class_rows(pg) == ["2 ground"]  # (not asked yet)
+        pg.clock.run_for(2_000)
+        pg.wait_for_function("() => document.querySelectorAll('#classes label').length === 2", polling=50, timeout=30_000)
+        assert class_rows(pg) == ["2 ground", "6 building"]
+    finally:
+        ctx.close()
+        srv.close()
