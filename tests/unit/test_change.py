@@ -497,3 +497,26 @@ def test_one_crs_with_heights_in_another_unit_is_refused(tmp_path):
     after = write_las(tmp_path / "after.las", plane(), keys=[*EPSG_32610_KEYS, (4099, 0, 1, 9002)])
     with pytest.raises(InputError, match=rf"^{before} is in EPSG:32610, lengths in m; {after} in EPSG:32610, lengths in m, heights in ft: change compares"):
         gp.change(before, after, 0.5)
+
+
+def test_surveys_in_degrees_are_refused_not_measured_in_square_degrees(tmp_path):
+    """Both in WGS 84 (GeoTIFF keys: geographic, EPSG:4326), the ground risen by 2 over a corner:
+    the areas and volumes came out in square degrees, labelled as units (fill 3.2e-7: the
+    command printed 'fill 0.000 cubic units', 'compared 0.00 square units'), though it rose."""
+    paths = []
+    for name, rise in (("before.las", 0.0), ("after.las", 2.0)):
+        header = laspy.LasHeader(point_format=0, version="1.2")
+        header.scales, header.offsets = np.array([1e-7, 1e-7, 0.01]), np.array([-123.0, 44.0, 0.0])
+        header.vlrs.append(laspy.VLR("LASF_Projection", 34735, "GeoKeyDirectoryTag", struct.pack("<12H", 1, 1, 0, 2, 1024, 0, 1, 2, 2048, 0, 1, 4326)))
+        xyz = plane() * (0.00002, 0.00002, 1.0) + (-123.0, 44.0, 0.0)  # 0.0008 x 0.0008 degrees
+        xyz[(xyz[:, 0] < -122.9996) & (xyz[:, 1] < 44.0004), 2] += rise
+        las = laspy.LasData(header)
+        las.x, las.y, las.z = xyz.T
+        las.write(str(tmp_path / name))
+        paths.append(tmp_path / name)
+    with pytest.raises(InputError) as caught:
+        gp.change(*paths, 0.00002)
+    assert str(caught.value) == (
+        f"{paths[0]} and {paths[1]}: in EPSG:4326, x and y in degrees, not lengths: change measures areas and volumes in lengths; "
+        "reproject both to a projected CRS first (gigapoint convert --to-crs)"
+    )

@@ -33,7 +33,9 @@ a point lying exactly on a pixel edge may fall on either side (each draw's batch
 transforms of their own): ~0.1 % of autzen's 4 ft pixels drawn 20,000 points at a time.
 
 Both surveys must be in one CRS and one unit: nothing is reprojected (``gigapoint convert
---to-crs`` does that), and a height difference between feet and metres would be no length.
+--to-crs`` does that), and a height difference between feet and metres would be no length. A
+geographic CRS is refused: its x and y are degrees, and areas and volumes in them (a pile's
+fill of 4e-7 square degrees times metres, printed "0.000 cubic units") would be no measure.
 
 Volumes are the difference summed over the pixels compared, times a pixel's area: fill where the
 after surface is higher, cut where it is lower, net = fill - cut. ``min_change`` is a level of
@@ -254,7 +256,8 @@ def check_crs(before, after, labels: tuple[str, str]) -> tuple[str | None, dict]
     """(The CRS both surveys are in, its units: io.crs_units); one naming none takes the
     other's. A one-line InputError naming both where they name different CRSs, or different
     units (autzen's WKT in feet and its copy in metres: one projection, other numbers): nothing
-    is reprojected, their pixels would not be the same ground, nor their heights one unit."""
+    is reprojected, their pixels would not be the same ground, nor their heights one unit; and
+    where their x and y are angles (a geographic CRS): no area or volume is measured in degrees."""
     (crs_a, units_a), (crs_b, units_b) = cloud_crs_units(before), cloud_crs_units(after)
     other_crs = crs_a and crs_b and crs_identity(crs_a) != crs_identity(crs_b)
     known = [(a, b) for a, b in zip(_lengths(units_a), _lengths(units_b)) if a is not None and b is not None]
@@ -263,7 +266,14 @@ def check_crs(before, after, labels: tuple[str, str]) -> tuple[str | None, dict]
             f"{labels[0]} is in {crs_name(crs_a)}, {units_named(units_a)}; {labels[1]} in {crs_name(crs_b)}, {units_named(units_b)}: "
             "change compares two surveys in one CRS and unit; reproject one first (gigapoint convert --to-crs)"
         )
-    return (crs_a, units_a) if crs_a else (crs_b, units_b)
+    crs, units = (crs_a, units_a) if crs_a else (crs_b, units_b)
+    across = units["horizontal"]
+    if across is not None and across["metres"] is None:  # (degrees: a pixel's area and the volumes would be in square degrees, "0.000 cubic units")
+        raise InputError(
+            f"{labels[0]} and {labels[1]}: in {crs_name(crs)}, x and y in {across['name']}s, not lengths: "
+            "change measures areas and volumes in lengths; reproject both to a projected CRS first (gigapoint convert --to-crs)"
+        )
+    return crs, units
 
 
 def surface(cloud, camera: Camera, fill_nodata=None, full: bool = False) -> np.ndarray:
