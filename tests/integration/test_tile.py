@@ -158,6 +158,10 @@ def test_a_chunks_tiles_are_grouped_as_numpys_unique_over_rows_groups_them(low, 
         ({"size": 500, "buffer": 501}, "tile: buffer=501: a buffer is a number from 0 to the tile's edge (500), in the files' units"),
         ({"size": 500, "format": "ply"}, "tile: format='ply': tiles are written as laz or las"),
         ({"size": 0.01}, "tile: size=0.01: 117,747 x 56,271 tiles over the extent of {}, above 1,000,000; take larger tiles"),
+        # the count was said in 306 digits
+        ({"size": 1e-300}, "tile: size=1e-300: 1.18e+303 x 5.63e+302 tiles over the extent of {}, above 1,000,000; take larger tiles"),
+        # an internal OverflowError as points were placed (and tile -1 would be named by its 301-digit corner)
+        ({"size": 1e300}, "tile: size=1e+300: a tile's edge must be at most 2e+12, the span points can have"),
     ],
 )
 def test_bad_values_are_refused_in_one_line_before_a_point_is_read(autzen_path, tmp_path, monkeypatch, options, message):
@@ -380,6 +384,14 @@ def test_tiles_of_a_decimal_size_hold_the_points_on_their_edges_and_buffers(tmp_
         assert np.array_equal(np.asarray(written.X), want), path.name
         assert np.array_equal(np.asarray(written.overlap, bool), (want < 10 * i) | (want >= 10 * i + 10)), path.name
     assert res.points == 100 and res.buffer_points == 9 * (3 + 4)  # each inner edge: the 3 points below it, the 4 from it to 0.03 above
+
+
+def test_a_tile_far_larger_than_a_point_on_a_fine_grid_holds_it():
+    """A size of 1e10 on the nanometre grid a one-point float file gets: 1e19 grid steps a tile,
+    past int64, raised an OverflowError (an 'internal error' from the command); placed as floats,
+    the point is in tile 0, as any size above it places it."""
+    for size in (1e10, 2e12):
+        assert TileAxis(size, 0.0, 1e-9, 5.0).index(np.array([5.0, 5.5, -1.0])).tolist() == [0, 0, -1]
 
 
 def test_tiles_of_points_without_a_las_grid_share_one_grid(tmp_path):

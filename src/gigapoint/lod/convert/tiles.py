@@ -64,6 +64,7 @@ from ...atomic import append_file, folder_refusal, folders_for, nearest_folder, 
 from ...core.chunk import PointChunk
 from ...core.chunked import ReadOnce
 from ...core.cloud import check_valid_count
+from ...core.coords import MAX_SPAN
 from ...errors import GigapointWarning, InputError, check_switch, counted, is_real, warn, warnings_kept
 from ...io import given_paths, with_subfolders
 from ...io.colorize import open_colorization
@@ -135,7 +136,7 @@ def tile(
     ``overwrite``, which replaces the tiles of this run's names and leaves every other file.
     Tiles appear only once every one is written, all at once (a folder ``out`` that was missing
     appears with all of them; one that was there is swapped for one of its other files and them). A point is in the tile whose square holds its position as stored, on the
-    tiles' LAS grid (``TileAxis``): one on an edge in the tile that starts there. Bad values (a size not above 0, a buffer below
+    tiles' LAS grid (``TileAxis``): one on an edge in the tile that starts there. Bad values (a size not above 0 or above 2e12, a buffer below
     0 or above the size, more than a million tiles over the headers' extent) are one-line
     InputErrors before a point is read; inputs without header bounds (text, .npy) are refused as
     their points pass a million tiles' extent, before a tile is written."""
@@ -144,6 +145,8 @@ def tile(
         check_switch(switch, value, "tile")
     if not (is_real(size) and size > 0):
         raise InputError(f"tile: size={size!r}: a tile's edge is a number above 0, in the files' units")
+    if size > MAX_SPAN:  # (1e300: tile -1 was named by a 301-digit corner, and placing points overflowed int64)
+        raise InputError(f"tile: size={size!r}: a tile's edge must be at most {MAX_SPAN:g}, the span points can have")
     if not (is_real(buffer) and 0 <= buffer <= size):
         raise InputError(f"tile: buffer={buffer!r}: a buffer is a number from 0 to the tile's edge ({size:g}), in the files' units")
     if format not in TILE_FORMATS:
@@ -388,8 +391,9 @@ def _extent_checked(points, size: float, where: str):
 def _check_tile_count(lo, hi, size: float, where: str) -> None:
     """More than MAX_TILES tiles over x and y of ``lo``..``hi``: a one-line InputError."""
     across = [max(0, math.floor(hi[a] / size) - math.floor(lo[a] / size) + 1) for a in (0, 1)]  # (a clip beside the data: 0)
-    if across[0] * across[1] > MAX_TILES:
-        raise InputError(f"tile: size={size!r}: {across[0]:,} x {across[1]:,} tiles over the extent of {where}, above {MAX_TILES:,}; take larger tiles")
+    if across[0] * across[1] > MAX_TILES:  # (a count past 1e15 as 1.2e+305, not in 306 digits)
+        shown = [f"{n:,}" if n < 1e15 else f"{n:.3g}" for n in across]
+        raise InputError(f"tile: size={size!r}: {shown[0]} x {shown[1]} tiles over the extent of {where}, above {MAX_TILES:,}; take larger tiles")
 
 
 def tile_index(values: np.ndarray, size: float) -> np.ndarray:
@@ -425,7 +429,8 @@ class TileAxis:
     def __init__(self, size: float, buffer: float, scale: float, offset: float):
         self.size, self.buffer, self.scale, self.offset = size, buffer, scale, offset
         self.steps, self.start, self.reach = (_in_steps(v, scale) for v in (size, offset, buffer))  # in grid steps
-        self.exact = self.steps.is_integer() and self.start.is_integer()
+        # (whole steps beyond 2^53 are no exact count, and their integers overflow int64: a size of 1e10 on a 1e-9 grid)
+        self.exact = all(v.is_integer() and abs(v) < 2**53 for v in (self.steps, self.start))
 
     def _stored(self, values: np.ndarray) -> np.ndarray:
         """Each of ``values`` as its grid integer (float)."""
