@@ -161,6 +161,13 @@ def _wkt_units(crs: list) -> tuple[dict | None, dict | None]:
     return (units[0] if units else None), (units[2] if len(units) == 3 else None)
 
 
+def angular_across(units: dict) -> dict | None:
+    """The horizontal unit of ``units`` (``crs_units``'s) where it is an angle (a geographic CRS:
+    x and y in degrees, no lengths to measure areas, volumes or distances in), else None."""
+    across = units["horizontal"]
+    return across if across is not None and across["metres"] is None else None
+
+
 def crs_units(crs: str | None, geokeys: dict[int, int] | None = None) -> dict:
     """The units of a CRS's coordinates, for lengths measured in them: {"horizontal": U,
     "vertical": U, "vertical_assumed": bool}, each U {name, symbol, metres} or None (unknown).

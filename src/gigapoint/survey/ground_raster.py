@@ -33,7 +33,7 @@ def ground_parameters(files, cell=None, slope=None, window=None, threshold=None,
     the defaults converted from metres (a cloud in feet: cell 3.28 ft...; units unknown: taken
     as metres). A value that is no number > 0 (threshold, scalar: >= 0), or coordinates in
     degrees without every length given, is a one-line InputError."""
-    from ..io.crs import files_units
+    from ..io.crs import angular_across, files_units
 
     given = {"cell": cell, "slope": slope, "window": window, "threshold": threshold, "scalar": scalar}
     for name, value in given.items():
@@ -42,7 +42,7 @@ def ground_parameters(files, cell=None, slope=None, window=None, threshold=None,
             raise InputError(f"classify_ground: {name} must be a number {least}, got {number_text(value)}")
     units = files_units(files)
     across, up = units["horizontal"], units["vertical"]
-    if across is not None and across["metres"] is None and any(given[n] is None for n in ("cell", "window")):
+    if angular_across(units) is not None and any(given[n] is None for n in ("cell", "window")):
         raise InputError(f"classify_ground: the coordinates are in {across['name']}s, not lengths: give cell and window in them, or reproject the cloud")
     per_metre_across = 1.0 / across["metres"] if across is not None and across["metres"] else 1.0
     per_metre_up = 1.0 / up["metres"] if up is not None and up["metres"] else 1.0

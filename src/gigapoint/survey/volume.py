@@ -49,6 +49,7 @@ import numpy as np
 from ..core.cloud import PointCloud
 from ..errors import EmptyCloudError, InputError, check_switch, is_real, number_text, warn
 from ..io._base import headers_once
+from ..io.crs import angular_across
 from ..io.filters import may_move, placed_in, placed_over, point_filter
 from ..io.polygon import ClipPolygon, check_simple, clip_polygon_of
 from ..lod.query import is_octree
@@ -425,6 +426,9 @@ def _measured(toe: ClipPolygon, source, octree, gsd, base, classes, drop_classes
             cloud = octree
         else:  # (an opened octree takes no filter of its own: the grid's footprint bounds what is read of it)
             cloud = open_survey(source, {**filters, "clip": None} if is_octree(source) else filters, "volume")
+        angle = angular_across(cloud_units(cloud))
+        if angle is not None:  # (a pile's fill came out in square degrees times metres, labelled "cubic units")
+            raise InputError(f"{label}: x and y in {angle['name']}s, not lengths: volume measures in lengths; reproject it to a projected CRS first (gigapoint convert --to-crs)")
         lo, hi = cloud.bounds
         camera = Camera.top_down(((box[0], box[1], lo[2]), (box[2], box[3], hi[2])), gsd)
         drawn = surface(cloud, camera, full=full)
