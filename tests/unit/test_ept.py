@@ -544,6 +544,102 @@ def test_an_ept_node_that_disagrees_with_the_schema_is_refused(tmp_path, entry, 
         assert "\n" not in str(err.value) and str(err.value).endswith(": its values would be wrong")
 
 
+def _with_array_nodes(folder: Path, scene: dict, arrays: dict, node_dims: dict | None = None) -> None:
+    """``folder``'s laszip nodes rewritten with LAS extra-bytes arrays (several values a point, as
+    laspy writes a normal): ``arrays`` {name: (stored (n, k) values of every point, stored dtype,
+    (scales, offsets) or None)}; ``node_dims`` {node key: {name: (stored dtype, scaling)}}: that
+    node's instead. ept.json is left as it is."""
+    for key, idx in scene["nodes"].items():
+        path = folder / "ept-data" / f"{voxel_name(key)}.laz"
+        las = laspy.read(path)
+        for name, (values, stored, scaling) in arrays.items():
+            stored, scaling = (node_dims or {}).get(key, {}).get(name, (stored, scaling))
+            scales, offsets = (np.asarray(v, np.float64) for v in scaling) if scaling else (None, None)
+            las.add_extra_dim(laspy.ExtraBytesParams(name, f"{values.shape[1]}{np.dtype(stored).str[1:]}", scales=scales, offsets=offsets))
+            las.points.array[name] = values[idx]  # (as stored: las[name] = ... unscales by the VLR's scale)
+        las.write(str(path))
+
+
+def _split_entries(name: str, k: int, **entry) -> list[dict]:
+    """The schema entries Entwine writes for an extra-bytes array ``name`` of ``k`` values a point:
+    PDAL's LAS reader splits it into dimensions ``name0`` .. (scaled ones as doubles)."""
+    return [{"name": f"{name}{i}", **entry} for i in range(k)]
+
+
+@pytest.mark.parametrize("data_type", ["laszip", "binary"])
+def test_an_ept_extra_bytes_array_is_read_as_the_schemas_split_dimensions(tmp_path, data_type):
+    """A source's extra-bytes array (3 doubles of a normal, 3 scaled int16s) is split by PDAL into
+    dimensions ``normal0``, ``normal1``, .. of ept.json's schema; a laszip node that holds the array
+    itself (one extra-bytes descriptor of 3 values) left those attributes zeros without a word.
+    Each is the node's array's value of that place (scaled by its own scale and offset), as laspy
+    reads the node, and a binary dataset of the same schema reads to the same numbers."""
+    scene = make_scene(n=3000, seed=7)
+    rng = np.random.default_rng(11)
+    n = len(scene["xyz"])
+    normal = rng.normal(0.0, 1.0, (n, 3))
+    refl = rng.integers(-2000, 2000, (n, 3)).astype(np.int16)
+    refl_scaling = ([0.01, 0.1, 1.0], [-5.0, 0.0, 2.0])
+    refl_values = refl * np.array(refl_scaling[0]) + np.array(refl_scaling[1])
+    double = {"type": "float", "size": 8}
+    entries = _split_entries("normal", 3, **double) + _split_entries("refl", 3, **double)
+    columns = [normal[:, i] for i in range(3)] + [refl_values[:, i] for i in range(3)]
+    if data_type == "binary":
+        d = write_ept(tmp_path / "e", scene, "binary", extra=list(zip(entries, columns, strict=True)))
+    else:
+        d = write_ept(tmp_path / "e", scene, "laszip")
+        _with_array_nodes(d, scene, {"normal": (normal, np.float64, None), "refl": (refl, np.int16, refl_scaling)})
+        meta = json.loads((d / "ept.json").read_text())
+        (d / "ept.json").write_text(json.dumps(dict(meta, schema=meta["schema"] + entries)))
+    c = gp.open(d)
+    names = [e["name"] for e in entries]
+    assert set(names) <= set(c.attribute_names)
+    c.load_hierarchy()
+    for i in np.flatnonzero(c.counts > 0).tolist():
+        key = int(c.keys[i])
+        idx = scene["nodes"][key]
+        p = c.node_points(i)
+        assert {a: p[a].dtype for a in names} == dict.fromkeys(names, np.float64)
+        for k in range(3):
+            np.testing.assert_array_equal(p[f"normal{k}"], normal[idx, k])
+            np.testing.assert_allclose(p[f"refl{k}"], refl_values[idx, k], rtol=0, atol=1e-9)
+        if data_type == "laszip":  # (laspy's reading of the node: its array, scaled by its VLR)
+            node = laspy.read(d / "ept-data" / f"{voxel_name(key)}.laz")
+            for k in range(3):
+                np.testing.assert_array_equal(p[f"normal{k}"], np.asarray(node["normal"])[:, k])
+                np.testing.assert_array_equal(p[f"refl{k}"], np.asarray(node["refl"])[:, k])
+
+
+def test_an_ept_node_array_that_disagrees_with_the_split_schema_is_refused(tmp_path):
+    """The schema's split dimensions (``refl0`` ..: int16, unscaled) read from a laszip node's
+    array where it agrees; a node whose array gives other values (float32, that the int16 the
+    dataset's ``refl0`` is cannot hold) is a one-line error naming the node's file, the schema's
+    dimension and the value of the node's array it would be."""
+    scene = make_scene(n=3000, seed=5)
+    n = len(scene["xyz"])
+    refl = np.random.default_rng(4).integers(-200, 200, (n, 2)).astype(np.int16)
+    child = _child_node(scene)
+    d = write_ept(tmp_path / "e", scene, "laszip")
+    _with_array_nodes(d, scene, {"refl": (refl, np.int16, None)}, node_dims={child: {"refl": (np.float32, None)}})
+    meta = json.loads((d / "ept.json").read_text())
+    (d / "ept.json").write_text(json.dumps(dict(meta, schema=meta["schema"] + _split_entries("refl", 2, type="signed", size=2))))
+    c = gp.open(d)
+    c.load_hierarchy()
+    for i in np.flatnonzero(c.counts > 0).tolist():
+        key = int(c.keys[i])
+        if key != child:
+            p = c.node_points(i)
+            assert p["refl0"].dtype == np.int16
+            np.testing.assert_array_equal(np.stack([p["refl0"], p["refl1"]], axis=1), refl[scene["nodes"][key]])
+            continue
+        with pytest.raises(InputError) as err:
+            c.node_points(i)
+        name = voxel_name(child)
+        assert str(err.value) == (
+            f"{d / 'ept-data' / name}.laz: node {name}'s extra dimension 'refl0' (value 0 of the node's array 'refl') "
+            "gives float32 values (stored as float32), where the dataset's 'refl0' is int16 (ept.json's schema, its root node): its values would be wrong"
+        )
+
+
 def test_an_ept_count_is_its_hierarchys_once_read(broken, scene):
     """ept.json's ``points`` beside what its hierarchy holds (PDAL's bcbf: 10 and 5): a render
     said "5 of 10 points drawn" of all there is. Once every page is read (``info``, a frame

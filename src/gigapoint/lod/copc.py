@@ -111,10 +111,12 @@ def point_dtype(point_format: int, record_length: int, extra: list[ExtraField] |
 
 class ExtraField:
     """One attribute stored in a point's extra bytes: ``name``, its stored ``dtype``, and the
-    ``scale``/``offset`` its descriptor applies (value = stored * scale + offset), or None."""
+    ``scale``/``offset`` its descriptor applies (value = stored * scale + offset), or None.
+    ``element``: the place of its value in field ``name`` of several values a point (a LAS
+    extra-bytes array, as an EPT node holds one: ``dtype`` is then one value's), or None."""
 
-    def __init__(self, name: str, dtype, scale: float | None = None, offset: float | None = None):
-        self.name, self.dtype, self.scale, self.offset = name, np.dtype(dtype), scale, offset
+    def __init__(self, name: str, dtype, scale: float | None = None, offset: float | None = None, element: int | None = None):
+        self.name, self.dtype, self.scale, self.offset, self.element = name, np.dtype(dtype), scale, offset, element
 
     @property
     def scaling(self) -> tuple[float, float] | None:
@@ -130,7 +132,7 @@ class ExtraField:
 
     def values(self, rec: np.ndarray) -> np.ndarray:
         """The field of point records ``rec`` as values: stored * scale + offset where scaled."""
-        v = rec[self.name]
+        v = rec[self.name] if self.element is None else np.ascontiguousarray(rec[self.name][:, self.element])
         if self.scaling is None:
             return v
         scale, offset = self.scaling

@@ -8,8 +8,9 @@ little-endian, ``ept-data/d-x-y-z.bin``; ``zstandard``: binary compressed with Z
 ``ept-data/d-x-y-z.zst``, read with the zstandard package), ``hierarchyType`` (``json``), ``schema`` (name, type
 signed/unsigned/float, size, scale and offset per dimension; those beyond the LAS fields,
 Entwine's OriginId, are attributes under their own names, scaled once: by a laszip node's
-extra-bytes VLR where it scales them, else by the schema; a node that disagrees with the schema
-is refused) and ``srs`` (wkt, authority,
+extra-bytes VLR where it scales them, else by the schema; a node's extra-bytes array of several
+values a point, ``normal``, gives the dimensions PDAL splits it into, ``normal0`` ..; a node that
+disagrees with the schema is refused) and ``srs`` (wkt, authority,
 horizontal). The hierarchy: ``ept-hierarchy/0-0-0-0.json`` maps node names to point counts,
 -1 for a node whose subtree is in ``ept-hierarchy/<name>.json``, read when a frame draws it
 (voxel_octree.py).
@@ -308,9 +309,11 @@ class EptCloud(VoxelOctree):
         values would be wrong: both scale it, differently; the schema scales a type the node does
         not store (already scaled values, scaled again); or its values do not fit the attribute's
         dtype, fixed at open (scaled values cast to whole numbers, int32 to uint8); or it holds
-        several values a point (an array type), where the schema gives one."""
+        several values a point (an array type), where the schema gives one. A value of the
+        node's array that the schema names as a dimension it was split into (``normal0``:
+        _node_fields) is checked as a dimension of its own."""
         dtype = self._attr_dtypes[attr]
-        field = node if node.scaling else ExtraField(node.name, node.dtype, schema.scale, schema.offset)
+        field = node if node.scaling else ExtraField(node.name, node.dtype, schema.scale, schema.offset, node.element)
         if node.dtype.shape:  # (an array type, 3 x int16: its dtype was said as numpy's ('<i2', (3,)))
             problem = f"holds {node.dtype.shape[0]} values a point ({node.dtype.shape[0]} x {node.dtype.base}), where ept.json's schema gives it one ({schema.dtype})"
         elif node.scaling and schema.scaling and node.scaling != schema.scaling:
@@ -322,19 +325,29 @@ class EptCloud(VoxelOctree):
             problem = f"gives {field.value_dtype} values{scaled}, where the dataset's {attr!r} is {dtype} (ept.json's schema, its root node)"
         else:
             return field
-        raise InputError(f"{self.node_file(key)}: node {voxel_name(key)}'s extra dimension {node.name!r} {problem}: its values would be wrong")
+        of_array = "" if node.element is None else f" (value {node.element} of the node's array {node.name!r})"
+        raise InputError(f"{self.node_file(key)}: node {voxel_name(key)}'s extra dimension {schema.name!r}{of_array} {problem}: its values would be wrong")
 
 
 def _node_fields(header) -> dict[str, ExtraField]:
     """{dimension: ExtraField} of a LAS header's extra bytes, as its extra-bytes VLR stores them
-    (laspy's names, those of its point records; a scale or offset of one value a point only)."""
-    out = {}
+    (laspy's names, those of its point records). An array of k values a point (``normal``,
+    3 x float64) is a field of them all (a schema that names it as one dimension is refused:
+    _node_field) and each value, scaled by its own scale and offset, under the names of the
+    dimensions it is split into: PDAL's ``normal0`` .. (its LAS reader's, so Entwine's schema)
+    and the LAS reader's ``normal_0`` ..; a dimension of the node that has such a name is itself."""
+    out, split = {}, {}
     for d in header.point_format.extra_dimensions:
-        single = d.num_elements == 1
-        scale = float(d.scales[0]) if single and d.scales is not None else None
-        offset = float(d.offsets[0]) if single and d.offsets is not None else None
-        out[d.name] = ExtraField(d.name, d.dtype, scale, offset)
-    return out
+        scales = [None] * d.num_elements if d.scales is None else [float(s) for s in d.scales]
+        offsets = [None] * d.num_elements if d.offsets is None else [float(o) for o in d.offsets]
+        if d.num_elements == 1:
+            out[d.name] = ExtraField(d.name, d.dtype, scales[0], offsets[0])
+            continue
+        out[d.name] = ExtraField(d.name, d.dtype)
+        for k in range(d.num_elements):
+            value = ExtraField(d.name, d.dtype.base, scales[k], offsets[k], element=k)
+            split.update({f"{d.name}{k}": value, f"{d.name}_{k}": value})
+    return {**split, **out}
 
 
 def open_ept(path_or_url) -> EptCloud:
