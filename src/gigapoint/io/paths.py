@@ -59,6 +59,13 @@ def _not_a_path(value, where: str | None, name: str) -> InputError:
     return InputError(f"{where + ': ' if where else ''}{name}: {value_text(value)} is not a path (a str or os.PathLike)")
 
 
+#: what an http(s) URL among the point files of a conversion, tiling or classification is told
+URL_NOT_POINT_FILES = (
+    "a URL is read only as an octree (a COPC file or an EPT dataset), opened alone to draw it (open, info, render, section, view); "
+    "point files are read from this machine: download it first"
+)
+
+
 def _local(p) -> Path:
     """A path as given, a ``file://`` URL's or ``~/...`` expanded; another URL a one-line InputError."""
     text = os.fspath(p) if isinstance(p, (str, os.PathLike)) else None
@@ -66,7 +73,10 @@ def _local(p) -> Path:
         local = file_url_path(text)  # gp.open("file:///...") was "only http:// and https:// URLs are read"
         url = URL_LIKE.match(text) if local is None else None
         if url:
-            raise InputError(f"{shown_url(f'{url.group(1)}://{url.group(2)}')}: only http:// and https:// URLs are read (COPC and EPT octrees)")
+            shown = shown_url(f"{url.group(1)}://{url.group(2)}")
+            if url.group(1).lower() in ("http", "https"):  # (was "only http:// and https:// URLs are read", of an http URL)
+                raise InputError(f"{shown}: {URL_NOT_POINT_FILES}")
+            raise InputError(f"{shown}: only http:// and https:// URLs are read (COPC and EPT octrees)")
         p = local if local is not None else Path(p).expanduser()  # "~/scans/a.laz" from Python (a shell expands it)
     return Path(p)
 

@@ -70,7 +70,7 @@ def refuse_octrees(paths, why: str) -> None:
         kind = lod_source_kind(path)
         if kind is not None and not is_local_copc(path):
             what = {"folder": "a converted octree folder", "ept": "an EPT dataset"}.get(kind, "a URL")
-            raise InputError(f"{shown_url(path)}: {what} opens alone, drawn level of detail as stored; {why}")
+            raise InputError(f"{shown_url(as_url(path) or path)}: {what} opens alone, drawn level of detail as stored; {why}")  # (a Path of a URL: http:/host)
 
 
 def open_octree(path) -> OctreeCloud | PointCloud:

@@ -22,6 +22,7 @@ import numpy as np
 from ...atomic import same_file
 from ...errors import InputError
 from ...io import URL_LIKE, expand_paths, file_url_path, shown_url
+from ...io.http import as_url
 from ..code import code_version
 from ..ept import ept_location
 from ..kinds import work_dir as copc_work_dir
@@ -66,6 +67,8 @@ def refuse_octrees(inputs) -> None:
     """A one-line InputError for an input path that is an octree folder or an EPT dataset: an
     output of conversions, not point files to read."""
     for p in inputs:
+        if as_url(p) is not None:  # (an EPT's URL was named here whole, its password and token too): expand_paths says it
+            continue
         if OctreeDir(p).kind is not None:
             raise InputError(f"{p}: is a converted octree (or a conversion in progress), not an input point cloud")
         if ept_location(p) is not None:  # (was "holds no supported point cloud file", or an unknown .json)
