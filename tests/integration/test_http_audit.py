@@ -4,12 +4,21 @@ than asked. Servers bind 127.0.0.1."""
 
 from __future__ import annotations
 
+import re
+
+import numpy as np
 import pytest
 
 import gigapoint as gp
 from gigapoint.errors import InputError
+from gigapoint.io import http as gphttp
 
 pytest.importorskip("httpx")
+
+
+def _frame(cloud, **kw):
+    cam = gp.Camera.fit(cloud.bounds, view="iso", width=120, height=90)
+    return gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", **kw))
 
 SECRET = "http://reader:hunter2@127.0.0.1:9/{name}?sig=SIG%2Fsecret&se=2031"
 SHOWN = "http://reader:***@127.0.0.1:9/{name}?sig=***&se=***"
@@ -48,3 +57,63 @@ def test_a_url_among_others_is_named_with_its_two_slashes(tmp_path, capsys):
     assert main(["render", url, str(tmp_path / "b.laz"), "-o", str(tmp_path / "x.png")]) == 1
     err = capsys.readouterr().err.strip()
     assert err == f"error: {SHOWN.format(name='ept/')}: an EPT dataset opens alone, drawn level of detail as stored; it cannot join other files"
+
+
+# --------------------------------------------------------------------------- failures past a redirect
+
+
+@pytest.fixture
+def server(tmp_path):
+    from test_copc_http import RangeServer
+
+    rng = np.random.default_rng(3)
+    xyz = rng.random((3_000, 3)) * (50, 40, 10) + (1000, 2000, 30)
+    gp.convert(gp.from_arrays(xyz), tmp_path / "scan.copc.laz", format="copc", max_leaf=500)
+    s = RangeServer(tmp_path)
+    yield s
+    s.close()
+
+
+@pytest.fixture
+def quick(monkeypatch):
+    monkeypatch.setattr(gphttp, "TIMEOUT", 0.5)
+    monkeypatch.setattr(gphttp, "RETRIES", 1)
+
+
+@pytest.mark.timeout(60)
+def test_a_failure_past_a_redirect_names_where_it_led(server, quick):
+    """A URL redirected to a host that refuses the connection (a CDN's, a retired mirror) or to a
+    signed URL the store refuses (expired: 403) was said as the URL given's failure alone
+    ("…/scan.copc.laz: cannot connect ([Errno 111] Connection refused)" of a server that answers):
+    the message now says where the redirect led, its signature hidden."""
+    url = server.url("s/scan.copc.laz")
+    server.route = lambda path: (302, "http://127.0.0.1:1/scan.copc.laz?sig=SECRET") if path == "/s/scan.copc.laz" else None
+    with pytest.raises(InputError) as e:
+        gp.open(url)
+    assert str(e.value).startswith(f"{url}: cannot connect (")
+    assert str(e.value).endswith(") (redirected to http://127.0.0.1:1/scan.copc.laz?sig=***) (after 2 attempts)")
+    server.route = lambda path: (302, "/bucket/scan.copc.laz?sig=SECRET") if path == "/s/scan.copc.laz" else (403, None)
+    with pytest.raises(InputError) as e:
+        gp.open(url)
+    assert str(e.value) == f"{url}: HTTP 403 Forbidden for bytes 0..65,536 (redirected to {server.url('bucket/scan.copc.laz?sig=***')})"
+    server.route = None
+    with pytest.raises(InputError) as e:  # no redirect: as before
+        gp.open(server.url("gone.copc.laz"))
+    assert str(e.value) == f"{server.url('gone.copc.laz')}: HTTP 404 Not Found for bytes 0..65,536"
+
+
+@pytest.mark.timeout(60)
+def test_a_moved_file_gone_mid_render_is_named_where_it_was_read(server, quick):
+    """A COPC file moved (its ranges then read where the redirect led, HttpClient.moved) and
+    removed there while drawn: the 404 named only the URL given, which the server still
+    redirects."""
+    server.route = lambda path: (301, "/new/scan.copc.laz") if path == "/old/scan.copc.laz" else None
+    (server.root / "new").mkdir()
+    (server.root / "scan.copc.laz").rename(server.root / "new" / "scan.copc.laz")
+    url = server.url("old/scan.copc.laz")
+    c = gp.open(url)
+    (server.root / "new" / "scan.copc.laz").unlink()
+    with pytest.raises(InputError) as e:
+        _frame(c, point_budget=10**9, lod_threshold_px=0.0)
+    assert re.fullmatch(rf"{re.escape(url)}: HTTP 404 Not Found for bytes [\d,]+\.\.[\d,]+ \(redirected to {re.escape(server.url('new/scan.copc.laz'))}\)", str(e.value))
+    c.close()

@@ -14,7 +14,8 @@ HTTP 502/503/504). Whatever goes wrong is a one-line ``InputError`` naming the U
 error status, a short read, a server that ignores ``Range`` (200 with the whole file) or
 answers another range than asked, a range past the end of the file, a timeout, a file that
 changed on the server since its first answer (size, ETag or Last-Modified), too many redirects,
-a redirect from https to http or to another scheme (not followed). Messages name a URL
+a redirect from https to http or to another scheme (not followed); a failure past a redirect also
+names where it led. Messages name a URL
 as ``shown_url`` gives it: its password (or a user name alone, a token) and query values as ***
 (signed URLs are how COPC files are shared); requests use the URL itself.
 
@@ -380,13 +381,14 @@ class HttpClient:
                 elif r.history:  # signed: asked afresh next time; its siblings may be beside it (HttpFile.sibling)
                     self.signed[url] = _led_to(r)
                 status = r.status_code
+                there = _redirected(httpx, url, r.url)
                 if status in _RETRY_STATUS:
-                    raise _Transient(f"HTTP {status} {r.reason_phrase} for {what}")
+                    raise _Transient(f"HTTP {status} {r.reason_phrase} for {what}{there}")
                 if status == 416:
-                    raise InputError(f"{shown_url(url)}: {what} lie past the end of the file (HTTP 416 Range Not Satisfiable)")
+                    raise InputError(f"{shown_url(url)}: {what} lie past the end of the file (HTTP 416 Range Not Satisfiable){there}")
                 if status >= 400:
                     error = HttpNotFound if status == 404 else InputError
-                    raise error(f"{shown_url(url)}: HTTP {status} {r.reason_phrase} for {what}")
+                    raise error(f"{shown_url(url)}: HTTP {status} {r.reason_phrase} for {what}{there}")
                 expect = size
                 whole = False  # a 200 with the whole file, taken as the head of a small file
                 ignored = (
@@ -438,12 +440,12 @@ class HttpClient:
             raise InputError(f"{shown_url(url)}: {exc}") from None
         except httpx.TooManyRedirects:
             raise InputError(f"{shown_url(url)}: too many redirects (more than {self.client.max_redirects}: a redirect loop?) for {what}") from None
-        except httpx.TimeoutException:
-            raise InputError(f"{shown_url(url)}: no answer within {self.timeout:g} s for {what} (timed out)") from None
+        except httpx.TimeoutException as exc:
+            raise InputError(f"{shown_url(url)}: no answer within {self.timeout:g} s for {what} (timed out){_redirected(httpx, url, exc.request.url)}") from None
         except (httpx.RemoteProtocolError, httpx.ReadError) as exc:
-            raise _Transient(f"short read of {what}: the connection broke off ({_one_line(exc)})") from None
+            raise _Transient(f"short read of {what}: the connection broke off ({_one_line(exc)}){_redirected(httpx, url, exc.request.url)}") from None
         except (httpx.ConnectError, httpx.WriteError) as exc:
-            raise _Transient(f"cannot connect ({_one_line(exc)})") from None
+            raise _Transient(f"cannot connect ({_one_line(exc)}){_redirected(httpx, url, exc.request.url)}") from None
         except httpx.HTTPError as exc:
             raise InputError(f"{shown_url(url)}: {type(exc).__name__}: {_one_line(exc)}") from None
         except httpx.InvalidURL as exc:  # not an HTTPError: 'http://[::1' reached the CLI as an internal error
@@ -493,6 +495,13 @@ def _check_redirect(response) -> None:
         raise _BadRedirect(f"redirected to {where}: only http:// and https:// URLs are read")
     if old.scheme == "https" and new.scheme == "http":
         raise _BadRedirect(f"redirected from https to {where}: not followed (the answer would travel unencrypted)")
+
+
+def _redirected(httpx, url: str, final) -> str:
+    """' (redirected to FINAL)' where a request for ``url`` was last sent to another URL (a
+    redirect now, or one remembered: ``HttpClient.moved``), else '': a failure there (a host that
+    does not resolve, a 403 of an expired signature) was said as the URL given's alone."""
+    return "" if final == httpx.URL(url) else f" (redirected to {shown_url(str(final))})"
 
 
 def _led_to(response) -> str:
