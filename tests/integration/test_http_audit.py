@@ -117,3 +117,25 @@ def test_a_moved_file_gone_mid_render_is_named_where_it_was_read(server, quick):
         _frame(c, point_budget=10**9, lod_threshold_px=0.0)
     assert re.fullmatch(rf"{re.escape(url)}: HTTP 404 Not Found for bytes [\d,]+\.\.[\d,]+ \(redirected to {re.escape(server.url('new/scan.copc.laz'))}\)", str(e.value))
     c.close()
+
+
+# --------------------------------------------------------------------------- servers and files
+
+
+@pytest.mark.parametrize("mode", ["ok", "ignore_range"])
+def test_an_empty_file_over_http_is_said_empty(server, capsys, mode):
+    """An empty COPC file on the server (an upload that never started) was "bytes 0..65,536 lie
+    past the end of the file (HTTP 416 Range Not Satisfiable)" (a server answering ranges) or
+    "not a COPC file (a file that starts with b'')" (one answering 200 and the empty file); a
+    local one is "file is empty (0 bytes)", and so is a URL's."""
+    from gigapoint.cli import main
+    from gigapoint.errors import EmptyCloudError
+
+    (server.root / "empty.copc.laz").write_bytes(b"")
+    server.mode = mode
+    url = server.url("empty.copc.laz")
+    with pytest.raises(EmptyCloudError) as e:
+        gp.open(url)
+    assert str(e.value) == f"{url}: file is empty (0 bytes)"
+    assert main(["info", url]) == 1
+    assert capsys.readouterr().err.strip() == f"error: {url}: file is empty (0 bytes)"

@@ -384,6 +384,8 @@ class HttpClient:
                 there = _redirected(httpx, url, r.url)
                 if status in _RETRY_STATUS:
                     raise _Transient(f"HTTP {status} {r.reason_phrase} for {what}{there}")
+                if status == 416 and start == 0 and allow_short:  # the head of an empty file (no first byte to give)
+                    return b""
                 if status == 416:
                     raise InputError(f"{shown_url(url)}: {what} lie past the end of the file (HTTP 416 Range Not Satisfiable){there}")
                 if status >= 400:

@@ -22,7 +22,7 @@ import io
 import numpy as np
 
 from ..core.chunk import safe_attribute_name
-from ..errors import GigapointWarning, InputError, warn
+from ..errors import EmptyCloudError, GigapointWarning, InputError, warn
 from ..io import laz_process
 from ..io.http import ByteSource, HttpFile, LocalFile, open_source
 from ..io.las import EVLR_HEADER, PROJECTION_USER_ID, WKT_RECORD, evlr_headers, read_las_header, wkt_of
@@ -198,6 +198,8 @@ class CopcCloud(VoxelOctree):
         self.source = source
         name = source.name
         head = source.read_head(HEAD_READ)
+        if not head:  # (a URL's was "bytes 0..65,536 lie past the end of the file (HTTP 416)")
+            raise EmptyCloudError(f"{name}: file is empty (0 bytes)")
         if not is_copc_head(head):
             if head[:4] == b"LASF" and len(head) > 104:  # its own version and kind: every LAS file was "a LAS 1.4 file"
                 kind = "LAZ" if head[104] & 0x80 else "LAS"
