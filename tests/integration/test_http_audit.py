@@ -139,3 +139,32 @@ def test_an_empty_file_over_http_is_said_empty(server, capsys, mode):
     assert str(e.value) == f"{url}: file is empty (0 bytes)"
     assert main(["info", url]) == 1
     assert capsys.readouterr().err.strip() == f"error: {url}: file is empty (0 bytes)"
+
+
+def test_a_rate_limited_server_is_asked_again_after_its_retry_after(monkeypatch):
+    """HTTP 429 Too Many Requests (GCS's, R2's, GitHub's rate limits, which a frame's requests in
+    flight together meet) failed the frame at once: it is now retried as 503 is, after the
+    server's Retry-After (at most the timeout), and after the last attempt is one line."""
+    import httpx
+
+    answers = []
+
+    def store(request):
+        status, wait = answers.pop(0)
+        if status == 429:
+            return httpx.Response(429, headers={"Retry-After": wait} if wait else {})
+        return httpx.Response(206, headers={"Content-Range": "bytes 0-9/100"}, content=bytes(range(10)))
+
+    waits: list[float] = []
+    monkeypatch.setattr(gphttp.time, "sleep", waits.append)
+    client = gphttp.HttpClient()
+    client.client._transport = httpx.MockTransport(store)  # (a Retry-After from a store, no waiting here)
+    answers[:] = [(429, "3"), (429, "3600"), (206, None)]
+    assert gphttp.HttpFile("https://store.example/x.copc.laz", client).read(0, 10) == bytes(range(10))
+    assert waits == [3.0, client.timeout]
+    answers[:] = [(429, None)] * 3
+    with pytest.raises(InputError) as e:
+        gphttp.HttpFile("https://store.example/y.copc.laz", client).read(0, 10)
+    assert str(e.value) == "https://store.example/y.copc.laz: HTTP 429 Too Many Requests for bytes 0..10 (after 3 attempts)"
+    assert waits[2:] == [0.05, 0.1] and answers == []
+    client.close()

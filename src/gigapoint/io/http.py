@@ -10,7 +10,7 @@ connections reused), a small thread pool so that several requests are in flight
 (``read_many``), a timeout on every request (connect, each read) and an overall deadline per
 request, so that a server that stalls or trickles never hangs a frame, a bounded in-memory
 LRU cache of the ranges read, and two retries of transient failures (connection errors,
-HTTP 502/503/504). Whatever goes wrong is a one-line ``InputError`` naming the URL: an HTTP
+HTTP 429/502/503/504, after the server's Retry-After up to a timeout). Whatever goes wrong is a one-line ``InputError`` naming the URL: an HTTP
 error status, a short read, a server that ignores ``Range`` (200 with the whole file) or
 answers another range than asked, a range past the end of the file, a timeout, a file that
 changed on the server since its first answer (size, ETag or Last-Modified), too many redirects,
@@ -56,13 +56,13 @@ MIN_RATE = 16 << 10
 WORKERS = 6
 #: Bytes of ranges kept in memory (least recently used dropped first).
 CACHE_BYTES = 256 << 20
-#: Extra attempts after a transient failure (connection error, HTTP 502/503/504).
+#: Extra attempts after a transient failure (connection error, HTTP 429/502/503/504).
 RETRIES = 2
 #: ``read_many`` joins ranges less than this far apart into one request (the bytes between are
 #: read and dropped), up to MERGE_MAX bytes a request: a frame's nodes often lie side by side.
 MERGE_GAP = 64 << 10
 MERGE_MAX = 8 << 20
-_RETRY_STATUS = (502, 503, 504)
+_RETRY_STATUS = (429, 502, 503, 504)  # 429 Too Many Requests: a store's rate limit (GCS, R2, GitHub), met by a frame's requests in flight
 _URL = re.compile(r"^(https?):/+(.+)$", re.IGNORECASE)
 #: a URL's scheme (a Path of one has lost a '/') and the rest; a path or request target's ?query and #fragment
 _SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]+:/+)(.*)$", re.DOTALL)
@@ -333,7 +333,7 @@ class HttpClient:
             except _Transient as exc:
                 if last:
                     raise InputError(f"{shown_url(url)}: {exc} (after {self.retries + 1} attempts)") from None
-                time.sleep(0.05 * 2**attempt)
+                time.sleep(max(0.05 * 2**attempt, min(exc.retry_after, self.timeout)))
                 continue
             if cache:
                 self.cache.put(key, data)
@@ -383,7 +383,7 @@ class HttpClient:
                 status = r.status_code
                 there = _redirected(httpx, url, r.url)
                 if status in _RETRY_STATUS:
-                    raise _Transient(f"HTTP {status} {r.reason_phrase} for {what}{there}")
+                    raise _Transient(f"HTTP {status} {r.reason_phrase} for {what}{there}", _retry_after(r.headers))
                 if status == 416 and start == 0 and allow_short:  # the head of an empty file (no first byte to give)
                     return b""
                 if status == 416:
@@ -521,7 +521,18 @@ class HttpNotFound(InputError):
 
 
 class _Transient(Exception):
-    """A failure worth another attempt (its text becomes the InputError's after the last one)."""
+    """A failure worth another attempt (its text becomes the InputError's after the last one),
+    ``retry_after`` seconds from now at the soonest (the server's Retry-After)."""
+
+    def __init__(self, text: str, retry_after: float = 0.0):
+        super().__init__(text)
+        self.retry_after = retry_after
+
+
+def _retry_after(headers) -> float:
+    """The seconds an answer's Retry-After header asks to wait (its delay-seconds form), else 0."""
+    value = headers.get("retry-after", "").strip()
+    return float(value) if value.isdigit() else 0.0
 
 
 class HttpFile(ByteSource):
