@@ -168,3 +168,26 @@ def test_a_rate_limited_server_is_asked_again_after_its_retry_after(monkeypatch)
     assert str(e.value) == "https://store.example/y.copc.laz: HTTP 429 Too Many Requests for bytes 0..10 (after 3 attempts)"
     assert waits[2:] == [0.05, 0.1] and answers == []
     client.close()
+
+
+def test_a_potree_or_converted_octree_folder_url_is_named_as_one(server, capsys):
+    """``gigapoint info http://host/potree/`` (the folder's URL, as a Potree viewer's page links
+    it) was "…/potree/ept.json: HTTP 404 Not Found for the file", a gigapoint octree folder's the
+    same: each opens from a local folder only, and the message now says so (metadata.json or
+    octree.json asked once ept.json is not found). A folder of neither keeps the 404."""
+    from gigapoint.cli import main
+
+    for folder, name, what in (("potree", "metadata.json", "a Potree octree folder"), ("tree", "octree.json", "a converted octree folder")):
+        (server.root / folder).mkdir()
+        (server.root / folder / name).write_text("{}")
+        want = f"{server.url(folder + '/')}: {what} ({name}); Potree and converted octrees open from a local folder (over HTTP: COPC files and EPT datasets)"
+        for given in (folder + "/", folder):  # (the CLI's Path drops the '/')
+            with pytest.raises(InputError) as e:
+                gp.open(server.url(given))
+            assert str(e.value) == want
+        assert main(["info", server.url(folder + "/")]) == 1
+        assert capsys.readouterr().err.strip() == f"error: {want}"
+    (server.root / "other").mkdir()
+    with pytest.raises(InputError) as e:
+        gp.open(server.url("other/"))
+    assert str(e.value) == f"{server.url('other/ept.json')}: HTTP 404 Not Found for the file"

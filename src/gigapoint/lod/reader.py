@@ -13,9 +13,9 @@ from urllib.parse import urlsplit, urlunsplit
 import numpy as np
 
 from ..errors import EmptyCloudError, InputError
-from ..io.http import HttpNotFound, as_url, shown_url
+from ..io.http import HttpNotFound, as_url, open_source, shown_url
 from .kinds import copc_file_kind, ept_location
-from .octree_dir import FORMAT_VERSION, OctreeDir
+from .octree_dir import FORMAT_VERSION, GIGAPOINT_META, POTREE_META, OctreeDir
 
 if TYPE_CHECKING:
     from ..core.cloud import PointCloud
@@ -73,6 +73,22 @@ def refuse_octrees(paths, why: str) -> None:
             raise InputError(f"{shown_url(as_url(path) or path)}: {what} opens alone, drawn level of detail as stored; {why}")  # (a Path of a URL: http:/host)
 
 
+def refuse_local_only_octree(folder_url: str) -> None:
+    """A one-line InputError where the folder URL ``folder_url`` (no ept.json there) holds a
+    Potree or gigapoint octree, which open from a local folder only: a Potree folder's URL was
+    "…/ept.json: HTTP 404 Not Found". Asked only once ept.json is not found."""
+    ept = open_source(ept_location(folder_url))
+    try:
+        for name, what in ((POTREE_META, "a Potree octree folder"), (GIGAPOINT_META, "a converted octree folder")):
+            try:
+                ept.sibling(name).read_head(1)
+            except InputError:
+                continue
+            raise InputError(f"{shown_url(folder_url)}: {what} ({name}); Potree and converted octrees open from a local folder (over HTTP: COPC files and EPT datasets)")
+    finally:
+        ept.close()
+
+
 def open_octree(path) -> OctreeCloud | PointCloud:
     """Open an octree for rendering: an OctreeCloud (gigapoint or Potree 2.0 folder; a COPC file
     or EPT dataset, local or an http(s) URL), or for an unfinished conversion its preview (a
@@ -99,9 +115,11 @@ def open_octree(path) -> OctreeCloud | PointCloud:
         except HttpNotFound as exc:
             # no file there: an EPT folder given without its '/' (typer's Path drops it:
             # `gigapoint info https://host/ept/` asked for https://host/ept as a COPC file)
+            folder = urlunsplit(parts._replace(path=parts.path + "/"))
             try:
-                return open_ept(urlunsplit(parts._replace(path=parts.path + "/")))
+                return open_ept(folder)
             except HttpNotFound:
+                refuse_local_only_octree(folder)
                 raise exc from None
     if kind == "ept":
         try:
@@ -111,6 +129,8 @@ def open_octree(path) -> OctreeCloud | PointCloud:
             # Path drops the '/' and opened the file while gp.open said ".../ept.json: HTTP 404"
             parts = urlsplit(as_url(path) or "")
             name = parts.path.rstrip("/").rsplit("/", 1)[-1]
+            if parts.path.endswith("/") and "." not in name:
+                refuse_local_only_octree(as_url(path))
             if not parts.path.endswith("/") or "." not in name:
                 raise
             try:
