@@ -4,6 +4,7 @@ one .las/.laz/.ply file, faithful to the inputs' integers, classes, colours and 
 from __future__ import annotations
 
 import importlib
+import re
 
 import laspy
 import numpy as np
@@ -393,3 +394,15 @@ def test_a_point_file_whose_input_fails_part_way_leaves_no_folder_it_made(tmp_pa
     rc, _, err = cli("convert", bad, "-o", tmp_path / "kept" / "a" / "b" / "x.laz")
     assert rc == 1 and "'abc' is not a number" in err
     assert list((tmp_path / "kept").iterdir()) == []  # its own folder stays; those made go
+
+
+def test_the_summary_says_a_slow_rate_in_points_not_zero_millions(cli, tmp_path):
+    """A run below a million points a second printed "0.00 M points/s": its speed in points (1,000
+    points take far longer than the millisecond that would make a million a second)."""
+    from gigapoint.cli.cloud_opts import rate_note
+
+    assert rate_note(2_345_678) == "2.35 M points/s" and rate_note(1234.4) == "1,234 points/s" and rate_note(0.0) == "0 points/s"
+    np.save(tmp_path / "few.npy", np.random.default_rng(1).random((1000, 3)) * 100)
+    rc, stdout, err = cli("convert", tmp_path / "few.npy", "-o", tmp_path / "few.las", "-q")
+    assert rc == 0, err
+    assert re.search(r", \d[\d,]* points/s$", stdout.strip()), stdout

@@ -10,7 +10,7 @@ import typer
 
 from ..errors import GigapointError, InputError, counted
 from .app import app
-from .cloud_opts import RecursiveOption, skipped_note, subfolders_read
+from .cloud_opts import RecursiveOption, rate_note, skipped_note, subfolders_read
 
 #: the lengths' help: in the cloud's units, the default converted from metres
 _UNITS = "in the cloud's units (its CRS's: a cloud in feet takes the default in feet)"
@@ -71,7 +71,7 @@ def classify(
     print(
         f"{output}: {counted(result.points, 'point')}, {result.ground:,} ground (2), {result.non_ground:,} not (1){noise}{_heights_told(result.heights, units, normalize)}{skipped}; "
         f"cell {p['cell']:.4g} {units}, slope {p['slope']:g}, window {p['window']:.4g}, threshold {p['threshold']:.4g}, scalar {p['scalar']:.4g}; "
-        f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s"
+        f"{result.seconds:.1f} s, {rate_note(result.points_per_second)}"
     )
 
 
@@ -105,7 +105,7 @@ def _classify_noise(inputs, output: Path, params: dict, overwrite: bool, recursi
     print(
         f"{output}: {counted(result.points, 'point')}, {result.noise:,} isolated found noise (7){kept}{skipped}; "
         f"step {p['step']:.4g} x {p['step_z']:.4g} {p['units']}, isolated {p['isolated']}; {result.cells:,} cells in {result.table_bytes / 2**20:.1f} MiB; "
-        f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s"
+        f"{result.seconds:.1f} s, {rate_note(result.points_per_second)}"
     )
 
 
@@ -133,5 +133,5 @@ def _heights_only(sources, output: Path, params: dict, normalize: bool, overwrit
     print(
         f"{output}: {counted(result.points, 'point')}{_heights_told(result.heights, p['units'], normalize)}; "
         f"ground model of {counted(result.ground, 'class-2 point')}, cell {p['cell']:.4g} {p['units']}{skipped}; "
-        f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s"
+        f"{result.seconds:.1f} s, {rate_note(result.points_per_second)}"
     )

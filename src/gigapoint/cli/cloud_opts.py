@@ -148,6 +148,14 @@ def skipped_note(skipped: int) -> str:
     return f", {counted(skipped, 'invalid point')} skipped" if skipped else ""
 
 
+def rate_note(points_per_second: float) -> str:
+    """A summary line's speed: millions a second, or whole points a second below one million (a
+    small or slow run printed "0.00 M points/s")."""
+    if points_per_second >= 1e6:
+        return f"{points_per_second / 1e6:.2f} M points/s"
+    return f"{points_per_second:,.0f} points/s"
+
+
 def uncolored_note(uncolored: int | None, raster) -> str:
     """What a summary line says of the points --colorize left uncoloured: nothing without it."""
     if uncolored is None:

@@ -26,6 +26,7 @@ from .cloud_opts import (
     crs_options_named,
     filter_options,
     output_crs_keywords,
+    rate_note,
     skipped_note,
     thin_option,
     uncolored_note,
@@ -142,11 +143,11 @@ def convert(
     colored = uncolored_note(result.uncolored, colorize)
     if to_file:
         thinned = f", thinned from {result.thinned_from:,}" if result.thinned_from is not None else ""
-        print(f"{output}: {counted(result.points, 'point')} ({result.format}){thinned}{colored}{skipped}, {result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s")
+        print(f"{output}: {counted(result.points, 'point')} ({result.format}){thinned}{colored}{skipped}, {result.seconds:.1f} s, {rate_note(result.points_per_second)}")
         return
     print(  # OUTPUT as given: a Dask run's result holds it absolute (its workers need that)
         f"{output}: {counted(result.points, 'point')} in {counted(result.nodes, 'node')} ({result.format}, {result.sampler}){colored}{skipped}, "
-        f"{result.seconds:.1f} s, {result.points_per_second / 1e6:.2f} M points/s{resumed}"
+        f"{result.seconds:.1f} s, {rate_note(result.points_per_second)}{resumed}"
         + (f"; viewable after {result.first_view_seconds:.1f} s" if result.first_view_seconds is not None else "")
     )
 
