@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 import gigapoint as gp
+from gigapoint.core.compact import rgba32
 from gigapoint.render.params import batch_alphas
 from gigapoint.render.passes.transparency import fragments, hybrid_reference, sorted_reference
 
@@ -104,6 +105,8 @@ def _kbuffer(pix, key, rgb, a8, n, k, fallback, background):
 
 def error(points: int = 150_000, width: int = 320, height: int = 180) -> None:
     cloud = gp.demo(points, seed=1)
+    # u32 RGBA8 whatever the cloud holds (the demo's colours are per-block palettes since #22)
+    colors = rgba32(cloud.color)
     bg = (0, 0, 0, 255)
     for view in ("overview", "closeup"):
         cam = _camera(cloud, view, width, height)
@@ -119,14 +122,14 @@ def error(points: int = 150_000, width: int = 320, height: int = 180) -> None:
         print(
             f"error: {points:,} points, {width}x{height}, {view}: fragments per covered pixel mean {cover[hit].mean():.1f}, median {np.median(cover[hit]):.0f}"
         )
-        rgb = cloud.color.view(np.uint8).reshape(-1, 4)[index, :3].astype(float)
+        rgb = colors.view(np.uint8).reshape(-1, 4)[index, :3].astype(float)
         key = (depth.view(np.uint32).astype(np.uint64) << np.uint64(32)) | index.astype(np.uint64)
         front = (opaque.visibility.reshape(-1) >> np.uint64(32)).astype(np.int64)
         rel = depth.astype(np.float64) / np.maximum((front[pix].astype(np.uint32).view(np.float32)).astype(np.float64), 1e-30)
         for opacity in (0.25, 0.5, 0.8):
             alphas = batch_alphas(None, opacity, len(sel.ids))
             a8 = alphas[k, 0].astype(float)
-            args = (cloud, sel, width, height, v.near, v.far, cloud.color, alphas, fallback, bg)
+            args = (cloud, sel, width, height, v.near, v.far, colors, alphas, fallback, bg)
             exact = sorted_reference(*args).view(np.uint8).reshape(-1, 4)[hit, :3].astype(int)
             reveal_t = np.exp(np.bincount(pix, np.log1p(-np.minimum(a8 / 255.0, 1 - 1e-15)), n))
 
