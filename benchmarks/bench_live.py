@@ -157,7 +157,7 @@ def bench_snapshot(frames, keep) -> None:
     warm = _fill(frames, 8)  # above one batch (SNAPSHOT_BATCH): the tree shaped first, leaves split; JIT warm-up
     warm.snapshot()
     for k in range(8):
-        _push(warm, frames[k + 8])
+        _push(warm, frames[(k + 8) % len(frames)])  # (with --keep under 16 fewer frames are made)
     warm.snapshot()  # and a second one: stored points moved
     live = _fill(frames, keep)
     from gigapoint.bench.report import machine_pages, pages_since
