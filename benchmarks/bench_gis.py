@@ -103,10 +103,10 @@ def gp_cmd(*args) -> list[str]:
 def dtm_grid(las: Path, gsd: float) -> tuple[float, float, int, int]:
     """(origin_x, origin_y, width, height) of gigapoint's top-down grid of the ground points
     (camera.Camera.top_down over the bounds of the class 2 points it renders: pixel edges on
-    whole multiples of the gsd)."""
-    import math
-
+    whole multiples of the gsd; asked of top_down itself, whose margins a copy here missed)."""
     import laspy
+
+    from gigapoint import Camera
 
     lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
     with laspy.open(str(las)) as f:
@@ -116,10 +116,11 @@ def dtm_grid(las: Path, gsd: float) -> tuple[float, float, int, int]:
                 x, y = np.asarray(pts.x)[ground], np.asarray(pts.y)[ground]
                 lo = np.minimum(lo, [x.min(), y.min()])
                 hi = np.maximum(hi, [x.max(), y.max()])
-    first_col, top_row = math.floor(lo[0] / gsd), math.ceil(hi[1] / gsd)
-    width = math.floor(hi[0] / gsd) - first_col + 1
-    height = top_row - math.ceil(lo[1] / gsd) + 1
-    return first_col * gsd, (top_row - height) * gsd, width, height
+    cam = Camera.top_down(((lo[0], lo[1], 0.0), (hi[0], hi[1], 0.0)), gsd)
+    _, _, _, _, centre_x, centre_y = cam.world_file()  # of the upper-left pixel
+    # edges are whole multiples of the gsd: rounded, the sums above leave no float residue
+    left, top = round(centre_x / gsd - 0.5) * gsd, round(centre_y / gsd + 0.5) * gsd
+    return left, top - cam.height * gsd, cam.width, cam.height
 
 
 def write_ortho(las: Path, path: Path) -> Path:
