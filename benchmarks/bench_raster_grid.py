@@ -35,6 +35,13 @@ def same(a, b) -> bool:
     return np.array_equal(a, b)
 
 
+def classes_of(classified) -> np.ndarray:
+    """The classification ground._classified set: it returns (chunk, the dem at its points) now,
+    the chunk alone in revisions before that (c999df4), which a base may be."""
+    chunk = classified[0] if isinstance(classified, tuple) else classified
+    return chunk.attributes["classification"]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", required=True, help="the revision to compare with (git rev)")
@@ -67,8 +74,8 @@ def run_cases(order: str, xyz, grids: dict, dem, tolerance, base_chunks, base_gr
         "bilinear": {side: (lambda g=g: g.bilinear(dem, xyz)) for side, g in grids.items()},
         "cells_of": {side: (lambda g=g: g.cells_of(xyz)) for side, g in grids.items()},
         "ground _classified": {
-            "new": lambda: ground._classified(chunk, grids["new"], dem, tolerance, {1: 0, 2: 0, "noise": 0})[0].attributes["classification"],
-            "base": lambda: base_ground._classified(base_chunk, grids["base"], dem, tolerance, {1: 0, 2: 0, "noise": 0}).attributes["classification"],
+            "new": lambda: classes_of(ground._classified(chunk, grids["new"], dem, tolerance, {1: 0, 2: 0, "noise": 0})),
+            "base": lambda: classes_of(base_ground._classified(base_chunk, grids["base"], dem, tolerance, {1: 0, 2: 0, "noise": 0})),
         },
     }
     for name, sides in cases.items():
