@@ -1,0 +1,53 @@
+"""Benchmark scripts' own helpers whose mistakes give wrong figures without an error: an A/B
+whose base is secretly this revision, a PDAL grid one column off gigapoint's."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pytest
+
+import gigapoint as gp
+
+BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
+
+
+@pytest.fixture
+def scripts(monkeypatch):
+    """benchmarks/ importable, as it is to the scripts themselves (their folder is sys.path[0]);
+    gigapoint_base's modules forgotten afterwards."""
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    yield
+    for name in [m for m in sys.modules if m == "gigapoint_base" or m.startswith("gigapoint_base.")]:
+        del sys.modules[name]
+
+
+def test_ab_base_draws_with_its_own_code(scripts, tmp_path):
+    """gigapoint imports most names on first use, by absolute module names: the exported base
+    must resolve them in itself, or bench_ab compares this revision with itself."""
+    import bench_ab
+
+    base = bench_ab.load_base("HEAD", tmp_path)
+    assert base.render_frame.__module__ == "gigapoint_base.render.renderer"
+    assert Path(base.render_frame.__code__.co_filename).is_relative_to(tmp_path)
+    assert base.PointCloud is not gp.PointCloud and base.Camera is not gp.Camera
+    assert importlib.import_module("gigapoint_base.lod").convert.__module__.startswith("gigapoint_base.")
+
+
+def test_gis_dtm_grid_is_gigapoints_top_down_grid(scripts, tmp_path):
+    """PDAL's writers.gdal is given gigapoint's grid: Camera.top_down's, margins included (a
+    ground point on a cell edge, x = 6, puts a column before it)."""
+    import bench_gis
+
+    las = tmp_path / "g.las"
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = [0.001] * 3, [0.0] * 3
+    data = laspy.LasData(header)
+    data.x, data.y, data.z = np.array([6.0, 10.5, 50.0]), np.array([6.0, 10.5, 50.0]), np.array([1.0, 2.0, 3.0])
+    data.classification = np.array([2, 2, 1], np.uint8)  # the class 1 point is not drawn
+    data.write(str(las))
+    assert bench_gis.dtm_grid(las, 1.0) == (5.0, 5.0, 6, 6)
