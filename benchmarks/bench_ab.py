@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 import gigapoint as gp
+from gigapoint.core.palette import PaletteColors
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -78,7 +79,11 @@ def base_cloud(base, cloud):
     """The base revision's PointCloud over this revision's arrays: every field both revisions'
     PointCloud takes (the compact layout's ``ext``/``packing`` too, which a base from before #22 lacks)."""
     known = {f.name for f in dataclasses.fields(base.PointCloud) if f.init}
-    return base.PointCloud(**{f.name: getattr(cloud, f.name) for f in dataclasses.fields(cloud) if f.init and f.name in known})
+    fields = {f.name: getattr(cloud, f.name) for f in dataclasses.fields(cloud) if f.init and f.name in known}
+    if isinstance(cloud.color, PaletteColors):  # in the base's own class, or it takes them for an array
+        palettes = importlib.import_module("gigapoint_base.core.palette").PaletteColors
+        fields["color"] = palettes(**{f.name: getattr(cloud.color, f.name) for f in dataclasses.fields(cloud.color) if f.init})
+    return base.PointCloud(**fields)
 
 
 def compare_images(base, cloud, octree_path) -> list[str]:
