@@ -141,6 +141,29 @@ def test_a_folder_of_empty_tiles_says_no_file_holds_a_point(tmp_path, options):
     assert str(caught.value) == f"{tmp_path / 'a.laz'}, {tmp_path / 'b.laz'}: no file holds any point"
 
 
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda files, out: gp.convert(files, out / "octree"),
+        lambda files, out: gp.convert(files, out / "all.laz"),
+        lambda files, out: gp.convert(files, out / "filtered", classes=[2]),
+        lambda files, out: gp.tile(files, out / "tiles", 100.0),
+    ],
+    ids=["convert-octree", "convert-laz", "convert-filtered", "tile"],
+)
+def test_converting_or_tiling_only_empty_tiles_says_no_file_holds_a_point(tmp_path, make):
+    """Every tile empty (each skipped with a warning): convert and tile said 'no valid points',
+    the words for NaN or absurd positions; they say what gp.open says."""
+    files = [tmp_path / "a.laz", tmp_path / "b.laz"]
+    for f in files:
+        laspy.LasData(laspy.LasHeader(point_format=3, version="1.2")).write(f)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GigapointWarning)  # (each tile's "holds no points, skipped")
+        with pytest.raises(EmptyCloudError) as caught:
+            make(files, tmp_path)
+    assert str(caught.value) == f"{files[0]}, {files[1]}: no file holds any point"
+
+
 def test_info_of_a_folder_tells_offsets_apart_as_one_files_info_prints_them(cli, tmp_path):
     """Offsets that differ in their 11th digit (PDAL's offset 'auto': each tile its own) were
     counted as one offset in the folder's block, printed to 10 digits."""

@@ -556,9 +556,13 @@ def _joined(parts: list[np.ndarray]) -> np.ndarray:
     return np.concatenate(parts, out=out)
 
 
-def check_valid_count(name: str, valid: int, skipped: int) -> None:
+def check_valid_count(name: str, valid: int, skipped: int, from_files: bool = False) -> None:
     """No valid point is an error; invalid points skipped, a warning (``build_cloud``'s rule, and
-    the chunked build's)."""
+    the chunked build's). ``from_files``: the points were read from the files ``name`` names; none
+    read at all (each skipped as empty) is "no file holds any point", gp.open's words, not the
+    NaN or absurd positions' "no valid points" (convert and tile said that)."""
+    if from_files and valid == skipped == 0:
+        raise EmptyCloudError(f"{name}: no file holds any point")
     if valid == 0:
         detail = f" ({counted(skipped, 'invalid point')}: NaN, inf or beyond ±{MAX_ABS_COORDINATE:g})" if skipped else ""
         raise EmptyCloudError(f"{name}: no valid points{detail}")

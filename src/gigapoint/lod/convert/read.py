@@ -340,7 +340,7 @@ class ReadPhase(Job):
         if self.point_filter is not None and "filter_passed" in st:  # not "no valid points" where the filter left none
             replace(self.point_filter, read=st["filter_read"], passed=st["filter_passed"]).check_passed(files_label(self.paths))
         # the plain cloud's error where no point is valid, its warning of the skipped ones, naming the files as it does (self.name is a file's stem)
-        check_valid_count(files_label(self.paths) if self.paths else self.name, st.get("points", 0), st.get("skipped", 0))
+        check_valid_count(files_label(self.paths) if self.paths else self.name, st.get("points", 0), st.get("skipped", 0), from_files=bool(self.paths))
         edge = float(np.max(hi - lo))
         st.setdefault("source", self.source_facts(self.paths or self.source_files))  # CRS, LAS grid, colors: for outputs that hold them
         st["compact"] = self.compact_plan()

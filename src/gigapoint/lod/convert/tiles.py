@@ -197,7 +197,7 @@ def tile(
         spill = _TileSpill(work, float(size), float(buffer), files.label, grid)
         for chunk in points():
             spill.add(chunk)
-        check_valid_count(files.label, tally["points"], tally["skipped"])  # (the skipped points' warning)
+        check_valid_count(files.label, tally["points"], tally["skipped"], from_files=True)  # (the skipped points' warning)
         written = spill.write_tiles(name, format, files, grid, tiles_folder, shown)
         if created:  # every tile whole: now they appear, all at once
             with folders_for(out):

@@ -149,7 +149,7 @@ class PointFiles:
         if passing is not None:  # "no point passes the filter", not "no valid points"
             passing.check_passed(self.label)
         if not tally["points"]:  # (raised in the write: no file is left)
-            check_valid_count(self.label, 0, tally["skipped"])
+            check_valid_count(self.label, 0, tally["skipped"], from_files=True)
 
 
 def write_point_file(
@@ -181,7 +181,7 @@ def write_point_file(
             yield inputs.colored(f, chunk if thinning is None else thinning.kept(chunk, f), tally)
 
     written = write_points(out, chunks, None, grid=inputs.las_grid, crs_records=inputs.crs_records, color_bits=None, has_color=inputs.has_color)
-    check_valid_count(inputs.label, written, tally["skipped"])  # the skipped points' warning
+    check_valid_count(inputs.label, written, tally["skipped"], from_files=True)  # the skipped points' warning
     return written, tally["skipped"], tally["points"], tally["uncolored"]
 
 
