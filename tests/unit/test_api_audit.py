@@ -208,6 +208,26 @@ NOT_PATHS = [
 ]  # fmt: skip
 
 
+# an empty list of paths: the operation's name leads (section, orthophoto and classify_ground said "open: no file given")
+NO_PATHS = [
+    ("section", lambda out: gp.section([], (0, 0, 1, 1), 1), "section: no file given"),
+    ("orthophoto", lambda out: gp.orthophoto([], 1.0), "orthophoto: no file given"),
+    ("classify-ground", lambda out: gp.classify_ground([], out.with_suffix(".las")), "classify_ground: no file given"),
+    ("classify-noise", lambda out: gp.classify_noise([[]], out.with_suffix(".las")), "classify_noise: no file given"),
+    ("tile", lambda out: gp.tile([], out, 100), "tile: no file given"),
+    ("open", lambda out: gp.open([[], ()]), "open: no file given"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("call", "message"), [case[1:] for case in NO_PATHS], ids=[case[0] for case in NO_PATHS])
+def test_no_path_given_is_said_by_the_operation(tmp_path, call, message):
+    out = tmp_path / "out"
+    with pytest.raises(InputError) as err:
+        call(out)
+    assert str(err.value) == message
+    assert not out.exists() and not out.with_suffix(".las").exists()
+
+
 @pytest.mark.parametrize(("call", "message"), [case[1:] for case in NOT_PATHS], ids=[case[0] for case in NOT_PATHS])
 def test_an_input_that_is_not_a_path_is_named_in_one_line(autzen_path, tmp_path, call, message):
     out = tmp_path / "out"

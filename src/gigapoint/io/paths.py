@@ -34,12 +34,21 @@ def file_url_path(text: str) -> Path | None:
     return Path(urllib.request.url2pathname(u.path))
 
 
-def given_paths(paths, where: str | None = None, name: str = "inputs") -> list:
+def given_paths(paths, where: str | None = None, name: str = "inputs", empty_ok: bool = False) -> list:
     """``paths`` as a list of paths: one path alone, or several (a list, a tuple, any iterable),
     lists and tuples among them spread out in order; anything else a one-line InputError naming
     the entry (``where``: the operation, ``name``: the argument), "tile: inputs[1]: None is not a
     path (a str or os.PathLike)": pathlib's TypeError ("expected str, bytes or os.PathLike object,
-    not int") before, from deep inside."""
+    not int") before, from deep inside. No path at all is "``where``: no file given" unless
+    ``empty_ok`` (gp.section([]) said "open: no file given", gp.open's words)."""
+    out = _spread_paths(paths, where, name)
+    if not out and where is not None and not empty_ok:
+        raise InputError(f"{where}: no file given")
+    return out
+
+
+def _spread_paths(paths, where: str | None, name: str) -> list:
+    """``given_paths``' list, however short (lists within lists spread out)."""
     if isinstance(paths, (str, os.PathLike)):
         return [paths]
     if not isinstance(paths, Iterable) or isinstance(paths, bytes):
@@ -47,7 +56,7 @@ def given_paths(paths, where: str | None = None, name: str = "inputs") -> list:
     out: list = []
     for i, p in enumerate(paths):
         if isinstance(p, (list, tuple)):
-            out.extend(given_paths(p, where, f"{name}[{i}]"))
+            out.extend(_spread_paths(p, where, f"{name}[{i}]"))
         elif isinstance(p, (str, os.PathLike)):
             out.append(p)
         else:

@@ -360,7 +360,7 @@ def convert(
     if name is not None and not isinstance(name, str):  # 5 went into octree.json as a number
         raise InputError(f"convert: name must be a string, got {name!r}")
     if source_files is not None:  # a path given alone was read letter by letter, a missing file skipped: no CRS, no word
-        source_files = [check_file(p) for p in given_paths(source_files, "convert", "source_files")]
+        source_files = [check_file(p) for p in given_paths(source_files, "convert", "source_files", empty_ok=True)]
     out = local_path(out, "the output", ConvertError)  # a file:// URL names a path
     if format is None and out is not None and str(out) != "" and is_point_file_name(out) and _are_paths(inputs):  # -o ground.laz: one plain point file
         octree_options = {"sampler": sampler, "memory_limit": memory_limit, "max_leaf": max_leaf, "layout": layout, "colors": colors,
