@@ -14,6 +14,7 @@ import numpy as np
 
 from ..core.renderable import Renderable
 from ..errors import CameraError, InputError, check_switch, is_real, number_text
+from ..io.filters import point_filter
 from ..io.paths import given_paths
 from ..lod.reader import cloud_crs_units
 from ..render import Camera, RenderSettings, render_frame
@@ -65,13 +66,16 @@ def orthophoto(source, gsd, out=None, dsm=None, fill_nodata=None, classes=None, 
         raise InputError(f"orthophoto: gsd must be a number > 0 (cloud units per pixel), got {number_text(gsd)}")
     if fill_nodata is not None and fill_nodata != "all":
         check_max_distance("orthophoto: fill_nodata", fill_nodata)
+    # the filters' bad values under orthophoto's name, before anything is read (gp.open's said "open: classes=...")
+    keep = point_filter(classes, drop_classes, clip, "orthophoto", clip_polygon=clip_polygon)
     for path, suffixes in ((out, IMAGE_SUFFIXES), (dsm, GEOTIFF_SUFFIXES)):  # before anything is read (a long render lost to a name)
         if path is not None:
             check_output(path, overwrite, suffixes)
     settings = RenderSettings.of(settings)
     if setting_overrides:
         settings = settings.given(**setting_overrides)
-    cloud = _cloud(source, {"classes": classes, "drop_classes": drop_classes, "clip": clip, "clip_polygon": clip_polygon})
+    polygon = None if keep is None else keep.polygon  # (read once: a GeoJSON file)
+    cloud = _cloud(source, {"classes": classes, "drop_classes": drop_classes, "clip": clip, "clip_polygon": polygon})
     try:
         camera = Camera.top_down(cloud.bounds, gsd)
     except CameraError as exc:
