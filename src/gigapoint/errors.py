@@ -27,8 +27,15 @@ def first_line(exc: BaseException) -> str:
 
 def counted(n: int, noun: str, plural: str | None = None) -> str:
     """``n`` things as a message says them: '1 point', '2,000 points' (``plural``: where adding
-    's' is wrong, 'batches')."""
-    return f"{n:,} {noun if n == 1 else plural or noun + 's'}"
+    's' is wrong, 'batches'); the count as ``count_text`` says it."""
+    return f"{count_text(n)} {noun if n == 1 else plural or noun + 's'}"
+
+
+def count_text(n) -> str:
+    """A count as a message says it: exact with thousands' commas ('2,000'), or from 1e15 on in
+    three significant digits ('1.18e+303'): the cells, pixels or tiles an absurd size makes (a
+    cell of 1e-300) were printed in 300 digits."""
+    return f"{n:,.0f}" if n < 1e15 else f"{n:.3g}"
 
 
 def number_text(value) -> str:

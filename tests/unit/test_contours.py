@@ -99,6 +99,8 @@ def test_too_many_levels_is_a_one_line_error():
     with pytest.raises(GigapointError, match=r"^contour_lines: interval 0.01 gives 7,100 levels over 71; give a larger one \(at most 1,000 levels\)$"):
         contour_lines(PLANE, WORLD_FILE, 0.01)
     assert len(contour_lines(PLANE, WORLD_FILE, 0.1)) == 710  # 34.5 .. 105.4: under the limit
+    with pytest.raises(GigapointError, match=r"^contour_lines: interval 1e-300 gives 7.1e\+301 levels over 71; "):  # (not in 302 digits)
+        contour_lines(PLANE, WORLD_FILE, 1e-300)
 
 
 def test_drawn_lines_cover_the_pixels_they_run_through_and_index_lines_are_twice_as_wide():

@@ -110,6 +110,8 @@ SECTION_CLOUD = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 1.0]])
         (lambda: gp.section(gp.from_arrays(SECTION_CLOUD), (0, 0, 10, 0), 2).camera(scale=0.0), "section: scale (pixels per unit) must be a number > 0, got 0"),
         (lambda: gp.section(gp.from_arrays(SECTION_CLOUD), (0, 0, 10, 0), 2).camera(vertical_exaggeration=-1e13),
          "section: vertical_exaggeration must be a number > 0 (1: heights at the scale of distances), got -1e+13"),
+        (lambda: gp.section(gp.from_arrays(SECTION_CLOUD), (0, 0, 10, 0), 2).camera(scale=1e300),  # (not in 300 digits: errors.count_text)
+         "section: scale 1e+300 makes a 1e+301x1e+300 image, over 16,384 pixels a side: a scale of 1.64e+03 or less fits"),
         # (the filters checked under orthophoto's name, as section's: gp.open's said "open: classes='x'")
         (lambda: gp.orthophoto("m.laz", 1.0, classes="x"), "orthophoto: classes='x': class numbers are integers from 0 to 255 (LAS classes)"),
         (lambda: gp.orthophoto("m.laz", 1.0, clip=(1, 0, 0, 1)), "orthophoto: clip=(1, 0, 0, 1): xmin 1 is above xmax 0"),

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..core.coords import MAX_SPAN
-from ..errors import CameraError, is_real, number_text, numbers_text
+from ..errors import CameraError, count_text, is_real, number_text, numbers_text
 
 if TYPE_CHECKING:
     from ..core.selection import View
@@ -142,12 +142,6 @@ def _round_up(v: float) -> float:
     """``v`` rounded up to three significant digits (a suggested gsd that still fits)."""
     step = 10.0 ** (math.floor(math.log10(v)) - 2)
     return math.ceil(v / step - 1e-9) * step
-
-
-def pixels_text(n: float) -> str:
-    """A count of pixels in a message: exact with thousands' commas, or past 1e15 (an absurd gsd's)
-    in three significant digits, not 300."""
-    return f"{n:,.0f}" if n < 1e15 else f"{n:.3g}"
 
 
 def image_side(name: str, v) -> int:
@@ -355,7 +349,7 @@ class Camera:
         if max(width, height) > MAX_IMAGE_SIDE:
             # (a side of extent / gsd pixels takes at most that + 2: the margins' rows may add one)
             fits = _round_up(float(np.max(hi[:2] - lo[:2])) / (MAX_IMAGE_SIDE - 2))
-            raise CameraError(f"gsd {number_text(gsd)} makes a {pixels_text(width)}x{pixels_text(height)} image, over {MAX_IMAGE_SIDE:,} pixels a side: a gsd of {fits:g} or more fits")
+            raise CameraError(f"gsd {number_text(gsd)} makes a {count_text(width)}x{count_text(height)} image, over {MAX_IMAGE_SIDE:,} pixels a side: a gsd of {fits:g} or more fits")
         left, top = first_col * gsd, top_row * gsd
         # the eye just above the highest point: depths then span little more than the cloud's
         # heights, so float32 depths give heights (``heights``) as finely as they can

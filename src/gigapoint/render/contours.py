@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_bytes
-from ..errors import GigapointError, InputError, is_real
+from ..errors import GigapointError, InputError, count_text, is_real
 from ..io import horizontal_epsg
 
 INDEX_EVERY = 5  # every 5th line an index contour
@@ -88,7 +88,7 @@ def contour_levels(z_min: float, z_max: float, interval: float, base: float = 0.
     count = last - first + 1
     if count > MAX_LEVELS:
         raise InputError(
-            f"{where}: interval {interval:g}{unit} gives {count:,} levels over {z_max - z_min:g}{unit}; give a larger one (at most {MAX_LEVELS:,} levels)"
+            f"{where}: interval {interval:g}{unit} gives {count_text(count)} levels over {z_max - z_min:g}{unit}; give a larger one (at most {MAX_LEVELS:,} levels)"
         )
     return np.arange(first, last + 1, dtype=np.int64)
 

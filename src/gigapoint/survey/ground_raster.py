@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, is_real, number_text
+from ..errors import InputError, count_text, is_real, number_text
 from .raster_grid import RasterGrid
 
 #: PDAL's and the paper's defaults, in metres (``slope``: rise over run, no unit)
@@ -107,7 +107,7 @@ def files_grid(inputs, cell: float, progress) -> RasterGrid:
     grid = RasterGrid.over(bounds[0], bounds[1], cell)
     if grid.cells > MAX_CELLS:
         raise InputError(
-            f"{inputs.label}: cells of {cell:g} make a {grid.shape[1]:,} x {grid.shape[0]:,} raster over the files' extent, more than "
+            f"{inputs.label}: cells of {cell:g} make a {count_text(grid.shape[1])} x {count_text(grid.shape[0])} raster over the files' extent, more than "
             f"{MAX_CELLS:,} cells: give a larger cell, or classify tiles of it (gigapoint tile)"
         )
     return grid

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
-from ..errors import CameraError, InputError, is_real, number_text, numbers_text
+from ..errors import CameraError, InputError, count_text, is_real, number_text, numbers_text
 from ..io.crs import crs_units
 from ..io.filters import PointFilter, along_and_across, corridor_of, point_filter
 from ..io.paths import given_paths
@@ -115,7 +115,7 @@ class Section:
             image = needed(pixel)
             if max(image) > MAX_IMAGE_SIDE:
                 fits = (MAX_IMAGE_SIDE - 2 * BORDER - 2) / max(self.length, z_hi - z_lo)
-                raise CameraError(f"section: scale {number_text(scale)} makes a {image[0]:,}x{image[1]:,} image, over {MAX_IMAGE_SIDE:,} pixels a side: a scale of {fits:.3g} or less fits")
+                raise CameraError(f"section: scale {number_text(scale)} makes a {count_text(image[0])}x{count_text(image[1])} image, over {MAX_IMAGE_SIDE:,} pixels a side: a scale of {fits:.3g} or less fits")
         else:  # the largest pixel that fits the section into the size (1e-9: division's rounding never needs one more)
             fit = (DEFAULT_WIDTH, MAX_IMAGE_SIDE) if size is None else check_size(size)
             pixel = max(self.length / (fit[0] - 2 * BORDER - 1), (z_hi - z_lo) / (fit[1] - 2 * BORDER - 2)) * (1 + 1e-9)

@@ -24,12 +24,11 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
-from ..errors import GigapointError, InputError
+from ..errors import GigapointError, InputError, count_text
 from ..io.filters import PointFilter, point_filter
 from ..lod.query import is_octree, points_meeting
 from ..lod.reader import open_octree
 from ..lod.voxel_octree import VoxelOctree
-from ..render.camera import pixels_text
 from ..survey.change import SURFACE_SPACING, unit_names
 from ..survey.volume import BASES, MARGIN_PIXELS, Volume, on_one_line
 from . import protocol as P
@@ -101,7 +100,7 @@ def check_gsd(points, gsd: float) -> None:
         raise P.ProtocolError("volume: the polygon's points lie on one line: it has no area; move a point off the line")
     across = side(points) / gsd
     if across > MAX_GRID_PIXELS:
-        raise P.ProtocolError(f"volume: a gsd of {gsd:g} makes the polygon {pixels_text(across)} pixels across, over {MAX_GRID_PIXELS:,}: give {side(points) / MAX_GRID_PIXELS:.2g} or more")
+        raise P.ProtocolError(f"volume: a gsd of {gsd:g} makes the polygon {count_text(across)} pixels across, over {MAX_GRID_PIXELS:,}: give {side(points) / MAX_GRID_PIXELS:.2g} or more")
 
 
 def toe(points) -> dict:
