@@ -524,8 +524,11 @@ def test_a_named_text_column_of_hex_colours_is_left_out_not_taken_for_a_comment(
         ("spaces.xyz", "x y z intensity # exported by hand\n1 2 3 10\n4 5 6 20\n", {"intensity": [10, 20]}),  # "the header names 7"
         ("commas.csv", "x,y,z # site A\n1,2,3\n4,5,6\n", {}),  # "line 1: not numeric point data" (no header: 'z # site A')
         ("cc.txt", "//X,Y,Z,Intensity // CloudCompare\n1,2,3,10\n4,5,6,20\n", {"intensity": [10, 20]}),  # attribute 'intensity __ cloudcompare'
+        # a mark inside a name is the name's, not a comment: "the header names 3" / "names 4"
+        ("returns.csv", "x,y,z,#returns,intensity\n1,2,3,1,10\n4,5,6,2,20\n", {"#returns": [1, 2], "intensity": [10, 20]}),
+        ("scan.xyz", "X Y Z Scan# Intensity # note\n1 2 3 7 10\n4 5 6 8 20\n", {"Scan#": [7, 8], "intensity": [10, 20]}),
     ],
-    ids=["spaces", "commas", "cloudcompare"],
+    ids=["spaces", "commas", "cloudcompare", "hash-in-a-name", "hash-ending-a-name"],
 )
 def test_a_comment_ending_the_header_line_names_no_column(tmp_path, name, text, attributes):
     """A comment ending the header line ("x y z intensity # note") was split into column names,

@@ -468,7 +468,7 @@ def test_info_of_a_text_file_names_attributes_as_reading_does(tmp_path):
     # info said "Foo/Bar" where the cloud read holds "foo_bar" (and --color-attribute takes that)
     p = tmp_path / "a.xyz"
     p.write_text("x y z Foo/Bar\n1 2 3 4\n4 5 6 8\n")
-    assert file_info(p)["attributes"] == list(open_cloud(p).attributes) == ["foo_bar"]
+    assert file_info(p)["attributes"] == list(open_cloud(p).attributes) == ["Foo_Bar"]  # (as the file spells it: io._base.attribute_spelling)
 
 
 def test_registry_takes_a_new_reader(tmp_path, monkeypatch):
@@ -567,10 +567,11 @@ def test_a_file_named_twice_is_read_once(tmp_path):
 
 
 def test_field_names_are_listed_as_read_and_two_of_one_lower_case_name_are_an_error(tmp_path):
-    """NPY fields are read in lower case, PLY's as the file spells them (but those gigapoint reads
-    by name: ply.attribute_spelling), and info lists them so (it listed the file's spelling,
-    which --color-attribute then refused); two fields of one name in lower case ('Intensity' and
-    'intensity', 'X' and 'x') were one: the last kept, the other lost without a word."""
+    """Fields are read as the file spells them, but those gigapoint reads by name in lower case
+    (io._base.attribute_spelling: NPY's 'Return_Number', PLY's 'scalar_Intensity' kept), and info
+    lists them so (it listed the file's spelling, which --color-attribute then refused); two fields
+    read under one name ('Intensity' and 'intensity', 'X' and 'x') were one: the last kept, the
+    other lost without a word."""
     from gigapoint.errors import InputError
 
     PLY_XYZ = "property float x\nproperty float y\nproperty float z\n"
@@ -584,7 +585,7 @@ def test_field_names_are_listed_as_read_and_two_of_one_lower_case_name_are_an_er
     clash = {
         "c.csv": ("x,y,z,Intensity,intensity\n1,2,3,10,20\n4,5,6,30,40\n", "'Intensity' and 'intensity'"),
         "red.csv": ("x,y,z,red,R,g,b\n1,2,3,10,20,1,1\n", "'red' and 'R'"),
-        "c.ply": ("ply\nformat ascii 1.0\nelement vertex 1\n" + PLY_XYZ + "property float Q\nproperty float q\nend_header\n1 2 3 4 5\n", "'Q' and 'q'"),
+        "c.ply": ("ply\nformat ascii 1.0\nelement vertex 1\n" + PLY_XYZ + "property float X\nend_header\n1 2 3 4\n", "'x' and 'X'"),
     }
     for name, (text, both) in clash.items():
         (tmp_path / name).write_text(text)
@@ -594,7 +595,7 @@ def test_field_names_are_listed_as_read_and_two_of_one_lower_case_name_are_an_er
         for way in (open_cloud, file_info):
             with pytest.raises(InputError) as e:
                 way(tmp_path / name)
-            assert str(e.value).startswith(f"{tmp_path / name}: ") and f"fields {both} are one name" in str(e.value), str(e.value)
+            assert str(e.value).startswith(f"{tmp_path / name}: ") and f"fields {both} are both read as" in str(e.value), str(e.value)
 
 
 @pytest.mark.parametrize("encoding", ["ascii", "binary_little_endian"])

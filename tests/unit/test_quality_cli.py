@@ -75,9 +75,9 @@ def test_a_missing_color_attribute_is_refused_before_the_inputs_are_read(tmp_pat
     las.x, las.y, las.z = xyz.T
     las.write(str(tmp_path / "a.laz"))
     (tmp_path / "b.ply").write_text("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
-                                    "property float hag\nend_header\n1 2 3 7\n")  # fmt: skip
+                                    "property float Hag\nend_header\n1 2 3 7\n")  # fmt: skip
     np.save(tmp_path / "c.npy", np.c_[xyz, np.ones(4)])  # (N, 4): x y z intensity
-    (tmp_path / "d.csv").write_text("x,y,z,hag,a/b\n1,2,3,4,5\n")
+    (tmp_path / "d.csv").write_text("x,y,z,Hag,a/b\n1,2,3,4,5\n")  # (as the PLY spells it: one attribute, every reader keeping the case)
     for name in ("a.laz", "b.ply", "c.npy", "d.csv"):
         path = tmp_path / name
         assert reader_for(path).header(path)["attributes"] == list(gp.open(path).attribute_names), name
@@ -86,7 +86,7 @@ def test_a_missing_color_attribute_is_refused_before_the_inputs_are_read(tmp_pat
         (["a.laz"], ("a.laz has no attribute 'nope' (attributes: classification, edge_of_flight_line, gps_time, hag, intensity, key_point, "
                      "number_of_returns, point_source_id, return_number, scan_angle_rank, scan_direction_flag, synthetic, user_data, withheld)")),
         (["c.npy"], "c.npy has no attribute 'nope' (attributes: intensity)"),
-        (["b.ply", "d.csv"], "2 files has no attribute 'nope' (attributes: hag)"),
+        (["b.ply", "d.csv"], "2 files has no attribute 'nope' (attributes: Hag)"),
     ):  # fmt: skip
         args = [str(tmp_path / f) for f in inputs]
         assert main(["render", *args, "-o", str(tmp_path / "x.png"), "--color-attribute", "nope"]) == 1

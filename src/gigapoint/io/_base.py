@@ -167,27 +167,59 @@ def check_chunk_size(chunk_size: int) -> int:
     return check_whole("open", "chunk_size", chunk_size, 1)
 
 
+#: Point attributes gigapoint reads from (and writes to) these formats, as the LAS reader names them.
+ATTRIBUTE_DTYPES = {
+    "intensity": np.dtype(np.uint16),
+    "classification": np.dtype(np.uint8),
+    "return_number": np.dtype(np.uint8),
+    "number_of_returns": np.dtype(np.uint8),
+    "point_source_id": np.dtype(np.uint16),
+    "gps_time": np.dtype(np.float64),
+    "user_data": np.dtype(np.uint8),
+    "scan_angle": np.dtype(np.int16),  # 0.006 degrees
+    **dict.fromkeys(("scan_direction_flag", "edge_of_flight_line", "synthetic", "key_point", "withheld", "overlap", "scanner_channel"),
+                    np.dtype(np.uint8)),
+}  # fmt: skip
+#: Attributes point format 6/7/8 has a field for (nir: 8 only; scan_angle_rank, formats 0-5's
+#: degrees, is written to scan_angle); the writer stores any other in extra bytes.
+LAS_FIELD_ATTRIBUTES = frozenset({*ATTRIBUTE_DTYPES, "nir", "scan_angle_rank"})
+
+
+#: the fields gigapoint reads by name, in any case: x y z, colours, LAS fields, normals
+_READ_BY_NAME = frozenset({
+    *LAS_FIELD_ATTRIBUTES, "x", "y", "z", "nx", "ny", "nz",
+    "red", "green", "blue", "alpha", "r", "g", "b", "a", "diffuse_red", "diffuse_green", "diffuse_blue", "diffuse_alpha",
+})  # fmt: skip
+
+
+def attribute_spelling(field: str) -> str:
+    """The name a point file's field is read under, by every reader (text, NPY, PLY; LAS keeps its
+    extra bytes' names too): one gigapoint reads by name ('X', 'Classification': PDAL's; 'NX') in
+    lower case, any other as the file spells it ('scalar_Intensity' came back 'scalar_intensity',
+    and a PLY's 'Hag' no longer met a CSV's 'Hag' once one reader kept the case and one did not)."""
+    lower = field.lower()
+    return lower if lower in _READ_BY_NAME else field
+
+
 def check_distinct_names(path: Path, names: list[str], keys: list[str] | None = None) -> None:
-    """Fields are read by their name in lower case (``keys``: those, default ``names`` lowered):
-    two of one key ('Intensity' and 'intensity', 'X' and 'x') were one, the last kept without a word."""
+    """Two fields read under one name (``keys``: those, default ``attribute_spelling``'s: 'X' and
+    'x', 'Intensity' and 'intensity') were one, the last kept without a word: refused."""
     seen: dict[str, str] = {}
-    for name, key in zip(names, keys or [n.lower() for n in names]):
+    for name, key in zip(names, keys or [attribute_spelling(n) for n in names]):
         if key in seen:
-            raise fail(path, f"fields {seen[key]!r} and {name!r} are one name read in lower case ({key!r}); rename one")
+            raise fail(path, f"fields {seen[key]!r} and {name!r} are both read as {key!r}; rename one")
         seen[key] = name
 
 
-def attribute_names(names: list[str], colors: list[str], spelling: Callable[[str], str] = str.lower) -> list[str]:
+def attribute_names(names: list[str], colors: list[str]) -> list[str]:
     """The attributes ``rows_to_chunk`` makes of fields ``names`` (``colors``: color_names'), as it names them."""
-    out = (safe_attribute_name(spelling(n)) for n in names if n.lower() not in ("x", "y", "z") and n.lower() not in colors)
+    out = (safe_attribute_name(attribute_spelling(n)) for n in names if n.lower() not in ("x", "y", "z") and n.lower() not in colors)
     return [n for n in out if n is not None]
 
 
-def rows_to_chunk(path: Path, names: list[str], columns: list[np.ndarray], scaler: ColorScaler,
-                  spelling: Callable[[str], str] = str.lower) -> PointChunk:  # fmt: skip
+def rows_to_chunk(path: Path, names: list[str], columns: list[np.ndarray], scaler: ColorScaler) -> PointChunk:
     """A PointChunk from named 1-D columns: x y z, red green blue [alpha] (or r g b [a]), found in
-    any case, the rest attributes, named ``spelling(field)`` (in lower case unless a reader keeps
-    the file's own spelling: PLY, ``ply.attribute_spelling``)."""
+    any case, the rest attributes, named as ``attribute_spelling`` reads them."""
     check_distinct_names(path, names)
     lower = [n.lower() for n in names]
     col = dict(zip(lower, columns))
@@ -207,7 +239,7 @@ def rows_to_chunk(path: Path, names: list[str], columns: list[np.ndarray], scale
     for field, key, values in zip(names, lower, columns):
         if key in ("x", "y", "z") or key in used:
             continue
-        name = safe_attribute_name(spelling(field))  # 'a/b' as 'a_b': a file's own names are kept, not refused
+        name = safe_attribute_name(attribute_spelling(field))  # 'a/b' as 'a_b': a file's own names are kept, not refused
         if name is not None:
             attributes[name] = np.ascontiguousarray(values)
     return PointChunk(xyz, rgba, attributes)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import GigapointWarning, warn
+from ._base import ATTRIBUTE_DTYPES, LAS_FIELD_ATTRIBUTES  # noqa: F401  (here by their old names: copc.py, the writers)
 from .las import scan_angle_units
 
 #: ASPRS LAS 1.4 classes (R15, table 17; 8 and 12 as LAS 1.2 named them before 1.4 reserved them):
@@ -46,24 +47,8 @@ def class_name(code: int) -> str:
     return CLASS_NAMES.get(code) or ("reserved" if code < 64 else "user defined")
 
 
-#: Point attributes gigapoint reads from (and writes to) these formats, as the LAS reader names them.
-ATTRIBUTE_DTYPES = {
-    "intensity": np.dtype(np.uint16),
-    "classification": np.dtype(np.uint8),
-    "return_number": np.dtype(np.uint8),
-    "number_of_returns": np.dtype(np.uint8),
-    "point_source_id": np.dtype(np.uint16),
-    "gps_time": np.dtype(np.float64),
-    "user_data": np.dtype(np.uint8),
-    "scan_angle": np.dtype(np.int16),  # 0.006 degrees
-    **dict.fromkeys(("scan_direction_flag", "edge_of_flight_line", "synthetic", "key_point", "withheld", "overlap", "scanner_channel"),
-                    np.dtype(np.uint8)),
-}  # fmt: skip
 #: The bits of the ``flags`` byte (of formats 6-10) each flag is stored at (scanner_channel: 2 bits).
 FLAG_BITS = {"synthetic": 0, "key_point": 1, "withheld": 2, "overlap": 3, "scanner_channel": 4, "scan_direction_flag": 6, "edge_of_flight_line": 7}
-#: Attributes point format 6/7/8 has a field for (nir: 8 only; scan_angle_rank, formats 0-5's
-#: degrees, is written to scan_angle); the writer stores any other in extra bytes.
-LAS_FIELD_ATTRIBUTES = frozenset({*ATTRIBUTE_DTYPES, "nir", "scan_angle_rank"})
 
 
 def field_attributes(point_format: int) -> frozenset:

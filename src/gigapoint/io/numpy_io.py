@@ -166,7 +166,7 @@ class NpyReader(Reader):
         arr = self._open(path)
         names = _names_read(_layout_names(path, "NPY array", arr.dtype, arr.shape), arr.dtype)
         cols = color_names(names)
-        attributes = attribute_names(names, cols)  # as read: in lower case
+        attributes = attribute_names(names, cols)  # as read (_base.attribute_spelling)
         chunks = self.read_chunks(path) if len(arr) else None
         return scanned_info(path, "NPY", chunks, bool(cols), attributes, dtype=str(arr.dtype), shape=list(arr.shape))
 

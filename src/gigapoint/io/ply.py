@@ -7,7 +7,7 @@ list properties before or inside the vertex element fall back to plyfile reading
 Vertex properties: x y z, red green blue [alpha] (also r g b, diffuse_*), the rest
 (nx ny nz, intensity, scalar_*...) become attributes: those gigapoint reads by name (normals,
 LAS fields) in lower case whatever the file's case, any other as the file spells it
-(``attribute_spelling``). Without those, colours come from PCL's
+(``_base.attribute_spelling``). Without those, colours come from PCL's
 packed 4-byte ``rgb``/``rgba`` (consumed) or a 3D Gaussian splat's ``f_dc_0..2`` (kept).
 A binary mesh's elements after the vertices (faces) are walked, not read, to check that they
 end where the file does: a header that overstates the vertex count is refused, not read as
@@ -40,7 +40,6 @@ from ._base import (
     scan_bounds,
     unpack_rgb,
 )
-from .las_fields import LAS_FIELD_ATTRIBUTES
 
 _MAX_HEADER = 1 << 20
 #: the header's last line (blanks after the word taken, as other readers take them)
@@ -48,18 +47,6 @@ _END_HEADER = re.compile(rb"[\r\n]end_header[ \t\r]*\n")
 
 #: 3D Gaussian splats' degree-0 spherical harmonic, 1 / (2 sqrt(pi)): colour = 0.5 + SH_C0 * f_dc
 SH_C0 = 0.28209479177387814
-
-
-#: attributes gigapoint reads by name, in lower case: a PLY field of one of them in another case
-#: ('Classification', PDAL's; 'NX') is read as it, for classes= filters, normals and LAS fields
-CASELESS_ATTRIBUTES = LAS_FIELD_ATTRIBUTES | {"nx", "ny", "nz"}
-
-
-def attribute_spelling(field: str) -> str:
-    """The attribute a PLY vertex property is read as: one of CASELESS_ATTRIBUTES in lower case,
-    any other as the file spells it ('scalar_Intensity' was 'scalar_intensity': a cloud saved to
-    PLY came back with other names)."""
-    return field.lower() if field.lower() in CASELESS_ATTRIBUTES else field
 
 
 def _without_lists(line: str, props, lists: set) -> str:
@@ -130,7 +117,7 @@ class _Header:
             if self.packed is None and {"f_dc_0", "f_dc_1", "f_dc_2"} <= set(lower):
                 self.splat = [self.scalar_names[lower.index(f"f_dc_{k}")] for k in range(3)]
         self.has_color = bool(self.colors or self.packed or self.splat)
-        self.attributes = attribute_names([n for n in self.scalar_names if n != self.packed], self.colors, attribute_spelling)
+        self.attributes = attribute_names([n for n in self.scalar_names if n != self.packed], self.colors)
         self.has_lists = any(isinstance(p, plyfile.PlyListProperty) for el in [*self.before, self.vertex] for p in el.properties)
 
     def chunk(self, names: list[str], cols: list[np.ndarray], scaler: ColorScaler) -> PointChunk:
@@ -143,7 +130,7 @@ class _Header:
                 dc = np.column_stack([col[n] for n in self.splat]).astype(np.float64)
                 rgb = (np.clip(0.5 + SH_C0 * np.nan_to_num(dc), 0, 1) * 255 + 0.5).astype(np.uint8)
             names, cols = [*col, "red", "green", "blue"], [*col.values(), *rgb.T]
-        return rows_to_chunk(self.path, names, cols, scaler, attribute_spelling)
+        return rows_to_chunk(self.path, names, cols, scaler)
 
 
 #: a face's list of vertex indices (as the PLY format names it; some writers drop the s): 3 at least

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import re
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -36,6 +37,7 @@ from ._base import (
     DEFAULT_CHUNK_SIZE,
     Reader,
     attribute_names,
+    attribute_spelling,
     check_chunk_size,
     check_distinct_names,
     check_file,
@@ -55,6 +57,7 @@ _BY_COUNT = {
 }
 _ALIASES = {"red": "r", "green": "g", "blue": "b", "alpha": "a", "//x": "x"}
 _MAX_HEADER_LINES = 100
+_HEADER_COMMENT = re.compile(r"\s(?:#|//)")
 _MAX_LINE = 1 << 16
 
 
@@ -138,12 +141,14 @@ def _layout(path: Path) -> _Layout:
     candidates = list(first)
     # header: the first line that is not a comment, or a comment line naming x y z (CloudCompare's "//X,Y,Z")
     for i, (lineno, line) in enumerate(candidates):
-        body = _without_comment(line.lstrip().lstrip("#/")).strip()  # ("x y z intensity # note": its comment named 3 more columns)
+        # a comment ends it where its mark starts a word ("x y z intensity # note" named 3 more
+        # columns); one inside a name is the name's ("x,y,z,#returns", "Scan#")
+        body = _HEADER_COMMENT.split(line.lstrip().lstrip("#/"), maxsplit=1)[0].strip()
         tokens = _split(body, _sniff_delimiter(body))
-        lowered = [_ALIASES.get(t.strip("'\"").lower(), t.strip("'\"").lower()) for t in tokens]
-        if not _numeric(tokens) and {"x", "y", "z"} <= set(lowered):
-            check_distinct_names(path, [t.strip("'\"") for t in tokens], lowered)
-            header_names = lowered
+        spelled = [_ALIASES.get(t.strip("'\"").lower(), attribute_spelling(t.strip("'\""))) for t in tokens]
+        if not _numeric(tokens) and {"x", "y", "z"} <= set(spelled):
+            check_distinct_names(path, [t.strip("'\"") for t in tokens], spelled)
+            header_names = spelled
             skip = lineno
             candidates = candidates[i + 1 :]
             break
