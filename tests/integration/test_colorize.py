@@ -100,6 +100,9 @@ def test_a_paletted_raster_gives_each_point_its_pixels_colour_from_the_table(cli
     rows, cols, las = _pixels_of(tmp_path / "out.las")
     expected = np.array([table[i][:3] for i in range(4)], np.uint16)[indices[0, rows, cols]] * 257
     assert np.array_equal(_rgb(las), expected) and len(np.unique(expected, axis=0)) == 4
+    # --colorize-bits means nothing to a table's 8-bit colours, but a bad one is still refused (it passed unchecked)
+    rc, _, err = cli("convert", no_rgb, "-o", tmp_path / "bits.las", "--colorize", paletted, "--colorize-bits", "99", "-q")
+    assert rc != 0 and f"error: {paletted}: --colorize-bits for its uint8 values must be an integer from 1 to 8, got 99\n" in err, err
 
 
 def test_a_16_bit_raster_keeps_its_values_high_byte(no_rgb, tmp_path):

@@ -33,6 +33,7 @@ from .cloud_opts import (
     cloud_options,
     filter_options,
     open_files,
+    rate_note,
     subfolders_read,
 )
 from .contour_opts import (
@@ -205,7 +206,7 @@ def print_stats(stats, console=None, compiled_s: float = 0.0) -> None:
     """The render statistics line; ``compiled_s``: seconds of it numba spent compiling (a first run)."""
     console = console or err_console()
     h = stats.precision_histogram
-    rate = f"{stats.points_processed / max(stats.time_ms, 1e-9) / 1e3:,.1f} M points/s"
+    rate = rate_note(stats.points_processed / max(stats.time_ms, 1e-9) * 1e3)  # ("0.0 M points/s" for a small render)
     if compiled_s >= 0.5:
         rate = f"compiling kernels included: {compiled_s:.0f} s, once per install"
     console.print(

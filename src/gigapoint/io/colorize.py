@@ -97,16 +97,16 @@ class Colorization:
             raise InputError(f"{self.path}: its bands hold {ds.dtypes[0]} values; colorize reads orthophotos of 8- or 16-bit integers{scale}")
         self.bands = (1, 2, 3) if ds.count >= 3 else (1, 1, 1)  # (one or two bands: grey, and maybe its alpha)
         type_bits = np.dtype(ds.dtypes[0]).itemsize * 8
-        self.palette = _palette(ds, type_bits)
-        if self.palette is not None:  # (its values are indices, of no bit depth: the colours are 8-bit)
-            self.bands, self.nbits = (1, 1, 1), 8
-        elif bits is not None:  # (--colorize-bits: the user's word over the file's)
+        if bits is not None:  # (--colorize-bits: the user's word over the file's; a bad one refused for a paletted raster too)
             try:
                 self.nbits = check_whole(str(self.path), f"--colorize-bits for its {ds.dtypes[0]} values", bits, 1, type_bits)
             except InputError:
                 ds.close()
                 raise
-        else:
+        self.palette = _palette(ds, type_bits)
+        if self.palette is not None:  # (its values are indices, of no bit depth: its table's colours are 8-bit, --colorize-bits or not)
+            self.bands, self.nbits = (1, 1, 1), 8
+        elif bits is None:
             self.nbits = max(_nbits(ds.tags(band, ns="IMAGE_STRUCTURE"), type_bits) for band in set(self.bands))
             if self.nbits == 16:  # (16-bit, naming no NBITS: maybe 12-bit data, dark as 16-bit)
                 self._warn_of_fewer_bits(sorted(set(self.bands)))

@@ -381,7 +381,7 @@ class HttpClient:
                 elif r.history:  # signed: asked afresh next time; its siblings may be beside it (HttpFile.sibling)
                     self.signed[url] = _led_to(r)
                 status = r.status_code
-                there = _redirected(httpx, url, r.url)
+                there = _redirected(httpx, url, r.url) if status >= 400 else ""  # (for the failures' messages: not every node read)
                 if status in _RETRY_STATUS:
                     raise _Transient(f"HTTP {status} {r.reason_phrase} for {what}{there}", _retry_after(r.headers))
                 if status == 416 and start == 0 and allow_short:  # the head of an empty file (no first byte to give)

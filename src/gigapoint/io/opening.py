@@ -8,7 +8,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from ..core.chunk import PointChunk
-from ..core.cloud import PointCloud, build_cloud
+from ..core.cloud import PointCloud, build_cloud, check_valid_count
 from ..errors import EmptyCloudError, GigapointWarning, InputError, check_switch, warn
 from ._base import DEFAULT_CHUNK_SIZE, check_chunk_size, headers_once
 from .crs import warn_mixed_crs
@@ -119,10 +119,9 @@ def open_cloud(
             else:
                 cloud = build_cloud(stream, name=name, layout=layout, colors=colors)
         except EmptyCloudError as exc:
-            detail = str(exc).split(": ", 1)[-1]
-            if len(set(empty)) == len(files):  # each skipped as empty: not "no valid points" (NaN or absurd positions); progressive=True's words
-                detail = "no file holds any point"
-            raise EmptyCloudError(f"{files_label(files)}: {detail}") from None
+            if len(set(empty)) == len(files):  # each skipped as empty: not "no valid points" (NaN or absurd positions)
+                check_valid_count(files_label(files), 0, 0, from_files=True)  # (raises: "no file holds any point")
+            raise EmptyCloudError(f"{files_label(files)}: {str(exc).split(': ', 1)[-1]}") from None
         cloud.source_files = tuple(files)  # gp.convert(cloud) takes their CRS
         return cloud
 

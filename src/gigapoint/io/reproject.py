@@ -160,14 +160,16 @@ class Reprojection:
         their coordinates are read in ``from_crs`` all the same, as PDAL's in_srs reads them."""
         import pyproj
 
-        others = []
+        others, other_by_text = [], {}  # (each header text parsed once: thousands of tiles name one CRS)
         for f in files:
             text = _header_crs(f)
-            try:
-                if text and not same_horizontal(pyproj.CRS.from_user_input(text), self.given_source):
-                    others.append((f, text))
-            except pyproj.exceptions.CRSError:  # (a CRS PROJ cannot read: from_crs is given for such a file)
-                continue
+            if text and text not in other_by_text:
+                try:
+                    other_by_text[text] = not same_horizontal(pyproj.CRS.from_user_input(text), self.given_source)
+                except pyproj.exceptions.CRSError:  # (a CRS PROJ cannot read: from_crs is given for such a file)
+                    other_by_text[text] = False
+            if text and other_by_text[text]:
+                others.append((f, text))
         if others:
             f, text = others[0]
             more = f" (and {counted(len(others) - 1, 'more file')})" if len(others) > 1 else ""

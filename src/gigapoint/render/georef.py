@@ -14,6 +14,7 @@ import numpy as np
 from ..atomic import atomic_bytes, write_failure, write_together
 from ..errors import GigapointError, GigapointWarning, warn
 from ..io import EPSG_LENGTH_UNITS, crs_wkt, horizontal_epsg, vertical_crs
+from ..io.crs import angular_across
 from .camera import Camera
 from .image_files import IMAGE_SUFFIXES, check_image_fits, check_output, save_heights, save_image
 
@@ -148,7 +149,7 @@ def horizontal_keys(crs: str | None, wkt: str | None, units: dict) -> dict:
     with a WKT that GDAL would cut."""
     horizontal = units.get("horizontal")
     code = horizontal_epsg(crs)
-    if code is not None and horizontal is not None and horizontal["metres"] is None:  # an angle: geographic
+    if code is not None and angular_across(units) is not None:  # an angle: geographic
         return {MODEL_TYPE: GEOGRAPHIC, RASTER_TYPE: PIXEL_IS_AREA, GEOGRAPHIC_TYPE: code}
     if code is not None:  # (an 'EPSG:n' whose units are unknown, pyproj missing, is taken to be projected)
         return {MODEL_TYPE: PROJECTED, RASTER_TYPE: PIXEL_IS_AREA, PROJECTED_CS_TYPE: code, **linear_unit_keys(horizontal)}

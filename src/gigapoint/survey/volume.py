@@ -53,7 +53,7 @@ from ..io.crs import angular_across
 from ..io.filters import may_move, placed_in, placed_over, point_filter
 from ..io.polygon import ClipPolygon, check_simple, clip_polygon_of
 from ..lod.query import is_octree
-from ..lod.reader import cloud_crs, cloud_crs_units, cloud_units
+from ..lod.reader import cloud_crs_units
 from ..lod.store import OctreeCloud
 from ..lod.voxel_octree import VoxelOctree
 from ..render import Camera
@@ -426,7 +426,8 @@ def _measured(toe: ClipPolygon, source, octree, gsd, base, classes, drop_classes
             cloud = octree
         else:  # (an opened octree takes no filter of its own: the grid's footprint bounds what is read of it)
             cloud = open_survey(source, {**filters, "clip": None} if is_octree(source) else filters, "volume")
-        angle = angular_across(cloud_units(cloud))
+        crs, units = cloud_crs_units(cloud)
+        angle = angular_across(units)
         if angle is not None:  # (a pile's fill came out in square degrees times metres, labelled "cubic units")
             raise InputError(f"{label}: x and y in {angle['name']}s, not lengths: volume measures in lengths; reproject it to a projected CRS first (gigapoint convert --to-crs)")
         lo, hi = cloud.bounds
@@ -450,7 +451,7 @@ def _measured(toe: ClipPolygon, source, octree, gsd, base, classes, drop_classes
         _warn_if_empty(pile, where, fill_nodata)
         above_base[rows, cols] = above  # (piles that overlap: the later one's height where they do)
     dsm = np.where(np.logical_or.reduce(insides), heights, np.nan).astype(np.float32)
-    return Volume(tuple(piles), dsm, above_base, toe.polygons, camera, float(gsd), base, cloud_crs(cloud), cloud_units(cloud))
+    return Volume(tuple(piles), dsm, above_base, toe.polygons, camera, float(gsd), base, crs, units)
 
 
 __all__ = ["Pile", "Volume", "volume"]

@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from ..io import crs_units
+from ..io.crs import angular_across
 from ..io.polygon import crossing_problem
 from ..survey.volume import ring_area
 
@@ -47,7 +48,7 @@ def summary(points, units: dict | None = None, closed: bool = False) -> dict:
     z_in_xy_unit = v["metres"] / h["metres"] if h and v and h["metres"] and v["metres"] else 1.0
     horizontal, vertical = np.hypot(d[:, 0], d[:, 1]), d[:, 2]
     length = np.hypot(horizontal, vertical * z_in_xy_unit)
-    angular = h is not None and h["metres"] is None
+    angular = angular_across(units) is not None
 
     def lengths(a, b, c) -> dict:
         return {"length": None if angular else float(a), "horizontal": None if angular else float(b), "vertical": float(c)}

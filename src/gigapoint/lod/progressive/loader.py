@@ -34,7 +34,6 @@ from ...core.chunked import physical_memory
 from ...core.cloud import check_valid_count
 from ...core.threads import SMALL_BATCH
 from ...errors import (
-    EmptyCloudError,
     GigapointError,
     GigapointWarning,
     InputError,
@@ -362,7 +361,7 @@ def file_sources(paths, cut_off: list | None = None, point_filter: PointFilter |
         scales.append(head.get("scale"))
         sources.append((str(f), lambda f=f, reader=reader: filtered(read(reader.read_salvaged(f, min(DEFAULT_CHUNK_SIZE, DECODE_CHUNK))), f, point_filter)))
     if not sources:
-        raise EmptyCloudError(f"{files_label(files)}: no file holds any point")
+        check_valid_count(files_label(files), 0, 0, from_files=True)  # (raises: "no file holds any point")
     if point_filter is not None:  # the root cube of the points kept: a clip box of a corner of the survey is not drawn tiny
         lo, hi = point_filter.clipped_bounds(lo, hi)
     name = cloud_name(files)
