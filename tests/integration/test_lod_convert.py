@@ -979,6 +979,23 @@ def test_options_of_one_format_are_refused_for_another(tmp_path):
     assert convert(cloud, tmp_path / "w", layout="words", colors="rgba").points == 2_000  # words holds rgba: consistent
 
 
+@pytest.mark.parametrize("knob, value", [
+    ("partition_points", -5),  # every point its own partition: a conversion of hours for a large input
+    ("partition_points", 2.5),  # (taken as a budget of 2.5 points)
+    ("partition_points", "abc"),  # a TypeError inside the Job
+    ("upper_points", 0),  # (0 was taken as "derive it", -1 as a budget no group fits)
+    ("chunk_size", "x"),  # "open: chunk_size ...; the conversion stopped unfinished: run it again once that file is whole"
+])  # fmt: skip
+def test_a_bad_tuning_knob_is_refused_in_one_line_before_the_output_is_touched(demo_las, tmp_path, knob, value):
+    from gigapoint.errors import InputError
+
+    out = tmp_path / "oct"
+    with pytest.raises(InputError) as caught:
+        convert([demo_las], out, **{knob: value})
+    assert str(caught.value) == f"convert: {knob} must be an integer >= 1, got {value!r}"
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("fmt", ["gigapoint", "potree", "copc"])
 def test_a_las_file_with_a_negative_scale_converts_like_it_reads(demo_las, tmp_path, fmt):
     """A negative LAS scale (a mirrored axis; the reader takes it) was an internal "source scale

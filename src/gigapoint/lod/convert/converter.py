@@ -14,7 +14,7 @@ from pathlib import Path
 
 from ...core import pages
 from ...core.renderable import PointSource
-from ...errors import GigapointError, GigapointWarning, InputError, check_switch, type_text, warn
+from ...errors import GigapointError, GigapointWarning, InputError, check_switch, check_whole, type_text, warn
 from ...io import files_label, given_paths, with_subfolders
 from ...io._base import check_file, headers_once
 from ...io.colorize import open_colorization
@@ -362,6 +362,11 @@ def convert(
     if source_files is not None:  # a path given alone was read letter by letter, a missing file skipped: no CRS, no word
         source_files = [check_file(p) for p in given_paths(source_files, "convert", "source_files", empty_ok=True)]
     out = local_path(out, "the output", ConvertError)  # a file:// URL names a path
+    # the tuning knobs, before a folder is made: -5 partition points split down to single points
+    # (a run of hours), 'abc' was a TypeError and a bad chunk_size blamed the first input file
+    for knob, value in (("partition_points", partition_points), ("upper_points", upper_points), ("chunk_size", chunk_size)):
+        if value is not None:
+            check_whole("convert", knob, value, 1)
     if format is None and out is not None and str(out) != "" and is_point_file_name(out) and _are_paths(inputs):  # -o ground.laz: one plain point file
         octree_options = {"sampler": sampler, "memory_limit": memory_limit, "max_leaf": max_leaf, "layout": layout, "colors": colors,
                           "encoding": encoding, "client": client, "name": name, "partition_points": partition_points,
