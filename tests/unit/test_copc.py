@@ -499,6 +499,28 @@ def test_extra_bytes_descriptors_are_read_with_their_scale(tmp_path):
         point_dtype(7, 36 + 2, fields)
 
 
+def test_extra_bytes_array_descriptors_hold_their_place_in_the_record():
+    """Data types 11-20 are 2 values a point, 21-30 three (of type 1-10 of the same last digit):
+    a 2 x uint16 array is ``pair_0``, ``pair_1`` after its 4 bytes' place; an array named as a
+    standard field only holds its 3 x 8 bytes; 31 and up are one line naming the field."""
+    from gigapoint.lod.copc import EXTRA_BYTES_DTYPE, extra_fields, point_dtype
+
+    d = np.zeros(3, EXTRA_BYTES_DTYPE)
+    d[0]["data_type"], d[0]["name"] = 1, b"flag"
+    d[1]["data_type"], d[1]["name"] = 13, b"pair"  # 2 x unsigned short
+    d[1]["options"], d[1]["scale"], d[1]["offset"] = 8, [0.5, 4.0, 0.0], [9.0, 9.0, 9.0]  # scaled, offsets not set
+    d[2]["data_type"], d[2]["name"] = 30, b"gps_time"  # 3 x double, a standard attribute's name
+    fields = extra_fields([(b"LASF_Spec", 4, d.tobytes())])
+    assert [(f.attribute, f.scaling) for f in fields] == [("flag", None), ("pair_0", (0.5, 0.0)), ("pair_1", (4.0, 0.0)), ("_extra2", None)]
+    rec = np.zeros(2, point_dtype(7, 36 + 1 + 4 + 24, fields))
+    assert rec.dtype["pair"].shape == (2,) and rec.dtype["_extra2"].shape == (3,) and "extra_bytes" not in rec.dtype.names
+    rec["pair"] = [[10, 20], [30, 40]]
+    assert fields[1].values(rec).tolist() == [5.0, 15.0] and fields[2].values(rec).tolist() == [80.0, 160.0]
+    d[2]["data_type"] = 31
+    with pytest.raises(ValueError, match="field 'gps_time' has data type 31, which LAS 1.4 does not define"):
+        extra_fields([(b"LASF_Spec", 4, d.tobytes())])
+
+
 def test_a_scaled_float32_extra_bytes_field_is_scaled_in_float64():
     """A float32 extra bytes field with a scale came back float32 * scale, in float32 (NumPy 2
     keeps float32 times a Python float float32): 3e6 * 0.001 + 10 was 3010.000000 only to
@@ -513,6 +535,69 @@ def test_a_scaled_float32_extra_bytes_field_is_scaled_in_float64():
     got = field.values(rec)
     assert field.value_dtype == got.dtype == np.float64
     np.testing.assert_array_equal(got, rec["amplitude"].astype(np.float64) * 0.001 + 10.0)
+
+
+def _copc_with_arrays(path: Path, monkeypatch) -> Path:
+    """A COPC file whose points hold LAS extra-bytes arrays, described as laspy describes them
+    (data types 30 and 24 of LAS 1.4 R13, which R15 deprecates): ``normal`` (3 x float64),
+    ``slope`` (3 x int16, each value its own scale and offset) and ``height`` (float32: the
+    point's index, to match points up), in nodes 0-0-0-0 and its eight children."""
+    from gigapoint.lod import copc_write
+    from gigapoint.lod.copc import EXTRA_BYTES_RECORD, EXTRA_BYTES_USER_ID
+
+    params = [
+        laspy.ExtraBytesParams("normal", "3f8"),
+        laspy.ExtraBytesParams("slope", "3i2", scales=np.array([0.5, 0.25, 2.0]), offsets=np.array([1.0, -2.0, 3.0])),
+        laspy.ExtraBytesParams("height", "f4"),
+    ]
+    header = laspy.LasHeader(point_format=7, version="1.4")
+    header.add_extra_dims(params)
+    descriptors = header.vlrs.get("ExtraBytesVlr")[0].record_data_bytes()
+    monkeypatch.setattr(copc_write, "_extra_bytes_vlr", lambda extra: copc_write._vlr(EXTRA_BYTES_USER_ID, EXTRA_BYTES_RECORD, descriptors, "Extra Bytes"))
+    rng = np.random.default_rng(8)
+    keys = [1, *range(8, 16)]
+    mins, edges = key_cube(keys, [0.0, 0.0, 0.0], 64.0)
+    nodes, first = [], 0
+    for key, lo, edge in zip(keys, mins, edges):
+        n = 300
+        attrs = {
+            "normal": rng.normal(size=(n, 3)),
+            "slope": rng.integers(-30_000, 30_000, (n, 3)).astype(np.int16),
+            "height": np.arange(first, first + n, dtype=np.float32),
+        }
+        nodes.append((key, np.round(lo + rng.random((n, 3)) * edge, 2), None, attrs))
+        first += n
+    extra = {"normal": np.dtype(("<f8", (3,))), "slope": np.dtype(("<i2", (3,))), "height": np.dtype("<f4")}
+    write_copc(path, nodes, scale=[0.01] * 3, offset=[0.0] * 3, cube_min=[0.0] * 3, cube_edge=64.0, extra=extra)
+    return path
+
+
+def test_extra_bytes_arrays_read_as_the_las_reader_names_them(tmp_path, monkeypatch):
+    """A COPC file with LAS extra-bytes arrays (laspy's 3f8 normal, a scaled 3i2) was refused
+    ("data type 30, which LAS 1.4 R15 no longer defines"), while the LAS reader opened the same
+    file. Each value of an array is the attribute ``name_<k>``, as the LAS reader names it, with
+    laspy's values (its own scale and offset applied), by nodes and for the whole file."""
+    path = _copc_with_arrays(tmp_path / "arrays.copc.laz", monkeypatch)
+    las = laspy.read(path)
+    assert las.header.vlrs.get("ExtraBytesVlr")[0].extra_bytes_structs[0].data_type == 30  # (laspy's code for 3 doubles)
+    order = np.argsort(np.asarray(las.height))  # laspy's points in index order
+    want = {f"normal_{k}": np.asarray(las.normal)[order, k] for k in range(3)}
+    want |= {f"slope_{k}": np.asarray(las.slope)[order, k] for k in range(3)}
+    assert want["slope_1"][:3].tolist() == (np.asarray(las.points.array["slope"])[order[:3], 1] * 0.25 - 2.0).tolist()  # (scaled)
+    c = gp.open(path)
+    assert isinstance(c, CopcCloud) and {*want, "height"} <= set(c.attribute_names)
+    assert "normal" not in c.attribute_names
+    parts = [c.node_points(i) for i in np.flatnonzero(c.counts > 0).tolist()]
+    by_nodes = {a: np.concatenate([p[a] for p in parts]) for a in [*want, "height"]}
+    whole = c.to_memory().attributes
+    flat = gp.open(path, progressive=True)  # the LAS reader's names of the same file
+    flat.wait()
+    assert set(want) <= set(flat.attribute_names)
+    for got in (by_nodes, whole):
+        at = np.argsort(got["height"])
+        for a, v in want.items():
+            assert got[a].dtype == np.float64
+            np.testing.assert_array_equal(got[a][at], v, err_msg=a)
 
 
 @pytest.mark.parametrize("where", [0.3, 0.4, 0.5])

@@ -77,7 +77,7 @@ EXTRA_BYTES_RECORD = 4
 EXTRA_BYTES_DTYPE = np.dtype(
     [
         ("reserved", "<u2"),
-        ("data_type", "u1"),  # 1-10: the scalars of EXTRA_BYTES_TYPES; 0: ``options`` untyped bytes
+        ("data_type", "u1"),  # 1-10: the scalars of EXTRA_BYTES_TYPES, 11-30 arrays of them; 0: ``options`` untyped bytes
         ("options", "u1"),  # bit 0 no_data, 1 min, 2 max, 3 scale, 4 offset are set
         ("name", "S32"),
         ("unused", "V4"),
@@ -96,9 +96,13 @@ EVLR_WALK = 4  # past it, the most EVLR headers read over HTTP (a request each) 
 
 def point_dtype(point_format: int, record_length: int, extra: list[ExtraField] | None = None) -> np.dtype:
     """The record layout of point format 6/7/8 with ``record_length - base`` extra bytes: the
-    ``extra`` fields (extra_fields) first, any bytes they do not describe as ``extra_bytes``."""
+    ``extra`` fields (extra_fields) first, any bytes they do not describe as ``extra_bytes``.
+    The values of an array (``element`` 0 .. k-1, in order) are one field of k values."""
     base = POINT_DTYPES[point_format]
-    fields = [(f.name, f.dtype) for f in extra or []]
+    layout = {}
+    for f in extra or []:  # (an array's last value sets its length)
+        layout[f.name] = f.dtype if f.element is None else np.dtype((f.dtype, (f.element + 1,)))
+    fields = list(layout.items())
     named = sum(dt.itemsize for _, dt in fields)
     rest = record_length - base.itemsize - named
     if rest < 0:
@@ -113,10 +117,17 @@ class ExtraField:
     """One attribute stored in a point's extra bytes: ``name``, its stored ``dtype``, and the
     ``scale``/``offset`` its descriptor applies (value = stored * scale + offset), or None.
     ``element``: the place of its value in field ``name`` of several values a point (a LAS
-    extra-bytes array, as an EPT node holds one: ``dtype`` is then one value's), or None."""
+    extra-bytes array, as a COPC file or an EPT node may hold: ``dtype`` is then one value's), or
+    None."""
 
     def __init__(self, name: str, dtype, scale: float | None = None, offset: float | None = None, element: int | None = None):
         self.name, self.dtype, self.scale, self.offset, self.element = name, np.dtype(dtype), scale, offset, element
+
+    @property
+    def attribute(self) -> str:
+        """The attribute it is read as: ``name``, or ``name_<element>`` for a value of an array
+        (the LAS reader's names: io/las.py ``_attribute_fields``)."""
+        return self.name if self.element is None else f"{self.name}_{self.element}"
 
     @property
     def scaling(self) -> tuple[float, float] | None:
@@ -141,7 +152,9 @@ class ExtraField:
 
 def extra_fields(vlrs, point_format: int = 8) -> list[ExtraField]:
     """The named, typed fields of a LAS 1.4 file's Extra Bytes VLR (LASF_Spec 4), in record order.
-    Untyped bytes, and fields whose name is empty, repeated or a standard attribute's, become
+    An array of k values a point (data types 11-30: ``normal``, 3 x float64) is k fields
+    (``element`` 0 .. k-1), each scaled by its own scale and offset, as laspy reads it. Untyped
+    bytes, and fields whose name is empty, repeated or a standard attribute's, become
     ``_extra<i>`` fields that only hold their place."""
     for user, rec, data in vlrs:
         if user != EXTRA_BYTES_USER_ID or rec != EXTRA_BYTES_RECORD:
@@ -155,15 +168,20 @@ def extra_fields(vlrs, point_format: int = 8) -> list[ExtraField]:
             if kind == 0:
                 out.append(ExtraField(f"_extra{i}", f"V{max(opts, 1)}"))
                 continue
-            if kind not in EXTRA_BYTES_TYPES:
-                raise ValueError(f"its extra bytes field {name!r} has data type {kind}, which LAS 1.4 R15 no longer defines (1-10)")
-            if not name or name in seen or name in field_attributes(point_format):
-                out.append(ExtraField(f"_extra{i}", EXTRA_BYTES_TYPES[kind]))
+            if not 1 <= kind <= 30:
+                raise ValueError(f"its extra bytes field {name!r} has data type {kind}, which LAS 1.4 does not define (1-30)")
+            # 11-20: two values a point, 21-30: three, of the scalar type 1-10 of the same last
+            # digit (LAS 1.4 R13; R15 deprecates them, laspy still writes them and PDAL reads them)
+            scalar, count = EXTRA_BYTES_TYPES[(kind - 1) % 10 + 1], (kind - 1) // 10 + 1
+            names = [name] if count == 1 else [name, *(f"{name}_{k}" for k in range(count))]
+            if not name or seen.intersection(names) or field_attributes(point_format).intersection(names):
+                out.append(ExtraField(f"_extra{i}", scalar if count == 1 else np.dtype((scalar, (count,)))))
                 continue
-            seen.add(name)
-            scale = float(d["scale"][0]) if opts & 8 else None
-            offset = float(d["offset"][0]) if opts & 16 else None
-            out.append(ExtraField(name, EXTRA_BYTES_TYPES[kind], scale, offset))
+            seen.update(names)
+            for k in range(count):
+                scale = float(d["scale"][k]) if opts & 8 else None
+                offset = float(d["offset"][k]) if opts & 16 else None
+                out.append(ExtraField(name, scalar, scale, offset, element=None if count == 1 else k))
         return out
     return []
 
@@ -254,7 +272,7 @@ class CopcCloud(VoxelOctree):
         self.file_size = file_size
         self.point_format = fmt
         self._attr_dtypes = dict(ATTRIBUTE_DTYPES, **({"nir": np.dtype(np.uint16)} if fmt == 8 else {}))
-        self._attr_dtypes.update({f.name: f.value_dtype for f in self.extra})
+        self._attr_dtypes.update({f.attribute: f.value_dtype for f in self.extra})
         self._evlrs = (int(hdr["start_of_first_evlr"]), int(hdr["number_of_evlrs"]))
         crs = wkt_of(vlrs) or self._evlr_wkt(data_start)
         meta = {
@@ -446,7 +464,7 @@ class CopcCloud(VoxelOctree):
         if self.point_format == 8:
             attrs["nir"] = rec["nir"]
         for f in self.extra:
-            attrs[f.name] = f.values(rec)
+            attrs[f.attribute] = f.values(rec)
         return {"xyz": xyz, "rgb": rgb, "attributes": attrs}
 
 
