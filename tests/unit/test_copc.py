@@ -479,6 +479,29 @@ def test_attributes_without_a_las_field_go_to_extra_bytes(tmp_path):
         np.testing.assert_array_equal(np.concatenate([p[a] for p in parts])[order], attrs[a][want_order], err_msg=a)
 
 
+@pytest.mark.parametrize("out", ["x.copc.laz", "octree"])
+def test_an_attribute_of_several_values_a_point_is_converted_a_column_each(tmp_path, out):
+    """An NPZ's (N, 3) normals and an (N, 2) attribute were left out of an octree conversion
+    without a word (a COPC file, a gigapoint octree: neither had them). They are written a column
+    each, as the point-file writers write them (``nx``, ``ny``, ``nz``; ``pair_0``, ``pair_1``),
+    and read back under those names with their values."""
+    rng = np.random.default_rng(6)
+    n = 3000
+    normals, pair = rng.normal(size=(n, 3)), rng.integers(-(2**31), 2**31 - 1, (n, 2)).astype(np.int32)
+    np.savez(tmp_path / "pts.npz", xyz=rng.uniform(0, 50, (n, 3)), normals=normals, pair=pair, index=np.arange(n, dtype=np.uint32))
+    gp.convert(tmp_path / "pts.npz", tmp_path / out)
+    c = open_octree(tmp_path / out)
+    want = {"nx": normals[:, 0], "ny": normals[:, 1], "nz": normals[:, 2], "pair_0": pair[:, 0], "pair_1": pair[:, 1]}
+    assert {*want, "index"} <= set(c.attribute_names)
+    parts = [c.node_points(i) for i in np.flatnonzero(c.counts > 0).tolist()]
+    got = {a: np.concatenate([p[a] for p in parts]) for a in [*want, "index"]}
+    at = np.argsort(got["index"])
+    assert got["index"][at].tolist() == list(range(n))
+    for a, v in want.items():
+        assert got[a].dtype == v.dtype
+        np.testing.assert_array_equal(got[a][at], v, err_msg=a)
+
+
 def test_extra_bytes_descriptors_are_read_with_their_scale(tmp_path):
     """A COPC written elsewhere with a scaled extra bytes field: gigapoint applies scale and offset."""
     from gigapoint.lod.copc import EXTRA_BYTES_DTYPE, extra_fields, point_dtype

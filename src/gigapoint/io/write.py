@@ -61,7 +61,7 @@ def write_points(
     written = 0
 
     def flat_chunks() -> Iterable[PointChunk]:
-        return (dataclasses.replace(chunk, attributes=_one_value_a_point(chunk.attributes)) for chunk in chunks())
+        return (dataclasses.replace(chunk, attributes=one_value_a_point(chunk.attributes)) for chunk in chunks())
 
     def write(tmp: Path) -> None:
         nonlocal written
@@ -79,11 +79,12 @@ def write_points(
     return written
 
 
-def _one_value_a_point(attributes: dict) -> dict:
+def one_value_a_point(attributes: dict) -> dict:
     """``attributes`` with one of k values a point (an NPZ's (N, 3) ``normals``) as k columns:
     ``nx``, ``ny``, ``nz`` for normals (as PLY files and the renderer name them), else ``name_0``
     .. (as the LAS reader names an extra bytes array's). A file's fields hold one value a point:
-    such an attribute was numpy's "could not broadcast input array" traceback. A column whose
+    such an attribute was numpy's "could not broadcast input array" traceback; an octree
+    conversion (lod/convert/read.py ``valid_chunk``) left it out without a word. A column whose
     name an attribute has already is left to that attribute."""
     out = {a: v for a, v in attributes.items() if v.ndim == 1}
     for a, v in attributes.items():

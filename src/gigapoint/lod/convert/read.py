@@ -19,7 +19,7 @@ from ...io import files_label, read_chunks, scan_angles_differ
 from ...io.filters import filtered
 from ...io.las import with_scan_angle
 from ...io.registry import reader_for
-from ...io.write import file_has_color
+from ...io.write import file_has_color, one_value_a_point
 from ..preview import PreviewSampler, preview_points
 from .prefetch import prefetch
 from .spill import encode_xyz, las_xyz_code, load_raw_chunk, one_value, save_raw_chunk
@@ -82,7 +82,8 @@ def constant_value(entry: list) -> np.generic:
 
 
 def valid_chunk(chunk) -> tuple:
-    """A chunk's valid points: (xyz, rgba as u32, {attribute: values} of its 1-D attributes,
+    """A chunk's valid points: (xyz, rgba as u32, {attribute: values} of its attributes, one of
+    several values a point a column each (io.write ``one_value_a_point``),
     {attribute: dtype str}, invalid points, bounds min, bounds max; the bounds are None without
     a valid point)."""
     n_in = len(chunk)
@@ -90,9 +91,10 @@ def valid_chunk(chunk) -> tuple:
     n_valid = int(np.count_nonzero(valid))
     keep = slice(None) if n_valid == n_in else valid
     xyz = chunk.xyz[keep]
-    names = {a: v.dtype.str for a, v in chunk.attributes.items() if v.ndim == 1}
+    attributes = one_value_a_point(chunk.attributes)  # (N, 3) normals as nx, ny, nz, as a point file gets them
+    names = {a: v.dtype.str for a, v in attributes.items()}
     rgba = np.ascontiguousarray(chunk.rgba[keep]).view(np.uint32).reshape(-1)
-    kept = {a: np.ascontiguousarray(chunk.attributes[a][keep]) for a in names}
+    kept = {a: np.ascontiguousarray(attributes[a][keep]) for a in names}
     return xyz, rgba, kept, names, n_in - n_valid, (c_lo if n_valid else None), (c_hi if n_valid else None)
 
 
