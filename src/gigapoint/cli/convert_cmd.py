@@ -42,7 +42,7 @@ def convert(
         "or one plain .las, .laz or .ply file of every point read (merged, filtered, thinned: no octree)."
     ),
     sampler: str | None = typer.Option(None, help="grid (first point per cell of a 128³ grid per node; the default) or poisson (minimum distance)."),
-    memory_limit: str | None = typer.Option(None, "--memory-limit", help="Peak memory, e.g. 4G or 512M (default: a quarter of the RAM; each of N local Dask workers': half the RAM among them, at most a quarter each; with --dask, the same from the workers' own memory). An input that fits is converted in memory; a larger one is spilled to OUTPUT/.partial in partitions."),
+    memory_limit: str | None = typer.Option(None, "--memory-limit", help="Peak memory, e.g. 4G or 512M; kept from about 512M up (below it the process itself, ~200 MB, goes past a small limit: 64M peaked near 300 MB) (default: a quarter of the RAM; each of N local Dask workers': half the RAM among them, at most a quarter each; with --dask, the same from the workers' own memory). An input that fits is converted in memory; a larger one is spilled to OUTPUT/.partial in partitions."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing converted cloud in OUTPUT."),
     format: str | None = typer.Option(
         None,
