@@ -15,10 +15,7 @@ from gigapoint.io import http as gphttp
 
 pytest.importorskip("httpx")
 
-
-def _frame(cloud, **kw):
-    cam = gp.Camera.fit(cloud.bounds, view="iso", width=120, height=90)
-    return gp.render_frame(cloud, cam, gp.RenderSettings(backend="cpu", **kw))
+from test_copc_http import RangeServer, _frame, quick  # noqa: F401 - quick: a fixture
 
 SECRET = "http://reader:hunter2@127.0.0.1:9/{name}?sig=SIG%2Fsecret&se=2031"
 SHOWN = "http://reader:***@127.0.0.1:9/{name}?sig=***&se=***"
@@ -64,20 +61,12 @@ def test_a_url_among_others_is_named_with_its_two_slashes(tmp_path, capsys):
 
 @pytest.fixture
 def server(tmp_path):
-    from test_copc_http import RangeServer
-
     rng = np.random.default_rng(3)
     xyz = rng.random((3_000, 3)) * (50, 40, 10) + (1000, 2000, 30)
     gp.convert(gp.from_arrays(xyz), tmp_path / "scan.copc.laz", format="copc", max_leaf=500)
     s = RangeServer(tmp_path)
     yield s
     s.close()
-
-
-@pytest.fixture
-def quick(monkeypatch):
-    monkeypatch.setattr(gphttp, "TIMEOUT", 0.5)
-    monkeypatch.setattr(gphttp, "RETRIES", 1)
 
 
 @pytest.mark.timeout(60)
