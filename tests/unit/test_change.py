@@ -110,16 +110,20 @@ def test_surveys_that_share_no_pixel_are_refused():
 # --- the command: LAS files in a CRS ---------------------------------------------------------------
 
 EPSG_32610_KEYS = [(1024, 0, 1, 1), (3072, 0, 1, 32610)]  # LAS 1.2 GeoTIFF keys: projected, UTM 10N
+EPSG_4326_KEYS = [(1024, 0, 1, 2), (2048, 0, 1, 4326)]  # geographic, WGS 84: x and y in degrees
+DEGREES_SCALE = (1e-7, 1e-7, 0.01)  # x and y to ~1 cm in degrees
+DEGREES_ORIGIN = (-123.0, 44.0)  # Oregon, in longitude and latitude
 
 
-def write_las(path, xyz, keys=EPSG_32610_KEYS, wkt=None):
-    """A LAS 1.2 file of ``xyz`` (from ORIGIN) naming its CRS by GeoTIFF ``keys``, or by ``wkt`` (a WKT VLR) where given."""
+def write_las(path, xyz, keys=EPSG_32610_KEYS, wkt=None, scale=(0.01, 0.01, 0.01), origin=ORIGIN):
+    """A LAS 1.2 file of ``xyz`` (from ``origin``, stored at ``scale``) naming its CRS by GeoTIFF
+    ``keys``, or by ``wkt`` (a WKT VLR) where given."""
     header = laspy.LasHeader(point_format=0, version="1.2")
-    header.scales, header.offsets = np.array([0.01] * 3), np.array([*ORIGIN, 0.0])
+    header.scales, header.offsets = np.array(scale), np.array([*origin, 0.0])
     data = struct.pack("<4H", 1, 1, 0, len(keys)) + b"".join(struct.pack("<4H", *k) for k in keys)
     header.vlrs.append(WktCoordinateSystemVlr(wkt) if wkt else laspy.VLR("LASF_Projection", 34735, "GeoKeyDirectoryTag", data))
     las = laspy.LasData(header)
-    las.x, las.y, las.z = (xyz + (*ORIGIN, 0.0)).T
+    las.x, las.y, las.z = (xyz + (*origin, 0.0)).T
     las.write(str(path))
     return path
 
@@ -505,15 +509,9 @@ def test_surveys_in_degrees_are_refused_not_measured_in_square_degrees(tmp_path)
     command printed 'fill 0.000 cubic units', 'compared 0.00 square units'), though it rose."""
     paths = []
     for name, rise in (("before.las", 0.0), ("after.las", 2.0)):
-        header = laspy.LasHeader(point_format=0, version="1.2")
-        header.scales, header.offsets = np.array([1e-7, 1e-7, 0.01]), np.array([-123.0, 44.0, 0.0])
-        header.vlrs.append(laspy.VLR("LASF_Projection", 34735, "GeoKeyDirectoryTag", struct.pack("<12H", 1, 1, 0, 2, 1024, 0, 1, 2, 2048, 0, 1, 4326)))
-        xyz = plane() * (0.00002, 0.00002, 1.0) + (-123.0, 44.0, 0.0)  # 0.0008 x 0.0008 degrees
-        xyz[(xyz[:, 0] < -122.9996) & (xyz[:, 1] < 44.0004), 2] += rise
-        las = laspy.LasData(header)
-        las.x, las.y, las.z = xyz.T
-        las.write(str(tmp_path / name))
-        paths.append(tmp_path / name)
+        xyz = plane() * (0.00002, 0.00002, 1.0)  # 0.0008 x 0.0008 degrees from DEGREES_ORIGIN
+        xyz[(xyz[:, 0] < 0.0004) & (xyz[:, 1] < 0.0004), 2] += rise
+        paths.append(write_las(tmp_path / name, xyz, keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=DEGREES_ORIGIN))
     with pytest.raises(InputError) as caught:
         gp.change(*paths, 0.00002)
     assert str(caught.value) == (

@@ -494,19 +494,11 @@ def test_a_lon_lat_toe_naming_no_crs_over_a_projected_survey_is_refused_as_a_rea
 def test_a_survey_in_degrees_is_refused_not_measured_in_square_degrees(tmp_path):
     """A pile in WGS 84 (GeoTIFF keys: geographic, EPSG:4326): its fill came out in square degrees
     times metres (~1e-9) under the label of cubic units: refused in one line, as change refuses."""
-    import struct
+    from test_change import DEGREES_ORIGIN, DEGREES_SCALE, EPSG_4326_KEYS, write_las  # (tests/unit is on sys.path)
 
-    import laspy
-
-    header = laspy.LasHeader(point_format=0, version="1.2")
-    header.scales, header.offsets = np.array([1e-7, 1e-7, 0.01]), np.array([-123.0, 44.0, 0.0])
-    header.vlrs.append(laspy.VLR("LASF_Projection", 34735, "GeoKeyDirectoryTag", struct.pack("<12H", 1, 1, 0, 2, 1024, 0, 1, 2, 2048, 0, 1, 4326)))
     g = np.arange(40) * 0.00002
-    x, y = np.meshgrid(g - 123.0, g + 44.0)
-    las = laspy.LasData(header)
-    las.x, las.y, las.z = x.ravel(), y.ravel(), np.full(x.size, 2.0)
-    path = tmp_path / "pile.las"
-    las.write(str(path))
+    x, y = np.meshgrid(g, g)  # 0.0008 x 0.0008 degrees from DEGREES_ORIGIN (-123, 44)
+    path = write_las(tmp_path / "pile.las", np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=DEGREES_ORIGIN)
     toe = "POLYGON ((-122.9998 44.0002, -122.9994 44.0002, -122.9994 44.0006, -122.9998 44.0006, -122.9998 44.0002))"
     with pytest.raises(InputError) as caught:
         gp.volume(path, toe, 0.00002, base=0.0)
