@@ -7,7 +7,6 @@ import importlib
 import sys
 from pathlib import Path
 
-import laspy
 import numpy as np
 import pytest
 
@@ -38,16 +37,12 @@ def test_ab_base_draws_with_its_own_code(scripts, tmp_path):
     assert importlib.import_module("gigapoint_base.lod").convert.__module__.startswith("gigapoint_base.")
 
 
-def test_gis_dtm_grid_is_gigapoints_top_down_grid(scripts, tmp_path):
+def test_gis_dtm_grid_is_gigapoints_top_down_grid(scripts, tmp_path, points_las_writer):
     """PDAL's writers.gdal is given gigapoint's grid: Camera.top_down's, margins included (a
     ground point on a cell edge, x = 6, puts a column before it)."""
     import bench_gis
 
-    las = tmp_path / "g.las"
-    header = laspy.LasHeader(point_format=3, version="1.2")
-    header.scales, header.offsets = [0.001] * 3, [0.0] * 3
-    data = laspy.LasData(header)
-    data.x, data.y, data.z = np.array([6.0, 10.5, 50.0]), np.array([6.0, 10.5, 50.0]), np.array([1.0, 2.0, 3.0])
-    data.classification = np.array([2, 2, 1], np.uint8)  # the class 1 point is not drawn
-    data.write(str(las))
+    xyz = np.array([[6.0, 6.0, 1.0], [10.5, 10.5, 2.0], [50.0, 50.0, 3.0]])
+    classes = np.array([2, 2, 1], np.uint8)  # the class 1 point is not drawn
+    las = points_las_writer(tmp_path / "g.las", xyz, np.zeros((3, 3), np.uint16), classification=classes)
     assert bench_gis.dtm_grid(las, 1.0) == (5.0, 5.0, 6, 6)
