@@ -62,11 +62,9 @@ def main(argv=None) -> int:
     sizes = [int(s) for s in args.sizes.split(",")]
     xyz, rgb, _ = demo_arrays(args.points, seed=5)
     for fill in (_fill_octree, _fill_live):  # numba's compile: not counted
-        fill(xyz[:20_000], rgb[:20_000], 5_000)
-        fill(xyz[:20_000], rgb[:20_000], 20_000)
         for size in sizes:  # the smallest batches take paths of their own (add of 50 points compiled 6 s in)
-            for small_batch in (threads.SMALL_BATCH, 0):
-                _timed(fill, xyz[: 4 * size], rgb[: 4 * size], size, small_batch)
+            for small_batch in (threads.SMALL_BATCH, 0):  # two calls of each size: at 100 000, 4 were a whole timed round
+                _timed(fill, xyz[: 2 * size], rgb[: 2 * size], size, small_batch)
     idle = "take up work at once" if threads.threads_awake() else "sleep"
     print(f"{cpu_model()}; numba {numba.threading_layer()} layer, {numba.get_num_threads()} threads whose idle ones {idle}; SMALL_BATCH {threads.SMALL_BATCH:,}")
     for name, fill in (("ProgressiveOctree.add", _fill_octree), ("LiveCloud.push", _fill_live)):
