@@ -253,6 +253,27 @@ def test_a_paused_stream_counts_and_frames_only_what_has_not_decayed():
     assert ", 0 frames, 0 live points" in live.hud()
 
 
+def test_float_colours_keep_the_range_of_the_first_coloured_frame():
+    """Each push judged its float colours by their own range: in a 0..1 stream, a frame that
+    overshot to 1.025 was read as 0..255 (almost black beside its neighbours), and in a 0..255
+    stream a dark frame (all <= 1) as 0..1 (almost white). A cloud decides once, as a file."""
+    xyz = frame(0)[0]
+
+    def pushed_colour(live, rgb):
+        live.push(xyz, rgb=np.tile(rgb, (len(xyz), 1)))
+        return live.frame_points([live.frames[-1]])[1][0].tolist()
+
+    unit = LiveCloud()
+    assert pushed_colour(unit, (0.5, 0.5, 1.0)) == [128, 128, 255, 255]
+    assert pushed_colour(unit, (0.5, 0.5, 1.025)) == [128, 128, 255, 255]  # clipped (alone: [0, 0, 1, 255])
+    assert pushed_colour(unit, np.array([200, 100, 50])) == [200, 100, 50, 255]  # integers keep their own range
+    bytes_ = LiveCloud()
+    assert pushed_colour(bytes_, (200.0, 100.0, 50.0)) == [200, 100, 50, 255]
+    assert pushed_colour(bytes_, (0.9, 1.0, 1.0)) == [1, 1, 1, 255]  # a dark 0..255 frame (alone: [230, 255, 255, 255])
+    with pytest.raises(InputError, match=r"^live: push: colors must be 0..1, 0..255 or 0..65535 \(16 bits\), got -0.5$"):
+        pushed_colour(unit, (0.5, -0.5, 1.0))  # still refused
+
+
 def test_without_decay_no_alpha_is_given():
     live = LiveCloud()
     live.push(*frame(0))

@@ -118,6 +118,29 @@ def test_float_and_16_bit_rgb_are_judged_as_pushed_colours():
         depth_to_points(d, K, rgb=rgb)
 
 
+def test_a_depth_streams_float_colours_keep_the_range_of_its_first_frame():
+    """Each frame's float image was judged by its own range: in a 0..1 stream, a frame whose max
+    went just over 1.0 came out almost black ([0, 0, 1] for (0.5, 0.5, 1.025)), and in a 0..255
+    stream a dark frame (all <= 1) almost white. The stream's ``scratch`` keeps the first frame's
+    decision, as a file's range (push_depth: one per producer thread)."""
+    d = np.ones((4, 5), np.float32)
+
+    def colour(rgb, scratch):
+        return depth_to_points(d, K, rgb=np.broadcast_to(rgb, (4, 5, 3)), scratch=scratch)[2][0].tolist()
+
+    unit: dict = {}
+    assert colour((0.5, 0.5, 1.0), unit) == [128, 128, 255, 255]
+    assert colour((0.5, 0.5, 1.025), unit) == [128, 128, 255, 255]  # clipped, as before the range was judged
+    assert colour((0.5, 0.5, 1.025), None) == [0, 0, 1, 255]  # a frame alone: 0..255
+    bytes_: dict = {}
+    assert colour((200.0, 100.0, 50.0), bytes_) == [200, 100, 50, 255]
+    assert colour((0.9, 1.0, 1.0), bytes_) == [1, 1, 1, 255]
+    live = LiveCloud()
+    for rgb in ((0.5, 0.5, 1.0), (0.5, 0.5, 1.025)):
+        live.push_depth(d, K, rgb=np.broadcast_to(rgb, (4, 5, 3)))
+    assert np.unique(live.frame_points()[1], axis=0).tolist() == [[128, 128, 255, 255]]
+
+
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [

@@ -212,11 +212,16 @@ def points_for(xyz, where: str) -> np.ndarray:
     return a
 
 
-def colors_for(rgb, n: int, where: str) -> np.ndarray:
+def colors_for(rgb, n: int, where: str, scalers: dict | None = None) -> np.ndarray:
     """Colors given with ``n`` points (from_arrays, a frame pushed, points added) as uint8 RGBA
     (n, 4), their range judged as a file's (``ColorScaler``: floats of 0..255 were all white);
     a one-line InputError starting with ``where`` when they are not (N, 3|4) colors of 0..65535
-    or not ``n`` rows."""
+    or not ``n`` rows.
+
+    ``scalers``: a stream's ColorScalers (a dict kept from one frame to the next, filled here;
+    one for float colours, one for integer ones), so its range is decided on its first frame as
+    a file's is: judged frame by frame, a 0..1 frame that overshot to 1.025 was read as 0..255,
+    all but black beside its neighbours. None: these colours are judged alone."""
     try:
         try:
             rgb = np.asarray(rgb)
@@ -231,7 +236,8 @@ def colors_for(rgb, n: int, where: str) -> np.ndarray:
             if not (0 <= lo and hi <= 65535):  # (NaN fails both)
                 bad = rgb.reshape(-1)[np.flatnonzero(~((rgb >= 0) & (rgb <= 65535)))[0]].item()
                 raise ValueError(f"colors must be 0..1, 0..255 or 0..65535 (16 bits), got {bad!r}")
-        rgba = ColorScaler()(rgb)
+        scaler = ColorScaler() if scalers is None else scalers.setdefault("float" if rgb.dtype.kind == "f" else "integer", ColorScaler())
+        rgba = scaler(rgb)
     except ValueError as exc:
         raise InputError(f"{where}: {exc}") from None
     if len(rgba) != n:

@@ -216,7 +216,8 @@ class LiveCloud:
         self.lock = LiveLock(released=self._commit_pending)
         self._pending: deque = deque()  # (frame in core's layout, FrameInfo) batched, not yet in the ring
         self._pending_lock = threading.Lock()
-        self._depth_scratch = threading.local()  # push_depth's reused arrays, one set per producer thread
+        self._depth_scratch = threading.local()  # push_depth's reused arrays and colour range, one set per producer thread
+        self._push_colors: dict = {}  # push's colour range (colors_for's scalers): decided on the first frame with colours, as a file's
         self._attr_dtypes: dict | None = None  # fixed by the first frame (as the octree's attributes)
         self.buffers_: LiveBuffers | None = None
         self._free: list[int] = []
@@ -375,7 +376,8 @@ class LiveCloud:
     # ------------------------------------------------------------------ pushing frames
     def push(self, xyz, rgb=None, pose=None, time: float | None = None, normals=None, **attributes) -> int:
         """Add a frame: xyz (N, 3) in sensor coordinates (``pose``: 4x4 sensor -> world; None:
-        world coordinates), colors (N, 3|4) uint8/uint16/float, optional (N, 3) normals in sensor
+        world coordinates), colors (N, 3|4) uint8/uint16/float (their range decided on the first
+        frame with colours, as a file's: ``colors_for``), optional (N, 3) normals in sensor
         coordinates and 1-D attributes of length N. Points with NaN/inf coordinates are dropped.
         Returns the frame's sequence number. A bad frame raises a one-line InputError and leaves
         the ring as it was."""
@@ -421,7 +423,7 @@ class LiveCloud:
     def _push_points(self, xyz_in, rgb, pose, time, normals, attributes, pushed_at, world_normals, pose_tag, ordered) -> int:
         name, n = self.name, len(xyz_in)
         p = parse_pose(pose, f"{name}: push") if pose_tag is None else pose_tag
-        rgba = colors_for(rgb, n, f"{name}: push") if rgb is not None else None
+        rgba = colors_for(rgb, n, f"{name}: push", self._push_colors) if rgb is not None else None
         attrs = {}
         for a, v in attributes.items():
             v = _array(v, f"{name}: push: attribute {a!r}")

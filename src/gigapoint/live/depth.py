@@ -248,13 +248,15 @@ def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, ma
 
     ``scratch``: a dict that keeps the positions, pixel indices and the kernel's metres from one
     call to the next (LiveCloud.push_depth: one per producer thread): the xyz and pixel index
-    returned are then views of its arrays, valid until the next call with it. Made anew for
+    returned are then views of its arrays, valid until the next call with it. It also keeps the
+    stream's colour range (``colors_for``'s scalers), decided on its first frame with colours. Made anew for
     every frame they are ~7 MB of fresh pages while the caller still holds the last frame's:
     1.6 ms a frame on the Intel Xeon VM, as long as the kernel (docs/benchmarks.md)."""
     d, scale = check_depth(depth, depth_scale, name)
     fx, fy, cx, cy = parse_intrinsics(intrinsics, name)
     p = parse_pose(pose, name)
     h, w = d.shape
+    scratch = {} if scratch is None else scratch
     rgb8 = np.empty((0, 4), np.uint8)
     if rgb is not None:
         from ..core.chunk import colors_for
@@ -269,13 +271,15 @@ def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, ma
             raise InputError(f"{name}: rgb must hold numbers (uint8, uint16 or float colors), got dtype {c.dtype}")
         rgb8 = c.reshape(h * w, c.shape[2])
         # 8-bit RGB(A) read as it is; others judged as push's colours (to_rgba8 took every float
-        # as 0..1: a float image of 0..255 was all white, NaN and -3 black without a word)
-        rgb8 = np.ascontiguousarray(rgb8) if rgb8.dtype == np.uint8 else colors_for(rgb8, h * w, name)
+        # as 0..1: a float image of 0..255 was all white, NaN and -3 black without a word), their
+        # range once per stream: judged per frame, one overshooting 1.0 a little flashed black
+        if rgb8.dtype != np.uint8:
+            rgb8 = colors_for(rgb8, h * w, name, scratch.setdefault("color_scalers", {}))
+        rgb8 = np.ascontiguousarray(rgb8)
     if max_depth is not None and not (is_real(max_depth) and max_depth > 0 or max_depth == np.inf):  # -1: "no valid pixel"
         raise InputError(f"{name}: max_depth must be a positive number of metres or None, got {max_depth!r}")
     limit = np.inf if max_depth is None else float(max_depth)
     n = h * w
-    scratch = {} if scratch is None else scratch
 
     def reused(key, shape, dtype):
         a = scratch.get(key)
