@@ -253,6 +253,26 @@ def test_a_paused_stream_counts_and_frames_only_what_has_not_decayed():
     assert ", 0 frames, 0 live points" in live.hud()
 
 
+def test_the_facts_asked_every_frame_count_no_frame_on_the_lock():
+    """n_points, len, n_frames, bounds, repr and the HUD took the frame's lock: asked by every
+    rendered frame and the viewer's watcher up to 120 times a second, each counted as a frame
+    drawn (writers took their turn behind them, builders saw frames being drawn)."""
+    now = [0.0]
+    live = LiveCloud(decay=1.0, clock=lambda: now[0])
+    live.push(np.full((1000, 3), -50.0))
+    now[0] = 0.8
+    live.push(np.full((2000, 3), 7.0))
+    now[0] = 1.5  # the first frame has faded out: the queries still drop it
+    assert live.lock.builder_turn(0) == (0, False)  # (frames drawn so far, whether frames are being drawn)
+    assert live.n_points == 2000 and len(live) == 2000 and live.n_frames == 1
+    assert live.bounds[0].tolist() == [7.0, 7.0, 7.0]
+    assert repr(live) == "LiveCloud('live', 1 of 100 frames, 2,000 live points)"
+    assert ", 1 frames, 2,000 live points" in live.hud()
+    assert live.lock.builder_turn(0) == (0, False)
+    assert len(live.frame_points()[0]) == 2000  # reads the ring's points as a frame does: counted
+    assert live.lock.builder_turn(0) == (1, True)
+
+
 def test_float_colours_keep_the_range_of_the_first_coloured_frame():
     """Each push judged its float colours by their own range: in a 0..1 stream, a frame that
     overshot to 1.025 was read as 0..255 (almost black beside its neighbours), and in a 0..255

@@ -262,11 +262,15 @@ class LiveCloud:
     load_progress = 1.0
 
     @contextmanager
-    def _as_drawn_now(self):
+    def _as_drawn_now(self, reading: bool = False):
         """The lock held, frames past their ``decay`` gone: what a frame drawn now would show. (Decay
         drops frames only at a push, a drawn frame or here: a paused stream's count, bounds and
-        HUD held a frame that had faded out until the next of them.)"""
-        with self.lock.reading():
+        HUD held a frame that had faded out until the next of them.) The plain lock, which counts
+        no frame: the facts (n_points, bounds, repr, the HUD) are asked by every rendered frame
+        and the viewer's watcher up to 120 times a second, and as frames they made writers wait
+        for a frame's turn and ``_commit_pending`` stop early. ``reading``: the frame's lock, for
+        what reads the ring's points as a frame does (snapshot, frame_points)."""
+        with self.lock.reading() if reading else self.lock:
             self._drop_decayed()
             yield
 
@@ -776,7 +780,7 @@ class LiveCloud:
         positions), or of ``frames``, FrameInfo of ``cloud.frames`` still in it: a frame that has
         left the ring is a one-line InputError (its chunks hold newer frames' points: they were
         given as its own)."""
-        with self._as_drawn_now():
+        with self._as_drawn_now(reading=True):
             frames = list(self.frames) if frames is None else self._frames_in_ring(frames)
             if not frames:
                 return np.empty((0, 3)), np.empty((0, 4), np.uint8), {}
@@ -821,7 +825,7 @@ class LiveCloud:
         self.warnings.issue()  # (its player's thread's, in the user's: as save and close)
         self._check_open("snapshot")
         check_switch("normals", normals, f"{self.name}: snapshot")  # "no" kept the normals
-        with self._as_drawn_now():  # frames that faded out since the last push or drawn frame were frozen
+        with self._as_drawn_now(reading=True):  # frames that faded out since the last push or drawn frame were frozen
             buf = self.buffers_
             slots = [s for f in self.frames for s in f.chunks]
             runs = self._runs(self.frames) if slots else None
