@@ -2714,3 +2714,15 @@ def test_the_automatic_intensity_range_is_the_points_held():
     f = gp.render_frame(o, cam, EXACT.replace(color_mode="intensity"))
     grey = f.image[f.visibility != EMPTY_PIXEL][:, 0]
     assert grey.min() == 0 and grey.max() == 255
+
+
+def test_added_float_colours_keep_the_range_of_the_first_colours_added():
+    """Each add() judged its float colours by their own range (as a live push did): a 0..1 batch
+    that overshot to 1.025 was read as 0..255, almost black beside the batch before it."""
+    o = ProgressiveOctree("t")
+    xyz = np.random.default_rng(2).random((200, 3)) * 10
+    o.add(xyz[:100], np.tile((0.5, 0.5, 1.0), (100, 1)))
+    o.add(xyz[100:], np.tile((0.5, 0.5, 1.025), (100, 1)))
+    colors = np.unique(_leaf_points(o)["color"].view(np.uint8).reshape(-1, 4), axis=0)
+    assert colors.tolist() == [[128, 128, 255, 255]]  # (the second batch alone: [0, 0, 1, 255])
+    o.close()

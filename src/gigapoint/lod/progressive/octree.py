@@ -623,6 +623,7 @@ class ProgressiveOctree:
         self.shown_points = 0  # ``points`` as of the last finished insertion: what n_points says (its insertion takes a split leaf's points out, then back in)
         self.skipped = 0  # invalid points left out (NaN, inf, beyond ±1e12)
         self.points_per_class = np.zeros(256, np.int64)  # of the points added, by LAS class (``class_facts``)
+        self._added_colors: dict = {}  # add()'s colour range (colors_for's scalers): decided on its first colours, as a file's and a live push's
         self.closed = False  # close() frees everything; add() then refuses (it would start a new tree)
         self.spilled = 0  # points taken out of split leaves to be inserted again, in all
         self.lo = np.full(3, np.inf)
@@ -1129,7 +1130,7 @@ class ProgressiveOctree:
         if rgb is None:
             rgba = np.full(n, np.array([200, 200, 200, 255], np.uint8).view(np.uint32)[0], np.uint32)
         else:
-            rgba = colors_for(rgb, n, self.name).view(np.uint32).reshape(-1)
+            rgba = colors_for(rgb, n, self.name, self._added_colors).view(np.uint32).reshape(-1)
         attrs = {}
         for a, v in attributes.items():
             v = np.asarray(v)
