@@ -38,6 +38,22 @@ def count_text(n) -> str:
     return f"{n:,.0f}" if n < 1e15 else f"{n:.3g}"
 
 
+def count_or_inf(count) -> int | float:
+    """``count()``: cells, tiles, pixels or levels counted from an extent over a size (with
+    ``math.floor``), or math.inf where that division overflows (a subnormal size, 5e-324:
+    ``math.floor(inf)`` was an OverflowError, an internal error): more than any limit, so that the
+    caller's one-line too-large refusal says it (``count_text(math.inf)``: 'inf')."""
+    import math
+
+    import numpy as np
+
+    with np.errstate(over="ignore", invalid="ignore"):  # (numpy's extents: no 'overflow encountered' warning besides)
+        try:
+            return count()
+        except (OverflowError, ValueError):  # (ValueError: math.floor(nan), an extent of inf - inf)
+            return math.inf
+
+
 def number_text(value) -> str:
     """A number as a message says it: compact and exact ('2e+12', '0', '0.25': a bound such as
     2e12 was spelled 2000000000000.0); '%g' where it reads back as the same number, else the

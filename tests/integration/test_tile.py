@@ -160,6 +160,8 @@ def test_a_chunks_tiles_are_grouped_as_numpys_unique_over_rows_groups_them(low, 
         ({"size": 0.01}, "tile: size=0.01: 117,747 x 56,271 tiles over the extent of {}, above 1,000,000; take larger tiles"),
         # the count was said in 306 digits
         ({"size": 1e-300}, "tile: size=1e-300: 1.18e+303 x 5.63e+302 tiles over the extent of {}, above 1,000,000; take larger tiles"),
+        # a subnormal size overflowed the division: an internal OverflowError
+        ({"size": 5e-324}, "tile: size=5e-324: inf x inf tiles over the extent of {}, above 1,000,000; take larger tiles"),
         # an internal OverflowError as points were placed (and tile -1 would be named by its 301-digit corner)
         ({"size": 1e300}, "tile: size=1e+300: a tile's edge must be at most 2e+12, the span points can have"),
     ],

@@ -146,6 +146,8 @@ def test_bad_inputs_are_one_line_errors(tmp_path, town):
         gp.classify_ground(path, tmp_path / "a.laz", cell=0.001)
     with pytest.raises(InputError, match=r"town.las: cells of 1e-300 make a 2e\+302 x 2e\+302 raster over the files' extent"):  # (not in 303 digits)
         gp.classify_ground(path, tmp_path / "a.laz", cell=1e-300)
+    with pytest.raises(InputError, match=r"town.las: cells of 4.94066e-324 make a inf x inf raster over the files' extent"):  # (overflowed: an OverflowError)
+        gp.classify_ground(path, tmp_path / "a.laz", cell=5e-324)
     (tmp_path / "there.laz").write_bytes(b"mine")
     with pytest.raises(InputError, match="there.laz: already exists; pass overwrite=True"):
         gp.classify_ground(path, tmp_path / "there.laz")

@@ -61,15 +61,21 @@ def home(tmp_path):
         # (said well before: pinned)
         (["convert", "{in}/pic.laz", "-o", "{out}/o"], "{in}/pic.laz: not a LAS/LAZ file (starts with b'\\x89PNG', expected b'LASF')"),
         (["convert", "{in}/small.las", "-o", "{out}/o.las", "--thin", "nan"], "convert: --thin nan: the cells' edge is a number above 0, in the cloud's units"),
+        # (numpy's "warning: overflow encountered in divide" came first)
+        (["convert", "{in}/small.las", "-o", "{out}/o.las", "--thin", "5e-324"],
+         "convert: --thin 5e-324: cells too small for the data's extent ({in}/small.las: cells 0 to inf from the origin)"),
         (["convert", "{in}/small.las", "-o", "{out}/o", "--workers", "0"], "--workers: needs at least 1 worker, got 0"),
         (["convert", "{in}/small.las", "-o", "{out}/o.las", "--clip", "10,10,5,5"], "convert: --clip 10,10,5,5: xmin 10 is above xmax 5"),
         (["convert", "{in}/small.las", "-o", "{out}/o.las", "--classes", "999"], "convert: --classes 999: class numbers are integers from 0 to 255 (LAS classes), got 999"),
         (["tile", "{in}/small.las", "-o", "{out}/t", "--size", "nan"], "tile: --size nan: a tile's edge is a number above 0, in the files' units"),
         (["tile", "{in}/small.las", "-o", "{out}/t", "--size", "1e-12"],
          "tile: --size 1e-12: 99,920,000,000,001 x 99,940,000,000,001 tiles over the extent of {in}/small.las, above 1,000,000; take larger tiles"),
+        # a subnormal size overflowed the division: numpy's warning, then "internal error: OverflowError"
+        (["tile", "{in}/small.las", "-o", "{out}/t", "--size", "5e-324"], "tile: --size 4.94066e-324: inf x inf tiles over the extent of {in}/small.las, above 1,000,000; take larger tiles"),
     ],
     ids=["info-bound-1e300", "tile-bound-1e300", "convert-bound-nan", "tile-bound-nan", "convert-polygon-png",
-         "convert-png-as-laz", "convert-thin-nan", "convert-workers-0", "convert-clip-inverted", "convert-classes-999", "tile-size-nan", "tile-size-1e-12"],
+         "convert-png-as-laz", "convert-thin-nan", "convert-thin-5e-324", "convert-workers-0", "convert-clip-inverted", "convert-classes-999", "tile-size-nan", "tile-size-1e-12",
+         "tile-size-5e-324"],
 )  # fmt: skip
 def test_bad_input_is_one_line_and_leaves_no_output(cli, inputs, tmp_path, args, problem):
     refused_in_one_line(cli, inputs, tmp_path, args, problem)

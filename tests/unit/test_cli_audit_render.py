@@ -61,6 +61,9 @@ def inputs(tmp_path_factory):
         # the image's size was said in 300 digits
         (["render", "{in}/small.las", "-o", "{out}/x.png", "--gsd", "1e-300"],
          "{in}/small.las: --gsd 1e-300 makes a 1e+302x5e+301 image, over 16,384 pixels a side: a gsd of 0.00611 or more fits"),
+        # a subnormal gsd overflowed the division: "internal error: OverflowError"
+        (["render", "{in}/small.las", "-o", "{out}/x.png", "--gsd", "5e-324"],
+         "{in}/small.las: --gsd 4.94066e-324 makes a infxinf image, over 16,384 pixels a side: a gsd of 0.00611 or more fits"),
         # a count of points and of terabytes in 100 digits each
         (["bench", "-n", "1e99", "--json", "{out}/b.json"], "--points: the demo scene has at most 4,000,000,000 points, got '1e99'"),
         # a grid step said as '5000.0', a number given as 5000 (errors.number_text)
@@ -97,7 +100,7 @@ def inputs(tmp_path_factory):
         (["demo", "-n", "0", "-o", "{out}/d.png"], "--points must be between 1 and 4,000,000,000, got 0"),
         (["view", "--demo", "0"], "--demo: point count must be in 1..2e9, got 0"),
     ],
-    ids=["camera-eye-1e300", "camera-target-1e13", "camera-distance-1e300", "fps-1e-9", "gsd-1e200", "gsd-1e-300", "bench-points-1e99", "demo-scale-5000",
+    ids=["camera-eye-1e300", "camera-target-1e13", "camera-distance-1e300", "fps-1e-9", "gsd-1e200", "gsd-1e-300", "gsd-5e-324", "bench-points-1e99", "demo-scale-5000",
          "fov-0", "fov-nan", "width-0", "height-1e9", "eye-is-target", "eye-nan", "up-zero", "ipd-nan", "ipd-1e13", "convergence-1e300", "turntable-0", "point-size-0",
          "point-budget-0", "gsd-nan", "missing", "zero-bytes", "png-as-laz", "all-nan", "no-rows", "unknown-suffix", "missing-no-folder-made", "through-a-file",
          "output-is-input", "demo-points-0", "view-demo-0"],

@@ -97,10 +97,13 @@ def refused_in_one_line(cli, inputs, tmp_path, args, problem) -> None:
         (["classify", "{in}/small.las", "-o", "{out}/c.txt", "--noise"], "{out}/c.txt: classify writes a .las, .laz or .ply file"),
         (["classify", "{in}/small.las", "-o", "{out}/c.txt", "--ground"], "{out}/c.txt: classify writes a .las, .laz or .ply file"),
         (["classify", "{in}/small.las", "-o", "{out}/c.txt", "--height-above-ground"], "{out}/c.txt: classify writes a .las, .laz or .ply file"),
+        # a subnormal cell overflowed the raster's division: numpy's warning, then "internal error: OverflowError"
+        (["classify", "{in}/small.las", "-o", "{out}/c.las", "--ground", "--cell", "5e-324"],
+         "{in}/small.las: cells of 4.94066e-324 make a inf x inf raster over the files' extent, more than 120,000,000 cells: give a larger cell, or classify tiles of it (gigapoint tile)"),
     ],
     ids=["volume-polygon-1e300", "convert-polygon-1e300", "volume-gsd-over-polygon-box", "change-apart", "section-line-1e300", "section-width-1e300",
          "convert-from-crs-alone", "tile-from-crs-alone", "classify-ground-octree", "classify-noise-octree", "tile-octree", "convert-octree",
-         "classify-noise-txt", "classify-ground-txt", "classify-heights-txt"],
+         "classify-noise-txt", "classify-ground-txt", "classify-heights-txt", "classify-ground-cell-5e-324"],
 )  # fmt: skip
 def test_bad_input_is_one_line_and_leaves_no_output(cli, inputs, tmp_path, args, problem):
     refused_in_one_line(cli, inputs, tmp_path, args, problem)

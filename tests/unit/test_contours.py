@@ -101,6 +101,8 @@ def test_too_many_levels_is_a_one_line_error():
     assert len(contour_lines(PLANE, WORLD_FILE, 0.1)) == 710  # 34.5 .. 105.4: under the limit
     with pytest.raises(GigapointError, match=r"^contour_lines: interval 1e-300 gives 7.1e\+301 levels over 71; "):  # (not in 302 digits)
         contour_lines(PLANE, WORLD_FILE, 1e-300)
+    with pytest.raises(GigapointError, match=r"^contour_lines: interval 4.94066e-324 gives inf levels over 71; "):  # (overflowed: an OverflowError)
+        contour_lines(PLANE, WORLD_FILE, 5e-324)
 
 
 def test_drawn_lines_cover_the_pixels_they_run_through_and_index_lines_are_twice_as_wide():

@@ -112,6 +112,11 @@ SECTION_CLOUD = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 1.0]])
          "section: vertical_exaggeration must be a number > 0 (1: heights at the scale of distances), got -1e+13"),
         (lambda: gp.section(gp.from_arrays(SECTION_CLOUD), (0, 0, 10, 0), 2).camera(scale=1e300),  # (not in 300 digits: errors.count_text)
          "section: scale 1e+300 makes a 1e+301x1e+300 image, over 16,384 pixels a side: a scale of 1.64e+03 or less fits"),
+        # (pixels of 1e-308 overflowed the division: an OverflowError)
+        (lambda: gp.section(gp.from_arrays(SECTION_CLOUD), (0, 0, 10, 0), 2).camera(scale=1e308),
+         "section: scale 1e+308 makes a infx1e+308 image, over 16,384 pixels a side: a scale of 1.64e+03 or less fits"),
+        (lambda: gp.orthophoto(gp.from_arrays(SECTION_CLOUD), 5e-324),
+         "orthophoto: gsd: gsd 4.94066e-324 makes a infx2 image, over 16,384 pixels a side: a gsd of 0.000611 or more fits"),
         # (the filters checked under orthophoto's name, as section's: gp.open's said "open: classes='x'")
         (lambda: gp.orthophoto("m.laz", 1.0, classes="x"), "orthophoto: classes='x': class numbers are integers from 0 to 255 (LAS classes)"),
         (lambda: gp.orthophoto("m.laz", 1.0, clip=(1, 0, 0, 1)), "orthophoto: clip=(1, 0, 0, 1): xmin 1 is above xmax 0"),
@@ -125,3 +130,16 @@ def test_survey_errors_spell_the_numbers_given_compactly(call, message):
     with pytest.raises(GigapointError) as err:
         call()
     assert str(err.value) == message
+
+
+def test_a_count_whose_division_overflows_is_infinite_and_said_so():
+    """``errors.count_or_inf``: the count of a size that overflows its division (5e-324) is more
+    than any limit, not an OverflowError; ``count_text`` says it 'inf', a huge one in 3 digits."""
+    import math
+
+    from gigapoint.errors import count_or_inf, count_text
+
+    assert count_or_inf(lambda: math.floor(100.0 / 0.5) + 1) == 201
+    assert count_or_inf(lambda: math.floor(np.float64(100.0) / 5e-324) + 1) == math.inf  # (numpy's overflow warning too: pytest's -W error finds it)
+    assert count_or_inf(lambda: math.floor(1e308 * 10 - 1e308 * 10)) == math.inf  # (inf - inf: nan)
+    assert [count_text(n) for n in (2000, 1.18e303, math.inf)] == ["2,000", "1.18e+303", "inf"]

@@ -45,7 +45,8 @@ class CellKeys:
     def size_for(self, lo, hi, where: str) -> None:
         """Key bits and corner cell for points within ``lo``..``hi`` (read from ``where``): each
         axis as many bits as its extent in cells needs, the bits left shared out to widen every axis both ways."""
-        lo_cell, hi_cell = np.floor(np.asarray(lo, np.float64) / self.edges), np.floor(np.asarray(hi, np.float64) / self.edges)
+        with np.errstate(over="ignore"):  # (a subnormal cell's division: inf, refused just below)
+            lo_cell, hi_cell = np.floor(np.asarray(lo, np.float64) / self.edges), np.floor(np.asarray(hi, np.float64) / self.edges)
         if not np.all(np.abs(np.concatenate([lo_cell, hi_cell])) < _EXACT):
             self.too_small(f"{where}: cells {lo_cell.min():.3g} to {hi_cell.max():.3g} from the origin")
         lo_cell, cells = lo_cell.astype(np.int64), (hi_cell - lo_cell + 1).astype(np.int64)

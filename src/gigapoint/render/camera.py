@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..core.coords import MAX_SPAN
-from ..errors import CameraError, count_text, is_real, number_text, numbers_text
+from ..errors import CameraError, count_or_inf, count_text, is_real, number_text, numbers_text
 
 if TYPE_CHECKING:
     from ..core.selection import View
@@ -343,14 +343,13 @@ class Camera:
         # point of the box on an image edge (a max y on the grid: py = -5e-9) fell outside, so each
         # edge of the box lies at least EDGE_MARGIN_PX inside the image (a row or column more there).
         margin = EDGE_MARGIN_PX
-        first_col, top_row = math.floor(lo[0] / gsd - margin), math.ceil(hi[1] / gsd + margin)
-        width = math.floor(hi[0] / gsd + margin) - first_col + 1
-        height = top_row - math.ceil(lo[1] / gsd - margin) + 1
+        width = count_or_inf(lambda: math.floor(hi[0] / gsd + margin) - math.floor(lo[0] / gsd - margin) + 1)
+        height = count_or_inf(lambda: math.ceil(hi[1] / gsd + margin) - math.ceil(lo[1] / gsd - margin) + 1)
         if max(width, height) > MAX_IMAGE_SIDE:
             # (a side of extent / gsd pixels takes at most that + 2: the margins' rows may add one)
             fits = _round_up(float(np.max(hi[:2] - lo[:2])) / (MAX_IMAGE_SIDE - 2))
             raise CameraError(f"gsd {number_text(gsd)} makes a {count_text(width)}x{count_text(height)} image, over {MAX_IMAGE_SIDE:,} pixels a side: a gsd of {fits:g} or more fits")
-        left, top = first_col * gsd, top_row * gsd
+        left, top = math.floor(lo[0] / gsd - margin) * gsd, math.ceil(hi[1] / gsd + margin) * gsd
         # the eye just above the highest point: depths then span little more than the cloud's
         # heights, so float32 depths give heights (``heights``) as finely as they can
         eye_z = hi[2] + max(hi[2] - lo[2], gsd)

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_bytes
-from ..errors import GigapointError, InputError, count_text, is_real
+from ..errors import GigapointError, InputError, count_or_inf, count_text, is_real
 from ..io import horizontal_epsg
 
 INDEX_EVERY = 5  # every 5th line an index contour
@@ -84,13 +84,13 @@ def check_base(where: str, base) -> float:
 def contour_levels(z_min: float, z_max: float, interval: float, base: float = 0.0, where: str = "contour_lines", unit: str = "") -> np.ndarray:
     """The whole steps k (int64) whose levels ``base + k * interval`` lie in ``z_min..z_max``;
     more than MAX_LEVELS a one-line InputError (``unit``: the heights' unit symbol, for it)."""
-    first, last = math.ceil((z_min - base) / interval), math.floor((z_max - base) / interval)
-    count = last - first + 1
+    count = count_or_inf(lambda: math.floor((z_max - base) / interval) - math.ceil((z_min - base) / interval) + 1)
     if count > MAX_LEVELS:
         raise InputError(
             f"{where}: interval {interval:g}{unit} gives {count_text(count)} levels over {z_max - z_min:g}{unit}; give a larger one (at most {MAX_LEVELS:,} levels)"
         )
-    return np.arange(first, last + 1, dtype=np.int64)
+    first = math.ceil((z_min - base) / interval)
+    return np.arange(first, first + count, dtype=np.int64)
 
 
 def contour_lines(heights, world_file, interval, base=0.0, where: str = "contour_lines", unit: str = "") -> list[ContourLine]:

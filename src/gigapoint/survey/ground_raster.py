@@ -107,7 +107,7 @@ def files_grid(inputs, cell: float, progress) -> RasterGrid:
     grid = RasterGrid.over(bounds[0], bounds[1], cell)
     if grid.cells > MAX_CELLS:
         raise InputError(
-            f"{inputs.label}: cells of {cell:g} make a {count_text(grid.shape[1])} x {count_text(grid.shape[0])} raster over the files' extent, more than "
+            f"{inputs.label}: cells of {number_text(cell)} make a {count_text(grid.shape[1])} x {count_text(grid.shape[0])} raster over the files' extent, more than "
             f"{MAX_CELLS:,} cells: give a larger cell, or classify tiles of it (gigapoint tile)"
         )
     return grid

@@ -31,6 +31,8 @@ from typing import Literal
 import numpy as np
 from numba import njit
 
+from ..errors import count_or_inf
+
 
 @dataclass(frozen=True)
 class RasterGrid:
@@ -47,8 +49,9 @@ class RasterGrid:
     @classmethod
     def over(cls, lo, hi, cell: float) -> RasterGrid:
         """The grid over the box ``lo``..``hi`` (x, y, ...) from its lowest corner, rows northwards:
-        floor(extent / cell) + 1 cells each way, so that its highest x and y lie inside the last."""
-        shape = tuple(math.floor((h - low) / cell) + 1 for low, h in zip(lo[1::-1], hi[1::-1]))  # (rows: y, columns: x)
+        floor(extent / cell) + 1 cells each way, so that its highest x and y lie inside the last
+        (math.inf where a tiny cell overflows the division: the caller refuses it as too many)."""
+        shape = tuple(count_or_inf(lambda low=low, h=h: math.floor((h - low) / cell) + 1) for low, h in zip(lo[1::-1], hi[1::-1]))  # (rows: y, columns: x)
         return cls((lo[0], lo[1]), cell, shape, rows_north=True, measured_from="corner")
 
     @classmethod

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
-from ..errors import CameraError, InputError, count_text, is_real, number_text, numbers_text
+from ..errors import CameraError, InputError, count_or_inf, count_text, is_real, number_text, numbers_text
 from ..io.crs import crs_units
 from ..io.filters import PointFilter, along_and_across, corridor_of, point_filter
 from ..io.paths import given_paths
@@ -106,7 +106,8 @@ class Section:
 
         def needed(pixel: float) -> tuple[int, int]:
             """Pixels across and up that hold every point at ``pixel`` units a pixel, borders included."""
-            return (math.floor(self.length / pixel) + 1 + 2 * BORDER, math.ceil(z_hi / pixel) - math.floor(z_lo / pixel) + 1 + 2 * BORDER)
+            return (count_or_inf(lambda: math.floor(self.length / pixel) + 1 + 2 * BORDER),
+                    count_or_inf(lambda: math.ceil(z_hi / pixel) - math.floor(z_lo / pixel) + 1 + 2 * BORDER))
 
         if scale is not None:
             if not (is_real(scale) and scale > 0):

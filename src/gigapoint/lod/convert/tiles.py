@@ -65,7 +65,7 @@ from ...core.chunk import PointChunk
 from ...core.chunked import ReadOnce
 from ...core.cloud import check_valid_count
 from ...core.coords import MAX_SPAN
-from ...errors import GigapointWarning, InputError, check_switch, count_text, counted, is_real, warn, warnings_kept
+from ...errors import GigapointWarning, InputError, check_switch, count_or_inf, count_text, counted, is_real, warn, warnings_kept
 from ...io import given_paths, with_subfolders
 from ...io.colorize import open_colorization
 from ...io.filters import point_filter
@@ -390,7 +390,7 @@ def _extent_checked(points, size: float, where: str):
 
 def _check_tile_count(lo, hi, size: float, where: str) -> None:
     """More than MAX_TILES tiles over x and y of ``lo``..``hi``: a one-line InputError."""
-    across = [max(0, math.floor(hi[a] / size) - math.floor(lo[a] / size) + 1) for a in (0, 1)]  # (a clip beside the data: 0)
+    across = [max(0, count_or_inf(lambda a=a: math.floor(hi[a] / size) - math.floor(lo[a] / size) + 1)) for a in (0, 1)]  # (a clip beside the data: 0)
     if across[0] * across[1] > MAX_TILES:  # (count_text: a count past 1e15 as 1.2e+305, not in 306 digits)
         raise InputError(f"tile: size={size!r}: {count_text(across[0])} x {count_text(across[1])} tiles over the extent of {where}, above {MAX_TILES:,}; take larger tiles")
 
