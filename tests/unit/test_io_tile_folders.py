@@ -273,6 +273,31 @@ def test_a_glob_pattern_matching_folders_reads_each_as_a_folder_named(tmp_path, 
     assert rc == 0 and out.startswith(f"{tmp_path / 'oct'}: 155 points in ") and err == f"warning: {city / 'ept'}: {octree}\n"
 
 
+@pytest.mark.parametrize(
+    ("where", "call"),
+    [
+        ("open", lambda pattern, out: gp.open(pattern)),
+        ("convert", lambda pattern, out: gp.convert(pattern, out / "oct")),
+        ("convert", lambda pattern, out: gp.convert(pattern, out / "c.las")),
+        ("tile", lambda pattern, out: gp.tile(pattern, out / "tiles", 100)),
+        ("classify_ground", lambda pattern, out: gp.classify_ground(pattern, out / "g.las")),
+    ],
+    ids=["open", "convert", "convert-las", "tile", "classify-ground"],
+)
+def test_a_pattern_matching_only_octrees_is_said_under_the_operation_with_why(tmp_path, where, call):
+    """Each octree a pattern matches is skipped with a warning; where nothing else is left, every
+    operation said gp.open's "open: no file given", and not why."""
+    from gigapoint.errors import InputError
+
+    for name in ("ept_a", "ept_b"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "ept.json").write_text("{}")
+    with pytest.raises(InputError) as caught, pytest.warns(GigapointWarning) as warned:
+        call(str(tmp_path / "ept_*"), tmp_path)
+    assert str(caught.value) == f"{where}: no point file given: only octrees matched (ept_a, ept_b), not read with point files (open one alone)"
+    assert [str(w.message) for w in warned] == [f"{tmp_path / o}: an octree, not read with the point files around it (open it alone)" for o in ("ept_a", "ept_b")]
+
+
 def test_recursive_is_an_option_of_render_view_and_convert(tmp_path, cli, monkeypatch):
     from gigapoint.errors import InputError
     from gigapoint.viewer.server import ViewerServer

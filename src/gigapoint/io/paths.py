@@ -210,19 +210,23 @@ def _folder_files(folder: Path, recursive: bool) -> tuple[list[Path], list[Path]
 READ_SUBFOLDERS = "read every file below it with --recursive (recursive=True in Python), or name them"
 
 
-def expand_paths(paths: Iterable, recursive: bool = False) -> list[Path]:
+def expand_paths(paths: Iterable, recursive: bool = False, where: str = "open") -> list[Path]:
     """Files named (paths, ``file://`` URLs, ``~/...``, glob patterns: ``pattern_matches``), with
     each directory replaced by its supported files sorted by name (``recursive``: also those of
     its subfolders, depth first, but hidden ones and octrees; an octree a pattern matches is left
     out too); a file named twice (or also through its folder) is read once, with
     a warning: its points were merged twice into one cloud or octree. Subfolders holding point
     files are not read otherwise (a folder's raw/ and classified/ copies of its tiles would be
-    read twice): said in the error of a folder with no file of its own, else in a warning."""
+    read twice): said in the error of a folder with no file of its own, else in a warning.
+    Patterns matching only octrees leave no file: a one-line InputError under ``where`` (the
+    operation's name) saying so."""
     out: list[Path] = []
+    skipped: list[Path] = []  # octrees patterns matched, not read
     for p, matched in _named(given_paths(paths)):  # (5 among them: a TypeError from pathlib)
         p = _local(p)
         if matched and p.is_dir() and is_dataset_folder(p):  # ("tiles/*": a conversion's output beside the tiles)
             _octree_skipped(p)
+            skipped.append(p)
         elif p.is_dir():  # (once an operation, headers_once: each of its steps expands the paths again; a walk below is not cheap)
             found, below, octrees = read_once("recursive folder" if recursive else "folder", p, lambda p=p: _folder_files(p, recursive))
             if below and not found:
@@ -238,8 +242,10 @@ def expand_paths(paths: Iterable, recursive: bool = False) -> list[Path]:
             out.extend(found)
         else:
             out.append(check_file(p))
+    if skipped and not out:  # (said "open: no file given" whatever the operation, and not why)
+        raise InputError(f"{where}: no point file given: only octrees matched ({file_names(skipped)}), not read with point files (open one alone)")
     if not out:
-        raise InputError("open: no file given")
+        raise InputError(f"{where}: no file given")
     seen: set = set()
     once = []
     for f in out:

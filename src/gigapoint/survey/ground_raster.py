@@ -70,7 +70,7 @@ def point_files(source, out, overwrite: bool, chunk_size: int | None, where: str
         raise InputError(f"{out}: {where} writes a .las, .laz or .ply file")
     check_point_file_output(out, overwrite)
     sources = given_paths(source, where, "source")  # (5 among them: "classify_ground: source[0]: ...", not a TypeError or a nameless "inputs[0]")
-    return out, PointFiles(sources, out, chunk_size, ply=out.suffix.lower() == ".ply")
+    return out, PointFiles(sources, out, chunk_size, ply=out.suffix.lower() == ".ply", where=where)
 
 
 def progress_bar(shown: bool):

@@ -60,7 +60,7 @@ def input_paths(inputs) -> list[Path] | None:
         raise InputError("convert: no input given")
     inputs = [local_path(p, "an input") for p in inputs]
     refuse_octrees(inputs)
-    return expand_paths(inputs)
+    return expand_paths(inputs, where="convert")
 
 
 def refuse_octrees(inputs) -> None:

@@ -169,7 +169,7 @@ def tile(
     _check_output_folder(out, overwrite)
     inputs = with_subfolders(given) if recursive else given
     colorization = open_colorization(colorize, colorize_bits, "tile")  # a raster that cannot be read: said before a point is
-    files = PointFiles(inputs, out, chunk_size, reprojection=reprojection, colorization=colorization)
+    files = PointFiles(inputs, out, chunk_size, reprojection=reprojection, colorization=colorization, where="tile")
     keep = files.points_filter(keep)  # (a clip polygon moved into the CRS the points are tiled in)
     name = name or (Path(files.files[0]).stem if len(files.files) == 1 else out.resolve().name)
     bounds = files.headers_bounds()

@@ -71,15 +71,15 @@ class PointFiles:
     ``reprojection``: their points moved into its CRS as they are read; the grid, the CRS records and
     the headers' bounds are then the target CRS's (each file's CRS checked before a point is read).
     ``colorization``: the points coloured from its raster (``colored``), whose CRS is checked
-    against theirs (the output's) here."""
+    against theirs (the output's) here. ``where``: the operation, as its errors name it."""
 
     def __init__(
         self, inputs, out: Path, chunk_size: int | None, ply: bool = False, reprojection: Reprojection | None = None,
-        colorization: Colorization | None = None,
+        colorization: Colorization | None = None, where: str = "convert",
     ):
         inputs = [inputs] if isinstance(inputs, (str, os.PathLike)) else inputs
         refuse_octrees(p for p in inputs if isinstance(p, (str, os.PathLike)))  # (an octree folder's .npy arrays were read as points)
-        self.files = expand_paths(inputs)
+        self.files = expand_paths(inputs, where=where)
         if any(same_file(out, f) for f in self.files):
             raise InputError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
         self.label = files_label(self.files)
