@@ -19,6 +19,7 @@ from .paths import (
     expand_paths,
     files_label,
     scan_angles_differ,
+    skipped_message,
 )
 from .registry import reader_for
 
@@ -105,7 +106,7 @@ def open_cloud(
                 if not several:
                     raise
                 empty.append(f)
-                warn(f"{f}: holds no points, skipped", GigapointWarning)
+                warn(skipped_message(f), GigapointWarning)
         if passing is not None:  # not "no valid points": the filter left none
             passing.check_passed(files_label(files))
 
