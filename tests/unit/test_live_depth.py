@@ -121,12 +121,12 @@ def test_float_and_16_bit_rgb_are_judged_as_pushed_colours():
 def test_a_depth_streams_float_colours_keep_the_range_of_its_first_frame():
     """Each frame's float image was judged by its own range: in a 0..1 stream, a frame whose max
     went just over 1.0 came out almost black ([0, 0, 1] for (0.5, 0.5, 1.025)), and in a 0..255
-    stream a dark frame (all <= 1) almost white. The stream's ``scratch`` keeps the first frame's
-    decision, as a file's range (push_depth: one per producer thread)."""
+    stream a dark frame (all <= 1) almost white. The stream's ``scalers`` keep the first frame's
+    decision, as a file's range (push_depth: the cloud's, as push's)."""
     d = np.ones((4, 5), np.float32)
 
-    def colour(rgb, scratch):
-        return depth_to_points(d, K, rgb=np.broadcast_to(rgb, (4, 5, 3)), scratch=scratch)[2][0].tolist()
+    def colour(rgb, scalers):
+        return depth_to_points(d, K, rgb=np.broadcast_to(rgb, (4, 5, 3)), scalers=scalers)[2][0].tolist()
 
     unit: dict = {}
     assert colour((0.5, 0.5, 1.0), unit) == [128, 128, 255, 255]

@@ -403,7 +403,8 @@ class LiveCloud:
             where = f"{self.name}: push_depth"  # (several clouds: which one refused, as push says)
             p = parse_pose(pose, where)
             scratch = self._depth_scratch.__dict__  # this producer thread's (the frame keeps no view of its arrays)
-            xyz, nrm, rgba, _ = depth_to_points(depth, intrinsics, p, rgb, depth_scale, max_depth, where, z_order=True, scratch=scratch)
+            xyz, nrm, rgba, _ = depth_to_points(depth, intrinsics, p, rgb, depth_scale, max_depth, where, z_order=True, scratch=scratch,
+                                                  scalers=self._push_colors)  # (the cloud's range, as push's: a replay, one thread, colours as live)
             seq = self._push(xyz, rgba, None, time, None, {}, pushed_at, world_normals=nrm, pose_tag=p, ordered=True)
         except GigapointError as exc:
             self.refused(exc)

@@ -238,7 +238,7 @@ def tile_order(h: int, w: int, z_order: bool) -> tuple[np.ndarray, int, int]:
 
 
 def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, max_depth=None, name: str = "push_depth", z_order: bool = False,
-                    scratch: dict | None = None):  # fmt: skip
+                    scratch: dict | None = None, scalers: dict | None = None):  # fmt: skip
     """(xyz float64 (N, 3) world, normals float32 (N, 3) world, rgba uint8 (N, 4) or None,
     pixel index int64 (N,)) of the valid pixels of an (H, W) depth image, in row-major order, or
     with ``z_order`` tile by tile in the image's Z order (``tile_order``): consecutive points are
@@ -248,8 +248,9 @@ def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, ma
 
     ``scratch``: a dict that keeps the positions, pixel indices and the kernel's metres from one
     call to the next (LiveCloud.push_depth: one per producer thread): the xyz and pixel index
-    returned are then views of its arrays, valid until the next call with it. It also keeps the
-    stream's colour range (``colors_for``'s scalers), decided on its first frame with colours. Made anew for
+    returned are then views of its arrays, valid until the next call with it. ``scalers``: the
+    stream's colour range (``colors_for``'s), decided on its first frame with colours
+    (LiveCloud.push_depth: the cloud's, as push's; None: this frame's alone). Made anew for
     every frame they are ~7 MB of fresh pages while the caller still holds the last frame's:
     1.6 ms a frame on the Intel Xeon VM, as long as the kernel (docs/benchmarks.md)."""
     d, scale = check_depth(depth, depth_scale, name)
@@ -274,7 +275,7 @@ def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, ma
         # as 0..1: a float image of 0..255 was all white, NaN and -3 black without a word), their
         # range once per stream: judged per frame, one overshooting 1.0 a little flashed black
         if rgb8.dtype != np.uint8:
-            rgb8 = colors_for(rgb8, h * w, name, scratch.setdefault("color_scalers", {}))
+            rgb8 = colors_for(rgb8, h * w, name, scalers)
         rgb8 = np.ascontiguousarray(rgb8)
     if max_depth is not None and not (is_real(max_depth) and max_depth > 0 or max_depth == np.inf):  # -1: "no valid pixel"
         raise InputError(f"{name}: max_depth must be a positive number of metres or None, got {max_depth!r}")
