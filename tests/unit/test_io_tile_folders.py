@@ -298,33 +298,6 @@ def test_a_pattern_matching_only_octrees_is_said_under_the_operation_with_why(tm
     assert [str(w.message) for w in warned] == [f"{tmp_path / o}: an octree, not read with the point files around it (open it alone)" for o in ("ept_a", "ept_b")]
 
 
-@pytest.mark.parametrize("empty", ["c.xyz", "c.txt", "c.ply", "c.npy", "c.laz"])
-@pytest.mark.parametrize(
-    "call",
-    [
-        lambda ins, out: gp.open(*ins).n_points,
-        lambda ins, out: gp.open(*ins, progressive=True).wait() and 50,
-        lambda ins, out: gp.convert(ins, out / "oct").points,
-        lambda ins, out: gp.convert(ins, out / "c.las").points,
-        lambda ins, out: sum(laspy.read(f).header.point_count for f in gp.tile(ins, out / "tiles", 100).tiles),
-    ],
-    ids=["open", "open-progressive", "convert", "convert-las", "tile"],
-)
-def test_a_0_byte_file_among_several_is_skipped_as_an_empty_las_file_is(tmp_path, empty, call):
-    """A 0-byte text, PLY or NPY file among several: every reader's header refused it ("file is
-    empty (0 bytes)"), and gp.open, convert and tile stopped where an empty LAS tile is skipped
-    with a warning; alone it is still that one-line error."""
-    (tmp_path / "a.xyz").write_text("".join(f"{i} {i} 0\n" for i in range(50)))
-    (tmp_path / empty).write_bytes(b"")
-    with pytest.warns(GigapointWarning) as warned:
-        assert call([tmp_path / "a.xyz", tmp_path / empty], tmp_path) == 50
-    assert [str(w.message) for w in warned if "holds no points" in str(w.message)] == [f"{tmp_path / empty}: holds no points, skipped"]
-    (tmp_path / "alone").mkdir()
-    with pytest.raises(EmptyCloudError) as caught:
-        call([tmp_path / empty], tmp_path / "alone")
-    assert str(caught.value) == f"{tmp_path / empty}: file is empty (0 bytes)"
-
-
 def test_recursive_is_an_option_of_render_view_and_convert(tmp_path, cli, monkeypatch):
     from gigapoint.errors import InputError
     from gigapoint.viewer.server import ViewerServer

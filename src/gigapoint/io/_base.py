@@ -134,9 +134,8 @@ def fail(path: Path | str, problem: object, cls: type[InputError] = InputError) 
     return cls(f"{path}: {one_line(problem)}")
 
 
-def check_file(path: Path | str, empty_ok: bool = False) -> Path:
-    """The path as a Path, after checking it names a readable, non-empty regular file
-    (``empty_ok``: or an empty one, for ``expand_paths`` to skip among several)."""
+def check_file(path: Path | str) -> Path:
+    """The path as a Path, after checking it names a readable, non-empty regular file."""
     p = Path(path)
     try:
         st = p.stat()
@@ -150,7 +149,7 @@ def check_file(path: Path | str, empty_ok: bool = False) -> Path:
         raise fail(p, "is not a regular file")
     if not os.access(p, os.R_OK):
         raise fail(p, "permission denied")
-    if st.st_size == 0 and not empty_ok:
+    if st.st_size == 0:
         raise fail(p, "file is empty (0 bytes)", EmptyCloudError)
     return p
 

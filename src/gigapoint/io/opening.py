@@ -19,7 +19,6 @@ from .paths import (
     expand_paths,
     files_label,
     scan_angles_differ,
-    skipped_message,
 )
 from .registry import reader_for
 
@@ -106,7 +105,7 @@ def open_cloud(
                 if not several:
                     raise
                 empty.append(f)
-                warn(skipped_message(f), GigapointWarning)
+                warn(f"{f}: holds no points, skipped", GigapointWarning)
         if passing is not None:  # not "no valid points": the filter left none
             passing.check_passed(files_label(files))
 

@@ -241,47 +241,25 @@ def expand_paths(paths: Iterable, recursive: bool = False, where: str = "open") 
                 raise fail(p, f"{what} no supported point cloud file ({', '.join(supported_suffixes())})", EmptyCloudError)
             out.extend(found)
         else:
-            out.append(check_file(p, empty_ok=True))  # (a 0-byte one: ``_without_empty_files``)
+            out.append(check_file(p))
     if skipped and not out:  # (said "open: no file given" whatever the operation, and not why)
         raise InputError(f"{where}: no point file given: only octrees matched ({file_names(skipped)}), not read with point files (open one alone)")
     if not out:
         raise InputError(f"{where}: no file given")
     seen: set = set()
-    once, empty = [], []
+    once = []
     for f in out:
         try:  # one file: also through a hard link or a second mount, which resolve() tells apart
             st = f.stat()
             key = (st.st_dev, st.st_ino) if st.st_ino else f.resolve()  # (0: a file system without inode numbers)
         except OSError:
-            st, key = None, f.resolve()
+            key = f.resolve()
         if key in seen:
             warn(f"{f}: named more than once; its points are read once", GigapointWarning)
             continue
         seen.add(key)
         once.append(f)
-        if st is not None and st.st_size == 0:
-            empty.append(f)
-    return _without_empty_files(once, empty)
-
-
-def _without_empty_files(files: list[Path], empty: list[Path]) -> list[Path]:
-    """``files`` but the ``empty`` ones (0 bytes) among them, each skipped with the warning of a
-    file without points (an empty LAS tile's, ``skipped_message``): every reader's header refused
-    a 0-byte text, PLY or NPY file among several ("file is empty (0 bytes)"), so gp.open, convert
-    and tile stopped where an empty LAS file was skipped. One file alone keeps its one-line error;
-    none but empty ones: gp.open's "no file holds any point"."""
-    if not empty or len(files) == 1:
-        return files
-    if len(empty) == len(files):
-        raise EmptyCloudError(f"{files_label(files)}: no file holds any point")
-    for f in empty:  # (once an operation: its steps expand the paths again)
-        read_once("empty file", f, lambda f=f: warn(skipped_message(f), GigapointWarning))
-    return [f for f in files if f not in empty]
-
-
-def skipped_message(path) -> str:
-    """The warning of a file without points among several, skipped (gp.open's, convert's, tile's)."""
-    return f"{path}: holds no points, skipped"
+    return once
 
 
 def with_subfolders(paths) -> list:

@@ -18,7 +18,6 @@ from ...errors import EmptyCloudError, GigapointError, GigapointWarning, InputEr
 from ...io import files_label, read_chunks, scan_angles_differ
 from ...io.filters import filtered
 from ...io.las import with_scan_angle
-from ...io.paths import skipped_message
 from ...io.registry import reader_for
 from ...io.write import file_has_color, one_value_a_point
 from ..preview import PreviewSampler, preview_points
@@ -46,6 +45,10 @@ def _skipped_if_empty(path, chunks, several: bool, skipped: list | None = None):
             skipped.append(str(path))
         else:
             warn(skipped_message(path), GigapointWarning)
+
+
+def skipped_message(path) -> str:
+    return f"{path}: holds no points, skipped"
 
 
 def merge_attributes(attrs: dict | None, names: dict) -> dict:

@@ -334,7 +334,6 @@ def file_sources(paths, cut_off: list | None = None, point_filter: PointFilter |
     from ...io import cloud_name, expand_paths, files_label, reader_for, scan_angles_differ, warn_mixed_crs
     from ...io._base import DEFAULT_CHUNK_SIZE
     from ...io.las import with_scan_angle
-    from ...io.paths import skipped_message
 
     files = expand_paths(paths)
     warn_mixed_crs(files)
@@ -346,7 +345,7 @@ def file_sources(paths, cut_off: list | None = None, point_filter: PointFilter |
         head = reader.header(f, salvage=True)  # not info(): an NPY file's info read all its points before the loader began
         n = head["point_count"]
         if n == 0 and len(files) > 1:  # as gp.open and convert: an empty tile among several is skipped, said
-            warn(skipped_message(f), GigapointWarning)
+            warn(f"{f}: holds no points, skipped", GigapointWarning)
             continue
         if n == 0:  # the reader's one-line error now, as gp.open's: not a cloud that loads nothing and says so at wait()
             next(iter(reader.read_chunks(f)), None)
