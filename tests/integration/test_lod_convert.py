@@ -1242,3 +1242,10 @@ def test_a_copc_name_writes_copc_and_a_folder_is_not_named_like_a_point_file(aut
     grown = gp.open(autzen_path, progressive=True)
     assert grown.save(tmp_path / "grown.copc.laz").format == "copc"
     grown.close()
+
+
+def test_numpy_integer_tuning_knobs_are_taken_as_ints(demo_las, tmp_path):
+    """A knob given as np.int64 (a value computed with numpy) passed the check but reached the
+    conversion's saved state as it was: 'Object of type int64 is not JSON serializable'."""
+    result = convert([demo_las], tmp_path / "oct", partition_points=np.int64(50_000), chunk_size=np.int64(20_000))
+    assert result.points == len(laspy.read(str(demo_las)).points)

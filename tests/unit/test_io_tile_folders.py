@@ -139,6 +139,8 @@ def test_a_folder_of_empty_tiles_says_no_file_holds_a_point(tmp_path, options):
         with pytest.raises(EmptyCloudError) as caught:
             gp.open(tmp_path, **options)
     assert str(caught.value) == f"{tmp_path / 'a.laz'}, {tmp_path / 'b.laz'}: no file holds any point"
+    # (no "no valid points ... During handling of the above exception" above it in a traceback)
+    assert caught.value.__context__ is None or caught.value.__suppress_context__
 
 
 @pytest.mark.parametrize(

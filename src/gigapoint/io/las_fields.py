@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import GigapointWarning, warn
-from ._base import ATTRIBUTE_DTYPES, LAS_FIELD_ATTRIBUTES  # noqa: F401  (here by their old names: copc.py, the writers)
+from ._base import LAS_FIELD_ATTRIBUTES
 from .las import scan_angle_units
 
 #: ASPRS LAS 1.4 classes (R15, table 17; 8 and 12 as LAS 1.2 named them before 1.4 reserved them):

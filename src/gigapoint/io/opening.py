@@ -119,11 +119,13 @@ def open_cloud(
             else:
                 cloud = build_cloud(stream, name=name, layout=layout, colors=colors)
         except EmptyCloudError as exc:
-            if len(set(empty)) == len(files):  # each skipped as empty: not "no valid points" (NaN or absurd positions)
-                check_valid_count(files_label(files), 0, 0, from_files=True)  # (raises: "no file holds any point")
-            raise EmptyCloudError(f"{files_label(files)}: {str(exc).split(': ', 1)[-1]}") from None
-        cloud.source_files = tuple(files)  # gp.convert(cloud) takes their CRS
-        return cloud
+            failed = str(exc).split(": ", 1)[-1]
+        else:
+            cloud.source_files = tuple(files)  # gp.convert(cloud) takes their CRS
+            return cloud
+        if len(set(empty)) == len(files):  # each skipped as empty: not "no valid points" (NaN or absurd positions)
+            check_valid_count(files_label(files), 0, 0, from_files=True)  # (raises: "no file holds any point", no "During handling" above it)
+        raise EmptyCloudError(f"{files_label(files)}: {failed}")
 
     if not progress:
         return build(chunks if chunked else chunks())

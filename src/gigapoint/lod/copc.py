@@ -24,9 +24,10 @@ import numpy as np
 from ..core.chunk import safe_attribute_name
 from ..errors import EmptyCloudError, GigapointWarning, InputError, warn
 from ..io import laz_process
+from ..io._base import ATTRIBUTE_DTYPES
 from ..io.http import ByteSource, HttpFile, LocalFile, open_source
 from ..io.las import EVLR_HEADER, PROJECTION_USER_ID, WKT_RECORD, evlr_headers, read_las_header, wkt_of
-from ..io.las_fields import ATTRIBUTE_DTYPES, EXTRA_BYTES_TYPES, FLAG_BITS, field_attributes
+from ..io.las_fields import EXTRA_BYTES_TYPES, FLAG_BITS, field_attributes
 from ..io.las_kernels import _scaled_xyz
 from .kinds import (
     COPC_INFO_DTYPE,

@@ -364,9 +364,10 @@ def convert(
     out = local_path(out, "the output", ConvertError)  # a file:// URL names a path
     # the tuning knobs, before a folder is made: -5 partition points split down to single points
     # (a run of hours), 'abc' was a TypeError and a bad chunk_size blamed the first input file
-    for knob, value in (("partition_points", partition_points), ("upper_points", upper_points), ("chunk_size", chunk_size)):
-        if value is not None:
-            check_whole("convert", knob, value, 1)
+    partition_points, upper_points, chunk_size = (
+        None if value is None else check_whole("convert", knob, value, 1)  # (as ints: np.int64 50000 failed the state's JSON)
+        for knob, value in (("partition_points", partition_points), ("upper_points", upper_points), ("chunk_size", chunk_size))
+    )
     if format is None and out is not None and str(out) != "" and is_point_file_name(out) and _are_paths(inputs):  # -o ground.laz: one plain point file
         octree_options = {"sampler": sampler, "memory_limit": memory_limit, "max_leaf": max_leaf, "layout": layout, "colors": colors,
                           "encoding": encoding, "client": client, "name": name, "partition_points": partition_points,
