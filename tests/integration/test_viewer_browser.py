@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import contextlib
 import io
 import threading
 import time
@@ -625,16 +626,26 @@ def test_unticking_a_class_hides_it_and_ticking_it_shows_it_again(browser, autze
         srv.close()
 
 
+@contextlib.contextmanager
+def served_page(browser, cloud):
+    """(server, page): ``cloud`` served and a new page of the viewport's size, not opened yet (a
+    test may set its clock first); both closed after."""
+    srv = ViewerServer(cloud).start()
+    ctx = browser.new_context(viewport=VIEWPORT)
+    try:
+        yield srv, ctx.new_page()
+    finally:
+        ctx.close()
+        srv.close()
+
+
 def test_the_fly_speed_follows_a_loading_cloud_as_it_grows(browser, strips_loading):
     """The fly speed (a quarter of the scene's radius a second) was set from the bounds the page's
     hello held: a file read west to east flew at its first strip's pace (126/s over a 1000 x 1000
     survey, not 177/s), one served before its first point at 0.25/s. The cloud's line each frame
     carries again as it grows sets it."""
     xyz, cloud, go_on = strips_loading
-    srv = ViewerServer(cloud).start()
-    ctx = browser.new_context(viewport=VIEWPORT)
-    try:
-        pg = ctx.new_page()
+    with served_page(browser, cloud) as (srv, pg):
         pg.goto(srv.url)
         wait_full_frame(pg, 0)
         first_strip = np.linalg.norm(np.ptp(xyz[:20_000], axis=0)) / 2
@@ -644,9 +655,6 @@ def test_the_fly_speed_follows_a_loading_cloud_as_it_grows(browser, strips_loadi
         whole = np.linalg.norm(np.ptp(xyz, axis=0)) / 2
         pg.wait_for_function("(s) => document.getElementById('speed-value').textContent === s", arg=f"{whole * 0.25:.3g}/s", timeout=10_000)
         assert pg.locator("#speed-value").text_content() == "177/s"
-    finally:
-        ctx.close()
-        srv.close()
 
 
 @pytest.fixture
@@ -690,10 +698,7 @@ def test_a_cloud_served_before_its_first_points_enables_its_classes_panel_once_t
     complete, as if for good. It says its first points are not in yet, and lists their classes,
     enabled, once they are."""
     cloud, (first,) = classes_loading(6)
-    srv = ViewerServer(cloud).start()
-    ctx = browser.new_context(viewport=VIEWPORT)
-    try:
-        pg = ctx.new_page()
+    with served_page(browser, cloud) as (srv, pg):
         pg.goto(srv.url)
         wait_full_frame(pg, 0)
         assert pg.locator("#classes-note").text_content() == "hidden_classes: survey's first points are not in yet; its classes are listed once they are"
@@ -704,9 +709,6 @@ def test_a_cloud_served_before_its_first_points_enables_its_classes_panel_once_t
         assert pg.locator('#classes input[data-code="6"]').is_enabled() and pg.locator("#btn-classes-none").is_enabled()
         pg.locator('#classes input[data-code="6"]').uncheck()  # and it hides the class
         pg.wait_for_function("() => window.gigapoint.settings.hidden_classes.join() === '6'", timeout=30_000)
-    finally:
-        ctx.close()
-        srv.close()
 
 
 def test_a_class_that_comes_within_the_class_lists_throttle_is_listed_after_it(browser, classes_loading):
@@ -717,10 +719,7 @@ def test_a_class_that_comes_within_the_class_lists_throttle_is_listed_after_it(b
     cloud, (ground, building) = classes_loading(2, 6)
     ground.set()
     cloud.wait_first_points()
-    srv = ViewerServer(cloud).start()
-    ctx = browser.new_context(viewport=VIEWPORT)
-    try:
-        pg = ctx.new_page()
+    with served_page(browser, cloud) as (srv, pg):
         pg.clock.install(time=0)
         pg.clock.pause_at(1_000)  # (the page's timers run only as the test moves its clock)
         pg.goto(srv.url)
@@ -736,6 +735,3 @@ def test_a_class_that_comes_within_the_class_lists_throttle_is_listed_after_it(b
         pg.clock.run_for(2_000)
         pg.wait_for_function("() => document.querySelectorAll('#classes label').length === 2", polling=50, timeout=30_000)
         assert class_rows(pg) == ["2 ground", "6 building"]
-    finally:
-        ctx.close()
-        srv.close()

@@ -176,22 +176,33 @@ def test_scans_of_different_fields_keep_the_attributes_all_have(autzen, tmp_path
     assert (chunks[1].rgba == (200, 200, 200, 255)).all()
 
 
+def _scan_node(e, guid: str, doubles, integers=()):
+    """A scan made of libE57's nodes in ``e`` (a file open for writing): its guid and a points
+    prototype of double fields ``doubles`` and 0/1 integer fields ``integers``; returns its points
+    node (pye57's write_scan_raw writes no spherical coordinates, time stamps or empty scans)."""
+    from pye57 import libe57
+
+    image = e.image_file
+    scan = libe57.StructureNode(image)
+    scan.set("guid", libe57.StringNode(image, guid))
+    proto = libe57.StructureNode(image)
+    for name in doubles:
+        proto.set(name, libe57.FloatNode(image, 0.0, libe57.E57_DOUBLE))
+    for name in integers:
+        proto.set(name, libe57.IntegerNode(image, 0, 0, 1))
+    points = libe57.CompressedVectorNode(image, proto, libe57.VectorNode(image, True))
+    scan.set("points", points)
+    e.data3d.append(scan)
+    return points
+
+
 def test_a_scan_without_points_takes_no_attribute_from_the_others(autzen, tmp_path):
     """An empty scan (a station aborted) of coordinates and colours, before one of intensity and no
     colours: the intensity is kept, unwarned (it was left out of the whole file, 'not in every
     scan'), and the header says no colours (it said the empty scan's)."""
-    from pye57 import libe57
-
     path = tmp_path / "aborted.e57"
     e = pye57.E57(str(path), mode="w")
-    image = e.image_file
-    scan = libe57.StructureNode(image)
-    scan.set("guid", libe57.StringNode(image, "{aborted}"))
-    proto = libe57.StructureNode(image)
-    for name in ("cartesianX", "cartesianY", "cartesianZ", "colorRed", "colorGreen", "colorBlue"):
-        proto.set(name, libe57.FloatNode(image, 0.0, libe57.E57_DOUBLE))
-    scan.set("points", libe57.CompressedVectorNode(image, proto, libe57.VectorNode(image, True)))
-    e.data3d.append(scan)
+    _scan_node(e, "{aborted}", ("cartesianX", "cartesianY", "cartesianZ", "colorRed", "colorGreen", "colorBlue"))
     n = 100
     lo, hi = autzen.xyz[:n].min(axis=0), autzen.xyz[:n].max(axis=0)
     header = SimpleNamespace(name="station 1", rotation=TURN, translation=SHIFT, xMinimum=lo[0], yMinimum=lo[1], zMinimum=lo[2],
@@ -210,20 +221,10 @@ def test_a_scan_without_points_takes_no_attribute_from_the_others(autzen, tmp_pa
 
 def test_spherical_scans_are_converted(tmp_path):
     """A scan of range, azimuth and elevation only: x = r cos(el) cos(az), y = r cos(el) sin(az), z = r sin(el)."""
-    from pye57 import libe57
-
     r, az, el = np.array([10.0, 20.0]), np.array([0.0, np.pi / 2]), np.array([0.0, np.pi / 6])
     path = tmp_path / "sph.e57"
     e = pye57.E57(str(path), mode="w")
-    image = e.image_file
-    scan = libe57.StructureNode(image)
-    scan.set("guid", libe57.StringNode(image, "{spherical}"))
-    proto = libe57.StructureNode(image)
-    for name in ("sphericalRange", "sphericalAzimuth", "sphericalElevation"):
-        proto.set(name, libe57.FloatNode(image, 0.0, libe57.E57_DOUBLE))
-    points = libe57.CompressedVectorNode(image, proto, libe57.VectorNode(image, True))
-    scan.set("points", points)
-    e.data3d.append(scan)
+    points = _scan_node(e, "{spherical}", ("sphericalRange", "sphericalAzimuth", "sphericalElevation"))
     arrays, buffers = e.make_buffers(["sphericalRange", "sphericalAzimuth", "sphericalElevation"], 2)
     arrays["sphericalRange"][:], arrays["sphericalAzimuth"][:], arrays["sphericalElevation"][:] = r, az, el
     writer = points.writer(buffers)
@@ -313,15 +314,7 @@ def test_time_stamps_flagged_invalid_are_nan(tmp_path):
     path = tmp_path / "stamps.e57"
     e = pye57.E57(str(path), mode="w")
     image = e.image_file
-    scan = libe57.StructureNode(image)
-    scan.set("guid", libe57.StringNode(image, "{stamps}"))
-    proto = libe57.StructureNode(image)
-    for name in ("cartesianX", "cartesianY", "cartesianZ", "timeStamp"):
-        proto.set(name, libe57.FloatNode(image, 0.0, libe57.E57_DOUBLE))
-    proto.set("isTimeStampInvalid", libe57.IntegerNode(image, 0, 0, 1))
-    points = libe57.CompressedVectorNode(image, proto, libe57.VectorNode(image, True))
-    scan.set("points", points)
-    e.data3d.append(scan)
+    points = _scan_node(e, "{stamps}", ("cartesianX", "cartesianY", "cartesianZ", "timeStamp"), ("isTimeStampInvalid",))
     fields = ["cartesianX", "cartesianY", "cartesianZ", "timeStamp", "isTimeStampInvalid"]
     arrays = {f: np.ascontiguousarray(v, np.float64) for f, v in zip(fields, [*xyz.T, stamps, flags])}
     buffers = libe57.VectorSourceDestBuffer()

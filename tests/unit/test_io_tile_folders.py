@@ -128,12 +128,19 @@ def test_an_empty_tile_is_skipped_by_a_progressive_load_as_by_open(tmp_path, loa
         assert f"{tmp_path / 'tile_00_05.laz'}: holds no points, skipped" in [str(w.message) for w in caught]
 
 
+def _empty_tiles(folder) -> list:
+    """Two LAS tiles without a point, a.laz and b.laz in ``folder``."""
+    files = [folder / "a.laz", folder / "b.laz"]
+    for f in files:
+        laspy.LasData(laspy.LasHeader(point_format=3, version="1.2")).write(f)
+    return files
+
+
 @pytest.mark.parametrize("options", [{}, {"chunked": True}, {"progressive": True}], ids=["in_memory", "chunked", "progressive"])
 def test_a_folder_of_empty_tiles_says_no_file_holds_a_point(tmp_path, options):
     """Every tile empty (each skipped with a warning): gp.open said 'no valid points', as of NaN
     or absurd positions; it says what a progressive load says."""
-    for name in ("a.laz", "b.laz"):
-        laspy.LasData(laspy.LasHeader(point_format=3, version="1.2")).write(tmp_path / name)
+    _empty_tiles(tmp_path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GigapointWarning)  # (each tile's "holds no points, skipped")
         with pytest.raises(EmptyCloudError) as caught:
@@ -156,9 +163,7 @@ def test_a_folder_of_empty_tiles_says_no_file_holds_a_point(tmp_path, options):
 def test_converting_or_tiling_only_empty_tiles_says_no_file_holds_a_point(tmp_path, make):
     """Every tile empty (each skipped with a warning): convert and tile said 'no valid points',
     the words for NaN or absurd positions; they say what gp.open says."""
-    files = [tmp_path / "a.laz", tmp_path / "b.laz"]
-    for f in files:
-        laspy.LasData(laspy.LasHeader(point_format=3, version="1.2")).write(f)
+    files = _empty_tiles(tmp_path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GigapointWarning)  # (each tile's "holds no points, skipped")
         with pytest.raises(EmptyCloudError) as caught:

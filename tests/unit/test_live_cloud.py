@@ -235,42 +235,29 @@ def test_a_snapshot_leaves_out_frames_that_decayed_since_the_last_push_or_drawn_
 
 def test_a_paused_stream_counts_and_frames_only_what_has_not_decayed():
     """n_points, len, bounds, repr and the HUD counted frames that had faded out until the next
-    push, drawn frame or snapshot: a paused stream with decay=1 s showed its old count forever."""
+    push, drawn frame or snapshot: a paused stream with decay=1 s showed its old count forever.
+    And they took the frame's lock: asked by every rendered frame and the viewer's watcher up to
+    120 times a second, each counted as a frame drawn (writers took their turn behind them,
+    builders saw frames being drawn)."""
     now = [0.0]
     live = LiveCloud(decay=1.0, clock=lambda: now[0])
     live.push(np.full((1000, 3), -50.0))
     now[0] = 0.8
     live.push(np.full((2000, 3), 7.0))
     now[0] = 1.5  # the first frame has faded out; nothing pushed or drawn since
+    assert live.lock.builder_turn(0) == (0, False)  # (frames drawn so far, whether frames are being drawn)
     assert live.n_points == 2000 and len(live) == 2000 and live.n_frames == 1
     lo, hi = live.bounds
     assert lo.tolist() == [7.0, 7.0, 7.0] and hi.tolist() == [7.0, 7.0, 7.0]
     assert repr(live) == "LiveCloud('live', 1 of 100 frames, 2,000 live points)"
     assert ", 1 frames, 2,000 live points" in live.hud()
+    assert live.lock.builder_turn(0) == (0, False)  # (the queries counted no frame)
+    assert len(live.frame_points()[0]) == 2000  # reads the ring's points as a frame does: counted
+    assert live.lock.builder_turn(0) == (1, True)
     now[0] = 2.0  # the second one too: nothing left (a unit box to look at)
     assert len(live) == 0 and repr(live) == "LiveCloud('live', 0 of 100 frames, 0 live points)"
     assert [b.tolist() for b in live.bounds] == [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]
     assert ", 0 frames, 0 live points" in live.hud()
-
-
-def test_the_facts_asked_every_frame_count_no_frame_on_the_lock():
-    """n_points, len, n_frames, bounds, repr and the HUD took the frame's lock: asked by every
-    rendered frame and the viewer's watcher up to 120 times a second, each counted as a frame
-    drawn (writers took their turn behind them, builders saw frames being drawn)."""
-    now = [0.0]
-    live = LiveCloud(decay=1.0, clock=lambda: now[0])
-    live.push(np.full((1000, 3), -50.0))
-    now[0] = 0.8
-    live.push(np.full((2000, 3), 7.0))
-    now[0] = 1.5  # the first frame has faded out: the queries still drop it
-    assert live.lock.builder_turn(0) == (0, False)  # (frames drawn so far, whether frames are being drawn)
-    assert live.n_points == 2000 and len(live) == 2000 and live.n_frames == 1
-    assert live.bounds[0].tolist() == [7.0, 7.0, 7.0]
-    assert repr(live) == "LiveCloud('live', 1 of 100 frames, 2,000 live points)"
-    assert ", 1 frames, 2,000 live points" in live.hud()
-    assert live.lock.builder_turn(0) == (0, False)
-    assert len(live.frame_points()[0]) == 2000  # reads the ring's points as a frame does: counted
-    assert live.lock.builder_turn(0) == (1, True)
 
 
 def test_float_colours_keep_the_range_of_the_first_coloured_frame():

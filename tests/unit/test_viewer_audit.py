@@ -329,8 +329,12 @@ def test_a_tab_opened_before_the_first_point_is_fit_to_the_points_once_they_come
         shown = untouched.snapshot()[0]
         assert shown.as_dict() == core.default_state(96, 64).as_dict()  # the 'auto' view of the points loaded
         assert frames["untouched"][-1]["camera"] == shown.as_dict() and frames["untouched"][-1]["visible_pixels"] > 1000
-        in_memory = ViewerCore(gp.from_arrays(xyz)).default_state(96, 64)  # the same points held in memory
+        held = ViewerCore(gp.from_arrays(xyz))  # the same points held in memory
+        in_memory = held.default_state(96, 64)
+        held.close_all()
         assert np.linalg.norm(shown.target - in_memory.target) < 20 and shown.distance == pytest.approx(in_memory.distance, rel=0.05)
         assert moved.snapshot()[0].as_dict() == chosen
     finally:
+        go_on.set()  # (a test failed before it: the loader waits no 30 s)
         core.close_all()
+        cloud.close()
