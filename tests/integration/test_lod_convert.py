@@ -1249,3 +1249,13 @@ def test_numpy_integer_tuning_knobs_are_taken_as_ints(demo_las, tmp_path):
     conversion's saved state as it was: 'Object of type int64 is not JSON serializable'."""
     result = convert([demo_las], tmp_path / "oct", partition_points=np.int64(50_000), chunk_size=np.int64(20_000))
     assert result.points == len(laspy.read(str(demo_las)).points)
+
+
+def test_no_input_at_all_is_said_in_one_line(tmp_path):
+    """An empty tuple of inputs was a TypeError from os.fspath (the COPC check took it for one path); a list said it."""
+    from gigapoint.errors import InputError
+
+    for nothing in ((), []):
+        with pytest.raises(InputError, match=r"^convert: no input given$"):
+            convert(nothing, tmp_path / "oct")
+    assert not (tmp_path / "oct").exists()

@@ -510,12 +510,13 @@ def test_a_named_text_column_of_hex_colours_is_left_out_not_taken_for_a_comment(
     comment-ending fix of this session), and the file refused: "line 2 has 3 columns, the header names 4"."""
     from gigapoint.errors import GigapointWarning
 
-    p = tmp_path / "hex.csv"
-    p.write_text("x,y,z,color\n1,2,3,#ff0000\n4,5,6,#00ff00\n")
-    with pytest.warns(GigapointWarning, match=r"hex.csv: column\(s\) color hold text, not numbers: left out"):
-        cloud = open_cloud(p)
-    assert cloud.n_points == 2 and list(cloud.attributes) == []
-    np.testing.assert_allclose(np.sort(cloud.positions()[:, 0]), [1, 4])
+    for name, text in (("hex.csv", "x,y,z,color\n1,2,3,#ff0000\n4,5,6,#00ff00\n"), ("hex.txt", "x y z color\n1 2 3 #ff0000\n4 5 6 #00ff00\n")):
+        p = tmp_path / name  # (spaces: "line 2 has 3 columns, expected 4", the lines' columns counted without the '#')
+        p.write_text(text)
+        with pytest.warns(GigapointWarning, match=rf"{name}: column\(s\) color hold text, not numbers: left out"):
+            cloud = open_cloud(p)
+        assert cloud.n_points == 2 and list(cloud.attributes) == []
+        np.testing.assert_allclose(np.sort(cloud.positions()[:, 0]), [1, 4])
 
 
 @pytest.mark.parametrize(

@@ -110,8 +110,11 @@ class _Layout:
     """What the first lines of a text file say: lines to skip, delimiter, column names."""
 
     def __init__(self, path: Path, skip: int, delimiter: str | None, names: list[str], header: bool, quoted: bool,
-                 columns: list[int] | None = None, n_columns: int | None = None):  # fmt: skip
+                 columns: list[int] | None = None, n_columns: int | None = None, comments_end_lines: bool = True):  # fmt: skip
         self.path, self.skip, self.delimiter, self.names, self.header = path, skip, delimiter, names, header
+        # a '#' or '//' ends a line of points ("1 2 3 # note"), unless a named column's text starts
+        # with one ("#ff0000" under "x y z color": its lines count that column)
+        self.comments_end_lines = comments_end_lines
         self.quoted = quoted  # the data's numbers are in double quotes (a spreadsheet's CSV)
         self.columns = columns  # the columns read (None: all); a header's text columns are left out
         self.n_columns = len(names) if n_columns is None else n_columns  # the columns every line has
@@ -173,7 +176,8 @@ def _layout(path: Path) -> _Layout:
     tokens, n_columns = _values(values, delimiter), len(_split(values, delimiter))
     if header_names and header_names[-1] == "":  # ("x,y,z,": its last separator names no column either)
         header_names = header_names[:-1]
-    if header_names is not None and len(header_names) == len(_split(line, delimiter)) != len(tokens):
+    hash_column = header_names is not None and len(header_names) == len(_split(line, delimiter)) != len(tokens)
+    if hash_column:
         values = line  # a named column of text starting with '#' ("#ff0000"), not a comment: left out below, as before
         tokens, n_columns = _split(line, delimiter), len(header_names)
     columns = list(range(len(tokens))) if len(tokens) < n_columns else None
@@ -190,7 +194,7 @@ def _layout(path: Path) -> _Layout:
                 f"{path}: column(s) {', '.join(header_names[i] for i in text)} hold text, not numbers: left out", GigapointWarning
             )
             kept = [i for i in range(len(tokens)) if i not in text]
-            return _Layout(path, skip, delimiter, [header_names[i] for i in kept], True, quoted, kept, n_columns)
+            return _Layout(path, skip, delimiter, [header_names[i] for i in kept], True, quoted, kept, n_columns, not hash_column)
         names = header_names
     else:
         if len(tokens) < 3:
@@ -199,13 +203,19 @@ def _layout(path: Path) -> _Layout:
     return _Layout(path, skip, delimiter, names, header_names is not None, quoted, columns, n_columns)
 
 
-def _first_bad_line(path: Path, lines: list[str], first_lineno: int, delimiter: str | None, ncols: int, columns=None) -> tuple[int, str]:
+def _line_columns(line: str, layout: _Layout) -> list[str]:
+    """A line of points split into its columns, as the layout counts them."""
+    line = line.rstrip("\r\n")
+    return _split(_without_comment(line) if layout.comments_end_lines else line, layout.delimiter)
+
+
+def _first_bad_line(path: Path, lines: list[str], first_lineno: int, layout: _Layout, ncols: int, columns=None) -> tuple[int, str]:
     """The index in ``lines`` of the first unparsable line of a chunk and what is wrong with it
     (only called after loadtxt failed); ``columns``: those read (None: all)."""
     for i, line in enumerate(lines):
         if not line.strip() or _is_comment(line):
             continue
-        tokens = _split(_without_comment(line.rstrip("\r\n")), delimiter)
+        tokens = _line_columns(line, layout)
         if len(tokens) != ncols:
             return i, f"line {first_lineno + i} has {len(tokens)} columns, expected {ncols}"
         for t in tokens if columns is None else [tokens[c] for c in columns]:
@@ -242,11 +252,11 @@ def _chunks(path: Path, chunk_size: int, layout: _Layout) -> Iterator[np.ndarray
                     arr = _parsed(lines, layout.delimiter, columns)
                     good = not arr.size or arr.shape[1] == used
                     if good and columns is not None:  # usecols reads short lines as long as they reach the columns used
-                        good = all(len(_split(_without_comment(ln.rstrip("\r\n")), layout.delimiter)) == ncols for ln in lines if ln.strip() and not _is_comment(ln))
+                        good = all(len(_line_columns(ln, layout)) == ncols for ln in lines if ln.strip() and not _is_comment(ln))
                 except ValueError:
                     good = False
                 if not good:  # the lines before the bad one first: a progressive load keeps them
-                    bad, problem = _first_bad_line(path, lines, lineno, layout.delimiter, ncols, columns)
+                    bad, problem = _first_bad_line(path, lines, lineno, layout, ncols, columns)
                     with contextlib.suppress(ValueError):
                         before = _parsed(lines[:bad], layout.delimiter, columns) if bad else np.empty((0, used))
                         if before.size and before.shape[1] == used:

@@ -258,6 +258,8 @@ def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, ma
     p = parse_pose(pose, name)
     h, w = d.shape
     scratch = {} if scratch is None else scratch
+    if max_depth is not None and not (is_real(max_depth) and max_depth > 0 or max_depth == np.inf):  # -1: "no valid pixel"; before the colours, whose range a refused frame must not decide
+        raise InputError(f"{name}: max_depth must be a positive number of metres or None, got {max_depth!r}")
     rgb8 = np.empty((0, 4), np.uint8)
     if rgb is not None:
         from ..core.chunk import colors_for
@@ -277,8 +279,6 @@ def depth_to_points(depth, intrinsics, pose=None, rgb=None, depth_scale=None, ma
         if rgb8.dtype != np.uint8:
             rgb8 = colors_for(rgb8, h * w, name, scalers)
         rgb8 = np.ascontiguousarray(rgb8)
-    if max_depth is not None and not (is_real(max_depth) and max_depth > 0 or max_depth == np.inf):  # -1: "no valid pixel"
-        raise InputError(f"{name}: max_depth must be a positive number of metres or None, got {max_depth!r}")
     limit = np.inf if max_depth is None else float(max_depth)
     n = h * w
 

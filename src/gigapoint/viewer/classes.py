@@ -78,7 +78,7 @@ def class_panel(cloud, hidden=(), seen: bool = True) -> dict:
             cache["__classes__"] = held_classes(cloud.attributes["classification"])
         return {"enabled": True, "reason": "", "source": "cloud", "complete": True, "classes": entries(cache["__classes__"])}
     if isinstance(cloud, ProgressiveOctree):  # counted as its points come: complete once they all have
-        return {"enabled": True, "reason": "", "source": "cloud", "complete": not cloud.loading, "classes": entries(np.flatnonzero(cloud.points_per_class).tolist())}  # (read once: the loader may drop the attribute meanwhile)
+        return {"enabled": True, "reason": "", "source": "cloud", "complete": not cloud.loading, "classes": entries(cloud.class_facts().get("classes", []))}  # ({} where the loader dropped the attribute meanwhile)
     facts = cloud.class_facts() if isinstance(cloud, OctreeCloud) else {}
     if "classes" in facts:
         return {"enabled": True, "reason": "", "source": "metadata", "complete": True, "classes": entries(filter_kept(cloud, facts["classes"]))}
