@@ -7,6 +7,8 @@ edges), GeoJSON and WKT read alike, autzen cut through ``gp.open``, ``convert -o
 from __future__ import annotations
 
 import json
+import math
+import re
 import struct
 import sys
 
@@ -410,11 +412,18 @@ def test_one_crs_written_two_ways_moves_the_polygon_once(tmp_path, monkeypatch):
     assert polygon.placed_by_file[str(keyed)] is polygon.placed_by_file[str(written)]
 
 
+ON_ONE_LINE = "the polygon's points lie on one line: it has no area; move a point off the line"
 BAD = {
     "missing": (None, "no such file (nor WKT text: POLYGON ((x y, ...)))"),
     "not-polygon-text": ("x,y,z\n1,2,3\n", "neither GeoJSON nor WKT (POLYGON, MULTIPOLYGON): not a clip polygon"),
     "broken-json": ("{\"type\": ", "not valid GeoJSON (Expecting value: line 1 column 10 (char 9))"),
-    "two-vertices": (json.dumps({"type": "Polygon", "coordinates": [[[0, 0], [1, 1], [0, 0], [1, 1]]]}), "a ring has fewer than 3 distinct vertices; it encloses no area"),
+    "two-vertices": (json.dumps({"type": "Polygon", "coordinates": [[[0, 0], [1, 1], [0, 0], [1, 1]]]}), ON_ONE_LINE),
+    "one-spot": (json.dumps({"type": "Polygon", "coordinates": [[[3, 4], [3, 4], [3, 4], [3, 4]]]}), "the polygon's points are at one x, y: it has no area"),
+    "wkt-on-one-line": ("POLYGON ((636400 848900, 637000 849200, 637600 849500, 636400 848900))", ON_ONE_LINE),
+    "hole-on-one-line": (
+        json.dumps({"type": "MultiPolygon", "coordinates": [SQUARE_WITH_HOLE, [CONCAVE[0], [[13, 1], [14, 2], [15, 3], [13, 1]]]]}),
+        ON_ONE_LINE.replace("the polygon's", "polygon 2's hole 1's"),
+    ),
     "nan": ("POLYGON ((0 0, 1 0, nan 1, 0 0))", "a polygon vertex is NaN or infinite ([nan, 1.0])"),
     "linestring": (json.dumps({"type": "LineString", "coordinates": [[0, 0], [1, 1]]}), "a LineString, not a polygon: a clip polygon is a Polygon or MultiPolygon"),
     "point": (json.dumps({"type": "Feature", "geometry": {"type": "Point", "coordinates": [0, 0]}}), "a Point, not a polygon: a clip polygon is a Polygon or MultiPolygon"),
@@ -435,6 +444,60 @@ def test_bad_polygons_are_one_line_errors_naming_the_file_before_reading(cli, tm
     assert str(err.value) == want
     rc, _, cli_err = cli("render", tmp_path / "missing.laz", "-o", tmp_path / "x.png", "--clip-polygon", area)
     assert rc != 0 and cli_err.strip() == "error: " + (f"render: --clip-polygon {area}: {message}" if content is None else f"{area}: {message}")
+
+
+def test_a_polygon_on_one_line_is_refused_by_section_and_orthophoto_before_reading(tmp_path):
+    """A ring on one line was read, every point of the file, to "no point passes the filter (clip
+    polygon ...)" (of points in memory: those on its line kept); refused as gp.open refuses it."""
+    line = "POLYGON ((0 0, 1 1, 2 2, 0 0))"
+    want = f"^{re.escape(f'WKT {line}: {ON_ONE_LINE}')}$"
+    with pytest.raises(InputError, match=want):
+        gp.section(tmp_path / "missing.laz", (0, 0, 2, 2), 1, clip_polygon=line)
+    with pytest.raises(InputError, match=want):
+        gp.orthophoto(tmp_path / "missing.laz", 1, clip_polygon=line)
+    on_line = gp.from_arrays(np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [2.0, 2.0, 0.0], [1.0, 0.0, 0.0]]))
+    with pytest.raises(InputError, match=want):
+        gp.section(on_line, (0, 0, 2, 2), 1, clip_polygon=line)
+
+
+@pytest.mark.parametrize(
+    ("ring", "problem"),
+    [
+        ([[637000.1, 4850000.3], [637010.2, 4850010.6], [637020.3, 4850020.9]], ON_ONE_LINE),  # UTM-sized, slanted: rounding off the line
+        ([[0, 0], [10, 0], [0, 10], [10, 10]], None),  # a bow tie: its shoelace 0, its halves areas all the same
+        ([[0, 0], [100, 0], [50, 0.01]], None),  # thin, but not a line
+    ],
+    ids=["slanted-utm", "bow-tie", "thin"],
+)
+def test_no_area_is_points_on_one_line_not_a_shoelace_of_zero(ring, problem):
+    from gigapoint.io.polygon import no_area_problem
+
+    assert no_area_problem(ring) == problem
+
+
+def test_a_polygon_in_the_crs_a_bound_one_binds_is_not_moved_and_one_from_lon_lat_moves_by_its_towgs84():
+    """moved_polygon compares CRSs by crs.same_horizontal (a WKT1 with TOWGS84 is the CRS it
+    binds) and moves by the bound CRS: its TOWGS84 (zero here) moves the datum, not PROJ's own
+    shift for Amersfoort (~100 m apart at Amersfoort)."""
+    pyproj = pytest.importorskip("pyproj")
+    from gigapoint.io.polygon import moved_polygon
+
+    rd = pyproj.CRS.from_epsg(28992)
+    wkt1 = rd.to_wkt("WKT1_GDAL").replace('DATUM["Amersfoort",', 'DATUM["Amersfoort",TOWGS84[0,0,0,0,0,0,0],')
+    bound = pyproj.CRS.from_user_input(wkt1)
+    compound = pyproj.CRS.from_user_input(f'COMPD_CS["RD + NAP",{wkt1},{pyproj.CRS.from_epsg(5709).to_wkt("WKT1_GDAL")}]')
+    assert bound.is_bound and compound.sub_crs_list[0].is_bound
+    square = clip_polygon_of("POLYGON ((155000 463000, 155100 463000, 155100 463100, 155000 463100, 155000 463000))", "test")
+    for target in (bound, compound):
+        kept = moved_polygon(square, rd, target)
+        assert kept.polygons[0][0] is square.polygons[0][0] and kept.moved_from == "Amersfoort / RD New"
+    lon_lat = clip_polygon_of("POLYGON ((5.387 52.156, 5.388 52.156, 5.388 52.157, 5.387 52.157, 5.387 52.156))", "test")
+    by_towgs84 = pyproj.Transformer.from_crs("EPSG:4326", bound, always_xy=True).transform(5.387, 52.156)
+    by_proj = pyproj.Transformer.from_crs("EPSG:4326", rd, always_xy=True).transform(5.387, 52.156)
+    assert math.dist(by_towgs84, by_proj) > 50  # (the binding matters)
+    for target in (bound, compound):
+        moved = moved_polygon(lon_lat, pyproj.CRS.from_epsg(4326), target)
+        assert np.allclose(moved.polygons[0][0][0], by_towgs84, rtol=0, atol=1e-6)
 
 
 @pytest.mark.parametrize(

@@ -274,11 +274,15 @@ def pyproj_parts(crs) -> list:
     return whole.sub_crs_list if whole.is_compound else [whole]
 
 
-def pyproj_horizontal(crs):
-    """The horizontal part of a pyproj CRS (a compound one's, unbound), None where it has none (a
-    vertical CRS)."""
+def pyproj_horizontal(crs, bound: bool = False):
+    """The horizontal part of a pyproj CRS (a compound one's), None where it has none (a vertical
+    CRS); unbound, as CRSs are compared (``same_horizontal``), unless ``bound``: then a WKT1's
+    TOWGS84 is kept, as a pyproj Transformer moves x and y by it (unbound, by PROJ's own datum
+    shift: metres apart)."""
+    if bound and crs.is_bound:
+        return crs  # (one bound whole, a compound one too: its x and y move as its horizontal part's)
     part = next((c for c in pyproj_parts(crs) if not c.is_vertical), None)
-    return part.source_crs if part is not None and part.is_bound else part
+    return part.source_crs if part is not None and part.is_bound and not bound else part
 
 
 def same_horizontal(one, other) -> bool:

@@ -199,7 +199,7 @@ def _geojson_polygon(document, source: str, label: str) -> ClipPolygon:
     if not polygons:
         raise InputError(f"{label}: holds no polygon")
     moved_from = document.get("moved_from") if isinstance(document.get("moved_from"), str) else None  # (as_spec's)
-    return ClipPolygon([[_ring(r, label) for r in rings] for rings in polygons], source, _epsg(document), names, features, moved_from)
+    return ClipPolygon(_polygon_rings(polygons, label), source, _epsg(document), names, features, moved_from)
 
 
 def _collect(node, polygons: list, names: list, features: list, label: str, name: str | None = None, feature: int | None = None) -> None:
@@ -238,9 +238,24 @@ def _list(value, label: str) -> list:
     return value
 
 
-def _ring(positions, label: str) -> np.ndarray:
-    """One ring as a (k, 2) array, without a closing vertex; a one-line error for positions that
-    are not numbers, NaN or infinite, or fewer than 3 distinct vertices."""
+def _polygon_rings(polygons: list, label: str) -> list[list[np.ndarray]]:
+    """The rings of each polygon (lists of positions) read by ``_ring``, each named in its errors as ``_ring_name`` names it."""
+    several = len(polygons) > 1
+    return [[_ring(ring, label, _ring_name(p, r, several)) for r, ring in enumerate(rings)] for p, rings in enumerate(polygons, start=1)]
+
+
+def _ring_name(p: int, r: int, several: bool) -> str:
+    """How messages name ring ``r`` (0: the outline) of polygon ``p`` (from 1) of ``several`` or one:
+    'the polygon', 'polygon 2', "polygon 2's hole 1"."""
+    name = f"polygon {p}" if several else "the polygon"
+    return f"{name}'s hole {r}" if r else name
+
+
+def _ring(positions, label: str, name: str) -> np.ndarray:
+    """One ring (called ``name`` in messages) as a (k, 2) array, without a closing vertex; a
+    one-line error for positions that are not numbers, NaN or infinite, or that enclose no area
+    (``no_area_problem``: every clip, section, orthophoto and volume refuses it here, before
+    anything is read; it kept nothing, or only the points on its line)."""
     try:
         xy = np.array([p[:2] for p in _list(positions, label)], np.float64)
     except (TypeError, ValueError, IndexError):
@@ -253,9 +268,25 @@ def _ring(positions, label: str) -> np.ndarray:
         raise InputError(f"{label}: a polygon vertex lies beyond ±{MAX_ABS_COORDINATE:g} ({xy[(np.abs(xy) > MAX_ABS_COORDINATE).any(axis=1)][0].tolist()}): no point can be there")
     if len(xy) > 1 and np.array_equal(xy[0], xy[-1]):
         xy = xy[:-1]
-    if len(np.unique(xy, axis=0)) < 3:
-        raise InputError(f"{label}: a ring has fewer than 3 distinct vertices; it encloses no area")
+    problem = no_area_problem(xy, name)
+    if problem:
+        raise InputError(f"{label}: {problem}")
     return xy
+
+
+def no_area_problem(ring, name: str = "the polygon") -> str | None:
+    """"the polygon's points lie on one line: ..." where the vertices of ring ``ring`` ((k, 2+))
+    do, within a billionth of its size (not its shoelace area: a bow tie's halves cancel, and
+    clip by the even-odd rule), or "... are at one x, y" (a point repeated); None for a ring with an area."""
+    xy = np.asarray(ring, np.float64)[:, :2]
+    size = float(np.ptp(xy, axis=0).max())
+    if size == 0:
+        return f"{name}'s points are at one x, y: it has no area"
+    centred = xy - xy.mean(axis=0)
+    across = np.linalg.svd(centred, full_matrices=False)[2][-1]  # the direction square to the line that fits best
+    if np.abs(centred @ across).max() <= 1e-9 * size:
+        return f"{name}'s points lie on one line: it has no area; move a point off the line"
+    return None
 
 
 def _epsg(document: dict) -> int | None:
@@ -322,7 +353,7 @@ def _wkt_polygon(text: str, source: str) -> ClipPolygon:
         raise problem("its rings are lists of 'x y' vertices in parentheses")
     if any(len(v) < 2 for rings in polygons for r in rings for v in r):
         raise problem("a vertex has fewer than 2 numbers")
-    return ClipPolygon([[_ring(r, source) for r in rings] for rings in polygons], source, int(srid[1]) if srid else None)
+    return ClipPolygon(_polygon_rings(polygons, source), source, int(srid[1]) if srid else None)
 
 
 def far_apart(polygon: ClipPolygon, lo, hi) -> bool:
@@ -338,11 +369,6 @@ def looks_like_lon_lat(polygon: ClipPolygon) -> bool:
     return bool(np.all(np.abs(polygon.lo) <= (180, 90)) and np.all(np.abs(polygon.hi) <= (180, 90)))
 
 
-def horizontal_crs(crs):
-    """The horizontal part of a pyproj CRS (a compound one's first part; the CRS itself else): a clip polygon's x and y."""
-    return crs.sub_crs_list[0] if crs.is_compound else crs
-
-
 def moved_polygon(polygon: ClipPolygon, source, target, tolerance: float | None = None) -> ClipPolygon:
     """``polygon`` moved from pyproj CRS ``source`` into ``target`` (their horizontal parts), its
     edges cut into pieces whose moved ends follow the curves a projection makes of straight edges
@@ -351,9 +377,13 @@ def moved_polygon(polygon: ClipPolygon, source, target, tolerance: float | None 
     came from): it is in the target's coordinates."""
     import pyproj
 
-    source, target = horizontal_crs(source), horizontal_crs(target)
+    from .crs import pyproj_horizontal, same_horizontal
+
+    same = same_horizontal(source, target)  # (named the target: already in the points' coordinates)
+    # (bound kept: a WKT1's TOWGS84 is how its datum is moved; unbound, PROJ's own shift, metres off)
+    source, target = pyproj_horizontal(source, bound=True), pyproj_horizontal(target, bound=True)
     came_from = f"EPSG:{polygon.epsg}" if polygon.epsg is not None else source.name
-    if source.equals(target, ignore_axis_order=True):  # (named the target: already in the points' coordinates)
+    if same:
         return ClipPolygon(polygon.polygons, polygon.source, None, polygon.names, polygon.features, came_from)
     move = pyproj.Transformer.from_crs(source, target, always_xy=True)
     moved = [[_moved_ring(ring, move, tolerance, polygon.source, target.name) for ring in rings] for rings in polygon.polygons]
@@ -447,13 +477,11 @@ def check_simple(polygon: ClipPolygon, why: str) -> None:
     several = len(polygon.polygons) > 1
     for p, rings in enumerate(polygon.polygons, start=1):
         for r, ring in enumerate(rings):
-            name = "the polygon" if not several else f"polygon {p}"
-            name = f"{name}'s hole {r}" if r else name
-            problem = crossing_problem(ring, name)
+            problem = crossing_problem(ring, _ring_name(p, r, several))
             if problem:
                 raise InputError(f"{polygon.source}: {problem}: {why}")
 
 
 __all__ = [
-    "ClipPolygon", "check_simple", "clip_polygon_of", "crossing_edges", "crossing_problem", "far_apart", "horizontal_crs", "looks_like_lon_lat", "moved_polygon",
+    "ClipPolygon", "check_simple", "clip_polygon_of", "crossing_edges", "crossing_problem", "far_apart", "looks_like_lon_lat", "moved_polygon", "no_area_problem",
 ]  # fmt: skip

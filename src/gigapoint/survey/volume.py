@@ -209,23 +209,6 @@ def ring_area(ring: np.ndarray) -> float:
     return abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))) / 2
 
 
-def on_one_line(ring) -> bool:
-    """Whether the ring of (k, 2+) vertices ``ring`` has no area: its points on one line (rounding
-    leaves a line's shoelace a hair above 0, so against its size), or at one spot."""
-    xy = np.asarray(ring, np.float64)[:, :2]
-    size = float(np.ptp(xy, axis=0).max())
-    return ring_area(xy) <= 1e-9 * size**2
-
-
-def _check_areas(toe) -> None:
-    """A one-line InputError for a toe whose outer ring has no area: "no pixel centre of the grid
-    lies inside it: give a finer gsd" sent users after a grid no size of which could help."""
-    for p, rings in enumerate(toe.polygons, start=1):
-        if on_one_line(rings[0]):
-            name = "the polygon" if len(toe.polygons) == 1 else f"polygon {p}"
-            raise InputError(f"{toe.source}: {name}'s points lie on one line: it has no area; move a point off the line")
-
-
 def _base_heights(base, toe_xy: np.ndarray, toe_z: np.ndarray, xy: np.ndarray, where: str) -> tuple[np.ndarray, dict]:
     """The base's heights at ``xy`` and what it is (``Pile.base``), from the toe's heights ``toe_z`` at ``toe_xy``."""
     if not isinstance(base, str):
@@ -402,7 +385,6 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
         check_max_distance("volume: fill_nodata", fill_nodata)
     toe = clip_polygon_of(clip_polygon, f"volume: clip_polygon={clip_polygon!r}")
     check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it")
-    _check_areas(toe)
     point_filter(classes, drop_classes, where="volume")  # bad classes told before an octree is opened
     octree = _opened_octree(source)
     try:

@@ -26,11 +26,12 @@ from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
 from ..errors import GigapointError, InputError, count_text
 from ..io.filters import PointFilter, point_filter
+from ..io.polygon import no_area_problem
 from ..lod.query import is_octree, points_meeting
 from ..lod.reader import open_octree
 from ..lod.voxel_octree import VoxelOctree
 from ..survey.change import SURFACE_SPACING, unit_names
-from ..survey.volume import BASES, MARGIN_PIXELS, Volume, on_one_line
+from ..survey.volume import BASES, MARGIN_PIXELS, Volume
 from . import protocol as P
 from .section_tool import MAX_POINTS as SECTION_MAX_POINTS
 from .section_tool import every_kth, own_reader_source
@@ -94,10 +95,9 @@ def default_gsd(points, spacing: float) -> tuple[float, str]:
 def check_gsd(points, gsd: float) -> None:
     """A ProtocolError where the polygon has no area, or where ``gsd`` makes it more than
     MAX_GRID_PIXELS pixels across."""
-    if side(points) == 0:
-        raise P.ProtocolError("volume: the polygon's points are at one x, y: it has no area")
-    if on_one_line(points):  # (gp.volume says so too; of two points it said its clip_polygon's repr)
-        raise P.ProtocolError("volume: the polygon's points lie on one line: it has no area; move a point off the line")
+    no_area = no_area_problem(points)  # (gp.volume's check, said as the viewer's error: of two points it said its clip_polygon's repr)
+    if no_area:
+        raise P.ProtocolError(f"volume: {no_area}")
     across = side(points) / gsd
     if across > MAX_GRID_PIXELS:
         raise P.ProtocolError(f"volume: a gsd of {gsd:g} makes the polygon {count_text(across)} pixels across, over {MAX_GRID_PIXELS:,}: give {side(points) / MAX_GRID_PIXELS:.2g} or more")
