@@ -5,6 +5,7 @@ bounded time."""
 
 from __future__ import annotations
 
+import gzip
 import subprocess
 import sys
 import threading
@@ -33,7 +34,10 @@ class RangeServer:
     """Serves ``root`` on 127.0.0.1 with byte ranges; ``mode`` makes it misbehave: "error" (HTTP
     500), "ignore_range" (200 with the whole file), "short" (closes before the promised body
     ends), "short_206" (a 206 whose body and Content-Length are shorter than asked), "wrong_range"
-    (another range than asked), "hang" (never answers). ``fail_after``: behave for that many
+    (another range than asked), "hang" (never answers), "gzip" (the file gzipped, Content-Encoding:
+    gzip, despite Accept-Encoding: identity: ranges of the compressed bytes, as S3 serves an object
+    stored so), "gzip_plain" (Content-Encoding: gzip on bytes that are not). ``no_length``: answers
+    without Content-Length (the connection closed at their end). ``fail_after``: behave for that many
     requests first. ``route(path)``: (status, Location or None) answered instead of the file
     (redirects, refusals), or None. Counts requests and connections."""
 
@@ -49,6 +53,7 @@ class RangeServer:
         self.delay = 0.0  # seconds each answer waits (so that concurrent requests overlap)
         self.etag = None  # sent with each file's bytes when set
         self.rate = 0  # bytes a second each answer's body is sent at (0: at once)
+        self.no_length = False
         self.inflight = self.max_inflight = 0
         self.route = None
         self.lock = threading.Lock()
@@ -102,6 +107,8 @@ class RangeServer:
                     self.end_headers()
                     return
                 data = path.read_bytes()
+                if mode == "gzip":
+                    data = gzip.compress(data, mtime=0)
                 rng = self.headers.get("Range")
                 if rng and mode != "ignore_range":
                     a, b = (int(v) for v in rng.split("=")[1].split("-"))
@@ -128,7 +135,13 @@ class RangeServer:
                 else:
                     body = data
                     self.send_response(200)
-                self.send_header("Content-Length", str(len(body)))
+                if server.no_length:
+                    self.send_header("Connection", "close")
+                    self.close_connection = True
+                else:
+                    self.send_header("Content-Length", str(len(body)))
+                if mode in ("gzip", "gzip_plain"):
+                    self.send_header("Content-Encoding", "gzip")
                 if server.etag:
                     self.send_header("ETag", server.etag)
                 self.end_headers()

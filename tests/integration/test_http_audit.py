@@ -180,3 +180,101 @@ def test_a_potree_or_converted_octree_folder_url_is_named_as_one(server, capsys)
     with pytest.raises(InputError) as e:
         gp.open(server.url("other/"))
     assert str(e.value) == f"{server.url('other/ept.json')}: HTTP 404 Not Found for the file"
+
+
+def test_an_octree_json_url_is_named_for_what_it_is(server):
+    """``gp.open('http://host/tree/octree.json')`` (a converted octree's metadata, as gigapoint
+    writes it) said "ept.json lacks 'dataType', 'hierarchyType', 'schema'"; any other JSON file's
+    URL "ept.json lacks ..." of a file that is no ept.json."""
+    gp.convert(gp.from_arrays(np.random.default_rng(4).random((2_000, 3))), server.root / "tree", max_leaf=500)
+    url = server.url("tree/octree.json")
+    with pytest.raises(InputError) as e:
+        gp.open(url)
+    assert str(e.value) == f"{url}: a converted octree's octree.json; converted octrees open from a local folder (over HTTP: COPC files and EPT datasets)"
+    (server.root / "tree" / "other.json").write_text('{"points": 5}')
+    url = server.url("tree/other.json?sig=x")
+    with pytest.raises(InputError) as e:
+        gp.open(url)
+    assert str(e.value) == f"{server.url('tree/other.json?sig=***')}: not an EPT ept.json (it lacks 'bounds', 'dataType', 'hierarchyType', 'schema')"
+
+
+@pytest.mark.parametrize("mode", ["ok", "ignore_range"])
+def test_a_cut_las_file_over_http_is_said_truncated_as_the_local_one(server, mode):
+    """A 4-byte 'LASF' file (an upload cut short) was "not a COPC file (a LAS file without the
+    COPC info VLR first)" over HTTP, "truncated LAS header: ..." on disk: now the local words."""
+    cut = server.root / "cut.copc.laz"
+    cut.write_bytes(b"LASF")
+    with pytest.raises(InputError) as local:
+        gp.open(cut)
+    server.mode = mode
+    url = server.url("cut.copc.laz")
+    with pytest.raises(InputError) as e:
+        gp.open(url)
+    assert str(e.value) == str(local.value).replace(str(cut), url) == f"{url}: truncated LAS header: the file has 4 bytes, a LAS header needs at least 227"
+
+
+@pytest.mark.timeout(60)
+def test_an_answer_compressed_against_accept_encoding_identity(server, quick):
+    """A server that gzips its answers though asked for none (S3 serving an object stored with
+    Content-Encoding: gzip): a whole file is decoded (an EPT dataset draws); ranges of the
+    compressed bytes cannot be read, which was "the server sent more than the N bytes asked for";
+    a 'gzip' answer that is not was "DecodingError: Error -3 while decompressing data: ..."."""
+    from test_ept import make_scene, write_ept
+
+    write_ept(server.root / "ept", make_scene(2_000, seed=1), "laszip")
+    server.mode = "gzip"
+    c = gp.open(server.url("ept/"))
+    assert _frame(c, point_budget=10**9, lod_threshold_px=0.0).stats.points_processed == 2_000
+    c.close()
+    url = server.url("scan.copc.laz")
+    with pytest.raises(InputError) as e:
+        gp.open(url)
+    assert str(e.value) == (
+        f"{url}: the server sent bytes 0..65,536 compressed (Content-Encoding: gzip) though asked for the file as stored "
+        "(Accept-Encoding: identity): ranges of it cannot be read; serve the file without Content-Encoding"
+    )
+    server.mode = "gzip_plain"
+    url = server.url("ept/ept.json")
+    with pytest.raises(InputError) as e:
+        gp.open(url)
+    assert re.fullmatch(rf"{re.escape(url)}: the file does not decode as the server's Content-Encoding says \([^\n]+\)", str(e.value))
+
+
+@pytest.mark.timeout(30)
+def test_a_file_of_unknown_size_is_given_up_on_when_it_stalls_not_when_slow(server, quick):
+    """A whole file read without Content-Length had 3 x TIMEOUT (30 s) however it progressed: a
+    big ept.json or node over a slow link failed. Now only a stall ends it: no byte for TIMEOUT
+    seconds (0.5 s here; the file takes 2 s at 10 KB/s, in parts 0.05 s apart)."""
+    import socket
+    import threading
+    import time
+
+    data = bytes(range(256)) * 80
+    (server.root / "big.bin").write_bytes(data)
+    server.no_length, server.rate = True, 10_000
+    t = time.perf_counter()
+    f = gphttp.HttpFile(server.url("big.bin"))
+    assert f.read_all() == data
+    f.close()
+    assert 1.8 < time.perf_counter() - t < 5
+    listener = socket.create_server(("127.0.0.1", 0))
+
+    def stall():  # 100 bytes, then nothing
+        conn, _ = listener.accept()
+        with conn:
+            conn.recv(65536)
+            conn.sendall(b"HTTP/1.1 200 OK\r\nConnection: close\r\n\r\n" + bytes(100))
+            time.sleep(3)
+
+    threading.Thread(target=stall, daemon=True).start()
+    url = f"http://127.0.0.1:{listener.getsockname()[1]}/big.bin"
+    t = time.perf_counter()
+    f = gphttp.HttpFile(url)
+    try:
+        with pytest.raises(InputError) as e:
+            f.read_all()
+    finally:
+        f.close()
+        listener.close()
+    assert str(e.value) == f"{url}: the file stopped arriving: no byte for 0.5 s after 100 bytes (timed out)"
+    assert time.perf_counter() - t < 2

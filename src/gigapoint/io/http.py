@@ -14,8 +14,10 @@ HTTP 429/502/503/504, after the server's Retry-After up to a timeout). Whatever 
 error status, a short read, a server that ignores ``Range`` (200 with the whole file) or
 answers another range than asked, a range past the end of the file, a timeout, a file that
 changed on the server since its first answer (size, ETag or Last-Modified), too many redirects,
-a redirect from https to http or to another scheme (not followed); a failure past a redirect also
-names where it led. Messages name a URL
+a redirect from https to http or to another scheme (not followed), ranges sent compressed
+(Content-Encoding, despite ``Accept-Encoding: identity``: a whole file so is decoded), a whole
+file of unknown size that stops arriving (no byte for the timeout; a slow one is read however
+long it takes); a failure past a redirect also names where it led. Messages name a URL
 as ``shown_url`` gives it: its password (or a user name alone, a token) and query values as ***
 (signed URLs are how COPC files are shared); requests use the URL itself.
 
@@ -372,6 +374,7 @@ class HttpClient:
 
     def _request(self, httpx, url, start, size, headers, allow_short, what, t0, limit) -> bytes:
         self.requests += 1
+        body = bytearray()
         try:
             with self.client.stream("GET", self.moved.get(url, url), headers=headers) as r:
                 if r.history and urlsplit(str(r.url)).path == urlsplit(url).path + "/":  # (nginx's answer to a folder's URL)
@@ -397,7 +400,14 @@ class HttpClient:
                     f"{shown_url(url)}: the server ignored the range request for {what} (HTTP 200 with the whole file); "
                     "COPC and EPT over HTTP need a server that answers Range requests (HTTP 206)"
                 )
-                length = r.headers.get("content-length", "")
+                encoding = r.headers.get("content-encoding", "identity").strip().lower()
+                if status == 206 and encoding != "identity":  # (S3's object stored gzipped: ranges of the compressed bytes)
+                    raise InputError(
+                        f"{shown_url(url)}: the server sent {what} compressed (Content-Encoding: {encoding}) though asked for the "
+                        "file as stored (Accept-Encoding: identity): ranges of it cannot be read; serve the file without Content-Encoding"
+                    )
+                # (a compressed answer's Content-Length is not the file's: its bytes, decoded, are)
+                length = r.headers.get("content-length", "") if encoding == "identity" else ""
                 if start == 0 and allow_short and status == 200 and length.isdigit() and int(length) <= size:
                     # a range that covers the whole file may be answered 200 (RFC 9110): a small
                     # COPC's head read ("ignored the range request" before), not an ignored range
@@ -425,9 +435,10 @@ class HttpClient:
                     self._same_file(url, r.headers, int(length) if length.isdigit() else None)
                     if start is None and length.isdigit():
                         limit[0] = self._limit(int(length))
-                body = bytearray()
                 for part in r.iter_bytes():
                     body += part
+                    if start is None and not length.isdigit():  # a file of unknown size: given up on when it stalls, not when slow
+                        limit[0] = time.monotonic() - t0 + self._limit(None)
                     if whole and len(body) > expect:
                         raise InputError(ignored)
                     if expect is not None and len(body) > expect:
@@ -443,11 +454,15 @@ class HttpClient:
         except httpx.TooManyRedirects:
             raise InputError(f"{shown_url(url)}: too many redirects (more than {self.client.max_redirects}: a redirect loop?) for {what}") from None
         except httpx.TimeoutException as exc:
+            if body:  # (it was "no answer" of a file that stopped half-way)
+                raise InputError(f"{shown_url(url)}: {what} stopped arriving: no byte for {self.timeout:g} s after {len(body):,} bytes (timed out)") from None
             raise InputError(f"{shown_url(url)}: no answer within {self.timeout:g} s for {what} (timed out){_redirected(httpx, url, exc.request.url)}") from None
         except (httpx.RemoteProtocolError, httpx.ReadError) as exc:
             raise _Transient(f"short read of {what}: the connection broke off ({_one_line(exc)}){_redirected(httpx, url, exc.request.url)}") from None
         except (httpx.ConnectError, httpx.WriteError) as exc:
             raise _Transient(f"cannot connect ({_one_line(exc)}){_redirected(httpx, url, exc.request.url)}") from None
+        except httpx.DecodingError as exc:
+            raise InputError(f"{shown_url(url)}: {what} does not decode as the server's Content-Encoding says ({_one_line(exc)})") from None
         except httpx.HTTPError as exc:
             raise InputError(f"{shown_url(url)}: {type(exc).__name__}: {_one_line(exc)}") from None
         except httpx.InvalidURL as exc:  # not an HTTPError: 'http://[::1' reached the CLI as an internal error

@@ -31,7 +31,8 @@ from ..io.http import ByteSource, open_source, shown_url
 from ..io.las import scan_angle_units
 from ..io.las_kernels import _scaled_xyz
 from .copc import ExtraField
-from .kinds import ept_location
+from .kinds import EPT_FILE, ept_location
+from .octree_dir import FORMAT_NAME
 from .store import check_grid, known_classes, tight_bounds
 from .voxel_octree import VoxelOctree, parse_voxel_name, voxel_name
 
@@ -87,6 +88,11 @@ def _class_meta(schema: list[dict]) -> dict:
     return {}
 
 
+def _named_ept(name: str) -> bool:
+    """Whether the file ``name`` (a path or a URL, its query aside) is called ept.json."""
+    return name.split("?")[0].split("#")[0].rstrip("/").rsplit("/", 1)[-1] == EPT_FILE
+
+
 class EptCloud(VoxelOctree):
     """An EPT dataset opened as an octree: ``ept.json`` and the root hierarchy file at open,
     deeper hierarchy files and node files when a frame draws them. ``meta`` holds ``crs``,
@@ -102,10 +108,15 @@ class EptCloud(VoxelOctree):
         if not isinstance(meta, dict):
             raise InputError(f"{name}: not an EPT ept.json (expected a JSON object)")
         missing = [k for k in ("bounds", "points", "dataType", "hierarchyType", "schema") if k not in meta]
-        if missing and "hierarchy" in meta and "encoding" in meta:  # (a URL's any .json is taken for EPT's)
-            raise InputError(f"{name}: a Potree metadata.json; Potree octrees open from a local folder (over HTTP: COPC files and EPT datasets)")
-        if missing:
-            raise InputError(f"{name}: ept.json lacks {', '.join(repr(k) for k in missing)}")
+        if missing:  # (a URL's any .json is taken for EPT's)
+            lacks = f"lacks {', '.join(repr(k) for k in missing)}"
+            if "hierarchy" in meta and "encoding" in meta:
+                what = "a Potree metadata.json; Potree octrees open"
+            elif meta.get("format") == FORMAT_NAME:  # ('…/tree/octree.json' was "ept.json lacks 'dataType', ...")
+                what = "a converted octree's octree.json; converted octrees open"
+            else:
+                raise InputError(f"{name}: ept.json {lacks}" if _named_ept(name) else f"{name}: not an EPT ept.json (it {lacks})")
+            raise InputError(f"{name}: {what} from a local folder (over HTTP: COPC files and EPT datasets)")
         self.data_type = meta["dataType"]
         if self.data_type not in DATA_TYPES:
             raise InputError(f"{name}: EPT dataType {self.data_type!r} is not supported (laszip, binary or zstandard)")
