@@ -170,3 +170,28 @@ def test_camera_errors_spell_the_numbers_given_compactly(call, message):
     with pytest.raises(CameraError) as err:
         call()
     assert str(err.value) == message
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda: Camera.look_at((1e200, 0, 0), (5, 5, 5)), "camera eye must lie within ±1e+30, got (1e+200, 0, 0)"),
+        (lambda: Camera.look_at((0, 0, 0), (0, 0, 1), up=(0, 1e300, 0)), "camera up must lie within ±1e+30, got (0, 1e+300, 0)"),
+        (lambda: Camera.orbit((5, 5, 5), 0, 30, 1e300), "orbit distance must be at most 1e+30, got 1e+300"),
+        (lambda: Camera.fit(((0, 0, 0), (1e300, 1, 1))), "camera bounds max must lie within ±1e+30, got (1e+300, 1, 1)"),
+        (lambda: Camera.look_at((0, 0, 10), (0, 0, 0), projection="orthographic", ortho_height=1e308), "orthographic camera needs ortho_height at most 1e+30, got 1e+308"),
+    ],
+)  # fmt: skip
+def test_camera_refuses_coordinates_whose_float64_sums_overflow(call, message):
+    """An eye at 1e200, an up of 1e300, an orbit 1e300 away drew a blank image with numpy's
+    'overflow encountered in dot' warnings (a box of 1e300 said 'eye and target are the same
+    point'): one line naming the vector instead."""
+    with pytest.raises(CameraError) as err:
+        call()
+    assert str(err.value) == message
+
+
+def test_camera_takes_a_whole_numpy_float32_size():
+    """np.float32(64) was 'must be an integer', np.float64(64) taken: both are 64."""
+    cam = Camera.look_at((0, 0, 10), (0, 0, 0), width=np.float32(64), height=np.float64(48))
+    assert (cam.width, cam.height) == (64, 48) and type(cam.width) is int

@@ -325,3 +325,14 @@ def test_the_viewer_panel_names_fields_by_their_labels():
     assert "fixed: point size pixels (with point size 1: the exact one-pixel render); attenuated: point world size, at most point size" in helps["size_mode"]
     names = {spec.name for spec in settings_fields(RenderSettings)}
     assert not [(n, h) for n, h in helps.items() if names & set(re.findall(r"\b[a-z]+(?:_[a-z]+)+\b", h))]
+
+
+def test_short_hex_colours_read_as_css_does_and_a_bad_name_lists_the_names():
+    """'#fff' was 'cannot read color'; 'red' was refused without saying which names there are."""
+    assert RenderSettings(background="#fff").background == (255, 255, 255, 255)
+    assert RenderSettings(background="#1a2C").background == (0x11, 0xAA, 0x22, 0xCC)
+    with pytest.raises(SettingsError) as err:
+        RenderSettings(background="red")
+    assert str(err.value) == "background: cannot read color 'red' (use black, white, gray, grey, darkgray, skyblue, potree, #rrggbb, #rgb or r,g,b)"
+    with pytest.raises(SettingsError, match=r"^background: cannot read color '#ggg' \(use black, "):
+        RenderSettings(background="#ggg")

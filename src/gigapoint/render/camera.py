@@ -40,6 +40,10 @@ EDGE_MARGIN_PX = 1 / 64
 #: numpy's warnings and a refused world file)
 MAX_GSD = MAX_SPAN
 TRIM = 1e-4  # framing sample points: this share at each side may fall outside the frame (a few stray points)
+#: the largest coordinate of a camera's vectors, its orbit distance and ortho_height: far beyond any
+#: framing of points (within ±1e12), far below where float64 squares overflow (an eye at 1e200 gave
+#: numpy's overflow warnings and a blank image)
+MAX_CAMERA_COORDINATE = 1e30
 
 
 def _vec3(value, what: str) -> tuple[float, float, float]:
@@ -51,6 +55,8 @@ def _vec3(value, what: str) -> tuple[float, float, float]:
         raise CameraError(f"camera {what} must be three numbers, got {len(v)}")
     if not all(math.isfinite(c) for c in v):
         raise CameraError(f"camera {what} must be finite, got {numbers_text(v)}")
+    if max(map(abs, v)) > MAX_CAMERA_COORDINATE:
+        raise CameraError(f"camera {what} must lie within ±{MAX_CAMERA_COORDINATE:g}, got {numbers_text(v)}")
     return v
 
 
@@ -147,7 +153,7 @@ def _round_up(v: float) -> float:
 def image_side(name: str, v) -> int:
     """An image's width or height (``name``) as an int in 1..MAX_IMAGE_SIDE (960.0 taken as 960),
     else a one-line CameraError."""
-    if isinstance(v, float) and v.is_integer():
+    if isinstance(v, (float, np.floating)) and v.is_integer():  # (np.float32(960) too)
         v = int(v)
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= MAX_IMAGE_SIDE:  # True was 1 pixel
         raise CameraError(f"image {name} must be an integer in 1..{MAX_IMAGE_SIDE}, got {v!r}")
@@ -209,6 +215,8 @@ class Camera:
             h = self.ortho_height
             if not (is_real(h) and h > 0):  # ("10" was math's TypeError)
                 raise CameraError(f"orthographic camera needs ortho_height > 0, got {number_text(h)}")
+            if h > MAX_CAMERA_COORDINATE:  # (1e308: numpy's warnings in ray)
+                raise CameraError(f"orthographic camera needs ortho_height at most {MAX_CAMERA_COORDINATE:g}, got {number_text(h)}")
         if np.linalg.norm(self.up) == 0:
             raise CameraError("camera up vector is zero")
         for name in ("near", "far"):
@@ -231,6 +239,8 @@ class Camera:
                 raise CameraError(f"orbit {name} must be a finite number, got {number_text(v)}")
         if not distance > 0:
             raise CameraError(f"orbit distance must be > 0, got {number_text(distance)}")
+        if distance > MAX_CAMERA_COORDINATE:  # (named here, not as the eye it would place)
+            raise CameraError(f"orbit distance must be at most {MAX_CAMERA_COORDINATE:g}, got {number_text(distance)}")
         target = np.asarray(_vec3(target, "target"))
         yaw_r, pitch_r = math.radians(yaw), math.radians(pitch)
         direction = np.array([math.cos(pitch_r) * math.cos(yaw_r), math.cos(pitch_r) * math.sin(yaw_r), math.sin(pitch_r)])

@@ -58,23 +58,25 @@ _NAMED_COLORS = {
 
 
 def parse_color(value, name: str = "background") -> tuple[int, int, int, int]:
-    """'black', '#rrggbb', '#rrggbbaa', 'r,g,b' or a tuple -> (r, g, b, a) in 0..255."""
+    """'black', '#rrggbb', '#rrggbbaa', '#rgb', '#rgba', 'r,g,b' or a tuple -> (r, g, b, a) in 0..255."""
     text = value
+    spellings = f"use {', '.join(_NAMED_COLORS)}, #rrggbb, #rgb or r,g,b"  # ('red' did not say which names there are)
     if isinstance(value, str):
         s = value.strip().lower()
         if s in _NAMED_COLORS:
             return (*_NAMED_COLORS[s], 255)
-        if s.startswith("#") and len(s) in (7, 9):
+        if s.startswith("#") and len(s) in (4, 5, 7, 9):
+            digits = s[1:] if len(s) > 5 else "".join(c * 2 for c in s[1:])  # CSS's #fff is #ffffff ('cannot read color')
             try:
-                parts = [int(s[i : i + 2], 16) for i in range(1, len(s), 2)]
+                parts = [int(digits[i : i + 2], 16) for i in range(0, len(digits), 2)]
             except ValueError:
-                raise SettingsError(f"{name}: cannot read color {value!r}") from None
+                raise SettingsError(f"{name}: cannot read color {value!r} ({spellings})") from None
             return tuple(parts + [255] * (4 - len(parts)))  # type: ignore[return-value]
         value = s.split(",")
     try:
         numbers = [float(v) for v in value]
     except (TypeError, ValueError):
-        raise SettingsError(f"{name}: cannot read color {text!r} (use a name, #rrggbb or r,g,b)") from None
+        raise SettingsError(f"{name}: cannot read color {text!r} ({spellings})") from None
     # whole numbers only: 'inf' was an internal OverflowError, '0.5,0.5,0.5' black without a word
     if len(numbers) not in (3, 4) or not all(0 <= p <= 255 and p == int(p) for p in numbers):
         raise SettingsError(f"{name}: color needs 3 or 4 whole numbers in 0..255, got {text!r}")
@@ -146,7 +148,7 @@ class RenderSettings:
         10_000_000, "Converted octrees: most points a frame draws (largest projected nodes first).", min=1, group="lod"
     )
     max_points: int = setting(
-        0, "Plain clouds: draw at most this many points, every k-th of each batch (a quick preview); 0 = all.", min=0, group="lod"
+        0, "Plain clouds: draw at most this many points, every k-th of each batch, at least one of each (a quick preview); 0 = all.", min=0, group="lod"
     )
     lod_threshold_px: float = setting(
         100.0, "Converted octrees: nodes projected smaller than this many pixels are not drawn.", min=0.0, group="lod"
