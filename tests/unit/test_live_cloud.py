@@ -281,6 +281,58 @@ def test_float_colours_keep_the_range_of_the_first_coloured_frame():
         pushed_colour(unit, (0.5, -0.5, 1.0))  # still refused
 
 
+@pytest.mark.parametrize(
+    "bad",
+    [
+        lambda live, rgb: live.push(np.zeros((4, 3)), rgb=rgb, intensity=np.ones(5)),  # an attribute of the wrong length
+        lambda live, rgb: live.push(np.zeros((4, 3)), rgb=rgb, normals=np.ones((3, 3))),
+        lambda live, rgb: live.push(np.zeros((4, 3)), rgb=rgb, time=float("nan")),
+        lambda live, rgb: live.push(np.full((4, 3), np.nan), rgb=rgb),  # no valid point
+        lambda live, rgb: live.push(np.zeros((5, 3)), rgb=rgb),  # 4 colours for 5 points
+        lambda live, rgb: live.push(np.zeros((4, 3)), rgb=rgb, label=np.full(4, 1000)),  # the first frame's uint8 cannot hold it
+        lambda live, rgb: live.push_depth(np.zeros((2, 2)), (1, 1, 1, 1), rgb=rgb.reshape(2, 2, 3)),  # no valid pixel
+        lambda live, rgb: live.push_depth(np.ones((2, 2)), (1, 1, 1, 1), rgb=rgb.reshape(2, 2, 3), time=float("inf")),
+    ],
+)
+def test_a_refused_frame_does_not_decide_the_streams_colour_range(bad):
+    """A frame's float colours decided the stream's range before its other checks: a 0..255
+    frame refused for a bad attribute, time or no valid point made the 0..1 stream after it
+    black (0.5 read as 0..255)."""
+    live = LiveCloud()
+    live.push(np.zeros((4, 3)), label=np.zeros(4, np.uint8))
+    with pytest.raises(InputError):
+        bad(live, np.full((4, 3), 200.0))
+    live.push(np.ones((4, 3)), rgb=np.full((4, 3), 0.5), label=np.zeros(4, np.uint8))
+    assert live.frame_points([live.frames[-1]])[1][0].tolist() == [128, 128, 128, 255]
+
+
+def test_clear_starts_a_stream_that_decides_its_own_colour_range():
+    """clear() drops every frame but kept the colour range: a 0..255 float stream after a
+    cleared 0..1 one was read as 0..1 (every point white)."""
+    live = LiveCloud()
+    live.push(np.zeros((4, 3)), rgb=np.full((4, 3), 0.5))
+    live.clear()
+    live.push(np.zeros((4, 3)), rgb=np.full((4, 3), 200.0))
+    assert live.frame_points()[1][0].tolist() == [200, 200, 200, 255]
+    live.push(np.zeros((4, 3)), rgb=np.full((4, 3), 0.9))  # the new stream's range holds: a dark 0..255 frame
+    assert live.frame_points([live.frames[-1]])[1][0].tolist() == [1, 1, 1, 255]
+
+
+def test_the_huds_frames_per_second_reads_the_clouds_clock():
+    """Arrivals were stamped, and frames/s read, with the real clock beside the cloud's
+    ``clock=``: ten frames pushed a fake 0.1 s apart (at once in real time) read ~10^5 frames/s,
+    and a stream the fake clock had left 5 s behind still read as running."""
+    now = [100.0]
+    live = LiveCloud(clock=lambda: now[0])
+    for _ in range(10):
+        live.push(np.zeros((4, 3)))
+        now[0] += 0.1
+    assert live.stats.frames_per_second() == pytest.approx(10.0)
+    assert live.hud().startswith("live: 10.0 frames/s in, 10 frames")
+    now[0] += 5.0  # nothing since: the stream stopped
+    assert live.hud().startswith("live: 0.0 frames/s in, 10 frames")
+
+
 def test_without_decay_no_alpha_is_given():
     live = LiveCloud()
     live.push(*frame(0))
@@ -606,7 +658,7 @@ def test_frames_per_second_follows_a_changing_and_a_slow_stream_and_says_when_it
     assert slow.frames_per_second(now=15.5) == 0.0  # no frame for 6.5 s, twice its interval: stopped
 
 
-def test_close_frees_frames_and_snapshots_and_refuses_later_pushes():
+def test_close_frees_frames_and_snapshots_and_refuses_later_pushes(tmp_path):
     """``close`` stopped the source and recording only: frames and snapshots stayed in memory,
     and a push or snapshot afterwards went on as if open."""
     live = LiveCloud()
@@ -617,9 +669,12 @@ def test_close_frees_frames_and_snapshots_and_refuses_later_pushes():
     live.close()
     assert live.n_points == 0 and live.snapshots.n_points == 0 and live.snapshots.pool is None
     assert repr(live) == "LiveCloud('live', 0 of 100 frames, 0 live points, 0 snapshot points, closed)"
-    for what, call in (("push", lambda: live.push(*frame(2, n=10))), ("snapshot", live.snapshot), ("save", lambda: live.save("x.las"))):
+    for what, call in (("push", lambda: live.push(*frame(2, n=10))), ("snapshot", live.snapshot), ("save", lambda: live.save("x.las")),
+                       ("push_depth", lambda: live.push_depth(np.ones((2, 2)), (1, 1, 1, 1))),  # (was "live: push: ...")
+                       ("record", lambda: live.record(tmp_path / "rec"))):  # (made a folder never to get a frame)  # fmt: skip
         with pytest.raises(InputError, match=f"^live: {what}: the live cloud is closed"):
             call()
+    assert not (tmp_path / "rec").exists()
 
 
 def test_a_nan_normal_is_an_unknown_one_and_the_point_is_still_lit():

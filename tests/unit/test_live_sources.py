@@ -424,6 +424,29 @@ def test_a_replay_equals_the_recorded_frames(tmp_path):
         live.record(tmp_path / "rec")
 
 
+def test_a_depth_frame_is_recorded_with_its_own_time_while_another_producer_pushes(tmp_path):
+    """push_depth recorded the cloud's last time stamp: a frame another producer pushed
+    between its push and its recording gave the depth frame that frame's time (replayed there)."""
+    import threading
+
+    live = LiveCloud()
+    live.record(tmp_path / "rec")
+    commit, others = live._commit_pending, []
+
+    def another_producer_meanwhile():
+        commit()
+        if not others:
+            others.append(threading.Thread(target=live.push, args=(np.zeros((4, 3)),), kwargs={"time": 99.0}))
+            others[0].start()
+            others[0].join()
+
+    live._commit_pending = another_producer_meanwhile
+    live.push_depth(np.ones((2, 2)), (1, 1, 1, 1), time=3.0)
+    live.stop_recording()
+    index = json.loads((tmp_path / "rec" / "index.json").read_text())
+    assert sorted((e["kind"], e["time"]) for e in index["frames"]) == [("depth", 3.0), ("points", 99.0)]
+
+
 def test_recording_into_the_recording_being_replayed_is_refused_and_it_is_kept(tmp_path):
     """Recording a replay into its own folder with overwrite=True deleted the recording's frames
     before the player read them: nothing played, 0 frames recorded, the recording lost."""

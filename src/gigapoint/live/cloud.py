@@ -30,6 +30,7 @@ new frame, falling linearly to 0 at ``decay``; ``fade_alpha``) that the transpar
 
 from __future__ import annotations
 
+import copy
 import heapq
 import numbers
 import os
@@ -119,7 +120,8 @@ class LiveStats:
     frames_dropped: int = 0  # frames accepted but dropped unseen: more than ``keep`` waited for the lock
     points_in: int = 0
     last_error: str | None = None
-    arrivals: deque = field(default_factory=lambda: deque(maxlen=120))  # perf_counter of recent arrivals
+    clock: Callable[[], float] = _time.monotonic  # the cloud's (a test's fake): arrivals and frames_per_second's now
+    arrivals: deque = field(default_factory=lambda: deque(maxlen=120))  # clock() of recent arrivals
     latencies: deque = field(default_factory=lambda: deque(maxlen=_LATENCIES))  # seconds, push -> drawn
 
     def frames_per_second(self, now: float | None = None) -> float:
@@ -130,7 +132,7 @@ class LiveStats:
         a = list(self.arrivals)
         if len(a) < 2:
             return 0.0
-        now = _time.perf_counter() if now is None else now
+        now = self.clock() if now is None else now
         recent = [t for t in a if t >= a[-1] - 2.0]
         if len(recent) < 2:
             recent = a[-2:]
@@ -216,8 +218,8 @@ class LiveCloud:
         self.lock = LiveLock(released=self._commit_pending)
         self._pending: deque = deque()  # (frame in core's layout, FrameInfo) batched, not yet in the ring
         self._pending_lock = threading.Lock()
-        self._depth_scratch = threading.local()  # push_depth's reused arrays and colour range, one set per producer thread
-        self._push_colors: dict = {}  # push's colour range (colors_for's scalers): decided on the first frame with colours, as a file's
+        self._depth_scratch = threading.local()  # push_depth's reused arrays, one set per producer thread
+        self._push_colors: dict = {}  # the stream's colour range (colors_for's scalers): decided by its first accepted frame with colours, as a file's
         self._attr_dtypes: dict | None = None  # fixed by the first frame (as the octree's attributes)
         self.buffers_: LiveBuffers | None = None
         self._free: list[int] = []
@@ -229,7 +231,7 @@ class LiveCloud:
         self._seq = 0
         self._spacing = None  # ((buffers id, step, snapshot points), push count when measured, spacing): _kept_spacing
         self.points = 0  # points in the ring
-        self.stats = LiveStats()
+        self.stats = LiveStats(clock=self.clock)  # (stamped by the real clock beside a fake one, frames/s disagreed with frame times and decay)
         self.snapshots = None  # the ProgressiveOctree of snapshots (created by the first snapshot)
         self.snapshots_colored = False  # a frame snapshotted had colours: save writes RGB (else the grey is made up)
         self.closed = False  # close(): frames and snapshots freed, pushes refused
@@ -242,7 +244,6 @@ class LiveCloud:
         self._chunk_time = np.empty(0, np.float32)  # per ring chunk: its frame's arrival (frame_time), NaN when free
         self._listeners: list[Callable[[], None]] = []
         self.recorder = None
-        self._last_time = 0.0
         self.player = None  # a source feeding it (sources.Player), if any
         self.warnings = KeptWarnings()  # its player's thread's warnings, for snapshot, save, close (or player.join) to issue
 
@@ -387,7 +388,7 @@ class LiveCloud:
         the ring as it was."""
         pushed_at = _time.perf_counter()
         try:
-            return self._push(xyz, rgb, pose, time, normals, attributes, pushed_at)
+            return self._push(xyz, rgb, pose, time, normals, attributes, pushed_at)[0]
         except GigapointError as exc:
             self.refused(exc)
             raise
@@ -401,21 +402,26 @@ class LiveCloud:
         pushed_at = _time.perf_counter()
         try:
             where = f"{self.name}: push_depth"  # (several clouds: which one refused, as push says)
+            self._check_open("push_depth")  # (before the kernel: a closed cloud's refusal named push)
             p = parse_pose(pose, where)
             scratch = self._depth_scratch.__dict__  # this producer thread's (the frame keeps no view of its arrays)
-            xyz, nrm, rgba, _ = depth_to_points(depth, intrinsics, p, rgb, depth_scale, max_depth, where, z_order=True, scratch=scratch,
-                                                  scalers=self._push_colors)  # (the cloud's range, as push's: a replay, one thread, colours as live)
-            seq = self._push(xyz, rgba, None, time, None, {}, pushed_at, world_normals=nrm, pose_tag=p, ordered=True)
+            scalers = self._trial_colors()  # (the cloud's range, as push's: a replay, one thread, colours as live)
+            xyz, nrm, rgba, _ = depth_to_points(depth, intrinsics, p, rgb, depth_scale, max_depth, where, z_order=True, scratch=scratch, scalers=scalers)
+            seq, t = self._push(xyz, rgba, None, time, None, {}, pushed_at, world_normals=nrm, pose_tag=p, ordered=True, scalers=scalers)
         except GigapointError as exc:
             self.refused(exc)
             raise
         if self.recorder is not None:
-            self.recorder.write_depth(seq, depth, intrinsics, p, rgb, depth_scale, max_depth, self._last_time)
+            self.recorder.write_depth(seq, depth, intrinsics, p, rgb, depth_scale, max_depth, t)
         return seq
 
-    def _push(self, xyz, rgb, pose, time, normals, attributes, pushed_at, world_normals=None, pose_tag=None, ordered=False) -> int:
-        """``ordered``: a depth frame's points in its image's Z order, batched as they come
-        (batch_frame); other frames are sorted by Morton code."""
+    def _push(self, xyz, rgb, pose, time, normals, attributes, pushed_at, world_normals=None, pose_tag=None, ordered=False,
+              scalers=None) -> tuple[int, float]:  # fmt: skip
+        """The frame's sequence number and time stamp (for a depth frame's recording: the cloud's
+        last time stamp was another producer's frame's when one pushed meanwhile). ``ordered``: a
+        depth frame's points in its image's Z order, batched as they come (batch_frame); other
+        frames are sorted by Morton code. ``scalers``: the colour range the frame's colours were
+        judged with (push_depth's ``_trial_colors``), kept if it is accepted."""
         name = self.name
         self._check_open("push")
         xyz_in = points_for(xyz, f"{name}: push")
@@ -423,12 +429,13 @@ class LiveCloud:
         if n == 0:
             raise InputError(f"{name}: push: the frame has no points")
         with threads_for(n):  # a small frame on this thread alone: waking the others costs more (core/threads.py)
-            return self._push_points(xyz_in, rgb, pose, time, normals, attributes, pushed_at, world_normals, pose_tag, ordered)
+            return self._push_points(xyz_in, rgb, pose, time, normals, attributes, pushed_at, world_normals, pose_tag, ordered, scalers)
 
-    def _push_points(self, xyz_in, rgb, pose, time, normals, attributes, pushed_at, world_normals, pose_tag, ordered) -> int:
+    def _push_points(self, xyz_in, rgb, pose, time, normals, attributes, pushed_at, world_normals, pose_tag, ordered, scalers) -> tuple[int, float]:
         name, n = self.name, len(xyz_in)
         p = parse_pose(pose, f"{name}: push") if pose_tag is None else pose_tag
-        rgba = colors_for(rgb, n, f"{name}: push", self._push_colors) if rgb is not None else None
+        scalers = self._trial_colors() if scalers is None else scalers
+        rgba = colors_for(rgb, n, f"{name}: push", scalers) if rgb is not None else None
         attrs = {}
         for a, v in attributes.items():
             v = _array(v, f"{name}: push: attribute {a!r}")
@@ -480,10 +487,10 @@ class LiveCloud:
             frame = batch_frame(pts, rgba, per_point, lo, hi, self.chunk, ordered)
         with self._pending_lock:
             self._attribute_set(attrs)  # in push order: the first frame's set, which later ones keep to
+            self._keep_colors(scalers)  # (the frame is accepted: its colours may decide the range)
             seq = self._seq
             self._seq += 1
             self._pending.append((frame, FrameInfo(seq, [], m, t, arrived, p, lo, hi, pushed_at, colored=colored)))
-            self._last_time = t
             # the queue's bound: behind ``keep`` newer frames, a waiting frame would leave the ring
             # as soon as it was copied in (a renderer holding the lock, a producer outpacing the
             # copies: the queue grew without end); producers still never wait
@@ -498,7 +505,7 @@ class LiveCloud:
         self._commit_pending()
         if self.recorder is not None and pose_tag is None:
             self.recorder.write_points(seq, xyz_in, rgb, pose, t, normals, attributes)
-        return seq
+        return seq, t
 
     def _commit_pending(self) -> None:
         """Copy the frames waiting in ``_pending`` into the ring, in push order, whenever the lock
@@ -525,7 +532,7 @@ class LiveCloud:
                 self._expire()
                 self.stats.frames_in += 1
                 self.stats.points_in += info.n_points
-                self.stats.arrivals.append(_time.perf_counter())
+                self.stats.arrivals.append(self.clock())
                 committed += 1
                 if self.lock.frame_waiting():
                     break
@@ -533,6 +540,20 @@ class LiveCloud:
             self.lock.release()
         if committed:
             self._notify()
+
+    def _trial_colors(self) -> dict:
+        """A copy of the stream's colour range for a frame's colours to be judged with, kept
+        (``_keep_colors``) only once the frame is accepted: a frame refused after its colours were
+        judged (a bad attribute or time, no valid point) decided the range of the whole stream."""
+        return {kind: copy.copy(s) for kind, s in self._push_colors.items()}
+
+    def _keep_colors(self, scalers: dict) -> None:
+        """An accepted frame's range (``_trial_colors``) is the stream's where it decided one
+        (or revised 8 to 16 bits) and no frame accepted meanwhile did (pending lock held)."""
+        for kind, s in scalers.items():
+            kept = self._push_colors.setdefault(kind, s)
+            if kept.mode is None or (kept.mode, s.mode) == ("8", "16"):
+                kept.mode = s.mode
 
     def _attribute_set(self, attrs: dict) -> None:
         """The first frame fixes the attributes; a later frame may leave some out (0 then) but
@@ -657,9 +678,12 @@ class LiveCloud:
             self.points -= f.n_points
 
     def clear(self) -> None:
-        """Drop every frame from the ring (snapshots stay)."""
+        """Drop every frame from the ring (snapshots stay); the next stream decides its own
+        colour range (a 0..255 float stream after a 0..1 one was read as 0..1: all white)."""
         with self.lock.writing():
             self._expire(keep=0)  # (not self.keep = 0 meanwhile: a push then dropped every waiting frame)
+            with self._pending_lock:
+                self._push_colors = {}
         self._notify()
 
     # ------------------------------------------------------------------ drawing (Renderable)
@@ -890,6 +914,7 @@ class LiveCloud:
         and time, and index.json); returns the Recorder (``stop()`` or ``live.stop_recording()``)."""
         from .record import Recorder
 
+        self._check_open("record")  # (a closed cloud's recording folder was made, never to get a frame)
         check_switch("overwrite", overwrite, f"{self.name}: record")
         if self.recorder is not None:
             raise InputError(f"{self.name}: already recording into {self.recorder.directory}")
