@@ -319,3 +319,18 @@ def test_a_cloud_of_a_colourless_file_saves_without_colours_until_it_is_given_so
     cloud.save(tmp_path / "coloured.las")
     coloured = laspy.read(str(tmp_path / "coloured.las"))
     assert coloured.header.point_format.id == 7 and set(np.asarray(coloured.green).tolist()) == {20 * 257}
+
+
+def test_a_progressive_octree_saves_8_bit_colours_as_its_files_stored_them(tmp_path, autzen_path):
+    """autzen_trim stores 8-bit values in its 16-bit fields: a progressive cloud's save("x.laz")
+    wrote them x 257 (red up to 60652), where a plain cloud's save and convert -o x.laz keep them
+    (red up to 236); points added of its own make LAS's 16-bit colours again."""
+    cloud = gp.open(autzen_path, progressive=True)
+    cloud.save(tmp_path / "as_stored.laz")
+    red = np.asarray(laspy.read(tmp_path / "as_stored.laz").red)
+    np.testing.assert_array_equal(np.sort(red), np.sort(np.asarray(laspy.read(autzen_path).red)))
+    cloud.add(np.array([[636500.0, 849200.0, 450.0]]), rgb=np.array([[255, 0, 0]], np.uint8))
+    cloud.save(tmp_path / "own.laz")
+    red = np.asarray(laspy.read(tmp_path / "own.laz").red)
+    assert int(red.max()) == 65535 and int(np.sort(red)[-2]) == 236 * 257
+    cloud.close()

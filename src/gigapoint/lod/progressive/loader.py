@@ -180,7 +180,7 @@ class Loader:
                     sl = slice(s, min(s + (SLICE_WHILE_DRAWING if drawing else SLICE_POINTS), len(chunk)))
                     attrs = self.octree.held_of(chunk.attributes)
                     try:
-                        self.octree.add(chunk.xyz[sl], chunk.rgba[sl], **{a: v[sl] for a, v in attrs.items()})
+                        self.octree.add_read(chunk.xyz[sl], chunk.rgba[sl], {a: v[sl] for a, v in attrs.items()}, chunk.color_bits)
                     except InputError as exc:
                         raise _of_source(exc, self.octree.name, name) from None
                     self._first_in.set()

@@ -57,7 +57,7 @@ from ...core.attributes import Attributes, encode, fits, holder_for, repacked, r
 from ...core.attributes import stored as stored_array
 from ...core.bounds import valid_bounds
 from ...core.chunk import PointChunk, attribute_dtype_problem, attribute_name_problem, colors_for, points_for, warn_dropped_attributes
-from ...core.cloud import MAX_ABS_COORDINATE, at_scale, byte_views, check_valid_count, take
+from ...core.cloud import MAX_ABS_COORDINATE, at_scale, byte_views, check_valid_count, source_color_bits, take
 from ...core.compact import GRID_TOLERANCE, centre_half, ext_bits_per_point, point_words, stream_words, streams_into
 from ...core.framelock import FrameLock
 from ...core.layout import BATCH_DTYPE, EXT_FULL_BITS, PACK_DTYPE, WORD_BITS
@@ -613,6 +613,7 @@ class ProgressiveOctree:
         self.lock = FrameLock()
         self._attribute_dtypes = dict(attributes) if attributes is not None else None
         self._dropped_said: set[str] = set()  # attributes said to be left out (keep_attributes)
+        self._color_bits: set[int | None] = set()  # the colours' bits of the points added (add_read): a point file's save keeps 8-bit values
         self.pool: Pool | None = None
         self.origin: np.ndarray | None = None
         self.edge = 0.0
@@ -1117,11 +1118,18 @@ class ProgressiveOctree:
         widens to numpy's dtype for both (uint16 and float32: float32), as ``gp.open`` of
         several files does. While a loader fills the octree, an add waits for the files' first
         points, whose attributes are the set."""
+        return self.add_read(xyz, rgb, attributes, None)
+
+    def add_read(self, xyz, rgb, attributes: dict, color_bits: int | None) -> int:
+        """``add`` of points read from a file whose colours were ``color_bits``-bit values
+        (PointChunk.color_bits; None: not a file's, as ``add``'s): a LAS file of 8-bit values in
+        16-bit fields is saved into a point file as it was, not x 257 (as a plain cloud's save)."""
         xyz = np.ascontiguousarray(points_for(xyz, self.name), np.float64)
         n = len(xyz)
         if n == 0:
             return 0
         self.wait_first_points()
+        self._color_bits.add(color_bits)
         with threads_for(n, when_awake=False):  # a small batch on this thread alone: waking the others costs more (core/threads.py)
             return self._add(xyz, rgb, attributes)
 
@@ -1611,7 +1619,8 @@ class ProgressiveOctree:
         ply = out.suffix.lower() == ".ply"
         grid = None if ply or self.grid is None else las_grid(self.lo, self.hi, np.full(3, self.grid[1]), self.grid[0])
         crs = [] if ply else source_crs_records(self.source_files)
-        n = write_points(out, self.chunks, self.points, grid=grid, crs_records=crs, color_bits=None, has_color=sources_have_color(self.source_files))
+        color_bits = 8 if source_color_bits(self._color_bits) == 8 else 16  # (LAS's own: 16; 8 where the files stored 8-bit values)
+        n = write_points(out, self.chunks, self.points, grid=grid, crs_records=crs, color_bits=color_bits, has_color=sources_have_color(self.source_files))
         return ConvertResult(out, out.suffix[1:].lower(), None, n, 0, self.skipped, time.perf_counter() - t0, False)
 
     def check_loaded(self, to: str) -> None:
