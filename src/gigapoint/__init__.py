@@ -116,13 +116,13 @@ def demo(
     return build_cloud(chunks, name=name, colors=colors)
 
 
-def _flat_paths(paths) -> tuple:
+def _flat_paths(paths, where: str) -> tuple:
     """Paths with lists and tuples of them (at any depth) spread out, in order; anything else
     that is not a path (None, a number, an array) a one-line InputError naming it (``io.given_paths``)."""
     from .io import given_paths
 
     one_list = len(paths) == 1 and isinstance(paths[0], (list, tuple))  # gp.open([a, 5]): "paths[1]: 5 is not a path"
-    return tuple(given_paths(paths[0] if one_list else paths, "open", "paths"))
+    return tuple(given_paths(paths[0] if one_list else paths, where, "paths"))
 
 
 def open(*paths, progressive: bool = False, **options):
@@ -158,22 +158,31 @@ def open(*paths, progressive: bool = False, **options):
     from .io._base import headers_once
 
     with headers_once():  # one operation: its steps (patterns, folders, headers) each read once, the loader's thread too
-        return _open(paths, progressive, options)
+        return _open(paths, progressive, options, "open")
 
 
-def _open(paths: tuple, progressive: bool, options: dict):
+def open_for(where: str, *paths, **options):
+    """``open`` for an operation that reads its paths through it (section, orthophoto, volume,
+    change): its errors name ``where`` ("section: no point file given: only octrees matched" was "open: ...")."""
+    from .io._base import headers_once
+
+    with headers_once():
+        return _open(paths, False, options, where)
+
+
+def _open(paths: tuple, progressive: bool, options: dict, where: str):
     from .errors import InputError, check_switch
     from .io import lone_match
     from .io.filters import point_filter
     from .lod.kinds import refuse_unwritten_copc
     from .lod.reader import refuse_octrees
 
-    paths = tuple(lone_match(_flat_paths(paths)))  # (a pattern matching one octree opens it)
+    paths = tuple(lone_match(_flat_paths(paths, where)))  # (a pattern matching one octree opens it)
     refuse_unwritten_copc(paths)
-    check_switch("progressive", progressive, "open")  # (chunked= is open_cloud's to check)
+    check_switch("progressive", progressive, where)  # (chunked= is open_cloud's to check)
     recursive = options.pop("recursive", False)
-    check_switch("recursive", recursive, "open")
-    keep = point_filter(options.pop("classes", None), options.pop("drop_classes", None), options.pop("clip", None), "open", corridor=options.pop("corridor", None),
+    check_switch("recursive", recursive, where)
+    keep = point_filter(options.pop("classes", None), options.pop("drop_classes", None), options.pop("clip", None), where, corridor=options.pop("corridor", None),
                         clip_polygon=options.pop("clip_polygon", None))  # fmt: skip
     if recursive:
         from .io import with_subfolders
@@ -202,7 +211,7 @@ def _open(paths: tuple, progressive: bool, options: dict):
 
     from .io import open_cloud
 
-    known = [p for p in inspect.signature(open_cloud).parameters if p not in ("paths", "point_filter")]
+    known = [p for p in inspect.signature(open_cloud).parameters if p not in ("paths", "point_filter", "where")]
     unknown = sorted(set(options) - set(known))
     if unknown:  # a TypeError naming the internal open_cloud() before
         raise InputError(
@@ -210,7 +219,7 @@ def _open(paths: tuple, progressive: bool, options: dict):
             "progressive=True (with memory_limit=), classes=, drop_classes=, clip=, corridor=, clip_polygon="
         )
 
-    return open_cloud(*paths, point_filter=keep, **options)
+    return open_cloud(*paths, point_filter=keep, where=where, **options)
 
 
 # Imported on first use (PEP 562): numba and the kernels for most (``import gigapoint`` took

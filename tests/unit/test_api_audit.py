@@ -197,7 +197,8 @@ NOT_PATHS = [
     ("change-bare", lambda src, out: gp.change(5, src, 10), f"change: before: 5 {NOT_A_PATH}"),
     ("volume-bare", lambda src, out: gp.volume(5, "POLYGON ((0 0, 1 0, 1 1, 0 0))", 1), f"volume: source: 5 {NOT_A_PATH}"),
     ("volume", lambda src, out: gp.volume([None], "POLYGON ((0 0, 1 0, 1 1, 0 0))", 1), f"volume: source[0]: None {NOT_A_PATH}"),
-    ("expand-paths", lambda src, out: expand_paths([src, 5]), f"inputs[1]: 5 {NOT_A_PATH}"),  # (a caller that named none)
+    ("expand-paths", lambda src, out: expand_paths([src, 5]), f"open: inputs[1]: 5 {NOT_A_PATH}"),  # (a caller that named none: gp.open's, as its other errors)
+    ("expand-paths-where", lambda src, out: expand_paths([src, 5], where="tile"), f"tile: inputs[1]: 5 {NOT_A_PATH}"),  # (where= was not passed on: "inputs[1]")
     # operations that read through gp.open or expand_paths name themselves (they said "open: paths[0]" and a nameless "inputs[0]")
     ("section", lambda src, out: gp.section([5], (0, 0, 1, 1), 1), f"section: source[0]: 5 {NOT_A_PATH}"),
     ("orthophoto", lambda src, out: gp.orthophoto([src, 5], 1.0), f"orthophoto: source[1]: 5 {NOT_A_PATH}"),

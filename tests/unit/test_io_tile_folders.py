@@ -128,6 +128,75 @@ def test_an_empty_tile_is_skipped_by_a_progressive_load_as_by_open(tmp_path, loa
         assert f"{tmp_path / 'tile_00_05.laz'}: holds no points, skipped" in [str(w.message) for w in caught]
 
 
+def _empty_file(folder: Path, kind: str) -> Path:
+    """An input without a point: a 0-byte text file, a text file of blank lines, a LAS file counting none."""
+    if kind == "las":
+        laspy.LasData(laspy.LasHeader(point_format=3, version="1.2")).write(folder / "empty.las")
+        return folder / "empty.las"
+    (folder / "empty.xyz").write_text("" if kind == "0-byte" else "\n\n  \n")
+    return folder / "empty.xyz"
+
+
+def _loaded_points(cloud) -> int:
+    """The points a progressive load holds once done (its warnings issued by the wait)."""
+    assert cloud.wait(timeout=120)
+    return cloud.n_points
+
+
+# each operation's count of the points it read: a 0-byte text file, one of blank lines or a LAS file counting none among them
+EMPTY_AMONG_SEVERAL = [
+    ("open", lambda files, out: gp.open(files).n_points),
+    ("progressive", lambda files, out: _loaded_points(gp.open(files, progressive=True))),
+    ("convert-las", lambda files, out: gp.convert(files, out / "all.las").points),
+    ("convert-octree", lambda files, out: gp.convert(files, out / "octree").points),
+    ("tile", lambda files, out: gp.tile(files, out / "tiles", 100.0).points),
+]
+#: what each kind of empty file alone is refused with
+EMPTY_ALONE = {"0-byte": "file is empty (0 bytes)", "blank-lines": "holds no points", "las": "LAS file holds no points (header point count is 0)"}
+
+
+@pytest.mark.parametrize("kind", ["0-byte", "blank-lines", "las"])
+@pytest.mark.parametrize("call", [c[1] for c in EMPTY_AMONG_SEVERAL], ids=[c[0] for c in EMPTY_AMONG_SEVERAL])
+def test_an_empty_input_among_several_is_skipped_with_one_warning_by_every_operation(tmp_path, kind, call):
+    """A 0-byte file or one of blank lines among several: gp.open skipped the blank one, but its
+    progressive load, convert and tile stopped on it ("holds no points"), and every one on a
+    0-byte file ("file is empty"); an empty LAS file was said twice by a conversion to .las (a pass each)."""
+    tiles = write_tiles(tmp_path / "in", 2)
+    empty = _empty_file(tmp_path / "in", kind)
+    with pytest.warns(GigapointWarning) as caught:
+        assert call([tiles[0], empty, tiles[1]], tmp_path) == 100
+    assert [str(w.message) for w in caught if "holds no points" in str(w.message)] == [f"{empty}: holds no points, skipped"]
+
+
+def test_an_empty_las_file_beside_a_text_file_is_said_once_by_a_conversion_to_las(tmp_path):
+    """Points of a text file have no LAS grid: written in two passes, each said the empty LAS file again."""
+    text = tmp_path / "a.xyz"
+    text.write_text("0 0 0\n1 1 1\n2 2 1\n")
+    empty = _empty_file(tmp_path, "las")
+    with pytest.warns(GigapointWarning) as caught:
+        assert gp.convert([text, empty], tmp_path / "all.las").points == 3
+    assert [str(w.message) for w in caught] == [f"{empty}: holds no points, skipped"]
+
+
+@pytest.mark.parametrize("kind", ["0-byte", "blank-lines", "las"])
+@pytest.mark.parametrize("call", [c[1] for c in EMPTY_AMONG_SEVERAL], ids=[c[0] for c in EMPTY_AMONG_SEVERAL])
+def test_an_empty_input_alone_is_an_error_naming_it(tmp_path, kind, call):
+    empty = _empty_file(tmp_path, kind)
+    with pytest.raises(EmptyCloudError) as caught:
+        call([empty], tmp_path)
+    assert str(caught.value) == f"{empty}: {EMPTY_ALONE[kind]}"
+
+
+def test_only_empty_inputs_of_any_kind_say_no_file_holds_a_point(tmp_path):
+    """A 0-byte text file beside a LAS file counting none: each pair says what two empty LAS files say
+    (one was judged alone: "holds no points" one way round, "no file holds any point" the other)."""
+    files = [_empty_file(tmp_path, "0-byte"), _empty_file(tmp_path, "las")]
+    for pair in (files, files[::-1]):
+        with pytest.raises(EmptyCloudError) as caught:
+            gp.open(pair)
+        assert str(caught.value) == f"{pair[0]}, {pair[1]}: no file holds any point"
+
+
 def _empty_tiles(folder) -> list:
     """Two LAS tiles without a point, a.laz and b.laz in ``folder``."""
     files = [folder / "a.laz", folder / "b.laz"]
@@ -288,12 +357,18 @@ def test_a_glob_pattern_matching_folders_reads_each_as_a_folder_named(tmp_path, 
         ("convert", lambda pattern, out: gp.convert(pattern, out / "c.las")),
         ("tile", lambda pattern, out: gp.tile(pattern, out / "tiles", 100)),
         ("classify_ground", lambda pattern, out: gp.classify_ground(pattern, out / "g.las")),
+        ("section", lambda pattern, out: gp.section(pattern, (0, 0, 1, 1), 1)),
+        ("orthophoto", lambda pattern, out: gp.orthophoto(pattern, 1.0)),
+        ("volume", lambda pattern, out: gp.volume(pattern, "POLYGON ((500000 4000000, 500100 4000000, 500100 4000100, 500000 4000000))", 1)),
+        ("volume", lambda pattern, out: gp.volume(pattern, "POLYGON ((0 0, 1 0, 1 1, 0 0))", 1)),  # (lon/lat-like: placed over the headers first)
+        ("change", lambda pattern, out: gp.change(pattern, pattern, 1)),
     ],
-    ids=["open", "convert", "convert-las", "tile", "classify-ground"],
+    ids=["open", "convert", "convert-las", "tile", "classify-ground", "section", "orthophoto", "volume", "volume-lon-lat", "change"],
 )
 def test_a_pattern_matching_only_octrees_is_said_under_the_operation_with_why(tmp_path, where, call):
     """Each octree a pattern matches is skipped with a warning; where nothing else is left, every
-    operation said gp.open's "open: no file given", and not why."""
+    operation said gp.open's "open: no file given", and not why (section, orthophoto, volume and
+    change, reading through gp.open, still said "open: ...")."""
     from gigapoint.errors import InputError
 
     for name in ("ept_a", "ept_b"):

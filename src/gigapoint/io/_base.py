@@ -134,8 +134,9 @@ def fail(path: Path | str, problem: object, cls: type[InputError] = InputError) 
     return cls(f"{path}: {one_line(problem)}")
 
 
-def check_file(path: Path | str) -> Path:
-    """The path as a Path, after checking it names a readable, non-empty regular file."""
+def check_file(path: Path | str, empty_ok: bool = False) -> Path:
+    """The path as a Path, after checking it names a readable, non-empty regular file
+    (``empty_ok``: or an empty one, which its reader refuses, or an operation skips among several)."""
     p = Path(path)
     try:
         st = p.stat()
@@ -149,7 +150,7 @@ def check_file(path: Path | str) -> Path:
         raise fail(p, "is not a regular file")
     if not os.access(p, os.R_OK):
         raise fail(p, "permission denied")
-    if st.st_size == 0:
+    if st.st_size == 0 and not empty_ok:
         raise fail(p, "file is empty (0 bytes)", EmptyCloudError)
     return p
 

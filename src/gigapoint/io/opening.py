@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud, check_valid_count
-from ..errors import EmptyCloudError, GigapointWarning, InputError, check_switch, warn
+from ..errors import EmptyCloudError, InputError, check_switch
 from ._base import DEFAULT_CHUNK_SIZE, check_chunk_size, headers_once
 from .crs import warn_mixed_crs
 from .filters import PointFilter, filtered
@@ -18,7 +18,9 @@ from .paths import (
     cloud_name,
     expand_paths,
     files_label,
+    files_with_points,
     scan_angles_differ,
+    skip_empty,
 )
 from .registry import reader_for
 
@@ -47,6 +49,7 @@ def open_cloud(
     colors: str = "auto",
     chunked: bool | None = None,
     point_filter: PointFilter | None = None,
+    where: str = "open",
 ) -> PointCloud:
     """Read files and/or directories (all supported files inside, sorted by name) into one PointCloud.
 
@@ -61,16 +64,17 @@ def open_cloud(
     cloud), for files whose points do not fit in memory as floats; None (the
     default): chunked when the files' headers say they hold more than ``CHUNKED_ABOVE`` (50 M).
     ``point_filter``: only the points it keeps are read (io/filters.py; gp.open's ``classes``,
-    ``drop_classes`` and ``clip``); the headers' counts are then upper bounds.
+    ``drop_classes`` and ``clip``); the headers' counts are then upper bounds. ``where``: the
+    operation reading them (gp.open, section, orthophoto...), as the paths' errors name it.
     """
     if not paths:
-        raise InputError("open: no file given")
+        raise InputError(f"{where}: no file given")
     chunk_size = check_chunk_size(chunk_size)
     check_switch("chunked", chunked, "open", allow_none=True)  # "no" was taken as true
     check_switch("progress", progress, "open")
     if name is not None and not isinstance(name, str):  # the name every message and output of the cloud starts with
         raise InputError(f"open: name must be a string, got {name!r}")
-    files = expand_paths(paths)
+    files = files_with_points(expand_paths(paths, where=where))
     plan = [(f, reader_for(f)) for f in files]
     if name is None:
         name = cloud_name(files)
@@ -105,7 +109,7 @@ def open_cloud(
                 if not several:
                     raise
                 empty.append(f)
-                warn(f"{f}: holds no points, skipped", GigapointWarning)
+                skip_empty(f)
         if passing is not None:  # not "no valid points": the filter left none
             passing.check_passed(files_label(files))
 

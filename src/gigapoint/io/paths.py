@@ -222,7 +222,7 @@ def expand_paths(paths: Iterable, recursive: bool = False, where: str = "open") 
     operation's name) saying so."""
     out: list[Path] = []
     skipped: list[Path] = []  # octrees patterns matched, not read
-    for p, matched in _named(given_paths(paths)):  # (5 among them: a TypeError from pathlib)
+    for p, matched in _named(given_paths(paths, where)):  # (5 among them: a TypeError from pathlib; none: "``where``: no file given")
         p = _local(p)
         if matched and p.is_dir() and is_dataset_folder(p):  # ("tiles/*": a conversion's output beside the tiles)
             _octree_skipped(p)
@@ -241,11 +241,9 @@ def expand_paths(paths: Iterable, recursive: bool = False, where: str = "open") 
                 raise fail(p, f"{what} no supported point cloud file ({', '.join(supported_suffixes())})", EmptyCloudError)
             out.extend(found)
         else:
-            out.append(check_file(p))
+            out.append(check_file(p, empty_ok=True))  # (a 0-byte one among several: skipped by ``files_with_points``)
     if skipped and not out:  # (said "open: no file given" whatever the operation, and not why)
         raise InputError(f"{where}: no point file given: only octrees matched ({file_names(skipped)}), not read with point files (open one alone)")
-    if not out:
-        raise InputError(f"{where}: no file given")
     seen: set = set()
     once = []
     for f in out:
@@ -260,6 +258,42 @@ def expand_paths(paths: Iterable, recursive: bool = False, where: str = "open") 
         seen.add(key)
         once.append(f)
     return once
+
+
+def files_with_points(files: list[Path]) -> list[Path]:
+    """``files`` (``expand_paths``'), but where there are several, those holding no point (0 bytes,
+    a text file of blank lines, a header counting none) left out, each said once (``skip_empty``):
+    what gp.open, its progressive load, convert and tile read. One file alone is kept (its
+    reader's one-line error says it is empty); several all empty, "no file holds any point"."""
+    if len(files) < 2:
+        return files
+    kept, empty = [], []
+    for f in files:
+        (empty if _holds_no_points(f) else kept).append(f)
+    if not kept:
+        raise EmptyCloudError(f"{files_label(files)}: no file holds any point")
+    for f in empty:
+        skip_empty(f)
+    return kept
+
+
+def _holds_no_points(f: Path) -> bool:
+    """Whether a file is empty, as its size or its header (read once an operation) tells."""
+    try:
+        return f.stat().st_size == 0 or reader_for(f).header(f, salvage=True)["point_count"] == 0
+    except EmptyCloudError:  # (a text file's header: "holds no points")
+        return True
+
+
+def skipped_message(path) -> str:
+    """The warning of a file without points among several, skipped."""
+    return f"{path}: holds no points, skipped"
+
+
+def skip_empty(path) -> None:
+    """Say that a file without points among several is skipped (once an operation: a conversion
+    reads its files in several passes)."""
+    read_once("empty skipped", path, lambda: warn(skipped_message(path), GigapointWarning))
 
 
 def with_subfolders(paths) -> list:

@@ -231,9 +231,9 @@ def open_survey(source, filters: dict, where: str = "change"):
         if any(v is not None for v in filters.values()):  # (its own filter is the one it was opened with)
             raise InputError(f"{source.name}: an opened LOD octree reads no other filter; give its path, or open it with them (gigapoint.open(path, classes=...))")
         return source
-    from .. import open as open_points
+    from .. import open_for
 
-    cloud = open_points(source, **filters)
+    cloud = open_for(where, source, **filters)
     if not (isinstance(cloud, PointCloud) or is_octree(cloud)):
         raise InputError(f"{survey_label(source)}: an unfinished conversion; its preview holds a sample of the points: give the point files, or wait for the octree")
     return cloud

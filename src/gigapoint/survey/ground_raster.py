@@ -61,7 +61,6 @@ def point_files(source, out, overwrite: bool, chunk_size: int | None, where: str
     """(``out`` as a Path, the PointFiles of ``source`` it is written from) for a classification
     that writes every point of its inputs again: ``out`` a .las, .laz or .ply file not there
     yet (or ``overwrite``), checked before a point is read (one-line errors starting ``where``)."""
-    from ..io.paths import given_paths
     from ..io.write import check_point_file_output
     from ..lod.convert.to_file import PointFiles
 
@@ -69,8 +68,7 @@ def point_files(source, out, overwrite: bool, chunk_size: int | None, where: str
     if out.suffix.lower() not in (".las", ".laz", ".ply"):
         raise InputError(f"{out}: {where} writes a .las, .laz or .ply file")
     check_point_file_output(out, overwrite)
-    sources = given_paths(source, where, "source")  # (5 among them: "classify_ground: source[0]: ...", not a TypeError or a nameless "inputs[0]")
-    return out, PointFiles(sources, out, chunk_size, ply=out.suffix.lower() == ".ply", where=where)
+    return out, PointFiles(source, out, chunk_size, ply=out.suffix.lower() == ".ply", where=where, name="source")
 
 
 def progress_bar(shown: bool):

@@ -99,9 +99,9 @@ def _cloud(source, filters: dict):
         if given:  # (they would be dropped without a word)
             raise InputError(f"orthophoto: {', '.join(given)} filter the files read; a cloud is drawn as it is (filter it with gigapoint.open)")
         return source
-    from .. import open as open_points
+    from .. import open_for
 
-    return open_points(given_paths(source, "orthophoto", "source"), **given)  # (5 among them named by orthophoto, not gp.open)
+    return open_for("orthophoto", given_paths(source, "orthophoto", "source"), **given)  # (5 among them named by orthophoto, not gp.open)
 
 
 __all__ = ["Orthophoto", "orthophoto"]

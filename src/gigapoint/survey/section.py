@@ -198,9 +198,9 @@ def section(source, line, width, classes=None, drop_classes=None, clip_polygon=N
             kept, name, units = octree_path_kept(paths[0], keep, _region(keep), "section the point files, or wait for the octree")
             cloud = build_cloud(kept, name=name, colors="rgba")
         else:  # only the corridor's points are read
-            from .. import open as open_points
+            from .. import open_for
 
-            cloud = open_points(paths, classes=classes, drop_classes=drop_classes, corridor=lane, clip_polygon=keep.polygon)
+            cloud = open_for("section", paths, classes=classes, drop_classes=drop_classes, corridor=lane, clip_polygon=keep.polygon)
             units = cloud_units(cloud)
     return Section(cloud, lane[:4], lane[4], units)
 

@@ -329,13 +329,13 @@ def _opened_octree(source):
     """The LOD octree ``source`` names (its path, or a pattern matching one) opened unread (its
     metadata; an unfinished conversion's preview, which ``open_survey`` refuses); None for any
     other source. Opened once: its CRS places the toe (``_in_survey_crs``), then its nodes are read."""
-    from .. import open as open_points
+    from .. import open_for
     from ..lod import is_lod_source
 
     if isinstance(source, PointCloud) or is_octree(source):
         return None
     paths = _survey_paths(source)
-    return open_points(paths[0]) if len(paths) == 1 and is_lod_source(paths[0]) else None
+    return open_for("volume", paths[0]) if len(paths) == 1 and is_lod_source(paths[0]) else None
 
 
 def _in_survey_crs(toe: ClipPolygon, source, opened=None) -> ClipPolygon:
@@ -352,7 +352,7 @@ def _in_survey_crs(toe: ClipPolygon, source, opened=None) -> ClipPolygon:
     label = survey_label(source)
     survey = source if opened is None else opened
     if not (isinstance(survey, PointCloud) or is_octree(survey)):
-        return placed_over(toe, expand_paths(_survey_paths(source)), label)
+        return placed_over(toe, expand_paths(_survey_paths(source), where="volume"), label)
     crs, units = cloud_crs_units(survey)
     return placed_in(toe, crs, units, survey.bounds, label)
 

@@ -66,6 +66,7 @@ from ...io._base import one_line
 from ...io.colorize import Colorization
 from ...io.filters import PointFilter, filtered
 from ...io.las import with_scan_angle
+from ...io.paths import skipped_message
 from ...io.registry import reader_for
 from ...io.reproject import Reprojection
 from ..code import code_version
@@ -85,7 +86,6 @@ from .read import (
     merge_attributes,
     merge_constants,
     moved_and_blackened,
-    skipped_message,
     spill_chunk,
 )
 from .spill import copy_range, decode_xyz, las_xyz_code, load_raw_chunk, load_raw_chunks, raw_chunk_files, raw_xyz_code

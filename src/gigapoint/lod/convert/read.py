@@ -14,10 +14,11 @@ import numpy as np
 from ...core.bounds import valid_bounds
 from ...core.chunk import PointChunk, join_chunks, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
-from ...errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, value_text, warn
+from ...errors import EmptyCloudError, GigapointError, InputError, value_text
 from ...io import files_label, read_chunks, scan_angles_differ
 from ...io.filters import filtered
 from ...io.las import with_scan_angle
+from ...io.paths import skip_empty
 from ...io.registry import reader_for
 from ...io.write import file_has_color, one_value_a_point
 from ..preview import PreviewSampler, preview_points
@@ -44,11 +45,7 @@ def _skipped_if_empty(path, chunks, several: bool, skipped: list | None = None):
         if skipped is not None:
             skipped.append(str(path))
         else:
-            warn(skipped_message(path), GigapointWarning)
-
-
-def skipped_message(path) -> str:
-    return f"{path}: holds no points, skipped"
+            skip_empty(path)
 
 
 def merge_attributes(attrs: dict | None, names: dict) -> dict:

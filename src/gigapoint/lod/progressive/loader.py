@@ -35,12 +35,10 @@ from ...core.cloud import check_valid_count
 from ...core.threads import SMALL_BATCH
 from ...errors import (
     GigapointError,
-    GigapointWarning,
     InputError,
     KeptWarnings,
     MemoryLimitError,
     keep_warnings,
-    warn,
 )
 from ...io import human_bytes
 from ...io._base import headers_once
@@ -331,11 +329,11 @@ def file_sources(paths, cut_off: list | None = None, point_filter: PointFilter |
     ``point_filter``: each chunk goes through it as it is read (the total, then, counts points
     read, not kept; the bounds are cut to its clip box)."""
     from ...core.cloud import finest_scale
-    from ...io import cloud_name, expand_paths, files_label, reader_for, scan_angles_differ, warn_mixed_crs
+    from ...io import cloud_name, expand_paths, files_with_points, reader_for, scan_angles_differ, warn_mixed_crs
     from ...io._base import DEFAULT_CHUNK_SIZE
     from ...io.las import with_scan_angle
 
-    files = expand_paths(paths)
+    files = files_with_points(expand_paths(paths))  # (an empty file among several: skipped, as gp.open and convert skip it)
     warn_mixed_crs(files)
     read = with_scan_angle if scan_angles_differ(files) else iter
     sources, total, lo, hi = [], 0, np.full(3, np.inf), np.full(3, -np.inf)
@@ -344,9 +342,6 @@ def file_sources(paths, cut_off: list | None = None, point_filter: PointFilter |
         reader = reader_for(f)
         head = reader.header(f, salvage=True)  # not info(): an NPY file's info read all its points before the loader began
         n = head["point_count"]
-        if n == 0 and len(files) > 1:  # as gp.open and convert: an empty tile among several is skipped, said
-            warn(f"{f}: holds no points, skipped", GigapointWarning)
-            continue
         if n == 0:  # the reader's one-line error now, as gp.open's: not a cloud that loads nothing and says so at wait()
             next(iter(reader.read_chunks(f)), None)
         if head.get("truncated") and cut_off is not None:
@@ -360,8 +355,6 @@ def file_sources(paths, cut_off: list | None = None, point_filter: PointFilter |
         offsets.append(head.get("offset"))
         scales.append(head.get("scale"))
         sources.append((str(f), lambda f=f, reader=reader: filtered(read(reader.read_salvaged(f, min(DEFAULT_CHUNK_SIZE, DECODE_CHUNK))), f, point_filter)))
-    if not sources:
-        check_valid_count(files_label(files), 0, 0, from_files=True)  # (raises: "no file holds any point")
     if point_filter is not None:  # the root cube of the points kept: a clip box of a corner of the survey is not drawn tiny
         lo, hi = point_filter.clipped_bounds(lo, hi)
     name = cloud_name(files)
