@@ -468,8 +468,8 @@ def test_a_toe_naming_a_crs_over_an_octrees_path_opens_it_once(autzen_layered, a
     ring, in_degrees = block_in_degrees(autzen_path)
     given = gp.volume(autzen_layered[kind], {"type": "Polygon", "coordinates": [[*ring.tolist(), ring[0].tolist()]]}, 2.0)
     opens = []
-    real_open = gp.open
-    monkeypatch.setattr(gp, "open", lambda *paths, **options: opens.append(paths) or real_open(*paths, **options))
+    real_open = gp.open_for  # (gp.open under the operation's name)
+    monkeypatch.setattr(gp, "open_for", lambda where, *paths, **options: opens.append(paths) or real_open(where, *paths, **options))
     moved = gp.volume(autzen_layered[kind], in_degrees, 2.0)
     assert opens == [(autzen_layered[kind],)]
     assert moved.piles[0].pixels == given.piles[0].pixels == 40 * 17 and given.fill > 1000
