@@ -515,6 +515,6 @@ def test_surveys_in_degrees_are_refused_not_measured_in_square_degrees(tmp_path)
     with pytest.raises(InputError) as caught:
         gp.change(*paths, 0.00002)
     assert str(caught.value) == (
-        f"{paths[0]} and {paths[1]}: in EPSG:4326, x and y in degrees, not lengths: change measures areas and volumes in lengths; "
-        "reproject both to a projected CRS first (gigapoint convert --to-crs)"
+        f"change: {paths[0]} has coordinates in degrees (EPSG:4326); measuring areas and volumes needs metres or feet: "
+        "reproject first (gigapoint convert --to-crs EPSG:32610, WGS 84 / UTM zone 10N, where the data lie)"
     )

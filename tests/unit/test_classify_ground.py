@@ -229,3 +229,21 @@ def test_the_openings_cross_passes_are_scipys_grey_erosion_and_dilation():
     for raster in (surface, surface[:1, :6], surface[:6, :1], surface[:1, :1], surface[:2, :3]):
         np.testing.assert_array_equal(smrf._cross_extreme(raster, True), ndimage.grey_erosion(raster, footprint=cross, mode="nearest"))
         np.testing.assert_array_equal(smrf._cross_extreme(raster, False), ndimage.grey_dilation(raster, footprint=cross, mode="nearest"))
+
+
+def test_coordinates_in_degrees_need_cell_and_window_given(tmp_path):
+    """In WGS 84 the default cell (1 m) and window (18 m) have no length in degrees: refused in
+    the one wording the surveys refuse degrees in (io.crs.refuse_angles), south of the equator
+    its southern UTM zone offered."""
+    from test_change import DEGREES_SCALE, EPSG_4326_KEYS, write_las  # (tests/unit is on sys.path)
+
+    g = np.arange(20) * 0.00002
+    x, y = np.meshgrid(g, g)
+    path = write_las(tmp_path / "wgs84.las", np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=(151.2, -33.9))
+    with pytest.raises(InputError) as caught:
+        gp.classify_ground(path, tmp_path / "out.laz", cell=0.00002)
+    assert str(caught.value) == (
+        f"classify_ground: {path} has coordinates in degrees (EPSG:4326); a default window (18 m) needs metres or feet: "
+        "give both, or reproject first (gigapoint convert --to-crs EPSG:32756, WGS 84 / UTM zone 56S, where the data lie)"
+    )
+    assert not (tmp_path / "out.laz").exists()

@@ -199,3 +199,23 @@ def test_the_cli_classifies_noise_and_names_its_options(cli, surface, tmp_path):
     rc, _, err = cli("classify", path, "-o", tmp_path / "b.laz")
     assert rc != 0 and "classify: say what to classify: --ground, --noise, --height-above-ground, or several" in err
     assert not (tmp_path / "b.laz").exists()
+
+
+def test_coordinates_in_degrees_need_both_steps_given(tmp_path):
+    """In WGS 84 the default step (4 m) has no length in degrees: refused in the one wording the
+    surveys refuse degrees in (io.crs.refuse_angles), the UTM zone the points lie in offered;
+    both steps given, it runs in them."""
+    from test_change import DEGREES_ORIGIN, DEGREES_SCALE, EPSG_4326_KEYS, write_las  # (tests/unit is on sys.path)
+
+    g = np.arange(20) * 0.00002
+    x, y = np.meshgrid(g, g)
+    path = write_las(tmp_path / "wgs84.las", np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=DEGREES_ORIGIN)
+    with pytest.raises(InputError) as caught:
+        gp.classify_noise(path, tmp_path / "out.laz", step=0.00004)
+    assert str(caught.value) == (
+        f"classify_noise: {path} has coordinates in degrees (EPSG:4326); a default step or step_z (4 m) needs metres or feet: "
+        "give both, or reproject first (gigapoint convert --to-crs EPSG:32610, WGS 84 / UTM zone 10N, where the data lie)"
+    )
+    assert not (tmp_path / "out.laz").exists()
+    result = gp.classify_noise(path, tmp_path / "out.laz", step=0.00004, step_z=4.0)
+    assert (result.params["step"], result.params["step_z"], result.noise) == (0.00004, 4.0, 0)

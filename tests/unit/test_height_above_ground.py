@@ -174,3 +174,30 @@ def test_classify_grounds_heights_are_its_models_bilinear_read_once_a_point(slop
     expected = xyz[:, 2] - bilinear(grid, made["dem"], xyz)
     np.testing.assert_array_equal(np.asarray(b.HeightAboveGround), expected.astype(np.float32))
     assert result.heights == (expected.min(), expected.max())
+
+
+def test_coordinates_in_degrees_are_measured_with_a_cell_given(tmp_path):
+    """A WGS 84 cloud was refused even with its cell given, by classify_ground's words (\"give
+    cell and window\": height_above_ground takes no window), as was a cell of 0: now only the
+    default cell (1 m, no length in degrees) is refused, under its own name; given, it runs."""
+    from test_change import DEGREES_ORIGIN, DEGREES_SCALE, EPSG_4326_KEYS, write_las  # (tests/unit is on sys.path)
+
+    g = np.arange(20) * 0.00002
+    x, y = np.meshgrid(g, g)
+    xyz = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)])
+    xyz[0, 2] = 7.0  # one point 5 above the others' plane
+    path = write_las(tmp_path / "wgs84.las", xyz, keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=DEGREES_ORIGIN)
+    las = laspy.read(str(path))
+    las.classification = np.where(np.arange(len(xyz)) == 0, 1, 2).astype(np.uint8)
+    las.write(str(path))
+    with pytest.raises(InputError) as caught:
+        gp.height_above_ground(path, tmp_path / "out.las")
+    assert str(caught.value) == (
+        f"height_above_ground: {path} has coordinates in degrees (EPSG:4326); a default cell (1 m) needs metres or feet: "
+        "give cell, or reproject first (gigapoint convert --to-crs EPSG:32610, WGS 84 / UTM zone 10N, where the data lie)"
+    )
+    with pytest.raises(InputError, match=r"^height_above_ground: cell must be a number > 0, got 0$"):
+        gp.height_above_ground(path, tmp_path / "out.las", cell=0)
+    result = gp.height_above_ground(path, tmp_path / "out.las", cell=0.00004)
+    heights = np.asarray(laspy.read(str(tmp_path / "out.las"))["HeightAboveGround"])
+    assert result.params["cell"] == 0.00004 and heights[0] == pytest.approx(5.0, abs=0.01) and np.abs(heights[1:]).max() < 0.01

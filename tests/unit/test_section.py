@@ -109,6 +109,20 @@ def test_the_csv_holds_the_rows_and_the_command_says_what_it_wrote(cli, files, t
     np.testing.assert_allclose(sorted_rows(table), expected_rows(), rtol=0, atol=2e-4)
 
 
+def test_write_csv_replaces_a_file_only_with_overwrite(files, tmp_path):
+    """Section.write_csv replaced an existing file silently, where every other writer refuses
+    without overwrite=True (the CLI checked --overwrite itself)."""
+    cut = gp.section(files["straight"], line_of("straight"), WIDTH)
+    mine = tmp_path / "mine.csv"
+    mine.write_text("my survey notes\n")
+    with pytest.raises(gp.GigapointError) as error:
+        cut.write_csv(mine)
+    assert str(error.value) == f"{mine}: already exists; pass overwrite=True to replace it"
+    assert mine.read_text() == "my survey notes\n"
+    cut.write_csv(mine, overwrite=True)
+    assert mine.read_text().splitlines()[0] == "distance_along,offset,z,classification"
+
+
 @pytest.mark.parametrize("kind", ["straight", "diagonal"])
 def test_the_image_draws_the_profile_where_distances_and_heights_put_it(files, kind):
     """At 2 pixels a unit, column floor(2 * distance) + BORDER and row floor(2 * (top - z)) (top:
@@ -275,3 +289,20 @@ def test_a_corridor_thinner_than_float32_depths_draws_its_points(cli, tmp_path):
 def test_the_command_names_the_files_of_an_empty_corridor(cli, files, tmp_path):
     rc, out, err = cli("section", files["straight"], "--line", "0,0,10,0", "--width", 2, "-o", tmp_path / "s.png")
     assert rc == 1 and err.startswith(f"error: {files['straight']}: no point passes the filter (corridor 0, 0 to 10, 0, width 2)")
+
+
+def test_a_cloud_in_degrees_is_refused_not_drawn_two_pixels_wide(tmp_path):
+    """In WGS 84 the section drew its 0.0007 degrees along the line on the heights' scale (metres):
+    a 1920 x 16,384 image, the points in its first two columns; refused in the one wording the
+    surveys refuse degrees in (io.crs.refuse_angles)."""
+    from test_change import DEGREES_ORIGIN, DEGREES_SCALE, EPSG_4326_KEYS, write_las  # (tests/unit is on sys.path)
+
+    g = np.arange(40) * 0.00002
+    x, y = np.meshgrid(g, g)
+    path = write_las(tmp_path / "wgs84.las", np.column_stack([x.ravel(), y.ravel(), 2.0 + x.ravel() * 1e4]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=DEGREES_ORIGIN)
+    with pytest.raises(InputError) as caught:
+        gp.section(path, (-123.0, 44.0004, -122.9993, 44.0004), 0.00004)
+    assert str(caught.value) == (
+        "section: wgs84.las has coordinates in degrees; drawing heights against distances along the line needs metres or feet: "
+        "reproject first (gigapoint convert --to-crs EPSG:32610, WGS 84 / UTM zone 10N, where the data lie)"
+    )

@@ -329,6 +329,19 @@ def test_a_toe_crossing_itself_is_refused_naming_its_edges():
         gp.volume(box_pile(), holed, 0.5)
 
 
+def test_a_hole_outside_its_outline_is_refused_not_measured_between_the_rings():
+    """Rings swapped (the larger second): the pixels between them were measured and the polygon's
+    area came out negative (400 - 900 = -500); a hole beside the outline likewise. A hole inside
+    it is measured without its pixels."""
+    outline, hole = square(10, 10, 30, 30)["coordinates"][0], square(15, 15, 20, 20)["coordinates"][0]
+    pile = gp.volume(box_pile(), {"type": "Polygon", "coordinates": [outline, hole]}, 0.5, base=100).piles[0]
+    assert (pile.polygon_area, pile.area, pile.fill) == (375.0, 375.0, 500.0 - 25 * 5)
+    for rings in ([outline, square(5, 5, 35, 35)["coordinates"][0]], [outline, square(32, 10, 38, 16)["coordinates"][0]]):
+        with pytest.raises(InputError) as error:
+            gp.volume(box_pile(), {"type": "Polygon", "coordinates": rings}, 0.5, base=100)
+        assert str(error.value) == "the GeoJSON geometry: the polygon's hole 1 is not inside its outline (its first ring): redraw it, the outline first"
+
+
 def test_a_toe_without_heights_says_why_and_how_to_mend_it():
     """Points 2 units apart and a 0.25 grid: the toe's pixels hold none, so no plane can be laid
     (the message named neither the grid nor a coarser one); a 3-unit grid finds the toe."""
@@ -504,5 +517,6 @@ def test_a_survey_in_degrees_is_refused_not_measured_in_square_degrees(tmp_path)
     with pytest.raises(InputError) as caught:
         gp.volume(path, toe, 0.00002, base=0.0)
     assert str(caught.value) == (
-        f"{path}: x and y in degrees, not lengths: volume measures in lengths; reproject it to a projected CRS first (gigapoint convert --to-crs)"
+        f"volume: {path} has coordinates in degrees (EPSG:4326); measuring a volume needs metres or feet: "
+        "reproject first (gigapoint convert --to-crs EPSG:32610, WGS 84 / UTM zone 10N, where the data lie)"
     )

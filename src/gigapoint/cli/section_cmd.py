@@ -84,5 +84,5 @@ def section(
     side = f"{across} a side" if vertical_exaggeration == 1 and up == across else f"{across} across, {pixel / vertical_exaggeration:.6g} {up} up"
     typer.echo(f"wrote {output} ({camera.width}x{camera.height}, {counted(cut.cloud.n_points, 'point')} in the corridor, a pixel {pixel:.6g} {side})")
     if csv is not None:
-        cut.write_csv(csv)
+        cut.write_csv(csv, overwrite)
         typer.echo(f"wrote {csv} ({counted(cut.cloud.n_points, 'row')})")

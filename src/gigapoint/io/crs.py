@@ -10,7 +10,7 @@ import re
 import threading
 from pathlib import Path
 
-from ..errors import GigapointError, GigapointWarning, warn
+from ..errors import GigapointError, GigapointWarning, InputError, warn
 from ._base import read_once
 from .las import LasReader, first_crs_header, geokeys, read_las_header
 from .paths import file_names
@@ -166,6 +166,36 @@ def angular_across(units: dict) -> dict | None:
     x and y in degrees, no lengths to measure areas, volumes or distances in), else None."""
     across = units["horizontal"]
     return across if across is not None and across["metres"] is None else None
+
+
+def refuse_angles(where: str, source, crs: str | None, units: dict, operation: str, instead: str = "", bounds=None) -> None:
+    """A one-line InputError where ``units``' x and y are angles (``angular_across``): no
+    length, area or volume is measured in degrees. ``source`` names the file, ``operation``
+    what needs lengths, ``instead`` another way out ('give both, or '); ``crs`` (None: not
+    named) the CRS, ``units`` its io.crs_units; ``bounds`` (lo, hi) in
+    longitude/latitude: their UTM zone is offered as the CRS to move them into."""
+    angle = angular_across(units)
+    if angle is None:
+        return
+    target = "EPSG:n of a projected CRS"
+    if bounds is not None:
+        lon, lat = ((float(lo) + float(hi)) / 2 for lo, hi in zip(bounds[0][:2], bounds[1][:2]))
+        if -180 <= lon <= 180 and -80 <= lat <= 84:  # (UTM's reach)
+            zone = min(int((lon + 180) // 6) + 1, 60)
+            target = f"EPSG:{(32600 if lat >= 0 else 32700) + zone}, WGS 84 / UTM zone {zone}{'N' if lat >= 0 else 'S'}, where the data lie"
+    raise InputError(
+        f"{where}: {source} has coordinates in {angle['name']}s{f' ({crs_name(crs)})' if crs else ''}; {operation} needs metres or feet: "
+        f"{instead}reproject first (gigapoint convert --to-crs {target})"
+    )
+
+
+def refuse_files_in_angles(where: str, files, operation: str, instead: str = "") -> None:
+    """``refuse_angles`` for the first LAS/LAZ file of ``files`` naming a CRS (``files_units``' file)."""
+    for f in files:
+        hdr = first_crs_header([f])
+        if hdr is not None:
+            refuse_angles(where, f, hdr.crs(), crs_units(hdr.crs(), geokeys(hdr.vlrs)), operation, instead, (hdr.mins, hdr.maxs))
+            return
 
 
 def crs_units(crs: str | None, geokeys: dict[int, int] | None = None) -> dict:

@@ -54,7 +54,7 @@ import numpy as np
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
 from ..errors import CameraError, InputError, check_switch, is_real, number_text
-from ..io.crs import angular_across, crs_identity, crs_name
+from ..io.crs import crs_identity, crs_name, refuse_angles
 from ..io.filters import PointFilter, point_filter
 from ..io.paths import given_paths
 from ..lod.potree import PotreeCloud
@@ -267,12 +267,8 @@ def check_crs(before, after, labels: tuple[str, str]) -> tuple[str | None, dict]
             "change compares two surveys in one CRS and unit; reproject one first (gigapoint convert --to-crs)"
         )
     crs, units = (crs_a, units_a) if crs_a else (crs_b, units_b)
-    angle = angular_across(units)
-    if angle is not None:  # (degrees: a pixel's area and the volumes would be in square degrees, "0.000 cubic units")
-        raise InputError(
-            f"{labels[0]} and {labels[1]}: in {crs_name(crs)}, x and y in {angle['name']}s, not lengths: "
-            "change measures areas and volumes in lengths; reproject both to a projected CRS first (gigapoint convert --to-crs)"
-        )
+    # (degrees: a pixel's area and the volumes would be in square degrees, "0.000 cubic units")
+    refuse_angles("change", labels[0] if crs_a else labels[1], crs, units, "measuring areas and volumes", bounds=before.bounds)
     return crs, units
 
 

@@ -28,22 +28,24 @@ GROUND, NON_GROUND = 2, 1
 MAX_CELLS = 120_000_000
 
 
-def ground_parameters(files, cell=None, slope=None, window=None, threshold=None, scalar=None) -> dict:
+def ground_parameters(files, cell=None, slope=None, window=None, threshold=None, scalar=None, where="classify_ground", lengths=("cell", "window")) -> dict:
     """The SMRF parameters in the units of ``files``' CRS: those given as they are, the others
     the defaults converted from metres (a cloud in feet: cell 3.28 ft...; units unknown: taken
     as metres). A value that is no number > 0 (threshold, scalar: >= 0), or coordinates in
-    degrees without every length given, is a one-line InputError."""
-    from ..io.crs import angular_across, files_units
+    degrees without every one of ``lengths`` given (those the caller uses), is a one-line
+    InputError; ``where``: the operation messages name."""
+    from ..io.crs import files_units, refuse_files_in_angles
 
     given = {"cell": cell, "slope": slope, "window": window, "threshold": threshold, "scalar": scalar}
     for name, value in given.items():
         least = "> 0" if name in ("cell", "slope", "window") else ">= 0"
         if value is not None and not (is_real(value) and (value > 0 if least == "> 0" else value >= 0)):
-            raise InputError(f"classify_ground: {name} must be a number {least}, got {number_text(value)}")
+            raise InputError(f"{where}: {name} must be a number {least}, got {number_text(value)}")
     units = files_units(files)
     across, up = units["horizontal"], units["vertical"]
-    if angular_across(units) is not None and any(given[n] is None for n in ("cell", "window")):
-        raise InputError(f"classify_ground: the coordinates are in {across['name']}s, not lengths: give cell and window in them, or reproject the cloud")
+    defaults = [f"{name} ({DEFAULTS_METRES[name]:g} m)" for name in lengths if given[name] is None]
+    if defaults:
+        refuse_files_in_angles(where, files, f"a default {' or '.join(defaults)}", f"give {'both' if len(lengths) > 1 else lengths[0]}, or ")
     per_metre_across = 1.0 / across["metres"] if across is not None and across["metres"] else 1.0
     per_metre_up = 1.0 / up["metres"] if up is not None and up["metres"] else 1.0
     params = {

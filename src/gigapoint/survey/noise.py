@@ -59,7 +59,7 @@ def noise_parameters(files, step=None, step_z=None, isolated=None) -> dict:
     number >= 0, or coordinates in degrees without both steps given, is a one-line InputError."""
     import numbers
 
-    from ..io.crs import angular_across, files_units
+    from ..io.crs import files_units, refuse_files_in_angles
 
     for name, value in (("step", step), ("step_z", step_z)):
         if value is not None and not (is_real(value) and value > 0):
@@ -68,8 +68,8 @@ def noise_parameters(files, step=None, step_z=None, isolated=None) -> dict:
         raise InputError(f"classify_noise: isolated must be a whole number >= 0, got {isolated!r}")
     units = files_units(files)
     across, up = units["horizontal"], units["vertical"]
-    if angular_across(units) is not None and (step is None or step_z is None):
-        raise InputError(f"classify_noise: the coordinates are in {across['name']}s, not lengths: give step and step_z, or reproject the cloud")
+    if step is None or step_z is None:
+        refuse_files_in_angles("classify_noise", files, f"a default step or step_z ({NOISE_STEP_METRES:g} m)", "give both, or ")
     metres_across = across["metres"] if across is not None and across["metres"] else 1.0
     metres_up = up["metres"] if up is not None and up["metres"] else 1.0
     step = NOISE_STEP_METRES / metres_across if step is None else float(step)

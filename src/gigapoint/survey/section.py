@@ -18,8 +18,8 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
-from ..errors import CameraError, InputError, count_or_inf, count_text, is_real, number_text, numbers_text
-from ..io.crs import crs_units
+from ..errors import CameraError, InputError, check_switch, count_or_inf, count_text, is_real, number_text, numbers_text
+from ..io.crs import crs_units, refuse_angles
 from ..io.filters import PointFilter, along_and_across, corridor_of, point_filter
 from ..io.paths import given_paths
 from ..lod import is_lod_source
@@ -78,10 +78,15 @@ class Section:
             return None
         return self.cloud.attributes.at("classification", self.index)
 
-    def write_csv(self, path) -> None:
+    def write_csv(self, path, overwrite: bool = False) -> None:
         """The rows as ``distance_along,offset,z[,classification]`` (a header line, then a point a
-        line, by distance), written atomically, the folders missing on its way made."""
+        line, by distance), written atomically, the folders missing on its way made; an existing
+        file is replaced only with ``overwrite=True`` (as the other writers: it was, silently)."""
         from ..atomic import atomic_write, folders_for
+        from ..render.image_files import check_output
+
+        check_switch("overwrite", overwrite, "section")
+        check_output(path, overwrite, suffixes={".csv"})
 
         columns = [self.distance, self.offset, self.z]
         header, formats = "distance_along,offset,z", ["%.6f"] * 3
@@ -202,6 +207,8 @@ def section(source, line, width, classes=None, drop_classes=None, clip_polygon=N
 
             cloud = open_for("section", paths, classes=classes, drop_classes=drop_classes, corridor=lane, clip_polygon=keep.polygon)
             units = cloud_units(cloud)
+    # (in degrees the image drew 0.0007 degrees along the line on the heights' metre scale: 2 pixels wide, 16,384 tall)
+    refuse_angles("section", cloud.name, None, units, "drawing heights against distances along the line", bounds=cloud.bounds)
     return Section(cloud, lane[:4], lane[4], units)
 
 

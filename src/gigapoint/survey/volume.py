@@ -49,7 +49,7 @@ import numpy as np
 from ..core.cloud import PointCloud
 from ..errors import EmptyCloudError, InputError, check_switch, is_real, number_text, warn
 from ..io._base import headers_once
-from ..io.crs import angular_across
+from ..io.crs import refuse_angles
 from ..io.filters import may_move, placed_in, placed_over, point_filter
 from ..io.polygon import ClipPolygon, check_simple, clip_polygon_of
 from ..lod.query import is_octree
@@ -207,6 +207,17 @@ def ring_area(ring: np.ndarray) -> float:
     """The area of the ring of (k, 2) vertices ``ring`` (the shoelace formula; without its closing vertex)."""
     x, y = ring[:, 0] - ring[0, 0], ring[:, 1] - ring[0, 1]  # (from a vertex: no cancellation at UTM sizes)
     return abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))) / 2
+
+
+def _check_holes(toe) -> None:
+    """A one-line InputError for a hole that is not inside its polygon's outline (rings swapped,
+    a hole drawn beside it): the pixels between the rings were measured, the area reported as
+    the outline's less the hole's, below 0."""
+    for p, (outline, *holes) in enumerate(toe.polygons, start=1):
+        for h, hole in enumerate(holes, start=1):
+            if ring_area(hole) >= ring_area(outline) or not ClipPolygon([[outline]], toe.source).inside(hole).any():
+                name = "the polygon" if len(toe.polygons) == 1 else f"polygon {p}"
+                raise InputError(f"{toe.source}: {name}'s hole {h} is not inside its outline (its first ring): redraw it, the outline first")
 
 
 def _base_heights(base, toe_xy: np.ndarray, toe_z: np.ndarray, xy: np.ndarray, where: str) -> tuple[np.ndarray, dict]:
@@ -385,6 +396,7 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
         check_max_distance("volume: fill_nodata", fill_nodata)
     toe = clip_polygon_of(clip_polygon, f"volume: clip_polygon={clip_polygon!r}")
     check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it")
+    _check_holes(toe)
     point_filter(classes, drop_classes, where="volume")  # bad classes told before an octree is opened
     octree = _opened_octree(source)
     try:
@@ -409,9 +421,8 @@ def _measured(toe: ClipPolygon, source, octree, gsd, base, classes, drop_classes
         else:  # (an opened octree takes no filter of its own: the grid's footprint bounds what is read of it)
             cloud = open_survey(source, {**filters, "clip": None} if is_octree(source) else filters, "volume")
         crs, units = cloud_crs_units(cloud)
-        angle = angular_across(units)
-        if angle is not None:  # (a pile's fill came out in square degrees times metres, labelled "cubic units")
-            raise InputError(f"{label}: x and y in {angle['name']}s, not lengths: volume measures in lengths; reproject it to a projected CRS first (gigapoint convert --to-crs)")
+        # (in degrees a pile's fill came out in square degrees times metres, labelled "cubic units")
+        refuse_angles("volume", label, crs, units, "measuring a volume", bounds=(toe.lo, toe.hi))
         lo, hi = cloud.bounds
         camera = Camera.top_down(((box[0], box[1], lo[2]), (box[2], box[3], hi[2])), gsd)
         drawn = surface(cloud, camera, full=full)
