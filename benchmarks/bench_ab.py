@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_ab.py --base de52ae0                       # 20 M brute force + 5 M LOD
     .venv/bin/python benchmarks/bench_ab.py --base HEAD~3 --points 2M --lod-points 1M --rounds 3
+    .venv/bin/python benchmarks/bench_ab.py --base HEAD~1 --points 8M --cap 1M --speed cap --lod-points 200k
 
 The base revision's ``src/gigapoint`` is exported (``git archive``) into a temporary folder as
 the package ``gigapoint_base`` (its imports are relative, so it runs beside ``gigapoint``). Both
@@ -12,7 +13,8 @@ difference is the renderer's:
    a point cap) on a small demo scene and on a converted octree; visibility buffers and
    images must be identical bit for bit (exit status 1 otherwise);
 2. **speed**: frames of the brute-force overview and close-up (1 thread and all) and of the
-   octree at a point budget, base and new interleaved frame by frame (the host drifts:
+   octree at a point budget, and HQS and transparency of the brute-force scene under a point
+   cap ``--cap`` (``--speed cap``: those alone), base and new interleaved frame by frame (the host drifts:
    compare the ratio, not absolute times). JIT warm-up is excluded. Reported: median ms
    and the ratio base / new (> 1: the new code is faster).
 """
@@ -53,6 +55,10 @@ IMAGE_SETTINGS = [
     {"color_mode": "elevation", "colormap": "turbo"},
     {"color_mode": "classification", "edl": True, "fill_holes": 1},
     {"max_points": 50_000},
+    {"max_points": 50_000, "hqs": True},
+    {"max_points": 25_000, "hqs": True, "point_size": 3, "point_shape": "round", "splat_softness": 2.0},
+    {"max_points": 40_000, "opacity": 0.5},
+    {"max_points": 25_000, "opacity": 0.5, "point_size": 3},
     {"adaptive_precision": False, "background": "white"},
 ]
 
@@ -97,7 +103,7 @@ def compare_images(base, cloud, octree_path) -> list[str]:
             bcam = base.Camera.fit(n.bounds, view=view, width=320, height=200)
             for kw in IMAGE_SETTINGS:
                 if label == "octree" and "max_points" in kw:
-                    kw = {"point_budget": kw["max_points"]}
+                    kw = {k: v for k, v in kw.items() if k != "max_points"} | {"point_budget": kw["max_points"]}
                 s = {"backend": "cpu", "size_mode": "fixed", **kw}  # the exact sizes (the base may know no other)
                 fb = base.render_frame(b, bcam, base.RenderSettings(**s))
                 fn = gp.render_frame(n, cam, gp.RenderSettings(**s))
@@ -133,10 +139,12 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=7, help="timed frames of each, interleaved")
     ap.add_argument("--width", type=int, default=1920)
     ap.add_argument("--height", type=int, default=1080)
+    ap.add_argument("--cap", default="1M", help="max_points of the HQS and transparency frames")
+    ap.add_argument("--speed", choices=("all", "cap"), default="all", help="cap: only the frames under a point cap")
     args = ap.parse_args(argv)
     from gigapoint.bench import benchmark_cameras, cpu_model, parse_count
 
-    n, n_lod = parse_count(args.points), parse_count(args.lod_points)
+    n, n_lod, cap = parse_count(args.points), parse_count(args.lod_points), parse_count(args.cap)
     cpu = cpu_model()
     print(f"A/B: {args.base} (base) against the working tree (new); {cpu}")
     with tempfile.TemporaryDirectory() as tmp:
@@ -155,24 +163,27 @@ def main(argv=None) -> int:
         rows = []
         for view, cam in benchmark_cameras(cloud.bounds, args.width, args.height).items():
             bcam = base.Camera(**{f: getattr(cam, f) for f in ("eye", "target", "up", "fov", "width", "height", "projection", "ortho_height", "near", "far")})
-            for threads in (1, None):
-                s = {"backend": "cpu", "threads": threads, "size_mode": "fixed"}
+            cases = [] if args.speed == "cap" else [(f"{n / 1e6:g} M brute force", {"threads": t}) for t in (1, None)]
+            for name, kw in [(f"HQS, max_points {cap / 1e6:g} M", {"hqs": True}), (f"opacity 0.5, max_points {cap / 1e6:g} M", {"opacity": 0.5})]:
+                cases.append((name, {"max_points": cap, **kw}))
+            for scene, kw in cases:
+                s = {"backend": "cpu", "size_mode": "fixed", **kw}
                 bs, ns = base.RenderSettings(**s), gp.RenderSettings(**s)
                 tb, tn = interleaved([(base.render_frame, bcloud, bcam, bs), (gp.render_frame, cloud, cam, ns)], args.rounds)
-                rows.append((f"{n / 1e6:g} M brute force", view, threads or "all", tb, tn))
+                rows.append((scene, view, kw.get("threads") or "all", tb, tn))
         del cloud, bcloud
         boct, noct = base.open(str(octree)), gp.open(octree)
-        for view in ("iso", "top"):
+        for view in ("iso", "top") if args.speed == "all" else ():
             cam = gp.Camera.fit(noct.bounds, view=view, width=args.width, height=args.height)
             bcam = base.Camera.fit(noct.bounds, view=view, width=args.width, height=args.height)
             s = {"backend": "cpu", "point_budget": 2_000_000, "size_mode": "fixed"}
             bs, ns = base.RenderSettings(**s), gp.RenderSettings(**s)
             tb, tn = interleaved([(base.render_frame, boct, bcam, bs), (gp.render_frame, noct, cam, ns)], args.rounds)
             rows.append((f"{n_lod / 1e6:g} M octree, 2 M budget", view, "all", tb, tn))
-        print(f"  {'scene':28} {'view':9} {'thr':>4} {'base ms':>9} {'new ms':>9} {'base/new':>9}")
+        print(f"  {'scene':34} {'view':9} {'thr':>4} {'base ms':>9} {'new ms':>9} {'base/new':>9}")
         for scene, view, threads, tb, tn in rows:
             mb, mn = statistics.median(tb) * 1e3, statistics.median(tn) * 1e3
-            print(f"  {scene:28} {view:9} {threads!s:>4} {mb:9.1f} {mn:9.1f} {mb / mn:9.3f}")
+            print(f"  {scene:34} {view:9} {threads!s:>4} {mb:9.1f} {mn:9.1f} {mb / mn:9.3f}")
     if failures:
         print(f"DIFFERENT images: {failures}")
         return 1

@@ -227,6 +227,32 @@ def test_hqs_under_a_point_cap_blends_only_the_points_drawn(demo):
     assert not np.array_equal(ref, hqs_reference(cloud, sel, vis, cam.width, cam.height, near, far, cloud.color, fallback, 0.05))
 
 
+@pytest.mark.parametrize("step", [2, 5, 8])
+def test_hqs_under_a_point_cap_equals_the_reference_at_every_step(demo, step):
+    """A point cap's subsample is gathered before it is projected (the points skipped are not
+    read): the image stays the reference's, which projects every point and blends every step-th,
+    one-pixel and splats, overview and close-up (10- to 30-bit batches)."""
+    from gigapoint.render.passes import splat_for
+
+    cloud, overview, _ = demo
+    lo, hi = cloud.bounds
+    c = (lo + hi) / 2
+    closeup = gp.Camera.look_at((c[0] - 120, c[1] - 120, c[2] + 40.0), tuple(c), fov=60, width=200, height=120)
+    bits = set()
+    for cam in (overview, closeup):
+        view = cam.view(cloud.bounds)
+        for kw in ({"size_mode": "fixed"}, {"size_mode": "adaptive"}, {"size_mode": "fixed", "point_size": 3, "point_shape": "round", "splat_softness": 2.0}):
+            s = gp.RenderSettings(backend="cpu", max_points=-(-cloud.n_points // step), hqs=True, threads=2, **kw)
+            draw = cloud.prepare(view, s)
+            assert draw.step == step
+            bits |= set(np.unique(draw.selection.bits).tolist())
+            plain = gp.render_frame(cloud, cam, s.replace(hqs=False, splat_softness=0.0))
+            ref = hqs_reference(cloud, draw.selection, plain.visibility.reshape(-1), cam.width, cam.height, view.near, view.far, cloud.color,
+                                _u32(plain.image), s.hqs_depth_tolerance, splat_for(s, cam, draw, view.near), s.splat_softness, step=step)  # fmt: skip
+            np.testing.assert_array_equal(_u32(gp.render(cloud, cam, s)), ref)
+    assert len(bits) > 1  # the gather of the medium and high words at their precisions
+
+
 def test_hqs_mean_is_exact_past_the_packed_sums():
     """5000 points in one pixel, far more than the 32 a packed u64 sums: the spill sums keep the
     mean exact, hard and with soft-splat weights, whatever the threads and bands."""

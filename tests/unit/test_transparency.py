@@ -199,7 +199,9 @@ def test_kernel_equals_reference_one_pixel(demo, opacity):
 
 
 @pytest.mark.parametrize(("options", "threads"), [({"size_mode": "adaptive"}, 2), ({"point_size": 3, "point_shape": "round"}, 1),
-                                                  ({"size_mode": "fixed", "max_points": 40_000}, 2)])  # fmt: skip
+                                                  ({"size_mode": "fixed", "max_points": 40_000}, 2),
+                                                  ({"size_mode": "adaptive", "max_points": 30_000}, 2),
+                                                  ({"point_size": 3, "point_shape": "round", "max_points": 18_750}, 1)])  # fmt: skip
 def test_kernel_equals_reference_splats_and_steps(demo, options, threads):
     cloud, cam = demo
     s = gp.RenderSettings(backend="cpu", opacity=0.6, background=BG, threads=threads, **options)

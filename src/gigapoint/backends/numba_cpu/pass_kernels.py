@@ -30,7 +30,7 @@ from ...render.params import (
     TR_REVEAL_BITS,
     soft_weight,
 )
-from .raster import footprint_spans, inside_frustum, project_batch
+from .raster import footprint_spans, gather_every, inside_frustum, project_batch
 
 EMPTY = np.uint64(0xFFFFFFFFFFFFFFFF)
 _LOW32 = np.uint64(0xFFFFFFFF)
@@ -526,6 +526,26 @@ def _band_reach(footprint, counts):
         max_count = max(max_count, counts[k])
     return reach, max_count
 
+@njit(inline="always")
+def _project_every(low, med, high, first, c, step, bits, m, width, height, near, far, pix, depth, clip, token, sub_low, sub_med, sub_high):
+    """Pixel ids and depths of every step-th point of the batch at words first..first+c into
+    pix[:n], depth[:n]; returns n. step > 1 gathers those points' words into the scratch sub_*
+    first, as ``raster.rasterize`` does: the points a point cap skips are neither read nor
+    projected (the same projection per point: the same pixels and depths as the depth pass)."""
+    if step == 1:
+        project_batch(low[first : first + c], med[first : first + c], high[first : first + c], bits, m,
+                      width, height, near, far, pix[:c], depth[:c], clip, token)  # fmt: skip
+        return c
+    n = (c + step - 1) // step
+    gather_every(low, first, n, step, sub_low)
+    if bits > 10:  # a 10-bit projection reads the low word alone
+        gather_every(med, first, n, step, sub_med)
+    if bits > 20:
+        gather_every(high, first, n, step, sub_high)
+    project_batch(sub_low[:n], sub_med[:n], sub_high[:n], bits, m, width, height, near, far, pix[:n], depth[:n], clip, token)
+    return n
+
+
 @njit(parallel=True, cache=True)
 def hqs_shade(
     firsts,
@@ -582,40 +602,29 @@ def hqs_shade(
         p1 = np.int32(r1 * width)
         pix = np.empty(max_count, np.int32)
         depth = np.empty(max_count, np.float32)
+        sub = max_count if step > 1 else 0
+        sub_low, sub_med, sub_high = np.empty(sub, np.uint32), np.empty(sub, np.uint32), np.empty(sub, np.uint32)
         for k in range(counts.shape[0]):
             if r0 == r1 or row_hi[k] + reach < r0 or row_lo[k] - reach >= r1:
                 continue
             first = firsts[k]
-            c = counts[k]
             clip = not inside_frustum(mats[k], width, height, near32, far32)
-            project_batch(
-                low[first : first + c],
-                med[first : first + c],
-                high[first : first + c],
-                bits[k],
-                mats[k],
-                width,
-                height,
-                near32,
-                far32,
-                pix[:c],
-                depth[:c],
-                clip,
-                token,
-            )
+            n = _project_every(low, med, high, first, counts[k], step, bits[k], mats[k], width, height, near32, far32,
+                               pix, depth, clip, token, sub_low, sub_med, sub_high)  # fmt: skip
+            # entry j is point first + j * step
             if n_fp == 1:
-                for j in range(0, c, step):
-                    if j + _PREFETCH_AHEAD < c:
+                for j in range(n):
+                    if j + _PREFETCH_AHEAD < n:
                         q = pix[j + _PREFETCH_AHEAD]
                         if p0 <= q < p1:
                             prefetch(acc, q)
                             prefetch(vis_f32, 2 * q + 1)
                     p = pix[j]
                     if p0 <= p < p1:
-                        _hqs_add(p, depth[j], color[first + j], np.uint64(1), vis_f32, t1, acc, spill_rg, spill_ba, spill_n)
+                        _hqs_add(p, depth[j], color[first + j * step], np.uint64(1), vis_f32, t1, acc, spill_rg, spill_ba, spill_n)
                 continue
-            for j in range(0, c, step):
-                if j + _PREFETCH_AHEAD < c and pix[j + _PREFETCH_AHEAD] >= 0:
+            for j in range(n):
+                if j + _PREFETCH_AHEAD < n and pix[j + _PREFETCH_AHEAD] >= 0:
                     q = pix[j + _PREFETCH_AHEAD]
                     prefetch(acc, q)
                     prefetch(vis_f32, 2 * q + 1)
@@ -636,7 +645,7 @@ def hqs_shade(
                         w = soft_weight(footprint[o, 0], footprint[o, 1], s, softness)
                         if w > 0:
                             _hqs_add(
-                                np.int64(yy) * width + xx, depth[j], color[first + j], w, vis_f32, t1, acc, spill_rg, spill_ba, spill_n
+                                np.int64(yy) * width + xx, depth[j], color[first + j * step], w, vis_f32, t1, acc, spill_rg, spill_ba, spill_n
                             )
         _hqs_resolve_rows(r0, r1, width, acc, spill_rg, spill_ba, spill_n, fallback, out)
 
@@ -765,24 +774,26 @@ def transparency_shade(
         pix = np.empty(max_count, np.int32)
         depth = np.empty(max_count, np.float32)
         dbits = depth.view(np.uint32)
+        sub = max_count if step > 1 else 0
+        sub_low, sub_med, sub_high = np.empty(sub, np.uint32), np.empty(sub, np.uint32), np.empty(sub, np.uint32)
         for k in range(counts.shape[0]):
             if r0 == r1 or row_hi[k] + reach < r0 or row_lo[k] - reach >= r1:
                 continue
             first = firsts[k]
-            c = counts[k]
             clip = not inside_frustum(mats[k], width, height, near32, far32)
-            project_batch(low[first : first + c], med[first : first + c], high[first : first + c], bits[k], mats[k],
-                          width, height, near32, far32, pix[:c], depth[:c], clip, token)  # fmt: skip
+            n = _project_every(low, med, high, first, counts[k], step, bits[k], mats[k], width, height, near32, far32,
+                               pix, depth, clip, token, sub_low, sub_med, sub_high)  # fmt: skip
             a8 = np.uint64(alphas[k, 0])
             reveal = (np.uint64(alphas[k, 1]) << _TR_COUNT_SHIFT) + np.uint64(1)
-            for j in range(0, c, step):
+            for j in range(n):  # entry j is point first + j * step
                 p = pix[j]
                 if p < 0:
                     continue
-                key = (np.uint64(dbits[j]) << np.uint64(32)) | np.uint64(first + j)
+                index = first + j * step
+                key = (np.uint64(dbits[j]) << np.uint64(32)) | np.uint64(index)
                 if n_fp == 1:
                     if p0 <= p < p1:
-                        _tr_add(p, key, color[first + j], a8, reveal, kbuf, kalpha, sums)
+                        _tr_add(p, key, color[index], a8, reveal, kbuf, kalpha, sums)
                     continue
                 x = np.int64(p % width)
                 y = np.int64(p // width)
@@ -790,7 +801,7 @@ def transparency_shade(
                     continue
                 s = size if atten == 0 else min(size, max(np.float32(1.0), atten / depth[j]))
                 kk = min(np.int64(s), k_max)  # needs are integers: size s covers those of floor(s)
-                col = color[first + j]
+                col = color[index]
                 if kk == 1 and one_centre:  # most points of an adaptive overview: their own pixel
                     if r0 <= y < r1:
                         _tr_add(p, key, col, a8, reveal, kbuf, kalpha, sums)

@@ -250,6 +250,14 @@ def mark_footprint(m, width, height, dirty, n):
     return True
 
 
+@njit(inline="always")
+def gather_every(words, first, n, step, out):
+    """out[:n] = words[first], words[first + step], ...: a subsample (every step-th point of a
+    batch) made contiguous, so the one compiled projection of contiguous slices serves it."""
+    for j in range(n):
+        out[j] = words[first + j * step]
+
+
 @njit(cache=True, error_model="numpy")
 def project_batch(low, med, high, bits, m, width, height, near, far, pix, depth, clip, token):
     """Phase 1: pixel id (or -1) and float32 depth of each point of one batch.
@@ -533,12 +541,10 @@ def rasterize(firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes
             n = (c + step - 1) // step
             packed = codes[k] != FULL_LAYOUT
             if step > 1:
-                for j in range(n):
-                    sub_low[j] = low[f + j * step]
+                gather_every(low, f, n, step, sub_low)
                 if not packed:
-                    for j in range(n):
-                        sub_med[j] = med[f + j * step]
-                        sub_high[j] = high[f + j * step]
+                    gather_every(med, f, n, step, sub_med)
+                    gather_every(high, f, n, step, sub_high)
             if packed:
                 fine = 0
                 for v in range(n_views):
