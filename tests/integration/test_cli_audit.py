@@ -182,7 +182,7 @@ def test_a_world_size_the_size_mode_ignores_is_refused(cloud_file, tmp_path, cli
     """--size-mode fixed --point-world-size 2 drew 16-pixel points (the size's implied
     --point-size), the world size ignored without a word."""
     rc, _, err = cli("render", cloud_file, "-o", tmp_path / "x.png", *SIZE, "--size-mode", mode, "--point-world-size", 2)
-    assert (rc, err) == (1, f"error: --point-world-size: sizes attenuated points, not --size-mode {mode} (it would be ignored)\n")
+    assert (rc, err) == (1, f"error: --point-world-size needs --size-mode auto or attenuated, not {mode} (it would be ignored)\n")
     assert not (tmp_path / "x.png").exists()
     assert cli("render", cloud_file, "-o", tmp_path / "x.png", *SIZE, "--size-mode", "attenuated", "--point-world-size", 2)[0] == 0
 

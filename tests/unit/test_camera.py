@@ -133,6 +133,38 @@ def test_fit_cloud_takes_a_view_given_as_a_numpy_pair():
     assert cam == Camera.fit(cloud.bounds, view=(30.0, 40.0), width=64, height=48)
 
 
+def test_an_unknown_keyword_names_the_constructor_and_what_it_takes():
+    """``Camera.fit_cloud(cloud, foo=1)`` was Python's "Camera.__init__() got an unexpected keyword
+    argument 'foo'"; fit's ortho_height (which its projection sets) "got multiple values"."""
+    import gigapoint as gp
+
+    cloud = gp.from_arrays(np.random.default_rng(0).random((50, 3)))
+    box = (np.zeros(3), np.ones(3))
+    fit = "view, width, height, fov, projection, margin, recenter, trim, up, near, far"
+    for call, message in (
+        (lambda: Camera.fit_cloud(cloud, foo=1), f"Camera.fit_cloud: unknown keyword foo (it takes cloud, {fit})"),
+        (lambda: Camera.fit_cloud(cloud, points=np.zeros((3, 3))), f"Camera.fit_cloud: unknown keyword points (it takes cloud, {fit})"),
+        (lambda: Camera.fit(box, projection="orthographic", ortho_height=3), ("Camera.fit: unknown keyword ortho_height (it takes bounds, "
+         "view, width, height, fov, projection, margin, recenter, points, trim, up, near, far)")),
+        (lambda: Camera.look_at((0, 0, 1), (0, 0, 0), zoom=2), ("Camera.look_at: unknown keyword zoom (it takes eye, target, up, fov, width, "
+         "height, projection, ortho_height, near, far)")),
+        (lambda: Camera.orbit((0, 0, 0), 0, 10, 5, dist=1), ("Camera.orbit: unknown keyword dist (it takes target, yaw, pitch, distance, up, "
+         "fov, width, height, projection, ortho_height, near, far)")),
+    ):  # fmt: skip
+        with pytest.raises(CameraError) as err:
+            call()
+        assert str(err.value) == message
+    assert Camera.fit_cloud(cloud, view="top", width=64, height=48, near=0.5, far=99.0, margin=1.2).near == 0.5  # what it takes: taken
+
+
+def test_a_perspective_camera_refuses_an_ortho_height():
+    """``Camera.look_at(eye, target, ortho_height=5)`` (perspective) was taken, the height ignored."""
+    with pytest.raises(CameraError) as err:
+        Camera.look_at((0, 0, 10), (0, 0, 0), ortho_height=5)
+    assert str(err.value) == "camera ortho_height is for projection='orthographic'; a perspective camera's view is set by fov, got ortho_height 5"
+    assert Camera.look_at((0, 0, 10), (0, 0, 0), ortho_height=None).projection == "perspective"
+
+
 @pytest.mark.parametrize("kw", [{"yaw": "a"}, {"pitch": None}, {"distance": "5"}, {"yaw": np.nan}])
 def test_orbit_refuses_non_numbers_in_one_line(kw):
     """``Camera.orbit(target, 'a', 10, 5)`` was a TypeError ("must be real number, not str"), a

@@ -127,16 +127,61 @@ def test_a_colour_option_the_color_mode_does_not_read_is_refused(npy, tmp_path, 
     """--colormap turbo alone drew the cloud's own colours, --color-attribute x with --color-mode
     elevation the elevation: each option was dropped without a word."""
     for extra, problem in (
-        (["--colormap", "turbo"], "--colormap: colours only --color-mode elevation or attribute, not rgb"),
-        (["--color-mode", "elevation", "--color-attribute", "z"], "--color-attribute: colours only --color-mode attribute, not elevation"),
-        (["--color-mode", "intensity", "--elevation-range", "0,5"], "--elevation-range: colours only --color-mode elevation, not intensity"),
-        (["--color-mode", "elevation", "--intensity-range", "0,5"], "--intensity-range: colours only --color-mode intensity, not elevation"),
-        (["--attribute-range", "0,5"], "--attribute-range: colours only --color-mode attribute, not rgb"),
+        (["--colormap", "turbo"], "--colormap needs --color-mode elevation or attribute"),
+        (["--colormap", "viridis"], "--colormap needs --color-mode elevation or attribute"),  # (its default, yet typed)
+        (["--color-mode", "elevation", "--color-attribute", "z"], "--color-attribute needs --color-mode attribute, not elevation"),
+        (["--color-mode", "intensity", "--elevation-range", "0,5"], "--elevation-range needs --color-mode elevation, not intensity"),
+        (["--color-mode", "elevation", "--intensity-range", "0,5"], "--intensity-range needs --color-mode intensity, not elevation"),
+        (["--attribute-range", "0,5"], "--attribute-range needs --color-mode attribute"),
     ):
         assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "24", *extra]) == 1
         assert capsys.readouterr().err == f"error: {problem} (it would be ignored)\n"
     assert not list(tmp_path.iterdir())
     assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "24", "--color-mode", "elevation", "--colormap", "turbo"]) == 0
+
+
+@pytest.mark.parametrize(
+    "extra, problem",
+    [
+        (["--ipd", "0.1"], "--ipd needs --stereo side-by-side or anaglyph"),
+        (["--convergence", "5"], "--convergence needs --stereo side-by-side or anaglyph"),
+        (["--edl-strength", "2"], "--edl-strength needs --edl"),
+        (["--edl-strength", "1"], "--edl-strength needs --edl"),  # its default, yet typed: counted
+        (["--edl-radius", "2"], "--edl-radius needs --edl"),
+        (["--supersample-filter", "lanczos"], "--supersample-filter needs --supersample 2 or 4"),
+        (["--supersample", "1", "--supersample-filter", "lanczos"], "--supersample-filter needs --supersample 2 or 4"),
+        (["--foveated"], "--foveated needs --fill-holes 1, 2 or 3"),
+        (["--shininess", "8"], "--shininess needs --lighting"),
+        (["--hqs-depth-tolerance", "0.05"], "--hqs-depth-tolerance needs --hqs"),
+        (["--size-mode", "adaptive", "--point-world-size", "2"], "--point-world-size needs --size-mode auto or attenuated, not adaptive"),
+    ],
+)
+def test_an_option_its_switch_is_off_for_is_refused(npy, tmp_path, capsys, extra, problem):
+    """--ipd without --stereo, --edl-strength without --edl, --foveated without --fill-holes, ...
+    drew the image without them, without a word."""
+    assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "24", *extra]) == 1
+    assert capsys.readouterr().err == f"error: {problem} (it would be ignored)\n"
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_switch_given_lets_its_options_through(npy, tmp_path):
+    for extra in (["--edl", "--edl-strength", "1", "--edl-radius", "2"], ["--fill-holes", "2", "--foveated"], ["--hqs", "--hqs-depth-tolerance", "0.05"],
+                  ["--stereo", "anaglyph", "--ipd", "0.1", "--convergence", "5"], ["--supersample", "4", "--supersample-filter", "lanczos"]):  # fmt: skip
+        assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "24", "--overwrite", "--backend", "cpu", *extra]) == 0, extra
+
+
+@pytest.mark.parametrize("suffix", [".jpg", ".bmp"])
+def test_a_see_through_background_written_where_the_format_has_no_alpha_is_warned_once(npy, tmp_path, capsys, suffix):
+    """--background '#ff000080' -o x.jpg wrote an opaque red background without a word."""
+    out = tmp_path / f"x{suffix}"
+    assert main(["render", str(npy), "-o", str(out), "-W", "32", "-H", "24", "--backend", "cpu", "--background", "#ff000080"]) == 0
+    kind = suffix[1:].upper()
+    assert capsys.readouterr().err == f"warning: {out}: a {kind} file holds no alpha: the background's alpha 128 is written opaque\n"
+    assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "24", "--backend", "cpu", "--background", "#ff000080"]) == 0
+    assert capsys.readouterr().err == ""
+    assert np.asarray(Image.open(tmp_path / "x.png"))[0, 0].tolist() == [255, 0, 0, 128]  # (a PNG keeps it)
+    assert main(["render", str(npy), "-o", str(out), "-W", "32", "-H", "24", "--backend", "cpu", "--overwrite", "--background", "#ff0000"]) == 0
+    assert capsys.readouterr().err == ""
 
 
 def test_a_bad_turntable_is_refused_before_the_inputs_are_read(tmp_path, capsys):

@@ -11,6 +11,7 @@ import re
 from pathlib import Path
 from typing import Literal, get_args
 
+import numpy as np
 import pytest
 import typer
 
@@ -270,8 +271,10 @@ def test_point_world_size_alone_means_attenuated_points_of_at_most_16_px():
     assert (s.size_mode, s.point_world_size, s.point_size) == ("attenuated", 0.5, 16)
     s = parse(RenderSettings, "--point-world-size", "0.5", "--point-size", "4")
     assert (s.size_mode, s.point_size) == ("attenuated", 4)
-    s = parse(RenderSettings, "--point-world-size", "0.5", "--size-mode", "fixed", "--point-size", "1")
-    assert (s.size_mode, s.point_size) == ("fixed", 1)
+    s = parse(RenderSettings, "--point-world-size", "0.5", "--size-mode", "auto", "--point-size", "1")
+    assert (s.size_mode, s.point_size) == ("auto", 1)  # given too: kept
+    with pytest.raises(SettingsError, match=r"^--point-world-size needs --size-mode auto or attenuated, not fixed \(it would be ignored\)$"):
+        parse(RenderSettings, "--point-world-size", "0.5", "--size-mode", "fixed", "--point-size", "1")
     assert parse(RenderSettings, "--size-mode", "attenuated", "--point-world-size", "2").point_size == 16
     assert parse(RenderSettings, "--size-mode", "attenuated", "--point-world-size", "2", "--point-size", "1").point_size == 1
     with pytest.raises(SettingsError, match=r"^--point-world-size: size_mode 'attenuated' needs point_world_size > 0"):
@@ -313,9 +316,24 @@ def test_a_colour_of_numbers_that_are_not_whole_bytes_is_refused(value):
 
 def test_colours_read_as_names_hex_and_whole_numbers():
     assert RenderSettings(background="1,2,3").background == (1, 2, 3, 255)
+    assert RenderSettings(background=(1, 1, 1)).background == (1, 1, 1, 255)
     assert RenderSettings(background=(1.0, 2.0, 3.0, 4.0)).background == (1, 2, 3, 4)
+    assert RenderSettings(background=(255.0, 0.0, 0.0)).background == (255, 0, 0, 255)
+    assert RenderSettings(background=(0.0, 0.0, 0.0)).background == (0, 0, 0, 255)  # (black on either scale)
     assert RenderSettings(background="#102030").background == (16, 32, 48, 255)
     assert RenderSettings(background="white").background == (255, 255, 255, 255)
+
+
+@pytest.mark.parametrize(
+    "value, scaled",
+    [((1.0, 1.0, 1.0), "(255, 255, 255) or 'white'"), ((0.5, 0.5, 0.5), "(128, 128, 128) or 'gray'"), ("1.0,0,0", "(255, 0, 0) or '#ff0000'"),
+     (np.array([0.0, 0.0, 1.0, 0.5]), "(0, 0, 255, 128) or '#0000ff80'")],
+)
+def test_a_colour_of_floats_within_0_to_1_is_refused_with_its_0_to_255_values(value, scaled):
+    """background=(1.0, 1.0, 1.0) (0..1 channels: white) was read as 0..255: near black, without a word."""
+    with pytest.raises(SettingsError) as err:
+        RenderSettings(background=value)
+    assert str(err.value) == f"background: color needs 3 or 4 whole numbers in 0..255, got {value!r} (0..1 channels: give {scaled})"
 
 
 def test_the_viewer_panel_names_fields_by_their_labels():

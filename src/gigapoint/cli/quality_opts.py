@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..errors import SettingsError, warnings_kept
+from ..errors import warnings_kept
 from ..render.settings import RenderSettings
 from .settings_opts import option_of
 
@@ -17,30 +17,6 @@ def _quality_fields() -> list[str]:
 # every image-quality field of RenderSettings -> the `gigapoint render` option that sets it
 _OPTIONS = option_of(RenderSettings)
 OPTION_OF = {name: _OPTIONS[name] for name in _quality_fields()}
-
-
-# the colour options that only a color mode reads: (field, the modes that read it)
-_MODE_OPTIONS = (
-    ("color_attribute", ("attribute",)),
-    ("colormap", ("elevation", "attribute")),
-    ("elevation_range", ("elevation",)),
-    ("intensity_range", ("intensity",)),
-    ("attribute_range", ("attribute",)),
-)
-
-
-def check_color_options(settings) -> None:
-    """A one-line SettingsError for a colour option the image's color mode does not read
-    (``--colormap turbo`` alone, ``--color-attribute x --color-mode elevation``), or a
-    ``--point-world-size`` that the size mode does not: each was dropped without a word. The
-    viewer keeps them (its modes change while it runs)."""
-    defaults = RenderSettings()
-    for name, modes in _MODE_OPTIONS:
-        if getattr(settings, name) != getattr(defaults, name) and settings.color_mode not in modes:
-            uses = " or ".join(modes)
-            raise SettingsError(f"{OPTION_OF[name]}: colours only --color-mode {uses}, not {settings.color_mode} (it would be ignored)")
-    if settings.point_world_size > 0 and settings.size_mode in ("fixed", "adaptive"):  # (drew 16-pixel points, the size ignored)
-        raise SettingsError(f"--point-world-size: sizes attenuated points, not --size-mode {settings.size_mode} (it would be ignored)")
 
 
 def check_color_attribute(inputs, settings) -> None:

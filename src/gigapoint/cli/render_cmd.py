@@ -12,12 +12,13 @@ from typing import Annotated
 import typer
 
 from ..core.coords import MAX_ABS_COORDINATE, MAX_SPAN
-from ..errors import CameraError, GigapointError, counted, number_text
+from ..errors import CameraError, GigapointError, GigapointWarning, counted, number_text, warn
 from ..io import crs_wkt, files_label
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from ..render.contours import draw_contours
 from ..render.georef import georef_paths, georef_writes, map_image, raster_writes
+from ..render.image_files import NO_ALPHA_SUFFIXES
 from ..render.raster_fill import fill_map
 from . import compiling
 from .app import app
@@ -49,7 +50,7 @@ from .gsd_opts import check_fill_nodata, check_gsd_value
 from .info_cmd import memory_line
 from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_image, write_together
 from .progress import err_console, progress_bar, status
-from .quality_opts import check_color_attribute, check_color_options, prepare_cloud
+from .quality_opts import check_color_attribute, prepare_cloud
 from .settings_opts import named_option, options_named, settings_from_options, with_settings_options
 
 _CAMERA_KEYS = {"eye": 3, "target": 3, "up": 3, "yaw": 1, "pitch": 1, "distance": 1, "fov": 1}
@@ -182,6 +183,13 @@ def top_down_camera(cloud, gsd: float, output: Path, inputs) -> Camera:
     return cam
 
 
+def warn_alpha_dropped(output: Path, settings, videos) -> None:
+    """A background less than opaque (``#rrggbbaa``) written where the file holds no alpha (JPEG,
+    BMP, a video; ``videos``: their suffixes): said once, naming the file (it came out opaque without a word)."""
+    if settings.background[3] < 255 and output.suffix.lower() in NO_ALPHA_SUFFIXES | videos:
+        warn(f"{output}: a {output.suffix[1:].upper()} file holds no alpha: the background's alpha {settings.background[3]} is written opaque", GigapointWarning)
+
+
 def open_inputs(inputs, point_budget: int, progressive: bool | None = None, options: dict | None = None, point_filter=None):
     """The command's inputs (lod/progressive.open_sized: inputs above the point budget build an
     LOD octree as they load, and the render waits for it; ``options``: ``--colors``/``--chunked``,
@@ -293,6 +301,7 @@ def render(
     georef = georef_paths([output, depth_out]) if gsd is not None else []
     for side in georef:  # refused like the image: a user's world file or .prj is not replaced without asking
         check_output(side, overwrite, suffixes=None)
+    warn_alpha_dropped(output, settings, VIDEO_SUFFIXES)
     contours_drawn = check_contour_options(contours, contours_base, contours_out, contours_on_image, gsd, overwrite)
     check_outputs_apart([output, depth_out, index_out, *georef, contours_out], inputs)
     if projection not in (None, "perspective", "orthographic"):
@@ -303,7 +312,6 @@ def render(
     fill_distance = check_fill_nodata(fill_nodata, gsd, depth_out or contours)  # (contours are traced on the filled heights too)
     projection = projection or "perspective"
     width, height = check_image_size(width, height, fov)  # before reading anything
-    check_color_options(settings)
     point_filter = filter_options(classes, drop_classes, clip, "render", clip_polygon)
     inputs = subfolders_read(inputs, recursive)
     with options_named():  # (--color-attribute: the files' headers lack it)

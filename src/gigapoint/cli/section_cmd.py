@@ -13,7 +13,6 @@ from ..render import RenderSettings
 from .app import app
 from .cloud_opts import ClassesOption, ClipPolygonOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
 from .output import check_image_fits, check_output, check_outputs_apart, save_image
-from .quality_opts import check_color_options
 from .settings_opts import options_named, with_settings_options
 
 
@@ -68,7 +67,6 @@ def section(
         raise GigapointError(f"section: --vertical-exaggeration must be a number > 0, got {number_text(vertical_exaggeration)}")
     if settings.stereo != "none":  # (two eyes of an orthographic side view see the same)
         raise GigapointError("section: --stereo: a section is one orthographic view")
-    check_color_options(settings)
     keep = filter_options(classes, drop_classes, None, "section", clip_polygon)  # (checked here: its errors name the options)
     chosen = {} if keep is None else {"classes": keep.classes or None, "drop_classes": keep.drop_classes or None, "clip_polygon": keep.polygon}
     cut = gp.section(subfolders_read(inputs, recursive), lane[:4], lane[4], **chosen)

@@ -182,9 +182,32 @@ def settings_from_options(cls: type, values: dict, given: frozenset | set = froz
             kwargs[target] = value
             blame[target] = blame[source]
     try:
-        return cls(**kwargs)
+        settings = cls(**kwargs)
     except SettingsError as exc:
         raise named_option(exc, blame) from None
+    check_needs(settings, given)
+    return settings
+
+
+def _or(values) -> str:
+    words = [str(v) for v in values]
+    return " or ".join(filter(None, [", ".join(words[:-1]), words[-1]]))
+
+
+def check_needs(settings, given) -> None:
+    """A one-line SettingsError for an option given on the command line (``given``: field names)
+    that ``settings`` would not read: its field's ``needs`` (another field's values) not met
+    (``--ipd`` without ``--stereo``, ``--colormap`` with ``--color-mode rgb``): each was dropped
+    without a word. Only options typed count: ``--edl-strength 1`` is its default, yet said."""
+    specs = {spec.name: spec for spec in settings_fields(type(settings))}
+    for name in (n for n in specs if n in given and specs[n].needs):
+        switch, values = specs[name].needs
+        current = getattr(settings, switch)
+        if current in values:
+            continue
+        wanted = specs[switch].option if specs[switch].kind == "bool" else f"{specs[switch].option} {_or(values)}"
+        instead = f", not {current}" if current != specs[switch].default else ""
+        raise SettingsError(f"{specs[name].option} needs {wanted}{instead} (it would be ignored)")
 
 
 @contextmanager

@@ -8,6 +8,7 @@ yaw around the up axis measured from +x, pitch above the horizon (positive looks
 from __future__ import annotations
 
 import functools
+import inspect
 import math
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
@@ -44,6 +45,18 @@ TRIM = 1e-4  # framing sample points: this share at each side may fall outside t
 #: framing of points (within ±1e12), far below where float64 squares overflow (an eye at 1e200 gave
 #: numpy's overflow warnings and a blank image)
 MAX_CAMERA_COORDINATE = 1e30
+#: the keywords look_at and orbit pass on to Camera, and those fit passes on (its projection sets ortho_height)
+CAMERA_KEYWORDS = ("projection", "ortho_height", "near", "far")
+FIT_KEYWORDS = ("up", "near", "far")
+
+
+def _check_keywords(method: str, kw: dict, passed_on) -> None:
+    """A one-line CameraError naming ``Camera.method`` and a keyword it does not take, with those
+    it does (Python's said "Camera.__init__() got an unexpected keyword argument 'foo'")."""
+    unknown = [k for k in kw if k not in passed_on]
+    if unknown:
+        named = [p for p in inspect.signature(getattr(Camera, method)).parameters if p != "kw"]
+        raise CameraError(f"Camera.{method}: unknown keyword {', '.join(unknown)} (it takes {', '.join(dict.fromkeys([*named, *passed_on]))})")
 
 
 def _vec3(value, what: str) -> tuple[float, float, float]:
@@ -208,6 +221,8 @@ class Camera:
             raise CameraError(f"camera projection must be 'perspective' or 'orthographic', got {self.projection!r}")
         if not (is_real(self.fov) and 0.01 <= self.fov <= 179.0):  # (True was a 1 degree view)
             raise CameraError(f"camera fov must be between 0.01 and 179 degrees, got {number_text(self.fov)}")
+        if self.projection == "perspective" and self.ortho_height is not None:  # (it was ignored: fov sets the view)
+            raise CameraError(f"camera ortho_height is for projection='orthographic'; a perspective camera's view is set by fov, got ortho_height {number_text(self.ortho_height)}")
         d = np.subtract(self.target, self.eye)
         if not np.linalg.norm(d) > 0:
             raise CameraError("camera eye and target are the same point")
@@ -229,11 +244,13 @@ class Camera:
     # --- constructors -------------------------------------------------------------
     @classmethod
     def look_at(cls, eye, target, up=(0, 0, 1), fov=60.0, width=1920, height=1080, **kw) -> Camera:
+        _check_keywords("look_at", kw, CAMERA_KEYWORDS)
         return cls(eye=eye, target=target, up=up, fov=fov, width=width, height=height, **kw)
 
     @classmethod
     def orbit(cls, target, yaw, pitch, distance, up=(0, 0, 1), fov=60.0, width=1920, height=1080, **kw) -> Camera:
         """Camera at ``distance`` from ``target``, at (yaw, pitch) degrees (z-up world)."""
+        _check_keywords("orbit", kw, CAMERA_KEYWORDS)
         for name, v in (("yaw", yaw), ("pitch", pitch), ("distance", distance)):
             if not is_real(v):  # 'a' was math's TypeError, a NaN yaw an eye that "must be finite"
                 raise CameraError(f"orbit {name} must be a finite number, got {number_text(v)}")
@@ -261,6 +278,7 @@ class Camera:
         ``points``: (k, 3) positions to frame instead of the box's corners (``sample_points``;
         ``trim`` (default ``TRIM``) of them at each side may fall outside): the data, not its box, fills the frame.
         ``view='auto'``: the (yaw, pitch) ``auto_view`` gives (of ``points``, else the box)."""
+        _check_keywords("fit", kw, FIT_KEYWORDS)
         width, height = image_side("width", width), image_side("height", height)  # before width / height divides
         lo, hi = _box(bounds)
         box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
@@ -424,6 +442,8 @@ class Camera:
     def fit_cloud(cls, cloud, view="auto", **kw) -> Camera:
         """``fit`` for a cloud (any Renderable): the 'auto' view frames its points (``sample_points``),
         so its data, not its bounding box, fills the frame; other views frame its box."""
+        fit = [p for p in inspect.signature(cls.fit).parameters if p not in ("bounds", "view", "points", "kw")]
+        _check_keywords("fit_cloud", kw, [*fit, *FIT_KEYWORDS])
         auto = isinstance(view, str) and view == "auto"  # (a numpy pair compared element-wise: "ambiguous truth value")
         return cls.fit(cloud.bounds, view=view, points=sample_points(cloud) if auto else None, **kw)
 

@@ -12,6 +12,7 @@ from ..atomic import atomic_npy, atomic_write, folders_for, output_file_refusal,
 from ..errors import GigapointError
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff", ".bmp"}
+NO_ALPHA_SUFFIXES = {".jpg", ".jpeg", ".bmp"}  # images written as RGB: their alpha dropped
 WEBP_MAX_SIDE = 16_383  # libwebp's limit (an image may be 16 384 wide): its "encoding error" came once the render was done
 
 
@@ -40,7 +41,7 @@ def save_image(image: np.ndarray, path, tiff_tags=None) -> None:
     path = Path(path)
     fmt = {".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF", ".tiff": "TIFF"}.get(path.suffix.lower())
     img = Image.fromarray(image)
-    if path.suffix.lower() in (".jpg", ".jpeg", ".bmp"):
+    if path.suffix.lower() in NO_ALPHA_SUFFIXES:
         img = img.convert("RGB")
     # PNG at zlib level 1: the default (6) took 0.3 s of a 1.8 s first render of 1 M points and its
     # files of renders (flat background) were larger, not smaller (docs/benchmarks.md, CLI first render)

@@ -58,7 +58,9 @@ _NAMED_COLORS = {
 
 
 def parse_color(value, name: str = "background") -> tuple[int, int, int, int]:
-    """'black', '#rrggbb', '#rrggbbaa', '#rgb', '#rgba', 'r,g,b' or a tuple -> (r, g, b, a) in 0..255."""
+    """'black', '#rrggbb', '#rrggbbaa', '#rgb', '#rgba', 'r,g,b' or a tuple -> (r, g, b, a) in 0..255.
+    Channels are whole numbers in 0..255; floats that all lie in 0..1 (not all 0) are refused, as
+    0..1 channels would be misread (255.0 is taken as 255)."""
     text = value
     spellings = f"use {', '.join(_NAMED_COLORS)}, #rrggbb, #rgb or r,g,b"  # ('red' did not say which names there are)
     if isinstance(value, str):
@@ -77,10 +79,23 @@ def parse_color(value, name: str = "background") -> tuple[int, int, int, int]:
         numbers = [float(v) for v in value]
     except (TypeError, ValueError):
         raise SettingsError(f"{name}: cannot read color {text!r} ({spellings})") from None
-    # whole numbers only: 'inf' was an internal OverflowError, '0.5,0.5,0.5' black without a word
-    if len(numbers) not in (3, 4) or not all(0 <= p <= 255 and p == int(p) for p in numbers):
-        raise SettingsError(f"{name}: color needs 3 or 4 whole numbers in 0..255, got {text!r}")
+    # whole numbers only: 'inf' was an internal OverflowError, '0.5,0.5,0.5' black without a word;
+    # floats within 0..1 are refused too, whole or not: (1.0, 1.0, 1.0) meant white, not (1, 1, 1)
+    fractions = len(numbers) in (3, 4) and all(0 <= p <= 1 for p in numbers) and any(numbers) and any(map(_written_as_float, value))
+    if fractions or len(numbers) not in (3, 4) or not all(0 <= p <= 255 and p == int(p) for p in numbers):
+        hint = ""
+        if fractions:
+            scaled = [round(p * 255) for p in numbers]
+            hint = f" (0..1 channels: give {tuple(scaled)} or {format_color(scaled)!r})"
+        raise SettingsError(f"{name}: color needs 3 or 4 whole numbers in 0..255, got {text!r}{hint}")
     return tuple(int(p) for p in numbers) + (255,) * (4 - len(numbers))  # type: ignore[return-value]
+
+
+def _written_as_float(value) -> bool:
+    """A colour channel given as a float (1.0, np.float32, '1.0'), not as a whole number (1, '1')."""
+    if isinstance(value, str):
+        return not value.strip().lstrip("+-").isdigit()
+    return isinstance(value, (float, np.floating))
 
 
 def format_color(rgba) -> str:
@@ -107,6 +122,7 @@ def setting(
     label: str | None = None,
     step: float | None = None,
     implies: dict | None = None,
+    needs: tuple | None = None,
 ):
     """A settings field: its default and the metadata that CLI, viewer and validation read.
 
@@ -114,10 +130,11 @@ def setting(
     CLI option where it is not ``--kebab-case`` of the field; ``group`` one of GROUPS;
     ``viewer=False`` hides it from the viewer's panel; ``kind="color"`` marks a color tuple;
     ``implies`` {field: value}: giving this field's CLI option also sets those fields, unless
-    their own options are given too.
+    their own options are given too; ``needs`` (field, values): the field this one is read only
+    at (those values of it), so the CLI refuses its option given without that.
     """
     meta = {"help": help, "group": group}
-    extra = {"min": min, "max": max, "option": option, "kind": kind, "label": label, "step": step, "implies": implies}
+    extra = {"min": min, "max": max, "option": option, "kind": kind, "label": label, "step": step, "implies": implies, "needs": needs}
     meta.update({k: v for k, v in extra.items() if v is not None})
     if exclusive_min:
         meta["exclusive_min"] = True
@@ -163,21 +180,31 @@ class RenderSettings:
         "The attribute color mode's attribute: any the cloud holds (a LAS file's extra bytes too), mapped through the colormap "
         "(given on the command line or as a keyword of render, it also means color_mode attribute).",
         implies={"color_mode": "attribute"},
+        needs=("color_mode", ("attribute",)),
     )
-    colormap: Colormap = setting("viridis", "Colormap of the elevation and attribute color modes.")
-    elevation_range: Range | None = setting(None, "'low,high' elevations mapped onto the colormap (default: the cloud's z extent).")
-    intensity_range: Range | None = setting(None, "'low,high' intensity contrast range (default: 2nd..98th percentile).")
-    attribute_range: Range | None = setting(None, "'low,high' values of color_attribute mapped onto the colormap (default: 2nd..98th percentile).")
+    colormap: Colormap = setting("viridis", "Colormap of the elevation and attribute color modes.", needs=("color_mode", ("elevation", "attribute")))
+    elevation_range: Range | None = setting(
+        None, "'low,high' elevations mapped onto the colormap (default: the cloud's z extent).", needs=("color_mode", ("elevation",))
+    )
+    intensity_range: Range | None = setting(
+        None, "'low,high' intensity contrast range (default: 2nd..98th percentile).", needs=("color_mode", ("intensity",))
+    )
+    attribute_range: Range | None = setting(
+        None, "'low,high' values of color_attribute mapped onto the colormap (default: 2nd..98th percentile).", needs=("color_mode", ("attribute",))
+    )
     edl: bool = setting(False, "Eye-dome lighting.")
-    edl_strength: float = setting(1.0, "Eye-dome lighting strength.", min=0.0, max=10_000.0)  # float32 in the kernels: 1e39 was inf
-    edl_radius: float = setting(1.4, "Eye-dome lighting radius in pixels.", min=0.5, max=16.0)
+    # float32 in the kernels: 1e39 was inf
+    edl_strength: float = setting(1.0, "Eye-dome lighting strength.", min=0.0, max=10_000.0, needs=("edl", (True,)))
+    edl_radius: float = setting(1.4, "Eye-dome lighting radius in pixels.", min=0.5, max=16.0, needs=("edl", (True,)))
     fill_holes: int = setting(0, "Depth-aware hole filling: 0 off, 1/2/3 = 3x3/5x5/7x7 window.", min=0, max=3)
     fill_holes_foveated: bool = setting(
-        False, "Hole filling window grows from 3x3 in the centre to the full size at the border.", option="--foveated"
+        False, "Hole filling window grows from 3x3 in the centre to the full size at the border.", option="--foveated",
+        needs=("fill_holes", (1, 2, 3)),
     )
     hqs: bool = setting(False, "High-quality shading: blend the colors of all points near the front.")
     hqs_depth_tolerance: float = setting(
-        0.01, "High-quality shading blends the points at most this fraction behind the closest.", min=0.0, max=1.0
+        0.01, "High-quality shading blends the points at most this fraction behind the closest.", min=0.0, max=1.0,
+        needs=("hqs", (True,)),
     )
     point_size: int = setting(1, "Point size in pixels (attenuated: the largest size; adaptive: a multiple of the size).", min=1, max=64)
     point_shape: PointShape = setting("square", "Point footprint shape.")
@@ -193,6 +220,7 @@ class RenderSettings:
         "attenuated, point_size 16).",
         min=0.0,
         implies={"size_mode": "attenuated", "point_size": 16},
+        needs=("size_mode", ("auto", "attenuated")),  # (fixed and adaptive sizes ignore it)
     )
     splat_softness: float = setting(
         0.0, "Soft splats (Kraft's falloff exponent, e.g. 2) blended by high-quality shading; 0 = hard.", min=0.0, max=64.0
@@ -206,7 +234,9 @@ class RenderSettings:
         step=0.05,
     )
     supersample: Supersample = setting(1, "Anti-aliasing: render 1, 2 or 4 times larger and filter down.")
-    supersample_filter: SupersampleFilter = setting("box", "Supersampling filter: box (exact block mean) or lanczos (Pillow).")
+    supersample_filter: SupersampleFilter = setting(
+        "box", "Supersampling filter: box (exact block mean) or lanczos (Pillow).", needs=("supersample", (2, 4))
+    )
     stereo: Stereo = setting("none", "Stereo pair: none, side-by-side or anaglyph.")
     ipd: float | None = setting(
         None,
@@ -215,6 +245,7 @@ class RenderSettings:
         "0 for an orthographic camera; 0 = both eyes alike).",
         min=0.0,
         max=MAX_SPAN,
+        needs=("stereo", ("side-by-side", "anaglyph")),
     )
     convergence: float | None = setting(
         None,
@@ -222,9 +253,10 @@ class RenderSettings:
         min=0.0,
         exclusive_min=True,
         max=MAX_SPAN,
+        needs=("stereo", ("side-by-side", "anaglyph")),
     )
     lighting: bool = setting(False, "Blinn-Phong headlight from the cloud's normals (the CLI estimates them when missing).")
-    shininess: float = setting(32.0, "Lighting specular exponent.", min=0.0, max=10_000.0)
+    shininess: float = setting(32.0, "Lighting specular exponent.", min=0.0, max=10_000.0, needs=("lighting", (True,)))
 
     def __post_init__(self) -> None:
         for spec in settings_fields(type(self)):
@@ -308,6 +340,7 @@ class SettingSpec:
     step: float | None = None
     size: int = 0  # values of a color tuple (3 or 4)
     implies: tuple = ()  # ((field, value), ...) its CLI option also sets
+    needs: tuple = ()  # (field, values): the field's values at which this one is read (none: always)
 
     def check(self, value):
         """``value`` validated (and normalised: ints, the matching choice, (low, high) floats, RGBA)."""
@@ -451,6 +484,7 @@ def _spec(f, tp) -> SettingSpec:
         step=meta.get("step"),
         size=size,
         implies=tuple(dict(meta.get("implies") or {}).items()),
+        needs=tuple(meta.get("needs") or ()),
     )
 
 
