@@ -1228,16 +1228,17 @@ def test_convert_checks_its_name_switches_and_source_files(autzen_path, tmp_path
 def test_a_copc_name_writes_copc_and_a_folder_is_not_named_like_a_point_file(autzen_path, tmp_path, capsys):
     """`gigapoint convert a.laz -o scan.copc.laz` without --format wrote a gigapoint folder named
     scan.copc.laz, and `-o web.las --format potree` a folder named web.las; a progressive save alike.
+    `-o scan.csv` (.xyz, .npz, ...) said "a gigapoint octree is a folder", not that convert writes no CSV.
     (`-o scan.laz` without --format writes one plain LAZ file: test_convert_to_file.py.)"""
     import gigapoint as gp
 
     assert main(["convert", str(autzen_path), "-o", str(tmp_path / "scan.copc.laz"), "--quiet"]) == 0
     assert (tmp_path / "scan.copc.laz").is_file() and open_octree(tmp_path / "scan.copc.laz").meta["points"] == 110_000
-    for name, fmt in (("scan.xyz", []), ("web.las", ["--format", "potree"])):
+    potree_said = "a potree octree is a folder; name it without a point file's suffix, or write --format copc into a .copc.laz file"
+    no_such_file = "convert writes .las, .laz or .ply files, an octree folder or a .copc.laz file, not "  # (was "a gigapoint octree is a folder")
+    for name, fmt, said in (("web.las", ["--format", "potree"], potree_said), *((f"scan.{s}", [], no_such_file + "." + s.lower()) for s in ("xyz", "CSV", "txt", "npz", "npy", "e57"))):
         assert main(["convert", str(autzen_path), "-o", str(tmp_path / name), "--quiet", *fmt]) == 1
-        kind = "potree" if fmt else "gigapoint"
-        want = f"error: {tmp_path / name}: a {kind} octree is a folder; name it without a point file's suffix, or write --format copc into a .copc.laz file"
-        assert capsys.readouterr().err.strip() == want
+        assert capsys.readouterr().err.strip() == f"error: {tmp_path / name}: {said}"
         assert not (tmp_path / name).exists()
     grown = gp.open(autzen_path, progressive=True)
     assert grown.save(tmp_path / "grown.copc.laz").format == "copc"
