@@ -592,7 +592,8 @@ def test_save_names_what_it_cannot_write_and_writes_copc(tmp_path, monkeypatch):
     for bad, problem in (
         (5, "save: the output must be a path (.las, .laz, .ply or an octree folder), got 5"),
         ("", "save: the output must be a path (.las, .laz, .ply or an octree folder), got ''"),
-        ("scan.xyz", "scan.xyz: save writes .las, .laz or .ply files, or an octree folder (a name without a point file's suffix)"),
+        ("scan.xyz", "scan.xyz: save writes .las, .laz or .ply files, an octree folder or a .copc.laz file, not .xyz"),
+        ("scan.CSV", "scan.CSV: save writes .las, .laz or .ply files, an octree folder or a .copc.laz file, not .csv"),
     ):
         with pytest.raises(InputError, match=f"^{re.escape(problem)}$"):
             live.save(bad)
@@ -626,7 +627,8 @@ for suffix in (".las", ".laz", ".ply"):
 
 def test_save_on_a_full_disk_is_one_line_naming_the_file_and_leaves_nothing(tmp_path):
     """A LAZ that could not be written (a full disk; here a file size limit) was lazrs'
-    "IoError: Failed to call write", naming no file, and no OSError (the CLI's "internal error")."""
+    "IoError: Failed to call write", naming no file, and no OSError (the CLI's "internal error");
+    it now also says the room left on the disk, as lazrs names no cause."""
     import subprocess
     import sys
 
@@ -637,6 +639,7 @@ def test_save_on_a_full_disk_is_one_line_naming_the_file_and_leaves_nothing(tmp_
     assert [line.split(" (")[0] for line in lines] == [f"{tmp_path / f'scan{s}'}: not written" for s in (".las", ".laz", ".ply")]
     assert all(line.endswith("); nothing was left there") for line in lines)
     assert "File too large" in lines[0] and "Failed to call write" in lines[1] and "File too large" in lines[2]
+    assert re.search(r"Failed to call write; [\d,]+ bytes free on its disk\)", lines[1])  # (lazrs's words alone hid a full disk)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["warm.las", "warm.laz", "warm.ply"]  # no scan.*, no temporary file
 
 

@@ -11,12 +11,13 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
+import shutil
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write, folders_for, output_file_refusal, refuse, write_failure
+from ..atomic import atomic_write, folders_for, nearest_folder, output_file_refusal, refuse, write_failure
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, set_cloud_writer
 from ..errors import GigapointWarning, InputError, first_line, warn
@@ -75,6 +76,8 @@ def write_points(
             atomic_write(path, write)
     except (OSError, LazrsError) as exc:  # a full disk: lazrs said "IoError: Failed to call write", naming no file, not an OSError
         reason = write_failure(exc) if isinstance(exc, OSError) else first_line(exc)
+        if not isinstance(exc, OSError) and "Failed to call" in reason:  # lazrs names no cause: the disk's room tells a full one
+            reason += f"; {shutil.disk_usage(nearest_folder(path.parent)).free:,} bytes free on its disk"
         raise InputError(f"{path}: not written ({reason}); nothing was left there") from None
     return written
 

@@ -24,7 +24,7 @@ def save_snapshots(octree, path, overwrite: bool = False, has_color: bool = True
     if is_copc_name(path):  # a COPC file (the octree's, convert's default for the name), not a plain LAZ under its name
         return int(octree.save(path, overwrite=overwrite, has_color=has_color).points)
     if suffix not in POINT_FILE_SUFFIXES and is_supported_name(path):  # "scan.xyz" was an octree folder of that name
-        raise InputError(f"{path}: save writes .las, .laz or .ply files, or an octree folder (a name without a point file's suffix)")
+        raise InputError(f"{path}: save writes .las, .laz or .ply files, an octree folder or a .copc.laz file, not {suffix}")  # (as convert says)
     if suffix not in POINT_FILE_SUFFIXES:
         return int(octree.save(path, overwrite=overwrite, has_color=has_color).points)
     check_point_file_output(path, overwrite)
