@@ -169,33 +169,52 @@ def loaded():
 
 
 @pytest.fixture
-def strips_loading():
+def gated_loading():
+    """``load(strips, gates, name="survey", total=None)``: a progressive cloud ``name`` fed
+    ``strips`` ((xyz, attributes) pairs; attributes a dict, or None for none) in turn as one
+    source, each held until its gate of ``gates`` is set (a threading.Event, one gate may hold
+    several strips; None: no wait), as a slow file; ``total``: the points it tells up front. Its
+    gates are set and its clouds closed after."""
+    from gigapoint.core.chunk import PointChunk
+    from gigapoint.lod.progressive import Loader, ProgressiveOctree
+
+    made = []
+
+    def load(strips, gates, name="survey", total=None):
+        def chunks():
+            for (xyz, attributes), gate in zip(strips, gates, strict=True):
+                if gate is not None:
+                    gate.wait(60)
+                yield PointChunk(xyz, attributes=attributes or {})
+
+        cloud = ProgressiveOctree(name)
+        made.append((cloud, gates))
+        cloud.attach(Loader(cloud, [(name, chunks)], total).start())
+        return cloud
+
+    yield load
+    for cloud, gates in made:
+        for gate in gates:
+            if gate is not None:
+                gate.set()
+        cloud.close()
+
+
+@pytest.fixture
+def strips_loading(gated_loading):
     """(xyz, cloud, go_on): 200 000 points over a 1000 x 1000 survey loading progressively west to
     east in strips of 20 000, held after the first strip until ``go_on`` is set (a viewer started
     on a file's first points); the cloud holds that strip when given, and is closed after."""
     import threading
-    import time
-
-    from gigapoint.lod.progressive import Loader, ProgressiveOctree
 
     rng = np.random.default_rng(1)
     xyz = rng.uniform((0, 0, 0), (1000, 1000, 5), (200_000, 3))
     xyz = xyz[np.argsort(xyz[:, 0])]  # read in scan order: west to east
     go_on = threading.Event()
-
-    def strips():
-        for first in range(0, len(xyz), 20_000):
-            if first:
-                go_on.wait(30)
-            yield next(gp.from_arrays(xyz[first : first + 20_000]).chunks())
-
-    cloud = ProgressiveOctree("strips")
-    cloud.attach(Loader(cloud, [("strips", strips)], len(xyz)).start())
-    while cloud.n_points == 0:
-        time.sleep(0.01)
-    yield xyz, cloud, go_on
-    go_on.set()
-    cloud.close()
+    strips = [(xyz[first : first + 20_000], None) for first in range(0, len(xyz), 20_000)]
+    cloud = gated_loading(strips, [None] + [go_on] * (len(strips) - 1), name="strips", total=len(xyz))
+    cloud.wait_first_points()
+    return xyz, cloud, go_on
 
 
 def pytest_report_header(config):

@@ -658,34 +658,18 @@ def test_the_fly_speed_follows_a_loading_cloud_as_it_grows(browser, strips_loadi
 
 
 @pytest.fixture
-def classes_loading():
+def classes_loading(gated_loading):
     """``load(*classes)``: (cloud, gates), a progressive cloud "survey" loading one strip of 20,000
     points of each class of ``classes`` in turn, each held until its gate is set (a slow file); the
     clouds are closed after."""
-    from gigapoint.core.chunk import PointChunk
-    from gigapoint.lod.progressive import Loader, ProgressiveOctree
-
-    made = []
 
     def load(*classes):
         gates = [threading.Event() for _ in classes]
         xyz = np.random.default_rng(1).uniform((0, 0, 0), (1000, 1000, 5), (20_000 * len(classes), 3))
+        strips = [(xyz[20_000 * k : 20_000 * (k + 1)], {"classification": np.full(20_000, code, np.uint8)}) for k, code in enumerate(classes)]
+        return gated_loading(strips, gates), gates
 
-        def strips():
-            for k, (code, gate) in enumerate(zip(classes, gates)):
-                gate.wait(60)
-                yield PointChunk(xyz[20_000 * k : 20_000 * (k + 1)], attributes={"classification": np.full(20_000, code, np.uint8)})
-
-        cloud = ProgressiveOctree("survey")
-        cloud.attach(Loader(cloud, [("survey", strips)], None).start())
-        made.append((cloud, gates))
-        return cloud, gates
-
-    yield load
-    for cloud, gates in made:
-        for gate in gates:
-            gate.set()
-        cloud.close()
+    return load
 
 
 def class_rows(pg) -> list[str]:

@@ -151,26 +151,16 @@ def test_a_progressive_cloud_lists_exactly_the_classes_its_points_hold(autzen_pa
     both.close()
 
 
-def test_a_loading_progressive_cloud_lists_the_classes_seen_so_far_until_it_is_loaded(autzen_path):
+def test_a_loading_progressive_cloud_lists_the_classes_seen_so_far_until_it_is_loaded(autzen_path, gated_loading):
     """While it loads the list is the classes of the points in so far, not complete (the page
-    asks again); a source that brings another class adds it; loaded, it is complete."""
+    asks again); a strip that brings another class adds it; loaded, it is complete."""
     import threading
-
-    from gigapoint.core.chunk import PointChunk
-    from gigapoint.lod.progressive import Loader, ProgressiveOctree
 
     las = pytest.importorskip("laspy").read(autzen_path)
     gate = threading.Event()
-
-    def autzen():
-        yield PointChunk(las.xyz, attributes={"classification": np.asarray(las.classification)})
-
-    def water():
-        gate.wait(60)
-        yield PointChunk(las.xyz[:500], attributes={"classification": np.full(500, 9, np.uint8)})
-
-    cloud = ProgressiveOctree("gated")
-    cloud.attach(Loader(cloud, [("autzen", autzen), ("water", water)], None).start())
+    autzen = (las.xyz, {"classification": np.asarray(las.classification)})
+    water = (las.xyz[:500], {"classification": np.full(500, 9, np.uint8)})
+    cloud = gated_loading([autzen, water], [None, gate], name="gated")
     cloud.wait_first_points()  # (autzen went in whole, as the first chunk does; water waits at the gate)
     panel = class_panel(cloud, hidden=(40,))  # (a class hidden and never seen is not listed: as for a cloud in memory)
     assert (panel["source"], panel["complete"], codes(panel)) == ("cloud", False, [1, 2])
@@ -178,36 +168,22 @@ def test_a_loading_progressive_cloud_lists_the_classes_seen_so_far_until_it_is_l
     assert cloud.wait(timeout=120)
     panel = class_panel(cloud)
     assert (panel["complete"], codes(panel)) == (True, [1, 2, 9])
-    cloud.close()
 
 
-def test_a_progressive_cloud_before_its_first_points_says_so_and_its_panel_is_not_complete():
+def test_a_progressive_cloud_before_its_first_points_says_so_and_its_panel_is_not_complete(gated_loading):
     """Before its first points a progressive octree holds no attribute: its panel said it had no
     classification, complete (as if for good), and refused hidden classes for it. It says its
     first points are not in yet, not complete (the page asks again); then lists their classes."""
     import threading
 
-    from gigapoint.core.chunk import PointChunk
-    from gigapoint.lod.progressive import Loader, ProgressiveOctree
-
     xyz, _, classes = two_classes()
     gate = threading.Event()
-
-    def held():
-        gate.wait(60)
-        yield PointChunk(xyz, attributes={"classification": classes})
-
-    cloud = ProgressiveOctree("held")
-    cloud.attach(Loader(cloud, [("held", held)], None).start())
-    try:
-        reason = "hidden_classes: held's first points are not in yet; its classes are listed once they are"
-        assert class_panel(cloud) == {"enabled": False, "reason": reason, "source": "none", "complete": False, "classes": []}
-        gate.set()
-        assert cloud.wait(timeout=120)
-        assert class_panel(cloud) == {"enabled": True, "reason": "", "source": "cloud", "complete": True, "classes": TWO}
-    finally:
-        gate.set()
-        cloud.close()
+    cloud = gated_loading([(xyz, {"classification": classes})], [gate], name="held")
+    reason = "hidden_classes: held's first points are not in yet; its classes are listed once they are"
+    assert class_panel(cloud) == {"enabled": False, "reason": reason, "source": "none", "complete": False, "classes": []}
+    gate.set()
+    assert cloud.wait(timeout=120)
+    assert class_panel(cloud) == {"enabled": True, "reason": "", "source": "cloud", "complete": True, "classes": TWO}
 
 
 def test_an_octree_lists_the_classes_its_metadata_names(tmp_path, two_class_cloud):
