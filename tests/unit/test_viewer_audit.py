@@ -289,28 +289,23 @@ def test_the_auto_view_of_a_loading_cloud_frames_every_point_loaded(strips_loadi
         in_memory.close_all()
 
 
-def test_a_tab_opened_before_the_first_point_is_fit_to_the_points_once_they_come():
+def test_a_tab_opened_before_the_first_point_is_fit_to_the_points_once_they_come(gated_loading):
     """A tab opened while a loading cloud held no point yet (`gigapoint view` serves after 5 s
     without one; its page opens at once) was fit to an empty box: the origin at a distance of
     5e-08, its zoom held under 0.01, and it showed nothing once the points came. It is fit to
-    them, as the 'auto' view; a tab moved meanwhile keeps its view."""
+    them, as the 'auto' view; a tab moved meanwhile keeps its view. It follows the 'auto' view
+    until moved: fit once, to the points of the watcher's first look, it kept the first strip's
+    framing (this test failed alone, numba's kernels cold, the load slower than a tick)."""
     import threading
     import time
 
-    from gigapoint.lod.progressive import Loader, ProgressiveOctree
     from gigapoint.viewer.protocol import unpack_frame
     from gigapoint.viewer.session import ViewerCore
 
     xyz = np.random.default_rng(1).uniform((637000, 4850000, 0), (638000, 4851000, 5), (100_000, 3))
     go_on = threading.Event()
-
-    def late():
-        go_on.wait(30)
-        for first in range(0, len(xyz), 20_000):
-            yield next(gp.from_arrays(xyz[first : first + 20_000]).chunks())
-
-    cloud = ProgressiveOctree("late")
-    cloud.attach(Loader(cloud, [("late", late)], len(xyz)).start())
+    strips = [(xyz[first : first + 20_000], None) for first in range(0, len(xyz), 20_000)]
+    cloud = gated_loading(strips, [go_on] + [None] * (len(strips) - 1), name="late", total=len(xyz))
     core = ViewerCore(cloud)
     frames = {"untouched": [], "moved": []}
 
@@ -335,6 +330,64 @@ def test_a_tab_opened_before_the_first_point_is_fit_to_the_points_once_they_come
         assert np.linalg.norm(shown.target - in_memory.target) < 20 and shown.distance == pytest.approx(in_memory.distance, rel=0.05)
         assert moved.snapshot()[0].as_dict() == chosen
     finally:
-        go_on.set()  # (a test failed before it: the loader waits no 30 s)
         core.close_all()
-        cloud.close()
+
+
+def test_a_loading_clouds_reframe_reads_the_bounds_and_tells_each_tab_once(gated_loading, monkeypatch):
+    """As a loading cloud's points doubled, its watcher reframed (the bounds read, the tab opened
+    before the first point told) and then redrew (the bounds read again, every tab told again): two
+    reads and two frames asked of that tab each time. One redraw does both, once; and a redraw is
+    not the user's doing: the tab Viewer.screenshot shows (the one last moved) stays."""
+    import threading
+
+    from gigapoint.viewer.session import ViewerCore
+    from gigapoint.viewer.watch import LoadWatcher
+
+    gate = threading.Event()
+    cloud = gated_loading([(np.random.default_rng(1).uniform(0, 1000, (20_000, 3)), None)], [gate])
+    core = ViewerCore(cloud)
+    core.watcher.stop()  # (its redraws every 0.25 s: this test runs its last one itself)
+    core.watcher._thread.join(10)
+    try:
+        blind, moved = core.open_session(lambda kind, payload: True, 96, 64), core.open_session(lambda kind, payload: True, 96, 64)
+        moved.handle({"type": "orbit", "dyaw": 30})
+        blind.handle({"type": "refresh"})  # (not a move: it stays fit to nothing, and is the active tab)
+        assert blind.snapshot()[0].distance == pytest.approx(5e-08) and core.last_active is blind
+        gate.set()
+        assert cloud.wait(timeout=60)
+        reads = []
+        take_bounds = core._take_bounds
+        monkeypatch.setattr(core, "_take_bounds", lambda: reads.append(1) or take_bounds())
+        versions = {s: s.version for s in (blind, moved)}
+        watcher = LoadWatcher(core, cloud, interval_s=0.01).start()  # done: one last redraw, framing the points
+        assert watcher.finished.wait(60)  # (it waits for the render lock: a tab's first frame, kernels cold)
+        assert len(reads) == 1 and {s: s.version - versions[s] for s in versions} == {blind: 1, moved: 1}
+        assert blind.snapshot()[0].as_dict() == core.default_state(96, 64).as_dict()
+        assert core.last_active is blind
+    finally:
+        core.close_all()
+
+
+def test_a_screenshot_counts_the_pixels_its_supersampling_renders(cloud, monkeypatch):
+    """The screenshot's limit (40 M pixels) counted the image's, not the render's: a tab at
+    anti-aliasing 4 asked for 4096x4096 (16.8 M) rendered 16384x16384, 268 M pixels (~21 bytes
+    each: 5.6 GB, a minute under the render lock). Refused in one line, nothing rendered; the
+    size it allows is drawn."""
+    rendered, render_locked = [], S.render_locked
+
+    def recorded(cloud, cam, *args, **kw):
+        rendered.append((cam.width, cam.height))
+        assert cam.width * cam.height < 10_000, "rendered a screenshot over the limit"  # (not 5.6 GB here)
+        return render_locked(cloud, cam, *args, **kw)
+
+    monkeypatch.setattr(S, "render_locked", recorded)
+    core = S.ViewerCore(cloud, gp.RenderSettings(supersample=4))
+    try:
+        with pytest.raises(S.P.ProtocolError, match=r"^screenshot: 4096x4096 at supersample 4 renders 16384x16384, over 40,000,000 pixels"):
+            core.screenshot(None, 4096, 4096)
+        with pytest.raises(S.P.ProtocolError, match=r"renders 6328x6328, over"):  # (40.04 M pixels)
+            core.screenshot(None, 1582, 1582)
+        assert rendered == []
+        assert core.screenshot(None, 64, 48)[:4] == b"\x89PNG" and rendered == [(64, 48)]
+    finally:
+        core.close_all()

@@ -231,32 +231,26 @@ class ViewerCore:
         self.cloud = cloud
         self.redraw()
 
-    def reframe(self) -> None:
-        """Sample again what the 'auto' view frames, from the cloud drawn now (a loading cloud grew:
-        its first points may be a strip of the survey, or none); views stay, but those of tabs
-        opened before the first point and not moved since, which looked at nothing."""
-        if self.cloud.n_points == 0:  # (nothing to frame yet; once points are counted, the bounds hold them)
-            return
-        self._take_bounds()
-        with RENDER_LOCK:  # sample_points prepares the cloud as a frame does (the octree's pool): not beside one
-            self.framing = sample_points(self.cloud)
-        for s in list(self.sessions.values()):
-            with s.cond:
-                if s.framed_nothing:  # (fit to an empty box: the origin, at 5e-08, zoom held under 0.01)
-                    s.state = self.default_state(s.width, s.height, fov=s.state.fov)
-                    s.framed_nothing = False
-                    s._changed(False)
-
     def _take_bounds(self) -> None:
         lo, hi = self.cloud.bounds
         self.bounds = (np.asarray(lo, np.float64), np.asarray(hi, np.float64))
 
-    def redraw(self) -> None:
-        """Every tab draws again (the cloud changed: swapped, or grown while it loads); views stay."""
+    def redraw(self, reframe: bool = False) -> None:
+        """Every tab draws again (the cloud changed: swapped, or grown while it loads); views stay.
+        ``reframe``: a loading cloud grew (its first points may be a strip of the survey, or none):
+        sample again what the 'auto' view frames, and fit to it the tabs opened before the first
+        point and not moved since: they looked at nothing, then at the first points only (a strip
+        of the survey, where the file is in scan order). The bounds are read, and each tab told, once."""
+        reframe = reframe and self.cloud.n_points > 0  # (nothing to frame yet; once points are counted, the bounds hold them)
         self._take_bounds()
+        if reframe:
+            with RENDER_LOCK:  # sample_points prepares the cloud as a frame does (the octree's pool): not beside one
+                self.framing = sample_points(self.cloud)
         for s in list(self.sessions.values()):
             with s.cond:
-                s._changed(False)
+                if reframe and s.follows_auto:
+                    s.state = self.default_state(s.width, s.height, fov=s.state.fov)
+                s._draw_again()
 
     def cloud_info(self) -> dict:
         lo, hi = self.bounds
@@ -326,6 +320,11 @@ class ViewerCore:
         h = int(height) if height is not None else vh * scale
         if not (1 <= w <= P.MAX_SHOT_SIDE and 1 <= h <= P.MAX_SHOT_SIDE and w * h <= P.MAX_SHOT_PIXELS):
             raise P.ProtocolError(f"screenshot: {w}x{h} is outside 1..{P.MAX_SHOT_SIDE} per side / {P.MAX_SHOT_PIXELS:,} pixels")
+        ss = settings.supersample  # rendered at ss times each side: 4096x4096 at 4 was 268 M pixels, ~5.6 GB and a minute
+        if w * h * ss * ss > P.MAX_SHOT_PIXELS:
+            raise P.ProtocolError(
+                f"screenshot: {w}x{h} at supersample {ss} renders {w * ss}x{h * ss}, over {P.MAX_SHOT_PIXELS:,} pixels: ask a smaller size or lower the anti-aliasing"
+            )
         cam = state.camera(w, h)
         frame = render_locked(self.cloud, cam, settings)
         return encode_image(overlaid(frame.image, cam, lines), "PNG")
@@ -355,7 +354,9 @@ class Session:
         self.cond = threading.Condition()
         self.width, self.height = width, height
         self.state = core.default_state(width, height)
-        self.framed_nothing = core.cloud.n_points == 0  # its view fit to no point: fit again once points come (ViewerCore.reframe), unless moved
+        # opened before the first point (fit to an empty box: the origin, at 5e-08, zoom held under 0.01):
+        # it follows the 'auto' view as the points come (ViewerCore.redraw), until moved
+        self.follows_auto = core.cloud.n_points == 0
         self.settings = core.settings
         self.good_settings = self.settings
         self.cloud_shown = core.cloud_info()  # the panel's cloud line, as hello sent it; a frame carries it again once it changes
@@ -397,10 +398,15 @@ class Session:
             return OrbitState(**{**self.state.__dict__, "target": self.state.target.copy()}), self.settings, (self.width, self.height)
 
     def _changed(self, motion: bool) -> None:
-        self.version += 1
+        """The user changed this tab: it draws again, and is the one Viewer.screenshot shows."""
         if motion:
             self.last_motion = time.monotonic()
         self.core.last_active = self
+        self._draw_again()
+
+    def _draw_again(self) -> None:
+        """Draw the latest state (under ``cond``); not the user's doing: the active tab stays."""
+        self.version += 1
         self.cond.notify_all()
 
     def handle(self, msg: dict) -> dict | None:
@@ -487,7 +493,7 @@ class Session:
                 motion = False
             if seq is not None:
                 self.seq = seq
-            self.framed_nothing = self.framed_nothing and not motion  # (moved: the view the user chose stays)
+            self.follows_auto = self.follows_auto and not motion  # (moved: the view the user chose stays)
             self._changed(motion)
         return reply
 

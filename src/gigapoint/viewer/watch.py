@@ -117,7 +117,7 @@ class LoadWatcher(_Watcher):
     """While a progressive octree fills: redraw every tab ``interval_s`` (what is loaded so far)
     and keep the HUD's line on points loaded and points/s; one last redraw when it is done. What
     the 'auto' view frames (a new tab's first view) is sampled again as the points double, and
-    once all are loaded; a tab opened before the first point is fit to them (ViewerCore.reframe)."""
+    once all are loaded; a tab opened before the first point is fit to them (ViewerCore.redraw)."""
 
     def __init__(self, core, cloud, interval_s: float = 0.25):
         super().__init__(core, "gigapoint-load-watch")
@@ -137,10 +137,10 @@ class LoadWatcher(_Watcher):
             done = not self.cloud.loading
             self.core.note = load_note(self.cloud, rate)
             n_points = self.cloud.n_points
-            if done or n_points >= max(2 * self.framed, 1):  # the 'auto' view framed the first points read for good
-                self.core.reframe()
+            reframe = done or n_points >= max(2 * self.framed, 1)  # the 'auto' view framed the first points read for good
+            if reframe:
                 self.framed = n_points
-            self.core.redraw()
+            self.core.redraw(reframe=reframe)
             if done:
                 self.finished.set()
 
