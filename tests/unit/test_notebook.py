@@ -236,3 +236,43 @@ def test_a_render_as_a_cells_last_line_is_a_png_in_a_jupyter_kernel():
     assert output.output_type == "execute_result"
     assert output.data["text/plain"] == "Image(64x48 RGBA, uint8)"
     assert Image.open(io.BytesIO(base64.b64decode(output.data["image/png"]))).size == (64, 48)
+
+
+def test_a_closed_viewer_lets_go_of_the_cloud_it_opened(tmp_path):
+    """A closed Viewer of a path, kept by a variable or the notebook's Out[] (``gp.Viewer("big.laz")``
+    as a cell's last line), held the cloud it had read until the kernel stopped."""
+    import gc
+    import weakref
+
+    pytest.importorskip("starlette")
+    path = tmp_path / "p.npy"
+    np = pytest.importorskip("numpy")
+    np.save(path, np.random.default_rng(1).random((2000, 3)))
+    v = gp.Viewer(path, display=False)
+    opened = weakref.ref(v.cloud)
+    v.close()
+    gc.collect()
+    assert opened() is None and v.cloud is None
+    assert repr(v) == f"Viewer('p.npy', {v.url}, closed)" and v.closed
+    with pytest.raises(gp.GigapointError, match=r"^Viewer of 'p.npy': closed, its server stopped; open a new Viewer to redraw the cloud$"):
+        v.redraw()
+    v.close()  # twice: nothing more
+    cloud = gp.demo(2000)
+    with gp.Viewer(cloud, display=False) as w:
+        pass
+    assert w.cloud is cloud  # the program's own cloud stays where it was
+
+
+def test_a_viewers_settings_and_address_are_checked_before_its_points_are_read(tmp_path, monkeypatch):
+    """A bad port or settings were said only after the file's points were read (15 s for 5 M points)."""
+    pytest.importorskip("starlette")
+    read = []
+    monkeypatch.setattr(gp, "open", lambda *paths, **_: read.append(paths))
+    for bad, problem in (
+        ({"settings": {"point_size": 3}}, "settings must be a gigapoint.RenderSettings, got dict"),
+        ({"port": -1}, "port must be in 0..65535, got -1"),
+        ({"host": ""}, "host must be an address or a host name"),
+    ):
+        with pytest.raises(gp.GigapointError, match=f"^{re.escape(problem)}"):
+            gp.Viewer(tmp_path / "big.laz", display=False, **bad)
+    assert read == []

@@ -194,6 +194,7 @@ def memory_line(cloud) -> str:
     a cloud holds per component (``PointCloud.memory``, ``ProgressiveOctree.memory``), or what the process
     holds for other kinds."""
     from ..core import PointCloud
+    from ..io import human_bytes
     from ..lod.progressive import ProgressiveOctree
 
     n = max(int(cloud.n_points), 1)
@@ -204,7 +205,7 @@ def memory_line(cloud) -> str:
     m = cloud.memory()
     total = sum(m.values())
     parts = ", ".join(f"{k} {v / n:.2f}" for k, v in m.items())
-    return f"memory: {total / 2**20:,.1f} MiB, {total / n:.2f} bytes/point: {parts} ({cloud.layout} layout){tail}"
+    return f"memory: {human_bytes(total)}, {total / n:.2f} bytes/point: {parts} ({cloud.layout} layout){tail}"  # (a small cloud's was '0.0 MiB')
 
 
 def attributes_held(cloud) -> dict:

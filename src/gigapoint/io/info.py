@@ -12,7 +12,7 @@ import numpy as np
 from ..core.coords import MAX_ABS_COORDINATE, scale_decimals, value_decimals
 from ..errors import InputError, counted
 from ._base import STREAM_CHUNK_SIZE, check_file, headers_once
-from .crs import crs_identity, crs_name
+from .crs import crs_identity, crs_name, crs_units
 from .filters import point_filter
 from .paths import cloud_name, expand_paths, file_names, files_label
 from .registry import is_dataset_folder, reader_for
@@ -21,13 +21,16 @@ from .stats import PointStats, file_stats
 
 def file_info(path) -> dict:
     """What a file holds: format, point_count, bounds {min, max}, attributes, file_size, and for
-    LAS/LAZ las_version, point_format, scale, offset, crs (EPSG/WKT string or None).
+    LAS/LAZ las_version, point_format, scale, offset, crs (EPSG/WKT string or None) and
+    units (io.crs_units of the crs, where it names one).
 
     LAS bounds come from the header; other formats are scanned (in chunks)."""
     p = check_file(path)
     reader = reader_for(p)
     info = reader.info(p)
     info.setdefault("crs", None)
+    if info["crs"]:  # (feet or metres: the CRS's name rarely says, its numbers never)
+        info["units"] = crs_units(info["crs"])
     info["reader"] = reader.name
     return info
 
@@ -79,6 +82,8 @@ def folder_info(folder, infos: list[dict]) -> dict:
                              ("generating_software", "software", lambda i: i.get("generating_software") or "unknown")):  # fmt: skip
         if shared(label, text):
             out[key] = first.get(key)
+    if out.get("crs"):
+        out["units"] = first.get("units")
     out["details"] = details
     out["file_size"] = sum(i.get("file_size") or 0 for i in infos)
     return out
@@ -118,7 +123,8 @@ def format_info(info: dict) -> str:
         scale, on_grid = info.get("scale"), info.get("on_grid", True)
         lines.append(f"  bounds min:  {_coords(lo, scale, on_grid)}{src}")
         lines.append(f"  bounds max:  {_coords(hi, scale, on_grid)}")
-        lines.append(f"  extent:      {_coords([h - lo_ for lo_, h in zip(lo, hi)], scale, on_grid)}")
+        # (max - min is on the scale's grid whatever the offset: 40.67000000001 at scale 1e-7 showed float noise)
+        lines.append(f"  extent:      {_coords([h - lo_ for lo_, h in zip(lo, hi)], scale, on_grid=False)}")
     lines.append(f"  color:       {'yes' if info.get('has_color') else 'no (default color)'}")
     attrs = info.get("attributes") or []
     lines.append(f"  attributes:  {', '.join(attrs) if attrs else 'none'}")
@@ -128,6 +134,8 @@ def format_info(info: dict) -> str:
         lines.append(f"  offset:      {', '.join(f'{v:.15g}' for v in info['offset'])}")
     if (info.get("crs") or info.get("las_version")) and "crs differs" not in (info.get("details") or {}):  # (a folder's tiles': said below)
         lines.append(f"  crs:         {crs_name(info.get('crs'))}")
+        if info.get("crs"):
+            lines.append(f"  units:       {units_text(info.get('units') or crs_units(info['crs']))}")
     if info.get("generating_software"):
         lines.append(f"  software:    {info['generating_software']}")
     if info.get("columns"):
@@ -220,6 +228,15 @@ def format_stats(stats: dict) -> str:
     else:
         lines.append("  color:       none")
     return "\n".join(lines)
+
+
+def units_text(units: dict) -> str:
+    """'x, y: metre; z: US survey foot': a crs_units dict as ``format_info`` shows it."""
+    h, v = units["horizontal"], units["vertical"]
+    if h is None and v is None:
+        return "not named (read as they are)"
+    z = "not named" if v is None else v["name"] + (" (assumed: the CRS names no vertical unit)" if units.get("vertical_assumed") else "")
+    return f"x, y: {'not named' if h is None else h['name']}; z: {z}"
 
 
 def human_bytes(n: int) -> str:

@@ -113,6 +113,18 @@ class PNG(bytes):
         return f"<PNG, {len(self):,} bytes>"
 
 
+class _StoppedServer:
+    """What a closed Viewer keeps of its server: its address, not its sessions or cloud."""
+
+    closed = True
+
+    def __init__(self, server) -> None:
+        self.url, self.host, self.port, self.push_url = server.url, server.host, server.port, server.push_url
+
+    def close(self) -> None:
+        """Closed already."""
+
+
 class Viewer:
     """Serve ``cloud_or_path`` (a PointCloud, a path or a list of paths) and show it.
 
@@ -130,13 +142,20 @@ class Viewer:
 
     def __init__(self, cloud_or_path, width: int = 960, height: int = 600, host: str = "127.0.0.1", port: int = 0, settings=None, display: bool = True, url: str | None = None):
         from ..render.camera import MAX_IMAGE_SIDE
-        from .server import ViewerServer
+        from ..render.settings import RenderSettings
+        from .server import ViewerServer, _require_starlette, check_address
 
         for name, v in (("width", width), ("height", height)):  # the IFrame's: 0 showed nothing, without a word
             check_whole("Viewer", name, v, 1, MAX_IMAGE_SIDE, " pixels")
         check_switch("display", display, "Viewer")  # "no" was taken as true
         self._where_shown = _where_shown(url)
+        # said before a path's points are read (a bad port or settings came after 15 s of a 5 M point file)
+        _require_starlette()
+        check_address(host, port)
+        RenderSettings.of(settings)
         self.cloud = _as_cloud(cloud_or_path)
+        self.name = self.cloud.name
+        self._opened_here = self.cloud is not cloud_or_path  # (from paths: none but this Viewer holds it)
         token = None if self._where_shown is None else secrets.token_urlsafe(18)  # (its Host is the proxy's: no loopback check)
         self.server = ViewerServer(self.cloud, host=host, port=port, token=token, settings=settings).start()
         self.width, self.height = width, height
@@ -215,10 +234,15 @@ class Viewer:
 
     def _check_open(self, to: str) -> None:
         if self.closed:
-            raise InputError(f"Viewer of {self.cloud.name!r}: closed, its server stopped; open a new Viewer to {to}")
+            raise InputError(f"Viewer of {self.name!r}: closed, its server stopped; open a new Viewer to {to}")
 
     def close(self) -> None:
+        """Stop the server; a cloud the Viewer opened from paths is let go (``cloud`` None): a closed
+        Viewer kept by a variable or the notebook's Out[] held its server and cloud until the kernel stopped."""
         self.server.close()
+        self.server = _StoppedServer(self.server)
+        if self._opened_here:
+            self.cloud = None
         for made in _MADE_BY_CELL.values():  # its cell no longer keeps it (and its cloud) alive
             if self in made:
                 made.remove(self)
@@ -232,6 +256,6 @@ class Viewer:
     def __repr__(self) -> str:
         closed = ", closed" if self.closed else ""
         if self._where_shown is None:
-            return f"Viewer({self.cloud.name!r}, {self.url}{closed})"
+            return f"Viewer({self.name!r}, {self.url}{closed})"
         shown = self.shown_at or f"Colab's proxy of port {self.server.port}"
-        return f"Viewer({self.cloud.name!r}, shown at {shown}, served on {self.server.host}:{self.server.port}{closed})"
+        return f"Viewer({self.name!r}, shown at {shown}, served on {self.server.host}:{self.server.port}{closed})"
