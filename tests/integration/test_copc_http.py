@@ -36,7 +36,8 @@ class RangeServer:
     ends), "short_206" (a 206 whose body and Content-Length are shorter than asked), "wrong_range"
     (another range than asked), "hang" (never answers), "gzip" (the file gzipped, Content-Encoding:
     gzip, despite Accept-Encoding: identity: ranges of the compressed bytes, as S3 serves an object
-    stored so), "gzip_plain" (Content-Encoding: gzip on bytes that are not). ``no_length``: answers
+    stored so), "gzip_plain" (Content-Encoding: gzip on bytes that are not), "binary" (Content-Encoding:
+    binary, a coding httpx passes as sent, on the file as stored). ``no_length``: answers
     without Content-Length (the connection closed at their end). ``fail_after``: behave for that many
     requests first. ``route(path)``: (status, Location or None) answered instead of the file
     (redirects, refusals), or None. Counts requests and connections."""
@@ -142,6 +143,8 @@ class RangeServer:
                     self.send_header("Content-Length", str(len(body)))
                 if mode in ("gzip", "gzip_plain"):
                     self.send_header("Content-Encoding", "gzip")
+                if mode == "binary":
+                    self.send_header("Content-Encoding", "binary")
                 if server.etag:
                     self.send_header("ETag", server.etag)
                 self.end_headers()

@@ -240,6 +240,21 @@ def test_an_answer_compressed_against_accept_encoding_identity(server, quick):
     assert re.fullmatch(rf"{re.escape(url)}: the file does not decode as the server's Content-Encoding says \([^\n]+\)", str(e.value))
 
 
+def test_a_range_with_a_content_encoding_httpx_does_not_decode_is_read_as_sent(server, quick):
+    """A 206 with Content-Encoding: binary (as some stores label bytes; aws-chunked, none alike)
+    was refused as "sent compressed": only what httpx decodes (gzip, deflate, br, zstd) is; the
+    rest comes as stored, its Content-Length the bytes'."""
+    data = bytes(range(256)) * 40
+    (server.root / "labelled.bin").write_bytes(data)
+    server.mode = "binary"
+    f = gphttp.HttpFile(server.url("labelled.bin"))
+    try:
+        assert f.read(1000, 5000) == data[1000:6000]
+        assert f.read_all() == data
+    finally:
+        f.close()
+
+
 @pytest.mark.timeout(30)
 def test_a_file_of_unknown_size_is_given_up_on_when_it_stalls_not_when_slow(server, quick):
     """A whole file read without Content-Length had 3 x TIMEOUT (30 s) however it progressed: a
@@ -278,3 +293,42 @@ def test_a_file_of_unknown_size_is_given_up_on_when_it_stalls_not_when_slow(serv
         listener.close()
     assert str(e.value) == f"{url}: the file stopped arriving: no byte for 0.5 s after 100 bytes (timed out)"
     assert time.perf_counter() - t < 2
+
+
+@pytest.mark.timeout(30)
+def test_a_file_of_unknown_size_trickled_is_given_up_on_at_its_deadline(quick, monkeypatch):
+    """A byte every 0.1 s kept a file of unknown size coming for ever (each byte put its deadline
+    off again): its deadline now grows with the bytes come at MIN_RATE, as a known size's does:
+    3 x TIMEOUT + bytes / MIN_RATE = 1.5 s + t / 4 s here, met at t = 2 s."""
+    import socket
+    import threading
+    import time
+
+    listener = socket.create_server(("127.0.0.1", 0))
+
+    def trickle():  # 40 bytes over 4 s
+        conn, _ = listener.accept()
+        with conn:
+            conn.recv(65536)
+            conn.sendall(b"HTTP/1.1 200 OK\r\nConnection: close\r\n\r\n")
+            try:
+                for _ in range(40):
+                    conn.sendall(b"y")
+                    time.sleep(0.1)
+            except OSError:
+                pass  # the client gave up
+
+    threading.Thread(target=trickle, daemon=True).start()
+    url = f"http://127.0.0.1:{listener.getsockname()[1]}/slow.json"
+    t = time.perf_counter()
+    f = gphttp.HttpFile(url)
+    try:
+        monkeypatch.setattr(gphttp, "MIN_RATE", 40)
+        with pytest.raises(InputError) as e:
+            f.read_all()
+    finally:
+        f.close()
+        listener.close()
+    m = re.fullmatch(rf"{re.escape(url)}: the file did not arrive within ([0-9.]+) s", str(e.value))
+    assert m and 1.8 <= float(m.group(1)) <= 2.3, str(e.value)
+    assert time.perf_counter() - t < 3

@@ -15,9 +15,9 @@ error status, a short read, a server that ignores ``Range`` (200 with the whole 
 answers another range than asked, a range past the end of the file, a timeout, a file that
 changed on the server since its first answer (size, ETag or Last-Modified), too many redirects,
 a redirect from https to http or to another scheme (not followed), ranges sent compressed
-(Content-Encoding, despite ``Accept-Encoding: identity``: a whole file so is decoded), a whole
-file of unknown size that stops arriving (no byte for the timeout; a slow one is read however
-long it takes); a failure past a redirect also names where it led. Messages name a URL
+(a Content-Encoding httpx decodes, despite ``Accept-Encoding: identity``: a whole file so is
+decoded), a whole file of unknown size that stops arriving (no byte for the timeout) or comes
+slower than its deadline, which grows with the bytes come as a known size's does; a failure past a redirect also names where it led. Messages name a URL
 as ``shown_url`` gives it: its password (or a user name alone, a token) and query values as ***
 (signed URLs are how COPC files are shared); requests use the URL itself.
 
@@ -64,6 +64,8 @@ RETRIES = 2
 #: read and dropped), up to MERGE_MAX bytes a request: a frame's nodes often lie side by side.
 MERGE_GAP = 64 << 10
 MERGE_MAX = 8 << 20
+#: Content-Encodings httpx decodes (its own list, httpx._decoders.SUPPORTED_DECODERS, is not public).
+_DECODED = ("gzip", "deflate", "br", "zstd")
 _RETRY_STATUS = (429, 502, 503, 504)  # 429 Too Many Requests: a store's rate limit (GCS, R2, GitHub), met by a frame's requests in flight
 _URL = re.compile(r"^(https?):/+(.+)$", re.IGNORECASE)
 #: a URL's scheme (a Path of one has lost a '/') and the rest; a path or request target's ?query and #fragment
@@ -400,14 +402,15 @@ class HttpClient:
                     f"{shown_url(url)}: the server ignored the range request for {what} (HTTP 200 with the whole file); "
                     "COPC and EPT over HTTP need a server that answers Range requests (HTTP 206)"
                 )
-                encoding = r.headers.get("content-encoding", "identity").strip().lower()
-                if status == 206 and encoding != "identity":  # (S3's object stored gzipped: ranges of the compressed bytes)
+                encoding = r.headers.get("content-encoding", "").strip().lower()
+                compressed = any(e.strip() in _DECODED for e in encoding.split(","))  # (others, binary or aws-chunked, come as sent)
+                if status == 206 and compressed:  # (S3's object stored gzipped: ranges of the compressed bytes)
                     raise InputError(
                         f"{shown_url(url)}: the server sent {what} compressed (Content-Encoding: {encoding}) though asked for the "
                         "file as stored (Accept-Encoding: identity): ranges of it cannot be read; serve the file without Content-Encoding"
                     )
                 # (a compressed answer's Content-Length is not the file's: its bytes, decoded, are)
-                length = r.headers.get("content-length", "") if encoding == "identity" else ""
+                length = "" if compressed else r.headers.get("content-length", "")
                 if start == 0 and allow_short and status == 200 and length.isdigit() and int(length) <= size:
                     # a range that covers the whole file may be answered 200 (RFC 9110): a small
                     # COPC's head read ("ignored the range request" before), not an ignored range
@@ -437,8 +440,8 @@ class HttpClient:
                         limit[0] = self._limit(int(length))
                 for part in r.iter_bytes():
                     body += part
-                    if start is None and not length.isdigit():  # a file of unknown size: given up on when it stalls, not when slow
-                        limit[0] = time.monotonic() - t0 + self._limit(None)
+                    if start is None and not length.isdigit():  # a file of unknown size: its deadline grows with the bytes come
+                        limit[0] = self._limit(len(body))
                     if whole and len(body) > expect:
                         raise InputError(ignored)
                     if expect is not None and len(body) > expect:
