@@ -334,3 +334,15 @@ def test_a_progressive_octree_saves_8_bit_colours_as_its_files_stored_them(tmp_p
     red = np.asarray(laspy.read(tmp_path / "own.laz").red)
     assert int(red.max()) == 65535 and int(np.sort(red)[-2]) == 236 * 257
     cloud.close()
+
+
+def test_a_progressive_octree_keeps_8_bit_colours_after_an_add_it_refused(tmp_path, autzen_path):
+    """add() noted its points' colours as LAS's 16-bit ones before checking the batch: an add
+    refused (an attribute the cloud has not) made the save write autzen's 8-bit values x 257."""
+    cloud = gp.open(autzen_path, progressive=True)
+    with pytest.raises(InputError, match="bogus"):
+        cloud.add(np.array([[636500.0, 849200.0, 450.0]]), rgb=np.array([[1, 2, 3]], np.uint8), bogus=np.array([1.0]))
+    cloud.save(tmp_path / "after.laz")
+    red = np.asarray(laspy.read(tmp_path / "after.laz").red)
+    np.testing.assert_array_equal(np.sort(red), np.sort(np.asarray(laspy.read(autzen_path).red)))
+    cloud.close()

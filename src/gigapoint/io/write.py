@@ -44,6 +44,12 @@ def check_point_file_output(path: Path, overwrite: bool) -> None:
     refuse(path, output_file_refusal(path, overwrite, f"{what}; not replaced"), InputError)
 
 
+def las_color_bits(source_bits: int | None) -> int:
+    """The ``color_bits`` a cloud's save writes with, of its source's (``source_color_bits``):
+    8 where the source stored 8-bit values (kept as they were), else LAS's own 16."""
+    return 8 if source_bits == 8 else 16
+
+
 def write_points(
     path: Path, chunks: Chunks, n_points: int | None, *, grid=None, crs_records=(), color_bits: int | None = 16, has_color: bool = True
 ) -> int:
@@ -352,9 +358,9 @@ def save_cloud(cloud: PointCloud, path, overwrite: bool = False, points_per_chun
         exact = f"open its files ({files}) with colors='rgba'" if files else "make the cloud with colors='rgba'"
         warn(f"{path}: the cloud holds its colours approximated (RGB565 or a palette), so the file gets those; {exact} for exact colours", GigapointWarning)
     crs = source_crs_records(cloud.source_files) if path.suffix.lower() != ".ply" else []
-    color_bits = 8 if cloud.source_color_bits == 8 else 16  # (LAS's own: 16; 8 where the source stored 8-bit values)
     return write_points(
-        path, lambda: cloud.chunks(points_per_chunk), cloud.n_points, grid=_source_grid(cloud), crs_records=crs, color_bits=color_bits,
+        path, lambda: cloud.chunks(points_per_chunk), cloud.n_points, grid=_source_grid(cloud), crs_records=crs,
+        color_bits=las_color_bits(cloud.source_color_bits),
         has_color=has_color,
     )
 

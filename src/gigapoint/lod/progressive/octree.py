@@ -1129,9 +1129,11 @@ class ProgressiveOctree:
         if n == 0:
             return 0
         self.wait_first_points()
-        self._color_bits.add(color_bits)
         with threads_for(n, when_awake=False):  # a small batch on this thread alone: waking the others costs more (core/threads.py)
-            return self._add(xyz, rgb, attributes)
+            added = self._add(xyz, rgb, attributes)
+        if added:  # (a batch refused adds no colours: its bits do not count)
+            self._color_bits.add(color_bits)
+        return added
 
     def _add(self, xyz, rgb, attributes: dict) -> int:
         n = len(xyz)
@@ -1608,7 +1610,7 @@ class ProgressiveOctree:
         import time
 
         from ...io.las_fields import las_grid
-        from ...io.write import check_point_file_output, source_crs_records, sources_have_color, write_points
+        from ...io.write import check_point_file_output, las_color_bits, source_crs_records, sources_have_color, write_points
         from ..convert.converter import ConvertResult
 
         if options:  # (sampler=, max_leaf=, ...: each meant something of an octree only)
@@ -1619,7 +1621,7 @@ class ProgressiveOctree:
         ply = out.suffix.lower() == ".ply"
         grid = None if ply or self.grid is None else las_grid(self.lo, self.hi, np.full(3, self.grid[1]), self.grid[0])
         crs = [] if ply else source_crs_records(self.source_files)
-        color_bits = 8 if source_color_bits(self._color_bits) == 8 else 16  # (LAS's own: 16; 8 where the files stored 8-bit values)
+        color_bits = las_color_bits(source_color_bits(self._color_bits))
         n = write_points(out, self.chunks, self.points, grid=grid, crs_records=crs, color_bits=color_bits, has_color=sources_have_color(self.source_files))
         return ConvertResult(out, out.suffix[1:].lower(), None, n, 0, self.skipped, time.perf_counter() - t0, False)
 
