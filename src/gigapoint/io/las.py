@@ -248,6 +248,14 @@ def read_las_header(path: Path, salvage: bool = False) -> LasHeader:
     return hdr
 
 
+def truncated_header(size: int) -> str:
+    """What is wrong with a LAS file of ``size`` bytes too short for any LAS header, else ''
+    (a local file's and a COPC URL's alike)."""
+    if size >= HEADER_SIZE[0]:
+        return ""
+    return f"truncated LAS header: the file has {size} bytes, a LAS header needs at least {HEADER_SIZE[0]}"
+
+
 def _read_las_header(path: Path, salvage: bool = False) -> LasHeader:
     path = check_file(path)
     with open(path, "rb") as f:
@@ -257,8 +265,8 @@ def _read_las_header(path: Path, salvage: bool = False) -> LasHeader:
         head = f.read(375)
         if head[:4] != b"LASF":
             raise fail(path, f"not a LAS/LAZ file (starts with {head[:4]!r}, expected b'LASF')")
-        if size < 227:
-            raise fail(path, f"truncated LAS header: the file has {size} bytes, a LAS header needs at least 227")
+        if truncated_header(size):
+            raise fail(path, truncated_header(size))
         major, minor = head[24], head[25]
         if major != 1 or minor > 4:
             raise fail(path, f"unsupported LAS version {major}.{minor} (gigapoint reads 1.0-1.4)")

@@ -26,7 +26,7 @@ from ..errors import EmptyCloudError, GigapointWarning, InputError, warn
 from ..io import laz_process
 from ..io._base import ATTRIBUTE_DTYPES
 from ..io.http import ByteSource, HttpFile, LocalFile, open_source
-from ..io.las import EVLR_HEADER, HEADER_SIZE, PROJECTION_USER_ID, WKT_RECORD, evlr_headers, read_las_header, wkt_of
+from ..io.las import EVLR_HEADER, PROJECTION_USER_ID, WKT_RECORD, evlr_headers, read_las_header, truncated_header, wkt_of
 from ..io.las_fields import EXTRA_BYTES_TYPES, FLAG_BITS, field_attributes
 from ..io.las_kernels import _scaled_xyz
 from .kinds import (
@@ -219,8 +219,8 @@ class CopcCloud(VoxelOctree):
         head = source.read_head(HEAD_READ)
         if not head:  # (a URL's was "bytes 0..65,536 lie past the end of the file (HTTP 416)")
             raise EmptyCloudError(f"{name}: file is empty (0 bytes)")
-        if head[:4] == b"LASF" and len(head) < HEADER_SIZE[0]:  # (a URL's was "not a COPC file": a local one's words)
-            raise InputError(f"{name}: truncated LAS header: the file has {len(head)} bytes, a LAS header needs at least {HEADER_SIZE[0]}")
+        if head[:4] == b"LASF" and truncated_header(len(head)):  # (a URL's was "not a COPC file": a local one's words)
+            raise InputError(f"{name}: {truncated_header(len(head))}")
         if not is_copc_head(head):
             if head[:4] == b"LASF" and len(head) > 104:  # its own version and kind: every LAS file was "a LAS 1.4 file"
                 kind = "LAZ" if head[104] & 0x80 else "LAS"
