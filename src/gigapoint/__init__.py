@@ -215,7 +215,7 @@ def _open(paths: tuple, progressive: bool, options: dict, where: str):
     unknown = sorted(set(options) - set(known))
     if unknown:  # a TypeError naming the internal open_cloud() before
         raise InputError(
-            f"open: unknown option(s) {', '.join(unknown)}; it takes {', '.join(known)}, recursive=True, "
+            f"{where}: unknown option(s) {', '.join(unknown)}; it takes {', '.join(known)}, recursive=True, "
             "progressive=True (with memory_limit=), classes=, drop_classes=, clip=, corridor=, clip_polygon="
         )
 

@@ -229,6 +229,26 @@ def test_no_path_given_is_said_by_the_operation(tmp_path, call, message):
     assert not out.exists() and not out.with_suffix(".las").exists()
 
 
+def test_open_for_names_the_operation_in_every_error_of_its_options(autzen_path):
+    """open_for("section", ...) named the operation for its paths only: its chunked=, progress=,
+    name= and unknown options said "open: ..."."""
+    from gigapoint.io import open_cloud
+
+    cases = [
+        (lambda: gp.open_for("section", autzen_path, chunked="no"), "section: chunked must be True or False or None, got 'no'"),
+        (lambda: gp.open_for("orthophoto", autzen_path, progress="yes"), "orthophoto: progress must be True or False, got 'yes'"),
+        (lambda: gp.open_for("volume", autzen_path, name=5), "volume: name must be a string, got 5"),
+        (lambda: open_cloud(where="change"), "change: no file given"),
+    ]
+    for call, message in cases:
+        with pytest.raises(InputError) as err:
+            call()
+        assert str(err.value) == message
+    with pytest.raises(InputError) as err:
+        gp.open_for("section", autzen_path, bogus=1)
+    assert str(err.value).startswith("section: unknown option(s) bogus; it takes chunk_size, ")
+
+
 @pytest.mark.parametrize(("call", "message"), [case[1:] for case in NOT_PATHS], ids=[case[0] for case in NOT_PATHS])
 def test_an_input_that_is_not_a_path_is_named_in_one_line(autzen_path, tmp_path, call, message):
     out = tmp_path / "out"

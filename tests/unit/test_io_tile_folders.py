@@ -11,7 +11,7 @@ import pytest
 
 import gigapoint as gp
 from gigapoint.errors import EmptyCloudError, GigapointWarning
-from gigapoint.io import READ_SUBFOLDERS
+from gigapoint.io import READ_SUBFOLDERS, point_stats
 
 laspy = pytest.importorskip("laspy")
 
@@ -150,6 +150,7 @@ EMPTY_AMONG_SEVERAL = [
     ("convert-las", lambda files, out: gp.convert(files, out / "all.las").points),
     ("convert-octree", lambda files, out: gp.convert(files, out / "octree").points),
     ("tile", lambda files, out: gp.tile(files, out / "tiles", 100.0).points),
+    ("point-stats", lambda files, out: point_stats(files)["point_count"]),  # (refused the 0-byte file and the blank one)
 ]
 #: what each kind of empty file alone is refused with
 EMPTY_ALONE = {"0-byte": "file is empty (0 bytes)", "blank-lines": "holds no points", "las": "LAS file holds no points (header point count is 0)"}
@@ -166,6 +167,18 @@ def test_an_empty_input_among_several_is_skipped_with_one_warning_by_every_opera
     with pytest.warns(GigapointWarning) as caught:
         assert call([tiles[0], empty, tiles[1]], tmp_path) == 100
     assert [str(w.message) for w in caught if "holds no points" in str(w.message)] == [f"{empty}: holds no points, skipped"]
+
+
+@pytest.mark.parametrize("kind", ["0-byte", "blank-lines"])
+def test_render_color_attribute_reads_the_headers_of_the_files_with_points(tmp_path, cli, kind):
+    """render's --color-attribute check read every input's header: an empty file among several,
+    which the render skips, was "file is empty (0 bytes)" / "holds no points" before a point was read."""
+    tiles = write_tiles(tmp_path / "in", 2)
+    empty = _empty_file(tmp_path / "in", kind)
+    out = tmp_path / "x.png"
+    args = ("render", empty, *tiles, "--color-mode", "attribute", "--color-attribute", "intensity", "--width", "32", "--height", "24", "-o", out)
+    rc, _, err = cli(*args)
+    assert (rc, err.strip()) == (0, f"warning: {empty}: holds no points, skipped") and out.is_file()
 
 
 def test_an_empty_las_file_beside_a_text_file_is_said_once_by_a_conversion_to_las(tmp_path):

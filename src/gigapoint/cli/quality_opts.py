@@ -23,7 +23,7 @@ def check_color_attribute(inputs, settings) -> None:
     """A --color-attribute that no input file has, told from the files' headers before any is
     read (``missing_attribute``'s line: it came once every input was read). Octrees, and files
     whose headers do not list their attributes, are checked once read, as before."""
-    from ..io import cloud_name, expand_paths, reader_for
+    from ..io import cloud_name, point_files_of, reader_for
     from ..lod import is_lod_source
     from ..render.colors import missing_attribute
 
@@ -31,7 +31,7 @@ def check_color_attribute(inputs, settings) -> None:
     if settings.color_mode != "attribute" or not name or any(is_lod_source(p) for p in inputs):
         return
     with warnings_kept():  # a file named twice is warned about once, when read (not here: kept, dropped)
-        files = expand_paths(inputs)
+        files = point_files_of(inputs)
     heads = [reader_for(f).header(f, salvage=True).get("attributes") for f in files]  # salvage: a cut-off file is drawn
     if None in heads or any(name in head for head in heads):
         return

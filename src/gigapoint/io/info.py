@@ -14,7 +14,7 @@ from ..errors import InputError, counted
 from ._base import STREAM_CHUNK_SIZE, check_file, headers_once
 from .crs import crs_identity, crs_name, crs_units
 from .filters import point_filter
-from .paths import cloud_name, expand_paths, file_names, files_label
+from .paths import cloud_name, file_names, files_label, point_files_of
 from .registry import is_dataset_folder, reader_for
 from .stats import PointStats, file_stats
 
@@ -162,7 +162,7 @@ def point_stats(*paths, recursive: bool = False, chunk_size: int = STREAM_CHUNK_
     for path in paths:
         _refuse_octree_folder(path)
     keep = point_filter(classes, drop_classes, clip, "point_stats", clip_polygon=clip_polygon)  # (bad values: said before reading)
-    files = expand_paths(paths, recursive=recursive)
+    files = point_files_of(paths, recursive=recursive)  # (an empty file among several: skipped, as gp.open skips it)
     total = PointStats()
     for f in files:
         total.merge(file_stats(f, chunk_size, point_filter=keep))

@@ -16,9 +16,8 @@ from .filters import PointFilter, filtered
 from .las import with_scan_angle
 from .paths import (
     cloud_name,
-    expand_paths,
     files_label,
-    files_with_points,
+    point_files_of,
     scan_angles_differ,
     skip_empty,
 )
@@ -67,14 +66,12 @@ def open_cloud(
     ``drop_classes`` and ``clip``); the headers' counts are then upper bounds. ``where``: the
     operation reading them (gp.open, section, orthophoto...), as the paths' errors name it.
     """
-    if not paths:
-        raise InputError(f"{where}: no file given")
     chunk_size = check_chunk_size(chunk_size)
-    check_switch("chunked", chunked, "open", allow_none=True)  # "no" was taken as true
-    check_switch("progress", progress, "open")
+    check_switch("chunked", chunked, where, allow_none=True)  # "no" was taken as true
+    check_switch("progress", progress, where)
     if name is not None and not isinstance(name, str):  # the name every message and output of the cloud starts with
-        raise InputError(f"open: name must be a string, got {name!r}")
-    files = files_with_points(expand_paths(paths, where=where))
+        raise InputError(f"{where}: name must be a string, got {name!r}")
+    files = point_files_of(paths, where)  # (none: "``where``: no file given", given_paths')
     plan = [(f, reader_for(f)) for f in files]
     if name is None:
         name = cloud_name(files)

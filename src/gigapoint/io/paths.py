@@ -277,6 +277,12 @@ def files_with_points(files: list[Path]) -> list[Path]:
     return kept
 
 
+def point_files_of(paths, where: str = "open", recursive: bool = False) -> list[Path]:
+    """The files ``paths`` name (``expand_paths``) whose points are read: among several, those
+    holding none left out (``files_with_points``). What every reader of several files' points goes by."""
+    return files_with_points(expand_paths(paths, recursive, where))
+
+
 def _holds_no_points(f: Path) -> bool:
     """Whether a file is empty, as its size or its header (read once an operation) tells."""
     try:

@@ -63,6 +63,7 @@ def point_files(source, out, overwrite: bool, chunk_size: int | None, where: str
     """(``out`` as a Path, the PointFiles of ``source`` it is written from) for a classification
     that writes every point of its inputs again: ``out`` a .las, .laz or .ply file not there
     yet (or ``overwrite``), checked before a point is read (one-line errors starting ``where``)."""
+    from ..io import given_paths
     from ..io.write import check_point_file_output
     from ..lod.convert.to_file import PointFiles
 
@@ -70,7 +71,7 @@ def point_files(source, out, overwrite: bool, chunk_size: int | None, where: str
     if out.suffix.lower() not in (".las", ".laz", ".ply"):
         raise InputError(f"{out}: {where} writes a .las, .laz or .ply file")
     check_point_file_output(out, overwrite)
-    return out, PointFiles(source, out, chunk_size, ply=out.suffix.lower() == ".ply", where=where, name="source")
+    return out, PointFiles(given_paths(source, where, "source"), out, chunk_size, ply=out.suffix.lower() == ".ply", where=where)
 
 
 def progress_bar(shown: bool):

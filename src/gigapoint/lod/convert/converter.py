@@ -329,7 +329,7 @@ def convert(
     """
     check_switch("overwrite", overwrite, "convert")
     check_switch("recursive", recursive, "convert")
-    if recursive and isinstance(inputs, (str, os.PathLike)):
+    if isinstance(inputs, (str, os.PathLike)):  # (as a list: given_paths' below, which PointFiles takes)
         inputs = [inputs]
     if isinstance(inputs, (list, tuple)) and inputs and isinstance(inputs[0], (str, os.PathLike)):  # files, then None: None named
         inputs = given_paths(inputs, "convert")  # (taken as PointChunks: "item 0 is a str")

@@ -1008,10 +1008,7 @@ class DaskPhases(ReadPhase, PartitionPhases, BuildPhases):
         step = READ_CHUNKS * self.chunk_size
         for f, p in enumerate(self.paths):
             reader = reader_for(p)
-            n = reader.point_count(p)  # (the header's; None where it has none: text)
-            if n == 0 and len(self.paths) > 1:  # an empty tile of any format: skipped, as one process skips it (read._skipped_if_empty)
-                warn(self._as_given(skipped_message(p)), GigapointWarning)
-                continue
+            n = reader.point_count(p)  # (the header's; None where it has none: text. An empty file among several: left out by input_paths)
             if n and getattr(reader, "reads_ranges", False):
                 reads += [[f, s, min(s + step, n), None] for s in range(0, n, step)]
             else:

@@ -21,7 +21,7 @@ import numpy as np
 
 from ...atomic import same_file
 from ...errors import InputError
-from ...io import URL_LIKE, expand_paths, file_url_path, files_with_points, shown_url
+from ...io import URL_LIKE, file_url_path, point_files_of, shown_url
 from ...io.http import as_url
 from ..code import code_version
 from ..ept import ept_location
@@ -60,7 +60,7 @@ def input_paths(inputs) -> list[Path] | None:
         raise InputError("convert: no input given")
     inputs = [local_path(p, "an input") for p in inputs]
     refuse_octrees(inputs)
-    return files_with_points(expand_paths(inputs, where="convert"))  # (an empty file among several: skipped, said once)
+    return point_files_of(inputs, "convert")  # (an empty file among several: skipped, said once)
 
 
 def refuse_octrees(inputs) -> None:

@@ -29,7 +29,7 @@ from ...core.bounds import valid_bounds
 from ...core.chunk import PointChunk, attributes_in_common, warn_dropped_attributes
 from ...core.cloud import MAX_ABS_COORDINATE, check_valid_count
 from ...errors import EmptyCloudError, GigapointWarning, InputError, warn
-from ...io import expand_paths, file_names, files_label, files_with_points, given_paths, read_chunks, scan_angles_differ
+from ...io import file_names, files_label, point_files_of, read_chunks, scan_angles_differ
 from ...io._base import STREAM_CHUNK_SIZE
 from ...io.colorize import Colorization
 from ...io.crs import files_crs
@@ -70,16 +70,16 @@ class PointFiles:
     ``reprojection``: their points moved into its CRS as they are read; the grid, the CRS records and
     the headers' bounds are then the target CRS's (each file's CRS checked before a point is read).
     ``colorization``: the points coloured from its raster (``colored``), whose CRS is checked
-    against theirs (the output's) here. ``where``: the operation, as its errors name it; ``name``: its argument.
-    A file without points among several is skipped, said once (``io.files_with_points``)."""
+    against theirs (the output's) here. ``inputs``: paths as ``io.given_paths`` gives them (the
+    caller's, under its argument's name); ``where``: the operation, as its errors name it.
+    A file without points among several is skipped, said once (``io.point_files_of``)."""
 
     def __init__(
         self, inputs, out: Path, chunk_size: int | None, ply: bool = False, reprojection: Reprojection | None = None,
-        colorization: Colorization | None = None, where: str = "convert", name: str = "inputs",
+        colorization: Colorization | None = None, where: str = "convert",
     ):
-        inputs = given_paths(inputs, where, name)  # (5 among them: "classify_ground: source[0]: ...")
         refuse_octrees(inputs)  # (an octree folder's .npy arrays were read as points)
-        self.files = files_with_points(expand_paths(inputs, where=where))
+        self.files = point_files_of(inputs, where)
         if any(same_file(out, f) for f in self.files):
             raise InputError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
         self.label = files_label(self.files)

@@ -329,11 +329,11 @@ def file_sources(paths, cut_off: list | None = None, point_filter: PointFilter |
     ``point_filter``: each chunk goes through it as it is read (the total, then, counts points
     read, not kept; the bounds are cut to its clip box)."""
     from ...core.cloud import finest_scale
-    from ...io import cloud_name, expand_paths, files_with_points, reader_for, scan_angles_differ, warn_mixed_crs
+    from ...io import cloud_name, point_files_of, reader_for, scan_angles_differ, warn_mixed_crs
     from ...io._base import DEFAULT_CHUNK_SIZE
     from ...io.las import with_scan_angle
 
-    files = files_with_points(expand_paths(paths))  # (an empty file among several: skipped, as gp.open and convert skip it)
+    files = point_files_of(paths)  # (an empty file among several: skipped, as gp.open and convert skip it)
     warn_mixed_crs(files)
     read = with_scan_angle if scan_angles_differ(files) else iter
     sources, total, lo, hi = [], 0, np.full(3, np.inf), np.full(3, -np.inf)
