@@ -286,6 +286,21 @@ def test_cli_side_files_are_never_replaced_without_overwrite(cli, tmp_path):
     assert read_world_file(tmp_path / "o.pgw")[0] == 8.0
 
 
+def test_cli_a_prj_holding_the_same_crs_is_kept(cli, tmp_path):
+    """x.webp then x.jpg of one map share x.prj: the second keeps it (as gigapoint.orthophoto
+    does), where it said 'x.prj: already exists'; a .prj of another CRS is still refused."""
+    rc, _, err = cli("render", AUTZEN, "-o", tmp_path / "x.webp", "--gsd", 10)
+    assert rc == 0, err
+    rc, stdout, err = cli("render", AUTZEN, "-o", tmp_path / "x.jpg", "--gsd", 10)
+    assert rc == 0, err
+    assert (tmp_path / "x.prj").read_text() == read_las_header(AUTZEN).crs()
+    assert stdout.splitlines()[-1] == f"wrote {tmp_path / 'x.jgw'}"
+    (tmp_path / "x.prj").write_text("precious")
+    rc, _, err = cli("render", AUTZEN, "-o", tmp_path / "x.png", "--gsd", 10)
+    assert rc == 1 and err.strip() == f"error: {tmp_path / 'x.prj'}: already exists; pass --overwrite to replace it", err
+    assert (tmp_path / "x.prj").read_text() == "precious" and not (tmp_path / "x.png").exists()
+
+
 def test_a_failed_side_write_takes_the_image_back(cli, tmp_path, grid_npy, monkeypatch):
     """The world file's write failing (a full disk) removes the image written before it: no
     orthophoto is left without its georeference."""

@@ -109,6 +109,20 @@ def test_the_csv_holds_the_rows_and_the_command_says_what_it_wrote(cli, files, t
     np.testing.assert_allclose(sorted_rows(table), expected_rows(), rtol=0, atol=2e-4)
 
 
+@pytest.mark.parametrize("suffix", [".jpg", ".png"])
+def test_a_see_through_background_in_a_jpeg_is_warned_as_render_warns_it(cli, files, tmp_path, suffix):
+    """section -o s.jpg --background '#ff000080' wrote it opaque without the word render says."""
+    out = tmp_path / f"s{suffix}"
+    line = ",".join(f"{v:.15g}" for v in line_of("straight"))
+    rc, _, err = cli("section", files["straight"], "--line", line, "--width", WIDTH, "-o", out, "--scale", 2, "--background", "#ff000080")
+    assert rc == 0
+    warned = f"warning: {out}: a JPG file holds no alpha: the background's alpha 128 is written opaque\n"
+    assert err == (warned if suffix == ".jpg" else "")
+    assert Image.open(out).mode == ("RGB" if suffix == ".jpg" else "RGBA")
+    if suffix == ".png":
+        assert np.asarray(Image.open(out))[0, 0].tolist() == [255, 0, 0, 128]  # (a PNG keeps it)
+
+
 def test_write_csv_replaces_a_file_only_with_overwrite(files, tmp_path):
     """Section.write_csv replaced an existing file silently, where every other writer refuses
     without overwrite=True (the CLI checked --overwrite itself)."""

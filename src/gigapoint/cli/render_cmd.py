@@ -12,13 +12,13 @@ from typing import Annotated
 import typer
 
 from ..core.coords import MAX_ABS_COORDINATE, MAX_SPAN
-from ..errors import CameraError, GigapointError, GigapointWarning, counted, number_text, warn
+from ..errors import CameraError, GigapointError, counted, number_text
 from ..io import crs_wkt, files_label
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from ..render.contours import draw_contours
-from ..render.georef import georef_paths, georef_writes, map_image, raster_writes
-from ..render.image_files import NO_ALPHA_SUFFIXES
+from ..render.georef import georef_paths, georef_writes, map_image, raster_writes, unheld_side_writes
+from ..render.image_files import warn_alpha_dropped
 from ..render.raster_fill import fill_map
 from . import compiling
 from .app import app
@@ -183,13 +183,6 @@ def top_down_camera(cloud, gsd: float, output: Path, inputs) -> Camera:
     return cam
 
 
-def warn_alpha_dropped(output: Path, settings, videos) -> None:
-    """A background less than opaque (``#rrggbbaa``) written where the file holds no alpha (JPEG,
-    BMP, a video; ``videos``: their suffixes): said once, naming the file (it came out opaque without a word)."""
-    if settings.background[3] < 255 and output.suffix.lower() in NO_ALPHA_SUFFIXES | videos:
-        warn(f"{output}: a {output.suffix[1:].upper()} file holds no alpha: the background's alpha {settings.background[3]} is written opaque", GigapointWarning)
-
-
 def open_inputs(inputs, point_budget: int, progressive: bool | None = None, options: dict | None = None, point_filter=None):
     """The command's inputs (lod/progressive.open_sized: inputs above the point budget build an
     LOD octree as they load, and the render waits for it; ``options``: ``--colors``/``--chunked``,
@@ -300,8 +293,9 @@ def render(
             check_output(extra, overwrite, suffixes=suffixes)
     georef = georef_paths([output, depth_out]) if gsd is not None else []
     for side in georef:  # refused like the image: a user's world file or .prj is not replaced without asking
-        check_output(side, overwrite, suffixes=None)
-    warn_alpha_dropped(output, settings, VIDEO_SUFFIXES)
+        if side.suffix != ".prj" or not side.exists():  # (a .prj there may hold this very CRS: checked once it is known)
+            check_output(side, overwrite, suffixes=None)
+    warn_alpha_dropped(output, settings.background[3], VIDEO_SUFFIXES)
     contours_drawn = check_contour_options(contours, contours_base, contours_out, contours_on_image, gsd, overwrite)
     check_outputs_apart([output, depth_out, index_out, *georef, contours_out], inputs)
     if projection not in (None, "perspective", "orthographic"):
@@ -359,8 +353,13 @@ def render(
 
         crs, units = cloud_crs_units(cloud)
         wkt = crs_wkt(crs)
+        side_writes, notes = georef_writes(cam, (output, depth_out), crs, wkt, units)
+        side_writes = unheld_side_writes(side_writes, wkt)  # (x.webp, then x.jpg: x.prj kept, as gigapoint.orthophoto keeps it)
+        for path, _ in side_writes:
+            check_output(path, overwrite, suffixes=None)
     else:
         cam = make_camera(cloud, width, height, view, camera, projection, fov)
+        notes = []
     compiled = compiling.compiled_seconds()
     with options_named():
         frame = gp.render_frame(cloud, cam, settings)
@@ -384,9 +383,7 @@ def render(
         writes.append((index_out, lambda p: save_array(frame.index, p)))
     if contours_out is not None:
         writes.append(contour_write(lines, cam, contours_out, crs, wkt))
-    notes = []
     if gsd is not None:
-        side_writes, notes = georef_writes(cam, (output, depth_out), crs, wkt, units)
         writes += side_writes
     written = write_together(writes)
     if stats:

@@ -10,6 +10,7 @@ import typer
 
 from ..errors import GigapointError, counted, number_text
 from ..render import RenderSettings
+from ..render.image_files import warn_alpha_dropped
 from .app import app
 from .cloud_opts import ClassesOption, ClipPolygonOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
 from .output import check_image_fits, check_output, check_outputs_apart, save_image
@@ -57,6 +58,7 @@ def section(
     if csv is not None:
         check_output(csv, overwrite, suffixes={".csv"})
     check_outputs_apart([output, csv], inputs)
+    warn_alpha_dropped(output, settings.background[3])
     lane = corridor_of(numbers("--line", line, 4), width, f"section: --line {line}", f"section: --width {number_text(width)}")
     if scale is not None and size is not None:
         raise GigapointError("section: --scale and --size: give one (a size sets the scale)")

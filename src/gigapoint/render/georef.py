@@ -232,7 +232,7 @@ def write_map(camera: Camera, crs: str | None, units: dict, rasters, overwrite: 
         check_output(path, overwrite, GEOTIFF_SUFFIXES if np.ndim(array) == 2 else IMAGE_SUFFIXES)
         check_image_fits(path, camera.width, camera.height)
     side_writes, notes = georef_writes(camera, [path for path, _ in rasters], crs, wkt, units)
-    side_writes = [(path, save) for path, save in side_writes if not _holds(path, wkt)]
+    side_writes = unheld_side_writes(side_writes, wkt)
     named = [path for path, _ in rasters] + [path for path, _ in side_writes]
     for i, path in enumerate(named):
         if any(path.resolve() == other.resolve() for other in named[:i]):  # (ortho.tif and ortho.tiff: one .tfw)
@@ -256,6 +256,12 @@ def _said(path: Path, save):
             raise GigapointError(f"{path}: not written ({write_failure(exc)}); none of the map's files was left") from None
 
     return save_or_say
+
+
+def unheld_side_writes(side_writes, wkt: str | None) -> list:
+    """``side_writes`` (georef_writes') less a .prj that holds ``wkt`` already: an earlier product
+    of the same map beside it (change.tif, then change.png) keeps it, neither refused nor rewritten."""
+    return [(path, save) for path, save in side_writes if not _holds(path, wkt)]
 
 
 def _holds(path: Path, wkt: str | None) -> bool:

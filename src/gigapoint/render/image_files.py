@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_npy, atomic_write, folders_for, output_file_refusal, refuse
-from ..errors import GigapointError
+from ..errors import GigapointError, GigapointWarning, warn
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff", ".bmp"}
 NO_ALPHA_SUFFIXES = {".jpg", ".jpeg", ".bmp"}  # images written as RGB: their alpha dropped
@@ -31,6 +31,15 @@ def check_image_fits(path, width: int, height: int) -> None:
     path = Path(path)
     if path.suffix.lower() == ".webp" and max(width, height) > WEBP_MAX_SIDE:
         raise GigapointError(f"{path}: a WebP image is at most {WEBP_MAX_SIDE:,} pixels a side, this one would be {width}x{height}; write .png or .tif")
+
+
+def warn_alpha_dropped(path, background_alpha: int, also_opaque=()) -> None:
+    """A background less than opaque (``#rrggbbaa``: its alpha ``background_alpha``) written where
+    the file holds no alpha (JPEG, BMP; ``also_opaque``: more suffixes, a video's): said once,
+    naming the file (it came out opaque without a word). render and section say it alike."""
+    path = Path(path)
+    if background_alpha < 255 and path.suffix.lower() in NO_ALPHA_SUFFIXES | set(also_opaque):
+        warn(f"{path}: a {path.suffix[1:].upper()} file holds no alpha: the background's alpha {background_alpha} is written opaque", GigapointWarning)
 
 
 def save_image(image: np.ndarray, path, tiff_tags=None) -> None:
