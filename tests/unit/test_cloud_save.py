@@ -207,6 +207,19 @@ def test_save_refuses_in_one_line_naming_the_file_and_leaves_nothing(tmp_path, m
     assert cloud.save("taken.las", overwrite=True) == 100 and laspy.read("taken.las").header.point_count == 100
 
 
+def test_convert_of_a_cloud_into_a_point_file_points_to_its_save(tmp_path):
+    """gp.convert(cloud, "a.laz") said "a gigapoint octree is a folder": the cloud's own save writes that file."""
+    from gigapoint.lod.octree_dir import ConvertError
+
+    cloud = gp.from_arrays(np.random.default_rng(2).random((100, 3)))
+    out = tmp_path / "a.laz"
+    said = f"{out}: convert writes a cloud as an octree folder or a .copc.laz file; cloud.save({str(out)!r}) writes its points as that file"
+    with pytest.raises(ConvertError, match=f"^{re.escape(said)}$"):
+        gp.convert(cloud, out)
+    assert not out.exists()
+    assert cloud.save(out) == 100  # (as it says)
+
+
 def test_save_makes_the_folders_missing_on_its_way(tmp_path):
     """As an octree folder and a COPC file are made (convert, a progressive cloud's save): "the
     folder nowhere does not exist" was the one output refused for it."""

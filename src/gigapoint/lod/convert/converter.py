@@ -394,9 +394,11 @@ def convert(
     if sampler not in SAMPLERS:
         raise ConvertError(f"sampler: unknown sampler {sampler!r}; choose {' or '.join(SAMPLERS)}")
     max_leaf = DEFAULT_MAX_LEAF if max_leaf is None else max_leaf
-    if format is None and out is not None and str(out) != "" and not is_copc_name(out) and is_supported_name(out) and _are_paths(inputs):
-        # -o out.csv said "a gigapoint octree is a folder", never that convert writes no CSV
-        raise ConvertError(f"{out}: convert writes .las, .laz or .ply files, an octree folder or a .copc.laz file, not {Path(out).suffix.lower()}")
+    if format is None and out is not None and str(out) != "" and not is_copc_name(out) and is_supported_name(out):
+        if _are_paths(inputs):  # -o out.csv said "a gigapoint octree is a folder", never that convert writes no CSV
+            raise ConvertError(f"{out}: convert writes .las, .laz or .ply files, an octree folder or a .copc.laz file, not {Path(out).suffix.lower()}")
+        if isinstance(inputs, PointSource) and is_point_file_name(out):  # (it said "a gigapoint octree is a folder")
+            raise ConvertError(f"{out}: convert writes a cloud as an octree folder or a .copc.laz file; cloud.save({str(out)!r}) writes its points as that file")
     if format is None:  # -o scan.copc.laz without --format was a gigapoint folder of that name
         format = "copc" if is_copc_name(out) else "gigapoint"
     if format not in FORMATS:
