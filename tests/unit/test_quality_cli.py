@@ -164,6 +164,15 @@ def test_an_option_its_switch_is_off_for_is_refused(npy, tmp_path, capsys, extra
     assert not list(tmp_path.iterdir())
 
 
+def test_hqs_with_an_opacity_below_1_is_refused(npy, tmp_path, capsys):
+    """--hqs --opacity 0.5 drew the transparent image alone (transparency replaces HQS), without a word."""
+    assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "24", "--hqs", "--opacity", "0.5"]) == 1
+    said = "--hqs: high-quality shading is not drawn at opacity 0.5, whose transparent points replace it; give one"
+    assert capsys.readouterr().err == f"error: {said}\n"
+    assert not list(tmp_path.iterdir())
+    assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "24", "--backend", "cpu", "--hqs", "--opacity", "1"]) == 0
+
+
 def test_a_switch_given_lets_its_options_through(npy, tmp_path):
     for extra in (["--edl", "--edl-strength", "1", "--edl-radius", "2"], ["--fill-holes", "2", "--foveated"], ["--hqs", "--hqs-depth-tolerance", "0.05"],
                   ["--stereo", "anaglyph", "--ipd", "0.1", "--convergence", "5"], ["--supersample", "4", "--supersample-filter", "lanczos"]):  # fmt: skip

@@ -5,6 +5,7 @@ and the hybrid composite (render/passes/transparency.py) on the CPU, against its
 from __future__ import annotations
 
 import contextlib
+import re
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ from gigapoint.errors import GigapointError, SettingsError
 from gigapoint.render.params import TR_LAYERS, batch_alphas
 from gigapoint.render.passes import splat_for
 from gigapoint.render.passes.transparency import hybrid_reference, sorted_reference, wants_transparency
-from gigapoint.render.settings import settings_fields
+from gigapoint.render.settings import RenderSettings, settings_fields
 
 BG = (10, 20, 30, 255)
 
@@ -246,9 +247,21 @@ def test_independent_of_batch_order_and_threads(demo):
 def test_with_other_passes(demo):
     """Hole filling, EDL, lighting, stereo and supersampling take transparent frames too."""
     cloud, cam = demo
-    for opts in ({"fill_holes": 1, "edl": True}, {"stereo": "side-by-side"}, {"supersample": 2}, {"hqs": True}):
+    for opts in ({"fill_holes": 1, "edl": True}, {"stereo": "side-by-side"}, {"supersample": 2}):
         img = gp.render(cloud, cam, backend="cpu", opacity=0.5, **opts)
         assert img.dtype == np.uint8 and img.shape[2] == 4 and img[..., :3].any()
+
+
+def test_hqs_below_opacity_1_is_refused_not_dropped(demo):
+    """hqs=True with opacity 0.5 drew the transparent frame alone (the same pixels as without
+    hqs), without a word: refused in one line, in Python and on the command line alike."""
+    cloud, cam = demo
+    said = "hqs: high-quality shading is not drawn at opacity 0.5, whose transparent points replace it; give one"
+    with pytest.raises(SettingsError, match=f"^{re.escape(said)}$"):
+        gp.render(cloud, cam, backend="cpu", opacity=0.5, hqs=True)
+    with pytest.raises(SettingsError, match=f"^{re.escape(said)}$"):
+        RenderSettings(hqs=True).replace(opacity=0.5)
+    assert gp.render(cloud, cam, backend="cpu", opacity=1.0, hqs=True)[..., :3].any()  # (opaque: hqs drawn)
 
 
 def test_compact_layout_equals_its_expansion():
