@@ -50,3 +50,53 @@ def test_the_memory_of_a_small_cloud_is_not_zero_mib(cli, tmp_path):
     line = next(line for line in out.splitlines() if line.startswith("memory:"))
     size, per_point = re.match(r"memory: ([\d.]+) KiB, ([\d.]+) bytes/point", line).groups()
     assert abs(float(size) * 1024 / 1000 - float(per_point)) < 0.1  # the total is the points' bytes
+
+
+def test_a_coordinate_on_the_grid_has_no_decimals_of_float_noise():
+    """At scale 1e-7 near 2e5 (float64 steps of 3e-11) a value one float step off the 7-decimal
+    grid, offset + X * scale's rounding, showed 11 decimals: '193898.87588700003'."""
+    from gigapoint.core.coords import value_decimals
+
+    on_grid = 193898.875887
+    noisy = float(np.nextafter(on_grid, np.inf))
+    assert value_decimals(noisy, 1e-7) == 7 and value_decimals(on_grid, 1e-7) == 7
+    assert value_decimals(float(np.nextafter(4e6 + 0.12345678, 0)), 1e-8) == 8
+    assert value_decimals(637000.123456, 0.001) == 6  # off the grid by a fraction of a step: the file's value, as before
+    assert value_decimals(193898.87588702643, 1e-7) == 10  # (PDAL's offset 'auto': 0.26 of a step off; its last float digit dropped)
+
+
+def test_info_help_breaks_no_line_mid_sentence():
+    """click keeps a docstring's line breaks: ``info --help`` at 80 columns read 'or of those the'
+    / 'filters (--classes, ...) keep.'; each paragraph is one line, wrapped by the terminal's width."""
+    import inspect
+
+    from gigapoint.cli.info_cmd import info
+
+    paragraphs = inspect.getdoc(info).split("\n\n")
+    assert len(paragraphs) == 2 and all("\n" not in p for p in paragraphs), paragraphs
+
+
+def test_a_potree_octree_shows_its_grid_and_counts_in_the_singular(cli, tmp_path):
+    """A Potree folder's metadata.json names its scale and offset; info showed neither and its
+    bounds at 3 decimals ('-2.060'); a one-node octree was '1 nodes in 1 levels'."""
+    town = Path(__file__).parent / "data" / "potree_converter" / "town_DEFAULT"
+    rc, out, err = cli("info", town)
+    assert rc == 0, err
+    lines = out.splitlines()
+    assert "  scale:       0.01, 0.01, 0.01" in lines and "  offset:      0.52, -2.06, -13.96" in lines
+    assert "  bounds min:  0.52, -2.06, -13.96" in lines and "  bounds max:  996.62, 1001.63, 57.73" in lines
+    rc, out, err = cli("info", PDAL_EPT / "autzen_clip_4326.copc.laz")
+    assert rc == 0 and "  octree:      1 node in 1 level, 1 hierarchy page, spacing 0.456803" in out.splitlines(), err
+
+
+def test_a_folders_copc_files_show_as_naming_one_does(cli, tmp_path):
+    """``info FOLDER`` showed its COPC files as plain 'LAZ 1.4' without their octree lines."""
+    import shutil
+
+    for name in ("autzen_clip_native.copc.laz", "autzen_clip_4326.copc.laz"):
+        shutil.copy(PDAL_EPT / name, tmp_path / name)
+    rc, named, err = cli("info", *sorted(tmp_path.iterdir()))
+    assert rc == 0, err
+    rc, listed, err = cli("info", tmp_path)
+    assert rc == 0, err
+    assert listed == named and listed.count("  format:      COPC 1.4, point format 7\n") == 2 and listed.count("  octree:") == 2

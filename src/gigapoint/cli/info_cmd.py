@@ -52,8 +52,7 @@ def info(
 ) -> None:
     """Show format, point count, bounds, attributes, LAS version/scale/offset and CRS of files.
 
-    With --stats, statistics of their points (read once, in bounded memory), or of those the
-    filters (--classes, --drop-classes, --clip, --clip-polygon) keep."""
+    With --stats, statistics of their points (read once, in bounded memory), or of those the filters (--classes, --drop-classes, --clip, --clip-polygon) keep."""  # (one line: click keeps a docstring's line breaks)
     options = cloud_options(colors, chunked)
     given = {"--classes": classes, "--drop-classes": drop_classes, "--clip": clip, "--clip-polygon": clip_polygon}
     filters = [name for name, value in given.items() if value is not None]
@@ -91,7 +90,9 @@ def info(
             # a pattern names a folder's files: summed as a folder is ("tiles/*.laz" was a block a tile); one it matches alone is that file
             named = f.is_dir() or (len(found) > 1 and pattern_matches(f) is not None)
             summed = f if (stats or len(found) > FOLDER_LISTED) and named and not (each or memory) else None
-            paths.extend([(f, True, None, None)] if lod else [(p, False, None, summed) for p in found])
+            # a folder's COPC files listed one by one: shown as naming one shows it (its octree's lines, not 'LAZ 1.4')
+            listed_copc = [summed is None and not stats and is_local_copc(p) for p in found]
+            paths.extend([(f, True, None, None)] if lod else [(p, copc, None, summed) for p, copc in zip(found, listed_copc)])
         except GigapointError as exc:  # a missing file among several stopped the others from being shown
             paths.append((f, False, exc, None))
     failed = shown = 0

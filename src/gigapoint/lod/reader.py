@@ -12,7 +12,7 @@ from urllib.parse import urlsplit, urlunsplit
 
 import numpy as np
 
-from ..errors import EmptyCloudError, InputError
+from ..errors import EmptyCloudError, InputError, counted
 from ..io.http import HttpNotFound, as_url, open_source, shown_url
 from .kinds import copc_file_kind, ept_location
 from .octree_dir import FORMAT_VERSION, GIGAPOINT_META, POTREE_META, OctreeDir
@@ -210,13 +210,17 @@ def octree_info(path) -> dict:
             "file_size": size,
             "details": _conversion_details(s, d.resume_hint),
         }
+    from .potree import PotreeCloud
+
     cloud = open_octree(p)
     lo, hi = cloud.bounds
-    potree = d.kind == "potree"
+    potree = isinstance(cloud, PotreeCloud)
+    # the source's grid (a LAS input's; a Potree octree's metadata.json): bounds print at its decimals
+    scale, offset = (cloud.scale.tolist(), cloud.offset.tolist()) if potree else (cloud.meta.get("scale"), None)
     attributes, crs = sorted(cloud.attributes), cloud.meta.get("crs")
     levels = int(cloud.nodes["level"].max()) + 1
     sampler, spacing = cloud.meta.get("sampler"), cloud.meta.get("spacing")
-    text = f"{len(cloud.keys):,} nodes in {levels} levels"
+    text = f"{counted(len(cloud.keys), 'node')} in {counted(levels, 'level')}"
     text += (f", {sampler} sampler" if sampler else "") + (f", spacing {spacing:.6g}" if spacing else "")
     has_color = bool(cloud.meta.get("has_color", True))  # false: converted from points without colours (a folder older than the key: assumed)
     if potree:  # its nodes are decoded on demand: the metadata names what they hold (as gigapoint names them)
@@ -234,7 +238,8 @@ def octree_info(path) -> dict:
         "has_color": has_color,
         "attributes": attributes,
         "crs": crs,
-        "scale": None if potree else cloud.meta.get("scale"),  # the source's grid (LAS inputs): bounds print at its decimals
+        "scale": scale,
+        "offset": offset,
         "on_grid": False,  # its positions are floats (reprojected ones on no grid): no more decimals than the scale's
         "nodes": len(cloud.keys),
         "levels": levels,
@@ -274,7 +279,7 @@ def _voxel_info(path) -> dict:
         else:  # the whole dataset: ept.json's folder
             size = bytes_under(Path(ept_location(path)).parent)
         details = {
-            "octree": f"{len(cloud.keys):,} nodes in {len(per_level)} levels, {cloud.pages_read:,} hierarchy pages"
+            "octree": f"{counted(len(cloud.keys), 'node')} in {counted(len(per_level), 'level')}, {counted(cloud.pages_read, 'hierarchy page')}"
             + (f", spacing {meta['spacing']:.6g}" if meta.get("spacing") else ""),
             "per level": ", ".join(f"{lv}: {n:,}" for lv, n in enumerate(per_level)),
         }
