@@ -184,6 +184,28 @@ def test_writing_in_small_chunks_gives_the_same_file_as_one_chunk(tmp_path, suff
         assert one.read_bytes() == many.read_bytes()
 
 
+@pytest.mark.parametrize("how", ["convert", "save"])
+def test_a_ply_keeps_the_crs_in_a_header_comment_and_reads_it_back(tmp_path, autzen_path, cli, how):
+    """``convert autzen.laz -o a.ply`` (and a cloud's save) lost the CRS without a word: PLY has no
+    field for one. It is written in a ``comment crs`` line, which PLY readers skip and gigapoint reads."""
+    import plyfile
+
+    from gigapoint.io import file_info
+    from gigapoint.lod.reader import cloud_crs
+
+    out = tmp_path / "a.ply"
+    if how == "convert":
+        rc, _, err = cli("convert", autzen_path, "-o", out)
+        assert rc == 0, err
+    else:
+        gp.open(autzen_path, colors="rgba").save(out)
+    wkt = read_las_header(autzen_path).crs()
+    assert wkt.startswith('PROJCS["NAD_1983_HARN_Lambert_Conformal_Conic"')
+    assert cloud_crs(gp.open(out)) == wkt and file_info(out)["crs"] == wkt
+    ply = plyfile.PlyData.read(out)  # (a standard PLY reader: the comment is skipped, the points all there)
+    assert ply.comments == [f"crs {wkt}"] and ply["vertex"].count == 110_000
+
+
 def test_save_refuses_in_one_line_naming_the_file_and_leaves_nothing(tmp_path, monkeypatch):
     cloud = gp.from_arrays(np.random.default_rng(2).random((100, 3)), big=np.full(100, -(2**63)))
     (tmp_path / "taken.las").write_bytes(b"mine")

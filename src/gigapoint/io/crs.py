@@ -14,6 +14,7 @@ from ..errors import GigapointError, GigapointWarning, InputError, warn
 from ._base import read_once
 from .las import LasReader, first_crs_header, geokeys, read_las_header
 from .paths import file_names
+from .ply import first_ply_crs
 from .registry import reader_for
 
 WKT_EPSG = re.compile(r'(?:AUTHORITY|ID)\[\s*"EPSG"\s*,\s*"?(\d+)"?\s*\]\s*\]\s*$', re.IGNORECASE)
@@ -384,14 +385,17 @@ def files_units(files) -> dict:
 def files_crs_units(files) -> tuple[str | None, dict]:
     """(``files_crs``, ``files_units``) of ``files`` from one read of the header naming the CRS."""
     hdr = first_crs_header(files)
-    return (hdr.crs(), crs_units(hdr.crs(), geokeys(hdr.vlrs))) if hdr else (None, crs_units(None))
+    if hdr:
+        return hdr.crs(), crs_units(hdr.crs(), geokeys(hdr.vlrs))
+    crs = first_ply_crs(files)
+    return crs, crs_units(crs)
 
 
 def files_crs(files) -> str | None:
     """The CRS of the first LAS/LAZ file of ``files`` that names one: its WKT, else 'EPSG:n' (or
-    'EPSG:n+v') of its GeoTIFF keys (LasHeader.crs); None without one."""
+    'EPSG:n+v') of its GeoTIFF keys (LasHeader.crs); else a PLY file's (first_ply_crs); None without one."""
     hdr = first_crs_header(files)
-    return hdr.crs() if hdr else None
+    return hdr.crs() if hdr else first_ply_crs(files)
 
 
 def crs_wkt(crs: str | None) -> str | None:

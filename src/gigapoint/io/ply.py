@@ -11,7 +11,8 @@ LAS fields) in lower case whatever the file's case, any other as the file spells
 packed 4-byte ``rgb``/``rgba`` (consumed) or a 3D Gaussian splat's ``f_dc_0..2`` (kept).
 A binary mesh's elements after the vertices (faces) are walked, not read, to check that they
 end where the file does: a header that overstates the vertex count is refused, not read as
-vertices made of the faces' bytes.
+vertices made of the faces' bytes. PLY has no field for a CRS: gigapoint writes it in a
+``comment crs <WKT or EPSG:n>`` header line and reads it back (other readers skip comments).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.chunk import ColorScaler, PointChunk
-from ..errors import EmptyCloudError
+from ..errors import EmptyCloudError, GigapointError
 from ._base import (
     DEFAULT_CHUNK_SIZE,
     SALVAGE_HINT,
@@ -44,6 +45,9 @@ from ._base import (
 _MAX_HEADER = 1 << 20
 #: the header's last line (blanks after the word taken, as other readers take them)
 _END_HEADER = re.compile(rb"[\r\n]end_header[ \t\r]*\n")
+
+#: a header comment naming the points' CRS starts so (io/write.py writes it)
+PLY_CRS_COMMENT = "crs "
 
 #: 3D Gaussian splats' degree-0 spherical harmonic, 1 / (2 sqrt(pi)): colour = 0.5 + SH_C0 * f_dc
 SH_C0 = 0.28209479177387814
@@ -91,6 +95,7 @@ class _Header:
         if negative:  # plyfile takes "element vertex -5": numpy's "negative dimensions" came later
             raise fail(path, f"corrupt PLY header: element {negative[0].name!r} has a negative count ({negative[0].count})")
         self.ply = ply
+        self.crs = next((c.removeprefix(PLY_CRS_COMMENT).strip() for c in ply.comments if c.startswith(PLY_CRS_COMMENT)), None) or None
         self.text = ply.text
         self.byte_order = ply.byte_order
         self.file_size = path.stat().st_size
@@ -131,6 +136,21 @@ class _Header:
                 rgb = (np.clip(0.5 + SH_C0 * np.nan_to_num(dc), 0, 1) * 255 + 0.5).astype(np.uint8)
             names, cols = [*col, "red", "green", "blue"], [*col.values(), *rgb.T]
         return rows_to_chunk(self.path, names, cols, scaler)
+
+
+def first_ply_crs(files) -> str | None:
+    """The CRS of the first PLY file of ``files`` that names one (its ``comment crs`` line), None
+    without one; a file gone or damaged since it was read says nothing (its read says why)."""
+    for f in files:
+        if Path(f).suffix.lower() != ".ply":
+            continue
+        try:
+            crs = _Header(Path(f)).crs
+        except (GigapointError, OSError):
+            continue
+        if crs:
+            return crs
+    return None
 
 
 #: a face's list of vertex indices (as the PLY format names it; some writers drop the s): 3 at least
@@ -370,5 +390,6 @@ class PlyReader(Reader):
             "has_color": h.has_color,
             "attributes": h.attributes,  # as read (attribute_spelling), no list property
             "elements": {el.name: el.count for el in h.ply.elements},
+            "crs": h.crs,
             "file_size": h.file_size,
         }

@@ -21,8 +21,9 @@ from ..atomic import atomic_write, folders_for, nearest_folder, output_file_refu
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, set_cloud_writer
 from ..errors import GigapointWarning, InputError, first_line, warn
-from .las import GEOKEYS_RECORD, PROJECTION_USER_ID, WKT_RECORD, LasReader, first_crs_header, read_las_header, wkt_of
+from .las import GEOKEYS_RECORD, PROJECTION_USER_ID, WKT_RECORD, LasReader, first_crs_header, read_las_header, vlrs_crs, wkt_of
 from .las_fields import LAS_FIELD_OF, choose_point_format, extra_attributes, field_attributes, las_field_values, las_grid
+from .ply import PLY_CRS_COMMENT
 from .registry import reader_for
 
 #: the point files ``write_points`` writes, by suffix
@@ -59,7 +60,8 @@ def write_points(
     positions on, else one fine enough for their bounds; ``crs_records``: (user id, record id,
     data) VLRs naming their CRS; ``color_bits``: 16 stores 8-bit colours x 257, 8 as they are, as a
     file of 8-bit values in 16-bit fields had them; None: as each chunk says, its ``color_bits``,
-    16 where it does not) or .ply (red, green, blue only ``has_color``). ``n_points`` None: not known before the points are read (a
+    16 where it does not) or .ply (red, green, blue only ``has_color``; the CRS the records name in a
+    ``comment crs`` header line, PLY having no field of its own for one). ``n_points`` None: not known before the points are read (a
     filter's, files': a PLY header's count is written once they are). The first chunk's attributes
     (names and dtypes) stand for every chunk's. Returns the points written."""
     from lazrs import LazrsError
@@ -73,7 +75,7 @@ def write_points(
     def write(tmp: Path) -> None:
         nonlocal written
         if suffix == ".ply":
-            written = _write_ply(tmp, path, flat_chunks, n_points, has_color)
+            written = _write_ply(tmp, path, flat_chunks, n_points, has_color, vlrs_crs(crs_records))
         else:
             written = _write_las(tmp, path, flat_chunks, grid, crs_records, color_bits, has_color)
 
@@ -191,7 +193,7 @@ _PLY_NAMES = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": 
 _PLY_COUNT_DIGITS = 20
 
 
-def _write_ply(tmp: Path, path: Path, chunks: Chunks, n: int | None, has_color: bool) -> int:
+def _write_ply(tmp: Path, path: Path, chunks: Chunks, n: int | None, has_color: bool, crs: str | None) -> int:
     """Binary little-endian PLY: x, y, z (double), red, green, blue (uchar; ``has_color`` only), then the attributes;
     the header (made from the first chunk) first, then the records chunk by chunk. ``n`` None: the
     header's count is written as zeros of a fixed width and patched once the points are counted,
@@ -202,7 +204,7 @@ def _write_ply(tmp: Path, path: Path, chunks: Chunks, n: int | None, has_color: 
         for chunk in chunks():
             if fields is None:
                 fields = _ply_fields(path, chunk, chunks, has_color)
-                count_at = _write_ply_header(f, fields, n)
+                count_at = _write_ply_header(f, fields, n, crs)
             data = np.empty(len(chunk), fields)
             for k, a in enumerate("xyz"):
                 data[a] = chunk.xyz[:, k]
@@ -213,7 +215,7 @@ def _write_ply(tmp: Path, path: Path, chunks: Chunks, n: int | None, has_color: 
             f.write(data.tobytes())
             written += len(chunk)
         if fields is None:  # no chunk: a header alone
-            count_at = _write_ply_header(f, _ply_fields(path, _NO_POINTS, chunks, has_color), n)
+            count_at = _write_ply_header(f, _ply_fields(path, _NO_POINTS, chunks, has_color), n, crs)
         if n is None:
             f.seek(count_at)
             f.write(f"{written:0{_PLY_COUNT_DIGITS}d}".encode())
@@ -257,13 +259,15 @@ def _ply_name_problem(name: str, taken: set[str]) -> str | None:
     return None
 
 
-def _write_ply_header(f, fields: list, n: int | None) -> int:
-    """Write the PLY header of ``n`` points (None: zeros to patch); returns where its count starts."""
+def _write_ply_header(f, fields: list, n: int | None, crs: str | None = None) -> int:
+    """Write the PLY header of ``n`` points (None: zeros to patch), ``crs`` in a ``comment crs``
+    line (ply.PLY_CRS_COMMENT, its whitespace made single spaces: one line); returns where its count starts."""
     count = f"{0:0{_PLY_COUNT_DIGITS}d}" if n is None else str(n)
     properties = "".join(f"property {_PLY_NAMES[np.dtype(t).str[1:]]} {a}\n" for a, t in fields)
-    head = "ply\nformat binary_little_endian 1.0\nelement vertex "
+    comment = f"comment {PLY_CRS_COMMENT}{' '.join(crs.split())}\n" if crs else ""
+    head = f"ply\nformat binary_little_endian 1.0\n{comment}element vertex "
     f.write(f"{head}{count}\n{properties}end_header\n".encode())
-    return len(head)
+    return len(head.encode())
 
 
 def _ply_type(path: Path, name: str, dt: np.dtype, lo: int, hi: int) -> str:
@@ -357,7 +361,7 @@ def save_cloud(cloud: PointCloud, path, overwrite: bool = False, points_per_chun
         files = ", ".join(str(f) for f in cloud.source_files)
         exact = f"open its files ({files}) with colors='rgba'" if files else "make the cloud with colors='rgba'"
         warn(f"{path}: the cloud holds its colours approximated (RGB565 or a palette), so the file gets those; {exact} for exact colours", GigapointWarning)
-    crs = source_crs_records(cloud.source_files) if path.suffix.lower() != ".ply" else []
+    crs = source_crs_records(cloud.source_files)
     return write_points(
         path, lambda: cloud.chunks(points_per_chunk), cloud.n_points, grid=_source_grid(cloud), crs_records=crs,
         color_bits=las_color_bits(cloud.source_color_bits),

@@ -92,8 +92,9 @@ class PointFiles:
         self.one_angle = scan_angles_differ(self.files)
         self.names = _attributes_in_common(self.files, self.one_angle, self.chunk_size, out)
         self.counts = [reader_for(f).point_count(f) for f in self.files]
-        if ply:
-            self.las_grid, self.crs_records = None, []
+        if ply:  # (doubles on no grid; the CRS in a header comment: io/write.py)
+            self.las_grid = None
+            self.crs_records = wkt_crs_records(reprojection.target_wkt()) if reprojection is not None else source_crs_records(self.files)
         elif reprojection is not None:
             self.las_grid, self.crs_records = output_grid(self.files, reprojection), wkt_crs_records(reprojection.target_wkt())
         else:

@@ -1620,7 +1620,7 @@ class ProgressiveOctree:
         t0 = time.perf_counter()
         ply = out.suffix.lower() == ".ply"
         grid = None if ply or self.grid is None else las_grid(self.lo, self.hi, np.full(3, self.grid[1]), self.grid[0])
-        crs = [] if ply else source_crs_records(self.source_files)
+        crs = source_crs_records(self.source_files)
         color_bits = las_color_bits(source_color_bits(self._color_bits))
         n = write_points(out, self.chunks, self.points, grid=grid, crs_records=crs, color_bits=color_bits, has_color=sources_have_color(self.source_files))
         return ConvertResult(out, out.suffix[1:].lower(), None, n, 0, self.skipped, time.perf_counter() - t0, False)
