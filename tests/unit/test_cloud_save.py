@@ -184,9 +184,9 @@ def test_writing_in_small_chunks_gives_the_same_file_as_one_chunk(tmp_path, suff
         assert one.read_bytes() == many.read_bytes()
 
 
-@pytest.mark.parametrize("how", ["convert", "save"])
+@pytest.mark.parametrize("how", ["convert", "save", "progressive"])
 def test_a_ply_keeps_the_crs_in_a_header_comment_and_reads_it_back(tmp_path, autzen_path, cli, how):
-    """``convert autzen.laz -o a.ply`` (and a cloud's save) lost the CRS without a word: PLY has no
+    """``convert autzen.laz -o a.ply`` (a cloud's save, a progressive cloud's) lost the CRS without a word: PLY has no
     field for one. It is written in a ``comment crs`` line, which PLY readers skip and gigapoint reads."""
     import plyfile
 
@@ -197,6 +197,10 @@ def test_a_ply_keeps_the_crs_in_a_header_comment_and_reads_it_back(tmp_path, aut
     if how == "convert":
         rc, _, err = cli("convert", autzen_path, "-o", out)
         assert rc == 0, err
+    elif how == "progressive":
+        loading = gp.open(autzen_path, progressive=True)
+        assert loading.wait(timeout=120)
+        loading.save(out)
     else:
         gp.open(autzen_path, colors="rgba").save(out)
     wkt = read_las_header(autzen_path).crs()
