@@ -199,16 +199,36 @@ def test_kernel_equals_reference_one_pixel(demo, opacity):
     assert err.mean() < 1.0 and np.percentile(err, 99) <= 10
 
 
-@pytest.mark.parametrize(("options", "threads"), [({"size_mode": "adaptive"}, 2), ({"point_size": 3, "point_shape": "round"}, 1),
-                                                  ({"size_mode": "fixed", "max_points": 40_000}, 2),
-                                                  ({"size_mode": "adaptive", "max_points": 30_000}, 2),
-                                                  ({"point_size": 3, "point_shape": "round", "max_points": 18_750}, 1)])  # fmt: skip
-def test_kernel_equals_reference_splats_and_steps(demo, options, threads):
+@pytest.mark.parametrize(("options", "threads"), [({"size_mode": "adaptive"}, 2), ({"point_size": 3, "point_shape": "round"}, 1)])
+def test_kernel_equals_reference_splats(demo, options, threads):
     cloud, cam = demo
     s = gp.RenderSettings(backend="cpu", opacity=0.6, background=BG, threads=threads, **options)
     got = _u32(gp.render(cloud, cam, s))
     hybrid, _ = reference_of(cloud, cam, s)
     assert np.array_equal(got, hybrid)
+
+
+@pytest.mark.parametrize(("options", "threads", "step"), [({"size_mode": "fixed", "max_points": 40_000}, 2, 4),
+                                                          ({"size_mode": "adaptive", "max_points": 30_000}, 2, 5),
+                                                          ({"point_size": 3, "point_shape": "round", "max_points": 18_750}, 1, 8)])  # fmt: skip
+def test_kernel_equals_reference_under_a_point_cap_overview_and_close_up(demo, options, threads, step):
+    """A point cap's every step-th point is gathered before it is projected: the overview's
+    batches are all 10-bit (the low word alone), the close-up's 20- and 30-bit ones gather their
+    medium and high words too."""
+    cloud, overview = demo
+    lo, hi = cloud.bounds
+    c = (lo + hi) / 2
+    closeup = gp.Camera.look_at((c[0] - 120, c[1] - 120, c[2] + 40.0), tuple(c), fov=60, width=200, height=120)
+    s = gp.RenderSettings(backend="cpu", opacity=0.6, background=BG, threads=threads, **options)
+    bits = set()
+    for cam in (overview, closeup):
+        draw = cloud.prepare(cam.view(cloud.bounds), s)
+        assert draw.step == step
+        bits |= set(np.unique(draw.selection.bits).tolist())
+        got = _u32(gp.render(cloud, cam, s))
+        hybrid, _ = reference_of(cloud, cam, s)
+        assert np.array_equal(got, hybrid)
+    assert bits == {10, 20, 30}
 
 
 def test_batch_alphas_fade(demo):

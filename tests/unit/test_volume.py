@@ -139,7 +139,16 @@ def test_a_toe_of_points_on_one_line_is_refused_for_having_no_area():
     for toe in (line, slanted):
         with pytest.raises(InputError) as err:
             gp.volume(box_pile(), toe, 0.25, base=100)
-        assert str(err.value) == f"volume: clip_polygon={toe!r}: the polygon's points lie on one line: it has no area; move a point off the line"
+        assert str(err.value) == "volume: the GeoJSON geometry: the polygon's points lie on one line: it has no area; move a point off the line"
+
+
+def test_a_long_geojson_toes_error_stays_one_short_line():
+    """A dict toe was labelled by its repr: a 2000-vertex polygon on one line made a 33,932-character message."""
+    ring = [[15 + 0.001 * i, 15.0] for i in range(2000)] + [[15, 15]]
+    with pytest.raises(InputError) as err:
+        gp.volume(box_pile(), {"type": "Polygon", "coordinates": [ring]}, 0.25, base=100)
+    assert str(err.value) == "volume: the GeoJSON geometry: the polygon's points lie on one line: it has no area; move a point off the line"
+    assert len(str(err.value)) < 300
 
 
 def test_two_piles_in_a_feature_collection_are_named_and_summed():

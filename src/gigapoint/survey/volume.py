@@ -394,7 +394,7 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
     check_switch("full", full, "volume")
     if fill_nodata is not None and fill_nodata != "all":
         check_max_distance("volume: fill_nodata", fill_nodata)
-    toe = clip_polygon_of(clip_polygon, f"volume: clip_polygon={clip_polygon!r}")
+    toe = clip_polygon_of(clip_polygon, "volume: the GeoJSON geometry" if isinstance(clip_polygon, dict) else f"volume: clip_polygon={clip_polygon!r}")
     check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it")
     _check_holes(toe)
     point_filter(classes, drop_classes, where="volume")  # bad classes told before an octree is opened
