@@ -128,6 +128,15 @@ def write_las(path, xyz, keys=EPSG_32610_KEYS, wkt=None, scale=(0.01, 0.01, 0.01
     return path
 
 
+def write_degrees_grid(path, n, height=lambda x, y: np.full(x.size, 2.0), origin=DEGREES_ORIGIN):
+    """A LAS file in WGS 84 (EPSG:4326 keys, x and y at DEGREES_SCALE): n x n points 0.00002
+    degrees apart from ``origin`` (n = 40: 0.0008 degrees square), at ``height(x, y)`` of their
+    offsets in degrees (2 by default)."""
+    g = np.arange(n) * 0.00002
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    return write_las(path, np.column_stack([x, y, height(x, y)]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=origin)
+
+
 @pytest.fixture
 def surveys(tmp_path):
     """before.las (the plane) and after.las (the box and the pit, its plane 4 units longer north), EPSG:32610."""

@@ -235,11 +235,9 @@ def test_coordinates_in_degrees_need_cell_and_window_given(tmp_path):
     """In WGS 84 the default cell (1 m) and window (18 m) have no length in degrees: refused in
     the one wording the surveys refuse degrees in (io.crs.refuse_angles), south of the equator
     its southern UTM zone offered."""
-    from test_change import DEGREES_SCALE, EPSG_4326_KEYS, write_las  # (tests/unit is on sys.path)
+    from test_change import write_degrees_grid  # (tests/unit is on sys.path)
 
-    g = np.arange(20) * 0.00002
-    x, y = np.meshgrid(g, g)
-    path = write_las(tmp_path / "wgs84.las", np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=(151.2, -33.9))
+    path = write_degrees_grid(tmp_path / "wgs84.las", 20, origin=(151.2, -33.9))
     with pytest.raises(InputError) as caught:
         gp.classify_ground(path, tmp_path / "out.laz", cell=0.00002)
     assert str(caught.value) == (

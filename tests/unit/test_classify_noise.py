@@ -205,11 +205,9 @@ def test_coordinates_in_degrees_need_both_steps_given(tmp_path):
     """In WGS 84 the default step (4 m) has no length in degrees: refused in the one wording the
     surveys refuse degrees in (io.crs.refuse_angles), the UTM zone the points lie in offered;
     both steps given, it runs in them."""
-    from test_change import DEGREES_ORIGIN, DEGREES_SCALE, EPSG_4326_KEYS, write_las  # (tests/unit is on sys.path)
+    from test_change import write_degrees_grid  # (tests/unit is on sys.path)
 
-    g = np.arange(20) * 0.00002
-    x, y = np.meshgrid(g, g)
-    path = write_las(tmp_path / "wgs84.las", np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=DEGREES_ORIGIN)
+    path = write_degrees_grid(tmp_path / "wgs84.las", 20)
     with pytest.raises(InputError) as caught:
         gp.classify_noise(path, tmp_path / "out.laz", step=0.00004)
     assert str(caught.value) == (

@@ -180,15 +180,12 @@ def test_coordinates_in_degrees_are_measured_with_a_cell_given(tmp_path):
     """A WGS 84 cloud was refused even with its cell given, by classify_ground's words (\"give
     cell and window\": height_above_ground takes no window), as was a cell of 0: now only the
     default cell (1 m, no length in degrees) is refused, under its own name; given, it runs."""
-    from test_change import DEGREES_ORIGIN, DEGREES_SCALE, EPSG_4326_KEYS, write_las  # (tests/unit is on sys.path)
+    from test_change import write_degrees_grid  # (tests/unit is on sys.path)
 
-    g = np.arange(20) * 0.00002
-    x, y = np.meshgrid(g, g)
-    xyz = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)])
-    xyz[0, 2] = 7.0  # one point 5 above the others' plane
-    path = write_las(tmp_path / "wgs84.las", xyz, keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=DEGREES_ORIGIN)
+    first = np.arange(400) == 0
+    path = write_degrees_grid(tmp_path / "wgs84.las", 20, lambda x, y: np.where(first, 7.0, 2.0))  # the first point 5 above the others' plane
     las = laspy.read(str(path))
-    las.classification = np.where(np.arange(len(xyz)) == 0, 1, 2).astype(np.uint8)
+    las.classification = np.where(first, 1, 2).astype(np.uint8)
     las.write(str(path))
     with pytest.raises(InputError) as caught:
         gp.height_above_ground(path, tmp_path / "out.las")

@@ -309,11 +309,9 @@ def test_a_cloud_in_degrees_is_refused_not_drawn_two_pixels_wide(tmp_path):
     """In WGS 84 the section drew its 0.0007 degrees along the line on the heights' scale (metres):
     a 1920 x 16,384 image, the points in its first two columns; refused in the one wording the
     surveys refuse degrees in (io.crs.refuse_angles)."""
-    from test_change import DEGREES_ORIGIN, DEGREES_SCALE, EPSG_4326_KEYS, write_las  # (tests/unit is on sys.path)
+    from test_change import write_degrees_grid  # (tests/unit is on sys.path)
 
-    g = np.arange(40) * 0.00002
-    x, y = np.meshgrid(g, g)
-    path = write_las(tmp_path / "wgs84.las", np.column_stack([x.ravel(), y.ravel(), 2.0 + x.ravel() * 1e4]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=DEGREES_ORIGIN)
+    path = write_degrees_grid(tmp_path / "wgs84.las", 40, lambda x, y: 2.0 + x * 1e4)
     with pytest.raises(InputError) as caught:
         gp.section(path, (-123.0, 44.0004, -122.9993, 44.0004), 0.00004)
     assert str(caught.value) == (

@@ -517,11 +517,9 @@ def test_a_lon_lat_toe_naming_no_crs_over_a_projected_survey_is_refused_as_a_rea
 def test_a_survey_in_degrees_is_refused_not_measured_in_square_degrees(tmp_path):
     """A pile in WGS 84 (GeoTIFF keys: geographic, EPSG:4326): its fill came out in square degrees
     times metres (~1e-9) under the label of cubic units: refused in one line, as change refuses."""
-    from test_change import DEGREES_ORIGIN, DEGREES_SCALE, EPSG_4326_KEYS, write_las  # (tests/unit is on sys.path)
+    from test_change import write_degrees_grid  # (tests/unit is on sys.path)
 
-    g = np.arange(40) * 0.00002
-    x, y = np.meshgrid(g, g)  # 0.0008 x 0.0008 degrees from DEGREES_ORIGIN (-123, 44)
-    path = write_las(tmp_path / "pile.las", np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=DEGREES_ORIGIN)
+    path = write_degrees_grid(tmp_path / "pile.las", 40)  # 0.0008 x 0.0008 degrees from DEGREES_ORIGIN (-123, 44)
     toe = "POLYGON ((-122.9998 44.0002, -122.9994 44.0002, -122.9994 44.0006, -122.9998 44.0006, -122.9998 44.0002))"
     with pytest.raises(InputError) as caught:
         gp.volume(path, toe, 0.00002, base=0.0)
