@@ -166,7 +166,7 @@ def test_an_empty_input_among_several_is_skipped_with_one_warning_by_every_opera
     empty = _empty_file(tmp_path / "in", kind)
     with pytest.warns(GigapointWarning) as caught:
         assert call([tiles[0], empty, tiles[1]], tmp_path) == 100
-    assert [str(w.message) for w in caught if "holds no points" in str(w.message)] == [f"{empty}: holds no points, skipped"]
+    assert [str(w.message) for w in caught if str(empty) in str(w.message)] == [f"{empty}: holds no points, skipped"]  # every warning naming it: one
 
 
 @pytest.mark.parametrize("kind", ["0-byte", "blank-lines"])
