@@ -145,6 +145,8 @@ def main(argv=None) -> int:
     from gigapoint.bench import benchmark_cameras, cpu_model, parse_count
 
     n, n_lod, cap = parse_count(args.points), parse_count(args.lod_points), parse_count(args.cap)
+    if cap >= n:  # step 1: every point drawn, the capped frames time nothing new
+        ap.error(f"--cap {args.cap} must be below --points {args.points} (a cap of {cap:,} leaves all {n:,} points drawn)")
     cpu = cpu_model()
     print(f"A/B: {args.base} (base) against the working tree (new); {cpu}")
     with tempfile.TemporaryDirectory() as tmp:
