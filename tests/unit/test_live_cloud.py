@@ -284,7 +284,7 @@ def test_float_colours_keep_the_range_of_the_first_coloured_frame():
 @pytest.mark.parametrize(
     "bad",
     [
-        lambda live, rgb: live.push(np.zeros((4, 3)), rgb=rgb, intensity=np.ones(5)),  # an attribute of the wrong length
+        lambda live, rgb: live.push(np.zeros((4, 3)), rgb=rgb, label=np.zeros(5, np.uint8)),  # an attribute of the wrong length
         lambda live, rgb: live.push(np.zeros((4, 3)), rgb=rgb, normals=np.ones((3, 3))),
         lambda live, rgb: live.push(np.zeros((4, 3)), rgb=rgb, time=float("nan")),
         lambda live, rgb: live.push(np.full((4, 3), np.nan), rgb=rgb),  # no valid point
@@ -304,6 +304,33 @@ def test_a_refused_frame_does_not_decide_the_streams_colour_range(bad):
         bad(live, np.full((4, 3), 200.0))
     live.push(np.ones((4, 3)), rgb=np.full((4, 3), 0.5), label=np.zeros(4, np.uint8))
     assert live.frame_points([live.frames[-1]])[1][0].tolist() == [128, 128, 128, 255]
+
+
+def test_a_producer_judging_colours_while_another_decides_a_range_is_not_broken(monkeypatch):
+    """_trial_colors iterated the stream's colour ranges without the pending lock: a producer
+    whose frame decided a new kind (16-bit colours) meanwhile raised "dictionary changed size
+    during iteration" in the other producer's push. The copy hook lets the second producer run
+    inside the first one's iteration (waiting for it at most a second: it waits on the lock)."""
+    import types
+
+    import gigapoint.live.cloud as live_cloud
+
+    live = LiveCloud()
+    live.push(np.zeros((4, 3)), rgb=np.full((4, 3), 0.5))  # decides the float range
+    other = threading.Thread(target=lambda: live.push(np.zeros((4, 3)), rgb=np.full((4, 3), 200, np.uint16)))
+    real_copy = live_cloud.copy.copy
+
+    def copy_while_another_pushes(x):
+        if not other.is_alive() and other.ident is None:
+            other.start()
+            other.join(timeout=1.0)
+        return real_copy(x)
+
+    monkeypatch.setattr(live_cloud, "copy", types.SimpleNamespace(copy=copy_while_another_pushes))
+    live.push(np.zeros((4, 3)), rgb=np.full((4, 3), 0.5))
+    other.join()
+    firsts = sorted(live.frame_points([f])[1][0].tolist() for f in live.frames)
+    assert firsts == [[128, 128, 128, 255]] * 2 + [[200, 200, 200, 255]]
 
 
 def test_clear_starts_a_stream_that_decides_its_own_colour_range():

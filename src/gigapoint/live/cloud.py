@@ -544,8 +544,11 @@ class LiveCloud:
     def _trial_colors(self) -> dict:
         """A copy of the stream's colour range for a frame's colours to be judged with, kept
         (``_keep_colors``) only once the frame is accepted: a frame refused after its colours were
-        judged (a bad attribute or time, no valid point) decided the range of the whole stream."""
-        return {kind: copy.copy(s) for kind, s in self._push_colors.items()}
+        judged (a bad attribute or time, no valid point) decided the range of the whole stream.
+        Under the pending lock: another producer's ``_keep_colors`` may add a kind meanwhile
+        (iterating then raised "dictionary changed size during iteration")."""
+        with self._pending_lock:
+            return {kind: copy.copy(s) for kind, s in self._push_colors.items()}
 
     def _keep_colors(self, scalers: dict) -> None:
         """An accepted frame's range (``_trial_colors``) is the stream's where it decided one
