@@ -556,6 +556,15 @@ def test_crossing_edges_names_the_first_two_edges_that_meet(ring, edges):
     assert crossing_edges(ring) == edges
 
 
+def test_a_clip_polygons_hole_outside_its_outline_is_refused_before_reading():
+    """A hole half outside its outline kept, by the even-odd rule, the points in its part beyond
+    the outline (as if the clip reached there); it is refused, as a volume's toe is."""
+    with pytest.raises(InputError) as error:
+        clip_polygon_of("POLYGON ((10 10, 30 10, 30 30, 10 30, 10 10), (25 15, 35 15, 35 20, 25 20, 25 15))", "test")
+    assert str(error.value) == "WKT POLYGON ((10 10, 30 10, 30 30,...: the polygon's hole 1 is not inside its outline (its first ring): redraw it, the outline first"
+    assert clip_polygon_of({"type": "Polygon", "coordinates": SQUARE_WITH_HOLE}, "test").describe() == "clip polygon the GeoJSON geometry (1 hole, 8 vertices)"
+
+
 def test_crossing_edges_match_every_pair_compared():
     from gigapoint.io.polygon import crossing_edges
 

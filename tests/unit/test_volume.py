@@ -351,6 +351,33 @@ def test_a_hole_outside_its_outline_is_refused_not_measured_between_the_rings():
         assert str(error.value) == "the GeoJSON geometry: the polygon's hole 1 is not inside its outline (its first ring): redraw it, the outline first"
 
 
+def test_a_hole_crossing_its_outline_or_another_hole_is_refused():
+    """Only a hole wholly beside its outline (or larger) was refused: one half outside it was
+    measured by the even-odd rule (the part outside counted) while polygon_area took the whole
+    hole off (area 400 against polygon_area 350); so were holes over one another, or one
+    holding another. A hole crossing a notch of its outline has every vertex inside it. A hole
+    touching its outline at a vertex is inside it."""
+    outline = square(10, 10, 30, 30)["coordinates"][0]
+    u_shape = [[10, 10], [30, 10], [30, 30], [22, 30], [22, 15], [18, 15], [18, 30], [10, 30], [10, 10]]  # a notch down to y 15
+    not_inside = "the GeoJSON geometry: the polygon's hole 1 is not inside its outline (its first ring): redraw it, the outline first"
+    overlap = "the GeoJSON geometry: the polygon's holes 1 and 2 overlap (by the even-odd rule their overlap is inside): make them one hole"
+    cases = [
+        ([outline, square(25, 15, 35, 20)["coordinates"][0]], not_inside),  # half outside
+        ([outline, [[5, 5], [12, 5], [12, 12], [5, 12], [5, 5]]], not_inside),  # over the outline's corner
+        ([u_shape, square(12, 20, 28, 25)["coordinates"][0]], not_inside),  # across the notch, every vertex inside
+        ([outline, square(12, 12, 18, 18)["coordinates"][0], square(15, 15, 20, 20)["coordinates"][0]], overlap),
+        ([outline, square(12, 12, 28, 28)["coordinates"][0], square(15, 15, 20, 20)["coordinates"][0]], overlap),  # one in the other
+        ([outline, square(15, 15, 20, 20)["coordinates"][0], square(12, 12, 28, 28)["coordinates"][0]], overlap),
+    ]
+    for rings, message in cases:
+        with pytest.raises(InputError) as error:
+            gp.volume(box_pile(), {"type": "Polygon", "coordinates": rings}, 0.5, base=100)
+        assert str(error.value) == message, rings
+    touching = [outline, [[10, 10], [14, 10], [10, 14], [10, 10]], square(16, 16, 20, 20)["coordinates"][0], square(20, 16, 24, 20)["coordinates"][0]]
+    pile = gp.volume(box_pile(), {"type": "Polygon", "coordinates": touching}, 0.5, base=100).piles[0]
+    assert pile.polygon_area == 400 - 8 - 16 - 16
+
+
 def test_a_toe_without_heights_says_why_and_how_to_mend_it():
     """Points 2 units apart and a 0.25 grid: the toe's pixels hold none, so no plane can be laid
     (the message named neither the grid nor a coarser one); a 3-unit grid finds the toe."""

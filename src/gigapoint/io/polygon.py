@@ -10,7 +10,8 @@ joined (where two overlap, as Features of one collection may, their overlap is k
 exactly on an edge (outer or a hole's) is kept, as a clip box's bounds are.
 
 Parsed with json and a small WKT reader (no shapely or GDAL); every bad input is a one-line
-InputError naming the file before anything is read. The kernels are in polygon_kernels.py. A
+InputError naming the file before anything is read (a hole outside its outline or over another hole
+too: ``check_holes``). The kernels are in polygon_kernels.py. A
 polygon is moved from one CRS into another by pyproj (``moved_polygon``: a GeoJSON naming a CRS
 other than the files', filters.py; ``--to-crs``, reproject.py).
 """
@@ -199,7 +200,10 @@ def _geojson_polygon(document, source: str, label: str) -> ClipPolygon:
     if not polygons:
         raise InputError(f"{label}: holds no polygon")
     moved_from = document.get("moved_from") if isinstance(document.get("moved_from"), str) else None  # (as_spec's)
-    return ClipPolygon(_polygon_rings(polygons, label), source, _epsg(document), names, features, moved_from)
+    polygon = ClipPolygon(_polygon_rings(polygons, label), source, _epsg(document), names, features, moved_from)
+    if moved_from is None:  # (a moved one's were checked before it was moved)
+        check_holes(polygon)
+    return polygon
 
 
 def _collect(node, polygons: list, names: list, features: list, label: str, name: str | None = None, feature: int | None = None) -> None:
@@ -353,7 +357,9 @@ def _wkt_polygon(text: str, source: str) -> ClipPolygon:
         raise problem("its rings are lists of 'x y' vertices in parentheses")
     if any(len(v) < 2 for rings in polygons for r in rings for v in r):
         raise problem("a vertex has fewer than 2 numbers")
-    return ClipPolygon(_polygon_rings(polygons, source), source, int(srid[1]) if srid else None)
+    polygon = ClipPolygon(_polygon_rings(polygons, source), source, int(srid[1]) if srid else None)
+    check_holes(polygon)
+    return polygon
 
 
 def far_apart(polygon: ClipPolygon, lo, hi) -> bool:
@@ -425,9 +431,23 @@ def crossing_edges(ring) -> tuple[int, int] | None:
     if n < 4:  # a triangle's edges all meet their neighbours only
         return None
     a = xy[numbers] - xy[0]  # (from a vertex: no cancellation at UTM sizes)
-    b = np.roll(a, -1, axis=0)
+
+    def apart(i, j):  # not i nor its neighbours
+        return ((j - i) % n > 1) & ((j - i) % n < n - 1)
+
+    found = _meeting_pairs(a, np.roll(a, -1, axis=0), apart, touching=True)
+    if found is None:
+        return None
+    return int(numbers[found[0]]) + 1, int(numbers[found[1]]) + 1
+
+
+def _meeting_pairs(a: np.ndarray, b: np.ndarray, compared, touching: bool) -> tuple[int, int] | None:
+    """The first pair (i < j) of the segments ``a[i]``..``b[i]`` that meet (cross, or touch too
+    where ``touching``) among those ``compared(i, j)`` (index arrays) allows; None where none do.
+    Only segments whose x and y ranges overlap are compared."""
+    n = len(a)
     lo, hi = np.minimum(a, b), np.maximum(a, b)
-    # of two edges whose x ranges overlap, one starts within the other's: each edge is compared
+    # of two segments whose x ranges overlap, one starts within the other's: each is compared
     # with those (sorted by where their x range starts) that start within its own
     order = np.argsort(lo[:, 0], kind="stable")
     first = np.searchsorted(lo[order, 0], lo[:, 0], side="left")
@@ -435,21 +455,18 @@ def crossing_edges(ring) -> tuple[int, int] | None:
     found = []
     for block in np.array_split(np.arange(n), max(1, int(counts.sum()) // 1_000_000)):  # ~a million pairs at a time
         i = np.repeat(block, counts[block])
-        offsets = np.arange(len(i)) - np.repeat(np.cumsum(counts[block]) - counts[block], counts[block])  # 0, 1, .. in each edge's run
+        offsets = np.arange(len(i)) - np.repeat(np.cumsum(counts[block]) - counts[block], counts[block])  # 0, 1, .. in each segment's run
         j = order[first[i] + offsets]
-        apart = (j - i) % n
-        tested = (apart > 1) & (apart < n - 1) & (lo[j, 1] <= hi[i, 1]) & (hi[j, 1] >= lo[i, 1])  # not i nor its neighbours; y ranges overlap
+        tested = compared(i, j) & (lo[j, 1] <= hi[i, 1]) & (hi[j, 1] >= lo[i, 1])  # y ranges overlap
         i, j = i[tested], j[tested]
-        meet = _segments_meet(a[i], b[i], a[j], b[j])
+        meet = _segments_meet(a[i], b[i], a[j], b[j], touching)
         found += list(zip(np.minimum(i, j)[meet].tolist(), np.maximum(i, j)[meet].tolist()))
-    if not found:
-        return None
-    i, j = min(found)
-    return int(numbers[i]) + 1, int(numbers[j]) + 1
+    return min(found) if found else None
 
 
-def _segments_meet(p: np.ndarray, q: np.ndarray, r: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Whether segment p..q meets each of the segments r..s ((k, 2) arrays): crosses or touches."""
+def _segments_meet(p: np.ndarray, q: np.ndarray, r: np.ndarray, s: np.ndarray, touching: bool = True) -> np.ndarray:
+    """Whether segment p..q meets each of the segments r..s ((k, 2) arrays): crosses, or touches
+    too where ``touching``."""
 
     def orientation(a, b, c):
         return np.sign((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
@@ -459,6 +476,8 @@ def _segments_meet(p: np.ndarray, q: np.ndarray, r: np.ndarray, s: np.ndarray) -
 
     d1, d2, d3, d4 = orientation(r, s, p), orientation(r, s, q), orientation(p, q, r), orientation(p, q, s)
     crossing = (d1 * d2 < 0) & (d3 * d4 < 0)
+    if not touching:
+        return crossing
     touching = ((d1 == 0) & within(r, s, p)) | ((d2 == 0) & within(r, s, q)) | ((d3 == 0) & within(p, q, r)) | ((d4 == 0) & within(p, q, s))
     return crossing | touching
 
@@ -482,6 +501,45 @@ def check_simple(polygon: ClipPolygon, why: str) -> None:
                 raise InputError(f"{polygon.source}: {problem}: {why}")
 
 
+def check_holes(polygon: ClipPolygon) -> None:
+    """A one-line InputError naming ``polygon``'s file where a hole is not inside its outline (a
+    vertex outside it, or an edge crossing one of its edges) or two holes overlap (their edges
+    cross, or one holds the other): by the even-odd rule the area between them was inside, not
+    left out (a clip kept points beyond the outline; a volume's pixels and its polygon_area, the
+    outline's less its holes', disagreed). A hole may touch its outline or another hole."""
+    several = len(polygon.polygons) > 1
+    for p, (outline, *holes) in enumerate(polygon.polygons, start=1):
+        if not holes:
+            continue
+        name = _ring_name(p, 0, several)
+        rings = [outline, *holes]
+        ring_of = np.repeat(np.arange(len(rings)), [len(r) for r in rings])  # of each edge (by its start): 0 the outline, h hole h
+        a = np.concatenate(rings) - outline[0]  # (from a vertex: no cancellation at UTM sizes)
+        b = np.concatenate([np.roll(r, -1, axis=0) for r in rings]) - outline[0]
+        crossing = _meeting_pairs(a, b, lambda i, j, ring_of=ring_of: ring_of[i] != ring_of[j], touching=False)
+        crossed = None if crossing is None else sorted(int(ring_of[e]) for e in crossing)
+        outside = ~ClipPolygon([[outline]], polygon.source).inside(np.concatenate(holes))
+        strays = ring_of[len(outline):][outside].tolist() + ([crossed[1]] if crossed and crossed[0] == 0 else [])
+        if strays:
+            raise InputError(f"{polygon.source}: {name}'s hole {min(strays)} is not inside its outline (its first ring): redraw it, the outline first")
+        overlap = crossed or _nested_holes(holes, polygon.source)
+        if overlap:
+            raise InputError(f"{polygon.source}: {name}'s holes {overlap[0]} and {overlap[1]} overlap (by the even-odd rule their overlap is inside): make them one hole")
+
+
+def _nested_holes(holes: list[np.ndarray], source: str) -> list[int] | None:
+    """The numbers (from 1, the lower first) of two holes one of which holds every vertex of the
+    other (their edges crossing none), or None."""
+    starts = np.cumsum([0] + [len(hole) for hole in holes[:-1]])
+    vertices = np.concatenate(holes)
+    for h, hole in enumerate(holes, start=1):  # (one test of every hole's vertices a hole: not one a pair)
+        all_inside = np.logical_and.reduceat(ClipPolygon([[hole]], source).inside(vertices), starts)
+        all_inside[h - 1] = False
+        if all_inside.any():
+            return sorted((int(all_inside.argmax()) + 1, h))
+    return None
+
+
 __all__ = [
-    "ClipPolygon", "check_simple", "clip_polygon_of", "crossing_edges", "crossing_problem", "far_apart", "looks_like_lon_lat", "moved_polygon", "no_area_problem",
+    "ClipPolygon", "check_holes", "check_simple", "clip_polygon_of", "crossing_edges", "crossing_problem", "far_apart", "looks_like_lon_lat", "moved_polygon", "no_area_problem",
 ]  # fmt: skip

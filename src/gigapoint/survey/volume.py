@@ -209,17 +209,6 @@ def ring_area(ring: np.ndarray) -> float:
     return abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))) / 2
 
 
-def _check_holes(toe) -> None:
-    """A one-line InputError for a hole that is not inside its polygon's outline (rings swapped,
-    a hole drawn beside it): the pixels between the rings were measured, the area reported as
-    the outline's less the hole's, below 0."""
-    for p, (outline, *holes) in enumerate(toe.polygons, start=1):
-        for h, hole in enumerate(holes, start=1):
-            if ring_area(hole) >= ring_area(outline) or not ClipPolygon([[outline]], toe.source).inside(hole).any():
-                name = "the polygon" if len(toe.polygons) == 1 else f"polygon {p}"
-                raise InputError(f"{toe.source}: {name}'s hole {h} is not inside its outline (its first ring): redraw it, the outline first")
-
-
 def _base_heights(base, toe_xy: np.ndarray, toe_z: np.ndarray, xy: np.ndarray, where: str) -> tuple[np.ndarray, dict]:
     """The base's heights at ``xy`` and what it is (``Pile.base``), from the toe's heights ``toe_z`` at ``toe_xy``."""
     if not isinstance(base, str):
@@ -396,7 +385,6 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
         check_max_distance("volume: fill_nodata", fill_nodata)
     toe = clip_polygon_of(clip_polygon, "volume: the GeoJSON geometry" if isinstance(clip_polygon, dict) else f"volume: clip_polygon={clip_polygon!r}")
     check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it")
-    _check_holes(toe)
     point_filter(classes, drop_classes, where="volume")  # bad classes told before an octree is opened
     octree = _opened_octree(source)
     try:
