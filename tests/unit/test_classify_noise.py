@@ -211,9 +211,33 @@ def test_coordinates_in_degrees_need_both_steps_given(tmp_path):
     with pytest.raises(InputError) as caught:
         gp.classify_noise(path, tmp_path / "out.laz", step=0.00004)
     assert str(caught.value) == (
-        f"classify_noise: {path} has coordinates in degrees (EPSG:4326); a default step or step_z (4 m) needs metres or feet: "
+        f"classify_noise: {path} has coordinates in degrees (EPSG:4326); a default step_z (4 m) needs metres or feet: "
         "give both, or reproject first (gigapoint convert --to-crs EPSG:32610, WGS 84 / UTM zone 10N, where the data lie)"
     )
     assert not (tmp_path / "out.laz").exists()
     result = gp.classify_noise(path, tmp_path / "out.laz", step=0.00004, step_z=4.0)
     assert (result.params["step"], result.params["step_z"], result.noise) == (0.00004, 4.0, 0)
+
+
+def test_the_parameters_read_the_crs_from_one_header_read(tmp_path, monkeypatch):
+    """noise_parameters and ground_parameters read the files' header for their units, then
+    again (refuse_files_in_angles) to refuse degrees: two reads of each header, a request each
+    for files on a network. Now one read gives both; the refusal names the defaults missing
+    (it said "a default step or step_z" with step given)."""
+    import gigapoint.io.las as las
+    from gigapoint.survey.ground_raster import ground_parameters
+    from gigapoint.survey.noise import noise_parameters
+    from test_change import DEGREES_ORIGIN, DEGREES_SCALE, EPSG_4326_KEYS, write_las  # (tests/unit is on sys.path)
+
+    g = np.arange(20) * 0.00002
+    x, y = np.meshgrid(g, g)
+    path = write_las(tmp_path / "wgs84.las", np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=DEGREES_ORIGIN)
+    reads = []
+    real_read = las.read_las_header
+    monkeypatch.setattr(las, "read_las_header", lambda f, *a, **k: reads.append(f) or real_read(f, *a, **k))
+    for refused in (lambda: noise_parameters([path], step_z=1.0), lambda: ground_parameters([path], window=1.0)):
+        with pytest.raises(InputError, match=r"; a default (step|cell) \((4|1) m\) needs metres or feet: "):
+            refused()
+        assert reads == [path]
+        reads.clear()
+    assert noise_parameters([path], step=0.00004, step_z=1.0)["units"] == "°" and reads == [path]

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ..errors import GigapointError, GigapointWarning, InputError, warn
 from ._base import read_once
-from .las import LasReader, first_crs_header, geokeys, read_las_header
+from .las import LasReader, first_crs_file, first_crs_header, geokeys, read_las_header
 from .paths import file_names
 from .ply import first_ply_crs
 from .registry import reader_for
@@ -190,13 +190,19 @@ def refuse_angles(where: str, source, crs: str | None, units: dict, operation: s
     )
 
 
-def refuse_files_in_angles(where: str, files, operation: str, instead: str = "") -> None:
-    """``refuse_angles`` for the first LAS/LAZ file of ``files`` naming a CRS (``files_units``' file)."""
-    for f in files:
-        hdr = first_crs_header([f])
-        if hdr is not None:
-            refuse_angles(where, f, hdr.crs(), crs_units(hdr.crs(), geokeys(hdr.vlrs)), operation, instead, (hdr.mins, hdr.maxs))
-            return
+def files_length_units(where: str, files, operation: str | None, instead: str = "") -> dict:
+    """``files_units`` of ``files``, and where ``operation`` is given (what needs lengths: None,
+    nothing does) ``refuse_angles`` for the file they are read from, its CRS named: one header
+    read (each file's in turn, up to the first naming a CRS), not one for each."""
+    found = first_crs_file(files)
+    if found is None:
+        return crs_units(None)
+    path, hdr = found
+    crs = hdr.crs()
+    units = crs_units(crs, geokeys(hdr.vlrs))
+    if operation is not None:
+        refuse_angles(where, path, crs, units, operation, instead, (hdr.mins, hdr.maxs))
+    return units
 
 
 def crs_units(crs: str | None, geokeys: dict[int, int] | None = None) -> dict:

@@ -676,13 +676,19 @@ def first_crs_header(files) -> LasHeader | None:
     """The header of the first LAS/LAZ file of ``files`` that names a CRS (warn_mixed_crs warns
     where files differ), None without one; a file of another format, or gone or damaged since it
     was read, says nothing (its header is not a LAS header)."""
+    found = first_crs_file(files)
+    return None if found is None else found[1]
+
+
+def first_crs_file(files) -> tuple[object, LasHeader] | None:
+    """(the file, its header) of ``first_crs_header``: messages name the file."""
     for f in files:
         try:
             hdr = read_las_header(f, salvage=True)
         except (GigapointError, OSError):
             continue
         if hdr.crs():
-            return hdr
+            return f, hdr
     return None
 
 

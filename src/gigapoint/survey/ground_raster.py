@@ -34,18 +34,17 @@ def ground_parameters(files, cell=None, slope=None, window=None, threshold=None,
     as metres). A value that is no number > 0 (threshold, scalar: >= 0), or coordinates in
     degrees without every one of ``lengths`` given (those the caller uses), is a one-line
     InputError; ``where``: the operation messages name."""
-    from ..io.crs import files_units, refuse_files_in_angles
+    from ..io.crs import files_length_units
 
     given = {"cell": cell, "slope": slope, "window": window, "threshold": threshold, "scalar": scalar}
     for name, value in given.items():
         least = "> 0" if name in ("cell", "slope", "window") else ">= 0"
         if value is not None and not (is_real(value) and (value > 0 if least == "> 0" else value >= 0)):
             raise InputError(f"{where}: {name} must be a number {least}, got {number_text(value)}")
-    units = files_units(files)
-    across, up = units["horizontal"], units["vertical"]
     defaults = [f"{name} ({DEFAULTS_METRES[name]:g} m)" for name in lengths if given[name] is None]
-    if defaults:
-        refuse_files_in_angles(where, files, f"a default {' or '.join(defaults)}", f"give {'both' if len(lengths) > 1 else lengths[0]}, or ")
+    needs_lengths = f"a default {' or '.join(defaults)}" if defaults else None
+    units = files_length_units(where, files, needs_lengths, f"give {'both' if len(lengths) > 1 else lengths[0]}, or ")
+    across, up = units["horizontal"], units["vertical"]
     per_metre_across = 1.0 / across["metres"] if across is not None and across["metres"] else 1.0
     per_metre_up = 1.0 / up["metres"] if up is not None and up["metres"] else 1.0
     params = {

@@ -59,17 +59,17 @@ def noise_parameters(files, step=None, step_z=None, isolated=None) -> dict:
     number >= 0, or coordinates in degrees without both steps given, is a one-line InputError."""
     import numbers
 
-    from ..io.crs import files_units, refuse_files_in_angles
+    from ..io.crs import files_length_units
 
     for name, value in (("step", step), ("step_z", step_z)):
         if value is not None and not (is_real(value) and value > 0):
             raise InputError(f"classify_noise: {name} must be a number > 0, got {number_text(value)}")
     if isolated is not None and not (isinstance(isolated, numbers.Integral) and not isinstance(isolated, bool) and isolated >= 0):
         raise InputError(f"classify_noise: isolated must be a whole number >= 0, got {isolated!r}")
-    units = files_units(files)
+    defaulted = " or ".join(name for name, value in (("step", step), ("step_z", step_z)) if value is None)
+    needs_lengths = f"a default {defaulted} ({NOISE_STEP_METRES:g} m)" if defaulted else None
+    units = files_length_units("classify_noise", files, needs_lengths, "give both, or ")
     across, up = units["horizontal"], units["vertical"]
-    if step is None or step_z is None:
-        refuse_files_in_angles("classify_noise", files, f"a default step or step_z ({NOISE_STEP_METRES:g} m)", "give both, or ")
     metres_across = across["metres"] if across is not None and across["metres"] else 1.0
     metres_up = up["metres"] if up is not None and up["metres"] else 1.0
     step = NOISE_STEP_METRES / metres_across if step is None else float(step)
