@@ -6,6 +6,7 @@ autzen_trim.laz across; bad values one line before reading."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import laspy
 import numpy as np
@@ -135,6 +136,16 @@ def test_write_csv_replaces_a_file_only_with_overwrite(files, tmp_path):
     assert mine.read_text() == "my survey notes\n"
     cut.write_csv(mine, overwrite=True)
     assert mine.read_text().splitlines()[0] == "distance_along,offset,z,classification"
+
+
+def test_write_csv_writes_rows_under_any_name(files, tmp_path):
+    """write_csv refused any suffix but .csv ("unsupported output type '.txt'"), where rows.txt
+    was written before; the CLI's --csv asks for a .csv itself."""
+    cut = gp.section(files["straight"], line_of("straight"), WIDTH)
+    cut.write_csv(tmp_path / "mine.csv")
+    for name in ("rows.txt", "rows"):
+        cut.write_csv(tmp_path / name)
+        assert (tmp_path / name).read_text() == (tmp_path / "mine.csv").read_text()
 
 
 @pytest.mark.parametrize("kind", ["straight", "diagonal"])
@@ -315,6 +326,24 @@ def test_a_cloud_in_degrees_is_refused_not_drawn_two_pixels_wide(tmp_path):
     with pytest.raises(InputError) as caught:
         gp.section(path, (-123.0, 44.0004, -122.9993, 44.0004), 0.00004)
     assert str(caught.value) == (
-        "section: wgs84.las has coordinates in degrees; drawing heights against distances along the line needs metres or feet: "
+        f"section: {path} has coordinates in degrees (EPSG:4326); drawing heights against distances along the line needs metres or feet: "
         "reproject first (gigapoint convert --to-crs EPSG:32610, WGS 84 / UTM zone 10N, where the data lie)"
     )
+
+
+def test_degrees_are_refused_before_the_corridor_is_read(tmp_path):
+    """The refusal of degrees came after the corridor's points were read, and only where it held
+    some: a UTM line over a cloud in degrees was "no point passes the filter", for files, an
+    opened cloud and an octree alike. The units are checked first, the CRS named."""
+    from test_change import DEGREES_ORIGIN, DEGREES_SCALE, EPSG_4326_KEYS, write_las  # (tests/unit is on sys.path)
+
+    g = np.arange(40) * 0.00002
+    x, y = np.meshgrid(g, g)
+    path = write_las(tmp_path / "wgs84.las", np.column_stack([x.ravel(), y.ravel(), 2.0 + x.ravel() * 1e4]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=DEGREES_ORIGIN)
+    copc = Path(__file__).parent / "data" / "pdal_ept" / "autzen_clip_4326.copc.laz"
+    why = "has coordinates in degrees (EPSG:4326); drawing heights against distances along the line needs metres or feet: reproject first"
+    wgs84 = "has coordinates in degrees (WGS 84 (EPSG:4326)); drawing heights against distances along the line needs metres or feet: reproject first"
+    for source, said in ((path, f"{path} {why}"), (gp.open(path), f"wgs84.las {why}"), (copc, f"{copc} {wgs84}"), (gp.open(copc), f"autzen_clip_4326.copc.laz {wgs84}")):
+        with pytest.raises(InputError) as caught:
+            gp.section(source, (637000, 851000, 637500, 851500), 10)  # (in UTM metres: no point of the cloud in its corridor)
+        assert str(caught.value).startswith(f"section: {said} (gigapoint convert --to-crs EPSG:32610"), source

@@ -107,16 +107,6 @@ def kept_points(cloud, keep: PointFilter, label: str, region: str) -> list[Point
     return kept
 
 
-def octree_path_kept(path, keep: PointFilter, region: str, instead: str) -> tuple[list[PointChunk], str, dict]:
-    """(``kept_points``, the octree's name, its units: reader.cloud_units) of the octree at
-    ``path`` (opened and closed here); an unfinished conversion's preview (a sample of the
-    points) a one-line InputError: ``instead``, what to do instead, ends it."""
-    from .reader import cloud_units
-
-    with opened_octree(path, instead) as octree:
-        return kept_points(octree, keep, shown_url(path), region), octree.name, cloud_units(octree)
-
-
 @contextmanager
 def opened_octree(path, instead: str) -> Iterator[OctreeCloud]:
     """The octree at ``path`` (``open_octree``), closed after (a URL's connections); an unfinished

@@ -19,12 +19,14 @@ import numpy as np
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
 from ..errors import CameraError, InputError, check_switch, count_or_inf, count_text, is_real, number_text, numbers_text
-from ..io.crs import crs_units, refuse_angles
+from ..io._base import headers_once
+from ..io.crs import crs_units, files_length_units, refuse_angles
 from ..io.filters import PointFilter, along_and_across, corridor_of, point_filter
-from ..io.paths import given_paths
+from ..io.http import shown_url
+from ..io.paths import expand_paths, given_paths
 from ..lod import is_lod_source
-from ..lod.query import is_octree, kept_points, octree_path_kept
-from ..lod.reader import cloud_units
+from ..lod.query import is_octree, kept_points, opened_octree
+from ..lod.reader import cloud_crs_units
 from ..render import Camera, Frame, RenderSettings, render_frame
 from ..render.camera import MAX_IMAGE_SIDE, image_side
 
@@ -86,7 +88,7 @@ class Section:
         from ..render.image_files import check_output
 
         check_switch("overwrite", overwrite, "section")
-        check_output(path, overwrite, suffixes={".csv"})
+        check_output(path, overwrite, suffixes=None)  # (any name: the CLI's --csv asks for a .csv itself)
 
         columns = [self.distance, self.offset, self.z]
         header, formats = "distance_along,offset,z", ["%.6f"] * 3
@@ -192,24 +194,39 @@ def section(source, line, width, classes=None, drop_classes=None, clip_polygon=N
     lane = corridor_of(line, width, f"section: line={numbers_text(line)}", f"section: width={number_text(width)}")
     keep = point_filter(classes, drop_classes, where="section", corridor=lane, clip_polygon=clip_polygon)  # (its bad values before anything is read)
     if isinstance(source, PointCloud):
+        units = _units_in_lengths(source)
         kept = list(keep.apply(source.chunks(), source.name))  # (the corridor's points only)
         keep.check_passed(source.name)
-        cloud, units = build_cloud(kept, name=source.name, colors="rgba"), cloud_units(source)  # (its colours as the cloud holds them)
+        cloud = build_cloud(kept, name=source.name, colors="rgba")  # (its colours as the cloud holds them)
     elif is_octree(source):
-        cloud, units = build_cloud(kept_points(source, keep, source.name, _region(keep)), name=source.name, colors="rgba"), cloud_units(source)
+        units = _units_in_lengths(source)
+        cloud = build_cloud(kept_points(source, keep, source.name, _region(keep)), name=source.name, colors="rgba")
     else:
         paths = given_paths(source, "section", "source")  # (5 among them: "section: source[0]: ...", not gp.open's "open: paths[0]")
         if len(paths) == 1 and is_lod_source(paths[0]):
-            kept, name, units = octree_path_kept(paths[0], keep, _region(keep), "section the point files, or wait for the octree")
-            cloud = build_cloud(kept, name=name, colors="rgba")
+            with opened_octree(paths[0], "section the point files, or wait for the octree") as octree:
+                units = _units_in_lengths(octree, shown_url(paths[0]))
+                cloud = build_cloud(kept_points(octree, keep, shown_url(paths[0]), _region(keep)), name=octree.name, colors="rgba")
         else:  # only the corridor's points are read
             from .. import open_for
 
-            cloud = open_for("section", paths, classes=classes, drop_classes=drop_classes, corridor=lane, clip_polygon=keep.polygon)
-            units = cloud_units(cloud)
-    # (in degrees the image drew 0.0007 degrees along the line on the heights' metre scale: 2 pixels wide, 16,384 tall)
-    refuse_angles("section", cloud.name, None, units, "drawing heights against distances along the line", bounds=cloud.bounds)
+            with headers_once():  # (the header naming the CRS read once: here, then by open_for)
+                units = files_length_units("section", expand_paths(paths, where="section"), DRAWN_ALONG)
+                cloud = open_for("section", paths, classes=classes, drop_classes=drop_classes, corridor=lane, clip_polygon=keep.polygon)
     return Section(cloud, lane[:4], lane[4], units)
+
+
+#: what a section needs lengths for, as its refusal of degrees says it (in degrees the image drew
+#: 0.0007 degrees along the line on the heights' metre scale: 2 pixels wide, 16,384 tall)
+DRAWN_ALONG = "drawing heights against distances along the line"
+
+
+def _units_in_lengths(cloud, label: str | None = None) -> dict:
+    """``cloud``'s units (reader.cloud_crs_units), its x and y in degrees refused (``label``
+    names it, else its name) before a point is read."""
+    crs, units = cloud_crs_units(cloud)
+    refuse_angles("section", label or cloud.name, crs, units, DRAWN_ALONG, bounds=cloud.bounds)
+    return units
 
 
 def _region(keep: PointFilter) -> str:
