@@ -478,8 +478,8 @@ def _segments_meet(p: np.ndarray, q: np.ndarray, r: np.ndarray, s: np.ndarray, t
     crossing = (d1 * d2 < 0) & (d3 * d4 < 0)
     if not touching:
         return crossing
-    touching = ((d1 == 0) & within(r, s, p)) | ((d2 == 0) & within(r, s, q)) | ((d3 == 0) & within(p, q, r)) | ((d4 == 0) & within(p, q, s))
-    return crossing | touching
+    touches = ((d1 == 0) & within(r, s, p)) | ((d2 == 0) & within(r, s, q)) | ((d3 == 0) & within(p, q, r)) | ((d4 == 0) & within(p, q, s))
+    return crossing | touches
 
 
 def crossing_problem(ring, name: str = "the polygon") -> str | None:
