@@ -546,6 +546,16 @@ def _project_every(low, med, high, first, c, step, bits, m, width, height, near,
     return n
 
 
+@njit(inline="always")
+def _every_scratch(max_count, step):
+    """A thread's (pix, depth, sub_low, sub_med, sub_high) for ``_project_every`` of batches of
+    up to ``max_count`` points (the sub_* words only where step > 1 gathers into them)."""
+    sub = max_count if step > 1 else 0
+    pix = np.empty(max_count, np.int32)
+    depth = np.empty(max_count, np.float32)
+    return pix, depth, np.empty(sub, np.uint32), np.empty(sub, np.uint32), np.empty(sub, np.uint32)
+
+
 @njit(parallel=True, cache=True)
 def hqs_shade(
     firsts,
@@ -600,10 +610,7 @@ def hqs_shade(
         r1 = bands[t + 1]
         p0 = np.int32(r0 * width)
         p1 = np.int32(r1 * width)
-        pix = np.empty(max_count, np.int32)
-        depth = np.empty(max_count, np.float32)
-        sub = max_count if step > 1 else 0
-        sub_low, sub_med, sub_high = np.empty(sub, np.uint32), np.empty(sub, np.uint32), np.empty(sub, np.uint32)
+        pix, depth, sub_low, sub_med, sub_high = _every_scratch(max_count, step)
         for k in range(counts.shape[0]):
             if r0 == r1 or row_hi[k] + reach < r0 or row_lo[k] - reach >= r1:
                 continue
@@ -771,11 +778,8 @@ def transparency_shade(
         r1 = bands[t + 1]
         p0 = np.int32(r0 * width)
         p1 = np.int32(r1 * width)
-        pix = np.empty(max_count, np.int32)
-        depth = np.empty(max_count, np.float32)
+        pix, depth, sub_low, sub_med, sub_high = _every_scratch(max_count, step)
         dbits = depth.view(np.uint32)
-        sub = max_count if step > 1 else 0
-        sub_low, sub_med, sub_high = np.empty(sub, np.uint32), np.empty(sub, np.uint32), np.empty(sub, np.uint32)
         for k in range(counts.shape[0]):
             if r0 == r1 or row_hi[k] + reach < r0 or row_lo[k] - reach >= r1:
                 continue

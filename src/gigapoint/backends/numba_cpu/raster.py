@@ -540,17 +540,17 @@ def rasterize(firsts, counts, bits, mats, low, med, high, ext, ext_firsts, codes
             c = counts[k]
             n = (c + step - 1) // step
             packed = codes[k] != FULL_LAYOUT
+            fine = 0
+            for v in range(n_views):
+                fine = max(fine, bits[v, k])
             if step > 1:
                 gather_every(low, f, n, step, sub_low)
-                if not packed:
+                if not packed and fine > 10:  # a 10-bit draw reads the low word alone, a 20-bit one not the high
                     gather_every(med, f, n, step, sub_med)
+                if not packed and fine > 20:
                     gather_every(high, f, n, step, sub_high)
-            if packed:
-                fine = 0
-                for v in range(n_views):
-                    fine = max(fine, bits[v, k])
-                if fine > 10:  # a 10-bit draw reads the low word alone
-                    expand_tails(ext, ext_firsts[k], codes[k], np.int64(0), n, step, sub_med, sub_high, sub_bits)  # np.int64: a literal 0 compiles it again
+            if packed and fine > 10:
+                expand_tails(ext, ext_firsts[k], codes[k], np.int64(0), n, step, sub_med, sub_high, sub_bits)  # np.int64: a literal 0 compiles it again
             for v in range(n_views):
                 buf = frames[v] if t == 0 or banded else scratch[v, t - 1]
                 near = np.float32(nears[v])
