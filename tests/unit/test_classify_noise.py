@@ -224,14 +224,13 @@ def test_the_parameters_read_the_crs_from_one_header_read(tmp_path, monkeypatch)
     again (refuse_files_in_angles) to refuse degrees: two reads of each header, a request each
     for files on a network. Now one read gives both; the refusal names the defaults missing
     (it said "a default step or step_z" with step given)."""
-    import gigapoint.io.las as las
+    from test_change import write_degrees_grid  # (tests/unit is on sys.path)
+
+    from gigapoint.io import las
     from gigapoint.survey.ground_raster import ground_parameters
     from gigapoint.survey.noise import noise_parameters
-    from test_change import DEGREES_ORIGIN, DEGREES_SCALE, EPSG_4326_KEYS, write_las  # (tests/unit is on sys.path)
 
-    g = np.arange(20) * 0.00002
-    x, y = np.meshgrid(g, g)
-    path = write_las(tmp_path / "wgs84.las", np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=DEGREES_ORIGIN)
+    path = write_degrees_grid(tmp_path / "wgs84.las", 20)
     reads = []
     real_read = las.read_las_header
     monkeypatch.setattr(las, "read_las_header", lambda f, *a, **k: reads.append(f) or real_read(f, *a, **k))

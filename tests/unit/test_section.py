@@ -335,11 +335,9 @@ def test_degrees_are_refused_before_the_corridor_is_read(tmp_path):
     """The refusal of degrees came after the corridor's points were read, and only where it held
     some: a UTM line over a cloud in degrees was "no point passes the filter", for files, an
     opened cloud and an octree alike. The units are checked first, the CRS named."""
-    from test_change import DEGREES_ORIGIN, DEGREES_SCALE, EPSG_4326_KEYS, write_las  # (tests/unit is on sys.path)
+    from test_change import write_degrees_grid  # (tests/unit is on sys.path)
 
-    g = np.arange(40) * 0.00002
-    x, y = np.meshgrid(g, g)
-    path = write_las(tmp_path / "wgs84.las", np.column_stack([x.ravel(), y.ravel(), 2.0 + x.ravel() * 1e4]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=DEGREES_ORIGIN)
+    path = write_degrees_grid(tmp_path / "wgs84.las", 40, lambda x, y: 2.0 + x * 1e4)
     copc = Path(__file__).parent / "data" / "pdal_ept" / "autzen_clip_4326.copc.laz"
     why = "has coordinates in degrees (EPSG:4326); drawing heights against distances along the line needs metres or feet: reproject first"
     wgs84 = "has coordinates in degrees (WGS 84 (EPSG:4326)); drawing heights against distances along the line needs metres or feet: reproject first"
