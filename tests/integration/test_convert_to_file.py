@@ -407,3 +407,48 @@ def test_the_summary_says_a_slow_rate_in_points_not_zero_millions(cli, tmp_path)
     rc, stdout, err = cli("convert", tmp_path / "few.npy", "-o", tmp_path / "few.las", "-q")
     assert rc == 0, err
     assert re.search(r", \d[\d,]* points/s$", stdout.strip()), stdout
+
+
+def _ply_in_utm(path):
+    """100 points in a PLY file naming EPSG:32610 in its ``comment crs`` line (as gigapoint writes it)."""
+    import plyfile
+
+    v = np.zeros(100, [("x", "<f8"), ("y", "<f8"), ("z", "<f8")])
+    v["x"], v["y"], v["z"] = 500_000 + np.arange(100.0), 5_000_000.0, np.arange(100) % 7
+    plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")], comments=["crs EPSG:32610"]).write(str(path))
+    return path
+
+
+@pytest.mark.parametrize("output", ["out.ply", "out.las", "octree"])
+def test_a_ply_inputs_crs_is_kept_by_every_output(tmp_path, output):
+    """The CRS of the outputs was read from LAS headers only: a PLY file's ``comment crs`` was
+    lost converting it to PLY, LAS or an octree, without a word."""
+    import json
+
+    import plyfile
+
+    pyproj = pytest.importorskip("pyproj")
+    out = tmp_path / output
+    convert(_ply_in_utm(tmp_path / "utm.ply"), out)
+    if output == "out.ply":
+        assert plyfile.PlyData.read(str(out)).comments == ["crs EPSG:32610"]
+    else:
+        crs = read_las_header(out).crs() if output == "out.las" else json.loads((out / "octree.json").read_text())["crs"]
+        assert pyproj.CRS.from_user_input(crs).to_epsg() == 32610
+
+
+def test_a_compound_crs_too_long_for_a_ply_header_line_is_written_by_its_codes(autzen_path, tmp_path):
+    """The WKT of EPSG:6557+6360 is 1,042 bytes on one line: a PLY header line of that length is
+    refused by RPly (Open3D, CloudCompare: 1024 at most). A CRS naming its EPSG codes is written
+    by them, and read back as that CRS (its vertical unit too)."""
+    import plyfile
+
+    from gigapoint.io import files_crs_units
+
+    pytest.importorskip("pyproj")
+    out = tmp_path / "compound.ply"
+    convert(autzen_path, out, clip=CLIP, to_crs="EPSG:6557+6360", from_crs="EPSG:2994+6360")
+    head = out.read_bytes()[:4096].split(b"end_header\n")[0]
+    assert max(len(line) for line in head.splitlines()) < 1024 and plyfile.PlyData.read(str(out)).comments == ["crs EPSG:6557+6360"]
+    crs, units = files_crs_units([out])
+    assert crs == "EPSG:6557+6360" and units["vertical"]["symbol"] == "US ft" and gp.open(out).n_points > 0

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import gigapoint as gp
-from gigapoint.errors import InputError
+from gigapoint.errors import GigapointWarning, InputError
 from gigapoint.io.las import read_las_header, wkt_of
 from gigapoint.io.write import save_cloud
 
@@ -265,7 +265,7 @@ import resource, signal, sys
 from pathlib import Path
 import numpy as np
 import gigapoint as gp
-from gigapoint.errors import InputError
+from gigapoint.errors import GigapointWarning, InputError
 
 out = Path(sys.argv[1])
 cloud = gp.from_arrays(np.random.default_rng(3).random((20000, 3)) * 100, np.full((20000, 3), 9, np.uint8))
@@ -385,3 +385,43 @@ def test_a_progressive_octree_keeps_8_bit_colours_after_an_add_it_refused(tmp_pa
     red = np.asarray(laspy.read(tmp_path / "after.laz").red)
     np.testing.assert_array_equal(np.sort(red), np.sort(np.asarray(laspy.read(autzen_path).red)))
     cloud.close()
+
+
+def test_a_ply_cloud_saved_keeps_its_crs(tmp_path):
+    """A cloud opened from a PLY file naming its CRS saved it to no file: the CRS records were
+    read from LAS headers only."""
+    import plyfile
+
+    pyproj = pytest.importorskip("pyproj")
+    v = np.zeros(10, [("x", "<f8"), ("y", "<f8"), ("z", "<f8")])
+    v["x"] = 500_000 + np.arange(10.0)
+    plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")], comments=["crs EPSG:32610"]).write(str(tmp_path / "utm.ply"))
+    cloud = gp.open(tmp_path / "utm.ply")
+    cloud.save(tmp_path / "out.ply")
+    cloud.save(tmp_path / "out.las")
+    assert plyfile.PlyData.read(str(tmp_path / "out.ply")).comments == ["crs EPSG:32610"]
+    assert pyproj.CRS.from_user_input(read_las_header(tmp_path / "out.las").crs()).to_epsg() == 32610
+
+
+#: a WKT naming no EPSG code of its own, not in ASCII
+ZONE_WKT = (
+    'PROJCS["Zoné 10",GEOGCS["WGS 84",DATUM["WGS_1984",SPHEROID["WGS 84",6378137,298.257223563]],PRIMEM["Greenwich",0],'
+    'UNIT["degree",0.0174532925199433]],PROJECTION["Transverse_Mercator"],PARAMETER["latitude_of_origin",0],'
+    'PARAMETER["central_meridian",-123],PARAMETER["scale_factor",0.9996],PARAMETER["false_easting",500000],'
+    'PARAMETER["false_northing",0],UNIT["metre",1]]'
+)
+
+
+def test_a_crs_a_ply_header_cannot_hold_is_left_out_with_a_warning(tmp_path):
+    """A PLY header is ASCII: a WKT in another script was written into it, and the file could not
+    be read back, by gigapoint either ('ascii' codec can't decode). It is left out, said once."""
+    import plyfile
+    from test_change import write_las  # (tests/unit is on sys.path)
+
+    source = write_las(tmp_path / "zone.las", np.random.default_rng(0).random((50, 3)), wkt=ZONE_WKT)
+    out = tmp_path / "zone.ply"
+    with pytest.warns(GigapointWarning) as caught:
+        gp.open(source).save(out)
+    said = [str(w.message) for w in caught if "CRS" in str(w.message)]
+    assert said == [f"{out}: its CRS (Zoné 10 (WKT)) is not written: its WKT is not ASCII, and a PLY header line must be ASCII and under 1024 bytes; save as .las or .laz to keep it"]
+    assert plyfile.PlyData.read(str(out)).comments == [] and gp.open(out).n_points == 50

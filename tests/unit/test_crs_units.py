@@ -211,8 +211,8 @@ def test_render_gsd_reads_the_header_naming_the_crs_once(cli, tmp_path, autzen_p
 
     from gigapoint.io import crs
 
-    read, first = [], crs.first_crs_header
-    monkeypatch.setattr(crs, "first_crs_header", lambda files: read.append(list(files)) or first(files))
+    read, first = [], crs.first_crs_file
+    monkeypatch.setattr(crs, "first_crs_file", lambda files: read.append(list(files)) or first(files))
     rc, _, err = cli("render", autzen_path, "-o", tmp_path / "ortho.tif", "--gsd", 20)
     assert rc == 0, err
     assert read == [[autzen_path]]  # its CRS and its units from one read (there were two)
@@ -335,3 +335,20 @@ def test_crs_identity_by_pyproj_tells_an_esri_wkt_from_another_unit(autzen_path)
     assert len(same) == 1
     metres = autzen.replace('UNIT["foot",0.3048,AUTHORITY["EPSG","9002"]]', 'UNIT["metre",1,AUTHORITY["EPSG","9001"]]').replace("1312335.958005249", "400000")
     assert crs_identity(metres) not in same | {"EPSG:2994"}
+
+
+def test_a_ply_files_crs_is_read_once_an_operation(tmp_path, monkeypatch):
+    """A PLY file's ``comment crs`` header was parsed again for each question (its CRS, its
+    units, the records to write): once an operation (``headers_once``), as LAS headers are."""
+    import plyfile
+
+    from gigapoint.io import files_crs, files_crs_units, ply
+    from gigapoint.io._base import headers_once
+
+    v = np.zeros(3, [("x", "<f8"), ("y", "<f8"), ("z", "<f8")])
+    plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")], comments=["crs EPSG:32610"]).write(str(tmp_path / "a.ply"))
+    parsed = []
+    monkeypatch.setattr(ply, "_Header", lambda path, read=ply._Header: parsed.append(path) or read(path))
+    with headers_once():
+        assert files_crs([tmp_path / "a.ply"]) == "EPSG:32610" and files_crs_units([tmp_path / "a.ply"])[0] == "EPSG:32610"
+    assert parsed == [tmp_path / "a.ply"]

@@ -198,3 +198,17 @@ def test_coordinates_in_degrees_are_measured_with_a_cell_given(tmp_path):
     result = gp.height_above_ground(path, tmp_path / "out.las", cell=0.00004)
     heights = np.asarray(laspy.read(str(tmp_path / "out.las"))["HeightAboveGround"])
     assert result.params["cell"] == 0.00004 and heights[0] == pytest.approx(5.0, abs=0.01) and np.abs(heights[1:]).max() < 0.01
+
+
+def test_a_ply_in_degrees_is_refused_its_default_cell(tmp_path):
+    """As a LAS file in degrees is (above): the PLY file's ``comment crs`` line was not read."""
+    from test_change import write_degrees_grid  # (tests/unit is on sys.path)
+
+    ply = tmp_path / "wgs84.ply"
+    gp.convert(write_degrees_grid(tmp_path / "wgs84.las", 20), ply)
+    with pytest.raises(InputError) as caught:
+        gp.height_above_ground(ply, tmp_path / "out.las")
+    assert str(caught.value) == (
+        f"height_above_ground: {ply} has coordinates in degrees (EPSG:4326); a default cell (1 m) needs metres or feet: "
+        "give cell, or reproject first (gigapoint convert --to-crs EPSG:n of a projected CRS)"
+    )

@@ -345,3 +345,19 @@ def test_degrees_are_refused_before_the_corridor_is_read(tmp_path):
         with pytest.raises(InputError) as caught:
             gp.section(source, (637000, 851000, 637500, 851500), 10)  # (in UTM metres: no point of the cloud in its corridor)
         assert str(caught.value).startswith(f"section: {said} (gigapoint convert --to-crs EPSG:32610"), source
+
+
+def test_a_ply_in_degrees_is_refused_as_a_las_file_is(tmp_path):
+    """A PLY file names its CRS in a ``comment crs`` line: the units check read LAS headers only,
+    so the LAS file's points in degrees were refused and the same points in a PLY file drawn. A
+    PLY header has no bounds: no UTM zone is offered."""
+    from test_change import write_degrees_grid  # (tests/unit is on sys.path)
+
+    ply = tmp_path / "wgs84.ply"
+    gp.convert(write_degrees_grid(tmp_path / "wgs84.las", 40, lambda x, y: 2.0 + x * 1e4), ply)
+    with pytest.raises(InputError) as caught:
+        gp.section(ply, (-123.0, 44.0004, -122.9993, 44.0004), 0.00004)
+    assert str(caught.value) == (
+        f"section: {ply} has coordinates in degrees (EPSG:4326); drawing heights against distances along the line needs metres or feet: "
+        "reproject first (gigapoint convert --to-crs EPSG:n of a projected CRS)"
+    )

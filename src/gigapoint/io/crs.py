@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ..errors import GigapointError, GigapointWarning, InputError, warn
 from ._base import read_once
-from .las import LasReader, first_crs_file, first_crs_header, geokeys, read_las_header
+from .las import LasHeader, LasReader, first_crs_file, geokeys, read_las_header
 from .paths import file_names
 from .ply import first_ply_crs
 from .registry import reader_for
@@ -98,6 +98,14 @@ def _text_identity(crs: str) -> str:
     if horizontal is None:
         return crs
     return f"EPSG:{horizontal}" + (f"+{vertical}" if vertical is not None else "")
+
+
+def own_epsg(crs: str) -> str | None:
+    """'EPSG:n', or 'EPSG:h+v' of a compound CRS, where ``crs`` names itself by those codes (an
+    'EPSG:n' text, a WKT's own AUTHORITY / ID, a compound WKT's parts': ``_text_identity``) and
+    pyproj reads that back as a CRS; else None (a WKT naming no code of its own, no pyproj)."""
+    identity = _text_identity(crs)
+    return identity if EPSG_TEXT.fullmatch(identity) and crs_wkt(identity) else None
 
 
 #: Symbols of the length units coordinates come in, by their size in metres (WKT names one unit
@@ -190,18 +198,34 @@ def refuse_angles(where: str, source, crs: str | None, units: dict, operation: s
     )
 
 
+def first_crs(files) -> tuple[object, str, dict, LasHeader | None] | None:
+    """(the file, its CRS, ``crs_units`` of it, its LAS header) of the first LAS/LAZ file of
+    ``files`` that names a CRS (its WKT, else 'EPSG:n' of its GeoTIFF keys, whose unit keys the
+    units read too), else of the first PLY file naming one in a ``comment crs`` line (its header
+    None); None where none does. What files_crs, files_units, files_length_units and the CRS
+    records a save or conversion writes all read."""
+    found = first_crs_file(files)
+    if found is not None:
+        path, hdr = found
+        return path, hdr.crs(), crs_units(hdr.crs(), geokeys(hdr.vlrs)), hdr
+    found = first_ply_crs(files)
+    if found is None:
+        return None
+    path, crs = found
+    return path, crs, crs_units(crs), None
+
+
 def files_length_units(where: str, files, operation: str | None, instead: str = "") -> dict:
     """``files_units`` of ``files``, and where ``operation`` is given (what needs lengths: None,
     nothing does) ``refuse_angles`` for the file they are read from, its CRS named: one header
-    read (each file's in turn, up to the first naming a CRS), not one for each."""
-    found = first_crs_file(files)
+    read (each file's in turn, up to the first naming a CRS), not one for each. A LAS header's
+    bounds offer their UTM zone; a PLY header has none (no points read for them)."""
+    found = first_crs(files)
     if found is None:
         return crs_units(None)
-    path, hdr = found
-    crs = hdr.crs()
-    units = crs_units(crs, geokeys(hdr.vlrs))
+    path, crs, units, hdr = found
     if operation is not None:
-        refuse_angles(where, path, crs, units, operation, instead, (hdr.mins, hdr.maxs))
+        refuse_angles(where, path, crs, units, operation, instead, None if hdr is None else (hdr.mins, hdr.maxs))
     return units
 
 
@@ -383,25 +407,21 @@ def _axis_unit(axis, angle: bool = False) -> dict | None:
 
 
 def files_units(files) -> dict:
-    """``crs_units`` of the first LAS/LAZ file of ``files`` that names a CRS (its WKT, else its
-    GeoTIFF keys); all unknown without one."""
+    """``crs_units`` of the first file of ``files`` that names a CRS (``first_crs``); all unknown without one."""
     return files_crs_units(files)[1]
 
 
 def files_crs_units(files) -> tuple[str | None, dict]:
     """(``files_crs``, ``files_units``) of ``files`` from one read of the header naming the CRS."""
-    hdr = first_crs_header(files)
-    if hdr:
-        return hdr.crs(), crs_units(hdr.crs(), geokeys(hdr.vlrs))
-    crs = first_ply_crs(files)
-    return crs, crs_units(crs)
+    found = first_crs(files)
+    return (found[1], found[2]) if found else (None, crs_units(None))
 
 
 def files_crs(files) -> str | None:
     """The CRS of the first LAS/LAZ file of ``files`` that names one: its WKT, else 'EPSG:n' (or
-    'EPSG:n+v') of its GeoTIFF keys (LasHeader.crs); else a PLY file's (first_ply_crs); None without one."""
-    hdr = first_crs_header(files)
-    return hdr.crs() if hdr else first_ply_crs(files)
+    'EPSG:n+v') of its GeoTIFF keys (LasHeader.crs); else a PLY file's (``first_crs``); None without one."""
+    found = first_crs(files)
+    return found[1] if found else None
 
 
 def crs_wkt(crs: str | None) -> str | None:

@@ -37,6 +37,7 @@ from ._base import (
     color_names,
     fail,
     packed_rgb_field,
+    read_once,
     rows_to_chunk,
     scan_bounds,
     unpack_rgb,
@@ -138,18 +139,19 @@ class _Header:
         return rows_to_chunk(self.path, names, cols, scaler)
 
 
-def first_ply_crs(files) -> str | None:
-    """The CRS of the first PLY file of ``files`` that names one (its ``comment crs`` line), None
-    without one; a file gone or damaged since it was read says nothing (its read says why)."""
+def first_ply_crs(files) -> tuple[object, str] | None:
+    """(the file, its CRS) of the first PLY file of ``files`` that names one (its ``comment crs``
+    line), None without one; a file gone or damaged since it was read says nothing (its read says
+    why). Each header read once an operation (``read_once``: its CRS and units are asked for in turn)."""
     for f in files:
         if Path(f).suffix.lower() != ".ply":
             continue
         try:
-            crs = _Header(Path(f)).crs
+            crs = read_once("ply crs", f, lambda f=f: _Header(Path(f)).crs)
         except (GigapointError, OSError):
             continue
         if crs:
-            return crs
+            return f, crs
     return None
 
 

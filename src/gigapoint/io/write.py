@@ -21,7 +21,8 @@ from ..atomic import atomic_write, folders_for, nearest_folder, output_file_refu
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, set_cloud_writer
 from ..errors import GigapointWarning, InputError, first_line, warn
-from .las import GEOKEYS_RECORD, PROJECTION_USER_ID, WKT_RECORD, LasReader, first_crs_header, read_las_header, vlrs_crs, wkt_of
+from .crs import crs_name, crs_wkt, first_crs, own_epsg
+from .las import GEOKEYS_RECORD, PROJECTION_USER_ID, WKT_RECORD, LasReader, read_las_header, vlrs_crs, wkt_of
 from .las_fields import LAS_FIELD_OF, choose_point_format, extra_attributes, field_attributes, las_field_values, las_grid
 from .ply import PLY_CRS_COMMENT
 from .registry import reader_for
@@ -75,7 +76,7 @@ def write_points(
     def write(tmp: Path) -> None:
         nonlocal written
         if suffix == ".ply":
-            written = _write_ply(tmp, path, flat_chunks, n_points, has_color, vlrs_crs(crs_records))
+            written = _write_ply(tmp, path, flat_chunks, n_points, has_color, _ply_crs(path, vlrs_crs(crs_records)))
         else:
             written = _write_las(tmp, path, flat_chunks, grid, crs_records, color_bits, has_color)
 
@@ -259,12 +260,34 @@ def _ply_name_problem(name: str, taken: set[str]) -> str | None:
     return None
 
 
+#: the longest ``comment crs`` line written: RPly (Open3D, CloudCompare) refuses a header line of 1024 bytes
+_PLY_CRS_LINE_MAX = 1000
+
+
+def _ply_crs(path: Path, crs: str | None) -> str | None:
+    """What a PLY file's ``comment crs`` line names ``crs`` by: 'EPSG:n' (or 'EPSG:h+v') where
+    it names itself so (``own_epsg``), else its WKT on one line where that is ASCII
+    (a PLY header is) and short enough for every reader (``_PLY_CRS_LINE_MAX``); else None, the
+    CRS left out with a warning naming ``path``."""
+    if not crs:
+        return None
+    code = own_epsg(crs)
+    if code:
+        return code
+    text = " ".join(crs.split())
+    if text.isascii() and len(f"comment {PLY_CRS_COMMENT}{text}") < _PLY_CRS_LINE_MAX:
+        return text
+    why = "is not ASCII" if not text.isascii() else f"is {len(text):,} characters"
+    warn(f"{path}: its CRS ({crs_name(crs)}) is not written: its WKT {why}, and a PLY header line must be ASCII and under 1024 bytes; save as .las or .laz to keep it", GigapointWarning)
+    return None
+
+
 def _write_ply_header(f, fields: list, n: int | None, crs: str | None = None) -> int:
-    """Write the PLY header of ``n`` points (None: zeros to patch), ``crs`` in a ``comment crs``
-    line (ply.PLY_CRS_COMMENT, its whitespace made single spaces: one line); returns where its count starts."""
+    """Write the PLY header of ``n`` points (None: zeros to patch), ``crs`` (``_ply_crs``'s) in a
+    ``comment crs`` line (ply.PLY_CRS_COMMENT); returns where its count starts."""
     count = f"{0:0{_PLY_COUNT_DIGITS}d}" if n is None else str(n)
     properties = "".join(f"property {_PLY_NAMES[np.dtype(t).str[1:]]} {a}\n" for a, t in fields)
-    comment = f"comment {PLY_CRS_COMMENT}{' '.join(crs.split())}\n" if crs else ""
+    comment = f"comment {PLY_CRS_COMMENT}{crs}\n" if crs else ""
     head = f"ply\nformat binary_little_endian 1.0\n{comment}element vertex "
     f.write(f"{head}{count}\n{properties}end_header\n".encode())
     return len(head.encode())
@@ -297,14 +320,16 @@ def source_crs_records(files) -> list[tuple[bytes, int, bytes]]:
     """The CRS records of the first LAS/LAZ file of ``files`` that names one, to write into a LAS
     file: its WKT (a VLR's, or an EVLR's), else its GeoTIFF key records as they are (LAS 1.4 wants
     WKT with point format 7; GeoTIFF keys are read by laspy, PDAL and gigapoint all the same, and
-    making WKT of them needs pyproj). Empty where none names one."""
-    hdr = first_crs_header(files)
-    if hdr is None:
+    making WKT of them needs pyproj); else a PLY file's ``comment crs`` CRS as WKT (an 'EPSG:n' by
+    pyproj: none without it). Empty where none names one (``first_crs``)."""
+    found = first_crs(files)
+    if found is None:
         return []
-    wkt = wkt_of(hdr.vlrs + hdr.evlrs)
+    crs, hdr = found[1], found[3]
+    wkt = crs_wkt(crs) if hdr is None else wkt_of(hdr.vlrs + hdr.evlrs)
     if wkt:
         return wkt_crs_records(wkt)
-    return [(u, r, d) for u, r, d in hdr.vlrs if u == PROJECTION_USER_ID and r in _GEOTIFF_RECORDS]
+    return [] if hdr is None else [(u, r, d) for u, r, d in hdr.vlrs if u == PROJECTION_USER_ID and r in _GEOTIFF_RECORDS]
 
 
 def file_has_color(path) -> bool:

@@ -11,6 +11,7 @@ import numpy as np
 
 from ...errors import GigapointWarning, warn
 from ...io import crs_wkt, file_names, warn_mixed_crs
+from ...io.crs import first_crs
 from ...io.las import LasReader, read_las_header, wkt_of
 from ...io.registry import reader_for
 from ...io.write import file_has_color
@@ -68,6 +69,9 @@ def input_facts(paths, one_grid: bool = False, moved_to: tuple | None = None) ->
             crs = text
             hdr = read_las_header(p)  # (its (E)VLRs: the first CRS's file only)
             wkt = wkt_of(hdr.vlrs + hdr.evlrs) or crs_wkt(text)
+    found = first_crs(paths or []) if crs is None and moved_to is None else None
+    if found is not None:  # no LAS file names one: a PLY file's ``comment crs`` line
+        crs, wkt = found[1], crs_wkt(found[1])
     if moved_to is not None:
         crs = wkt = moved_to[0]
         scale, offset = (None, None) if moved_to[1] is None else (np.asarray(v, np.float64) for v in moved_to[1])
