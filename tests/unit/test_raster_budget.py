@@ -40,6 +40,23 @@ def test_budget_draws_every_kth_point_exactly(demo_small, view):
     assert (frame.visibility != EMPTY_PIXEL).sum() > 0.8 * covered_full
 
 
+def test_budget_close_up_gathers_every_precision_exactly():
+    """A close-up's batches are drawn at 10, 20 and 30 bits: under a cap, rasterize gathers the
+    medium and high words of every step-th point only where the batch's precision reads them;
+    the numpy reference projects every point and keeps every step-th (the overviews above are
+    all 10-bit)."""
+    cloud = gp.demo(150_000, seed=1, scale=None)  # (its close-up below draws batches at all three precisions)
+    lo, hi = cloud.bounds
+    c = (lo + hi) / 2
+    cam = Camera.look_at((c[0] - 120, c[1] - 120, c[2] + 40.0), tuple(c), fov=60, width=200, height=120)
+    budget = cloud.n_points // 3
+    settings = RenderSettings(max_points=budget, backend="cpu", size_mode="fixed")
+    draw = cloud.prepare(cam.view(cloud.bounds), settings)
+    assert {10, 20, 30} <= set(np.unique(draw.selection.bits).tolist())
+    frame = gp.render_frame(cloud, cam, settings)
+    np.testing.assert_array_equal(frame.visibility, _reference_subsample(cloud, cam, draw.step))
+
+
 def test_budget_image_identical_with_one_and_two_threads(demo_small):
     cam = Camera.fit(demo_small.bounds, view="iso", width=200, height=120)
     a = gp.render_frame(demo_small, cam, RenderSettings(max_points=50_000, threads=1, backend="cpu"))
