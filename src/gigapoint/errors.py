@@ -75,15 +75,23 @@ def value_text(value) -> str:
     return str(int(value)) if is_whole_number(value) else one_line_repr(value)
 
 
+#: the most characters of a value a message quotes (a clip_polygon list of 2,000 vertices made an error line of 85,000)
+REPR_MAX = 80
+
+
 def one_line_repr(value) -> str:
-    """``repr(value)`` where it is one line, as a one-line message quotes a value; else what
-    the value is: a numpy array by its shape ('a 2x3 array', 'an array of 1,000 values'),
-    anything else by its type ('a DataFrame'). A 2-D array given as clip= printed its rows over lines."""
+    """``repr(value)`` where it is one line, as a one-line message quotes a value (but for a
+    string or path, a file's name said in full, its first ``REPR_MAX`` characters and '...' where
+    longer); else what the value is: a numpy array by its shape ('a 2x3 array', 'an array of
+    1,000 values'), anything else by its type ('a DataFrame'). A 2-D array given as clip=
+    printed its rows over lines."""
+    import os
+
     import numpy as np
 
     text = repr(value)
     if "\n" not in text:
-        return text
+        return text if len(text) <= REPR_MAX or isinstance(value, (str, os.PathLike)) else f"{text[: REPR_MAX - 3]}..."
     if isinstance(value, np.ndarray):  # (a long 1-D one's repr spans lines too)
         return f"an array of {counted(value.size, 'value')}" if value.ndim == 1 else f"a {'x'.join(map(str, value.shape))} array"
     return type_text(value)

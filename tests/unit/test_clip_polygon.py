@@ -593,3 +593,15 @@ def test_a_self_crossing_polygon_still_clips_by_the_even_odd_rule():
     bow_tie = clip_polygon_of("POLYGON ((0 0, 10 0, 0 10, 10 10, 0 0))", "test")
     inside = bow_tie.inside(np.array([[5.0, 2.0, 0.0], [5.0, 8.0, 0.0], [2.0, 5.0, 0.0], [8.0, 5.0, 0.0]]))
     assert inside.tolist() == [True, True, False, False]  # the lower and upper triangles, not the sides
+
+
+def test_a_long_vertex_list_is_quoted_short_in_its_error(autzen_path):
+    """A clip_polygon list of 2,000 vertices (not a polygon gigapoint takes) was quoted whole:
+    an error line of 85,000 characters; its label is cut, for gp.open and gp.volume alike."""
+    vertices = [[float(i), float(i % 7)] for i in range(2000)]
+    for where, call in (("open", lambda: gp.open(autzen_path, clip_polygon=vertices)), ("volume", lambda: gp.volume(autzen_path, vertices, 1.0))):
+        with pytest.raises(InputError) as caught:
+            call()
+        said = str(caught.value)
+        assert said.startswith(f"{where}: clip_polygon=[[0.0, 0.0], [1.0, 1.0],") and "...: a clip polygon is" in said, said
+        assert len(said) < 300, len(said)

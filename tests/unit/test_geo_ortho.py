@@ -14,7 +14,7 @@ from PIL import Image
 from test_crs_units import geokeys_vlr  # tests/unit is on sys.path
 
 import gigapoint as gp
-from gigapoint.errors import CameraError
+from gigapoint.errors import CameraError, GigapointError
 from gigapoint.io.las import read_las_header
 from gigapoint.render.camera import MAX_IMAGE_SIDE
 
@@ -299,6 +299,21 @@ def test_cli_a_prj_holding_the_same_crs_is_kept(cli, tmp_path):
     rc, _, err = cli("render", AUTZEN, "-o", tmp_path / "x.png", "--gsd", 10)
     assert rc == 1 and err.strip() == f"error: {tmp_path / 'x.prj'}: already exists; pass --overwrite to replace it", err
     assert (tmp_path / "x.prj").read_text() == "precious" and not (tmp_path / "x.png").exists()
+
+
+def test_a_prj_beside_a_map_of_no_crs_is_refused(cli, tmp_path, grid_npy):
+    """A cloud naming no CRS writes no .prj: an x.prj already there (another map's) would be left
+    describing this one, so it is refused without --overwrite (it was written beside it, rc 0),
+    by the CLI and by gigapoint.orthophoto alike."""
+    path, _ = grid_npy
+    (tmp_path / "x.prj").write_text('PROJCS["some other map"]')
+    rc, _, err = cli("render", path, "-o", tmp_path / "x.png", "--gsd", GSD)
+    assert rc == 1 and err.strip() == f"error: {tmp_path / 'x.prj'}: already exists; pass --overwrite to replace it", err
+    with pytest.raises(GigapointError, match="x.prj: already exists"):
+        gp.orthophoto(path, GSD, out=tmp_path / "y.png", dsm=tmp_path / "x.tif")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["grid.npy", "x.prj"]
+    rc, _, err = cli("render", path, "-o", tmp_path / "x.png", "--gsd", GSD, "--overwrite")
+    assert rc == 0 and (tmp_path / "x.pgw").exists(), err
 
 
 def test_a_failed_side_write_takes_the_image_back(cli, tmp_path, grid_npy, monkeypatch):

@@ -167,7 +167,7 @@ def test_an_option_its_switch_is_off_for_is_refused(npy, tmp_path, capsys, extra
 def test_hqs_with_an_opacity_below_1_is_refused(npy, tmp_path, capsys):
     """--hqs --opacity 0.5 drew the transparent image alone (transparency replaces HQS), without a word."""
     assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "24", "--hqs", "--opacity", "0.5"]) == 1
-    said = "--hqs: high-quality shading is not drawn at opacity 0.5, whose transparent points replace it; give one"
+    said = "--hqs: high-quality shading is not drawn at opacity 0.5, whose transparent points replace it; turn hqs off or set opacity to 1"
     assert capsys.readouterr().err == f"error: {said}\n"
     assert not list(tmp_path.iterdir())
     assert main(["render", str(npy), "-o", str(tmp_path / "x.png"), "-W", "32", "-H", "24", "--backend", "cpu", "--hqs", "--opacity", "1"]) == 0

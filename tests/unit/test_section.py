@@ -283,6 +283,10 @@ def test_a_corridor_without_points_names_the_files(files):
         (["--line", "0,0,1,1", "--width", "1", "--scale", "-1"], "error: section: --scale must be a number > 0 (pixels per unit), got -1"),
         (["--line", "0,0,1,1", "--width", "1", "--vertical-exaggeration", "0"], "error: section: --vertical-exaggeration must be a number > 0, got 0"),
         (["--line", "0,0,1,1", "--width", "1", "--classes", "2,x"], "error: section: --classes 2,x: give integers from 0 to 255, separated by commas"),
+        # stereo's options are section's to refuse: --ipd said it needs --stereo, which section refuses
+        (["--line", "0,0,1,1", "--width", "1", "--ipd", "0.1"], "error: section: --ipd: a section is one orthographic view (no stereo)"),
+        (["--line", "0,0,1,1", "--width", "1", "--convergence", "5"], "error: section: --convergence: a section is one orthographic view (no stereo)"),
+        (["--line", "0,0,1,1", "--width", "1", "--stereo", "anaglyph"], "error: section: --stereo: a section is one orthographic view (no stereo)"),
     ],
 )
 def test_the_command_refuses_bad_values_in_one_line(cli, tmp_path, args, message):

@@ -276,7 +276,7 @@ def test_hqs_below_opacity_1_is_refused_not_dropped(demo):
     """hqs=True with opacity 0.5 drew the transparent frame alone (the same pixels as without
     hqs), without a word: refused in one line, in Python and on the command line alike."""
     cloud, cam = demo
-    said = "hqs: high-quality shading is not drawn at opacity 0.5, whose transparent points replace it; give one"
+    said = "hqs: high-quality shading is not drawn at opacity 0.5, whose transparent points replace it; turn hqs off or set opacity to 1"
     with pytest.raises(SettingsError, match=f"^{re.escape(said)}$"):
         gp.render(cloud, cam, backend="cpu", opacity=0.5, hqs=True)
     with pytest.raises(SettingsError, match=f"^{re.escape(said)}$"):

@@ -17,7 +17,7 @@ from ..io import crs_wkt, files_label
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from ..render.contours import draw_contours
-from ..render.georef import georef_paths, georef_writes, map_image, raster_writes, unheld_side_writes
+from ..render.georef import georef_paths, georef_writes, map_image, raster_writes, refused_side_paths, unheld_side_writes
 from ..render.image_files import warn_alpha_dropped
 from ..render.raster_fill import fill_map
 from . import compiling
@@ -355,7 +355,7 @@ def render(
         wkt = crs_wkt(crs)
         side_writes, notes = georef_writes(cam, (output, depth_out), crs, wkt, units)
         side_writes = unheld_side_writes(side_writes, wkt)  # (x.webp, then x.jpg: x.prj kept, as gigapoint.orthophoto keeps it)
-        for path, _ in side_writes:
+        for path in refused_side_paths(side_writes, (output, depth_out), wkt):  # (no CRS: any .prj there is another map's)
             check_output(path, overwrite, suffixes=None)
     else:
         cam = make_camera(cloud, width, height, view, camera, projection, fov)

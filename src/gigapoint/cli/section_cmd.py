@@ -29,8 +29,12 @@ def numbers(option: str, text: str, count: int, kind=float, separator: str = ","
     return values
 
 
+#: a section's options of stereo pairs, refused: two eyes of an orthographic side view see the same
+_NO_STEREO = {name: f"section: --{name}: a section is one orthographic view (no stereo)" for name in ("stereo", "ipd", "convergence")}
+
+
 @app.command()
-@with_settings_options(RenderSettings)
+@with_settings_options(RenderSettings, refused=_NO_STEREO)
 def section(
     inputs: Annotated[list[Path], typer.Argument(readable=False, help="Point cloud files or directories (merged). A quoted glob pattern ('tiles/*.laz') stands for what it matches.")],
     line: Annotated[str, typer.Option("--line", metavar="X1,Y1,X2,Y2", help="The section's line: its two ends, in the files' coordinates; the image shows its start on the left.")],
@@ -67,8 +71,6 @@ def section(
     image_size = None if size is None else check_size(numbers("--size", size.lower(), 2, int, "x"))
     if not (math.isfinite(vertical_exaggeration) and vertical_exaggeration > 0):
         raise GigapointError(f"section: --vertical-exaggeration must be a number > 0, got {number_text(vertical_exaggeration)}")
-    if settings.stereo != "none":  # (two eyes of an orthographic side view see the same)
-        raise GigapointError("section: --stereo: a section is one orthographic view")
     keep = filter_options(classes, drop_classes, None, "section", clip_polygon)  # (checked here: its errors name the options)
     chosen = {} if keep is None else {"classes": keep.classes or None, "drop_classes": keep.drop_classes or None, "clip_polygon": keep.polygon}
     cut = gp.section(subfolders_read(inputs, recursive), lane[:4], lane[4], **chosen)

@@ -231,9 +231,11 @@ def named_option(exc: GigapointError, blame: dict[str, str]) -> GigapointError:
     return exc
 
 
-def with_settings_options(cls: type = RenderSettings, param: str = "settings"):
+def with_settings_options(cls: type = RenderSettings, param: str = "settings", refused: dict[str, str] | None = None):
     """Decorator for a typer command: its parameter ``param`` is replaced by one option per field
-    of ``cls`` and receives the ``cls`` instance they make. Apply it below ``@app.command()``."""
+    of ``cls`` and receives the ``cls`` instance they make. Apply it below ``@app.command()``.
+    ``refused``: field -> the message that refuses its option when typed, before any other check
+    (section's --ipd is refused as section's, not as needing --stereo, which it refuses too)."""
 
     def decorate(func):
         sig = inspect.signature(func, eval_str=True)
@@ -253,6 +255,9 @@ def with_settings_options(cls: type = RenderSettings, param: str = "settings"):
             values = {name: kwargs.pop(name) for name in setting_names}
             sources = {name: ctx.get_parameter_source(name) for name in setting_names}
             given = {name for name, src in sources.items() if src is not None and src.name not in ("DEFAULT", "DEFAULT_MAP")}
+            for name, message in (refused or {}).items():
+                if name in given:
+                    raise SettingsError(message)
             kwargs[param] = settings_from_options(cls, values, given)
             return func(**kwargs)
 

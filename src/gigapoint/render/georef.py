@@ -237,7 +237,7 @@ def write_map(camera: Camera, crs: str | None, units: dict, rasters, overwrite: 
     for i, path in enumerate(named):
         if any(path.resolve() == other.resolve() for other in named[:i]):  # (ortho.tif and ortho.tiff: one .tfw)
             raise GigapointError(f"{path}: named for two outputs")
-    for path, _ in side_writes:  # a user's world file or .prj is not replaced without asking
+    for path in refused_side_paths(side_writes, [path for path, _ in rasters], wkt):  # a user's world file or .prj is not replaced without asking
         check_output(path, overwrite, suffixes=None)
     written = write_together([(path, _said(path, save)) for path, save in raster_writes(camera, crs, wkt, units, rasters) + side_writes])
     for note in notes:
@@ -262,6 +262,14 @@ def unheld_side_writes(side_writes, wkt: str | None) -> list:
     """``side_writes`` (georef_writes') less a .prj that holds ``wkt`` already: an earlier product
     of the same map beside it (change.tif, then change.png) keeps it, neither refused nor rewritten."""
     return [(path, save) for path, save in side_writes if not _holds(path, wkt)]
+
+
+def refused_side_paths(side_writes, images, wkt: str | None) -> list[Path]:
+    """The paths refused where they exist, without overwrite: those ``side_writes``
+    (unheld_side_writes') write, and with no WKT to write (no CRS) each .prj beside ``images``:
+    it would be left describing another map beside this one."""
+    stale = [] if wkt else [path for path in georef_paths(images) if path.suffix == ".prj" and path.exists()]
+    return [path for path, _ in side_writes] + stale
 
 
 def _holds(path: Path, wkt: str | None) -> bool:

@@ -268,7 +268,7 @@ class RenderSettings:
         if self.splat_softness > 0 and not self.hqs:
             raise SettingsError("splat_softness needs hqs=True (soft splats are blended by high-quality shading)")
         if self.hqs and self.opacity < 1:  # (passes.finish_frame composites transparent points instead: hqs was dropped without a word)
-            raise SettingsError(f"hqs: high-quality shading is not drawn at opacity {number_text(self.opacity)}, whose transparent points replace it; give one")
+            raise SettingsError(f"hqs: high-quality shading is not drawn at opacity {number_text(self.opacity)}, whose transparent points replace it; turn hqs off or set opacity to 1")
         if self.size_mode == "attenuated" and not self.point_world_size > 0:
             raise SettingsError("size_mode 'attenuated' needs point_world_size > 0 (metres)")
 
