@@ -565,6 +565,29 @@ def test_a_clip_polygons_hole_outside_its_outline_is_refused_before_reading():
     assert clip_polygon_of({"type": "Polygon", "coordinates": SQUARE_WITH_HOLE}, "test").describe() == "clip polygon the GeoJSON geometry (1 hole, 8 vertices)"
 
 
+def test_holes_meeting_only_at_vertices_are_judged_by_points_strictly_inside_or_outside():
+    """Edges meeting only at vertices are no crossing, and a point on an edge was counted inside:
+    a triangle over a square (a vertex of each on the other's edge, its tip inside the square)
+    and a hole in the notch of an L (every vertex on the outline) passed; two holes touching
+    along edges (a triangle in an L-shaped hole's notch) were refused as nested."""
+    square = "(-10 -10, 10 -10, 10 10, -10 10, -10 -10)"
+    cases = [
+        (f"POLYGON ({square}, (0 0, 4 0, 4 4, 0 4, 0 0), (2 2, 6 -2, -2 -2, 2 2))", "the polygon's holes 1 and 2 overlap (by the even-odd rule their overlap is inside): make them one hole"),
+        ("POLYGON ((0 0, 6 0, 6 4, 4 4, 4 6, 0 6, 0 0), (6 4, 4 6, 4 4, 6 4))", "the polygon's hole 1 is not inside its outline (its first ring): redraw it, the outline first"),
+    ]
+    for wkt, message in cases:
+        with pytest.raises(InputError) as error:
+            clip_polygon_of(wkt, "test")
+        assert str(error.value).endswith(f"...: {message}"), wkt
+    touching = clip_polygon_of(f"POLYGON ({square}, (2 2, 6 2, 6 4, 4 4, 4 6, 2 6, 2 2), (6 4, 4 6, 4 4, 6 4))", "test")
+    assert touching.describe() == "clip polygon WKT POLYGON ((-10 -10, 10 -10, 10 ... (2 holes, 13 vertices)"
+    # holes sharing edges at coordinates whose middles round off the shared edge: touching, not overlapping
+    x0, y0 = 637000.1, 4850000.3
+    ring = [[x0 + 0.7 * x + 0.13 * y, y0 + 0.3 * y] for x, y in ((0, 0), (30, 0), (30, 30), (0, 30), (0, 0))]  # (sheared: edges aslant)
+    holes = [[[x0 + 0.7 * x + 0.13 * y, y0 + 0.3 * y] for x, y in ((i, 1), (i + 1, 1), (i + 1, 2), (i, 2), (i, 1))] for i in range(1, 20)]
+    assert clip_polygon_of({"type": "Polygon", "coordinates": [ring, *holes]}, "test").describe() == "clip polygon the GeoJSON geometry (19 holes, 80 vertices)"
+
+
 def test_crossing_edges_match_every_pair_compared():
     from gigapoint.io.polygon import crossing_edges
 

@@ -265,8 +265,9 @@ def _read_las_header(path: Path, salvage: bool = False) -> LasHeader:
         head = f.read(375)
         if head[:4] != b"LASF":
             raise fail(path, f"not a LAS/LAZ file (starts with {head[:4]!r}, expected b'LASF')")
-        if truncated_header(size):
-            raise fail(path, truncated_header(size))
+        truncated = truncated_header(size)
+        if truncated:
+            raise fail(path, truncated)
         major, minor = head[24], head[25]
         if major != 1 or minor > 4:
             raise fail(path, f"unsupported LAS version {major}.{minor} (gigapoint reads 1.0-1.4)")

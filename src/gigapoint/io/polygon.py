@@ -77,10 +77,10 @@ class ClipPolygon:
         self.placed_by_file: dict[str, ClipPolygon] = {}
         self.moved_by_crs: dict[str, ClipPolygon | None] = {}
         rings = [ring for polygon in polygons for ring in polygon]
-        self.edges = np.concatenate([np.hstack([ring, np.roll(ring, -1, axis=0)]) for ring in rings])  # rows x1, y1, x2, y2
-        # the polygon of each edge: a point is inside by even-odd over its polygon's rings, the polygons joined
-        self.owners = np.repeat(np.arange(len(polygons)), [sum(len(ring) for ring in polygon) for polygon in polygons])
         xy = np.concatenate(rings)
+        self.edges = np.hstack([xy, xy[_following([len(ring) for ring in rings])]])  # rows x1, y1, x2, y2
+        # the polygon of each edge: a point is inside by even-odd over its polygon's rings, the polygons joined
+        self.owners = np.repeat(np.repeat(np.arange(len(polygons)), [len(polygon) for polygon in polygons]), [len(ring) for ring in rings])
         self.lo, self.hi = xy.min(axis=0), xy.max(axis=0)
         self.n_vertices = len(xy)
         self._buckets = None  # (starts, members) of the edges by y: made on first use
@@ -445,23 +445,31 @@ def _meeting_pairs(a: np.ndarray, b: np.ndarray, compared, touching: bool) -> tu
     """The first pair (i < j) of the segments ``a[i]``..``b[i]`` that meet (cross, or touch too
     where ``touching``) among those ``compared(i, j)`` (index arrays) allows; None where none do.
     Only segments whose x and y ranges overlap are compared."""
-    n = len(a)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    # of two segments whose x ranges overlap, one starts within the other's: each is compared
-    # with those (sorted by where their x range starts) that start within its own
-    order = np.argsort(lo[:, 0], kind="stable")
-    first = np.searchsorted(lo[order, 0], lo[:, 0], side="left")
-    counts = np.searchsorted(lo[order, 0], hi[:, 0], side="right") - first
     found = []
-    for block in np.array_split(np.arange(n), max(1, int(counts.sum()) // 1_000_000)):  # ~a million pairs at a time
-        i = np.repeat(block, counts[block])
-        offsets = np.arange(len(i)) - np.repeat(np.cumsum(counts[block]) - counts[block], counts[block])  # 0, 1, .. in each segment's run
-        j = order[first[i] + offsets]
-        tested = compared(i, j) & (lo[j, 1] <= hi[i, 1]) & (hi[j, 1] >= lo[i, 1])  # y ranges overlap
-        i, j = i[tested], j[tested]
+    for i, j in _overlapping_boxes(np.minimum(a, b), np.maximum(a, b), compared=compared):
         meet = _segments_meet(a[i], b[i], a[j], b[j], touching)
         found += list(zip(np.minimum(i, j)[meet].tolist(), np.maximum(i, j)[meet].tolist()))
     return min(found) if found else None
+
+
+def _overlapping_boxes(lo: np.ndarray, hi: np.ndarray, others: tuple[np.ndarray, np.ndarray] | None = None, compared=None):
+    """The pairs (i, j) of the boxes ``lo[i]``..``hi[i]`` and the ``others`` (their (lo, hi);
+    None: the same boxes) whose x and y ranges overlap, among those ``compared(i, j)`` allows
+    (None: all): index arrays, about a million pairs at a time. Each box is paired with the
+    others that start within its x range: of two overlapping boxes one starts within the
+    other's (a pair may come twice, either way round), and a point starts within any box it is in."""
+    other_lo, other_hi = (lo, hi) if others is None else others
+    order = np.argsort(other_lo[:, 0], kind="stable")
+    first = np.searchsorted(other_lo[order, 0], lo[:, 0], side="left")
+    counts = np.searchsorted(other_lo[order, 0], hi[:, 0], side="right") - first
+    for block in np.array_split(np.arange(len(lo)), max(1, int(counts.sum()) // 1_000_000)):
+        i = np.repeat(block, counts[block])
+        offsets = np.arange(len(i)) - np.repeat(np.cumsum(counts[block]) - counts[block], counts[block])  # 0, 1, .. in each box's run
+        j = order[first[i] + offsets]
+        tested = (other_lo[j, 1] <= hi[i, 1]) & (other_hi[j, 1] >= lo[i, 1])  # y ranges overlap
+        if compared is not None:
+            tested &= compared(i, j)
+        yield i[tested], j[tested]
 
 
 def _segments_meet(p: np.ndarray, q: np.ndarray, r: np.ndarray, s: np.ndarray, touching: bool = True) -> np.ndarray:
@@ -502,11 +510,12 @@ def check_simple(polygon: ClipPolygon, why: str) -> None:
 
 
 def check_holes(polygon: ClipPolygon) -> None:
-    """A one-line InputError naming ``polygon``'s file where a hole is not inside its outline (a
-    vertex outside it, or an edge crossing one of its edges) or two holes overlap (their edges
-    cross, or one holds the other): by the even-odd rule the area between them was inside, not
-    left out (a clip kept points beyond the outline; a volume's pixels and its polygon_area, the
-    outline's less its holes', disagreed). A hole may touch its outline or another hole."""
+    """A one-line InputError naming ``polygon``'s file where a hole is not inside its outline (an
+    edge crossing one of its edges, or a vertex or an edge's middle outside it) or two holes
+    overlap (their edges cross, or a vertex or an edge's middle of one lies inside the other):
+    by the even-odd rule the area between them was inside, not left out (a clip kept points
+    beyond the outline; a volume's pixels and its polygon_area, the outline's less its holes',
+    disagreed). A hole may touch its outline or another hole, at a vertex or along an edge."""
     several = len(polygon.polygons) > 1
     for p, (outline, *holes) in enumerate(polygon.polygons, start=1):
         if not holes:
@@ -515,28 +524,79 @@ def check_holes(polygon: ClipPolygon) -> None:
         rings = [outline, *holes]
         ring_of = np.repeat(np.arange(len(rings)), [len(r) for r in rings])  # of each edge (by its start): 0 the outline, h hole h
         a = np.concatenate(rings) - outline[0]  # (from a vertex: no cancellation at UTM sizes)
-        b = np.concatenate([np.roll(r, -1, axis=0) for r in rings]) - outline[0]
+        b = a[_following([len(r) for r in rings])]
         crossing = _meeting_pairs(a, b, lambda i, j, ring_of=ring_of: ring_of[i] != ring_of[j], touching=False)
         crossed = None if crossing is None else sorted(int(ring_of[e]) for e in crossing)
-        outside = ~ClipPolygon([[outline]], polygon.source).inside(np.concatenate(holes))
-        strays = ring_of[len(outline):][outside].tolist() + ([crossed[1]] if crossed and crossed[0] == 0 else [])
+        # edges that only touch: each hole judged by its vertices and its edges' middles, those
+        # on the edge of the ring they are tested in (inside it, by points_inside) left out
+        n = len(outline)
+        points = np.concatenate([a[n:], (a[n:] + b[n:]) / 2])
+        hole_of = np.tile(ring_of[n:], 2)
+        tolerance = POLYGON_SHARE * float(np.max(a[:n].max(axis=0) - a[:n].min(axis=0)))
+        outside = np.flatnonzero(~ClipPolygon([[a[:n]]], polygon.source).inside(points))
+        outside = np.setdiff1d(outside, outside[_on_edges(points[outside], a[:n], b[:n], tolerance)[0]])
+        strays = hole_of[outside].tolist() + ([crossed[1]] if crossed and crossed[0] == 0 else [])
         if strays:
             raise InputError(f"{polygon.source}: {name}'s hole {min(strays)} is not inside its outline (its first ring): redraw it, the outline first")
-        overlap = crossed or _nested_holes(holes, polygon.source)
+        overlap = crossed or _hole_in_hole(points, hole_of, a[n:], b[n:], ring_of[n:], tolerance, polygon.source)
         if overlap:
             raise InputError(f"{polygon.source}: {name}'s holes {overlap[0]} and {overlap[1]} overlap (by the even-odd rule their overlap is inside): make them one hole")
 
 
-def _nested_holes(holes: list[np.ndarray], source: str) -> list[int] | None:
-    """The numbers (from 1, the lower first) of two holes one of which holds every vertex of the
-    other (their edges crossing none), or None."""
-    starts = np.cumsum([0] + [len(hole) for hole in holes[:-1]])
-    vertices = np.concatenate(holes)
-    for h, hole in enumerate(holes, start=1):  # (one test of every hole's vertices a hole: not one a pair)
-        all_inside = np.logical_and.reduceat(ClipPolygon([[hole]], source).inside(vertices), starts)
-        all_inside[h - 1] = False
-        if all_inside.any():
-            return sorted((int(all_inside.argmax()) + 1, h))
+def _following(sizes: list[int]) -> np.ndarray:
+    """The index of each vertex's next in its ring (the first after the last), the rings (of
+    ``sizes`` vertices) one after another: the ends of their edges."""
+    ends = np.cumsum(sizes)
+    following = np.arange(1, int(ends[-1]) + 1)
+    following[ends - 1] = ends - sizes
+    return following
+
+
+def _on_edges(points: np.ndarray, a: np.ndarray, b: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """(point, edge) index arrays: the points within ``tolerance`` of the edges ``a[e]``..``b[e]``
+    (an edge's middle computed misses an edge it shares by a rounding)."""
+    on = [(np.zeros(0, np.int64), np.zeros(0, np.int64))]
+    for edge, point in _overlapping_boxes(np.minimum(a, b) - tolerance, np.maximum(a, b) + tolerance, (points, points)):
+        step = b[edge] - a[edge]
+        along = np.clip(np.sum((points[point] - a[edge]) * step, axis=1) / np.maximum(np.sum(step * step, axis=1), np.finfo(np.float64).tiny), 0, 1)
+        near = np.hypot(*(a[edge] + along[:, None] * step - points[point]).T) <= tolerance
+        on.append((point[near], edge[near]))
+    return np.concatenate([point for point, _ in on]), np.concatenate([edge for _, edge in on])
+
+
+def _hole_in_hole(points: np.ndarray, hole_of: np.ndarray, a: np.ndarray, b: np.ndarray, ring_of: np.ndarray, tolerance: float, source: str) -> list[int] | None:
+    """The numbers (from 1, the lower first) of two holes, a point of one (``hole_of``: each of
+    ``points``' hole) inside the other, not on its edge (within ``tolerance``), or None. The
+    holes' edges: ``a[e]``..``b[e]``, of hole ``ring_of[e]``."""
+    starts = np.flatnonzero(np.diff(ring_of, prepend=0))
+    holes, lo, hi = np.split(a, starts[1:]), np.minimum.reduceat(a, starts), np.maximum.reduceat(a, starts)
+    # only holes whose boxes meet another's may overlap it
+    pairs = [np.concatenate(pair) for pair in _overlapping_boxes(lo, hi, compared=lambda i, j: i != j)]
+    boxed = np.unique(np.concatenate(pairs)) + 1 if pairs else np.zeros(0, np.int64)
+    rank = np.full(len(holes) + 1, -1)
+    rank[boxed] = np.arange(len(boxed))
+    judged = np.flatnonzero(rank[hole_of] >= 0)
+    edges = np.flatnonzero(rank[ring_of] >= 0)
+    point, edge = _on_edges(points[judged], a[edges], b[edges], tolerance)
+    point, on_hole = judged[point], ring_of[edges[edge]]
+    point, on_hole = point[hole_of[point] != on_hole], on_hole[hole_of[point] != on_hole]  # the points on another hole's edge
+    # a polygon of each hole holds its own points (on its edge): those holes are halved by each
+    # bit of their ranks, and each half's points tested in the other half's holes (two holes
+    # differ in some bit): a few dozen tests, not one a hole
+    for bit in range(len(boxed).bit_length()):
+        for side in (0, 1):
+            other = boxed[(np.arange(len(boxed)) >> bit & 1) != side]
+            if not len(other):
+                continue
+            tested = (rank[hole_of] >= 0) & ((rank[hole_of] >> bit & 1) == side)
+            tested[point[(rank[on_hole] >> bit & 1) != side]] = False  # on the edge of a hole it is tested in
+            tested = np.flatnonzero(tested)
+            inside = tested[ClipPolygon([[holes[h - 1]] for h in other], source).inside(points[tested])]
+            if len(inside):
+                point = points[inside[0]]
+                around = other[np.all((lo[other - 1] <= point) & (point <= hi[other - 1]), axis=1)]
+                holder = next(h for h in around if ClipPolygon([[holes[h - 1]]], source).inside(point[None])[0])
+                return sorted((int(hole_of[inside[0]]), int(holder)))
     return None
 
 

@@ -219,8 +219,9 @@ class CopcCloud(VoxelOctree):
         head = source.read_head(HEAD_READ)
         if not head:  # (a URL's was "bytes 0..65,536 lie past the end of the file (HTTP 416)")
             raise EmptyCloudError(f"{name}: file is empty (0 bytes)")
-        if head[:4] == b"LASF" and truncated_header(len(head)):  # (a URL's was "not a COPC file": a local one's words)
-            raise InputError(f"{name}: {truncated_header(len(head))}")
+        truncated = truncated_header(len(head)) if head[:4] == b"LASF" else ""
+        if truncated:  # (a URL's was "not a COPC file": a local one's words)
+            raise InputError(f"{name}: {truncated}")
         if not is_copc_head(head):
             if head[:4] == b"LASF" and len(head) > 104:  # its own version and kind: every LAS file was "a LAS 1.4 file"
                 kind = "LAZ" if head[104] & 0x80 else "LAS"

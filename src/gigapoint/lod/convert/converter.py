@@ -206,9 +206,7 @@ class _InMemoryConverter(InMemoryPhases, _Converter):
 
 
 def _are_paths(inputs) -> bool:
-    """Whether ``inputs`` name files and folders (a path, or a list or tuple of them)."""
-    if isinstance(inputs, (str, os.PathLike)):
-        return True
+    """Whether ``inputs`` name files and folders (a list or tuple of them: convert made a lone path a list)."""
     return isinstance(inputs, (list, tuple)) and all(isinstance(p, (str, os.PathLike)) for p in inputs)
 
 
@@ -334,7 +332,7 @@ def convert(
     if isinstance(inputs, (list, tuple)) and inputs and isinstance(inputs[0], (str, os.PathLike)):  # files, then None: None named
         inputs = given_paths(inputs, "convert")  # (taken as PointChunks: "item 0 is a str")
     if _are_paths(inputs):  # a COPC file a conversion still writes: its work folder named, not a bare "no such file"
-        refuse_unwritten_copc([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs)  # (() was [()]: a TypeError, not 'no input given')
+        refuse_unwritten_copc(inputs)
     if recursive and not _are_paths(inputs):
         raise InputError("convert: recursive=True reads the subfolders of folders; the inputs are a cloud or PointChunks")  # (dropped without a word)
     if recursive:
