@@ -137,6 +137,15 @@ def write_degrees_grid(path, n, height=lambda x, y: np.full(x.size, 2.0), origin
     return write_las(path, np.column_stack([x, y, height(x, y)]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=origin)
 
 
+def refused_writing_nothing(classify, path, out, **options) -> str:
+    """The one-line InputError of ``classify(path, out, **options)`` (a classification refused in
+    degrees), checking it left no ``out``."""
+    with pytest.raises(InputError) as caught:
+        classify(path, out, **options)
+    assert not out.exists()
+    return str(caught.value)
+
+
 @pytest.fixture
 def surveys(tmp_path):
     """before.las (the plane) and after.las (the box and the pit, its plane 4 units longer north), EPSG:32610."""

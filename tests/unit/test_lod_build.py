@@ -358,11 +358,12 @@ def test_a_frame_draws_node_by_node_in_the_morton_order_of_their_cubes(grid_tree
 
 def test_an_iterable_of_what_is_not_a_point_chunk_is_a_one_line_error(tmp_path):
     """convert([cloud], out), or a list of paths and clouds, was an AttributeError ('PointCloud'
-    object has no attribute 'xyz') from deep in the read phase."""
+    object has no attribute 'xyz') from deep in the read phase. A cloud's long repr is quoted
+    cut to 80 characters (errors.one_line_repr)."""
     from gigapoint.errors import InputError
 
     cloud = gp.from_arrays(np.random.default_rng(0).random((100, 3)))
-    for inputs, what in (([cloud], f"inputs[0]: {cloud!r}"), ([PointChunk(np.zeros((5, 3))), "a.laz", cloud], "inputs[1]: 'a.laz'"), ([5], "inputs[0]: 5")):
+    for inputs, what in (([cloud], f"inputs[0]: {cloud!r:.77}..."), ([PointChunk(np.zeros((5, 3))), "a.laz", cloud], "inputs[1]: 'a.laz'"), ([5], "inputs[0]: 5")):
         with pytest.raises(InputError) as e:
             convert(inputs, tmp_path / "o")
         assert str(e.value) == f"convert: {what} is neither a path nor a PointChunk (inputs are files and folders, a cloud, or PointChunks)"

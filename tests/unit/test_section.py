@@ -365,3 +365,14 @@ def test_a_ply_in_degrees_is_refused_as_a_las_file_is(tmp_path):
         f"section: {ply} has coordinates in degrees (EPSG:4326); drawing heights against distances along the line needs metres or feet: "
         "reproject first (gigapoint convert --to-crs EPSG:n of a projected CRS)"
     )
+
+
+def test_a_file_named_twice_is_warned_of_once(tmp_path, recwarn):
+    """gp.section expands its paths for the units, then opens them: a file named twice was warned
+    of twice (each expansion said it; io.paths now says it once an operation)."""
+    from test_change import write_las  # (tests/unit is on sys.path)
+
+    rng = np.random.default_rng(0)
+    path = write_las(tmp_path / "a.las", np.column_stack([rng.uniform(0, 100, 2000), rng.uniform(0, 100, 2000), rng.uniform(0, 5, 2000)]))
+    gp.section([path, path], (500_000, 4_000_050, 500_100, 4_000_050), 2)
+    assert [str(w.message) for w in recwarn if "named more than once" in str(w.message)] == [f"{path}: named more than once; its points are read once"]

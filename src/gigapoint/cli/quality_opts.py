@@ -2,21 +2,7 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 from ..errors import warnings_kept
-from ..render.settings import RenderSettings
-from .settings_opts import option_of
-
-
-def _quality_fields() -> list[str]:
-    names = [f.name for f in dataclasses.fields(RenderSettings)]
-    return names[names.index("color_mode") :]  # the image-quality block of RenderSettings
-
-
-# every image-quality field of RenderSettings -> the `gigapoint render` option that sets it
-_OPTIONS = option_of(RenderSettings)
-OPTION_OF = {name: _OPTIONS[name] for name in _quality_fields()}
 
 
 def check_color_attribute(inputs, settings) -> None:
@@ -24,15 +10,17 @@ def check_color_attribute(inputs, settings) -> None:
     read (``missing_attribute``'s line: it came once every input was read). Octrees, and files
     whose headers do not list their attributes, are checked once read, as before."""
     from ..io import cloud_name, point_files_of, reader_for
+    from ..io._base import headers_once
     from ..lod import is_lod_source
     from ..render.colors import missing_attribute
 
     name = settings.color_attribute
     if settings.color_mode != "attribute" or not name or any(is_lod_source(p) for p in inputs):
         return
-    with warnings_kept():  # a file named twice is warned about once, when read (not here: kept, dropped)
-        files = point_files_of(inputs)
-    heads = [reader_for(f).header(f, salvage=True).get("attributes") for f in files]  # salvage: a cut-off file is drawn
+    with headers_once():  # (point_files_of read each header to skip empty files: read once)
+        with warnings_kept():  # a file named twice is warned about once, when read (not here: kept, dropped)
+            files = point_files_of(inputs)
+        heads = [reader_for(f).header(f, salvage=True).get("attributes") for f in files]  # salvage: a cut-off file is drawn
     if None in heads or any(name in head for head in heads):
         return
     raise missing_attribute(cloud_name(files), name, set(heads[0]).intersection(*heads[1:]))  # a merge keeps the shared ones

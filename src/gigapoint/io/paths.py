@@ -253,7 +253,7 @@ def expand_paths(paths: Iterable, recursive: bool = False, where: str = "open") 
         except OSError:
             key = f.resolve()
         if key in seen:
-            warn(f"{f}: named more than once; its points are read once", GigapointWarning)
+            read_once("named twice", f, lambda f=f: warn(f"{f}: named more than once; its points are read once", GigapointWarning))  # (said once an operation)
             continue
         seen.add(key)
         once.append(f)
