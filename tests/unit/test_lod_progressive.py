@@ -894,7 +894,7 @@ def test_the_second_chunk_is_decoded_once_the_first_is_in(scene, monkeypatch):
             events.append(f"decoded {k}")
             yield PointChunk(xyz[s : s + 10_000], rgba[s : s + 10_000].view(np.uint8).reshape(-1, 4))
 
-    real_add = ProgressiveOctree.add
+    real_add = ProgressiveOctree.add_read  # (the loader inserts a file's points through add_read)
 
     def slow_add(self, *args, **kwargs):
         if not self.n_points:
@@ -903,7 +903,7 @@ def test_the_second_chunk_is_decoded_once_the_first_is_in(scene, monkeypatch):
         events.append("inserted")
         return n
 
-    monkeypatch.setattr(ProgressiveOctree, "add", slow_add)
+    monkeypatch.setattr(ProgressiveOctree, "add_read", slow_add)
     cloud = open_progressive([("chunks", chunks)], 40_000, None, "chunks")
     try:
         cloud.wait(timeout=60)
@@ -1363,7 +1363,7 @@ def test_an_error_inserting_the_first_slice_ends_the_load_instead_of_hanging(mon
         time.sleep(0.3)  # as an insertion takes: the decoder is then waiting for it (at once, its turn was cancelled)
         raise InputError(f"{self.name}: refused on purpose")
 
-    monkeypatch.setattr(ProgressiveOctree, "add", refuse)
+    monkeypatch.setattr(ProgressiveOctree, "add_read", refuse)
     cloud = gp.demo(3_000_000, progressive=True)
     with pytest.raises(InputError, match=r"^demo\(3,000,000\): refused on purpose$"):
         cloud.wait(timeout=60)
@@ -2583,13 +2583,13 @@ def test_many_small_files_load_in_joined_batches(tmp_path, monkeypatch):
     xyz = demo_arrays(15_000, seed=2)[0]
     for k in range(300):
         np.save(tmp_path / f"t{k:04d}.npy", xyz[k * 50 : (k + 1) * 50])
-    sizes, real_add = [], ProgressiveOctree.add
+    sizes, real_add = [], ProgressiveOctree.add_read
 
     def counting_add(self, xyz, *args, **kwargs):
         sizes.append(len(xyz))
         return real_add(self, xyz, *args, **kwargs)
 
-    monkeypatch.setattr(ProgressiveOctree, "add", counting_add)
+    monkeypatch.setattr(ProgressiveOctree, "add_read", counting_add)
     cloud = gp.open(tmp_path, progressive=True)
     assert cloud.wait(timeout=60)
     assert sizes == [50, SMALL_BATCH, 15_000 - 50 - SMALL_BATCH]
