@@ -442,8 +442,7 @@ class Camera:
     def fit_cloud(cls, cloud, view="auto", **kw) -> Camera:
         """``fit`` for a cloud (any Renderable): the 'auto' view frames its points (``sample_points``),
         so its data, not its bounding box, fills the frame; other views frame its box."""
-        fit = [p for p in inspect.signature(cls.fit).parameters if p not in ("bounds", "view", "points", "kw")]
-        _check_keywords("fit_cloud", kw, [*fit, *FIT_KEYWORDS])
+        _check_keywords("fit_cloud", kw, FIT_CLOUD_KEYWORDS)
         auto = isinstance(view, str) and view == "auto"  # (a numpy pair compared element-wise: "ambiguous truth value")
         return cls.fit(cloud.bounds, view=view, points=sample_points(cloud) if auto else None, **kw)
 
@@ -549,3 +548,7 @@ class Camera:
         ev = self.ortho_height / 2
         origin = np.asarray(self.eye) + nx * ev * self.aspect * right + ny * ev * up
         return origin, -back
+
+
+# what fit_cloud passes on to fit: fit's parameters but those it sets itself, and fit's keywords (read once, not each call)
+FIT_CLOUD_KEYWORDS = (*(p for p in inspect.signature(Camera.fit).parameters if p not in ("bounds", "view", "points", "kw")), *FIT_KEYWORDS)

@@ -152,7 +152,7 @@ class Viewer:
         # said before a path's points are read (a bad port or settings came after 15 s of a 5 M point file)
         _require_starlette()
         check_address(host, port)
-        RenderSettings.of(settings)
+        settings = RenderSettings.of(settings)  # (parsed once: the server takes the settings as they are)
         self.cloud = _as_cloud(cloud_or_path)
         self.name = self.cloud.name
         self._opened_here = self.cloud is not cloud_or_path  # (from paths: none but this Viewer holds it)
