@@ -306,6 +306,26 @@ def test_cli_outputs_are_never_replaced_without_overwrite(cli, tmp_path, surveys
     assert np.asarray(Image.open(tmp_path / "c.tif")).shape == (88, 80)
 
 
+def test_cli_keeps_the_prj_of_the_same_map_and_refuses_another_maps(cli, tmp_path, surveys):
+    """d.png's d.prj holds the surveys' CRS: d.tif beside it keeps it (it was refused, 'already
+    exists', though Change.write_geotiff keeps it); a .prj of another CRS, or any .prj beside a
+    map of no CRS (it would describe another map), is refused without --overwrite."""
+    rc, _, err = cli("change", *surveys, "--gsd", 1, "-o", tmp_path / "d1.tif", "--preview", tmp_path / "d.png")
+    assert rc == 0, err
+    prj = (tmp_path / "d.prj").read_bytes()
+    rc, out, err = cli("change", *surveys, "--gsd", 1, "-o", tmp_path / "d.tif", "--json")
+    assert rc == 0, err
+    assert json.loads(out)["outputs"] == [str(tmp_path / "d.tif"), str(tmp_path / "d.tfw")]
+    assert (tmp_path / "d.prj").read_bytes() == prj == (tmp_path / "d1.prj").read_bytes()
+    (tmp_path / "e.prj").write_text('PROJCS["some other map"]')
+    no_crs = [write_las(tmp_path / f"{name}_no_crs.las", plane(), keys=[]) for name in ("before", "after")]
+    for inputs, existing in ((surveys, "e.prj"), (no_crs, "d.prj")):
+        rc, _, err = cli("change", *inputs, "--gsd", 1, "-o", tmp_path / f"{existing[0]}2.tif", "--preview", tmp_path / f"{existing[0]}.jpg")
+        assert rc == 1 and err.strip() == f"error: {tmp_path / existing}: already exists; pass --overwrite to replace it", err
+        assert not list(tmp_path.glob(f"{existing[0]}2.*")) and not list(tmp_path.glob(f"{existing[0]}.j*"))
+    assert (tmp_path / "e.prj").read_text() == 'PROJCS["some other map"]' and (tmp_path / "d.prj").read_bytes() == prj
+
+
 def test_cli_leaves_nothing_half_written(cli, tmp_path, surveys, monkeypatch):
     """A failed write (a full disk at the world file) takes back the GeoTIFF and preview written
     before it; a failure before any write (no overlap) writes nothing."""

@@ -275,6 +275,24 @@ def test_cli_writes_the_heights_above_the_base_and_a_preview_as_python_does(cli,
     assert preview.shape == (*result.above_base.shape, 4) and (preview[..., 3] == 0).sum() > 0  # the margin beyond the toe
 
 
+def test_cli_keeps_the_prj_of_the_same_map_and_refuses_another_maps(cli, tmp_path, autzen_path):
+    """a.png's a.prj holds autzen's CRS: --dsm-out a.tif beside it keeps it (it was refused,
+    'already exists', though write_dsm keeps it); a .prj of another CRS is refused."""
+    toe = tmp_path / "toe.geojson"
+    toe.write_text(json.dumps(square(*AUTZEN_BLOCK, "block")))
+    rc, _, err = cli("volume", autzen_path, "--clip-polygon", toe, "--gsd", 4, "-o", tmp_path / "a1.tif", "--preview", tmp_path / "a.png")
+    assert rc == 0, err
+    prj = (tmp_path / "a.prj").read_bytes()
+    rc, out, err = cli("volume", autzen_path, "--clip-polygon", toe, "--gsd", 4, "--dsm-out", tmp_path / "a.tif", "--json")
+    assert rc == 0, err
+    assert json.loads(out)["outputs"] == [str(tmp_path / "a.tif"), str(tmp_path / "a.tfw")]
+    assert (tmp_path / "a.prj").read_bytes() == prj == (tmp_path / "a1.prj").read_bytes()
+    (tmp_path / "b.prj").write_text('PROJCS["some other map"]')
+    rc, _, err = cli("volume", autzen_path, "--clip-polygon", toe, "--gsd", 4, "-o", tmp_path / "b.tif")
+    assert rc == 1 and err.strip() == f"error: {tmp_path / 'b.prj'}: already exists; pass --overwrite to replace it", err
+    assert not list(tmp_path.glob("b.t*")) and (tmp_path / "b.prj").read_text() == 'PROJCS["some other map"]'
+
+
 def test_cli_reports_a_multipolygon_feature_as_one_pile_in_parts(cli, tmp_path, autzen_path):
     x0, y0, x1, y1 = AUTZEN_BLOCK
     middle = (x0 + x1) / 2

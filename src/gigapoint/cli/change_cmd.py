@@ -12,7 +12,7 @@ from typing import Annotated
 import typer
 
 from ..errors import GigapointError, counted, number_text
-from ..render.georef import GEOTIFF_SUFFIXES, georef_paths, georef_writes, raster_writes
+from ..render.georef import GEOTIFF_SUFFIXES, check_side_outputs, checked_side_writes, raster_writes
 from .app import app
 from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
 from .gsd_opts import ALL_POINTS_HELP, check_fill_nodata, check_gsd_value
@@ -56,9 +56,7 @@ def change(
     check_output(output, overwrite, suffixes=GEOTIFF_SUFFIXES)
     if preview is not None:
         check_output(preview, overwrite)
-    georef = georef_paths([output, preview])
-    for side in georef:  # a user's world file or .prj is not replaced without asking
-        check_output(side, overwrite, suffixes=None)
+    georef = check_side_outputs([output, preview], overwrite)
     check_outputs_apart([output, preview, *georef], [before, after])
     check_gsd_value(gsd)
     if not (math.isfinite(min_change) and min_change >= 0):
@@ -77,7 +75,7 @@ def change(
         check_image_fits(preview, cam.width, cam.height)
     wkt = crs_wkt(crs)
     writes = raster_writes(cam, crs, wkt, result.units, [(output, result.dz), (preview, None if preview is None else result.preview(value_range))])
-    side_writes, notes = georef_writes(cam, (output, preview), crs, wkt, result.units)
+    side_writes, notes = checked_side_writes(cam, (output, preview), crs, wkt, result.units, overwrite)  # (d.tif, then d.png: d.prj kept)
     written = write_together(writes + side_writes)
     summary = result.summary()
     if as_json:

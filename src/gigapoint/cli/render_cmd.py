@@ -17,7 +17,7 @@ from ..io import crs_wkt, files_label
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from ..render.contours import draw_contours
-from ..render.georef import georef_paths, georef_writes, map_image, raster_writes, refused_side_paths, unheld_side_writes
+from ..render.georef import check_side_outputs, checked_side_writes, map_image, raster_writes
 from ..render.image_files import warn_alpha_dropped
 from ..render.raster_fill import fill_map
 from . import compiling
@@ -291,10 +291,7 @@ def render(
     for extra, suffixes in ((depth_out, {".tif", ".tiff"} if gsd is not None else {".npy"}), (index_out, {".npy"})):
         if extra is not None:
             check_output(extra, overwrite, suffixes=suffixes)
-    georef = georef_paths([output, depth_out]) if gsd is not None else []
-    for side in georef:  # refused like the image: a user's world file or .prj is not replaced without asking
-        if side.suffix != ".prj" or not side.exists():  # (a .prj there may hold this very CRS: checked once it is known)
-            check_output(side, overwrite, suffixes=None)
+    georef = check_side_outputs([output, depth_out], overwrite) if gsd is not None else []
     warn_alpha_dropped(output, settings.background[3], VIDEO_SUFFIXES)
     contours_drawn = check_contour_options(contours, contours_base, contours_out, contours_on_image, gsd, overwrite)
     check_outputs_apart([output, depth_out, index_out, *georef, contours_out], inputs)
@@ -353,10 +350,7 @@ def render(
 
         crs, units = cloud_crs_units(cloud)
         wkt = crs_wkt(crs)
-        side_writes, notes = georef_writes(cam, (output, depth_out), crs, wkt, units)
-        side_writes = unheld_side_writes(side_writes, wkt)  # (x.webp, then x.jpg: x.prj kept, as gigapoint.orthophoto keeps it)
-        for path in refused_side_paths(side_writes, (output, depth_out), wkt):  # (no CRS: any .prj there is another map's)
-            check_output(path, overwrite, suffixes=None)
+        side_writes, notes = checked_side_writes(cam, (output, depth_out), crs, wkt, units, overwrite)  # (x.webp, then x.jpg: x.prj kept)
     else:
         cam = make_camera(cloud, width, height, view, camera, projection, fov)
         notes = []

@@ -12,7 +12,7 @@ from typing import Annotated
 import typer
 
 from ..errors import CameraError, GigapointError, counted
-from ..render.georef import GEOTIFF_SUFFIXES, georef_paths, write_map
+from ..render.georef import GEOTIFF_SUFFIXES, check_side_outputs, write_map
 from .app import app
 from .cloud_opts import ClassesOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
 from .gsd_opts import VOLUME_POINTS_HELP, check_fill_nodata, check_gsd_value
@@ -66,9 +66,7 @@ def volume(
     for path, suffixes in ((output, GEOTIFF_SUFFIXES), (preview, IMAGE_SUFFIXES), (dsm_out, GEOTIFF_SUFFIXES)):
         if path is not None:
             check_output(path, overwrite, suffixes=suffixes)
-    georef = georef_paths([output, preview, dsm_out])
-    for side in georef:  # a user's world file or .prj is not replaced without asking
-        check_output(side, overwrite, suffixes=None)
+    georef = check_side_outputs([output, preview, dsm_out], overwrite)  # (an existing .prj: write_map judges it once the CRS is known)
     check_outputs_apart([output, preview, dsm_out, *georef], inputs)
     check_gsd_value(gsd)
     chosen_base = _base_of(base.strip().lower())

@@ -231,14 +231,12 @@ def write_map(camera: Camera, crs: str | None, units: dict, rasters, overwrite: 
     for path, array in rasters:
         check_output(path, overwrite, GEOTIFF_SUFFIXES if np.ndim(array) == 2 else IMAGE_SUFFIXES)
         check_image_fits(path, camera.width, camera.height)
-    side_writes, notes = georef_writes(camera, [path for path, _ in rasters], crs, wkt, units)
-    side_writes = unheld_side_writes(side_writes, wkt)
-    named = [path for path, _ in rasters] + [path for path, _ in side_writes]
+    images = [path for path, _ in rasters]
+    named = images + [world_file_path(path) for path in images]  # (each .prj once: georef_paths)
     for i, path in enumerate(named):
         if any(path.resolve() == other.resolve() for other in named[:i]):  # (ortho.tif and ortho.tiff: one .tfw)
             raise GigapointError(f"{path}: named for two outputs")
-    for path in refused_side_paths(side_writes, [path for path, _ in rasters], wkt):  # a user's world file or .prj is not replaced without asking
-        check_output(path, overwrite, suffixes=None)
+    side_writes, notes = checked_side_writes(camera, images, crs, wkt, units, overwrite)
     written = write_together([(path, _said(path, save)) for path, save in raster_writes(camera, crs, wkt, units, rasters) + side_writes])
     for note in notes:
         warn(note, GigapointWarning)
@@ -256,6 +254,30 @@ def _said(path: Path, save):
             raise GigapointError(f"{path}: not written ({write_failure(exc)}); none of the map's files was left") from None
 
     return save_or_say
+
+
+def check_side_outputs(images, overwrite: bool) -> list[Path]:
+    """Before the cloud is read: the world files and .prj files beside ``images`` (None: not
+    written; ``georef_paths``), each refused like the image where it exists without
+    ``overwrite``, but an existing .prj: it may hold this very CRS (``checked_side_writes``
+    judges it once the CRS is known). Returns them."""
+    paths = georef_paths(images)
+    for side in paths:
+        if side.suffix != ".prj" or not side.exists():
+            check_output(side, overwrite, suffixes=None)
+    return paths
+
+
+def checked_side_writes(camera: Camera, images, crs: str | None, wkt: str | None, units: dict, overwrite: bool) -> tuple[list, list[str]]:
+    """Once the CRS is known: ``georef_writes`` of ``images`` less a .prj that holds ``wkt``
+    already (``unheld_side_writes``), each path they write, and with no CRS a .prj beside
+    ``images`` (``refused_side_paths``), refused where it exists without ``overwrite``: a user's
+    world file or .prj is not replaced without asking."""
+    side_writes, notes = georef_writes(camera, images, crs, wkt, units)
+    side_writes = unheld_side_writes(side_writes, wkt)
+    for path in refused_side_paths(side_writes, images, wkt):
+        check_output(path, overwrite, suffixes=None)
+    return side_writes, notes
 
 
 def unheld_side_writes(side_writes, wkt: str | None) -> list:
