@@ -66,6 +66,20 @@ def test_autzen_to_utm_moves_every_point_as_pyproj_does_and_names_utm(cli, autze
     assert "  crs:         WGS 84 / UTM zone 10N (EPSG:32610)" in stdout.splitlines()  # (its WKT by name and code, as info shows a WKT)
 
 
+def test_a_ply_naming_its_crs_in_a_comment_is_reprojected_from_it(cli, autzen_path, tmp_path):
+    """A PLY's ``comment crs`` line is its CRS to move from, as a LAS header's is (it was "names
+    no CRS to reproject from"): autzen as PLY lands where the LAZ does."""
+    ply, out = tmp_path / "autzen.ply", tmp_path / "utm.las"
+    gp.open(autzen_path, colors="rgba").save(ply)
+    rc, _, err = cli("convert", ply, "-o", out, "--to-crs", UTM, "-q")
+    assert rc == 0, err
+    x, y, _ = _pyproj_moved(autzen_path, UTM)
+    written = laspy.read(str(out))
+    assert np.abs(np.sort(np.asarray(written.x)) - np.sort(x)).max() <= 0.0005 + 1e-9
+    assert np.abs(np.sort(np.asarray(written.y)) - np.sort(y)).max() <= 0.0005 + 1e-9
+    assert crs_identity(files_crs([out])) == UTM
+
+
 def test_a_round_trip_back_to_the_source_crs_lands_within_two_of_its_steps(autzen_path, tmp_path):
     utm, back = tmp_path / "utm.las", tmp_path / "back.las"
     with pytest.warns(GigapointWarning, match="z is kept"):

@@ -132,6 +132,17 @@ def test_ewkt_names_the_crs_its_polygon_is_moved_from(autzen_path, tmp_path):
     assert gp.open(autzen_path, clip_polygon=f"SRID=4326;{wkt}").n_points == gp.open(autzen_path, clip_polygon=named).n_points == 51_774
 
 
+def test_a_polygon_naming_its_crs_is_moved_into_a_ply_files_crs_as_into_a_las_files(autzen_path, tmp_path):
+    """A PLY's ``comment crs`` line names its CRS as a LAS header does: a polygon in EPSG:4326 over
+    autzen saved as PLY clips what it clips of the LAZ (it kept nothing: only LAS headers were read)."""
+    pytest.importorskip("pyproj")
+    ply = tmp_path / "autzen.ply"
+    gp.open(autzen_path, colors="rgba").save(ply)
+    ring = [[-123.0723, 44.0495], [-123.0703, 44.0495], [-123.0703, 44.0515], [-123.0723, 44.0515], [-123.0723, 44.0495]]
+    named = {"type": "Polygon", "coordinates": [ring], "crs": {"type": "name", "properties": {"name": "EPSG:4326"}}}
+    assert gp.open(ply, clip_polygon=named).n_points == gp.open(autzen_path, clip_polygon=named).n_points == 51_774
+
+
 def test_points_on_edges_and_vertices_are_kept_those_in_holes_not():
     polygon = clip_polygon_of({"type": "MultiPolygon", "coordinates": [SQUARE_WITH_HOLE, CONCAVE]}, "test")
     x, y = np.meshgrid(np.arange(-1.0, 22.0, 0.5), np.arange(-1.0, 12.0, 0.5))  # the vertices and edges among them

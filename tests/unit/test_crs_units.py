@@ -211,8 +211,8 @@ def test_render_gsd_reads_the_header_naming_the_crs_once(cli, tmp_path, autzen_p
 
     from gigapoint.io import crs
 
-    read, first = [], crs.first_crs_file
-    monkeypatch.setattr(crs, "first_crs_file", lambda files: read.append(list(files)) or first(files))
+    read, first = [], crs.first_crs
+    monkeypatch.setattr(crs, "first_crs", lambda files: read.append(list(files)) or first(files))
     rc, _, err = cli("render", autzen_path, "-o", tmp_path / "ortho.tif", "--gsd", 20)
     assert rc == 0, err
     assert read == [[autzen_path]]  # its CRS and its units from one read (there were two)

@@ -108,6 +108,19 @@ def test_tiles_with_different_crs_are_warned_about(tmp_path, progressive):
     assert "2 different CRSs (a.las: EPSG:32610; b.las: EPSG:32611)" in said[0] and "not reprojected" in said[0]
 
 
+def test_a_ply_naming_another_crs_among_las_tiles_is_warned_about(tmp_path):
+    """A PLY's ``comment crs`` line is its CRS as a LAS header's is (the PLY was skipped: silent)."""
+    write_tile(tmp_path / "a.las", tile_points(0, 500_000.0), 0.001, (500_000, 4_800_000, 0), geokeys(32610))
+    write_tile(tmp_path / "b.las", tile_points(1, 500_050.0), 0.001, (500_000, 4_800_000, 0), geokeys(32611))
+    gp.open(tmp_path / "b.las").save(tmp_path / "b.ply")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cloud = gp.open([tmp_path / "a.las", tmp_path / "b.ply"])
+    assert cloud.n_points == 4000
+    said = crs_warnings(caught)
+    assert len(said) == 1 and "2 different CRSs (a.las: EPSG:32610; b.ply: EPSG:32611)" in said[0], said
+
+
 def test_one_crs_as_wkt_and_as_geokeys_is_not_warned_about(tmp_path):
     """The same CRS (EPSG 32610) as a LAS 1.4 WKT in one tile and GeoTIFF keys in the other."""
     wkt = laspy.VLR("LASF_Projection", 2112, "OGC WKT", UTM10_WKT.encode() + b"\0")

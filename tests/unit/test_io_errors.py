@@ -555,6 +555,19 @@ def test_a_hex_colour_column_under_a_header_ending_in_a_comment_is_named_as_the_
     assert cloud.n_points == 2 and list(cloud.attributes) == []
 
 
+def test_text_columns_of_several_csvs_are_said_once_a_file(tmp_path):
+    """Each file's layout is read once an operation: the empty-file check among several read it
+    before the points did, and each file's text column was said twice."""
+    files = [tmp_path / "a.csv", tmp_path / "b.csv"]
+    for p in files:
+        p.write_text("x,y,z,name\n1,2,3,foo\n4,5,6,bar\n")
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        cloud = gp.open(files)
+    assert [str(w.message) for w in said] == [f"{p}: column(s) name hold text, not numbers: left out" for p in files]
+    assert cloud.n_points == 4
+
+
 def test_a_named_text_column_is_left_out_with_a_warning(tmp_path):
     """A CSV with a column of labels ("x,y,z,intensity,label") was refused whole ("'a' is not a
     number"): the named text column is left out, said once; the numbers in other columns are

@@ -12,10 +12,10 @@ from pathlib import Path
 
 from ..errors import GigapointError, GigapointWarning, InputError, warn
 from ._base import read_once
-from .las import LasHeader, LasReader, first_crs_file, geokeys, read_las_header
+from .las import LasHeader, LasReader, geokeys, read_las_header
 from .paths import file_names
-from .ply import first_ply_crs
-from .registry import reader_for
+from .ply import PlyReader
+from .registry import file_header, reader_for
 
 WKT_EPSG = re.compile(r'(?:AUTHORITY|ID)\[\s*"EPSG"\s*,\s*"?(\d+)"?\s*\]\s*\]\s*$', re.IGNORECASE)
 
@@ -198,21 +198,33 @@ def refuse_angles(where: str, source, crs: str | None, units: dict, operation: s
     )
 
 
+def file_crs(path) -> tuple[str | None, LasHeader | None]:
+    """(the CRS ``path`` names, its LAS header): a LAS/LAZ header's (its WKT, else 'EPSG:n' or
+    'EPSG:n+v' of its GeoTIFF keys: LasHeader.crs), a PLY header's ``comment crs`` line (no LAS
+    header); None for another format or none named. Each header read once an operation; a file
+    gone or damaged raises its reader's error."""
+    reader = reader_for(path)
+    if isinstance(reader, LasReader):
+        hdr = read_las_header(path, salvage=True)  # (a file cut off still names its CRS)
+        return hdr.crs(), hdr
+    if isinstance(reader, PlyReader):
+        return file_header(path, salvage=True)["crs"], None
+    return None, None
+
+
 def first_crs(files) -> tuple[object, str, dict, LasHeader | None] | None:
-    """(the file, its CRS, ``crs_units`` of it, its LAS header) of the first LAS/LAZ file of
-    ``files`` that names a CRS (its WKT, else 'EPSG:n' of its GeoTIFF keys, whose unit keys the
-    units read too), else of the first PLY file naming one in a ``comment crs`` line (its header
-    None); None where none does. What files_crs, files_units, files_length_units and the CRS
-    records a save or conversion writes all read."""
-    found = first_crs_file(files)
-    if found is not None:
-        path, hdr = found
-        return path, hdr.crs(), crs_units(hdr.crs(), geokeys(hdr.vlrs)), hdr
-    found = first_ply_crs(files)
-    if found is None:
-        return None
-    path, crs = found
-    return path, crs, crs_units(crs), None
+    """(the file, its CRS, ``crs_units`` of it, its LAS header or None) of the first file of
+    ``files`` that names a CRS (``file_crs``: a LAS header's GeoTIFF unit keys read too); None
+    where none does, or names one. What files_crs, files_units, files_length_units, a clip
+    polygon's placing and the CRS records a save or conversion writes all read."""
+    for f in files:
+        try:
+            crs, hdr = file_crs(f)
+        except (GigapointError, OSError):  # gone or damaged since it was read: its read says why
+            continue
+        if crs:
+            return f, crs, crs_units(crs, None if hdr is None else geokeys(hdr.vlrs)), hdr
+    return None
 
 
 def files_length_units(where: str, files, operation: str | None, instead: str = "") -> dict:
@@ -438,19 +450,19 @@ def crs_wkt(crs: str | None) -> str | None:
 
 
 def warn_mixed_crs(files, then: str = "") -> None:
-    """Warn where LAS/LAZ files read as one cloud name different CRSs, or some name one and
+    """Warn where LAS/LAZ and PLY files read as one cloud name different CRSs, or some name one and
     others none (lost with their VLRs, or another CRS unsaid): their coordinates are used as
     they are, nothing is reprojected, so such tiles may not line up (``then``: what follows,
     added to the message). Once an operation (``headers_once``: open_sized reads the files twice)."""
     if len(files) < 2:
         return
     first: dict = {}  # CRS (crs_identity: one however each file writes it): the first file naming it
-    have, none = 0, []  # how many LAS files name a CRS; those naming none
+    have, none = 0, []  # how many files name a CRS; those naming none
     for f in files:
         try:  # (the header the read uses: no second open; salvage: as scan_angles_differ)
-            if not isinstance(reader_for(f), LasReader):  # (no CRS to name: not said to lack one)
+            if not isinstance(reader_for(f), (LasReader, PlyReader)):  # (no CRS to name: not said to lack one)
                 continue
-            crs = read_las_header(f, salvage=True).crs()
+            crs = file_crs(f)[0]
         except GigapointError:  # a bad file: reading its points says so, in its own words
             continue
         if crs:

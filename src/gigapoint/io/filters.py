@@ -283,18 +283,18 @@ def _placed(polygon: ClipPolygon, path) -> ClipPolygon:
 
 def placed_over(polygon: ClipPolygon, files, where) -> ClipPolygon:
     """``polygon`` in the coordinates of the points of ``files`` (named ``where`` in messages):
-    ``placed_in`` the CRS the first of their LAS headers naming one names, over its box (as it
-    is where none names one, or they are no LAS/LAZ files: an octree, a PLY)."""
-    from .crs import crs_units
-    from .las import first_crs_header, geokeys
+    ``placed_in`` the CRS the first of them naming one names (``first_crs``: a LAS header, a PLY
+    comment), over its LAS header's box (a PLY's header has none); as it is where none names one
+    (an octree, a file of another format)."""
+    from .crs import first_crs
 
     if not may_move(polygon):
         return polygon  # in the points' coordinates (the usual case: no header read)
-    header = first_crs_header(files)
-    if header is None:
+    found = first_crs(files)
+    if found is None:
         return polygon
-    crs = header.crs()
-    return placed_in(polygon, crs, crs_units(crs, geokeys(header.vlrs)), (header.mins, header.maxs), where)
+    _, crs, units, header = found
+    return placed_in(polygon, crs, units, None if header is None else (header.mins, header.maxs), where)
 
 
 def may_move(polygon: ClipPolygon) -> bool:
@@ -334,13 +334,14 @@ def placed_in(polygon: ClipPolygon, crs: str | None, units: dict, bounds, where)
 def refuse_lon_lat(polygon: ClipPolygon, crs: str, units: dict, bounds, where) -> None:
     """A one-line InputError where ``polygon``, taken as it is, lies within longitude/latitude's
     range far from the ``bounds`` (lo, hi) of points (named ``where``) in ``crs``, a projected CRS
-    (``units``: its io.crs_units): it would clip nothing. One naming no CRS is lon/lat by RFC 7946;
+    (``units``: its io.crs_units): it would clip nothing. ``bounds`` None (a PLY header tells
+    none): not here, the points as read tell (PointFilter). One naming no CRS is lon/lat by RFC 7946;
     one naming a CRS is here only without pyproj to move it."""
     from .crs import crs_name
 
     horizontal = units["horizontal"]
     projected = horizontal is not None and horizontal["metres"] is not None
-    if not (projected and looks_like_lon_lat(polygon) and far_apart(polygon, *bounds)):
+    if not (projected and bounds is not None and looks_like_lon_lat(polygon) and far_apart(polygon, *bounds)):
         return
     (x0, y0), (x1, y1) = polygon.lo, polygon.hi
     if polygon.epsg is None:

@@ -23,7 +23,7 @@ import numpy as np
 from ..core import pages
 from ..core.chunk import ColorScaler, PointChunk, safe_attribute_name
 from ..core.coords import MAX_ABS_COORDINATE, NUMPY_MAX
-from ..errors import EmptyCloudError, GigapointError, GigapointWarning, InputError, warn
+from ..errors import EmptyCloudError, GigapointWarning, InputError, warn
 from . import laz_process
 from ._base import DEFAULT_CHUNK_SIZE, SALVAGE_HINT, Reader, check_chunk_size, check_file, fail, one_line, read_once
 
@@ -671,26 +671,6 @@ def vlrs_crs(vlrs) -> str | None:
     if 0 < vertical < 32767 and not any(vertical in codes for codes in GEOTIFF10_VERTICAL_CODES):
         return f"EPSG:{horizontal}+{vertical}"
     return f"EPSG:{horizontal}"
-
-
-def first_crs_header(files) -> LasHeader | None:
-    """The header of the first LAS/LAZ file of ``files`` that names a CRS (warn_mixed_crs warns
-    where files differ), None without one; a file of another format, or gone or damaged since it
-    was read, says nothing (its header is not a LAS header)."""
-    found = first_crs_file(files)
-    return None if found is None else found[1]
-
-
-def first_crs_file(files) -> tuple[object, LasHeader] | None:
-    """(the file, its header) of ``first_crs_header``: messages name the file."""
-    for f in files:
-        try:
-            hdr = read_las_header(f, salvage=True)
-        except (GigapointError, OSError):
-            continue
-        if hdr.crs():
-            return f, hdr
-    return None
 
 
 def geokeys(vlrs) -> dict[int, int]:

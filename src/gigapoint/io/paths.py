@@ -16,7 +16,7 @@ from ..errors import EmptyCloudError, GigapointWarning, InputError, value_text, 
 from ._base import check_file, fail, read_once
 from .http import shown_url
 from .las import LasReader, read_las_header
-from .registry import in_folder, is_dataset_folder, is_supported_name, reader_for, supported_suffixes
+from .registry import file_header, in_folder, is_dataset_folder, is_supported_name, reader_for, supported_suffixes
 
 #: a URL (scheme, rest); http and https are lod/reader's, file:// is ``file_url_path``'s
 URL_LIKE = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]+):/+(.*)$")  # (a Path of 'ftp://h/x' is 'ftp:/h/x'; 'C:/' is a drive)
@@ -271,7 +271,9 @@ def files_with_points(files: list[Path]) -> list[Path]:
     for f in files:
         (empty if _holds_no_points(f) else kept).append(f)
     if not kept:
-        raise EmptyCloudError(f"{files_label(files)}: no file holds any point")
+        from ..core.cloud import check_valid_count
+
+        check_valid_count(files_label(files), 0, 0, from_files=True)  # (its "no file holds any point")
     for f in empty:
         skip_empty(f)
     return kept
@@ -286,7 +288,7 @@ def point_files_of(paths, where: str = "open", recursive: bool = False) -> list[
 def _holds_no_points(f: Path) -> bool:
     """Whether a file is empty, as its size or its header (read once an operation) tells."""
     try:
-        return f.stat().st_size == 0 or reader_for(f).header(f, salvage=True)["point_count"] == 0
+        return f.stat().st_size == 0 or file_header(f, salvage=True)["point_count"] == 0
     except EmptyCloudError:  # (a text file's header: "holds no points")
         return True
 

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.chunk import ColorScaler, PointChunk
-from ..errors import EmptyCloudError, GigapointError
+from ..errors import EmptyCloudError
 from ._base import (
     DEFAULT_CHUNK_SIZE,
     SALVAGE_HINT,
@@ -37,7 +37,6 @@ from ._base import (
     color_names,
     fail,
     packed_rgb_field,
-    read_once,
     rows_to_chunk,
     scan_bounds,
     unpack_rgb,
@@ -139,22 +138,6 @@ class _Header:
         return rows_to_chunk(self.path, names, cols, scaler)
 
 
-def first_ply_crs(files) -> tuple[object, str] | None:
-    """(the file, its CRS) of the first PLY file of ``files`` that names one (its ``comment crs``
-    line), None without one; a file gone or damaged since it was read says nothing (its read says
-    why). Each header read once an operation (``read_once``: its CRS and units are asked for in turn)."""
-    for f in files:
-        if Path(f).suffix.lower() != ".ply":
-            continue
-        try:
-            crs = read_once("ply crs", f, lambda f=f: _Header(Path(f)).crs)
-        except (GigapointError, OSError):
-            continue
-        if crs:
-            return f, crs
-    return None
-
-
 #: a face's list of vertex indices (as the PLY format names it; some writers drop the s): 3 at least
 _FACE_CORNERS = ("vertex_indices", "vertex_index")
 
@@ -180,7 +163,8 @@ class PlyReader(Reader):
 
     def header(self, path: Path, salvage: bool = False) -> dict:
         """Also ``has_color``: whether its vertices have color properties (a COPC output of
-        points without them is written without colors)."""
+        points without them is written without colors); ``crs``: what its ``comment crs`` line
+        names, None without one."""
         path = check_file(path)
         h = _Header(path)
         short = None
@@ -193,7 +177,7 @@ class PlyReader(Reader):
             short = self._binary_span(path, h)[2]
         if short and not salvage:
             raise fail(path, short + SALVAGE_HINT)
-        head = {"point_count": h.count, "has_color": h.has_color, "attributes": h.attributes}
+        head = {"point_count": h.count, "has_color": h.has_color, "attributes": h.attributes, "crs": h.crs}
         return head if short is None else {**head, "truncated": short}
 
     def read_salvaged(self, path: Path, chunk_size: int = DEFAULT_CHUNK_SIZE) -> Iterator[PointChunk]:

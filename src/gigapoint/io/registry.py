@@ -100,6 +100,14 @@ def reader_for(path: Path | str) -> Reader:
     )
 
 
+def file_header(path, salvage: bool = False) -> dict:
+    """``reader_for(path).header(path, salvage)``, read once an operation (``read_once``): the
+    empty-file check, the CRS and the read each ask for it (a text file's layout warns as read)."""
+    from ._base import read_once
+
+    return read_once("salvaged header" if salvage else "header", path, lambda: reader_for(path).header(path, salvage=salvage))
+
+
 _loaded = False
 
 

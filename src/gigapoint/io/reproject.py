@@ -38,9 +38,9 @@ import numpy as np
 from ..core.chunk import PointChunk
 from ..core.coords import MAX_ABS_COORDINATE
 from ..errors import GigapointWarning, InputError, counted, first_line, warn
-from .crs import crs_identity, crs_name, crs_units, same_horizontal
+from .crs import crs_identity, crs_name, crs_units, file_crs, same_horizontal
 from .filters import PointFilter, may_move, placed_in, placed_over
-from .las import LasReader, read_las_header
+from .las import LasReader
 from .polygon import ClipPolygon, moved_polygon
 from .registry import reader_for
 
@@ -162,7 +162,7 @@ class Reprojection:
 
         others, other_by_text = [], {}  # (each header text parsed once: thousands of tiles name one CRS)
         for f in files:
-            text = _header_crs(f)
+            text = file_crs(f)[0]
             if text and text not in other_by_text:
                 try:
                     other_by_text[text] = not same_horizontal(pyproj.CRS.from_user_input(text), self.given_source)
@@ -198,7 +198,7 @@ class Reprojection:
 
     def _file_crs(self, path) -> str:
         """The CRS ``path``'s header names (WKT or 'EPSG:n'); a one-line InputError where it names none."""
-        text = _header_crs(path)
+        text = file_crs(path)[0]
         if not text:
             raise InputError(f"{path}: names no CRS to reproject from; give the CRS its coordinates are in with {self.from_crs_hint}")
         return text
@@ -406,11 +406,6 @@ class Reprojection:
             return self.target.to_wkt("WKT1_GDAL")
         except pyproj.exceptions.CRSError:
             return self.target.to_wkt("WKT2_2019")
-
-
-def _header_crs(path) -> str | None:
-    """The CRS a LAS/LAZ file's header names (WKT or 'EPSG:n'); None where it names none or the file is of another format."""
-    return read_las_header(path).crs() if isinstance(reader_for(path), LasReader) else None
 
 
 def output_grid(files, reprojection: Reprojection):

@@ -43,6 +43,7 @@ from ._base import (
     check_file,
     color_names,
     fail,
+    read_once,
     rows_to_chunk,
     scanned_info,
 )
@@ -121,6 +122,12 @@ class _Layout:
 
 
 def _layout(path: Path) -> _Layout:
+    """The file's layout, read once an operation (``read_once``): its header, the empty-file
+    check and its points each ask, and its warnings are said once."""
+    return read_once("text layout", path, lambda: _read_layout(path))
+
+
+def _read_layout(path: Path) -> _Layout:
     try:
         with open(path, encoding="utf-8-sig") as f:
             first: list[tuple[int, str]] = []
