@@ -8,8 +8,9 @@ import re
 from pathlib import Path
 
 import numpy as np
+from test_crs_units import write_geokeys_only  # (tests/unit is on sys.path)
 
-from gigapoint.io import file_info, folder_info
+from gigapoint.io import file_info, files_units, folder_info
 
 PDAL_EPT = Path(__file__).parent / "data" / "pdal_ept"
 
@@ -32,6 +33,16 @@ def test_info_says_the_units_of_the_crs(cli, autzen_path, tmp_path):
     np.save(no_crs, np.arange(30, dtype=np.float64).reshape(10, 3))
     rc, out, _ = cli("info", no_crs)
     assert "units:" not in out  # (no CRS named: no line)
+
+
+def test_info_says_the_units_a_las_files_geotiff_unit_keys_name(cli, tmp_path):
+    """Oregon Lambert in feet (ProjectedCSTypeGeoKey 2992) with heights in metres by the file's
+    VerticalUnitsGeoKey (9001): info said "z: foot (assumed...)" where measurements use metres."""
+    path = write_geokeys_only(tmp_path / "feet_xy_metre_z.las", 2992, {4099: 9001})
+    rc, out, err = cli("info", path)
+    assert rc == 0, err
+    assert "  units:       x, y: foot; z: metre" in out.splitlines()
+    assert file_info(path)["units"] == files_units([path])
 
 
 def test_the_extent_has_the_scales_decimals_whatever_the_offset(cli):

@@ -12,7 +12,7 @@ import numpy as np
 from ..core.coords import MAX_ABS_COORDINATE, scale_decimals, value_decimals
 from ..errors import InputError, counted
 from ._base import STREAM_CHUNK_SIZE, check_file, headers_once
-from .crs import crs_identity, crs_name, crs_units
+from .crs import crs_identity, crs_name, crs_units, first_crs
 from .filters import point_filter
 from .paths import cloud_name, file_names, files_label, point_files_of
 from .registry import is_dataset_folder, reader_for
@@ -30,7 +30,8 @@ def file_info(path) -> dict:
     info = reader.info(p)
     info.setdefault("crs", None)
     if info["crs"]:  # (feet or metres: the CRS's name rarely says, its numbers never)
-        info["units"] = crs_units(info["crs"])
+        found = first_crs([p])  # (what measurements go by: a LAS file's GeoTIFF unit keys too)
+        info["units"] = found[2] if found else crs_units(info["crs"])  # (else a CRS only pyproj read from laspy's header)
     info["reader"] = reader.name
     return info
 
@@ -135,7 +136,7 @@ def format_info(info: dict) -> str:
     if (info.get("crs") or info.get("las_version")) and "crs differs" not in (info.get("details") or {}):  # (a folder's tiles': said below)
         lines.append(f"  crs:         {crs_name(info.get('crs'))}")
         if info.get("crs"):
-            lines.append(f"  units:       {units_text(info.get('units') or crs_units(info['crs']))}")
+            lines.append(f"  units:       {units_text(info['units'])}")
     if info.get("generating_software"):
         lines.append(f"  software:    {info['generating_software']}")
     if info.get("columns"):

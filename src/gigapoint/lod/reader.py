@@ -238,6 +238,7 @@ def octree_info(path) -> dict:
         "has_color": has_color,
         "attributes": attributes,
         "crs": crs,
+        "units": cloud_units(cloud),
         "scale": scale,
         "offset": offset,
         "on_grid": False,  # its positions are floats (reprojected ones on no grid): no more decimals than the scale's
@@ -298,6 +299,7 @@ def _voxel_info(path) -> dict:
             "scale": meta.get("scale"),
             "offset": meta.get("offset"),
             "crs": meta.get("crs"),
+            "units": cloud_units(cloud),
             "generating_software": meta.get("generating_software"),
             "nodes": len(cloud.keys),
             "levels": len(per_level),
