@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ..errors import GigapointError, GigapointWarning, InputError, warn
 from ._base import read_once
-from .las import LasHeader, LasReader, geokeys, read_las_header
+from .las import LasHeader, LasReader, geokeys, read_las_header, wkt_of
 from .paths import file_names
 from .ply import PlyReader
 from .registry import file_header, reader_for
@@ -225,6 +225,17 @@ def first_crs(files) -> tuple[object, str, dict, LasHeader | None] | None:
         if crs:
             return f, crs, crs_units(crs, None if hdr is None else geokeys(hdr.vlrs)), hdr
     return None
+
+
+def first_crs_wkt(files) -> tuple[str, str | None, LasHeader | None] | None:
+    """(the CRS, its WKT, its LAS header or None) of ``first_crs``: the WKT its LAS (E)VLRs hold,
+    else ``crs_wkt`` of its CRS (GeoTIFF keys' or a PLY comment's 'EPSG:n': None without pyproj).
+    What a conversion's output and the CRS records a save writes name."""
+    found = first_crs(files)
+    if found is None:
+        return None
+    crs, hdr = found[1], found[3]
+    return crs, (None if hdr is None else wkt_of(hdr.vlrs + hdr.evlrs)) or crs_wkt(crs), hdr
 
 
 def files_length_units(where: str, files, operation: str | None, instead: str = "") -> dict:

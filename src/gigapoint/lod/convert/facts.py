@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import GigapointWarning, warn
-from ...io import crs_wkt, file_names, warn_mixed_crs
-from ...io.crs import first_crs
-from ...io.las import LasReader, read_las_header, wkt_of
+from ...io import file_names, warn_mixed_crs
+from ...io.crs import first_crs_wkt
+from ...io.las import LasReader
 from ...io.registry import reader_for
 from ...io.write import file_has_color
 
@@ -43,7 +43,7 @@ def input_facts(paths, one_grid: bool = False, moved_to: tuple | None = None) ->
     (the target CRS's WKT, the moved points' LAS grid (scale, offset) or None) where the points
     are reprojected as they are read (convert's to_crs): the CRS and grid are those, and the
     inputs' own (mixed CRSs, grids apart) nothing to warn of."""
-    crs = wkt = scale = offset = None
+    scale = offset = None
     has_color = None
     grids = []  # (file, scale, offset) of the LAS inputs
     for p in paths or []:
@@ -64,18 +64,11 @@ def input_facts(paths, one_grid: bool = False, moved_to: tuple | None = None) ->
         scale = s if scale is None else np.minimum(scale, s)
         offset = np.asarray(info["offset"], np.float64) if offset is None else offset
         grids.append((p, s, np.asarray(info["offset"], np.float64)))
-        text = info.get("crs")
-        if text and crs is None:
-            crs = text
-            hdr = read_las_header(p)  # (its (E)VLRs: the first CRS's file only)
-            wkt = wkt_of(hdr.vlrs + hdr.evlrs) or crs_wkt(text)
-    found = first_crs(paths or []) if crs is None and moved_to is None else None
-    if found is not None:  # no LAS file names one: a PLY file's ``comment crs`` line
-        crs, wkt = found[1], crs_wkt(found[1])
     if moved_to is not None:
         crs = wkt = moved_to[0]
         scale, offset = (None, None) if moved_to[1] is None else (np.asarray(v, np.float64) for v in moved_to[1])
     else:
+        crs, wkt = (first_crs_wkt(paths or []) or (None, None))[:2]
         warn_mixed_crs(paths or [], then="; the output takes the first CRS named")
         if one_grid and grids:
             _warn_off_grid(grids, scale, offset)

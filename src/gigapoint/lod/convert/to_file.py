@@ -92,13 +92,11 @@ class PointFiles:
         self.one_angle = scan_angles_differ(self.files)
         self.names = _attributes_in_common(self.files, self.one_angle, self.chunk_size, out)
         self.counts = [reader_for(f).point_count(f) for f in self.files]
+        self.crs_records = wkt_crs_records(reprojection.target_wkt()) if reprojection is not None else source_crs_records(self.files)
         if ply:  # (doubles on no grid; the CRS in a header comment: io/write.py)
             self.las_grid = None
-            self.crs_records = wkt_crs_records(reprojection.target_wkt()) if reprojection is not None else source_crs_records(self.files)
-        elif reprojection is not None:
-            self.las_grid, self.crs_records = output_grid(self.files, reprojection), wkt_crs_records(reprojection.target_wkt())
         else:
-            self.las_grid, self.crs_records = _las_inputs_grid(self.files, facts), source_crs_records(self.files)
+            self.las_grid = output_grid(self.files, reprojection) if reprojection is not None else _las_inputs_grid(self.files, facts)
         self.colorization = colorization
         if colorization is not None:  # (the points' CRS is the output's: the target's where reprojected)
             colorization.check_crs(reprojection.target_wkt() if reprojection is not None else files_crs(self.files), self.label)
