@@ -198,6 +198,12 @@ def test_point_stats_takes_a_list_of_paths_as_gp_open_does(autzen_path):
     assert point_stats((autzen_path,))["point_count"] == 110_000
 
 
+def test_point_stats_names_itself_in_its_input_errors(autzen_path):
+    """Its inputs' errors said "open: inputs[1]: ..." (point_files_of's default), not its own name."""
+    with pytest.raises(InputError, match=r"^point_stats: inputs\[1\]: 5 is not a path \(a str or os\.PathLike\)$"):
+        point_stats([autzen_path, 5])
+
+
 @pytest.mark.parametrize("given", [None, 30_000])
 def test_stats_read_chunks_of_the_stream_size_unless_told(autzen_path, monkeypatch, given):
     """``info --stats`` (file_stats) reads in chunks of STREAM_CHUNK_SIZE (its peak memory is a chunk

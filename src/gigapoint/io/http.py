@@ -104,6 +104,15 @@ def shown_url(text) -> str:
     return m.group(1) + _hidden_user_info(hidden_query(m.group(2)))
 
 
+def last_name(text) -> str:
+    """The last part of a path or URL, a URL's query and fragment aside (its token no part of its
+    name): 'https://host/d/ept.json?sig=x' -> 'ept.json'."""
+    text = os.fspath(text) if isinstance(text, os.PathLike) else str(text)
+    if _SCHEME.match(text):
+        text = text.split("?")[0].split("#")[0]
+    return text.rstrip("/").rsplit("/", 1)[-1]
+
+
 def _hidden_user_info(rest: str) -> str:
     """A URL's part after ``scheme://`` with its user info hidden: 'user:pw@host/x' ->
     'user:***@host/x', 'token@host/x' -> '***@host/x'. The user info ends at the last '@' before

@@ -163,7 +163,7 @@ def point_stats(*paths, recursive: bool = False, chunk_size: int = STREAM_CHUNK_
     for path in paths:
         _refuse_octree_folder(path)
     keep = point_filter(classes, drop_classes, clip, "point_stats", clip_polygon=clip_polygon)  # (bad values: said before reading)
-    files = point_files_of(paths, recursive=recursive)  # (an empty file among several: skipped, as gp.open skips it)
+    files = point_files_of(paths, where="point_stats", recursive=recursive)  # (an empty file among several: skipped, as gp.open skips it)
     total = PointStats()
     for f in files:
         total.merge(file_stats(f, chunk_size, point_filter=keep))

@@ -71,7 +71,7 @@ def open_cloud(
     check_switch("progress", progress, where)
     if name is not None and not isinstance(name, str):  # the name every message and output of the cloud starts with
         raise InputError(f"{where}: name must be a string, got {name!r}")
-    files = point_files_of(paths, where)  # (none: "``where``: no file given", given_paths')
+    files = point_files_of(paths, where=where)  # (none: "``where``: no file given", given_paths')
     plan = [(f, reader_for(f)) for f in files]
     if name is None:
         name = cloud_name(files)

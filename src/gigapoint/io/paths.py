@@ -210,7 +210,7 @@ def _folder_files(folder: Path, recursive: bool) -> tuple[list[Path], list[Path]
 READ_SUBFOLDERS = "read every file below it with --recursive (recursive=True in Python), or name them"
 
 
-def expand_paths(paths: Iterable, recursive: bool = False, where: str = "open") -> list[Path]:
+def expand_paths(paths: Iterable, *, recursive: bool = False, where: str = "open") -> list[Path]:
     """Files named (paths, ``file://`` URLs, ``~/...``, glob patterns: ``pattern_matches``), with
     each directory replaced by its supported files sorted by name (``recursive``: also those of
     its subfolders, depth first, but hidden ones and octrees; an octree a pattern matches is left
@@ -279,10 +279,10 @@ def files_with_points(files: list[Path]) -> list[Path]:
     return kept
 
 
-def point_files_of(paths, where: str = "open", recursive: bool = False) -> list[Path]:
+def point_files_of(paths, *, where: str = "open", recursive: bool = False) -> list[Path]:
     """The files ``paths`` name (``expand_paths``) whose points are read: among several, those
     holding none left out (``files_with_points``). What every reader of several files' points goes by."""
-    return files_with_points(expand_paths(paths, recursive, where))
+    return files_with_points(expand_paths(paths, recursive=recursive, where=where))
 
 
 def _holds_no_points(f: Path) -> bool:

@@ -25,7 +25,7 @@ from ..core.chunk import safe_attribute_name
 from ..errors import EmptyCloudError, GigapointWarning, InputError, warn
 from ..io import laz_process
 from ..io._base import ATTRIBUTE_DTYPES
-from ..io.http import ByteSource, HttpFile, LocalFile, open_source
+from ..io.http import ByteSource, LocalFile, last_name, open_source
 from ..io.las import EVLR_HEADER, PROJECTION_USER_ID, WKT_RECORD, evlr_headers, read_las_header, truncated_header, wkt_of
 from ..io.las_fields import EXTRA_BYTES_TYPES, FLAG_BITS, field_attributes
 from ..io.las_kernels import _scaled_xyz
@@ -301,9 +301,7 @@ class CopcCloud(VoxelOctree):
                 f"(its hierarchy, at bytes {root[0]:,}..{root[0] + root[1]:,}, is cut off: no node can be found){self._as_laz()}"
             )
         self._check_range(root[0], root[1], "the root hierarchy page")
-        path = name.split("?")[0].split("#")[0] if isinstance(source, HttpFile) else name  # (a URL's token is no part of its name)
-        stem = path.rstrip("/").rsplit("/", 1)[-1]
-        self._open(stem, meta, root, path=None)
+        self._open(last_name(name), meta, root, path=None)
 
     def _evlr_wkt(self, data_start: int) -> str | None:
         """The WKT of a LASF_Projection EVLR (copc-lib writes its CRS so, after the hierarchy

@@ -27,7 +27,7 @@ import numpy as np
 from ..core.chunk import safe_attribute_name
 from ..errors import InputError
 from ..io import laz_process
-from ..io.http import ByteSource, open_source, shown_url
+from ..io.http import ByteSource, last_name, open_source, shown_url
 from ..io.las import scan_angle_units
 from ..io.las_kernels import _scaled_xyz
 from .copc import ExtraField
@@ -90,7 +90,7 @@ def _class_meta(schema: list[dict]) -> dict:
 
 def _named_ept(name: str) -> bool:
     """Whether the file ``name`` (a path or a URL, its query aside) is called ept.json."""
-    return name.split("?")[0].split("#")[0].rstrip("/").rsplit("/", 1)[-1] == EPT_FILE
+    return last_name(name) == EPT_FILE
 
 
 class EptCloud(VoxelOctree):

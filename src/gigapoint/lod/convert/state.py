@@ -60,7 +60,7 @@ def input_paths(inputs) -> list[Path] | None:
         raise InputError("convert: no input given")
     inputs = [local_path(p, "an input") for p in inputs]
     refuse_octrees(inputs)
-    return point_files_of(inputs, "convert")  # (an empty file among several: skipped, said once)
+    return point_files_of(inputs, where="convert")  # (an empty file among several: skipped, said once)
 
 
 def refuse_octrees(inputs) -> None:

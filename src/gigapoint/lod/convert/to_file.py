@@ -79,7 +79,7 @@ class PointFiles:
         colorization: Colorization | None = None, where: str = "convert",
     ):
         refuse_octrees(inputs)  # (an octree folder's .npy arrays were read as points)
-        self.files = point_files_of(inputs, where)
+        self.files = point_files_of(inputs, where=where)
         if any(same_file(out, f) for f in self.files):
             raise InputError(f"{out}: is one of the inputs; write it elsewhere (it would replace the points being read)")
         self.label = files_label(self.files)
