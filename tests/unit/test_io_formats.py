@@ -128,7 +128,7 @@ def test_ply_pcl_packed_rgb_is_the_colour(tmp_path, text, byte_order, kind):
     assert (rgba[:, 3] == 255).all() and attrs == {}
     info = file_info(p)
     assert info["has_color"] and info["attributes"] == []
-    assert reader_for(p).header(p) == {"point_count": 40, "has_color": True, "attributes": []}
+    assert reader_for(p).header(p) == {"point_count": 40, "has_color": True, "attributes": [], "crs": None}
 
 
 def test_ply_gaussian_splat_drawn_in_its_f_dc_colours(tmp_path):
