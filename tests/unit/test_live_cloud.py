@@ -675,17 +675,41 @@ def test_frames_per_second_follows_a_changing_and_a_slow_stream_and_says_when_it
     and a steady frame every 3 s read 0 (a stopped stream) from 2 s after each frame."""
     from gigapoint.live.cloud import LiveStats
 
-    s = LiveStats()
-    assert s.frames_per_second(now=0.0) == 0.0
+    now = [0.0]
+    s = LiveStats(clock=lambda: now[0])
+    assert s.frames_per_second() == 0.0
     s.arrivals.extend(np.arange(120) / 30.0)
-    assert s.frames_per_second(now=4.0) == pytest.approx(30.0)
+    now[0] = 4.0
+    assert s.frames_per_second() == pytest.approx(30.0)
     s.arrivals.extend(4.0 + np.arange(1, 11))
-    assert s.frames_per_second(now=14.5) == pytest.approx(1.0)
-    assert s.frames_per_second(now=16.5) == 0.0  # no frame for 2.5 s: stopped
-    slow = LiveStats()
+    now[0] = 14.5
+    assert s.frames_per_second() == pytest.approx(1.0)
+    now[0] = 16.5
+    assert s.frames_per_second() == 0.0  # no frame for 2.5 s: stopped
+    slow = LiveStats(clock=lambda: now[0])
     slow.arrivals.extend([0.0, 3.0, 6.0, 9.0])
-    assert slow.frames_per_second(now=11.5) == pytest.approx(1 / 3)
-    assert slow.frames_per_second(now=15.5) == 0.0  # no frame for 6.5 s, twice its interval: stopped
+    now[0] = 11.5
+    assert slow.frames_per_second() == pytest.approx(1 / 3)
+    now[0] = 15.5
+    assert slow.frames_per_second() == 0.0  # no frame for 6.5 s, twice its interval: stopped
+
+
+def test_frames_per_second_of_arrivals_at_one_clock_reading_is_no_rate():
+    """Two arrivals at the same reading of a frozen or coarse clock read 1e9 frames/s (their
+    interval taken as 1e-9 s); a rate is told only by arrivals that span time."""
+    now = [10.0]
+    live = LiveCloud(clock=lambda: now[0])
+    for _ in range(2):
+        live.push(np.zeros((4, 3)))  # both at 10.0: a frozen clock
+    assert live.stats.frames_per_second() == 0.0
+    assert live.hud().startswith("live: 0.0 frames/s in, 2 frames")
+    s = live.stats
+    s.arrivals.clear()
+    s.arrivals.extend([9.0, 9.5, 10.0, 10.0, 10.0])  # a coarse clock: three in the last tick
+    assert s.frames_per_second() == pytest.approx(4 / 1.0)  # 4 intervals over the 1 s spanned
+    s.arrivals.clear()
+    s.arrivals.extend([5.0, 10.0, 10.0])  # the last two at one instant: the one before them spans time
+    assert s.frames_per_second() == pytest.approx(2 / 5.0)
 
 
 def test_close_frees_frames_and_snapshots_and_refuses_later_pushes(tmp_path):

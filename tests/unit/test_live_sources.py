@@ -562,6 +562,72 @@ def test_a_damaged_index_reads_only_its_own_frames_and_a_leap_in_time_is_not_wai
         ReplaySource(tmp_path / "rec")
 
 
+def test_a_replay_clears_where_the_recorded_cloud_was_cleared(tmp_path):
+    """clear() dropped the live cloud's frames and colour range, but the recording did not mark
+    it: the replay kept the frames before the clear and their 0..1 range, so the 0..255 frames
+    after it read as white."""
+    live = LiveCloud(keep=10)
+    rec = live.record(tmp_path / "rec")
+    for k in range(2):
+        live.push(patch(k)[0], rgb=np.full((500, 3), 0.5), time=float(k))
+    live.clear()
+    high = patch(7)[0] + np.float32(10.0)  # another height and colour range
+    live.push(high, rgb=np.full((500, 3), 100.0), time=2.0)
+    live.stop_recording()
+    again = LiveCloud(keep=10)
+    player = Player(ReplaySource(tmp_path / "rec"), again, rate=None)
+    player.run()
+    assert player.errors == 0 and player.frames == 3
+    assert [f.time for f in again.frames] == [f.time for f in live.frames] == [2.0]
+    np.testing.assert_array_equal(cloud_points(again), cloud_points(live))
+    assert np.unique(again.frame_points()[1], axis=0).tolist() == np.unique(live.frame_points()[1], axis=0).tolist() == [[100, 100, 100, 255]]
+    np.testing.assert_array_equal(again.bounds, live.bounds)
+    assert rec.n_frames == 3  # the clear is marked in the index, and is no frame
+    kinds = [e["kind"] for e in json.loads((tmp_path / "rec" / "index.json").read_text())["frames"]]
+    assert kinds == ["points", "points", "clear", "points"]
+
+
+def test_a_recording_whose_index_is_not_json_replays_its_frame_files_with_one_warning(tmp_path):
+    """An index.json that is not JSON (cut short by a crash, edited by hand) refused the whole
+    recording ("unreadable"), though frames/ held every frame; a folder with no frame files, and
+    one whose index.json is someone's own JSON, are still no recording."""
+    from gigapoint.errors import GigapointWarning
+
+    live = LiveCloud(keep=10)
+    live.record(tmp_path / "rec")
+    for k in range(3):
+        live.push(patch(k)[0], time=float(k))
+    live.stop_recording()
+    index = tmp_path / "rec" / "index.json"
+    index.write_text(index.read_text()[:40])  # cut short
+    assert is_recording(tmp_path / "rec")
+    with pytest.warns(GigapointWarning) as seen:
+        source = open_source(tmp_path / "rec")
+    assert isinstance(source, ReplaySource)
+    said = [str(w.message) for w in seen]
+    assert len(said) == 1 and re.fullmatch(
+        rf"{re.escape(str(index))}: damaged, not JSON \(.+\): the frame files in {re.escape(str(tmp_path / 'rec' / 'frames'))} are replayed without it, in name order",
+        said[0],
+    )
+    again = LiveCloud(keep=10)
+    player = Player(source, again, rate=None)
+    player.run()
+    assert player.errors == 0 and [f.time for f in again.frames] == [0.0, 1.0, 2.0]
+    np.testing.assert_array_equal(cloud_points(again), cloud_points(live))
+    with pytest.raises(InputError, match=r"holds a recording already; pass overwrite=True to replace it$"):
+        LiveCloud().record(tmp_path / "rec")  # its frames are not recorded over unasked
+    index.write_text('{"pages": [1, 2, 3]}')  # someone's own index.json beside frame files
+    assert not is_recording(tmp_path / "rec")
+    with pytest.raises(InputError, match=r"index.json: not a gigapoint live recording index$"):
+        ReplaySource(tmp_path / "rec")
+    index.write_text("{not json")
+    for f in (tmp_path / "rec" / "frames").iterdir():
+        f.unlink()
+    assert not is_recording(tmp_path / "rec")
+    with pytest.raises(InputError, match=r"index.json: unreadable \(Expecting property name enclosed in double quotes: line 1 column 2 \(char 1\)\)$"):
+        ReplaySource(tmp_path / "rec")
+
+
 def test_a_folder_with_someones_own_index_json_is_no_recording_and_is_not_overwritten(tmp_path):
     """A recording is known by its index.json's format: a folder holding only a user's own
     index.json counted as one, so overwrite=True replaced that file with a recording's."""

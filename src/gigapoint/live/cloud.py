@@ -124,20 +124,24 @@ class LiveStats:
     arrivals: deque = field(default_factory=lambda: deque(maxlen=120))  # clock() of recent arrivals
     latencies: deque = field(default_factory=lambda: deque(maxlen=_LATENCIES))  # seconds, push -> drawn
 
-    def frames_per_second(self, now: float | None = None) -> float:
-        """Frames in a second over the last 2 s of arrivals (the last interval for a slower
-        stream); 0 once no frame came for twice that interval (at least 2 s): the stream stopped.
+    def frames_per_second(self) -> float:
+        """Frames in a second over the last 2 s of arrivals (from the last earlier arrival for a
+        slower stream); 0 once no frame came for twice that interval (at least 2 s): the stream
+        stopped, and 0 while every arrival came at one clock reading (no rate to tell).
         (Over the last 120 arrivals, a 30 -> 1 frames/s stream still read 8.7 after 10 s, and a
-        steady 0.4 frames/s one read 0 two seconds after each frame.)"""
+        steady 0.4 frames/s one read 0 two seconds after each frame; two arrivals at one reading
+        of a frozen or coarse clock read 1e9 frames/s.)"""
         a = list(self.arrivals)
         if len(a) < 2:
             return 0.0
-        now = self.clock() if now is None else now
         recent = [t for t in a if t >= a[-1] - 2.0]
-        if len(recent) < 2:
-            recent = a[-2:]
-        interval = max(recent[-1] - recent[0], 1e-9) / (len(recent) - 1)
-        if now - a[-1] > max(2.0, 2.0 * interval):  # the stream stopped
+        if recent[-1] <= recent[0]:  # arrivals at one instant tell no rate: back to the last one before them
+            recent = [t for t in a if t < recent[-1]][-1:] + recent
+        span = recent[-1] - recent[0]
+        if span <= 0:
+            return 0.0
+        interval = span / (len(recent) - 1)
+        if self.clock() - a[-1] > max(2.0, 2.0 * interval):  # the stream stopped
             return 0.0
         return 1.0 / interval
 
@@ -682,11 +686,14 @@ class LiveCloud:
 
     def clear(self) -> None:
         """Drop every frame from the ring (snapshots stay); the next stream decides its own
-        colour range (a 0..255 float stream after a 0..1 one was read as 0..1: all white)."""
+        colour range (a 0..255 float stream after a 0..1 one was read as 0..1: all white). A
+        recording records it: its replay clears there too (it kept the first range and frames)."""
         with self.lock.writing():
             self._expire(keep=0)  # (not self.keep = 0 meanwhile: a push then dropped every waiting frame)
             with self._pending_lock:
                 self._push_colors = {}
+        if self.recorder is not None:
+            self.recorder.write_clear()
         self._notify()
 
     # ------------------------------------------------------------------ drawing (Renderable)

@@ -5,6 +5,8 @@ A recording is a folder: ``frames/000000.npz``... one file per frame, each writt
 and arrays), and ``index.json`` listing them, rewritten atomically about once a second and when
 the recording stops. A frame pushed as a depth image is recorded as that image and its
 intrinsics (replay runs the same kernel again), one pushed as points as its sensor-frame points.
+A ``clear()`` of the cloud is recorded as a frame file of kind ``clear`` (no arrays, the time of
+the frame before it): the replay clears its cloud there, as the live cloud was.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ _NPZ_MAGIC = b"PK\x03\x04"  # a zip archive's first bytes: every frame file np.s
 class RecordedFrame:
     """One frame of a stream: points (``xyz`` in sensor coordinates) or a depth image, with its pose and time."""
 
-    kind: str  # "points" or "depth"
+    kind: str  # "points", "depth" or "clear" (the cloud cleared: LiveCloud.clear)
     time: float
     pose: np.ndarray | None = None
     xyz: np.ndarray | None = None
@@ -47,8 +49,11 @@ class RecordedFrame:
     max_depth: float | None = None
     origin: str | None = None  # its file or message, for a refused frame's message
 
-    def push_into(self, live) -> int:
-        """Push this frame into a LiveCloud (``push`` or ``push_depth``)."""
+    def push_into(self, live) -> int | None:
+        """Push this frame into a LiveCloud (``push`` or ``push_depth``; a clear: ``clear``, None)."""
+        if self.kind == "clear":
+            live.clear()
+            return None
         if self.kind == "depth":
             return live.push_depth(self.depth, self.intrinsics, self.pose, self.rgb, self.depth_scale, self.time, self.max_depth)
         return live.push(self.xyz, self.rgb, self.pose, self.time, self.normals, **self.attributes)
@@ -77,6 +82,7 @@ class Recorder:
         self.entries: list[dict] = []  # the frames written, in the order they were numbered
         self.error: InputError | None = None  # why the recording stopped early (a full disk), else None
         self._numbered = 0
+        self._last_time: float | None = None  # the newest frame's time stamp: a clear's
         self._lock = threading.Lock()
         self._written_at = 0.0
         self.started = time.time()
@@ -108,6 +114,7 @@ class Recorder:
             return
         with self._lock:
             self.entries.append({"file": name, "time": t, "kind": kind})
+            self._last_time = t
         if time.monotonic() - self._written_at > self.index_every_s:
             self._write_index()
 
@@ -141,6 +148,13 @@ class Recorder:
         arrays["max_depth"] = np.array(np.nan if max_depth is None else max_depth, np.float64)
         self._write(arrays, "depth", t)
 
+    def write_clear(self) -> None:
+        """The cloud was cleared (LiveCloud.clear): its frames and colour range dropped. Recorded
+        at the time of the frame before it (no wait in a replay at its rate); before any frame,
+        nothing to record: a replay starts from an empty cloud."""
+        if self._last_time is not None:
+            self._write({}, "clear", self._last_time)
+
     def _index(self) -> dict:
         with self._lock:
             entries = sorted(self.entries, key=lambda e: e["file"])  # (producers on several threads finish out of order)
@@ -163,7 +177,7 @@ class Recorder:
 
     @property
     def n_frames(self) -> int:
-        return len(self.entries)
+        return sum(e["kind"] != "clear" for e in self.entries)
 
 
 def _opt(z, name):
@@ -195,20 +209,29 @@ def _frame_of(path: Path, z) -> RecordedFrame:
         raise InputError(f"{path}: not a recorded frame (an NPZ archive without a frame's kind and time)")
     kind = str(z["kind"])
     t = float(z["time"])
+    if kind == "clear":
+        return RecordedFrame("clear", t)
     pose = z.get("pose", None)
     rgb = z.get("rgb", None)
     if kind == "depth":
         return RecordedFrame("depth", t, pose, rgb=rgb, depth=z["depth"], intrinsics=z["intrinsics"],
                              depth_scale=_opt(z, "depth_scale"), max_depth=_opt(z, "max_depth"))  # fmt: skip
     if kind != "points":
-        raise InputError(f"{path}: unknown frame kind {kind!r} (points or depth)")
+        raise InputError(f"{path}: unknown frame kind {kind!r} (points, depth or clear)")
     attrs = {k[5:]: z[k] for k in z.files if k.startswith("attr_")}
     return RecordedFrame("points", t, pose, xyz=z["xyz"], rgb=rgb, normals=z.get("normals", None), attributes=attrs)
 
 
+def _frame_files(directory: Path) -> list[Path]:
+    """The frame files in a recording's frames/ folder, in name order (their order)."""
+    return sorted((directory / FRAMES).glob("[0-9]*.npz"))
+
+
 def _read_index(directory: Path) -> dict:
     """A recording's index.json, read; a one-line InputError where there is none, or it is not
-    a recording's (its ``format``)."""
+    a recording's (its ``format``). An index that is not JSON (cut short by a crash, edited by
+    hand) beside frame files stands for an index of no frames, its ``damaged`` saying why
+    (recording_files then plays every frame file): refused whole, the frames were lost."""
     index = directory / INDEX
     if not directory.exists():
         raise InputError(f"{directory}: no such folder (a live recording: a folder with {INDEX})")
@@ -216,8 +239,12 @@ def _read_index(directory: Path) -> dict:
         raise InputError(f"{directory}: not a live recording (no {INDEX})")
     try:
         meta = json.loads(index.read_text())
-    except (OSError, ValueError) as exc:
+    except OSError as exc:
         raise InputError(f"{index}: unreadable ({exc})") from None
+    except ValueError as exc:  # not JSON (UnicodeDecodeError among them)
+        if not _frame_files(directory):
+            raise InputError(f"{index}: unreadable ({first_line(exc)})") from None
+        return {"format": FORMAT, "frames": [], "damaged": first_line(exc)}
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise InputError(f"{index}: not a gigapoint live recording index")
     return meta
@@ -227,7 +254,10 @@ def recording_files(directory) -> list[Path]:
     """The frame files of a recording, in order: index.json's, then any written after it."""
     directory = Path(directory)
     index = directory / INDEX
-    entries = _read_index(directory).get("frames", [])
+    meta = _read_index(directory)
+    if "damaged" in meta:
+        warn(f"{index}: damaged, not JSON ({meta['damaged']}): the frame files in {directory / FRAMES} are replayed without it, in name order", GigapointWarning)
+    entries = meta.get("frames", [])
     if not isinstance(entries, list):  # (7 was a TypeError)
         raise InputError(f"{index}: damaged: its frames are not a list")
     # an entry that is not a relative name inside the recording (5 was a TypeError; "/etc/hostname" was read) is left out
@@ -235,7 +265,7 @@ def recording_files(directory) -> list[Path]:
     named = [Path(e["file"]) for e in entries if isinstance(e, dict) and isinstance(e.get("file"), str)]
     listed = [directory / f for f in named if not f.is_absolute() and ".." not in f.parts]
     seen = {p.name for p in listed}
-    later = sorted(p for p in (directory / FRAMES).glob("[0-9]*.npz") if p.name not in seen)
+    later = [p for p in _frame_files(directory) if p.name not in seen]
     return [p for p in listed if p.is_file()] + later
 
 
@@ -247,7 +277,7 @@ def stopped_early(directory) -> str | None:
 
 def is_recording(path) -> bool:
     """Whether ``path`` is a recording's folder: its index.json is a recording's (its ``format``),
-    not anyone's index.json."""
+    not anyone's index.json, or is damaged (not JSON) beside frame files."""
     try:
         _read_index(Path(path))
     except InputError:

@@ -588,7 +588,7 @@ class Player:
                     return
             try:
                 frame.push_into(self.live)
-                self.frames += 1
+                self.frames += frame.kind != "clear"  # (a clear is no frame)
             except GigapointError as exc:
                 self.errors += 1  # counted by the cloud too (stats.frames_rejected)
                 # which file or message (the cloud's message named only itself: "live: push: the frame has no points")
