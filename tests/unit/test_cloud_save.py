@@ -107,6 +107,18 @@ def test_from_arrays_with_attributes_saves_to_las_laz_and_ply_and_reads_back_equ
     assert laspy.read(tmp_path / "a.las").header.scales.tolist() == [0.001] * 3  # from_arrays' scale is the file's
 
 
+@pytest.mark.parametrize("copies", [1, 2])
+def test_one_point_or_equal_points_save_on_a_millimetre_grid(tmp_path, copies):
+    """A cloud of one point (or of equal points) has no extent: its LAS scale was the 1 nm / float64
+    floor (8.6e-9 at UTM coordinates), which other tools show as absurd scales and offsets; such
+    points are saved on the millimetre grid, and read back within half a millimetre."""
+    xyz = np.array([[654321.1234567, 4321987.4567891, 123.7891234]] * copies)
+    gp.from_arrays(xyz).save(tmp_path / "one.las")
+    las = laspy.read(tmp_path / "one.las")
+    assert las.header.scales.tolist() == [0.001] * 3
+    np.testing.assert_allclose(np.column_stack([las.x, las.y, las.z]), xyz, atol=0.0005, rtol=0)
+
+
 @pytest.mark.parametrize(
     ("suffix", "left_out"),
     [(".las", ["x", "red", "bit_fields", "café"]), (".laz", ["x", "red", "bit_fields", "café"]), (".ply", ["x", "red", "Red", "my attr", "café"])],
