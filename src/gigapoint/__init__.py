@@ -44,6 +44,17 @@ def _is_octree(path) -> bool:
 
 _registry.register_dataset_folder(_is_octree)
 
+
+def _dataset_part(path) -> str | None:
+    """lod's word on a file that is part of an octree (a Potree octree's octree.bin), for io's
+    reader choice: it was "unknown point cloud format"."""
+    from .lod.kinds import potree_part
+
+    return potree_part(path)
+
+
+_registry.register_dataset_part(_dataset_part)
+
 # the subpackage loaded now (cheap: its names are lazy), so that no later import of it makes
 # ``gigapoint.render`` the package: it is the function (``_LAZY``), as it was
 import importlib as _importlib

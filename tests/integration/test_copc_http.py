@@ -37,7 +37,9 @@ class RangeServer:
     (another range than asked), "hang" (never answers), "gzip" (the file gzipped, Content-Encoding:
     gzip, despite Accept-Encoding: identity: ranges of the compressed bytes, as S3 serves an object
     stored so), "gzip_plain" (Content-Encoding: gzip on bytes that are not), "binary" (Content-Encoding:
-    binary, a coding httpx passes as sent, on the file as stored). ``no_length``: answers
+    binary, a coding httpx passes as sent, on the file as stored), "unknown_size" (Content-Range
+    'bytes A-B/*': RFC 9110's file of unknown size), "unknown_size_lies" (that, with the range
+    asked in it and the body cut at the file's end). ``no_length``: answers
     without Content-Length (the connection closed at their end). ``fail_after``: behave for that many
     requests first. ``route(path)``: (status, Location or None) answered instead of the file
     (redirects, refusals), or None. Counts requests and connections."""
@@ -119,7 +121,7 @@ class RangeServer:
                         self.send_header("Content-Length", "0")
                         self.end_headers()
                         return
-                    b = min(b, len(data) - 1)
+                    asked_end, b = b, min(b, len(data) - 1)
                     if mode == "whole_200" and a == 0 and b == len(data) - 1:  # the range is the whole file: 200
                         self.send_response(200)
                         self.send_header("Content-Length", str(len(data)))
@@ -132,7 +134,12 @@ class RangeServer:
                         b = a + max(0, (b - a) // 2)
                     body = data[a : b + 1]
                     self.send_response(206)
-                    self.send_header("Content-Range", f"bytes {a}-{b}/{len(data)}")
+                    if mode == "unknown_size":
+                        self.send_header("Content-Range", f"bytes {a}-{b}/*")
+                    elif mode == "unknown_size_lies":  # the range asked said sent, the body cut at the file's end
+                        self.send_header("Content-Range", f"bytes {a}-{asked_end}/*")
+                    else:
+                        self.send_header("Content-Range", f"bytes {a}-{b}/{len(data)}")
                 else:
                     body = data
                     self.send_response(200)
@@ -367,6 +374,28 @@ def test_a_small_copc_file_answered_whole_with_200(server, tmp_path):
     small.unlink()
 
 
+def test_a_small_copc_file_of_unknown_size(server, tmp_path):
+    """Ranges answered with 'bytes 0-N/*' (RFC 9110: a file of unknown size) and, past the file's
+    end, a body cut where the file ends: the head of a file under 64 KiB was "the server
+    answered bytes 0..N to a request for bytes 0..65,536" and it could not be opened; a body that
+    is not the range its Content-Range says is still refused."""
+    rng = np.random.default_rng(2)
+    small = server.root / "small_unknown.copc.laz"
+    convert(gp.from_arrays(rng.random((300, 3)) * (50, 40, 10) + (1000, 2000, 30)), small, format="copc")
+    size = small.stat().st_size
+    assert size < gphttp_head()
+    server.mode = "unknown_size"
+    c = gp.open(server.url(small.name))
+    assert isinstance(c, CopcCloud) and c.n_points == 300
+    assert _frame(c, point_budget=10**9, lod_threshold_px=0.0).stats.points_processed == 300
+    c.close()
+    server.mode = "unknown_size_lies"
+    with pytest.raises(InputError) as e:
+        gp.open(server.url(small.name))
+    assert str(e.value) == f"{server.url(small.name)}: short read: {size:,} of the {gphttp_head():,} bytes asked for (bytes 0..{gphttp_head():,})"
+    small.unlink()
+
+
 def gphttp_head() -> int:
     from gigapoint.lod.copc import HEAD_READ
 
@@ -383,6 +412,21 @@ def test_a_potree_metadata_url_is_named_as_one(server):
     with pytest.raises(InputError) as e:
         gp.open(url)
     assert str(e.value) == f"{url}: a Potree metadata.json; Potree octrees open from a local folder (over HTTP: COPC files and EPT datasets)"
+
+
+def test_a_potree_octrees_data_file_url_is_named_as_one(server):
+    """``…/tree/octree.bin`` (or hierarchy.bin) was "not a COPC file (a file that starts with ...)":
+    it is named as a Potree octree's file, which opens from a local folder."""
+    d = server.root / "potree_bin"
+    d.mkdir(exist_ok=True)
+    for name in ("octree.bin", "hierarchy.bin"):
+        (d / name).write_bytes(bytes(range(256)) * 4)
+        url = server.url(f"potree_bin/{name}")
+        for given in (url, url + "?sig=s"):
+            with pytest.raises(InputError) as e:
+                gp.open(given)
+            shown = gphttp.shown_url(given)
+            assert str(e.value) == f"{shown}: a Potree octree's {name}, part of its folder; Potree octrees open from a local folder (over HTTP: COPC files and EPT datasets)"
 
 
 def test_ept_url_with_a_query_string(data, server):
@@ -607,13 +651,15 @@ def test_shown_url_hides_passwords_and_query_values():
     assert s(Path("https://u:pw@h/a.laz?key=k")) == "https:/u:***@h/a.laz?key=***"  # (the CLI's Path of a URL)
     assert s("http://user:sec/ret@h:1/x") == "http://user:***@h:1/x"  # a raw '/' in the password
     assert s("http://u:1234@[::1]:80/x") == "http://u:***@[::1]:80/x"
-    # a token as the user name (GitHub's, GitLab's) was shown whole; a password that is digits up
-    # to a raw '/' was read as a port and shown: 'h:8080/a@b' reads the same, hidden as one
+    # a token as the user name (GitHub's, GitLab's) was shown whole
     assert s("https://ghp_T0KEN@raw.example/x.laz?a=1") == "https://***@raw.example/x.laz?a=***"
     assert s("https://me@mail.example@h/x") == "https://***@h/x"
-    assert s("http://user:1234/x@h:1/y") == "http://user:***@h:1/y"
-    assert s("http://h:8080/a@b") == "http://h:***@b"
-    for same in ("http://h/x?", "http://[::1", "http://[::1]:80/a@b", "http://h/a:b@c", "http://h/a@b", "/data/a?b=1.laz", "C:/x?y=1", "scan.laz"):
+    assert s("http://user:pw@host/x") == "http://user:***@host/x"
+    assert s("http://token@host/p?q=@") == "http://***@host/p?q=***"
+    # the user info ends at the first '/' (RFC 3986): 'h:8080/a@b' was shown as 'h:***@b'; a
+    # password of digits up to a raw '/' is a port and a path there, as httpx reads it
+    for same in ("http://h:8080/a@b", "http://user:1234/x@h:1/y", "http://h/x?", "http://[::1", "http://[::1]:80/a@b", "http://h/a:b@c", "http://h/a@b",
+                 "/data/a?b=1.laz", "C:/x?y=1", "scan.laz"):  # fmt: skip
         assert s(same) == same
     with pytest.raises(InputError) as e:  # httpx: "Invalid port: 'sec'", a piece of the password
         gp.open("http://user:sec/ret@127.0.0.1:1/x.copc.laz")

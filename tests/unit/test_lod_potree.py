@@ -133,6 +133,22 @@ def test_reader_follows_proxy_chunks(tmp_path):
     assert oc.node_points(0)["rgba"].view(np.uint8).reshape(-1, 4).tolist() == [[200, 200, 200, 255]] * 2
 
 
+def test_a_potree_octrees_data_file_given_alone_names_its_folder(converted, tmp_path):
+    """octree.bin or hierarchy.bin given as a point file (or a COPC file) said "unknown point cloud
+    format (suffix '.bin', ...)" ("not a COPC file" as a URL): it names the folder that opens."""
+    from gigapoint.lod.copc import open_copc
+
+    folder = converted[("potree", "DEFAULT")]
+    for name in ("octree.bin", "hierarchy.bin"):
+        for open_ in (gp.open, open_copc):
+            with pytest.raises(InputError) as e:
+                open_(folder / name)
+            assert str(e.value) == f"{folder / name}: a Potree octree's {name}, part of its folder; open the folder {folder}"
+    (tmp_path / "octree.bin").write_bytes((folder / "octree.bin").read_bytes()[:64])  # no metadata.json beside it: no Potree octree's
+    with pytest.raises(InputError, match=r"octree\.bin: unknown point cloud format \(suffix '\.bin'"):
+        gp.open(tmp_path / "octree.bin")
+
+
 def test_reader_bad_files_one_line_errors(tmp_path):
     _write_potree(tmp_path / "bad", b"\x00" * 21, 21, b"")
     with pytest.raises(InputError, match="hierarchy") as e:

@@ -67,6 +67,15 @@ def in_folder(path: Path) -> bool:
     return any(r.weak_sniff(head) for r in shared)
 
 
+#: tests of a file that is part of a dataset, not a point file (a Potree octree's octree.bin:
+#: gigapoint/__init__.py registers lod's, as io cannot import lod): what to say of it, else None
+_DATASET_PARTS: list[Callable[[Path], str | None]] = []
+
+
+def register_dataset_part(test: Callable[[Path], str | None]) -> None:
+    _DATASET_PARTS.append(test)
+
+
 def reader_by_name(name: str) -> Reader:
     for r in readers():
         if r.name.lower() == name.lower():
@@ -79,6 +88,10 @@ def reader_for(path: Path | str) -> Reader:
     from ._base import check_file, fail, read_head, read_once
 
     p = check_file(path)
+    for test in _DATASET_PARTS:
+        part = test(p)
+        if part is not None:
+            raise UnsupportedFormatError(part)
     head = read_once("head", p, lambda: read_head(p))  # (an operation asks several times a file: headers_once)
     all_readers = readers()
     for r in all_readers:

@@ -36,6 +36,7 @@ from .kinds import (
     VLR_HEADER_DTYPE,
     copc_file_kind,
     is_copc_head,
+    potree_part,
 )
 from .store import check_grid, tight_bounds
 from .voxel_octree import VOXEL_KEY_DTYPE, VoxelOctree, valid_voxels, voxel_name, voxel_to_key
@@ -223,6 +224,9 @@ class CopcCloud(VoxelOctree):
         if truncated:  # (a URL's was "not a COPC file": a local one's words)
             raise InputError(f"{name}: {truncated}")
         if not is_copc_head(head):
+            part = potree_part(name)
+            if part is not None:
+                raise InputError(part)
             if head[:4] == b"LASF" and len(head) > 104:  # its own version and kind: every LAS file was "a LAS 1.4 file"
                 kind = "LAZ" if head[104] & 0x80 else "LAS"
                 what = f"{kind} {head[24]}.{head[25]} file without the COPC info VLR first"

@@ -11,10 +11,10 @@ from urllib.parse import urlsplit, urlunsplit
 import numpy as np
 
 from ..errors import InputError
-from ..io.http import as_url
+from ..io.http import as_url, last_name, shown_url
 from ..io.las import read_las_header
 from ..io.paths import file_url_path
-from .octree_dir import RESUME_HINT, OctreeDir
+from .octree_dir import POTREE_HIERARCHY, POTREE_META, POTREE_OCTREE, RESUME_HINT, OctreeDir
 
 # --------------------------------------------------------------------------- COPC's head (copc.py)
 
@@ -110,6 +110,22 @@ def copc_file_kind(path) -> str | None:
         return "laz" if read_las_header(Path(path)).evlrs_cut is not None else "copc"
     except InputError:  # its points cut too: COPC's error says what is left
         return "copc"
+
+
+def potree_part(path) -> str | None:
+    """What to say of a Potree 2.0 octree's octree.bin or hierarchy.bin (a URL's, or a local one's
+    beside its metadata.json) given where a point file or a COPC file is read, else None: it was
+    "not a COPC file" or "unknown point cloud format", its octree's folder unnamed."""
+    url = as_url(path)
+    name = last_name(url or path)
+    if name not in (POTREE_OCTREE, POTREE_HIERARCHY):
+        return None
+    if url is not None:
+        return f"{shown_url(url)}: a Potree octree's {name}, part of its folder; Potree octrees open from a local folder (over HTTP: COPC files and EPT datasets)"
+    folder = Path(path).parent
+    if not (folder / POTREE_META).is_file():
+        return None
+    return f"{path}: a Potree octree's {name}, part of its folder; open the folder {folder}"
 
 
 # --------------------------------------------------------------------------- EPT (ept.py)
