@@ -144,7 +144,13 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     from gigapoint.bench import benchmark_cameras, cpu_model, parse_count
 
-    n, n_lod, cap = parse_count(args.points), parse_count(args.lod_points), parse_count(args.cap)
+    counts = []
+    for option, text in (("--points", args.points), ("--lod-points", args.lod_points), ("--cap", args.cap)):
+        try:
+            counts.append(parse_count(text, option))
+        except gp.GigapointError as exc:
+            ap.error(str(exc))  # the usage and one line, as argparse says any other bad option
+    n, n_lod, cap = counts
     if cap >= n:  # step 1: every point drawn, the capped frames time nothing new
         ap.error(f"--cap {args.cap} must be below --points {args.points} (a cap of {cap:,} leaves all {n:,} points drawn)")
     cpu = cpu_model()

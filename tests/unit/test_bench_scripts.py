@@ -37,6 +37,17 @@ def test_ab_base_draws_with_its_own_code(scripts, tmp_path):
     assert importlib.import_module("gigapoint_base.lod").convert.__module__.startswith("gigapoint_base.")
 
 
+@pytest.mark.parametrize("option", ["--points", "--lod-points", "--cap"])
+def test_ab_bad_count_is_an_argparse_error_naming_its_option(scripts, capsys, option):
+    """A bad --cap was said as a traceback naming --points."""
+    import bench_ab
+
+    with pytest.raises(SystemExit) as exit_:
+        bench_ab.main(["--base", "HEAD", option, "x"])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert err.splitlines()[-1].endswith(f" error: {option}: cannot read 'x' (use e.g. 20M, 200k, 1e6 or 5000000)")
+
 def test_gis_dtm_grid_is_gigapoints_top_down_grid(scripts, tmp_path, points_las_writer):
     """PDAL's writers.gdal is given gigapoint's grid: Camera.top_down's, margins included (a
     ground point on a cell edge, x = 6, puts a column before it)."""

@@ -98,8 +98,8 @@ def pages_since(before: tuple[int, int]) -> dict:
     return {"alloc_mib": (alloc - before[0]) / 2**20, "reported_mib": (reported - before[1]) / 2**20}
 
 
-def parse_count(text) -> int:
-    """'20M', '100_000_000', '1e6', '200k' -> a positive int."""
+def parse_count(text, option: str = "--points") -> int:
+    """'20M', '100_000_000', '1e6', '200k' -> a positive int; errors name ``option``."""
     s = str(text).strip().lower().replace("_", "").replace(",", "")
     mult = 1
     if s and s[-1] in _SUFFIXES:
@@ -107,11 +107,11 @@ def parse_count(text) -> int:
     try:
         value = float(s) * mult
     except ValueError:
-        raise GigapointError(f"--points: cannot read {text!r} (use e.g. 20M, 200k, 1e6 or 5000000)") from None
+        raise GigapointError(f"{option}: cannot read {text!r} (use e.g. 20M, 200k, 1e6 or 5000000)") from None
     if not (math.isfinite(value) and value >= 1 and value == int(value)):
-        raise GigapointError(f"--points: need a positive whole number of points, got {text!r}")
+        raise GigapointError(f"{option}: need a positive whole number of points, got {text!r}")
     if value > MAX_DEMO_POINTS:  # (1e99 was said as a 100-digit count of points and of terabytes)
-        raise GigapointError(f"--points: the demo scene has at most {MAX_DEMO_POINTS:,} points, got {text!r}")
+        raise GigapointError(f"{option}: the demo scene has at most {MAX_DEMO_POINTS:,} points, got {text!r}")
     return int(value)
 
 
