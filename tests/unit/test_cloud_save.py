@@ -437,3 +437,15 @@ def test_a_crs_a_ply_header_cannot_hold_is_left_out_with_a_warning(tmp_path):
     said = [str(w.message) for w in caught if "CRS" in str(w.message)]
     assert said == [f"{out}: its CRS (Zoné 10 (WKT)) is not written: its WKT is not ASCII, and a PLY header line must be ASCII and under 1024 bytes; save as .las or .laz to keep it"]
     assert plyfile.PlyData.read(str(out)).comments == [] and gp.open(out).n_points == 50
+
+
+def test_convert_of_an_opened_octree_is_refused_as_its_folder_is(tmp_path):
+    """gp.convert(gp.open(octree folder), ...) said "got a CompactOctree": the folder's own refusal, with what to convert instead."""
+    folder = tmp_path / "oct"
+    gp.convert(gp.from_arrays(np.random.default_rng(3).random((100, 3))), folder, progress=False)
+    octree = gp.open(folder)
+    said = f"{folder}: is a converted octree (opened), not an input point cloud; convert the point files it was made from"
+    for out in (tmp_path / "again", tmp_path / "a.laz"):
+        with pytest.raises(InputError, match=f"^{re.escape(said)}$"):
+            gp.convert(octree, out)
+        assert not out.exists()

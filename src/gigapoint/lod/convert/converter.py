@@ -30,6 +30,7 @@ from ..copc_write import check_copc_output
 from ..kinds import is_copc_name, refuse_unwritten_copc
 from ..octree_dir import STOPPED_BY_INPUT, STOPPED_RESUMES, ConvertError
 from ..progress import NullProgress, RichProgress
+from ..store import OctreeCloud
 from .in_memory import InMemoryPhases
 from .keep_freed_memory import KeepFreedMemory
 from .options import DEFAULT_MAX_LEAF, ENCODINGS, FORMATS, parse_memory
@@ -333,6 +334,8 @@ def convert(
         inputs = given_paths(inputs, "convert")  # (taken as PointChunks: "item 0 is a str")
     if _are_paths(inputs):  # a COPC file a conversion still writes: its work folder named, not a bare "no such file"
         refuse_unwritten_copc(inputs)
+    if isinstance(inputs, OctreeCloud):  # gp.open of an octree folder: as its folder's path is refused (was "got a CompactOctree")
+        raise InputError(f"{inputs.path or inputs.name}: is a converted octree (opened), not an input point cloud; convert the point files it was made from")
     if recursive and not _are_paths(inputs):
         raise InputError("convert: recursive=True reads the subfolders of folders; the inputs are a cloud or PointChunks")  # (dropped without a word)
     if recursive:
