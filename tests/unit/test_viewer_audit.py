@@ -9,6 +9,7 @@ import logging
 import shutil
 import socket
 import struct
+import threading
 import tracemalloc
 
 import numpy as np
@@ -391,3 +392,40 @@ def test_a_screenshot_counts_the_pixels_its_supersampling_renders(cloud, monkeyp
         assert core.screenshot(None, 64, 48)[:4] == b"\x89PNG" and rendered == [(64, 48)]
     finally:
         core.close_all()
+
+
+def test_a_tabs_frames_lower_their_supersampling_to_the_pixel_limit(cloud, monkeypatch):
+    """Only screenshots counted the pixels supersampling renders: a 4096x4096 tab at anti-aliasing
+    4 rendered 268 M pixels a frame. Its frames render at the highest supersample within the
+    screenshots' limit (40 M), and the HUD says so."""
+    asked, render_locked = [], S.render_locked
+    small = S.ViewerCore(cloud).default_state(32, 32).camera(32, 32)
+
+    def recorded(cloud, cam, settings, **kw):  # what the renderer is asked for; a small frame drawn in its place
+        asked.append((cam.width, cam.height, settings.supersample))
+        return render_locked(cloud, small, settings.replace(supersample=1), **kw)
+
+    monkeypatch.setattr(S, "render_locked", recorded)
+    headers, sent = [], threading.Semaphore(0)
+
+    def send(kind, payload):
+        if kind == "bytes":
+            headers.append(S.P.unpack_frame(payload)[0])
+            sent.release()
+        return True
+
+    core = S.ViewerCore(cloud, gp.RenderSettings(supersample=4))
+    try:
+        tab = core.open_session(send, 4096, 4096)
+        assert sent.acquire(timeout=60)
+        for size in ((2000, 1500), (64, 48)):
+            tab.handle({"type": "resize", "width": size[0], "height": size[1]})
+            assert sent.acquire(timeout=60)
+    finally:
+        core.close_all()
+    assert asked == [(4096, 4096, 1), (2000, 1500, 2), (64, 48, 4)]  # 16.8 M, 12 M and 49 k pixels rendered
+    assert [h["note"] for h in headers] == [
+        "anti-aliasing 4 lowered to 1 at 4096x4096 (at most 40,000,000 pixels rendered a frame)",
+        "anti-aliasing 4 lowered to 2 at 2000x1500 (at most 40,000,000 pixels rendered a frame)",
+        "",
+    ]

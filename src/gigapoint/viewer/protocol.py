@@ -27,7 +27,7 @@ from ..render.settings import RenderSettings, SettingSpec, help_text, parse_colo
 MAX_MESSAGE = 16_384  # bytes of one client message
 MAX_VIEW_SIDE = 4096  # pixels of the live view
 MAX_SHOT_SIDE = 8192  # pixels of a screenshot side
-MAX_SHOT_PIXELS = 40_000_000
+MAX_SHOT_PIXELS = 40_000_000  # rendered for a screenshot, supersampling counted; a tab's frame lowers its supersample to fit
 MAX_ABS_NUMBER = 1e9  # settings numbers beyond this are absurd (point budget 1e12...)
 MAX_ABS_COORD = 1e13
 FRAME_MAGIC = b"GPF1"

@@ -78,6 +78,19 @@ def view_frame(cloud, camera, settings) -> Frame:
     return frame
 
 
+def within_frame_pixels(settings: RenderSettings, width: int, height: int) -> tuple[RenderSettings, str]:
+    """``settings`` at the highest supersample (halved from its own: 4, 2, 1) that renders a
+    ``width`` x ``height`` frame within the screenshots' pixel limit, and a HUD line where it was
+    lowered: a 4096x4096 tab at 4 rendered 268 M pixels a frame."""
+    ss = settings.supersample
+    while ss > 1 and width * height * ss * ss > P.MAX_SHOT_PIXELS:
+        ss //= 2
+    if ss == settings.supersample:
+        return settings, ""
+    said = f"anti-aliasing {settings.supersample} lowered to {ss} at {width}x{height} (at most {P.MAX_SHOT_PIXELS:,} pixels rendered a frame)"
+    return settings.replace(supersample=ss), said
+
+
 def render_locked(cloud, camera, settings, cancelled=None):
     """view_frame under the process-wide lock; None if ``cancelled()`` turned true while waiting for it."""
     with RENDER_LOCK:
@@ -732,7 +745,7 @@ class Session:
             cloud = self.core.cloud
             try:
                 cam = state.camera(max(1, round(w / scale)), max(1, round(h / scale)))
-                drawn = self.budget.settings_for(settings) if moving else settings
+                drawn, lowered = within_frame_pixels(self.budget.settings_for(settings) if moving else settings, cam.width, cam.height)
                 frame = render_locked(cloud, cam, drawn, cancelled=lambda: self.closed)
                 if frame is None:
                     return
@@ -779,7 +792,7 @@ class Session:
                 "memory": memory_rss(),
                 "cloud_bytes": cloud_bytes(cloud),
                 "load_progress": float(cloud.load_progress),
-                "note": self.core.note,
+                "note": "\n".join(line for line in (self.core.note, lowered) if line),
                 "camera": state.as_dict(),
             }
             info = self.core.cloud_info()
