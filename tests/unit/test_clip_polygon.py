@@ -639,3 +639,23 @@ def test_a_long_vertex_list_is_quoted_short_in_its_error(autzen_path):
         said = str(caught.value)
         assert said.startswith(f"{where}: clip_polygon=[[0.0, 0.0], [1.0, 1.0],") and "...: a clip polygon is" in said, said
         assert len(said) < 300, len(said)
+
+
+def test_long_wkt_text_is_quoted_by_its_start_and_length(cli, tmp_path):
+    """WKT text of 10,000 vertices whose ring is not in parentheses (or of another geometry) was
+    an OSError quoting it whole (a file's name too long: 150,000 characters); a string is quoted
+    whole as a file's name, WKT text by its start and its length, in the API and the CLI alike."""
+    ring = ", ".join(f"{i} {i % 7}" for i in range(10_000))
+    for text, reason in ((f"POLYGON {ring}", "no such file (nor WKT text: POLYGON ((x y, ...)))"),
+                         (f"LINESTRING ({ring})", "a LINESTRING, not a polygon: a clip polygon is a POLYGON or MULTIPOLYGON")):  # fmt: skip
+        start = f"{text[:30]}... ({len(text):,} characters)"
+        for where, call in (("open", lambda text=text: gp.open(tmp_path / "missing.laz", clip_polygon=text)), ("volume", lambda text=text: gp.volume(tmp_path / "missing.laz", text, 1.0))):
+            with pytest.raises(InputError) as caught:
+                call()
+            assert str(caught.value) == f"{where}: clip_polygon={text[:30] + '...'!r} ({len(text):,} characters): {reason}"
+            assert len(str(caught.value)) < 200
+        rc, _, err = cli("render", tmp_path / "missing.laz", "-o", tmp_path / "x.png", "--clip-polygon", text)
+        assert (rc, err) == (1, f"error: render: --clip-polygon {start}: {reason}\n")
+    with pytest.raises(InputError) as caught:  # a hole with no area: named by the text's start too
+        clip_polygon_of(f"POLYGON (({ring}, 0 0), (1 1, 2 2))", "test")
+    assert str(caught.value) == "WKT POLYGON ((0 0, 1 1, 2 2, 3 3, ...: the polygon's hole 1's points lie on one line: it has no area; move a point off the line"

@@ -27,10 +27,13 @@ from pathlib import Path
 import numpy as np
 
 from ..core.coords import MAX_ABS_COORDINATE
-from ..errors import InputError
+from ..errors import REPR_MAX, InputError, value_text
 
 #: How WKT of a polygon starts (a file named POLYGON.wkt does not)
 _WKT_START = re.compile(r"\s*(?:SRID=\d+\s*;)?\s*(MULTI)?POLYGON\s*(Z|M|ZM)?\s*(\(|EMPTY)", re.IGNORECASE)
+
+#: How WKT text of any geometry starts, well formed or not: what a message quotes by its start alone
+_WKT_KEYWORD = re.compile(r"\s*(?:SRID=\d+\s*;)?\s*(?:(?:MULTI)?(?:POLYGON|POINT|LINESTRING)|GEOMETRYCOLLECTION)[\s(]", re.IGNORECASE)
 
 #: EWKT's SRID prefix (PostGIS's ST_AsEWKT: "SRID=2994;POLYGON ((...))"): the EPSG code of its
 #: coordinates, moved from as a GeoJSON's crs member (was "no such file" of such text)
@@ -143,6 +146,16 @@ class ClipPolygon:
         return meets
 
 
+def polygon_text(value, shown: str | None = None) -> str:
+    """How a message quotes a clip polygon: as ``shown`` (the command line's text) or ``value_text``;
+    WKT text of more than ``REPR_MAX`` characters by its start and its length (a WKT string of
+    10,000 vertices was quoted whole, as a file's name is)."""
+    if not (isinstance(value, str) and len(value) > REPR_MAX and _WKT_KEYWORD.match(value)):
+        return value_text(value) if shown is None else shown
+    start = value.strip()[:30] + "..."
+    return f"{start if shown is not None else repr(start)} ({len(value):,} characters)"
+
+
 def clip_polygon_of(value, label: str) -> ClipPolygon:
     """The ClipPolygon of ``value``: a path to a GeoJSON or WKT file, a WKT string, a GeoJSON
     geometry (a dict: ``as_spec``'s too) or a ClipPolygon; a one-line InputError starting with
@@ -158,9 +171,13 @@ def clip_polygon_of(value, label: str) -> ClipPolygon:
     if isinstance(value, str) and _WKT_START.match(text):
         return _wkt_polygon(text, f"WKT {text.strip()[:30]}{'...' * (len(text.strip()) > 30)}")
     path = Path(value)
-    if path.is_dir():  # (was "no such file" of a folder that is there)
+    try:
+        is_dir, is_file = path.is_dir(), path.is_file()
+    except OSError:  # a name too long for a file: WKT text gone wrong ("POLYGON 0 0, ..." was an OSError quoting it whole)
+        is_dir = is_file = False
+    if is_dir:  # (was "no such file" of a folder that is there)
         raise InputError(f"{label}: is a folder, not a clip polygon file (GeoJSON or WKT)")
-    if not path.is_file():
+    if not is_file:
         if isinstance(value, str):  # (a file named "POINT (1).geojson" is read as one)
             _refuse_other_wkt(text, label)
         raise InputError(f"{label}: no such file{' (nor WKT text: POLYGON ((x y, ...)))' * isinstance(value, str)}")
@@ -601,5 +618,5 @@ def _hole_in_hole(points: np.ndarray, hole_of: np.ndarray, a: np.ndarray, b: np.
 
 
 __all__ = [
-    "ClipPolygon", "check_holes", "check_simple", "clip_polygon_of", "crossing_edges", "crossing_problem", "far_apart", "looks_like_lon_lat", "moved_polygon", "no_area_problem",
+    "ClipPolygon", "check_holes", "check_simple", "clip_polygon_of", "crossing_edges", "crossing_problem", "far_apart", "looks_like_lon_lat", "moved_polygon", "no_area_problem", "polygon_text",
 ]  # fmt: skip

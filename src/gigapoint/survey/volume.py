@@ -47,11 +47,11 @@ from typing import NamedTuple
 import numpy as np
 
 from ..core.cloud import PointCloud
-from ..errors import EmptyCloudError, InputError, check_switch, is_real, number_text, value_text, warn
+from ..errors import EmptyCloudError, InputError, check_switch, is_real, number_text, warn
 from ..io._base import headers_once
 from ..io.crs import refuse_angles
 from ..io.filters import may_move, placed_in, placed_over, point_filter
-from ..io.polygon import ClipPolygon, check_simple, clip_polygon_of
+from ..io.polygon import ClipPolygon, check_simple, clip_polygon_of, polygon_text
 from ..lod.query import is_octree
 from ..lod.reader import cloud_crs_units
 from ..lod.store import OctreeCloud
@@ -383,7 +383,7 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
     check_switch("full", full, "volume")
     if fill_nodata is not None and fill_nodata != "all":
         check_max_distance("volume: fill_nodata", fill_nodata)
-    toe = clip_polygon_of(clip_polygon, "volume: the GeoJSON geometry" if isinstance(clip_polygon, dict) else f"volume: clip_polygon={value_text(clip_polygon)}")
+    toe = clip_polygon_of(clip_polygon, "volume: the GeoJSON geometry" if isinstance(clip_polygon, dict) else f"volume: clip_polygon={polygon_text(clip_polygon)}")
     check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it")
     point_filter(classes, drop_classes, where="volume")  # bad classes told before an octree is opened
     octree = _opened_octree(source)
