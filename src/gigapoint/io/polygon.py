@@ -151,9 +151,9 @@ def polygon_text(value, shown: str | None = None) -> str:
     WKT text of more than ``REPR_MAX`` characters by its start and its length (a WKT string of
     10,000 vertices was quoted whole, as a file's name is)."""
     if not (isinstance(value, str) and len(value) > REPR_MAX and _WKT_KEYWORD.match(value)):
-        return value_text(value) if shown is None else shown
+        return shown or value_text(value)
     start = value.strip()[:30] + "..."
-    return f"{start if shown is not None else repr(start)} ({len(value):,} characters)"
+    return f"{start if shown else repr(start)} ({len(value):,} characters)"
 
 
 def clip_polygon_of(value, label: str) -> ClipPolygon:
