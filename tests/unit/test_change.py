@@ -111,6 +111,7 @@ def test_surveys_that_share_no_pixel_are_refused():
 
 EPSG_32610_KEYS = [(1024, 0, 1, 1), (3072, 0, 1, 32610)]  # LAS 1.2 GeoTIFF keys: projected, UTM 10N
 EPSG_4326_KEYS = [(1024, 0, 1, 2), (2048, 0, 1, 4326)]  # geographic, WGS 84: x and y in degrees
+EPSG_4326_METRES_UP_KEYS = [*EPSG_4326_KEYS, (4099, 0, 1, 9001)]  # and heights in metres (VerticalUnitsGeoKey)
 DEGREES_SCALE = (1e-7, 1e-7, 0.01)  # x and y to ~1 cm in degrees
 DEGREES_ORIGIN = (-123.0, 44.0)  # Oregon, in longitude and latitude
 
@@ -128,13 +129,13 @@ def write_las(path, xyz, keys=EPSG_32610_KEYS, wkt=None, scale=(0.01, 0.01, 0.01
     return path
 
 
-def write_degrees_grid(path, n, height=lambda x, y: np.full(x.size, 2.0), origin=DEGREES_ORIGIN):
+def write_degrees_grid(path, n, height=lambda x, y: np.full(x.size, 2.0), origin=DEGREES_ORIGIN, keys=EPSG_4326_KEYS):
     """A LAS file in WGS 84 (EPSG:4326 keys, x and y at DEGREES_SCALE): n x n points 0.00002
     degrees apart from ``origin`` (n = 40: 0.0008 degrees square), at ``height(x, y)`` of their
-    offsets in degrees (2 by default)."""
+    offsets in degrees (2 by default); ``keys``: its GeoTIFF keys (EPSG_4326_METRES_UP_KEYS: heights in metres)."""
     g = np.arange(n) * 0.00002
     x, y = (a.ravel() for a in np.meshgrid(g, g))
-    return write_las(path, np.column_stack([x, y, height(x, y)]), keys=EPSG_4326_KEYS, scale=DEGREES_SCALE, origin=origin)
+    return write_las(path, np.column_stack([x, y, height(x, y)]), keys=keys, scale=DEGREES_SCALE, origin=origin)
 
 
 def refused_writing_nothing(classify, path, out, **options) -> str:

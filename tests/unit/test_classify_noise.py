@@ -58,7 +58,7 @@ def test_the_planted_points_are_found_and_nothing_else(surface, tmp_path):
     assert (got[cluster] == 1).all()  # 19 others around each: no noise with isolated 5
     assert (got[: planted[0]] == 2).all()  # no ground point flagged (its 27 cells hold 144 points, about)
     assert (result.points, result.noise, result.kept_noise) == (14_470, 50, 0)
-    assert result.params == {"step": 4.0, "step_z": 4.0, "isolated": 5, "units": "m (assumed)"}  # lasnoise's defaults, no CRS: metres
+    assert result.params == {"step": 4.0, "step_z": 4.0, "isolated": 5, "units": "m (assumed)", "height_units": "m (assumed)"}  # lasnoise's defaults, no CRS: metres
 
 
 def test_isolated_is_the_most_other_points_in_the_27_cells(surface, tmp_path):
@@ -212,8 +212,22 @@ def test_coordinates_in_degrees_need_both_steps_given(tmp_path):
         f"classify_noise: {path} has coordinates in degrees (EPSG:4326); a default step_z (4 m) needs metres or feet: "
         "give both, or reproject first (gigapoint convert --to-crs EPSG:32610, WGS 84 / UTM zone 10N, where the data lie)"
     )
+    assert refused_writing_nothing(gp.classify_noise, path, tmp_path / "out.laz").startswith(
+        f"classify_noise: {path} has coordinates in degrees (EPSG:4326); a default step (4 m) or step_z (4 m) needs metres or feet: give both, or "
+    )
     result = gp.classify_noise(path, tmp_path / "out.laz", step=0.00004, step_z=4.0)
     assert (result.params["step"], result.params["step_z"], result.noise) == (0.00004, 4.0, 0)
+
+
+def test_the_cli_says_each_step_in_its_unit_in_degrees(tmp_path, cli):
+    """A cloud in WGS 84 with heights in metres: its steps were said 'step 4e-05 x 4 °' (both in
+    the horizontal unit); now the width in degrees, the height in metres."""
+    from test_change import EPSG_4326_METRES_UP_KEYS, write_degrees_grid  # (tests/unit is on sys.path)
+
+    path = write_degrees_grid(tmp_path / "wgs84.las", 20, keys=EPSG_4326_METRES_UP_KEYS)
+    rc, out, err = cli("classify", path, "-o", tmp_path / "out.las", "--noise", "--step", "0.00004", "--step-z", "4", "-q")
+    assert rc == 0, err
+    assert ": 400 points, 0 isolated found noise (7); step 4e-05 ° x 4 m, isolated 5; " in out
 
 
 def test_the_parameters_read_the_crs_from_one_header_read(tmp_path, monkeypatch):
@@ -223,14 +237,15 @@ def test_the_parameters_read_the_crs_from_one_header_read(tmp_path, monkeypatch)
     (it said "a default step or step_z" with step given)."""
     from test_change import write_degrees_grid  # (tests/unit is on sys.path)
 
-    from gigapoint.io import las
+    from gigapoint.io import crs
     from gigapoint.survey.ground_raster import ground_parameters
     from gigapoint.survey.noise import noise_parameters
 
     path = write_degrees_grid(tmp_path / "wgs84.las", 20)
     reads = []
-    real_read = las.read_las_header
-    monkeypatch.setattr(las, "read_las_header", lambda f, *a, **k: reads.append(f) or real_read(f, *a, **k))
+    real_read = crs.read_las_header
+    monkeypatch.setattr(crs, "read_las_header",  # (the name io.crs calls: las.read_las_header is bound there at import)
+                         lambda f, *a, **k: reads.append(f) or real_read(f, *a, **k))
     for refused in (lambda: noise_parameters([path], step_z=1.0), lambda: ground_parameters([path], window=1.0)):
         with pytest.raises(InputError, match=r"; a default (step|cell) \((4|1) m\) needs metres or feet: "):
             refused()

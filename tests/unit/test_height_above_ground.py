@@ -87,7 +87,7 @@ def test_known_heights_are_measured_within_the_models_interpolation_error(sloped
     assert error[near_buildings].max() > 0.05 and error[~near_buildings].max() < 0.005  # (the bound is no blank cheque: measured 0.19 and 0.0012)
     assert result.ground == int((known == 0).sum()) and result.points == len(known)
     assert result.heights == pytest.approx((heights.min(), heights.max()), abs=1e-5)
-    assert result.params == {"cell": 1.0, "units": "m (assumed)"}
+    assert result.params == {"cell": 1.0, "units": "m (assumed)", "height_units": "m (assumed)"}
 
 
 def test_normalize_writes_the_height_as_z_and_keeps_x_y(sloped, tmp_path):
@@ -198,6 +198,24 @@ def test_coordinates_in_degrees_are_measured_with_a_cell_given(tmp_path):
     result = gp.height_above_ground(path, tmp_path / "out.las", cell=0.00004)
     heights = np.asarray(laspy.read(str(tmp_path / "out.las"))["HeightAboveGround"])
     assert result.params["cell"] == 0.00004 and heights[0] == pytest.approx(5.0, abs=0.01) and np.abs(heights[1:]).max() < 0.01
+
+
+def test_the_cli_says_heights_in_the_vertical_unit_of_a_cloud_in_degrees(tmp_path, cli):
+    """A cloud in WGS 84 with heights in metres: its heights above ground were said in degrees
+    ('0 to 5 °', the horizontal unit); now in metres, its cell still in degrees."""
+    from test_change import EPSG_4326_METRES_UP_KEYS, write_degrees_grid  # (tests/unit is on sys.path)
+
+    first = np.arange(400) == 0
+    path = write_degrees_grid(tmp_path / "wgs84.las", 20, lambda x, y: np.where(first, 7.0, 2.0), keys=EPSG_4326_METRES_UP_KEYS)
+    las = laspy.read(str(path))
+    las.classification = np.where(first, 1, 2).astype(np.uint8)
+    las.write(str(path))
+    rc, out, err = cli("classify", path, "-o", tmp_path / "hag.las", "--height-above-ground", "--cell", "0.00004", "-q")
+    assert rc == 0, err
+    assert ": 400 points, heights above ground 0 to 5 m in HeightAboveGround; ground model of 399 class-2 points, cell 4e-05 °; " in out
+    rc, out, err = cli("classify", path, "-o", tmp_path / "both.las", "--ground", "--height-above-ground", "--cell", "0.00004", "--window", "0.0002", "-q")
+    assert rc == 0, err
+    assert ", heights above ground 0 to 5 m in HeightAboveGround; cell 4e-05 °, " in out
 
 
 def test_a_ply_in_degrees_is_refused_its_default_cell(tmp_path):

@@ -69,7 +69,7 @@ def classify(
         kept = f", {result.noise - result.isolated:,} noise kept" if result.noise > result.isolated else ""
         noise = f", {result.isolated:,} isolated found noise (7; step {p['step']:.4g} x {p['step_z']:.4g}, isolated {p['isolated']}){kept}"
     print(
-        f"{output}: {counted(result.points, 'point')}, {result.ground:,} ground (2), {result.non_ground:,} not (1){noise}{_heights_told(result.heights, units, normalize)}{skipped}; "
+        f"{output}: {counted(result.points, 'point')}, {result.ground:,} ground (2), {result.non_ground:,} not (1){noise}{_heights_told(result.heights, p['height_units'], normalize)}{skipped}; "
         f"cell {p['cell']:.4g} {units}, slope {p['slope']:g}, window {p['window']:.4g}, threshold {p['threshold']:.4g}, scalar {p['scalar']:.4g}; "
         f"{result.seconds:.1f} s, {rate_note(result.points_per_second)}"
     )
@@ -104,13 +104,20 @@ def _classify_noise(inputs, output: Path, params: dict, overwrite: bool, recursi
     kept = f", {result.kept_noise:,} noise kept" if result.kept_noise else ""
     print(
         f"{output}: {counted(result.points, 'point')}, {result.noise:,} isolated found noise (7){kept}{skipped}; "
-        f"step {p['step']:.4g} x {p['step_z']:.4g} {p['units']}, isolated {p['isolated']}; {result.cells:,} cells in {result.table_bytes / 2**20:.1f} MiB; "
+        f"step {_step_told(p)}, isolated {p['isolated']}; {result.cells:,} cells in {result.table_bytes / 2**20:.1f} MiB; "
         f"{result.seconds:.1f} s, {rate_note(result.points_per_second)}"
     )
 
 
+def _step_told(p: dict) -> str:
+    """--noise's cells' width and height, each in its unit (a cloud in degrees: 'step 4e-05 ° x 4 m')."""
+    if p["units"] == p["height_units"]:
+        return f"{p['step']:.4g} x {p['step_z']:.4g} {p['units']}"
+    return f"{p['step']:.4g} {p['units']} x {p['step_z']:.4g} {p['height_units']}"
+
+
 def _heights_told(heights, units: str, normalize: bool) -> str:
-    """The output line's words for the heights above ground written (None: none)."""
+    """The output line's words for the heights above ground written (None: none), in ``units``, the vertical unit's."""
     if heights is None:
         return ""
     return f", heights above ground {heights[0]:.4g} to {heights[1]:.4g} {units} in HeightAboveGround{' and z' if normalize else ''}"
@@ -131,7 +138,7 @@ def _heights_only(sources, output: Path, params: dict, normalize: bool, overwrit
     p = result.params
     skipped = skipped_note(result.skipped)
     print(
-        f"{output}: {counted(result.points, 'point')}{_heights_told(result.heights, p['units'], normalize)}; "
+        f"{output}: {counted(result.points, 'point')}{_heights_told(result.heights, p['height_units'], normalize)}; "
         f"ground model of {counted(result.ground, 'class-2 point')}, cell {p['cell']:.4g} {p['units']}{skipped}; "
         f"{result.seconds:.1f} s, {rate_note(result.points_per_second)}"
     )

@@ -200,7 +200,7 @@ def classify_ground(source, out, *, cell=None, slope=None, window=None, threshol
     finally:
         shown.close()
     if noise_params is not None:
-        params = {**params, **{k: v for k, v in noise_params.items() if k != "units"}}
+        params = {**params, **{k: v for k, v in noise_params.items() if k not in ("units", "height_units")}}
     return GroundResult(out, written, counts[GROUND], counts[NON_GROUND], counts["noise"], tally["skipped"], params, time.perf_counter() - t0,
                         found["noise"], span.range())
 

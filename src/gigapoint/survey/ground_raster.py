@@ -41,8 +41,7 @@ def ground_parameters(files, cell=None, slope=None, window=None, threshold=None,
         least = "> 0" if name in ("cell", "slope", "window") else ">= 0"
         if value is not None and not (is_real(value) and (value > 0 if least == "> 0" else value >= 0)):
             raise InputError(f"{where}: {name} must be a number {least}, got {number_text(value)}")
-    defaults = [f"{name} ({DEFAULTS_METRES[name]:g} m)" for name in lengths if given[name] is None]
-    needs_lengths = f"a default {' or '.join(defaults)}" if defaults else None
+    needs_lengths = defaults_needing_lengths({name: DEFAULTS_METRES[name] for name in lengths if given[name] is None})
     units = files_length_units(where, files, needs_lengths, f"give {'both' if len(lengths) > 1 else lengths[0]}, or ")
     across, up = units["horizontal"], units["vertical"]
     per_metre_across = 1.0 / across["metres"] if across is not None and across["metres"] else 1.0
@@ -54,8 +53,19 @@ def ground_parameters(files, cell=None, slope=None, window=None, threshold=None,
         "threshold": DEFAULTS_METRES["threshold"] * per_metre_up if threshold is None else float(threshold),
         "scalar": DEFAULTS_METRES["scalar"] * per_metre_up if scalar is None else float(scalar),
     }
-    params["units"] = across["symbol"] if across is not None else "m (assumed)"
-    return params
+    return {**params, "units": unit_symbol(across), "height_units": unit_symbol(up)}
+
+
+def defaults_needing_lengths(defaults: dict[str, float]) -> str | None:
+    """What needs lengths, in io.crs.refuse_angles' words, of the ``defaults`` used ({name:
+    metres}): 'a default cell (1 m) or window (18 m)'; None where none is."""
+    return f"a default {' or '.join(f'{name} ({metres:g} m)' for name, metres in defaults.items())}" if defaults else None
+
+
+def unit_symbol(unit: dict | None) -> str:
+    """How a classification names a unit of io.crs_units (horizontal or vertical): its symbol;
+    none known, 'm (assumed)', as its defaults take it."""
+    return unit["symbol"] if unit is not None else "m (assumed)"
 
 
 def point_files(source, out, overwrite: bool, chunk_size: int | None, where: str):

@@ -111,7 +111,7 @@ def height_above_ground(source, out, *, cell=None, normalize: bool = False, over
     memory bounded by the raster."""
     t0 = time.perf_counter()
     out, inputs = point_files(source, out, overwrite, chunk_size, "height_above_ground")
-    params = {k: v for k, v in ground_parameters(inputs.files, cell=cell, where="height_above_ground", lengths=("cell",)).items() if k in ("cell", "units")}
+    params = {k: v for k, v in ground_parameters(inputs.files, cell=cell, where="height_above_ground", lengths=("cell",)).items() if k in ("cell", "units", "height_units")}
     shown = progress_bar(progress)
     span, tally = HeightSpan(), {}
     try:

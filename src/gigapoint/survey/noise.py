@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, is_real, number_text
-from .ground_raster import NOISE_CLASSES, point_files, progress_bar, write_through
+from .ground_raster import NOISE_CLASSES, defaults_needing_lengths, point_files, progress_bar, unit_symbol, write_through
 
 #: lasnoise's defaults: cells of 4 m each way; a point with at most 5 others in its 27 cells is noise
 NOISE_STEP_METRES = 4.0
@@ -66,8 +66,7 @@ def noise_parameters(files, step=None, step_z=None, isolated=None) -> dict:
             raise InputError(f"classify_noise: {name} must be a number > 0, got {number_text(value)}")
     if isolated is not None and not (isinstance(isolated, numbers.Integral) and not isinstance(isolated, bool) and isolated >= 0):
         raise InputError(f"classify_noise: isolated must be a whole number >= 0, got {isolated!r}")
-    defaulted = " or ".join(name for name, value in (("step", step), ("step_z", step_z)) if value is None)
-    needs_lengths = f"a default {defaulted} ({NOISE_STEP_METRES:g} m)" if defaulted else None
+    needs_lengths = defaults_needing_lengths({name: NOISE_STEP_METRES for name, value in (("step", step), ("step_z", step_z)) if value is None})
     units = files_length_units("classify_noise", files, needs_lengths, "give both, or ")
     across, up = units["horizontal"], units["vertical"]
     metres_across = across["metres"] if across is not None and across["metres"] else 1.0
@@ -77,7 +76,8 @@ def noise_parameters(files, step=None, step_z=None, isolated=None) -> dict:
         "step": step,
         "step_z": step * metres_across / metres_up if step_z is None else float(step_z),
         "isolated": DEFAULT_ISOLATED if isolated is None else int(isolated),
-        "units": across["symbol"] if across is not None else "m (assumed)",
+        "units": unit_symbol(across),
+        "height_units": unit_symbol(up),
     }
 
 
