@@ -576,6 +576,23 @@ def test_a_clip_polygons_hole_outside_its_outline_is_refused_before_reading():
     assert clip_polygon_of({"type": "Polygon", "coordinates": SQUARE_WITH_HOLE}, "test").describe() == "clip polygon the GeoJSON geometry (1 hole, 8 vertices)"
 
 
+def test_the_same_hole_twice_is_refused_as_overlapping_and_named_as_the_caller_names_it(autzen_path):
+    """The same ring twice (either way round, from any vertex) was accepted: each point of one
+    lies on the other's edge. It overlaps wholly: refused, naming both. A GeoJSON geometry's hole
+    errors start with the caller's label (gp.open's clip_polygon=...), as its other errors do."""
+    ring = [[0, 0], [4, 0], [4, 4], [0, 4], [0, 0]]
+    outline = [[-10, -10], [10, -10], [10, 10], [-10, 10], [-10, -10]]
+    other = [[5, 5], [6, 5], [6, 6], [5, 5]]
+    overlap = "the polygon's holes {} and {} overlap (by the even-odd rule their overlap is inside): make them one hole"
+    for holes, pair in (([ring, ring], (1, 2)), ([ring, other, ring[::-1]], (1, 3)), ([other, ring, [[4, 4], [0, 4], [0, 0], [4, 0], [4, 4]]], (2, 3))):
+        with pytest.raises(InputError) as error:
+            clip_polygon_of({"type": "Polygon", "coordinates": [outline, *holes]}, "test: clip_polygon")
+        assert str(error.value) == "test: clip_polygon: " + overlap.format(*pair)
+    with pytest.raises(InputError) as error:
+        gp.open(autzen_path, clip_polygon={"type": "Polygon", "coordinates": [outline, ring, ring]})
+    assert str(error.value).startswith("open: clip_polygon={'type': 'Polygon', ") and str(error.value).endswith(": " + overlap.format(1, 2))
+
+
 def test_holes_meeting_only_at_vertices_are_judged_by_points_strictly_inside_or_outside():
     """Edges meeting only at vertices are no crossing, and a point on an edge was counted inside:
     a triangle over a square (a vertex of each on the other's edge, its tip inside the square)

@@ -366,7 +366,7 @@ def test_a_hole_outside_its_outline_is_refused_not_measured_between_the_rings():
     for rings in ([outline, square(5, 5, 35, 35)["coordinates"][0]], [outline, square(32, 10, 38, 16)["coordinates"][0]]):
         with pytest.raises(InputError) as error:
             gp.volume(box_pile(), {"type": "Polygon", "coordinates": rings}, 0.5, base=100)
-        assert str(error.value) == "the GeoJSON geometry: the polygon's hole 1 is not inside its outline (its first ring): redraw it, the outline first"
+        assert str(error.value) == "volume: the GeoJSON geometry: the polygon's hole 1 is not inside its outline (its first ring): redraw it, the outline first"
 
 
 def test_a_hole_crossing_its_outline_or_another_hole_is_refused():
@@ -377,8 +377,8 @@ def test_a_hole_crossing_its_outline_or_another_hole_is_refused():
     touching its outline at a vertex is inside it."""
     outline = square(10, 10, 30, 30)["coordinates"][0]
     u_shape = [[10, 10], [30, 10], [30, 30], [22, 30], [22, 15], [18, 15], [18, 30], [10, 30], [10, 10]]  # a notch down to y 15
-    not_inside = "the GeoJSON geometry: the polygon's hole 1 is not inside its outline (its first ring): redraw it, the outline first"
-    overlap = "the GeoJSON geometry: the polygon's holes 1 and 2 overlap (by the even-odd rule their overlap is inside): make them one hole"
+    not_inside = "volume: the GeoJSON geometry: the polygon's hole 1 is not inside its outline (its first ring): redraw it, the outline first"
+    overlap = "volume: the GeoJSON geometry: the polygon's holes 1 and 2 overlap (by the even-odd rule their overlap is inside): make them one hole"
     cases = [
         ([outline, square(25, 15, 35, 20)["coordinates"][0]], not_inside),  # half outside
         ([outline, [[5, 5], [12, 5], [12, 12], [5, 12], [5, 5]]], not_inside),  # over the outline's corner
@@ -386,6 +386,7 @@ def test_a_hole_crossing_its_outline_or_another_hole_is_refused():
         ([outline, square(12, 12, 18, 18)["coordinates"][0], square(15, 15, 20, 20)["coordinates"][0]], overlap),
         ([outline, square(12, 12, 28, 28)["coordinates"][0], square(15, 15, 20, 20)["coordinates"][0]], overlap),  # one in the other
         ([outline, square(15, 15, 20, 20)["coordinates"][0], square(12, 12, 28, 28)["coordinates"][0]], overlap),
+        ([outline, square(15, 15, 20, 20)["coordinates"][0], square(15, 15, 20, 20)["coordinates"][0][::-1]], overlap),  # the same hole twice (was accepted)
     ]
     for rings, message in cases:
         with pytest.raises(InputError) as error:
@@ -394,6 +395,26 @@ def test_a_hole_crossing_its_outline_or_another_hole_is_refused():
     touching = [outline, [[10, 10], [14, 10], [10, 14], [10, 10]], square(16, 16, 20, 20)["coordinates"][0], square(20, 16, 24, 20)["coordinates"][0]]
     pile = gp.volume(box_pile(), {"type": "Polygon", "coordinates": touching}, 0.5, base=100).piles[0]
     assert pile.polygon_area == 400 - 8 - 16 - 16
+
+
+def test_a_hole_error_names_the_toe_as_the_other_volume_errors_do(cli, tmp_path, autzen_path):
+    """A GeoJSON geometry's hole errors said 'the GeoJSON geometry: ...' where its other errors
+    (a ring on one line) say 'volume: the GeoJSON geometry: ...'; a file's name the file, from
+    Python and the command line alike."""
+    outline, hole = square(10, 10, 30, 30)["coordinates"][0], square(15, 15, 20, 20)["coordinates"][0]
+    overlap = "the polygon's holes 1 and 2 overlap (by the even-odd rule their overlap is inside): make them one hole"
+    for holes in ([hole, hole], [hole, [[1, 1], [2, 2], [3, 3], [1, 1]]]):
+        with pytest.raises(InputError, match=r"^volume: the GeoJSON geometry: the polygon's hole"):
+            gp.volume(box_pile(), {"type": "Polygon", "coordinates": [outline, *holes]}, 0.5)
+    toe = tmp_path / "toe.geojson"
+    x0, y0, x1, y1 = AUTZEN_BLOCK
+    ring = square(x0 + 10, y0 + 10, x0 + 20, y0 + 20)["coordinates"][0]
+    toe.write_text(json.dumps({"type": "Polygon", "coordinates": [square(*AUTZEN_BLOCK)["coordinates"][0], ring, ring[::-1]]}))
+    with pytest.raises(InputError) as error:
+        gp.volume(autzen_path, toe, 2)
+    assert str(error.value) == f"{toe}: {overlap}"
+    rc, _, err = cli("volume", autzen_path, "--clip-polygon", toe, "--gsd", "2")
+    assert rc != 0 and err.strip() == f"error: {toe}: {overlap}"
 
 
 def test_a_toe_without_heights_says_why_and_how_to_mend_it():

@@ -219,7 +219,7 @@ def _geojson_polygon(document, source: str, label: str) -> ClipPolygon:
     moved_from = document.get("moved_from") if isinstance(document.get("moved_from"), str) else None  # (as_spec's)
     polygon = ClipPolygon(_polygon_rings(polygons, label), source, _epsg(document), names, features, moved_from)
     if moved_from is None:  # (a moved one's were checked before it was moved)
-        check_holes(polygon)
+        check_holes(polygon, label)  # (a dict's: named as the caller names it, 'volume: the GeoJSON geometry')
     return polygon
 
 
@@ -526,13 +526,14 @@ def check_simple(polygon: ClipPolygon, why: str) -> None:
                 raise InputError(f"{polygon.source}: {problem}: {why}")
 
 
-def check_holes(polygon: ClipPolygon) -> None:
-    """A one-line InputError naming ``polygon``'s file where a hole is not inside its outline (an
+def check_holes(polygon: ClipPolygon, label: str | None = None) -> None:
+    """A one-line InputError naming ``polygon``'s file (``label``: how else to name it) where a hole is not inside its outline (an
     edge crossing one of its edges, or a vertex or an edge's middle outside it) or two holes
     overlap (their edges cross, or a vertex or an edge's middle of one lies inside the other):
     by the even-odd rule the area between them was inside, not left out (a clip kept points
     beyond the outline; a volume's pixels and its polygon_area, the outline's less its holes',
     disagreed). A hole may touch its outline or another hole, at a vertex or along an edge."""
+    label = label or polygon.source
     several = len(polygon.polygons) > 1
     for p, (outline, *holes) in enumerate(polygon.polygons, start=1):
         if not holes:
@@ -554,10 +555,23 @@ def check_holes(polygon: ClipPolygon) -> None:
         outside = np.setdiff1d(outside, outside[_on_edges(points[outside], a[:n], b[:n], tolerance)[0]])
         strays = hole_of[outside].tolist() + ([crossed[1]] if crossed and crossed[0] == 0 else [])
         if strays:
-            raise InputError(f"{polygon.source}: {name}'s hole {min(strays)} is not inside its outline (its first ring): redraw it, the outline first")
-        overlap = crossed or _hole_in_hole(points, hole_of, a[n:], b[n:], ring_of[n:], tolerance, polygon.source)
+            raise InputError(f"{label}: {name}'s hole {min(strays)} is not inside its outline (its first ring): redraw it, the outline first")
+        overlap = crossed or _same_holes(holes) or _hole_in_hole(points, hole_of, a[n:], b[n:], ring_of[n:], tolerance, polygon.source)
         if overlap:
-            raise InputError(f"{polygon.source}: {name}'s holes {overlap[0]} and {overlap[1]} overlap (by the even-odd rule their overlap is inside): make them one hole")
+            raise InputError(f"{label}: {name}'s holes {overlap[0]} and {overlap[1]} overlap (by the even-odd rule their overlap is inside): make them one hole")
+
+
+def _same_holes(holes: list[np.ndarray]) -> list[int] | None:
+    """The numbers (from 1) of the first two holes with the same vertices (the same ring twice,
+    either way round, from any vertex), or None: each point of one lies on the other's edge, so
+    ``_hole_in_hole`` finds none inside the other, yet they overlap wholly."""
+    first: dict[bytes, int] = {}
+    for h, ring in enumerate(holes, start=1):
+        key = np.unique(ring, axis=0).tobytes()
+        if key in first:
+            return [first[key], h]
+        first[key] = h
+    return None
 
 
 def _following(sizes: list[int]) -> np.ndarray:
