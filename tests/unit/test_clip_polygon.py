@@ -676,3 +676,32 @@ def test_long_wkt_text_is_quoted_by_its_start_and_length(cli, tmp_path):
     with pytest.raises(InputError) as caught:  # a hole with no area: named by the text's start too
         clip_polygon_of(f"POLYGON (({ring}, 0 0), (1 1, 2 2))", "test")
     assert str(caught.value) == "WKT POLYGON ((0 0, 1 1, 2 2, 3 3, ...: the polygon's hole 1's points lie on one line: it has no area; move a point off the line"
+
+
+def test_a_grid_of_touching_holes_is_accepted_and_one_over_them_refused():
+    """Holes sharing edges in a grid (every box meeting its neighbours') touch, not overlap; a
+    hole laid over four of them overlaps the first it covers a point of."""
+    from gigapoint.io.polygon import ClipPolygon, check_holes
+
+    outline = np.array([[-1, -1], [31, -1], [31, 31], [-1, 31]], float)
+    holes = [np.array([[i, j], [i + 1, j], [i + 1, j + 1], [i, j + 1]], float) for i in range(30) for j in range(30)]
+    check_holes(ClipPolygon([[outline, *holes]], "grid"))
+    over = np.array([[10.5, 10.5], [11.5, 10.5], [11.5, 11.5], [10.5, 11.5]])
+    with pytest.raises(InputError, match=r"^grid: the polygon's holes \d+ and 901 overlap "):
+        check_holes(ClipPolygon([[outline, *holes, over]], "grid"))
+
+
+def test_overlapping_boxes_pairs_every_overlapping_pair_once():
+    """The grid of cells the boxes are bucketed in finds each pair whose x and y ranges overlap
+    (touching included), as comparing every pair does, of boxes of mixed sizes and points."""
+    from gigapoint.io.polygon import _overlapping_boxes
+
+    rng = np.random.default_rng(5)
+    lo = rng.integers(0, 40, (300, 2)).astype(float)
+    hi = lo + rng.choice([0, 1, 2, 30], (300, 2))
+    points = rng.integers(0, 40, (200, 2)).astype(float)
+    for others in (None, (points, points)):
+        other_lo, other_hi = (lo, hi) if others is None else others
+        pairs = [(int(i), int(j)) for i, j in zip(*(np.concatenate(p) for p in zip(*_overlapping_boxes(lo, hi, others))))]
+        expected = {(i, j) for i in range(len(lo)) for j in range(len(other_lo)) if np.all((other_lo[j] <= hi[i]) & (other_hi[j] >= lo[i]))}
+        assert len(pairs) == len(set(pairs)) and set(pairs) == expected

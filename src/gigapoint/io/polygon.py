@@ -472,21 +472,60 @@ def _meeting_pairs(a: np.ndarray, b: np.ndarray, compared, touching: bool) -> tu
 def _overlapping_boxes(lo: np.ndarray, hi: np.ndarray, others: tuple[np.ndarray, np.ndarray] | None = None, compared=None):
     """The pairs (i, j) of the boxes ``lo[i]``..``hi[i]`` and the ``others`` (their (lo, hi);
     None: the same boxes) whose x and y ranges overlap, among those ``compared(i, j)`` allows
-    (None: all): index arrays, about a million pairs at a time. Each box is paired with the
-    others that start within its x range: of two overlapping boxes one starts within the
-    other's (a pair may come twice, either way round), and a point starts within any box it is in."""
+    (None: all): index arrays, about a million pairs at a time, each pair once. The boxes are
+    bucketed in a grid of cells about as wide as they are, and paired in the cell holding the
+    corner where they start to overlap (in both boxes' cells). (A sweep along x alone paired each
+    hole of a grid of touching ones with its whole column: seconds for 8,000 holes.)"""
     other_lo, other_hi = (lo, hi) if others is None else others
-    order = np.argsort(other_lo[:, 0], kind="stable")
-    first = np.searchsorted(other_lo[order, 0], lo[:, 0], side="left")
-    counts = np.searchsorted(other_lo[order, 0], hi[:, 0], side="right") - first
-    for block in np.array_split(np.arange(len(lo)), max(1, int(counts.sum()) // 1_000_000)):
-        i = np.repeat(block, counts[block])
-        offsets = np.arange(len(i)) - np.repeat(np.cumsum(counts[block]) - counts[block], counts[block])  # 0, 1, .. in each box's run
-        j = order[first[i] + offsets]
-        tested = (other_lo[j, 1] <= hi[i, 1]) & (other_hi[j, 1] >= lo[i, 1])  # y ranges overlap
+    if not (len(lo) and len(other_lo)):
+        return
+    origin = np.minimum(lo.min(axis=0), other_lo.min(axis=0))
+    cell, rows = _grid_cell(origin, (lo, hi), (other_lo, other_hi))
+
+    def cell_of(at: np.ndarray) -> np.ndarray:
+        return ((at - origin) // cell).astype(np.int64)
+
+    def covered(box_lo: np.ndarray, box_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # (box, cell key) of each cell a box covers
+        first, span = cell_of(box_lo), cell_of(box_hi) - cell_of(box_lo) + 1
+        box = np.repeat(np.arange(len(box_lo)), span[:, 0] * span[:, 1])
+        k = _counting_runs(span[:, 0] * span[:, 1])
+        return box, (first[box, 0] + k // span[box, 1]) * rows + first[box, 1] + k % span[box, 1]
+
+    (box, key), (other, other_key) = (_by_key(*covered(*boxes)) for boxes in ((lo, hi), (other_lo, other_hi)))  # (sorted: searched in order)
+    first = np.searchsorted(other_key, key, side="left")
+    counts = np.searchsorted(other_key, key, side="right") - first
+    for block in np.array_split(np.arange(len(key)), max(1, int(counts.sum()) // 1_000_000)):
+        entry = np.repeat(block, counts[block])
+        i, j = box[entry], other[first[entry] + _counting_runs(counts[block])]
+        corner = cell_of(np.maximum(lo[i], other_lo[j]))
+        tested = np.all((other_lo[j] <= hi[i]) & (other_hi[j] >= lo[i]), axis=1) & (corner[:, 0] * rows + corner[:, 1] == key[entry])
         if compared is not None:
             tested &= compared(i, j)
         yield i[tested], j[tested]
+
+
+def _by_key(box: np.ndarray, key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    order = np.argsort(key, kind="stable")
+    return box[order], key[order]
+
+
+def _grid_cell(origin: np.ndarray, *boxes: tuple[np.ndarray, np.ndarray]) -> tuple[float, int]:
+    """(the width of ``_overlapping_boxes``' cells, the rows of its grid): the boxes' median
+    size, doubled until they cover at most a few cells each on the whole (a long edge over
+    many small holes), and at least a millionth of their extent (the keys in range)."""
+    sides = np.concatenate([np.max(h - lo, axis=1) for lo, h in boxes])
+    top = np.max([h.max(axis=0) for _, h in boxes], axis=0)
+    extent = float(np.max(top - origin))
+    positive = sides[sides > 0]
+    cell = max(float(np.median(positive)) if len(positive) else extent, extent / 2**20, np.finfo(np.float64).tiny)
+    while sum(int(np.prod((lo_h[1] - origin) // cell - (lo_h[0] - origin) // cell + 1, axis=1).sum()) for lo_h in boxes) > 8 * len(sides) + 64:
+        cell *= 2
+    return cell, int((top[1] - origin[1]) // cell) + 1
+
+
+def _counting_runs(lengths: np.ndarray) -> np.ndarray:
+    """0, 1, .. counted along each of the runs ``lengths`` long, one after another."""
+    return np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths)
 
 
 def _segments_meet(p: np.ndarray, q: np.ndarray, r: np.ndarray, s: np.ndarray, touching: bool = True) -> np.ndarray:
@@ -556,7 +595,7 @@ def check_holes(polygon: ClipPolygon, label: str | None = None) -> None:
         strays = hole_of[outside].tolist() + ([crossed[1]] if crossed and crossed[0] == 0 else [])
         if strays:
             raise InputError(f"{label}: {name}'s hole {min(strays)} is not inside its outline (its first ring): redraw it, the outline first")
-        overlap = crossed or _same_holes(holes) or _hole_in_hole(points, hole_of, a[n:], b[n:], ring_of[n:], tolerance, polygon.source)
+        overlap = crossed or _same_holes(holes) or _hole_in_hole(points, hole_of, a[n:], b[n:], ring_of[n:], tolerance)
         if overlap:
             raise InputError(f"{label}: {name}'s holes {overlap[0]} and {overlap[1]} overlap (by the even-odd rule their overlap is inside): make them one hole")
 
@@ -564,13 +603,16 @@ def check_holes(polygon: ClipPolygon, label: str | None = None) -> None:
 def _same_holes(holes: list[np.ndarray]) -> list[int] | None:
     """The numbers (from 1) of the first two holes with the same vertices (the same ring twice,
     either way round, from any vertex), or None: each point of one lies on the other's edge, so
-    ``_hole_in_hole`` finds none inside the other, yet they overlap wholly."""
+    ``_hole_in_hole`` finds none inside the other, yet they overlap wholly. Only holes of one
+    box and vertex count are compared."""
+    boxes = np.array([[*ring.min(axis=0), *ring.max(axis=0), len(ring)] for ring in holes])
+    _, group, count = np.unique(boxes, axis=0, return_inverse=True, return_counts=True)
     first: dict[bytes, int] = {}
-    for h, ring in enumerate(holes, start=1):
-        key = np.unique(ring, axis=0).tobytes()
+    for h in np.flatnonzero(count[group.ravel()] > 1):
+        key = holes[h][np.lexsort(holes[h].T)].tobytes()  # (its vertices in order of y, then x)
         if key in first:
-            return [first[key], h]
-        first[key] = h
+            return [first[key], int(h) + 1]
+        first[key] = int(h) + 1
     return None
 
 
@@ -595,40 +637,31 @@ def _on_edges(points: np.ndarray, a: np.ndarray, b: np.ndarray, tolerance: float
     return np.concatenate([point for point, _ in on]), np.concatenate([edge for _, edge in on])
 
 
-def _hole_in_hole(points: np.ndarray, hole_of: np.ndarray, a: np.ndarray, b: np.ndarray, ring_of: np.ndarray, tolerance: float, source: str) -> list[int] | None:
+def _hole_in_hole(points: np.ndarray, hole_of: np.ndarray, a: np.ndarray, b: np.ndarray, ring_of: np.ndarray, tolerance: float) -> list[int] | None:
     """The numbers (from 1, the lower first) of two holes, a point of one (``hole_of``: each of
     ``points``' hole) inside the other, not on its edge (within ``tolerance``), or None. The
-    holes' edges: ``a[e]``..``b[e]``, of hole ``ring_of[e]``."""
+    holes' edges: ``a[e]``..``b[e]``, of hole ``ring_of[e]``. Only a point in another hole's box
+    is tested in it: by the edges of that hole its ray to the right crosses (even-odd)."""
     starts = np.flatnonzero(np.diff(ring_of, prepend=0))
-    holes, lo, hi = np.split(a, starts[1:]), np.minimum.reduceat(a, starts), np.maximum.reduceat(a, starts)
-    # only holes whose boxes meet another's may overlap it
-    pairs = [np.concatenate(pair) for pair in _overlapping_boxes(lo, hi, compared=lambda i, j: i != j)]
-    boxed = np.unique(np.concatenate(pairs)) + 1 if pairs else np.zeros(0, np.int64)
-    rank = np.full(len(holes) + 1, -1)
-    rank[boxed] = np.arange(len(boxed))
-    judged = np.flatnonzero(rank[hole_of] >= 0)
-    edges = np.flatnonzero(rank[ring_of] >= 0)
-    point, edge = _on_edges(points[judged], a[edges], b[edges], tolerance)
-    point, on_hole = judged[point], ring_of[edges[edge]]
-    point, on_hole = point[hole_of[point] != on_hole], on_hole[hole_of[point] != on_hole]  # the points on another hole's edge
-    # a polygon of each hole holds its own points (on its edge): those holes are halved by each
-    # bit of their ranks, and each half's points tested in the other half's holes (two holes
-    # differ in some bit): a few dozen tests, not one a hole
-    for bit in range(len(boxed).bit_length()):
-        for side in (0, 1):
-            other = boxed[(np.arange(len(boxed)) >> bit & 1) != side]
-            if not len(other):
-                continue
-            tested = (rank[hole_of] >= 0) & ((rank[hole_of] >> bit & 1) == side)
-            tested[point[(rank[on_hole] >> bit & 1) != side]] = False  # on the edge of a hole it is tested in
-            tested = np.flatnonzero(tested)
-            inside = tested[ClipPolygon([[holes[h - 1]] for h in other], source).inside(points[tested])]
-            if len(inside):
-                point = points[inside[0]]
-                around = other[np.all((lo[other - 1] <= point) & (point <= hi[other - 1]), axis=1)]
-                holder = next(h for h in around if ClipPolygon([[holes[h - 1]]], source).inside(point[None])[0])
-                return sorted((int(hole_of[inside[0]]), int(holder)))
-    return None
+    lo, hi = np.minimum.reduceat(a, starts), np.maximum.reduceat(a, starts)  # each hole's box (hole h at h - 1)
+    tested = [np.concatenate(pair) for pair in zip(*_overlapping_boxes(points, points, (lo, hi), compared=lambda p, h: hole_of[p] != h + 1))]
+    if not tested:
+        return None
+    point, hole = tested[0], tested[1] + 1
+    on_point, on_edge = _on_edges(points, a, b, tolerance)
+    keep = ~np.isin(point * (len(lo) + 1) + hole, on_point * (len(lo) + 1) + ring_of[on_edge], kind="sort")  # (on its edge: touching)
+    point, hole = point[keep], hole[keep]
+    rays_lo, rays_hi = points[point], np.column_stack([hi[hole - 1, 0], points[point, 1]])
+    crossings = np.zeros(len(point), np.int64)
+    for ray, e in _overlapping_boxes(rays_lo, rays_hi, (np.minimum(a, b), np.maximum(a, b)), compared=lambda r, e: ring_of[e] == hole[r]):
+        (px, py), (ax, ay), (bx, by) = rays_lo[ray].T, a[e].T, b[e].T
+        rise = np.where(by != ay, by - ay, 1.0)  # (a level edge crosses no ray: the first test)
+        crossed = ((ay > py) != (by > py)) & (px < ax + (py - ay) * (bx - ax) / rise)
+        crossings += np.bincount(ray[crossed], minlength=len(point))
+    inside = crossings % 2 == 1
+    if not inside.any():
+        return None
+    return min(sorted((int(hole_of[p]), int(h))) for p, h in zip(point[inside], hole[inside]))
 
 
 __all__ = [
