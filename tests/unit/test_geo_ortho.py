@@ -316,6 +316,34 @@ def test_a_prj_beside_a_map_of_no_crs_is_refused(cli, tmp_path, grid_npy):
     assert rc == 0 and (tmp_path / "x.pgw").exists(), err
 
 
+def test_overwriting_a_map_with_one_of_no_crs_removes_the_earlier_prj(cli, tmp_path):
+    """autzen's map (its CRS in x.prj), then --overwrite from the same points in a .npy (no CRS):
+    x.prj was left, describing the new map in a CRS its inputs do not name. It is removed, and
+    said so; gigapoint.orthophoto's overwrite=True alike, by a warning."""
+    points = tmp_path / "points.npy"
+    np.save(points, gp.open(AUTZEN).positions())
+    for name in ("x.png", "y.tif"):
+        rc, _, err = cli("render", AUTZEN, "-o", tmp_path / name, "--gsd", 10)
+        assert rc == 0, err
+    assert (tmp_path / "x.prj").read_text() == read_las_header(AUTZEN).crs() == (tmp_path / "y.prj").read_text()
+    rc, stdout, err = cli("render", points, "-o", tmp_path / "x.png", "--gsd", 10, "--overwrite")
+    assert rc == 0, err
+    assert stdout.splitlines()[-1] == f"removed {tmp_path / 'x.prj'}: an earlier map's CRS, which these inputs do not name"
+    assert not (tmp_path / "x.prj").exists() and read_world_file(tmp_path / "x.pgw")[0] == 10.0
+    with pytest.warns(gp.GigapointWarning, match=r"^removed \S*y\.prj: an earlier map's CRS, which these inputs do not name$"):
+        gp.orthophoto(points, 10, out=tmp_path / "y.tif", overwrite=True)
+    assert sorted(p.name for p in tmp_path.glob("*.prj")) == []
+
+
+def test_an_image_and_a_dsm_sharing_one_world_file_are_refused(cli, tmp_path, grid_npy):
+    """m.tif and --depth-out m.tiff both need m.tfw: render wrote it twice (the second over the
+    first), where gigapoint.orthophoto refused the pair; refused before anything is read or written."""
+    path, _ = grid_npy
+    rc, _, err = cli("render", path, "-o", tmp_path / "m.tif", "--gsd", GSD, "--depth-out", tmp_path / "m.tiff")
+    assert rc == 1 and err.strip() == f"error: {tmp_path / 'm.tfw'}: named for two outputs", err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["grid.npy"]
+
+
 def test_a_failed_side_write_takes_the_image_back(cli, tmp_path, grid_npy, monkeypatch):
     """The world file's write failing (a full disk) removes the image written before it: no
     orthophoto is left without its georeference."""

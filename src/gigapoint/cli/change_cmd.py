@@ -12,7 +12,7 @@ from typing import Annotated
 import typer
 
 from ..errors import GigapointError, counted, number_text
-from ..render.georef import GEOTIFF_SUFFIXES, check_side_outputs, checked_side_writes, raster_writes
+from ..render.georef import GEOTIFF_SUFFIXES, check_side_outputs, checked_side_writes, raster_writes, remove_stale_prjs
 from .app import app
 from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
 from .gsd_opts import ALL_POINTS_HELP, check_fill_nodata, check_gsd_value
@@ -75,8 +75,9 @@ def change(
         check_image_fits(preview, cam.width, cam.height)
     wkt = crs_wkt(crs)
     writes = raster_writes(cam, crs, wkt, result.units, [(output, result.dz), (preview, None if preview is None else result.preview(value_range))])
-    side_writes, notes = checked_side_writes(cam, (output, preview), crs, wkt, result.units, overwrite)  # (d.tif, then d.png: d.prj kept)
+    side_writes, notes, stale = checked_side_writes(cam, (output, preview), crs, wkt, result.units, overwrite)  # (d.tif, then d.png: d.prj kept)
     written = write_together(writes + side_writes)
+    notes += remove_stale_prjs(stale)
     summary = result.summary()
     if as_json:
         typer.echo(json.dumps({**summary, "outputs": [str(p) for p in written]}, indent=1))

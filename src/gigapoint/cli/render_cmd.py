@@ -17,7 +17,7 @@ from ..io import crs_wkt, files_label
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from ..render.contours import draw_contours
-from ..render.georef import check_side_outputs, checked_side_writes, map_image, raster_writes
+from ..render.georef import check_side_outputs, checked_side_writes, map_image, raster_writes, remove_stale_prjs
 from ..render.image_files import warn_alpha_dropped
 from ..render.raster_fill import fill_map
 from . import compiling
@@ -350,10 +350,10 @@ def render(
 
         crs, units = cloud_crs_units(cloud)
         wkt = crs_wkt(crs)
-        side_writes, notes = checked_side_writes(cam, (output, depth_out), crs, wkt, units, overwrite)  # (x.webp, then x.jpg: x.prj kept)
+        side_writes, notes, stale = checked_side_writes(cam, (output, depth_out), crs, wkt, units, overwrite)  # (x.webp, then x.jpg: x.prj kept)
     else:
         cam = make_camera(cloud, width, height, view, camera, projection, fov)
-        notes = []
+        notes, stale = [], []
     compiled = compiling.compiled_seconds()
     with options_named():
         frame = gp.render_frame(cloud, cam, settings)
@@ -380,6 +380,7 @@ def render(
     if gsd is not None:
         writes += side_writes
     written = write_together(writes)
+    notes += remove_stale_prjs(stale)
     if stats:
         print_stats(frame.stats, compiled_s=compiled)
         err_console().print(memory_line(cloud), highlight=False)

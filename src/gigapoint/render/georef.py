@@ -224,21 +224,19 @@ def write_map(camera: Camera, crs: str | None, units: dict, rasters, overwrite: 
     .prj files, all or none (atomic.write_together), as the CLI writes them; returns the paths
     written. Each is checked first: its type (a surface model is a .tif), an existing file
     refused without ``overwrite``. A .prj that holds this very CRS already (an earlier product of
-    the same map beside it: change.tif, then change.png) is kept. Why no .prj is written, or a
-    GeoTIFF names no CRS, is a GigapointWarning."""
+    the same map beside it: change.tif, then change.png) is kept; with no CRS to write, one
+    there is removed with ``overwrite`` (``remove_stale_prjs``). Why no .prj is written, a GeoTIFF
+    names no CRS, or a .prj was removed, is a GigapointWarning."""
     rasters = [(Path(path), array) for path, array in rasters if path is not None]
     wkt = crs_wkt(crs)
     for path, array in rasters:
         check_output(path, overwrite, GEOTIFF_SUFFIXES if np.ndim(array) == 2 else IMAGE_SUFFIXES)
         check_image_fits(path, camera.width, camera.height)
     images = [path for path, _ in rasters]
-    named = images + [world_file_path(path) for path in images]  # (each .prj once: georef_paths)
-    for i, path in enumerate(named):
-        if any(path.resolve() == other.resolve() for other in named[:i]):  # (ortho.tif and ortho.tiff: one .tfw)
-            raise GigapointError(f"{path}: named for two outputs")
-    side_writes, notes = checked_side_writes(camera, images, crs, wkt, units, overwrite)
+    check_world_files_apart(images)
+    side_writes, notes, stale = checked_side_writes(camera, images, crs, wkt, units, overwrite)
     written = write_together([(path, _said(path, save)) for path, save in raster_writes(camera, crs, wkt, units, rasters) + side_writes])
-    for note in notes:
+    for note in notes + remove_stale_prjs(stale):
         warn(note, GigapointWarning)
     return written
 
@@ -256,11 +254,23 @@ def _said(path: Path, save):
     return save_or_say
 
 
+def check_world_files_apart(images) -> None:
+    """A one-line error where two of ``images`` (None: not written) are one file, or their world
+    files are (ortho.tif and ortho.tiff: one ortho.tfw, the second written over the first)."""
+    images = [Path(image) for image in images if image is not None]
+    named = images + [world_file_path(image) for image in images]  # (each .prj once: georef_paths)
+    for i, path in enumerate(named):
+        if any(path.resolve() == other.resolve() for other in named[:i]):
+            raise GigapointError(f"{path}: named for two outputs")
+
+
 def check_side_outputs(images, overwrite: bool) -> list[Path]:
-    """Before the cloud is read: the world files and .prj files beside ``images`` (None: not
-    written; ``georef_paths``), each refused like the image where it exists without
-    ``overwrite``, but an existing .prj: it may hold this very CRS (``checked_side_writes``
-    judges it once the CRS is known). Returns them."""
+    """Before the cloud is read: ``images`` (None: not written) apart with their world files
+    (``check_world_files_apart``), and the world files and .prj files beside them
+    (``georef_paths``), each refused like the image where it exists without ``overwrite``, but
+    an existing .prj: it may hold this very CRS (``checked_side_writes`` judges it once the CRS
+    is known). Returns them."""
+    check_world_files_apart(images)
     paths = georef_paths(images)
     for side in paths:
         if side.suffix != ".prj" or not side.exists():
@@ -268,16 +278,18 @@ def check_side_outputs(images, overwrite: bool) -> list[Path]:
     return paths
 
 
-def checked_side_writes(camera: Camera, images, crs: str | None, wkt: str | None, units: dict, overwrite: bool) -> tuple[list, list[str]]:
+def checked_side_writes(camera: Camera, images, crs: str | None, wkt: str | None, units: dict, overwrite: bool) -> tuple[list, list[str], list[Path]]:
     """Once the CRS is known: ``georef_writes`` of ``images`` less a .prj that holds ``wkt``
-    already (``unheld_side_writes``), each path they write, and with no CRS a .prj beside
-    ``images`` (``refused_side_paths``), refused where it exists without ``overwrite``: a user's
-    world file or .prj is not replaced without asking."""
+    already (``unheld_side_writes``), each path they write, and with no WKT a .prj beside
+    ``images`` (``stale_prjs``), refused where it exists without ``overwrite``: a user's world
+    file or .prj is not replaced without asking. Returns the writes, the notes, and those stale
+    .prj files, which the caller removes once the map is written (``remove_stale_prjs``)."""
     side_writes, notes = georef_writes(camera, images, crs, wkt, units)
     side_writes = unheld_side_writes(side_writes, wkt)
-    for path in refused_side_paths(side_writes, images, wkt):
+    stale = stale_prjs(images, wkt)
+    for path in [path for path, _ in side_writes] + stale:
         check_output(path, overwrite, suffixes=None)
-    return side_writes, notes
+    return side_writes, notes, stale
 
 
 def unheld_side_writes(side_writes, wkt: str | None) -> list:
@@ -286,12 +298,17 @@ def unheld_side_writes(side_writes, wkt: str | None) -> list:
     return [(path, save) for path, save in side_writes if not _holds(path, wkt)]
 
 
-def refused_side_paths(side_writes, images, wkt: str | None) -> list[Path]:
-    """The paths refused where they exist, without overwrite: those ``side_writes``
-    (unheld_side_writes') write, and with no WKT to write (no CRS) each .prj beside ``images``:
-    it would be left describing another map beside this one."""
-    stale = [] if wkt else [path for path in georef_paths(images) if path.suffix == ".prj" and path.exists()]
-    return [path for path, _ in side_writes] + stale
+def stale_prjs(images, wkt: str | None) -> list[Path]:
+    """With no WKT to write (no CRS), each existing .prj beside ``images``: an earlier map's,
+    it would be left describing this one."""
+    return [] if wkt else [path for path in georef_paths(images) if path.suffix == ".prj" and path.exists()]
+
+
+def remove_stale_prjs(stale) -> list[str]:
+    """Remove ``stale`` (``stale_prjs``, passed by overwrite) once the map is written: a line each to say so."""
+    for path in stale:
+        path.unlink(missing_ok=True)
+    return [f"removed {path}: an earlier map's CRS, which these inputs do not name" for path in stale]
 
 
 def _holds(path: Path, wkt: str | None) -> bool:
