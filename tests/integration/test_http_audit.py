@@ -5,6 +5,7 @@ than asked. Servers bind 127.0.0.1."""
 from __future__ import annotations
 
 import re
+import shutil
 
 import numpy as np
 import pytest
@@ -59,17 +60,31 @@ def test_a_url_among_others_is_named_with_its_two_slashes(tmp_path, capsys):
 # --------------------------------------------------------------------------- failures past a redirect
 
 
-@pytest.fixture
-def server(tmp_path):
+@pytest.fixture(scope="module")
+def scan(tmp_path_factory):
+    """scan.copc.laz, converted once for the module (27 s on a cold numba cache, under load more:
+    it was converted for each test, inside the tests' deadlock guards) and drawn once, so that
+    its decoding and drawing kernels are compiled before any test's guard starts."""
     rng = np.random.default_rng(3)
     xyz = rng.random((3_000, 3)) * (50, 40, 10) + (1000, 2000, 30)
-    gp.convert(gp.from_arrays(xyz), tmp_path / "scan.copc.laz", format="copc", max_leaf=500)
+    path = tmp_path_factory.mktemp("scan") / "scan.copc.laz"
+    gp.convert(gp.from_arrays(xyz), path, format="copc", max_leaf=500)
+    c = gp.open(path)
+    _frame(c, point_budget=10**9, lod_threshold_px=0.0)
+    c.close()
+    return path
+
+
+@pytest.fixture
+def server(tmp_path, scan):
+    """scan.copc.laz served from ``tmp_path`` (a copy: tests move, remove and add files there)."""
+    shutil.copyfile(scan, tmp_path / "scan.copc.laz")
     s = RangeServer(tmp_path)
     yield s
     s.close()
 
 
-@pytest.mark.timeout(60)
+@pytest.mark.timeout(60, func_only=True)  # (the server fixture's conversion, once a module, is not timed)
 def test_a_failure_past_a_redirect_names_where_it_led(server, quick):
     """A URL redirected to a host that refuses the connection (a CDN's, a retired mirror) or to a
     signed URL the store refuses (expired: 403) was said as the URL given's failure alone
@@ -91,7 +106,7 @@ def test_a_failure_past_a_redirect_names_where_it_led(server, quick):
     assert str(e.value) == f"{server.url('gone.copc.laz')}: HTTP 404 Not Found for bytes 0..65,536"
 
 
-@pytest.mark.timeout(60)
+@pytest.mark.timeout(60, func_only=True)
 def test_a_moved_file_gone_mid_render_is_named_where_it_was_read(server, quick):
     """A COPC file moved (its ranges then read where the redirect led, HttpClient.moved) and
     removed there while drawn: the 404 named only the URL given, which the server still
@@ -213,7 +228,7 @@ def test_a_cut_las_file_over_http_is_said_truncated_as_the_local_one(server, mod
     assert str(e.value) == str(local.value).replace(str(cut), url) == f"{url}: truncated LAS header: the file has 4 bytes, a LAS header needs at least 227"
 
 
-@pytest.mark.timeout(60)
+@pytest.mark.timeout(60, func_only=True)
 def test_an_answer_compressed_against_accept_encoding_identity(server, quick):
     """A server that gzips its answers though asked for none (S3 serving an object stored with
     Content-Encoding: gzip): a whole file is decoded (an EPT dataset draws); ranges of the
@@ -255,7 +270,7 @@ def test_a_range_with_a_content_encoding_httpx_does_not_decode_is_read_as_sent(s
         f.close()
 
 
-@pytest.mark.timeout(60)  # (as its neighbours: the server fixture converts a COPC file first, 27 s on a cold numba cache)
+@pytest.mark.timeout(60, func_only=True)  # (as its neighbours: a deadlock guard of the test alone, the fixtures' conversion not)
 def test_a_file_of_unknown_size_is_given_up_on_when_it_stalls_not_when_slow(server, quick, monkeypatch):
     """A whole file read without Content-Length had 3 x TIMEOUT (30 s) however it progressed: a
     big ept.json or node over a slow link failed. Now its deadline grows with the bytes come (at
