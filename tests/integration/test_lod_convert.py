@@ -1154,7 +1154,7 @@ def test_a_cloud_converts_as_the_file_it_was_read_from(autzen_path, tmp_path):
     np.testing.assert_array_equal(_octree_points(tmp_path / "from_progressive"), _octree_points(tmp_path / "from_file"))
     assert open_octree(tmp_path / "from_progressive").meta["crs"] == open_octree(tmp_path / "from_file").meta["crs"] is not None
     progressive.close()
-    with pytest.raises(gp.GigapointError, match="convert: inputs are files, folders, a cloud or PointChunks, got a CompactOctree"):
+    with pytest.raises(gp.GigapointError, match=r"from_file: is a converted octree \(opened\), not an input point cloud; convert the point files it was made from$"):
         convert(open_octree(tmp_path / "from_file"), tmp_path / "again")
 
 
