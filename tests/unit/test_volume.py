@@ -113,7 +113,7 @@ def test_holes_inside_the_polygon_are_filled_and_counted():
     pile = gp.volume(holed, square(10, 10, 30, 30), 0.5, base=100).piles[0]
     assert pile.fill == 500.0 and pile.filled == 16 / 400 and pile.empty == 0.0
     unfilled = (
-        r"^the GeoJSON geometry: 4\.0% of the pile's pixels hold no height and count no volume \(its figures are short by them\): the toe "
+        r"^volume: the GeoJSON geometry: 4\.0% of the pile's pixels hold no height and count no volume \(its figures are short by them\): the toe "
         r"runs beyond the data's footprint \(draw it inside the points\), or holes are left unfilled \(fill_nodata=None; 'all' fills them\)$"
     )
     with pytest.warns(GigapointWarning, match=unfilled):  # (the share alone, in the figures, is easily missed)
@@ -125,7 +125,7 @@ def test_a_toe_beyond_the_data_warns_that_its_empty_pixels_count_no_volume():
     """The toe 30 x 30 over the survey's corner, 20 x 20 of it with points: its pixels beyond the
     data hold no height, even filled (a TIN does not extrapolate), and count no volume; said, as
     a warning naming the toe and the share, and in ``empty``."""
-    beyond = r"^the GeoJSON geometry: 55\.6% of the pile's pixels hold no height and count no volume \(its figures are short by them\): the toe runs beyond the data's footprint \(draw it inside the points\)$"
+    beyond = r"^volume: the GeoJSON geometry: 55\.6% of the pile's pixels hold no height and count no volume \(its figures are short by them\): the toe runs beyond the data's footprint \(draw it inside the points\)$"
     with pytest.warns(GigapointWarning, match=beyond):
         pile = gp.volume(box_pile(), square(20, 20, 50, 50), 0.5, base=100).piles[0]
     assert (pile.fill, pile.area, pile.empty) == (5 * 25.0, 900.0, 2000 / 3600)  # the block's 5 x 5 corner inside it, 5 high
@@ -329,7 +329,7 @@ def test_cli_outputs_are_refused_before_anything_is_read(cli, tmp_path, monkeypa
     ("polygon", "kwargs", "message"),
     [
         (None, {}, "volume: clip_polygon is needed"),
-        (square(1000, 1000, 1010, 1010), {}, r"the GeoJSON geometry: no point of arrays lies in its box x 1000..1010, y 1000..1010: the polygon is outside the data"),
+        (square(1000, 1000, 1010, 1010), {}, r"^volume: the GeoJSON geometry: no point of arrays lies in its box x 1000..1010, y 1000..1010: the polygon is outside the data"),
         (square(10, 10, 30, 30), {"gsd": 0}, "volume: gsd must be a number > 0"),
         (square(10, 10, 30, 30), {"base": "top"}, "volume: base must be 'plane', 'lowest' or an elevation"),
     ],
@@ -347,12 +347,12 @@ def test_a_toe_crossing_itself_is_refused_naming_its_edges():
     why = "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it"
     with pytest.raises(InputError) as error:
         gp.volume(box_pile(), bow_tie, 0.5)
-    assert str(error.value) == f"the GeoJSON geometry: the polygon crosses itself (edges 2 and 4): {why}"
+    assert str(error.value) == f"volume: the GeoJSON geometry: the polygon crosses itself (edges 2 and 4): {why}"
     piles = {"type": "MultiPolygon", "coordinates": [square(0, 0, 5, 5)["coordinates"], bow_tie["coordinates"]]}
-    with pytest.raises(InputError, match=r"^the GeoJSON geometry: polygon 2 crosses itself \(edges 2 and 4\): "):
+    with pytest.raises(InputError, match=r"^volume: the GeoJSON geometry: polygon 2 crosses itself \(edges 2 and 4\): "):
         gp.volume(box_pile(), piles, 0.5)
     holed = {"type": "Polygon", "coordinates": [*square(0, 0, 40, 40)["coordinates"], *bow_tie["coordinates"]]}
-    with pytest.raises(InputError, match=r"^the GeoJSON geometry: the polygon's hole 1 crosses itself \(edges 2 and 4\): "):
+    with pytest.raises(InputError, match=r"^volume: the GeoJSON geometry: the polygon's hole 1 crosses itself \(edges 2 and 4\): "):
         gp.volume(box_pile(), holed, 0.5)
 
 
@@ -417,6 +417,35 @@ def test_a_hole_error_names_the_toe_as_the_other_volume_errors_do(cli, tmp_path,
     assert rc != 0 and err.strip() == f"error: {toe}: {overlap}"
 
 
+def test_a_toes_crossing_and_no_point_errors_name_it_as_its_ring_and_hole_errors_do(cli, tmp_path, autzen_path):
+    """A GeoJSON dict's ring and hole errors start 'volume: the GeoJSON geometry: '; its crossing
+    and its no-point errors said 'the GeoJSON geometry: ...'. A dict naming its own source (the
+    viewer's polygon) and a file are named by it, from Python and the command line alike."""
+    x, y = lattice(40.0)
+    gap = (x >= 14.5) & (x < 25.5) & (y >= 14.5) & (y < 25.5)  # points in the box read, none inside
+    cloud = gp.from_arrays(np.column_stack([x, y, np.full(x.size, 100.0)])[~gap])
+    bow_tie = [[10, 10], [30, 10], [10, 30], [30, 30], [10, 10]]
+    crossing = "the polygon crosses itself (edges 2 and 4): a toe must not cross itself (its area and the pixels inside it would disagree): redraw it"
+    cases = [
+        ([bow_tie], crossing),
+        ([*square(0, 0, 40, 40)["coordinates"], bow_tie], crossing.replace("the polygon", "the polygon's hole 1")),
+        (square(15, 15, 25, 25)["coordinates"], "no point of arrays lies inside it"),
+        (square(1000, 1000, 1010, 1010)["coordinates"], "no point of arrays lies in its box x 1000..1010, y 1000..1010: the polygon is outside the data"),
+    ]
+    for coordinates, problem in cases:
+        for source, name in (({}, "volume: the GeoJSON geometry"), ({"source": "the measured polygon"}, "the measured polygon")):
+            with pytest.raises(InputError) as error:
+                gp.volume(cloud, {"type": "Polygon", "coordinates": coordinates, **source}, 0.5)
+            assert str(error.value) == f"{name}: {problem}"
+    toe = tmp_path / "toe.geojson"
+    toe.write_text(json.dumps({"type": "Polygon", "coordinates": [bow_tie]}))
+    with pytest.raises(InputError) as error:
+        gp.volume(cloud, toe, 0.5)
+    assert str(error.value) == f"{toe}: {crossing}"
+    rc, _, err = cli("volume", autzen_path, "--clip-polygon", toe, "--gsd", "2")
+    assert rc != 0 and err.strip() == f"error: {toe}: {crossing}"
+
+
 def test_a_toe_without_heights_says_why_and_how_to_mend_it():
     """Points 2 units apart and a 0.25 grid: the toe's pixels hold none, so no plane can be laid
     (the message named neither the grid nor a coarser one); a 3-unit grid finds the toe."""
@@ -432,7 +461,7 @@ def test_a_polygon_over_a_gap_in_the_data_holds_no_point():
     x, y = lattice(40.0)
     gap = (x >= 14.5) & (x < 25.5) & (y >= 14.5) & (y < 25.5)  # points in the box read (a pixel beyond), none inside
     cloud = gp.from_arrays(np.column_stack([x, y, np.full(x.size, 100.0)])[~gap])
-    with pytest.raises(InputError, match=r"^the GeoJSON geometry: no point of arrays lies inside it$"):
+    with pytest.raises(InputError, match=r"^volume: the GeoJSON geometry: no point of arrays lies inside it$"):
         gp.volume(cloud, square(15, 15, 25, 25), 0.5)
 
 
@@ -501,7 +530,7 @@ def test_cli_volume_of_an_octree_folder_with_all_points_is_the_point_files(cli, 
         figures[name] = json.loads(out)["total"]["fill"]
     assert figures["every"] == pytest.approx(figures["las"], rel=1e-7) and figures["octree"] < figures["las"]
     outside = {"type": "Polygon", "coordinates": [[[1000, 1000], [1010, 1000], [1010, 1010], [1000, 1000]]]}  # (at 0..10: lon/lat, refused as such)
-    with pytest.raises(InputError, match=r"^the GeoJSON geometry: no point of .*autzen_octree lies in its box x 1000\.\.1010, y 1000\.\.1010: the polygon is outside the data$"):
+    with pytest.raises(InputError, match=r"^volume: the GeoJSON geometry: no point of .*autzen_octree lies in its box x 1000\.\.1010, y 1000\.\.1010: the polygon is outside the data$"):
         gp.volume(autzen_layered["gigapoint"], outside, 16)
 
 

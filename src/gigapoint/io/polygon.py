@@ -50,6 +50,8 @@ _NOT_AREAS = {"Point", "MultiPoint", "LineString", "MultiLineString"}
 POLYGON_SHARE = 1e-8
 #: pieces an edge of a clip polygon is cut into, at most, to follow its curve once moved
 MAX_EDGE_PIECES = 1024
+#: the source of a GeoJSON dict naming none of its own: its messages start with the caller's label
+UNNAMED_GEOMETRY = "the GeoJSON geometry"
 
 
 class ClipPolygon:
@@ -163,7 +165,7 @@ def clip_polygon_of(value, label: str) -> ClipPolygon:
     if isinstance(value, ClipPolygon):
         return value
     if isinstance(value, dict):
-        source = value.get("source") if isinstance(value.get("source"), str) else "the GeoJSON geometry"
+        source = value.get("source") if isinstance(value.get("source"), str) else UNNAMED_GEOMETRY
         return _geojson_polygon(value, source, label)
     if not isinstance(value, (str, os.PathLike)):
         raise InputError(f"{label}: a clip polygon is a GeoJSON or WKT file, or WKT text (POLYGON ((x y, ...)))")
@@ -552,17 +554,18 @@ def crossing_problem(ring, name: str = "the polygon") -> str | None:
     return None if edges is None else f"{name} crosses itself (edges {edges[0]} and {edges[1]})"
 
 
-def check_simple(polygon: ClipPolygon, why: str) -> None:
-    """A one-line InputError naming ``polygon``'s file, the ring and its edges where a ring crosses
+def check_simple(polygon: ClipPolygon, why: str, label: str | None = None) -> None:
+    """A one-line InputError naming ``polygon``'s file (``label``: how else to name it), the ring and its edges where a ring crosses
     itself, ending with ``why`` it matters. What measures an area calls it (a volume's toe): the
     shoelace's area and the even-odd rule's inside differ there. A clip is well defined by the
     even-odd rule, a self-crossing polygon's included: clipping does not call it."""
+    label = label or polygon.source
     several = len(polygon.polygons) > 1
     for p, rings in enumerate(polygon.polygons, start=1):
         for r, ring in enumerate(rings):
             problem = crossing_problem(ring, _ring_name(p, r, several))
             if problem:
-                raise InputError(f"{polygon.source}: {problem}: {why}")
+                raise InputError(f"{label}: {problem}: {why}")
 
 
 def check_holes(polygon: ClipPolygon, label: str | None = None) -> None:
@@ -665,5 +668,5 @@ def _hole_in_hole(points: np.ndarray, hole_of: np.ndarray, a: np.ndarray, b: np.
 
 
 __all__ = [
-    "ClipPolygon", "check_holes", "check_simple", "clip_polygon_of", "crossing_edges", "crossing_problem", "far_apart", "looks_like_lon_lat", "moved_polygon", "no_area_problem", "polygon_text",
+    "UNNAMED_GEOMETRY", "ClipPolygon", "check_holes", "check_simple", "clip_polygon_of", "crossing_edges", "crossing_problem", "far_apart", "looks_like_lon_lat", "moved_polygon", "no_area_problem", "polygon_text",
 ]  # fmt: skip

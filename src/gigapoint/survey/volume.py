@@ -51,7 +51,7 @@ from ..errors import EmptyCloudError, InputError, check_switch, is_real, number_
 from ..io._base import headers_once
 from ..io.crs import refuse_angles
 from ..io.filters import may_move, placed_in, placed_over, point_filter
-from ..io.polygon import ClipPolygon, check_simple, clip_polygon_of, polygon_text
+from ..io.polygon import UNNAMED_GEOMETRY, ClipPolygon, check_simple, clip_polygon_of, polygon_text
 from ..lod.query import is_octree
 from ..lod.reader import cloud_crs_units
 from ..lod.store import OctreeCloud
@@ -383,19 +383,21 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
     check_switch("full", full, "volume")
     if fill_nodata is not None and fill_nodata != "all":
         check_max_distance("volume: fill_nodata", fill_nodata)
-    toe = clip_polygon_of(clip_polygon, "volume: the GeoJSON geometry" if isinstance(clip_polygon, dict) else f"volume: clip_polygon={polygon_text(clip_polygon)}")
-    check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it")
+    label = "volume: the GeoJSON geometry" if isinstance(clip_polygon, dict) else f"volume: clip_polygon={polygon_text(clip_polygon)}"
+    toe = clip_polygon_of(clip_polygon, label)
+    named = label if toe.source == UNNAMED_GEOMETRY else toe.source  # (a bare dict's: as its ring and hole errors name it)
+    check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it", named)
     point_filter(classes, drop_classes, where="volume")  # bad classes told before an octree is opened
     octree = _opened_octree(source)
     try:
-        return _measured(toe, source, octree, gsd, base, classes, drop_classes, fill_nodata, full)
+        return _measured(toe, named, source, octree, gsd, base, classes, drop_classes, fill_nodata, full)
     finally:
         if isinstance(octree, VoxelOctree):  # (a COPC/EPT URL opened here: its connections)
             octree.close()
 
 
-def _measured(toe: ClipPolygon, source, octree, gsd, base, classes, drop_classes, fill_nodata, full: bool) -> Volume:
-    """``volume``'s figures, its arguments checked (``octree``: ``_opened_octree(source)``)."""
+def _measured(toe: ClipPolygon, named: str, source, octree, gsd, base, classes, drop_classes, fill_nodata, full: bool) -> Volume:
+    """``volume``'s figures, its arguments checked (``named``: how messages name ``toe``; ``octree``: ``_opened_octree(source)``)."""
     toe = _in_survey_crs(toe, source, octree)  # (before its box bounds what is read)
     margin = MARGIN_PIXELS * gsd
     box = [*(toe.lo - margin), *(toe.hi + margin)]  # read-time: only the points near the piles
@@ -418,7 +420,7 @@ def _measured(toe: ClipPolygon, source, octree, gsd, base, classes, drop_classes
             raise EmptyCloudError(label)
     except EmptyCloudError:
         (x0, y0), (x1, y1) = toe.lo, toe.hi
-        raise InputError(f"{toe.source}: no point of {label} lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}: the polygon is outside the data") from None
+        raise InputError(f"{named}: no point of {label} lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}: the polygon is outside the data") from None
     heights = drawn if fill_nodata is None else fill_heights(drawn, None if fill_nodata == "all" else fill_nodata)
     grid = RasterGrid.of_camera(camera)
     groups = _pile_parts(toe)
@@ -426,7 +428,7 @@ def _measured(toe: ClipPolygon, source, octree, gsd, base, classes, drop_classes
     above_base = np.full(grid.shape, np.nan, np.float32)
     piles = []
     for name, members in groups:
-        where = f"{toe.source}: {name}" if len(groups) > 1 else toe.source
+        where = f"{named}: {name}" if len(groups) > 1 else named
         pile, rows, cols, above = _pile([toe.polygons[i] for i in members], [insides[i] for i in members], name, drawn, heights, grid, base, where, label)
         piles.append(pile)
         _warn_if_empty(pile, where, fill_nodata)
