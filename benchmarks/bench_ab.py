@@ -142,15 +142,9 @@ def main(argv=None) -> int:
     ap.add_argument("--cap", default="1M", help="max_points of the HQS and transparency frames")
     ap.add_argument("--speed", choices=("all", "cap"), default="all", help="cap: only the frames under a point cap")
     args = ap.parse_args(argv)
-    from gigapoint.bench import benchmark_cameras, cpu_model, parse_count
+    from gigapoint.bench import benchmark_cameras, cpu_model, parse_counts
 
-    counts = []
-    for option, text in (("--points", args.points), ("--lod-points", args.lod_points), ("--cap", args.cap)):
-        try:
-            counts.append(parse_count(text, option))
-        except gp.GigapointError as exc:
-            ap.error(str(exc))  # the usage and one line, as argparse says any other bad option
-    n, n_lod, cap = counts
+    n, n_lod, cap = parse_counts(ap, ("--points", args.points), ("--lod-points", args.lod_points), ("--cap", args.cap))
     if cap >= n:  # step 1: every point drawn, the capped frames time nothing new
         ap.error(f"--cap {args.cap} must be below --points {args.points} (a cap of {cap:,} leaves all {n:,} points drawn)")
     cpu = cpu_model()

@@ -73,7 +73,7 @@ from pathlib import Path
 import numpy as np
 
 import gigapoint as gp
-from gigapoint.bench import parse_count, run_measured
+from gigapoint.bench import parse_counts, run_measured
 from gigapoint.io import demo_arrays, read_chunks
 from gigapoint.lod.progressive import ProgressiveOctree
 
@@ -737,12 +737,12 @@ def main(argv=None) -> int:
     ap.add_argument("--backend", default="auto", choices=["auto", "cpu", "wgpu"], help="the rasterizer of --parts frames and hidden")
     ap.add_argument("--base", default="HEAD~1", help="the revision --parts insert-ab compares this one with")
     args = ap.parse_args(argv)
-    n = parse_count(args.points)
+    n, batch = parse_counts(ap, ("--points", args.points), ("--batch", args.batch))
     print(f"{_cpu()}, {os.cpu_count()} cores; {n:,} points")
     if "insert" in args.parts:
-        bench_insert(n, parse_count(args.batch), args.rounds)
+        bench_insert(n, batch, args.rounds)
     if "insert-ab" in args.parts:
-        bench_insert_ab(n, parse_count(args.batch), args.rounds, args.base)
+        bench_insert_ab(n, batch, args.rounds, args.base)
     if "load" in args.parts:
         bench_load(n, args.rounds)
     if "memory" in args.parts:
@@ -764,7 +764,7 @@ def main(argv=None) -> int:
     if "select" in args.parts:
         bench_select(n)
     if "sort" in args.parts:
-        bench_sort(n, parse_count(args.batch))
+        bench_sort(n, batch)
     if "sample" in args.parts:
         bench_sample(n)
     if "hidden" in args.parts:

@@ -30,7 +30,7 @@ from pathlib import Path
 import bench_progressive  # a sibling script: its folder is sys.path[0]
 
 import gigapoint as gp
-from gigapoint.bench import parse_count
+from gigapoint.bench import parse_counts
 from gigapoint.lod.progressive import ProgressiveOctree, loader
 
 
@@ -117,7 +117,7 @@ def main(argv=None) -> int:
     ap.add_argument("--formats", nargs="+", default=["las", "laz"], choices=["las", "laz"], help="the files the load part reads (memory reads LAS)")
     ap.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "gigapoint-bench-slices", help="where the town's files are kept")
     args = ap.parse_args(argv)
-    n, sizes = parse_count(args.points), [parse_count(s) for s in args.slices]
+    n, *sizes = parse_counts(ap, ("--points", args.points), *(("slices", s) for s in args.slices))
     paths = town_files(args.data, n, args.formats if args.part == "load" else ["las"])
     print(f"{bench_progressive._cpu()}; {n:,} points; the loader's slices of {', '.join(f'{s:,}' for s in sizes)} points")
     if args.part == "load":

@@ -23,7 +23,7 @@ import numpy as np
 import gigapoint
 from gigapoint.backends.numba_cpu import NumbaCpuBackend
 from gigapoint.backends.wgpu import WgpuBackend, shaders
-from gigapoint.bench import benchmark_cameras, comparison_cameras, parse_count
+from gigapoint.bench import benchmark_cameras, comparison_cameras, parse_counts
 from gigapoint.core.selection import select
 
 EMPTY = np.uint64(0xFFFFFFFFFFFFFFFF)
@@ -73,7 +73,8 @@ def main(argv=None) -> int:
                     help="the demos of the small frames and of the 1920x1080 ones")  # fmt: skip
     ap.add_argument("--timing", default="0", help="points of the demo to time both shader texts on (0: none)")
     args = ap.parse_args(argv)
-    small, large = (parse_count(p) for p in args.points)
+    small, large = parse_counts(ap, *(("--points", p) for p in args.points))
+    n = parse_counts(ap, ("--timing", args.timing))[0] if args.timing != "0" else 0  # (before minutes of frames)
     cpu = NumbaCpuBackend()
     gpus = {"kept": backend(False), "fusable": backend(True)}
     print(gpus["kept"].describe())
@@ -89,7 +90,6 @@ def main(argv=None) -> int:
                 print(f"{label:>5} {view:8s} products {name:8s} {differences(gpu.rasterize(cloud, *f), want)}", flush=True)
         for gpu in gpus.values():
             gpu.forget(cloud)
-    n = parse_count(args.timing) if args.timing != "0" else 0
     if n:
         cloud = gigapoint.demo(n)
         for view, cam in benchmark_cameras(cloud.bounds, 1920, 1080).items():

@@ -48,6 +48,20 @@ def test_ab_bad_count_is_an_argparse_error_naming_its_option(scripts, capsys, op
     err = capsys.readouterr().err
     assert err.splitlines()[-1].endswith(f" error: {option}: cannot read 'x' (use e.g. 20M, 200k, 1e6 or 5000000)")
 
+@pytest.mark.parametrize(
+    ("script", "argv", "option"),
+    [("bench_slices", ["load", "1M", "x"], "slices"), ("bench_progressive", ["--batch", "x"], "--batch"), ("gpu_exactness", ["--timing", "x"], "--timing")],
+)
+def test_a_bad_count_is_an_argparse_error_naming_its_option(scripts, capsys, script, argv, option):
+    """A bad slice size, --batch or --timing was a traceback naming --points."""
+    main = importlib.import_module(script).main
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert err.splitlines()[-1].endswith(f" error: {option}: cannot read 'x' (use e.g. 20M, 200k, 1e6 or 5000000)")
+
+
 def test_gis_dtm_grid_is_gigapoints_top_down_grid(scripts, tmp_path, points_las_writer):
     """PDAL's writers.gdal is given gigapoint's grid: Camera.top_down's, margins included (a
     ground point on a cell edge, x = 6, puts a column before it)."""

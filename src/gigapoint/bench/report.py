@@ -115,6 +115,16 @@ def parse_count(text, option: str = "--points") -> int:
     return int(value)
 
 
+def parse_counts(parser, *given: tuple[str, object]) -> list[int]:
+    """``parse_count`` of each (option, text); a bad one is ``parser``'s error (an
+    argparse.ArgumentParser's: the usage and one line naming the option, exit status 2), as
+    argparse says any other bad option, not a traceback."""
+    try:
+        return [parse_count(text, option) for option, text in given]
+    except GigapointError as exc:
+        parser.error(str(exc))
+
+
 def parse_threads(text) -> int | None:
     """'all' -> None (every core), else a positive int."""
     s = str(text).strip().lower()
