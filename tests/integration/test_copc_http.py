@@ -39,7 +39,8 @@ class RangeServer:
     stored so), "gzip_plain" (Content-Encoding: gzip on bytes that are not), "binary" (Content-Encoding:
     binary, a coding httpx passes as sent, on the file as stored), "unknown_size" (Content-Range
     'bytes A-B/*': RFC 9110's file of unknown size), "unknown_size_lies" (that, with the range
-    asked in it and the body cut at the file's end). ``no_length``: answers
+    asked in it and the body cut at the file's end), "backwards_range" (Content-Range 'bytes A-(A-5)/*':
+    its last byte before its first). ``no_length``: answers
     without Content-Length (the connection closed at their end). ``fail_after``: behave for that many
     requests first. ``route(path)``: (status, Location or None) answered instead of the file
     (redirects, refusals), or None. Counts requests and connections."""
@@ -138,6 +139,8 @@ class RangeServer:
                         self.send_header("Content-Range", f"bytes {a}-{b}/*")
                     elif mode == "unknown_size_lies":  # the range asked said sent, the body cut at the file's end
                         self.send_header("Content-Range", f"bytes {a}-{asked_end}/*")
+                    elif mode == "backwards_range":
+                        self.send_header("Content-Range", f"bytes {a}-{a - 5}/*")
                     else:
                         self.send_header("Content-Range", f"bytes {a}-{b}/{len(data)}")
                 else:
@@ -394,6 +397,19 @@ def test_a_small_copc_file_of_unknown_size(server, tmp_path):
         gp.open(server.url(small.name))
     assert str(e.value) == f"{server.url(small.name)}: short read: {size:,} of the {gphttp_head():,} bytes asked for (bytes 0..{gphttp_head():,})"
     small.unlink()
+
+
+def test_a_content_range_ending_before_it_starts_is_refused_as_malformed(server):
+    """'bytes 10-5/*' to a read that may come short (a head read's) was taken for the file's end:
+    -4 bytes expected, then "the server sent more than the -4 bytes asked for"."""
+    (server.root / "backwards.bin").write_bytes(bytes(range(200)))
+    url = server.url("backwards.bin")
+    server.mode = "backwards_range"
+    client = gphttp.HttpClient()
+    with pytest.raises(InputError) as e:
+        client.get(url, 10, 100, allow_short=True)
+    assert str(e.value) == f"{url}: answer to a range request has no valid Content-Range header ('bytes 10-5/*')"
+    client.close()
 
 
 def gphttp_head() -> int:

@@ -86,6 +86,29 @@ def test_a_files_offset_grid_and_geotiff_crs_are_kept_and_16_bit_colours_keep_th
     assert cloud.save(tmp_path / "later.las") == 5000 and read_las_header(tmp_path / "later.las").crs() is None
 
 
+def test_crs_records_of_geotiff_keys_make_no_wkt(tmp_path, autzen_path, monkeypatch):
+    """source_crs_records of a LAS file naming its CRS by GeoTIFF keys alone made a WKT of them by
+    pyproj (and its units), both thrown away: the keys are copied as they are. A LAS WKT is
+    copied as it is; a PLY's 'EPSG:n' is made WKT (by pyproj)."""
+    import pyproj
+
+    from gigapoint.io.write import source_crs_records
+
+    src_path = tmp_path / "old.las"
+    _las_with_offset_and_geotiff_crs(src_path)
+    gp.open(src_path, colors="rgba").save(tmp_path / "old.ply")
+    made = []
+    for name in ("from_user_input", "from_epsg"):
+        real = getattr(pyproj.CRS, name).__func__
+        monkeypatch.setattr(pyproj.CRS, name, classmethod(lambda cls, *a, real=real, **k: made.append(a) or real(cls, *a, **k)))
+    keys = [(b"LASF_Projection", 34735, struct.pack("<8H", 1, 1, 0, 1, 3072, 0, 1, 32610))]  # (_las_with_offset_and_geotiff_crs's)
+    assert source_crs_records([src_path]) == keys and made == []
+    wkt = wkt_of(read_las_header(autzen_path).vlrs)
+    assert source_crs_records([autzen_path]) == [(b"LASF_Projection", 2112, wkt.encode() + b"\0")] and made == []
+    (_, record, data), = source_crs_records([tmp_path / "old.ply"])
+    assert record == 2112 and pyproj.CRS.from_wkt(data.rstrip(b"\0").decode()).to_epsg() == 32610 and made
+
+
 def test_from_arrays_with_attributes_saves_to_las_laz_and_ply_and_reads_back_equal(tmp_path):
     rng = np.random.default_rng(3)
     n = 4000
@@ -117,6 +140,21 @@ def test_one_point_or_equal_points_save_on_a_millimetre_grid(tmp_path, copies):
     las = laspy.read(tmp_path / "one.las")
     assert las.header.scales.tolist() == [0.001] * 3
     np.testing.assert_allclose(np.column_stack([las.x, las.y, las.z]), xyz, atol=0.0005, rtol=0)
+
+
+def test_one_point_far_out_saves_on_the_grid_float64_tells_apart(tmp_path):
+    """A point at 1e12 m has no extent: it got the millimetre, though float64 tells no finer steps
+    than 2e-15 of its coordinates apart there (0.002): that floor, as for a cloud with an extent."""
+    from gigapoint.io.las_fields import default_step
+
+    far = 2e-15 * 1e12
+    assert default_step([1e12, -1e12, 5.0], [1e12, -1e12, 5.0]) == far
+    assert default_step([0, 0, 0], [0, 0, 0]) == 0.001  # (near 0: the millimetre)
+    xyz = np.array([[1e12, -1e12, 5.0]])
+    gp.from_arrays(xyz).save(tmp_path / "far.las")
+    las = laspy.read(tmp_path / "far.las")
+    assert las.header.scales.tolist() == [far] * 3
+    np.testing.assert_allclose(np.column_stack([las.x, las.y, las.z]), xyz, atol=far / 2, rtol=0)
 
 
 @pytest.mark.parametrize(

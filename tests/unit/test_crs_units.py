@@ -206,6 +206,14 @@ def test_real_pyprojs_units_of_epsg_codes():
     assert crs_units("EPSG:4979")["vertical"] == METRE and crs_units("EPSG:4978") == UNKNOWN
 
 
+def test_format_info_of_a_dict_with_a_crs_and_no_units(autzen_path):
+    """format_info (public) of a dict a caller built with a crs but no units was a KeyError:
+    the units are those of its crs."""
+    wkt = read_las_header(autzen_path).crs()
+    lines = gp.io.format_info({"path": "made.las", "crs": wkt}).splitlines()
+    assert "  units:       x, y: foot; z: foot (assumed: the CRS names no vertical unit)" in lines
+
+
 def test_render_gsd_reads_the_header_naming_the_crs_once(cli, tmp_path, autzen_path, monkeypatch):
     from PIL import Image
 

@@ -89,6 +89,36 @@ def test_info_reads_each_header_once(tiles, reads, capsys):
     assert reads["header"] == ONCE and reads["head"] == ONCE
 
 
+def test_file_info_of_a_las_file_naming_a_crs_reads_its_header_once(autzen_path, monkeypatch):
+    """file_info read the header for the file's info, then again for its CRS's units (first_crs):
+    ``gigapoint info`` of a folder of tiles paid it per file."""
+    from gigapoint.io import file_info
+
+    parses, real = [], las._read_las_header
+    monkeypatch.setattr(las, "_read_las_header", lambda *a, **k: parses.append(a) or real(*a, **k))
+    info = file_info(autzen_path)
+    assert info["crs"] and info["units"]["horizontal"]["name"] == "foot"
+    assert len(parses) == 1
+
+
+def test_warn_mixed_crs_asks_each_files_format_once(tmp_path, autzen_path, monkeypatch):
+    """warn_mixed_crs asked each file's reader for its LAS/PLY check, then file_crs asked again;
+    a format naming no CRS (an NPY file) is still not said to lack one."""
+    import numpy as np
+
+    from gigapoint.io import crs
+
+    np.save(tmp_path / "points.npy", np.zeros((10, 3)))
+    write_las(tmp_path / "plain.las", n=100)
+    files = [autzen_path, tmp_path / "plain.las", tmp_path / "points.npy"]
+    asked, real = [], crs.reader_for
+    monkeypatch.setattr(crs, "reader_for", lambda path: asked.append(path) or real(path))
+    with pytest.warns(gp.GigapointWarning) as said:
+        crs.warn_mixed_crs(files)
+    assert len(said) == 1 and str(said[0].message).startswith("plain.las names no CRS, where autzen_trim.laz names ")
+    assert asked == files
+
+
 def test_render_reads_each_header_once(tiles, reads, tmp_path):
     """``gigapoint render`` (open_sized: the headers, then the cloud or a progressive octree)."""
     from gigapoint.cli import main

@@ -198,43 +198,53 @@ def refuse_angles(where: str, source, crs: str | None, units: dict, operation: s
     )
 
 
-def file_crs(path) -> tuple[str | None, LasHeader | None]:
-    """(the CRS ``path`` names, its LAS header): a LAS/LAZ header's (its WKT, else 'EPSG:n' or
-    'EPSG:n+v' of its GeoTIFF keys: LasHeader.crs), a PLY header's ``comment crs`` line (no LAS
-    header); None for another format or none named. Each header read once an operation; a file
-    gone or damaged raises its reader's error."""
+def file_crs(path) -> tuple[str | None, LasHeader | None, bool]:
+    """(the CRS ``path`` names, its LAS header, whether its format can name one): a LAS/LAZ
+    header's (its WKT, else 'EPSG:n' or 'EPSG:n+v' of its GeoTIFF keys: LasHeader.crs), a PLY
+    header's ``comment crs`` line (no LAS header); None for none named, and for another format
+    (False: it cannot, so it is not said to lack one). Each header read once an operation; a
+    file gone or damaged raises its reader's error."""
     reader = reader_for(path)
     if isinstance(reader, LasReader):
         hdr = read_las_header(path, salvage=True)  # (a file cut off still names its CRS)
-        return hdr.crs(), hdr
+        return hdr.crs(), hdr, True
     if isinstance(reader, PlyReader):
-        return file_header(path, salvage=True)["crs"], None
-    return None, None
+        return file_header(path, salvage=True)["crs"], None, True
+    return None, None, False
 
 
-def first_crs(files) -> tuple[object, str, dict, LasHeader | None] | None:
-    """(the file, its CRS, ``crs_units`` of it, its LAS header or None) of the first file of
-    ``files`` that names a CRS (``file_crs``: a LAS header's GeoTIFF unit keys read too); None
-    where none does, or names one. What files_crs, files_units, files_length_units, a clip
-    polygon's placing and the CRS records a save or conversion writes all read."""
+def first_named_crs(files) -> tuple[object, str, LasHeader | None] | None:
+    """(the file, its CRS, its LAS header or None) of the first file of ``files`` that names a
+    CRS (``file_crs``); None where none does (a file gone or damaged since it was read: skipped)."""
     for f in files:
         try:
-            crs, hdr = file_crs(f)
+            crs, hdr, _ = file_crs(f)
         except (GigapointError, OSError):  # gone or damaged since it was read: its read says why
             continue
         if crs:
-            return f, crs, crs_units(crs, None if hdr is None else geokeys(hdr.vlrs)), hdr
+            return f, crs, hdr
     return None
 
 
-def first_crs_wkt(files) -> tuple[str, str | None, LasHeader | None] | None:
-    """(the CRS, its WKT, its LAS header or None) of ``first_crs``: the WKT its LAS (E)VLRs hold,
-    else ``crs_wkt`` of its CRS (GeoTIFF keys' or a PLY comment's 'EPSG:n': None without pyproj).
-    What a conversion's output and the CRS records a save writes name."""
-    found = first_crs(files)
+def first_crs(files) -> tuple[object, str, dict, LasHeader | None] | None:
+    """(the file, its CRS, ``crs_units`` of it, its LAS header or None) of ``first_named_crs``
+    (a LAS header's GeoTIFF unit keys read too); None where no file names one. What files_crs,
+    files_units, files_length_units and a clip polygon's placing read."""
+    found = first_named_crs(files)
     if found is None:
         return None
-    crs, hdr = found[1], found[3]
+    f, crs, hdr = found
+    return f, crs, crs_units(crs, None if hdr is None else geokeys(hdr.vlrs)), hdr
+
+
+def first_crs_wkt(files) -> tuple[str, str | None, LasHeader | None] | None:
+    """(the CRS, its WKT, its LAS header or None) of ``first_named_crs``: the WKT its LAS (E)VLRs
+    hold, else ``crs_wkt`` of its CRS (GeoTIFF keys' or a PLY comment's 'EPSG:n': None without
+    pyproj). What a conversion's output names."""
+    found = first_named_crs(files)
+    if found is None:
+        return None
+    crs, hdr = found[1], found[2]
     return crs, (None if hdr is None else wkt_of(hdr.vlrs + hdr.evlrs)) or crs_wkt(crs), hdr
 
 
@@ -471,9 +481,9 @@ def warn_mixed_crs(files, then: str = "") -> None:
     have, none = 0, []  # how many files name a CRS; those naming none
     for f in files:
         try:  # (the header the read uses: no second open; salvage: as scan_angles_differ)
-            if not isinstance(reader_for(f), (LasReader, PlyReader)):  # (no CRS to name: not said to lack one)
+            crs, _, can_name = file_crs(f)
+            if not can_name:  # (a format with no CRS to name: not said to lack one)
                 continue
-            crs = file_crs(f)[0]
         except GigapointError:  # a bad file: reading its points says so, in its own words
             continue
         if crs:

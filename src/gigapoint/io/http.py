@@ -433,7 +433,7 @@ class HttpClient:
                     if status != 206:
                         raise InputError(f"{shown_url(url)}: unexpected HTTP {status} {r.reason_phrase} for {what}")
                     m = _CONTENT_RANGE.match(r.headers.get("content-range", ""))
-                    if m is None:
+                    if m is None or int(m.group(2)) < int(m.group(1)):  # ('bytes 10-5/*': no range; a head read expected -4 bytes)
                         raise InputError(
                             f"{shown_url(url)}: answer to a range request has no valid Content-Range header ({r.headers.get('content-range')!r})"
                         )

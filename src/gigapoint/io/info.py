@@ -19,6 +19,7 @@ from .registry import is_dataset_folder, reader_for
 from .stats import PointStats, file_stats
 
 
+@headers_once()  # (its LAS header: read for its info, then for its CRS's units)
 def file_info(path) -> dict:
     """What a file holds: format, point_count, bounds {min, max}, attributes, file_size, and for
     LAS/LAZ las_version, point_format, scale, offset, crs (EPSG/WKT string or None) and
@@ -136,7 +137,7 @@ def format_info(info: dict) -> str:
     if (info.get("crs") or info.get("las_version")) and "crs differs" not in (info.get("details") or {}):  # (a folder's tiles': said below)
         lines.append(f"  crs:         {crs_name(info.get('crs'))}")
         if info.get("crs"):
-            lines.append(f"  units:       {units_text(info['units'])}")
+            lines.append(f"  units:       {units_text(info.get('units') or crs_units(info['crs']))}")  # (a dict made by hand: no units)
     if info.get("generating_software"):
         lines.append(f"  software:    {info['generating_software']}")
     if info.get("columns"):

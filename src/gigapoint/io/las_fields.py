@@ -138,12 +138,12 @@ def default_step(lo, hi) -> float:
     a cloud under 65.5 m across (at least 65 536 steps across it: a 10 cm object kept its shape,
     not 100 mm-steps), and never below what float64 tells apart at its coordinates (2e-15 of
     them: ~8 of its steps) or 1 nm. Points that floor does not tell apart (one point, equal
-    points) get the millimetre: their zero extent gave the floor itself, 8.6e-9 at UTM
-    coordinates, a scale other tools show as absurd."""
+    points) get the millimetre (or that floor, where coarser): their zero extent gave the floor
+    itself, 8.6e-9 at UTM coordinates, a scale other tools show as absurd."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     extent = float(np.max(hi - lo))
     floor = max(2e-15 * max(1.0, float(np.abs(lo).max()), float(np.abs(hi).max())), 1e-9)
-    return max(min(0.001, extent / 2**16), floor) if extent > floor else 0.001
+    return max(min(0.001, extent / 2**16) if extent > floor else 0.001, floor)  # (1e12 m: 0.002, float64's own steps)
 
 
 def las_grid(lo, hi, scale=None, offset=None) -> tuple[np.ndarray, np.ndarray]:

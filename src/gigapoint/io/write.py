@@ -21,7 +21,7 @@ from ..atomic import atomic_write, folders_for, nearest_folder, output_file_refu
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, set_cloud_writer
 from ..errors import GigapointWarning, InputError, first_line, warn
-from .crs import crs_name, first_crs_wkt, own_epsg
+from .crs import crs_name, crs_wkt, first_named_crs, own_epsg
 from .las import GEOKEYS_RECORD, PROJECTION_USER_ID, WKT_RECORD, LasReader, read_las_header, vlrs_crs, wkt_of
 from .las_fields import LAS_FIELD_OF, choose_point_format, extra_attributes, field_attributes, las_field_values, las_grid
 from .ply import PLY_CRS_COMMENT
@@ -322,12 +322,14 @@ def source_crs_records(files) -> list[tuple[bytes, int, bytes]]:
     WKT with point format 7; GeoTIFF keys are read by laspy, PDAL and gigapoint all the same, and
     making WKT of them needs pyproj); else a PLY file's ``comment crs`` CRS as WKT (an 'EPSG:n' by
     pyproj: none without it). Empty where none names one (``first_crs``)."""
-    found = first_crs_wkt(files)
+    found = first_named_crs(files)
     if found is None:
         return []
-    _, wkt, hdr = found
-    if hdr is not None and not wkt_of(hdr.vlrs + hdr.evlrs):  # (its GeoTIFF keys, as they are)
+    _, crs, hdr = found
+    wkt = None if hdr is None else wkt_of(hdr.vlrs + hdr.evlrs)
+    if hdr is not None and wkt is None:  # its GeoTIFF keys, as they are (no WKT made of them by pyproj: 0.13 s, unused)
         return [(u, r, d) for u, r, d in hdr.vlrs if u == PROJECTION_USER_ID and r in _GEOTIFF_RECORDS]
+    wkt = wkt or crs_wkt(crs)
     return [] if wkt is None else wkt_crs_records(wkt)
 
 
