@@ -733,6 +733,38 @@ def test_a_full_disk_stops_the_recording_once_and_the_stream_goes_on(tmp_path, m
     assert (tmp_path / "new" / "index.json").is_file()
 
 
+def test_a_recording_stopped_after_a_clear_counts_its_frames_not_the_clear(tmp_path, monkeypatch):
+    """push, clear(), push, then a full disk: said 'stopped after 3 frames' (the clear's file
+    counted) while n_frames was 2."""
+    import errno
+    import warnings
+
+    from gigapoint.errors import GigapointWarning
+    from gigapoint.live import record as rec_module
+
+    live = LiveCloud()
+    rec = live.record(tmp_path / "rec")
+    savez, calls = np.savez, []
+
+    def filling(f, **arrays):
+        calls.append(1)
+        if len(calls) > 3:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        savez(f, **arrays)
+
+    monkeypatch.setattr(rec_module.np, "savez", filling)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        live.push(patch(0, 10)[0])
+        live.clear()
+        live.push(patch(1, 10)[0])
+        live.push(patch(2, 10)[0])
+    said = [str(w.message) for w in seen if issubclass(w.category, GigapointWarning)]
+    assert said == [f"{tmp_path / 'rec'}: recording stopped after 2 frames: [Errno 28] No space left on device: '{tmp_path / 'rec' / 'frames' / '000003.npz'}'"]
+    assert rec.n_frames == 2
+    live.stop_recording()
+
+
 def test_not_a_recording(tmp_path):
     with pytest.raises(InputError, match="not a live recording"):
         ReplaySource(tmp_path)

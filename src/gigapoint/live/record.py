@@ -80,6 +80,7 @@ class Recorder:
                 old.unlink()
         self.index_every_s = index_every_s
         self.entries: list[dict] = []  # the frames written, in the order they were numbered
+        self._frames = 0  # of those, the frames pushed (not the clears)
         self.error: InputError | None = None  # why the recording stopped early (a full disk), else None
         self._numbered = 0
         self._last_time: float | None = None  # the newest frame's time stamp: a clear's
@@ -114,6 +115,7 @@ class Recorder:
             return
         with self._lock:
             self.entries.append({"file": name, "time": t, "kind": kind})
+            self._frames += kind != "clear"
             self._last_time = t
         if time.monotonic() - self._written_at > self.index_every_s:
             self._write_index()
@@ -122,7 +124,7 @@ class Recorder:
         with self._lock:
             if self.error is not None:
                 return
-            self.error = InputError(f"{self.directory}: recording stopped after {len(self.entries)} frames: {first_line(exc)}")
+            self.error = InputError(f"{self.directory}: recording stopped after {self._frames} frames: {first_line(exc)}")
         warn(str(self.error), GigapointWarning)
         self._write_index()  # the frames written so far, if there is room for that
 
@@ -177,7 +179,7 @@ class Recorder:
 
     @property
     def n_frames(self) -> int:
-        return sum(e["kind"] != "clear" for e in self.entries)
+        return self._frames
 
 
 def _opt(z, name):
