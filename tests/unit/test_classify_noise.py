@@ -193,7 +193,7 @@ def test_the_cli_classifies_noise_and_names_its_options(cli, surface, tmp_path):
         assert rc != 0 and message in err and len(err.strip().splitlines()) == 1, err
     rc, out, err = cli("classify", path, "-o", tmp_path / "both.laz", "--noise", "--ground", "--step", "5", "-q")
     assert rc == 0, err
-    assert " ground (2), " in out and "50 isolated found noise (7; step 5 x 5, isolated 5)" in out
+    assert " ground (2), " in out and "50 isolated found noise (7; step 5 x 5 m (assumed), isolated 5)" in out  # (said without its unit before)
     rc, _, err = cli("classify", path, "-o", tmp_path / "b.laz", "--ground", "--noise", "--isolated", "-1")
     assert rc != 0 and "classify: --isolated must be a whole number >= 0, got -1" in err
     rc, _, err = cli("classify", path, "-o", tmp_path / "b.laz")
@@ -228,6 +228,11 @@ def test_the_cli_says_each_step_in_its_unit_in_degrees(tmp_path, cli):
     rc, out, err = cli("classify", path, "-o", tmp_path / "out.las", "--noise", "--step", "0.00004", "--step-z", "4", "-q")
     assert rc == 0, err
     assert ": 400 points, 0 isolated found noise (7); step 4e-05 ° x 4 m, isolated 5; " in out
+    # with --ground: its step said 'step 4e-05 x 4' (no units), its threshold and scalar (heights) as if in degrees
+    rc, out, err = cli("classify", path, "-o", tmp_path / "both.las", "--ground", "--noise", "--cell", "0.00004", "--window", "0.0002",
+                       "--step", "0.00004", "--step-z", "4", "-q")  # fmt: skip
+    assert rc == 0, err
+    assert " isolated found noise (7; step 4e-05 ° x 4 m, isolated 5); cell 4e-05 °, slope 0.15, window 0.0002, threshold 0.5 m, scalar 1.25 m; " in out
 
 
 def test_the_parameters_read_the_crs_from_one_header_read(tmp_path, monkeypatch):

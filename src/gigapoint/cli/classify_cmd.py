@@ -67,10 +67,11 @@ def classify(
     noise = f", {result.noise:,} noise kept" if result.noise else ""
     if "isolated" in p:  # (--noise: the points found, and the noise the files held already)
         kept = f", {result.noise - result.isolated:,} noise kept" if result.noise > result.isolated else ""
-        noise = f", {result.isolated:,} isolated found noise (7; step {p['step']:.4g} x {p['step_z']:.4g}, isolated {p['isolated']}){kept}"
+        noise = f", {result.isolated:,} isolated found noise (7; step {_step_told(p)}, isolated {p['isolated']}){kept}"
+    up = "" if p["height_units"] == units else f" {p['height_units']}"  # threshold and scalar are heights: in degrees, said in metres
     print(
         f"{output}: {counted(result.points, 'point')}, {result.ground:,} ground (2), {result.non_ground:,} not (1){noise}{_heights_told(result.heights, p['height_units'], normalize)}{skipped}; "
-        f"cell {p['cell']:.4g} {units}, slope {p['slope']:g}, window {p['window']:.4g}, threshold {p['threshold']:.4g}, scalar {p['scalar']:.4g}; "
+        f"cell {p['cell']:.4g} {units}, slope {p['slope']:g}, window {p['window']:.4g}, threshold {p['threshold']:.4g}{up}, scalar {p['scalar']:.4g}{up}; "
         f"{result.seconds:.1f} s, {rate_note(result.points_per_second)}"
     )
 
