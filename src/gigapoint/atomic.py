@@ -40,7 +40,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-__all__ = ["append_file", "atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "folder_refusal", "fsync_file", "make_folders", "mapped_npy", "nearest_folder", "output_file_refusal", "refuse", "reserve", "start_writeback", "temp_files", "write_at", "write_failure", "write_together"]
+__all__ = ["append_file", "atomic_bytes", "atomic_json", "atomic_npy", "atomic_open", "atomic_write", "folder_refusal", "fsync_file", "make_folders", "mapped_npy", "nearest_folder", "output_file_refusal", "refuse", "refuse_named_twice", "reserve", "start_writeback", "temp_files", "write_at", "write_failure", "write_together"]
 
 _IOV_MAX = min(1024, os.sysconf("SC_IOV_MAX")) if hasattr(os, "sysconf") else 16  # buffers per writev
 _SHORT_WRITE = re.compile(r"(\d+) requested and (\d+) written")
@@ -165,6 +165,16 @@ def refuse(path, refusal: str | None, error: type[Exception]) -> None:
     line naming ``path``, where there is one."""
     if refusal is not None:
         raise error(f"{path}: {refusal}")
+
+
+def refuse_named_twice(paths, error: type[Exception]) -> None:
+    """``error`` raised in one line where two of ``paths`` are one file (links and ``..`` seen
+    through): the second written would replace the first."""
+    seen: list[Path] = []
+    for path in map(Path, paths):
+        if path.resolve() in seen:
+            raise error(f"{path}: named for two outputs")
+        seen.append(path.resolve())
 
 
 def make_folders(path) -> list[Path]:

@@ -12,11 +12,11 @@ from typing import Annotated
 import typer
 
 from ..errors import GigapointError, counted, number_text
-from ..render.georef import GEOTIFF_SUFFIXES, check_side_outputs, checked_side_writes, raster_writes, remove_stale_prjs
+from ..render.georef import GEOTIFF_SUFFIXES, check_side_outputs, checked_side_writes, raster_writes, write_map_files
 from .app import app
 from .cloud_opts import ClassesOption, ClipOption, DropClassesOption, RecursiveOption, filter_options, subfolders_read
 from .gsd_opts import ALL_POINTS_HELP, check_fill_nodata, check_gsd_value
-from .output import check_image_fits, check_output, check_outputs_apart, write_together
+from .output import check_image_fits, check_output, check_outputs_apart
 
 SURVEY_HELP = (
     "The {} survey: a point cloud file, a folder of tiles or a quoted glob pattern ('{}/*.laz'), its files merged; "
@@ -76,8 +76,7 @@ def change(
     wkt = crs_wkt(crs)
     writes = raster_writes(cam, crs, wkt, result.units, [(output, result.dz), (preview, None if preview is None else result.preview(value_range))])
     side_writes, notes, stale = checked_side_writes(cam, (output, preview), crs, wkt, result.units, overwrite)  # (d.tif, then d.png: d.prj kept)
-    written = write_together(writes + side_writes)
-    notes += remove_stale_prjs(stale)
+    written = write_map_files(writes + side_writes, stale)
     summary = result.summary()
     if as_json:
         typer.echo(json.dumps({**summary, "outputs": [str(p) for p in written]}, indent=1))

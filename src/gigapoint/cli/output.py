@@ -6,11 +6,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..atomic import same_file, write_together
+from ..atomic import refuse_named_twice, same_file
 from ..errors import GigapointError
 from ..render.image_files import IMAGE_SUFFIXES, check_image_fits, check_output, save_array, save_heights, save_image
 
-__all__ = ["IMAGE_SUFFIXES", "check_image_fits", "check_output", "check_outputs_apart", "save_array", "save_heights", "save_image", "write_together"]
+__all__ = ["IMAGE_SUFFIXES", "check_image_fits", "check_output", "check_outputs_apart", "save_array", "save_heights", "save_image"]
 
 
 def check_outputs_apart(outputs, inputs) -> None:
@@ -22,9 +22,8 @@ def check_outputs_apart(outputs, inputs) -> None:
 
     inputs = [m for p in inputs for m in (pattern_matches(p) or [p])]  # ("tiles/*.npy" --index-out tiles/pts.npy)
     given = [Path(o) for o in outputs if o is not None]
-    for i, out in enumerate(given):
-        if any(out.resolve() == other.resolve() for other in given[:i]):
-            raise GigapointError(f"{out}: named for two outputs")
+    refuse_named_twice(given, GigapointError)
+    for out in given:
         if not out.exists():
             continue
         for p in inputs:

@@ -17,7 +17,7 @@ from ..io import crs_wkt, files_label
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from ..render.contours import draw_contours
-from ..render.georef import check_side_outputs, checked_side_writes, map_image, raster_writes, remove_stale_prjs
+from ..render.georef import check_side_outputs, checked_side_writes, map_image, raster_writes, write_map_files
 from ..render.image_files import warn_alpha_dropped
 from ..render.raster_fill import fill_map
 from . import compiling
@@ -48,7 +48,7 @@ from .contour_opts import (
 )
 from .gsd_opts import check_fill_nodata, check_gsd_value
 from .info_cmd import memory_line
-from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_image, write_together
+from .output import check_image_fits, check_output, check_outputs_apart, save_array, save_image
 from .progress import err_console, progress_bar, status
 from .quality_opts import check_color_attribute, prepare_cloud
 from .settings_opts import named_option, options_named, settings_from_options, with_settings_options
@@ -353,7 +353,7 @@ def render(
         side_writes, notes, stale = checked_side_writes(cam, (output, depth_out), crs, wkt, units, overwrite)  # (x.webp, then x.jpg: x.prj kept)
     else:
         cam = make_camera(cloud, width, height, view, camera, projection, fov)
-        notes, stale = [], []
+        side_writes, notes, stale = [], [], []
     compiled = compiling.compiled_seconds()
     with options_named():
         frame = gp.render_frame(cloud, cam, settings)
@@ -377,10 +377,7 @@ def render(
         writes.append((index_out, lambda p: save_array(frame.index, p)))
     if contours_out is not None:
         writes.append(contour_write(lines, cam, contours_out, crs, wkt))
-    if gsd is not None:
-        writes += side_writes
-    written = write_together(writes)
-    notes += remove_stale_prjs(stale)
+    written = write_map_files(writes + side_writes, stale)
     if stats:
         print_stats(frame.stats, compiled_s=compiled)
         err_console().print(memory_line(cloud), highlight=False)

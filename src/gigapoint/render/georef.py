@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_bytes, write_failure, write_together
+from ..atomic import atomic_bytes, refuse_named_twice, write_failure, write_together
 from ..errors import GigapointError, GigapointWarning, warn
 from ..io import EPSG_LENGTH_UNITS, crs_wkt, horizontal_epsg, vertical_crs
 from ..io.crs import angular_across
@@ -225,7 +225,7 @@ def write_map(camera: Camera, crs: str | None, units: dict, rasters, overwrite: 
     written. Each is checked first: its type (a surface model is a .tif), an existing file
     refused without ``overwrite``. A .prj that holds this very CRS already (an earlier product of
     the same map beside it: change.tif, then change.png) is kept; with no CRS to write, one
-    there is removed with ``overwrite`` (``remove_stale_prjs``). Why no .prj is written, a GeoTIFF
+    there is removed with ``overwrite`` (``write_map_files``). Why no .prj is written, a GeoTIFF
     names no CRS, or a .prj was removed, is a GigapointWarning."""
     rasters = [(Path(path), array) for path, array in rasters if path is not None]
     wkt = crs_wkt(crs)
@@ -235,8 +235,8 @@ def write_map(camera: Camera, crs: str | None, units: dict, rasters, overwrite: 
     images = [path for path, _ in rasters]
     check_world_files_apart(images)
     side_writes, notes, stale = checked_side_writes(camera, images, crs, wkt, units, overwrite)
-    written = write_together([(path, _said(path, save)) for path, save in raster_writes(camera, crs, wkt, units, rasters) + side_writes])
-    for note in notes + remove_stale_prjs(stale):
+    written = write_map_files([(path, _said(path, save)) for path, save in raster_writes(camera, crs, wkt, units, rasters) + side_writes], stale)
+    for note in notes:
         warn(note, GigapointWarning)
     return written
 
@@ -258,10 +258,7 @@ def check_world_files_apart(images) -> None:
     """A one-line error where two of ``images`` (None: not written) are one file, or their world
     files are (ortho.tif and ortho.tiff: one ortho.tfw, the second written over the first)."""
     images = [Path(image) for image in images if image is not None]
-    named = images + [world_file_path(image) for image in images]  # (each .prj once: georef_paths)
-    for i, path in enumerate(named):
-        if any(path.resolve() == other.resolve() for other in named[:i]):
-            raise GigapointError(f"{path}: named for two outputs")
+    refuse_named_twice(images + [world_file_path(image) for image in images], GigapointError)  # (each .prj once: georef_paths)
 
 
 def check_side_outputs(images, overwrite: bool) -> list[Path]:
@@ -282,14 +279,15 @@ def checked_side_writes(camera: Camera, images, crs: str | None, wkt: str | None
     """Once the CRS is known: ``georef_writes`` of ``images`` less a .prj that holds ``wkt``
     already (``unheld_side_writes``), each path they write, and with no WKT a .prj beside
     ``images`` (``stale_prjs``), refused where it exists without ``overwrite``: a user's world
-    file or .prj is not replaced without asking. Returns the writes, the notes, and those stale
-    .prj files, which the caller removes once the map is written (``remove_stale_prjs``)."""
+    file or .prj is not replaced without asking. Returns the writes, the notes (to say once the
+    map is written: a stale .prj's removal among them), and those stale .prj files, which
+    ``write_map_files`` removes once the map is written."""
     side_writes, notes = georef_writes(camera, images, crs, wkt, units)
     side_writes = unheld_side_writes(side_writes, wkt)
     stale = stale_prjs(images, wkt)
     for path in [path for path, _ in side_writes] + stale:
         check_output(path, overwrite, suffixes=None)
-    return side_writes, notes, stale
+    return side_writes, notes + [f"removed {path}: an earlier map's CRS, which these inputs do not name" for path in stale], stale
 
 
 def unheld_side_writes(side_writes, wkt: str | None) -> list:
@@ -304,11 +302,14 @@ def stale_prjs(images, wkt: str | None) -> list[Path]:
     return [] if wkt else [path for path in georef_paths(images) if path.suffix == ".prj" and path.exists()]
 
 
-def remove_stale_prjs(stale) -> list[str]:
-    """Remove ``stale`` (``stale_prjs``, passed by overwrite) once the map is written: a line each to say so."""
+def write_map_files(writes, stale) -> list[Path]:
+    """A map's ``writes`` (its rasters' and ``checked_side_writes``' (path, save) pairs) written
+    all or none (atomic.write_together), then the ``stale`` .prj files (``checked_side_writes``')
+    removed: an earlier map's CRS left beside a map that names none. Returns the paths written."""
+    written = write_together(writes)
     for path in stale:
         path.unlink(missing_ok=True)
-    return [f"removed {path}: an earlier map's CRS, which these inputs do not name" for path in stale]
+    return written
 
 
 def _holds(path: Path, wkt: str | None) -> bool:
