@@ -78,12 +78,17 @@ def view_frame(cloud, camera, settings) -> Frame:
     return frame
 
 
+def over_pixel_limit(width: int, height: int, supersample: int) -> bool:
+    """Whether a ``width`` x ``height`` frame rendered at ``supersample`` times each side is over the screenshots' pixel limit."""
+    return width * height * supersample * supersample > P.MAX_SHOT_PIXELS
+
+
 def within_frame_pixels(settings: RenderSettings, width: int, height: int) -> tuple[RenderSettings, str]:
     """``settings`` at the highest supersample (halved from its own: 4, 2, 1) that renders a
     ``width`` x ``height`` frame within the screenshots' pixel limit, and a HUD line where it was
     lowered: a 4096x4096 tab at 4 rendered 268 M pixels a frame."""
     ss = settings.supersample
-    while ss > 1 and width * height * ss * ss > P.MAX_SHOT_PIXELS:
+    while ss > 1 and over_pixel_limit(width, height, ss):
         ss //= 2
     if ss == settings.supersample:
         return settings, ""
@@ -331,10 +336,10 @@ class ViewerCore:
             width = max(1, round(int(height) * vw / vh))
         w = int(width) if width is not None else vw * scale
         h = int(height) if height is not None else vh * scale
-        if not (1 <= w <= P.MAX_SHOT_SIDE and 1 <= h <= P.MAX_SHOT_SIDE and w * h <= P.MAX_SHOT_PIXELS):
+        if not (1 <= w <= P.MAX_SHOT_SIDE and 1 <= h <= P.MAX_SHOT_SIDE) or over_pixel_limit(w, h, 1):
             raise P.ProtocolError(f"screenshot: {w}x{h} is outside 1..{P.MAX_SHOT_SIDE} per side / {P.MAX_SHOT_PIXELS:,} pixels")
         ss = settings.supersample  # rendered at ss times each side: 4096x4096 at 4 was 268 M pixels, ~5.6 GB and a minute
-        if w * h * ss * ss > P.MAX_SHOT_PIXELS:
+        if over_pixel_limit(w, h, ss):
             raise P.ProtocolError(
                 f"screenshot: {w}x{h} at supersample {ss} renders {w * ss}x{h * ss}, over {P.MAX_SHOT_PIXELS:,} pixels: ask a smaller size or lower the anti-aliasing"
             )
