@@ -674,6 +674,25 @@ def test_recording_into_an_odd_folder(tmp_path, monkeypatch):
     assert (tmp_path / "empty" / "index.json").exists()
 
 
+def _fill_disk_after(monkeypatch, frames: int) -> list:
+    """A disk that fills after ``frames`` frame files: np.savez of the recorder raises ENOSPC
+    from then on; the list counts the writes tried."""
+    import errno
+
+    from gigapoint.live import record as rec_module
+
+    savez, calls = np.savez, []
+
+    def filling(f, **arrays):
+        calls.append(1)
+        if len(calls) > frames:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        savez(f, **arrays)
+
+    monkeypatch.setattr(rec_module.np, "savez", filling)
+    return calls
+
+
 def test_a_full_disk_stops_the_recording_once_and_the_stream_goes_on(tmp_path, monkeypatch):
     """Frame 5 cannot be written (a full disk): every push after raised OSError although its
     frame was in, and index.json listed 40 frames of which 5 existed. Now the recording stops
@@ -687,15 +706,8 @@ def test_a_full_disk_stops_the_recording_once_and_the_stream_goes_on(tmp_path, m
 
     live = LiveCloud()
     rec = live.record(tmp_path / "rec")
-    savez, calls = np.savez, []
-
-    def filling(f, **arrays):
-        calls.append(1)
-        if len(calls) > 5:
-            raise OSError(errno.ENOSPC, "No space left on device")
-        savez(f, **arrays)
-
-    monkeypatch.setattr(rec_module.np, "savez", filling)
+    savez = np.savez  # (the real one: put back below)
+    calls = _fill_disk_after(monkeypatch, 5)
     frames = [patch(k, 50)[0] for k in range(40)]
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
@@ -736,23 +748,13 @@ def test_a_full_disk_stops_the_recording_once_and_the_stream_goes_on(tmp_path, m
 def test_a_recording_stopped_after_a_clear_counts_its_frames_not_the_clear(tmp_path, monkeypatch):
     """push, clear(), push, then a full disk: said 'stopped after 3 frames' (the clear's file
     counted) while n_frames was 2."""
-    import errno
     import warnings
 
     from gigapoint.errors import GigapointWarning
-    from gigapoint.live import record as rec_module
 
     live = LiveCloud()
     rec = live.record(tmp_path / "rec")
-    savez, calls = np.savez, []
-
-    def filling(f, **arrays):
-        calls.append(1)
-        if len(calls) > 3:
-            raise OSError(errno.ENOSPC, "No space left on device")
-        savez(f, **arrays)
-
-    monkeypatch.setattr(rec_module.np, "savez", filling)
+    _fill_disk_after(monkeypatch, 3)
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
         live.push(patch(0, 10)[0])
