@@ -593,6 +593,26 @@ def test_the_same_hole_twice_is_refused_as_overlapping_and_named_as_the_caller_n
     assert str(error.value).startswith("open: clip_polygon={'type': 'Polygon', ") and str(error.value).endswith(": " + overlap.format(1, 2))
 
 
+def test_the_same_hole_with_a_vertex_more_on_an_edge_is_refused_as_overlapping():
+    """The same square twice, one with a vertex more in an edge's middle, was accepted: only rings
+    of the same vertices were compared, and each vertex and edge middle of one lies on the other's
+    edge. A point inside each hole (an edge's middle moved inward; for a hole too thin for its
+    first edge's, another edge's) is tested too. Holes touching along an edge are still accepted."""
+    outline = [[-10, -10], [10, -10], [10, 10], [-10, 10], [-10, -10]]  # (the tolerance: 2e-7)
+    square, more = [[1, 1], [2, 1], [2, 2], [1, 2], [1, 1]], [[1, 1], [1.5, 1], [2, 1], [2, 2], [1, 2], [1, 1]]
+    other = [[5, 5], [6, 5], [6, 6], [5, 5]]
+    w = 5e-7  # (a middle moved 4e-7 in from a long edge is 1e-7 from the other: too near)
+    thin, thin_more = [[0, 0], [1, 0], [1, w], [0, w], [0, 0]], [[0, w], [0, 0], [0.5, 0], [1, 0], [1, w], [0, w]]
+    overlap = "test: the polygon's holes {} and {} overlap (by the even-odd rule their overlap is inside): make them one hole"
+    for holes, pair in (([square, more], (1, 2)), ([more, other, square[::-1]], (1, 3)), ([other, thin, thin_more], (2, 3))):
+        with pytest.raises(InputError) as error:
+            clip_polygon_of({"type": "Polygon", "coordinates": [outline, *holes]}, "test")
+        assert str(error.value) == overlap.format(*pair)
+    above = [[0, w], [1, w], [1, 1], [0, 1], [0, w]]
+    touching = clip_polygon_of({"type": "Polygon", "coordinates": [outline, thin, above, more, [[2, 1], [3, 1], [3, 2], [2, 2], [2, 1]]]}, "test")
+    assert touching.describe() == "clip polygon the GeoJSON geometry (4 holes, 21 vertices)"
+
+
 def test_holes_meeting_only_at_vertices_are_judged_by_points_strictly_inside_or_outside():
     """Edges meeting only at vertices are no crossing, and a point on an edge was counted inside:
     a triangle over a square (a vertex of each on the other's edge, its tip inside the square)
@@ -693,7 +713,9 @@ def test_a_grid_of_touching_holes_is_accepted_and_one_over_them_refused():
 
 def test_overlapping_boxes_pairs_every_overlapping_pair_once():
     """The grid of cells the boxes are bucketed in finds each pair whose x and y ranges overlap
-    (touching included), as comparing every pair does, of boxes of mixed sizes and points."""
+    (touching included), as comparing every pair does, of boxes of mixed sizes and points. The
+    boxes with themselves: each pair once (i < j), none with itself (each pair came twice, and
+    each box with itself: _meeting_pairs tested twice the segments)."""
     from gigapoint.io.polygon import _overlapping_boxes
 
     rng = np.random.default_rng(5)
@@ -703,5 +725,8 @@ def test_overlapping_boxes_pairs_every_overlapping_pair_once():
     for others in (None, (points, points)):
         other_lo, other_hi = (lo, hi) if others is None else others
         pairs = [(int(i), int(j)) for i, j in zip(*(np.concatenate(p) for p in zip(*_overlapping_boxes(lo, hi, others))))]
-        expected = {(i, j) for i in range(len(lo)) for j in range(len(other_lo)) if np.all((other_lo[j] <= hi[i]) & (other_hi[j] >= lo[i]))}
+        expected = {
+            (i, j) for i in range(len(lo)) for j in range(len(other_lo))
+            if np.all((other_lo[j] <= hi[i]) & (other_hi[j] >= lo[i])) and (others is not None or i < j)
+        }  # fmt: skip
         assert len(pairs) == len(set(pairs)) and set(pairs) == expected

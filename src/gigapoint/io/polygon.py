@@ -474,7 +474,8 @@ def _meeting_pairs(a: np.ndarray, b: np.ndarray, compared, touching: bool) -> tu
 def _overlapping_boxes(lo: np.ndarray, hi: np.ndarray, others: tuple[np.ndarray, np.ndarray] | None = None, compared=None):
     """The pairs (i, j) of the boxes ``lo[i]``..``hi[i]`` and the ``others`` (their (lo, hi);
     None: the same boxes) whose x and y ranges overlap, among those ``compared(i, j)`` allows
-    (None: all): index arrays, about a million pairs at a time, each pair once. The boxes are
+    (None: all): index arrays, about a million pairs at a time, each pair once (i < j where
+    ``others`` is None: no box with itself). The boxes are
     bucketed in a grid of cells about as wide as they are, and paired in the cell holding the
     corner where they start to overlap (in both boxes' cells). (A sweep along x alone paired each
     hole of a grid of touching ones with its whole column: seconds for 8,000 holes.)"""
@@ -501,6 +502,8 @@ def _overlapping_boxes(lo: np.ndarray, hi: np.ndarray, others: tuple[np.ndarray,
         i, j = box[entry], other[first[entry] + _counting_runs(counts[block])]
         corner = cell_of(np.maximum(lo[i], other_lo[j]))
         tested = np.all((other_lo[j] <= hi[i]) & (other_hi[j] >= lo[i]), axis=1) & (corner[:, 0] * rows + corner[:, 1] == key[entry])
+        if others is None:
+            tested &= i < j
         if compared is not None:
             tested &= compared(i, j)
         yield i[tested], j[tested]
@@ -571,7 +574,7 @@ def check_simple(polygon: ClipPolygon, why: str, label: str | None = None) -> No
 def check_holes(polygon: ClipPolygon, label: str | None = None) -> None:
     """A one-line InputError naming ``polygon``'s file (``label``: how else to name it) where a hole is not inside its outline (an
     edge crossing one of its edges, or a vertex or an edge's middle outside it) or two holes
-    overlap (their edges cross, or a vertex or an edge's middle of one lies inside the other):
+    overlap (their edges cross, or a vertex, an edge's middle or a point inside one lies inside the other):
     by the even-odd rule the area between them was inside, not left out (a clip kept points
     beyond the outline; a volume's pixels and its polygon_area, the outline's less its holes',
     disagreed). A hole may touch its outline or another hole, at a vertex or along an edge."""
@@ -587,36 +590,21 @@ def check_holes(polygon: ClipPolygon, label: str | None = None) -> None:
         b = a[_following([len(r) for r in rings])]
         crossing = _meeting_pairs(a, b, lambda i, j, ring_of=ring_of: ring_of[i] != ring_of[j], touching=False)
         crossed = None if crossing is None else sorted(int(ring_of[e]) for e in crossing)
-        # edges that only touch: each hole judged by its vertices and its edges' middles, those
+        # edges that only touch: each hole judged by its vertices, its edges' middles and a point inside it, those
         # on the edge of the ring they are tested in (inside it, by points_inside) left out
         n = len(outline)
-        points = np.concatenate([a[n:], (a[n:] + b[n:]) / 2])
-        hole_of = np.tile(ring_of[n:], 2)
         tolerance = POLYGON_SHARE * float(np.max(a[:n].max(axis=0) - a[:n].min(axis=0)))
+        inner, inner_hole = _inner_points(a[n:], b[n:], ring_of[n:], tolerance)  # (two holes the same: one inside the other by it)
+        points = np.concatenate([a[n:], (a[n:] + b[n:]) / 2, inner])
+        hole_of = np.concatenate([np.tile(ring_of[n:], 2), inner_hole])
         outside = np.flatnonzero(~ClipPolygon([[a[:n]]], polygon.source).inside(points))
         outside = np.setdiff1d(outside, outside[_on_edges(points[outside], a[:n], b[:n], tolerance)[0]])
         strays = hole_of[outside].tolist() + ([crossed[1]] if crossed and crossed[0] == 0 else [])
         if strays:
             raise InputError(f"{label}: {name}'s hole {min(strays)} is not inside its outline (its first ring): redraw it, the outline first")
-        overlap = crossed or _same_holes(holes) or _hole_in_hole(points, hole_of, a[n:], b[n:], ring_of[n:], tolerance)
+        overlap = crossed or _hole_in_hole(points, hole_of, a[n:], b[n:], ring_of[n:], tolerance)
         if overlap:
             raise InputError(f"{label}: {name}'s holes {overlap[0]} and {overlap[1]} overlap (by the even-odd rule their overlap is inside): make them one hole")
-
-
-def _same_holes(holes: list[np.ndarray]) -> list[int] | None:
-    """The numbers (from 1) of the first two holes with the same vertices (the same ring twice,
-    either way round, from any vertex), or None: each point of one lies on the other's edge, so
-    ``_hole_in_hole`` finds none inside the other, yet they overlap wholly. Only holes of one
-    box and vertex count are compared."""
-    boxes = np.array([[*ring.min(axis=0), *ring.max(axis=0), len(ring)] for ring in holes])
-    _, group, count = np.unique(boxes, axis=0, return_inverse=True, return_counts=True)
-    first: dict[bytes, int] = {}
-    for h in np.flatnonzero(count[group.ravel()] > 1):
-        key = holes[h][np.lexsort(holes[h].T)].tobytes()  # (its vertices in order of y, then x)
-        if key in first:
-            return [first[key], int(h) + 1]
-        first[key] = int(h) + 1
-    return None
 
 
 def _following(sizes: list[int]) -> np.ndarray:
@@ -644,7 +632,7 @@ def _hole_in_hole(points: np.ndarray, hole_of: np.ndarray, a: np.ndarray, b: np.
     """The numbers (from 1, the lower first) of two holes, a point of one (``hole_of``: each of
     ``points``' hole) inside the other, not on its edge (within ``tolerance``), or None. The
     holes' edges: ``a[e]``..``b[e]``, of hole ``ring_of[e]``. Only a point in another hole's box
-    is tested in it: by the edges of that hole its ray to the right crosses (even-odd)."""
+    is tested in it (``_inside_holes``)."""
     starts = np.flatnonzero(np.diff(ring_of, prepend=0))
     lo, hi = np.minimum.reduceat(a, starts), np.maximum.reduceat(a, starts)  # each hole's box (hole h at h - 1)
     tested = [np.concatenate(pair) for pair in zip(*_overlapping_boxes(points, points, (lo, hi), compared=lambda p, h: hole_of[p] != h + 1))]
@@ -654,17 +642,51 @@ def _hole_in_hole(points: np.ndarray, hole_of: np.ndarray, a: np.ndarray, b: np.
     on_point, on_edge = _on_edges(points, a, b, tolerance)
     keep = ~np.isin(point * (len(lo) + 1) + hole, on_point * (len(lo) + 1) + ring_of[on_edge], kind="sort")  # (on its edge: touching)
     point, hole = point[keep], hole[keep]
-    rays_lo, rays_hi = points[point], np.column_stack([hi[hole - 1, 0], points[point, 1]])
-    crossings = np.zeros(len(point), np.int64)
-    for ray, e in _overlapping_boxes(rays_lo, rays_hi, (np.minimum(a, b), np.maximum(a, b)), compared=lambda r, e: ring_of[e] == hole[r]):
-        (px, py), (ax, ay), (bx, by) = rays_lo[ray].T, a[e].T, b[e].T
-        rise = np.where(by != ay, by - ay, 1.0)  # (a level edge crosses no ray: the first test)
-        crossed = ((ay > py) != (by > py)) & (px < ax + (py - ay) * (bx - ax) / rise)
-        crossings += np.bincount(ray[crossed], minlength=len(point))
-    inside = crossings % 2 == 1
+    inside = _inside_holes(points[point], hole, a, b, ring_of)
     if not inside.any():
         return None
     return min(sorted((int(hole_of[p]), int(h))) for p, h in zip(point[inside], hole[inside]))
+
+
+def _inside_holes(points: np.ndarray, hole: np.ndarray, a: np.ndarray, b: np.ndarray, ring_of: np.ndarray) -> np.ndarray:
+    """Whether each of ``points`` is inside hole ``hole[k]`` (numbered as ``ring_of``, from 1), by
+    the even-odd rule: the edges of that hole its ray to the right crosses."""
+    starts = np.flatnonzero(np.diff(ring_of, prepend=0))
+    right = np.maximum.reduceat(a[:, 0], starts)  # each hole's right end (hole h at h - 1)
+    rays_hi = np.column_stack([np.maximum(right[hole - 1], points[:, 0]), points[:, 1]])
+    crossings = np.zeros(len(points), np.int64)
+    for ray, e in _overlapping_boxes(points, rays_hi, (np.minimum(a, b), np.maximum(a, b)), compared=lambda r, e: ring_of[e] == hole[r]):
+        (px, py), (ax, ay), (bx, by) = points[ray].T, a[e].T, b[e].T
+        rise = np.where(by != ay, by - ay, 1.0)  # (a level edge crosses no ray: the first test)
+        crossed = ((ay > py) != (by > py)) & (px < ax + (py - ay) * (bx - ax) / rise)
+        crossings += np.bincount(ray[crossed], minlength=len(points))
+    return crossings % 2 == 1
+
+
+def _inner_points(a: np.ndarray, b: np.ndarray, ring_of: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """(points, their holes): a point of each hole inside it farther than ``tolerance`` from its
+    edges ``a[e]``..``b[e]`` (of hole ``ring_of[e]``, from 1), an edge's middle moved twice
+    ``tolerance`` to the edge's inner side (the left where the hole turns anticlockwise): its
+    first edge's, else (a thin hole) the first that is; none for a hole thinner than that. Two
+    holes the same (with a vertex more on an edge, or from another vertex) have all their vertices
+    and edge middles on each other's edges: this one is inside the other."""
+    step = b - a
+    length = np.hypot(*step.T)
+    turn = np.sign(np.bincount(ring_of, weights=a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1]))  # each hole's sign of its area
+    edges = np.flatnonzero(length > 0)
+
+    def inside_of(edge: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # (points, holes): of each hole the first of edge's that is
+        inward = np.column_stack([-step[edge, 1], step[edge, 0]]) * (2 * tolerance * turn[ring_of[edge]] / length[edge])[:, None]
+        points, hole = (a[edge] + b[edge]) / 2 + inward, ring_of[edge]
+        good = _inside_holes(points, hole, a, b, ring_of)
+        on_point, on_edge = _on_edges(points, a, b, tolerance)
+        good[on_point[ring_of[on_edge] == hole[on_point]]] = False
+        first = np.unique(hole[good], return_index=True)[1]
+        return points[good][first], hole[good][first]
+
+    points, hole = inside_of(edges[np.unique(ring_of[edges], return_index=True)[1]])
+    thin_points, thin_hole = inside_of(edges[~np.isin(ring_of[edges], hole)])
+    return np.concatenate([points, thin_points]), np.concatenate([hole, thin_hole])
 
 
 __all__ = [
