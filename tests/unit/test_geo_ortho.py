@@ -335,6 +335,23 @@ def test_overwriting_a_map_with_one_of_no_crs_removes_the_earlier_prj(cli, tmp_p
     assert sorted(p.name for p in tmp_path.glob("*.prj")) == []
 
 
+def test_overwriting_a_map_with_a_plain_image_removes_its_world_file_and_prj(cli, tmp_path):
+    """autzen's map x.png (x.pgw, x.prj), then x.png --overwrite without --gsd: x.pgw and x.prj
+    were left, placing the plain image on the old map's grid. They go once it is written, said in
+    one line; without --overwrite, beside an image not there yet, they are left as they were."""
+    rc, _, err = cli("render", AUTZEN, "-o", tmp_path / "x.png", "--gsd", 10)
+    assert rc == 0, err
+    rc, stdout, err = cli("render", AUTZEN, "-o", tmp_path / "x.png", "-W", 64, "-H", 36, "--overwrite")
+    assert rc == 0, err
+    removed = f"removed {tmp_path / 'x.pgw'}, {tmp_path / 'x.prj'}: an earlier map's georeferencing; this image is no map (no --gsd)"
+    assert stdout.splitlines()[-1] == removed
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.png"] and Image.open(tmp_path / "x.png").size == (64, 36)
+    (tmp_path / "y.pgw").write_text("precious")
+    rc, stdout, err = cli("render", AUTZEN, "-o", tmp_path / "y.png", "-W", 64, "-H", 36)
+    assert rc == 0 and "removed" not in stdout, err
+    assert (tmp_path / "y.pgw").read_text() == "precious"
+
+
 def test_an_image_and_a_dsm_sharing_one_world_file_are_refused(cli, tmp_path, grid_npy):
     """m.tif and --depth-out m.tiff both need m.tfw: render wrote it twice (the second over the
     first), where gigapoint.orthophoto refused the pair; refused before anything is read or written."""

@@ -17,7 +17,15 @@ from ..io import crs_wkt, files_label
 from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from ..render.contours import draw_contours
-from ..render.georef import check_side_outputs, checked_side_writes, map_image, raster_writes, write_map_files
+from ..render.georef import (
+    check_side_outputs,
+    checked_side_writes,
+    map_image,
+    raster_writes,
+    stale_notes,
+    stale_side_files,
+    write_map_files,
+)
 from ..render.image_files import warn_alpha_dropped
 from ..render.raster_fill import fill_map
 from . import compiling
@@ -353,7 +361,9 @@ def render(
         side_writes, notes, stale = checked_side_writes(cam, (output, depth_out), crs, wkt, units, overwrite)  # (x.webp, then x.jpg: x.prj kept)
     else:
         cam = make_camera(cloud, width, height, view, camera, projection, fov)
-        side_writes, notes, stale = [], [], []
+        # an earlier map's world file and .prj would place this image on its grid: replaced, they go too
+        stale = stale_side_files([output], written=[]) if overwrite else []
+        side_writes, notes = [], stale_notes(stale, map_drawn=False)
     compiled = compiling.compiled_seconds()
     with options_named():
         frame = gp.render_frame(cloud, cam, settings)

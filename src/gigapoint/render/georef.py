@@ -278,16 +278,16 @@ def check_side_outputs(images, overwrite: bool) -> list[Path]:
 def checked_side_writes(camera: Camera, images, crs: str | None, wkt: str | None, units: dict, overwrite: bool) -> tuple[list, list[str], list[Path]]:
     """Once the CRS is known: ``georef_writes`` of ``images`` less a .prj that holds ``wkt``
     already (``unheld_side_writes``), each path they write, and with no WKT a .prj beside
-    ``images`` (``stale_prjs``), refused where it exists without ``overwrite``: a user's world
+    ``images`` (``stale_side_files``), refused where it exists without ``overwrite``: a user's world
     file or .prj is not replaced without asking. Returns the writes, the notes (to say once the
     map is written: a stale .prj's removal among them), and those stale .prj files, which
     ``write_map_files`` removes once the map is written."""
     side_writes, notes = georef_writes(camera, images, crs, wkt, units)
+    stale = stale_side_files(images, [path for path, _ in side_writes])
     side_writes = unheld_side_writes(side_writes, wkt)
-    stale = stale_prjs(images, wkt)
     for path in [path for path, _ in side_writes] + stale:
         check_output(path, overwrite, suffixes=None)
-    return side_writes, notes + [f"removed {path}: an earlier map's CRS, which these inputs do not name" for path in stale], stale
+    return side_writes, notes + stale_notes(stale), stale
 
 
 def unheld_side_writes(side_writes, wkt: str | None) -> list:
@@ -296,16 +296,27 @@ def unheld_side_writes(side_writes, wkt: str | None) -> list:
     return [(path, save) for path, save in side_writes if not _holds(path, wkt)]
 
 
-def stale_prjs(images, wkt: str | None) -> list[Path]:
-    """With no WKT to write (no CRS), each existing .prj beside ``images``: an earlier map's,
-    it would be left describing this one."""
-    return [] if wkt else [path for path in georef_paths(images) if path.suffix == ".prj" and path.exists()]
+def stale_side_files(images, written) -> list[Path]:
+    """Each existing world file and .prj beside ``images`` (``georef_paths``) that is not among
+    the ``written`` ones: an earlier map's (its .prj where this one names no CRS, both where
+    this image is no map: render without --gsd), left describing this one."""
+    written = {Path(path).resolve() for path in written}
+    return [path for path in georef_paths(images) if path.exists() and path.resolve() not in written]
+
+
+def stale_notes(stale, map_drawn: bool = True) -> list[str]:
+    """What is said of ``stale`` (``stale_side_files``) removed: beside a map, a line for each
+    .prj of a CRS its inputs do not name; beside an image drawn as no map (render without
+    --gsd), one line for its world file and .prj."""
+    if map_drawn:
+        return [f"removed {path}: an earlier map's CRS, which these inputs do not name" for path in stale]
+    return [f"removed {', '.join(map(str, stale))}: an earlier map's georeferencing; this image is no map (no --gsd)"] if stale else []
 
 
 def write_map_files(writes, stale) -> list[Path]:
     """A map's ``writes`` (its rasters' and ``checked_side_writes``' (path, save) pairs) written
-    all or none (atomic.write_together), then the ``stale`` .prj files (``checked_side_writes``')
-    removed: an earlier map's CRS left beside a map that names none. Returns the paths written."""
+    all or none (atomic.write_together), then the ``stale`` files (``stale_side_files``) removed: an
+    earlier map's CRS left beside a map that names none, its world file beside a plain image. Returns the paths written."""
     written = write_together(writes)
     for path in stale:
         path.unlink(missing_ok=True)
