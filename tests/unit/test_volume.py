@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -607,6 +608,26 @@ def test_a_lon_lat_toe_naming_no_crs_over_a_projected_survey_is_refused_as_a_rea
     with pytest.raises(InputError) as err:
         gp.volume(autzen_layered["copc"], toe, 2.0)
     assert str(err.value).startswith(f"{toe}: {says.format(autzen_layered['copc'])}")
+
+
+def test_a_geojson_dicts_crs_refusals_name_it_as_volumes_other_errors_do(autzen_path, monkeypatch):
+    """A GeoJSON dict toe refused in placing it over the survey (lon/lat naming no CRS over
+    autzen's feet; a CRS PROJ does not know; a CRS to move from without pyproj) said 'the GeoJSON
+    geometry: ...' where its other errors say 'volume: the GeoJSON geometry: ...'."""
+    ring = [[-123.1, 44.0], [-123.0, 44.0], [-123.0, 44.1], [-123.1, 44.0]]
+    with pytest.raises(InputError) as err:
+        gp.volume(autzen_path, {"type": "Polygon", "coordinates": [ring]}, 2.0)
+    assert str(err.value) == (
+        "volume: the GeoJSON geometry: x -123.1..-123, y 44..44.1 looks like longitude/latitude (RFC 7946 GeoJSON) while "
+        f"{autzen_path} is in NAD_1983_HARN_Lambert_Conformal_Conic (WKT): add a crs member naming its CRS, or reproject it into the files' coordinates"
+    )
+    unknown = {"type": "Polygon", "crs": {"type": "name", "properties": {"name": "EPSG:99999"}}, "coordinates": [ring]}
+    with pytest.raises(InputError, match=r"^volume: the GeoJSON geometry: names EPSG:99999"):  # (PROJ knows it not; without pyproj: it is needed)
+        gp.volume(autzen_path, unknown, 2.0)
+    monkeypatch.setitem(sys.modules, "pyproj", None)  # (import pyproj raises ImportError)
+    in_degrees = {**unknown, "crs": {"type": "name", "properties": {"name": "EPSG:4326"}}}
+    with pytest.raises(InputError, match=r"^volume: the GeoJSON geometry: names EPSG:4326 while .* is in .*: moving it there needs pyproj"):
+        gp.volume(autzen_path, in_degrees, 2.0)
 
 
 def test_a_survey_in_degrees_is_refused_not_measured_in_square_degrees(tmp_path):

@@ -338,13 +338,13 @@ def _opened_octree(source):
     return open_for("volume", paths[0]) if len(paths) == 1 and is_lod_source(paths[0]) else None
 
 
-def _in_survey_crs(toe: ClipPolygon, source, opened=None) -> ClipPolygon:
+def _in_survey_crs(toe: ClipPolygon, named: str, source, opened=None) -> ClipPolygon:
     """``toe`` in the survey's coordinates, as a read filter places its polygon (io/filters.py's
     ``placed_in``): moved from the CRS its GeoJSON names into the survey's (``cloud_crs``'s: that
     of its first point file naming one, or an octree's: ``opened``, where ``source`` is its path),
     refused in one line where it looks like longitude/latitude naming none over a projected
-    survey. Only headers (or an octree's metadata) are read, before a point is: the toe's box
-    bounds what is read."""
+    survey (``named``: how its messages name the toe, as volume's others do). Only headers (or
+    an octree's metadata) are read, before a point is: the toe's box bounds what is read."""
     if not may_move(toe):
         return toe
     from ..io import expand_paths
@@ -352,9 +352,9 @@ def _in_survey_crs(toe: ClipPolygon, source, opened=None) -> ClipPolygon:
     label = survey_label(source)
     survey = source if opened is None else opened
     if not (isinstance(survey, PointCloud) or is_octree(survey)):
-        return placed_over(toe, expand_paths(_survey_paths(source), where="volume"), label)
+        return placed_over(toe, expand_paths(_survey_paths(source), where="volume"), label, named)
     crs, units = cloud_crs_units(survey)
-    return placed_in(toe, crs, units, survey.bounds, label)
+    return placed_in(toe, crs, units, survey.bounds, label, named)
 
 
 @headers_once()  # (one operation: the toe placed over the survey's headers, then its points read, each header read and each warning said once)
@@ -398,7 +398,7 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
 
 def _measured(toe: ClipPolygon, named: str, source, octree, gsd, base, classes, drop_classes, fill_nodata, full: bool) -> Volume:
     """``volume``'s figures, its arguments checked (``named``: how messages name ``toe``; ``octree``: ``_opened_octree(source)``)."""
-    toe = _in_survey_crs(toe, source, octree)  # (before its box bounds what is read)
+    toe = _in_survey_crs(toe, named, source, octree)  # (before its box bounds what is read)
     margin = MARGIN_PIXELS * gsd
     box = [*(toe.lo - margin), *(toe.hi + margin)]  # read-time: only the points near the piles
     filters = {"classes": classes, "drop_classes": drop_classes, "clip": box}
