@@ -234,6 +234,7 @@ def test_writing_in_small_chunks_gives_the_same_file_as_one_chunk(tmp_path, suff
         assert one.read_bytes() == many.read_bytes()
 
 
+@pytest.mark.timeout(600)  # a deadlock guard: the progressive load's kernels compile in its thread, minutes on a cold cache under load
 @pytest.mark.parametrize("how", ["convert", "save", "progressive"])
 def test_a_ply_keeps_the_crs_in_a_header_comment_and_reads_it_back(tmp_path, autzen_path, cli, how):
     """``convert autzen.laz -o a.ply`` (a cloud's save, a progressive cloud's) lost the CRS without a word: PLY has no
@@ -249,7 +250,7 @@ def test_a_ply_keeps_the_crs_in_a_header_comment_and_reads_it_back(tmp_path, aut
         assert rc == 0, err
     elif how == "progressive":
         loading = gp.open(autzen_path, progressive=True)
-        assert loading.wait(timeout=120)
+        assert loading.wait()  # (until the load ends: wait(120) failed one still compiling, twice in fresh worktrees at load 4)
         loading.save(out)
     else:
         gp.open(autzen_path, colors="rgba").save(out)
