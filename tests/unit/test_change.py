@@ -310,7 +310,8 @@ def test_cli_outputs_are_never_replaced_without_overwrite(cli, tmp_path, surveys
 def test_cli_keeps_the_prj_of_the_same_map_and_refuses_another_maps(cli, tmp_path, surveys):
     """d.png's d.prj holds the surveys' CRS: d.tif beside it keeps it (it was refused, 'already
     exists', though Change.write_geotiff keeps it); a .prj of another CRS, or any .prj beside a
-    map of no CRS (it would describe another map), is refused without --overwrite."""
+    map of no CRS (it would describe another map), is refused without --overwrite; one another
+    map beside it uses (d.pgw), whatever is passed."""
     rc, _, err = cli("change", *surveys, "--gsd", 1, "-o", tmp_path / "d1.tif", "--preview", tmp_path / "d.png")
     assert rc == 0, err
     prj = (tmp_path / "d.prj").read_bytes()
@@ -320,9 +321,11 @@ def test_cli_keeps_the_prj_of_the_same_map_and_refuses_another_maps(cli, tmp_pat
     assert (tmp_path / "d.prj").read_bytes() == prj == (tmp_path / "d1.prj").read_bytes()
     (tmp_path / "e.prj").write_text('PROJCS["some other map"]')
     no_crs = [write_las(tmp_path / f"{name}_no_crs.las", plane(), keys=[]) for name in ("before", "after")]
-    for inputs, existing in ((surveys, "e.prj"), (no_crs, "d.prj")):
+    # (d.prj is d.png's map's too, d.pgw beside it: refused even with --overwrite, which would remove it)
+    shared = "holds the CRS of the map beside it (d.pgw), which these inputs do not name: write this map under another name"
+    for inputs, existing, why in ((surveys, "e.prj", "already exists; pass --overwrite to replace it"), (no_crs, "d.prj", shared)):
         rc, _, err = cli("change", *inputs, "--gsd", 1, "-o", tmp_path / f"{existing[0]}2.tif", "--preview", tmp_path / f"{existing[0]}.jpg")
-        assert rc == 1 and err.strip() == f"error: {tmp_path / existing}: already exists; pass --overwrite to replace it", err
+        assert rc == 1 and err.strip() == f"error: {tmp_path / existing}: {why}", err
         assert not list(tmp_path.glob(f"{existing[0]}2.*")) and not list(tmp_path.glob(f"{existing[0]}.j*"))
     assert (tmp_path / "e.prj").read_text() == 'PROJCS["some other map"]' and (tmp_path / "d.prj").read_bytes() == prj
 

@@ -352,6 +352,26 @@ def test_overwriting_a_map_with_a_plain_image_removes_its_world_file_and_prj(cli
     assert (tmp_path / "y.pgw").read_text() == "precious"
 
 
+def test_overwrite_keeps_the_prj_another_map_of_the_stem_uses(cli, tmp_path):
+    """x.tif is a map (x.tfw, x.prj); a plain x.png --overwrite (x.png not there before) removed
+    x.prj, which x.tif's map still needs. Kept now, and x.tfw with it; a map of no CRS named x.png
+    is refused (x.prj is x.tif's and would describe it), even with --overwrite: nothing removed."""
+    rc, _, err = cli("render", AUTZEN, "-o", tmp_path / "x.tif", "--gsd", 10)
+    assert rc == 0, err
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    assert sorted(before) == ["x.prj", "x.tfw", "x.tif"]
+    rc, stdout, err = cli("render", AUTZEN, "-o", tmp_path / "x.png", "-W", 64, "-H", 36, "--overwrite")
+    assert rc == 0 and "removed" not in stdout, err
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.name != "x.png"} == before
+    points = tmp_path / "points.npy"
+    np.save(points, gp.open(AUTZEN).positions())
+    (tmp_path / "x.png").unlink()
+    for extra in ((), ("--overwrite",)):
+        rc, _, err = cli("render", points, "-o", tmp_path / "x.png", "--gsd", 10, *extra)
+        assert rc == 1 and err.strip() == f"error: {tmp_path / 'x.prj'}: holds the CRS of the map beside it (x.tfw), which these inputs do not name: write this map under another name", err
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.name != "points.npy"} == before  # (no x.png, no x.pgw)
+
+
 def test_an_image_and_a_dsm_sharing_one_world_file_are_refused(cli, tmp_path, grid_npy):
     """m.tif and --depth-out m.tiff both need m.tfw: render wrote it twice (the second over the
     first), where gigapoint.orthophoto refused the pair; refused before anything is read or written."""

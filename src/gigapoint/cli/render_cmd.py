@@ -362,7 +362,8 @@ def render(
     else:
         cam = make_camera(cloud, width, height, view, camera, projection, fov)
         # an earlier map's world file and .prj would place this image on its grid: replaced, they go too
-        stale = stale_side_files([output], written=[]) if overwrite else []
+        # (beside an image not there before, they are another's: kept; a .prj another map uses: kept)
+        stale = stale_side_files([output], written=[]) if overwrite and Path(output).exists() else []
         side_writes, notes = [], stale_notes(stale, map_drawn=False)
     compiled = compiling.compiled_seconds()
     with options_named():

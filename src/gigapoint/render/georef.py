@@ -283,7 +283,10 @@ def checked_side_writes(camera: Camera, images, crs: str | None, wkt: str | None
     map is written: a stale .prj's removal among them), and those stale .prj files, which
     ``write_map_files`` removes once the map is written."""
     side_writes, notes = georef_writes(camera, images, crs, wkt, units)
-    stale = stale_side_files(images, [path for path, _ in side_writes])
+    written = [path for path, _ in side_writes]
+    for prj in _prjs_of_other_maps(images, written):  # neither removed (that map's) nor left (said of this one)
+        raise GigapointError(f"{prj}: holds the CRS of the map beside it ({_other_world_files(prj, images)[0].name}), which these inputs do not name: write this map under another name")
+    stale = stale_side_files(images, written)
     side_writes = unheld_side_writes(side_writes, wkt)
     for path in [path for path, _ in side_writes] + stale:
         check_output(path, overwrite, suffixes=None)
@@ -299,9 +302,27 @@ def unheld_side_writes(side_writes, wkt: str | None) -> list:
 def stale_side_files(images, written) -> list[Path]:
     """Each existing world file and .prj beside ``images`` (``georef_paths``) that is not among
     the ``written`` ones: an earlier map's (its .prj where this one names no CRS, both where
-    this image is no map: render without --gsd), left describing this one."""
+    this image is no map: render without --gsd), left describing this one. A .prj another map
+    of the stem still uses (ortho.tif's ortho.tfw beside it) is not one: it is that map's."""
+    kept = {path.resolve() for path in _prjs_of_other_maps(images, written)}
     written = {Path(path).resolve() for path in written}
-    return [path for path in georef_paths(images) if path.exists() and path.resolve() not in written]
+    return [path for path in georef_paths(images) if path.exists() and path.resolve() not in written | kept]
+
+
+def _other_world_files(prj: Path, images) -> list[Path]:
+    """The world files beside ``prj`` (any image type's of its stem) but those of ``images``:
+    another map's, which shares the .prj (ortho.tif's ortho.tfw beside ortho.png's)."""
+    ours = {world_file_path(Path(image)).resolve() for image in filter(None, images)}
+    sides = sorted({*WORLD_FILE_SUFFIXES.values(), ".wld"})
+    return [w for w in (prj.with_suffix(s) for s in sides) if w.exists() and w.resolve() not in ours]
+
+
+def _prjs_of_other_maps(images, written) -> list[Path]:
+    """The existing .prj files beside ``images`` not among ``written`` that another map of the
+    stem uses (``_other_world_files``)."""
+    written = {Path(path).resolve() for path in written}
+    prjs = [path for path in georef_paths(images) if path.suffix == ".prj" and path.exists() and path.resolve() not in written]
+    return [prj for prj in prjs if _other_world_files(prj, images)]
 
 
 def stale_notes(stale, map_drawn: bool = True) -> list[str]:
