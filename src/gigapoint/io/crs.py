@@ -237,15 +237,15 @@ def first_crs(files) -> tuple[object, str, dict, LasHeader | None] | None:
     return f, crs, crs_units(crs, None if hdr is None else geokeys(hdr.vlrs)), hdr
 
 
-def first_crs_wkt(files) -> tuple[str, str | None, LasHeader | None] | None:
-    """(the CRS, its WKT, its LAS header or None) of ``first_named_crs``: the WKT its LAS (E)VLRs
+def first_crs_wkt(files) -> tuple[str, str | None] | None:
+    """(the CRS, its WKT) of ``first_named_crs``: the WKT its LAS (E)VLRs
     hold, else ``crs_wkt`` of its CRS (GeoTIFF keys' or a PLY comment's 'EPSG:n': None without
     pyproj). What a conversion's output names."""
     found = first_named_crs(files)
     if found is None:
         return None
     crs, hdr = found[1], found[2]
-    return crs, (None if hdr is None else wkt_of(hdr.vlrs + hdr.evlrs)) or crs_wkt(crs), hdr
+    return crs, (None if hdr is None else wkt_of(hdr.vlrs + hdr.evlrs)) or crs_wkt(crs)
 
 
 def files_length_units(where: str, files, operation: str | None, instead: str = "") -> dict:

@@ -465,9 +465,9 @@ def _meeting_pairs(a: np.ndarray, b: np.ndarray, compared, touching: bool) -> tu
     where ``touching``) among those ``compared(i, j)`` (index arrays) allows; None where none do.
     Only segments whose x and y ranges overlap are compared."""
     found = []
-    for i, j in _overlapping_boxes(np.minimum(a, b), np.maximum(a, b), compared=compared):
+    for i, j in _overlapping_boxes(np.minimum(a, b), np.maximum(a, b), compared=compared):  # (i < j: no others)
         meet = _segments_meet(a[i], b[i], a[j], b[j], touching)
-        found += list(zip(np.minimum(i, j)[meet].tolist(), np.maximum(i, j)[meet].tolist()))
+        found += list(zip(i[meet].tolist(), j[meet].tolist()))
     return min(found) if found else None
 
 

@@ -68,7 +68,7 @@ def input_facts(paths, one_grid: bool = False, moved_to: tuple | None = None) ->
         crs = wkt = moved_to[0]
         scale, offset = (None, None) if moved_to[1] is None else (np.asarray(v, np.float64) for v in moved_to[1])
     else:
-        crs, wkt = (first_crs_wkt(paths or []) or (None, None))[:2]
+        crs, wkt = first_crs_wkt(paths or []) or (None, None)
         warn_mixed_crs(paths or [], then="; the output takes the first CRS named")
         if one_grid and grids:
             _warn_off_grid(grids, scale, offset)
