@@ -767,6 +767,24 @@ def test_a_recording_stopped_after_a_clear_counts_its_frames_not_the_clear(tmp_p
     live.stop_recording()
 
 
+def test_a_recording_stopped_after_one_frame_says_1_frame(tmp_path, monkeypatch):
+    """A full disk at the second frame said 'stopped after 1 frames'."""
+    import warnings
+
+    from gigapoint.errors import GigapointWarning
+
+    live = LiveCloud()
+    live.record(tmp_path / "rec")
+    _fill_disk_after(monkeypatch, 1)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        live.push(patch(0, 10)[0])
+        live.push(patch(1, 10)[0])
+    said = [str(w.message) for w in seen if issubclass(w.category, GigapointWarning)]
+    assert said == [f"{tmp_path / 'rec'}: recording stopped after 1 frame: [Errno 28] No space left on device: '{tmp_path / 'rec' / 'frames' / '000001.npz'}'"]
+    live.stop_recording()
+
+
 def test_not_a_recording(tmp_path):
     with pytest.raises(InputError, match="not a live recording"):
         ReplaySource(tmp_path)

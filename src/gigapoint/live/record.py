@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_json, atomic_open
-from ..errors import GigapointWarning, InputError, first_line, warn
+from ..errors import GigapointWarning, InputError, counted, first_line, warn
 
 FORMAT = "gigapoint-live-recording"
 INDEX = "index.json"
@@ -124,7 +124,7 @@ class Recorder:
         with self._lock:
             if self.error is not None:
                 return
-            self.error = InputError(f"{self.directory}: recording stopped after {self._frames} frames: {first_line(exc)}")
+            self.error = InputError(f"{self.directory}: recording stopped after {counted(self._frames, 'frame')}: {first_line(exc)}")
         warn(str(self.error), GigapointWarning)
         self._write_index()  # the frames written so far, if there is room for that
 
