@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..errors import GigapointError, number_text
+from ..errors import GigapointError, counted, number_text
 
 
 def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: float | None = None, record: Path | None = None, overwrite: bool = False,
@@ -54,7 +54,7 @@ def view_live(source: str, *, replay: bool = False, keep: int = 100, decay: floa
     finally:
         live.close()
         if recorder is not None:  # the frames written (dropped unseen ones too); every frame in was said when a full disk stopped it
-            print(f"recorded {recorder.n_frames} frames into {record}" + (f" ({recorder.error})" if recorder.error else ""), file=sys.stderr)
+            print(f"recorded {counted(recorder.n_frames, 'frame')} into {record}" + (f" ({recorder.error})" if recorder.error else ""), file=sys.stderr)
 
 
 def check_live_options(keep: int, decay: float | None, rate: float | None) -> None:
