@@ -484,14 +484,21 @@ def test_replay_plays_at_the_recorded_rate_and_a_frame_written_after_the_index_i
     assert again.n_frames == 3 and time.perf_counter() - t0 >= 0.29  # 0.6 s of stream at twice its rate
 
 
+def _recorded(folder, times) -> LiveCloud:
+    """A cloud (keep=10) that recorded into ``folder`` one ``patch(k)`` frame at each of
+    ``times``, its recording stopped."""
+    live = LiveCloud(keep=10)
+    live.record(folder)
+    for k, t in enumerate(times):
+        live.push(patch(k)[0], time=float(t))
+    live.stop_recording()
+    return live
+
+
 def test_a_damaged_frame_of_a_recording_is_refused_and_the_rest_play(tmp_path):
     """A truncated or overwritten frame file ended the replay: BadZipFile was not one of the
     errors read_frame turned into its one line, so the stream stopped there."""
-    live = LiveCloud(keep=10)
-    live.record(tmp_path / "rec")
-    for k in range(5):
-        live.push(patch(k)[0], time=float(k))
-    live.stop_recording()
+    _recorded(tmp_path / "rec", range(5))
     files = recording_files(tmp_path / "rec")
     with open(files[1], "r+b") as f:
         f.truncate(50)
@@ -514,11 +521,7 @@ def test_a_junk_file_among_a_recordings_frames_is_said_to_be_no_frame(tmp_path):
     note or an .npy of objects with its pickle message ("This file contains pickled (object)
     data...", "Object arrays cannot be loaded when allow_pickle=False"), an NPZ of one's own
     with "'kind is not a file in the archive'"; the frames around them play."""
-    live = LiveCloud(keep=10)
-    live.record(tmp_path / "rec")
-    for k in range(2):
-        live.push(patch(k)[0], time=float(k))
-    live.stop_recording()
+    _recorded(tmp_path / "rec", range(2))
     frames = tmp_path / "rec" / "frames"
     (frames / "000005.npz").write_text("my notes on this take\n")
     np.save(frames / "000006.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True)
@@ -540,11 +543,7 @@ def test_a_damaged_index_reads_only_its_own_frames_and_a_leap_in_time_is_not_wai
     was read as a frame. A frame stamped 1e12 s after the last stalled the replay for good."""
     import time
 
-    live = LiveCloud(keep=10)
-    live.record(tmp_path / "rec")
-    for k, t in enumerate((0.0, 0.1, 1e12, 1e12 + 0.1)):
-        live.push(patch(k)[0], time=t)
-    live.stop_recording()
+    _recorded(tmp_path / "rec", (0.0, 0.1, 1e12, 1e12 + 0.1))
     index = tmp_path / "rec" / "index.json"
     meta = json.loads(index.read_text())
     outside = tmp_path / "outside.npz"
@@ -593,11 +592,7 @@ def test_a_recording_whose_index_is_not_json_replays_its_frame_files_with_one_wa
     one whose index.json is someone's own JSON, are still no recording."""
     from gigapoint.errors import GigapointWarning
 
-    live = LiveCloud(keep=10)
-    live.record(tmp_path / "rec")
-    for k in range(3):
-        live.push(patch(k)[0], time=float(k))
-    live.stop_recording()
+    live = _recorded(tmp_path / "rec", range(3))
     index = tmp_path / "rec" / "index.json"
     index.write_text(index.read_text()[:40])  # cut short
     assert is_recording(tmp_path / "rec")
