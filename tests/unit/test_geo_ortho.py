@@ -338,7 +338,8 @@ def test_overwriting_a_map_with_one_of_no_crs_removes_the_earlier_prj(cli, tmp_p
 def test_overwriting_a_map_with_a_plain_image_removes_its_world_file_and_prj(cli, tmp_path):
     """autzen's map x.png (x.pgw, x.prj), then x.png --overwrite without --gsd: x.pgw and x.prj
     were left, placing the plain image on the old map's grid. They go once it is written, said in
-    one line; without --overwrite, beside an image not there yet, they are left as they were."""
+    one line; without --overwrite, beside an image not there yet, they are refused and left as
+    they were (the image was written beside them, rc 0)."""
     rc, _, err = cli("render", AUTZEN, "-o", tmp_path / "x.png", "--gsd", 10)
     assert rc == 0, err
     rc, stdout, err = cli("render", AUTZEN, "-o", tmp_path / "x.png", "-W", 64, "-H", 36, "--overwrite")
@@ -348,8 +349,34 @@ def test_overwriting_a_map_with_a_plain_image_removes_its_world_file_and_prj(cli
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.png"] and Image.open(tmp_path / "x.png").size == (64, 36)
     (tmp_path / "y.pgw").write_text("precious")
     rc, stdout, err = cli("render", AUTZEN, "-o", tmp_path / "y.png", "-W", 64, "-H", 36)
-    assert rc == 0 and "removed" not in stdout, err
-    assert (tmp_path / "y.pgw").read_text() == "precious"
+    refused = f"error: {tmp_path / 'y.pgw'}: an earlier map's georeferencing, which would place y.png (no map: no --gsd) on its grid; remove it, or pass --overwrite to remove it once the image is written"
+    assert rc == 1 and "removed" not in stdout and err.strip() == refused, err
+    assert (tmp_path / "y.pgw").read_text() == "precious" and not (tmp_path / "y.png").exists()
+
+
+def test_a_plain_image_where_a_removed_map_was_is_refused_or_cleared(cli, tmp_path):
+    """x.png a map (x.pgw, x.prj), x.png removed, then a plain x.png: it was written beside the
+    old map's x.pgw and x.prj without a word (a GIS placed it on that grid). Refused before
+    anything is read, nothing removed; with --overwrite they go once it is written, as where
+    x.png was still there. A plain --depth-out is a .npy, which no GIS places: the d.tfw and d.prj
+    of an earlier map's d.tif, not replaced, are kept."""
+    rc, _, err = cli("render", AUTZEN, "-o", tmp_path / "x.png", "--gsd", 10, "--depth-out", tmp_path / "d.tif")
+    assert rc == 0, err
+    (tmp_path / "x.png").unlink()
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    assert sorted(before) == ["d.prj", "d.tfw", "d.tif", "x.pgw", "x.prj"]
+    rc, stdout, err = cli("render", AUTZEN, "-o", tmp_path / "x.png", "-W", 64, "-H", 36, "--depth-out", tmp_path / "d.npy")
+    refused = f"error: {tmp_path / 'x.pgw'}, {tmp_path / 'x.prj'}: an earlier map's georeferencing, which would place x.png (no map: no --gsd) on its grid; remove them, or pass --overwrite to remove them once the image is written"
+    assert rc == 1 and stdout == "" and err.strip() == refused, err
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    rc, stdout, err = cli("render", AUTZEN, "-o", tmp_path / "x.png", "-W", 64, "-H", 36, "--depth-out", tmp_path / "d.npy", "--overwrite")
+    assert rc == 0, err
+    removed = f"removed {tmp_path / 'x.pgw'}, {tmp_path / 'x.prj'}: an earlier map's georeferencing; this image is no map (no --gsd)"
+    assert stdout.splitlines()[-1] == removed
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.npy", "d.prj", "d.tfw", "d.tif", "x.png"]
+    assert all((tmp_path / name).read_bytes() == before[name] for name in ("d.prj", "d.tfw", "d.tif"))
+    rc, _, err = cli("render", AUTZEN, "-o", tmp_path / "y.png", "--depth-out", tmp_path / "d.tif", "--overwrite")  # (a plain depth is no map)
+    assert rc == 1 and err.strip() == f"error: {tmp_path / 'd.tif'}: unsupported output type '.tif'; use one of .npy", err
 
 
 def test_overwrite_keeps_the_prj_another_map_of_the_stem_uses(cli, tmp_path):

@@ -317,6 +317,8 @@ def test_cli_outputs_are_refused_before_anything_is_read(cli, tmp_path, monkeypa
     assert rc == 1 and err.strip() == f"error: {tmp_path / 'p.pgw'}: already exists; pass --overwrite to replace it", err
     rc, _, err = cli("volume", autzen_path, "--clip-polygon", toe, "--gsd", 2, "-o", tmp_path / "h.png")
     assert rc == 1 and err.strip() == f"error: {tmp_path / 'h.png'}: unsupported output type '.png'; use one of .tif, .tiff", err
+    rc, _, err = cli("volume", autzen_path, "--clip-polygon", toe, "--gsd", 2, "-o", tmp_path / "h.tif", "--dsm-out", tmp_path / "h.tiff")
+    assert rc == 1 and err.strip() == f"error: {tmp_path / 'h.tfw'}: named for two outputs", err  # (one h.tfw)
     locked = tmp_path / "locked"
     locked.mkdir()
     real_access = os.access

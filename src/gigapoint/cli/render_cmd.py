@@ -18,12 +18,12 @@ from ..render import VIEWS, Camera, RenderSettings
 from ..render.camera import image_size
 from ..render.contours import draw_contours
 from ..render.georef import (
+    check_plain_image,
     check_side_outputs,
     checked_side_writes,
     map_image,
     raster_writes,
     stale_notes,
-    stale_side_files,
     write_map_files,
 )
 from ..render.image_files import warn_alpha_dropped
@@ -300,6 +300,8 @@ def render(
         if extra is not None:
             check_output(extra, overwrite, suffixes=suffixes)
     georef = check_side_outputs([output, depth_out], overwrite) if gsd is not None else []
+    # an earlier map's world file and .prj would place a plain image on its grid (a plain --depth-out is a .npy, which no GIS places)
+    stale = check_plain_image(output, overwrite) if gsd is None and turntable is None else []
     warn_alpha_dropped(output, settings.background[3], VIDEO_SUFFIXES)
     contours_drawn = check_contour_options(contours, contours_base, contours_out, contours_on_image, gsd, overwrite)
     check_outputs_apart([output, depth_out, index_out, *georef, contours_out], inputs)
@@ -361,9 +363,6 @@ def render(
         side_writes, notes, stale = checked_side_writes(cam, (output, depth_out), crs, wkt, units, overwrite)  # (x.webp, then x.jpg: x.prj kept)
     else:
         cam = make_camera(cloud, width, height, view, camera, projection, fov)
-        # an earlier map's world file and .prj would place this image on its grid: replaced, they go too
-        # (beside an image not there before, they are another's: kept; a .prj another map uses: kept)
-        stale = stale_side_files([output], written=[]) if overwrite and Path(output).exists() else []
         side_writes, notes = [], stale_notes(stale, map_drawn=False)
     compiled = compiling.compiled_seconds()
     with options_named():

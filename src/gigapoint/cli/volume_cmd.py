@@ -66,7 +66,8 @@ def volume(
     for path, suffixes in ((output, GEOTIFF_SUFFIXES), (preview, IMAGE_SUFFIXES), (dsm_out, GEOTIFF_SUFFIXES)):
         if path is not None:
             check_output(path, overwrite, suffixes=suffixes)
-    georef = check_side_outputs([output, preview, dsm_out], overwrite)  # (an existing .prj: write_map judges it once the CRS is known)
+    # (an existing .prj: write_map judges it once the CRS is known; the rest it takes as checked here)
+    georef = check_side_outputs([output, preview, dsm_out], overwrite)
     check_outputs_apart([output, preview, dsm_out, *georef], inputs)
     check_gsd_value(gsd)
     chosen_base = _base_of(base.strip().lower())
@@ -82,7 +83,7 @@ def volume(
         raise CameraError(f"{keep.polygon.source}: --gsd over its box: {exc}") from None
     rasters = [(output, result.above_base), (preview, None if preview is None else result.preview()), (dsm_out, result.heights)]
     # all or none; nothing asked, nothing written (nor a word on the .prj none would have)
-    written = write_map(result.camera, result.crs, result.units, rasters, overwrite) if any(path for path, _ in rasters) else []
+    written = write_map(result.camera, result.crs, result.units, rasters, overwrite, checked=True) if any(path for path, _ in rasters) else []
     summary = result.summary()
     if as_json:
         typer.echo(json.dumps({**summary, "outputs": [str(p) for p in written]}, indent=1))

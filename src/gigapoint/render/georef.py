@@ -219,21 +219,25 @@ def raster_writes(camera: Camera, crs: str | None, wkt: str | None, units: dict,
     return writes
 
 
-def write_map(camera: Camera, crs: str | None, units: dict, rasters, overwrite: bool = False) -> list[Path]:
+def write_map(camera: Camera, crs: str | None, units: dict, rasters, overwrite: bool = False, checked: bool = False) -> list[Path]:
     """``rasters`` ((path, array) pairs: ``raster_writes``) written with their world files and
     .prj files, all or none (atomic.write_together), as the CLI writes them; returns the paths
     written. Each is checked first: its type (a surface model is a .tif), an existing file
     refused without ``overwrite``. A .prj that holds this very CRS already (an earlier product of
     the same map beside it: change.tif, then change.png) is kept; with no CRS to write, one
     there is removed with ``overwrite`` (``write_map_files``). Why no .prj is written, a GeoTIFF
-    names no CRS, or a .prj was removed, is a GigapointWarning."""
+    names no CRS, or a .prj was removed, is a GigapointWarning. ``checked``: the rasters' paths and
+    their world files were checked already, before the survey was read (the CLI's check_output and
+    ``check_side_outputs``), not again."""
     rasters = [(Path(path), array) for path, array in rasters if path is not None]
     wkt = crs_wkt(crs)
     for path, array in rasters:
-        check_output(path, overwrite, GEOTIFF_SUFFIXES if np.ndim(array) == 2 else IMAGE_SUFFIXES)
+        if not checked:
+            check_output(path, overwrite, GEOTIFF_SUFFIXES if np.ndim(array) == 2 else IMAGE_SUFFIXES)
         check_image_fits(path, camera.width, camera.height)
     images = [path for path, _ in rasters]
-    check_world_files_apart(images)
+    if not checked:
+        check_world_files_apart(images)
     side_writes, notes, stale = checked_side_writes(camera, images, crs, wkt, units, overwrite)
     written = write_map_files([(path, _said(path, save)) for path, save in raster_writes(camera, crs, wkt, units, rasters) + side_writes], stale)
     for note in notes:
@@ -283,10 +287,10 @@ def checked_side_writes(camera: Camera, images, crs: str | None, wkt: str | None
     map is written: a stale .prj's removal among them), and those stale .prj files, which
     ``write_map_files`` removes once the map is written."""
     side_writes, notes = georef_writes(camera, images, crs, wkt, units)
-    written = [path for path, _ in side_writes]
-    for prj in _prjs_of_other_maps(images, written):  # neither removed (that map's) nor left (said of this one)
+    left = _left_beside(images, [path for path, _ in side_writes])
+    for prj in _prjs_of_other_maps(left, images):  # neither removed (that map's) nor left (said of this one)
         raise GigapointError(f"{prj}: holds the CRS of the map beside it ({_other_world_files(prj, images)[0].name}), which these inputs do not name: write this map under another name")
-    stale = stale_side_files(images, written)
+    stale = left  # (stale_side_files': none is another map's, refused above)
     side_writes = unheld_side_writes(side_writes, wkt)
     for path in [path for path, _ in side_writes] + stale:
         check_output(path, overwrite, suffixes=None)
@@ -304,9 +308,25 @@ def stale_side_files(images, written) -> list[Path]:
     the ``written`` ones: an earlier map's (its .prj where this one names no CRS, both where
     this image is no map: render without --gsd), left describing this one. A .prj another map
     of the stem still uses (ortho.tif's ortho.tfw beside it) is not one: it is that map's."""
-    kept = {path.resolve() for path in _prjs_of_other_maps(images, written)}
-    written = {Path(path).resolve() for path in written}
-    return [path for path in georef_paths(images) if path.exists() and path.resolve() not in written | kept]
+    left = _left_beside(images, written)
+    kept = _prjs_of_other_maps(left, images)
+    return [path for path in left if path not in kept]
+
+
+def check_plain_image(image, overwrite: bool) -> list[Path]:
+    """Before anything is drawn: the world file and .prj an earlier map left beside ``image``, an
+    image drawn as no map (render without --gsd; ``stale_side_files``), which would place it on
+    that map's grid. Refused without ``overwrite`` (nothing is removed without asking), else
+    returned: ``write_map_files`` removes them once the image is written, whether it replaces the
+    map's image or that was removed before."""
+    stale = stale_side_files([image], written=[])
+    if stale and not overwrite:
+        them = "it" if len(stale) == 1 else "them"
+        raise GigapointError(
+            f"{', '.join(map(str, stale))}: an earlier map's georeferencing, which would place {Path(image).name} (no map: no --gsd) on its grid; "
+            f"remove {them}, or pass overwrite=True to remove {them} once the image is written"
+        )
+    return stale
 
 
 def _other_world_files(prj: Path, images) -> list[Path]:
@@ -317,12 +337,16 @@ def _other_world_files(prj: Path, images) -> list[Path]:
     return [w for w in (prj.with_suffix(s) for s in sides) if w.exists() and w.resolve() not in ours]
 
 
-def _prjs_of_other_maps(images, written) -> list[Path]:
-    """The existing .prj files beside ``images`` not among ``written`` that another map of the
-    stem uses (``_other_world_files``)."""
+def _left_beside(images, written) -> list[Path]:
+    """The existing world files and .prj files beside ``images`` (``georef_paths``) not among ``written``."""
     written = {Path(path).resolve() for path in written}
-    prjs = [path for path in georef_paths(images) if path.suffix == ".prj" and path.exists() and path.resolve() not in written]
-    return [prj for prj in prjs if _other_world_files(prj, images)]
+    return [path for path in georef_paths(images) if path.exists() and path.resolve() not in written]
+
+
+def _prjs_of_other_maps(left, images) -> list[Path]:
+    """The .prj files among ``left`` (``_left_beside``) that another map of the stem uses
+    (``_other_world_files``)."""
+    return [path for path in left if path.suffix == ".prj" and _other_world_files(path, images)]
 
 
 def stale_notes(stale, map_drawn: bool = True) -> list[str]:
