@@ -379,6 +379,18 @@ def test_a_plain_image_where_a_removed_map_was_is_refused_or_cleared(cli, tmp_pa
     assert rc == 1 and err.strip() == f"error: {tmp_path / 'd.tif'}: unsupported output type '.tif'; use one of .npy", err
 
 
+def test_a_lone_prj_beside_a_plain_image_is_left_alone(cli, tmp_path):
+    """s.prj beside s.shp (a shapefile's, no world file): a plain s.png is no map for it to
+    misplace; neither refused nor, with --overwrite, removed."""
+    (tmp_path / "s.shp").write_bytes(b"shape")
+    (tmp_path / "s.prj").write_text("PROJCS shapefile's")
+    for extra in ((), ("--overwrite",)):
+        rc, stdout, err = cli("render", AUTZEN, "-o", tmp_path / "s.png", "-W", 64, "-H", 36, *extra)
+        assert rc == 0 and "removed" not in stdout, err
+        assert (tmp_path / "s.prj").read_text() == "PROJCS shapefile's"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.png", "s.prj", "s.shp"]
+
+
 def test_overwrite_keeps_the_prj_another_map_of_the_stem_uses(cli, tmp_path):
     """x.tif is a map (x.tfw, x.prj); a plain x.png --overwrite (x.png not there before) removed
     x.prj, which x.tif's map still needs. Kept now, and x.tfw with it; a map of no CRS named x.png

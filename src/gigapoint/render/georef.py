@@ -318,9 +318,11 @@ def check_plain_image(image, overwrite: bool) -> list[Path]:
     image drawn as no map (render without --gsd; ``stale_side_files``), which would place it on
     that map's grid. Refused without ``overwrite`` (nothing is removed without asking), else
     returned: ``write_map_files`` removes them once the image is written, whether it replaces the
-    map's image or that was removed before."""
+    map's image or that was removed before. A .prj with no world file beside it is left alone."""
     stale = stale_side_files([image], written=[])
-    if stale and not overwrite:
+    if all(path.suffix == ".prj" for path in stale):  # a .prj alone places nothing (and may be a shapefile's)
+        return []
+    if not overwrite:
         them = "it" if len(stale) == 1 else "them"
         raise GigapointError(
             f"{', '.join(map(str, stale))}: an earlier map's georeferencing, which would place {Path(image).name} (no map: no --gsd) on its grid; "
