@@ -341,6 +341,46 @@ def test_without_pyproj_a_polygon_naming_lon_lat_over_projected_files_is_refused
     )
 
 
+def test_a_geojson_dicts_placement_refusals_start_with_the_operation_as_its_ring_errors_do(autzen_path, tmp_path, monkeypatch):
+    """A bare GeoJSON dict refused in placing it over the files (lon/lat naming no CRS over
+    autzen's feet; a CRS PROJ does not know; a CRS to move from without pyproj) said 'the GeoJSON
+    geometry: ...' with no 'open: ' where its ring and hole errors start 'open: clip_polygon={...}';
+    now 'open: the GeoJSON geometry: ', as gp.volume names its own, the dict quoted at most once."""
+    lonlat = {"type": "Polygon", "coordinates": [LON_LAT_TRIANGLE]}
+    unknown = {**lonlat, "crs": {"type": "name", "properties": {"name": "EPSG:99999"}}}
+    far = {"type": "Polygon", "coordinates": [[[x + 100_000, y] for x, y in SITE["geometry"]["coordinates"][0]]]}
+
+    def refusal(error, call, polygon) -> str:
+        with pytest.raises(error) as err:
+            call(polygon)
+        assert str(err.value).count(repr(polygon)) <= 1
+        return str(err.value)
+
+    def opened(polygon):
+        return gp.open(autzen_path, clip_polygon=polygon)
+
+    looks = f"x -123.1..-123, y 44..44.1 looks like longitude/latitude (RFC 7946 GeoJSON) while {autzen_path} is in {AUTZEN_CRS}: "
+    add_crs = "add a crs member naming its CRS, or reproject it into the files' coordinates"
+    assert refusal(InputError, opened, lonlat) == f"open: the GeoJSON geometry: {looks}{add_crs}"
+    converted = refusal(InputError, lambda polygon: gp.convert(autzen_path, tmp_path / "out.laz", clip_polygon=polygon), lonlat)
+    assert converted == f"convert: the GeoJSON geometry: {looks}{add_crs}"
+    assert refusal(InputError, opened, unknown) == (
+        f"open: the GeoJSON geometry: names EPSG:99999, a CRS PROJ does not know: cannot move it into {autzen_path}'s CRS"
+    )
+    assert refusal(EmptyCloudError, opened, far) == (  # (the far-away hint: named once, the dict never quoted)
+        f"{autzen_path}: no point passes the filter (clip polygon open: the GeoJSON geometry (4 vertices)): 110,000 points read; "
+        "open: the GeoJSON geometry spans x 736300..737200, y 848900..849600, far from the points' x 636002..637179, y 848935..849498: give it in the files' coordinates"
+    )
+    monkeypatch.setitem(sys.modules, "pyproj", None)  # (import pyproj raises ImportError)
+    degrees = {**lonlat, "crs": {"type": "name", "properties": {"name": "EPSG:4326"}}}
+    assert refusal(InputError, opened, degrees) == (
+        f"open: the GeoJSON geometry: names EPSG:4326 while {autzen_path} is in {AUTZEN_CRS}: moving it there needs pyproj (pip install 'gigapoint[gis]'), "
+        f"or reproject it into the files' coordinates"
+    )
+    with pytest.raises(InputError, match=r"^open: clip_polygon=\{'type': 'Polygon', .*: the polygon's points lie on one line"):  # (its ring errors, as before)
+        opened({**degrees, "coordinates": [LON_LAT_TRIANGLE[:2]]})
+
+
 def test_a_geojson_naming_another_crs_than_the_files_is_warned_of_without_pyproj(tmp_path, monkeypatch):
     las_path = _grid_las(tmp_path / "utm.las")
     las = laspy.read(str(las_path))

@@ -43,7 +43,7 @@ from ..errors import (
     warn,
 )
 from ._base import read_once
-from .polygon import ClipPolygon, clip_polygon_of, far_apart, looks_like_lon_lat, moved_polygon, polygon_text
+from .polygon import UNNAMED_GEOMETRY, ClipPolygon, clip_polygon_of, far_apart, looks_like_lon_lat, moved_polygon, polygon_text
 
 #: The option names as Python's keywords and the CLI's options say them
 PYTHON_NAMES = {"classes": "classes=", "drop_classes": "drop_classes=", "clip": "clip=", "corridor": "corridor=", "clip_polygon": "clip_polygon="}
@@ -415,7 +415,9 @@ def point_filter(classes=None, drop_classes=None, clip=None, where: str = "open"
         raise InputError(f"{where}: {names['classes'].strip()} and {names['drop_classes'].strip()} both name class {', '.join(map(str, both))}; keep it or drop it")
     box = _clip(clip, label["clip"])
     lane = () if corridor is None else _corridor(corridor, f"{where}: {names['corridor']}{numbers_text(corridor)}")
-    area = None if clip_polygon is None else clip_polygon_of(clip_polygon, f"{where}: {names['clip_polygon']}{polygon_text(clip_polygon, (shown or {}).get('clip_polygon'))}")
+    polygon_label = f"{where}: {names['clip_polygon']}{polygon_text(clip_polygon, (shown or {}).get('clip_polygon'))}"
+    # (a bare GeoJSON dict named as gigapoint.volume names its own: its refusals once placed over the files start 'open: the GeoJSON geometry: ')
+    area = None if clip_polygon is None else clip_polygon_of(clip_polygon, polygon_label, f"{where}: {UNNAMED_GEOMETRY}")
     if not (keep or drop or box or lane or area):
         return None
     return PointFilter(keep, drop, box, lane, area)

@@ -158,14 +158,15 @@ def polygon_text(value, shown: str | None = None) -> str:
     return f"{start if shown else repr(start)} ({len(value):,} characters)"
 
 
-def clip_polygon_of(value, label: str) -> ClipPolygon:
+def clip_polygon_of(value, label: str, unnamed: str = UNNAMED_GEOMETRY) -> ClipPolygon:
     """The ClipPolygon of ``value``: a path to a GeoJSON or WKT file, a WKT string, a GeoJSON
-    geometry (a dict: ``as_spec``'s too) or a ClipPolygon; a one-line InputError starting with
-    ``label`` (the option as given) for anything else."""
+    geometry (a dict: ``as_spec``'s too; its source ``unnamed`` where it names none, as the
+    messages that start with it name it: 'open: the GeoJSON geometry') or a ClipPolygon; a
+    one-line InputError starting with ``label`` (the option as given) for anything else."""
     if isinstance(value, ClipPolygon):
         return value
     if isinstance(value, dict):
-        source = value.get("source") if isinstance(value.get("source"), str) else UNNAMED_GEOMETRY
+        source = value.get("source") if isinstance(value.get("source"), str) else unnamed
         return _geojson_polygon(value, source, label)
     if not isinstance(value, (str, os.PathLike)):
         raise InputError(f"{label}: a clip polygon is a GeoJSON or WKT file, or WKT text (POLYGON ((x y, ...)))")
