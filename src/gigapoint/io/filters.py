@@ -281,9 +281,8 @@ def _placed(polygon: ClipPolygon, path) -> ClipPolygon:
     return placed_over(polygon, [path], path)
 
 
-def placed_over(polygon: ClipPolygon, files, where, named: str | None = None) -> ClipPolygon:
-    """``polygon`` in the coordinates of the points of ``files`` (named ``where`` in messages, the
-    polygon ``named``: ``placed_in``):
+def placed_over(polygon: ClipPolygon, files, where) -> ClipPolygon:
+    """``polygon`` in the coordinates of the points of ``files`` (named ``where`` in messages):
     ``placed_in`` the CRS the first of them naming one names (``first_crs``: a LAS header, a PLY
     comment), over its LAS header's box (a PLY's header has none); as it is where none names one
     (an octree, a file of another format)."""
@@ -295,7 +294,7 @@ def placed_over(polygon: ClipPolygon, files, where, named: str | None = None) ->
     if found is None:
         return polygon
     _, crs, units, header = found
-    return placed_in(polygon, crs, units, None if header is None else (header.mins, header.maxs), where, named)
+    return placed_in(polygon, crs, units, None if header is None else (header.mins, header.maxs), where)
 
 
 def may_move(polygon: ClipPolygon) -> bool:
@@ -304,11 +303,11 @@ def may_move(polygon: ClipPolygon) -> bool:
     return polygon.moved_from is None and (polygon.epsg is not None or looks_like_lon_lat(polygon))
 
 
-def placed_in(polygon: ClipPolygon, crs: str | None, units: dict, bounds, where, named: str | None = None) -> ClipPolygon:
+def placed_in(polygon: ClipPolygon, crs: str | None, units: dict, bounds, where) -> ClipPolygon:
     """``polygon`` in the coordinates of points in ``crs`` (the module's notes; ``units``: its
     io.crs_units, ``bounds``: the points' (lo, hi) box, ``where``: how messages name them, a file
-    or a survey; ``named``: how they name the polygon, its source unless the caller labels it, as
-    gigapoint.volume does a bare GeoJSON dict: 'volume: the GeoJSON geometry'): moved from the CRS its GeoJSON names into ``crs`` where pyproj is installed;
+    or a survey; the polygon by its source, a bare GeoJSON dict's as its caller named it:
+    'volume: the GeoJSON geometry', ``clip_polygon_of``): moved from the CRS its GeoJSON names into ``crs`` where pyproj is installed;
     else as it is (a warning where both name EPSG codes that differ), or a one-line InputError
     where it lies in longitude/latitude's range far from points in a projected CRS
     (``refuse_lon_lat``: it would clip nothing). As it is where ``crs`` is None."""
@@ -316,26 +315,25 @@ def placed_in(polygon: ClipPolygon, crs: str | None, units: dict, bounds, where,
 
     if not may_move(polygon) or crs is None:
         return polygon
-    named = named or polygon.source
     if polygon.epsg is not None:
         moved = polygon.moved_by_crs
         # once a CRS, not once a file (a survey's thousands of tiles share one), however each
         # file writes it (a WKT, GeoTIFF keys' EPSG:n): one polygon for all files in one CRS
         identity = crs_identity(crs)
         if identity not in moved:
-            moved[identity] = _moved_into(polygon, crs, where, named)
+            moved[identity] = _moved_into(polygon, crs, where)
         if moved[identity] is not None:
             return moved[identity]
-    refuse_lon_lat(polygon, crs, units, bounds, where, named)
+    refuse_lon_lat(polygon, crs, units, bounds, where)
     epsg = horizontal_epsg(crs)
     if polygon.epsg is not None and epsg is not None and epsg != polygon.epsg:
-        message = f"{named} names EPSG:{polygon.epsg}, {where} EPSG:{epsg}: the polygon is taken in the files' coordinates, not reprojected"
+        message = f"{polygon.source} names EPSG:{polygon.epsg}, {where} EPSG:{epsg}: the polygon is taken in the files' coordinates, not reprojected"
         read_once("clip polygon CRS", f"{polygon.source} EPSG:{epsg}", lambda: warn(message, GigapointWarning))
     return polygon
 
 
-def refuse_lon_lat(polygon: ClipPolygon, crs: str, units: dict, bounds, where, named: str) -> None:
-    """A one-line InputError, naming it ``named``, where ``polygon``, taken as it is, lies within longitude/latitude's
+def refuse_lon_lat(polygon: ClipPolygon, crs: str, units: dict, bounds, where) -> None:
+    """A one-line InputError, naming it by its source, where ``polygon``, taken as it is, lies within longitude/latitude's
     range far from the ``bounds`` (lo, hi) of points (named ``where``) in ``crs``, a projected CRS
     (``units``: its io.crs_units): it would clip nothing. ``bounds`` None (a PLY header tells
     none): not here, the points as read tell (PointFilter). One naming no CRS is lon/lat by RFC 7946;
@@ -349,17 +347,17 @@ def refuse_lon_lat(polygon: ClipPolygon, crs: str, units: dict, bounds, where, n
     (x0, y0), (x1, y1) = polygon.lo, polygon.hi
     if polygon.epsg is None:
         raise InputError(
-            f"{named}: x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g} looks like longitude/latitude (RFC 7946 GeoJSON) while {where} "
+            f"{polygon.source}: x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g} looks like longitude/latitude (RFC 7946 GeoJSON) while {where} "
             f"is in {crs_name(crs)}: add a crs member naming its CRS, or reproject it into the files' coordinates"
         )
     raise InputError(
-        f"{named}: names EPSG:{polygon.epsg} while {where} is in {crs_name(crs)}: moving it there needs pyproj "
+        f"{polygon.source}: names EPSG:{polygon.epsg} while {where} is in {crs_name(crs)}: moving it there needs pyproj "
         f"(pip install 'gigapoint[gis]'), or reproject it into the files' coordinates"
     )
 
 
-def _moved_into(polygon: ClipPolygon, crs: str, path, named: str) -> ClipPolygon | None:
-    """``polygon`` (named ``named`` in messages) moved from the EPSG code it names into ``crs``
+def _moved_into(polygon: ClipPolygon, crs: str, path) -> ClipPolygon | None:
+    """``polygon`` moved from the EPSG code it names into ``crs``
     (``path``'s); None without pyproj. A code or CRS PROJ does not know: a one-line InputError
     naming its file."""
     from .crs import crs_name
@@ -371,11 +369,11 @@ def _moved_into(polygon: ClipPolygon, crs: str, path, named: str) -> ClipPolygon
     try:
         source = pyproj.CRS.from_epsg(polygon.epsg)
     except pyproj.exceptions.CRSError:
-        raise InputError(f"{named}: names EPSG:{polygon.epsg}, a CRS PROJ does not know: cannot move it into {path}'s CRS") from None
+        raise InputError(f"{polygon.source}: names EPSG:{polygon.epsg}, a CRS PROJ does not know: cannot move it into {path}'s CRS") from None
     try:
         target = pyproj.CRS.from_user_input(crs)
     except pyproj.exceptions.CRSError:
-        raise InputError(f"{path}: its CRS ({crs_name(crs)}) is not one PROJ knows: cannot move {named} (EPSG:{polygon.epsg}) into it") from None
+        raise InputError(f"{path}: its CRS ({crs_name(crs)}) is not one PROJ knows: cannot move {polygon.source} (EPSG:{polygon.epsg}) into it") from None
     return moved_polygon(polygon, source, target)
 
 

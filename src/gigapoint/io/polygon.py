@@ -558,18 +558,17 @@ def crossing_problem(ring, name: str = "the polygon") -> str | None:
     return None if edges is None else f"{name} crosses itself (edges {edges[0]} and {edges[1]})"
 
 
-def check_simple(polygon: ClipPolygon, why: str, label: str | None = None) -> None:
-    """A one-line InputError naming ``polygon``'s file (``label``: how else to name it), the ring and its edges where a ring crosses
+def check_simple(polygon: ClipPolygon, why: str) -> None:
+    """A one-line InputError naming ``polygon`` (its source), the ring and its edges where a ring crosses
     itself, ending with ``why`` it matters. What measures an area calls it (a volume's toe): the
     shoelace's area and the even-odd rule's inside differ there. A clip is well defined by the
     even-odd rule, a self-crossing polygon's included: clipping does not call it."""
-    label = label or polygon.source
     several = len(polygon.polygons) > 1
     for p, rings in enumerate(polygon.polygons, start=1):
         for r, ring in enumerate(rings):
             problem = crossing_problem(ring, _ring_name(p, r, several))
             if problem:
-                raise InputError(f"{label}: {problem}: {why}")
+                raise InputError(f"{polygon.source}: {problem}: {why}")
 
 
 def check_holes(polygon: ClipPolygon, label: str | None = None) -> None:

@@ -338,12 +338,12 @@ def _opened_octree(source):
     return open_for("volume", paths[0]) if len(paths) == 1 and is_lod_source(paths[0]) else None
 
 
-def _in_survey_crs(toe: ClipPolygon, named: str, source, opened=None) -> ClipPolygon:
+def _in_survey_crs(toe: ClipPolygon, source, opened=None) -> ClipPolygon:
     """``toe`` in the survey's coordinates, as a read filter places its polygon (io/filters.py's
     ``placed_in``): moved from the CRS its GeoJSON names into the survey's (``cloud_crs``'s: that
     of its first point file naming one, or an octree's: ``opened``, where ``source`` is its path),
     refused in one line where it looks like longitude/latitude naming none over a projected
-    survey (``named``: how its messages name the toe, as volume's others do). Only headers (or
+    survey (naming the toe by its source, as volume's other messages do). Only headers (or
     an octree's metadata) are read, before a point is: the toe's box bounds what is read."""
     if not may_move(toe):
         return toe
@@ -352,9 +352,9 @@ def _in_survey_crs(toe: ClipPolygon, named: str, source, opened=None) -> ClipPol
     label = survey_label(source)
     survey = source if opened is None else opened
     if not (isinstance(survey, PointCloud) or is_octree(survey)):
-        return placed_over(toe, expand_paths(_survey_paths(source), where="volume"), label, named)
+        return placed_over(toe, expand_paths(_survey_paths(source), where="volume"), label)
     crs, units = cloud_crs_units(survey)
-    return placed_in(toe, crs, units, survey.bounds, label, named)
+    return placed_in(toe, crs, units, survey.bounds, label)
 
 
 @headers_once()  # (one operation: the toe placed over the survey's headers, then its points read, each header read and each warning said once)
@@ -383,22 +383,22 @@ def volume(source, clip_polygon, gsd, base="plane", classes=None, drop_classes=N
     check_switch("full", full, "volume")
     if fill_nodata is not None and fill_nodata != "all":
         check_max_distance("volume: fill_nodata", fill_nodata)
-    label = "volume: the GeoJSON geometry" if isinstance(clip_polygon, dict) else f"volume: clip_polygon={polygon_text(clip_polygon)}"
-    toe = clip_polygon_of(clip_polygon, label)
-    named = label if toe.source == UNNAMED_GEOMETRY else toe.source  # (a bare dict's: as its ring and hole errors name it)
-    check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it", named)
+    unnamed = f"volume: {UNNAMED_GEOMETRY}"  # (a bare dict's name in every message, as its ring and hole errors name it)
+    label = unnamed if isinstance(clip_polygon, dict) else f"volume: clip_polygon={polygon_text(clip_polygon)}"
+    toe = clip_polygon_of(clip_polygon, label, unnamed)
+    check_simple(toe, "a toe must not cross itself (its area and the pixels inside it would disagree): redraw it")
     point_filter(classes, drop_classes, where="volume")  # bad classes told before an octree is opened
     octree = _opened_octree(source)
     try:
-        return _measured(toe, named, source, octree, gsd, base, classes, drop_classes, fill_nodata, full)
+        return _measured(toe, source, octree, gsd, base, classes, drop_classes, fill_nodata, full)
     finally:
         if isinstance(octree, VoxelOctree):  # (a COPC/EPT URL opened here: its connections)
             octree.close()
 
 
-def _measured(toe: ClipPolygon, named: str, source, octree, gsd, base, classes, drop_classes, fill_nodata, full: bool) -> Volume:
-    """``volume``'s figures, its arguments checked (``named``: how messages name ``toe``; ``octree``: ``_opened_octree(source)``)."""
-    toe = _in_survey_crs(toe, named, source, octree)  # (before its box bounds what is read)
+def _measured(toe: ClipPolygon, source, octree, gsd, base, classes, drop_classes, fill_nodata, full: bool) -> Volume:
+    """``volume``'s figures, its arguments checked (``octree``: ``_opened_octree(source)``)."""
+    toe = _in_survey_crs(toe, source, octree)  # (before its box bounds what is read)
     margin = MARGIN_PIXELS * gsd
     box = [*(toe.lo - margin), *(toe.hi + margin)]  # read-time: only the points near the piles
     filters = {"classes": classes, "drop_classes": drop_classes, "clip": box}
@@ -420,7 +420,7 @@ def _measured(toe: ClipPolygon, named: str, source, octree, gsd, base, classes, 
             raise EmptyCloudError(label)
     except EmptyCloudError:
         (x0, y0), (x1, y1) = toe.lo, toe.hi
-        raise InputError(f"{named}: no point of {label} lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}: the polygon is outside the data") from None
+        raise InputError(f"{toe.source}: no point of {label} lies in its box x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}: the polygon is outside the data") from None
     heights = drawn if fill_nodata is None else fill_heights(drawn, None if fill_nodata == "all" else fill_nodata)
     grid = RasterGrid.of_camera(camera)
     groups = _pile_parts(toe)
@@ -428,7 +428,7 @@ def _measured(toe: ClipPolygon, named: str, source, octree, gsd, base, classes, 
     above_base = np.full(grid.shape, np.nan, np.float32)
     piles = []
     for name, members in groups:
-        where = f"{named}: {name}" if len(groups) > 1 else named
+        where = f"{toe.source}: {name}" if len(groups) > 1 else toe.source
         pile, rows, cols, above = _pile([toe.polygons[i] for i in members], [insides[i] for i in members], name, drawn, heights, grid, base, where, label)
         piles.append(pile)
         _warn_if_empty(pile, where, fill_nodata)
