@@ -52,7 +52,7 @@ def frames(cloud, cam, settings, rounds: int) -> tuple[float, float, int]:
 
 
 def main(argv=None) -> int:
-    from gigapoint.bench import benchmark_cameras, cpu_model, parse_count
+    from gigapoint.bench import benchmark_cameras, cpu_model, parse_counts
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", default="1G", help="demo town size (100M, 1G)")
@@ -63,7 +63,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-attributes", action="store_true", help="leave out intensity and classification (3 bytes a point)")
     ap.add_argument("--png", help="write the overview to this PNG")
     args = ap.parse_args(argv)
-    n = parse_count(args.points)
+    (n,) = parse_counts(ap, ("--points", args.points))
     cpu = cpu_model()
     settings = gp.RenderSettings(backend="cpu", size_mode="fixed")
     print(f"bench_billion: {n:,} points at {args.scale:g} m; {cpu}, numba threads {settings.threads or 'all'}", flush=True)

@@ -205,7 +205,6 @@ def octree_scene(name: str, src: Path, work: Path, args) -> None:
 def octree_part(args) -> None:
     import tempfile
 
-    from gigapoint.bench import parse_count
     from gigapoint.lod import convert, open_octree
 
     with tempfile.TemporaryDirectory(prefix="bench_compact_octree_") as tmp:
@@ -217,7 +216,7 @@ def octree_part(args) -> None:
             gp.render_frame(oc, gp.Camera.fit(oc.bounds, width=64, height=64), gp.RenderSettings(backend="cpu", size_mode="fixed"))
         if not args.skip_autzen and AUTZEN.exists():
             octree_scene("autzen_trim", AUTZEN, work / "autzen", args)
-        n = parse_count(args.points)
+        n = args.points
         t = time.perf_counter()
         src = write_town_las(work / "town.las", n, args.scale)
         print(f"\n(demo town LAS written in {time.perf_counter() - t:.1f} s, {src.stat().st_size / n:.1f} B/point)")
@@ -310,11 +309,9 @@ def resolve_times(vis, colors, rounds: int) -> list[float]:
 
 
 def colors_part(args) -> None:
-    from gigapoint.bench import parse_count
-
     if not args.skip_autzen and AUTZEN.exists():
         colors_scene("autzen_trim", gp.open(AUTZEN, colors="rgba"), args)
-    n = parse_count(args.points)
+    n = args.points
     t = time.perf_counter()
     town = gp.demo(n, scale=args.scale, colors="rgba")
     print(f"\n(demo town built in {time.perf_counter() - t:.1f} s)")
@@ -374,12 +371,10 @@ def default_scene(name: str, default, exact, args, open_calls: dict | None = Non
 
 
 def default_part(args) -> None:
-    from gigapoint.bench import parse_count
-
     if not args.skip_autzen and AUTZEN.exists():
         opens = {"auto": lambda: gp.open(AUTZEN), "rgb565": lambda: gp.open(AUTZEN, colors="rgb565")}
         default_scene("autzen_trim", gp.open(AUTZEN), gp.open(AUTZEN, colors="rgba"), args, opens)
-    n = parse_count(args.points)
+    n = args.points
     t = time.perf_counter()
     town = gp.demo(n, scale=args.scale)
     print(f"\n(default demo town built in {time.perf_counter() - t:.1f} s)")
@@ -412,15 +407,13 @@ def bitmap_rows(name: str, q: np.ndarray, cloud) -> None:
 
 def bitmaps_part(args) -> None:
     """Bitmaps against relative offsets (issue #22's "measure both"), lossless at the source's grid."""
-    from gigapoint.bench import parse_count
-
     if not args.skip_autzen and AUTZEN.exists():
         import laspy
 
         las = laspy.read(str(AUTZEN))
         xyz = np.stack([las.X, las.Y, las.Z], axis=1).astype(np.int64)  # the file's integers: its grid
         bitmap_rows("autzen_trim (0.01 m)", xyz - xyz.min(axis=0), gp.open(AUTZEN))
-    n = parse_count(args.points)
+    n = args.points
     town = gp.demo(n, scale=args.scale)
     q = np.round(town.positions() / args.scale).astype(np.int64)
     bitmap_rows(f"demo town ({n:,}) at {args.scale:g} m", q - q.min(axis=0), town)
@@ -439,7 +432,9 @@ def main(argv=None) -> int:
     ap.add_argument("--default", action="store_true", help="the default colours (colors='auto') against the 16-byte layout and RGB565")
     ap.add_argument("--bitmaps", action="store_true", help="occupancy bitmaps against relative offsets per brick (Todoran 4.1) instead")
     args = ap.parse_args(argv)
-    from gigapoint.bench import cpu_model, parse_count
+    from gigapoint.bench import cpu_model, parse_counts
+
+    (args.points,) = parse_counts(ap, ("--points", args.points))  # (a number from here on, checked before any work)
 
     cpu = cpu_model()
     print(f"compact layout vs three words; {cpu}, numba threads {gp.RenderSettings().threads or 'all'}")
@@ -463,7 +458,7 @@ def main(argv=None) -> int:
         xyz = np.stack([las.x, las.y, las.z], axis=1)
         ok &= scene("autzen_trim", gp.open(AUTZEN), xyz, args)
         del las, xyz
-    n = parse_count(args.points)
+    n = args.points
     t = time.perf_counter()
     cloud = build_cloud(demo_chunks(n, scale=args.scale), name="demo", layout="compact")
     print(f"\n(demo town built in {time.perf_counter() - t:.1f} s)")

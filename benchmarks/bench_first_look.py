@@ -95,7 +95,7 @@ def bands_ab(args) -> None:
     def batch_split(matrices, firsts, counts, low, width, height, splat, n_parts):
         return backend.split_by_points(counts, n_parts), np.arange(len(counts), dtype=np.int64), backend._NO_BANDS
 
-    cloud = gp.open(args.file) if args.demo is None else gp.demo(int(args.demo))
+    cloud = gp.open(args.file) if args.demo is None else gp.demo(args.demo)
     lo, hi = (np.asarray(b, np.float64) for b in cloud.bounds)
     cams = {
         "default view": gp.Camera.fit_cloud(cloud, width=args.width, height=args.height),
@@ -178,6 +178,10 @@ def main(argv=None) -> int:
     ap.add_argument("--bands-ab", action="store_true", help="2-thread splat frames: row bands against the batch split (same process)")
     ap.add_argument("--demo", default=None, help="with --bands-ab: a demo town of this many points instead of --file")
     args = ap.parse_args(argv)
+    if args.demo is not None:
+        from gigapoint.bench import parse_counts
+
+        (args.demo,) = parse_counts(ap, ("--demo", args.demo))
     if not args.file.exists():
         print(f"error: {args.file} not found", file=sys.stderr)
         return 1

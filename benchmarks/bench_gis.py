@@ -79,7 +79,7 @@ import numpy as np
 from bench_convert import write_las, write_laz  # a sibling script: its folder is sys.path[0]
 
 from gigapoint.bench import run_measured
-from gigapoint.bench.report import cpu_model, parse_count
+from gigapoint.bench.report import cpu_model, parse_counts
 
 JOBS = ("filter", "thin", "tile", "stats", "dtm", "copy", "reproject", "ground", "colorize", "noise")
 #: the PDAL stage a job needs beyond the core ones (builds without PROJ, GDAL or some filters lack them)
@@ -390,6 +390,7 @@ def main(argv=None) -> int:
     ap.add_argument("--pdal", default=shutil.which("pdal") or "pdal")
     ap.add_argument("--json", default=None, help="also write the rows to this JSON file")
     a = ap.parse_args(argv)
+    (n_demo,) = parse_counts(ap, ("--points", a.points))
     jobs = [j for j in a.jobs.split(",") if j]
     if bad := set(jobs) - set(JOBS):
         raise SystemExit(f"unknown jobs {sorted(bad)}; choose from {JOBS}")
@@ -408,10 +409,10 @@ def main(argv=None) -> int:
         if a.input:
             las = Path(a.input)
         else:
-            las = work / f"demo_{parse_count(a.points)}.las"
+            las = work / f"demo_{n_demo}.las"
             if not las.exists():
                 t = time.perf_counter()
-                write_las(las, parse_count(a.points))
+                write_las(las, n_demo)
                 print(f"wrote {las} in {time.perf_counter() - t:.1f} s", file=sys.stderr)
         n = las_count(las)
         warm = work / "warm.las"

@@ -23,7 +23,7 @@ import time
 import numpy as np
 
 import gigapoint as gp
-from gigapoint.bench import cpu_model, one_line_errors, parse_count
+from gigapoint.bench import cpu_model, one_line_errors, parse_counts
 
 
 def frames_while_loading(n: int, width: int, height: int, drawer) -> dict:
@@ -56,10 +56,10 @@ def main(argv=None) -> None:
     ap.add_argument("--height", type=int, default=1080)
     ap.add_argument("--rounds", type=int, default=2, help="loads per setting, alternating")
     args = ap.parse_args(argv)
+    (n,) = parse_counts(ap, ("--points", args.points))
     from gigapoint.backends.wgpu import memory
     from gigapoint.render.backend import get_backend
 
-    n = parse_count(args.points)
     drawer = get_backend("wgpu")
     print(f"{cpu_model()}; {drawer.describe()}")
     frames_while_loading(200_000, 320, 240, drawer)  # compiles the kernels

@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 import gigapoint as gp
-from gigapoint.bench import cpu_model
+from gigapoint.bench import cpu_model, parse_counts
 from gigapoint.live import cloud as live_cloud
 from gigapoint.live.cloud import LiveCloud
 
@@ -65,10 +65,11 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=2000)
     ap.add_argument("--rounds", type=int, default=3)
     args = ap.parse_args(argv)
+    sizes = parse_counts(ap, *(("--sizes", s) for s in args.sizes.split(",")))
     _run(_frames(50, 300), 0.5)  # numba's compile: not counted
     _run(_frames(50, 300), 0.0)
     print(f"{cpu_model()}; {args.frames:,} frames kept, drawn at 1280x720 on the CPU backend")
-    for size in (int(s) for s in args.sizes.split(",")):
+    for size in sizes:
         frames = _frames(args.frames, size)
         runs: dict[str, list[dict]] = {"packed": [], "a chunk a frame": []}
         for _ in range(args.rounds):

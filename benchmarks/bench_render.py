@@ -16,7 +16,7 @@ from pathlib import Path
 
 from rich.console import Console
 
-from gigapoint.bench import one_line_errors, parse_count, parse_threads, print_results, run_render_benchmark, write_results
+from gigapoint.bench import one_line_errors, parse_counts, parse_threads, print_results, run_render_benchmark, write_results
 
 
 @one_line_errors
@@ -33,7 +33,7 @@ def main(argv=None) -> None:
     ap.add_argument("--json", type=Path, help="where to write the JSON results")
     args = ap.parse_args(argv)
     err = Console(stderr=True)
-    points = [parse_count(p) for p in args.points]
+    points = parse_counts(ap, *(("--points", p) for p in args.points))
     threads = [parse_threads(t) for t in args.threads]
     json_path = args.json or (args.out / "bench_render.json" if args.out else Path("bench_render.json"))
     results = run_render_benchmark(

@@ -21,7 +21,7 @@ import time
 
 import numba
 
-from gigapoint.bench import cpu_model
+from gigapoint.bench import cpu_model, parse_counts
 from gigapoint.core import threads
 from gigapoint.io import demo_arrays
 from gigapoint.live.cloud import LiveCloud
@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     ap.add_argument("--points", type=int, default=400_000, help="points in all, per size (at most 2 000 calls)")
     ap.add_argument("--rounds", type=int, default=3)
     args = ap.parse_args(argv)
-    sizes = [int(s) for s in args.sizes.split(",")]
+    sizes = parse_counts(ap, *(("--sizes", s) for s in args.sizes.split(",")))
     xyz, rgb, _ = demo_arrays(args.points, seed=5)
     for fill in (_fill_octree, _fill_live):  # numba's compile: not counted
         for size in sizes:  # the smallest batches take paths of their own (add of 50 points compiled 6 s in)

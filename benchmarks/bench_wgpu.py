@@ -31,7 +31,7 @@ from rich.console import Console
 from rich.table import Table
 
 import gigapoint
-from gigapoint.bench import benchmark_cameras, cpu_model, one_line_errors, parse_count
+from gigapoint.bench import benchmark_cameras, cpu_model, one_line_errors, parse_counts
 from gigapoint.core.selection import Selection, select
 from gigapoint.lod import parse_memory
 
@@ -137,11 +137,11 @@ def main(argv=None) -> None:
     ap.add_argument("--gpu-memory", default="2G", help="GPU memory for point data (past it, frames re-upload pages): e.g. 64G on a big GPU")
     ap.add_argument("--no-cpu", action="store_true", help="skip the CPU backend (and the comparison of images)")
     args = ap.parse_args(argv)
+    sizes = parse_counts(ap, *(("--points", p) for p in args.points))
     out, err = Console(width=150), Console(stderr=True, width=150)
     from gigapoint.backends.numba_cpu import NumbaCpuBackend
     from gigapoint.backends.wgpu import WgpuBackend
 
-    sizes = [parse_count(p) for p in args.points]
     budget = parse_memory(args.gpu_memory, "--gpu-memory")
     backends = [] if args.no_cpu else [("cpu", NumbaCpuBackend(), "")]
     backends.append(("wgpu", WgpuBackend(memory_budget=budget), ""))

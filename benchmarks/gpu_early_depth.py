@@ -39,7 +39,7 @@ from rich.console import Console
 from rich.table import Table
 
 import gigapoint
-from gigapoint.bench import benchmark_cameras, cpu_model, one_line_errors, parse_count
+from gigapoint.bench import benchmark_cameras, cpu_model, one_line_errors, parse_counts
 from gigapoint.core.selection import select
 from gigapoint.errors import GigapointError
 
@@ -230,6 +230,7 @@ def main(argv=None) -> None:
     ap.add_argument("--front-to-back", action="store_true", help="also each run with its batches sorted front to back")
     ap.add_argument("--gpu-memory", default="2G", help="GPU memory for point data: e.g. 100G on a big GPU")
     args = ap.parse_args(argv)
+    sizes = parse_counts(ap, *(("--points", p) for p in args.points))
     out, err = Console(width=150), Console(stderr=True, width=150)
     from gigapoint.backends.wgpu import WgpuBackend
     from gigapoint.lod import parse_memory
@@ -238,7 +239,7 @@ def main(argv=None) -> None:
     backend = variant_backend(budget)
     fallback = WgpuBackend(atomics64=False, memory_budget=budget) if args.fallback else None
     out.print(f"{cpu_model()}; {backend.describe()}")
-    for n in (parse_count(p) for p in args.points):
+    for n in sizes:
         t0 = time.perf_counter()
         cloud = gigapoint.demo(n)
         err.print(f"[dim]demo scene of {n:,} points built in {time.perf_counter() - t0:.1f} s[/dim]")

@@ -4,6 +4,8 @@ whose base is secretly this revision, a PDAL grid one column off gigapoint's."""
 from __future__ import annotations
 
 import importlib
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -60,6 +62,32 @@ def test_a_bad_count_is_an_argparse_error_naming_its_option(scripts, capsys, scr
     assert exit_.value.code == 2
     err = capsys.readouterr().err
     assert err.splitlines()[-1].endswith(f" error: {option}: cannot read 'x' (use e.g. 20M, 200k, 1e6 or 5000000)")
+
+
+@pytest.mark.parametrize(
+    ("script", "argv", "option"),
+    [
+        ("bench_billion", ["--points", "x"], "--points"),
+        ("bench_compact", ["--points", "x"], "--points"),
+        ("bench_gis", ["--points", "x"], "--points"),
+        ("bench_gpu_uploads", ["--points", "x"], "--points"),
+        ("bench_render", ["--points", "1M", "x"], "--points"),
+        ("bench_wgpu", ["--points", "x"], "--points"),
+        ("gpu_early_depth", ["--points", "2M", "x"], "--points"),
+        ("bench_small_batches", ["--sizes", "50,x"], "--sizes"),
+        ("bench_live_small_frames", ["--sizes", "50,x"], "--sizes"),
+        ("bench_first_look", ["--bands-ab", "--demo", "x"], "--demo"),
+    ],
+)
+def test_every_scripts_bad_count_is_an_argparse_error_naming_its_option(script, argv, option):
+    """These read their counts with their own int() or parse_count: a traceback, or exit status 1
+    (and a bad second size only after the first size's minutes of work)."""
+    env = dict(os.environ, PYTHONPATH=str(BENCHMARKS.parent / "src"))
+    run = subprocess.run([sys.executable, str(BENCHMARKS / f"{script}.py"), *argv], env=env, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 2, run.stderr
+    assert "Traceback" not in run.stderr
+    assert [ln for ln in run.stderr.splitlines() if "error" in ln] == [run.stderr.splitlines()[-1]]
+    assert run.stderr.splitlines()[-1].endswith(f" error: {option}: cannot read 'x' (use e.g. 20M, 200k, 1e6 or 5000000)")
 
 
 def test_gis_dtm_grid_is_gigapoints_top_down_grid(scripts, tmp_path, points_las_writer):
