@@ -260,6 +260,28 @@ def test_a_paused_stream_counts_and_frames_only_what_has_not_decayed():
     assert ", 0 frames, 0 live points" in live.hud()
 
 
+def test_a_frame_decay_seconds_old_is_gone_as_its_fade_is_zero():
+    """Expiry took a frame out only when older than ``decay`` while its fade reached 0 at
+    ``decay``: a frame exactly ``decay`` seconds old was drawn at alpha 0 yet counted by
+    n_points, bounds and the HUD."""
+    now = [0.0]
+    live = LiveCloud(decay=1.0, clock=lambda: now[0])
+    now[0] = 0.5
+    live.push(np.full((1000, 3), 7.0))
+    view = gp.Camera.fit(([0.0] * 3, [10.0] * 3), view="top", width=32, height=32).view(live.bounds)
+    now[0] = 1.5 - 2**-10  # just under 1 s old: faint, counted and drawn
+    assert live.n_points == 1000 and live.bounds[0].tolist() == [7.0, 7.0, 7.0] and ", 1 frames, 1,000 live points" in live.hud()
+    with live.reading():
+        draw = live.prepare(view, gp.RenderSettings())
+    assert draw.alpha.tolist() == [2**-10]
+    now[0] = 1.5  # exactly 1 s old: alpha 0, so gone
+    assert live.n_points == 0 and live.n_frames == 0 and ", 0 frames, 0 live points" in live.hud()
+    assert [b.tolist() for b in live.bounds] == [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]
+    with live.reading():
+        draw = live.prepare(view, gp.RenderSettings())
+    assert len(draw.selection.ids) == 0
+
+
 def test_float_colours_keep_the_range_of_the_first_coloured_frame():
     """Each push judged its float colours by their own range: in a 0..1 stream, a frame that
     overshot to 1.025 was read as 0..255 (almost black beside its neighbours), and in a 0..255

@@ -14,15 +14,15 @@ packed after the frames before it into a shared chunk (``_pack``): a chunk each 
 waits, batched, in a queue and is copied in when the drawing lets go of the lock: producers
 never wait for the renderer. At most ``keep`` frames wait: an older one would leave the ring as
 soon as it was copied in, never drawn, so it is dropped (``stats.frames_dropped``, a warning
-once) and the queue holds no more than a full ring. Frames beyond ``keep`` (or older than ``decay``
-seconds) leave the ring and their chunks are reused: memory stays flat over a long stream.
+once) and the queue holds no more than a full ring. Frames beyond ``keep`` (or ``decay``
+seconds old) leave the ring and their chunks are reused: memory stays flat over a long stream.
 
 ``snapshot()`` freezes the frames in the ring into a ProgressiveOctree (lod.progressive, its
 public ``add``); the octree's pool is mirrored into the same buffers, so one DrawList draws the
 ring (every chunk in view) and the octree's selection (its LOD within ``point_budget``).
 
 Per point, ``frame_time`` (float32) holds the seconds since the cloud's start at which its
-frame arrived (NaN for snapshot points). With ``decay``, frames older than ``decay`` seconds
+frame arrived (NaN for snapshot points). With ``decay``, frames ``decay`` seconds old
 leave the ring, and until then fade: ``prepare`` gives each drawn batch an ``alpha`` (1 for a
 new frame, falling linearly to 0 at ``decay``; ``fade_alpha``) that the transparency pass
 (render/passes/transparency.py) composites; ``fade=False`` drops them without fading.
@@ -662,11 +662,12 @@ class LiveCloud:
         return out
 
     def _expire(self, keep: int | None = None) -> None:
-        """Frames beyond ``keep`` (the cloud's by default) or older than ``decay`` leave the ring (lock held)."""
+        """Frames beyond ``keep`` (the cloud's by default) or ``decay`` seconds old leave the ring (lock held)."""
         keep = self.keep if keep is None else keep
         now = self.now()
         drop = []
-        while len(self.frames) > keep or (self.decay is not None and self.frames and now - self.frames[0].arrived > self.decay):
+        # (at ``decay`` seconds old a frame's fade is 0: drawn as nothing, it is not counted either)
+        while len(self.frames) > keep or (self.decay is not None and self.frames and now - self.frames[0].arrived >= self.decay):
             drop.append(self.frames.popleft())
         if not drop:
             return
