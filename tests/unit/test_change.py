@@ -77,6 +77,21 @@ def test_min_change_leaves_small_changes_out():
     assert (c.fill, c.cut, c.area_changed) == (0.0, 0.0, 0.0)  # 'by more than'
 
 
+def test_a_move_of_exactly_min_change_is_left_out_whatever_the_float32_rounding():
+    """Heights of 400-520 (a LAS grid of 0.01) moved exactly -2 and +3: float32 gives |dz| an ulp
+    either side (2.0000305 in 22 of the 800 pixels moved 2); min_change 2 leaves all of those out."""
+    x, y = (a.ravel() for a in np.meshgrid(np.arange(0.5, 40), np.arange(0.5, 40)))  # one point a pixel, at its centre
+    z = np.round(np.random.default_rng(0).uniform(400, 520, x.size), 2)
+    before = np.column_stack([x + ORIGIN[0], y + ORIGIN[1], z])
+    after = before.copy()
+    after[:, 2] += np.where(x < 20, -2.0, 3.0)
+    c = gp.change(gp.from_arrays(before), gp.from_arrays(after), 1, min_change=2)
+    assert ((np.abs(c.dz[:, :20]) > 2).sum(), c.resolution) == (22, 2**-13)  # the rounding that bit
+    assert (c.cut, c.area_changed) == (0.0, 800.0) and c.fill == pytest.approx(2400, abs=0.01)
+    c = gp.change(gp.from_arrays(before), gp.from_arrays(after), 1)  # min_change 0: every pixel moved
+    assert c.area_changed == 1600.0 and c.cut == pytest.approx(1600, abs=0.01)
+
+
 def test_the_preview_is_symmetric_around_zero():
     """Red where cut, white where unchanged, blue where filled, transparent where not compared;
     by default spanning the 98th percentile of the changed pixels' |dz| (the box's 3 here: 800 of their 900)."""

@@ -39,8 +39,9 @@ fill of 4e-7 square degrees times metres, printed "0.000 cubic units") would be 
 
 Volumes are the difference summed over the pixels compared, times a pixel's area: fill where the
 after surface is higher, cut where it is lower, net = fill - cut. ``min_change`` is a level of
-detection: only pixels that moved by more count in the volumes and the changed area (0: all
-that moved by more than the float32 heights can tell from their rounding, ``Change.resolution``)."""
+detection: only pixels that moved by more count in the volumes and the changed area, "more" by
+more than the float32 heights can tell from their rounding (``Change.resolution``: a move of
+exactly ``min_change`` is no more; 0: all that moved by more than that rounding)."""
 
 from __future__ import annotations
 
@@ -114,8 +115,9 @@ class Change:
 
     @cached_property
     def changed(self) -> np.ndarray:
-        """Compared pixels that moved by more than ``min_change`` and than the heights' ``resolution``."""
-        return self.compared & (np.abs(np.where(self.compared, self.dz, 0.0)) > max(self.min_change, self.resolution))
+        """Compared pixels that moved by more than ``min_change`` plus the heights' ``resolution``
+        (not the larger of the two: a move of exactly ``min_change`` came out up to an ulp above it)."""
+        return self.compared & (np.abs(np.where(self.compared, self.dz, 0.0)) > self.min_change + self.resolution)
 
     @property
     def cell_area(self) -> float:
