@@ -525,6 +525,39 @@ def test_cli_all_points_reads_every_node_of_an_octree(cli, autzen_layered, tmp_p
         gp.change(autzen_layered["gigapoint"], AUTZEN, COARSE_GSD, full="yes")
 
 
+@pytest.mark.parametrize("octree_first", [True, False])
+def test_one_survey_sampled_against_one_read_whole_is_warned_of(autzen_layered, octree_first, recwarn):
+    """The sampled surface lies low: as BEFORE its fill comes out high (the same points: 9,922 ft³
+    of fill and no cut), as AFTER its cut; one warning naming it and what to give."""
+    octree = autzen_layered["copc"]
+    c = gp.change(octree, AUTZEN, COARSE_GSD) if octree_first else gp.change(AUTZEN, octree, COARSE_GSD)
+    bias = "fill comes out high and cut low" if octree_first else "cut comes out high and fill low"
+    message = (
+        f"change: {octree} is read down to the octree levels the gsd needs (a sample of its points), {AUTZEN} whole: "
+        f"the sample's surface lies low where the ground is rough, so {bias}; --all-points (full=True) reads every point"
+    )
+    assert [str(w.message) for w in recwarn] == [message]
+    assert (c.fill > 9_000 and c.cut == 0) if octree_first else (c.cut > 9_000 and c.fill == 0)
+
+
+@pytest.mark.parametrize(
+    "pair, full",
+    [(("copc", "copc"), False), ((AUTZEN, AUTZEN), False), (("copc", AUTZEN), True)],
+    ids=["both-sampled", "both-files", "all-points"],
+)
+def test_no_sampling_warning_where_both_surveys_are_read_alike(autzen_layered, pair, full, recwarn):
+    gp.change(*(autzen_layered.get(p, p) for p in pair), COARSE_GSD, full=full)
+    assert [str(w.message) for w in recwarn] == []
+
+
+def test_cli_warns_of_one_sampled_survey_but_not_with_all_points(cli, autzen_layered, tmp_path):
+    args = ("change", autzen_layered["gigapoint"], AUTZEN, "--gsd", COARSE_GSD, "--overwrite", "-o", tmp_path / "c.tif")
+    rc, _, err = cli(*args)
+    assert rc == 0 and err.count("warning: change: ") == 1 and f"{autzen_layered['gigapoint']} is read down to the octree levels" in err
+    rc, _, err = cli(*args, "--all-points")
+    assert rc == 0 and "warning" not in err
+
+
 # --- surveys in different units ----------------------------------------------------------------------
 
 FOOT, METRE = 'UNIT["foot",0.3048,AUTHORITY["EPSG","9002"]]', 'UNIT["metre",1,AUTHORITY["EPSG","9001"]]'

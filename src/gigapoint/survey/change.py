@@ -25,8 +25,10 @@ ground rises within a cell (a roof's edge, a tree's crown), not on open ground. 
 z, whatever the pixel's size, hence a quarter of a pixel and not half: autzen (110,000 points,
 max_leaf 2,000) at 16 ft reads 79,000 points (levels down to 2.3 ft), 98 % of its pixels within
 0.5 ft of every point's surface, 99.5 % within 2.3 ft; at half a pixel (4.6 ft) 30,000 points,
-88 % within 0.5 ft. Volumes then come out a little low where the surface is rough.
-``full=True`` reads every node (every point: the surface of the point files exactly).
+88 % within 0.5 ft. A sampled surface lies low where the ground is rough: sampled as the before
+survey, fill comes out high and cut low; as the after survey, the reverse (``change`` warns where
+only one of the two is sampled). ``full=True`` reads every node (every point: the surface of the
+point files exactly).
 
 A survey of fewer than STREAM_POINTS points is drawn whole, as its point files would be; in several draws
 a point lying exactly on a pixel edge may fall on either side (each draw's batches have float32
@@ -54,12 +56,12 @@ import numpy as np
 
 from ..core.chunk import PointChunk
 from ..core.cloud import PointCloud, build_cloud
-from ..errors import CameraError, InputError, check_switch, is_real, number_text
+from ..errors import CameraError, InputError, check_switch, is_real, number_text, warn
 from ..io.crs import crs_identity, crs_name, refuse_angles
 from ..io.filters import PointFilter, point_filter
 from ..io.paths import given_paths
 from ..lod.potree import PotreeCloud
-from ..lod.query import is_octree, points_meeting
+from ..lod.query import deepest_level, is_octree, points_meeting
 from ..lod.reader import cloud_crs_units
 from ..lod.store import OctreeCloud
 from ..lod.voxel_octree import VoxelOctree
@@ -292,7 +294,7 @@ def _octree_heights(octree, camera: Camera, full: bool) -> np.ndarray:
     (``full``: at every level, each point in one node), drawn STREAM_POINTS at a time, each pixel
     the highest of the heights drawn there; nodes outside the camera's footprint are not read."""
     pixels = RasterGrid.of_camera(camera)
-    max_spacing = None if full else SURFACE_SPACING * pixels.cell
+    max_spacing = _spacing_read(camera, full)
     keep = octree.read_filter if isinstance(octree, OctreeCloud) and octree.read_filter is not None else PointFilter()
     footprint = PointFilter(clip=pixels.bounds)
     heights = np.full((camera.height, camera.width), np.nan, np.float32)
@@ -313,6 +315,34 @@ def _octree_heights(octree, camera: Camera, full: bool) -> np.ndarray:
         draw_group()
     keep.check_passed(octree.name)
     return heights
+
+
+def _spacing_read(camera: Camera, full: bool) -> float | None:
+    """The spacing an octree's levels are read down to for ``camera``'s surface; None (every level) with ``full``."""
+    return None if full else SURFACE_SPACING * RasterGrid.of_camera(camera).cell
+
+
+def is_sampled(survey, camera: Camera, full: bool) -> bool:
+    """Whether ``surface`` reads only a sample of ``survey``: an octree whose levels the camera's
+    gsd needs stop above its deepest."""
+    if not isinstance(survey, OctreeCloud):  # (a ProgressiveOctree's every leaf is read: points_meeting)
+        return False
+    deepest = deepest_level(survey, _spacing_read(camera, full))
+    return deepest is not None and deepest < int(survey.levels.max())
+
+
+def warn_one_sampled(surveys: list, labels: tuple[str, str], camera: Camera, full: bool) -> None:
+    """One warning where one survey's surface is a sample (``is_sampled``) and the other's every
+    point: its surface lies low, which biases fill and cut one way (not where both are sampled)."""
+    sampled = [is_sampled(s, camera, full) for s in surveys]
+    if sampled[0] == sampled[1]:
+        return
+    which = 0 if sampled[0] else 1
+    bias = "fill comes out high and cut low" if which == 0 else "cut comes out high and fill low"
+    warn(
+        f"change: {labels[which]} is read down to the octree levels the gsd needs (a sample of its points), {labels[1 - which]} whole: "
+        f"the sample's surface lies low where the ground is rough, so {bias}; --all-points (full=True) reads every point"
+    )
 
 
 def _source_grid(octree) -> tuple[np.ndarray, np.ndarray] | None:
@@ -370,6 +400,7 @@ def change(before, after, gsd, classes=None, drop_classes=None, clip=None, fill_
             camera = Camera.top_down((np.minimum(*lows), np.maximum(*highs)), gsd)  # one grid, one eye: pixel to pixel
         except CameraError as exc:  # the grid spans both: name them (a huge survey beside a tiny one said neither)
             raise CameraError(f"{labels[0]} and {labels[1]}: {exc}") from None
+        warn_one_sampled(surveys, labels, camera, full)
         heights = [surface(s, camera, fill_nodata, full) for s in surveys]
     finally:
         for survey, source in zip(surveys, (before, after)):
