@@ -148,8 +148,11 @@ def output_file_refusal(path, overwrite: bool, what: str, suffixes=None, kind: s
     every output: a folder there ("is a directory, not ``what``": a folder is never replaced by a
     file), a suffix not in ``suffixes`` (where given; told as an unsupported ``kind`` type: a
     video's "video"), an existing file without ``overwrite``, or what keeps its folders from being
-    made and written into (``folder_refusal``); None where it can. Images, videos and point files
+    made and written into (``folder_refusal``); None where it can. An ``overwrite`` not True or
+    False is refused first. Images, videos and point files
     check this (``refuse`` says it)."""
+    if not isinstance(overwrite, (bool, np.bool_)):  # (every writer's last guard: overwrite="no" is true and replaced the file)
+        return f"overwrite must be True or False, got {overwrite!r}"
     path = Path(path)
     if path.is_dir():  # (before the suffix: "unsupported ... type '(none)'" for -o FOLDER hid what was wrong)
         return f"is a directory, not {what}"

@@ -210,6 +210,7 @@ def test_open_takes_true_or_false_for_its_switches(tmp_path):
     assert gp.open(tmp_path / "p.npy", chunk_size=np.int64(30), name="p").n_points == 100
     gp.convert([tmp_path / "p.npy"], tmp_path / "octree")
     (tmp_path / "turn.gif").write_bytes(b"mine")
+    (tmp_path / "mine.laz").write_bytes(b"mine")
     live = gp.LiveCloud()
     live.push(np.random.default_rng(1).random((50, 3)))
     live.snapshot()
@@ -218,10 +219,19 @@ def test_open_takes_true_or_false_for_its_switches(tmp_path):
         (lambda: gp.render_turntable(gp.demo(1_000), 2, tmp_path / "turn.gif", width=32, height=24, overwrite="no"), "video"),
         (lambda: live.record(tmp_path / "rec", overwrite="false"), "live: record"),
         (lambda: live.save(tmp_path / "octree", overwrite="no"), "live: save"),
+        # (a progressive cloud's plain file: its save took "no" as true and replaced it)
+        (lambda: _loaded(gp.open(tmp_path / "p.npy", progressive=True)).save(tmp_path / "mine.laz", overwrite="no"), re.escape(str(tmp_path / "mine.laz"))),
     ):
         with pytest.raises(InputError, match=rf"^{where}: overwrite must be True or False, got '(no|false)'$"):
             call()
     assert (tmp_path / "turn.gif").read_bytes() == b"mine" and gp.open(tmp_path / "octree").n_points == 100
+    assert (tmp_path / "mine.laz").read_bytes() == b"mine"
+
+
+def _loaded(cloud):
+    """``cloud`` once its loader has read everything."""
+    assert cloud.wait()
+    return cloud
 
 
 def test_the_demo_refuses_a_seed_or_scale_it_cannot_use_in_one_line():
