@@ -488,3 +488,95 @@ def test_convert_of_an_opened_octree_is_refused_as_its_folder_is(tmp_path):
         with pytest.raises(InputError, match=f"^{re.escape(said)}$"):
             gp.convert(octree, out)
         assert not out.exists()
+
+
+def test_a_progressive_octree_of_a_colourless_file_saves_the_colours_an_add_gave(tmp_path, autzen_path):
+    """Colours given to add(rgb=) were dropped by a save where the source file had none (point
+    format 6, a PLY without red, octree.json's has_color false): the files alone decided, where a
+    plain cloud keeps colours of its own. Without an add's colours the save stays colourless."""
+    import json
+
+    src = laspy.read(autzen_path)
+    las = laspy.LasData(laspy.LasHeader(point_format=1, version="1.2"))
+    las.header.scales, las.header.offsets = src.header.scales, src.header.offsets
+    las.X, las.Y, las.Z = src.X[:5000], src.Y[:5000], src.Z[:5000]
+    las.write(str(tmp_path / "norgb.laz"))
+    cloud = gp.open(tmp_path / "norgb.laz", progressive=True)
+    cloud.wait()
+    cloud.save(tmp_path / "plain.laz")
+    assert laspy.read(tmp_path / "plain.laz").header.point_format.id == 6
+    cloud.add(np.c_[np.full(10, 636500.0), np.full(10, 849000.0), np.linspace(410, 420, 10)], rgb=np.tile(np.array([10, 20, 30], np.uint8), (10, 1)))
+    cloud.wait()
+    cloud.save(tmp_path / "p.laz")
+    cloud.save(tmp_path / "p.ply")
+    cloud.save(tmp_path / "p_oct")
+    out = laspy.read(tmp_path / "p.laz")
+    assert out.header.point_format.id == 7 and np.count_nonzero(np.asarray(out.green) == 20 * 257) == 10
+    assert b"property uchar red" in (tmp_path / "p.ply").read_bytes().split(b"end_header")[0]
+    assert json.loads((tmp_path / "p_oct" / "octree.json").read_text())["has_color"] is True
+    cloud.close()
+
+
+def _far_las(path: Path, x0: float) -> None:
+    """Two points at x ~ ``x0`` on a 0.01 grid from offset ``x0`` (autzen's y and z)."""
+    las = laspy.LasData(laspy.LasHeader(point_format=3, version="1.2"))
+    las.header.scales, las.header.offsets = np.full(3, 0.01), np.array([x0, 0.0, 0.0])
+    las.x, las.y, las.z = np.array([x0 + 0.5, x0 + 1.25]), np.array([849000.0, 849001.0]), np.array([400.0, 401.0])
+    las.write(str(path))
+
+
+def test_a_merge_spanning_more_than_2_30_steps_keeps_its_scale_and_one_beyond_int32_says_it_coarsens(tmp_path, autzen_path):
+    """autzen and points at x 30 000 000 (2.9e9 steps of 0.01 apart) were merged at scale 0.0273
+    without a word (2**30 steps counted from the lowest point): centred, 32-bit integers hold
+    them at 0.01, every value as read; at x 60 000 000 they do not, and the coarser scale is said."""
+    import warnings
+
+    _far_las(tmp_path / "far.las", 30_000_000.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GigapointWarning)
+        warnings.filterwarnings("ignore", "far.las names no CRS", GigapointWarning)
+        gp.convert([autzen_path, tmp_path / "far.las"], tmp_path / "farm.laz")
+    src, far, out = laspy.read(autzen_path), laspy.read(tmp_path / "far.las"), laspy.read(tmp_path / "farm.laz")
+    np.testing.assert_array_equal(out.header.scales, [0.01, 0.01, 0.01])
+    np.testing.assert_array_equal(out.header.offsets[1:], [0.0, 0.0])  # (y, z: the first file's offset still holds them)
+    for axis in "xyz":
+        want = np.concatenate([np.asarray(src[axis]), np.asarray(far[axis])])
+        assert np.abs(np.asarray(out[axis]) - want).max() < 1e-6
+    _far_las(tmp_path / "farther.las", 60_000_000.0)
+    with pytest.warns(GigapointWarning) as said:
+        gp.convert([autzen_path, tmp_path / "farther.las"], tmp_path / "farm2.laz")
+    coarse = [str(w.message) for w in said if "32-bit" in str(w.message)]
+    want = f"{tmp_path / 'farm2.laz'}: the points span more than 32-bit integers hold at scale 0.01, 0.01, 0.01: written at scale 0.0138218, 0.01, 0.01"
+    assert coarse == [f"{want}, positions moved by up to 0.00691"]
+    assert laspy.read(tmp_path / "farm2.laz").header.scales[0] == pytest.approx(0.0138218, rel=1e-5)
+
+
+def test_a_progressive_save_of_points_added_beyond_int32_on_its_grid_says_it_coarsens(tmp_path, autzen_path):
+    """A progressive octree's save("x.laz") after add() of a point at x 60 000 000 coarsened its grid without a word."""
+    cloud = gp.open(autzen_path, progressive=True)
+    cloud.wait()
+    cloud.add(np.array([[60_000_000.5, 849000.0, 400.0]]))
+    with pytest.warns(GigapointWarning, match=r"p\.laz: the points span more than 32-bit integers hold at scale 0\.01, 0\.01, 0\.01: written at scale 0\.0138218, 0\.01, 0\.01, positions moved by up to 0\.00691$"):
+        cloud.save(tmp_path / "p.laz")
+    cloud.close()
+
+
+def test_attribute_values_beyond_their_las_field_are_said_once_a_field_on_save(tmp_path):
+    """intensity -5 or 70 000 and class 300 were written 0, 65 535 and 255 without a word; values
+    the field holds are written without one."""
+    import warnings
+
+    xyz = np.c_[np.arange(4.0), np.zeros(4), np.zeros(4)]
+    cloud = gp.from_arrays(xyz, intensity=np.array([-5, 70000, 70001, 7]), classification=np.array([2, 300, 2, 2]))
+    with pytest.warns(GigapointWarning) as said:
+        save_cloud(cloud, tmp_path / "x.laz", points_per_chunk=2)  # (two chunks: said once a field, counted over both)
+    out = tmp_path / "x.laz"
+    assert [str(w.message) for w in said] == [
+        f"{out}: 3 intensity values beyond 0..65535, what its LAS field holds: written as 0 or 65535",
+        f"{out}: 1 classification value beyond 0..255, what its LAS field holds: written as 0 or 255",
+    ]
+    las = laspy.read(out)
+    assert np.asarray(las.intensity).tolist() == [0, 65535, 65535, 7] and np.asarray(las.classification).tolist() == [2, 255, 2, 2]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GigapointWarning)
+        gp.from_arrays(xyz, intensity=np.array([0, 65535, 3, 7])).save(tmp_path / "fits.laz")

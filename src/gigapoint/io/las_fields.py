@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import GigapointWarning, warn
+from ..errors import GigapointWarning, counted, warn
 from ._base import LAS_FIELD_ATTRIBUTES
 from .las import scan_angle_units
 
@@ -75,15 +75,28 @@ LAS_FIELD_RANGE = {
 LAS_FIELD_OF = {"scan_angle_rank": "scan_angle"}
 
 
-def las_field_values(name: str, values) -> np.ndarray:
+def las_field_values(name: str, values, clipped: dict | None = None) -> np.ndarray:
     """An attribute's ``values`` in the range of its LAS field (clipped; gps_time as float64;
     scan_angle_rank, degrees, in scan_angle's 0.006 degree units): what the COPC writer and a
-    live cloud's LAS save store (in field ``LAS_FIELD_OF.get(name, name)``)."""
+    live cloud's LAS save store (in field ``LAS_FIELD_OF.get(name, name)``). ``clipped``:
+    {name: how many values were clipped}, added to (``warn_clipped`` says them)."""
     if name == "gps_time":
         return np.asarray(values, np.float64)
     if name == "scan_angle_rank":
         return scan_angle_units(values)
-    return np.clip(np.asarray(values), *LAS_FIELD_RANGE[name])
+    values, (lo, hi) = np.asarray(values), LAS_FIELD_RANGE[name]
+    if clipped is not None:
+        clipped[name] = clipped.get(name, 0) + int(np.count_nonzero((values < lo) | (values > hi)))
+    return np.clip(values, lo, hi)
+
+
+def warn_clipped(where, clipped: dict) -> None:
+    """One line a field of ``clipped`` ({name: count}, ``las_field_values``') whose values were
+    beyond its LAS field: -5 or 70 000 became 0 or 65 535 without a word."""
+    for name, n in clipped.items():
+        if n:
+            lo, hi = LAS_FIELD_RANGE[name]
+            warn(f"{where}: {counted(n, f'{name} value')} beyond {lo}..{hi}, what its LAS field holds: written as {lo} or {hi}", GigapointWarning)
 
 
 def record_names(point_format: int) -> frozenset:
@@ -146,17 +159,31 @@ def default_step(lo, hi) -> float:
     return max(min(0.001, extent / 2**16) if extent > floor else 0.001, floor)  # (1e12 m: 0.002, float64's own steps)
 
 
-def las_grid(lo, hi, scale=None, offset=None) -> tuple[np.ndarray, np.ndarray]:
+def las_grid(lo, hi, scale=None, offset=None, out=None) -> tuple[np.ndarray, np.ndarray]:
     """(scale, offset) per axis of 32-bit integers for points within [lo, hi]: the input's when
-    both are given and the points fit on them; else ``scale`` (a grid the points lie on, from 0:
-    the offset a multiple of it) or ``default_step``, coarser where the extent needs it, from
-    the grid line at or below ``lo``."""
+    both are given and the points fit on them; else ``scale`` (a grid the points lie on: from
+    ``offset``, else from 0) or ``default_step``, with, per axis, the given offset where it holds
+    the points, else the grid line at or below ``lo``, else one centred on them (the whole int32
+    range). Coarser only where that range is too short; said, for output ``out``, where it
+    coarsens a given ``scale`` (the points then move by up to half the new step)."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    base = np.zeros(3) if offset is None else np.asarray(offset, np.float64)
     if scale is not None and offset is not None:
-        s, o = np.asarray(scale, np.float64), np.asarray(offset, np.float64)
-        if np.all(s > 0) and np.all((lo - o) / s > _INT32[0] + 1) and np.all((hi - o) / s < _INT32[1] - 1):
-            return s, o
+        s = np.asarray(scale, np.float64)
+        if _fits_int32(lo, hi, s, base).all():
+            return s, base
     s = np.broadcast_to(np.asarray(scale, np.float64), (3,)) if scale is not None else np.full(3, default_step(lo, hi))
-    s = np.maximum(s, (hi - lo) / 2**30)
-    o = np.floor(lo / s) * s
-    return s, o
+    wide = np.maximum(s, (hi - lo) / (2**32 - 2**9))  # centred: half the span and half a step of rounding within 2**31 - 2 steps
+    if out is not None and scale is not None and np.any(wide > s):
+        old, new = (", ".join(f"{v:.6g}" for v in scales) for scales in (s, wide))
+        warn(f"{out}: the points span more than 32-bit integers hold at scale {old}: written at scale {new}, "
+             f"positions moved by up to {float(np.max(wide)) / 2:.3g}", GigapointWarning)  # fmt: skip
+    s = wide
+    from_lo, centred = base + np.floor((lo - base) / s) * s, base + np.round(((lo + hi) / 2 - base) / s) * s
+    o = np.where(_fits_int32(lo, hi, s, from_lo), from_lo, centred)
+    return s, o if offset is None else np.where(_fits_int32(lo, hi, s, base), base, o)  # (the axes the given offset holds keep it)
+
+
+def _fits_int32(lo, hi, s, o) -> np.ndarray:
+    """Per axis: whether [lo, hi] lies within 32-bit integers on the grid (``s``, ``o``), a step inside their ends."""
+    return ((lo - o) / s > _INT32[0] + 1) & ((hi - o) / s < _INT32[1] - 1)

@@ -23,7 +23,7 @@ from ..core.cloud import PointCloud, set_cloud_writer
 from ..errors import GigapointWarning, InputError, first_line, warn
 from .crs import crs_name, crs_wkt, first_named_crs, own_epsg
 from .las import GEOKEYS_RECORD, PROJECTION_USER_ID, WKT_RECORD, LasReader, read_las_header, vlrs_crs, wkt_of
-from .las_fields import LAS_FIELD_OF, choose_point_format, extra_attributes, field_attributes, las_field_values, las_grid
+from .las_fields import LAS_FIELD_OF, choose_point_format, extra_attributes, field_attributes, las_field_values, las_grid, warn_clipped
 from .ply import PLY_CRS_COMMENT
 from .registry import reader_for
 
@@ -135,14 +135,14 @@ def _las_layout(path: Path, attributes: dict, grid, crs_records, has_color: bool
 
 def _write_las(tmp: Path, path: Path, chunks: Chunks, grid, crs_records, color_bits: int | None, has_color: bool) -> int:
     """Point format 7 (8 with ``nir``; 6 without ``has_color``), LAS 1.4: attributes the format has a field for go to
-    it, clipped to its range as the COPC writer does (they were added as extra bytes under the
+    it, clipped to its range as the COPC writer does, said once a field (they were added as extra bytes under the
     field's own name, which laspy refused: "field 'intensity' occurs more than once"); others
     as extra bytes (las_fields.extra_attributes: booleans as u8, half floats as f4). The header
     is made from the first chunk, as it comes: one pass over the points (files are read once)."""
     import laspy
 
     grid = grid if grid is not None else _grid_of(chunks)
-    written = 0
+    written, clipped = 0, {}
     with contextlib.ExitStack() as open_file:
         writer = None
         for chunk in chunks():
@@ -156,11 +156,12 @@ def _write_las(tmp: Path, path: Path, chunks: Chunks, grid, crs_records, color_b
             for k, channel in enumerate(("red", "green", "blue") if has_color else ()):
                 rec[channel] = chunk.rgba[:, k].astype(np.uint16) * np.uint16(257 if bits == 16 else 1)
             for a, field in fields.items():
-                rec[field] = las_field_values(a, chunk.attributes[a]).astype(rec[field].dtype)
+                rec[field] = las_field_values(a, chunk.attributes[a], clipped).astype(rec[field].dtype)
             for a, dt in extra.items():
                 rec[a] = chunk.attributes[a].astype(dt)
             writer.write_points(rec)
             written += len(chunk)
+        warn_clipped(path, clipped)
         if writer is None:  # no chunk: a header alone
             header = _las_layout(path, _NO_POINTS.attributes, grid, crs_records, has_color)[0]
             open_file.enter_context(laspy.open(str(tmp), mode="w", header=header, do_compress=path.suffix.lower() == ".laz"))
@@ -356,13 +357,14 @@ def _las_files(files) -> list[Path]:
     return [Path(p) for p in files if Path(p).is_file() and isinstance(reader_for(p), LasReader)]
 
 
-def _source_grid(cloud: PointCloud):
+def _source_grid(cloud: PointCloud, out: Path):
     """(scale, offset) of the grid the cloud's source stored positions on (its finest scale, its
-    first LAS file's offset), where its points fit 32-bit integers on it; None where it had none."""
+    first LAS file's offset), where its points fit 32-bit integers on it (else a coarser one, said naming
+    ``out``: ``las_grid``); None where it had none."""
     if cloud.source_scale is None:
         return None
     offset = next((read_las_header(p).offset for p in _las_files(cloud.source_files)), None)
-    return las_grid(*cloud.bounds, cloud.source_scale, offset)  # (no offset: one from 0, a multiple of the scale)
+    return las_grid(*cloud.bounds, cloud.source_scale, offset, out)  # (no offset: one from 0, a multiple of the scale)
 
 
 #: points a chunk of ``save_cloud`` holds
@@ -389,7 +391,7 @@ def save_cloud(cloud: PointCloud, path, overwrite: bool = False, points_per_chun
         warn(f"{path}: the cloud holds its colours approximated (RGB565 or a palette), so the file gets those; {exact} for exact colours", GigapointWarning)
     crs = source_crs_records(cloud.source_files)
     return write_points(
-        path, lambda: cloud.chunks(points_per_chunk), cloud.n_points, grid=_source_grid(cloud), crs_records=crs,
+        path, lambda: cloud.chunks(points_per_chunk), cloud.n_points, grid=_source_grid(cloud, path), crs_records=crs,
         color_bits=las_color_bits(cloud.source_color_bits),
         has_color=has_color,
     )

@@ -370,7 +370,7 @@ def write_copc_sets(path: Path, sources: list[Path], st: dict, progress, page_le
     src = st.get("source") or {}
     attrs = st.get("attributes") or {}
     origin, edge = np.array(st["origin"], np.float64), float(st["edge"])
-    scale, offset = output_grid(st)
+    scale, offset = output_grid(st, out=path)
     fmt = choose_point_format(attrs, src.get("has_color", True))
     if src.get("crs") and not src.get("wkt"):  # LAS 1.2 GeoTIFF keys: their EPSG code, no WKT, and no pyproj to make one
         warn(

@@ -5,7 +5,8 @@ io/write.py's writer as they are read, so no more than a chunk is held, however 
 
 The file is faithful to the inputs: the first LAS file's CRS, a LAS grid that holds every LAS
 input's points exactly (their finest scale, the first file's offset: facts.input_facts, which
-warns of files off it), colours as each file stored them (8-bit values or 16-bit ones), the
+warns of files off it; centred, or coarser where 32-bit integers cannot span them: las_grid, which
+says so), colours as each file stored them (8-bit values or 16-bit ones), the
 attributes every file has (as gp.open keeps them), colours only where an input has them (LAS point
 format 6, a PLY without red, green, blue where none has: not the grey the viewer draws them in;
 black for the points of a colourless file among coloured ones, warned of). Invalid points (NaN, inf) are skipped with
@@ -96,7 +97,7 @@ class PointFiles:
         if ply:  # (doubles on no grid; the CRS in a header comment: io/write.py)
             self.las_grid = None
         else:
-            self.las_grid = output_grid(self.files, reprojection) if reprojection is not None else _las_inputs_grid(self.files, facts)
+            self.las_grid = output_grid(self.files, reprojection) if reprojection is not None else _las_inputs_grid(self.files, facts, out)
         self.colorization = colorization
         if colorization is not None:  # (the points' CRS is the output's: the target's where reprojected)
             colorization.check_crs(reprojection.target_wkt() if reprojection is not None else files_crs(self.files), self.label)
@@ -233,12 +234,13 @@ def _attributes_in_common(files, one_angle: bool, chunk_size: int, out: Path) ->
     return names or []
 
 
-def _las_inputs_grid(files, facts: dict):
+def _las_inputs_grid(files, facts: dict, out: Path):
     """The grid every point of LAS inputs lies on (their finest scale, the first file's offset),
-    where their headers' bounds fit 32-bit integers on it; None where an input is no LAS file
-    (a grid is then made from the points' bounds, a pass over them)."""
+    where their headers' bounds fit 32-bit integers on it (else ``las_grid``'s, coarser where it
+    must be: said, naming ``out``); None where an input is no LAS file (a grid is then made from
+    the points' bounds, a pass over them)."""
     if facts["scale"] is None or not all(isinstance(reader_for(f), LasReader) for f in files):
         return None
     bounds = [reader_for(f).header(f)["bounds"] for f in files]
     lo, hi = np.min([b[0] for b in bounds], axis=0), np.max([b[1] for b in bounds], axis=0)
-    return las_grid(lo, hi, facts["scale"], facts["offset"])
+    return las_grid(lo, hi, facts["scale"], facts["offset"], out)

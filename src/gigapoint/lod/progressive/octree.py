@@ -625,6 +625,7 @@ class ProgressiveOctree:
         self.skipped = 0  # invalid points left out (NaN, inf, beyond ±1e12)
         self.points_per_class = np.zeros(256, np.int64)  # of the points added, by LAS class (``class_facts``)
         self._added_colors: dict = {}  # add()'s colour range (colors_for's scalers): decided on its first colours, as a file's and a live push's
+        self._colors_added = False  # whether an add() brought colours (rgb=): a save then writes colours, whatever the source files hold
         self.closed = False  # close() frees everything; add() then refuses (it would start a new tree)
         self.spilled = 0  # points taken out of split leaves to be inserted again, in all
         self.lo = np.full(3, np.inf)
@@ -1118,7 +1119,9 @@ class ProgressiveOctree:
         widens to numpy's dtype for both (uint16 and float32: float32), as ``gp.open`` of
         several files does. While a loader fills the octree, an add waits for the files' first
         points, whose attributes are the set."""
-        return self.add_read(xyz, rgb, attributes, None)
+        added = self.add_read(xyz, rgb, attributes, None)
+        self._colors_added = self._colors_added or (rgb is not None and added > 0)
+        return added
 
     def add_read(self, xyz, rgb, attributes: dict, color_bits: int | None) -> int:
         """``add`` of points read from a file whose colours were ``color_bits``-bit values
@@ -1599,6 +1602,7 @@ class ProgressiveOctree:
         options.setdefault("source_files", [p for p in self.source_files if p.is_file()])  # the files' CRS and LAS grid (those still there)
         options.setdefault("max_leaf", self.max_leaf)
         options.setdefault("name", self.name)  # name= another was "multiple values for keyword argument"
+        options.setdefault("has_color", self._saves_colors())
         grown = options["max_leaf"] == self.max_leaf and options.get("client") is None and self.points > 0
         inputs = self.grown() if grown else self.chunks()
         return convert(inputs, out, format=format, overwrite=overwrite, **options)
@@ -1610,7 +1614,7 @@ class ProgressiveOctree:
         import time
 
         from ...io.las_fields import las_grid
-        from ...io.write import check_point_file_output, las_color_bits, source_crs_records, sources_have_color, write_points
+        from ...io.write import check_point_file_output, las_color_bits, source_crs_records, write_points
         from ..convert.converter import ConvertResult
 
         if options:  # (sampler=, max_leaf=, ...: each meant something of an octree only)
@@ -1619,11 +1623,18 @@ class ProgressiveOctree:
         self._check_savable()
         t0 = time.perf_counter()
         ply = out.suffix.lower() == ".ply"
-        grid = None if ply or self.grid is None else las_grid(self.lo, self.hi, np.full(3, self.grid[1]), self.grid[0])
+        grid = None if ply or self.grid is None else las_grid(self.lo, self.hi, np.full(3, self.grid[1]), self.grid[0], out)
         crs = source_crs_records(self.source_files)
         color_bits = las_color_bits(source_color_bits(self._color_bits))
-        n = write_points(out, self.chunks, self.points, grid=grid, crs_records=crs, color_bits=color_bits, has_color=sources_have_color(self.source_files))
+        n = write_points(out, self.chunks, self.points, grid=grid, crs_records=crs, color_bits=color_bits, has_color=self._saves_colors())
         return ConvertResult(out, out.suffix[1:].lower(), None, n, 0, self.skipped, time.perf_counter() - t0, False)
+
+    def _saves_colors(self) -> bool:
+        """Whether a save writes colours: where an ``add`` brought some, or the source files have
+        them (io/write.py's ``sources_have_color``: colourless files' grey is no colour of theirs)."""
+        from ...io.write import sources_have_color
+
+        return self._colors_added or sources_have_color(self.source_files)
 
     def check_loaded(self, to: str) -> None:
         """Wait for loading to finish; a one-line InputError where the octree is closed, or a
