@@ -170,7 +170,7 @@ def las_grid(lo, hi, scale=None, offset=None, out=None) -> tuple[np.ndarray, np.
     base = np.zeros(3) if offset is None else np.asarray(offset, np.float64)
     if scale is not None and offset is not None:
         s = np.asarray(scale, np.float64)
-        if _fits_int32(lo, hi, s, base).all():
+        if np.all(s > 0) and _fits_int32(lo, hi, s, base).all():
             return s, base
     s = np.broadcast_to(np.asarray(scale, np.float64), (3,)) if scale is not None else np.full(3, default_step(lo, hi))
     wide = np.maximum(s, (hi - lo) / (2**32 - 2**9))  # centred: half the span and half a step of rounding within 2**31 - 2 steps
